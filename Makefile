@@ -1,0 +1,93 @@
+# raysweep — one plain GNU Makefile.
+#   make            build build/bin/raysweepd
+#   make test       build and run every test (SAN=1: ASan + UBSan build)
+#   make bench      benchmarks, one JSON object per line
+#   make run        start the daemon with the embedded default scene
+#   make deps       install missing Debian packages (no-op when all present)
+# Variables: WERROR=1 adds -Werror; SAN=1 builds into build-san/.
+
+SHELL := /bin/bash
+CC ?= cc
+
+ifeq ($(SAN),1)
+BUILD := build-san
+SANFLAGS := -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
+OPT := -O1
+else
+BUILD := build
+SANFLAGS :=
+OPT := -O2
+endif
+
+WARN := -Wall -Wextra -Wshadow -Wno-unused-parameter -Wstrict-prototypes
+ifeq ($(WERROR),1)
+WARN += -Werror
+endif
+
+CPPFLAGS := -Iinclude -Iserver -D_GNU_SOURCE -MMD -MP
+CFLAGS := -std=c11 $(OPT) -g $(WARN) $(SANFLAGS) -fPIC
+LDFLAGS := $(SANFLAGS)
+LIBS := -lembree3 -lOpenEXRCore -lexpat -lcjson -lpthread -lm
+
+KERNEL_SRC := $(shell find server/kernel -name '*.c' | sort)
+KERNEL_OBJ := $(KERNEL_SRC:%.c=$(BUILD)/obj/%.o)
+KERNEL_LIB := $(BUILD)/lib/librswkernel.a
+
+DAEMON_SRC := server/main.c
+DAEMON_OBJ := $(DAEMON_SRC:%.c=$(BUILD)/obj/%.o)
+
+TEST_SUPPORT_SRC := $(wildcard tests/support/*.c)
+TEST_SUPPORT_OBJ := $(TEST_SUPPORT_SRC:%.c=$(BUILD)/obj/%.o)
+TEST_SRC := $(sort $(wildcard tests/unit/test_*.c tests/validation/test_*.c))
+TEST_BIN := $(patsubst %.c,$(BUILD)/tests/%,$(notdir $(TEST_SRC)))
+
+BENCH_SRC := $(wildcard tests/bench/*.c)
+BENCH_BIN := $(patsubst %.c,$(BUILD)/bench/%,$(notdir $(BENCH_SRC)))
+
+.PHONY: all deps test bench run clean format
+
+all: deps $(BUILD)/bin/raysweepd
+
+deps:
+	@tools/deps.sh
+
+$(BUILD)/obj/%.o: %.c
+	@mkdir -p $(dir $@)
+	$(CC) $(CPPFLAGS) $(CFLAGS) -c $< -o $@
+
+$(KERNEL_LIB): $(KERNEL_OBJ)
+	@mkdir -p $(dir $@)
+	rm -f $@ && ar rcs $@ $^
+
+$(BUILD)/bin/raysweepd: $(DAEMON_OBJ) $(KERNEL_LIB)
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) -o $@ $(DAEMON_OBJ) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS)
+
+$(BUILD)/tests/%: $(BUILD)/obj/tests/unit/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS)
+
+$(BUILD)/tests/%: $(BUILD)/obj/tests/validation/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS)
+
+$(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS)
+
+test: deps $(BUILD)/bin/raysweepd $(TEST_BIN)
+	@BUILD=$(BUILD) SAN=$(SAN) tests/run.sh $(TEST_BIN)
+
+bench: deps $(BUILD)/bin/raysweepd $(BENCH_BIN)
+	@for b in $(BENCH_BIN); do $$b || exit 1; done
+
+run: deps $(BUILD)/bin/raysweepd
+	$(BUILD)/bin/raysweepd serve
+
+format:
+	clang-format -i $$(find server client include tests -name '*.[ch]')
+
+clean:
+	rm -rf build build-san
+
+-include $(shell find $(BUILD)/obj -name '*.d' 2>/dev/null)

@@ -1,0 +1,196 @@
+#include "transform.h"
+
+#include <string.h>
+
+static void mat_mul(const double a[4][4], const double b[4][4], double r[4][4]) {
+  double t[4][4];
+  for (int i = 0; i < 4; i++)
+    for (int j = 0; j < 4; j++) {
+      double s = 0;
+      for (int k = 0; k < 4; k++) s += a[i][k] * b[k][j];
+      t[i][j] = s;
+    }
+  memcpy(r, t, sizeof t);
+}
+
+/* Gauss-Jordan with partial pivoting. */
+static bool mat_inverse(const double a[4][4], double r[4][4]) {
+  double m[4][8];
+  for (int i = 0; i < 4; i++)
+    for (int j = 0; j < 4; j++) {
+      if (!isfinite(a[i][j])) return false;
+      m[i][j] = a[i][j];
+      m[i][j + 4] = (i == j) ? 1.0 : 0.0;
+    }
+  double scale = 0;
+  for (int i = 0; i < 4; i++)
+    for (int j = 0; j < 4; j++)
+      if (fabs(a[i][j]) > scale) scale = fabs(a[i][j]);
+  if (scale == 0) return false;
+  for (int c = 0; c < 4; c++) {
+    int p = c;
+    for (int i = c + 1; i < 4; i++)
+      if (fabs(m[i][c]) > fabs(m[p][c])) p = i;
+    if (fabs(m[p][c]) <= 1e-14 * scale) return false;
+    if (p != c)
+      for (int j = 0; j < 8; j++) {
+        double t = m[c][j];
+        m[c][j] = m[p][j];
+        m[p][j] = t;
+      }
+    double inv = 1.0 / m[c][c];
+    for (int j = 0; j < 8; j++) m[c][j] *= inv;
+    for (int i = 0; i < 4; i++) {
+      if (i == c || m[i][c] == 0) continue;
+      double f = m[i][c];
+      for (int j = 0; j < 8; j++) m[i][j] -= f * m[c][j];
+    }
+  }
+  for (int i = 0; i < 4; i++)
+    for (int j = 0; j < 4; j++) r[i][j] = m[i][j + 4];
+  return true;
+}
+
+xform xf_identity(void) {
+  xform t;
+  memset(&t, 0, sizeof t);
+  for (int i = 0; i < 4; i++) t.m[i][i] = t.inv[i][i] = 1.0;
+  return t;
+}
+
+bool xf_from_matrix(const double m[4][4], xform *out) {
+  xform t;
+  memcpy(t.m, m, sizeof t.m);
+  if (!mat_inverse(t.m, t.inv)) return false;
+  *out = t;
+  return true;
+}
+
+xform xf_mul(const xform *a, const xform *b) {
+  xform r;
+  mat_mul(a->m, b->m, r.m);
+  mat_mul(b->inv, a->inv, r.inv);
+  return r;
+}
+
+xform xf_inverse(const xform *a) {
+  xform r;
+  memcpy(r.m, a->inv, sizeof r.m);
+  memcpy(r.inv, a->m, sizeof r.inv);
+  return r;
+}
+
+xform xf_translate(vec3 v) {
+  xform t = xf_identity();
+  t.m[0][3] = v.x;
+  t.m[1][3] = v.y;
+  t.m[2][3] = v.z;
+  t.inv[0][3] = -v.x;
+  t.inv[1][3] = -v.y;
+  t.inv[2][3] = -v.z;
+  return t;
+}
+
+xform xf_scale(vec3 s) {
+  xform t = xf_identity();
+  t.m[0][0] = s.x;
+  t.m[1][1] = s.y;
+  t.m[2][2] = s.z;
+  t.inv[0][0] = 1.0 / s.x;
+  t.inv[1][1] = 1.0 / s.y;
+  t.inv[2][2] = 1.0 / s.z;
+  return t;
+}
+
+/* Rodrigues' rotation about a unit axis, counter-clockwise for a positive
+ * angle when looking down the axis (Mitsuba's Transform::rotate). */
+xform xf_rotate(vec3 axis, double angle_deg) {
+  vec3 a = v3_norm(axis);
+  double th = angle_deg * (RSW_PI / 180.0);
+  double s = sin(th), c = cos(th), cc = 1.0 - c;
+  xform t = xf_identity();
+  t.m[0][0] = a.x * a.x + (1 - a.x * a.x) * c;
+  t.m[0][1] = a.x * a.y * cc - a.z * s;
+  t.m[0][2] = a.x * a.z * cc + a.y * s;
+  t.m[1][0] = a.x * a.y * cc + a.z * s;
+  t.m[1][1] = a.y * a.y + (1 - a.y * a.y) * c;
+  t.m[1][2] = a.y * a.z * cc - a.x * s;
+  t.m[2][0] = a.x * a.z * cc - a.y * s;
+  t.m[2][1] = a.y * a.z * cc + a.x * s;
+  t.m[2][2] = a.z * a.z + (1 - a.z * a.z) * c;
+  for (int i = 0; i < 3; i++)
+    for (int j = 0; j < 3; j++) t.inv[i][j] = t.m[j][i];
+  return t;
+}
+
+bool xf_look_at(vec3 origin, vec3 target, vec3 up, xform *out) {
+  vec3 dir = v3_sub(target, origin);
+  if (!(v3_len(dir) > 0)) return false;
+  dir = v3_norm(dir);
+  vec3 left = v3_cross(v3_norm(up), dir);
+  if (!(v3_len(left) > 1e-12)) return false;
+  left = v3_norm(left);
+  vec3 new_up = v3_cross(dir, left);
+  double m[4][4] = {{left.x, new_up.x, dir.x, origin.x},
+                    {left.y, new_up.y, dir.y, origin.y},
+                    {left.z, new_up.z, dir.z, origin.z},
+                    {0, 0, 0, 1}};
+  return xf_from_matrix(m, out);
+}
+
+vec3 xf_point(const xform *t, vec3 p) {
+  const double(*m)[4] = t->m;
+  double x = m[0][0] * p.x + m[0][1] * p.y + m[0][2] * p.z + m[0][3];
+  double y = m[1][0] * p.x + m[1][1] * p.y + m[1][2] * p.z + m[1][3];
+  double z = m[2][0] * p.x + m[2][1] * p.y + m[2][2] * p.z + m[2][3];
+  double w = m[3][0] * p.x + m[3][1] * p.y + m[3][2] * p.z + m[3][3];
+  if (w != 1.0) return v3(x / w, y / w, z / w);
+  return v3(x, y, z);
+}
+
+vec3 xf_vector(const xform *t, vec3 v) {
+  const double(*m)[4] = t->m;
+  return v3(m[0][0] * v.x + m[0][1] * v.y + m[0][2] * v.z,
+            m[1][0] * v.x + m[1][1] * v.y + m[1][2] * v.z,
+            m[2][0] * v.x + m[2][1] * v.y + m[2][2] * v.z);
+}
+
+vec3 xf_normal(const xform *t, vec3 n) {
+  const double(*m)[4] = t->inv;
+  return v3(m[0][0] * n.x + m[1][0] * n.y + m[2][0] * n.z,
+            m[0][1] * n.x + m[1][1] * n.y + m[2][1] * n.z,
+            m[0][2] * n.x + m[1][2] * n.y + m[2][2] * n.z);
+}
+
+vec3 xf_inv_point(const xform *t, vec3 p) {
+  xform i = xf_inverse(t);
+  return xf_point(&i, p);
+}
+
+vec3 xf_inv_vector(const xform *t, vec3 v) {
+  const double(*m)[4] = t->inv;
+  return v3(m[0][0] * v.x + m[0][1] * v.y + m[0][2] * v.z,
+            m[1][0] * v.x + m[1][1] * v.y + m[1][2] * v.z,
+            m[2][0] * v.x + m[2][1] * v.y + m[2][2] * v.z);
+}
+
+bool xf_is_identity(const xform *t) {
+  for (int i = 0; i < 4; i++)
+    for (int j = 0; j < 4; j++)
+      if (t->m[i][j] != (i == j ? 1.0 : 0.0)) return false;
+  return true;
+}
+
+bool xf_is_similarity(const xform *t, double *scale) {
+  vec3 c[3];
+  for (int j = 0; j < 3; j++) c[j] = v3(t->m[0][j], t->m[1][j], t->m[2][j]);
+  double l0 = v3_len(c[0]), l1 = v3_len(c[1]), l2 = v3_len(c[2]);
+  double tol = 1e-6 * (l0 + l1 + l2);
+  if (fabs(l0 - l1) > tol || fabs(l0 - l2) > tol) return false;
+  if (fabs(v3_dot(c[0], c[1])) > tol * l0 || fabs(v3_dot(c[0], c[2])) > tol * l0 ||
+      fabs(v3_dot(c[1], c[2])) > tol * l0)
+    return false;
+  if (t->m[3][0] != 0 || t->m[3][1] != 0 || t->m[3][2] != 0 || t->m[3][3] != 1) return false;
+  if (scale) *scale = (l0 + l1 + l2) / 3.0;
+  return true;
+}

@@ -1,0 +1,326 @@
+/* Runtime interfaces of the radiometric kernel: object classes, the plugin
+ * record, and one small ops table per concept (texture, BSDF, emitter,
+ * sensor, sampler, integrator). Every implementation lives in its class's
+ * directory, one plugin per file, and is listed once in scene/registry.c.
+ *
+ * Conventions (Mitsuba 3, kernel-behavior.md §0):
+ *  - local shading frame: n = +z; wi points towards where the path came
+ *    from (the sensor side), wo the other way; both point away from the
+ *    surface;
+ *  - bsdf eval returns f_r(wi, wo) |cos theta_o| (cosine folded in);
+ *    sample returns the weight eval/pdf;
+ *  - radiance in W m^-2 sr^-1 [nm^-1]; irradiance in W m^-2 [nm^-1]. */
+#ifndef RSW_KERNEL_H
+#define RSW_KERNEL_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "core/error.h"
+#include "core/rng.h"
+#include "core/transform.h"
+#include "core/vec.h"
+#include "core/warp.h"
+
+typedef enum obj_class {
+  CLS_SCENE,
+  CLS_SHAPE,
+  CLS_BSDF,
+  CLS_EMITTER,
+  CLS_SENSOR,
+  CLS_FILM,
+  CLS_SAMPLER,
+  CLS_RFILTER,
+  CLS_INTEGRATOR,
+  CLS_TEXTURE,
+  CLS__COUNT
+} obj_class;
+
+/* "shape", "bsdf", ... (the XML tag of the class). */
+const char *obj_class_name(obj_class c);
+
+typedef enum variant { VARIANT_RGB, VARIANT_MONO } variant;
+
+/* What a render is evaluated at; given to every plugin's prepare(). */
+typedef struct render_ctx {
+  variant variant;
+  double wavelength; /* nm; mono only (default 550) */
+} render_ctx;
+
+struct loader;
+struct node;
+struct scene;
+typedef struct object object;
+
+/* A plugin: name, class, life cycle, and its class's ops table. */
+typedef struct plugin {
+  const char *name;
+  obj_class cls;
+  /* Build from a document node. Reads properties with the ld_* getters
+   * (scene/loader.h); any property it does not read is an error raised by
+   * the builder. Writes *out only on success. */
+  rsw_status (*create)(struct loader *ld, struct node *n, object **out);
+  /* Free the object's own memory (not its children: the scene owns every
+   * object and frees each once). */
+  void (*destroy)(object *o);
+  /* Optional: evaluate wavelength-dependent state before a render (e.g. a
+   * tabulated spectrum at the context's wavelength). */
+  rsw_status (*prepare)(object *o, const render_ctx *rc, rsw_err *err);
+  const void *ops; /* class-specific ops table, or NULL */
+} plugin;
+
+/* Every object starts with this header. */
+struct object {
+  const plugin *plugin;
+  const char *id; /* borrowed from the document node */
+};
+
+/* Point on a surface, as the integrator sees it. */
+typedef struct surface_interaction {
+  double t;            /* ray distance */
+  vec3 p;              /* world position */
+  vec3 ng;             /* geometric normal (unit, world, after flip_normals) */
+  frame sh;            /* shading frame (n = shading normal) */
+  double uv[2];        /* texture coordinates */
+  vec3 wi;             /* local: towards the ray origin */
+  const struct shape *shape;
+  uint32_t prim;
+} surface_interaction;
+
+/* ---- textures ---------------------------------------------------------- */
+typedef struct texture texture;
+typedef struct texture_ops {
+  color (*eval)(const texture *t, const surface_interaction *si);
+  /* Mean value over the texture (used for sampling decisions). */
+  color (*mean)(const texture *t);
+} texture_ops;
+struct texture {
+  object base;
+  const texture_ops *ops;
+};
+static inline color tex_eval(const texture *t, const surface_interaction *si) {
+  return t->ops->eval(t, si);
+}
+
+/* ---- BSDFs --------------------------------------------------------------- */
+enum bsdf_flags {
+  BSDF_NULL = 0,
+  BSDF_DIFFUSE_REFLECTION = 1u << 0,
+  BSDF_GLOSSY_REFLECTION = 1u << 1,
+  BSDF_DELTA_REFLECTION = 1u << 2,
+  BSDF_DIFFUSE_TRANSMISSION = 1u << 3,
+  BSDF_GLOSSY_TRANSMISSION = 1u << 4,
+  BSDF_DELTA_TRANSMISSION = 1u << 5,
+  BSDF_TWO_SIDED = 1u << 6, /* reflects from both sides (twosided) */
+};
+#define BSDF_SMOOTH                                                            \
+  (BSDF_DIFFUSE_REFLECTION | BSDF_GLOSSY_REFLECTION |                          \
+   BSDF_DIFFUSE_TRANSMISSION | BSDF_GLOSSY_TRANSMISSION)
+#define BSDF_DELTA (BSDF_DELTA_REFLECTION | BSDF_DELTA_TRANSMISSION)
+
+typedef struct bsdf_sample {
+  vec3 wo;              /* local */
+  double pdf;           /* solid angle; for delta lobes: discrete prob. */
+  double eta;           /* relative IOR of the sampled interaction (1 if
+                           reflection) */
+  unsigned sampled_type; /* one bsdf_flags bit */
+} bsdf_sample;
+
+typedef struct bsdf bsdf;
+typedef struct bsdf_ops {
+  /* Sample wo given si->wi. u1 picks a lobe, u2 the direction. Returns the
+   * weight eval/pdf (delta lobes: the lobe's weight) and fills *bs; a
+   * failed sample returns black with bs->pdf = 0. */
+  color (*sample)(const bsdf *b, const surface_interaction *si, double u1,
+                  vec2 u2, bsdf_sample *bs);
+  /* f_r(wi, wo) |cos theta_o| for the smooth lobes; 0 for delta lobes. */
+  color (*eval)(const bsdf *b, const surface_interaction *si, vec3 wo);
+  /* Solid-angle pdf of sample() producing wo (smooth lobes only). */
+  double (*pdf)(const bsdf *b, const surface_interaction *si, vec3 wo);
+} bsdf_ops;
+struct bsdf {
+  object base;
+  const bsdf_ops *ops;
+  unsigned flags; /* union of the lobes' bsdf_flags */
+};
+
+/* ---- emitters ------------------------------------------------------------ */
+enum emitter_flags {
+  EMITTER_DELTA_DIRECTION = 1u << 0, /* directional */
+  EMITTER_INFINITE = 1u << 1,        /* environment (constant, envmap) */
+  EMITTER_SURFACE = 1u << 2,         /* area */
+};
+
+typedef struct direction_sample {
+  vec3 p;      /* sampled point (on the emitter, or far away for infinite
+                  and delta-direction emitters) */
+  vec3 n;      /* emitter normal at p (surface emitters) */
+  vec3 d;      /* unit direction from the reference point towards p */
+  double dist; /* distance to p */
+  double pdf;  /* solid angle density (1 for delta) */
+  bool delta;
+} direction_sample;
+
+typedef struct emitter emitter;
+typedef struct emitter_ops {
+  /* Sample a direction from ref->p towards the emitter. Returns the
+   * emitted radiance (irradiance for delta emitters) divided by ds->pdf,
+   * not accounting for visibility; black on failure. */
+  color (*sample_direction)(const emitter *e, const surface_interaction *ref,
+                            vec2 u, direction_sample *ds);
+  /* Solid-angle pdf that sample_direction() picks ds->d from ref. */
+  double (*pdf_direction)(const emitter *e, const surface_interaction *ref,
+                          const direction_sample *ds);
+  /* Radiance arriving along a ray that hit the emitter's shape at `hit`
+   * (surface emitters) or escaped the scene in world direction `d`
+   * (infinite emitters; hit is NULL). d is the ray direction. */
+  color (*eval)(const emitter *e, const surface_interaction *hit, vec3 d);
+  /* Called once the scene's bounds are known. */
+  void (*set_scene)(emitter *e, const struct scene *s);
+} emitter_ops;
+struct emitter {
+  object base;
+  const emitter_ops *ops;
+  unsigned flags;
+  double sampling_weight;      /* Mitsuba's sampling_weight (default 1) */
+  const struct shape *shape;   /* surface emitters: the shape it sits on */
+};
+
+/* ---- films and reconstruction filters ------------------------------------ */
+typedef struct rfilter {
+  object base;
+  double radius;                      /* pixels */
+  double (*eval)(const struct rfilter *f, double x); /* 1-D, separable */
+} rfilter;
+
+typedef enum pixel_format { PIXFMT_RGB, PIXFMT_LUMINANCE } pixel_format;
+typedef enum component_format { COMPFMT_FLOAT32, COMPFMT_FLOAT16 } component_format;
+
+typedef struct film {
+  object base;
+  int width, height;
+  pixel_format pixel_format;         /* forced to luminance in mono */
+  component_format component_format;
+  rfilter *filter;
+} film;
+
+/* ---- samplers ------------------------------------------------------------ */
+typedef struct sampler sampler;
+/* Per-sample state: lives on the stack of the rendering thread. */
+typedef struct sampler_state {
+  const sampler *s;
+  pcg32 rng;
+  uint64_t pixel_key; /* hash of (seed, pixel) */
+  uint32_t sample_index, spp, dim;
+} sampler_state;
+typedef struct sampler_ops {
+  /* Begin sample `sample_index` of `spp` for pixel `pixel` under `seed`.
+   * The stream depends on nothing else (determinism). */
+  void (*start)(const sampler *s, sampler_state *st, uint64_t seed,
+                uint64_t pixel, uint32_t sample_index, uint32_t spp);
+  double (*next_1d)(sampler_state *st);
+  vec2 (*next_2d)(sampler_state *st);
+  /* spp actually used for a requested count (stratified rounds to a
+   * square). */
+  uint32_t (*adjust_spp)(const sampler *s, uint32_t spp);
+} sampler_ops;
+struct sampler {
+  object base;
+  const sampler_ops *ops;
+  uint32_t sample_count;
+  uint64_t seed; /* base seed, added to the render's seed */
+  bool jitter;
+};
+
+/* ---- sensors ------------------------------------------------------------- */
+typedef struct sensor sensor;
+typedef struct sensor_ops {
+  /* Ray for film sample u in [0,1)^2 and aperture sample a; returns the
+   * ray weight (0 for no ray). */
+  double (*sample_ray)(const sensor *s, vec2 film_u, vec2 aperture_u, ray3 *ray);
+  /* Called once the scene's bounds are known (bounding sphere, default
+   * ray_offset); may fail (e.g. a target shape without area). */
+  rsw_status (*set_scene)(sensor *s, const struct scene *sc, rsw_err *err);
+} sensor_ops;
+struct sensor {
+  object base;
+  const sensor_ops *ops;
+  film *film;
+  sampler *sampler;
+  xform to_world;
+};
+
+/* ---- integrators --------------------------------------------------------- */
+typedef struct render_stats {
+  uint64_t rays;        /* intersection queries */
+  uint64_t shadow_rays; /* occlusion queries */
+} render_stats;
+
+typedef struct integrator integrator;
+typedef struct integrator_ops {
+  /* Radiance arriving at ray.o along -ray.d. */
+  color (*Li)(const integrator *it, const struct scene *sc, sampler_state *st,
+              ray3 ray, render_stats *stats);
+} integrator_ops;
+struct integrator {
+  object base;
+  const integrator_ops *ops;
+  int max_depth;   /* -1 = infinite */
+  int rr_depth;
+  bool hide_emitters;
+};
+
+/* ---- shapes -------------------------------------------------------------- */
+typedef enum geom_kind { GEOM_MESH, GEOM_SPHERE, GEOM_DISK } geom_kind;
+
+/* Triangle mesh in object space (before to_world). */
+typedef struct mesh {
+  uint32_t n_verts, n_faces;
+  float *pos;      /* 3 per vertex (owned) */
+  float *nrm;      /* 3 per vertex or NULL (owned) */
+  float *uv;       /* 2 per vertex or NULL (owned) */
+  uint32_t *faces; /* 3 per face (owned) */
+} mesh;
+
+typedef struct shape {
+  object base;
+  geom_kind geom;
+  xform to_world;   /* object -> world; the Embree instance transform */
+  bool flip_normals;
+  bool face_normals; /* ignore vertex normals */
+  bsdf *bsdf;
+  emitter *emitter; /* area light, or NULL */
+  mesh mesh;        /* GEOM_MESH */
+  /* Derived by shape_finalize(): */
+  double area;      /* world-space surface area */
+  double *tri_cdf;  /* meshes: cumulative world areas, n_faces entries */
+  unsigned index;   /* position in scene->shapes */
+} shape;
+
+/* ---- the scene ----------------------------------------------------------- */
+struct accel;
+
+typedef struct scene {
+  object base;
+  variant variant;
+  object **objects;      /* every object, for prepare/destroy (owned) */
+  size_t n_objects, cap_objects;
+  shape **shapes;
+  size_t n_shapes;
+  emitter **emitters;    /* all emitters, area lights included */
+  size_t n_emitters;
+  double *emitter_cdf;   /* by sampling_weight */
+  double emitter_weight_sum;
+  emitter *environment;  /* at most one infinite emitter */
+  sensor **sensors;
+  size_t n_sensors;
+  integrator *integrator;
+  struct accel *accel;
+  vec3 bbox_min, bbox_max;
+  vec3 bsphere_center;
+  double bsphere_radius; /* inflated as Mitsuba: max(eps, r (1 + eps)) */
+  struct node *doc;      /* the document the scene was built from (owned) */
+} scene;
+
+#endif

@@ -1,0 +1,92 @@
+/* The builder's side of the document tree: what plugins call from their
+ * create() to read their properties. Each getter marks the property used;
+ * the builder rejects any property left unused (Mitsuba's
+ * ParserConfig.unused_properties = Error). Getters validate the type and
+ * finiteness and, on error, record the property's location in ld->err.
+ *
+ * "absent" means the document did not give the property: the default is
+ * used (Mitsuba's defaults, kernel-behavior.md §2.3). */
+#ifndef RSW_SCENE_LOADER_H
+#define RSW_SCENE_LOADER_H
+
+#include "../kernel.h"
+#include "node.h"
+
+typedef struct loader {
+  variant variant;
+  rsw_err *err;
+  const char *base_dir; /* directory relative file names resolve against */
+  node *root;
+  scene *scene;         /* the scene being built (objects are added here) */
+  /* id -> node index (builder-private) */
+  node **ids;
+  size_t n_ids, cap_ids;
+} loader;
+
+/* Report an error about property `name` of n (or about n itself when name
+ * is NULL) and return code. */
+rsw_status ld_fail(loader *ld, node *n, const char *name, rsw_status code,
+                   const char *fmt, ...) __attribute__((format(printf, 5, 6)));
+
+bool ld_has(const node *n, const char *name); /* does not mark used */
+
+rsw_status ld_float(loader *ld, node *n, const char *name, double def, double *out);
+/* As ld_float, and the value must lie in [lo, hi]. */
+rsw_status ld_float_range(loader *ld, node *n, const char *name, double def,
+                          double lo, double hi, double *out);
+rsw_status ld_int(loader *ld, node *n, const char *name, long long def,
+                  long long lo, long long hi, long long *out);
+rsw_status ld_bool(loader *ld, node *n, const char *name, bool def, bool *out);
+/* *out is borrowed from the document (valid while the scene lives). */
+rsw_status ld_string(loader *ld, node *n, const char *name, const char *def,
+                     const char **out);
+/* *present (may be NULL) tells whether the property was given. */
+rsw_status ld_vec3(loader *ld, node *n, const char *name, vec3 def, vec3 *out,
+                   bool *present);
+rsw_status ld_transform(loader *ld, node *n, const char *name, xform *out,
+                        bool *present);
+/* A file name resolved against the scene's directory; must exist and be
+ * readable. *out is owned by the caller (free()). */
+rsw_status ld_path(loader *ld, node *n, const char *name, char **out);
+
+/* A spectral texture: absent -> uniform(def); a number, a 3-vector (rgb),
+ * an rgb/uniform/tabulated spectrum -> a `uniform` texture; a nested
+ * texture object or a ref to one -> that texture. `lo` is the smallest
+ * allowed value for constant inputs (0 for reflectances; -INFINITY for no
+ * check). *out is owned by the scene. */
+rsw_status ld_texture(loader *ld, node *n, const char *name, double def,
+                      double lo, texture **out);
+/* As ld_texture but *out = NULL when absent. */
+rsw_status ld_texture_opt(loader *ld, node *n, const char *name, double lo,
+                          texture **out);
+
+/* The nested object (or referenced object) of class cls. With name NULL,
+ * the one child of that class whatever its key (error if several); with a
+ * name, the property of that name (error if it is another class).
+ * *out = NULL when absent. */
+rsw_status ld_child(loader *ld, node *n, const char *name, obj_class cls,
+                    object **out);
+/* All children of class cls in declaration order. *out is malloc'ed (free
+ * it); the objects are owned by the scene. */
+rsw_status ld_children(loader *ld, node *n, obj_class cls, object ***out,
+                       size_t *count);
+
+/* Register an object created outside a node (e.g. a default film) with the
+ * scene, which then owns it. */
+rsw_status ld_adopt(loader *ld, object *o);
+/* Create a plugin instance of `type` with no properties (defaults). */
+rsw_status ld_create_default(loader *ld, const char *type, obj_class cls,
+                             const char *id, object **out);
+
+/* Evaluate a spectrum property for a render context (mono: value at the
+ * wavelength, linear interpolation, error outside the table; rgb: the
+ * triple; uniform: the value everywhere). */
+rsw_status spectrum_eval(const spectrum *s, const render_ctx *rc, color *out,
+                         rsw_err *err, const char *where);
+
+/* Registry lookup (scene/registry.c). NULL if unknown. */
+const plugin *registry_find(const char *name);
+/* All registered plugins, NULL-terminated. */
+extern const plugin *const rsw_plugins[];
+
+#endif

@@ -1,0 +1,47 @@
+/* The one list of plugins. Adding a plugin is one new file defining
+ * `const plugin plugin_<name>` and one line here. */
+#include "loader.h"
+
+#include <string.h>
+
+/* Declared weak while the plugin set is being assembled across branches:
+ * a plugin whose file is absent resolves to NULL and is skipped. */
+#define PLUGINS(X)                                                            \
+  X(scene)                                                                    \
+  X(rectangle) X(disk) X(sphere) X(cube) X(obj) X(ply)                        \
+  X(diffuse) X(conductor) X(roughconductor) X(dielectric) X(twosided)        \
+  X(directional) X(constant) X(area)                                          \
+  X(hdistant) X(distant) X(radiancemeter) X(perspective)                      \
+  X(hdrfilm) X(box) X(gaussian)                                               \
+  X(independent) X(stratified)                                                \
+  X(path)                                                                     \
+  X(uniform) X(checkerboard) X(bitmap)
+
+#define DECLARE_(name) extern const plugin plugin_##name __attribute__((weak));
+PLUGINS(DECLARE_)
+#undef DECLARE_
+
+const plugin *const rsw_plugins[] = {
+#define ENTRY_(name) &plugin_##name,
+    PLUGINS(ENTRY_)
+#undef ENTRY_
+    NULL};
+
+const plugin *registry_find(const char *name) {
+  size_t n = sizeof rsw_plugins / sizeof rsw_plugins[0] - 1;
+  for (size_t i = 0; i < n; i++)
+    if (rsw_plugins[i] && strcmp(rsw_plugins[i]->name, name) == 0) return rsw_plugins[i];
+  return NULL;
+}
+
+static const char *const class_names[CLS__COUNT] = {
+    [CLS_SCENE] = "scene",       [CLS_SHAPE] = "shape",
+    [CLS_BSDF] = "bsdf",         [CLS_EMITTER] = "emitter",
+    [CLS_SENSOR] = "sensor",     [CLS_FILM] = "film",
+    [CLS_SAMPLER] = "sampler",   [CLS_RFILTER] = "rfilter",
+    [CLS_INTEGRATOR] = "integrator", [CLS_TEXTURE] = "texture",
+};
+
+const char *obj_class_name(obj_class c) {
+  return (unsigned)c < CLS__COUNT ? class_names[c] : "object";
+}

@@ -1,0 +1,38 @@
+/* Geometry services every shape offers, whatever its plugin: the hit
+ * record -> surface interaction, uniform position sampling, area.
+ * Shape plugins only differ in how they build the object (mesh from a file,
+ * two-triangle rectangle, analytic sphere/disk); the rest is here. */
+#ifndef RSW_SHAPES_SHAPE_H
+#define RSW_SHAPES_SHAPE_H
+
+#include "../kernel.h"
+
+/* A sampled point on a shape's surface. */
+typedef struct position_sample {
+  vec3 p;      /* world */
+  vec3 n;      /* unit world normal (after flip_normals) */
+  double uv[2];
+  double pdf;  /* area density, 1/area for uniform sampling */
+} position_sample;
+
+/* Uniformly sample a point on the shape (world-space area measure):
+ * rectangle: to_world (2u.x-1, 2u.y-1, 0); disk: concentric disk;
+ * sphere: uniform sphere; mesh: triangle by area then uniform barycentric. */
+position_sample shape_sample_position(const shape *s, vec2 u);
+/* Area pdf of shape_sample_position (1/area). */
+double shape_pdf_position(const shape *s);
+
+/* Fill si from a hit (prim, barycentrics u/v for triangles or the object
+ * space hit point for analytic shapes) on ray r at distance t. */
+struct accel_hit;
+void shape_fill_interaction(const shape *s, const ray3 *r, const struct accel_hit *h,
+                            surface_interaction *si);
+
+/* Compute area, triangle cdf; check geometry (degenerate to_world for a
+ * disk, non-uniform scale for a sphere, ...). Called by create(). */
+rsw_status shape_finalize(shape *s, rsw_err *err, const char *where);
+
+/* Free a shape's owned geometry (used by every shape plugin's destroy). */
+void shape_release(shape *s);
+
+#endif

@@ -1,0 +1,18 @@
+/* Texture helpers shared by plugins. */
+#ifndef RSW_TEXTURES_TEXTURE_H
+#define RSW_TEXTURES_TEXTURE_H
+
+#include "../kernel.h"
+#include "../scene/node.h"
+
+/* A `uniform` texture holding a spectrum; its value is re-evaluated by
+ * prepare() for each render (wavelength in mono). The spectrum is copied.
+ * Returned owned; free with plugin->destroy, or hand it to the scene with
+ * ld_adopt(). */
+texture *uniform_texture_new(const spectrum *s, const char *id);
+/* Shorthand for a constant (uniform spectrum v, already prepared). */
+texture *uniform_texture_const(double v, const char *id);
+/* The uniform texture's current value (for parameter tables/tests). */
+bool uniform_texture_value(const texture *t, color *out);
+
+#endif
