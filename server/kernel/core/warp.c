@@ -165,15 +165,15 @@ double warp_square_to_uniform_sphere_pdf(vec3 v) {
 }
 
 /* Uniform cone through the concentric disk (Mitsuba square_to_uniform_cone,
- * "approach 1"): with c = cos_cutoff and p = concentric(u),
- *   z = 1 - (1 - c) |p|^2,  (x, y) = p sqrt((1 - c)(2 - (1 - c) |p|^2)),
+ * its low-distortion "approach 2"): with c = cos_cutoff, p = concentric(u),
+ *   z = c + (1 - c)(1 - |p|^2),  (x, y) = p sqrt((1 - c)(2 - (1 - c) |p|^2)),
  * so |(x,y)|^2 = 1 - z^2 and z is uniform in [c, 1]: the solid angle of
  * the cone is 2 pi (1 - c) and the pdf its inverse. */
 vec3 warp_square_to_uniform_cone(vec2 u, double cos_cutoff) {
   double k = 1.0 - cos_cutoff;
   vec2 p = warp_square_to_disk_concentric(u);
   double pn = p.x * p.x + p.y * p.y;
-  double z = 1.0 - k * pn;
+  double z = cos_cutoff + k * (1.0 - pn);
   double s = sqrt(fmax(0.0, k * (2.0 - k * pn)));
   return v3(p.x * s, p.y * s, z);
 }
