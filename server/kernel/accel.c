@@ -72,39 +72,53 @@ static bool unit_hit(geom_kind g, const double o[3], const double d[3], double t
   return true;
 }
 
+/* Embree's RTCRayN/RTCHitN accessors are C++ only; in C the SOA layout is
+ * addressed directly: RTCRayN is 12 arrays of N 32-bit fields (org_x,
+ * org_y, org_z, tnear, dir_x, dir_y, dir_z, time, tfar, mask, id, flags),
+ * RTCHitN follows it (Ng_x, Ng_y, Ng_z, u, v, primID, geomID, instID[0]). */
+enum { RAY_ORG = 0, RAY_TNEAR = 3, RAY_DIR = 4, RAY_TFAR = 8, RAY_FIELDS = 12 };
+enum { HIT_NG = 0, HIT_U = 3, HIT_V = 4, HIT_PRIM = 5, HIT_GEOM = 6, HIT_INST = 7 };
+#define RAYN_F(p, N, f, i) (((float *)(p))[(size_t)(f) * (N) + (i)])
+#define HITN_F(p, N, f, i) (((float *)(p))[(size_t)(f) * (N) + (i)])
+#define HITN_U(p, N, f, i) (((unsigned *)(p))[(size_t)(f) * (N) + (i)])
+
+static void load_ray(const void *ray, unsigned N, unsigned i, double o[3], double d[3]) {
+  for (int k = 0; k < 3; k++) {
+    o[k] = RAYN_F(ray, N, RAY_ORG + k, i);
+    d[k] = RAYN_F(ray, N, RAY_DIR + k, i);
+  }
+}
+
 static void unit_intersect(const struct RTCIntersectFunctionNArguments *args) {
   const shape *s = args->geometryUserPtr;
-  struct RTCRayHitN *rh = args->rayhit;
-  struct RTCRayN *ray = RTCRayHitN_RayN(rh, args->N);
-  struct RTCHitN *hit = RTCRayHitN_HitN(rh, args->N);
-  for (unsigned i = 0; i < args->N; i++) {
+  unsigned N = args->N;
+  void *ray = args->rayhit;
+  void *hit = (float *)args->rayhit + (size_t)RAY_FIELDS * N;
+  for (unsigned i = 0; i < N; i++) {
     if (!args->valid[i]) continue;
-    double o[3] = {RTCRayN_org_x(ray, args->N, i), RTCRayN_org_y(ray, args->N, i), RTCRayN_org_z(ray, args->N, i)};
-    double d[3] = {RTCRayN_dir_x(ray, args->N, i), RTCRayN_dir_y(ray, args->N, i), RTCRayN_dir_z(ray, args->N, i)};
-    double t, n[3];
-    if (!unit_hit(s->geom, o, d, RTCRayN_tnear(ray, args->N, i), RTCRayN_tfar(ray, args->N, i), &t, n)) continue;
-    RTCRayN_tfar(ray, args->N, i) = (float)t;
-    RTCHitN_Ng_x(hit, args->N, i) = (float)n[0];
-    RTCHitN_Ng_y(hit, args->N, i) = (float)n[1];
-    RTCHitN_Ng_z(hit, args->N, i) = (float)n[2];
-    RTCHitN_u(hit, args->N, i) = 0;
-    RTCHitN_v(hit, args->N, i) = 0;
-    RTCHitN_primID(hit, args->N, i) = args->primID;
-    RTCHitN_geomID(hit, args->N, i) = args->geomID;
-    RTCHitN_instID(hit, args->N, i, 0) = args->context->instID[0];
+    double o[3], d[3], t, n[3];
+    load_ray(ray, N, i, o, d);
+    if (!unit_hit(s->geom, o, d, RAYN_F(ray, N, RAY_TNEAR, i), RAYN_F(ray, N, RAY_TFAR, i), &t, n)) continue;
+    RAYN_F(ray, N, RAY_TFAR, i) = (float)t;
+    for (int k = 0; k < 3; k++) HITN_F(hit, N, HIT_NG + k, i) = (float)n[k];
+    HITN_F(hit, N, HIT_U, i) = 0;
+    HITN_F(hit, N, HIT_V, i) = 0;
+    HITN_U(hit, N, HIT_PRIM, i) = args->primID;
+    HITN_U(hit, N, HIT_GEOM, i) = args->geomID;
+    HITN_U(hit, N, HIT_INST, i) = args->context->instID[0];
   }
 }
 
 static void unit_occluded(const struct RTCOccludedFunctionNArguments *args) {
   const shape *s = args->geometryUserPtr;
-  struct RTCRayN *ray = args->ray;
-  for (unsigned i = 0; i < args->N; i++) {
+  unsigned N = args->N;
+  void *ray = args->ray;
+  for (unsigned i = 0; i < N; i++) {
     if (!args->valid[i]) continue;
-    double o[3] = {RTCRayN_org_x(ray, args->N, i), RTCRayN_org_y(ray, args->N, i), RTCRayN_org_z(ray, args->N, i)};
-    double d[3] = {RTCRayN_dir_x(ray, args->N, i), RTCRayN_dir_y(ray, args->N, i), RTCRayN_dir_z(ray, args->N, i)};
-    double t, n[3];
-    if (unit_hit(s->geom, o, d, RTCRayN_tnear(ray, args->N, i), RTCRayN_tfar(ray, args->N, i), &t, n))
-      RTCRayN_tfar(ray, args->N, i) = -INFINITY;
+    double o[3], d[3], t, n[3];
+    load_ray(ray, N, i, o, d);
+    if (unit_hit(s->geom, o, d, RAYN_F(ray, N, RAY_TNEAR, i), RAYN_F(ray, N, RAY_TFAR, i), &t, n))
+      RAYN_F(ray, N, RAY_TFAR, i) = -INFINITY;
   }
 }
 

@@ -740,7 +740,8 @@ static rsw_status scene_finalize(loader *ld, scene *s) {
   return RSW_OK;
 }
 
-static variant parse_variant(const char *v, bool *ok) {
+static variant parse_variant(const char *name, bool *ok) {
+  const char *v = name;
   *ok = true;
   if (!v || strcmp(v, "rgb") == 0 || strcmp(v, "scalar_rgb") == 0) return VARIANT_RGB;
   if (strcmp(v, "mono") == 0 || strcmp(v, "scalar_mono") == 0 || strcmp(v, "scalar_mono_double") == 0)
@@ -842,19 +843,19 @@ static char *read_all(const char *path, size_t *len, rsw_err *err) {
 rsw_status scene_load_memory(const char *text, size_t len, const char *name, bool is_xml,
                              const scene_load_opts *opts, scene **out, rsw_err *err) {
   node *root = NULL;
-  char *variant = NULL;
+  char *doc_variant = NULL;
   rsw_status st;
   if (is_xml) {
     st = scene_read_xml(text, len, name, opts ? opts->defines : NULL, opts ? opts->n_defines : 0, &root,
-                        &variant, err);
+                        &doc_variant, err);
   } else {
     if (opts && opts->n_defines)
       return rsw_fail(err, RSW_ERR_USAGE, "-D", "-D parameters apply to XML scenes only (%s is JSON)", name);
-    st = scene_read_json(text, len, name, &root, &variant, err);
+    st = scene_read_json(text, len, name, &root, &doc_variant, err);
   }
   if (st) return st;
-  st = scene_build(root, variant, opts, out, err);
-  free(variant);
+  st = scene_build(root, doc_variant, opts, out, err);
+  free(doc_variant);
   return st;
 }
 

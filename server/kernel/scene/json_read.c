@@ -55,7 +55,9 @@ static void ptr_join(char *out, size_t len, const char *base, const char *key) {
 }
 
 static void ptr_index(char *out, size_t len, const char *base, int i) {
-  snprintf(out, len, "%s/%d", base, i);
+  char idx[16];
+  snprintf(idx, sizeof idx, "%d", i);
+  ptr_join(out, len, base, idx);
 }
 
 static rsw_status fail(jctx *c, rsw_status code, const char *where, const char *fmt, ...)
