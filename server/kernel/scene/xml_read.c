@@ -153,8 +153,21 @@ static bool is_decimal(const char *s) {
   return *p == '\0';
 }
 
-static bool parse_double(const char *s, double *out) {
-  if (!is_decimal(s)) return false;
+/* Copy s without surrounding whitespace into buf (Mitsuba's stof/stoll
+ * tolerate both); false when it does not fit. */
+static bool trim_copy(const char *s, char *buf, size_t cap) {
+  while (isspace((unsigned char)*s)) s++;
+  size_t n = strlen(s);
+  while (n > 0 && isspace((unsigned char)s[n - 1])) n--;
+  if (n + 1 > cap) return false;
+  memcpy(buf, s, n);
+  buf[n] = '\0';
+  return true;
+}
+
+static bool parse_double(const char *raw, double *out) {
+  char s[XML_MAX_TOKEN];
+  if (!trim_copy(raw, s, sizeof s) || !is_decimal(s)) return false;
   char *end;
   double v = strtod(s, &end);
   if (*end != '\0' || !isfinite(v)) return false;
@@ -163,7 +176,9 @@ static bool parse_double(const char *s, double *out) {
 }
 
 /* Integer with |v| <= 2^53, so that the double in prop.num holds it exactly. */
-static bool parse_int(const char *s, double *out) {
+static bool parse_int(const char *raw, double *out) {
+  char s[XML_MAX_TOKEN];
+  if (!trim_copy(raw, s, sizeof s)) return false;
   const char *p = s;
   bool neg = false;
   if (*p == '+' || *p == '-') neg = (*p++ == '-');
