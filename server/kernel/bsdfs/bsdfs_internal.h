@@ -1,0 +1,108 @@
+/* BSDF plugin structs and direct constructors, shared by the plugin files
+ * and by tests that build BSDFs without the scene loader.
+ *
+ * Ownership: the constructors return an owned bsdf (free it with
+ * b->base.plugin->destroy(&b->base)); they borrow the textures and nested
+ * BSDFs they are given (in a scene, the scene owns those). They return
+ * NULL when out of memory. */
+#ifndef RSW_BSDFS_INTERNAL_H
+#define RSW_BSDFS_INTERNAL_H
+
+#include "../kernel.h"
+#include "ior_data.h"
+#include "microfacet.h"
+
+extern const plugin plugin_diffuse;
+extern const plugin plugin_conductor;
+extern const plugin plugin_roughconductor;
+extern const plugin plugin_dielectric;
+extern const plugin plugin_twosided;
+
+/* ---- diffuse ------------------------------------------------------------ */
+typedef struct diffuse_bsdf {
+  bsdf base;
+  texture *reflectance;
+} diffuse_bsdf;
+
+bsdf *diffuse_new(texture *reflectance);
+
+/* ---- conductors (smooth and rough share the complex index) -------------- */
+typedef struct conductor_ior {
+  texture *eta, *k;               /* used when material is NULL */
+  const ior_conductor *material;  /* preset, or NULL ("none") */
+  color mat_eta, mat_k;           /* the preset at the render's wavelength
+                                     (set at creation for 550 nm / rgb,
+                                     refreshed by prepare()) */
+} conductor_ior;
+
+/* eta and k at si. */
+void conductor_ior_eval(const conductor_ior *c, const surface_interaction *si,
+                        color *eta, color *k);
+/* Reads `material` / `eta` / `k` for plugin `who` (Mitsuba's rule: a
+ * material other than "none" together with eta is an error; with a
+ * material, eta/k are not read, so a stray k is an unused property). */
+rsw_status conductor_ior_load(struct loader *ld, struct node *n, const char *who,
+                              conductor_ior *out);
+/* Sets the preset's cached values for rc (no-op without a preset). */
+rsw_status conductor_ior_prepare(conductor_ior *c, const render_ctx *rc,
+                                 rsw_err *err, const char *where);
+
+typedef struct conductor_bsdf {
+  bsdf base;
+  conductor_ior ior;
+  texture *specular_reflectance; /* NULL = 1 */
+} conductor_bsdf;
+
+/* eta/k textures (material NULL) or a preset (eta/k NULL; its values are
+ * evaluated for rc, which may be NULL for mono 550 nm). */
+bsdf *conductor_new(texture *eta, texture *k, const ior_conductor *material,
+                    texture *specular_reflectance, const render_ctx *rc);
+
+typedef struct roughconductor_bsdf {
+  bsdf base;
+  conductor_ior ior;
+  texture *specular_reflectance; /* NULL = 1 */
+  mf_type type;
+  texture *alpha_u, *alpha_v;    /* the same texture when isotropic */
+  bool sample_visible;
+} roughconductor_bsdf;
+
+bsdf *roughconductor_new(mf_type type, texture *alpha_u, texture *alpha_v,
+                         bool sample_visible, texture *eta, texture *k,
+                         const ior_conductor *material,
+                         texture *specular_reflectance, const render_ctx *rc);
+
+/* ---- dielectric --------------------------------------------------------- */
+typedef struct dielectric_bsdf {
+  bsdf base;
+  double eta; /* int_ior / ext_ior */
+  texture *specular_reflectance;   /* NULL = 1 */
+  texture *specular_transmittance; /* NULL = 1 */
+} dielectric_bsdf;
+
+bsdf *dielectric_new(double int_ior, double ext_ior, texture *specular_reflectance,
+                     texture *specular_transmittance);
+
+/* ---- twosided ----------------------------------------------------------- */
+typedef struct twosided_bsdf {
+  bsdf base;
+  bsdf *brdf[2]; /* front, back (the same object when only one is given) */
+} twosided_bsdf;
+
+/* back may be NULL (= front). Neither may have transmission lobes (the
+ * plugin's create() checks; this constructor trusts its caller). */
+bsdf *twosided_new(bsdf *front, bsdf *back);
+
+/* Helpers shared by the plugin files. */
+static inline color bsdf_factor(const texture *t, const surface_interaction *si) {
+  return t ? tex_eval(t, si) : col1(1.0);
+}
+static inline color bsdf_fail(bsdf_sample *bs) {
+  bs->wo = v3(0.0, 0.0, 0.0);
+  bs->pdf = 0.0;
+  bs->eta = 1.0;
+  bs->sampled_type = 0;
+  return col1(0.0);
+}
+
+#endif

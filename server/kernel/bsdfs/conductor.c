@@ -1,0 +1,152 @@
+/* `conductor`: a smooth metal, a perfect specular reflector weighted by
+ * the conductor Fresnel term of the complex index eta + i k.
+ *
+ *   sample: wo = reflect(wi) (delta), pdf 1,
+ *           weight = F(cos theta_i; eta, k) * specular_reflectance;
+ *   eval = pdf = 0 (a delta lobe cannot be evaluated).
+ * With the defaults eta = 0, k = 1, F = 1: a perfect mirror.
+ *
+ * Also holds the complex-index plumbing (material presets or eta/k
+ * textures) shared with roughconductor.c.
+ *
+ * Source: mitsuba3 src/bsdfs/conductor.cpp; kernel-behavior.md §2.3. */
+#include <stdlib.h>
+#include <string.h>
+
+#include "../scene/loader.h"
+#include "bsdfs_internal.h"
+#include "fresnel.h"
+
+/* ---- complex index of refraction ---------------------------------------- */
+
+void conductor_ior_eval(const conductor_ior *c, const surface_interaction *si,
+                        color *eta, color *k) {
+  if (c->material) {
+    *eta = c->mat_eta;
+    *k = c->mat_k;
+  } else {
+    *eta = tex_eval(c->eta, si);
+    *k = tex_eval(c->k, si);
+  }
+}
+
+rsw_status conductor_ior_prepare(conductor_ior *c, const render_ctx *rc, rsw_err *err,
+                                 const char *where) {
+  if (!c->material) return RSW_OK;
+  return ior_conductor_for_ctx(c->material, rc, &c->mat_eta, &c->mat_k, err, where);
+}
+
+rsw_status conductor_ior_load(loader *ld, node *n, const char *who, conductor_ior *out) {
+  conductor_ior c = {0};
+  const char *material;
+  rsw_status st = ld_string(ld, n, "material", "none", &material);
+  if (st != RSW_OK) return st;
+  if (strcmp(material, "none") != 0) {
+    if (ld_has(n, "eta"))
+      return ld_fail(ld, n, "eta", RSW_ERR_INVALID,
+                     "%s: give either 'material' or 'eta'/'k', not both", who);
+    c.material = ior_conductor_lookup(material);
+    if (!c.material)
+      return ld_fail(ld, n, "material", RSW_ERR_INVALID,
+                     "%s: unknown material '%s' (known: %s)", who, material,
+                     ior_conductor_names());
+    /* Initial values for this variant (mono at the default 550 nm);
+     * prepare() re-evaluates them for each render. */
+    render_ctx rc = {.variant = ld->variant, .wavelength = 550.0};
+    st = conductor_ior_prepare(&c, &rc, ld->err, n->loc);
+    if (st != RSW_OK) return st;
+  } else {
+    if ((st = ld_texture(ld, n, "eta", 0.0, 0.0, &c.eta)) != RSW_OK) return st;
+    if ((st = ld_texture(ld, n, "k", 1.0, 0.0, &c.k)) != RSW_OK) return st;
+  }
+  *out = c;
+  return RSW_OK;
+}
+
+/* ---- the smooth conductor ------------------------------------------------ */
+
+static color conductor_sample(const bsdf *b, const surface_interaction *si, double u1,
+                              vec2 u2, bsdf_sample *bs) {
+  (void)u1;
+  (void)u2;
+  const conductor_bsdf *c = (const conductor_bsdf *)b;
+  double cos_i = si->wi.z;
+  if (!(cos_i > 0.0)) return bsdf_fail(bs);
+  bs->wo = reflect_local(si->wi);
+  bs->pdf = 1.0;
+  bs->eta = 1.0;
+  bs->sampled_type = BSDF_DELTA_REFLECTION;
+  color eta, k;
+  conductor_ior_eval(&c->ior, si, &eta, &k);
+  color f = fresnel_conductor_col(cos_i, eta, k);
+  return col_mul(f, bsdf_factor(c->specular_reflectance, si));
+}
+
+static color conductor_eval(const bsdf *b, const surface_interaction *si, vec3 wo) {
+  (void)b;
+  (void)si;
+  (void)wo;
+  return col1(0.0);
+}
+
+static double conductor_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
+  (void)b;
+  (void)si;
+  (void)wo;
+  return 0.0;
+}
+
+static const bsdf_ops conductor_ops = {
+    .sample = conductor_sample, .eval = conductor_eval, .pdf = conductor_pdf};
+
+static void conductor_destroy(object *o) { free(o); }
+
+static rsw_status conductor_prepare(object *o, const render_ctx *rc, rsw_err *err) {
+  return conductor_ior_prepare(&((conductor_bsdf *)o)->ior, rc, err, o->id);
+}
+
+static rsw_status conductor_create(loader *ld, node *n, object **out) {
+  conductor_ior ior;
+  texture *spec;
+  rsw_status st = conductor_ior_load(ld, n, "conductor", &ior);
+  if (st != RSW_OK) return st;
+  if ((st = ld_texture(ld, n, "specular_reflectance", 1.0, 0.0, &spec)) != RSW_OK) return st;
+  conductor_bsdf *c = calloc(1, sizeof *c);
+  if (!c) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "conductor: out of memory");
+  c->base.base.plugin = &plugin_conductor;
+  c->base.base.id = n->id;
+  c->base.ops = &conductor_ops;
+  c->base.flags = BSDF_DELTA_REFLECTION;
+  c->ior = ior;
+  c->specular_reflectance = spec;
+  *out = &c->base.base;
+  return RSW_OK;
+}
+
+const plugin plugin_conductor = {
+    .name = "conductor",
+    .cls = CLS_BSDF,
+    .create = conductor_create,
+    .destroy = conductor_destroy,
+    .prepare = conductor_prepare,
+    .ops = &conductor_ops,
+};
+
+bsdf *conductor_new(texture *eta, texture *k, const ior_conductor *material,
+                    texture *specular_reflectance, const render_ctx *rc) {
+  conductor_bsdf *c = calloc(1, sizeof *c);
+  if (!c) return NULL;
+  c->base.base.plugin = &plugin_conductor;
+  c->base.ops = &conductor_ops;
+  c->base.flags = BSDF_DELTA_REFLECTION;
+  c->ior.eta = eta;
+  c->ior.k = k;
+  c->ior.material = material;
+  c->specular_reflectance = specular_reflectance;
+  render_ctx def = {.variant = VARIANT_MONO, .wavelength = 550.0};
+  if (conductor_ior_prepare(&c->ior, rc ? rc : &def, NULL, NULL) != RSW_OK) {
+    free(c);
+    return NULL;
+  }
+  return &c->base;
+}

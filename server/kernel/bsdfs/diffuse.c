@@ -1,0 +1,71 @@
+/* `diffuse`: the Lambertian BRDF, one-sided (black from the back).
+ *
+ *   f_r(wi, wo) = rho / pi for cos(theta_i) > 0 and cos(theta_o) > 0,
+ *   eval = f_r cos(theta_o);
+ *   sample: wo ~ cos(theta_o) / pi (cosine hemisphere), weight = rho.
+ *
+ * Source: mitsuba3 src/bsdfs/diffuse.cpp; kernel-behavior.md §2.3
+ * (reflectance default 0.5). */
+#include <stdlib.h>
+
+#include "../scene/loader.h"
+#include "bsdfs_internal.h"
+
+static color diffuse_sample(const bsdf *b, const surface_interaction *si, double u1,
+                            vec2 u2, bsdf_sample *bs) {
+  (void)u1;
+  const diffuse_bsdf *d = (const diffuse_bsdf *)b;
+  if (!(si->wi.z > 0.0)) return bsdf_fail(bs);
+  bs->wo = warp_square_to_cosine_hemisphere(u2);
+  bs->pdf = warp_square_to_cosine_hemisphere_pdf(bs->wo);
+  bs->eta = 1.0;
+  bs->sampled_type = BSDF_DIFFUSE_REFLECTION;
+  if (!(bs->pdf > 0.0) || !(bs->wo.z > 0.0)) return bsdf_fail(bs);
+  return tex_eval(d->reflectance, si);
+}
+
+static color diffuse_eval(const bsdf *b, const surface_interaction *si, vec3 wo) {
+  const diffuse_bsdf *d = (const diffuse_bsdf *)b;
+  if (!(si->wi.z > 0.0) || !(wo.z > 0.0)) return col1(0.0);
+  return col_scale(tex_eval(d->reflectance, si), RSW_INV_PI * wo.z);
+}
+
+static double diffuse_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
+  (void)b;
+  if (!(si->wi.z > 0.0) || !(wo.z > 0.0)) return 0.0;
+  return warp_square_to_cosine_hemisphere_pdf(wo);
+}
+
+static const bsdf_ops diffuse_ops = {
+    .sample = diffuse_sample, .eval = diffuse_eval, .pdf = diffuse_pdf};
+
+static void diffuse_destroy(object *o) { free(o); }
+
+static rsw_status diffuse_create(loader *ld, node *n, object **out) {
+  texture *refl;
+  rsw_status st = ld_texture(ld, n, "reflectance", 0.5, 0.0, &refl);
+  if (st != RSW_OK) return st;
+  bsdf *b = diffuse_new(refl);
+  if (!b) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "diffuse: out of memory");
+  b->base.id = n->id;
+  *out = &b->base;
+  return RSW_OK;
+}
+
+const plugin plugin_diffuse = {
+    .name = "diffuse",
+    .cls = CLS_BSDF,
+    .create = diffuse_create,
+    .destroy = diffuse_destroy,
+    .ops = &diffuse_ops,
+};
+
+bsdf *diffuse_new(texture *reflectance) {
+  diffuse_bsdf *d = calloc(1, sizeof *d);
+  if (!d) return NULL;
+  d->base.base.plugin = &plugin_diffuse;
+  d->base.ops = &diffuse_ops;
+  d->base.flags = BSDF_DIFFUSE_REFLECTION;
+  d->reflectance = reflectance;
+  return &d->base;
+}

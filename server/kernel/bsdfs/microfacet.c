@@ -1,0 +1,207 @@
+/* Microfacet distributions (formulas and sources in microfacet.h). */
+#include "microfacet.h"
+
+#define INV_SQRT_PI 0.56418958354775628695
+
+mf_distr mf_make(mf_type type, double alpha_u, double alpha_v, bool sample_visible) {
+  mf_distr d;
+  d.type = type;
+  d.alpha_u = alpha_u > 1e-4 ? alpha_u : 1e-4;
+  d.alpha_v = alpha_v > 1e-4 ? alpha_v : 1e-4;
+  d.sample_visible = sample_visible;
+  return d;
+}
+
+double mf_D(const mf_distr *d, vec3 m) {
+  double c = m.z;
+  if (!(c > 0.0)) return 0.0;
+  double c2 = c * c;
+  double xu = m.x / d->alpha_u, yv = m.y / d->alpha_v;
+  double result;
+  if (d->type == MF_BECKMANN) {
+    result = exp(-(xu * xu + yv * yv) / c2) / (RSW_PI * d->alpha_u * d->alpha_v * c2 * c2);
+  } else {
+    double t = xu * xu + yv * yv + c2;
+    result = 1.0 / (RSW_PI * d->alpha_u * d->alpha_v * t * t);
+  }
+  /* Written so that a NaN also lands on 0. */
+  return result * c > 1e-20 ? result : 0.0;
+}
+
+double mf_smith_g1(const mf_distr *d, vec3 v, vec3 m) {
+  /* Consistent orientation first: a back-facing microfacet is invisible. */
+  if (v3_dot(v, m) * v.z <= 0.0) return 0.0;
+  double ax = d->alpha_u * v.x, ay = d->alpha_v * v.y;
+  double xy_alpha_2 = ax * ax + ay * ay;
+  if (xy_alpha_2 == 0.0) return 1.0;
+  double t = xy_alpha_2 / (v.z * v.z);
+  if (d->type == MF_BECKMANN) {
+    double a = 1.0 / sqrt(t), a2 = a * a;
+    if (a >= 1.6) return 1.0;
+    return (3.535 * a + 2.181 * a2) / (1.0 + 2.276 * a + 2.577 * a2);
+  }
+  return 2.0 / (1.0 + sqrt(1.0 + t));
+}
+
+double mf_G(const mf_distr *d, vec3 wi, vec3 wo, vec3 m) {
+  return mf_smith_g1(d, wi, m) * mf_smith_g1(d, wo, m);
+}
+
+double mf_pdf(const mf_distr *d, vec3 wi, vec3 m) {
+  double D = mf_D(d, m);
+  if (D == 0.0) return 0.0;
+  if (d->sample_visible) {
+    if (!(wi.z > 0.0)) return 0.0;
+    return D * mf_smith_g1(d, wi, m) * fabs(v3_dot(wi, m)) / wi.z;
+  }
+  return D * m.z;
+}
+
+double mf_erfinv(double x) {
+  if (!(x > -1.0)) return x == -1.0 ? -INFINITY : NAN;
+  if (!(x < 1.0)) return x == 1.0 ? INFINITY : NAN;
+  /* Giles, "Approximating the erfinv function" (GPU Computing Gems, 2010),
+   * single-precision branch: relative error ~1e-7 as a first guess. */
+  double w = -log((1.0 - x) * (1.0 + x)), p;
+  if (w < 5.0) {
+    w -= 2.5;
+    p = 2.81022636e-08;
+    p = 3.43273939e-07 + p * w;
+    p = -3.5233877e-06 + p * w;
+    p = -4.39150654e-06 + p * w;
+    p = 0.00021858087 + p * w;
+    p = -0.00125372503 + p * w;
+    p = -0.00417768164 + p * w;
+    p = 0.246640727 + p * w;
+    p = 1.50140941 + p * w;
+  } else {
+    w = sqrt(w) - 3.0;
+    p = -0.000200214257;
+    p = 0.000100950558 + p * w;
+    p = 0.00134934322 + p * w;
+    p = -0.00367342844 + p * w;
+    p = 0.00573950773 + p * w;
+    p = -0.0076224613 + p * w;
+    p = 0.00943887047 + p * w;
+    p = 1.00167406 + p * w;
+    p = 2.83297682 + p * w;
+  }
+  double y = p * x;
+  /* Newton on f(y) = erf(y) - x, f'(y) = 2/sqrt(pi) exp(-y^2). */
+  for (int i = 0; i < 2; i++) {
+    double deriv = 2.0 * INV_SQRT_PI * exp(-y * y);
+    if (!(deriv > 0.0)) break;
+    y -= (erf(y) - x) / deriv;
+  }
+  return y;
+}
+
+/* Slopes of a visible-normal sample of the Beckmann distribution with
+ * alpha = 1 for incidence cosine cos_i (Jakob 2014). The marginal CDF in
+ * the erf() domain x = erf(slope_x) is, up to normalisation,
+ *   C(x) = 1 + x + tan(theta_i) exp(-erfinv(x)^2) / sqrt(pi),
+ * normalised by C(erf(cot theta_i)); it is inverted with three Newton steps
+ * from the analytic solution for theta_i = pi/2. The slope along y is
+ * Gaussian: erfinv(2 u.y - 1). Mitsuba uses the same scheme because the
+ * original 2014 inversion (Heitz & d'Eon) has discontinuities. */
+static vec2 beckmann_visible_11(double cos_i, vec2 u) {
+  double tan_i = sqrt(fmax(0.0, 1.0 - cos_i * cos_i)) / cos_i;
+  double cot_i = 1.0 / tan_i;
+  double maxval = erf(cot_i);
+  u.x = fmin(fmax(u.x, 1e-6), 1.0 - 1e-6);
+  u.y = fmin(fmax(u.y, 1e-6), 1.0 - 1e-6);
+  double x = maxval - (maxval + 1.0) * erf(sqrt(-log(u.x)));
+  /* tan_i * exp(-cot_i^2) is 0 at normal incidence (tan_i = 0). */
+  double tail = tan_i > 0.0 ? INV_SQRT_PI * tan_i * exp(-cot_i * cot_i) : 0.0;
+  double ux = u.x * (1.0 + maxval + tail);
+  for (int i = 0; i < 3; i++) {
+    double slope = mf_erfinv(x);
+    double value = 1.0 + x + INV_SQRT_PI * tan_i * exp(-slope * slope) - ux;
+    double deriv = 1.0 - slope * tan_i;
+    x -= value / deriv;
+  }
+  /* Keep x inside erfinv's domain after the Newton steps. */
+  x = fmin(fmax(x, -1.0 + 1e-15), 1.0 - 1e-15);
+  return v2(mf_erfinv(x), mf_erfinv(2.0 * u.y - 1.0));
+}
+
+/* Beckmann visible normals: stretch wi to the alpha = 1 configuration,
+ * sample slopes there, rotate back to wi's azimuth and unstretch
+ * (Heitz & d'Eon 2014, §4). */
+static vec3 beckmann_sample_visible(const mf_distr *d, vec3 wi, vec2 u) {
+  vec3 wi_p = v3_norm(v3(d->alpha_u * wi.x, d->alpha_v * wi.y, wi.z));
+  double sin_t = sqrt(fmax(0.0, 1.0 - wi_p.z * wi_p.z));
+  double cos_phi = 1.0, sin_phi = 0.0;
+  if (sin_t > 0.0) {
+    cos_phi = fmin(fmax(wi_p.x / sin_t, -1.0), 1.0);
+    sin_phi = fmin(fmax(wi_p.y / sin_t, -1.0), 1.0);
+  }
+  vec2 s = beckmann_visible_11(wi_p.z, u);
+  double sx = (cos_phi * s.x - sin_phi * s.y) * d->alpha_u;
+  double sy = (sin_phi * s.x + cos_phi * s.y) * d->alpha_v;
+  return v3_norm(v3(-sx, -sy, 1.0));
+}
+
+/* GGX visible normals, Heitz 2018: stretch wi to the hemisphere
+ * configuration Vh, sample the projected area of the unit hemisphere seen
+ * from Vh (a disk whose far half is squashed by (1 + Vh.z)/2), lift the
+ * point onto the hemisphere and unstretch the normal. */
+static vec3 ggx_sample_visible(const mf_distr *d, vec3 wi, vec2 u) {
+  vec3 vh = v3_norm(v3(d->alpha_u * wi.x, d->alpha_v * wi.y, wi.z));
+  double lensq = vh.x * vh.x + vh.y * vh.y;
+  vec3 t1 = lensq > 0.0 ? v3_scale(v3(-vh.y, vh.x, 0.0), 1.0 / sqrt(lensq)) : v3(1.0, 0.0, 0.0);
+  vec3 t2 = v3_cross(vh, t1);
+  double r = sqrt(u.x), phi = 2.0 * RSW_PI * u.y;
+  double p1 = r * cos(phi), p2 = r * sin(phi);
+  double s = 0.5 * (1.0 + vh.z);
+  p2 = (1.0 - s) * sqrt(fmax(0.0, 1.0 - p1 * p1)) + s * p2;
+  double pz = sqrt(fmax(0.0, 1.0 - p1 * p1 - p2 * p2));
+  vec3 nh = v3_add(v3_add(v3_scale(t1, p1), v3_scale(t2, p2)), v3_scale(vh, pz));
+  return v3_norm(v3(d->alpha_u * nh.x, d->alpha_v * nh.y, fmax(0.0, nh.z)));
+}
+
+/* Sampling D(m) cos(theta_m) directly (Walter et al. 2007 with Mitsuba's
+ * anisotropic azimuth): phi from tan(phi) = (av/au) tan(2 pi u.y) placed in
+ * the quadrant of 2 pi u.y, the effective alpha^2 = 1 / (cos^2 phi / au^2 +
+ * sin^2 phi / av^2), then
+ *   Beckmann: tan^2 theta = -alpha^2 log(1 - u.x)
+ *   GGX:      tan^2 theta = alpha^2 u.x / (1 - u.x). */
+static vec3 sample_all_normals(const mf_distr *d, vec2 u) {
+  double sin_phi, cos_phi, alpha2;
+  if (d->alpha_u == d->alpha_v) {
+    sin_phi = sin(2.0 * RSW_PI * u.y);
+    cos_phi = cos(2.0 * RSW_PI * u.y);
+    alpha2 = d->alpha_u * d->alpha_u;
+  } else {
+    double tmp = d->alpha_v / d->alpha_u * tan(2.0 * RSW_PI * u.y);
+    cos_phi = 1.0 / sqrt(tmp * tmp + 1.0);
+    /* cos(phi) < 0 for u.y in (1/4, 3/4): the second and third quadrants. */
+    cos_phi = copysign(cos_phi, fabs(u.y - 0.5) - 0.25);
+    sin_phi = cos_phi * tmp;
+    double cu = cos_phi / d->alpha_u, sv = sin_phi / d->alpha_v;
+    alpha2 = 1.0 / (cu * cu + sv * sv);
+  }
+  double tan2;
+  if (d->type == MF_BECKMANN)
+    tan2 = -alpha2 * log(1.0 - u.x);
+  else
+    tan2 = alpha2 * u.x / (1.0 - u.x);
+  double cos_t = 1.0 / sqrt(1.0 + tan2);
+  double sin_t = sqrt(fmax(0.0, 1.0 - cos_t * cos_t));
+  return v3(cos_phi * sin_t, sin_phi * sin_t, cos_t);
+}
+
+vec3 mf_sample(const mf_distr *d, vec3 wi, vec2 u, double *pdf) {
+  vec3 m;
+  if (!d->sample_visible)
+    m = sample_all_normals(d, u);
+  else if (d->type == MF_GGX)
+    m = ggx_sample_visible(d, wi, u);
+  else
+    m = beckmann_sample_visible(d, wi, u);
+  /* The density is evaluated by the same code as mf_pdf() so that sample
+   * and pdf agree to the last bit (Mitsuba computes the D cos form in
+   * closed form; it is the same quantity). */
+  *pdf = mf_pdf(d, wi, m);
+  return m;
+}

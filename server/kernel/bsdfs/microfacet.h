@@ -1,0 +1,64 @@
+/* Beckmann and GGX (Trowbridge-Reitz) microfacet distributions, anisotropic,
+ * with Smith shadowing-masking and two sampling strategies: the
+ * distribution of visible normals (default) and D(m) cos(theta_m).
+ *
+ * Sources: mitsuba3 include/mitsuba/render/microfacet.h; Walter et al.
+ * 2007 "Microfacet models for refraction through rough surfaces"; Heitz
+ * 2018 "Sampling the GGX distribution of visible normals" (JCGT 7(4));
+ * Jakob 2014 "An improved visible normal sampling routine for the
+ * Beckmann distribution"; kernel-behavior.md §2.3.
+ *
+ * All vectors are in the local shading frame (n = +z). */
+#ifndef RSW_BSDFS_MICROFACET_H
+#define RSW_BSDFS_MICROFACET_H
+
+#include <stdbool.h>
+
+#include "../core/vec.h"
+#include "../core/warp.h"
+
+typedef enum mf_type { MF_BECKMANN, MF_GGX } mf_type;
+
+typedef struct mf_distr {
+  mf_type type;
+  double alpha_u, alpha_v; /* roughness along the tangent / bitangent */
+  bool sample_visible;     /* sample visible normals (Heitz & d'Eon) */
+} mf_distr;
+
+/* A distribution; alphas are clamped to >= 1e-4 as Mitsuba's configure()
+ * does (zero roughness belongs to the smooth models). */
+mf_distr mf_make(mf_type type, double alpha_u, double alpha_v, bool sample_visible);
+
+/* D(m), the normal distribution (per unit projected area):
+ *   Beckmann: exp(-(mx^2/au^2 + my^2/av^2) / cos^2) / (pi au av cos^4)
+ *   GGX:      1 / (pi au av (mx^2/au^2 + my^2/av^2 + mz^2)^2)
+ * set to 0 where D cos(theta_m) <= 1e-20 (Mitsuba, to avoid numerical
+ * trouble downstream) and for m.z <= 0. */
+double mf_D(const mf_distr *d, vec3 m);
+
+/* Smith's G1(v, m), with t = (au^2 vx^2 + av^2 vy^2) / vz^2:
+ *   Beckmann: a = 1/sqrt(t); 1 if a >= 1.6, else the rational fit
+ *             (3.535 a + 2.181 a^2) / (1 + 2.276 a + 2.577 a^2)
+ *             (< 0.35 % error, Walter et al. 2007 eq. 27);
+ *   GGX:      2 / (1 + sqrt(1 + t)).
+ * 1 when t = 0 (normal incidence); 0 when (v.m) v.z <= 0 (the back of a
+ * microfacet cannot be seen from the front and vice versa). */
+double mf_smith_g1(const mf_distr *d, vec3 v, vec3 m);
+
+/* Separable shadowing-masking G1(wi, m) G1(wo, m). */
+double mf_G(const mf_distr *d, vec3 wi, vec3 wo, vec3 m);
+
+/* Sample a microfacet normal m for incident direction wi (wi.z > 0) and
+ * write its solid-angle density in *pdf (see mf_pdf). */
+vec3 mf_sample(const mf_distr *d, vec3 wi, vec2 u, double *pdf);
+
+/* Density of mf_sample() producing m (solid angle, over m):
+ *   visible:     D_wi(m) = G1(wi, m) |wi.m| D(m) / wi.z
+ *   not visible: D(m) cos(theta_m). */
+double mf_pdf(const mf_distr *d, vec3 wi, vec3 m);
+
+/* Inverse error function on (-1, 1) (double precision: Giles' 2010
+ * approximation refined by Newton steps on erf()). */
+double mf_erfinv(double x);
+
+#endif

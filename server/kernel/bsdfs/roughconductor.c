@@ -1,0 +1,198 @@
+/* `roughconductor`: a rough metal, the Torrance-Sparrow microfacet BRDF
+ * with a Beckmann (default) or GGX distribution.
+ *
+ *   h = normalize(wi + wo),
+ *   f_r cos(theta_o) = F(wi.h; eta, k) D(h) G(wi, wo, h) / (4 cos(theta_i))
+ *                      * specular_reflectance,
+ * zero unless cos(theta_i) > 0 and cos(theta_o) > 0.
+ *
+ * Sampling draws a microfacet normal m (visible normals by default, or
+ * D(m) cos(theta_m)) and reflects wi about it: wo = 2 (wi.m) m - wi, with
+ * the Jacobian dwo/dm = 1 / (4 |wo.m|), so
+ *   pdf(wo) = pdf_m(m) / (4 wo.m),
+ *   weight  = F G1(wo, m)                           (visible normals:
+ *             eval / pdf, since wi.m = wo.m)
+ *           = F G(wi, wo, m) (wi.m) / (cos(theta_i) cos(theta_m))
+ *                                                   (D cos sampling).
+ *
+ * Source: mitsuba3 src/bsdfs/roughconductor.cpp and
+ * include/mitsuba/render/microfacet.h; kernel-behavior.md §2.3. */
+#include <stdlib.h>
+#include <string.h>
+#include <ctype.h>
+
+#include "../scene/loader.h"
+#include "bsdfs_internal.h"
+#include "fresnel.h"
+
+/* Scalar roughness from a texture: luminance, which is the value itself
+ * for a uniform (mono or grey) input, as Mitsuba's eval_1(). */
+static mf_distr distr_at(const roughconductor_bsdf *r, const surface_interaction *si) {
+  double au = col_luminance(tex_eval(r->alpha_u, si));
+  double av = r->alpha_v == r->alpha_u ? au : col_luminance(tex_eval(r->alpha_v, si));
+  return mf_make(r->type, au, av, r->sample_visible);
+}
+
+static color rough_sample(const bsdf *b, const surface_interaction *si, double u1,
+                          vec2 u2, bsdf_sample *bs) {
+  (void)u1;
+  const roughconductor_bsdf *r = (const roughconductor_bsdf *)b;
+  vec3 wi = si->wi;
+  if (!(wi.z > 0.0)) return bsdf_fail(bs);
+  mf_distr d = distr_at(r, si);
+  double pdf_m;
+  vec3 m = mf_sample(&d, wi, u2, &pdf_m);
+  vec3 wo = reflect_about(wi, m);
+  double wo_m = v3_dot(wo, m);
+  if (!(pdf_m > 0.0) || !(wo.z > 0.0) || !(wo_m > 0.0)) return bsdf_fail(bs);
+  bs->wo = wo;
+  bs->pdf = pdf_m / (4.0 * wo_m);
+  bs->eta = 1.0;
+  bs->sampled_type = BSDF_GLOSSY_REFLECTION;
+  double weight;
+  if (d.sample_visible)
+    weight = mf_smith_g1(&d, wo, m);
+  else
+    weight = mf_G(&d, wi, wo, m) * v3_dot(wi, m) / (wi.z * m.z);
+  color eta, k;
+  conductor_ior_eval(&r->ior, si, &eta, &k);
+  color f = fresnel_conductor_col(v3_dot(wi, m), eta, k);
+  return col_mul(col_scale(f, weight), bsdf_factor(r->specular_reflectance, si));
+}
+
+static color rough_eval(const bsdf *b, const surface_interaction *si, vec3 wo) {
+  const roughconductor_bsdf *r = (const roughconductor_bsdf *)b;
+  vec3 wi = si->wi;
+  if (!(wi.z > 0.0) || !(wo.z > 0.0)) return col1(0.0);
+  vec3 h = v3_norm(v3_add(wi, wo));
+  mf_distr d = distr_at(r, si);
+  double D = mf_D(&d, h);
+  if (D == 0.0) return col1(0.0);
+  double value = D * mf_G(&d, wi, wo, h) / (4.0 * wi.z);
+  color eta, k;
+  conductor_ior_eval(&r->ior, si, &eta, &k);
+  color f = fresnel_conductor_col(v3_dot(wi, h), eta, k);
+  return col_mul(col_scale(f, value), bsdf_factor(r->specular_reflectance, si));
+}
+
+static double rough_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
+  const roughconductor_bsdf *r = (const roughconductor_bsdf *)b;
+  vec3 wi = si->wi;
+  if (!(wi.z > 0.0) || !(wo.z > 0.0)) return 0.0;
+  vec3 h = v3_norm(v3_add(wi, wo));
+  double wi_h = v3_dot(wi, h), wo_h = v3_dot(wo, h);
+  if (!(wi_h > 0.0) || !(wo_h > 0.0)) return 0.0;
+  mf_distr d = distr_at(r, si);
+  return mf_pdf(&d, wi, h) / (4.0 * wo_h);
+}
+
+static const bsdf_ops rough_ops = {
+    .sample = rough_sample, .eval = rough_eval, .pdf = rough_pdf};
+
+static void rough_destroy(object *o) { free(o); }
+
+static rsw_status rough_prepare(object *o, const render_ctx *rc, rsw_err *err) {
+  return conductor_ior_prepare(&((roughconductor_bsdf *)o)->ior, rc, err, o->id);
+}
+
+static bool equal_nocase(const char *a, const char *b) {
+  for (; *a && *b; a++, b++)
+    if (tolower((unsigned char)*a) != tolower((unsigned char)*b)) return false;
+  return *a == *b;
+}
+
+/* Distribution and roughness as Mitsuba's MicrofacetDistribution(props):
+ * `distribution` "beckmann" (default) or "ggx" (case-insensitive);
+ * either `alpha` (default 0.1) or both `alpha_u` and `alpha_v`;
+ * `sample_visible` (default true). */
+static rsw_status rough_create(loader *ld, node *n, object **out) {
+  const char *dist;
+  rsw_status st = ld_string(ld, n, "distribution", "beckmann", &dist);
+  if (st != RSW_OK) return st;
+  mf_type type;
+  if (equal_nocase(dist, "beckmann"))
+    type = MF_BECKMANN;
+  else if (equal_nocase(dist, "ggx"))
+    type = MF_GGX;
+  else
+    return ld_fail(ld, n, "distribution", RSW_ERR_INVALID,
+                   "roughconductor: unknown distribution '%s' (expected "
+                   "\"beckmann\" or \"ggx\")", dist);
+
+  texture *au, *av;
+  bool has_u = ld_has(n, "alpha_u"), has_v = ld_has(n, "alpha_v");
+  if (ld_has(n, "alpha")) {
+    if (has_u || has_v)
+      return ld_fail(ld, n, has_u ? "alpha_u" : "alpha_v", RSW_ERR_INVALID,
+                     "roughconductor: give either 'alpha' or 'alpha_u' and "
+                     "'alpha_v', not both");
+    if ((st = ld_texture(ld, n, "alpha", 0.1, 0.0, &au)) != RSW_OK) return st;
+    av = au;
+  } else if (has_u || has_v) {
+    if (!(has_u && has_v))
+      return ld_fail(ld, n, has_u ? "alpha_v" : "alpha_u", RSW_ERR_MISSING,
+                     "roughconductor: 'alpha_u' and 'alpha_v' must be given "
+                     "together");
+    if ((st = ld_texture(ld, n, "alpha_u", 0.1, 0.0, &au)) != RSW_OK) return st;
+    if ((st = ld_texture(ld, n, "alpha_v", 0.1, 0.0, &av)) != RSW_OK) return st;
+  } else {
+    if ((st = ld_texture(ld, n, "alpha", 0.1, 0.0, &au)) != RSW_OK) return st;
+    av = au;
+  }
+
+  bool sample_visible;
+  if ((st = ld_bool(ld, n, "sample_visible", true, &sample_visible)) != RSW_OK) return st;
+  conductor_ior ior;
+  if ((st = conductor_ior_load(ld, n, "roughconductor", &ior)) != RSW_OK) return st;
+  texture *spec;
+  if ((st = ld_texture_opt(ld, n, "specular_reflectance", 0.0, &spec)) != RSW_OK) return st;
+
+  roughconductor_bsdf *r = calloc(1, sizeof *r);
+  if (!r) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "roughconductor: out of memory");
+  r->base.base.plugin = &plugin_roughconductor;
+  r->base.base.id = n->id;
+  r->base.ops = &rough_ops;
+  r->base.flags = BSDF_GLOSSY_REFLECTION;
+  r->ior = ior;
+  r->specular_reflectance = spec;
+  r->type = type;
+  r->alpha_u = au;
+  r->alpha_v = av;
+  r->sample_visible = sample_visible;
+  *out = &r->base.base;
+  return RSW_OK;
+}
+
+const plugin plugin_roughconductor = {
+    .name = "roughconductor",
+    .cls = CLS_BSDF,
+    .create = rough_create,
+    .destroy = rough_destroy,
+    .prepare = rough_prepare,
+    .ops = &rough_ops,
+};
+
+bsdf *roughconductor_new(mf_type type, texture *alpha_u, texture *alpha_v,
+                         bool sample_visible, texture *eta, texture *k,
+                         const ior_conductor *material,
+                         texture *specular_reflectance, const render_ctx *rc) {
+  roughconductor_bsdf *r = calloc(1, sizeof *r);
+  if (!r) return NULL;
+  r->base.base.plugin = &plugin_roughconductor;
+  r->base.ops = &rough_ops;
+  r->base.flags = BSDF_GLOSSY_REFLECTION;
+  r->ior.eta = eta;
+  r->ior.k = k;
+  r->ior.material = material;
+  r->specular_reflectance = specular_reflectance;
+  r->type = type;
+  r->alpha_u = alpha_u;
+  r->alpha_v = alpha_v ? alpha_v : alpha_u;
+  r->sample_visible = sample_visible;
+  render_ctx def = {.variant = VARIANT_MONO, .wavelength = 550.0};
+  if (conductor_ior_prepare(&r->ior, rc ? rc : &def, NULL, NULL) != RSW_OK) {
+    free(r);
+    return NULL;
+  }
+  return &r->base;
+}
