@@ -55,7 +55,7 @@ static bool parse_pos_double(const char *s, double *out) {
 }
 
 static int cmd_render(int argc, char **argv) {
-  const char *scene_path = NULL, *out_path = NULL, *sensor_id = NULL, *variant = NULL;
+  const char *scene_path = NULL, *out_path = NULL, *sensor_id = NULL, *variant_name = NULL;
   scene_define defines[MAX_DEFINES];
   size_t n_defines = 0;
   unsigned long long spp = 0, seed = 0, threads = 0;
@@ -87,7 +87,7 @@ static int cmd_render(int argc, char **argv) {
       i++;
     } else if (strcmp(a, "--variant") == 0) {
       if (!val) return usage_error("render", "%s needs mono or rgb", a);
-      variant = val, i++;
+      variant_name = val, i++;
     } else if (strncmp(a, "-D", 2) == 0) {
       const char *def = a[2] ? a + 2 : val;
       if (!a[2]) i++;
@@ -120,7 +120,7 @@ static int cmd_render(int argc, char **argv) {
   }
   rsw_err err = {0};
   char msg[1200];
-  scene_load_opts lo = {.size = sizeof lo, .variant = variant, .defines = defines, .n_defines = n_defines};
+  scene_load_opts lo = {.size = sizeof lo, .variant = variant_name, .defines = defines, .n_defines = n_defines};
   if (scene_load_file(scene_path, &lo, &sc, &err)) {
     fprintf(stderr, "raysweepd render: %s\n", rsw_err_format(&err, msg, sizeof msg));
     goto out;

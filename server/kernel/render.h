@@ -35,7 +35,7 @@ typedef struct film_image {
   uint32_t spp;
   uint64_t seed;
   double wavelength;
-  variant variant;
+  rsw_variant variant;
 } film_image;
 
 typedef struct render_result_stats {

@@ -51,7 +51,7 @@ typedef struct harness {
   object *obj;
 } harness;
 
-static void h_init(harness *h, node *doc, variant v) {
+static void h_init(harness *h, node *doc, rsw_variant v) {
   memset(h, 0, sizeof *h);
   h->ld.variant = v;
   h->ld.err = &h->err;
@@ -62,7 +62,7 @@ static void h_init(harness *h, node *doc, variant v) {
   h->doc = doc;
 }
 
-static rsw_status h_build(harness *h, node *doc, variant v) {
+static rsw_status h_build(harness *h, node *doc, rsw_variant v) {
   h_init(h, doc, v);
   const plugin *pl = registry_find(doc->type);
   if (!pl) return RSW_ERR_UNKNOWN_PLUGIN;
@@ -510,7 +510,7 @@ static void test_sensor_defaults(void) {
   h_free(&h);
 }
 
-static rsw_status build_film(harness *h, const char *key, const char *value, variant v) {
+static rsw_status build_film(harness *h, const char *key, const char *value, rsw_variant v) {
   node *f = film_node(4, 3);
   if (key) set_str(f, key, value);
   return h_build(h, f, v);

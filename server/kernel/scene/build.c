@@ -740,7 +740,7 @@ static rsw_status scene_finalize(loader *ld, scene *s) {
   return RSW_OK;
 }
 
-static variant parse_variant(const char *name, bool *ok) {
+static rsw_variant parse_variant(const char *name, bool *ok) {
   const char *v = name;
   *ok = true;
   if (!v || strcmp(v, "rgb") == 0 || strcmp(v, "scalar_rgb") == 0) return VARIANT_RGB;
@@ -754,7 +754,7 @@ rsw_status scene_build(node *root, const char *doc_variant, const scene_load_opt
                        rsw_err *err) {
   const char *vname = opts && opts->variant ? opts->variant : doc_variant;
   bool ok;
-  variant var = parse_variant(vname, &ok);
+  rsw_variant var = parse_variant(vname, &ok);
   if (!ok) {
     rsw_status st = rsw_fail(err, RSW_ERR_INVALID, opts && opts->variant ? "--variant" : root->loc,
                              "unknown variant '%s' (expected \"mono\" or \"rgb\")", vname);
