@@ -4,10 +4,10 @@
 #include <stdio.h>
 #include <string.h>
 
-scene *tsup_load(const char *text, const char *variant) {
+scene *tsup_load(const char *text, const char *variant_name) {
   rsw_err err = {0};
   scene *s = NULL;
-  scene_load_opts o = {.size = sizeof o, .variant = variant};
+  scene_load_opts o = {.size = sizeof o, .variant = variant_name};
   const char *c = text;
   while (*c == ' ' || *c == '\n') c++;
   if (scene_load_memory(text, strlen(text), "test-scene", *c == '<', &o, &s, &err)) {
@@ -18,10 +18,10 @@ scene *tsup_load(const char *text, const char *variant) {
   return s;
 }
 
-scene *tsup_load_file(const char *path, const char *variant) {
+scene *tsup_load_file(const char *path, const char *variant_name) {
   rsw_err err = {0};
   scene *s = NULL;
-  scene_load_opts o = {.size = sizeof o, .variant = variant};
+  scene_load_opts o = {.size = sizeof o, .variant = variant_name};
   if (scene_load_file(path, &o, &s, &err)) {
     char buf[1200];
     printf("  scene load failed: %s\n", rsw_err_format(&err, buf, sizeof buf));

@@ -7,9 +7,9 @@
 
 /* Load a JSON (or XML when text starts with '<') scene from memory;
  * prints the error and returns NULL on failure. */
-scene *tsup_load(const char *text, const char *variant);
+scene *tsup_load(const char *text, const char *variant_name);
 /* Same from a file under the repository root. */
-scene *tsup_load_file(const char *path, const char *variant);
+scene *tsup_load_file(const char *path, const char *variant_name);
 /* Render sensor 0 (spp 0 = the scene's); returns false (and prints) on
  * failure. */
 bool tsup_render(scene *s, uint32_t spp, uint64_t seed, int threads, film_image *out);
