@@ -243,6 +243,14 @@ static void test_hdistant_shape_target(void) {
     CHECK_ABS(ps.z, 0.0, 1e-9);
     CHECK(hypot(ps.x, ps.y) <= 1.0 + 1e-9, "target sample off the disk");
   }
+  /* A target without area cannot weight its samples: set_scene fails. */
+  shape *plate = NULL;
+  for (size_t i = 0; i < h.sc.n_objects; i++)
+    if (h.sc.objects[i]->plugin->cls == CLS_SHAPE) plate = (shape *)h.sc.objects[i];
+  REQUIRE(plate, "target shape not adopted by the scene");
+  plate->area = 0.0;
+  CHECK(s->ops->set_scene(s, &h.sc, &h.err) == RSW_ERR_INVALID, "zero-area target accepted");
+  CHECK(strcmp(h.err.where, "m") == 0, "error does not name the sensor: '%s'", h.err.where);
   h_free(&h);
 }
 
