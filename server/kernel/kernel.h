@@ -40,11 +40,11 @@ typedef enum obj_class {
 /* "shape", "bsdf", ... (the XML tag of the class). */
 const char *obj_class_name(obj_class c);
 
-typedef enum variant { VARIANT_RGB, VARIANT_MONO } variant;
+typedef enum rsw_variant { VARIANT_RGB, VARIANT_MONO } rsw_variant;
 
 /* What a render is evaluated at; given to every plugin's prepare(). */
 typedef struct render_ctx {
-  variant variant;
+  rsw_variant variant;
   double wavelength; /* nm; mono only (default 550) */
 } render_ctx;
 
@@ -303,7 +303,7 @@ struct accel;
 
 typedef struct scene {
   object base;
-  variant variant;
+  rsw_variant variant;
   object **objects;      /* every object, for prepare/destroy (owned) */
   size_t n_objects, cap_objects;
   shape **shapes;

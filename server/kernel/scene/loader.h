@@ -13,7 +13,7 @@
 #include "node.h"
 
 typedef struct loader {
-  variant variant;
+  rsw_variant variant;
   rsw_err *err;
   const char *base_dir; /* directory relative file names resolve against */
   node *root;

@@ -1,0 +1,258 @@
+/* The two-level Embree acceleration structure (see accel.h for why two
+ * levels). The only file that includes Embree.
+ *
+ * Triangle meshes are Embree triangle geometries in object space. Spheres
+ * and disks are user geometries whose callbacks intersect the unit sphere /
+ * unit disk in double precision in the instance's object space (Embree
+ * hands the callback the ray already transformed by the instance). */
+#include "accel.h"
+
+#include <embree3/rtcore.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+struct accel {
+  RTCDevice device;
+  RTCScene top;
+  RTCScene *sub; /* one per shape */
+  size_t n_sub;
+  size_t bytes;
+  char error[512]; /* first Embree error seen during a build */
+};
+
+static void on_embree_error(void *user, enum RTCError code, const char *str) {
+  accel *a = user;
+  if (a && !a->error[0]) snprintf(a->error, sizeof a->error, "Embree error %d: %s", (int)code, str ? str : "");
+}
+
+/* ---- user geometry: unit sphere and unit disk ------------------------------------ */
+
+static void unit_bounds(const struct RTCBoundsFunctionArguments *args) {
+  const shape *s = args->geometryUserPtr;
+  struct RTCBounds *b = args->bounds_o;
+  float z = s->geom == GEOM_SPHERE ? 1.0f : 1e-6f;
+  b->lower_x = -1.0f, b->lower_y = -1.0f, b->lower_z = -z;
+  b->upper_x = 1.0f, b->upper_y = 1.0f, b->upper_z = z;
+}
+
+/* Nearest t in (tnear, tfar) where object-space ray (o, d) meets the unit
+ * sphere or unit disk; returns false if none. Normal in object space. */
+static bool unit_hit(geom_kind g, const double o[3], const double d[3], double tnear, double tfar, double *t_out,
+                     double n_out[3]) {
+  if (g == GEOM_SPHERE) {
+    /* |o + t d|^2 = 1: a t^2 + 2 b t + c = 0, solved stably. */
+    double a = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+    double b = o[0] * d[0] + o[1] * d[1] + o[2] * d[2];
+    double c = o[0] * o[0] + o[1] * o[1] + o[2] * o[2] - 1.0;
+    double disc = b * b - a * c;
+    if (disc < 0 || a == 0) return false;
+    double sq = sqrt(disc);
+    double q = b < 0 ? -b + sq : -b - sq; /* q = -(b + sign(b) sq) */
+    double t0 = q / a, t1 = q != 0 ? c / q : t0;
+    if (t0 > t1) {
+      double tmp = t0;
+      t0 = t1;
+      t1 = tmp;
+    }
+    double t = t0 > tnear ? t0 : t1;
+    if (!(t > tnear && t < tfar)) return false;
+    *t_out = t;
+    for (int i = 0; i < 3; i++) n_out[i] = o[i] + t * d[i];
+    return true;
+  }
+  if (d[2] == 0) return false;
+  double t = -o[2] / d[2];
+  if (!(t > tnear && t < tfar)) return false;
+  double x = o[0] + t * d[0], y = o[1] + t * d[1];
+  if (x * x + y * y > 1.0) return false;
+  *t_out = t;
+  n_out[0] = 0, n_out[1] = 0, n_out[2] = 1;
+  return true;
+}
+
+/* Embree's RTCRayN/RTCHitN accessors are C++ only; in C the SOA layout is
+ * addressed directly: RTCRayN is 12 arrays of N 32-bit fields (org_x,
+ * org_y, org_z, tnear, dir_x, dir_y, dir_z, time, tfar, mask, id, flags),
+ * RTCHitN follows it (Ng_x, Ng_y, Ng_z, u, v, primID, geomID, instID[0]). */
+enum { RAY_ORG = 0, RAY_TNEAR = 3, RAY_DIR = 4, RAY_TFAR = 8, RAY_FIELDS = 12 };
+enum { HIT_NG = 0, HIT_U = 3, HIT_V = 4, HIT_PRIM = 5, HIT_GEOM = 6, HIT_INST = 7 };
+#define RAYN_F(p, N, f, i) (((float *)(p))[(size_t)(f) * (N) + (i)])
+#define HITN_F(p, N, f, i) (((float *)(p))[(size_t)(f) * (N) + (i)])
+#define HITN_U(p, N, f, i) (((unsigned *)(p))[(size_t)(f) * (N) + (i)])
+
+static void load_ray(const void *ray, unsigned N, unsigned i, double o[3], double d[3]) {
+  for (int k = 0; k < 3; k++) {
+    o[k] = RAYN_F(ray, N, RAY_ORG + k, i);
+    d[k] = RAYN_F(ray, N, RAY_DIR + k, i);
+  }
+}
+
+static void unit_intersect(const struct RTCIntersectFunctionNArguments *args) {
+  const shape *s = args->geometryUserPtr;
+  unsigned N = args->N;
+  void *ray = args->rayhit;
+  void *hit = (float *)args->rayhit + (size_t)RAY_FIELDS * N;
+  for (unsigned i = 0; i < N; i++) {
+    if (!args->valid[i]) continue;
+    double o[3], d[3], t, n[3];
+    load_ray(ray, N, i, o, d);
+    if (!unit_hit(s->geom, o, d, RAYN_F(ray, N, RAY_TNEAR, i), RAYN_F(ray, N, RAY_TFAR, i), &t, n)) continue;
+    RAYN_F(ray, N, RAY_TFAR, i) = (float)t;
+    for (int k = 0; k < 3; k++) HITN_F(hit, N, HIT_NG + k, i) = (float)n[k];
+    HITN_F(hit, N, HIT_U, i) = 0;
+    HITN_F(hit, N, HIT_V, i) = 0;
+    HITN_U(hit, N, HIT_PRIM, i) = args->primID;
+    HITN_U(hit, N, HIT_GEOM, i) = args->geomID;
+    HITN_U(hit, N, HIT_INST, i) = args->context->instID[0];
+  }
+}
+
+static void unit_occluded(const struct RTCOccludedFunctionNArguments *args) {
+  const shape *s = args->geometryUserPtr;
+  unsigned N = args->N;
+  void *ray = args->ray;
+  for (unsigned i = 0; i < N; i++) {
+    if (!args->valid[i]) continue;
+    double o[3], d[3], t, n[3];
+    load_ray(ray, N, i, o, d);
+    if (unit_hit(s->geom, o, d, RAYN_F(ray, N, RAY_TNEAR, i), RAYN_F(ray, N, RAY_TFAR, i), &t, n))
+      RAYN_F(ray, N, RAY_TFAR, i) = -INFINITY;
+  }
+}
+
+/* ---- build ------------------------------------------------------------------------------ */
+
+static rsw_status embree_fail(accel *a, rsw_err *err, const char *where, const char *what) {
+  return rsw_fail(err, RSW_ERR_EMBREE, where, "%s%s%s", what, a->error[0] ? ": " : "", a->error);
+}
+
+static RTCGeometry shape_geometry(accel *a, const shape *s) {
+  RTCGeometry g;
+  if (s->geom == GEOM_MESH) {
+    g = rtcNewGeometry(a->device, RTC_GEOMETRY_TYPE_TRIANGLE);
+    if (!g) return NULL;
+    float *v = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float),
+                                       s->mesh.n_verts);
+    unsigned *ix = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned),
+                                           s->mesh.n_faces);
+    if (!v || !ix) {
+      rtcReleaseGeometry(g);
+      return NULL;
+    }
+    memcpy(v, s->mesh.pos, 3 * (size_t)s->mesh.n_verts * sizeof(float));
+    memcpy(ix, s->mesh.faces, 3 * (size_t)s->mesh.n_faces * sizeof(unsigned));
+    a->bytes += 3 * (size_t)s->mesh.n_verts * sizeof(float) + 3 * (size_t)s->mesh.n_faces * sizeof(unsigned);
+  } else {
+    g = rtcNewGeometry(a->device, RTC_GEOMETRY_TYPE_USER);
+    if (!g) return NULL;
+    rtcSetGeometryUserPrimitiveCount(g, 1);
+    rtcSetGeometryUserData(g, (void *)s);
+    rtcSetGeometryBoundsFunction(g, unit_bounds, NULL);
+    rtcSetGeometryIntersectFunction(g, unit_intersect);
+    rtcSetGeometryOccludedFunction(g, unit_occluded);
+  }
+  rtcCommitGeometry(g);
+  return g;
+}
+
+static void set_instance_transform(RTCGeometry inst, const xform *t) {
+  float m[12];
+  for (int r = 0; r < 3; r++)
+    for (int c = 0; c < 4; c++) m[4 * r + c] = (float)t->m[r][c];
+  rtcSetGeometryTransform(inst, 0, RTC_FORMAT_FLOAT3X4_ROW_MAJOR, m);
+}
+
+rsw_status accel_build(scene *s, rsw_err *err) {
+  accel *a = calloc(1, sizeof *a);
+  if (!a) return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+  a->device = rtcNewDevice(NULL);
+  if (!a->device) {
+    free(a);
+    return rsw_fail(err, RSW_ERR_EMBREE, "", "cannot create the Embree device");
+  }
+  rtcSetDeviceErrorFunction(a->device, on_embree_error, a);
+  s->accel = a;
+  a->top = rtcNewScene(a->device);
+  a->sub = calloc(s->n_shapes ? s->n_shapes : 1, sizeof *a->sub);
+  if (!a->top || !a->sub) return embree_fail(a, err, "", "cannot create the top-level scene");
+  a->n_sub = s->n_shapes;
+  for (size_t i = 0; i < s->n_shapes; i++) {
+    const shape *sh = s->shapes[i];
+    RTCScene sub = rtcNewScene(a->device);
+    if (!sub) return embree_fail(a, err, sh->base.id, "cannot create a shape scene");
+    a->sub[i] = sub;
+    rtcSetSceneBuildQuality(sub, RTC_BUILD_QUALITY_HIGH);
+    RTCGeometry g = shape_geometry(a, sh);
+    if (!g) return embree_fail(a, err, sh->base.id, "cannot create geometry");
+    rtcAttachGeometryByID(sub, g, 0);
+    rtcReleaseGeometry(g);
+    rtcCommitScene(sub);
+    RTCGeometry inst = rtcNewGeometry(a->device, RTC_GEOMETRY_TYPE_INSTANCE);
+    if (!inst) return embree_fail(a, err, sh->base.id, "cannot create an instance");
+    rtcSetGeometryInstancedScene(inst, sub);
+    set_instance_transform(inst, &sh->to_world);
+    rtcCommitGeometry(inst);
+    rtcAttachGeometryByID(a->top, inst, (unsigned)i);
+    rtcReleaseGeometry(inst);
+  }
+  rtcCommitScene(a->top);
+  if (a->error[0]) return embree_fail(a, err, "", "acceleration structure build failed");
+  return RSW_OK;
+}
+
+void accel_free(accel *a) {
+  if (!a) return;
+  if (a->top) rtcReleaseScene(a->top);
+  for (size_t i = 0; i < a->n_sub; i++)
+    if (a->sub[i]) rtcReleaseScene(a->sub[i]);
+  free(a->sub);
+  if (a->device) rtcReleaseDevice(a->device);
+  free(a);
+}
+
+size_t accel_memory(const accel *a) { return a ? a->bytes : 0; }
+
+/* ---- queries ------------------------------------------------------------------------------- */
+
+static void fill_ray(struct RTCRay *ray, const ray3 *r) {
+  ray->org_x = (float)r->o.x;
+  ray->org_y = (float)r->o.y;
+  ray->org_z = (float)r->o.z;
+  ray->dir_x = (float)r->d.x;
+  ray->dir_y = (float)r->d.y;
+  ray->dir_z = (float)r->d.z;
+  ray->tnear = (float)r->tmin;
+  ray->tfar = r->tmax >= 3.0e38 ? INFINITY : (float)r->tmax;
+  ray->time = 0;
+  ray->mask = 0xFFFFFFFFu;
+  ray->id = 0;
+  ray->flags = 0;
+}
+
+bool accel_intersect(const accel *a, const ray3 *r, accel_hit *h) {
+  struct RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  struct RTCRayHit rh;
+  fill_ray(&rh.ray, r);
+  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  rtcIntersect1(a->top, &ctx, &rh);
+  if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
+  h->t = rh.ray.tfar;
+  h->shape = rh.hit.instID[0];
+  h->prim = rh.hit.primID;
+  h->u = rh.hit.u;
+  h->v = rh.hit.v;
+  return true;
+}
+
+bool accel_occluded(const accel *a, const ray3 *r) {
+  struct RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  struct RTCRay ray;
+  fill_ray(&ray, r);
+  rtcOccluded1(a->top, &ctx, &ray);
+  return ray.tfar < 0;
+}

@@ -1,0 +1,38 @@
+/* Ray queries on the two-level acceleration structure. accel.c is the only
+ * file that includes Embree.
+ *
+ * Layout (decided once, relied on by parameter updates): every shape is its
+ * own Embree scene holding one geometry in object space, instanced into the
+ * top-level scene with the shape's to_world as instance transform (instance
+ * id = shape index). Debian's Embree 3.13 allows one instance level and only
+ * honours per-geometry refit inside such a two-level scene; so a rigid
+ * to_world change is a top-level rebuild, a vertex move a refit of that
+ * mesh's own BVH. */
+#ifndef RSW_ACCEL_H
+#define RSW_ACCEL_H
+
+#include "kernel.h"
+
+typedef struct accel accel;
+
+typedef struct accel_hit {
+  double t;         /* distance along the (unnormalised) ray direction */
+  uint32_t shape;   /* index into scene->shapes */
+  uint32_t prim;    /* triangle index (meshes), 0 for analytic shapes */
+  double u, v;      /* barycentrics for triangles (p = (1-u-v) p0 + u p1 + v p2) */
+} accel_hit;
+
+/* Build for all shapes of s (s->accel is set). Thread count for the
+ * Embree build is Embree's default. */
+rsw_status accel_build(scene *s, rsw_err *err);
+void accel_free(accel *a);
+
+/* Closest hit on [r->tmin, r->tmax]; false if none. Thread-safe. */
+bool accel_intersect(const accel *a, const ray3 *r, accel_hit *h);
+/* Any hit on [r->tmin, r->tmax]. Thread-safe. */
+bool accel_occluded(const accel *a, const ray3 *r);
+
+/* Bytes held by Embree buffers we allocated (for reporting). */
+size_t accel_memory(const accel *a);
+
+#endif

@@ -1,0 +1,91 @@
+/* `directional`: a distant source of uniform irradiance from one direction
+ * (mitsuba3 src/emitters/directional.cpp; kernel-behavior.md §2.3).
+ *
+ * `direction` is the direction light travels ((0,0,-1): sun at zenith);
+ * or `to_world` (exclusive) maps local +z onto it. `irradiance` is per unit
+ * area normal to the beam, W m^-2 [nm^-1], and must not vary spatially.
+ * Next-event estimation: a delta direction, pdf 1, value = irradiance; the
+ * shadow ray ends 2 max(R, |p - c|) away (R, c: the scene's bounding
+ * sphere). Never hit by BSDF-sampled rays. */
+#include <stdlib.h>
+
+#include "../scene/loader.h"
+#include "../textures/texture.h"
+
+typedef struct directional {
+  emitter base;
+  texture *irradiance;
+  vec3 d; /* unit propagation direction */
+  vec3 center;
+  double radius;
+} directional;
+
+static color dir_sample(const emitter *e, const surface_interaction *ref, vec2 u, direction_sample *ds) {
+  const directional *dl = (const directional *)e;
+  (void)u;
+  double dist = 2.0 * fmax(dl->radius, v3_len(v3_sub(ref->p, dl->center)));
+  ds->d = v3_neg(dl->d);
+  ds->dist = dist;
+  ds->p = v3_fma(ref->p, dist, ds->d);
+  ds->n = dl->d;
+  ds->pdf = 1.0;
+  ds->delta = true;
+  return tex_eval(dl->irradiance, ref);
+}
+
+static double dir_pdf(const emitter *e, const surface_interaction *ref, const direction_sample *ds) {
+  (void)e, (void)ref, (void)ds;
+  return 0.0; /* a delta distribution is never hit by chance */
+}
+
+static color dir_eval(const emitter *e, const surface_interaction *hit, vec3 d) {
+  (void)e, (void)hit, (void)d;
+  return col1(0);
+}
+
+static void dir_set_scene(emitter *e, const scene *s) {
+  directional *dl = (directional *)e;
+  dl->center = s->bsphere_center;
+  dl->radius = s->bsphere_radius;
+}
+
+static const emitter_ops directional_ops = {
+    .sample_direction = dir_sample, .pdf_direction = dir_pdf, .eval = dir_eval, .set_scene = dir_set_scene};
+
+static void dir_destroy(object *o) { free(o); }
+
+static rsw_status dir_create(loader *ld, node *n, object **out) {
+  directional *dl = calloc(1, sizeof *dl);
+  if (!dl) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+  dl->base.ops = &directional_ops;
+  dl->base.flags = EMITTER_DELTA_DIRECTION;
+  rsw_status st = ld_float_range(ld, n, "sampling_weight", 1.0, 0.0, INFINITY, &dl->base.sampling_weight);
+  if (!st) st = ld_texture(ld, n, "irradiance", 1.0, 0.0, &dl->irradiance);
+  color tmp;
+  if (!st && !uniform_texture_value(dl->irradiance, &tmp))
+    st = ld_fail(ld, n, "irradiance", RSW_ERR_INVALID,
+                 "irradiance must not vary spatially (give a number, rgb or spectrum, not a texture)");
+  bool has_dir = false, has_xf = false;
+  vec3 d;
+  xform xf;
+  if (!st) st = ld_vec3(ld, n, "direction", v3(0, 0, 1), &d, &has_dir);
+  if (!st) st = ld_transform(ld, n, "to_world", &xf, &has_xf);
+  if (!st && has_dir && has_xf)
+    st = ld_fail(ld, n, "direction", RSW_ERR_INVALID, "give either 'direction' or 'to_world', not both");
+  if (!st && has_dir && !(v3_len(d) > 0))
+    st = ld_fail(ld, n, "direction", RSW_ERR_INVALID, "direction must be non-zero");
+  if (st) {
+    free(dl);
+    return st;
+  }
+  dl->d = has_xf ? v3_norm(xf_vector(&xf, v3(0, 0, 1))) : v3_norm(d);
+  if (!(v3_len(dl->d) > 0)) {
+    free(dl);
+    return ld_fail(ld, n, "to_world", RSW_ERR_INVALID, "to_world maps +z to a zero vector");
+  }
+  *out = &dl->base.base;
+  return RSW_OK;
+}
+
+const plugin plugin_directional = {
+    .name = "directional", .cls = CLS_EMITTER, .create = dir_create, .destroy = dir_destroy, .ops = &directional_ops};

@@ -1,0 +1,182 @@
+/* `hdrfilm`: the film description of a sensor (mitsuba3
+ * src/films/hdrfilm.cpp, src/render/film.cpp; kernel-behavior.md §2.3).
+ *
+ * Only the description lives here: size, pixel and component format, the
+ * reconstruction filter. The renderer owns the pixel buffer and writes
+ * OpenEXR through image_exr; this film writes nothing itself.
+ *
+ * Defaults: width 768, height 576, file_format "openexr", pixel_format
+ * "rgb" (forced to "luminance" in mono, as Mitsuba does, with no error),
+ * component_format "float16", crop = the whole film, sample_border false,
+ * rfilter `gaussian`. What Mitsuba accepts but this kernel does not
+ * produce (alpha / XYZ pixel formats, uint32 components, RGBE / PFM files,
+ * partial crop windows, border sampling) is RSW_ERR_UNSUPPORTED. */
+#include <stdlib.h>
+#include <strings.h>
+
+#include "../scene/loader.h"
+
+/* Bounds that keep a hostile document from asking for a huge buffer. */
+#define HDRFILM_MAX_DIM 65536
+#define HDRFILM_MAX_PIXELS (1LL << 26)
+
+typedef struct hdrfilm {
+  film base;
+  pixel_format requested; /* what the document asked for (before mono) */
+} hdrfilm;
+
+static void hdrfilm_destroy(object *o) { free(o); }
+
+/* The variant is known per render: mono forces one luminance channel. */
+static rsw_status hdrfilm_prepare(object *o, const render_ctx *rc, rsw_err *err) {
+  (void)err;
+  hdrfilm *f = (hdrfilm *)o;
+  f->base.pixel_format = rc->variant == VARIANT_MONO ? PIXFMT_LUMINANCE : f->requested;
+  return RSW_OK;
+}
+
+static rsw_status hdrfilm_create(loader *ld, node *n, object **out);
+
+const plugin plugin_hdrfilm = {
+    .name = "hdrfilm",
+    .cls = CLS_FILM,
+    .create = hdrfilm_create,
+    .destroy = hdrfilm_destroy,
+    .prepare = hdrfilm_prepare,
+    .ops = NULL,
+};
+
+typedef struct name_code {
+  const char *name;
+  int code; /* >= 0: value; -1: known to Mitsuba but unsupported here */
+} name_code;
+
+/* The entry named `value` (case-insensitive, as Mitsuba lower-cases these
+ * strings), or NULL. */
+static const name_code *find_name(const char *value, const name_code *table,
+                                  size_t count) {
+  for (size_t i = 0; i < count; i++)
+    if (strcasecmp(value, table[i].name) == 0) return &table[i];
+  return NULL;
+}
+
+/* Look `value` up: unknown names are invalid, names Mitsuba knows but this
+ * kernel does not produce are unsupported. */
+static rsw_status lookup(loader *ld, node *n, const char *key, const char *value,
+                         const name_code *table, size_t count, const char *valid,
+                         int *out) {
+  const name_code *e = find_name(value, table, count);
+  if (!e)
+    return ld_fail(ld, n, key, RSW_ERR_INVALID, "hdrfilm: unknown %s '%s' (supported: %s)",
+                   key, value, valid);
+  if (e->code < 0)
+    return ld_fail(ld, n, key, RSW_ERR_UNSUPPORTED,
+                   "hdrfilm: %s '%s' is not supported (supported: %s)", key, value, valid);
+  *out = e->code;
+  return RSW_OK;
+}
+
+static const name_code file_formats[] = {
+    {"openexr", 0}, {"exr", 0}, {"rgbe", -1}, {"pfm", -1}};
+static const name_code pixel_formats[] = {
+    {"rgb", PIXFMT_RGB}, {"luminance", PIXFMT_LUMINANCE}, {"rgba", -1},
+    {"luminance_alpha", -1}, {"xyz", -1}, {"xyza", -1}};
+static const name_code component_formats[] = {
+    {"float16", COMPFMT_FLOAT16}, {"float32", COMPFMT_FLOAT32}, {"uint32", -1}};
+#define COUNT(a) (sizeof(a) / sizeof((a)[0]))
+
+static rsw_status hdrfilm_read(loader *ld, node *n, hdrfilm *f) {
+  long long w = 0, h = 0;
+  rsw_status st = ld_int(ld, n, "width", 768, 1, HDRFILM_MAX_DIM, &w);
+  if (st == RSW_OK) st = ld_int(ld, n, "height", 576, 1, HDRFILM_MAX_DIM, &h);
+  if (st != RSW_OK) return st;
+  if (w * h > HDRFILM_MAX_PIXELS)
+    return ld_fail(ld, n, NULL, RSW_ERR_LIMIT, "hdrfilm: %lldx%lld pixels exceed the limit of %lld",
+                   w, h, HDRFILM_MAX_PIXELS);
+  f->base.width = (int)w;
+  f->base.height = (int)h;
+
+  /* Crop window (film.cpp): must lie inside the film; only the full film is
+   * rendered here. */
+  long long cx = 0, cy = 0, cw = 0, ch = 0;
+  st = ld_int(ld, n, "crop_offset_x", 0, 0, HDRFILM_MAX_DIM, &cx);
+  if (st == RSW_OK) st = ld_int(ld, n, "crop_offset_y", 0, 0, HDRFILM_MAX_DIM, &cy);
+  if (st == RSW_OK) st = ld_int(ld, n, "crop_width", w, 1, HDRFILM_MAX_DIM, &cw);
+  if (st == RSW_OK) st = ld_int(ld, n, "crop_height", h, 1, HDRFILM_MAX_DIM, &ch);
+  if (st != RSW_OK) return st;
+  if (cx + cw > w || cy + ch > h)
+    return ld_fail(ld, n, NULL, RSW_ERR_INVALID,
+                   "hdrfilm: invalid crop window (offset %lld,%lld size %lldx%lld on a "
+                   "%lldx%lld film)",
+                   cx, cy, cw, ch, w, h);
+  if (cx != 0 || cy != 0 || cw != w || ch != h)
+    return ld_fail(ld, n, NULL, RSW_ERR_UNSUPPORTED,
+                   "hdrfilm: crop windows other than the whole film are not supported");
+
+  bool flag = false;
+  st = ld_bool(ld, n, "sample_border", false, &flag);
+  if (st != RSW_OK) return st;
+  if (flag)
+    return ld_fail(ld, n, "sample_border", RSW_ERR_UNSUPPORTED,
+                   "hdrfilm: sample_border = true is not supported");
+  /* compensate (Kahan summation) changes nothing when the renderer
+   * accumulates in double; banner is accepted and ignored as in Mitsuba. */
+  st = ld_bool(ld, n, "compensate", false, &flag);
+  if (st == RSW_OK) st = ld_bool(ld, n, "banner", false, &flag);
+  if (st != RSW_OK) return st;
+
+  const char *s = NULL;
+  int code = 0;
+  st = ld_string(ld, n, "file_format", "openexr", &s);
+  if (st == RSW_OK)
+    st = lookup(ld, n, "file_format", s, file_formats, COUNT(file_formats), "openexr", &code);
+  if (st != RSW_OK) return st;
+
+  st = ld_string(ld, n, "pixel_format", "rgb", &s);
+  if (st != RSW_OK) return st;
+  if (ld->variant == VARIANT_MONO) {
+    /* Mitsuba forces Y in monochrome variants whatever was asked (with a
+     * warning); a name Mitsuba does not know is still an error here. */
+    if (!find_name(s, pixel_formats, COUNT(pixel_formats)))
+      return ld_fail(ld, n, "pixel_format", RSW_ERR_INVALID,
+                     "hdrfilm: unknown pixel_format '%s'", s);
+    code = PIXFMT_LUMINANCE;
+  } else {
+    st = lookup(ld, n, "pixel_format", s, pixel_formats, COUNT(pixel_formats),
+                "rgb, luminance", &code);
+    if (st != RSW_OK) return st;
+  }
+  f->requested = (pixel_format)code;
+  f->base.pixel_format = ld->variant == VARIANT_MONO ? PIXFMT_LUMINANCE : f->requested;
+
+  st = ld_string(ld, n, "component_format", "float16", &s);
+  if (st == RSW_OK)
+    st = lookup(ld, n, "component_format", s, component_formats, COUNT(component_formats),
+                "float16, float32", &code);
+  if (st != RSW_OK) return st;
+  f->base.component_format = (component_format)code;
+
+  object *o = NULL;
+  st = ld_child(ld, n, NULL, CLS_RFILTER, &o);
+  if (st != RSW_OK) return st;
+  if (!o) {
+    st = ld_create_default(ld, "gaussian", CLS_RFILTER, "rfilter", &o);
+    if (st != RSW_OK) return st;
+  }
+  f->base.filter = (rfilter *)o;
+  return RSW_OK;
+}
+
+static rsw_status hdrfilm_create(loader *ld, node *n, object **out) {
+  hdrfilm *f = calloc(1, sizeof *f);
+  if (!f) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+  f->base.base.plugin = &plugin_hdrfilm;
+  f->base.base.id = n->id;
+  rsw_status st = hdrfilm_read(ld, n, f);
+  if (st != RSW_OK) {
+    free(f);
+    return st;
+  }
+  *out = &f->base.base;
+  return RSW_OK;
+}

@@ -1,0 +1,177 @@
+/* `path`: unidirectional path tracer with next-event estimation and
+ * multiple importance sampling, following Mitsuba 3's path integrator loop
+ * (mitsuba3 src/integrators/path.cpp; kernel-behavior.md §2.4).
+ *
+ * Estimator: L = sum over path vertices of T * (Le w_bsdf + NEE w_em), with
+ * T the product of BSDF sample weights f |cos| / pdf, power-heuristic MIS
+ * weights w(a, b) = a^2 / (a^2 + b^2) between emitter sampling (solid-angle
+ * pdf times the emitter selection probability) and BSDF sampling. Delta
+ * emitters and delta BSDF lobes take weight 1 on their only strategy.
+ * Russian roulette from depth rr_depth with survival probability
+ * q = min(max(T) eta^2, 0.95). */
+#include <stdlib.h>
+
+#include "../accel.h"
+#include "../scene/loader.h"
+#include "../shapes/shape.h"
+
+static inline double mis_weight(double a, double b) {
+  a *= a;
+  b *= b;
+  double w = a / (a + b);
+  return isfinite(w) ? w : 0.0;
+}
+
+/* Mitsuba's spawn_ray: offset the origin along the geometric normal, on
+ * the side of the new direction, by (1 + max|p|) RayEpsilon. */
+static ray3 spawn_ray(const surface_interaction *si, vec3 d) {
+  double mag = (1.0 + v3_max_abs(si->p)) * RSW_RAY_EPSILON;
+  vec3 off = v3_scale(si->ng, v3_dot(si->ng, d) >= 0 ? mag : -mag);
+  ray3 r = {v3_add(si->p, off), d, 0.0, INFINITY};
+  return r;
+}
+
+static ray3 spawn_ray_to(const surface_interaction *si, vec3 d, double dist) {
+  ray3 r = spawn_ray(si, d);
+  /* Stop short of the target by ShadowEpsilon (relative), as Mitsuba. */
+  r.tmax = isfinite(dist) ? dist * (1.0 - RSW_SHADOW_EPSILON) : INFINITY;
+  return r;
+}
+
+static bool intersect(const scene *sc, const ray3 *r, surface_interaction *si, render_stats *stats) {
+  accel_hit h;
+  stats->rays++;
+  if (!accel_intersect(sc->accel, r, &h)) return false;
+  shape_fill_interaction(sc->shapes[h.shape], r, &h, si);
+  return true;
+}
+
+/* Pick an emitter proportionally to sampling_weight; returns its index and
+ * the selection probability. */
+static size_t pick_emitter(const scene *sc, double u, double *prob) {
+  double t = u * sc->emitter_weight_sum;
+  size_t lo = 0, hi = sc->n_emitters - 1;
+  while (lo < hi) {
+    size_t mid = (lo + hi) / 2;
+    if (sc->emitter_cdf[mid] <= t)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  *prob = sc->emitters[lo]->sampling_weight / sc->emitter_weight_sum;
+  return lo;
+}
+
+static double emitter_prob(const scene *sc, const emitter *e) {
+  return sc->emitter_weight_sum > 0 ? e->sampling_weight / sc->emitter_weight_sum : 0.0;
+}
+
+static color path_Li(const integrator *it, const scene *sc, sampler_state *st, ray3 ray, render_stats *stats) {
+  const sampler_ops *sops = st->s->ops;
+  color L = col1(0), T = col1(1);
+  if (it->max_depth == 0) return L;
+  double eta = 1.0, prev_pdf = 1.0;
+  bool prev_delta = true;
+  surface_interaction si, prev_si;
+  int depth = 0;
+  bool hit = intersect(sc, &ray, &si, stats);
+  for (;;) {
+    /* Emission seen by this ray (area light or the environment). */
+    bool visible_emitter = !(it->hide_emitters && depth == 0);
+    if (!hit) {
+      const emitter *env = sc->environment;
+      if (env && visible_emitter) {
+        double em_pdf = 0.0;
+        if (!prev_delta) {
+          direction_sample ds = {.d = v3_norm(ray.d), .dist = INFINITY};
+          em_pdf = env->ops->pdf_direction(env, &prev_si, &ds) * emitter_prob(sc, env);
+        }
+        color Le = env->ops->eval(env, NULL, ray.d);
+        L = col_add(L, col_scale(col_mul(T, Le), mis_weight(prev_pdf, em_pdf)));
+      }
+      break;
+    }
+    const emitter *em = si.shape->emitter;
+    if (em && visible_emitter) {
+      color Le = em->ops->eval(em, &si, ray.d);
+      if (!col_is_black(Le)) {
+        double em_pdf = 0.0;
+        if (!prev_delta) {
+          direction_sample ds = {.p = si.p, .n = si.ng, .d = v3_norm(ray.d), .dist = si.t * v3_len(ray.d)};
+          em_pdf = em->ops->pdf_direction(em, &prev_si, &ds) * emitter_prob(sc, em);
+        }
+        L = col_add(L, col_scale(col_mul(T, Le), mis_weight(prev_pdf, em_pdf)));
+      }
+    }
+    if (!(it->max_depth < 0 || depth + 1 < it->max_depth)) break;
+    const bsdf *b = si.shape->bsdf;
+
+    /* Next-event estimation towards one emitter. */
+    if ((b->flags & BSDF_SMOOTH) && sc->n_emitters > 0) {
+      double pe;
+      size_t k = pick_emitter(sc, sops->next_1d(st), &pe);
+      const emitter *e = sc->emitters[k];
+      direction_sample ds;
+      color value = e->ops->sample_direction(e, &si, sops->next_2d(st), &ds);
+      if (ds.pdf > 0 && !col_is_black(value)) {
+        ray3 sr = spawn_ray_to(&si, ds.d, ds.dist);
+        stats->shadow_rays++;
+        if (!accel_occluded(sc->accel, &sr)) {
+          vec3 wo = frame_to_local(&si.sh, ds.d);
+          color f = b->ops->eval(b, &si, wo);
+          if (!col_is_black(f)) {
+            double w = ds.delta ? 1.0 : mis_weight(ds.pdf * pe, b->ops->pdf(b, &si, wo));
+            L = col_add(L, col_scale(col_mul(T, col_mul(f, value)), w / pe));
+          }
+        }
+      }
+    }
+
+    /* Continue the path by sampling the BSDF. */
+    bsdf_sample bs;
+    double u1 = sops->next_1d(st);
+    vec2 u2 = sops->next_2d(st);
+    color weight = b->ops->sample(b, &si, u1, u2, &bs);
+    if (!(bs.pdf > 0) || col_is_black(weight)) break;
+    vec3 wo_world = frame_to_world(&si.sh, bs.wo);
+    ray = spawn_ray(&si, wo_world);
+    T = col_mul(T, weight);
+    eta *= bs.eta;
+    prev_si = si;
+    prev_pdf = bs.pdf;
+    prev_delta = (bs.sampled_type & BSDF_DELTA) != 0;
+    depth++;
+    if (depth >= it->rr_depth) {
+      double q = fmin(col_max(T) * eta * eta, 0.95);
+      if (!(sops->next_1d(st) < q)) break;
+      T = col_scale(T, 1.0 / q);
+    }
+    if (!(col_max(T) > 0)) break;
+    hit = intersect(sc, &ray, &si, stats);
+  }
+  return L;
+}
+
+static const integrator_ops path_ops = {.Li = path_Li};
+
+static void path_destroy(object *o) { free(o); }
+
+static rsw_status path_create(loader *ld, node *n, object **out) {
+  integrator *it = calloc(1, sizeof *it);
+  if (!it) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+  it->ops = &path_ops;
+  long long md, rr;
+  rsw_status st = ld_int(ld, n, "max_depth", -1, -1, 1 << 30, &md);
+  if (!st) st = ld_int(ld, n, "rr_depth", 5, 1, 1 << 30, &rr);
+  if (!st) st = ld_bool(ld, n, "hide_emitters", false, &it->hide_emitters);
+  if (st) {
+    free(it);
+    return st;
+  }
+  it->max_depth = (int)md;
+  it->rr_depth = (int)rr;
+  *out = &it->base;
+  return RSW_OK;
+}
+
+const plugin plugin_path = {.name = "path", .cls = CLS_INTEGRATOR, .create = path_create, .destroy = path_destroy, .ops = &path_ops};

@@ -1,0 +1,300 @@
+/* Tile-parallel rendering with a deterministic result (see render.h).
+ *
+ * Each pixel (ix, iy) takes spp samples; sample s draws, in order, a 2-D
+ * film jitter, a 2-D aperture sample, then whatever the integrator needs
+ * (Mitsuba's render_sample order, kernel-behavior.md §1.1). The film sample
+ * is u = ((ix, iy) + jitter) / (W, H). The sample's contribution w L is
+ * splatted with the film's reconstruction filter: with the box filter of
+ * radius 0.5 it lands in its own pixel with weight 1 (Mitsuba ignores the
+ * jitter for placement), so a pixel is the plain mean of its samples; other
+ * filters spread it over the pixels whose centres lie within the radius,
+ * and a pixel is sum(f w L) / sum(f). */
+#include "render.h"
+
+#include <pthread.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "scene/scene.h"
+
+#define TILE 16
+
+typedef struct tile_buf {
+  int x0, y0, w, h; /* region covered, margin included, clipped to film */
+  double *acc;      /* w*h*4: sum(f wL) rgb, sum(f) */
+} tile_buf;
+
+typedef struct job {
+  scene *sc;
+  const sensor *se;
+  const film *fm;
+  const render_opts *opts;
+  uint32_t spp;
+  int W, H, tiles_x, tiles_y;
+  size_t n_tiles;
+  int margin; /* pixels a splat can reach beyond its own */
+  bool box;   /* box filter of radius 0.5: own pixel only */
+  double *film_acc; /* W*H*4 */
+  /* Work distribution and ordered merge. */
+  pthread_mutex_t lock;
+  size_t next_tile;
+  size_t next_commit;
+  tile_buf **done;  /* finished, not yet merged */
+  bool failed;
+  /* Stats (merged under lock). */
+  render_stats rays;
+  uint64_t samples, invalid;
+} job;
+
+static void splat(const job *jb, tile_buf *tb, double px, double py, color v) {
+  if (jb->box) {
+    int ix = (int)px, iy = (int)py;
+    if (ix >= jb->W) ix = jb->W - 1;
+    if (iy >= jb->H) iy = jb->H - 1;
+    double *a = &tb->acc[4 * ((size_t)(iy - tb->y0) * tb->w + (ix - tb->x0))];
+    a[0] += v.c[0], a[1] += v.c[1], a[2] += v.c[2], a[3] += 1.0;
+    return;
+  }
+  const rfilter *f = jb->fm->filter;
+  double r = f->radius;
+  int xlo = (int)ceil(px - r - 0.5), xhi = (int)floor(px + r - 0.5);
+  int ylo = (int)ceil(py - r - 0.5), yhi = (int)floor(py + r - 0.5);
+  if (xlo < tb->x0) xlo = tb->x0;
+  if (ylo < tb->y0) ylo = tb->y0;
+  if (xhi > tb->x0 + tb->w - 1) xhi = tb->x0 + tb->w - 1;
+  if (yhi > tb->y0 + tb->h - 1) yhi = tb->y0 + tb->h - 1;
+  for (int y = ylo; y <= yhi; y++) {
+    double fy = f->eval(f, py - (y + 0.5));
+    if (fy == 0) continue;
+    for (int x = xlo; x <= xhi; x++) {
+      double wgt = fy * f->eval(f, px - (x + 0.5));
+      if (wgt == 0) continue;
+      double *a = &tb->acc[4 * ((size_t)(y - tb->y0) * tb->w + (x - tb->x0))];
+      a[0] += wgt * v.c[0], a[1] += wgt * v.c[1], a[2] += wgt * v.c[2], a[3] += wgt;
+    }
+  }
+}
+
+static tile_buf *render_tile(job *jb, size_t t, render_stats *rs, uint64_t *samples, uint64_t *invalid) {
+  int tx = (int)(t % (size_t)jb->tiles_x), ty = (int)(t / (size_t)jb->tiles_x);
+  int px0 = tx * TILE, py0 = ty * TILE;
+  int px1 = px0 + TILE < jb->W ? px0 + TILE : jb->W;
+  int py1 = py0 + TILE < jb->H ? py0 + TILE : jb->H;
+  tile_buf *tb = malloc(sizeof *tb);
+  if (!tb) return NULL;
+  tb->x0 = px0 - jb->margin > 0 ? px0 - jb->margin : 0;
+  tb->y0 = py0 - jb->margin > 0 ? py0 - jb->margin : 0;
+  int x1 = px1 + jb->margin < jb->W ? px1 + jb->margin : jb->W;
+  int y1 = py1 + jb->margin < jb->H ? py1 + jb->margin : jb->H;
+  tb->w = x1 - tb->x0;
+  tb->h = y1 - tb->y0;
+  tb->acc = calloc((size_t)tb->w * tb->h * 4, sizeof(double));
+  if (!tb->acc) {
+    free(tb);
+    return NULL;
+  }
+  const sampler *smp = jb->se->sampler;
+  const integrator *it = jb->sc->integrator;
+  sampler_state st;
+  for (int iy = py0; iy < py1; iy++) {
+    for (int ix = px0; ix < px1; ix++) {
+      uint64_t pixel = (uint64_t)iy * (uint64_t)jb->W + (uint64_t)ix;
+      for (uint32_t s = 0; s < jb->spp; s++) {
+        smp->ops->start(smp, &st, jb->opts->seed, pixel, s, jb->spp);
+        vec2 j = smp->ops->next_2d(&st);
+        double px = ix + j.x, py = iy + j.y;
+        vec2 film_u = v2(px / jb->W, py / jb->H);
+        vec2 ap = smp->ops->next_2d(&st);
+        ray3 ray;
+        double w = jb->se->ops->sample_ray(jb->se, film_u, ap, &ray);
+        color v = col1(0);
+        if (w != 0) {
+          color L = it->ops->Li(it, jb->sc, &st, ray, rs);
+          v = col_scale(L, w);
+          if (!isfinite(v.c[0]) || !isfinite(v.c[1]) || !isfinite(v.c[2])) {
+            (*invalid)++;
+            v = col1(0);
+          }
+        }
+        splat(jb, tb, px, py, v);
+      }
+      *samples += jb->spp;
+    }
+  }
+  return tb;
+}
+
+static void merge_tile(job *jb, tile_buf *tb) {
+  for (int y = 0; y < tb->h; y++)
+    for (int x = 0; x < tb->w; x++) {
+      const double *a = &tb->acc[4 * ((size_t)y * tb->w + x)];
+      double *d = &jb->film_acc[4 * ((size_t)(tb->y0 + y) * jb->W + (tb->x0 + x))];
+      d[0] += a[0], d[1] += a[1], d[2] += a[2], d[3] += a[3];
+    }
+  free(tb->acc);
+  free(tb);
+}
+
+static void *worker(void *arg) {
+  job *jb = arg;
+  render_stats rs = {0};
+  uint64_t samples = 0, invalid = 0;
+  for (;;) {
+    pthread_mutex_lock(&jb->lock);
+    size_t t = jb->next_tile++;
+    bool stop = jb->failed || t >= jb->n_tiles || (jb->opts->cancel && atomic_load(jb->opts->cancel));
+    pthread_mutex_unlock(&jb->lock);
+    if (stop) break;
+    tile_buf *tb = render_tile(jb, t, &rs, &samples, &invalid);
+    pthread_mutex_lock(&jb->lock);
+    if (!tb) {
+      jb->failed = true;
+    } else {
+      /* Merge in tile order so floating-point sums never depend on
+       * scheduling. */
+      jb->done[t] = tb;
+      while (jb->next_commit < jb->n_tiles && jb->done[jb->next_commit]) {
+        merge_tile(jb, jb->done[jb->next_commit]);
+        jb->done[jb->next_commit] = NULL;
+        jb->next_commit++;
+      }
+      if (jb->opts->progress) jb->opts->progress(jb->opts->progress_user, jb->next_commit, jb->n_tiles);
+    }
+    pthread_mutex_unlock(&jb->lock);
+  }
+  pthread_mutex_lock(&jb->lock);
+  jb->rays.rays += rs.rays;
+  jb->rays.shadow_rays += rs.shadow_rays;
+  jb->samples += samples;
+  jb->invalid += invalid;
+  pthread_mutex_unlock(&jb->lock);
+  return NULL;
+}
+
+static double now_s(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, render_result_stats *stats,
+                         rsw_err *err) {
+  double t0 = now_s();
+  if (opts->sensor >= sc->n_sensors)
+    return rsw_fail(err, RSW_ERR_NOT_FOUND, "sensor", sc->n_sensors ? "no sensor with index %zu (the scene has %zu)"
+                                                                     : "the scene has no sensor%.0zu%.0zu",
+                    opts->sensor, sc->n_sensors);
+  const sensor *se = sc->sensors[opts->sensor];
+  const film *fm = se->film;
+  render_ctx rc = {.variant = sc->variant, .wavelength = opts->wavelength > 0 ? opts->wavelength : 550.0};
+  if (!(rc.wavelength > 0 && rc.wavelength < 1e6))
+    return rsw_fail(err, RSW_ERR_RANGE, "wavelength", "wavelength must be a positive number of nm");
+  rsw_status st = scene_prepare(sc, &rc, err);
+  if (st) return st;
+  uint32_t spp = opts->spp ? opts->spp : se->sampler->sample_count;
+  if (se->sampler->ops->adjust_spp) spp = se->sampler->ops->adjust_spp(se->sampler, spp);
+  if (spp == 0) return rsw_fail(err, RSW_ERR_RANGE, "spp", "spp must be at least 1");
+
+  job jb;
+  memset(&jb, 0, sizeof jb);
+  jb.sc = sc;
+  jb.se = se;
+  jb.fm = fm;
+  jb.opts = opts;
+  jb.spp = spp;
+  jb.W = fm->width;
+  jb.H = fm->height;
+  jb.tiles_x = (jb.W + TILE - 1) / TILE;
+  jb.tiles_y = (jb.H + TILE - 1) / TILE;
+  jb.n_tiles = (size_t)jb.tiles_x * jb.tiles_y;
+  jb.box = fm->filter->radius <= 0.5 + 1e-12;
+  jb.margin = jb.box ? 0 : (int)ceil(fm->filter->radius + 0.5);
+  jb.film_acc = calloc((size_t)jb.W * jb.H * 4, sizeof(double));
+  jb.done = calloc(jb.n_tiles, sizeof *jb.done);
+  if (!jb.film_acc || !jb.done) {
+    free(jb.film_acc);
+    free(jb.done);
+    return rsw_fail(err, RSW_ERR_NOMEM, "film", "out of memory for a %dx%d film", jb.W, jb.H);
+  }
+  pthread_mutex_init(&jb.lock, NULL);
+  int nt = opts->threads > 0 ? opts->threads : (int)sysconf(_SC_NPROCESSORS_ONLN);
+  if (nt < 1) nt = 1;
+  if (nt > 256) nt = 256;
+  if ((size_t)nt > jb.n_tiles) nt = (int)jb.n_tiles;
+  pthread_t th[256];
+  int started = 0;
+  for (int i = 0; i < nt; i++) {
+    if (pthread_create(&th[i], NULL, worker, &jb) != 0) break;
+    started++;
+  }
+  if (started == 0) worker(&jb);
+  for (int i = 0; i < started; i++) pthread_join(th[i], NULL);
+  pthread_mutex_destroy(&jb.lock);
+  for (size_t i = 0; i < jb.n_tiles; i++)
+    if (jb.done[i]) merge_tile(&jb, jb.done[i]);
+  free(jb.done);
+  if (jb.failed) {
+    free(jb.film_acc);
+    return rsw_fail(err, RSW_ERR_NOMEM, "render", "out of memory while rendering");
+  }
+  if (opts->cancel && atomic_load(opts->cancel)) {
+    free(jb.film_acc);
+    return rsw_fail(err, RSW_ERR_RENDER, "render", "render cancelled");
+  }
+
+  /* Develop: normalise by the filter weights; mono films hold one
+   * luminance channel Y (Mitsuba forces it), rgb films R, G, B or Y. */
+  bool lum = sc->variant == VARIANT_MONO || fm->pixel_format == PIXFMT_LUMINANCE;
+  film_image img;
+  memset(&img, 0, sizeof img);
+  img.width = jb.W;
+  img.height = jb.H;
+  img.channels = lum ? 1 : 3;
+  if (lum) {
+    img.channel_names[0] = "Y";
+  } else {
+    img.channel_names[0] = "R";
+    img.channel_names[1] = "G";
+    img.channel_names[2] = "B";
+  }
+  img.half = fm->component_format == COMPFMT_FLOAT16;
+  img.spp = spp;
+  img.seed = opts->seed;
+  img.wavelength = sc->variant == VARIANT_MONO ? rc.wavelength : 0.0;
+  img.variant = sc->variant;
+  img.data = malloc((size_t)jb.W * jb.H * img.channels * sizeof(float));
+  if (!img.data) {
+    free(jb.film_acc);
+    return rsw_fail(err, RSW_ERR_NOMEM, "film", "out of memory");
+  }
+  for (size_t i = 0; i < (size_t)jb.W * jb.H; i++) {
+    const double *a = &jb.film_acc[4 * i];
+    double inv = a[3] != 0 ? 1.0 / a[3] : 0.0;
+    color c = col(a[0] * inv, a[1] * inv, a[2] * inv);
+    if (lum) {
+      img.data[i] = (float)(sc->variant == VARIANT_MONO ? c.c[0] : col_luminance(c));
+    } else {
+      img.data[3 * i] = (float)c.c[0];
+      img.data[3 * i + 1] = (float)c.c[1];
+      img.data[3 * i + 2] = (float)c.c[2];
+    }
+  }
+  free(jb.film_acc);
+  if (stats) {
+    stats->rays = jb.rays;
+    stats->samples = jb.samples;
+    stats->invalid_samples = jb.invalid;
+    stats->threads = started ? started : 1;
+    stats->wall_s = now_s() - t0;
+  }
+  *out = img;
+  return RSW_OK;
+}
+
+void film_image_free(film_image *img) {
+  if (!img) return;
+  free(img->data);
+  img->data = NULL;
+}

@@ -1,0 +1,58 @@
+/* Rendering one sensor of a scene into a film buffer.
+ *
+ * Determinism: every sample's random numbers come from the sampler seeded
+ * by (seed, pixel index, sample index) only; pixels are accumulated in a
+ * fixed order inside fixed 16x16 tiles, and tiles are merged into the film
+ * in tile order; so 1 thread and N threads give bitwise-identical films. */
+#ifndef RSW_RENDER_H
+#define RSW_RENDER_H
+
+#include <stdatomic.h>
+
+#include "kernel.h"
+
+typedef struct render_opts {
+  size_t size;          /* sizeof(render_opts) */
+  size_t sensor;        /* index into scene->sensors */
+  uint32_t spp;         /* 0: the sensor sampler's sample_count */
+  uint64_t seed;
+  double wavelength;    /* nm, mono only; 0 means 550 */
+  int threads;          /* 0: all cores */
+  const atomic_int *cancel; /* optional: non-zero stops the render */
+  /* Optional progress callback: tiles done of total (called from worker
+   * threads, serialised). */
+  void (*progress)(void *user, size_t done, size_t total);
+  void *progress_user;
+} render_opts;
+
+/* A developed film: HWC float32, row 0 = first (top) row. */
+typedef struct film_image {
+  int width, height, channels;
+  const char *channel_names[4]; /* static strings: "R","G","B" or "Y" */
+  float *data;                  /* owned */
+  bool half;                    /* the film asked for float16 storage */
+  /* What was rendered (for metadata). */
+  uint32_t spp;
+  uint64_t seed;
+  double wavelength;
+  rsw_variant variant;
+} film_image;
+
+typedef struct render_result_stats {
+  render_stats rays;
+  uint64_t samples;
+  uint64_t invalid_samples; /* NaN/inf contributions dropped */
+  double wall_s;
+  int threads;
+} render_result_stats;
+
+rsw_status render_sensor(scene *s, const render_opts *opts, film_image *out, render_result_stats *stats,
+                         rsw_err *err);
+void film_image_free(film_image *img);
+
+/* Write a developed film as OpenEXR (float32, or float16 when the film asks
+ * for it), through a temporary file renamed on success. Metadata records
+ * the sensor, spp, seed, variant and wavelength. */
+rsw_status film_image_write_exr(const film_image *img, const char *path, const char *sensor_id, rsw_err *err);
+
+#endif

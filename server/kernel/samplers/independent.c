@@ -1,0 +1,66 @@
+/* `independent` sampler (mitsuba3 src/samplers/independent.cpp): every
+ * dimension of every sample is an independent uniform draw from the
+ * sample's own PCG32 stream (seeded by sampler_seed_stream()).
+ * Parameters: sample_count (4), seed (0, added to the render's seed). */
+#include <stdlib.h>
+
+#include "../scene/loader.h"
+#include "sampler_common.h"
+
+static void independent_start(const sampler *s, sampler_state *st, uint64_t seed,
+                              uint64_t pixel, uint32_t sample_index, uint32_t spp) {
+  sampler_seed_stream(s, st, seed, pixel, sample_index, spp);
+}
+
+static double independent_next_1d(sampler_state *st) {
+  st->dim++;
+  return pcg32_next_double(&st->rng);
+}
+
+static vec2 independent_next_2d(sampler_state *st) {
+  st->dim++;
+  double x = pcg32_next_double(&st->rng);
+  double y = pcg32_next_double(&st->rng);
+  return v2(x, y);
+}
+
+/* Any count works; 0 means "the scene's sample_count". */
+static uint32_t independent_adjust_spp(const sampler *s, uint32_t spp) {
+  return spp ? spp : s->sample_count;
+}
+
+static const sampler_ops independent_ops = {
+    .start = independent_start,
+    .next_1d = independent_next_1d,
+    .next_2d = independent_next_2d,
+    .adjust_spp = independent_adjust_spp,
+};
+
+static void independent_destroy(object *o) { free(o); }
+
+static rsw_status independent_create(loader *ld, node *n, object **out);
+
+const plugin plugin_independent = {
+    .name = "independent",
+    .cls = CLS_SAMPLER,
+    .create = independent_create,
+    .destroy = independent_destroy,
+    .ops = &independent_ops,
+};
+
+static rsw_status independent_create(loader *ld, node *n, object **out) {
+  long long count = 0, seed = 0;
+  rsw_status st = ld_int(ld, n, "sample_count", 4, 1, SAMPLER_MAX_SPP, &count);
+  if (st == RSW_OK) st = ld_int(ld, n, "seed", 0, 0, UINT32_MAX, &seed);
+  if (st != RSW_OK) return st;
+  sampler *s = calloc(1, sizeof *s);
+  if (!s) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+  s->base.plugin = &plugin_independent;
+  s->base.id = n->id;
+  s->ops = &independent_ops;
+  s->sample_count = (uint32_t)count;
+  s->seed = (uint64_t)seed;
+  s->jitter = true;
+  *out = &s->base;
+  return RSW_OK;
+}

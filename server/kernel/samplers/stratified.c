@@ -1,0 +1,141 @@
+/* `stratified` sampler (mitsuba3 src/samplers/stratified.cpp).
+ *
+ * sample_count is rounded up to a square n^2 (Mitsuba: the smallest
+ * n with n^2 >= spp, so 10 -> 16). For each dimension d, sample s of a
+ * pixel takes stratum
+ *   p = permute(s, n^2, hash(seed, pixel, d))
+ * a bijection of [0, n^2), so the n^2 samples of a pixel fill every
+ * stratum exactly once, in a different order per dimension:
+ *   next_1d: (p + j) / n^2                       (n^2 strata of [0,1))
+ *   next_2d: ((p mod n) + jx, (p div n) + jy) / n (n x n cells)
+ * j ~ U[0,1) from the sample's PCG32 stream when jitter is on (default),
+ * 0.5 (stratum centre) otherwise. Parameters: sample_count (4), seed (0),
+ * jitter (true). */
+#include <stdlib.h>
+
+#include "../scene/loader.h"
+#include "sampler_common.h"
+
+/* Kensler 2013, "Correlated Multi-Jittered Sampling" (Pixar technical memo
+ * 13-01), listing 3: a hash-based permutation of [0, l) indexed by the
+ * seed p. Each round is invertible on the bits selected by the mask w (the
+ * smallest all-ones mask >= l - 1); results >= l are re-hashed (cycle
+ * walking), which keeps the map a bijection on [0, l). */
+static uint32_t permute(uint32_t i, uint32_t l, uint32_t p) {
+  uint32_t w = l - 1;
+  w |= w >> 1;
+  w |= w >> 2;
+  w |= w >> 4;
+  w |= w >> 8;
+  w |= w >> 16;
+  do {
+    i ^= p;
+    i *= 0xe170893du;
+    i ^= p >> 16;
+    i ^= (i & w) >> 4;
+    i ^= p >> 8;
+    i *= 0x0929eb3fu;
+    i ^= p >> 23;
+    i ^= (i & w) >> 1;
+    i *= 1u | p >> 27;
+    i *= 0x6935fa69u;
+    i ^= (i & w) >> 11;
+    i *= 0x74dcb303u;
+    i ^= (i & w) >> 2;
+    i *= 0x9e501cc3u;
+    i ^= (i & w) >> 2;
+    i *= 0xc860a3dfu;
+    i &= w;
+    i ^= i >> 5;
+  } while (i >= l);
+  return (i + p) % l;
+}
+
+/* Smallest n with n^2 >= spp. */
+static uint32_t ceil_sqrt(uint32_t spp) {
+  uint32_t n = 1;
+  while ((uint64_t)n * n < spp) n++;
+  return n;
+}
+
+static uint32_t stratified_adjust_spp(const sampler *s, uint32_t spp) {
+  if (spp == 0) spp = s->sample_count;
+  uint32_t n = ceil_sqrt(spp);
+  return n * n;
+}
+
+/* Permutation seed of dimension d: a 32-bit hash of (seed, pixel, d). */
+static uint32_t dim_seed(const sampler_state *st) {
+  return (uint32_t)(mix64(st->pixel_key ^ (0x9e3779b97f4a7c15ULL * ((uint64_t)st->dim + 1))) >>
+                    32);
+}
+
+/* Stratum of the current sample in the current dimension, in [0, n^2). */
+static uint32_t stratum(const sampler_state *st, uint32_t n2) {
+  return permute(st->sample_index % n2, n2, dim_seed(st));
+}
+
+static double jitter(sampler_state *st) {
+  return st->s->jitter ? pcg32_next_double(&st->rng) : 0.5;
+}
+
+static void stratified_start(const sampler *s, sampler_state *st, uint64_t seed,
+                             uint64_t pixel, uint32_t sample_index, uint32_t spp) {
+  sampler_seed_stream(s, st, seed, pixel, sample_index, spp);
+}
+
+static double stratified_next_1d(sampler_state *st) {
+  uint32_t n = ceil_sqrt(st->spp ? st->spp : 1), n2 = n * n;
+  uint32_t p = stratum(st, n2);
+  double j = jitter(st);
+  st->dim++;
+  return ((double)p + j) / (double)n2;
+}
+
+static vec2 stratified_next_2d(sampler_state *st) {
+  uint32_t n = ceil_sqrt(st->spp ? st->spp : 1), n2 = n * n;
+  uint32_t p = stratum(st, n2);
+  uint32_t y = p / n, x = p - y * n;
+  double jx = jitter(st);
+  double jy = jitter(st);
+  st->dim++;
+  return v2(((double)x + jx) / (double)n, ((double)y + jy) / (double)n);
+}
+
+static const sampler_ops stratified_ops = {
+    .start = stratified_start,
+    .next_1d = stratified_next_1d,
+    .next_2d = stratified_next_2d,
+    .adjust_spp = stratified_adjust_spp,
+};
+
+static void stratified_destroy(object *o) { free(o); }
+
+static rsw_status stratified_create(loader *ld, node *n, object **out);
+
+const plugin plugin_stratified = {
+    .name = "stratified",
+    .cls = CLS_SAMPLER,
+    .create = stratified_create,
+    .destroy = stratified_destroy,
+    .ops = &stratified_ops,
+};
+
+static rsw_status stratified_create(loader *ld, node *n, object **out) {
+  long long count = 0, seed = 0;
+  bool jit = true;
+  rsw_status st = ld_int(ld, n, "sample_count", 4, 1, SAMPLER_MAX_SPP, &count);
+  if (st == RSW_OK) st = ld_int(ld, n, "seed", 0, 0, UINT32_MAX, &seed);
+  if (st == RSW_OK) st = ld_bool(ld, n, "jitter", true, &jit);
+  if (st != RSW_OK) return st;
+  sampler *s = calloc(1, sizeof *s);
+  if (!s) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+  s->base.plugin = &plugin_stratified;
+  s->base.id = n->id;
+  s->ops = &stratified_ops;
+  s->seed = (uint64_t)seed;
+  s->jitter = jit;
+  s->sample_count = stratified_adjust_spp(s, (uint32_t)count);
+  *out = &s->base;
+  return RSW_OK;
+}

@@ -1,0 +1,606 @@
+/* JSON scene dictionaries -> document tree, with Mitsuba 3's load_dict
+ * grammar (kernel-behavior.md §2.1; mitsuba3 src/core/python/parser.cpp):
+ *
+ *  - a dict is one object: "type" names the plugin (root: "scene" or absent),
+ *    every other key is a property; keys may not contain '.';
+ *  - nested dicts with "type" are child objects whose id is "id" if given,
+ *    else the key;
+ *  - {"type":"ref","id":X} references an object; {"type":"rgb","value":v},
+ *    {"type":"uniform","value":x}, {"type":"spectrum","value":x or
+ *    [[wl,v],...]} and {"type":"spectrum","wavelengths":[..],"values":[..]}
+ *    are spectra;
+ *  - numbers, booleans, strings and 3-vectors are plain properties;
+ *  - transforms have no encoding in Mitsuba's dicts; ours (DESIGN.md) is a
+ *    4x4 row-major matrix given as 4 rows of 4, or a list of operations
+ *    applied in order like XML ({"translate":..}, {"rotate":{"axis","angle"}},
+ *    {"scale":..}, {"lookat":{"origin","target","up"}}, {"matrix":[16]}),
+ *    each left-multiplied onto the accumulated transform. A flat list of 16
+ *    numbers is kept as a number list, which ld_transform() accepts too.
+ *
+ * Deliberate strictness beyond cJSON: duplicate keys in one object are an
+ * error (cJSON keeps them silently), nesting is limited to RSW_MAX_DEPTH,
+ * and integers are exact only below 2^53 (is_int is false above). */
+#include <cjson/cJSON.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "node.h"
+
+#define TWO_POW_53 9007199254740992.0
+
+typedef struct jctx {
+  const char *source;
+  rsw_err *err;
+  size_t n_nodes;
+} jctx;
+
+/* JSON pointer of `key` under `base` (RFC 6901 escaping), prefixed by the
+ * source name: "scene.json#/shape/bsdf". */
+static void ptr_join(char *out, size_t len, const char *base, const char *key) {
+  size_t n = (size_t)snprintf(out, len, "%s/", base);
+  for (const char *c = key; *c && n + 3 < len; c++) {
+    if (*c == '~') {
+      out[n++] = '~';
+      out[n++] = '0';
+    } else if (*c == '/') {
+      out[n++] = '~';
+      out[n++] = '1';
+    } else {
+      out[n++] = *c;
+    }
+  }
+  out[n < len ? n : len - 1] = '\0';
+}
+
+static void ptr_index(char *out, size_t len, const char *base, int i) {
+  char idx[16];
+  snprintf(idx, sizeof idx, "%d", i);
+  ptr_join(out, len, base, idx);
+}
+
+static rsw_status fail(jctx *c, rsw_status code, const char *where, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+static rsw_status fail(jctx *c, rsw_status code, const char *where, const char *fmt, ...) {
+  char msg[600];
+  va_list ap;
+  va_start(ap, fmt);
+  vsnprintf(msg, sizeof msg, fmt, ap);
+  va_end(ap);
+  return rsw_fail(c->err, code, where, "%s", msg);
+}
+
+static int array_size(const cJSON *a) {
+  int n = 0;
+  for (const cJSON *e = a->child; e; e = e->next) n++;
+  return n;
+}
+
+static bool all_numbers(const cJSON *a) {
+  for (const cJSON *e = a->child; e; e = e->next)
+    if (!cJSON_IsNumber(e)) return false;
+  return true;
+}
+
+static rsw_status read_vec3(jctx *c, const cJSON *v, const char *where, vec3 *out) {
+  if (!cJSON_IsArray(v) || array_size(v) != 3 || !all_numbers(v))
+    return fail(c, RSW_ERR_TYPE, where, "expected an array of 3 numbers");
+  const cJSON *e = v->child;
+  out->x = e->valuedouble;
+  out->y = e->next->valuedouble;
+  out->z = e->next->next->valuedouble;
+  return RSW_OK;
+}
+
+/* 16 numbers, or 4 rows of 4 numbers. */
+static rsw_status read_matrix(jctx *c, const cJSON *v, const char *where, xform *out) {
+  double m[4][4];
+  if (cJSON_IsArray(v) && array_size(v) == 16 && all_numbers(v)) {
+    int i = 0;
+    for (const cJSON *e = v->child; e; e = e->next, i++) m[i / 4][i % 4] = e->valuedouble;
+  } else if (cJSON_IsArray(v) && array_size(v) == 4) {
+    int r = 0;
+    for (const cJSON *row = v->child; row; row = row->next, r++) {
+      if (!cJSON_IsArray(row) || array_size(row) != 4 || !all_numbers(row))
+        return fail(c, RSW_ERR_TYPE, where, "a 4x4 matrix needs 4 rows of 4 numbers");
+      int k = 0;
+      for (const cJSON *e = row->child; e; e = e->next, k++) m[r][k] = e->valuedouble;
+    }
+  } else {
+    return fail(c, RSW_ERR_TYPE, where,
+                "expected a 4x4 matrix: 16 numbers or 4 rows of 4 numbers (row-major)");
+  }
+  if (!xf_from_matrix(m, out)) return fail(c, RSW_ERR_INVALID, where, "matrix is singular");
+  return RSW_OK;
+}
+
+static bool is_transform_op(const cJSON *o) {
+  static const char *const ops[] = {"translate", "rotate", "scale", "lookat", "matrix"};
+  if (!cJSON_IsObject(o) || !o->child || o->child->next) return false;
+  for (size_t i = 0; i < sizeof ops / sizeof ops[0]; i++)
+    if (o->child->string && strcmp(o->child->string, ops[i]) == 0) return true;
+  return false;
+}
+
+/* One op object {"name": args}; returns the op's matrix. */
+static rsw_status read_op(jctx *c, const cJSON *o, const char *where, xform *out) {
+  const cJSON *a = o->child;
+  const char *name = a->string;
+  char w[512];
+  ptr_join(w, sizeof w, where, name);
+  if (strcmp(name, "translate") == 0) {
+    vec3 t;
+    rsw_status st = read_vec3(c, a, w, &t);
+    if (st) return st;
+    *out = xf_translate(t);
+  } else if (strcmp(name, "scale") == 0) {
+    vec3 s;
+    if (cJSON_IsNumber(a)) {
+      s = v3(a->valuedouble, a->valuedouble, a->valuedouble);
+    } else {
+      rsw_status st = read_vec3(c, a, w, &s);
+      if (st) return fail(c, RSW_ERR_TYPE, w, "scale: expected a number or 3 numbers");
+    }
+    if (s.x == 0 || s.y == 0 || s.z == 0)
+      return fail(c, RSW_ERR_INVALID, w, "scale factors must be non-zero");
+    *out = xf_scale(s);
+  } else if (strcmp(name, "rotate") == 0) {
+    if (!cJSON_IsObject(a)) return fail(c, RSW_ERR_TYPE, w, "rotate: expected {\"axis\": [x,y,z], \"angle\": degrees}");
+    const cJSON *axis = NULL, *angle = NULL;
+    for (const cJSON *k = a->child; k; k = k->next) {
+      if (strcmp(k->string, "axis") == 0 && !axis) axis = k;
+      else if (strcmp(k->string, "angle") == 0 && !angle) angle = k;
+      else {
+        char wk[600];
+        ptr_join(wk, sizeof wk, w, k->string);
+        return fail(c, RSW_ERR_INVALID, wk, "rotate: unexpected key '%s' (expected axis, angle)", k->string);
+      }
+    }
+    if (!axis || !angle) return fail(c, RSW_ERR_MISSING, w, "rotate: needs both 'axis' and 'angle'");
+    char wa[600];
+    ptr_join(wa, sizeof wa, w, "axis");
+    vec3 ax;
+    rsw_status st = read_vec3(c, axis, wa, &ax);
+    if (st) return st;
+    if (!(v3_len(ax) > 0)) return fail(c, RSW_ERR_INVALID, wa, "rotate: axis must be non-zero");
+    if (!cJSON_IsNumber(angle)) {
+      ptr_join(wa, sizeof wa, w, "angle");
+      return fail(c, RSW_ERR_TYPE, wa, "rotate: angle must be a number (degrees)");
+    }
+    *out = xf_rotate(ax, angle->valuedouble);
+  } else if (strcmp(name, "lookat") == 0) {
+    if (!cJSON_IsObject(a)) return fail(c, RSW_ERR_TYPE, w, "lookat: expected {\"origin\", \"target\", \"up\"}");
+    vec3 v[3];
+    bool got[3] = {false, false, false};
+    static const char *const keys[3] = {"origin", "target", "up"};
+    for (const cJSON *k = a->child; k; k = k->next) {
+      int idx = -1;
+      for (int i = 0; i < 3; i++)
+        if (strcmp(k->string, keys[i]) == 0) idx = i;
+      char wk[600];
+      ptr_join(wk, sizeof wk, w, k->string);
+      if (idx < 0 || got[idx])
+        return fail(c, RSW_ERR_INVALID, wk, "lookat: unexpected or repeated key '%s'", k->string);
+      rsw_status st = read_vec3(c, k, wk, &v[idx]);
+      if (st) return st;
+      got[idx] = true;
+    }
+    if (!got[0] || !got[1]) return fail(c, RSW_ERR_MISSING, w, "lookat: needs 'origin' and 'target'");
+    if (!got[2]) {
+      /* As Mitsuba's XML parser: without `up`, take coordinate_system's
+       * first vector of the viewing direction. */
+      vec3 s, t;
+      coordinate_system(v3_norm(v3_sub(v[1], v[0])), &s, &t);
+      v[2] = s;
+    }
+    if (!xf_look_at(v[0], v[1], v[2], out))
+      return fail(c, RSW_ERR_INVALID, w, "lookat: degenerate (origin == target or up parallel to the view)");
+  } else { /* matrix */
+    return read_matrix(c, a, w, out);
+  }
+  return RSW_OK;
+}
+
+/* A list of op objects (or a single op object) -> accumulated transform. */
+static rsw_status read_ops(jctx *c, const cJSON *v, const char *where, xform *out) {
+  xform acc = xf_identity();
+  if (is_transform_op(v)) return read_op(c, v, where, out);
+  int i = 0;
+  for (const cJSON *e = v->child; e; e = e->next, i++) {
+    char w[512];
+    ptr_index(w, sizeof w, where, i);
+    if (!is_transform_op(e))
+      return fail(c, RSW_ERR_TYPE, w,
+                  "expected a transform operation: one of {\"translate\"}, {\"rotate\"}, "
+                  "{\"scale\"}, {\"lookat\"}, {\"matrix\"}");
+    xform op;
+    rsw_status st = read_op(c, e, w, &op);
+    if (st) return st;
+    acc = xf_mul(&op, &acc); /* left-multiply: later ops apply after */
+  }
+  *out = acc;
+  return RSW_OK;
+}
+
+static rsw_status check_duplicate_keys(jctx *c, const cJSON *obj, const char *where) {
+  size_t n = 0;
+  for (const cJSON *a = obj->child; a; a = a->next, n++) {
+    if (n >= RSW_MAX_PROPS)
+      return fail(c, RSW_ERR_LIMIT, where, "more than %d keys in one object", RSW_MAX_PROPS);
+    for (const cJSON *b = a->next; b; b = b->next)
+      if (strcmp(a->string, b->string) == 0) {
+        char w[512];
+        ptr_join(w, sizeof w, where, a->string);
+        return fail(c, RSW_ERR_DUPLICATE, w, "duplicate key '%s'", a->string);
+      }
+  }
+  return RSW_OK;
+}
+
+/* {"type":"spectrum", ...} / rgb / uniform -> spectrum. */
+static rsw_status read_spectrum(jctx *c, const cJSON *o, const char *type, const char *where,
+                                spectrum *out) {
+  memset(out, 0, sizeof *out);
+  const cJSON *value = NULL, *wls = NULL, *vals = NULL;
+  for (const cJSON *k = o->child; k; k = k->next) {
+    if (strcmp(k->string, "type") == 0) continue;
+    char w[512];
+    ptr_join(w, sizeof w, where, k->string);
+    if (strcmp(k->string, "value") == 0) value = k;
+    else if (strcmp(type, "spectrum") == 0 && strcmp(k->string, "wavelengths") == 0) wls = k;
+    else if (strcmp(type, "spectrum") == 0 && strcmp(k->string, "values") == 0) vals = k;
+    else if (strcmp(k->string, "filename") == 0)
+      return fail(c, RSW_ERR_UNSUPPORTED, w, "spectrum files are not supported: give the values inline");
+    else
+      return fail(c, RSW_ERR_INVALID, w, "unexpected key '%s' in a '%s' value", k->string, type);
+  }
+  char w[512];
+  if (strcmp(type, "rgb") == 0) {
+    ptr_join(w, sizeof w, where, "value");
+    if (!value) return fail(c, RSW_ERR_MISSING, where, "rgb: missing 'value'");
+    out->kind = SPEC_RGB;
+    if (cJSON_IsNumber(value)) {
+      out->rgb[0] = out->rgb[1] = out->rgb[2] = value->valuedouble;
+    } else {
+      vec3 v;
+      rsw_status st = read_vec3(c, value, w, &v);
+      if (st) return fail(c, RSW_ERR_TYPE, w, "rgb: 'value' must be a number or 3 numbers");
+      out->rgb[0] = v.x;
+      out->rgb[1] = v.y;
+      out->rgb[2] = v.z;
+    }
+    return RSW_OK;
+  }
+  if (strcmp(type, "uniform") == 0 || (value && cJSON_IsNumber(value))) {
+    ptr_join(w, sizeof w, where, "value");
+    if (!value) return fail(c, RSW_ERR_MISSING, where, "%s: missing 'value'", type);
+    if (!cJSON_IsNumber(value)) return fail(c, RSW_ERR_TYPE, w, "%s: 'value' must be a number", type);
+    if (wls || vals) return fail(c, RSW_ERR_INVALID, where, "spectrum: give either 'value' or 'wavelengths'+'values'");
+    out->kind = SPEC_UNIFORM;
+    out->value = value->valuedouble;
+    return RSW_OK;
+  }
+  /* Tabulated: value = [[wl, v], ...] or wavelengths + values. */
+  size_t n = 0;
+  if (value) {
+    if (wls || vals) return fail(c, RSW_ERR_INVALID, where, "spectrum: give either 'value' or 'wavelengths'+'values'");
+    ptr_join(w, sizeof w, where, "value");
+    if (!cJSON_IsArray(value)) return fail(c, RSW_ERR_TYPE, w, "spectrum: 'value' must be a number or a list of [wavelength, value] pairs");
+    n = (size_t)array_size(value);
+  } else {
+    if (!wls || !vals) return fail(c, RSW_ERR_MISSING, where, "spectrum: needs 'value', or 'wavelengths' and 'values'");
+    ptr_join(w, sizeof w, where, "wavelengths");
+    if (!cJSON_IsArray(wls) || !all_numbers(wls)) return fail(c, RSW_ERR_TYPE, w, "spectrum: 'wavelengths' must be a list of numbers");
+    ptr_join(w, sizeof w, where, "values");
+    if (!cJSON_IsArray(vals) || !all_numbers(vals)) return fail(c, RSW_ERR_TYPE, w, "spectrum: 'values' must be a list of numbers");
+    n = (size_t)array_size(wls);
+    if ((size_t)array_size(vals) != n)
+      return fail(c, RSW_ERR_INVALID, where, "spectrum: 'wavelengths' has %zu entries but 'values' has %d", n, array_size(vals));
+  }
+  if (n < 2) return fail(c, RSW_ERR_INVALID, where, "spectrum: a table needs at least 2 samples");
+  if (n > RSW_MAX_SPECTRUM) return fail(c, RSW_ERR_LIMIT, where, "spectrum: more than %d samples", RSW_MAX_SPECTRUM);
+  out->kind = SPEC_TABLE;
+  out->n = n;
+  out->wl = malloc(n * sizeof(double));
+  out->val = malloc(n * sizeof(double));
+  if (!out->wl || !out->val) {
+    spectrum_free(out);
+    return fail(c, RSW_ERR_NOMEM, where, "out of memory");
+  }
+  if (value) {
+    size_t i = 0;
+    for (const cJSON *e = value->child; e; e = e->next, i++) {
+      ptr_index(w, sizeof w, where, (int)i);
+      if (!cJSON_IsArray(e) || array_size(e) != 2 || !all_numbers(e)) {
+        spectrum_free(out);
+        return fail(c, RSW_ERR_TYPE, w, "spectrum: each entry must be [wavelength_nm, value]");
+      }
+      out->wl[i] = e->child->valuedouble;
+      out->val[i] = e->child->next->valuedouble;
+    }
+  } else {
+    size_t i = 0;
+    for (const cJSON *e = wls->child; e; e = e->next, i++) out->wl[i] = e->valuedouble;
+    i = 0;
+    for (const cJSON *e = vals->child; e; e = e->next, i++) out->val[i] = e->valuedouble;
+  }
+  for (size_t i = 0; i < n; i++) {
+    if (!(out->wl[i] > 0) || (i > 0 && !(out->wl[i] > out->wl[i - 1]))) {
+      spectrum_free(out);
+      return fail(c, RSW_ERR_INVALID, where,
+                  "spectrum: wavelengths must be positive and strictly increasing (entry %zu)", i);
+    }
+  }
+  return RSW_OK;
+}
+
+static rsw_status read_object(jctx *c, const cJSON *obj, const char *key, const char *where,
+                              int depth, node **out);
+
+/* Convert one property value and append it to n. */
+static rsw_status read_value(jctx *c, node *n, const cJSON *v, const char *key, const char *where,
+                             int depth) {
+  if (depth > RSW_MAX_DEPTH)
+    return fail(c, RSW_ERR_LIMIT, where, "nesting deeper than %d levels", RSW_MAX_DEPTH);
+  if (strchr(key, '.'))
+    return fail(c, RSW_ERR_INVALID, where,
+                "key '%s' contains '.', which separates parameter paths (nest the dict instead)", key);
+  if (strlen(key) >= RSW_MAX_NAME)
+    return fail(c, RSW_ERR_LIMIT, where, "key longer than %d characters", RSW_MAX_NAME - 1);
+  prop *p;
+#define ADD_(kind)                                                             \
+  do {                                                                         \
+    p = node_add_prop(n, key, kind, where);                                    \
+    if (!p) return fail(c, RSW_ERR_NOMEM, where, "out of memory");             \
+  } while (0)
+  if (cJSON_IsBool(v)) {
+    ADD_(PROP_BOOL);
+    p->b = cJSON_IsTrue(v);
+  } else if (cJSON_IsNumber(v)) {
+    ADD_(PROP_NUMBER);
+    p->num = v->valuedouble;
+    p->is_int = (p->num == floor(p->num) && fabs(p->num) < TWO_POW_53);
+  } else if (cJSON_IsString(v)) {
+    ADD_(PROP_STRING);
+    p->str = rsw_strdup(v->valuestring);
+    if (!p->str) return fail(c, RSW_ERR_NOMEM, where, "out of memory");
+  } else if (cJSON_IsNull(v)) {
+    return fail(c, RSW_ERR_TYPE, where, "null is not a valid property value");
+  } else if (cJSON_IsArray(v)) {
+    int len = array_size(v);
+    if (len == 3 && all_numbers(v)) {
+      vec3 x;
+      rsw_status st = read_vec3(c, v, where, &x);
+      if (st) return st;
+      ADD_(PROP_VEC3);
+      p->vec = x;
+    } else if (all_numbers(v)) {
+      ADD_(PROP_NUMBERS);
+      p->n_nums = (size_t)len;
+      p->nums = malloc((len ? (size_t)len : 1) * sizeof(double));
+      if (!p->nums) return fail(c, RSW_ERR_NOMEM, where, "out of memory");
+      int i = 0;
+      for (const cJSON *e = v->child; e; e = e->next) p->nums[i++] = e->valuedouble;
+    } else if (len == 4 && cJSON_IsArray(v->child)) {
+      xform xf;
+      rsw_status st = read_matrix(c, v, where, &xf);
+      if (st) return st;
+      ADD_(PROP_TRANSFORM);
+      p->xf = xf;
+    } else if (len > 0 && cJSON_IsObject(v->child)) {
+      xform xf;
+      rsw_status st = read_ops(c, v, where, &xf);
+      if (st) return st;
+      ADD_(PROP_TRANSFORM);
+      p->xf = xf;
+    } else {
+      return fail(c, RSW_ERR_TYPE, where,
+                  "unsupported array: expected numbers, a 4x4 matrix or a list of transform operations");
+    }
+  } else if (cJSON_IsObject(v)) {
+    const cJSON *type = cJSON_GetObjectItemCaseSensitive(v, "type");
+    if (!type) {
+      if (is_transform_op(v)) {
+        xform xf;
+        rsw_status st = read_ops(c, v, where, &xf);
+        if (st) return st;
+        ADD_(PROP_TRANSFORM);
+        p->xf = xf;
+        return RSW_OK;
+      }
+      return fail(c, RSW_ERR_MISSING, where, "object has no \"type\" (every nested object names its plugin)");
+    }
+    char wt[512];
+    ptr_join(wt, sizeof wt, where, "type");
+    if (!cJSON_IsString(type)) return fail(c, RSW_ERR_TYPE, wt, "\"type\" must be a string");
+    rsw_status st = check_duplicate_keys(c, v, where);
+    if (st) return st;
+    const char *t = type->valuestring;
+    if (strcmp(t, "ref") == 0) {
+      const cJSON *id = NULL;
+      for (const cJSON *k = v->child; k; k = k->next) {
+        if (strcmp(k->string, "type") == 0) continue;
+        char wk[600];
+        ptr_join(wk, sizeof wk, where, k->string);
+        if (strcmp(k->string, "id") != 0)
+          return fail(c, RSW_ERR_INVALID, wk, "ref: unexpected key '%s' (a ref has only \"type\" and \"id\")", k->string);
+        id = k;
+      }
+      if (!id || !cJSON_IsString(id) || !id->valuestring[0])
+        return fail(c, RSW_ERR_MISSING, where, "ref: needs a non-empty string \"id\"");
+      ADD_(PROP_REF);
+      p->ref = rsw_strdup(id->valuestring);
+      if (!p->ref) return fail(c, RSW_ERR_NOMEM, where, "out of memory");
+    } else if (strcmp(t, "rgb") == 0 || strcmp(t, "spectrum") == 0 || strcmp(t, "uniform") == 0) {
+      spectrum s;
+      st = read_spectrum(c, v, t, where, &s);
+      if (st) return st;
+      p = node_add_prop(n, key, PROP_SPECTRUM, where);
+      if (!p) {
+        spectrum_free(&s);
+        return fail(c, RSW_ERR_NOMEM, where, "out of memory");
+      }
+      p->spec = s;
+    } else {
+      node *child = NULL;
+      st = read_object(c, v, key, where, depth + 1, &child);
+      if (st) return st;
+      p = node_add_prop(n, key, PROP_NODE, where);
+      if (!p) {
+        node_free(child);
+        return fail(c, RSW_ERR_NOMEM, where, "out of memory");
+      }
+      p->child = child;
+    }
+  } else {
+    return fail(c, RSW_ERR_TYPE, where, "unsupported JSON value");
+  }
+#undef ADD_
+  return RSW_OK;
+}
+
+static rsw_status read_object(jctx *c, const cJSON *obj, const char *key, const char *where,
+                              int depth, node **out) {
+  if (depth > RSW_MAX_DEPTH)
+    return fail(c, RSW_ERR_LIMIT, where, "nesting deeper than %d levels", RSW_MAX_DEPTH);
+  if (++c->n_nodes > RSW_MAX_NODES)
+    return fail(c, RSW_ERR_LIMIT, where, "more than %d objects", RSW_MAX_NODES);
+  const cJSON *type = cJSON_GetObjectItemCaseSensitive(obj, "type");
+  const char *tname = type && cJSON_IsString(type) ? type->valuestring : "scene";
+  if (strlen(tname) >= RSW_MAX_NAME) return fail(c, RSW_ERR_LIMIT, where, "type name too long");
+  node *n = node_new(NULL, tname, where);
+  if (!n) return fail(c, RSW_ERR_NOMEM, where, "out of memory");
+  rsw_status st = RSW_OK;
+  const cJSON *id = cJSON_GetObjectItemCaseSensitive(obj, "id");
+  if (id) {
+    char w[512];
+    ptr_join(w, sizeof w, where, "id");
+    if (!cJSON_IsString(id) || !id->valuestring[0] || strlen(id->valuestring) >= RSW_MAX_NAME) {
+      st = fail(c, RSW_ERR_TYPE, w, "\"id\" must be a non-empty string");
+      goto done;
+    }
+    n->id = rsw_strdup(id->valuestring);
+    n->id_explicit = true;
+  } else if (key) {
+    n->id = rsw_strdup(key);
+  }
+  if ((id || key) && !n->id) {
+    st = fail(c, RSW_ERR_NOMEM, where, "out of memory");
+    goto done;
+  }
+  for (const cJSON *k = obj->child; k; k = k->next) {
+    if (strcmp(k->string, "type") == 0 || strcmp(k->string, "id") == 0) continue;
+    char w[512];
+    ptr_join(w, sizeof w, where, k->string);
+    st = read_value(c, n, k, k->string, w, depth);
+    if (st) goto done;
+  }
+done:
+  if (st) {
+    node_free(n);
+    return st;
+  }
+  *out = n;
+  return RSW_OK;
+}
+
+/* Line and column (1-based) of a byte offset, for parse errors. */
+static void line_col(const char *text, size_t off, int *line, int *colno) {
+  int l = 1, cc = 1;
+  for (size_t i = 0; i < off; i++) {
+    if (text[i] == '\n') {
+      l++;
+      cc = 1;
+    } else {
+      cc++;
+    }
+  }
+  *line = l;
+  *colno = cc;
+}
+
+rsw_status scene_read_json(const char *text, size_t len, const char *source_name,
+                           node **root_out, char **variant_out, rsw_err *err) {
+  jctx c = {.source = source_name ? source_name : "scene.json", .err = err};
+  char where[512];
+  snprintf(where, sizeof where, "%s#", c.source);
+  if (variant_out) *variant_out = NULL;
+  if (len == 0) return fail(&c, RSW_ERR_PARSE, where, "empty document");
+  const char *end = NULL;
+  cJSON *doc = cJSON_ParseWithLengthOpts(text, len, &end, 0);
+  if (!doc) {
+    size_t off = end && end >= text && end <= text + len ? (size_t)(end - text) : 0;
+    int line, colno;
+    line_col(text, off, &line, &colno);
+    char w[600];
+    snprintf(w, sizeof w, "%s:%d:%d", c.source, line, colno);
+    return fail(&c, RSW_ERR_PARSE, w, "malformed JSON near line %d, column %d", line, colno);
+  }
+  /* Trailing garbage after the document. */
+  if (end) {
+    const char *e = end;
+    while (e < text + len && (*e == ' ' || *e == '\t' || *e == '\n' || *e == '\r' || *e == '\0')) e++;
+    if (e < text + len) {
+      int line, colno;
+      line_col(text, (size_t)(e - text), &line, &colno);
+      char w[600];
+      snprintf(w, sizeof w, "%s:%d:%d", c.source, line, colno);
+      cJSON_Delete(doc);
+      return fail(&c, RSW_ERR_PARSE, w, "unexpected content after the JSON document");
+    }
+  }
+  rsw_status st = RSW_OK;
+  node *root = NULL;
+  char *variant = NULL;
+  if (!cJSON_IsObject(doc)) {
+    st = fail(&c, RSW_ERR_TYPE, where, "the document must be a JSON object (a scene dictionary)");
+    goto out;
+  }
+  st = check_duplicate_keys(&c, doc, where);
+  if (st) goto out;
+  const cJSON *type = cJSON_GetObjectItemCaseSensitive(doc, "type");
+  if (type && (!cJSON_IsString(type) || strcmp(type->valuestring, "scene") != 0)) {
+    char w[600];
+    ptr_join(w, sizeof w, where, "type");
+    st = fail(&c, RSW_ERR_INVALID, w, "the root object must have \"type\": \"scene\"");
+    goto out;
+  }
+  const cJSON *var = cJSON_GetObjectItemCaseSensitive(doc, "variant");
+  if (var) {
+    char w[600];
+    ptr_join(w, sizeof w, where, "variant");
+    if (!cJSON_IsString(var)) {
+      st = fail(&c, RSW_ERR_TYPE, w, "\"variant\" must be a string (\"mono\" or \"rgb\")");
+      goto out;
+    }
+    variant = rsw_strdup(var->valuestring);
+  }
+  /* Build the root without the "variant" key: detach it temporarily. */
+  cJSON *detached = var ? cJSON_DetachItemViaPointer(doc, (cJSON *)var) : NULL;
+  if (cJSON_GetObjectItemCaseSensitive(doc, "id")) {
+    char w[600];
+    ptr_join(w, sizeof w, where, "id");
+    st = fail(&c, RSW_ERR_INVALID, w, "the root scene takes no \"id\"");
+  } else {
+    st = read_object(&c, doc, NULL, where, 0, &root);
+  }
+  cJSON_Delete(detached);
+  if (st) goto out;
+  free(root->id);
+  root->id = NULL;
+  st = node_assign_ids(root, err);
+out:
+  cJSON_Delete(doc);
+  if (st) {
+    node_free(root);
+    free(variant);
+    return st;
+  }
+  *root_out = root;
+  if (variant_out)
+    *variant_out = variant;
+  else
+    free(variant);
+  return RSW_OK;
+}

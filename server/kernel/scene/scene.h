@@ -1,0 +1,39 @@
+/* Loading, finalising and freeing a scene. */
+#ifndef RSW_SCENE_SCENE_H
+#define RSW_SCENE_SCENE_H
+
+#include "../kernel.h"
+#include "node.h"
+
+typedef struct scene_load_opts {
+  size_t size;                 /* sizeof(scene_load_opts): lets it grow */
+  const char *variant;         /* "mono"/"rgb" overriding the document's, or NULL */
+  const scene_define *defines; /* XML -D overrides */
+  size_t n_defines;
+  const char *base_dir;        /* where relative file names resolve; NULL: "." */
+} scene_load_opts;
+
+/* Build a scene from a document tree. Takes ownership of root (freed on
+ * failure too). doc_variant is the variant the document declared (or NULL);
+ * opts->variant overrides it; default rgb. */
+rsw_status scene_build(node *root, const char *doc_variant, const scene_load_opts *opts,
+                       scene **out, rsw_err *err);
+
+/* Read a JSON or XML file (by extension; .xml is XML, anything else is
+ * sniffed: a leading '<' means XML) and build it. */
+rsw_status scene_load_file(const char *path, const scene_load_opts *opts, scene **out,
+                           rsw_err *err);
+/* Same from memory; `name` is used in error locations. */
+rsw_status scene_load_memory(const char *text, size_t len, const char *name, bool is_xml,
+                             const scene_load_opts *opts, scene **out, rsw_err *err);
+
+/* Evaluate every object's wavelength-dependent state for a render. */
+rsw_status scene_prepare(scene *s, const render_ctx *rc, rsw_err *err);
+
+/* Sensor by id, or by decimal index when `id` is all digits. NULL if none. */
+sensor *scene_find_sensor(const scene *s, const char *id, size_t *index_out);
+
+/* Free the scene, every object it owns and its document. NULL is a no-op. */
+void scene_free(scene *s);
+
+#endif

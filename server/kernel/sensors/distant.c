@@ -1,0 +1,120 @@
+/* `distant`: single-direction distant radiancemeter (mitsuba3
+ * src/sensors/distant.cpp; kernel-behavior.md §1.3).
+ *
+ * Every ray travels along d = to_world (0,0,1) (the direction the sensor
+ * looks, into the scene); the one pixel records the radiance leaving the
+ * scene along -d (W m^-2 sr^-1 [nm^-1]), averaged over the target.
+ * Origins: point target o = p - 2R d; shape target o = ps.p - 2R d with
+ * weight 1/(pdf area); no target: a disk of radius R around the bounding
+ * sphere centre, orthogonal to d (to_world's z), shifted back by R.
+ * There is no ray_offset parameter. */
+#include <math.h>
+#include <stdlib.h>
+
+#include "sensor_common.h"
+
+typedef struct distant {
+  sensor base;
+  ray_target target;
+  vec3 d;       /* unit, into the scene */
+  vec3 center;  /* scene bounding sphere */
+  double radius;
+} distant;
+
+static double distant_sample_ray(const sensor *s, vec2 film_u, vec2 aperture_u,
+                                 ray3 *ray) {
+  (void)film_u;
+  const distant *ds = (const distant *)s;
+  /* Point/shape targets start 2R away (the sphere's diameter: the origin is
+   * outside the scene whatever the target); the no-target disk goes
+   * through the centre, so R suffices. */
+  double offset = ds->target.kind == RAY_TARGET_NONE ? ds->radius : 2.0 * ds->radius;
+  vec3 o;
+  double w = ray_target_origin(&ds->target, &s->to_world, ds->center, ds->radius,
+                               offset, ds->d, aperture_u, &o);
+  ray->o = o;
+  ray->d = ds->d;
+  ray->tmin = 0.0;
+  ray->tmax = INFINITY;
+  return w;
+}
+
+static rsw_status distant_set_scene(sensor *s, const scene *sc, rsw_err *err) {
+  distant *ds = (distant *)s;
+  rsw_status st = ray_target_check(&ds->target, s->base.id, err);
+  if (st != RSW_OK) return st;
+  ds->center = sc->bsphere_center; /* radius already inflated (kernel.h) */
+  ds->radius = sc->bsphere_radius;
+  return RSW_OK;
+}
+
+static const sensor_ops distant_ops = {
+    .sample_ray = distant_sample_ray,
+    .set_scene = distant_set_scene,
+};
+
+static void distant_destroy(object *o) { free(o); }
+
+static rsw_status distant_create(loader *ld, node *n, object **out);
+
+const plugin plugin_distant = {
+    .name = "distant",
+    .cls = CLS_SENSOR,
+    .create = distant_create,
+    .destroy = distant_destroy,
+    .ops = &distant_ops,
+};
+
+static rsw_status distant_read(loader *ld, node *n, distant *ds) {
+  rsw_status st = sensor_read_base(ld, n, &ds->base);
+  if (st != RSW_OK) return st;
+  st = sensor_require_1x1_film(ld, n, &ds->base);
+  if (st != RSW_OK) return st;
+
+  if (ld_has(n, "direction") && ld_has(n, "to_world"))
+    return ld_fail(ld, n, "direction", RSW_ERR_INVALID,
+                   "distant: only one of 'direction' and 'to_world' can be given");
+  bool has_dir = false;
+  vec3 dir = v3(0, 0, 1);
+  st = ld_vec3(ld, n, "direction", dir, &dir, &has_dir);
+  if (st != RSW_OK) return st;
+  if (has_dir) {
+    if (!(v3_len(dir) > 0.0))
+      return ld_fail(ld, n, "direction", RSW_ERR_INVALID,
+                     "distant: 'direction' must not be the zero vector");
+    /* Mitsuba: to_world = look_at(0, normalize(direction), up) with up the
+     * second vector of coordinate_system(direction). */
+    vec3 dn = v3_norm(dir), s_unused, up;
+    coordinate_system(dn, &s_unused, &up);
+    if (!xf_look_at(v3(0, 0, 0), dn, up, &ds->base.to_world))
+      return ld_fail(ld, n, "direction", RSW_ERR_INVALID,
+                     "distant: cannot build a frame from 'direction'");
+  } else {
+    st = ld_transform(ld, n, "to_world", &ds->base.to_world, NULL);
+    if (st != RSW_OK) return st;
+  }
+  /* Mitsuba leaves the direction scaled with to_world; the integrators
+   * expect a unit ray direction. */
+  vec3 d = xf_vector(&ds->base.to_world, v3(0, 0, 1));
+  if (!(v3_len(d) > 0.0) || !v3_finite(d))
+    return ld_fail(ld, n, "to_world", RSW_ERR_INVALID,
+                   "distant: 'to_world' maps +z to a zero vector");
+  ds->d = v3_norm(d);
+  return sensor_read_target(ld, n, &ds->target);
+}
+
+static rsw_status distant_create(loader *ld, node *n, object **out) {
+  distant *ds = calloc(1, sizeof *ds);
+  if (!ds) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+  ds->base.base.plugin = &plugin_distant;
+  ds->base.base.id = n->id;
+  ds->base.ops = &distant_ops;
+  ds->base.to_world = xf_identity();
+  rsw_status st = distant_read(ld, n, ds);
+  if (st != RSW_OK) {
+    free(ds);
+    return st;
+  }
+  *out = &ds->base.base;
+  return RSW_OK;
+}

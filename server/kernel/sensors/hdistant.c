@@ -1,0 +1,100 @@
+/* `hdistant`: hemispherical distant radiancemeter (Eradiate plugin,
+ * eradiate/mitsuba3 src/eradiate_plugins/sensors/hdistant.cpp;
+ * kernel-behavior.md §1.2).
+ *
+ * Each film sample u maps to one exitant direction of the hemisphere around
+ * the sensor axis to_world (0,0,1):
+ *   v_local = square_to_uniform_hemisphere(u)   (concentric based)
+ *   omega   = to_world v_local,   ray.d = -omega
+ * The map preserves area, so every pixel subtends 2 pi / (W H) sr and the
+ * film records, per pixel, the mean over samples of weight * L(o, d): the
+ * radiance leaving the target along omega (W m^-2 sr^-1 [nm^-1]).
+ *
+ * Ray origins follow the target strategy (sensor_common.h) with the
+ * distance `ray_offset` back along -d; a negative ray_offset (default -1)
+ * is resolved in set_scene() to R without a target and 2R with one, R
+ * being the inflated bounding-sphere radius. */
+#include <math.h>
+#include <stdlib.h>
+
+#include "sensor_common.h"
+
+typedef struct hdistant {
+  sensor base;
+  ray_target target;
+  double ray_offset_param; /* as given; < 0: resolve from the scene */
+  double ray_offset;       /* in use (resolved by set_scene) */
+  vec3 center;             /* scene bounding sphere */
+  double radius;
+} hdistant;
+
+static double hdistant_sample_ray(const sensor *s, vec2 film_u, vec2 aperture_u,
+                                  ray3 *ray) {
+  const hdistant *h = (const hdistant *)s;
+  vec3 v_local = warp_square_to_uniform_hemisphere(film_u);
+  /* Normalised so that a to_world with a scale still gives a unit ray
+   * direction (Mitsuba leaves it scaled; the integrators assume |d| = 1). */
+  vec3 omega = v3_norm(xf_vector(&s->to_world, v_local));
+  vec3 d = v3_neg(omega);
+  vec3 o;
+  double w = ray_target_origin(&h->target, &s->to_world, h->center, h->radius,
+                               h->ray_offset, d, aperture_u, &o);
+  ray->o = o;
+  ray->d = d;
+  ray->tmin = 0.0;
+  ray->tmax = INFINITY;
+  return w;
+}
+
+static rsw_status hdistant_set_scene(sensor *s, const scene *sc, rsw_err *err) {
+  hdistant *h = (hdistant *)s;
+  rsw_status st = ray_target_check(&h->target, s->base.id, err);
+  if (st != RSW_OK) return st;
+  /* scene->bsphere_radius is already inflated as Mitsuba's set_scene does:
+   * R = max(RayEpsilon, r (1 + RayEpsilon)). */
+  h->center = sc->bsphere_center;
+  h->radius = sc->bsphere_radius;
+  if (h->ray_offset_param < 0.0)
+    h->ray_offset = h->target.kind == RAY_TARGET_NONE ? h->radius : 2.0 * h->radius;
+  else
+    h->ray_offset = h->ray_offset_param;
+  return RSW_OK;
+}
+
+static const sensor_ops hdistant_ops = {
+    .sample_ray = hdistant_sample_ray,
+    .set_scene = hdistant_set_scene,
+};
+
+static void hdistant_destroy(object *o) { free(o); }
+
+static rsw_status hdistant_create(loader *ld, node *n, object **out);
+
+const plugin plugin_hdistant = {
+    .name = "hdistant",
+    .cls = CLS_SENSOR,
+    .create = hdistant_create,
+    .destroy = hdistant_destroy,
+    .ops = &hdistant_ops,
+};
+
+static rsw_status hdistant_create(loader *ld, node *n, object **out) {
+  hdistant *h = calloc(1, sizeof *h);
+  if (!h) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+  h->base.base.plugin = &plugin_hdistant;
+  h->base.base.id = n->id;
+  h->base.ops = &hdistant_ops;
+  h->base.to_world = xf_identity();
+
+  rsw_status st = sensor_read_base(ld, n, &h->base);
+  if (st == RSW_OK) st = ld_transform(ld, n, "to_world", &h->base.to_world, NULL);
+  if (st == RSW_OK) st = sensor_read_target(ld, n, &h->target);
+  if (st == RSW_OK) st = ld_float(ld, n, "ray_offset", -1.0, &h->ray_offset_param);
+  if (st != RSW_OK) {
+    free(h);
+    return st;
+  }
+  h->ray_offset = h->ray_offset_param;
+  *out = &h->base.base;
+  return RSW_OK;
+}

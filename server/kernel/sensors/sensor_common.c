@@ -1,0 +1,116 @@
+#include "sensor_common.h"
+
+#include <math.h>
+
+#include "../shapes/shape.h"
+
+/* The nested object of class cls, or a default instance of `def_type`
+ * when the document gives none (mitsuba3 src/render/sensor.cpp creates an
+ * hdrfilm and an independent sampler the same way). */
+static rsw_status child_or_default(loader *ld, node *n, obj_class cls,
+                                   const char *def_type, const char *def_id,
+                                   object **out) {
+  object *o = NULL;
+  rsw_status st = ld_child(ld, n, NULL, cls, &o);
+  if (st != RSW_OK) return st;
+  if (!o) {
+    st = ld_create_default(ld, def_type, cls, def_id, &o);
+    if (st != RSW_OK) return st;
+  }
+  if (!o || o->plugin == NULL || o->plugin->cls != cls)
+    return ld_fail(ld, n, NULL, RSW_ERR_TYPE, "%s: expected a %s", n->type,
+                   obj_class_name(cls));
+  *out = o;
+  return RSW_OK;
+}
+
+rsw_status sensor_read_base(loader *ld, node *n, sensor *s) {
+  object *f = NULL, *smp = NULL;
+  rsw_status st = child_or_default(ld, n, CLS_FILM, "hdrfilm", "film", &f);
+  if (st != RSW_OK) return st;
+  st = child_or_default(ld, n, CLS_SAMPLER, "independent", "sampler", &smp);
+  if (st != RSW_OK) return st;
+
+  /* Mitsuba: shutter_open (0), shutter_close (0), the open time must not be
+   * negative. Nothing in a scene moves, so the values change nothing. */
+  double open = 0, close = 0;
+  st = ld_float(ld, n, "shutter_open", 0.0, &open);
+  if (st != RSW_OK) return st;
+  st = ld_float(ld, n, "shutter_close", 0.0, &close);
+  if (st != RSW_OK) return st;
+  if (close < open)
+    return ld_fail(ld, n, "shutter_close", RSW_ERR_RANGE,
+                   "%s: shutter_close (%g) is before shutter_open (%g)", n->type,
+                   close, open);
+
+  s->film = (film *)f;
+  s->sampler = (sampler *)smp;
+  return RSW_OK;
+}
+
+rsw_status sensor_require_1x1_film(loader *ld, node *n, const sensor *s) {
+  if (s->film->width != 1 || s->film->height != 1)
+    return ld_fail(ld, n, NULL, RSW_ERR_INVALID,
+                   "%s: this sensor only supports films of 1x1 pixels (got %dx%d)",
+                   n->type, s->film->width, s->film->height);
+  return RSW_OK;
+}
+
+rsw_status sensor_read_target(loader *ld, node *n, ray_target *t) {
+  ray_target r = {.kind = RAY_TARGET_NONE};
+  prop *p = node_find(n, "target");
+  if (p) {
+    if (p->kind == PROP_VEC3) {
+      rsw_status st = ld_vec3(ld, n, "target", v3(0, 0, 0), &r.point, NULL);
+      if (st != RSW_OK) return st;
+      r.kind = RAY_TARGET_POINT;
+    } else if (p->kind == PROP_NODE || p->kind == PROP_REF) {
+      object *o = NULL;
+      rsw_status st = ld_child(ld, n, "target", CLS_SHAPE, &o);
+      if (st != RSW_OK) return st;
+      if (!o)
+        return ld_fail(ld, n, "target", RSW_ERR_TYPE,
+                       "%s: 'target' must be a point or a shape", n->type);
+      r.kind = RAY_TARGET_SHAPE;
+      r.shape = (const shape *)o;
+    } else {
+      return ld_fail(ld, n, "target", RSW_ERR_TYPE,
+                     "%s: unsupported 'target' type (must be a point or a shape)",
+                     n->type);
+    }
+  }
+  *t = r;
+  return RSW_OK;
+}
+
+rsw_status ray_target_check(const ray_target *t, const char *where, rsw_err *err) {
+  if (t->kind != RAY_TARGET_SHAPE) return RSW_OK;
+  double a = t->shape->area;
+  if (!(a > 0.0) || !isfinite(a))
+    return rsw_fail(err, RSW_ERR_INVALID, where,
+                    "target shape '%s' has no usable surface area (%g)",
+                    t->shape->base.id ? t->shape->base.id : "?", a);
+  return RSW_OK;
+}
+
+double ray_target_origin(const ray_target *t, const xform *to_world, vec3 center,
+                         double radius, double offset, vec3 d, vec2 u, vec3 *o) {
+  switch (t->kind) {
+  case RAY_TARGET_POINT:
+    *o = v3_fma(t->point, -offset, d);
+    return 1.0;
+  case RAY_TARGET_SHAPE: {
+    position_sample ps = shape_sample_position(t->shape, u);
+    *o = v3_fma(ps.p, -offset, d);
+    double denom = ps.pdf * t->shape->area;
+    return denom > 0.0 ? 1.0 / denom : 0.0;
+  }
+  case RAY_TARGET_NONE:
+  default: {
+    vec2 q = warp_square_to_disk_concentric(u);
+    vec3 perp = xf_vector(to_world, v3(q.x, q.y, 0.0));
+    *o = v3_fma(v3_fma(center, radius, perp), -offset, d);
+    return 1.0;
+  }
+  }
+}

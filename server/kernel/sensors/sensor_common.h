@@ -1,0 +1,58 @@
+/* Parts shared by the sensor plugins (private to sensors/): what Mitsuba's
+ * Sensor base class reads (film, sampler, shutter), the 1x1-film check of
+ * the single-pixel sensors, and the ray-target strategy of the distant
+ * family (distant, hdistant), kernel-behavior.md §1.2-§1.3. */
+#ifndef RSW_SENSORS_SENSOR_COMMON_H
+#define RSW_SENSORS_SENSOR_COMMON_H
+
+#include "../kernel.h"
+#include "../scene/loader.h"
+
+/* Read the properties every sensor has (mitsuba3 src/render/sensor.cpp):
+ * the nested film (default: an `hdrfilm` with its defaults), the nested
+ * sampler (default: `independent`, sample_count 4), and shutter_open /
+ * shutter_close (accepted and validated; ignored since nothing moves).
+ * Fills s->film and s->sampler (owned by the scene). */
+rsw_status sensor_read_base(loader *ld, node *n, sensor *s);
+
+/* Error unless s->film is 1x1 pixels (distant, radiancemeter: Mitsuba's
+ * "This sensor only supports films of size 1x1 Pixels!"). */
+rsw_status sensor_require_1x1_film(loader *ld, node *n, const sensor *s);
+
+/* Where the rays of a distant sensor are aimed. */
+typedef enum ray_target_kind {
+  RAY_TARGET_NONE,  /* disk cross-section of the scene's bounding sphere */
+  RAY_TARGET_POINT, /* one world point */
+  RAY_TARGET_SHAPE, /* uniform area samples on a (flat) shape */
+} ray_target_kind;
+
+typedef struct ray_target {
+  ray_target_kind kind;
+  vec3 point;          /* RAY_TARGET_POINT */
+  const shape *shape;  /* RAY_TARGET_SHAPE (owned by the scene) */
+} ray_target;
+
+/* Read the optional `target` property: a 3-vector is a point target, a
+ * nested or referenced shape a shape target; anything else is an error
+ * (Mitsuba: "Unsupported 'target' parameter type"). */
+rsw_status sensor_read_target(loader *ld, node *n, ray_target *t);
+
+/* Checks that need the finished scene: a shape target must have a finite,
+ * positive area (the weight divides by it). `where` names the sensor. */
+rsw_status ray_target_check(const ray_target *t, const char *where, rsw_err *err);
+
+/* Origin of a ray with unit direction d (pointing into the scene) for the
+ * aperture sample u; returns the ray weight (eradiate/mitsuba3
+ * src/eradiate_plugins/sensors/hdistant.cpp, mitsuba3 src/sensors/distant.cpp):
+ *   point:  o = p - offset d,                         weight 1
+ *   shape:  ps = sample_position(u), o = ps.p - offset d,
+ *           weight 1 / (ps.pdf * area)   (= 1 for uniform area sampling)
+ *   none:   q = square_to_disk_concentric(u),
+ *           o = c + R to_world (q.x, q.y, 0) - offset d,   weight 1
+ * so without a target the origins fill the disk of radius R around the
+ * bounding-sphere centre c in the plane orthogonal to the sensor axis
+ * to_world (0,0,1), shifted back by offset. */
+double ray_target_origin(const ray_target *t, const xform *to_world, vec3 center,
+                         double radius, double offset, vec3 d, vec2 u, vec3 *o);
+
+#endif

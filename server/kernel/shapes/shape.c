@@ -1,0 +1,277 @@
+/* Geometry shared by every shape plugin. */
+#include "shape.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+#include "../accel.h"
+#include "../scene/loader.h"
+#include "shape_common.h"
+
+/* ---- common properties ------------------------------------------------------ */
+
+rsw_status shape_read_common(loader *ld, node *n, shape *s, bool mesh_like) {
+  rsw_status st = ld_transform(ld, n, "to_world", &s->to_world, NULL);
+  if (st) return st;
+  st = ld_bool(ld, n, "flip_normals", false, &s->flip_normals);
+  if (st) return st;
+  object *o;
+  st = ld_child(ld, n, NULL, CLS_EMITTER, &o);
+  if (st) return st;
+  s->emitter = (emitter *)o;
+  if (s->emitter && !(s->emitter->flags & EMITTER_SURFACE))
+    return ld_fail(ld, n, NULL, RSW_ERR_INVALID, "%s '%s': only an area emitter can be nested in a shape",
+                   n->type, n->id);
+  st = ld_child(ld, n, NULL, CLS_BSDF, &o);
+  if (st) return st;
+  if (!o) {
+    /* Mitsuba's default: a diffuse BSDF (reflectance 0.5). */
+    st = ld_create_default(ld, "diffuse", CLS_BSDF, "diffuse", &o);
+    if (st) return st;
+  }
+  s->bsdf = (bsdf *)o;
+  (void)mesh_like;
+  return RSW_OK;
+}
+
+void shape_release(shape *s) {
+  free(s->mesh.pos);
+  free(s->mesh.nrm);
+  free(s->mesh.uv);
+  free(s->mesh.faces);
+  free(s->tri_cdf);
+  memset(&s->mesh, 0, sizeof s->mesh);
+  s->tri_cdf = NULL;
+}
+
+void shape_destroy(object *o) {
+  shape *s = (shape *)o;
+  shape_release(s);
+  free(s);
+}
+
+static inline vec3 mesh_vertex(const mesh *m, uint32_t i) {
+  const float *p = &m->pos[3 * (size_t)i];
+  return v3(p[0], p[1], p[2]);
+}
+
+rsw_status shape_finalize(shape *s, rsw_err *err, const char *where) {
+  if (s->emitter) s->emitter->shape = s;
+  switch (s->geom) {
+  case GEOM_MESH: {
+    const mesh *m = &s->mesh;
+    if (m->n_faces == 0) return rsw_fail(err, RSW_ERR_INVALID, where, "mesh has no faces");
+    free(s->tri_cdf);
+    s->tri_cdf = malloc((size_t)m->n_faces * sizeof(double));
+    if (!s->tri_cdf) return rsw_fail(err, RSW_ERR_NOMEM, where, "out of memory");
+    double acc = 0;
+    for (uint32_t f = 0; f < m->n_faces; f++) {
+      const uint32_t *ix = &m->faces[3 * (size_t)f];
+      for (int k = 0; k < 3; k++)
+        if (ix[k] >= m->n_verts)
+          return rsw_fail(err, RSW_ERR_INVALID, where, "face %u references vertex %u of %u", f, ix[k], m->n_verts);
+      vec3 p0 = xf_point(&s->to_world, mesh_vertex(m, ix[0]));
+      vec3 p1 = xf_point(&s->to_world, mesh_vertex(m, ix[1]));
+      vec3 p2 = xf_point(&s->to_world, mesh_vertex(m, ix[2]));
+      acc += 0.5 * v3_len(v3_cross(v3_sub(p1, p0), v3_sub(p2, p0)));
+      s->tri_cdf[f] = acc;
+    }
+    s->area = acc;
+    for (uint32_t i = 0; i < 3 * m->n_verts; i++)
+      if (!isfinite(m->pos[i])) return rsw_fail(err, RSW_ERR_INVALID, where, "mesh has a non-finite vertex");
+    break;
+  }
+  case GEOM_SPHERE: {
+    double r;
+    if (!xf_is_similarity(&s->to_world, &r))
+      return rsw_fail(err, RSW_ERR_INVALID, where,
+                      "sphere: to_world must be a rotation, uniform scale and translation (no shear or "
+                      "non-uniform scale)");
+    s->area = 4.0 * RSW_PI * r * r;
+    break;
+  }
+  case GEOM_DISK: {
+    /* Area of the image of the unit disk: pi |ex x ey|, exact for any
+     * linear map that keeps it an ellipse. Mitsuba rejects non-uniform
+     * scale within the plane only through its sampling; we accept ellipses
+     * for intersection but require a similarity within the plane so that
+     * uniform sampling stays uniform. */
+    vec3 ex = xf_vector(&s->to_world, v3(1, 0, 0));
+    vec3 ey = xf_vector(&s->to_world, v3(0, 1, 0));
+    double lx = v3_len(ex), ly = v3_len(ey);
+    if (!(lx > 0) || !(ly > 0) || fabs(lx - ly) > 1e-6 * (lx + ly) ||
+        fabs(v3_dot(ex, ey)) > 1e-6 * lx * ly)
+      return rsw_fail(err, RSW_ERR_INVALID, where,
+                      "disk: to_world must not shear or scale non-uniformly within the disk's plane");
+    s->area = RSW_PI * v3_len(v3_cross(ex, ey));
+    break;
+  }
+  }
+  if (!(s->area > 0) || !isfinite(s->area))
+    return rsw_fail(err, RSW_ERR_INVALID, where, "shape has zero or non-finite area");
+  return RSW_OK;
+}
+
+/* ---- sampling ---------------------------------------------------------------- */
+
+position_sample shape_sample_position(const shape *s, vec2 u) {
+  position_sample ps;
+  memset(&ps, 0, sizeof ps);
+  switch (s->geom) {
+  case GEOM_MESH: {
+    const mesh *m = &s->mesh;
+    /* Pick a triangle by area (binary search on the cdf), reuse u.x. */
+    double target = u.x * s->area;
+    uint32_t lo = 0, hi = m->n_faces - 1;
+    while (lo < hi) {
+      uint32_t mid = lo + (hi - lo) / 2;
+      if (s->tri_cdf[mid] <= target)
+        lo = mid + 1;
+      else
+        hi = mid;
+    }
+    uint32_t f = lo;
+    double prev = f ? s->tri_cdf[f - 1] : 0.0;
+    double w = s->tri_cdf[f] - prev;
+    double ux = w > 0 ? (target - prev) / w : 0.5;
+    if (ux < 0) ux = 0;
+    if (ux >= 1) ux = 0x1.fffffffffffffp-1;
+    /* Uniform barycentrics (Mitsuba's square_to_uniform_triangle). */
+    double t = sqrt(1.0 - ux);
+    double b1 = 1.0 - t, b2 = t * u.y;
+    const uint32_t *ix = &m->faces[3 * (size_t)f];
+    vec3 p0 = mesh_vertex(m, ix[0]), p1 = mesh_vertex(m, ix[1]), p2 = mesh_vertex(m, ix[2]);
+    vec3 po = v3_add(v3_add(v3_scale(p0, 1 - b1 - b2), v3_scale(p1, b1)), v3_scale(p2, b2));
+    ps.p = xf_point(&s->to_world, po);
+    vec3 w0 = xf_point(&s->to_world, p0), w1 = xf_point(&s->to_world, p1), w2 = xf_point(&s->to_world, p2);
+    ps.n = v3_norm(v3_cross(v3_sub(w1, w0), v3_sub(w2, w0)));
+    if (m->uv) {
+      const float *a = &m->uv[2 * (size_t)ix[0]], *b = &m->uv[2 * (size_t)ix[1]], *c = &m->uv[2 * (size_t)ix[2]];
+      ps.uv[0] = (1 - b1 - b2) * a[0] + b1 * b[0] + b2 * c[0];
+      ps.uv[1] = (1 - b1 - b2) * a[1] + b1 * b[1] + b2 * c[1];
+    } else {
+      ps.uv[0] = b1;
+      ps.uv[1] = b2;
+    }
+    break;
+  }
+  case GEOM_SPHERE: {
+    vec3 d = warp_square_to_uniform_sphere(u);
+    ps.p = xf_point(&s->to_world, d);
+    ps.n = v3_norm(xf_normal(&s->to_world, d));
+    ps.uv[0] = u.x;
+    ps.uv[1] = u.y;
+    break;
+  }
+  case GEOM_DISK: {
+    vec2 q = warp_square_to_disk_concentric(u);
+    ps.p = xf_point(&s->to_world, v3(q.x, q.y, 0));
+    ps.n = v3_norm(xf_normal(&s->to_world, v3(0, 0, 1)));
+    ps.uv[0] = u.x;
+    ps.uv[1] = u.y;
+    break;
+  }
+  }
+  if (s->flip_normals) ps.n = v3_neg(ps.n);
+  ps.pdf = 1.0 / s->area;
+  return ps;
+}
+
+double shape_pdf_position(const shape *s) { return 1.0 / s->area; }
+
+/* ---- hit -> interaction --------------------------------------------------------- */
+
+void shape_fill_interaction(const shape *s, const ray3 *r, const accel_hit *h, surface_interaction *si) {
+  si->t = h->t;
+  si->shape = s;
+  si->prim = h->prim;
+  vec3 n, sn, tangent = v3(0, 0, 0);
+  switch (s->geom) {
+  case GEOM_MESH: {
+    const mesh *m = &s->mesh;
+    const uint32_t *ix = &m->faces[3 * (size_t)h->prim];
+    double b1 = h->u, b2 = h->v, b0 = 1.0 - b1 - b2;
+    vec3 p0 = mesh_vertex(m, ix[0]), p1 = mesh_vertex(m, ix[1]), p2 = mesh_vertex(m, ix[2]);
+    /* Position from barycentrics in object space, then to world: more
+     * accurate than o + t d for spawning the next ray. */
+    vec3 po = v3_add(v3_add(v3_scale(p0, b0), v3_scale(p1, b1)), v3_scale(p2, b2));
+    si->p = xf_point(&s->to_world, po);
+    /* Face normal = (p1 - p0) x (p2 - p0), as Mitsuba's Mesh. */
+    n = v3_norm(xf_normal(&s->to_world, v3_cross(v3_sub(p1, p0), v3_sub(p2, p0))));
+    if (m->nrm && !s->face_normals) {
+      const float *a = &m->nrm[3 * (size_t)ix[0]], *b = &m->nrm[3 * (size_t)ix[1]], *c = &m->nrm[3 * (size_t)ix[2]];
+      vec3 no = v3(b0 * a[0] + b1 * b[0] + b2 * c[0], b0 * a[1] + b1 * b[1] + b2 * c[1],
+                   b0 * a[2] + b1 * b[2] + b2 * c[2]);
+      sn = v3_norm(xf_normal(&s->to_world, no));
+      if (!(v3_len2(sn) > 0.5)) sn = n;
+    } else {
+      sn = n;
+    }
+    tangent = v3(0, 0, 0);
+    if (m->uv) {
+      const float *a = &m->uv[2 * (size_t)ix[0]], *b = &m->uv[2 * (size_t)ix[1]], *c = &m->uv[2 * (size_t)ix[2]];
+      si->uv[0] = b0 * a[0] + b1 * b[0] + b2 * c[0];
+      si->uv[1] = b0 * a[1] + b1 * b[1] + b2 * c[1];
+      /* dp/du from the uv parameterisation (Mitsuba's Mesh): it orients the
+       * shading frame's s axis, which anisotropic BSDFs depend on. */
+      double du0 = b[0] - a[0], dv0 = b[1] - a[1], du1 = c[0] - a[0], dv1 = c[1] - a[1];
+      double det = du0 * dv1 - dv0 * du1;
+      if (det != 0) {
+        vec3 dp0 = v3_sub(p1, p0), dp1 = v3_sub(p2, p0);
+        tangent = xf_vector(&s->to_world, v3_scale(v3_sub(v3_scale(dp0, dv1), v3_scale(dp1, dv0)), 1.0 / det));
+      }
+    } else {
+      si->uv[0] = b1;
+      si->uv[1] = b2;
+    }
+    break;
+  }
+  case GEOM_SPHERE: {
+    /* Project the hit onto the unit sphere in object space (removes the
+     * float error of the intersection). uv = (phi / 2pi, theta / pi) as
+     * Mitsuba's sphere. */
+    vec3 pw = v3_fma(r->o, h->t, r->d);
+    vec3 po = v3_norm(xf_inv_point(&s->to_world, pw));
+    si->p = xf_point(&s->to_world, po);
+    n = sn = v3_norm(xf_normal(&s->to_world, po));
+    double phi = atan2(po.y, po.x);
+    if (phi < 0) phi += 2 * RSW_PI;
+    si->uv[0] = phi * RSW_INV_2PI;
+    si->uv[1] = acos(fmax(-1.0, fmin(1.0, po.z))) * RSW_INV_PI;
+    tangent = xf_vector(&s->to_world, v3(-po.y, po.x, 0));
+    break;
+  }
+  case GEOM_DISK:
+  default: {
+    vec3 pw = v3_fma(r->o, h->t, r->d);
+    vec3 po = xf_inv_point(&s->to_world, pw);
+    po.z = 0;
+    tangent = v3(0, 0, 0);
+    si->p = xf_point(&s->to_world, po);
+    n = sn = v3_norm(xf_normal(&s->to_world, v3(0, 0, 1)));
+    /* uv = (r, phi / 2pi) as Mitsuba's disk. */
+    double phi = atan2(po.y, po.x);
+    if (phi < 0) phi += 2 * RSW_PI;
+    si->uv[0] = sqrt(po.x * po.x + po.y * po.y);
+    si->uv[1] = phi * RSW_INV_2PI;
+    break;
+  }
+  }
+  if (s->flip_normals) {
+    n = v3_neg(n);
+    sn = v3_neg(sn);
+  }
+  si->ng = n;
+  /* Shading frame: s along dp/du made orthogonal to the normal when
+   * available, else Mitsuba's coordinate_system(n). */
+  vec3 ts = v3_sub(tangent, v3_scale(sn, v3_dot(sn, tangent)));
+  double tl = v3_len(ts);
+  if (tl > 1e-9 * (v3_len(tangent) + 1e-300)) {
+    si->sh.n = sn;
+    si->sh.s = v3_scale(ts, 1.0 / tl);
+    si->sh.t = v3_cross(sn, si->sh.s);
+  } else {
+    si->sh = frame_from_normal(sn);
+  }
+  si->wi = frame_to_local(&si->sh, v3_neg(v3_norm(r->d)));
+}
