@@ -9,8 +9,8 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "kernel/shapes/mesh_io.h"
 #include "../support/test.h"
+#include "kernel/shapes/mesh_io.h"
 
 RSW_TEST_DEFINE_GLOBALS
 
@@ -61,7 +61,8 @@ static const float *corner(const mesh *m, uint32_t f, int i) {
 static double tri_area_sum(const mesh *m) {
   double sum = 0;
   for (uint32_t f = 0; f < m->n_faces; f++) {
-    const float *a = corner(m, f, 0), *b = corner(m, f, 1), *c = corner(m, f, 2);
+    const float *a = corner(m, f, 0), *b = corner(m, f, 1),
+                *c = corner(m, f, 2);
     double e1[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
     double e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
     double x = e1[1] * e2[2] - e1[2] * e2[1];
@@ -82,8 +83,8 @@ static void check_quad(const mesh *m, bool flipped, const char *what) {
   const float want[4][3] = {{-1, -1, 0}, {1, -1, 0}, {1, 1, 0}, {-1, 1, 0}};
   for (uint32_t i = 0; i < 4; i++) {
     for (int c = 0; c < 3; c++)
-      CHECK(m->pos[3 * i + c] == want[i][c], "%s: pos[%u][%d] = %g", what, i,
-            c, m->pos[3 * i + c]);
+      CHECK(m->pos[3 * i + c] == want[i][c], "%s: pos[%u][%d] = %g", what, i, c,
+            m->pos[3 * i + c]);
     CHECK(m->nrm[3 * i] == 0 && m->nrm[3 * i + 1] == 0 &&
               m->nrm[3 * i + 2] == 1,
           "%s: normal %u", what, i);
@@ -163,11 +164,10 @@ static void test_obj_cube(void) {
 static void test_obj_negative_and_forms(void) {
   /* Negative indices count back from the last element defined so far;
    * mixed corner forms; a vertex reused with the same (v, vt) is shared. */
-  const char *src =
-      "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0 1.0\n" /* w ignored */
-      "vt 0.25 0.75\nvt 0.5\n"                   /* v defaults to 0 */
-      "f -4/-2 -3/-1 -2/-1\n"                    /* (0,vt0) (1,vt1) (2,vt1) */
-      "f 1/1 3/2 4\n";                           /* (0,vt0) (2,vt1) (3,-) */
+  const char *src = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0 1.0\n" /* w ignored */
+                    "vt 0.25 0.75\nvt 0.5\n" /* v defaults to 0 */
+                    "f -4/-2 -3/-1 -2/-1\n"  /* (0,vt0) (1,vt1) (2,vt1) */
+                    "f 1/1 3/2 4\n";         /* (0,vt0) (2,vt1) (3,-) */
   mesh m;
   rsw_err err = {0};
   const char *p = write_text("neg.obj", src);
@@ -180,8 +180,7 @@ static void test_obj_negative_and_forms(void) {
   REQUIRE(m.uv != NULL, "uvs lost");
   CHECK(m.nrm == NULL, "normals invented");
   /* flip: v -> 1 - v */
-  CHECK(m.uv[0] == 0.25f && m.uv[1] == 0.25f, "uv0 (%g, %g)", m.uv[0],
-        m.uv[1]);
+  CHECK(m.uv[0] == 0.25f && m.uv[1] == 0.25f, "uv0 (%g, %g)", m.uv[0], m.uv[1]);
   CHECK(m.uv[2] == 0.5f && m.uv[3] == 1.0f, "uv1 (%g, %g)", m.uv[2], m.uv[3]);
   CHECK(m.uv[6] == 0.0f && m.uv[7] == 0.0f, "corner without vt: (%g, %g)",
         m.uv[6], m.uv[7]);
@@ -234,10 +233,10 @@ static void test_ply_binary_types(void) {
   unsigned char buf[1024];
   size_t n = strlen(hdr);
   memcpy(buf, hdr, n);
-#define PUT(v)                                                               \
-  do {                                                                       \
-    memcpy(buf + n, &(v), sizeof(v));                                        \
-    n += sizeof(v);                                                          \
+#define PUT(v)                                                                 \
+  do {                                                                         \
+    memcpy(buf + n, &(v), sizeof(v));                                          \
+    n += sizeof(v);                                                            \
   } while (0)
   for (int i = 0; i < 5; i++) {
     float x = (float)i;
@@ -308,17 +307,20 @@ static const struct bad_case {
      "index -1 out of range"},
     {"nonfinite_binary.ply", false, RSW_ERR_FILE, "byte 284 (vertex 0)",
      "non-finite x"},
-    {"no_end_header.ply", false, RSW_ERR_FILE, "no_end_header.ply:5:", "no end_header line"},
+    {"no_end_header.ply", false, RSW_ERR_FILE,
+     "no_end_header.ply:5:", "no end_header line"},
     {"no_faces.ply", false, RSW_ERR_FILE, "no_faces.ply", "no faces"},
-    {"truncated_ascii.ply", false, RSW_ERR_FILE, "truncated_ascii.ply:21: face 1", "truncated:"},
+    {"truncated_ascii.ply", false, RSW_ERR_FILE,
+     "truncated_ascii.ply:21: face 1", "truncated:"},
     {"truncated_binary.ply", false, RSW_ERR_FILE, "(face 0)", "truncated:"},
-    {"bad_number.obj", true, RSW_ERR_FILE, "bad_number.obj:4:", "bad number \"-1.x\""},
-    {"index_out_of_range.obj", true, RSW_ERR_FILE, "index_out_of_range.obj:13:",
-     "vertex index 5 out of range"},
+    {"bad_number.obj", true, RSW_ERR_FILE,
+     "bad_number.obj:4:", "bad number \"-1.x\""},
+    {"index_out_of_range.obj", true, RSW_ERR_FILE,
+     "index_out_of_range.obj:13:", "vertex index 5 out of range"},
     {"no_faces.obj", true, RSW_ERR_FILE, "no_faces.obj", "no faces"},
     {"nonfinite.obj", true, RSW_ERR_FILE, "nonfinite.obj:5:", "non-finite"},
-    {"two_corner_face.obj", true, RSW_ERR_FILE, "two_corner_face.obj:13:",
-     "2 corners"},
+    {"two_corner_face.obj", true, RSW_ERR_FILE,
+     "two_corner_face.obj:13:", "2 corners"},
     {"zero_index.obj", true, RSW_ERR_FILE, "zero_index.obj:13:", "index 0"},
 };
 
@@ -403,8 +405,8 @@ static void test_inline_errors(void) {
       mesh_free(&m);
       continue;
     }
-    CHECK(strstr(err_text(&err), cases[i].text), "case %zu: \"%s\" lacks \"%s\"",
-          i, err_text(&err), cases[i].text);
+    CHECK(strstr(err_text(&err), cases[i].text),
+          "case %zu: \"%s\" lacks \"%s\"", i, err_text(&err), cases[i].text);
   }
   mesh m;
   rsw_err err = {0};

@@ -17,7 +17,7 @@
 #include <string.h>
 #include <sys/stat.h>
 
-/* ---- shared helpers ------------------------------------------------------- */
+/* ---- shared helpers ------------------------------------------------------ */
 
 /* Largest mesh file we read into memory: 16 GiB. */
 #define MESH_MAX_FILE_BYTES ((uint64_t)1 << 34)
@@ -91,7 +91,7 @@ void mesh_free(mesh *m) {
 
 static bool is_blank(char c) { return c == ' ' || c == '\t' || c == '\r'; }
 
-/* ---- OBJ ------------------------------------------------------------------ */
+/* ---- OBJ ----------------------------------------------------------------- */
 
 #define OBJ_NONE UINT32_MAX
 
@@ -112,8 +112,8 @@ typedef struct obj_parser {
   bool any_vt, all_vn;
 } obj_parser;
 
-static rsw_status obj_fail(obj_parser *o, rsw_status code, const char *fmt,
-                           ...) __attribute__((format(printf, 3, 4)));
+static rsw_status obj_fail(obj_parser *o, rsw_status code, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
 static rsw_status obj_fail(obj_parser *o, rsw_status code, const char *fmt,
                            ...) {
   char where[300], msg[512];
@@ -379,7 +379,8 @@ static rsw_status obj_build(obj_parser *o, bool flip_tex_coords, mesh *out) {
       m.uv[2 * i] = u;
       m.uv[2 * i + 1] = v;
     }
-    if (m.nrm) memcpy(m.nrm + 3 * i, o->vn + 3 * (size_t)k[2], 3 * sizeof(float));
+    if (m.nrm)
+      memcpy(m.nrm + 3 * i, o->vn + 3 * (size_t)k[2], 3 * sizeof(float));
   }
   memcpy(m.faces, o->faces, o->nf * 3 * sizeof *m.faces);
   *out = m;
@@ -408,7 +409,8 @@ rsw_status mesh_load_obj(const char *path, bool flip_tex_coords, mesh *out,
     char *kw = p;
     while (*p && !is_blank(*p)) p++;
     size_t kwlen = (size_t)(p - kw);
-    for (size_t i = 0; kwlen && i < sizeof obj_statements / sizeof *obj_statements; i++)
+    for (size_t i = 0;
+         kwlen && i < sizeof obj_statements / sizeof *obj_statements; i++)
       if (strlen(obj_statements[i].keyword) == kwlen &&
           memcmp(obj_statements[i].keyword, kw, kwlen) == 0) {
         st = obj_statements[i].parse(&o, p);
@@ -424,7 +426,7 @@ rsw_status mesh_load_obj(const char *path, bool flip_tex_coords, mesh *out,
   return st;
 }
 
-/* ---- PLY ------------------------------------------------------------------ */
+/* ---- PLY ----------------------------------------------------------------- */
 
 typedef enum ply_type {
   PLY_INVALID,
@@ -442,11 +444,11 @@ static const struct {
   const char *name;
   ply_type type;
 } ply_type_names[] = {
-    {"char", PLY_I8},    {"int8", PLY_I8},      {"uchar", PLY_U8},
-    {"uint8", PLY_U8},   {"short", PLY_I16},    {"int16", PLY_I16},
-    {"ushort", PLY_U16}, {"uint16", PLY_U16},   {"int", PLY_I32},
-    {"int32", PLY_I32},  {"uint", PLY_U32},     {"uint32", PLY_U32},
-    {"float", PLY_F32},  {"float32", PLY_F32},  {"double", PLY_F64},
+    {"char", PLY_I8},     {"int8", PLY_I8},     {"uchar", PLY_U8},
+    {"uint8", PLY_U8},    {"short", PLY_I16},   {"int16", PLY_I16},
+    {"ushort", PLY_U16},  {"uint16", PLY_U16},  {"int", PLY_I32},
+    {"int32", PLY_I32},   {"uint", PLY_U32},    {"uint32", PLY_U32},
+    {"float", PLY_F32},   {"float32", PLY_F32}, {"double", PLY_F64},
     {"float64", PLY_F64},
 };
 static const unsigned ply_type_size[] = {0, 1, 1, 2, 2, 4, 4, 4, 8};
@@ -484,8 +486,8 @@ typedef struct ply_file {
   int face_prop;              /* index list in the face element */
   /* data cursor */
   const unsigned char *base, *p, *end;
-  size_t line;                /* ascii: line of *p */
-  const char *cur_elem;       /* for messages */
+  size_t line;          /* ascii: line of *p */
+  const char *cur_elem; /* for messages */
   uint64_t cur_index;
 } ply_file;
 
@@ -493,8 +495,7 @@ typedef struct ply_file {
  * plus the element being read. */
 static rsw_status ply_fail(ply_file *f, rsw_status code, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));
-static rsw_status ply_fail(ply_file *f, rsw_status code, const char *fmt,
-                           ...) {
+static rsw_status ply_fail(ply_file *f, rsw_status code, const char *fmt, ...) {
   char msg[512], where[300];
   va_list ap;
   va_start(ap, fmt);
@@ -566,12 +567,13 @@ static rsw_status ply_header_line(ply_file *f, char *line, size_t ln,
                       "binary_big_endian PLY files are unsupported (convert "
                       "to binary_little_endian)");
     else
-      return header_fail(f, ln, RSW_ERR_FILE, "unknown format \"%.40s\"",
-                         w[1]);
+      return header_fail(f, ln, RSW_ERR_FILE, "unknown format \"%.40s\"", w[1]);
     return RSW_OK;
   }
   if (strcmp(w[0], "element") == 0) {
-    if (n != 3) return header_fail(f, ln, RSW_ERR_FILE, "expected \"element <name> <count>\"");
+    if (n != 3)
+      return header_fail(f, ln, RSW_ERR_FILE,
+                         "expected \"element <name> <count>\"");
     if (f->n_elems == PLY_MAX_ELEMENTS)
       return header_fail(f, ln, RSW_ERR_LIMIT, "more than %d elements",
                          PLY_MAX_ELEMENTS);
@@ -611,14 +613,12 @@ static rsw_status ply_header_line(ply_file *f, char *line, size_t ln,
                            "list count type \"%.20s\" is not an integer type",
                            w[2]);
       if (pr.type == PLY_INVALID)
-        return header_fail(f, ln, RSW_ERR_FILE, "unknown type \"%.20s\"",
-                           w[3]);
+        return header_fail(f, ln, RSW_ERR_FILE, "unknown type \"%.20s\"", w[3]);
     } else if (n == 3) {
       pr.type = ply_type_by_name(w[1]);
       name = w[2];
       if (pr.type == PLY_INVALID)
-        return header_fail(f, ln, RSW_ERR_FILE, "unknown type \"%.20s\"",
-                           w[1]);
+        return header_fail(f, ln, RSW_ERR_FILE, "unknown type \"%.20s\"", w[1]);
     } else {
       return header_fail(f, ln, RSW_ERR_FILE, "malformed property line");
     }
@@ -639,11 +639,11 @@ static const struct {
   const char *name;
   int role;
 } ply_roles[] = {
-    {"x", R_X},          {"y", R_Y},          {"z", R_Z},
-    {"nx", R_NX},        {"ny", R_NY},        {"nz", R_NZ},
-    {"u", R_U},          {"v", R_V},          {"s", R_U},
-    {"t", R_V},          {"texture_u", R_U},  {"texture_v", R_V},
-    {"texture_s", R_U},  {"texture_t", R_V},
+    {"x", R_X},         {"y", R_Y},         {"z", R_Z},
+    {"nx", R_NX},       {"ny", R_NY},       {"nz", R_NZ},
+    {"u", R_U},         {"v", R_V},         {"s", R_U},
+    {"t", R_V},         {"texture_u", R_U}, {"texture_v", R_V},
+    {"texture_s", R_U}, {"texture_t", R_V},
 };
 
 /* Find the vertex and face elements and the properties we read. */
@@ -705,9 +705,10 @@ static rsw_status ply_bind(ply_file *f) {
 static uint64_t ply_min_row_bytes(const ply_file *f, const ply_elem *el) {
   uint64_t b = 0;
   for (int i = 0; i < el->n_props; i++)
-    b += f->ascii ? 2 : ply_type_size[el->props[i].count_type != PLY_INVALID
-                                          ? el->props[i].count_type
-                                          : el->props[i].type];
+    b += f->ascii ? 2
+                  : ply_type_size[el->props[i].count_type != PLY_INVALID
+                                      ? el->props[i].count_type
+                                      : el->props[i].type];
   return b;
 }
 
@@ -723,8 +724,8 @@ static rsw_status ply_value(ply_file *f, ply_type t, double *out) {
     const char *s = (const char *)f->p;
     char *e;
     double x = strtod(s, &e);
-    if (e == s || ((const unsigned char *)e < f->end && *e &&
-                   !is_blank(*e) && *e != '\n')) {
+    if (e == s || ((const unsigned char *)e < f->end && *e && !is_blank(*e) &&
+                   *e != '\n')) {
       const char *t2 = s;
       while ((const unsigned char *)t2 < f->end && *t2 && !is_blank(*t2) &&
              *t2 != '\n')
@@ -733,8 +734,10 @@ static rsw_status ply_value(ply_file *f, ply_type t, double *out) {
                       (int)(t2 - s > 40 ? 40 : t2 - s), s);
     }
     if (ply_is_integer(t) && x != floor(x))
-      return ply_fail(f, RSW_ERR_FILE, "non-integer value %g for an integer "
-                                       "property", x);
+      return ply_fail(f, RSW_ERR_FILE,
+                      "non-integer value %g for an integer "
+                      "property",
+                      x);
     f->p = (const unsigned char *)e;
     *out = x;
     return RSW_OK;
@@ -747,12 +750,24 @@ static rsw_status ply_value(ply_file *f, ply_type t, double *out) {
   uint64_t u = 0;
   for (unsigned i = 0; i < sz; i++) u |= (uint64_t)b[i] << (8 * i);
   switch (t) {
-  case PLY_I8: *out = (double)(int8_t)(uint8_t)u; break;
-  case PLY_U8: *out = (double)(uint8_t)u; break;
-  case PLY_I16: *out = (double)(int16_t)(uint16_t)u; break;
-  case PLY_U16: *out = (double)(uint16_t)u; break;
-  case PLY_I32: *out = (double)(int32_t)(uint32_t)u; break;
-  case PLY_U32: *out = (double)(uint32_t)u; break;
+  case PLY_I8:
+    *out = (double)(int8_t)(uint8_t)u;
+    break;
+  case PLY_U8:
+    *out = (double)(uint8_t)u;
+    break;
+  case PLY_I16:
+    *out = (double)(int16_t)(uint16_t)u;
+    break;
+  case PLY_U16:
+    *out = (double)(uint16_t)u;
+    break;
+  case PLY_I32:
+    *out = (double)(int32_t)(uint32_t)u;
+    break;
+  case PLY_U32:
+    *out = (double)(uint32_t)u;
+    break;
   case PLY_F32: {
     uint32_t w = (uint32_t)u;
     float x;
@@ -766,22 +781,22 @@ static rsw_status ply_value(ply_file *f, ply_type t, double *out) {
     *out = x;
     break;
   }
-  default: return ply_fail(f, RSW_ERR_FILE, "invalid property type");
+  default:
+    return ply_fail(f, RSW_ERR_FILE, "invalid property type");
   }
   f->p += sz;
   return RSW_OK;
 }
 
 /* Read a list's length at the cursor; checked against the bytes left. */
-static rsw_status ply_list_count(ply_file *f, const ply_prop *pr,
-                                 uint64_t *n) {
+static rsw_status ply_list_count(ply_file *f, const ply_prop *pr, uint64_t *n) {
   double c;
   rsw_status st = ply_value(f, pr->count_type, &c);
   if (st != RSW_OK) return st;
   uint64_t min_item = f->ascii ? 1 : ply_type_size[pr->type];
   if (c < 0)
-    return ply_fail(f, RSW_ERR_FILE, "list %s has negative length %g",
-                    pr->name, c);
+    return ply_fail(f, RSW_ERR_FILE, "list %s has negative length %g", pr->name,
+                    c);
   if (c > (double)(uint64_t)(f->end - f->p) / (double)min_item + 1)
     return ply_fail(f, RSW_ERR_FILE,
                     "truncated: list %s of %g items runs past the end of the "
@@ -811,8 +826,7 @@ static rsw_status ply_skip_prop(ply_file *f, const ply_prop *pr) {
   return RSW_OK;
 }
 
-static rsw_status ply_read_vertices(ply_file *f, const ply_elem *el,
-                                    mesh *m) {
+static rsw_status ply_read_vertices(ply_file *f, const ply_elem *el, mesh *m) {
   for (uint64_t i = 0; i < el->count; i++) {
     f->cur_index = i;
     double role[R__COUNT] = {0};
@@ -909,9 +923,10 @@ static rsw_status ply_skip_elem(ply_file *f, const ply_elem *el) {
     /* count <= 2^31 and fixed <= 64 * 8: no overflow. */
     uint64_t bytes = el->count * fixed;
     if (bytes > (uint64_t)(f->end - f->p))
-      return ply_fail(f, RSW_ERR_FILE, "truncated: element %s needs %llu "
-                                       "bytes", el->name,
-                      (unsigned long long)bytes);
+      return ply_fail(f, RSW_ERR_FILE,
+                      "truncated: element %s needs %llu "
+                      "bytes",
+                      el->name, (unsigned long long)bytes);
     f->p += bytes;
     return RSW_OK;
   }
@@ -936,8 +951,7 @@ static rsw_status ply_header(ply_file *f, char *data, size_t size) {
   while (!done) {
     char *nl = memchr(p, '\n', (size_t)(end - p));
     ln++;
-    if (!nl)
-      return header_fail(f, ln, RSW_ERR_FILE, "no end_header line");
+    if (!nl) return header_fail(f, ln, RSW_ERR_FILE, "no end_header line");
     *nl = '\0';
     if (memchr(p, '\0', (size_t)(nl - p)))
       return header_fail(f, ln, RSW_ERR_FILE, "NUL byte in the header");
@@ -996,12 +1010,12 @@ rsw_status mesh_load_ply(const char *path, mesh *out, rsw_err *err) {
     size_t nv = (size_t)ve->count;
     m.n_verts = (uint32_t)nv;
     m.pos = malloc((nv ? nv : 1) * 3 * sizeof *m.pos);
-    if (f->role_prop[R_NX] >= 0) m.nrm = malloc((nv ? nv : 1) * 3 * sizeof *m.nrm);
+    if (f->role_prop[R_NX] >= 0)
+      m.nrm = malloc((nv ? nv : 1) * 3 * sizeof *m.nrm);
     if (f->role_prop[R_U] >= 0) m.uv = malloc((nv ? nv : 1) * 2 * sizeof *m.uv);
     if (!m.pos || (f->role_prop[R_NX] >= 0 && !m.nrm) ||
         (f->role_prop[R_U] >= 0 && !m.uv))
-      st = rsw_fail(err, RSW_ERR_NOMEM, path, "no memory for %zu vertices",
-                    nv);
+      st = rsw_fail(err, RSW_ERR_NOMEM, path, "no memory for %zu vertices", nv);
   }
   for (int e = 0; st == RSW_OK && e < f->n_elems; e++) {
     const ply_elem *el = &f->elems[e];
