@@ -74,7 +74,7 @@ static float float_from_half(uint16_t h) {
   return f;
 }
 
-/* ---- stream callbacks ----------------------------------------------------- */
+/* ---- stream callbacks ---------------------------------------------------- */
 
 typedef struct exr_stream {
   int fd;
@@ -102,8 +102,8 @@ static int64_t stream_read(exr_const_context_t ctxt, void *ud, void *buffer,
     return -1;
   }
   while (done < sz) {
-    ssize_t n = pread(st->fd, p + done, (size_t)(sz - done),
-                      (off_t)(offset + done));
+    ssize_t n =
+        pread(st->fd, p + done, (size_t)(sz - done), (off_t)(offset + done));
     if (n < 0) {
       if (errno == EINTR) continue;
       error_cb(ctxt, EXR_ERR_READ_IO, "read at byte %llu failed: %s",
@@ -134,8 +134,8 @@ static int64_t stream_write(exr_const_context_t ctxt, void *ud,
     return -1;
   }
   while (done < sz) {
-    ssize_t n = pwrite(st->fd, p + done, (size_t)(sz - done),
-                       (off_t)(offset + done));
+    ssize_t n =
+        pwrite(st->fd, p + done, (size_t)(sz - done), (off_t)(offset + done));
     if (n < 0) {
       if (errno == EINTR) continue;
       error_cb(ctxt, EXR_ERR_WRITE_IO, "write at byte %llu failed: %s",
@@ -161,14 +161,13 @@ static exr_context_initializer_t stream_init(exr_stream *st) {
 static rsw_status exr_fail(rsw_err *err, rsw_status code, const char *path,
                            const exr_stream *st, exr_result_t rv,
                            const char *what) {
-  if (st->msg[0])
-    return rsw_fail(err, code, path, "%s: %s", what, st->msg);
+  if (st->msg[0]) return rsw_fail(err, code, path, "%s: %s", what, st->msg);
   return rsw_fail(err, code, path, "%s: %s [%s]", what,
                   exr_get_default_error_message(rv),
                   exr_get_error_code_as_string(rv));
 }
 
-/* ---- writing -------------------------------------------------------------- */
+/* ---- writing ------------------------------------------------------------- */
 
 /* Encode every scanline chunk of part 0 from the HWC buffer `pix`
  * (elem_size bytes a sample, of pixel type ptype). */
@@ -227,8 +226,7 @@ static rsw_status check_write_args(const char *path, int width, int height,
     return rsw_fail(err, RSW_ERR_INVALID, "", "EXR output path is empty");
   if (width < 1 || height < 1)
     return rsw_fail(err, RSW_ERR_INVALID, where,
-                    "image size %d x %d must be at least 1 x 1", width,
-                    height);
+                    "image size %d x %d must be at least 1 x 1", width, height);
   if (n_channels < 1 || n_channels > EXR_MAX_CHANNELS)
     return rsw_fail(err, RSW_ERR_INVALID, where,
                     "channel count %d outside [1, %d]", n_channels,
@@ -262,8 +260,8 @@ static rsw_status check_write_args(const char *path, int width, int height,
 
 rsw_status exr_write_image(const char *path, int width, int height,
                            int n_channels, const char *const *channel_names,
-                           const float *data, bool half,
-                           const exr_meta *meta, rsw_err *err) {
+                           const float *data, bool half, const exr_meta *meta,
+                           rsw_err *err) {
   rsw_status s = check_write_args(path, width, height, n_channels,
                                   channel_names, data, meta, err);
   if (s != RSW_OK) return s;
@@ -275,8 +273,7 @@ rsw_status exr_write_image(const char *path, int width, int height,
     if (!halves)
       return rsw_fail(err, RSW_ERR_NOMEM, path,
                       "no memory for %zu float16 samples", n_samples);
-    for (size_t i = 0; i < n_samples; i++)
-      halves[i] = half_from_float(data[i]);
+    for (size_t i = 0; i < n_samples; i++) halves[i] = half_from_float(data[i]);
   }
 
   char tmp[4096];
@@ -304,10 +301,10 @@ rsw_status exr_write_image(const char *path, int width, int height,
     rv = exr_add_part(ctx, NULL, EXR_STORAGE_SCANLINE, &part);
   }
   if (rv == EXR_ERR_SUCCESS)
-    rv = exr_initialize_required_attr_simple(
-        ctx, part, width, height,
-        meta && meta->uncompressed ? EXR_COMPRESSION_NONE
-                                   : EXR_COMPRESSION_ZIP);
+    rv = exr_initialize_required_attr_simple(ctx, part, width, height,
+                                             meta && meta->uncompressed
+                                                 ? EXR_COMPRESSION_NONE
+                                                 : EXR_COMPRESSION_ZIP);
   for (int c = 0; c < n_channels && rv == EXR_ERR_SUCCESS; c++)
     rv = exr_add_channel(ctx, part, channel_names[c],
                          half ? EXR_PIXEL_HALF : EXR_PIXEL_FLOAT,
@@ -354,13 +351,13 @@ rsw_status exr_write_image(const char *path, int width, int height,
   if (rename(tmp, path) != 0) {
     int e = errno;
     unlink(tmp);
-    return rsw_fail(err, RSW_ERR_IO, path, "cannot rename %s over it: %s",
-                    tmp, strerror(e));
+    return rsw_fail(err, RSW_ERR_IO, path, "cannot rename %s over it: %s", tmp,
+                    strerror(e));
   }
   return RSW_OK;
 }
 
-/* ---- reading -------------------------------------------------------------- */
+/* ---- reading ------------------------------------------------------------- */
 
 /* Where one channel's samples land while decoding: a plane of the image's
  * size in the file's own pixel type, converted to float afterwards (we do
@@ -422,8 +419,8 @@ static exr_result_t decode_all(exr_context_t ctx, exr_storage_t storage,
       exr_chunk_info_t ci;
       rv = exr_read_scanline_chunk_info(ctx, 0, (int)y, &ci);
       if (rv == EXR_ERR_SUCCESS)
-        rv = decode_chunk(ctx, &ci, &dec, &started, chl, planes, width,
-                          height, 0, (int64_t)ci.start_y - dw->min.y);
+        rv = decode_chunk(ctx, &ci, &dec, &started, chl, planes, width, height,
+                          0, (int64_t)ci.start_y - dw->min.y);
     }
   } else {
     uint32_t tw = 0, th = 0;
@@ -458,8 +455,8 @@ static char *dup_n(const char *s, size_t n) {
 }
 
 /* Copy the header's string attributes into img. */
-static rsw_status read_meta(exr_context_t ctx, exr_image *img,
-                            const char *path, rsw_err *err) {
+static rsw_status read_meta(exr_context_t ctx, exr_image *img, const char *path,
+                            rsw_err *err) {
   int32_t count = 0;
   if (exr_get_attribute_count(ctx, 0, &count) != EXR_ERR_SUCCESS || count <= 0)
     return RSW_OK;
@@ -475,8 +472,8 @@ static rsw_status read_meta(exr_context_t ctx, exr_image *img,
       continue;
     size_t len = a->string->length > 0 ? (size_t)a->string->length : 0;
     char *k = dup_n(a->name, strlen(a->name));
-    char *v = dup_n(a->string->str ? a->string->str : "",
-                    a->string->str ? len : 0);
+    char *v =
+        dup_n(a->string->str ? a->string->str : "", a->string->str ? len : 0);
     if (!k || !v) {
       free(k);
       free(v);
@@ -511,8 +508,7 @@ static rsw_status read_header(exr_context_t ctx, const exr_stream *st,
     return rsw_fail(err, RSW_ERR_FILE, path, "empty EXR data window");
   if (nc < 1 || nc > EXR_MAX_CHANNELS)
     return rsw_fail(err, RSW_ERR_UNSUPPORTED, path,
-                    "EXR has %d channels (need 1 to %d)", nc,
-                    EXR_MAX_CHANNELS);
+                    "EXR has %d channels (need 1 to %d)", nc, EXR_MAX_CHANNELS);
   if (w > (int64_t)EXR_MAX_SAMPLES || h > (int64_t)EXR_MAX_SAMPLES ||
       (size_t)w * (size_t)h > EXR_MAX_SAMPLES / (size_t)nc)
     return rsw_fail(err, RSW_ERR_LIMIT, path,
@@ -526,8 +522,8 @@ static rsw_status read_header(exr_context_t ctx, const exr_stream *st,
     const exr_attr_chlist_entry_t *e = &(*chl)->entries[c];
     if (e->x_sampling != 1 || e->y_sampling != 1)
       return rsw_fail(err, RSW_ERR_UNSUPPORTED, path,
-                      "EXR channel \"%s\" is subsampled (%d x %d)",
-                      e->name.str, e->x_sampling, e->y_sampling);
+                      "EXR channel \"%s\" is subsampled (%d x %d)", e->name.str,
+                      e->x_sampling, e->y_sampling);
     if (e->pixel_type != EXR_PIXEL_HALF && e->pixel_type != EXR_PIXEL_FLOAT &&
         e->pixel_type != EXR_PIXEL_UINT)
       return rsw_fail(err, RSW_ERR_FILE, path,
@@ -545,8 +541,7 @@ static rsw_status read_header(exr_context_t ctx, const exr_stream *st,
 
 /* Decode the pixels of part 0 into img->data (float HWC). */
 static rsw_status read_pixels(exr_context_t ctx, const exr_stream *st,
-                              exr_storage_t storage,
-                              const exr_attr_box2i_t *dw,
+                              exr_storage_t storage, const exr_attr_box2i_t *dw,
                               const exr_attr_chlist_t *chl, exr_image *img,
                               const char *path, rsw_err *err) {
   size_t npix = (size_t)img->width * (size_t)img->height;
@@ -616,8 +611,8 @@ rsw_status exr_read_image(const char *path, exr_image *out, rsw_err *err) {
   exr_context_t ctx = NULL;
   exr_result_t rv = exr_start_read(&ctx, path, &init);
   if (rv != EXR_ERR_SUCCESS) {
-    rsw_status s = exr_fail(err, RSW_ERR_FILE, path, &st, rv,
-                            "not a readable EXR file");
+    rsw_status s =
+        exr_fail(err, RSW_ERR_FILE, path, &st, rv, "not a readable EXR file");
     if (ctx) exr_finish(&ctx);
     close(st.fd);
     return s;

@@ -34,7 +34,7 @@ typedef struct exr_meta {
 
 /* A decoded image (owned; release with exr_image_free). */
 typedef struct exr_image {
-  int width, height;   /* of the data window */
+  int width, height; /* of the data window */
   int n_channels;
   char **channel_names; /* n_channels, in the file's (alphabetical) order */
   float *data;          /* width * height * n_channels, HWC, row 0 = top */

@@ -12,8 +12,8 @@
 /* Only to write a tiled file, which exr_write_image does not do. */
 #include <OpenEXR/openexr.h>
 
-#include "kernel/image_exr.h"
 #include "../support/test.h"
+#include "kernel/image_exr.h"
 
 RSW_TEST_DEFINE_GLOBALS
 
@@ -60,8 +60,7 @@ static void test_float_rgb_roundtrip(void) {
   exr_image img;
   s = exr_read_image(p, &img, &err);
   REQUIRE(s == RSW_OK, "read: %s: %s", err.where, err.msg);
-  CHECK(img.width == w && img.height == h, "size %dx%d", img.width,
-        img.height);
+  CHECK(img.width == w && img.height == h, "size %dx%d", img.width, img.height);
   REQUIRE(img.n_channels == 3, "channels %d", img.n_channels);
   /* EXR stores channels alphabetically: B, G, R. */
   CHECK(strcmp(img.channel_names[0], "B") == 0, "first channel %s",
@@ -92,10 +91,10 @@ static void test_half_y_roundtrip(void) {
    *   70000 -> +inf (beyond 65520); 1/3 -> nearest half 0x3555;
    *   1 + 2^-11 is a tie between 1 and 1 + 2^-10: rounds to even, 1;
    *   2^-26 -> 0 (below half the smallest subnormal). */
-  const float in[8] = {1.0f, 65504.0f, -0x1p-24f, 70000.0f,
-                       1.0f / 3.0f, 1.0f + 0x1p-11f, 0x1p-26f, -0.0f};
-  const float want[8] = {1.0f, 65504.0f, -0x1p-24f, INFINITY,
-                         0.333251953125f, 1.0f, 0.0f, -0.0f};
+  const float in[8] = {1.0f,        65504.0f,        -0x1p-24f, 70000.0f,
+                       1.0f / 3.0f, 1.0f + 0x1p-11f, 0x1p-26f,  -0.0f};
+  const float want[8] = {1.0f, 65504.0f, -0x1p-24f, INFINITY, 0.333251953125f,
+                         1.0f, 0.0f,     -0.0f};
   const char *names[] = {"Y"};
   exr_meta_entry me[] = {{"raysweep_variant", "mono"},
                          {"comments", "spectral radiance, nm 550"}};
@@ -112,8 +111,8 @@ static void test_half_y_roundtrip(void) {
   CHECK(strcmp(img.channel_names[0], "Y") == 0, "name %s",
         img.channel_names[0]);
   for (int i = 0; i < 8; i++)
-    CHECK(img.data[i] == want[i], "sample %d: %.9g, want %.9g", i,
-          img.data[i], want[i]);
+    CHECK(img.data[i] == want[i], "sample %d: %.9g, want %.9g", i, img.data[i],
+          want[i]);
   CHECK(signbit(img.data[7]), "-0 lost its sign");
   const char *v = exr_image_meta(&img, "raysweep_variant");
   CHECK(v && strcmp(v, "mono") == 0, "metadata variant = %s", v ? v : "NULL");
@@ -209,8 +208,8 @@ static void test_bad_arguments(void) {
   CHECK(strstr(err.msg, "twice") != NULL, "msg: %s", err.msg);
   rsw_err_clear(&err);
   const char *one[] = {"Y"};
-  CHECK(exr_write_image(tpath("a.exr"), 0, 1, 1, one, px, false, NULL,
-                        &err) == RSW_ERR_INVALID,
+  CHECK(exr_write_image(tpath("a.exr"), 0, 1, 1, one, px, false, NULL, &err) ==
+            RSW_ERR_INVALID,
         "zero width accepted");
   rsw_err_clear(&err);
   CHECK(exr_write_image(tpath("a.exr"), 1 << 20, 1 << 20, 1, one, px, false,
