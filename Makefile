@@ -76,7 +76,7 @@ $(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
 	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS)
 
 test: deps $(BUILD)/bin/raysweepd $(TEST_BIN)
-	@BUILD=$(BUILD) SAN=$(SAN) tests/run.sh $(TEST_BIN)
+	@RSW_BIN_DIR=$(BUILD)/bin BUILD=$(BUILD) SAN=$(SAN) tests/run.sh $(TEST_BIN)
 
 bench: deps $(BUILD)/bin/raysweepd $(BENCH_BIN)
 	@for b in $(BENCH_BIN); do $$b || exit 1; done
