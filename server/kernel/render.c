@@ -19,7 +19,7 @@
 
 #include "scene/scene.h"
 
-#define TILE 16
+#define TILE 8
 
 typedef struct tile_buf {
   int x0, y0, w, h; /* region covered, margin included, clipped to film */

@@ -162,7 +162,9 @@ static void test_fresnel_dielectric(void) {
 /* ---- microfacet building blocks ------------------------------------------------- */
 
 static void test_erfinv(void) {
-  for (double x = -0.999999; x < 1.0; x += 0.0123) CHECK_ABS(erf(mf_erfinv(x)), x, 1e-14);
+  /* Giles' single-precision approximation, as Mitsuba: ~1e-7 relative in
+   * erfinv, so erf(erfinv(x)) is within 2e-7 of x (abs). */
+  for (double x = -0.999999; x < 1.0; x += 0.0123) CHECK_ABS(erf(mf_erfinv(x)), x, 2e-7);
   CHECK(mf_erfinv(0.0) == 0.0, "erfinv(0) = 0");
   CHECK(isinf(mf_erfinv(1.0)), "erfinv(1) = inf");
 }
