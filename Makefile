@@ -57,7 +57,7 @@ $(BUILD)/obj/%.o: %.c
 
 $(KERNEL_LIB): $(KERNEL_OBJ)
 	@mkdir -p $(dir $@)
-	rm -f $@ && ar rcs $@ $^
+	@rm -f $@ && ar rcs $@ $^
 
 $(BUILD)/bin/raysweepd: $(DAEMON_OBJ) $(KERNEL_LIB)
 	@mkdir -p $(dir $@)

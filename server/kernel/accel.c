@@ -256,3 +256,142 @@ bool accel_occluded(const accel *a, const ray3 *r) {
   rtcOccluded1(a->top, &ctx, &ray);
   return ray.tfar < 0;
 }
+
+/* ---- measurement ------------------------------------------------------------------------------ */
+
+#include <pthread.h>
+#include <time.h>
+
+#include "core/rng.h"
+
+typedef struct ceiling_job {
+  RTCScene scene;
+  vec3 c;
+  double r;
+  uint64_t n, seed;
+  unsigned index;
+  uint64_t hits;
+  float *rays; /* n x (org, dir) */
+  struct ceiling_sync *sync;
+  bool ok;
+} ceiling_job;
+
+/* Workers report ready after generating rays and wait for `go`, so the
+ * caller's clock covers the queries only. */
+typedef struct ceiling_sync {
+  pthread_mutex_t lock;
+  pthread_cond_t cond;
+  int ready;
+  bool go, abort;
+} ceiling_sync;
+
+static vec3 uniform_sphere_point(pcg32 *g) {
+  double z = 1.0 - 2.0 * pcg32_next_double(g), phi = 2.0 * RSW_PI * pcg32_next_double(g);
+  double s = sqrt(fmax(0.0, 1.0 - z * z));
+  return v3(s * cos(phi), s * sin(phi), z);
+}
+
+/* Generates its rays, waits at the barrier (so that the caller times only
+ * the queries), then traces them. */
+static void *ceiling_worker(void *arg) {
+  ceiling_job *j = arg;
+  pcg32 g;
+  pcg32_seed(&g, j->seed, j->index + 1);
+  j->rays = malloc(j->n * 6 * sizeof(float));
+  j->ok = j->rays != NULL;
+  for (uint64_t i = 0; j->ok && i < j->n; i++) {
+    vec3 o = v3_fma(j->c, 2.0 * j->r, uniform_sphere_point(&g));
+    double rr = j->r * cbrt(pcg32_next_double(&g));
+    vec3 t = v3_fma(j->c, rr, uniform_sphere_point(&g));
+    vec3 d = v3_norm(v3_sub(t, o));
+    float *q = &j->rays[6 * i];
+    q[0] = (float)o.x, q[1] = (float)o.y, q[2] = (float)o.z;
+    q[3] = (float)d.x, q[4] = (float)d.y, q[5] = (float)d.z;
+  }
+  pthread_mutex_lock(&j->sync->lock);
+  j->sync->ready++;
+  pthread_cond_broadcast(&j->sync->cond);
+  while (!j->sync->go) pthread_cond_wait(&j->sync->cond, &j->sync->lock);
+  if (j->sync->abort) j->ok = false;
+  pthread_mutex_unlock(&j->sync->lock);
+  struct RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  uint64_t hits = 0;
+  for (uint64_t i = 0; j->ok && i < j->n; i++) {
+    const float *q = &j->rays[6 * i];
+    struct RTCRayHit rh;
+    rh.ray.org_x = q[0], rh.ray.org_y = q[1], rh.ray.org_z = q[2];
+    rh.ray.dir_x = q[3], rh.ray.dir_y = q[4], rh.ray.dir_z = q[5];
+    rh.ray.tnear = 0, rh.ray.tfar = INFINITY, rh.ray.time = 0, rh.ray.mask = 0xFFFFFFFFu, rh.ray.id = 0,
+    rh.ray.flags = 0;
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(j->scene, &ctx, &rh);
+    hits += rh.hit.geomID != RTC_INVALID_GEOMETRY_ID;
+  }
+  j->hits = hits;
+  free(j->rays);
+  j->rays = NULL;
+  return NULL;
+}
+
+static RTCScene build_flat(const scene *s) {
+  RTCScene fs = rtcNewScene(s->accel->device);
+  rtcSetSceneBuildQuality(fs, RTC_BUILD_QUALITY_HIGH);
+  for (size_t i = 0; i < s->n_shapes; i++) {
+    const shape *sh = s->shapes[i];
+    if (sh->geom != GEOM_MESH) continue;
+    RTCGeometry g = rtcNewGeometry(s->accel->device, RTC_GEOMETRY_TYPE_TRIANGLE);
+    float *v = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float),
+                                       sh->mesh.n_verts);
+    unsigned *ix = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned),
+                                           sh->mesh.n_faces);
+    for (uint32_t k = 0; k < sh->mesh.n_verts; k++) {
+      const float *p = &sh->mesh.pos[3 * (size_t)k];
+      vec3 w = xf_point(&sh->to_world, v3(p[0], p[1], p[2]));
+      v[3 * k] = (float)w.x, v[3 * k + 1] = (float)w.y, v[3 * k + 2] = (float)w.z;
+    }
+    memcpy(ix, sh->mesh.faces, 3 * (size_t)sh->mesh.n_faces * sizeof(unsigned));
+    rtcCommitGeometry(g);
+    rtcAttachGeometry(fs, g);
+    rtcReleaseGeometry(g);
+  }
+  rtcCommitScene(fs);
+  return fs;
+}
+
+double accel_ceiling_rays_per_s(const scene *s, bool flat, uint64_t n_rays, int threads, uint64_t seed) {
+  if (!s->accel || threads < 1 || threads > 256) return 0;
+  RTCScene sc = flat ? build_flat(s) : s->accel->top;
+  if (!sc) return 0;
+  ceiling_job jobs[256];
+  pthread_t th[256];
+  ceiling_sync sync = {.ready = 0};
+  pthread_mutex_init(&sync.lock, NULL);
+  pthread_cond_init(&sync.cond, NULL);
+  if (n_rays > ((uint64_t)1 << 26)) n_rays = (uint64_t)1 << 26;
+  int started = 0;
+  for (int i = 0; i < threads; i++) {
+    jobs[i] = (ceiling_job){.scene = sc, .c = s->bsphere_center, .r = s->bsphere_radius,
+                            .n = n_rays / (uint64_t)threads, .seed = seed, .index = (unsigned)i, .sync = &sync};
+    if (pthread_create(&th[i], NULL, ceiling_worker, &jobs[i]) != 0) break;
+    started++;
+  }
+  pthread_mutex_lock(&sync.lock);
+  while (sync.ready < started) pthread_cond_wait(&sync.cond, &sync.lock);
+  sync.abort = started < threads;
+  sync.go = true;
+  pthread_cond_broadcast(&sync.cond);
+  pthread_mutex_unlock(&sync.lock);
+  struct timespec t0, t1;
+  clock_gettime(CLOCK_MONOTONIC, &t0);
+  for (int i = 0; i < started; i++) pthread_join(th[i], NULL);
+  clock_gettime(CLOCK_MONOTONIC, &t1);
+  pthread_mutex_destroy(&sync.lock);
+  pthread_cond_destroy(&sync.cond);
+  bool ok = started == threads;
+  for (int i = 0; i < started; i++) ok = ok && jobs[i].ok;
+  if (flat) rtcReleaseScene(sc);
+  double dt = (t1.tv_sec - t0.tv_sec) + 1e-9 * (t1.tv_nsec - t0.tv_nsec);
+  return ok && dt > 0 ? (double)(n_rays / (uint64_t)threads) * started / dt : 0;
+}

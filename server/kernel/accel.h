@@ -35,4 +35,15 @@ bool accel_occluded(const accel *a, const ray3 *r);
 /* Bytes held by Embree buffers we allocated (for reporting). */
 size_t accel_memory(const accel *a);
 
+/* ---- measurement (make bench) ------------------------------------------------ */
+
+/* Rays per second of random incoherent rtcIntersect1 queries against the
+ * scene's geometry on `threads` threads: origins uniform on a sphere of
+ * twice the scene's bounding radius, aimed at uniform points inside the
+ * bounding sphere (the "Embree ceiling"). With flat = true the same
+ * triangles are put in a single-level Embree scene (vertices transformed to
+ * world space, analytic shapes skipped) to measure what the two-level
+ * layout costs. Returns 0 on failure. */
+double accel_ceiling_rays_per_s(const scene *s, bool flat, uint64_t n_rays, int threads, uint64_t seed);
+
 #endif

@@ -130,12 +130,12 @@ static rsw_status read_op(jctx *c, const cJSON *o, const char *where, xform *out
   char w[512];
   ptr_join(w, sizeof w, where, name);
   if (strcmp(name, "translate") == 0) {
-    vec3 t;
+    vec3 t = {0, 0, 0};
     rsw_status st = read_vec3(c, a, w, &t);
     if (st) return st;
     *out = xf_translate(t);
   } else if (strcmp(name, "scale") == 0) {
-    vec3 s;
+    vec3 s = {0, 0, 0};
     if (cJSON_IsNumber(a)) {
       s = v3(a->valuedouble, a->valuedouble, a->valuedouble);
     } else {
@@ -263,7 +263,7 @@ static rsw_status read_spectrum(jctx *c, const cJSON *o, const char *type, const
     if (cJSON_IsNumber(value)) {
       out->rgb[0] = out->rgb[1] = out->rgb[2] = value->valuedouble;
     } else {
-      vec3 v;
+      vec3 v = {0, 0, 0};
       rsw_status st = read_vec3(c, value, w, &v);
       if (st) return fail(c, RSW_ERR_TYPE, w, "rgb: 'value' must be a number or 3 numbers");
       out->rgb[0] = v.x;
@@ -370,7 +370,7 @@ static rsw_status read_value(jctx *c, node *n, const cJSON *v, const char *key, 
   } else if (cJSON_IsArray(v)) {
     int len = array_size(v);
     if (len == 3 && all_numbers(v)) {
-      vec3 x;
+      vec3 x = {0, 0, 0};
       rsw_status st = read_vec3(c, v, where, &x);
       if (st) return st;
       ADD_(PROP_VEC3);

@@ -1,0 +1,149 @@
+/* make bench: kernel throughput, one JSON object per line.
+ *
+ *  seed_hdistant  the hdistant seed scene (proto/examples/hdistant_seed.xml),
+ *                 32x32, 3200 spp; target: under 1 s wall on 2 cores.
+ *  mesh_1m        a 1,002,528-triangle heightfield (written as a binary PLY
+ *                 into a temporary directory) under a perspective sensor,
+ *                 path integrator with max_depth 5; target: ratio >= 0.6.
+ *
+ * For each: wall time, samples/s, rays/s (intersection + occlusion queries
+ * the integrator made), and in the same run, same threads, same geometry,
+ * the Embree ceiling (random incoherent rtcIntersect1 rays/s on our
+ * two-level structure), the ratio of the two, and the ceiling of a flat
+ * single-level structure of the same triangles (what the two levels cost).
+ * Threads: $RSW_BENCH_THREADS or all cores. */
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "../../server/kernel/accel.h"
+#include "../../server/kernel/render.h"
+#include "../../server/kernel/scene/scene.h"
+
+static int bench_threads(void) {
+  const char *e = getenv("RSW_BENCH_THREADS");
+  int t = e ? atoi(e) : 0;
+  if (t <= 0) t = (int)sysconf(_SC_NPROCESSORS_ONLN);
+  return t < 1 ? 1 : t;
+}
+
+static int report(const char *name, scene *s, uint32_t spp, int threads, double target_wall, double target_ratio) {
+  rsw_err err = {0};
+  render_opts o = {.size = sizeof o, .spp = spp, .seed = 1, .threads = threads};
+  film_image img;
+  render_result_stats st;
+  /* Warm-up render (page faults, TBB/thread start) is not timed. */
+  render_opts warm = o;
+  warm.spp = 1;
+  if (render_sensor(s, &warm, &img, &st, &err) == RSW_OK) film_image_free(&img);
+  if (render_sensor(s, &o, &img, &st, &err)) {
+    fprintf(stderr, "bench %s: %s\n", name, err.msg);
+    return 1;
+  }
+  film_image_free(&img);
+  double rays = (double)(st.rays.rays + st.rays.shadow_rays);
+  double rps = rays / st.wall_s;
+  uint64_t n = (uint64_t)fmax(2e6, rays / 2);
+  double ceiling = accel_ceiling_rays_per_s(s, false, n, threads, 7);
+  double flat = accel_ceiling_rays_per_s(s, true, n, threads, 7);
+  printf("{\"bench\": \"%s\", \"wall_s\": %.4f, \"samples_per_s\": %.4g, \"rays_per_s\": %.4g, "
+         "\"ceiling_rays_per_s\": %.4g, \"ratio_to_ceiling\": %.3f, \"threads\": %d, \"spp\": %u, "
+         "\"rays\": %.0f, \"shadow_rays\": %llu, \"flat_ceiling_rays_per_s\": %.4g, "
+         "\"two_level_over_flat\": %.3f",
+         name, st.wall_s, st.samples / st.wall_s, rps, ceiling, ceiling > 0 ? rps / ceiling : 0, st.threads, spp,
+         rays, (unsigned long long)st.rays.shadow_rays, flat, flat > 0 ? ceiling / flat : 0);
+  if (target_wall > 0) printf(", \"target_wall_s\": %.2f, \"meets_target\": %s", target_wall, st.wall_s < target_wall ? "true" : "false");
+  if (target_ratio > 0)
+    printf(", \"target_ratio\": %.2f, \"meets_target\": %s", target_ratio,
+           ceiling > 0 && rps / ceiling >= target_ratio ? "true" : "false");
+  printf("}\n");
+  fflush(stdout);
+  return 0;
+}
+
+static int bench_seed(int threads) {
+  rsw_err err = {0};
+  scene *s = NULL;
+  scene_load_opts lo = {.size = sizeof lo};
+  if (scene_load_file("proto/examples/hdistant_seed.xml", &lo, &s, &err)) {
+    fprintf(stderr, "bench seed_hdistant: %s: %s\n", err.where, err.msg);
+    return 1;
+  }
+  int rc = report("seed_hdistant", s, 3200, threads, 1.0, 0);
+  scene_free(s);
+  return rc;
+}
+
+/* A rolling heightfield of (N-1)^2 * 2 triangles over [-1,1]^2. */
+static int write_terrain(const char *path, int N) {
+  FILE *f = fopen(path, "wb");
+  if (!f) return 1;
+  uint32_t nv = (uint32_t)N * N, nf = (uint32_t)(N - 1) * (N - 1) * 2;
+  fprintf(f, "ply\nformat binary_little_endian 1.0\nelement vertex %u\nproperty float x\nproperty float y\n"
+             "property float z\nelement face %u\nproperty list uchar uint vertex_indices\nend_header\n", nv, nf);
+  for (int j = 0; j < N; j++)
+    for (int i = 0; i < N; i++) {
+      float x = -1.0f + 2.0f * i / (N - 1), y = -1.0f + 2.0f * j / (N - 1);
+      float z = 0.08f * sinf(9.0f * x) * cosf(7.0f * y) + 0.03f * sinf(37.0f * x + 23.0f * y) +
+                0.01f * cosf(91.0f * x - 57.0f * y);
+      float p[3] = {x, y, z};
+      fwrite(p, sizeof p, 1, f);
+    }
+  for (int j = 0; j < N - 1; j++)
+    for (int i = 0; i < N - 1; i++) {
+      uint32_t a = (uint32_t)(j * N + i), b = a + 1, c = a + (uint32_t)N, d = c + 1;
+      unsigned char three = 3;
+      uint32_t t1[3] = {a, b, d}, t2[3] = {a, d, c};
+      fwrite(&three, 1, 1, f);
+      fwrite(t1, sizeof t1, 1, f);
+      fwrite(&three, 1, 1, f);
+      fwrite(t2, sizeof t2, 1, f);
+    }
+  return fclose(f) != 0;
+}
+
+static int bench_mesh(int threads) {
+  char dir[] = "/tmp/rsw-bench-XXXXXX";
+  if (!mkdtemp(dir)) return 1;
+  char ply[256], json[4096];
+  snprintf(ply, sizeof ply, "%s/terrain.ply", dir);
+  if (write_terrain(ply, 709)) {
+    fprintf(stderr, "bench mesh_1m: cannot write %s\n", ply);
+    return 1;
+  }
+  snprintf(json, sizeof json,
+           "{\"type\": \"scene\","
+           " \"cam\": {\"type\": \"perspective\", \"fov\": 50,"
+           "   \"to_world\": [{\"lookat\": {\"origin\": [0, -2.2, 1.2], \"target\": [0, 0, 0], \"up\": [0, 0, 1]}}],"
+           "   \"sampler\": {\"type\": \"independent\"},"
+           "   \"film\": {\"type\": \"hdrfilm\", \"width\": 256, \"height\": 256, \"rfilter\": {\"type\": \"box\"}}},"
+           " \"integrator\": {\"type\": \"path\", \"max_depth\": 5},"
+           " \"sky\": {\"type\": \"constant\", \"radiance\": 0.3},"
+           " \"sun\": {\"type\": \"directional\", \"direction\": [0.4, 0.3, -0.8], \"irradiance\": 3},"
+           " \"terrain\": {\"type\": \"ply\", \"filename\": \"%s\","
+           "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.4}}}",
+           ply);
+  rsw_err err = {0};
+  scene *s = NULL;
+  scene_load_opts lo = {.size = sizeof lo};
+  int rc = 1;
+  if (scene_load_memory(json, strlen(json), "mesh_1m", false, &lo, &s, &err)) {
+    fprintf(stderr, "bench mesh_1m: %s: %s\n", err.where, err.msg);
+  } else {
+    rc = report("mesh_1m", s, 16, threads, 0, 0.6);
+  }
+  scene_free(s);
+  remove(ply);
+  rmdir(dir);
+  return rc;
+}
+
+int main(void) {
+  int threads = bench_threads();
+  int rc = bench_seed(threads);
+  rc |= bench_mesh(threads);
+  return rc;
+}
