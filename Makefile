@@ -45,6 +45,7 @@ BENCH_SRC := $(wildcard tests/bench/*.c)
 BENCH_BIN := $(patsubst %.c,$(BUILD)/bench/%,$(notdir $(BENCH_SRC)))
 
 .PHONY: all deps test bench run clean format
+.SECONDARY:
 
 all: deps $(BUILD)/bin/raysweepd
 
