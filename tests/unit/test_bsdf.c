@@ -20,6 +20,7 @@
 #include "kernel/bsdfs/ior_data.h"
 #include "kernel/bsdfs/microfacet.h"
 #include "kernel/core/rng.h"
+#include "kernel/scene/scene.h"
 #include "kernel/textures/texture.h"
 #include "../support/chi2.h"
 #include "../support/test.h"
@@ -630,6 +631,145 @@ static void test_twosided(void) {
   free_tex(rho);
 }
 
+
+/* ---- the plugins through the scene loader ------------------------------------------- */
+
+/* Load a JSON document in `variant`; returns the status (and the scene on
+ * success, else NULL) with err filled. */
+static rsw_status load_json(const char *text, const char *variant, scene **out, rsw_err *err) {
+  scene_load_opts o = {.size = sizeof o, .variant = variant};
+  rsw_err_clear(err);
+  *out = NULL;
+  return scene_load_memory(text, strlen(text), "test_bsdf", false, &o, out, err);
+}
+
+/* The BSDF with that id (textures made from its properties may carry the
+ * same id). */
+static object *find_object(const scene *s, const char *id) {
+  for (size_t i = 0; i < s->n_objects; i++)
+    if (s->objects[i]->id && strcmp(s->objects[i]->id, id) == 0 &&
+        s->objects[i]->plugin->cls == CLS_BSDF)
+      return s->objects[i];
+  return NULL;
+}
+
+static double tex_value(const texture *t) {
+  color c = col1(NAN);
+  if (!t || !uniform_texture_value(t, &c)) return NAN;
+  return c.c[0];
+}
+
+static void test_loader_defaults(void) {
+  const char *doc =
+      "{\"type\": \"scene\","
+      " \"d\": {\"type\": \"diffuse\"},"
+      " \"c\": {\"type\": \"conductor\"},"
+      " \"r\": {\"type\": \"roughconductor\"},"
+      " \"g\": {\"type\": \"dielectric\"},"
+      " \"t\": {\"type\": \"twosided\", \"inner\": {\"type\": \"diffuse\", \"reflectance\": 0.25}}}";
+  scene *s;
+  rsw_err err;
+  rsw_status st = load_json(doc, "mono", &s, &err);
+  REQUIRE(st == RSW_OK, "load: %s: %s", err.where, err.msg);
+  diffuse_bsdf *d = (diffuse_bsdf *)find_object(s, "d");
+  conductor_bsdf *c = (conductor_bsdf *)find_object(s, "c");
+  roughconductor_bsdf *r = (roughconductor_bsdf *)find_object(s, "r");
+  dielectric_bsdf *g = (dielectric_bsdf *)find_object(s, "g");
+  twosided_bsdf *t = (twosided_bsdf *)find_object(s, "t");
+  REQUIRE(d && c && r && g && t, "all five BSDFs built");
+  CHECK(tex_value(d->reflectance) == 0.5, "diffuse reflectance 0.5");
+  CHECK(!c->ior.material && tex_value(c->ior.eta) == 0.0 && tex_value(c->ior.k) == 1.0,
+        "conductor eta 0, k 1");
+  CHECK(tex_value(c->specular_reflectance) == 1.0, "conductor specular_reflectance 1");
+  CHECK(r->type == MF_BECKMANN && r->sample_visible && r->alpha_u == r->alpha_v &&
+            tex_value(r->alpha_u) == 0.1 && !r->specular_reflectance,
+        "roughconductor: beckmann, alpha 0.1, sample_visible, no specular_reflectance");
+  CHECK_REL(g->eta, 1.5046 / 1.000277, 1e-15);
+  CHECK(t->brdf[0] == t->brdf[1] && t->brdf[0]->base.plugin == &plugin_diffuse,
+        "twosided: back = front");
+  CHECK(t->base.flags == (BSDF_DIFFUSE_REFLECTION | BSDF_TWO_SIDED), "twosided flags");
+  scene_free(s);
+}
+
+static void test_loader_options(void) {
+  const char *doc =
+      "{\"type\": \"scene\","
+      " \"r\": {\"type\": \"roughconductor\", \"distribution\": \"GGX\", \"alpha_u\": 0.1,"
+      "        \"alpha_v\": 0.4, \"sample_visible\": false, \"eta\": 0.2, \"k\": 3.0,"
+      "        \"specular_reflectance\": 0.9},"
+      " \"a\": {\"type\": \"conductor\", \"material\": \"Au\"},"
+      " \"g\": {\"type\": \"dielectric\", \"int_ior\": \"water\", \"ext_ior\": 1.0},"
+      " \"t\": {\"type\": \"twosided\", \"f\": {\"type\": \"diffuse\"},"
+      "        \"b\": {\"type\": \"conductor\"}}}";
+  scene *s;
+  rsw_err err;
+  rsw_status st = load_json(doc, "mono", &s, &err);
+  REQUIRE(st == RSW_OK, "load: %s: %s", err.where, err.msg);
+  roughconductor_bsdf *r = (roughconductor_bsdf *)find_object(s, "r");
+  conductor_bsdf *a = (conductor_bsdf *)find_object(s, "a");
+  dielectric_bsdf *g = (dielectric_bsdf *)find_object(s, "g");
+  twosided_bsdf *t = (twosided_bsdf *)find_object(s, "t");
+  REQUIRE(r && a && g && t, "built");
+  CHECK(r->type == MF_GGX && !r->sample_visible, "ggx, sample_visible false");
+  CHECK(tex_value(r->alpha_u) == 0.1 && tex_value(r->alpha_v) == 0.4, "alpha_u/alpha_v");
+  CHECK(tex_value(r->ior.eta) == 0.2 && tex_value(r->ior.k) == 3.0, "eta/k");
+  CHECK(tex_value(r->specular_reflectance) == 0.9, "specular_reflectance");
+  CHECK(a->ior.material && strcmp(a->ior.material->name, "Au") == 0, "Au preset");
+  CHECK_REL(g->eta, 1.3330, 1e-15);
+  CHECK(t->brdf[0]->base.plugin == &plugin_diffuse && t->brdf[1]->base.plugin == &plugin_conductor,
+        "twosided front/back in declaration order");
+
+  /* A render at 550 nm and one outside the Au table. */
+  render_ctx rc = {.variant = VARIANT_MONO, .wavelength = 550.0};
+  rsw_err_clear(&err);
+  CHECK(scene_prepare(s, &rc, &err) == RSW_OK, "prepare at 550 nm: %s", err.msg);
+  rc.wavelength = 2000.0;
+  rsw_err_clear(&err);
+  CHECK(scene_prepare(s, &rc, &err) == RSW_ERR_RANGE, "prepare at 2000 nm fails");
+  CHECK(strstr(err.msg, "Au") != NULL, "the error names the material: %s", err.msg);
+  scene_free(s);
+}
+
+static void test_loader_errors(void) {
+  static const struct {
+    const char *doc;
+    rsw_status code;
+  } cases[] = {
+      {"{\"type\": \"scene\", \"c\": {\"type\": \"conductor\", \"material\": \"Au\", \"eta\": 0.2}}",
+       RSW_ERR_INVALID},
+      {"{\"type\": \"scene\", \"c\": {\"type\": \"conductor\", \"material\": \"Xx\"}}", RSW_ERR_INVALID},
+      {"{\"type\": \"scene\", \"c\": {\"type\": \"conductor\", \"material\": \"Au\", \"k\": 2}}",
+       RSW_ERR_UNUSED_PROPERTY},
+      {"{\"type\": \"scene\", \"r\": {\"type\": \"roughconductor\", \"material\": \"Cu\", \"eta\": 1}}",
+       RSW_ERR_INVALID},
+      {"{\"type\": \"scene\", \"r\": {\"type\": \"roughconductor\", \"alpha\": 0.1, \"alpha_u\": 0.2,"
+       " \"alpha_v\": 0.3}}",
+       RSW_ERR_INVALID},
+      {"{\"type\": \"scene\", \"r\": {\"type\": \"roughconductor\", \"alpha_u\": 0.2}}", RSW_ERR_MISSING},
+      {"{\"type\": \"scene\", \"r\": {\"type\": \"roughconductor\", \"distribution\": \"phong\"}}",
+       RSW_ERR_INVALID},
+      {"{\"type\": \"scene\", \"g\": {\"type\": \"dielectric\", \"int_ior\": \"unobtainium\"}}",
+       RSW_ERR_INVALID},
+      {"{\"type\": \"scene\", \"g\": {\"type\": \"dielectric\", \"ext_ior\": -1.0}}", RSW_ERR_RANGE},
+      {"{\"type\": \"scene\", \"t\": {\"type\": \"twosided\"}}", RSW_ERR_MISSING},
+      {"{\"type\": \"scene\", \"t\": {\"type\": \"twosided\", \"a\": {\"type\": \"dielectric\"}}}",
+       RSW_ERR_INVALID},
+      {"{\"type\": \"scene\", \"t\": {\"type\": \"twosided\", \"a\": {\"type\": \"diffuse\"},"
+       " \"b\": {\"type\": \"diffuse\"}, \"c\": {\"type\": \"diffuse\"}}}",
+       RSW_ERR_INVALID},
+      {"{\"type\": \"scene\", \"d\": {\"type\": \"diffuse\", \"reflectance\": -0.5}}", RSW_ERR_RANGE},
+  };
+  for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+    scene *s;
+    rsw_err err;
+    rsw_status st = load_json(cases[i].doc, "mono", &s, &err);
+    CHECK(st == cases[i].code, "case %zu: got %s (%s: %s), expected %s", i, rsw_status_name(st),
+          err.where, err.msg, rsw_status_name(cases[i].code));
+    CHECK(st == RSW_OK || err.where[0] != '\0', "case %zu: the error names a place", i);
+    scene_free(s);
+  }
+}
+
 int main(void) {
   RSW_TEST_RUN(test_fresnel_conductor);
   RSW_TEST_RUN(test_fresnel_dielectric);
@@ -644,6 +784,9 @@ int main(void) {
   RSW_TEST_RUN(test_conductor_presets);
   RSW_TEST_RUN(test_dielectric);
   RSW_TEST_RUN(test_twosided);
+  RSW_TEST_RUN(test_loader_defaults);
+  RSW_TEST_RUN(test_loader_options);
+  RSW_TEST_RUN(test_loader_errors);
   RSW_TEST_RUN(test_roughconductor_chi2_isotropic);
   RSW_TEST_RUN(test_roughconductor_chi2_anisotropic);
   RSW_TEST_END("test_bsdf");

@@ -38,11 +38,10 @@ typedef struct conductor_ior {
 /* eta and k at si. */
 void conductor_ior_eval(const conductor_ior *c, const surface_interaction *si,
                         color *eta, color *k);
-/* Reads `material` / `eta` / `k` for plugin `who` (Mitsuba's rule: a
+/* Reads `material` / `eta` / `k` of a conductor node (Mitsuba's rule: a
  * material other than "none" together with eta is an error; with a
  * material, eta/k are not read, so a stray k is an unused property). */
-rsw_status conductor_ior_load(struct loader *ld, struct node *n, const char *who,
-                              conductor_ior *out);
+rsw_status conductor_ior_load(struct loader *ld, struct node *n, conductor_ior *out);
 /* Sets the preset's cached values for rc (no-op without a preset). */
 rsw_status conductor_ior_prepare(conductor_ior *c, const render_ctx *rc,
                                  rsw_err *err, const char *where);
@@ -54,7 +53,8 @@ typedef struct conductor_bsdf {
 } conductor_bsdf;
 
 /* eta/k textures (material NULL) or a preset (eta/k NULL; its values are
- * evaluated for rc, which may be NULL for mono 550 nm). */
+ * evaluated for rc, which may be NULL for mono 550 nm). NULL also when
+ * rc's wavelength lies outside the preset's table. */
 bsdf *conductor_new(texture *eta, texture *k, const ior_conductor *material,
                     texture *specular_reflectance, const render_ctx *rc);
 

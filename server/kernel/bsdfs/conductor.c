@@ -36,7 +36,7 @@ rsw_status conductor_ior_prepare(conductor_ior *c, const render_ctx *rc, rsw_err
   return ior_conductor_for_ctx(c->material, rc, &c->mat_eta, &c->mat_k, err, where);
 }
 
-rsw_status conductor_ior_load(loader *ld, node *n, const char *who, conductor_ior *out) {
+rsw_status conductor_ior_load(loader *ld, node *n, conductor_ior *out) {
   conductor_ior c = {0};
   const char *material;
   rsw_status st = ld_string(ld, n, "material", "none", &material);
@@ -44,11 +44,11 @@ rsw_status conductor_ior_load(loader *ld, node *n, const char *who, conductor_io
   if (strcmp(material, "none") != 0) {
     if (ld_has(n, "eta"))
       return ld_fail(ld, n, "eta", RSW_ERR_INVALID,
-                     "%s: give either 'material' or 'eta'/'k', not both", who);
+                     "give either 'material' or 'eta'/'k', not both");
     c.material = ior_conductor_lookup(material);
     if (!c.material)
       return ld_fail(ld, n, "material", RSW_ERR_INVALID,
-                     "%s: unknown material '%s' (known: %s)", who, material,
+                     "unknown material '%s' (known: %s)", material,
                      ior_conductor_names());
     /* Initial values for this variant (mono at the default 550 nm);
      * prepare() re-evaluates them for each render. */
@@ -108,7 +108,7 @@ static rsw_status conductor_prepare(object *o, const render_ctx *rc, rsw_err *er
 static rsw_status conductor_create(loader *ld, node *n, object **out) {
   conductor_ior ior;
   texture *spec;
-  rsw_status st = conductor_ior_load(ld, n, "conductor", &ior);
+  rsw_status st = conductor_ior_load(ld, n, &ior);
   if (st != RSW_OK) return st;
   if ((st = ld_texture(ld, n, "specular_reflectance", 1.0, 0.0, &spec)) != RSW_OK) return st;
   conductor_bsdf *c = calloc(1, sizeof *c);

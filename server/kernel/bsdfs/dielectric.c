@@ -73,7 +73,7 @@ static rsw_status read_ior(loader *ld, node *n, const char *name, const char *de
     if (st != RSW_OK) return st;
     if (!(*out > 0.0))
       return ld_fail(ld, n, name, RSW_ERR_RANGE,
-                     "dielectric: '%s' must be positive (got %g)", name, *out);
+                     "'%s' must be positive (got %g)", name, *out);
     return RSW_OK;
   }
   if (p) {
@@ -82,7 +82,7 @@ static rsw_status read_ior(loader *ld, node *n, const char *name, const char *de
   }
   if (!ior_dielectric_lookup(mat, out))
     return ld_fail(ld, n, name, RSW_ERR_INVALID,
-                   "dielectric: unknown material '%s' for '%s' (known: %s)", mat, name,
+                   "unknown material '%s' for '%s' (known: %s)", mat, name,
                    ior_dielectric_names());
   return RSW_OK;
 }

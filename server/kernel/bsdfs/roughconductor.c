@@ -116,7 +116,7 @@ static rsw_status rough_create(loader *ld, node *n, object **out) {
     type = MF_GGX;
   else
     return ld_fail(ld, n, "distribution", RSW_ERR_INVALID,
-                   "roughconductor: unknown distribution '%s' (expected "
+                   "unknown distribution '%s' (expected "
                    "\"beckmann\" or \"ggx\")", dist);
 
   texture *au, *av;
@@ -124,14 +124,14 @@ static rsw_status rough_create(loader *ld, node *n, object **out) {
   if (ld_has(n, "alpha")) {
     if (has_u || has_v)
       return ld_fail(ld, n, has_u ? "alpha_u" : "alpha_v", RSW_ERR_INVALID,
-                     "roughconductor: give either 'alpha' or 'alpha_u' and "
+                     "give either 'alpha' or 'alpha_u' and "
                      "'alpha_v', not both");
     if ((st = ld_texture(ld, n, "alpha", 0.1, 0.0, &au)) != RSW_OK) return st;
     av = au;
   } else if (has_u || has_v) {
     if (!(has_u && has_v))
       return ld_fail(ld, n, has_u ? "alpha_v" : "alpha_u", RSW_ERR_MISSING,
-                     "roughconductor: 'alpha_u' and 'alpha_v' must be given "
+                     "'alpha_u' and 'alpha_v' must be given "
                      "together");
     if ((st = ld_texture(ld, n, "alpha_u", 0.1, 0.0, &au)) != RSW_OK) return st;
     if ((st = ld_texture(ld, n, "alpha_v", 0.1, 0.0, &av)) != RSW_OK) return st;
@@ -143,7 +143,7 @@ static rsw_status rough_create(loader *ld, node *n, object **out) {
   bool sample_visible;
   if ((st = ld_bool(ld, n, "sample_visible", true, &sample_visible)) != RSW_OK) return st;
   conductor_ior ior;
-  if ((st = conductor_ior_load(ld, n, "roughconductor", &ior)) != RSW_OK) return st;
+  if ((st = conductor_ior_load(ld, n, &ior)) != RSW_OK) return st;
   texture *spec;
   if ((st = ld_texture_opt(ld, n, "specular_reflectance", 0.0, &spec)) != RSW_OK) return st;
 

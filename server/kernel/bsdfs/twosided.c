@@ -62,7 +62,8 @@ static rsw_status twosided_create(loader *ld, node *n, object **out) {
   if (count == 0 || count > 2) {
     free(kids);
     return ld_fail(ld, n, NULL, count == 0 ? RSW_ERR_MISSING : RSW_ERR_INVALID,
-                   "twosided: expected one or two nested BSDFs, got %zu", count);
+                   "twosided '%s': expected one or two nested BSDFs, got %zu",
+                   n->id ? n->id : "", count);
   }
   bsdf *front = (bsdf *)kids[0];
   bsdf *back = count == 2 ? (bsdf *)kids[1] : front;
@@ -71,9 +72,9 @@ static rsw_status twosided_create(loader *ld, node *n, object **out) {
     const bsdf *c = i == 0 ? front : back;
     if (c->flags & TRANSMISSION_LOBES)
       return ld_fail(ld, n, NULL, RSW_ERR_INVALID,
-                     "twosided: nested BSDF '%s' (%s) has a transmission "
+                     "twosided '%s': nested BSDF '%s' (%s) has a transmission "
                      "component; only reflection models can be nested",
-                     c->base.id ? c->base.id : "?", c->base.plugin->name);
+                     n->id ? n->id : "", c->base.id ? c->base.id : "?", c->base.plugin->name);
   }
   bsdf *b = twosided_new(front, back);
   if (!b) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "twosided: out of memory");
