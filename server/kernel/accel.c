@@ -300,10 +300,11 @@ static void *ceiling_worker(void *arg) {
   j->rays = malloc(j->n * 6 * sizeof(float));
   j->ok = j->rays != NULL;
   for (uint64_t i = 0; j->ok && i < j->n; i++) {
-    vec3 o = v3_fma(j->c, 2.0 * j->r, uniform_sphere_point(&g));
+    /* Origin uniform in the bounding ball, direction uniform on the
+     * sphere: incoherent rays as secondary bounces produce them. */
     double rr = j->r * cbrt(pcg32_next_double(&g));
-    vec3 t = v3_fma(j->c, rr, uniform_sphere_point(&g));
-    vec3 d = v3_norm(v3_sub(t, o));
+    vec3 o = v3_fma(j->c, rr, uniform_sphere_point(&g));
+    vec3 d = uniform_sphere_point(&g);
     float *q = &j->rays[6 * i];
     q[0] = (float)o.x, q[1] = (float)o.y, q[2] = (float)o.z;
     q[3] = (float)d.x, q[4] = (float)d.y, q[5] = (float)d.z;

@@ -38,9 +38,9 @@ size_t accel_memory(const accel *a);
 /* ---- measurement (make bench) ------------------------------------------------ */
 
 /* Rays per second of random incoherent rtcIntersect1 queries against the
- * scene's geometry on `threads` threads: origins uniform on a sphere of
- * twice the scene's bounding radius, aimed at uniform points inside the
- * bounding sphere (the "Embree ceiling"). With flat = true the same
+ * scene's geometry on `threads` threads: origins uniform inside the
+ * scene's bounding ball, directions uniform on the sphere (the "Embree
+ * ceiling"). With flat = true the same
  * triangles are put in a single-level Embree scene (vertices transformed to
  * world space, analytic shapes skipped) to measure what the two-level
  * layout costs. Returns 0 on failure. */

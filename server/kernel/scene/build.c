@@ -393,7 +393,10 @@ static rsw_status check_spectrum(loader *ld, node *n, prop *p, double lo) {
 
 static rsw_status make_uniform(loader *ld, node *n, prop *p, const spectrum *s, texture **out) {
   texture *t = uniform_texture_new(s, n->id);
-  if (!t) return ld_fail(ld, n, p ? p->name : NULL, RSW_ERR_NOMEM, "out of memory");
+  if (!t || (p && !uniform_texture_set_where(t, p->loc))) {
+    if (t) t->base.plugin->destroy(&t->base);
+    return ld_fail(ld, n, p ? p->name : NULL, RSW_ERR_NOMEM, "out of memory");
+  }
   rsw_status st = ld_adopt(ld, &t->base);
   if (st) return st;
   *out = t;

@@ -12,6 +12,9 @@
 texture *uniform_texture_new(const spectrum *s, const char *id);
 /* Shorthand for a constant (uniform spectrum v, already prepared). */
 texture *uniform_texture_const(double v, const char *id);
+/* Record where in the document the value came from, for error messages
+ * at render time (copied). */
+bool uniform_texture_set_where(texture *t, const char *where);
 /* The uniform texture's current value (for parameter tables/tests). */
 bool uniform_texture_value(const texture *t, color *out);
 

@@ -12,6 +12,7 @@ typedef struct uniform_tex {
   texture base;
   spectrum spec;  /* owned copy */
   color value;    /* current value (after prepare) */
+  char *where;    /* document location of the property it came from (owned) */
 } uniform_tex;
 
 static color uniform_eval(const texture *t, const surface_interaction *si) {
@@ -26,12 +27,13 @@ static const texture_ops uniform_ops = {.eval = uniform_eval, .mean = uniform_me
 static void uniform_destroy(object *o) {
   uniform_tex *u = (uniform_tex *)o;
   spectrum_free(&u->spec);
+  free(u->where);
   free(u);
 }
 
 static rsw_status uniform_prepare(object *o, const render_ctx *rc, rsw_err *err) {
   uniform_tex *u = (uniform_tex *)o;
-  return spectrum_eval(&u->spec, rc, &u->value, err, o->id);
+  return spectrum_eval(&u->spec, rc, &u->value, err, u->where ? u->where : o->id);
 }
 
 static rsw_status uniform_create(loader *ld, node *n, object **out);
@@ -79,6 +81,14 @@ texture *uniform_texture_new(const spectrum *s, const char *id) {
 texture *uniform_texture_const(double v, const char *id) {
   spectrum s = {.kind = SPEC_UNIFORM, .value = v};
   return uniform_texture_new(&s, id);
+}
+
+bool uniform_texture_set_where(texture *t, const char *where) {
+  if (t->base.plugin != &plugin_uniform) return false;
+  uniform_tex *u = (uniform_tex *)t;
+  free(u->where);
+  u->where = rsw_strdup(where);
+  return u->where != NULL;
 }
 
 bool uniform_texture_value(const texture *t, color *out) {

@@ -1,0 +1,178 @@
+/* `raysweepd render` end to end: the real binary, real files. Checks the
+ * film that comes out (size, channels, metadata), the command-line
+ * overrides (-D, --variant, --wavelength, --sensor, --spp, --seed), and
+ * that a failed render leaves no output file. */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "../../server/kernel/image_exr.h"
+#include "../support/test.h"
+
+RSW_TEST_DEFINE_GLOBALS
+
+static char tmpdir[64];
+static const char *bin_dir(void) {
+  const char *e = getenv("RSW_BIN_DIR");
+  return e && *e ? e : "build/bin";
+}
+
+/* Run raysweepd with args (NULL-terminated); returns the exit status, or
+ * -1 on a signal. stderr goes to errbuf. */
+static int run(char *errbuf, size_t len, const char *const *args) {
+  char exe[512];
+  snprintf(exe, sizeof exe, "%s/raysweepd", bin_dir());
+  int pipefd[2];
+  if (pipe(pipefd)) return -2;
+  pid_t pid = fork();
+  if (pid == 0) {
+    dup2(pipefd[1], 2);
+    close(pipefd[0]);
+    const char *argv[64];
+    int n = 0;
+    argv[n++] = exe;
+    for (int i = 0; args[i] && n < 62; i++) argv[n++] = args[i];
+    argv[n] = NULL;
+    execv(exe, (char *const *)argv);
+    _exit(127);
+  }
+  close(pipefd[1]);
+  size_t got = 0;
+  ssize_t r;
+  while ((r = read(pipefd[0], errbuf + got, len - 1 - got)) > 0) got += (size_t)r;
+  errbuf[got] = '\0';
+  close(pipefd[0]);
+  int status;
+  waitpid(pid, &status, 0);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+static bool exists(const char *p) {
+  struct stat sb;
+  return stat(p, &sb) == 0;
+}
+
+static void write_file(const char *path, const char *text) {
+  FILE *f = fopen(path, "w");
+  if (f) {
+    fputs(text, f);
+    fclose(f);
+  }
+}
+
+static void test_render_seed_exr(void) {
+  char out[128], err[4096];
+  snprintf(out, sizeof out, "%s/seed.exr", tmpdir);
+  const char *args[] = {"render", "proto/examples/hdistant_seed.xml", "--spp", "16", "--seed", "3", "-o", out, NULL};
+  int rc = run(err, sizeof err, args);
+  REQUIRE(rc == 0, "exit %d: %s", rc, err);
+  exr_image img;
+  rsw_err e = {0};
+  REQUIRE(exr_read_image(out, &img, &e) == RSW_OK, "read back: %s", e.msg);
+  CHECK(img.width == 32 && img.height == 32, "32x32, got %dx%d", img.width, img.height);
+  CHECK(img.n_channels == 3 && exr_image_channel(&img, "R") >= 0 && exr_image_channel(&img, "B") >= 0, "RGB film");
+  const char *spp = exr_image_meta(&img, "raysweep:spp"), *sensor = exr_image_meta(&img, "raysweep:sensor");
+  CHECK(spp && strcmp(spp, "16") == 0, "spp metadata: %s", spp ? spp : "(none)");
+  CHECK(sensor && strcmp(sensor, "hdistant") == 0, "sensor metadata: %s", sensor ? sensor : "(none)");
+  double sum = 0;
+  for (int i = 0; i < img.width * img.height * img.n_channels; i++) sum += img.data[i];
+  CHECK(sum > 0, "film is not black");
+  exr_image_free(&img);
+}
+
+static void test_variant_and_wavelength(void) {
+  char out[128], err[4096];
+  snprintf(out, sizeof out, "%s/mono.exr", tmpdir);
+  const char *args[] = {"render", "proto/examples/hdistant_seed.xml", "--variant", "mono", "--wavelength", "600",
+                        "--spp", "4", "--threads", "1", "-o", out, NULL};
+  int rc = run(err, sizeof err, args);
+  REQUIRE(rc == 0, "exit %d: %s", rc, err);
+  exr_image img;
+  rsw_err e = {0};
+  REQUIRE(exr_read_image(out, &img, &e) == RSW_OK, "read back: %s", e.msg);
+  CHECK(img.n_channels == 1 && exr_image_channel(&img, "Y") == 0, "mono film has one channel Y");
+  const char *wl = exr_image_meta(&img, "raysweep:wavelength_nm");
+  CHECK(wl && atof(wl) == 600.0, "wavelength metadata: %s", wl ? wl : "(none)");
+  exr_image_free(&img);
+}
+
+static void test_defines_and_sensor(void) {
+  char scene[128], out[128], err[4096];
+  snprintf(scene, sizeof scene, "%s/params.xml", tmpdir);
+  snprintf(out, sizeof out, "%s/params.exr", tmpdir);
+  write_file(scene,
+             "<scene version=\"3.0.0\">\n"
+             "  <default name=\"res\" value=\"4\"/>\n"
+             "  <sensor type=\"radiancemeter\" id=\"meter\">\n"
+             "    <point name=\"origin\" value=\"0, 0, 1\"/><vector name=\"direction\" value=\"0, 0, -1\"/>\n"
+             "    <film type=\"hdrfilm\"><integer name=\"width\" value=\"1\"/><integer name=\"height\" value=\"1\"/>\n"
+             "      <string name=\"component_format\" value=\"float32\"/>\n"
+             "      <rfilter type=\"box\"/></film>\n"
+             "  </sensor>\n"
+             "  <sensor type=\"hdistant\" id=\"hemi\">\n"
+             "    <film type=\"hdrfilm\"><integer name=\"width\" value=\"$res\"/><integer name=\"height\" value=\"$res\"/>\n"
+             "      <rfilter type=\"box\"/></film>\n"
+             "  </sensor>\n"
+             "  <emitter type=\"directional\"><vector name=\"direction\" value=\"0, 0, -1\"/></emitter>\n"
+             "  <shape type=\"rectangle\"/>\n"
+             "</scene>\n");
+  const char *args[] = {"render", scene, "-D", "res=6", "--sensor", "hemi", "--spp", "2", "-o", out, NULL};
+  int rc = run(err, sizeof err, args);
+  REQUIRE(rc == 0, "exit %d: %s", rc, err);
+  exr_image img;
+  rsw_err e = {0};
+  REQUIRE(exr_read_image(out, &img, &e) == RSW_OK, "read back: %s", e.msg);
+  CHECK(img.width == 6 && img.height == 6, "-D res=6 overrides the default 4: got %dx%d", img.width, img.height);
+  exr_image_free(&img);
+  /* By index, and the first sensor by default. */
+  const char *args2[] = {"render", scene, "--sensor", "0", "--spp", "2", "-o", out, NULL};
+  rc = run(err, sizeof err, args2);
+  REQUIRE(rc == 0, "exit %d: %s", rc, err);
+  REQUIRE(exr_read_image(out, &img, &e) == RSW_OK, "read back: %s", e.msg);
+  CHECK(img.width == 1 && img.height == 1, "sensor 0 is the 1x1 radiancemeter");
+  /* Lambertian 0.5 plate, E = 1 at normal incidence: 0.5/pi exactly. */
+  CHECK(fabs(img.data[0] - 0.5 / 3.14159265358979323846) < 1e-6, "meter reads %g", img.data[0]);
+  exr_image_free(&img);
+}
+
+static void test_failure_leaves_no_file(void) {
+  char scene[128], out[128], err[4096];
+  snprintf(scene, sizeof scene, "%s/oob.json", tmpdir);
+  snprintf(out, sizeof out, "%s/never.exr", tmpdir);
+  /* Loads, but the render fails: the wavelength lies outside the table. */
+  write_file(scene,
+             "{\"type\": \"scene\", \"variant\": \"mono\","
+             " \"s\": {\"type\": \"radiancemeter\", \"origin\": [0, 0, 1], \"direction\": [0, 0, -1],"
+             "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}},"
+             " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1]},"
+             " \"p\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\","
+             "   \"reflectance\": {\"type\": \"spectrum\", \"value\": [[500, 0.1], [600, 0.2]]}}}}");
+  const char *args[] = {"render", scene, "--wavelength", "700", "-o", out, NULL};
+  int rc = run(err, sizeof err, args);
+  CHECK(rc == 1, "exit %d", rc);
+  CHECK(strstr(err, "700") && strstr(err, "/p/bsdf/reflectance"), "error names the wavelength and the property: %s", err);
+  CHECK(!exists(out), "no output file after a failed render");
+  /* An unwritable output: clear error, nothing left behind. */
+  char bad[160];
+  snprintf(bad, sizeof bad, "%s/no/such/dir/x.exr", tmpdir);
+  const char *args2[] = {"render", "proto/examples/hdistant_seed.xml", "--spp", "1", "-o", bad, NULL};
+  rc = run(err, sizeof err, args2);
+  CHECK(rc == 1, "exit %d", rc);
+  CHECK(strstr(err, "x.exr") != NULL, "error names the output file: %s", err);
+}
+
+int main(void) {
+  snprintf(tmpdir, sizeof tmpdir, "/tmp/rsw-cli-XXXXXX");
+  if (!mkdtemp(tmpdir)) return 1;
+  RSW_TEST_RUN(test_render_seed_exr);
+  RSW_TEST_RUN(test_variant_and_wavelength);
+  RSW_TEST_RUN(test_defines_and_sensor);
+  RSW_TEST_RUN(test_failure_leaves_no_file);
+  char cmd[128];
+  snprintf(cmd, sizeof cmd, "rm -rf %s", tmpdir);
+  if (system(cmd)) fprintf(stderr, "could not remove %s\n", tmpdir);
+  RSW_TEST_END("test_cli");
+}
