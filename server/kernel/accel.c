@@ -9,22 +9,38 @@
 
 #include <embree3/rtcore.h>
 #include <math.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 struct accel {
-  RTCDevice device;
+  RTCDevice device; /* the process-wide device (not owned) */
   RTCScene top;
   RTCScene *sub; /* one per shape */
   size_t n_sub;
   size_t bytes;
-  char error[512]; /* first Embree error seen during a build */
+  char error[512]; /* first Embree error seen during this build */
 };
 
+/* One Embree device per process: devices are heavyweight (each owns its
+ * thread arenas), and every scene of a daemon shares it. Embree reports
+ * errors through a device-wide callback; the message goes to a
+ * thread-local slot, since builds of different scenes may run on different
+ * threads at once. */
+static RTCDevice g_device;
+static pthread_once_t g_device_once = PTHREAD_ONCE_INIT;
+static _Thread_local char t_embree_error[512];
+
 static void on_embree_error(void *user, enum RTCError code, const char *str) {
-  accel *a = user;
-  if (a && !a->error[0]) snprintf(a->error, sizeof a->error, "Embree error %d: %s", (int)code, str ? str : "");
+  (void)user;
+  if (!t_embree_error[0])
+    snprintf(t_embree_error, sizeof t_embree_error, "Embree error %d: %s", (int)code, str ? str : "");
+}
+
+static void device_init(void) {
+  g_device = rtcNewDevice(NULL);
+  if (g_device) rtcSetDeviceErrorFunction(g_device, on_embree_error, NULL);
 }
 
 /* ---- user geometry: unit sphere and unit disk ------------------------------------ */
@@ -125,6 +141,7 @@ static void unit_occluded(const struct RTCOccludedFunctionNArguments *args) {
 /* ---- build ------------------------------------------------------------------------------ */
 
 static rsw_status embree_fail(accel *a, rsw_err *err, const char *where, const char *what) {
+  if (!a->error[0]) snprintf(a->error, sizeof a->error, "%s", t_embree_error);
   return rsw_fail(err, RSW_ERR_EMBREE, where, "%s%s%s", what, a->error[0] ? ": " : "", a->error);
 }
 
@@ -167,12 +184,13 @@ static void set_instance_transform(RTCGeometry inst, const xform *t) {
 rsw_status accel_build(scene *s, rsw_err *err) {
   accel *a = calloc(1, sizeof *a);
   if (!a) return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
-  a->device = rtcNewDevice(NULL);
+  pthread_once(&g_device_once, device_init);
+  a->device = g_device;
   if (!a->device) {
     free(a);
     return rsw_fail(err, RSW_ERR_EMBREE, "", "cannot create the Embree device");
   }
-  rtcSetDeviceErrorFunction(a->device, on_embree_error, a);
+  t_embree_error[0] = '\0';
   s->accel = a;
   a->top = rtcNewScene(a->device);
   a->sub = calloc(s->n_shapes ? s->n_shapes : 1, sizeof *a->sub);
@@ -198,7 +216,10 @@ rsw_status accel_build(scene *s, rsw_err *err) {
     rtcReleaseGeometry(inst);
   }
   rtcCommitScene(a->top);
-  if (a->error[0]) return embree_fail(a, err, "", "acceleration structure build failed");
+  if (t_embree_error[0] || rtcGetDeviceError(a->device) != RTC_ERROR_NONE) {
+    snprintf(a->error, sizeof a->error, "%s", t_embree_error);
+    return embree_fail(a, err, "", "acceleration structure build failed");
+  }
   return RSW_OK;
 }
 
@@ -208,7 +229,6 @@ void accel_free(accel *a) {
   for (size_t i = 0; i < a->n_sub; i++)
     if (a->sub[i]) rtcReleaseScene(a->sub[i]);
   free(a->sub);
-  if (a->device) rtcReleaseDevice(a->device);
   free(a);
 }
 
@@ -259,7 +279,6 @@ bool accel_occluded(const accel *a, const ray3 *r) {
 
 /* ---- measurement ------------------------------------------------------------------------------ */
 
-#include <pthread.h>
 #include <time.h>
 
 #include "core/rng.h"
