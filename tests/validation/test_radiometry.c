@@ -9,7 +9,9 @@
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <unistd.h>
 
+#include "../../server/kernel/image_exr.h"
 #include "../support/test.h"
 #include "../support/tsup.h"
 
@@ -296,7 +298,55 @@ static void test_mono_tabulated_spectrum(void) {
   scene_free(s);
 }
 
+static void test_bitmap_texture(void) {
+  /* A 2x2 RGB bitmap as the plate's reflectance, nearest lookup. Row 0 of
+   * the image is its top, v = 0 its bottom (Mitsuba's convention); the
+   * rectangle's uv is ((x+1)/2, (y+1)/2). A radiancemeter looking straight
+   * down at (x, y) under a sun at zenith reads rho(uv) / pi exactly. */
+  char path[] = "/tmp/rsw-bitmap-XXXXXX.exr";
+  int fd = mkstemps(path, 4);
+  REQUIRE(fd >= 0, "temp file");
+  close(fd);
+  const float px[12] = {0.1f, 0.2f, 0.3f, 0.4f, 0.5f, 0.6f,   /* top row: (0,0), (1,0) */
+                        0.7f, 0.8f, 0.9f, 0.25f, 0.5f, 0.75f}; /* bottom row */
+  const char *names[3] = {"R", "G", "B"};
+  rsw_err err = {0};
+  REQUIRE(exr_write_image(path, 2, 2, 3, names, px, false, NULL, &err) == RSW_OK, "write: %s", err.msg);
+  /* (x, y) -> expected texel: bottom-left, bottom-right, top-left. */
+  const double pts[3][2] = {{-0.5, -0.5}, {0.5, -0.5}, {-0.5, 0.5}};
+  const int texel[3] = {2, 3, 0};
+  for (int k = 0; k < 3; k++) {
+    for (int mono = 0; mono < 2; mono++) {
+      char sc[2048];
+      snprintf(sc, sizeof sc,
+               "{\"type\": \"scene\","
+               " \"m\": {\"type\": \"radiancemeter\", \"origin\": [%g, %g, 1], \"direction\": [0, 0, -1],"
+               "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"component_format\": \"float32\","
+               "     \"rfilter\": {\"type\": \"box\"}}},"
+               " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1]},"
+               " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\","
+               "   \"reflectance\": {\"type\": \"bitmap\", \"filename\": \"%s\", \"filter_type\": \"nearest\"}}}}",
+               pts[k][0], pts[k][1], path);
+      scene *s = tsup_load(sc, mono ? "mono" : "rgb");
+      REQUIRE(s, "scene");
+      film_image img;
+      REQUIRE(tsup_render(s, 2, 1, 1, &img), "render");
+      const float *t = &px[3 * texel[k]];
+      if (mono) {
+        double y = 0.212671 * t[0] + 0.715160 * t[1] + 0.072169 * t[2];
+        CHECK_REL(img.data[0], y / 3.14159265358979323846, 1e-5);
+      } else {
+        for (int c = 0; c < 3; c++) CHECK_REL(img.data[c], t[c] / 3.14159265358979323846, 1e-5);
+      }
+      film_image_free(&img);
+      scene_free(s);
+    }
+  }
+  remove(path);
+}
+
 int main(void) {
+  RSW_TEST_RUN(test_bitmap_texture);
   RSW_TEST_RUN(test_hdistant_shape_target_exact);
   RSW_TEST_RUN(test_hdistant_point_target_exact);
   RSW_TEST_RUN(test_hdistant_large_target_quarter);
