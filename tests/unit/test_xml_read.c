@@ -495,6 +495,35 @@ static void test_params(void) {
   CHECK(st == RSW_ERR_USAGE, "empty -D name: %d", st);
 }
 
+/* ---- generated ids ------------------------------------------------------------- */
+
+/* Unnamed objects get type, type_1, ... in depth-first document order,
+ * skipping ids written explicitly anywhere in the document. */
+static void test_generated_ids(void) {
+  const char *xml = "<scene version=\"3.0.0\">\n"
+                    "  <bsdf type=\"d\"/>\n"
+                    "  <shape type=\"s\"><bsdf type=\"d\"/><bsdf type=\"e\"/></shape>\n"
+                    "  <bsdf type=\"d\"/>\n"
+                    "  <bsdf type=\"x\" id=\"d_1\"/>\n"
+                    "  <bsdf type=\"x\" id=\"x\"/>\n"
+                    "  <bsdf type=\"x\"/>\n"
+                    "  <bsdf type=\"d\"/>\n"
+                    "</scene>\n";
+  node *root;
+  rsw_err err;
+  REQUIRE(parse_str(xml, NULL, 0, &root, &err) == RSW_OK, "%s %s", err.where, err.msg);
+  static const char *const want[] = {"d", "s", "d_3", "d_1", "x", "x_1", "d_4"};
+  REQUIRE(root->n_props == 7, "%zu children", root->n_props);
+  for (size_t i = 0; i < 7; i++)
+    CHECK(strcmp(child(root, i)->id, want[i]) == 0, "child %zu id %s, want %s", i,
+          child(root, i)->id, want[i]);
+  node *shape = child(root, 1);
+  /* the shape's children come before the later top-level objects */
+  CHECK(strcmp(child(shape, 0)->id, "d_2") == 0, "nested id %s", child(shape, 0)->id);
+  CHECK(strcmp(child(shape, 1)->id, "e") == 0, "nested id %s", child(shape, 1)->id);
+  node_free(root);
+}
+
 /* ---- versions and limits ----------------------------------------------------- */
 
 static void test_versions(void) {
@@ -634,6 +663,7 @@ int main(void) {
   RSW_TEST_RUN(test_transform_ops);
   RSW_TEST_RUN(test_properties);
   RSW_TEST_RUN(test_params);
+  RSW_TEST_RUN(test_generated_ids);
   RSW_TEST_RUN(test_versions);
   RSW_TEST_RUN(test_limits);
   RSW_TEST_RUN(test_bad_corpus);

@@ -85,27 +85,85 @@ prop *node_find(const node *n, const char *name) {
 
 /* ---- deterministic ids ---------------------------------------------------- */
 
+/* Ids taken so far, hashed (open addressing; keys borrowed from nodes), and
+ * per plugin type the next suffix to try. A linear set made generation
+ * cubic in the number of same-type objects (k-th object: k probes, each a
+ * scan); with the hash and the per-type counter it is linear. The counter
+ * is exact: every candidate below it is already taken, and ids are only
+ * ever added. */
 typedef struct idset {
-  char **ids;
-  size_t n, cap;
+  const char **slots;
+  size_t n, cap; /* cap: 0 or a power of two */
+  const char **types;
+  unsigned *next;
+  size_t n_types, cap_types;
 } idset;
 
+static size_t id_hash(const char *s) { /* FNV-1a */
+  unsigned long long h = 1469598103934665603ull;
+  for (; *s; s++) h = (h ^ (unsigned char)*s) * 1099511628211ull;
+  return (size_t)h;
+}
+
+static size_t idset_slot(const char **slots, size_t cap, const char *id) {
+  size_t i = id_hash(id) & (cap - 1);
+  while (slots[i] && strcmp(slots[i], id) != 0) i = (i + 1) & (cap - 1);
+  return i;
+}
+
 static bool idset_has(const idset *s, const char *id) {
-  for (size_t i = 0; i < s->n; i++)
-    if (strcmp(s->ids[i], id) == 0) return true;
-  return false;
+  return s->cap && s->slots[idset_slot(s->slots, s->cap, id)];
 }
 
 static bool idset_add(idset *s, const char *id) {
-  if (s->n == s->cap) {
+  if (2 * (s->n + 1) > s->cap) {
     size_t cap = s->cap ? 2 * s->cap : 64;
-    char **p = realloc(s->ids, cap * sizeof *p);
-    if (!p) return false;
-    s->ids = p;
+    const char **slots = calloc(cap, sizeof *slots);
+    if (!slots) return false;
+    for (size_t i = 0; i < s->cap; i++)
+      if (s->slots[i]) slots[idset_slot(slots, cap, s->slots[i])] = s->slots[i];
+    free(s->slots);
+    s->slots = slots;
     s->cap = cap;
   }
-  s->ids[s->n++] = (char *)id;
+  size_t i = idset_slot(s->slots, s->cap, id);
+  if (!s->slots[i]) {
+    s->slots[i] = id;
+    s->n++;
+  }
   return true;
+}
+
+/* Slot of the suffix counter for `type` (hashed like the id set); NULL on
+ * OOM. New counters start at 0 (= the bare type name). */
+static unsigned *idset_counter(idset *s, const char *type) {
+  if (2 * (s->n_types + 1) > s->cap_types) {
+    size_t cap = s->cap_types ? 2 * s->cap_types : 16;
+    const char **types = calloc(cap, sizeof *types);
+    unsigned *next = calloc(cap, sizeof *next);
+    if (!types || !next) {
+      free(types);
+      free(next);
+      return NULL;
+    }
+    for (size_t i = 0; i < s->cap_types; i++)
+      if (s->types[i]) {
+        size_t j = idset_slot(types, cap, s->types[i]);
+        types[j] = s->types[i];
+        next[j] = s->next[i];
+      }
+    free(s->types);
+    free(s->next);
+    s->types = types;
+    s->next = next;
+    s->cap_types = cap;
+  }
+  size_t i = idset_slot(s->types, s->cap_types, type);
+  if (!s->types[i]) {
+    s->types[i] = type;
+    s->n_types++;
+  }
+  return &s->next[i];
 }
 
 static bool collect_ids(node *n, idset *s) {
@@ -117,10 +175,18 @@ static bool collect_ids(node *n, idset *s) {
 
 static rsw_status assign(node *n, idset *s, bool is_root, rsw_err *err) {
   if (!n->id && !is_root) {
+    const char *type = n->type ? n->type : "object";
+    unsigned *k = idset_counter(s, type);
+    if (!k) return rsw_fail(err, RSW_ERR_NOMEM, n->loc, "out of memory assigning ids");
     char buf[RSW_MAX_NAME + 32];
-    snprintf(buf, sizeof buf, "%s", n->type ? n->type : "object");
-    for (unsigned k = 1; idset_has(s, buf); k++)
-      snprintf(buf, sizeof buf, "%s_%u", n->type ? n->type : "object", k);
+    for (;; ++*k) {
+      if (*k == 0)
+        snprintf(buf, sizeof buf, "%s", type);
+      else
+        snprintf(buf, sizeof buf, "%s_%u", type, *k);
+      if (!idset_has(s, buf)) break;
+    }
+    ++*k;
     n->id = rsw_strdup(buf);
     if (!n->id || !idset_add(s, n->id))
       return rsw_fail(err, RSW_ERR_NOMEM, n->loc, "out of memory assigning ids");
@@ -140,6 +206,8 @@ rsw_status node_assign_ids(node *root, rsw_err *err) {
     st = rsw_fail(err, RSW_ERR_NOMEM, root->loc, "out of memory assigning ids");
   else
     st = assign(root, &s, true, err);
-  free(s.ids);
+  free(s.slots);
+  free(s.types);
+  free(s.next);
   return st;
 }

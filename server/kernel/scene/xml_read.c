@@ -20,7 +20,10 @@
  *   - duplicate property names in one object are an error (Mitsuba errors
  *     too, later, in Properties);
  *   - <integer> is exact within +-2^53 (so a double holds it exactly);
- *   - numbers are plain decimal (no hex, inf, nan), finite;
+ *   - numbers are plain decimal (no hex, inf, nan), finite; blanks around
+ *     a single number are tolerated (as std::stof/stoll do); lists split on
+ *     runs of commas and/or whitespace (string::tokenize(s, ", "));
+ *   - <boolean> takes "true"/"false" in any case (Mitsuba lower-cases);
  *   - <vector>/<point>: x, y, z each default to 0 (Mitsuba 3 requires all
  *     three); a one-number value= is replicated, as Mitsuba does;
  *   - text content inside elements, DOCTYPEs, <include>, <alias>, <path> and
