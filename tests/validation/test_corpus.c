@@ -291,6 +291,57 @@ static void test_corpus_daemon(void) {
   }
 }
 
+/* Every proper prefix of a good scene (a file cut short anywhere) must fail
+ * with a placed message: truncation is the commonest corruption, and each
+ * cut lands the parsers in a different state. */
+static const char good_xml_scene[] =
+    "<scene version=\"3.0.0\">\n"
+    "  <sensor type=\"perspective\">\n"
+    "    <transform name=\"to_world\"><lookat origin=\"0, 0, 5\" target=\"0, 0, 0\" up=\"0, 1, 0\"/></transform>\n"
+    "    <film type=\"hdrfilm\"><integer name=\"width\" value=\"4\"/><integer name=\"height\" value=\"4\"/></film>\n"
+    "  </sensor>\n"
+    "  <emitter type=\"directional\"><vector name=\"direction\" x=\"0\" y=\"0\" z=\"-1\"/></emitter>\n"
+    "  <shape type=\"rectangle\"><bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"0.5\"/></bsdf></shape>\n"
+    "</scene>\n";
+
+static void check_prefixes(const char *text, bool is_xml) {
+  size_t len = strlen(text);
+  /* The whole scene loads: otherwise the prefixes prove nothing. */
+  rsw_err err = {0};
+  scene *sc = NULL;
+  rsw_status st = scene_load_memory(text, len, "good", is_xml, NULL, &sc, &err);
+  REQUIRE(st == RSW_OK && sc, "the complete %s scene fails: %s: %s", is_xml ? "XML" : "JSON", err.where, err.msg);
+  scene_free(sc);
+  int bad = 0;
+  for (size_t n = 0; n < len; n++) {
+    /* A prefix that ends in whitespace after the root's close is complete. */
+    bool complete = strspn(text + n, " \t\r\n") == len - n;
+    memset(&err, 0, sizeof err);
+    sc = NULL;
+    /* An exact-size copy without a terminator: ASan then catches any read
+     * past `len`, which the API's length argument promises not to do. */
+    char *cut = malloc(n ? n : 1);
+    REQUIRE(cut, "out of memory");
+    memcpy(cut, text, n);
+    st = scene_load_memory(cut, n, "cut", is_xml, NULL, &sc, &err);
+    free(cut);
+    scene_free(sc);
+    if (complete) continue;
+    if (st == RSW_OK || !err.msg[0] || !err.where[0]) {
+      if (bad++ < 5)
+        CHECK(false, "%s scene cut to %zu of %zu bytes: status %d, where '%s', message '%s'",
+              is_xml ? "XML" : "JSON", n, len, (int)st, err.where, err.msg);
+    }
+  }
+  CHECK(bad == 0, "%d truncated %s scenes loaded or failed without a placed message", bad,
+        is_xml ? "XML" : "JSON");
+}
+
+static void test_truncated_prefixes(void) {
+  check_prefixes(good_scene, false);
+  check_prefixes(good_xml_scene, true);
+}
+
 /* ---- command lines ----------------------------------------------------------------- */
 
 /* Run a command line and check: normal exit with `want` (1 or 2), a
@@ -373,6 +424,7 @@ int main(void) {
   }
   RSW_TEST_RUN(test_corpus_size);
   RSW_TEST_RUN(test_corpus_in_process);
+  RSW_TEST_RUN(test_truncated_prefixes);
   RSW_TEST_RUN(test_good_scene_renders);
   RSW_TEST_RUN(test_corpus_daemon);
   RSW_TEST_RUN(test_bad_command_lines);
