@@ -401,6 +401,10 @@ static void test_bad_command_lines(void) {
       {"missing scene file", {NULL, "render", "-o", out, NULL}, 2},
       {"two scene files", {NULL, "render", good, good, "-o", out, NULL}, 2},
       {"-D without '='", {NULL, "render", good, "-Dfoo", "-o", out, NULL}, 2},
+      /* A usage error after a -D: the definitions parsed so far must still
+       * be freed (LSan in the SAN build). */
+      {"-D then an unknown option", {NULL, "render", good, "-Dfoo=1", "--bogus", "-o", out, NULL}, 2},
+      {"-D then -o without a file", {NULL, "render", good, "-D", "foo=1", "-o", NULL}, 2},
       {"nonexistent scene file", {NULL, "render", missing, "-o", out, NULL}, 1},
       {"scene file is a directory", {NULL, "render", g_scratch.dir, "-o", out, NULL}, 1},
       {"-D on a JSON scene", {NULL, "render", good, "-Dradius=2", "-o", out, NULL}, 1},
@@ -412,6 +416,23 @@ static void test_bad_command_lines(void) {
   };
   for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++)
     check_bad_cmdline(cases[i].what, cases[i].argv, cases[i].want);
+
+  /* More -D definitions than the daemon holds (256). */
+  enum { N_DEFS = 300 };
+  static char defs[N_DEFS][32];
+  char *argv[N_DEFS + 8];
+  int k = 0;
+  argv[k++] = NULL;
+  argv[k++] = "render";
+  argv[k++] = good;
+  for (int i = 0; i < N_DEFS; i++) {
+    snprintf(defs[i], sizeof defs[i], "-Dp%d=1", i);
+    argv[k++] = defs[i];
+  }
+  argv[k++] = "-o";
+  argv[k++] = out;
+  argv[k] = NULL;
+  check_bad_cmdline("300 -D definitions", argv, 2);
 }
 
 int main(void) {
