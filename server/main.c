@@ -9,6 +9,8 @@
  * non-zero with a message naming the flag, file or document place. */
 #include <errno.h>
 #include <limits.h>
+#include <stdarg.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -27,10 +29,14 @@ typedef struct command {
   int (*run)(int argc, char **argv);
 } command;
 
-static int usage_error(const char *cmd, const char *fmt, const char *arg) {
+static int usage_error(const char *cmd, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static int usage_error(const char *cmd, const char *fmt, ...) {
+  va_list ap;
+  va_start(ap, fmt);
   fprintf(stderr, "raysweepd %s: ", cmd);
-  fprintf(stderr, fmt, arg);
+  vfprintf(stderr, fmt, ap);
   fputc('\n', stderr);
+  va_end(ap);
   return 2;
 }
 
@@ -60,56 +66,61 @@ static int cmd_render(int argc, char **argv) {
   size_t n_defines = 0;
   unsigned long long spp = 0, seed = 0, threads = 0;
   double wavelength = 0;
+  int rc = 1;
+  scene *sc = NULL;
+  film_image img = {0};
+#define USAGE(...)                                                                                           \
+  do {                                                                                                       \
+    rc = usage_error("render", __VA_ARGS__);                                                                 \
+    goto out;                                                                                                \
+  } while (0)
   for (int i = 1; i < argc; i++) {
     const char *a = argv[i];
     const char *val = i + 1 < argc ? argv[i + 1] : NULL;
     if (strcmp(a, "-o") == 0 || strcmp(a, "--output") == 0) {
-      if (!val) return usage_error("render", "%s needs a file name", a);
+      if (!val) USAGE("%s needs a file name", a);
       out_path = val, i++;
     } else if (strcmp(a, "--sensor") == 0) {
-      if (!val) return usage_error("render", "%s needs a sensor id or index", a);
+      if (!val) USAGE("%s needs a sensor id or index", a);
       sensor_id = val, i++;
     } else if (strcmp(a, "--spp") == 0) {
       if (!parse_u64(val, 1ull << 31, &spp) || spp == 0)
-        return usage_error("render", "--spp needs a positive integer (got '%s')", val ? val : "");
+        USAGE("--spp needs a positive integer (got '%s')", val ? val : "");
       i++;
     } else if (strcmp(a, "--seed") == 0) {
-      if (!parse_u64(val, ULLONG_MAX, &seed))
-        return usage_error("render", "--seed needs a non-negative integer (got '%s')", val ? val : "");
+      if (!parse_u64(val, ULLONG_MAX, &seed)) USAGE("--seed needs a non-negative integer (got '%s')", val ? val : "");
       i++;
     } else if (strcmp(a, "--threads") == 0) {
       if (!parse_u64(val, 256, &threads) || threads == 0)
-        return usage_error("render", "--threads needs an integer in [1, 256] (got '%s')", val ? val : "");
+        USAGE("--threads needs an integer in [1, 256] (got '%s')", val ? val : "");
       i++;
     } else if (strcmp(a, "--wavelength") == 0) {
       if (!parse_pos_double(val, &wavelength))
-        return usage_error("render", "--wavelength needs a positive number of nm (got '%s')", val ? val : "");
+        USAGE("--wavelength needs a positive number of nm (got '%s')", val ? val : "");
       i++;
     } else if (strcmp(a, "--variant") == 0) {
-      if (!val) return usage_error("render", "%s needs mono or rgb", a);
+      if (!val) USAGE("%s needs mono or rgb", a);
       variant_name = val, i++;
     } else if (strncmp(a, "-D", 2) == 0) {
       const char *def = a[2] ? a + 2 : val;
       if (!a[2]) i++;
       const char *eq = def ? strchr(def, '=') : NULL;
-      if (!def || !eq || eq == def) return usage_error("render", "-D needs name=value (got '%s')", def ? def : "");
-      if (n_defines == MAX_DEFINES) return usage_error("render", "too many -D definitions%s", "");
+      if (!def || !eq || eq == def) USAGE("-D needs name=value (got '%s')", def ? def : "");
+      if (n_defines == MAX_DEFINES) USAGE("too many -D definitions (at most %d)", MAX_DEFINES);
       char *name = strndup(def, (size_t)(eq - def));
-      if (!name) return usage_error("render", "out of memory%s", "");
+      if (!name) USAGE("%s", "out of memory");
       defines[n_defines].name = name;
       defines[n_defines].value = eq + 1;
       n_defines++;
     } else if (a[0] == '-' && a[1]) {
-      return usage_error("render", "unknown option '%s'", a);
+      USAGE("unknown option '%s'", a);
     } else if (!scene_path) {
       scene_path = a;
     } else {
-      return usage_error("render", "unexpected argument '%s' (one scene file per render)", a);
+      USAGE("unexpected argument '%s' (one scene file per render)", a);
     }
   }
-  int rc = 1;
-  scene *sc = NULL;
-  film_image img = {0};
+#undef USAGE
   if (!scene_path) {
     rc = usage_error("render", "missing the scene file%s", "");
     goto out;

@@ -119,6 +119,9 @@ static rsw_status rough_create(loader *ld, node *n, object **out) {
                    "unknown distribution '%s' (expected "
                    "\"beckmann\" or \"ggx\")", dist);
 
+  /* Roughness must be positive: Mitsuba silently clamps alpha to 1e-4;
+   * we refuse smaller values (use `conductor` for a perfect mirror). */
+  const double alpha_min = 1e-4;
   texture *au, *av;
   bool has_u = ld_has(n, "alpha_u"), has_v = ld_has(n, "alpha_v");
   if (ld_has(n, "alpha")) {
@@ -126,17 +129,17 @@ static rsw_status rough_create(loader *ld, node *n, object **out) {
       return ld_fail(ld, n, has_u ? "alpha_u" : "alpha_v", RSW_ERR_INVALID,
                      "give either 'alpha' or 'alpha_u' and "
                      "'alpha_v', not both");
-    if ((st = ld_texture(ld, n, "alpha", 0.1, 0.0, &au)) != RSW_OK) return st;
+    if ((st = ld_texture(ld, n, "alpha", 0.1, alpha_min, &au)) != RSW_OK) return st;
     av = au;
   } else if (has_u || has_v) {
     if (!(has_u && has_v))
       return ld_fail(ld, n, has_u ? "alpha_v" : "alpha_u", RSW_ERR_MISSING,
                      "'alpha_u' and 'alpha_v' must be given "
                      "together");
-    if ((st = ld_texture(ld, n, "alpha_u", 0.1, 0.0, &au)) != RSW_OK) return st;
-    if ((st = ld_texture(ld, n, "alpha_v", 0.1, 0.0, &av)) != RSW_OK) return st;
+    if ((st = ld_texture(ld, n, "alpha_u", 0.1, alpha_min, &au)) != RSW_OK) return st;
+    if ((st = ld_texture(ld, n, "alpha_v", 0.1, alpha_min, &av)) != RSW_OK) return st;
   } else {
-    if ((st = ld_texture(ld, n, "alpha", 0.1, 0.0, &au)) != RSW_OK) return st;
+    if ((st = ld_texture(ld, n, "alpha", 0.1, alpha_min, &au)) != RSW_OK) return st;
     av = au;
   }
 

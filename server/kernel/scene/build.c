@@ -135,13 +135,18 @@ static rsw_status unknown_plugin(loader *ld, node *n) {
   return rsw_fail(ld->err, RSW_ERR_UNKNOWN_PLUGIN, n->loc, "unknown plugin type '%s'", n->type);
 }
 
+static const char *article(const char *word) {
+  return word && strchr("aeiou", word[0]) ? "an" : "a";
+}
+
 /* Plugin of a node, checking the XML tag agrees with its class. */
 static rsw_status node_plugin(loader *ld, node *n, const plugin **out) {
   const plugin *pl = registry_find(n->type);
   if (!pl || pl->cls == CLS_SCENE) return unknown_plugin(ld, n);
   if (n->tag && strcmp(n->tag, obj_class_name(pl->cls)) != 0)
-    return rsw_fail(ld->err, RSW_ERR_TYPE, n->loc, "<%s type=\"%s\">: '%s' is a %s plugin, not a %s",
-                    n->tag, n->type, n->type, obj_class_name(pl->cls), n->tag);
+    return rsw_fail(ld->err, RSW_ERR_TYPE, n->loc, "<%s type=\"%s\">: '%s' is %s %s plugin, not %s %s",
+                    n->tag, n->type, n->type, article(obj_class_name(pl->cls)), obj_class_name(pl->cls),
+                    article(n->tag), n->tag);
   *out = pl;
   return RSW_OK;
 }
@@ -185,8 +190,8 @@ static rsw_status ld_build(loader *ld, node *n, obj_class cls, object **out) {
   rsw_status st = node_plugin(ld, n, &pl);
   if (st) return st;
   if (cls != CLS__COUNT && pl->cls != cls)
-    return rsw_fail(ld->err, RSW_ERR_TYPE, n->loc, "expected a %s here, got the %s plugin '%s'",
-                    obj_class_name(cls), obj_class_name(pl->cls), n->type);
+    return rsw_fail(ld->err, RSW_ERR_TYPE, n->loc, "expected %s %s here, got the %s plugin '%s'",
+                    article(obj_class_name(cls)), obj_class_name(cls), obj_class_name(pl->cls), n->type);
   if (n->build_state == 2) {
     *out = n->built;
     return RSW_OK;
@@ -208,10 +213,16 @@ static rsw_status ld_build(loader *ld, node *n, obj_class cls, object **out) {
   for (size_t i = 0; i < n->n_props; i++) {
     prop *p = &n->props[i];
     if (!p->used) {
-      if (p->kind == PROP_NODE)
+      if (p->kind == PROP_NODE || p->kind == PROP_REF) {
+        node *t = p->kind == PROP_NODE ? p->child : resolve_ref(ld, p->ref);
+        const plugin *tp = t ? registry_find(t->type) : NULL;
+        const char *cname = tp ? obj_class_name(tp->cls) : "object";
         return rsw_fail(ld->err, RSW_ERR_UNUSED_PROPERTY, p->loc,
-                        "%s '%s' does not take a nested %s%s%s (unused)", n->type, n->id ? n->id : "",
-                        p->child->type, p->name[0] ? " named " : "", p->name);
+                        "%s '%s' takes no %s%s%s: %s%s%s is the %s plugin '%s' (unused)", n->type,
+                        n->id ? n->id : "", cname, p->name[0] ? " as '" : "", p->name, p->name[0] ? "'" : "",
+                        p->kind == PROP_REF ? "the reference resolves to " : "", p->kind == PROP_REF ? p->ref : "it",
+                        cname, t ? t->type : "?");
+      }
       return rsw_fail(ld->err, RSW_ERR_UNUSED_PROPERTY, p->loc,
                       "%s '%s' has no property '%s' (unused property)", n->type, n->id ? n->id : "",
                       p->name);
@@ -354,7 +365,10 @@ rsw_status ld_path(loader *ld, node *n, const char *name, char **out) {
     snprintf(path, len, "%s/%s", ld->base_dir, f);
   struct stat sb;
   if (stat(path, &sb) != 0 || !S_ISREG(sb.st_mode)) {
-    st = ld_fail(ld, n, name, RSW_ERR_FILE, "file '%s' not found (resolved to '%s')", f, path);
+    if (stat(path, &sb) == 0)
+      st = ld_fail(ld, n, name, RSW_ERR_FILE, "'%s' is not a regular file (resolved to '%s')", f, path);
+    else
+      st = ld_fail(ld, n, name, RSW_ERR_FILE, "file '%s' not found (resolved to '%s')", f, path);
     free(path);
     return st;
   }
