@@ -265,6 +265,7 @@ bool accel_intersect(const accel *a, const ray3 *r, accel_hit *h) {
   h->prim = rh.hit.primID;
   h->u = rh.hit.u;
   h->v = rh.hit.v;
+  h->ng = v3(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z);
   return true;
 }
 

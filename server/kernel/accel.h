@@ -20,6 +20,8 @@ typedef struct accel_hit {
   uint32_t shape;   /* index into scene->shapes */
   uint32_t prim;    /* triangle index (meshes), 0 for analytic shapes */
   double u, v;      /* barycentrics for triangles (p = (1-u-v) p0 + u p1 + v p2) */
+  vec3 ng;          /* unnormalised geometric normal in object space, oriented
+                       as (p1 - p0) x (p2 - p0) for triangles */
 } accel_hit;
 
 /* Build for all shapes of s (s->accel is set). Thread count for the

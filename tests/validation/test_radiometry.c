@@ -345,7 +345,49 @@ static void test_bitmap_texture(void) {
   remove(path);
 }
 
+static void test_mesh_plate_without_attributes(void) {
+  /* A PLY plate with neither normals nor uvs (its face normals come from
+   * Embree's hit) and one with vertex normals: both are the Lambertian
+   * plate of the closed form, seen by a radiancemeter. */
+  const char *plys[2] = {
+      "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+      "element face 2\nproperty list uchar int vertex_indices\nend_header\n"
+      "-1 -1 0\n1 -1 0\n1 1 0\n-1 1 0\n3 0 1 2\n3 0 2 3\n",
+      "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+      "property float nx\nproperty float ny\nproperty float nz\n"
+      "element face 2\nproperty list uchar int vertex_indices\nend_header\n"
+      "-1 -1 0 0 0 1\n1 -1 0 0 0 1\n1 1 0 0 0 1\n-1 1 0 0 0 1\n3 0 1 2\n3 0 2 3\n"};
+  for (int k = 0; k < 2; k++) {
+    char path[] = "/tmp/rsw-plate-XXXXXX.ply";
+    int fd = mkstemps(path, 4);
+    REQUIRE(fd >= 0, "temp file");
+    FILE *f = fdopen(fd, "w");
+    fputs(plys[k], f);
+    fclose(f);
+    char sc[2048];
+    snprintf(sc, sizeof sc,
+             "{\"type\": \"scene\","
+             " \"m\": {\"type\": \"radiancemeter\", \"origin\": [0.3, -0.2, 2], \"direction\": [-0.1, 0.05, -1],"
+             "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"component_format\": \"float32\","
+             "     \"rfilter\": {\"type\": \"box\"}}},"
+             " \"sun\": {\"type\": \"directional\", \"direction\": [0.5, 0, -0.86602540378443864676]},"
+             " \"plate\": {\"type\": \"ply\", \"filename\": \"%s\","
+             "   \"to_world\": [{\"rotate\": {\"axis\": [0, 0, 1], \"angle\": 30}}, {\"translate\": [0, 0, 0.1]}],"
+             "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}",
+             path);
+    scene *s = tsup_load(sc, NULL);
+    REQUIRE(s, "scene");
+    film_image img;
+    REQUIRE(tsup_render(s, 4, 1, 1, &img), "render");
+    CHECK_REL(img.data[0], L_PLATE, 1e-5);
+    film_image_free(&img);
+    scene_free(s);
+    remove(path);
+  }
+}
+
 int main(void) {
+  RSW_TEST_RUN(test_mesh_plate_without_attributes);
   RSW_TEST_RUN(test_bitmap_texture);
   RSW_TEST_RUN(test_hdistant_shape_target_exact);
   RSW_TEST_RUN(test_hdistant_point_target_exact);
