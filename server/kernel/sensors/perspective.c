@@ -33,11 +33,13 @@ static double perspective_sample_ray(const sensor *s, vec2 film_u, vec2 aperture
   double sx = film_u.x + p->pp_offset_x, sy = film_u.y + p->pp_offset_y;
   double t = p->tan_half_fov_x;
   vec3 d = v3_norm(v3((1.0 - 2.0 * sx) * t, (1.0 - 2.0 * sy) * t / p->aspect, 1.0));
-  ray->o = xf_point(&s->to_world, v3(0, 0, 0));
-  /* to_world is a rigid motion (checked in create), so d stays unit. */
-  ray->d = v3_norm(xf_vector(&s->to_world, d));
-  ray->tmin = p->near_clip / d.z;
-  ray->tmax = p->far_clip / d.z;
+  /* to_world is a rigid motion (checked in create): d stays unit and the
+   * origin is the translation column. */
+  ray->o = v3(s->to_world.m[0][3], s->to_world.m[1][3], s->to_world.m[2][3]);
+  ray->d = xf_vector(&s->to_world, d);
+  double inv_z = 1.0 / d.z;
+  ray->tmin = p->near_clip * inv_z;
+  ray->tmax = p->far_clip * inv_z;
   return 1.0;
 }
 
