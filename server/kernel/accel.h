@@ -34,6 +34,30 @@ bool accel_intersect(const accel *a, const ray3 *r, accel_hit *h);
 /* Any hit on [r->tmin, r->tmax]. Thread-safe. */
 bool accel_occluded(const accel *a, const ray3 *r);
 
+/* ---- updates (scene/params.c) ------------------------------------------------
+ * Each call stages work on one shape; accel_commit() then commits the
+ * top-level scene once if anything changed. */
+
+/* New to_world of shape sh: the instance transform only. */
+void accel_update_transform(accel *a, const shape *sh);
+/* sh's vertex positions changed (same count): copy them and refit that
+ * shape's BVH (RTC_BUILD_QUALITY_REFIT). */
+rsw_status accel_update_vertices(accel *a, const shape *sh, rsw_err *err);
+/* sh's topology changed (faces, vertex count): rebuild that shape's BVH. */
+rsw_status accel_rebuild_shape(accel *a, const shape *sh, rsw_err *err);
+/* Commit the top level if any update was staged. */
+rsw_status accel_commit(accel *a, rsw_err *err);
+
+/* Counters of Embree work since the structure was built (test hook and
+ * update reports). */
+typedef struct accel_counters {
+  unsigned long top_commits;      /* rtcCommitScene on the top level */
+  unsigned long instance_updates; /* instance transforms written */
+  unsigned long refits;           /* shape BVHs refitted */
+  unsigned long rebuilds;         /* shape BVHs rebuilt */
+} accel_counters;
+void accel_get_counters(const accel *a, accel_counters *out);
+
 /* Bytes held by Embree buffers we allocated (for reporting). */
 size_t accel_memory(const accel *a);
 

@@ -51,6 +51,8 @@ typedef struct render_ctx {
 struct loader;
 struct node;
 struct scene;
+struct param_visitor;
+struct param_table;
 typedef struct object object;
 
 /* A plugin: name, class, life cycle, and its class's ops table. */
@@ -68,6 +70,12 @@ typedef struct plugin {
    * tabulated spectrum at the context's wavelength). */
   rsw_status (*prepare)(object *o, const render_ctx *rc, rsw_err *err);
   const void *ops; /* class-specific ops table, or NULL */
+  /* Optional: report parameters and nested objects (scene/params.h),
+   * Mitsuba's traverse(). */
+  void (*traverse)(object *o, struct param_visitor *v);
+  /* Optional: refresh derived state after an update wrote one of this
+   * object's parameters (values were validated before any was written). */
+  void (*parameters_changed)(object *o);
 } plugin;
 
 /* Every object starts with this header. */
@@ -321,6 +329,7 @@ typedef struct scene {
   vec3 bsphere_center;
   double bsphere_radius; /* inflated as Mitsuba: max(eps, r (1 + eps)) */
   struct node *doc;      /* the document the scene was built from (owned) */
+  struct param_table *params; /* the parameter table (owned) */
 } scene;
 
 #endif
