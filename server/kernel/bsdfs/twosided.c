@@ -86,9 +86,10 @@ static rsw_status twosided_create(loader *ld, node *n, object **out) {
 
 static void twosided_traverse(object *o, param_visitor *v) {
   twosided_bsdf *t = (twosided_bsdf *)o;
-  /* Mitsuba: brdf_0, and brdf_1 only when it is another object. */
+  /* Mitsuba reports both slots; when the back is the front's object,
+   * `brdf_1...` keys are aliases of the `brdf_0...` ones. */
   pv_object(v, "brdf_0", &t->brdf[0]->base, NAN, NAN);
-  if (t->brdf[1] != t->brdf[0]) pv_object(v, "brdf_1", &t->brdf[1]->base, NAN, NAN);
+  pv_object(v, "brdf_1", &t->brdf[1]->base, NAN, NAN);
 }
 
 const plugin plugin_twosided = {

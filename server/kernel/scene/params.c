@@ -1046,16 +1046,15 @@ rsw_status scene_update(scene *s, const param_update *items, size_t n, update_re
       if (o->kind == EK_MESHBUF && o->buf == MB_FACES) fc = sg[k].item->value.arr, nf = sg[k].item->value.n / 3;
       if (o->kind == EK_TRANSFORM) xf = &sg[k].xf;
     }
-    double area = 0;
+    double area = 0, det = xf_abs_det3(xf);
     for (size_t f = 0; f < nf; f++) {
       vec3 p[3];
       for (int c = 0; c < 3; c++) {
         size_t vi = fc ? (size_t)fc[3 * f + c] : sh->mesh.faces[3 * f + c];
         p[c] = pos ? v3((float)pos[3 * vi], (float)pos[3 * vi + 1], (float)pos[3 * vi + 2])
                    : v3(sh->mesh.pos[3 * vi], sh->mesh.pos[3 * vi + 1], sh->mesh.pos[3 * vi + 2]);
-        p[c] = xf_point(xf, p[c]);
       }
-      area += 0.5 * v3_len(v3_cross(v3_sub(p[1], p[0]), v3_sub(p[2], p[0])));
+      area += tri_world_area(xf, det, p[0], p[1], p[2]);
     }
     if (!(area > 0) || !isfinite(area))
       st = rsw_fail(err, RSW_ERR_INVALID, sg[i].item->key, "'%s': the mesh would have zero or non-finite area",

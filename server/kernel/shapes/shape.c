@@ -46,13 +46,11 @@ static rsw_status shape_check_transform(const object *o, const xform *t, const c
   tmp.emitter = NULL;
   /* shape_finalize on a copy without its cdf computes only the area. */
   if (s->geom == GEOM_MESH) {
-    double area = 0;
+    double area = 0, det = xf_abs_det3(t);
     const mesh *m = &s->mesh;
     for (uint32_t f = 0; f < m->n_faces; f++) {
       const uint32_t *ix = &m->faces[3 * (size_t)f];
-      vec3 p0 = xf_point(t, mesh_vertex(m, ix[0])), p1 = xf_point(t, mesh_vertex(m, ix[1])),
-           p2 = xf_point(t, mesh_vertex(m, ix[2]));
-      area += 0.5 * v3_len(v3_cross(v3_sub(p1, p0), v3_sub(p2, p0)));
+      area += tri_world_area(t, det, mesh_vertex(m, ix[0]), mesh_vertex(m, ix[1]), mesh_vertex(m, ix[2]));
     }
     if (!(area > 0) || !isfinite(area))
       return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': the shape would have zero or non-finite area", key);
@@ -116,16 +114,13 @@ rsw_status shape_finalize(shape *s, rsw_err *err, const char *where) {
     free(s->tri_cdf);
     s->tri_cdf = malloc((size_t)m->n_faces * sizeof(double));
     if (!s->tri_cdf) return rsw_fail(err, RSW_ERR_NOMEM, where, "out of memory");
-    double acc = 0;
+    double acc = 0, det = xf_abs_det3(&s->to_world);
     for (uint32_t f = 0; f < m->n_faces; f++) {
       const uint32_t *ix = &m->faces[3 * (size_t)f];
       for (int k = 0; k < 3; k++)
         if (ix[k] >= m->n_verts)
           return rsw_fail(err, RSW_ERR_INVALID, where, "face %u references vertex %u of %u", f, ix[k], m->n_verts);
-      vec3 p0 = xf_point(&s->to_world, mesh_vertex(m, ix[0]));
-      vec3 p1 = xf_point(&s->to_world, mesh_vertex(m, ix[1]));
-      vec3 p2 = xf_point(&s->to_world, mesh_vertex(m, ix[2]));
-      acc += 0.5 * v3_len(v3_cross(v3_sub(p1, p0), v3_sub(p2, p0)));
+      acc += tri_world_area(&s->to_world, det, mesh_vertex(m, ix[0]), mesh_vertex(m, ix[1]), mesh_vertex(m, ix[2]));
       s->tri_cdf[f] = acc;
     }
     s->area = acc;

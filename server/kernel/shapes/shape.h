@@ -32,6 +32,20 @@ void shape_fill_interaction(const shape *s, const ray3 *r, const struct accel_hi
  * disk, non-uniform scale for a sphere, ...). Called by create(). */
 rsw_status shape_finalize(shape *s, rsw_err *err, const char *where);
 
+/* |det| of the linear part of t (for triangle areas below). */
+static inline double xf_abs_det3(const xform *t) {
+  const double(*m)[4] = t->m;
+  return fabs(m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
+              m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]));
+}
+
+/* World area of an object-space triangle under t without transforming its
+ * vertices: with A the linear part, |A e1 x A e2| = |det A| |A^-T (e1 x e2)|,
+ * and xf_normal applies A^-T. */
+static inline double tri_world_area(const xform *t, double abs_det, vec3 p0, vec3 p1, vec3 p2) {
+  return 0.5 * abs_det * v3_len(xf_normal(t, v3_cross(v3_sub(p1, p0), v3_sub(p2, p0))));
+}
+
 /* Free a shape's owned geometry (used by every shape plugin's destroy). */
 void shape_release(shape *s);
 
