@@ -17,11 +17,13 @@
 
 #include "kernel/image_exr.h"
 #include "kernel/render.h"
+#include "kernel/scene/params.h"
 #include "kernel/scene/scene.h"
 #include "raysweep/status.h"
 
 #define RSW_VERSION "0.1.0"
 #define MAX_DEFINES 256
+#define MAX_SETS 1024
 
 typedef struct command {
   const char *name;
@@ -60,10 +62,14 @@ static bool parse_pos_double(const char *s, double *out) {
   return true;
 }
 
+static int apply_sets(const char *cmd, scene *sc, const char *const *sets, size_t n);
+
 static int cmd_render(int argc, char **argv) {
   const char *scene_path = NULL, *out_path = NULL, *sensor_id = NULL, *variant_name = NULL;
   scene_define defines[MAX_DEFINES];
   size_t n_defines = 0;
+  const char *sets[MAX_SETS];
+  size_t n_sets = 0;
   unsigned long long spp = 0, seed = 0, threads = 0;
   double wavelength = 0;
   int rc = 1;
@@ -101,6 +107,10 @@ static int cmd_render(int argc, char **argv) {
     } else if (strcmp(a, "--variant") == 0) {
       if (!val) USAGE("%s needs mono or rgb", a);
       variant_name = val, i++;
+    } else if (strcmp(a, "--set") == 0) {
+      if (!val || !strchr(val, '=') || val[0] == '=') USAGE("--set needs KEY=VALUE (got '%s')", val ? val : "");
+      if (n_sets == MAX_SETS) USAGE("too many --set (at most %d)", MAX_SETS);
+      sets[n_sets++] = val, i++;
     } else if (strncmp(a, "-D", 2) == 0) {
       const char *def = a[2] ? a + 2 : val;
       if (!a[2]) i++;
@@ -136,6 +146,7 @@ static int cmd_render(int argc, char **argv) {
     fprintf(stderr, "raysweepd render: %s\n", rsw_err_format(&err, msg, sizeof msg));
     goto out;
   }
+  if (n_sets && apply_sets("render", sc, sets, n_sets)) goto out;
   size_t sensor_index = 0;
   if (sensor_id) {
     if (!scene_find_sensor(sc, sensor_id, &sensor_index)) {
@@ -170,6 +181,167 @@ out:
   return rc;
 }
 
+/* Apply --set KEY=VALUE updates (VALUE is JSON) as one atomic update.
+ * Returns non-zero after printing the error. */
+static int apply_sets(const char *cmd, scene *sc, const char *const *sets, size_t n) {
+  param_update *items = calloc(n, sizeof *items);
+  char **keys = calloc(n, sizeof *keys);
+  rsw_err err = {0};
+  char msg[1200];
+  int rc = 0;
+  if (!items || !keys) {
+    fprintf(stderr, "raysweepd %s: out of memory\n", cmd);
+    rc = 1;
+  }
+  size_t parsed = 0;
+  for (size_t i = 0; i < n && !rc; i++) {
+    const char *eq = strchr(sets[i], '=');
+    keys[i] = strndup(sets[i], (size_t)(eq - sets[i]));
+    if (!keys[i]) {
+      rc = 1;
+      break;
+    }
+    items[i].key = keys[i];
+    if (param_value_parse(eq + 1, keys[i], &items[i].value, &err)) {
+      fprintf(stderr, "raysweepd %s: --set %s\n", cmd, rsw_err_format(&err, msg, sizeof msg));
+      rc = 1;
+      break;
+    }
+    parsed = i + 1;
+  }
+  if (!rc && scene_update(sc, items, n, NULL, &err)) {
+    fprintf(stderr, "raysweepd %s: --set: %s\n", cmd, rsw_err_format(&err, msg, sizeof msg));
+    rc = 1;
+  }
+  for (size_t i = 0; i < parsed; i++) param_value_free(&items[i].value);
+  for (size_t i = 0; keys && i < n; i++) free(keys[i]);
+  free(keys);
+  free(items);
+  return rc;
+}
+
+/* JSON string literal (keys and ids are plain, but escape anyway). */
+static void print_json_string(const char *s) {
+  putchar('"');
+  for (; *s; s++) {
+    if (*s == '"' || *s == '\\') printf("\\%c", *s);
+    else if ((unsigned char)*s < 0x20) printf("\\u%04x", *s);
+    else putchar(*s);
+  }
+  putchar('"');
+}
+
+static int cmd_params(int argc, char **argv) {
+  const char *scene_path = NULL, *match = "*", *variant_name = NULL;
+  unsigned mask = UPDATE_SPECTRAL | UPDATE_GEOMETRIC;
+  bool include_none = true, json = false;
+  scene_define defines[MAX_DEFINES];
+  size_t n_defines = 0;
+  int rc = 1;
+  scene *sc = NULL;
+  size_t *idx = NULL, count = 0;
+#define USAGE(...)                                                                                           \
+  do {                                                                                                       \
+    rc = usage_error("params", __VA_ARGS__);                                                                 \
+    goto out;                                                                                                \
+  } while (0)
+  for (int i = 1; i < argc; i++) {
+    const char *a = argv[i];
+    const char *val = i + 1 < argc ? argv[i + 1] : NULL;
+    if (strcmp(a, "--match") == 0) {
+      if (!val) USAGE("%s needs a glob (e.g. '*.reflectance.value') or TYPE:ID:PATH", a);
+      match = val, i++;
+    } else if (strcmp(a, "--class") == 0) {
+      update_class c;
+      if (!val || !update_class_parse(val, &c)) USAGE("--class needs spectral, geometric or none (got '%s')", val ? val : "");
+      mask = c == UPDATE_NONE ? 0 : (unsigned)c;
+      include_none = c == UPDATE_NONE;
+      i++;
+    } else if (strcmp(a, "--json") == 0) {
+      json = true;
+    } else if (strcmp(a, "--variant") == 0) {
+      if (!val) USAGE("%s needs mono or rgb", a);
+      variant_name = val, i++;
+    } else if (strncmp(a, "-D", 2) == 0) {
+      const char *def = a[2] ? a + 2 : val;
+      if (!a[2]) i++;
+      const char *eq = def ? strchr(def, '=') : NULL;
+      if (!def || !eq || eq == def) USAGE("-D needs name=value (got '%s')", def ? def : "");
+      if (n_defines == MAX_DEFINES) USAGE("too many -D definitions (at most %d)", MAX_DEFINES);
+      char *name = strndup(def, (size_t)(eq - def));
+      if (!name) USAGE("%s", "out of memory");
+      defines[n_defines].name = name;
+      defines[n_defines].value = eq + 1;
+      n_defines++;
+    } else if (a[0] == '-' && a[1]) {
+      USAGE("unknown option '%s'", a);
+    } else if (!scene_path) {
+      scene_path = a;
+    } else {
+      USAGE("unexpected argument '%s'", a);
+    }
+  }
+#undef USAGE
+  if (!scene_path) {
+    rc = usage_error("params", "missing the scene file%s", "");
+    goto out;
+  }
+  rsw_err err = {0};
+  char msg[1200];
+  scene_load_opts lo = {.size = sizeof lo, .variant = variant_name, .defines = defines, .n_defines = n_defines};
+  if (scene_load_file(scene_path, &lo, &sc, &err)) {
+    fprintf(stderr, "raysweepd params: %s\n", rsw_err_format(&err, msg, sizeof msg));
+    goto out;
+  }
+  if (params_match(sc, match, mask, include_none, &idx, &count, &err)) {
+    fprintf(stderr, "raysweepd params: --match: %s\n", rsw_err_format(&err, msg, sizeof msg));
+    goto out;
+  }
+  if (json) printf("[\n");
+  for (size_t k = 0; k < count; k++) {
+    param_info pi;
+    params_info(sc, idx[k], &pi);
+    char *value = params_value_json(sc, idx[k], 16);
+    if (json) {
+      printf("  {\"key\": ");
+      print_json_string(pi.key);
+      printf(", \"type\": \"%s\", \"class\": \"%s\", \"shape\": [%zu", param_type_name(pi.type),
+             update_class_name(pi.cls), pi.shape[0]);
+      if (pi.shape[1]) printf(", %zu", pi.shape[1]);
+      printf("], \"object_type\": ");
+      print_json_string(pi.object_type);
+      printf(", \"object_class\": ");
+      print_json_string(pi.object_class);
+      printf(", \"object_id\": ");
+      print_json_string(pi.object_id);
+      printf(", \"value\": %s, \"aliases\": [", value ? value : "null");
+      for (size_t a = 0; a < pi.n_aliases; a++) {
+        if (a) printf(", ");
+        print_json_string(pi.aliases[a]);
+      }
+      printf("]}%s\n", k + 1 < count ? "," : "");
+    } else {
+      char dims[48];
+      if (pi.shape[1])
+        snprintf(dims, sizeof dims, "%zux%zu", pi.shape[0], pi.shape[1]);
+      else
+        snprintf(dims, sizeof dims, "%zu", pi.shape[0]);
+      printf("%-48s %-9s %-9s %-7s %s", pi.key, param_type_name(pi.type), update_class_name(pi.cls), dims,
+             value ? value : "?");
+      for (size_t a = 0; a < pi.n_aliases; a++) printf("%s%s", a ? ", " : "  (alias: ", pi.aliases[a]);
+      printf("%s\n", pi.n_aliases ? ")" : "");
+    }
+    free(value);
+  }
+  if (json) printf("]\n");
+  rc = 0;
+out:
+  free(idx);
+  scene_free(sc);
+  for (size_t i = 0; i < n_defines; i++) free((char *)defines[i].name);
+  return rc;
+}
+
 static int cmd_version(int argc, char **argv) {
   (void)argc, (void)argv;
   printf("raysweepd %s (variants: mono, rgb)\n", RSW_VERSION);
@@ -183,9 +355,12 @@ static int cmd_serve(int argc, char **argv) {
 }
 
 static const command commands[] = {
-    {"render", "render SCENE [-D name=value]... [--sensor ID] [--spp N] [--seed S] [--wavelength NM] "
-               "[--threads N] [--variant mono|rgb] -o OUT.exr",
+    {"render", "render SCENE [-D name=value]... [--set KEY=VALUE]... [--sensor ID] [--spp N] [--seed S] "
+               "[--wavelength NM] [--threads N] [--variant mono|rgb] -o OUT.exr",
      cmd_render},
+    {"params", "params SCENE [-D name=value]... [--match GLOB|TYPE:ID:PATH] [--class spectral|geometric|none] "
+               "[--variant mono|rgb] [--json]",
+     cmd_params},
     {"serve", "serve", cmd_serve},
     {"version", "version", cmd_version},
 };

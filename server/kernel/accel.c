@@ -18,7 +18,12 @@ struct accel {
   RTCDevice device; /* the process-wide device (not owned) */
   RTCScene top;
   RTCScene *sub; /* one per shape */
+  RTCGeometry *geom; /* the shape's geometry in its scene (held) */
+  RTCGeometry *inst; /* its instance in the top level (held) */
+  uint32_t *nverts;  /* vertex count Embree holds for each mesh */
   size_t n_sub;
+  bool top_dirty;
+  accel_counters counters;
   size_t bytes;
   char error[512]; /* first Embree error seen during this build */
 };
@@ -193,8 +198,12 @@ rsw_status accel_build(scene *s, rsw_err *err) {
   t_embree_error[0] = '\0';
   s->accel = a;
   a->top = rtcNewScene(a->device);
-  a->sub = calloc(s->n_shapes ? s->n_shapes : 1, sizeof *a->sub);
-  if (!a->top || !a->sub) return embree_fail(a, err, "", "cannot create the top-level scene");
+  size_t ns = s->n_shapes ? s->n_shapes : 1;
+  a->sub = calloc(ns, sizeof *a->sub);
+  a->geom = calloc(ns, sizeof *a->geom);
+  a->inst = calloc(ns, sizeof *a->inst);
+  a->nverts = calloc(ns, sizeof *a->nverts);
+  if (!a->top || !a->sub || !a->geom || !a->inst || !a->nverts) return embree_fail(a, err, "", "cannot create the top-level scene");
   a->n_sub = s->n_shapes;
   for (size_t i = 0; i < s->n_shapes; i++) {
     const shape *sh = s->shapes[i];
@@ -205,7 +214,8 @@ rsw_status accel_build(scene *s, rsw_err *err) {
     RTCGeometry g = shape_geometry(a, sh);
     if (!g) return embree_fail(a, err, sh->base.id, "cannot create geometry");
     rtcAttachGeometryByID(sub, g, 0);
-    rtcReleaseGeometry(g);
+    a->geom[i] = g; /* keep our reference for updates */
+    a->nverts[i] = sh->mesh.n_verts;
     rtcCommitScene(sub);
     RTCGeometry inst = rtcNewGeometry(a->device, RTC_GEOMETRY_TYPE_INSTANCE);
     if (!inst) return embree_fail(a, err, sh->base.id, "cannot create an instance");
@@ -213,7 +223,7 @@ rsw_status accel_build(scene *s, rsw_err *err) {
     set_instance_transform(inst, &sh->to_world);
     rtcCommitGeometry(inst);
     rtcAttachGeometryByID(a->top, inst, (unsigned)i);
-    rtcReleaseGeometry(inst);
+    a->inst[i] = inst;
   }
   rtcCommitScene(a->top);
   if (t_embree_error[0] || rtcGetDeviceError(a->device) != RTC_ERROR_NONE) {
@@ -226,13 +236,89 @@ rsw_status accel_build(scene *s, rsw_err *err) {
 void accel_free(accel *a) {
   if (!a) return;
   if (a->top) rtcReleaseScene(a->top);
-  for (size_t i = 0; i < a->n_sub; i++)
+  for (size_t i = 0; i < a->n_sub; i++) {
+    if (a->inst[i]) rtcReleaseGeometry(a->inst[i]);
+    if (a->geom[i]) rtcReleaseGeometry(a->geom[i]);
     if (a->sub[i]) rtcReleaseScene(a->sub[i]);
+  }
   free(a->sub);
+  free(a->geom);
+  free(a->inst);
+  free(a->nverts);
   free(a);
 }
 
 size_t accel_memory(const accel *a) { return a ? a->bytes : 0; }
+
+/* ---- updates ---------------------------------------------------------------------------------- */
+
+void accel_update_transform(accel *a, const shape *sh) {
+  unsigned i = sh->index;
+  set_instance_transform(a->inst[i], &sh->to_world);
+  rtcCommitGeometry(a->inst[i]);
+  a->top_dirty = true;
+  a->counters.instance_updates++;
+}
+
+static rsw_status check_embree(accel *a, rsw_err *err, const char *where, const char *what) {
+  if (t_embree_error[0] || rtcGetDeviceError(a->device) != RTC_ERROR_NONE) {
+    snprintf(a->error, sizeof a->error, "%s", t_embree_error);
+    t_embree_error[0] = '\0';
+    return embree_fail(a, err, where, what);
+  }
+  return RSW_OK;
+}
+
+rsw_status accel_rebuild_shape(accel *a, const shape *sh, rsw_err *err) {
+  unsigned i = sh->index;
+  t_embree_error[0] = '\0';
+  RTCGeometry g = shape_geometry(a, sh);
+  if (!g) return embree_fail(a, err, sh->base.id, "cannot create geometry");
+  rtcDetachGeometry(a->sub[i], 0);
+  rtcReleaseGeometry(a->geom[i]);
+  rtcAttachGeometryByID(a->sub[i], g, 0);
+  a->geom[i] = g;
+  a->nverts[i] = sh->mesh.n_verts;
+  rtcCommitScene(a->sub[i]);
+  rtcCommitGeometry(a->inst[i]);
+  a->top_dirty = true;
+  a->counters.rebuilds++;
+  return check_embree(a, err, sh->base.id, "rebuilding the shape's BVH failed");
+}
+
+rsw_status accel_update_vertices(accel *a, const shape *sh, rsw_err *err) {
+  unsigned i = sh->index;
+  if (sh->geom != GEOM_MESH) return RSW_OK;
+  /* A different vertex count is a topology change: rebuild. */
+  size_t bytes = 3 * (size_t)sh->mesh.n_verts * sizeof(float);
+  float *v = rtcGetGeometryBufferData(a->geom[i], RTC_BUFFER_TYPE_VERTEX, 0);
+  if (!v || a->nverts[i] != sh->mesh.n_verts) return accel_rebuild_shape(a, sh, err);
+  t_embree_error[0] = '\0';
+  memcpy(v, sh->mesh.pos, bytes);
+  rtcUpdateGeometryBuffer(a->geom[i], RTC_BUFFER_TYPE_VERTEX, 0);
+  /* Refit the shape's own BVH: its topology is unchanged. */
+  rtcSetGeometryBuildQuality(a->geom[i], RTC_BUILD_QUALITY_REFIT);
+  rtcCommitGeometry(a->geom[i]);
+  rtcCommitScene(a->sub[i]);
+  rtcCommitGeometry(a->inst[i]);
+  a->top_dirty = true;
+  a->counters.refits++;
+  return check_embree(a, err, sh->base.id, "refitting the shape's BVH failed");
+}
+
+rsw_status accel_commit(accel *a, rsw_err *err) {
+  if (!a->top_dirty) return RSW_OK;
+  t_embree_error[0] = '\0';
+  rtcCommitScene(a->top);
+  a->top_dirty = false;
+  a->counters.top_commits++;
+  return check_embree(a, err, "", "committing the top-level scene failed");
+}
+
+void accel_get_counters(const accel *a, accel_counters *out) {
+  if (a) *out = a->counters;
+  else memset(out, 0, sizeof *out);
+}
 
 /* ---- queries ------------------------------------------------------------------------------- */
 

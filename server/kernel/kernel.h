@@ -297,6 +297,8 @@ typedef struct shape {
   xform to_world;   /* object -> world; the Embree instance transform */
   bool flip_normals;
   bool face_normals; /* ignore vertex normals */
+  bool mesh_params;  /* exposes its buffers (cube, obj, ply; not rectangle) */
+  double silhouette_sampling_weight; /* Mitsuba's; no effect here */
   bsdf *bsdf;
   emitter *emitter; /* area light, or NULL */
   mesh mesh;        /* GEOM_MESH */

@@ -42,6 +42,9 @@ void conductor_ior_eval(const conductor_ior *c, const surface_interaction *si,
  * material other than "none" together with eta is an error; with a
  * material, eta/k are not read, so a stray k is an unused property). */
 rsw_status conductor_ior_load(struct loader *ld, struct node *n, conductor_ior *out);
+/* Reports eta/k (when not a preset) to a parameter traversal. */
+struct param_visitor;
+void conductor_ior_traverse(conductor_ior *c, struct param_visitor *v);
 /* Sets the preset's cached values for rc (no-op without a preset). */
 rsw_status conductor_ior_prepare(conductor_ior *c, const render_ctx *rc,
                                  rsw_err *err, const char *where);

@@ -14,6 +14,7 @@
 #include <string.h>
 
 #include "../scene/loader.h"
+#include "../scene/params.h"
 #include "bsdfs_internal.h"
 #include "fresnel.h"
 
@@ -123,6 +124,20 @@ static rsw_status conductor_create(loader *ld, node *n, object **out) {
   return RSW_OK;
 }
 
+/* eta/k are reported only without a material preset (a preset has no
+ * texture to update); specular_reflectance always. */
+void conductor_ior_traverse(conductor_ior *c, param_visitor *v) {
+  if (c->material) return;
+  pv_object(v, "eta", &c->eta->base, 0.0, INFINITY);
+  pv_object(v, "k", &c->k->base, 0.0, INFINITY);
+}
+
+static void conductor_traverse(object *o, param_visitor *v) {
+  conductor_bsdf *c = (conductor_bsdf *)o;
+  conductor_ior_traverse(&c->ior, v);
+  if (c->specular_reflectance) pv_object(v, "specular_reflectance", &c->specular_reflectance->base, 0.0, INFINITY);
+}
+
 const plugin plugin_conductor = {
     .name = "conductor",
     .cls = CLS_BSDF,
@@ -130,6 +145,7 @@ const plugin plugin_conductor = {
     .destroy = conductor_destroy,
     .prepare = conductor_prepare,
     .ops = &conductor_ops,
+    .traverse = conductor_traverse,
 };
 
 bsdf *conductor_new(texture *eta, texture *k, const ior_conductor *material,

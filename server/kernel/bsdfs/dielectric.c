@@ -17,6 +17,7 @@
 #include <string.h>
 
 #include "../scene/loader.h"
+#include "../scene/params.h"
 #include "bsdfs_internal.h"
 #include "fresnel.h"
 
@@ -102,12 +103,22 @@ static rsw_status dielectric_create(loader *ld, node *n, object **out) {
   return RSW_OK;
 }
 
+static void dielectric_traverse(object *o, param_visitor *v) {
+  dielectric_bsdf *d = (dielectric_bsdf *)o;
+  /* eta = int_ior / ext_ior, as Mitsuba reports it. */
+  pv_float(v, "eta", &d->eta, UPDATE_SPECTRAL, 1e-6, INFINITY);
+  if (d->specular_reflectance) pv_object(v, "specular_reflectance", &d->specular_reflectance->base, 0.0, INFINITY);
+  if (d->specular_transmittance)
+    pv_object(v, "specular_transmittance", &d->specular_transmittance->base, 0.0, INFINITY);
+}
+
 const plugin plugin_dielectric = {
     .name = "dielectric",
     .cls = CLS_BSDF,
     .create = dielectric_create,
     .destroy = dielectric_destroy,
     .ops = &dielectric_ops,
+    .traverse = dielectric_traverse,
 };
 
 bsdf *dielectric_new(double int_ior, double ext_ior, texture *specular_reflectance,

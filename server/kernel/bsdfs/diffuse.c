@@ -9,6 +9,7 @@
 #include <stdlib.h>
 
 #include "../scene/loader.h"
+#include "../scene/params.h"
 #include "bsdfs_internal.h"
 
 static color diffuse_sample(const bsdf *b, const surface_interaction *si, double u1,
@@ -52,12 +53,17 @@ static rsw_status diffuse_create(loader *ld, node *n, object **out) {
   return RSW_OK;
 }
 
+static void diffuse_traverse(object *o, param_visitor *v) {
+  pv_object(v, "reflectance", &((diffuse_bsdf *)o)->reflectance->base, 0.0, INFINITY);
+}
+
 const plugin plugin_diffuse = {
     .name = "diffuse",
     .cls = CLS_BSDF,
     .create = diffuse_create,
     .destroy = diffuse_destroy,
     .ops = &diffuse_ops,
+    .traverse = diffuse_traverse,
 };
 
 bsdf *diffuse_new(texture *reflectance) {

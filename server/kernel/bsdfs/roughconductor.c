@@ -22,6 +22,7 @@
 #include <ctype.h>
 
 #include "../scene/loader.h"
+#include "../scene/params.h"
 #include "bsdfs_internal.h"
 #include "fresnel.h"
 
@@ -166,6 +167,19 @@ static rsw_status rough_create(loader *ld, node *n, object **out) {
   return RSW_OK;
 }
 
+static void rough_traverse(object *o, param_visitor *v) {
+  roughconductor_bsdf *r = (roughconductor_bsdf *)o;
+  /* Mitsuba: `alpha` when isotropic, else `alpha_u` and `alpha_v`. */
+  if (r->alpha_u == r->alpha_v) {
+    pv_object(v, "alpha", &r->alpha_u->base, 1e-4, INFINITY);
+  } else {
+    pv_object(v, "alpha_u", &r->alpha_u->base, 1e-4, INFINITY);
+    pv_object(v, "alpha_v", &r->alpha_v->base, 1e-4, INFINITY);
+  }
+  conductor_ior_traverse(&r->ior, v);
+  if (r->specular_reflectance) pv_object(v, "specular_reflectance", &r->specular_reflectance->base, 0.0, INFINITY);
+}
+
 const plugin plugin_roughconductor = {
     .name = "roughconductor",
     .cls = CLS_BSDF,
@@ -173,6 +187,7 @@ const plugin plugin_roughconductor = {
     .destroy = rough_destroy,
     .prepare = rough_prepare,
     .ops = &rough_ops,
+    .traverse = rough_traverse,
 };
 
 bsdf *roughconductor_new(mf_type type, texture *alpha_u, texture *alpha_v,

@@ -12,6 +12,7 @@
 #include <stdlib.h>
 
 #include "../scene/loader.h"
+#include "../scene/params.h"
 #include "bsdfs_internal.h"
 
 #define TRANSMISSION_LOBES                                                     \
@@ -83,12 +84,20 @@ static rsw_status twosided_create(loader *ld, node *n, object **out) {
   return RSW_OK;
 }
 
+static void twosided_traverse(object *o, param_visitor *v) {
+  twosided_bsdf *t = (twosided_bsdf *)o;
+  /* Mitsuba: brdf_0, and brdf_1 only when it is another object. */
+  pv_object(v, "brdf_0", &t->brdf[0]->base, NAN, NAN);
+  if (t->brdf[1] != t->brdf[0]) pv_object(v, "brdf_1", &t->brdf[1]->base, NAN, NAN);
+}
+
 const plugin plugin_twosided = {
     .name = "twosided",
     .cls = CLS_BSDF,
     .create = twosided_create,
     .destroy = twosided_destroy,
     .ops = &twosided_ops,
+    .traverse = twosided_traverse,
 };
 
 bsdf *twosided_new(bsdf *front, bsdf *back) {

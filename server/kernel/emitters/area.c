@@ -8,6 +8,7 @@
 #include <stdlib.h>
 
 #include "../scene/loader.h"
+#include "../scene/params.h"
 #include "../shapes/shape.h"
 #include "../textures/texture.h"
 
@@ -68,4 +69,11 @@ static rsw_status area_create(loader *ld, node *n, object **out) {
   return RSW_OK;
 }
 
-const plugin plugin_area = {.name = "area", .cls = CLS_EMITTER, .create = area_create, .destroy = area_destroy, .ops = &area_ops};
+static void area_traverse(object *o, param_visitor *v) {
+  area_light *a = (area_light *)o;
+  pv_object(v, "radiance", &a->radiance->base, 0.0, INFINITY);
+  pv_float(v, "sampling_weight", &a->base.sampling_weight, UPDATE_SPECTRAL, 0.0, INFINITY);
+}
+
+const plugin plugin_area = {.name = "area", .cls = CLS_EMITTER, .create = area_create, .destroy = area_destroy,
+                            .ops = &area_ops, .traverse = area_traverse};

@@ -5,6 +5,7 @@
 #include <stdlib.h>
 
 #include "../scene/loader.h"
+#include "../scene/params.h"
 #include "../textures/texture.h"
 
 typedef struct constant_env {
@@ -56,5 +57,11 @@ static rsw_status const_create(loader *ld, node *n, object **out) {
   return RSW_OK;
 }
 
-const plugin plugin_constant = {
-    .name = "constant", .cls = CLS_EMITTER, .create = const_create, .destroy = const_destroy, .ops = &constant_ops};
+static void const_traverse(object *o, param_visitor *v) {
+  constant_env *c = (constant_env *)o;
+  pv_object(v, "radiance", &c->radiance->base, 0.0, INFINITY);
+  pv_float(v, "sampling_weight", &c->base.sampling_weight, UPDATE_SPECTRAL, 0.0, INFINITY);
+}
+
+const plugin plugin_constant = {.name = "constant", .cls = CLS_EMITTER, .create = const_create,
+                                .destroy = const_destroy, .ops = &constant_ops, .traverse = const_traverse};

@@ -10,12 +10,14 @@
 #include <stdlib.h>
 
 #include "../scene/loader.h"
+#include "../scene/params.h"
 #include "../textures/texture.h"
 
 typedef struct directional {
   emitter base;
   texture *irradiance;
-  vec3 d; /* unit propagation direction */
+  xform to_world; /* local +z -> propagation direction */
+  vec3 d;         /* unit propagation direction, always to_world (0,0,1) */
   vec3 center;
   double radius;
 } directional;
@@ -54,6 +56,37 @@ static const emitter_ops directional_ops = {
 
 static void dir_destroy(object *o) { free(o); }
 
+/* Mitsuba: to_world = look_at(0, normalize(direction), up) with up the
+ * first vector of coordinate_system(direction). */
+static bool look_at_direction(vec3 d, xform *out) {
+  vec3 dn = v3_norm(d), up, unused;
+  coordinate_system(dn, &up, &unused);
+  return xf_look_at(v3(0, 0, 0), dn, up, out);
+}
+
+/* d always comes from to_world, whichever way it was set, so that an
+ * update of `direction` or `to_world` equals a reload with it. */
+static void derive_direction(directional *dl) { dl->d = v3_norm(xf_vector(&dl->to_world, v3(0, 0, 1))); }
+
+static vec3 dir_get_direction(const object *o) { return ((const directional *)o)->d; }
+
+static void dir_set_direction(object *o, vec3 d) {
+  directional *dl = (directional *)o;
+  if (look_at_direction(d, &dl->to_world)) derive_direction(dl);
+}
+
+static void dir_traverse(object *o, param_visitor *v) {
+  directional *dl = (directional *)o;
+  pv_object(v, "irradiance", &dl->irradiance->base, 0.0, INFINITY);
+  /* Not geometric: the emitter is not in the acceleration structure. */
+  pv_transform(v, "to_world", &dl->to_world, UPDATE_SPECTRAL, NULL);
+  /* Convenience key: the propagation direction, rewriting to_world. */
+  pv_vector(v, "direction", dir_get_direction, dir_set_direction, UPDATE_SPECTRAL);
+  pv_float(v, "sampling_weight", &dl->base.sampling_weight, UPDATE_SPECTRAL, 0.0, INFINITY);
+}
+
+static void dir_parameters_changed(object *o) { derive_direction((directional *)o); }
+
 static rsw_status dir_create(loader *ld, node *n, object **out) {
   directional *dl = calloc(1, sizeof *dl);
   if (!dl) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
@@ -78,7 +111,13 @@ static rsw_status dir_create(loader *ld, node *n, object **out) {
     free(dl);
     return st;
   }
-  dl->d = has_xf ? v3_norm(xf_vector(&xf, v3(0, 0, 1))) : v3_norm(d);
+  if (has_xf) {
+    dl->to_world = xf;
+  } else if (!look_at_direction(d, &dl->to_world)) {
+    free(dl);
+    return ld_fail(ld, n, "direction", RSW_ERR_INVALID, "cannot build a frame from 'direction'");
+  }
+  derive_direction(dl);
   if (!(v3_len(dl->d) > 0)) {
     free(dl);
     return ld_fail(ld, n, "to_world", RSW_ERR_INVALID, "to_world maps +z to a zero vector");
@@ -87,5 +126,6 @@ static rsw_status dir_create(loader *ld, node *n, object **out) {
   return RSW_OK;
 }
 
-const plugin plugin_directional = {
-    .name = "directional", .cls = CLS_EMITTER, .create = dir_create, .destroy = dir_destroy, .ops = &directional_ops};
+const plugin plugin_directional = {.name = "directional", .cls = CLS_EMITTER, .create = dir_create,
+                                   .destroy = dir_destroy, .ops = &directional_ops, .traverse = dir_traverse,
+                                   .parameters_changed = dir_parameters_changed};

@@ -15,9 +15,11 @@
 #include <sys/stat.h>
 
 #include "../accel.h"
+#include "../core/strdist.h"
 #include "../shapes/shape.h"
 #include "../textures/texture.h"
 #include "loader.h"
+#include "params.h"
 #include "scene.h"
 
 #define TWO_POW_53 9007199254740992.0
@@ -101,29 +103,13 @@ static node *resolve_ref(loader *ld, const char *id) {
   return NULL;
 }
 
-static size_t edit_distance(const char *a, const char *b) {
-  size_t la = strlen(a), lb = strlen(b);
-  if (la > 64 || lb > 64) return 99;
-  size_t d[65][65];
-  for (size_t i = 0; i <= la; i++) d[i][0] = i;
-  for (size_t j = 0; j <= lb; j++) d[0][j] = j;
-  for (size_t i = 1; i <= la; i++)
-    for (size_t j = 1; j <= lb; j++) {
-      size_t c = d[i - 1][j - 1] + (a[i - 1] != b[j - 1]);
-      if (d[i - 1][j] + 1 < c) c = d[i - 1][j] + 1;
-      if (d[i][j - 1] + 1 < c) c = d[i][j - 1] + 1;
-      d[i][j] = c;
-    }
-  return d[la][lb];
-}
-
 static rsw_status unknown_plugin(loader *ld, node *n) {
   const char *best = NULL;
   size_t best_d = 3;
   for (size_t i = 0; rsw_plugins[i] || i == 0; i++) {
     const plugin *p = rsw_plugins[i];
     if (!p) continue;
-    size_t d = edit_distance(n->type, p->name);
+    size_t d = rsw_edit_distance(n->type, p->name);
     if (d < best_d) {
       best_d = d;
       best = p->name;
@@ -710,6 +696,35 @@ static void shape_bbox(const shape *sh, vec3 *lo, vec3 *hi) {
   }
 }
 
+/* Bounds and everything derived from them: the scene's bounding sphere,
+ * emitters' and sensors' set_scene. Run at load and after every geometric
+ * update, so that an update equals a reload (Mitsuba does not refresh
+ * sensors after an update; we do, deliberately). */
+rsw_status scene_refresh_bounds(scene *s, rsw_err *err) {
+  vec3 lo = v3(INFINITY, INFINITY, INFINITY), hi = v3(-INFINITY, -INFINITY, -INFINITY);
+  for (size_t i = 0; i < s->n_shapes; i++) shape_bbox(s->shapes[i], &lo, &hi);
+  if (s->n_shapes == 0) lo = hi = v3(0, 0, 0);
+  s->bbox_min = lo;
+  s->bbox_max = hi;
+  s->bsphere_center = v3_scale(v3_add(lo, hi), 0.5);
+  double r = v3_len(v3_sub(hi, s->bsphere_center));
+  /* Mitsuba's sensors and emitters inflate the bounding sphere:
+   * R = max(RayEpsilon, R (1 + RayEpsilon)). */
+  s->bsphere_radius = fmax(RSW_RAY_EPSILON, r * (1.0 + RSW_RAY_EPSILON));
+  for (size_t i = 0; i < s->n_emitters; i++) {
+    emitter *e = s->emitters[i];
+    if (e->ops->set_scene) e->ops->set_scene(e, s);
+  }
+  for (size_t i = 0; i < s->n_sensors; i++) {
+    sensor *se = s->sensors[i];
+    if (se->ops->set_scene) {
+      rsw_status st = se->ops->set_scene(se, s, err);
+      if (st) return st;
+    }
+  }
+  return RSW_OK;
+}
+
 static rsw_status scene_finalize(loader *ld, scene *s) {
   rsw_status st;
   if (!s->integrator) {
@@ -721,19 +736,7 @@ static rsw_status scene_finalize(loader *ld, scene *s) {
     if (st) return st;
     s->integrator = (integrator *)o;
   }
-  vec3 lo = v3(INFINITY, INFINITY, INFINITY), hi = v3(-INFINITY, -INFINITY, -INFINITY);
-  for (size_t i = 0; i < s->n_shapes; i++) {
-    s->shapes[i]->index = (unsigned)i;
-    shape_bbox(s->shapes[i], &lo, &hi);
-  }
-  if (s->n_shapes == 0) lo = hi = v3(0, 0, 0);
-  s->bbox_min = lo;
-  s->bbox_max = hi;
-  s->bsphere_center = v3_scale(v3_add(lo, hi), 0.5);
-  double r = v3_len(v3_sub(hi, s->bsphere_center));
-  /* Mitsuba's sensors and emitters inflate the bounding sphere:
-   * R = max(RayEpsilon, R (1 + RayEpsilon)). */
-  s->bsphere_radius = fmax(RSW_RAY_EPSILON, r * (1.0 + RSW_RAY_EPSILON));
+  for (size_t i = 0; i < s->n_shapes; i++) s->shapes[i]->index = (unsigned)i;
   st = accel_build(s, ld->err);
   if (st) return st;
   s->emitter_weight_sum = 0;
@@ -741,20 +744,13 @@ static rsw_status scene_finalize(loader *ld, scene *s) {
     s->emitter_cdf = malloc(s->n_emitters * sizeof(double));
     if (!s->emitter_cdf) return rsw_fail(ld->err, RSW_ERR_NOMEM, "", "out of memory");
     for (size_t i = 0; i < s->n_emitters; i++) {
-      emitter *e = s->emitters[i];
-      if (e->ops->set_scene) e->ops->set_scene(e, s);
-      s->emitter_weight_sum += e->sampling_weight;
+      s->emitter_weight_sum += s->emitters[i]->sampling_weight;
       s->emitter_cdf[i] = s->emitter_weight_sum;
     }
   }
-  for (size_t i = 0; i < s->n_sensors; i++) {
-    sensor *se = s->sensors[i];
-    if (se->ops->set_scene) {
-      st = se->ops->set_scene(se, s, ld->err);
-      if (st) return st;
-    }
-  }
-  return RSW_OK;
+  st = scene_refresh_bounds(s, ld->err);
+  if (st) return st;
+  return params_build(s, ld->err);
 }
 
 static rsw_variant parse_variant(const char *name, bool *ok) {
@@ -940,6 +936,7 @@ sensor *scene_find_sensor(const scene *s, const char *id, size_t *index_out) {
 void scene_free(scene *s) {
   if (!s) return;
   accel_free(s->accel);
+  params_free(s->params);
   for (size_t i = s->n_objects; i-- > 0;) {
     object *o = s->objects[i];
     if (o == &s->base) continue;

@@ -27,6 +27,10 @@ rsw_status scene_load_file(const char *path, const scene_load_opts *opts, scene 
 rsw_status scene_load_memory(const char *text, size_t len, const char *name, bool is_xml,
                              const scene_load_opts *opts, scene **out, rsw_err *err);
 
+/* Recompute the scene's bounds and what emitters and sensors derive from
+ * them (after geometry changed). */
+rsw_status scene_refresh_bounds(scene *s, rsw_err *err);
+
 /* Evaluate every object's wavelength-dependent state for a render. */
 rsw_status scene_prepare(scene *s, const render_ctx *rc, rsw_err *err);
 

@@ -11,6 +11,7 @@
 #include <math.h>
 #include <stdlib.h>
 
+#include "../scene/params.h"
 #include "sensor_common.h"
 
 typedef struct distant {
@@ -57,7 +58,48 @@ static void distant_destroy(object *o) { free(o); }
 
 static rsw_status distant_create(loader *ld, node *n, object **out);
 
+/* Mitsuba's rule for `direction`: look_at(0, normalize(direction), up)
+ * with up the second vector of coordinate_system(direction). */
+static bool distant_frame(vec3 dir, xform *out) {
+  vec3 dn = v3_norm(dir), s_unused, up;
+  coordinate_system(dn, &s_unused, &up);
+  return xf_look_at(v3(0, 0, 0), dn, up, out);
+}
+
+static vec3 distant_get_direction(const object *o) { return ((const distant *)o)->d; }
+
+static void distant_set_direction(object *o, vec3 dir) {
+  distant *ds = (distant *)o;
+  xform t;
+  if (distant_frame(dir, &t)) ds->base.to_world = t;
+}
+
+static void distant_parameters_changed(object *o) {
+  distant *ds = (distant *)o;
+  ds->d = v3_norm(xf_vector(&ds->base.to_world, v3(0, 0, 1)));
+}
+
+static rsw_status distant_check_xf(const object *o, const xform *t, const char *key, rsw_err *err) {
+  (void)o;
+  vec3 d = xf_vector(t, v3(0, 0, 1));
+  if (!(v3_len(d) > 0.0) || !v3_finite(d))
+    return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': to_world maps +z to a zero vector", key);
+  return RSW_OK;
+}
+
+/* Mitsuba does not expose a distant sensor's transform; we do, with the
+ * `direction` convenience key (the direction the sensor looks, into the
+ * scene), since viewing angles are what sweeps vary most. Neither is
+ * geometric. */
+static void distant_traverse(object *o, param_visitor *v) {
+  distant *ds = (distant *)o;
+  pv_transform(v, "to_world", &ds->base.to_world, UPDATE_SPECTRAL, distant_check_xf);
+  pv_vector(v, "direction", distant_get_direction, distant_set_direction, UPDATE_SPECTRAL);
+}
+
 const plugin plugin_distant = {
+    .traverse = distant_traverse,
+    .parameters_changed = distant_parameters_changed,
     .name = "distant",
     .cls = CLS_SENSOR,
     .create = distant_create,
@@ -84,9 +126,7 @@ static rsw_status distant_read(loader *ld, node *n, distant *ds) {
                      "distant: 'direction' must not be the zero vector");
     /* Mitsuba: to_world = look_at(0, normalize(direction), up) with up the
      * second vector of coordinate_system(direction). */
-    vec3 dn = v3_norm(dir), s_unused, up;
-    coordinate_system(dn, &s_unused, &up);
-    if (!xf_look_at(v3(0, 0, 0), dn, up, &ds->base.to_world))
+    if (!distant_frame(dir, &ds->base.to_world))
       return ld_fail(ld, n, "direction", RSW_ERR_INVALID,
                      "distant: cannot build a frame from 'direction'");
   } else {

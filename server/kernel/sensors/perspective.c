@@ -16,6 +16,7 @@
 #include <string.h>
 #include <strings.h>
 
+#include "../scene/params.h"
 #include "sensor_common.h"
 
 typedef struct perspective {
@@ -59,7 +60,21 @@ static void perspective_destroy(object *o) { free(o); }
 
 static rsw_status perspective_create(loader *ld, node *n, object **out);
 
+/* The camera transform must stay a rigid motion (as checked at load). */
+static rsw_status perspective_check_xf(const object *o, const xform *t, const char *key, rsw_err *err) {
+  (void)o;
+  double scale;
+  if (!xf_is_similarity(t, &scale) || fabs(scale - 1.0) > 1e-4)
+    return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': a perspective camera's to_world must be a rotation and translation", key);
+  return RSW_OK;
+}
+
+static void perspective_traverse(object *o, param_visitor *v) {
+  pv_transform(v, "to_world", &((sensor *)o)->to_world, UPDATE_SPECTRAL, perspective_check_xf);
+}
+
 const plugin plugin_perspective = {
+    .traverse = perspective_traverse,
     .name = "perspective",
     .cls = CLS_SENSOR,
     .create = perspective_create,

@@ -141,7 +141,11 @@ static rsw_status disk_create(loader *ld, node *n, object **out) {
   return finish(ld, n, s, out);
 }
 
-const plugin plugin_rectangle = {.name = "rectangle", .cls = CLS_SHAPE, .create = rectangle_create, .destroy = shape_destroy};
-const plugin plugin_cube = {.name = "cube", .cls = CLS_SHAPE, .create = cube_create, .destroy = shape_destroy};
-const plugin plugin_sphere = {.name = "sphere", .cls = CLS_SHAPE, .create = sphere_create, .destroy = shape_destroy};
-const plugin plugin_disk = {.name = "disk", .cls = CLS_SHAPE, .create = disk_create, .destroy = shape_destroy};
+const plugin plugin_rectangle = {.name = "rectangle", .cls = CLS_SHAPE, .create = rectangle_create, .destroy = shape_destroy,
+                                   .traverse = shape_traverse, .parameters_changed = shape_parameters_changed};
+const plugin plugin_cube = {.name = "cube", .cls = CLS_SHAPE, .create = cube_create, .destroy = shape_destroy,
+                                   .traverse = shape_traverse, .parameters_changed = shape_parameters_changed};
+const plugin plugin_sphere = {.name = "sphere", .cls = CLS_SHAPE, .create = sphere_create, .destroy = shape_destroy,
+                                   .traverse = shape_traverse, .parameters_changed = shape_parameters_changed};
+const plugin plugin_disk = {.name = "disk", .cls = CLS_SHAPE, .create = disk_create, .destroy = shape_destroy,
+                                   .traverse = shape_traverse, .parameters_changed = shape_parameters_changed};

@@ -6,7 +6,10 @@
 
 #include "../accel.h"
 #include "../scene/loader.h"
+#include "../scene/params.h"
 #include "shape_common.h"
+
+static inline vec3 mesh_vertex(const mesh *m, uint32_t i);
 
 /* ---- common properties ------------------------------------------------------ */
 
@@ -30,8 +33,57 @@ rsw_status shape_read_common(loader *ld, node *n, shape *s, bool mesh_like) {
     if (st) return st;
   }
   s->bsdf = (bsdf *)o;
-  (void)mesh_like;
+  s->mesh_params = mesh_like;
+  return ld_float_range(ld, n, "silhouette_sampling_weight", 1.0, 0.0, INFINITY, &s->silhouette_sampling_weight);
+}
+
+/* What a to_world must satisfy for this shape (as checked at load). */
+static rsw_status shape_check_transform(const object *o, const xform *t, const char *key, rsw_err *err) {
+  const shape *s = (const shape *)o;
+  shape tmp = *s;
+  tmp.to_world = *t;
+  tmp.tri_cdf = NULL;
+  tmp.emitter = NULL;
+  /* shape_finalize on a copy without its cdf computes only the area. */
+  if (s->geom == GEOM_MESH) {
+    double area = 0;
+    const mesh *m = &s->mesh;
+    for (uint32_t f = 0; f < m->n_faces; f++) {
+      const uint32_t *ix = &m->faces[3 * (size_t)f];
+      vec3 p0 = xf_point(t, mesh_vertex(m, ix[0])), p1 = xf_point(t, mesh_vertex(m, ix[1])),
+           p2 = xf_point(t, mesh_vertex(m, ix[2]));
+      area += 0.5 * v3_len(v3_cross(v3_sub(p1, p0), v3_sub(p2, p0)));
+    }
+    if (!(area > 0) || !isfinite(area))
+      return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': the shape would have zero or non-finite area", key);
+    return RSW_OK;
+  }
+  rsw_err local = {0};
+  if (shape_finalize(&tmp, &local, key)) return rsw_fail(err, local.code, key, "'%s': %s", key, local.msg);
   return RSW_OK;
+}
+
+void shape_traverse(object *o, param_visitor *v) {
+  shape *s = (shape *)o;
+  /* Every shape, meshes included, exposes to_world: it is the Embree
+   * instance transform. Mitsuba bakes it into mesh vertices and does not
+   * expose it on meshes; this is a deliberate difference, and
+   * vertex_positions are in object space (before to_world). */
+  pv_transform(v, "to_world", &s->to_world, UPDATE_GEOMETRIC, shape_check_transform);
+  pv_float(v, "silhouette_sampling_weight", &s->silhouette_sampling_weight, UPDATE_NONE, 0, INFINITY);
+  if (s->mesh_params) {
+    pv_mesh_buffer(v, "faces", s);
+    pv_mesh_buffer(v, "vertex_positions", s);
+    if (s->mesh.nrm) pv_mesh_buffer(v, "vertex_normals", s);
+    if (s->mesh.uv) pv_mesh_buffer(v, "vertex_texcoords", s);
+  }
+  pv_object(v, "bsdf", &s->bsdf->base, NAN, NAN);
+  if (s->emitter) pv_object(v, "emitter", &s->emitter->base, NAN, NAN);
+}
+
+void shape_parameters_changed(object *o) {
+  /* Validated before the update was applied: this cannot fail. */
+  shape_finalize((shape *)o, NULL, "");
 }
 
 void shape_release(shape *s) {

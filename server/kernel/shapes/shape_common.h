@@ -10,5 +10,8 @@
 rsw_status shape_read_common(loader *ld, node *n, shape *s, bool mesh_like);
 /* plugin.destroy for every shape. */
 void shape_destroy(object *o);
+/* plugin.traverse / parameters_changed for every shape. */
+void shape_traverse(object *o, struct param_visitor *v);
+void shape_parameters_changed(object *o);
 
 #endif

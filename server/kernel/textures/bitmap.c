@@ -10,6 +10,7 @@
 
 #include "../image_exr.h"
 #include "../scene/loader.h"
+#include "../scene/params.h"
 
 typedef enum wrap_mode { WRAP_REPEAT, WRAP_MIRROR, WRAP_CLAMP } wrap_mode;
 
@@ -146,5 +147,9 @@ static rsw_status bm_create(loader *ld, node *n, object **out) {
   return RSW_OK;
 }
 
+static void bm_traverse(object *o, param_visitor *v) {
+  pv_transform(v, "to_uv", &((bitmap_tex *)o)->to_uv, UPDATE_SPECTRAL, NULL);
+}
+
 const plugin plugin_bitmap = {.name = "bitmap", .cls = CLS_TEXTURE, .create = bm_create, .destroy = bm_destroy,
-                              .prepare = bm_prepare, .ops = &bitmap_ops};
+                              .prepare = bm_prepare, .ops = &bitmap_ops, .traverse = bm_traverse};

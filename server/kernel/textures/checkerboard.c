@@ -5,6 +5,7 @@
 #include <stdlib.h>
 
 #include "../scene/loader.h"
+#include "../scene/params.h"
 
 typedef struct checkerboard {
   texture base;
@@ -45,5 +46,12 @@ static rsw_status cb_create(loader *ld, node *n, object **out) {
   return RSW_OK;
 }
 
-const plugin plugin_checkerboard = {
-    .name = "checkerboard", .cls = CLS_TEXTURE, .create = cb_create, .destroy = cb_destroy, .ops = &checkerboard_ops};
+static void cb_traverse(object *o, param_visitor *v) {
+  checkerboard *c = (checkerboard *)o;
+  pv_object(v, "color0", &c->c0->base, NAN, NAN);
+  pv_object(v, "color1", &c->c1->base, NAN, NAN);
+  pv_transform(v, "to_uv", &c->to_uv, UPDATE_SPECTRAL, NULL);
+}
+
+const plugin plugin_checkerboard = {.name = "checkerboard", .cls = CLS_TEXTURE, .create = cb_create,
+                                    .destroy = cb_destroy, .ops = &checkerboard_ops, .traverse = cb_traverse};

@@ -15,6 +15,12 @@ texture *uniform_texture_const(double v, const char *id);
 /* Record where in the document the value came from, for error messages
  * at render time (copied). */
 bool uniform_texture_set_where(texture *t, const char *where);
+/* The spectrum a uniform texture holds (NULL for other textures). */
+const spectrum *uniform_texture_spectrum(const texture *t);
+/* Replace it (copied). The value used for rendering is recomputed by the
+ * next prepare(); uniform and rgb values take effect at once as well.
+ * Returns false when out of memory (then nothing changed). */
+bool uniform_texture_set_spectrum(texture *t, const spectrum *s);
 /* The uniform texture's current value (for parameter tables/tests). */
 bool uniform_texture_value(const texture *t, color *out);
 

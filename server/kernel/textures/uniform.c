@@ -6,6 +6,7 @@
 #include <string.h>
 
 #include "../scene/loader.h"
+#include "../scene/params.h"
 #include "texture.h"
 
 typedef struct uniform_tex {
@@ -36,7 +37,11 @@ static rsw_status uniform_prepare(object *o, const render_ctx *rc, rsw_err *err)
   return spectrum_eval(&u->spec, rc, &u->value, err, u->where ? u->where : o->id);
 }
 
+static bool spectrum_copy(spectrum *dst, const spectrum *src);
 static rsw_status uniform_create(loader *ld, node *n, object **out);
+
+/* Mitsuba's uniform spectrum reports its value as `value`. */
+static void uniform_traverse(object *o, param_visitor *v) { pv_spectrum(v, "value", (texture *)o); }
 
 const plugin plugin_uniform = {
     .name = "uniform",
@@ -45,6 +50,7 @@ const plugin plugin_uniform = {
     .destroy = uniform_destroy,
     .prepare = uniform_prepare,
     .ops = &uniform_ops,
+    .traverse = uniform_traverse,
 };
 
 static bool spectrum_copy(spectrum *dst, const spectrum *src) {
@@ -81,6 +87,23 @@ texture *uniform_texture_new(const spectrum *s, const char *id) {
 texture *uniform_texture_const(double v, const char *id) {
   spectrum s = {.kind = SPEC_UNIFORM, .value = v};
   return uniform_texture_new(&s, id);
+}
+
+const spectrum *uniform_texture_spectrum(const texture *t) {
+  if (t->base.plugin != &plugin_uniform) return NULL;
+  return &((const uniform_tex *)t)->spec;
+}
+
+bool uniform_texture_set_spectrum(texture *t, const spectrum *s) {
+  if (t->base.plugin != &plugin_uniform) return false;
+  uniform_tex *u = (uniform_tex *)t;
+  spectrum copy;
+  if (!spectrum_copy(&copy, s)) return false;
+  spectrum_free(&u->spec);
+  u->spec = copy;
+  if (s->kind == SPEC_UNIFORM) u->value = col1(s->value);
+  if (s->kind == SPEC_RGB) u->value = col(s->rgb[0], s->rgb[1], s->rgb[2]);
+  return true;
 }
 
 bool uniform_texture_set_where(texture *t, const char *where) {

@@ -1,0 +1,1149 @@
+/* The scene parameter table: traversal, lookup, updates (see params.h). */
+#include "params.h"
+
+#include <cjson/cJSON.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "../accel.h"
+#include "../core/strdist.h"
+#include "../shapes/mesh_io.h"
+#include "../shapes/shape.h"
+#include "../textures/texture.h"
+#include "scene.h"
+
+/* ---- entries and the table ------------------------------------------------------ */
+
+typedef enum entry_kind { EK_FLOAT, EK_BOOL, EK_TRANSFORM, EK_VECTOR, EK_SPECTRUM, EK_MESHBUF } entry_kind;
+typedef enum mesh_buf { MB_POSITIONS, MB_FACES, MB_NORMALS, MB_TEXCOORDS } mesh_buf;
+
+typedef struct entry {
+  char *key;
+  entry_kind kind;
+  update_class cls;
+  object *owner;
+  double lo, hi;
+  double *fptr;
+  bool bval;
+  xform *xptr;
+  xform_check_fn check;
+  vec_get_fn vget;
+  vec_set_fn vset;
+  texture *tex;
+  shape *sh;
+  mesh_buf buf;
+  char **aliases;
+  size_t n_aliases;
+} entry;
+
+typedef struct objrec {
+  object *o;
+  char *path;
+} objrec;
+
+struct param_table {
+  entry *e;
+  size_t n, cap;
+  objrec *objs; /* first path of every object reached */
+  size_t n_objs, cap_objs;
+  objrec *alias; /* further paths of shared objects */
+  size_t n_alias, cap_alias;
+  /* Open-addressing hash: key or alias -> entry index + 1 (0 = empty). */
+  const char **hkey;
+  size_t *hval;
+  size_t hcap;
+};
+
+const char *param_type_name(param_type t) {
+  static const char *const names[] = {"float", "spectrum", "rgb", "vector", "transform", "buffer", "bool"};
+  return (unsigned)t < sizeof names / sizeof names[0] ? names[t] : "?";
+}
+
+const char *update_class_name(update_class c) {
+  return c == UPDATE_GEOMETRIC ? "geometric" : c == UPDATE_SPECTRAL ? "spectral" : "none";
+}
+
+bool update_class_parse(const char *s, update_class *out) {
+  if (strcmp(s, "none") == 0) *out = UPDATE_NONE;
+  else if (strcmp(s, "spectral") == 0) *out = UPDATE_SPECTRAL;
+  else if (strcmp(s, "geometric") == 0) *out = UPDATE_GEOMETRIC;
+  else return false;
+  return true;
+}
+
+static bool grow(void **arr, size_t *cap, size_t n, size_t elem) {
+  if (n < *cap) return true;
+  size_t c = *cap ? 2 * *cap : 32;
+  void *p = realloc(*arr, c * elem);
+  if (!p) return false;
+  *arr = p;
+  *cap = c;
+  return true;
+}
+
+static uint64_t hash_str(const char *s) {
+  uint64_t h = 1469598103934665603ULL;
+  for (; *s; s++) h = (h ^ (unsigned char)*s) * 1099511628211ULL;
+  return h;
+}
+
+static size_t hash_find(const param_table *t, const char *key) {
+  if (!t->hcap) return 0;
+  size_t m = t->hcap - 1;
+  for (size_t i = hash_str(key) & m;; i = (i + 1) & m) {
+    if (!t->hval[i]) return 0;
+    if (strcmp(t->hkey[i], key) == 0) return t->hval[i];
+  }
+}
+
+static bool hash_put(param_table *t, const char *key, size_t idx) {
+  size_t m = t->hcap - 1;
+  for (size_t i = hash_str(key) & m;; i = (i + 1) & m) {
+    if (!t->hval[i]) {
+      t->hkey[i] = key;
+      t->hval[i] = idx + 1;
+      return true;
+    }
+    if (strcmp(t->hkey[i], key) == 0) return true; /* first wins */
+  }
+}
+
+void params_free(param_table *t) {
+  if (!t) return;
+  for (size_t i = 0; i < t->n; i++) {
+    free(t->e[i].key);
+    for (size_t k = 0; k < t->e[i].n_aliases; k++) free(t->e[i].aliases[k]);
+    free(t->e[i].aliases);
+  }
+  for (size_t i = 0; i < t->n_objs; i++) free(t->objs[i].path);
+  for (size_t i = 0; i < t->n_alias; i++) free(t->alias[i].path);
+  free(t->e);
+  free(t->objs);
+  free(t->alias);
+  free(t->hkey);
+  free(t->hval);
+  free(t);
+}
+
+/* ---- traversal -------------------------------------------------------------------- */
+
+struct param_visitor {
+  param_table *t;
+  rsw_status st;
+  rsw_err *err;
+  object *cur;
+  const char *prefix; /* path of cur ("" at the root) */
+  double lo, hi;      /* constraint for a uniform texture reached here */
+};
+
+static char *join(const char *prefix, const char *name) {
+  size_t lp = strlen(prefix), ln = strlen(name);
+  char *k = malloc(lp + ln + 2);
+  if (!k) return NULL;
+  if (lp) {
+    memcpy(k, prefix, lp);
+    k[lp] = '.';
+    memcpy(k + lp + 1, name, ln + 1);
+  } else {
+    memcpy(k, name, ln + 1);
+  }
+  return k;
+}
+
+static entry *add_entry(param_visitor *v, const char *name, entry_kind kind, update_class cls) {
+  if (v->st) return NULL;
+  param_table *t = v->t;
+  if (!grow((void **)&t->e, &t->cap, t->n, sizeof *t->e)) {
+    v->st = rsw_fail(v->err, RSW_ERR_NOMEM, "params", "out of memory");
+    return NULL;
+  }
+  entry *e = &t->e[t->n];
+  memset(e, 0, sizeof *e);
+  e->key = join(v->prefix, name);
+  if (!e->key) {
+    v->st = rsw_fail(v->err, RSW_ERR_NOMEM, "params", "out of memory");
+    return NULL;
+  }
+  e->kind = kind;
+  e->cls = cls;
+  e->owner = v->cur;
+  e->lo = -INFINITY;
+  e->hi = INFINITY;
+  t->n++;
+  return e;
+}
+
+void pv_float(param_visitor *v, const char *name, double *ptr, update_class cls, double lo, double hi) {
+  entry *e = add_entry(v, name, EK_FLOAT, cls);
+  if (!e) return;
+  e->fptr = ptr;
+  e->lo = lo;
+  e->hi = hi;
+}
+
+void pv_bool_ro(param_visitor *v, const char *name, bool value) {
+  entry *e = add_entry(v, name, EK_BOOL, UPDATE_NONE);
+  if (e) e->bval = value;
+}
+
+void pv_transform(param_visitor *v, const char *name, xform *ptr, update_class cls, xform_check_fn check) {
+  entry *e = add_entry(v, name, EK_TRANSFORM, cls);
+  if (!e) return;
+  e->xptr = ptr;
+  e->check = check;
+}
+
+void pv_vector(param_visitor *v, const char *name, vec_get_fn get, vec_set_fn set, update_class cls) {
+  entry *e = add_entry(v, name, EK_VECTOR, cls);
+  if (!e) return;
+  e->vget = get;
+  e->vset = set;
+}
+
+void pv_spectrum(param_visitor *v, const char *name, texture *t) {
+  entry *e = add_entry(v, name, EK_SPECTRUM, UPDATE_SPECTRAL);
+  if (!e) return;
+  e->tex = t;
+  e->lo = isnan(v->lo) ? -INFINITY : v->lo;
+  e->hi = isnan(v->hi) ? INFINITY : v->hi;
+}
+
+void pv_mesh_buffer(param_visitor *v, const char *name, shape *sh) {
+  mesh_buf b;
+  update_class cls = UPDATE_GEOMETRIC;
+  if (strcmp(name, "vertex_positions") == 0) b = MB_POSITIONS;
+  else if (strcmp(name, "faces") == 0) b = MB_FACES;
+  else if (strcmp(name, "vertex_normals") == 0) b = MB_NORMALS, cls = UPDATE_SPECTRAL;
+  else if (strcmp(name, "vertex_texcoords") == 0) b = MB_TEXCOORDS, cls = UPDATE_SPECTRAL;
+  else return;
+  entry *e = add_entry(v, name, EK_MESHBUF, cls);
+  if (!e) return;
+  e->sh = sh;
+  e->buf = b;
+}
+
+static const objrec *find_obj(const param_table *t, const object *o) {
+  for (size_t i = 0; i < t->n_objs; i++)
+    if (t->objs[i].o == o) return &t->objs[i];
+  return NULL;
+}
+
+static bool path_taken(const param_table *t, const char *path) {
+  for (size_t i = 0; i < t->n_objs; i++)
+    if (strcmp(t->objs[i].path, path) == 0) return true;
+  return false;
+}
+
+static void visit(param_visitor *v, object *o, char *path, double lo, double hi) {
+  param_table *t = v->t;
+  if (find_obj(t, o)) {
+    /* Shared through a ref: listed once, this path becomes an alias. */
+    if (!grow((void **)&t->alias, &t->cap_alias, t->n_alias, sizeof *t->alias)) {
+      free(path);
+      v->st = rsw_fail(v->err, RSW_ERR_NOMEM, "params", "out of memory");
+      return;
+    }
+    t->alias[t->n_alias++] = (objrec){o, path};
+    return;
+  }
+  if (!grow((void **)&t->objs, &t->cap_objs, t->n_objs, sizeof *t->objs)) {
+    free(path);
+    v->st = rsw_fail(v->err, RSW_ERR_NOMEM, "params", "out of memory");
+    return;
+  }
+  t->objs[t->n_objs++] = (objrec){o, path};
+  if (!o->plugin || !o->plugin->traverse) return;
+  param_visitor saved = *v;
+  v->cur = o;
+  v->prefix = path;
+  v->lo = lo;
+  v->hi = hi;
+  o->plugin->traverse(o, v);
+  saved.st = v->st;
+  *v = saved;
+}
+
+void pv_object(param_visitor *v, const char *name, object *child, double lo, double hi) {
+  if (!child || v->st) return;
+  char *path = join(v->prefix, name);
+  if (!path) {
+    v->st = rsw_fail(v->err, RSW_ERR_NOMEM, "params", "out of memory");
+    return;
+  }
+  if (!find_obj(v->t, child) && path_taken(v->t, path)) {
+    /* Name clash: Mitsuba appends _1, _2, ... */
+    char *base = path;
+    for (unsigned k = 1;; k++) {
+      char buf[32];
+      snprintf(buf, sizeof buf, "_%u", k);
+      path = malloc(strlen(base) + strlen(buf) + 1);
+      if (!path) break;
+      strcpy(path, base);
+      strcat(path, buf);
+      if (!path_taken(v->t, path)) break;
+      free(path);
+    }
+    free(base);
+    if (!path) {
+      v->st = rsw_fail(v->err, RSW_ERR_NOMEM, "params", "out of memory");
+      return;
+    }
+  }
+  visit(v, child, path, lo, hi);
+}
+
+/* Aliases: for every other path A of a shared object O, each entry whose
+ * key lies under O's first path P gets the alias A + key[len(P):]. */
+static rsw_status build_aliases(param_table *t, rsw_err *err) {
+  for (size_t a = 0; a < t->n_alias; a++) {
+    const objrec *first = find_obj(t, t->alias[a].o);
+    if (!first) continue;
+    size_t lp = strlen(first->path);
+    for (size_t i = 0; i < t->n; i++) {
+      entry *e = &t->e[i];
+      if (strncmp(e->key, first->path, lp) != 0 || e->key[lp] != '.') continue;
+      char *al = join(t->alias[a].path, e->key + lp + 1);
+      char **arr = al ? realloc(e->aliases, (e->n_aliases + 1) * sizeof *arr) : NULL;
+      if (!arr) {
+        free(al);
+        return rsw_fail(err, RSW_ERR_NOMEM, "params", "out of memory");
+      }
+      e->aliases = arr;
+      e->aliases[e->n_aliases++] = al;
+    }
+  }
+  return RSW_OK;
+}
+
+static rsw_status build_hash(param_table *t, rsw_err *err) {
+  size_t count = t->n;
+  for (size_t i = 0; i < t->n; i++) count += t->e[i].n_aliases;
+  size_t cap = 64;
+  while (cap < 2 * count + 1) cap *= 2;
+  t->hkey = calloc(cap, sizeof *t->hkey);
+  t->hval = calloc(cap, sizeof *t->hval);
+  if (!t->hkey || !t->hval) return rsw_fail(err, RSW_ERR_NOMEM, "params", "out of memory");
+  t->hcap = cap;
+  for (size_t i = 0; i < t->n; i++) hash_put(t, t->e[i].key, i);
+  for (size_t i = 0; i < t->n; i++)
+    for (size_t k = 0; k < t->e[i].n_aliases; k++) hash_put(t, t->e[i].aliases[k], i);
+  return RSW_OK;
+}
+
+rsw_status params_build(scene *s, rsw_err *err) {
+  params_free(s->params);
+  s->params = NULL;
+  param_table *t = calloc(1, sizeof *t);
+  if (!t) return rsw_fail(err, RSW_ERR_NOMEM, "params", "out of memory");
+  param_visitor v = {.t = t, .err = err, .cur = &s->base, .prefix = "", .lo = NAN, .hi = NAN};
+  /* Mitsuba's Scene::traverse reports this flag first. We do not reorder
+   * threads, so it is read-only here. */
+  pv_bool_ro(&v, "allow_thread_reordering", true);
+  /* Scene children by id, in declaration order. */
+  node *root = s->doc;
+  for (size_t i = 0; root && i < root->n_props && !v.st; i++) {
+    prop *p = &root->props[i];
+    if (p->kind != PROP_NODE || !p->child->built) continue;
+    if (strcmp(p->child->loc, "(default)") == 0) continue; /* synthetic defaults */
+    object *o = p->child->built;
+    pv_object(&v, o->id, o, NAN, NAN);
+  }
+  rsw_status st = v.st;
+  if (!st) st = build_aliases(t, err);
+  if (!st) st = build_hash(t, err);
+  if (st) {
+    params_free(t);
+    return st;
+  }
+  s->params = t;
+  return RSW_OK;
+}
+
+/* ---- lookup --------------------------------------------------------------------- */
+
+size_t params_count(const scene *s) { return s->params ? s->params->n : 0; }
+
+static void entry_shape(const entry *e, size_t dims[2]) {
+  dims[0] = 1;
+  dims[1] = 0;
+  switch (e->kind) {
+  case EK_TRANSFORM: dims[0] = 4, dims[1] = 4; break;
+  case EK_VECTOR: dims[0] = 3; break;
+  case EK_SPECTRUM: {
+    const spectrum *sp = uniform_texture_spectrum(e->tex);
+    if (sp && sp->kind == SPEC_TABLE) dims[0] = sp->n, dims[1] = 2;
+    else if (sp && sp->kind == SPEC_RGB) dims[0] = 3;
+    break;
+  }
+  case EK_MESHBUF: {
+    const mesh *m = &e->sh->mesh;
+    dims[0] = e->buf == MB_FACES ? 3 * (size_t)m->n_faces
+               : e->buf == MB_TEXCOORDS ? 2 * (size_t)m->n_verts : 3 * (size_t)m->n_verts;
+    break;
+  }
+  default: break;
+  }
+}
+
+static param_type entry_type(const scene *s, const entry *e) {
+  switch (e->kind) {
+  case EK_FLOAT: return PARAM_FLOAT;
+  case EK_BOOL: return PARAM_BOOL;
+  case EK_TRANSFORM: return PARAM_TRANSFORM;
+  case EK_VECTOR: return PARAM_VECTOR;
+  case EK_SPECTRUM: return s->variant == VARIANT_MONO ? PARAM_SPECTRUM : PARAM_RGB;
+  case EK_MESHBUF: return PARAM_BUFFER;
+  }
+  return PARAM_FLOAT;
+}
+
+bool params_info(const scene *s, size_t i, param_info *out) {
+  if (!s->params || i >= s->params->n) return false;
+  const entry *e = &s->params->e[i];
+  memset(out, 0, sizeof *out);
+  out->key = e->key;
+  out->type = entry_type(s, e);
+  out->cls = e->cls;
+  entry_shape(e, out->shape);
+  out->object_type = e->owner->plugin ? e->owner->plugin->name : "scene";
+  out->object_class = e->owner->plugin ? obj_class_name(e->owner->plugin->cls) : "scene";
+  out->object_id = e->owner->id ? e->owner->id : "";
+  out->aliases = (const char *const *)e->aliases;
+  out->n_aliases = e->n_aliases;
+  return true;
+}
+
+static rsw_status not_found(const scene *s, const char *key, rsw_err *err) {
+  const param_table *t = s->params;
+  const char *best[3] = {NULL, NULL, NULL};
+  size_t bd[3] = {(size_t)-1, (size_t)-1, (size_t)-1};
+  for (size_t i = 0; t && i < t->n; i++) {
+    size_t d = rsw_edit_distance(key, t->e[i].key);
+    for (int k = 0; k < 3; k++)
+      if (d < bd[k]) {
+        for (int j = 2; j > k; j--) bd[j] = bd[j - 1], best[j] = best[j - 1];
+        bd[k] = d;
+        best[k] = t->e[i].key;
+        break;
+      }
+  }
+  /* Mitsuba silently ignores unknown keys; an unknown key here is an error
+   * so that a misspelt update cannot go unnoticed. */
+  if (!best[0]) return rsw_fail(err, RSW_ERR_NOT_FOUND, key, "unknown parameter '%s' (the scene has none)", key);
+  return rsw_fail(err, RSW_ERR_NOT_FOUND, key, "unknown parameter '%s'; closest: %s%s%s%s%s", key, best[0],
+                  best[1] ? ", " : "", best[1] ? best[1] : "", best[2] ? ", " : "", best[2] ? best[2] : "");
+}
+
+/* TYPE:ID:PATH -> the key of PATH under the object of class or plugin TYPE
+ * and id ID (Eradiate's SearchSceneParameter). */
+static rsw_status resolve_search(const scene *s, const char *spec, char **key_out, rsw_err *err) {
+  const char *c1 = strchr(spec, ':');
+  const char *c2 = c1 ? strchr(c1 + 1, ':') : NULL;
+  if (!c1 || !c2 || c1 == spec || c2 == c1 + 1 || !c2[1])
+    return rsw_fail(err, RSW_ERR_INVALID, spec, "a search is written TYPE:ID:PATH (e.g. bsdf:surface_bsdf:reflectance.value)");
+  size_t lt = (size_t)(c1 - spec), li = (size_t)(c2 - c1 - 1);
+  const param_table *t = s->params;
+  for (size_t i = 0; t && i < t->n_objs; i++) {
+    const object *o = t->objs[i].o;
+    if (!o->id || strlen(o->id) != li || strncmp(o->id, c1 + 1, li) != 0) continue;
+    const char *cls = o->plugin ? obj_class_name(o->plugin->cls) : "scene";
+    const char *pname = o->plugin ? o->plugin->name : "scene";
+    if ((strlen(cls) == lt && strncmp(cls, spec, lt) == 0) || (strlen(pname) == lt && strncmp(pname, spec, lt) == 0)) {
+      *key_out = join(t->objs[i].path, c2 + 1);
+      return *key_out ? RSW_OK : rsw_fail(err, RSW_ERR_NOMEM, spec, "out of memory");
+    }
+  }
+  return rsw_fail(err, RSW_ERR_NOT_FOUND, spec, "no %.*s with id '%.*s' in the scene", (int)lt, spec, (int)li, c1 + 1);
+}
+
+rsw_status params_lookup(const scene *s, const char *key, size_t *index, rsw_err *err) {
+  if (!s->params) return rsw_fail(err, RSW_ERR_NOT_FOUND, key, "the scene has no parameter table");
+  size_t h = hash_find(s->params, key);
+  if (h) {
+    *index = h - 1;
+    return RSW_OK;
+  }
+  if (strchr(key, ':')) {
+    char *k = NULL;
+    rsw_status st = resolve_search(s, key, &k, err);
+    if (st) return st;
+    h = hash_find(s->params, k);
+    if (!h) {
+      rsw_fail(err, RSW_ERR_NOT_FOUND, key, "'%s' resolves to '%s', which is not a parameter", key, k);
+      free(k);
+      return RSW_ERR_NOT_FOUND;
+    }
+    free(k);
+    *index = h - 1;
+    return RSW_OK;
+  }
+  return not_found(s, key, err);
+}
+
+rsw_status params_match(const scene *s, const char *glob, unsigned class_mask, bool include_none, size_t **out,
+                        size_t *count, rsw_err *err) {
+  *out = NULL;
+  *count = 0;
+  const param_table *t = s->params;
+  size_t n = t ? t->n : 0;
+  size_t *res = malloc((n ? n : 1) * sizeof *res);
+  if (!res) return rsw_fail(err, RSW_ERR_NOMEM, glob, "out of memory");
+  size_t k = 0;
+  if (strchr(glob, ':')) {
+    size_t i;
+    rsw_status st = params_lookup(s, glob, &i, err);
+    if (st) {
+      free(res);
+      return st;
+    }
+    const entry *e = &t->e[i];
+    if ((e->cls & class_mask) || (e->cls == UPDATE_NONE && include_none)) res[k++] = i;
+  } else {
+    for (size_t i = 0; i < n; i++) {
+      const entry *e = &t->e[i];
+      if (!((e->cls & class_mask) || (e->cls == UPDATE_NONE && include_none))) continue;
+      bool m = rsw_glob_match(glob, e->key);
+      for (size_t a = 0; !m && a < e->n_aliases; a++) m = rsw_glob_match(glob, e->aliases[a]);
+      if (m) res[k++] = i;
+    }
+  }
+  if (!k) {
+    free(res);
+    return rsw_fail(err, RSW_ERR_NOT_FOUND, glob, "no parameter matches '%s'", glob);
+  }
+  *out = res;
+  *count = k;
+  return RSW_OK;
+}
+
+/* ---- values as JSON ---------------------------------------------------------------- */
+
+typedef struct sbuf {
+  char *p;
+  size_t n, cap;
+  bool oom;
+} sbuf;
+
+static void sb_printf(sbuf *b, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static void sb_printf(sbuf *b, const char *fmt, ...) {
+  if (b->oom) return;
+  for (;;) {
+    va_list ap;
+    va_start(ap, fmt);
+    int w = vsnprintf(b->p ? b->p + b->n : NULL, b->p ? b->cap - b->n : 0, fmt, ap);
+    va_end(ap);
+    if (w < 0) {
+      b->oom = true;
+      return;
+    }
+    if (b->p && b->n + (size_t)w < b->cap) {
+      b->n += (size_t)w;
+      return;
+    }
+    size_t cap = b->cap ? b->cap : 64;
+    while (cap <= b->n + (size_t)w) cap *= 2;
+    char *np = realloc(b->p, cap);
+    if (!np) {
+      b->oom = true;
+      return;
+    }
+    b->p = np;
+    b->cap = cap;
+  }
+}
+
+static void sb_num(sbuf *b, double v) {
+  if (v == floor(v) && fabs(v) < 1e15)
+    sb_printf(b, "%.0f", v);
+  else
+    sb_printf(b, "%.17g", v);
+}
+
+static void sb_nums(sbuf *b, const double *v, size_t n) {
+  sb_printf(b, "[");
+  for (size_t i = 0; i < n; i++) {
+    if (i) sb_printf(b, ", ");
+    sb_num(b, v[i]);
+  }
+  sb_printf(b, "]");
+}
+
+char *params_value_json(const scene *s, size_t i, size_t max_items) {
+  if (!s->params || i >= s->params->n) return NULL;
+  const entry *e = &s->params->e[i];
+  sbuf b = {0};
+  switch (e->kind) {
+  case EK_FLOAT: sb_num(&b, *e->fptr); break;
+  case EK_BOOL: sb_printf(&b, "%s", e->bval ? "true" : "false"); break;
+  case EK_TRANSFORM:
+    sb_printf(&b, "[");
+    for (int r = 0; r < 4; r++) {
+      if (r) sb_printf(&b, ", ");
+      sb_nums(&b, e->xptr->m[r], 4);
+    }
+    sb_printf(&b, "]");
+    break;
+  case EK_VECTOR: {
+    vec3 v = e->vget(e->owner);
+    double a[3] = {v.x, v.y, v.z};
+    sb_nums(&b, a, 3);
+    break;
+  }
+  case EK_SPECTRUM: {
+    const spectrum *sp = uniform_texture_spectrum(e->tex);
+    if (!sp) break;
+    if (sp->kind == SPEC_UNIFORM) {
+      sb_num(&b, sp->value);
+    } else if (sp->kind == SPEC_RGB) {
+      sb_nums(&b, sp->rgb, 3);
+    } else {
+      sb_printf(&b, "{\"wavelengths\": ");
+      sb_nums(&b, sp->wl, sp->n);
+      sb_printf(&b, ", \"values\": ");
+      sb_nums(&b, sp->val, sp->n);
+      sb_printf(&b, "}");
+    }
+    break;
+  }
+  case EK_MESHBUF: {
+    size_t dims[2];
+    entry_shape(e, dims);
+    size_t n = dims[0];
+    if (max_items && n > max_items) {
+      sb_printf(&b, "{\"length\": %zu}", n);
+      break;
+    }
+    const mesh *m = &e->sh->mesh;
+    sb_printf(&b, "[");
+    for (size_t k = 0; k < n; k++) {
+      if (k) sb_printf(&b, ", ");
+      if (e->buf == MB_FACES)
+        sb_printf(&b, "%u", m->faces[k]);
+      else
+        sb_printf(&b, "%.9g", (double)(e->buf == MB_POSITIONS ? m->pos[k] : e->buf == MB_NORMALS ? m->nrm[k] : m->uv[k]));
+    }
+    sb_printf(&b, "]");
+    break;
+  }
+  }
+  if (b.oom) {
+    free(b.p);
+    return NULL;
+  }
+  return b.p;
+}
+
+/* ---- parsing values --------------------------------------------------------------- */
+
+void param_value_free(param_value *v) {
+  if (!v) return;
+  free(v->arr);
+  spectrum_free(&v->table);
+  memset(v, 0, sizeof *v);
+}
+
+static bool json_numbers(const cJSON *a, double *out, size_t *n) {
+  size_t k = 0;
+  for (const cJSON *x = a->child; x; x = x->next) {
+    if (!cJSON_IsNumber(x)) return false;
+    if (out) out[k] = x->valuedouble;
+    k++;
+  }
+  *n = k;
+  return true;
+}
+
+static rsw_status parse_table(const cJSON *o, const char *where, spectrum *out, rsw_err *err) {
+  const cJSON *wl = cJSON_GetObjectItemCaseSensitive(o, "wavelengths");
+  const cJSON *vals = cJSON_GetObjectItemCaseSensitive(o, "values");
+  const cJSON *value = cJSON_GetObjectItemCaseSensitive(o, "value");
+  memset(out, 0, sizeof *out);
+  out->kind = SPEC_TABLE;
+  size_t n = 0;
+  if (wl && vals) {
+    size_t n2;
+    if (!cJSON_IsArray(wl) || !cJSON_IsArray(vals) || !json_numbers(wl, NULL, &n) || !json_numbers(vals, NULL, &n2) ||
+        n != n2)
+      return rsw_fail(err, RSW_ERR_TYPE, where, "a tabulated spectrum needs \"wavelengths\" and \"values\": two lists of numbers of the same length");
+  } else if (value && cJSON_IsArray(value)) {
+    for (const cJSON *x = value->child; x; x = x->next) {
+      size_t k;
+      if (!cJSON_IsArray(x) || !json_numbers(x, NULL, &k) || k != 2)
+        return rsw_fail(err, RSW_ERR_TYPE, where, "a spectrum \"value\" list holds [wavelength_nm, value] pairs");
+      n++;
+    }
+  } else {
+    return rsw_fail(err, RSW_ERR_TYPE, where, "expected {\"wavelengths\": [...], \"values\": [...]} or {\"type\": \"spectrum\", \"value\": [[wl, v], ...]}");
+  }
+  if (n < 2 || n > RSW_MAX_SPECTRUM)
+    return rsw_fail(err, RSW_ERR_INVALID, where, "a tabulated spectrum needs between 2 and %d samples", RSW_MAX_SPECTRUM);
+  out->n = n;
+  out->wl = malloc(n * sizeof(double));
+  out->val = malloc(n * sizeof(double));
+  if (!out->wl || !out->val) {
+    spectrum_free(out);
+    return rsw_fail(err, RSW_ERR_NOMEM, where, "out of memory");
+  }
+  if (wl && vals) {
+    size_t k;
+    json_numbers(wl, out->wl, &k);
+    json_numbers(vals, out->val, &k);
+  } else {
+    size_t i = 0;
+    for (const cJSON *x = value->child; x; x = x->next, i++) {
+      out->wl[i] = x->child->valuedouble;
+      out->val[i] = x->child->next->valuedouble;
+    }
+  }
+  for (size_t i = 0; i < n; i++)
+    if (!(out->wl[i] > 0) || (i && !(out->wl[i] > out->wl[i - 1]))) {
+      spectrum_free(out);
+      return rsw_fail(err, RSW_ERR_INVALID, where, "spectrum wavelengths must be positive and strictly increasing");
+    }
+  return RSW_OK;
+}
+
+rsw_status param_value_parse(const char *json, const char *where, param_value *out, rsw_err *err) {
+  memset(out, 0, sizeof *out);
+  if (!json || !*json) return rsw_fail(err, RSW_ERR_PARSE, where, "empty value");
+  const char *end = NULL;
+  cJSON *j = cJSON_ParseWithOpts(json, &end, 1);
+  if (!j) return rsw_fail(err, RSW_ERR_PARSE, where, "value is not valid JSON: '%s'", json);
+  rsw_status st = RSW_OK;
+  if (cJSON_IsNumber(j)) {
+    out->kind = PV_NUMBER;
+    out->num = j->valuedouble;
+  } else if (cJSON_IsBool(j)) {
+    out->kind = PV_BOOL;
+    out->b = cJSON_IsTrue(j);
+  } else if (cJSON_IsArray(j)) {
+    out->kind = PV_ARRAY;
+    size_t n = 0;
+    if (json_numbers(j, NULL, &n)) {
+      out->arr = malloc((n ? n : 1) * sizeof(double));
+      if (!out->arr) st = rsw_fail(err, RSW_ERR_NOMEM, where, "out of memory");
+      else json_numbers(j, out->arr, &out->n);
+    } else {
+      /* Nested rows of equal length (a 4x4 matrix). */
+      size_t rows = 0, cols = 0, total = 0;
+      for (const cJSON *r = j->child; r && !st; r = r->next, rows++) {
+        size_t k = 0;
+        if (!cJSON_IsArray(r) || !json_numbers(r, NULL, &k) || (rows && k != cols))
+          st = rsw_fail(err, RSW_ERR_TYPE, where, "expected numbers, or rows of numbers of equal length");
+        cols = k;
+        total += k;
+      }
+      if (!st) {
+        out->arr = malloc((total ? total : 1) * sizeof(double));
+        if (!out->arr) st = rsw_fail(err, RSW_ERR_NOMEM, where, "out of memory");
+      }
+      if (!st) {
+        size_t k = 0;
+        for (const cJSON *r = j->child; r; r = r->next) {
+          size_t m = 0;
+          json_numbers(r, out->arr + k, &m);
+          k += m;
+        }
+        out->n = total;
+        out->rows = rows;
+      }
+    }
+  } else if (cJSON_IsObject(j)) {
+    const cJSON *type = cJSON_GetObjectItemCaseSensitive(j, "type");
+    const cJSON *value = cJSON_GetObjectItemCaseSensitive(j, "value");
+    if (type && cJSON_IsString(type) && (strcmp(type->valuestring, "rgb") == 0 || strcmp(type->valuestring, "uniform") == 0)) {
+      /* {"type": "rgb", "value": [r, g, b]} / {"type": "uniform", "value": x} */
+      if (value && cJSON_IsNumber(value)) {
+        out->kind = PV_NUMBER;
+        out->num = value->valuedouble;
+      } else if (value && cJSON_IsArray(value) && strcmp(type->valuestring, "rgb") == 0) {
+        size_t n;
+        out->kind = PV_ARRAY;
+        out->arr = malloc(3 * sizeof(double));
+        if (!out->arr || !json_numbers(value, NULL, &n) || n != 3)
+          st = rsw_fail(err, RSW_ERR_TYPE, where, "rgb: \"value\" must be 3 numbers");
+        else
+          json_numbers(value, out->arr, &out->n);
+      } else {
+        st = rsw_fail(err, RSW_ERR_TYPE, where, "%s: missing or bad \"value\"", type->valuestring);
+      }
+    } else if (type && cJSON_IsString(type) && strcmp(type->valuestring, "spectrum") == 0 && value &&
+               cJSON_IsNumber(value)) {
+      out->kind = PV_NUMBER;
+      out->num = value->valuedouble;
+    } else {
+      out->kind = PV_TABLE;
+      st = parse_table(j, where, &out->table, err);
+    }
+  } else {
+    st = rsw_fail(err, RSW_ERR_TYPE, where, "expected a number, a list of numbers or a spectrum object");
+  }
+  cJSON_Delete(j);
+  if (st) param_value_free(out);
+  return st;
+}
+
+/* ---- updates -------------------------------------------------------------------- */
+
+static const char *kind_expect(const scene *s, const entry *e) {
+  switch (e->kind) {
+  case EK_FLOAT: return "a number";
+  case EK_BOOL: return "a boolean";
+  case EK_TRANSFORM: return "a 4x4 matrix (16 numbers, row-major, or 4 rows of 4)";
+  case EK_VECTOR: return "3 numbers";
+  case EK_SPECTRUM:
+    return s->variant == VARIANT_MONO ? "a number, an [r, g, b] triple or a tabulated spectrum"
+                                      : "a number or an [r, g, b] triple";
+  case EK_MESHBUF: return "a flat list of numbers";
+  }
+  return "a value";
+}
+
+static rsw_status check_range(const entry *e, const char *key, double x, rsw_err *err) {
+  if (!isfinite(x)) return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': value must be finite", key);
+  if (x < e->lo || x > e->hi) {
+    if (isinf(e->hi)) return rsw_fail(err, RSW_ERR_RANGE, key, "'%s': value %g must be >= %g", key, x, e->lo);
+    return rsw_fail(err, RSW_ERR_RANGE, key, "'%s': value %g must lie in [%g, %g]", key, x, e->lo, e->hi);
+  }
+  return RSW_OK;
+}
+
+/* A staged update: what validation decided, applied afterwards. */
+typedef struct staged {
+  size_t index;
+  const param_update *item;
+  xform xf;
+  spectrum spec; /* borrowed from the item (copied on apply) */
+  vec3 vec;
+  bool changed;
+} staged;
+
+static bool spectrum_equal(const spectrum *a, const spectrum *b) {
+  if (a->kind != b->kind) return false;
+  switch (a->kind) {
+  case SPEC_UNIFORM: return a->value == b->value;
+  case SPEC_RGB: return memcmp(a->rgb, b->rgb, sizeof a->rgb) == 0;
+  case SPEC_TABLE:
+    return a->n == b->n && memcmp(a->wl, b->wl, a->n * sizeof(double)) == 0 &&
+           memcmp(a->val, b->val, a->n * sizeof(double)) == 0;
+  }
+  return false;
+}
+
+/* Vertex count the mesh will have after this map (positions may change it
+ * only together with faces). */
+static rsw_status validate(const scene *s, staged *sg, const staged *all, size_t n_all, rsw_err *err) {
+  const entry *e = &s->params->e[sg->index];
+  const param_value *v = &sg->item->value;
+  const char *key = sg->item->key;
+  if (e->cls == UPDATE_NONE) return rsw_fail(err, RSW_ERR_INVALID, key, "'%s' is read-only", e->key);
+  switch (e->kind) {
+  case EK_FLOAT: {
+    if (v->kind != PV_NUMBER)
+      return rsw_fail(err, RSW_ERR_TYPE, key, "'%s' takes %s", key, kind_expect(s, e));
+    rsw_status st = check_range(e, key, v->num, err);
+    if (st) return st;
+    sg->changed = *e->fptr != v->num;
+    return RSW_OK;
+  }
+  case EK_TRANSFORM: {
+    if (v->kind != PV_ARRAY || v->n != 16 || (v->rows && v->rows != 4))
+      return rsw_fail(err, RSW_ERR_TYPE, key, "'%s' takes %s", key, kind_expect(s, e));
+    double m[4][4];
+    for (int i = 0; i < 16; i++) {
+      if (!isfinite(v->arr[i])) return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': matrix entries must be finite", key);
+      m[i / 4][i % 4] = v->arr[i];
+    }
+    if (!xf_from_matrix(m, &sg->xf)) return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': matrix is singular", key);
+    if (e->check) {
+      rsw_status st = e->check(e->owner, &sg->xf, key, err);
+      if (st) return st;
+    }
+    sg->changed = memcmp(e->xptr->m, sg->xf.m, sizeof sg->xf.m) != 0;
+    return RSW_OK;
+  }
+  case EK_VECTOR: {
+    if (v->kind != PV_ARRAY || v->n != 3 || v->rows)
+      return rsw_fail(err, RSW_ERR_TYPE, key, "'%s' takes %s", key, kind_expect(s, e));
+    sg->vec = v3(v->arr[0], v->arr[1], v->arr[2]);
+    if (!v3_finite(sg->vec) || !(v3_len(sg->vec) > 0))
+      return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': a direction must be finite and non-zero", key);
+    vec3 cur = e->vget(e->owner);
+    sg->changed = cur.x != sg->vec.x || cur.y != sg->vec.y || cur.z != sg->vec.z;
+    return RSW_OK;
+  }
+  case EK_SPECTRUM: {
+    spectrum sp = {.kind = SPEC_UNIFORM};
+    if (v->kind == PV_NUMBER) {
+      sp.value = v->num;
+      rsw_status st = check_range(e, key, v->num, err);
+      if (st) return st;
+    } else if (v->kind == PV_ARRAY && v->n == 3 && !v->rows) {
+      sp.kind = SPEC_RGB;
+      for (int i = 0; i < 3; i++) {
+        sp.rgb[i] = v->arr[i];
+        rsw_status st = check_range(e, key, v->arr[i], err);
+        if (st) return st;
+      }
+    } else if (v->kind == PV_TABLE) {
+      if (s->variant != VARIANT_MONO)
+        return rsw_fail(err, RSW_ERR_UNSUPPORTED, key,
+                        "'%s': a tabulated spectrum needs the mono variant (this scene is rgb)", key);
+      sp = v->table;
+      for (size_t i = 0; i < sp.n; i++) {
+        rsw_status st = check_range(e, key, sp.val[i], err);
+        if (st) return st;
+      }
+    } else {
+      return rsw_fail(err, RSW_ERR_TYPE, key, "'%s' takes %s", key, kind_expect(s, e));
+    }
+    sg->spec = sp;
+    const spectrum *cur = uniform_texture_spectrum(e->tex);
+    sg->changed = !cur || !spectrum_equal(cur, &sp);
+    return RSW_OK;
+  }
+  case EK_MESHBUF: {
+    if (v->kind != PV_ARRAY || v->rows)
+      return rsw_fail(err, RSW_ERR_TYPE, key, "'%s' takes %s", key, kind_expect(s, e));
+    const mesh *m = &e->sh->mesh;
+    /* Other buffers of the same mesh in this map decide the new counts. */
+    const param_value *pos = NULL, *faces = NULL;
+    for (size_t k = 0; k < n_all; k++) {
+      const entry *o = &s->params->e[all[k].index];
+      if (o->kind != EK_MESHBUF || o->sh != e->sh) continue;
+      if (o->buf == MB_POSITIONS) pos = &all[k].item->value;
+      if (o->buf == MB_FACES) faces = &all[k].item->value;
+    }
+    size_t nv = pos && pos->kind == PV_ARRAY ? pos->n / 3 : m->n_verts;
+    switch (e->buf) {
+    case MB_POSITIONS:
+      if (v->n % 3 || !v->n || (v->n != 3 * (size_t)m->n_verts && !faces))
+        return rsw_fail(err, RSW_ERR_INVALID, key,
+                        "'%s' takes %u numbers (3 per vertex); changing the vertex count needs 'faces' in the same update",
+                        key, 3 * m->n_verts);
+      if (v->n / 3 > MESH_MAX_ELEMENTS) return rsw_fail(err, RSW_ERR_LIMIT, key, "'%s': too many vertices", key);
+      for (size_t i = 0; i < v->n; i++)
+        if (!isfinite(v->arr[i]) || fabs(v->arr[i]) > 3.0e38)
+          return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': coordinate %zu is not a finite float", key, i);
+      break;
+    case MB_FACES:
+      if (!v->n || v->n % 3 || v->n / 3 > MESH_MAX_ELEMENTS)
+        return rsw_fail(err, RSW_ERR_INVALID, key, "'%s' takes a non-empty list of vertex indices, 3 per face", key);
+      for (size_t i = 0; i < v->n; i++)
+        if (!(v->arr[i] >= 0 && v->arr[i] < (double)nv && v->arr[i] == floor(v->arr[i])))
+          return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': index %zu (%g) is not a vertex index below %zu", key, i,
+                          v->arr[i], nv);
+      break;
+    case MB_NORMALS:
+    case MB_TEXCOORDS: {
+      size_t per = e->buf == MB_NORMALS ? 3 : 2;
+      if (v->n != per * nv)
+        return rsw_fail(err, RSW_ERR_INVALID, key, "'%s' takes %zu numbers (%zu per vertex)", key, per * nv, per);
+      for (size_t i = 0; i < v->n; i++)
+        if (!isfinite(v->arr[i])) return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': values must be finite", key);
+      break;
+    }
+    }
+    sg->changed = true;
+    if (e->buf == MB_POSITIONS && v->n == 3 * (size_t)m->n_verts) {
+      sg->changed = false;
+      for (size_t i = 0; i < v->n && !sg->changed; i++) sg->changed = (float)v->arr[i] != m->pos[i];
+    } else if (e->buf == MB_FACES && v->n == 3 * (size_t)m->n_faces) {
+      sg->changed = false;
+      for (size_t i = 0; i < v->n && !sg->changed; i++) sg->changed = (uint32_t)v->arr[i] != m->faces[i];
+    }
+    return RSW_OK;
+  }
+  case EK_BOOL: break;
+  }
+  return rsw_fail(err, RSW_ERR_INVALID, key, "'%s' is read-only", e->key);
+}
+
+static rsw_status apply_meshbuf(const entry *e, const param_value *v, rsw_err *err) {
+  mesh *m = &e->sh->mesh;
+  switch (e->buf) {
+  case MB_POSITIONS: {
+    if (v->n != 3 * (size_t)m->n_verts) {
+      float *p = realloc(m->pos, v->n * sizeof(float));
+      if (!p) return rsw_fail(err, RSW_ERR_NOMEM, e->key, "out of memory");
+      m->pos = p;
+      m->n_verts = (uint32_t)(v->n / 3);
+    }
+    for (size_t i = 0; i < v->n; i++) m->pos[i] = (float)v->arr[i];
+    break;
+  }
+  case MB_FACES: {
+    if (v->n != 3 * (size_t)m->n_faces) {
+      uint32_t *f = realloc(m->faces, v->n * sizeof(uint32_t));
+      if (!f) return rsw_fail(err, RSW_ERR_NOMEM, e->key, "out of memory");
+      m->faces = f;
+      m->n_faces = (uint32_t)(v->n / 3);
+    }
+    for (size_t i = 0; i < v->n; i++) m->faces[i] = (uint32_t)v->arr[i];
+    break;
+  }
+  case MB_NORMALS:
+  case MB_TEXCOORDS: {
+    float **dst = e->buf == MB_NORMALS ? &m->nrm : &m->uv;
+    float *p = realloc(*dst, v->n * sizeof(float));
+    if (!p) return rsw_fail(err, RSW_ERR_NOMEM, e->key, "out of memory");
+    *dst = p;
+    for (size_t i = 0; i < v->n; i++) p[i] = (float)v->arr[i];
+    break;
+  }
+  }
+  return RSW_OK;
+}
+
+static double now_s(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+
+rsw_status scene_update(scene *s, const param_update *items, size_t n, update_report *report, rsw_err *err) {
+  double t0 = now_s();
+  if (report) memset(report, 0, sizeof *report);
+  if (!s->params) return rsw_fail(err, RSW_ERR_NOT_FOUND, "params", "the scene has no parameter table");
+  staged *sg = calloc(n ? n : 1, sizeof *sg);
+  if (!sg) return rsw_fail(err, RSW_ERR_NOMEM, "params", "out of memory");
+  rsw_status st = RSW_OK;
+  /* 1. Resolve every key; a key (or two names of it) given twice is an
+   *    error, since the result would depend on the order. */
+  for (size_t i = 0; i < n && !st; i++) {
+    sg[i].item = &items[i];
+    st = params_lookup(s, items[i].key, &sg[i].index, err);
+    for (size_t k = 0; k < i && !st; k++)
+      if (sg[k].index == sg[i].index)
+        st = rsw_fail(err, RSW_ERR_DUPLICATE, items[i].key, "'%s' is given twice in one update (also as '%s')",
+                      items[i].key, items[k].key);
+  }
+  /* 2. Validate everything before writing anything. */
+  for (size_t i = 0; i < n && !st; i++) st = validate(s, &sg[i], sg, n, err);
+  if (st) {
+    free(sg);
+    return st;
+  }
+  /* Geometry checks that need the new values together: a mesh's new
+   * vertices (with its faces and transform, new or current) must keep a
+   * positive area, or sampling it would divide by zero. */
+  for (size_t i = 0; i < n && !st; i++) {
+    const entry *e = &s->params->e[sg[i].index];
+    if (!sg[i].changed || e->kind != EK_MESHBUF || (e->buf != MB_POSITIONS && e->buf != MB_FACES)) continue;
+    const shape *sh = e->sh;
+    const double *pos = NULL, *fc = NULL;
+    size_t nf = sh->mesh.n_faces;
+    const xform *xf = &sh->to_world;
+    for (size_t k = 0; k < n; k++) {
+      const entry *o = &s->params->e[sg[k].index];
+      if (o->owner != e->owner) continue;
+      if (o->kind == EK_MESHBUF && o->buf == MB_POSITIONS) pos = sg[k].item->value.arr;
+      if (o->kind == EK_MESHBUF && o->buf == MB_FACES) fc = sg[k].item->value.arr, nf = sg[k].item->value.n / 3;
+      if (o->kind == EK_TRANSFORM) xf = &sg[k].xf;
+    }
+    double area = 0;
+    for (size_t f = 0; f < nf; f++) {
+      vec3 p[3];
+      for (int c = 0; c < 3; c++) {
+        size_t vi = fc ? (size_t)fc[3 * f + c] : sh->mesh.faces[3 * f + c];
+        p[c] = pos ? v3((float)pos[3 * vi], (float)pos[3 * vi + 1], (float)pos[3 * vi + 2])
+                   : v3(sh->mesh.pos[3 * vi], sh->mesh.pos[3 * vi + 1], sh->mesh.pos[3 * vi + 2]);
+        p[c] = xf_point(xf, p[c]);
+      }
+      area += 0.5 * v3_len(v3_cross(v3_sub(p[1], p[0]), v3_sub(p[2], p[0])));
+    }
+    if (!(area > 0) || !isfinite(area))
+      st = rsw_fail(err, RSW_ERR_INVALID, sg[i].item->key, "'%s': the mesh would have zero or non-finite area",
+                    sg[i].item->key);
+  }
+  if (st) {
+    free(sg);
+    return st;
+  }
+  accel_counters before;
+  accel_get_counters(s->accel, &before);
+  /* 3. Apply. */
+  unsigned classes = 0;
+  size_t changed = 0;
+  bool geometry = false;
+  for (size_t i = 0; i < n && !st; i++) {
+    if (!sg[i].changed) continue;
+    const entry *e = &s->params->e[sg[i].index];
+    changed++;
+    classes |= e->cls;
+    switch (e->kind) {
+    case EK_FLOAT: *e->fptr = sg[i].item->value.num; break;
+    case EK_TRANSFORM: *e->xptr = sg[i].xf; break;
+    case EK_VECTOR: e->vset(e->owner, sg[i].vec); break;
+    case EK_SPECTRUM:
+      if (!uniform_texture_set_spectrum(e->tex, &sg[i].spec))
+        st = rsw_fail(err, RSW_ERR_NOMEM, e->key, "out of memory");
+      break;
+    case EK_MESHBUF: st = apply_meshbuf(e, &sg[i].item->value, err); break;
+    case EK_BOOL: break;
+    }
+    if (e->cls == UPDATE_GEOMETRIC) geometry = true;
+  }
+  /* 4. Derived state, each touched object once. */
+  for (size_t i = 0; i < n && !st; i++) {
+    if (!sg[i].changed) continue;
+    object *o = s->params->e[sg[i].index].owner;
+    bool seen = false;
+    for (size_t k = 0; k < i && !seen; k++) seen = sg[k].changed && s->params->e[sg[k].index].owner == o;
+    if (seen) continue;
+    if (o->plugin && o->plugin->parameters_changed) o->plugin->parameters_changed(o);
+  }
+  /* Embree: instance transforms, refits and rebuilds, then one commit. */
+  for (size_t i = 0; i < n && !st && geometry; i++) {
+    if (!sg[i].changed) continue;
+    const entry *e = &s->params->e[sg[i].index];
+    if (e->cls != UPDATE_GEOMETRIC) continue;
+    const shape *sh = (const shape *)e->owner;
+    if (e->kind == EK_TRANSFORM) {
+      accel_update_transform(s->accel, sh);
+    } else if (e->kind == EK_MESHBUF) {
+      bool topology = false;
+      for (size_t k = 0; k < n; k++) {
+        const entry *o = &s->params->e[sg[k].index];
+        if (sg[k].changed && o->kind == EK_MESHBUF && o->sh == e->sh && o->buf == MB_FACES) topology = true;
+      }
+      if (e->buf == MB_FACES || (topology && e->buf == MB_POSITIONS)) {
+        if (e->buf == MB_FACES) st = accel_rebuild_shape(s->accel, sh, err);
+      } else if (e->buf == MB_POSITIONS) {
+        st = accel_update_vertices(s->accel, sh, err);
+      }
+    }
+  }
+  if (!st && geometry) {
+    st = accel_commit(s->accel, err);
+    /* Bounds, emitters and sensors: the same code as a load, so that an
+     * update equals a reload. */
+    if (!st) st = scene_refresh_bounds(s, err);
+  }
+  /* Emitter selection by sampling_weight (cheap: one pass). */
+  if (!st && changed) {
+    double sum = 0;
+    for (size_t i = 0; i < s->n_emitters; i++) {
+      sum += s->emitters[i]->sampling_weight;
+      if (s->emitter_cdf) s->emitter_cdf[i] = sum;
+    }
+    s->emitter_weight_sum = sum;
+  }
+  free(sg);
+  if (report) {
+    accel_counters after;
+    accel_get_counters(s->accel, &after);
+    report->classes = classes;
+    report->changed = changed;
+    report->refits = (unsigned)(after.refits - before.refits);
+    report->rebuilds = (unsigned)(after.rebuilds - before.rebuilds);
+    report->instance_updates = (unsigned)(after.instance_updates - before.instance_updates);
+    report->seconds = now_s() - t0;
+  }
+  return st;
+}
