@@ -283,13 +283,19 @@ static void test_info_types_classes(void) {
   REQUIRE(s, "load rgb");
   check_info(s, "my_shape.to_world", PARAM_TRANSFORM, UPDATE_GEOMETRIC, 4, 4, "shape");
   check_info(s, "my_shape.silhouette_sampling_weight", PARAM_FLOAT, UPDATE_NONE, 1, 0, "shape");
-  check_info(s, "my_shape.bsdf.reflectance.value", PARAM_RGB, UPDATE_SPECTRAL, 3, 0, "texture");
+  /* rgb variant: a reflectance given as rgb has shape [3]; one given as a
+   * number stays one number (shape [1], JSON a number; params.h: "an
+   * [r, g, b] triple (or one number)"), as Mitsuba's uniform spectrum in
+   * rgb variants. */
+  check_info(s, "my_shape.bsdf.reflectance.value", PARAM_RGB, UPDATE_SPECTRAL, 1, 0, "texture");
   check_info(s, "ball.bsdf.reflectance.value", PARAM_RGB, UPDATE_SPECTRAL, 3, 0, "texture");
   check_info(s, "m.vertex_positions", PARAM_BUFFER, UPDATE_GEOMETRIC, 12, 0, "shape");
   check_info(s, "m.faces", PARAM_BUFFER, UPDATE_GEOMETRIC, 6, 0, "shape");
   check_info(s, "m.to_world", PARAM_TRANSFORM, UPDATE_GEOMETRIC, 4, 4, "shape");
-  check_info(s, "n.vertex_normals", PARAM_BUFFER, UPDATE_GEOMETRIC, 12, 0, "shape");
-  check_info(s, "n.vertex_texcoords", PARAM_BUFFER, UPDATE_GEOMETRIC, 8, 0, "shape");
+  /* Normals and uv are used at shading time only: spectral (params.h),
+   * no acceleration-structure work. */
+  check_info(s, "n.vertex_normals", PARAM_BUFFER, UPDATE_SPECTRAL, 12, 0, "shape");
+  check_info(s, "n.vertex_texcoords", PARAM_BUFFER, UPDATE_SPECTRAL, 8, 0, "shape");
   check_info(s, "emitter.to_world", PARAM_TRANSFORM, UPDATE_SPECTRAL, 4, 4, "emitter");
   check_info(s, "emitter.direction", PARAM_VECTOR, UPDATE_SPECTRAL, 3, 0, "emitter");
   check_info(s, "emitter.sampling_weight", PARAM_FLOAT, UPDATE_SPECTRAL, 1, 0, "emitter");

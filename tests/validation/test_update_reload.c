@@ -308,12 +308,14 @@ static void test_directional_to_world(void) {
 }
 
 static void test_hdistant_direction(void) {
-  /* hdistant's `direction` is its axis to_world (0,0,1); written, it sets
-   * to_world = look_at(0, d, up) with up the second vector of
-   * coordinate_system(d), as distant's direction does (mitsuba3
-   * src/sensors/distant.cpp). S' spells that look_at out. */
-  vec3 d = v3_norm(v3(0.3, -0.2, 1)), s_unused, up;
-  coordinate_system(d, &s_unused, &up);
+  /* hdistant's `direction` is its hemisphere axis to_world (0,0,1).
+   * Written, it keeps the film's azimuthal orientation (sensors/hdistant.c,
+   * hdistant_set_direction): to_world = look_at(0, d, up) with
+   * up = normalize(cross(d, x_old)), x_old = the old to_world (1,0,0),
+   * here (1,0,0) since S's to_world is the identity. S' spells that
+   * look_at out. */
+  vec3 d = v3_norm(v3(0.3, -0.2, 1));
+  vec3 up = v3_norm(v3_cross(d, v3(1, 0, 0)));
   char a[4096], b[4096];
   snprintf(a, sizeof a,
            "{\"type\": \"scene\", " HDIST_T ", " SUN ","
@@ -363,6 +365,104 @@ static void test_perspective_to_world(void) {
   run_case(&c);
 }
 
+static void test_checkerboard_color_and_to_uv(void) {
+  /* A texture's nested uniform (color0) and its to_uv, in one update. */
+  const char *fmt = "{\"type\": \"scene\", " HDIST_T ", " SUN ","
+                    " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\":"
+                    "   {\"type\": \"checkerboard\", \"color0\": %s, \"color1\": 0.8, \"to_uv\": %s}}}}";
+  char a[4096], b[4096];
+  snprintf(a, sizeof a, fmt, "0.2", "[{\"scale\": 1}]");
+  snprintf(b, sizeof b, fmt, "0.45", "[3, 0, 0, 0.25, 0, 3, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]");
+  reload_case c = {.name = "checkerboard color0 and to_uv", .before = a, .after = b,
+                   .upd = {{"plate.bsdf.reflectance.color0.value", "0.45"},
+                           {"plate.bsdf.reflectance.to_uv", "[3, 0, 0, 0.25, 0, 3, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]"}},
+                   .n_upd = 2, .classes = UPDATE_SPECTRAL};
+  run_case(&c);
+}
+
+static void test_constant_radiance(void) {
+  const char *fmt = "{\"type\": \"scene\", " HDIST_T ","
+                    " \"sky\": {\"type\": \"constant\", \"radiance\": %s},"
+                    " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}";
+  char a[4096], b[4096];
+  snprintf(a, sizeof a, fmt, "1.0");
+  snprintf(b, sizeof b, fmt, "{\"type\": \"rgb\", \"value\": [0.3, 0.6, 1.4]}");
+  reload_case c = {.name = "constant radiance", .before = a, .after = b,
+                   .upd = {{"sky.radiance.value", "[0.3, 0.6, 1.4]"}}, .n_upd = 1, .classes = UPDATE_SPECTRAL};
+  run_case(&c);
+}
+
+static void test_sampling_weight(void) {
+  /* Two suns: the emitter-selection distribution must be rebuilt (the
+   * expectation does not change, the samples do). */
+  const char *fmt = "{\"type\": \"scene\", " PERSP ", " SUN ","
+                    " \"sun2\": {\"type\": \"directional\", \"direction\": [-0.3, 0.4, -1], \"irradiance\": 0.5,"
+                    "   \"sampling_weight\": %s},"
+                    " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}";
+  char a[4096], b[4096];
+  snprintf(a, sizeof a, fmt, "1");
+  snprintf(b, sizeof b, fmt, "5");
+  reload_case c = {.name = "directional sampling_weight", .before = a, .after = b,
+                   .upd = {{"sun2.sampling_weight", "5"}}, .n_upd = 1, .classes = UPDATE_SPECTRAL};
+  run_case(&c);
+}
+
+/* Area light over a floor, seen by a perspective camera; `light_xf` is the
+ * light's to_world, `radiance` its radiance. */
+#define AREA_FMT                                                                                                 \
+  "{\"type\": \"scene\", " PERSP ","                                                                             \
+  " \"floor\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 2}],"                                        \
+  "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.6}},"                                                 \
+  " \"light\": {\"type\": \"rectangle\", \"to_world\": %s,"                                                      \
+  "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0},"                                                    \
+  "   \"emitter\": {\"type\": \"area\", \"radiance\": %s}}}"
+
+static void test_area_radiance(void) {
+  const char *xf = "[{\"scale\": 0.3}, {\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 180}}, {\"translate\": [0, 0, 1]}]";
+  char a[4096], b[4096];
+  snprintf(a, sizeof a, AREA_FMT, xf, "5");
+  snprintf(b, sizeof b, AREA_FMT, xf, "{\"type\": \"rgb\", \"value\": [9, 4, 2]}");
+  reload_case c = {.name = "area radiance", .before = a, .after = b,
+                   .upd = {{"light.emitter.radiance.value", "[9, 4, 2]"}}, .n_upd = 1, .classes = UPDATE_SPECTRAL};
+  run_case(&c);
+}
+
+static void test_area_light_to_world(void) {
+  /* Moving and resizing an emitting shape: its area (hence the emitted
+   * power sampled by next-event estimation) must be refreshed. */
+  xform sc = xf_scale(v3(0.6, 0.2, 1)), rx = xf_rotate(v3(1, 0, 0), 160), tr = xf_translate(v3(0.3, -0.2, 0.8));
+  xform t1 = xf_mul(&rx, &sc);
+  xform t = xf_mul(&tr, &t1);
+  char m[1024], a[4096], b[4096];
+  xform_json(&t, false, m, sizeof m);
+  snprintf(a, sizeof a, AREA_FMT,
+           "[{\"scale\": 0.3}, {\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 180}}, {\"translate\": [0, 0, 1]}]", "5");
+  snprintf(b, sizeof b, AREA_FMT, m, "5");
+  reload_case c = {.name = "area light to_world", .before = a, .after = b, .upd = {{"light.to_world", m}},
+                   .n_upd = 1, .classes = UPDATE_GEOMETRIC};
+  run_case(&c);
+}
+
+static void test_sphere_to_world(void) {
+  /* A sphere over a ground plate: a similarity (rotation, uniform scale,
+   * translation) is legal for a sphere. */
+  xform sc = xf_scale(v3(0.7, 0.7, 0.7)), rz = xf_rotate(v3(0, 0, 1), 40), tr = xf_translate(v3(-0.3, 0.4, 0.9));
+  xform t1 = xf_mul(&rz, &sc);
+  xform t = xf_mul(&tr, &t1);
+  char m[1024], a[4096], b[4096];
+  xform_json(&t, false, m, sizeof m);
+  const char *fmt = "{\"type\": \"scene\", " PERSP ", " SUN ","
+                    " \"ground\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 2}],"
+                    "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.4}},"
+                    " \"ball\": {\"type\": \"sphere\", \"to_world\": %s,"
+                    "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.8}}}";
+  snprintf(a, sizeof a, fmt, "[{\"scale\": 0.5}, {\"translate\": [0, 0, 0.5]}]");
+  snprintf(b, sizeof b, fmt, m);
+  reload_case c = {.name = "sphere to_world", .before = a, .after = b, .upd = {{"ball.to_world", m}},
+                   .n_upd = 1, .classes = UPDATE_GEOMETRIC};
+  run_case(&c);
+}
+
 /* ---- geometric cases ------------------------------------------------------------ */
 
 static void test_rectangle_to_world(void) {
@@ -405,9 +505,9 @@ static void test_rectangle_far_hdistant_no_target(void) {
 
 /* A 3x3-vertex ascii PLY grid over [-1,1]^2 (8 triangles), without normals
  * or texture coordinates; z of the centre vertex is `zc` and of the corner
- * (1,1) is `zk`. Values are multiples of 1/8 so the file's text and the
+ * (1,1) is `zk`; each cell is split along one diagonal or the other. Values are multiples of 1/8 so the file's text and the
  * update's doubles give the same floats. */
-static bool write_grid_ply(const char *path, double zc, double zk, double out_pos[27]) {
+static bool write_grid_ply(const char *path, double zc, double zk, bool flip_diagonals, double out_pos[27]) {
   FILE *f = fopen(path, "w");
   if (!f) return false;
   fprintf(f, "ply\nformat ascii 1.0\nelement vertex 9\nproperty float x\nproperty float y\nproperty float z\n"
@@ -424,7 +524,10 @@ static bool write_grid_ply(const char *path, double zc, double zk, double out_po
   for (int j = 0; j < 2; j++)
     for (int i = 0; i < 2; i++) {
       int v0 = j * 3 + i;
-      fprintf(f, "3 %d %d %d\n3 %d %d %d\n", v0, v0 + 1, v0 + 4, v0, v0 + 4, v0 + 3);
+      if (flip_diagonals)
+        fprintf(f, "3 %d %d %d\n3 %d %d %d\n", v0, v0 + 1, v0 + 3, v0 + 1, v0 + 4, v0 + 3);
+      else
+        fprintf(f, "3 %d %d %d\n3 %d %d %d\n", v0, v0 + 1, v0 + 4, v0, v0 + 4, v0 + 3);
     }
   return fclose(f) == 0;
 }
@@ -434,8 +537,8 @@ static void test_ply_vertex_positions(void) {
   snprintf(pa, sizeof pa, "/tmp/rsw_ptest_%ld_a.ply", (long)getpid());
   snprintf(pb, sizeof pb, "/tmp/rsw_ptest_%ld_b.ply", (long)getpid());
   double pos_a[27], pos_b[27];
-  REQUIRE(write_grid_ply(pa, 0, 0, pos_a), "write %s", pa);
-  REQUIRE(write_grid_ply(pb, 0.625, -0.375, pos_b), "write %s", pb);
+  REQUIRE(write_grid_ply(pa, 0, 0, false, pos_a), "write %s", pa);
+  REQUIRE(write_grid_ply(pb, 0.625, -0.375, false, pos_b), "write %s", pb);
   const char *fmt = "{\"type\": \"scene\", " PERSP ", " SUN ","
                     " \"m\": {\"type\": \"ply\", \"filename\": \"%s\","
                     "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.6}}}";
@@ -455,6 +558,56 @@ static void test_ply_vertex_positions(void) {
   unlink(pb);
 }
 
+static void test_ply_faces(void) {
+  /* Same vertices (a non-planar grid), the other diagonal in every cell:
+   * a topology change (that mesh's BVH rebuilt). */
+  char pa[256], pb[256];
+  snprintf(pa, sizeof pa, "/tmp/rsw_ptest_%ld_c.ply", (long)getpid());
+  snprintf(pb, sizeof pb, "/tmp/rsw_ptest_%ld_d.ply", (long)getpid());
+  double pos[27];
+  REQUIRE(write_grid_ply(pa, 0.75, -0.5, false, pos), "write %s", pa);
+  REQUIRE(write_grid_ply(pb, 0.75, -0.5, true, pos), "write %s", pb);
+  const char *fmt = "{\"type\": \"scene\", " PERSP ", " SUN ","
+                    " \"m\": {\"type\": \"ply\", \"filename\": \"%s\","
+                    "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.6}}}";
+  char a[4096], b[4096], v[1024];
+  snprintf(a, sizeof a, fmt, pa);
+  snprintf(b, sizeof b, fmt, pb);
+  size_t n = (size_t)snprintf(v, sizeof v, "[");
+  for (int j = 0; j < 2; j++)
+    for (int i = 0; i < 2; i++) {
+      int v0 = j * 3 + i;
+      n += (size_t)snprintf(v + n, sizeof v - n, "%s%d, %d, %d, %d, %d, %d", (i || j) ? ", " : "", v0, v0 + 1,
+                            v0 + 3, v0 + 1, v0 + 4, v0 + 3);
+    }
+  snprintf(v + n, sizeof v - n, "]");
+  reload_case c = {.name = "ply faces", .before = a, .after = b, .upd = {{"m.faces", v}}, .n_upd = 1,
+                   .classes = UPDATE_GEOMETRIC};
+  run_case(&c);
+  unlink(pa);
+  unlink(pb);
+}
+
+static void test_ply_to_world(void) {
+  char pa[256];
+  snprintf(pa, sizeof pa, "/tmp/rsw_ptest_%ld_e.ply", (long)getpid());
+  double pos[27];
+  REQUIRE(write_grid_ply(pa, 0.75, -0.5, false, pos), "write %s", pa);
+  xform rz = xf_rotate(v3(0, 0, 1), 25), tr = xf_translate(v3(0.2, 0.3, -0.1));
+  xform t = xf_mul(&tr, &rz);
+  char m[1024], a[4096], b[4096];
+  xform_json(&t, false, m, sizeof m);
+  const char *fmt = "{\"type\": \"scene\", " PERSP ", " SUN ","
+                    " \"m\": {\"type\": \"ply\", \"filename\": \"%s\", \"to_world\": %s,"
+                    "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.6}}}";
+  snprintf(a, sizeof a, fmt, pa, "[{\"scale\": 1}]");
+  snprintf(b, sizeof b, fmt, pa, m);
+  reload_case c = {.name = "ply to_world", .before = a, .after = b, .upd = {{"m.to_world", m}}, .n_upd = 1,
+                   .classes = UPDATE_GEOMETRIC};
+  run_case(&c);
+  unlink(pa);
+}
+
 int main(void) {
   RSW_TEST_RUN(test_diffuse_number);
   RSW_TEST_RUN(test_diffuse_rgb);
@@ -463,6 +616,10 @@ int main(void) {
   RSW_TEST_RUN(test_roughconductor_alpha);
   RSW_TEST_RUN(test_roughconductor_eta_k);
   RSW_TEST_RUN(test_mono_tabulated_reflectance);
+  RSW_TEST_RUN(test_checkerboard_color_and_to_uv);
+  RSW_TEST_RUN(test_constant_radiance);
+  RSW_TEST_RUN(test_area_radiance);
+  RSW_TEST_RUN(test_sampling_weight);
   RSW_TEST_RUN(test_directional_direction);
   RSW_TEST_RUN(test_directional_to_world);
   RSW_TEST_RUN(test_hdistant_direction);
@@ -471,5 +628,9 @@ int main(void) {
   RSW_TEST_RUN(test_rectangle_to_world);
   RSW_TEST_RUN(test_rectangle_far_hdistant_no_target);
   RSW_TEST_RUN(test_ply_vertex_positions);
+  RSW_TEST_RUN(test_ply_faces);
+  RSW_TEST_RUN(test_ply_to_world);
+  RSW_TEST_RUN(test_sphere_to_world);
+  RSW_TEST_RUN(test_area_light_to_world);
   RSW_TEST_END("test_update_reload");
 }
