@@ -888,6 +888,61 @@ static void test_bsphere_refresh(void) {
   scene_free(s);
 }
 
+/* ---- mono tables at the render's wavelength ------------------------------------ */
+
+static bool render_at(scene *s, double wl, film_image *out, rsw_err *err) {
+  render_opts o = {.size = sizeof o, .spp = 4, .seed = 3, .threads = 1, .wavelength = wl};
+  return render_sensor(s, &o, out, NULL, err) == RSW_OK;
+}
+
+static void test_mono_table_range(void) {
+  /* A tabulated value is evaluated at the render's wavelength by linear
+   * interpolation; outside the table it is an error, not zero (issue 3,
+   * item 5) — after an update as after a load. */
+  scene *s = tsup_load("{\"type\": \"scene\", \"cam\": {\"type\": \"hdistant\", \"target\": {\"type\": \"rectangle\"},"
+                       " \"film\": {\"type\": \"hdrfilm\", \"width\": 4, \"height\": 4, \"rfilter\": {\"type\": \"box\"}}},"
+                       " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1], \"irradiance\": 1},"
+                       " \"p\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}",
+                       "mono");
+  REQUIRE(s, "load");
+  update_report rep;
+  film_image img;
+  rsw_err err = {0};
+  if (upd1_ok(s, "p.bsdf.reflectance.value", "{\"wavelengths\": [400, 500], \"values\": [0.2, 0.6]}", &rep)) {
+    /* Zero-variance scene: L = rho(450) E / pi with rho(450) = 0.4. */
+    if (render_at(s, 450, &img, &err)) {
+      CHECK_REL(img.data[0], 0.4 / M_PI, 1e-5);
+      film_image_free(&img);
+    } else {
+      CHECK(false, "render at 450 nm inside the table failed: %s", err.msg);
+    }
+    err = (rsw_err){0};
+    bool ok = render_at(s, 650, &img, &err);
+    CHECK(!ok, "render at 650 nm outside the table [400, 500] must fail");
+    if (ok) film_image_free(&img);
+  }
+  if (upd1_ok(s, "p.bsdf.reflectance.value", "{\"type\": \"spectrum\", \"value\": [[600, 0.3], [700, 0.7]]}", &rep)) {
+    err = (rsw_err){0};
+    if (render_at(s, 650, &img, &err)) {
+      CHECK_REL(img.data[0], 0.5 / M_PI, 1e-5);
+      film_image_free(&img);
+    } else {
+      CHECK(false, "render at 650 nm inside the new table failed: %s", err.msg);
+    }
+  }
+  /* Back to a number. */
+  if (upd1_ok(s, "p.bsdf.reflectance.value", "0.25", &rep)) {
+    err = (rsw_err){0};
+    if (render_at(s, 450, &img, &err)) {
+      CHECK_REL(img.data[0], 0.25 / M_PI, 1e-5);
+      film_image_free(&img);
+    } else {
+      CHECK(false, "render after setting a number failed: %s", err.msg);
+    }
+  }
+  scene_free(s);
+}
+
 int main(void) {
   snprintf(ply_plain, sizeof ply_plain, "/tmp/rsw_params_%ld_plain.ply", (long)getpid());
   snprintf(ply_attrs, sizeof ply_attrs, "/tmp/rsw_params_%ld_attrs.ply", (long)getpid());
@@ -906,6 +961,7 @@ int main(void) {
   RSW_TEST_RUN(test_update_classes_counters);
   RSW_TEST_RUN(test_update_by_alias_and_search);
   RSW_TEST_RUN(test_bsphere_refresh);
+  RSW_TEST_RUN(test_mono_table_range);
   unlink(ply_plain);
   unlink(ply_attrs);
   RSW_TEST_END("test_params");

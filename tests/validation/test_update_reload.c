@@ -608,6 +608,57 @@ static void test_ply_to_world(void) {
   unlink(pa);
 }
 
+static void test_hdistant_direction_rotated(void) {
+  /* As above from a to_world rotated about z: the new local +x is the old
+   * one projected orthogonally to the new axis (up = cross(d, x_old)). */
+  xform rz = xf_rotate(v3(0, 0, 1), 30);
+  char m[1024], a[4096], b[4096];
+  xform_json(&rz, false, m, sizeof m);
+  vec3 d = v3_norm(v3(-0.4, 0.25, 1));
+  vec3 x_old = v3_norm(xf_vector(&rz, v3(1, 0, 0)));
+  vec3 up = v3_norm(v3_cross(d, x_old));
+  snprintf(a, sizeof a,
+           "{\"type\": \"scene\", \"cam\": {\"type\": \"hdistant\", \"target\": {\"type\": \"rectangle\"},"
+           "   \"to_world\": %s, " SAMPLER ", " FILM16 "}, " SUN ","
+           " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"roughconductor\", \"alpha\": 0.3}}}",
+           m);
+  snprintf(b, sizeof b,
+           "{\"type\": \"scene\", \"cam\": {\"type\": \"hdistant\", \"target\": {\"type\": \"rectangle\"},"
+           "   \"to_world\": [{\"lookat\": {\"origin\": [0, 0, 0], \"target\": [%.17g, %.17g, %.17g],"
+           "   \"up\": [%.17g, %.17g, %.17g]}}], " SAMPLER ", " FILM16 "}, " SUN ","
+           " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"roughconductor\", \"alpha\": 0.3}}}",
+           d.x, d.y, d.z, up.x, up.y, up.z);
+  char v[256];
+  snprintf(v, sizeof v, "[%.17g, %.17g, %.17g]", d.x, d.y, d.z);
+  reload_case c = {.name = "hdistant direction from a rotated to_world", .before = a, .after = b,
+                   .upd = {{"cam.direction", v}}, .n_upd = 1, .classes = UPDATE_SPECTRAL};
+  run_case(&c);
+}
+
+static void test_distant_ray_offset_refresh(void) {
+  /* distant with a point target puts its origins 2R back along the ray,
+   * R the scene's bounding radius, resolved at load. Moving `blocker` from
+   * below the plate to high above the target changes R; with the load-time
+   * R the origins would start below the blocker and see the plate, with
+   * the refreshed one (as a reload) they start above it and see it. */
+  const char *fmt = "{\"type\": \"scene\", \"cam\": {\"type\": \"distant\", \"direction\": [0, 0, -1],"
+                    "   \"target\": [0.3, 0.3, 0], \"sampler\": {\"type\": \"independent\", \"sample_count\": 4},"
+                    "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},"
+                    " " SUN ","
+                    " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}},"
+                    " \"blocker\": {\"type\": \"rectangle\", \"to_world\": %s,"
+                    "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.9}}}";
+  xform sc = xf_scale(v3(0.2, 0.2, 1)), tr = xf_translate(v3(0.3, 0.3, 4));
+  xform t = xf_mul(&tr, &sc);
+  char m[1024], a[4096], b[4096];
+  xform_json(&t, false, m, sizeof m);
+  snprintf(a, sizeof a, fmt, "[{\"translate\": [0, 0, -2]}]");
+  snprintf(b, sizeof b, fmt, m);
+  reload_case c = {.name = "distant ray_offset after a geometric update", .before = a, .after = b,
+                   .upd = {{"blocker.to_world", m}}, .n_upd = 1, .classes = UPDATE_GEOMETRIC};
+  run_case(&c);
+}
+
 int main(void) {
   RSW_TEST_RUN(test_diffuse_number);
   RSW_TEST_RUN(test_diffuse_rgb);
@@ -623,7 +674,9 @@ int main(void) {
   RSW_TEST_RUN(test_directional_direction);
   RSW_TEST_RUN(test_directional_to_world);
   RSW_TEST_RUN(test_hdistant_direction);
+  RSW_TEST_RUN(test_hdistant_direction_rotated);
   RSW_TEST_RUN(test_distant_direction);
+  RSW_TEST_RUN(test_distant_ray_offset_refresh);
   RSW_TEST_RUN(test_perspective_to_world);
   RSW_TEST_RUN(test_rectangle_to_world);
   RSW_TEST_RUN(test_rectangle_far_hdistant_no_target);
