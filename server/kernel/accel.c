@@ -165,6 +165,7 @@ static RTCGeometry shape_geometry(accel *a, const shape *s) {
     }
     memcpy(v, s->mesh.pos, 3 * (size_t)s->mesh.n_verts * sizeof(float));
     memcpy(ix, s->mesh.faces, 3 * (size_t)s->mesh.n_faces * sizeof(unsigned));
+    rtcSetGeometryBuildQuality(g, RTC_BUILD_QUALITY_HIGH);
     a->bytes += 3 * (size_t)s->mesh.n_verts * sizeof(float) + 3 * (size_t)s->mesh.n_faces * sizeof(unsigned);
   } else {
     g = rtcNewGeometry(a->device, RTC_GEOMETRY_TYPE_USER);
@@ -210,7 +211,16 @@ rsw_status accel_build(scene *s, rsw_err *err) {
     RTCScene sub = rtcNewScene(a->device);
     if (!sub) return embree_fail(a, err, sh->base.id, "cannot create a shape scene");
     a->sub[i] = sub;
-    rtcSetSceneBuildQuality(sub, RTC_BUILD_QUALITY_HIGH);
+    /* Meshes: Embree 3.13 honours a per-geometry build quality, and so
+     * RTC_BUILD_QUALITY_REFIT when vertices move, only in a dynamic scene
+     * of build quality LOW (its two-level builder); the mesh's own BVH is
+     * still built with quality HIGH (shape_geometry). */
+    if (sh->geom == GEOM_MESH) {
+      rtcSetSceneFlags(sub, RTC_SCENE_FLAG_DYNAMIC);
+      rtcSetSceneBuildQuality(sub, RTC_BUILD_QUALITY_LOW);
+    } else {
+      rtcSetSceneBuildQuality(sub, RTC_BUILD_QUALITY_HIGH);
+    }
     RTCGeometry g = shape_geometry(a, sh);
     if (!g) return embree_fail(a, err, sh->base.id, "cannot create geometry");
     rtcAttachGeometryByID(sub, g, 0);

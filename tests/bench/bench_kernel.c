@@ -17,10 +17,12 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "../../server/kernel/accel.h"
 #include "../../server/kernel/render.h"
+#include "../../server/kernel/scene/params.h"
 #include "../../server/kernel/scene/scene.h"
 
 static int bench_threads(void) {
@@ -141,6 +143,113 @@ static int bench_mesh(int threads) {
   return rc;
 }
 
+static double now_s(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+static int cmp_double(const void *a, const void *b) {
+  double x = *(const double *)a, y = *(const double *)b;
+  return x < y ? -1 : x > y;
+}
+
+static double median(double *v, size_t n) {
+  qsort(v, n, sizeof *v, cmp_double);
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+/* params_1m: the cost of parameter updates on a resident 1M-triangle
+ * scene against the cost of loading it. Targets: a spectral update within
+ * 50 us and at least 10^4 times cheaper than a load; a refit within 0.3
+ * of the load time. */
+static int bench_params(void) {
+  char dir[] = "/tmp/rsw-bench-XXXXXX";
+  if (!mkdtemp(dir)) return 1;
+  char ply[256], json[4096];
+  snprintf(ply, sizeof ply, "%s/terrain.ply", dir);
+  if (write_terrain(ply, 709)) return 1;
+  snprintf(json, sizeof json,
+           "{\"type\": \"scene\","
+           " \"cam\": {\"type\": \"perspective\", \"fov\": 50,"
+           "   \"to_world\": [{\"lookat\": {\"origin\": [0, -2.2, 1.2], \"target\": [0, 0, 0], \"up\": [0, 0, 1]}}],"
+           "   \"film\": {\"type\": \"hdrfilm\", \"width\": 64, \"height\": 64}},"
+           " \"sun\": {\"type\": \"directional\", \"direction\": [0.4, 0.3, -0.8]},"
+           " \"terrain\": {\"type\": \"ply\", \"filename\": \"%s\","
+           "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.4}}}",
+           ply);
+  rsw_err err = {0};
+  scene *s = NULL;
+  scene_load_opts lo = {.size = sizeof lo};
+  double t0 = now_s();
+  if (scene_load_memory(json, strlen(json), "params_1m", false, &lo, &s, &err)) {
+    fprintf(stderr, "bench params_1m: %s: %s\n", err.where, err.msg);
+    return 1;
+  }
+  double load_s = now_s() - t0;
+  int rc = 0;
+  /* Spectral: alternate between two values (equal values are no-ops). */
+  enum { N_SPECTRAL = 10000 };
+  static double us[N_SPECTRAL];
+  param_update up = {.key = "terrain.bsdf.reflectance.value", .value = {.kind = PV_NUMBER}};
+  for (int i = 0; i < N_SPECTRAL && !rc; i++) {
+    up.value.num = (i & 1) ? 0.4 : 0.5;
+    double a = now_s();
+    if (scene_update(s, &up, 1, NULL, &err)) rc = 1;
+    us[i] = (now_s() - a) * 1e6;
+  }
+  double spectral_us = median(us, N_SPECTRAL);
+  /* to_world: instance transform, top-level rebuild only. */
+  double xf_s[5];
+  double m1[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1}, m2[16] = {0, -1, 0, 0.1, 1, 0, 0, 0, 0, 0, 1, 0.05, 0, 0, 0, 1};
+  param_update ux = {.key = "terrain.to_world", .value = {.kind = PV_ARRAY, .n = 16}};
+  for (int i = 0; i < 5 && !rc; i++) {
+    ux.value.arr = (i & 1) ? m1 : m2;
+    double a = now_s();
+    if (scene_update(s, &ux, 1, NULL, &err)) rc = 1;
+    xf_s[i] = now_s() - a;
+  }
+  /* vertex_positions: same count, object space; refit of the mesh's BVH. */
+  const shape *sh = s->shapes[0];
+  size_t nv = sh->mesh.n_verts;
+  double *pos[2];
+  double vx_s[3];
+  unsigned refits = 0;
+  pos[0] = malloc(3 * nv * sizeof(double));
+  pos[1] = malloc(3 * nv * sizeof(double));
+  for (size_t i = 0; pos[0] && pos[1] && i < 3 * nv; i++) {
+    pos[0][i] = sh->mesh.pos[i] * (i % 3 == 2 ? 1.5 : 1.0);
+    pos[1][i] = sh->mesh.pos[i] * (i % 3 == 2 ? 0.5 : 1.0);
+  }
+  param_update uv = {.key = "terrain.vertex_positions", .value = {.kind = PV_ARRAY, .n = 3 * nv}};
+  for (int i = 0; i < 3 && !rc && pos[0] && pos[1]; i++) {
+    uv.value.arr = pos[i & 1];
+    update_report rep;
+    double a = now_s();
+    if (scene_update(s, &uv, 1, &rep, &err)) rc = 1;
+    vx_s[i] = now_s() - a;
+    refits += rep.refits;
+  }
+  free(pos[0]);
+  free(pos[1]);
+  if (rc) {
+    fprintf(stderr, "bench params_1m: %s: %s\n", err.where, err.msg);
+  } else {
+    double xf = median(xf_s, 5), vx = median(vx_s, 3);
+    printf("{\"bench\": \"params_1m\", \"triangles\": %u, \"load_s\": %.4f, \"spectral_update_us\": %.3f, "
+           "\"to_world_update_s\": %.6f, \"vertex_update_s\": %.4f, \"load_over_spectral_update\": %.4g, "
+           "\"vertex_update_over_load\": %.3f, \"refits\": %u, \"target_spectral_update_us\": 50, "
+           "\"meets_target\": %s}\n",
+           sh->mesh.n_faces, load_s, spectral_us, xf, vx, load_s / (spectral_us * 1e-6), vx / load_s, refits,
+           spectral_us <= 50 && load_s / (spectral_us * 1e-6) >= 1e4 && vx <= 0.3 * load_s ? "true" : "false");
+    fflush(stdout);
+  }
+  scene_free(s);
+  remove(ply);
+  rmdir(dir);
+  return rc;
+}
+
 /* $RSW_BENCH_ONLY=name runs one benchmark (for profiling). */
 static bool wanted(const char *name) {
   const char *only = getenv("RSW_BENCH_ONLY");
@@ -152,5 +261,6 @@ int main(void) {
   int rc = 0;
   if (wanted("seed_hdistant")) rc |= bench_seed(threads);
   if (wanted("mesh_1m")) rc |= bench_mesh(threads);
+  if (wanted("params_1m")) rc |= bench_params();
   return rc;
 }
