@@ -302,9 +302,19 @@ typedef struct shape {
   bsdf *bsdf;
   emitter *emitter; /* area light, or NULL */
   mesh mesh;        /* GEOM_MESH */
-  /* Derived by shape_finalize(): */
-  double area;      /* world-space surface area */
+  bool sampled;     /* positions are sampled on it (a sensor's target) */
+  /* Derived by shape_finalize(). A mesh's area and area cdf are computed
+   * only when something samples it (an area emitter, a sensor target): an
+   * O(faces) pass that plain geometry does not need. */
+  double area;      /* world-space surface area (0 for unsampled meshes) */
   double *tri_cdf;  /* meshes: cumulative world areas, n_faces entries */
+  uint32_t tri_cdf_n; /* entries allocated in tri_cdf */
+  /* A cdf computed ahead by a parameter update's validation, installed by
+   * parameters_changed instead of recomputing (scene/params.c). */
+  double *tri_cdf_next;
+  uint32_t tri_cdf_next_n;
+  double area_next;
+  bool cdf_staged;
   unsigned index;   /* position in scene->shapes */
 } shape;
 

@@ -819,6 +819,7 @@ typedef struct staged {
   xform xf;
   spectrum spec; /* borrowed from the item (copied on apply) */
   vec3 vec;
+  float *fpos;   /* vertex_positions converted to float (owned until applied) */
   bool changed;
 } staged;
 
@@ -926,9 +927,14 @@ static rsw_status validate(const scene *s, staged *sg, const staged *all, size_t
                         "'%s' takes %u numbers (3 per vertex); changing the vertex count needs 'faces' in the same update",
                         key, 3 * m->n_verts);
       if (v->n / 3 > MESH_MAX_ELEMENTS) return rsw_fail(err, RSW_ERR_LIMIT, key, "'%s': too many vertices", key);
-      for (size_t i = 0; i < v->n; i++)
-        if (!isfinite(v->arr[i]) || fabs(v->arr[i]) > 3.0e38)
-          return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': coordinate %zu is not a finite float", key, i);
+      {
+        /* Branch-free scan first (vectorises), then locate the culprit. */
+        int bad = 0;
+        for (size_t i = 0; i < v->n; i++) bad |= !(fabs(v->arr[i]) <= 3.0e38);
+        for (size_t i = 0; bad && i < v->n; i++)
+          if (!(fabs(v->arr[i]) <= 3.0e38))
+            return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': coordinate %zu is not a finite float", key, i);
+      }
       break;
     case MB_FACES:
       if (!v->n || v->n % 3 || v->n / 3 > MESH_MAX_ELEMENTS)
@@ -950,8 +956,9 @@ static rsw_status validate(const scene *s, staged *sg, const staged *all, size_t
     }
     sg->changed = true;
     if (e->buf == MB_POSITIONS && v->n == 3 * (size_t)m->n_verts) {
-      sg->changed = false;
-      for (size_t i = 0; i < v->n && !sg->changed; i++) sg->changed = (float)v->arr[i] != m->pos[i];
+      int diff = 0;
+      for (size_t i = 0; i < v->n; i++) diff |= (float)v->arr[i] != m->pos[i];
+      sg->changed = diff != 0;
     } else if (e->buf == MB_FACES && v->n == 3 * (size_t)m->n_faces) {
       sg->changed = false;
       for (size_t i = 0; i < v->n && !sg->changed; i++) sg->changed = (uint32_t)v->arr[i] != m->faces[i];
@@ -1036,29 +1043,72 @@ rsw_status scene_update(scene *s, const param_update *items, size_t n, update_re
     const entry *e = &s->params->e[sg[i].index];
     if (!sg[i].changed || e->kind != EK_MESHBUF || (e->buf != MB_POSITIONS && e->buf != MB_FACES)) continue;
     const shape *sh = e->sh;
-    const double *pos = NULL, *fc = NULL;
+    if (!sh->emitter && !sh->sampled) continue; /* nothing samples it: no area needed */
+    const double *fc = NULL;
     size_t nf = sh->mesh.n_faces;
     const xform *xf = &sh->to_world;
+    const float *fpos = NULL;
     for (size_t k = 0; k < n; k++) {
       const entry *o = &s->params->e[sg[k].index];
       if (o->owner != e->owner) continue;
-      if (o->kind == EK_MESHBUF && o->buf == MB_POSITIONS) pos = sg[k].item->value.arr;
+      if (o->kind == EK_MESHBUF && o->buf == MB_POSITIONS && sg[k].changed) {
+        /* Convert once (a sequential pass); the area loop then gathers
+         * floats, and applying the update swaps this buffer in. */
+        const param_value *pv = &sg[k].item->value;
+        if (!sg[k].fpos) {
+          sg[k].fpos = malloc(pv->n * sizeof(float));
+          if (!sg[k].fpos) {
+            st = rsw_fail(err, RSW_ERR_NOMEM, sg[k].item->key, "out of memory");
+            break;
+          }
+          for (size_t q = 0; q < pv->n; q++) sg[k].fpos[q] = (float)pv->arr[q];
+        }
+        fpos = sg[k].fpos;
+      }
       if (o->kind == EK_MESHBUF && o->buf == MB_FACES) fc = sg[k].item->value.arr, nf = sg[k].item->value.n / 3;
       if (o->kind == EK_TRANSFORM) xf = &sg[k].xf;
+    }
+    if (st) break;
+    /* The new area cdf, computed once here and installed by the shape's
+     * parameters_changed (same arithmetic as shape_finalize, so the result
+     * equals a reload's). Only the transform changing is left to
+     * shape_finalize. */
+    shape *msh = e->sh;
+    if (msh->tri_cdf_next_n < nf) {
+      double *c = realloc(msh->tri_cdf_next, nf * sizeof(double));
+      if (!c) {
+        st = rsw_fail(err, RSW_ERR_NOMEM, sg[i].item->key, "out of memory");
+        break;
+      }
+      msh->tri_cdf_next = c;
+      msh->tri_cdf_next_n = (uint32_t)nf;
     }
     double area = 0, det = xf_abs_det3(xf);
     for (size_t f = 0; f < nf; f++) {
       vec3 p[3];
       for (int c = 0; c < 3; c++) {
         size_t vi = fc ? (size_t)fc[3 * f + c] : sh->mesh.faces[3 * f + c];
-        p[c] = pos ? v3((float)pos[3 * vi], (float)pos[3 * vi + 1], (float)pos[3 * vi + 2])
-                   : v3(sh->mesh.pos[3 * vi], sh->mesh.pos[3 * vi + 1], sh->mesh.pos[3 * vi + 2]);
+        const float *q = fpos ? &fpos[3 * vi] : &sh->mesh.pos[3 * vi];
+        p[c] = v3(q[0], q[1], q[2]);
       }
       area += tri_world_area(xf, det, p[0], p[1], p[2]);
+      msh->tri_cdf_next[f] = area;
     }
-    if (!(area > 0) || !isfinite(area))
+    if (!(area > 0) || !isfinite(area)) {
       st = rsw_fail(err, RSW_ERR_INVALID, sg[i].item->key, "'%s': the mesh would have zero or non-finite area",
                     sg[i].item->key);
+    } else {
+      msh->area_next = area;
+      msh->tri_cdf_next_n = (uint32_t)nf; /* entries valid (buffer may be larger) */
+      msh->cdf_staged = true;
+    }
+  }
+  if (st) {
+    for (size_t i = 0; i < n; i++) {
+      const entry *e = &s->params->e[sg[i].index];
+      if (e->kind == EK_MESHBUF) e->sh->cdf_staged = false;
+      free(sg[i].fpos);
+    }
   }
   if (st) {
     free(sg);
@@ -1083,7 +1133,18 @@ rsw_status scene_update(scene *s, const param_update *items, size_t n, update_re
       if (!uniform_texture_set_spectrum(e->tex, &sg[i].spec))
         st = rsw_fail(err, RSW_ERR_NOMEM, e->key, "out of memory");
       break;
-    case EK_MESHBUF: st = apply_meshbuf(e, &sg[i].item->value, err); break;
+    case EK_MESHBUF:
+      if (sg[i].fpos) {
+        /* Positions were converted during validation: swap them in. */
+        mesh *m = &e->sh->mesh;
+        free(m->pos);
+        m->pos = sg[i].fpos;
+        m->n_verts = (uint32_t)(sg[i].item->value.n / 3);
+        sg[i].fpos = NULL;
+      } else {
+        st = apply_meshbuf(e, &sg[i].item->value, err);
+      }
+      break;
     case EK_BOOL: break;
     }
     if (e->cls == UPDATE_GEOMETRIC) geometry = true;
@@ -1133,6 +1194,7 @@ rsw_status scene_update(scene *s, const param_update *items, size_t n, update_re
     }
     s->emitter_weight_sum = sum;
   }
+  for (size_t i = 0; i < n; i++) free(sg[i].fpos);
   free(sg);
   if (report) {
     accel_counters after;

@@ -73,6 +73,8 @@ rsw_status sensor_read_target(loader *ld, node *n, ray_target *t) {
                        "%s: 'target' must be a point or a shape", n->type);
       r.kind = RAY_TARGET_SHAPE;
       r.shape = (const shape *)o;
+      st = shape_enable_sampling((shape *)o, ld->err, n->loc);
+      if (st != RSW_OK) return st;
     } else {
       return ld_fail(ld, n, "target", RSW_ERR_TYPE,
                      "%s: unsupported 'target' type (must be a point or a shape)",

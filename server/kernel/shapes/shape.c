@@ -43,9 +43,12 @@ static rsw_status shape_check_transform(const object *o, const xform *t, const c
   shape tmp = *s;
   tmp.to_world = *t;
   tmp.tri_cdf = NULL;
+  tmp.tri_cdf_n = 0;
+  tmp.tri_cdf_next = NULL;
   tmp.emitter = NULL;
   /* shape_finalize on a copy without its cdf computes only the area. */
   if (s->geom == GEOM_MESH) {
+    if (!s->emitter && !s->sampled) return RSW_OK; /* area not needed */
     double area = 0, det = xf_abs_det3(t);
     const mesh *m = &s->mesh;
     for (uint32_t f = 0; f < m->n_faces; f++) {
@@ -80,8 +83,23 @@ void shape_traverse(object *o, param_visitor *v) {
 }
 
 void shape_parameters_changed(object *o) {
+  shape *s = (shape *)o;
+  if (s->cdf_staged) {
+    /* The update's validation already computed the new area cdf (the same
+     * arithmetic as shape_finalize): swap it in. */
+    double *t = s->tri_cdf;
+    uint32_t tn = s->tri_cdf_n;
+    s->tri_cdf = s->tri_cdf_next;
+    s->tri_cdf_n = s->tri_cdf_next_n;
+    s->tri_cdf_next = t;
+    s->tri_cdf_next_n = tn;
+    s->area = s->area_next;
+    s->cdf_staged = false;
+    if (s->emitter) s->emitter->shape = s;
+    return;
+  }
   /* Validated before the update was applied: this cannot fail. */
-  shape_finalize((shape *)o, NULL, "");
+  shape_finalize(s, NULL, "");
 }
 
 void shape_release(shape *s) {
@@ -90,8 +108,12 @@ void shape_release(shape *s) {
   free(s->mesh.uv);
   free(s->mesh.faces);
   free(s->tri_cdf);
+  free(s->tri_cdf_next);
   memset(&s->mesh, 0, sizeof s->mesh);
   s->tri_cdf = NULL;
+  s->tri_cdf_n = 0;
+  s->tri_cdf_next = NULL;
+  s->tri_cdf_next_n = 0;
 }
 
 void shape_destroy(object *o) {
@@ -111,21 +133,34 @@ rsw_status shape_finalize(shape *s, rsw_err *err, const char *where) {
   case GEOM_MESH: {
     const mesh *m = &s->mesh;
     if (m->n_faces == 0) return rsw_fail(err, RSW_ERR_INVALID, where, "mesh has no faces");
-    free(s->tri_cdf);
-    s->tri_cdf = malloc((size_t)m->n_faces * sizeof(double));
-    if (!s->tri_cdf) return rsw_fail(err, RSW_ERR_NOMEM, where, "out of memory");
+    /* Indices and coordinates are checked whatever happens next: Embree
+     * would read out of bounds. */
+    uint32_t worst = 0;
+    for (size_t i = 0; i < 3 * (size_t)m->n_faces; i++) worst = m->faces[i] > worst ? m->faces[i] : worst;
+    if (worst >= m->n_verts)
+      return rsw_fail(err, RSW_ERR_INVALID, where, "a face references vertex %u of %u", worst, m->n_verts);
+    int bad = 0;
+    for (size_t i = 0; i < 3 * (size_t)m->n_verts; i++) bad |= !(fabsf(m->pos[i]) <= 3.0e38f);
+    if (bad) return rsw_fail(err, RSW_ERR_INVALID, where, "mesh has a non-finite vertex");
+    if (!s->emitter && !s->sampled) {
+      s->area = 0;
+      return RSW_OK;
+    }
+    if (!s->tri_cdf || s->tri_cdf_n != m->n_faces) {
+      /* Reused when the face count is unchanged (vertex updates): a fresh
+       * buffer would page-fault in on every update. */
+      double *cdf = realloc(s->tri_cdf, (size_t)m->n_faces * sizeof(double));
+      if (!cdf) return rsw_fail(err, RSW_ERR_NOMEM, where, "out of memory");
+      s->tri_cdf = cdf;
+      s->tri_cdf_n = m->n_faces;
+    }
     double acc = 0, det = xf_abs_det3(&s->to_world);
     for (uint32_t f = 0; f < m->n_faces; f++) {
       const uint32_t *ix = &m->faces[3 * (size_t)f];
-      for (int k = 0; k < 3; k++)
-        if (ix[k] >= m->n_verts)
-          return rsw_fail(err, RSW_ERR_INVALID, where, "face %u references vertex %u of %u", f, ix[k], m->n_verts);
       acc += tri_world_area(&s->to_world, det, mesh_vertex(m, ix[0]), mesh_vertex(m, ix[1]), mesh_vertex(m, ix[2]));
       s->tri_cdf[f] = acc;
     }
     s->area = acc;
-    for (uint32_t i = 0; i < 3 * m->n_verts; i++)
-      if (!isfinite(m->pos[i])) return rsw_fail(err, RSW_ERR_INVALID, where, "mesh has a non-finite vertex");
     break;
   }
   case GEOM_SPHERE: {
@@ -155,8 +190,15 @@ rsw_status shape_finalize(shape *s, rsw_err *err, const char *where) {
   }
   }
   if (!(s->area > 0) || !isfinite(s->area))
-    return rsw_fail(err, RSW_ERR_INVALID, where, "shape has zero or non-finite area");
+    return rsw_fail(err, RSW_ERR_INVALID, where, "%s has zero or non-finite area, but is sampled (%s)",
+                    s->base.id ? s->base.id : "shape", s->emitter ? "an area emitter" : "a sensor target");
   return RSW_OK;
+}
+
+rsw_status shape_enable_sampling(shape *s, rsw_err *err, const char *where) {
+  if (s->sampled) return RSW_OK;
+  s->sampled = true;
+  return shape_finalize(s, err, where);
 }
 
 /* ---- sampling ---------------------------------------------------------------- */

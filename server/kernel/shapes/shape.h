@@ -46,6 +46,10 @@ static inline double tri_world_area(const xform *t, double abs_det, vec3 p0, vec
   return 0.5 * abs_det * v3_len(xf_normal(t, v3_cross(v3_sub(p1, p0), v3_sub(p2, p0))));
 }
 
+/* Mark a shape as sampled (a sensor target) and compute what sampling
+ * needs; fails when it has no area. */
+rsw_status shape_enable_sampling(shape *s, rsw_err *err, const char *where);
+
 /* Free a shape's owned geometry (used by every shape plugin's destroy). */
 void shape_release(shape *s);
 
