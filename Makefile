@@ -25,7 +25,7 @@ WARN += -Werror
 endif
 
 CPPFLAGS := -Iinclude -Iserver -D_GNU_SOURCE -MMD -MP
-CFLAGS := -std=c11 $(OPT) -g $(WARN) $(SANFLAGS) -fPIC
+CFLAGS := -std=c11 $(OPT) -g -fno-math-errno $(WARN) $(SANFLAGS) -fPIC
 LDFLAGS := $(SANFLAGS)
 LIBS := -lembree3 -lOpenEXRCore -lexpat -lcjson -lpthread -lm
 
