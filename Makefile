@@ -28,12 +28,14 @@ CPPFLAGS := -Iinclude -Iserver -D_GNU_SOURCE -MMD -MP
 CFLAGS := -std=c11 $(OPT) -g -fno-math-errno $(WARN) $(SANFLAGS) -fPIC
 LDFLAGS := $(SANFLAGS)
 LIBS := -lembree3 -lOpenEXRCore -lexpat -lcjson -lpthread -lm
+DAEMON_LIBS := -lmicrohttpd -lcrypto
+TEST_LIBS := -lcurl
 
 KERNEL_SRC := $(shell find server/kernel -name '*.c' | sort)
 KERNEL_OBJ := $(KERNEL_SRC:%.c=$(BUILD)/obj/%.o)
 KERNEL_LIB := $(BUILD)/lib/librswkernel.a
 
-DAEMON_SRC := server/main.c
+DAEMON_SRC := server/main.c $(shell find server/service server/http -name '*.c' 2>/dev/null | sort)
 DAEMON_OBJ := $(DAEMON_SRC:%.c=$(BUILD)/obj/%.o)
 
 TEST_SUPPORT_SRC := $(wildcard tests/support/*.c)
@@ -62,7 +64,7 @@ $(KERNEL_LIB): $(KERNEL_OBJ)
 
 $(BUILD)/bin/raysweepd: $(DAEMON_OBJ) $(KERNEL_LIB)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $(DAEMON_OBJ) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS)
+	$(CC) $(LDFLAGS) -o $@ $(DAEMON_OBJ) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS) $(DAEMON_LIBS)
 
 $(BUILD)/tests/%: $(BUILD)/obj/tests/unit/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
 	@mkdir -p $(dir $@)
@@ -74,11 +76,11 @@ $(BUILD)/tests/%: $(BUILD)/obj/tests/validation/%.o $(TEST_SUPPORT_OBJ) $(KERNEL
 
 $(BUILD)/tests/%: $(BUILD)/obj/tests/integration/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS)
+	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS) $(TEST_LIBS)
 
 $(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS)
+	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS) $(TEST_LIBS)
 
 test: deps $(BUILD)/bin/raysweepd $(TEST_BIN)
 	@RSW_BIN_DIR=$(BUILD)/bin BUILD=$(BUILD) SAN=$(SAN) tests/run.sh $(TEST_BIN)

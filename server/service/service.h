@@ -1,0 +1,129 @@
+/* The service layer of raysweepd: resident scenes, blobs, parameter
+ * updates, synchronous renders and jobs of kernel contexts. No HTTP types:
+ * server/http/ translates requests into these calls and their results and
+ * errors into responses (see /work/notes/api-spec.md, proto/openapi.yaml).
+ *
+ * Every function is thread-safe unless noted. Errors come back as an
+ * rsw_status with an svc_error naming the place (JSON pointer, parameter
+ * key) and, for unknown keys, candidate keys. */
+#ifndef RSW_SERVICE_H
+#define RSW_SERVICE_H
+
+#include <stdatomic.h>
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "../kernel/core/error.h"
+#include "../kernel/render.h"
+
+typedef struct service service;
+
+typedef struct svc_error {
+  rsw_err err;            /* code, where (pointer or key), message */
+  int http_status;        /* the status the HTTP layer should answer with
+                             (0: derive from err.code via rsw_status_http) */
+  char key[256];          /* parameter key when the error is about one */
+  char candidates[3][256];/* closest keys for an unknown key ("" unused) */
+  int retry_after_s;      /* for 429 */
+} svc_error;
+
+typedef struct service_opts {
+  size_t size;                 /* sizeof(service_opts) */
+  int render_threads;          /* 0: all cores */
+  const char *data_root;       /* plain file names in scenes resolve only
+                                  inside it (NULL: none allowed) */
+  const char *blob_dir;        /* where blobs are stored (created) */
+  size_t max_queue;            /* queued jobs before 429 (default 64) */
+  double result_ttl_s;         /* finished jobs' results live this long
+                                  (default 3600) */
+  uint64_t max_pixel_samples;  /* width*height*spp*sensors per request
+                                  (default 2^32) */
+} service_opts;
+
+rsw_status service_new(const service_opts *opts, service **out, rsw_err *err);
+/* Cancels running work, joins the workers, frees everything. NULL ok. */
+void service_free(service *svc);
+/* Stop accepting work (ready goes false); running jobs are cancelled. */
+void service_shutdown(service *svc);
+bool service_ready(const service *svc);
+
+/* ---- JSON documents ---------------------------------------------------------
+ * Results that are JSON documents come back as malloc'ed, NUL-terminated
+ * strings (*json_out, free()). */
+
+/* GET /v1 body. */
+char *service_info_json(service *svc);
+/* GET /metrics body (Prometheus text). http_requests is maintained by the
+ * HTTP layer through service_count_request. */
+char *service_metrics_text(service *svc);
+void service_count_request(service *svc, const char *route, int status);
+
+/* ---- scenes ------------------------------------------------------------------ */
+
+/* Load a scene from a request body; is_xml picks the reader. variant may be
+ * NULL. On success *created tells whether it is new (201) or was already
+ * resident (200, no work done) and *json_out is the SceneSummary. */
+rsw_status service_scene_post(service *svc, const char *body, size_t len, bool is_xml, const char *variant,
+                              bool *created, char **id_out, char **json_out, svc_error *e);
+/* Load a scene file at startup (--scene) or the embedded default. */
+rsw_status service_scene_load_file(service *svc, const char *path, char **id_out, svc_error *e);
+rsw_status service_scene_load_text(service *svc, const char *text, size_t len, bool is_xml, const char *name,
+                                   char **id_out, svc_error *e);
+rsw_status service_scene_list(service *svc, char **json_out, svc_error *e);
+rsw_status service_scene_get(service *svc, const char *id, char **json_out, svc_error *e);
+rsw_status service_scene_delete(service *svc, const char *id, bool force, svc_error *e);
+
+/* GET params: *revision_out is the base revision (the ETag). */
+rsw_status service_params_get(service *svc, const char *id, const char *match, const char *cls,
+                              char **json_out, uint64_t *revision_out, svc_error *e);
+/* PATCH params: body is a JSON object {key: value}. if_match < 0: none. */
+rsw_status service_params_patch(service *svc, const char *id, const char *body, size_t len, int64_t if_match,
+                                char **json_out, uint64_t *revision_out, svc_error *e);
+
+/* A film produced by a render, with its context. */
+typedef struct svc_film {
+  film_image img;
+  char scene[65];
+  uint64_t revision;
+  char context[72];
+  char sensor[256];
+} svc_film;
+void svc_film_free(svc_film *f);
+
+/* POST :render (body: RenderRequest). Blocks until done or timeout_s. */
+rsw_status service_render(service *svc, const char *id, const char *body, size_t len, svc_film *out,
+                          svc_error *e);
+
+/* GET sensors/{sensor}/directions. */
+rsw_status service_directions(service *svc, const char *id, const char *sensor, char **json_out, svc_error *e);
+
+/* ---- blobs ------------------------------------------------------------------- */
+/* created: false when it existed already. 422 on a digest mismatch. */
+rsw_status service_blob_put(service *svc, const char *sha256_hex, const void *data, size_t len, bool *created,
+                            svc_error *e);
+bool service_blob_exists(service *svc, const char *sha256_hex);
+/* body {digests:[...]} -> {missing:[...]} */
+rsw_status service_blobs_missing(service *svc, const char *body, size_t len, char **json_out, svc_error *e);
+
+/* ---- jobs -------------------------------------------------------------------- */
+/* idem_key may be NULL. *job_id_out (malloc'ed) for the Location header. */
+rsw_status service_job_submit(service *svc, const char *scene_id, const char *body, size_t len,
+                              const char *idem_key, char **job_id_out, char **json_out, svc_error *e);
+rsw_status service_job_list(service *svc, char **json_out, svc_error *e);
+rsw_status service_job_get(service *svc, const char *job_id, char **json_out, svc_error *e);
+rsw_status service_job_cancel(service *svc, const char *job_id, char **json_out, svc_error *e);
+rsw_status service_job_delete(service *svc, const char *job_id, svc_error *e);
+rsw_status service_job_results(service *svc, const char *job_id, char **json_out, svc_error *e);
+rsw_status service_job_result(service *svc, const char *job_id, const char *context, const char *sensor,
+                              svc_film *out, svc_error *e);
+
+/* Server-sent events: wait until the job has an event with sequence number
+ * > after (or has ended), up to timeout_ms. Fills *json_out with the next
+ * event's data and *seq_out with its number, *is_end when it is the final
+ * `end` event. Returns RSW_OK with *json_out NULL on a timeout (the HTTP
+ * layer then sends a keep-alive comment). */
+rsw_status service_job_next_event(service *svc, const char *job_id, uint64_t after, int timeout_ms,
+                                  uint64_t *seq_out, char **json_out, bool *is_end, svc_error *e);
+
+#endif
