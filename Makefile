@@ -29,7 +29,7 @@ CFLAGS := -std=c11 $(OPT) -g -fno-math-errno $(WARN) $(SANFLAGS) -fPIC
 LDFLAGS := $(SANFLAGS)
 LIBS := -lembree3 -lOpenEXRCore -lexpat -lcjson -lpthread -lm
 DAEMON_LIBS := -lmicrohttpd -lcrypto
-TEST_LIBS := -lcurl
+TEST_LIBS := -lcurl -lcrypto
 
 KERNEL_SRC := $(shell find server/kernel -name '*.c' | sort)
 KERNEL_OBJ := $(KERNEL_SRC:%.c=$(BUILD)/obj/%.o)
