@@ -312,6 +312,7 @@ static resp do_req(const daemon_proc *d, req q) {
   } else if (strcmp(method, "HEAD") == 0) {
     curl_easy_setopt(c, CURLOPT_NOBODY, 1L);
   } else if (strcmp(method, "POST") == 0) {
+    h = curl_slist_append(h, "Content-Type:"); /* no body, no type (curl would say form-urlencoded) */
     curl_easy_setopt(c, CURLOPT_POSTFIELDSIZE_LARGE, (curl_off_t)0);
     curl_easy_setopt(c, CURLOPT_POSTFIELDS, "");
   } else if (strcmp(method, "GET") != 0) {
@@ -615,12 +616,27 @@ static void test_metrics(void) {
   /* The issue's list: requests by route and status, scenes resident and
    * their bytes, jobs by state, contexts rendered, render seconds, update
    * seconds by class, queue depth. */
-  const char *names[] = {"rsw_http_requests_total", "rsw_scenes_resident", "rsw_scene_resident_bytes",
-                         "rsw_jobs", "rsw_contexts_rendered_total", "rsw_render_seconds",
-                         "rsw_update_seconds", "rsw_queue_depth"};
+  const char *names[] = {"raysweep_http_requests_total", "raysweep_scenes_resident", "raysweep_scene_bytes",
+                         "raysweep_jobs", "raysweep_contexts_rendered_total", "raysweep_render_seconds_total",
+                         "raysweep_update_seconds_total", "raysweep_queue_depth"};
   for (size_t i = 0; i < sizeof names / sizeof *names; i++)
     CHECK(strstr(r.body, names[i]) != NULL, "metric %s present", names[i]);
-  CHECK(strstr(r.body, "route=\"") && strstr(r.body, "status=\""), "requests labelled by route and status");
+  /* Values after the tests before this one: requests counted by route
+   * template and status, scenes resident, jobs that succeeded, renders,
+   * spectral updates (the PATCHes). */
+  CHECK(strstr(r.body, "raysweep_http_requests_total{route=\"") && strstr(r.body, "status=\"200\"}"),
+        "requests labelled by route and status");
+  CHECK(!strstr(r.body, "route=\"/v1/jobs/job-") && strstr(r.body, "{id}"), "routes are templates, not concrete paths");
+  double v;
+  const char *p = strstr(r.body, "\nraysweep_scenes_resident ");
+  CHECK(p && sscanf(p, "\nraysweep_scenes_resident %lf", &v) == 1 && v >= 3, "scenes resident: %s",
+        p ? "too few" : "missing");
+  p = strstr(r.body, "\nraysweep_contexts_rendered_total ");
+  CHECK(p && sscanf(p, "\nraysweep_contexts_rendered_total %lf", &v) == 1 && v >= 40, "contexts rendered");
+  p = strstr(r.body, "raysweep_jobs{state=\"succeeded\"} ");
+  CHECK(p && sscanf(p, "raysweep_jobs{state=\"succeeded\"} %lf", &v) == 1 && v >= 5, "succeeded jobs");
+  p = strstr(r.body, "raysweep_update_seconds_total{class=\"spectral\"} ");
+  CHECK(p != NULL, "update seconds by class");
   resp_free(&r);
 }
 
@@ -1045,7 +1061,7 @@ static void test_jobs_routes(void) {
     if (jstr_is(it, "context", "b.2") && jstr_is(it, "sensor", "hemi")) {
       CHECK(jstr_is(it, "state", "succeeded") && jnum(it, "wavelength") == 600 && jnum(it, "spp") == 3 &&
                 jnum(it, "seed") == 4 && jnum(it, "width") == 5 && jnum(it, "height") == 5 &&
-                jnum(it, "channels") == 1,
+                cJSON_GetArraySize(cJSON_GetObjectItemCaseSensitive(it, "channels")) == 1,
             "result entry for (b.2, hemi): %.600s", r.body);
       if (jstr(it, "href")) snprintf(href, sizeof href, "%s", jstr(it, "href"));
     }
