@@ -674,7 +674,7 @@ rsw_status service_job_result(service *svc, const char *id, const char *context,
     if (!it->has_film) {
       pthread_mutex_unlock(&svc->lock);
       if (it->state == JOB_FAILED)
-        return svc_fail(e, RSW_ERR_RENDER, 422, context, "context '%s' sensor '%s' failed: %s", context, sensor_name, it->error);
+        return svc_fail(e, RSW_ERR_NOT_FOUND, 404, context, "context '%s' sensor '%s' has no film: it failed: %s", context, sensor_name, it->error);
       return svc_fail(e, RSW_ERR_NOT_FOUND, 404, context, "context '%s' sensor '%s' has no film yet (%s)", context,
                       sensor_name, state_names[it->state]);
     }
