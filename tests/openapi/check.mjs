@@ -252,6 +252,25 @@ await check('operation_ids', () => {
   return problems;
 });
 
+// swagger-parser checks 3.1 documents against the meta-schema only, so the
+// path templates and their parameters are matched here: every {name} has a
+// required `in: path` parameter and every path parameter is in the template.
+await check('path_parameters', () => {
+  const problems = [];
+  for (const { path, where, op } of operations(raw)) {
+    const inPath = new Set([...path.matchAll(/\{([^}/]+)\}/g)].map((m) => m[1]));
+    const declared = new Map();
+    for (const p of [...(raw.paths[path].parameters || []), ...(op.parameters || [])].map((p) => deref(raw, p)))
+      if (p?.in === 'path') declared.set(p.name, p);
+    for (const name of inPath) if (!declared.has(name)) problems.push(`${where}: {${name}} has no path parameter`);
+    for (const [name, p] of declared) {
+      if (!inPath.has(name)) problems.push(`${where}: path parameter ${name} is not in the template`);
+      else if (p.required !== true) problems.push(`${where}: path parameter ${name} is not required`);
+    }
+  }
+  return problems;
+});
+
 // 4xx/5xx (and default) responses, of operations and of components/responses:
 // exactly application/problem+json, schema Problem.
 await check('errors_problem_json', () => {
