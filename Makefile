@@ -35,13 +35,17 @@ KERNEL_SRC := $(shell find server/kernel -name '*.c' | sort)
 KERNEL_OBJ := $(KERNEL_SRC:%.c=$(BUILD)/obj/%.o)
 KERNEL_LIB := $(BUILD)/lib/librswkernel.a
 
-DAEMON_SRC := server/main.c server/serve.c $(shell find server/service server/http -name '*.c' 2>/dev/null | sort)
+SERVICE_SRC := $(shell find server/service -name '*.c' 2>/dev/null | sort)
+SERVICE_OBJ := $(SERVICE_SRC:%.c=$(BUILD)/obj/%.o)
+SERVICE_LIB := $(BUILD)/lib/librswservice.a
+DAEMON_SRC := server/main.c $(shell find server/http -name '*.c' 2>/dev/null | sort) $(wildcard server/serve.c)
 DAEMON_OBJ := $(DAEMON_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/obj/$(BUILD)/gen/default_scene.o
 
 TEST_SUPPORT_SRC := $(wildcard tests/support/*.c)
 TEST_SUPPORT_OBJ := $(TEST_SUPPORT_SRC:%.c=$(BUILD)/obj/%.o)
 TEST_SRC := $(sort $(wildcard tests/unit/test_*.c tests/validation/test_*.c tests/integration/test_*.c))
 TEST_BIN := $(patsubst %.c,$(BUILD)/tests/%,$(notdir $(TEST_SRC)))
+TEST_SCRIPTS := $(sort $(wildcard tests/integration/test_*.sh))
 
 BENCH_SRC := $(wildcard tests/bench/*.c)
 BENCH_BIN := $(patsubst %.c,$(BUILD)/bench/%,$(notdir $(BENCH_SRC)))
@@ -62,9 +66,13 @@ $(KERNEL_LIB): $(KERNEL_OBJ)
 	@mkdir -p $(dir $@)
 	@rm -f $@ && ar rcs $@ $^
 
-$(BUILD)/bin/raysweepd: $(DAEMON_OBJ) $(KERNEL_LIB)
+$(SERVICE_LIB): $(SERVICE_OBJ)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $(DAEMON_OBJ) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS) $(DAEMON_LIBS)
+	@rm -f $@ && ar rcs $@ $^
+
+$(BUILD)/bin/raysweepd: $(DAEMON_OBJ) $(SERVICE_LIB) $(KERNEL_LIB)
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) -o $@ $(DAEMON_OBJ) $(SERVICE_LIB) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS) $(DAEMON_LIBS)
 
 # The embedded default scene (raysweepd serve without --scene): the XML as
 # one C string literal (backslash, quote and '?' escaped: no trigraphs).
@@ -87,16 +95,16 @@ $(BUILD)/tests/%: $(BUILD)/obj/tests/validation/%.o $(TEST_SUPPORT_OBJ) $(KERNEL
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS)
 
-$(BUILD)/tests/%: $(BUILD)/obj/tests/integration/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
+$(BUILD)/tests/%: $(BUILD)/obj/tests/integration/%.o $(TEST_SUPPORT_OBJ) $(SERVICE_LIB) $(KERNEL_LIB)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS) $(TEST_LIBS)
+	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(SERVICE_LIB),$^) $(SERVICE_LIB) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS) $(TEST_LIBS) -lcrypto
 
 $(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS) $(TEST_LIBS)
 
 test: deps $(BUILD)/bin/raysweepd $(TEST_BIN)
-	@RSW_BIN_DIR=$(BUILD)/bin BUILD=$(BUILD) SAN=$(SAN) tests/run.sh $(TEST_BIN)
+	@RSW_BIN_DIR=$(BUILD)/bin BUILD=$(BUILD) SAN=$(SAN) tests/run.sh $(TEST_BIN) $(TEST_SCRIPTS)
 
 bench: deps $(BUILD)/bin/raysweepd $(BENCH_BIN)
 	@for b in $(BENCH_BIN); do $$b || exit 1; done

@@ -9,7 +9,7 @@ export LSAN_OPTIONS="suppressions=$here/lsan.supp:print_suppressions=0${LSAN_OPT
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
 pass=0; fail=0
 for t in "$@"; do
-  name=$(basename "$t")
+  name=$(basename "$t" .sh)
   out=$("$t" 2>&1); rc=$?
   echo "$out"
   line=$(echo "$out" | grep -E "^$name: [0-9]+ passed, [0-9]+ failed$" | tail -n 1)

@@ -19,3 +19,11 @@ if [ ${#missing[@]} -gt 0 ]; then
   $SUDO apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >&2
 fi
+# The OpenAPI validator of tests/openapi (pinned by its package-lock.json).
+# A failed install only warns: test_openapi then fails and says why.
+root=$(cd "$(dirname "$0")/.." && pwd)
+if command -v npm >/dev/null && [ ! -d "$root/tests/openapi/node_modules" ]; then
+  echo "deps: npm ci --prefix tests/openapi" >&2
+  npm ci --prefix "$root/tests/openapi" --no-audit --no-fund >&2 ||
+    echo "deps: npm ci failed; test_openapi will fail until tests/openapi/node_modules exists" >&2
+fi

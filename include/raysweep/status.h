@@ -34,7 +34,18 @@ extern "C" {
   X(RSW_ERR_RENDER, "render failed", 500)                                     \
   X(RSW_ERR_USAGE, "invalid command-line usage", 400)                         \
   X(RSW_ERR_CYCLE, "reference cycle", 422)                                    \
-  X(RSW_ERR_RANGE, "value out of range", 422)
+  X(RSW_ERR_RANGE, "value out of range", 422)                                \
+  X(RSW_ERR_TIMEOUT, "deadline exceeded", 504)                                \
+  X(RSW_ERR_CANCELLED, "cancelled", 409)                                      \
+  X(RSW_ERR_CONFLICT, "conflict with the current state", 409)                 \
+  X(RSW_ERR_PRECONDITION, "precondition failed (stale revision)", 412)        \
+  X(RSW_ERR_BUSY, "too many queued jobs", 429)                                \
+  X(RSW_ERR_UNAVAILABLE, "service unavailable", 503)                          \
+  X(RSW_ERR_MEDIA_TYPE, "unsupported media type", 415)                        \
+  X(RSW_ERR_NOT_ACCEPTABLE, "no acceptable representation", 406)             \
+  X(RSW_ERR_UNAUTHORIZED, "authentication required", 401)                     \
+  X(RSW_ERR_METHOD, "method not allowed", 405)                                \
+  X(RSW_ERR_TOO_LARGE, "request body too large", 413)
 
 typedef enum rsw_status {
 #define RSW_STATUS_ENUM_(name, msg, http) name,

@@ -43,6 +43,7 @@ typedef struct job {
   size_t next_commit;
   tile_buf **done;  /* finished, not yet merged */
   bool failed;
+  bool stopped; /* deadline passed */
   /* Stats (merged under lock). */
   render_stats rays;
   uint64_t samples, invalid;
@@ -137,6 +138,8 @@ static void merge_tile(job *jb, tile_buf *tb) {
   free(tb);
 }
 
+static double now_s(void);
+
 static void *worker(void *arg) {
   job *jb = arg;
   render_stats rs = {0};
@@ -144,7 +147,8 @@ static void *worker(void *arg) {
   for (;;) {
     pthread_mutex_lock(&jb->lock);
     size_t t = jb->next_tile++;
-    bool stop = jb->failed || t >= jb->n_tiles || (jb->opts->cancel && atomic_load(jb->opts->cancel));
+    bool stop = jb->failed || jb->stopped || t >= jb->n_tiles || (jb->opts->cancel && atomic_load(jb->opts->cancel));
+    if (!stop && jb->opts->deadline > 0 && now_s() > jb->opts->deadline) jb->stopped = stop = true;
     pthread_mutex_unlock(&jb->lock);
     if (stop) break;
     tile_buf *tb = render_tile(jb, t, &rs, &samples, &invalid);
@@ -241,7 +245,11 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
   }
   if (opts->cancel && atomic_load(opts->cancel)) {
     free(jb.film_acc);
-    return rsw_fail(err, RSW_ERR_RENDER, "render", "render cancelled");
+    return rsw_fail(err, RSW_ERR_CANCELLED, "render", "render cancelled");
+  }
+  if (jb.stopped) {
+    free(jb.film_acc);
+    return rsw_fail(err, RSW_ERR_TIMEOUT, "timeout_s", "render stopped at its deadline after %.3f s", now_s() - t0);
   }
 
   /* Develop: normalise by the filter weights; mono films hold one

@@ -18,7 +18,10 @@ typedef struct render_opts {
   uint64_t seed;
   double wavelength;    /* nm, mono only; 0 means 550 */
   int threads;          /* 0: all cores */
-  const atomic_int *cancel; /* optional: non-zero stops the render */
+  const atomic_int *cancel; /* optional: non-zero stops the render
+                               (checked between tiles): RSW_ERR_CANCELLED */
+  double deadline;          /* optional: CLOCK_MONOTONIC seconds after which
+                               the render stops: RSW_ERR_TIMEOUT (0: none) */
   /* Optional progress callback: tiles done of total (called from worker
    * threads, serialised). */
   void (*progress)(void *user, size_t done, size_t total);

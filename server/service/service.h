@@ -115,7 +115,7 @@ rsw_status service_job_get(service *svc, const char *job_id, char **json_out, sv
 rsw_status service_job_cancel(service *svc, const char *job_id, char **json_out, svc_error *e);
 rsw_status service_job_delete(service *svc, const char *job_id, svc_error *e);
 rsw_status service_job_results(service *svc, const char *job_id, char **json_out, svc_error *e);
-rsw_status service_job_result(service *svc, const char *job_id, const char *context, const char *sensor,
+rsw_status service_job_result(service *svc, const char *job_id, const char *context, const char *sensor_id,
                               svc_film *out, svc_error *e);
 
 /* Server-sent events: wait until the job has an event with sequence number

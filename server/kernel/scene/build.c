@@ -342,6 +342,14 @@ rsw_status ld_path(loader *ld, node *n, const char *name, char **out) {
   if (st) return st;
   if (!f) return ld_fail(ld, n, NULL, RSW_ERR_MISSING, "%s '%s': missing property '%s'", n->type, n->id, name);
   if (!f[0]) return ld_fail(ld, n, name, RSW_ERR_INVALID, "property '%s' is empty", name);
+  if (ld->resolve) {
+    rsw_err local = {0};
+    char *path = NULL;
+    st = ld->resolve(ld->resolve_user, f, &path, &local);
+    if (st) return ld_fail(ld, n, name, st, "property '%s': %s", name, local.msg);
+    *out = path;
+    return RSW_OK;
+  }
   size_t len = strlen(f) + strlen(ld->base_dir) + 2;
   char *path = malloc(len);
   if (!path) return ld_fail(ld, n, name, RSW_ERR_NOMEM, "out of memory");
@@ -783,7 +791,8 @@ rsw_status scene_build(node *root, const char *doc_variant, const scene_load_opt
   s->variant = var;
   s->doc = root;
   loader ld = {.variant = var, .err = err, .base_dir = opts && opts->base_dir ? opts->base_dir : ".",
-               .root = root, .scene = s};
+               .root = root, .scene = s, .resolve = opts ? opts->resolve : NULL,
+               .resolve_user = opts ? opts->resolve_user : NULL};
   rsw_status st = index_ids(&ld, root);
   if (!st) {
     root->build_state = 1;

@@ -16,6 +16,8 @@ typedef struct loader {
   rsw_variant variant;
   rsw_err *err;
   const char *base_dir; /* directory relative file names resolve against */
+  rsw_status (*resolve)(void *user, const char *name, char **path_out, rsw_err *err);
+  void *resolve_user;
   node *root;
   scene *scene;         /* the scene being built (objects are added here) */
   /* id -> node index (builder-private) */

@@ -417,6 +417,23 @@ bool params_info(const scene *s, size_t i, param_info *out) {
   return true;
 }
 
+size_t params_closest(const scene *s, const char *key, const char *out[3]) {
+  const param_table *t = s->params;
+  size_t bd[3] = {(size_t)-1, (size_t)-1, (size_t)-1};
+  out[0] = out[1] = out[2] = NULL;
+  for (size_t i = 0; t && i < t->n; i++) {
+    size_t d = rsw_edit_distance(key, t->e[i].key);
+    for (int k = 0; k < 3; k++)
+      if (d < bd[k]) {
+        for (int j = 2; j > k; j--) bd[j] = bd[j - 1], out[j] = out[j - 1];
+        bd[k] = d;
+        out[k] = t->e[i].key;
+        break;
+      }
+  }
+  return out[2] ? 3 : out[1] ? 2 : out[0] ? 1 : 0;
+}
+
 static rsw_status not_found(const scene *s, const char *key, rsw_err *err) {
   const param_table *t = s->params;
   const char *best[3] = {NULL, NULL, NULL};

@@ -107,6 +107,9 @@ bool params_info(const scene *s, size_t i, param_info *out);
  * relative to that object). On failure: RSW_ERR_NOT_FOUND naming the key
  * and listing the three closest keys. */
 rsw_status params_lookup(const scene *s, const char *key, size_t *index, rsw_err *err);
+/* The up to three keys closest to `key` (edit distance); returns how many
+ * were written. The strings are borrowed from the table. */
+size_t params_closest(const scene *s, const char *key, const char *out[3]);
 /* Indices of entries whose key (or an alias) matches glob (`*` matches any
  * run of characters, dots included; `?` one character) and whose class is
  * in class_mask (UPDATE_* bits; UPDATE_NONE entries match when

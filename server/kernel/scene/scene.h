@@ -11,6 +11,12 @@ typedef struct scene_load_opts {
   const scene_define *defines; /* XML -D overrides */
   size_t n_defines;
   const char *base_dir;        /* where relative file names resolve; NULL: "." */
+  /* Optional: resolve a file name written in the scene (a mesh, a bitmap)
+   * to a readable path (malloc'ed into *path_out), or fail naming it. The
+   * daemon confines names to its data root and maps "sha256:<hex>" to its
+   * blob store. NULL: relative to base_dir, any path allowed. */
+  rsw_status (*resolve)(void *user, const char *name, char **path_out, rsw_err *err);
+  void *resolve_user;
 } scene_load_opts;
 
 /* Build a scene from a document tree. Takes ownership of root (freed on

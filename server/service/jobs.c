@@ -1,0 +1,726 @@
+/* Jobs of kernel contexts: validation, the queue, the worker that renders
+ * them, results, and the event log behind server-sent events.
+ *
+ * One worker renders one (context, sensor) at a time with every render
+ * thread: the CPU belongs to the render, and jobs on one scene never share
+ * its parameter state. A job's results are a pure function of the request
+ * and the base revision: each (context, sensor) seed defaults to a hash of
+ * (job seed, context id, sensor id), never of the call order, so a sweep
+ * split into several jobs gives bitwise the films of one job. */
+#include <math.h>
+#include <openssl/evp.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "service_internal.h"
+
+static const char *const state_names[] = {"queued", "running", "succeeded", "failed", "cancelled"};
+
+/* FNV-1a 64 over (job seed, context id, sensor id), folded to 32 bits. */
+static uint64_t default_seed(uint64_t job_seed, const char *ctx, const char *sensor_id) {
+  uint64_t h = 1469598103934665603ULL;
+  for (int i = 0; i < 8; i++) h = (h ^ ((job_seed >> (8 * i)) & 0xff)) * 1099511628211ULL;
+  for (const char *c = ctx; *c; c++) h = (h ^ (unsigned char)*c) * 1099511628211ULL;
+  h = (h ^ 0xff) * 1099511628211ULL; /* separator */
+  for (const char *c = sensor_id; *c; c++) h = (h ^ (unsigned char)*c) * 1099511628211ULL;
+  return (h ^ (h >> 32)) & 0xffffffffULL;
+}
+
+static bool valid_context_id(const char *s) {
+  size_t n = strlen(s);
+  if (n < 1 || n > 64) return false;
+  for (size_t i = 0; i < n; i++) {
+    char c = s[i];
+    if (!((c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '.' || c == '_' ||
+          c == '-'))
+      return false;
+  }
+  return true;
+}
+
+static void job_free(job *j) {
+  if (!j) return;
+  for (size_t i = 0; i < j->n_items; i++) {
+    cJSON_Delete(j->items[i].params);
+    if (j->items[i].has_film) svc_film_free(&j->items[i].film);
+  }
+  for (size_t i = 0; i < j->n_events; i++) free(j->events[i].json);
+  free(j->events);
+  free(j->items);
+  free(j->context_remaining);
+  free(j->idem_key);
+  free(j);
+}
+
+/* svc->lock held. */
+static void push_event(service *svc, job *j, cJSON *data, bool end) {
+  if (j->n_events == j->cap_events) {
+    size_t cap = j->cap_events ? 2 * j->cap_events : 16;
+    job_event *p = realloc(j->events, cap * sizeof *p);
+    if (!p) {
+      cJSON_Delete(data);
+      return;
+    }
+    j->events = p;
+    j->cap_events = cap;
+  }
+  job_event *ev = &j->events[j->n_events];
+  ev->seq = j->n_events + 1;
+  ev->json = cJSON_PrintUnformatted(data);
+  ev->end = end;
+  cJSON_Delete(data);
+  j->n_events++;
+  pthread_cond_broadcast(&svc->cond);
+}
+
+static cJSON *job_json(const job *j) {
+  cJSON *o = cJSON_CreateObject();
+  cJSON_AddStringToObject(o, "id", j->id);
+  cJSON_AddStringToObject(o, "scene", j->scene_id);
+  cJSON_AddNumberToObject(o, "revision", (double)j->revision);
+  cJSON_AddStringToObject(o, "state", state_names[j->state]);
+  cJSON_AddNumberToObject(o, "contexts_total", (double)j->n_contexts);
+  cJSON_AddNumberToObject(o, "contexts_done", (double)j->contexts_done);
+  cJSON_AddNumberToObject(o, "renders_total", (double)j->n_items);
+  cJSON_AddNumberToObject(o, "renders_done", (double)j->items_done);
+  cJSON_AddNumberToObject(o, "renders_failed", (double)j->items_failed);
+  cJSON_AddStringToObject(o, "created", j->created_iso);
+  if (j->started_iso[0]) cJSON_AddStringToObject(o, "started", j->started_iso);
+  if (j->finished_iso[0]) {
+    cJSON_AddStringToObject(o, "finished", j->finished_iso);
+    cJSON_AddNumberToObject(o, "seconds", j->t_finished - j->t_started);
+  }
+  if (j->error[0]) cJSON_AddStringToObject(o, "error", j->error);
+  char href[128];
+  snprintf(href, sizeof href, "/v1/jobs/%s/results", j->id);
+  cJSON_AddStringToObject(o, "href_results", href);
+  snprintf(href, sizeof href, "/v1/jobs/%s/events", j->id);
+  cJSON_AddStringToObject(o, "href_events", href);
+  return o;
+}
+
+static job *find_job_locked(service *svc, const char *id) {
+  for (size_t i = 0; i < svc->n_jobs; i++)
+    if (!svc->jobs[i]->deleted && strcmp(svc->jobs[i]->id, id) == 0) return svc->jobs[i];
+  return NULL;
+}
+
+static rsw_status no_job(svc_error *e, const char *id) {
+  return svc_fail(e, RSW_ERR_NOT_FOUND, 404, id, "no job '%s' (unknown, deleted or expired)", id);
+}
+
+/* Merge job-level and context-level overrides: context keys win. */
+static cJSON *merge_params(const cJSON *job_params, const cJSON *ctx_params) {
+  cJSON *m = cJSON_CreateObject();
+  if (!m) return NULL;
+  for (const cJSON *k = job_params ? job_params->child : NULL; k; k = k->next)
+    if (!ctx_params || !cJSON_GetObjectItemCaseSensitive(ctx_params, k->string))
+      cJSON_AddItemToObject(m, k->string, cJSON_Duplicate(k, 1));
+  for (const cJSON *k = ctx_params ? ctx_params->child : NULL; k; k = k->next)
+    cJSON_AddItemToObject(m, k->string, cJSON_Duplicate(k, 1));
+  return m;
+}
+
+/* Keys of an override map must exist and their values parse; their legal
+ * values are checked when each context renders (a failed context records
+ * its error and the others keep their results). */
+static rsw_status check_params(const scene *sc, const cJSON *p, const char *ptr, svc_error *e) {
+  if (!p) return RSW_OK;
+  if (!cJSON_IsObject(p)) return svc_fail(e, RSW_ERR_TYPE, 422, ptr, "params must be an object {key: value}");
+  for (const cJSON *k = p->child; k; k = k->next) {
+    size_t idx;
+    rsw_err err = {0};
+    if (params_lookup(sc, k->string, &idx, &err) != RSW_OK) {
+      e->err = err;
+      e->http_status = 422;
+      snprintf(e->err.where, sizeof e->err.where, "%s/%s", ptr, k->string);
+      snprintf(e->key, sizeof e->key, "%s", k->string);
+      const char *c[3];
+      size_t n = params_closest(sc, k->string, c);
+      for (size_t i = 0; i < n; i++) snprintf(e->candidates[i], sizeof e->candidates[i], "%s", c[i]);
+      return err.code;
+    }
+    char *txt = cJSON_PrintUnformatted(k);
+    param_value v;
+    rsw_status st = txt ? param_value_parse(txt, k->string, &v, &err) : RSW_ERR_NOMEM;
+    free(txt);
+    if (st) {
+      char w[512];
+      snprintf(w, sizeof w, "%s/%s", ptr, k->string);
+      return svc_fail(e, st, 422, w, "%s", err.msg);
+    }
+    param_value_free(&v);
+  }
+  return RSW_OK;
+}
+
+static bool get_uint(const cJSON *o, const char *name, double max, uint64_t *out, bool *present, const char *ptr,
+                     svc_error *e, rsw_status *st) {
+  const cJSON *x = cJSON_GetObjectItemCaseSensitive(o, name);
+  *present = x != NULL;
+  if (!x) return true;
+  if (!cJSON_IsNumber(x) || x->valuedouble < 0 || x->valuedouble > max || x->valuedouble != floor(x->valuedouble)) {
+    char w[300];
+    snprintf(w, sizeof w, "%s/%s", ptr, name);
+    *st = svc_fail(e, RSW_ERR_INVALID, 422, w, "%s must be a non-negative integer", name);
+    return false;
+  }
+  *out = (uint64_t)x->valuedouble;
+  return true;
+}
+
+rsw_status service_job_submit(service *svc, const char *scene_id, const char *body, size_t len,
+                              const char *idem_key, char **job_id_out, char **json_out, svc_error *e) {
+  if (!service_ready(svc)) return svc_fail(e, RSW_ERR_UNAVAILABLE, 503, "", "the server is shutting down");
+  unsigned char digest[32];
+  unsigned int dl = 32;
+  EVP_Digest(body, len, digest, &dl, EVP_sha256(), NULL);
+  if (idem_key) {
+    pthread_mutex_lock(&svc->lock);
+    for (size_t i = 0; i < svc->n_jobs; i++) {
+      job *j = svc->jobs[i];
+      if (j->deleted || !j->idem_key || strcmp(j->idem_key, idem_key) != 0 || strcmp(j->scene_id, scene_id) != 0)
+        continue;
+      if (memcmp(j->body_digest, digest, 32) != 0) {
+        pthread_mutex_unlock(&svc->lock);
+        return svc_fail(e, RSW_ERR_CONFLICT, 409, "Idempotency-Key",
+                        "Idempotency-Key '%s' was used for another request body", idem_key);
+      }
+      *job_id_out = strdup(j->id);
+      cJSON *jj = job_json(j);
+      *json_out = cJSON_PrintUnformatted(jj);
+      cJSON_Delete(jj);
+      pthread_mutex_unlock(&svc->lock);
+      return RSW_OK;
+    }
+    pthread_mutex_unlock(&svc->lock);
+  }
+  resident *r = svc_scene_acquire(svc, scene_id);
+  if (!r) return svc_fail(e, RSW_ERR_NOT_FOUND, 404, scene_id, "no resident scene '%s'", scene_id);
+  cJSON *req = cJSON_ParseWithLength(body, len);
+  rsw_status st = RSW_OK;
+  job *jb = NULL;
+  if (!req) st = svc_fail(e, RSW_ERR_PARSE, 400, "", "the body is not valid JSON");
+  else if (!cJSON_IsObject(req)) st = svc_fail(e, RSW_ERR_TYPE, 422, "", "the body must be a JSON object");
+  const cJSON *contexts = NULL, *defaults = NULL, *jparams = NULL;
+  uint64_t job_seed = 0;
+  for (const cJSON *k = !st ? req->child : NULL; k && !st; k = k->next) {
+    if (strcmp(k->string, "contexts") == 0) contexts = k;
+    else if (strcmp(k->string, "defaults") == 0) defaults = k;
+    else if (strcmp(k->string, "params") == 0) jparams = k;
+    else if (strcmp(k->string, "seed") == 0) {
+      bool present;
+      get_uint(req, "seed", 9007199254740991.0, &job_seed, &present, "", e, &st);
+    } else {
+      char w[300];
+      snprintf(w, sizeof w, "/%s", k->string);
+      st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, 422, w, "unknown field '%s' (expected contexts, defaults, params, seed)",
+                    k->string);
+    }
+  }
+  if (!st && (!cJSON_IsArray(contexts) || !contexts->child))
+    st = svc_fail(e, RSW_ERR_MISSING, 422, "/contexts", "a job needs a non-empty \"contexts\" list");
+  if (!st && defaults && !cJSON_IsObject(defaults))
+    st = svc_fail(e, RSW_ERR_TYPE, 422, "/defaults", "defaults must be an object");
+  scene *sc = r->sc;
+  pthread_mutex_lock(&r->lock); /* the parameter table is stable under it */
+  if (!st) st = check_params(sc, jparams, "/params", e);
+  /* Defaults. */
+  uint64_t d_spp = 0;
+  double d_wl = 0;
+  const cJSON *d_sensors = NULL;
+  if (!st && defaults) {
+    bool present;
+    get_uint(defaults, "spp", 4294967295.0, &d_spp, &present, "/defaults", e, &st);
+    const cJSON *w = cJSON_GetObjectItemCaseSensitive(defaults, "wavelength");
+    if (!st && w) {
+      if (!cJSON_IsNumber(w) || !(w->valuedouble > 0)) st = svc_fail(e, RSW_ERR_INVALID, 422, "/defaults/wavelength", "wavelength must be a positive number");
+      else d_wl = w->valuedouble;
+    }
+    d_sensors = cJSON_GetObjectItemCaseSensitive(defaults, "sensors");
+    for (const cJSON *k = defaults->child; k && !st; k = k->next)
+      if (strcmp(k->string, "spp") && strcmp(k->string, "wavelength") && strcmp(k->string, "sensors")) {
+        char w2[300];
+        snprintf(w2, sizeof w2, "/defaults/%s", k->string);
+        st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, 422, w2, "unknown field '%s' in defaults", k->string);
+      }
+  }
+  /* Count renders and validate every context before accepting. */
+  size_t n_ctx = 0, n_items = 0;
+  for (const cJSON *c = !st ? contexts->child : NULL; c && !st; c = c->next, n_ctx++) {
+    char ptr[64];
+    snprintf(ptr, sizeof ptr, "/contexts/%zu", n_ctx);
+    if (!cJSON_IsObject(c)) {
+      st = svc_fail(e, RSW_ERR_TYPE, 422, ptr, "a context must be an object");
+      break;
+    }
+    const cJSON *id = cJSON_GetObjectItemCaseSensitive(c, "id");
+    if (!cJSON_IsString(id) || !valid_context_id(id->valuestring)) {
+      st = svc_fail(e, RSW_ERR_INVALID, 422, ptr, "context \"id\" must match [A-Za-z0-9._-]{1,64}");
+      break;
+    }
+    for (const cJSON *p = contexts->child; p != c; p = p->next) {
+      const cJSON *pid = cJSON_GetObjectItemCaseSensitive(p, "id");
+      if (strcmp(pid->valuestring, id->valuestring) == 0) {
+        st = svc_fail(e, RSW_ERR_DUPLICATE, 422, ptr, "context id '%s' appears twice", id->valuestring);
+        break;
+      }
+    }
+    for (const cJSON *k = c->child; k && !st; k = k->next)
+      if (strcmp(k->string, "id") && strcmp(k->string, "wavelength") && strcmp(k->string, "params") &&
+          strcmp(k->string, "sensors") && strcmp(k->string, "spp") && strcmp(k->string, "seed")) {
+        char w[300];
+        snprintf(w, sizeof w, "%s/%s", ptr, k->string);
+        st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, 422, w, "unknown field '%s' in a context", k->string);
+      }
+    if (st) break;
+    const cJSON *w = cJSON_GetObjectItemCaseSensitive(c, "wavelength");
+    if (w && (!cJSON_IsNumber(w) || !(w->valuedouble > 0))) {
+      char p2[80];
+      snprintf(p2, sizeof p2, "%s/wavelength", ptr);
+      st = svc_fail(e, RSW_ERR_INVALID, 422, p2, "wavelength must be a positive number of nm");
+      break;
+    }
+    if ((w || d_wl > 0) && sc->variant != VARIANT_MONO) {
+      st = svc_fail(e, RSW_ERR_INVALID, 422, ptr, "wavelength applies to mono scenes; this scene is rgb");
+      break;
+    }
+    char pp[80];
+    snprintf(pp, sizeof pp, "%s/params", ptr);
+    st = check_params(sc, cJSON_GetObjectItemCaseSensitive(c, "params"), pp, e);
+    if (st) break;
+    uint64_t dummy;
+    bool present;
+    get_uint(c, "spp", 4294967295.0, &dummy, &present, ptr, e, &st);
+    if (!st) get_uint(c, "seed", 9007199254740991.0, &dummy, &present, ptr, e, &st);
+    if (st) break;
+    const cJSON *sens = cJSON_GetObjectItemCaseSensitive(c, "sensors");
+    if (!sens) sens = d_sensors;
+    if (sens) {
+      if (!cJSON_IsArray(sens) || !sens->child) {
+        st = svc_fail(e, RSW_ERR_TYPE, 422, ptr, "sensors must be a non-empty list of sensor ids");
+        break;
+      }
+      for (const cJSON *s = sens->child; s && !st; s = s->next) {
+        size_t si;
+        if (!cJSON_IsString(s) || !svc_find_sensor(sc, s->valuestring, &si))
+          st = svc_fail(e, RSW_ERR_NOT_FOUND, 422, ptr, "no sensor '%s' in the scene",
+                        cJSON_IsString(s) ? s->valuestring : "?");
+        n_items++;
+      }
+    } else {
+      if (!sc->n_sensors) st = svc_fail(e, RSW_ERR_INVALID, 422, ptr, "the scene has no sensor");
+      n_items += sc->n_sensors;
+    }
+  }
+  if (!st && n_ctx > 100000) st = svc_fail(e, RSW_ERR_LIMIT, 422, "/contexts", "at most 100000 contexts per job");
+  /* Build the job. */
+  if (!st) {
+    jb = calloc(1, sizeof *jb);
+    if (jb) {
+      jb->items = calloc(n_items, sizeof *jb->items);
+      jb->context_remaining = calloc(n_ctx, sizeof *jb->context_remaining);
+    }
+    if (!jb || !jb->items || !jb->context_remaining) st = svc_fail(e, RSW_ERR_NOMEM, 500, "", "out of memory");
+  }
+  size_t k = 0, ci = 0;
+  for (const cJSON *c = !st ? contexts->child : NULL; c && !st; c = c->next, ci++) {
+    const cJSON *id = cJSON_GetObjectItemCaseSensitive(c, "id");
+    const cJSON *w = cJSON_GetObjectItemCaseSensitive(c, "wavelength");
+    const cJSON *sens = cJSON_GetObjectItemCaseSensitive(c, "sensors");
+    if (!sens) sens = d_sensors;
+    uint64_t spp = d_spp, seed = 0;
+    bool has_spp, has_seed;
+    get_uint(c, "spp", 4294967295.0, &spp, &has_spp, "", e, &st);
+    if (!has_spp) spp = d_spp;
+    get_uint(c, "seed", 9007199254740991.0, &seed, &has_seed, "", e, &st);
+    size_t ns = sens ? (size_t)cJSON_GetArraySize(sens) : sc->n_sensors;
+    jb->context_remaining[ci] = ns;
+    for (size_t s = 0; s < ns && !st; s++, k++) {
+      render_item *it = &jb->items[k];
+      snprintf(it->context, sizeof it->context, "%s", id->valuestring);
+      it->context_index = ci;
+      const char *sname = sens ? cJSON_GetArrayItem(sens, (int)s)->valuestring : sc->sensors[s]->base.id;
+      svc_find_sensor(sc, sname, &it->sensor_index);
+      snprintf(it->sensor, sizeof it->sensor, "%s", sc->sensors[it->sensor_index]->base.id);
+      it->wavelength = w ? w->valuedouble : d_wl;
+      it->spp = (uint32_t)spp;
+      it->seed = has_seed ? seed : default_seed(job_seed, it->context, it->sensor);
+      it->params = merge_params(jparams, cJSON_GetObjectItemCaseSensitive(c, "params"));
+      const sensor *se = sc->sensors[it->sensor_index];
+      uint64_t eff = spp ? spp : se->sampler->sample_count;
+      uint64_t ps = (uint64_t)se->film->width * (uint64_t)se->film->height * eff;
+      if (ps > svc->opts.max_pixel_samples) {
+        char p2[80];
+        snprintf(p2, sizeof p2, "/contexts/%zu", ci);
+        st = svc_fail(e, RSW_ERR_LIMIT, 422, p2, "%llu pixel samples exceed this server's limit of %llu",
+                      (unsigned long long)ps, (unsigned long long)svc->opts.max_pixel_samples);
+      }
+    }
+  }
+  pthread_mutex_unlock(&r->lock);
+  cJSON_Delete(req);
+  if (st) {
+    if (jb) {
+      jb->n_items = n_items;
+      job_free(jb);
+    }
+    svc_scene_release(svc, r);
+    return st;
+  }
+  jb->n_items = n_items;
+  jb->n_contexts = n_ctx;
+  jb->res = r; /* keeps the ref taken above */
+  memcpy(jb->scene_id, r->id, 65);
+  memcpy(jb->body_digest, digest, 32);
+  if (idem_key) jb->idem_key = strdup(idem_key);
+  jb->created = time(NULL);
+  jb->t_created = svc_now();
+  svc_iso_time(jb->created, jb->created_iso);
+  jb->state = JOB_QUEUED;
+  pthread_mutex_lock(&svc->lock);
+  if (svc->n_queue >= svc->opts.max_queue) {
+    size_t q = svc->n_queue;
+    pthread_mutex_unlock(&svc->lock);
+    job_free(jb);
+    svc_scene_release(svc, r);
+    st = svc_fail(e, RSW_ERR_BUSY, 429, "", "%zu jobs are already queued (the limit); retry later", q);
+    e->retry_after_s = 1;
+    return st;
+  }
+  snprintf(jb->id, sizeof jb->id, "job-%06llu", (unsigned long long)++svc->next_job);
+  jb->revision = r->revision;
+  bool ok = (svc->n_jobs < svc->cap_jobs ||
+             (svc->jobs = realloc(svc->jobs, (svc->cap_jobs = svc->cap_jobs ? 2 * svc->cap_jobs : 16) * sizeof *svc->jobs))) &&
+            (svc->n_queue < svc->cap_queue ||
+             (svc->queue = realloc(svc->queue, (svc->cap_queue = svc->cap_queue ? 2 * svc->cap_queue : 16) * sizeof *svc->queue)));
+  if (!ok) {
+    pthread_mutex_unlock(&svc->lock);
+    job_free(jb);
+    svc_scene_release(svc, r);
+    return svc_fail(e, RSW_ERR_NOMEM, 500, "", "out of memory");
+  }
+  svc->jobs[svc->n_jobs++] = jb;
+  svc->queue[svc->n_queue++] = jb;
+  r->active_jobs++;
+  *job_id_out = strdup(jb->id);
+  *json_out = NULL;
+  cJSON *jj = job_json(jb);
+  *json_out = cJSON_PrintUnformatted(jj);
+  cJSON_Delete(jj);
+  pthread_cond_broadcast(&svc->cond);
+  pthread_mutex_unlock(&svc->lock);
+  return RSW_OK;
+}
+
+/* ---- the worker ------------------------------------------------------------------ */
+
+static void finish_job(service *svc, job *j) {
+  /* svc->lock held */
+  if (atomic_load(&j->cancel)) j->state = JOB_CANCELLED;
+  else if (j->items_failed) {
+    j->state = JOB_FAILED;
+    if (!j->error[0]) snprintf(j->error, sizeof j->error, "%zu of %zu renders failed", j->items_failed, j->n_items);
+  } else j->state = JOB_SUCCEEDED;
+  j->t_finished = svc_now();
+  svc_iso_time(time(NULL), j->finished_iso);
+  j->res->active_jobs--;
+  cJSON *d = cJSON_CreateObject();
+  cJSON_AddStringToObject(d, "state", state_names[j->state]);
+  cJSON_AddNumberToObject(d, "done", (double)j->items_done);
+  cJSON_AddNumberToObject(d, "total", (double)j->n_items);
+  push_event(svc, j, d, true);
+}
+
+void *svc_worker_main(void *arg) {
+  service *svc = arg;
+  pthread_mutex_lock(&svc->lock);
+  for (;;) {
+    while (!svc->n_queue && !svc->stopping) {
+      struct timespec ts;
+      clock_gettime(CLOCK_REALTIME, &ts);
+      ts.tv_sec += 5;
+      pthread_cond_timedwait(&svc->cond, &svc->lock, &ts);
+      svc_jobs_expire(svc);
+    }
+    if (svc->stopping) {
+      /* Queued jobs end cancelled. */
+      for (size_t i = 0; i < svc->n_queue; i++) {
+        atomic_store(&svc->queue[i]->cancel, 1);
+        finish_job(svc, svc->queue[i]);
+      }
+      svc->n_queue = 0;
+      break;
+    }
+    job *j = svc->queue[0];
+    memmove(svc->queue, svc->queue + 1, (svc->n_queue - 1) * sizeof *svc->queue);
+    svc->n_queue--;
+    j->state = JOB_RUNNING;
+    j->t_started = svc_now();
+    svc_iso_time(time(NULL), j->started_iso);
+    for (size_t i = 0; i < j->n_items; i++) {
+      if (atomic_load(&j->cancel) || svc->stopping) break;
+      render_item *it = &j->items[i];
+      pthread_mutex_unlock(&svc->lock);
+      svc_error e = {0};
+      render_spec rs = {.sensor_index = it->sensor_index, .spp = it->spp, .seed = it->seed,
+                        .wavelength = it->wavelength, .overrides = it->params, .cancel = &j->cancel};
+      rsw_status st = svc_render_locked(svc, j->res, &rs, &it->film, &e);
+      pthread_mutex_lock(&svc->lock);
+      if (st == RSW_ERR_CANCELLED) break;
+      cJSON *d = cJSON_CreateObject();
+      cJSON_AddStringToObject(d, "context", it->context);
+      cJSON_AddStringToObject(d, "sensor", it->sensor);
+      if (st) {
+        it->state = JOB_FAILED;
+        rsw_err_format(&e.err, it->error, sizeof it->error);
+        j->items_failed++;
+        svc->renders_failed++;
+        cJSON_AddStringToObject(d, "state", "failed");
+        cJSON_AddStringToObject(d, "error", it->error);
+      } else {
+        it->state = JOB_SUCCEEDED;
+        it->has_film = true;
+        snprintf(it->film.context, sizeof it->film.context, "%s", it->context);
+        svc->contexts_rendered++;
+        cJSON_AddStringToObject(d, "state", "succeeded");
+      }
+      j->items_done++;
+      if (--j->context_remaining[it->context_index] == 0) j->contexts_done++;
+      cJSON_AddNumberToObject(d, "done", (double)j->items_done);
+      cJSON_AddNumberToObject(d, "total", (double)j->n_items);
+      push_event(svc, j, d, false);
+    }
+    finish_job(svc, j);
+  }
+  pthread_mutex_unlock(&svc->lock);
+  return NULL;
+}
+
+/* Drop finished jobs older than the results TTL. svc->lock held. */
+void svc_jobs_expire(service *svc) {
+  double now = svc_now();
+  for (size_t i = 0; i < svc->n_jobs;) {
+    job *j = svc->jobs[i];
+    bool done = j->state != JOB_QUEUED && j->state != JOB_RUNNING;
+    if (done && now - j->t_finished > svc->opts.result_ttl_s) j->deleted = true;
+    if (j->deleted && done) {
+      svc->jobs[i] = svc->jobs[--svc->n_jobs];
+      resident *r = j->res;
+      bool free_scene = --r->refs == 0 && r->deleted;
+      job_free(j);
+      if (free_scene) {
+        scene_free(r->sc);
+        pthread_mutex_destroy(&r->lock);
+        free(r);
+      }
+      continue;
+    }
+    i++;
+  }
+}
+
+void svc_jobs_free(service *svc) {
+  for (size_t i = 0; i < svc->n_jobs; i++) {
+    resident *r = svc->jobs[i]->res;
+    job_free(svc->jobs[i]);
+    if (--r->refs == 0 && r->deleted) {
+      /* Deleted while its jobs still held it: no longer in svc->scenes. */
+      scene_free(r->sc);
+      pthread_mutex_destroy(&r->lock);
+      free(r);
+    }
+  }
+  free(svc->jobs);
+  free(svc->queue);
+  svc->jobs = NULL;
+  svc->queue = NULL;
+  svc->n_jobs = svc->n_queue = 0;
+}
+
+/* ---- queries --------------------------------------------------------------------- */
+
+rsw_status service_job_list(service *svc, char **json_out, svc_error *e) {
+  (void)e;
+  cJSON *o = cJSON_CreateObject();
+  cJSON *a = cJSON_AddArrayToObject(o, "jobs");
+  pthread_mutex_lock(&svc->lock);
+  svc_jobs_expire(svc);
+  for (size_t i = 0; i < svc->n_jobs; i++)
+    if (!svc->jobs[i]->deleted) cJSON_AddItemToArray(a, job_json(svc->jobs[i]));
+  pthread_mutex_unlock(&svc->lock);
+  *json_out = cJSON_PrintUnformatted(o);
+  cJSON_Delete(o);
+  return RSW_OK;
+}
+
+rsw_status service_job_get(service *svc, const char *id, char **json_out, svc_error *e) {
+  pthread_mutex_lock(&svc->lock);
+  job *j = find_job_locked(svc, id);
+  cJSON *o = j ? job_json(j) : NULL;
+  pthread_mutex_unlock(&svc->lock);
+  if (!o) return no_job(e, id);
+  *json_out = cJSON_PrintUnformatted(o);
+  cJSON_Delete(o);
+  return RSW_OK;
+}
+
+rsw_status service_job_cancel(service *svc, const char *id, char **json_out, svc_error *e) {
+  pthread_mutex_lock(&svc->lock);
+  job *j = find_job_locked(svc, id);
+  if (!j) {
+    pthread_mutex_unlock(&svc->lock);
+    return no_job(e, id);
+  }
+  if (j->state == JOB_QUEUED) {
+    /* Not started: take it off the queue and end it now. */
+    for (size_t i = 0; i < svc->n_queue; i++)
+      if (svc->queue[i] == j) {
+        memmove(svc->queue + i, svc->queue + i + 1, (svc->n_queue - i - 1) * sizeof *svc->queue);
+        svc->n_queue--;
+        break;
+      }
+    atomic_store(&j->cancel, 1);
+    finish_job(svc, j);
+  } else if (j->state == JOB_RUNNING) {
+    atomic_store(&j->cancel, 1); /* the render stops at its next tile */
+  }
+  cJSON *o = job_json(j);
+  pthread_mutex_unlock(&svc->lock);
+  *json_out = cJSON_PrintUnformatted(o);
+  cJSON_Delete(o);
+  return RSW_OK;
+}
+
+rsw_status service_job_delete(service *svc, const char *id, svc_error *e) {
+  pthread_mutex_lock(&svc->lock);
+  job *j = find_job_locked(svc, id);
+  if (!j) {
+    pthread_mutex_unlock(&svc->lock);
+    return no_job(e, id);
+  }
+  if (j->state == JOB_QUEUED) {
+    for (size_t i = 0; i < svc->n_queue; i++)
+      if (svc->queue[i] == j) {
+        memmove(svc->queue + i, svc->queue + i + 1, (svc->n_queue - i - 1) * sizeof *svc->queue);
+        svc->n_queue--;
+        break;
+      }
+    atomic_store(&j->cancel, 1);
+    finish_job(svc, j);
+  } else if (j->state == JOB_RUNNING) {
+    atomic_store(&j->cancel, 1);
+  }
+  /* Freed by the next expiry pass once it has stopped. */
+  j->deleted = true;
+  pthread_cond_broadcast(&svc->cond);
+  if (j->state != JOB_RUNNING) svc_jobs_expire(svc);
+  pthread_mutex_unlock(&svc->lock);
+  return RSW_OK;
+}
+
+rsw_status service_job_results(service *svc, const char *id, char **json_out, svc_error *e) {
+  pthread_mutex_lock(&svc->lock);
+  job *j = find_job_locked(svc, id);
+  if (!j) {
+    pthread_mutex_unlock(&svc->lock);
+    return no_job(e, id);
+  }
+  cJSON *o = cJSON_CreateObject();
+  cJSON_AddStringToObject(o, "job", j->id);
+  cJSON_AddStringToObject(o, "state", state_names[j->state]);
+  cJSON *a = cJSON_AddArrayToObject(o, "results");
+  for (size_t i = 0; i < j->n_items; i++) {
+    const render_item *it = &j->items[i];
+    cJSON *x = cJSON_CreateObject();
+    cJSON_AddStringToObject(x, "context", it->context);
+    cJSON_AddStringToObject(x, "sensor", it->sensor);
+    cJSON_AddStringToObject(x, "state", state_names[it->state]);
+    if (it->wavelength > 0) cJSON_AddNumberToObject(x, "wavelength", it->wavelength);
+    cJSON_AddNumberToObject(x, "seed", (double)it->seed);
+    if (it->has_film) {
+      cJSON_AddNumberToObject(x, "spp", it->film.img.spp);
+      cJSON_AddNumberToObject(x, "width", it->film.img.width);
+      cJSON_AddNumberToObject(x, "height", it->film.img.height);
+      cJSON *ch = cJSON_AddArrayToObject(x, "channels");
+      for (int c = 0; c < it->film.img.channels; c++)
+        cJSON_AddItemToArray(ch, cJSON_CreateString(it->film.img.channel_names[c]));
+      char href[512];
+      snprintf(href, sizeof href, "/v1/jobs/%s/results/%s/%s", j->id, it->context, it->sensor);
+      cJSON_AddStringToObject(x, "href", href);
+    }
+    if (it->error[0]) cJSON_AddStringToObject(x, "error", it->error);
+    cJSON_AddItemToArray(a, x);
+  }
+  pthread_mutex_unlock(&svc->lock);
+  *json_out = cJSON_PrintUnformatted(o);
+  cJSON_Delete(o);
+  return RSW_OK;
+}
+
+rsw_status service_job_result(service *svc, const char *id, const char *context, const char *sensor_id,
+                              svc_film *out, svc_error *e) {
+  const char *sensor_name = sensor_id;
+  pthread_mutex_lock(&svc->lock);
+  job *j = find_job_locked(svc, id);
+  if (!j) {
+    pthread_mutex_unlock(&svc->lock);
+    return no_job(e, id);
+  }
+  for (size_t i = 0; i < j->n_items; i++) {
+    const render_item *it = &j->items[i];
+    if (strcmp(it->context, context) != 0 || strcmp(it->sensor, sensor_name) != 0) continue;
+    if (!it->has_film) {
+      pthread_mutex_unlock(&svc->lock);
+      if (it->state == JOB_FAILED)
+        return svc_fail(e, RSW_ERR_NOT_FOUND, 404, context, "context '%s' sensor '%s' has no film: it failed: %s", context, sensor_name, it->error);
+      return svc_fail(e, RSW_ERR_NOT_FOUND, 404, context, "context '%s' sensor '%s' has no film yet (%s)", context,
+                      sensor_name, state_names[it->state]);
+    }
+    /* A copy: the job may be deleted while the response is written. */
+    *out = it->film;
+    size_t n = (size_t)it->film.img.width * it->film.img.height * it->film.img.channels;
+    out->img.data = malloc(n * sizeof(float));
+    if (!out->img.data) {
+      pthread_mutex_unlock(&svc->lock);
+      return svc_fail(e, RSW_ERR_NOMEM, 500, "", "out of memory");
+    }
+    memcpy(out->img.data, it->film.img.data, n * sizeof(float));
+    pthread_mutex_unlock(&svc->lock);
+    return RSW_OK;
+  }
+  pthread_mutex_unlock(&svc->lock);
+  return svc_fail(e, RSW_ERR_NOT_FOUND, 404, context, "job %s has no result for context '%s' and sensor '%s'", id,
+                  context, sensor_name);
+}
+
+rsw_status service_job_next_event(service *svc, const char *id, uint64_t after, int timeout_ms, uint64_t *seq_out,
+                                  char **json_out, bool *is_end, svc_error *e) {
+  *json_out = NULL;
+  *is_end = false;
+  struct timespec ts;
+  clock_gettime(CLOCK_REALTIME, &ts);
+  ts.tv_sec += timeout_ms / 1000;
+  ts.tv_nsec += (long)(timeout_ms % 1000) * 1000000L;
+  if (ts.tv_nsec >= 1000000000L) ts.tv_sec++, ts.tv_nsec -= 1000000000L;
+  pthread_mutex_lock(&svc->lock);
+  for (;;) {
+    job *j = find_job_locked(svc, id);
+    if (!j) {
+      pthread_mutex_unlock(&svc->lock);
+      return no_job(e, id);
+    }
+    if (j->n_events > after) {
+      job_event *ev = &j->events[after];
+      *seq_out = ev->seq;
+      *json_out = strdup(ev->json ? ev->json : "{}");
+      *is_end = ev->end;
+      pthread_mutex_unlock(&svc->lock);
+      return RSW_OK;
+    }
+    if (pthread_cond_timedwait(&svc->cond, &svc->lock, &ts) != 0) break;
+  }
+  pthread_mutex_unlock(&svc->lock);
+  return RSW_OK;
+}

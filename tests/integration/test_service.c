@@ -1,0 +1,171 @@
+/* The service layer in process (no HTTP): scene ids, parameter patches
+ * with revisions, synchronous renders with overrides that leave the base
+ * state untouched, jobs with per-context wavelengths and events. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../../server/service/service.h"
+#include "../support/test.h"
+
+RSW_TEST_DEFINE_GLOBALS
+
+static const char *PLATE =
+    "{\"type\": \"scene\", \"variant\": \"mono\","
+    " \"meter\": {\"type\": \"distant\", \"direction\": [0, 0, -1], \"target\": [0, 0, 0],"
+    "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"component_format\": \"float32\"}},"
+    " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1], \"irradiance\": 1.0},"
+    " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}";
+
+static service *svc;
+
+static void test_scene_ids(void) {
+  bool created = false;
+  char *id = NULL, *json = NULL, *id2 = NULL, *json2 = NULL;
+  svc_error e = {0};
+  REQUIRE(service_scene_post(svc, PLATE, strlen(PLATE), false, NULL, &created, &id, &json, &e) == RSW_OK, "post: %s",
+          e.err.msg);
+  CHECK(created, "first post creates");
+  CHECK(strlen(id) == 64, "id is a SHA-256 hex digest");
+  /* Same document with other whitespace: same canonical form, same id. */
+  char *spaced = malloc(strlen(PLATE) + 8);
+  sprintf(spaced, "  %s\n\n", PLATE);
+  REQUIRE(service_scene_post(svc, spaced, strlen(spaced), false, NULL, &created, &id2, &json2, &e) == RSW_OK,
+          "repost: %s", e.err.msg);
+  CHECK(!created, "reposting the same scene is a no-op");
+  CHECK(strcmp(id, id2) == 0, "same id");
+  free(id2), free(json2);
+  /* Another variant is another scene. */
+  REQUIRE(service_scene_post(svc, PLATE, strlen(PLATE), false, "rgb", &created, &id2, &json2, &e) == RSW_OK, "rgb");
+  CHECK(created && strcmp(id, id2) != 0, "variant is part of the id");
+  CHECK(service_scene_delete(svc, id2, false, &e) == RSW_OK, "delete");
+  free(id2), free(json2), free(spaced), free(id), free(json);
+  /* A bad scene names the place. */
+  svc_error e2 = {0};
+  char *i3 = NULL, *j3 = NULL;
+  CHECK(service_scene_post(svc, "{\"s\": {\"type\": \"nope\"}}", 23, false, NULL, &created, &i3, &j3, &e2) != RSW_OK,
+        "unknown plugin rejected");
+  CHECK(e2.http_status == 422 && strstr(e2.err.where, "/s"), "422 with pointer: %d %s", e2.http_status, e2.err.where);
+}
+
+static char *post_plate(void) {
+  bool created;
+  char *id = NULL, *json = NULL;
+  svc_error e = {0};
+  if (service_scene_post(svc, PLATE, strlen(PLATE), false, NULL, &created, &id, &json, &e)) return NULL;
+  free(json);
+  return id;
+}
+
+static void test_render_overrides_restore_base(void) {
+  char *id = post_plate();
+  REQUIRE(id, "scene");
+  svc_film a, b, c;
+  svc_error e = {0};
+  const char *q1 = "{\"spp\": 4, \"seed\": 1}";
+  const char *q2 = "{\"spp\": 4, \"seed\": 1, \"params\": {\"plate.bsdf.reflectance.value\": 0.25}}";
+  REQUIRE(service_render(svc, id, q1, strlen(q1), &a, &e) == RSW_OK, "render: %s", e.err.msg);
+  REQUIRE(service_render(svc, id, q2, strlen(q2), &b, &e) == RSW_OK, "render with override: %s", e.err.msg);
+  REQUIRE(service_render(svc, id, q1, strlen(q1), &c, &e) == RSW_OK, "render again: %s", e.err.msg);
+  CHECK_REL(a.img.data[0], 0.5 / 3.14159265358979323846, 1e-5);
+  CHECK_REL(b.img.data[0], 0.25 / 3.14159265358979323846, 1e-5);
+  CHECK(memcmp(a.img.data, c.img.data, sizeof(float)) == 0, "the override did not leak into the base state");
+  svc_film_free(&a), svc_film_free(&b), svc_film_free(&c);
+  /* Unknown key: 422 naming it, with candidates. */
+  const char *q3 = "{\"params\": {\"plate.bsdf.reflectanse.value\": 0.25}}";
+  svc_error e3 = {0};
+  svc_film d;
+  CHECK(service_render(svc, id, q3, strlen(q3), &d, &e3) != RSW_OK, "unknown key rejected");
+  CHECK(strcmp(e3.key, "plate.bsdf.reflectanse.value") == 0, "key named: %s", e3.key);
+  CHECK(strcmp(e3.candidates[0], "plate.bsdf.reflectance.value") == 0, "closest key first: %s", e3.candidates[0]);
+  free(id);
+}
+
+static void test_patch_revisions(void) {
+  char *id = post_plate();
+  REQUIRE(id, "scene");
+  char *json = NULL;
+  uint64_t rev = 0, rev2 = 0;
+  svc_error e = {0};
+  REQUIRE(service_params_get(svc, id, "*", NULL, &json, &rev, &e) == RSW_OK, "get");
+  free(json);
+  const char *patch = "{\"plate.bsdf.reflectance.value\": 0.3}";
+  REQUIRE(service_params_patch(svc, id, patch, strlen(patch), (int64_t)rev, &json, &rev2, &e) == RSW_OK, "patch: %s",
+          e.err.msg);
+  free(json);
+  CHECK(rev2 == rev + 1, "revision advances: %llu -> %llu", (unsigned long long)rev, (unsigned long long)rev2);
+  svc_error e2 = {0};
+  CHECK(service_params_patch(svc, id, patch, strlen(patch), (int64_t)rev, &json, &rev2, &e2) == RSW_ERR_PRECONDITION,
+        "stale If-Match");
+  CHECK(e2.http_status == 412, "412");
+  /* Back to 0.5 so the other tests see the base scene. */
+  const char *back = "{\"plate.bsdf.reflectance.value\": 0.5}";
+  svc_error e3 = {0};
+  CHECK(service_params_patch(svc, id, back, strlen(back), -1, &json, &rev2, &e3) == RSW_OK, "patch back");
+  free(json);
+  free(id);
+}
+
+static void test_job_spectral_loop(void) {
+  char *id = post_plate();
+  REQUIRE(id, "scene");
+  /* Job-level tabulated reflectance, evaluated at each context's wavelength. */
+  char body[8192];
+  size_t n = (size_t)snprintf(body, sizeof body,
+                              "{\"seed\": 3, \"params\": {\"plate.bsdf.reflectance.value\": "
+                              "{\"wavelengths\": [400, 700], \"values\": [0.2, 0.8]}}, \"contexts\": [");
+  for (int i = 0; i < 10; i++)
+    n += (size_t)snprintf(body + n, sizeof body - n, "%s{\"id\": \"w%d\", \"wavelength\": %d, \"spp\": 2}", i ? ", " : "",
+                          i, 400 + 30 * i);
+  snprintf(body + n, sizeof body - n, "]}");
+  char *jid = NULL, *json = NULL;
+  svc_error e = {0};
+  REQUIRE(service_job_submit(svc, id, body, strlen(body), NULL, &jid, &json, &e) == RSW_OK, "submit: %s", e.err.msg);
+  free(json);
+  /* Follow the events to the end. */
+  uint64_t after = 0, seq;
+  bool end = false;
+  int contexts = 0;
+  for (int guard = 0; !end && guard < 200; guard++) {
+    char *ev = NULL;
+    REQUIRE(service_job_next_event(svc, jid, after, 5000, &seq, &ev, &end, &e) == RSW_OK, "events");
+    if (!ev) continue;
+    after = seq;
+    if (!end) contexts++;
+    free(ev);
+  }
+  CHECK(end && contexts == 10, "10 context events then end (%d)", contexts);
+  for (int i = 0; i < 10; i++) {
+    char ctx[16];
+    snprintf(ctx, sizeof ctx, "w%d", i);
+    svc_film f;
+    REQUIRE(service_job_result(svc, jid, ctx, "meter", &f, &e) == RSW_OK, "result %s: %s", ctx, e.err.msg);
+    double w = 400 + 30 * i, rho = 0.2 + 0.6 * (w - 400) / 300;
+    CHECK_REL(f.img.data[0], rho / 3.14159265358979323846, 1e-5);
+    svc_film_free(&f);
+  }
+  /* The base state is untouched by job-level overrides. */
+  char *tab = NULL;
+  uint64_t rev;
+  REQUIRE(service_params_get(svc, id, "plate.bsdf.reflectance.value", NULL, &tab, &rev, &e) == RSW_OK, "get");
+  CHECK(strstr(tab, "\"value\":0.5") != NULL, "base value still 0.5: %s", tab);
+  free(tab);
+  free(jid);
+  free(id);
+}
+
+int main(void) {
+  service_opts o = {.size = sizeof o, .render_threads = 2};
+  rsw_err err = {0};
+  if (service_new(&o, &svc, &err)) {
+    printf("service_new: %s\n", err.msg);
+    return 1;
+  }
+  RSW_TEST_RUN(test_scene_ids);
+  RSW_TEST_RUN(test_render_overrides_restore_base);
+  RSW_TEST_RUN(test_patch_revisions);
+  RSW_TEST_RUN(test_job_spectral_loop);
+  service_free(svc);
+  RSW_TEST_END("test_service");
+}
