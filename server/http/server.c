@@ -14,6 +14,7 @@
 #include <errno.h>
 #include <netdb.h>
 #include <netinet/in.h>
+#include <pthread.h>
 #include <stdarg.h>
 #include <stdatomic.h>
 #include <stdint.h>
@@ -22,6 +23,7 @@
 #include <string.h>
 #include <strings.h>
 #include <sys/socket.h>
+#include <time.h>
 #include <unistd.h>
 
 #include <microhttpd.h>
@@ -34,6 +36,9 @@
  * silent connections; it also reveals clients that went away). */
 #define SSE_POLL_MS 500
 #define SSE_PING_MS 15000
+/* On shutdown, event streams go on this long for their jobs' final
+ * `end` event (the service cancels running jobs) before they are cut. */
+#define SSE_GRACE_MS 3000
 /* Idle connections close after this (seconds). */
 #define CONNECTION_TIMEOUT_S 120
 
@@ -45,6 +50,12 @@ struct http_server {
   size_t max_body;
   int port;
   atomic_bool stopping;
+  _Atomic int64_t stop_deadline_ms; /* monotonic ms; streams end after it */
+  /* Open event streams, so that stopping can wait for them to send their
+   * jobs' `end` before MHD closes every socket. */
+  pthread_mutex_t lock;
+  pthread_cond_t streams_done;
+  int n_streams;
 };
 
 /* One request in flight. */
@@ -57,6 +68,9 @@ typedef struct conn {
   size_t len, cap;
   bool too_large; /* body passed max_body: read and dropped, then 413 */
   bool answered;  /* a response is queued already */
+  bool seen_first; /* the first call (headers only) is over */
+  bool has_early;  /* early holds a problem to send at the last call */
+  http_resp early;
 } conn;
 
 /* ---- responses ------------------------------------------------------------ */
@@ -102,7 +116,13 @@ static enum MHD_Result send_resp(struct MHD_Connection *c, conn *cn, http_req *r
       snprintf(st->job, sizeof st->job, "%s", resp->sse_job);
       st->after = resp->sse_after;
       mr = MHD_create_response_from_callback(MHD_SIZE_UNKNOWN, 4096, sse_read, st, sse_free);
-      if (!mr) free(st);
+      if (!mr) {
+        free(st);
+      } else {
+        pthread_mutex_lock(&cn->srv->lock);
+        cn->srv->n_streams++;
+        pthread_mutex_unlock(&cn->srv->lock);
+      }
     }
     if (mr) {
       MHD_add_response_header(mr, MHD_HTTP_HEADER_CONTENT_TYPE, "text/event-stream");
@@ -126,13 +146,39 @@ static enum MHD_Result send_resp(struct MHD_Connection *c, conn *cn, http_req *r
   return ret;
 }
 
+/* Does the request announce a body? */
+static bool has_body(struct MHD_Connection *c) {
+  const char *cl = MHD_lookup_connection_value(c, MHD_HEADER_KIND, MHD_HTTP_HEADER_CONTENT_LENGTH);
+  if (MHD_lookup_connection_value(c, MHD_HEADER_KIND, MHD_HTTP_HEADER_TRANSFER_ENCODING)) return true;
+  return cl && strtoull(cl, NULL, 10) != 0;
+}
+
+/* Answer with a problem. At the first call of a request that announces a
+ * body, the answer goes out at once and MHD closes the connection without
+ * reading the body; without a body it waits for the request's last call
+ * (cn->early), so the connection stays open for the next request. */
 static enum MHD_Result send_problem(struct MHD_Connection *c, conn *cn, int status, const char *code,
                                     const char *detail, const char *allow, bool www_auth) {
   http_req r = {.svc = cn->srv->svc};
   http_resp_problem(&r, status, code, "%s", detail);
   if (allow) snprintf(r.resp.allow, sizeof r.resp.allow, "%s", allow);
   r.resp.www_authenticate = www_auth;
+  if (!cn->seen_first && !has_body(c)) {
+    cn->early = r.resp;
+    cn->has_early = true;
+    return MHD_YES;
+  }
   return send_resp(c, cn, &r);
+}
+
+static int64_t now_ms(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
+}
+
+static bool streams_must_end(http_server *srv) {
+  return atomic_load(&srv->stopping) && now_ms() >= atomic_load(&srv->stop_deadline_ms);
 }
 
 /* ---- server-sent events ------------------------------------------------------
@@ -165,7 +211,7 @@ static ssize_t sse_read(void *cls, uint64_t pos, char *buf, size_t max) {
   while (st->out_off >= st->out.len) {
     http_buf_free(&st->out);
     st->out_off = 0;
-    if (st->ended || atomic_load(&st->srv->stopping)) return MHD_CONTENT_READER_END_OF_STREAM;
+    if (st->ended || streams_must_end(st->srv)) return MHD_CONTENT_READER_END_OF_STREAM;
     uint64_t seq = 0;
     char *json = NULL;
     bool is_end = false;
@@ -197,8 +243,12 @@ static ssize_t sse_read(void *cls, uint64_t pos, char *buf, size_t max) {
 
 static void sse_free(void *cls) {
   sse_stream *st = cls;
+  http_server *srv = st->srv;
   http_buf_free(&st->out);
   free(st);
+  pthread_mutex_lock(&srv->lock);
+  if (--srv->n_streams == 0) pthread_cond_broadcast(&srv->streams_done);
+  pthread_mutex_unlock(&srv->lock);
 }
 
 /* ---- generic checks ----------------------------------------------------------- */
@@ -394,12 +444,19 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
     cn->srv = srv;
     *con_cls = cn;
     enum MHD_Result ret = MHD_YES;
-    if (!first_checks(c, cn, url, method, &ret)) return ret;
-    return MHD_YES;
+    first_checks(c, cn, url, method, &ret);
+    cn->seen_first = true;
+    return ret;
   }
-  if (cn->answered) { /* answered at the first call: drop the body */
-    *upload_data_size = 0;
-    return MHD_YES;
+  if (cn->answered || cn->has_early) { /* answered already: drop any body */
+    if (*upload_data_size) {
+      *upload_data_size = 0;
+      return MHD_YES;
+    }
+    if (cn->answered) return MHD_YES;
+    http_req r = {.svc = srv->svc, .resp = cn->early};
+    cn->has_early = false;
+    return send_resp(c, cn, &r);
   }
   if (*upload_data_size) {
     take_body(cn, upload_data, *upload_data_size);
@@ -413,6 +470,7 @@ static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls, en
   (void)cls, (void)c, (void)toe;
   conn *cn = *con_cls;
   if (!cn) return;
+  if (cn->has_early) http_resp_clear(&cn->early);
   free(cn->seg_buf);
   free(cn->body);
   free(cn);
@@ -475,6 +533,7 @@ rsw_status http_server_start(service *svc, const http_opts *opts, http_server **
   srv->svc = svc;
   srv->max_body = opts->max_body ? opts->max_body : HTTP_DEFAULT_MAX_BODY;
   atomic_init(&srv->stopping, false);
+  atomic_init(&srv->stop_deadline_ms, 0);
   if (has_token) {
     srv->token = strdup(opts->token);
     if (!srv->token) {
@@ -497,12 +556,20 @@ rsw_status http_server_start(service *svc, const http_opts *opts, http_server **
   }
 
   unsigned flags = MHD_USE_THREAD_PER_CONNECTION | MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_POLL | MHD_USE_ERROR_LOG;
-  srv->mhd = MHD_start_daemon(flags, 0, NULL, NULL, on_request, srv, MHD_OPTION_LISTEN_SOCKET, fd,
-                              MHD_OPTION_NOTIFY_COMPLETED, on_completed, srv, MHD_OPTION_CONNECTION_LIMIT,
-                              opts->max_connections ? opts->max_connections : 256u, MHD_OPTION_CONNECTION_TIMEOUT,
-                              (unsigned)CONNECTION_TIMEOUT_S, MHD_OPTION_EXTERNAL_LOGGER, on_log, NULL,
-                              MHD_OPTION_END);
+  pthread_condattr_t ca;
+  pthread_condattr_init(&ca);
+  pthread_condattr_setclock(&ca, CLOCK_MONOTONIC);
+  pthread_mutex_init(&srv->lock, NULL);
+  pthread_cond_init(&srv->streams_done, &ca);
+  pthread_condattr_destroy(&ca);
+  /* The logger goes first so that it sees the other options' messages. */
+  srv->mhd = MHD_start_daemon(flags, 0, NULL, NULL, on_request, srv, MHD_OPTION_EXTERNAL_LOGGER, on_log, NULL,
+                              MHD_OPTION_LISTEN_SOCKET, fd, MHD_OPTION_NOTIFY_COMPLETED, on_completed, srv,
+                              MHD_OPTION_CONNECTION_LIMIT, opts->max_connections ? opts->max_connections : 256u,
+                              MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)CONNECTION_TIMEOUT_S, MHD_OPTION_END);
   if (!srv->mhd) {
+    pthread_cond_destroy(&srv->streams_done);
+    pthread_mutex_destroy(&srv->lock);
     close(fd);
     free(srv->token);
     free(srv);
@@ -523,10 +590,23 @@ int http_server_port(const http_server *srv) { return srv ? srv->port : 0; }
 
 void http_server_stop(http_server *srv) {
   if (!srv) return;
+  int64_t deadline = now_ms() + SSE_GRACE_MS;
+  atomic_store(&srv->stop_deadline_ms, deadline);
   atomic_store(&srv->stopping, true);
-  /* Joins every connection thread; event streams notice `stopping` within
-   * SSE_POLL_MS, renders return once the service was shut down. */
+  /* Event streams end with their job's `end` event (the service cancelled
+   * the jobs) or at the deadline (their next poll). Wait for them before
+   * MHD shuts every socket down, or clients would lose the `end`. */
+  struct timespec until = {.tv_sec = (time_t)((deadline + SSE_POLL_MS) / 1000),
+                           .tv_nsec = (long)((deadline + SSE_POLL_MS) % 1000) * 1000000L};
+  pthread_mutex_lock(&srv->lock);
+  while (srv->n_streams > 0)
+    if (pthread_cond_timedwait(&srv->streams_done, &srv->lock, &until) == ETIMEDOUT) break;
+  pthread_mutex_unlock(&srv->lock);
+  /* Joins every connection thread; renders return once the service was
+   * shut down. */
   MHD_stop_daemon(srv->mhd);
+  pthread_cond_destroy(&srv->streams_done);
+  pthread_mutex_destroy(&srv->lock);
   free(srv->token);
   free(srv);
 }
