@@ -232,41 +232,51 @@ rsw_status http_film_exr(const svc_film *f, void **bytes_out, size_t *len_out, r
 
 /* ---- problem+json ---------------------------------------------------------- */
 
+/* Reason phrases (RFC 9110) and the machine codes the HTTP layer uses for
+ * errors of its own: the phrase in upper snake case. */
+static const struct {
+  int status;
+  const char *reason, *code;
+} statuses[] = {
+    {200, "OK", "OK"},
+    {201, "Created", "CREATED"},
+    {202, "Accepted", "ACCEPTED"},
+    {204, "No Content", "NO_CONTENT"},
+    {400, "Bad Request", "BAD_REQUEST"},
+    {401, "Unauthorized", "UNAUTHORIZED"},
+    {403, "Forbidden", "FORBIDDEN"},
+    {404, "Not Found", "NOT_FOUND"},
+    {405, "Method Not Allowed", "METHOD_NOT_ALLOWED"},
+    {406, "Not Acceptable", "NOT_ACCEPTABLE"},
+    {409, "Conflict", "CONFLICT"},
+    {410, "Gone", "GONE"},
+    {412, "Precondition Failed", "PRECONDITION_FAILED"},
+    {413, "Content Too Large", "CONTENT_TOO_LARGE"},
+    {415, "Unsupported Media Type", "UNSUPPORTED_MEDIA_TYPE"},
+    {422, "Unprocessable Content", "UNPROCESSABLE_CONTENT"},
+    {429, "Too Many Requests", "TOO_MANY_REQUESTS"},
+    {500, "Internal Server Error", "INTERNAL_SERVER_ERROR"},
+    {501, "Not Implemented", "NOT_IMPLEMENTED"},
+    {503, "Service Unavailable", "SERVICE_UNAVAILABLE"},
+    {504, "Gateway Timeout", "GATEWAY_TIMEOUT"},
+};
+
 const char *http_reason(int status) {
-  static const struct {
-    int status;
-    const char *reason;
-  } reasons[] = {
-      {200, "OK"},
-      {201, "Created"},
-      {202, "Accepted"},
-      {204, "No Content"},
-      {400, "Bad Request"},
-      {401, "Unauthorized"},
-      {403, "Forbidden"},
-      {404, "Not Found"},
-      {405, "Method Not Allowed"},
-      {406, "Not Acceptable"},
-      {409, "Conflict"},
-      {410, "Gone"},
-      {412, "Precondition Failed"},
-      {413, "Content Too Large"},
-      {415, "Unsupported Media Type"},
-      {422, "Unprocessable Content"},
-      {429, "Too Many Requests"},
-      {500, "Internal Server Error"},
-      {501, "Not Implemented"},
-      {503, "Service Unavailable"},
-      {504, "Gateway Timeout"},
-  };
-  for (size_t i = 0; i < sizeof reasons / sizeof reasons[0]; i++)
-    if (reasons[i].status == status) return reasons[i].reason;
+  for (size_t i = 0; i < sizeof statuses / sizeof statuses[0]; i++)
+    if (statuses[i].status == status) return statuses[i].reason;
   return "Error";
+}
+
+const char *http_status_code(int status) {
+  for (size_t i = 0; i < sizeof statuses / sizeof statuses[0]; i++)
+    if (statuses[i].status == status) return statuses[i].code;
+  return "ERROR";
 }
 
 char *http_problem_json(int status, const char *code, const char *detail, const char *pointer, const char *key,
                         const char *const *candidates, size_t n_candidates) {
   http_buf b = {0};
+  if (!code) code = http_status_code(status);
   http_buf_puts(&b, "{\"type\":\"https://raysweep.dev/problems/");
   /* code is an identifier ([A-Z0-9_]); escape anyway, minus the quotes */
   http_buf tmp = {0};
@@ -299,6 +309,15 @@ char *http_problem_json(int status, const char *code, const char *detail, const 
   return http_buf_take(&b, NULL);
 }
 
+/* Is where a place in a document: a JSON pointer ("/shapes/0") or
+ * "file:line[:column]"? (Other where strings, such as a digest or a key,
+ * stay in the detail only.) */
+static bool is_place(const char *where) {
+  if (where[0] == '/') return true;
+  const char *colon = strchr(where, ':');
+  return colon && colon != where && colon[1] >= '0' && colon[1] <= '9';
+}
+
 char *http_problem_from_svc(const svc_error *e, int *status_out) {
   int status = e->http_status ? e->http_status : rsw_status_http(e->err.code);
   if (status < 400 || status > 599) status = 500; /* an error must not read as success */
@@ -307,7 +326,7 @@ char *http_problem_from_svc(const svc_error *e, int *status_out) {
     rsw_err_format(&e->err, detail, sizeof detail);
   else
     snprintf(detail, sizeof detail, "%s", rsw_strerror(e->err.code));
-  const char *pointer = e->err.where[0] == '/' ? e->err.where : NULL;
+  const char *pointer = is_place(e->err.where) ? e->err.where : NULL;
   const char *cands[3] = {e->candidates[0], e->candidates[1], e->candidates[2]};
   *status_out = status;
   return http_problem_json(status, rsw_status_name(e->err.code), detail, pointer, e->key, cands, 3);

@@ -62,7 +62,8 @@ rsw_status http_film_exr(const svc_film *f, void **bytes_out, size_t *len_out, r
 
 /* ---- problem+json ----------------------------------------------------------
  * RFC 9457 body: {"type": "https://raysweep.dev/problems/<code>", "title":
- * reason phrase of status, "status", "detail", "code", and when given
+ * reason phrase of status, "status", "detail", "code" (NULL: the status's
+ * http_status_code), and when given
  * "pointer", "key", "candidates"}. pointer, key may be NULL or "";
  * candidates is NULL or n_candidates strings (empty ones skipped).
  * Returns malloc'ed text or NULL when out of memory. */
@@ -70,11 +71,15 @@ char *http_problem_json(int status, const char *code, const char *detail, const 
                         const char *const *candidates, size_t n_candidates);
 /* The same from a service error: status is e->http_status or
  * rsw_status_http(e->err.code); code is the status name (RSW_ERR_...);
- * detail is "where: message"; pointer is err.where when it is a JSON
- * pointer ("/..."). *status_out receives the status. */
+ * detail is "where: message"; pointer is err.where when it names a place
+ * in the document (a JSON pointer "/..." or "file:line"). *status_out
+ * receives the status. */
 char *http_problem_from_svc(const svc_error *e, int *status_out);
 /* Reason phrase of an HTTP status ("Not Found"); "Error" when unknown. */
 const char *http_reason(int status);
+/* The machine code of an HTTP-layer error: the reason phrase in upper
+ * snake case ("NOT_FOUND", "CONTENT_TOO_LARGE"); "ERROR" when unknown. */
+const char *http_status_code(int status);
 
 /* ---- request helpers ------------------------------------------------------- */
 

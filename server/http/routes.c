@@ -118,7 +118,7 @@ static void resp_film(http_req *r, const svc_film *f, http_film_format fmt) {
 static bool negotiate_film(http_req *r, http_film_format *fmt) {
   *fmt = http_accept_film(r->accept);
   if (*fmt != HTTP_FILM_NONE) return true;
-  http_resp_problem(r, 406, "NOT_ACCEPTABLE",
+  http_resp_problem(r, 406, NULL,
                     "Accept '%s' allows none of application/json, image/x-exr, application/x-npy", r->accept);
   return false;
 }
@@ -132,7 +132,7 @@ static bool query_bool(http_req *r, const char *name, const char *v, bool *out) 
     return true;
   }
   if (strcmp(v, "false") == 0 || strcmp(v, "0") == 0) return true;
-  http_resp_problem(r, 400, "BAD_QUERY", "query parameter %s must be true or false (got '%s')", name, v);
+  http_resp_problem(r, 400, NULL, "query parameter %s must be true or false (got '%s')", name, v);
   return false;
 }
 
@@ -146,7 +146,7 @@ static bool query_enum(http_req *r, const char *name, const char *v, const char 
     strncat(list, i ? ", " : "", sizeof list - strlen(list) - 1);
     strncat(list, allowed[i], sizeof list - strlen(list) - 1);
   }
-  http_resp_problem(r, 400, "BAD_QUERY", "query parameter %s must be one of %s (got '%s')", name, list, v);
+  http_resp_problem(r, 400, NULL, "query parameter %s must be one of %s (got '%s')", name, list, v);
   return false;
 }
 
@@ -179,7 +179,7 @@ static bool parse_if_match(http_req *r, int64_t *out) {
   if (n >= 2 && v[0] == '"' && v[n - 1] == '"') v++, n -= 2;
   uint64_t rev;
   if (!parse_u64(v, n, &rev) || rev > INT64_MAX) {
-    http_resp_problem(r, 400, "BAD_HEADER", "If-Match must be a quoted revision number such as \"3\" (got '%s')",
+    http_resp_problem(r, 400, NULL, "If-Match must be a quoted revision number such as \"3\" (got '%s')",
                       r->if_match);
     return false;
   }
@@ -197,7 +197,7 @@ static void h_ready(http_req *r) {
   if (service_ready(r->svc))
     http_resp_json(r, 200, strdup("{\"status\":\"ready\"}"));
   else
-    http_resp_problem(r, 503, "NOT_READY", "the server is shutting down or not ready to accept work");
+    http_resp_problem(r, 503, NULL, "the server is shutting down or not ready to accept work");
 }
 
 static void h_metrics(http_req *r) {
@@ -344,7 +344,7 @@ static void h_job_events(http_req *r) {
     size_t n = strlen(v);
     while (n && v[n - 1] == ' ') n--;
     if (n && !parse_u64(v, n, &after)) {
-      http_resp_problem(r, 400, "BAD_HEADER", "Last-Event-ID must be an event sequence number (got '%s')",
+      http_resp_problem(r, 400, NULL, "Last-Event-ID must be an event sequence number (got '%s')",
                         r->last_event_id);
       return;
     }

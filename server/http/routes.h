@@ -84,7 +84,8 @@ const http_route *http_route_find(const char *method, const char *path, char *se
                                   size_t allow_len);
 
 /* Response helpers for handlers and server.c. They replace any previous
- * body. resp_problem formats detail; resp_svc_error answers from an
+ * body. http_resp_problem formats detail; its code NULL means the HTTP
+ * status name (http_status_code). http_resp_svc_error answers from an
  * svc_error (status, Retry-After for 429). */
 void http_resp_json(http_req *r, int status, char *json_owned);
 void http_resp_problem(http_req *r, int status, const char *code, const char *fmt, ...)

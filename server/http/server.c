@@ -313,7 +313,7 @@ static bool first_checks(struct MHD_Connection *c, conn *cn, const char *url, co
    * for the token first so that unauthenticated clients learn nothing. */
   if (!(rt && rt->public_route) && !authorized(srv, c)) {
     cn->route = rt;
-    *ret = send_problem(c, cn, 401, "UNAUTHORIZED", "this server requires Authorization: Bearer <token>", NULL,
+    *ret = send_problem(c, cn, 401, NULL, "this server requires Authorization: Bearer <token>", NULL,
                         true);
     return false;
   }
@@ -321,10 +321,10 @@ static bool first_checks(struct MHD_Connection *c, conn *cn, const char *url, co
     char detail[600];
     if (path_known) {
       snprintf(detail, sizeof detail, "%s is not allowed on %.400s (allowed: %s)", method, url, allow);
-      *ret = send_problem(c, cn, 405, "METHOD_NOT_ALLOWED", detail, allow, false);
+      *ret = send_problem(c, cn, 405, NULL, detail, allow, false);
     } else {
       snprintf(detail, sizeof detail, "no route %.400s (see GET /v1 and proto/openapi.yaml)", url);
-      *ret = send_problem(c, cn, 404, "ROUTE_NOT_FOUND", detail, NULL, false);
+      *ret = send_problem(c, cn, 404, NULL, detail, NULL, false);
     }
     return false;
   }
@@ -334,7 +334,7 @@ static bool first_checks(struct MHD_Connection *c, conn *cn, const char *url, co
     char detail[400];
     snprintf(detail, sizeof detail, "Content-Type '%.200s' is not accepted here (send %s)", ct,
              media_expected(rt->body));
-    *ret = send_problem(c, cn, 415, "UNSUPPORTED_MEDIA_TYPE", detail, NULL, false);
+    *ret = send_problem(c, cn, 415, NULL, detail, NULL, false);
     return false;
   }
   const char *cl = header(c, MHD_HTTP_HEADER_CONTENT_LENGTH);
@@ -346,7 +346,7 @@ static bool first_checks(struct MHD_Connection *c, conn *cn, const char *url, co
       char detail[200];
       snprintf(detail, sizeof detail, "request body of %llu bytes exceeds the limit of %zu (--max-body)", n,
                srv->max_body);
-      *ret = send_problem(c, cn, 413, "PAYLOAD_TOO_LARGE", detail, NULL, false);
+      *ret = send_problem(c, cn, 413, NULL, detail, NULL, false);
       return false;
     }
     /* Reserve the announced length once instead of growing by doubling. */
@@ -390,7 +390,7 @@ static enum MHD_Result dispatch(struct MHD_Connection *c, conn *cn, const char *
   if (cn->too_large) {
     char detail[200];
     snprintf(detail, sizeof detail, "request body exceeds the limit of %zu bytes (--max-body)", cn->srv->max_body);
-    return send_problem(c, cn, 413, "PAYLOAD_TOO_LARGE", detail, NULL, false);
+    return send_problem(c, cn, 413, NULL, detail, NULL, false);
   }
   const char *ct = header(c, MHD_HTTP_HEADER_CONTENT_TYPE);
   const char *body = cn->body ? cn->body : "";
@@ -399,12 +399,12 @@ static enum MHD_Result dispatch(struct MHD_Connection *c, conn *cn, const char *
   if ((rt->body == HTTP_BODY_JSON || rt->body == HTTP_BODY_SCENE) && !ct && len) {
     char detail[200];
     snprintf(detail, sizeof detail, "a request body needs a Content-Type (%s)", media_expected(rt->body));
-    return send_problem(c, cn, 415, "UNSUPPORTED_MEDIA_TYPE", detail, NULL, false);
+    return send_problem(c, cn, 415, NULL, detail, NULL, false);
   }
   if (json && !http_json_depth_ok(body, len, HTTP_MAX_JSON_DEPTH)) {
     char detail[120];
     snprintf(detail, sizeof detail, "JSON body nests deeper than %d levels", HTTP_MAX_JSON_DEPTH);
-    return send_problem(c, cn, 400, "JSON_TOO_DEEP", detail, NULL, false);
+    return send_problem(c, cn, 400, NULL, detail, NULL, false);
   }
   /* Every field of a JSON request is optional somewhere (a render with all
    * defaults): an empty body means an empty object. */

@@ -226,6 +226,36 @@ static void test_problem(void) {
   t = http_problem_from_svc(&e, &status);
   CHECK(t && status == 409, "explicit status %d", status);
   free(t);
+
+  /* file:line is a place (pointer); a digest in where is not. */
+  memset(&e, 0, sizeof e);
+  rsw_fail(&e.err, RSW_ERR_PARSE, "scene.xml:12", "bad tag");
+  t = http_problem_from_svc(&e, &status);
+  j = t ? cJSON_Parse(t) : NULL;
+  REQUIRE(j, "does not parse");
+  cJSON *ptr = cJSON_GetObjectItem(j, "pointer");
+  CHECK(status == 400 && ptr && strcmp(ptr->valuestring, "scene.xml:12") == 0, "file:line pointer");
+  CHECK(strcmp(cJSON_GetObjectItem(j, "detail")->valuestring, "scene.xml:12: bad tag") == 0, "detail");
+  cJSON_Delete(j);
+  free(t);
+  memset(&e, 0, sizeof e);
+  rsw_fail(&e.err, RSW_ERR_INVALID, "ab12", "digest mismatch");
+  t = http_problem_from_svc(&e, &status);
+  j = t ? cJSON_Parse(t) : NULL;
+  REQUIRE(j, "does not parse");
+  CHECK(!cJSON_GetObjectItem(j, "pointer"), "a digest is not a pointer");
+  cJSON_Delete(j);
+  free(t);
+
+  /* HTTP-layer problems: code NULL gives the status name. */
+  t = http_problem_json(413, NULL, "too big", NULL, NULL, NULL, 0);
+  j = t ? cJSON_Parse(t) : NULL;
+  REQUIRE(j, "does not parse");
+  CHECK(strcmp(cJSON_GetObjectItem(j, "code")->valuestring, "CONTENT_TOO_LARGE") == 0, "code from status");
+  CHECK(strcmp(cJSON_GetObjectItem(j, "type")->valuestring, "https://raysweep.dev/problems/CONTENT_TOO_LARGE") == 0,
+        "type from status");
+  cJSON_Delete(j);
+  free(t);
 }
 
 static void test_accept(void) {
