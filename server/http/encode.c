@@ -273,8 +273,8 @@ const char *http_status_code(int status) {
   return "ERROR";
 }
 
-char *http_problem_json(int status, const char *code, const char *detail, const char *pointer, const char *key,
-                        const char *const *candidates, size_t n_candidates) {
+static char *problem_json(int status, const char *code, const char *title, const char *detail, const char *pointer,
+                          const char *key, const char *const *candidates, size_t n_candidates) {
   http_buf b = {0};
   if (!code) code = http_status_code(status);
   http_buf_puts(&b, "{\"type\":\"https://raysweep.dev/problems/");
@@ -284,7 +284,7 @@ char *http_problem_json(int status, const char *code, const char *detail, const 
   if (tmp.p) http_buf_append(&b, tmp.p + 1, tmp.len - 2);
   http_buf_free(&tmp);
   http_buf_puts(&b, "\",\"title\":");
-  http_buf_json_string(&b, http_reason(status));
+  http_buf_json_string(&b, title);
   http_buf_printf(&b, ",\"status\":%d,\"detail\":", status);
   http_buf_json_string(&b, detail ? detail : "");
   http_buf_puts(&b, ",\"code\":");
@@ -309,6 +309,11 @@ char *http_problem_json(int status, const char *code, const char *detail, const 
   return http_buf_take(&b, NULL);
 }
 
+char *http_problem_json(int status, const char *code, const char *detail, const char *pointer, const char *key,
+                        const char *const *candidates, size_t n_candidates) {
+  return problem_json(status, code, http_reason(status), detail, pointer, key, candidates, n_candidates);
+}
+
 /* Is where a place in a document: a JSON pointer ("/shapes/0") or
  * "file:line[:column]"? (Other where strings, such as a digest or a key,
  * stay in the detail only.) */
@@ -329,7 +334,9 @@ char *http_problem_from_svc(const svc_error *e, int *status_out) {
   const char *pointer = is_place(e->err.where) ? e->err.where : NULL;
   const char *cands[3] = {e->candidates[0], e->candidates[1], e->candidates[2]};
   *status_out = status;
-  return http_problem_json(status, rsw_status_name(e->err.code), detail, pointer, e->key, cands, 3);
+  /* The title belongs to the problem type (the code), not to the case. */
+  return problem_json(status, rsw_status_name(e->err.code), rsw_strerror(e->err.code), detail, pointer, e->key,
+                      cands, 3);
 }
 
 /* ---- request helpers ------------------------------------------------------- */

@@ -62,7 +62,7 @@ rsw_status http_film_exr(const svc_film *f, void **bytes_out, size_t *len_out, r
 
 /* ---- problem+json ----------------------------------------------------------
  * RFC 9457 body: {"type": "https://raysweep.dev/problems/<code>", "title":
- * reason phrase of status, "status", "detail", "code" (NULL: the status's
+ * the status's reason phrase, "status", "detail", "code" (NULL: the status's
  * http_status_code), and when given
  * "pointer", "key", "candidates"}. pointer, key may be NULL or "";
  * candidates is NULL or n_candidates strings (empty ones skipped).
@@ -70,7 +70,8 @@ rsw_status http_film_exr(const svc_film *f, void **bytes_out, size_t *len_out, r
 char *http_problem_json(int status, const char *code, const char *detail, const char *pointer, const char *key,
                         const char *const *candidates, size_t n_candidates);
 /* The same from a service error: status is e->http_status or
- * rsw_status_http(e->err.code); code is the status name (RSW_ERR_...);
+ * rsw_status_http(e->err.code); code is the status name (RSW_ERR_...)
+ * and title its message (rsw_strerror: "unknown plugin");
  * detail is "where: message"; pointer is err.where when it names a place
  * in the document (a JSON pointer "/..." or "file:line"). *status_out
  * receives the status. */

@@ -396,14 +396,8 @@ static void h_blob_put(http_req *r) {
     http_resp_svc_error(r, &e);
     return;
   }
-  snprintf(r->resp.location, sizeof r->resp.location, "/v1/blobs/%s", r->params[0]);
-  char *json = NULL;
-  http_buf b = {0};
-  http_buf_puts(&b, "{\"digest\":");
-  http_buf_json_string(&b, r->params[0]);
-  http_buf_printf(&b, ",\"size\":%zu,\"created\":%s}", r->body_len, created ? "true" : "false");
-  json = http_buf_take(&b, NULL);
-  http_resp_json(r, created ? 201 : 200, json);
+  resp_empty(r, created ? 201 : 200);
+  if (created) snprintf(r->resp.location, sizeof r->resp.location, "/v1/blobs/%s", r->params[0]);
 }
 
 static void h_blob_head(http_req *r) {

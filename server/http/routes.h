@@ -20,7 +20,7 @@ typedef enum http_body_kind {
   HTTP_BODY_NONE,  /* any body is read and ignored */
   HTTP_BODY_JSON,  /* application/json (or an empty body) */
   HTTP_BODY_SCENE, /* application/json, application/xml or text/xml */
-  HTTP_BODY_RAW,   /* bytes of any type (blobs) */
+  HTTP_BODY_RAW,   /* bytes: application/octet-stream or no type (blobs) */
 } http_body_kind;
 
 /* The response a handler builds. body is malloc'ed (freed by the caller);

@@ -288,12 +288,17 @@ static bool media_fits(http_body_kind kind, const char *ct) {
   case HTTP_BODY_SCENE:
     return http_media_type_is(ct, "application/json") || http_media_type_is(ct, "application/xml") ||
            http_media_type_is(ct, "text/xml");
+  case HTTP_BODY_RAW: return http_media_type_is(ct, "application/octet-stream");
   default: return true;
   }
 }
 
 static const char *media_expected(http_body_kind kind) {
-  return kind == HTTP_BODY_SCENE ? "application/json, application/xml or text/xml" : "application/json";
+  switch (kind) {
+  case HTTP_BODY_SCENE: return "application/json, application/xml or text/xml";
+  case HTTP_BODY_RAW: return "application/octet-stream";
+  default: return "application/json";
+  }
 }
 
 /* First call for a request: headers are in, the body is not. Answers

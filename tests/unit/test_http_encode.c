@@ -218,6 +218,7 @@ static void test_problem(void) {
   REQUIRE(j, "does not parse");
   CHECK(status == 404 && cJSON_GetObjectItem(j, "status")->valueint == 404, "404 from the code");
   CHECK(strcmp(cJSON_GetObjectItem(j, "code")->valuestring, "RSW_ERR_NOT_FOUND") == 0, "code");
+  CHECK(strcmp(cJSON_GetObjectItem(j, "title")->valuestring, "not found") == 0, "title is the code's message");
   CHECK(!cJSON_GetObjectItem(j, "pointer") && !cJSON_GetObjectItem(j, "key"), "no pointer, no key");
   cJSON_Delete(j);
   free(t);
