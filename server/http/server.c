@@ -39,6 +39,8 @@
 /* On shutdown, event streams go on this long for their jobs' final
  * `end` event (the service cancels running jobs) before they are cut. */
 #define SSE_GRACE_MS 3000
+/* Most body memory reserved from Content-Length before the bytes arrive. */
+#define PREALLOC_MAX ((size_t)16 << 20)
 /* Idle connections close after this (seconds). */
 #define CONNECTION_TIMEOUT_S 120
 
@@ -354,10 +356,12 @@ static bool first_checks(struct MHD_Connection *c, conn *cn, const char *url, co
       *ret = send_problem(c, cn, 413, NULL, detail, NULL, false);
       return false;
     }
-    /* Reserve the announced length once instead of growing by doubling. */
+    /* Reserve the announced length once instead of growing by doubling,
+     * up to a point: an announcement alone must not pin much memory. */
     if (!errno && end != cl && n > 0 && rt->body != HTTP_BODY_NONE) {
-      cn->body = malloc((size_t)n + 1);
-      if (cn->body) cn->cap = (size_t)n + 1;
+      size_t want = (size_t)n + 1 < PREALLOC_MAX ? (size_t)n + 1 : PREALLOC_MAX;
+      cn->body = malloc(want);
+      if (cn->body) cn->cap = want;
     }
   }
   return true;
