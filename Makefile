@@ -39,7 +39,7 @@ SERVICE_SRC := $(shell find server/service -name '*.c' 2>/dev/null | sort)
 SERVICE_OBJ := $(SERVICE_SRC:%.c=$(BUILD)/obj/%.o)
 SERVICE_LIB := $(BUILD)/lib/librswservice.a
 DAEMON_SRC := server/main.c $(shell find server/http -name '*.c' 2>/dev/null | sort) $(wildcard server/serve.c)
-DAEMON_OBJ := $(DAEMON_SRC:%.c=$(BUILD)/obj/%.o)
+DAEMON_OBJ := $(DAEMON_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/obj/$(BUILD)/gen/default_scene.o
 
 TEST_SUPPORT_SRC := $(wildcard tests/support/*.c)
 TEST_SUPPORT_OBJ := $(TEST_SUPPORT_SRC:%.c=$(BUILD)/obj/%.o)
@@ -73,6 +73,19 @@ $(SERVICE_LIB): $(SERVICE_OBJ)
 $(BUILD)/bin/raysweepd: $(DAEMON_OBJ) $(SERVICE_LIB) $(KERNEL_LIB)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $(DAEMON_OBJ) $(SERVICE_LIB) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS) $(DAEMON_LIBS)
+
+# The embedded default scene (raysweepd serve without --scene): the XML as
+# one C string literal (backslash, quote and '?' escaped: no trigraphs).
+$(BUILD)/gen/default_scene.c: proto/examples/hdistant_seed.xml
+	@mkdir -p $(dir $@)
+	{ echo '#include "default_scene.h"'; echo 'const char rsw_default_scene_xml[] ='; \
+	  sed -e 's/\\/\\\\/g' -e 's/"/\\"/g' -e 's/?/\\?/g' -e 's/^/  "/' -e 's/$$/\\n"/' $<; \
+	  echo ';'; echo 'const size_t rsw_default_scene_xml_len = sizeof rsw_default_scene_xml - 1;'; } > $@
+
+# The HTTP encoders are not in the kernel library: link them in.
+$(BUILD)/tests/test_http_encode: $(BUILD)/obj/tests/unit/test_http_encode.o $(BUILD)/obj/server/http/encode.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS)
 
 $(BUILD)/tests/%: $(BUILD)/obj/tests/unit/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
 	@mkdir -p $(dir $@)

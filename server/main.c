@@ -20,6 +20,7 @@
 #include "kernel/scene/params.h"
 #include "kernel/scene/scene.h"
 #include "raysweep/status.h"
+#include "serve.h"
 
 #define RSW_VERSION "0.1.0"
 #define MAX_DEFINES 256
@@ -348,12 +349,6 @@ static int cmd_version(int argc, char **argv) {
   return 0;
 }
 
-static int cmd_serve(int argc, char **argv) {
-  (void)argc, (void)argv;
-  fprintf(stderr, "raysweepd serve: the HTTP daemon is not part of this build yet; use 'raysweepd render'\n");
-  return 2;
-}
-
 static const command commands[] = {
     {"render", "render SCENE [-D name=value]... [--set KEY=VALUE]... [--sensor ID] [--spp N] [--seed S] "
                "[--wavelength NM] [--threads N] [--variant mono|rgb] -o OUT.exr",
@@ -361,7 +356,8 @@ static const command commands[] = {
     {"params", "params SCENE [-D name=value]... [--match GLOB|TYPE:ID:PATH] [--class spectral|geometric|none] "
                "[--variant mono|rgb] [--json]",
      cmd_params},
-    {"serve", "serve", cmd_serve},
+    {"serve", RSW_SERVE_USAGE, cmd_serve},
+    {"routes", "routes", cmd_routes},
     {"version", "version", cmd_version},
 };
 

@@ -76,9 +76,13 @@ static float float_from_half(uint16_t h) {
 
 /* ---- stream callbacks ---------------------------------------------------- */
 
+/* Where the library's bytes go or come from: a descriptor (fd >= 0), or,
+ * for exr_encode_image, a growable memory buffer (fd < 0). */
 typedef struct exr_stream {
   int fd;
   char msg[512]; /* first message the library reported, or "" */
+  uint8_t *mem;  /* memory sink: malloc'ed bytes, mem_len of them valid */
+  size_t mem_len, mem_cap;
 } exr_stream;
 
 static void stream_error_handler(exr_const_context_t ctxt, exr_result_t code,
@@ -123,6 +127,37 @@ static int64_t stream_size(exr_const_context_t ctxt, void *ud) {
   return (int64_t)sb.st_size;
 }
 
+/* Memory sink: the library writes at increasing offsets (and patches the
+ * chunk offset table behind the header at the end), so grow by doubling up
+ * to the largest image EXR_MAX_SAMPLES allows plus headroom for headers. */
+static int64_t mem_write(exr_const_context_t ctxt, exr_stream *st,
+                         const uint8_t *p, uint64_t sz, uint64_t offset,
+                         exr_stream_error_func_ptr_t error_cb) {
+  const uint64_t cap_max = (uint64_t)EXR_MAX_SAMPLES * 4 + ((uint64_t)1 << 24);
+  if (offset + sz > cap_max) {
+    error_cb(ctxt, EXR_ERR_WRITE_IO, "in-memory EXR would exceed %llu bytes",
+             (unsigned long long)cap_max);
+    return -1;
+  }
+  size_t end = (size_t)(offset + sz);
+  if (end > st->mem_cap) {
+    size_t cap = st->mem_cap ? st->mem_cap : 4096;
+    while (cap < end) cap *= 2;
+    uint8_t *q = realloc(st->mem, cap);
+    if (!q) {
+      error_cb(ctxt, EXR_ERR_OUT_OF_MEMORY, "no memory for %zu EXR bytes", cap);
+      return -1;
+    }
+    st->mem = q;
+    st->mem_cap = cap;
+  }
+  if (offset > st->mem_len) /* a gap the library fills later: zero it */
+    memset(st->mem + st->mem_len, 0, (size_t)offset - st->mem_len);
+  memcpy(st->mem + offset, p, (size_t)sz);
+  if (end > st->mem_len) st->mem_len = end;
+  return (int64_t)sz;
+}
+
 static int64_t stream_write(exr_const_context_t ctxt, void *ud,
                             const void *buffer, uint64_t sz, uint64_t offset,
                             exr_stream_error_func_ptr_t error_cb) {
@@ -133,6 +168,7 @@ static int64_t stream_write(exr_const_context_t ctxt, void *ud,
     error_cb(ctxt, EXR_ERR_WRITE_IO, "write past any possible file end");
     return -1;
   }
+  if (st->fd < 0) return mem_write(ctxt, st, p, sz, offset, error_cb);
   while (done < sz) {
     ssize_t n =
         pwrite(st->fd, p + done, (size_t)(sz - done), (off_t)(offset + done));
@@ -258,43 +294,29 @@ static rsw_status check_write_args(const char *path, int width, int height,
   return RSW_OK;
 }
 
-rsw_status exr_write_image(const char *path, int width, int height,
-                           int n_channels, const char *const *channel_names,
-                           const float *data, bool half, const exr_meta *meta,
-                           rsw_err *err) {
-  rsw_status s = check_write_args(path, width, height, n_channels,
-                                  channel_names, data, meta, err);
-  if (s != RSW_OK) return s;
-
+/* Write the whole file (header, chunks, offset table) through st, which
+ * is a descriptor or a memory sink. label names the output in errors and is
+ * what the library is told the file is called. */
+static rsw_status write_to_stream(exr_stream *st, const char *label, int width,
+                                  int height, int n_channels,
+                                  const char *const *channel_names,
+                                  const float *data, bool half,
+                                  const exr_meta *meta, rsw_err *err) {
   size_t n_samples = (size_t)width * (size_t)height * (size_t)n_channels;
   uint16_t *halves = NULL;
   if (half) {
     halves = malloc(n_samples * sizeof *halves);
     if (!halves)
-      return rsw_fail(err, RSW_ERR_NOMEM, path,
+      return rsw_fail(err, RSW_ERR_NOMEM, label,
                       "no memory for %zu float16 samples", n_samples);
     for (size_t i = 0; i < n_samples; i++) halves[i] = half_from_float(data[i]);
   }
 
-  char tmp[4096];
-  int n = snprintf(tmp, sizeof tmp, "%s.tmp.%ld", path, (long)getpid());
-  if (n < 0 || (size_t)n >= sizeof tmp) {
-    free(halves);
-    return rsw_fail(err, RSW_ERR_INVALID, path, "EXR output path too long");
-  }
-  exr_stream st = {.fd = -1};
-  st.fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (st.fd < 0) {
-    int e = errno;
-    free(halves);
-    return rsw_fail(err, RSW_ERR_IO, path, "cannot create %s: %s", tmp,
-                    strerror(e));
-  }
-
-  exr_context_initializer_t init = stream_init(&st);
+  exr_context_initializer_t init = stream_init(st);
   exr_context_t ctx = NULL;
   const char *what = "cannot start EXR file";
-  exr_result_t rv = exr_start_write(&ctx, tmp, EXR_WRITE_FILE_DIRECTLY, &init);
+  exr_result_t rv =
+      exr_start_write(&ctx, label, EXR_WRITE_FILE_DIRECTLY, &init);
   int part = 0;
   if (rv == EXR_ERR_SUCCESS) {
     what = "cannot define EXR header";
@@ -335,9 +357,33 @@ rsw_status exr_write_image(const char *path, int width, int height,
     }
   }
   free(halves);
+  if (rv != EXR_ERR_SUCCESS)
+    return exr_fail(err, RSW_ERR_IO, label, st, rv, what);
+  return RSW_OK;
+}
 
-  if (rv != EXR_ERR_SUCCESS) {
-    s = exr_fail(err, RSW_ERR_IO, path, &st, rv, what);
+rsw_status exr_write_image(const char *path, int width, int height,
+                           int n_channels, const char *const *channel_names,
+                           const float *data, bool half, const exr_meta *meta,
+                           rsw_err *err) {
+  rsw_status s = check_write_args(path, width, height, n_channels,
+                                  channel_names, data, meta, err);
+  if (s != RSW_OK) return s;
+
+  char tmp[4096];
+  int n = snprintf(tmp, sizeof tmp, "%s.tmp.%ld", path, (long)getpid());
+  if (n < 0 || (size_t)n >= sizeof tmp)
+    return rsw_fail(err, RSW_ERR_INVALID, path, "EXR output path too long");
+  exr_stream st = {.fd = -1};
+  st.fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (st.fd < 0) {
+    int e = errno;
+    return rsw_fail(err, RSW_ERR_IO, path, "cannot create %s: %s", tmp,
+                    strerror(e));
+  }
+  s = write_to_stream(&st, path, width, height, n_channels, channel_names,
+                      data, half, meta, err);
+  if (s != RSW_OK) {
     close(st.fd);
     unlink(tmp);
     return s;
@@ -354,6 +400,28 @@ rsw_status exr_write_image(const char *path, int width, int height,
     return rsw_fail(err, RSW_ERR_IO, path, "cannot rename %s over it: %s", tmp,
                     strerror(e));
   }
+  return RSW_OK;
+}
+
+rsw_status exr_encode_image(int width, int height, int n_channels,
+                            const char *const *names, const float *data,
+                            bool half, const exr_meta *meta, void **bytes_out,
+                            size_t *len_out, rsw_err *err) {
+  const char *label = "(EXR in memory)";
+  if (!bytes_out || !len_out)
+    return rsw_fail(err, RSW_ERR_INVALID, label, "no output pointers");
+  rsw_status s = check_write_args(label, width, height, n_channels, names,
+                                  data, meta, err);
+  if (s != RSW_OK) return s;
+  exr_stream st = {.fd = -1};
+  s = write_to_stream(&st, label, width, height, n_channels, names, data, half,
+                      meta, err);
+  if (s != RSW_OK) {
+    free(st.mem);
+    return s;
+  }
+  *bytes_out = st.mem;
+  *len_out = st.mem_len;
   return RSW_OK;
 }
 

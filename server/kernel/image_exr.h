@@ -60,6 +60,15 @@ rsw_status exr_write_image(const char *path, int width, int height,
                            const float *data, bool half,
                            const exr_meta *meta_or_NULL, rsw_err *err);
 
+/* Encode the same file exr_write_image would write into memory instead:
+ * *bytes_out (malloc'ed, free() it) holds *len_out bytes of a complete EXR.
+ * Arguments and errors as for exr_write_image (errors name
+ * "(EXR in memory)"); outputs are written only on success. Thread-safe. */
+rsw_status exr_encode_image(int width, int height, int n_channels,
+                            const char *const *names, const float *data,
+                            bool half, const exr_meta *meta_or_NULL,
+                            void **bytes_out, size_t *len_out, rsw_err *err);
+
 /* Read part 0 of a scanline or tiled (level 0 of a mip/rip map) EXR whose
  * channels are HALF, FLOAT or UINT and not subsampled, into float32 HWC.
  * Writes *out only on success; release it with exr_image_free.

@@ -1,0 +1,96 @@
+/* Internal to server/http: the routes table and the request/response
+ * records its handlers work on. No microhttpd types: server.c (the one
+ * file that includes microhttpd.h) fills an http_req from the connection,
+ * runs the route's handler and turns the http_resp into a response. */
+#ifndef RSW_HTTP_ROUTES_H
+#define RSW_HTTP_ROUTES_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+
+#include "../service/service.h"
+
+#define HTTP_MAX_PATH_PARAMS 3
+#define HTTP_MAX_JSON_DEPTH 64
+
+/* What a route's body must be (checked before the handler runs). */
+typedef enum http_body_kind {
+  HTTP_BODY_NONE,  /* any body is read and ignored */
+  HTTP_BODY_JSON,  /* application/json (or an empty body) */
+  HTTP_BODY_SCENE, /* application/json, application/xml or text/xml */
+  HTTP_BODY_RAW,   /* bytes: application/octet-stream or no type (blobs) */
+} http_body_kind;
+
+/* The response a handler builds. body is malloc'ed (freed by the caller);
+ * header values are copied into the fixed fields. */
+typedef struct http_resp {
+  int status;
+  const char *content_type; /* static string; NULL with no body */
+  void *body;
+  size_t len;
+  char location[512];
+  char etag[32];
+  int retry_after_s;        /* > 0: Retry-After */
+  bool www_authenticate;    /* WWW-Authenticate: Bearer */
+  char allow[64];           /* for 405 */
+  /* Server-sent events instead of a body: server.c streams
+   * service_job_next_event for sse_job after sse_after. */
+  bool sse;
+  char sse_job[128];
+  uint64_t sse_after;
+} http_resp;
+
+/* One request, as the handler sees it: everything server.c looked up from
+ * the connection (NULL when absent), the path's {placeholders} in order,
+ * and the whole body. */
+typedef struct http_req {
+  service *svc;
+  const char *method, *path;
+  const char *params[HTTP_MAX_PATH_PARAMS];
+  /* query */
+  const char *q_match, *q_class, *q_force, *q_variant;
+  /* headers */
+  const char *content_type, *accept, *if_match, *idempotency_key, *last_event_id;
+  const char *body;
+  size_t body_len;
+  http_resp resp;
+} http_req;
+
+typedef void (*http_handler)(http_req *r);
+
+typedef struct http_route {
+  const char *method;
+  const char *path; /* template: literal segments, "{name}", "{name}:verb" */
+  http_body_kind body;
+  bool public_route; /* no token needed (health) */
+  http_handler handler;
+} http_route;
+
+/* The table, in the order `raysweepd routes` prints it. */
+extern const http_route http_routes[];
+extern const size_t http_n_routes;
+
+/* Match path against a template; on success fill params (borrowed
+ * pointers into seg_buf, which must hold strlen(path) + 1 bytes). */
+bool http_route_match(const char *tmpl, const char *path, char *seg_buf, const char *params[HTTP_MAX_PATH_PARAMS]);
+
+/* Find the route for (method, path). Returns it, or NULL with *path_known
+ * telling whether another method would match (then allow receives the
+ * comma-separated methods, for a 405). */
+const http_route *http_route_find(const char *method, const char *path, char *seg_buf,
+                                  const char *params[HTTP_MAX_PATH_PARAMS], bool *path_known, char *allow,
+                                  size_t allow_len);
+
+/* Response helpers for handlers and server.c. They replace any previous
+ * body. http_resp_problem formats detail; its code NULL means the HTTP
+ * status name (http_status_code). http_resp_svc_error answers from an
+ * svc_error (status, Retry-After for 429). */
+void http_resp_json(http_req *r, int status, char *json_owned);
+void http_resp_problem(http_req *r, int status, const char *code, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+void http_resp_svc_error(http_req *r, const svc_error *e);
+void http_resp_clear(http_resp *resp);
+
+#endif

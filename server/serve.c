@@ -1,0 +1,306 @@
+/* raysweepd serve: parse the command line, start the service and the HTTP
+ * server, preload scenes, then wait for SIGTERM/SIGINT in the main thread
+ * and shut down in order (service first so blocked renders return, then
+ * the HTTP threads, then the service's memory).
+ *
+ * The signals are blocked before any thread starts so that every thread
+ * inherits the mask and only sigwait() here ever receives them: no handler
+ * runs on an arbitrary thread and nothing async-signal-unsafe can happen. */
+#include "serve.h"
+
+#include <errno.h>
+#include <ftw.h>
+#include <math.h>
+#include <pthread.h>
+#include <signal.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "default_scene.h"
+#include "http/http.h"
+#include "service/service.h"
+
+#define MAX_SCENES 256
+#define MAX_TOKEN 4096
+
+typedef struct serve_args {
+  const char *listen, *data_root, *blob_dir, *token_file, *port_file;
+  const char *scenes[MAX_SCENES];
+  size_t n_scenes;
+  unsigned long long threads, max_queue, max_body;
+  double result_ttl;
+} serve_args;
+
+static int fail_usage(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
+static int fail_usage(const char *fmt, ...) {
+  va_list ap;
+  va_start(ap, fmt);
+  fprintf(stderr, "raysweepd serve: ");
+  vfprintf(stderr, fmt, ap);
+  fputc('\n', stderr);
+  va_end(ap);
+  return 2;
+}
+
+static bool parse_ull(const char *s, unsigned long long max, unsigned long long *out) {
+  if (!s || !*s || *s == '-' || *s == '+') return false;
+  char *end;
+  errno = 0;
+  unsigned long long v = strtoull(s, &end, 10);
+  if (errno || *end || v > max) return false;
+  *out = v;
+  return true;
+}
+
+/* BYTES with an optional binary suffix: 1048576, 1024k, 256M, 1G. */
+static bool parse_bytes(const char *s, unsigned long long *out) {
+  if (!s || !*s || *s == '-' || *s == '+') return false;
+  char *end;
+  errno = 0;
+  unsigned long long v = strtoull(s, &end, 10);
+  if (errno || end == s) return false;
+  unsigned shift = 0;
+  if (*end == 'k' || *end == 'K') shift = 10, end++;
+  else if (*end == 'm' || *end == 'M') shift = 20, end++;
+  else if (*end == 'g' || *end == 'G') shift = 30, end++;
+  if (*end || v > (1ull << 40) >> shift) return false;
+  *out = v << shift;
+  return *out > 0;
+}
+
+/* Options table: each takes one value. */
+typedef enum opt_id {
+  OPT_LISTEN, OPT_THREADS, OPT_SCENE, OPT_DATA_ROOT, OPT_BLOB_DIR, OPT_TOKEN_FILE,
+  OPT_MAX_BODY, OPT_MAX_QUEUE, OPT_RESULT_TTL, OPT_PORT_FILE,
+} opt_id;
+
+static const struct {
+  const char *name;
+  opt_id id;
+} options[] = {
+    {"--listen", OPT_LISTEN},         {"--threads", OPT_THREADS},       {"--scene", OPT_SCENE},
+    {"--data-root", OPT_DATA_ROOT},   {"--blob-dir", OPT_BLOB_DIR},     {"--token-file", OPT_TOKEN_FILE},
+    {"--max-body", OPT_MAX_BODY},     {"--max-queue", OPT_MAX_QUEUE},   {"--result-ttl", OPT_RESULT_TTL},
+    {"--port-file", OPT_PORT_FILE},
+};
+
+static int parse_args(int argc, char **argv, serve_args *a) {
+  for (int i = 1; i < argc; i++) {
+    const char *arg = argv[i];
+    if (strcmp(arg, "-h") == 0 || strcmp(arg, "--help") == 0) {
+      printf("usage: raysweepd %s\n", RSW_SERVE_USAGE);
+      return -1;
+    }
+    size_t k = 0;
+    while (k < sizeof options / sizeof options[0] && strcmp(options[k].name, arg) != 0) k++;
+    if (k == sizeof options / sizeof options[0]) return fail_usage("unknown option '%s' (usage: raysweepd %s)", arg, RSW_SERVE_USAGE);
+    if (i + 1 >= argc) return fail_usage("%s needs a value", arg);
+    const char *v = argv[++i];
+    switch (options[k].id) {
+    case OPT_LISTEN: a->listen = v; break;
+    case OPT_DATA_ROOT: a->data_root = v; break;
+    case OPT_BLOB_DIR: a->blob_dir = v; break;
+    case OPT_TOKEN_FILE: a->token_file = v; break;
+    case OPT_PORT_FILE: a->port_file = v; break;
+    case OPT_SCENE:
+      if (a->n_scenes == MAX_SCENES) return fail_usage("too many --scene (at most %d)", MAX_SCENES);
+      a->scenes[a->n_scenes++] = v;
+      break;
+    case OPT_THREADS:
+      if (!parse_ull(v, 256, &a->threads) || !a->threads)
+        return fail_usage("--threads needs an integer in [1, 256] (got '%s')", v);
+      break;
+    case OPT_MAX_QUEUE:
+      if (!parse_ull(v, 1000000, &a->max_queue) || !a->max_queue)
+        return fail_usage("--max-queue needs an integer in [1, 1000000] (got '%s')", v);
+      break;
+    case OPT_MAX_BODY:
+      if (!parse_bytes(v, &a->max_body))
+        return fail_usage("--max-body needs a positive byte count such as 268435456 or 256M (got '%s')", v);
+      break;
+    case OPT_RESULT_TTL: {
+      char *end;
+      errno = 0;
+      a->result_ttl = strtod(v, &end);
+      if (errno || end == v || *end || !(a->result_ttl > 0) || !isfinite(a->result_ttl))
+        return fail_usage("--result-ttl needs a positive number of seconds (got '%s')", v);
+      break;
+    }
+    }
+  }
+  return 0;
+}
+
+/* HOST:PORT, :PORT (loopback) or HOST (port 8350). */
+static int parse_listen(const char *s, char *host, size_t host_len, int *port) {
+  *port = 8350;
+  if (s[0] == '[' || (strchr(s, ':') && strchr(s, ':') != strrchr(s, ':')))
+    return fail_usage("--listen: IPv6 addresses are not supported (got '%s'); use an IPv4 address such as "
+                      "127.0.0.1:8350", s);
+  const char *colon = strrchr(s, ':');
+  size_t hl = colon ? (size_t)(colon - s) : strlen(s);
+  if (hl >= host_len) return fail_usage("--listen: host name too long");
+  if (hl == 0)
+    snprintf(host, host_len, "127.0.0.1");
+  else
+    snprintf(host, host_len, "%.*s", (int)hl, s);
+  if (colon) {
+    unsigned long long p;
+    if (!parse_ull(colon + 1, 65535, &p))
+      return fail_usage("--listen: port must be an integer in [0, 65535] (got '%s')", colon + 1);
+    *port = (int)p;
+  }
+  return 0;
+}
+
+/* The token is the file's content without surrounding whitespace. */
+static int read_token(const char *path, char *tok, size_t cap) {
+  FILE *f = fopen(path, "rb");
+  if (!f) return fail_usage("--token-file %s: %s", path, strerror(errno));
+  size_t n = fread(tok, 1, cap - 1, f);
+  bool more = fgetc(f) != EOF;
+  fclose(f);
+  if (more) return fail_usage("--token-file %s: longer than %zu bytes", path, cap - 1);
+  tok[n] = '\0';
+  size_t b = 0;
+  while (b < n && strchr(" \t\r\n", tok[b])) b++;
+  while (n > b && strchr(" \t\r\n", tok[n - 1])) n--;
+  memmove(tok, tok + b, n - b);
+  tok[n - b] = '\0';
+  if (!tok[0]) return fail_usage("--token-file %s: the file is empty", path);
+  for (const char *p = tok; *p; p++)
+    if ((unsigned char)*p < 0x21 || *p == 0x7f)
+      return fail_usage("--token-file %s: the token must not contain spaces or control characters", path);
+  return 0;
+}
+
+static int write_port_file(const char *path, int port) {
+  char tmp[4096];
+  if (snprintf(tmp, sizeof tmp, "%s.tmp.%ld", path, (long)getpid()) >= (int)sizeof tmp) {
+    fprintf(stderr, "raysweepd serve: --port-file: path too long\n");
+    return 1;
+  }
+  FILE *f = fopen(tmp, "w");
+  if (!f || fprintf(f, "%d\n", port) < 0 || fclose(f) != 0 || rename(tmp, path) != 0) {
+    fprintf(stderr, "raysweepd serve: --port-file %s: %s\n", path, strerror(errno));
+    unlink(tmp);
+    return 1;
+  }
+  return 0;
+}
+
+static int remove_entry(const char *path, const struct stat *sb, int flag, struct FTW *ftw) {
+  (void)sb, (void)flag, (void)ftw;
+  remove(path);
+  return 0;
+}
+
+static void svc_error_print(const char *what, const svc_error *e) {
+  char msg[1200];
+  fprintf(stderr, "raysweepd serve: %s: %s\n", what, rsw_err_format(&e->err, msg, sizeof msg));
+}
+
+int cmd_serve(int argc, char **argv) {
+  serve_args a = {0};
+  int rc = parse_args(argc, argv, &a);
+  if (rc) return rc < 0 ? 0 : rc;
+  char host[256];
+  int port;
+  if ((rc = parse_listen(a.listen ? a.listen : "127.0.0.1:8350", host, sizeof host, &port))) return rc;
+  char token[MAX_TOKEN] = "";
+  if (a.token_file && (rc = read_token(a.token_file, token, sizeof token))) return rc;
+  if (!token[0] && !http_host_is_loopback(host))
+    return fail_usage("refusing to listen on %s (not a loopback address) without --token-file", host);
+
+  /* Before any thread exists (the service's workers, MHD's threads). */
+  sigset_t stop_signals;
+  sigemptyset(&stop_signals);
+  sigaddset(&stop_signals, SIGTERM);
+  sigaddset(&stop_signals, SIGINT);
+  pthread_sigmask(SIG_BLOCK, &stop_signals, NULL);
+  signal(SIGPIPE, SIG_IGN);
+
+  char blob_tmp[] = "/tmp/raysweepd-blobs-XXXXXX";
+  const char *blob_dir = a.blob_dir;
+  if (!blob_dir) {
+    if (!mkdtemp(blob_tmp)) {
+      fprintf(stderr, "raysweepd serve: cannot create a blob directory under /tmp: %s\n", strerror(errno));
+      return 1;
+    }
+    blob_dir = blob_tmp;
+  }
+
+  service *svc = NULL;
+  http_server *srv = NULL;
+  rc = 1;
+  rsw_err err = {0};
+  char msg[1200];
+  service_opts so = {.size = sizeof so,
+                     .render_threads = (int)a.threads,
+                     .data_root = a.data_root,
+                     .blob_dir = blob_dir,
+                     .max_queue = (size_t)a.max_queue,
+                     .result_ttl_s = a.result_ttl};
+  if (service_new(&so, &svc, &err)) {
+    fprintf(stderr, "raysweepd serve: %s\n", rsw_err_format(&err, msg, sizeof msg));
+    goto out;
+  }
+  for (size_t i = 0; i < a.n_scenes; i++) {
+    svc_error e = {0};
+    char *id = NULL;
+    char what[4200];
+    snprintf(what, sizeof what, "--scene %s", a.scenes[i]);
+    if (service_scene_load_file(svc, a.scenes[i], &id, &e)) {
+      svc_error_print(what, &e);
+      goto out;
+    }
+    fprintf(stderr, "raysweepd: scene %s loaded from %s\n", id ? id : "?", a.scenes[i]);
+    free(id);
+  }
+  if (!a.n_scenes) {
+    svc_error e = {0};
+    char *id = NULL;
+    if (service_scene_load_text(svc, rsw_default_scene_xml, rsw_default_scene_xml_len, true, "default_scene.xml", &id,
+                                &e)) {
+      svc_error_print("the embedded default scene", &e);
+      goto out;
+    }
+    fprintf(stderr, "raysweepd: scene %s loaded (embedded default: hdistant seed scene)\n", id ? id : "?");
+    free(id);
+  }
+
+  http_opts ho = {.size = sizeof ho, .host = host, .port = port, .token = token[0] ? token : NULL,
+                  .max_body = (size_t)a.max_body};
+  rsw_status s = http_server_start(svc, &ho, &srv, &err);
+  if (s) {
+    fprintf(stderr, "raysweepd serve: %s\n", rsw_err_format(&err, msg, sizeof msg));
+    rc = s == RSW_ERR_USAGE || s == RSW_ERR_UNSUPPORTED ? 2 : 1;
+    goto out;
+  }
+  fprintf(stderr, "raysweepd: listening on http://%s:%d\n", host, http_server_port(srv));
+  if (a.port_file && write_port_file(a.port_file, http_server_port(srv))) goto out;
+
+  int sig = 0;
+  while (sigwait(&stop_signals, &sig) != 0) {
+  }
+  fprintf(stderr, "raysweepd: %s: shutting down\n", sig == SIGINT ? "SIGINT" : "SIGTERM");
+  rc = 0;
+out:
+  if (svc) service_shutdown(svc); /* ready -> 503, running work cancelled */
+  http_server_stop(srv);          /* joins the connection threads */
+  service_free(svc);
+  if (!a.blob_dir) nftw(blob_tmp, remove_entry, 16, FTW_DEPTH | FTW_PHYS);
+  return rc;
+}
+
+int cmd_routes(int argc, char **argv) {
+  if (argc > 1) {
+    fprintf(stderr, "raysweepd routes: takes no arguments (got '%s')\n", argv[1]);
+    return 2;
+  }
+  http_routes_print(stdout);
+  return 0;
+}

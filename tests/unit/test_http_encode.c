@@ -1,0 +1,303 @@
+/* Encoders of the HTTP layer (server/http/encode.c): film JSON, NPY and
+ * in-memory EXR (exr_encode_image, decoded back through exr_read_image),
+ * problem+json, Accept negotiation and the JSON depth scan. */
+#include <cjson/cJSON.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "http/encode.h"
+#include "kernel/image_exr.h"
+#include "../support/test.h"
+
+RSW_TEST_DEFINE_GLOBALS
+
+/* A 3 x 2 RGB film whose samples are distinct and not exactly representable
+ * in few digits, with one NaN (JSON must print it as null). */
+static svc_film make_film(float *data) {
+  svc_film f;
+  memset(&f, 0, sizeof f);
+  f.img.width = 3;
+  f.img.height = 2;
+  f.img.channels = 3;
+  f.img.channel_names[0] = "R";
+  f.img.channel_names[1] = "G";
+  f.img.channel_names[2] = "B";
+  for (int i = 0; i < 18; i++) data[i] = (float)(i + 1) / 7.0f - 0.5f;
+  f.img.data = data;
+  f.img.spp = 16;
+  f.img.seed = 42;
+  f.img.wavelength = 550;
+  f.img.variant = VARIANT_RGB;
+  snprintf(f.scene, sizeof f.scene, "%064d", 7);
+  f.revision = 3;
+  snprintf(f.context, sizeof f.context, "ctx-1");
+  snprintf(f.sensor, sizeof f.sensor, "cam \"a\"");
+  return f;
+}
+
+static void test_film_json(void) {
+  float data[18];
+  svc_film f = make_film(data);
+  data[4] = NAN;
+  char *text = NULL;
+  size_t len = 0;
+  rsw_err err = {0};
+  REQUIRE(http_film_json(&f, &text, &len, &err) == RSW_OK, "film json: %s", err.msg);
+  CHECK(strlen(text) == len, "length %zu vs strlen %zu", len, strlen(text));
+  cJSON *j = cJSON_Parse(text);
+  REQUIRE(j, "film JSON does not parse: %.200s", text);
+  CHECK(cJSON_GetObjectItem(j, "width")->valueint == 3, "width");
+  CHECK(cJSON_GetObjectItem(j, "height")->valueint == 2, "height");
+  CHECK(strcmp(cJSON_GetObjectItem(j, "layout")->valuestring, "HWC") == 0, "layout");
+  cJSON *ch = cJSON_GetObjectItem(j, "channels");
+  CHECK(cJSON_GetArraySize(ch) == 3 && strcmp(cJSON_GetArrayItem(ch, 2)->valuestring, "B") == 0, "channels");
+  cJSON *d = cJSON_GetObjectItem(j, "data");
+  REQUIRE(cJSON_GetArraySize(d) == 18, "data has %d numbers", cJSON_GetArraySize(d));
+  for (int i = 0; i < 18; i++) {
+    cJSON *v = cJSON_GetArrayItem(d, i);
+    if (i == 4) {
+      CHECK(cJSON_IsNull(v), "NaN sample should be null");
+      continue;
+    }
+    /* 9 significant digits round-trip float32 exactly */
+    CHECK(cJSON_IsNumber(v) && (float)v->valuedouble == data[i], "sample %d: %.9g vs %.9g", i, v->valuedouble,
+          (double)data[i]);
+  }
+  cJSON *m = cJSON_GetObjectItem(j, "meta");
+  REQUIRE(m, "no meta");
+  CHECK(strcmp(cJSON_GetObjectItem(m, "sensor")->valuestring, "cam \"a\"") == 0, "sensor escaped");
+  CHECK(strcmp(cJSON_GetObjectItem(m, "context")->valuestring, "ctx-1") == 0, "context");
+  CHECK(cJSON_GetObjectItem(m, "revision")->valueint == 3, "revision");
+  CHECK(cJSON_GetObjectItem(m, "spp")->valueint == 16, "spp");
+  CHECK(cJSON_GetObjectItem(m, "seed")->valueint == 42, "seed");
+  CHECK(cJSON_IsNull(cJSON_GetObjectItem(m, "wavelength")), "rgb film: wavelength null");
+  cJSON_Delete(j);
+  free(text);
+
+  /* A synchronous render has no context: null. */
+  f.context[0] = '\0';
+  REQUIRE(http_film_json(&f, &text, &len, &err) == RSW_OK, "film json: %s", err.msg);
+  j = cJSON_Parse(text);
+  REQUIRE(j, "does not parse");
+  CHECK(cJSON_IsNull(cJSON_GetObjectItem(cJSON_GetObjectItem(j, "meta"), "context")), "context null");
+  cJSON_Delete(j);
+  free(text);
+}
+
+static void test_film_npy(void) {
+  float data[18];
+  svc_film f = make_film(data);
+  void *bytes = NULL;
+  size_t len = 0;
+  rsw_err err = {0};
+  REQUIRE(http_film_npy(&f, &bytes, &len, &err) == RSW_OK, "npy: %s", err.msg);
+  const uint8_t *p = bytes;
+  CHECK(memcmp(p, "\x93NUMPY\x01\x00", 8) == 0, "magic and version 1.0");
+  size_t hlen = (size_t)p[8] | (size_t)p[9] << 8;
+  size_t start = 10 + hlen;
+  CHECK(start % 64 == 0, "data starts at %zu, not a multiple of 64", start);
+  CHECK(len == start + 18 * 4, "length %zu", len);
+  CHECK(p[start - 1] == '\n', "header ends with a newline");
+  char header[256] = {0};
+  memcpy(header, p + 10, hlen < 255 ? hlen : 255);
+  CHECK(strstr(header, "{'descr': '<f4', 'fortran_order': False, 'shape': (2, 3, 3), }") == header,
+        "header dict: %s", header);
+  for (size_t i = strlen("{'descr': '<f4', 'fortran_order': False, 'shape': (2, 3, 3), }"); i + 1 < hlen; i++)
+    CHECK(header[i] == ' ', "padding byte %zu is 0x%02x", i, (unsigned char)header[i]);
+  for (int i = 0; i < 18; i++) {
+    const uint8_t *q = p + start + 4 * i;
+    uint32_t u = (uint32_t)q[0] | (uint32_t)q[1] << 8 | (uint32_t)q[2] << 16 | (uint32_t)q[3] << 24;
+    float v;
+    memcpy(&v, &u, 4);
+    CHECK(v == data[i], "sample %d: %g vs %g", i, (double)v, (double)data[i]);
+  }
+  free(bytes);
+}
+
+/* exr_encode_image's bytes written to a file read back through
+ * exr_read_image: same pixels (float32, exact), same metadata. */
+static void test_exr_round_trip(void) {
+  float data[18];
+  svc_film f = make_film(data);
+  void *bytes = NULL;
+  size_t len = 0;
+  rsw_err err = {0};
+  REQUIRE(http_film_exr(&f, &bytes, &len, &err) == RSW_OK, "exr: %s", err.msg);
+  CHECK(len > 100 && memcmp(bytes, "\x76\x2f\x31\x01", 4) == 0, "EXR magic, %zu bytes", len);
+  char path[] = "/tmp/test_http_encode_XXXXXX";
+  int fd = mkstemp(path);
+  REQUIRE(fd >= 0, "mkstemp");
+  CHECK(write(fd, bytes, len) == (ssize_t)len, "write");
+  close(fd);
+  free(bytes);
+  exr_image img = {0};
+  rsw_status s = exr_read_image(path, &img, &err);
+  unlink(path);
+  REQUIRE(s == RSW_OK, "read back: %s", err.msg);
+  CHECK(img.width == 3 && img.height == 2 && img.n_channels == 3, "size %dx%dx%d", img.width, img.height,
+        img.n_channels);
+  const char *names[3] = {"R", "G", "B"};
+  for (int c = 0; c < 3; c++) {
+    int k = exr_image_channel(&img, names[c]);
+    REQUIRE(k >= 0, "channel %s missing", names[c]);
+    for (int i = 0; i < 6; i++)
+      CHECK(img.data[i * 3 + k] == data[i * 3 + c], "pixel %d %s: %g vs %g", i, names[c],
+            (double)img.data[i * 3 + k], (double)data[i * 3 + c]);
+  }
+  const char *sensor_meta = exr_image_meta(&img, "sensor");
+  CHECK(sensor_meta && strcmp(sensor_meta, "cam \"a\"") == 0, "sensor meta %s", sensor_meta ? sensor_meta : "(none)");
+  const char *rev = exr_image_meta(&img, "revision");
+  CHECK(rev && strcmp(rev, "3") == 0, "revision meta");
+  exr_image_free(&img);
+
+  /* Bad arguments fail with a message and leave the outputs alone. */
+  bytes = (void *)&len;
+  err = (rsw_err){0};
+  CHECK(exr_encode_image(0, 1, 1, names, data, false, NULL, &bytes, &len, &err) == RSW_ERR_INVALID, "0 width");
+  CHECK(bytes == (void *)&len && err.msg[0], "outputs untouched, message set");
+}
+
+/* A larger half-float image takes several chunks and many buffer doublings. */
+static void test_exr_half_large(void) {
+  int w = 300, h = 200;
+  float *px = malloc(sizeof(float) * (size_t)w * (size_t)h);
+  REQUIRE(px, "alloc");
+  for (int i = 0; i < w * h; i++) px[i] = (float)(i % 1024); /* exact in half */
+  const char *names[1] = {"Y"};
+  void *bytes = NULL;
+  size_t len = 0;
+  rsw_err err = {0};
+  rsw_status s = exr_encode_image(w, h, 1, names, px, true, NULL, &bytes, &len, &err);
+  REQUIRE(s == RSW_OK, "encode: %s", err.msg);
+  char path[] = "/tmp/test_http_encode_XXXXXX";
+  int fd = mkstemp(path);
+  REQUIRE(fd >= 0, "mkstemp");
+  CHECK(write(fd, bytes, len) == (ssize_t)len, "write");
+  close(fd);
+  free(bytes);
+  exr_image img = {0};
+  s = exr_read_image(path, &img, &err);
+  unlink(path);
+  REQUIRE(s == RSW_OK, "read back: %s", err.msg);
+  int bad = 0;
+  for (int i = 0; i < w * h; i++) bad += img.data[i] != px[i];
+  CHECK(img.width == w && img.height == h && bad == 0, "%d of %d samples differ", bad, w * h);
+  exr_image_free(&img);
+  free(px);
+}
+
+static void test_problem(void) {
+  const char *cands[3] = {"a.value", "", "b.value"};
+  char *t = http_problem_json(422, "RSW_ERR_INVALID", "bad \"x\"", "/shapes/0", "x.value", cands, 3);
+  REQUIRE(t, "problem");
+  cJSON *j = cJSON_Parse(t);
+  REQUIRE(j, "problem does not parse: %s", t);
+  CHECK(strcmp(cJSON_GetObjectItem(j, "type")->valuestring, "https://raysweep.dev/problems/RSW_ERR_INVALID") == 0,
+        "type");
+  CHECK(strcmp(cJSON_GetObjectItem(j, "title")->valuestring, "Unprocessable Content") == 0, "title");
+  CHECK(cJSON_GetObjectItem(j, "status")->valueint == 422, "status");
+  CHECK(strcmp(cJSON_GetObjectItem(j, "detail")->valuestring, "bad \"x\"") == 0, "detail");
+  CHECK(strcmp(cJSON_GetObjectItem(j, "pointer")->valuestring, "/shapes/0") == 0, "pointer");
+  CHECK(strcmp(cJSON_GetObjectItem(j, "key")->valuestring, "x.value") == 0, "key");
+  cJSON *c = cJSON_GetObjectItem(j, "candidates");
+  CHECK(cJSON_GetArraySize(c) == 2, "two non-empty candidates");
+  cJSON_Delete(j);
+  free(t);
+
+  svc_error e;
+  memset(&e, 0, sizeof e);
+  rsw_fail(&e.err, RSW_ERR_NOT_FOUND, "", "no scene 'abc'");
+  int status = 0;
+  t = http_problem_from_svc(&e, &status);
+  REQUIRE(t, "from svc");
+  j = cJSON_Parse(t);
+  REQUIRE(j, "does not parse");
+  CHECK(status == 404 && cJSON_GetObjectItem(j, "status")->valueint == 404, "404 from the code");
+  CHECK(strcmp(cJSON_GetObjectItem(j, "code")->valuestring, "RSW_ERR_NOT_FOUND") == 0, "code");
+  CHECK(strcmp(cJSON_GetObjectItem(j, "title")->valuestring, "not found") == 0, "title is the code's message");
+  CHECK(!cJSON_GetObjectItem(j, "pointer") && !cJSON_GetObjectItem(j, "key"), "no pointer, no key");
+  cJSON_Delete(j);
+  free(t);
+
+  e.http_status = 409; /* explicit status wins */
+  t = http_problem_from_svc(&e, &status);
+  CHECK(t && status == 409, "explicit status %d", status);
+  free(t);
+
+  /* file:line is a place (pointer); a digest in where is not. */
+  memset(&e, 0, sizeof e);
+  rsw_fail(&e.err, RSW_ERR_PARSE, "scene.xml:12", "bad tag");
+  t = http_problem_from_svc(&e, &status);
+  j = t ? cJSON_Parse(t) : NULL;
+  REQUIRE(j, "does not parse");
+  cJSON *ptr = cJSON_GetObjectItem(j, "pointer");
+  CHECK(status == 400 && ptr && strcmp(ptr->valuestring, "scene.xml:12") == 0, "file:line pointer");
+  CHECK(strcmp(cJSON_GetObjectItem(j, "detail")->valuestring, "scene.xml:12: bad tag") == 0, "detail");
+  cJSON_Delete(j);
+  free(t);
+  memset(&e, 0, sizeof e);
+  rsw_fail(&e.err, RSW_ERR_INVALID, "ab12", "digest mismatch");
+  t = http_problem_from_svc(&e, &status);
+  j = t ? cJSON_Parse(t) : NULL;
+  REQUIRE(j, "does not parse");
+  CHECK(!cJSON_GetObjectItem(j, "pointer"), "a digest is not a pointer");
+  cJSON_Delete(j);
+  free(t);
+
+  /* HTTP-layer problems: code NULL gives the status name. */
+  t = http_problem_json(413, NULL, "too big", NULL, NULL, NULL, 0);
+  j = t ? cJSON_Parse(t) : NULL;
+  REQUIRE(j, "does not parse");
+  CHECK(strcmp(cJSON_GetObjectItem(j, "code")->valuestring, "CONTENT_TOO_LARGE") == 0, "code from status");
+  CHECK(strcmp(cJSON_GetObjectItem(j, "type")->valuestring, "https://raysweep.dev/problems/CONTENT_TOO_LARGE") == 0,
+        "type from status");
+  cJSON_Delete(j);
+  free(t);
+}
+
+static void test_accept(void) {
+  CHECK(http_accept_film(NULL) == HTTP_FILM_JSON, "missing");
+  CHECK(http_accept_film("") == HTTP_FILM_JSON, "empty");
+  CHECK(http_accept_film("*/*") == HTTP_FILM_JSON, "*/*");
+  CHECK(http_accept_film("image/x-exr") == HTTP_FILM_EXR, "exr");
+  CHECK(http_accept_film("Application/X-NPY") == HTTP_FILM_NPY, "npy, case");
+  CHECK(http_accept_film("text/html, application/x-npy;q=0.5") == HTTP_FILM_NPY, "npy second");
+  CHECK(http_accept_film("*/*;q=0.1, image/x-exr") == HTTP_FILM_EXR, "exact beats wildcard");
+  CHECK(http_accept_film("image/*") == HTTP_FILM_EXR, "image/*");
+  CHECK(http_accept_film("application/*") == HTTP_FILM_JSON, "application/*");
+  CHECK(http_accept_film("*/*, application/json;q=0") == HTTP_FILM_EXR, "json excluded");
+  CHECK(http_accept_film("image/x-exr;q=0, image/*") == HTTP_FILM_NONE, "exr excluded under image/*");
+  CHECK(http_accept_film("text/html") == HTTP_FILM_NONE, "406");
+  CHECK(http_accept_film("application/json;q=0") == HTTP_FILM_NONE, "only json, excluded");
+  CHECK(http_accept_film("application/json; charset=\"utf-8,x\"; q=1") == HTTP_FILM_JSON, "quoted param");
+}
+
+static void test_depth_and_media(void) {
+  char deep[200];
+  memset(deep, '[', 65);
+  memset(deep + 65, ']', 65);
+  CHECK(!http_json_depth_ok(deep, 130, 64), "65 deep rejected");
+  CHECK(http_json_depth_ok(deep + 1, 128, 64), "64 deep accepted");
+  const char *s = "{\"a\": \"[[[[[[[[[[\\\"[[[[\", \"b\": [1, {\"c\": 2}]}";
+  CHECK(http_json_depth_ok(s, strlen(s), 3), "brackets in strings do not count");
+  CHECK(!http_json_depth_ok(s, strlen(s), 2), "depth 3 over a limit of 2");
+  CHECK(http_media_type_is("application/json; charset=utf-8", "application/json"), "params");
+  CHECK(http_media_type_is(" Application/JSON", "application/json"), "case");
+  CHECK(!http_media_type_is("application/jsonx", "application/json"), "prefix only");
+  CHECK(!http_media_type_is(NULL, "application/json"), "missing");
+}
+
+int main(void) {
+  RSW_TEST_RUN(test_film_json);
+  RSW_TEST_RUN(test_film_npy);
+  RSW_TEST_RUN(test_exr_round_trip);
+  RSW_TEST_RUN(test_exr_half_large);
+  RSW_TEST_RUN(test_problem);
+  RSW_TEST_RUN(test_accept);
+  RSW_TEST_RUN(test_depth_and_media);
+  RSW_TEST_END("test_http_encode");
+}
