@@ -1148,7 +1148,7 @@ static void test_spectral_job(void) {
   cJSON_Delete(j);
   int bad = 0;
   for (int i = 0; i < 20; i++) {
-    char ctx[8];
+    char ctx[16];
     snprintf(ctx, sizeof ctx, "c%02d", i);
     double w = 400.0 + 300.0 * i / 19.0, rho = 0.2 + 0.6 * (w - 400.0) / 300.0;
     resp r = result(&main_d, job, ctx, "meter", "application/json");
@@ -1197,7 +1197,7 @@ static void test_split_job_bitwise(void) {
   int diff = 0, seed_diff = 0, fetched = 0;
   const char *sensors[] = {"meter", "hemi"};
   for (int i = 0; i < 20; i++) {
-    char ctx[8];
+    char ctx[16];
     snprintf(ctx, sizeof ctx, "c%02d", i);
     for (int s = 0; s < 2; s++) {
       resp a = result(&main_d, whole, ctx, sensors[s], "application/x-npy");
