@@ -243,7 +243,8 @@ int cmd_serve(int argc, char **argv) {
                      .data_root = a.data_root,
                      .blob_dir = blob_dir,
                      .max_queue = (size_t)a.max_queue,
-                     .result_ttl_s = a.result_ttl};
+                     .result_ttl_s = a.result_ttl,
+                     .max_body_bytes = (size_t)a.max_body};
   if (service_new(&so, &svc, &err)) {
     fprintf(stderr, "raysweepd serve: %s\n", rsw_err_format(&err, msg, sizeof msg));
     goto out;

@@ -43,7 +43,7 @@ typedef struct job {
   size_t next_commit;
   tile_buf **done;  /* finished, not yet merged */
   bool failed;
-  bool stopped; /* deadline passed */
+  atomic_bool stopped; /* deadline passed (set by any worker) */
   /* Stats (merged under lock). */
   render_stats rays;
   uint64_t samples, invalid;
@@ -78,6 +78,8 @@ static void splat(const job *jb, tile_buf *tb, double px, double py, color v) {
   }
 }
 
+static double now_s(void);
+
 static tile_buf *render_tile(job *jb, size_t t, render_stats *rs, uint64_t *samples, uint64_t *invalid) {
   int tx = (int)(t % (size_t)jb->tiles_x), ty = (int)(t / (size_t)jb->tiles_x);
   int px0 = tx * TILE, py0 = ty * TILE;
@@ -101,6 +103,14 @@ static tile_buf *render_tile(job *jb, size_t t, render_stats *rs, uint64_t *samp
   sampler_state st;
   for (int iy = py0; iy < py1; iy++) {
     for (int ix = px0; ix < px1; ix++) {
+      /* Cancellation and deadlines are honoured between pixels, so a
+       * long render stops within one pixel's samples; the partial tile is
+       * discarded with the render. */
+      if ((jb->opts->cancel && atomic_load(jb->opts->cancel)) ||
+          (jb->opts->deadline > 0 && now_s() > jb->opts->deadline)) {
+        if (!(jb->opts->cancel && atomic_load(jb->opts->cancel))) atomic_store(&jb->stopped, true);
+        return tb;
+      }
       uint64_t pixel = (uint64_t)iy * (uint64_t)jb->W + (uint64_t)ix;
       for (uint32_t s = 0; s < jb->spp; s++) {
         smp->ops->start(smp, &st, jb->opts->seed, pixel, s, jb->spp);
@@ -138,8 +148,6 @@ static void merge_tile(job *jb, tile_buf *tb) {
   free(tb);
 }
 
-static double now_s(void);
-
 static void *worker(void *arg) {
   job *jb = arg;
   render_stats rs = {0};
@@ -147,8 +155,11 @@ static void *worker(void *arg) {
   for (;;) {
     pthread_mutex_lock(&jb->lock);
     size_t t = jb->next_tile++;
-    bool stop = jb->failed || jb->stopped || t >= jb->n_tiles || (jb->opts->cancel && atomic_load(jb->opts->cancel));
-    if (!stop && jb->opts->deadline > 0 && now_s() > jb->opts->deadline) jb->stopped = stop = true;
+    bool stop = jb->failed || atomic_load(&jb->stopped) || t >= jb->n_tiles || (jb->opts->cancel && atomic_load(jb->opts->cancel));
+    if (!stop && jb->opts->deadline > 0 && now_s() > jb->opts->deadline) {
+      atomic_store(&jb->stopped, true);
+      stop = true;
+    }
     pthread_mutex_unlock(&jb->lock);
     if (stop) break;
     tile_buf *tb = render_tile(jb, t, &rs, &samples, &invalid);
@@ -247,7 +258,7 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
     free(jb.film_acc);
     return rsw_fail(err, RSW_ERR_CANCELLED, "render", "render cancelled");
   }
-  if (jb.stopped) {
+  if (atomic_load(&jb.stopped)) {
     free(jb.film_acc);
     return rsw_fail(err, RSW_ERR_TIMEOUT, "timeout_s", "render stopped at its deadline after %.3f s", now_s() - t0);
   }

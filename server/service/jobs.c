@@ -223,8 +223,10 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     st = svc_fail(e, RSW_ERR_MISSING, 422, "/contexts", "a job needs a non-empty \"contexts\" list");
   if (!st && defaults && !cJSON_IsObject(defaults))
     st = svc_fail(e, RSW_ERR_TYPE, 422, "/defaults", "defaults must be an object");
+  /* Validation reads the parameter table's keys, the sensors' ids and
+   * films: all fixed at load, so no scene lock is needed (a running render
+   * holds it for its whole duration). */
   scene *sc = r->sc;
-  pthread_mutex_lock(&r->lock); /* the parameter table is stable under it */
   if (!st) st = check_params(sc, jparams, "/params", e);
   /* Defaults. */
   uint64_t d_spp = 0;
@@ -359,7 +361,6 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       }
     }
   }
-  pthread_mutex_unlock(&r->lock);
   cJSON_Delete(req);
   if (st) {
     if (jb) {

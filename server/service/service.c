@@ -215,6 +215,7 @@ char *service_info_json(service *svc) {
     cJSON_AddItemToArray(pl, e);
   }
   cJSON *lim = cJSON_AddObjectToObject(o, "limits");
+  if (svc->opts.max_body_bytes) cJSON_AddNumberToObject(lim, "max_body_bytes", (double)svc->opts.max_body_bytes);
   cJSON_AddNumberToObject(lim, "max_depth", RSW_MAX_DEPTH);
   cJSON_AddNumberToObject(lim, "max_queue", (double)svc->opts.max_queue);
   cJSON_AddNumberToObject(lim, "max_pixel_samples", (double)svc->opts.max_pixel_samples);
@@ -1126,6 +1127,14 @@ rsw_status service_blob_put(service *svc, const char *h, const void *data, size_
   }
   *created = true;
   return RSW_OK;
+}
+
+long long service_blob_size(service *svc, const char *h) {
+  if (!is_hex64(h)) return -1;
+  char path[8192];
+  snprintf(path, sizeof path, "%s/%s", svc->blob_dir, h);
+  struct stat sb;
+  return stat(path, &sb) == 0 ? (long long)sb.st_size : -1;
 }
 
 bool service_blob_exists(service *svc, const char *h) {

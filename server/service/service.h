@@ -39,6 +39,8 @@ typedef struct service_opts {
                                   (default 3600) */
   uint64_t max_pixel_samples;  /* width*height*spp*sensors per request
                                   (default 2^32) */
+  size_t max_body_bytes;       /* reported in GET /v1 (the HTTP layer
+                                  enforces it) */
 } service_opts;
 
 rsw_status service_new(const service_opts *opts, service **out, rsw_err *err);
@@ -103,6 +105,8 @@ rsw_status service_directions(service *svc, const char *id, const char *sensor, 
 rsw_status service_blob_put(service *svc, const char *sha256_hex, const void *data, size_t len, bool *created,
                             svc_error *e);
 bool service_blob_exists(service *svc, const char *sha256_hex);
+/* Size in bytes of a stored blob, or -1 when absent. */
+long long service_blob_size(service *svc, const char *sha256_hex);
 /* body {digests:[...]} -> {missing:[...]} */
 rsw_status service_blobs_missing(service *svc, const char *body, size_t len, char **json_out, svc_error *e);
 
