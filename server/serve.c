@@ -244,7 +244,7 @@ int cmd_serve(int argc, char **argv) {
                      .blob_dir = blob_dir,
                      .max_queue = (size_t)a.max_queue,
                      .result_ttl_s = a.result_ttl,
-                     .max_body_bytes = (size_t)a.max_body};
+                     .max_body_bytes = a.max_body ? (size_t)a.max_body : HTTP_DEFAULT_MAX_BODY};
   if (service_new(&so, &svc, &err)) {
     fprintf(stderr, "raysweepd serve: %s\n", rsw_err_format(&err, msg, sizeof msg));
     goto out;

@@ -331,7 +331,9 @@ char *http_problem_from_svc(const svc_error *e, int *status_out) {
     rsw_err_format(&e->err, detail, sizeof detail);
   else
     snprintf(detail, sizeof detail, "%s", rsw_strerror(e->err.code));
-  const char *pointer = is_place(e->err.where) ? e->err.where : NULL;
+  /* Scene errors come as "scene.json#/a/b": the pointer is after '#'. */
+  const char *hash = strchr(e->err.where, '#');
+  const char *pointer = hash && hash[1] == '/' ? hash + 1 : is_place(e->err.where) ? e->err.where : NULL;
   const char *cands[3] = {e->candidates[0], e->candidates[1], e->candidates[2]};
   *status_out = status;
   /* The title belongs to the problem type (the code), not to the case. */

@@ -175,7 +175,9 @@ bool service_ready(const service *svc) { return svc && atomic_load(&svc->ready);
 static void resident_free(resident *r) {
   if (!r) return;
   scene_free(r->sc);
+  cJSON_Delete(r->base_params);
   pthread_mutex_destroy(&r->lock);
+  pthread_mutex_destroy(&r->cache_lock);
   free(r);
 }
 
@@ -338,6 +340,8 @@ static void count_update(service *svc, const update_report *rep) {
 }
 
 /* ---- scenes ---------------------------------------------------------------------- */
+
+static void refresh_param_cache(resident *r);
 
 /* File references while loading: blobs by digest, plain names inside the
  * data root; every digest goes into the scene id. */
@@ -544,6 +548,8 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
   r->load_s = load_s;
   r->created = time(NULL);
   pthread_mutex_init(&r->lock, NULL);
+  pthread_mutex_init(&r->cache_lock, NULL);
+  refresh_param_cache(r);
   r->refs = 1;
   svc->scenes[svc->n_scenes++] = r;
   if (!has_files && (svc->n_raw < svc->cap_raw ||
@@ -735,6 +741,21 @@ static cJSON *param_entry_json(const scene *sc, size_t i) {
   return o;
 }
 
+/* Rebuild the base-state cache; r->lock held (no overrides applied). */
+static void refresh_param_cache(resident *r) {
+  cJSON *a = cJSON_CreateArray();
+  size_t n = params_count(r->sc);
+  for (size_t i = 0; a && i < n; i++) {
+    cJSON *p = param_entry_json(r->sc, i);
+    cJSON_AddItemToArray(a, p ? p : cJSON_CreateNull());
+  }
+  pthread_mutex_lock(&r->cache_lock);
+  cJSON_Delete(r->base_params);
+  r->base_params = a;
+  r->cache_revision = r->revision;
+  pthread_mutex_unlock(&r->cache_lock);
+}
+
 /* An unknown-key error with the closest keys, for problem+json. */
 static rsw_status key_error(svc_error *e, const scene *sc, const char *key, const rsw_err *err) {
   e->err = *err;
@@ -763,30 +784,34 @@ rsw_status service_params_get(service *svc, const char *id, const char *match, c
     mask = c == UPDATE_NONE ? 0 : (unsigned)c;
     none = c == UPDATE_NONE;
   }
-  pthread_mutex_lock(&r->lock);
+  /* Matching reads only the table's keys and classes (fixed at load);
+   * values come from the base-state cache, so this never waits for a
+   * render. */
   size_t *idx = NULL, n = 0;
   rsw_err err = {0};
   rsw_status st = params_match(r->sc, match && *match ? match : "*", mask, none, &idx, &n, &err);
   cJSON *o = NULL;
+  pthread_mutex_lock(&r->cache_lock);
+  uint64_t rev = r->cache_revision;
   if (st == RSW_OK) {
     o = cJSON_CreateObject();
-    cJSON_AddNumberToObject(o, "revision", (double)r->revision);
+    cJSON_AddNumberToObject(o, "revision", (double)rev);
     cJSON *a = cJSON_AddArrayToObject(o, "params");
     for (size_t k = 0; k < n; k++) {
-      cJSON *p = param_entry_json(r->sc, idx[k]);
-      if (p) cJSON_AddItemToArray(a, p);
+      cJSON *p = cJSON_GetArrayItem(r->base_params, (int)idx[k]);
+      if (p) cJSON_AddItemToArray(a, cJSON_Duplicate(p, 1));
     }
   } else if (st == RSW_ERR_NOT_FOUND && !strchr(match, ':')) {
     /* A glob matching nothing is an empty table, not an error, over HTTP. */
     o = cJSON_CreateObject();
-    cJSON_AddNumberToObject(o, "revision", (double)r->revision);
+    cJSON_AddNumberToObject(o, "revision", (double)rev);
     cJSON_AddArrayToObject(o, "params");
     st = RSW_OK;
   } else {
     key_error(e, r->sc, match, &err);
   }
-  *revision_out = r->revision;
-  pthread_mutex_unlock(&r->lock);
+  pthread_mutex_unlock(&r->cache_lock);
+  *revision_out = rev;
   free(idx);
   svc_scene_release(svc, r);
   if (st) return st;
@@ -860,7 +885,10 @@ rsw_status service_params_patch(service *svc, const char *id, const char *body, 
     st = scene_update(r->sc, u, n, &rep, &err);
     if (st) update_error(e, r->sc, u, n, &err);
   }
-  if (!st && rep.changed) r->revision++;
+  if (!st && rep.changed) {
+    r->revision++;
+    refresh_param_cache(r);
+  }
   *revision_out = r->revision;
   cJSON *o = NULL;
   if (!st) {

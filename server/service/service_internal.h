@@ -21,6 +21,12 @@ typedef struct resident {
   double load_s;
   time_t created;
   pthread_mutex_t lock;
+  /* The parameter table's entries at the base state (JSON, table order)
+   * and their revision, so GET params answers without waiting for a
+   * render that holds `lock` (renders apply per-context overrides). */
+  pthread_mutex_t cache_lock;
+  cJSON *base_params;
+  uint64_t cache_revision;
   int active_jobs;    /* queued or running jobs on this scene (svc->lock) */
   int refs;           /* holders outside svc->lock (svc->lock) */
   bool deleted;       /* removed from the registry; freed at refs == 0 */
