@@ -511,11 +511,7 @@ void svc_jobs_expire(service *svc) {
       resident *r = j->res;
       bool free_scene = --r->refs == 0 && r->deleted;
       job_free(j);
-      if (free_scene) {
-        scene_free(r->sc);
-        pthread_mutex_destroy(&r->lock);
-        free(r);
-      }
+      if (free_scene) svc_resident_free(r);
       continue;
     }
     i++;
@@ -528,9 +524,7 @@ void svc_jobs_free(service *svc) {
     job_free(svc->jobs[i]);
     if (--r->refs == 0 && r->deleted) {
       /* Deleted while its jobs still held it: no longer in svc->scenes. */
-      scene_free(r->sc);
-      pthread_mutex_destroy(&r->lock);
-      free(r);
+      svc_resident_free(r);
     }
   }
   free(svc->jobs);

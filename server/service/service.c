@@ -172,7 +172,7 @@ void service_shutdown(service *svc) {
 
 bool service_ready(const service *svc) { return svc && atomic_load(&svc->ready); }
 
-static void resident_free(resident *r) {
+void svc_resident_free(resident *r) {
   if (!r) return;
   scene_free(r->sc);
   cJSON_Delete(r->base_params);
@@ -186,7 +186,7 @@ void service_free(service *svc) {
   service_shutdown(svc);
   if (svc->worker_started) pthread_join(svc->worker, NULL);
   svc_jobs_free(svc);
-  for (size_t i = 0; i < svc->n_scenes; i++) resident_free(svc->scenes[i]);
+  for (size_t i = 0; i < svc->n_scenes; i++) svc_resident_free(svc->scenes[i]);
   free(svc->scenes);
   free(svc->raw);
   free(svc->reqs);
@@ -432,7 +432,7 @@ void svc_scene_release(service *svc, resident *r) {
   pthread_mutex_lock(&svc->lock);
   bool free_it = --r->refs == 0 && r->deleted;
   pthread_mutex_unlock(&svc->lock);
-  if (free_it) resident_free(r);
+  if (free_it) svc_resident_free(r);
 }
 
 void svc_scene_summary(const resident *r, cJSON *o) {
@@ -713,7 +713,7 @@ rsw_status service_scene_delete(service *svc, const char *id, bool force, svc_er
   bool free_now = r->refs == 0;
   pthread_cond_broadcast(&svc->cond);
   pthread_mutex_unlock(&svc->lock);
-  if (free_now) resident_free(r);
+  if (free_now) svc_resident_free(r);
   return RSW_OK;
 }
 

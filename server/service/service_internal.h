@@ -123,6 +123,8 @@ rsw_status svc_fail(svc_error *e, rsw_status code, int http, const char *where, 
 /* Find a resident scene and take a ref (svc->lock must NOT be held). */
 resident *svc_scene_acquire(service *svc, const char *id);
 void svc_scene_release(service *svc, resident *r);
+/* Free a resident scene (no refs left). */
+void svc_resident_free(resident *r);
 /* Render one context on a resident scene: apply `overrides` (a JSON
  * object {key: value}, may be NULL) on top of the base state, render,
  * restore the base state. Takes r->lock. */

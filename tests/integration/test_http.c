@@ -1925,6 +1925,7 @@ int main(void) {
   curl_global_cleanup();
   char cmd[128];
   snprintf(cmd, sizeof cmd, "rm -rf %s", tmpdir);
-  if (system(cmd)) fprintf(stderr, "could not remove %s\n", tmpdir);
+  if (getenv("RSW_KEEP_TMP")) fprintf(stderr, "kept %s\n", tmpdir);
+  else if (system(cmd)) fprintf(stderr, "could not remove %s\n", tmpdir);
   RSW_TEST_END("test_http");
 }
