@@ -1,0 +1,207 @@
+/* libraysweep: a C client for raysweepd.
+ *
+ * Life cycle, as curl and Embree: opaque handles with _new/_free pairs
+ * (_free(NULL) is a no-op); every call returns an rsw_status (status.h;
+ * RSW_OK = 0, rsw_strerror() for a message); out-parameters are written
+ * only on success; details of the last failure (including the server's
+ * problem+json) are kept per client handle.
+ *
+ * Ownership is stated on every prototype: "borrowed" arguments are read
+ * during the call only; results marked "owned" belong to the caller and
+ * are freed as stated.
+ *
+ * Thread safety: one rsw_client may be used by one thread at a time;
+ * several clients may be used in parallel. rsw_film, rsw_contexts and
+ * rsw_job_status objects are plain data: use each from one thread at a
+ * time. rsw_strerror is thread-safe.
+ *
+ * This header depends on no other library's headers and compiles as C11
+ * and as C++. */
+#ifndef RAYSWEEP_CLIENT_H
+#define RAYSWEEP_CLIENT_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "status.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* Errors this library adds to status.h's list are reported with these
+ * codes (already in status.h): RSW_ERR_IO (local files), RSW_ERR_UNAVAILABLE
+ * (cannot connect, or 503 after retries), RSW_ERR_TIMEOUT, RSW_ERR_PARSE
+ * (a response that is not what the API promises). A server error keeps the
+ * server's code (rsw_status from the problem's "code" when it names one,
+ * else the HTTP status mapped to the closest code). */
+
+typedef struct rsw_client rsw_client;
+
+/* Options for rsw_client_new. Zero-initialise, set `size`, fill what you
+ * need: the struct may grow (OpenEXR Core's convention). */
+typedef struct rsw_client_opts {
+  size_t size;               /* sizeof(rsw_client_opts) */
+  const char *base_url;      /* "http://127.0.0.1:8350" when NULL */
+  const char *token;         /* bearer token, or NULL */
+  double connect_timeout_s;  /* 0: 10 s */
+  double timeout_s;          /* whole request; 0: none */
+  int max_retries;           /* on connection errors, 429 and 503; 0: 3;
+                                negative: no retries */
+  double retry_backoff_s;    /* first backoff, doubled each retry; 0: 0.2 s;
+                                Retry-After wins when the server sends it */
+} rsw_client_opts;
+
+/* Create a client. Borrows opts (strings are copied). *out is owned: free
+ * with rsw_client_free. Thread-safe. */
+rsw_status rsw_client_new(const rsw_client_opts *opts, rsw_client **out);
+/* Free a client; NULL is a no-op. */
+void rsw_client_free(rsw_client *c);
+
+/* The last error of this client, valid until its next call. All strings
+ * are borrowed from the client ("" when absent). */
+typedef struct rsw_error_info {
+  rsw_status status;
+  int http_status;            /* 0 when no HTTP response */
+  const char *code;           /* the server's machine code, e.g. "RSW_ERR_NOT_FOUND" */
+  const char *message;        /* human-readable detail */
+  const char *pointer;        /* JSON pointer or file:line, or "" */
+  const char *key;            /* parameter key, or "" */
+  const char *candidates[3];  /* closest keys for an unknown key, or NULL */
+} rsw_error_info;
+const rsw_error_info *rsw_client_last_error(const rsw_client *c);
+
+/* ---- server ---------------------------------------------------------------- */
+
+/* GET /v1 as JSON text. *json_out is owned: free with rsw_free. */
+rsw_status rsw_server_info(rsw_client *c, char **json_out);
+/* GET /v1/health/ready: RSW_OK when ready. */
+rsw_status rsw_server_ready(rsw_client *c);
+
+/* Free memory returned by this library (strings, arrays). NULL ok. */
+void rsw_free(void *p);
+
+/* ---- scenes ------------------------------------------------------------------ */
+
+/* Push a scene file (JSON or Mitsuba XML, by extension or content).
+ * Every file the scene references (`filename` properties, resolved
+ * against the scene file's directory) is hashed; the server is asked which
+ * digests it lacks, only those are uploaded, and the references are
+ * rewritten to "sha256:<hex>" before the scene is posted. variant may be
+ * NULL. id_out: 65 bytes (64 hex + NUL). created_out (may be NULL): 1 when
+ * the server loaded it, 0 when it was already resident. */
+rsw_status rsw_scene_push_file(rsw_client *c, const char *path, const char *variant, char id_out[65],
+                               int *created_out);
+/* Same from memory; base_dir resolves relative file names (NULL: "."). */
+rsw_status rsw_scene_push_buffer(rsw_client *c, const char *text, size_t len, const char *base_dir,
+                                 const char *variant, char id_out[65], int *created_out);
+/* GET /v1/scenes, /v1/scenes/{id} as JSON text (owned: rsw_free). */
+rsw_status rsw_scene_list(rsw_client *c, char **json_out);
+rsw_status rsw_scene_info(rsw_client *c, const char *id, char **json_out);
+/* DELETE /v1/scenes/{id}; force cancels its jobs. */
+rsw_status rsw_scene_delete(rsw_client *c, const char *id, int force);
+
+/* ---- parameters ---------------------------------------------------------------- */
+
+/* The parameter table as JSON text ({revision, params:[...]}); match and
+ * class_name may be NULL. *revision_out (may be NULL) is the base
+ * revision. */
+rsw_status rsw_params_get(rsw_client *c, const char *id, const char *match, const char *class_name,
+                          char **json_out, uint64_t *revision_out);
+/* Apply a parameter map atomically. map_json is a JSON object text
+ * {"key": value, ...} (borrowed). if_match < 0: unconditional; otherwise
+ * RSW_ERR_PRECONDITION when the base revision moved. *revision_out (may be
+ * NULL) gets the new revision. */
+rsw_status rsw_params_update(rsw_client *c, const char *id, const char *map_json, int64_t if_match,
+                             uint64_t *revision_out);
+
+/* ---- films ----------------------------------------------------------------------- */
+
+typedef struct rsw_film rsw_film;
+/* Accessors; pointers are borrowed from the film. data is H*W*C float32,
+ * row-major (row 0 = top), channels interleaved. */
+int rsw_film_width(const rsw_film *f);
+int rsw_film_height(const rsw_film *f);
+int rsw_film_channels(const rsw_film *f);
+const char *rsw_film_channel_name(const rsw_film *f, int i);
+const float *rsw_film_data(const rsw_film *f);
+/* Metadata the server attached (JSON object text, borrowed; may be "{}"). */
+const char *rsw_film_meta(const rsw_film *f);
+/* Write as float32 OpenEXR (through a temp file renamed on success) or as
+ * NumPy .npy (<f4, shape (H, W, C)). Borrow everything. */
+rsw_status rsw_film_save_exr(const rsw_film *f, const char *path);
+rsw_status rsw_film_save_npy(const rsw_film *f, const char *path);
+void rsw_film_free(rsw_film *f);
+
+/* One synchronous render. request_json is a RenderRequest text
+ * ({"sensor", "spp", "seed", "wavelength", "params", "timeout_s"}) or NULL
+ * for the defaults. *film_out is owned: rsw_film_free. */
+rsw_status rsw_render(rsw_client *c, const char *id, const char *request_json, rsw_film **film_out);
+
+/* ---- jobs ------------------------------------------------------------------------ */
+
+/* A list of kernel contexts being built. */
+typedef struct rsw_contexts rsw_contexts;
+rsw_status rsw_contexts_new(rsw_contexts **out);
+void rsw_contexts_free(rsw_contexts *x);
+/* Append a context with id ([A-Za-z0-9._-]{1,64}); wavelength <= 0: none.
+ * Returns its index through *index (may be NULL). */
+rsw_status rsw_contexts_add(rsw_contexts *x, const char *id, double wavelength, size_t *index);
+/* Per-context settings (index from rsw_contexts_add). value_json is JSON
+ * text (borrowed). spp/seed < 0: unset. */
+rsw_status rsw_contexts_set_param(rsw_contexts *x, size_t index, const char *key, const char *value_json);
+rsw_status rsw_contexts_add_sensor(rsw_contexts *x, size_t index, const char *sensor);
+rsw_status rsw_contexts_set_spp(rsw_contexts *x, size_t index, long long spp);
+rsw_status rsw_contexts_set_seed(rsw_contexts *x, size_t index, long long seed);
+/* Job-level settings: overrides for every context, default sensors and
+ * spp, and the job seed. */
+rsw_status rsw_contexts_set_job_param(rsw_contexts *x, const char *key, const char *value_json);
+rsw_status rsw_contexts_add_default_sensor(rsw_contexts *x, const char *sensor);
+rsw_status rsw_contexts_set_default_spp(rsw_contexts *x, long long spp);
+rsw_status rsw_contexts_set_job_seed(rsw_contexts *x, long long seed);
+size_t rsw_contexts_count(const rsw_contexts *x);
+
+/* Submit a job. idempotency_key may be NULL. job_id_out: 40 bytes. */
+rsw_status rsw_job_submit(rsw_client *c, const char *scene_id, const rsw_contexts *x, const char *idempotency_key,
+                          char job_id_out[40]);
+
+typedef enum rsw_job_state {
+  RSW_JOB_QUEUED,
+  RSW_JOB_RUNNING,
+  RSW_JOB_SUCCEEDED,
+  RSW_JOB_FAILED,
+  RSW_JOB_CANCELLED
+} rsw_job_state;
+
+typedef struct rsw_job_status {
+  rsw_job_state state;
+  size_t contexts_total, contexts_done;
+  size_t renders_total, renders_done, renders_failed;
+  double seconds;     /* elapsed since start (0 when queued) */
+  char error[512];    /* "" unless failed */
+} rsw_job_status;
+
+rsw_status rsw_job_get(rsw_client *c, const char *job_id, rsw_job_status *out);
+/* Progress callback: one call per finished (context, sensor) and once at
+ * the end. Return non-zero to stop waiting (the job keeps running). */
+typedef int (*rsw_progress_fn)(void *user, const char *context, const char *sensor, size_t done, size_t total,
+                               int failed);
+/* Wait until the job ends, following its server-sent events (reconnecting
+ * with Last-Event-ID when the stream drops). timeout_s <= 0: no limit
+ * (RSW_ERR_TIMEOUT otherwise). *final_out (may be NULL) gets the end
+ * state. */
+rsw_status rsw_job_wait(rsw_client *c, const char *job_id, rsw_progress_fn progress, void *user, double timeout_s,
+                        rsw_job_status *final_out);
+rsw_status rsw_job_cancel(rsw_client *c, const char *job_id);
+rsw_status rsw_job_delete(rsw_client *c, const char *job_id);
+/* GET /v1/jobs and /v1/jobs/{id}/results as JSON text (owned: rsw_free). */
+rsw_status rsw_job_list(rsw_client *c, char **json_out);
+rsw_status rsw_job_results(rsw_client *c, const char *job_id, char **json_out);
+/* One film of a job. *film_out is owned: rsw_film_free. */
+rsw_status rsw_job_fetch(rsw_client *c, const char *job_id, const char *context, const char *sensor,
+                         rsw_film **film_out);
+
+#ifdef __cplusplus
+}
+#endif
+#endif
