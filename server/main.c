@@ -65,6 +65,20 @@ static bool parse_pos_double(const char *s, double *out) {
 
 static int apply_sets(const char *cmd, scene *sc, const char *const *sets, size_t n);
 
+/* -D name=value: append to defines (the name is malloc'ed). Returns NULL,
+ * or why it was refused. */
+static const char *add_define(scene_define *defines, size_t *n, const char *def) {
+  const char *eq = def ? strchr(def, '=') : NULL;
+  if (!def || !eq || eq == def) return "-D needs name=value";
+  if (*n == MAX_DEFINES) return "too many -D definitions";
+  char *name = strndup(def, (size_t)(eq - def));
+  if (!name) return "out of memory";
+  defines[*n].name = name;
+  defines[*n].value = eq + 1;
+  (*n)++;
+  return NULL;
+}
+
 static int cmd_render(int argc, char **argv) {
   const char *scene_path = NULL, *out_path = NULL, *sensor_id = NULL, *variant_name = NULL;
   scene_define defines[MAX_DEFINES];
@@ -115,14 +129,8 @@ static int cmd_render(int argc, char **argv) {
     } else if (strncmp(a, "-D", 2) == 0) {
       const char *def = a[2] ? a + 2 : val;
       if (!a[2]) i++;
-      const char *eq = def ? strchr(def, '=') : NULL;
-      if (!def || !eq || eq == def) USAGE("-D needs name=value (got '%s')", def ? def : "");
-      if (n_defines == MAX_DEFINES) USAGE("too many -D definitions (at most %d)", MAX_DEFINES);
-      char *name = strndup(def, (size_t)(eq - def));
-      if (!name) USAGE("%s", "out of memory");
-      defines[n_defines].name = name;
-      defines[n_defines].value = eq + 1;
-      n_defines++;
+      const char *why = add_define(defines, &n_defines, def);
+      if (why) USAGE("%s (got '%s')", why, def ? def : "");
     } else if (a[0] == '-' && a[1]) {
       USAGE("unknown option '%s'", a);
     } else if (!scene_path) {
@@ -266,14 +274,8 @@ static int cmd_params(int argc, char **argv) {
     } else if (strncmp(a, "-D", 2) == 0) {
       const char *def = a[2] ? a + 2 : val;
       if (!a[2]) i++;
-      const char *eq = def ? strchr(def, '=') : NULL;
-      if (!def || !eq || eq == def) USAGE("-D needs name=value (got '%s')", def ? def : "");
-      if (n_defines == MAX_DEFINES) USAGE("too many -D definitions (at most %d)", MAX_DEFINES);
-      char *name = strndup(def, (size_t)(eq - def));
-      if (!name) USAGE("%s", "out of memory");
-      defines[n_defines].name = name;
-      defines[n_defines].value = eq + 1;
-      n_defines++;
+      const char *why = add_define(defines, &n_defines, def);
+      if (why) USAGE("%s (got '%s')", why, def ? def : "");
     } else if (a[0] == '-' && a[1]) {
       USAGE("unknown option '%s'", a);
     } else if (!scene_path) {

@@ -561,15 +561,10 @@ rsw_status service_job_get(service *svc, const char *id, char **json_out, svc_er
   return RSW_OK;
 }
 
-rsw_status service_job_cancel(service *svc, const char *id, char **json_out, svc_error *e) {
-  pthread_mutex_lock(&svc->lock);
-  job *j = find_job_locked(svc, id);
-  if (!j) {
-    pthread_mutex_unlock(&svc->lock);
-    return no_job(e, id);
-  }
+/* Cancel: a queued job leaves the queue and ends now; a running one stops
+ * at its render's next pixel. svc->lock held. */
+static void stop_job(service *svc, job *j) {
   if (j->state == JOB_QUEUED) {
-    /* Not started: take it off the queue and end it now. */
     for (size_t i = 0; i < svc->n_queue; i++)
       if (svc->queue[i] == j) {
         memmove(svc->queue + i, svc->queue + i + 1, (svc->n_queue - i - 1) * sizeof *svc->queue);
@@ -579,8 +574,18 @@ rsw_status service_job_cancel(service *svc, const char *id, char **json_out, svc
     atomic_store(&j->cancel, 1);
     finish_job(svc, j);
   } else if (j->state == JOB_RUNNING) {
-    atomic_store(&j->cancel, 1); /* the render stops at its next tile */
+    atomic_store(&j->cancel, 1);
   }
+}
+
+rsw_status service_job_cancel(service *svc, const char *id, char **json_out, svc_error *e) {
+  pthread_mutex_lock(&svc->lock);
+  job *j = find_job_locked(svc, id);
+  if (!j) {
+    pthread_mutex_unlock(&svc->lock);
+    return no_job(e, id);
+  }
+  stop_job(svc, j);
   cJSON *o = job_json(j);
   pthread_mutex_unlock(&svc->lock);
   *json_out = cJSON_PrintUnformatted(o);
@@ -595,18 +600,7 @@ rsw_status service_job_delete(service *svc, const char *id, svc_error *e) {
     pthread_mutex_unlock(&svc->lock);
     return no_job(e, id);
   }
-  if (j->state == JOB_QUEUED) {
-    for (size_t i = 0; i < svc->n_queue; i++)
-      if (svc->queue[i] == j) {
-        memmove(svc->queue + i, svc->queue + i + 1, (svc->n_queue - i - 1) * sizeof *svc->queue);
-        svc->n_queue--;
-        break;
-      }
-    atomic_store(&j->cancel, 1);
-    finish_job(svc, j);
-  } else if (j->state == JOB_RUNNING) {
-    atomic_store(&j->cancel, 1);
-  }
+  stop_job(svc, j);
   /* Freed by the next expiry pass once it has stopped. */
   j->deleted = true;
   pthread_cond_broadcast(&svc->cond);
