@@ -14,6 +14,7 @@
 #include <fcntl.h>
 #include <math.h>
 #include <netinet/in.h>
+#include <pthread.h>
 #include <signal.h>
 #include <stdarg.h>
 #include <stdint.h>
@@ -699,6 +700,231 @@ static void test_wait_timeout_stop_cancel(void) {
   rsw_client_free(c);
 }
 
+
+/* ---- a scripted HTTP server ----------------------------------------------------------
+ * For what the real daemon does not do on demand: drop an event stream in
+ * the middle of an event, refuse event streams, answer 429/503 with
+ * Retry-After. One thread accepts connections one at a time, reads the
+ * request head, and writes the raw answer the script gives, then closes
+ * the connection. */
+
+typedef struct fake_server fake_server;
+/* Write the raw answer to request number n (0-based) into out. */
+typedef void (*fake_script)(fake_server *fs, int n, const char *method, const char *path, char *out, size_t cap);
+
+struct fake_server {
+  int fd, port;
+  pthread_t thread;
+  fake_script script;
+  int n_requests;
+  char last_event_id[8][32]; /* Last-Event-ID of request n ("" when absent) */
+  char paths[8][128];
+  int polls; /* GET /v1/jobs/{id} so far */
+};
+
+static void *fake_main(void *arg) {
+  fake_server *fs = arg;
+  for (;;) {
+    int cfd = accept(fs->fd, NULL, NULL);
+    if (cfd < 0) return NULL;
+    char req[4096];
+    size_t got = 0;
+    while (got < sizeof req - 1) {
+      ssize_t r = read(cfd, req + got, sizeof req - 1 - got);
+      if (r <= 0) break;
+      got += (size_t)r;
+      req[got] = '\0';
+      if (strstr(req, "\r\n\r\n")) break;
+    }
+    req[got] = '\0';
+    if (strncmp(req, "QUIT", 4) == 0 || got == 0) {
+      close(cfd);
+      if (got && strncmp(req, "QUIT", 4) == 0) return NULL;
+      continue;
+    }
+    char method[16] = "", path[128] = "";
+    sscanf(req, "%15s %127s", method, path);
+    int n = fs->n_requests++;
+    if (n < 8) {
+      snprintf(fs->paths[n], sizeof fs->paths[n], "%s", path);
+      const char *l = strcasestr(req, "\r\nLast-Event-ID:");
+      fs->last_event_id[n][0] = '\0';
+      if (l) sscanf(l + 16, " %31[^\r\n]", fs->last_event_id[n]);
+    }
+    char out[8192];
+    fs->script(fs, n, method, path, out, sizeof out);
+    size_t len = strlen(out), off = 0;
+    while (off < len) {
+      ssize_t w = write(cfd, out + off, len - off);
+      if (w <= 0) break;
+      off += (size_t)w;
+    }
+    close(cfd);
+  }
+}
+
+static bool fake_start(fake_server *fs, fake_script script) {
+  memset(fs, 0, sizeof *fs);
+  fs->script = script;
+  fs->fd = socket(AF_INET, SOCK_STREAM, 0);
+  struct sockaddr_in a = {.sin_family = AF_INET, .sin_port = 0};
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t len = sizeof a;
+  if (fs->fd < 0 || bind(fs->fd, (struct sockaddr *)&a, sizeof a) != 0 || listen(fs->fd, 8) != 0 ||
+      getsockname(fs->fd, (struct sockaddr *)&a, &len) != 0)
+    return false;
+  fs->port = ntohs(a.sin_port);
+  return pthread_create(&fs->thread, NULL, fake_main, fs) == 0;
+}
+
+static void fake_stop(fake_server *fs) {
+  int fd = socket(AF_INET, SOCK_STREAM, 0);
+  struct sockaddr_in a = {.sin_family = AF_INET, .sin_port = htons((uint16_t)fs->port)};
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  if (fd >= 0 && connect(fd, (struct sockaddr *)&a, sizeof a) == 0 && write(fd, "QUIT", 4) == 4) {
+  }
+  if (fd >= 0) close(fd);
+  pthread_join(fs->thread, NULL);
+  close(fs->fd);
+}
+
+static void answer(char *out, size_t cap, const char *status, const char *ctype, const char *extra, const char *body) {
+  snprintf(out, cap, "HTTP/1.1 %s\r\nContent-Type: %s\r\n%sConnection: close\r\nContent-Length: %zu\r\n\r\n%s", status,
+           ctype, extra, strlen(body), body);
+}
+
+#define SSE_HEAD "HTTP/1.1 200 OK\r\nContent-Type: text/event-stream\r\nCache-Control: no-cache\r\nConnection: close\r\n\r\n"
+#define CTX_EVENT(n, ctx) "event: context\nid: " #n "\ndata: {\"context\": \"" ctx "\", \"sensor\": \"meter\", \"state\": \"succeeded\", \"done\": " #n ", \"total\": 3}\n\n"
+#define JOB_DONE "{\"id\": \"j1\", \"state\": \"succeeded\", \"contexts_total\": 3, \"contexts_done\": 3, \"renders_total\": 3, \"renders_done\": 3, \"renders_failed\": 0}"
+
+/* Events 1 and 2 and half of event 3, then the connection closes; after a
+ * reconnect (Last-Event-ID: 2), event 3 and the end. */
+static void script_drop(fake_server *fs, int n, const char *method, const char *path, char *out, size_t cap) {
+  (void)fs;
+  (void)method;
+  if (strcmp(path, "/v1/jobs/j1/events") == 0 && n == 0)
+    snprintf(out, cap, SSE_HEAD ": ping\n\n" CTX_EVENT(1, "c0") CTX_EVENT(2, "c1") "event: context\nid: 3\ndata: {\"con");
+  else if (strcmp(path, "/v1/jobs/j1/events") == 0)
+    snprintf(out, cap, SSE_HEAD CTX_EVENT(3, "c2") "event: end\nid: 4\ndata: {\"state\": \"succeeded\"}\n\n");
+  else if (strcmp(path, "/v1/jobs/j1") == 0)
+    answer(out, cap, "200 OK", "application/json", "", JOB_DONE);
+  else
+    answer(out, cap, "404 Not Found", "application/problem+json", "", "{\"status\": 404, \"code\": \"RSW_ERR_NOT_FOUND\"}");
+}
+
+/* No event streams here (406); the job is running on the first poll and
+ * done on the second. */
+static void script_poll(fake_server *fs, int n, const char *method, const char *path, char *out, size_t cap) {
+  (void)n;
+  (void)method;
+  if (strcmp(path, "/v1/jobs/j1/events") == 0) {
+    answer(out, cap, "406 Not Acceptable", "application/problem+json", "",
+           "{\"status\": 406, \"code\": \"NOT_ACCEPTABLE\", \"detail\": \"no streams through this proxy\"}");
+  } else if (strcmp(path, "/v1/jobs/j1") == 0) {
+    if (fs->polls++ == 0)
+      answer(out, cap, "200 OK", "application/json", "",
+             "{\"id\": \"j1\", \"state\": \"running\", \"renders_total\": 3, \"renders_done\": 1}");
+    else
+      answer(out, cap, "200 OK", "application/json", "", JOB_DONE);
+  } else if (strcmp(path, "/v1/jobs/j1/results") == 0) {
+    answer(out, cap, "200 OK", "application/json", "",
+           fs->polls <= 1 ? "{\"job\": \"j1\", \"results\": [{\"context\": \"c0\", \"sensor\": \"meter\", \"state\": \"succeeded\"},"
+                            " {\"context\": \"c1\", \"sensor\": \"meter\", \"state\": \"queued\"},"
+                            " {\"context\": \"c2\", \"sensor\": \"meter\", \"state\": \"queued\"}]}"
+                          : "{\"job\": \"j1\", \"results\": [{\"context\": \"c0\", \"sensor\": \"meter\", \"state\": \"succeeded\"},"
+                            " {\"context\": \"c1\", \"sensor\": \"meter\", \"state\": \"failed\"},"
+                            " {\"context\": \"c2\", \"sensor\": \"meter\", \"state\": \"succeeded\"}]}");
+  } else {
+    answer(out, cap, "404 Not Found", "application/problem+json", "", "{\"status\": 404}");
+  }
+}
+
+/* 429 with Retry-After: 1, then 503 without, then the answer. */
+static void script_busy(fake_server *fs, int n, const char *method, const char *path, char *out, size_t cap) {
+  (void)fs;
+  (void)method;
+  (void)path;
+  if (n == 0)
+    answer(out, cap, "429 Too Many Requests", "application/problem+json", "Retry-After: 1\r\n",
+           "{\"status\": 429, \"code\": \"RSW_ERR_BUSY\", \"detail\": \"queue full\"}");
+  else if (n == 1)
+    answer(out, cap, "503 Service Unavailable", "application/problem+json", "",
+           "{\"status\": 503, \"code\": \"UNAVAILABLE\", \"detail\": \"not ready\"}");
+  else
+    answer(out, cap, "200 OK", "application/json", "", "{\"name\": \"fake\"}");
+}
+
+static void test_wait_reconnects(void) {
+  fake_server fs;
+  REQUIRE(fake_start(&fs, script_drop), "fake server");
+  char url[64];
+  snprintf(url, sizeof url, "http://127.0.0.1:%d", fs.port);
+  rsw_client *c = client_for(url, NULL, 0);
+  progress_log p = {0};
+  rsw_job_status st = {0};
+  rsw_status s = c ? rsw_job_wait(c, "j1", on_progress, &p, 10, &st) : RSW_ERR_NOMEM;
+  CHECK(s == RSW_OK && st.state == RSW_JOB_SUCCEEDED && st.renders_done == 3, "wait: %s %s", rsw_strerror(s),
+        c ? why(c) : "");
+  CHECK(p.contexts == 3 && p.ends == 1 && strcmp(p.seen[0], "c0") == 0 && strcmp(p.seen[1], "c1") == 0 &&
+            strcmp(p.seen[2], "c2") == 0,
+        "each context reported once: %d calls (%s %s %s)", p.contexts, p.seen[0], p.seen[1], p.seen[2]);
+  CHECK(fs.n_requests == 3 && fs.last_event_id[0][0] == '\0' && strcmp(fs.last_event_id[1], "2") == 0 &&
+            strcmp(fs.paths[2], "/v1/jobs/j1") == 0,
+        "%d requests; reconnected with Last-Event-ID '%s'", fs.n_requests, fs.last_event_id[1]);
+  rsw_client_free(c);
+  fake_stop(&fs);
+}
+
+static void test_wait_polls_without_events(void) {
+  fake_server fs;
+  REQUIRE(fake_start(&fs, script_poll), "fake server");
+  char url[64];
+  snprintf(url, sizeof url, "http://127.0.0.1:%d", fs.port);
+  rsw_client *c = client_for(url, NULL, 0);
+  progress_log p = {0};
+  rsw_job_status st = {0};
+  rsw_status s = c ? rsw_job_wait(c, "j1", on_progress, &p, 10, &st) : RSW_ERR_NOMEM;
+  CHECK(s == RSW_OK && st.state == RSW_JOB_SUCCEEDED, "wait by polling: %s %s", rsw_strerror(s), c ? why(c) : "");
+  CHECK(p.contexts == 3 && p.failed == 1 && p.ends == 1 && strcmp(p.seen[0], "c0") == 0 &&
+            strcmp(p.seen[2], "c2") == 0 && fs.polls == 2,
+        "polled progress: %d calls, %d failed, %d polls", p.contexts, p.failed, fs.polls);
+  rsw_client_free(c);
+  fake_stop(&fs);
+}
+
+static void test_retry_after(void) {
+  fake_server fs;
+  REQUIRE(fake_start(&fs, script_busy), "fake server");
+  char url[64];
+  snprintf(url, sizeof url, "http://127.0.0.1:%d", fs.port);
+  rsw_client *c = client_for(url, NULL, 0); /* 3 retries, backoff 0.01 s */
+  char *json = NULL;
+  double t0 = now_s();
+  rsw_status s = c ? rsw_server_info(c, &json) : RSW_ERR_NOMEM;
+  double dt = now_s() - t0;
+  CHECK(s == RSW_OK && json && strstr(json, "fake") && fs.n_requests == 3, "after 429 and 503: %s, %d requests",
+        rsw_strerror(s), fs.n_requests);
+  CHECK(dt >= 0.95 && dt < 5, "Retry-After: 1 honoured: %.3f s", dt);
+  rsw_free(json);
+  rsw_client_free(c);
+  /* Without retries the 429 comes back, its problem as the last error. */
+  fs.n_requests = 0;
+  c = client_for(url, NULL, -1);
+  json = NULL;
+  s = c ? rsw_server_info(c, &json) : RSW_ERR_NOMEM;
+  const rsw_error_info *e = c ? rsw_client_last_error(c) : NULL;
+  CHECK(s == RSW_ERR_BUSY && e && e->http_status == 429 && strcmp(e->message, "queue full") == 0 &&
+            fs.n_requests == 1,
+        "no retries: %s", rsw_strerror(s));
+  /* A problem code that is no RSW name: the HTTP status decides. */
+  s = c ? rsw_server_info(c, &json) : RSW_ERR_NOMEM;
+  e = c ? rsw_client_last_error(c) : NULL;
+  CHECK(s == RSW_ERR_UNAVAILABLE && e && e->http_status == 503 && strcmp(e->code, "UNAVAILABLE") == 0,
+        "503 with code UNAVAILABLE: %s", rsw_strerror(s));
+  rsw_client_free(c);
+  fake_stop(&fs);
+}
+
 static void test_unknown_ids(void) {
   rsw_client *c = client_for(main_d.url, NULL, 0);
   REQUIRE(c, "client");
@@ -814,6 +1040,9 @@ int main(void) {
     RSW_TEST_RUN(test_job_sweep);
     RSW_TEST_RUN(test_wait_timeout_stop_cancel);
     RSW_TEST_RUN(test_unknown_ids);
+    RSW_TEST_RUN(test_wait_reconnects);
+    RSW_TEST_RUN(test_wait_polls_without_events);
+    RSW_TEST_RUN(test_retry_after);
     RSW_TEST_RUN(test_connection_refused);
     RSW_TEST_RUN(test_unauthorized);
   }
