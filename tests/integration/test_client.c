@@ -27,9 +27,9 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "raysweep/client.h"
 #include "../../server/kernel/image_exr.h"
 #include "../support/test.h"
+#include "raysweep/client.h"
 
 RSW_TEST_DEFINE_GLOBALS
 
@@ -115,8 +115,8 @@ static bool daemon_start(daemon_proc *d, const char *name, const char *const *ex
       dup2(fd, 2);
       close(fd);
     }
-    const char *argv[64] = {exe, "serve", "--listen", "127.0.0.1:0", "--port-file", port_file, "--data-root",
-                            data_root, "--blob-dir", blob_dir};
+    const char *argv[64] = {exe,       "serve",       "--listen", "127.0.0.1:0", "--port-file",
+                            port_file, "--data-root", data_root,  "--blob-dir",  blob_dir};
     int n = 10;
     for (int i = 0; extra && extra[i] && n < 62; i++) argv[n++] = extra[i];
     argv[n] = NULL;
@@ -170,8 +170,12 @@ static void daemon_stop(daemon_proc *d) {
 static daemon_proc main_d;
 
 static rsw_client *client_for(const char *url, const char *token, int max_retries) {
-  rsw_client_opts o = {.size = sizeof o, .base_url = url, .token = token, .timeout_s = 60,
-                       .max_retries = max_retries, .retry_backoff_s = 0.01};
+  rsw_client_opts o = {.size = sizeof o,
+                       .base_url = url,
+                       .token = token,
+                       .timeout_s = 60,
+                       .max_retries = max_retries,
+                       .retry_backoff_s = 0.01};
   rsw_client *c = NULL;
   return rsw_client_new(&o, &c) == RSW_OK ? c : NULL;
 }
@@ -244,7 +248,8 @@ static const char *QUAD_JSON =
     " 'meter': {'type': 'distant', 'direction': [0, 0, -1], 'target': [0.3, 0.2, 0],"
     "   'film': {'type': 'hdrfilm', 'width': 1, 'height': 1, 'rfilter': {'type': 'box'}}},"
     " 'sun': {'type': 'directional', 'direction': [0, 0, -1]},"
-    " 'quad': {'type': 'ply', 'filename': 'meshes/quad.ply', 'bsdf': {'type': 'diffuse', 'reflectance': %s}}}";
+    " 'quad': {'type': 'ply', 'filename': 'meshes/quad.ply', 'bsdf': {'type': 'diffuse', 'reflectance': "
+    "%s}}}";
 
 static const char *QUAD_XML =
     "<scene version=\"3.0.0\">\n"
@@ -306,7 +311,8 @@ static void test_push_json_with_blob(void) {
   /* A missing referenced file: RSW_ERR_IO naming it. */
   jq(doc, sizeof doc, "{'type': 'scene', 'm': {'type': 'ply', 'filename': 'nope/missing.ply'}}");
   s = rsw_scene_push_buffer(c, doc, strlen(doc), dir, NULL, id3, NULL);
-  CHECK(s == RSW_ERR_IO && strstr(why(c), "nope/missing.ply"), "missing file: %s %s", rsw_strerror(s), why(c));
+  CHECK(s == RSW_ERR_IO && strstr(why(c), "nope/missing.ply"), "missing file: %s %s", rsw_strerror(s),
+        why(c));
   /* A missing scene file. */
   s = rsw_scene_push_file(c, "/nonexistent/scene.json", NULL, id3, NULL);
   CHECK(s == RSW_ERR_IO && strstr(why(c), "/nonexistent/scene.json"), "missing scene: %s %s", rsw_strerror(s),
@@ -440,7 +446,8 @@ static bool read_npy(const char *path, int shape[3], float **data, size_t *heade
   snprintf(dict, sizeof dict, "%.*s", (int)(hl < 255 ? hl : 255), (char *)p + 10);
   const char *sh = strstr(dict, "'shape': (");
   bool ok = strstr(dict, "'descr': '<f4'") && strstr(dict, "'fortran_order': False") && sh &&
-            sscanf(sh, "'shape': (%d, %d, %d)", &shape[0], &shape[1], &shape[2]) == 3 && p[10 + hl - 1] == '\n';
+            sscanf(sh, "'shape': (%d, %d, %d)", &shape[0], &shape[1], &shape[2]) == 3 &&
+            p[10 + hl - 1] == '\n';
   size_t n = ok ? (size_t)shape[0] * (size_t)shape[1] * (size_t)shape[2] : 0;
   ok = ok && len == 10 + hl + 4 * n;
   if (ok) {
@@ -461,14 +468,16 @@ static void test_render_save(void) {
   char id[65];
   REQUIRE(plate_scene(c, "0.3", id), "scene");
   rsw_film *f = NULL;
-  rsw_status s = rsw_render(c, id, "{\"sensor\": \"hemi\", \"spp\": 8, \"seed\": 3, \"wavelength\": 600}", &f);
+  rsw_status s =
+      rsw_render(c, id, "{\"sensor\": \"hemi\", \"spp\": 8, \"seed\": 3, \"wavelength\": 600}", &f);
   REQUIRE(s == RSW_OK, "render: %s %s", rsw_strerror(s), why(c));
   int w = rsw_film_width(f), h = rsw_film_height(f), nc = rsw_film_channels(f);
   CHECK(w == 5 && h == 5 && nc == 1 && strcmp(rsw_film_channel_name(f, 0), "Y") == 0 &&
             rsw_film_channel_name(f, 1) == NULL,
         "film %dx%dx%d", w, h, nc);
   const char *meta = rsw_film_meta(f);
-  CHECK(strstr(meta, "\"sensor\":\"hemi\"") && strstr(meta, "\"wavelength\":600") && strstr(meta, "\"seed\":3"),
+  CHECK(strstr(meta, "\"sensor\":\"hemi\"") && strstr(meta, "\"wavelength\":600") &&
+            strstr(meta, "\"seed\":3"),
         "meta: %s", meta);
   const float *d = rsw_film_data(f);
   size_t n = (size_t)w * (size_t)h * (size_t)nc;
@@ -499,7 +508,8 @@ static void test_render_save(void) {
   float *nd = NULL;
   size_t header = 0;
   if (s == RSW_OK && read_npy(npy, shape, &nd, &header)) {
-    CHECK(shape[0] == h && shape[1] == w && shape[2] == nc, "shape (%d, %d, %d)", shape[0], shape[1], shape[2]);
+    CHECK(shape[0] == h && shape[1] == w && shape[2] == nc, "shape (%d, %d, %d)", shape[0], shape[1],
+          shape[2]);
     CHECK(header % 64 == 0, "data starts at %zu, a multiple of 64", header);
     CHECK(memcmp(nd, d, n * sizeof *d) == 0, "NPY samples bitwise equal to the JSON film");
     free(nd);
@@ -529,7 +539,8 @@ typedef struct progress_log {
   char seen[32][16];
 } progress_log;
 
-static int on_progress(void *user, const char *context, const char *sensor, size_t done, size_t total, int failed) {
+static int on_progress(void *user, const char *context, const char *sensor, size_t done, size_t total,
+                       int failed) {
   progress_log *p = user;
   if (!context) {
     p->ends++;
@@ -591,21 +602,24 @@ static void test_job_sweep(void) {
   REQUIRE(c, "client");
   char id[65], job[40], again[40];
   REQUIRE(plate_scene(c, "0.5", id), "scene");
-  enum { N = 12 };
+  enum {
+    N = 12
+  };
   REQUIRE(submit_sweep(c, id, N, "sweep-key-1", job), "submit");
   /* The same Idempotency-Key and body: the same job. */
-  CHECK(submit_sweep(c, id, N, "sweep-key-1", again) && strcmp(job, again) == 0, "idempotent resubmit: %s vs %s",
-        job, again);
+  CHECK(submit_sweep(c, id, N, "sweep-key-1", again) && strcmp(job, again) == 0,
+        "idempotent resubmit: %s vs %s", job, again);
   progress_log p = {0};
   rsw_job_status st = {0};
   rsw_status s = rsw_job_wait(c, job, on_progress, &p, 60, &st);
   REQUIRE(s == RSW_OK, "wait: %s %s", rsw_strerror(s), why(c));
-  CHECK(st.state == RSW_JOB_SUCCEEDED && st.contexts_total == N && st.contexts_done == N && st.renders_done == N &&
-            st.renders_failed == 0 && st.error[0] == '\0',
+  CHECK(st.state == RSW_JOB_SUCCEEDED && st.contexts_total == N && st.contexts_done == N &&
+            st.renders_done == N && st.renders_failed == 0 && st.error[0] == '\0',
         "final: state %d, contexts %zu/%zu renders %zu", (int)st.state, st.contexts_done, st.contexts_total,
         st.renders_done);
   CHECK(p.contexts == N && p.ends == 1 && p.failed == 0 && p.last_done == N && p.last_total == N,
-        "progress: %d context calls, %d end calls, last %zu/%zu", p.contexts, p.ends, p.last_done, p.last_total);
+        "progress: %d context calls, %d end calls, last %zu/%zu", p.contexts, p.ends, p.last_done,
+        p.last_total);
   /* Waiting again on a finished job: the stream replays, ends at once. */
   progress_log p2 = {0};
   s = rsw_job_wait(c, job, on_progress, &p2, 10, NULL);
@@ -662,7 +676,8 @@ static bool submit_long(rsw_client *c, const char *id, char job[40]) {
     snprintf(ctx, sizeof ctx, "L%03d", i);
     ok = rsw_contexts_add(x, ctx, 500, NULL) == RSW_OK;
   }
-  ok = ok && rsw_contexts_add_default_sensor(x, "hemi") == RSW_OK && rsw_contexts_set_default_spp(x, 4000) == RSW_OK;
+  ok = ok && rsw_contexts_add_default_sensor(x, "hemi") == RSW_OK &&
+       rsw_contexts_set_default_spp(x, 4000) == RSW_OK;
   rsw_status s = ok ? rsw_job_submit(c, id, x, NULL, job) : RSW_ERR_INVALID;
   if (s) fprintf(stdout, "  submit: %s %s\n", rsw_strerror(s), why(c));
   rsw_contexts_free(x);
@@ -678,8 +693,8 @@ static void test_wait_timeout_stop_cancel(void) {
   double t0 = now_s();
   rsw_status s = rsw_job_wait(c, job, NULL, NULL, 0.3, NULL);
   double dt = now_s() - t0;
-  CHECK(s == RSW_ERR_TIMEOUT && dt >= 0.25 && dt < 3.0, "wait with a 0.3 s limit: %s after %.2f s", rsw_strerror(s),
-        dt);
+  CHECK(s == RSW_ERR_TIMEOUT && dt >= 0.25 && dt < 3.0, "wait with a 0.3 s limit: %s after %.2f s",
+        rsw_strerror(s), dt);
   /* The callback stops the wait at its first context; the job runs on. */
   progress_log p = {.stop_after = 1};
   s = rsw_job_wait(c, job, on_progress, &p, 60, NULL);
@@ -700,7 +715,6 @@ static void test_wait_timeout_stop_cancel(void) {
   rsw_client_free(c);
 }
 
-
 /* ---- a scripted HTTP server ----------------------------------------------------------
  * For what the real daemon does not do on demand: drop an event stream in
  * the middle of an event, refuse event streams, answer 429/503 with
@@ -710,7 +724,8 @@ static void test_wait_timeout_stop_cancel(void) {
 
 typedef struct fake_server fake_server;
 /* Write the raw answer to request number n (0-based) into out. */
-typedef void (*fake_script)(fake_server *fs, int n, const char *method, const char *path, char *out, size_t cap);
+typedef void (*fake_script)(fake_server *fs, int n, const char *method, const char *path, char *out,
+                            size_t cap);
 
 struct fake_server {
   int fd, port;
@@ -781,21 +796,28 @@ static void fake_stop(fake_server *fs) {
   int fd = socket(AF_INET, SOCK_STREAM, 0);
   struct sockaddr_in a = {.sin_family = AF_INET, .sin_port = htons((uint16_t)fs->port)};
   a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  if (fd >= 0 && connect(fd, (struct sockaddr *)&a, sizeof a) == 0 && write(fd, "QUIT", 4) == 4) {
-  }
+  if (fd >= 0 && connect(fd, (struct sockaddr *)&a, sizeof a) == 0 && write(fd, "QUIT", 4) == 4) {}
   if (fd >= 0) close(fd);
   pthread_join(fs->thread, NULL);
   close(fs->fd);
 }
 
-static void answer(char *out, size_t cap, const char *status, const char *ctype, const char *extra, const char *body) {
-  snprintf(out, cap, "HTTP/1.1 %s\r\nContent-Type: %s\r\n%sConnection: close\r\nContent-Length: %zu\r\n\r\n%s", status,
+static void answer(char *out, size_t cap, const char *status, const char *ctype, const char *extra,
+                   const char *body) {
+  snprintf(out, cap,
+           "HTTP/1.1 %s\r\nContent-Type: %s\r\n%sConnection: close\r\nContent-Length: %zu\r\n\r\n%s", status,
            ctype, extra, strlen(body), body);
 }
 
-#define SSE_HEAD "HTTP/1.1 200 OK\r\nContent-Type: text/event-stream\r\nCache-Control: no-cache\r\nConnection: close\r\n\r\n"
-#define CTX_EVENT(n, ctx) "event: context\nid: " #n "\ndata: {\"context\": \"" ctx "\", \"sensor\": \"meter\", \"state\": \"succeeded\", \"done\": " #n ", \"total\": 3}\n\n"
-#define JOB_DONE "{\"id\": \"j1\", \"state\": \"succeeded\", \"contexts_total\": 3, \"contexts_done\": 3, \"renders_total\": 3, \"renders_done\": 3, \"renders_failed\": 0}"
+#define SSE_HEAD                                                                                             \
+  "HTTP/1.1 200 OK\r\nContent-Type: text/event-stream\r\nCache-Control: no-cache\r\nConnection: "            \
+  "close\r\n\r\n"
+#define CTX_EVENT(n, ctx)                                                                                    \
+  "event: context\nid: " #n "\ndata: {\"context\": \"" ctx                                                   \
+  "\", \"sensor\": \"meter\", \"state\": \"succeeded\", \"done\": " #n ", \"total\": 3}\n\n"
+#define JOB_DONE                                                                                             \
+  "{\"id\": \"j1\", \"state\": \"succeeded\", \"contexts_total\": 3, \"contexts_done\": 3, "                 \
+  "\"renders_total\": 3, \"renders_done\": 3, \"renders_failed\": 0}"
 
 /* Events 1 and 2 and half of event 3, then the connection closes; after a
  * reconnect (Last-Event-ID: 2), event 3 and the end. */
@@ -803,13 +825,16 @@ static void script_drop(fake_server *fs, int n, const char *method, const char *
   (void)fs;
   (void)method;
   if (strcmp(path, "/v1/jobs/j1/events") == 0 && n == 0)
-    snprintf(out, cap, SSE_HEAD ": ping\n\n" CTX_EVENT(1, "c0") CTX_EVENT(2, "c1") "event: context\nid: 3\ndata: {\"con");
+    snprintf(out, cap,
+             SSE_HEAD ": ping\n\n" CTX_EVENT(1, "c0")
+                 CTX_EVENT(2, "c1") "event: context\nid: 3\ndata: {\"con");
   else if (strcmp(path, "/v1/jobs/j1/events") == 0)
     snprintf(out, cap, SSE_HEAD CTX_EVENT(3, "c2") "event: end\nid: 4\ndata: {\"state\": \"succeeded\"}\n\n");
   else if (strcmp(path, "/v1/jobs/j1") == 0)
     answer(out, cap, "200 OK", "application/json", "", JOB_DONE);
   else
-    answer(out, cap, "404 Not Found", "application/problem+json", "", "{\"status\": 404, \"code\": \"RSW_ERR_NOT_FOUND\"}");
+    answer(out, cap, "404 Not Found", "application/problem+json", "",
+           "{\"status\": 404, \"code\": \"RSW_ERR_NOT_FOUND\"}");
 }
 
 /* No event streams here (406); the job is running on the first poll and
@@ -828,10 +853,12 @@ static void script_poll(fake_server *fs, int n, const char *method, const char *
       answer(out, cap, "200 OK", "application/json", "", JOB_DONE);
   } else if (strcmp(path, "/v1/jobs/j1/results") == 0) {
     answer(out, cap, "200 OK", "application/json", "",
-           fs->polls <= 1 ? "{\"job\": \"j1\", \"results\": [{\"context\": \"c0\", \"sensor\": \"meter\", \"state\": \"succeeded\"},"
+           fs->polls <= 1 ? "{\"job\": \"j1\", \"results\": [{\"context\": \"c0\", \"sensor\": \"meter\", "
+                            "\"state\": \"succeeded\"},"
                             " {\"context\": \"c1\", \"sensor\": \"meter\", \"state\": \"queued\"},"
                             " {\"context\": \"c2\", \"sensor\": \"meter\", \"state\": \"queued\"}]}"
-                          : "{\"job\": \"j1\", \"results\": [{\"context\": \"c0\", \"sensor\": \"meter\", \"state\": \"succeeded\"},"
+                          : "{\"job\": \"j1\", \"results\": [{\"context\": \"c0\", \"sensor\": \"meter\", "
+                            "\"state\": \"succeeded\"},"
                             " {\"context\": \"c1\", \"sensor\": \"meter\", \"state\": \"failed\"},"
                             " {\"context\": \"c2\", \"sensor\": \"meter\", \"state\": \"succeeded\"}]}");
   } else {
@@ -884,7 +911,8 @@ static void test_wait_polls_without_events(void) {
   progress_log p = {0};
   rsw_job_status st = {0};
   rsw_status s = c ? rsw_job_wait(c, "j1", on_progress, &p, 10, &st) : RSW_ERR_NOMEM;
-  CHECK(s == RSW_OK && st.state == RSW_JOB_SUCCEEDED, "wait by polling: %s %s", rsw_strerror(s), c ? why(c) : "");
+  CHECK(s == RSW_OK && st.state == RSW_JOB_SUCCEEDED, "wait by polling: %s %s", rsw_strerror(s),
+        c ? why(c) : "");
   CHECK(p.contexts == 3 && p.failed == 1 && p.ends == 1 && strcmp(p.seen[0], "c0") == 0 &&
             strcmp(p.seen[2], "c2") == 0 && fs.polls == 2,
         "polled progress: %d calls, %d failed, %d polls", p.contexts, p.failed, fs.polls);
@@ -902,8 +930,8 @@ static void test_retry_after(void) {
   double t0 = now_s();
   rsw_status s = c ? rsw_server_info(c, &json) : RSW_ERR_NOMEM;
   double dt = now_s() - t0;
-  CHECK(s == RSW_OK && json && strstr(json, "fake") && fs.n_requests == 3, "after 429 and 503: %s, %d requests",
-        rsw_strerror(s), fs.n_requests);
+  CHECK(s == RSW_OK && json && strstr(json, "fake") && fs.n_requests == 3,
+        "after 429 and 503: %s, %d requests", rsw_strerror(s), fs.n_requests);
   CHECK(dt >= 0.95 && dt < 5, "Retry-After: 1 honoured: %.3f s", dt);
   rsw_free(json);
   rsw_client_free(c);
@@ -961,7 +989,8 @@ static int dead_port(void) {
   a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
   socklen_t len = sizeof a;
   int port = 0;
-  if (fd >= 0 && bind(fd, (struct sockaddr *)&a, sizeof a) == 0 && getsockname(fd, (struct sockaddr *)&a, &len) == 0)
+  if (fd >= 0 && bind(fd, (struct sockaddr *)&a, sizeof a) == 0 &&
+      getsockname(fd, (struct sockaddr *)&a, &len) == 0)
     port = ntohs(a.sin_port);
   if (fd >= 0) close(fd);
   return port;
@@ -1049,7 +1078,9 @@ int main(void) {
   daemon_stop(&main_d);
   char cmd[128];
   snprintf(cmd, sizeof cmd, "rm -rf %s", tmpdir);
-  if (getenv("RSW_KEEP_TMP")) fprintf(stderr, "kept %s\n", tmpdir);
-  else if (system(cmd)) fprintf(stderr, "could not remove %s\n", tmpdir);
+  if (getenv("RSW_KEEP_TMP"))
+    fprintf(stderr, "kept %s\n", tmpdir);
+  else if (system(cmd))
+    fprintf(stderr, "could not remove %s\n", tmpdir);
   RSW_TEST_END("test_client");
 }
