@@ -734,7 +734,10 @@ struct fake_server {
   int n_requests;
   char last_event_id[8][32]; /* Last-Event-ID of request n ("" when absent) */
   char paths[8][128];
-  int polls; /* GET /v1/jobs/{id} so far */
+  int polls;     /* GET /v1/jobs/{id} so far */
+  char *body[8]; /* request bodies (owned), by request number */
+  size_t body_len[8];
+  char ctype[8][64]; /* their Content-Type */
 };
 
 static void *fake_main(void *arg) {
@@ -744,14 +747,31 @@ static void *fake_main(void *arg) {
     if (cfd < 0) return NULL;
     char req[4096];
     size_t got = 0;
+    char *head_end = NULL;
     while (got < sizeof req - 1) {
       ssize_t r = read(cfd, req + got, sizeof req - 1 - got);
       if (r <= 0) break;
       got += (size_t)r;
       req[got] = '\0';
-      if (strstr(req, "\r\n\r\n")) break;
+      if ((head_end = strstr(req, "\r\n\r\n"))) break;
     }
     req[got] = '\0';
+    /* The body, by Content-Length (the client sends no chunked bodies). */
+    const char *cl = strcasestr(req, "\r\nContent-Length:");
+    size_t body_len = cl ? (size_t)strtoul(cl + 17, NULL, 10) : 0;
+    char *body = head_end && body_len < ((size_t)1 << 24) ? malloc(body_len + 1) : NULL;
+    if (body) {
+      size_t have = got - (size_t)(head_end + 4 - req);
+      if (have > body_len) have = body_len;
+      memcpy(body, head_end + 4, have);
+      while (have < body_len) {
+        ssize_t r = read(cfd, body + have, body_len - have);
+        if (r <= 0) break;
+        have += (size_t)r;
+      }
+      body_len = have;
+      body[body_len] = '\0';
+    }
     if (strncmp(req, "QUIT", 4) == 0 || got == 0) {
       close(cfd);
       if (got && strncmp(req, "QUIT", 4) == 0) return NULL;
@@ -765,7 +785,14 @@ static void *fake_main(void *arg) {
       const char *l = strcasestr(req, "\r\nLast-Event-ID:");
       fs->last_event_id[n][0] = '\0';
       if (l) sscanf(l + 16, " %31[^\r\n]", fs->last_event_id[n]);
+      const char *ct = strcasestr(req, "\r\nContent-Type:");
+      fs->ctype[n][0] = '\0';
+      if (ct) sscanf(ct + 15, " %63[^\r\n]", fs->ctype[n]);
+      fs->body[n] = body;
+      fs->body_len[n] = body_len;
+      body = NULL;
     }
+    free(body);
     char out[8192];
     fs->script(fs, n, method, path, out, sizeof out);
     size_t len = strlen(out), off = 0;
@@ -800,6 +827,7 @@ static void fake_stop(fake_server *fs) {
   if (fd >= 0) close(fd);
   pthread_join(fs->thread, NULL);
   close(fs->fd);
+  for (int i = 0; i < 8; i++) free(fs->body[i]);
 }
 
 static void answer(char *out, size_t cap, const char *status, const char *ctype, const char *extra,
@@ -879,6 +907,88 @@ static void script_busy(fake_server *fs, int n, const char *method, const char *
            "{\"status\": 503, \"code\": \"UNAVAILABLE\", \"detail\": \"not ready\"}");
   else
     answer(out, cap, "200 OK", "application/json", "", "{\"name\": \"fake\"}");
+}
+
+/* A blob store that lacks everything it is asked about; scenes get a fixed
+ * id. The bodies are kept for the test to look at. */
+static void script_push(fake_server *fs, int n, const char *method, const char *path, char *out, size_t cap) {
+  if (strcmp(method, "POST") == 0 && strcmp(path, "/v1/blobs:missing") == 0) {
+    const char *q = n < 8 && fs->body[n] ? strstr(fs->body[n], "[") : NULL; /* echo the digests array */
+    const char *e = q ? strchr(q, ']') : NULL;
+    char body[2048];
+    snprintf(body, sizeof body, "{\"missing\": %.*s}", q && e ? (int)(e - q + 1) : 2, q && e ? q : "[]");
+    answer(out, cap, "200 OK", "application/json", "", body);
+  } else if (strcmp(method, "PUT") == 0 && strncmp(path, "/v1/blobs/", 10) == 0) {
+    answer(out, cap, "201 Created", "application/json", "", "");
+  } else if (strcmp(method, "POST") == 0 && strncmp(path, "/v1/scenes", 10) == 0) {
+    answer(out, cap, "201 Created", "application/json", "",
+           "{\"id\": \"aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa\", \"revision\": 0}");
+  } else {
+    answer(out, cap, "404 Not Found", "application/problem+json", "", "{\"status\": 404}");
+  }
+}
+
+/* What goes over the wire for a push: one digest asked about per distinct
+ * file, one PUT of its bytes, and the XML posted byte for byte except the
+ * rewritten filename value. */
+static void test_push_wire(void) {
+  fake_server fs;
+  REQUIRE(fake_start(&fs, script_push), "fake server");
+  char url[64], dir[160], path[200];
+  snprintf(url, sizeof url, "http://127.0.0.1:%d", fs.port);
+  snprintf(dir, sizeof dir, "%s/scene-json", tmpdir); /* holds meshes/quad.ply (test_push_json_with_blob) */
+  snprintf(path, sizeof path, "%s/meshes/quad.ply", dir);
+  size_t ply_len = 0;
+  char *ply = read_file(path, &ply_len);
+  REQUIRE(ply, "read %s", path);
+  free(ply);
+  rsw_client *c = client_for(url, NULL, 0);
+  char id[65];
+  int created = -1;
+  snprintf(path, sizeof path, "%s/quad.xml", dir);
+  rsw_status s = c ? rsw_scene_push_file(c, path, "mono", id, &created) : RSW_ERR_NOMEM;
+  REQUIRE(s == RSW_OK && created == 1 && id[0] == 'a', "push: %s %s", rsw_strerror(s), c ? why(c) : "");
+  CHECK(fs.n_requests == 3 && strcmp(fs.paths[0], "/v1/blobs:missing") == 0 &&
+            strncmp(fs.paths[1], "/v1/blobs/", 10) == 0 &&
+            strcmp(fs.paths[2], "/v1/scenes?variant=mono") == 0,
+        "requests: %d (%s, %s, %s)", fs.n_requests, fs.paths[0], fs.paths[1], fs.paths[2]);
+  const char *hex = fs.paths[1] + 10;
+  CHECK(strlen(hex) == 64 && strspn(hex, "0123456789abcdef") == 64, "PUT names a digest: %s", fs.paths[1]);
+  CHECK(fs.body_len[1] == ply_len && strcmp(fs.ctype[1], "application/octet-stream") == 0,
+        "PUT carries the PLY: %zu bytes of %s", fs.body_len[1], fs.ctype[1]);
+  char want[4096], ref[80];
+  snprintf(ref, sizeof ref, "sha256:%s", hex);
+  const char *at = strstr(QUAD_XML, "meshes/quad.ply");
+  REQUIRE(at, "the XML names the mesh");
+  snprintf(want, sizeof want, "%.*s%s%s", (int)(at - QUAD_XML), QUAD_XML, ref,
+           at + strlen("meshes/quad.ply"));
+  CHECK(fs.body[2] && strcmp(fs.body[2], want) == 0 && strcmp(fs.ctype[2], "application/xml") == 0,
+        "posted XML (%s):\n%s\nwant:\n%s", fs.ctype[2], fs.body[2] ? fs.body[2] : "(none)", want);
+  rsw_client_free(c);
+  fake_stop(&fs);
+
+  /* JSON: two references to the file, one already a digest. */
+  REQUIRE(fake_start(&fs, script_push), "fake server");
+  snprintf(url, sizeof url, "http://127.0.0.1:%d", fs.port);
+  c = client_for(url, NULL, 0);
+  char doc[1024];
+  jq(doc, sizeof doc,
+     "{'type': 'scene', 'a': {'type': 'ply', 'filename': 'meshes/quad.ply'},"
+     " 'list': [{'b': {'type': 'ply', 'filename': './meshes/../meshes/quad.ply'}}],"
+     " 'c': {'type': 'ply', 'filename': 'sha256:%s'}}",
+     "0123456789abcdef0123456789abcdef0123456789abcdef0123456789abcdef");
+  s = c ? rsw_scene_push_buffer(c, doc, strlen(doc), dir, NULL, id, NULL) : RSW_ERR_NOMEM;
+  REQUIRE(s == RSW_OK, "push JSON: %s %s", rsw_strerror(s), c ? why(c) : "");
+  CHECK(fs.n_requests == 3 && fs.body[0] && strstr(fs.body[0], hex) &&
+            !strstr(fs.body[0], "0123456789abcdef0123"),
+        "one digest asked about: %s", fs.body[0] ? fs.body[0] : "(none)");
+  const char *posted = fs.body[2] ? fs.body[2] : "";
+  const char *first = strstr(posted, ref), *second = first ? strstr(first + 1, ref) : NULL;
+  CHECK(first && second && !strstr(posted, "meshes/") && strstr(posted, "sha256:0123456789abcdef") &&
+            strcmp(fs.ctype[2], "application/json") == 0,
+        "posted JSON: %s", posted);
+  rsw_client_free(c);
+  fake_stop(&fs);
 }
 
 static void test_wait_reconnects(void) {
@@ -1069,6 +1179,7 @@ int main(void) {
     RSW_TEST_RUN(test_job_sweep);
     RSW_TEST_RUN(test_wait_timeout_stop_cancel);
     RSW_TEST_RUN(test_unknown_ids);
+    RSW_TEST_RUN(test_push_wire);
     RSW_TEST_RUN(test_wait_reconnects);
     RSW_TEST_RUN(test_wait_polls_without_events);
     RSW_TEST_RUN(test_retry_after);
