@@ -957,7 +957,7 @@ static void test_push_wire(void) {
   CHECK(fs.body_len[1] == ply_len && strcmp(fs.ctype[1], "application/octet-stream") == 0,
         "PUT carries the PLY: %zu bytes of %s", fs.body_len[1], fs.ctype[1]);
   char want[4096], ref[80];
-  snprintf(ref, sizeof ref, "sha256:%s", hex);
+  snprintf(ref, sizeof ref, "sha256:%.64s", hex);
   const char *at = strstr(QUAD_XML, "meshes/quad.ply");
   REQUIRE(at, "the XML names the mesh");
   snprintf(want, sizeof want, "%.*s%s%s", (int)(at - QUAD_XML), QUAD_XML, ref,
