@@ -788,6 +788,7 @@ static void *fake_main(void *arg) {
       const char *ct = strcasestr(req, "\r\nContent-Type:");
       fs->ctype[n][0] = '\0';
       if (ct) sscanf(ct + 15, " %63[^\r\n]", fs->ctype[n]);
+      free(fs->body[n]); /* a test may restart the count */
       fs->body[n] = body;
       fs->body_len[n] = body_len;
       body = NULL;
