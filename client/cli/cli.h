@@ -25,11 +25,12 @@ enum {
 
 #define CLI_MAX_OPTS 16
 
-/* One option a command accepts. has_arg: takes a value (`--x V` or
- * `--x=V`); repeat: may be given several times (otherwise the last wins). */
+/* One option a command accepts. arg: the value's placeholder for help
+ * (the option takes a value, `--x V` or `--x=V`), NULL for a flag; repeat:
+ * may be given several times (otherwise the last wins). */
 typedef struct cli_opt {
   const char *name;
-  bool has_arg;
+  const char *arg;
   bool repeat;
   const char *help; /* one line for per-command help */
 } cli_opt;

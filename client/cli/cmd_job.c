@@ -7,7 +7,7 @@
 #include "cli.h"
 
 const cli_opt cli_opts_job_watch[] = {
-    {"--timeout", true, false, "stop waiting after S seconds (exit 5; the job keeps running)"},
+    {"--timeout", "S", false, "stop waiting after S seconds (exit 5; the job keeps running)"},
     {NULL},
 };
 
@@ -48,11 +48,13 @@ int cmd_job_ls(cli_ctx *ctx, const cli_args *a) {
         const char *state = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(job, "state"));
         const char *scene = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(job, "scene"));
         const char *created = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(job, "created"));
-        printf("%-14s %-9s %6.0f/%-6.0f renders  %4.0f failed  scene %.12s  %s\n", id ? id : "?",
-               state ? state : "?", cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(job, "renders_done")),
-               cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(job, "renders_total")),
-               cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(job, "renders_failed")), scene ? scene : "?",
-               created ? created : "");
+        char progress[64];
+        snprintf(progress, sizeof progress, "%.0f/%.0f",
+                 cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(job, "renders_done")),
+                 cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(job, "renders_total")));
+        printf("%-14s %-9s %13s renders  %4.0f failed  scene %.12s  %s\n", id ? id : "?", state ? state : "?",
+               progress, cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(job, "renders_failed")),
+               scene ? scene : "?", created ? created : "");
       }
       cJSON_Delete(j);
     }

@@ -7,17 +7,17 @@
 #include "cli.h"
 
 const cli_opt cli_opts_render[] = {
-    {"--sensor", true, false, "sensor id or index (default: the first)"},
-    {"--spp", true, false, "samples per pixel (default: the scene's sampler)"},
-    {"--seed", true, false, "sampler seed (default 0)"},
-    {"--wavelength", true, false, "wavelength in nm (mono variant; default 550)"},
-    {"--set", true, true, "KEY=VALUE parameter override for this render only (VALUE is JSON)"},
-    {"--timeout", true, false, "seconds the server may spend (exit 5 past it)"},
-    {"-o", true, false, "output file: .exr, .npy or .json (the film JSON)"},
+    {"--sensor", "S", false, "sensor id or index (default: the first)"},
+    {"--spp", "N", false, "samples per pixel (default: the scene's sampler)"},
+    {"--seed", "N", false, "sampler seed (default 0)"},
+    {"--wavelength", "NM", false, "wavelength in nm (mono variant; default 550)"},
+    {"--set", "KEY=VALUE", true, "parameter override for this render only (VALUE is JSON)"},
+    {"--timeout", "S", false, "seconds the server may spend (exit 5 past it)"},
+    {"-o", "FILE", false, "output file: .exr, .npy or .json (the film JSON)"},
     {NULL},
 };
 const cli_opt cli_opts_fetch[] = {
-    {"-o", true, false, "output file: .exr, .npy or .json (the film JSON)"},
+    {"-o", "FILE", false, "output file: .exr, .npy or .json (the film JSON)"},
     {NULL},
 };
 

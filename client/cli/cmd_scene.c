@@ -8,20 +8,20 @@
 #include "cli.h"
 
 const cli_opt cli_opts_scene_push[] = {
-    {"--variant", true, false, "mono or rgb (overrides the scene's own)"},
+    {"--variant", "mono|rgb", false, "mono or rgb (overrides the scene's own)"},
     {NULL},
 };
 const cli_opt cli_opts_scene_rm[] = {
-    {"--force", false, false, "also cancel the scene's queued and running jobs"},
+    {"--force", NULL, false, "also cancel the scene's queued and running jobs"},
     {NULL},
 };
 const cli_opt cli_opts_params[] = {
-    {"--match", true, false, "glob over keys (e.g. '*.reflectance.value') or TYPE:ID:PATH"},
-    {"--class", true, false, "spectral, geometric or none"},
+    {"--match", "GLOB", false, "glob over keys (e.g. '*.reflectance.value') or TYPE:ID:PATH"},
+    {"--class", "C", false, "spectral, geometric or none"},
     {NULL},
 };
 const cli_opt cli_opts_set[] = {
-    {"--if-match", true, false, "apply only if the scene is still at revision REV"},
+    {"--if-match", "REV", false, "apply only if the scene is still at revision REV"},
     {NULL},
 };
 

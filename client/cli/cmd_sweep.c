@@ -20,20 +20,20 @@
 #include "cli.h"
 
 const cli_opt cli_opts_sweep[] = {
-    {"--contexts", true, false, "FILE.jsonl: one Context object per line (id optional)"},
-    {"--grid", true, true, "NAME=START:STOP:STEP, end included; NAME is wavelength or a parameter key"},
-    {"--set", true, true, "KEY=VALUE job-level parameter (VALUE is JSON)"},
-    {"--sensor", true, true, "sensor to render (default: every sensor)"},
-    {"--spp", true, false, "samples per pixel"},
-    {"--seed", true, false, "job seed (default 0)"},
-    {"--shard", true, false, "I/N: keep contexts I, I+N, I+2N, ... (ids unchanged)"},
-    {"--format", true, false, "film files: exr (default), npy or json"},
-    {"--timeout", true, false, "stop waiting after S seconds (exit 5; the job keeps running)"},
-    {"-o", true, false, "output directory"},
+    {"--contexts", "FILE.jsonl", false, "one Context object per line (id optional)"},
+    {"--grid", "NAME=START:STOP:STEP", true, "a range, end included; NAME is wavelength or a parameter key; several form a product"},
+    {"--set", "KEY=VALUE", true, "job-level parameter for every context (VALUE is JSON)"},
+    {"--sensor", "S", true, "sensor to render (default: every sensor)"},
+    {"--spp", "N", false, "samples per pixel"},
+    {"--seed", "N", false, "job seed (default 0)"},
+    {"--shard", "I/N", false, "keep contexts I, I+N, I+2N, ... (ids unchanged)"},
+    {"--format", "exr|npy|json", false, "film files: exr (default), npy or json"},
+    {"--timeout", "S", false, "stop waiting after S seconds (exit 5; the job keeps running)"},
+    {"-o", "DIR", false, "output directory"},
     {NULL},
 };
 const cli_opt cli_opts_merge[] = {
-    {"-o", true, false, "output directory"},
+    {"-o", "DIR", false, "output directory"},
     {NULL},
 };
 

@@ -94,8 +94,11 @@ static void command_help(const cli_command *c) {
   printf("usage: raysweep %s%s%s\n\n%s\n", name, c->args[0] ? " " : "", c->args, c->summary);
   if (c->opts[0].name) {
     printf("\nOptions:\n");
-    for (const cli_opt *o = c->opts; o->name; o++)
-      printf("  %-22s %s\n", o->name, o->help ? o->help : "");
+    for (const cli_opt *o = c->opts; o->name; o++) {
+      char flag[64];
+      snprintf(flag, sizeof flag, "%s%s%s", o->name, o->arg ? " " : "", o->arg ? o->arg : "");
+      printf("  %-28s %s%s\n", flag, o->help ? o->help : "", o->repeat ? " (repeatable)" : "");
+    }
   }
   printf("\n%s", global_help);
 }
@@ -150,7 +153,7 @@ static int parse_args(cli_ctx *ctx, const cli_command *c, int argc, char **argv,
     if (k < 0) return cli_usage(ctx, "unknown option '%.*s' (see raysweep %s --help)", (int)len, arg, ctx->cmd);
     const cli_opt *o = &c->opts[k];
     const char *val = "";
-    if (o->has_arg) {
+    if (o->arg) {
       if (len < strlen(arg))
         val = arg + len + 1;
       else if (i + 1 < argc)
@@ -258,14 +261,15 @@ int main(int argc, char **argv) {
       printf("raysweep %s subcommands:\n", rest[0]);
       for (size_t i = 0; i < N_COMMANDS; i++)
         if (strcmp(commands[i].group, rest[0]) == 0)
-          printf("  raysweep %s %s %s\n      %s\n", commands[i].group, commands[i].name, commands[i].args,
-                 commands[i].summary);
+          printf("  raysweep %s %s%s%s\n      %s\n", commands[i].group, commands[i].name,
+                 commands[i].args[0] ? " " : "", commands[i].args, commands[i].summary);
       free(rest);
       return CLI_OK;
     }
-    if (group_known)
-      fprintf(stderr, "raysweep %s: %s '%s'\n", rest[0], n_rest > 1 ? "unknown subcommand" : "missing a subcommand",
-              n_rest > 1 ? rest[1] : "(see raysweep --help)");
+    if (group_known && n_rest > 1)
+      fprintf(stderr, "raysweep %s: unknown subcommand '%s' (see raysweep %s --help)\n", rest[0], rest[1], rest[0]);
+    else if (group_known)
+      fprintf(stderr, "raysweep %s: missing a subcommand (see raysweep %s --help)\n", rest[0], rest[0]);
     else
       fprintf(stderr, "raysweep: unknown command '%s' (see raysweep --help)\n", rest[0]);
     free(rest);

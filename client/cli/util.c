@@ -55,8 +55,9 @@ int cli_report(const cli_ctx *ctx, rsw_status s, const char *what) {
   const char *msg = e && e->message && e->message[0] ? e->message : rsw_strerror(s);
   if (code == CLI_CONNECT) {
     fprintf(stderr,
-            "raysweep %s: cannot connect to raysweepd at %s: %s\n"
-            "  (is the daemon running there? set --server URL or RAYSWEEP_URL)\n",
+            "raysweep %s: cannot connect to raysweepd at %s\n"
+            "  %s\n"
+            "  (start it with `raysweepd serve`, or point --server URL / RAYSWEEP_URL at a running one)\n",
             ctx->cmd, ctx->server_url ? ctx->server_url : "?", msg);
     return code;
   }
@@ -392,7 +393,7 @@ int cli_wait_job(cli_ctx *ctx, const char *job_id, double timeout_s, rsw_job_sta
   rsw_job_status st;
   memset(&st, 0, sizeof st);
   rsw_status s = rsw_job_wait(ctx->client, job_id, cli_progress_cb, &p, timeout_s, &st);
-  if (s == RSW_OK) {
+  if (s == RSW_OK && st.state == RSW_JOB_SUCCEEDED) {
     p.done = st.renders_done, p.total = st.renders_total, p.failed = st.renders_failed;
     cli_progress_finish(&p);
   } else if (p.drawn && ctx->stderr_tty) {
