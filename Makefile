@@ -65,8 +65,8 @@ PREFIX ?= /usr/local
 # raysweep.pc for a prefix ($(1)), as printf arguments, one line each.
 client_pc_lines = 'prefix=$(1)' 'includedir=$${prefix}/include' 'libdir=$${prefix}/lib' '' \
   'Name: raysweep' 'Description: C client library for raysweepd, the raysweep radiometric kernel daemon' \
-  'Version: 0.1.0' 'Requires.private: libcurl libcjson expat libcrypto' 'Cflags: -I$${includedir}' \
-  'Libs: -L$${libdir} -lraysweep' 'Libs.private: -lOpenEXRCore -lpthread -lm'
+  'Version: 0.1.0' 'Cflags: -I$${includedir}' \
+  'Libs: -L$${libdir} -lraysweep' 'Libs.private: -lcurl -lcjson -lexpat -lcrypto -lOpenEXRCore -lpthread -lm'
 
 .PHONY: all deps test bench run clean format install
 .SECONDARY:

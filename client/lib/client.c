@@ -22,16 +22,15 @@ double client_now_s(void) {
 void client_sleep_s(double s) {
   if (!(s > 0)) return;
   struct timespec ts = {.tv_sec = (time_t)s, .tv_nsec = (long)((s - (double)(time_t)s) * 1e9)};
-  while (nanosleep(&ts, &ts) != 0 && errno == EINTR) {
-  }
+  while (nanosleep(&ts, &ts) != 0 && errno == EINTR) {}
 }
 
 bool client_escape(const char *s, char *out, size_t cap) {
   static const char hex[] = "0123456789ABCDEF";
   size_t o = 0;
   for (const unsigned char *p = (const unsigned char *)s; *p; p++) {
-    bool plain = (*p >= 'A' && *p <= 'Z') || (*p >= 'a' && *p <= 'z') || (*p >= '0' && *p <= '9') || *p == '-' ||
-                 *p == '.' || *p == '_' || *p == '~';
+    bool plain = (*p >= 'A' && *p <= 'Z') || (*p >= 'a' && *p <= 'z') || (*p >= '0' && *p <= '9') ||
+                 *p == '-' || *p == '.' || *p == '_' || *p == '~';
     if (o + (plain ? 1 : 3) >= cap) return false;
     if (plain) {
       out[o++] = (char)*p;
@@ -102,7 +101,9 @@ void rsw_client_free(rsw_client *c) {
   free(c);
 }
 
-void rsw_free(void *p) { free(p); }
+void rsw_free(void *p) {
+  free(p);
+}
 
 /* ---- the last error ---------------------------------------------------------------- */
 
@@ -142,10 +143,10 @@ static const struct {
   long http;
   rsw_status status;
 } http_map[] = {
-    {400, RSW_ERR_PARSE},          {401, RSW_ERR_UNAUTHORIZED},   {404, RSW_ERR_NOT_FOUND},
-    {405, RSW_ERR_METHOD},         {406, RSW_ERR_NOT_ACCEPTABLE}, {409, RSW_ERR_CONFLICT},
-    {412, RSW_ERR_PRECONDITION},   {413, RSW_ERR_TOO_LARGE},      {415, RSW_ERR_MEDIA_TYPE},
-    {422, RSW_ERR_INVALID},        {429, RSW_ERR_BUSY},           {503, RSW_ERR_UNAVAILABLE},
+    {400, RSW_ERR_PARSE},        {401, RSW_ERR_UNAUTHORIZED},   {404, RSW_ERR_NOT_FOUND},
+    {405, RSW_ERR_METHOD},       {406, RSW_ERR_NOT_ACCEPTABLE}, {409, RSW_ERR_CONFLICT},
+    {412, RSW_ERR_PRECONDITION}, {413, RSW_ERR_TOO_LARGE},      {415, RSW_ERR_MEDIA_TYPE},
+    {422, RSW_ERR_INVALID},      {429, RSW_ERR_BUSY},           {503, RSW_ERR_UNAVAILABLE},
     {504, RSW_ERR_TIMEOUT},
 };
 

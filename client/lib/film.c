@@ -22,14 +22,24 @@ struct rsw_film {
   char *meta;   /* JSON object text */
 };
 
-int rsw_film_width(const rsw_film *f) { return f ? f->width : 0; }
-int rsw_film_height(const rsw_film *f) { return f ? f->height : 0; }
-int rsw_film_channels(const rsw_film *f) { return f ? f->channels : 0; }
+int rsw_film_width(const rsw_film *f) {
+  return f ? f->width : 0;
+}
+int rsw_film_height(const rsw_film *f) {
+  return f ? f->height : 0;
+}
+int rsw_film_channels(const rsw_film *f) {
+  return f ? f->channels : 0;
+}
 const char *rsw_film_channel_name(const rsw_film *f, int i) {
   return f && i >= 0 && i < f->channels ? f->names[i] : NULL;
 }
-const float *rsw_film_data(const rsw_film *f) { return f ? f->data : NULL; }
-const char *rsw_film_meta(const rsw_film *f) { return f ? f->meta : NULL; }
+const float *rsw_film_data(const rsw_film *f) {
+  return f ? f->data : NULL;
+}
+const char *rsw_film_meta(const rsw_film *f) {
+  return f ? f->meta : NULL;
+}
 
 void rsw_film_free(rsw_film *f) {
   if (!f) return;
@@ -52,10 +62,12 @@ rsw_status film_from_json(rsw_client *c, const char *text, size_t len, const cha
   rsw_status s = RSW_OK;
   int nc = cJSON_GetArraySize(ch);
   if (!cJSON_IsNumber(w) || !cJSON_IsNumber(h) || w->valuedouble < 1 || h->valuedouble < 1 ||
-      w->valuedouble > 1e6 || h->valuedouble > 1e6 || !cJSON_IsArray(ch) || nc < 1 || nc > FILM_MAX_CHANNELS ||
-      !cJSON_IsArray(data) || (layout && !(cJSON_IsString(layout) && strcmp(layout->valuestring, "HWC") == 0))) {
+      w->valuedouble > 1e6 || h->valuedouble > 1e6 || !cJSON_IsArray(ch) || nc < 1 ||
+      nc > FILM_MAX_CHANNELS || !cJSON_IsArray(data) ||
+      (layout && !(cJSON_IsString(layout) && strcmp(layout->valuestring, "HWC") == 0))) {
     cJSON_Delete(doc);
-    return client_fail(c, RSW_ERR_PARSE, "%s: not a film (width, height, channels, layout \"HWC\", data)", what);
+    return client_fail(c, RSW_ERR_PARSE, "%s: not a film (width, height, channels, layout \"HWC\", data)",
+                       what);
   }
   int width = w->valueint, height = h->valueint;
   size_t n = (size_t)width * (size_t)height * (size_t)nc;
@@ -98,9 +110,12 @@ rsw_status film_from_json(rsw_client *c, const char *text, size_t len, const cha
     cJSON_ArrayForEach(it, data) {
       if (k >= n) break;
       /* The daemon writes non-finite samples as null. */
-      if (cJSON_IsNumber(it)) f->data[k++] = (float)it->valuedouble;
-      else if (cJSON_IsNull(it)) f->data[k++] = NAN;
-      else break;
+      if (cJSON_IsNumber(it))
+        f->data[k++] = (float)it->valuedouble;
+      else if (cJSON_IsNull(it))
+        f->data[k++] = NAN;
+      else
+        break;
     }
     if (k != n || cJSON_GetArraySize(data) != (int)n)
       s = client_fail(c, RSW_ERR_PARSE, "%s: data holds %d numbers, want %dx%dx%d = %zu", what,
@@ -132,8 +147,10 @@ rsw_status rsw_film_save_exr(const rsw_film *f, const char *path) {
   if (!s && cJSON_IsObject(meta)) {
     cJSON_ArrayForEach(it, meta) {
       const char *v = NULL;
-      if (cJSON_IsString(it)) v = it->valuestring;
-      else if (cJSON_IsNumber(it) || cJSON_IsBool(it)) v = owned[count] = cJSON_PrintUnformatted(it);
+      if (cJSON_IsString(it))
+        v = it->valuestring;
+      else if (cJSON_IsNumber(it) || cJSON_IsBool(it))
+        v = owned[count] = cJSON_PrintUnformatted(it);
       if (!v || !it->string) continue;
       entries[count].key = it->string;
       entries[count].value = v;
@@ -143,8 +160,8 @@ rsw_status rsw_film_save_exr(const rsw_film *f, const char *path) {
   if (!s) {
     exr_meta m = {.entries = entries, .count = count};
     rsw_err err = {0};
-    s = exr_write_image(path, f->width, f->height, f->channels, (const char *const *)f->names, f->data, false, &m,
-                        &err);
+    s = exr_write_image(path, f->width, f->height, f->channels, (const char *const *)f->names, f->data, false,
+                        &m, &err);
   }
   for (int i = 0; owned && i < n_meta; i++) free(owned[i]);
   free(owned);
@@ -169,8 +186,8 @@ static void put_le32(unsigned char *p, float v) {
 rsw_status rsw_film_save_npy(const rsw_film *f, const char *path) {
   if (!f || !path) return RSW_ERR_INVALID;
   char dict[160];
-  int dn = snprintf(dict, sizeof dict, "{'descr': '<f4', 'fortran_order': False, 'shape': (%d, %d, %d), }", f->height,
-                    f->width, f->channels);
+  int dn = snprintf(dict, sizeof dict, "{'descr': '<f4', 'fortran_order': False, 'shape': (%d, %d, %d), }",
+                    f->height, f->width, f->channels);
   if (dn < 0 || (size_t)dn >= sizeof dict) return RSW_ERR_INVALID;
   size_t header = (10 + (size_t)dn + 1 + 63) / 64 * 64;
   unsigned char head[256];
@@ -212,14 +229,19 @@ rsw_status rsw_render(rsw_client *c, const char *id, const char *request_json, r
   if (!c) return RSW_ERR_INVALID;
   client_clear_error(c);
   char esc[256], path[300];
-  if (!id || !client_escape(id, esc, sizeof esc)) return client_fail(c, RSW_ERR_INVALID, "scene id missing or too long");
+  if (!id || !client_escape(id, esc, sizeof esc))
+    return client_fail(c, RSW_ERR_INVALID, "scene id missing or too long");
   if (!film_out) return client_fail(c, RSW_ERR_INVALID, "render: film_out is NULL");
   snprintf(path, sizeof path, "/v1/scenes/%s:render", esc);
   const char *body = request_json && *request_json ? request_json : "{}";
   http_resp r;
   rsw_status s = http_request(c,
-                              &(http_req){.method = "POST", .path = path, .content_type = "application/json",
-                                          .body = body, .body_len = strlen(body), .accept = "application/json"},
+                              &(http_req){.method = "POST",
+                                          .path = path,
+                                          .content_type = "application/json",
+                                          .body = body,
+                                          .body_len = strlen(body),
+                                          .accept = "application/json"},
                               &r);
   if (s) return s;
   char what[320];

@@ -17,12 +17,15 @@
  * build, and rsw_client_new promises to be. */
 static pthread_once_t global_once = PTHREAD_ONCE_INIT;
 static CURLcode global_rc = CURLE_OK;
-static void global_init(void) { global_rc = curl_global_init(CURL_GLOBAL_DEFAULT); }
+static void global_init(void) {
+  global_rc = curl_global_init(CURL_GLOBAL_DEFAULT);
+}
 
 rsw_status http_client_init(rsw_client *c) {
   pthread_once(&global_once, global_init);
   if (global_rc != CURLE_OK)
-    return client_fail(c, RSW_ERR_UNAVAILABLE, "libcurl initialisation failed: %s", curl_easy_strerror(global_rc));
+    return client_fail(c, RSW_ERR_UNAVAILABLE, "libcurl initialisation failed: %s",
+                       curl_easy_strerror(global_rc));
   c->curl = curl_easy_init();
   if (!c->curl) return client_fail(c, RSW_ERR_NOMEM, "libcurl: cannot create an easy handle");
   return RSW_OK;
@@ -122,7 +125,8 @@ static rsw_status setup(rsw_client *c, const http_req *q, exchange *x, char *url
   CURL *h = c->curl;
   curl_easy_reset(h);
   int n = snprintf(url, url_cap, "%s%s", c->base_url, q->path);
-  if (n < 0 || (size_t)n >= url_cap) return client_fail(c, RSW_ERR_INVALID, "URL too long: %s%s", c->base_url, q->path);
+  if (n < 0 || (size_t)n >= url_cap)
+    return client_fail(c, RSW_ERR_INVALID, "URL too long: %s%s", c->base_url, q->path);
   bool ok = add_header(x, "Accept: %s", q->accept ? q->accept : "application/json");
   if (c->token) ok = ok && add_header(x, "Authorization: Bearer %s", c->token);
   if (q->content_type) ok = ok && add_header(x, "Content-Type: %s", q->content_type);
@@ -131,7 +135,8 @@ static rsw_status setup(rsw_client *c, const http_req *q, exchange *x, char *url
   if (q->last_event_id) ok = ok && add_header(x, "Last-Event-ID: %s", q->last_event_id);
   /* No "Expect: 100-continue" round trip before large uploads. */
   ok = ok && add_header(x, "Expect:%s", "");
-  if (!ok) return client_fail(c, RSW_ERR_NOMEM, "cannot build the request headers of %s %s", q->method, q->path);
+  if (!ok)
+    return client_fail(c, RSW_ERR_NOMEM, "cannot build the request headers of %s %s", q->method, q->path);
 
   curl_easy_setopt(h, CURLOPT_URL, url);
   curl_easy_setopt(h, CURLOPT_HTTPHEADER, x->headers);
@@ -165,13 +170,14 @@ static bool retryable_curl(CURLcode rc) {
          rc == CURLE_SEND_ERROR || rc == CURLE_RECV_ERROR;
 }
 
-static rsw_status curl_failure(rsw_client *c, CURLcode rc, const exchange *x, const char *url, const http_req *q) {
+static rsw_status curl_failure(rsw_client *c, CURLcode rc, const exchange *x, const char *url,
+                               const http_req *q) {
   const char *detail = x->errbuf[0] ? x->errbuf : curl_easy_strerror(rc);
   if (rc == CURLE_OPERATION_TIMEDOUT)
     return client_fail(c, RSW_ERR_TIMEOUT, "%s %s: no complete answer in time (%s)", q->method, url, detail);
   if (rc == CURLE_COULDNT_CONNECT || rc == CURLE_COULDNT_RESOLVE_HOST)
-    return client_fail(c, RSW_ERR_UNAVAILABLE, "cannot connect to raysweepd at %s (%s); is the daemon running?",
-                       c->base_url, detail);
+    return client_fail(c, RSW_ERR_UNAVAILABLE,
+                       "cannot connect to raysweepd at %s (%s); is the daemon running?", c->base_url, detail);
   if (rc == CURLE_OUT_OF_MEMORY) return client_fail(c, RSW_ERR_NOMEM, "%s %s: out of memory", q->method, url);
   if (rc == CURLE_URL_MALFORMAT || rc == CURLE_UNSUPPORTED_PROTOCOL)
     return client_fail(c, RSW_ERR_INVALID, "bad server URL %s (%s)", url, detail);
@@ -202,8 +208,8 @@ rsw_status http_request(rsw_client *c, const http_req *q, http_resp *r) {
       curl_easy_getinfo(c->curl, CURLINFO_RESPONSE_CODE, &status);
       curl_easy_getinfo(c->curl, CURLINFO_RETRY_AFTER, &retry_after);
     }
-    bool again = attempt < c->max_retries &&
-                 (rc == CURLE_OK ? (status == 429 || status == 503) : retryable_curl(rc));
+    bool again =
+        attempt < c->max_retries && (rc == CURLE_OK ? (status == 429 || status == 503) : retryable_curl(rc));
     if (again) {
       free(b.p);
       /* Retry-After (seconds) wins over our own schedule; capped so a
@@ -330,8 +336,9 @@ rsw_status http_stream(rsw_client *c, const http_req *q, double timeout_s, http_
     *not_a_stream = true;
     return client_fail(c, RSW_ERR_PARSE, "GET %s: the answer is not text/event-stream", url);
   }
-  if (st.overflow) return client_fail(c, RSW_ERR_LIMIT, "GET %s: an event line over %zu bytes", url,
-                                      (size_t)CLIENT_MAX_SSE_EVENT);
+  if (st.overflow)
+    return client_fail(c, RSW_ERR_LIMIT, "GET %s: an event line over %zu bytes", url,
+                       (size_t)CLIENT_MAX_SSE_EVENT);
   if (rc == CURLE_OK) return RSW_OK;
   if (rc == CURLE_OPERATION_TIMEDOUT && timeout_s > 0)
     return client_fail(c, RSW_ERR_TIMEOUT, "GET %s: wait limit of %.3g s reached", url, timeout_s);

@@ -15,7 +15,7 @@
 
 /* Caps on what the client accepts, so a confused server cannot make it
  * allocate without bound. */
-#define CLIENT_MAX_BODY ((size_t)1 << 31)  /* one response body: 2 GiB */
+#define CLIENT_MAX_BODY      ((size_t)1 << 31) /* one response body: 2 GiB */
 #define CLIENT_MAX_SSE_EVENT ((size_t)1 << 20) /* one server-sent event: 1 MiB */
 
 struct rsw_client {
@@ -41,7 +41,8 @@ struct rsw_client {
 void client_clear_error(rsw_client *c);
 /* Record a local failure (no HTTP answer) and return s: "report and return"
  * in one statement. */
-rsw_status client_fail(rsw_client *c, rsw_status s, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+rsw_status client_fail(rsw_client *c, rsw_status s, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
 /* Record an HTTP error answer (problem+json when body parses as one, else
  * the HTTP status alone); what names the request ("GET /v1/scenes/x").
  * Returns the mapped status. */

@@ -14,9 +14,9 @@
 #define MAX_CONTEXTS 100000
 
 struct rsw_contexts {
-  cJSON *root;     /* the JobRequest: {contexts, defaults?, params?, seed?} */
-  cJSON *list;     /* root.contexts */
-  cJSON **items;   /* items[i] is contexts[i]: O(1) access by index */
+  cJSON *root;   /* the JobRequest: {contexts, defaults?, params?, seed?} */
+  cJSON *list;   /* root.contexts */
+  cJSON **items; /* items[i] is contexts[i]: O(1) access by index */
   size_t n, cap;
 };
 
@@ -41,7 +41,9 @@ void rsw_contexts_free(rsw_contexts *x) {
   free(x);
 }
 
-size_t rsw_contexts_count(const rsw_contexts *x) { return x ? x->n : 0; }
+size_t rsw_contexts_count(const rsw_contexts *x) {
+  return x ? x->n : 0;
+}
 
 static bool valid_context_id(const char *id) {
   size_t n = 0;
@@ -172,21 +174,26 @@ static bool job_path(const char *job_id, const char *suffix, char *path, size_t 
   return n > 0 && (size_t)n < cap;
 }
 
-rsw_status rsw_job_submit(rsw_client *c, const char *scene_id, const rsw_contexts *x, const char *idempotency_key,
-                          char job_id_out[40]) {
+rsw_status rsw_job_submit(rsw_client *c, const char *scene_id, const rsw_contexts *x,
+                          const char *idempotency_key, char job_id_out[40]) {
   if (!c) return RSW_ERR_INVALID;
   client_clear_error(c);
   char esc[256], path[300];
   if (!scene_id || !client_escape(scene_id, esc, sizeof esc))
     return client_fail(c, RSW_ERR_INVALID, "scene id missing or too long");
-  if (!x || !x->n || !job_id_out) return client_fail(c, RSW_ERR_INVALID, "job submit: no contexts or no job_id_out");
+  if (!x || !x->n || !job_id_out)
+    return client_fail(c, RSW_ERR_INVALID, "job submit: no contexts or no job_id_out");
   snprintf(path, sizeof path, "/v1/scenes/%s/jobs", esc);
   char *body = cJSON_PrintUnformatted(x->root);
   if (!body) return client_fail(c, RSW_ERR_NOMEM, "cannot print the job request");
   http_resp r;
   rsw_status s = http_request(c,
-                              &(http_req){.method = "POST", .path = path, .content_type = "application/json",
-                                          .body = body, .body_len = strlen(body), .idempotency_key = idempotency_key},
+                              &(http_req){.method = "POST",
+                                          .path = path,
+                                          .content_type = "application/json",
+                                          .body = body,
+                                          .body_len = strlen(body),
+                                          .idempotency_key = idempotency_key},
                               &r);
   free(body);
   if (s) return s;
@@ -205,8 +212,8 @@ static const struct {
   const char *name;
   rsw_job_state state;
 } job_states[] = {
-    {"queued", RSW_JOB_QUEUED},       {"running", RSW_JOB_RUNNING},     {"succeeded", RSW_JOB_SUCCEEDED},
-    {"failed", RSW_JOB_FAILED},       {"cancelled", RSW_JOB_CANCELLED},
+    {"queued", RSW_JOB_QUEUED}, {"running", RSW_JOB_RUNNING},     {"succeeded", RSW_JOB_SUCCEEDED},
+    {"failed", RSW_JOB_FAILED}, {"cancelled", RSW_JOB_CANCELLED},
 };
 
 static bool state_from_name(const char *name, rsw_job_state *out) {
@@ -218,7 +225,9 @@ static bool state_from_name(const char *name, rsw_job_state *out) {
   return false;
 }
 
-static bool is_final(rsw_job_state s) { return s == RSW_JOB_SUCCEEDED || s == RSW_JOB_FAILED || s == RSW_JOB_CANCELLED; }
+static bool is_final(rsw_job_state s) {
+  return s == RSW_JOB_SUCCEEDED || s == RSW_JOB_FAILED || s == RSW_JOB_CANCELLED;
+}
 
 static size_t count_of(const cJSON *o, const char *name) {
   const cJSON *v = cJSON_GetObjectItemCaseSensitive(o, name);
@@ -226,7 +235,8 @@ static size_t count_of(const cJSON *o, const char *name) {
 }
 
 /* Decode a Job document. */
-static rsw_status job_decode(rsw_client *c, const char *text, size_t len, const char *what, rsw_job_status *out) {
+static rsw_status job_decode(rsw_client *c, const char *text, size_t len, const char *what,
+                             rsw_job_status *out) {
   cJSON *a = cJSON_ParseWithLength(text, len);
   const cJSON *st = cJSON_GetObjectItemCaseSensitive(a, "state");
   rsw_job_status j = {0};
@@ -252,7 +262,8 @@ rsw_status rsw_job_get(rsw_client *c, const char *job_id, rsw_job_status *out) {
   if (!c) return RSW_ERR_INVALID;
   client_clear_error(c);
   char path[320];
-  if (!job_path(job_id, "", path, sizeof path)) return client_fail(c, RSW_ERR_INVALID, "job id missing or too long");
+  if (!job_path(job_id, "", path, sizeof path))
+    return client_fail(c, RSW_ERR_INVALID, "job id missing or too long");
   if (!out) return client_fail(c, RSW_ERR_INVALID, "job get: out is NULL");
   http_resp r;
   rsw_status s = http_request(c, &(http_req){.method = "GET", .path = path}, &r);
@@ -280,7 +291,8 @@ rsw_status rsw_job_delete(rsw_client *c, const char *job_id) {
   if (!c) return RSW_ERR_INVALID;
   client_clear_error(c);
   char path[320];
-  if (!job_path(job_id, "", path, sizeof path)) return client_fail(c, RSW_ERR_INVALID, "job id missing or too long");
+  if (!job_path(job_id, "", path, sizeof path))
+    return client_fail(c, RSW_ERR_INVALID, "job id missing or too long");
   http_resp r;
   rsw_status s = http_request(c, &(http_req){.method = "DELETE", .path = path}, &r);
   if (!s) http_resp_free(&r);
@@ -306,13 +318,16 @@ rsw_status rsw_job_fetch(rsw_client *c, const char *job_id, const char *context,
   if (!c) return RSW_ERR_INVALID;
   client_clear_error(c);
   char ctx[256], sen[256], suffix[540], path[900];
-  if (!context || !sensor || !client_escape(context, ctx, sizeof ctx) || !client_escape(sensor, sen, sizeof sen))
+  if (!context || !sensor || !client_escape(context, ctx, sizeof ctx) ||
+      !client_escape(sensor, sen, sizeof sen))
     return client_fail(c, RSW_ERR_INVALID, "fetch: context and sensor must be given (under 85 characters)");
   snprintf(suffix, sizeof suffix, "/results/%s/%s", ctx, sen);
-  if (!job_path(job_id, suffix, path, sizeof path)) return client_fail(c, RSW_ERR_INVALID, "job id missing or too long");
+  if (!job_path(job_id, suffix, path, sizeof path))
+    return client_fail(c, RSW_ERR_INVALID, "job id missing or too long");
   if (!film_out) return client_fail(c, RSW_ERR_INVALID, "fetch: film_out is NULL");
   http_resp r;
-  rsw_status s = http_request(c, &(http_req){.method = "GET", .path = path, .accept = "application/json"}, &r);
+  rsw_status s =
+      http_request(c, &(http_req){.method = "GET", .path = path, .accept = "application/json"}, &r);
   if (s) return s;
   char what[920];
   snprintf(what, sizeof what, "GET %s", path);
@@ -337,7 +352,7 @@ typedef struct sse_state {
   bool user_stop;      /* the progress callback asked to stop */
   bool gone;           /* `event: error` (the job went away) */
   char gone_detail[512];
-  size_t events;       /* context events dispatched (progress made) */
+  size_t events; /* context events dispatched (progress made) */
   rsw_progress_fn progress;
   void *user;
 } sse_state;
@@ -373,9 +388,8 @@ static int sse_dispatch(sse_state *s) {
   if (strcmp(s->event, "context") == 0 && d) {
     const char *ctx = jstr(d, "context"), *sensor = jstr(d, "sensor"), *state = jstr(d, "state");
     s->events++;
-    if (s->progress &&
-        s->progress(s->user, ctx ? ctx : "", sensor ? sensor : "", count_of(d, "done"), count_of(d, "total"),
-                    state && strcmp(state, "failed") == 0)) {
+    if (s->progress && s->progress(s->user, ctx ? ctx : "", sensor ? sensor : "", count_of(d, "done"),
+                                   count_of(d, "total"), state && strcmp(state, "failed") == 0)) {
       s->user_stop = true;
       stop = 1;
     }
@@ -419,7 +433,8 @@ static int sse_line(void *user, const char *line, size_t len) {
 static rsw_status wait_polling(rsw_client *c, const char *job_id, rsw_progress_fn progress, void *user,
                                double deadline, size_t skip, rsw_job_status *st) {
   char path[320];
-  if (!job_path(job_id, "/results", path, sizeof path)) return client_fail(c, RSW_ERR_INVALID, "job id too long");
+  if (!job_path(job_id, "/results", path, sizeof path))
+    return client_fail(c, RSW_ERR_INVALID, "job id too long");
   unsigned char *reported = NULL; /* reported[i]: results[i] already passed to progress */
   size_t n_reported = 0, n_done = skip;
   double interval = 0.05;
@@ -460,7 +475,8 @@ static rsw_status wait_polling(rsw_client *c, const char *job_id, rsw_progress_f
             skip--;
           } else {
             n_done++;
-            stop = progress(user, ctx ? ctx : "", sensor ? sensor : "", n_done, n, strcmp(state, "failed") == 0) != 0;
+            stop = progress(user, ctx ? ctx : "", sensor ? sensor : "", n_done, n,
+                            strcmp(state, "failed") == 0) != 0;
           }
         }
         i++;
@@ -487,12 +503,13 @@ static rsw_status wait_polling(rsw_client *c, const char *job_id, rsw_progress_f
   return s;
 }
 
-rsw_status rsw_job_wait(rsw_client *c, const char *job_id, rsw_progress_fn progress, void *user, double timeout_s,
-                        rsw_job_status *final_out) {
+rsw_status rsw_job_wait(rsw_client *c, const char *job_id, rsw_progress_fn progress, void *user,
+                        double timeout_s, rsw_job_status *final_out) {
   if (!c) return RSW_ERR_INVALID;
   client_clear_error(c);
   char path[320];
-  if (!job_path(job_id, "/events", path, sizeof path)) return client_fail(c, RSW_ERR_INVALID, "job id missing or too long");
+  if (!job_path(job_id, "/events", path, sizeof path))
+    return client_fail(c, RSW_ERR_INVALID, "job id missing or too long");
   double deadline = timeout_s > 0 ? client_now_s() + timeout_s : 0;
   sse_state ss = {.c = c, .progress = progress, .user = user};
   rsw_status s = RSW_OK;
@@ -510,7 +527,9 @@ rsw_status rsw_job_wait(rsw_client *c, const char *job_id, rsw_progress_fn progr
     }
     size_t before = ss.events;
     bool stopped = false, not_a_stream = false;
-    http_req q = {.method = "GET", .path = path, .accept = "text/event-stream",
+    http_req q = {.method = "GET",
+                  .path = path,
+                  .accept = "text/event-stream",
                   .last_event_id = ss.last_id[0] ? ss.last_id : NULL};
     s = http_stream(c, &q, left, sse_line, &ss, &stopped, &not_a_stream);
     ss.event[0] = ss.pending_id[0] = '\0'; /* a partial event is sent again after reconnecting */
@@ -529,7 +548,8 @@ rsw_status rsw_job_wait(rsw_client *c, const char *job_id, rsw_progress_fn progr
     }
     if (s == RSW_ERR_UNAUTHORIZED || s == RSW_ERR_NOT_FOUND) break;
     if (stopped) { /* a line over the event cap or no memory */
-      s = client_fail(c, RSW_ERR_LIMIT, "GET %s: an event over %zu bytes", path, (size_t)CLIENT_MAX_SSE_EVENT);
+      s = client_fail(c, RSW_ERR_LIMIT, "GET %s: an event over %zu bytes", path,
+                      (size_t)CLIENT_MAX_SSE_EVENT);
       break;
     }
     if (s == RSW_ERR_TIMEOUT && deadline > 0 && client_now_s() >= deadline) {

@@ -21,7 +21,7 @@
 
 #define SHA_PREFIX "sha256:"
 /* Most distinct files one scene may reference. */
-#define MAX_REFS 65536
+#define MAX_REFS   65536
 
 /* One referenced file. */
 typedef struct file_ref {
@@ -80,7 +80,8 @@ static rsw_status read_all(rsw_client *c, const char *path, const char *what, ch
       if (ncap > CLIENT_MAX_BODY) {
         free(p);
         fclose(f);
-        return client_fail(c, RSW_ERR_LIMIT, "%s: %s larger than %zu bytes", path, what, (size_t)CLIENT_MAX_BODY);
+        return client_fail(c, RSW_ERR_LIMIT, "%s: %s larger than %zu bytes", path, what,
+                           (size_t)CLIENT_MAX_BODY);
       }
       char *q = realloc(p, ncap);
       if (!q) {
@@ -109,13 +110,16 @@ static rsw_status read_all(rsw_client *c, const char *path, const char *what, ch
 
 /* Resolve name against base_dir, hash the file, and add it to the list
  * (once per path). hex_out gets its digest. */
-static rsw_status add_ref(rsw_client *c, ref_list *l, const char *base_dir, const char *name, char hex_out[65]) {
+static rsw_status add_ref(rsw_client *c, ref_list *l, const char *base_dir, const char *name,
+                          char hex_out[65]) {
   if (!*name) return client_fail(c, RSW_ERR_IO, "a scene references an empty file name");
   size_t need = strlen(base_dir) + strlen(name) + 2;
   char *path = malloc(need);
   if (!path) return client_fail(c, RSW_ERR_NOMEM, "out of memory");
-  if (name[0] == '/') snprintf(path, need, "%s", name);
-  else snprintf(path, need, "%s/%s", base_dir, name);
+  if (name[0] == '/')
+    snprintf(path, need, "%s", name);
+  else
+    snprintf(path, need, "%s/%s", base_dir, name);
   for (size_t i = 0; i < l->n; i++)
     if (strcmp(l->v[i].path, path) == 0) {
       memcpy(hex_out, l->v[i].hex, 65);
@@ -147,7 +151,9 @@ static rsw_status add_ref(rsw_client *c, ref_list *l, const char *base_dir, cons
   return RSW_OK;
 }
 
-static bool is_digest_ref(const char *v) { return strncmp(v, SHA_PREFIX, strlen(SHA_PREFIX)) == 0; }
+static bool is_digest_ref(const char *v) {
+  return strncmp(v, SHA_PREFIX, strlen(SHA_PREFIX)) == 0;
+}
 
 /* ---- JSON scenes ---------------------------------------------------------------- */
 
@@ -186,8 +192,10 @@ static rsw_status json_rewrite(rsw_client *c, const char *text, size_t len, cons
   rsw_status s = json_walk(c, doc, l, base_dir, &changed);
   if (!s && changed) {
     *out = cJSON_PrintUnformatted(doc);
-    if (!*out) s = client_fail(c, RSW_ERR_NOMEM, "cannot print the rewritten scene");
-    else *out_len = strlen(*out);
+    if (!*out)
+      s = client_fail(c, RSW_ERR_NOMEM, "cannot print the rewritten scene");
+    else
+      *out_len = strlen(*out);
   }
   cJSON_Delete(doc);
   return s;
@@ -250,8 +258,10 @@ static void XMLCALL xml_start(void *user, const XML_Char *el, const XML_Char **a
   if (x->status || strcmp(el, "string") != 0) return;
   const char *name = NULL, *value = NULL;
   for (int i = 0; attrs[i]; i += 2) {
-    if (strcmp(attrs[i], "name") == 0) name = attrs[i + 1];
-    else if (strcmp(attrs[i], "value") == 0) value = attrs[i + 1];
+    if (strcmp(attrs[i], "name") == 0)
+      name = attrs[i + 1];
+    else if (strcmp(attrs[i], "value") == 0)
+      value = attrs[i + 1];
   }
   if (!name || strcmp(name, "filename") != 0 || !value || is_digest_ref(value)) return;
   XML_Index at = XML_GetCurrentByteIndex(x->parser);
@@ -259,8 +269,9 @@ static void XMLCALL xml_start(void *user, const XML_Char *el, const XML_Char **a
   size_t from, to;
   if (at < 0 || count <= 0 || (size_t)at + (size_t)count > x->len ||
       !find_attr(x->text + at, (size_t)count, "value", &from, &to)) {
-    x->status = client_fail(x->c, RSW_ERR_PARSE, "line %lu: cannot locate the value of <string name=\"filename\">",
-                            (unsigned long)XML_GetCurrentLineNumber(x->parser));
+    x->status =
+        client_fail(x->c, RSW_ERR_PARSE, "line %lu: cannot locate the value of <string name=\"filename\">",
+                    (unsigned long)XML_GetCurrentLineNumber(x->parser));
     XML_StopParser(x->parser, XML_FALSE);
     return;
   }
@@ -347,8 +358,11 @@ static rsw_status upload_missing(rsw_client *c, const ref_list *l) {
   if (!body) return client_fail(c, RSW_ERR_NOMEM, "out of memory");
   http_resp r;
   rsw_status s = http_request(c,
-                              &(http_req){.method = "POST", .path = "/v1/blobs:missing",
-                                          .content_type = "application/json", .body = body, .body_len = strlen(body)},
+                              &(http_req){.method = "POST",
+                                          .path = "/v1/blobs:missing",
+                                          .content_type = "application/json",
+                                          .body = body,
+                                          .body_len = strlen(body)},
                               &r);
   free(body);
   if (s) return s;
@@ -372,8 +386,11 @@ static rsw_status upload_missing(rsw_client *c, const ref_list *l) {
     char path[128];
     snprintf(path, sizeof path, "/v1/blobs/%s", f->hex);
     s = http_request(c,
-                     &(http_req){.method = "PUT", .path = path, .content_type = "application/octet-stream",
-                                 .body = data, .body_len = len},
+                     &(http_req){.method = "PUT",
+                                 .path = path,
+                                 .content_type = "application/octet-stream",
+                                 .body = data,
+                                 .body_len = len},
                      &r);
     free(data);
     if (s) break;
@@ -387,7 +404,8 @@ static rsw_status upload_missing(rsw_client *c, const ref_list *l) {
 
 static bool looks_xml(const char *text, size_t len) {
   size_t i = 0;
-  if (len >= 3 && (unsigned char)text[0] == 0xEF && (unsigned char)text[1] == 0xBB && (unsigned char)text[2] == 0xBF)
+  if (len >= 3 && (unsigned char)text[0] == 0xEF && (unsigned char)text[1] == 0xBB &&
+      (unsigned char)text[2] == 0xBF)
     i = 3; /* UTF-8 byte order mark */
   while (i < len && strchr(" \t\r\n", text[i])) i++;
   return i < len && text[i] == '<';
@@ -398,7 +416,8 @@ static rsw_status push(rsw_client *c, const char *text, size_t len, const char *
                        int is_xml, char id_out[65], int *created_out) {
   if (!c) return RSW_ERR_INVALID;
   client_clear_error(c);
-  if (!text || !id_out) return client_fail(c, RSW_ERR_INVALID, "scene push: text and id_out must not be NULL");
+  if (!text || !id_out)
+    return client_fail(c, RSW_ERR_INVALID, "scene push: text and id_out must not be NULL");
   if (is_xml < 0) is_xml = looks_xml(text, len);
   if (!base_dir || !*base_dir) base_dir = ".";
   ref_list refs = {0};
@@ -411,22 +430,27 @@ static rsw_status push(rsw_client *c, const char *text, size_t len, const char *
   char path[256] = "/v1/scenes";
   if (!s && variant && *variant) {
     char esc[128];
-    if (!client_escape(variant, esc, sizeof esc)) s = client_fail(c, RSW_ERR_INVALID, "variant name too long");
-    else snprintf(path, sizeof path, "/v1/scenes?variant=%s", esc);
+    if (!client_escape(variant, esc, sizeof esc))
+      s = client_fail(c, RSW_ERR_INVALID, "variant name too long");
+    else
+      snprintf(path, sizeof path, "/v1/scenes?variant=%s", esc);
   }
   http_resp r = {0};
   if (!s)
     s = http_request(c,
-                     &(http_req){.method = "POST", .path = path,
+                     &(http_req){.method = "POST",
+                                 .path = path,
                                  .content_type = is_xml ? "application/xml" : "application/json",
-                                 .body = doc ? doc : text, .body_len = doc ? doc_len : len},
+                                 .body = doc ? doc : text,
+                                 .body_len = doc ? doc_len : len},
                      &r);
   free(doc);
   if (s) return s;
   cJSON *a = cJSON_ParseWithLength(r.body, r.len);
   const cJSON *id = cJSON_GetObjectItemCaseSensitive(a, "id");
   if (!cJSON_IsString(id) || strlen(id->valuestring) != 64) {
-    s = client_fail(c, RSW_ERR_PARSE, "POST /v1/scenes: the answer has no 64-character \"id\": %.200s", r.body);
+    s = client_fail(c, RSW_ERR_PARSE, "POST /v1/scenes: the answer has no 64-character \"id\": %.200s",
+                    r.body);
   } else {
     memcpy(id_out, id->valuestring, 65);
     if (created_out) *created_out = r.status == 201;
@@ -458,11 +482,16 @@ rsw_status rsw_scene_push_file(rsw_client *c, const char *path, const char *vari
   }
   strcpy(dir, path);
   char *slash = strrchr(dir, '/');
-  if (!slash) strcpy(dir, ".");
-  else if (slash == dir) dir[1] = '\0';
-  else *slash = '\0';
+  if (!slash)
+    strcpy(dir, ".");
+  else if (slash == dir)
+    dir[1] = '\0';
+  else
+    *slash = '\0';
   size_t n = strlen(path);
-  int is_xml = n >= 4 && strcmp(path + n - 4, ".xml") == 0 ? 1 : n >= 5 && strcmp(path + n - 5, ".json") == 0 ? 0 : -1;
+  int is_xml = n >= 4 && strcmp(path + n - 4, ".xml") == 0    ? 1
+               : n >= 5 && strcmp(path + n - 5, ".json") == 0 ? 0
+                                                              : -1;
   s = push(c, text, len, dir, variant, is_xml, id_out, created_out);
   free(dir);
   free(text);
@@ -479,7 +508,8 @@ rsw_status rsw_scene_list(rsw_client *c, char **json_out) {
 rsw_status rsw_scene_info(rsw_client *c, const char *id, char **json_out) {
   if (!c) return RSW_ERR_INVALID;
   char esc[256], path[300];
-  if (!id || !client_escape(id, esc, sizeof esc)) return client_fail(c, RSW_ERR_INVALID, "scene id missing or too long");
+  if (!id || !client_escape(id, esc, sizeof esc))
+    return client_fail(c, RSW_ERR_INVALID, "scene id missing or too long");
   snprintf(path, sizeof path, "/v1/scenes/%s", esc);
   return client_get_text(c, path, json_out);
 }
@@ -487,7 +517,8 @@ rsw_status rsw_scene_info(rsw_client *c, const char *id, char **json_out) {
 rsw_status rsw_scene_delete(rsw_client *c, const char *id, int force) {
   if (!c) return RSW_ERR_INVALID;
   char esc[256], path[320];
-  if (!id || !client_escape(id, esc, sizeof esc)) return client_fail(c, RSW_ERR_INVALID, "scene id missing or too long");
+  if (!id || !client_escape(id, esc, sizeof esc))
+    return client_fail(c, RSW_ERR_INVALID, "scene id missing or too long");
   snprintf(path, sizeof path, "/v1/scenes/%s%s", esc, force ? "?force=true" : "");
   http_resp r;
   rsw_status s = http_request(c, &(http_req){.method = "DELETE", .path = path}, &r);
@@ -502,9 +533,11 @@ rsw_status rsw_params_get(rsw_client *c, const char *id, const char *match, cons
   if (!c) return RSW_ERR_INVALID;
   client_clear_error(c);
   char esc[256], m[512], k[128], path[1024];
-  if (!id || !client_escape(id, esc, sizeof esc)) return client_fail(c, RSW_ERR_INVALID, "scene id missing or too long");
+  if (!id || !client_escape(id, esc, sizeof esc))
+    return client_fail(c, RSW_ERR_INVALID, "scene id missing or too long");
   if (!json_out) return client_fail(c, RSW_ERR_INVALID, "params: json_out is NULL");
-  if (match && !client_escape(match, m, sizeof m)) return client_fail(c, RSW_ERR_INVALID, "match pattern too long");
+  if (match && !client_escape(match, m, sizeof m))
+    return client_fail(c, RSW_ERR_INVALID, "match pattern too long");
   if (class_name && !client_escape(class_name, k, sizeof k))
     return client_fail(c, RSW_ERR_INVALID, "class name too long");
   snprintf(path, sizeof path, "/v1/scenes/%s/params%s%s%s%s%s", esc, match || class_name ? "?" : "",
@@ -531,14 +564,18 @@ rsw_status rsw_params_update(rsw_client *c, const char *id, const char *map_json
   if (!c) return RSW_ERR_INVALID;
   client_clear_error(c);
   char esc[256], path[300], etag[40];
-  if (!id || !client_escape(id, esc, sizeof esc)) return client_fail(c, RSW_ERR_INVALID, "scene id missing or too long");
+  if (!id || !client_escape(id, esc, sizeof esc))
+    return client_fail(c, RSW_ERR_INVALID, "scene id missing or too long");
   if (!map_json) return client_fail(c, RSW_ERR_INVALID, "params update: map_json is NULL");
   snprintf(path, sizeof path, "/v1/scenes/%s/params", esc);
   snprintf(etag, sizeof etag, "\"%lld\"", (long long)if_match);
   http_resp r;
   rsw_status s = http_request(c,
-                              &(http_req){.method = "PATCH", .path = path, .content_type = "application/json",
-                                          .body = map_json, .body_len = strlen(map_json),
+                              &(http_req){.method = "PATCH",
+                                          .path = path,
+                                          .content_type = "application/json",
+                                          .body = map_json,
+                                          .body_len = strlen(map_json),
                                           .if_match = if_match >= 0 ? etag : NULL},
                               &r);
   if (s) return s;
