@@ -161,4 +161,15 @@ format:
 clean:
 	rm -rf build build-san
 
+# ---- raysweep CLI (client/cli): only the public libraysweep API ----
+CLI_SRC := $(sort $(wildcard client/cli/*.c))
+CLI_OBJ := $(CLI_SRC:%.c=$(BUILD)/obj/%.o)
+CLI_LIBS := -lcurl -lcjson -lexpat -lcrypto -lOpenEXRCore -lm -lpthread
+.PHONY: cli-objs
+all test: $(BUILD)/bin/raysweep
+cli-objs: $(CLI_OBJ)
+$(BUILD)/bin/raysweep: $(CLI_OBJ) $(BUILD)/lib/libraysweep.a
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) -o $@ $(CLI_OBJ) $(BUILD)/lib/libraysweep.a $(CLI_LIBS)
+
 -include $(shell find $(BUILD)/obj -name '*.d' 2>/dev/null)
