@@ -12,6 +12,6 @@ JOB=$(post "$URL/v1/scenes/$SCENE/jobs" -d '{
 # Server-sent events until the job ends; the last one says how.
 curl -sSfN "$URL/v1/jobs/$JOB/events" | grep -q '^data: {"state":"succeeded"'
 for w in $(seq 400 50 700); do
-  curl -sSf -w '\n' "$URL/v1/jobs/$JOB/results/w$w/camera" |   # {..., "data": [value], ...}
-    sed "s/.*\"data\":\[\([^]]*\)\].*/$w \1/"
+  FILM=$(curl -sSf "$URL/v1/jobs/$JOB/results/w$w/camera")   # {..., "data": [value], ...}
+  echo "$w $(echo "$FILM" | sed 's/.*"data":\[\([^]]*\)\].*/\1/')"
 done
