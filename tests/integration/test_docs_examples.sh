@@ -74,12 +74,14 @@ check() {
   if [ -n "$msg" ]; then bad "$name: $msg"; else ok; fi
 }
 
-# run NAME CMD...: runs an example in docs/examples (where plate.json is)
-# with a time limit; its stdout goes to $tmp/NAME.out.
+# run NAME CMD...: runs an example with a time limit in a fresh copy of
+# docs/examples (the examples read plate.json from the current directory and
+# may write there); its stdout goes to $tmp/NAME.out.
 run() {
   local name=$1 rc
   shift
-  (cd "$examples" && timeout 120 "$@") >"$tmp/$name.out" 2>"$tmp/$name.err"
+  rm -rf "$tmp/work" && cp -R "$examples" "$tmp/work" || { bad "$name: cannot copy docs/examples"; return 1; }
+  (cd "$tmp/work" && timeout 120 "$@") >"$tmp/$name.out" 2>"$tmp/$name.err"
   rc=$?
   if [ "$rc" -ne 0 ]; then
     bad "$name: exit $rc: $(tail -n 5 "$tmp/$name.err")"
