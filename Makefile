@@ -50,10 +50,28 @@ TEST_SCRIPTS := $(sort $(wildcard tests/integration/test_*.sh))
 BENCH_SRC := $(wildcard tests/bench/*.c)
 BENCH_BIN := $(patsubst %.c,$(BUILD)/bench/%,$(notdir $(BENCH_SRC)))
 
-.PHONY: all deps test bench run clean format
+# ---- libraysweep (client/lib): the C client library ------------------------
+# libraysweep.a / .so link in the project's one EXR writer and the status
+# tables (server/kernel/image_exr.c, core/error.c) rather than copying them.
+# The .so exports only the public API (client/lib/libraysweep.map).
+CLIENT_SRC := $(sort $(wildcard client/lib/*.c))
+CLIENT_OBJ := $(CLIENT_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/obj/server/kernel/image_exr.o $(BUILD)/obj/server/kernel/core/error.o
+CLIENT_A := $(BUILD)/lib/libraysweep.a
+CLIENT_SO := $(BUILD)/lib/libraysweep.so
+CLIENT_PC := $(BUILD)/lib/pkgconfig/raysweep.pc
+CLIENT_LIBS := -lcurl -lcjson -lexpat -lcrypto -lOpenEXRCore -lpthread -lm
+CLIENT_HEADERS := include/raysweep/client.h include/raysweep/status.h
+PREFIX ?= /usr/local
+# raysweep.pc for a prefix ($(1)), as printf arguments, one line each.
+client_pc_lines = 'prefix=$(1)' 'includedir=$${prefix}/include' 'libdir=$${prefix}/lib' '' \
+  'Name: raysweep' 'Description: C client library for raysweepd, the raysweep radiometric kernel daemon' \
+  'Version: 0.1.0' 'Cflags: -I$${includedir}' \
+  'Libs: -L$${libdir} -lraysweep' 'Libs.private: -lcurl -lcjson -lexpat -lcrypto -lOpenEXRCore -lpthread -lm'
+
+.PHONY: all deps test bench run clean format install
 .SECONDARY:
 
-all: deps $(BUILD)/bin/raysweepd
+all: deps $(BUILD)/bin/raysweepd $(CLIENT_A) $(CLIENT_SO) $(CLIENT_PC)
 
 deps:
 	@tools/deps.sh
@@ -81,6 +99,31 @@ $(BUILD)/gen/default_scene.c: proto/examples/hdistant_seed.xml
 	{ echo '#include "default_scene.h"'; echo 'const char rsw_default_scene_xml[] ='; \
 	  sed -e 's/\\/\\\\/g' -e 's/"/\\"/g' -e 's/?/\\?/g' -e 's/^/  "/' -e 's/$$/\\n"/' $<; \
 	  echo ';'; echo 'const size_t rsw_default_scene_xml_len = sizeof rsw_default_scene_xml - 1;'; } > $@
+
+# ---- libraysweep rules ------------------------------------------------------
+$(CLIENT_A): $(CLIENT_OBJ)
+	@mkdir -p $(dir $@)
+	@rm -f $@ && ar rcs $@ $^
+
+$(CLIENT_SO): $(CLIENT_OBJ) client/lib/libraysweep.map
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) -shared -Wl,-soname,libraysweep.so -Wl,--version-script=client/lib/libraysweep.map -o $@ $(CLIENT_OBJ) $(CLIENT_LIBS)
+
+$(CLIENT_PC):
+	@mkdir -p $(dir $@)
+	printf '%s\n' $(call client_pc_lines,$(PREFIX)) > $@
+
+# The client test sees only the public header and the static library.
+$(BUILD)/tests/test_client: $(BUILD)/obj/tests/integration/test_client.o $(CLIENT_A)
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) -o $@ $< $(CLIENT_A) $(CLIENT_LIBS)
+
+install: $(CLIENT_A) $(CLIENT_SO)
+	install -d $(DESTDIR)$(PREFIX)/include/raysweep $(DESTDIR)$(PREFIX)/lib/pkgconfig
+	install -m 644 $(CLIENT_HEADERS) $(DESTDIR)$(PREFIX)/include/raysweep/
+	install -m 644 $(CLIENT_A) $(DESTDIR)$(PREFIX)/lib/
+	install -m 755 $(CLIENT_SO) $(DESTDIR)$(PREFIX)/lib/
+	printf '%s\n' $(call client_pc_lines,$(PREFIX)) > $(DESTDIR)$(PREFIX)/lib/pkgconfig/raysweep.pc
 
 # The HTTP encoders are not in the kernel library: link them in.
 $(BUILD)/tests/test_http_encode: $(BUILD)/obj/tests/unit/test_http_encode.o $(BUILD)/obj/server/http/encode.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
@@ -117,5 +160,16 @@ format:
 
 clean:
 	rm -rf build build-san
+
+# ---- raysweep CLI (client/cli): only the public libraysweep API ----
+CLI_SRC := $(sort $(wildcard client/cli/*.c))
+CLI_OBJ := $(CLI_SRC:%.c=$(BUILD)/obj/%.o)
+CLI_LIBS := -lcurl -lcjson -lexpat -lcrypto -lOpenEXRCore -lm -lpthread
+.PHONY: cli-objs
+all test: $(BUILD)/bin/raysweep
+cli-objs: $(CLI_OBJ)
+$(BUILD)/bin/raysweep: $(CLI_OBJ) $(BUILD)/lib/libraysweep.a
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) -o $@ $(CLI_OBJ) $(BUILD)/lib/libraysweep.a $(CLI_LIBS)
 
 -include $(shell find $(BUILD)/obj -name '*.d' 2>/dev/null)

@@ -1,0 +1,171 @@
+/* raysweep CLI: shared declarations.
+ *
+ * The CLI talks to raysweepd only through the public libraysweep API
+ * (include/raysweep/client.h); cJSON (a system library) reads and writes
+ * the JSON documents the API hands around as text. */
+#ifndef RSW_CLI_H
+#define RSW_CLI_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdio.h>
+
+#include "raysweep/client.h"
+
+/* Exit codes, documented in `raysweep --help`. */
+enum {
+  CLI_OK = 0,
+  CLI_SERVER = 1,  /* the server answered with a problem */
+  CLI_USAGE = 2,   /* bad command line or bad local input description */
+  CLI_CONNECT = 3, /* cannot connect to the daemon */
+  CLI_JOB = 4,     /* job (or one of its renders) failed or was cancelled */
+  CLI_TIMEOUT = 5, /* a deadline passed */
+  CLI_IO = 6       /* local files */
+};
+
+#define CLI_MAX_OPTS 16
+
+/* One option a command accepts. arg: the value's placeholder for help
+ * (the option takes a value, `--x V` or `--x=V`), NULL for a flag; repeat:
+ * may be given several times (otherwise the last wins). */
+typedef struct cli_opt {
+  const char *name;
+  const char *arg;
+  bool repeat;
+  const char *help; /* one line for per-command help */
+} cli_opt;
+
+/* The parsed command line of one command: positionals, and the values of
+ * each option in the order given (index = the option's index in the
+ * command's table; a flag's value is ""). */
+typedef struct cli_args {
+  const char **pos;
+  size_t n_pos;
+  const cli_opt *opts;
+  size_t n_opts;
+  const char **vals[CLI_MAX_OPTS];
+  size_t n_vals[CLI_MAX_OPTS];
+} cli_args;
+
+/* What every command handler gets. */
+typedef struct cli_ctx {
+  const char *cmd;        /* "scene push", for messages */
+  const char *server_url; /* effective base URL */
+  bool json, quiet;
+  bool stderr_tty;
+  rsw_client *client; /* created before the handler when the command needs it */
+} cli_ctx;
+
+struct cli_command;
+typedef int (*cli_run_fn)(cli_ctx *ctx, const cli_args *a);
+
+typedef struct cli_command {
+  const char *group; /* first word */
+  const char *name;  /* second word, or NULL */
+  const char *args;  /* positional synopsis and options, for usage lines */
+  const char *summary;
+  const cli_opt *opts; /* terminated by a {NULL} entry */
+  size_t min_pos, max_pos;
+  bool needs_client;
+  cli_run_fn run;
+} cli_command;
+
+/* ---- options (main.c) ---- */
+/* Last value of option `name`, or NULL when absent. */
+const char *cli_get(const cli_args *a, const char *name);
+/* All values of option `name` (borrowed), count through *n. */
+const char *const *cli_get_all(const cli_args *a, const char *name, size_t *n);
+bool cli_has(const cli_args *a, const char *name);
+
+/* ---- util.c ---- */
+int cli_usage(const cli_ctx *ctx, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+/* Print a local failure ("raysweep CMD: ...") and return code. */
+int cli_fail(const cli_ctx *ctx, int code, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+/* Report a failed library call on ctx->client (what the server said, or why
+ * the call did not reach it) and return the exit code for it. */
+int cli_report(const cli_ctx *ctx, rsw_status s, const char *what);
+/* Exit code for a status and the client's error info (NULL when none). */
+int cli_exit_code(rsw_status s, const rsw_error_info *e);
+
+bool cli_parse_u64(const char *s, unsigned long long max, unsigned long long *out);
+bool cli_parse_double(const char *s, double *out);
+/* Shortest "%.*g" that reads back as v exactly. buf >= 32 bytes. */
+void cli_format_double(char *buf, size_t n, double v);
+
+/* Split KEY=VALUE: VALUE is JSON; a value that is not JSON is an error
+ * (quote strings). On success *key_out is owned (free). */
+int cli_split_set(const cli_ctx *ctx, const char *opt, const char *kv, char **key_out, const char **value_out);
+
+/* Build {"key": value, ...} from KEY=VALUE words (VALUE is JSON text;
+ * opt names the flag in messages). Returns 0 with *out owned
+ * (cJSON_Delete), or an exit code after printing. */
+struct cJSON;
+int cli_build_param_map(const cli_ctx *ctx, const char *opt, const char *const *sets, size_t n, struct cJSON **out);
+
+/* Film file formats, chosen by extension. */
+typedef enum cli_format { CLI_FMT_NONE, CLI_FMT_EXR, CLI_FMT_NPY, CLI_FMT_JSON } cli_format;
+cli_format cli_format_from_path(const char *path);
+cli_format cli_format_from_name(const char *name);
+const char *cli_format_ext(cli_format f);
+/* Write a film in a format; returns a CLI exit code after printing. */
+int cli_save_film(const cli_ctx *ctx, const rsw_film *f, const char *path, cli_format fmt);
+
+/* Whole file into memory (NUL-terminated); NULL with errno on failure. */
+char *cli_read_file(const char *path, size_t *len_out);
+/* Write text through a temp file renamed on success. 0 or -1 (errno). */
+int cli_write_file_atomic(const char *path, const char *data, size_t len);
+/* mkdir -p. 0 or -1 (errno). */
+int cli_mkdirs(const char *path);
+/* A name that is safe as one path component. */
+bool cli_safe_component(const char *s);
+
+/* Progress of a job on stderr: a bar on a TTY, plain lines otherwise,
+ * nothing with --quiet. Pass cli_progress_cb and a cli_progress as user. */
+typedef struct cli_progress {
+  const cli_ctx *ctx;
+  double start, last_print;
+  size_t done, total, failed;
+  bool drawn;
+} cli_progress;
+void cli_progress_init(cli_progress *p, const cli_ctx *ctx);
+int cli_progress_cb(void *user, const char *context, const char *sensor, size_t done, size_t total, int failed);
+void cli_progress_finish(cli_progress *p);
+double cli_now(void);
+
+/* Wait for a job with progress; prints the end state. Returns a CLI exit
+ * code: 0 succeeded (no failed renders), 4 failed/cancelled/renders failed,
+ * 5 timeout, or the code of a transport failure. */
+int cli_wait_job(cli_ctx *ctx, const char *job_id, double timeout_s, rsw_job_status *final_out);
+const char *cli_job_state_name(rsw_job_state s);
+
+/* ---- handlers ---- */
+int cmd_status(cli_ctx *ctx, const cli_args *a);
+int cmd_scene_push(cli_ctx *ctx, const cli_args *a);
+int cmd_scene_ls(cli_ctx *ctx, const cli_args *a);
+int cmd_scene_show(cli_ctx *ctx, const cli_args *a);
+int cmd_scene_rm(cli_ctx *ctx, const cli_args *a);
+int cmd_params(cli_ctx *ctx, const cli_args *a);
+int cmd_set(cli_ctx *ctx, const cli_args *a);
+int cmd_render(cli_ctx *ctx, const cli_args *a);
+int cmd_fetch(cli_ctx *ctx, const cli_args *a);
+int cmd_sweep(cli_ctx *ctx, const cli_args *a);
+int cmd_merge(cli_ctx *ctx, const cli_args *a);
+int cmd_job_ls(cli_ctx *ctx, const cli_args *a);
+int cmd_job_show(cli_ctx *ctx, const cli_args *a);
+int cmd_job_watch(cli_ctx *ctx, const cli_args *a);
+int cmd_job_cancel(cli_ctx *ctx, const cli_args *a);
+int cmd_job_rm(cli_ctx *ctx, const cli_args *a);
+
+/* Option tables, defined beside their handlers. */
+extern const cli_opt cli_opts_none[];
+extern const cli_opt cli_opts_scene_push[];
+extern const cli_opt cli_opts_scene_rm[];
+extern const cli_opt cli_opts_params[];
+extern const cli_opt cli_opts_set[];
+extern const cli_opt cli_opts_render[];
+extern const cli_opt cli_opts_fetch[];
+extern const cli_opt cli_opts_sweep[];
+extern const cli_opt cli_opts_merge[];
+extern const cli_opt cli_opts_job_watch[];
+
+#endif

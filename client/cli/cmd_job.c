@@ -1,0 +1,148 @@
+/* raysweep job ls | show | watch | cancel | rm. */
+#include <cjson/cJSON.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "cli.h"
+
+const cli_opt cli_opts_job_watch[] = {
+    {"--timeout", "S", false, "stop waiting after S seconds (exit 5; the job keeps running)"},
+    {NULL},
+};
+
+static void print_status_json(const char *id, const rsw_job_status *st) {
+  cJSON *o = cJSON_CreateObject();
+  cJSON_AddStringToObject(o, "id", id);
+  cJSON_AddStringToObject(o, "state", cli_job_state_name(st->state));
+  cJSON_AddNumberToObject(o, "contexts_total", (double)st->contexts_total);
+  cJSON_AddNumberToObject(o, "contexts_done", (double)st->contexts_done);
+  cJSON_AddNumberToObject(o, "renders_total", (double)st->renders_total);
+  cJSON_AddNumberToObject(o, "renders_done", (double)st->renders_done);
+  cJSON_AddNumberToObject(o, "renders_failed", (double)st->renders_failed);
+  cJSON_AddNumberToObject(o, "seconds", st->seconds);
+  if (st->error[0]) cJSON_AddStringToObject(o, "error", st->error);
+  char *t = cJSON_PrintUnformatted(o);
+  if (t) printf("%s\n", t);
+  free(t);
+  cJSON_Delete(o);
+}
+
+int cmd_job_ls(cli_ctx *ctx, const cli_args *a) {
+  (void)a;
+  char *text = NULL;
+  rsw_status s = rsw_job_list(ctx->client, &text);
+  if (s) return cli_report(ctx, s, "GET /v1/jobs");
+  int rc = CLI_OK;
+  if (ctx->json) {
+    fputs(text, stdout);
+    if (!*text || text[strlen(text) - 1] != '\n') putchar('\n');
+  } else {
+    cJSON *j = cJSON_Parse(text);
+    if (!j) {
+      rc = cli_fail(ctx, CLI_SERVER, "the server's answer is not JSON");
+    } else {
+      const cJSON *job;
+      cJSON_ArrayForEach(job, cJSON_GetObjectItemCaseSensitive(j, "jobs")) {
+        const char *id = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(job, "id"));
+        const char *state = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(job, "state"));
+        const char *scene = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(job, "scene"));
+        const char *created = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(job, "created"));
+        char progress[64];
+        snprintf(progress, sizeof progress, "%.0f/%.0f",
+                 cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(job, "renders_done")),
+                 cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(job, "renders_total")));
+        printf("%-14s %-9s %13s renders  %4.0f failed  scene %.12s  %s\n", id ? id : "?", state ? state : "?",
+               progress, cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(job, "renders_failed")),
+               scene ? scene : "?", created ? created : "");
+      }
+      cJSON_Delete(j);
+    }
+  }
+  rsw_free(text);
+  return rc;
+}
+
+/* The Job object as the server sends it, picked out of GET /v1/jobs (the
+ * library gives one job as a struct). NULL when not listed. Owned. */
+static char *job_json(cli_ctx *ctx, const char *id) {
+  char *text = NULL, *out = NULL;
+  if (rsw_job_list(ctx->client, &text)) return NULL;
+  cJSON *j = cJSON_Parse(text);
+  const cJSON *job;
+  cJSON_ArrayForEach(job, cJSON_GetObjectItemCaseSensitive(j, "jobs")) {
+    const char *jid = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(job, "id"));
+    if (jid && strcmp(jid, id) == 0) {
+      out = cJSON_PrintUnformatted(job);
+      break;
+    }
+  }
+  cJSON_Delete(j);
+  rsw_free(text);
+  return out;
+}
+
+int cmd_job_show(cli_ctx *ctx, const cli_args *a) {
+  const char *id = a->pos[0];
+  rsw_job_status st;
+  rsw_status s = rsw_job_get(ctx->client, id, &st);
+  if (s) return cli_report(ctx, s, id);
+  if (ctx->json) {
+    char *t = job_json(ctx, id);
+    if (t)
+      printf("%s\n", t);
+    else
+      print_status_json(id, &st);
+    free(t);
+    return CLI_OK;
+  }
+  printf("id:        %s\n", id);
+  printf("state:     %s\n", cli_job_state_name(st.state));
+  printf("contexts:  %zu/%zu\n", st.contexts_done, st.contexts_total);
+  printf("renders:   %zu/%zu (%zu failed)\n", st.renders_done, st.renders_total, st.renders_failed);
+  printf("seconds:   %.3f\n", st.seconds);
+  if (st.error[0]) printf("error:     %s\n", st.error);
+  return CLI_OK;
+}
+
+int cmd_job_watch(cli_ctx *ctx, const cli_args *a) {
+  const char *id = a->pos[0];
+  double timeout = 0;
+  const char *v = cli_get(a, "--timeout");
+  if (v && (!cli_parse_double(v, &timeout) || !(timeout > 0)))
+    return cli_usage(ctx, "--timeout needs a positive number of seconds (got '%s')", v);
+  rsw_job_status st;
+  memset(&st, 0, sizeof st);
+  int rc = cli_wait_job(ctx, id, timeout, &st);
+  if (rc != CLI_OK && rc != CLI_JOB) return rc;
+  if (ctx->json)
+    print_status_json(id, &st);
+  else
+    printf("%s %s: %zu/%zu renders, %zu failed, %.3f s\n", id, cli_job_state_name(st.state), st.renders_done,
+           st.renders_total, st.renders_failed, st.seconds);
+  return rc;
+}
+
+int cmd_job_cancel(cli_ctx *ctx, const cli_args *a) {
+  const char *id = a->pos[0];
+  rsw_status s = rsw_job_cancel(ctx->client, id);
+  if (s) return cli_report(ctx, s, id);
+  rsw_job_status st;
+  s = rsw_job_get(ctx->client, id, &st);
+  if (s) return cli_report(ctx, s, id);
+  if (ctx->json)
+    print_status_json(id, &st);
+  else
+    printf("%s %s\n", id, cli_job_state_name(st.state));
+  return CLI_OK;
+}
+
+int cmd_job_rm(cli_ctx *ctx, const cli_args *a) {
+  rsw_status s = rsw_job_delete(ctx->client, a->pos[0]);
+  if (s) return cli_report(ctx, s, a->pos[0]);
+  if (ctx->json)
+    printf("{\"deleted\":\"%s\"}\n", a->pos[0]);
+  else if (!ctx->quiet)
+    fprintf(stderr, "raysweep job rm: %s deleted\n", a->pos[0]);
+  return CLI_OK;
+}

@@ -1,0 +1,146 @@
+/* raysweep render (one synchronous render) and fetch (one film of a job). */
+#include <cjson/cJSON.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "cli.h"
+
+const cli_opt cli_opts_render[] = {
+    {"--sensor", "S", false, "sensor id or index (default: the first)"},
+    {"--spp", "N", false, "samples per pixel (default: the scene's sampler)"},
+    {"--seed", "N", false, "sampler seed (default 0)"},
+    {"--wavelength", "NM", false, "wavelength in nm (mono variant; default 550)"},
+    {"--set", "KEY=VALUE", true, "parameter override for this render only (VALUE is JSON)"},
+    {"--timeout", "S", false, "seconds the server may spend (exit 5 past it)"},
+    {"-o", "FILE", false, "output file: .exr, .npy or .json (the film JSON)"},
+    {NULL},
+};
+const cli_opt cli_opts_fetch[] = {
+    {"-o", "FILE", false, "output file: .exr, .npy or .json (the film JSON)"},
+    {NULL},
+};
+
+static int output_format(const cli_ctx *ctx, const char *out, cli_format *fmt) {
+  if (!out) return cli_usage(ctx, "missing -o OUT.exr|.npy|.json");
+  *fmt = cli_format_from_path(out);
+  if (*fmt == CLI_FMT_NONE)
+    return cli_usage(ctx, "-o '%s': the format is chosen by extension: .exr, .npy or .json", out);
+  return 0;
+}
+
+static void report_written(const cli_ctx *ctx, const rsw_film *f, const char *path, double seconds) {
+  if (ctx->json) {
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "file", path);
+    cJSON_AddNumberToObject(o, "width", rsw_film_width(f));
+    cJSON_AddNumberToObject(o, "height", rsw_film_height(f));
+    cJSON *ch = cJSON_AddArrayToObject(o, "channels");
+    for (int i = 0; i < rsw_film_channels(f); i++)
+      cJSON_AddItemToArray(ch, cJSON_CreateString(rsw_film_channel_name(f, i)));
+    cJSON *meta = cJSON_Parse(rsw_film_meta(f));
+    if (meta) cJSON_AddItemToObject(o, "meta", meta);
+    cJSON_AddNumberToObject(o, "seconds", seconds);
+    char *t = cJSON_PrintUnformatted(o);
+    if (t) printf("%s\n", t);
+    free(t);
+    cJSON_Delete(o);
+  } else if (!ctx->quiet) {
+    fprintf(stderr, "raysweep %s: wrote %s (%dx%d, %d channel%s, %.3f s)\n", ctx->cmd, path, rsw_film_width(f),
+            rsw_film_height(f), rsw_film_channels(f), rsw_film_channels(f) == 1 ? "" : "s", seconds);
+  }
+}
+
+int cmd_render(cli_ctx *ctx, const cli_args *a) {
+  const char *out = cli_get(a, "-o");
+  cli_format fmt;
+  int rc = output_format(ctx, out, &fmt);
+  if (rc) return rc;
+  cJSON *req = cJSON_CreateObject();
+  if (!req) return cli_fail(ctx, CLI_IO, "out of memory");
+  const char *v;
+  unsigned long long u;
+  double d;
+  if ((v = cli_get(a, "--sensor"))) {
+    if (!*v) {
+      rc = cli_usage(ctx, "--sensor needs a sensor id or index");
+      goto out;
+    }
+    cJSON_AddStringToObject(req, "sensor", v);
+  }
+  if ((v = cli_get(a, "--spp"))) {
+    if (!cli_parse_u64(v, 1ull << 31, &u) || u == 0) {
+      rc = cli_usage(ctx, "--spp needs a positive integer (got '%s')", v);
+      goto out;
+    }
+    cJSON_AddNumberToObject(req, "spp", (double)u);
+  }
+  if ((v = cli_get(a, "--seed"))) {
+    /* JSON numbers are doubles on the wire: seeds stay below 2^53. */
+    if (!cli_parse_u64(v, (1ull << 53) - 1, &u)) {
+      rc = cli_usage(ctx, "--seed needs an integer in [0, 2^53) (got '%s')", v);
+      goto out;
+    }
+    cJSON_AddNumberToObject(req, "seed", (double)u);
+  }
+  if ((v = cli_get(a, "--wavelength"))) {
+    if (!cli_parse_double(v, &d) || !(d > 0)) {
+      rc = cli_usage(ctx, "--wavelength needs a positive number of nm (got '%s')", v);
+      goto out;
+    }
+    cJSON_AddNumberToObject(req, "wavelength", d);
+  }
+  if ((v = cli_get(a, "--timeout"))) {
+    if (!cli_parse_double(v, &d) || !(d > 0)) {
+      rc = cli_usage(ctx, "--timeout needs a positive number of seconds (got '%s')", v);
+      goto out;
+    }
+    cJSON_AddNumberToObject(req, "timeout_s", d);
+  }
+  size_t n_sets;
+  const char *const *sets = cli_get_all(a, "--set", &n_sets);
+  if (n_sets) {
+    cJSON *map;
+    if ((rc = cli_build_param_map(ctx, "--set", sets, n_sets, &map))) goto out;
+    cJSON_AddItemToObject(req, "params", map);
+  }
+  char *text = cJSON_PrintUnformatted(req);
+  if (!text) {
+    rc = cli_fail(ctx, CLI_IO, "out of memory");
+    goto out;
+  }
+  rsw_film *film = NULL;
+  double t0 = cli_now();
+  rsw_status s = rsw_render(ctx->client, a->pos[0], text, &film);
+  double seconds = cli_now() - t0;
+  free(text);
+  if (s) {
+    rc = cli_report(ctx, s, a->pos[0]);
+    goto out;
+  }
+  rc = cli_save_film(ctx, film, out, fmt);
+  if (!rc) report_written(ctx, film, out, seconds);
+  rsw_film_free(film);
+out:
+  cJSON_Delete(req);
+  return rc;
+}
+
+int cmd_fetch(cli_ctx *ctx, const cli_args *a) {
+  const char *out = cli_get(a, "-o");
+  cli_format fmt;
+  int rc = output_format(ctx, out, &fmt);
+  if (rc) return rc;
+  rsw_film *film = NULL;
+  double t0 = cli_now();
+  rsw_status s = rsw_job_fetch(ctx->client, a->pos[0], a->pos[1], a->pos[2], &film);
+  if (s) {
+    char what[256];
+    snprintf(what, sizeof what, "%s %s %s", a->pos[0], a->pos[1], a->pos[2]);
+    return cli_report(ctx, s, what);
+  }
+  rc = cli_save_film(ctx, film, out, fmt);
+  if (!rc) report_written(ctx, film, out, cli_now() - t0);
+  rsw_film_free(film);
+  return rc;
+}

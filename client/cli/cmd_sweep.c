@@ -1,0 +1,783 @@
+/* raysweep sweep (one job over many kernel contexts, films into a
+ * directory with an index) and raysweep merge (join shard directories).
+ *
+ * Reproducibility across shards: context ids are numbered over the whole
+ * unsharded list, and no per-context seed is sent, so the server derives
+ * each (context, sensor) seed from fnv1a64(job seed, context id, sensor id)
+ * (proto/API-NOTES.md, Context). A context therefore renders the same film
+ * whichever shard submits it, and the union of the shards' films equals
+ * the unsharded sweep bit for bit. */
+#include <cjson/cJSON.h>
+#include <errno.h>
+#include <fcntl.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "cli.h"
+
+const cli_opt cli_opts_sweep[] = {
+    {"--contexts", "FILE.jsonl", false, "one Context object per line (id optional)"},
+    {"--grid", "NAME=START:STOP:STEP", true, "a range, end included; NAME is wavelength or a parameter key; several form a product"},
+    {"--set", "KEY=VALUE", true, "job-level parameter for every context (VALUE is JSON)"},
+    {"--sensor", "S", true, "sensor to render (default: every sensor)"},
+    {"--spp", "N", false, "samples per pixel"},
+    {"--seed", "N", false, "job seed (default 0)"},
+    {"--shard", "I/N", false, "keep contexts I, I+N, I+2N, ... (ids unchanged)"},
+    {"--format", "exr|npy|json", false, "film files: exr (default), npy or json"},
+    {"--timeout", "S", false, "stop waiting after S seconds (exit 5; the job keeps running)"},
+    {"-o", "DIR", false, "output directory"},
+    {NULL},
+};
+const cli_opt cli_opts_merge[] = {
+    {"-o", "DIR", false, "output directory"},
+    {NULL},
+};
+
+/* The unsharded list may be longer than one job allows (the point of
+ * --shard), so the local cap is larger than the server's 100000. */
+#define MAX_CONTEXTS 10000000ull
+#define MAX_GRIDS 16
+
+typedef struct sweep_item {
+  char id[72];
+  bool has_wl;
+  double wl;
+  cJSON *params;  /* object or NULL, owned */
+  cJSON *sensors; /* array of strings or NULL, owned */
+  long long spp, seed; /* -1: unset */
+} sweep_item;
+
+typedef struct grid_axis {
+  char *name; /* owned */
+  bool is_wavelength;
+  double start, step;
+  size_t n;
+} grid_axis;
+
+typedef struct sweep_list {
+  sweep_item *items;
+  size_t n, cap;
+  size_t total; /* unsharded count */
+} sweep_list;
+
+static void items_free(sweep_list *l) {
+  for (size_t i = 0; i < l->n; i++) {
+    cJSON_Delete(l->items[i].params);
+    cJSON_Delete(l->items[i].sensors);
+  }
+  free(l->items);
+}
+
+static sweep_item *items_push(sweep_list *l) {
+  if (l->n == l->cap) {
+    size_t cap = l->cap ? l->cap * 2 : 64;
+    sweep_item *ni = realloc(l->items, cap * sizeof *ni);
+    if (!ni) return NULL;
+    l->items = ni, l->cap = cap;
+  }
+  sweep_item *it = &l->items[l->n++];
+  memset(it, 0, sizeof *it);
+  it->spp = it->seed = -1;
+  return it;
+}
+
+/* "c" + index zero-padded to at least 5 digits; the width is that of the
+ * largest index, so every id of one sweep has the same width and ids sort
+ * in list order. */
+static int id_width(size_t total) {
+  int w = 1;
+  for (size_t m = total > 0 ? total - 1 : 0; m >= 10; m /= 10) w++;
+  return w < 5 ? 5 : w;
+}
+
+static void make_id(char out[72], int width, size_t index) {
+  char digits[24];
+  int len = snprintf(digits, sizeof digits, "%zu", index);
+  int pad = width > len ? width - len : 0;
+  out[0] = 'c';
+  memset(out + 1, '0', (size_t)pad);
+  memcpy(out + 1 + pad, digits, (size_t)len + 1);
+}
+
+/* NAME=START:STOP:STEP. The count uses integer steps so 400:700:10 has 31
+ * values whatever the rounding of (stop - start) / step:
+ *   n = floor((stop - start) / step + 1e-9) + 1,  value_k = start + k step. */
+static int parse_grid(const cli_ctx *ctx, const char *spec, grid_axis *g) {
+  const char *eq = strchr(spec, '=');
+  if (!eq || eq == spec) return cli_usage(ctx, "--grid needs NAME=START:STOP:STEP (got '%s')", spec);
+  char *nums = strdup(eq + 1);
+  if (!nums) return cli_fail(ctx, CLI_IO, "out of memory");
+  char *p1 = strchr(nums, ':'), *p2 = p1 ? strchr(p1 + 1, ':') : NULL;
+  double start, stop, step;
+  int rc = 0;
+  if (!p1 || !p2) {
+    rc = cli_usage(ctx, "--grid %s: the range needs START:STOP:STEP", spec);
+  } else {
+    *p1 = *p2 = '\0';
+    if (!cli_parse_double(nums, &start) || !cli_parse_double(p1 + 1, &stop) || !cli_parse_double(p2 + 1, &step))
+      rc = cli_usage(ctx, "--grid %s: START, STOP and STEP must be numbers", spec);
+    else if (!(step > 0))
+      rc = cli_usage(ctx, "--grid %s: STEP must be positive", spec);
+    else if (stop < start)
+      rc = cli_usage(ctx, "--grid %s: STOP is below START", spec);
+  }
+  free(nums);
+  if (rc) return rc;
+  double n = floor((stop - start) / step + 1e-9) + 1;
+  if (!(n <= (double)MAX_CONTEXTS))
+    return cli_usage(ctx, "--grid %s: %.0f values (at most %llu)", spec, n, MAX_CONTEXTS);
+  g->name = strndup(spec, (size_t)(eq - spec));
+  if (!g->name) return cli_fail(ctx, CLI_IO, "out of memory");
+  g->is_wavelength = strcmp(g->name, "wavelength") == 0;
+  g->start = start, g->step = step, g->n = (size_t)n;
+  if (g->is_wavelength && !(start > 0))
+    return cli_usage(ctx, "--grid %s: wavelengths must be positive (nm)", spec);
+  return 0;
+}
+
+/* The Cartesian product of the axes, first axis slowest; only the indices
+ * this shard keeps are materialised. */
+static int build_grid(const cli_ctx *ctx, const grid_axis *g, size_t n_axes, size_t shard_i, size_t shard_n,
+                      sweep_list *l) {
+  unsigned long long total = 1;
+  for (size_t a = 0; a < n_axes; a++) {
+    total *= g[a].n;
+    if (total > MAX_CONTEXTS) return cli_usage(ctx, "--grid: the product has more than %llu contexts", MAX_CONTEXTS);
+  }
+  l->total = (size_t)total;
+  int w = id_width(l->total);
+  for (size_t i = shard_i; i < l->total; i += shard_n) {
+    sweep_item *it = items_push(l);
+    if (!it) return cli_fail(ctx, CLI_IO, "out of memory");
+    make_id(it->id, w, i);
+    size_t rest = i;
+    for (size_t a = n_axes; a-- > 0;) {
+      size_t k = rest % g[a].n;
+      rest /= g[a].n;
+      double v = g[a].start + (double)k * g[a].step;
+      if (g[a].is_wavelength) {
+        it->has_wl = true, it->wl = v;
+      } else {
+        if (!it->params && !(it->params = cJSON_CreateObject())) return cli_fail(ctx, CLI_IO, "out of memory");
+        cJSON_AddNumberToObject(it->params, g[a].name, v);
+      }
+    }
+  }
+  return 0;
+}
+
+static bool json_is_int(const cJSON *v, double lo) {
+  return cJSON_IsNumber(v) && v->valuedouble >= lo && v->valuedouble == floor(v->valuedouble) &&
+         v->valuedouble < 9007199254740992.0;
+}
+
+/* One Context per non-blank line: {id?, wavelength?, params?, sensors?,
+ * spp?, seed?}; a missing id is numbered like a grid's. */
+static int read_contexts(const cli_ctx *ctx, const char *path, size_t shard_i, size_t shard_n, sweep_list *l) {
+  size_t len;
+  char *text = cli_read_file(path, &len);
+  if (!text) return cli_fail(ctx, CLI_IO, "--contexts: cannot read '%s': %s", path, strerror(errno));
+  int rc = 0;
+  /* First pass: count the contexts so generated ids have their width. */
+  size_t total = 0;
+  for (char *s = text; *s;) {
+    char *nl = strchr(s, '\n');
+    size_t n = nl ? (size_t)(nl - s) : strlen(s);
+    for (size_t k = 0; k < n; k++)
+      if (s[k] != ' ' && s[k] != '\t' && s[k] != '\r') {
+        total++;
+        break;
+      }
+    s += n + (nl ? 1 : 0);
+  }
+  l->total = total;
+  int w = id_width(total);
+  size_t line = 0, index = 0;
+  for (char *s = text; *s && !rc;) {
+    char *nl = strchr(s, '\n');
+    if (nl) *nl = '\0';
+    line++;
+    char *next = nl ? nl + 1 : s + strlen(s);
+    bool blank = true;
+    for (char *k = s; *k; k++)
+      if (*k != ' ' && *k != '\t' && *k != '\r') blank = false;
+    if (blank) {
+      s = next;
+      continue;
+    }
+    size_t my = index++;
+    if (my % shard_n != shard_i) {
+      s = next;
+      continue;
+    }
+    cJSON *o = cJSON_Parse(s);
+    if (!cJSON_IsObject(o)) {
+      cJSON_Delete(o);
+      rc = cli_usage(ctx, "%s:%zu: not a JSON object", path, line);
+      break;
+    }
+    sweep_item *it = items_push(l);
+    if (!it) {
+      cJSON_Delete(o);
+      rc = cli_fail(ctx, CLI_IO, "out of memory");
+      break;
+    }
+    make_id(it->id, w, my);
+    cJSON *f;
+    cJSON_ArrayForEach(f, o) {
+      const char *k = f->string;
+      if (strcmp(k, "id") == 0) {
+        const char *id = cJSON_GetStringValue(f);
+        if (!id || !*id || strlen(id) > 64) {
+          rc = cli_usage(ctx, "%s:%zu: id must be a string of 1 to 64 characters", path, line);
+          break;
+        }
+        snprintf(it->id, sizeof it->id, "%s", id);
+      } else if (strcmp(k, "wavelength") == 0) {
+        if (!cJSON_IsNumber(f) || !(f->valuedouble > 0)) {
+          rc = cli_usage(ctx, "%s:%zu: wavelength must be a positive number (nm)", path, line);
+          break;
+        }
+        it->has_wl = true, it->wl = f->valuedouble;
+      } else if (strcmp(k, "params") == 0) {
+        if (!cJSON_IsObject(f)) {
+          rc = cli_usage(ctx, "%s:%zu: params must be an object {key: value}", path, line);
+          break;
+        }
+        it->params = cJSON_Duplicate(f, 1);
+      } else if (strcmp(k, "sensors") == 0) {
+        const cJSON *sv;
+        bool ok = cJSON_IsArray(f);
+        cJSON_ArrayForEach(sv, f) ok = ok && cJSON_IsString(sv);
+        if (!ok) {
+          rc = cli_usage(ctx, "%s:%zu: sensors must be an array of sensor ids", path, line);
+          break;
+        }
+        it->sensors = cJSON_Duplicate(f, 1);
+      } else if (strcmp(k, "spp") == 0) {
+        if (!json_is_int(f, 1)) {
+          rc = cli_usage(ctx, "%s:%zu: spp must be a positive integer", path, line);
+          break;
+        }
+        it->spp = (long long)f->valuedouble;
+      } else if (strcmp(k, "seed") == 0) {
+        if (!json_is_int(f, 0)) {
+          rc = cli_usage(ctx, "%s:%zu: seed must be a non-negative integer", path, line);
+          break;
+        }
+        it->seed = (long long)f->valuedouble;
+      } else {
+        rc = cli_usage(ctx, "%s:%zu: unknown field '%s' (a Context has id, wavelength, params, sensors, spp, seed)",
+                       path, line, k);
+        break;
+      }
+    }
+    cJSON_Delete(o);
+    s = next;
+  }
+  free(text);
+  return rc;
+}
+
+static int cmp_item_id(const void *a, const void *b) {
+  return strcmp((*(const sweep_item *const *)a)->id, (*(const sweep_item *const *)b)->id);
+}
+
+/* One film of the index: its line (owned) and, for merge, the source. */
+typedef struct index_entry {
+  const char *context, *sensor; /* borrowed from line */
+  cJSON *line;
+  char *src; /* owned, merge only */
+  size_t order;
+} index_entry;
+
+static int cmp_entry(const void *a, const void *b) {
+  const index_entry *x = a, *y = b;
+  int c = strcmp(x->context, y->context);
+  if (!c) c = strcmp(x->sensor, y->sensor);
+  if (!c) c = x->order < y->order ? -1 : x->order > y->order;
+  return c;
+}
+
+/* index.jsonl: one line per film, sorted by context then sensor, so a
+ * merged directory's index equals the unsharded one byte for byte. */
+static int write_index(const cli_ctx *ctx, const char *dir, index_entry *e, size_t n) {
+  qsort(e, n, sizeof *e, cmp_entry);
+  char *buf = NULL;
+  size_t len = 0;
+  FILE *f = open_memstream(&buf, &len);
+  if (!f) return cli_fail(ctx, CLI_IO, "out of memory");
+  for (size_t i = 0; i < n; i++) {
+    char *t = cJSON_PrintUnformatted(e[i].line);
+    if (t) fprintf(f, "%s\n", t);
+    free(t);
+  }
+  fclose(f);
+  size_t pn = strlen(dir) + 16;
+  char *path = malloc(pn);
+  int rc = CLI_OK;
+  if (!buf || !path) {
+    rc = cli_fail(ctx, CLI_IO, "out of memory");
+  } else {
+    snprintf(path, pn, "%s/index.jsonl", dir);
+    if (cli_write_file_atomic(path, buf, len)) rc = cli_fail(ctx, CLI_IO, "cannot write '%s': %s", path, strerror(errno));
+  }
+  free(path);
+  free(buf);
+  return rc;
+}
+
+static void entries_free(index_entry *e, size_t n) {
+  for (size_t i = 0; i < n; i++) {
+    cJSON_Delete(e[i].line);
+    free(e[i].src);
+  }
+  free(e);
+}
+
+/* Feed the builder. Errors here are about the contexts the user described:
+ * usage (2). */
+static int build_contexts(const cli_ctx *ctx, const cli_args *a, sweep_item **sorted, size_t n, const cJSON *job_params,
+                          long long spp, long long seed, rsw_contexts **out) {
+  rsw_contexts *x = NULL;
+  rsw_status s = rsw_contexts_new(&x);
+  if (s) return cli_fail(ctx, CLI_IO, "cannot start a context list: %s", rsw_strerror(s));
+  int rc = 0;
+  char what[160] = "";
+  for (size_t i = 0; i < n && !s; i++) {
+    const sweep_item *it = sorted[i];
+    size_t idx;
+    snprintf(what, sizeof what, "context '%s'", it->id);
+    if ((s = rsw_contexts_add(x, it->id, it->has_wl ? it->wl : 0, &idx))) break;
+    const cJSON *p;
+    cJSON_ArrayForEach(p, it->params) {
+      char *v = cJSON_PrintUnformatted(p);
+      s = v ? rsw_contexts_set_param(x, idx, p->string, v) : RSW_ERR_NOMEM;
+      free(v);
+      if (s) break;
+    }
+    cJSON_ArrayForEach(p, it->sensors) if (!s) s = rsw_contexts_add_sensor(x, idx, p->valuestring);
+    if (!s && it->spp >= 0) s = rsw_contexts_set_spp(x, idx, it->spp);
+    if (!s && it->seed >= 0) s = rsw_contexts_set_seed(x, idx, it->seed);
+  }
+  if (!s) {
+    snprintf(what, sizeof what, "--set");
+    const cJSON *p;
+    cJSON_ArrayForEach(p, job_params) {
+      char *v = cJSON_PrintUnformatted(p);
+      s = v ? rsw_contexts_set_job_param(x, p->string, v) : RSW_ERR_NOMEM;
+      free(v);
+      if (s) break;
+    }
+  }
+  size_t n_sensors;
+  const char *const *sensors = cli_get_all(a, "--sensor", &n_sensors);
+  for (size_t i = 0; i < n_sensors && !s; i++) {
+    snprintf(what, sizeof what, "--sensor '%s'", sensors[i]);
+    s = rsw_contexts_add_default_sensor(x, sensors[i]);
+  }
+  if (!s && spp > 0) snprintf(what, sizeof what, "--spp"), s = rsw_contexts_set_default_spp(x, spp);
+  if (!s) snprintf(what, sizeof what, "--seed"), s = rsw_contexts_set_job_seed(x, seed);
+  if (s) {
+    rc = s == RSW_ERR_NOMEM ? cli_fail(ctx, CLI_IO, "out of memory")
+                            : cli_usage(ctx, "%s: %s", what, rsw_strerror(s));
+    rsw_contexts_free(x);
+    return rc;
+  }
+  *out = x;
+  return 0;
+}
+
+/* Films of a finished job into dir/<context>/<sensor>.<ext>, one index
+ * entry each. Failed renders are reported and counted. */
+static int fetch_all(cli_ctx *ctx, const char *job, const char *dir, cli_format fmt, sweep_item **sorted, size_t n,
+                     const cJSON *job_params, index_entry **entries_out, size_t *n_out, size_t *failed_out) {
+  char *text = NULL;
+  rsw_status s = rsw_job_results(ctx->client, job, &text);
+  if (s) return cli_report(ctx, s, job);
+  cJSON *res = cJSON_Parse(text);
+  rsw_free(text);
+  const cJSON *list = cJSON_GetObjectItemCaseSensitive(res, "results");
+  if (!cJSON_IsArray(list)) {
+    cJSON_Delete(res);
+    return cli_fail(ctx, CLI_SERVER, "%s: the results answer has no results list", job);
+  }
+  size_t cap = (size_t)cJSON_GetArraySize(list);
+  index_entry *e = calloc(cap ? cap : 1, sizeof *e);
+  size_t ne = 0, failed = 0;
+  int rc = e ? 0 : cli_fail(ctx, CLI_IO, "out of memory");
+  const cJSON *r;
+  cJSON_ArrayForEach(r, list) {
+    if (rc) break;
+    const char *c = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "context"));
+    const char *sn = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "sensor"));
+    const char *state = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "state"));
+    if (!c || !sn || !state) {
+      rc = cli_fail(ctx, CLI_SERVER, "%s: a result without context, sensor or state", job);
+      break;
+    }
+    if (strcmp(state, "succeeded") != 0) {
+      const char *err = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "error"));
+      fprintf(stderr, "raysweep %s: %s/%s %s%s%s\n", ctx->cmd, c, sn, state, err ? ": " : "", err ? err : "");
+      failed++;
+      continue;
+    }
+    if (!cli_safe_component(c) || !cli_safe_component(sn)) {
+      rc = cli_fail(ctx, CLI_IO, "%s/%s: not usable as a file name", c, sn);
+      break;
+    }
+    char rel[600], path[4096];
+    snprintf(rel, sizeof rel, "%s", c);
+    snprintf(path, sizeof path, "%s/%s", dir, rel);
+    if (cli_mkdirs(path)) {
+      rc = cli_fail(ctx, CLI_IO, "cannot create '%s': %s", path, strerror(errno));
+      break;
+    }
+    snprintf(rel, sizeof rel, "%s/%s.%s", c, sn, cli_format_ext(fmt));
+    snprintf(path, sizeof path, "%s/%s", dir, rel);
+    rsw_film *film = NULL;
+    if ((s = rsw_job_fetch(ctx->client, job, c, sn, &film))) {
+      char what[300];
+      snprintf(what, sizeof what, "%s %s/%s", job, c, sn);
+      rc = cli_report(ctx, s, what);
+      break;
+    }
+    rc = cli_save_film(ctx, film, path, fmt);
+    rsw_film_free(film);
+    if (rc) break;
+    /* Index line: wavelength and seed as the server used them; params the
+     * effective overrides (job-level, then the context's own). */
+    cJSON *line = cJSON_CreateObject();
+    cJSON_AddStringToObject(line, "context", c);
+    cJSON_AddStringToObject(line, "sensor", sn);
+    const cJSON *wl = cJSON_GetObjectItemCaseSensitive(r, "wavelength");
+    sweep_item key, *kp = &key;
+    snprintf(key.id, sizeof key.id, "%s", c);
+    sweep_item **found = bsearch(&kp, sorted, n, sizeof *sorted, cmp_item_id);
+    if (cJSON_IsNumber(wl))
+      cJSON_AddNumberToObject(line, "wavelength", wl->valuedouble);
+    else if (found && (*found)->has_wl)
+      cJSON_AddNumberToObject(line, "wavelength", (*found)->wl);
+    else
+      cJSON_AddNullToObject(line, "wavelength");
+    cJSON *params = job_params ? cJSON_Duplicate(job_params, 1) : cJSON_CreateObject();
+    const cJSON *p;
+    if (found) cJSON_ArrayForEach(p, (*found)->params) {
+        cJSON_DeleteItemFromObjectCaseSensitive(params, p->string);
+        cJSON_AddItemToObject(params, p->string, cJSON_Duplicate(p, 1));
+      }
+    cJSON_AddItemToObject(line, "params", params);
+    const cJSON *seed = cJSON_GetObjectItemCaseSensitive(r, "seed");
+    if (cJSON_IsNumber(seed))
+      cJSON_AddNumberToObject(line, "seed", seed->valuedouble);
+    else
+      cJSON_AddNullToObject(line, "seed");
+    cJSON_AddStringToObject(line, "file", rel);
+    e[ne].line = line;
+    e[ne].context = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(line, "context"));
+    e[ne].sensor = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(line, "sensor"));
+    e[ne].order = ne;
+    ne++;
+  }
+  cJSON_Delete(res);
+  if (rc) {
+    entries_free(e, ne);
+    return rc;
+  }
+  *entries_out = e, *n_out = ne, *failed_out = failed;
+  return 0;
+}
+
+int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
+  const char *scene = a->pos[0], *dir = cli_get(a, "-o"), *contexts_file = cli_get(a, "--contexts");
+  size_t n_grids;
+  const char *const *grids = cli_get_all(a, "--grid", &n_grids);
+  if (!dir) return cli_usage(ctx, "missing -o DIR");
+  if (!contexts_file == !n_grids) return cli_usage(ctx, "give either --contexts FILE.jsonl or --grid NAME=START:STOP:STEP");
+  if (n_grids > MAX_GRIDS) return cli_usage(ctx, "at most %d --grid axes", MAX_GRIDS);
+  const char *v;
+  cli_format fmt = CLI_FMT_EXR;
+  if ((v = cli_get(a, "--format")) && (fmt = cli_format_from_name(v)) == CLI_FMT_NONE)
+    return cli_usage(ctx, "--format needs exr, npy or json (got '%s')", v);
+  unsigned long long spp = 0, seed = 0, shard_i = 0, shard_n = 1;
+  if ((v = cli_get(a, "--spp")) && (!cli_parse_u64(v, 1ull << 31, &spp) || spp == 0))
+    return cli_usage(ctx, "--spp needs a positive integer (got '%s')", v);
+  if ((v = cli_get(a, "--seed")) && !cli_parse_u64(v, (1ull << 53) - 1, &seed))
+    return cli_usage(ctx, "--seed needs an integer in [0, 2^53) (got '%s')", v);
+  if ((v = cli_get(a, "--shard"))) {
+    const char *slash = strchr(v, '/');
+    char ib[32];
+    if (!slash || (size_t)(slash - v) >= sizeof ib) return cli_usage(ctx, "--shard needs I/N (got '%s')", v);
+    memcpy(ib, v, (size_t)(slash - v));
+    ib[slash - v] = '\0';
+    if (!cli_parse_u64(ib, MAX_CONTEXTS, &shard_i) || !cli_parse_u64(slash + 1, MAX_CONTEXTS, &shard_n) ||
+        shard_n == 0 || shard_i >= shard_n)
+      return cli_usage(ctx, "--shard needs I/N with 0 <= I < N (got '%s')", v);
+  }
+  double timeout = 0;
+  if ((v = cli_get(a, "--timeout")) && (!cli_parse_double(v, &timeout) || !(timeout > 0)))
+    return cli_usage(ctx, "--timeout needs a positive number of seconds (got '%s')", v);
+  size_t n_sets;
+  const char *const *sets = cli_get_all(a, "--set", &n_sets);
+  cJSON *job_params = NULL;
+  int rc = cli_build_param_map(ctx, "--set", sets, n_sets, &job_params);
+  if (rc) return rc;
+
+  sweep_list l = {0};
+  grid_axis axes[MAX_GRIDS] = {{0}};
+  sweep_item **sorted = NULL;
+  rsw_contexts *x = NULL;
+  index_entry *entries = NULL;
+  size_t n_entries = 0, failed = 0;
+  char job[40] = "";
+  if (contexts_file) {
+    rc = read_contexts(ctx, contexts_file, shard_i, shard_n, &l);
+  } else {
+    for (size_t i = 0; i < n_grids && !rc; i++) {
+      rc = parse_grid(ctx, grids[i], &axes[i]);
+      for (size_t k = 0; k < i && !rc; k++)
+        if (strcmp(axes[k].name, axes[i].name) == 0) rc = cli_usage(ctx, "--grid %s given twice", axes[i].name);
+    }
+    if (!rc) rc = build_grid(ctx, axes, n_grids, shard_i, shard_n, &l);
+  }
+  if (rc) goto out;
+  if (cli_mkdirs(dir)) {
+    rc = cli_fail(ctx, CLI_IO, "cannot create '%s': %s", dir, strerror(errno));
+    goto out;
+  }
+  sorted = malloc((l.n ? l.n : 1) * sizeof *sorted);
+  if (!sorted) {
+    rc = cli_fail(ctx, CLI_IO, "out of memory");
+    goto out;
+  }
+  for (size_t i = 0; i < l.n; i++) sorted[i] = &l.items[i];
+  qsort(sorted, l.n, sizeof *sorted, cmp_item_id);
+  for (size_t i = 0; i < l.n; i++) {
+    if (!cli_safe_component(sorted[i]->id)) {
+      rc = cli_usage(ctx, "context id '%s' cannot name a directory", sorted[i]->id);
+      goto out;
+    }
+    if (i && strcmp(sorted[i]->id, sorted[i - 1]->id) == 0) {
+      rc = cli_usage(ctx, "context id '%s' appears twice", sorted[i]->id);
+      goto out;
+    }
+  }
+  if (l.n == 0) {
+    /* A shard past the end of a short list: nothing to submit, an empty
+     * index keeps `merge` simple. */
+    if (!ctx->quiet) fprintf(stderr, "raysweep sweep: shard %llu/%llu has no contexts\n", shard_i, shard_n);
+    rc = write_index(ctx, dir, NULL, 0);
+    goto out;
+  }
+  if ((rc = build_contexts(ctx, a, sorted, l.n, job_params, (long long)spp, (long long)seed, &x))) goto out;
+  /* Submit in list order (the builder saw them sorted by id, which for
+   * generated ids is the same order). */
+  rsw_status s = rsw_job_submit(ctx->client, scene, x, NULL, job);
+  if (s) {
+    rc = cli_report(ctx, s, scene);
+    goto out;
+  }
+  if (!ctx->quiet)
+    fprintf(stderr, "raysweep sweep: job %s: %zu contexts%s\n", job, l.n,
+            shard_n > 1 ? " (one shard)" : "");
+  rsw_job_status st;
+  rc = cli_wait_job(ctx, job, timeout, &st);
+  if (rc != CLI_OK && rc != CLI_JOB) goto out;
+  int job_rc = rc;
+  if ((rc = fetch_all(ctx, job, dir, fmt, sorted, l.n, job_params, &entries, &n_entries, &failed))) goto out;
+  if ((rc = write_index(ctx, dir, entries, n_entries))) goto out;
+  rc = job_rc;
+  if (ctx->json) {
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "job", job);
+    cJSON_AddStringToObject(o, "state", cli_job_state_name(st.state));
+    cJSON_AddStringToObject(o, "dir", dir);
+    cJSON_AddNumberToObject(o, "contexts", (double)l.n);
+    cJSON_AddNumberToObject(o, "films", (double)n_entries);
+    cJSON_AddNumberToObject(o, "failed", (double)failed);
+    char *t = cJSON_PrintUnformatted(o);
+    if (t) printf("%s\n", t);
+    free(t);
+    cJSON_Delete(o);
+  } else if (!ctx->quiet) {
+    fprintf(stderr, "raysweep sweep: %zu films in %s%s\n", n_entries, dir, failed ? " (some renders failed)" : "");
+  }
+out:
+  entries_free(entries, n_entries);
+  rsw_contexts_free(x);
+  free(sorted);
+  items_free(&l);
+  for (size_t i = 0; i < MAX_GRIDS; i++) free(axes[i].name);
+  cJSON_Delete(job_params);
+  return rc;
+}
+
+/* ---- merge ---- */
+
+/* A relative path inside a sweep directory: no leading '/', no "..". */
+static bool safe_relative(const char *p) {
+  if (!p || !*p || p[0] == '/') return false;
+  for (const char *s = p; *s;) {
+    const char *e = strchr(s, '/');
+    size_t n = e ? (size_t)(e - s) : strlen(s);
+    if (n == 0 || (n == 2 && s[0] == '.' && s[1] == '.')) return false;
+    s += n + (e ? 1 : 0);
+  }
+  return true;
+}
+
+static bool same_bytes(const char *a, const char *b) {
+  size_t la, lb;
+  char *x = cli_read_file(a, &la), *y = cli_read_file(b, &lb);
+  bool same = x && y && la == lb && memcmp(x, y, la) == 0;
+  free(x);
+  free(y);
+  return same;
+}
+
+/* Hard link when the file system allows it, else copy through a temp
+ * file. dst must not be src. */
+static int link_or_copy(const char *src, const char *dst) {
+  unlink(dst);
+  if (link(src, dst) == 0) return 0;
+  size_t len;
+  char *data = cli_read_file(src, &len);
+  if (!data) return -1;
+  int rc = cli_write_file_atomic(dst, data, len);
+  free(data);
+  return rc;
+}
+
+static int read_index(const cli_ctx *ctx, const char *dir, index_entry **e, size_t *n, size_t *cap) {
+  size_t pn = strlen(dir) + 16;
+  char *path = malloc(pn);
+  if (!path) return cli_fail(ctx, CLI_IO, "out of memory");
+  snprintf(path, pn, "%s/index.jsonl", dir);
+  char *text = cli_read_file(path, NULL);
+  if (!text) {
+    int rc = cli_fail(ctx, CLI_IO, "cannot read '%s': %s", path, strerror(errno));
+    free(path);
+    return rc;
+  }
+  int rc = 0;
+  size_t line = 0;
+  for (char *s = text, *nl; *s && !rc; s = nl ? nl + 1 : s + strlen(s)) {
+    nl = strchr(s, '\n');
+    if (nl) *nl = '\0';
+    line++;
+    if (!*s) continue;
+    cJSON *o = cJSON_Parse(s);
+    const char *c = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "context"));
+    const char *sn = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "sensor"));
+    const char *file = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "file"));
+    if (!c || !sn || !safe_relative(file)) {
+      cJSON_Delete(o);
+      rc = cli_fail(ctx, CLI_IO, "%s:%zu: not an index line (context, sensor and a relative file)", path, line);
+      break;
+    }
+    if (*n == *cap) {
+      size_t nc = *cap ? *cap * 2 : 64;
+      index_entry *ne = realloc(*e, nc * sizeof *ne);
+      if (!ne) {
+        cJSON_Delete(o);
+        rc = cli_fail(ctx, CLI_IO, "out of memory");
+        break;
+      }
+      *e = ne, *cap = nc;
+    }
+    index_entry *it = &(*e)[*n];
+    size_t sl = strlen(dir) + strlen(file) + 2;
+    it->src = malloc(sl);
+    if (!it->src) {
+      cJSON_Delete(o);
+      rc = cli_fail(ctx, CLI_IO, "out of memory");
+      break;
+    }
+    snprintf(it->src, sl, "%s/%s", dir, file);
+    it->line = o, it->context = c, it->sensor = sn, it->order = *n;
+    (*n)++;
+  }
+  free(text);
+  free(path);
+  return rc;
+}
+
+int cmd_merge(cli_ctx *ctx, const cli_args *a) {
+  const char *out = cli_get(a, "-o");
+  if (!out) return cli_usage(ctx, "missing -o DIR");
+  index_entry *e = NULL;
+  size_t n = 0, cap = 0, dups = 0;
+  int rc = 0;
+  for (size_t i = 0; i < a->n_pos && !rc; i++) rc = read_index(ctx, a->pos[i], &e, &n, &cap);
+  if (rc) goto done;
+  qsort(e, n, sizeof *e, cmp_entry);
+  /* Duplicates (a shard given twice, overlapping shards): the same film is
+   * kept once; different films for one (context, sensor) are refused. */
+  size_t kept = 0;
+  for (size_t i = 0; i < n; i++) {
+    if (kept && strcmp(e[kept - 1].context, e[i].context) == 0 && strcmp(e[kept - 1].sensor, e[i].sensor) == 0) {
+      if (!same_bytes(e[kept - 1].src, e[i].src)) {
+        rc = cli_fail(ctx, CLI_IO, "%s/%s is in two inputs with different films: %s and %s", e[i].context,
+                      e[i].sensor, e[kept - 1].src, e[i].src);
+        for (size_t k = i; k < n; k++) {
+          cJSON_Delete(e[k].line);
+          free(e[k].src);
+        }
+        n = kept;
+        goto done;
+      }
+      dups++;
+      cJSON_Delete(e[i].line);
+      free(e[i].src);
+      continue;
+    }
+    e[kept++] = e[i];
+  }
+  n = kept;
+  if (cli_mkdirs(out)) {
+    rc = cli_fail(ctx, CLI_IO, "cannot create '%s': %s", out, strerror(errno));
+    goto done;
+  }
+  for (size_t i = 0; i < n && !rc; i++) {
+    const char *file = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(e[i].line, "file"));
+    size_t dl = strlen(out) + strlen(file) + 2;
+    char *dst = malloc(dl);
+    if (!dst) {
+      rc = cli_fail(ctx, CLI_IO, "out of memory");
+      break;
+    }
+    snprintf(dst, dl, "%s/%s", out, file);
+    char *slash = strrchr(dst, '/');
+    *slash = '\0';
+    if (cli_mkdirs(dst)) rc = cli_fail(ctx, CLI_IO, "cannot create '%s': %s", dst, strerror(errno));
+    *slash = '/';
+    struct stat ss, ds;
+    if (!rc && stat(e[i].src, &ss) != 0) rc = cli_fail(ctx, CLI_IO, "cannot read '%s': %s", e[i].src, strerror(errno));
+    /* Merging into one of the inputs: the film is already in place. */
+    bool in_place = !rc && stat(dst, &ds) == 0 && ds.st_dev == ss.st_dev && ds.st_ino == ss.st_ino;
+    if (!rc && !in_place && link_or_copy(e[i].src, dst))
+      rc = cli_fail(ctx, CLI_IO, "cannot copy '%s' to '%s': %s", e[i].src, dst, strerror(errno));
+    free(dst);
+  }
+  if (!rc) rc = write_index(ctx, out, e, n);
+  if (!rc) {
+    if (ctx->json) {
+      cJSON *o = cJSON_CreateObject();
+      cJSON_AddStringToObject(o, "dir", out);
+      cJSON_AddNumberToObject(o, "films", (double)n);
+      cJSON_AddNumberToObject(o, "duplicates", (double)dups);
+      char *t = cJSON_PrintUnformatted(o);
+      if (t) printf("%s\n", t);
+      free(t);
+      cJSON_Delete(o);
+    } else if (!ctx->quiet)
+      fprintf(stderr, "raysweep merge: %zu films in %s%s\n", n, out, dups ? " (identical duplicates kept once)" : "");
+  }
+done:
+  entries_free(e, n);
+  return rc;
+}

@@ -1,0 +1,307 @@
+/* raysweep: the command-line client of raysweepd.
+ *
+ * Commands are one const table (redis' command table); the generic checks
+ * (global options, --help, option syntax, positional counts, the client
+ * connection settings) run in main before any handler, so a handler only
+ * sees a well-formed command line. */
+#include <errno.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "cli.h"
+
+#define DEFAULT_URL "http://127.0.0.1:8350"
+
+const cli_opt cli_opts_none[] = {{NULL}};
+
+static const cli_command commands[] = {
+    {"status", NULL, "", "server version, variants, limits and readiness", cli_opts_none, 0, 0, true, cmd_status},
+    {"scene", "push", "FILE [--variant mono|rgb]",
+     "upload a scene (JSON or Mitsuba XML) and the files it references; prints the scene id",
+     cli_opts_scene_push, 1, 1, true, cmd_scene_push},
+    {"scene", "ls", "", "list resident scenes", cli_opts_none, 0, 0, true, cmd_scene_ls},
+    {"scene", "show", "ID", "one scene's summary", cli_opts_none, 1, 1, true, cmd_scene_show},
+    {"scene", "rm", "ID [--force]", "unload a scene (--force cancels its jobs)", cli_opts_scene_rm, 1, 1, true,
+     cmd_scene_rm},
+    {"params", NULL, "ID [--match GLOB] [--class spectral|geometric|none]", "the scene's parameter table",
+     cli_opts_params, 1, 1, true, cmd_params},
+    {"set", NULL, "ID KEY=VALUE... [--if-match REV]",
+     "update parameters atomically (VALUE is JSON); prints the new revision", cli_opts_set, 2, (size_t)-1, true,
+     cmd_set},
+    {"render", NULL,
+     "ID [--sensor S] [--spp N] [--seed N] [--wavelength NM] [--set KEY=VALUE]... [--timeout S] "
+     "-o OUT.exr|.npy|.json",
+     "render one context synchronously (format by extension; .json is the film JSON)", cli_opts_render, 1, 1,
+     true, cmd_render},
+    {"sweep", NULL,
+     "ID (--contexts FILE.jsonl | --grid NAME=START:STOP:STEP...) [--set KEY=VALUE]... [--sensor S]... "
+     "[--spp N] [--seed N] [--shard I/N] [--format exr|npy|json] [--timeout S] -o DIR",
+     "submit a job over many contexts, show progress, fetch every film into DIR with DIR/index.jsonl",
+     cli_opts_sweep, 1, 1, true, cmd_sweep},
+    {"merge", NULL, "DIR... -o DIR", "join sweep shard directories into one (films hard-linked or copied)",
+     cli_opts_merge, 1, (size_t)-1, false, cmd_merge},
+    {"job", "ls", "", "list jobs", cli_opts_none, 0, 0, true, cmd_job_ls},
+    {"job", "show", "ID", "one job's state and progress", cli_opts_none, 1, 1, true, cmd_job_show},
+    {"job", "watch", "ID [--timeout S]", "follow a job's progress until it ends", cli_opts_job_watch, 1, 1, true,
+     cmd_job_watch},
+    {"job", "cancel", "ID", "cancel a job", cli_opts_none, 1, 1, true, cmd_job_cancel},
+    {"job", "rm", "ID", "delete a job and its results (cancels it if running)", cli_opts_none, 1, 1, true,
+     cmd_job_rm},
+    {"fetch", NULL, "JOB CONTEXT SENSOR -o FILE.exr|.npy|.json", "download one film of a job", cli_opts_fetch, 3,
+     3, true, cmd_fetch},
+};
+#define N_COMMANDS (sizeof commands / sizeof commands[0])
+
+static const char global_help[] =
+    "Global options (anywhere on the command line):\n"
+    "  --server URL       daemon base URL (env RAYSWEEP_URL; default " DEFAULT_URL ")\n"
+    "  --token-file F     bearer token read from F (env RAYSWEEP_TOKEN holds the token itself)\n"
+    "  --json             machine-readable output on stdout\n"
+    "  --quiet, -q        no progress or informational messages on stderr\n"
+    "  --help, -h         this help; `raysweep COMMAND --help` for one command\n"
+    "\n"
+    "Exit codes:\n"
+    "  0  ok\n"
+    "  1  the server said no (its problem is printed: code, message, place, candidates)\n"
+    "  2  usage error\n"
+    "  3  cannot connect to the daemon\n"
+    "  4  job failed or was cancelled (or some of its renders failed)\n"
+    "  5  timeout\n"
+    "  6  local I/O error (files, directories, inconsistent shard directories)\n";
+
+static void command_name(const cli_command *c, char *buf, size_t n) {
+  snprintf(buf, n, "%s%s%s", c->group, c->name ? " " : "", c->name ? c->name : "");
+}
+
+static void usage_list(FILE *f) {
+  fprintf(f, "usage: raysweep [global options] COMMAND [args]\n\nCommands:\n");
+  for (size_t i = 0; i < N_COMMANDS; i++) {
+    char name[32];
+    command_name(&commands[i], name, sizeof name);
+    fprintf(f, "  raysweep %s%s%s\n", name, commands[i].args[0] ? " " : "", commands[i].args);
+    fprintf(f, "      %s\n", commands[i].summary);
+  }
+  fputc('\n', f);
+  fputs(global_help, f);
+}
+
+static void command_help(const cli_command *c) {
+  char name[32];
+  command_name(c, name, sizeof name);
+  printf("usage: raysweep %s%s%s\n\n%s\n", name, c->args[0] ? " " : "", c->args, c->summary);
+  if (c->opts[0].name) {
+    printf("\nOptions:\n");
+    for (const cli_opt *o = c->opts; o->name; o++) {
+      char flag[64];
+      snprintf(flag, sizeof flag, "%s%s%s", o->name, o->arg ? " " : "", o->arg ? o->arg : "");
+      printf("  %-28s %s%s\n", flag, o->help ? o->help : "", o->repeat ? " (repeatable)" : "");
+    }
+  }
+  printf("\n%s", global_help);
+}
+
+/* ---- option access ---- */
+
+static int opt_index(const cli_args *a, const char *name) {
+  for (size_t i = 0; i < a->n_opts; i++)
+    if (strcmp(a->opts[i].name, name) == 0) return (int)i;
+  return -1;
+}
+
+const char *cli_get(const cli_args *a, const char *name) {
+  int i = opt_index(a, name);
+  if (i < 0 || a->n_vals[i] == 0) return NULL;
+  return a->vals[i][a->n_vals[i] - 1];
+}
+
+const char *const *cli_get_all(const cli_args *a, const char *name, size_t *n) {
+  int i = opt_index(a, name);
+  *n = i < 0 ? 0 : a->n_vals[i];
+  return i < 0 ? NULL : a->vals[i];
+}
+
+bool cli_has(const cli_args *a, const char *name) { return cli_get(a, name) != NULL; }
+
+/* Parse a command's arguments against its option table. Returns 0, or a
+ * usage exit code after printing. Every values array holds at most argc
+ * entries, so it is sized once. */
+static int parse_args(cli_ctx *ctx, const cli_command *c, int argc, char **argv, cli_args *a) {
+  memset(a, 0, sizeof *a);
+  a->opts = c->opts;
+  while (c->opts[a->n_opts].name) a->n_opts++;
+  a->pos = calloc((size_t)argc + 1, sizeof *a->pos);
+  for (size_t i = 0; i < a->n_opts; i++) a->vals[i] = calloc((size_t)argc + 1, sizeof(char *));
+  bool only_pos = false;
+  for (int i = 0; i < argc; i++) {
+    const char *arg = argv[i];
+    if (!only_pos && strcmp(arg, "--") == 0) {
+      only_pos = true;
+      continue;
+    }
+    if (only_pos || arg[0] != '-' || arg[1] == '\0') {
+      a->pos[a->n_pos++] = arg;
+      continue;
+    }
+    const char *eq = strchr(arg, '=');
+    size_t len = eq && strncmp(arg, "--", 2) == 0 ? (size_t)(eq - arg) : strlen(arg);
+    int k = -1;
+    for (size_t j = 0; j < a->n_opts; j++)
+      if (strlen(c->opts[j].name) == len && strncmp(c->opts[j].name, arg, len) == 0) k = (int)j;
+    if (k < 0) return cli_usage(ctx, "unknown option '%.*s' (see raysweep %s --help)", (int)len, arg, ctx->cmd);
+    const cli_opt *o = &c->opts[k];
+    const char *val = "";
+    if (o->arg) {
+      if (len < strlen(arg))
+        val = arg + len + 1;
+      else if (i + 1 < argc)
+        val = argv[++i];
+      else
+        return cli_usage(ctx, "%s needs a value", o->name);
+    } else if (len < strlen(arg)) {
+      return cli_usage(ctx, "%s takes no value", o->name);
+    }
+    if (!o->repeat) a->n_vals[k] = 0;
+    a->vals[k][a->n_vals[k]++] = val;
+  }
+  if (a->n_pos < c->min_pos)
+    return cli_usage(ctx, "missing arguments (usage: raysweep %s %s)", ctx->cmd, c->args);
+  if (a->n_pos > c->max_pos)
+    return cli_usage(ctx, "unexpected argument '%s' (usage: raysweep %s %s)", a->pos[c->max_pos], ctx->cmd, c->args);
+  return 0;
+}
+
+static void free_args(cli_args *a) {
+  free(a->pos);
+  for (size_t i = 0; i < a->n_opts; i++) free(a->vals[i]);
+}
+
+/* Token: --token-file wins over RAYSWEEP_TOKEN; trailing white space (the
+ * newline of `echo secret > F`) is not part of it. */
+static int read_token(const cli_ctx *ctx, const char *token_file, char **out) {
+  *out = NULL;
+  if (token_file) {
+    size_t len;
+    char *t = cli_read_file(token_file, &len);
+    if (!t) return cli_fail(ctx, CLI_IO, "--token-file: cannot read '%s': %s", token_file, strerror(errno));
+    while (len && (t[len - 1] == '\n' || t[len - 1] == '\r' || t[len - 1] == ' ' || t[len - 1] == '\t'))
+      t[--len] = '\0';
+    if (!len) {
+      free(t);
+      return cli_fail(ctx, CLI_USAGE, "--token-file: '%s' is empty", token_file);
+    }
+    *out = t;
+    return 0;
+  }
+  const char *env = getenv("RAYSWEEP_TOKEN");
+  if (env && *env && !(*out = strdup(env))) return cli_fail(ctx, CLI_IO, "out of memory");
+  return 0;
+}
+
+int main(int argc, char **argv) {
+  cli_ctx ctx = {.cmd = "", .stderr_tty = isatty(STDERR_FILENO) == 1};
+  const char *server = NULL, *token_file = NULL;
+  bool help = false;
+  /* Global options anywhere before "--": take them out of argv. */
+  char **rest = calloc((size_t)argc + 1, sizeof *rest);
+  int n_rest = 0;
+  if (!rest) return CLI_IO;
+  bool after_dashes = false;
+  for (int i = 1; i < argc; i++) {
+    const char *arg = argv[i];
+    if (after_dashes || strcmp(arg, "--") == 0) {
+      after_dashes = true;
+      rest[n_rest++] = argv[i];
+    } else if (strcmp(arg, "--json") == 0) {
+      ctx.json = true;
+    } else if (strcmp(arg, "--quiet") == 0 || strcmp(arg, "-q") == 0) {
+      ctx.quiet = true;
+    } else if (strcmp(arg, "--help") == 0 || strcmp(arg, "-h") == 0) {
+      help = true;
+    } else if (strcmp(arg, "--server") == 0 || strcmp(arg, "--token-file") == 0) {
+      if (i + 1 >= argc) {
+        free(rest);
+        return cli_usage(&ctx, "%s needs a value", arg);
+      }
+      *(arg[2] == 's' ? &server : &token_file) = argv[++i];
+    } else if (strncmp(arg, "--server=", 9) == 0) {
+      server = arg + 9;
+    } else if (strncmp(arg, "--token-file=", 13) == 0) {
+      token_file = arg + 13;
+    } else {
+      rest[n_rest++] = argv[i];
+    }
+  }
+  int rc;
+  if (n_rest > 0 && strcmp(rest[0], "help") == 0) { /* "raysweep help [CMD]" */
+    help = true;
+    memmove(rest, rest + 1, (size_t)(n_rest - 1) * sizeof *rest);
+    n_rest--;
+  }
+  if (n_rest == 0) {
+    usage_list(help ? stdout : stderr);
+    free(rest);
+    return help ? CLI_OK : CLI_USAGE;
+  }
+  /* Look the command up: one word, or group + word. */
+  const cli_command *cmd = NULL;
+  bool group_known = false;
+  for (size_t i = 0; i < N_COMMANDS; i++) {
+    if (strcmp(commands[i].group, rest[0]) != 0) continue;
+    group_known = true;
+    if (!commands[i].name || (n_rest > 1 && strcmp(commands[i].name, rest[1]) == 0)) {
+      cmd = &commands[i];
+      break;
+    }
+  }
+  if (!cmd) {
+    if (group_known && help && n_rest == 1) {
+      printf("raysweep %s subcommands:\n", rest[0]);
+      for (size_t i = 0; i < N_COMMANDS; i++)
+        if (strcmp(commands[i].group, rest[0]) == 0)
+          printf("  raysweep %s %s%s%s\n      %s\n", commands[i].group, commands[i].name,
+                 commands[i].args[0] ? " " : "", commands[i].args, commands[i].summary);
+      free(rest);
+      return CLI_OK;
+    }
+    if (group_known && n_rest > 1)
+      fprintf(stderr, "raysweep %s: unknown subcommand '%s' (see raysweep %s --help)\n", rest[0], rest[1], rest[0]);
+    else if (group_known)
+      fprintf(stderr, "raysweep %s: missing a subcommand (see raysweep %s --help)\n", rest[0], rest[0]);
+    else
+      fprintf(stderr, "raysweep: unknown command '%s' (see raysweep --help)\n", rest[0]);
+    free(rest);
+    return CLI_USAGE;
+  }
+  char name[32];
+  command_name(cmd, name, sizeof name);
+  ctx.cmd = name;
+  if (help) {
+    command_help(cmd);
+    free(rest);
+    return CLI_OK;
+  }
+  int skip = cmd->name ? 2 : 1;
+  cli_args args;
+  rc = parse_args(&ctx, cmd, n_rest - skip, rest + skip, &args);
+  char *token = NULL;
+  if (!rc && cmd->needs_client) {
+    ctx.server_url = server ? server : getenv("RAYSWEEP_URL");
+    if (!ctx.server_url || !*ctx.server_url) ctx.server_url = DEFAULT_URL;
+    rc = read_token(&ctx, token_file, &token);
+    if (!rc) {
+      rsw_client_opts o = {.size = sizeof o, .base_url = ctx.server_url, .token = token};
+      rsw_status s = rsw_client_new(&o, &ctx.client);
+      if (s) rc = cli_fail(&ctx, s == RSW_ERR_INVALID ? CLI_USAGE : CLI_IO, "cannot create a client for '%s': %s",
+                           ctx.server_url, rsw_strerror(s));
+    }
+  }
+  if (!rc) rc = cmd->run(&ctx, &args);
+  rsw_client_free(ctx.client);
+  free(token);
+  free_args(&args);
+  free(rest);
+  return rc;
+}

@@ -1,0 +1,252 @@
+/* Films: decoding the daemon's JSON film, the accessors, and saving as
+ * OpenEXR (through the project's one EXR writer, server/kernel/image_exr.c,
+ * linked into the library) or as NumPy .npy. */
+#include <cjson/cJSON.h>
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "internal.h"
+#include "kernel/image_exr.h"
+
+/* Most channels a film may have (the EXR writer's cap as well). */
+#define FILM_MAX_CHANNELS 64
+
+struct rsw_film {
+  int width, height, channels;
+  char **names; /* channels entries */
+  float *data;  /* H * W * C, HWC, row 0 = top */
+  char *meta;   /* JSON object text */
+};
+
+int rsw_film_width(const rsw_film *f) {
+  return f ? f->width : 0;
+}
+int rsw_film_height(const rsw_film *f) {
+  return f ? f->height : 0;
+}
+int rsw_film_channels(const rsw_film *f) {
+  return f ? f->channels : 0;
+}
+const char *rsw_film_channel_name(const rsw_film *f, int i) {
+  return f && i >= 0 && i < f->channels ? f->names[i] : NULL;
+}
+const float *rsw_film_data(const rsw_film *f) {
+  return f ? f->data : NULL;
+}
+const char *rsw_film_meta(const rsw_film *f) {
+  return f ? f->meta : NULL;
+}
+
+void rsw_film_free(rsw_film *f) {
+  if (!f) return;
+  for (int i = 0; f->names && i < f->channels; i++) free(f->names[i]);
+  free(f->names);
+  free(f->data);
+  free(f->meta);
+  free(f);
+}
+
+rsw_status film_from_json(rsw_client *c, const char *text, size_t len, const char *what, rsw_film **out) {
+  cJSON *doc = cJSON_ParseWithLength(text, len);
+  if (!doc) return client_fail(c, RSW_ERR_PARSE, "%s: the film is not JSON", what);
+  const cJSON *w = cJSON_GetObjectItemCaseSensitive(doc, "width");
+  const cJSON *h = cJSON_GetObjectItemCaseSensitive(doc, "height");
+  const cJSON *ch = cJSON_GetObjectItemCaseSensitive(doc, "channels");
+  const cJSON *layout = cJSON_GetObjectItemCaseSensitive(doc, "layout");
+  const cJSON *data = cJSON_GetObjectItemCaseSensitive(doc, "data");
+  const cJSON *meta = cJSON_GetObjectItemCaseSensitive(doc, "meta");
+  rsw_status s = RSW_OK;
+  int nc = cJSON_GetArraySize(ch);
+  if (!cJSON_IsNumber(w) || !cJSON_IsNumber(h) || w->valuedouble < 1 || h->valuedouble < 1 ||
+      w->valuedouble > 1e6 || h->valuedouble > 1e6 || !cJSON_IsArray(ch) || nc < 1 ||
+      nc > FILM_MAX_CHANNELS || !cJSON_IsArray(data) ||
+      (layout && !(cJSON_IsString(layout) && strcmp(layout->valuestring, "HWC") == 0))) {
+    cJSON_Delete(doc);
+    return client_fail(c, RSW_ERR_PARSE, "%s: not a film (width, height, channels, layout \"HWC\", data)",
+                       what);
+  }
+  int width = w->valueint, height = h->valueint;
+  size_t n = (size_t)width * (size_t)height * (size_t)nc;
+  if (n > EXR_MAX_SAMPLES) {
+    cJSON_Delete(doc);
+    return client_fail(c, RSW_ERR_LIMIT, "%s: film of %zu samples is too large", what, n);
+  }
+  rsw_film *f = calloc(1, sizeof *f);
+  if (f) {
+    f->width = width;
+    f->height = height;
+    f->names = calloc((size_t)nc, sizeof *f->names);
+    f->data = malloc(n * sizeof *f->data);
+    f->meta = cJSON_IsObject(meta) ? cJSON_PrintUnformatted(meta) : NULL;
+    if (!f->meta) {
+      f->meta = malloc(3);
+      if (f->meta) strcpy(f->meta, "{}");
+    }
+  }
+  if (!f || !f->names || !f->data || !f->meta) {
+    rsw_film_free(f);
+    cJSON_Delete(doc);
+    return client_fail(c, RSW_ERR_NOMEM, "%s: no memory for a %dx%dx%d film", what, width, height, nc);
+  }
+  const cJSON *it;
+  cJSON_ArrayForEach(it, ch) {
+    if (!cJSON_IsString(it)) {
+      s = client_fail(c, RSW_ERR_PARSE, "%s: channel %d is not a name", what, f->channels);
+      break;
+    }
+    f->names[f->channels] = malloc(strlen(it->valuestring) + 1);
+    if (!f->names[f->channels]) {
+      s = client_fail(c, RSW_ERR_NOMEM, "out of memory");
+      break;
+    }
+    strcpy(f->names[f->channels++], it->valuestring);
+  }
+  size_t k = 0;
+  if (!s) {
+    cJSON_ArrayForEach(it, data) {
+      if (k >= n) break;
+      /* The daemon writes non-finite samples as null. */
+      if (cJSON_IsNumber(it))
+        f->data[k++] = (float)it->valuedouble;
+      else if (cJSON_IsNull(it))
+        f->data[k++] = NAN;
+      else
+        break;
+    }
+    if (k != n || cJSON_GetArraySize(data) != (int)n)
+      s = client_fail(c, RSW_ERR_PARSE, "%s: data holds %d numbers, want %dx%dx%d = %zu", what,
+                      cJSON_GetArraySize(data), height, width, nc, n);
+  }
+  cJSON_Delete(doc);
+  if (s) {
+    rsw_film_free(f);
+    return s;
+  }
+  *out = f;
+  return RSW_OK;
+}
+
+/* ---- saving ------------------------------------------------------------------------- */
+
+/* The film's metadata as EXR string attributes (strings as they are,
+ * numbers and booleans as JSON text; null and nested values skipped), the
+ * same keys the daemon's own EXR answers carry. */
+rsw_status rsw_film_save_exr(const rsw_film *f, const char *path) {
+  if (!f || !path) return RSW_ERR_INVALID;
+  cJSON *meta = cJSON_Parse(f->meta);
+  int n_meta = cJSON_GetArraySize(meta);
+  exr_meta_entry *entries = calloc((size_t)(n_meta > 0 ? n_meta : 1), sizeof *entries);
+  char **owned = calloc((size_t)(n_meta > 0 ? n_meta : 1), sizeof *owned);
+  rsw_status s = entries && owned ? RSW_OK : RSW_ERR_NOMEM;
+  size_t count = 0;
+  const cJSON *it;
+  if (!s && cJSON_IsObject(meta)) {
+    cJSON_ArrayForEach(it, meta) {
+      const char *v = NULL;
+      if (cJSON_IsString(it))
+        v = it->valuestring;
+      else if (cJSON_IsNumber(it) || cJSON_IsBool(it))
+        v = owned[count] = cJSON_PrintUnformatted(it);
+      if (!v || !it->string) continue;
+      entries[count].key = it->string;
+      entries[count].value = v;
+      count++;
+    }
+  }
+  if (!s) {
+    exr_meta m = {.entries = entries, .count = count};
+    rsw_err err = {0};
+    s = exr_write_image(path, f->width, f->height, f->channels, (const char *const *)f->names, f->data, false,
+                        &m, &err);
+  }
+  for (int i = 0; owned && i < n_meta; i++) free(owned[i]);
+  free(owned);
+  free(entries);
+  cJSON_Delete(meta);
+  return s;
+}
+
+static void put_le32(unsigned char *p, float v) {
+  uint32_t u;
+  memcpy(&u, &v, 4);
+  p[0] = (unsigned char)u;
+  p[1] = (unsigned char)(u >> 8);
+  p[2] = (unsigned char)(u >> 16);
+  p[3] = (unsigned char)(u >> 24);
+}
+
+/* NPY format 1.0: magic "\x93NUMPY", version 1.0, a little-endian u16
+ * header length, then a Python dict literal padded with spaces and ended
+ * by '\n' so that the data starts at a multiple of 64 bytes (NumPy's
+ * ARRAY_ALIGN), then the samples, little-endian float32, C order. */
+rsw_status rsw_film_save_npy(const rsw_film *f, const char *path) {
+  if (!f || !path) return RSW_ERR_INVALID;
+  char dict[160];
+  int dn = snprintf(dict, sizeof dict, "{'descr': '<f4', 'fortran_order': False, 'shape': (%d, %d, %d), }",
+                    f->height, f->width, f->channels);
+  if (dn < 0 || (size_t)dn >= sizeof dict) return RSW_ERR_INVALID;
+  size_t header = (10 + (size_t)dn + 1 + 63) / 64 * 64;
+  unsigned char head[256];
+  memcpy(head, "\x93NUMPY\x01\x00", 8);
+  head[8] = (unsigned char)((header - 10) & 0xff);
+  head[9] = (unsigned char)((header - 10) >> 8);
+  memcpy(head + 10, dict, (size_t)dn);
+  memset(head + 10 + dn, ' ', header - 10 - (size_t)dn - 1);
+  head[header - 1] = '\n';
+
+  size_t tlen = strlen(path) + 32;
+  char *tmp = malloc(tlen);
+  if (!tmp) return RSW_ERR_NOMEM;
+  snprintf(tmp, tlen, "%s.tmp.%ld", path, (long)getpid());
+  FILE *out = fopen(tmp, "wb");
+  if (!out) {
+    free(tmp);
+    return RSW_ERR_IO;
+  }
+  bool ok = fwrite(head, 1, header, out) == header;
+  size_t n = (size_t)f->width * (size_t)f->height * (size_t)f->channels;
+  unsigned char chunk[4096];
+  for (size_t i = 0; i < n && ok;) {
+    size_t k = 0;
+    for (; k < sizeof chunk / 4 && i < n; k++, i++) put_le32(chunk + 4 * k, f->data[i]);
+    ok = fwrite(chunk, 4, k, out) == k;
+  }
+  ok = (fflush(out) == 0) && ok;
+  ok = (fclose(out) == 0) && ok;
+  if (ok) ok = rename(tmp, path) == 0;
+  if (!ok) unlink(tmp);
+  free(tmp);
+  return ok ? RSW_OK : RSW_ERR_IO;
+}
+
+/* ---- one render ------------------------------------------------------------------------ */
+
+rsw_status rsw_render(rsw_client *c, const char *id, const char *request_json, rsw_film **film_out) {
+  if (!c) return RSW_ERR_INVALID;
+  client_clear_error(c);
+  char esc[256], path[300];
+  if (!id || !client_escape(id, esc, sizeof esc))
+    return client_fail(c, RSW_ERR_INVALID, "scene id missing or too long");
+  if (!film_out) return client_fail(c, RSW_ERR_INVALID, "render: film_out is NULL");
+  snprintf(path, sizeof path, "/v1/scenes/%s:render", esc);
+  const char *body = request_json && *request_json ? request_json : "{}";
+  http_resp r;
+  rsw_status s = http_request(c,
+                              &(http_req){.method = "POST",
+                                          .path = path,
+                                          .content_type = "application/json",
+                                          .body = body,
+                                          .body_len = strlen(body),
+                                          .accept = "application/json"},
+                              &r);
+  if (s) return s;
+  char what[320];
+  snprintf(what, sizeof what, "POST %s", path);
+  s = film_from_json(c, r.body, r.len, what, film_out);
+  http_resp_free(&r);
+  return s;
+}

@@ -1,0 +1,116 @@
+/* libraysweep internals shared by the files of client/lib/. Not installed.
+ *
+ * Layering: http.c is the one file that talks to libcurl (it sees CURL
+ * only through the opaque `void *curl` below); client.c holds the handle's
+ * life cycle, the last-error slot and the small GET/DELETE wrappers;
+ * scene.c, film.c and jobs.c build requests and decode answers with cJSON. */
+#ifndef RSW_CLIENT_INTERNAL_H
+#define RSW_CLIENT_INTERNAL_H
+
+#include <stdarg.h>
+#include <stdbool.h>
+#include <stddef.h>
+
+#include "raysweep/client.h"
+
+/* Caps on what the client accepts, so a confused server cannot make it
+ * allocate without bound. */
+#define CLIENT_MAX_BODY      ((size_t)1 << 31) /* one response body: 2 GiB */
+#define CLIENT_MAX_SSE_EVENT ((size_t)1 << 20) /* one server-sent event: 1 MiB */
+
+struct rsw_client {
+  char *base_url; /* without a trailing '/' */
+  char *token;    /* NULL: no Authorization header */
+  double connect_timeout_s, timeout_s;
+  int max_retries; /* >= 0 after rsw_client_new */
+  double retry_backoff_s;
+  void *curl; /* CURL *: one easy handle, so connections are kept alive */
+
+  /* The last error: info points into the buffers below. */
+  rsw_error_info info;
+  char code[64];
+  char message[1024];
+  char pointer[256];
+  char key[256];
+  char candidates[3][256];
+};
+
+/* ---- the last-error slot (client.c) ---------------------------------------- */
+
+/* Reset to "no error". */
+void client_clear_error(rsw_client *c);
+/* Record a local failure (no HTTP answer) and return s: "report and return"
+ * in one statement. */
+rsw_status client_fail(rsw_client *c, rsw_status s, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
+/* Record an HTTP error answer (problem+json when body parses as one, else
+ * the HTTP status alone); what names the request ("GET /v1/scenes/x").
+ * Returns the mapped status. */
+rsw_status client_fail_http(rsw_client *c, long http_status, const char *body, size_t len, const char *what);
+/* Status for an HTTP error status without a usable problem code. */
+rsw_status client_status_for_http(long http_status);
+
+/* ---- HTTP (http.c) ---------------------------------------------------------- */
+
+typedef struct http_req {
+  const char *method;       /* "GET", "POST", "PUT", "PATCH", "DELETE", "HEAD" */
+  const char *path;         /* appended to base_url; already percent-encoded */
+  const char *content_type; /* of body; NULL when there is none */
+  const void *body;
+  size_t body_len;
+  const char *accept;          /* NULL: application/json */
+  const char *if_match;        /* If-Match value, or NULL */
+  const char *idempotency_key; /* or NULL */
+  const char *last_event_id;   /* or NULL */
+} http_req;
+
+typedef struct http_resp {
+  long status;
+  char *body; /* NUL-terminated (owned; http_resp_free); may be empty */
+  size_t len;
+  char etag[80];
+} http_resp;
+
+/* One request with the client's retry policy: retried with exponential
+ * backoff on connection errors, 429 and 503 (Retry-After wins). RSW_OK
+ * with *r filled on a 2xx answer; otherwise the last error is set (from
+ * the problem+json body) and *r is left empty. */
+rsw_status http_request(rsw_client *c, const http_req *q, http_resp *r);
+void http_resp_free(http_resp *r);
+
+/* Server-sent events: on_line gets each line of a 2xx text/event-stream
+ * body without its end of line; returning non-zero stops the stream.
+ * timeout_s <= 0: none. Returns RSW_OK when the server ended the stream or
+ * on_line stopped it (*stopped tells which), RSW_ERR_UNAVAILABLE when the
+ * connection dropped or could not be made, RSW_ERR_TIMEOUT, or the mapped
+ * status of an HTTP error answer (last error set). *not_a_stream is set
+ * when a 2xx answer was not text/event-stream (nothing passed to on_line).
+ * No retries here: the caller reconnects with Last-Event-ID. */
+typedef int (*http_line_fn)(void *user, const char *line, size_t len);
+rsw_status http_stream(rsw_client *c, const http_req *q, double timeout_s, http_line_fn on_line, void *user,
+                       bool *stopped, bool *not_a_stream);
+
+/* Create / destroy the easy handle of a client (curl's global init is done
+ * once per process, thread-safely). */
+rsw_status http_client_init(rsw_client *c);
+void http_client_cleanup(rsw_client *c);
+
+/* ---- helpers (client.c) ---------------------------------------------------- */
+
+/* Percent-encode s (everything outside A-Z a-z 0-9 - . _ ~) into out;
+ * false when it does not fit. */
+bool client_escape(const char *s, char *out, size_t cap);
+/* GET path and hand back the body as an owned string (rsw_free). */
+rsw_status client_get_text(rsw_client *c, const char *path, char **json_out);
+/* Monotonic seconds. */
+double client_now_s(void);
+/* Sleep s seconds (interrupted sleeps resume). */
+void client_sleep_s(double s);
+
+/* ---- films (film.c) -------------------------------------------------------- */
+
+/* Decode a JSON film answer ({width, height, channels, layout, data,
+ * meta}); what names the request in errors. */
+rsw_status film_from_json(rsw_client *c, const char *text, size_t len, const char *what, rsw_film **out);
+
+#endif
