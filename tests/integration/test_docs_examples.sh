@@ -104,6 +104,23 @@ else
   ok
   run sweep.c "$tmp/sweep"
 fi
+# The way the README builds it: `make install PREFIX=...` (headers, .a, .so,
+# raysweep.pc), then pkg-config. (The make variables of a `make test` that
+# runs this script are dropped, so the inner make is a plain one.)
+if env -u MAKEFLAGS -u MFLAGS -u MAKELEVEL make -s -C "$root" install PREFIX="$tmp/prefix" SAN="${SAN:-}" \
+  >"$tmp/install.log" 2>&1; then
+  ok
+  if cc "${cflags[@]}" "$examples/sweep.c" \
+    $(PKG_CONFIG_PATH="$tmp/prefix/lib/pkgconfig" pkg-config --cflags --libs raysweep) \
+    -Wl,-rpath,"$tmp/prefix/lib" -o "$tmp/sweep_pc" 2>"$tmp/cc_pc.err"; then
+    ok
+    run sweep.c-pkg-config "$tmp/sweep_pc"
+  else
+    bad "sweep.c does not build with pkg-config --cflags --libs raysweep: $(head -n 20 "$tmp/cc_pc.err")"
+  fi
+else
+  bad "make install PREFIX=$tmp/prefix: $(tail -n 10 "$tmp/install.log")"
+fi
 
 # ---- the raysweep CLI -----------------------------------------------------------
 if [ ! -x "$bin/raysweep" ]; then
