@@ -94,16 +94,23 @@ void cli_format_double(char *buf, size_t n, double v);
 
 /* Split KEY=VALUE: VALUE is JSON; a value that is not JSON is an error
  * (quote strings). On success *key_out is owned (free). */
-int cli_split_set(const cli_ctx *ctx, const char *opt, const char *kv, char **key_out, const char **value_out);
+int cli_split_set(const cli_ctx *ctx, const char *opt, const char *kv, char **key_out,
+                  const char **value_out);
 
 /* Build {"key": value, ...} from KEY=VALUE words (VALUE is JSON text;
  * opt names the flag in messages). Returns 0 with *out owned
  * (cJSON_Delete), or an exit code after printing. */
 struct cJSON;
-int cli_build_param_map(const cli_ctx *ctx, const char *opt, const char *const *sets, size_t n, struct cJSON **out);
+int cli_build_param_map(const cli_ctx *ctx, const char *opt, const char *const *sets, size_t n,
+                        struct cJSON **out);
 
 /* Film file formats, chosen by extension. */
-typedef enum cli_format { CLI_FMT_NONE, CLI_FMT_EXR, CLI_FMT_NPY, CLI_FMT_JSON } cli_format;
+typedef enum cli_format {
+  CLI_FMT_NONE,
+  CLI_FMT_EXR,
+  CLI_FMT_NPY,
+  CLI_FMT_JSON
+} cli_format;
 cli_format cli_format_from_path(const char *path);
 cli_format cli_format_from_name(const char *name);
 const char *cli_format_ext(cli_format f);
@@ -128,7 +135,8 @@ typedef struct cli_progress {
   bool drawn;
 } cli_progress;
 void cli_progress_init(cli_progress *p, const cli_ctx *ctx);
-int cli_progress_cb(void *user, const char *context, const char *sensor, size_t done, size_t total, int failed);
+int cli_progress_cb(void *user, const char *context, const char *sensor, size_t done, size_t total,
+                    int failed);
 void cli_progress_finish(cli_progress *p);
 double cli_now(void);
 

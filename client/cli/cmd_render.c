@@ -46,8 +46,9 @@ static void report_written(const cli_ctx *ctx, const rsw_film *f, const char *pa
     free(t);
     cJSON_Delete(o);
   } else if (!ctx->quiet) {
-    fprintf(stderr, "raysweep %s: wrote %s (%dx%d, %d channel%s, %.3f s)\n", ctx->cmd, path, rsw_film_width(f),
-            rsw_film_height(f), rsw_film_channels(f), rsw_film_channels(f) == 1 ? "" : "s", seconds);
+    fprintf(stderr, "raysweep %s: wrote %s (%dx%d, %d channel%s, %.3f s)\n", ctx->cmd, path,
+            rsw_film_width(f), rsw_film_height(f), rsw_film_channels(f), rsw_film_channels(f) == 1 ? "" : "s",
+            seconds);
   }
 }
 

@@ -129,7 +129,8 @@ int cmd_scene_ls(cli_ctx *ctx, const cli_args *a) {
         char sensors[256];
         join_strings(cJSON_GetObjectItemCaseSensitive(sc, "sensors"), ",", sensors, sizeof sensors);
         printf("%s  %-4s  rev %-4.0f  params %-5.0f  jobs %-3.0f  sensors %s\n", jstr(sc, "id"),
-               jstr(sc, "variant"), jnum(sc, "revision"), jnum(sc, "params"), jnum(sc, "jobs_active"), sensors);
+               jstr(sc, "variant"), jnum(sc, "revision"), jnum(sc, "params"), jnum(sc, "jobs_active"),
+               sensors);
       }
       cJSON_Delete(j);
     }
@@ -250,7 +251,8 @@ int cmd_set(cli_ctx *ctx, const cli_args *a) {
   const char *im = cli_get(a, "--if-match");
   if (im) {
     unsigned long long v;
-    if (!cli_parse_u64(im, INT64_MAX, &v)) return cli_usage(ctx, "--if-match needs a revision number (got '%s')", im);
+    if (!cli_parse_u64(im, INT64_MAX, &v))
+      return cli_usage(ctx, "--if-match needs a revision number (got '%s')", im);
     if_match = (int64_t)v;
   }
   cJSON *map;

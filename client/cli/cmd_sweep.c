@@ -21,7 +21,8 @@
 
 const cli_opt cli_opts_sweep[] = {
     {"--contexts", "FILE.jsonl", false, "one Context object per line (id optional)"},
-    {"--grid", "NAME=START:STOP:STEP", true, "a range, end included; NAME is wavelength or a parameter key; several form a product"},
+    {"--grid", "NAME=START:STOP:STEP", true,
+     "a range, end included; NAME is wavelength or a parameter key; several form a product"},
     {"--set", "KEY=VALUE", true, "job-level parameter for every context (VALUE is JSON)"},
     {"--sensor", "S", true, "sensor to render (default: every sensor)"},
     {"--spp", "N", false, "samples per pixel"},
@@ -40,14 +41,14 @@ const cli_opt cli_opts_merge[] = {
 /* The unsharded list may be longer than one job allows (the point of
  * --shard), so the local cap is larger than the server's 100000. */
 #define MAX_CONTEXTS 10000000ull
-#define MAX_GRIDS 16
+#define MAX_GRIDS    16
 
 typedef struct sweep_item {
   char id[72];
   bool has_wl;
   double wl;
-  cJSON *params;  /* object or NULL, owned */
-  cJSON *sensors; /* array of strings or NULL, owned */
+  cJSON *params;       /* object or NULL, owned */
+  cJSON *sensors;      /* array of strings or NULL, owned */
   long long spp, seed; /* -1: unset */
 } sweep_item;
 
@@ -118,7 +119,8 @@ static int parse_grid(const cli_ctx *ctx, const char *spec, grid_axis *g) {
     rc = cli_usage(ctx, "--grid %s: the range needs START:STOP:STEP", spec);
   } else {
     *p1 = *p2 = '\0';
-    if (!cli_parse_double(nums, &start) || !cli_parse_double(p1 + 1, &stop) || !cli_parse_double(p2 + 1, &step))
+    if (!cli_parse_double(nums, &start) || !cli_parse_double(p1 + 1, &stop) ||
+        !cli_parse_double(p2 + 1, &step))
       rc = cli_usage(ctx, "--grid %s: START, STOP and STEP must be numbers", spec);
     else if (!(step > 0))
       rc = cli_usage(ctx, "--grid %s: STEP must be positive", spec);
@@ -146,7 +148,8 @@ static int build_grid(const cli_ctx *ctx, const grid_axis *g, size_t n_axes, siz
   unsigned long long total = 1;
   for (size_t a = 0; a < n_axes; a++) {
     total *= g[a].n;
-    if (total > MAX_CONTEXTS) return cli_usage(ctx, "--grid: the product has more than %llu contexts", MAX_CONTEXTS);
+    if (total > MAX_CONTEXTS)
+      return cli_usage(ctx, "--grid: the product has more than %llu contexts", MAX_CONTEXTS);
   }
   l->total = (size_t)total;
   int w = id_width(l->total);
@@ -162,7 +165,8 @@ static int build_grid(const cli_ctx *ctx, const grid_axis *g, size_t n_axes, siz
       if (g[a].is_wavelength) {
         it->has_wl = true, it->wl = v;
       } else {
-        if (!it->params && !(it->params = cJSON_CreateObject())) return cli_fail(ctx, CLI_IO, "out of memory");
+        if (!it->params && !(it->params = cJSON_CreateObject()))
+          return cli_fail(ctx, CLI_IO, "out of memory");
         cJSON_AddNumberToObject(it->params, g[a].name, v);
       }
     }
@@ -177,7 +181,8 @@ static bool json_is_int(const cJSON *v, double lo) {
 
 /* One Context per non-blank line: {id?, wavelength?, params?, sensors?,
  * spp?, seed?}; a missing id is numbered like a grid's. */
-static int read_contexts(const cli_ctx *ctx, const char *path, size_t shard_i, size_t shard_n, sweep_list *l) {
+static int read_contexts(const cli_ctx *ctx, const char *path, size_t shard_i, size_t shard_n,
+                         sweep_list *l) {
   size_t len;
   char *text = cli_read_file(path, &len);
   if (!text) return cli_fail(ctx, CLI_IO, "--contexts: cannot read '%s': %s", path, strerror(errno));
@@ -271,8 +276,9 @@ static int read_contexts(const cli_ctx *ctx, const char *path, size_t shard_i, s
         }
         it->seed = (long long)f->valuedouble;
       } else {
-        rc = cli_usage(ctx, "%s:%zu: unknown field '%s' (a Context has id, wavelength, params, sensors, spp, seed)",
-                       path, line, k);
+        rc = cli_usage(
+            ctx, "%s:%zu: unknown field '%s' (a Context has id, wavelength, params, sensors, spp, seed)",
+            path, line, k);
         break;
       }
     }
@@ -324,7 +330,8 @@ static int write_index(const cli_ctx *ctx, const char *dir, index_entry *e, size
     rc = cli_fail(ctx, CLI_IO, "out of memory");
   } else {
     snprintf(path, pn, "%s/index.jsonl", dir);
-    if (cli_write_file_atomic(path, buf, len)) rc = cli_fail(ctx, CLI_IO, "cannot write '%s': %s", path, strerror(errno));
+    if (cli_write_file_atomic(path, buf, len))
+      rc = cli_fail(ctx, CLI_IO, "cannot write '%s': %s", path, strerror(errno));
   }
   free(path);
   free(buf);
@@ -341,8 +348,8 @@ static void entries_free(index_entry *e, size_t n) {
 
 /* Feed the builder. Errors here are about the contexts the user described:
  * usage (2). */
-static int build_contexts(const cli_ctx *ctx, const cli_args *a, sweep_item **sorted, size_t n, const cJSON *job_params,
-                          long long spp, long long seed, rsw_contexts **out) {
+static int build_contexts(const cli_ctx *ctx, const cli_args *a, sweep_item **sorted, size_t n,
+                          const cJSON *job_params, long long spp, long long seed, rsw_contexts **out) {
   rsw_contexts *x = NULL;
   rsw_status s = rsw_contexts_new(&x);
   if (s) return cli_fail(ctx, CLI_IO, "cannot start a context list: %s", rsw_strerror(s));
@@ -394,8 +401,9 @@ static int build_contexts(const cli_ctx *ctx, const cli_args *a, sweep_item **so
 
 /* Films of a finished job into dir/<context>/<sensor>.<ext>, one index
  * entry each. Failed renders are reported and counted. */
-static int fetch_all(cli_ctx *ctx, const char *job, const char *dir, cli_format fmt, sweep_item **sorted, size_t n,
-                     const cJSON *job_params, index_entry **entries_out, size_t *n_out, size_t *failed_out) {
+static int fetch_all(cli_ctx *ctx, const char *job, const char *dir, cli_format fmt, sweep_item **sorted,
+                     size_t n, const cJSON *job_params, index_entry **entries_out, size_t *n_out,
+                     size_t *failed_out) {
   char *text = NULL;
   rsw_status s = rsw_job_results(ctx->client, job, &text);
   if (s) return cli_report(ctx, s, job);
@@ -497,7 +505,8 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
   size_t n_grids;
   const char *const *grids = cli_get_all(a, "--grid", &n_grids);
   if (!dir) return cli_usage(ctx, "missing -o DIR");
-  if (!contexts_file == !n_grids) return cli_usage(ctx, "give either --contexts FILE.jsonl or --grid NAME=START:STOP:STEP");
+  if (!contexts_file == !n_grids)
+    return cli_usage(ctx, "give either --contexts FILE.jsonl or --grid NAME=START:STOP:STEP");
   if (n_grids > MAX_GRIDS) return cli_usage(ctx, "at most %d --grid axes", MAX_GRIDS);
   const char *v;
   cli_format fmt = CLI_FMT_EXR;
@@ -540,7 +549,8 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
     for (size_t i = 0; i < n_grids && !rc; i++) {
       rc = parse_grid(ctx, grids[i], &axes[i]);
       for (size_t k = 0; k < i && !rc; k++)
-        if (strcmp(axes[k].name, axes[i].name) == 0) rc = cli_usage(ctx, "--grid %s given twice", axes[i].name);
+        if (strcmp(axes[k].name, axes[i].name) == 0)
+          rc = cli_usage(ctx, "--grid %s given twice", axes[i].name);
     }
     if (!rc) rc = build_grid(ctx, axes, n_grids, shard_i, shard_n, &l);
   }
@@ -582,8 +592,7 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
     goto out;
   }
   if (!ctx->quiet)
-    fprintf(stderr, "raysweep sweep: job %s: %zu contexts%s\n", job, l.n,
-            shard_n > 1 ? " (one shard)" : "");
+    fprintf(stderr, "raysweep sweep: job %s: %zu contexts%s\n", job, l.n, shard_n > 1 ? " (one shard)" : "");
   rsw_job_status st;
   rc = cli_wait_job(ctx, job, timeout, &st);
   if (rc != CLI_OK && rc != CLI_JOB) goto out;
@@ -604,7 +613,8 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
     free(t);
     cJSON_Delete(o);
   } else if (!ctx->quiet) {
-    fprintf(stderr, "raysweep sweep: %zu films in %s%s\n", n_entries, dir, failed ? " (some renders failed)" : "");
+    fprintf(stderr, "raysweep sweep: %zu films in %s%s\n", n_entries, dir,
+            failed ? " (some renders failed)" : "");
   }
 out:
   entries_free(entries, n_entries);
@@ -676,7 +686,8 @@ static int read_index(const cli_ctx *ctx, const char *dir, index_entry **e, size
     const char *file = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "file"));
     if (!c || !sn || !safe_relative(file)) {
       cJSON_Delete(o);
-      rc = cli_fail(ctx, CLI_IO, "%s:%zu: not an index line (context, sensor and a relative file)", path, line);
+      rc = cli_fail(ctx, CLI_IO, "%s:%zu: not an index line (context, sensor and a relative file)", path,
+                    line);
       break;
     }
     if (*n == *cap) {
@@ -719,7 +730,8 @@ int cmd_merge(cli_ctx *ctx, const cli_args *a) {
    * kept once; different films for one (context, sensor) are refused. */
   size_t kept = 0;
   for (size_t i = 0; i < n; i++) {
-    if (kept && strcmp(e[kept - 1].context, e[i].context) == 0 && strcmp(e[kept - 1].sensor, e[i].sensor) == 0) {
+    if (kept && strcmp(e[kept - 1].context, e[i].context) == 0 &&
+        strcmp(e[kept - 1].sensor, e[i].sensor) == 0) {
       if (!same_bytes(e[kept - 1].src, e[i].src)) {
         rc = cli_fail(ctx, CLI_IO, "%s/%s is in two inputs with different films: %s and %s", e[i].context,
                       e[i].sensor, e[kept - 1].src, e[i].src);
@@ -756,7 +768,8 @@ int cmd_merge(cli_ctx *ctx, const cli_args *a) {
     if (cli_mkdirs(dst)) rc = cli_fail(ctx, CLI_IO, "cannot create '%s': %s", dst, strerror(errno));
     *slash = '/';
     struct stat ss, ds;
-    if (!rc && stat(e[i].src, &ss) != 0) rc = cli_fail(ctx, CLI_IO, "cannot read '%s': %s", e[i].src, strerror(errno));
+    if (!rc && stat(e[i].src, &ss) != 0)
+      rc = cli_fail(ctx, CLI_IO, "cannot read '%s': %s", e[i].src, strerror(errno));
     /* Merging into one of the inputs: the film is already in place. */
     bool in_place = !rc && stat(dst, &ds) == 0 && ds.st_dev == ss.st_dev && ds.st_ino == ss.st_ino;
     if (!rc && !in_place && link_or_copy(e[i].src, dst))
@@ -775,7 +788,8 @@ int cmd_merge(cli_ctx *ctx, const cli_args *a) {
       free(t);
       cJSON_Delete(o);
     } else if (!ctx->quiet)
-      fprintf(stderr, "raysweep merge: %zu films in %s%s\n", n, out, dups ? " (identical duplicates kept once)" : "");
+      fprintf(stderr, "raysweep merge: %zu films in %s%s\n", n, out,
+              dups ? " (identical duplicates kept once)" : "");
   }
 done:
   entries_free(e, n);

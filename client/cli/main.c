@@ -18,19 +18,20 @@
 const cli_opt cli_opts_none[] = {{NULL}};
 
 static const cli_command commands[] = {
-    {"status", NULL, "", "server version, variants, limits and readiness", cli_opts_none, 0, 0, true, cmd_status},
+    {"status", NULL, "", "server version, variants, limits and readiness", cli_opts_none, 0, 0, true,
+     cmd_status},
     {"scene", "push", "FILE [--variant mono|rgb]",
      "upload a scene (JSON or Mitsuba XML) and the files it references; prints the scene id",
      cli_opts_scene_push, 1, 1, true, cmd_scene_push},
     {"scene", "ls", "", "list resident scenes", cli_opts_none, 0, 0, true, cmd_scene_ls},
     {"scene", "show", "ID", "one scene's summary", cli_opts_none, 1, 1, true, cmd_scene_show},
-    {"scene", "rm", "ID [--force]", "unload a scene (--force cancels its jobs)", cli_opts_scene_rm, 1, 1, true,
-     cmd_scene_rm},
+    {"scene", "rm", "ID [--force]", "unload a scene (--force cancels its jobs)", cli_opts_scene_rm, 1, 1,
+     true, cmd_scene_rm},
     {"params", NULL, "ID [--match GLOB] [--class spectral|geometric|none]", "the scene's parameter table",
      cli_opts_params, 1, 1, true, cmd_params},
     {"set", NULL, "ID KEY=VALUE... [--if-match REV]",
-     "update parameters atomically (VALUE is JSON); prints the new revision", cli_opts_set, 2, (size_t)-1, true,
-     cmd_set},
+     "update parameters atomically (VALUE is JSON); prints the new revision", cli_opts_set, 2, (size_t)-1,
+     true, cmd_set},
     {"render", NULL,
      "ID [--sensor S] [--spp N] [--seed N] [--wavelength NM] [--set KEY=VALUE]... [--timeout S] "
      "-o OUT.exr|.npy|.json",
@@ -45,13 +46,13 @@ static const cli_command commands[] = {
      cli_opts_merge, 1, (size_t)-1, false, cmd_merge},
     {"job", "ls", "", "list jobs", cli_opts_none, 0, 0, true, cmd_job_ls},
     {"job", "show", "ID", "one job's state and progress", cli_opts_none, 1, 1, true, cmd_job_show},
-    {"job", "watch", "ID [--timeout S]", "follow a job's progress until it ends", cli_opts_job_watch, 1, 1, true,
-     cmd_job_watch},
+    {"job", "watch", "ID [--timeout S]", "follow a job's progress until it ends", cli_opts_job_watch, 1, 1,
+     true, cmd_job_watch},
     {"job", "cancel", "ID", "cancel a job", cli_opts_none, 1, 1, true, cmd_job_cancel},
     {"job", "rm", "ID", "delete a job and its results (cancels it if running)", cli_opts_none, 1, 1, true,
      cmd_job_rm},
-    {"fetch", NULL, "JOB CONTEXT SENSOR -o FILE.exr|.npy|.json", "download one film of a job", cli_opts_fetch, 3,
-     3, true, cmd_fetch},
+    {"fetch", NULL, "JOB CONTEXT SENSOR -o FILE.exr|.npy|.json", "download one film of a job", cli_opts_fetch,
+     3, 3, true, cmd_fetch},
 };
 #define N_COMMANDS (sizeof commands / sizeof commands[0])
 
@@ -123,7 +124,9 @@ const char *const *cli_get_all(const cli_args *a, const char *name, size_t *n) {
   return i < 0 ? NULL : a->vals[i];
 }
 
-bool cli_has(const cli_args *a, const char *name) { return cli_get(a, name) != NULL; }
+bool cli_has(const cli_args *a, const char *name) {
+  return cli_get(a, name) != NULL;
+}
 
 /* Parse a command's arguments against its option table. Returns 0, or a
  * usage exit code after printing. Every values array holds at most argc
@@ -150,7 +153,8 @@ static int parse_args(cli_ctx *ctx, const cli_command *c, int argc, char **argv,
     int k = -1;
     for (size_t j = 0; j < a->n_opts; j++)
       if (strlen(c->opts[j].name) == len && strncmp(c->opts[j].name, arg, len) == 0) k = (int)j;
-    if (k < 0) return cli_usage(ctx, "unknown option '%.*s' (see raysweep %s --help)", (int)len, arg, ctx->cmd);
+    if (k < 0)
+      return cli_usage(ctx, "unknown option '%.*s' (see raysweep %s --help)", (int)len, arg, ctx->cmd);
     const cli_opt *o = &c->opts[k];
     const char *val = "";
     if (o->arg) {
@@ -169,7 +173,8 @@ static int parse_args(cli_ctx *ctx, const cli_command *c, int argc, char **argv,
   if (a->n_pos < c->min_pos)
     return cli_usage(ctx, "missing arguments (usage: raysweep %s %s)", ctx->cmd, c->args);
   if (a->n_pos > c->max_pos)
-    return cli_usage(ctx, "unexpected argument '%s' (usage: raysweep %s %s)", a->pos[c->max_pos], ctx->cmd, c->args);
+    return cli_usage(ctx, "unexpected argument '%s' (usage: raysweep %s %s)", a->pos[c->max_pos], ctx->cmd,
+                     c->args);
   return 0;
 }
 
@@ -267,7 +272,8 @@ int main(int argc, char **argv) {
       return CLI_OK;
     }
     if (group_known && n_rest > 1)
-      fprintf(stderr, "raysweep %s: unknown subcommand '%s' (see raysweep %s --help)\n", rest[0], rest[1], rest[0]);
+      fprintf(stderr, "raysweep %s: unknown subcommand '%s' (see raysweep %s --help)\n", rest[0], rest[1],
+              rest[0]);
     else if (group_known)
       fprintf(stderr, "raysweep %s: missing a subcommand (see raysweep %s --help)\n", rest[0], rest[0]);
     else
@@ -294,8 +300,9 @@ int main(int argc, char **argv) {
     if (!rc) {
       rsw_client_opts o = {.size = sizeof o, .base_url = ctx.server_url, .token = token};
       rsw_status s = rsw_client_new(&o, &ctx.client);
-      if (s) rc = cli_fail(&ctx, s == RSW_ERR_INVALID ? CLI_USAGE : CLI_IO, "cannot create a client for '%s': %s",
-                           ctx.server_url, rsw_strerror(s));
+      if (s)
+        rc = cli_fail(&ctx, s == RSW_ERR_INVALID ? CLI_USAGE : CLI_IO, "cannot create a client for '%s': %s",
+                      ctx.server_url, rsw_strerror(s));
     }
   }
   if (!rc) rc = cmd->run(&ctx, &args);

@@ -66,8 +66,8 @@ int cli_report(const cli_ctx *ctx, rsw_status s, const char *what) {
     return code;
   }
   const char *name = e->code && e->code[0] ? e->code : rsw_status_name(s);
-  fprintf(stderr, "raysweep %s: %s: the server said no (HTTP %d, %s): %s\n", ctx->cmd, what, e->http_status, name,
-          msg);
+  fprintf(stderr, "raysweep %s: %s: the server said no (HTTP %d, %s): %s\n", ctx->cmd, what, e->http_status,
+          name, msg);
   if (e->pointer && e->pointer[0]) fprintf(stderr, "  at: %s\n", e->pointer);
   if (e->key && e->key[0]) fprintf(stderr, "  key: %s\n", e->key);
   if (e->candidates[0]) {
@@ -109,7 +109,8 @@ void cli_format_double(char *buf, size_t n, double v) {
   }
 }
 
-int cli_split_set(const cli_ctx *ctx, const char *opt, const char *kv, char **key_out, const char **value_out) {
+int cli_split_set(const cli_ctx *ctx, const char *opt, const char *kv, char **key_out,
+                  const char **value_out) {
   const char *eq = strchr(kv, '=');
   if (!eq || eq == kv) return cli_usage(ctx, "%s needs KEY=VALUE (got '%s')", opt, kv);
   if (!eq[1]) return cli_usage(ctx, "%s %.*s: the value is empty (VALUE is JSON)", opt, (int)(eq - kv), kv);
@@ -222,7 +223,8 @@ cli_format cli_format_from_path(const char *path) {
   char ext[8];
   size_t n = strlen(dot + 1);
   if (n >= sizeof ext) return CLI_FMT_NONE;
-  for (size_t i = 0; i <= n; i++) ext[i] = (char)(dot[1 + i] >= 'A' && dot[1 + i] <= 'Z' ? dot[1 + i] + 32 : dot[1 + i]);
+  for (size_t i = 0; i <= n; i++)
+    ext[i] = (char)(dot[1 + i] >= 'A' && dot[1 + i] <= 'Z' ? dot[1 + i] + 32 : dot[1 + i]);
   return cli_format_from_name(ext);
 }
 
@@ -338,23 +340,26 @@ static void progress_draw(cli_progress *p, bool final) {
   char failed[48] = "";
   if (p->failed) snprintf(failed, sizeof failed, "  %zu failed", p->failed);
   if (p->ctx->stderr_tty) {
-    enum { WIDTH = 30 };
+    enum {
+      WIDTH = 30
+    };
     int fill = p->total ? (int)((double)WIDTH * (double)p->done / (double)p->total) : 0;
     char bar[WIDTH + 1];
     for (int i = 0; i < WIDTH; i++) bar[i] = i < fill ? '#' : '.';
     bar[WIDTH] = '\0';
-    fprintf(stderr, "\r[%s] %zu/%zu  %.1f/s  ETA %s%s\033[K", bar, p->done, p->total, rate, final ? "0s" : eta,
-            failed);
+    fprintf(stderr, "\r[%s] %zu/%zu  %.1f/s  ETA %s%s\033[K", bar, p->done, p->total, rate,
+            final ? "0s" : eta, failed);
     if (final) fputc('\n', stderr);
   } else {
-    fprintf(stderr, "raysweep %s: %zu/%zu renders done  %.1f/s  ETA %s%s\n", p->ctx->cmd, p->done, p->total, rate,
-            final ? "0s" : eta, failed);
+    fprintf(stderr, "raysweep %s: %zu/%zu renders done  %.1f/s  ETA %s%s\n", p->ctx->cmd, p->done, p->total,
+            rate, final ? "0s" : eta, failed);
   }
   fflush(stderr);
   p->drawn = true;
 }
 
-int cli_progress_cb(void *user, const char *context, const char *sensor, size_t done, size_t total, int failed) {
+int cli_progress_cb(void *user, const char *context, const char *sensor, size_t done, size_t total,
+                    int failed) {
   cli_progress *p = user;
   (void)context, (void)sensor;
   if (done > p->done) p->done = done;
@@ -400,7 +405,8 @@ int cli_wait_job(cli_ctx *ctx, const char *job_id, double timeout_s, rsw_job_sta
     fputc('\n', stderr);
   }
   if (s == RSW_ERR_TIMEOUT) {
-    fprintf(stderr, "raysweep %s: job %s did not finish within %g s (it keeps running: raysweep job watch %s)\n",
+    fprintf(stderr,
+            "raysweep %s: job %s did not finish within %g s (it keeps running: raysweep job watch %s)\n",
             ctx->cmd, job_id, timeout_s, job_id);
     return CLI_TIMEOUT;
   }

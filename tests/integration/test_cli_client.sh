@@ -1,0 +1,309 @@
+#!/usr/bin/env bash
+# The `raysweep` CLI against the real daemon on an ephemeral loopback port:
+# every subcommand, a wavelength sweep on a Lambertian plate that must give
+# L = rho(lambda) E cos(theta) / pi, sharded sweeps merged == the unsharded
+# sweep byte for byte, and the documented exit codes (1 server said no,
+# 2 usage, 3 cannot connect, 4 job cancelled, 5 timeout, 6 local I/O).
+# Ends with "test_cli_client: N passed, N failed" (tests/run.sh sums it).
+set -u
+root=$(cd "$(dirname "$0")/../.." && pwd)
+bin=$(cd "${RSW_BIN_DIR:-$root/build/bin}" 2>/dev/null && pwd)
+name=test_cli_client
+pass=0
+fail=0
+ok() { pass=$((pass + 1)); }
+bad() {
+  fail=$((fail + 1))
+  echo "FAIL $name: $*"
+}
+finish() {
+  echo "$name: $pass passed, $fail failed"
+  [ "$fail" -eq 0 ]
+  exit $?
+}
+if [ -z "$bin" ] || [ ! -x "$bin/raysweep" ] || [ ! -x "$bin/raysweepd" ]; then
+  bad "raysweep and raysweepd must be built in ${RSW_BIN_DIR:-build/bin} (make build/bin/raysweep)"
+  finish
+fi
+command -v python3 >/dev/null || {
+  bad "python3 is needed for the checks"
+  finish
+}
+
+tmp=$(mktemp -d)
+pids=()
+cleanup() {
+  for p in "${pids[@]}"; do kill "$p" 2>/dev/null && wait "$p" 2>/dev/null; done
+  rm -rf "$tmp"
+}
+trap cleanup EXIT
+
+# start_daemon DIR [raysweepd options]: sets $started_port ("" on failure).
+# Not in a command substitution: the daemon must be a child of this shell
+# (so cleanup can stop it) and must not hold a pipe open.
+start_daemon() {
+  local d=$1
+  shift
+  mkdir -p "$d/data"
+  "$bin/raysweepd" serve --listen 127.0.0.1:0 --port-file "$d/port" --data-root "$d/data" "$@" >"$d/log" 2>&1 &
+  pids+=($!)
+  for _ in $(seq 200); do
+    [ -s "$d/port" ] && break
+    sleep 0.05
+  done
+  started_port=$(cat "$d/port" 2>/dev/null)
+}
+
+start_daemon "$tmp/d1"
+port=$started_port
+if [ -z "$port" ]; then
+  bad "the daemon did not start: $(cat "$tmp/d1/log")"
+  finish
+fi
+export RAYSWEEP_URL="http://127.0.0.1:$port"
+unset RAYSWEEP_TOKEN
+rs() { "$bin/raysweep" "$@"; }
+cd "$tmp" || exit 1
+
+# expect RC LABEL CMD...: run CMD (stdout to out, stderr to err), check its exit status.
+expect() {
+  local want=$1 label=$2
+  shift 2
+  "$@" >"$tmp/out" 2>"$tmp/err"
+  local got=$?
+  if [ "$got" -eq "$want" ]; then ok; else bad "$label: exit $got, wanted $want; stderr: $(head -c 600 "$tmp/err")"; fi
+}
+# contains LABEL FILE TEXT
+contains() {
+  if grep -qF -- "$3" "$2"; then ok; else bad "$1: '$3' not in $(head -c 600 "$2")"; fi
+}
+# py LABEL CODE [args]: python3 assertion (exit 0 = pass).
+py() {
+  local label=$1 code=$2
+  shift 2
+  if python3 -c "$code" "$@" 2>"$tmp/pyerr"; then ok; else bad "$label: $(tail -n 3 "$tmp/pyerr")"; fi
+}
+
+# A Lambertian plate seen at nadir under a sun at nadir: L = rho E cos 0 / pi.
+cat >plate.json <<'EOF'
+{
+  "type": "scene",
+  "variant": "mono",
+  "nadir": {
+    "type": "distant",
+    "direction": [0, 0, -1],
+    "target": [0, 0, 0],
+    "sampler": {"type": "independent", "sample_count": 4},
+    "film": {"type": "hdrfilm", "width": 1, "height": 1, "component_format": "float32", "rfilter": {"type": "box"}}
+  },
+  "integrator": {"type": "path", "max_depth": -1},
+  "sun": {"type": "directional", "direction": [0, 0, -1], "irradiance": 1.0},
+  "plate": {"type": "rectangle", "bsdf": {"type": "diffuse", "reflectance": 0.5}}
+}
+EOF
+
+# ---- status ----
+expect 0 "status" rs status
+contains "status ready" out "ready:     yes"
+expect 0 "status --json" rs status --json
+py "status --json is the server's GET /v1" 'import json,sys; d=json.load(open(sys.argv[1])); assert d["name"]=="raysweepd" and "mono" in d["variants"]' out
+
+# ---- scenes ----
+expect 0 "scene push xml" rs scene push "$root/proto/examples/hdistant_seed.xml"
+seed_id=$(cat out)
+py "scene push prints a 64-hex id" 'import re,sys; assert re.fullmatch("[0-9a-f]{64}", sys.argv[1])' "$seed_id"
+expect 0 "scene push json" rs -q scene push plate.json
+plate=$(cat out)
+[ ! -s err ] && ok || bad "--quiet scene push wrote to stderr: $(cat err)"
+expect 0 "scene push again" rs scene push plate.json --json
+py "pushing again gives the same id, not created" 'import json,sys; d=json.load(open(sys.argv[1])); assert d["id"]==sys.argv[2] and d["created"] is False, d' out "$plate"
+expect 0 "scene ls" rs scene ls
+contains "scene ls plate" out "$plate"
+contains "scene ls seed" out "$seed_id"
+expect 0 "scene ls --json" rs scene ls --json
+py "scene ls --json" 'import json,sys; ids=[s["id"] for s in json.load(open(sys.argv[1]))["scenes"]]; assert sys.argv[2] in ids and sys.argv[3] in ids' out "$plate" "$seed_id"
+expect 0 "scene show" rs scene show "$plate"
+contains "scene show variant" out "mono"
+contains "scene show sensors" out "nadir"
+expect 0 "scene show --json" rs scene show "$plate" --json
+py "scene show --json" 'import json,sys; d=json.load(open(sys.argv[1])); assert d["id"]==sys.argv[2] and d["sensors"]==["nadir"]' out "$plate"
+
+# ---- params / set ----
+expect 0 "params --match" rs params "$plate" --match '*.reflectance.value'
+contains "params lists the reflectance" out "plate.bsdf.reflectance.value"
+py "params --match filters" 'import sys; lines=open(sys.argv[1]).read().splitlines(); assert len(lines)==1 and lines[0].split()[-1]=="0.5", lines' out
+expect 0 "params --class geometric" rs params "$plate" --class geometric --json
+py "params --class geometric" 'import json,sys; k=[p["key"] for p in json.load(open(sys.argv[1]))["params"]]; assert "plate.to_world" in k and "plate.bsdf.reflectance.value" not in k, k' out
+expect 2 "params --class bogus" rs params "$plate" --class bogus
+expect 0 "set" rs set "$plate" plate.bsdf.reflectance.value=0.3
+rev=$(cat out)
+py "set prints the new revision" 'import sys; assert int(sys.argv[1]) >= 1' "$rev"
+expect 1 "set --if-match stale" rs set "$plate" plate.bsdf.reflectance.value=0.5 --if-match $((rev + 5))
+expect 0 "set --if-match current" rs set "$plate" plate.bsdf.reflectance.value=0.5 --if-match "$rev" --json
+py "set --json" 'import json,sys; assert json.load(open(sys.argv[1]))["revision"] > int(sys.argv[2])' out "$rev"
+expect 0 "params after set" rs params "$plate" --match 'plate.bsdf.reflectance.value' --json
+py "set took effect" 'import json,sys; assert json.load(open(sys.argv[1]))["params"][0]["value"]==0.5' out
+
+# ---- render ----
+expect 0 "render exr" rs render "$plate" --spp 4 -o r.exr
+expect 0 "render npy" rs render "$plate" --spp 4 -o r.npy
+expect 0 "render json" rs render "$plate" --spp 4 --seed 3 --wavelength 500 -o r.json
+py "render files: EXR magic, NPY header and data, JSON value rho/pi" '
+import json, math, struct, sys
+exr = open("r.exr", "rb").read()
+assert exr[:4] == b"\x76\x2f\x31\x01" and 100 < len(exr) < 100000, len(exr)
+npy = open("r.npy", "rb").read()
+assert npy[:6] == b"\x93NUMPY"
+hl = struct.unpack("<H", npy[8:10])[0]
+header = npy[10:10 + hl].decode()
+assert "<f4" in header and "(1, 1, 1)" in header, header
+assert len(npy) == 10 + hl + 4
+film = json.load(open("r.json"))
+assert film["width"] == 1 and film["height"] == 1 and film["channels"] == ["Y"] and film["layout"] == "HWC"
+v = film["data"][0]
+assert abs(v - 0.5 / math.pi) < 1e-6 * 0.5 / math.pi, v
+assert film["meta"]["wavelength"] == 500 and film["meta"]["seed"] == 3
+(nv,) = struct.unpack("<f", npy[-4:])
+assert nv == struct.unpack("<f", struct.pack("<f", v))[0], (nv, v)
+'
+expect 0 "render --set --json" rs render "$plate" --set plate.bsdf.reflectance.value=0.25 --json -o r2.json
+py "render --set overrides for one render" 'import json,math; v=json.load(open("r2.json"))["data"][0]; assert abs(v-0.25/math.pi)<1e-6, v; assert json.load(open("out"))["file"]=="r2.json"'
+expect 2 "render without -o" rs render "$plate"
+expect 2 "render unknown extension" rs render "$plate" -o r.txt
+expect 2 "render bad --spp" rs render "$plate" --spp 0 -o r.exr
+expect 2 "render --set not JSON" rs render "$plate" --set plate.bsdf.reflectance.value=abc -o r.exr
+
+# ---- wavelength sweep: L(lambda) = rho(lambda) E / pi, rho tabulated 0.2 at 400 to 0.8 at 700 ----
+expect 0 "sweep grid" rs sweep "$plate" --grid 'wavelength=400:700:100' \
+  --set 'plate.bsdf.reflectance.value={"wavelengths":[400,700],"values":[0.2,0.8]}' --format json -o sw
+py "sweep index and values rho(w)/pi" '
+import json, math, os
+lines = [json.loads(l) for l in open("sw/index.jsonl")]
+assert len(lines) == 4, lines
+assert [l["context"] for l in lines] == ["c00000", "c00001", "c00002", "c00003"]
+for l, w in zip(lines, [400, 500, 600, 700]):
+    assert l["wavelength"] == w and l["sensor"] == "nadir" and l["file"] == l["context"] + "/nadir.json", l
+    assert "plate.bsdf.reflectance.value" in l["params"] and isinstance(l["seed"], int)
+    rho = 0.2 + 0.6 * (w - 400) / 300
+    v = json.load(open(os.path.join("sw", l["file"])))["data"][0]
+    assert abs(v - rho / math.pi) < 1e-6, (w, v, rho / math.pi)
+'
+# --contexts: ids given or numbered by line; a parameter grid on a key.
+printf '%s\n' '{"id":"mine","wavelength":450}' '' '{"wavelength":650,"params":{"plate.bsdf.reflectance.value":0.4}}' >ctx.jsonl
+expect 0 "sweep --contexts" rs -q sweep "$plate" --contexts ctx.jsonl --format npy -o sc
+[ ! -s err ] && ok || bad "sweep --quiet wrote to stderr: $(cat err)"
+py "sweep --contexts ids and params" '
+import json
+lines = [json.loads(l) for l in open("sc/index.jsonl")]
+assert [l["context"] for l in lines] == ["c00001", "mine"], lines
+assert lines[0]["params"] == {"plate.bsdf.reflectance.value": 0.4} and lines[0]["file"] == "c00001/nadir.npy"
+'
+expect 0 "sweep grid on a key" rs sweep "$plate" --grid plate.bsdf.reflectance.value=0.1:0.3:0.1 --json --format json -o sk
+py "grid on a key: inclusive end, values in params" '
+import json, math
+lines = [json.loads(l) for l in open("sk/index.jsonl")]
+assert len(lines) == 3, lines
+for l, rho in zip(lines, [0.1, 0.2, 0.3]):
+    r = l["params"]["plate.bsdf.reflectance.value"]
+    assert abs(r - rho) < 1e-12, r
+    v = json.load(open("sk/" + l["file"]))["data"][0]
+    assert abs(v - r / math.pi) < 1e-6
+d = json.load(open("out")); assert d["films"] == 3 and d["state"] == "succeeded", d
+'
+expect 2 "sweep both --grid and --contexts" rs sweep "$plate" --grid wavelength=400:500:50 --contexts ctx.jsonl -o x
+expect 2 "sweep bad --grid" rs sweep "$plate" --grid wavelength=400:300:10 -o x
+expect 2 "sweep bad --shard" rs sweep "$plate" --grid wavelength=400:500:50 --shard 2/2 -o x
+expect 2 "sweep without -o" rs sweep "$plate" --grid wavelength=400:500:50
+
+# ---- shards: a stochastic scene (hdistant, 4 spp) so seeds matter ----
+expect 0 "push hdistant" rs -q scene push "$root/proto/examples/hdistant_lambertian.json"
+hd=$(cat out)
+grid=(--grid wavelength=400:700:100 --grid sun.irradiance.value=1:2:1 --spp 4 --seed 11)
+expect 0 "sweep unsharded" rs -q sweep "$hd" "${grid[@]}" -o u
+expect 0 "sweep shard 0/2" rs -q sweep "$hd" "${grid[@]}" --shard 0/2 -o s0
+expect 0 "sweep shard 1/2" rs -q sweep "$hd" "${grid[@]}" --shard 1/2 -o s1
+expect 0 "merge" rs merge s1 s0 -o m
+n_u=$(wc -l <u/index.jsonl)
+[ "$n_u" -eq 8 ] && ok || bad "unsharded index has $n_u lines, wanted 8"
+cmp -s u/index.jsonl m/index.jsonl && ok || bad "merged index differs from the unsharded one"
+same=0
+for f in $(cd u && ls ./*/*.exr); do cmp -s "u/$f" "m/$f" && same=$((same + 1)); done
+[ "$same" -eq 8 ] && ok || bad "only $same of 8 merged films equal the unsharded ones"
+[ "$(wc -l <s0/index.jsonl)" -eq 4 ] && grep -q '"c00002"' s0/index.jsonl && ! grep -q '"c00001"' s0/index.jsonl && ok ||
+  bad "shard 0/2 should hold c00000, c00002, ...: $(cut -c1-40 s0/index.jsonl)"
+expect 0 "sweep other seed" rs -q sweep "$hd" "${grid[@]}" --seed 12 -o u2
+cmp -s u/c00003/sensor.exr u2/c00003/sensor.exr && bad "films do not depend on the seed: the shard check proves nothing" || ok
+expect 0 "merge an identical duplicate" rs merge u s0 -o m2
+cmp -s u/index.jsonl m2/index.jsonl && ok || bad "merge of u and s0 should equal u"
+expect 6 "merge different films for one context" rs merge u u2 -o m3
+contains "merge names the conflict" err "different films"
+expect 6 "merge of a missing dir" rs merge nowhere -o m4
+
+# ---- jobs ----
+expect 0 "job ls" rs job ls
+contains "job ls lists jobs" out "succeeded"
+job1=$(awk 'NR==1{print $1}' out)
+expect 0 "job show" rs job show "$job1"
+contains "job show state" out "succeeded"
+expect 0 "job show --json" rs job show "$job1" --json
+py "job show --json" 'import json,sys; d=json.load(open(sys.argv[1])); assert d["id"]==sys.argv[2] and d["state"]=="succeeded"' out "$job1"
+expect 0 "job watch finished" rs job watch "$job1"
+expect 0 "fetch" rs fetch "$job1" c00001 nadir -o f.json
+py "fetch film" 'import json,math; v=json.load(open("f.json"))["data"][0]; assert abs(v-0.4/math.pi)<1e-6, v'
+expect 0 "fetch npy" rs fetch "$job1" c00001 nadir -o f.npy
+expect 1 "fetch unknown context" rs fetch "$job1" nope nadir -o f2.json
+# A long job: the sweep gives up waiting (5), then cancel, watch says 4.
+expect 5 "sweep --timeout" rs sweep "$hd" --grid wavelength=400:700:10 --spp 50000 --timeout 0.3 -o big
+long=$(sed -n 's/^raysweep sweep: job \([^:]*\):.*/\1/p' err | head -n 1)
+[ -n "$long" ] && ok || bad "sweep did not name its job: $(cat err)"
+expect 0 "job cancel" rs job cancel "$long"
+expect 4 "job watch cancelled" rs job watch "$long" --timeout 20
+contains "job watch says cancelled" out "cancelled"
+expect 0 "job show cancelled" rs job show "$long" --json
+py "job state cancelled" 'import json,sys; assert json.load(open(sys.argv[1]))["state"]=="cancelled"' out
+expect 0 "job rm" rs job rm "$long"
+expect 1 "job show removed" rs job show "$long"
+
+# ---- errors ----
+expect 3 "daemon not running" rs --server http://127.0.0.1:1 status
+contains "not running: clear message" err "cannot connect to raysweepd at http://127.0.0.1:1"
+expect 1 "unknown scene" rs scene show 0000000000000000000000000000000000000000000000000000000000000000
+contains "unknown scene: the server's code" err "RSW_ERR_NOT_FOUND"
+expect 1 "render unknown scene" rs render nosuchscene -o x.exr
+expect 1 "unknown parameter key" rs set "$plate" plate.bsdf.reflectanc.value=0.5
+contains "unknown key: did you mean" err "did you mean: plate.bsdf.reflectance.value"
+expect 1 "unknown key in render --set" rs render "$plate" --set plate.bsdf.reflectanc.value=0.5 -o x.exr
+contains "render --set: did you mean" err "did you mean"
+echo secret-token >token
+echo wrong-token >wrong
+start_daemon "$tmp/d2" --token-file "$tmp/token"
+port2=$started_port
+if [ -n "$port2" ]; then
+  expect 1 "wrong token" rs --server "http://127.0.0.1:$port2" --token-file wrong scene ls
+  contains "wrong token: 401" err "401"
+  expect 1 "no token" rs --server "http://127.0.0.1:$port2" scene ls
+  expect 0 "right token file" rs --server "http://127.0.0.1:$port2" --token-file token scene ls
+  RAYSWEEP_TOKEN=secret-token expect 0 "RAYSWEEP_TOKEN" rs --server "http://127.0.0.1:$port2" scene ls
+else
+  bad "the daemon with a token did not start: $(cat "$tmp/d2/log")"
+fi
+expect 6 "unreadable token file" rs --token-file /nonexistent/token status
+expect 2 "no command" rs
+expect 2 "unknown command" rs frobnicate
+expect 2 "unknown subcommand" rs scene frob
+expect 2 "missing argument" rs scene show
+expect 2 "unknown option" rs scene ls --bogus
+expect 2 "set without =" rs set "$plate" novalue
+expect 0 "help" rs --help
+contains "help documents exit codes" out "Exit codes"
+expect 0 "command help" rs sweep --help
+contains "sweep help" out "--shard I/N"
+expect 0 "group help" rs job --help
+contains "job help" out "raysweep job watch"
+
+# ---- scene rm last: jobs above used the scenes ----
+expect 0 "scene rm" rs scene rm "$seed_id"
+expect 1 "scene show removed" rs scene show "$seed_id"
+expect 0 "scene rm --force" rs scene rm "$hd" --force
+
+finish
