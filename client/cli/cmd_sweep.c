@@ -312,7 +312,7 @@ static int cmp_entry(const void *a, const void *b) {
 /* index.jsonl: one line per film, sorted by context then sensor, so a
  * merged directory's index equals the unsharded one byte for byte. */
 static int write_index(const cli_ctx *ctx, const char *dir, index_entry *e, size_t n) {
-  qsort(e, n, sizeof *e, cmp_entry);
+  if (n) qsort(e, n, sizeof *e, cmp_entry);
   char *buf = NULL;
   size_t len = 0;
   FILE *f = open_memstream(&buf, &len);
@@ -348,7 +348,7 @@ static void entries_free(index_entry *e, size_t n) {
 
 /* Feed the builder. Errors here are about the contexts the user described:
  * usage (2). */
-static int build_contexts(const cli_ctx *ctx, const cli_args *a, sweep_item **sorted, size_t n,
+static int build_contexts(const cli_ctx *ctx, const cli_args *a, const sweep_item *items, size_t n,
                           const cJSON *job_params, long long spp, long long seed, rsw_contexts **out) {
   rsw_contexts *x = NULL;
   rsw_status s = rsw_contexts_new(&x);
@@ -356,7 +356,7 @@ static int build_contexts(const cli_ctx *ctx, const cli_args *a, sweep_item **so
   int rc = 0;
   char what[160] = "";
   for (size_t i = 0; i < n && !s; i++) {
-    const sweep_item *it = sorted[i];
+    const sweep_item *it = &items[i];
     size_t idx;
     snprintf(what, sizeof what, "context '%s'", it->id);
     if ((s = rsw_contexts_add(x, it->id, it->has_wl ? it->wl : 0, &idx))) break;
@@ -583,9 +583,8 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
     rc = write_index(ctx, dir, NULL, 0);
     goto out;
   }
-  if ((rc = build_contexts(ctx, a, sorted, l.n, job_params, (long long)spp, (long long)seed, &x))) goto out;
-  /* Submit in list order (the builder saw them sorted by id, which for
-   * generated ids is the same order). */
+  /* The job lists the contexts in the order the user described them. */
+  if ((rc = build_contexts(ctx, a, l.items, l.n, job_params, (long long)spp, (long long)seed, &x))) goto out;
   rsw_status s = rsw_job_submit(ctx->client, scene, x, NULL, job);
   if (s) {
     rc = cli_report(ctx, s, scene);
@@ -725,7 +724,7 @@ int cmd_merge(cli_ctx *ctx, const cli_args *a) {
   int rc = 0;
   for (size_t i = 0; i < a->n_pos && !rc; i++) rc = read_index(ctx, a->pos[i], &e, &n, &cap);
   if (rc) goto done;
-  qsort(e, n, sizeof *e, cmp_entry);
+  if (n) qsort(e, n, sizeof *e, cmp_entry);
   /* Duplicates (a shard given twice, overlapping shards): the same film is
    * kept once; different films for one (context, sensor) are refused. */
   size_t kept = 0;

@@ -210,6 +210,10 @@ for l, rho in zip(lines, [0.1, 0.2, 0.3]):
     assert abs(v - r / math.pi) < 1e-6
 d = json.load(open("out")); assert d["films"] == 3 and d["state"] == "succeeded", d
 '
+expect 0 "sweep: a shard past the end" rs -q sweep "$plate" --grid wavelength=400:400:1 --shard 1/2 -o empty
+[ -f empty/index.jsonl ] && [ ! -s empty/index.jsonl ] && ok || bad "an empty shard should write an empty index"
+expect 1 "sweep --set unknown key" rs sweep "$plate" --grid wavelength=400:500:100 --set plate.bsdf.reflectanc.value=0.5 -o x
+contains "sweep --set: did you mean" err "did you mean: plate.bsdf.reflectance.value"
 expect 2 "sweep both --grid and --contexts" rs sweep "$plate" --grid wavelength=400:500:50 --contexts ctx.jsonl -o x
 expect 2 "sweep bad --grid" rs sweep "$plate" --grid wavelength=400:300:10 -o x
 expect 2 "sweep bad --shard" rs sweep "$plate" --grid wavelength=400:500:50 --shard 2/2 -o x
