@@ -1,0 +1,156 @@
+#!/usr/bin/env bash
+# Runs the README's client examples (docs/examples/: C with libraysweep, the
+# raysweep CLI, curl, Python) against the real daemon on an ephemeral
+# loopback port, so they cannot rot. Each must print the wavelengths 400,
+# 450, ..., 700 nm and, for the plate of docs/examples/plate.json (a
+# Lambertian rectangle lit at normal incidence with irradiance E = 1, seen by
+# a `distant` sensor), the radiance
+#   L(w) = rho(w) * E * cos(0) / pi,   rho(w) = 0.2 + 0.6 * (w - 400) / 300
+# (the job-level tabulated reflectance, linear between its two points), to
+# 1e-5 relative. The README must hold every example verbatim.
+# Environment: RSW_BIN_DIR (default build/bin: raysweepd, raysweep; the
+# library is looked for in RSW_BIN_DIR/../lib), SAN=1 (the library is built
+# with ASan+UBSan, so the C example is too). Ends with the summary line
+# "test_docs_examples: N passed, N failed" that tests/run.sh sums.
+set -u
+root=$(cd "$(dirname "$0")/../.." && pwd)
+cd "$root" || exit 1
+bin=${RSW_BIN_DIR:-build/bin}
+case $bin in /*) ;; *) bin=$root/$bin ;; esac
+lib=$(cd "$bin/.." && pwd)/lib
+examples=$root/docs/examples
+
+pass=0
+fail=0
+ok() { pass=$((pass + 1)); }
+bad() { echo "FAIL $*"; fail=$((fail + 1)); }
+finish() {
+  echo "test_docs_examples: $pass passed, $fail failed"
+  [ "$fail" -eq 0 ]
+  exit
+}
+
+tmp=$(mktemp -d "${TMPDIR:-/tmp}/rsw_docs.XXXXXX") || { bad "mktemp"; finish; }
+daemon=
+cleanup() {
+  [ -n "$daemon" ] && kill "$daemon" 2>/dev/null && wait "$daemon" 2>/dev/null
+  rm -rf "$tmp"
+}
+trap cleanup EXIT
+
+# ---- the daemon ------------------------------------------------------------
+"$bin/raysweepd" serve --listen 127.0.0.1:0 --port-file "$tmp/port" --data-root "$tmp" --threads 1 \
+  >"$tmp/daemon.log" 2>&1 &
+daemon=$!
+for _ in $(seq 100); do
+  [ -s "$tmp/port" ] && break
+  kill -0 "$daemon" 2>/dev/null || break
+  sleep 0.1
+done
+if [ ! -s "$tmp/port" ]; then
+  bad "daemon: no port file after 10 s: $(tail -n 5 "$tmp/daemon.log")"
+  finish
+fi
+export RAYSWEEP_URL="http://127.0.0.1:$(cat "$tmp/port")"
+unset RAYSWEEP_TOKEN
+
+# The expected output, "wavelength value" per line.
+awk 'BEGIN { for (w = 400; w <= 700; w += 50) printf "%d %.9g\n", w, (0.2 + 0.6 * (w - 400) / 300) / 3.141592653589793 }' \
+  >"$tmp/expected"
+
+# check NAME FILE: FILE (an example's stdout) holds exactly the expected
+# wavelengths, in any order, each with the expected value to 1e-5 relative.
+check() {
+  local name=$1 out=$2 msg
+  msg=$(sort -n "$out" | awk -v exp_file="$tmp/expected" '
+    BEGIN { n = 0; while ((getline line < exp_file) > 0) { split(line, f, " "); ew[n] = f[1]; ev[n] = f[2]; n++ } }
+    NF != 2 || $1 !~ /^[0-9.]+$/ { print "line " NR " is not \"wavelength value\": " $0; bad = 1; exit }
+    { i = NR - 1
+      if (i >= n) { print "extra line: " $0; bad = 1; exit }
+      if ($1 + 0 != ew[i] + 0) { print "wavelength " $1 ", expected " ew[i]; bad = 1; exit }
+      d = ($2 - ev[i]) / ev[i]; if (d < 0) d = -d
+      if (d > 1e-5) { print "at " $1 " nm: " $2 ", expected " ev[i] " (rho/pi; relative error " d ")"; bad = 1; exit } }
+    END { if (!bad && NR != n) print NR " lines, expected " n }')
+  if [ -n "$msg" ]; then bad "$name: $msg"; else ok; fi
+}
+
+# run NAME CMD...: runs an example with a time limit in a fresh copy of
+# docs/examples (the examples read plate.json from the current directory and
+# may write there); its stdout goes to $tmp/NAME.out.
+run() {
+  local name=$1 rc
+  shift
+  rm -rf "$tmp/work" && cp -R "$examples" "$tmp/work" || { bad "$name: cannot copy docs/examples"; return 1; }
+  (cd "$tmp/work" && timeout 120 "$@") >"$tmp/$name.out" 2>"$tmp/$name.err"
+  rc=$?
+  if [ "$rc" -ne 0 ]; then
+    bad "$name: exit $rc: $(tail -n 5 "$tmp/$name.err")"
+    return 1
+  fi
+  ok
+  check "$name" "$tmp/$name.out"
+}
+
+# ---- C with libraysweep -------------------------------------------------------
+cflags=(-std=c11 -Wall -Wextra -Werror -pedantic)
+[ "${SAN:-}" = 1 ] && cflags+=(-fsanitize=address,undefined -fno-omit-frame-pointer)
+syslibs=(-lcurl -lcjson -lexpat -lcrypto -lOpenEXRCore -lm -lpthread)
+if [ ! -f "$lib/libraysweep.a" ]; then
+  bad "sweep.c: $lib/libraysweep.a is missing (build the library first)"
+elif ! cc "${cflags[@]}" -I"$root/include" "$examples/sweep.c" "$lib/libraysweep.a" "${syslibs[@]}" \
+  -o "$tmp/sweep" 2>"$tmp/cc.err"; then
+  bad "sweep.c does not compile against include/ and libraysweep.a: $(head -n 20 "$tmp/cc.err")"
+else
+  ok
+  run sweep.c "$tmp/sweep"
+fi
+# The way the README builds it: `make install PREFIX=...` (headers, .a, .so,
+# raysweep.pc), then pkg-config. (The make variables of a `make test` that
+# runs this script are dropped, so the inner make is a plain one.)
+if env -u MAKEFLAGS -u MFLAGS -u MAKELEVEL make -s -C "$root" install PREFIX="$tmp/prefix" SAN="${SAN:-}" \
+  >"$tmp/install.log" 2>&1; then
+  ok
+  if cc "${cflags[@]}" "$examples/sweep.c" \
+    $(PKG_CONFIG_PATH="$tmp/prefix/lib/pkgconfig" pkg-config --cflags --libs raysweep) \
+    -Wl,-rpath,"$tmp/prefix/lib" -o "$tmp/sweep_pc" 2>"$tmp/cc_pc.err"; then
+    ok
+    run sweep.c-pkg-config "$tmp/sweep_pc"
+  else
+    bad "sweep.c does not build with pkg-config --cflags --libs raysweep: $(head -n 20 "$tmp/cc_pc.err")"
+  fi
+else
+  bad "make install PREFIX=$tmp/prefix: $(tail -n 10 "$tmp/install.log")"
+fi
+
+# ---- the raysweep CLI -----------------------------------------------------------
+if [ ! -x "$bin/raysweep" ]; then
+  bad "sweep.sh: $bin/raysweep is missing (build the CLI first)"
+else
+  run sweep.sh env PATH="$bin:$PATH" sh ./sweep.sh
+fi
+
+# ---- curl and Python ------------------------------------------------------------
+run sweep_curl.sh sh ./sweep_curl.sh
+run sweep.py python3 ./sweep.py
+
+# ---- the outputs agree with each other -------------------------------------------
+# (Each was checked against rho/pi above; here the four lists must also name
+# the same wavelengths, so no example silently drops a context.)
+ref=
+for f in "$tmp"/*.out; do
+  [ -s "$f" ] || continue
+  cut -d' ' -f1 "$f" | sort -n >"$f.w"
+  if [ -z "$ref" ]; then ref=$f.w; elif cmp -s "$ref" "$f.w"; then ok; else
+    bad "$(basename "$f" .out) prints other wavelengths than $(basename "${ref%.w}" .out)"
+  fi
+done
+
+# ---- the README holds every example verbatim ----------------------------------------
+readme=$(<"$root/README.md")
+for f in plate.json sweep.c sweep.sh sweep_curl.sh sweep.py; do
+  if [ ! -f "$examples/$f" ]; then bad "docs/examples/$f is missing"; continue; fi
+  text=$(<"$examples/$f")
+  if [[ $readme == *"$text"* ]]; then ok; else bad "README.md does not contain docs/examples/$f verbatim"; fi
+done
+
+finish
