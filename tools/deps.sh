@@ -5,7 +5,7 @@
 # npm package conflicts with them, so it is never installed here.
 set -euo pipefail
 pkgs=(build-essential pkg-config libembree-dev libopenexr-dev libmicrohttpd-dev
-      libcjson-dev libcurl4-openssl-dev libexpat1-dev libssl-dev curl)
+      libcjson-dev libcurl4-openssl-dev libexpat1-dev libssl-dev curl python3)
 missing=()
 for p in "${pkgs[@]}"; do
   if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
