@@ -165,10 +165,10 @@ static rsw_status load_pixels(loader *ld, node *n, envmap *m, const exr_image *i
   int r = exr_image_channel(img, "R"), g = exr_image_channel(img, "G"), b = exr_image_channel(img, "B");
   int y = exr_image_channel(img, "Y");
   bool rgb = r >= 0 && g >= 0 && b >= 0;
-  if (!rgb && y < 0) return ld_fail(ld, n, "filename", RSW_ERR_INVALID, "envmap '%s' has neither R,G,B nor Y channels", path);
+  if (!rgb && y < 0) return ld_fail(ld, n, "filename", RSW_ERR_INVALID, "'%s' has neither R,G,B nor Y channels", path);
   if (img->width < 2 || img->height < 3)
     return ld_fail(ld, n, "filename", RSW_ERR_INVALID,
-                   "envmap '%s' is %dx%d; an environment map must be at least 2x3 pixels", path, img->width, img->height);
+                   "'%s' is %dx%d; an environment map must be at least 2x3 pixels", path, img->width, img->height);
   m->w = img->width;
   m->h = img->height;
   m->rgb = malloc((size_t)m->w * m->h * 3 * sizeof(float));
@@ -181,7 +181,7 @@ static rsw_status load_pixels(loader *ld, node *n, envmap *m, const exr_image *i
     for (int k = 0; k < 3; k++) {
       if (!isfinite(v[k]) || v[k] < 0)
         return ld_fail(ld, n, "filename", RSW_ERR_INVALID,
-                       "envmap '%s': pixel (%zu, %zu) is negative or not finite (radiance must be >= 0)", path,
+                       "'%s': pixel (%zu, %zu) is negative or not finite (radiance must be >= 0)", path,
                        i % (size_t)m->w, i / (size_t)m->w);
       m->rgb[3 * i + k] = v[k];
     }
