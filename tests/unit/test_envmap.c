@@ -15,6 +15,7 @@
 #include "../support/tsup.h"
 #include "kernel/core/distr2d.h"
 #include "kernel/image_exr.h"
+#include "kernel/scene/params.h"
 
 RSW_TEST_DEFINE_GLOBALS
 
@@ -207,6 +208,13 @@ static void test_orientation(void) {
   REQUIRE(s && s->environment, "scene");
   const emitter *e = s->environment;
   CHECK(e->flags == EMITTER_INFINITE, "flags %u", e->flags);
+  /* traverse(): scale, to_world, sampling_weight in the parameter table. */
+  const char *keys[3] = {"env.scale", "env.to_world", "env.sampling_weight"};
+  for (int k = 0; k < 3; k++) {
+    size_t idx;
+    rsw_err perr = {0};
+    CHECK(params_lookup(s, keys[k], &idx, &perr) == RSW_OK, "%s: %s", keys[k], perr.msg);
+  }
   for (int i = 0; i < 4; i++) {
     double phi = 2 * PI * (i + 0.5) / 4;
     color c = e->ops->eval(e, NULL, v3(sin(phi), 0, -cos(phi)));
