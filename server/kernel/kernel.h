@@ -186,6 +186,9 @@ typedef struct emitter_ops {
   color (*eval)(const emitter *e, const surface_interaction *hit, vec3 d);
   /* Called once the scene's bounds are known. */
   void (*set_scene)(emitter *e, const struct scene *s);
+  /* Optional (infinite emitters): the Q, U, V Stokes components of the
+   * radiance arriving along ray direction d (I is what eval returns). */
+  void (*eval_polarization)(const emitter *e, vec3 d, double quv[3]);
 } emitter_ops;
 struct emitter {
   object base;
@@ -202,7 +205,9 @@ typedef struct rfilter {
   double (*eval)(const struct rfilter *f, double x); /* 1-D, separable */
 } rfilter;
 
-typedef enum pixel_format { PIXFMT_RGB, PIXFMT_LUMINANCE } pixel_format;
+/* PIXFMT_STOKES (mono only): channels S0..S3, the Stokes vector
+ * (I, Q, U, V). */
+typedef enum pixel_format { PIXFMT_RGB, PIXFMT_LUMINANCE, PIXFMT_STOKES } pixel_format;
 typedef enum component_format { COMPFMT_FLOAT32, COMPFMT_FLOAT16 } component_format;
 
 typedef struct film {
@@ -267,9 +272,10 @@ typedef struct render_stats {
 
 typedef struct integrator integrator;
 typedef struct integrator_ops {
-  /* Radiance arriving at ray.o along -ray.d. */
+  /* Radiance arriving at ray.o along -ray.d. When quv is not NULL (Stokes
+   * films), the Q, U, V of that radiance are added to quv[0..2]. */
   color (*Li)(const integrator *it, const struct scene *sc, sampler_state *st,
-              ray3 ray, render_stats *stats);
+              ray3 ray, render_stats *stats, double *quv);
 } integrator_ops;
 struct integrator {
   object base;

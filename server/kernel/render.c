@@ -21,9 +21,13 @@
 
 #define TILE 8
 
+/* Accumulator layout per pixel: sum(f w L) rgb, sum(f), and for Stokes
+ * films sum(f w (Q, U, V)). */
+#define ACC_MAX 7
+
 typedef struct tile_buf {
   int x0, y0, w, h; /* region covered, margin included, clipped to film */
-  double *acc;      /* w*h*4: sum(f wL) rgb, sum(f) */
+  double *acc;      /* w*h*stride */
 } tile_buf;
 
 typedef struct job {
@@ -36,6 +40,8 @@ typedef struct job {
   size_t n_tiles;
   int margin; /* pixels a splat can reach beyond its own */
   bool box;   /* box filter of radius 0.5: own pixel only */
+  bool stokes; /* Stokes film: Q, U, V accumulated too */
+  int stride;  /* doubles per pixel in accumulators: 4 or 7 */
   double *film_acc; /* W*H*4 */
   /* Work distribution and ordered merge. */
   pthread_mutex_t lock;
@@ -49,13 +55,15 @@ typedef struct job {
   uint64_t samples, invalid;
 } job;
 
-static void splat(const job *jb, tile_buf *tb, double px, double py, color v) {
+static void splat(const job *jb, tile_buf *tb, double px, double py, color v, const double *quv) {
+  int S = jb->stride;
   if (jb->box) {
     int ix = (int)px, iy = (int)py;
     if (ix >= jb->W) ix = jb->W - 1;
     if (iy >= jb->H) iy = jb->H - 1;
-    double *a = &tb->acc[4 * ((size_t)(iy - tb->y0) * tb->w + (ix - tb->x0))];
+    double *a = &tb->acc[(size_t)S * ((size_t)(iy - tb->y0) * tb->w + (ix - tb->x0))];
     a[0] += v.c[0], a[1] += v.c[1], a[2] += v.c[2], a[3] += 1.0;
+    if (S == ACC_MAX) a[4] += quv[0], a[5] += quv[1], a[6] += quv[2];
     return;
   }
   const rfilter *f = jb->fm->filter;
@@ -72,8 +80,9 @@ static void splat(const job *jb, tile_buf *tb, double px, double py, color v) {
     for (int x = xlo; x <= xhi; x++) {
       double wgt = fy * f->eval(f, px - (x + 0.5));
       if (wgt == 0) continue;
-      double *a = &tb->acc[4 * ((size_t)(y - tb->y0) * tb->w + (x - tb->x0))];
+      double *a = &tb->acc[(size_t)S * ((size_t)(y - tb->y0) * tb->w + (x - tb->x0))];
       a[0] += wgt * v.c[0], a[1] += wgt * v.c[1], a[2] += wgt * v.c[2], a[3] += wgt;
+      if (S == ACC_MAX) a[4] += wgt * quv[0], a[5] += wgt * quv[1], a[6] += wgt * quv[2];
     }
   }
 }
@@ -93,7 +102,7 @@ static tile_buf *render_tile(job *jb, size_t t, render_stats *rs, uint64_t *samp
   int y1 = py1 + jb->margin < jb->H ? py1 + jb->margin : jb->H;
   tb->w = x1 - tb->x0;
   tb->h = y1 - tb->y0;
-  tb->acc = calloc((size_t)tb->w * tb->h * 4, sizeof(double));
+  tb->acc = calloc((size_t)tb->w * tb->h * (size_t)jb->stride, sizeof(double));
   if (!tb->acc) {
     free(tb);
     return NULL;
@@ -121,15 +130,19 @@ static tile_buf *render_tile(job *jb, size_t t, render_stats *rs, uint64_t *samp
         ray3 ray;
         double w = jb->se->ops->sample_ray(jb->se, film_u, ap, &ray);
         color v = col1(0);
+        double quv[3] = {0, 0, 0};
         if (w != 0) {
-          color L = it->ops->Li(it, jb->sc, &st, ray, rs);
+          color L = it->ops->Li(it, jb->sc, &st, ray, rs, jb->stokes ? quv : NULL);
           v = col_scale(L, w);
-          if (!isfinite(v.c[0]) || !isfinite(v.c[1]) || !isfinite(v.c[2])) {
+          for (int k = 0; k < 3; k++) quv[k] *= w;
+          if (!isfinite(v.c[0]) || !isfinite(v.c[1]) || !isfinite(v.c[2]) || !isfinite(quv[0]) ||
+              !isfinite(quv[1]) || !isfinite(quv[2])) {
             (*invalid)++;
             v = col1(0);
+            quv[0] = quv[1] = quv[2] = 0;
           }
         }
-        splat(jb, tb, px, py, v);
+        splat(jb, tb, px, py, v, quv);
       }
       *samples += jb->spp;
     }
@@ -138,11 +151,12 @@ static tile_buf *render_tile(job *jb, size_t t, render_stats *rs, uint64_t *samp
 }
 
 static void merge_tile(job *jb, tile_buf *tb) {
+  int S = jb->stride;
   for (int y = 0; y < tb->h; y++)
     for (int x = 0; x < tb->w; x++) {
-      const double *a = &tb->acc[4 * ((size_t)y * tb->w + x)];
-      double *d = &jb->film_acc[4 * ((size_t)(tb->y0 + y) * jb->W + (tb->x0 + x))];
-      d[0] += a[0], d[1] += a[1], d[2] += a[2], d[3] += a[3];
+      const double *a = &tb->acc[(size_t)S * ((size_t)y * tb->w + x)];
+      double *d = &jb->film_acc[(size_t)S * ((size_t)(tb->y0 + y) * jb->W + (tb->x0 + x))];
+      for (int k = 0; k < S; k++) d[k] += a[k];
     }
   free(tb->acc);
   free(tb);
@@ -225,8 +239,10 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
   jb.tiles_y = (jb.H + TILE - 1) / TILE;
   jb.n_tiles = (size_t)jb.tiles_x * jb.tiles_y;
   jb.box = fm->filter->radius <= 0.5 + 1e-12;
+  jb.stokes = fm->pixel_format == PIXFMT_STOKES && sc->variant == VARIANT_MONO;
+  jb.stride = jb.stokes ? ACC_MAX : 4;
   jb.margin = jb.box ? 0 : (int)ceil(fm->filter->radius + 0.5);
-  jb.film_acc = calloc((size_t)jb.W * jb.H * 4, sizeof(double));
+  jb.film_acc = calloc((size_t)jb.W * jb.H * (size_t)jb.stride, sizeof(double));
   jb.done = calloc(jb.n_tiles, sizeof *jb.done);
   if (!jb.film_acc || !jb.done) {
     free(jb.film_acc);
@@ -265,15 +281,22 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
 
   /* Develop: normalise by the filter weights; mono films hold one
    * luminance channel Y (Mitsuba forces it), rgb films R, G, B or Y. */
-  bool lum = sc->variant == VARIANT_MONO || fm->pixel_format == PIXFMT_LUMINANCE;
+  bool lum = !jb.stokes && (sc->variant == VARIANT_MONO || fm->pixel_format == PIXFMT_LUMINANCE);
   film_image img;
   memset(&img, 0, sizeof img);
   img.width = jb.W;
   img.height = jb.H;
-  img.channels = lum ? 1 : 3;
-  if (lum) {
+  if (jb.stokes) {
+    img.channels = 4;
+    img.channel_names[0] = "S0";
+    img.channel_names[1] = "S1";
+    img.channel_names[2] = "S2";
+    img.channel_names[3] = "S3";
+  } else if (lum) {
+    img.channels = 1;
     img.channel_names[0] = "Y";
   } else {
+    img.channels = 3;
     img.channel_names[0] = "R";
     img.channel_names[1] = "G";
     img.channel_names[2] = "B";
@@ -289,10 +312,13 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
     return rsw_fail(err, RSW_ERR_NOMEM, "film", "out of memory");
   }
   for (size_t i = 0; i < (size_t)jb.W * jb.H; i++) {
-    const double *a = &jb.film_acc[4 * i];
+    const double *a = &jb.film_acc[(size_t)jb.stride * i];
     double inv = a[3] != 0 ? 1.0 / a[3] : 0.0;
     color c = col(a[0] * inv, a[1] * inv, a[2] * inv);
-    if (lum) {
+    if (jb.stokes) {
+      img.data[4 * i] = (float)c.c[0];
+      for (int k = 0; k < 3; k++) img.data[4 * i + 1 + (size_t)k] = (float)(a[4 + k] * inv);
+    } else if (lum) {
       img.data[i] = (float)(sc->variant == VARIANT_MONO ? c.c[0] : col_luminance(c));
     } else {
       img.data[3 * i] = (float)c.c[0];

@@ -12,6 +12,7 @@
  * produce (alpha / XYZ pixel formats, uint32 components, RGBE / PFM files,
  * partial crop windows, border sampling) is RSW_ERR_UNSUPPORTED. */
 #include <stdlib.h>
+#include <string.h>
 #include <strings.h>
 
 #include "../scene/loader.h"
@@ -31,7 +32,8 @@ static void hdrfilm_destroy(object *o) { free(o); }
 static rsw_status hdrfilm_prepare(object *o, const render_ctx *rc, rsw_err *err) {
   (void)err;
   hdrfilm *f = (hdrfilm *)o;
-  f->base.pixel_format = rc->variant == VARIANT_MONO ? PIXFMT_LUMINANCE : f->requested;
+  f->base.pixel_format =
+      rc->variant == VARIANT_MONO && f->requested != PIXFMT_STOKES ? PIXFMT_LUMINANCE : f->requested;
   return RSW_OK;
 }
 
@@ -79,7 +81,7 @@ static rsw_status lookup(loader *ld, node *n, const char *key, const char *value
 static const name_code file_formats[] = {
     {"openexr", 0}, {"exr", 0}, {"rgbe", -1}, {"pfm", -1}};
 static const name_code pixel_formats[] = {
-    {"rgb", PIXFMT_RGB}, {"luminance", PIXFMT_LUMINANCE}, {"rgba", -1},
+    {"rgb", PIXFMT_RGB}, {"luminance", PIXFMT_LUMINANCE}, {"stokes", PIXFMT_STOKES}, {"rgba", -1},
     {"luminance_alpha", -1}, {"xyz", -1}, {"xyza", -1}};
 static const name_code component_formats[] = {
     {"float16", COMPFMT_FLOAT16}, {"float32", COMPFMT_FLOAT32}, {"uint32", -1}};
@@ -140,14 +142,19 @@ static rsw_status hdrfilm_read(loader *ld, node *n, hdrfilm *f) {
     if (!find_name(s, pixel_formats, COUNT(pixel_formats)))
       return ld_fail(ld, n, "pixel_format", RSW_ERR_INVALID,
                      "hdrfilm: unknown pixel_format '%s'", s);
-    code = PIXFMT_LUMINANCE;
+    /* "stokes": channels S0..S3 (I, Q, U, V) — kept in mono. */
+    code = strcmp(s, "stokes") == 0 ? PIXFMT_STOKES : PIXFMT_LUMINANCE;
+  } else if (strcmp(s, "stokes") == 0) {
+    return ld_fail(ld, n, "pixel_format", RSW_ERR_UNSUPPORTED,
+                   "hdrfilm: pixel_format 'stokes' needs the mono variant (Stokes vectors are per wavelength)");
   } else {
     st = lookup(ld, n, "pixel_format", s, pixel_formats, COUNT(pixel_formats),
                 "rgb, luminance", &code);
     if (st != RSW_OK) return st;
   }
   f->requested = (pixel_format)code;
-  f->base.pixel_format = ld->variant == VARIANT_MONO ? PIXFMT_LUMINANCE : f->requested;
+  f->base.pixel_format =
+      ld->variant == VARIANT_MONO && f->requested != PIXFMT_STOKES ? PIXFMT_LUMINANCE : f->requested;
 
   st = ld_string(ld, n, "component_format", "float16", &s);
   if (st == RSW_OK)

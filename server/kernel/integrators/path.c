@@ -66,7 +66,19 @@ static double emitter_prob(const scene *sc, const emitter *e) {
   return sc->emitter_weight_sum > 0 ? e->sampling_weight / sc->emitter_weight_sum : 0.0;
 }
 
-static color path_Li(const integrator *it, const scene *sc, sampler_state *st, ray3 ray, render_stats *stats) {
+/* Stokes films: only an environment that reports polarisation carries Q,
+ * U, V; they are scaled by the path throughput's intensity (BSDFs are
+ * treated as non-polarising and the frame is not rotated along the path —
+ * a stated simplification until a polarised integrator exists). */
+static void add_polarization(double *quv, const emitter *e, vec3 d, double scale) {
+  if (!quv || !e->ops->eval_polarization || scale == 0) return;
+  double q[3] = {0, 0, 0};
+  e->ops->eval_polarization(e, d, q);
+  for (int k = 0; k < 3; k++) quv[k] += scale * q[k];
+}
+
+static color path_Li(const integrator *it, const scene *sc, sampler_state *st, ray3 ray, render_stats *stats,
+                     double *quv) {
   const sampler_ops *sops = st->s->ops;
   color L = col1(0), T = col1(1);
   if (it->max_depth == 0) return L;
@@ -87,7 +99,9 @@ static color path_Li(const integrator *it, const scene *sc, sampler_state *st, r
           em_pdf = env->ops->pdf_direction(env, &prev_si, &ds) * emitter_prob(sc, env);
         }
         color Le = env->ops->eval(env, NULL, ray.d);
-        L = col_add(L, col_scale(col_mul(T, Le), mis_weight(prev_pdf, em_pdf)));
+        double w = mis_weight(prev_pdf, em_pdf);
+        L = col_add(L, col_scale(col_mul(T, Le), w));
+        add_polarization(quv, env, v3_norm(ray.d), T.c[0] * w);
       }
       break;
     }
@@ -122,6 +136,8 @@ static color path_Li(const integrator *it, const scene *sc, sampler_state *st, r
           if (!col_is_black(f)) {
             double w = ds.delta ? 1.0 : mis_weight(ds.pdf * pe, b->ops->pdf(b, &si, wo));
             L = col_add(L, col_scale(col_mul(T, col_mul(f, value)), w / pe));
+            if (quv && (e->flags & EMITTER_INFINITE))
+              add_polarization(quv, e, ds.d, T.c[0] * f.c[0] * w / (pe * ds.pdf));
           }
         }
       }

@@ -134,8 +134,8 @@ static void record_failure(const env_adapter *ca, const char *fmt, ...) {
 }
 
 /* I of the plugin's radiance towards unit direction d at the prepared
- * wavelength; 0 (recorded) if it is not finite or negative. Q, U, V are
- * computed by the plugin but not carried (films record intensity). */
+ * wavelength; 0 (recorded) if it is not finite or negative. Q, U, V reach
+ * Stokes films through adapter_eval_polarization. */
 static double radiance_I(const env_adapter *a, vec3 d) {
   double s[4] = {0, 0, 0, 0}, dir[3];
   out3(d, dir);
@@ -198,8 +198,27 @@ static color adapter_eval(const emitter *e, const surface_interaction *hit, vec3
   return col1(radiance_I((const env_adapter *)e, v3_scale(d, 1.0 / len)));
 }
 
-static const emitter_ops adapter_ops = {
-    .sample_direction = adapter_sample, .pdf_direction = adapter_pdf, .eval = adapter_eval};
+/* Q, U, V of the plugin's radiance along ray direction d (Stokes films). */
+static void adapter_eval_polarization(const emitter *e, vec3 d, double quv[3]) {
+  const env_adapter *a = (const env_adapter *)e;
+  double len = v3_len(d);
+  quv[0] = quv[1] = quv[2] = 0;
+  if (!(len > 0) || !isfinite(len)) return;
+  double s[4] = {0, 0, 0, 0}, dir[3];
+  out3(v3_scale(d, 1.0 / len), dir);
+  rsw_stokes_context ctx = {.wavelengths = &a->wavelength, .count = 1, .stokes = {&s[0], &s[1], &s[2], &s[3]}};
+  a->lp->api->add_radiance(a->inst, &ctx, dir);
+  if (!isfinite(s[1]) || !isfinite(s[2]) || !isfinite(s[3])) {
+    record_failure(a, "add_radiance returned a non-finite Q, U or V at %g nm; used 0", a->wavelength);
+    return;
+  }
+  quv[0] = s[1], quv[1] = s[2], quv[2] = s[3];
+}
+
+static const emitter_ops adapter_ops = {.sample_direction = adapter_sample,
+                                        .pdf_direction = adapter_pdf,
+                                        .eval = adapter_eval,
+                                        .eval_polarization = adapter_eval_polarization};
 
 static const loaded_plugin *find_loaded(const char *name) {
   for (size_t i = 0; name && i < g_n_loaded; i++)
