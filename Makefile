@@ -27,7 +27,7 @@ endif
 CPPFLAGS := -Iinclude -Iserver -D_GNU_SOURCE -MMD -MP
 CFLAGS := -std=c11 $(OPT) -g -fno-math-errno $(WARN) $(SANFLAGS) -fPIC
 LDFLAGS := $(SANFLAGS)
-LIBS := -lembree3 -lOpenEXRCore -lexpat -lcjson -lpthread -lm
+LIBS := -lembree3 -lOpenEXRCore -lexpat -lcjson -lpthread -ldl -lm
 DAEMON_LIBS := -lmicrohttpd -lcrypto
 TEST_LIBS := -lcurl -lcrypto
 

@@ -2,7 +2,7 @@
  *
  *   raysweepd render SCENE [-D name=value]... [--sensor ID] [--spp N]
  *                          [--seed S] [--wavelength NM] [--threads N]
- *                          [--variant mono|rgb] -o OUT.exr
+ *                          [--variant mono|rgb] [--plugin-dir DIR] -o OUT.exr
  *   raysweepd version
  *
  * Subcommands are a const table (redis' command table). Bad input exits
@@ -16,6 +16,7 @@
 #include <string.h>
 
 #include "kernel/image_exr.h"
+#include "kernel/plugins/env_plugin.h"
 #include "kernel/render.h"
 #include "kernel/scene/params.h"
 #include "kernel/scene/scene.h"
@@ -81,6 +82,7 @@ static const char *add_define(scene_define *defines, size_t *n, const char *def)
 
 static int cmd_render(int argc, char **argv) {
   const char *scene_path = NULL, *out_path = NULL, *sensor_id = NULL, *variant_name = NULL;
+  const char *plugin_dir = NULL;
   scene_define defines[MAX_DEFINES];
   size_t n_defines = 0;
   const char *sets[MAX_SETS];
@@ -126,6 +128,9 @@ static int cmd_render(int argc, char **argv) {
       if (!val || !strchr(val, '=') || val[0] == '=') USAGE("--set needs KEY=VALUE (got '%s')", val ? val : "");
       if (n_sets == MAX_SETS) USAGE("too many --set (at most %d)", MAX_SETS);
       sets[n_sets++] = val, i++;
+    } else if (strcmp(a, "--plugin-dir") == 0) {
+      if (!val) USAGE("%s needs a directory", a);
+      plugin_dir = val, i++;
     } else if (strncmp(a, "-D", 2) == 0) {
       const char *def = a[2] ? a + 2 : val;
       if (!a[2]) i++;
@@ -150,6 +155,10 @@ static int cmd_render(int argc, char **argv) {
   }
   rsw_err err = {0};
   char msg[1200];
+  if (plugin_dir && plugins_load_dir(plugin_dir, &err)) {
+    fprintf(stderr, "raysweepd render: %s\n", rsw_err_format(&err, msg, sizeof msg));
+    goto out;
+  }
   scene_load_opts lo = {.size = sizeof lo, .variant = variant_name, .defines = defines, .n_defines = n_defines};
   if (scene_load_file(scene_path, &lo, &sc, &err)) {
     fprintf(stderr, "raysweepd render: %s\n", rsw_err_format(&err, msg, sizeof msg));
@@ -176,6 +185,11 @@ static int cmd_render(int argc, char **argv) {
   if (rs.invalid_samples)
     fprintf(stderr, "raysweepd render: warning: %llu samples were NaN or infinite and were dropped\n",
             (unsigned long long)rs.invalid_samples);
+  char pmsg[600];
+  size_t pfail = plugin_emitter_failures(sc, pmsg, sizeof pmsg);
+  if (pfail)
+    fprintf(stderr, "raysweepd render: warning: %zu environment plugin failures were replaced by black; first: %s\n",
+            pfail, pmsg);
   if (film_image_write_exr(&img, out_path, sc->sensors[sensor_index]->base.id, &err)) {
     fprintf(stderr, "raysweepd render: %s\n", rsw_err_format(&err, msg, sizeof msg));
     goto out;
@@ -186,6 +200,7 @@ static int cmd_render(int argc, char **argv) {
 out:
   film_image_free(&img);
   scene_free(sc);
+  plugins_unload(); /* after the scene: its plugin emitters call into them */
   for (size_t i = 0; i < n_defines; i++) free((char *)defines[i].name);
   return rc;
 }
@@ -353,7 +368,7 @@ static int cmd_version(int argc, char **argv) {
 
 static const command commands[] = {
     {"render", "render SCENE [-D name=value]... [--set KEY=VALUE]... [--sensor ID] [--spp N] [--seed S] "
-               "[--wavelength NM] [--threads N] [--variant mono|rgb] -o OUT.exr",
+               "[--wavelength NM] [--threads N] [--variant mono|rgb] [--plugin-dir DIR] -o OUT.exr",
      cmd_render},
     {"params", "params SCENE [-D name=value]... [--match GLOB|TYPE:ID:PATH] [--class spectral|geometric|none] "
                "[--variant mono|rgb] [--json]",

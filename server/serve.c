@@ -21,13 +21,14 @@
 
 #include "default_scene.h"
 #include "http/http.h"
+#include "kernel/plugins/env_plugin.h"
 #include "service/service.h"
 
 #define MAX_SCENES 256
 #define MAX_TOKEN 4096
 
 typedef struct serve_args {
-  const char *listen, *data_root, *blob_dir, *token_file, *port_file;
+  const char *listen, *data_root, *blob_dir, *token_file, *port_file, *plugin_dir;
   const char *scenes[MAX_SCENES];
   size_t n_scenes;
   unsigned long long threads, max_queue, max_body;
@@ -74,7 +75,7 @@ static bool parse_bytes(const char *s, unsigned long long *out) {
 /* Options table: each takes one value. */
 typedef enum opt_id {
   OPT_LISTEN, OPT_THREADS, OPT_SCENE, OPT_DATA_ROOT, OPT_BLOB_DIR, OPT_TOKEN_FILE,
-  OPT_MAX_BODY, OPT_MAX_QUEUE, OPT_RESULT_TTL, OPT_PORT_FILE,
+  OPT_MAX_BODY, OPT_MAX_QUEUE, OPT_RESULT_TTL, OPT_PORT_FILE, OPT_PLUGIN_DIR,
 } opt_id;
 
 static const struct {
@@ -84,7 +85,7 @@ static const struct {
     {"--listen", OPT_LISTEN},         {"--threads", OPT_THREADS},       {"--scene", OPT_SCENE},
     {"--data-root", OPT_DATA_ROOT},   {"--blob-dir", OPT_BLOB_DIR},     {"--token-file", OPT_TOKEN_FILE},
     {"--max-body", OPT_MAX_BODY},     {"--max-queue", OPT_MAX_QUEUE},   {"--result-ttl", OPT_RESULT_TTL},
-    {"--port-file", OPT_PORT_FILE},
+    {"--port-file", OPT_PORT_FILE},   {"--plugin-dir", OPT_PLUGIN_DIR},
 };
 
 static int parse_args(int argc, char **argv, serve_args *a) {
@@ -105,6 +106,7 @@ static int parse_args(int argc, char **argv, serve_args *a) {
     case OPT_BLOB_DIR: a->blob_dir = v; break;
     case OPT_TOKEN_FILE: a->token_file = v; break;
     case OPT_PORT_FILE: a->port_file = v; break;
+    case OPT_PLUGIN_DIR: a->plugin_dir = v; break;
     case OPT_SCENE:
       if (a->n_scenes == MAX_SCENES) return fail_usage("too many --scene (at most %d)", MAX_SCENES);
       a->scenes[a->n_scenes++] = v;
@@ -223,11 +225,28 @@ int cmd_serve(int argc, char **argv) {
   pthread_sigmask(SIG_BLOCK, &stop_signals, NULL);
   signal(SIGPIPE, SIG_IGN);
 
+  /* Plugins are loaded once, here, before any thread or scene exists;
+   * never from a request. */
+  if (a.plugin_dir) {
+    rsw_err perr = {0};
+    char pmsg[1200];
+    if (plugins_load_dir(a.plugin_dir, &perr)) {
+      fprintf(stderr, "raysweepd serve: %s\n", rsw_err_format(&perr, pmsg, sizeof pmsg));
+      return 1;
+    }
+    for (size_t i = 0; i < plugins_count(); i++) {
+      const char *pretty, *file;
+      const plugin *p = plugins_at(i, &pretty, &file);
+      fprintf(stderr, "raysweepd: plugin emitter '%s' (%s) loaded from %s\n", p->name, pretty, file);
+    }
+  }
+
   char blob_tmp[] = "/tmp/raysweepd-blobs-XXXXXX";
   const char *blob_dir = a.blob_dir;
   if (!blob_dir) {
     if (!mkdtemp(blob_tmp)) {
       fprintf(stderr, "raysweepd serve: cannot create a blob directory under /tmp: %s\n", strerror(errno));
+      plugins_unload();
       return 1;
     }
     blob_dir = blob_tmp;
@@ -294,6 +313,7 @@ out:
   http_server_stop(srv);          /* joins the connection threads */
   service_free(svc);
   if (!a.blob_dir) nftw(blob_tmp, remove_entry, 16, FTW_DEPTH | FTW_PHYS);
+  plugins_unload(); /* after service_free: no scene uses them any more */
   return rc;
 }
 

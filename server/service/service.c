@@ -14,6 +14,7 @@
 
 #include "../kernel/accel.h"
 #include "../kernel/core/warp.h"
+#include "../kernel/plugins/env_plugin.h"
 #include "../kernel/scene/loader.h"
 #include "service_internal.h"
 
@@ -214,6 +215,16 @@ char *service_info_json(service *svc) {
     cJSON *e = cJSON_CreateObject();
     cJSON_AddStringToObject(e, "name", p->name);
     cJSON_AddStringToObject(e, "class", obj_class_name(p->cls));
+    cJSON_AddItemToArray(pl, e);
+  }
+  for (size_t i = 0; i < plugins_count(); i++) { /* --plugin-dir environment plugins */
+    const char *pretty = NULL;
+    const plugin *p = plugins_at(i, &pretty, NULL);
+    cJSON *e = cJSON_CreateObject();
+    cJSON_AddStringToObject(e, "name", p->name);
+    cJSON_AddStringToObject(e, "class", obj_class_name(p->cls));
+    cJSON_AddStringToObject(e, "pretty_name", pretty);
+    cJSON_AddBoolToObject(e, "external", 1);
     cJSON_AddItemToArray(pl, e);
   }
   cJSON *lim = cJSON_AddObjectToObject(o, "limits");

@@ -1,6 +1,7 @@
 /* The one list of plugins. Adding a plugin is one new file defining
  * `const plugin plugin_<name>` and one line here. */
 #include "loader.h"
+#include "../plugins/env_plugin.h"
 
 #include <string.h>
 
@@ -31,7 +32,7 @@ const plugin *registry_find(const char *name) {
   size_t n = sizeof rsw_plugins / sizeof rsw_plugins[0] - 1;
   for (size_t i = 0; i < n; i++)
     if (rsw_plugins[i] && strcmp(rsw_plugins[i]->name, name) == 0) return rsw_plugins[i];
-  return NULL;
+  return plugins_find(name); /* environment plugins loaded with --plugin-dir */
 }
 
 static const char *const class_names[CLS__COUNT] = {
