@@ -424,6 +424,63 @@ static void test_sunsky_bad_values(void) {
   scene_free(bad);
 }
 
+/* ---- the README holds the example verbatim -------------------------------------------- */
+
+static char *slurp(const char *path) {
+  FILE *f = fopen(path, "rb");
+  if (!f) return NULL;
+  char *buf = NULL;
+  if (fseek(f, 0, SEEK_END) == 0) {
+    long n = ftell(f);
+    if (n >= 0 && n < (1L << 24) && fseek(f, 0, SEEK_SET) == 0 && (buf = malloc((size_t)n + 1))) {
+      if (fread(buf, 1, (size_t)n, f) != (size_t)n) {
+        free(buf);
+        buf = NULL;
+      } else {
+        buf[n] = 0;
+      }
+    }
+  }
+  fclose(f);
+  return buf;
+}
+
+/* The repository root: RSW_TEST_DIR/.. (set by tests/run.sh), else two
+ * levels above this executable (BUILD/tests/<this>). */
+static bool repo_root(char *out, size_t len) {
+  const char *td = getenv("RSW_TEST_DIR");
+  if (td && *td) return snprintf(out, len, "%s/..", td) < (int)len;
+  char exe[PATH_MAX];
+  ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
+  if (n <= 0) return false;
+  exe[n] = 0;
+  for (int k = 0; k < 3; k++) {
+    char *slash = strrchr(exe, '/');
+    if (!slash) return false;
+    *slash = 0;
+  }
+  return snprintf(out, len, "%s", exe) < (int)len;
+}
+
+/* "Writing an environment plugin" shows tests/plugins/two_hemispheres.c in
+ * full, so the documented example is the built and tested one. */
+static void test_readme_holds_example(void) {
+  char root[PATH_MAX], path[PATH_MAX + 64];
+  REQUIRE(repo_root(root, sizeof root), "repository root");
+  snprintf(path, sizeof path, "%s/README.md", root);
+  char *readme = slurp(path);
+  snprintf(path, sizeof path, "%s/tests/plugins/two_hemispheres.c", root);
+  char *src = slurp(path);
+  CHECK(readme && src, "read README.md and two_hemispheres.c under %s", root);
+  if (readme && src) {
+    CHECK(strstr(readme, src) != NULL, "README.md does not hold tests/plugins/two_hemispheres.c verbatim");
+    CHECK(strstr(readme, "cc -shared -fPIC -I include -o test.so two_hemispheres.c") != NULL,
+          "README.md lacks the one-line build command");
+  }
+  free(readme);
+  free(src);
+}
+
 /* ---- main ---------------------------------------------------------------------------- */
 
 /* BUILD/tests/<this> -> BUILD/plugins, unless RSW_PLUGIN_DIR says. */
@@ -468,6 +525,7 @@ int main(void) {
   RSW_TEST_RUN(test_sunsky_update_sun_direction);
   RSW_TEST_RUN(test_sunsky_update_sharpness);
   RSW_TEST_RUN(test_sunsky_bad_values);
+  RSW_TEST_RUN(test_readme_holds_example);
   plugins_unload();
   RSW_TEST_END("test_env_plugins");
 }
