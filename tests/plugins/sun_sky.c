@@ -97,7 +97,7 @@ static int create(const double *const *values, void **instance, char *errbuf, si
 
 static void destroy(void *instance) { free(instance); }
 
-static int clone(const void *instance, void **out, char *errbuf, size_t errlen) {
+static int clone_instance(const void *instance, void **out, char *errbuf, size_t errlen) {
   sunsky *k = malloc(sizeof *k);
   if (!k) {
     snprintf(errbuf, errlen, "out of memory");
@@ -179,7 +179,7 @@ static const rsw_env_plugin table = {
     .n_params = P_COUNT,
     .create = create,
     .destroy = destroy,
-    .clone = clone,
+    .clone = clone_instance,
     .set_param = set_param,
     .get_param = get_param,
     .prepare = prepare,
