@@ -173,3 +173,14 @@ $(BUILD)/bin/raysweep: $(CLI_OBJ) $(BUILD)/lib/libraysweep.a
 	$(CC) $(LDFLAGS) -o $@ $(CLI_OBJ) $(BUILD)/lib/libraysweep.a $(CLI_LIBS)
 
 -include $(shell find $(BUILD)/obj -name '*.d' 2>/dev/null)
+
+# ---- environment plugins (tests/plugins): the SDK examples, each built ----
+# like a user would, against include/raysweep/plugin.h only (no kernel
+# sources). Sanitizer builds load them uninstrumented.
+PLUGIN_SRC := $(sort $(wildcard tests/plugins/*.c))
+PLUGIN_SO := $(patsubst tests/plugins/%.c,$(BUILD)/plugins/%.so,$(PLUGIN_SRC))
+PLUGIN_CFLAGS := -std=c11 -O2 -g $(WARN)
+all test: $(PLUGIN_SO)
+$(BUILD)/plugins/%.so: tests/plugins/%.c include/raysweep/plugin.h
+	@mkdir -p $(dir $@)
+	$(CC) -shared -fPIC -I include $(PLUGIN_CFLAGS) -o $@ $< -lm
