@@ -205,6 +205,12 @@ static void svc_error_print(const char *what, const svc_error *e) {
   fprintf(stderr, "raysweepd serve: %s: %s\n", what, rsw_err_format(&e->err, msg, sizeof msg));
 }
 
+static void report_plugin(void *user, const rsw_err *e) {
+  (void)user;
+  char msg[1200];
+  fprintf(stderr, "raysweepd serve: plugin refused: %s\n", rsw_err_format(e, msg, sizeof msg));
+}
+
 int cmd_serve(int argc, char **argv) {
   serve_args a = {0};
   int rc = parse_args(argc, argv, &a);
@@ -230,7 +236,9 @@ int cmd_serve(int argc, char **argv) {
   if (a.plugin_dir) {
     rsw_err perr = {0};
     char pmsg[1200];
-    if (plugins_load_dir(a.plugin_dir, &perr)) {
+    /* A bad plugin is refused with a message; the good ones load and the
+     * service starts (only an unreadable directory stops it). */
+    if (plugins_load_dir_lenient(a.plugin_dir, report_plugin, NULL, &perr) == (size_t)-1) {
       fprintf(stderr, "raysweepd serve: %s\n", rsw_err_format(&perr, pmsg, sizeof pmsg));
       return 1;
     }

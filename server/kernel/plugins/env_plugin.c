@@ -542,7 +542,8 @@ static rsw_status load_one(const char *path, rsw_err *err) {
 
 static int cmp_str(const void *a, const void *b) { return strcmp(*(char *const *)a, *(char *const *)b); }
 
-rsw_status plugins_load_dir(const char *dir, rsw_err *err) {
+/* The `*.so` files of dir, sorted (owned: free each and the array). */
+static rsw_status list_dir(const char *dir, char ***out, size_t *count, rsw_err *err) {
   DIR *d = opendir(dir);
   if (!d) return rsw_fail(err, RSW_ERR_FILE, dir, "--plugin-dir %s: cannot open the directory", dir);
   char **names = NULL;
@@ -568,6 +569,21 @@ rsw_status plugins_load_dir(const char *dir, rsw_err *err) {
   }
   closedir(d);
   if (!st && n) qsort(names, n, sizeof *names, cmp_str);
+  if (st) {
+    for (size_t i = 0; i < n; i++) free(names[i]);
+    free(names);
+    return st;
+  }
+  *out = names;
+  *count = n;
+  return RSW_OK;
+}
+
+rsw_status plugins_load_dir(const char *dir, rsw_err *err) {
+  char **names = NULL;
+  size_t n = 0;
+  rsw_status st = list_dir(dir, &names, &n, err);
+  if (st) return st;
   size_t before = g_n_loaded;
   for (size_t i = 0; !st && i < n; i++) st = load_one(names[i], err);
   if (st) /* all or nothing for this directory */
@@ -575,6 +591,23 @@ rsw_status plugins_load_dir(const char *dir, rsw_err *err) {
   for (size_t i = 0; i < n; i++) free(names[i]);
   free(names);
   return st;
+}
+
+size_t plugins_load_dir_lenient(const char *dir, void (*report)(void *user, const rsw_err *e), void *user,
+                                rsw_err *err) {
+  char **names = NULL;
+  size_t n = 0, refused = 0;
+  if (list_dir(dir, &names, &n, err)) return (size_t)-1;
+  for (size_t i = 0; i < n; i++) {
+    rsw_err e = {0};
+    if (load_one(names[i], &e) != RSW_OK) {
+      refused++;
+      if (report) report(user, &e);
+    }
+    free(names[i]);
+  }
+  free(names);
+  return refused;
 }
 
 void plugins_unload(void) {

@@ -22,6 +22,13 @@
  * Not thread-safe: call before rendering starts. */
 rsw_status plugins_load_dir(const char *dir, rsw_err *err);
 
+/* The daemon's variant: load each plugin of dir independently; one that
+ * fails is refused (report is called with its error, naming the file) and
+ * the others still load, so a bad plugin never stops the service. Returns
+ * the number refused, or (size_t)-1 when dir cannot be read (err set). */
+size_t plugins_load_dir_lenient(const char *dir, void (*report)(void *user, const rsw_err *e), void *user,
+                                rsw_err *err);
+
 /* dlclose every loaded plugin (call at exit, after every scene that uses
  * one has been freed). */
 void plugins_unload(void);
