@@ -96,6 +96,47 @@ typedef struct twosided_bsdf {
  * plugin's create() checks; this constructor trusts its caller). */
 bsdf *twosided_new(bsdf *front, bsdf *back);
 
+/* ---- Earth-observation surfaces (Eradiate) ------------------------------ */
+extern const plugin plugin_rpv;
+extern const plugin plugin_bilambertian;
+extern const plugin plugin_hapke;
+
+typedef struct rpv_bsdf {
+  bsdf base;
+  texture *rho_0, *k, *g;
+  texture *rho_c; /* == rho_0 unless given */
+} rpv_bsdf;
+
+/* rho_c NULL: the same texture as rho_0. */
+bsdf *rpv_new(texture *rho_0, texture *k, texture *g, texture *rho_c);
+/* RPV f_r(wi, wo) of one channel (no cosine factor), for tests. */
+double rpv_fr(double rho_0, double k, double g, double rho_c, vec3 wi, vec3 wo);
+
+typedef struct bilambertian_bsdf {
+  bsdf base;
+  texture *reflectance, *transmittance;
+} bilambertian_bsdf;
+
+bsdf *bilambertian_new(texture *reflectance, texture *transmittance);
+
+typedef struct hapke_bsdf {
+  bsdf base;
+  texture *w, *b, *c, *theta, *B_0, *h; /* theta in degrees */
+} hapke_bsdf;
+
+bsdf *hapke_new(texture *w, texture *b, texture *c, texture *theta, texture *B_0, texture *h);
+/* Hapke f_r(wi, wo) of one channel (no cosine factor; theta in degrees). */
+double hapke_fr(double w, double b, double c, double theta_deg, double B_0, double h,
+                vec3 wi, vec3 wo);
+
+/* Range check of a constant (uniform) texture at load, per channel;
+ * varying textures are not checked. Open or closed bounds. */
+struct loader;
+struct node;
+rsw_status bsdf_check_const_range(struct loader *ld, struct node *n, const char *name,
+                                  const texture *t, double lo, bool lo_open, double hi,
+                                  bool hi_open);
+
 /* Helpers shared by the plugin files. */
 static inline color bsdf_factor(const texture *t, const surface_interaction *si) {
   return t ? tex_eval(t, si) : col1(1.0);

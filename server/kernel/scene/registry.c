@@ -11,6 +11,7 @@
   X(scene)                                                                    \
   X(rectangle) X(disk) X(sphere) X(cube) X(obj) X(ply)                        \
   X(diffuse) X(conductor) X(roughconductor) X(dielectric) X(twosided)        \
+  X(rpv) X(bilambertian) X(hapke)                                             \
   X(directional) X(constant) X(area) X(envmap)                                \
   X(hdistant) X(distant) X(radiancemeter) X(perspective)                      \
   X(hdrfilm) X(box) X(gaussian)                                               \

@@ -1,0 +1,166 @@
+/* `rpv`: the Rahman-Pinty-Verstraete reflection model (Eradiate), one-sided.
+ *
+ * With cos(theta_i), cos(theta_o) > 0 and dphi = phi_i - phi_o:
+ *   cos(Theta) = cos(theta_i) cos(theta_o) + sin(theta_i) sin(theta_o) cos(dphi)
+ *   F = (1 - g^2) / (1 + g^2 + 2 g cos(Theta))^(3/2)          (Henyey-Greenstein)
+ *   G = sqrt(tan^2(theta_i) + tan^2(theta_o)
+ *            - 2 tan(theta_i) tan(theta_o) cos(dphi))
+ *   H = 1 + (1 - rho_c) / (1 + G)                             (hot spot)
+ *   M = (cos(theta_i) cos(theta_o) (cos(theta_i) + cos(theta_o)))^(k - 1)
+ *   f_r = rho_0 M F H / pi,   eval = f_r cos(theta_o).
+ * At the pole the azimuth is taken as 0 (sin(phi) = 0, cos(phi) = 1).
+ * The formula is symmetric in wi and wo, so f_r is reciprocal.
+ * Sampling: cosine hemisphere, pdf cos(theta_o) / pi, weight eval / pdf.
+ *
+ * rho_c defaults to the same texture object as rho_0; it is then not a
+ * parameter of its own (Eradiate's rpv.cpp does the same).
+ *
+ * Source: eradiate/mitsuba3 src/eradiate_plugins/bsdfs/rpv.cpp;
+ * Rahman, Pinty, Verstraete (1993) JGR 98(D11); kernel-behavior.md §4.1. */
+#include <math.h>
+#include <stdlib.h>
+
+#include "../scene/loader.h"
+#include "../scene/params.h"
+#include "../textures/texture.h"
+#include "bsdfs_internal.h"
+
+/* sin(theta), cos(phi), sin(phi) of a local direction; azimuth 0 at the
+ * pole. */
+static void dir_angles(vec3 w, double *sin_t, double *cos_p, double *sin_p) {
+  double s = sqrt(w.x * w.x + w.y * w.y);
+  *sin_t = s;
+  if (s > 0.0) {
+    *cos_p = w.x / s;
+    *sin_p = w.y / s;
+  } else {
+    *cos_p = 1.0;
+    *sin_p = 0.0;
+  }
+}
+
+/* pi f_r = rho_0 M F H (the BRF) for one channel. */
+static double rpv_brf(double rho_0, double k, double g, double rho_c, vec3 wi, vec3 wo) {
+  double ci = wi.z, co = wo.z;
+  double si, cpi, spi, so, cpo, spo;
+  dir_angles(wi, &si, &cpi, &spi);
+  dir_angles(wo, &so, &cpo, &spo);
+  double cos_dphi = cpi * cpo + spi * spo; /* cos(phi_i - phi_o) */
+  double cos_big = ci * co + si * so * cos_dphi;
+  double f = (1.0 - g * g) / pow(1.0 + g * g + 2.0 * g * cos_big, 1.5);
+  double ti = si / ci, to = so / co;
+  double g2 = ti * ti + to * to - 2.0 * ti * to * cos_dphi;
+  double gg = sqrt(fmax(g2, 0.0));
+  double h = 1.0 + (1.0 - rho_c) / (1.0 + gg);
+  double m = pow(ci * co * (ci + co), k - 1.0);
+  return rho_0 * m * f * h;
+}
+
+double rpv_fr(double rho_0, double k, double g, double rho_c, vec3 wi, vec3 wo) {
+  return rpv_brf(rho_0, k, g, rho_c, wi, wo) * RSW_INV_PI;
+}
+
+/* pi f_r per channel, which is also the sampling weight eval / pdf =
+ * f_r cos / (cos / pi). Kept apart from the cosine so that k = 1, g = 0,
+ * rho_c = 1 gives exactly diffuse's numbers (M = F = H = 1 exactly). */
+static color rpv_value(const rpv_bsdf *r, const surface_interaction *si, vec3 wo) {
+  vec3 wi = si->wi;
+  color rho_0 = tex_eval(r->rho_0, si), k = tex_eval(r->k, si), g = tex_eval(r->g, si);
+  color rho_c = r->rho_c == r->rho_0 ? rho_0 : tex_eval(r->rho_c, si);
+  color out;
+  for (int i = 0; i < 3; i++) {
+    double v = rpv_brf(rho_0.c[i], k.c[i], g.c[i], rho_c.c[i], wi, wo);
+    out.c[i] = isfinite(v) ? v : 0.0;
+  }
+  return out;
+}
+
+static color rpv_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2,
+                        bsdf_sample *bs) {
+  (void)u1;
+  if (!(si->wi.z > 0.0)) return bsdf_fail(bs);
+  bs->wo = warp_square_to_cosine_hemisphere(u2);
+  bs->pdf = warp_square_to_cosine_hemisphere_pdf(bs->wo);
+  bs->eta = 1.0;
+  bs->sampled_type = BSDF_GLOSSY_REFLECTION;
+  if (!(bs->pdf > 0.0) || !(bs->wo.z > 0.0)) return bsdf_fail(bs);
+  return rpv_value((const rpv_bsdf *)b, si, bs->wo);
+}
+
+static color rpv_eval(const bsdf *b, const surface_interaction *si, vec3 wo) {
+  if (!(si->wi.z > 0.0) || !(wo.z > 0.0)) return col1(0.0);
+  return col_scale(rpv_value((const rpv_bsdf *)b, si, wo), RSW_INV_PI * wo.z);
+}
+
+static double rpv_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
+  (void)b;
+  if (!(si->wi.z > 0.0) || !(wo.z > 0.0)) return 0.0;
+  return warp_square_to_cosine_hemisphere_pdf(wo);
+}
+
+static const bsdf_ops rpv_ops = {.sample = rpv_sample, .eval = rpv_eval, .pdf = rpv_pdf};
+
+static void rpv_destroy(object *o) { free(o); }
+
+rsw_status bsdf_check_const_range(loader *ld, node *n, const char *name, const texture *t,
+                                  double lo, bool lo_open, double hi, bool hi_open) {
+  color c;
+  if (!t || !uniform_texture_value(t, &c)) return RSW_OK; /* varying: not checked */
+  for (int i = 0; i < 3; i++) {
+    double v = c.c[i];
+    bool ok = isfinite(v) && (lo_open ? v > lo : v >= lo) && (hi_open ? v < hi : v <= hi);
+    if (!ok)
+      return ld_fail(ld, n, name, RSW_ERR_INVALID, "%s = %g lies outside %c%g, %g%c", name, v,
+                     lo_open ? '(' : '[', lo, hi, hi_open ? ')' : ']');
+  }
+  return RSW_OK;
+}
+
+/* Ranges as Eradiate documents them: rho_0 >= 0, k >= 0, -1 < g < 1,
+ * rho_c >= 0. */
+static rsw_status rpv_create(loader *ld, node *n, object **out) {
+  texture *rho_0, *k, *g, *rho_c;
+  rsw_status st;
+  if ((st = ld_texture(ld, n, "rho_0", 0.1, 0.0, &rho_0)) != RSW_OK) return st;
+  if ((st = ld_texture(ld, n, "k", 0.1, 0.0, &k)) != RSW_OK) return st;
+  if ((st = ld_texture(ld, n, "g", 0.0, -INFINITY, &g)) != RSW_OK) return st;
+  if ((st = ld_texture_opt(ld, n, "rho_c", 0.0, &rho_c)) != RSW_OK) return st;
+  if ((st = bsdf_check_const_range(ld, n, "k", k, 0.0, false, INFINITY, true)) != RSW_OK)
+    return st;
+  if ((st = bsdf_check_const_range(ld, n, "g", g, -1.0, true, 1.0, true)) != RSW_OK) return st;
+  bsdf *b = rpv_new(rho_0, k, g, rho_c);
+  if (!b) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "rpv: out of memory");
+  b->base.id = n->id;
+  *out = &b->base;
+  return RSW_OK;
+}
+
+static void rpv_traverse(object *o, param_visitor *v) {
+  rpv_bsdf *r = (rpv_bsdf *)o;
+  pv_object(v, "rho_0", &r->rho_0->base, 0.0, INFINITY);
+  pv_object(v, "k", &r->k->base, 0.0, INFINITY);
+  pv_object(v, "g", &r->g->base, nextafter(-1.0, 0.0), nextafter(1.0, 0.0));
+  if (r->rho_c != r->rho_0) pv_object(v, "rho_c", &r->rho_c->base, 0.0, INFINITY);
+}
+
+const plugin plugin_rpv = {
+    .name = "rpv",
+    .cls = CLS_BSDF,
+    .create = rpv_create,
+    .destroy = rpv_destroy,
+    .ops = &rpv_ops,
+    .traverse = rpv_traverse,
+};
+
+bsdf *rpv_new(texture *rho_0, texture *k, texture *g, texture *rho_c) {
+  rpv_bsdf *r = calloc(1, sizeof *r);
+  if (!r) return NULL;
+  r->base.base.plugin = &plugin_rpv;
+  r->base.ops = &rpv_ops;
+  r->base.flags = BSDF_GLOSSY_REFLECTION;
+  r->rho_0 = rho_0;
+  r->k = k;
+  r->g = g;
+  r->rho_c = rho_c ? rho_c : rho_0;
+  return &r->base;
+}
