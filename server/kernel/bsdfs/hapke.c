@@ -102,7 +102,10 @@ double hapke_fr(double w, double b, double c, double theta_deg, double B_0, doub
   double b2 = b * b;
   double P = (1.0 - c) * (1.0 - b2) / pow(1.0 + 2.0 * b * cos_g + b2, 1.5) +
              c * (1.0 - b2) / pow(1.0 - 2.0 * b * cos_g + b2, 1.5);
-  double t_half = tan(0.5 * acos(cos_g));
+  /* tan(g/2) from the chord |wi - wo| = 2 sin(g/2), exact near g = 0
+   * (acos(cos g) is not: it gives g ~ 1e-8 for wi == wo). */
+  double chord = v3_len(v3_sub(wi, wo));
+  double t_half = tan(asin(fmin(0.5 * chord, 1.0)));
   double B;
   if (t_half == 0.0)
     B = B_0; /* g = 0: tan(g/2) / h = 0 for every h, including the 0/0 of h = 0 */
