@@ -13,6 +13,7 @@
   X(diffuse) X(conductor) X(roughconductor) X(dielectric) X(twosided)        \
   X(directional) X(constant) X(area) X(envmap)                                \
   X(hdistant) X(distant) X(radiancemeter) X(perspective)                      \
+  X(mdistant) X(distantflux) X(mradiancemeter)                                \
   X(hdrfilm) X(box) X(gaussian)                                               \
   X(independent) X(stratified)                                                \
   X(path)                                                                     \
