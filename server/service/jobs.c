@@ -669,6 +669,7 @@ rsw_status service_job_result(service *svc, const char *id, const char *context,
     }
     /* A copy: the job may be deleted while the response is written. */
     *out = it->film;
+    out->img.angles = NULL; /* deep-copied below, never shared */
     size_t n = (size_t)it->film.img.width * it->film.img.height * it->film.img.channels;
     out->img.data = malloc(n * sizeof(float));
     if (!out->img.data) {
@@ -677,7 +678,6 @@ rsw_status service_job_result(service *svc, const char *id, const char *context,
     }
     memcpy(out->img.data, it->film.img.data, n * sizeof(float));
     /* The per-pixel viewing angles (distant-family films) are owned too. */
-    out->img.angles = NULL;
     if (it->film.img.angles) {
       size_t na = (size_t)it->film.img.width * it->film.img.height * 2;
       out->img.angles = malloc(na * sizeof(double));
