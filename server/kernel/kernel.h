@@ -255,6 +255,10 @@ typedef struct sensor_ops {
   /* Called once the scene's bounds are known (bounding sphere, default
    * ray_offset); may fail (e.g. a target shape without area). */
   rsw_status (*set_scene)(sensor *s, const struct scene *sc, rsw_err *err);
+  /* Optional (distant family): each pixel's viewing zenith and azimuth in
+   * degrees, zen_az[2 (iy W + ix)] and [2 (iy W + ix) + 1], azimuth in
+   * [0, 360) in Eradiate's east-right convention (atan2(y, x)). */
+  void (*pixel_angles)(const sensor *s, int W, int H, double *zen_az);
 } sensor_ops;
 struct sensor {
   object base;

@@ -327,6 +327,14 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
     }
   }
   free(jb.film_acc);
+  if (se->ops->pixel_angles) {
+    img.angles = malloc((size_t)jb.W * jb.H * 2 * sizeof(double));
+    if (!img.angles) {
+      free(img.data);
+      return rsw_fail(err, RSW_ERR_NOMEM, "film", "out of memory");
+    }
+    se->ops->pixel_angles(se, jb.W, jb.H, img.angles);
+  }
   if (stats) {
     stats->rays = jb.rays;
     stats->samples = jb.samples;
@@ -342,4 +350,6 @@ void film_image_free(film_image *img) {
   if (!img) return;
   free(img->data);
   img->data = NULL;
+  free(img->angles);
+  img->angles = NULL;
 }

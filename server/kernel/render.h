@@ -39,6 +39,9 @@ typedef struct film_image {
   uint64_t seed;
   double wavelength;
   rsw_variant variant;
+  /* Viewing zenith, azimuth (degrees) of each pixel, 2 per pixel,
+   * row-major (owned); NULL when the sensor has no pixel_angles op. */
+  double *angles;
 } film_image;
 
 typedef struct render_result_stats {
@@ -55,7 +58,9 @@ void film_image_free(film_image *img);
 
 /* Write a developed film as OpenEXR (float32, or float16 when the film asks
  * for it), through a temporary file renamed on success. Metadata records
- * the sensor, spp, seed, variant and wavelength. */
+ * the sensor, spp, seed, variant and wavelength, and the per-pixel viewing
+ * angles when the film has them ("raysweep:zenith_deg",
+ * "raysweep:azimuth_deg": comma-separated, row-major, %.9g). */
 rsw_status film_image_write_exr(const film_image *img, const char *path, const char *sensor_id, rsw_err *err);
 
 #endif

@@ -669,6 +669,7 @@ rsw_status service_job_result(service *svc, const char *id, const char *context,
     }
     /* A copy: the job may be deleted while the response is written. */
     *out = it->film;
+    out->img.angles = NULL; /* deep-copied below, never shared */
     size_t n = (size_t)it->film.img.width * it->film.img.height * it->film.img.channels;
     out->img.data = malloc(n * sizeof(float));
     if (!out->img.data) {
@@ -676,6 +677,18 @@ rsw_status service_job_result(service *svc, const char *id, const char *context,
       return svc_fail(e, RSW_ERR_NOMEM, 500, "", "out of memory");
     }
     memcpy(out->img.data, it->film.img.data, n * sizeof(float));
+    /* The per-pixel viewing angles (distant-family films) are owned too. */
+    if (it->film.img.angles) {
+      size_t na = (size_t)it->film.img.width * it->film.img.height * 2;
+      out->img.angles = malloc(na * sizeof(double));
+      if (!out->img.angles) {
+        free(out->img.data);
+        out->img.data = NULL;
+        pthread_mutex_unlock(&svc->lock);
+        return svc_fail(e, RSW_ERR_NOMEM, 500, "", "out of memory");
+      }
+      memcpy(out->img.angles, it->film.img.angles, na * sizeof(double));
+    }
     pthread_mutex_unlock(&svc->lock);
     return RSW_OK;
   }

@@ -14,6 +14,7 @@
   X(rpv) X(bilambertian) X(hapke)                                             \
   X(directional) X(constant) X(area) X(envmap)                                \
   X(hdistant) X(distant) X(radiancemeter) X(perspective)                      \
+  X(mdistant) X(distantflux) X(mradiancemeter)                                \
   X(hdrfilm) X(box) X(gaussian)                                               \
   X(independent) X(stratified)                                                \
   X(path)                                                                     \

@@ -49,9 +49,16 @@ static rsw_status distant_set_scene(sensor *s, const scene *sc, rsw_err *err) {
   return RSW_OK;
 }
 
+/* The one pixel sees the radiance leaving along -d. */
+static void distant_pixel_angles(const sensor *s, int W, int H, double *zen_az) {
+  vec3 w = v3_neg(((const distant *)s)->d);
+  for (size_t i = 0; i < (size_t)W * H; i++) direction_angles(w, &zen_az[2 * i], &zen_az[2 * i + 1]);
+}
+
 static const sensor_ops distant_ops = {
     .sample_ray = distant_sample_ray,
     .set_scene = distant_set_scene,
+    .pixel_angles = distant_pixel_angles,
 };
 
 static void distant_destroy(object *o) { free(o); }

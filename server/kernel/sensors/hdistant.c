@@ -62,9 +62,15 @@ static rsw_status hdistant_set_scene(sensor *s, const scene *sc, rsw_err *err) {
   return RSW_OK;
 }
 
+static void hdistant_pixel_angles(const sensor *s, int W, int H, double *zen_az) {
+  (void)s;
+  hemisphere_pixel_angles(W, H, zen_az);
+}
+
 static const sensor_ops hdistant_ops = {
     .sample_ray = hdistant_sample_ray,
     .set_scene = hdistant_set_scene,
+    .pixel_angles = hdistant_pixel_angles,
 };
 
 static void hdistant_destroy(object *o) { free(o); }

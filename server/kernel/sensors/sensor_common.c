@@ -1,6 +1,8 @@
 #include "sensor_common.h"
 
+#include <ctype.h>
 #include <math.h>
+#include <stdlib.h>
 
 #include "../shapes/shape.h"
 
@@ -115,4 +117,72 @@ double ray_target_origin(const ray_target *t, const xform *to_world, vec3 center
     return 1.0;
   }
   }
+}
+
+rsw_status sensor_read_vec3_list(loader *ld, node *n, const char *name, vec3 **out, size_t *count) {
+  const char *text = NULL;
+  rsw_status st = ld_string(ld, n, name, NULL, &text);
+  if (st != RSW_OK) return st;
+  if (!text)
+    return ld_fail(ld, n, name, RSW_ERR_MISSING, "%s: '%s' is required (a string of 3N numbers)", n->type, name);
+  size_t cap = 16, k = 0;
+  double *v = malloc(cap * sizeof *v);
+  if (!v) return ld_fail(ld, n, name, RSW_ERR_NOMEM, "out of memory");
+  const char *p = text;
+  for (;;) {
+    while (*p == ',' || isspace((unsigned char)*p)) p++;
+    if (!*p) break;
+    char *end = NULL;
+    double x = strtod(p, &end);
+    if (end == p || !isfinite(x)) {
+      free(v);
+      return ld_fail(ld, n, name, RSW_ERR_INVALID, "%s: '%s': entry %zu is not a finite number (near \"%.20s\")",
+                     n->type, name, k, p);
+    }
+    if (k == cap) {
+      cap *= 2;
+      double *nv = realloc(v, cap * sizeof *v);
+      if (!nv) {
+        free(v);
+        return ld_fail(ld, n, name, RSW_ERR_NOMEM, "out of memory");
+      }
+      v = nv;
+    }
+    v[k++] = x;
+    p = end;
+  }
+  if (k == 0 || k % 3 != 0) {
+    free(v);
+    return ld_fail(ld, n, name, RSW_ERR_INVALID, "%s: '%s' must hold 3N numbers, N >= 1 (got %zu)", n->type, name,
+                   k);
+  }
+  vec3 *r = malloc(k / 3 * sizeof *r);
+  if (!r) {
+    free(v);
+    return ld_fail(ld, n, name, RSW_ERR_NOMEM, "out of memory");
+  }
+  for (size_t i = 0; i < k / 3; i++) r[i] = v3(v[3 * i], v[3 * i + 1], v[3 * i + 2]);
+  free(v);
+  *out = r;
+  *count = k / 3;
+  return RSW_OK;
+}
+
+void direction_angles(vec3 w, double *zenith, double *azimuth) {
+  const double deg = 180.0 / 3.14159265358979323846;
+  double z = w.z > 1.0 ? 1.0 : (w.z < -1.0 ? -1.0 : w.z);
+  double phi = atan2(w.y, w.x) * deg;
+  if (phi < 0.0) phi += 360.0;
+  if (phi >= 360.0) phi -= 360.0;
+  *zenith = acos(z) * deg;
+  *azimuth = phi;
+}
+
+void hemisphere_pixel_angles(int W, int H, double *zen_az) {
+  for (int iy = 0; iy < H; iy++)
+    for (int ix = 0; ix < W; ix++) {
+      vec3 v = warp_square_to_uniform_hemisphere(v2((ix + 0.5) / W, (iy + 0.5) / H));
+      size_t i = 2 * ((size_t)iy * W + (size_t)ix);
+      direction_angles(v, &zen_az[i], &zen_az[i + 1]);
+    }
 }

@@ -55,4 +55,21 @@ rsw_status ray_target_check(const ray_target *t, const char *where, rsw_err *err
 double ray_target_origin(const ray_target *t, const xform *to_world, vec3 center,
                          double radius, double offset, vec3 d, vec2 u, vec3 *o);
 
+/* Read a string property of 3N numbers separated by commas and/or white
+ * space (Eradiate's mdistant `directions`, mradiancemeter `origins`) into
+ * *out (malloc'ed, N entries, caller frees). Error when it is absent,
+ * empty, not numbers, or not a multiple of 3 long. */
+rsw_status sensor_read_vec3_list(loader *ld, node *n, const char *name, vec3 **out, size_t *count);
+
+/* Viewing angles of an exitant direction w (unit, world or local), in
+ * degrees, Eradiate's east-right convention: zenith acos(w.z), azimuth
+ * atan2(w.y, w.x) wrapped to [0, 360). */
+void direction_angles(vec3 w, double *zenith, double *azimuth);
+
+/* pixel_angles of the hemispherical films (hdistant, distantflux): each
+ * pixel's angles from the LOCAL vector square_to_uniform_hemisphere at its
+ * centre ((ix + 0.5)/W, (iy + 0.5)/H), as Eradiate's post-processing does
+ * (eradiate src/eradiate/warp.py; kernel-behavior.md §1.2). */
+void hemisphere_pixel_angles(int W, int H, double *zen_az);
+
 #endif

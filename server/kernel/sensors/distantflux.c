@@ -1,0 +1,144 @@
+/* `distantflux`: hemispherical exitant flux density (Eradiate plugin,
+ * eradiate/mitsuba3 src/eradiate_plugins/sensors/distantflux.cpp;
+ * kernel-behavior.md §1.5).
+ *
+ * Directions, targets and ray_offset exactly as hdistant:
+ *   v_local = square_to_uniform_hemisphere(u), omega = to_world v_local,
+ *   ray.d = -omega.
+ * Each sample is weighted by cos theta / (p_H N_pix) with p_H = 1 / (2 pi)
+ * the hemisphere's sampling density and N_pix = W H:
+ *   w = 2 pi (omega . n_ref) / (W H),   n_ref = to_world (0,0,1),
+ * times the target weight. A pixel holds (2 pi / N_pix) E_pixel[L cos theta],
+ * so the SUM over all pixels is the radiosity
+ *   J = int_hemisphere L cos theta d omega   (W m^-2 [nm^-1]).
+ * n_ref is read from the current to_world at each sample, so updating the
+ * `to_world` / `direction` parameters moves the reference normal too. */
+#include <math.h>
+#include <stdlib.h>
+
+#include "../scene/params.h"
+#include "sensor_common.h"
+
+typedef struct distantflux {
+  sensor base;
+  ray_target target;
+  double ray_offset_param; /* as given; < 0: resolve from the scene */
+  double ray_offset;
+  vec3 center;
+  double radius;
+} distantflux;
+
+static double distantflux_sample_ray(const sensor *s, vec2 film_u, vec2 aperture_u, ray3 *ray) {
+  const distantflux *f = (const distantflux *)s;
+  vec3 v_local = warp_square_to_uniform_hemisphere(film_u);
+  vec3 omega = v3_norm(xf_vector(&s->to_world, v_local));
+  vec3 n_ref = v3_norm(xf_vector(&s->to_world, v3(0, 0, 1)));
+  vec3 d = v3_neg(omega);
+  vec3 o;
+  double w = ray_target_origin(&f->target, &s->to_world, f->center, f->radius, f->ray_offset, d, aperture_u, &o);
+  double n_pix = (double)s->film->width * (double)s->film->height;
+  w *= 2.0 * 3.14159265358979323846 * v3_dot(omega, n_ref) / n_pix;
+  ray->o = o;
+  ray->d = d;
+  ray->tmin = 0.0;
+  ray->tmax = INFINITY;
+  return w;
+}
+
+static rsw_status distantflux_set_scene(sensor *s, const scene *sc, rsw_err *err) {
+  distantflux *f = (distantflux *)s;
+  rsw_status st = ray_target_check(&f->target, s->base.id, err);
+  if (st != RSW_OK) return st;
+  f->center = sc->bsphere_center; /* radius already inflated (kernel.h) */
+  f->radius = sc->bsphere_radius;
+  if (f->ray_offset_param < 0.0)
+    f->ray_offset = f->target.kind == RAY_TARGET_NONE ? f->radius : 2.0 * f->radius;
+  else
+    f->ray_offset = f->ray_offset_param;
+  return RSW_OK;
+}
+
+static void distantflux_pixel_angles(const sensor *s, int W, int H, double *zen_az) {
+  (void)s;
+  hemisphere_pixel_angles(W, H, zen_az);
+}
+
+static const sensor_ops distantflux_ops = {
+    .sample_ray = distantflux_sample_ray,
+    .set_scene = distantflux_set_scene,
+    .pixel_angles = distantflux_pixel_angles,
+};
+
+static void distantflux_destroy(object *o) { free(o); }
+
+static rsw_status distantflux_create(loader *ld, node *n, object **out);
+
+/* The reference normal (pointing away from the scene): to_world (0,0,1). */
+static vec3 distantflux_get_direction(const object *o) {
+  return v3_norm(xf_vector(&((const sensor *)o)->to_world, v3(0, 0, 1)));
+}
+
+/* As hdistant: the new frame keeps the old local +x projected onto the
+ * plane orthogonal to the new axis. */
+static void distantflux_set_direction(object *o, vec3 dir) {
+  sensor *s = (sensor *)o;
+  vec3 dn = v3_norm(dir);
+  vec3 x_old = v3_norm(xf_vector(&s->to_world, v3(1, 0, 0)));
+  vec3 up = v3_cross(dn, x_old);
+  if (!(v3_len(up) > 1e-9)) up = v3_cross(dn, v3(1, 0, 0));
+  if (!(v3_len(up) > 1e-9)) {
+    vec3 unused;
+    coordinate_system(dn, &unused, &up);
+  }
+  xform t;
+  if (xf_look_at(v3(0, 0, 0), dn, v3_norm(up), &t)) s->to_world = t;
+}
+
+static rsw_status distantflux_check_xf(const object *o, const xform *t, const char *key, rsw_err *err) {
+  (void)o;
+  vec3 d = xf_vector(t, v3(0, 0, 1));
+  if (!(v3_len(d) > 0.0) || !v3_finite(d))
+    return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': to_world maps +z to a zero vector", key);
+  return RSW_OK;
+}
+
+static void distantflux_traverse(object *o, param_visitor *v) {
+  sensor *s = (sensor *)o;
+  pv_transform(v, "to_world", &s->to_world, UPDATE_SPECTRAL, distantflux_check_xf);
+  pv_vector(v, "direction", distantflux_get_direction, distantflux_set_direction, UPDATE_SPECTRAL);
+}
+
+const plugin plugin_distantflux = {
+    .traverse = distantflux_traverse,
+    .name = "distantflux",
+    .cls = CLS_SENSOR,
+    .create = distantflux_create,
+    .destroy = distantflux_destroy,
+    .ops = &distantflux_ops,
+};
+
+static rsw_status distantflux_create(loader *ld, node *n, object **out) {
+  distantflux *f = calloc(1, sizeof *f);
+  if (!f) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+  f->base.base.plugin = &plugin_distantflux;
+  f->base.base.id = n->id;
+  f->base.ops = &distantflux_ops;
+  f->base.to_world = xf_identity();
+
+  rsw_status st = sensor_read_base(ld, n, &f->base);
+  if (st == RSW_OK) st = ld_transform(ld, n, "to_world", &f->base.to_world, NULL);
+  if (st == RSW_OK) {
+    vec3 d = xf_vector(&f->base.to_world, v3(0, 0, 1));
+    if (!(v3_len(d) > 0.0) || !v3_finite(d))
+      st = ld_fail(ld, n, "to_world", RSW_ERR_INVALID, "distantflux: 'to_world' maps +z to a zero vector");
+  }
+  if (st == RSW_OK) st = sensor_read_target(ld, n, &f->target);
+  if (st == RSW_OK) st = ld_float(ld, n, "ray_offset", -1.0, &f->ray_offset_param);
+  if (st != RSW_OK) {
+    free(f);
+    return st;
+  }
+  f->ray_offset = f->ray_offset_param;
+  *out = &f->base.base;
+  return RSW_OK;
+}

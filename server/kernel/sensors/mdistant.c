@@ -1,0 +1,144 @@
+/* `mdistant`: multi-direction distant radiancemeter (Eradiate plugin,
+ * eradiate/mitsuba3 src/eradiate_plugins/sensors/mdistant.cpp;
+ * kernel-behavior.md §1.4).
+ *
+ * N sub-sensors, one per triple of the `directions` string; each triple is
+ * the direction that sub-sensor looks (into the scene; Eradiate passes the
+ * negated viewing directions). The film is N x 1 and pixel i is sub-sensor
+ * i = floor(u.x N): its rays travel along d_i = normalize(dir_i) and it
+ * records the radiance leaving along -d_i (W m^-2 sr^-1 [nm^-1]).
+ * Sub-sensor i's frame is look_at(0, d_i, up) with up the FIRST vector of
+ * coordinate_system(d_i); it only orients the no-target disk, which is thus
+ * orthogonal to d_i. Targets and ray_offset as hdistant (default offset R
+ * without a target, 2R with one). There is no to_world. */
+#include <math.h>
+#include <stdlib.h>
+
+#include "sensor_common.h"
+
+typedef struct mdistant {
+  sensor base;
+  ray_target target;
+  size_t n;
+  vec3 *d;        /* n unit directions, into the scene */
+  xform *frames;  /* n: look_at(0, d_i, first vector of coordinate_system) */
+  double ray_offset_param; /* as given; < 0: resolve from the scene */
+  double ray_offset;
+  vec3 center;
+  double radius;
+} mdistant;
+
+static size_t mdistant_index(const mdistant *m, double ux) {
+  double f = floor(ux * (double)m->n);
+  if (!(f >= 0.0)) return 0;
+  return f >= (double)m->n ? m->n - 1 : (size_t)f;
+}
+
+static double mdistant_sample_ray(const sensor *s, vec2 film_u, vec2 aperture_u, ray3 *ray) {
+  const mdistant *m = (const mdistant *)s;
+  size_t i = mdistant_index(m, film_u.x);
+  vec3 o;
+  double w = ray_target_origin(&m->target, &m->frames[i], m->center, m->radius, m->ray_offset, m->d[i],
+                               aperture_u, &o);
+  ray->o = o;
+  ray->d = m->d[i];
+  ray->tmin = 0.0;
+  ray->tmax = INFINITY;
+  return w;
+}
+
+static rsw_status mdistant_set_scene(sensor *s, const scene *sc, rsw_err *err) {
+  mdistant *m = (mdistant *)s;
+  rsw_status st = ray_target_check(&m->target, s->base.id, err);
+  if (st != RSW_OK) return st;
+  m->center = sc->bsphere_center; /* radius already inflated (kernel.h) */
+  m->radius = sc->bsphere_radius;
+  if (m->ray_offset_param < 0.0)
+    m->ray_offset = m->target.kind == RAY_TARGET_NONE ? m->radius : 2.0 * m->radius;
+  else
+    m->ray_offset = m->ray_offset_param;
+  return RSW_OK;
+}
+
+/* Pixel ix is sub-sensor floor((ix + 0.5) N / W) = ix (W = N); its
+ * exitant direction is -d_i, in world coordinates. */
+static void mdistant_pixel_angles(const sensor *s, int W, int H, double *zen_az) {
+  const mdistant *m = (const mdistant *)s;
+  for (int iy = 0; iy < H; iy++)
+    for (int ix = 0; ix < W; ix++) {
+      size_t i = 2 * ((size_t)iy * W + (size_t)ix);
+      size_t k = mdistant_index(m, (ix + 0.5) / W);
+      direction_angles(v3_neg(m->d[k]), &zen_az[i], &zen_az[i + 1]);
+    }
+}
+
+static const sensor_ops mdistant_ops = {
+    .sample_ray = mdistant_sample_ray,
+    .set_scene = mdistant_set_scene,
+    .pixel_angles = mdistant_pixel_angles,
+};
+
+static void mdistant_destroy(object *o) {
+  mdistant *m = (mdistant *)o;
+  if (!m) return;
+  free(m->d);
+  free(m->frames);
+  free(m);
+}
+
+static rsw_status mdistant_create(loader *ld, node *n, object **out);
+
+const plugin plugin_mdistant = {
+    .name = "mdistant",
+    .cls = CLS_SENSOR,
+    .create = mdistant_create,
+    .destroy = mdistant_destroy,
+    .ops = &mdistant_ops,
+};
+
+static rsw_status mdistant_read(loader *ld, node *n, mdistant *m) {
+  if (ld_has(n, "to_world"))
+    return ld_fail(ld, n, "to_world", RSW_ERR_INVALID,
+                   "mdistant: 'to_world' is not supported (orientation comes from 'directions')");
+  rsw_status st = sensor_read_base(ld, n, &m->base);
+  if (st != RSW_OK) return st;
+  st = sensor_read_vec3_list(ld, n, "directions", &m->d, &m->n);
+  if (st != RSW_OK) return st;
+  if (m->base.film->width < 0 || (size_t)m->base.film->width != m->n || m->base.film->height != 1)
+    return ld_fail(ld, n, "film", RSW_ERR_INVALID,
+                   "mdistant: the film must be %zu x 1 pixels, one per direction (got %dx%d)", m->n,
+                   m->base.film->width, m->base.film->height);
+  m->frames = malloc(m->n * sizeof *m->frames);
+  if (!m->frames) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+  for (size_t i = 0; i < m->n; i++) {
+    if (!(v3_len(m->d[i]) > 0.0))
+      return ld_fail(ld, n, "directions", RSW_ERR_INVALID, "mdistant: direction %zu is the zero vector", i);
+    m->d[i] = v3_norm(m->d[i]);
+    vec3 up, unused;
+    coordinate_system(m->d[i], &up, &unused);
+    if (!xf_look_at(v3(0, 0, 0), m->d[i], up, &m->frames[i]))
+      return ld_fail(ld, n, "directions", RSW_ERR_INVALID, "mdistant: cannot build a frame for direction %zu", i);
+  }
+  st = sensor_read_target(ld, n, &m->target);
+  if (st != RSW_OK) return st;
+  st = ld_float(ld, n, "ray_offset", -1.0, &m->ray_offset_param);
+  if (st != RSW_OK) return st;
+  m->ray_offset = m->ray_offset_param;
+  return RSW_OK;
+}
+
+static rsw_status mdistant_create(loader *ld, node *n, object **out) {
+  mdistant *m = calloc(1, sizeof *m);
+  if (!m) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+  m->base.base.plugin = &plugin_mdistant;
+  m->base.base.id = n->id;
+  m->base.ops = &mdistant_ops;
+  m->base.to_world = xf_identity();
+  rsw_status st = mdistant_read(ld, n, m);
+  if (st != RSW_OK) {
+    mdistant_destroy(&m->base.base);
+    return st;
+  }
+  *out = &m->base.base;
+  return RSW_OK;
+}

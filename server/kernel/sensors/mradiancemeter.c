@@ -1,0 +1,100 @@
+/* `mradiancemeter`: N radiancemeters in one sensor (Eradiate plugin,
+ * eradiate/mitsuba3 src/eradiate_plugins/sensors/mradiancemeter.cpp;
+ * kernel-behavior.md §1.4).
+ *
+ * `origins` and `directions` are strings of 3N numbers each (commas and/or
+ * white space); the film is N x 1 and pixel i = floor(u.x N) is the
+ * radiancemeter at origin_i looking along normalize(direction_i): the
+ * radiance arriving at origin_i from that direction, weight 1. As for
+ * radiancemeter the origin is nudged by RayEpsilon along d. */
+#include <math.h>
+#include <stdlib.h>
+
+#include "sensor_common.h"
+
+typedef struct mradiancemeter {
+  sensor base;
+  size_t n;
+  vec3 *o, *d; /* n each; d unit */
+} mradiancemeter;
+
+static double mradiancemeter_sample_ray(const sensor *s, vec2 film_u, vec2 aperture_u, ray3 *ray) {
+  (void)aperture_u;
+  const mradiancemeter *m = (const mradiancemeter *)s;
+  double f = floor(film_u.x * (double)m->n);
+  size_t i = !(f >= 0.0) ? 0 : (f >= (double)m->n ? m->n - 1 : (size_t)f);
+  ray->o = v3_fma(m->o[i], RSW_RAY_EPSILON, m->d[i]);
+  ray->d = m->d[i];
+  ray->tmin = 0.0;
+  ray->tmax = INFINITY;
+  return 1.0;
+}
+
+static rsw_status mradiancemeter_set_scene(sensor *s, const scene *sc, rsw_err *err) {
+  (void)s;
+  (void)sc;
+  (void)err;
+  return RSW_OK;
+}
+
+static const sensor_ops mradiancemeter_ops = {
+    .sample_ray = mradiancemeter_sample_ray,
+    .set_scene = mradiancemeter_set_scene,
+};
+
+static void mradiancemeter_destroy(object *o) {
+  mradiancemeter *m = (mradiancemeter *)o;
+  if (!m) return;
+  free(m->o);
+  free(m->d);
+  free(m);
+}
+
+static rsw_status mradiancemeter_create(loader *ld, node *n, object **out);
+
+const plugin plugin_mradiancemeter = {
+    .name = "mradiancemeter",
+    .cls = CLS_SENSOR,
+    .create = mradiancemeter_create,
+    .destroy = mradiancemeter_destroy,
+    .ops = &mradiancemeter_ops,
+};
+
+static rsw_status mradiancemeter_read(loader *ld, node *n, mradiancemeter *m) {
+  rsw_status st = sensor_read_base(ld, n, &m->base);
+  if (st != RSW_OK) return st;
+  size_t n_o = 0;
+  st = sensor_read_vec3_list(ld, n, "origins", &m->o, &n_o);
+  if (st != RSW_OK) return st;
+  st = sensor_read_vec3_list(ld, n, "directions", &m->d, &m->n);
+  if (st != RSW_OK) return st;
+  if (n_o != m->n)
+    return ld_fail(ld, n, "directions", RSW_ERR_INVALID,
+                   "mradiancemeter: %zu origins but %zu directions (they must pair up)", n_o, m->n);
+  if (m->base.film->width < 0 || (size_t)m->base.film->width != m->n || m->base.film->height != 1)
+    return ld_fail(ld, n, "film", RSW_ERR_INVALID,
+                   "mradiancemeter: the film must be %zu x 1 pixels, one per radiancemeter (got %dx%d)", m->n,
+                   m->base.film->width, m->base.film->height);
+  for (size_t i = 0; i < m->n; i++) {
+    if (!(v3_len(m->d[i]) > 0.0))
+      return ld_fail(ld, n, "directions", RSW_ERR_INVALID, "mradiancemeter: direction %zu is the zero vector", i);
+    m->d[i] = v3_norm(m->d[i]);
+  }
+  return RSW_OK;
+}
+
+static rsw_status mradiancemeter_create(loader *ld, node *n, object **out) {
+  mradiancemeter *m = calloc(1, sizeof *m);
+  if (!m) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+  m->base.base.plugin = &plugin_mradiancemeter;
+  m->base.base.id = n->id;
+  m->base.ops = &mradiancemeter_ops;
+  m->base.to_world = xf_identity();
+  rsw_status st = mradiancemeter_read(ld, n, m);
+  if (st != RSW_OK) {
+    mradiancemeter_destroy(&m->base.base);
+    return st;
+  }
+  *out = &m->base.base;
+  return RSW_OK;
+}
