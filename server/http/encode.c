@@ -161,7 +161,18 @@ rsw_status http_film_json(const svc_film *f, char **bytes_out, size_t *len_out, 
     http_buf_printf(&b, "%.17g", im->wavelength);
   else
     http_buf_puts(&b, "null");
-  http_buf_printf(&b, ",\"spp\":%u,\"seed\":%llu}}", im->spp, (unsigned long long)im->seed);
+  http_buf_printf(&b, ",\"spp\":%u,\"seed\":%llu", im->spp, (unsigned long long)im->seed);
+  if (im->angles) {
+    /* Distant-family films: each pixel's viewing zenith and azimuth in
+     * degrees (Eradiate's east-right convention), row-major. */
+    size_t np = (size_t)im->width * (size_t)im->height;
+    for (int k = 0; k < 2 && !b.failed; k++) {
+      http_buf_puts(&b, k ? "],\"azimuth_deg\":[" : ",\"zenith_deg\":[");
+      for (size_t i = 0; i < np && !b.failed; i++) http_buf_printf(&b, "%s%.9g", i ? "," : "", im->angles[2 * i + (size_t)k]);
+    }
+    http_buf_puts(&b, "]");
+  }
+  http_buf_puts(&b, "}}");
   size_t len = 0;
   char *text = http_buf_take(&b, &len);
   if (!text) return rsw_fail(err, RSW_ERR_NOMEM, "film JSON", "no memory for %zu samples as JSON", n);
