@@ -13,6 +13,7 @@
 
 #include "../accel.h"
 #include "../scene/loader.h"
+#include "../shapes/instance.h"
 #include "../shapes/shape.h"
 
 static inline double mis_weight(double a, double b) {
@@ -42,7 +43,7 @@ static bool intersect(const scene *sc, const ray3 *r, surface_interaction *si, r
   accel_hit h;
   stats->rays++;
   if (!accel_intersect(sc->accel, r, &h)) return false;
-  shape_fill_interaction(sc->shapes[h.shape], r, &h, si);
+  hit_fill_interaction(sc, r, &h, si);
   return true;
 }
 
