@@ -21,6 +21,7 @@
 #include "../textures/texture.h"
 #include "loader.h"
 #include "params.h"
+#include "periodic.h"
 #include "scene.h"
 
 #define TWO_POW_53 9007199254740992.0
@@ -673,6 +674,13 @@ static rsw_status scene_create(loader *ld, node *n, object **out) {
     case CLS_BSDF:
     case CLS_TEXTURE:
       break; /* declared at the top level to be referenced */
+    case CLS_SCENE:
+      if (o->plugin == &plugin_periodic) {
+        if (s->periodic.on) return rsw_fail(ld->err, RSW_ERR_DUPLICATE, p->loc, "a scene takes one periodic boundary");
+        s->periodic = *periodic_of(o);
+        break;
+      }
+      return rsw_fail(ld->err, RSW_ERR_INVALID, p->loc, "a scene cannot be a child of the scene");
     default:
       return rsw_fail(ld->err, RSW_ERR_INVALID, p->loc, "a %s cannot be a child of the scene (nest it in a sensor)",
                       obj_class_name(c));
@@ -695,6 +703,15 @@ rsw_status scene_refresh_bounds(scene *s, rsw_err *err) {
   vec3 lo = v3(INFINITY, INFINITY, INFINITY), hi = v3(-INFINITY, -INFINITY, -INFINITY);
   for (size_t i = 0; i < s->n_shapes; i++) instance_bbox(s->shapes[i], &lo, &hi);
   if (!(lo.x <= hi.x)) lo = hi = v3(0, 0, 0); /* no rendered geometry */
+  if (s->periodic.on) {
+    /* The geometry's vertical extent bounds the wrapping; the column's
+     * lateral extent stands for the (infinite) scene in the bounding
+     * sphere, as sensors and emitters see it. */
+    s->periodic.zmin = lo.z;
+    s->periodic.zmax = hi.z;
+    lo.x = s->periodic.min[0], lo.y = s->periodic.min[1];
+    hi.x = s->periodic.max[0], hi.y = s->periodic.max[1];
+  }
   s->bbox_min = lo;
   s->bbox_max = hi;
   s->bsphere_center = v3_scale(v3_add(lo, hi), 0.5);
