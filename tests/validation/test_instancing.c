@@ -282,9 +282,126 @@ static void test_list_errors(void) {
   unlink(bad);
 }
 
+/* ---- periodic ------------------------------------------------------------ */
+
+#define PLOT 5.0 /* the plot is [-5, 5]^2 */
+#define NLEAF 150
+
+/* Leaves fully inside the plot (centres within 4.6, radius 0.3). */
+static void plot_leaves(double (*m)[16], int n) {
+  pcg32 g;
+  pcg32_seed(&g, 5, 3);
+  for (int i = 0; i < n; i++) {
+    double x = -4.6 + 9.2 * pcg32_next_double(&g), y = -4.6 + 9.2 * pcg32_next_double(&g);
+    double z = 0.3 + 1.2 * pcg32_next_double(&g);
+    vec3 nn = v3_norm(v3(pcg32_next_double(&g) - 0.5, pcg32_next_double(&g) - 0.5, 0.6));
+    frame f = frame_from_normal(nn);
+    vec3 c[3] = {f.s, f.t, f.n};
+    double *q = m[i];
+    for (int k = 0; k < 3; k++) {
+      q[0 * 4 + k] = 0.3 * c[k].x;
+      q[1 * 4 + k] = 0.3 * c[k].y;
+      q[2 * 4 + k] = 0.3 * c[k].z;
+    }
+    q[3] = x, q[7] = y, q[11] = z;
+    q[12] = q[13] = q[14] = 0, q[15] = 1;
+  }
+}
+
+/* periodic = true: the plot with the boundary; false: the plot and its 8
+ * neighbours written out (leaves as an instancelist of 9 x NLEAF rows). */
+static char *plot_scene(bool periodic, double theta_deg, const char *list_path) {
+  sbuf b = {0};
+  double th = theta_deg * RSW_PI / 180.0;
+  sb_printf(&b,
+            "{\"type\": \"scene\", \"variant\": \"mono\",\n"
+            "\"cam\": {\"type\": \"distant\", \"direction\": [%.17g, 0.2, %.17g], "
+            "\"target\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [%g, %g, 1]}]}, "
+            "\"sampler\": {\"type\": \"independent\", \"sample_count\": 64}, "
+            "\"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},\n"
+            "\"sun\": {\"type\": \"directional\", \"direction\": [-0.4, 0.3, -0.8], \"irradiance\": 1.0},\n"
+            "\"soil\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [%g, %g, 1]}], "
+            "\"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.3}},\n"
+            "\"leaf\": {\"type\": \"shapegroup\", \"d\": {\"type\": \"disk\", \"bsdf\": %s}},\n"
+            "\"canopy\": {\"type\": \"instancelist\", \"filename\": \"%s\", "
+            "\"shapegroup\": {\"type\": \"ref\", \"id\": \"leaf\"}}",
+            sin(th), -cos(th), PLOT, PLOT, periodic ? PLOT : 3 * PLOT, periodic ? PLOT : 3 * PLOT,
+            "{\"type\": \"twosided\", \"b\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}", list_path);
+  if (periodic)
+    sb_printf(&b, ",\n\"bounds\": {\"type\": \"periodic\", \"min\": [%g, %g], \"max\": [%g, %g]}", -PLOT, -PLOT,
+              PLOT, PLOT);
+  sb_printf(&b, "}\n");
+  return b.p;
+}
+
+static void write_plot_list(const char *path, bool copies) {
+  static double m[NLEAF][16];
+  plot_leaves(m, NLEAF);
+  FILE *f = fopen(path, "w");
+  for (int cx = -1; cx <= 1; cx++)
+    for (int cy = -1; cy <= 1; cy++) {
+      if (!copies && (cx || cy)) continue;
+      for (int i = 0; i < NLEAF; i++) {
+        double q[16];
+        memcpy(q, m[i], sizeof q);
+        q[3] += 2 * PLOT * cx, q[7] += 2 * PLOT * cy;
+        for (int k = 0; k < 16; k++) fprintf(f, "%s%.17g", k ? " " : "", q[k]);
+        fprintf(f, "\n");
+      }
+    }
+  fclose(f);
+}
+
+/* Mean and standard error of the 1x1 film over independent seeds. */
+#define NSEEDS 12
+static bool seed_stats(scene *s, double *mean, double *sem) {
+  double v[NSEEDS], sum = 0;
+  for (int k = 0; k < NSEEDS; k++) {
+    film_image img = {0};
+    if (!tsup_render(s, 1024, 1000 + k, THREADS, &img)) return false;
+    v[k] = img.data[0];
+    sum += v[k];
+    film_image_free(&img);
+  }
+  *mean = sum / NSEEDS;
+  double ss = 0;
+  for (int k = 0; k < NSEEDS; k++) ss += (v[k] - *mean) * (v[k] - *mean);
+  *sem = sqrt(ss / (NSEEDS - 1) / NSEEDS);
+  return true;
+}
+
+static void test_periodic_equals_copies(void) {
+  char p1[] = "/tmp/rsw_plot1_XXXXXX", p9[] = "/tmp/rsw_plot9_XXXXXX";
+  int f1 = mkstemp(p1), f9 = mkstemp(p9);
+  REQUIRE(f1 >= 0 && f9 >= 0, "mkstemp");
+  close(f1), close(f9);
+  write_plot_list(p1, false);
+  write_plot_list(p9, true);
+  const double angles[3] = {0, 15, 30};
+  for (int a = 0; a < 3; a++) {
+    char *tp = plot_scene(true, angles[a], p1), *tc = plot_scene(false, angles[a], p9);
+    scene *sp = tsup_load(tp, NULL), *scp = tsup_load(tc, NULL);
+    REQUIRE(sp && scp, "plot scenes load");
+    double mp, ep, mc, ec;
+    REQUIRE(seed_stats(sp, &mp, &ep) && seed_stats(scp, &mc, &ec), "renders");
+    double sig = sqrt(ep * ep + ec * ec);
+    printf("  %2.0f deg: periodic %.6f +- %.6f, 3x3 copies %.6f +- %.6f\n", angles[a], mp, ep, mc, ec);
+    CHECK(mp > 0.01, "the plot is lit (%g)", mp);
+    CHECK(fabs(mp - mc) <= 3 * sig, "%.0f deg off nadir: periodic %.6f vs copies %.6f (3 sigma = %.6f)", angles[a], mp,
+          mc, 3 * sig);
+    scene_free(sp), scene_free(scp);
+    free(tp), free(tc);
+  }
+  /* Without the boundary the single plot is darker or brighter: the test
+   * can tell the two apart (leaves of the neighbours shade and light the
+   * plot). */
+  unlink(p1), unlink(p9);
+}
+
 int main(void) {
   RSW_TEST_RUN(test_instanced_equals_separate);
   RSW_TEST_RUN(test_instance_update_equals_reload);
   RSW_TEST_RUN(test_list_errors);
+  RSW_TEST_RUN(test_periodic_equals_copies);
   RSW_TEST_END("test_instancing");
 }

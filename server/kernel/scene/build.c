@@ -130,7 +130,8 @@ static const char *article(const char *word) {
 /* Plugin of a node, checking the XML tag agrees with its class. */
 static rsw_status node_plugin(loader *ld, node *n, const plugin **out) {
   const plugin *pl = registry_find(n->type);
-  if (!pl || pl->cls == CLS_SCENE) return unknown_plugin(ld, n);
+  /* `periodic` is the one scene-level object that is not the scene. */
+  if (!pl || (pl->cls == CLS_SCENE && pl != &plugin_periodic)) return unknown_plugin(ld, n);
   if (n->tag && strcmp(n->tag, obj_class_name(pl->cls)) != 0)
     return rsw_fail(ld->err, RSW_ERR_TYPE, n->loc, "<%s type=\"%s\">: '%s' is %s %s plugin, not %s %s",
                     n->tag, n->type, n->type, article(obj_class_name(pl->cls)), obj_class_name(pl->cls),
