@@ -398,10 +398,23 @@ static void test_periodic_equals_copies(void) {
   unlink(p1), unlink(p9);
 }
 
+/* The example scene loads and renders a lit film. */
+static void test_example_scene(void) {
+  scene *s = tsup_load_file("proto/examples/canopy_periodic.json", NULL);
+  REQUIRE(s, "canopy_periodic.json loads");
+  CHECK(s->periodic.on, "periodic boundary set");
+  film_image img = {0};
+  REQUIRE(tsup_render(s, 2, 1, THREADS, &img), "renders");
+  CHECK(film_sum(&img) > 0, "lit");
+  film_image_free(&img);
+  scene_free(s);
+}
+
 int main(void) {
   RSW_TEST_RUN(test_instanced_equals_separate);
   RSW_TEST_RUN(test_instance_update_equals_reload);
   RSW_TEST_RUN(test_list_errors);
   RSW_TEST_RUN(test_periodic_equals_copies);
+  RSW_TEST_RUN(test_example_scene);
   RSW_TEST_END("test_instancing");
 }
