@@ -7,12 +7,16 @@
  * hands the callback the ray already transformed by the instance). */
 #include "accel.h"
 
+#include <stdatomic.h>
+
 #include <embree3/rtcore.h>
 #include <math.h>
 #include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+
+#include "shapes/instance.h"
 
 struct accel {
   RTCDevice device; /* the process-wide device (not owned) */
@@ -23,6 +27,15 @@ struct accel {
   uint32_t *nverts;  /* vertex count Embree holds for each mesh */
   size_t n_sub;
   bool top_dirty;
+  /* Shape groups: one Embree scene each, built once however many
+   * instances use it. */
+  const shape_group **grp;
+  RTCScene *grp_scene;
+  size_t n_grp;
+  /* Top-level ids >= n_sub are instancelist placements: their shape
+   * index and placement number. */
+  uint32_t *list_shape, *list_sub;
+  size_t n_list;
   accel_counters counters;
   size_t bytes;
   char error[512]; /* first Embree error seen during this build */
@@ -43,9 +56,27 @@ static void on_embree_error(void *user, enum RTCError code, const char *str) {
     snprintf(t_embree_error, sizeof t_embree_error, "Embree error %d: %s", (int)code, str ? str : "");
 }
 
+/* Bytes the device holds (its memory monitor's running sum). A
+ * process-wide counter like the device it measures. */
+static _Atomic long long g_embree_bytes;
+
+static bool on_embree_memory(void *user, ssize_t bytes, bool post) {
+  (void)user, (void)post;
+  atomic_fetch_add(&g_embree_bytes, (long long)bytes);
+  return true;
+}
+
 static void device_init(void) {
   g_device = rtcNewDevice(NULL);
-  if (g_device) rtcSetDeviceErrorFunction(g_device, on_embree_error, NULL);
+  if (g_device) {
+    rtcSetDeviceErrorFunction(g_device, on_embree_error, NULL);
+    rtcSetDeviceMemoryMonitorFunction(g_device, on_embree_memory, NULL);
+  }
+}
+
+size_t accel_embree_bytes(void) {
+  long long b = atomic_load(&g_embree_bytes);
+  return b > 0 ? (size_t)b : 0;
 }
 
 /* ---- user geometry: unit sphere and unit disk ------------------------------------ */
@@ -143,6 +174,71 @@ static void unit_occluded(const struct RTCOccludedFunctionNArguments *args) {
   }
 }
 
+/* Group members (analytic shapes inside a shapegroup): Embree hands the
+ * ray in group space; the member's own to_world is applied here, in
+ * double precision (t is unchanged by the affine map, the direction is not
+ * normalised). */
+static void member_bounds(const struct RTCBoundsFunctionArguments *args) {
+  const shape *s = args->geometryUserPtr;
+  struct RTCBounds *b = args->bounds_o;
+  double z = s->geom == GEOM_SPHERE ? 1.0 : 1e-6;
+  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  for (int c = 0; c < 8; c++) {
+    vec3 p = xf_point(&s->to_world, v3(c & 1 ? 1 : -1, c & 2 ? 1 : -1, c & 4 ? z : -z));
+    double q[3] = {p.x, p.y, p.z};
+    for (int k = 0; k < 3; k++) lo[k] = fmin(lo[k], q[k]), hi[k] = fmax(hi[k], q[k]);
+  }
+  /* Widen by a float ulp-scale margin: the box is rounded to float. */
+  b->lower_x = nextafterf((float)lo[0], -INFINITY), b->lower_y = nextafterf((float)lo[1], -INFINITY);
+  b->lower_z = nextafterf((float)lo[2], -INFINITY);
+  b->upper_x = nextafterf((float)hi[0], INFINITY), b->upper_y = nextafterf((float)hi[1], INFINITY);
+  b->upper_z = nextafterf((float)hi[2], INFINITY);
+}
+
+static void member_ray(const shape *s, const void *ray, unsigned N, unsigned i, double o[3], double d[3]) {
+  load_ray(ray, N, i, o, d);
+  vec3 oo = xf_inv_point(&s->to_world, v3(o[0], o[1], o[2]));
+  vec3 dd = xf_inv_vector(&s->to_world, v3(d[0], d[1], d[2]));
+  o[0] = oo.x, o[1] = oo.y, o[2] = oo.z;
+  d[0] = dd.x, d[1] = dd.y, d[2] = dd.z;
+}
+
+static void member_intersect(const struct RTCIntersectFunctionNArguments *args) {
+  const shape *s = args->geometryUserPtr;
+  unsigned N = args->N;
+  void *ray = args->rayhit;
+  void *hit = (float *)args->rayhit + (size_t)RAY_FIELDS * N;
+  for (unsigned i = 0; i < N; i++) {
+    if (!args->valid[i]) continue;
+    double o[3], d[3], t, n[3];
+    member_ray(s, ray, N, i, o, d);
+    if (!unit_hit(s->geom, o, d, RAYN_F(ray, N, RAY_TNEAR, i), RAYN_F(ray, N, RAY_TFAR, i), &t, n)) continue;
+    vec3 ng = xf_normal(&s->to_world, v3(n[0], n[1], n[2])); /* group space */
+    RAYN_F(ray, N, RAY_TFAR, i) = (float)t;
+    HITN_F(hit, N, HIT_NG + 0, i) = (float)ng.x;
+    HITN_F(hit, N, HIT_NG + 1, i) = (float)ng.y;
+    HITN_F(hit, N, HIT_NG + 2, i) = (float)ng.z;
+    HITN_F(hit, N, HIT_U, i) = 0;
+    HITN_F(hit, N, HIT_V, i) = 0;
+    HITN_U(hit, N, HIT_PRIM, i) = args->primID;
+    HITN_U(hit, N, HIT_GEOM, i) = args->geomID;
+    HITN_U(hit, N, HIT_INST, i) = args->context->instID[0];
+  }
+}
+
+static void member_occluded(const struct RTCOccludedFunctionNArguments *args) {
+  const shape *s = args->geometryUserPtr;
+  unsigned N = args->N;
+  void *ray = args->ray;
+  for (unsigned i = 0; i < N; i++) {
+    if (!args->valid[i]) continue;
+    double o[3], d[3], t, n[3];
+    member_ray(s, ray, N, i, o, d);
+    if (unit_hit(s->geom, o, d, RAYN_F(ray, N, RAY_TNEAR, i), RAYN_F(ray, N, RAY_TFAR, i), &t, n))
+      RAYN_F(ray, N, RAY_TFAR, i) = -INFINITY;
+  }
+}
+
 /* ---- build ------------------------------------------------------------------------------ */
 
 static rsw_status embree_fail(accel *a, rsw_err *err, const char *where, const char *what) {
@@ -187,6 +283,102 @@ static void set_instance_transform(RTCGeometry inst, const xform *t) {
   rtcSetGeometryTransform(inst, 0, RTC_FORMAT_FLOAT3X4_ROW_MAJOR, m);
 }
 
+/* A shapegroup's Embree scene (built on first use): meshes as triangles
+ * with the member's to_world baked into a vertex copy, analytic members as
+ * user geometry that applies their to_world in the callbacks; a member
+ * whose to_world is the identity uses the plain callbacks, so that a group
+ * of one untransformed shape traces exactly as that shape would. */
+static RTCScene group_scene(accel *a, const shape_group *g) {
+  for (size_t i = 0; i < a->n_grp; i++)
+    if (a->grp[i] == g) return a->grp_scene[i];
+  const shape_group **ng = realloc(a->grp, (a->n_grp + 1) * sizeof *ng);
+  if (!ng) return NULL;
+  a->grp = ng;
+  RTCScene *ns = realloc(a->grp_scene, (a->n_grp + 1) * sizeof *ns);
+  if (!ns) return NULL;
+  a->grp_scene = ns;
+  RTCScene sc = rtcNewScene(a->device);
+  if (!sc) return NULL;
+  rtcSetSceneBuildQuality(sc, RTC_BUILD_QUALITY_HIGH);
+  for (size_t i = 0; i < g->n_members; i++) {
+    const shape *m = g->members[i];
+    RTCGeometry geo;
+    if (m->geom == GEOM_MESH) {
+      geo = rtcNewGeometry(a->device, RTC_GEOMETRY_TYPE_TRIANGLE);
+      if (!geo) break;
+      float *v = rtcSetNewGeometryBuffer(geo, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float),
+                                         m->mesh.n_verts);
+      unsigned *ix = rtcSetNewGeometryBuffer(geo, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned),
+                                             m->mesh.n_faces);
+      if (!v || !ix) {
+        rtcReleaseGeometry(geo);
+        break;
+      }
+      for (uint32_t k = 0; k < m->mesh.n_verts; k++) {
+        const float *q = &m->mesh.pos[3 * (size_t)k];
+        vec3 w = xf_point(&m->to_world, v3(q[0], q[1], q[2]));
+        v[3 * k] = (float)w.x, v[3 * k + 1] = (float)w.y, v[3 * k + 2] = (float)w.z;
+      }
+      memcpy(ix, m->mesh.faces, 3 * (size_t)m->mesh.n_faces * sizeof(unsigned));
+      rtcSetGeometryBuildQuality(geo, RTC_BUILD_QUALITY_HIGH);
+      rtcCommitGeometry(geo);
+      a->bytes += 3 * (size_t)m->mesh.n_verts * sizeof(float) + 3 * (size_t)m->mesh.n_faces * sizeof(unsigned);
+    } else if (xf_is_identity(&m->to_world)) {
+      geo = shape_geometry(a, m);
+      if (!geo) break;
+    } else {
+      geo = rtcNewGeometry(a->device, RTC_GEOMETRY_TYPE_USER);
+      if (!geo) break;
+      rtcSetGeometryUserPrimitiveCount(geo, 1);
+      rtcSetGeometryUserData(geo, (void *)m);
+      rtcSetGeometryBoundsFunction(geo, member_bounds, NULL);
+      rtcSetGeometryIntersectFunction(geo, member_intersect);
+      rtcSetGeometryOccludedFunction(geo, member_occluded);
+      rtcCommitGeometry(geo);
+    }
+    rtcAttachGeometryByID(sc, geo, (unsigned)i);
+    rtcReleaseGeometry(geo); /* the scene holds it */
+  }
+  rtcCommitScene(sc);
+  a->grp[a->n_grp] = g;
+  a->grp_scene[a->n_grp++] = sc;
+  return sc;
+}
+
+static void set_instance_transform_f(RTCGeometry inst, const float m[12]) {
+  rtcSetGeometryTransform(inst, 0, RTC_FORMAT_FLOAT3X4_ROW_MAJOR, m);
+}
+
+/* Instances of a group at top-level ids: an `instance` at its shape index,
+ * an instancelist's placements from *next_id on. */
+static rsw_status build_instances(accel *a, const instance_shape *is, size_t i, size_t *next_id, rsw_err *err) {
+  const shape *sh = &is->base;
+  RTCScene gs = group_scene(a, is->group);
+  if (!gs) return embree_fail(a, err, sh->base.id, "cannot build the shape group's scene");
+  for (uint32_t k = 0; k < is->n; k++) {
+    RTCGeometry inst = rtcNewGeometry(a->device, RTC_GEOMETRY_TYPE_INSTANCE);
+    if (!inst) return embree_fail(a, err, sh->base.id, "cannot create an instance");
+    rtcSetGeometryInstancedScene(inst, gs);
+    if (is->xf) {
+      set_instance_transform_f(inst, &is->xf[12 * (size_t)k]);
+    } else {
+      set_instance_transform(inst, &sh->to_world);
+    }
+    rtcCommitGeometry(inst);
+    if (is->xf) {
+      size_t id = (*next_id)++;
+      rtcAttachGeometryByID(a->top, inst, (unsigned)id);
+      a->list_shape[id - a->n_sub] = (uint32_t)i;
+      a->list_sub[id - a->n_sub] = k;
+      rtcReleaseGeometry(inst); /* never updated: the top level holds it */
+    } else {
+      rtcAttachGeometryByID(a->top, inst, (unsigned)i);
+      a->inst[i] = inst;
+    }
+  }
+  return RSW_OK;
+}
+
 rsw_status accel_build(scene *s, rsw_err *err) {
   accel *a = calloc(1, sizeof *a);
   if (!a) return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
@@ -206,8 +398,30 @@ rsw_status accel_build(scene *s, rsw_err *err) {
   a->nverts = calloc(ns, sizeof *a->nverts);
   if (!a->top || !a->sub || !a->geom || !a->inst || !a->nverts) return embree_fail(a, err, "", "cannot create the top-level scene");
   a->n_sub = s->n_shapes;
+  size_t n_list = 0;
+  for (size_t i = 0; i < s->n_shapes; i++)
+    if (shape_is_instancing(s->shapes[i]) && ((const instance_shape *)s->shapes[i])->xf)
+      n_list += ((const instance_shape *)s->shapes[i])->n;
+  if (n_list + s->n_shapes >= 0xFFFFFFF0u) return rsw_fail(err, RSW_ERR_RANGE, "", "too many instances");
+  if (n_list) {
+    a->list_shape = malloc(n_list * sizeof *a->list_shape);
+    a->list_sub = malloc(n_list * sizeof *a->list_sub);
+    if (!a->list_shape || !a->list_sub) return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+    a->n_list = n_list;
+  }
+  size_t next_id = s->n_shapes;
   for (size_t i = 0; i < s->n_shapes; i++) {
     const shape *sh = s->shapes[i];
+    if (shape_is_group(sh)) {
+      if (!group_scene(a, (const shape_group *)sh))
+        return embree_fail(a, err, sh->base.id, "cannot build the shape group's scene");
+      continue;
+    }
+    if (shape_is_instancing(sh)) {
+      rsw_status st = build_instances(a, (const instance_shape *)sh, i, &next_id, err);
+      if (st) return st;
+      continue;
+    }
     RTCScene sub = rtcNewScene(a->device);
     if (!sub) return embree_fail(a, err, sh->base.id, "cannot create a shape scene");
     a->sub[i] = sub;
@@ -251,6 +465,11 @@ void accel_free(accel *a) {
     if (a->geom[i]) rtcReleaseGeometry(a->geom[i]);
     if (a->sub[i]) rtcReleaseScene(a->sub[i]);
   }
+  for (size_t i = 0; i < a->n_grp; i++) rtcReleaseScene(a->grp_scene[i]);
+  free(a->grp);
+  free(a->grp_scene);
+  free(a->list_shape);
+  free(a->list_sub);
   free(a->sub);
   free(a->geom);
   free(a->inst);
@@ -264,6 +483,7 @@ size_t accel_memory(const accel *a) { return a ? a->bytes : 0; }
 
 void accel_update_transform(accel *a, const shape *sh) {
   unsigned i = sh->index;
+  if (!a->inst[i]) return; /* a shape group: not in the top level */
   set_instance_transform(a->inst[i], &sh->to_world);
   rtcCommitGeometry(a->inst[i]);
   a->top_dirty = true;
@@ -357,7 +577,15 @@ bool accel_intersect(const accel *a, const ray3 *r, accel_hit *h) {
   rtcIntersect1(a->top, &ctx, &rh);
   if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
   h->t = rh.ray.tfar;
-  h->shape = rh.hit.instID[0];
+  uint32_t id = rh.hit.instID[0];
+  if (id < a->n_sub) {
+    h->shape = id;
+    h->sub = 0;
+  } else {
+    h->shape = a->list_shape[id - a->n_sub];
+    h->sub = a->list_sub[id - a->n_sub];
+  }
+  h->member = rh.hit.geomID;
   h->prim = rh.hit.primID;
   h->u = rh.hit.u;
   h->v = rh.hit.v;
@@ -457,7 +685,7 @@ static RTCScene build_flat(const scene *s) {
   rtcSetSceneBuildQuality(fs, RTC_BUILD_QUALITY_HIGH);
   for (size_t i = 0; i < s->n_shapes; i++) {
     const shape *sh = s->shapes[i];
-    if (sh->geom != GEOM_MESH) continue;
+    if (sh->geom != GEOM_MESH || shape_is_group(sh) || shape_is_instancing(sh)) continue;
     RTCGeometry g = rtcNewGeometry(s->accel->device, RTC_GEOMETRY_TYPE_TRIANGLE);
     float *v = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float),
                                        sh->mesh.n_verts);

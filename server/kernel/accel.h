@@ -7,7 +7,12 @@
  * id = shape index). Debian's Embree 3.13 allows one instance level and only
  * honours per-geometry refit inside such a two-level scene; so a rigid
  * to_world change is a top-level rebuild, a vertex move a refit of that
- * mesh's own BVH. */
+ * mesh's own BVH.
+ *
+ * Instancing (shapes/instance.h): each shapegroup is one Embree scene with
+ * its members (geomID = member index); an `instance` is attached at its
+ * shape index like any shape, an `instancelist`'s placements at ids after
+ * all shapes (a 2 x 4-byte map gives shape and placement back). */
 #ifndef RSW_ACCEL_H
 #define RSW_ACCEL_H
 
@@ -18,6 +23,8 @@ typedef struct accel accel;
 typedef struct accel_hit {
   double t;         /* distance along the (unnormalised) ray direction */
   uint32_t shape;   /* index into scene->shapes */
+  uint32_t member;  /* instanced hits: the member of the group (its geomID in the group) */
+  uint32_t sub;     /* instanced hits: the placement within an instancelist (0 for `instance`) */
   uint32_t prim;    /* triangle index (meshes), 0 for analytic shapes */
   double u, v;      /* barycentrics for triangles (p = (1-u-v) p0 + u p1 + v p2) */
   vec3 ng;          /* unnormalised geometric normal in object space, oriented
@@ -60,6 +67,11 @@ void accel_get_counters(const accel *a, accel_counters *out);
 
 /* Bytes held by Embree buffers we allocated (for reporting). */
 size_t accel_memory(const accel *a);
+
+/* Bytes Embree's device holds now, process-wide, from its device memory
+ * monitor (rtcSetDeviceMemoryMonitorFunction): every scene, BVH and
+ * geometry of the shared device. */
+size_t accel_embree_bytes(void);
 
 /* ---- measurement (make bench) ------------------------------------------------ */
 

@@ -331,6 +331,16 @@ typedef struct shape {
 /* ---- the scene ----------------------------------------------------------- */
 struct accel;
 
+/* A periodic lateral boundary (scene/periodic.h): rays leaving the box
+ * [min[0], max[0]] x [min[1], max[1]] through a side re-enter through the
+ * opposite side. zmin/zmax: the geometry's vertical extent (set with the
+ * bounds), beyond which a ray can hit nothing more. */
+typedef struct periodic_bounds {
+  bool on;
+  double min[2], max[2];
+  double zmin, zmax;
+} periodic_bounds;
+
 typedef struct scene {
   object base;
   rsw_variant variant;
@@ -352,6 +362,7 @@ typedef struct scene {
   double bsphere_radius; /* inflated as Mitsuba: max(eps, r (1 + eps)) */
   struct node *doc;      /* the document the scene was built from (owned) */
   struct param_table *params; /* the parameter table (owned) */
+  periodic_bounds periodic;   /* the `periodic` object, if any */
 } scene;
 
 #endif

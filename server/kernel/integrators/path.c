@@ -13,6 +13,8 @@
 
 #include "../accel.h"
 #include "../scene/loader.h"
+#include "../scene/periodic.h"
+#include "../shapes/instance.h"
 #include "../shapes/shape.h"
 
 static inline double mis_weight(double a, double b) {
@@ -41,8 +43,11 @@ static ray3 spawn_ray_to(const surface_interaction *si, vec3 d, double dist) {
 static bool intersect(const scene *sc, const ray3 *r, surface_interaction *si, render_stats *stats) {
   accel_hit h;
   stats->rays++;
-  if (!accel_intersect(sc->accel, r, &h)) return false;
-  shape_fill_interaction(sc->shapes[h.shape], r, &h, si);
+  ray3 seg = *r;
+  double off;
+  if (!scene_trace(sc, &seg, &h, &off)) return false;
+  hit_fill_interaction(sc, &seg, &h, si);
+  si->t += off; /* distance along the whole (possibly wrapped) ray */
   return true;
 }
 
@@ -130,7 +135,7 @@ static color path_Li(const integrator *it, const scene *sc, sampler_state *st, r
       if (ds.pdf > 0 && !col_is_black(value)) {
         ray3 sr = spawn_ray_to(&si, ds.d, ds.dist);
         stats->shadow_rays++;
-        if (!accel_occluded(sc->accel, &sr)) {
+        if (!scene_occluded(sc, &sr)) {
           vec3 wo = frame_to_local(&si.sh, ds.d);
           color f = b->ops->eval(b, &si, wo);
           if (!col_is_black(f)) {

@@ -16,10 +16,12 @@
 
 #include "../accel.h"
 #include "../core/strdist.h"
+#include "../shapes/instance.h"
 #include "../shapes/shape.h"
 #include "../textures/texture.h"
 #include "loader.h"
 #include "params.h"
+#include "periodic.h"
 #include "scene.h"
 
 #define TWO_POW_53 9007199254740992.0
@@ -128,7 +130,8 @@ static const char *article(const char *word) {
 /* Plugin of a node, checking the XML tag agrees with its class. */
 static rsw_status node_plugin(loader *ld, node *n, const plugin **out) {
   const plugin *pl = registry_find(n->type);
-  if (!pl || pl->cls == CLS_SCENE) return unknown_plugin(ld, n);
+  /* `periodic` is the one scene-level object that is not the scene. */
+  if (!pl || (pl->cls == CLS_SCENE && pl != &plugin_periodic)) return unknown_plugin(ld, n);
   if (n->tag && strcmp(n->tag, obj_class_name(pl->cls)) != 0)
     return rsw_fail(ld->err, RSW_ERR_TYPE, n->loc, "<%s type=\"%s\">: '%s' is %s %s plugin, not %s %s",
                     n->tag, n->type, n->type, article(obj_class_name(pl->cls)), obj_class_name(pl->cls),
@@ -672,6 +675,13 @@ static rsw_status scene_create(loader *ld, node *n, object **out) {
     case CLS_BSDF:
     case CLS_TEXTURE:
       break; /* declared at the top level to be referenced */
+    case CLS_SCENE:
+      if (o->plugin == &plugin_periodic) {
+        if (s->periodic.on) return rsw_fail(ld->err, RSW_ERR_DUPLICATE, p->loc, "a scene takes one periodic boundary");
+        s->periodic = *periodic_of(o);
+        break;
+      }
+      return rsw_fail(ld->err, RSW_ERR_INVALID, p->loc, "a scene cannot be a child of the scene");
     default:
       return rsw_fail(ld->err, RSW_ERR_INVALID, p->loc, "a %s cannot be a child of the scene (nest it in a sensor)",
                       obj_class_name(c));
@@ -683,26 +693,8 @@ static rsw_status scene_create(loader *ld, node *n, object **out) {
 
 const plugin plugin_scene = {.name = "scene", .cls = CLS_SCENE, .create = scene_create};
 
-/* Shapes first, then everything that depends on the scene's bounds. */
-static void shape_bbox(const shape *sh, vec3 *lo, vec3 *hi) {
-  if (sh->geom == GEOM_MESH) {
-    for (uint32_t i = 0; i < sh->mesh.n_verts; i++) {
-      const float *q = &sh->mesh.pos[3 * (size_t)i];
-      vec3 p = xf_point(&sh->to_world, v3(q[0], q[1], q[2]));
-      lo->x = fmin(lo->x, p.x), lo->y = fmin(lo->y, p.y), lo->z = fmin(lo->z, p.z);
-      hi->x = fmax(hi->x, p.x), hi->y = fmax(hi->y, p.y), hi->z = fmax(hi->z, p.z);
-    }
-    return;
-  }
-  /* Sphere and disk: transform the corners of their object-space box. */
-  double zr = sh->geom == GEOM_SPHERE ? 1.0 : 0.0;
-  for (int c = 0; c < 8; c++) {
-    vec3 q = v3(c & 1 ? 1 : -1, c & 2 ? 1 : -1, c & 4 ? zr : -zr);
-    vec3 p = xf_point(&sh->to_world, q);
-    lo->x = fmin(lo->x, p.x), lo->y = fmin(lo->y, p.y), lo->z = fmin(lo->z, p.z);
-    hi->x = fmax(hi->x, p.x), hi->y = fmax(hi->y, p.y), hi->z = fmax(hi->z, p.z);
-  }
-}
+/* Shapes first, then everything that depends on the scene's bounds
+ * (instance_bbox: plain shapes, groups and instances). */
 
 /* Bounds and everything derived from them: the scene's bounding sphere,
  * emitters' and sensors' set_scene. Run at load and after every geometric
@@ -710,8 +702,17 @@ static void shape_bbox(const shape *sh, vec3 *lo, vec3 *hi) {
  * sensors after an update; we do, deliberately). */
 rsw_status scene_refresh_bounds(scene *s, rsw_err *err) {
   vec3 lo = v3(INFINITY, INFINITY, INFINITY), hi = v3(-INFINITY, -INFINITY, -INFINITY);
-  for (size_t i = 0; i < s->n_shapes; i++) shape_bbox(s->shapes[i], &lo, &hi);
-  if (s->n_shapes == 0) lo = hi = v3(0, 0, 0);
+  for (size_t i = 0; i < s->n_shapes; i++) instance_bbox(s->shapes[i], &lo, &hi);
+  if (!(lo.x <= hi.x)) lo = hi = v3(0, 0, 0); /* no rendered geometry */
+  if (s->periodic.on) {
+    /* The geometry's vertical extent bounds the wrapping; the column's
+     * lateral extent stands for the (infinite) scene in the bounding
+     * sphere, as sensors and emitters see it. */
+    s->periodic.zmin = lo.z;
+    s->periodic.zmax = hi.z;
+    lo.x = s->periodic.min[0], lo.y = s->periodic.min[1];
+    hi.x = s->periodic.max[0], hi.y = s->periodic.max[1];
+  }
   s->bbox_min = lo;
   s->bbox_max = hi;
   s->bsphere_center = v3_scale(v3_add(lo, hi), 0.5);

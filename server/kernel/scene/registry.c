@@ -18,7 +18,8 @@
   X(hdrfilm) X(box) X(gaussian)                                               \
   X(independent) X(stratified)                                                \
   X(path)                                                                     \
-  X(uniform) X(checkerboard) X(bitmap)
+  X(uniform) X(checkerboard) X(bitmap)                                       \
+  X(shapegroup) X(instance) X(instancelist) X(periodic)
 
 #define DECLARE_(name) extern const plugin plugin_##name __attribute__((weak));
 PLUGINS(DECLARE_)

@@ -1,0 +1,127 @@
+/* The periodic lateral boundary (see periodic.h). */
+#include "periodic.h"
+
+#include <stdlib.h>
+
+#include "loader.h"
+
+static void periodic_destroy(object *o) { free(o); }
+
+/* The plugin only carries the box; scene_create copies it into
+ * scene->periodic. */
+typedef struct periodic_obj {
+  object base;
+  periodic_bounds b;
+} periodic_obj;
+
+static rsw_status read_xy(loader *ld, node *n, const char *name, double out[2]) {
+  prop *p = node_find(n, name);
+  if (!p) return ld_fail(ld, n, NULL, RSW_ERR_MISSING, "%s '%s': missing property '%s'", n->type, n->id, name);
+  if (p->kind != PROP_NUMBERS || p->n_nums != 2)
+    return ld_fail(ld, n, name, RSW_ERR_TYPE, "property '%s' must be a list of 2 numbers [x, y]", name);
+  out[0] = p->nums[0];
+  out[1] = p->nums[1];
+  p->used = true;
+  return RSW_OK;
+}
+
+static rsw_status periodic_create(loader *ld, node *n, object **out) {
+  periodic_obj *o = calloc(1, sizeof *o);
+  if (!o) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+  rsw_status st = read_xy(ld, n, "min", o->b.min);
+  if (!st) st = read_xy(ld, n, "max", o->b.max);
+  if (!st && !(o->b.max[0] > o->b.min[0] && o->b.max[1] > o->b.min[1] && isfinite(o->b.max[0] - o->b.min[0]) &&
+               isfinite(o->b.max[1] - o->b.min[1])))
+    st = ld_fail(ld, n, "max", RSW_ERR_RANGE, "periodic '%s': max must exceed min in x and y (finite)", n->id);
+  if (st) {
+    free(o);
+    return st;
+  }
+  o->b.on = true;
+  *out = &o->base;
+  return RSW_OK;
+}
+
+const plugin plugin_periodic = {.name = "periodic", .cls = CLS_SCENE, .create = periodic_create,
+                                .destroy = periodic_destroy};
+
+const periodic_bounds *periodic_of(const object *o) { return &((const periodic_obj *)o)->b; }
+
+/* x brought into [lo, hi) modulo the period. */
+static double wrap(double x, double lo, double hi) {
+  if (x >= lo && x < hi) return x;
+  double L = hi - lo, r = fmod(x - lo, L);
+  if (r < 0) r += L;
+  double w = lo + r;
+  return w < hi ? w : lo;
+}
+
+/* Distance along r to the side wall it leaves the column through, and
+ * which walls (bit 0: x, bit 1: y). */
+static double side_exit(const periodic_bounds *b, const ray3 *r, int *walls) {
+  double tx = r->d.x > 0 ? (b->max[0] - r->o.x) / r->d.x : r->d.x < 0 ? (b->min[0] - r->o.x) / r->d.x : INFINITY;
+  double ty = r->d.y > 0 ? (b->max[1] - r->o.y) / r->d.y : r->d.y < 0 ? (b->min[1] - r->o.y) / r->d.y : INFINITY;
+  tx = fmax(tx, 0.0), ty = fmax(ty, 0.0);
+  *walls = (tx <= ty ? 1 : 0) | (ty <= tx ? 2 : 0);
+  return fmin(tx, ty);
+}
+
+/* Re-enter through the opposite wall(s) at distance ts; false when the ray
+ * has left the geometry's slab for good (above going up, below going
+ * down) or its segment ends before the wall. */
+static bool advance(const periodic_bounds *b, ray3 *q, double ts, int walls) {
+  if (!(ts < q->tmax) || !isfinite(ts)) return false;
+  vec3 p = v3_fma(q->o, ts, q->d);
+  if ((q->d.z >= 0 && p.z > b->zmax) || (q->d.z <= 0 && p.z < b->zmin)) return false;
+  if (walls & 1) p.x = q->d.x > 0 ? b->min[0] : b->max[0];
+  if (walls & 2) p.y = q->d.y > 0 ? b->min[1] : b->max[1];
+  q->o = p;
+  q->tmin = 0;
+  q->tmax -= ts;
+  return true;
+}
+
+/* A ray nearly parallel to the ground inside an empty layer would wrap
+ * forever: after this many walls it is treated as escaped. */
+enum { MAX_WRAPS = 100000 };
+
+bool scene_trace(const scene *s, ray3 *r, accel_hit *h, double *t_offset) {
+  *t_offset = 0;
+  const periodic_bounds *b = &s->periodic;
+  if (!b->on) return accel_intersect(s->accel, r, h);
+  ray3 q = *r;
+  q.o.x = wrap(q.o.x, b->min[0], b->max[0]);
+  q.o.y = wrap(q.o.y, b->min[1], b->max[1]);
+  double off = 0;
+  for (int k = 0; k < MAX_WRAPS; k++) {
+    int walls;
+    double ts = side_exit(b, &q, &walls);
+    ray3 seg = q;
+    seg.tmax = fmin(q.tmax, ts);
+    if (seg.tmax >= seg.tmin && accel_intersect(s->accel, &seg, h)) {
+      *r = q;
+      *t_offset = off;
+      return true;
+    }
+    if (!advance(b, &q, ts, walls)) return false;
+    off += ts;
+  }
+  return false;
+}
+
+bool scene_occluded(const scene *s, const ray3 *r) {
+  const periodic_bounds *b = &s->periodic;
+  if (!b->on) return accel_occluded(s->accel, r);
+  ray3 q = *r;
+  q.o.x = wrap(q.o.x, b->min[0], b->max[0]);
+  q.o.y = wrap(q.o.y, b->min[1], b->max[1]);
+  for (int k = 0; k < MAX_WRAPS; k++) {
+    int walls;
+    double ts = side_exit(b, &q, &walls);
+    ray3 seg = q;
+    seg.tmax = fmin(q.tmax, ts);
+    if (seg.tmax >= seg.tmin && accel_occluded(s->accel, &seg)) return true;
+    if (!advance(b, &q, ts, walls)) return false;
+  }
+  return false;
+}

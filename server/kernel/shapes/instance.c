@@ -1,0 +1,337 @@
+/* shapegroup, instance and instancelist (see instance.h). */
+#include "instance.h"
+
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../accel.h"
+#include "../scene/params.h"
+#include "shape_common.h"
+
+/* ---- shapegroup ------------------------------------------------------------ */
+
+static void box_add(vec3 *lo, vec3 *hi, vec3 p) {
+  lo->x = fmin(lo->x, p.x), lo->y = fmin(lo->y, p.y), lo->z = fmin(lo->z, p.z);
+  hi->x = fmax(hi->x, p.x), hi->y = fmax(hi->y, p.y), hi->z = fmax(hi->z, p.z);
+}
+
+/* World (here: group-space) bounds of a plain shape. */
+static void member_bbox(const shape *sh, vec3 *lo, vec3 *hi) {
+  if (sh->geom == GEOM_MESH) {
+    for (uint32_t i = 0; i < sh->mesh.n_verts; i++) {
+      const float *q = &sh->mesh.pos[3 * (size_t)i];
+      box_add(lo, hi, xf_point(&sh->to_world, v3(q[0], q[1], q[2])));
+    }
+    return;
+  }
+  double zr = sh->geom == GEOM_SPHERE ? 1.0 : 0.0;
+  for (int c = 0; c < 8; c++)
+    box_add(lo, hi, xf_point(&sh->to_world, v3(c & 1 ? 1 : -1, c & 2 ? 1 : -1, c & 4 ? zr : -zr)));
+}
+
+static void group_destroy(object *o) {
+  shape_group *g = (shape_group *)o;
+  free(g->members);
+  free(g);
+}
+
+static rsw_status group_create(loader *ld, node *n, object **out) {
+  shape_group *g = calloc(1, sizeof *g);
+  if (!g) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+  g->base.geom = GEOM_MESH; /* no geometry of its own */
+  g->base.to_world = xf_identity();
+  object **arr = NULL;
+  size_t cnt = 0;
+  rsw_status st = ld_children(ld, n, CLS_SHAPE, &arr, &cnt);
+  if (st) {
+    free(g);
+    return st;
+  }
+  g->members = (shape **)arr;
+  g->n_members = cnt;
+  g->lo = v3(INFINITY, INFINITY, INFINITY);
+  g->hi = v3(-INFINITY, -INFINITY, -INFINITY);
+  for (size_t i = 0; i < cnt && !st; i++) {
+    shape *m = g->members[i];
+    if (shape_is_group(m) || shape_is_instancing(m))
+      st = ld_fail(ld, n, NULL, RSW_ERR_UNSUPPORTED,
+                   "shapegroup '%s': member '%s' is a %s; groups do not nest (Embree allows one instance level)",
+                   n->id, m->base.id, m->base.plugin->name);
+    else if (m->emitter)
+      st = ld_fail(ld, n, NULL, RSW_ERR_UNSUPPORTED,
+                   "shapegroup '%s': member '%s' carries an area emitter; instanced emitters are not supported",
+                   n->id, m->base.id);
+    else
+      member_bbox(m, &g->lo, &g->hi);
+  }
+  if (!st && cnt == 0) st = ld_fail(ld, n, NULL, RSW_ERR_INVALID, "shapegroup '%s' has no shapes", n->id);
+  if (st) {
+    group_destroy(&g->base.base);
+    return st;
+  }
+  *out = &g->base.base;
+  return RSW_OK;
+}
+
+/* Members' BSDFs stay reachable as parameters (<group>.<member>.bsdf...);
+ * their to_world is baked into the group's Embree scene, so it is not a
+ * parameter. */
+static void group_traverse(object *o, param_visitor *v) {
+  shape_group *g = (shape_group *)o;
+  for (size_t i = 0; i < g->n_members; i++) {
+    shape *m = g->members[i];
+    char key[256];
+    snprintf(key, sizeof key, "%s.bsdf", m->base.id ? m->base.id : "member");
+    pv_object(v, key, &m->bsdf->base, NAN, NAN);
+  }
+}
+
+const plugin plugin_shapegroup = {.name = "shapegroup", .cls = CLS_SHAPE, .create = group_create,
+                                  .destroy = group_destroy, .traverse = group_traverse};
+
+/* ---- instance -------------------------------------------------------------------------- */
+
+static void instance_destroy(object *o) {
+  instance_shape *s = (instance_shape *)o;
+  free(s->xf);
+  free(s);
+}
+
+static rsw_status read_group(loader *ld, node *n, shape_group **out) {
+  object *o;
+  rsw_status st = ld_child(ld, n, "shapegroup", CLS_SHAPE, &o);
+  if (st) return st;
+  if (!o) return ld_fail(ld, n, NULL, RSW_ERR_MISSING, "%s '%s': missing property 'shapegroup'", n->type, n->id);
+  if (!shape_is_group((shape *)o))
+    return ld_fail(ld, n, "shapegroup", RSW_ERR_TYPE, "property 'shapegroup' must be a shapegroup, got '%s'",
+                   o->plugin->name);
+  *out = (shape_group *)o;
+  return RSW_OK;
+}
+
+static rsw_status instance_create(loader *ld, node *n, object **out) {
+  instance_shape *s = calloc(1, sizeof *s);
+  if (!s) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+  s->base.geom = GEOM_MESH;
+  s->n = 1;
+  rsw_status st = ld_transform(ld, n, "to_world", &s->base.to_world, NULL);
+  if (!st) st = read_group(ld, n, &s->group);
+  if (st) {
+    free(s);
+    return st;
+  }
+  *out = &s->base.base;
+  return RSW_OK;
+}
+
+/* Any invertible placement is valid (the loader checked invertibility). */
+static rsw_status instance_check_transform(const object *o, const xform *t, const char *key, rsw_err *err) {
+  (void)o, (void)t, (void)key, (void)err;
+  return RSW_OK;
+}
+
+/* to_world is geometric: the instance transform and one top-level commit
+ * (accel_update_transform), the group's BVH is untouched. */
+static void instance_traverse(object *o, param_visitor *v) {
+  instance_shape *s = (instance_shape *)o;
+  pv_transform(v, "to_world", &s->base.to_world, UPDATE_GEOMETRIC, instance_check_transform);
+}
+
+static void instance_parameters_changed(object *o) { (void)o; }
+
+const plugin plugin_instance = {.name = "instance", .cls = CLS_SHAPE, .create = instance_create,
+                                .destroy = instance_destroy, .traverse = instance_traverse,
+                                .parameters_changed = instance_parameters_changed};
+
+/* ---- instancelist ---------------------------------------------------------------------- */
+
+/* Row-major 3x4 of a leaf placement: T(x, y, z) R S(r), R's columns the
+ * frame (s, t, n) of the unit normal (Mitsuba's coordinate_system), so
+ * that the leaf's +z turns to n. */
+static void leaf_matrix(const double v[7], float out[12]) {
+  vec3 n = v3_norm(v3(v[3], v[4], v[5]));
+  frame f = frame_from_normal(n);
+  double r = v[6];
+  const vec3 cols[3] = {f.s, f.t, f.n};
+  for (int c = 0; c < 3; c++) {
+    out[0 * 4 + c] = (float)(r * cols[c].x);
+    out[1 * 4 + c] = (float)(r * cols[c].y);
+    out[2 * 4 + c] = (float)(r * cols[c].z);
+  }
+  out[3] = (float)v[0], out[7] = (float)v[1], out[11] = (float)v[2];
+}
+
+rsw_status instance_list_parse(const char *path, float **xf_out, uint32_t *n_out, rsw_err *err) {
+  *xf_out = NULL;
+  *n_out = 0;
+  FILE *f = fopen(path, "r");
+  if (!f) return rsw_fail(err, RSW_ERR_FILE, path, "cannot open instance list '%s': %s", path, strerror(errno));
+  size_t cap = 1024, n = 0;
+  float *xf = malloc(cap * 12 * sizeof(float));
+  rsw_status st = xf ? RSW_OK : rsw_fail(err, RSW_ERR_NOMEM, path, "out of memory");
+  char line[4096];
+  char where[300];
+  unsigned long lineno = 0;
+  while (!st && fgets(line, sizeof line, f)) {
+    lineno++;
+    snprintf(where, sizeof where, "%s:%lu", path, lineno);
+    size_t len = strlen(line);
+    if (len == sizeof line - 1 && line[len - 1] != '\n' && !feof(f)) {
+      st = rsw_fail(err, RSW_ERR_PARSE, where, "line longer than %zu characters", sizeof line - 2);
+      break;
+    }
+    char *hash = strchr(line, '#');
+    if (hash) *hash = '\0';
+    double v[17];
+    int k = 0;
+    char *p = line;
+    for (;;) {
+      while (*p == ' ' || *p == '\t' || *p == '\r' || *p == '\n') p++;
+      if (!*p) break;
+      char *end;
+      errno = 0;
+      double x = strtod(p, &end);
+      if (end == p || (*end && *end != ' ' && *end != '\t' && *end != '\r' && *end != '\n')) {
+        st = rsw_fail(err, RSW_ERR_PARSE, where, "'%.*s' is not a number", (int)strcspn(p, " \t\r\n"), p);
+        break;
+      }
+      if (!isfinite(x)) {
+        st = rsw_fail(err, RSW_ERR_PARSE, where, "non-finite number");
+        break;
+      }
+      if (k < 17) v[k] = x;
+      k++;
+      p = end;
+    }
+    if (st || k == 0) continue;
+    if (k != 16 && k != 7) {
+      st = rsw_fail(err, RSW_ERR_PARSE, where,
+                    "a row has 16 numbers (a 4x4 to_world) or 7 (x y z nx ny nz radius), got %d", k);
+      break;
+    }
+    if (n == cap) {
+      float *g = realloc(xf, 2 * cap * 12 * sizeof(float));
+      if (!g) {
+        st = rsw_fail(err, RSW_ERR_NOMEM, where, "out of memory");
+        break;
+      }
+      xf = g;
+      cap *= 2;
+    }
+    float *m = &xf[12 * n];
+    if (k == 16) {
+      if (v[12] != 0 || v[13] != 0 || v[14] != 0 || v[15] != 1) {
+        st = rsw_fail(err, RSW_ERR_INVALID, where, "the last row of a to_world must be 0 0 0 1");
+        break;
+      }
+      double mm[4][4];
+      for (int i = 0; i < 16; i++) mm[i / 4][i % 4] = v[i];
+      xform t;
+      if (!xf_from_matrix(mm, &t)) {
+        st = rsw_fail(err, RSW_ERR_INVALID, where, "singular to_world");
+        break;
+      }
+      for (int i = 0; i < 12; i++) m[i] = (float)v[i];
+    } else {
+      if (!(v[6] > 0)) {
+        st = rsw_fail(err, RSW_ERR_INVALID, where, "radius must be > 0 (got %g)", v[6]);
+        break;
+      }
+      if (!(v[3] * v[3] + v[4] * v[4] + v[5] * v[5] > 0)) {
+        st = rsw_fail(err, RSW_ERR_INVALID, where, "the normal must not be zero");
+        break;
+      }
+      leaf_matrix(v, m);
+    }
+    n++;
+    if (n > 0xFFFFFFF0u) st = rsw_fail(err, RSW_ERR_RANGE, where, "too many instances");
+  }
+  if (!st && ferror(f)) st = rsw_fail(err, RSW_ERR_FILE, path, "read error");
+  fclose(f);
+  if (!st && n == 0) st = rsw_fail(err, RSW_ERR_INVALID, path, "instance list '%s' has no rows", path);
+  if (st) {
+    free(xf);
+    return st;
+  }
+  float *shrunk = realloc(xf, n * 12 * sizeof(float));
+  *xf_out = shrunk ? shrunk : xf;
+  *n_out = (uint32_t)n;
+  return RSW_OK;
+}
+
+static rsw_status instancelist_create(loader *ld, node *n, object **out) {
+  instance_shape *s = calloc(1, sizeof *s);
+  if (!s) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+  s->base.geom = GEOM_MESH;
+  s->base.to_world = xf_identity();
+  char *path = NULL;
+  rsw_status st = read_group(ld, n, &s->group);
+  if (!st) st = ld_path(ld, n, "filename", &path);
+  if (!st) st = instance_list_parse(path, &s->xf, &s->n, ld->err);
+  free(path);
+  if (st) {
+    free(s);
+    return st;
+  }
+  *out = &s->base.base;
+  return RSW_OK;
+}
+
+const plugin plugin_instancelist = {.name = "instancelist", .cls = CLS_SHAPE, .create = instancelist_create,
+                                    .destroy = instance_destroy};
+
+/* ---- shared ------------------------------------------------------------------------------ */
+
+xform instance_transform(const instance_shape *s, uint32_t k) {
+  if (!s->xf) return s->base.to_world;
+  const float *m = &s->xf[12 * (size_t)k];
+  double mm[4][4] = {{m[0], m[1], m[2], m[3]}, {m[4], m[5], m[6], m[7]}, {m[8], m[9], m[10], m[11]}, {0, 0, 0, 1}};
+  xform t;
+  if (!xf_from_matrix(mm, &t)) t = xf_identity(); /* checked at load */
+  return t;
+}
+
+void instance_bbox(const shape *sh, vec3 *lo, vec3 *hi) {
+  if (shape_is_group(sh)) return;
+  if (!shape_is_instancing(sh)) {
+    member_bbox(sh, lo, hi);
+    return;
+  }
+  const instance_shape *s = (const instance_shape *)sh;
+  const shape_group *g = s->group;
+  for (uint32_t k = 0; k < s->n; k++) {
+    xform t = instance_transform(s, k);
+    for (int c = 0; c < 8; c++)
+      box_add(lo, hi, xf_point(&t, v3(c & 1 ? g->hi.x : g->lo.x, c & 2 ? g->hi.y : g->lo.y, c & 4 ? g->hi.z : g->lo.z)));
+  }
+}
+
+void hit_fill_interaction(const scene *sc, const ray3 *r, const accel_hit *h, surface_interaction *si) {
+  const shape *top = sc->shapes[h->shape];
+  if (!shape_is_instancing(top)) {
+    shape_fill_interaction(top, r, h, si);
+    return;
+  }
+  const instance_shape *is = (const instance_shape *)top;
+  const shape *m = is->group->members[h->member];
+  /* The member seen through placement * member.to_world: a copy with that
+   * transform shades exactly as a plain shape would (barycentrics are
+   * invariant under the affine maps involved). */
+  shape tmp = *m;
+  xform place = instance_transform(is, h->sub);
+  tmp.to_world = xf_mul(&place, &m->to_world);
+  accel_hit hh = *h;
+  if (m->geom == GEOM_MESH) {
+    /* Embree's Ng is in group space (member to_world baked in): back to
+     * the member's object space, n_obj ~ M^T n_group (normals map by
+     * M^-T), the orientation kept. */
+    const double(*a)[4] = m->to_world.m;
+    vec3 g = h->ng;
+    hh.ng = v3(a[0][0] * g.x + a[1][0] * g.y + a[2][0] * g.z, a[0][1] * g.x + a[1][1] * g.y + a[2][1] * g.z,
+               a[0][2] * g.x + a[1][2] * g.y + a[2][2] * g.z);
+  }
+  shape_fill_interaction(&tmp, r, &hh, si);
+  si->shape = m;
+}

@@ -1,0 +1,62 @@
+/* Instancing: `shapegroup` (shapes defined once, not rendered themselves),
+ * `instance` (one placement of a group: to_world + the group) and
+ * `instancelist` (N placements read from a text file).
+ *
+ * All three are shapes in scene->shapes so that they take part in loading,
+ * parameters and bounds like any shape; accel.c gives each group one
+ * Embree scene holding all its members (member to_world baked into the
+ * vertices, analytic members transformed in their callbacks, since
+ * Debian's Embree allows one instance level) and instances that scene once
+ * per placement in the top level.
+ *
+ * Memory: an `instance` is a full shape object (a few hundred bytes); an
+ * `instancelist` stores one compact record per placement, a 3x4 float
+ * matrix (48 bytes), plus what Embree holds per instance. */
+#ifndef RSW_SHAPES_INSTANCE_H
+#define RSW_SHAPES_INSTANCE_H
+
+#include "shape.h"
+
+extern const plugin plugin_shapegroup, plugin_instance, plugin_instancelist;
+
+typedef struct shape_group {
+  shape base;        /* base.to_world unused (identity) */
+  shape **members;   /* owned array; the shapes are owned by the scene */
+  size_t n_members;
+  vec3 lo, hi;       /* bounds of the members in group space */
+} shape_group;
+
+typedef struct instance_shape {
+  shape base;        /* `instance`: base.to_world is the placement */
+  shape_group *group;
+  uint32_t n;        /* placements: 1 for `instance` */
+  float *xf;         /* `instancelist`: n row-major 3x4 matrices; NULL for `instance` */
+} instance_shape;
+
+static inline bool shape_is_group(const shape *s) { return s->base.plugin == &plugin_shapegroup; }
+static inline bool shape_is_instancing(const shape *s) {
+  return s->base.plugin == &plugin_instance || s->base.plugin == &plugin_instancelist;
+}
+
+/* The placement transform of instance k of s (an instancing shape). */
+xform instance_transform(const instance_shape *s, uint32_t k);
+
+/* Extend [lo, hi] by the world bounds of a group (nothing: not rendered)
+ * or of an instancing shape (group box corners under each placement). */
+void instance_bbox(const shape *s, vec3 *lo, vec3 *hi);
+
+/* Parse an instance list (one placement per row: 16 numbers, a row-major
+ * 4x4 to_world; or 7 numbers "x y z nx ny nz radius", a leaf translated to
+ * (x, y, z), its +z turned to the normal and scaled by radius). '#' starts
+ * a comment. On success *xf (n x 12 floats, malloc'ed) and *n. Errors
+ * name file:line. Exposed for tests. */
+rsw_status instance_list_parse(const char *path, float **xf, uint32_t *n, rsw_err *err);
+
+#endif
+
+/* Hit -> interaction for any top-level shape: plain shapes go to
+ * shape_fill_interaction; a hit inside an instanced group is filled from
+ * the member's geometry under placement * member.to_world, and si->shape is
+ * the member (its BSDF shades the hit). */
+struct accel_hit;
+void hit_fill_interaction(const scene *sc, const ray3 *r, const struct accel_hit *h, surface_interaction *si);

@@ -1,0 +1,123 @@
+/* make bench: canopy_100k. 100,000 instanced leaves (a 2-triangle quad,
+ * one shapegroup, one instancelist of "x y z nx ny nz radius" rows) over a
+ * Lambertian soil in a periodic 20 m plot, under a directional sun, seen by
+ * `hdistant` with a 76x1 film (76 directions; `mdistant` is on another
+ * branch) at 1,000 spp. One JSON line:
+ *   load_s        scene_load_file wall time (list parse + Embree build)
+ *   rss_mib       VmRSS after the load
+ *   embree_mib    Embree's device memory (its memory monitor)
+ *   bytes_per_instance  (RSS after - RSS before the load) / instances: all
+ *                 memory the canopy costs, shared leaf geometry included
+ *   rays_per_s, ceiling_rays_per_s, ratio_to_ceiling, threads
+ * Targets: load <= 2 s, bytes_per_instance <= 1024.
+ * Threads: $RSW_BENCH_THREADS or all cores; spp: $RSW_BENCH_CANOPY_SPP. */
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "../../server/kernel/accel.h"
+#include "../../server/kernel/core/rng.h"
+#include "../../server/kernel/render.h"
+#include "../../server/kernel/scene/scene.h"
+
+#define N_LEAVES 100000
+
+static double now_s(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+static double rss_bytes(void) {
+  FILE *f = fopen("/proc/self/status", "r");
+  if (!f) return 0;
+  char line[256];
+  double kb = 0;
+  while (fgets(line, sizeof line, f))
+    if (strncmp(line, "VmRSS:", 6) == 0) kb = atof(line + 6);
+  fclose(f);
+  return kb * 1024.0;
+}
+
+int main(void) {
+  const char *e = getenv("RSW_BENCH_THREADS");
+  int threads = e ? atoi(e) : 0;
+  if (threads <= 0) threads = (int)sysconf(_SC_NPROCESSORS_ONLN);
+  e = getenv("RSW_BENCH_CANOPY_SPP");
+  uint32_t spp = e && atoi(e) > 0 ? (uint32_t)atoi(e) : 1000;
+  char dir[] = "/tmp/rsw_canopy_XXXXXX";
+  if (!mkdtemp(dir)) return 1;
+  char list[300], json[300];
+  snprintf(list, sizeof list, "%s/leaves.txt", dir);
+  snprintf(json, sizeof json, "%s/canopy.json", dir);
+  FILE *f = fopen(list, "w");
+  if (!f) return 1;
+  pcg32 g;
+  pcg32_seed(&g, 11, 1);
+  /* 100,000 leaves of radius 0.05 m in a 20 m x 20 m plot, 0.2..2.2 m
+   * high: leaf area index about 0.8. */
+  for (int i = 0; i < N_LEAVES; i++) {
+    double x = -10 + 20 * pcg32_next_double(&g), y = -10 + 20 * pcg32_next_double(&g);
+    double z = 0.2 + 2.0 * pcg32_next_double(&g);
+    double nx = pcg32_next_double(&g) - 0.5, ny = pcg32_next_double(&g) - 0.5, nz = pcg32_next_double(&g) - 0.5;
+    fprintf(f, "%.5f %.5f %.5f %.4f %.4f %.4f 0.05\n", x, y, z, nx, ny, nz + 1e-3);
+  }
+  fclose(f);
+  f = fopen(json, "w");
+  if (!f) return 1;
+  fprintf(f,
+          "{\"type\": \"scene\", \"variant\": \"mono\",\n"
+          " \"sensor\": {\"type\": \"hdistant\", \"target\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [10, 10, 1]}]},"
+          " \"sampler\": {\"type\": \"independent\", \"sample_count\": %u},"
+          " \"film\": {\"type\": \"hdrfilm\", \"width\": 76, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},\n"
+          " \"integrator\": {\"type\": \"path\", \"max_depth\": -1},\n"
+          " \"sun\": {\"type\": \"directional\", \"direction\": [0.5, 0, -0.8660254037844386], \"irradiance\": 1.0},\n"
+          " \"soil\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [10, 10, 1]}],"
+          " \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.2}},\n"
+          " \"leaf\": {\"type\": \"shapegroup\", \"quad\": {\"type\": \"rectangle\","
+          " \"bsdf\": {\"type\": \"twosided\", \"b\": {\"type\": \"diffuse\", \"reflectance\": 0.45}}}},\n"
+          " \"canopy\": {\"type\": \"instancelist\", \"filename\": \"leaves.txt\","
+          " \"shapegroup\": {\"type\": \"ref\", \"id\": \"leaf\"}},\n"
+          " \"plot\": {\"type\": \"periodic\", \"min\": [-10, -10], \"max\": [10, 10]}}\n",
+          spp);
+  fclose(f);
+  double rss0 = rss_bytes();
+  double emb0 = (double)accel_embree_bytes();
+  rsw_err err = {0};
+  scene *s = NULL;
+  scene_load_opts lo = {.size = sizeof lo};
+  double t0 = now_s();
+  if (scene_load_file(json, &lo, &s, &err)) {
+    fprintf(stderr, "bench canopy_100k: %s: %s\n", err.where, err.msg);
+    return 1;
+  }
+  double load_s = now_s() - t0;
+  double rss1 = rss_bytes(), emb1 = (double)accel_embree_bytes();
+  render_opts o = {.size = sizeof o, .spp = spp, .seed = 1, .threads = threads};
+  film_image img;
+  render_result_stats st;
+  if (render_sensor(s, &o, &img, &st, &err)) {
+    fprintf(stderr, "bench canopy_100k: %s\n", err.msg);
+    return 1;
+  }
+  film_image_free(&img);
+  double rays = (double)(st.rays.rays + st.rays.shadow_rays), rps = rays / st.wall_s;
+  double ceiling = accel_ceiling_rays_per_s(s, false, (uint64_t)fmax(2e6, rays / 2), threads, 7);
+  printf("{\"bench\": \"canopy_100k\", \"load_s\": %.3f, \"rss_mib\": %.1f, \"embree_mib\": %.1f, "
+         "\"bytes_per_instance\": %.0f, \"embree_bytes_per_instance\": %.0f, \"rays_per_s\": %.4g, "
+         "\"ceiling_rays_per_s\": %.4g, \"ratio_to_ceiling\": %.3f, \"threads\": %d, \"spp\": %u, "
+         "\"wall_s\": %.3f, \"instances\": %d, \"sensor\": \"hdistant 76x1\", \"periodic\": true, "
+         "\"meets_target\": %s}\n",
+         load_s, rss1 / 1048576.0, emb1 / 1048576.0, (rss1 - rss0) / N_LEAVES, (emb1 - emb0) / N_LEAVES, rps, ceiling,
+         ceiling > 0 ? rps / ceiling : 0, st.threads, spp, st.wall_s, N_LEAVES,
+         load_s <= 2.0 && (rss1 - rss0) / N_LEAVES <= 1024 ? "true" : "false");
+  scene_free(s);
+  unlink(list);
+  unlink(json);
+  rmdir(dir);
+  return 0;
+}
