@@ -1,8 +1,8 @@
 /* make bench: canopy_100k. 100,000 instanced leaves (a 2-triangle quad,
  * one shapegroup, one instancelist of "x y z nx ny nz radius" rows) over a
  * Lambertian soil in a periodic 20 m plot, under a directional sun, seen by
- * `hdistant` with a 76x1 film (76 directions; `mdistant` is on another
- * branch) at 1,000 spp. One JSON line:
+ * `mdistant` with 76 directions (the principal plane, zenith -75..+75
+ * degrees in 2-degree steps) at 1,000 spp each. One JSON line:
  *   load_s        scene_load_file wall time (list parse + Embree build)
  *   rss_mib       VmRSS after the load
  *   embree_mib    Embree's device memory (its memory monitor)
@@ -69,9 +69,17 @@ int main(void) {
   fclose(f);
   f = fopen(json, "w");
   if (!f) return 1;
+  /* The directions the 76 sub-sensors look into the scene. */
+  char dirs[76 * 64];
+  size_t dn = 0;
+  for (int k = 0; k < 76; k++) {
+    double th = (-75.0 + 2.0 * k) * 3.14159265358979323846 / 180.0;
+    dn += (size_t)snprintf(dirs + dn, sizeof dirs - dn, "%s%.9f 0 %.9f", k ? ", " : "", -sin(th), -cos(th));
+  }
   fprintf(f,
           "{\"type\": \"scene\", \"variant\": \"mono\",\n"
-          " \"sensor\": {\"type\": \"hdistant\", \"target\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [10, 10, 1]}]},"
+          " \"sensor\": {\"type\": \"mdistant\", \"directions\": \"%s\","
+          " \"target\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [10, 10, 1]}]},"
           " \"sampler\": {\"type\": \"independent\", \"sample_count\": %u},"
           " \"film\": {\"type\": \"hdrfilm\", \"width\": 76, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},\n"
           " \"integrator\": {\"type\": \"path\", \"max_depth\": -1},\n"
@@ -83,7 +91,7 @@ int main(void) {
           " \"canopy\": {\"type\": \"instancelist\", \"filename\": \"leaves.txt\","
           " \"shapegroup\": {\"type\": \"ref\", \"id\": \"leaf\"}},\n"
           " \"plot\": {\"type\": \"periodic\", \"min\": [-10, -10], \"max\": [10, 10]}}\n",
-          spp);
+          dirs, spp);
   fclose(f);
   double rss0 = rss_bytes();
   double emb0 = (double)accel_embree_bytes();
@@ -110,7 +118,7 @@ int main(void) {
   printf("{\"bench\": \"canopy_100k\", \"load_s\": %.3f, \"rss_mib\": %.1f, \"embree_mib\": %.1f, "
          "\"bytes_per_instance\": %.0f, \"embree_bytes_per_instance\": %.0f, \"rays_per_s\": %.4g, "
          "\"ceiling_rays_per_s\": %.4g, \"ratio_to_ceiling\": %.3f, \"threads\": %d, \"spp\": %u, "
-         "\"wall_s\": %.3f, \"instances\": %d, \"sensor\": \"hdistant 76x1\", \"periodic\": true, "
+         "\"wall_s\": %.3f, \"instances\": %d, \"sensor\": \"mdistant 76\", \"periodic\": true, "
          "\"meets_target\": %s}\n",
          load_s, rss1 / 1048576.0, emb1 / 1048576.0, (rss1 - rss0) / N_LEAVES, (emb1 - emb0) / N_LEAVES, rps, ceiling,
          ceiling > 0 ? rps / ceiling : 0, st.threads, spp, st.wall_s, N_LEAVES,
