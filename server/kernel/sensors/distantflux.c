@@ -16,7 +16,6 @@
 #include <math.h>
 #include <stdlib.h>
 
-#include "../scene/params.h"
 #include "sensor_common.h"
 
 typedef struct distantflux {
@@ -51,10 +50,7 @@ static rsw_status distantflux_set_scene(sensor *s, const scene *sc, rsw_err *err
   if (st != RSW_OK) return st;
   f->center = sc->bsphere_center; /* radius already inflated (kernel.h) */
   f->radius = sc->bsphere_radius;
-  if (f->ray_offset_param < 0.0)
-    f->ray_offset = f->target.kind == RAY_TARGET_NONE ? f->radius : 2.0 * f->radius;
-  else
-    f->ray_offset = f->ray_offset_param;
+  f->ray_offset = sensor_ray_offset(&f->target, f->ray_offset_param, f->radius);
   return RSW_OK;
 }
 
@@ -73,43 +69,9 @@ static void distantflux_destroy(object *o) { free(o); }
 
 static rsw_status distantflux_create(loader *ld, node *n, object **out);
 
-/* The reference normal (pointing away from the scene): to_world (0,0,1). */
-static vec3 distantflux_get_direction(const object *o) {
-  return v3_norm(xf_vector(&((const sensor *)o)->to_world, v3(0, 0, 1)));
-}
-
-/* As hdistant: the new frame keeps the old local +x projected onto the
- * plane orthogonal to the new axis. */
-static void distantflux_set_direction(object *o, vec3 dir) {
-  sensor *s = (sensor *)o;
-  vec3 dn = v3_norm(dir);
-  vec3 x_old = v3_norm(xf_vector(&s->to_world, v3(1, 0, 0)));
-  vec3 up = v3_cross(dn, x_old);
-  if (!(v3_len(up) > 1e-9)) up = v3_cross(dn, v3(1, 0, 0));
-  if (!(v3_len(up) > 1e-9)) {
-    vec3 unused;
-    coordinate_system(dn, &unused, &up);
-  }
-  xform t;
-  if (xf_look_at(v3(0, 0, 0), dn, v3_norm(up), &t)) s->to_world = t;
-}
-
-static rsw_status distantflux_check_xf(const object *o, const xform *t, const char *key, rsw_err *err) {
-  (void)o;
-  vec3 d = xf_vector(t, v3(0, 0, 1));
-  if (!(v3_len(d) > 0.0) || !v3_finite(d))
-    return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': to_world maps +z to a zero vector", key);
-  return RSW_OK;
-}
-
-static void distantflux_traverse(object *o, param_visitor *v) {
-  sensor *s = (sensor *)o;
-  pv_transform(v, "to_world", &s->to_world, UPDATE_SPECTRAL, distantflux_check_xf);
-  pv_vector(v, "direction", distantflux_get_direction, distantflux_set_direction, UPDATE_SPECTRAL);
-}
-
+/* to_world and the `direction` key: sensor_traverse_axis (sensor_common.h). */
 const plugin plugin_distantflux = {
-    .traverse = distantflux_traverse,
+    .traverse = sensor_traverse_axis,
     .name = "distantflux",
     .cls = CLS_SENSOR,
     .create = distantflux_create,

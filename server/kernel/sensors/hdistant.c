@@ -17,7 +17,6 @@
 #include <math.h>
 #include <stdlib.h>
 
-#include "../scene/params.h"
 #include "sensor_common.h"
 
 typedef struct hdistant {
@@ -55,10 +54,7 @@ static rsw_status hdistant_set_scene(sensor *s, const scene *sc, rsw_err *err) {
    * R = max(RayEpsilon, r (1 + RayEpsilon)). */
   h->center = sc->bsphere_center;
   h->radius = sc->bsphere_radius;
-  if (h->ray_offset_param < 0.0)
-    h->ray_offset = h->target.kind == RAY_TARGET_NONE ? h->radius : 2.0 * h->radius;
-  else
-    h->ray_offset = h->ray_offset_param;
+  h->ray_offset = sensor_ray_offset(&h->target, h->ray_offset_param, h->radius);
   return RSW_OK;
 }
 
@@ -77,47 +73,9 @@ static void hdistant_destroy(object *o) { free(o); }
 
 static rsw_status hdistant_create(loader *ld, node *n, object **out);
 
-/* The hemisphere axis (pointing away from the scene): to_world (0,0,1). */
-static vec3 hdistant_get_direction(const object *o) {
-  return v3_norm(xf_vector(&((const sensor *)o)->to_world, v3(0, 0, 1)));
-}
-
-/* Setting the axis keeps the film's azimuthal orientation: the new local
- * +x is the old one projected onto the plane orthogonal to the axis (for
- * an axis along the old +x, Eradiate's rule with orientation 0:
- * up = cross(D, +x), then coordinate_system()). */
-static void hdistant_set_direction(object *o, vec3 dir) {
-  sensor *s = (sensor *)o;
-  vec3 dn = v3_norm(dir);
-  vec3 x_old = v3_norm(xf_vector(&s->to_world, v3(1, 0, 0)));
-  vec3 up = v3_cross(dn, x_old);
-  if (!(v3_len(up) > 1e-9)) up = v3_cross(dn, v3(1, 0, 0));
-  if (!(v3_len(up) > 1e-9)) {
-    vec3 unused;
-    coordinate_system(dn, &unused, &up);
-  }
-  xform t;
-  if (xf_look_at(v3(0, 0, 0), dn, v3_norm(up), &t)) s->to_world = t;
-}
-
-static rsw_status hdistant_check_xf(const object *o, const xform *t, const char *key, rsw_err *err) {
-  (void)o;
-  vec3 d = xf_vector(t, v3(0, 0, 1));
-  if (!(v3_len(d) > 0.0) || !v3_finite(d))
-    return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': to_world maps +z to a zero vector", key);
-  return RSW_OK;
-}
-
-/* Mitsuba does not expose hdistant's transform; we do (spectral class: no
- * acceleration-structure work), with the `direction` convenience key. */
-static void hdistant_traverse(object *o, param_visitor *v) {
-  sensor *s = (sensor *)o;
-  pv_transform(v, "to_world", &s->to_world, UPDATE_SPECTRAL, hdistant_check_xf);
-  pv_vector(v, "direction", hdistant_get_direction, hdistant_set_direction, UPDATE_SPECTRAL);
-}
-
+/* to_world and the `direction` key: sensor_traverse_axis (sensor_common.h). */
 const plugin plugin_hdistant = {
-    .traverse = hdistant_traverse,
+    .traverse = sensor_traverse_axis,
     .name = "hdistant",
     .cls = CLS_SENSOR,
     .create = hdistant_create,

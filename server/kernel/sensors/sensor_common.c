@@ -1,5 +1,7 @@
 #include "sensor_common.h"
 
+#include "../scene/params.h"
+
 #include <ctype.h>
 #include <math.h>
 #include <stdlib.h>
@@ -185,4 +187,41 @@ void hemisphere_pixel_angles(int W, int H, double *zen_az) {
       size_t i = 2 * ((size_t)iy * W + (size_t)ix);
       direction_angles(v, &zen_az[i], &zen_az[i + 1]);
     }
+}
+
+vec3 sensor_axis_get(const object *o) {
+  return v3_norm(xf_vector(&((const sensor *)o)->to_world, v3(0, 0, 1)));
+}
+
+void sensor_axis_set(object *o, vec3 dir) {
+  sensor *s = (sensor *)o;
+  vec3 dn = v3_norm(dir);
+  vec3 x_old = v3_norm(xf_vector(&s->to_world, v3(1, 0, 0)));
+  vec3 up = v3_cross(dn, x_old);
+  if (!(v3_len(up) > 1e-9)) up = v3_cross(dn, v3(1, 0, 0));
+  if (!(v3_len(up) > 1e-9)) {
+    vec3 unused;
+    coordinate_system(dn, &unused, &up);
+  }
+  xform t;
+  if (xf_look_at(v3(0, 0, 0), dn, v3_norm(up), &t)) s->to_world = t;
+}
+
+rsw_status sensor_check_axis_xf(const object *o, const xform *t, const char *key, rsw_err *err) {
+  (void)o;
+  vec3 d = xf_vector(t, v3(0, 0, 1));
+  if (!(v3_len(d) > 0.0) || !v3_finite(d))
+    return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': to_world maps +z to a zero vector", key);
+  return RSW_OK;
+}
+
+void sensor_traverse_axis(object *o, param_visitor *v) {
+  sensor *s = (sensor *)o;
+  pv_transform(v, "to_world", &s->to_world, UPDATE_SPECTRAL, sensor_check_axis_xf);
+  pv_vector(v, "direction", sensor_axis_get, sensor_axis_set, UPDATE_SPECTRAL);
+}
+
+double sensor_ray_offset(const ray_target *t, double param, double radius) {
+  if (param >= 0.0) return param;
+  return t->kind == RAY_TARGET_NONE ? radius : 2.0 * radius;
 }

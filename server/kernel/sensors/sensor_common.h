@@ -72,4 +72,22 @@ void direction_angles(vec3 w, double *zenith, double *azimuth);
  * (eradiate src/eradiate/warp.py; kernel-behavior.md §1.2). */
 void hemisphere_pixel_angles(int W, int H, double *zen_az);
 
+/* ---- the hemispherical sensors' shared parameters (hdistant, distantflux) --
+ * Mitsuba does not expose these sensors' transforms; we do, with the
+ * `direction` convenience key (the hemisphere axis, pointing away from the
+ * scene). Setting the axis keeps the film's azimuthal orientation: the new
+ * local +x is the old one projected onto the plane orthogonal to the axis
+ * (for an axis along the old +x, Eradiate's rule with orientation 0:
+ * up = cross(D, +x), then coordinate_system()). Neither is geometric. */
+struct param_visitor;
+vec3 sensor_axis_get(const object *o);
+void sensor_axis_set(object *o, vec3 dir);
+/* to_world must map +z to a non-zero vector. */
+rsw_status sensor_check_axis_xf(const object *o, const xform *t, const char *key, rsw_err *err);
+/* pv_transform("to_world") + pv_vector("direction") for a sensor. */
+void sensor_traverse_axis(object *o, struct param_visitor *v);
+/* The default ray_offset (Eradiate's set_scene): R without a target, 2R
+ * with one; a given value (>= 0) wins. */
+double sensor_ray_offset(const ray_target *t, double param, double radius);
+
 #endif
