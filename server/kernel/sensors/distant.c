@@ -86,21 +86,13 @@ static void distant_parameters_changed(object *o) {
   ds->d = v3_norm(xf_vector(&ds->base.to_world, v3(0, 0, 1)));
 }
 
-static rsw_status distant_check_xf(const object *o, const xform *t, const char *key, rsw_err *err) {
-  (void)o;
-  vec3 d = xf_vector(t, v3(0, 0, 1));
-  if (!(v3_len(d) > 0.0) || !v3_finite(d))
-    return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': to_world maps +z to a zero vector", key);
-  return RSW_OK;
-}
-
 /* Mitsuba does not expose a distant sensor's transform; we do, with the
  * `direction` convenience key (the direction the sensor looks, into the
  * scene), since viewing angles are what sweeps vary most. Neither is
  * geometric. */
 static void distant_traverse(object *o, param_visitor *v) {
   distant *ds = (distant *)o;
-  pv_transform(v, "to_world", &ds->base.to_world, UPDATE_SPECTRAL, distant_check_xf);
+  pv_transform(v, "to_world", &ds->base.to_world, UPDATE_SPECTRAL, sensor_check_axis_xf);
   pv_vector(v, "direction", distant_get_direction, distant_set_direction, UPDATE_SPECTRAL);
 }
 
