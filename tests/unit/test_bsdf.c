@@ -22,6 +22,7 @@
 #include "kernel/core/rng.h"
 #include "kernel/scene/scene.h"
 #include "kernel/textures/texture.h"
+#include "../support/bsdf_test.h"
 #include "../support/chi2.h"
 #include "../support/test.h"
 
@@ -35,52 +36,6 @@ RSW_TEST_DEFINE_GLOBALS
 
 static const double incidence_deg[3] = {0.0, 60.0, 85.0};
 
-static vec3 dir_deg(double theta_deg, double phi_deg) {
-  double t = theta_deg * RSW_PI / 180.0, p = phi_deg * RSW_PI / 180.0;
-  return v3(sin(t) * cos(p), sin(t) * sin(p), cos(t));
-}
-
-static surface_interaction si_with(vec3 wi) {
-  surface_interaction si;
-  memset(&si, 0, sizeof si);
-  si.sh = frame_from_normal(v3(0, 0, 1));
-  si.wi = wi;
-  return si;
-}
-
-static void free_bsdf(bsdf *b) {
-  if (b) b->base.plugin->destroy(&b->base);
-}
-static void free_tex(texture *t) {
-  if (t) t->base.plugin->destroy(&t->base);
-}
-
-/* ---- chi-square adapter ---------------------------------------------------- */
-
-typedef struct chi2_bsdf {
-  const bsdf *b;
-  surface_interaction si;
-} chi2_bsdf;
-
-/* u[0] picks the lobe, u[1..2] the direction; a failed sample (pdf 0 or
- * black weight) has weight 0, as in Mitsuba's BSDFAdapter. */
-static bool chi2_bsdf_sample(void *user, const double *u, vec3 *out, double *weight) {
-  chi2_bsdf *c = user;
-  bsdf_sample bs;
-  color w = c->b->ops->sample(c->b, &c->si, u[0], v2(u[1], u[2]), &bs);
-  if (!(bs.pdf > 0.0) || col_is_black(w)) {
-    *weight = 0.0;
-    return false;
-  }
-  *out = bs.wo;
-  *weight = 1.0;
-  return true;
-}
-
-static double chi2_bsdf_pdf(void *user, vec3 wo) {
-  chi2_bsdf *c = user;
-  return c->b->ops->pdf(c->b, &c->si, wo);
-}
 
 /* ires: trapezoid points per cell axis when integrating the pdf. Mitsuba's
  * 4 is too coarse for lobes much narrower than a cell (alpha 0.05 puts a
@@ -88,7 +43,7 @@ static double chi2_bsdf_pdf(void *user, vec3 wo) {
  * falls by e^-4 across a cell): the expected counts are then off by more
  * than the statistical noise. 8 suffices for alpha >= 0.1, 32 for 0.05. */
 static void run_chi2(const bsdf *b, vec3 wi, const char *what, int ires) {
-  chi2_bsdf c = {b, si_with(wi)};
+  chi2_bsdf c = {b, tb_si_with(wi)};
   chi2_config cfg = chi2_defaults(CHI2_SPHERE, 3);
   cfg.sample_count = CHI2_SAMPLES;
   cfg.test_count = CHI2_TESTS;
@@ -204,16 +159,16 @@ static void test_microfacet_normalisation(void) {
     for (int a = 0; a < 3; a++) {
       mf_distr d = mf_make(types[t], alphas[a][0], alphas[a][1], true);
       CHECK_REL(hemi_integral(&d, v3(0, 0, 1), f_d_cos), 1.0, types[t] == MF_GGX ? 5e-3 : 1e-3);
-      vec3 wi = dir_deg(60.0, 30.0);
+      vec3 wi = tb_dir_deg(60.0, 30.0);
       CHECK_REL(hemi_integral(&d, wi, f_visible), wi.z, types[t] == MF_GGX ? 5e-3 : 5e-3);
     }
   /* D is zeroed where D cos <= 1e-20 and below the horizon. */
   mf_distr d = mf_make(MF_BECKMANN, 0.05, 0.05, true);
-  CHECK(mf_D(&d, dir_deg(80.0, 0.0)) == 0.0, "Beckmann tail underflows to 0");
+  CHECK(mf_D(&d, tb_dir_deg(80.0, 0.0)) == 0.0, "Beckmann tail underflows to 0");
   CHECK(mf_D(&d, v3(0, 0, -1)) == 0.0, "D = 0 below the horizon");
   /* G1 = 1 at normal incidence, 0 for a back-facing microfacet. */
   CHECK(mf_smith_g1(&d, v3(0, 0, 1), v3(0, 0, 1)) == 1.0, "G1(n, n) = 1");
-  CHECK(mf_smith_g1(&d, dir_deg(80.0, 0.0), dir_deg(-15.0, 0.0)) == 0.0, "G1 back-facing = 0");
+  CHECK(mf_smith_g1(&d, tb_dir_deg(80.0, 0.0), tb_dir_deg(-15.0, 0.0)) == 0.0, "G1 back-facing = 0");
 }
 
 /* ---- diffuse ------------------------------------------------------------------------ */
@@ -223,14 +178,14 @@ static void test_diffuse(void) {
   bsdf *b = diffuse_new(rho);
   REQUIRE(b && rho, "allocation");
   CHECK(b->flags == BSDF_DIFFUSE_REFLECTION, "flags");
-  for (int a = 0; a < 3; a++) run_chi2(b, dir_deg(incidence_deg[a], 20.0), "diffuse", 8);
-  surface_interaction si = si_with(dir_deg(30.0, 0.0));
-  vec3 wo = dir_deg(50.0, 120.0);
+  for (int a = 0; a < 3; a++) run_chi2(b, tb_dir_deg(incidence_deg[a], 20.0), "diffuse", 8);
+  surface_interaction si = tb_si_with(tb_dir_deg(30.0, 0.0));
+  vec3 wo = tb_dir_deg(50.0, 120.0);
   CHECK_REL(b->ops->eval(b, &si, wo).c[0], 0.7 / RSW_PI * wo.z, 1e-14);
   CHECK_REL(b->ops->pdf(b, &si, wo), wo.z / RSW_PI, 1e-14);
   /* One-sided: black from the back and towards the back. */
   CHECK(b->ops->eval(b, &si, v3(0, 0.6, -0.8)).c[0] == 0.0, "eval below the horizon");
-  surface_interaction back = si_with(v3(0, 0.6, -0.8));
+  surface_interaction back = tb_si_with(v3(0, 0.6, -0.8));
   CHECK(b->ops->eval(b, &back, wo).c[0] == 0.0, "eval from the back");
   bsdf_sample bs;
   color w = b->ops->sample(b, &back, 0.5, v2(0.3, 0.3), &bs);
@@ -238,8 +193,8 @@ static void test_diffuse(void) {
   w = b->ops->sample(b, &si, 0.5, v2(0.3, 0.7), &bs);
   CHECK_REL(w.c[0], 0.7, 1e-15);
   CHECK(bs.sampled_type == BSDF_DIFFUSE_REFLECTION && bs.eta == 1.0, "sample record");
-  free_bsdf(b);
-  free_tex(rho);
+  tb_free_bsdf(b);
+  tb_free_tex(rho);
 }
 
 /* ---- rough conductor ------------------------------------------------------------------ */
@@ -261,11 +216,11 @@ static rough_case rough_make(mf_type type, double au, double av, bool visible, d
 }
 
 static void rough_free(rough_case *r) {
-  free_bsdf(r->b);
-  free_tex(r->au);
-  free_tex(r->av);
-  free_tex(r->eta);
-  free_tex(r->k);
+  tb_free_bsdf(r->b);
+  tb_free_tex(r->au);
+  tb_free_tex(r->av);
+  tb_free_tex(r->eta);
+  tb_free_tex(r->k);
 }
 
 static const char *type_name(mf_type t) { return t == MF_GGX ? "ggx" : "beckmann"; }
@@ -282,7 +237,7 @@ static void test_roughconductor_chi2_isotropic(void) {
         snprintf(what, sizeof what, "roughconductor %s alpha %g sample_visible %d",
                  type_name(types[t]), alphas[a], v == 0);
         for (int i = 0; i < 3; i++)
-          run_chi2(r.b, dir_deg(incidence_deg[i], 40.0), what, alphas[a] < 0.1 ? 32 : 8);
+          run_chi2(r.b, tb_dir_deg(incidence_deg[i], 40.0), what, alphas[a] < 0.1 ? 32 : 8);
         rough_free(&r);
       }
 }
@@ -296,7 +251,7 @@ static void test_roughconductor_chi2_anisotropic(void) {
       char what[96];
       snprintf(what, sizeof what, "roughconductor %s alpha (0.1, 0.5) sample_visible %d",
                type_name(types[t]), v == 0);
-      for (int i = 0; i < 3; i++) run_chi2(r.b, dir_deg(incidence_deg[i], 40.0), what, 8);
+      for (int i = 0; i < 3; i++) run_chi2(r.b, tb_dir_deg(incidence_deg[i], 40.0), what, 8);
       rough_free(&r);
     }
 }
@@ -304,7 +259,7 @@ static void test_roughconductor_chi2_anisotropic(void) {
 /* sample()'s weight equals eval/pdf and its pdf equals pdf(), for the
  * smooth lobes, over many samples. */
 static void check_weight_consistency(const bsdf *b, vec3 wi, const char *what) {
-  surface_interaction si = si_with(wi);
+  surface_interaction si = tb_si_with(wi);
   pcg32 rng;
   pcg32_seed(&rng, 7, 11);
   int bad = 0, ok = 0;
@@ -335,9 +290,9 @@ static void test_weight_is_eval_over_pdf(void) {
   texture *rho = uniform_texture_const(0.6, "rho");
   bsdf *d = diffuse_new(rho);
   REQUIRE(d, "allocation");
-  for (int i = 0; i < 3; i++) check_weight_consistency(d, dir_deg(incidence_deg[i], 10.0), "diffuse");
-  free_bsdf(d);
-  free_tex(rho);
+  for (int i = 0; i < 3; i++) check_weight_consistency(d, tb_dir_deg(incidence_deg[i], 10.0), "diffuse");
+  tb_free_bsdf(d);
+  tb_free_tex(rho);
   const mf_type types[2] = {MF_BECKMANN, MF_GGX};
   for (int t = 0; t < 2; t++)
     for (int v = 0; v < 2; v++) {
@@ -347,8 +302,8 @@ static void test_weight_is_eval_over_pdf(void) {
       rough_case ra = rough_make(types[t], 0.1, 0.5, v == 0, 1.3, 2.0);
       REQUIRE(r.b && ra.b, "allocation");
       for (int i = 0; i < 3; i++) {
-        check_weight_consistency(r.b, dir_deg(incidence_deg[i], 10.0), "roughconductor");
-        check_weight_consistency(ra.b, dir_deg(incidence_deg[i], 70.0), "roughconductor aniso");
+        check_weight_consistency(r.b, tb_dir_deg(incidence_deg[i], 10.0), "roughconductor");
+        check_weight_consistency(ra.b, tb_dir_deg(incidence_deg[i], 70.0), "roughconductor aniso");
       }
       rough_free(&r);
       rough_free(&ra);
@@ -369,14 +324,14 @@ static void test_reciprocity(void) {
       vec3 a = warp_square_to_uniform_hemisphere(v2(pcg32_next_double(&rng), pcg32_next_double(&rng)));
       vec3 b = warp_square_to_uniform_hemisphere(v2(pcg32_next_double(&rng), pcg32_next_double(&rng)));
       if (a.z < 1e-3 || b.z < 1e-3) continue;
-      surface_interaction sa = si_with(a), sb = si_with(b);
+      surface_interaction sa = tb_si_with(a), sb = tb_si_with(b);
       double fab = bs[n]->ops->eval(bs[n], &sa, b).c[0] / b.z;
       double fba = bs[n]->ops->eval(bs[n], &sb, a).c[0] / a.z;
       CHECK(fabs(fab - fba) <= 1e-10 * fmax(fab, fba), "reciprocity of %s: %g vs %g",
             bs[n]->base.plugin->name, fab, fba);
     }
-  free_bsdf(d);
-  free_tex(rho);
+  tb_free_bsdf(d);
+  tb_free_tex(rho);
   rough_free(&r1);
   rough_free(&r2);
 }
@@ -394,7 +349,7 @@ static void test_white_furnace(void) {
         rough_case r = rough_make(types[t], alphas[a], alphas[a], v == 0, 0.0, 1.0);
         REQUIRE(r.b, "allocation");
         for (int i = 0; i < 2; i++) {
-          surface_interaction si = si_with(dir_deg(incidence_deg[i], 0.0));
+          surface_interaction si = tb_si_with(tb_dir_deg(incidence_deg[i], 0.0));
           pcg32 rng;
           pcg32_seed(&rng, 17, 23);
           const int n = 200000;
@@ -421,16 +376,16 @@ static void test_roughconductor_edges(void) {
   rough_case r = rough_make(MF_GGX, 0.3, 0.3, true, 0.0, 1.0);
   REQUIRE(r.b, "allocation");
   CHECK(r.b->flags == BSDF_GLOSSY_REFLECTION, "flags");
-  surface_interaction back = si_with(v3(0, 0.6, -0.8));
+  surface_interaction back = tb_si_with(v3(0, 0.6, -0.8));
   bsdf_sample bs;
   color w = r.b->ops->sample(r.b, &back, 0.5, v2(0.4, 0.4), &bs);
   CHECK(col_is_black(w) && bs.pdf == 0.0, "sample from the back fails");
   CHECK(r.b->ops->eval(r.b, &back, v3(0, 0, 1)).c[0] == 0.0, "eval from the back");
-  surface_interaction si = si_with(dir_deg(30.0, 0.0));
+  surface_interaction si = tb_si_with(tb_dir_deg(30.0, 0.0));
   CHECK(r.b->ops->eval(r.b, &si, v3(0, 0.6, -0.8)).c[0] == 0.0, "eval below the horizon");
   CHECK(r.b->ops->pdf(r.b, &si, v3(0, 0.6, -0.8)) == 0.0, "pdf below the horizon");
   /* The eval formula at one point, written out: F D G / (4 cos_i). */
-  vec3 wi = dir_deg(30.0, 0.0), wo = dir_deg(45.0, 160.0), h = v3_norm(v3_add(wi, wo));
+  vec3 wi = tb_dir_deg(30.0, 0.0), wo = tb_dir_deg(45.0, 160.0), h = v3_norm(v3_add(wi, wo));
   double a = 0.3, c = h.z, t2 = (h.x * h.x + h.y * h.y) / (c * c);
   double D = 1.0 / (RSW_PI * a * a * c * c * c * c * (1 + t2 / (a * a)) * (1 + t2 / (a * a)));
   double ti = (a * a) * (wi.x * wi.x + wi.y * wi.y) / (wi.z * wi.z);
@@ -450,8 +405,8 @@ static void test_conductor_smooth(void) {
   REQUIRE(mirror && tinted, "allocation");
   CHECK(mirror->flags == BSDF_DELTA_REFLECTION, "flags");
   for (int i = 0; i < 3; i++) {
-    vec3 wi = dir_deg(incidence_deg[i], 33.0);
-    surface_interaction si = si_with(wi);
+    vec3 wi = tb_dir_deg(incidence_deg[i], 33.0);
+    surface_interaction si = tb_si_with(wi);
     bsdf_sample bs;
     color w = mirror->ops->sample(mirror, &si, 0.3, v2(0.2, 0.9), &bs);
     CHECK_REL(w.c[0], 1.0, 1e-12);
@@ -464,11 +419,11 @@ static void test_conductor_smooth(void) {
     w = tinted->ops->sample(tinted, &si, 0.3, v2(0.2, 0.9), &bs);
     CHECK_REL(w.c[1], 0.8, 1e-12);
   }
-  free_bsdf(mirror);
-  free_bsdf(tinted);
-  free_tex(eta);
-  free_tex(k);
-  free_tex(spec);
+  tb_free_bsdf(mirror);
+  tb_free_bsdf(tinted);
+  tb_free_tex(eta);
+  tb_free_tex(k);
+  tb_free_tex(spec);
 }
 
 static void test_conductor_presets(void) {
@@ -497,7 +452,7 @@ static void test_conductor_presets(void) {
   render_ctx mono = {.variant = VARIANT_MONO, .wavelength = 550.0};
   bsdf *b = conductor_new(NULL, NULL, au, NULL, &mono);
   REQUIRE(b, "allocation");
-  surface_interaction si = si_with(v3(0, 0, 1));
+  surface_interaction si = tb_si_with(v3(0, 0, 1));
   bsdf_sample bs;
   color w = b->ops->sample(b, &si, 0.5, v2(0.5, 0.5), &bs);
   double r0 = ((eta_ref - 1) * (eta_ref - 1) + k_ref * k_ref) /
@@ -528,7 +483,7 @@ static void test_conductor_presets(void) {
     CHECK_REL(w.c[c], fresnel_conductor(1.0, eta, k), 1e-12);
   }
   CHECK(w.c[0] > w.c[2], "gold reflects more red than blue");
-  free_bsdf(b);
+  tb_free_bsdf(b);
 }
 
 /* ---- dielectric ----------------------------------------------------------------------- */
@@ -551,9 +506,9 @@ static void test_dielectric(void) {
   const double thetas[] = {0.0, 20.0, 45.0, 60.0, 85.0};
   for (int side = 0; side < 2; side++)
     for (int i = 0; i < 5; i++) {
-      vec3 wi = dir_deg(thetas[i], 25.0);
+      vec3 wi = tb_dir_deg(thetas[i], 25.0);
       if (side) wi.z = -wi.z;
-      surface_interaction si = si_with(wi);
+      surface_interaction si = tb_si_with(wi);
       bsdf_sample br, bt;
       color wr = b->ops->sample(b, &si, 0.0, v2(0.5, 0.5), &br);
       color wt = b->ops->sample(b, &si, 0.999999, v2(0.5, 0.5), &bt);
@@ -587,14 +542,14 @@ static void test_dielectric(void) {
             "delta: eval = pdf = 0");
     }
   /* Total internal reflection from inside at 60 degrees (critical ~41.7). */
-  vec3 wi = dir_deg(60.0, 0.0);
+  vec3 wi = tb_dir_deg(60.0, 0.0);
   wi.z = -wi.z;
-  surface_interaction si = si_with(wi);
+  surface_interaction si = tb_si_with(wi);
   bsdf_sample bs;
   color w = b->ops->sample(b, &si, 0.999999, v2(0.5, 0.5), &bs);
   CHECK(bs.sampled_type == BSDF_DELTA_REFLECTION && bs.pdf == 1.0 && w.c[0] == 1.0,
         "TIR reflects with probability 1");
-  free_bsdf(b);
+  tb_free_bsdf(b);
 }
 
 /* ---- twosided --------------------------------------------------------------------------- */
@@ -608,12 +563,12 @@ static void test_twosided(void) {
   bsdf *two = twosided_new(front, back.b);
   REQUIRE(one && two, "allocation");
   CHECK(one->flags & BSDF_TWO_SIDED, "flags");
-  vec3 wi_back = dir_deg(120.0, 30.0); /* 60 degrees from the back */
+  vec3 wi_back = tb_dir_deg(120.0, 30.0); /* 60 degrees from the back */
   run_chi2(one, wi_back, "twosided(diffuse) from the back", 8);
   run_chi2(two, wi_back, "twosided(diffuse, roughconductor ggx 0.3) from the back", 8);
   /* Back side = the nested BSDF with both directions mirrored. */
-  surface_interaction sb = si_with(wi_back), sf = si_with(v3(wi_back.x, wi_back.y, -wi_back.z));
-  vec3 wo = dir_deg(130.0, 200.0), wo_m = v3(wo.x, wo.y, -wo.z);
+  surface_interaction sb = tb_si_with(wi_back), sf = tb_si_with(v3(wi_back.x, wi_back.y, -wi_back.z));
+  vec3 wo = tb_dir_deg(130.0, 200.0), wo_m = v3(wo.x, wo.y, -wo.z);
   CHECK_REL(two->ops->eval(two, &sb, wo).c[0], back.b->ops->eval(back.b, &sf, wo_m).c[0], 1e-15);
   CHECK_REL(two->ops->pdf(two, &sb, wo), back.b->ops->pdf(back.b, &sf, wo_m), 1e-15);
   CHECK_REL(one->ops->eval(one, &sb, wo).c[0], 0.4 / RSW_PI * fabs(wo.z), 1e-14);
@@ -624,11 +579,11 @@ static void test_twosided(void) {
   two->ops->sample(two, &sb, 0.5, v2(0.3, 0.6), &bs);
   CHECK(bs.pdf > 0 && bs.wo.z < 0.0, "back-side sample stays on the back");
   check_weight_consistency(two, wi_back, "twosided back");
-  free_bsdf(one);
-  free_bsdf(two);
-  free_bsdf(front);
+  tb_free_bsdf(one);
+  tb_free_bsdf(two);
+  tb_free_bsdf(front);
   rough_free(&back);
-  free_tex(rho);
+  tb_free_tex(rho);
 }
 
 

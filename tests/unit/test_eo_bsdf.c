@@ -13,6 +13,7 @@
 #include "kernel/core/rng.h"
 #include "kernel/scene/scene.h"
 #include "kernel/textures/texture.h"
+#include "../support/bsdf_test.h"
 #include "../support/chi2.h"
 #include "../support/test.h"
 
@@ -22,51 +23,9 @@ RSW_TEST_DEFINE_GLOBALS
 /* rpv 2 sets x 2 incidences + bilambertian 4 + hapke 2 sets x 2 = 12. */
 #define CHI2_TESTS 12
 
-static vec3 dir_deg(double theta_deg, double phi_deg) {
-  double t = theta_deg * RSW_PI / 180.0, p = phi_deg * RSW_PI / 180.0;
-  return v3(sin(t) * cos(p), sin(t) * sin(p), cos(t));
-}
-
-static surface_interaction si_with(vec3 wi) {
-  surface_interaction si;
-  memset(&si, 0, sizeof si);
-  si.sh = frame_from_normal(v3(0, 0, 1));
-  si.wi = wi;
-  return si;
-}
-
-static void free_bsdf(bsdf *b) {
-  if (b) b->base.plugin->destroy(&b->base);
-}
-static void free_tex(texture *t) {
-  if (t) t->base.plugin->destroy(&t->base);
-}
-
-typedef struct chi2_bsdf {
-  const bsdf *b;
-  surface_interaction si;
-} chi2_bsdf;
-
-static bool chi2_bsdf_sample(void *user, const double *u, vec3 *out, double *weight) {
-  chi2_bsdf *c = user;
-  bsdf_sample bs;
-  color w = c->b->ops->sample(c->b, &c->si, u[0], v2(u[1], u[2]), &bs);
-  if (!(bs.pdf > 0.0) || col_is_black(w)) {
-    *weight = 0.0;
-    return false;
-  }
-  *out = bs.wo;
-  *weight = 1.0;
-  return true;
-}
-
-static double chi2_bsdf_pdf(void *user, vec3 wo) {
-  chi2_bsdf *c = user;
-  return c->b->ops->pdf(c->b, &c->si, wo);
-}
 
 static void run_chi2(const bsdf *b, vec3 wi, const char *what) {
-  chi2_bsdf c = {b, si_with(wi)};
+  chi2_bsdf c = {b, tb_si_with(wi)};
   chi2_config cfg = chi2_defaults(CHI2_SPHERE, 3);
   cfg.sample_count = CHI2_SAMPLES;
   cfg.test_count = CHI2_TESTS;
@@ -78,7 +37,7 @@ static void run_chi2(const bsdf *b, vec3 wi, const char *what) {
 
 /* Sampling weight equals eval / pdf and pdf matches, at 200 samples. */
 static void check_weights(const bsdf *b, vec3 wi, const char *what) {
-  surface_interaction si = si_with(wi);
+  surface_interaction si = tb_si_with(wi);
   pcg32 rng;
   pcg32_seed(&rng, 7, 3);
   int bad = 0;
@@ -114,11 +73,11 @@ static rpv_case rpv_make(double rho_0, double k, double g, double rho_c) {
   return r;
 }
 static void rpv_free(rpv_case *r) {
-  free_bsdf(r->b);
-  free_tex(r->rho_0);
-  free_tex(r->k);
-  free_tex(r->g);
-  free_tex(r->rho_c);
+  tb_free_bsdf(r->b);
+  tb_free_tex(r->rho_0);
+  tb_free_tex(r->k);
+  tb_free_tex(r->g);
+  tb_free_tex(r->rho_c);
 }
 
 static void test_rpv_chi2(void) {
@@ -127,7 +86,7 @@ static void test_rpv_chi2(void) {
   REQUIRE(a.b && b.b, "rpv_new");
   CHECK(((rpv_bsdf *)a.b)->rho_c == a.rho_0, "rho_c defaults to rho_0's object");
   for (int i = 0; i < 2; i++) {
-    vec3 wi = dir_deg(i ? 60.0 : 10.0, 30.0);
+    vec3 wi = tb_dir_deg(i ? 60.0 : 10.0, 30.0);
     run_chi2(a.b, wi, "rpv defaults");
     run_chi2(b.b, wi, "rpv (0.183, 0.78, -0.1, 0.3)");
     check_weights(a.b, wi, "rpv defaults");
@@ -148,7 +107,7 @@ static void test_rpv_reciprocity(void) {
   pcg32_seed(&rng, 11, 1);
   for (int s = 0; s < 50; s++) {
     vec3 wi = random_up(&rng), wo = random_up(&rng);
-    surface_interaction a = si_with(wi), b = si_with(wo);
+    surface_interaction a = tb_si_with(wi), b = tb_si_with(wo);
     double f1 = r.b->ops->eval(r.b, &a, wo).c[0] / fabs(wo.z);
     double f2 = r.b->ops->eval(r.b, &b, wi).c[0] / fabs(wi.z);
     CHECK(f1 > 0.0, "rpv eval positive");
@@ -183,7 +142,7 @@ static void test_rpv_closed_form(void) {
     vec3 wi = v3(sin(ti) * cos(pi_), sin(ti) * sin(pi_), cos(ti));
     vec3 wo = v3(sin(to) * cos(po), sin(to) * sin(po), cos(to));
     rpv_case r = rpv_make(rho_0, k, g, rho_c);
-    surface_interaction si = si_with(wi);
+    surface_interaction si = tb_si_with(wi);
     double got = r.b->ops->eval(r.b, &si, wo).c[0];
     double want = rpv_ref(rho_0, k, g, rho_c, ti, s == 0 ? 0.0 : pi_, to, po) * cos(to);
     CHECK_REL(got, want, 1e-9);
@@ -191,9 +150,9 @@ static void test_rpv_closed_form(void) {
   }
   /* k = 1, g = 0, rho_c = 1 is Lambertian rho_0 / pi. */
   rpv_case l = rpv_make(0.3, 1.0, 0.0, 1.0);
-  surface_interaction si = si_with(dir_deg(40, 10));
-  CHECK_REL(l.b->ops->eval(l.b, &si, dir_deg(20, 200)).c[0], 0.3 / RSW_PI * cos(20 * RSW_PI / 180), 1e-14);
-  CHECK(l.b->ops->eval(l.b, &si, dir_deg(120, 0)).c[0] == 0.0, "rpv is one-sided");
+  surface_interaction si = tb_si_with(tb_dir_deg(40, 10));
+  CHECK_REL(l.b->ops->eval(l.b, &si, tb_dir_deg(20, 200)).c[0], 0.3 / RSW_PI * cos(20 * RSW_PI / 180), 1e-14);
+  CHECK(l.b->ops->eval(l.b, &si, tb_dir_deg(120, 0)).c[0] == 0.0, "rpv is one-sided");
   rpv_free(&l);
 }
 
@@ -204,15 +163,15 @@ static void test_bilambertian(void) {
   bsdf *b = bilambertian_new(r, t);
   REQUIRE(b, "bilambertian_new");
   CHECK(b->flags == (BSDF_DIFFUSE_REFLECTION | BSDF_DIFFUSE_TRANSMISSION), "flags");
-  vec3 up = dir_deg(30, 10), down = dir_deg(150, 70);
+  vec3 up = tb_dir_deg(30, 10), down = tb_dir_deg(150, 70);
   run_chi2(b, up, "bilambertian (0.3, 0.6) from above");
   run_chi2(b, down, "bilambertian (0.3, 0.6) from below");
   check_weights(b, up, "bilambertian above");
   check_weights(b, down, "bilambertian below");
   /* eval on both sides. */
-  vec3 wo_up = dir_deg(50, 0), wo_dn = dir_deg(130, 0);
+  vec3 wo_up = tb_dir_deg(50, 0), wo_dn = tb_dir_deg(130, 0);
   double c = cos(50 * RSW_PI / 180);
-  surface_interaction su = si_with(up), sd = si_with(down);
+  surface_interaction su = tb_si_with(up), sd = tb_si_with(down);
   CHECK_REL(b->ops->eval(b, &su, wo_up).c[0], 0.3 / RSW_PI * c, 1e-14);
   CHECK_REL(b->ops->eval(b, &su, wo_dn).c[0], 0.6 / RSW_PI * c, 1e-14);
   CHECK_REL(b->ops->eval(b, &sd, wo_dn).c[0], 0.3 / RSW_PI * c, 1e-14);
@@ -228,25 +187,25 @@ static void test_bilambertian(void) {
   w = b->ops->sample(b, &sd, 0.9, v2(0.3, 0.4), &bs);
   CHECK(bs.wo.z > 0.0 && bs.sampled_type == BSDF_DIFFUSE_TRANSMISSION, "transmission crosses");
   CHECK_REL(w.c[0], 0.9, 1e-14);
-  free_bsdf(b);
-  free_tex(r);
-  free_tex(t);
+  tb_free_bsdf(b);
+  tb_free_tex(r);
+  tb_free_tex(t);
   /* R + T = 0: p_R is NaN -> 0, no NaN anywhere. */
   texture *z = uniform_texture_const(0.0, NULL);
   b = bilambertian_new(z, z);
   w = b->ops->sample(b, &su, 0.5, v2(0.3, 0.4), &bs);
   CHECK(w.c[0] == 0.0 && !isnan(bs.pdf), "black bilambertian: weight 0, no NaN");
-  free_bsdf(b);
+  tb_free_bsdf(b);
   /* Pure reflector from below: transmission pdf is 0. */
   texture *one = uniform_texture_const(1.0, NULL);
   b = bilambertian_new(one, z);
   run_chi2(b, down, "bilambertian (1, 0) from below");
-  free_bsdf(b);
+  tb_free_bsdf(b);
   b = bilambertian_new(z, one);
   run_chi2(b, up, "bilambertian (0, 1) from above");
-  free_bsdf(b);
-  free_tex(z);
-  free_tex(one);
+  tb_free_bsdf(b);
+  tb_free_tex(z);
+  tb_free_tex(one);
 }
 
 /* ---- hapke ------------------------------------------------------------------ */
@@ -264,8 +223,8 @@ static hapke_case hapke_make(double w, double b, double c, double theta, double 
   return r;
 }
 static void hapke_free(hapke_case *r) {
-  free_bsdf(r->b);
-  for (int k = 0; k < 6; k++) free_tex(r->t[k]);
+  tb_free_bsdf(r->b);
+  for (int k = 0; k < 6; k++) tb_free_tex(r->t[k]);
 }
 
 static void test_hapke_chi2(void) {
@@ -273,7 +232,7 @@ static void test_hapke_chi2(void) {
   /* Eradiate's regolith example (Nguyen 2025 fit): */
   hapke_case b = hapke_make(0.52, 0.17, 0.62, 15.0, 0.9, 0.06);
   for (int i = 0; i < 2; i++) {
-    vec3 wi = dir_deg(i ? 65.0 : 20.0, 45.0);
+    vec3 wi = tb_dir_deg(i ? 65.0 : 20.0, 45.0);
     run_chi2(a.b, wi, "hapke defaults");
     run_chi2(b.b, wi, "hapke (0.52, 0.17, 0.62, 15, 0.9, 0.06)");
     check_weights(a.b, wi, "hapke defaults");
@@ -294,7 +253,7 @@ static void test_hapke_energy_and_guard(void) {
     hapke_case hc = hapke_make(params[p][0], params[p][1], params[p][2], params[p][3],
                                params[p][4], params[p][5]);
     for (double ti = 0.0; ti < 85.0; ti += 20.0) {
-      surface_interaction si = si_with(dir_deg(ti, 0));
+      surface_interaction si = tb_si_with(tb_dir_deg(ti, 0));
       pcg32 rng;
       pcg32_seed(&rng, 3, 4);
       const int n = 20000;
@@ -316,21 +275,21 @@ static void test_hapke_energy_and_guard(void) {
   hapke_case g0 = hapke_make(0.5, 0.2, 0.5, 30.0, 1.0, 0.0);
   const double th[4] = {0.0, 10.0, 45.0, 80.0};
   for (int k = 0; k < 4; k++) {
-    vec3 w = dir_deg(th[k], 33.0);
-    surface_interaction si = si_with(w);
+    vec3 w = tb_dir_deg(th[k], 33.0);
+    surface_interaction si = tb_si_with(w);
     double v = g0.b->ops->eval(g0.b, &si, w).c[0];
     CHECK(isfinite(v) && v > 0.0, "hapke h = 0 at g = 0, theta %g: %g", th[k], v);
     /* g = 0 gets the full surge B_0: (1 + B) with B = B_0 = 1 vs B = 0. */
     double v_ref = hapke_fr(0.5, 0.2, 0.5, 30.0, 0.0, 0.0, w, w) * w.z;
     CHECK(v > v_ref, "surge at g = 0: %g > %g", v, v_ref);
     /* Away from g = 0 with h = 0 the surge vanishes. */
-    vec3 wo = dir_deg(th[k] + 5.0, 33.0);
+    vec3 wo = tb_dir_deg(th[k] + 5.0, 33.0);
     CHECK_REL(g0.b->ops->eval(g0.b, &si, wo).c[0],
               hapke_fr(0.5, 0.2, 0.5, 30.0, 0.0, 0.0, w, wo) * wo.z, 1e-14);
   }
   /* theta = 0 (smooth): E1 = E2 = 0, S = 1; finite everywhere. */
-  CHECK(isfinite(hapke_fr(0.5, 0.2, 0.5, 0.0, 0.0, 0.0, dir_deg(0, 0), dir_deg(0, 0))), "theta 0");
-  CHECK(hapke_fr(0.5, 0.2, 0.5, 30.0, 0.0, 0.0, dir_deg(30, 0), dir_deg(100, 0)) == 0.0,
+  CHECK(isfinite(hapke_fr(0.5, 0.2, 0.5, 0.0, 0.0, 0.0, tb_dir_deg(0, 0), tb_dir_deg(0, 0))), "theta 0");
+  CHECK(hapke_fr(0.5, 0.2, 0.5, 30.0, 0.0, 0.0, tb_dir_deg(30, 0), tb_dir_deg(100, 0)) == 0.0,
         "hapke is one-sided");
   hapke_free(&g0);
 }
