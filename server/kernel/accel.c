@@ -141,23 +141,30 @@ static void load_ray(const void *ray, unsigned N, unsigned i, double o[3], doubl
   }
 }
 
+/* Record a hit of ray i at distance t with geometric normal n (in the
+ * space Embree handed the ray in); u, v are unused by analytic shapes. */
+static void store_hit(const struct RTCIntersectFunctionNArguments *args, unsigned i, double t, const double n[3]) {
+  unsigned N = args->N;
+  void *hit = (float *)args->rayhit + (size_t)RAY_FIELDS * N;
+  RAYN_F(args->rayhit, N, RAY_TFAR, i) = (float)t;
+  for (int k = 0; k < 3; k++) HITN_F(hit, N, HIT_NG + k, i) = (float)n[k];
+  HITN_F(hit, N, HIT_U, i) = 0;
+  HITN_F(hit, N, HIT_V, i) = 0;
+  HITN_U(hit, N, HIT_PRIM, i) = args->primID;
+  HITN_U(hit, N, HIT_GEOM, i) = args->geomID;
+  HITN_U(hit, N, HIT_INST, i) = args->context->instID[0];
+}
+
 static void unit_intersect(const struct RTCIntersectFunctionNArguments *args) {
   const shape *s = args->geometryUserPtr;
   unsigned N = args->N;
   void *ray = args->rayhit;
-  void *hit = (float *)args->rayhit + (size_t)RAY_FIELDS * N;
   for (unsigned i = 0; i < N; i++) {
     if (!args->valid[i]) continue;
     double o[3], d[3], t, n[3];
     load_ray(ray, N, i, o, d);
     if (!unit_hit(s->geom, o, d, RAYN_F(ray, N, RAY_TNEAR, i), RAYN_F(ray, N, RAY_TFAR, i), &t, n)) continue;
-    RAYN_F(ray, N, RAY_TFAR, i) = (float)t;
-    for (int k = 0; k < 3; k++) HITN_F(hit, N, HIT_NG + k, i) = (float)n[k];
-    HITN_F(hit, N, HIT_U, i) = 0;
-    HITN_F(hit, N, HIT_V, i) = 0;
-    HITN_U(hit, N, HIT_PRIM, i) = args->primID;
-    HITN_U(hit, N, HIT_GEOM, i) = args->geomID;
-    HITN_U(hit, N, HIT_INST, i) = args->context->instID[0];
+    store_hit(args, i, t, n);
   }
 }
 
@@ -207,22 +214,13 @@ static void member_intersect(const struct RTCIntersectFunctionNArguments *args) 
   const shape *s = args->geometryUserPtr;
   unsigned N = args->N;
   void *ray = args->rayhit;
-  void *hit = (float *)args->rayhit + (size_t)RAY_FIELDS * N;
   for (unsigned i = 0; i < N; i++) {
     if (!args->valid[i]) continue;
     double o[3], d[3], t, n[3];
     member_ray(s, ray, N, i, o, d);
     if (!unit_hit(s->geom, o, d, RAYN_F(ray, N, RAY_TNEAR, i), RAYN_F(ray, N, RAY_TFAR, i), &t, n)) continue;
     vec3 ng = xf_normal(&s->to_world, v3(n[0], n[1], n[2])); /* group space */
-    RAYN_F(ray, N, RAY_TFAR, i) = (float)t;
-    HITN_F(hit, N, HIT_NG + 0, i) = (float)ng.x;
-    HITN_F(hit, N, HIT_NG + 1, i) = (float)ng.y;
-    HITN_F(hit, N, HIT_NG + 2, i) = (float)ng.z;
-    HITN_F(hit, N, HIT_U, i) = 0;
-    HITN_F(hit, N, HIT_V, i) = 0;
-    HITN_U(hit, N, HIT_PRIM, i) = args->primID;
-    HITN_U(hit, N, HIT_GEOM, i) = args->geomID;
-    HITN_U(hit, N, HIT_INST, i) = args->context->instID[0];
+    store_hit(args, i, t, (double[3]){ng.x, ng.y, ng.z});
   }
 }
 
