@@ -43,6 +43,20 @@ double mf_smith_g1(const mf_distr *d, vec3 v, vec3 m) {
   return 2.0 / (1.0 + sqrt(1.0 + t));
 }
 
+double mf_visible_g1(const mf_distr *d, vec3 v, vec3 m) {
+  if (d->type == MF_GGX) return mf_smith_g1(d, v, m); /* GGX's G1 is exact */
+  if (v3_dot(v, m) * v.z <= 0.0) return 0.0;
+  double ax = d->alpha_u * v.x, ay = d->alpha_v * v.y;
+  double xy_alpha_2 = ax * ax + ay * ay;
+  if (xy_alpha_2 == 0.0) return 1.0;
+  /* G1 = 1 / (1 + Lambda(a)), Lambda(a) = (erf(a) - 1) / 2 +
+   * exp(-a^2) / (2 a sqrt(pi)), a = 1 / sqrt(t) = v.z / sqrt(xy_alpha_2).
+   * Written as a sum of non-negative terms: no cancellation; a = 0
+   * (grazing) gives 2 / inf = 0. */
+  double a = fabs(v.z) / sqrt(xy_alpha_2);
+  return 2.0 / (1.0 + erf(a) + INV_SQRT_PI * exp(-a * a) / a);
+}
+
 double mf_G(const mf_distr *d, vec3 wi, vec3 wo, vec3 m) {
   return mf_smith_g1(d, wi, m) * mf_smith_g1(d, wo, m);
 }
@@ -52,7 +66,10 @@ double mf_pdf(const mf_distr *d, vec3 wi, vec3 m) {
   if (D == 0.0) return 0.0;
   if (d->sample_visible) {
     if (!(wi.z > 0.0)) return 0.0;
-    return D * mf_smith_g1(d, wi, m) * fabs(v3_dot(wi, m)) / wi.z;
+    /* The exact Smith G1: the visible-normal samplers below draw this
+     * density exactly (Beckmann's rational fit would be off by up to
+     * 0.35 %, see microfacet.h). */
+    return D * mf_visible_g1(d, wi, m) * fabs(v3_dot(wi, m)) / wi.z;
   }
   return D * m.z;
 }
