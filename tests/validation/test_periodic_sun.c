@@ -314,6 +314,31 @@ static void test_tracer_grazing(void) {
   double o = periodic_slab_offset(&s->periodic, v3(0, 0, 0), d);
   CHECK(o * cos(t) > 1.0 && o * cos(t) < 1.01, "slab offset %.6g", o);
   scene_free(s);
+
+  /* Rendered: a distant sensor looking exactly horizontally at a point
+   * between soil and sheet, under a constant sky. Its rays never leave the
+   * slab: they are counted as unresolved and see no sky (before, they
+   * escaped after 100,000 walls and saw it). */
+  scene *hs = tsup_load(
+      "{\"type\": \"scene\", \"variant\": \"mono\","
+      " \"cam\": {\"type\": \"distant\", \"direction\": [0.6, 0.8, 0], \"target\": [0, 0, 0.5],"
+      "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 2},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}},"
+      " \"sky\": {\"type\": \"constant\", \"radiance\": 1},"
+      " \"sheet\": {\"type\": \"rectangle\", \"to_world\": [{\"translate\": [0, 0, 1]}], \"bsdf\": {\"type\": \"diffuse\"}},"
+      " \"soil\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\"}},"
+      " \"cell\": {\"type\": \"periodic\", \"min\": [-1, -1], \"max\": [1, 1]}}",
+      NULL);
+  REQUIRE(hs, "horizontal scene loads");
+  film_image img = {0};
+  rsw_err err = {0};
+  render_opts ro = {.size = sizeof ro, .seed = 3, .threads = 1};
+  render_result_stats st = {0};
+  REQUIRE(render_sensor(hs, &ro, &img, &st, &err) == RSW_OK, "renders");
+  CHECK(st.rays.unresolved == 2, "unresolved camera rays: %llu (want 2)", (unsigned long long)st.rays.unresolved);
+  CHECK(img.data[0] == 0.0f, "an unresolved ray sees no sky (film %g)", img.data[0]);
+  film_image_free(&img);
+  scene_free(hs);
 }
 
 int main(void) {
