@@ -17,6 +17,8 @@
  *  - A plot with leaves under the periodic boundary equals the plot with
  *    its explicit copies around it at sun zeniths 80 and 85 degrees
  *    (distant sensor at nadir, target = the central plot), within 3 sigma.
+ *  - Area lamps under the periodic boundary equal their explicit copies
+ *    (multiple importance sampling of copies reached through the boundary).
  *  - The tracer: a nearly horizontal ray inside the slab ends by leaving
  *    it (exact) after many walls; one within the guard's reach of
  *    horizontal is unresolved (never "unoccluded").
@@ -274,6 +276,48 @@ static void test_periodic_equals_copies_low_sun(void) {
   unlink(p1), unlink(pk);
 }
 
+/* ---- an area emitter under the periodic boundary ---------------------------
+ * Small down-facing lamps (0.8 m squares at z = 0.5, one per 2 m cell) over
+ * a Lambertian soil, seen from above at nadir: the periodic cell against
+ * 13 x 13 explicit lamps (the lamps beyond add < 0.1%). Next-event
+ * estimation samples only the lamp in the cell; a BSDF-sampled ray that
+ * reaches a neighbour's copy through the boundary used to get the MIS
+ * weight of a strategy that never samples it (the cell was 27% dark). */
+static scene *lamp_scene(bool periodic, int K) {
+  static char buf[100000];
+  int n = snprintf(buf, sizeof buf,
+                   "{\"type\": \"scene\", \"variant\": \"mono\","
+                   " \"sensor\": {\"type\": \"distant\", \"direction\": [0, 0, -1], \"target\": {\"type\": \"rectangle\"},"
+                   "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 8192},"
+                   "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},"
+                   " \"integrator\": {\"type\": \"path\", \"max_depth\": 3},"
+                   " \"soil\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [%d, %d, 1]}],"
+                   "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}",
+                   2 * K + 1, 2 * K + 1);
+  for (int i = -K; i <= K; i++)
+    for (int j = -K; j <= K; j++)
+      n += snprintf(buf + n, sizeof buf - n,
+                    ", \"lamp_%d_%d\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 0.4},"
+                    " {\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 180}}, {\"translate\": [%d, %d, 0.5]}],"
+                    " \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0}, \"emitter\": {\"type\": \"area\", \"radiance\": 1}}",
+                    i + K, j + K, 2 * i, 2 * j);
+  if (periodic) n += snprintf(buf + n, sizeof buf - n, ", \"cell\": {\"type\": \"periodic\", \"min\": [-1, -1], \"max\": [1, 1]}");
+  snprintf(buf + n, sizeof buf - n, "}");
+  return tsup_load(buf, NULL);
+}
+
+static void test_area_emitter_equals_copies(void) {
+  scene *sp = lamp_scene(true, 0), *sc = lamp_scene(false, 6);
+  REQUIRE(sp && sc, "lamp scenes load");
+  double mp, ep, mc, ec;
+  REQUIRE(seed_stats(sp, 3000, &mp, &ep) && seed_stats(sc, 4000, &mc, &ec), "renders");
+  double sig = sqrt(ep * ep + ec * ec);
+  printf("  area lamps: periodic %.5f +- %.5f, 13x13 lamps %.5f +- %.5f\n", mp, ep, mc, ec);
+  CHECK(fabs(mp - mc) <= 3 * sig, "area lamps: periodic %.5f vs copies %.5f (3 sigma = %.5f)", mp, mc, 3 * sig);
+  CHECK(sig < 0.02 * mc, "area lamps: sigma %.3g too large", sig);
+  scene_free(sp), scene_free(sc);
+}
+
 /* ---- the tracer ------------------------------------------------------------ */
 
 static void test_tracer_grazing(void) {
@@ -345,6 +389,7 @@ int main(void) {
   RSW_TEST_RUN(test_sheet_over_soil_low_sun);
   RSW_TEST_RUN(test_distant_sensors_grazing_view);
   RSW_TEST_RUN(test_periodic_equals_copies_low_sun);
+  RSW_TEST_RUN(test_area_emitter_equals_copies);
   RSW_TEST_RUN(test_tracer_grazing);
   RSW_TEST_END("test_periodic_sun");
 }

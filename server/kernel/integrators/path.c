@@ -41,8 +41,11 @@ static ray3 spawn_ray_to(const surface_interaction *si, vec3 d, double dist) {
 }
 
 /* TRACE_UNRESOLVED (periodic scenes, scene/periodic.h): the ray neither
- * hit nor escaped; the path ends there, without environment light. */
-static trace_result intersect(const scene *sc, const ray3 *r, surface_interaction *si, render_stats *stats) {
+ * hit nor escaped; the path ends there, without environment light.
+ * *wrapped: the hit was reached through the periodic boundary (a copy of
+ * the shape in another cell). */
+static trace_result intersect(const scene *sc, const ray3 *r, surface_interaction *si, render_stats *stats,
+                              bool *wrapped) {
   accel_hit h;
   stats->rays++;
   ray3 seg = *r;
@@ -54,6 +57,7 @@ static trace_result intersect(const scene *sc, const ray3 *r, surface_interactio
   }
   hit_fill_interaction(sc, &seg, &h, si);
   si->t += off; /* distance along the whole (possibly wrapped) ray */
+  *wrapped = off > 0;
   return TRACE_HIT;
 }
 
@@ -97,7 +101,8 @@ static color path_Li(const integrator *it, const scene *sc, sampler_state *st, r
   bool prev_delta = true;
   surface_interaction si, prev_si;
   int depth = 0;
-  trace_result hit = intersect(sc, &ray, &si, stats);
+  bool wrapped = false;
+  trace_result hit = intersect(sc, &ray, &si, stats, &wrapped);
   for (;;) {
     /* Emission seen by this ray (area light or the environment). */
     bool visible_emitter = !(it->hide_emitters && depth == 0);
@@ -121,7 +126,10 @@ static color path_Li(const integrator *it, const scene *sc, sampler_state *st, r
       color Le = em->ops->eval(em, &si, ray.d);
       if (!col_is_black(Le)) {
         double em_pdf = 0.0;
-        if (!prev_delta) {
+        /* Next-event estimation samples the emitter in the column only,
+         * along a segment that never wraps: a copy reached through the
+         * periodic boundary is BSDF sampling's alone (weight 1). */
+        if (!prev_delta && !wrapped) {
           direction_sample ds = {.p = si.p, .n = si.ng, .d = v3_norm(ray.d), .dist = si.t * v3_len(ray.d)};
           em_pdf = em->ops->pdf_direction(em, &prev_si, &ds) * emitter_prob(sc, em);
         }
@@ -179,7 +187,7 @@ static color path_Li(const integrator *it, const scene *sc, sampler_state *st, r
       T = col_scale(T, 1.0 / q);
     }
     if (!(col_max(T) > 0)) break;
-    hit = intersect(sc, &ray, &si, stats);
+    hit = intersect(sc, &ray, &si, stats, &wrapped);
   }
   return L;
 }
