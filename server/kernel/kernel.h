@@ -272,6 +272,7 @@ struct sensor {
 typedef struct render_stats {
   uint64_t rays;        /* intersection queries */
   uint64_t shadow_rays; /* occlusion queries */
+  uint64_t unresolved;  /* periodic rays that neither hit nor left the slab (scene/periodic.h) */
 } render_stats;
 
 typedef struct integrator integrator;

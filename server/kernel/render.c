@@ -196,6 +196,7 @@ static void *worker(void *arg) {
   pthread_mutex_lock(&jb->lock);
   jb->rays.rays += rs.rays;
   jb->rays.shadow_rays += rs.shadow_rays;
+  jb->rays.unresolved += rs.unresolved;
   jb->samples += samples;
   jb->invalid += invalid;
   pthread_mutex_unlock(&jb->lock);

@@ -4,9 +4,13 @@
  * `direction` is the direction light travels ((0,0,-1): sun at zenith);
  * or `to_world` (exclusive) maps local +z onto it. `irradiance` is per unit
  * area normal to the beam, W m^-2 [nm^-1], and must not vary spatially.
- * Next-event estimation: a delta direction, pdf 1, value = irradiance; the
- * shadow ray ends 2 max(R, |p - c|) away (R, c: the scene's bounding
- * sphere). Never hit by BSDF-sampled rays. */
+ * Next-event estimation: a delta direction, pdf 1, value = irradiance.
+ * The emitter is infinitely far: ds.dist is INFINITY, so the shadow ray
+ * is unbounded (deliberate difference from Mitsuba, whose 2 max(R, |p - c|)
+ * is equivalent in a finite scene but cuts the shadow ray in a periodic
+ * one, where R is the radius of one column: issue 11). ds.p stays
+ * Mitsuba's point 2 max(R, |p - c|) back along the beam (R, c: the
+ * scene's bounding sphere). Never hit by BSDF-sampled rays. */
 #include <stdlib.h>
 
 #include "../scene/loader.h"
@@ -25,10 +29,10 @@ typedef struct directional {
 static color dir_sample(const emitter *e, const surface_interaction *ref, vec2 u, direction_sample *ds) {
   const directional *dl = (const directional *)e;
   (void)u;
-  double dist = 2.0 * fmax(dl->radius, v3_len(v3_sub(ref->p, dl->center)));
+  double far = 2.0 * fmax(dl->radius, v3_len(v3_sub(ref->p, dl->center)));
   ds->d = v3_neg(dl->d);
-  ds->dist = dist;
-  ds->p = v3_fma(ref->p, dist, ds->d);
+  ds->dist = INFINITY;
+  ds->p = v3_fma(ref->p, far, ds->d);
   ds->n = dl->d;
   ds->pdf = 1.0;
   ds->delta = true;

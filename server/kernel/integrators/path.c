@@ -40,15 +40,25 @@ static ray3 spawn_ray_to(const surface_interaction *si, vec3 d, double dist) {
   return r;
 }
 
-static bool intersect(const scene *sc, const ray3 *r, surface_interaction *si, render_stats *stats) {
+/* TRACE_UNRESOLVED (periodic scenes, scene/periodic.h): the ray neither
+ * hit nor escaped; the path ends there, without environment light.
+ * *wrapped: the hit was reached through the periodic boundary (a copy of
+ * the shape in another cell). */
+static trace_result intersect(const scene *sc, const ray3 *r, surface_interaction *si, render_stats *stats,
+                              bool *wrapped) {
   accel_hit h;
   stats->rays++;
   ray3 seg = *r;
   double off;
-  if (!scene_trace(sc, &seg, &h, &off)) return false;
+  trace_result tr = scene_trace(sc, &seg, &h, &off);
+  if (tr != TRACE_HIT) {
+    if (tr == TRACE_UNRESOLVED) stats->unresolved++;
+    return tr;
+  }
   hit_fill_interaction(sc, &seg, &h, si);
   si->t += off; /* distance along the whole (possibly wrapped) ray */
-  return true;
+  *wrapped = off > 0;
+  return TRACE_HIT;
 }
 
 /* Pick an emitter proportionally to sampling_weight; returns its index and
@@ -91,13 +101,14 @@ static color path_Li(const integrator *it, const scene *sc, sampler_state *st, r
   bool prev_delta = true;
   surface_interaction si, prev_si;
   int depth = 0;
-  bool hit = intersect(sc, &ray, &si, stats);
+  bool wrapped = false;
+  trace_result hit = intersect(sc, &ray, &si, stats, &wrapped);
   for (;;) {
     /* Emission seen by this ray (area light or the environment). */
     bool visible_emitter = !(it->hide_emitters && depth == 0);
-    if (!hit) {
+    if (hit != TRACE_HIT) {
       const emitter *env = sc->environment;
-      if (env && visible_emitter) {
+      if (env && visible_emitter && hit == TRACE_MISS) {
         double em_pdf = 0.0;
         if (!prev_delta) {
           direction_sample ds = {.d = v3_norm(ray.d), .dist = INFINITY};
@@ -115,7 +126,10 @@ static color path_Li(const integrator *it, const scene *sc, sampler_state *st, r
       color Le = em->ops->eval(em, &si, ray.d);
       if (!col_is_black(Le)) {
         double em_pdf = 0.0;
-        if (!prev_delta) {
+        /* Next-event estimation samples the emitter in the column only,
+         * along a segment that never wraps: a copy reached through the
+         * periodic boundary is BSDF sampling's alone (weight 1). */
+        if (!prev_delta && !wrapped) {
           direction_sample ds = {.p = si.p, .n = si.ng, .d = v3_norm(ray.d), .dist = si.t * v3_len(ray.d)};
           em_pdf = em->ops->pdf_direction(em, &prev_si, &ds) * emitter_prob(sc, em);
         }
@@ -135,7 +149,12 @@ static color path_Li(const integrator *it, const scene *sc, sampler_state *st, r
       if (ds.pdf > 0 && !col_is_black(value)) {
         ray3 sr = spawn_ray_to(&si, ds.d, ds.dist);
         stats->shadow_rays++;
-        if (!scene_occluded(sc, &sr)) {
+        /* Infinitely distant emitters give dist = INFINITY: the shadow ray
+         * is unbounded (in a periodic scene, cut only by leaving the
+         * slab). An unresolved one counts as blocked, never as lit. */
+        trace_result occ = scene_occluded(sc, &sr);
+        if (occ == TRACE_UNRESOLVED) stats->unresolved++;
+        if (occ == TRACE_MISS) {
           vec3 wo = frame_to_local(&si.sh, ds.d);
           color f = b->ops->eval(b, &si, wo);
           if (!col_is_black(f)) {
@@ -168,7 +187,7 @@ static color path_Li(const integrator *it, const scene *sc, sampler_state *st, r
       T = col_scale(T, 1.0 / q);
     }
     if (!(col_max(T) > 0)) break;
-    hit = intersect(sc, &ray, &si, stats);
+    hit = intersect(sc, &ray, &si, stats, &wrapped);
   }
   return L;
 }

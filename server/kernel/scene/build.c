@@ -706,8 +706,11 @@ rsw_status scene_refresh_bounds(scene *s, rsw_err *err) {
   if (!(lo.x <= hi.x)) lo = hi = v3(0, 0, 0); /* no rendered geometry */
   if (s->periodic.on) {
     /* The geometry's vertical extent bounds the wrapping; the column's
-     * lateral extent stands for the (infinite) scene in the bounding
-     * sphere, as sensors and emitters see it. */
+     * lateral extent gives the bounding sphere. That sphere does not bound
+     * the (infinite) scene, so nothing may use it as a bound on ray
+     * lengths or to put an origin outside the scene: shadow rays towards
+     * infinitely distant emitters are unbounded and distant sensors
+     * place their origins outside the slab (scene/periodic.h). */
     s->periodic.zmin = lo.z;
     s->periodic.zmax = hi.z;
     lo.x = s->periodic.min[0], lo.y = s->periodic.min[1];

@@ -56,6 +56,20 @@ static double wrap(double x, double lo, double hi) {
   return w < hi ? w : lo;
 }
 
+/* A margin around the geometry's slab [zmin, zmax] inside which nothing
+ * lies either (it covers the float rounding of Embree's vertices), so that
+ * cutting a ray at the margin is exact. */
+static double slab_margin(const periodic_bounds *b) {
+  return 1e-4 * (b->zmax - b->zmin) + 1e-6 * (1.0 + fmax(fabs(b->zmin), fabs(b->zmax)));
+}
+
+double periodic_slab_offset(const periodic_bounds *b, vec3 p, vec3 d) {
+  if (!b->on) return 0.0;
+  double m = slab_margin(b);
+  double t = d.z < 0 ? (b->zmax + m - p.z) / -d.z : d.z > 0 ? (p.z - (b->zmin - m)) / d.z : 0.0;
+  return t > 0 && isfinite(t) ? t : 0.0;
+}
+
 /* Distance along r to the side wall it leaves the column through, and
  * which walls (bit 0: x, bit 1: y). */
 static double side_exit(const periodic_bounds *b, const ray3 *r, int *walls) {
@@ -66,34 +80,71 @@ static double side_exit(const periodic_bounds *b, const ray3 *r, int *walls) {
   return fmin(tx, ty);
 }
 
+/* Move the origin of q by ts along it (ts < q->tmax), wrapped into the
+ * column; *off accumulates the distance. */
+static void move_origin(const periodic_bounds *b, ray3 *q, double ts, double *off) {
+  vec3 p = v3_fma(q->o, ts, q->d);
+  p.x = wrap(p.x, b->min[0], b->max[0]);
+  p.y = wrap(p.y, b->min[1], b->max[1]);
+  q->o = p;
+  q->tmin = fmax(0.0, q->tmin - ts);
+  q->tmax -= ts;
+  *off += ts;
+}
+
+/* A ray whose origin lies outside the slab (plus margin) and heads
+ * towards it is moved, exactly, to the slab's margin plane (nothing lies
+ * between). False when it can hit nothing: it heads away or its segment
+ * ends before the slab. */
+static bool enter_slab(const periodic_bounds *b, ray3 *q, double *off) {
+  double m = slab_margin(b), top = b->zmax + m, bot = b->zmin - m, t;
+  if (q->o.z > top) {
+    if (!(q->d.z < 0)) return false;
+    t = (top - q->o.z) / q->d.z;
+  } else if (q->o.z < bot) {
+    if (!(q->d.z > 0)) return false;
+    t = (bot - q->o.z) / q->d.z;
+  } else {
+    return true;
+  }
+  if (!(t < q->tmax)) return false;
+  move_origin(b, q, t, off);
+  return true;
+}
+
 /* Re-enter through the opposite wall(s) at distance ts; false when the ray
  * has left the geometry's slab for good (above going up, below going
- * down) or its segment ends before the wall. */
+ * down, or level outside it) or its segment ends before the wall. */
 static bool advance(const periodic_bounds *b, ray3 *q, double ts, int walls) {
   if (!(ts < q->tmax) || !isfinite(ts)) return false;
   vec3 p = v3_fma(q->o, ts, q->d);
-  if ((q->d.z >= 0 && p.z > b->zmax) || (q->d.z <= 0 && p.z < b->zmin)) return false;
+  double m = slab_margin(b);
+  if ((q->d.z >= 0 && p.z > b->zmax + m) || (q->d.z <= 0 && p.z < b->zmin - m)) return false;
   if (walls & 1) p.x = q->d.x > 0 ? b->min[0] : b->max[0];
   if (walls & 2) p.y = q->d.y > 0 ? b->min[1] : b->max[1];
   q->o = p;
-  q->tmin = 0;
+  q->tmin = fmax(0.0, q->tmin - ts);
   q->tmax -= ts;
   return true;
 }
 
-/* A ray nearly parallel to the ground inside an empty layer would wrap
- * forever: after this many walls it is treated as escaped. */
-enum { MAX_WRAPS = 100000 };
+/* The walk ends exactly when the ray leaves the slab (or its segment
+ * ends), however many walls that takes: a ray with d.z != 0 always leaves
+ * it. Only a ray within about (zmax - zmin) / (PERIODIC_MAX_WALLS * cell)
+ * radians of horizontal, inside the slab, can run into this guard; such a
+ * ray is reported as unresolved (see periodic.h), never as escaped. */
+enum { PERIODIC_MAX_WALLS = 1 << 16 };
 
-bool scene_trace(const scene *s, ray3 *r, accel_hit *h, double *t_offset) {
+trace_result scene_trace(const scene *s, ray3 *r, accel_hit *h, double *t_offset) {
   *t_offset = 0;
   const periodic_bounds *b = &s->periodic;
-  if (!b->on) return accel_intersect(s->accel, r, h);
+  if (!b->on) return accel_intersect(s->accel, r, h) ? TRACE_HIT : TRACE_MISS;
   ray3 q = *r;
   q.o.x = wrap(q.o.x, b->min[0], b->max[0]);
   q.o.y = wrap(q.o.y, b->min[1], b->max[1]);
   double off = 0;
-  for (int k = 0; k < MAX_WRAPS; k++) {
+  if (!enter_slab(b, &q, &off)) return TRACE_MISS;
+  for (int k = 0; k < PERIODIC_MAX_WALLS; k++) {
     int walls;
     double ts = side_exit(b, &q, &walls);
     ray3 seg = q;
@@ -101,27 +152,29 @@ bool scene_trace(const scene *s, ray3 *r, accel_hit *h, double *t_offset) {
     if (seg.tmax >= seg.tmin && accel_intersect(s->accel, &seg, h)) {
       *r = q;
       *t_offset = off;
-      return true;
+      return TRACE_HIT;
     }
-    if (!advance(b, &q, ts, walls)) return false;
+    if (!advance(b, &q, ts, walls)) return TRACE_MISS;
     off += ts;
   }
-  return false;
+  return TRACE_UNRESOLVED;
 }
 
-bool scene_occluded(const scene *s, const ray3 *r) {
+trace_result scene_occluded(const scene *s, const ray3 *r) {
   const periodic_bounds *b = &s->periodic;
-  if (!b->on) return accel_occluded(s->accel, r);
+  if (!b->on) return accel_occluded(s->accel, r) ? TRACE_HIT : TRACE_MISS;
   ray3 q = *r;
   q.o.x = wrap(q.o.x, b->min[0], b->max[0]);
   q.o.y = wrap(q.o.y, b->min[1], b->max[1]);
-  for (int k = 0; k < MAX_WRAPS; k++) {
+  double off = 0;
+  if (!enter_slab(b, &q, &off)) return TRACE_MISS;
+  for (int k = 0; k < PERIODIC_MAX_WALLS; k++) {
     int walls;
     double ts = side_exit(b, &q, &walls);
     ray3 seg = q;
     seg.tmax = fmin(q.tmax, ts);
-    if (seg.tmax >= seg.tmin && accel_occluded(s->accel, &seg)) return true;
-    if (!advance(b, &q, ts, walls)) return false;
+    if (seg.tmax >= seg.tmin && accel_occluded(s->accel, &seg)) return TRACE_HIT;
+    if (!advance(b, &q, ts, walls)) return TRACE_MISS;
   }
-  return false;
+  return TRACE_UNRESOLVED;
 }

@@ -9,8 +9,19 @@
  * opposite wall with the same direction; rays leaving through the top or
  * bottom (above or below all geometry) continue normally. An origin outside
  * the column is first brought into it (modulo the period), which is exact
- * for the infinite canopy. The sensors' bounding sphere uses the column's
- * lateral extent. */
+ * for the infinite canopy.
+ *
+ * Nothing lies outside the geometry's slab [zmin, zmax] (the vertical
+ * extent of all shapes, set with the bounds), so a ray ends exactly when
+ * it leaves the slab, however many walls it crosses first: a ray whose
+ * direction is not horizontal always does. A ray starting outside the
+ * slab is first moved along itself to the slab (exact). Shadow rays
+ * towards infinitely distant emitters (directional, constant, envmap,
+ * environment plugins) have no length limit (direction_sample.dist is
+ * INFINITY), so a wrapped shadow ray is cut by the slab only. The
+ * scene's bounding sphere covers one column; distant sensors put their
+ * ray origins outside the slab (sensor_common.c), so nothing that uses
+ * the sphere assumes the scene is finite. */
 #ifndef RSW_SCENE_PERIODIC_H
 #define RSW_SCENE_PERIODIC_H
 
@@ -20,13 +31,27 @@ extern const plugin plugin_periodic;
 /* The box a `periodic` object carries (scene_create copies it). */
 const periodic_bounds *periodic_of(const object *o);
 
+/* What a traced ray did. A periodic ray that stays inside the slab for
+ * 65536 walls (only a ray within about (zmax - zmin) / (65536 * cell
+ * width) radians of horizontal can) is UNRESOLVED: it neither hit nor
+ * escaped. It is never counted as escaped: scene_occluded's callers treat
+ * it as blocked (it is non-zero) and the path tracer ends the path there
+ * without environment light, and counts it (render_stats.unresolved). */
+typedef enum trace_result { TRACE_MISS = 0, TRACE_HIT = 1, TRACE_UNRESOLVED = 2 } trace_result;
+
 /* Closest hit honouring the periodic boundary (plain accel_intersect
  * without one). On a hit, *r is the ray segment that hit (its origin
  * wrapped; h->t is along it) and *t_offset the distance travelled before
  * that segment (so the hit lies at t_offset + h->t along the original
  * ray). */
-bool scene_trace(const scene *s, ray3 *r, accel_hit *h, double *t_offset);
-/* Any hit on [tmin, tmax] honouring the boundary. */
-bool scene_occluded(const scene *s, const ray3 *r);
+trace_result scene_trace(const scene *s, ray3 *r, accel_hit *h, double *t_offset);
+/* Any hit on [tmin, tmax] honouring the boundary (TRACE_HIT: occluded). */
+trace_result scene_occluded(const scene *s, const ray3 *r);
+
+/* The distance t >= 0 to move back along -d from p so that p - t d lies
+ * outside the slab on the side the direction d comes from (above it for
+ * d.z < 0, below for d.z > 0; 0 when already there, when d is horizontal
+ * or without a periodic boundary). Exact: nothing lies there. */
+double periodic_slab_offset(const periodic_bounds *b, vec3 p, vec3 d);
 
 #endif

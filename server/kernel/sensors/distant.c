@@ -44,6 +44,7 @@ static rsw_status distant_set_scene(sensor *s, const scene *sc, rsw_err *err) {
   distant *ds = (distant *)s;
   rsw_status st = ray_target_check(&ds->target, s->base.id, err);
   if (st != RSW_OK) return st;
+  ray_target_bind(&ds->target, sc, false);
   ds->center = sc->bsphere_center; /* radius already inflated (kernel.h) */
   ds->radius = sc->bsphere_radius;
   return RSW_OK;

@@ -48,6 +48,7 @@ static rsw_status distantflux_set_scene(sensor *s, const scene *sc, rsw_err *err
   distantflux *f = (distantflux *)s;
   rsw_status st = ray_target_check(&f->target, s->base.id, err);
   if (st != RSW_OK) return st;
+  ray_target_bind(&f->target, sc, f->ray_offset_param >= 0.0);
   f->center = sc->bsphere_center; /* radius already inflated (kernel.h) */
   f->radius = sc->bsphere_radius;
   f->ray_offset = sensor_ray_offset(&f->target, f->ray_offset_param, f->radius);

@@ -50,6 +50,7 @@ static rsw_status hdistant_set_scene(sensor *s, const scene *sc, rsw_err *err) {
   hdistant *h = (hdistant *)s;
   rsw_status st = ray_target_check(&h->target, s->base.id, err);
   if (st != RSW_OK) return st;
+  ray_target_bind(&h->target, sc, h->ray_offset_param >= 0.0);
   /* scene->bsphere_radius is already inflated as Mitsuba's set_scene does:
    * R = max(RayEpsilon, r (1 + RayEpsilon)). */
   h->center = sc->bsphere_center;

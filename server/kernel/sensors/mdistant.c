@@ -51,6 +51,7 @@ static rsw_status mdistant_set_scene(sensor *s, const scene *sc, rsw_err *err) {
   mdistant *m = (mdistant *)s;
   rsw_status st = ray_target_check(&m->target, s->base.id, err);
   if (st != RSW_OK) return st;
+  ray_target_bind(&m->target, sc, m->ray_offset_param >= 0.0);
   m->center = sc->bsphere_center; /* radius already inflated (kernel.h) */
   m->radius = sc->bsphere_radius;
   if (m->ray_offset_param < 0.0)

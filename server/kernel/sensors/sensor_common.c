@@ -6,6 +6,7 @@
 #include <math.h>
 #include <stdlib.h>
 
+#include "../scene/periodic.h"
 #include "../shapes/shape.h"
 
 /* The nested object of class cls, or a default instance of `def_type`
@@ -99,20 +100,38 @@ rsw_status ray_target_check(const ray_target *t, const char *where, rsw_err *err
   return RSW_OK;
 }
 
+void ray_target_bind(ray_target *t, const scene *sc, bool explicit_offset) {
+  t->slab = sc->periodic;
+  if (explicit_offset) t->slab.on = false;
+}
+
+/* The offset, raised (periodic scenes) to put p - offset d outside the
+ * slab. */
+static double slab_offset(const ray_target *t, vec3 p, vec3 d, double offset) {
+  return t->slab.on ? fmax(offset, periodic_slab_offset(&t->slab, p, d)) : offset;
+}
+
 double ray_target_origin(const ray_target *t, const xform *to_world, vec3 center,
                          double radius, double offset, vec3 d, vec2 u, vec3 *o) {
   switch (t->kind) {
   case RAY_TARGET_POINT:
-    *o = v3_fma(t->point, -offset, d);
+    *o = v3_fma(t->point, -slab_offset(t, t->point, d, offset), d);
     return 1.0;
   case RAY_TARGET_SHAPE: {
     position_sample ps = shape_sample_position(t->shape, u);
-    *o = v3_fma(ps.p, -offset, d);
+    *o = v3_fma(ps.p, -slab_offset(t, ps.p, d, offset), d);
     double denom = ps.pdf * t->shape->area;
     return denom > 0.0 ? 1.0 / denom : 0.0;
   }
   case RAY_TARGET_NONE:
   default: {
+    const periodic_bounds *b = &t->slab;
+    if (b->on && d.z != 0.0) {
+      vec3 p = v3(b->min[0] + u.x * (b->max[0] - b->min[0]), b->min[1] + u.y * (b->max[1] - b->min[1]),
+                  d.z < 0.0 ? b->zmax : b->zmin);
+      *o = v3_fma(p, -periodic_slab_offset(b, p, d), d);
+      return 1.0;
+    }
     vec2 q = warp_square_to_disk_concentric(u);
     vec3 perp = xf_vector(to_world, v3(q.x, q.y, 0.0));
     *o = v3_fma(v3_fma(center, radius, perp), -offset, d);

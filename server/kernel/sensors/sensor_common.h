@@ -30,6 +30,9 @@ typedef struct ray_target {
   ray_target_kind kind;
   vec3 point;          /* RAY_TARGET_POINT */
   const shape *shape;  /* RAY_TARGET_SHAPE (owned by the scene) */
+  /* The scene's periodic boundary (ray_target_bind), when origins are to
+   * be put outside its geometry's slab; .on false otherwise. */
+  periodic_bounds slab;
 } ray_target;
 
 /* Read the optional `target` property: a 3-vector is a point target, a
@@ -40,6 +43,20 @@ rsw_status sensor_read_target(loader *ld, node *n, ray_target *t);
 /* Checks that need the finished scene: a shape target must have a finite,
  * positive area (the weight divides by it). `where` names the sensor. */
 rsw_status ray_target_check(const ray_target *t, const char *where, rsw_err *err);
+
+/* Set the scene (each sensor's set_scene). In a periodic scene (infinite
+ * canopy) "outside the scene" means outside the geometry's slab, which
+ * the bounding sphere of one column does not ensure; unless the sensor's
+ * ray_offset was given explicitly (explicit_offset: used as given),
+ * ray_target_origin then (issue 11):
+ *   point, shape: moves the origin further back along -d until it lies
+ *     outside the slab (exact: nothing lies there), when offset does not;
+ *   none: samples the cell [min, max] uniformly on the slab's face that
+ *     d enters through (exact average over the infinite canopy, which a
+ *     disk of radius R is not), origin just outside it; weight 1. A
+ *     horizontal d keeps the disk.
+ * Without a periodic boundary nothing changes. */
+void ray_target_bind(ray_target *t, const scene *sc, bool explicit_offset);
 
 /* Origin of a ray with unit direction d (pointing into the scene) for the
  * aperture sample u; returns the ray weight (eradiate/mitsuba3
