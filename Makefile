@@ -130,6 +130,18 @@ $(BUILD)/tests/test_http_encode: $(BUILD)/obj/tests/unit/test_http_encode.o $(BU
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS)
 
+# test_image_exr_stress also reads every film through OpenEXR's C++ library
+# (tests/support/imf_read.cpp), whose decoder is independent of OpenEXR Core.
+IMF_CXXFLAGS := -std=c++17 $(OPT) -g -Wall -Wextra $(SANFLAGS) -I/usr/include/OpenEXR -I/usr/include/Imath -pthread
+IMF_LIBS := -lOpenEXR -lIex -lIlmThread -lImath -pthread
+$(BUILD)/obj/tests/support/imf_read.o: tests/support/imf_read.cpp tests/support/imf_read.h
+	@mkdir -p $(dir $@)
+	$(CXX) $(IMF_CXXFLAGS) -c $< -o $@
+
+$(BUILD)/tests/test_image_exr_stress: $(BUILD)/obj/tests/unit/test_image_exr_stress.o $(BUILD)/obj/tests/support/imf_read.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
+	@mkdir -p $(dir $@)
+	$(CXX) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS) $(IMF_LIBS)
+
 $(BUILD)/tests/%: $(BUILD)/obj/tests/unit/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS)
