@@ -51,11 +51,12 @@ BENCH_SRC := $(wildcard tests/bench/*.c)
 BENCH_BIN := $(patsubst %.c,$(BUILD)/bench/%,$(notdir $(BENCH_SRC)))
 
 # ---- libraysweep (client/lib): the C client library ------------------------
-# libraysweep.a / .so link in the project's one EXR writer and the status
-# tables (server/kernel/image_exr.c, core/error.c) rather than copying them.
+# libraysweep.a / .so link in the project's one EXR writer, the film
+# attributes and the status tables (server/kernel/image_exr.c, film_io.c,
+# core/error.c) rather than copying them.
 # The .so exports only the public API (client/lib/libraysweep.map).
 CLIENT_SRC := $(sort $(wildcard client/lib/*.c))
-CLIENT_OBJ := $(CLIENT_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/obj/server/kernel/image_exr.o $(BUILD)/obj/server/kernel/core/error.o
+CLIENT_OBJ := $(CLIENT_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/obj/server/kernel/image_exr.o $(BUILD)/obj/server/kernel/film_io.o $(BUILD)/obj/server/kernel/core/error.o
 CLIENT_A := $(BUILD)/lib/libraysweep.a
 CLIENT_SO := $(BUILD)/lib/libraysweep.so
 CLIENT_PC := $(BUILD)/lib/pkgconfig/raysweep.pc
