@@ -4,8 +4,9 @@
 # daemon's `Accept: image/x-exr` answers (a synchronous render and a job
 # result), and the client library through the CLI (`raysweep render -o
 # x.exr`, `raysweep fetch`, `raysweep sweep --format exr`). The same context
-# (mono, hdistant 32x32, 4 spp, seed 7, 550 nm) is rendered each way and the
-# attributes are read back from the file bytes by a small Python reader of
+# (mono, hdistant 32x32, 4 spp, seed 7, 550 nm; and an rgb one) is rendered
+# each way and the attributes are read back from the file bytes by a small
+# Python reader of
 # the EXR header (independent of OpenEXR): every attribute of raysweepd
 # render's file must be there with the same value (sensor, spp, seed,
 # variant, wavelength_nm, the per-pixel zenith_deg / azimuth_deg), and the
@@ -92,48 +93,51 @@ run "daemon job result EXR" curl -sf "$url/v1/jobs/$job/results/w550/sensor" -H 
 run "raysweep render -o x.exr" rs -q render "$id" --spp 4 --seed 7 --wavelength 550 -o cli_render.exr
 run "raysweep fetch -o x.exr" rs -q fetch "$job" w550 sensor -o cli_fetch.exr
 
-if python3 - "$id" sw/w550/sensor.exr >"$tmp/py" 2>&1 <<'EOF'; then ok; else bad "$(cat "$tmp/py")"; fi
-import struct, sys
+# check REF WANT_JSON SCENE_ID LABEL=FILE=CONTEXT...: REF must hold the
+# attributes WANT_JSON plus the two angle lists; each FILE must hold REF's
+# attributes with the same values, plus scene, revision and CONTEXT.
+cat >check.py <<'EOF'
+import json, struct, sys
+
+standard = {"channels", "compression", "dataWindow", "displayWindow", "lineOrder", "pixelAspectRatio",
+            "screenWindowCenter", "screenWindowWidth", "type"}
 
 def attrs(path):
-    """String attributes of an EXR header, read from the bytes."""
+    """The non-standard string attributes of an EXR header read from the
+    bytes, the non-standard attribute types, the data window's pixel count."""
     b = open(path, "rb").read()
     assert b[:4] == b"\x76\x2f\x31\x01", path + ": not an EXR file"
-    i, out, types = 8, {}, {}
+    i, out, types, npix = 8, {}, {}, 0
     while b[i] != 0:
         j = b.index(0, i); key = b[i:j].decode(); i = j + 1
         j = b.index(0, i); typ = b[i:j].decode(); i = j + 1
         (n,) = struct.unpack("<i", b[i:i + 4]); i += 4
-        types[key] = typ
-        if typ == "string":
-            out[key] = b[i:i + n].decode()
+        if key not in standard:
+            types[key] = typ
+            if typ == "string":
+                out[key] = b[i:i + n].decode()
+        if key == "dataWindow":
+            x0, y0, x1, y1 = struct.unpack("<4i", b[i:i + 16])
+            npix = (x1 - x0 + 1) * (y1 - y0 + 1)
         i += n
-    return out, types
+    return out, types, npix
 
-standard = {"channels", "compression", "dataWindow", "displayWindow", "lineOrder", "pixelAspectRatio",
-            "screenWindowCenter", "screenWindowWidth"}
-ref, ref_types = attrs("ref.exr")
-want = {"raysweep:sensor": "sensor", "raysweep:spp": "4", "raysweep:seed": "7", "raysweep:variant": "mono",
-        "raysweep:wavelength_nm": "550"}
+angles = {"raysweep:zenith_deg", "raysweep:azimuth_deg"}
+ref_path, want, scene_id = sys.argv[1], json.loads(sys.argv[2]), sys.argv[3]
+ref, ref_types, npix = attrs(ref_path)
 errors = []
 for k, v in want.items():
     if ref.get(k) != v:
         errors.append("raysweepd render: %s = %r, want %r" % (k, ref.get(k), v))
-for k in ("raysweep:zenith_deg", "raysweep:azimuth_deg"):
-    if len(ref.get(k, "").split(",")) != 32 * 32:
-        errors.append("raysweepd render: %s is not 1024 angles" % k)
-if set(ref_types) - standard != set(ref):
-    errors.append("raysweepd render: unexpected attributes %s" % sorted(set(ref_types) - standard - set(ref)))
-
-scene_id, sweep_film = sys.argv[1], sys.argv[2]
-films = {"daemon render (image/x-exr)": ("daemon_render.exr", "render"),
-         "daemon job result (image/x-exr)": ("daemon_job.exr", "w550"),
-         "raysweep render -o (rsw_film_save_exr)": ("cli_render.exr", "render"),
-         "raysweep fetch -o (rsw_film_save_exr)": ("cli_fetch.exr", "w550"),
-         "raysweep sweep --format exr": (sweep_film, "w550")}
-for label, (path, context) in films.items():
+for k in angles:
+    if len(ref.get(k, "").split(",")) != npix:
+        errors.append("raysweepd render: %s is not %d angles" % (k, npix))
+if set(ref_types) != set(want) | angles:
+    errors.append("raysweepd render: attributes %s" % sorted(set(ref_types)))
+for arg in sys.argv[4:]:
+    label, path, context = arg.split("=")
     try:
-        got, types = attrs(path)
+        got, types, _ = attrs(path)
     except Exception as e:
         errors.append("%s: %s" % (label, e))
         continue
@@ -144,13 +148,36 @@ for label, (path, context) in films.items():
     extra = {k: v for k, v in got.items() if k not in ref}
     if set(extra) != {"raysweep:scene", "raysweep:revision", "raysweep:context"}:
         errors.append("%s: attributes beyond raysweepd render's: %s" % (label, sorted(extra)))
-    if extra.get("raysweep:scene") != scene_id or extra.get("raysweep:context") != context or \
-            not extra.get("raysweep:revision", "").isdigit():
+    elif extra["raysweep:scene"] != scene_id or extra["raysweep:context"] != context or \
+            not extra["raysweep:revision"].isdigit():
         errors.append("%s: scene/revision/context %s" % (label, extra))
-    if set(types) - standard != set(got):
-        errors.append("%s: non-string attributes %s" % (label, sorted(set(types) - standard - set(got))))
+    if set(types) != set(got):
+        errors.append("%s: non-string attributes %s" % (label, sorted(set(types) - set(got))))
 if errors:
-    print("\n".join(errors[:12]))
+    print("\n".join(errors[:16]))
     sys.exit(1)
 EOF
+check() {
+  if python3 check.py "$@" >"$tmp/py" 2>&1; then ok; else bad "$(cat "$tmp/py")"; fi
+}
+check ref.exr '{"raysweep:sensor": "sensor", "raysweep:spp": "4", "raysweep:seed": "7",
+  "raysweep:variant": "mono", "raysweep:wavelength_nm": "550"}' "$id" \
+  "daemon render (image/x-exr)=daemon_render.exr=render" \
+  "daemon job result (image/x-exr)=daemon_job.exr=w550" \
+  "raysweep render -o (rsw_film_save_exr)=cli_render.exr=render" \
+  "raysweep fetch -o (rsw_film_save_exr)=cli_fetch.exr=w550" \
+  "raysweep sweep --format exr=sw/w550/sensor.exr=w550"
+
+# rgb (no wavelength), from Mitsuba XML.
+xml=$root/proto/examples/hdistant_seed.xml
+run "raysweepd render rgb" "$bin/raysweepd" render "$xml" --spp 4 --seed 9 --threads 2 -o ref_rgb.exr
+run "scene push rgb" rs -q scene push "$xml"
+id_rgb=$(cat out)
+run "daemon render EXR rgb" curl -sf -X POST "$url/v1/scenes/$id_rgb:render" -H 'Content-Type: application/json' \
+  -H 'Accept: image/x-exr' -d '{"spp": 4, "seed": 9}' -o daemon_rgb.exr
+run "raysweep render -o x.exr rgb" rs -q render "$id_rgb" --spp 4 --seed 9 -o cli_rgb.exr
+check ref_rgb.exr '{"raysweep:sensor": "hdistant", "raysweep:spp": "4", "raysweep:seed": "9",
+  "raysweep:variant": "rgb"}' "$id_rgb" \
+  "daemon render rgb (image/x-exr)=daemon_rgb.exr=render" \
+  "raysweep render -o rgb (rsw_film_save_exr)=cli_rgb.exr=render"
 finish
