@@ -51,11 +51,12 @@ BENCH_SRC := $(wildcard tests/bench/*.c)
 BENCH_BIN := $(patsubst %.c,$(BUILD)/bench/%,$(notdir $(BENCH_SRC)))
 
 # ---- libraysweep (client/lib): the C client library ------------------------
-# libraysweep.a / .so link in the project's one EXR writer and the status
-# tables (server/kernel/image_exr.c, core/error.c) rather than copying them.
+# libraysweep.a / .so link in the project's one EXR writer, the film
+# attributes and the status tables (server/kernel/image_exr.c, film_io.c,
+# core/error.c) rather than copying them.
 # The .so exports only the public API (client/lib/libraysweep.map).
 CLIENT_SRC := $(sort $(wildcard client/lib/*.c))
-CLIENT_OBJ := $(CLIENT_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/obj/server/kernel/image_exr.o $(BUILD)/obj/server/kernel/core/error.o
+CLIENT_OBJ := $(CLIENT_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/obj/server/kernel/image_exr.o $(BUILD)/obj/server/kernel/film_io.o $(BUILD)/obj/server/kernel/core/error.o
 CLIENT_A := $(BUILD)/lib/libraysweep.a
 CLIENT_SO := $(BUILD)/lib/libraysweep.so
 CLIENT_PC := $(BUILD)/lib/pkgconfig/raysweep.pc
@@ -129,6 +130,18 @@ install: $(CLIENT_A) $(CLIENT_SO)
 $(BUILD)/tests/test_http_encode: $(BUILD)/obj/tests/unit/test_http_encode.o $(BUILD)/obj/server/http/encode.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS)
+
+# test_image_exr_stress also reads every film through OpenEXR's C++ library
+# (tests/support/imf_read.cpp), whose decoder is independent of OpenEXR Core.
+IMF_CXXFLAGS := -std=c++17 $(OPT) -g -Wall -Wextra $(SANFLAGS) -I/usr/include/OpenEXR -I/usr/include/Imath -pthread
+IMF_LIBS := -lOpenEXR -lIex -lIlmThread -lImath -pthread
+$(BUILD)/obj/tests/support/imf_read.o: tests/support/imf_read.cpp tests/support/imf_read.h
+	@mkdir -p $(dir $@)
+	$(CXX) $(IMF_CXXFLAGS) -c $< -o $@
+
+$(BUILD)/tests/test_image_exr_stress: $(BUILD)/obj/tests/unit/test_image_exr_stress.o $(BUILD)/obj/tests/support/imf_read.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
+	@mkdir -p $(dir $@)
+	$(CXX) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS) $(IMF_LIBS)
 
 $(BUILD)/tests/%: $(BUILD)/obj/tests/unit/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
 	@mkdir -p $(dir $@)

@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include "internal.h"
+#include "kernel/film_io.h"
 #include "kernel/image_exr.h"
 
 /* Most channels a film may have (the EXR writer's cap as well). */
@@ -132,40 +133,90 @@ rsw_status film_from_json(rsw_client *c, const char *text, size_t len, const cha
 
 /* ---- saving ------------------------------------------------------------------------- */
 
-/* The film's metadata as EXR string attributes (strings as they are,
- * numbers and booleans as JSON text; null and nested values skipped), the
- * same keys the daemon's own EXR answers carry. */
+/* A meta member that must be a number holding an integer in [0, max]
+ * (absent or null: *has false). False when it is something else. */
+static bool meta_uint(const cJSON *meta, const char *key, double max, bool *has, uint64_t *out) {
+  const cJSON *v = cJSON_GetObjectItemCaseSensitive(meta, key);
+  *has = false;
+  if (!v || cJSON_IsNull(v)) return true;
+  if (!cJSON_IsNumber(v) || !(v->valuedouble >= 0) || v->valuedouble > max || v->valuedouble != floor(v->valuedouble))
+    return false;
+  *has = true;
+  *out = (uint64_t)v->valuedouble;
+  return true;
+}
+
+/* A meta member that must be a string (absent or null: *out NULL). */
+static bool meta_string(const cJSON *meta, const char *key, const char **out) {
+  const cJSON *v = cJSON_GetObjectItemCaseSensitive(meta, key);
+  *out = NULL;
+  if (!v || cJSON_IsNull(v)) return true;
+  if (!cJSON_IsString(v)) return false;
+  *out = v->valuestring;
+  return true;
+}
+
+/* The per-pixel angle arrays (zenith_deg, azimuth_deg) interleaved into
+ * *angles (malloc'ed), or NULL when the meta has neither. False when only
+ * one is there, or either is not npix numbers, or out of memory. */
+static bool meta_angles(const cJSON *meta, size_t npix, double **angles) {
+  const cJSON *zen = cJSON_GetObjectItemCaseSensitive(meta, "zenith_deg");
+  const cJSON *az = cJSON_GetObjectItemCaseSensitive(meta, "azimuth_deg");
+  *angles = NULL;
+  if (!zen && !az) return true;
+  if (!cJSON_IsArray(zen) || !cJSON_IsArray(az) || (size_t)cJSON_GetArraySize(zen) != npix ||
+      (size_t)cJSON_GetArraySize(az) != npix)
+    return false;
+  double *a = malloc(2 * npix * sizeof *a);
+  if (!a) return false;
+  const cJSON *arr[2] = {zen, az};
+  for (int k = 0; k < 2; k++) {
+    size_t i = 0;
+    const cJSON *it;
+    cJSON_ArrayForEach(it, arr[k]) {
+      if (!cJSON_IsNumber(it)) {
+        free(a);
+        return false;
+      }
+      a[2 * i++ + (size_t)k] = it->valuedouble;
+    }
+  }
+  *angles = a;
+  return true;
+}
+
+/* The film's meta (the daemon's JSON film meta) becomes the "raysweep:"
+ * attributes of film_io.h, through the same code and number formats as
+ * raysweepd render -o and the daemon's own EXR answers. */
 rsw_status rsw_film_save_exr(const rsw_film *f, const char *path) {
   if (!f || !path) return RSW_ERR_INVALID;
   cJSON *meta = cJSON_Parse(f->meta);
-  int n_meta = cJSON_GetArraySize(meta);
-  exr_meta_entry *entries = calloc((size_t)(n_meta > 0 ? n_meta : 1), sizeof *entries);
-  char **owned = calloc((size_t)(n_meta > 0 ? n_meta : 1), sizeof *owned);
-  rsw_status s = entries && owned ? RSW_OK : RSW_ERR_NOMEM;
-  size_t count = 0;
-  const cJSON *it;
-  if (!s && cJSON_IsObject(meta)) {
-    cJSON_ArrayForEach(it, meta) {
-      const char *v = NULL;
-      if (cJSON_IsString(it))
-        v = it->valuestring;
-      else if (cJSON_IsNumber(it) || cJSON_IsBool(it))
-        v = owned[count] = cJSON_PrintUnformatted(it);
-      if (!v || !it->string) continue;
-      entries[count].key = it->string;
-      entries[count].value = v;
-      count++;
-    }
+  film_exr_info info = film_exr_info_none();
+  double *angles = NULL;
+  rsw_status s = RSW_OK;
+  if (cJSON_IsObject(meta)) {
+    uint64_t spp = 0;
+    const cJSON *wl = cJSON_GetObjectItemCaseSensitive(meta, "wavelength");
+    bool ok = meta_string(meta, "scene", &info.scene) && meta_string(meta, "context", &info.context) &&
+              meta_string(meta, "sensor", &info.sensor) && meta_string(meta, "variant", &info.variant) &&
+              meta_uint(meta, "revision", 18446744073709549568.0, &info.has_revision, &info.revision) &&
+              meta_uint(meta, "spp", 4294967295.0, &info.has_spp, &spp) &&
+              meta_uint(meta, "seed", 18446744073709549568.0, &info.has_seed, &info.seed) &&
+              (!wl || cJSON_IsNull(wl) || cJSON_IsNumber(wl));
+    info.spp = (uint32_t)spp;
+    if (ok && cJSON_IsNumber(wl)) info.wavelength_nm = wl->valuedouble;
+    if (ok && !meta_angles(meta, (size_t)f->width * (size_t)f->height, &angles)) ok = false;
+    info.angles = angles;
+    if (!ok) s = RSW_ERR_PARSE;
+  } else if (f->meta && strcmp(f->meta, "{}") != 0) {
+    s = RSW_ERR_PARSE;
   }
   if (!s) {
-    exr_meta m = {.entries = entries, .count = count};
     rsw_err err = {0};
-    s = exr_write_image(path, f->width, f->height, f->channels, (const char *const *)f->names, f->data, false,
-                        &m, &err);
+    s = film_exr_write(path, f->width, f->height, f->channels, (const char *const *)f->names, f->data, false,
+                       &info, &err);
   }
-  for (int i = 0; owned && i < n_meta; i++) free(owned[i]);
-  free(owned);
-  free(entries);
+  free(angles);
   cJSON_Delete(meta);
   return s;
 }

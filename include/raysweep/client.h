@@ -128,7 +128,13 @@ const float *rsw_film_data(const rsw_film *f);
 /* Metadata the server attached (JSON object text, borrowed; may be "{}"). */
 const char *rsw_film_meta(const rsw_film *f);
 /* Write as float32 OpenEXR (through a temp file renamed on success) or as
- * NumPy .npy (<f4, shape (H, W, C)). Borrow everything. */
+ * NumPy .npy (<f4, shape (H, W, C)). Borrow everything. The EXR carries the
+ * meta as the string attributes raysweepd writes ("raysweep:scene",
+ * "raysweep:revision", "raysweep:context", "raysweep:sensor",
+ * "raysweep:spp", "raysweep:seed", "raysweep:variant",
+ * "raysweep:wavelength_nm", and "raysweep:zenith_deg" /
+ * "raysweep:azimuth_deg" as comma-separated lists); RSW_ERR_PARSE when a
+ * meta member has the wrong type or an angle list the wrong length. */
 rsw_status rsw_film_save_exr(const rsw_film *f, const char *path);
 rsw_status rsw_film_save_npy(const rsw_film *f, const char *path);
 void rsw_film_free(rsw_film *f);

@@ -10,7 +10,7 @@
 #include <string.h>
 #include <strings.h>
 
-#include "../kernel/image_exr.h"
+#include "../kernel/film_io.h"
 
 /* ---- growable text buffer ------------------------------------------------ */
 
@@ -221,24 +221,14 @@ rsw_status http_film_exr(const svc_film *f, void **bytes_out, size_t *len_out, r
   rsw_status s = check_film(f, "film EXR", err);
   if (s) return s;
   const film_image *im = &f->img;
-  char revision[24], wavelength[32], spp[16], seed[24];
-  snprintf(revision, sizeof revision, "%llu", (unsigned long long)f->revision);
-  snprintf(wavelength, sizeof wavelength, "%.17g", im->wavelength);
-  snprintf(spp, sizeof spp, "%u", im->spp);
-  snprintf(seed, sizeof seed, "%llu", (unsigned long long)im->seed);
-  exr_meta_entry entries[8];
-  size_t n = 0;
-  entries[n++] = (exr_meta_entry){"scene", f->scene};
-  entries[n++] = (exr_meta_entry){"revision", revision};
-  if (f->context[0]) entries[n++] = (exr_meta_entry){"context", f->context};
-  entries[n++] = (exr_meta_entry){"sensor", f->sensor};
-  entries[n++] = (exr_meta_entry){"variant", variant_name(im->variant)};
-  if (im->variant == VARIANT_MONO) entries[n++] = (exr_meta_entry){"wavelength", wavelength};
-  entries[n++] = (exr_meta_entry){"spp", spp};
-  entries[n++] = (exr_meta_entry){"seed", seed};
-  exr_meta meta = {.entries = entries, .count = n};
-  return exr_encode_image(im->width, im->height, im->channels, im->channel_names, im->data, false, &meta,
-                          bytes_out, len_out, err);
+  /* The attributes raysweepd render writes, plus what the JSON meta adds. */
+  film_exr_info info = film_image_exr_info(im, f->sensor);
+  info.scene = f->scene;
+  info.has_revision = true;
+  info.revision = f->revision;
+  info.context = f->context;
+  return film_exr_encode(im->width, im->height, im->channels, im->channel_names, im->data, false, &info,
+                         bytes_out, len_out, err);
 }
 
 /* ---- problem+json ---------------------------------------------------------- */

@@ -56,8 +56,10 @@ rsw_status http_film_json(const svc_film *f, char **bytes_out, size_t *len_out, 
 rsw_status http_film_npy(const svc_film *f, void **bytes_out, size_t *len_out, rsw_err *err);
 
 /* Float32 OpenEXR (always float32, whatever the film asked for) with the
- * film's context as string attributes (scene, revision, context, sensor,
- * wavelength, spp, seed, variant). */
+ * film's context as the "raysweep:" string attributes of film_io.h (scene,
+ * revision, context, sensor, spp, seed, variant, wavelength_nm in mono,
+ * zenith_deg and azimuth_deg for distant-family sensors): those of
+ * raysweepd render -o plus scene, revision and context. */
 rsw_status http_film_exr(const svc_film *f, void **bytes_out, size_t *len_out, rsw_err *err);
 
 /* ---- problem+json ----------------------------------------------------------

@@ -1,22 +1,40 @@
 /* Developed film -> OpenEXR, with the render's context as string
- * attributes so a film is self-describing. */
+ * attributes so a film is self-describing (see film_io.h). */
+#include "film_io.h"
+
 #include <inttypes.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "image_exr.h"
 #include "render.h"
 
+/* Most attributes an info gives: scene, revision, context, sensor, spp,
+ * seed, variant, wavelength, zenith, azimuth. */
+#define FILM_EXR_MAX_ATTRS 10
+
+/* The attribute list of one info: entries point into info, the number
+ * buffers here and the two angle lists (owned). */
+typedef struct attrs {
+  exr_meta_entry e[FILM_EXR_MAX_ATTRS];
+  size_t count;
+  char revision[24], spp[16], seed[24], wavelength[32];
+  char *zenith, *azimuth;
+} attrs;
+
+film_exr_info film_exr_info_none(void) { return (film_exr_info){.wavelength_nm = NAN}; }
+
 /* "v0,v1,..." of every pixel's angle k (0 zenith, 1 azimuth), row-major,
  * %.9g (enough for a float's worth of angle). NULL when out of memory. */
-static char *angle_list(const film_image *img, int k) {
-  size_t n = (size_t)img->width * img->height;
+static char *angle_list(const double *angles, size_t n, int k) {
   size_t cap = n * 18 + 1, len = 0; /* "%.9g" is at most 16 chars, plus ',' */
   char *s = malloc(cap);
   if (!s) return NULL;
   s[0] = '\0';
   for (size_t i = 0; i < n; i++) {
-    int w = snprintf(s + len, cap - len, i ? ",%.9g" : "%.9g", img->angles[2 * i + (size_t)k]);
+    int w = snprintf(s + len, cap - len, i ? ",%.9g" : "%.9g", angles[2 * i + (size_t)k]);
     if (w < 0 || (size_t)w >= cap - len) {
       free(s);
       return NULL;
@@ -26,35 +44,85 @@ static char *angle_list(const film_image *img, int k) {
   return s;
 }
 
-rsw_status film_image_write_exr(const film_image *img, const char *path, const char *sensor_id, rsw_err *err) {
-  char spp[32], seed[32], wl[32];
-  snprintf(spp, sizeof spp, "%" PRIu32, img->spp);
-  snprintf(seed, sizeof seed, "%" PRIu64, img->seed);
-  snprintf(wl, sizeof wl, "%.17g", img->wavelength);
-  exr_meta_entry e[7] = {
-      {"raysweep:sensor", sensor_id ? sensor_id : ""},
-      {"raysweep:spp", spp},
-      {"raysweep:seed", seed},
-      {"raysweep:variant", img->variant == VARIANT_MONO ? "mono" : "rgb"},
-      {"raysweep:wavelength_nm", wl},
-  };
-  size_t count = img->variant == VARIANT_MONO ? 5 : 4;
-  char *zen = NULL, *az = NULL;
-  if (img->angles) {
-    zen = angle_list(img, 0);
-    az = angle_list(img, 1);
-    if (!zen || !az) {
-      free(zen);
-      free(az);
-      return rsw_fail(err, RSW_ERR_NOMEM, path, "out of memory for the pixel angles");
+static void add(attrs *a, const char *key, const char *value) {
+  if (value && value[0]) a->e[a->count++] = (exr_meta_entry){key, value};
+}
+
+static rsw_status build_attrs(const film_exr_info *info, int width, int height, attrs *a, const char *where,
+                              rsw_err *err) {
+  memset(a, 0, sizeof *a);
+  if (!info) return RSW_OK;
+  snprintf(a->revision, sizeof a->revision, "%" PRIu64, info->revision);
+  snprintf(a->spp, sizeof a->spp, "%" PRIu32, info->spp);
+  snprintf(a->seed, sizeof a->seed, "%" PRIu64, info->seed);
+  snprintf(a->wavelength, sizeof a->wavelength, "%.17g", info->wavelength_nm);
+  bool rgb = info->variant && strcmp(info->variant, "rgb") == 0;
+  add(a, "raysweep:scene", info->scene);
+  if (info->has_revision) add(a, "raysweep:revision", a->revision);
+  add(a, "raysweep:context", info->context);
+  add(a, "raysweep:sensor", info->sensor);
+  if (info->has_spp) add(a, "raysweep:spp", a->spp);
+  if (info->has_seed) add(a, "raysweep:seed", a->seed);
+  add(a, "raysweep:variant", info->variant);
+  if (!rgb && isfinite(info->wavelength_nm)) add(a, "raysweep:wavelength_nm", a->wavelength);
+  if (info->angles && width > 0 && height > 0) {
+    size_t n = (size_t)width * (size_t)height;
+    a->zenith = angle_list(info->angles, n, 0);
+    a->azimuth = angle_list(info->angles, n, 1);
+    if (!a->zenith || !a->azimuth) {
+      free(a->zenith);
+      free(a->azimuth);
+      return rsw_fail(err, RSW_ERR_NOMEM, where, "out of memory for the pixel angles");
     }
-    e[count++] = (exr_meta_entry){"raysweep:zenith_deg", zen};
-    e[count++] = (exr_meta_entry){"raysweep:azimuth_deg", az};
+    add(a, "raysweep:zenith_deg", a->zenith);
+    add(a, "raysweep:azimuth_deg", a->azimuth);
   }
-  exr_meta meta = {.entries = e, .count = count};
-  rsw_status st = exr_write_image(path, img->width, img->height, img->channels, img->channel_names, img->data,
-                                  img->half, &meta, err);
-  free(zen);
-  free(az);
+  return RSW_OK;
+}
+
+static void attrs_free(attrs *a) {
+  free(a->zenith);
+  free(a->azimuth);
+}
+
+rsw_status film_exr_write(const char *path, int width, int height, int n_channels,
+                          const char *const *channel_names, const float *data, bool half,
+                          const film_exr_info *info, rsw_err *err) {
+  attrs a;
+  rsw_status st = build_attrs(info, width, height, &a, path ? path : "", err);
+  if (st) return st;
+  exr_meta meta = {.entries = a.e, .count = a.count};
+  st = exr_write_image(path, width, height, n_channels, channel_names, data, half, &meta, err);
+  attrs_free(&a);
   return st;
+}
+
+rsw_status film_exr_encode(int width, int height, int n_channels, const char *const *channel_names,
+                           const float *data, bool half, const film_exr_info *info, void **bytes_out,
+                           size_t *len_out, rsw_err *err) {
+  attrs a;
+  rsw_status st = build_attrs(info, width, height, &a, "(EXR in memory)", err);
+  if (st) return st;
+  exr_meta meta = {.entries = a.e, .count = a.count};
+  st = exr_encode_image(width, height, n_channels, channel_names, data, half, &meta, bytes_out, len_out, err);
+  attrs_free(&a);
+  return st;
+}
+
+film_exr_info film_image_exr_info(const film_image *img, const char *sensor_id) {
+  film_exr_info info = film_exr_info_none();
+  info.sensor = sensor_id;
+  info.has_spp = info.has_seed = true;
+  info.spp = img->spp;
+  info.seed = img->seed;
+  info.variant = img->variant == VARIANT_MONO ? "mono" : "rgb";
+  if (img->variant == VARIANT_MONO) info.wavelength_nm = img->wavelength;
+  info.angles = img->angles;
+  return info;
+}
+
+rsw_status film_image_write_exr(const film_image *img, const char *path, const char *sensor_id, rsw_err *err) {
+  film_exr_info info = film_image_exr_info(img, sensor_id);
+  return film_exr_write(path, img->width, img->height, img->channels, img->channel_names, img->data, img->half,
+                        &info, err);
 }

@@ -205,6 +205,36 @@ static rsw_status exr_fail(rsw_err *err, rsw_status code, const char *path,
 
 /* ---- writing ------------------------------------------------------------- */
 
+/* What the chunk writer needs besides the pipeline: the writable context
+ * (the pipeline only holds a const one). */
+typedef struct chunk_sink {
+  exr_context_t ctx;
+} chunk_sink;
+
+/* The pipeline's write step, replacing the library's default one.
+ *
+ * A reader decides that a chunk is stored raw when its packed size equals
+ * its unpacked size (OpenEXR Core and the C++ library alike), and the
+ * writer is meant to store the raw bytes whenever compression does not make
+ * them smaller. Debian's OpenEXR 3.1.5 falls back to raw only when the ZIP
+ * output is strictly larger: a chunk that deflates to exactly its raw size
+ * is stored as zlib bytes that every reader then takes as pixels (OpenEXR
+ * issue #2306, fixed upstream by PR #2307). So whenever the compressed
+ * chunk is not smaller than the packed one we write the packed (raw)
+ * bytes ourselves; the ZIP encoder leaves packed_buffer untouched (it
+ * reorders into a scratch buffer). With NONE there is no compress step
+ * and compressed_buffer is packed_buffer already. */
+static exr_result_t write_chunk_raw_unless_smaller(exr_encode_pipeline_t *enc) {
+  const chunk_sink *sink = enc->encoding_user_data;
+  const void *bytes = enc->compressed_buffer;
+  uint64_t n = enc->compressed_bytes;
+  if (n >= enc->packed_bytes) {
+    bytes = enc->packed_buffer;
+    n = enc->packed_bytes;
+  }
+  return exr_write_scanline_chunk(sink->ctx, enc->part_index, enc->chunk.start_y, bytes, n);
+}
+
 /* Encode every scanline chunk of part 0 from the HWC buffer `pix`
  * (elem_size bytes a sample, of pixel type ptype). */
 static exr_result_t write_chunks(exr_context_t ctx, int width, int height,
@@ -217,6 +247,7 @@ static exr_result_t write_chunks(exr_context_t ctx, int width, int height,
   if (rv != EXR_ERR_SUCCESS) return rv;
   if (lines < 1) return EXR_ERR_INVALID_ARGUMENT;
   exr_encode_pipeline_t enc = EXR_ENCODE_PIPELINE_INITIALIZER;
+  chunk_sink sink = {.ctx = ctx};
   bool started = false;
   size_t pixel_stride = (size_t)n_channels * elem_size;
   for (int y = 0; y < height && rv == EXR_ERR_SUCCESS; y += lines) {
@@ -244,6 +275,10 @@ static exr_result_t write_chunks(exr_context_t ctx, int width, int height,
     if (!started) {
       rv = exr_encoding_choose_default_routines(ctx, 0, &enc);
       if (rv != EXR_ERR_SUCCESS) break;
+      /* exr_encoding_initialize zeroes the pipeline and exr_encoding_update
+       * keeps these two, so they are set once. */
+      enc.encoding_user_data = &sink;
+      enc.write_fn = write_chunk_raw_unless_smaller;
       started = true;
     }
     rv = exr_encoding_run(ctx, 0, &enc);

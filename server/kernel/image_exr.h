@@ -29,7 +29,10 @@ typedef struct exr_meta_entry {
 typedef struct exr_meta {
   const exr_meta_entry *entries; /* written as EXR string attributes */
   size_t count;
-  bool uncompressed; /* false (default): ZIP compression, 16 lines a chunk */
+  /* false (default): ZIP compression, 16 lines a chunk; a chunk that
+   * does not compress smaller is stored raw (see image_exr.c on OpenEXR
+   * 3.1.5's writer). */
+  bool uncompressed;
 } exr_meta;
 
 /* A decoded image (owned; release with exr_image_free). */

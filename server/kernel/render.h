@@ -9,6 +9,7 @@
 
 #include <stdatomic.h>
 
+#include "film_io.h"
 #include "kernel.h"
 
 typedef struct render_opts {
@@ -56,11 +57,14 @@ rsw_status render_sensor(scene *s, const render_opts *opts, film_image *out, ren
                          rsw_err *err);
 void film_image_free(film_image *img);
 
+/* The EXR attributes of a rendered film (film_io.h): sensor, spp, seed,
+ * variant, the wavelength in mono, the per-pixel viewing angles when the
+ * film has them. Borrows img and sensor_id (the info points into them). */
+film_exr_info film_image_exr_info(const film_image *img, const char *sensor_id);
+
 /* Write a developed film as OpenEXR (float32, or float16 when the film asks
- * for it), through a temporary file renamed on success. Metadata records
- * the sensor, spp, seed, variant and wavelength, and the per-pixel viewing
- * angles when the film has them ("raysweep:zenith_deg",
- * "raysweep:azimuth_deg": comma-separated, row-major, %.9g). */
+ * for it), through a temporary file renamed on success, with
+ * film_image_exr_info's attributes (film_exr_write). */
 rsw_status film_image_write_exr(const film_image *img, const char *path, const char *sensor_id, rsw_err *err);
 
 #endif

@@ -496,7 +496,7 @@ static void test_render_save(void) {
     CHECK(img.width == w && img.height == h && img.n_channels == 1 && strcmp(img.channel_names[0], "Y") == 0,
           "EXR %dx%dx%d", img.width, img.height, img.n_channels);
     CHECK(img.data && memcmp(img.data, d, n * sizeof *d) == 0, "EXR pixels bitwise equal to the JSON film");
-    const char *sensor = exr_image_meta(&img, "sensor");
+    const char *sensor = exr_image_meta(&img, "raysweep:sensor");
     CHECK(sensor && strcmp(sensor, "hemi") == 0, "EXR sensor attribute: %s", sensor ? sensor : "(none)");
     exr_image_free(&img);
   } else {

@@ -148,9 +148,9 @@ static void test_exr_round_trip(void) {
       CHECK(img.data[i * 3 + k] == data[i * 3 + c], "pixel %d %s: %g vs %g", i, names[c],
             (double)img.data[i * 3 + k], (double)data[i * 3 + c]);
   }
-  const char *sensor_meta = exr_image_meta(&img, "sensor");
+  const char *sensor_meta = exr_image_meta(&img, "raysweep:sensor");
   CHECK(sensor_meta && strcmp(sensor_meta, "cam \"a\"") == 0, "sensor meta %s", sensor_meta ? sensor_meta : "(none)");
-  const char *rev = exr_image_meta(&img, "revision");
+  const char *rev = exr_image_meta(&img, "raysweep:revision");
   CHECK(rev && strcmp(rev, "3") == 0, "revision meta");
   exr_image_free(&img);
 

@@ -1,0 +1,60 @@
+/* A film's EXR with what it is: the render's context as string attributes
+ * named "raysweep:<key>", so the file describes itself. Every EXR of a film
+ * the project writes goes through film_exr_write or film_exr_encode
+ * (raysweepd render -o, the daemon's image/x-exr answers and job results,
+ * rsw_film_save_exr and so the CLI), so all carry the same keys written
+ * the same way:
+ *
+ *   raysweep:scene          scene id (daemon films)
+ *   raysweep:revision       parameter revision rendered (daemon films)
+ *   raysweep:context        context id (daemon films: the job's context, or
+ *                           "render" for a synchronous render)
+ *   raysweep:sensor         sensor id
+ *   raysweep:spp            samples per pixel, decimal
+ *   raysweep:seed           render seed, decimal
+ *   raysweep:variant        "mono" or "rgb"
+ *   raysweep:wavelength_nm  mono films: the wavelength, %.17g
+ *   raysweep:zenith_deg, raysweep:azimuth_deg
+ *                           distant-family sensors: each pixel's viewing
+ *                           zenith and azimuth in degrees (Eradiate's
+ *                           east-right convention), %.9g, comma-separated,
+ *                           row-major
+ *
+ * The number formats are those of the daemon's JSON film meta, so a film
+ * fetched as JSON and saved by the client library gives the same strings.
+ * No OpenEXR types here; the pixels go through image_exr.c. */
+#ifndef RSW_KERNEL_FILM_IO_H
+#define RSW_KERNEL_FILM_IO_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "core/error.h"
+
+typedef struct film_exr_info {
+  const char *scene, *context, *sensor, *variant; /* NULL or "": not written */
+  bool has_revision, has_spp, has_seed;
+  uint64_t revision, seed;
+  uint32_t spp;
+  double wavelength_nm; /* written when finite and variant is not "rgb" */
+  /* NULL, or 2 per pixel (zenith, azimuth), row-major, degrees. */
+  const double *angles;
+} film_exr_info;
+
+/* An info that writes nothing (wavelength NaN); set what is known. */
+film_exr_info film_exr_info_none(void);
+
+/* Write / encode in memory a film (width x height x n_channels float32,
+ * HWC, channel_names as for exr_write_image; half: store float16) with
+ * info's attributes. Arguments and errors as exr_write_image and
+ * exr_encode_image (image_exr.h), plus RSW_ERR_NOMEM for the angle lists.
+ * Borrows everything. Thread-safe. */
+rsw_status film_exr_write(const char *path, int width, int height, int n_channels,
+                          const char *const *channel_names, const float *data, bool half,
+                          const film_exr_info *info, rsw_err *err);
+rsw_status film_exr_encode(int width, int height, int n_channels, const char *const *channel_names,
+                           const float *data, bool half, const film_exr_info *info, void **bytes_out,
+                           size_t *len_out, rsw_err *err);
+
+#endif

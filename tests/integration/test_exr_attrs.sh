@@ -1,0 +1,183 @@
+#!/usr/bin/env bash
+# Every EXR of a film carries the same self-describing "raysweep:" string
+# attributes, whoever writes it: `raysweepd render -o` (the reference), the
+# daemon's `Accept: image/x-exr` answers (a synchronous render and a job
+# result), and the client library through the CLI (`raysweep render -o
+# x.exr`, `raysweep fetch`, `raysweep sweep --format exr`). The same context
+# (mono, hdistant 32x32, 4 spp, seed 7, 550 nm; and an rgb one) is rendered
+# each way and the attributes are read back from the file bytes by a small
+# Python reader of
+# the EXR header (independent of OpenEXR): every attribute of raysweepd
+# render's file must be there with the same value (sensor, spp, seed,
+# variant, wavelength_nm, the per-pixel zenith_deg / azimuth_deg), and the
+# daemon's films add exactly raysweep:scene, raysweep:revision and
+# raysweep:context (the job's context id, or "render").
+# Ends with "test_exr_attrs: N passed, N failed" (tests/run.sh sums it).
+set -u
+root=$(cd "$(dirname "$0")/../.." && pwd)
+bin=$(cd "${RSW_BIN_DIR:-$root/build/bin}" 2>/dev/null && pwd)
+name=test_exr_attrs
+pass=0
+fail=0
+ok() { pass=$((pass + 1)); }
+bad() {
+  fail=$((fail + 1))
+  echo "FAIL $name: $*"
+}
+finish() {
+  echo "$name: $pass passed, $fail failed"
+  [ "$fail" -eq 0 ]
+  exit $?
+}
+if [ -z "$bin" ] || [ ! -x "$bin/raysweep" ] || [ ! -x "$bin/raysweepd" ]; then
+  bad "raysweep and raysweepd must be built in ${RSW_BIN_DIR:-build/bin}"
+  finish
+fi
+command -v python3 >/dev/null || {
+  bad "python3 is needed to read the EXR headers"
+  finish
+}
+command -v curl >/dev/null || {
+  bad "curl is needed to ask the daemon for EXR films"
+  finish
+}
+
+tmp=$(mktemp -d)
+pid=
+cleanup() {
+  [ -n "$pid" ] && kill "$pid" 2>/dev/null && wait "$pid" 2>/dev/null
+  rm -rf "$tmp"
+}
+trap cleanup EXIT
+cd "$tmp" || exit 1
+scene=$root/proto/examples/hdistant_lambertian.json
+
+# run LABEL CMD...: CMD must exit 0 (stdout to out, stderr to err).
+run() {
+  local label=$1
+  shift
+  if "$@" >"$tmp/out" 2>"$tmp/err"; then ok; else bad "$label: exit $?; stderr: $(head -c 600 "$tmp/err")"; fi
+}
+
+# The reference: one process, no daemon.
+run "raysweepd render" "$bin/raysweepd" render "$scene" --spp 4 --seed 7 --wavelength 550 --threads 2 -o ref.exr
+
+mkdir -p d/data
+"$bin/raysweepd" serve --listen 127.0.0.1:0 --port-file d/port --data-root d/data >d/log 2>&1 &
+pid=$!
+for _ in $(seq 200); do
+  [ -s d/port ] && break
+  sleep 0.05
+done
+port=$(cat d/port 2>/dev/null)
+if [ -z "$port" ]; then
+  bad "the daemon did not start: $(cat d/log)"
+  finish
+fi
+url="http://127.0.0.1:$port"
+export RAYSWEEP_URL=$url
+unset RAYSWEEP_TOKEN
+rs() { "$bin/raysweep" "$@"; }
+
+run "scene push" rs -q scene push "$scene"
+id=$(cat out)
+# The daemon's own EXR: a synchronous render...
+run "daemon render EXR" curl -sf -X POST "$url/v1/scenes/$id:render" -H 'Content-Type: application/json' \
+  -H 'Accept: image/x-exr' -d '{"spp": 4, "seed": 7, "wavelength": 550}' -o daemon_render.exr
+# ... and a job result (the CLI's sweep submits the job).
+printf '%s\n' '{"id": "w550", "wavelength": 550, "spp": 4, "seed": 7}' >ctx.jsonl
+run "sweep --format exr" rs --json sweep "$id" --contexts ctx.jsonl --format exr -o sw
+job=$(python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["job"])' out 2>/dev/null)
+run "daemon job result EXR" curl -sf "$url/v1/jobs/$job/results/w550/sensor" -H 'Accept: image/x-exr' -o daemon_job.exr
+# The client library through the CLI.
+run "raysweep render -o x.exr" rs -q render "$id" --spp 4 --seed 7 --wavelength 550 -o cli_render.exr
+run "raysweep fetch -o x.exr" rs -q fetch "$job" w550 sensor -o cli_fetch.exr
+
+# check REF WANT_JSON SCENE_ID LABEL=FILE=CONTEXT...: REF must hold the
+# attributes WANT_JSON plus the two angle lists; each FILE must hold REF's
+# attributes with the same values, plus scene, revision and CONTEXT.
+cat >check.py <<'EOF'
+import json, struct, sys
+
+standard = {"channels", "compression", "dataWindow", "displayWindow", "lineOrder", "pixelAspectRatio",
+            "screenWindowCenter", "screenWindowWidth", "type"}
+
+def attrs(path):
+    """The non-standard string attributes of an EXR header read from the
+    bytes, the non-standard attribute types, the data window's pixel count."""
+    b = open(path, "rb").read()
+    assert b[:4] == b"\x76\x2f\x31\x01", path + ": not an EXR file"
+    i, out, types, npix = 8, {}, {}, 0
+    while b[i] != 0:
+        j = b.index(0, i); key = b[i:j].decode(); i = j + 1
+        j = b.index(0, i); typ = b[i:j].decode(); i = j + 1
+        (n,) = struct.unpack("<i", b[i:i + 4]); i += 4
+        if key not in standard:
+            types[key] = typ
+            if typ == "string":
+                out[key] = b[i:i + n].decode()
+        if key == "dataWindow":
+            x0, y0, x1, y1 = struct.unpack("<4i", b[i:i + 16])
+            npix = (x1 - x0 + 1) * (y1 - y0 + 1)
+        i += n
+    return out, types, npix
+
+angles = {"raysweep:zenith_deg", "raysweep:azimuth_deg"}
+ref_path, want, scene_id = sys.argv[1], json.loads(sys.argv[2]), sys.argv[3]
+ref, ref_types, npix = attrs(ref_path)
+errors = []
+for k, v in want.items():
+    if ref.get(k) != v:
+        errors.append("raysweepd render: %s = %r, want %r" % (k, ref.get(k), v))
+for k in angles:
+    if len(ref.get(k, "").split(",")) != npix:
+        errors.append("raysweepd render: %s is not %d angles" % (k, npix))
+if set(ref_types) != set(want) | angles:
+    errors.append("raysweepd render: attributes %s" % sorted(set(ref_types)))
+for arg in sys.argv[4:]:
+    label, path, context = arg.split("=")
+    try:
+        got, types, _ = attrs(path)
+    except Exception as e:
+        errors.append("%s: %s" % (label, e))
+        continue
+    for k, v in ref.items():
+        if got.get(k) != v:
+            shown = (got.get(k) or "(none)")[:60]
+            errors.append("%s: %s = %s, raysweepd render wrote %s" % (label, k, shown, v[:60]))
+    extra = {k: v for k, v in got.items() if k not in ref}
+    if set(extra) != {"raysweep:scene", "raysweep:revision", "raysweep:context"}:
+        errors.append("%s: attributes beyond raysweepd render's: %s" % (label, sorted(extra)))
+    elif extra["raysweep:scene"] != scene_id or extra["raysweep:context"] != context or \
+            not extra["raysweep:revision"].isdigit():
+        errors.append("%s: scene/revision/context %s" % (label, extra))
+    if set(types) != set(got):
+        errors.append("%s: non-string attributes %s" % (label, sorted(set(types) - set(got))))
+if errors:
+    print("\n".join(errors[:16]))
+    sys.exit(1)
+EOF
+check() {
+  if python3 check.py "$@" >"$tmp/py" 2>&1; then ok; else bad "$(cat "$tmp/py")"; fi
+}
+check ref.exr '{"raysweep:sensor": "sensor", "raysweep:spp": "4", "raysweep:seed": "7",
+  "raysweep:variant": "mono", "raysweep:wavelength_nm": "550"}' "$id" \
+  "daemon render (image/x-exr)=daemon_render.exr=render" \
+  "daemon job result (image/x-exr)=daemon_job.exr=w550" \
+  "raysweep render -o (rsw_film_save_exr)=cli_render.exr=render" \
+  "raysweep fetch -o (rsw_film_save_exr)=cli_fetch.exr=w550" \
+  "raysweep sweep --format exr=sw/w550/sensor.exr=w550"
+
+# rgb (no wavelength), from Mitsuba XML.
+xml=$root/proto/examples/hdistant_seed.xml
+run "raysweepd render rgb" "$bin/raysweepd" render "$xml" --spp 4 --seed 9 --threads 2 -o ref_rgb.exr
+run "scene push rgb" rs -q scene push "$xml"
+id_rgb=$(cat out)
+run "daemon render EXR rgb" curl -sf -X POST "$url/v1/scenes/$id_rgb:render" -H 'Content-Type: application/json' \
+  -H 'Accept: image/x-exr' -d '{"spp": 4, "seed": 9}' -o daemon_rgb.exr
+run "raysweep render -o x.exr rgb" rs -q render "$id_rgb" --spp 4 --seed 9 -o cli_rgb.exr
+check ref_rgb.exr '{"raysweep:sensor": "hdistant", "raysweep:spp": "4", "raysweep:seed": "9",
+  "raysweep:variant": "rgb"}' "$id_rgb" \
+  "daemon render rgb (image/x-exr)=daemon_rgb.exr=render" \
+  "raysweep render -o rgb (rsw_film_save_exr)=cli_rgb.exr=render"
+finish
