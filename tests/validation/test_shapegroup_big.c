@@ -1,7 +1,7 @@
 /* Large shapegroups (issue 11 item 5): a leaf cloud of 32,000 disks in one
  * shapegroup (one JSON object of 32,000 keys, or one XML <shape> with
- * 32,000 children) loads, renders, and equals the same disks split into 8
- * groups of 4,000, bitwise (same seed, spp, threads; every disk is
+ * 32,000 children, or one JSON "members" list) loads, renders, and equals
+ * the same disks split into 8 groups of 4,000, bitwise (same seed, spp, threads; every disk is
  * intersected by the same double-precision member callback whatever its
  * group, so only exact float ties between two disks could differ).
  *
@@ -91,28 +91,33 @@ static double (*leaves(int n))[12] {
   "\"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.2}},\n"                                           \
   "\"leaf\": {\"type\": \"bilambertian\", \"reflectance\": 0.45, \"transmittance\": 0.4}"
 
-static void sb_leaf(sbuf *b, int i, const double *q) {
-  sb_printf(b, "\"d%d\": {\"type\": \"disk\", \"bsdf\": {\"type\": \"ref\", \"id\": \"leaf\"}, \"to_world\": [", i);
+static void sb_leaf(sbuf *b, int i, const double *q, bool keyed) {
+  if (keyed) sb_printf(b, "\"d%d\": ", i);
+  sb_printf(b, "{\"type\": \"disk\", \"bsdf\": {\"type\": \"ref\", \"id\": \"leaf\"}, \"to_world\": [");
   for (int k = 0; k < 12; k++) sb_printf(b, "%s%.9g", k ? ", " : "", q[k]);
   sb_printf(b, ", 0, 0, 0, 1]}");
 }
 
-/* n leaves in `groups` shapegroups (each instanced once, identity). */
-static char *cloud_json(const double (*m)[12], int n, int groups) {
+/* n leaves in `groups` shapegroups (each instanced once, identity); as
+ * keys "d<i>", or (list) as one "members" list per group. */
+static char *cloud_json_as(const double (*m)[12], int n, int groups, bool list) {
   sbuf b = {0};
   sb_printf(&b, "%s", HEAD);
   int per = (n + groups - 1) / groups;
   for (int g = 0; g < groups; g++) {
-    sb_printf(&b, ",\n\"g%d\": {\"type\": \"shapegroup\"", g);
+    sb_printf(&b, ",\n\"g%d\": {\"type\": \"shapegroup\"%s", g, list ? ", \"members\": [" : "");
     for (int i = g * per; i < n && i < (g + 1) * per; i++) {
-      sb_printf(&b, ",\n ");
-      sb_leaf(&b, i, m[i]);
+      sb_printf(&b, "%s\n ", list && i == g * per ? "" : ",");
+      sb_leaf(&b, i, m[i], !list);
     }
-    sb_printf(&b, "},\n\"i%d\": {\"type\": \"instance\", \"shapegroup\": {\"type\": \"ref\", \"id\": \"g%d\"}}", g, g);
+    sb_printf(&b, "%s},\n\"i%d\": {\"type\": \"instance\", \"shapegroup\": {\"type\": \"ref\", \"id\": \"g%d\"}}",
+              list ? "]" : "", g, g);
   }
   sb_printf(&b, "}\n");
   return b.p;
 }
+
+static char *cloud_json(const double (*m)[12], int n, int groups) { return cloud_json_as(m, n, groups, false); }
 
 /* The same scene as Mitsuba XML, one group. */
 static char *cloud_xml(const double (*m)[12], int n) {
@@ -164,24 +169,29 @@ static scene *timed_load(const char *text, const char *what, double *seconds) {
 static void test_one_group_equals_eight(void) {
   double (*m)[12] = leaves(NLEAF);
   char *one = cloud_json(m, NLEAF, 1), *eight = cloud_json(m, NLEAF, 8), *xml = cloud_xml(m, NLEAF);
-  double t1, t8, tx;
+  char *lst = cloud_json_as(m, NLEAF, 1, true);
+  double t1, t8, tx, tl;
   scene *s1 = timed_load(one, "32,000 disks in 1 group (JSON)", &t1);
   scene *s8 = timed_load(eight, "32,000 disks in 8 groups (JSON)", &t8);
   scene *sx = timed_load(xml, "32,000 disks in 1 group (XML)", &tx);
-  CHECK(s1 && s8 && sx, "load");
+  scene *sl = timed_load(lst, "32,000 disks in 1 group (JSON list)", &tl);
+  CHECK(s1 && s8 && sx && sl, "load");
   /* Generous: linear work takes well under a second here; a quadratic
    * step (32,000^2 string compares per pass) takes minutes. */
   CHECK(t1 < 30 && t8 < 30 && tx < 30, "load too slow: %.1f / %.1f / %.1f s", t1, t8, tx);
-  if (s1 && s8 && sx) {
+  if (s1 && s8 && sx && sl) {
     size_t idx;
     rsw_err err = {0};
     CHECK(params_lookup(s1, "g0.d31999.bsdf.reflectance.value", &idx, &err) == RSW_OK,
           "member parameter key: %s", err.msg);
-    film_image f1 = {0}, f8 = {0}, fx = {0};
+    CHECK(params_lookup(sl, "g0.members_31999.bsdf.reflectance.value", &idx, &err) == RSW_OK,
+          "list member parameter key: %s", err.msg);
+    film_image f1 = {0}, f8 = {0}, fx = {0}, fl = {0};
     double r0 = now_s();
     bool ok = tsup_render(s1, 0, SEED, THREADS, &f1);
     printf("  render 8x8x8 spp, 1 group: %.3f s\n", now_s() - r0);
-    ok = ok && tsup_render(s8, 0, SEED, THREADS, &f8) && tsup_render(sx, 0, SEED, THREADS, &fx);
+    ok = ok && tsup_render(s8, 0, SEED, THREADS, &f8) && tsup_render(sx, 0, SEED, THREADS, &fx) &&
+         tsup_render(sl, 0, SEED, THREADS, &fl);
     CHECK(ok, "render");
     if (ok) {
       double sum = 0;
@@ -190,7 +200,9 @@ static void test_one_group_equals_eight(void) {
       CHECK(sum > 0, "black film");
       CHECK(same_film(&f1, &f8), "one group and eight groups render differently");
       CHECK(same_film(&f1, &fx), "the XML group renders differently from the JSON group");
+      CHECK(same_film(&f1, &fl), "the member list renders differently from the keyed members");
     }
+    film_image_free(&fl);
     film_image_free(&f1);
     film_image_free(&f8);
     film_image_free(&fx);
@@ -198,6 +210,8 @@ static void test_one_group_equals_eight(void) {
   scene_free(s1);
   scene_free(s8);
   scene_free(sx);
+  scene_free(sl);
+  free(lst);
   free(one);
   free(eight);
   free(xml);
@@ -241,6 +255,12 @@ static void test_caps(void) {
   sb_printf(&b, "</bsdf></scene>");
   expect_load_error(b.p, true, RSW_ERR_LIMIT, "big.xml:4098", "diffuse 'mat' (opened at big.xml:1) has more than the 4096");
   free(b.p);
+
+  /* The list form: only in containers; every element an object. */
+  expect_load_error("{\"type\": \"scene\", \"mat\": {\"type\": \"twosided\", \"b\": [{\"type\": \"diffuse\"}]}}",
+                    false, RSW_ERR_TYPE, "big.json#/mat/b", "accepted only in the scene and in shapegroups");
+  expect_load_error("{\"type\": \"scene\", \"g\": {\"type\": \"shapegroup\", \"members\": [{\"type\": \"disk\"}, 3]}}",
+                    false, RSW_ERR_TYPE, "big.json#/g/members/1", "every element needs a \"type\"");
 
   /* The memory cap, lowered to 4 MiB: a 32,000-member group runs over it
    * part way; the error names the key being read and the cap. */
