@@ -439,6 +439,8 @@ static rsw_status read_value(jctx *c, node *n, const cJSON *v, const char *key, 
 #define ADD_(kind)                                                             \
   do {                                                                         \
     p = node_add_prop(n, key, kind, where);                                    \
+    if (!p && n->n_props >= RSW_MAX_NODES)                                     \
+      return fail(c, RSW_ERR_LIMIT, where, "more than %d properties in one object", RSW_MAX_NODES); \
     if (!p) return fail(c, RSW_ERR_NOMEM, where, "out of memory");             \
   } while (0)
   if (cJSON_IsBool(v)) {

@@ -472,7 +472,11 @@ static prop *add_prop(xml_ctx *c, node *owner, const char *name, prop_kind kind)
   }
   prop *p = node_add_prop(owner, name, kind, c->loc);
   if (!p) {
-    xfail(c, RSW_ERR_NOMEM, "out of memory");
+    if (owner->n_props >= RSW_MAX_NODES)
+      xfail(c, RSW_ERR_LIMIT, "more than %d properties in %s '%s'", RSW_MAX_NODES, owner->type,
+            owner->id ? owner->id : "");
+    else
+      xfail(c, RSW_ERR_NOMEM, "out of memory");
     return NULL;
   }
   c->bytes += node_mem_prop(p);
