@@ -12,6 +12,8 @@
  *    axis, seen from the zenith by a `distant` sensor aimed at a target of
  *    area A: (1/A) int L cos = rho E r l (sin ts + (pi - ts) cos ts) /
  *    (2 pi A), within 3 sigma; the same through a shapegroup + instance;
+ *  - the tube as a `distant` sensor's target (uniform area sampling) from
+ *    the zenith under a zenith sun reads 2 rho E / pi^2, within 3 sigma;
  *  - chi-square of the area emitter's direction sampling from an outside
  *    point (the density: pdf_A d^2 / cos at the tube's entry point);
  *  - a to_world update equals a reload, bitwise;
@@ -236,6 +238,39 @@ static void test_projected_reflected_power(void) {
   }
 }
 
+static void test_sensor_target(void) {
+  /* `distant` from the zenith aimed at the tube itself (a horizontal
+   * Lambertian tube under a zenith sun): target points are uniform in the
+   * angle theta around the axis; a point on the lower half is hidden by
+   * its mirror image on the upper half, so the reading is
+   * (1/pi) int_{-pi/2}^{pi/2} rho E cos(theta) / pi dtheta = 2 rho E / pi^2. */
+  const char *doc =
+      "{\"type\": \"scene\","
+      " \"cam\": {\"type\": \"distant\", \"direction\": [0, 0, -1],"
+      "   \"target\": {\"type\": \"ref\", \"id\": \"tube\"},"
+      "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 40000},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},"
+      " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1], \"irradiance\": 1.5},"
+      " \"tube\": {\"type\": \"cylinder\", \"p0\": [-1, 0, 0.5], \"p1\": [1, 0, 0.5], \"radius\": 0.3,"
+      "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.6}}}";
+  scene *s = tsup_load(doc, "mono");
+  REQUIRE(s, "scene");
+  double sum = 0, sum2 = 0;
+  const int K = 8;
+  for (int k = 0; k < K; k++) {
+    film_image img;
+    REQUIRE(tsup_render(s, 0, 70 + (uint64_t)k, 0, &img), "render");
+    sum += img.data[0];
+    sum2 += img.data[0] * img.data[0];
+    film_image_free(&img);
+  }
+  double m = sum / K, sem = sqrt(fmax(sum2 / K - m * m, 0) / (K - 1)), expect = 2 * 0.6 * 1.5 / (PI * PI);
+  printf("  tube as the target: %.6f +- %.6f (expected %.6f)\n", m, sem, expect);
+  CHECK(fabs(m - expect) <= 3 * sem, "mean %.6g vs %.6g (3 sigma %.3g)", m, expect, 3 * sem);
+  CHECK(sem < 0.01 * expect, "standard error %.3g too large", sem);
+  scene_free(s);
+}
+
 /* ---- direction sampling chi-square ------------------------------------------------- */
 
 typedef struct chi2_ctx {
@@ -392,6 +427,7 @@ int main(void) {
   RSW_TEST_RUN(test_emitter_seen_directly);
   RSW_TEST_RUN(test_inside_tube_irradiance);
   RSW_TEST_RUN(test_projected_reflected_power);
+  RSW_TEST_RUN(test_sensor_target);
   RSW_TEST_RUN(test_direction_sampling_chi2);
   RSW_TEST_RUN(test_update_equals_reload);
   RSW_TEST_END("test_cylinder");
