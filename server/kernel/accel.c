@@ -1,10 +1,11 @@
 /* The two-level Embree acceleration structure (see accel.h for why two
  * levels). The only file that includes Embree.
  *
- * Triangle meshes are Embree triangle geometries in object space. Spheres
- * and disks are user geometries whose callbacks intersect the unit sphere /
- * unit disk in double precision in the instance's object space (Embree
- * hands the callback the ray already transformed by the instance). */
+ * Triangle meshes are Embree triangle geometries in object space. Spheres,
+ * disks and cylinders are user geometries whose callbacks intersect the
+ * unit sphere / unit disk / unit tube in double precision in the
+ * instance's object space (Embree hands the callback the ray already
+ * transformed by the instance). */
 #include "accel.h"
 
 #include <stdatomic.h>
@@ -79,20 +80,62 @@ size_t accel_embree_bytes(void) {
   return b > 0 ? (size_t)b : 0;
 }
 
-/* ---- user geometry: unit sphere and unit disk ------------------------------------ */
+/* ---- user geometry: unit sphere, unit disk, unit tube ------------------------------ */
+
+/* Object-space box of an analytic shape: the unit sphere [-1,1]^3, the
+ * unit disk [-1,1]^2 x 0 (padded), the unit tube [-1,1]^2 x [0,1]. */
+static void unit_box(geom_kind g, double lo[3], double hi[3]) {
+  lo[0] = lo[1] = -1.0, hi[0] = hi[1] = 1.0;
+  if (g == GEOM_SPHERE) lo[2] = -1.0, hi[2] = 1.0;
+  else if (g == GEOM_CYLINDER) lo[2] = 0.0, hi[2] = 1.0;
+  else lo[2] = -1e-6, hi[2] = 1e-6;
+}
 
 static void unit_bounds(const struct RTCBoundsFunctionArguments *args) {
   const shape *s = args->geometryUserPtr;
   struct RTCBounds *b = args->bounds_o;
-  float z = s->geom == GEOM_SPHERE ? 1.0f : 1e-6f;
-  b->lower_x = -1.0f, b->lower_y = -1.0f, b->lower_z = -z;
-  b->upper_x = 1.0f, b->upper_y = 1.0f, b->upper_z = z;
+  double lo[3], hi[3];
+  unit_box(s->geom, lo, hi);
+  b->lower_x = (float)lo[0], b->lower_y = (float)lo[1], b->lower_z = (float)lo[2];
+  b->upper_x = (float)hi[0], b->upper_y = (float)hi[1], b->upper_z = (float)hi[2];
+}
+
+/* Unit tube x^2 + y^2 = 1, 0 <= z <= 1 (open, no caps): the nearer root
+ * within (tnear, tfar) whose z lies on the tube, else the farther one
+ * (mitsuba3 src/shapes/cylinder.cpp). A ray parallel to the axis never
+ * meets the open tube. */
+static bool tube_hit(const double o[3], const double d[3], double tnear, double tfar, double *t_out,
+                     double n_out[3]) {
+  double a = d[0] * d[0] + d[1] * d[1];
+  double b = o[0] * d[0] + o[1] * d[1];
+  double c = o[0] * o[0] + o[1] * o[1] - 1.0;
+  double disc = b * b - a * c;
+  if (!(a > 0) || disc < 0) return false;
+  double sq = sqrt(disc);
+  double q = b < 0 ? -b + sq : -b - sq;
+  double t0 = q / a, t1 = q != 0 ? c / q : t0;
+  if (t0 > t1) {
+    double tmp = t0;
+    t0 = t1;
+    t1 = tmp;
+  }
+  for (int k = 0; k < 2; k++) {
+    double t = k ? t1 : t0;
+    if (!(t > tnear && t < tfar)) continue;
+    double z = o[2] + t * d[2];
+    if (!(z >= 0.0 && z <= 1.0)) continue;
+    *t_out = t;
+    n_out[0] = o[0] + t * d[0], n_out[1] = o[1] + t * d[1], n_out[2] = 0;
+    return true;
+  }
+  return false;
 }
 
 /* Nearest t in (tnear, tfar) where object-space ray (o, d) meets the unit
  * sphere or unit disk; returns false if none. Normal in object space. */
 static bool unit_hit(geom_kind g, const double o[3], const double d[3], double tnear, double tfar, double *t_out,
                      double n_out[3]) {
+  if (g == GEOM_CYLINDER) return tube_hit(o, d, tnear, tfar, t_out, n_out);
   if (g == GEOM_SPHERE) {
     /* |o + t d|^2 = 1: a t^2 + 2 b t + c = 0, solved stably. */
     double a = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
@@ -188,10 +231,11 @@ static void unit_occluded(const struct RTCOccludedFunctionNArguments *args) {
 static void member_bounds(const struct RTCBoundsFunctionArguments *args) {
   const shape *s = args->geometryUserPtr;
   struct RTCBounds *b = args->bounds_o;
-  double z = s->geom == GEOM_SPHERE ? 1.0 : 1e-6;
+  double ulo[3], uhi[3];
+  unit_box(s->geom, ulo, uhi);
   double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
   for (int c = 0; c < 8; c++) {
-    vec3 p = xf_point(&s->to_world, v3(c & 1 ? 1 : -1, c & 2 ? 1 : -1, c & 4 ? z : -z));
+    vec3 p = xf_point(&s->to_world, v3(c & 1 ? uhi[0] : ulo[0], c & 2 ? uhi[1] : ulo[1], c & 4 ? uhi[2] : ulo[2]));
     double q[3] = {p.x, p.y, p.z};
     for (int k = 0; k < 3; k++) lo[k] = fmin(lo[k], q[k]), hi[k] = fmax(hi[k], q[k]);
   }

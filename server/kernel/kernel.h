@@ -291,7 +291,7 @@ struct integrator {
 };
 
 /* ---- shapes -------------------------------------------------------------- */
-typedef enum geom_kind { GEOM_MESH, GEOM_SPHERE, GEOM_DISK } geom_kind;
+typedef enum geom_kind { GEOM_MESH, GEOM_SPHERE, GEOM_DISK, GEOM_CYLINDER } geom_kind;
 
 /* Triangle mesh in object space (before to_world). */
 typedef struct mesh {

@@ -68,12 +68,6 @@ static rsw_status wrong_type(loader *ld, node *n, prop *p, const char *expected)
 
 static rsw_status index_ids(loader *ld, node *n) {
   if (n->id && n != ld->root) {
-    if (n->id_explicit) {
-      for (size_t i = 0; i < ld->n_ids; i++)
-        if (ld->ids[i]->id_explicit && strcmp(ld->ids[i]->id, n->id) == 0)
-          return rsw_fail(ld->err, RSW_ERR_DUPLICATE, n->loc,
-                          "duplicate id '%s' (also used at %s)", n->id, ld->ids[i]->loc);
-    }
     if (ld->n_ids == ld->cap_ids) {
       size_t cap = ld->cap_ids ? 2 * ld->cap_ids : 64;
       node **p = realloc(ld->ids, cap * sizeof *p);
@@ -91,17 +85,58 @@ static rsw_status index_ids(loader *ld, node *n) {
   return RSW_OK;
 }
 
+static size_t ref_slot(const loader *ld, const char *id) {
+  unsigned long long h = 1469598103934665603ull; /* FNV-1a */
+  for (const char *c = id; *c; c++) h = (h ^ (unsigned char)*c) * 1099511628211ull;
+  size_t i = (size_t)h & (ld->ref_cap - 1);
+  while (ld->ref_slots[i] && strcmp(ld->ref_slots[i]->id, id) != 0) i = (i + 1) & (ld->ref_cap - 1);
+  return i;
+}
+
+/* The ref table, filled in priority order (a later candidate never
+ * replaces an earlier one): explicit ids (which must be unique), then the
+ * top-level objects' keys in order, then any object's (implicit) id in
+ * document order. */
+static rsw_status index_refs(loader *ld) {
+  size_t cap = 64;
+  while (cap < 2 * (ld->n_ids + 1)) cap *= 2;
+  ld->ref_slots = calloc(cap, sizeof *ld->ref_slots);
+  if (!ld->ref_slots) return rsw_fail(ld->err, RSW_ERR_NOMEM, "", "out of memory");
+  ld->ref_cap = cap;
+  for (size_t i = 0; i < ld->n_ids; i++) {
+    node *n = ld->ids[i];
+    if (!n->id_explicit) continue;
+    size_t k = ref_slot(ld, n->id);
+    if (ld->ref_slots[k])
+      return rsw_fail(ld->err, RSW_ERR_DUPLICATE, n->loc, "duplicate id '%s' (also used at %s)", n->id,
+                      ld->ref_slots[k]->loc);
+    ld->ref_slots[k] = n;
+  }
+  for (size_t i = 0; i < ld->root->n_props; i++) {
+    prop *p = &ld->root->props[i];
+    if (p->kind != PROP_NODE || !p->child->id) continue;
+    size_t k = ref_slot(ld, p->child->id);
+    if (!ld->ref_slots[k]) ld->ref_slots[k] = p->child;
+  }
+  for (size_t i = 0; i < ld->n_ids; i++) {
+    size_t k = ref_slot(ld, ld->ids[i]->id);
+    if (!ld->ref_slots[k]) ld->ref_slots[k] = ld->ids[i];
+  }
+  return RSW_OK;
+}
+
 /* A ref names an explicit id first, then a top-level object's key (the
  * usual load_dict usage), then any object with that (implicit) id. */
 static node *resolve_ref(loader *ld, const char *id) {
-  for (size_t i = 0; i < ld->n_ids; i++)
-    if (ld->ids[i]->id_explicit && strcmp(ld->ids[i]->id, id) == 0) return ld->ids[i];
+  if (ld->ref_cap) {
+    node *t = ld->ref_slots[ref_slot(ld, id)];
+    if (t) return t;
+  }
+  /* Objects created since indexing (defaults attached to the root). */
   for (size_t i = 0; i < ld->root->n_props; i++) {
     prop *p = &ld->root->props[i];
-    if (p->kind == PROP_NODE && strcmp(p->child->id, id) == 0) return p->child;
+    if (p->kind == PROP_NODE && p->child->id && strcmp(p->child->id, id) == 0) return p->child;
   }
-  for (size_t i = 0; i < ld->n_ids; i++)
-    if (strcmp(ld->ids[i]->id, id) == 0) return ld->ids[i];
   return NULL;
 }
 
@@ -798,6 +833,7 @@ rsw_status scene_build(node *root, const char *doc_variant, const scene_load_opt
                .root = root, .scene = s, .resolve = opts ? opts->resolve : NULL,
                .resolve_user = opts ? opts->resolve_user : NULL};
   rsw_status st = index_ids(&ld, root);
+  if (!st) st = index_refs(&ld);
   if (!st) {
     root->build_state = 1;
     object *o;
@@ -815,6 +851,7 @@ rsw_status scene_build(node *root, const char *doc_variant, const scene_load_opt
   }
   if (!st) st = scene_finalize(&ld, s);
   free(ld.ids);
+  free(ld.ref_slots);
   if (st) {
     scene_free(s);
     return st;

@@ -19,7 +19,8 @@
  *
  * Deliberate strictness beyond cJSON: duplicate keys in one object are an
  * error (cJSON keeps them silently), nesting is limited to RSW_MAX_DEPTH,
- * and integers are exact only below 2^53 (is_int is false above). */
+ * an ordinary object to max_props keys (containers to the tree's memory
+ * cap), and integers are exact only below 2^53 (is_int is false above). */
 #include <cjson/cJSON.h>
 #include <math.h>
 #include <stdio.h>
@@ -34,6 +35,8 @@ typedef struct jctx {
   const char *source;
   rsw_err *err;
   size_t n_nodes;
+  const scene_limits *lim;
+  size_t bytes; /* document tree memory so far (node_mem_*) */
 } jctx;
 
 /* JSON pointer of `key` under `base` (RFC 6901 escaping), prefixed by the
@@ -223,18 +226,60 @@ static rsw_status read_ops(jctx *c, const cJSON *v, const char *where, xform *ou
   return RSW_OK;
 }
 
-static rsw_status check_duplicate_keys(jctx *c, const cJSON *obj, const char *where) {
+/* Keys of one object: duplicates are an error, and an ordinary object
+ * takes at most lim->max_props keys (a safety cap: no plugin has more
+ * than a few dozen properties). Containers (the scene, a shapegroup) take
+ * any number, bounded by the tree's memory cap. Large objects are checked
+ * with a hash set of the keys, small ones pairwise. */
+static rsw_status check_keys(jctx *c, const cJSON *obj, const char *type, const char *where) {
   size_t n = 0;
-  for (const cJSON *a = obj->child; a; a = a->next, n++) {
-    if (n >= RSW_MAX_PROPS)
-      return fail(c, RSW_ERR_LIMIT, where, "more than %d keys in one object", RSW_MAX_PROPS);
-    for (const cJSON *b = a->next; b; b = b->next)
-      if (strcmp(a->string, b->string) == 0) {
-        char w[512];
-        ptr_join(w, sizeof w, where, a->string);
-        return fail(c, RSW_ERR_DUPLICATE, w, "duplicate key '%s'", a->string);
-      }
+  for (const cJSON *a = obj->child; a; a = a->next) n++;
+  bool container = node_type_is_container(type);
+  if (!container && n > c->lim->max_props)
+    return fail(c, RSW_ERR_LIMIT, where,
+                "object '%s' (type '%s') has %zu keys, more than the %zu an object may have "
+                "(only the scene and shapegroups take more)",
+                where, type, n, c->lim->max_props);
+  if (n <= 32) {
+    for (const cJSON *a = obj->child; a; a = a->next)
+      for (const cJSON *b = a->next; b; b = b->next)
+        if (strcmp(a->string, b->string) == 0) {
+          char w[512];
+          ptr_join(w, sizeof w, where, a->string);
+          return fail(c, RSW_ERR_DUPLICATE, w, "duplicate key '%s'", a->string);
+        }
+    return RSW_OK;
   }
+  size_t cap = 64;
+  while (cap < 2 * n) cap *= 2;
+  const char **set = calloc(cap, sizeof *set);
+  if (!set) return fail(c, RSW_ERR_NOMEM, where, "out of memory");
+  rsw_status st = RSW_OK;
+  for (const cJSON *a = obj->child; a && !st; a = a->next) {
+    unsigned long long h = 1469598103934665603ull; /* FNV-1a */
+    for (const char *k = a->string; *k; k++) h = (h ^ (unsigned char)*k) * 1099511628211ull;
+    size_t i = (size_t)h & (cap - 1);
+    while (set[i] && strcmp(set[i], a->string) != 0) i = (i + 1) & (cap - 1);
+    if (set[i]) {
+      char w[512];
+      ptr_join(w, sizeof w, where, a->string);
+      st = fail(c, RSW_ERR_DUPLICATE, w, "duplicate key '%s'", a->string);
+    }
+    set[i] = a->string;
+  }
+  free(set);
+  return st;
+}
+
+/* Count `bytes` of document tree against the memory cap; `where` is the
+ * key being read when it runs out. */
+static rsw_status account(jctx *c, size_t bytes, const char *where) {
+  c->bytes += bytes;
+  if (c->bytes > c->lim->max_tree_bytes)
+    return fail(c, RSW_ERR_LIMIT, where,
+                "the scene document needs more than its memory cap of %zu bytes (%.0f MiB) at '%s'; "
+                "split the scene or raise the cap",
+                c->lim->max_tree_bytes, c->lim->max_tree_bytes / 1048576.0, where);
   return RSW_OK;
 }
 
@@ -338,6 +383,48 @@ static rsw_status read_spectrum(jctx *c, const cJSON *o, const char *type, const
 static rsw_status read_object(jctx *c, const cJSON *obj, const char *key, const char *where,
                               int depth, node **out);
 
+static rsw_status read_value(jctx *c, node *n, const cJSON *v, const char *key, const char *where,
+                             int depth);
+
+/* A list of objects in a container (the scene, a shapegroup):
+ * "members": [{"type": "disk", ...}, {"type": "ref", "id": "x"}, ...] adds
+ * one child per element, as if each had its own key; an element without
+ * an explicit "id" gets the id "<key>_<index>". Saves inventing 100,000
+ * keys. */
+static rsw_status read_list(jctx *c, node *n, const cJSON *v, const char *key, const char *where, int depth) {
+  if (!node_type_is_container(n->type))
+    return fail(c, RSW_ERR_TYPE, where,
+                "a list of objects is accepted only in the scene and in shapegroups ('%s' is a %s)", key, n->type);
+  int i = 0;
+  for (const cJSON *e = v->child; e; e = e->next, i++) {
+    char w[512];
+    ptr_index(w, sizeof w, where, i);
+    const cJSON *type = cJSON_IsObject(e) ? cJSON_GetObjectItemCaseSensitive(e, "type") : NULL;
+    if (!type || !cJSON_IsString(type))
+      return fail(c, RSW_ERR_TYPE, w, "'%s' is a list of objects: every element needs a \"type\"", key);
+    size_t before = n->n_props;
+    rsw_status st = read_value(c, n, e, key, w, depth + 1);
+    if (st) return st;
+    prop *p = n->n_props > before ? &n->props[n->n_props - 1] : NULL;
+    if (p && p->kind == PROP_NODE && !p->child->id_explicit) {
+      char id[RSW_MAX_NAME + 16];
+      snprintf(id, sizeof id, "%s_%d", key, i);
+      char *dup = rsw_strdup(id);
+      if (!dup) return fail(c, RSW_ERR_NOMEM, w, "out of memory");
+      free(p->child->id);
+      p->child->id = dup;
+    }
+    if (p && p->kind != PROP_NODE && p->kind != PROP_REF)
+      return fail(c, RSW_ERR_TYPE, w, "'%s' is a list of objects: a %s value is not an object", key,
+                  type->valuestring);
+    if (p) {
+      st = account(c, node_mem_prop(p), w);
+      if (st) return st;
+    }
+  }
+  return RSW_OK;
+}
+
 /* Convert one property value and append it to n. */
 static rsw_status read_value(jctx *c, node *n, const cJSON *v, const char *key, const char *where,
                              int depth) {
@@ -352,6 +439,8 @@ static rsw_status read_value(jctx *c, node *n, const cJSON *v, const char *key, 
 #define ADD_(kind)                                                             \
   do {                                                                         \
     p = node_add_prop(n, key, kind, where);                                    \
+    if (!p && n->n_props >= RSW_MAX_NODES)                                     \
+      return fail(c, RSW_ERR_LIMIT, where, "more than %d properties in one object", RSW_MAX_NODES); \
     if (!p) return fail(c, RSW_ERR_NOMEM, where, "out of memory");             \
   } while (0)
   if (cJSON_IsBool(v)) {
@@ -388,6 +477,8 @@ static rsw_status read_value(jctx *c, node *n, const cJSON *v, const char *key, 
       if (st) return st;
       ADD_(PROP_TRANSFORM);
       p->xf = xf;
+    } else if (len > 0 && cJSON_IsObject(v->child) && cJSON_GetObjectItemCaseSensitive(v->child, "type")) {
+      return read_list(c, n, v, key, where, depth);
     } else if (len > 0 && cJSON_IsObject(v->child)) {
       xform xf;
       rsw_status st = read_ops(c, v, where, &xf);
@@ -414,9 +505,9 @@ static rsw_status read_value(jctx *c, node *n, const cJSON *v, const char *key, 
     char wt[512];
     ptr_join(wt, sizeof wt, where, "type");
     if (!cJSON_IsString(type)) return fail(c, RSW_ERR_TYPE, wt, "\"type\" must be a string");
-    rsw_status st = check_duplicate_keys(c, v, where);
-    if (st) return st;
     const char *t = type->valuestring;
+    rsw_status st = check_keys(c, v, t, where);
+    if (st) return st;
     if (strcmp(t, "ref") == 0) {
       const cJSON *id = NULL;
       for (const cJSON *k = v->child; k; k = k->next) {
@@ -489,12 +580,15 @@ static rsw_status read_object(jctx *c, const cJSON *obj, const char *key, const 
     st = fail(c, RSW_ERR_NOMEM, where, "out of memory");
     goto done;
   }
-  for (const cJSON *k = obj->child; k; k = k->next) {
+  st = account(c, node_mem_self(n), where);
+  for (const cJSON *k = obj->child; k && !st; k = k->next) {
     if (strcmp(k->string, "type") == 0 || strcmp(k->string, "id") == 0) continue;
     char w[512];
     ptr_join(w, sizeof w, where, k->string);
+    size_t before = n->n_props;
     st = read_value(c, n, k, k->string, w, depth);
-    if (st) goto done;
+    /* (a list accounts for its elements itself) */
+    if (!st && n->n_props == before + 1) st = account(c, node_mem_prop(&n->props[n->n_props - 1]), w);
   }
 done:
   if (st) {
@@ -522,7 +616,14 @@ static void line_col(const char *text, size_t off, int *line, int *colno) {
 
 rsw_status scene_read_json(const char *text, size_t len, const char *source_name,
                            node **root_out, char **variant_out, rsw_err *err) {
-  jctx c = {.source = source_name ? source_name : "scene.json", .err = err};
+  return scene_read_json_limited(text, len, source_name, NULL, root_out, variant_out, err);
+}
+
+rsw_status scene_read_json_limited(const char *text, size_t len, const char *source_name,
+                                   const scene_limits *lim, node **root_out, char **variant_out,
+                                   rsw_err *err) {
+  jctx c = {.source = source_name ? source_name : "scene.json", .err = err,
+            .lim = lim ? lim : &scene_limits_default};
   char where[512];
   snprintf(where, sizeof where, "%s#", c.source);
   if (variant_out) *variant_out = NULL;
@@ -557,7 +658,7 @@ rsw_status scene_read_json(const char *text, size_t len, const char *source_name
     st = fail(&c, RSW_ERR_TYPE, where, "the document must be a JSON object (a scene dictionary)");
     goto out;
   }
-  st = check_duplicate_keys(&c, doc, where);
+  st = check_keys(&c, doc, "scene", where);
   if (st) goto out;
   const cJSON *type = cJSON_GetObjectItemCaseSensitive(doc, "type");
   if (type && (!cJSON_IsString(type) || strcmp(type->valuestring, "scene") != 0)) {

@@ -23,6 +23,10 @@ typedef struct loader {
   /* id -> node index (builder-private) */
   node **ids;
   size_t n_ids, cap_ids;
+  /* id -> the node a ref to it resolves to (open addressing; cap 0 or a
+   * power of two), so that 100,000 refs resolve in linear time */
+  node **ref_slots;
+  size_t ref_cap;
 } loader;
 
 /* Report an error about property `name` of n (or about n itself when name

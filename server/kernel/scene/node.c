@@ -47,6 +47,7 @@ void node_free(node *n) {
   if (!n) return;
   for (size_t i = 0; i < n->n_props; i++) prop_release(&n->props[i]);
   free(n->props);
+  free(n->name_index);
   free(n->tag);
   free(n->type);
   free(n->id);
@@ -54,8 +55,55 @@ void node_free(node *n) {
   free(n);
 }
 
+const scene_limits scene_limits_default = {.max_props = RSW_MAX_PROPS,
+                                           .max_tree_bytes = RSW_MAX_TREE_BYTES};
+
+bool node_type_is_container(const char *type) {
+  return type && (strcmp(type, "scene") == 0 || strcmp(type, "shapegroup") == 0);
+}
+
+/* Below this many properties a linear scan is as fast as hashing. */
+#define NODE_INDEX_MIN 16
+
+static size_t name_hash(const char *s) { /* FNV-1a */
+  unsigned long long h = 1469598103934665603ull;
+  for (; *s; s++) h = (h ^ (unsigned char)*s) * 1099511628211ull;
+  return (size_t)h;
+}
+
+/* Slot of `name` in the index: the one holding it, or the empty one where
+ * it would go. */
+static size_t index_slot(const node *n, const size_t *idx, size_t cap, const char *name) {
+  size_t i = name_hash(name) & (cap - 1);
+  while (idx[i] && strcmp(n->props[idx[i] - 1].name, name) != 0) i = (i + 1) & (cap - 1);
+  return i;
+}
+
+/* Record property k (already counted in n_props) in the index, first
+ * occurrence of a name winning as in the linear scan; (re)builds the
+ * table at half load. */
+static bool index_add(node *n, size_t k) {
+  if (2 * n->n_props > n->index_cap) {
+    size_t cap = n->index_cap ? 2 * n->index_cap : 64;
+    while (cap < 2 * n->n_props) cap *= 2;
+    size_t *idx = calloc(cap, sizeof *idx);
+    if (!idx) return false;
+    for (size_t j = 0; j < n->n_props; j++)
+      if (j != k) {
+        size_t s = index_slot(n, idx, cap, n->props[j].name);
+        if (!idx[s]) idx[s] = j + 1;
+      }
+    free(n->name_index);
+    n->name_index = idx;
+    n->index_cap = cap;
+  }
+  size_t s = index_slot(n, n->name_index, n->index_cap, n->props[k].name);
+  if (!n->name_index[s]) n->name_index[s] = k + 1;
+  return true;
+}
+
 prop *node_add_prop(node *n, const char *name, prop_kind kind, const char *loc) {
-  if (n->n_props >= RSW_MAX_PROPS) return NULL;
+  if (n->n_props >= RSW_MAX_NODES) return NULL;
   if (n->n_props == n->cap_props) {
     size_t cap = n->cap_props ? 2 * n->cap_props : 8;
     prop *p = realloc(n->props, cap * sizeof *p);
@@ -68,19 +116,37 @@ prop *node_add_prop(node *n, const char *name, prop_kind kind, const char *loc) 
   p->name = rsw_strdup(name ? name : "");
   p->loc = rsw_strdup(loc ? loc : "");
   p->kind = kind;
-  if (!p->name || !p->loc) {
+  n->n_props++;
+  if (!p->name || !p->loc ||
+      ((n->name_index || n->n_props >= NODE_INDEX_MIN) && !index_add(n, n->n_props - 1))) {
+    n->n_props--;
     free(p->name);
     free(p->loc);
     return NULL;
   }
-  n->n_props++;
   return p;
 }
 
 prop *node_find(const node *n, const char *name) {
+  if (n->name_index) {
+    size_t s = index_slot(n, n->name_index, n->index_cap, name);
+    return n->name_index[s] ? &n->props[n->name_index[s] - 1] : NULL;
+  }
   for (size_t i = 0; i < n->n_props; i++)
     if (strcmp(n->props[i].name, name) == 0) return &n->props[i];
   return NULL;
+}
+
+static size_t str_mem(const char *s) { return s ? strlen(s) + 1 : 0; }
+
+size_t node_mem_self(const node *n) {
+  return sizeof *n + str_mem(n->tag) + str_mem(n->type) + str_mem(n->id) + str_mem(n->loc) +
+         n->index_cap * sizeof *n->name_index;
+}
+
+size_t node_mem_prop(const prop *p) {
+  return sizeof *p + str_mem(p->name) + str_mem(p->loc) + str_mem(p->str) + str_mem(p->ref) +
+         p->n_nums * sizeof(double) + 2 * p->spec.n * sizeof(double);
 }
 
 /* ---- deterministic ids ---------------------------------------------------- */

@@ -18,8 +18,16 @@
 
 /* Limits that keep hostile documents bounded. */
 #define RSW_MAX_DEPTH 64          /* nesting of objects/arrays */
-#define RSW_MAX_PROPS 4096        /* properties per node */
+#define RSW_MAX_PROPS 4096        /* properties per ordinary object; containers
+                                     (the scene, a shapegroup) take any number of
+                                     children, bounded by RSW_MAX_NODES and the
+                                     document's memory cap below */
 #define RSW_MAX_NODES 1000000     /* nodes per document */
+/* Memory of one document tree (nodes, properties and their strings and
+ * arrays, as counted by node_mem_*): it stays resident with the scene. A
+ * shapegroup member (a disk with a to_world and a bsdf ref) takes about
+ * 1.5 KiB, so 1 GiB holds some 700,000 such members. */
+#define RSW_MAX_TREE_BYTES ((size_t)1 << 30)
 #define RSW_MAX_SPECTRUM 100000   /* samples in a tabulated spectrum */
 #define RSW_MAX_NAME 256          /* property names, ids, plugin types */
 
@@ -79,18 +87,41 @@ typedef struct node {
   char *loc;
   prop *props;
   size_t n_props, cap_props;
+  /* Name -> first property index + 1 (0: empty slot), open addressing,
+   * built once a node has NODE_INDEX_MIN properties so that node_find
+   * and duplicate checks stay O(1) on containers of 100,000 members. */
+  size_t *name_index;
+  size_t index_cap; /* 0 or a power of two */
   void *built;    /* set by the builder: the object made from this node */
   int build_state; /* builder-private: 0 new, 1 in progress, 2 done */
 } node;
+
+/* Per-document limits. scene_limits_default holds the RSW_MAX_* values;
+ * tests and embedders may pass lower ones to the *_limited readers. */
+typedef struct scene_limits {
+  size_t max_props;      /* properties of an ordinary object */
+  size_t max_tree_bytes; /* memory of the document tree */
+} scene_limits;
+extern const scene_limits scene_limits_default;
+
+/* Containers hold children by the thousand: the scene root and
+ * shapegroups. They are exempt from max_props (the tree's memory cap and
+ * RSW_MAX_NODES bound them instead). */
+bool node_type_is_container(const char *type);
 
 /* Allocation helpers for readers. All strings are copied. */
 node *node_new(const char *tag, const char *type, const char *loc);
 void node_free(node *n); /* recursive; NULL is a no-op */
 /* Append a property (zeroed except name/kind/loc); returns NULL on OOM or
- * past RSW_MAX_PROPS. The returned pointer is valid until the next add. */
+ * past RSW_MAX_NODES properties (readers check their own, lower, caps
+ * first). The returned pointer is valid until the next add. */
 prop *node_add_prop(node *n, const char *name, prop_kind kind, const char *loc);
-/* First property with this name, or NULL. */
+/* First property with this name, or NULL. O(1) on large nodes. */
 prop *node_find(const node *n, const char *name);
+/* Bytes a node / a property holds by itself (struct, strings, arrays; not
+ * the children), for the readers' memory cap. */
+size_t node_mem_self(const node *n);
+size_t node_mem_prop(const prop *p);
 void spectrum_free(spectrum *s);
 char *rsw_strdup(const char *s);
 
@@ -109,6 +140,14 @@ rsw_status scene_read_json(const char *text, size_t len, const char *source_name
 rsw_status scene_read_xml(const char *text, size_t len, const char *source_name,
                           const scene_define *defines, size_t n_defines,
                           node **root_out, char **variant_out, rsw_err *err);
+/* The same with explicit limits (NULL: scene_limits_default). */
+rsw_status scene_read_json_limited(const char *text, size_t len, const char *source_name,
+                                   const scene_limits *lim, node **root_out, char **variant_out,
+                                   rsw_err *err);
+rsw_status scene_read_xml_limited(const char *text, size_t len, const char *source_name,
+                                  const scene_define *defines, size_t n_defines,
+                                  const scene_limits *lim, node **root_out, char **variant_out,
+                                  rsw_err *err);
 
 /* Parse a transform op list / matrix shared by both readers.
  * Applies ops in order, each left-multiplied onto the accumulated

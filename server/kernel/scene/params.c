@@ -43,6 +43,7 @@ typedef struct entry {
 typedef struct objrec {
   object *o;
   char *path;
+  size_t e_begin, e_end; /* entries added while it was traversed */
 } objrec;
 
 struct param_table {
@@ -52,6 +53,10 @@ struct param_table {
   size_t n_objs, cap_objs;
   objrec *alias; /* further paths of shared objects */
   size_t n_alias, cap_alias;
+  /* objs by object pointer and by path: index + 1 (0 = empty), open
+   * addressing, so that traversing 100,000 group members stays linear. */
+  size_t *by_obj, *by_path;
+  size_t ocap;
   /* Open-addressing hash: key or alias -> entry index + 1 (0 = empty). */
   const char **hkey;
   size_t *hval;
@@ -124,6 +129,8 @@ void params_free(param_table *t) {
   free(t->e);
   free(t->objs);
   free(t->alias);
+  free(t->by_obj);
+  free(t->by_path);
   free(t->hkey);
   free(t->hval);
   free(t);
@@ -226,16 +233,57 @@ void pv_mesh_buffer(param_visitor *v, const char *name, shape *sh) {
   e->buf = b;
 }
 
-static const objrec *find_obj(const param_table *t, const object *o) {
-  for (size_t i = 0; i < t->n_objs; i++)
-    if (t->objs[i].o == o) return &t->objs[i];
-  return NULL;
+static size_t obj_slot(const param_table *t, const size_t *tab, size_t cap, const object *o) {
+  uint64_t h = (uint64_t)(uintptr_t)o * 0x9E3779B97F4A7C15ULL;
+  size_t i = (size_t)(h >> 20) & (cap - 1);
+  while (tab[i] && t->objs[tab[i] - 1].o != o) i = (i + 1) & (cap - 1);
+  return i;
+}
+
+static size_t path_slot(const param_table *t, const size_t *tab, size_t cap, const char *path) {
+  size_t i = hash_str(path) & (cap - 1);
+  while (tab[i] && strcmp(t->objs[tab[i] - 1].path, path) != 0) i = (i + 1) & (cap - 1);
+  return i;
+}
+
+/* Index objs[k] (just appended); rebuilds both tables at half load. */
+static bool objs_index(param_table *t, size_t k) {
+  if (2 * t->n_objs > t->ocap) {
+    size_t cap = t->ocap ? 2 * t->ocap : 64;
+    size_t *bo = calloc(cap, sizeof *bo), *bp = calloc(cap, sizeof *bp);
+    if (!bo || !bp) {
+      free(bo);
+      free(bp);
+      return false;
+    }
+    for (size_t j = 0; j < t->n_objs; j++) {
+      if (j == k) continue;
+      size_t s = obj_slot(t, bo, cap, t->objs[j].o);
+      if (!bo[s]) bo[s] = j + 1;
+      s = path_slot(t, bp, cap, t->objs[j].path);
+      if (!bp[s]) bp[s] = j + 1;
+    }
+    free(t->by_obj);
+    free(t->by_path);
+    t->by_obj = bo;
+    t->by_path = bp;
+    t->ocap = cap;
+  }
+  size_t s = obj_slot(t, t->by_obj, t->ocap, t->objs[k].o);
+  if (!t->by_obj[s]) t->by_obj[s] = k + 1;
+  s = path_slot(t, t->by_path, t->ocap, t->objs[k].path);
+  if (!t->by_path[s]) t->by_path[s] = k + 1;
+  return true;
+}
+
+static objrec *find_obj(const param_table *t, const object *o) {
+  if (!t->ocap) return NULL;
+  size_t s = obj_slot(t, t->by_obj, t->ocap, o);
+  return t->by_obj[s] ? &t->objs[t->by_obj[s] - 1] : NULL;
 }
 
 static bool path_taken(const param_table *t, const char *path) {
-  for (size_t i = 0; i < t->n_objs; i++)
-    if (strcmp(t->objs[i].path, path) == 0) return true;
-  return false;
+  return t->ocap && t->by_path[path_slot(t, t->by_path, t->ocap, path)];
 }
 
 static void visit(param_visitor *v, object *o, char *path, double lo, double hi) {
@@ -247,7 +295,7 @@ static void visit(param_visitor *v, object *o, char *path, double lo, double hi)
       v->st = rsw_fail(v->err, RSW_ERR_NOMEM, "params", "out of memory");
       return;
     }
-    t->alias[t->n_alias++] = (objrec){o, path};
+    t->alias[t->n_alias++] = (objrec){o, path, 0, 0};
     return;
   }
   if (!grow((void **)&t->objs, &t->cap_objs, t->n_objs, sizeof *t->objs)) {
@@ -255,7 +303,12 @@ static void visit(param_visitor *v, object *o, char *path, double lo, double hi)
     v->st = rsw_fail(v->err, RSW_ERR_NOMEM, "params", "out of memory");
     return;
   }
-  t->objs[t->n_objs++] = (objrec){o, path};
+  size_t k = t->n_objs++;
+  t->objs[k] = (objrec){o, path, t->n, t->n};
+  if (!objs_index(t, k)) {
+    v->st = rsw_fail(v->err, RSW_ERR_NOMEM, "params", "out of memory");
+    return;
+  }
   if (!o->plugin || !o->plugin->traverse) return;
   param_visitor saved = *v;
   v->cur = o;
@@ -265,6 +318,7 @@ static void visit(param_visitor *v, object *o, char *path, double lo, double hi)
   o->plugin->traverse(o, v);
   saved.st = v->st;
   *v = saved;
+  t->objs[k].e_end = t->n;
 }
 
 void pv_object(param_visitor *v, const char *name, object *child, double lo, double hi) {
@@ -297,18 +351,24 @@ void pv_object(param_visitor *v, const char *name, object *child, double lo, dou
 }
 
 /* Aliases: for every other path A of a shared object O, each entry whose
- * key lies under O's first path P gets the alias A + key[len(P):]. */
+ * key lies under O's first path P gets the alias A + key[len(P):]. Those
+ * entries were added while O was traversed (keys are built from the
+ * traversal prefix), so only that range is scanned: a BSDF shared by
+ * 100,000 group members costs 100,000 x its own entries, not x all. */
 static rsw_status build_aliases(param_table *t, rsw_err *err) {
   for (size_t a = 0; a < t->n_alias; a++) {
     const objrec *first = find_obj(t, t->alias[a].o);
     if (!first) continue;
     size_t lp = strlen(first->path);
-    for (size_t i = 0; i < t->n; i++) {
+    for (size_t i = first->e_begin; i < first->e_end; i++) {
       entry *e = &t->e[i];
       if (strncmp(e->key, first->path, lp) != 0 || e->key[lp] != '.') continue;
       char *al = join(t->alias[a].path, e->key + lp + 1);
-      char **arr = al ? realloc(e->aliases, (e->n_aliases + 1) * sizeof *arr) : NULL;
-      if (!arr) {
+      char **arr = e->aliases;
+      /* Capacity doubles at powers of two (implicit in n_aliases). */
+      if (al && (e->n_aliases & (e->n_aliases - 1)) == 0)
+        arr = realloc(e->aliases, (e->n_aliases ? 2 * e->n_aliases : 1) * sizeof *arr);
+      if (!al || !arr) {
         free(al);
         return rsw_fail(err, RSW_ERR_NOMEM, "params", "out of memory");
       }

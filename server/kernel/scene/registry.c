@@ -9,7 +9,7 @@
  * a plugin whose file is absent resolves to NULL and is skipped. */
 #define PLUGINS(X)                                                            \
   X(scene)                                                                    \
-  X(rectangle) X(disk) X(sphere) X(cube) X(obj) X(ply)                        \
+  X(rectangle) X(disk) X(sphere) X(cylinder) X(cube) X(obj) X(ply)           \
   X(diffuse) X(conductor) X(roughconductor) X(dielectric) X(twosided)        \
   X(rpv) X(bilambertian) X(hapke)                                             \
   X(directional) X(constant) X(area) X(envmap)                                \

@@ -96,6 +96,8 @@ typedef struct xml_ctx {
   xml_frame stack[RSW_MAX_DEPTH];
   size_t depth;
   size_t n_nodes;
+  const scene_limits *lim;
+  size_t bytes; /* document tree memory so far (node_mem_*) */
   param *params;
   size_t n_params, cap_params;
   id_table ids;
@@ -448,7 +450,10 @@ typedef struct tag_def {
 } tag_def;
 
 /* Add a property to `owner`, rejecting a second property of the same
- * (non-empty) name, as Mitsuba's Properties does. */
+ * (non-empty) name, as Mitsuba's Properties does (node_find is hashed on
+ * large objects, so a group of 100,000 named members stays linear). An
+ * ordinary object takes at most lim->max_props properties; containers (the
+ * scene, a shapegroup) any number within the tree's memory cap. */
 static prop *add_prop(xml_ctx *c, node *owner, const char *name, prop_kind kind) {
   if (name[0]) {
     const prop *old = node_find(owner, name);
@@ -458,12 +463,30 @@ static prop *add_prop(xml_ctx *c, node *owner, const char *name, prop_kind kind)
       return NULL;
     }
   }
+  if (!node_type_is_container(owner->type) && owner->n_props >= c->lim->max_props) {
+    xfail(c, RSW_ERR_LIMIT,
+          "%s '%s' (opened at %s) has more than the %zu properties an object may have (only the "
+          "scene and shapegroups take more)",
+          owner->type, owner->id ? owner->id : "", owner->loc, c->lim->max_props);
+    return NULL;
+  }
   prop *p = node_add_prop(owner, name, kind, c->loc);
   if (!p) {
-    if (owner->n_props >= RSW_MAX_PROPS)
-      xfail(c, RSW_ERR_LIMIT, "more than %d properties in one object", RSW_MAX_PROPS);
+    if (owner->n_props >= RSW_MAX_NODES)
+      xfail(c, RSW_ERR_LIMIT, "more than %d properties in %s '%s'", RSW_MAX_NODES, owner->type,
+            owner->id ? owner->id : "");
     else
       xfail(c, RSW_ERR_NOMEM, "out of memory");
+    return NULL;
+  }
+  c->bytes += node_mem_prop(p);
+  if (c->bytes > c->lim->max_tree_bytes) {
+    xfail(c, RSW_ERR_LIMIT,
+          "the scene document needs more than its memory cap of %zu bytes (%.0f MiB) here, in %s '%s' "
+          "(opened at %s); split the scene or raise the cap",
+          c->lim->max_tree_bytes, c->lim->max_tree_bytes / 1048576.0, owner->type,
+          owner->id ? owner->id : "", owner->loc);
+    return NULL;
   }
   return p;
 }
@@ -532,6 +555,7 @@ static rsw_status start_object(xml_ctx *c, xml_frame *parent, xml_frame *self) {
   if (!n) return xfail(c, RSW_ERR_NOMEM, "out of memory");
   p->child = n; /* the tree owns n from here on */
   c->n_nodes++;
+  c->bytes += node_mem_self(n);
   if (id) {
     if (!(n->id = rsw_strdup(id))) return xfail(c, RSW_ERR_NOMEM, "out of memory");
     n->id_explicit = true;
@@ -1073,8 +1097,17 @@ static const char *short_name(const char *source_name) {
 rsw_status scene_read_xml(const char *text, size_t len, const char *source_name,
                           const scene_define *defines, size_t n_defines,
                           node **root_out, char **variant_out, rsw_err *err) {
+  return scene_read_xml_limited(text, len, source_name, defines, n_defines, NULL, root_out,
+                                variant_out, err);
+}
+
+rsw_status scene_read_xml_limited(const char *text, size_t len, const char *source_name,
+                                  const scene_define *defines, size_t n_defines,
+                                  const scene_limits *lim, node **root_out, char **variant_out,
+                                  rsw_err *err) {
   xml_ctx c;
   memset(&c, 0, sizeof c);
+  c.lim = lim ? lim : &scene_limits_default;
   c.file = short_name(source_name);
   set_loc(&c, 1);
   rsw_status st = RSW_OK;

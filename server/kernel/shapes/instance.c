@@ -26,6 +26,18 @@ static void member_bbox(const shape *sh, vec3 *lo, vec3 *hi) {
     }
     return;
   }
+  if (sh->geom == GEOM_CYLINDER) {
+    /* The two end circles bound the tube: centre c, axes a = A e_x and
+     * b = A e_y, so coordinate k spans c_k +- sqrt(a_k^2 + b_k^2). */
+    vec3 a = xf_vector(&sh->to_world, v3(1, 0, 0)), b = xf_vector(&sh->to_world, v3(0, 1, 0));
+    vec3 x = v3(sqrt(a.x * a.x + b.x * b.x), sqrt(a.y * a.y + b.y * b.y), sqrt(a.z * a.z + b.z * b.z));
+    for (int e = 0; e < 2; e++) {
+      vec3 c = xf_point(&sh->to_world, v3(0, 0, e));
+      box_add(lo, hi, v3_sub(c, x));
+      box_add(lo, hi, v3_add(c, x));
+    }
+    return;
+  }
   double zr = sh->geom == GEOM_SPHERE ? 1.0 : 0.0;
   for (int c = 0; c < 8; c++)
     box_add(lo, hi, xf_point(&sh->to_world, v3(c & 1 ? 1 : -1, c & 2 ? 1 : -1, c & 4 ? zr : -zr)));

@@ -188,6 +188,23 @@ rsw_status shape_finalize(shape *s, rsw_err *err, const char *where) {
     s->area = RSW_PI * v3_len(v3_cross(ex, ey));
     break;
   }
+  case GEOM_CYLINDER: {
+    /* Uniform (phi, z) sampling is uniform in area only on a circular,
+     * right tube: to_world's x and y columns of equal length, all three
+     * orthogonal (Mitsuba warns and drops the shear; we refuse it). */
+    vec3 ex = xf_vector(&s->to_world, v3(1, 0, 0));
+    vec3 ey = xf_vector(&s->to_world, v3(0, 1, 0));
+    vec3 ez = xf_vector(&s->to_world, v3(0, 0, 1));
+    double lx = v3_len(ex), ly = v3_len(ey), lz = v3_len(ez);
+    if (!(lx > 0) || !(ly > 0) || !(lz > 0) || fabs(lx - ly) > 1e-6 * (lx + ly) ||
+        fabs(v3_dot(ex, ey)) > 1e-6 * lx * ly || fabs(v3_dot(ex, ez)) > 1e-6 * lx * lz ||
+        fabs(v3_dot(ey, ez)) > 1e-6 * ly * lz)
+      return rsw_fail(err, RSW_ERR_INVALID, where,
+                      "cylinder: to_world must keep the tube circular and right (no shear, the same "
+                      "scale across the axis)");
+    s->area = 2.0 * RSW_PI * 0.5 * (lx + ly) * lz;
+    break;
+  }
   }
   if (!(s->area > 0) || !isfinite(s->area))
     return rsw_fail(err, RSW_ERR_INVALID, where, "%s has zero or non-finite area, but is sampled (%s)",
@@ -250,6 +267,15 @@ position_sample shape_sample_position(const shape *s, vec2 u) {
     ps.n = v3_norm(xf_normal(&s->to_world, d));
     ps.uv[0] = u.x;
     ps.uv[1] = u.y;
+    break;
+  }
+  case GEOM_CYLINDER: {
+    double phi = 2.0 * RSW_PI * u.y;
+    double c = cos(phi), sn = sin(phi);
+    ps.p = xf_point(&s->to_world, v3(c, sn, u.x));
+    ps.n = v3_norm(xf_normal(&s->to_world, v3(c, sn, 0)));
+    ps.uv[0] = u.y;
+    ps.uv[1] = u.x;
     break;
   }
   case GEOM_DISK: {
@@ -337,6 +363,25 @@ void shape_fill_interaction(const shape *s, const ray3 *r, const accel_hit *h, s
     if (phi < 0) phi += 2 * RSW_PI;
     si->uv[0] = phi * RSW_INV_2PI;
     si->uv[1] = acos(fmax(-1.0, fmin(1.0, po.z))) * RSW_INV_PI;
+    tangent = xf_vector(&s->to_world, v3(-po.y, po.x, 0));
+    break;
+  }
+  case GEOM_CYLINDER: {
+    /* Back onto the unit tube in object space (removes the float error of
+     * the intersection, like Mitsuba's normal shift). uv = (phi / 2pi, z)
+     * and dp/du along (-y, x, 0), as Mitsuba's cylinder. */
+    vec3 pw = v3_fma(r->o, h->t, r->d);
+    vec3 po = xf_inv_point(&s->to_world, pw);
+    double rr = sqrt(po.x * po.x + po.y * po.y);
+    if (rr > 0) po.x /= rr, po.y /= rr;
+    else po.x = 1, po.y = 0;
+    po.z = fmin(1.0, fmax(0.0, po.z));
+    si->p = xf_point(&s->to_world, po);
+    n = sn = v3_norm(xf_normal(&s->to_world, v3(po.x, po.y, 0)));
+    double phi = atan2(po.y, po.x);
+    if (phi < 0) phi += 2 * RSW_PI;
+    si->uv[0] = phi * RSW_INV_2PI;
+    si->uv[1] = po.z;
     tangent = xf_vector(&s->to_world, v3(-po.y, po.x, 0));
     break;
   }

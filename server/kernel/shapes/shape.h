@@ -17,7 +17,8 @@ typedef struct position_sample {
 
 /* Uniformly sample a point on the shape (world-space area measure):
  * rectangle: to_world (2u.x-1, 2u.y-1, 0); disk: concentric disk;
- * sphere: uniform sphere; mesh: triangle by area then uniform barycentric. */
+ * sphere: uniform sphere; cylinder: (cos 2pi u.y, sin 2pi u.y, u.x);
+ * mesh: triangle by area then uniform barycentric. */
 position_sample shape_sample_position(const shape *s, vec2 u);
 /* Area pdf of shape_sample_position (1/area). */
 double shape_pdf_position(const shape *s);
