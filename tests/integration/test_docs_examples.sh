@@ -87,6 +87,75 @@ while IFS= read -r line; do
 done <"$tmp/blocks.log"
 rm -rf "$tmp/blocks"
 
+# The checker itself catches broken documentation: a failing block, a
+# skip marker without a reason, a block that differs from its file, a
+# transcript whose output differs, a curl that would save an error body,
+# and the README's old job example (plate.bsdf key, hdistant sensor).
+cat >"$tmp/broken.md" <<'MD'
+```sh
+true
+false
+```
+
+<!-- docs-test: skip -->
+```sh
+true
+```
+
+<!-- docs-test: file docs/examples/plate.json -->
+```json
+{"type": "scene"}
+```
+
+```sh
+$ echo one; echo two
+one
+three
+```
+
+```sh
+curl -s localhost:8350/v1/health/live -o live.txt
+```
+
+```sh
+URL=localhost:8350
+id() { sed -n 's/^{"id":"\([^"]*\)".*/\1/p'; }
+PLATE=$(curl -sS --fail-with-body -X POST $URL/v1/scenes -H 'Content-Type: application/json' \
+     --data-binary @proto/examples/hdistant_lambertian.json | id)
+JOB=$(curl -sS --fail-with-body -X POST $URL/v1/scenes/$PLATE/jobs -H 'Content-Type: application/json' -d '{
+  "params": {"plate.bsdf.reflectance.value": {"wavelengths": [400, 700], "values": [0.2, 0.8]}},
+  "contexts": [{"id": "w450", "wavelength": 450}]}' | id)
+curl -sS --fail-with-body -N $URL/v1/jobs/$JOB/events
+```
+
+```sh
+URL=localhost:8350
+id() { sed -n 's/^{"id":"\([^"]*\)".*/\1/p'; }
+PLATE=$(curl -sS --fail-with-body -X POST $URL/v1/scenes -H 'Content-Type: application/json' \
+     --data-binary @proto/examples/hdistant_lambertian.json | id)
+JOB=$(curl -sS --fail-with-body -X POST $URL/v1/scenes/$PLATE/jobs -H 'Content-Type: application/json' -d '{
+  "params": {"surface.bsdf.reflectance.value": {"wavelengths": [400, 700], "values": [0.2, 0.8]}},
+  "contexts": [{"id": "w450", "wavelength": 450}]}' | id)
+curl -sS --fail-with-body -N $URL/v1/jobs/$JOB/events >/dev/null
+curl -sSf $URL/v1/jobs/$JOB/results/w450/hdistant -H 'Accept: image/x-exr' -o w450.exr
+```
+MD
+{
+  python3 "$root/tests/support/docs_check.py" run --root "$root" --bin "$bin" --work "$tmp/broken" \
+    --url "$RAYSWEEP_URL" "${shim[@]}" "$tmp/broken.md"
+  python3 "$root/tests/support/docs_check.py" curl-lint "$tmp/broken.md"
+} >"$tmp/broken.log" 2>&1
+rm -rf "$tmp/broken"
+for want in "broken.md:1: exit 1" "broken.md:7: a docs-test skip marker needs a reason" \
+  "broken.md:12: the block differs from docs/examples/plate.json" \
+  "broken.md:16: \`echo one; echo two\` printed other lines" "broken.md:22: curl without" \
+  "broken.md:26: exit 22: curl: (22) The requested URL returned error: 422" \
+  "broken.md:37: exit 22: curl: (22) The requested URL returned error: 404"; do
+  if grep '^FAIL' "$tmp/broken.log" | grep -qF "$want"; then ok; else
+    bad "docs_check.py did not report '$want': $(tr '\n' ' ' <"$tmp/broken.log" | head -c 800)"
+  fi
+done
+
 # The expected output, "wavelength value" per line.
 awk 'BEGIN { for (w = 400; w <= 700; w += 50) printf "%d %.9g\n", w, (0.2 + 0.6 * (w - 400) / 300) / 3.141592653589793 }' \
   >"$tmp/expected"

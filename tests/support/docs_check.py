@@ -28,9 +28,9 @@ RULES for fenced blocks in Markdown (the visible rules the brief asks for):
         <!-- docs-test: file PATH -->      (the block must equal the file PATH
                                             byte for byte, and the test runs
                                             the file itself), or
-      - one of its commands is a build/bootstrap command (BUILD_RULE below:
+      - one of its commands is a build/bootstrap command (build_rule below:
         `make` with no target or only deps/all/run/test/bench/format/clean,
-        ./bootstrap, tools/deps.sh, apt-get, docker): the project is already
+        any *bootstrap* program, tools/deps.sh, apt-get, docker, sudo): the project is already
         built, and `make run` would start a second daemon on the default
         port. The block is reported as SKIP with the command.
   * Any other block with a `file PATH` marker (C, JSON, Python) must equal
@@ -98,23 +98,33 @@ def logical_lines(text):
     return out
 
 
+def commands(text):
+    """The simple commands of a block, split at ;, &&, ||, | and & (quotes
+    are not parsed: good enough to spot a command word)."""
+    for line in logical_lines(text):
+        code = re.sub(r"(^|\s)#.*$", "", line)
+        for cmd in re.split(r"&&|\|\||[;|&()]|\$\(", code):
+            if cmd.strip():
+                yield cmd.strip()
+
+
 def build_rule(text):
     """The first build/bootstrap command of a block, or None."""
-    for line in logical_lines(text):
-        words = line.split("#", 1)[0].split()
+    for cmd in commands(text):
+        words = cmd.split()
         while words and re.match(r"^[A-Za-z_][A-Za-z0-9_]*=", words[0]):
             words = words[1:]
-        if words[:1] == ["sudo"]:
-            words = words[1:]
+        if words[:1] in (["sudo"], ["su"]):
+            return cmd  # never run anything as root from a test
         if not words:
             continue
         w0 = words[0]
         if w0 == "make":
-            targets = [w for w in words[1:] if not w.startswith("-") and "=" not in w and w not in "&;|"]
+            targets = [w for w in words[1:] if not w.startswith("-") and "=" not in w]
             if all(t in MAKE_BUILD_TARGETS for t in targets):
-                return line.strip()
-        elif w0 in ("./bootstrap", "bootstrap", "tools/deps.sh", "apt-get", "apt", "docker"):
-            return line.strip()
+                return cmd
+        elif "bootstrap" in os.path.basename(w0) or w0 in ("tools/deps.sh", "apt-get", "apt", "docker"):
+            return cmd
     return None
 
 
@@ -234,7 +244,7 @@ def run_blocks(args):
                 continue
             rule = build_rule(text)
             if rule:
-                print(f"SKIP {where}: build/bootstrap command `{rule}` (rule BUILD_RULE in {os.path.relpath(__file__, root)})")
+                print(f"SKIP {where}: build/bootstrap command `{rule}` (rule build_rule in {os.path.relpath(__file__, root)})")
                 continue
             text = re.sub(r"\b(localhost|127\.0\.0\.1):8350\b", hostport, text)
             n_run += 1
@@ -304,8 +314,6 @@ def entries(lines, prog):
             out.append(code)
         elif out and code.startswith(" ") and code.strip():
             out[-1] += " " + code
-        elif not code.strip() and out is not None:
-            pass
     return [norm(e) for e in out]
 
 
