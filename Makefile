@@ -4,6 +4,8 @@
 #   make bench      benchmarks, one JSON object per line
 #   make run        start the daemon with the embedded default scene
 #   make deps       install missing Debian packages (no-op when all present)
+#   make install    raysweepd, raysweep, man pages, headers, libraysweep
+#                   (PREFIX=/usr/local, DESTDIR= for staging)
 # Variables: WERROR=1 adds -Werror; SAN=1 builds into build-san/.
 
 SHELL := /bin/bash
