@@ -4,6 +4,8 @@
 #   make bench      benchmarks, one JSON object per line
 #   make run        start the daemon with the embedded default scene
 #   make deps       install missing Debian packages (no-op when all present)
+#   make install    raysweepd, raysweep, man pages, headers, libraysweep
+#                   (PREFIX=/usr/local, DESTDIR= for staging)
 # Variables: WERROR=1 adds -Werror; SAN=1 builds into build-san/.
 
 SHELL := /bin/bash
@@ -61,12 +63,19 @@ CLIENT_A := $(BUILD)/lib/libraysweep.a
 CLIENT_SO := $(BUILD)/lib/libraysweep.so
 CLIENT_PC := $(BUILD)/lib/pkgconfig/raysweep.pc
 CLIENT_LIBS := -lcurl -lcjson -lexpat -lcrypto -lOpenEXRCore -lpthread -lm
-CLIENT_HEADERS := include/raysweep/client.h include/raysweep/status.h
+CLIENT_HEADERS := include/raysweep/client.h include/raysweep/status.h include/raysweep/version.h \
+  include/raysweep/plugin.h
 PREFIX ?= /usr/local
+# The one version (include/raysweep/version.h), for raysweep.pc.
+VERSION := $(shell sed -n 's/^\#define RSW_VERSION "\([^"]*\)"$$/\1/p' include/raysweep/version.h)
+ifeq ($(VERSION),)
+$(error cannot read RSW_VERSION from include/raysweep/version.h)
+endif
+MAN_PAGES := $(sort $(wildcard docs/man/*.1))
 # raysweep.pc for a prefix ($(1)), as printf arguments, one line each.
 client_pc_lines = 'prefix=$(1)' 'includedir=$${prefix}/include' 'libdir=$${prefix}/lib' '' \
   'Name: raysweep' 'Description: C client library for raysweepd, the raysweep radiometric kernel daemon' \
-  'Version: 0.1.0' 'Cflags: -I$${includedir}' \
+  'Version: $(VERSION)' 'Cflags: -I$${includedir}' \
   'Libs: -L$${libdir} -lraysweep' 'Libs.private: -lcurl -lcjson -lexpat -lcrypto -lOpenEXRCore -lpthread -lm'
 
 .PHONY: all deps test bench run clean format install
@@ -110,7 +119,7 @@ $(CLIENT_SO): $(CLIENT_OBJ) client/lib/libraysweep.map
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -shared -Wl,-soname,libraysweep.so -Wl,--version-script=client/lib/libraysweep.map -o $@ $(CLIENT_OBJ) $(CLIENT_LIBS)
 
-$(CLIENT_PC):
+$(CLIENT_PC): include/raysweep/version.h
 	@mkdir -p $(dir $@)
 	printf '%s\n' $(call client_pc_lines,$(PREFIX)) > $@
 
@@ -119,8 +128,15 @@ $(BUILD)/tests/test_client: $(BUILD)/obj/tests/integration/test_client.o $(CLIEN
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $< $(CLIENT_A) $(CLIENT_LIBS)
 
-install: $(CLIENT_A) $(CLIENT_SO)
-	install -d $(DESTDIR)$(PREFIX)/include/raysweep $(DESTDIR)$(PREFIX)/lib/pkgconfig
+# make install [PREFIX=/usr/local] [DESTDIR=staging root]: raysweepd and
+# raysweep in bin/, their man pages in share/man/man1/, the client and
+# plugin headers, libraysweep.{a,so} and raysweep.pc (whose prefix is
+# PREFIX, not DESTDIR, for packaging).
+install: $(BUILD)/bin/raysweepd $(BUILD)/bin/raysweep $(CLIENT_A) $(CLIENT_SO)
+	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(PREFIX)/share/man/man1 \
+	  $(DESTDIR)$(PREFIX)/include/raysweep $(DESTDIR)$(PREFIX)/lib/pkgconfig
+	install -m 755 $(BUILD)/bin/raysweepd $(BUILD)/bin/raysweep $(DESTDIR)$(PREFIX)/bin/
+	install -m 644 $(MAN_PAGES) $(DESTDIR)$(PREFIX)/share/man/man1/
 	install -m 644 $(CLIENT_HEADERS) $(DESTDIR)$(PREFIX)/include/raysweep/
 	install -m 644 $(CLIENT_A) $(DESTDIR)$(PREFIX)/lib/
 	install -m 755 $(CLIENT_SO) $(DESTDIR)$(PREFIX)/lib/

@@ -1,11 +1,11 @@
 /* raysweepd: the radiometric computation daemon.
  *
- *   raysweepd render SCENE [-D name=value]... [--sensor ID] [--spp N]
- *                          [--seed S] [--wavelength NM] [--threads N]
- *                          [--variant mono|rgb] [--plugin-dir DIR] -o OUT.exr
- *   raysweepd version
+ *   raysweepd render | params | serve | routes | version   (see `commands`)
  *
- * Subcommands are a const table (redis' command table). Bad input exits
+ * Subcommands are a const table (redis' command table); each row holds its
+ * usage line and help text, which `raysweepd COMMAND --help`, the README's
+ * usage blocks and docs/man/raysweepd.1 must agree with
+ * (tests/integration/test_usage.sh compares them). Bad input exits
  * non-zero with a message naming the flag, file or document place. */
 #include <errno.h>
 #include <limits.h>
@@ -21,15 +21,17 @@
 #include "kernel/scene/params.h"
 #include "kernel/scene/scene.h"
 #include "raysweep/status.h"
+#include "raysweep/version.h"
 #include "serve.h"
 
-#define RSW_VERSION "0.1.0"
 #define MAX_DEFINES 256
 #define MAX_SETS 1024
 
 typedef struct command {
   const char *name;
-  const char *usage;
+  const char *usage;   /* after "raysweepd ", one line (wrapped when printed) */
+  const char *summary; /* one line */
+  const char *help;    /* the options, one "  FLAG  what" per line, or "" */
   int (*run)(int argc, char **argv);
 } command;
 
@@ -361,26 +363,102 @@ out:
 }
 
 static int cmd_version(int argc, char **argv) {
-  (void)argc, (void)argv;
+  if (argc > 1) return usage_error("version", "takes no arguments (got '%s')", argv[1]);
   printf("raysweepd %s (variants: mono, rgb)\n", RSW_VERSION);
   return 0;
 }
 
 static const command commands[] = {
-    {"render", "render SCENE [-D name=value]... [--set KEY=VALUE]... [--sensor ID] [--spp N] [--seed S] "
-               "[--wavelength NM] [--threads N] [--variant mono|rgb] [--plugin-dir DIR] -o OUT.exr",
+    {"render",
+     "render SCENE [-D name=value]... [--set KEY=VALUE]... [--sensor ID] [--spp N] [--seed S] "
+     "[--wavelength NM] [--threads N] [--variant mono|rgb] [--plugin-dir DIR] -o OUT.exr",
+     "load a scene, apply parameter updates, render one sensor to OpenEXR",
+     "  SCENE               a .xml (Mitsuba XML) or .json scene file\n"
+     "  -o, --output OUT    the film; written next to it and renamed once complete\n"
+     "  -D name=value       sets an XML $name parameter (not for JSON scenes)\n"
+     "  --set KEY=VALUE     a parameter update after loading; VALUE is JSON (all --set form one update)\n"
+     "  --sensor ID         a sensor id or index (default: the first sensor)\n"
+     "  --spp N             samples per pixel (default: the sensor's sampler sample_count)\n"
+     "  --seed S            an integer >= 0, added to the sampler's seed (default 0)\n"
+     "  --wavelength NM     the render wavelength in nm, mono variant (default 550)\n"
+     "  --threads N         1 to 256 (default: every online core; the film does not depend on N)\n"
+     "  --variant mono|rgb  overrides the document's variant (default rgb)\n"
+     "  --plugin-dir DIR    load every *.so in DIR as an environment plugin first\n"
+     "Exit status: 0 ok, 1 the scene failed to load or render, 2 command-line mistake.\n",
      cmd_render},
-    {"params", "params SCENE [-D name=value]... [--match GLOB|TYPE:ID:PATH] [--class spectral|geometric|none] "
-               "[--variant mono|rgb] [--json]",
+    {"params",
+     "params SCENE [-D name=value]... [--match GLOB|TYPE:ID:PATH] [--class spectral|geometric|none] "
+     "[--variant mono|rgb] [--json]",
+     "print a scene's parameter table (key, type, class, shape, value, aliases)",
+     "  SCENE               a .xml (Mitsuba XML) or .json scene file\n"
+     "  -D name=value       sets an XML $name parameter (not for JSON scenes)\n"
+     "  --match PATTERN     a glob over keys ('*' also matches dots) or an Eradiate search TYPE:ID:PATH\n"
+     "  --class CLASS       only keys of this update class: spectral, geometric or none\n"
+     "  --variant mono|rgb  overrides the document's variant (default rgb)\n"
+     "  --json              a JSON array instead of the table\n",
      cmd_params},
-    {"serve", RSW_SERVE_USAGE, cmd_serve},
-    {"routes", "routes", cmd_routes},
-    {"version", "version", cmd_version},
+    {"serve", RSW_SERVE_USAGE, "the HTTP/JSON daemon (contract: proto/openapi.yaml)",
+     "  --listen HOST:PORT  default 127.0.0.1:8350; port 0 picks a free one (see --port-file)\n"
+     "  --threads N         render threads, 1 to 256 (default: every online core)\n"
+     "  --scene FILE        preload a scene (repeatable; default: the embedded default scene)\n"
+     "  --data-root DIR     plain file names in scenes resolve inside DIR (default: none, blobs only)\n"
+     "  --blob-dir DIR      where uploaded blobs are kept (default: a temporary directory)\n"
+     "  --token-file F      require 'Authorization: Bearer <token>' (needed off loopback)\n"
+     "  --max-body BYTES    largest request body, e.g. 1048576 or 1024k (default 256M)\n"
+     "  --max-queue N       most queued jobs before 429 (default 64)\n"
+     "  --result-ttl S      seconds job results are kept (default 3600)\n"
+     "  --port-file F       write the port listened on to F once listening\n"
+     "  --plugin-dir DIR    load every *.so in DIR as an environment plugin at start\n"
+     "Stops on SIGTERM or SIGINT.\n",
+     cmd_serve},
+    {"routes", "routes", "print the routes the daemon serves, one \"METHOD PATH\" per line", "", cmd_routes},
+    {"version", "version", "print the version (also raysweepd --version)", "", cmd_version},
 };
+#define N_COMMANDS (sizeof commands / sizeof commands[0])
+
+/* Print "PREFIX raysweepd USAGE", wrapped before column 100 at spaces outside
+ * brackets and parentheses, continuation lines aligned after "raysweepd CMD ". */
+static void print_usage_line(FILE *f, const char *prefix, const char *usage) {
+  const char *sp = strchr(usage, ' ');
+  int name_len = sp ? (int)(sp - usage) : (int)strlen(usage);
+  int indent = (int)strlen(prefix) + (int)strlen("raysweepd ") + name_len + 1;
+  int col = fprintf(f, "%sraysweepd %.*s", prefix, name_len, usage);
+  const char *p = sp;
+  while (p && *p) {
+    while (*p == ' ') p++;
+    const char *q = p; /* the next word: up to a space at depth 0 */
+    int depth = 0;
+    bool joined = false;
+    while (*q && (*q != ' ' || depth > 0)) {
+      if (*q == '[' || *q == '(') depth++;
+      if ((*q == ']' || *q == ')') && depth > 0) depth--;
+      q++;
+      /* A flag and its value stay together ("-o OUT.exr"). */
+      if (*q == ' ' && depth == 0 && *p == '-' && !joined && q[1] && !strchr("-[(", q[1])) q++, joined = true;
+    }
+    if (q == p) break;
+    if (col + 1 + (q - p) > 100) col = fprintf(f, "\n%*s", indent, "") - 1;
+    else col += fprintf(f, " ");
+    col += fprintf(f, "%.*s", (int)(q - p), p);
+    p = q;
+  }
+  fputc('\n', f);
+}
 
 static void usage(FILE *f) {
   fprintf(f, "usage:\n");
-  for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++) fprintf(f, "  raysweepd %s\n", commands[i].usage);
+  for (size_t i = 0; i < N_COMMANDS; i++) print_usage_line(f, "  ", commands[i].usage);
+  fprintf(f, "  raysweepd --help | COMMAND --help | --version\n");
+}
+
+static void command_help(const command *c) {
+  print_usage_line(stdout, "usage: ", c->usage);
+  printf("\n%s\n", c->summary);
+  if (c->help[0]) printf("\n%s", c->help);
+}
+
+static bool is_help(const char *a) {
+  return strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0;
 }
 
 int main(int argc, char **argv) {
@@ -388,13 +466,24 @@ int main(int argc, char **argv) {
     usage(stderr);
     return 2;
   }
-  if (strcmp(argv[1], "-h") == 0 || strcmp(argv[1], "--help") == 0 || strcmp(argv[1], "help") == 0) {
+  if (strcmp(argv[1], "--version") == 0 || strcmp(argv[1], "-V") == 0) return cmd_version(1, argv + 1);
+  bool help = is_help(argv[1]) || strcmp(argv[1], "help") == 0;
+  const char *name = help ? (argc > 2 ? argv[2] : NULL) : argv[1];
+  if (help && !name) {
     usage(stdout);
     return 0;
   }
-  for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
-    if (strcmp(argv[1], commands[i].name) == 0) return commands[i].run(argc - 1, argv + 1);
-  fprintf(stderr, "raysweepd: unknown command '%s'\n", argv[1]);
+  for (size_t i = 0; i < N_COMMANDS; i++) {
+    if (strcmp(name, commands[i].name) != 0) continue;
+    /* `raysweepd help CMD`, or --help / -h anywhere after the command. */
+    for (int k = 2; !help && k < argc; k++) help = is_help(argv[k]);
+    if (help) {
+      command_help(&commands[i]);
+      return 0;
+    }
+    return commands[i].run(argc - 1, argv + 1);
+  }
+  fprintf(stderr, "raysweepd: unknown command '%s'\n", name);
   usage(stderr);
   return 2;
 }

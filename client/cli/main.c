@@ -3,7 +3,10 @@
  * Commands are one const table (redis' command table); the generic checks
  * (global options, --help, option syntax, positional counts, the client
  * connection settings) run in main before any handler, so a handler only
- * sees a well-formed command line. */
+ * sees a well-formed command line. The usage strings and summaries below are
+ * what `raysweep --help` and `raysweep COMMAND --help` print; the README's
+ * usage block and docs/man/raysweep.1 must agree with them
+ * (tests/integration/test_usage.sh compares them). */
 #include <errno.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -12,6 +15,7 @@
 #include <unistd.h>
 
 #include "cli.h"
+#include "raysweep/version.h"
 
 #define DEFAULT_URL "http://127.0.0.1:8350"
 
@@ -63,6 +67,7 @@ static const char global_help[] =
     "  --json             machine-readable output on stdout\n"
     "  --quiet, -q        no progress or informational messages on stderr\n"
     "  --help, -h         this help; `raysweep COMMAND --help` for one command\n"
+    "  --version, -V      print the version and exit\n"
     "\n"
     "Exit codes:\n"
     "  0  ok\n"
@@ -77,12 +82,39 @@ static void command_name(const cli_command *c, char *buf, size_t n) {
   snprintf(buf, n, "%s%s%s", c->group, c->name ? " " : "", c->name ? c->name : "");
 }
 
+/* Print "PREFIX raysweep NAME ARGS", wrapped before column 100 at spaces
+ * outside brackets and parentheses (a flag keeps its value: "-o DIR"), with
+ * continuation lines aligned after "raysweep NAME ". */
+static void print_usage(FILE *f, const char *prefix, const char *name, const char *args) {
+  int indent = (int)strlen(prefix) + (int)strlen("raysweep ") + (int)strlen(name) + 1;
+  int col = fprintf(f, "%sraysweep %s", prefix, name);
+  const char *p = args;
+  while (*p) {
+    while (*p == ' ') p++;
+    const char *q = p;
+    int depth = 0;
+    bool joined = false;
+    while (*q && (*q != ' ' || depth > 0)) {
+      if (*q == '[' || *q == '(') depth++;
+      if ((*q == ']' || *q == ')') && depth > 0) depth--;
+      q++;
+      if (*q == ' ' && depth == 0 && *p == '-' && !joined && q[1] && !strchr("-[(", q[1])) q++, joined = true;
+    }
+    if (q == p) break;
+    if (col + 1 + (q - p) > 100) col = fprintf(f, "\n%*s", indent, "") - 1;
+    else col += fprintf(f, " ");
+    col += fprintf(f, "%.*s", (int)(q - p), p);
+    p = q;
+  }
+  fputc('\n', f);
+}
+
 static void usage_list(FILE *f) {
   fprintf(f, "usage: raysweep [global options] COMMAND [args]\n\nCommands:\n");
   for (size_t i = 0; i < N_COMMANDS; i++) {
     char name[32];
     command_name(&commands[i], name, sizeof name);
-    fprintf(f, "  raysweep %s%s%s\n", name, commands[i].args[0] ? " " : "", commands[i].args);
+    print_usage(f, "  ", name, commands[i].args);
     fprintf(f, "      %s\n", commands[i].summary);
   }
   fputc('\n', f);
@@ -92,7 +124,8 @@ static void usage_list(FILE *f) {
 static void command_help(const cli_command *c) {
   char name[32];
   command_name(c, name, sizeof name);
-  printf("usage: raysweep %s%s%s\n\n%s\n", name, c->args[0] ? " " : "", c->args, c->summary);
+  print_usage(stdout, "usage: ", name, c->args);
+  printf("\n%s\n", c->summary);
   if (c->opts[0].name) {
     printf("\nOptions:\n");
     for (const cli_opt *o = c->opts; o->name; o++) {
@@ -208,7 +241,7 @@ static int read_token(const cli_ctx *ctx, const char *token_file, char **out) {
 int main(int argc, char **argv) {
   cli_ctx ctx = {.cmd = "", .stderr_tty = isatty(STDERR_FILENO) == 1};
   const char *server = NULL, *token_file = NULL;
-  bool help = false;
+  bool help = false, version = false;
   /* Global options anywhere before "--": take them out of argv. */
   char **rest = calloc((size_t)argc + 1, sizeof *rest);
   int n_rest = 0;
@@ -225,6 +258,8 @@ int main(int argc, char **argv) {
       ctx.quiet = true;
     } else if (strcmp(arg, "--help") == 0 || strcmp(arg, "-h") == 0) {
       help = true;
+    } else if (strcmp(arg, "--version") == 0 || strcmp(arg, "-V") == 0) {
+      version = true;
     } else if (strcmp(arg, "--server") == 0 || strcmp(arg, "--token-file") == 0) {
       if (i + 1 >= argc) {
         free(rest);
@@ -240,6 +275,11 @@ int main(int argc, char **argv) {
     }
   }
   int rc;
+  if (version && !help) {
+    printf("raysweep %s\n", RSW_VERSION);
+    free(rest);
+    return CLI_OK;
+  }
   if (n_rest > 0 && strcmp(rest[0], "help") == 0) { /* "raysweep help [CMD]" */
     help = true;
     memmove(rest, rest + 1, (size_t)(n_rest - 1) * sizeof *rest);
@@ -266,8 +306,12 @@ int main(int argc, char **argv) {
       printf("raysweep %s subcommands:\n", rest[0]);
       for (size_t i = 0; i < N_COMMANDS; i++)
         if (strcmp(commands[i].group, rest[0]) == 0)
-          printf("  raysweep %s %s%s%s\n      %s\n", commands[i].group, commands[i].name,
-                 commands[i].args[0] ? " " : "", commands[i].args, commands[i].summary);
+        {
+          char sub[32];
+          command_name(&commands[i], sub, sizeof sub);
+          print_usage(stdout, "  ", sub, commands[i].args);
+          printf("      %s\n", commands[i].summary);
+        }
       free(rest);
       return CLI_OK;
     }

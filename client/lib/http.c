@@ -12,6 +12,7 @@
 #include <strings.h>
 
 #include "internal.h"
+#include "raysweep/version.h"
 
 /* curl_global_init once per process: it is not thread-safe on every curl
  * build, and rsw_client_new promises to be. */
@@ -142,7 +143,7 @@ static rsw_status setup(rsw_client *c, const http_req *q, exchange *x, char *url
   curl_easy_setopt(h, CURLOPT_HTTPHEADER, x->headers);
   curl_easy_setopt(h, CURLOPT_ERRORBUFFER, x->errbuf);
   curl_easy_setopt(h, CURLOPT_NOSIGNAL, 1L);
-  curl_easy_setopt(h, CURLOPT_USERAGENT, "libraysweep/0.1.0");
+  curl_easy_setopt(h, CURLOPT_USERAGENT, "libraysweep/" RSW_VERSION);
   curl_easy_setopt(h, CURLOPT_CONNECTTIMEOUT_MS, (long)(c->connect_timeout_s * 1000.0));
   curl_easy_setopt(h, CURLOPT_HEADERFUNCTION, on_header);
   curl_easy_setopt(h, CURLOPT_HEADERDATA, &x->hdr);

@@ -1,6 +1,11 @@
 #!/bin/sh
 # Wavelength sweep of a Lambertian plate with the raysweep CLI.
 set -e
+command -v raysweep >/dev/null || {
+  echo "sweep.sh: raysweep is not on PATH: run 'make install' (see Install in README.md)" \
+       "or export PATH=\"\$PWD/../../build/bin:\$PATH\" from docs/examples" >&2
+  exit 127
+}
 SCENE=$(raysweep scene push plate.json)
 raysweep sweep "$SCENE" --grid wavelength=400:700:50 --format json -o sweep \
   --set 'plate.bsdf.reflectance.value={"wavelengths": [400, 700], "values": [0.2, 0.8]}'

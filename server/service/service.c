@@ -16,9 +16,8 @@
 #include "../kernel/core/warp.h"
 #include "../kernel/plugins/env_plugin.h"
 #include "../kernel/scene/loader.h"
+#include "raysweep/version.h"
 #include "service_internal.h"
-
-#define RSW_VERSION "0.2.0"
 
 /* ---- small helpers ------------------------------------------------------------- */
 

@@ -1,5 +1,11 @@
 #!/usr/bin/env bash
-# Runs the README's client examples (docs/examples/: C with libraysweep, the
+# The documentation is executable. Part 1 runs every shell block of
+# README.md and docs/**/*.md against a real daemon on an ephemeral loopback
+# port (tests/support/docs_check.py `run`: the rules for what runs, what is
+# skipped and why, are in its header; blocks that copy a file are compared
+# with it byte for byte), and checks that every curl in them and in
+# docs/examples/*.sh fails on an HTTP error instead of saving the error
+# body as a film. Part 2 runs the README's client examples (docs/examples/: C with libraysweep, the
 # raysweep CLI, curl, Python) against the real daemon on an ephemeral
 # loopback port, so they cannot rot. Each must print the wavelengths 400,
 # 450, ..., 700 nm and, for the plate of docs/examples/plate.json (a
@@ -8,6 +14,8 @@
 #   L(w) = rho(w) * E * cos(0) / pi,   rho(w) = 0.2 + 0.6 * (w - 400) / 300
 # (the job-level tabulated reflectance, linear between its two points), to
 # 1e-5 relative. The README must hold every example verbatim.
+# Every docs/examples/*.sh runs (with build/bin on PATH), and sweep.sh says
+# how to get raysweep on PATH when it is not.
 # Environment: RSW_BIN_DIR (default build/bin: raysweepd, raysweep; the
 # library is looked for in RSW_BIN_DIR/../lib), SAN=1 (the library is built
 # with ASan+UBSan, so the C example is too). Ends with the summary line
@@ -53,6 +61,100 @@ if [ ! -s "$tmp/port" ]; then
 fi
 export RAYSWEEP_URL="http://127.0.0.1:$(cat "$tmp/port")"
 unset RAYSWEEP_TOKEN
+
+# ---- part 1: the shell blocks of README.md and docs/ -----------------------------
+# (Before the client examples: the README's walk-through starts from the
+# daemon's default scene.) Under SAN=1 the library is built with ASan, so
+# the blocks' `cc` links with the same flags (a shim first on PATH).
+shim=()
+if [ "${SAN:-}" = 1 ]; then
+  mkdir -p "$tmp/shim"
+  printf '#!/bin/sh\nexec /usr/bin/cc -fsanitize=address,undefined -fno-omit-frame-pointer "$@"\n' >"$tmp/shim/cc"
+  chmod +x "$tmp/shim/cc"
+  shim=(--path-prefix "$tmp/shim")
+fi
+python3 "$root/tests/support/docs_check.py" run --root "$root" --bin "$bin" --work "$tmp/blocks" \
+  --url "$RAYSWEEP_URL" "${shim[@]}" >"$tmp/blocks.log" 2>&1
+python3 "$root/tests/support/docs_check.py" curl-lint README.md $(find docs -name '*.md' | sort) docs/examples/*.sh \
+  >>"$tmp/blocks.log" 2>&1
+while IFS= read -r line; do
+  case $line in
+    PASS*) ok; [ -n "${RSW_VERBOSE:-}" ] && echo "$line" ;;
+    SKIP*) echo "$line" ;;
+    FAIL*) bad "${line#FAIL }" ;;
+    *) bad "docs_check.py: $line" ;;
+  esac
+done <"$tmp/blocks.log"
+rm -rf "$tmp/blocks"
+
+# The checker itself catches broken documentation: a failing block, a
+# skip marker without a reason, a block that differs from its file, a
+# transcript whose output differs, a curl that would save an error body,
+# and the README's old job example (plate.bsdf key, hdistant sensor).
+cat >"$tmp/broken.md" <<'MD'
+```sh
+true
+false
+```
+
+<!-- docs-test: skip -->
+```sh
+true
+```
+
+<!-- docs-test: file docs/examples/plate.json -->
+```json
+{"type": "scene"}
+```
+
+```sh
+$ echo one; echo two
+one
+three
+```
+
+```sh
+curl -s localhost:8350/v1/health/live -o live.txt
+```
+
+```sh
+URL=localhost:8350
+id() { sed -n 's/^{"id":"\([^"]*\)".*/\1/p'; }
+PLATE=$(curl -sS --fail-with-body -X POST $URL/v1/scenes -H 'Content-Type: application/json' \
+     --data-binary @proto/examples/hdistant_lambertian.json | id)
+JOB=$(curl -sS --fail-with-body -X POST $URL/v1/scenes/$PLATE/jobs -H 'Content-Type: application/json' -d '{
+  "params": {"plate.bsdf.reflectance.value": {"wavelengths": [400, 700], "values": [0.2, 0.8]}},
+  "contexts": [{"id": "w450", "wavelength": 450}]}' | id)
+curl -sS --fail-with-body -N $URL/v1/jobs/$JOB/events
+```
+
+```sh
+URL=localhost:8350
+id() { sed -n 's/^{"id":"\([^"]*\)".*/\1/p'; }
+PLATE=$(curl -sS --fail-with-body -X POST $URL/v1/scenes -H 'Content-Type: application/json' \
+     --data-binary @proto/examples/hdistant_lambertian.json | id)
+JOB=$(curl -sS --fail-with-body -X POST $URL/v1/scenes/$PLATE/jobs -H 'Content-Type: application/json' -d '{
+  "params": {"surface.bsdf.reflectance.value": {"wavelengths": [400, 700], "values": [0.2, 0.8]}},
+  "contexts": [{"id": "w450", "wavelength": 450}]}' | id)
+curl -sS --fail-with-body -N $URL/v1/jobs/$JOB/events >/dev/null
+curl -sSf $URL/v1/jobs/$JOB/results/w450/hdistant -H 'Accept: image/x-exr' -o w450.exr
+```
+MD
+{
+  python3 "$root/tests/support/docs_check.py" run --root "$root" --bin "$bin" --work "$tmp/broken" \
+    --url "$RAYSWEEP_URL" "${shim[@]}" "$tmp/broken.md"
+  python3 "$root/tests/support/docs_check.py" curl-lint "$tmp/broken.md"
+} >"$tmp/broken.log" 2>&1
+rm -rf "$tmp/broken"
+for want in "broken.md:1: exit 1" "broken.md:7: a docs-test skip marker needs a reason" \
+  "broken.md:12: the block differs from docs/examples/plate.json" \
+  "broken.md:16: \`echo one; echo two\` printed other lines" "broken.md:22: curl without" \
+  "broken.md:26: exit 22: curl: (22) The requested URL returned error: 422" \
+  "broken.md:37: exit 22: curl: (22) The requested URL returned error: 404"; do
+  if grep '^FAIL' "$tmp/broken.log" | grep -qF "$want"; then ok; else
+    bad "docs_check.py did not report '$want': $(tr '\n' ' ' <"$tmp/broken.log" | head -c 800)"
+  fi
+done
 
 # The expected output, "wavelength value" per line.
 awk 'BEGIN { for (w = 400; w <= 700; w += 50) printf "%d %.9g\n", w, (0.2 + 0.6 * (w - 400) / 300) / 3.141592653589793 }' \
@@ -122,16 +224,22 @@ else
   bad "make install PREFIX=$tmp/prefix: $(tail -n 10 "$tmp/install.log")"
 fi
 
-# ---- the raysweep CLI -----------------------------------------------------------
+# ---- every shell example (the raysweep CLI, curl), and Python ---------------------
 if [ ! -x "$bin/raysweep" ]; then
-  bad "sweep.sh: $bin/raysweep is missing (build the CLI first)"
-else
-  run sweep.sh env PATH="$bin:$PATH" sh ./sweep.sh
+  bad "$bin/raysweep is missing (build the CLI first)"
 fi
-
-# ---- curl and Python ------------------------------------------------------------
-run sweep_curl.sh sh ./sweep_curl.sh
+for f in "$examples"/*.sh; do
+  run "$(basename "$f")" env PATH="$bin:$PATH" sh "./$(basename "$f")"
+done
 run sweep.py python3 ./sweep.py
+# Without raysweep on PATH, sweep.sh says how to get it (not "raysweep: not found").
+mkdir -p "$tmp/nocli/bin" && cp -R "$examples" "$tmp/nocli/work"
+for t in sed cat curl; do ln -s "$(command -v $t)" "$tmp/nocli/bin/$t"; done
+(cd "$tmp/nocli/work" && PATH=$tmp/nocli/bin "$(command -v sh)" ./sweep.sh) >/dev/null 2>"$tmp/nocli.err"
+rc=$?
+if [ "$rc" -ne 0 ] && grep -q "make install" "$tmp/nocli.err"; then ok; else
+  bad "sweep.sh without raysweep on PATH: exit $rc, '$(head -c 200 "$tmp/nocli.err")' (want a hint to make install)"
+fi
 
 # ---- the outputs agree with each other -------------------------------------------
 # (Each was checked against rho/pi above; here the four lists must also name

@@ -3,7 +3,7 @@
  * the x > 0 hemisphere at wavelengths above 500 nm and from the x < 0
  * hemisphere below 500 nm, zero otherwise. A grey Lambertian object
  * turns orange on one side and blue on the other.
- * Build: cc -shared -fPIC -I include -o test.so two_hemispheres.c */
+ * Build: cc -shared -fPIC -I include -o test.so tests/plugins/two_hemispheres.c */
 #include <raysweep/plugin.h>
 #include <stdlib.h>
 
