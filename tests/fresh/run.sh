@@ -75,12 +75,16 @@ work=$(mktemp -d /var/tmp/raysweep-fresh.XXXXXX)
 root=$work/root
 mounts=()
 daemon=
+child=
 cleanup() {
   local rc=$?
   set +e
-  if [ -n "$daemon" ] && kill -0 "$daemon" 2>/dev/null; then
-    kill -TERM -- "-$daemon" 2>/dev/null; sleep 2; kill -KILL -- "-$daemon" 2>/dev/null
-  fi
+  local g
+  for g in $child $daemon; do
+    if kill -0 "$g" 2>/dev/null; then
+      kill -TERM -- "-$g" 2>/dev/null; sleep 2; kill -KILL -- "-$g" 2>/dev/null
+    fi
+  done
   local i
   for ((i = ${#mounts[@]} - 1; i >= 0; i--)); do
     umount "${mounts[i]}" 2>/dev/null || umount -l "${mounts[i]}"
@@ -123,6 +127,17 @@ in_root() {
   chroot "$root" /usr/bin/env -i HOME=/root LANG=C.UTF-8 TERM=dumb \
     PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin /bin/sh -c "cd /root/raysweep && $1"
 }
+# in_root_long LOG CMD: the same in a session of its own, waited for so that a
+# signal to this script is handled at once (cleanup stops the session).
+in_root_long() {
+  local log=$1 rc=0
+  shift
+  setsid bash -c "$(declare -f in_root); root='$root'; in_root \"\$1\"" _ "$1" >"$log" 2>&1 &
+  child=$!
+  wait "$child" || rc=$?
+  child=
+  return "$rc"
+}
 for tool in make cc; do
   ! in_root "command -v $tool" >/dev/null || die "the fresh root already has $tool: not a fresh machine"
 done
@@ -131,7 +146,7 @@ done
 say "./make -j2 test (log: $work/test.log)"
 t0=$(date +%s)
 rc=0
-in_root './make -j2 test' >"$work/test.log" 2>&1 || rc=$?
+in_root_long "$work/test.log" './make -j2 test' || rc=$?
 t_test=$(($(date +%s) - t0))
 summary=$(grep -E '^[0-9]+ passed, [0-9]+ failed$' "$work/test.log" | tail -n 1 || true)
 grep -E '^FAIL ' "$work/test.log" | head -n 20 || true
@@ -151,7 +166,7 @@ grep -q '^deps: installed ' "$work/test.log" || die "./make -j2 test did not ins
 in_root 'apt-get remove -y -qq libmicrohttpd-dev >/dev/null 2>&1; touch server/http/server.c'
 ! in_root 'dpkg -s libmicrohttpd-dev >/dev/null 2>&1' || die "could not remove libmicrohttpd-dev"
 rc=0
-in_root 'make -j2' >"$work/race.log" 2>&1 || rc=$?
+in_root_long "$work/race.log" 'make -j2' || rc=$?
 first_cc=$(grep -n -m1 -E '^cc .* -c ' "$work/race.log" | cut -d: -f1 || true)
 installed=$(grep -n -m1 '^deps: installed .*libmicrohttpd-dev' "$work/race.log" | cut -d: -f1 || true)
 if [ "$rc" -ne 0 ] || [ -z "$installed" ] || [ -z "$first_cc" ] || [ "$installed" -gt "$first_cc" ]; then
