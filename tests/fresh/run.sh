@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The README's two commands on a fresh Debian 12, for real (.ci/run runs this;
-# `make test` does not). As root:
+# `make test` does not). As root (through sudo when not root):
 #   1. a clean bookworm root file system: debootstrap --variant=minbase, plus
 #      git and ca-certificates only (the tarball is cached between runs in
 #      $RSW_FRESH_CACHE, default /var/cache/raysweep-fresh, for 30 days);
@@ -31,7 +31,10 @@ die() {
   exit 1
 }
 
-[ "$(id -u)" = 0 ] || die "must run as root (debootstrap, mount, chroot)"
+if [ "$(id -u)" != 0 ]; then
+  command -v sudo >/dev/null || die "must run as root (debootstrap, mount, chroot), and sudo is not installed"
+  exec sudo RSW_FRESH_CACHE="${RSW_FRESH_CACHE:-}" RSW_FRESH_MIRROR="${RSW_FRESH_MIRROR:-}" "$0" "$@"
+fi
 # A private mount namespace: the mounts below cannot leak out of this process.
 if [ -z "${RSW_FRESH_NS:-}" ] && command -v unshare >/dev/null && unshare --mount --propagation private true 2>/dev/null; then
   RSW_FRESH_NS=1 exec unshare --mount --propagation private "$0" "$@"
