@@ -182,7 +182,8 @@ def all_refs(node, where="#"):
 # ---- JSON Schema 2020-12, strictly -----------------------------------------
 # ajv's strict mode, which the earlier Node checker used: an unknown keyword
 # (a typo such as `minlenght`) is an error, `required` names declared
-# properties, and no keyword contradicts the schema's `type`. OpenAPI adds
+# properties, no keyword contradicts the schema's `type`, and a tuple
+# (prefixItems) is closed. OpenAPI adds
 # discriminator, xml, externalDocs and example to the vocabulary.
 SUBSCHEMA = {"not", "if", "then", "else", "items", "contains", "additionalProperties", "propertyNames",
              "unevaluatedItems", "unevaluatedProperties", "contentSchema"}
@@ -234,6 +235,10 @@ def strict_problems(schema, where):
         elif k in SUBSCHEMA_MAP and isinstance(v, dict):
             for name, s in v.items():
                 problems += strict_problems(s, f"{where}/{k}/{name}")
+    if isinstance(schema.get("prefixItems"), list):
+        n = len(schema["prefixItems"])
+        if schema.get("minItems") != n or not (schema.get("items") is False or schema.get("maxItems") == n):
+            problems.append(f"{where}: prefixItems without minItems {n} and items: false (an open tuple)")
     props = schema.get("properties")
     if isinstance(schema.get("required"), list) and isinstance(props, dict) and "$ref" not in schema:
         for r in schema["required"]:
