@@ -167,7 +167,7 @@ run: deps $(BUILD)/bin/raysweepd
 	fi
 	$(BUILD)/bin/raysweepd serve --listen 127.0.0.1:$(PORT)
 
-format:
+format: deps
 	tools/check-format.sh --fix
 
 clean:
