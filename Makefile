@@ -2,11 +2,15 @@
 #   make            build build/bin/raysweepd
 #   make test       build and run every test (SAN=1: ASan + UBSan build)
 #   make bench      benchmarks, one JSON object per line
-#   make run        start the daemon with the embedded default scene
+#   make run        start the daemon with the embedded default scene (PORT=8350)
 #   make deps       install missing Debian packages (no-op when all present)
 #   make install    raysweepd, raysweep, man pages, headers, libraysweep
 #                   (PREFIX=/usr/local, DESTDIR= for staging)
+#   make format     clang-format the C sources (tools/check-format.sh --fix)
 # Variables: WERROR=1 adds -Werror; SAN=1 builds into build-san/.
+# On a machine without make or cc, ./make ARGS installs them and runs make ARGS.
+# Every compile waits for `deps` (an order-only prerequisite), so make -jN
+# never starts compiling before the packages are installed.
 
 SHELL := /bin/bash
 CC ?= cc
@@ -86,7 +90,7 @@ all: deps $(BUILD)/bin/raysweepd $(CLIENT_A) $(CLIENT_SO) $(CLIENT_PC)
 deps:
 	@tools/deps.sh
 
-$(BUILD)/obj/%.o: %.c
+$(BUILD)/obj/%.o: %.c | deps
 	@mkdir -p $(dir $@)
 	$(CC) $(CPPFLAGS) $(CFLAGS) -c $< -o $@
 
@@ -151,7 +155,7 @@ $(BUILD)/tests/test_http_encode: $(BUILD)/obj/tests/unit/test_http_encode.o $(BU
 # (tests/support/imf_read.cpp), whose decoder is independent of OpenEXR Core.
 IMF_CXXFLAGS := -std=c++17 $(OPT) -g -Wall -Wextra $(SANFLAGS) -I/usr/include/OpenEXR -I/usr/include/Imath -pthread
 IMF_LIBS := -lOpenEXR -lIex -lIlmThread -lImath -pthread
-$(BUILD)/obj/tests/support/imf_read.o: tests/support/imf_read.cpp tests/support/imf_read.h
+$(BUILD)/obj/tests/support/imf_read.o: tests/support/imf_read.cpp tests/support/imf_read.h | deps
 	@mkdir -p $(dir $@)
 	$(CXX) $(IMF_CXXFLAGS) -c $< -o $@
 
@@ -181,11 +185,19 @@ test: deps $(BUILD)/bin/raysweepd $(TEST_BIN)
 bench: deps $(BUILD)/bin/raysweepd $(BENCH_BIN)
 	@for b in $(BENCH_BIN); do $$b || exit 1; done
 
+# make run PORT=N: another port. A port that is taken is said plainly, with
+# a free one to try (bash's /dev/tcp: something answers there).
+# (Only from the command line: a PORT in the environment is not ours.)
+PORT := $(if $(filter command line,$(origin PORT)),$(PORT),8350)
 run: deps $(BUILD)/bin/raysweepd
-	$(BUILD)/bin/raysweepd serve
+	@if (exec 3<>/dev/tcp/127.0.0.1/$(PORT)) 2>/dev/null; then \
+	  p=$$(($(PORT) + 1)); while [ $$p -lt 65535 ] && (exec 3<>/dev/tcp/127.0.0.1/$$p) 2>/dev/null; do p=$$((p + 1)); done; \
+	  echo "make run: port $(PORT) is in use (another raysweepd?): stop it, or try make run PORT=$$p" >&2; exit 1; \
+	fi
+	$(BUILD)/bin/raysweepd serve --listen 127.0.0.1:$(PORT)
 
-format:
-	clang-format -i $$(find server client include tests -name '*.[ch]')
+format: deps
+	tools/check-format.sh --fix
 
 clean:
 	rm -rf build build-san
@@ -210,6 +222,6 @@ PLUGIN_SRC := $(sort $(wildcard tests/plugins/*.c))
 PLUGIN_SO := $(patsubst tests/plugins/%.c,$(BUILD)/plugins/%.so,$(PLUGIN_SRC))
 PLUGIN_CFLAGS := -std=c11 -O2 -g $(WARN)
 all test: $(PLUGIN_SO)
-$(BUILD)/plugins/%.so: tests/plugins/%.c include/raysweep/plugin.h
+$(BUILD)/plugins/%.so: tests/plugins/%.c include/raysweep/plugin.h | deps
 	@mkdir -p $(dir $@)
 	$(CC) -shared -fPIC -I include $(PLUGIN_CFLAGS) -o $@ $< -lm

@@ -1,29 +1,57 @@
 #!/usr/bin/env bash
-# Install the Debian packages raysweep builds and tests with, when missing.
-# Costs one dpkg-query when everything is present; runs `apt-get update`
-# once before installing. Node.js/npm come with the machine image: Debian's
-# npm package conflicts with them, so it is never installed here.
+# Installs the Debian 12 packages raysweep builds and tests with, when any is
+# missing: `make deps`, every `make` (it runs first) and ./make (which runs it
+# before make exists). Costs one dpkg-query and no network when everything
+# is there. Otherwise it runs `apt-get update` and `apt-get install` (as root,
+# or through sudo), checks again, and exits non-zero, naming what is still
+# missing, when the install did not work.
 set -euo pipefail
-pkgs=(build-essential pkg-config libembree-dev libopenexr-dev libmicrohttpd-dev
-      libcjson-dev libcurl4-openssl-dev libexpat1-dev libssl-dev curl python3)
-missing=()
-for p in "${pkgs[@]}"; do
-  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
-    missing+=("$p")
+pkgs=(
+  # build: make, cc, ar, nm; the libraries
+  build-essential pkg-config libembree-dev libopenexr-dev libmicrohttpd-dev
+  libcjson-dev libcurl4-openssl-dev libexpat1-dev libssl-dev
+  # tests: curl and python3 (integration scripts, docs examples); python3-yaml
+  # and python3-jsonschema (tests/openapi/check.py); clang-format (make
+  # format, tools/check-format.sh)
+  curl python3 python3-yaml python3-jsonschema clang-format
+)
+
+missing() {
+  # One dpkg-query for all: a package it does not know is not listed (stderr).
+  local installed
+  installed=$(dpkg-query -W -f='${Package} ${db:Status-Abbrev}\n' "${pkgs[@]}" 2>/dev/null |
+    awk '$2 == "ii" { print $1 }') || true
+  local p
+  for p in "${pkgs[@]}"; do
+    grep -qx -- "$p" <<<"$installed" || printf '%s\n' "$p"
+  done
+}
+
+mapfile -t todo < <(missing)
+[ ${#todo[@]} -eq 0 ] && exit 0
+
+echo "deps: installing ${todo[*]}" >&2
+SUDO=()
+if [ "$(id -u)" != 0 ]; then
+  if command -v sudo >/dev/null; then
+    SUDO=(sudo)
+  else
+    echo "deps: FAILED: ${todo[*]} missing, and you are not root and sudo is not installed." >&2
+    echo "deps: as root, run: apt-get update && apt-get install ${todo[*]}" >&2
+    exit 1
   fi
-done
-if [ ${#missing[@]} -gt 0 ]; then
-  echo "deps: installing ${missing[*]}" >&2
-  SUDO=""
-  if [ "$(id -u)" != 0 ]; then SUDO="sudo"; fi
-  $SUDO apt-get update -qq
-  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >&2
 fi
-# The OpenAPI validator of tests/openapi (pinned by its package-lock.json).
-# A failed install only warns: test_openapi then fails and says why.
-root=$(cd "$(dirname "$0")/.." && pwd)
-if command -v npm >/dev/null && [ ! -d "$root/tests/openapi/node_modules" ]; then
-  echo "deps: npm ci --prefix tests/openapi" >&2
-  npm ci --prefix "$root/tests/openapi" --no-audit --no-fund >&2 ||
-    echo "deps: npm ci failed; test_openapi will fail until tests/openapi/node_modules exists" >&2
+if ! "${SUDO[@]}" apt-get update -qq >&2; then
+  echo "deps: FAILED: apt-get update did not work (no network, or no Debian mirror in /etc/apt/sources.list?)" >&2
+  exit 1
 fi
+if ! DEBIAN_FRONTEND=noninteractive "${SUDO[@]}" apt-get install -y -qq --no-install-recommends "${todo[@]}" >&2; then
+  echo "deps: FAILED: apt-get install ${todo[*]} did not work (see above)" >&2
+  exit 1
+fi
+mapfile -t still < <(missing)
+if [ ${#still[@]} -gt 0 ]; then
+  echo "deps: FAILED: still not installed after apt-get install: ${still[*]}" >&2
+  exit 1
+fi
+echo "deps: installed ${todo[*]}" >&2

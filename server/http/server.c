@@ -561,7 +561,10 @@ rsw_status http_server_start(service *svc, const http_opts *opts, http_server **
     if (fd >= 0) close(fd);
     free(srv->token);
     free(srv);
-    return rsw_fail(err, RSW_ERR_IO, "--listen", "cannot listen on %s:%d: %s", host, opts->port, strerror(e));
+    return rsw_fail(err, RSW_ERR_IO, "--listen", "cannot listen on %s:%d: %s%s", host, opts->port, strerror(e),
+                    e == EADDRINUSE ? " (another process, perhaps another raysweepd, has this port: stop it, or give "
+                                      "another port, e.g. --listen 127.0.0.1:0 for any free one)"
+                                    : "");
   }
 
   unsigned flags = MHD_USE_THREAD_PER_CONNECTION | MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_POLL | MHD_USE_ERROR_LOG;
