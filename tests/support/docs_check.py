@@ -119,7 +119,7 @@ def build_rule(text):
         if not words:
             continue
         w0 = words[0]
-        if w0 == "make":
+        if w0 in ("make", "./make"):  # ./make: the bootstrap wrapper of make
             targets = [w for w in words[1:] if not w.startswith("-") and "=" not in w]
             if all(t in MAKE_BUILD_TARGETS for t in targets):
                 return cmd
