@@ -15,6 +15,10 @@
  *    (estimated from K independent seeds of the untranslated scene; the
  *    translated render reuses seed 1, which only makes the difference
  *    smaller, so the bound is conservative).
+ *  - radiancemeters: six meters of an mradiancemeter lying on the box's
+ *    floor, looking up at the light, emission only: each sees exactly the
+ *    light's radiance (a meter whose origin rounds below the floor sees
+ *    the floor's black back instead).
  *  - canopy: a plot of 8,000 instanced discs of radius 5 cm (one shapegroup
  *    holding a unit disk, one instancelist) over a soil, lit by a sun at 30
  *    degrees and seen by mdistant in five directions of the principal plane
@@ -134,15 +138,33 @@ static void sb_wall(sbuf *b, const char *name, const char *rot, double tx, doubl
   sb_printf(b, "]}");
 }
 
-static char *cornell_scene(double D) {
+/* meters: instead of the camera, an mradiancemeter whose N_METER meters
+ * lie on the floor (z = -1) looking straight up at the light, with
+ * max_depth 1 (emission only): every pixel is the light's radiance. */
+#define N_METER 6
+static char *cornell_scene(double D, bool meters) {
   sbuf b = {0};
   sb_printf(&b, "{\"type\": \"scene\", \"variant\": \"mono\",\n"
-                "\"integrator\": {\"type\": \"path\", \"max_depth\": 6},\n"
-                "\"cam\": {\"type\": \"perspective\", \"fov\": 70, \"to_world\": [{\"lookat\": {\"origin\": "
-                "[0, -0.9, 0.1], \"target\": [0, 1, 0], \"up\": [0, 0, 1]}}");
-  sb_shift(&b, D);
-  sb_printf(&b, "], \"sampler\": {\"type\": \"independent\", \"sample_count\": 48}, "
-                "\"film\": {\"type\": \"hdrfilm\", \"width\": 8, \"height\": 8, \"rfilter\": {\"type\": \"box\"}}}");
+                "\"integrator\": {\"type\": \"path\", \"max_depth\": %d},\n",
+            meters ? 1 : 6);
+  if (meters) {
+    sb_printf(&b, "\"cam\": {\"type\": \"mradiancemeter\", \"origins\": \"");
+    for (int i = 0; i < N_METER; i++)
+      sb_printf(&b, "%s%.17g %.17g %.17g", i ? ", " : "", -0.2 + 0.08 * i + D * U[0], 0.1 - 0.03 * i + D * U[1],
+                -1.0 + D * U[2]);
+    sb_printf(&b, "\", \"directions\": \"");
+    for (int i = 0; i < N_METER; i++) sb_printf(&b, "%s0 0 1", i ? ", " : "");
+    sb_printf(&b, "\", \"sampler\": {\"type\": \"independent\", \"sample_count\": 1}, "
+                  "\"film\": {\"type\": \"hdrfilm\", \"width\": %d, \"height\": 1, "
+                  "\"rfilter\": {\"type\": \"box\"}}}",
+              N_METER);
+  } else {
+    sb_printf(&b, "\"cam\": {\"type\": \"perspective\", \"fov\": 70, \"to_world\": [{\"lookat\": {\"origin\": "
+                  "[0, -0.9, 0.1], \"target\": [0, 1, 0], \"up\": [0, 0, 1]}}");
+    sb_shift(&b, D);
+    sb_printf(&b, "], \"sampler\": {\"type\": \"independent\", \"sample_count\": 48}, "
+                  "\"film\": {\"type\": \"hdrfilm\", \"width\": 8, \"height\": 8, \"rfilter\": {\"type\": \"box\"}}}");
+  }
   sb_wall(&b, "floor", "", 0, 0, -1, 0.6, D);
   sb_wall(&b, "ceiling", "{\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 180}}", 0, 0, 1, 0.6, D);
   sb_wall(&b, "left", "{\"rotate\": {\"axis\": [0, 1, 0], \"angle\": 90}}", -1, 0, 0, 0.3, D);
@@ -178,7 +200,7 @@ static bool render_mean(const char *txt, uint64_t seed, double *mean) {
 
 static void test_cornell(void) {
   /* Sigma of one render's film mean from K independent seeds. */
-  char *txt = cornell_scene(0);
+  char *txt = cornell_scene(0, false);
   double m[K_SEEDS], s1 = 0, s2 = 0;
   for (int k = 0; k < K_SEEDS; k++) {
     REQUIRE(render_mean(txt, 1 + (uint64_t)k, &m[k]), "cornell render");
@@ -191,7 +213,7 @@ static void test_cornell(void) {
   printf("  cornell shift      0 m: film mean %.6f (sigma of one render %.2g)\n", m[0], sd);
   REQUIRE(sd > 0 && sd < 0.05 * m[0], "cornell: sigma %.3g of mean %.3g is not a usable yardstick", sd, m[0]);
   for (size_t k = 1; k < N_SHIFTS; k++) {
-    txt = cornell_scene(SHIFTS[k]);
+    txt = cornell_scene(SHIFTS[k], false);
     double mk;
     bool ok = render_mean(txt, 1, &mk);
     free(txt);
@@ -199,6 +221,26 @@ static void test_cornell(void) {
     printf("  cornell shift %6.0f m: film mean %.6f (%+.2f sigma)\n", SHIFTS[k], mk, (mk - m[0]) / (sqrt(2.0) * sd));
     CHECK(fabs(mk - m[0]) <= tol, "cornell box shifted by %g m: film mean %.6f vs %.6f (3 sigma = %.3g)", SHIFTS[k],
           mk, m[0], tol);
+  }
+}
+
+/* Radiancemeters lying on the floor see the light (radiance 8) at every
+ * shift, not the floor's back. */
+static void test_radiancemeters_on_floor(void) {
+  for (size_t k = 0; k < N_SHIFTS; k++) {
+    char *txt = cornell_scene(SHIFTS[k], true);
+    scene *s = tsup_load(txt, NULL);
+    free(txt);
+    REQUIRE(s, "meter scene at %g m", SHIFTS[k]);
+    film_image img;
+    bool ok = tsup_render(s, 0, 1, THREADS, &img);
+    scene_free(s);
+    REQUIRE(ok, "render");
+    int wrong = 0;
+    for (int i = 0; i < N_METER; i++) wrong += !(fabs(img.data[(size_t)i * img.channels] - 8.0) <= 1e-6);
+    printf("  radiancemeters on the floor, shift %6.0f m: %d of %d do not see the light\n", SHIFTS[k], wrong, N_METER);
+    CHECK(wrong == 0, "shifted by %g m: %d of %d radiancemeters on the floor miss the light", SHIFTS[k], wrong, N_METER);
+    film_image_free(&img);
   }
 }
 
@@ -318,6 +360,7 @@ static void test_canopy_hot_spot(void) {
 int main(void) {
   RSW_TEST_RUN(test_plate);
   RSW_TEST_RUN(test_cornell);
+  RSW_TEST_RUN(test_radiancemeters_on_floor);
   RSW_TEST_RUN(test_canopy_hot_spot);
   RSW_TEST_END("test_translation");
 }
