@@ -16,9 +16,9 @@
  *    translated render reuses seed 1, which only makes the difference
  *    smaller, so the bound is conservative).
  *  - radiancemeters: six meters of an mradiancemeter lying on the box's
- *    floor, looking up at the light, emission only: each sees exactly the
- *    light's radiance (a meter whose origin rounds below the floor sees
- *    the floor's black back instead).
+ *    tilted disk, looking at the light's centre, emission only: each sees
+ *    exactly the light's radiance (a meter whose origin rounds below the
+ *    disk sees the disk's black back instead).
  *  - canopy: a plot of 8,000 instanced discs of radius 5 cm (one shapegroup
  *    holding a unit disk, one instancelist) over a soil, lit by a sun at 30
  *    degrees and seen by mdistant in five directions of the principal plane
@@ -36,6 +36,7 @@
 #include <unistd.h>
 
 #include "../../server/kernel/core/rng.h"
+#include "../../server/kernel/core/transform.h"
 #include "../support/test.h"
 #include "../support/tsup.h"
 
@@ -73,10 +74,16 @@ static void sb_printf(sbuf *b, const char *fmt, ...) {
   }
 }
 
-/* ", {"translate": D u}" to append to a to_world operation list. */
-static void sb_shift(sbuf *b, double D) {
-  sb_printf(b, ", {\"translate\": [%.17g, %.17g, %.17g]}", D * U[0], D * U[1], D * U[2]);
+/* ", {"translate": base + D u}" to append to a to_world operation list. */
+static void sb_shift_from(sbuf *b, const double base[3], double D) {
+  sb_printf(b, ", {\"translate\": [%.17g, %.17g, %.17g]}", base[0] + D * U[0], base[1] + D * U[1], base[2] + D * U[2]);
 }
+static const double ZERO[3] = {0, 0, 0};
+static void sb_shift(sbuf *b, double D) { sb_shift_from(b, ZERO, D); }
+
+/* The box sits off the grid (its floor at z = -0.69), so that its
+ * coordinates are not exact in float32 at any shift. */
+static const double BOX[3] = {0.137, -0.071, 0.31};
 
 static double film_mean(const film_image *f) {
   double s = 0;
@@ -134,26 +141,36 @@ static void sb_wall(sbuf *b, const char *name, const char *rot, double tx, doubl
   sb_printf(b, ",\n\"%s\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": %g}, "
                "\"to_world\": [%s%s{\"translate\": [%g, %g, %g]}",
             name, rho, rot, *rot ? ", " : "", tx, ty, tz);
-  sb_shift(b, D);
+  sb_shift_from(b, BOX, D);
   sb_printf(b, "]}");
 }
 
 /* meters: instead of the camera, an mradiancemeter whose N_METER meters
- * lie on the floor (z = -1) looking straight up at the light, with
+ * lie on the tilted disk (the plaque) looking at the light's centre, with
  * max_depth 1 (emission only): every pixel is the light's radiance. */
 #define N_METER 6
+static void meter_ray(double D, int i, vec3 *o, vec3 *d) {
+  xform T = xf_translate(v3(BOX[0] - 0.5 + D * U[0], BOX[1] + 0.4 + D * U[1], BOX[2] - 0.3 + D * U[2]));
+  xform R = xf_rotate(v3(1, -1, 0), 60), S = xf_scale(v3(0.3, 0.3, 1));
+  xform RS = xf_mul(&R, &S), P = xf_mul(&T, &RS);
+  double a = 2 * PI * i / N_METER, r = 0.2 + 0.1 * (i % 3);
+  *o = xf_point(&P, v3(r * cos(a), r * sin(a), 0));
+  vec3 light = v3(BOX[0] + D * U[0], BOX[1] + 0.1 + D * U[1], BOX[2] + 0.98 + D * U[2]);
+  *d = v3_sub(light, *o);
+}
+
 static char *cornell_scene(double D, bool meters) {
   sbuf b = {0};
   sb_printf(&b, "{\"type\": \"scene\", \"variant\": \"mono\",\n"
                 "\"integrator\": {\"type\": \"path\", \"max_depth\": %d},\n",
             meters ? 1 : 6);
   if (meters) {
+    vec3 o[N_METER], d[N_METER];
+    for (int i = 0; i < N_METER; i++) meter_ray(D, i, &o[i], &d[i]);
     sb_printf(&b, "\"cam\": {\"type\": \"mradiancemeter\", \"origins\": \"");
-    for (int i = 0; i < N_METER; i++)
-      sb_printf(&b, "%s%.17g %.17g %.17g", i ? ", " : "", -0.2 + 0.08 * i + D * U[0], 0.1 - 0.03 * i + D * U[1],
-                -1.0 + D * U[2]);
+    for (int i = 0; i < N_METER; i++) sb_printf(&b, "%s%.17g %.17g %.17g", i ? ", " : "", o[i].x, o[i].y, o[i].z);
     sb_printf(&b, "\", \"directions\": \"");
-    for (int i = 0; i < N_METER; i++) sb_printf(&b, "%s0 0 1", i ? ", " : "");
+    for (int i = 0; i < N_METER; i++) sb_printf(&b, "%s%.17g %.17g %.17g", i ? ", " : "", d[i].x, d[i].y, d[i].z);
     sb_printf(&b, "\", \"sampler\": {\"type\": \"independent\", \"sample_count\": 1}, "
                   "\"film\": {\"type\": \"hdrfilm\", \"width\": %d, \"height\": 1, "
                   "\"rfilter\": {\"type\": \"box\"}}}",
@@ -161,7 +178,7 @@ static char *cornell_scene(double D, bool meters) {
   } else {
     sb_printf(&b, "\"cam\": {\"type\": \"perspective\", \"fov\": 70, \"to_world\": [{\"lookat\": {\"origin\": "
                   "[0, -0.9, 0.1], \"target\": [0, 1, 0], \"up\": [0, 0, 1]}}");
-    sb_shift(&b, D);
+    sb_shift_from(&b, BOX, D);
     sb_printf(&b, "], \"sampler\": {\"type\": \"independent\", \"sample_count\": 48}, "
                   "\"film\": {\"type\": \"hdrfilm\", \"width\": 8, \"height\": 8, \"rfilter\": {\"type\": \"box\"}}}");
   }
@@ -174,14 +191,14 @@ static char *cornell_scene(double D, bool meters) {
   sb_printf(&b, ",\n\"light\": {\"type\": \"rectangle\", \"emitter\": {\"type\": \"area\", \"radiance\": 8}, "
                 "\"to_world\": [{\"scale\": [0.3, 0.3, 1]}, {\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 180}}, "
                 "{\"translate\": [0, 0.1, 0.98]}");
-  sb_shift(&b, D);
+  sb_shift_from(&b, BOX, D);
   sb_printf(&b, "]},\n\"ball\": {\"type\": \"sphere\", \"radius\": 0.35, \"bsdf\": {\"type\": \"diffuse\", "
                 "\"reflectance\": 0.7}, \"to_world\": [{\"translate\": [0.35, 0.3, -0.65]}");
-  sb_shift(&b, D);
+  sb_shift_from(&b, BOX, D);
   sb_printf(&b, "]},\n\"plaque\": {\"type\": \"disk\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.7}, "
                 "\"to_world\": [{\"scale\": [0.3, 0.3, 1]}, {\"rotate\": {\"axis\": [1, -1, 0], \"angle\": 60}}, "
                 "{\"translate\": [-0.5, 0.4, -0.3]}");
-  sb_shift(&b, D);
+  sb_shift_from(&b, BOX, D);
   sb_printf(&b, "]}}\n");
   return b.p;
 }
@@ -224,9 +241,9 @@ static void test_cornell(void) {
   }
 }
 
-/* Radiancemeters lying on the floor see the light (radiance 8) at every
- * shift, not the floor's back. */
-static void test_radiancemeters_on_floor(void) {
+/* Radiancemeters lying on the tilted disk see the light (radiance 8) at
+ * every shift, not the disk's back. */
+static void test_radiancemeters_on_surface(void) {
   for (size_t k = 0; k < N_SHIFTS; k++) {
     char *txt = cornell_scene(SHIFTS[k], true);
     scene *s = tsup_load(txt, NULL);
@@ -238,8 +255,8 @@ static void test_radiancemeters_on_floor(void) {
     REQUIRE(ok, "render");
     int wrong = 0;
     for (int i = 0; i < N_METER; i++) wrong += !(fabs(img.data[(size_t)i * img.channels] - 8.0) <= 1e-6);
-    printf("  radiancemeters on the floor, shift %6.0f m: %d of %d do not see the light\n", SHIFTS[k], wrong, N_METER);
-    CHECK(wrong == 0, "shifted by %g m: %d of %d radiancemeters on the floor miss the light", SHIFTS[k], wrong, N_METER);
+    printf("  radiancemeters on a surface, shift %6.0f m: %d of %d do not see the light\n", SHIFTS[k], wrong, N_METER);
+    CHECK(wrong == 0, "shifted by %g m: %d of %d radiancemeters on a surface miss the light", SHIFTS[k], wrong, N_METER);
     film_image_free(&img);
   }
 }
@@ -360,7 +377,7 @@ static void test_canopy_hot_spot(void) {
 int main(void) {
   RSW_TEST_RUN(test_plate);
   RSW_TEST_RUN(test_cornell);
-  RSW_TEST_RUN(test_radiancemeters_on_floor);
+  RSW_TEST_RUN(test_radiancemeters_on_surface);
   RSW_TEST_RUN(test_canopy_hot_spot);
   RSW_TEST_END("test_translation");
 }
