@@ -27,6 +27,9 @@
  *    (pi L / (E cos theta_s)) must match the untranslated one within 0.5%,
  *    every direction within 3 sigma as above (per pixel).
  *
+ *  - an update that moves the soil 2 km away (and so Embree's frame, and
+ *    every instance transform with it) equals a reload, bit for bit.
+ *
  * Fixed seeds; two threads. */
 #include <math.h>
 #include <stdarg.h>
@@ -36,7 +39,9 @@
 #include <unistd.h>
 
 #include "../../server/kernel/core/rng.h"
+#include "../../server/kernel/accel.h"
 #include "../../server/kernel/core/transform.h"
+#include "../../server/kernel/scene/params.h"
 #include "../support/test.h"
 #include "../support/tsup.h"
 
@@ -293,7 +298,7 @@ static bool write_leaves(const char *path, double D) {
   return fclose(f) == 0;
 }
 
-static char *canopy_scene(double D, const char *list) {
+static char *canopy_scene(double D, const char *list, double soil_x) {
   sbuf b = {0};
   double ss = sin(SUN_ZEN * PI / 180), cs = cos(SUN_ZEN * PI / 180);
   sb_printf(&b, "{\"type\": \"scene\", \"variant\": \"mono\",\n"
@@ -309,8 +314,8 @@ static char *canopy_scene(double D, const char *list) {
                 "\"film\": {\"type\": \"hdrfilm\", \"width\": %d, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},\n"
                 "\"sun\": {\"type\": \"directional\", \"direction\": [%.17g, 0, %.17g], \"irradiance\": 1.0},\n"
                 "\"soil\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.15}, "
-                "\"to_world\": [{\"scale\": [4, 4, 1]}",
-            N_DIR, ss, -cs);
+                "\"to_world\": [{\"scale\": [4, 4, 1]}, {\"translate\": [%.17g, 0, 0]}",
+            N_DIR, ss, -cs, soil_x);
   sb_shift(&b, D);
   sb_printf(&b, "]},\n\"leaf\": {\"type\": \"shapegroup\", \"d\": {\"type\": \"disk\", \"bsdf\": "
                 "{\"type\": \"diffuse\", \"reflectance\": 0.45}}},\n"
@@ -327,7 +332,7 @@ static bool canopy_brf(double D, uint64_t seed, double brf[N_DIR]) {
   if (fd < 0) return false;
   close(fd);
   bool ok = write_leaves(path, D);
-  char *txt = ok ? canopy_scene(D, path) : NULL;
+  char *txt = ok ? canopy_scene(D, path, 0) : NULL;
   scene *s = txt ? tsup_load(txt, NULL) : NULL;
   free(txt);
   remove(path);
@@ -374,10 +379,55 @@ static void test_canopy_hot_spot(void) {
   }
 }
 
+static bool same_film(const film_image *a, const film_image *b) {
+  return a->width == b->width && a->height == b->height && a->channels == b->channels &&
+         memcmp(a->data, b->data, sizeof(float) * (size_t)a->width * a->height * a->channels) == 0;
+}
+
+/* Moving the soil 2 km away moves Embree's frame (accel_origin) and so
+ * rewrites every instance transform, the instancelist's included: the
+ * update must still equal a reload, bit for bit. */
+static void test_update_moves_frame(void) {
+  char path[] = "/tmp/rsw_translation_XXXXXX";
+  int fd = mkstemp(path);
+  REQUIRE(fd >= 0, "mkstemp");
+  close(fd);
+  REQUIRE(write_leaves(path, 0), "leaves");
+  char *t0 = canopy_scene(0, path, 0), *t1 = canopy_scene(0, path, 2000);
+  scene *s = tsup_load(t0, NULL), *r = tsup_load(t1, NULL);
+  free(t0), free(t1);
+  REQUIRE(s && r, "scenes load");
+  film_image before = {0}, after = {0}, ref = {0};
+  REQUIRE(tsup_render(s, 2000, 3, THREADS, &before), "render");
+  vec3 o0 = accel_origin(s->accel);
+  accel_counters c0, c1;
+  accel_get_counters(s->accel, &c0);
+  rsw_err err = {0};
+  param_update u = {.key = "soil.to_world"};
+  REQUIRE(param_value_parse("[[4, 0, 0, 2000], [0, 4, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]", "soil.to_world", &u.value,
+                            &err) == RSW_OK,
+          "parse: %s", err.msg);
+  rsw_status st = scene_update(s, &u, 1, NULL, &err);
+  param_value_free(&u.value);
+  REQUIRE(st == RSW_OK, "update: %s", err.msg);
+  accel_get_counters(s->accel, &c1);
+  vec3 o1 = accel_origin(s->accel), oref = accel_origin(r->accel);
+  CHECK(c1.origin_moves == c0.origin_moves + 1 && fabs(o1.x - o0.x) > 900,
+        "the update moves the frame (x %.3f -> %.3f, moves %lu -> %lu)", o0.x, o1.x, c0.origin_moves, c1.origin_moves);
+  CHECK(memcmp(&o1, &oref, sizeof o1) == 0, "frame after the update equals the reload's");
+  REQUIRE(tsup_render(s, 2000, 3, THREADS, &after) && tsup_render(r, 2000, 3, THREADS, &ref), "renders");
+  CHECK(same_film(&after, &ref), "update equals reload");
+  CHECK(!same_film(&before, &after), "the update changed the film");
+  film_image_free(&before), film_image_free(&after), film_image_free(&ref);
+  scene_free(s), scene_free(r);
+  remove(path);
+}
+
 int main(void) {
   RSW_TEST_RUN(test_plate);
   RSW_TEST_RUN(test_cornell);
   RSW_TEST_RUN(test_radiancemeters_on_surface);
   RSW_TEST_RUN(test_canopy_hot_spot);
+  RSW_TEST_RUN(test_update_moves_frame);
   RSW_TEST_END("test_translation");
 }
