@@ -37,6 +37,14 @@ struct accel {
    * index and placement number. */
   uint32_t *list_shape, *list_sub;
   size_t n_list;
+  /* Precision (accel.h): Embree's frame is centred on `origin`; per
+   * shape, the object-space bounds of meshes (what the origin is computed
+   * from) and `ext`, the largest |coordinate| of its geometry in instance
+   * space. */
+  const scene *scene;
+  vec3 origin;
+  vec3 *obox_lo, *obox_hi;
+  double *ext;
   accel_counters counters;
   size_t bytes;
   char error[512]; /* first Embree error seen during this build */
@@ -281,6 +289,107 @@ static void member_occluded(const struct RTCOccludedFunctionNArguments *args) {
   }
 }
 
+/* ---- Embree's frame and error bounds --------------------------------------------------- */
+
+static void set_instance_transform(RTCGeometry inst, const xform *t, vec3 origin);
+static void set_placement_transform(RTCGeometry inst, const instance_shape *is, uint32_t k, vec3 origin);
+
+static void box_add(vec3 *lo, vec3 *hi, vec3 p) {
+  lo->x = fmin(lo->x, p.x), lo->y = fmin(lo->y, p.y), lo->z = fmin(lo->z, p.z);
+  hi->x = fmax(hi->x, p.x), hi->y = fmax(hi->y, p.y), hi->z = fmax(hi->z, p.z);
+}
+
+/* Shape i's object-space bounds (meshes: its vertices; analytic shapes:
+ * the unit box, flat for a disk) and ext, the largest |coordinate| of what
+ * Embree holds for it in instance space (an instance: its group's
+ * members in group space). */
+static void shape_bounds(accel *a, size_t i) {
+  const shape *sh = a->scene->shapes[i];
+  vec3 lo = v3(INFINITY, INFINITY, INFINITY), hi = v3(-INFINITY, -INFINITY, -INFINITY);
+  if (shape_is_instancing(sh)) {
+    const shape_group *g = ((const instance_shape *)sh)->group;
+    lo = g->lo, hi = g->hi;
+  } else if (shape_is_group(sh)) {
+    lo = hi = v3(0, 0, 0);
+  } else if (sh->geom == GEOM_MESH) {
+    for (uint32_t k = 0; k < sh->mesh.n_verts; k++) {
+      const float *q = &sh->mesh.pos[3 * (size_t)k];
+      box_add(&lo, &hi, v3(q[0], q[1], q[2]));
+    }
+    if (!(lo.x <= hi.x)) lo = hi = v3(0, 0, 0);
+  } else {
+    double z = sh->geom == GEOM_SPHERE ? 1.0 : 0.0;
+    lo = v3(-1, -1, -z), hi = v3(1, 1, z);
+  }
+  a->obox_lo[i] = lo, a->obox_hi[i] = hi;
+  a->ext[i] = fmax(v3_max_abs(lo), v3_max_abs(hi));
+}
+
+/* The centre of the geometry's world bounds (object boxes under to_world,
+ * group boxes under each placement): a function of the scene's state only. */
+static vec3 frame_origin(const accel *a) {
+  const scene *s = a->scene;
+  vec3 lo = v3(INFINITY, INFINITY, INFINITY), hi = v3(-INFINITY, -INFINITY, -INFINITY);
+  for (size_t i = 0; i < s->n_shapes; i++) {
+    const shape *sh = s->shapes[i];
+    if (shape_is_group(sh)) continue;
+    if (shape_is_instancing(sh)) {
+      instance_bbox(sh, &lo, &hi);
+      continue;
+    }
+    vec3 l = a->obox_lo[i], h = a->obox_hi[i];
+    for (int c = 0; c < 8; c++)
+      box_add(&lo, &hi, xf_point(&sh->to_world, v3(c & 1 ? h.x : l.x, c & 2 ? h.y : l.y, c & 4 ? h.z : l.z)));
+  }
+  if (!(lo.x <= hi.x) || !v3_finite(lo) || !v3_finite(hi)) return v3(0, 0, 0);
+  return v3_scale(v3_add(lo, hi), 0.5);
+}
+
+/* Every top-level instance transform again, for a new origin. */
+static void rewrite_instances(accel *a) {
+  const scene *s = a->scene;
+  for (size_t i = 0; i < s->n_shapes; i++) {
+    const shape *sh = s->shapes[i];
+    if (shape_is_group(sh)) continue;
+    if (shape_is_instancing(sh) && ((const instance_shape *)sh)->xf) continue;
+    if (!a->inst[i]) continue;
+    set_instance_transform(a->inst[i], &sh->to_world, a->origin);
+    rtcCommitGeometry(a->inst[i]);
+  }
+  for (size_t j = 0; j < a->n_list; j++) {
+    RTCGeometry inst = rtcGetGeometry(a->top, (unsigned)(a->n_sub + j));
+    const instance_shape *is = (const instance_shape *)s->shapes[a->list_shape[j]];
+    set_placement_transform(inst, is, a->list_sub[j], a->origin);
+    rtcCommitGeometry(inst);
+  }
+  a->counters.origin_moves++;
+}
+
+vec3 accel_origin(const accel *a) { return a ? a->origin : v3(0, 0, 0); }
+
+/* The float32 error of Embree's view of the surface near p, measured
+ * along the unit normal n (accel.h). Embree rounds the ray origin o ~ p in
+ * its frame (error u |o - c| per coordinate, so u |n|_1 |p - c| along n),
+ * then maps it into instance space with the float inverse B = A^-1 of the
+ * instance transform (A, t): coordinate k of o_i = B (o - t) is off by
+ * about u |B_k|_1 (|o - c| + |t - c|), which moves the point along n by
+ * (A^T n)_k times that; the instance-space intersection itself is off by
+ * about u ext per coordinate, (A^T n)_k times that along n. */
+double accel_surface_error(const accel *a, uint32_t index, const xform *X, vec3 p, vec3 n) {
+  vec3 c = a->origin;
+  const double nn[3] = {n.x, n.y, n.z};
+  double w = 0, an1 = 0;
+  for (int k = 0; k < 3; k++) {
+    double atn = fabs(X->m[0][k] * nn[0] + X->m[1][k] * nn[1] + X->m[2][k] * nn[2]); /* |(A^T n)_k| */
+    an1 += atn;
+    w += atn * (fabs(X->inv[k][0]) + fabs(X->inv[k][1]) + fabs(X->inv[k][2]));
+  }
+  vec3 t = v3(X->m[0][3], X->m[1][3], X->m[2][3]);
+  double pc = v3_max_abs(v3_sub(p, c)), tc = v3_max_abs(v3_sub(t, c));
+  double n1 = fabs(n.x) + fabs(n.y) + fabs(n.z);
+  return RSW_F32_UNIT * (n1 * pc + w * (pc + tc) + an1 * a->ext[index]);
+}
+
 /* ---- build ------------------------------------------------------------------------------ */
 
 static rsw_status embree_fail(accel *a, rsw_err *err, const char *where, const char *what) {
@@ -318,10 +427,15 @@ static RTCGeometry shape_geometry(accel *a, const shape *s) {
   return g;
 }
 
-static void set_instance_transform(RTCGeometry inst, const xform *t) {
+/* Instance transform in Embree's frame: the translation is taken relative
+ * to the origin in double precision before it is rounded to float. */
+static void set_instance_transform(RTCGeometry inst, const xform *t, vec3 origin) {
   float m[12];
-  for (int r = 0; r < 3; r++)
-    for (int c = 0; c < 4; c++) m[4 * r + c] = (float)t->m[r][c];
+  const double o[3] = {origin.x, origin.y, origin.z};
+  for (int r = 0; r < 3; r++) {
+    for (int c = 0; c < 3; c++) m[4 * r + c] = (float)t->m[r][c];
+    m[4 * r + 3] = (float)(t->m[r][3] - o[r]);
+  }
   rtcSetGeometryTransform(inst, 0, RTC_FORMAT_FLOAT3X4_ROW_MAJOR, m);
 }
 
@@ -387,7 +501,13 @@ static RTCScene group_scene(accel *a, const shape_group *g) {
   return sc;
 }
 
-static void set_instance_transform_f(RTCGeometry inst, const float m[12]) {
+/* Placement k of an instancelist: the float linear part as stored, the
+ * double translation relative to the origin. */
+static void set_placement_transform(RTCGeometry inst, const instance_shape *is, uint32_t k, vec3 origin) {
+  float m[12];
+  memcpy(m, &is->xf[12 * (size_t)k], sizeof m);
+  const double *t = &is->tr[3 * (size_t)k];
+  m[3] = (float)(t[0] - origin.x), m[7] = (float)(t[1] - origin.y), m[11] = (float)(t[2] - origin.z);
   rtcSetGeometryTransform(inst, 0, RTC_FORMAT_FLOAT3X4_ROW_MAJOR, m);
 }
 
@@ -402,9 +522,9 @@ static rsw_status build_instances(accel *a, const instance_shape *is, size_t i, 
     if (!inst) return embree_fail(a, err, sh->base.id, "cannot create an instance");
     rtcSetGeometryInstancedScene(inst, gs);
     if (is->xf) {
-      set_instance_transform_f(inst, &is->xf[12 * (size_t)k]);
+      set_placement_transform(inst, is, k, a->origin);
     } else {
-      set_instance_transform(inst, &sh->to_world);
+      set_instance_transform(inst, &sh->to_world, a->origin);
     }
     rtcCommitGeometry(inst);
     if (is->xf) {
@@ -438,8 +558,15 @@ rsw_status accel_build(scene *s, rsw_err *err) {
   a->geom = calloc(ns, sizeof *a->geom);
   a->inst = calloc(ns, sizeof *a->inst);
   a->nverts = calloc(ns, sizeof *a->nverts);
-  if (!a->top || !a->sub || !a->geom || !a->inst || !a->nverts) return embree_fail(a, err, "", "cannot create the top-level scene");
+  a->obox_lo = calloc(ns, sizeof *a->obox_lo);
+  a->obox_hi = calloc(ns, sizeof *a->obox_hi);
+  a->ext = calloc(ns, sizeof *a->ext);
+  if (!a->top || !a->sub || !a->geom || !a->inst || !a->nverts || !a->obox_lo || !a->obox_hi || !a->ext)
+    return embree_fail(a, err, "", "cannot create the top-level scene");
   a->n_sub = s->n_shapes;
+  a->scene = s;
+  for (size_t i = 0; i < s->n_shapes; i++) shape_bounds(a, i);
+  a->origin = frame_origin(a);
   size_t n_list = 0;
   for (size_t i = 0; i < s->n_shapes; i++)
     if (shape_is_instancing(s->shapes[i]) && ((const instance_shape *)s->shapes[i])->xf)
@@ -486,7 +613,7 @@ rsw_status accel_build(scene *s, rsw_err *err) {
     RTCGeometry inst = rtcNewGeometry(a->device, RTC_GEOMETRY_TYPE_INSTANCE);
     if (!inst) return embree_fail(a, err, sh->base.id, "cannot create an instance");
     rtcSetGeometryInstancedScene(inst, sub);
-    set_instance_transform(inst, &sh->to_world);
+    set_instance_transform(inst, &sh->to_world, a->origin);
     rtcCommitGeometry(inst);
     rtcAttachGeometryByID(a->top, inst, (unsigned)i);
     a->inst[i] = inst;
@@ -516,6 +643,9 @@ void accel_free(accel *a) {
   free(a->geom);
   free(a->inst);
   free(a->nverts);
+  free(a->obox_lo);
+  free(a->obox_hi);
+  free(a->ext);
   free(a);
 }
 
@@ -526,7 +656,7 @@ size_t accel_memory(const accel *a) { return a ? a->bytes : 0; }
 void accel_update_transform(accel *a, const shape *sh) {
   unsigned i = sh->index;
   if (!a->inst[i]) return; /* a shape group: not in the top level */
-  set_instance_transform(a->inst[i], &sh->to_world);
+  set_instance_transform(a->inst[i], &sh->to_world, a->origin);
   rtcCommitGeometry(a->inst[i]);
   a->top_dirty = true;
   a->counters.instance_updates++;
@@ -551,6 +681,7 @@ rsw_status accel_rebuild_shape(accel *a, const shape *sh, rsw_err *err) {
   rtcAttachGeometryByID(a->sub[i], g, 0);
   a->geom[i] = g;
   a->nverts[i] = sh->mesh.n_verts;
+  shape_bounds(a, i);
   rtcCommitScene(a->sub[i]);
   rtcCommitGeometry(a->inst[i]);
   a->top_dirty = true;
@@ -567,6 +698,7 @@ rsw_status accel_update_vertices(accel *a, const shape *sh, rsw_err *err) {
   if (!v || a->nverts[i] != sh->mesh.n_verts) return accel_rebuild_shape(a, sh, err);
   t_embree_error[0] = '\0';
   memcpy(v, sh->mesh.pos, bytes);
+  shape_bounds(a, i);
   rtcUpdateGeometryBuffer(a->geom[i], RTC_BUFFER_TYPE_VERTEX, 0);
   /* Refit the shape's own BVH: its topology is unchanged. */
   rtcSetGeometryBuildQuality(a->geom[i], RTC_BUILD_QUALITY_REFIT);
@@ -581,6 +713,13 @@ rsw_status accel_update_vertices(accel *a, const shape *sh, rsw_err *err) {
 rsw_status accel_commit(accel *a, rsw_err *err) {
   if (!a->top_dirty) return RSW_OK;
   t_embree_error[0] = '\0';
+  /* The geometry moved: so may the frame's origin (the same function of
+   * the scene's state as at load, so that an update equals a reload). */
+  vec3 o = frame_origin(a);
+  if (memcmp(&o, &a->origin, sizeof o) != 0) {
+    a->origin = o;
+    rewrite_instances(a);
+  }
   rtcCommitScene(a->top);
   a->top_dirty = false;
   a->counters.top_commits++;
@@ -594,10 +733,10 @@ void accel_get_counters(const accel *a, accel_counters *out) {
 
 /* ---- queries ------------------------------------------------------------------------------- */
 
-static void fill_ray(struct RTCRay *ray, const ray3 *r) {
-  ray->org_x = (float)r->o.x;
-  ray->org_y = (float)r->o.y;
-  ray->org_z = (float)r->o.z;
+static void fill_ray(struct RTCRay *ray, const ray3 *r, vec3 origin) {
+  ray->org_x = (float)(r->o.x - origin.x);
+  ray->org_y = (float)(r->o.y - origin.y);
+  ray->org_z = (float)(r->o.z - origin.z);
   ray->dir_x = (float)r->d.x;
   ray->dir_y = (float)r->d.y;
   ray->dir_z = (float)r->d.z;
@@ -613,7 +752,7 @@ bool accel_intersect(const accel *a, const ray3 *r, accel_hit *h) {
   struct RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   struct RTCRayHit rh;
-  fill_ray(&rh.ray, r);
+  fill_ray(&rh.ray, r, a->origin);
   rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
   rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
   rtcIntersect1(a->top, &ctx, &rh);
@@ -639,7 +778,7 @@ bool accel_occluded(const accel *a, const ray3 *r) {
   struct RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   struct RTCRay ray;
-  fill_ray(&ray, r);
+  fill_ray(&ray, r, a->origin);
   rtcOccluded1(a->top, &ctx, &ray);
   return ray.tfar < 0;
 }
@@ -735,7 +874,7 @@ static RTCScene build_flat(const scene *s) {
                                            sh->mesh.n_faces);
     for (uint32_t k = 0; k < sh->mesh.n_verts; k++) {
       const float *p = &sh->mesh.pos[3 * (size_t)k];
-      vec3 w = xf_point(&sh->to_world, v3(p[0], p[1], p[2]));
+      vec3 w = v3_sub(xf_point(&sh->to_world, v3(p[0], p[1], p[2])), s->accel->origin);
       v[3 * k] = (float)w.x, v[3 * k + 1] = (float)w.y, v[3 * k + 2] = (float)w.z;
     }
     memcpy(ix, sh->mesh.faces, 3 * (size_t)sh->mesh.n_faces * sizeof(unsigned));
@@ -759,7 +898,7 @@ double accel_ceiling_rays_per_s(const scene *s, bool flat, uint64_t n_rays, int 
   if (n_rays > ((uint64_t)1 << 26)) n_rays = (uint64_t)1 << 26;
   int started = 0;
   for (int i = 0; i < threads; i++) {
-    jobs[i] = (ceiling_job){.scene = sc, .c = s->bsphere_center, .r = s->bsphere_radius,
+    jobs[i] = (ceiling_job){.scene = sc, .c = v3_sub(s->bsphere_center, s->accel->origin), .r = s->bsphere_radius,
                             .n = n_rays / (uint64_t)threads, .seed = seed, .index = (unsigned)i, .sync = &sync};
     if (pthread_create(&th[i], NULL, ceiling_worker, &jobs[i]) != 0) break;
     started++;

@@ -12,7 +12,17 @@
  * Instancing (shapes/instance.h): each shapegroup is one Embree scene with
  * its members (geomID = member index); an `instance` is attached at its
  * shape index like any shape, an `instancelist`'s placements at ids after
- * all shapes (a 2 x 4-byte map gives shape and placement back). */
+ * all shapes (a 2 x 4-byte map gives shape and placement back).
+ *
+ * Precision: Embree traces in float32. Everything it holds (instance
+ * translations, ray origins, the ceiling's flat copy) is expressed relative
+ * to accel_origin(), the centre of the geometry's bounds, which is
+ * recomputed (and every instance transform rewritten) whenever a commit
+ * moves it. So float rounding depends on distances within the scene, not on
+ * where the scene sits in the world: a canopy at 100 km from the world
+ * origin traces like the same canopy at the origin. accel_surface_error()
+ * bounds what that rounding can still do, for the offsets of spawned rays
+ * (shapes/shape.h spawn_ray). */
 #ifndef RSW_ACCEL_H
 #define RSW_ACCEL_H
 
@@ -41,6 +51,26 @@ bool accel_intersect(const accel *a, const ray3 *r, accel_hit *h);
 /* Any hit on [r->tmin, r->tmax]. Thread-safe. */
 bool accel_occluded(const accel *a, const ray3 *r);
 
+/* ---- float32 error bounds ---------------------------------------------------- */
+
+/* The world point Embree's frame is centred on (see above; the origin
+ * (0,0,0) for a NULL structure). */
+vec3 accel_origin(const accel *a);
+
+/* Bound (world units), along the surface's unit normal n, on the distance
+ * between a point p on the surface of top-level shape `index` (into
+ * scene->shapes), computed in double precision, and that surface as Embree
+ * intersects rays starting near p in float32. X is the instance transform
+ * Embree applies, (A, t): the shape's to_world, or the placement of the
+ * instance that was hit. With u = 2^-24, c = accel_origin(), B = A^-1 and
+ * ext the largest |coordinate| of the shape's geometry in instance space:
+ *   u [ |n|_1 |p - c| + sum_k |(A^T n)_k| |B_k|_1 (|p - c| + |t - c|)
+ *       + |A^T n|_1 ext ]                      (|.| of points: max-abs)
+ * the ray origin's rounding in Embree's frame, its float transform into
+ * instance space, and the intersection arithmetic there. It does not
+ * depend on a translation of the whole scene. */
+double accel_surface_error(const accel *a, uint32_t index, const xform *X, vec3 p, vec3 n);
+
 /* ---- updates (scene/params.c) ------------------------------------------------
  * Each call stages work on one shape; accel_commit() then commits the
  * top-level scene once if anything changed. */
@@ -62,6 +92,8 @@ typedef struct accel_counters {
   unsigned long instance_updates; /* instance transforms written */
   unsigned long refits;           /* shape BVHs refitted */
   unsigned long rebuilds;         /* shape BVHs rebuilt */
+  unsigned long origin_moves;     /* commits that moved accel_origin() (every
+                                     instance transform rewritten) */
 } accel_counters;
 void accel_get_counters(const accel *a, accel_counters *out);
 

@@ -94,6 +94,10 @@ typedef struct surface_interaction {
   vec3 wi;             /* local: towards the ray origin */
   const struct shape *shape;
   uint32_t prim;
+  double p_error;      /* bound on the distance between p and the surface as
+                          Embree traces it in float32 (world units; accel.h
+                          accel_surface_error): spawned rays start a few times
+                          this off the surface (shapes/shape.h spawn_ray) */
 } surface_interaction;
 
 /* ---- textures ---------------------------------------------------------- */

@@ -12,10 +12,18 @@
 #define RSW_INV_2PI 0.15915494309189533577
 #define RSW_INV_4PI 0.07957747154594766788
 
+/* The float32 rounding unit 2^-24 (half an ulp at 1): Embree traces in
+ * single precision. */
+#define RSW_F32_UNIT 5.9604644775390625e-08
+
 /* Mitsuba's RayEpsilon = 1500 * 2^-24 (float epsilon, Embree traces in
  * single precision); ShadowEpsilon = 10 * RayEpsilon.
- * Source: mitsuba3 include/mitsuba/core/math.h. */
-#define RSW_RAY_EPSILON (1500.0 * 5.9604644775390625e-08)
+ * Source: mitsuba3 include/mitsuba/core/math.h. Kept where Mitsuba's
+ * semantics use them as constants (bounding-sphere inflation, the
+ * radiancemeter's nudge, unit-vector tolerances). Spawned rays do NOT use
+ * Mitsuba's (1 + max|p|) RayEpsilon offset, which grows with the distance
+ * from the world origin: see spawn_ray in shapes/shape.h. */
+#define RSW_RAY_EPSILON (1500.0 * RSW_F32_UNIT)
 #define RSW_SHADOW_EPSILON (10.0 * RSW_RAY_EPSILON)
 
 typedef struct vec3 {

@@ -24,19 +24,20 @@ static inline double mis_weight(double a, double b) {
   return isfinite(w) ? w : 0.0;
 }
 
-/* Mitsuba's spawn_ray: offset the origin along the geometric normal, on
- * the side of the new direction, by (1 + max|p|) RayEpsilon. */
-static ray3 spawn_ray(const surface_interaction *si, vec3 d) {
-  double mag = (1.0 + v3_max_abs(si->p)) * RSW_RAY_EPSILON;
-  vec3 off = v3_scale(si->ng, v3_dot(si->ng, d) >= 0 ? mag : -mag);
-  ray3 r = {v3_add(si->p, off), d, 0.0, INFINITY};
-  return r;
-}
-
-static ray3 spawn_ray_to(const surface_interaction *si, vec3 d, double dist) {
-  ray3 r = spawn_ray(si, d);
-  /* Stop short of the target by ShadowEpsilon (relative), as Mitsuba. */
-  r.tmax = isfinite(dist) ? dist * (1.0 - RSW_SHADOW_EPSILON) : INFINITY;
+/* Shadow ray from si towards the emitter sample ds. Spawned rays are
+ * offset by the hit point's float error, not by Mitsuba's (1 + max|p|)
+ * RayEpsilon (shapes/shape.h spawn_ray). A point on a surface emitter gets
+ * the same treatment at the light's end (spawn_ray_between); for other
+ * emitters the ray stops short of ds.dist by ShadowEpsilon (relative), as
+ * Mitsuba. */
+static ray3 spawn_ray_to(const scene *sc, const surface_interaction *si, const emitter *e,
+                         const direction_sample *ds) {
+  if ((e->flags & EMITTER_SURFACE) && e->shape) {
+    const shape *ls = e->shape;
+    return spawn_ray_between(si, ds->p, ds->n, accel_surface_error(sc->accel, ls->index, &ls->to_world, ds->p, ds->n));
+  }
+  ray3 r = spawn_ray(si, ds->d);
+  r.tmax = isfinite(ds->dist) ? ds->dist * (1.0 - RSW_SHADOW_EPSILON) : INFINITY;
   return r;
 }
 
@@ -147,7 +148,7 @@ static color path_Li(const integrator *it, const scene *sc, sampler_state *st, r
       direction_sample ds;
       color value = e->ops->sample_direction(e, &si, sops->next_2d(st), &ds);
       if (ds.pdf > 0 && !col_is_black(value)) {
-        ray3 sr = spawn_ray_to(&si, ds.d, ds.dist);
+        ray3 sr = spawn_ray_to(sc, &si, e, &ds);
         stats->shadow_rays++;
         /* Infinitely distant emitters give dist = INFINITY: the shadow ray
          * is unbounded (in a periodic scene, cut only by leaving the

@@ -6,16 +6,19 @@
  * white space); the film is N x 1 and pixel i = floor(u.x N) is the
  * radiancemeter at origin_i looking along normalize(direction_i): the
  * radiance arriving at origin_i from that direction, weight 1. As for
- * radiancemeter the origin is nudged by RayEpsilon along d. */
+ * radiancemeter the origin is nudged by RayEpsilon along d
+ * (radiancemeter_ray_origin). */
 #include <math.h>
 #include <stdlib.h>
 
+#include "../accel.h"
 #include "sensor_common.h"
 
 typedef struct mradiancemeter {
   sensor base;
   size_t n;
   vec3 *o, *d; /* n each; d unit */
+  vec3 frame;  /* accel_origin() (set_scene) */
 } mradiancemeter;
 
 static double mradiancemeter_sample_ray(const sensor *s, vec2 film_u, vec2 aperture_u, ray3 *ray) {
@@ -23,7 +26,7 @@ static double mradiancemeter_sample_ray(const sensor *s, vec2 film_u, vec2 apert
   const mradiancemeter *m = (const mradiancemeter *)s;
   double f = floor(film_u.x * (double)m->n);
   size_t i = !(f >= 0.0) ? 0 : (f >= (double)m->n ? m->n - 1 : (size_t)f);
-  ray->o = v3_fma(m->o[i], RSW_RAY_EPSILON, m->d[i]);
+  ray->o = radiancemeter_ray_origin(m->o[i], m->d[i], m->frame);
   ray->d = m->d[i];
   ray->tmin = 0.0;
   ray->tmax = INFINITY;
@@ -31,9 +34,8 @@ static double mradiancemeter_sample_ray(const sensor *s, vec2 film_u, vec2 apert
 }
 
 static rsw_status mradiancemeter_set_scene(sensor *s, const scene *sc, rsw_err *err) {
-  (void)s;
-  (void)sc;
   (void)err;
+  ((mradiancemeter *)s)->frame = accel_origin(sc->accel);
   return RSW_OK;
 }
 

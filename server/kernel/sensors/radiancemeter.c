@@ -7,15 +7,19 @@
  * `origin` and `direction` (to_world = look_at(origin, origin + direction,
  * up), up the first vector of coordinate_system(direction)); when
  * to_world is given it wins and origin/direction are ignored, as in
- * Mitsuba. Like Mitsuba, the origin is nudged by RayEpsilon along d. */
+ * Mitsuba. Like Mitsuba, the origin is nudged by RayEpsilon along d (more
+ * in a scene so large that Embree's float32 frame is coarser there:
+ * radiancemeter_ray_origin). */
 #include <math.h>
 #include <stdlib.h>
 
+#include "../accel.h"
 #include "sensor_common.h"
 
 typedef struct radiancemeter {
   sensor base;
   vec3 o, d; /* d unit */
+  vec3 frame;  /* accel_origin() (set_scene) */
 } radiancemeter;
 
 static double radiancemeter_sample_ray(const sensor *s, vec2 film_u,
@@ -23,7 +27,7 @@ static double radiancemeter_sample_ray(const sensor *s, vec2 film_u,
   (void)film_u;
   (void)aperture_u;
   const radiancemeter *r = (const radiancemeter *)s;
-  ray->o = v3_fma(r->o, RSW_RAY_EPSILON, r->d);
+  ray->o = radiancemeter_ray_origin(r->o, r->d, r->frame);
   ray->d = r->d;
   ray->tmin = 0.0;
   ray->tmax = INFINITY;
@@ -31,9 +35,8 @@ static double radiancemeter_sample_ray(const sensor *s, vec2 film_u,
 }
 
 static rsw_status radiancemeter_set_scene(sensor *s, const scene *sc, rsw_err *err) {
-  (void)s;
-  (void)sc;
   (void)err;
+  ((radiancemeter *)s)->frame = accel_origin(sc->accel);
   return RSW_OK;
 }
 

@@ -6,6 +6,7 @@
 #include <math.h>
 #include <stdlib.h>
 
+#include "../accel.h"
 #include "../scene/periodic.h"
 #include "../shapes/shape.h"
 
@@ -243,4 +244,10 @@ void sensor_traverse_axis(object *o, param_visitor *v) {
 double sensor_ray_offset(const ray_target *t, double param, double radius) {
   if (param >= 0.0) return param;
   return t->kind == RAY_TARGET_NONE ? radius : 2.0 * radius;
+}
+
+vec3 radiancemeter_ray_origin(vec3 o, vec3 d, vec3 frame_origin) {
+  double d1 = fabs(d.x) + fabs(d.y) + fabs(d.z);
+  double e = RSW_SPAWN_ERRORS * RSW_F32_UNIT * d1 * v3_max_abs(v3_sub(o, frame_origin));
+  return v3_fma(o, fmax(RSW_RAY_EPSILON, e), d);
 }

@@ -107,4 +107,12 @@ void sensor_traverse_axis(object *o, struct param_visitor *v);
  * with one; a given value (>= 0) wins. */
 double sensor_ray_offset(const ray_target *t, double param, double radius);
 
+/* Ray origin of a radiancemeter at o looking along unit d: o nudged along
+ * d by Mitsuba's RayEpsilon, or, where Embree's float32 frame (centred on
+ * `frame_origin`, accel_origin() at set_scene) is coarser there, by
+ * RSW_SPAWN_ERRORS times its rounding error along d, so that a meter
+ * lying on a surface does not see that surface whatever the scene's size;
+ * unchanged by a translation of the whole scene. */
+vec3 radiancemeter_ray_origin(vec3 o, vec3 d, vec3 frame_origin);
+
 #endif

@@ -108,6 +108,7 @@ const plugin plugin_shapegroup = {.name = "shapegroup", .cls = CLS_SHAPE, .creat
 static void instance_destroy(object *o) {
   instance_shape *s = (instance_shape *)o;
   free(s->xf);
+  free(s->tr);
   free(s);
 }
 
@@ -162,7 +163,7 @@ const plugin plugin_instance = {.name = "instance", .cls = CLS_SHAPE, .create = 
 /* Row-major 3x4 of a leaf placement: T(x, y, z) R S(r), R's columns the
  * frame (s, t, n) of the unit normal (Mitsuba's coordinate_system), so
  * that the leaf's +z turns to n. */
-static void leaf_matrix(const double v[7], float out[12]) {
+static void leaf_matrix(const double v[7], float out[12], double tr[3]) {
   vec3 n = v3_norm(v3(v[3], v[4], v[5]));
   frame f = frame_from_normal(n);
   double r = v[6];
@@ -173,16 +174,22 @@ static void leaf_matrix(const double v[7], float out[12]) {
     out[2 * 4 + c] = (float)(r * cols[c].z);
   }
   out[3] = (float)v[0], out[7] = (float)v[1], out[11] = (float)v[2];
+  tr[0] = v[0], tr[1] = v[1], tr[2] = v[2];
 }
 
-rsw_status instance_list_parse(const char *path, float **xf_out, uint32_t *n_out, rsw_err *err) {
+/* The parser behind instance_list_parse: also returns the translations in
+ * double precision (n x 3, malloc'ed): a float keeps only ~7 digits, 8 mm
+ * steps at 100 km, so placements in georeferenced coordinates would move. */
+static rsw_status list_parse(const char *path, float **xf_out, double **tr_out, uint32_t *n_out, rsw_err *err) {
   *xf_out = NULL;
+  *tr_out = NULL;
   *n_out = 0;
   FILE *f = fopen(path, "r");
   if (!f) return rsw_fail(err, RSW_ERR_FILE, path, "cannot open instance list '%s': %s", path, strerror(errno));
   size_t cap = 1024, n = 0;
   float *xf = malloc(cap * 12 * sizeof(float));
-  rsw_status st = xf ? RSW_OK : rsw_fail(err, RSW_ERR_NOMEM, path, "out of memory");
+  double *tr = malloc(cap * 3 * sizeof(double));
+  rsw_status st = xf && tr ? RSW_OK : rsw_fail(err, RSW_ERR_NOMEM, path, "out of memory");
   char line[4096];
   char where[300];
   unsigned long lineno = 0;
@@ -225,14 +232,17 @@ rsw_status instance_list_parse(const char *path, float **xf_out, uint32_t *n_out
     }
     if (n == cap) {
       float *g = realloc(xf, 2 * cap * 12 * sizeof(float));
-      if (!g) {
+      if (g) xf = g;
+      double *gt = g ? realloc(tr, 2 * cap * 3 * sizeof(double)) : NULL;
+      if (gt) tr = gt;
+      if (!g || !gt) {
         st = rsw_fail(err, RSW_ERR_NOMEM, where, "out of memory");
         break;
       }
-      xf = g;
       cap *= 2;
     }
     float *m = &xf[12 * n];
+    double *tn = &tr[3 * n];
     if (k == 16) {
       if (v[12] != 0 || v[13] != 0 || v[14] != 0 || v[15] != 1) {
         st = rsw_fail(err, RSW_ERR_INVALID, where, "the last row of a to_world must be 0 0 0 1");
@@ -246,6 +256,7 @@ rsw_status instance_list_parse(const char *path, float **xf_out, uint32_t *n_out
         break;
       }
       for (int i = 0; i < 12; i++) m[i] = (float)v[i];
+      tn[0] = v[3], tn[1] = v[7], tn[2] = v[11];
     } else {
       if (!(v[6] > 0)) {
         st = rsw_fail(err, RSW_ERR_INVALID, where, "radius must be > 0 (got %g)", v[6]);
@@ -255,7 +266,7 @@ rsw_status instance_list_parse(const char *path, float **xf_out, uint32_t *n_out
         st = rsw_fail(err, RSW_ERR_INVALID, where, "the normal must not be zero");
         break;
       }
-      leaf_matrix(v, m);
+      leaf_matrix(v, m, tn);
     }
     n++;
     if (n > 0xFFFFFFF0u) st = rsw_fail(err, RSW_ERR_RANGE, where, "too many instances");
@@ -265,12 +276,22 @@ rsw_status instance_list_parse(const char *path, float **xf_out, uint32_t *n_out
   if (!st && n == 0) st = rsw_fail(err, RSW_ERR_INVALID, path, "instance list '%s' has no rows", path);
   if (st) {
     free(xf);
+    free(tr);
     return st;
   }
   float *shrunk = realloc(xf, n * 12 * sizeof(float));
   *xf_out = shrunk ? shrunk : xf;
+  double *tshrunk = realloc(tr, n * 3 * sizeof(double));
+  *tr_out = tshrunk ? tshrunk : tr;
   *n_out = (uint32_t)n;
   return RSW_OK;
+}
+
+rsw_status instance_list_parse(const char *path, float **xf_out, uint32_t *n_out, rsw_err *err) {
+  double *tr = NULL;
+  rsw_status st = list_parse(path, xf_out, &tr, n_out, err);
+  free(tr);
+  return st;
 }
 
 static rsw_status instancelist_create(loader *ld, node *n, object **out) {
@@ -281,7 +302,7 @@ static rsw_status instancelist_create(loader *ld, node *n, object **out) {
   char *path = NULL;
   rsw_status st = read_group(ld, n, &s->group);
   if (!st) st = ld_path(ld, n, "filename", &path);
-  if (!st) st = instance_list_parse(path, &s->xf, &s->n, ld->err);
+  if (!st) st = list_parse(path, &s->xf, &s->tr, &s->n, ld->err);
   free(path);
   if (st) {
     free(s);
@@ -299,7 +320,8 @@ const plugin plugin_instancelist = {.name = "instancelist", .cls = CLS_SHAPE, .c
 xform instance_transform(const instance_shape *s, uint32_t k) {
   if (!s->xf) return s->base.to_world;
   const float *m = &s->xf[12 * (size_t)k];
-  double mm[4][4] = {{m[0], m[1], m[2], m[3]}, {m[4], m[5], m[6], m[7]}, {m[8], m[9], m[10], m[11]}, {0, 0, 0, 1}};
+  const double *tr = &s->tr[3 * (size_t)k];
+  double mm[4][4] = {{m[0], m[1], m[2], tr[0]}, {m[4], m[5], m[6], tr[1]}, {m[8], m[9], m[10], tr[2]}, {0, 0, 0, 1}};
   xform t;
   if (!xf_from_matrix(mm, &t)) t = xf_identity(); /* checked at load */
   return t;
@@ -313,10 +335,22 @@ void instance_bbox(const shape *sh, vec3 *lo, vec3 *hi) {
   }
   const instance_shape *s = (const instance_shape *)sh;
   const shape_group *g = s->group;
-  for (uint32_t k = 0; k < s->n; k++) {
-    xform t = instance_transform(s, k);
+  if (!s->xf) {
     for (int c = 0; c < 8; c++)
-      box_add(lo, hi, xf_point(&t, v3(c & 1 ? g->hi.x : g->lo.x, c & 2 ? g->hi.y : g->lo.y, c & 4 ? g->hi.z : g->lo.z)));
+      box_add(lo, hi, xf_point(&sh->to_world, v3(c & 1 ? g->hi.x : g->lo.x, c & 2 ? g->hi.y : g->lo.y, c & 4 ? g->hi.z : g->lo.z)));
+    return;
+  }
+  /* Placements applied directly (instance_transform would also invert
+   * each matrix). */
+  for (uint32_t k = 0; k < s->n; k++) {
+    const float *m = &s->xf[12 * (size_t)k];
+    const double *t = &s->tr[3 * (size_t)k];
+    for (int c = 0; c < 8; c++) {
+      double q[3] = {c & 1 ? g->hi.x : g->lo.x, c & 2 ? g->hi.y : g->lo.y, c & 4 ? g->hi.z : g->lo.z};
+      box_add(lo, hi, v3((double)m[0] * q[0] + (double)m[1] * q[1] + (double)m[2] * q[2] + t[0],
+                         (double)m[4] * q[0] + (double)m[5] * q[1] + (double)m[6] * q[2] + t[1],
+                         (double)m[8] * q[0] + (double)m[9] * q[1] + (double)m[10] * q[2] + t[2]));
+    }
   }
 }
 
@@ -324,6 +358,7 @@ void hit_fill_interaction(const scene *sc, const ray3 *r, const accel_hit *h, su
   const shape *top = sc->shapes[h->shape];
   if (!shape_is_instancing(top)) {
     shape_fill_interaction(top, r, h, si);
+    si->p_error += accel_surface_error(sc->accel, h->shape, &top->to_world, si->p, si->ng);
     return;
   }
   const instance_shape *is = (const instance_shape *)top;
@@ -346,4 +381,8 @@ void hit_fill_interaction(const scene *sc, const ray3 *r, const accel_hit *h, su
   }
   shape_fill_interaction(&tmp, r, &hh, si);
   si->shape = m;
+  /* The position is computed from the member's own coordinates (object
+   * space barycentrics or re-projection) under placement * member, so its
+   * error is that of Embree's instance frame, not of the world offset. */
+  si->p_error += accel_surface_error(sc->accel, h->shape, &place, si->p, si->ng);
 }

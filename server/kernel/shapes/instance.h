@@ -11,7 +11,9 @@
  *
  * Memory: an `instance` is a full shape object (a few hundred bytes); an
  * `instancelist` stores one compact record per placement, a 3x4 float
- * matrix (48 bytes), plus what Embree holds per instance. */
+ * matrix (48 bytes) and its translation again in double precision (24
+ * bytes: placements may be georeferenced, kilometres from the origin),
+ * plus what Embree holds per instance. */
 #ifndef RSW_SHAPES_INSTANCE_H
 #define RSW_SHAPES_INSTANCE_H
 
@@ -31,6 +33,8 @@ typedef struct instance_shape {
   shape_group *group;
   uint32_t n;        /* placements: 1 for `instance` */
   float *xf;         /* `instancelist`: n row-major 3x4 matrices; NULL for `instance` */
+  double *tr;        /* `instancelist`: n translations (x, y, z), exact as read; the
+                        float ones in xf are not used for tracing */
 } instance_shape;
 
 static inline bool shape_is_group(const shape *s) { return s->base.plugin == &plugin_shapegroup; }

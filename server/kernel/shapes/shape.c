@@ -300,6 +300,7 @@ void shape_fill_interaction(const shape *s, const ray3 *r, const accel_hit *h, s
   si->t = h->t;
   si->shape = s;
   si->prim = h->prim;
+  si->p_error = 0; /* hit_fill_interaction adds Embree's rounding */
   vec3 n, sn, tangent = v3(0, 0, 0);
   switch (s->geom) {
   case GEOM_MESH: {
@@ -309,6 +310,9 @@ void shape_fill_interaction(const shape *s, const ray3 *r, const accel_hit *h, s
        * face normal from Embree's hit, which saves fetching three random
        * vertices (a cache miss on large meshes). */
       si->p = v3_fma(r->o, h->t, r->d);
+      /* Along the ray, p is off by Embree's error in t (and the ray's own
+       * rounding): a few float units of t |d|. */
+      si->p_error = 5.0 * RSW_F32_UNIT * h->t * v3_max_abs(r->d);
       n = sn = v3_norm(xf_normal(&s->to_world, h->ng));
       si->uv[0] = h->u;
       si->uv[1] = h->v;
