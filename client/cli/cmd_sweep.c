@@ -585,7 +585,13 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
   }
   /* The job lists the contexts in the order the user described them. */
   if ((rc = build_contexts(ctx, a, l.items, l.n, job_params, (long long)spp, (long long)seed, &x))) goto out;
+  cli_catch_interrupt();
   rsw_status s = rsw_job_submit(ctx->client, scene, x, NULL, job);
+  if (s && cli_interrupted) {
+    rc = cli_fail(ctx, CLI_INTERRUPTED,
+                  "interrupted while submitting the job (if the daemon got it, `raysweep job ls` shows it)");
+    goto out;
+  }
   if (s) {
     rc = cli_report(ctx, s, scene);
     goto out;
@@ -593,10 +599,18 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
   if (!ctx->quiet)
     fprintf(stderr, "raysweep sweep: job %s: %zu contexts%s\n", job, l.n, shard_n > 1 ? " (one shard)" : "");
   rsw_job_status st;
-  rc = cli_wait_job(ctx, job, timeout, &st);
+  /* Ctrl-C cancels the job (this command submitted it) and writes no films. */
+  rc = cli_wait_job(ctx, job, timeout, CLI_INTERRUPT_CANCEL, &st);
   if (rc != CLI_OK && rc != CLI_JOB) goto out;
   int job_rc = rc;
-  if ((rc = fetch_all(ctx, job, dir, fmt, sorted, l.n, job_params, &entries, &n_entries, &failed))) goto out;
+  if ((rc = fetch_all(ctx, job, dir, fmt, sorted, l.n, job_params, &entries, &n_entries, &failed))) {
+    if (cli_interrupted)
+      rc = cli_fail(ctx, CLI_INTERRUPTED,
+                    "interrupted while fetching films; job %s is over and keeps its results on the daemon "
+                    "(`raysweep fetch %s CONTEXT SENSOR`, or sweep again)",
+                    job, job);
+    goto out;
+  }
   if ((rc = write_index(ctx, dir, entries, n_entries))) goto out;
   rc = job_rc;
   if (ctx->json) {

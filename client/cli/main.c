@@ -71,7 +71,8 @@ static const char global_help[] =
     "  3  cannot connect to the daemon\n"
     "  4  job failed or was cancelled (or some of its renders failed)\n"
     "  5  timeout\n"
-    "  6  local I/O error (files, directories, inconsistent shard directories)\n";
+    "  6  local I/O error (files, directories, inconsistent shard directories)\n"
+    "  130 interrupted (Ctrl-C): sweep cancels its job first, job watch leaves it running\n";
 
 static void command_name(const cli_command *c, char *buf, size_t n) {
   snprintf(buf, n, "%s%s%s", c->group, c->name ? " " : "", c->name ? c->name : "");
@@ -298,7 +299,8 @@ int main(int argc, char **argv) {
     if (!ctx.server_url || !*ctx.server_url) ctx.server_url = DEFAULT_URL;
     rc = read_token(&ctx, token_file, &token);
     if (!rc) {
-      rsw_client_opts o = {.size = sizeof o, .base_url = ctx.server_url, .token = token};
+      rsw_client_opts o = {
+          .size = sizeof o, .base_url = ctx.server_url, .token = token, .interrupt = &cli_interrupted};
       rsw_status s = rsw_client_new(&o, &ctx.client);
       if (s)
         rc = cli_fail(&ctx, s == RSW_ERR_INVALID ? CLI_USAGE : CLI_IO, "cannot create a client for '%s': %s",

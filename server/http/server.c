@@ -14,6 +14,7 @@
 #include <errno.h>
 #include <netdb.h>
 #include <netinet/in.h>
+#include <poll.h>
 #include <pthread.h>
 #include <stdarg.h>
 #include <stdatomic.h>
@@ -394,6 +395,58 @@ static void take_body(conn *cn, const char *data, size_t n) {
 }
 
 /* The whole request is in: last checks, then the handler. */
+/* ---- clients that hang up ---------------------------------------------------- */
+
+/* While a long handler (a synchronous render) runs on a connection's
+ * thread, nobody reads its socket: a small thread polls it and sets `gone`
+ * when the peer closed it (POLLRDHUP: the client's FIN; HUP/ERR: reset), so
+ * the render stops instead of finishing for nobody. The request body is
+ * fully read by then, and HTTP clients do not half-close, so an end of
+ * stream here means the client went away. */
+#define WATCH_POLL_MS 100
+
+typedef struct client_watch {
+  struct MHD_Connection *conn;
+  int fd;
+  bool running;
+  atomic_int gone;
+  atomic_bool stop;
+  pthread_t thread;
+} client_watch;
+
+static void *watch_main(void *arg) {
+  client_watch *w = arg;
+  while (!atomic_load(&w->stop)) {
+    struct pollfd p = {.fd = w->fd, .events = POLLRDHUP};
+    int n = poll(&p, 1, WATCH_POLL_MS);
+    if (n > 0 && (p.revents & (POLLRDHUP | POLLHUP | POLLERR | POLLNVAL))) {
+      atomic_store(&w->gone, 1);
+      break;
+    }
+  }
+  return NULL;
+}
+
+/* http_req.watch_client: start the watch once per request. */
+static const atomic_int *watch_start(http_req *r) {
+  client_watch *w = r->watch_ctx;
+  if (w->running) return &w->gone;
+  const union MHD_ConnectionInfo *ci = MHD_get_connection_info(w->conn, MHD_CONNECTION_INFO_CONNECTION_FD);
+  if (!ci) return NULL;
+  w->fd = ci->connect_fd;
+  atomic_init(&w->gone, 0);
+  atomic_init(&w->stop, false);
+  w->running = pthread_create(&w->thread, NULL, watch_main, w) == 0;
+  return w->running ? &w->gone : NULL;
+}
+
+static void watch_stop(client_watch *w) {
+  if (!w->running) return;
+  atomic_store(&w->stop, true);
+  pthread_join(w->thread, NULL);
+  w->running = false;
+}
+
 static enum MHD_Result dispatch(struct MHD_Connection *c, conn *cn, const char *url, const char *method) {
   const http_route *rt = cn->route;
   if (cn->too_large) {
@@ -437,7 +490,11 @@ static enum MHD_Result dispatch(struct MHD_Connection *c, conn *cn, const char *
       .body_len = len,
       .resp = {.status = 500},
   };
+  client_watch w = {.conn = c};
+  r.watch_client = watch_start;
+  r.watch_ctx = &w;
   rt->handler(&r);
+  watch_stop(&w);
   return send_resp(c, cn, &r);
 }
 
