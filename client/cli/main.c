@@ -39,10 +39,11 @@ static const cli_command commands[] = {
      true, cmd_render},
     {"sweep", NULL,
      "ID (--contexts FILE.jsonl | --grid NAME=START:STOP:STEP...) [--set KEY=VALUE]... [--sensor S]... "
-     "[--spp N] [--seed N] [--shard I/N] [--format exr|npy|json] [--timeout S] -o DIR",
+     "[--spp N] [--seed N] [--shard I/N] [--format exr|npy|json] [--timeout S] -o DIR [--force]",
      "submit a job over many contexts, show progress, fetch every film into DIR with DIR/index.jsonl",
      cli_opts_sweep, 1, 1, true, cmd_sweep},
-    {"merge", NULL, "DIR... -o DIR", "join sweep shard directories into one (films hard-linked or copied)",
+    {"merge", NULL, "DIR... -o DIR [--partial]",
+     "join sweep shard directories into one (films hard-linked or copied); fails listing missing contexts",
      cli_opts_merge, 1, (size_t)-1, false, cmd_merge},
     {"job", "ls", "", "list jobs", cli_opts_none, 0, 0, true, cmd_job_ls},
     {"job", "show", "ID", "one job's state and progress", cli_opts_none, 1, 1, true, cmd_job_show},

@@ -23,7 +23,10 @@ static void on_sigint(int sig) {
 }
 
 void cli_catch_interrupt(void) {
-  struct sigaction sa;
+  struct sigaction sa, old;
+  /* Ignored at start (`nohup`, a background job of a non-interactive
+   * shell): stay ignored, as the convention for SIGINT goes. */
+  if (sigaction(SIGINT, NULL, &old) == 0 && old.sa_handler == SIG_IGN) return;
   memset(&sa, 0, sizeof sa);
   sa.sa_handler = on_sigint;
   sigemptyset(&sa.sa_mask);

@@ -318,6 +318,8 @@ char *service_metrics_text(service *svc) {
   for (int s = 0; s < 5; s++) mb_printf(&b, "raysweep_jobs{state=\"%s\"} %zu\n", states[s], by_state[s]);
   mb_printf(&b, "# HELP raysweep_queue_depth Jobs waiting for the worker.\n# TYPE raysweep_queue_depth gauge\n");
   mb_printf(&b, "raysweep_queue_depth %zu\n", svc->n_queue);
+  mb_printf(&b, "# HELP raysweep_sync_renders Synchronous renders (POST :render) in progress.\n");
+  mb_printf(&b, "# TYPE raysweep_sync_renders gauge\nraysweep_sync_renders %zu\n", svc->sync_renders);
   mb_printf(&b, "# HELP raysweep_contexts_rendered_total Renders of (context, sensor) completed.\n");
   mb_printf(&b, "# TYPE raysweep_contexts_rendered_total counter\nraysweep_contexts_rendered_total %llu\n",
             (unsigned long long)svc->contexts_rendered);
@@ -1077,13 +1079,15 @@ rsw_status service_render(service *svc, const char *id, const char *body, size_t
                     (unsigned long long)ps, (unsigned long long)svc->opts.max_pixel_samples);
   }
   if (!st) {
+    pthread_mutex_lock(&svc->lock);
+    svc->sync_renders++;
+    pthread_mutex_unlock(&svc->lock);
     st = svc_render_locked(svc, r, &rs, out, e);
-    if (!st) {
-      snprintf(out->context, sizeof out->context, "render");
-      pthread_mutex_lock(&svc->lock);
-      svc->contexts_rendered++;
-      pthread_mutex_unlock(&svc->lock);
-    }
+    pthread_mutex_lock(&svc->lock);
+    svc->sync_renders--;
+    if (!st) svc->contexts_rendered++;
+    pthread_mutex_unlock(&svc->lock);
+    if (!st) snprintf(out->context, sizeof out->context, "render");
   }
   cJSON_Delete(j);
   svc_scene_release(svc, r);
