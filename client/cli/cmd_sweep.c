@@ -581,25 +581,38 @@ static char *dir_file(const char *dir, const char *name) {
   return p;
 }
 
-/* The id of context k of the unsharded list a manifest describes. */
-static const char *manifest_id(const cJSON *ids, int width, size_t k, char buf[72]) {
-  if (ids) {
-    const char *s = cJSON_GetStringValue(cJSON_GetArrayItem(ids, (int)k));
-    return s ? s : "";
-  }
-  make_id(buf, width, k);
-  return buf;
-}
-
 typedef struct sweep_manifest {
   cJSON *root; /* owned */
   const char *sweep;
   size_t shard_i, shard_n, total;
   int id_width;
-  const cJSON *ids;        /* array or NULL (numbered ids) */
-  const cJSON *incomplete; /* array or NULL */
+  const char **ids;        /* owned array of total ids (borrowed strings), or NULL: numbered */
+  const char **incomplete; /* owned, sorted (strings borrowed from root) */
+  size_t n_incomplete;
   bool finished;
 } sweep_manifest;
+
+static void manifest_free(sweep_manifest *m) {
+  cJSON_Delete(m->root);
+  free(m->ids);
+  free(m->incomplete);
+  memset(m, 0, sizeof *m);
+}
+
+/* The id of context k of the unsharded list a manifest describes. */
+static const char *manifest_id(const sweep_manifest *m, size_t k, char buf[72]) {
+  if (m->ids) return m->ids[k];
+  make_id(buf, m->id_width, k);
+  return buf;
+}
+
+static int cmp_str(const void *a, const void *b) {
+  return strcmp(*(const char *const *)a, *(const char *const *)b);
+}
+
+static bool manifest_incomplete(const sweep_manifest *m, const char *id) {
+  return m->n_incomplete && bsearch(&id, m->incomplete, m->n_incomplete, sizeof *m->incomplete, cmp_str);
+}
 
 /* Read and check DIR/sweep.json. 0, or -1 when absent (errno ENOENT), or a
  * CLI exit code after printing. */
@@ -623,24 +636,43 @@ static int manifest_read(const cli_ctx *ctx, const char *dir, sweep_manifest *m)
   const cJSON *total = cJSON_GetObjectItemCaseSensitive(r, "contexts_total");
   const cJSON *width = cJSON_GetObjectItemCaseSensitive(r, "id_width");
   m->sweep = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "sweep"));
-  m->ids = cJSON_GetObjectItemCaseSensitive(r, "ids");
-  m->incomplete = cJSON_GetObjectItemCaseSensitive(r, "incomplete");
+  const cJSON *ids = cJSON_GetObjectItemCaseSensitive(r, "ids");
+  const cJSON *inc = cJSON_GetObjectItemCaseSensitive(r, "incomplete");
   m->finished = cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(r, "finished"));
   bool ok = m->sweep && cJSON_IsArray(shard) && cJSON_GetArraySize(shard) == 2 && json_is_int(total, 0) &&
-            (m->ids ? cJSON_IsArray(m->ids) : json_is_int(width, 1)) &&
-            (!m->incomplete || cJSON_IsArray(m->incomplete));
+            (ids ? cJSON_IsArray(ids) : json_is_int(width, 1)) && (!inc || cJSON_IsArray(inc));
   if (ok) {
     const cJSON *si = cJSON_GetArrayItem(shard, 0), *sn = cJSON_GetArrayItem(shard, 1);
     ok = json_is_int(si, 0) && json_is_int(sn, 1) && si->valuedouble < sn->valuedouble;
     if (ok) m->shard_i = (size_t)si->valuedouble, m->shard_n = (size_t)sn->valuedouble;
     m->total = (size_t)total->valuedouble;
-    m->id_width = m->ids ? 0 : (int)width->valuedouble;
-    if (m->ids && (size_t)cJSON_GetArraySize(m->ids) != m->total) ok = false;
+    m->id_width = ids ? 0 : (int)width->valuedouble;
+  }
+  /* Arrays for O(1) ids and O(log n) "incomplete?" (cJSON arrays are lists). */
+  if (ok && ids) {
+    m->ids = malloc((m->total ? m->total : 1) * sizeof *m->ids);
+    size_t k = 0;
+    const cJSON *v;
+    cJSON_ArrayForEach(v, ids) {
+      if (!m->ids || k >= m->total || !cJSON_IsString(v)) break;
+      m->ids[k++] = v->valuestring;
+    }
+    ok = m->ids && k == m->total && !v; /* every element a string, no more and no fewer */
+  }
+  if (ok && inc) {
+    size_t n = (size_t)cJSON_GetArraySize(inc);
+    m->incomplete = malloc((n ? n : 1) * sizeof *m->incomplete);
+    const cJSON *v;
+    cJSON_ArrayForEach(v, inc) {
+      if (!m->incomplete || !cJSON_IsString(v)) break;
+      m->incomplete[m->n_incomplete++] = v->valuestring;
+    }
+    ok = m->incomplete && m->n_incomplete == n;
+    if (ok && n) qsort(m->incomplete, n, sizeof *m->incomplete, cmp_str);
   }
   if (!ok) {
     int rc = cli_fail(ctx, CLI_IO, "%s: not a sweep manifest (%s)", path, MANIFEST_FORMAT);
-    cJSON_Delete(m->root);
-    m->root = NULL;
+    manifest_free(m);
     free(path);
     return rc;
   }
@@ -801,9 +833,8 @@ static int prepare_output(const cli_ctx *ctx, const char *dir, bool force) {
   }
   if (mrc == 0) { /* every context of its shard (an interrupted sweep has no index yet) */
     char buf[72];
-    for (size_t k = m.shard_i; k < m.total; k += m.shard_n)
-      removed += remove_context_dir(dir, manifest_id(m.ids, m.id_width, k, buf));
-    cJSON_Delete(m.root);
+    for (size_t k = m.shard_i; k < m.total; k += m.shard_n) removed += remove_context_dir(dir, manifest_id(&m, k, buf));
+    manifest_free(&m);
   }
   if (has_index && unlink(index) != 0 && errno != ENOENT) {
     int rc = cli_fail(ctx, CLI_IO, "cannot remove '%s': %s", index, strerror(errno));
@@ -1079,12 +1110,6 @@ typedef struct merge_input {
   sweep_manifest m;
 } merge_input;
 
-static bool json_array_has(const cJSON *arr, const char *s) {
-  const cJSON *v;
-  cJSON_ArrayForEach(v, arr) if (cJSON_IsString(v) && strcmp(v->valuestring, s) == 0) return true;
-  return false;
-}
-
 /* Films of `context` from an input without sweep.json (e sorted by context). */
 static bool legacy_has(const index_entry *e, size_t n, const merge_input *in, const char *context) {
   size_t lo = 0, hi = n;
@@ -1125,13 +1150,12 @@ static size_t merge_missing(const cli_ctx *ctx, const merge_input *in, size_t n_
     char buf[72], list[400] = "";
     size_t used = 0;
     for (size_t k = 0; k < m0->total; k++) {
-      const char *id = manifest_id(m0->ids, m0->id_width, k, buf);
+      const char *id = manifest_id(m0, k, buf);
       bool covered = false;
       for (size_t j = g; j < n_in && !covered; j++) {
         const sweep_manifest *m = &in[j].m;
         if (!in[j].has_manifest || strcmp(m->sweep, m0->sweep) != 0) continue;
-        covered = in[j].has_index && m->finished && k % m->shard_n == m->shard_i &&
-                  !json_array_has(m->incomplete, id);
+        covered = in[j].has_index && m->finished && k % m->shard_n == m->shard_i && !manifest_incomplete(m, id);
       }
       if (!covered) covered = legacy_has(e, n, in, id);
       if (covered) continue;
@@ -1314,7 +1338,7 @@ int cmd_merge(cli_ctx *ctx, const cli_args *a) {
   }
 done:
   entries_free(e, n);
-  for (size_t i = 0; i < a->n_pos; i++) cJSON_Delete(in[i].m.root);
+  for (size_t i = 0; i < a->n_pos; i++) manifest_free(&in[i].m);
   free(in);
   cJSON_Delete(missing_ids);
   return rc;
