@@ -12,6 +12,7 @@
 
 #include <arpa/inet.h>
 #include <errno.h>
+#include <fcntl.h>
 #include <netdb.h>
 #include <netinet/in.h>
 #include <poll.h>
@@ -403,23 +404,23 @@ static void take_body(conn *cn, const char *data, size_t n) {
  * the render stops instead of finishing for nobody. The request body is
  * fully read by then, and HTTP clients do not half-close, so an end of
  * stream here means the client went away. */
-#define WATCH_POLL_MS 100
-
 typedef struct client_watch {
   struct MHD_Connection *conn;
   int fd;
+  int wake[2]; /* a pipe: watch_stop writes, so the watcher leaves poll at once */
   bool running;
   atomic_int gone;
-  atomic_bool stop;
   pthread_t thread;
 } client_watch;
 
 static void *watch_main(void *arg) {
   client_watch *w = arg;
-  while (!atomic_load(&w->stop)) {
-    struct pollfd p = {.fd = w->fd, .events = POLLRDHUP};
-    int n = poll(&p, 1, WATCH_POLL_MS);
-    if (n > 0 && (p.revents & (POLLRDHUP | POLLHUP | POLLERR | POLLNVAL))) {
+  for (;;) {
+    struct pollfd p[2] = {{.fd = w->fd, .events = POLLRDHUP}, {.fd = w->wake[0], .events = POLLIN}};
+    int n = poll(p, 2, -1);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0 || p[1].revents) break; /* stopped: the handler is done */
+    if (p[0].revents & (POLLRDHUP | POLLHUP | POLLERR | POLLNVAL)) {
       atomic_store(&w->gone, 1);
       break;
     }
@@ -435,15 +436,23 @@ static const atomic_int *watch_start(http_req *r) {
   if (!ci) return NULL;
   w->fd = ci->connect_fd;
   atomic_init(&w->gone, 0);
-  atomic_init(&w->stop, false);
+  if (pipe2(w->wake, O_CLOEXEC) != 0) return NULL;
   w->running = pthread_create(&w->thread, NULL, watch_main, w) == 0;
-  return w->running ? &w->gone : NULL;
+  if (!w->running) {
+    close(w->wake[0]);
+    close(w->wake[1]);
+    return NULL;
+  }
+  return &w->gone;
 }
 
 static void watch_stop(client_watch *w) {
   if (!w->running) return;
-  atomic_store(&w->stop, true);
+  char c = 1;
+  while (write(w->wake[1], &c, 1) < 0 && errno == EINTR) {}
   pthread_join(w->thread, NULL);
+  close(w->wake[0]);
+  close(w->wake[1]);
   w->running = false;
 }
 
