@@ -6,6 +6,7 @@
 #ifndef RSW_CLI_H
 #define RSW_CLI_H
 
+#include <signal.h>
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdio.h>
@@ -20,8 +21,17 @@ enum {
   CLI_CONNECT = 3, /* cannot connect to the daemon */
   CLI_JOB = 4,     /* job (or one of its renders) failed or was cancelled */
   CLI_TIMEOUT = 5, /* a deadline passed */
-  CLI_IO = 6       /* local files */
+  CLI_IO = 6,      /* local files */
+  CLI_INTERRUPTED = 130 /* Ctrl-C (SIGINT): 128 + 2, the shells' convention */
 };
+
+/* Set by the SIGINT handler (cli_catch_interrupt); the client's transfers
+ * watch it (rsw_client_opts.interrupt) and stop within about a second. */
+extern volatile sig_atomic_t cli_interrupted;
+/* Catch the first SIGINT in cli_interrupted (the handler only sets the
+ * flag); a second one kills the process as usual (SA_RESETHAND). For the
+ * commands that wait on the daemon: sweep, render, job watch. */
+void cli_catch_interrupt(void);
 
 #define CLI_MAX_OPTS 16
 
@@ -130,7 +140,10 @@ bool cli_safe_component(const char *s);
  * nothing with --quiet. Pass cli_progress_cb and a cli_progress as user. */
 typedef struct cli_progress {
   const cli_ctx *ctx;
-  double start, last_print;
+  double start; /* when the job started running (cli_now's clock): the
+                   rate is done / (now - start), also for a client that
+                   joins a running job (start = now - the job's seconds) */
+  double last_print;
   size_t done, total, failed;
   bool drawn;
 } cli_progress;
@@ -140,10 +153,22 @@ int cli_progress_cb(void *user, const char *context, const char *sensor, size_t 
 void cli_progress_finish(cli_progress *p);
 double cli_now(void);
 
+/* What cli_wait_job does on Ctrl-C: cancel the job on the daemon (the
+ * command owns it: sweep), or leave it running and say how to cancel it
+ * (the command only watches it: job watch). */
+typedef enum cli_on_interrupt {
+  CLI_INTERRUPT_CANCEL,
+  CLI_INTERRUPT_DETACH
+} cli_on_interrupt;
+
 /* Wait for a job with progress; prints the end state. Returns a CLI exit
  * code: 0 succeeded (no failed renders), 4 failed/cancelled/renders failed,
- * 5 timeout, or the code of a transport failure. */
-int cli_wait_job(cli_ctx *ctx, const char *job_id, double timeout_s, rsw_job_status *final_out);
+ * 5 timeout, 130 interrupted (after cancelling or detaching, as `on_int`
+ * says, and saying so on stderr), or the code of a transport failure. */
+int cli_wait_job(cli_ctx *ctx, const char *job_id, double timeout_s, cli_on_interrupt on_int,
+                 rsw_job_status *final_out);
+/* "12s", "3m05s", "1h02m"; "?" for a negative or absurd value. */
+void cli_format_duration(char *buf, size_t n, double s);
 const char *cli_job_state_name(rsw_job_state s);
 
 /* ---- handlers ---- */

@@ -100,7 +100,21 @@ int cmd_job_show(cli_ctx *ctx, const cli_args *a) {
   printf("state:     %s\n", cli_job_state_name(st.state));
   printf("contexts:  %zu/%zu\n", st.contexts_done, st.contexts_total);
   printf("renders:   %zu/%zu (%zu failed)\n", st.renders_done, st.renders_total, st.renders_failed);
-  printf("seconds:   %.3f\n", st.seconds);
+  char el[32];
+  cli_format_duration(el, sizeof el, st.seconds);
+  if (st.state == RSW_JOB_QUEUED)
+    printf("elapsed:   - (queued, not started)\n");
+  else if (st.state == RSW_JOB_RUNNING)
+    printf("elapsed:   %s so far (%.3f s)\n", el, st.seconds);
+  else
+    printf("elapsed:   %s (%.3f s)\n", el, st.seconds);
+  if (st.state == RSW_JOB_RUNNING && st.seconds > 0 && st.renders_done > 0) {
+    /* The job's mean rate since it started, and the time left at it. */
+    double rate = (double)st.renders_done / st.seconds;
+    char eta[32];
+    cli_format_duration(eta, sizeof eta, (double)(st.renders_total - st.renders_done) / rate);
+    printf("rate:      %.2f renders/s  ETA %s\n", rate, eta);
+  }
   if (st.error[0]) printf("error:     %s\n", st.error);
   return CLI_OK;
 }
@@ -113,7 +127,11 @@ int cmd_job_watch(cli_ctx *ctx, const cli_args *a) {
     return cli_usage(ctx, "--timeout needs a positive number of seconds (got '%s')", v);
   rsw_job_status st;
   memset(&st, 0, sizeof st);
-  int rc = cli_wait_job(ctx, id, timeout, &st);
+  /* Ctrl-C stops watching and leaves the job alone: the watcher is often
+   * not the one who submitted it (a sweep in another terminal, a script),
+   * and cancelling is one explicit command away, which the message names. */
+  cli_catch_interrupt();
+  int rc = cli_wait_job(ctx, id, timeout, CLI_INTERRUPT_DETACH, &st);
   if (rc != CLI_OK && rc != CLI_JOB) return rc;
   if (ctx->json)
     print_status_json(id, &st);

@@ -112,9 +112,16 @@ int cmd_render(cli_ctx *ctx, const cli_args *a) {
   }
   rsw_film *film = NULL;
   double t0 = cli_now();
+  cli_catch_interrupt();
   rsw_status s = rsw_render(ctx->client, a->pos[0], text, &film);
   double seconds = cli_now() - t0;
   free(text);
+  if (s && cli_interrupted) {
+    /* The request is dropped, which closes the connection: the daemon
+     * stops a synchronous render whose client went away. */
+    rc = cli_fail(ctx, CLI_INTERRUPTED, "interrupted; the render request was dropped and the daemon stops the render");
+    goto out;
+  }
   if (s) {
     rc = cli_report(ctx, s, a->pos[0]);
     goto out;

@@ -171,7 +171,17 @@ int cmd_scene_show(cli_ctx *ctx, const cli_args *a) {
 
 int cmd_scene_rm(cli_ctx *ctx, const cli_args *a) {
   rsw_status s = rsw_scene_delete(ctx->client, a->pos[0], cli_has(a, "--force"));
-  if (s) return cli_report(ctx, s, a->pos[0]);
+  if (s) {
+    int rc = cli_report(ctx, s, a->pos[0]);
+    const rsw_error_info *e = rsw_client_last_error(ctx->client);
+    /* The daemon's hint names its API (?force=true); say it in CLI terms. */
+    if (e && e->http_status == 409)
+      fprintf(stderr,
+              "  (cancel those jobs with `raysweep job cancel JOB` (see `raysweep job ls`), or unload "
+              "anyway with `raysweep scene rm %s --force`, which cancels them first)\n",
+              a->pos[0]);
+    return rc;
+  }
   if (ctx->json)
     printf("{\"deleted\":\"%s\"}\n", a->pos[0]);
   else if (!ctx->quiet)

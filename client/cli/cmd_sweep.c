@@ -14,6 +14,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <dirent.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -30,11 +31,15 @@ const cli_opt cli_opts_sweep[] = {
     {"--shard", "I/N", false, "keep contexts I, I+N, I+2N, ... (ids unchanged)"},
     {"--format", "exr|npy|json", false, "film files: exr (default), npy or json"},
     {"--timeout", "S", false, "stop waiting after S seconds (exit 5; the job keeps running)"},
-    {"-o", "DIR", false, "output directory"},
+    {"-o", "DIR", false, "output directory: new or empty (see --force)"},
+    {"--force", NULL, false,
+     "DIR holds an earlier sweep: delete that sweep's films, index.jsonl and sweep.json first "
+     "(other files are kept; a DIR with no sweep in it is still refused)"},
     {NULL},
 };
 const cli_opt cli_opts_merge[] = {
     {"-o", "DIR", false, "output directory"},
+    {"--partial", NULL, false, "merge even when contexts are missing (they are listed; exit 0)"},
     {NULL},
 };
 
@@ -63,6 +68,11 @@ typedef struct sweep_list {
   sweep_item *items;
   size_t n, cap;
   size_t total; /* unsharded count */
+  /* --contexts with ids in the file: the id of every context of the
+   * unsharded list (NULL: numbered), so sweep.json can name the contexts
+   * of the other shards. NULL when every id is numbered. */
+  char **all_ids;
+  int id_width;
 } sweep_list;
 
 static void items_free(sweep_list *l) {
@@ -71,6 +81,9 @@ static void items_free(sweep_list *l) {
     cJSON_Delete(l->items[i].sensors);
   }
   free(l->items);
+  if (l->all_ids)
+    for (size_t i = 0; i < l->total; i++) free(l->all_ids[i]);
+  free(l->all_ids);
 }
 
 static sweep_item *items_push(sweep_list *l) {
@@ -152,7 +165,7 @@ static int build_grid(const cli_ctx *ctx, const grid_axis *g, size_t n_axes, siz
       return cli_usage(ctx, "--grid: the product has more than %llu contexts", MAX_CONTEXTS);
   }
   l->total = (size_t)total;
-  int w = id_width(l->total);
+  int w = l->id_width = id_width(l->total);
   for (size_t i = shard_i; i < l->total; i += shard_n) {
     sweep_item *it = items_push(l);
     if (!it) return cli_fail(ctx, CLI_IO, "out of memory");
@@ -200,7 +213,11 @@ static int read_contexts(const cli_ctx *ctx, const char *path, size_t shard_i, s
     s += n + (nl ? 1 : 0);
   }
   l->total = total;
-  int w = id_width(total);
+  int w = l->id_width = id_width(total);
+  if (strstr(text, "\"id\"") && total && !(l->all_ids = calloc(total, sizeof *l->all_ids))) {
+    free(text);
+    return cli_fail(ctx, CLI_IO, "out of memory");
+  }
   size_t line = 0, index = 0;
   for (char *s = text; *s && !rc;) {
     char *nl = strchr(s, '\n');
@@ -216,6 +233,12 @@ static int read_contexts(const cli_ctx *ctx, const char *path, size_t shard_i, s
     }
     size_t my = index++;
     if (my % shard_n != shard_i) {
+      if (l->all_ids) { /* another shard's line: only its id (that shard checks the rest) */
+        cJSON *o = cJSON_Parse(s);
+        const char *id = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "id"));
+        if (id && *id && strlen(id) <= 64) l->all_ids[my] = strdup(id);
+        cJSON_Delete(o);
+      }
       s = next;
       continue;
     }
@@ -283,6 +306,7 @@ static int read_contexts(const cli_ctx *ctx, const char *path, size_t shard_i, s
       }
     }
     cJSON_Delete(o);
+    if (!rc && l->all_ids && !(l->all_ids[my] = strdup(it->id))) rc = cli_fail(ctx, CLI_IO, "out of memory");
     s = next;
   }
   free(text);
@@ -299,6 +323,7 @@ typedef struct index_entry {
   cJSON *line;
   char *src; /* owned, merge only */
   size_t order;
+  size_t input; /* merge: which input directory */
 } index_entry;
 
 static int cmp_entry(const void *a, const void *b) {
@@ -402,8 +427,8 @@ static int build_contexts(const cli_ctx *ctx, const cli_args *a, const sweep_ite
 /* Films of a finished job into dir/<context>/<sensor>.<ext>, one index
  * entry each. Failed renders are reported and counted. */
 static int fetch_all(cli_ctx *ctx, const char *job, const char *dir, cli_format fmt, sweep_item **sorted,
-                     size_t n, const cJSON *job_params, index_entry **entries_out, size_t *n_out,
-                     size_t *failed_out) {
+                     size_t n, const cJSON *job_params, cJSON *incomplete, index_entry **entries_out,
+                     size_t *n_out, size_t *failed_out) {
   char *text = NULL;
   rsw_status s = rsw_job_results(ctx->client, job, &text);
   if (s) return cli_report(ctx, s, job);
@@ -432,6 +457,8 @@ static int fetch_all(cli_ctx *ctx, const char *job, const char *dir, cli_format 
       const char *err = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "error"));
       fprintf(stderr, "raysweep %s: %s/%s %s%s%s\n", ctx->cmd, c, sn, state, err ? ": " : "", err ? err : "");
       failed++;
+      const char *last = cJSON_GetStringValue(cJSON_GetArrayItem(incomplete, cJSON_GetArraySize(incomplete) - 1));
+      if (!last || strcmp(last, c) != 0) cJSON_AddItemToArray(incomplete, cJSON_CreateString(c));
       continue;
     }
     if (!cli_safe_component(c) || !cli_safe_component(sn)) {
@@ -500,6 +527,339 @@ static int fetch_all(cli_ctx *ctx, const char *job, const char *dir, cli_format 
   return 0;
 }
 
+/* ---- sweep.json: what a sweep directory is meant to hold ---- */
+
+/* DIR/sweep.json, written before the job is submitted and again when the
+ * sweep ends:
+ *   {"format": "raysweep-sweep/1", "sweep": FINGERPRINT, "scene": ID,
+ *    "shard": [I, N], "contexts_total": T,
+ *    "id_width": W | "ids": [every context id of the unsharded list],
+ *    "job": JOB | null, "finished": BOOL, "incomplete": [context ids]}
+ * FINGERPRINT is FNV-1a 64 over everything that defines the unsharded
+ * sweep (scene, contexts file or grid, --set, --sensor, --spp, --seed,
+ * --format) and not over --shard, so every shard of one sweep carries the
+ * same value. `merge` uses it to know which contexts a set of shard
+ * directories must cover; `sweep --force` to know what an earlier sweep
+ * wrote. "incomplete" lists contexts with a render that did not succeed. */
+#define MANIFEST_NAME   "sweep.json"
+#define MANIFEST_FORMAT "raysweep-sweep/1"
+
+static uint64_t fnv1a(uint64_t h, const char *s, size_t n) {
+  for (size_t i = 0; i < n; i++) h = (h ^ (unsigned char)s[i]) * 0x100000001b3ull;
+  return (h ^ 0xff) * 0x100000001b3ull; /* a separator, so "ab","c" != "a","bc" */
+}
+
+static uint64_t fnv1a_str(uint64_t h, const char *s) {
+  return fnv1a(h, s ? s : "", s ? strlen(s) : 0);
+}
+
+static void sweep_fingerprint(const cli_args *a, const char *scene, char out[17]) {
+  uint64_t h = 0xcbf29ce484222325ull;
+  h = fnv1a_str(h, MANIFEST_FORMAT);
+  h = fnv1a_str(h, scene);
+  const char *file = cli_get(a, "--contexts");
+  if (file) {
+    size_t len = 0;
+    char *text = cli_read_file(file, &len);
+    h = fnv1a(h, text ? text : "", text ? len : 0);
+    free(text);
+  }
+  static const char *const keyed[] = {"--grid", "--set", "--sensor", "--spp", "--seed", "--format"};
+  for (size_t k = 0; k < sizeof keyed / sizeof keyed[0]; k++) {
+    size_t n;
+    const char *const *v = cli_get_all(a, keyed[k], &n);
+    h = fnv1a_str(h, keyed[k]);
+    for (size_t i = 0; i < n; i++) h = fnv1a_str(h, v[i]);
+  }
+  snprintf(out, 17, "%016llx", (unsigned long long)h);
+}
+
+static char *dir_file(const char *dir, const char *name) {
+  size_t n = strlen(dir) + strlen(name) + 2;
+  char *p = malloc(n);
+  if (p) snprintf(p, n, "%s/%s", dir, name);
+  return p;
+}
+
+typedef struct sweep_manifest {
+  cJSON *root; /* owned */
+  const char *sweep;
+  size_t shard_i, shard_n, total;
+  int id_width;
+  const char **ids;        /* owned array of total ids (borrowed strings), or NULL: numbered */
+  const char **incomplete; /* owned, sorted (strings borrowed from root) */
+  size_t n_incomplete;
+  bool finished;
+} sweep_manifest;
+
+static void manifest_free(sweep_manifest *m) {
+  cJSON_Delete(m->root);
+  free(m->ids);
+  free(m->incomplete);
+  memset(m, 0, sizeof *m);
+}
+
+/* The id of context k of the unsharded list a manifest describes. */
+static const char *manifest_id(const sweep_manifest *m, size_t k, char buf[72]) {
+  if (m->ids) return m->ids[k];
+  make_id(buf, m->id_width, k);
+  return buf;
+}
+
+static int cmp_str(const void *a, const void *b) {
+  return strcmp(*(const char *const *)a, *(const char *const *)b);
+}
+
+static bool manifest_incomplete(const sweep_manifest *m, const char *id) {
+  return m->n_incomplete && bsearch(&id, m->incomplete, m->n_incomplete, sizeof *m->incomplete, cmp_str);
+}
+
+/* Read and check DIR/sweep.json. 0, or -1 when absent (errno ENOENT), or a
+ * CLI exit code after printing. */
+static int manifest_read(const cli_ctx *ctx, const char *dir, sweep_manifest *m) {
+  memset(m, 0, sizeof *m);
+  char *path = dir_file(dir, MANIFEST_NAME);
+  if (!path) return cli_fail(ctx, CLI_IO, "out of memory");
+  size_t len;
+  char *text = cli_read_file(path, &len);
+  if (!text) {
+    int e = errno;
+    int rc = e == ENOENT ? -1 : cli_fail(ctx, CLI_IO, "cannot read '%s': %s", path, strerror(e));
+    free(path);
+    errno = e;
+    return rc;
+  }
+  m->root = cJSON_ParseWithLength(text, len);
+  free(text);
+  const cJSON *r = m->root;
+  const cJSON *shard = cJSON_GetObjectItemCaseSensitive(r, "shard");
+  const cJSON *total = cJSON_GetObjectItemCaseSensitive(r, "contexts_total");
+  const cJSON *width = cJSON_GetObjectItemCaseSensitive(r, "id_width");
+  m->sweep = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "sweep"));
+  const cJSON *ids = cJSON_GetObjectItemCaseSensitive(r, "ids");
+  const cJSON *inc = cJSON_GetObjectItemCaseSensitive(r, "incomplete");
+  m->finished = cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(r, "finished"));
+  bool ok = m->sweep && cJSON_IsArray(shard) && cJSON_GetArraySize(shard) == 2 && json_is_int(total, 0) &&
+            (ids ? cJSON_IsArray(ids) : json_is_int(width, 1)) && (!inc || cJSON_IsArray(inc));
+  if (ok) {
+    const cJSON *si = cJSON_GetArrayItem(shard, 0), *sn = cJSON_GetArrayItem(shard, 1);
+    ok = json_is_int(si, 0) && json_is_int(sn, 1) && si->valuedouble < sn->valuedouble;
+    if (ok) m->shard_i = (size_t)si->valuedouble, m->shard_n = (size_t)sn->valuedouble;
+    m->total = (size_t)total->valuedouble;
+    m->id_width = ids ? 0 : (int)width->valuedouble;
+  }
+  /* Arrays for O(1) ids and O(log n) "incomplete?" (cJSON arrays are lists). */
+  if (ok && ids) {
+    m->ids = malloc((m->total ? m->total : 1) * sizeof *m->ids);
+    size_t k = 0;
+    const cJSON *v;
+    cJSON_ArrayForEach(v, ids) {
+      if (!m->ids || k >= m->total || !cJSON_IsString(v)) break;
+      m->ids[k++] = v->valuestring;
+    }
+    ok = m->ids && k == m->total && !v; /* every element a string, no more and no fewer */
+  }
+  if (ok && inc) {
+    size_t n = (size_t)cJSON_GetArraySize(inc);
+    m->incomplete = malloc((n ? n : 1) * sizeof *m->incomplete);
+    const cJSON *v;
+    cJSON_ArrayForEach(v, inc) {
+      if (!m->incomplete || !cJSON_IsString(v)) break;
+      m->incomplete[m->n_incomplete++] = v->valuestring;
+    }
+    ok = m->incomplete && m->n_incomplete == n;
+    if (ok && n) qsort(m->incomplete, n, sizeof *m->incomplete, cmp_str);
+  }
+  if (!ok) {
+    int rc = cli_fail(ctx, CLI_IO, "%s: not a sweep manifest (%s)", path, MANIFEST_FORMAT);
+    manifest_free(m);
+    free(path);
+    return rc;
+  }
+  free(path);
+  return 0;
+}
+
+/* Write DIR/sweep.json for this shard. incomplete may be NULL ([]). */
+static int manifest_write(const cli_ctx *ctx, const char *dir, const char *fingerprint, const char *scene,
+                          size_t shard_i, size_t shard_n, const sweep_list *l, const char *job, bool finished,
+                          const cJSON *incomplete) {
+  cJSON *o = cJSON_CreateObject();
+  cJSON_AddStringToObject(o, "format", MANIFEST_FORMAT);
+  cJSON_AddStringToObject(o, "sweep", fingerprint);
+  cJSON_AddStringToObject(o, "scene", scene);
+  cJSON *sh = cJSON_AddArrayToObject(o, "shard");
+  cJSON_AddItemToArray(sh, cJSON_CreateNumber((double)shard_i));
+  cJSON_AddItemToArray(sh, cJSON_CreateNumber((double)shard_n));
+  cJSON_AddNumberToObject(o, "contexts_total", (double)l->total);
+  if (l->all_ids) {
+    cJSON *ids = cJSON_AddArrayToObject(o, "ids");
+    char buf[72];
+    for (size_t k = 0; k < l->total; k++) {
+      if (!l->all_ids[k]) make_id(buf, l->id_width, k);
+      cJSON_AddItemToArray(ids, cJSON_CreateString(l->all_ids[k] ? l->all_ids[k] : buf));
+    }
+  } else {
+    cJSON_AddNumberToObject(o, "id_width", l->id_width);
+  }
+  if (job && *job)
+    cJSON_AddStringToObject(o, "job", job);
+  else
+    cJSON_AddNullToObject(o, "job");
+  cJSON_AddBoolToObject(o, "finished", finished);
+  cJSON_AddItemToObject(o, "incomplete", incomplete ? cJSON_Duplicate(incomplete, 1) : cJSON_CreateArray());
+  char *text = cJSON_PrintUnformatted(o);
+  cJSON_Delete(o);
+  char *path = dir_file(dir, MANIFEST_NAME);
+  int rc = CLI_OK;
+  if (!text || !path) {
+    rc = cli_fail(ctx, CLI_IO, "out of memory");
+  } else {
+    size_t n = strlen(text);
+    text[n] = '\n'; /* the NUL goes: write n + 1 bytes of "...}\n" */
+    if (cli_write_file_atomic(path, text, n + 1))
+      rc = cli_fail(ctx, CLI_IO, "cannot write '%s': %s", path, strerror(errno));
+  }
+  free(text);
+  free(path);
+  return rc;
+}
+
+/* Entries of a directory other than "." and "..": count, and the first. */
+static size_t dir_entries(DIR *d, char *first, size_t cap) {
+  size_t n = 0;
+  struct dirent *e;
+  if (cap) first[0] = '\0';
+  while ((e = readdir(d))) {
+    if (strcmp(e->d_name, ".") == 0 || strcmp(e->d_name, "..") == 0) continue;
+    if (!n && cap) snprintf(first, cap, "%s", e->d_name);
+    n++;
+  }
+  return n;
+}
+
+static bool is_regular(const char *path) {
+  struct stat st;
+  return lstat(path, &st) == 0 && S_ISREG(st.st_mode);
+}
+
+/* What a sweep writes into DIR/<context>/: <sensor>.exr|.npy|.json and
+ * the temp files of an interrupted write (<name>.tmp.<pid>). */
+static bool sweep_file_name(const char *name) {
+  if (strstr(name, ".tmp.")) return true;
+  const char *dot = strrchr(name, '.');
+  return dot && (strcmp(dot, ".exr") == 0 || strcmp(dot, ".npy") == 0 || strcmp(dot, ".json") == 0);
+}
+
+/* Remove DIR/<context>/'s sweep files and the directory when that empties
+ * it. Symbolic links are not followed. Returns the files removed. */
+static size_t remove_context_dir(const char *dir, const char *context) {
+  if (!cli_safe_component(context)) return 0;
+  char *cdir = dir_file(dir, context);
+  struct stat st;
+  size_t removed = 0;
+  if (cdir && lstat(cdir, &st) == 0 && S_ISDIR(st.st_mode)) {
+    DIR *d = opendir(cdir);
+    struct dirent *e;
+    while (d && (e = readdir(d))) {
+      if (!sweep_file_name(e->d_name)) continue;
+      char *f = dir_file(cdir, e->d_name);
+      if (f && is_regular(f) && unlink(f) == 0) removed++;
+      free(f);
+    }
+    if (d) closedir(d);
+    rmdir(cdir); /* fails, as it should, when something else is left */
+  }
+  free(cdir);
+  return removed;
+}
+
+/* Make -o DIR ready: create it when absent; an empty one is fine. A
+ * non-empty one is refused unless --force and it holds an earlier sweep
+ * (sweep.json or index.jsonl): then exactly what that sweep wrote goes
+ * (its films, the temp files of an interrupted write, emptied context
+ * directories, index.jsonl, sweep.json) and anything else stays. A
+ * directory holding no sweep is never emptied: a mistyped -o must not
+ * cost someone their files. */
+static int prepare_output(const cli_ctx *ctx, const char *dir, bool force) {
+  char first[256];
+  DIR *d = opendir(dir);
+  if (!d) {
+    if (errno == ENOENT) {
+      if (cli_mkdirs(dir)) return cli_fail(ctx, CLI_IO, "cannot create '%s': %s", dir, strerror(errno));
+      return 0;
+    }
+    return cli_fail(ctx, CLI_IO, "-o %s: %s", dir, strerror(errno));
+  }
+  size_t n = dir_entries(d, first, sizeof first);
+  closedir(d);
+  if (n == 0) return 0;
+  if (!force)
+    return cli_usage(ctx,
+                     "-o %s: the directory is not empty (%zu entr%s, e.g. '%s'); give a new or empty "
+                     "directory, or add --force to replace the earlier sweep in it",
+                     dir, n, n == 1 ? "y" : "ies", first);
+  char *index = dir_file(dir, "index.jsonl"), *manifest = dir_file(dir, MANIFEST_NAME);
+  if (!index || !manifest) {
+    free(index), free(manifest);
+    return cli_fail(ctx, CLI_IO, "out of memory");
+  }
+  bool has_index = is_regular(index), has_manifest = is_regular(manifest);
+  if (!has_index && !has_manifest) {
+    free(index), free(manifest);
+    return cli_usage(ctx,
+                     "-o %s: --force replaces an earlier sweep, but this non-empty directory holds none "
+                     "(no %s or index.jsonl); nothing was deleted: give a new or empty directory",
+                     dir, MANIFEST_NAME);
+  }
+  size_t removed = 0;
+  if (has_index) { /* every context the index names */
+    char *text = cli_read_file(index, NULL);
+    for (char *s = text, *nl; s && *s; s = nl ? nl + 1 : s + strlen(s)) {
+      nl = strchr(s, '\n');
+      if (nl) *nl = '\0';
+      cJSON *o = cJSON_Parse(s);
+      const char *c = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "context"));
+      if (c) removed += remove_context_dir(dir, c);
+      cJSON_Delete(o);
+    }
+    free(text);
+  }
+  sweep_manifest m;
+  int mrc = has_manifest ? manifest_read(ctx, dir, &m) : -1;
+  if (mrc > 0) {
+    free(index), free(manifest);
+    return mrc;
+  }
+  if (mrc == 0) { /* every context of its shard (an interrupted sweep has no index yet) */
+    char buf[72];
+    for (size_t k = m.shard_i; k < m.total; k += m.shard_n) removed += remove_context_dir(dir, manifest_id(&m, k, buf));
+    manifest_free(&m);
+  }
+  if (has_index && unlink(index) != 0 && errno != ENOENT) {
+    int rc = cli_fail(ctx, CLI_IO, "cannot remove '%s': %s", index, strerror(errno));
+    free(index), free(manifest);
+    return rc;
+  }
+  if (has_manifest && unlink(manifest) != 0 && errno != ENOENT) {
+    int rc = cli_fail(ctx, CLI_IO, "cannot remove '%s': %s", manifest, strerror(errno));
+    free(index), free(manifest);
+    return rc;
+  }
+  free(index), free(manifest);
+  d = opendir(dir);
+  size_t left = d ? dir_entries(d, first, sizeof first) : 0;
+  if (d) closedir(d);
+  if (!ctx->quiet) {
+    fprintf(stderr, "raysweep %s: --force: removed the earlier sweep in %s (%zu film%s)\n", ctx->cmd, dir, removed,
+            removed == 1 ? "" : "s");
+    if (left)
+      fprintf(stderr, "raysweep %s: kept %zu entr%s no sweep wrote (e.g. '%s')\n", ctx->cmd, left,
+              left == 1 ? "y" : "ies", first);
+  }
+  return 0;
+}
+
 int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
   const char *scene = a->pos[0], *dir = cli_get(a, "-o"), *contexts_file = cli_get(a, "--contexts");
   size_t n_grids;
@@ -542,7 +902,8 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
   rsw_contexts *x = NULL;
   index_entry *entries = NULL;
   size_t n_entries = 0, failed = 0;
-  char job[40] = "";
+  char job[40] = "", fingerprint[17] = "";
+  cJSON *incomplete = NULL;
   if (contexts_file) {
     rc = read_contexts(ctx, contexts_file, shard_i, shard_n, &l);
   } else {
@@ -555,10 +916,6 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
     if (!rc) rc = build_grid(ctx, axes, n_grids, shard_i, shard_n, &l);
   }
   if (rc) goto out;
-  if (cli_mkdirs(dir)) {
-    rc = cli_fail(ctx, CLI_IO, "cannot create '%s': %s", dir, strerror(errno));
-    goto out;
-  }
   sorted = malloc((l.n ? l.n : 1) * sizeof *sorted);
   if (!sorted) {
     rc = cli_fail(ctx, CLI_IO, "out of memory");
@@ -576,28 +933,55 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
       goto out;
     }
   }
+  /* Everything the user described is checked: now the directory. */
+  if ((rc = prepare_output(ctx, dir, cli_has(a, "--force")))) goto out;
+  sweep_fingerprint(a, scene, fingerprint);
   if (l.n == 0) {
     /* A shard past the end of a short list: nothing to submit, an empty
      * index keeps `merge` simple. */
     if (!ctx->quiet) fprintf(stderr, "raysweep sweep: shard %llu/%llu has no contexts\n", shard_i, shard_n);
     rc = write_index(ctx, dir, NULL, 0);
+    if (!rc) rc = manifest_write(ctx, dir, fingerprint, scene, shard_i, shard_n, &l, NULL, true, NULL);
     goto out;
   }
   /* The job lists the contexts in the order the user described them. */
   if ((rc = build_contexts(ctx, a, l.items, l.n, job_params, (long long)spp, (long long)seed, &x))) goto out;
+  cli_catch_interrupt();
   rsw_status s = rsw_job_submit(ctx->client, scene, x, NULL, job);
+  if (s && cli_interrupted) {
+    rc = cli_fail(ctx, CLI_INTERRUPTED,
+                  "interrupted while submitting the job (if the daemon got it, `raysweep job ls` shows it)");
+    goto out;
+  }
   if (s) {
     rc = cli_report(ctx, s, scene);
     goto out;
   }
   if (!ctx->quiet)
     fprintf(stderr, "raysweep sweep: job %s: %zu contexts%s\n", job, l.n, shard_n > 1 ? " (one shard)" : "");
+  /* Written before any film, so a sweep that dies half-way leaves a
+   * directory that says so (merge lists its contexts as missing; --force
+   * knows what to clean). */
+  if ((rc = manifest_write(ctx, dir, fingerprint, scene, shard_i, shard_n, &l, job, false, NULL))) goto out;
   rsw_job_status st;
-  rc = cli_wait_job(ctx, job, timeout, &st);
+  /* Ctrl-C cancels the job (this command submitted it) and writes no films. */
+  rc = cli_wait_job(ctx, job, timeout, CLI_INTERRUPT_CANCEL, &st);
   if (rc != CLI_OK && rc != CLI_JOB) goto out;
   int job_rc = rc;
-  if ((rc = fetch_all(ctx, job, dir, fmt, sorted, l.n, job_params, &entries, &n_entries, &failed))) goto out;
+  if (!(incomplete = cJSON_CreateArray())) {
+    rc = cli_fail(ctx, CLI_IO, "out of memory");
+    goto out;
+  }
+  if ((rc = fetch_all(ctx, job, dir, fmt, sorted, l.n, job_params, incomplete, &entries, &n_entries, &failed))) {
+    if (cli_interrupted)
+      rc = cli_fail(ctx, CLI_INTERRUPTED,
+                    "interrupted while fetching films; job %s is over and keeps its results on the daemon "
+                    "(`raysweep fetch %s CONTEXT SENSOR`, or sweep again)",
+                    job, job);
+    goto out;
+  }
   if ((rc = write_index(ctx, dir, entries, n_entries))) goto out;
+  if ((rc = manifest_write(ctx, dir, fingerprint, scene, shard_i, shard_n, &l, job, true, incomplete))) goto out;
   rc = job_rc;
   if (ctx->json) {
     cJSON *o = cJSON_CreateObject();
@@ -616,6 +1000,7 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
             failed ? " (some renders failed)" : "");
   }
 out:
+  cJSON_Delete(incomplete);
   entries_free(entries, n_entries);
   rsw_contexts_free(x);
   free(sorted);
@@ -661,7 +1046,8 @@ static int link_or_copy(const char *src, const char *dst) {
   return rc;
 }
 
-static int read_index(const cli_ctx *ctx, const char *dir, index_entry **e, size_t *n, size_t *cap) {
+static int read_index(const cli_ctx *ctx, const char *dir, size_t input, index_entry **e, size_t *n,
+                      size_t *cap) {
   size_t pn = strlen(dir) + 16;
   char *path = malloc(pn);
   if (!path) return cli_fail(ctx, CLI_IO, "out of memory");
@@ -708,7 +1094,7 @@ static int read_index(const cli_ctx *ctx, const char *dir, index_entry **e, size
       break;
     }
     snprintf(it->src, sl, "%s/%s", dir, file);
-    it->line = o, it->context = c, it->sensor = sn, it->order = *n;
+    it->line = o, it->context = c, it->sensor = sn, it->order = *n, it->input = input;
     (*n)++;
   }
   free(text);
@@ -716,13 +1102,136 @@ static int read_index(const cli_ctx *ctx, const char *dir, index_entry **e, size
   return rc;
 }
 
+/* ---- merge: are all the contexts there? ---- */
+
+typedef struct merge_input {
+  const char *dir;
+  bool has_manifest, has_index;
+  sweep_manifest m;
+} merge_input;
+
+/* Films of `context` from an input without sweep.json (e sorted by context). */
+static bool legacy_has(const index_entry *e, size_t n, const merge_input *in, const char *context) {
+  size_t lo = 0, hi = n;
+  while (lo < hi) {
+    size_t mid = lo + (hi - lo) / 2;
+    if (strcmp(e[mid].context, context) < 0)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  for (size_t i = lo; i < n && strcmp(e[i].context, context) == 0; i++)
+    if (!in[e[i].input].has_manifest) return true;
+  return false;
+}
+
+/* For each sweep the inputs' manifests name, the contexts no input
+ * supplies in full: a context is covered by an input whose shard holds it,
+ * whose sweep finished (index written) and that does not list it as
+ * incomplete, or by films of an input without a manifest. Prints what is
+ * missing; *missing_out (owned) gets every missing id when there is one
+ * sweep. Returns the number of missing contexts. */
+static size_t merge_missing(const cli_ctx *ctx, const merge_input *in, size_t n_in, const index_entry *e, size_t n,
+                            bool partial, size_t *n_sweeps, cJSON **missing_out) {
+  size_t total_missing = 0;
+  *n_sweeps = 0;
+  *missing_out = cJSON_CreateArray();
+  for (size_t g = 0; g < n_in; g++) {
+    const sweep_manifest *m0 = &in[g].m;
+    bool first = in[g].has_manifest;
+    for (size_t k = 0; k < g && first; k++)
+      if (in[k].has_manifest && strcmp(in[k].m.sweep, m0->sweep) == 0) first = false;
+    if (!first) continue; /* this sweep was checked with its first input */
+    (*n_sweeps)++;
+    size_t shard_n = m0->shard_n, missing = 0;
+    bool same_n = true;
+    for (size_t j = g; j < n_in; j++)
+      if (in[j].has_manifest && strcmp(in[j].m.sweep, m0->sweep) == 0 && in[j].m.shard_n != shard_n) same_n = false;
+    char buf[72], list[400] = "";
+    size_t used = 0;
+    for (size_t k = 0; k < m0->total; k++) {
+      const char *id = manifest_id(m0, k, buf);
+      bool covered = false;
+      for (size_t j = g; j < n_in && !covered; j++) {
+        const sweep_manifest *m = &in[j].m;
+        if (!in[j].has_manifest || strcmp(m->sweep, m0->sweep) != 0) continue;
+        covered = in[j].has_index && m->finished && k % m->shard_n == m->shard_i && !manifest_incomplete(m, id);
+      }
+      if (!covered) covered = legacy_has(e, n, in, id);
+      if (covered) continue;
+      missing++;
+      cJSON_AddItemToArray(*missing_out, cJSON_CreateString(id));
+      if (missing <= 12) {
+        int w = snprintf(list + used, sizeof list - used, "%s%s", missing > 1 ? ", " : "", id);
+        if (w > 0 && (size_t)w < sizeof list - used) used += (size_t)w;
+      }
+    }
+    if (!missing) continue;
+    total_missing += missing;
+    fprintf(stderr, "raysweep %s: %s%zu of %zu contexts of sweep %s (scene %.12s) are missing: %s%s\n", ctx->cmd,
+            partial ? "warning: " : "", missing, m0->total, m0->sweep,
+            cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(m0->root, "scene")), list,
+            missing > 12 ? ", ..." : "");
+    if (same_n) {
+      /* Name the shards that were not given (or did not finish). */
+      char shards[200] = "";
+      size_t su = 0, count = 0;
+      for (size_t i = 0; i < shard_n && count < 8; i++) {
+        bool given = false;
+        for (size_t j = g; j < n_in; j++)
+          if (in[j].has_manifest && strcmp(in[j].m.sweep, m0->sweep) == 0 && in[j].m.shard_i == i &&
+              in[j].m.finished && in[j].has_index)
+            given = true;
+        if (given) continue;
+        int w = snprintf(shards + su, sizeof shards - su, "%s%zu/%zu", count ? ", " : "", i, shard_n);
+        if (w > 0 && (size_t)w < sizeof shards - su) su += (size_t)w;
+        count++;
+      }
+      if (count)
+        fprintf(stderr, "  shard%s not given or not finished: %s (run `raysweep sweep ... --shard I/N` for %s)\n",
+                count == 1 ? "" : "s", shards, count == 1 ? "it" : "them");
+      else
+        fprintf(stderr, "  every shard is there: the missing contexts had renders that failed (see the shards' "
+                        "sweep.json \"incomplete\")\n");
+    }
+  }
+  return total_missing;
+}
+
 int cmd_merge(cli_ctx *ctx, const cli_args *a) {
   const char *out = cli_get(a, "-o");
   if (!out) return cli_usage(ctx, "missing -o DIR");
+  bool partial = cli_has(a, "--partial");
   index_entry *e = NULL;
-  size_t n = 0, cap = 0, dups = 0;
+  size_t n = 0, cap = 0, dups = 0, n_sweeps = 0, missing = 0;
+  cJSON *missing_ids = NULL;
   int rc = 0;
-  for (size_t i = 0; i < a->n_pos && !rc; i++) rc = read_index(ctx, a->pos[i], &e, &n, &cap);
+  merge_input *in = calloc(a->n_pos, sizeof *in);
+  if (!in) return cli_fail(ctx, CLI_IO, "out of memory");
+  for (size_t i = 0; i < a->n_pos && !rc; i++) {
+    in[i].dir = a->pos[i];
+    int mrc = manifest_read(ctx, a->pos[i], &in[i].m);
+    if (mrc > 0) {
+      rc = mrc;
+      break;
+    }
+    in[i].has_manifest = mrc == 0;
+    char *index = dir_file(a->pos[i], "index.jsonl");
+    in[i].has_index = index && is_regular(index);
+    free(index);
+    if (in[i].has_manifest && !in[i].has_index) {
+      /* A sweep that was interrupted or failed: its contexts are missing. */
+      if (!ctx->quiet)
+        fprintf(stderr, "raysweep merge: %s: the sweep did not finish (no index.jsonl); its films are not used\n",
+                a->pos[i]);
+      continue;
+    }
+    if (!in[i].has_manifest && !ctx->quiet)
+      fprintf(stderr, "raysweep merge: %s has no %s (an older raysweep wrote it): its contexts are merged, "
+                      "but what is missing from its sweep cannot be told\n",
+              a->pos[i], MANIFEST_NAME);
+    rc = read_index(ctx, a->pos[i], i, &e, &n, &cap);
+  }
   if (rc) goto done;
   if (n) qsort(e, n, sizeof *e, cmp_entry);
   /* Duplicates (a shard given twice, overlapping shards): the same film is
@@ -749,6 +1258,14 @@ int cmd_merge(cli_ctx *ctx, const cli_args *a) {
     e[kept++] = e[i];
   }
   n = kept;
+  /* Nothing is written before the inputs are known to be complete. */
+  missing = merge_missing(ctx, in, a->n_pos, e, n, partial, &n_sweeps, &missing_ids);
+  if (missing && !partial) {
+    rc = cli_fail(ctx, CLI_IO, "%zu context%s missing: nothing was written (give the missing shards, or "
+                               "--partial to merge what is there)",
+                  missing, missing == 1 ? " is" : "s are");
+    goto done;
+  }
   if (cli_mkdirs(out)) {
     rc = cli_fail(ctx, CLI_IO, "cannot create '%s': %s", out, strerror(errno));
     goto done;
@@ -776,6 +1293,35 @@ int cmd_merge(cli_ctx *ctx, const cli_args *a) {
     free(dst);
   }
   if (!rc) rc = write_index(ctx, out, e, n);
+  bool legacy = false;
+  for (size_t i = 0; i < a->n_pos; i++) legacy = legacy || !in[i].has_manifest;
+  if (!rc && n_sweeps == 1 && !legacy) {
+    /* The merged directory is that sweep unsharded (as complete as the
+     * inputs: what is missing is listed as incomplete). */
+    const sweep_manifest *m0 = NULL;
+    for (size_t i = 0; i < a->n_pos && !m0; i++) m0 = in[i].has_manifest ? &in[i].m : NULL;
+    cJSON *o = cJSON_Duplicate(m0->root, 1);
+    cJSON *sh = cJSON_CreateArray();
+    cJSON_AddItemToArray(sh, cJSON_CreateNumber(0));
+    cJSON_AddItemToArray(sh, cJSON_CreateNumber(1));
+    cJSON_ReplaceItemInObjectCaseSensitive(o, "shard", sh);
+    cJSON_ReplaceItemInObjectCaseSensitive(o, "job", cJSON_CreateNull());
+    cJSON_ReplaceItemInObjectCaseSensitive(o, "finished", cJSON_CreateTrue());
+    cJSON_ReplaceItemInObjectCaseSensitive(o, "incomplete", cJSON_Duplicate(missing_ids, 1));
+    char *text = cJSON_PrintUnformatted(o);
+    char *path = dir_file(out, MANIFEST_NAME);
+    if (!text || !path) {
+      rc = cli_fail(ctx, CLI_IO, "out of memory");
+    } else {
+      size_t len = strlen(text);
+      text[len] = '\n';
+      if (cli_write_file_atomic(path, text, len + 1))
+        rc = cli_fail(ctx, CLI_IO, "cannot write '%s': %s", path, strerror(errno));
+    }
+    free(text);
+    free(path);
+    cJSON_Delete(o);
+  }
   if (!rc) {
     if (ctx->json) {
       cJSON *o = cJSON_CreateObject();
@@ -792,5 +1338,8 @@ int cmd_merge(cli_ctx *ctx, const cli_args *a) {
   }
 done:
   entries_free(e, n);
+  for (size_t i = 0; i < a->n_pos; i++) manifest_free(&in[i].m);
+  free(in);
+  cJSON_Delete(missing_ids);
   return rc;
 }

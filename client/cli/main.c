@@ -39,18 +39,22 @@ static const cli_command commands[] = {
     {"render", NULL,
      "ID [--sensor S] [--spp N] [--seed N] [--wavelength NM] [--set KEY=VALUE]... [--timeout S] "
      "-o OUT.exr|.npy|.json",
-     "render one context synchronously (format by extension; .json is the film JSON)", cli_opts_render, 1, 1,
+     "render one context synchronously (format by extension; .json is the film JSON; Ctrl-C stops the render)",
+     cli_opts_render, 1, 1,
      true, cmd_render},
     {"sweep", NULL,
      "ID (--contexts FILE.jsonl | --grid NAME=START:STOP:STEP...) [--set KEY=VALUE]... [--sensor S]... "
-     "[--spp N] [--seed N] [--shard I/N] [--format exr|npy|json] [--timeout S] -o DIR",
-     "submit a job over many contexts, show progress, fetch every film into DIR with DIR/index.jsonl",
+     "[--spp N] [--seed N] [--shard I/N] [--format exr|npy|json] [--timeout S] -o DIR [--force]",
+     "submit a job over many contexts, show progress, fetch every film into DIR with DIR/index.jsonl and "
+     "DIR/sweep.json (Ctrl-C cancels the job)",
      cli_opts_sweep, 1, 1, true, cmd_sweep},
-    {"merge", NULL, "DIR... -o DIR", "join sweep shard directories into one (films hard-linked or copied)",
+    {"merge", NULL, "DIR... -o DIR [--partial]",
+     "join sweep shard directories into one (films hard-linked or copied); fails listing missing contexts",
      cli_opts_merge, 1, (size_t)-1, false, cmd_merge},
     {"job", "ls", "", "list jobs", cli_opts_none, 0, 0, true, cmd_job_ls},
     {"job", "show", "ID", "one job's state and progress", cli_opts_none, 1, 1, true, cmd_job_show},
-    {"job", "watch", "ID [--timeout S]", "follow a job's progress until it ends", cli_opts_job_watch, 1, 1,
+    {"job", "watch", "ID [--timeout S]", "follow a job's progress until it ends (Ctrl-C stops watching; the job goes on)",
+     cli_opts_job_watch, 1, 1,
      true, cmd_job_watch},
     {"job", "cancel", "ID", "cancel a job", cli_opts_none, 1, 1, true, cmd_job_cancel},
     {"job", "rm", "ID", "delete a job and its results (cancels it if running)", cli_opts_none, 1, 1, true,
@@ -76,7 +80,8 @@ static const char global_help[] =
     "  3  cannot connect to the daemon\n"
     "  4  job failed or was cancelled (or some of its renders failed)\n"
     "  5  timeout\n"
-    "  6  local I/O error (files, directories, inconsistent shard directories)\n";
+    "  6  local I/O error (files, directories, inconsistent shard directories)\n"
+    "  130 interrupted (Ctrl-C): sweep cancels its job first, job watch leaves it running\n";
 
 static void command_name(const cli_command *c, char *buf, size_t n) {
   snprintf(buf, n, "%s%s%s", c->group, c->name ? " " : "", c->name ? c->name : "");
@@ -342,7 +347,8 @@ int main(int argc, char **argv) {
     if (!ctx.server_url || !*ctx.server_url) ctx.server_url = DEFAULT_URL;
     rc = read_token(&ctx, token_file, &token);
     if (!rc) {
-      rsw_client_opts o = {.size = sizeof o, .base_url = ctx.server_url, .token = token};
+      rsw_client_opts o = {
+          .size = sizeof o, .base_url = ctx.server_url, .token = token, .interrupt = &cli_interrupted};
       rsw_status s = rsw_client_new(&o, &ctx.client);
       if (s)
         rc = cli_fail(&ctx, s == RSW_ERR_INVALID ? CLI_USAGE : CLI_IO, "cannot create a client for '%s': %s",

@@ -2,6 +2,7 @@
  * progress shared by the commands. */
 #include <errno.h>
 #include <math.h>
+#include <signal.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -11,6 +12,30 @@
 #include <unistd.h>
 
 #include "cli.h"
+
+/* ---- Ctrl-C ---- */
+
+volatile sig_atomic_t cli_interrupted = 0;
+
+static void on_sigint(int sig) {
+  (void)sig;
+  cli_interrupted = 1; /* nothing else: the wait loops act on it */
+}
+
+void cli_catch_interrupt(void) {
+  struct sigaction sa, old;
+  /* Ignored at start (`nohup`, a background job of a non-interactive
+   * shell): stay ignored, as the convention for SIGINT goes. */
+  if (sigaction(SIGINT, NULL, &old) == 0 && old.sa_handler == SIG_IGN) return;
+  memset(&sa, 0, sizeof sa);
+  sa.sa_handler = on_sigint;
+  sigemptyset(&sa.sa_mask);
+  /* No SA_RESTART: a blocking call returns EINTR and the loop sees the
+   * flag. SA_RESETHAND: a second Ctrl-C (say, while the cancel request
+   * hangs) ends the process the usual way. */
+  sa.sa_flags = SA_RESETHAND;
+  sigaction(SIGINT, &sa, NULL);
+}
 
 /* ---- messages and exit codes ---- */
 
@@ -312,7 +337,7 @@ double cli_now(void) {
   return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
-static void format_duration(char *buf, size_t n, double s) {
+void cli_format_duration(char *buf, size_t n, double s) {
   if (!(s >= 0) || s > 1e7) {
     snprintf(buf, n, "?");
     return;
@@ -336,7 +361,7 @@ static void progress_draw(cli_progress *p, bool final) {
   double el = cli_now() - p->start;
   double rate = el > 0 ? (double)p->done / el : 0;
   char eta[32] = "?";
-  if (rate > 0 && p->total >= p->done) format_duration(eta, sizeof eta, (double)(p->total - p->done) / rate);
+  if (rate > 0 && p->total >= p->done) cli_format_duration(eta, sizeof eta, (double)(p->total - p->done) / rate);
   char failed[48] = "";
   if (p->failed) snprintf(failed, sizeof failed, "  %zu failed", p->failed);
   if (p->ctx->stderr_tty) {
@@ -392,10 +417,44 @@ const char *cli_job_state_name(rsw_job_state s) {
   return "?";
 }
 
-int cli_wait_job(cli_ctx *ctx, const char *job_id, double timeout_s, rsw_job_status *final_out) {
+/* Ctrl-C during a wait: the flag is cleared first so that the client can
+ * still talk to the daemon (a second Ctrl-C now kills the process). */
+static int wait_interrupted(cli_ctx *ctx, const char *job_id, cli_on_interrupt on_int) {
+  cli_interrupted = 0;
+  if (on_int == CLI_INTERRUPT_DETACH) {
+    fprintf(stderr,
+            "raysweep %s: interrupted; job %s keeps running on the daemon "
+            "(cancel it with `raysweep job cancel %s`)\n",
+            ctx->cmd, job_id, job_id);
+    return CLI_INTERRUPTED;
+  }
+  rsw_status s = rsw_job_cancel(ctx->client, job_id);
+  rsw_job_status st;
+  if (!s) s = rsw_job_get(ctx->client, job_id, &st);
+  if (s) {
+    cli_report(ctx, s, job_id);
+    fprintf(stderr, "raysweep %s: interrupted; cancelling job %s failed (try `raysweep job cancel %s`)\n",
+            ctx->cmd, job_id, job_id);
+    return CLI_INTERRUPTED;
+  }
+  fprintf(stderr, "raysweep %s: interrupted; cancelled job %s on the daemon (%zu of %zu renders were done)\n",
+          ctx->cmd, job_id, st.renders_done, st.renders_total);
+  return CLI_INTERRUPTED;
+}
+
+int cli_wait_job(cli_ctx *ctx, const char *job_id, double timeout_s, cli_on_interrupt on_int,
+                 rsw_job_status *final_out) {
   cli_progress p;
   cli_progress_init(&p, ctx);
   rsw_job_status st;
+  memset(&st, 0, sizeof st);
+  /* Joining a running job: its rate counts from when it started on the
+   * daemon, not from now (the renders done before joining did not happen
+   * in the first instant). */
+  if (rsw_job_get(ctx->client, job_id, &st) == RSW_OK && st.seconds > 0) {
+    p.start -= st.seconds;
+    p.done = st.renders_done, p.total = st.renders_total;
+  }
   memset(&st, 0, sizeof st);
   rsw_status s = rsw_job_wait(ctx->client, job_id, cli_progress_cb, &p, timeout_s, &st);
   if (s == RSW_OK && st.state == RSW_JOB_SUCCEEDED) {
@@ -404,6 +463,7 @@ int cli_wait_job(cli_ctx *ctx, const char *job_id, double timeout_s, rsw_job_sta
   } else if (p.drawn && ctx->stderr_tty) {
     fputc('\n', stderr);
   }
+  if (cli_interrupted) return wait_interrupted(ctx, job_id, on_int);
   if (s == RSW_ERR_TIMEOUT) {
     fprintf(stderr,
             "raysweep %s: job %s did not finish within %g s (it keeps running: raysweep job watch %s)\n",

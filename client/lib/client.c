@@ -19,10 +19,20 @@ double client_now_s(void) {
   return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
-void client_sleep_s(double s) {
+bool client_interrupted(const rsw_client *c) {
+  return c && c->interrupt && *c->interrupt;
+}
+
+rsw_status client_fail_interrupted(rsw_client *c, const char *what) {
+  return client_fail(c, RSW_ERR_CANCELLED, "%s: interrupted", what);
+}
+
+void client_sleep_s(const rsw_client *c, double s) {
   if (!(s > 0)) return;
   struct timespec ts = {.tv_sec = (time_t)s, .tv_nsec = (long)((s - (double)(time_t)s) * 1e9)};
-  while (nanosleep(&ts, &ts) != 0 && errno == EINTR) {}
+  /* A signal that sets the interrupt flag also ends nanosleep with EINTR. */
+  while (nanosleep(&ts, &ts) != 0 && errno == EINTR)
+    if (client_interrupted(c)) return;
 }
 
 bool client_escape(const char *s, char *out, size_t cap) {
@@ -84,6 +94,7 @@ rsw_status rsw_client_new(const rsw_client_opts *opts, rsw_client **out) {
   c->timeout_s = o.timeout_s > 0 ? o.timeout_s : 0.0;
   c->max_retries = o.max_retries == 0 ? 3 : o.max_retries < 0 ? 0 : o.max_retries;
   c->retry_backoff_s = o.retry_backoff_s > 0 ? o.retry_backoff_s : 0.2;
+  c->interrupt = o.interrupt;
   rsw_status s = http_client_init(c);
   if (s) {
     rsw_client_free(c);

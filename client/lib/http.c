@@ -121,6 +121,13 @@ static bool add_header(exchange *x, const char *fmt, const char *value) {
   return true;
 }
 
+/* libcurl calls this often during a transfer and about once a second while
+ * idle: a non-zero answer aborts the transfer (CURLE_ABORTED_BY_CALLBACK). */
+static int on_xferinfo(void *user, curl_off_t dltotal, curl_off_t dlnow, curl_off_t ultotal, curl_off_t ulnow) {
+  (void)dltotal, (void)dlnow, (void)ultotal, (void)ulnow;
+  return client_interrupted(user) ? 1 : 0;
+}
+
 /* Set every option of one request on the (reset) handle. */
 static rsw_status setup(rsw_client *c, const http_req *q, exchange *x, char *url, size_t url_cap) {
   CURL *h = c->curl;
@@ -147,6 +154,11 @@ static rsw_status setup(rsw_client *c, const http_req *q, exchange *x, char *url
   curl_easy_setopt(h, CURLOPT_CONNECTTIMEOUT_MS, (long)(c->connect_timeout_s * 1000.0));
   curl_easy_setopt(h, CURLOPT_HEADERFUNCTION, on_header);
   curl_easy_setopt(h, CURLOPT_HEADERDATA, &x->hdr);
+  if (c->interrupt) {
+    curl_easy_setopt(h, CURLOPT_XFERINFOFUNCTION, on_xferinfo);
+    curl_easy_setopt(h, CURLOPT_XFERINFODATA, c);
+    curl_easy_setopt(h, CURLOPT_NOPROGRESS, 0L);
+  }
   /* The daemon's routes are plain http on a known host: no proxy from the
    * environment should sit between a client and its local daemon. Users
    * with a proxy set it explicitly in the base URL's host. */
@@ -190,6 +202,7 @@ rsw_status http_request(rsw_client *c, const http_req *q, http_resp *r) {
   memset(r, 0, sizeof *r);
   double backoff = c->retry_backoff_s;
   for (int attempt = 0;; attempt++) {
+    if (client_interrupted(c)) return client_fail_interrupted(c, q->path);
     exchange x = {0};
     char url[2048];
     body_buf b = {0};
@@ -217,12 +230,13 @@ rsw_status http_request(rsw_client *c, const http_req *q, http_resp *r) {
        * confused server cannot park the client for hours. */
       double wait = retry_after > 0 ? (double)retry_after : backoff;
       if (wait > 60.0) wait = 60.0;
-      client_sleep_s(wait);
+      client_sleep_s(c, wait);
       backoff *= 2.0;
       continue;
     }
     if (rc != CURLE_OK) {
       free(b.p);
+      if (rc == CURLE_ABORTED_BY_CALLBACK) return client_fail_interrupted(c, q->path);
       if (rc == CURLE_WRITE_ERROR && b.too_big)
         return client_fail(c, RSW_ERR_LIMIT, "%s %s: answer larger than %zu bytes", q->method, url,
                            (size_t)CLIENT_MAX_BODY);
@@ -300,6 +314,7 @@ rsw_status http_stream(rsw_client *c, const http_req *q, double timeout_s, http_
   client_clear_error(c);
   *stopped = false;
   *not_a_stream = false;
+  if (client_interrupted(c)) return client_fail_interrupted(c, q->path);
   exchange x = {0};
   char url[2048];
   rsw_status s = setup(c, q, &x, url, sizeof url);
@@ -341,6 +356,7 @@ rsw_status http_stream(rsw_client *c, const http_req *q, double timeout_s, http_
     return client_fail(c, RSW_ERR_LIMIT, "GET %s: an event line over %zu bytes", url,
                        (size_t)CLIENT_MAX_SSE_EVENT);
   if (rc == CURLE_OK) return RSW_OK;
+  if (rc == CURLE_ABORTED_BY_CALLBACK) return client_fail_interrupted(c, q->path);
   if (rc == CURLE_OPERATION_TIMEDOUT && timeout_s > 0)
     return client_fail(c, RSW_ERR_TIMEOUT, "GET %s: wait limit of %.3g s reached", url, timeout_s);
   return curl_failure(c, rc == CURLE_OPERATION_TIMEDOUT ? CURLE_RECV_ERROR : rc, &x, url, q);

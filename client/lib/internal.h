@@ -7,6 +7,7 @@
 #ifndef RSW_CLIENT_INTERNAL_H
 #define RSW_CLIENT_INTERNAL_H
 
+#include <signal.h>
 #include <stdarg.h>
 #include <stdbool.h>
 #include <stddef.h>
@@ -25,6 +26,7 @@ struct rsw_client {
   int max_retries; /* >= 0 after rsw_client_new */
   double retry_backoff_s;
   void *curl; /* CURL *: one easy handle, so connections are kept alive */
+  const volatile sig_atomic_t *interrupt; /* borrowed; NULL: none */
 
   /* The last error: info points into the buffers below. */
   rsw_error_info info;
@@ -104,8 +106,13 @@ bool client_escape(const char *s, char *out, size_t cap);
 rsw_status client_get_text(rsw_client *c, const char *path, char **json_out);
 /* Monotonic seconds. */
 double client_now_s(void);
-/* Sleep s seconds (interrupted sleeps resume). */
-void client_sleep_s(double s);
+/* Sleep s seconds (interrupted sleeps resume, unless the client's
+ * interrupt flag is set: then it returns early). c may be NULL. */
+void client_sleep_s(const rsw_client *c, double s);
+/* True when the client's interrupt flag (rsw_client_opts.interrupt) is set. */
+bool client_interrupted(const rsw_client *c);
+/* Record "interrupted" (RSW_ERR_CANCELLED) and return it. */
+rsw_status client_fail_interrupted(rsw_client *c, const char *what);
 
 /* ---- films (film.c) -------------------------------------------------------- */
 

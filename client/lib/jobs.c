@@ -496,7 +496,11 @@ static rsw_status wait_polling(rsw_client *c, const char *job_id, rsw_progress_f
     }
     double nap = interval;
     if (deadline > 0 && now + nap > deadline) nap = deadline - now;
-    client_sleep_s(nap);
+    client_sleep_s(c, nap);
+    if (client_interrupted(c)) {
+      s = client_fail_interrupted(c, path);
+      break;
+    }
     if (interval < 1.0) interval *= 1.5;
   }
   free(reported);
@@ -534,6 +538,7 @@ rsw_status rsw_job_wait(rsw_client *c, const char *job_id, rsw_progress_fn progr
     s = http_stream(c, &q, left, sse_line, &ss, &stopped, &not_a_stream);
     ss.event[0] = ss.pending_id[0] = '\0'; /* a partial event is sent again after reconnecting */
     ss.data_len = 0;
+    if (s == RSW_ERR_CANCELLED && client_interrupted(c)) break; /* the job keeps running */
     if (ss.user_stop) {
       s = client_fail(c, RSW_ERR_CANCELLED, "waiting for job %s stopped by the progress callback", job_id);
       break;
@@ -570,7 +575,7 @@ rsw_status rsw_job_wait(rsw_client *c, const char *job_id, rsw_progress_fn progr
       break;
     }
     if (drops > 1) {
-      client_sleep_s(backoff);
+      client_sleep_s(c, backoff);
       backoff *= 2.0;
     } else {
       backoff = c->retry_backoff_s;

@@ -20,6 +20,7 @@
 #ifndef RAYSWEEP_CLIENT_H
 #define RAYSWEEP_CLIENT_H
 
+#include <signal.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -50,6 +51,13 @@ typedef struct rsw_client_opts {
                                 negative: no retries */
   double retry_backoff_s;    /* first backoff, doubled each retry; 0: 0.2 s;
                                 Retry-After wins when the server sends it */
+  const volatile sig_atomic_t *interrupt; /* borrowed, may be NULL: once
+                                *interrupt is non-zero, a call in progress
+                                (a request, a stream, a wait, a retry pause)
+                                stops within about a second and returns
+                                RSW_ERR_CANCELLED, and later calls fail the
+                                same way until it is zero again. A signal
+                                handler may set it (the CLI's Ctrl-C). */
 } rsw_client_opts;
 
 /* Create a client. Borrows opts (strings are copied). *out is owned: free

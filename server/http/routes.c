@@ -280,7 +280,9 @@ static void h_render(http_req *r) {
   svc_error e = {0};
   svc_film f;
   memset(&f, 0, sizeof f);
-  if (service_render(r->svc, r->params[0], r->body, r->body_len, &f, &e) != RSW_OK) {
+  /* A client that hangs up (Ctrl-C on `raysweep render`) cancels the render. */
+  const atomic_int *gone = r->watch_client ? r->watch_client(r) : NULL;
+  if (service_render(r->svc, r->params[0], r->body, r->body_len, gone, &f, &e) != RSW_OK) {
     http_resp_svc_error(r, &e);
     return;
   }

@@ -5,6 +5,7 @@
 #ifndef RSW_HTTP_ROUTES_H
 #define RSW_HTTP_ROUTES_H
 
+#include <stdatomic.h>
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -45,7 +46,8 @@ typedef struct http_resp {
 /* One request, as the handler sees it: everything server.c looked up from
  * the connection (NULL when absent), the path's {placeholders} in order,
  * and the whole body. */
-typedef struct http_req {
+typedef struct http_req http_req;
+struct http_req {
   service *svc;
   const char *method, *path;
   const char *params[HTTP_MAX_PATH_PARAMS];
@@ -55,8 +57,14 @@ typedef struct http_req {
   const char *content_type, *accept, *if_match, *idempotency_key, *last_event_id;
   const char *body;
   size_t body_len;
+  /* For a long handler (a synchronous render): start watching the
+   * connection; the flag returned becomes 1 when the client hangs up and
+   * stays valid until the handler returns (the watch ends then). NULL when
+   * it cannot watch. watch_ctx belongs to server.c. */
+  const atomic_int *(*watch_client)(struct http_req *r);
+  void *watch_ctx;
   http_resp resp;
-} http_req;
+};
 
 typedef void (*http_handler)(http_req *r);
 

@@ -12,8 +12,10 @@
 
 #include <arpa/inet.h>
 #include <errno.h>
+#include <fcntl.h>
 #include <netdb.h>
 #include <netinet/in.h>
+#include <poll.h>
 #include <pthread.h>
 #include <stdarg.h>
 #include <stdatomic.h>
@@ -394,6 +396,66 @@ static void take_body(conn *cn, const char *data, size_t n) {
 }
 
 /* The whole request is in: last checks, then the handler. */
+/* ---- clients that hang up ---------------------------------------------------- */
+
+/* While a long handler (a synchronous render) runs on a connection's
+ * thread, nobody reads its socket: a small thread polls it and sets `gone`
+ * when the peer closed it (POLLRDHUP: the client's FIN; HUP/ERR: reset), so
+ * the render stops instead of finishing for nobody. The request body is
+ * fully read by then, and HTTP clients do not half-close, so an end of
+ * stream here means the client went away. */
+typedef struct client_watch {
+  struct MHD_Connection *conn;
+  int fd;
+  int wake[2]; /* a pipe: watch_stop writes, so the watcher leaves poll at once */
+  bool running;
+  atomic_int gone;
+  pthread_t thread;
+} client_watch;
+
+static void *watch_main(void *arg) {
+  client_watch *w = arg;
+  for (;;) {
+    struct pollfd p[2] = {{.fd = w->fd, .events = POLLRDHUP}, {.fd = w->wake[0], .events = POLLIN}};
+    int n = poll(p, 2, -1);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0 || p[1].revents) break; /* stopped: the handler is done */
+    if (p[0].revents & (POLLRDHUP | POLLHUP | POLLERR | POLLNVAL)) {
+      atomic_store(&w->gone, 1);
+      break;
+    }
+  }
+  return NULL;
+}
+
+/* http_req.watch_client: start the watch once per request. */
+static const atomic_int *watch_start(http_req *r) {
+  client_watch *w = r->watch_ctx;
+  if (w->running) return &w->gone;
+  const union MHD_ConnectionInfo *ci = MHD_get_connection_info(w->conn, MHD_CONNECTION_INFO_CONNECTION_FD);
+  if (!ci) return NULL;
+  w->fd = ci->connect_fd;
+  atomic_init(&w->gone, 0);
+  if (pipe2(w->wake, O_CLOEXEC) != 0) return NULL;
+  w->running = pthread_create(&w->thread, NULL, watch_main, w) == 0;
+  if (!w->running) {
+    close(w->wake[0]);
+    close(w->wake[1]);
+    return NULL;
+  }
+  return &w->gone;
+}
+
+static void watch_stop(client_watch *w) {
+  if (!w->running) return;
+  char c = 1;
+  while (write(w->wake[1], &c, 1) < 0 && errno == EINTR) {}
+  pthread_join(w->thread, NULL);
+  close(w->wake[0]);
+  close(w->wake[1]);
+  w->running = false;
+}
+
 static enum MHD_Result dispatch(struct MHD_Connection *c, conn *cn, const char *url, const char *method) {
   const http_route *rt = cn->route;
   if (cn->too_large) {
@@ -437,7 +499,11 @@ static enum MHD_Result dispatch(struct MHD_Connection *c, conn *cn, const char *
       .body_len = len,
       .resp = {.status = 500},
   };
+  client_watch w = {.conn = c};
+  r.watch_client = watch_start;
+  r.watch_ctx = &w;
   rt->handler(&r);
+  watch_stop(&w);
   return send_resp(c, cn, &r);
 }
 

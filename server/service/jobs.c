@@ -87,10 +87,13 @@ static cJSON *job_json(const job *j) {
   cJSON_AddNumberToObject(o, "renders_failed", (double)j->items_failed);
   cJSON_AddStringToObject(o, "created", j->created_iso);
   if (j->started_iso[0]) cJSON_AddStringToObject(o, "started", j->started_iso);
-  if (j->finished_iso[0]) {
-    cJSON_AddStringToObject(o, "finished", j->finished_iso);
-    cJSON_AddNumberToObject(o, "seconds", j->t_finished - j->t_started);
-  }
+  if (j->finished_iso[0]) cJSON_AddStringToObject(o, "finished", j->finished_iso);
+  /* Running time: so far while running, final once finished, 0 for a job
+   * that never started (cancelled while queued). A client that joins a
+   * running job divides renders_done by it for an honest rate. */
+  double seconds = 0;
+  if (j->started_iso[0]) seconds = (j->finished_iso[0] ? j->t_finished : svc_now()) - j->t_started;
+  if (j->started_iso[0] || j->finished_iso[0]) cJSON_AddNumberToObject(o, "seconds", seconds > 0 ? seconds : 0);
   if (j->error[0]) cJSON_AddStringToObject(o, "error", j->error);
   char href[128];
   snprintf(href, sizeof href, "/v1/jobs/%s/results", j->id);

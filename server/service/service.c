@@ -317,6 +317,8 @@ char *service_metrics_text(service *svc) {
   for (int s = 0; s < 5; s++) mb_printf(&b, "raysweep_jobs{state=\"%s\"} %zu\n", states[s], by_state[s]);
   mb_printf(&b, "# HELP raysweep_queue_depth Jobs waiting for the worker.\n# TYPE raysweep_queue_depth gauge\n");
   mb_printf(&b, "raysweep_queue_depth %zu\n", svc->n_queue);
+  mb_printf(&b, "# HELP raysweep_sync_renders Synchronous renders (POST :render) in progress.\n");
+  mb_printf(&b, "# TYPE raysweep_sync_renders gauge\nraysweep_sync_renders %zu\n", svc->sync_renders);
   mb_printf(&b, "# HELP raysweep_contexts_rendered_total Renders of (context, sensor) completed.\n");
   mb_printf(&b, "# TYPE raysweep_contexts_rendered_total counter\nraysweep_contexts_rendered_total %llu\n",
             (unsigned long long)svc->contexts_rendered);
@@ -703,10 +705,22 @@ rsw_status service_scene_delete(service *svc, const char *id, bool force, svc_er
     return no_scene(e, id);
   }
   if (r->active_jobs && !force) {
+    /* Name the jobs (the first few), so the answer says what to cancel. */
+    char ids[160] = "";
+    size_t used = 0, named = 0;
+    for (size_t i = 0; i < svc->n_jobs && named < 3; i++) {
+      const job *j = svc->jobs[i];
+      if (j->deleted || j->res != r || (j->state != JOB_QUEUED && j->state != JOB_RUNNING)) continue;
+      int k = snprintf(ids + used, sizeof ids - used, "%s%s", named ? ", " : "", j->id);
+      if (k < 0 || (size_t)k >= sizeof ids - used) break;
+      used += (size_t)k, named++;
+    }
     int n = r->active_jobs;
     pthread_mutex_unlock(&svc->lock);
-    return svc_fail(e, RSW_ERR_CONFLICT, 409, id, "scene '%s' has %d queued or running job(s); cancel them or delete with force=true",
-                    id, n);
+    return svc_fail(e, RSW_ERR_CONFLICT, 409, id,
+                    "scene '%s' is in use by %d queued or running job(s) (%s%s); cancel them "
+                    "(POST /v1/jobs/{id}:cancel) or delete with ?force=true, which cancels them first",
+                    id, n, ids, n > (int)named ? ", ..." : "");
   }
   for (size_t i = 0; i < svc->n_jobs; i++)
     if (svc->jobs[i]->res == r && (svc->jobs[i]->state == JOB_QUEUED || svc->jobs[i]->state == JOB_RUNNING))
@@ -1005,14 +1019,15 @@ rsw_status svc_render_locked(service *svc, resident *r, const render_spec *rs, s
   return st;
 }
 
-rsw_status service_render(service *svc, const char *id, const char *body, size_t len, svc_film *out, svc_error *e) {
+rsw_status service_render(service *svc, const char *id, const char *body, size_t len, const atomic_int *cancel,
+                          svc_film *out, svc_error *e) {
   if (!service_ready(svc)) return svc_fail(e, RSW_ERR_UNAVAILABLE, 503, "", "the server is shutting down");
   resident *r = svc_scene_acquire(svc, id);
   if (!r) return no_scene(e, id);
   memset(out, 0, sizeof *out);
   cJSON *j = len ? cJSON_ParseWithLength(body, len) : cJSON_CreateObject();
   rsw_status st = RSW_OK;
-  render_spec rs = {.seed = 0};
+  render_spec rs = {.seed = 0, .cancel = cancel};
   if (!j) st = svc_fail(e, RSW_ERR_PARSE, 400, "", "the body is not valid JSON");
   else if (!cJSON_IsObject(j)) st = svc_fail(e, RSW_ERR_TYPE, 422, "", "the body must be a JSON object");
   for (const cJSON *k = j && !st ? j->child : NULL; k && !st; k = k->next) {
@@ -1063,13 +1078,15 @@ rsw_status service_render(service *svc, const char *id, const char *body, size_t
                     (unsigned long long)ps, (unsigned long long)svc->opts.max_pixel_samples);
   }
   if (!st) {
+    pthread_mutex_lock(&svc->lock);
+    svc->sync_renders++;
+    pthread_mutex_unlock(&svc->lock);
     st = svc_render_locked(svc, r, &rs, out, e);
-    if (!st) {
-      snprintf(out->context, sizeof out->context, "render");
-      pthread_mutex_lock(&svc->lock);
-      svc->contexts_rendered++;
-      pthread_mutex_unlock(&svc->lock);
-    }
+    pthread_mutex_lock(&svc->lock);
+    svc->sync_renders--;
+    if (!st) svc->contexts_rendered++;
+    pthread_mutex_unlock(&svc->lock);
+    if (!st) snprintf(out->context, sizeof out->context, "render");
   }
   cJSON_Delete(j);
   svc_scene_release(svc, r);

@@ -93,9 +93,11 @@ typedef struct svc_film {
 } svc_film;
 void svc_film_free(svc_film *f);
 
-/* POST :render (body: RenderRequest). Blocks until done or timeout_s. */
-rsw_status service_render(service *svc, const char *id, const char *body, size_t len, svc_film *out,
-                          svc_error *e);
+/* POST :render (body: RenderRequest). Blocks until done or timeout_s, or
+ * until *cancel (borrowed, may be NULL) becomes non-zero: RSW_ERR_CANCELLED
+ * (the HTTP layer sets it when the client hangs up). */
+rsw_status service_render(service *svc, const char *id, const char *body, size_t len, const atomic_int *cancel,
+                          svc_film *out, svc_error *e);
 
 /* GET sensors/{sensor}/directions. */
 rsw_status service_directions(service *svc, const char *id, const char *sensor, char **json_out, svc_error *e);

@@ -110,6 +110,7 @@ struct service {
   } *reqs;
   size_t n_reqs, cap_reqs;
   uint64_t contexts_rendered, renders_failed;
+  size_t sync_renders; /* synchronous renders (POST :render) in progress */
   double render_seconds;
   double update_seconds[3]; /* none(+unchanged), spectral, geometric */
   uint64_t updates[3];

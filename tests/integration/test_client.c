@@ -693,8 +693,14 @@ static void test_wait_timeout_stop_cancel(void) {
   double t0 = now_s();
   rsw_status s = rsw_job_wait(c, job, NULL, NULL, 0.3, NULL);
   double dt = now_s() - t0;
-  CHECK(s == RSW_ERR_TIMEOUT && dt >= 0.25 && dt < 3.0, "wait with a 0.3 s limit: %s after %.2f s",
-        rsw_strerror(s), dt);
+  /* The limit is honoured: not before it (a lower bound no load can
+   * break), and the wait returned while the job still runs (an order, not
+   * an upper bound on the time a loaded machine takes). */
+  rsw_job_status js;
+  memset(&js, 0, sizeof js);
+  bool still = rsw_job_get(c, job, &js) == RSW_OK && (js.state == RSW_JOB_RUNNING || js.state == RSW_JOB_QUEUED);
+  CHECK(s == RSW_ERR_TIMEOUT && dt >= 0.25 && still, "wait with a 0.3 s limit: %s after %.2f s, job %s",
+        rsw_strerror(s), dt, still ? "still running" : "over");
   /* The callback stops the wait at its first context; the job runs on. */
   progress_log p = {.stop_after = 1};
   s = rsw_job_wait(c, job, on_progress, &p, 60, NULL);
@@ -1043,7 +1049,8 @@ static void test_retry_after(void) {
   double dt = now_s() - t0;
   CHECK(s == RSW_OK && json && strstr(json, "fake") && fs.n_requests == 3,
         "after 429 and 503: %s, %d requests", rsw_strerror(s), fs.n_requests);
-  CHECK(dt >= 0.95 && dt < 5, "Retry-After: 1 honoured: %.3f s", dt);
+  /* A lower bound only: a loaded machine can only make it longer. */
+  CHECK(dt >= 0.95, "Retry-After: 1 honoured: %.3f s", dt);
   rsw_free(json);
   rsw_client_free(c);
   /* Without retries the 429 comes back, its problem as the last error. */

@@ -1353,46 +1353,65 @@ static void calibrate(void) {
 }
 
 /* The issue: cancel "stops between sample passes, not only between
- * contexts". A context of one render tile (5x5 film) and ~2 s of samples:
- * cancelled 0.1 s in, the job must end well before the render would. */
+ * contexts". A context of one render tile (5x5 film) and ~60 s of samples
+ * (by the calibration): cancelled once running, the job must end with no
+ * render finished. That is an order of events, not a latency: a cancel
+ * honoured only between contexts would first finish a render (renders_done
+ * 1), and the 30 s wait is a limit far below the render's length, not a
+ * measurement (a loaded machine, a sanitizer build only make it longer). */
 static void test_cancel_between_passes(void) {
   char id[65], job[128], body[4096];
   REQUIRE(plate_scene(&main_d, "0.5", id), "scene");
-  REQUIRE(submit_job(&main_d, id, hemi_job_body(body, sizeof body, 3, 2.0), NULL, job) == 202, "submit");
-  CHECK(wait_running(&main_d, job, 10), "job starts running");
+  REQUIRE(submit_job(&main_d, id, hemi_job_body(body, sizeof body, 3, 60.0), NULL, job) == 202, "submit");
+  CHECK(wait_running(&main_d, job, 30), "job starts running");
   sleep_ms(100);
-  double t0 = now_s();
   char path[256];
   snprintf(path, sizeof path, "/v1/jobs/%s:cancel", job);
   resp r = post_json(&main_d, path, NULL);
   CHECK(r.status == 200, "cancel: %ld", r.status);
   resp_free(&r);
-  cJSON *j = wait_job(&main_d, job, 10);
-  double dt = now_s() - t0;
-  CHECK(j && jstr_is(j, "state", "cancelled"), "cancelled: %s", j ? jstr(j, "state") : "(none)");
-  CHECK(dt < 0.5, "the job ended %.2f s after the cancel (a render is ~2 s: it was not stopped mid-render)", dt);
-  CHECK(j && jnum(j, "renders_done") == 0, "no render finished: %g", j ? jnum(j, "renders_done") : -1);
+  cJSON *j = wait_job(&main_d, job, 30);
+  CHECK(j && jstr_is(j, "state", "cancelled"), "cancelled, before its first ~60 s render could end: %s",
+        j ? jstr(j, "state") : "(none)");
+  CHECK(j && jnum(j, "renders_done") == 0, "no render finished: %g (cancel waited for a render to end)",
+        j ? jnum(j, "renders_done") : -1);
   cJSON_Delete(j);
 }
 
 /* HTTP threads validate while the worker renders: reading a busy scene's
- * parameters and submitting another job to it answer at once. */
+ * parameters and submitting another job to it answer while its render
+ * (~60 s by the calibration) is still running. Asserted as an order (the
+ * answer, then the job still running with no render done), not a latency. */
 static void test_busy_scene_responsive(void) {
   char id[65], job[128], job2[128], body[4096], path[256];
   REQUIRE(plate_scene(&main_d, "0.55", id), "scene");
-  REQUIRE(submit_job(&main_d, id, hemi_job_body(body, sizeof body, 1, 1.5), NULL, job) == 202, "submit");
-  CHECK(wait_running(&main_d, job, 10), "job starts running");
-  double t0 = now_s();
+  REQUIRE(submit_job(&main_d, id, hemi_job_body(body, sizeof body, 1, 60.0), NULL, job) == 202, "submit");
+  CHECK(wait_running(&main_d, job, 30), "job starts running");
   long st = submit_job(&main_d, id, jq(body, sizeof body, "{'contexts': [{'id': 'q'}], 'defaults': {'spp': 1}}"),
                        NULL, job2);
-  double dt = now_s() - t0;
-  CHECK(st == 202 && dt < 0.5, "submit while rendering: %ld after %.2f s", st, dt);
+  snprintf(path, sizeof path, "/v1/jobs/%s", job);
+  resp g = get(&main_d, path);
+  cJSON *j = jparse(&g);
+  CHECK(st == 202 && jstr_is(j, "state", "running") && jnum(j, "renders_done") == 0,
+        "submit answered %ld while the render runs (job %s, %g renders done)", st, jstr(j, "state"),
+        jnum(j, "renders_done"));
+  cJSON_Delete(j);
+  resp_free(&g);
   snprintf(path, sizeof path, "/v1/scenes/%s/params", id);
   resp r = get(&main_d, path);
-  CHECK(r.status == 200 && r.secs < 0.5, "GET params while rendering: %ld after %.2f s", r.status, r.secs);
+  snprintf(path, sizeof path, "/v1/jobs/%s", job);
+  g = get(&main_d, path);
+  j = jparse(&g);
+  CHECK(r.status == 200 && jstr_is(j, "state", "running") && jnum(j, "renders_done") == 0,
+        "GET params answered %ld while the render runs (job %s)", r.status, jstr(j, "state"));
+  cJSON_Delete(j);
+  resp_free(&g);
   resp_free(&r);
-  cJSON_Delete(wait_job(&main_d, job, 10));
-  if (st == 202) cJSON_Delete(wait_job(&main_d, job2, 10));
+  snprintf(path, sizeof path, "/v1/jobs/%s:cancel", job);
+  r = post_json(&main_d, path, NULL);
+  resp_free(&r);
+  cJSON_Delete(wait_job(&main_d, job, 30));
+  if (st == 202) cJSON_Delete(wait_job(&main_d, job2, 30));
 }
 
 static void test_cancel(void) {
@@ -1646,6 +1665,8 @@ static void test_error_409(void) {
   snprintf(path, sizeof path, "/v1/scenes/%s", id);
   resp r = do_req(&main_d, (req){.method = "DELETE", .path = path});
   CHECK_PROBLEM(r, 409, "DELETE a scene with an active job");
+  CHECK(r.body && strstr(r.body, job) && strstr(r.body, "force=true"), "the 409 names the job and force=true: %.300s",
+        r.body ? r.body : "");
   resp_free(&r);
   r = get(&main_d, path);
   cJSON *j = jparse(&r);
@@ -1730,25 +1751,25 @@ static void test_error_504(void) {
   char id[65], path[256], body[256];
   REQUIRE(default_scene(&main_d, id), "default scene");
   snprintf(path, sizeof path, "/v1/scenes/%s:render", id);
-  /* 32x32 (16 render tiles) for ~3 s of work: stopped at the deadline. */
-  long spp = 3.0 * plate_sps / 1024.0;
+  /* 32x32 (16 render tiles) for ~60 s of work (by the calibration): the
+   * 504 arriving within the client's 30 s limit shows the work stopped at
+   * the deadline (an order: deadline, answer, then nothing left running),
+   * with no latency assertion for a loaded machine to break. */
+  long spp = 60.0 * plate_sps / 1024.0;
   resp r = post_json(&main_d, path, jq(body, sizeof body, "{'spp': %ld, 'timeout_s': 0.05}", spp < 1 ? 1 : spp));
   CHECK_PROBLEM(r, 504, "timeout_s exceeded");
-  CHECK(r.secs < 1, "the 504 came after %.2f s", r.secs);
   resp_free(&r);
-  /* And the work stopped: a small render is served promptly. */
-  r = do_req(&main_d, (req){.method = "POST", .path = path, .body = jq(body, sizeof body, "{'spp': 1}"),
-                            .timeout_s = 10});
+  /* And the work stopped: a small render on the same scene (which waits
+   * for the scene while a render holds it) is served within the limit. */
+  r = do_req(&main_d, (req){.method = "POST", .path = path, .body = jq(body, sizeof body, "{'spp': 1}")});
   CHECK(r.status == 200, "render after the 504: %ld", r.status);
-  CHECK(r.secs < 1, "served in %.2f s", r.secs);
   resp_free(&r);
-  /* One render tile (5x5) with ~1.5 s of samples: the deadline still
+  /* One render tile (5x5) with ~60 s of samples: the deadline still
    * holds (it must not wait for the tile, nor answer 200 after it). */
   REQUIRE(plate_scene(&main_d, "0.5", id), "plate");
   snprintf(path, sizeof path, "/v1/scenes/%s:render", id);
-  r = post_json(&main_d, path, jq(body, sizeof body, "{'sensor': 'hemi', 'spp': %ld, 'timeout_s': 0.05}", hemi_spp(1.5)));
+  r = post_json(&main_d, path, jq(body, sizeof body, "{'sensor': 'hemi', 'spp': %ld, 'timeout_s': 0.05}", hemi_spp(60.0)));
   CHECK_PROBLEM(r, 504, "timeout_s exceeded on a one-tile render");
-  CHECK(r.secs < 0.5, "answered after %.2f s", r.secs);
   resp_free(&r);
 }
 
@@ -1825,7 +1846,8 @@ static void test_error_429(void) {
   char a[65], b[65], c[65], body[4096], ja[128], jb[128], jc[128], path[256], ra[32];
   REQUIRE(plate_scene(&lim_d, "0.61", a) && plate_scene(&lim_d, "0.62", b) && plate_scene(&lim_d, "0.63", c),
           "scenes");
-  hemi_job_body(body, sizeof body, 3, 1.0);
+  /* Long enough (3 x ~60 s) that A is still running for the SIGTERM test. */
+  hemi_job_body(body, sizeof body, 3, 60.0);
   REQUIRE(submit_job(&lim_d, a, body, NULL, ja) == 202, "job A");
   CHECK(wait_running(&lim_d, ja, 10), "job A runs");
   CHECK(submit_job(&lim_d, b, body, NULL, jb) == 202, "job B queued");
@@ -1837,22 +1859,22 @@ static void test_error_429(void) {
   (void)jc;
 }
 
-/* SIGTERM with a job running (the limits daemon's from the 429 test, or a
- * new one): exit 0 within 5 s. */
+/* SIGTERM with a job running (the limits daemon's job A from the 429 test,
+ * ~180 s of renders): exit 0 long before that job could end, so shutdown
+ * cancelled it rather than waiting. The 30 s is a limit, not a measurement. */
 static void test_sigterm_with_work(void) {
   REQUIRE(lim_d.pid, "limits daemon");
   resp r = get(&lim_d, "/metrics");
   CHECK(strstr(r.body, "raysweep_jobs{state=\"running\"} 1"), "a job is running at SIGTERM");
   resp_free(&r);
   double secs = 0;
-  int rc = daemon_stop(&lim_d, 5, &secs);
-  CHECK(rc == 0, "exit status %d after SIGTERM (%.2f s)", rc, secs);
-  CHECK(secs < 5, "exited in %.2f s", secs);
+  int rc = daemon_stop(&lim_d, 30, &secs);
+  CHECK(rc == 0, "exit status %d after SIGTERM (%.2f s; -2: still running at the 30 s limit)", rc, secs);
 }
 
 static void test_sigterm_main(void) {
   double secs = 0;
-  int rc = daemon_stop(&main_d, 5, &secs);
+  int rc = daemon_stop(&main_d, 30, &secs);
   CHECK(rc == 0, "main daemon exit status %d after SIGTERM (%.2f s)", rc, secs);
   char *log = read_file(main_d.log, NULL);
   CHECK(log && strstr(log, "raysweepd: listening on http://127.0.0.1:"), "stderr announces the address: %.300s",

@@ -65,9 +65,9 @@ static void test_render_overrides_restore_base(void) {
   svc_error e = {0};
   const char *q1 = "{\"spp\": 4, \"seed\": 1}";
   const char *q2 = "{\"spp\": 4, \"seed\": 1, \"params\": {\"plate.bsdf.reflectance.value\": 0.25}}";
-  REQUIRE(service_render(svc, id, q1, strlen(q1), &a, &e) == RSW_OK, "render: %s", e.err.msg);
-  REQUIRE(service_render(svc, id, q2, strlen(q2), &b, &e) == RSW_OK, "render with override: %s", e.err.msg);
-  REQUIRE(service_render(svc, id, q1, strlen(q1), &c, &e) == RSW_OK, "render again: %s", e.err.msg);
+  REQUIRE(service_render(svc, id, q1, strlen(q1), NULL, &a, &e) == RSW_OK, "render: %s", e.err.msg);
+  REQUIRE(service_render(svc, id, q2, strlen(q2), NULL, &b, &e) == RSW_OK, "render with override: %s", e.err.msg);
+  REQUIRE(service_render(svc, id, q1, strlen(q1), NULL, &c, &e) == RSW_OK, "render again: %s", e.err.msg);
   CHECK_REL(a.img.data[0], 0.5 / 3.14159265358979323846, 1e-5);
   CHECK_REL(b.img.data[0], 0.25 / 3.14159265358979323846, 1e-5);
   CHECK(memcmp(a.img.data, c.img.data, sizeof(float)) == 0, "the override did not leak into the base state");
@@ -76,7 +76,7 @@ static void test_render_overrides_restore_base(void) {
   const char *q3 = "{\"params\": {\"plate.bsdf.reflectanse.value\": 0.25}}";
   svc_error e3 = {0};
   svc_film d;
-  CHECK(service_render(svc, id, q3, strlen(q3), &d, &e3) != RSW_OK, "unknown key rejected");
+  CHECK(service_render(svc, id, q3, strlen(q3), NULL, &d, &e3) != RSW_OK, "unknown key rejected");
   CHECK(strcmp(e3.key, "plate.bsdf.reflectanse.value") == 0, "key named: %s", e3.key);
   CHECK(strcmp(e3.candidates[0], "plate.bsdf.reflectance.value") == 0, "closest key first: %s", e3.candidates[0]);
   free(id);
