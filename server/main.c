@@ -9,8 +9,8 @@
  * non-zero with a message naming the flag, file or document place. */
 #include <errno.h>
 #include <limits.h>
-#include <stdarg.h>
 #include <math.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -25,7 +25,7 @@
 #include "serve.h"
 
 #define MAX_DEFINES 256
-#define MAX_SETS 1024
+#define MAX_SETS    1024
 
 typedef struct command {
   const char *name;
@@ -113,7 +113,8 @@ static int cmd_render(int argc, char **argv) {
         USAGE("--spp needs a positive integer (got '%s')", val ? val : "");
       i++;
     } else if (strcmp(a, "--seed") == 0) {
-      if (!parse_u64(val, ULLONG_MAX, &seed)) USAGE("--seed needs a non-negative integer (got '%s')", val ? val : "");
+      if (!parse_u64(val, ULLONG_MAX, &seed))
+        USAGE("--seed needs a non-negative integer (got '%s')", val ? val : "");
       i++;
     } else if (strcmp(a, "--threads") == 0) {
       if (!parse_u64(val, 256, &threads) || threads == 0)
@@ -127,7 +128,8 @@ static int cmd_render(int argc, char **argv) {
       if (!val) USAGE("%s needs mono or rgb", a);
       variant_name = val, i++;
     } else if (strcmp(a, "--set") == 0) {
-      if (!val || !strchr(val, '=') || val[0] == '=') USAGE("--set needs KEY=VALUE (got '%s')", val ? val : "");
+      if (!val || !strchr(val, '=') || val[0] == '=')
+        USAGE("--set needs KEY=VALUE (got '%s')", val ? val : "");
       if (n_sets == MAX_SETS) USAGE("too many --set (at most %d)", MAX_SETS);
       sets[n_sets++] = val, i++;
     } else if (strcmp(a, "--plugin-dir") == 0) {
@@ -161,7 +163,8 @@ static int cmd_render(int argc, char **argv) {
     fprintf(stderr, "raysweepd render: %s\n", rsw_err_format(&err, msg, sizeof msg));
     goto out;
   }
-  scene_load_opts lo = {.size = sizeof lo, .variant = variant_name, .defines = defines, .n_defines = n_defines};
+  scene_load_opts lo = {
+      .size = sizeof lo, .variant = variant_name, .defines = defines, .n_defines = n_defines};
   if (scene_load_file(scene_path, &lo, &sc, &err)) {
     fprintf(stderr, "raysweepd render: %s\n", rsw_err_format(&err, msg, sizeof msg));
     goto out;
@@ -177,8 +180,12 @@ static int cmd_render(int argc, char **argv) {
       goto out;
     }
   }
-  render_opts ro = {.size = sizeof ro, .sensor = sensor_index, .spp = (uint32_t)spp, .seed = seed,
-                    .wavelength = wavelength, .threads = (int)threads};
+  render_opts ro = {.size = sizeof ro,
+                    .sensor = sensor_index,
+                    .spp = (uint32_t)spp,
+                    .seed = seed,
+                    .wavelength = wavelength,
+                    .threads = (int)threads};
   render_result_stats rs;
   if (render_sensor(sc, &ro, &img, &rs, &err)) {
     fprintf(stderr, "raysweepd render: %s\n", rsw_err_format(&err, msg, sizeof msg));
@@ -190,7 +197,8 @@ static int cmd_render(int argc, char **argv) {
   char pmsg[600];
   size_t pfail = plugin_emitter_failures(sc, pmsg, sizeof pmsg);
   if (pfail)
-    fprintf(stderr, "raysweepd render: warning: %zu environment plugin failures were replaced by black; first: %s\n",
+    fprintf(stderr,
+            "raysweepd render: warning: %zu environment plugin failures were replaced by black; first: %s\n",
             pfail, pmsg);
   if (film_image_write_exr(&img, out_path, sc->sensors[sensor_index]->base.id, &err)) {
     fprintf(stderr, "raysweepd render: %s\n", rsw_err_format(&err, msg, sizeof msg));
@@ -250,9 +258,12 @@ static int apply_sets(const char *cmd, scene *sc, const char *const *sets, size_
 static void print_json_string(const char *s) {
   putchar('"');
   for (; *s; s++) {
-    if (*s == '"' || *s == '\\') printf("\\%c", *s);
-    else if ((unsigned char)*s < 0x20) printf("\\u%04x", *s);
-    else putchar(*s);
+    if (*s == '"' || *s == '\\')
+      printf("\\%c", *s);
+    else if ((unsigned char)*s < 0x20)
+      printf("\\u%04x", *s);
+    else
+      putchar(*s);
   }
   putchar('"');
 }
@@ -279,7 +290,8 @@ static int cmd_params(int argc, char **argv) {
       match = val, i++;
     } else if (strcmp(a, "--class") == 0) {
       update_class c;
-      if (!val || !update_class_parse(val, &c)) USAGE("--class needs spectral, geometric or none (got '%s')", val ? val : "");
+      if (!val || !update_class_parse(val, &c))
+        USAGE("--class needs spectral, geometric or none (got '%s')", val ? val : "");
       mask = c == UPDATE_NONE ? 0 : (unsigned)c;
       include_none = c == UPDATE_NONE;
       i++;
@@ -308,7 +320,8 @@ static int cmd_params(int argc, char **argv) {
   }
   rsw_err err = {0};
   char msg[1200];
-  scene_load_opts lo = {.size = sizeof lo, .variant = variant_name, .defines = defines, .n_defines = n_defines};
+  scene_load_opts lo = {
+      .size = sizeof lo, .variant = variant_name, .defines = defines, .n_defines = n_defines};
   if (scene_load_file(scene_path, &lo, &sc, &err)) {
     fprintf(stderr, "raysweepd params: %s\n", rsw_err_format(&err, msg, sizeof msg));
     goto out;
@@ -437,8 +450,10 @@ static void print_usage_line(FILE *f, const char *prefix, const char *usage) {
       if (*q == ' ' && depth == 0 && *p == '-' && !joined && q[1] && !strchr("-[(", q[1])) q++, joined = true;
     }
     if (q == p) break;
-    if (col + 1 + (q - p) > 100) col = fprintf(f, "\n%*s", indent, "") - 1;
-    else col += fprintf(f, " ");
+    if (col + 1 + (q - p) > 100)
+      col = fprintf(f, "\n%*s", indent, "") - 1;
+    else
+      col += fprintf(f, " ");
     col += fprintf(f, "%.*s", (int)(q - p), p);
     p = q;
   }

@@ -25,7 +25,7 @@
 #include "service/service.h"
 
 #define MAX_SCENES 256
-#define MAX_TOKEN 4096
+#define MAX_TOKEN  4096
 
 typedef struct serve_args {
   const char *listen, *data_root, *blob_dir, *token_file, *port_file, *plugin_dir;
@@ -64,9 +64,12 @@ static bool parse_bytes(const char *s, unsigned long long *out) {
   unsigned long long v = strtoull(s, &end, 10);
   if (errno || end == s) return false;
   unsigned shift = 0;
-  if (*end == 'k' || *end == 'K') shift = 10, end++;
-  else if (*end == 'm' || *end == 'M') shift = 20, end++;
-  else if (*end == 'g' || *end == 'G') shift = 30, end++;
+  if (*end == 'k' || *end == 'K')
+    shift = 10, end++;
+  else if (*end == 'm' || *end == 'M')
+    shift = 20, end++;
+  else if (*end == 'g' || *end == 'G')
+    shift = 30, end++;
   if (*end || v > (1ull << 40) >> shift) return false;
   *out = v << shift;
   return *out > 0;
@@ -74,18 +77,27 @@ static bool parse_bytes(const char *s, unsigned long long *out) {
 
 /* Options table: each takes one value. */
 typedef enum opt_id {
-  OPT_LISTEN, OPT_THREADS, OPT_SCENE, OPT_DATA_ROOT, OPT_BLOB_DIR, OPT_TOKEN_FILE,
-  OPT_MAX_BODY, OPT_MAX_QUEUE, OPT_RESULT_TTL, OPT_PORT_FILE, OPT_PLUGIN_DIR,
+  OPT_LISTEN,
+  OPT_THREADS,
+  OPT_SCENE,
+  OPT_DATA_ROOT,
+  OPT_BLOB_DIR,
+  OPT_TOKEN_FILE,
+  OPT_MAX_BODY,
+  OPT_MAX_QUEUE,
+  OPT_RESULT_TTL,
+  OPT_PORT_FILE,
+  OPT_PLUGIN_DIR,
 } opt_id;
 
 static const struct {
   const char *name;
   opt_id id;
 } options[] = {
-    {"--listen", OPT_LISTEN},         {"--threads", OPT_THREADS},       {"--scene", OPT_SCENE},
-    {"--data-root", OPT_DATA_ROOT},   {"--blob-dir", OPT_BLOB_DIR},     {"--token-file", OPT_TOKEN_FILE},
-    {"--max-body", OPT_MAX_BODY},     {"--max-queue", OPT_MAX_QUEUE},   {"--result-ttl", OPT_RESULT_TTL},
-    {"--port-file", OPT_PORT_FILE},   {"--plugin-dir", OPT_PLUGIN_DIR},
+    {"--listen", OPT_LISTEN},       {"--threads", OPT_THREADS},       {"--scene", OPT_SCENE},
+    {"--data-root", OPT_DATA_ROOT}, {"--blob-dir", OPT_BLOB_DIR},     {"--token-file", OPT_TOKEN_FILE},
+    {"--max-body", OPT_MAX_BODY},   {"--max-queue", OPT_MAX_QUEUE},   {"--result-ttl", OPT_RESULT_TTL},
+    {"--port-file", OPT_PORT_FILE}, {"--plugin-dir", OPT_PLUGIN_DIR},
 };
 
 static int parse_args(int argc, char **argv, serve_args *a) {
@@ -97,7 +109,8 @@ static int parse_args(int argc, char **argv, serve_args *a) {
     }
     size_t k = 0;
     while (k < sizeof options / sizeof options[0] && strcmp(options[k].name, arg) != 0) k++;
-    if (k == sizeof options / sizeof options[0]) return fail_usage("unknown option '%s' (usage: raysweepd %s)", arg, RSW_SERVE_USAGE);
+    if (k == sizeof options / sizeof options[0])
+      return fail_usage("unknown option '%s' (usage: raysweepd %s)", arg, RSW_SERVE_USAGE);
     if (i + 1 >= argc) return fail_usage("%s needs a value", arg);
     const char *v = argv[++i];
     switch (options[k].id) {
@@ -141,7 +154,8 @@ static int parse_listen(const char *s, char *host, size_t host_len, int *port) {
   *port = 8350;
   if (s[0] == '[' || (strchr(s, ':') && strchr(s, ':') != strrchr(s, ':')))
     return fail_usage("--listen: IPv6 addresses are not supported (got '%s'); use an IPv4 address such as "
-                      "127.0.0.1:8350", s);
+                      "127.0.0.1:8350",
+                      s);
   const char *colon = strrchr(s, ':');
   size_t hl = colon ? (size_t)(colon - s) : strlen(s);
   if (hl >= host_len) return fail_usage("--listen: host name too long");
@@ -291,8 +305,8 @@ int cmd_serve(int argc, char **argv) {
   if (!a.n_scenes) {
     svc_error e = {0};
     char *id = NULL;
-    if (service_scene_load_text(svc, rsw_default_scene_xml, rsw_default_scene_xml_len, true, "default_scene.xml", &id,
-                                &e)) {
+    if (service_scene_load_text(svc, rsw_default_scene_xml, rsw_default_scene_xml_len, true,
+                                "default_scene.xml", &id, &e)) {
       svc_error_print("the embedded default scene", &e);
       goto out;
     }
@@ -300,7 +314,10 @@ int cmd_serve(int argc, char **argv) {
     free(id);
   }
 
-  http_opts ho = {.size = sizeof ho, .host = host, .port = port, .token = token[0] ? token : NULL,
+  http_opts ho = {.size = sizeof ho,
+                  .host = host,
+                  .port = port,
+                  .token = token[0] ? token : NULL,
                   .max_body = (size_t)a.max_body};
   rsw_status s = http_server_start(svc, &ho, &srv, &err);
   if (s) {
@@ -312,8 +329,7 @@ int cmd_serve(int argc, char **argv) {
   if (a.port_file && write_port_file(a.port_file, http_server_port(srv))) goto out;
 
   int sig = 0;
-  while (sigwait(&stop_signals, &sig) != 0) {
-  }
+  while (sigwait(&stop_signals, &sig) != 0) {}
   fprintf(stderr, "raysweepd: %s: shutting down\n", sig == SIGINT ? "SIGINT" : "SIGTERM");
   rc = 0;
 out:

@@ -16,12 +16,12 @@
 /* Exit codes, documented in `raysweep --help`. */
 enum {
   CLI_OK = 0,
-  CLI_SERVER = 1,  /* the server answered with a problem */
-  CLI_USAGE = 2,   /* bad command line or bad local input description */
-  CLI_CONNECT = 3, /* cannot connect to the daemon */
-  CLI_JOB = 4,     /* job (or one of its renders) failed or was cancelled */
-  CLI_TIMEOUT = 5, /* a deadline passed */
-  CLI_IO = 6,      /* local files */
+  CLI_SERVER = 1,       /* the server answered with a problem */
+  CLI_USAGE = 2,        /* bad command line or bad local input description */
+  CLI_CONNECT = 3,      /* cannot connect to the daemon */
+  CLI_JOB = 4,          /* job (or one of its renders) failed or was cancelled */
+  CLI_TIMEOUT = 5,      /* a deadline passed */
+  CLI_IO = 6,           /* local files */
   CLI_INTERRUPTED = 130 /* Ctrl-C (SIGINT): 128 + 2, the shells' convention */
 };
 

@@ -8,13 +8,13 @@
  * whichever shard submits it, and the union of the shards' films equals
  * the unsharded sweep bit for bit. */
 #include <cjson/cJSON.h>
+#include <dirent.h>
 #include <errno.h>
 #include <fcntl.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <dirent.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -457,7 +457,8 @@ static int fetch_all(cli_ctx *ctx, const char *job, const char *dir, cli_format 
       const char *err = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "error"));
       fprintf(stderr, "raysweep %s: %s/%s %s%s%s\n", ctx->cmd, c, sn, state, err ? ": " : "", err ? err : "");
       failed++;
-      const char *last = cJSON_GetStringValue(cJSON_GetArrayItem(incomplete, cJSON_GetArraySize(incomplete) - 1));
+      const char *last =
+          cJSON_GetStringValue(cJSON_GetArrayItem(incomplete, cJSON_GetArraySize(incomplete) - 1));
       if (!last || strcmp(last, c) != 0) cJSON_AddItemToArray(incomplete, cJSON_CreateString(c));
       continue;
     }
@@ -833,7 +834,8 @@ static int prepare_output(const cli_ctx *ctx, const char *dir, bool force) {
   }
   if (mrc == 0) { /* every context of its shard (an interrupted sweep has no index yet) */
     char buf[72];
-    for (size_t k = m.shard_i; k < m.total; k += m.shard_n) removed += remove_context_dir(dir, manifest_id(&m, k, buf));
+    for (size_t k = m.shard_i; k < m.total; k += m.shard_n)
+      removed += remove_context_dir(dir, manifest_id(&m, k, buf));
     manifest_free(&m);
   }
   if (has_index && unlink(index) != 0 && errno != ENOENT) {
@@ -851,8 +853,8 @@ static int prepare_output(const cli_ctx *ctx, const char *dir, bool force) {
   size_t left = d ? dir_entries(d, first, sizeof first) : 0;
   if (d) closedir(d);
   if (!ctx->quiet) {
-    fprintf(stderr, "raysweep %s: --force: removed the earlier sweep in %s (%zu film%s)\n", ctx->cmd, dir, removed,
-            removed == 1 ? "" : "s");
+    fprintf(stderr, "raysweep %s: --force: removed the earlier sweep in %s (%zu film%s)\n", ctx->cmd, dir,
+            removed, removed == 1 ? "" : "s");
     if (left)
       fprintf(stderr, "raysweep %s: kept %zu entr%s no sweep wrote (e.g. '%s')\n", ctx->cmd, left,
               left == 1 ? "y" : "ies", first);
@@ -972,7 +974,8 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
     rc = cli_fail(ctx, CLI_IO, "out of memory");
     goto out;
   }
-  if ((rc = fetch_all(ctx, job, dir, fmt, sorted, l.n, job_params, incomplete, &entries, &n_entries, &failed))) {
+  if ((rc = fetch_all(ctx, job, dir, fmt, sorted, l.n, job_params, incomplete, &entries, &n_entries,
+                      &failed))) {
     if (cli_interrupted)
       rc = cli_fail(ctx, CLI_INTERRUPTED,
                     "interrupted while fetching films; job %s is over and keeps its results on the daemon "
@@ -981,7 +984,8 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
     goto out;
   }
   if ((rc = write_index(ctx, dir, entries, n_entries))) goto out;
-  if ((rc = manifest_write(ctx, dir, fingerprint, scene, shard_i, shard_n, &l, job, true, incomplete))) goto out;
+  if ((rc = manifest_write(ctx, dir, fingerprint, scene, shard_i, shard_n, &l, job, true, incomplete)))
+    goto out;
   rc = job_rc;
   if (ctx->json) {
     cJSON *o = cJSON_CreateObject();
@@ -1131,8 +1135,8 @@ static bool legacy_has(const index_entry *e, size_t n, const merge_input *in, co
  * incomplete, or by films of an input without a manifest. Prints what is
  * missing; *missing_out (owned) gets every missing id when there is one
  * sweep. Returns the number of missing contexts. */
-static size_t merge_missing(const cli_ctx *ctx, const merge_input *in, size_t n_in, const index_entry *e, size_t n,
-                            bool partial, size_t *n_sweeps, cJSON **missing_out) {
+static size_t merge_missing(const cli_ctx *ctx, const merge_input *in, size_t n_in, const index_entry *e,
+                            size_t n, bool partial, size_t *n_sweeps, cJSON **missing_out) {
   size_t total_missing = 0;
   *n_sweeps = 0;
   *missing_out = cJSON_CreateArray();
@@ -1146,7 +1150,8 @@ static size_t merge_missing(const cli_ctx *ctx, const merge_input *in, size_t n_
     size_t shard_n = m0->shard_n, missing = 0;
     bool same_n = true;
     for (size_t j = g; j < n_in; j++)
-      if (in[j].has_manifest && strcmp(in[j].m.sweep, m0->sweep) == 0 && in[j].m.shard_n != shard_n) same_n = false;
+      if (in[j].has_manifest && strcmp(in[j].m.sweep, m0->sweep) == 0 && in[j].m.shard_n != shard_n)
+        same_n = false;
     char buf[72], list[400] = "";
     size_t used = 0;
     for (size_t k = 0; k < m0->total; k++) {
@@ -1155,7 +1160,8 @@ static size_t merge_missing(const cli_ctx *ctx, const merge_input *in, size_t n_
       for (size_t j = g; j < n_in && !covered; j++) {
         const sweep_manifest *m = &in[j].m;
         if (!in[j].has_manifest || strcmp(m->sweep, m0->sweep) != 0) continue;
-        covered = in[j].has_index && m->finished && k % m->shard_n == m->shard_i && !manifest_incomplete(m, id);
+        covered =
+            in[j].has_index && m->finished && k % m->shard_n == m->shard_i && !manifest_incomplete(m, id);
       }
       if (!covered) covered = legacy_has(e, n, in, id);
       if (covered) continue;
@@ -1168,8 +1174,8 @@ static size_t merge_missing(const cli_ctx *ctx, const merge_input *in, size_t n_
     }
     if (!missing) continue;
     total_missing += missing;
-    fprintf(stderr, "raysweep %s: %s%zu of %zu contexts of sweep %s (scene %.12s) are missing: %s%s\n", ctx->cmd,
-            partial ? "warning: " : "", missing, m0->total, m0->sweep,
+    fprintf(stderr, "raysweep %s: %s%zu of %zu contexts of sweep %s (scene %.12s) are missing: %s%s\n",
+            ctx->cmd, partial ? "warning: " : "", missing, m0->total, m0->sweep,
             cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(m0->root, "scene")), list,
             missing > 12 ? ", ..." : "");
     if (same_n) {
@@ -1188,11 +1194,13 @@ static size_t merge_missing(const cli_ctx *ctx, const merge_input *in, size_t n_
         count++;
       }
       if (count)
-        fprintf(stderr, "  shard%s not given or not finished: %s (run `raysweep sweep ... --shard I/N` for %s)\n",
+        fprintf(stderr,
+                "  shard%s not given or not finished: %s (run `raysweep sweep ... --shard I/N` for %s)\n",
                 count == 1 ? "" : "s", shards, count == 1 ? "it" : "them");
       else
-        fprintf(stderr, "  every shard is there: the missing contexts had renders that failed (see the shards' "
-                        "sweep.json \"incomplete\")\n");
+        fprintf(stderr,
+                "  every shard is there: the missing contexts had renders that failed (see the shards' "
+                "sweep.json \"incomplete\")\n");
     }
   }
   return total_missing;
@@ -1222,13 +1230,15 @@ int cmd_merge(cli_ctx *ctx, const cli_args *a) {
     if (in[i].has_manifest && !in[i].has_index) {
       /* A sweep that was interrupted or failed: its contexts are missing. */
       if (!ctx->quiet)
-        fprintf(stderr, "raysweep merge: %s: the sweep did not finish (no index.jsonl); its films are not used\n",
+        fprintf(stderr,
+                "raysweep merge: %s: the sweep did not finish (no index.jsonl); its films are not used\n",
                 a->pos[i]);
       continue;
     }
     if (!in[i].has_manifest && !ctx->quiet)
-      fprintf(stderr, "raysweep merge: %s has no %s (an older raysweep wrote it): its contexts are merged, "
-                      "but what is missing from its sweep cannot be told\n",
+      fprintf(stderr,
+              "raysweep merge: %s has no %s (an older raysweep wrote it): its contexts are merged, "
+              "but what is missing from its sweep cannot be told\n",
               a->pos[i], MANIFEST_NAME);
     rc = read_index(ctx, a->pos[i], i, &e, &n, &cap);
   }
@@ -1261,8 +1271,9 @@ int cmd_merge(cli_ctx *ctx, const cli_args *a) {
   /* Nothing is written before the inputs are known to be complete. */
   missing = merge_missing(ctx, in, a->n_pos, e, n, partial, &n_sweeps, &missing_ids);
   if (missing && !partial) {
-    rc = cli_fail(ctx, CLI_IO, "%zu context%s missing: nothing was written (give the missing shards, or "
-                               "--partial to merge what is there)",
+    rc = cli_fail(ctx, CLI_IO,
+                  "%zu context%s missing: nothing was written (give the missing shards, or "
+                  "--partial to merge what is there)",
                   missing, missing == 1 ? " is" : "s are");
     goto done;
   }

@@ -39,9 +39,9 @@ static const cli_command commands[] = {
     {"render", NULL,
      "ID [--sensor S] [--spp N] [--seed N] [--wavelength NM] [--set KEY=VALUE]... [--timeout S] "
      "-o OUT.exr|.npy|.json",
-     "render one context synchronously (format by extension; .json is the film JSON; Ctrl-C stops the render)",
-     cli_opts_render, 1, 1,
-     true, cmd_render},
+     "render one context synchronously (format by extension; .json is the film JSON; Ctrl-C stops the "
+     "render)",
+     cli_opts_render, 1, 1, true, cmd_render},
     {"sweep", NULL,
      "ID (--contexts FILE.jsonl | --grid NAME=START:STOP:STEP...) [--set KEY=VALUE]... [--sensor S]... "
      "[--spp N] [--seed N] [--shard I/N] [--format exr|npy|json] [--timeout S] -o DIR [--force]",
@@ -53,9 +53,9 @@ static const cli_command commands[] = {
      cli_opts_merge, 1, (size_t)-1, false, cmd_merge},
     {"job", "ls", "", "list jobs", cli_opts_none, 0, 0, true, cmd_job_ls},
     {"job", "show", "ID", "one job's state and progress", cli_opts_none, 1, 1, true, cmd_job_show},
-    {"job", "watch", "ID [--timeout S]", "follow a job's progress until it ends (Ctrl-C stops watching; the job goes on)",
-     cli_opts_job_watch, 1, 1,
-     true, cmd_job_watch},
+    {"job", "watch", "ID [--timeout S]",
+     "follow a job's progress until it ends (Ctrl-C stops watching; the job goes on)", cli_opts_job_watch, 1,
+     1, true, cmd_job_watch},
     {"job", "cancel", "ID", "cancel a job", cli_opts_none, 1, 1, true, cmd_job_cancel},
     {"job", "rm", "ID", "delete a job and its results (cancels it if running)", cli_opts_none, 1, 1, true,
      cmd_job_rm},
@@ -106,8 +106,10 @@ static void print_usage(FILE *f, const char *prefix, const char *name, const cha
       if (*q == ' ' && depth == 0 && *p == '-' && !joined && q[1] && !strchr("-[(", q[1])) q++, joined = true;
     }
     if (q == p) break;
-    if (col + 1 + (q - p) > 100) col = fprintf(f, "\n%*s", indent, "") - 1;
-    else col += fprintf(f, " ");
+    if (col + 1 + (q - p) > 100)
+      col = fprintf(f, "\n%*s", indent, "") - 1;
+    else
+      col += fprintf(f, " ");
     col += fprintf(f, "%.*s", (int)(q - p), p);
     p = q;
   }
@@ -310,8 +312,7 @@ int main(int argc, char **argv) {
     if (group_known && help && n_rest == 1) {
       printf("raysweep %s subcommands:\n", rest[0]);
       for (size_t i = 0; i < N_COMMANDS; i++)
-        if (strcmp(commands[i].group, rest[0]) == 0)
-        {
+        if (strcmp(commands[i].group, rest[0]) == 0) {
           char sub[32];
           command_name(&commands[i], sub, sizeof sub);
           print_usage(stdout, "  ", sub, commands[i].args);

@@ -361,7 +361,8 @@ static void progress_draw(cli_progress *p, bool final) {
   double el = cli_now() - p->start;
   double rate = el > 0 ? (double)p->done / el : 0;
   char eta[32] = "?";
-  if (rate > 0 && p->total >= p->done) cli_format_duration(eta, sizeof eta, (double)(p->total - p->done) / rate);
+  if (rate > 0 && p->total >= p->done)
+    cli_format_duration(eta, sizeof eta, (double)(p->total - p->done) / rate);
   char failed[48] = "";
   if (p->failed) snprintf(failed, sizeof failed, "  %zu failed", p->failed);
   if (p->ctx->stderr_tty) {

@@ -139,7 +139,8 @@ static bool meta_uint(const cJSON *meta, const char *key, double max, bool *has,
   const cJSON *v = cJSON_GetObjectItemCaseSensitive(meta, key);
   *has = false;
   if (!v || cJSON_IsNull(v)) return true;
-  if (!cJSON_IsNumber(v) || !(v->valuedouble >= 0) || v->valuedouble > max || v->valuedouble != floor(v->valuedouble))
+  if (!cJSON_IsNumber(v) || !(v->valuedouble >= 0) || v->valuedouble > max ||
+      v->valuedouble != floor(v->valuedouble))
     return false;
   *has = true;
   *out = (uint64_t)v->valuedouble;

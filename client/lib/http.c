@@ -123,7 +123,8 @@ static bool add_header(exchange *x, const char *fmt, const char *value) {
 
 /* libcurl calls this often during a transfer and about once a second while
  * idle: a non-zero answer aborts the transfer (CURLE_ABORTED_BY_CALLBACK). */
-static int on_xferinfo(void *user, curl_off_t dltotal, curl_off_t dlnow, curl_off_t ultotal, curl_off_t ulnow) {
+static int on_xferinfo(void *user, curl_off_t dltotal, curl_off_t dlnow, curl_off_t ultotal,
+                       curl_off_t ulnow) {
   (void)dltotal, (void)dlnow, (void)ultotal, (void)ulnow;
   return client_interrupted(user) ? 1 : 0;
 }

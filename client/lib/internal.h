@@ -25,7 +25,7 @@ struct rsw_client {
   double connect_timeout_s, timeout_s;
   int max_retries; /* >= 0 after rsw_client_new */
   double retry_backoff_s;
-  void *curl; /* CURL *: one easy handle, so connections are kept alive */
+  void *curl;                             /* CURL *: one easy handle, so connections are kept alive */
   const volatile sig_atomic_t *interrupt; /* borrowed; NULL: none */
 
   /* The last error: info points into the buffers below. */

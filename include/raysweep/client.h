@@ -42,14 +42,14 @@ typedef struct rsw_client rsw_client;
 /* Options for rsw_client_new. Zero-initialise, set `size`, fill what you
  * need: the struct may grow (OpenEXR Core's convention). */
 typedef struct rsw_client_opts {
-  size_t size;               /* sizeof(rsw_client_opts) */
-  const char *base_url;      /* "http://127.0.0.1:8350" when NULL */
-  const char *token;         /* bearer token, or NULL */
-  double connect_timeout_s;  /* 0: 10 s */
-  double timeout_s;          /* whole request; 0: none */
-  int max_retries;           /* on connection errors, 429 and 503; 0: 3;
+  size_t size;                            /* sizeof(rsw_client_opts) */
+  const char *base_url;                   /* "http://127.0.0.1:8350" when NULL */
+  const char *token;                      /* bearer token, or NULL */
+  double connect_timeout_s;               /* 0: 10 s */
+  double timeout_s;                       /* whole request; 0: none */
+  int max_retries;                        /* on connection errors, 429 and 503; 0: 3;
                                 negative: no retries */
-  double retry_backoff_s;    /* first backoff, doubled each retry; 0: 0.2 s;
+  double retry_backoff_s;                 /* first backoff, doubled each retry; 0: 0.2 s;
                                 Retry-After wins when the server sends it */
   const volatile sig_atomic_t *interrupt; /* borrowed, may be NULL: once
                                 *interrupt is non-zero, a call in progress
@@ -70,12 +70,12 @@ void rsw_client_free(rsw_client *c);
  * are borrowed from the client ("" when absent). */
 typedef struct rsw_error_info {
   rsw_status status;
-  int http_status;            /* 0 when no HTTP response */
-  const char *code;           /* the server's machine code, e.g. "RSW_ERR_NOT_FOUND" */
-  const char *message;        /* human-readable detail */
-  const char *pointer;        /* JSON pointer or file:line, or "" */
-  const char *key;            /* parameter key, or "" */
-  const char *candidates[3];  /* closest keys for an unknown key, or NULL */
+  int http_status;           /* 0 when no HTTP response */
+  const char *code;          /* the server's machine code, e.g. "RSW_ERR_NOT_FOUND" */
+  const char *message;       /* human-readable detail */
+  const char *pointer;       /* JSON pointer or file:line, or "" */
+  const char *key;           /* parameter key, or "" */
+  const char *candidates[3]; /* closest keys for an unknown key, or NULL */
 } rsw_error_info;
 const rsw_error_info *rsw_client_last_error(const rsw_client *c);
 
@@ -176,8 +176,8 @@ rsw_status rsw_contexts_set_job_seed(rsw_contexts *x, long long seed);
 size_t rsw_contexts_count(const rsw_contexts *x);
 
 /* Submit a job. idempotency_key may be NULL. job_id_out: 40 bytes. */
-rsw_status rsw_job_submit(rsw_client *c, const char *scene_id, const rsw_contexts *x, const char *idempotency_key,
-                          char job_id_out[40]);
+rsw_status rsw_job_submit(rsw_client *c, const char *scene_id, const rsw_contexts *x,
+                          const char *idempotency_key, char job_id_out[40]);
 
 typedef enum rsw_job_state {
   RSW_JOB_QUEUED,
@@ -191,8 +191,8 @@ typedef struct rsw_job_status {
   rsw_job_state state;
   size_t contexts_total, contexts_done;
   size_t renders_total, renders_done, renders_failed;
-  double seconds;     /* elapsed since start (0 when queued) */
-  char error[512];    /* "" unless failed */
+  double seconds;  /* elapsed since start (0 when queued) */
+  char error[512]; /* "" unless failed */
 } rsw_job_status;
 
 rsw_status rsw_job_get(rsw_client *c, const char *job_id, rsw_job_status *out);
@@ -204,8 +204,8 @@ typedef int (*rsw_progress_fn)(void *user, const char *context, const char *sens
  * with Last-Event-ID when the stream drops). timeout_s <= 0: no limit
  * (RSW_ERR_TIMEOUT otherwise). *final_out (may be NULL) gets the end
  * state. */
-rsw_status rsw_job_wait(rsw_client *c, const char *job_id, rsw_progress_fn progress, void *user, double timeout_s,
-                        rsw_job_status *final_out);
+rsw_status rsw_job_wait(rsw_client *c, const char *job_id, rsw_progress_fn progress, void *user,
+                        double timeout_s, rsw_job_status *final_out);
 rsw_status rsw_job_cancel(rsw_client *c, const char *job_id);
 rsw_status rsw_job_delete(rsw_client *c, const char *job_id);
 /* GET /v1/jobs and /v1/jobs/{id}/results as JSON text (owned: rsw_free). */

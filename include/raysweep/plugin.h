@@ -71,7 +71,12 @@ extern "C" {
 #endif
 
 /* Log levels for rsw_plugin_host.log. */
-enum { RSW_LOG_DEBUG = 0, RSW_LOG_INFO = 1, RSW_LOG_WARN = 2, RSW_LOG_ERROR = 3 };
+enum {
+  RSW_LOG_DEBUG = 0,
+  RSW_LOG_INFO = 1,
+  RSW_LOG_WARN = 2,
+  RSW_LOG_ERROR = 3
+};
 
 /* ------------------------------------------------------------------------
  * Host services, owned by the host, valid until the plugin is unloaded
@@ -175,17 +180,16 @@ typedef struct rsw_prepare_context {
  * and frees in destroy; the host never dereferences it.
  * ---------------------------------------------------------------------- */
 typedef struct rsw_env_plugin {
-  uint32_t abi_version;    /* must equal RSW_PLUGIN_ABI_VERSION */
-  const char *type_name;   /* scene type: [a-z][a-z0-9_]*, e.g. "test" */
-  const char *pretty_name; /* human-readable, e.g. "SDK Test" */
+  uint32_t abi_version;           /* must equal RSW_PLUGIN_ABI_VERSION */
+  const char *type_name;          /* scene type: [a-z][a-z0-9_]*, e.g. "test" */
+  const char *pretty_name;        /* human-readable, e.g. "SDK Test" */
   const rsw_plugin_param *params; /* n_params descriptions (may be NULL if 0) */
   size_t n_params;
 
   /* Create an instance. param_values[i] points to the value of params[i]
    * (1 or 3 doubles; defaults filled in by the host); the pointers are
    * valid only during the call. On success write *instance and return 0. */
-  int (*create)(const double *const *param_values, void **instance, char *errbuf,
-                size_t errlen);
+  int (*create)(const double *const *param_values, void **instance, char *errbuf, size_t errlen);
   /* Free an instance (NULL is never passed). */
   void (*destroy)(void *instance);
   /* Optional (may be NULL): an independent copy of an instance, including
@@ -193,8 +197,7 @@ typedef struct rsw_env_plugin {
   int (*clone)(const void *instance, void **out, char *errbuf, size_t errlen);
   /* Set one declared parameter (value has 1 or 3 doubles). The host calls
    * prepare again before the next render. */
-  int (*set_param)(void *instance, const char *name, const double *value, char *errbuf,
-                   size_t errlen);
+  int (*set_param)(void *instance, const char *name, const double *value, char *errbuf, size_t errlen);
   /* Read one declared parameter into value_out (1 or 3 doubles); 0 on
    * success. */
   int (*get_param)(const void *instance, const char *name, double *value_out);
@@ -205,8 +208,7 @@ typedef struct rsw_env_plugin {
 
   /* Add the radiance arriving from `direction` (i.e. seen by a ray that
    * escapes along it) to ctx->stokes. Concurrent, read-only. */
-  void (*add_radiance)(const void *instance, rsw_stokes_context *ctx,
-                       const double direction[3]);
+  void (*add_radiance)(const void *instance, rsw_stokes_context *ctx, const double direction[3]);
   /* Sample a direction from u in [0,1)^2, write it (unit) and return its
    * solid-angle pdf (> 0). Concurrent, read-only. */
   double (*sample)(const void *instance, const double u[2], double direction_out[3]);

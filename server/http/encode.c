@@ -42,7 +42,9 @@ void http_buf_append(http_buf *b, const char *s, size_t n) {
   b->p[b->len] = '\0';
 }
 
-void http_buf_puts(http_buf *b, const char *s) { http_buf_append(b, s, strlen(s)); }
+void http_buf_puts(http_buf *b, const char *s) {
+  http_buf_append(b, s, strlen(s));
+}
 
 void http_buf_printf(http_buf *b, const char *fmt, ...) {
   char small[256];
@@ -79,9 +81,7 @@ void http_buf_json_string(http_buf *b, const char *s) {
     case '\n': http_buf_append(b, "\\n", 2); break;
     case '\r': http_buf_append(b, "\\r", 2); break;
     case '\t': http_buf_append(b, "\\t", 2); break;
-    default:
-      snprintf(esc, sizeof esc, "\\u%04x", ch);
-      http_buf_append(b, esc, 6);
+    default: snprintf(esc, sizeof esc, "\\u%04x", ch); http_buf_append(b, esc, 6);
     }
     run = s + 1;
   }
@@ -123,7 +123,9 @@ static size_t film_samples(const film_image *im) {
   return (size_t)im->width * (size_t)im->height * (size_t)im->channels;
 }
 
-static const char *variant_name(rsw_variant v) { return v == VARIANT_MONO ? "mono" : "rgb"; }
+static const char *variant_name(rsw_variant v) {
+  return v == VARIANT_MONO ? "mono" : "rgb";
+}
 
 rsw_status http_film_json(const svc_film *f, char **bytes_out, size_t *len_out, rsw_err *err) {
   rsw_status s = check_film(f, "film JSON", err);
@@ -168,7 +170,8 @@ rsw_status http_film_json(const svc_film *f, char **bytes_out, size_t *len_out, 
     size_t np = (size_t)im->width * (size_t)im->height;
     for (int k = 0; k < 2 && !b.failed; k++) {
       http_buf_puts(&b, k ? "],\"azimuth_deg\":[" : ",\"zenith_deg\":[");
-      for (size_t i = 0; i < np && !b.failed; i++) http_buf_printf(&b, "%s%.9g", i ? "," : "", im->angles[2 * i + (size_t)k]);
+      for (size_t i = 0; i < np && !b.failed; i++)
+        http_buf_printf(&b, "%s%.9g", i ? "," : "", im->angles[2 * i + (size_t)k]);
     }
     http_buf_puts(&b, "]");
   }
@@ -274,8 +277,9 @@ const char *http_status_code(int status) {
   return "ERROR";
 }
 
-static char *problem_json(int status, const char *code, const char *title, const char *detail, const char *pointer,
-                          const char *key, const char *const *candidates, size_t n_candidates) {
+static char *problem_json(int status, const char *code, const char *title, const char *detail,
+                          const char *pointer, const char *key, const char *const *candidates,
+                          size_t n_candidates) {
   http_buf b = {0};
   if (!code) code = http_status_code(status);
   http_buf_puts(&b, "{\"type\":\"https://raysweep.dev/problems/");
@@ -310,8 +314,8 @@ static char *problem_json(int status, const char *code, const char *title, const
   return http_buf_take(&b, NULL);
 }
 
-char *http_problem_json(int status, const char *code, const char *detail, const char *pointer, const char *key,
-                        const char *const *candidates, size_t n_candidates) {
+char *http_problem_json(int status, const char *code, const char *detail, const char *pointer,
+                        const char *key, const char *const *candidates, size_t n_candidates) {
   return problem_json(status, code, http_reason(status), detail, pointer, key, candidates, n_candidates);
 }
 
@@ -338,8 +342,8 @@ char *http_problem_from_svc(const svc_error *e, int *status_out) {
   const char *cands[3] = {e->candidates[0], e->candidates[1], e->candidates[2]};
   *status_out = status;
   /* The title belongs to the problem type (the code), not to the case. */
-  return problem_json(status, rsw_status_name(e->err.code), rsw_strerror(e->err.code), detail, pointer, e->key,
-                      cands, 3);
+  return problem_json(status, rsw_status_name(e->err.code), rsw_strerror(e->err.code), detail, pointer,
+                      e->key, cands, 3);
 }
 
 /* ---- request helpers ------------------------------------------------------- */
@@ -405,7 +409,9 @@ http_film_format http_accept_film(const char *accept) {
       {"image/x-exr", HTTP_FILM_EXR},
       {"application/x-npy", HTTP_FILM_NPY},
   };
-  enum { N_EXACT = sizeof exact / sizeof exact[0] };
+  enum {
+    N_EXACT = sizeof exact / sizeof exact[0]
+  };
   if (!accept) return HTTP_FILM_JSON;
   const char *p = accept;
   while (*p == ' ' || *p == '\t') p++;

@@ -69,8 +69,8 @@ rsw_status http_film_exr(const svc_film *f, void **bytes_out, size_t *len_out, r
  * "pointer", "key", "candidates"}. pointer, key may be NULL or "";
  * candidates is NULL or n_candidates strings (empty ones skipped).
  * Returns malloc'ed text or NULL when out of memory. */
-char *http_problem_json(int status, const char *code, const char *detail, const char *pointer, const char *key,
-                        const char *const *candidates, size_t n_candidates);
+char *http_problem_json(int status, const char *code, const char *detail, const char *pointer,
+                        const char *key, const char *const *candidates, size_t n_candidates);
 /* The same from a service error: status is e->http_status or
  * rsw_status_http(e->err.code); code is the status name (RSW_ERR_...)
  * and title its message (rsw_strerror: "unknown plugin");

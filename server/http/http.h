@@ -19,11 +19,11 @@
 typedef struct http_server http_server;
 
 typedef struct http_opts {
-  size_t size;        /* sizeof(http_opts) */
-  const char *host;   /* IPv4 literal or name resolving to IPv4 ("127.0.0.1") */
-  int port;           /* 0: an ephemeral port (see http_server_port) */
-  const char *token;  /* bearer token (NULL or "": no auth); copied */
-  size_t max_body;    /* request bodies over this many bytes get 413
+  size_t size;              /* sizeof(http_opts) */
+  const char *host;         /* IPv4 literal or name resolving to IPv4 ("127.0.0.1") */
+  int port;                 /* 0: an ephemeral port (see http_server_port) */
+  const char *token;        /* bearer token (NULL or "": no auth); copied */
+  size_t max_body;          /* request bodies over this many bytes get 413
                          (0: HTTP_DEFAULT_MAX_BODY) */
   unsigned max_connections; /* 0: 256 */
 } http_opts;

@@ -189,9 +189,13 @@ static bool parse_if_match(http_req *r, int64_t *out) {
 
 /* ---- handlers -------------------------------------------------------------- */
 
-static void h_info(http_req *r) { http_resp_json(r, 200, service_info_json(r->svc)); }
+static void h_info(http_req *r) {
+  http_resp_json(r, 200, service_info_json(r->svc));
+}
 
-static void h_live(http_req *r) { http_resp_json(r, 200, strdup("{\"status\":\"live\"}")); }
+static void h_live(http_req *r) {
+  http_resp_json(r, 200, strdup("{\"status\":\"live\"}"));
+}
 
 static void h_ready(http_req *r) {
   if (service_ready(r->svc))
@@ -221,7 +225,8 @@ static void h_scene_post(http_req *r) {
   svc_error e = {0};
   bool created = false;
   char *id = NULL, *json = NULL;
-  rsw_status s = service_scene_post(r->svc, r->body, r->body_len, is_xml, r->q_variant, &created, &id, &json, &e);
+  rsw_status s =
+      service_scene_post(r->svc, r->body, r->body_len, is_xml, r->q_variant, &created, &id, &json, &e);
   if (s == RSW_OK && id) snprintf(r->resp.location, sizeof r->resp.location, "/v1/scenes/%s", id);
   free(id);
   resp_result(r, s, created ? 201 : 200, json, &e);
@@ -258,7 +263,8 @@ static void h_params_get(http_req *r) {
   svc_error e = {0};
   char *json = NULL;
   uint64_t rev = 0;
-  rsw_status s = service_params_get(r->svc, r->params[0], r->q_match ? r->q_match : "*", r->q_class, &json, &rev, &e);
+  rsw_status s =
+      service_params_get(r->svc, r->params[0], r->q_match ? r->q_match : "*", r->q_class, &json, &rev, &e);
   if (s == RSW_OK) set_etag(r, rev);
   resp_result(r, s, 200, json, &e);
 }
@@ -446,7 +452,8 @@ const http_route http_routes[] = {
 const size_t http_n_routes = sizeof http_routes / sizeof http_routes[0];
 
 void http_routes_print(FILE *f) {
-  for (size_t i = 0; i < http_n_routes; i++) fprintf(f, "%s %s\n", http_routes[i].method, http_routes[i].path);
+  for (size_t i = 0; i < http_n_routes; i++)
+    fprintf(f, "%s %s\n", http_routes[i].method, http_routes[i].path);
 }
 
 /* ---- matching -------------------------------------------------------------
@@ -454,7 +461,8 @@ void http_routes_print(FILE *f) {
  * non-empty segment without ':' (so ".../{id}" never swallows a custom verb
  * like "x:cancel"); "{name}:verb" matches a segment ending in ":verb" with
  * a non-empty, ':'-free prefix. */
-bool http_route_match(const char *tmpl, const char *path, char *seg_buf, const char *params[HTTP_MAX_PATH_PARAMS]) {
+bool http_route_match(const char *tmpl, const char *path, char *seg_buf,
+                      const char *params[HTTP_MAX_PATH_PARAMS]) {
   size_t plen = strlen(path);
   memcpy(seg_buf, path, plen + 1);
   size_t starts[HTTP_MAX_PATH_PARAMS], lens[HTTP_MAX_PATH_PARAMS];

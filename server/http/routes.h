@@ -14,7 +14,7 @@
 #include "../service/service.h"
 
 #define HTTP_MAX_PATH_PARAMS 3
-#define HTTP_MAX_JSON_DEPTH 64
+#define HTTP_MAX_JSON_DEPTH  64
 
 /* What a route's body must be (checked before the handler runs). */
 typedef enum http_body_kind {
@@ -33,9 +33,9 @@ typedef struct http_resp {
   size_t len;
   char location[512];
   char etag[32];
-  int retry_after_s;        /* > 0: Retry-After */
-  bool www_authenticate;    /* WWW-Authenticate: Bearer */
-  char allow[64];           /* for 405 */
+  int retry_after_s;     /* > 0: Retry-After */
+  bool www_authenticate; /* WWW-Authenticate: Bearer */
+  char allow[64];        /* for 405 */
   /* Server-sent events instead of a body: server.c streams
    * service_job_next_event for sse_job after sse_after. */
   bool sse;
@@ -82,7 +82,8 @@ extern const size_t http_n_routes;
 
 /* Match path against a template; on success fill params (borrowed
  * pointers into seg_buf, which must hold strlen(path) + 1 bytes). */
-bool http_route_match(const char *tmpl, const char *path, char *seg_buf, const char *params[HTTP_MAX_PATH_PARAMS]);
+bool http_route_match(const char *tmpl, const char *path, char *seg_buf,
+                      const char *params[HTTP_MAX_PATH_PARAMS]);
 
 /* Find the route for (method, path). Returns it, or NULL with *path_known
  * telling whether another method would match (then allow receives the

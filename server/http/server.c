@@ -36,13 +36,13 @@
 /* Event streams poll the service this often for shutdown, and send a
  * keep-alive comment after this long without an event (proxies drop
  * silent connections; it also reveals clients that went away). */
-#define SSE_POLL_MS 500
-#define SSE_PING_MS 15000
+#define SSE_POLL_MS          500
+#define SSE_PING_MS          15000
 /* On shutdown, event streams go on this long for their jobs' final
  * `end` event (the service cancels running jobs) before they are cut. */
-#define SSE_GRACE_MS 3000
+#define SSE_GRACE_MS         3000
 /* Most body memory reserved from Content-Length before the bytes arrive. */
-#define PREALLOC_MAX ((size_t)16 << 20)
+#define PREALLOC_MAX         ((size_t)16 << 20)
 /* Idle connections close after this (seconds). */
 #define CONNECTION_TIMEOUT_S 120
 
@@ -67,11 +67,11 @@ typedef struct conn {
   http_server *srv;
   const http_route *route; /* NULL when answered at the first call */
   const char *params[HTTP_MAX_PATH_PARAMS];
-  char *seg_buf;           /* owns the strings params point into */
+  char *seg_buf; /* owns the strings params point into */
   char *body;
   size_t len, cap;
-  bool too_large; /* body passed max_body: read and dropped, then 413 */
-  bool answered;  /* a response is queued already */
+  bool too_large;  /* body passed max_body: read and dropped, then 413 */
+  bool answered;   /* a response is queued already */
   bool seen_first; /* the first call (headers only) is over */
   bool has_early;  /* early holds a problem to send at the last call */
   http_resp early;
@@ -220,7 +220,8 @@ static ssize_t sse_read(void *cls, uint64_t pos, char *buf, size_t max) {
     char *json = NULL;
     bool is_end = false;
     svc_error e = {0};
-    rsw_status s = service_job_next_event(st->srv->svc, st->job, st->after, SSE_POLL_MS, &seq, &json, &is_end, &e);
+    rsw_status s =
+        service_job_next_event(st->srv->svc, st->job, st->after, SSE_POLL_MS, &seq, &json, &is_end, &e);
     if (s != RSW_OK) { /* the job went away (deleted): say why, then end */
       int status;
       char *problem = http_problem_from_svc(&e, &status);
@@ -262,8 +263,7 @@ static void sse_free(void *cls) {
 static bool token_equal(const char *a, size_t alen, const char *b, size_t blen) {
   size_t n = alen > blen ? alen : blen;
   unsigned char d = alen != blen;
-  for (size_t i = 0; i < n; i++)
-    d |= (unsigned char)((i < alen ? a[i] : 0) ^ (i < blen ? b[i] : 0));
+  for (size_t i = 0; i < n; i++) d |= (unsigned char)((i < alen ? a[i] : 0) ^ (i < blen ? b[i] : 0));
   return d == 0;
 }
 
@@ -317,13 +317,13 @@ static bool first_checks(struct MHD_Connection *c, conn *cn, const char *url, co
     *ret = MHD_NO;
     return false;
   }
-  const http_route *rt = http_route_find(method, url, cn->seg_buf, cn->params, &path_known, allow, sizeof allow);
+  const http_route *rt =
+      http_route_find(method, url, cn->seg_buf, cn->params, &path_known, allow, sizeof allow);
   /* Health stays open to probes; everything else, known path or not, asks
    * for the token first so that unauthenticated clients learn nothing. */
   if (!(rt && rt->public_route) && !authorized(srv, c)) {
     cn->route = rt;
-    *ret = send_problem(c, cn, 401, NULL, "this server requires Authorization: Bearer <token>", NULL,
-                        true);
+    *ret = send_problem(c, cn, 401, NULL, "this server requires Authorization: Bearer <token>", NULL, true);
     return false;
   }
   if (!rt) {
@@ -460,13 +460,15 @@ static enum MHD_Result dispatch(struct MHD_Connection *c, conn *cn, const char *
   const http_route *rt = cn->route;
   if (cn->too_large) {
     char detail[200];
-    snprintf(detail, sizeof detail, "request body exceeds the limit of %zu bytes (--max-body)", cn->srv->max_body);
+    snprintf(detail, sizeof detail, "request body exceeds the limit of %zu bytes (--max-body)",
+             cn->srv->max_body);
     return send_problem(c, cn, 413, NULL, detail, NULL, false);
   }
   const char *ct = header(c, MHD_HTTP_HEADER_CONTENT_TYPE);
   const char *body = cn->body ? cn->body : "";
   size_t len = cn->len;
-  bool json = rt->body == HTTP_BODY_JSON || (rt->body == HTTP_BODY_SCENE && http_media_type_is(ct, "application/json"));
+  bool json = rt->body == HTTP_BODY_JSON ||
+              (rt->body == HTTP_BODY_SCENE && http_media_type_is(ct, "application/json"));
   if ((rt->body == HTTP_BODY_JSON || rt->body == HTTP_BODY_SCENE) && !ct && len) {
     char detail[200];
     snprintf(detail, sizeof detail, "a request body needs a Content-Type (%s)", media_expected(rt->body));
@@ -541,7 +543,8 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
   return dispatch(c, cn, url, method);
 }
 
-static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls, enum MHD_RequestTerminationCode toe) {
+static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls,
+                         enum MHD_RequestTerminationCode toe) {
   (void)cls, (void)c, (void)toe;
   conn *cn = *con_cls;
   if (!cn) return;
@@ -574,7 +577,8 @@ bool http_host_is_loopback(const char *host) {
 static rsw_status resolve(const char *host, int port, struct sockaddr_in *sin, rsw_err *err) {
   if (strchr(host, ':') || host[0] == '[')
     return rsw_fail(err, RSW_ERR_UNSUPPORTED, "--listen",
-                    "IPv6 addresses are not supported (got '%s'); use an IPv4 address such as 127.0.0.1", host);
+                    "IPv6 addresses are not supported (got '%s'); use an IPv4 address such as 127.0.0.1",
+                    host);
   memset(sin, 0, sizeof *sin);
   sin->sin_family = AF_INET;
   sin->sin_port = htons((uint16_t)port);
@@ -627,13 +631,15 @@ rsw_status http_server_start(service *svc, const http_opts *opts, http_server **
     if (fd >= 0) close(fd);
     free(srv->token);
     free(srv);
-    return rsw_fail(err, RSW_ERR_IO, "--listen", "cannot listen on %s:%d: %s%s", host, opts->port, strerror(e),
-                    e == EADDRINUSE ? " (another process, perhaps another raysweepd, has this port: stop it, or give "
-                                      "another port, e.g. --listen 127.0.0.1:0 for any free one)"
-                                    : "");
+    return rsw_fail(
+        err, RSW_ERR_IO, "--listen", "cannot listen on %s:%d: %s%s", host, opts->port, strerror(e),
+        e == EADDRINUSE ? " (another process, perhaps another raysweepd, has this port: stop it, or give "
+                          "another port, e.g. --listen 127.0.0.1:0 for any free one)"
+                        : "");
   }
 
-  unsigned flags = MHD_USE_THREAD_PER_CONNECTION | MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_POLL | MHD_USE_ERROR_LOG;
+  unsigned flags =
+      MHD_USE_THREAD_PER_CONNECTION | MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_POLL | MHD_USE_ERROR_LOG;
   pthread_condattr_t ca;
   pthread_condattr_init(&ca);
   pthread_condattr_setclock(&ca, CLOCK_MONOTONIC);
@@ -641,10 +647,11 @@ rsw_status http_server_start(service *svc, const http_opts *opts, http_server **
   pthread_cond_init(&srv->streams_done, &ca);
   pthread_condattr_destroy(&ca);
   /* The logger goes first so that it sees the other options' messages. */
-  srv->mhd = MHD_start_daemon(flags, 0, NULL, NULL, on_request, srv, MHD_OPTION_EXTERNAL_LOGGER, on_log, NULL,
-                              MHD_OPTION_LISTEN_SOCKET, fd, MHD_OPTION_NOTIFY_COMPLETED, on_completed, srv,
-                              MHD_OPTION_CONNECTION_LIMIT, opts->max_connections ? opts->max_connections : 256u,
-                              MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)CONNECTION_TIMEOUT_S, MHD_OPTION_END);
+  srv->mhd =
+      MHD_start_daemon(flags, 0, NULL, NULL, on_request, srv, MHD_OPTION_EXTERNAL_LOGGER, on_log, NULL,
+                       MHD_OPTION_LISTEN_SOCKET, fd, MHD_OPTION_NOTIFY_COMPLETED, on_completed, srv,
+                       MHD_OPTION_CONNECTION_LIMIT, opts->max_connections ? opts->max_connections : 256u,
+                       MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)CONNECTION_TIMEOUT_S, MHD_OPTION_END);
   if (!srv->mhd) {
     pthread_cond_destroy(&srv->streams_done);
     pthread_mutex_destroy(&srv->lock);
@@ -664,7 +671,9 @@ rsw_status http_server_start(service *svc, const http_opts *opts, http_server **
   return RSW_OK;
 }
 
-int http_server_port(const http_server *srv) { return srv ? srv->port : 0; }
+int http_server_port(const http_server *srv) {
+  return srv ? srv->port : 0;
+}
 
 void http_server_stop(http_server *srv) {
   if (!srv) return;

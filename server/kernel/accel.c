@@ -22,7 +22,7 @@
 struct accel {
   RTCDevice device; /* the process-wide device (not owned) */
   RTCScene top;
-  RTCScene *sub; /* one per shape */
+  RTCScene *sub;     /* one per shape */
   RTCGeometry *geom; /* the shape's geometry in its scene (held) */
   RTCGeometry *inst; /* its instance in the top level (held) */
   uint32_t *nverts;  /* vertex count Embree holds for each mesh */
@@ -94,9 +94,12 @@ size_t accel_embree_bytes(void) {
  * unit disk [-1,1]^2 x 0 (padded), the unit tube [-1,1]^2 x [0,1]. */
 static void unit_box(geom_kind g, double lo[3], double hi[3]) {
   lo[0] = lo[1] = -1.0, hi[0] = hi[1] = 1.0;
-  if (g == GEOM_SPHERE) lo[2] = -1.0, hi[2] = 1.0;
-  else if (g == GEOM_CYLINDER) lo[2] = 0.0, hi[2] = 1.0;
-  else lo[2] = -1e-6, hi[2] = 1e-6;
+  if (g == GEOM_SPHERE)
+    lo[2] = -1.0, hi[2] = 1.0;
+  else if (g == GEOM_CYLINDER)
+    lo[2] = 0.0, hi[2] = 1.0;
+  else
+    lo[2] = -1e-6, hi[2] = 1e-6;
 }
 
 static void unit_bounds(const struct RTCBoundsFunctionArguments *args) {
@@ -141,8 +144,8 @@ static bool tube_hit(const double o[3], const double d[3], double tnear, double 
 
 /* Nearest t in (tnear, tfar) where object-space ray (o, d) meets the unit
  * sphere or unit disk; returns false if none. Normal in object space. */
-static bool unit_hit(geom_kind g, const double o[3], const double d[3], double tnear, double tfar, double *t_out,
-                     double n_out[3]) {
+static bool unit_hit(geom_kind g, const double o[3], const double d[3], double tnear, double tfar,
+                     double *t_out, double n_out[3]) {
   if (g == GEOM_CYLINDER) return tube_hit(o, d, tnear, tfar, t_out, n_out);
   if (g == GEOM_SPHERE) {
     /* |o + t d|^2 = 1: a t^2 + 2 b t + c = 0, solved stably. */
@@ -179,8 +182,21 @@ static bool unit_hit(geom_kind g, const double o[3], const double d[3], double t
  * addressed directly: RTCRayN is 12 arrays of N 32-bit fields (org_x,
  * org_y, org_z, tnear, dir_x, dir_y, dir_z, time, tfar, mask, id, flags),
  * RTCHitN follows it (Ng_x, Ng_y, Ng_z, u, v, primID, geomID, instID[0]). */
-enum { RAY_ORG = 0, RAY_TNEAR = 3, RAY_DIR = 4, RAY_TFAR = 8, RAY_FIELDS = 12 };
-enum { HIT_NG = 0, HIT_U = 3, HIT_V = 4, HIT_PRIM = 5, HIT_GEOM = 6, HIT_INST = 7 };
+enum {
+  RAY_ORG = 0,
+  RAY_TNEAR = 3,
+  RAY_DIR = 4,
+  RAY_TFAR = 8,
+  RAY_FIELDS = 12
+};
+enum {
+  HIT_NG = 0,
+  HIT_U = 3,
+  HIT_V = 4,
+  HIT_PRIM = 5,
+  HIT_GEOM = 6,
+  HIT_INST = 7
+};
 #define RAYN_F(p, N, f, i) (((float *)(p))[(size_t)(f) * (N) + (i)])
 #define HITN_F(p, N, f, i) (((float *)(p))[(size_t)(f) * (N) + (i)])
 #define HITN_U(p, N, f, i) (((unsigned *)(p))[(size_t)(f) * (N) + (i)])
@@ -194,7 +210,8 @@ static void load_ray(const void *ray, unsigned N, unsigned i, double o[3], doubl
 
 /* Record a hit of ray i at distance t with geometric normal n (in the
  * space Embree handed the ray in); u, v are unused by analytic shapes. */
-static void store_hit(const struct RTCIntersectFunctionNArguments *args, unsigned i, double t, const double n[3]) {
+static void store_hit(const struct RTCIntersectFunctionNArguments *args, unsigned i, double t,
+                      const double n[3]) {
   unsigned N = args->N;
   void *hit = (float *)args->rayhit + (size_t)RAY_FIELDS * N;
   RAYN_F(args->rayhit, N, RAY_TFAR, i) = (float)t;
@@ -243,7 +260,8 @@ static void member_bounds(const struct RTCBoundsFunctionArguments *args) {
   unit_box(s->geom, ulo, uhi);
   double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
   for (int c = 0; c < 8; c++) {
-    vec3 p = xf_point(&s->to_world, v3(c & 1 ? uhi[0] : ulo[0], c & 2 ? uhi[1] : ulo[1], c & 4 ? uhi[2] : ulo[2]));
+    vec3 p =
+        xf_point(&s->to_world, v3(c & 1 ? uhi[0] : ulo[0], c & 2 ? uhi[1] : ulo[1], c & 4 ? uhi[2] : ulo[2]));
     double q[3] = {p.x, p.y, p.z};
     for (int k = 0; k < 3; k++) lo[k] = fmin(lo[k], q[k]), hi[k] = fmax(hi[k], q[k]);
   }
@@ -365,7 +383,9 @@ static void rewrite_instances(accel *a) {
   a->counters.origin_moves++;
 }
 
-vec3 accel_origin(const accel *a) { return a ? a->origin : v3(0, 0, 0); }
+vec3 accel_origin(const accel *a) {
+  return a ? a->origin : v3(0, 0, 0);
+}
 
 /* The float32 error of Embree's view of the surface near p, measured
  * along the unit normal n (accel.h). Embree rounds the ray origin o ~ p in
@@ -404,8 +424,8 @@ static RTCGeometry shape_geometry(accel *a, const shape *s) {
     if (!g) return NULL;
     float *v = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float),
                                        s->mesh.n_verts);
-    unsigned *ix = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned),
-                                           s->mesh.n_faces);
+    unsigned *ix = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                           3 * sizeof(unsigned), s->mesh.n_faces);
     if (!v || !ix) {
       rtcReleaseGeometry(g);
       return NULL;
@@ -464,8 +484,8 @@ static RTCScene group_scene(accel *a, const shape_group *g) {
       if (!geo) break;
       float *v = rtcSetNewGeometryBuffer(geo, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float),
                                          m->mesh.n_verts);
-      unsigned *ix = rtcSetNewGeometryBuffer(geo, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned),
-                                             m->mesh.n_faces);
+      unsigned *ix = rtcSetNewGeometryBuffer(geo, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                             3 * sizeof(unsigned), m->mesh.n_faces);
       if (!v || !ix) {
         rtcReleaseGeometry(geo);
         break;
@@ -478,7 +498,8 @@ static RTCScene group_scene(accel *a, const shape_group *g) {
       memcpy(ix, m->mesh.faces, 3 * (size_t)m->mesh.n_faces * sizeof(unsigned));
       rtcSetGeometryBuildQuality(geo, RTC_BUILD_QUALITY_HIGH);
       rtcCommitGeometry(geo);
-      a->bytes += 3 * (size_t)m->mesh.n_verts * sizeof(float) + 3 * (size_t)m->mesh.n_faces * sizeof(unsigned);
+      a->bytes +=
+          3 * (size_t)m->mesh.n_verts * sizeof(float) + 3 * (size_t)m->mesh.n_faces * sizeof(unsigned);
     } else if (xf_is_identity(&m->to_world)) {
       geo = shape_geometry(a, m);
       if (!geo) break;
@@ -513,7 +534,8 @@ static void set_placement_transform(RTCGeometry inst, const instance_shape *is, 
 
 /* Instances of a group at top-level ids: an `instance` at its shape index,
  * an instancelist's placements from *next_id on. */
-static rsw_status build_instances(accel *a, const instance_shape *is, size_t i, size_t *next_id, rsw_err *err) {
+static rsw_status build_instances(accel *a, const instance_shape *is, size_t i, size_t *next_id,
+                                  rsw_err *err) {
   const shape *sh = &is->base;
   RTCScene gs = group_scene(a, is->group);
   if (!gs) return embree_fail(a, err, sh->base.id, "cannot build the shape group's scene");
@@ -649,7 +671,9 @@ void accel_free(accel *a) {
   free(a);
 }
 
-size_t accel_memory(const accel *a) { return a ? a->bytes : 0; }
+size_t accel_memory(const accel *a) {
+  return a ? a->bytes : 0;
+}
 
 /* ---- updates ---------------------------------------------------------------------------------- */
 
@@ -727,8 +751,10 @@ rsw_status accel_commit(accel *a, rsw_err *err) {
 }
 
 void accel_get_counters(const accel *a, accel_counters *out) {
-  if (a) *out = a->counters;
-  else memset(out, 0, sizeof *out);
+  if (a)
+    *out = a->counters;
+  else
+    memset(out, 0, sizeof *out);
 }
 
 /* ---- queries ------------------------------------------------------------------------------- */
@@ -870,8 +896,8 @@ static RTCScene build_flat(const scene *s) {
     RTCGeometry g = rtcNewGeometry(s->accel->device, RTC_GEOMETRY_TYPE_TRIANGLE);
     float *v = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float),
                                        sh->mesh.n_verts);
-    unsigned *ix = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned),
-                                           sh->mesh.n_faces);
+    unsigned *ix = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                           3 * sizeof(unsigned), sh->mesh.n_faces);
     for (uint32_t k = 0; k < sh->mesh.n_verts; k++) {
       const float *p = &sh->mesh.pos[3 * (size_t)k];
       vec3 w = v3_sub(xf_point(&sh->to_world, v3(p[0], p[1], p[2])), s->accel->origin);
@@ -898,8 +924,13 @@ double accel_ceiling_rays_per_s(const scene *s, bool flat, uint64_t n_rays, int 
   if (n_rays > ((uint64_t)1 << 26)) n_rays = (uint64_t)1 << 26;
   int started = 0;
   for (int i = 0; i < threads; i++) {
-    jobs[i] = (ceiling_job){.scene = sc, .c = v3_sub(s->bsphere_center, s->accel->origin), .r = s->bsphere_radius,
-                            .n = n_rays / (uint64_t)threads, .seed = seed, .index = (unsigned)i, .sync = &sync};
+    jobs[i] = (ceiling_job){.scene = sc,
+                            .c = v3_sub(s->bsphere_center, s->accel->origin),
+                            .r = s->bsphere_radius,
+                            .n = n_rays / (uint64_t)threads,
+                            .seed = seed,
+                            .index = (unsigned)i,
+                            .sync = &sync};
     if (pthread_create(&th[i], NULL, ceiling_worker, &jobs[i]) != 0) break;
     started++;
   }

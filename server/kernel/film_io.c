@@ -24,7 +24,9 @@ typedef struct attrs {
   char *zenith, *azimuth;
 } attrs;
 
-film_exr_info film_exr_info_none(void) { return (film_exr_info){.wavelength_nm = NAN}; }
+film_exr_info film_exr_info_none(void) {
+  return (film_exr_info){.wavelength_nm = NAN};
+}
 
 /* "v0,v1,..." of every pixel's angle k (0 zenith, 1 azimuth), row-major,
  * %.9g (enough for a float's worth of angle). NULL when out of memory. */
@@ -121,8 +123,9 @@ film_exr_info film_image_exr_info(const film_image *img, const char *sensor_id) 
   return info;
 }
 
-rsw_status film_image_write_exr(const film_image *img, const char *path, const char *sensor_id, rsw_err *err) {
+rsw_status film_image_write_exr(const film_image *img, const char *path, const char *sensor_id,
+                                rsw_err *err) {
   film_exr_info info = film_image_exr_info(img, sensor_id);
-  return film_exr_write(path, img->width, img->height, img->channels, img->channel_names, img->data, img->half,
-                        &info, err);
+  return film_exr_write(path, img->width, img->height, img->channels, img->channel_names, img->data,
+                        img->half, &info, err);
 }

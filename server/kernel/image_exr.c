@@ -85,18 +85,15 @@ typedef struct exr_stream {
   size_t mem_len, mem_cap;
 } exr_stream;
 
-static void stream_error_handler(exr_const_context_t ctxt, exr_result_t code,
-                                 const char *msg) {
+static void stream_error_handler(exr_const_context_t ctxt, exr_result_t code, const char *msg) {
   void *ud = NULL;
   if (!ctxt || exr_get_user_data(ctxt, &ud) != EXR_ERR_SUCCESS || !ud) return;
   exr_stream *st = ud;
   if (st->msg[0]) return; /* the first error is the cause; keep it */
-  snprintf(st->msg, sizeof st->msg, "%s [%s]", msg ? msg : "",
-           exr_get_error_code_as_string(code));
+  snprintf(st->msg, sizeof st->msg, "%s [%s]", msg ? msg : "", exr_get_error_code_as_string(code));
 }
 
-static int64_t stream_read(exr_const_context_t ctxt, void *ud, void *buffer,
-                           uint64_t sz, uint64_t offset,
+static int64_t stream_read(exr_const_context_t ctxt, void *ud, void *buffer, uint64_t sz, uint64_t offset,
                            exr_stream_error_func_ptr_t error_cb) {
   exr_stream *st = ud;
   uint8_t *p = buffer;
@@ -106,12 +103,11 @@ static int64_t stream_read(exr_const_context_t ctxt, void *ud, void *buffer,
     return -1;
   }
   while (done < sz) {
-    ssize_t n =
-        pread(st->fd, p + done, (size_t)(sz - done), (off_t)(offset + done));
+    ssize_t n = pread(st->fd, p + done, (size_t)(sz - done), (off_t)(offset + done));
     if (n < 0) {
       if (errno == EINTR) continue;
-      error_cb(ctxt, EXR_ERR_READ_IO, "read at byte %llu failed: %s",
-               (unsigned long long)(offset + done), strerror(errno));
+      error_cb(ctxt, EXR_ERR_READ_IO, "read at byte %llu failed: %s", (unsigned long long)(offset + done),
+               strerror(errno));
       return -1;
     }
     if (n == 0) break; /* end of file: the library reports the short read */
@@ -130,13 +126,11 @@ static int64_t stream_size(exr_const_context_t ctxt, void *ud) {
 /* Memory sink: the library writes at increasing offsets (and patches the
  * chunk offset table behind the header at the end), so grow by doubling up
  * to the largest image EXR_MAX_SAMPLES allows plus headroom for headers. */
-static int64_t mem_write(exr_const_context_t ctxt, exr_stream *st,
-                         const uint8_t *p, uint64_t sz, uint64_t offset,
-                         exr_stream_error_func_ptr_t error_cb) {
+static int64_t mem_write(exr_const_context_t ctxt, exr_stream *st, const uint8_t *p, uint64_t sz,
+                         uint64_t offset, exr_stream_error_func_ptr_t error_cb) {
   const uint64_t cap_max = (uint64_t)EXR_MAX_SAMPLES * 4 + ((uint64_t)1 << 24);
   if (offset + sz > cap_max) {
-    error_cb(ctxt, EXR_ERR_WRITE_IO, "in-memory EXR would exceed %llu bytes",
-             (unsigned long long)cap_max);
+    error_cb(ctxt, EXR_ERR_WRITE_IO, "in-memory EXR would exceed %llu bytes", (unsigned long long)cap_max);
     return -1;
   }
   size_t end = (size_t)(offset + sz);
@@ -158,9 +152,8 @@ static int64_t mem_write(exr_const_context_t ctxt, exr_stream *st,
   return (int64_t)sz;
 }
 
-static int64_t stream_write(exr_const_context_t ctxt, void *ud,
-                            const void *buffer, uint64_t sz, uint64_t offset,
-                            exr_stream_error_func_ptr_t error_cb) {
+static int64_t stream_write(exr_const_context_t ctxt, void *ud, const void *buffer, uint64_t sz,
+                            uint64_t offset, exr_stream_error_func_ptr_t error_cb) {
   exr_stream *st = ud;
   const uint8_t *p = buffer;
   uint64_t done = 0;
@@ -170,12 +163,11 @@ static int64_t stream_write(exr_const_context_t ctxt, void *ud,
   }
   if (st->fd < 0) return mem_write(ctxt, st, p, sz, offset, error_cb);
   while (done < sz) {
-    ssize_t n =
-        pwrite(st->fd, p + done, (size_t)(sz - done), (off_t)(offset + done));
+    ssize_t n = pwrite(st->fd, p + done, (size_t)(sz - done), (off_t)(offset + done));
     if (n < 0) {
       if (errno == EINTR) continue;
-      error_cb(ctxt, EXR_ERR_WRITE_IO, "write at byte %llu failed: %s",
-               (unsigned long long)(offset + done), strerror(errno));
+      error_cb(ctxt, EXR_ERR_WRITE_IO, "write at byte %llu failed: %s", (unsigned long long)(offset + done),
+               strerror(errno));
       return -1;
     }
     done += (uint64_t)n;
@@ -194,12 +186,10 @@ static exr_context_initializer_t stream_init(exr_stream *st) {
 }
 
 /* Report a library failure: "<what>: <library message> [EXR_ERR_...]". */
-static rsw_status exr_fail(rsw_err *err, rsw_status code, const char *path,
-                           const exr_stream *st, exr_result_t rv,
-                           const char *what) {
+static rsw_status exr_fail(rsw_err *err, rsw_status code, const char *path, const exr_stream *st,
+                           exr_result_t rv, const char *what) {
   if (st->msg[0]) return rsw_fail(err, code, path, "%s: %s", what, st->msg);
-  return rsw_fail(err, code, path, "%s: %s [%s]", what,
-                  exr_get_default_error_message(rv),
+  return rsw_fail(err, code, path, "%s: %s [%s]", what, exr_get_default_error_message(rv),
                   exr_get_error_code_as_string(rv));
 }
 
@@ -237,10 +227,8 @@ static exr_result_t write_chunk_raw_unless_smaller(exr_encode_pipeline_t *enc) {
 
 /* Encode every scanline chunk of part 0 from the HWC buffer `pix`
  * (elem_size bytes a sample, of pixel type ptype). */
-static exr_result_t write_chunks(exr_context_t ctx, int width, int height,
-                                 int n_channels,
-                                 const char *const *channel_names,
-                                 const uint8_t *pix, size_t elem_size,
+static exr_result_t write_chunks(exr_context_t ctx, int width, int height, int n_channels,
+                                 const char *const *channel_names, const uint8_t *pix, size_t elem_size,
                                  exr_pixel_type_t ptype) {
   int32_t lines = 0;
   exr_result_t rv = exr_get_scanlines_per_chunk(ctx, 0, &lines);
@@ -254,23 +242,18 @@ static exr_result_t write_chunks(exr_context_t ctx, int width, int height,
     exr_chunk_info_t cinfo;
     rv = exr_write_scanline_chunk_info(ctx, 0, y, &cinfo);
     if (rv != EXR_ERR_SUCCESS) break;
-    rv = started ? exr_encoding_update(ctx, 0, &cinfo, &enc)
-                 : exr_encoding_initialize(ctx, 0, &cinfo, &enc);
+    rv = started ? exr_encoding_update(ctx, 0, &cinfo, &enc) : exr_encoding_initialize(ctx, 0, &cinfo, &enc);
     if (rv != EXR_ERR_SUCCESS) break;
     for (int c = 0; c < enc.channel_count; c++) {
       exr_coding_channel_info_t *ch = &enc.channels[c];
       int idx = 0;
-      while (idx < n_channels &&
-             strcmp(channel_names[idx], ch->channel_name) != 0)
-        idx++;
+      while (idx < n_channels && strcmp(channel_names[idx], ch->channel_name) != 0) idx++;
       if (idx == n_channels) return EXR_ERR_INVALID_ARGUMENT;
       ch->user_data_type = (uint16_t)ptype;
       ch->user_bytes_per_element = (int16_t)elem_size;
       ch->user_pixel_stride = (int32_t)pixel_stride;
       ch->user_line_stride = (int32_t)(pixel_stride * (size_t)width);
-      ch->encode_from_ptr =
-          pix + ((size_t)y * (size_t)width * (size_t)n_channels + (size_t)idx) *
-                    elem_size;
+      ch->encode_from_ptr = pix + ((size_t)y * (size_t)width * (size_t)n_channels + (size_t)idx) * elem_size;
     }
     if (!started) {
       rv = exr_encoding_choose_default_routines(ctx, 0, &enc);
@@ -287,89 +270,68 @@ static exr_result_t write_chunks(exr_context_t ctx, int width, int height,
   return rv != EXR_ERR_SUCCESS ? rv : drv;
 }
 
-static rsw_status check_write_args(const char *path, int width, int height,
-                                   int n_channels,
-                                   const char *const *channel_names,
-                                   const float *data, const exr_meta *meta,
+static rsw_status check_write_args(const char *path, int width, int height, int n_channels,
+                                   const char *const *channel_names, const float *data, const exr_meta *meta,
                                    rsw_err *err) {
   const char *where = path ? path : "(null)";
-  if (!path || !path[0])
-    return rsw_fail(err, RSW_ERR_INVALID, "", "EXR output path is empty");
+  if (!path || !path[0]) return rsw_fail(err, RSW_ERR_INVALID, "", "EXR output path is empty");
   if (width < 1 || height < 1)
-    return rsw_fail(err, RSW_ERR_INVALID, where,
-                    "image size %d x %d must be at least 1 x 1", width, height);
+    return rsw_fail(err, RSW_ERR_INVALID, where, "image size %d x %d must be at least 1 x 1", width, height);
   if (n_channels < 1 || n_channels > EXR_MAX_CHANNELS)
-    return rsw_fail(err, RSW_ERR_INVALID, where,
-                    "channel count %d outside [1, %d]", n_channels,
+    return rsw_fail(err, RSW_ERR_INVALID, where, "channel count %d outside [1, %d]", n_channels,
                     EXR_MAX_CHANNELS);
   if ((size_t)width * (size_t)height > EXR_MAX_SAMPLES / (size_t)n_channels)
-    return rsw_fail(err, RSW_ERR_LIMIT, where,
-                    "image %d x %d x %d exceeds %zu samples", width, height,
+    return rsw_fail(err, RSW_ERR_LIMIT, where, "image %d x %d x %d exceeds %zu samples", width, height,
                     n_channels, EXR_MAX_SAMPLES);
-  if (!channel_names || !data)
-    return rsw_fail(err, RSW_ERR_INVALID, where,
-                    "no channel names or pixel data");
+  if (!channel_names || !data) return rsw_fail(err, RSW_ERR_INVALID, where, "no channel names or pixel data");
   for (int c = 0; c < n_channels; c++) {
     const char *nm = channel_names[c];
     if (!nm || !nm[0] || strlen(nm) > 255)
-      return rsw_fail(err, RSW_ERR_INVALID, where,
-                      "channel %d needs a name of 1 to 255 characters", c);
+      return rsw_fail(err, RSW_ERR_INVALID, where, "channel %d needs a name of 1 to 255 characters", c);
     for (int d = 0; d < c; d++)
       if (strcmp(channel_names[d], nm) == 0)
-        return rsw_fail(err, RSW_ERR_INVALID, where,
-                        "channel name \"%s\" given twice", nm);
+        return rsw_fail(err, RSW_ERR_INVALID, where, "channel name \"%s\" given twice", nm);
   }
   if (meta && meta->count && !meta->entries)
     return rsw_fail(err, RSW_ERR_INVALID, where, "metadata list is NULL");
   for (size_t i = 0; meta && i < meta->count; i++)
-    if (!meta->entries[i].key || !meta->entries[i].key[0] ||
-        !meta->entries[i].value)
-      return rsw_fail(err, RSW_ERR_INVALID, where,
-                      "metadata entry %zu needs a key and a value", i);
+    if (!meta->entries[i].key || !meta->entries[i].key[0] || !meta->entries[i].value)
+      return rsw_fail(err, RSW_ERR_INVALID, where, "metadata entry %zu needs a key and a value", i);
   return RSW_OK;
 }
 
 /* Write the whole file (header, chunks, offset table) through st, which
  * is a descriptor or a memory sink. label names the output in errors and is
  * what the library is told the file is called. */
-static rsw_status write_to_stream(exr_stream *st, const char *label, int width,
-                                  int height, int n_channels,
-                                  const char *const *channel_names,
-                                  const float *data, bool half,
+static rsw_status write_to_stream(exr_stream *st, const char *label, int width, int height, int n_channels,
+                                  const char *const *channel_names, const float *data, bool half,
                                   const exr_meta *meta, rsw_err *err) {
   size_t n_samples = (size_t)width * (size_t)height * (size_t)n_channels;
   uint16_t *halves = NULL;
   if (half) {
     halves = malloc(n_samples * sizeof *halves);
-    if (!halves)
-      return rsw_fail(err, RSW_ERR_NOMEM, label,
-                      "no memory for %zu float16 samples", n_samples);
+    if (!halves) return rsw_fail(err, RSW_ERR_NOMEM, label, "no memory for %zu float16 samples", n_samples);
     for (size_t i = 0; i < n_samples; i++) halves[i] = half_from_float(data[i]);
   }
 
   exr_context_initializer_t init = stream_init(st);
   exr_context_t ctx = NULL;
   const char *what = "cannot start EXR file";
-  exr_result_t rv =
-      exr_start_write(&ctx, label, EXR_WRITE_FILE_DIRECTLY, &init);
+  exr_result_t rv = exr_start_write(&ctx, label, EXR_WRITE_FILE_DIRECTLY, &init);
   int part = 0;
   if (rv == EXR_ERR_SUCCESS) {
     what = "cannot define EXR header";
     rv = exr_add_part(ctx, NULL, EXR_STORAGE_SCANLINE, &part);
   }
   if (rv == EXR_ERR_SUCCESS)
-    rv = exr_initialize_required_attr_simple(ctx, part, width, height,
-                                             meta && meta->uncompressed
-                                                 ? EXR_COMPRESSION_NONE
-                                                 : EXR_COMPRESSION_ZIP);
+    rv = exr_initialize_required_attr_simple(
+        ctx, part, width, height, meta && meta->uncompressed ? EXR_COMPRESSION_NONE : EXR_COMPRESSION_ZIP);
   for (int c = 0; c < n_channels && rv == EXR_ERR_SUCCESS; c++)
-    rv = exr_add_channel(ctx, part, channel_names[c],
-                         half ? EXR_PIXEL_HALF : EXR_PIXEL_FLOAT,
+    rv = exr_add_channel(ctx, part, channel_names[c], half ? EXR_PIXEL_HALF : EXR_PIXEL_FLOAT,
                          EXR_PERCEPTUALLY_LOGARITHMIC, 1, 1);
   for (size_t i = 0; meta && i < meta->count && rv == EXR_ERR_SUCCESS; i++) {
     what = "cannot add EXR metadata";
-    rv = exr_attr_set_string(ctx, part, meta->entries[i].key,
-                             meta->entries[i].value);
+    rv = exr_attr_set_string(ctx, part, meta->entries[i].key, meta->entries[i].value);
   }
   if (rv == EXR_ERR_SUCCESS) {
     what = "cannot write EXR header";
@@ -377,10 +339,10 @@ static rsw_status write_to_stream(exr_stream *st, const char *label, int width,
   }
   if (rv == EXR_ERR_SUCCESS) {
     what = "cannot write EXR pixels";
-    rv = half ? write_chunks(ctx, width, height, n_channels, channel_names,
-                             (const uint8_t *)halves, 2, EXR_PIXEL_HALF)
-              : write_chunks(ctx, width, height, n_channels, channel_names,
-                             (const uint8_t *)data, 4, EXR_PIXEL_FLOAT);
+    rv = half ? write_chunks(ctx, width, height, n_channels, channel_names, (const uint8_t *)halves, 2,
+                             EXR_PIXEL_HALF)
+              : write_chunks(ctx, width, height, n_channels, channel_names, (const uint8_t *)data, 4,
+                             EXR_PIXEL_FLOAT);
   }
   if (ctx) {
     /* exr_finish writes the chunk offset table; its failure is a failure
@@ -392,17 +354,14 @@ static rsw_status write_to_stream(exr_stream *st, const char *label, int width,
     }
   }
   free(halves);
-  if (rv != EXR_ERR_SUCCESS)
-    return exr_fail(err, RSW_ERR_IO, label, st, rv, what);
+  if (rv != EXR_ERR_SUCCESS) return exr_fail(err, RSW_ERR_IO, label, st, rv, what);
   return RSW_OK;
 }
 
-rsw_status exr_write_image(const char *path, int width, int height,
-                           int n_channels, const char *const *channel_names,
-                           const float *data, bool half, const exr_meta *meta,
-                           rsw_err *err) {
-  rsw_status s = check_write_args(path, width, height, n_channels,
-                                  channel_names, data, meta, err);
+rsw_status exr_write_image(const char *path, int width, int height, int n_channels,
+                           const char *const *channel_names, const float *data, bool half,
+                           const exr_meta *meta, rsw_err *err) {
+  rsw_status s = check_write_args(path, width, height, n_channels, channel_names, data, meta, err);
   if (s != RSW_OK) return s;
 
   char tmp[4096];
@@ -413,11 +372,9 @@ rsw_status exr_write_image(const char *path, int width, int height,
   st.fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (st.fd < 0) {
     int e = errno;
-    return rsw_fail(err, RSW_ERR_IO, path, "cannot create %s: %s", tmp,
-                    strerror(e));
+    return rsw_fail(err, RSW_ERR_IO, path, "cannot create %s: %s", tmp, strerror(e));
   }
-  s = write_to_stream(&st, path, width, height, n_channels, channel_names,
-                      data, half, meta, err);
+  s = write_to_stream(&st, path, width, height, n_channels, channel_names, data, half, meta, err);
   if (s != RSW_OK) {
     close(st.fd);
     unlink(tmp);
@@ -426,31 +383,25 @@ rsw_status exr_write_image(const char *path, int width, int height,
   if (close(st.fd) != 0) {
     int e = errno;
     unlink(tmp);
-    return rsw_fail(err, RSW_ERR_IO, path, "cannot close %s: %s", tmp,
-                    strerror(e));
+    return rsw_fail(err, RSW_ERR_IO, path, "cannot close %s: %s", tmp, strerror(e));
   }
   if (rename(tmp, path) != 0) {
     int e = errno;
     unlink(tmp);
-    return rsw_fail(err, RSW_ERR_IO, path, "cannot rename %s over it: %s", tmp,
-                    strerror(e));
+    return rsw_fail(err, RSW_ERR_IO, path, "cannot rename %s over it: %s", tmp, strerror(e));
   }
   return RSW_OK;
 }
 
-rsw_status exr_encode_image(int width, int height, int n_channels,
-                            const char *const *names, const float *data,
-                            bool half, const exr_meta *meta, void **bytes_out,
+rsw_status exr_encode_image(int width, int height, int n_channels, const char *const *names,
+                            const float *data, bool half, const exr_meta *meta, void **bytes_out,
                             size_t *len_out, rsw_err *err) {
   const char *label = "(EXR in memory)";
-  if (!bytes_out || !len_out)
-    return rsw_fail(err, RSW_ERR_INVALID, label, "no output pointers");
-  rsw_status s = check_write_args(label, width, height, n_channels, names,
-                                  data, meta, err);
+  if (!bytes_out || !len_out) return rsw_fail(err, RSW_ERR_INVALID, label, "no output pointers");
+  rsw_status s = check_write_args(label, width, height, n_channels, names, data, meta, err);
   if (s != RSW_OK) return s;
   exr_stream st = {.fd = -1};
-  s = write_to_stream(&st, label, width, height, n_channels, names, data, half,
-                      meta, err);
+  s = write_to_stream(&st, label, width, height, n_channels, names, data, half, meta, err);
   if (s != RSW_OK) {
     free(st.mem);
     return s;
@@ -472,31 +423,26 @@ typedef struct plane {
 } plane;
 
 /* Decode one chunk whose top-left pixel is (x0, y0) of the data window. */
-static exr_result_t decode_chunk(exr_context_t ctx, const exr_chunk_info_t *ci,
-                                 exr_decode_pipeline_t *dec, bool *started,
-                                 const exr_attr_chlist_t *chl, plane *planes,
-                                 int width, int height, int64_t x0,
-                                 int64_t y0) {
-  exr_result_t rv = *started ? exr_decoding_update(ctx, 0, ci, dec)
-                             : exr_decoding_initialize(ctx, 0, ci, dec);
+static exr_result_t decode_chunk(exr_context_t ctx, const exr_chunk_info_t *ci, exr_decode_pipeline_t *dec,
+                                 bool *started, const exr_attr_chlist_t *chl, plane *planes, int width,
+                                 int height, int64_t x0, int64_t y0) {
+  exr_result_t rv =
+      *started ? exr_decoding_update(ctx, 0, ci, dec) : exr_decoding_initialize(ctx, 0, ci, dec);
   if (rv != EXR_ERR_SUCCESS) return rv;
   for (int c = 0; c < dec->channel_count; c++) {
     exr_coding_channel_info_t *ch = &dec->channels[c];
     int idx = 0;
-    while (idx < chl->num_channels &&
-           strcmp(chl->entries[idx].name.str, ch->channel_name) != 0)
-      idx++;
+    while (idx < chl->num_channels && strcmp(chl->entries[idx].name.str, ch->channel_name) != 0) idx++;
     if (idx == chl->num_channels) return EXR_ERR_CORRUPT_CHUNK;
-    if (x0 < 0 || y0 < 0 || ch->width < 0 || ch->height < 0 ||
-        x0 + ch->width > width || y0 + ch->height > height)
+    if (x0 < 0 || y0 < 0 || ch->width < 0 || ch->height < 0 || x0 + ch->width > width ||
+        y0 + ch->height > height)
       return EXR_ERR_CORRUPT_CHUNK;
     const plane *pl = &planes[idx];
     ch->user_data_type = (uint16_t)pl->type;
     ch->user_bytes_per_element = (int16_t)pl->bpe;
     ch->user_pixel_stride = pl->bpe;
     ch->user_line_stride = pl->bpe * width;
-    ch->decode_to_ptr =
-        pl->p + ((size_t)y0 * (size_t)width + (size_t)x0) * (size_t)pl->bpe;
+    ch->decode_to_ptr = pl->p + ((size_t)y0 * (size_t)width + (size_t)x0) * (size_t)pl->bpe;
   }
   if (!*started) {
     rv = exr_decoding_choose_default_routines(ctx, 0, dec);
@@ -506,10 +452,8 @@ static exr_result_t decode_chunk(exr_context_t ctx, const exr_chunk_info_t *ci,
   return exr_decoding_run(ctx, 0, dec);
 }
 
-static exr_result_t decode_all(exr_context_t ctx, exr_storage_t storage,
-                               const exr_attr_box2i_t *dw,
-                               const exr_attr_chlist_t *chl, plane *planes,
-                               int width, int height) {
+static exr_result_t decode_all(exr_context_t ctx, exr_storage_t storage, const exr_attr_box2i_t *dw,
+                               const exr_attr_chlist_t *chl, plane *planes, int width, int height) {
   exr_decode_pipeline_t dec = EXR_DECODE_PIPELINE_INITIALIZER;
   bool started = false;
   exr_result_t rv = EXR_ERR_SUCCESS;
@@ -517,21 +461,19 @@ static exr_result_t decode_all(exr_context_t ctx, exr_storage_t storage,
     int32_t lines = 0;
     rv = exr_get_scanlines_per_chunk(ctx, 0, &lines);
     if (rv == EXR_ERR_SUCCESS && lines < 1) rv = EXR_ERR_INVALID_ATTR;
-    for (int64_t y = dw->min.y; rv == EXR_ERR_SUCCESS && y <= dw->max.y;
-         y += lines) {
+    for (int64_t y = dw->min.y; rv == EXR_ERR_SUCCESS && y <= dw->max.y; y += lines) {
       exr_chunk_info_t ci;
       rv = exr_read_scanline_chunk_info(ctx, 0, (int)y, &ci);
       if (rv == EXR_ERR_SUCCESS)
-        rv = decode_chunk(ctx, &ci, &dec, &started, chl, planes, width, height,
-                          0, (int64_t)ci.start_y - dw->min.y);
+        rv = decode_chunk(ctx, &ci, &dec, &started, chl, planes, width, height, 0,
+                          (int64_t)ci.start_y - dw->min.y);
     }
   } else {
     uint32_t tw = 0, th = 0;
     exr_tile_level_mode_t lm;
     exr_tile_round_mode_t rm;
     rv = exr_get_tile_descriptor(ctx, 0, &tw, &th, &lm, &rm);
-    if (rv == EXR_ERR_SUCCESS && (tw == 0 || th == 0))
-      rv = EXR_ERR_INVALID_ATTR;
+    if (rv == EXR_ERR_SUCCESS && (tw == 0 || th == 0)) rv = EXR_ERR_INVALID_ATTR;
     int64_t nx = rv == EXR_ERR_SUCCESS ? ((int64_t)width + tw - 1) / tw : 0;
     int64_t ny = rv == EXR_ERR_SUCCESS ? ((int64_t)height + th - 1) / th : 0;
     /* Level (0, 0) is the full-resolution image in every level mode. */
@@ -540,8 +482,7 @@ static exr_result_t decode_all(exr_context_t ctx, exr_storage_t storage,
         exr_chunk_info_t ci;
         rv = exr_read_tile_chunk_info(ctx, 0, (int)tx, (int)ty, 0, 0, &ci);
         if (rv == EXR_ERR_SUCCESS)
-          rv = decode_chunk(ctx, &ci, &dec, &started, chl, planes, width,
-                            height, tx * tw, ty * th);
+          rv = decode_chunk(ctx, &ci, &dec, &started, chl, planes, width, height, tx * tw, ty * th);
       }
   }
   exr_result_t drv = exr_decoding_destroy(ctx, &dec);
@@ -558,25 +499,21 @@ static char *dup_n(const char *s, size_t n) {
 }
 
 /* Copy the header's string attributes into img. */
-static rsw_status read_meta(exr_context_t ctx, exr_image *img, const char *path,
-                            rsw_err *err) {
+static rsw_status read_meta(exr_context_t ctx, exr_image *img, const char *path, rsw_err *err) {
   int32_t count = 0;
-  if (exr_get_attribute_count(ctx, 0, &count) != EXR_ERR_SUCCESS || count <= 0)
-    return RSW_OK;
+  if (exr_get_attribute_count(ctx, 0, &count) != EXR_ERR_SUCCESS || count <= 0) return RSW_OK;
   img->meta_keys = calloc((size_t)count, sizeof *img->meta_keys);
   img->meta_values = calloc((size_t)count, sizeof *img->meta_values);
   if (!img->meta_keys || !img->meta_values)
     return rsw_fail(err, RSW_ERR_NOMEM, path, "no memory for metadata");
   for (int32_t i = 0; i < count; i++) {
     const exr_attribute_t *a = NULL;
-    if (exr_get_attribute_by_index(ctx, 0, EXR_ATTR_LIST_FILE_ORDER, i, &a) !=
-            EXR_ERR_SUCCESS ||
-        !a || a->type != EXR_ATTR_STRING || !a->string || !a->name)
+    if (exr_get_attribute_by_index(ctx, 0, EXR_ATTR_LIST_FILE_ORDER, i, &a) != EXR_ERR_SUCCESS || !a ||
+        a->type != EXR_ATTR_STRING || !a->string || !a->name)
       continue;
     size_t len = a->string->length > 0 ? (size_t)a->string->length : 0;
     char *k = dup_n(a->name, strlen(a->name));
-    char *v =
-        dup_n(a->string->str ? a->string->str : "", a->string->str ? len : 0);
+    char *v = dup_n(a->string->str ? a->string->str : "", a->string->str ? len : 0);
     if (!k || !v) {
       free(k);
       free(v);
@@ -590,52 +527,41 @@ static rsw_status read_meta(exr_context_t ctx, exr_image *img, const char *path,
 }
 
 /* Validate the header and fill img's size and channel names. */
-static rsw_status read_header(exr_context_t ctx, const exr_stream *st,
-                              exr_storage_t *storage, exr_attr_box2i_t *dw,
-                              const exr_attr_chlist_t **chl, exr_image *img,
+static rsw_status read_header(exr_context_t ctx, const exr_stream *st, exr_storage_t *storage,
+                              exr_attr_box2i_t *dw, const exr_attr_chlist_t **chl, exr_image *img,
                               const char *path, rsw_err *err) {
   exr_result_t rv = exr_get_storage(ctx, 0, storage);
-  if (rv != EXR_ERR_SUCCESS)
-    return exr_fail(err, RSW_ERR_FILE, path, st, rv, "bad EXR header");
+  if (rv != EXR_ERR_SUCCESS) return exr_fail(err, RSW_ERR_FILE, path, st, rv, "bad EXR header");
   if (*storage != EXR_STORAGE_SCANLINE && *storage != EXR_STORAGE_TILED)
-    return rsw_fail(err, RSW_ERR_UNSUPPORTED, path,
-                    "deep EXR images are not supported");
+    return rsw_fail(err, RSW_ERR_UNSUPPORTED, path, "deep EXR images are not supported");
   rv = exr_get_data_window(ctx, 0, dw);
   if (rv == EXR_ERR_SUCCESS) rv = exr_get_channels(ctx, 0, chl);
-  if (rv != EXR_ERR_SUCCESS || !*chl)
-    return exr_fail(err, RSW_ERR_FILE, path, st, rv, "bad EXR header");
+  if (rv != EXR_ERR_SUCCESS || !*chl) return exr_fail(err, RSW_ERR_FILE, path, st, rv, "bad EXR header");
   int64_t w = (int64_t)dw->max.x - dw->min.x + 1;
   int64_t h = (int64_t)dw->max.y - dw->min.y + 1;
   int nc = (*chl)->num_channels;
-  if (w < 1 || h < 1)
-    return rsw_fail(err, RSW_ERR_FILE, path, "empty EXR data window");
+  if (w < 1 || h < 1) return rsw_fail(err, RSW_ERR_FILE, path, "empty EXR data window");
   if (nc < 1 || nc > EXR_MAX_CHANNELS)
-    return rsw_fail(err, RSW_ERR_UNSUPPORTED, path,
-                    "EXR has %d channels (need 1 to %d)", nc, EXR_MAX_CHANNELS);
+    return rsw_fail(err, RSW_ERR_UNSUPPORTED, path, "EXR has %d channels (need 1 to %d)", nc,
+                    EXR_MAX_CHANNELS);
   if (w > (int64_t)EXR_MAX_SAMPLES || h > (int64_t)EXR_MAX_SAMPLES ||
       (size_t)w * (size_t)h > EXR_MAX_SAMPLES / (size_t)nc)
-    return rsw_fail(err, RSW_ERR_LIMIT, path,
-                    "EXR image %lld x %lld x %d exceeds %zu samples",
-                    (long long)w, (long long)h, nc, EXR_MAX_SAMPLES);
+    return rsw_fail(err, RSW_ERR_LIMIT, path, "EXR image %lld x %lld x %d exceeds %zu samples", (long long)w,
+                    (long long)h, nc, EXR_MAX_SAMPLES);
   img->channel_names = calloc((size_t)nc, sizeof *img->channel_names);
-  if (!img->channel_names)
-    return rsw_fail(err, RSW_ERR_NOMEM, path, "no memory for channels");
+  if (!img->channel_names) return rsw_fail(err, RSW_ERR_NOMEM, path, "no memory for channels");
   img->n_channels = nc; /* so exr_image_free frees the names on failure */
   for (int c = 0; c < nc; c++) {
     const exr_attr_chlist_entry_t *e = &(*chl)->entries[c];
     if (e->x_sampling != 1 || e->y_sampling != 1)
-      return rsw_fail(err, RSW_ERR_UNSUPPORTED, path,
-                      "EXR channel \"%s\" is subsampled (%d x %d)", e->name.str,
-                      e->x_sampling, e->y_sampling);
+      return rsw_fail(err, RSW_ERR_UNSUPPORTED, path, "EXR channel \"%s\" is subsampled (%d x %d)",
+                      e->name.str, e->x_sampling, e->y_sampling);
     if (e->pixel_type != EXR_PIXEL_HALF && e->pixel_type != EXR_PIXEL_FLOAT &&
         e->pixel_type != EXR_PIXEL_UINT)
-      return rsw_fail(err, RSW_ERR_FILE, path,
-                      "EXR channel \"%s\" has unknown pixel type %d",
-                      e->name.str, (int)e->pixel_type);
-    img->channel_names[c] =
-        dup_n(e->name.str, e->name.length > 0 ? (size_t)e->name.length : 0);
-    if (!img->channel_names[c])
-      return rsw_fail(err, RSW_ERR_NOMEM, path, "no memory for channels");
+      return rsw_fail(err, RSW_ERR_FILE, path, "EXR channel \"%s\" has unknown pixel type %d", e->name.str,
+                      (int)e->pixel_type);
+    img->channel_names[c] = dup_n(e->name.str, e->name.length > 0 ? (size_t)e->name.length : 0);
+    if (!img->channel_names[c]) return rsw_fail(err, RSW_ERR_NOMEM, path, "no memory for channels");
   }
   img->width = (int)w;
   img->height = (int)h;
@@ -643,9 +569,8 @@ static rsw_status read_header(exr_context_t ctx, const exr_stream *st,
 }
 
 /* Decode the pixels of part 0 into img->data (float HWC). */
-static rsw_status read_pixels(exr_context_t ctx, const exr_stream *st,
-                              exr_storage_t storage, const exr_attr_box2i_t *dw,
-                              const exr_attr_chlist_t *chl, exr_image *img,
+static rsw_status read_pixels(exr_context_t ctx, const exr_stream *st, exr_storage_t storage,
+                              const exr_attr_box2i_t *dw, const exr_attr_chlist_t *chl, exr_image *img,
                               const char *path, rsw_err *err) {
   size_t npix = (size_t)img->width * (size_t)img->height;
   int nc = img->n_channels;
@@ -662,21 +587,18 @@ static rsw_status read_pixels(exr_context_t ctx, const exr_stream *st,
   img->data = malloc(npix * (size_t)nc * sizeof *img->data);
   if (!native || !img->data) {
     free(native);
-    return rsw_fail(err, RSW_ERR_NOMEM, path,
-                    "no memory for a %d x %d x %d image", img->width,
-                    img->height, nc);
+    return rsw_fail(err, RSW_ERR_NOMEM, path, "no memory for a %d x %d x %d image", img->width, img->height,
+                    nc);
   }
   size_t off = 0;
   for (int c = 0; c < nc; c++) {
     planes[c].p = native + off;
     off += npix * (size_t)planes[c].bpe;
   }
-  exr_result_t rv =
-      decode_all(ctx, storage, dw, chl, planes, img->width, img->height);
+  exr_result_t rv = decode_all(ctx, storage, dw, chl, planes, img->width, img->height);
   if (rv != EXR_ERR_SUCCESS) {
     free(native);
-    return exr_fail(err, RSW_ERR_FILE, path, st, rv,
-                    "corrupt or truncated EXR pixel data");
+    return exr_fail(err, RSW_ERR_FILE, path, st, rv, "corrupt or truncated EXR pixel data");
   }
   for (int c = 0; c < nc; c++) {
     const uint8_t *p = planes[c].p;
@@ -700,13 +622,10 @@ static rsw_status read_pixels(exr_context_t ctx, const exr_stream *st,
 }
 
 rsw_status exr_read_image(const char *path, exr_image *out, rsw_err *err) {
-  if (!path || !path[0])
-    return rsw_fail(err, RSW_ERR_INVALID, "", "EXR input path is empty");
+  if (!path || !path[0]) return rsw_fail(err, RSW_ERR_INVALID, "", "EXR input path is empty");
   exr_stream st = {.fd = -1};
   st.fd = open(path, O_RDONLY | O_CLOEXEC);
-  if (st.fd < 0)
-    return rsw_fail(err, RSW_ERR_FILE, path, "cannot open EXR file: %s",
-                    strerror(errno));
+  if (st.fd < 0) return rsw_fail(err, RSW_ERR_FILE, path, "cannot open EXR file: %s", strerror(errno));
   exr_context_initializer_t init = stream_init(&st);
   init.write_fn = NULL;
   /* Fail on a damaged chunk table instead of guessing at the chunks. */
@@ -714,8 +633,7 @@ rsw_status exr_read_image(const char *path, exr_image *out, rsw_err *err) {
   exr_context_t ctx = NULL;
   exr_result_t rv = exr_start_read(&ctx, path, &init);
   if (rv != EXR_ERR_SUCCESS) {
-    rsw_status s =
-        exr_fail(err, RSW_ERR_FILE, path, &st, rv, "not a readable EXR file");
+    rsw_status s = exr_fail(err, RSW_ERR_FILE, path, &st, rv, "not a readable EXR file");
     if (ctx) exr_finish(&ctx);
     close(st.fd);
     return s;
@@ -726,8 +644,7 @@ rsw_status exr_read_image(const char *path, exr_image *out, rsw_err *err) {
   const exr_attr_chlist_t *chl = NULL;
   rsw_status s = read_header(ctx, &st, &storage, &dw, &chl, &img, path, err);
   if (s == RSW_OK) s = read_meta(ctx, &img, path, err);
-  if (s == RSW_OK)
-    s = read_pixels(ctx, &st, storage, &dw, chl, &img, path, err);
+  if (s == RSW_OK) s = read_pixels(ctx, &st, storage, &dw, chl, &img, path, err);
   exr_finish(&ctx);
   close(st.fd);
   if (s != RSW_OK) {

@@ -15,7 +15,7 @@
 
 /* Largest image either direction accepts, in samples (width x height x
  * channels): 2^28 floats = 1 GiB. */
-#define EXR_MAX_SAMPLES ((size_t)1 << 28)
+#define EXR_MAX_SAMPLES  ((size_t)1 << 28)
 /* Most channels a file may have. */
 #define EXR_MAX_CHANNELS 64
 
@@ -58,19 +58,17 @@ typedef struct exr_image {
  * Borrows every argument. Thread-safe for distinct paths.
  * Errors: RSW_ERR_INVALID (arguments), RSW_ERR_LIMIT (size),
  * RSW_ERR_IO (cannot create/write/rename), all naming path. */
-rsw_status exr_write_image(const char *path, int width, int height,
-                           int n_channels, const char *const *channel_names,
-                           const float *data, bool half,
+rsw_status exr_write_image(const char *path, int width, int height, int n_channels,
+                           const char *const *channel_names, const float *data, bool half,
                            const exr_meta *meta_or_NULL, rsw_err *err);
 
 /* Encode the same file exr_write_image would write into memory instead:
  * *bytes_out (malloc'ed, free() it) holds *len_out bytes of a complete EXR.
  * Arguments and errors as for exr_write_image (errors name
  * "(EXR in memory)"); outputs are written only on success. Thread-safe. */
-rsw_status exr_encode_image(int width, int height, int n_channels,
-                            const char *const *names, const float *data,
-                            bool half, const exr_meta *meta_or_NULL,
-                            void **bytes_out, size_t *len_out, rsw_err *err);
+rsw_status exr_encode_image(int width, int height, int n_channels, const char *const *names,
+                            const float *data, bool half, const exr_meta *meta_or_NULL, void **bytes_out,
+                            size_t *len_out, rsw_err *err);
 
 /* Read part 0 of a scanline or tiled (level 0 of a mip/rip map) EXR whose
  * channels are HALF, FLOAT or UINT and not subsampled, into float32 HWC.

@@ -40,7 +40,10 @@ typedef enum obj_class {
 /* "shape", "bsdf", ... (the XML tag of the class). */
 const char *obj_class_name(obj_class c);
 
-typedef enum rsw_variant { VARIANT_RGB, VARIANT_MONO } rsw_variant;
+typedef enum rsw_variant {
+  VARIANT_RGB,
+  VARIANT_MONO
+} rsw_variant;
 
 /* What a render is evaluated at; given to every plugin's prepare(). */
 typedef struct render_ctx {
@@ -86,15 +89,15 @@ struct object {
 
 /* Point on a surface, as the integrator sees it. */
 typedef struct surface_interaction {
-  double t;            /* ray distance */
-  vec3 p;              /* world position */
-  vec3 ng;             /* geometric normal (unit, world, after flip_normals) */
-  frame sh;            /* shading frame (n = shading normal) */
-  double uv[2];        /* texture coordinates */
-  vec3 wi;             /* local: towards the ray origin */
+  double t;     /* ray distance */
+  vec3 p;       /* world position */
+  vec3 ng;      /* geometric normal (unit, world, after flip_normals) */
+  frame sh;     /* shading frame (n = shading normal) */
+  double uv[2]; /* texture coordinates */
+  vec3 wi;      /* local: towards the ray origin */
   const struct shape *shape;
   uint32_t prim;
-  double p_error;      /* bound on the distance between p and the surface as
+  double p_error; /* bound on the distance between p and the surface as
                           Embree traces it in float32 (world units; accel.h
                           accel_surface_error): spawned rays start a few times
                           this off the surface (shapes/shape.h spawn_ray) */
@@ -126,15 +129,14 @@ enum bsdf_flags {
   BSDF_DELTA_TRANSMISSION = 1u << 5,
   BSDF_TWO_SIDED = 1u << 6, /* reflects from both sides (twosided) */
 };
-#define BSDF_SMOOTH                                                            \
-  (BSDF_DIFFUSE_REFLECTION | BSDF_GLOSSY_REFLECTION |                          \
-   BSDF_DIFFUSE_TRANSMISSION | BSDF_GLOSSY_TRANSMISSION)
+#define BSDF_SMOOTH                                                                                          \
+  (BSDF_DIFFUSE_REFLECTION | BSDF_GLOSSY_REFLECTION | BSDF_DIFFUSE_TRANSMISSION | BSDF_GLOSSY_TRANSMISSION)
 #define BSDF_DELTA (BSDF_DELTA_REFLECTION | BSDF_DELTA_TRANSMISSION)
 
 typedef struct bsdf_sample {
-  vec3 wo;              /* local */
-  double pdf;           /* solid angle; for delta lobes: discrete prob. */
-  double eta;           /* relative IOR of the sampled interaction (1 if
+  vec3 wo;               /* local */
+  double pdf;            /* solid angle; for delta lobes: discrete prob. */
+  double eta;            /* relative IOR of the sampled interaction (1 if
                            reflection) */
   unsigned sampled_type; /* one bsdf_flags bit */
 } bsdf_sample;
@@ -144,8 +146,7 @@ typedef struct bsdf_ops {
   /* Sample wo given si->wi. u1 picks a lobe, u2 the direction. Returns the
    * weight eval/pdf (delta lobes: the lobe's weight) and fills *bs; a
    * failed sample returns black with bs->pdf = 0. */
-  color (*sample)(const bsdf *b, const surface_interaction *si, double u1,
-                  vec2 u2, bsdf_sample *bs);
+  color (*sample)(const bsdf *b, const surface_interaction *si, double u1, vec2 u2, bsdf_sample *bs);
   /* f_r(wi, wo) |cos theta_o| for the smooth lobes; 0 for delta lobes. */
   color (*eval)(const bsdf *b, const surface_interaction *si, vec3 wo);
   /* Solid-angle pdf of sample() producing wo (smooth lobes only). */
@@ -179,11 +180,9 @@ typedef struct emitter_ops {
   /* Sample a direction from ref->p towards the emitter. Returns the
    * emitted radiance (irradiance for delta emitters) divided by ds->pdf,
    * not accounting for visibility; black on failure. */
-  color (*sample_direction)(const emitter *e, const surface_interaction *ref,
-                            vec2 u, direction_sample *ds);
+  color (*sample_direction)(const emitter *e, const surface_interaction *ref, vec2 u, direction_sample *ds);
   /* Solid-angle pdf that sample_direction() picks ds->d from ref. */
-  double (*pdf_direction)(const emitter *e, const surface_interaction *ref,
-                          const direction_sample *ds);
+  double (*pdf_direction)(const emitter *e, const surface_interaction *ref, const direction_sample *ds);
   /* Radiance arriving along a ray that hit the emitter's shape at `hit`
    * (surface emitters) or escaped the scene in world direction `d`
    * (infinite emitters; hit is NULL). d is the ray direction. */
@@ -198,26 +197,33 @@ struct emitter {
   object base;
   const emitter_ops *ops;
   unsigned flags;
-  double sampling_weight;      /* Mitsuba's sampling_weight (default 1) */
-  const struct shape *shape;   /* surface emitters: the shape it sits on */
+  double sampling_weight;    /* Mitsuba's sampling_weight (default 1) */
+  const struct shape *shape; /* surface emitters: the shape it sits on */
 };
 
 /* ---- films and reconstruction filters ------------------------------------ */
 typedef struct rfilter {
   object base;
-  double radius;                      /* pixels */
+  double radius;                                     /* pixels */
   double (*eval)(const struct rfilter *f, double x); /* 1-D, separable */
 } rfilter;
 
 /* PIXFMT_STOKES (mono only): channels S0..S3, the Stokes vector
  * (I, Q, U, V). */
-typedef enum pixel_format { PIXFMT_RGB, PIXFMT_LUMINANCE, PIXFMT_STOKES } pixel_format;
-typedef enum component_format { COMPFMT_FLOAT32, COMPFMT_FLOAT16 } component_format;
+typedef enum pixel_format {
+  PIXFMT_RGB,
+  PIXFMT_LUMINANCE,
+  PIXFMT_STOKES
+} pixel_format;
+typedef enum component_format {
+  COMPFMT_FLOAT32,
+  COMPFMT_FLOAT16
+} component_format;
 
 typedef struct film {
   object base;
   int width, height;
-  pixel_format pixel_format;         /* forced to luminance in mono */
+  pixel_format pixel_format; /* forced to luminance in mono */
   component_format component_format;
   rfilter *filter;
 } film;
@@ -234,8 +240,8 @@ typedef struct sampler_state {
 typedef struct sampler_ops {
   /* Begin sample `sample_index` of `spp` for pixel `pixel` under `seed`.
    * The stream depends on nothing else (determinism). */
-  void (*start)(const sampler *s, sampler_state *st, uint64_t seed,
-                uint64_t pixel, uint32_t sample_index, uint32_t spp);
+  void (*start)(const sampler *s, sampler_state *st, uint64_t seed, uint64_t pixel, uint32_t sample_index,
+                uint32_t spp);
   double (*next_1d)(sampler_state *st);
   vec2 (*next_2d)(sampler_state *st);
   /* spp actually used for a requested count (stratified rounds to a
@@ -283,19 +289,24 @@ typedef struct integrator integrator;
 typedef struct integrator_ops {
   /* Radiance arriving at ray.o along -ray.d. When quv is not NULL (Stokes
    * films), the Q, U, V of that radiance are added to quv[0..2]. */
-  color (*Li)(const integrator *it, const struct scene *sc, sampler_state *st,
-              ray3 ray, render_stats *stats, double *quv);
+  color (*Li)(const integrator *it, const struct scene *sc, sampler_state *st, ray3 ray, render_stats *stats,
+              double *quv);
 } integrator_ops;
 struct integrator {
   object base;
   const integrator_ops *ops;
-  int max_depth;   /* -1 = infinite */
+  int max_depth; /* -1 = infinite */
   int rr_depth;
   bool hide_emitters;
 };
 
 /* ---- shapes -------------------------------------------------------------- */
-typedef enum geom_kind { GEOM_MESH, GEOM_SPHERE, GEOM_DISK, GEOM_CYLINDER } geom_kind;
+typedef enum geom_kind {
+  GEOM_MESH,
+  GEOM_SPHERE,
+  GEOM_DISK,
+  GEOM_CYLINDER
+} geom_kind;
 
 /* Triangle mesh in object space (before to_world). */
 typedef struct mesh {
@@ -309,10 +320,10 @@ typedef struct mesh {
 typedef struct shape {
   object base;
   geom_kind geom;
-  xform to_world;   /* object -> world; the Embree instance transform */
+  xform to_world; /* object -> world; the Embree instance transform */
   bool flip_normals;
-  bool face_normals; /* ignore vertex normals */
-  bool mesh_params;  /* exposes its buffers (cube, obj, ply; not rectangle) */
+  bool face_normals;                 /* ignore vertex normals */
+  bool mesh_params;                  /* exposes its buffers (cube, obj, ply; not rectangle) */
   double silhouette_sampling_weight; /* Mitsuba's; no effect here */
   bsdf *bsdf;
   emitter *emitter; /* area light, or NULL */
@@ -321,8 +332,8 @@ typedef struct shape {
   /* Derived by shape_finalize(). A mesh's area and area cdf are computed
    * only when something samples it (an area emitter, a sensor target): an
    * O(faces) pass that plain geometry does not need. */
-  double area;      /* world-space surface area (0 for unsampled meshes) */
-  double *tri_cdf;  /* meshes: cumulative world areas, n_faces entries */
+  double area;        /* world-space surface area (0 for unsampled meshes) */
+  double *tri_cdf;    /* meshes: cumulative world areas, n_faces entries */
   uint32_t tri_cdf_n; /* entries allocated in tri_cdf */
   /* A cdf computed ahead by a parameter update's validation, installed by
    * parameters_changed instead of recomputing (scene/params.c). */
@@ -330,7 +341,7 @@ typedef struct shape {
   uint32_t tri_cdf_next_n;
   double area_next;
   bool cdf_staged;
-  unsigned index;   /* position in scene->shapes */
+  unsigned index; /* position in scene->shapes */
 } shape;
 
 /* ---- the scene ----------------------------------------------------------- */
@@ -349,23 +360,23 @@ typedef struct periodic_bounds {
 typedef struct scene {
   object base;
   rsw_variant variant;
-  object **objects;      /* every object, for prepare/destroy (owned) */
+  object **objects; /* every object, for prepare/destroy (owned) */
   size_t n_objects, cap_objects;
   shape **shapes;
   size_t n_shapes;
-  emitter **emitters;    /* all emitters, area lights included */
+  emitter **emitters; /* all emitters, area lights included */
   size_t n_emitters;
-  double *emitter_cdf;   /* by sampling_weight */
+  double *emitter_cdf; /* by sampling_weight */
   double emitter_weight_sum;
-  emitter *environment;  /* at most one infinite emitter */
+  emitter *environment; /* at most one infinite emitter */
   sensor **sensors;
   size_t n_sensors;
   integrator *integrator;
   struct accel *accel;
   vec3 bbox_min, bbox_max;
   vec3 bsphere_center;
-  double bsphere_radius; /* inflated as Mitsuba: max(eps, r (1 + eps)) */
-  struct node *doc;      /* the document the scene was built from (owned) */
+  double bsphere_radius;      /* inflated as Mitsuba: max(eps, r (1 + eps)) */
+  struct node *doc;           /* the document the scene was built from (owned) */
   struct param_table *params; /* the parameter table (owned) */
   periodic_bounds periodic;   /* the `periodic` object, if any */
 } scene;

@@ -38,16 +38,16 @@ typedef struct job {
   uint32_t spp;
   int W, H, tiles_x, tiles_y;
   size_t n_tiles;
-  int margin; /* pixels a splat can reach beyond its own */
-  bool box;   /* box filter of radius 0.5: own pixel only */
-  bool stokes; /* Stokes film: Q, U, V accumulated too */
-  int stride;  /* doubles per pixel in accumulators: 4 or 7 */
+  int margin;       /* pixels a splat can reach beyond its own */
+  bool box;         /* box filter of radius 0.5: own pixel only */
+  bool stokes;      /* Stokes film: Q, U, V accumulated too */
+  int stride;       /* doubles per pixel in accumulators: 4 or 7 */
   double *film_acc; /* W*H*4 */
   /* Work distribution and ordered merge. */
   pthread_mutex_t lock;
   size_t next_tile;
   size_t next_commit;
-  tile_buf **done;  /* finished, not yet merged */
+  tile_buf **done; /* finished, not yet merged */
   bool failed;
   atomic_bool stopped; /* deadline passed (set by any worker) */
   /* Stats (merged under lock). */
@@ -169,7 +169,8 @@ static void *worker(void *arg) {
   for (;;) {
     pthread_mutex_lock(&jb->lock);
     size_t t = jb->next_tile++;
-    bool stop = jb->failed || atomic_load(&jb->stopped) || t >= jb->n_tiles || (jb->opts->cancel && atomic_load(jb->opts->cancel));
+    bool stop = jb->failed || atomic_load(&jb->stopped) || t >= jb->n_tiles ||
+                (jb->opts->cancel && atomic_load(jb->opts->cancel));
     if (!stop && jb->opts->deadline > 0 && now_s() > jb->opts->deadline) {
       atomic_store(&jb->stopped, true);
       stop = true;
@@ -213,8 +214,9 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
                          rsw_err *err) {
   double t0 = now_s();
   if (opts->sensor >= sc->n_sensors)
-    return rsw_fail(err, RSW_ERR_NOT_FOUND, "sensor", sc->n_sensors ? "no sensor with index %zu (the scene has %zu)"
-                                                                     : "the scene has no sensor%.0zu%.0zu",
+    return rsw_fail(err, RSW_ERR_NOT_FOUND, "sensor",
+                    sc->n_sensors ? "no sensor with index %zu (the scene has %zu)"
+                                  : "the scene has no sensor%.0zu%.0zu",
                     opts->sensor, sc->n_sensors);
   const sensor *se = sc->sensors[opts->sensor];
   const film *fm = se->film;
@@ -277,7 +279,8 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
   }
   if (atomic_load(&jb.stopped)) {
     free(jb.film_acc);
-    return rsw_fail(err, RSW_ERR_TIMEOUT, "timeout_s", "render stopped at its deadline after %.3f s", now_s() - t0);
+    return rsw_fail(err, RSW_ERR_TIMEOUT, "timeout_s", "render stopped at its deadline after %.3f s",
+                    now_s() - t0);
   }
 
   /* Develop: normalise by the filter weights; mono films hold one

@@ -13,12 +13,12 @@
 #include "kernel.h"
 
 typedef struct render_opts {
-  size_t size;          /* sizeof(render_opts) */
-  size_t sensor;        /* index into scene->sensors */
-  uint32_t spp;         /* 0: the sensor sampler's sample_count */
+  size_t size;   /* sizeof(render_opts) */
+  size_t sensor; /* index into scene->sensors */
+  uint32_t spp;  /* 0: the sensor sampler's sample_count */
   uint64_t seed;
-  double wavelength;    /* nm, mono only; 0 means 550 */
-  int threads;          /* 0: all cores */
+  double wavelength;        /* nm, mono only; 0 means 550 */
+  int threads;              /* 0: all cores */
   const atomic_int *cancel; /* optional: non-zero stops the render
                                (checked between tiles): RSW_ERR_CANCELLED */
   double deadline;          /* optional: CLOCK_MONOTONIC seconds after which

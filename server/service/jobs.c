@@ -32,8 +32,8 @@ static bool valid_context_id(const char *s) {
   if (n < 1 || n > 64) return false;
   for (size_t i = 0; i < n; i++) {
     char c = s[i];
-    if (!((c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '.' || c == '_' ||
-          c == '-'))
+    if (!((c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '.' ||
+          c == '_' || c == '-'))
       return false;
   }
   return true;
@@ -93,7 +93,8 @@ static cJSON *job_json(const job *j) {
    * running job divides renders_done by it for an honest rate. */
   double seconds = 0;
   if (j->started_iso[0]) seconds = (j->finished_iso[0] ? j->t_finished : svc_now()) - j->t_started;
-  if (j->started_iso[0] || j->finished_iso[0]) cJSON_AddNumberToObject(o, "seconds", seconds > 0 ? seconds : 0);
+  if (j->started_iso[0] || j->finished_iso[0])
+    cJSON_AddNumberToObject(o, "seconds", seconds > 0 ? seconds : 0);
   if (j->error[0]) cJSON_AddStringToObject(o, "error", j->error);
   char href[128];
   snprintf(href, sizeof href, "/v1/jobs/%s/results", j->id);
@@ -158,12 +159,13 @@ static rsw_status check_params(const scene *sc, const cJSON *p, const char *ptr,
   return RSW_OK;
 }
 
-static bool get_uint(const cJSON *o, const char *name, double max, uint64_t *out, bool *present, const char *ptr,
-                     svc_error *e, rsw_status *st) {
+static bool get_uint(const cJSON *o, const char *name, double max, uint64_t *out, bool *present,
+                     const char *ptr, svc_error *e, rsw_status *st) {
   const cJSON *x = cJSON_GetObjectItemCaseSensitive(o, name);
   *present = x != NULL;
   if (!x) return true;
-  if (!cJSON_IsNumber(x) || x->valuedouble < 0 || x->valuedouble > max || x->valuedouble != floor(x->valuedouble)) {
+  if (!cJSON_IsNumber(x) || x->valuedouble < 0 || x->valuedouble > max ||
+      x->valuedouble != floor(x->valuedouble)) {
     char w[300];
     snprintf(w, sizeof w, "%s/%s", ptr, name);
     *st = svc_fail(e, RSW_ERR_INVALID, 422, w, "%s must be a non-negative integer", name);
@@ -183,7 +185,8 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     pthread_mutex_lock(&svc->lock);
     for (size_t i = 0; i < svc->n_jobs; i++) {
       job *j = svc->jobs[i];
-      if (j->deleted || !j->idem_key || strcmp(j->idem_key, idem_key) != 0 || strcmp(j->scene_id, scene_id) != 0)
+      if (j->deleted || !j->idem_key || strcmp(j->idem_key, idem_key) != 0 ||
+          strcmp(j->scene_id, scene_id) != 0)
         continue;
       if (memcmp(j->body_digest, digest, 32) != 0) {
         pthread_mutex_unlock(&svc->lock);
@@ -204,22 +207,27 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   cJSON *req = cJSON_ParseWithLength(body, len);
   rsw_status st = RSW_OK;
   job *jb = NULL;
-  if (!req) st = svc_fail(e, RSW_ERR_PARSE, 400, "", "the body is not valid JSON");
-  else if (!cJSON_IsObject(req)) st = svc_fail(e, RSW_ERR_TYPE, 422, "", "the body must be a JSON object");
+  if (!req)
+    st = svc_fail(e, RSW_ERR_PARSE, 400, "", "the body is not valid JSON");
+  else if (!cJSON_IsObject(req))
+    st = svc_fail(e, RSW_ERR_TYPE, 422, "", "the body must be a JSON object");
   const cJSON *contexts = NULL, *defaults = NULL, *jparams = NULL;
   uint64_t job_seed = 0;
   for (const cJSON *k = !st ? req->child : NULL; k && !st; k = k->next) {
-    if (strcmp(k->string, "contexts") == 0) contexts = k;
-    else if (strcmp(k->string, "defaults") == 0) defaults = k;
-    else if (strcmp(k->string, "params") == 0) jparams = k;
+    if (strcmp(k->string, "contexts") == 0)
+      contexts = k;
+    else if (strcmp(k->string, "defaults") == 0)
+      defaults = k;
+    else if (strcmp(k->string, "params") == 0)
+      jparams = k;
     else if (strcmp(k->string, "seed") == 0) {
       bool present;
       get_uint(req, "seed", 9007199254740991.0, &job_seed, &present, "", e, &st);
     } else {
       char w[300];
       snprintf(w, sizeof w, "/%s", k->string);
-      st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, 422, w, "unknown field '%s' (expected contexts, defaults, params, seed)",
-                    k->string);
+      st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, 422, w,
+                    "unknown field '%s' (expected contexts, defaults, params, seed)", k->string);
     }
   }
   if (!st && (!cJSON_IsArray(contexts) || !contexts->child))
@@ -240,8 +248,11 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     get_uint(defaults, "spp", 4294967295.0, &d_spp, &present, "/defaults", e, &st);
     const cJSON *w = cJSON_GetObjectItemCaseSensitive(defaults, "wavelength");
     if (!st && w) {
-      if (!cJSON_IsNumber(w) || !(w->valuedouble > 0)) st = svc_fail(e, RSW_ERR_INVALID, 422, "/defaults/wavelength", "wavelength must be a positive number");
-      else d_wl = w->valuedouble;
+      if (!cJSON_IsNumber(w) || !(w->valuedouble > 0))
+        st =
+            svc_fail(e, RSW_ERR_INVALID, 422, "/defaults/wavelength", "wavelength must be a positive number");
+      else
+        d_wl = w->valuedouble;
     }
     d_sensors = cJSON_GetObjectItemCaseSensitive(defaults, "sensors");
     for (const cJSON *k = defaults->child; k && !st; k = k->next)
@@ -319,7 +330,8 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       n_items += sc->n_sensors;
     }
   }
-  if (!st && n_ctx > 100000) st = svc_fail(e, RSW_ERR_LIMIT, 422, "/contexts", "at most 100000 contexts per job");
+  if (!st && n_ctx > 100000)
+    st = svc_fail(e, RSW_ERR_LIMIT, 422, "/contexts", "at most 100000 contexts per job");
   /* Build the job. */
   if (!st) {
     jb = calloc(1, sizeof *jb);
@@ -327,7 +339,8 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       jb->items = calloc(n_items, sizeof *jb->items);
       jb->context_remaining = calloc(n_ctx, sizeof *jb->context_remaining);
     }
-    if (!jb || !jb->items || !jb->context_remaining) st = svc_fail(e, RSW_ERR_NOMEM, 500, "", "out of memory");
+    if (!jb || !jb->items || !jb->context_remaining)
+      st = svc_fail(e, RSW_ERR_NOMEM, 500, "", "out of memory");
   }
   size_t k = 0, ci = 0;
   for (const cJSON *c = !st ? contexts->child : NULL; c && !st; c = c->next, ci++) {
@@ -396,9 +409,11 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   snprintf(jb->id, sizeof jb->id, "job-%06llu", (unsigned long long)++svc->next_job);
   jb->revision = r->revision;
   bool ok = (svc->n_jobs < svc->cap_jobs ||
-             (svc->jobs = realloc(svc->jobs, (svc->cap_jobs = svc->cap_jobs ? 2 * svc->cap_jobs : 16) * sizeof *svc->jobs))) &&
+             (svc->jobs = realloc(svc->jobs, (svc->cap_jobs = svc->cap_jobs ? 2 * svc->cap_jobs : 16) *
+                                                 sizeof *svc->jobs))) &&
             (svc->n_queue < svc->cap_queue ||
-             (svc->queue = realloc(svc->queue, (svc->cap_queue = svc->cap_queue ? 2 * svc->cap_queue : 16) * sizeof *svc->queue)));
+             (svc->queue = realloc(svc->queue, (svc->cap_queue = svc->cap_queue ? 2 * svc->cap_queue : 16) *
+                                                   sizeof *svc->queue)));
   if (!ok) {
     pthread_mutex_unlock(&svc->lock);
     job_free(jb);
@@ -422,11 +437,14 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
 
 static void finish_job(service *svc, job *j) {
   /* svc->lock held */
-  if (atomic_load(&j->cancel)) j->state = JOB_CANCELLED;
+  if (atomic_load(&j->cancel))
+    j->state = JOB_CANCELLED;
   else if (j->items_failed) {
     j->state = JOB_FAILED;
-    if (!j->error[0]) snprintf(j->error, sizeof j->error, "%zu of %zu renders failed", j->items_failed, j->n_items);
-  } else j->state = JOB_SUCCEEDED;
+    if (!j->error[0])
+      snprintf(j->error, sizeof j->error, "%zu of %zu renders failed", j->items_failed, j->n_items);
+  } else
+    j->state = JOB_SUCCEEDED;
   j->t_finished = svc_now();
   svc_iso_time(time(NULL), j->finished_iso);
   j->res->active_jobs--;
@@ -468,8 +486,12 @@ void *svc_worker_main(void *arg) {
       render_item *it = &j->items[i];
       pthread_mutex_unlock(&svc->lock);
       svc_error e = {0};
-      render_spec rs = {.sensor_index = it->sensor_index, .spp = it->spp, .seed = it->seed,
-                        .wavelength = it->wavelength, .overrides = it->params, .cancel = &j->cancel};
+      render_spec rs = {.sensor_index = it->sensor_index,
+                        .spp = it->spp,
+                        .seed = it->seed,
+                        .wavelength = it->wavelength,
+                        .overrides = it->params,
+                        .cancel = &j->cancel};
       rsw_status st = svc_render_locked(svc, j->res, &rs, &it->film, &e);
       pthread_mutex_lock(&svc->lock);
       if (st == RSW_ERR_CANCELLED) break;
@@ -666,9 +688,11 @@ rsw_status service_job_result(service *svc, const char *id, const char *context,
     if (!it->has_film) {
       pthread_mutex_unlock(&svc->lock);
       if (it->state == JOB_FAILED)
-        return svc_fail(e, RSW_ERR_NOT_FOUND, 404, context, "context '%s' sensor '%s' has no film: it failed: %s", context, sensor_name, it->error);
-      return svc_fail(e, RSW_ERR_NOT_FOUND, 404, context, "context '%s' sensor '%s' has no film yet (%s)", context,
-                      sensor_name, state_names[it->state]);
+        return svc_fail(e, RSW_ERR_NOT_FOUND, 404, context,
+                        "context '%s' sensor '%s' has no film: it failed: %s", context, sensor_name,
+                        it->error);
+      return svc_fail(e, RSW_ERR_NOT_FOUND, 404, context, "context '%s' sensor '%s' has no film yet (%s)",
+                      context, sensor_name, state_names[it->state]);
     }
     /* A copy: the job may be deleted while the response is written. */
     *out = it->film;
@@ -696,12 +720,12 @@ rsw_status service_job_result(service *svc, const char *id, const char *context,
     return RSW_OK;
   }
   pthread_mutex_unlock(&svc->lock);
-  return svc_fail(e, RSW_ERR_NOT_FOUND, 404, context, "job %s has no result for context '%s' and sensor '%s'", id,
-                  context, sensor_name);
+  return svc_fail(e, RSW_ERR_NOT_FOUND, 404, context, "job %s has no result for context '%s' and sensor '%s'",
+                  id, context, sensor_name);
 }
 
-rsw_status service_job_next_event(service *svc, const char *id, uint64_t after, int timeout_ms, uint64_t *seq_out,
-                                  char **json_out, bool *is_end, svc_error *e) {
+rsw_status service_job_next_event(service *svc, const char *id, uint64_t after, int timeout_ms,
+                                  uint64_t *seq_out, char **json_out, bool *is_end, svc_error *e) {
   *json_out = NULL;
   *is_end = false;
   struct timespec ts;

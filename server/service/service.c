@@ -77,7 +77,9 @@ static bool sha_begin(sha_ctx *c) {
   c->md = EVP_MD_CTX_new();
   return c->md && EVP_DigestInit_ex(c->md, EVP_sha256(), NULL) == 1;
 }
-static void sha_update(sha_ctx *c, const void *d, size_t n) { EVP_DigestUpdate(c->md, d, n); }
+static void sha_update(sha_ctx *c, const void *d, size_t n) {
+  EVP_DigestUpdate(c->md, d, n);
+}
 static void sha_end(sha_ctx *c, unsigned char out[32]) {
   unsigned int len = 32;
   EVP_DigestFinal_ex(c->md, out, &len);
@@ -170,7 +172,9 @@ void service_shutdown(service *svc) {
   pthread_mutex_unlock(&svc->lock);
 }
 
-bool service_ready(const service *svc) { return svc && atomic_load(&svc->ready); }
+bool service_ready(const service *svc) {
+  return svc && atomic_load(&svc->ready);
+}
 
 void svc_resident_free(resident *r) {
   if (!r) return;
@@ -227,7 +231,8 @@ char *service_info_json(service *svc) {
     cJSON_AddItemToArray(pl, e);
   }
   cJSON *lim = cJSON_AddObjectToObject(o, "limits");
-  if (svc->opts.max_body_bytes) cJSON_AddNumberToObject(lim, "max_body_bytes", (double)svc->opts.max_body_bytes);
+  if (svc->opts.max_body_bytes)
+    cJSON_AddNumberToObject(lim, "max_body_bytes", (double)svc->opts.max_body_bytes);
   cJSON_AddNumberToObject(lim, "max_depth", RSW_MAX_DEPTH);
   cJSON_AddNumberToObject(lim, "max_queue", (double)svc->opts.max_queue);
   cJSON_AddNumberToObject(lim, "max_pixel_samples", (double)svc->opts.max_pixel_samples);
@@ -306,16 +311,19 @@ char *service_metrics_text(service *svc) {
               svc->reqs[i].status, (unsigned long long)svc->reqs[i].n);
   size_t bytes = 0;
   for (size_t i = 0; i < svc->n_scenes; i++) bytes += scene_bytes(svc->scenes[i]->sc);
-  mb_printf(&b, "# HELP raysweep_scenes_resident Scenes held in memory.\n# TYPE raysweep_scenes_resident gauge\n");
+  mb_printf(
+      &b, "# HELP raysweep_scenes_resident Scenes held in memory.\n# TYPE raysweep_scenes_resident gauge\n");
   mb_printf(&b, "raysweep_scenes_resident %zu\n", svc->n_scenes);
-  mb_printf(&b, "# HELP raysweep_scene_bytes Bytes held by resident scenes' geometry.\n# TYPE raysweep_scene_bytes gauge\n");
+  mb_printf(&b, "# HELP raysweep_scene_bytes Bytes held by resident scenes' geometry.\n# TYPE "
+                "raysweep_scene_bytes gauge\n");
   mb_printf(&b, "raysweep_scene_bytes %zu\n", bytes);
   static const char *const states[] = {"queued", "running", "succeeded", "failed", "cancelled"};
   size_t by_state[5] = {0};
   for (size_t i = 0; i < svc->n_jobs; i++) by_state[svc->jobs[i]->state]++;
   mb_printf(&b, "# HELP raysweep_jobs Jobs by state.\n# TYPE raysweep_jobs gauge\n");
   for (int s = 0; s < 5; s++) mb_printf(&b, "raysweep_jobs{state=\"%s\"} %zu\n", states[s], by_state[s]);
-  mb_printf(&b, "# HELP raysweep_queue_depth Jobs waiting for the worker.\n# TYPE raysweep_queue_depth gauge\n");
+  mb_printf(&b,
+            "# HELP raysweep_queue_depth Jobs waiting for the worker.\n# TYPE raysweep_queue_depth gauge\n");
   mb_printf(&b, "raysweep_queue_depth %zu\n", svc->n_queue);
   mb_printf(&b, "# HELP raysweep_sync_renders Synchronous renders (POST :render) in progress.\n");
   mb_printf(&b, "# TYPE raysweep_sync_renders gauge\nraysweep_sync_renders %zu\n", svc->sync_renders);
@@ -329,14 +337,16 @@ char *service_metrics_text(service *svc) {
   mb_printf(&b, "# TYPE raysweep_render_seconds_total counter\nraysweep_render_seconds_total %.6f\n",
             svc->render_seconds);
   static const char *const classes[] = {"none", "spectral", "geometric"};
-  mb_printf(&b, "# HELP raysweep_update_seconds_total Time spent applying parameter updates, by the costliest class touched.\n");
+  mb_printf(&b, "# HELP raysweep_update_seconds_total Time spent applying parameter updates, by the "
+                "costliest class touched.\n");
   mb_printf(&b, "# TYPE raysweep_update_seconds_total counter\n");
   for (int c = 0; c < 3; c++)
     mb_printf(&b, "raysweep_update_seconds_total{class=\"%s\"} %.6f\n", classes[c], svc->update_seconds[c]);
   mb_printf(&b, "# HELP raysweep_updates_total Parameter updates applied, by the costliest class touched.\n");
   mb_printf(&b, "# TYPE raysweep_updates_total counter\n");
   for (int c = 0; c < 3; c++)
-    mb_printf(&b, "raysweep_updates_total{class=\"%s\"} %llu\n", classes[c], (unsigned long long)svc->updates[c]);
+    mb_printf(&b, "raysweep_updates_total{class=\"%s\"} %llu\n", classes[c],
+              (unsigned long long)svc->updates[c]);
   mb_printf(&b, "# HELP raysweep_ready Whether the server accepts work.\n# TYPE raysweep_ready gauge\n");
   mb_printf(&b, "raysweep_ready %d\n", atomic_load(&svc->ready) ? 1 : 0);
   pthread_mutex_unlock(&svc->lock);
@@ -374,13 +384,15 @@ static rsw_status resolve_file(void *user, const char *name, char **path_out, rs
     snprintf(path, sizeof path, "%s/%s", svc->blob_dir, name + 7);
     struct stat sb;
     if (stat(path, &sb) != 0)
-      return rsw_fail(err, RSW_ERR_FILE, name, "blob %s has not been uploaded (PUT /v1/blobs/%s)", name + 7, name + 7);
+      return rsw_fail(err, RSW_ERR_FILE, name, "blob %s has not been uploaded (PUT /v1/blobs/%s)", name + 7,
+                      name + 7);
     snprintf(dh, sizeof dh, "%s", name + 7);
   } else {
     if (!svc->data_root[0])
-      return rsw_fail(err, RSW_ERR_FILE, name,
-                      "file '%s': this daemon has no --data-root; upload it as a blob and refer to it as sha256:<hex>",
-                      name);
+      return rsw_fail(
+          err, RSW_ERR_FILE, name,
+          "file '%s': this daemon has no --data-root; upload it as a blob and refer to it as sha256:<hex>",
+          name);
     if (name[0] == '/')
       snprintf(path, sizeof path, "%s", name);
     else
@@ -451,7 +463,8 @@ void svc_scene_summary(const resident *r, cJSON *o) {
   cJSON_AddStringToObject(o, "id", r->id);
   cJSON_AddStringToObject(o, "variant", r->sc->variant == VARIANT_MONO ? "mono" : "rgb");
   cJSON *s = cJSON_AddArrayToObject(o, "sensors");
-  for (size_t i = 0; i < r->sc->n_sensors; i++) cJSON_AddItemToArray(s, cJSON_CreateString(r->sc->sensors[i]->base.id));
+  for (size_t i = 0; i < r->sc->n_sensors; i++)
+    cJSON_AddItemToArray(s, cJSON_CreateString(r->sc->sensors[i]->base.id));
   cJSON_AddNumberToObject(o, "revision", (double)r->revision);
 }
 
@@ -547,8 +560,9 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
   }
   r = calloc(1, sizeof *r);
   bool ok = r && (svc->n_scenes < svc->cap_scenes ||
-                  (svc->scenes = realloc(svc->scenes, (svc->cap_scenes = svc->cap_scenes ? 2 * svc->cap_scenes : 8) *
-                                                          sizeof *svc->scenes)) != NULL);
+                  (svc->scenes =
+                       realloc(svc->scenes, (svc->cap_scenes = svc->cap_scenes ? 2 * svc->cap_scenes : 8) *
+                                                sizeof *svc->scenes)) != NULL);
   if (!ok) {
     pthread_mutex_unlock(&svc->lock);
     free(r);
@@ -581,7 +595,8 @@ rsw_status service_scene_post(service *svc, const char *body, size_t len, bool i
                               bool *created, char **id_out, char **json_out, svc_error *e) {
   if (!service_ready(svc)) return svc_fail(e, RSW_ERR_UNAVAILABLE, 503, "", "the server is shutting down");
   resident *r;
-  rsw_status st = scene_post(svc, body, len, is_xml, variant, is_xml ? "scene.xml" : "scene.json", created, &r, e);
+  rsw_status st =
+      scene_post(svc, body, len, is_xml, variant, is_xml ? "scene.xml" : "scene.json", created, &r, e);
   if (st) return st;
   cJSON *o = cJSON_CreateObject();
   svc_scene_summary(r, o);
@@ -636,8 +651,10 @@ rsw_status service_scene_load_file(service *svc, const char *path, char **id_out
     char dir[4096];
     snprintf(dir, sizeof dir, "%s", path);
     char *slash = strrchr(dir, '/');
-    if (slash) *slash = '\0';
-    else snprintf(dir, sizeof dir, ".");
+    if (slash)
+      *slash = '\0';
+    else
+      snprintf(dir, sizeof dir, ".");
     char *rp = realpath(dir, NULL);
     if (rp) {
       snprintf(svc->data_root, sizeof svc->data_root, "%s", rp);
@@ -731,8 +748,10 @@ rsw_status service_scene_delete(service *svc, const char *id, bool force, svc_er
       break;
     }
   for (size_t i = 0; i < svc->n_raw;)
-    if (strcmp(svc->raw[i].id, id) == 0) svc->raw[i] = svc->raw[--svc->n_raw];
-    else i++;
+    if (strcmp(svc->raw[i].id, id) == 0)
+      svc->raw[i] = svc->raw[--svc->n_raw];
+    else
+      i++;
   r->deleted = true;
   bool free_now = r->refs == 0;
   pthread_cond_broadcast(&svc->cond);
@@ -803,7 +822,8 @@ rsw_status service_params_get(service *svc, const char *id, const char *match, c
     update_class c;
     if (!update_class_parse(cls, &c)) {
       svc_scene_release(svc, r);
-      return svc_fail(e, RSW_ERR_INVALID, 400, "class", "class must be spectral, geometric or none (got '%s')", cls);
+      return svc_fail(e, RSW_ERR_INVALID, 400, "class",
+                      "class must be spectral, geometric or none (got '%s')", cls);
     }
     mask = c == UPDATE_NONE ? 0 : (unsigned)c;
     none = c == UPDATE_NONE;
@@ -844,11 +864,12 @@ rsw_status service_params_get(service *svc, const char *id, const char *match, c
 }
 
 /* Parse a JSON object {key: value} into updates. Keys borrowed from j. */
-static rsw_status map_to_updates(const cJSON *j, const scene *sc, const char *where, param_update **out, size_t *n,
-                                 svc_error *e) {
+static rsw_status map_to_updates(const cJSON *j, const scene *sc, const char *where, param_update **out,
+                                 size_t *n, svc_error *e) {
   *out = NULL;
   *n = 0;
-  if (!cJSON_IsObject(j)) return svc_fail(e, RSW_ERR_TYPE, 422, where, "%s must be an object {key: value}", where);
+  if (!cJSON_IsObject(j))
+    return svc_fail(e, RSW_ERR_TYPE, 422, where, "%s must be an object {key: value}", where);
   size_t cnt = 0;
   for (const cJSON *k = j->child; k; k = k->next) cnt++;
   param_update *u = calloc(cnt ? cnt : 1, sizeof *u);
@@ -878,7 +899,8 @@ static void free_updates(param_update *u, size_t n) {
   free(u);
 }
 
-static rsw_status update_error(svc_error *e, const scene *sc, const param_update *u, size_t n, const rsw_err *err) {
+static rsw_status update_error(svc_error *e, const scene *sc, const param_update *u, size_t n,
+                               const rsw_err *err) {
   /* Name the key the kernel complained about (err->where is the key). */
   const char *key = err->where;
   for (size_t i = 0; i < n; i++)
@@ -901,8 +923,9 @@ rsw_status service_params_patch(service *svc, const char *id, const char *body, 
   size_t n = 0;
   update_report rep = {0};
   if (if_match >= 0 && (uint64_t)if_match != r->revision)
-    st = svc_fail(e, RSW_ERR_PRECONDITION, 412, "If-Match", "revision %lld is stale: the scene is at revision %llu",
-                  (long long)if_match, (unsigned long long)r->revision);
+    st = svc_fail(e, RSW_ERR_PRECONDITION, 412, "If-Match",
+                  "revision %lld is stale: the scene is at revision %llu", (long long)if_match,
+                  (unsigned long long)r->revision);
   if (!st) st = map_to_updates(j, r->sc, "body", &u, &n, e);
   if (!st) {
     rsw_err err = {0};
@@ -946,7 +969,8 @@ void svc_film_free(svc_film *f) {
 
 /* The current values of the overridden keys, to restore the base state
  * after a render (values round-trip exactly through their JSON text). */
-static rsw_status snapshot(const scene *sc, const param_update *u, size_t n, param_update **out, rsw_err *err) {
+static rsw_status snapshot(const scene *sc, const param_update *u, size_t n, param_update **out,
+                           rsw_err *err) {
   param_update *s = calloc(n ? n : 1, sizeof *s);
   if (!s) return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
   for (size_t i = 0; i < n; i++) {
@@ -984,19 +1008,29 @@ rsw_status svc_render_locked(service *svc, resident *r, const render_spec *rs, s
   if (!st && n) {
     update_report rep;
     st = scene_update(sc, u, n, &rep, &err);
-    if (st) update_error(e, sc, u, n, &err);
-    else count_update(svc, &rep);
+    if (st)
+      update_error(e, sc, u, n, &err);
+    else
+      count_update(svc, &rep);
   }
   if (!st) {
-    render_opts ro = {.size = sizeof ro, .sensor = rs->sensor_index, .spp = rs->spp, .seed = rs->seed,
-                      .wavelength = rs->wavelength, .threads = svc->opts.render_threads, .cancel = rs->cancel,
+    render_opts ro = {.size = sizeof ro,
+                      .sensor = rs->sensor_index,
+                      .spp = rs->spp,
+                      .seed = rs->seed,
+                      .wavelength = rs->wavelength,
+                      .threads = svc->opts.render_threads,
+                      .cancel = rs->cancel,
                       .deadline = rs->deadline};
     render_result_stats stats;
     rsw_err rerr = {0};
     st = render_sensor(sc, &ro, &out->img, &stats, &rerr);
     if (st) {
       e->err = rerr;
-      e->http_status = st == RSW_ERR_TIMEOUT ? 504 : st == RSW_ERR_CANCELLED ? 409 : st == RSW_ERR_NOMEM ? 500 : 422;
+      e->http_status = st == RSW_ERR_TIMEOUT     ? 504
+                       : st == RSW_ERR_CANCELLED ? 409
+                       : st == RSW_ERR_NOMEM     ? 500
+                                                 : 422;
     } else {
       pthread_mutex_lock(&svc->lock);
       svc->render_seconds += stats.wall_s;
@@ -1019,8 +1053,8 @@ rsw_status svc_render_locked(service *svc, resident *r, const render_spec *rs, s
   return st;
 }
 
-rsw_status service_render(service *svc, const char *id, const char *body, size_t len, const atomic_int *cancel,
-                          svc_film *out, svc_error *e) {
+rsw_status service_render(service *svc, const char *id, const char *body, size_t len,
+                          const atomic_int *cancel, svc_film *out, svc_error *e) {
   if (!service_ready(svc)) return svc_fail(e, RSW_ERR_UNAVAILABLE, 503, "", "the server is shutting down");
   resident *r = svc_scene_acquire(svc, id);
   if (!r) return no_scene(e, id);
@@ -1028,8 +1062,10 @@ rsw_status service_render(service *svc, const char *id, const char *body, size_t
   cJSON *j = len ? cJSON_ParseWithLength(body, len) : cJSON_CreateObject();
   rsw_status st = RSW_OK;
   render_spec rs = {.seed = 0, .cancel = cancel};
-  if (!j) st = svc_fail(e, RSW_ERR_PARSE, 400, "", "the body is not valid JSON");
-  else if (!cJSON_IsObject(j)) st = svc_fail(e, RSW_ERR_TYPE, 422, "", "the body must be a JSON object");
+  if (!j)
+    st = svc_fail(e, RSW_ERR_PARSE, 400, "", "the body is not valid JSON");
+  else if (!cJSON_IsObject(j))
+    st = svc_fail(e, RSW_ERR_TYPE, 422, "", "the body must be a JSON object");
   for (const cJSON *k = j && !st ? j->child : NULL; k && !st; k = k->next) {
     char ptr[300];
     snprintf(ptr, sizeof ptr, "/%s", k->string);
@@ -1043,32 +1079,43 @@ rsw_status service_render(service *svc, const char *id, const char *body, size_t
       if (!name || !svc_find_sensor(r->sc, name, &rs.sensor_index))
         st = svc_fail(e, RSW_ERR_NOT_FOUND, 422, ptr, "no sensor '%s' in the scene", name ? name : "?");
     } else if (strcmp(k->string, "spp") == 0) {
-      if (!cJSON_IsNumber(k) || k->valuedouble < 1 || k->valuedouble > 4294967295.0 || k->valuedouble != floor(k->valuedouble))
+      if (!cJSON_IsNumber(k) || k->valuedouble < 1 || k->valuedouble > 4294967295.0 ||
+          k->valuedouble != floor(k->valuedouble))
         st = svc_fail(e, RSW_ERR_INVALID, 422, ptr, "spp must be a positive integer");
-      else rs.spp = (uint32_t)k->valuedouble;
+      else
+        rs.spp = (uint32_t)k->valuedouble;
     } else if (strcmp(k->string, "seed") == 0) {
-      if (!cJSON_IsNumber(k) || k->valuedouble < 0 || k->valuedouble > 9007199254740991.0 || k->valuedouble != floor(k->valuedouble))
+      if (!cJSON_IsNumber(k) || k->valuedouble < 0 || k->valuedouble > 9007199254740991.0 ||
+          k->valuedouble != floor(k->valuedouble))
         st = svc_fail(e, RSW_ERR_INVALID, 422, ptr, "seed must be a non-negative integer");
-      else rs.seed = (uint64_t)k->valuedouble;
+      else
+        rs.seed = (uint64_t)k->valuedouble;
     } else if (strcmp(k->string, "wavelength") == 0) {
       if (!cJSON_IsNumber(k) || !(k->valuedouble > 0) || !isfinite(k->valuedouble))
         st = svc_fail(e, RSW_ERR_INVALID, 422, ptr, "wavelength must be a positive number of nm");
-      else rs.wavelength = k->valuedouble;
+      else
+        rs.wavelength = k->valuedouble;
     } else if (strcmp(k->string, "params") == 0) {
-      if (!cJSON_IsObject(k)) st = svc_fail(e, RSW_ERR_TYPE, 422, ptr, "params must be an object {key: value}");
-      else rs.overrides = k;
+      if (!cJSON_IsObject(k))
+        st = svc_fail(e, RSW_ERR_TYPE, 422, ptr, "params must be an object {key: value}");
+      else
+        rs.overrides = k;
     } else if (strcmp(k->string, "timeout_s") == 0) {
       if (!cJSON_IsNumber(k) || !(k->valuedouble > 0))
         st = svc_fail(e, RSW_ERR_INVALID, 422, ptr, "timeout_s must be a positive number");
-      else rs.deadline = svc_now() + k->valuedouble;
+      else
+        rs.deadline = svc_now() + k->valuedouble;
     } else {
-      st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, 422, ptr, "unknown field '%s' (expected sensor, spp, seed, wavelength, params, timeout_s)",
+      st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, 422, ptr,
+                    "unknown field '%s' (expected sensor, spp, seed, wavelength, params, timeout_s)",
                     k->string);
     }
   }
   if (!st && rs.wavelength > 0 && r->sc->variant != VARIANT_MONO)
-    st = svc_fail(e, RSW_ERR_INVALID, 422, "/wavelength", "wavelength applies to mono scenes; this scene is rgb");
-  if (!st && r->sc->n_sensors == 0) st = svc_fail(e, RSW_ERR_INVALID, 422, "/sensor", "the scene has no sensor");
+    st = svc_fail(e, RSW_ERR_INVALID, 422, "/wavelength",
+                  "wavelength applies to mono scenes; this scene is rgb");
+  if (!st && r->sc->n_sensors == 0)
+    st = svc_fail(e, RSW_ERR_INVALID, 422, "/sensor", "the scene has no sensor");
   if (!st) {
     const sensor *se = r->sc->sensors[rs.sensor_index];
     uint64_t spp = rs.spp ? rs.spp : se->sampler->sample_count;
@@ -1093,7 +1140,8 @@ rsw_status service_render(service *svc, const char *id, const char *body, size_t
   return st;
 }
 
-rsw_status service_directions(service *svc, const char *id, const char *sensor_name, char **json_out, svc_error *e) {
+rsw_status service_directions(service *svc, const char *id, const char *sensor_name, char **json_out,
+                              svc_error *e) {
   resident *r = svc_scene_acquire(svc, id);
   if (!r) return no_scene(e, id);
   size_t si;
@@ -1107,9 +1155,10 @@ rsw_status service_directions(service *svc, const char *id, const char *sensor_n
   const char *type = se->base.plugin->name;
   cJSON *o = NULL;
   if (strcmp(type, "hdistant") != 0 && strcmp(type, "distant") != 0) {
-    st = svc_fail(e, RSW_ERR_UNSUPPORTED, 422, sensor_name,
-                  "sensor '%s' is a %s; per-pixel directions exist for distant-family sensors (hdistant, distant)",
-                  sensor_name, type);
+    st = svc_fail(
+        e, RSW_ERR_UNSUPPORTED, 422, sensor_name,
+        "sensor '%s' is a %s; per-pixel directions exist for distant-family sensors (hdistant, distant)",
+        sensor_name, type);
   } else {
     int W = se->film->width, H = se->film->height;
     o = cJSON_CreateObject();
@@ -1156,8 +1205,10 @@ rsw_status service_directions(service *svc, const char *id, const char *sensor_n
 
 /* ---- blobs ----------------------------------------------------------------------- */
 
-rsw_status service_blob_put(service *svc, const char *h, const void *data, size_t len, bool *created, svc_error *e) {
-  if (!is_hex64(h)) return svc_fail(e, RSW_ERR_INVALID, 400, h, "a blob is named by its SHA-256: 64 lowercase hex digits");
+rsw_status service_blob_put(service *svc, const char *h, const void *data, size_t len, bool *created,
+                            svc_error *e) {
+  if (!is_hex64(h))
+    return svc_fail(e, RSW_ERR_INVALID, 400, h, "a blob is named by its SHA-256: 64 lowercase hex digits");
   unsigned char d[32];
   char dh[65];
   if (!sha256(data, len, d)) return svc_fail(e, RSW_ERR_NOMEM, 500, h, "hashing failed");
@@ -1219,7 +1270,8 @@ rsw_status service_blobs_missing(service *svc, const char *body, size_t len, cha
       snprintf(ptr, sizeof ptr, "/digests/%d", i);
       return svc_fail(e, RSW_ERR_INVALID, 422, ptr, "not a SHA-256 hex digest");
     }
-    if (!service_blob_exists(svc, x->valuestring)) cJSON_AddItemToArray(m, cJSON_CreateString(x->valuestring));
+    if (!service_blob_exists(svc, x->valuestring))
+      cJSON_AddItemToArray(m, cJSON_CreateString(x->valuestring));
   }
   cJSON_Delete(j);
   *json_out = print_json(o);

@@ -20,26 +20,26 @@
 typedef struct service service;
 
 typedef struct svc_error {
-  rsw_err err;            /* code, where (pointer or key), message */
-  int http_status;        /* the status the HTTP layer should answer with
+  rsw_err err;             /* code, where (pointer or key), message */
+  int http_status;         /* the status the HTTP layer should answer with
                              (0: derive from err.code via rsw_status_http) */
-  char key[256];          /* parameter key when the error is about one */
-  char candidates[3][256];/* closest keys for an unknown key ("" unused) */
-  int retry_after_s;      /* for 429 */
+  char key[256];           /* parameter key when the error is about one */
+  char candidates[3][256]; /* closest keys for an unknown key ("" unused) */
+  int retry_after_s;       /* for 429 */
 } svc_error;
 
 typedef struct service_opts {
-  size_t size;                 /* sizeof(service_opts) */
-  int render_threads;          /* 0: all cores */
-  const char *data_root;       /* plain file names in scenes resolve only
+  size_t size;                /* sizeof(service_opts) */
+  int render_threads;         /* 0: all cores */
+  const char *data_root;      /* plain file names in scenes resolve only
                                   inside it (NULL: none allowed) */
-  const char *blob_dir;        /* where blobs are stored (created) */
-  size_t max_queue;            /* queued jobs before 429 (default 64) */
-  double result_ttl_s;         /* finished jobs' results live this long
+  const char *blob_dir;       /* where blobs are stored (created) */
+  size_t max_queue;           /* queued jobs before 429 (default 64) */
+  double result_ttl_s;        /* finished jobs' results live this long
                                   (default 3600) */
-  uint64_t max_pixel_samples;  /* width*height*spp*sensors per request
+  uint64_t max_pixel_samples; /* width*height*spp*sensors per request
                                   (default 2^32) */
-  size_t max_body_bytes;       /* reported in GET /v1 (the HTTP layer
+  size_t max_body_bytes;      /* reported in GET /v1 (the HTTP layer
                                   enforces it) */
 } service_opts;
 
@@ -96,11 +96,12 @@ void svc_film_free(svc_film *f);
 /* POST :render (body: RenderRequest). Blocks until done or timeout_s, or
  * until *cancel (borrowed, may be NULL) becomes non-zero: RSW_ERR_CANCELLED
  * (the HTTP layer sets it when the client hangs up). */
-rsw_status service_render(service *svc, const char *id, const char *body, size_t len, const atomic_int *cancel,
-                          svc_film *out, svc_error *e);
+rsw_status service_render(service *svc, const char *id, const char *body, size_t len,
+                          const atomic_int *cancel, svc_film *out, svc_error *e);
 
 /* GET sensors/{sensor}/directions. */
-rsw_status service_directions(service *svc, const char *id, const char *sensor, char **json_out, svc_error *e);
+rsw_status service_directions(service *svc, const char *id, const char *sensor, char **json_out,
+                              svc_error *e);
 
 /* ---- blobs ------------------------------------------------------------------- */
 /* created: false when it existed already. 422 on a digest mismatch. */

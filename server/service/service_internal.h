@@ -17,7 +17,7 @@
 typedef struct resident {
   char id[65];
   scene *sc;
-  uint64_t revision;  /* base revision, +1 per PATCH that changed something */
+  uint64_t revision; /* base revision, +1 per PATCH that changed something */
   double load_s;
   time_t created;
   pthread_mutex_t lock;
@@ -27,13 +27,19 @@ typedef struct resident {
   pthread_mutex_t cache_lock;
   cJSON *base_params;
   uint64_t cache_revision;
-  int active_jobs;    /* queued or running jobs on this scene (svc->lock) */
-  int refs;           /* holders outside svc->lock (svc->lock) */
-  bool deleted;       /* removed from the registry; freed at refs == 0 */
+  int active_jobs; /* queued or running jobs on this scene (svc->lock) */
+  int refs;        /* holders outside svc->lock (svc->lock) */
+  bool deleted;    /* removed from the registry; freed at refs == 0 */
 } resident;
 
 /* One render of a job: a (context, sensor) pair. */
-typedef enum job_state { JOB_QUEUED, JOB_RUNNING, JOB_SUCCEEDED, JOB_FAILED, JOB_CANCELLED } job_state;
+typedef enum job_state {
+  JOB_QUEUED,
+  JOB_RUNNING,
+  JOB_SUCCEEDED,
+  JOB_FAILED,
+  JOB_CANCELLED
+} job_state;
 
 typedef struct render_item {
   char context[72];
@@ -58,7 +64,7 @@ typedef struct job_event {
 
 typedef struct job {
   char id[40];
-  resident *res;      /* holds a ref */
+  resident *res; /* holds a ref */
   char scene_id[65];
   uint64_t revision;
   job_state state;
@@ -84,14 +90,14 @@ struct service {
   char blob_dir[4096];
   char data_root[4096]; /* realpath, "" when none */
   pthread_mutex_t lock;
-  pthread_cond_t cond;  /* queue and job events */
+  pthread_cond_t cond; /* queue and job events */
   resident **scenes;
   size_t n_scenes, cap_scenes;
   /* body digest -> scene id, so reposting the same text skips a load */
   struct raw_index {
     unsigned char digest[32];
     char id[65];
-  } *raw;
+  } * raw;
   size_t n_raw, cap_raw;
   job **jobs;
   size_t n_jobs, cap_jobs;
@@ -107,7 +113,7 @@ struct service {
     char route[96];
     int status;
     uint64_t n;
-  } *reqs;
+  } * reqs;
   size_t n_reqs, cap_reqs;
   uint64_t contexts_rendered, renders_failed;
   size_t sync_renders; /* synchronous renders (POST :render) in progress */

@@ -63,7 +63,8 @@ int main(void) {
   for (int i = 0; i < N_LEAVES; i++) {
     double x = -10 + 20 * pcg32_next_double(&g), y = -10 + 20 * pcg32_next_double(&g);
     double z = 0.2 + 2.0 * pcg32_next_double(&g);
-    double nx = pcg32_next_double(&g) - 0.5, ny = pcg32_next_double(&g) - 0.5, nz = pcg32_next_double(&g) - 0.5;
+    double nx = pcg32_next_double(&g) - 0.5, ny = pcg32_next_double(&g) - 0.5,
+           nz = pcg32_next_double(&g) - 0.5;
     fprintf(f, "%.5f %.5f %.5f %.4f %.4f %.4f 0.05\n", x, y, z, nx, ny, nz + 1e-3);
   }
   fclose(f);
@@ -76,22 +77,24 @@ int main(void) {
     double th = (-75.0 + 2.0 * k) * 3.14159265358979323846 / 180.0;
     dn += (size_t)snprintf(dirs + dn, sizeof dirs - dn, "%s%.9f 0 %.9f", k ? ", " : "", -sin(th), -cos(th));
   }
-  fprintf(f,
-          "{\"type\": \"scene\", \"variant\": \"mono\",\n"
-          " \"sensor\": {\"type\": \"mdistant\", \"directions\": \"%s\","
-          " \"target\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [10, 10, 1]}]},"
-          " \"sampler\": {\"type\": \"independent\", \"sample_count\": %u},"
-          " \"film\": {\"type\": \"hdrfilm\", \"width\": 76, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},\n"
-          " \"integrator\": {\"type\": \"path\", \"max_depth\": -1},\n"
-          " \"sun\": {\"type\": \"directional\", \"direction\": [0.5, 0, -0.8660254037844386], \"irradiance\": 1.0},\n"
-          " \"soil\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [10, 10, 1]}],"
-          " \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.2}},\n"
-          " \"leaf\": {\"type\": \"shapegroup\", \"quad\": {\"type\": \"rectangle\","
-          " \"bsdf\": {\"type\": \"twosided\", \"b\": {\"type\": \"diffuse\", \"reflectance\": 0.45}}}},\n"
-          " \"canopy\": {\"type\": \"instancelist\", \"filename\": \"leaves.txt\","
-          " \"shapegroup\": {\"type\": \"ref\", \"id\": \"leaf\"}},\n"
-          " \"plot\": {\"type\": \"periodic\", \"min\": [-10, -10], \"max\": [10, 10]}}\n",
-          dirs, spp);
+  fprintf(
+      f,
+      "{\"type\": \"scene\", \"variant\": \"mono\",\n"
+      " \"sensor\": {\"type\": \"mdistant\", \"directions\": \"%s\","
+      " \"target\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [10, 10, 1]}]},"
+      " \"sampler\": {\"type\": \"independent\", \"sample_count\": %u},"
+      " \"film\": {\"type\": \"hdrfilm\", \"width\": 76, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},\n"
+      " \"integrator\": {\"type\": \"path\", \"max_depth\": -1},\n"
+      " \"sun\": {\"type\": \"directional\", \"direction\": [0.5, 0, -0.8660254037844386], \"irradiance\": "
+      "1.0},\n"
+      " \"soil\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [10, 10, 1]}],"
+      " \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.2}},\n"
+      " \"leaf\": {\"type\": \"shapegroup\", \"quad\": {\"type\": \"rectangle\","
+      " \"bsdf\": {\"type\": \"twosided\", \"b\": {\"type\": \"diffuse\", \"reflectance\": 0.45}}}},\n"
+      " \"canopy\": {\"type\": \"instancelist\", \"filename\": \"leaves.txt\","
+      " \"shapegroup\": {\"type\": \"ref\", \"id\": \"leaf\"}},\n"
+      " \"plot\": {\"type\": \"periodic\", \"min\": [-10, -10], \"max\": [10, 10]}}\n",
+      dirs, spp);
   fclose(f);
   double rss0 = rss_bytes();
   double emb0 = (double)accel_embree_bytes();
@@ -120,8 +123,8 @@ int main(void) {
          "\"ceiling_rays_per_s\": %.4g, \"ratio_to_ceiling\": %.3f, \"threads\": %d, \"spp\": %u, "
          "\"wall_s\": %.3f, \"instances\": %d, \"sensor\": \"mdistant 76\", \"periodic\": true, "
          "\"meets_target\": %s}\n",
-         load_s, rss1 / 1048576.0, emb1 / 1048576.0, (rss1 - rss0) / N_LEAVES, (emb1 - emb0) / N_LEAVES, rps, ceiling,
-         ceiling > 0 ? rps / ceiling : 0, st.threads, spp, st.wall_s, N_LEAVES,
+         load_s, rss1 / 1048576.0, emb1 / 1048576.0, (rss1 - rss0) / N_LEAVES, (emb1 - emb0) / N_LEAVES, rps,
+         ceiling, ceiling > 0 ? rps / ceiling : 0, st.threads, spp, st.wall_s, N_LEAVES,
          load_s <= 2.0 && (rss1 - rss0) / N_LEAVES <= 1024 ? "true" : "false");
   scene_free(s);
   unlink(list);

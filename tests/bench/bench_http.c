@@ -128,7 +128,8 @@ static double in_process_seconds(int n_ctx) {
     scene_find_sensor(sc, "meter", &si);
     double t0 = now_s();
     for (int i = 0; i < n_ctx; i++) {
-      render_opts o = {.size = sizeof o, .sensor = si, .spp = 1, .seed = (uint64_t)i, .wavelength = 400 + i % 300};
+      render_opts o = {
+          .size = sizeof o, .sensor = si, .spp = 1, .seed = (uint64_t)i, .wavelength = 400 + i % 300};
       film_image img;
       if (render_sensor(sc, &o, &img, NULL, &err) == RSW_OK) film_image_free(&img);
     }
@@ -149,7 +150,8 @@ int main(void) {
   remove(portfile);
   pid_t pid = fork();
   if (pid == 0) {
-    execl(exe, exe, "serve", "--listen", "127.0.0.1:0", "--port-file", portfile, "--max-queue", "16", (char *)NULL);
+    execl(exe, exe, "serve", "--listen", "127.0.0.1:0", "--port-file", portfile, "--max-queue", "16",
+          (char *)NULL);
     _exit(127);
   }
   int port = 0;
@@ -180,7 +182,9 @@ int main(void) {
   }
   char path[256];
   /* Synchronous round trips. */
-  enum { N_SYNC = 400 };
+  enum {
+    N_SYNC = 400
+  };
   double rt[N_SYNC];
   snprintf(path, sizeof path, "/v1/scenes/%s:render", id);
   for (int i = 0; i < 20; i++) request(c, "POST", path, "{\"sensor\": \"meter\", \"spp\": 1}", &b);
@@ -196,12 +200,16 @@ int main(void) {
   }
   qsort(rt, N_SYNC, sizeof *rt, cmp_double);
   /* A 1000-context job vs the same renders in process. */
-  enum { N_CTX = 1000 };
+  enum {
+    N_CTX = 1000
+  };
   size_t cap = 64 * N_CTX + 256, n = 0;
   char *job = malloc(cap);
-  n += (size_t)snprintf(job + n, cap - n, "{\"defaults\": {\"sensors\": [\"meter\"], \"spp\": 1}, \"contexts\": [");
+  n += (size_t)snprintf(job + n, cap - n,
+                        "{\"defaults\": {\"sensors\": [\"meter\"], \"spp\": 1}, \"contexts\": [");
   for (int i = 0; i < N_CTX; i++)
-    n += (size_t)snprintf(job + n, cap - n, "%s{\"id\": \"c%d\", \"wavelength\": %d}", i ? ", " : "", i, 400 + i % 300);
+    n += (size_t)snprintf(job + n, cap - n, "%s{\"id\": \"c%d\", \"wavelength\": %d}", i ? ", " : "", i,
+                          400 + i % 300);
   snprintf(job + n, cap - n, "]}");
   snprintf(path, sizeof path, "/v1/scenes/%s/jobs", id);
   double t0 = now_s();
@@ -219,7 +227,8 @@ int main(void) {
   /* Cancel latency: a job of long renders. */
   char big[512];
   snprintf(big, sizeof big,
-           "{\"defaults\": {\"sensors\": [\"big\"], \"spp\": 4096}, \"contexts\": [{\"id\": \"a\"}, {\"id\": \"b\"}]}");
+           "{\"defaults\": {\"sensors\": [\"big\"], \"spp\": 4096}, \"contexts\": [{\"id\": \"a\"}, {\"id\": "
+           "\"b\"}]}");
   st = request(c, "POST", path, big, &b);
   char cid[64] = "";
   double cancel_ms = -1;
@@ -249,12 +258,13 @@ int main(void) {
     if (rs == 504) deadline_ms = (now_s() - t0) * 1e3;
   }
   double per_ctx_us = (daemon_s - inproc_s) / N_CTX * 1e6;
-  printf("{\"bench\": \"http\", \"job_overhead_us_per_context\": %.1f, \"job_s\": %.4f, \"in_process_s\": %.4f, "
-         "\"sync_roundtrip_ms_p50\": %.3f, \"sync_roundtrip_ms_p99\": %.3f, \"cancel_latency_ms\": %.1f, "
-         "\"deadline_latency_ms\": %.1f, "
-         "\"contexts\": %d, \"target_us_per_context\": 150, \"target_roundtrip_ms\": 1, \"meets_target\": %s}\n",
-         per_ctx_us, daemon_s, inproc_s, rt[N_SYNC / 2], rt[(N_SYNC * 99) / 100], cancel_ms, deadline_ms, N_CTX,
-         per_ctx_us <= 150 && rt[N_SYNC / 2] <= 1.0 ? "true" : "false");
+  printf(
+      "{\"bench\": \"http\", \"job_overhead_us_per_context\": %.1f, \"job_s\": %.4f, \"in_process_s\": %.4f, "
+      "\"sync_roundtrip_ms_p50\": %.3f, \"sync_roundtrip_ms_p99\": %.3f, \"cancel_latency_ms\": %.1f, "
+      "\"deadline_latency_ms\": %.1f, "
+      "\"contexts\": %d, \"target_us_per_context\": 150, \"target_roundtrip_ms\": 1, \"meets_target\": %s}\n",
+      per_ctx_us, daemon_s, inproc_s, rt[N_SYNC / 2], rt[(N_SYNC * 99) / 100], cancel_ms, deadline_ms, N_CTX,
+      per_ctx_us <= 150 && rt[N_SYNC / 2] <= 1.0 ? "true" : "false");
 out:
   free(b.p);
   curl_easy_cleanup(c);

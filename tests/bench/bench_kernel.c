@@ -52,7 +52,8 @@ static double median(double *v, size_t n) {
  * ceiling interleaved, so a slow spell of the machine hits all three). */
 #define REPEATS 3
 
-static int report(const char *name, scene *s, uint32_t spp, int threads, double target_wall, double target_ratio) {
+static int report(const char *name, scene *s, uint32_t spp, int threads, double target_wall,
+                  double target_ratio) {
   rsw_err err = {0};
   render_opts o = {.size = sizeof o, .spp = spp, .seed = 1, .threads = threads};
   film_image img;
@@ -88,7 +89,9 @@ static int report(const char *name, scene *s, uint32_t spp, int threads, double 
          "\"two_level_over_flat\": %.3f, \"repeats\": %d",
          name, w, samples / w, rps, ceiling, ceiling > 0 ? rps / ceiling : 0, used_threads, spp, rays,
          (unsigned long long)shadow, flat, flat > 0 ? ceiling / flat : 0, REPEATS);
-  if (target_wall > 0) printf(", \"target_wall_s\": %.2f, \"meets_target\": %s", target_wall, w < target_wall ? "true" : "false");
+  if (target_wall > 0)
+    printf(", \"target_wall_s\": %.2f, \"meets_target\": %s", target_wall,
+           w < target_wall ? "true" : "false");
   if (target_ratio > 0)
     printf(", \"target_ratio\": %.2f, \"meets_target\": %s", target_ratio,
            ceiling > 0 && rps / ceiling >= target_ratio ? "true" : "false");
@@ -115,8 +118,10 @@ static int write_terrain(const char *path, int N) {
   FILE *f = fopen(path, "wb");
   if (!f) return 1;
   uint32_t nv = (uint32_t)N * N, nf = (uint32_t)(N - 1) * (N - 1) * 2;
-  fprintf(f, "ply\nformat binary_little_endian 1.0\nelement vertex %u\nproperty float x\nproperty float y\n"
-             "property float z\nelement face %u\nproperty list uchar uint vertex_indices\nend_header\n", nv, nf);
+  fprintf(f,
+          "ply\nformat binary_little_endian 1.0\nelement vertex %u\nproperty float x\nproperty float y\n"
+          "property float z\nelement face %u\nproperty list uchar uint vertex_indices\nend_header\n",
+          nv, nf);
   for (int j = 0; j < N; j++)
     for (int i = 0; i < N; i++) {
       float x = -1.0f + 2.0f * i / (N - 1), y = -1.0f + 2.0f * j / (N - 1);
@@ -150,9 +155,11 @@ static int bench_mesh(int threads) {
   snprintf(json, sizeof json,
            "{\"type\": \"scene\","
            " \"cam\": {\"type\": \"perspective\", \"fov\": 50,"
-           "   \"to_world\": [{\"lookat\": {\"origin\": [0, -2.2, 1.2], \"target\": [0, 0, 0], \"up\": [0, 0, 1]}}],"
+           "   \"to_world\": [{\"lookat\": {\"origin\": [0, -2.2, 1.2], \"target\": [0, 0, 0], \"up\": [0, "
+           "0, 1]}}],"
            "   \"sampler\": {\"type\": \"independent\"},"
-           "   \"film\": {\"type\": \"hdrfilm\", \"width\": 256, \"height\": 256, \"rfilter\": {\"type\": \"box\"}}},"
+           "   \"film\": {\"type\": \"hdrfilm\", \"width\": 256, \"height\": 256, \"rfilter\": {\"type\": "
+           "\"box\"}}},"
            " \"integrator\": {\"type\": \"path\", \"max_depth\": 5},"
            " \"sky\": {\"type\": \"constant\", \"radiance\": 0.3},"
            " \"sun\": {\"type\": \"directional\", \"direction\": [0.4, 0.3, -0.8], \"irradiance\": 3},"
@@ -187,7 +194,8 @@ static int bench_params(void) {
   snprintf(json, sizeof json,
            "{\"type\": \"scene\","
            " \"cam\": {\"type\": \"perspective\", \"fov\": 50,"
-           "   \"to_world\": [{\"lookat\": {\"origin\": [0, -2.2, 1.2], \"target\": [0, 0, 0], \"up\": [0, 0, 1]}}],"
+           "   \"to_world\": [{\"lookat\": {\"origin\": [0, -2.2, 1.2], \"target\": [0, 0, 0], \"up\": [0, "
+           "0, 1]}}],"
            "   \"film\": {\"type\": \"hdrfilm\", \"width\": 64, \"height\": 64}},"
            " \"sun\": {\"type\": \"directional\", \"direction\": [0.4, 0.3, -0.8]},"
            " \"terrain\": {\"type\": \"ply\", \"filename\": \"%s\","
@@ -204,7 +212,9 @@ static int bench_params(void) {
   double load_s = now_s() - t0;
   int rc = 0;
   /* Spectral: alternate between two values (equal values are no-ops). */
-  enum { N_SPECTRAL = 10000 };
+  enum {
+    N_SPECTRAL = 10000
+  };
   static double us[N_SPECTRAL];
   param_update up = {.key = "terrain.bsdf.reflectance.value", .value = {.kind = PV_NUMBER}};
   for (int i = 0; i < N_SPECTRAL && !rc; i++) {
@@ -216,7 +226,8 @@ static int bench_params(void) {
   double spectral_us = median(us, N_SPECTRAL);
   /* to_world: instance transform, top-level rebuild only. */
   double xf_s[5];
-  double m1[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1}, m2[16] = {0, -1, 0, 0.1, 1, 0, 0, 0, 0, 0, 1, 0.05, 0, 0, 0, 1};
+  double m1[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1},
+         m2[16] = {0, -1, 0, 0.1, 1, 0, 0, 0, 0, 0, 1, 0.05, 0, 0, 0, 1};
   param_update ux = {.key = "terrain.to_world", .value = {.kind = PV_ARRAY, .n = 16}};
   for (int i = 0; i < 5 && !rc; i++) {
     ux.value.arr = (i & 1) ? m1 : m2;
@@ -256,7 +267,8 @@ static int bench_params(void) {
            "\"vertex_update_over_load\": %.3f, \"refits\": %u, \"target_spectral_update_us\": 50, "
            "\"meets_target\": %s}\n",
            sh->mesh.n_faces, load_s, spectral_us, xf, vx, load_s / (spectral_us * 1e-6), vx / load_s, refits,
-           spectral_us <= 50 && load_s / (spectral_us * 1e-6) >= 1e4 && vx <= 0.3 * load_s ? "true" : "false");
+           spectral_us <= 50 && load_s / (spectral_us * 1e-6) >= 1e4 && vx <= 0.3 * load_s ? "true"
+                                                                                           : "false");
     fflush(stdout);
   }
   scene_free(s);

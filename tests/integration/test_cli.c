@@ -66,14 +66,16 @@ static void write_file(const char *path, const char *text) {
 static void test_render_seed_exr(void) {
   char out[128], err[4096];
   snprintf(out, sizeof out, "%s/seed.exr", tmpdir);
-  const char *args[] = {"render", "proto/examples/hdistant_seed.xml", "--spp", "16", "--seed", "3", "-o", out, NULL};
+  const char *args[] = {"render", "proto/examples/hdistant_seed.xml", "--spp", "16", "--seed", "3", "-o", out,
+                        NULL};
   int rc = run(err, sizeof err, args);
   REQUIRE(rc == 0, "exit %d: %s", rc, err);
   exr_image img;
   rsw_err e = {0};
   REQUIRE(exr_read_image(out, &img, &e) == RSW_OK, "read back: %s", e.msg);
   CHECK(img.width == 32 && img.height == 32, "32x32, got %dx%d", img.width, img.height);
-  CHECK(img.n_channels == 3 && exr_image_channel(&img, "R") >= 0 && exr_image_channel(&img, "B") >= 0, "RGB film");
+  CHECK(img.n_channels == 3 && exr_image_channel(&img, "R") >= 0 && exr_image_channel(&img, "B") >= 0,
+        "RGB film");
   const char *spp = exr_image_meta(&img, "raysweep:spp"), *sensor = exr_image_meta(&img, "raysweep:sensor");
   CHECK(spp && strcmp(spp, "16") == 0, "spp metadata: %s", spp ? spp : "(none)");
   CHECK(sensor && strcmp(sensor, "hdistant") == 0, "sensor metadata: %s", sensor ? sensor : "(none)");
@@ -86,8 +88,19 @@ static void test_render_seed_exr(void) {
 static void test_variant_and_wavelength(void) {
   char out[128], err[4096];
   snprintf(out, sizeof out, "%s/mono.exr", tmpdir);
-  const char *args[] = {"render", "proto/examples/hdistant_seed.xml", "--variant", "mono", "--wavelength", "600",
-                        "--spp", "4", "--threads", "1", "-o", out, NULL};
+  const char *args[] = {"render",
+                        "proto/examples/hdistant_seed.xml",
+                        "--variant",
+                        "mono",
+                        "--wavelength",
+                        "600",
+                        "--spp",
+                        "4",
+                        "--threads",
+                        "1",
+                        "-o",
+                        out,
+                        NULL};
   int rc = run(err, sizeof err, args);
   REQUIRE(rc == 0, "exit %d: %s", rc, err);
   exr_image img;
@@ -108,12 +121,14 @@ static void test_defines_and_sensor(void) {
              "  <default name=\"res\" value=\"4\"/>\n"
              "  <sensor type=\"radiancemeter\" id=\"meter\">\n"
              "    <point name=\"origin\" value=\"0, 0, 1\"/><vector name=\"direction\" value=\"0, 0, -1\"/>\n"
-             "    <film type=\"hdrfilm\"><integer name=\"width\" value=\"1\"/><integer name=\"height\" value=\"1\"/>\n"
+             "    <film type=\"hdrfilm\"><integer name=\"width\" value=\"1\"/><integer name=\"height\" "
+             "value=\"1\"/>\n"
              "      <string name=\"component_format\" value=\"float32\"/>\n"
              "      <rfilter type=\"box\"/></film>\n"
              "  </sensor>\n"
              "  <sensor type=\"hdistant\" id=\"hemi\">\n"
-             "    <film type=\"hdrfilm\"><integer name=\"width\" value=\"$res\"/><integer name=\"height\" value=\"$res\"/>\n"
+             "    <film type=\"hdrfilm\"><integer name=\"width\" value=\"$res\"/><integer name=\"height\" "
+             "value=\"$res\"/>\n"
              "      <rfilter type=\"box\"/></film>\n"
              "  </sensor>\n"
              "  <emitter type=\"directional\"><vector name=\"direction\" value=\"0, 0, -1\"/></emitter>\n"
@@ -125,7 +140,8 @@ static void test_defines_and_sensor(void) {
   exr_image img;
   rsw_err e = {0};
   REQUIRE(exr_read_image(out, &img, &e) == RSW_OK, "read back: %s", e.msg);
-  CHECK(img.width == 6 && img.height == 6, "-D res=6 overrides the default 4: got %dx%d", img.width, img.height);
+  CHECK(img.width == 6 && img.height == 6, "-D res=6 overrides the default 4: got %dx%d", img.width,
+        img.height);
   exr_image_free(&img);
   /* By index, and the first sensor by default. */
   const char *args2[] = {"render", scene, "--sensor", "0", "--spp", "2", "-o", out, NULL};
@@ -143,17 +159,17 @@ static void test_failure_leaves_no_file(void) {
   snprintf(scene, sizeof scene, "%s/oob.json", tmpdir);
   snprintf(out, sizeof out, "%s/never.exr", tmpdir);
   /* Loads, but the render fails: the wavelength lies outside the table. */
-  write_file(scene,
-             "{\"type\": \"scene\", \"variant\": \"mono\","
-             " \"s\": {\"type\": \"radiancemeter\", \"origin\": [0, 0, 1], \"direction\": [0, 0, -1],"
-             "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}},"
-             " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1]},"
-             " \"p\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\","
-             "   \"reflectance\": {\"type\": \"spectrum\", \"value\": [[500, 0.1], [600, 0.2]]}}}}");
+  write_file(scene, "{\"type\": \"scene\", \"variant\": \"mono\","
+                    " \"s\": {\"type\": \"radiancemeter\", \"origin\": [0, 0, 1], \"direction\": [0, 0, -1],"
+                    "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}},"
+                    " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1]},"
+                    " \"p\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\","
+                    "   \"reflectance\": {\"type\": \"spectrum\", \"value\": [[500, 0.1], [600, 0.2]]}}}}");
   const char *args[] = {"render", scene, "--wavelength", "700", "-o", out, NULL};
   int rc = run(err, sizeof err, args);
   CHECK(rc == 1, "exit %d", rc);
-  CHECK(strstr(err, "700") && strstr(err, "/p/bsdf/reflectance"), "error names the wavelength and the property: %s", err);
+  CHECK(strstr(err, "700") && strstr(err, "/p/bsdf/reflectance"),
+        "error names the wavelength and the property: %s", err);
   CHECK(!exists(out), "no output file after a failed render");
   /* An unwritable output: clear error, nothing left behind. */
   char bad[160];

@@ -698,7 +698,8 @@ static void test_wait_timeout_stop_cancel(void) {
    * an upper bound on the time a loaded machine takes). */
   rsw_job_status js;
   memset(&js, 0, sizeof js);
-  bool still = rsw_job_get(c, job, &js) == RSW_OK && (js.state == RSW_JOB_RUNNING || js.state == RSW_JOB_QUEUED);
+  bool still =
+      rsw_job_get(c, job, &js) == RSW_OK && (js.state == RSW_JOB_RUNNING || js.state == RSW_JOB_QUEUED);
   CHECK(s == RSW_ERR_TIMEOUT && dt >= 0.25 && still, "wait with a 0.3 s limit: %s after %.2f s, job %s",
         rsw_strerror(s), dt, still ? "still running" : "over");
   /* The callback stops the wait at its first context; the job runs on. */

@@ -207,9 +207,9 @@ typedef struct req {
   const char *accept; /* NULL: curl's default (Accept: * / *) */
   const char *hdr[6]; /* extra request headers, "Name: value" */
   const void *body;
-  size_t len;         /* 0 with body: strlen(body) */
-  double timeout_s;   /* default 30 */
-  bool sse;           /* stop reading after the SSE `end` event */
+  size_t len;       /* 0 with body: strlen(body) */
+  double timeout_s; /* default 30 */
+  bool sse;         /* stop reading after the SSE `end` event */
 } req;
 
 typedef struct resp {
@@ -322,20 +322,26 @@ static resp do_req(const daemon_proc *d, req q) {
   double t0 = now_s();
   CURLcode cc = curl_easy_perform(c);
   r.secs = now_s() - t0;
-  if (cc == CURLE_OK || (q.sse && cc == CURLE_WRITE_ERROR)) curl_easy_getinfo(c, CURLINFO_RESPONSE_CODE, &r.status);
-  else fprintf(stdout, "  %s %s: %s\n", method, q.path, curl_easy_strerror(cc));
+  if (cc == CURLE_OK || (q.sse && cc == CURLE_WRITE_ERROR))
+    curl_easy_getinfo(c, CURLINFO_RESPONSE_CODE, &r.status);
+  else
+    fprintf(stdout, "  %s %s: %s\n", method, q.path, curl_easy_strerror(cc));
   curl_slist_free_all(h);
   curl_easy_cleanup(c);
   if (!r.body) r.body = calloc(1, 1);
   return r;
 }
 
-static resp get(const daemon_proc *d, const char *path) { return do_req(d, (req){.path = path}); }
+static resp get(const daemon_proc *d, const char *path) {
+  return do_req(d, (req){.path = path});
+}
 static resp post_json(const daemon_proc *d, const char *path, const char *body) {
   return do_req(d, (req){.method = "POST", .path = path, .body = body});
 }
 
-static cJSON *jparse(const resp *r) { return r->body ? cJSON_ParseWithLength(r->body, r->len) : NULL; }
+static cJSON *jparse(const resp *r) {
+  return r->body ? cJSON_ParseWithLength(r->body, r->len) : NULL;
+}
 static const char *jstr(const cJSON *o, const char *k) {
   const cJSON *v = cJSON_GetObjectItemCaseSensitive(o, k);
   return cJSON_IsString(v) ? v->valuestring : NULL;
@@ -348,20 +354,22 @@ static bool jstr_is(const cJSON *o, const char *k, const char *want) {
   const char *s = jstr(o, k);
   return s && strcmp(s, want) == 0;
 }
-static bool starts_with(const char *s, const char *p) { return s && strncmp(s, p, strlen(p)) == 0; }
+static bool starts_with(const char *s, const char *p) {
+  return s && strncmp(s, p, strlen(p)) == 0;
+}
 
 /* An RFC 9457 body with the status of the response. */
-#define CHECK_PROBLEM(r, want, what)                                                                          \
-  do {                                                                                                        \
-    char ct_[128];                                                                                            \
-    CHECK((r).status == (want), "%s: status %ld, want %d; body %.300s", what, (r).status, want, (r).body);    \
-    hdr(&(r), "Content-Type", ct_, sizeof ct_);                                                               \
-    CHECK(starts_with(ct_, "application/problem+json"), "%s: Content-Type '%s'", what, ct_);                  \
-    cJSON *p_ = jparse(&(r));                                                                                 \
-    CHECK(p_ && jnum(p_, "status") == (want), "%s: problem status field: %.300s", what, (r).body);            \
-    CHECK(p_ && jstr(p_, "type") && jstr(p_, "title") && jstr(p_, "detail") && jstr(p_, "code"),              \
-          "%s: problem has type, title, detail, code: %.300s", what, (r).body);                               \
-    cJSON_Delete(p_);                                                                                         \
+#define CHECK_PROBLEM(r, want, what)                                                                         \
+  do {                                                                                                       \
+    char ct_[128];                                                                                           \
+    CHECK((r).status == (want), "%s: status %ld, want %d; body %.300s", what, (r).status, want, (r).body);   \
+    hdr(&(r), "Content-Type", ct_, sizeof ct_);                                                              \
+    CHECK(starts_with(ct_, "application/problem+json"), "%s: Content-Type '%s'", what, ct_);                 \
+    cJSON *p_ = jparse(&(r));                                                                                \
+    CHECK(p_ &&jnum(p_, "status") == (want), "%s: problem status field: %.300s", what, (r).body);            \
+    CHECK(p_ &&jstr(p_, "type") && jstr(p_, "title") && jstr(p_, "detail") && jstr(p_, "code"),              \
+          "%s: problem has type, title, detail, code: %.300s", what, (r).body);                              \
+    cJSON_Delete(p_);                                                                                        \
   } while (0)
 
 /* ---- scenes and jobs ----------------------------------------------------------------- */
@@ -394,8 +402,10 @@ static long post_scene(const daemon_proc *d, const char *doc, const char *ctype,
   resp r = do_req(d, (req){.method = "POST", .path = "/v1/scenes", .body = doc, .ctype = ctype});
   cJSON *j = jparse(&r);
   id_out[0] = '\0';
-  if ((r.status == 200 || r.status == 201) && jstr(j, "id")) snprintf(id_out, 65, "%s", jstr(j, "id"));
-  else fprintf(stdout, "  POST /v1/scenes: %ld %.400s\n", r.status, r.body);
+  if ((r.status == 200 || r.status == 201) && jstr(j, "id"))
+    snprintf(id_out, 65, "%s", jstr(j, "id"));
+  else
+    fprintf(stdout, "  POST /v1/scenes: %ld %.400s\n", r.status, r.body);
   long st = r.status;
   cJSON_Delete(j);
   resp_free(&r);
@@ -430,7 +440,8 @@ static bool default_scene(const daemon_proc *d, char *id) {
 }
 
 /* Submit a job; returns the status; job id into job (128 bytes). */
-static long submit_job(const daemon_proc *d, const char *scene, const char *body, const char *idem, char *job) {
+static long submit_job(const daemon_proc *d, const char *scene, const char *body, const char *idem,
+                       char *job) {
   char path[256], ik[160];
   snprintf(path, sizeof path, "/v1/scenes/%s/jobs", scene);
   req q = {.method = "POST", .path = path, .body = body};
@@ -441,7 +452,8 @@ static long submit_job(const daemon_proc *d, const char *scene, const char *body
   resp r = do_req(d, q);
   cJSON *j = jparse(&r);
   job[0] = '\0';
-  if (r.status == 202 && jstr(j, "id")) snprintf(job, 128, "%s", jstr(j, "id"));
+  if (r.status == 202 && jstr(j, "id"))
+    snprintf(job, 128, "%s", jstr(j, "id"));
   else if (r.status != 429 && r.status != 409)
     fprintf(stdout, "  POST %s: %ld %.400s\n", path, r.status, r.body);
   long st = r.status;
@@ -451,8 +463,8 @@ static long submit_job(const daemon_proc *d, const char *scene, const char *body
 }
 
 static bool terminal(const char *state) {
-  return state && (strcmp(state, "succeeded") == 0 || strcmp(state, "failed") == 0 ||
-                   strcmp(state, "cancelled") == 0);
+  return state &&
+         (strcmp(state, "succeeded") == 0 || strcmp(state, "failed") == 0 || strcmp(state, "cancelled") == 0);
 }
 
 /* Poll GET /v1/jobs/{id} until the state is final (or timeout_s); returns
@@ -560,7 +572,8 @@ static bool npy_parse(const resp *r, int sh[3], const float **data, size_t *n) {
   return *n == (size_t)sh[0] * (size_t)sh[1] * (size_t)sh[2];
 }
 
-static resp result(const daemon_proc *d, const char *job, const char *ctx, const char *sensor, const char *accept) {
+static resp result(const daemon_proc *d, const char *job, const char *ctx, const char *sensor,
+                   const char *accept) {
   char path[512];
   snprintf(path, sizeof path, "/v1/jobs/%s/results/%s/%s", job, ctx, sensor);
   return do_req(d, (req){.path = path, .accept = accept});
@@ -620,9 +633,14 @@ static void test_metrics(void) {
   /* The issue's list: requests by route and status, scenes resident and
    * their bytes, jobs by state, contexts rendered, render seconds, update
    * seconds by class, queue depth. */
-  const char *names[] = {"raysweep_http_requests_total", "raysweep_scenes_resident", "raysweep_scene_bytes",
-                         "raysweep_jobs", "raysweep_contexts_rendered_total", "raysweep_render_seconds_total",
-                         "raysweep_update_seconds_total", "raysweep_queue_depth"};
+  const char *names[] = {"raysweep_http_requests_total",
+                         "raysweep_scenes_resident",
+                         "raysweep_scene_bytes",
+                         "raysweep_jobs",
+                         "raysweep_contexts_rendered_total",
+                         "raysweep_render_seconds_total",
+                         "raysweep_update_seconds_total",
+                         "raysweep_queue_depth"};
   for (size_t i = 0; i < sizeof names / sizeof *names; i++)
     CHECK(strstr(r.body, names[i]) != NULL, "metric %s present", names[i]);
   /* Values after the tests before this one: requests counted by route
@@ -630,7 +648,8 @@ static void test_metrics(void) {
    * spectral updates (the PATCHes). */
   CHECK(strstr(r.body, "raysweep_http_requests_total{route=\"") && strstr(r.body, "status=\"200\"}"),
         "requests labelled by route and status");
-  CHECK(!strstr(r.body, "route=\"/v1/jobs/job-") && strstr(r.body, "{id}"), "routes are templates, not concrete paths");
+  CHECK(!strstr(r.body, "route=\"/v1/jobs/job-") && strstr(r.body, "{id}"),
+        "routes are templates, not concrete paths");
   double v;
   const char *p = strstr(r.body, "\nraysweep_scenes_resident ");
   CHECK(p && sscanf(p, "\nraysweep_scenes_resident %lf", &v) == 1 && v >= 3, "scenes resident: %s",
@@ -682,13 +701,15 @@ static void test_scenes_json(void) {
   j = jparse(&r);
   bool listed = false;
   const cJSON *it;
-  cJSON_ArrayForEach(it, cJSON_GetObjectItemCaseSensitive(j, "scenes")) if (jstr_is(it, "id", sid)) listed = true;
+  cJSON_ArrayForEach(it, cJSON_GetObjectItemCaseSensitive(j, "scenes")) if (jstr_is(it, "id", sid)) listed =
+      true;
   CHECK(r.status == 200 && listed, "GET /v1/scenes lists it: %ld", r.status);
   cJSON_Delete(j);
   resp_free(&r);
   r = get(&main_d, want_loc);
   j = jparse(&r);
-  CHECK(r.status == 200 && jstr_is(j, "id", sid) && jstr_is(j, "variant", "mono"), "GET scene: %ld", r.status);
+  CHECK(r.status == 200 && jstr_is(j, "id", sid) && jstr_is(j, "variant", "mono"), "GET scene: %ld",
+        r.status);
   CHECK(jnum(j, "shapes") == 1 && jnum(j, "emitters") == 1, "1 shape, 1 emitter: %.300s", r.body);
   CHECK(jnum(j, "params") > 0 && jnum(j, "resident_bytes") > 0 && jnum(j, "load_seconds") >= 0,
         "params, resident_bytes, load_seconds: %.300s", r.body);
@@ -723,14 +744,17 @@ static void test_scenes_xml_seed(void) {
   /* Render it: rgb, 32x32. */
   char path[256], body[256];
   snprintf(path, sizeof path, "/v1/scenes/%s:render", id1);
-  resp r = do_req(&main_d, (req){.method = "POST", .path = path, .body = jq(body, sizeof body, "{'spp': 1}"),
+  resp r = do_req(&main_d, (req){.method = "POST",
+                                 .path = path,
+                                 .body = jq(body, sizeof body, "{'spp': 1}"),
                                  .accept = "application/json"});
   film f = {0};
   CHECK(r.status == 200 && film_from_json(&r, &f), "render seed: %ld", r.status);
   if (f.doc) {
     const cJSON *ch = cJSON_GetObjectItemCaseSensitive(f.doc, "channels");
     CHECK(f.w == 32 && f.h == 32 && f.c == 3, "32x32x3, got %dx%dx%d", f.w, f.h, f.c);
-    CHECK(cJSON_IsString(cJSON_GetArrayItem(ch, 0)) && strcmp(cJSON_GetArrayItem(ch, 0)->valuestring, "R") == 0,
+    CHECK(cJSON_IsString(cJSON_GetArrayItem(ch, 0)) &&
+              strcmp(cJSON_GetArrayItem(ch, 0)->valuestring, "R") == 0,
           "channels R, G, B");
   }
   film_free(&f);
@@ -757,7 +781,8 @@ static void test_params_get_patch(void) {
              cJSON_IsArray(cJSON_GetObjectItemCaseSensitive(it, "shape")) &&
              cJSON_IsArray(cJSON_GetObjectItemCaseSensitive(it, "aliases"));
     }
-    if (jstr_is(it, "key", "plate.to_world")) xf = jstr_is(it, "class", "geometric") && jstr_is(it, "type", "transform");
+    if (jstr_is(it, "key", "plate.to_world"))
+      xf = jstr_is(it, "class", "geometric") && jstr_is(it, "type", "transform");
   }
   CHECK(refl, "plate.bsdf.reflectance.value: spectral spectrum 0.31 with shape, aliases: %.600s", r.body);
   CHECK(xf, "plate.to_world: geometric transform");
@@ -773,8 +798,8 @@ static void test_params_get_patch(void) {
     n++;
     if (!starts_with(jstr(it, "key"), "plate.") || !jstr_is(it, "class", "geometric")) bad++;
   }
-  CHECK(r.status == 200 && n >= 1 && bad == 0, "match=plate.*&class=geometric: %ld, %d entries, %d off", r.status,
-        n, bad);
+  CHECK(r.status == 200 && n >= 1 && bad == 0, "match=plate.*&class=geometric: %ld, %d entries, %d off",
+        r.status, n, bad);
   cJSON_Delete(j);
   resp_free(&r);
   /* PATCH with the current revision. */
@@ -820,8 +845,8 @@ static void test_params_get_patch(void) {
   cJSON_Delete(j);
   resp_free(&r);
   r = get(&main_d, path);
-  CHECK(strcmp(hdr(&r, "ETag", etag, sizeof etag), "\"1\"") == 0, "still revision 1 after the refused PATCHes: %s",
-        etag);
+  CHECK(strcmp(hdr(&r, "ETag", etag, sizeof etag), "\"1\"") == 0,
+        "still revision 1 after the refused PATCHes: %s", etag);
   resp_free(&r);
 }
 
@@ -944,8 +969,8 @@ static void test_directions(void) {
   CHECK(order_bad == 0, "row-major, iy outer (%d off)", order_bad);
   CHECK(unit_bad == 0, "unit vectors agreeing with zenith/azimuth (%d off)", unit_bad);
   const cJSON *c = cJSON_GetArrayItem(px, 2 * 5 + 2);
-  CHECK(fabs(jnum(c, "zenith_deg")) < 1e-3 && jnum(c, "z") > 0.999999, "centre pixel at zenith 0: zenith %g, z %g",
-        jnum(c, "zenith_deg"), jnum(c, "z"));
+  CHECK(fabs(jnum(c, "zenith_deg")) < 1e-3 && jnum(c, "z") > 0.999999,
+        "centre pixel at zenith 0: zenith %g, z %g", jnum(c, "zenith_deg"), jnum(c, "z"));
   struct {
     int ix, iy;
     double az;
@@ -956,7 +981,8 @@ static void test_directions(void) {
     double az = fmod(jnum(p, "azimuth_deg") + 360.0, 360.0);
     double d = fabs(az - ring[k].az);
     if (d > 180) d = 360 - d;
-    CHECK(d < 1e-3, "pixel (%d, %d): azimuth %g, want %g (east right)", ring[k].ix, ring[k].iy, az, ring[k].az);
+    CHECK(d < 1e-3, "pixel (%d, %d): azimuth %g, want %g (east right)", ring[k].ix, ring[k].iy, az,
+          ring[k].az);
     CHECK_ABS(jnum(p, "zenith_deg"), zen_ring, 1e-3);
   }
   cJSON_Delete(j);
@@ -984,7 +1010,8 @@ static void test_patch_equals_reload(void) {
   resp_free(&r);
   char ppath[256], pbody[128];
   snprintf(ppath, sizeof ppath, "/v1/scenes/%s/params", a);
-  r = do_req(&main_d, (req){.method = "PATCH", .path = ppath,
+  r = do_req(&main_d, (req){.method = "PATCH",
+                            .path = ppath,
                             .body = jq(pbody, sizeof pbody, "{'plate.bsdf.reflectance.value': 0.21}")});
   CHECK(r.status == 200, "PATCH: %ld %s", r.status, r.body);
   resp_free(&r);
@@ -1031,7 +1058,8 @@ static void test_jobs_routes(void) {
   snprintf(want, sizeof want, "/v1/jobs/%s", job);
   CHECK(strstr(hdr(&r, "Location", loc, sizeof loc), want) != NULL, "Location %s", loc);
   CHECK(jstr_is(j, "scene", id) && jnum(j, "revision") == 0 && jnum(j, "contexts_total") == 2 &&
-            jnum(j, "renders_total") == 4 && jstr(j, "created") && jstr(j, "href_results") && jstr(j, "href_events"),
+            jnum(j, "renders_total") == 4 && jstr(j, "created") && jstr(j, "href_results") &&
+            jstr(j, "href_events"),
         "Job body: %.500s", r.body);
   const char *st = jstr(j, "state");
   CHECK(st && (strcmp(st, "queued") == 0 || strcmp(st, "running") == 0 || strcmp(st, "succeeded") == 0),
@@ -1041,7 +1069,8 @@ static void test_jobs_routes(void) {
   j = wait_job(&main_d, job, 10);
   REQUIRE(j, "GET job");
   CHECK(jstr_is(j, "state", "succeeded") && jnum(j, "contexts_done") == 2 && jnum(j, "renders_done") == 4 &&
-            jnum(j, "renders_failed") == 0 && jstr(j, "started") && jstr(j, "finished") && jnum(j, "seconds") >= 0,
+            jnum(j, "renders_failed") == 0 && jstr(j, "started") && jstr(j, "finished") &&
+            jnum(j, "seconds") >= 0,
         "finished job: %s", jstr(j, "state"));
   cJSON_Delete(j);
   /* List. */
@@ -1049,7 +1078,8 @@ static void test_jobs_routes(void) {
   j = jparse(&r);
   bool listed = false;
   const cJSON *it;
-  cJSON_ArrayForEach(it, cJSON_GetObjectItemCaseSensitive(j, "jobs")) if (jstr_is(it, "id", job)) listed = true;
+  cJSON_ArrayForEach(it, cJSON_GetObjectItemCaseSensitive(j, "jobs")) if (jstr_is(it, "id", job)) listed =
+      true;
   CHECK(r.status == 200 && listed, "GET /v1/jobs lists it");
   cJSON_Delete(j);
   resp_free(&r);
@@ -1091,7 +1121,8 @@ static void test_jobs_routes(void) {
         "result NPY: %ld", r.status);
   resp_free(&r);
   r = result(&main_d, job, "b.2", "hemi", "image/x-exr");
-  CHECK(r.status == 200 && r.len > 4 && memcmp(r.body, "\x76\x2f\x31\x01", 4) == 0, "result EXR: %ld", r.status);
+  CHECK(r.status == 200 && r.len > 4 && memcmp(r.body, "\x76\x2f\x31\x01", 4) == 0, "result EXR: %ld",
+        r.status);
   resp_free(&r);
   r = result(&main_d, job, "b.2", "hemi", "image/png");
   CHECK_PROBLEM(r, 406, "result as image/png");
@@ -1129,8 +1160,8 @@ static const char *spectral_body(int from, int to, int seed) {
   char ctx[2048] = "";
   size_t off = 0;
   for (int i = from; i < to; i++)
-    off += (size_t)snprintf(ctx + off, sizeof ctx - off, "%s{'id': 'c%02d', 'wavelength': %.17g}", i > from ? ", " : "",
-                            i, 400.0 + 300.0 * i / 19.0);
+    off += (size_t)snprintf(ctx + off, sizeof ctx - off, "%s{'id': 'c%02d', 'wavelength': %.17g}",
+                            i > from ? ", " : "", i, 400.0 + 300.0 * i / 19.0);
   return jq(spectral_job_body, sizeof spectral_job_body,
             "{'contexts': [%s], 'defaults': {'spp': 2},"
             " 'params': {'plate.bsdf.reflectance.value': {'wavelengths': [400, 700], 'values': [0.2, 0.8]}},"
@@ -1387,8 +1418,8 @@ static void test_busy_scene_responsive(void) {
   REQUIRE(plate_scene(&main_d, "0.55", id), "scene");
   REQUIRE(submit_job(&main_d, id, hemi_job_body(body, sizeof body, 1, 60.0), NULL, job) == 202, "submit");
   CHECK(wait_running(&main_d, job, 30), "job starts running");
-  long st = submit_job(&main_d, id, jq(body, sizeof body, "{'contexts': [{'id': 'q'}], 'defaults': {'spp': 1}}"),
-                       NULL, job2);
+  long st = submit_job(
+      &main_d, id, jq(body, sizeof body, "{'contexts': [{'id': 'q'}], 'defaults': {'spp': 1}}"), NULL, job2);
   snprintf(path, sizeof path, "/v1/jobs/%s", job);
   resp g = get(&main_d, path);
   cJSON *j = jparse(&g);
@@ -1417,7 +1448,9 @@ static void test_busy_scene_responsive(void) {
 static void test_cancel(void) {
   char id[65], job[128], body[4096], path[256];
   REQUIRE(default_scene(&main_d, id), "default scene");
-  REQUIRE(submit_job(&main_d, id, long_job_body(body, sizeof body, 20, (int)(2.0 * plate_sps / 1024) + 1), NULL, job) == 202, "submit");
+  REQUIRE(submit_job(&main_d, id, long_job_body(body, sizeof body, 20, (int)(2.0 * plate_sps / 1024) + 1),
+                     NULL, job) == 202,
+          "submit");
   CHECK(wait_running(&main_d, job, 10), "job starts running");
   sleep_ms(100);
   snprintf(path, sizeof path, "/v1/jobs/%s:cancel", job);
@@ -1434,8 +1467,9 @@ static void test_cancel(void) {
   cJSON_Delete(j);
   /* The daemon is free again: a small render answers promptly. */
   snprintf(path, sizeof path, "/v1/scenes/%s:render", id);
-  r = do_req(&main_d, (req){.method = "POST", .path = path, .body = jq(body, sizeof body, "{'spp': 1}"),
-                            .timeout_s = 10});
+  r = do_req(
+      &main_d,
+      (req){.method = "POST", .path = path, .body = jq(body, sizeof body, "{'spp': 1}"), .timeout_s = 10});
   CHECK(r.status == 200, "render after the cancel: %ld", r.status);
   resp_free(&r);
 }
@@ -1459,10 +1493,14 @@ static void test_blobs(void) {
   CHECK(r.status == 200 && cJSON_GetArraySize(m) == 2, "both missing: %ld %.300s", r.status, r.body);
   cJSON_Delete(j);
   resp_free(&r);
-  r = do_req(&main_d, (req){.method = "PUT", .path = path, .body = ply, .len = len, .ctype = "application/octet-stream"});
+  r = do_req(
+      &main_d,
+      (req){.method = "PUT", .path = path, .body = ply, .len = len, .ctype = "application/octet-stream"});
   CHECK(r.status == 201, "PUT: %ld %.300s", r.status, r.body);
   resp_free(&r);
-  r = do_req(&main_d, (req){.method = "PUT", .path = path, .body = ply, .len = len, .ctype = "application/octet-stream"});
+  r = do_req(
+      &main_d,
+      (req){.method = "PUT", .path = path, .body = ply, .len = len, .ctype = "application/octet-stream"});
   CHECK(r.status == 200, "PUT again: %ld", r.status);
   resp_free(&r);
   r = do_req(&main_d, (req){.method = "HEAD", .path = path});
@@ -1479,7 +1517,9 @@ static void test_blobs(void) {
   /* Wrong digest: 422, nothing stored. */
   char wrong[256];
   snprintf(wrong, sizeof wrong, "/v1/blobs/%s", other);
-  r = do_req(&main_d, (req){.method = "PUT", .path = wrong, .body = ply, .len = len, .ctype = "application/octet-stream"});
+  r = do_req(
+      &main_d,
+      (req){.method = "PUT", .path = wrong, .body = ply, .len = len, .ctype = "application/octet-stream"});
   CHECK_PROBLEM(r, 422, "PUT with the wrong digest");
   resp_free(&r);
   r = do_req(&main_d, (req){.method = "HEAD", .path = wrong});
@@ -1519,11 +1559,10 @@ static void test_blobs(void) {
 }
 
 static void test_paths_outside_data_root(void) {
-  const char *fmt =
-      "{'type': 'scene', 'variant': 'mono',"
-      " 'meter': {'type': 'distant', 'direction': [0, 0, -1],"
-      "   'film': {'type': 'hdrfilm', 'width': 1, 'height': 1}},"
-      " 'm': {'type': 'ply', 'filename': '%s'}}";
+  const char *fmt = "{'type': 'scene', 'variant': 'mono',"
+                    " 'meter': {'type': 'distant', 'direction': [0, 0, -1],"
+                    "   'film': {'type': 'hdrfilm', 'width': 1, 'height': 1}},"
+                    " 'm': {'type': 'ply', 'filename': '%s'}}";
   char ply_abs[256];
   /* A real PLY, but outside --data-root (tmpdir/data). */
   snprintf(ply_abs, sizeof ply_abs, "%s/outside.ply", tmpdir);
@@ -1531,7 +1570,8 @@ static void test_paths_outside_data_root(void) {
   char *ply = read_file("tests/data/quad_le.ply", &len);
   if (ply) write_bytes(ply_abs, ply, len);
   free(ply);
-  const char *names[] = {"../../etc/passwd", "/etc/passwd", "../outside.ply", ply_abs, "sub/../../outside.ply"};
+  const char *names[] = {"../../etc/passwd", "/etc/passwd", "../outside.ply", ply_abs,
+                         "sub/../../outside.ply"};
   for (size_t i = 0; i < sizeof names / sizeof *names; i++) {
     char doc[2048], what[300];
     jq(doc, sizeof doc, fmt, names[i]);
@@ -1578,8 +1618,10 @@ static void *client_main(void *p) {
   snprintf(ctx, sizeof ctx, "k%d-a", a->k);
   resp r = result(&main_d, job, ctx, "meter", "application/json");
   film f = {0};
-  if (r.status == 200 && film_from_json(&r, &f) && fabs(f.data[0] - 0.5 / PI) < 1e-5) a->ok = true;
-  else snprintf(a->why, sizeof a->why, "result %ld", r.status);
+  if (r.status == 200 && film_from_json(&r, &f) && fabs(f.data[0] - 0.5 / PI) < 1e-5)
+    a->ok = true;
+  else
+    snprintf(a->why, sizeof a->why, "result %ld", r.status);
   film_free(&f);
   resp_free(&r);
   return NULL;
@@ -1604,7 +1646,9 @@ static void test_error_400(void) {
   resp r = post_json(&main_d, "/v1/scenes", "{\"type\": \"scene\", ");
   CHECK_PROBLEM(r, 400, "truncated JSON scene");
   resp_free(&r);
-  r = do_req(&main_d, (req){.method = "POST", .path = "/v1/scenes", .body = "<scene version=\"3.0.0\"><shape",
+  r = do_req(&main_d, (req){.method = "POST",
+                            .path = "/v1/scenes",
+                            .body = "<scene version=\"3.0.0\"><shape",
                             .ctype = "application/xml"});
   CHECK_PROBLEM(r, 400, "truncated XML scene");
   resp_free(&r);
@@ -1618,7 +1662,8 @@ static void test_error_400(void) {
 }
 
 static void test_error_404(void) {
-  const char *paths[] = {"/v1/nothing", "/v2", "/v1/scenes/0000000000000000000000000000000000000000000000000000000000000000",
+  const char *paths[] = {"/v1/nothing", "/v2",
+                         "/v1/scenes/0000000000000000000000000000000000000000000000000000000000000000",
                          "/v1/jobs/no-such-job", "/v1/jobs/no-such-job/results"};
   for (size_t i = 0; i < sizeof paths / sizeof *paths; i++) {
     resp r = get(&main_d, paths[i]);
@@ -1651,7 +1696,9 @@ static void test_error_406(void) {
   char id[65], path[256], body[64];
   REQUIRE(plate_scene(&main_d, "0.5", id), "scene");
   snprintf(path, sizeof path, "/v1/scenes/%s:render", id);
-  resp r = do_req(&main_d, (req){.method = "POST", .path = path, .body = jq(body, sizeof body, "{'spp': 1}"),
+  resp r = do_req(&main_d, (req){.method = "POST",
+                                 .path = path,
+                                 .body = jq(body, sizeof body, "{'spp': 1}"),
                                  .accept = "image/png"});
   CHECK_PROBLEM(r, 406, "render as image/png");
   resp_free(&r);
@@ -1665,12 +1712,13 @@ static void test_error_409(void) {
   snprintf(path, sizeof path, "/v1/scenes/%s", id);
   resp r = do_req(&main_d, (req){.method = "DELETE", .path = path});
   CHECK_PROBLEM(r, 409, "DELETE a scene with an active job");
-  CHECK(r.body && strstr(r.body, job) && strstr(r.body, "force=true"), "the 409 names the job and force=true: %.300s",
-        r.body ? r.body : "");
+  CHECK(r.body && strstr(r.body, job) && strstr(r.body, "force=true"),
+        "the 409 names the job and force=true: %.300s", r.body ? r.body : "");
   resp_free(&r);
   r = get(&main_d, path);
   cJSON *j = jparse(&r);
-  CHECK(r.status == 200 && jnum(j, "jobs_active") >= 1, "scene still there, jobs_active %g", jnum(j, "jobs_active"));
+  CHECK(r.status == 200 && jnum(j, "jobs_active") >= 1, "scene still there, jobs_active %g",
+        jnum(j, "jobs_active"));
   cJSON_Delete(j);
   resp_free(&r);
   snprintf(path, sizeof path, "/v1/scenes/%s?force=true", id);
@@ -1686,7 +1734,8 @@ static void test_error_409(void) {
   snprintf(key, sizeof key, "itest-%d", (int)getpid());
   jq(body2, sizeof body2, "{'contexts': [{'id': 'i0'}], 'defaults': {'spp': 1}}");
   REQUIRE(submit_job(&main_d, id, body2, key, job) == 202, "first with the key");
-  CHECK(submit_job(&main_d, id, body2, key, job2) == 202 && strcmp(job, job2) == 0, "same key, same body: same job");
+  CHECK(submit_job(&main_d, id, body2, key, job2) == 202 && strcmp(job, job2) == 0,
+        "same key, same body: same job");
   snprintf(path, sizeof path, "/v1/scenes/%s/jobs", id);
   char ik[96];
   snprintf(ik, sizeof ik, "Idempotency-Key: %s", key);
@@ -1698,7 +1747,8 @@ static void test_error_409(void) {
 }
 
 static void test_error_415(void) {
-  resp r = do_req(&main_d, (req){.method = "POST", .path = "/v1/scenes", .body = "scene", .ctype = "text/plain"});
+  resp r =
+      do_req(&main_d, (req){.method = "POST", .path = "/v1/scenes", .body = "scene", .ctype = "text/plain"});
   CHECK_PROBLEM(r, 415, "text/plain scene");
   resp_free(&r);
 }
@@ -1726,7 +1776,8 @@ static void test_error_422(void) {
   r = post_json(&main_d, path, jq(body, sizeof body, "{'contexts': [{'id': 'a'}, {'id': 'a'}]}"));
   CHECK_PROBLEM(r, 422, "duplicate context id");
   resp_free(&r);
-  r = post_json(&main_d, path, jq(body, sizeof body, "{'contexts': [{'id': 'a', 'params': {'plate.nope': 1}}]}"));
+  r = post_json(&main_d, path,
+                jq(body, sizeof body, "{'contexts': [{'id': 'a', 'params': {'plate.nope': 1}}]}"));
   CHECK_PROBLEM(r, 422, "unknown key in a context");
   j = jparse(&r);
   CHECK(jstr_is(j, "key", "plate.nope"), "problem key: %.300s", r.body);
@@ -1756,7 +1807,8 @@ static void test_error_504(void) {
    * the deadline (an order: deadline, answer, then nothing left running),
    * with no latency assertion for a loaded machine to break. */
   long spp = 60.0 * plate_sps / 1024.0;
-  resp r = post_json(&main_d, path, jq(body, sizeof body, "{'spp': %ld, 'timeout_s': 0.05}", spp < 1 ? 1 : spp));
+  resp r =
+      post_json(&main_d, path, jq(body, sizeof body, "{'spp': %ld, 'timeout_s': 0.05}", spp < 1 ? 1 : spp));
   CHECK_PROBLEM(r, 504, "timeout_s exceeded");
   resp_free(&r);
   /* And the work stopped: a small render on the same scene (which waits
@@ -1768,7 +1820,8 @@ static void test_error_504(void) {
    * holds (it must not wait for the tile, nor answer 200 after it). */
   REQUIRE(plate_scene(&main_d, "0.5", id), "plate");
   snprintf(path, sizeof path, "/v1/scenes/%s:render", id);
-  r = post_json(&main_d, path, jq(body, sizeof body, "{'sensor': 'hemi', 'spp': %ld, 'timeout_s': 0.05}", hemi_spp(60.0)));
+  r = post_json(&main_d, path,
+                jq(body, sizeof body, "{'sensor': 'hemi', 'spp': %ld, 'timeout_s': 0.05}", hemi_spp(60.0)));
   CHECK_PROBLEM(r, 504, "timeout_s exceeded on a one-tile render");
   resp_free(&r);
 }
@@ -1877,8 +1930,8 @@ static void test_sigterm_main(void) {
   int rc = daemon_stop(&main_d, 30, &secs);
   CHECK(rc == 0, "main daemon exit status %d after SIGTERM (%.2f s)", rc, secs);
   char *log = read_file(main_d.log, NULL);
-  CHECK(log && strstr(log, "raysweepd: listening on http://127.0.0.1:"), "stderr announces the address: %.300s",
-        log ? log : "");
+  CHECK(log && strstr(log, "raysweepd: listening on http://127.0.0.1:"),
+        "stderr announces the address: %.300s", log ? log : "");
   free(log);
 }
 
@@ -1947,7 +2000,9 @@ int main(void) {
   curl_global_cleanup();
   char cmd[128];
   snprintf(cmd, sizeof cmd, "rm -rf %s", tmpdir);
-  if (getenv("RSW_KEEP_TMP")) fprintf(stderr, "kept %s\n", tmpdir);
-  else if (system(cmd)) fprintf(stderr, "could not remove %s\n", tmpdir);
+  if (getenv("RSW_KEEP_TMP"))
+    fprintf(stderr, "kept %s\n", tmpdir);
+  else if (system(cmd))
+    fprintf(stderr, "could not remove %s\n", tmpdir);
   RSW_TEST_END("test_http");
 }

@@ -24,8 +24,8 @@ static void test_scene_ids(void) {
   bool created = false;
   char *id = NULL, *json = NULL, *id2 = NULL, *json2 = NULL;
   svc_error e = {0};
-  REQUIRE(service_scene_post(svc, PLATE, strlen(PLATE), false, NULL, &created, &id, &json, &e) == RSW_OK, "post: %s",
-          e.err.msg);
+  REQUIRE(service_scene_post(svc, PLATE, strlen(PLATE), false, NULL, &created, &id, &json, &e) == RSW_OK,
+          "post: %s", e.err.msg);
   CHECK(created, "first post creates");
   CHECK(strlen(id) == 64, "id is a SHA-256 hex digest");
   /* Same document with other whitespace: same canonical form, same id. */
@@ -37,16 +37,19 @@ static void test_scene_ids(void) {
   CHECK(strcmp(id, id2) == 0, "same id");
   free(id2), free(json2);
   /* Another variant is another scene. */
-  REQUIRE(service_scene_post(svc, PLATE, strlen(PLATE), false, "rgb", &created, &id2, &json2, &e) == RSW_OK, "rgb");
+  REQUIRE(service_scene_post(svc, PLATE, strlen(PLATE), false, "rgb", &created, &id2, &json2, &e) == RSW_OK,
+          "rgb");
   CHECK(created && strcmp(id, id2) != 0, "variant is part of the id");
   CHECK(service_scene_delete(svc, id2, false, &e) == RSW_OK, "delete");
   free(id2), free(json2), free(spaced), free(id), free(json);
   /* A bad scene names the place. */
   svc_error e2 = {0};
   char *i3 = NULL, *j3 = NULL;
-  CHECK(service_scene_post(svc, "{\"s\": {\"type\": \"nope\"}}", 23, false, NULL, &created, &i3, &j3, &e2) != RSW_OK,
+  CHECK(service_scene_post(svc, "{\"s\": {\"type\": \"nope\"}}", 23, false, NULL, &created, &i3, &j3, &e2) !=
+            RSW_OK,
         "unknown plugin rejected");
-  CHECK(e2.http_status == 422 && strstr(e2.err.where, "/s"), "422 with pointer: %d %s", e2.http_status, e2.err.where);
+  CHECK(e2.http_status == 422 && strstr(e2.err.where, "/s"), "422 with pointer: %d %s", e2.http_status,
+        e2.err.where);
 }
 
 static char *post_plate(void) {
@@ -66,7 +69,8 @@ static void test_render_overrides_restore_base(void) {
   const char *q1 = "{\"spp\": 4, \"seed\": 1}";
   const char *q2 = "{\"spp\": 4, \"seed\": 1, \"params\": {\"plate.bsdf.reflectance.value\": 0.25}}";
   REQUIRE(service_render(svc, id, q1, strlen(q1), NULL, &a, &e) == RSW_OK, "render: %s", e.err.msg);
-  REQUIRE(service_render(svc, id, q2, strlen(q2), NULL, &b, &e) == RSW_OK, "render with override: %s", e.err.msg);
+  REQUIRE(service_render(svc, id, q2, strlen(q2), NULL, &b, &e) == RSW_OK, "render with override: %s",
+          e.err.msg);
   REQUIRE(service_render(svc, id, q1, strlen(q1), NULL, &c, &e) == RSW_OK, "render again: %s", e.err.msg);
   CHECK_REL(a.img.data[0], 0.5 / 3.14159265358979323846, 1e-5);
   CHECK_REL(b.img.data[0], 0.25 / 3.14159265358979323846, 1e-5);
@@ -78,7 +82,8 @@ static void test_render_overrides_restore_base(void) {
   svc_film d;
   CHECK(service_render(svc, id, q3, strlen(q3), NULL, &d, &e3) != RSW_OK, "unknown key rejected");
   CHECK(strcmp(e3.key, "plate.bsdf.reflectanse.value") == 0, "key named: %s", e3.key);
-  CHECK(strcmp(e3.candidates[0], "plate.bsdf.reflectance.value") == 0, "closest key first: %s", e3.candidates[0]);
+  CHECK(strcmp(e3.candidates[0], "plate.bsdf.reflectance.value") == 0, "closest key first: %s",
+        e3.candidates[0]);
   free(id);
 }
 
@@ -91,12 +96,14 @@ static void test_patch_revisions(void) {
   REQUIRE(service_params_get(svc, id, "*", NULL, &json, &rev, &e) == RSW_OK, "get");
   free(json);
   const char *patch = "{\"plate.bsdf.reflectance.value\": 0.3}";
-  REQUIRE(service_params_patch(svc, id, patch, strlen(patch), (int64_t)rev, &json, &rev2, &e) == RSW_OK, "patch: %s",
-          e.err.msg);
+  REQUIRE(service_params_patch(svc, id, patch, strlen(patch), (int64_t)rev, &json, &rev2, &e) == RSW_OK,
+          "patch: %s", e.err.msg);
   free(json);
-  CHECK(rev2 == rev + 1, "revision advances: %llu -> %llu", (unsigned long long)rev, (unsigned long long)rev2);
+  CHECK(rev2 == rev + 1, "revision advances: %llu -> %llu", (unsigned long long)rev,
+        (unsigned long long)rev2);
   svc_error e2 = {0};
-  CHECK(service_params_patch(svc, id, patch, strlen(patch), (int64_t)rev, &json, &rev2, &e2) == RSW_ERR_PRECONDITION,
+  CHECK(service_params_patch(svc, id, patch, strlen(patch), (int64_t)rev, &json, &rev2, &e2) ==
+            RSW_ERR_PRECONDITION,
         "stale If-Match");
   CHECK(e2.http_status == 412, "412");
   /* Back to 0.5 so the other tests see the base scene. */
@@ -116,12 +123,13 @@ static void test_job_spectral_loop(void) {
                               "{\"seed\": 3, \"params\": {\"plate.bsdf.reflectance.value\": "
                               "{\"wavelengths\": [400, 700], \"values\": [0.2, 0.8]}}, \"contexts\": [");
   for (int i = 0; i < 10; i++)
-    n += (size_t)snprintf(body + n, sizeof body - n, "%s{\"id\": \"w%d\", \"wavelength\": %d, \"spp\": 2}", i ? ", " : "",
-                          i, 400 + 30 * i);
+    n += (size_t)snprintf(body + n, sizeof body - n, "%s{\"id\": \"w%d\", \"wavelength\": %d, \"spp\": 2}",
+                          i ? ", " : "", i, 400 + 30 * i);
   snprintf(body + n, sizeof body - n, "]}");
   char *jid = NULL, *json = NULL;
   svc_error e = {0};
-  REQUIRE(service_job_submit(svc, id, body, strlen(body), NULL, &jid, &json, &e) == RSW_OK, "submit: %s", e.err.msg);
+  REQUIRE(service_job_submit(svc, id, body, strlen(body), NULL, &jid, &json, &e) == RSW_OK, "submit: %s",
+          e.err.msg);
   free(json);
   /* Follow the events to the end. */
   uint64_t after = 0, seq;

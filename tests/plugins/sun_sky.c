@@ -34,14 +34,20 @@
 /* Host services, set once by the entry function (read-only afterwards). */
 static const rsw_plugin_host *host;
 
-enum { P_SKY, P_SUN, P_SUN_DIRECTION, P_SHARPNESS, P_COUNT };
+enum {
+  P_SKY,
+  P_SUN,
+  P_SUN_DIRECTION,
+  P_SHARPNESS,
+  P_COUNT
+};
 
 static const rsw_plugin_param params[P_COUNT] = {
     [P_SKY] = {.name = "sky", .type = RSW_PARAM_FLOAT, .default_value = {0.1}, .min = 0, .max = INFINITY},
     [P_SUN] = {.name = "sun", .type = RSW_PARAM_FLOAT, .default_value = {10.0}, .min = 0, .max = INFINITY},
     [P_SUN_DIRECTION] = {.name = "sun_direction", .type = RSW_PARAM_VECTOR3, .default_value = {0, 0, 1}},
-    [P_SHARPNESS] = {.name = "sharpness", .type = RSW_PARAM_FLOAT, .default_value = {100.0}, .min = 0,
-                     .max = 1e6},
+    [P_SHARPNESS] =
+        {.name = "sharpness", .type = RSW_PARAM_FLOAT, .default_value = {100.0}, .min = 0, .max = 1e6},
 };
 
 typedef struct sunsky {
@@ -52,7 +58,9 @@ typedef struct sunsky {
   double s[3], t[3], a[3], p_sun;
 } sunsky;
 
-static double dot3(const double x[3], const double y[3]) { return x[0] * y[0] + x[1] * y[1] + x[2] * y[2]; }
+static double dot3(const double x[3], const double y[3]) {
+  return x[0] * y[0] + x[1] * y[1] + x[2] * y[2];
+}
 
 /* Check the parameters and compute the derived state; 0 or an error. */
 static int derive(sunsky *k, char *errbuf, size_t errlen) {
@@ -95,7 +103,9 @@ static int create(const double *const *values, void **instance, char *errbuf, si
   return 0;
 }
 
-static void destroy(void *instance) { free(instance); }
+static void destroy(void *instance) {
+  free(instance);
+}
 
 static int clone_instance(const void *instance, void **out, char *errbuf, size_t errlen) {
   sunsky *k = malloc(sizeof *k);

@@ -22,7 +22,9 @@ static int create(const double *const *values, void **instance, char *errbuf, si
   return 0;
 }
 
-static void destroy(void *instance) { (void)instance; }
+static void destroy(void *instance) {
+  (void)instance;
+}
 
 static void add_radiance(const void *instance, rsw_stokes_context *ctx, const double d[3]) {
   (void)instance;

@@ -31,12 +31,12 @@
 #define CHI2_POOL_THRESHOLD 5.0
 /* Samples may exceed the domain bounds by this fraction of its extents
  * (Mitsuba: 1e-4) before the run is failed. */
-#define CHI2_DOMAIN_EPS 1e-4
-#define CHI2_MAX_DIM 16
+#define CHI2_DOMAIN_EPS     1e-4
+#define CHI2_MAX_DIM        16
 /* Points per axis of the trapezoid rule in disk cells cut by the circle:
  * the integrand has a kink there, so the default ires would leave errors
  * of a few percent of the cell's count. */
-#define CHI2_BOUNDARY_IRES 49
+#define CHI2_BOUNDARY_IRES  49
 
 chi2_config chi2_defaults(chi2_domain domain, int sample_dim) {
   chi2_config c;
@@ -52,8 +52,7 @@ chi2_config chi2_defaults(chi2_domain domain, int sample_dim) {
 }
 
 /* Appends a failure reason ("; "-separated) and marks the result failed. */
-static void chi2_fail(chi2_result *r, const char *fmt, ...)
-    __attribute__((format(printf, 2, 3)));
+static void chi2_fail(chi2_result *r, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 static void chi2_fail(chi2_result *r, const char *fmt, ...) {
   r->passed = false;
   size_t len = strlen(r->reason);
@@ -201,8 +200,7 @@ static int cell_index(double t, int n) {
   return (int)c;
 }
 
-static void tabulate_histogram(const chi2_config *cfg, const chi2_grid *g,
-                               chi2_sample_fn sample, void *user,
+static void tabulate_histogram(const chi2_config *cfg, const chi2_grid *g, chi2_sample_fn sample, void *user,
                                double *hist, chi2_result *r) {
   size_t outside = 0, bad_weight = 0;
   double total = 0.0;
@@ -223,9 +221,7 @@ static void tabulate_histogram(const chi2_config *cfg, const chi2_grid *g,
     }
     double x, y;
     if (!map_backward(cfg->domain, p, &x, &y)) {
-      if (outside++ == 0)
-        chi2_fail(r, "sample %zu outside the domain: (%.9g, %.9g, %.9g)", i, p.x,
-                  p.y, p.z);
+      if (outside++ == 0) chi2_fail(r, "sample %zu outside the domain: (%.9g, %.9g, %.9g)", i, p.x, p.y, p.z);
       continue;
     }
     int cx = cell_index((x - g->xmin) / g->xext, g->nx);
@@ -250,8 +246,7 @@ static double trap_point(double a, double b, int i, int n, double *weight) {
 }
 
 /* Integral of the pdf over the sphere-domain cell [x0,x1] x [y0,y1]. */
-static double integrate_sphere_cell(const chi2_config *cfg, chi2_pdf_fn pdf,
-                                    void *user, double x0, double x1,
+static double integrate_sphere_cell(const chi2_config *cfg, chi2_pdf_fn pdf, void *user, double x0, double x1,
                                     double y0, double y1, int *bad_pdf) {
   double sum = 0.0;
   for (int j = 0; j < cfg->ires; j++) {
@@ -280,9 +275,8 @@ static double integrate_sphere_cell(const chi2_config *cfg, chi2_pdf_fn pdf,
  * cell that the circle crosses uses CHI2_BOUNDARY_IRES points per axis. A
  * cell that meets the disk in a set of positive area thus always gets a
  * positive expected count. */
-static double integrate_disk_cell(const chi2_config *cfg, chi2_pdf_fn pdf,
-                                  void *user, double x0, double x1, double y0,
-                                  double y1, int *bad_pdf) {
+static double integrate_disk_cell(const chi2_config *cfg, chi2_pdf_fn pdf, void *user, double x0, double x1,
+                                  double y0, double y1, int *bad_pdf) {
   double ymin_abs = (y0 <= 0.0 && y1 >= 0.0) ? 0.0 : fmin(fabs(y0), fabs(y1));
   if (ymin_abs >= 1.0) return 0.0;
   double xm = sqrt(1.0 - ymin_abs * ymin_abs);
@@ -311,9 +305,8 @@ static double integrate_disk_cell(const chi2_config *cfg, chi2_pdf_fn pdf,
   return sum;
 }
 
-static void tabulate_pdf(const chi2_config *cfg, const chi2_grid *g,
-                         chi2_pdf_fn pdf, void *user, double *expected,
-                         chi2_result *r) {
+static void tabulate_pdf(const chi2_config *cfg, const chi2_grid *g, chi2_pdf_fn pdf, void *user,
+                         double *expected, chi2_result *r) {
   double cw = g->xext / g->nx, ch = g->yext / g->ny;
   double n = (double)cfg->sample_count, total = 0.0;
   int bad_pdf = 0;
@@ -321,15 +314,13 @@ static void tabulate_pdf(const chi2_config *cfg, const chi2_grid *g,
     double y0 = g->ymin + cy * ch, y1 = y0 + ch;
     for (int cx = 0; cx < g->nx; cx++) {
       double x0 = g->xmin + cx * cw, x1 = x0 + cw;
-      double v = cfg->domain == CHI2_SPHERE
-                     ? integrate_sphere_cell(cfg, pdf, user, x0, x1, y0, y1, &bad_pdf)
-                     : integrate_disk_cell(cfg, pdf, user, x0, x1, y0, y1, &bad_pdf);
+      double v = cfg->domain == CHI2_SPHERE ? integrate_sphere_cell(cfg, pdf, user, x0, x1, y0, y1, &bad_pdf)
+                                            : integrate_disk_cell(cfg, pdf, user, x0, x1, y0, y1, &bad_pdf);
       expected[(size_t)cy * g->nx + cx] = v * n;
       total += v;
     }
   }
-  if (bad_pdf > 0)
-    chi2_fail(r, "pdf returned a negative or non-finite value at %d points", bad_pdf);
+  if (bad_pdf > 0) chi2_fail(r, "pdf returned a negative or non-finite value at %d points", bad_pdf);
   if (total > 1.1) chi2_fail(r, "pdf integrates to %g > 1.1", total);
 }
 
@@ -375,8 +366,7 @@ static double pooled_chi2(const chi2_cell *cells, size_t n, int *dof) {
   return stat;
 }
 
-chi2_result chi2_run(const chi2_config *cfg, chi2_sample_fn sample,
-                     chi2_pdf_fn pdf, void *user) {
+chi2_result chi2_run(const chi2_config *cfg, chi2_sample_fn sample, chi2_pdf_fn pdf, void *user) {
   chi2_result r;
   memset(&r, 0, sizeof r);
   r.passed = true;
@@ -390,13 +380,11 @@ chi2_result chi2_run(const chi2_config *cfg, chi2_sample_fn sample,
     return r;
   }
   if (cfg->sample_dim < 1 || cfg->sample_dim > CHI2_MAX_DIM) {
-    chi2_fail(&r, "chi2_config.sample_dim: %d not in [1, %d]", cfg->sample_dim,
-              CHI2_MAX_DIM);
+    chi2_fail(&r, "chi2_config.sample_dim: %d not in [1, %d]", cfg->sample_dim, CHI2_MAX_DIM);
     return r;
   }
   if (cfg->res < 2 || cfg->res > 4096 || cfg->ires < 2 || cfg->ires > 1024) {
-    chi2_fail(&r, "chi2_config.res/ires: %d/%d not in [2, 4096]/[2, 1024]", cfg->res,
-              cfg->ires);
+    chi2_fail(&r, "chi2_config.res/ires: %d/%d not in [2, 4096]/[2, 1024]", cfg->res, cfg->ires);
     return r;
   }
   if (cfg->sample_count < 1 || cfg->sample_count > UINT32_MAX) {
@@ -428,12 +416,11 @@ chi2_result chi2_run(const chi2_config *cfg, chi2_sample_fn sample,
     cells[i].index = i;
     if (expected[i] == 0.0 && hist[i] != 0.0) {
       if (zero_exp_hits++ == 0)
-        chi2_fail(&r, "cell (%zu, %zu) has expected count 0 but observed %g",
-                  i % (size_t)g.nx, i / (size_t)g.nx, hist[i]);
+        chi2_fail(&r, "cell (%zu, %zu) has expected count 0 but observed %g", i % (size_t)g.nx,
+                  i / (size_t)g.nx, hist[i]);
     }
   }
-  if (zero_exp_hits > 1)
-    chi2_fail(&r, "%zu cells with expected 0 hold samples", zero_exp_hits);
+  if (zero_exp_hits > 1) chi2_fail(&r, "%zu cells with expected 0 hold samples", zero_exp_hits);
   qsort(cells, ncells, sizeof *cells, cell_cmp);
 
   r.chi2 = pooled_chi2(cells, ncells, &r.dof);
@@ -447,8 +434,8 @@ chi2_result chi2_run(const chi2_config *cfg, chi2_sample_fn sample,
   int tests = cfg->test_count > 1 ? cfg->test_count : 1;
   double alpha = 1.0 - pow(1.0 - cfg->alpha, 1.0 / tests);
   if (r.passed && (!isfinite(r.p_value) || r.p_value < alpha))
-    chi2_fail(&r, "rejected: chi2 = %.6g, dof = %d, p = %.6g < alpha' = %.6g", r.chi2,
-              r.dof, r.p_value, alpha);
+    chi2_fail(&r, "rejected: chi2 = %.6g, dof = %d, p = %.6g < alpha' = %.6g", r.chi2, r.dof, r.p_value,
+              alpha);
 
 done:
   free(hist);

@@ -26,8 +26,7 @@
 
 #define SHIM_ __attribute__((weak))
 
-SHIM_ rsw_status ld_fail(loader *ld, node *n, const char *name, rsw_status code,
-                         const char *fmt, ...) {
+SHIM_ rsw_status ld_fail(loader *ld, node *n, const char *name, rsw_status code, const char *fmt, ...) {
   char msg[512];
   va_list ap;
   va_start(ap, fmt);
@@ -39,10 +38,11 @@ SHIM_ rsw_status ld_fail(loader *ld, node *n, const char *name, rsw_status code,
   return rsw_fail(ld->err, code, where, "%s", msg);
 }
 
-SHIM_ bool ld_has(const node *n, const char *name) { return node_find(n, name) != NULL; }
+SHIM_ bool ld_has(const node *n, const char *name) {
+  return node_find(n, name) != NULL;
+}
 
-static prop *shim_get_(loader *ld, node *n, const char *name, prop_kind kind,
-                       rsw_status *st) {
+static prop *shim_get_(loader *ld, node *n, const char *name, prop_kind kind, rsw_status *st) {
   prop *p = node_find(n, name);
   *st = RSW_OK;
   if (!p) return NULL;
@@ -64,8 +64,8 @@ SHIM_ rsw_status ld_float(loader *ld, node *n, const char *name, double def, dou
   return RSW_OK;
 }
 
-SHIM_ rsw_status ld_float_range(loader *ld, node *n, const char *name, double def,
-                                double lo, double hi, double *out) {
+SHIM_ rsw_status ld_float_range(loader *ld, node *n, const char *name, double def, double lo, double hi,
+                                double *out) {
   double v = 0;
   rsw_status st = ld_float(ld, n, name, def, &v);
   if (st != RSW_OK) return st;
@@ -74,8 +74,8 @@ SHIM_ rsw_status ld_float_range(loader *ld, node *n, const char *name, double de
   return RSW_OK;
 }
 
-SHIM_ rsw_status ld_int(loader *ld, node *n, const char *name, long long def, long long lo,
-                        long long hi, long long *out) {
+SHIM_ rsw_status ld_int(loader *ld, node *n, const char *name, long long def, long long lo, long long hi,
+                        long long *out) {
   rsw_status st;
   prop *p = shim_get_(ld, n, name, PROP_NUMBER, &st);
   if (st != RSW_OK) return st;
@@ -95,8 +95,7 @@ SHIM_ rsw_status ld_bool(loader *ld, node *n, const char *name, bool def, bool *
   return RSW_OK;
 }
 
-SHIM_ rsw_status ld_string(loader *ld, node *n, const char *name, const char *def,
-                           const char **out) {
+SHIM_ rsw_status ld_string(loader *ld, node *n, const char *name, const char *def, const char **out) {
   rsw_status st;
   prop *p = shim_get_(ld, n, name, PROP_STRING, &st);
   if (st != RSW_OK) return st;
@@ -104,8 +103,7 @@ SHIM_ rsw_status ld_string(loader *ld, node *n, const char *name, const char *de
   return RSW_OK;
 }
 
-SHIM_ rsw_status ld_vec3(loader *ld, node *n, const char *name, vec3 def, vec3 *out,
-                         bool *present) {
+SHIM_ rsw_status ld_vec3(loader *ld, node *n, const char *name, vec3 def, vec3 *out, bool *present) {
   rsw_status st;
   prop *p = shim_get_(ld, n, name, PROP_VEC3, &st);
   if (st != RSW_OK) return st;
@@ -114,8 +112,7 @@ SHIM_ rsw_status ld_vec3(loader *ld, node *n, const char *name, vec3 def, vec3 *
   return RSW_OK;
 }
 
-SHIM_ rsw_status ld_transform(loader *ld, node *n, const char *name, xform *out,
-                              bool *present) {
+SHIM_ rsw_status ld_transform(loader *ld, node *n, const char *name, xform *out, bool *present) {
   rsw_status st;
   prop *p = shim_get_(ld, n, name, PROP_TRANSFORM, &st);
   if (st != RSW_OK) return st;
@@ -129,14 +126,12 @@ SHIM_ rsw_status ld_path(loader *ld, node *n, const char *name, char **out) {
   return ld_fail(ld, n, name, RSW_ERR_UNSUPPORTED, "test loader: no files");
 }
 
-SHIM_ rsw_status ld_texture(loader *ld, node *n, const char *name, double def, double lo,
-                            texture **out) {
+SHIM_ rsw_status ld_texture(loader *ld, node *n, const char *name, double def, double lo, texture **out) {
   (void)def, (void)lo, (void)out;
   return ld_fail(ld, n, name, RSW_ERR_UNSUPPORTED, "test loader: no textures");
 }
 
-SHIM_ rsw_status ld_texture_opt(loader *ld, node *n, const char *name, double lo,
-                                texture **out) {
+SHIM_ rsw_status ld_texture_opt(loader *ld, node *n, const char *name, double lo, texture **out) {
   (void)lo, (void)out;
   return ld_fail(ld, n, name, RSW_ERR_UNSUPPORTED, "test loader: no textures");
 }
@@ -156,7 +151,9 @@ SHIM_ rsw_status ld_adopt(loader *ld, object *o) {
 
 /* Stand-in geometry for a shape plugin that is not linked yet: the unit
  * disk at the origin (area pi, normal +z). */
-static void shim_shape_destroy_(object *o) { free(o); }
+static void shim_shape_destroy_(object *o) {
+  free(o);
+}
 static const plugin shim_shape_plugin_ = {
     .name = "shim-disk", .cls = CLS_SHAPE, .destroy = shim_shape_destroy_};
 
@@ -194,8 +191,7 @@ static obj_class shim_class_of_(const node *c) {
   return pl ? pl->cls : CLS_SHAPE;
 }
 
-SHIM_ rsw_status ld_child(loader *ld, node *n, const char *name, obj_class cls,
-                          object **out) {
+SHIM_ rsw_status ld_child(loader *ld, node *n, const char *name, obj_class cls, object **out) {
   *out = NULL;
   if (name) {
     prop *p = node_find(n, name);
@@ -209,8 +205,7 @@ SHIM_ rsw_status ld_child(loader *ld, node *n, const char *name, obj_class cls,
   for (size_t i = 0; i < n->n_props; i++) {
     prop *p = &n->props[i];
     if (p->kind != PROP_NODE || shim_class_of_(p->child) != cls) continue;
-    if (found)
-      return ld_fail(ld, n, p->name, RSW_ERR_DUPLICATE, "more than one %s", obj_class_name(cls));
+    if (found) return ld_fail(ld, n, p->name, RSW_ERR_DUPLICATE, "more than one %s", obj_class_name(cls));
     found = p;
   }
   if (!found) return RSW_OK;
@@ -218,14 +213,13 @@ SHIM_ rsw_status ld_child(loader *ld, node *n, const char *name, obj_class cls,
   return shim_build_(ld, found->child, cls, out);
 }
 
-SHIM_ rsw_status ld_children(loader *ld, node *n, obj_class cls, object ***out,
-                             size_t *count) {
+SHIM_ rsw_status ld_children(loader *ld, node *n, obj_class cls, object ***out, size_t *count) {
   (void)cls, (void)out, (void)count;
   return ld_fail(ld, n, NULL, RSW_ERR_UNSUPPORTED, "test loader: no child lists");
 }
 
-SHIM_ rsw_status ld_create_default(loader *ld, const char *type, obj_class cls,
-                                   const char *id, object **out) {
+SHIM_ rsw_status ld_create_default(loader *ld, const char *type, obj_class cls, const char *id,
+                                   object **out) {
   node *tmp = node_new(NULL, type, "<default>");
   if (!tmp) return rsw_fail(ld->err, RSW_ERR_NOMEM, "", "out of memory");
   object *o = NULL;
@@ -237,8 +231,8 @@ SHIM_ rsw_status ld_create_default(loader *ld, const char *type, obj_class cls,
   return RSW_OK;
 }
 
-SHIM_ rsw_status spectrum_eval(const spectrum *s, const render_ctx *rc, color *out,
-                               rsw_err *err, const char *where) {
+SHIM_ rsw_status spectrum_eval(const spectrum *s, const render_ctx *rc, color *out, rsw_err *err,
+                               const char *where) {
   (void)s, (void)rc, (void)out;
   return rsw_fail(err, RSW_ERR_UNSUPPORTED, where, "test loader: no spectra");
 }
@@ -278,7 +272,9 @@ SHIM_ position_sample shape_sample_position(const shape *s, vec2 u) {
   return ps;
 }
 
-SHIM_ double shape_pdf_position(const shape *s) { return 1.0 / s->area; }
+SHIM_ double shape_pdf_position(const shape *s) {
+  return 1.0 / s->area;
+}
 
 #undef SHIM_
 

@@ -15,6 +15,9 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../support/bsdf_test.h"
+#include "../support/chi2.h"
+#include "../support/test.h"
 #include "kernel/bsdfs/bsdfs_internal.h"
 #include "kernel/bsdfs/fresnel.h"
 #include "kernel/bsdfs/ior_data.h"
@@ -22,9 +25,6 @@
 #include "kernel/core/rng.h"
 #include "kernel/scene/scene.h"
 #include "kernel/textures/texture.h"
-#include "../support/bsdf_test.h"
-#include "../support/chi2.h"
-#include "../support/test.h"
 
 RSW_TEST_DEFINE_GLOBALS
 
@@ -32,10 +32,9 @@ RSW_TEST_DEFINE_GLOBALS
 /* Number of chi2_run calls in this file (for the Sidak correction):
  * diffuse 3 + isotropic rough 2x3x2x3 = 36 + anisotropic 2x2x3 = 12 +
  * twosided 2. */
-#define CHI2_TESTS 53
+#define CHI2_TESTS   53
 
 static const double incidence_deg[3] = {0.0, 60.0, 85.0};
-
 
 /* ires: trapezoid points per cell axis when integrating the pdf. Mitsuba's
  * 4 is too coarse for lobes much narrower than a cell (alpha 0.05 puts a
@@ -49,8 +48,8 @@ static void run_chi2(const bsdf *b, vec3 wi, const char *what, int ires) {
   cfg.test_count = CHI2_TESTS;
   cfg.ires = ires;
   chi2_result r = chi2_run(&cfg, chi2_bsdf_sample, chi2_bsdf_pdf, &c);
-  CHECK(r.passed, "chi2 %s, wi = (%.4f, %.4f, %.4f): p = %g, chi2 = %g, dof = %d: %s",
-        what, wi.x, wi.y, wi.z, r.p_value, r.chi2, r.dof, r.reason);
+  CHECK(r.passed, "chi2 %s, wi = (%.4f, %.4f, %.4f): p = %g, chi2 = %g, dof = %d: %s", what, wi.x, wi.y, wi.z,
+        r.p_value, r.chi2, r.dof, r.reason);
 }
 
 /* ---- Fresnel ------------------------------------------------------------------ */
@@ -61,7 +60,7 @@ static void run_chi2(const bsdf *b, vec3 wi, const char *what, int ires) {
 static double fresnel_complex_ref(double c, double eta, double k) {
   double complex n = eta + k * I;
   double s2 = 1.0 - c * c;
-  double complex nct = csqrt(n * n - s2);     /* n cos_t */
+  double complex nct = csqrt(n * n - s2); /* n cos_t */
   double complex ct = nct / n;
   double complex rs = (c - nct) / (c + nct);
   double complex rp = (n * c - ct) / (n * c + ct);
@@ -148,7 +147,9 @@ static double f_visible(const mf_distr *d, vec3 wi, vec3 m) {
   return mf_smith_g1(d, wi, m) * fmax(0.0, v3_dot(wi, m)) * mf_D(d, m);
 }
 
-static double f_pdf(const mf_distr *d, vec3 wi, vec3 m) { return mf_pdf(d, wi, m); }
+static double f_pdf(const mf_distr *d, vec3 wi, vec3 m) {
+  return mf_pdf(d, wi, m);
+}
 
 static void test_microfacet_normalisation(void) {
   /* Projected microfacet area is one: int D(m) cos(theta_m) dm = 1, and
@@ -230,8 +231,7 @@ typedef struct rough_case {
   texture *au, *av, *eta, *k;
 } rough_case;
 
-static rough_case rough_make(mf_type type, double au, double av, bool visible, double eta,
-                             double k) {
+static rough_case rough_make(mf_type type, double au, double av, bool visible, double eta, double k) {
   rough_case r;
   r.au = uniform_texture_const(au, "alpha_u");
   r.av = au == av ? NULL : uniform_texture_const(av, "alpha_v");
@@ -249,7 +249,9 @@ static void rough_free(rough_case *r) {
   tb_free_tex(r->k);
 }
 
-static const char *type_name(mf_type t) { return t == MF_GGX ? "ggx" : "beckmann"; }
+static const char *type_name(mf_type t) {
+  return t == MF_GGX ? "ggx" : "beckmann";
+}
 
 static void test_roughconductor_chi2_isotropic(void) {
   const mf_type types[2] = {MF_BECKMANN, MF_GGX};
@@ -260,8 +262,8 @@ static void test_roughconductor_chi2_isotropic(void) {
         rough_case r = rough_make(types[t], alphas[a], alphas[a], v == 0, 0.0, 1.0);
         REQUIRE(r.b, "allocation");
         char what[96];
-        snprintf(what, sizeof what, "roughconductor %s alpha %g sample_visible %d",
-                 type_name(types[t]), alphas[a], v == 0);
+        snprintf(what, sizeof what, "roughconductor %s alpha %g sample_visible %d", type_name(types[t]),
+                 alphas[a], v == 0);
         for (int i = 0; i < 3; i++)
           run_chi2(r.b, tb_dir_deg(incidence_deg[i], 40.0), what, alphas[a] < 0.1 ? 32 : 8);
         rough_free(&r);
@@ -275,8 +277,8 @@ static void test_roughconductor_chi2_anisotropic(void) {
       rough_case r = rough_make(types[t], 0.1, 0.5, v == 0, 0.0, 1.0);
       REQUIRE(r.b, "allocation");
       char what[96];
-      snprintf(what, sizeof what, "roughconductor %s alpha (0.1, 0.5) sample_visible %d",
-               type_name(types[t]), v == 0);
+      snprintf(what, sizeof what, "roughconductor %s alpha (0.1, 0.5) sample_visible %d", type_name(types[t]),
+               v == 0);
       for (int i = 0; i < 3; i++) run_chi2(r.b, tb_dir_deg(incidence_deg[i], 40.0), what, 8);
       rough_free(&r);
     }
@@ -302,8 +304,8 @@ static void check_weight_consistency(const bsdf *b, vec3 wi, const char *what) {
       if (!(fabs(w.c[c] - expect) <= 1e-9 * fmax(fabs(expect), 1e-300)) ||
           !(fabs(pdf - bs.pdf) <= 1e-9 * pdf)) {
         if (bad++ == 0)
-          CHECK(false, "%s: weight %.17g vs eval/pdf %.17g, pdf %.17g vs %.17g", what,
-                w.c[c], expect, bs.pdf, pdf);
+          CHECK(false, "%s: weight %.17g vs eval/pdf %.17g, pdf %.17g vs %.17g", what, w.c[c], expect, bs.pdf,
+                pdf);
       }
     }
     ok++;
@@ -481,8 +483,8 @@ static void test_conductor_presets(void) {
   surface_interaction si = tb_si_with(v3(0, 0, 1));
   bsdf_sample bs;
   color w = b->ops->sample(b, &si, 0.5, v2(0.5, 0.5), &bs);
-  double r0 = ((eta_ref - 1) * (eta_ref - 1) + k_ref * k_ref) /
-              ((eta_ref + 1) * (eta_ref + 1) + k_ref * k_ref);
+  double r0 =
+      ((eta_ref - 1) * (eta_ref - 1) + k_ref * k_ref) / ((eta_ref + 1) * (eta_ref + 1) + k_ref * k_ref);
   CHECK_REL(w.c[0], r0, 1e-12);
   CHECK(w.c[0] == w.c[1] && w.c[1] == w.c[2], "mono: equal channels");
 
@@ -612,7 +614,6 @@ static void test_twosided(void) {
   tb_free_tex(rho);
 }
 
-
 /* ---- the plugins through the scene loader ------------------------------------------- */
 
 /* Load a JSON document in `variant`; returns the status (and the scene on
@@ -628,8 +629,7 @@ static rsw_status load_json(const char *text, const char *variant, scene **out, 
  * same id). */
 static object *find_object(const scene *s, const char *id) {
   for (size_t i = 0; i < s->n_objects; i++)
-    if (s->objects[i]->id && strcmp(s->objects[i]->id, id) == 0 &&
-        s->objects[i]->plugin->cls == CLS_BSDF)
+    if (s->objects[i]->id && strcmp(s->objects[i]->id, id) == 0 && s->objects[i]->plugin->cls == CLS_BSDF)
       return s->objects[i];
   return NULL;
 }
@@ -666,22 +666,20 @@ static void test_loader_defaults(void) {
             tex_value(r->alpha_u) == 0.1 && !r->specular_reflectance,
         "roughconductor: beckmann, alpha 0.1, sample_visible, no specular_reflectance");
   CHECK_REL(g->eta, 1.5046 / 1.000277, 1e-15);
-  CHECK(t->brdf[0] == t->brdf[1] && t->brdf[0]->base.plugin == &plugin_diffuse,
-        "twosided: back = front");
+  CHECK(t->brdf[0] == t->brdf[1] && t->brdf[0]->base.plugin == &plugin_diffuse, "twosided: back = front");
   CHECK(t->base.flags == (BSDF_DIFFUSE_REFLECTION | BSDF_TWO_SIDED), "twosided flags");
   scene_free(s);
 }
 
 static void test_loader_options(void) {
-  const char *doc =
-      "{\"type\": \"scene\","
-      " \"r\": {\"type\": \"roughconductor\", \"distribution\": \"GGX\", \"alpha_u\": 0.1,"
-      "        \"alpha_v\": 0.4, \"sample_visible\": false, \"eta\": 0.2, \"k\": 3.0,"
-      "        \"specular_reflectance\": 0.9},"
-      " \"a\": {\"type\": \"conductor\", \"material\": \"Au\"},"
-      " \"g\": {\"type\": \"dielectric\", \"int_ior\": \"water\", \"ext_ior\": 1.0},"
-      " \"t\": {\"type\": \"twosided\", \"f\": {\"type\": \"diffuse\"},"
-      "        \"b\": {\"type\": \"conductor\"}}}";
+  const char *doc = "{\"type\": \"scene\","
+                    " \"r\": {\"type\": \"roughconductor\", \"distribution\": \"GGX\", \"alpha_u\": 0.1,"
+                    "        \"alpha_v\": 0.4, \"sample_visible\": false, \"eta\": 0.2, \"k\": 3.0,"
+                    "        \"specular_reflectance\": 0.9},"
+                    " \"a\": {\"type\": \"conductor\", \"material\": \"Au\"},"
+                    " \"g\": {\"type\": \"dielectric\", \"int_ior\": \"water\", \"ext_ior\": 1.0},"
+                    " \"t\": {\"type\": \"twosided\", \"f\": {\"type\": \"diffuse\"},"
+                    "        \"b\": {\"type\": \"conductor\"}}}";
   scene *s;
   rsw_err err;
   rsw_status st = load_json(doc, "mono", &s, &err);
@@ -744,8 +742,8 @@ static void test_loader_errors(void) {
     scene *s;
     rsw_err err;
     rsw_status st = load_json(cases[i].doc, "mono", &s, &err);
-    CHECK(st == cases[i].code, "case %zu: got %s (%s: %s), expected %s", i, rsw_status_name(st),
-          err.where, err.msg, rsw_status_name(cases[i].code));
+    CHECK(st == cases[i].code, "case %zu: got %s (%s: %s), expected %s", i, rsw_status_name(st), err.where,
+          err.msg, rsw_status_name(cases[i].code));
     CHECK(st == RSW_OK || err.where[0] != '\0', "case %zu: the error names a place", i);
     scene_free(s);
   }

@@ -68,7 +68,8 @@ static void test_distr2d(void) {
     vec2 u = v2(pcg32_next_double(&rng), pcg32_next_double(&rng));
     double pdf;
     vec2 p = distr2d_sample(&d, u, &pdf);
-    if (!(p.x >= 0 && p.x < 1 && p.y >= 0 && p.y < 1) || !(pdf > 0) || fabs(pdf - distr2d_pdf(&d, p)) > 1e-12 * pdf)
+    if (!(p.x >= 0 && p.x < 1 && p.y >= 0 && p.y < 1) || !(pdf > 0) ||
+        fabs(pdf - distr2d_pdf(&d, p)) > 1e-12 * pdf)
       bad++;
     else
       count[(int)(p.y * 3) * 5 + (int)(p.x * 5)]++;
@@ -76,7 +77,8 @@ static void test_distr2d(void) {
   CHECK(bad == 0, "%d samples outside, in a zero cell, or with an inconsistent pdf", bad);
   for (int k = 0; k < 15; k++) {
     double pk = w[k] / total, sigma = sqrt(n * pk * (1 - pk));
-    CHECK(fabs(count[k] - n * pk) <= 5 * sigma + 1e-9, "cell %d: %d samples, expected %.1f", k, count[k], n * pk);
+    CHECK(fabs(count[k] - n * pk) <= 5 * sigma + 1e-9, "cell %d: %d samples, expected %.1f", k, count[k],
+          n * pk);
   }
   /* Corners of the sample square stay in [0,1)^2. */
   vec2 c = distr2d_sample(&d, v2(0.9999999999999999, 0.9999999999999999), NULL);
@@ -95,12 +97,13 @@ static void test_distr2d(void) {
 
 static scene *env_scene(const char *env_json, const char *variant) {
   char sc[2048];
-  snprintf(sc, sizeof sc,
-           "{\"type\": \"scene\","
-           " \"cam\": {\"type\": \"perspective\", \"fov\": 30,"
-           "   \"film\": {\"type\": \"hdrfilm\", \"width\": 4, \"height\": 4, \"rfilter\": {\"type\": \"box\"}}},"
-           " \"env\": %s}",
-           env_json);
+  snprintf(
+      sc, sizeof sc,
+      "{\"type\": \"scene\","
+      " \"cam\": {\"type\": \"perspective\", \"fov\": 30,"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 4, \"height\": 4, \"rfilter\": {\"type\": \"box\"}}},"
+      " \"env\": %s}",
+      env_json);
   return tsup_load(sc, variant);
 }
 
@@ -154,8 +157,7 @@ static void test_sampling_chi2(void) {
   const char *xf[2] = {"", ", \"to_world\": [{\"rotate\": {\"axis\": [1, 2, 0.5], \"angle\": 37}}]"};
   for (int k = 0; k < 2; k++) {
     char env[512];
-    snprintf(env, sizeof env, "{\"type\": \"envmap\", \"filename\": \"%s\", \"scale\": 1.5%s}", path,
-             xf[k]);
+    snprintf(env, sizeof env, "{\"type\": \"envmap\", \"filename\": \"%s\", \"scale\": 1.5%s}", path, xf[k]);
     scene *s = env_scene(env, NULL);
     REQUIRE(s && s->environment, "scene");
     env_ctx c = {.e = s->environment};
@@ -170,7 +172,8 @@ static void test_sampling_chi2(void) {
     CHECK(r.passed, "to_world %d: %s (chi2 %g, dof %d, p %g)", k, r.reason, r.chi2, r.dof, r.p_value);
     if (k == 0) {
       chi2_result bad_r = chi2_run(&cfg, s_env, p_env_turned, &c);
-      CHECK(!bad_r.passed && bad_r.p_value < 1e-12, "a pdf turned by one column was accepted (p = %g)", bad_r.p_value);
+      CHECK(!bad_r.passed && bad_r.p_value < 1e-12, "a pdf turned by one column was accepted (p = %g)",
+            bad_r.p_value);
     }
     /* sample's value is eval / pdf, and its pdf is pdf_direction's. */
     pcg32 rng;
@@ -233,7 +236,8 @@ static void test_orientation(void) {
   scene_free(s);
   /* A rotation of 90 degrees about x takes local +y to world +z. */
   snprintf(env, sizeof env,
-           "{\"type\": \"envmap\", \"filename\": \"%s\", \"to_world\": [{\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 90}}]}",
+           "{\"type\": \"envmap\", \"filename\": \"%s\", \"to_world\": [{\"rotate\": {\"axis\": [1, 0, 0], "
+           "\"angle\": 90}}]}",
            path);
   s = env_scene(env, NULL);
   REQUIRE(s && s->environment, "scene");
@@ -256,8 +260,8 @@ static void test_load_errors(void) {
   CHECK(env_scene("{\"type\": \"envmap\"}", NULL) == NULL, "missing filename accepted");
   px[7] = 1;
   REQUIRE(write_map(path, 4, 3, 1, px), "write");
-  snprintf(env, sizeof env, "{\"type\": \"envmap\", \"filename\": \"%s\", \"to_world\": [{\"scale\": [1, 2, 1]}]}",
-           path);
+  snprintf(env, sizeof env,
+           "{\"type\": \"envmap\", \"filename\": \"%s\", \"to_world\": [{\"scale\": [1, 2, 1]}]}", path);
   CHECK(env_scene(env, NULL) == NULL, "non-uniform scale accepted");
   snprintf(env, sizeof env, "{\"type\": \"envmap\", \"filename\": \"%s\", \"scale\": -1}", path);
   CHECK(env_scene(env, NULL) == NULL, "negative scale accepted");
@@ -290,7 +294,8 @@ static void check_same_3sigma(const film_image *a, const film_image *b, const ch
       s2 += d * d;
     }
     double m = s / n, sem = sqrt(fmax((s2 - s * s / n) / (n - 1), 0) / n);
-    CHECK(fabs(m) <= 3 * sem + 1e-9, "%s channel %d: mean difference %.4g, 3 sigma %.4g", what, c, m, 3 * sem);
+    CHECK(fabs(m) <= 3 * sem + 1e-9, "%s channel %d: mean difference %.4g, 3 sigma %.4g", what, c, m,
+          3 * sem);
   }
 }
 
@@ -309,17 +314,20 @@ static void test_constant_map_equals_constant(void) {
       " \"cam\": {\"type\": \"perspective\", \"fov\": 30,"
       "   \"to_world\": [{\"lookat\": {\"origin\": [0, 0, 5], \"target\": [0, 0, 0], \"up\": [0, 1, 0]}}],"
       "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 16},"
-      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16, \"rfilter\": {\"type\": \"box\"}}},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16, \"rfilter\": {\"type\": "
+      "\"box\"}}},"
       " \"integrator\": {\"type\": \"path\", \"rr_depth\": 5},"
       " \"env\": %s,"
       " \"ball\": {\"type\": \"sphere\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 1.0}}}";
   char env[512], sc[2048];
   film_image img[2];
   for (int k = 0; k < 2; k++) {
-    if (k == 0) snprintf(env, sizeof env, "{\"type\": \"constant\", \"radiance\": [0.5, 1, 2]}");
+    if (k == 0)
+      snprintf(env, sizeof env, "{\"type\": \"constant\", \"radiance\": [0.5, 1, 2]}");
     else
       snprintf(env, sizeof env,
-               "{\"type\": \"envmap\", \"filename\": \"%s\", \"to_world\": [{\"rotate\": {\"axis\": [0, 0, 1], \"angle\": 20}}]}",
+               "{\"type\": \"envmap\", \"filename\": \"%s\", \"to_world\": [{\"rotate\": {\"axis\": [0, 0, "
+               "1], \"angle\": 20}}]}",
                path);
     snprintf(sc, sizeof sc, fmt, env);
     scene *s = tsup_load(sc, NULL);
@@ -333,7 +341,8 @@ static void test_constant_map_equals_constant(void) {
   for (int c = 0; c < 3; c++) {
     double m, sem;
     tsup_stats(&img[1], c, &m, &sem);
-    CHECK(fabs(m - L[c]) <= 3 * sem + 1e-9, "channel %d: mean %.5g vs L %.5g (3 sigma %.3g)", c, m, L[c], 3 * sem);
+    CHECK(fabs(m - L[c]) <= 3 * sem + 1e-9, "channel %d: mean %.5g vs L %.5g (3 sigma %.3g)", c, m, L[c],
+          3 * sem);
   }
   int background = 0, bad = 0;
   for (int i = 0; i < img[0].width * img[0].height; i++) {
@@ -376,16 +385,16 @@ static void test_bright_pole_equals_directional(void) {
   free(px);
   double omega = 2 * PI * (1 - sin(D) / D);
   double E = 2 * PI * Lb * (sin(D) * sin(D) / 2 + cos(2 * D) / 4 - sin(2 * D) / (8 * D));
-  const char *fmt =
-      "{\"type\": \"scene\","
-      " \"cam\": {\"type\": \"perspective\", \"fov\": 8,"
-      "   \"to_world\": [{\"lookat\": {\"origin\": %s, \"target\": [0, 0, 0], \"up\": %s}}],"
-      "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 16},"
-      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16, \"rfilter\": {\"type\": \"box\"}}},"
-      " \"integrator\": {\"type\": \"path\"},"
-      " \"light\": %s,"
-      " \"plate\": {\"type\": \"rectangle\"%s,"
-      "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}";
+  const char *fmt = "{\"type\": \"scene\","
+                    " \"cam\": {\"type\": \"perspective\", \"fov\": 8,"
+                    "   \"to_world\": [{\"lookat\": {\"origin\": %s, \"target\": [0, 0, 0], \"up\": %s}}],"
+                    "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 16},"
+                    "   \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16, \"rfilter\": "
+                    "{\"type\": \"box\"}}},"
+                    " \"integrator\": {\"type\": \"path\"},"
+                    " \"light\": %s,"
+                    " \"plate\": {\"type\": \"rectangle\"%s,"
+                    "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}";
   for (int k = 0; k < 2; k++) {
     const char *origin = k ? "[0, 0, 5]" : "[0, 5, 0]", *up = k ? "[0, 1, 0]" : "[0, 0, 1]";
     const char *plate_xf = k ? "" : ", \"to_world\": [{\"rotate\": {\"axis\": [1, 0, 0], \"angle\": -90}}]";
@@ -411,10 +420,11 @@ static void test_bright_pole_equals_directional(void) {
     for (int c = 0; c < 3; c++) {
       double m, sem;
       tsup_stats(&img[1], c, &m, &sem);
-      CHECK(fabs(m - directional) <= 3 * sem + bias, "case %d channel %d: envmap %.6g vs directional %.6g (3 sigma %.3g, bias %.3g)",
-            k, c, m, directional, 3 * sem, bias);
-      CHECK(fabs(m - rho * E / PI) <= 3 * sem, "case %d channel %d: envmap %.6g vs exact %.6g (3 sigma %.3g)", k, c, m,
-            rho * E / PI, 3 * sem);
+      CHECK(fabs(m - directional) <= 3 * sem + bias,
+            "case %d channel %d: envmap %.6g vs directional %.6g (3 sigma %.3g, bias %.3g)", k, c, m,
+            directional, 3 * sem, bias);
+      CHECK(fabs(m - rho * E / PI) <= 3 * sem, "case %d channel %d: envmap %.6g vs exact %.6g (3 sigma %.3g)",
+            k, c, m, rho * E / PI, 3 * sem);
       CHECK(sem < 0.02 * m, "case %d: standard error %.3g too large for a meaningful test", k, sem);
     }
     film_image_free(&img[0]);
@@ -449,8 +459,8 @@ static void test_mono(void) {
           double want = 2.0 * (m ? 0.7f : (v ? lum : (double)px[c]));
           if (fabs(img.data[i * img.channels + c] - want) > 1e-6 * want) bad++;
         }
-      CHECK(bad == 0, "variant %s, %s map: %d wrong values (first %.7g)", v ? "mono" : "rgb", m ? "Y" : "RGB", bad,
-            img.data[0]);
+      CHECK(bad == 0, "variant %s, %s map: %d wrong values (first %.7g)", v ? "mono" : "rgb", m ? "Y" : "RGB",
+            bad, img.data[0]);
       film_image_free(&img);
       scene_free(s);
     }

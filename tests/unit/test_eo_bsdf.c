@@ -9,20 +9,19 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../support/bsdf_test.h"
+#include "../support/chi2.h"
+#include "../support/test.h"
 #include "kernel/bsdfs/bsdfs_internal.h"
 #include "kernel/core/rng.h"
 #include "kernel/scene/scene.h"
 #include "kernel/textures/texture.h"
-#include "../support/bsdf_test.h"
-#include "../support/chi2.h"
-#include "../support/test.h"
 
 RSW_TEST_DEFINE_GLOBALS
 
 #define CHI2_SAMPLES 200000
 /* rpv 2 sets x 2 incidences + bilambertian 4 + hapke 2 sets x 2 = 12. */
-#define CHI2_TESTS 12
-
+#define CHI2_TESTS   12
 
 static void run_chi2(const bsdf *b, vec3 wi, const char *what) {
   chi2_bsdf c = {b, tb_si_with(wi)};
@@ -31,8 +30,8 @@ static void run_chi2(const bsdf *b, vec3 wi, const char *what) {
   cfg.test_count = CHI2_TESTS;
   cfg.ires = 8;
   chi2_result r = chi2_run(&cfg, chi2_bsdf_sample, chi2_bsdf_pdf, &c);
-  CHECK(r.passed, "chi2 %s, wi = (%.4f, %.4f, %.4f): p = %g, chi2 = %g, dof = %d: %s", what,
-        wi.x, wi.y, wi.z, r.p_value, r.chi2, r.dof, r.reason);
+  CHECK(r.passed, "chi2 %s, wi = (%.4f, %.4f, %.4f): p = %g, chi2 = %g, dof = %d: %s", what, wi.x, wi.y, wi.z,
+        r.p_value, r.chi2, r.dof, r.reason);
 }
 
 /* Sampling weight equals eval / pdf and pdf matches, at 200 samples. */
@@ -118,8 +117,8 @@ static void test_rpv_reciprocity(void) {
 
 /* §4.1 written with angles: theta, phi of each direction (phi from atan2,
  * which is 0 at the pole as the spec requires), tangents from tan(). */
-static double rpv_ref(double rho_0, double k, double g, double rho_c, double ti, double pi_,
-                      double to, double po) {
+static double rpv_ref(double rho_0, double k, double g, double rho_c, double ti, double pi_, double to,
+                      double po) {
   double dphi = pi_ - po;
   double cos_big = cos(ti) * cos(to) + sin(ti) * sin(to) * cos(dphi);
   double F = (1 - g * g) / pow(1 + g * g + 2 * g * cos_big, 1.5);
@@ -246,12 +245,11 @@ static void test_hapke_chi2(void) {
  * stays <= 1; the h = 0 guard: wi == wo (phase angle 0) and the pole give
  * finite values. */
 static void test_hapke_energy_and_guard(void) {
-  const double params[3][6] = {{0.5, 0.2, 0.5, 30.0, 0.0, 0.0},
-                               {0.9, 0.3, 0.3, 20.0, 1.0, 0.05},
-                               {0.52, 0.17, 0.62, 15.0, 0.9, 0.06}};
+  const double params[3][6] = {
+      {0.5, 0.2, 0.5, 30.0, 0.0, 0.0}, {0.9, 0.3, 0.3, 20.0, 1.0, 0.05}, {0.52, 0.17, 0.62, 15.0, 0.9, 0.06}};
   for (int p = 0; p < 3; p++) {
-    hapke_case hc = hapke_make(params[p][0], params[p][1], params[p][2], params[p][3],
-                               params[p][4], params[p][5]);
+    hapke_case hc =
+        hapke_make(params[p][0], params[p][1], params[p][2], params[p][3], params[p][4], params[p][5]);
     for (double ti = 0.0; ti < 85.0; ti += 20.0) {
       surface_interaction si = tb_si_with(tb_dir_deg(ti, 0));
       pcg32 rng;
@@ -260,14 +258,14 @@ static void test_hapke_energy_and_guard(void) {
       double sum = 0.0, sum2 = 0.0;
       for (int s = 0; s < n; s++) {
         bsdf_sample bs;
-        color w = hc.b->ops->sample(hc.b, &si, 0.5,
-                                    v2(pcg32_next_double(&rng), pcg32_next_double(&rng)), &bs);
+        color w =
+            hc.b->ops->sample(hc.b, &si, 0.5, v2(pcg32_next_double(&rng), pcg32_next_double(&rng)), &bs);
         sum += w.c[0];
         sum2 += w.c[0] * w.c[0];
       }
       double mean = sum / n, sd = sqrt((sum2 / n - mean * mean) / n);
-      CHECK(mean > 0.0 && mean <= 1.0 + 3.0 * sd, "hapke set %d at %g deg: albedo %g (+- %g)",
-            p, ti, mean, sd);
+      CHECK(mean > 0.0 && mean <= 1.0 + 3.0 * sd, "hapke set %d at %g deg: albedo %g (+- %g)", p, ti, mean,
+            sd);
     }
     hapke_free(&hc);
   }
@@ -284,8 +282,8 @@ static void test_hapke_energy_and_guard(void) {
     CHECK(v > v_ref, "surge at g = 0: %g > %g", v, v_ref);
     /* Away from g = 0 with h = 0 the surge vanishes. */
     vec3 wo = tb_dir_deg(th[k] + 5.0, 33.0);
-    CHECK_REL(g0.b->ops->eval(g0.b, &si, wo).c[0],
-              hapke_fr(0.5, 0.2, 0.5, 30.0, 0.0, 0.0, w, wo) * wo.z, 1e-14);
+    CHECK_REL(g0.b->ops->eval(g0.b, &si, wo).c[0], hapke_fr(0.5, 0.2, 0.5, 30.0, 0.0, 0.0, w, wo) * wo.z,
+              1e-14);
   }
   /* theta = 0 (smooth): E1 = E2 = 0, S = 1; finite everywhere. */
   CHECK(isfinite(hapke_fr(0.5, 0.2, 0.5, 0.0, 0.0, 0.0, tb_dir_deg(0, 0), tb_dir_deg(0, 0))), "theta 0");
@@ -306,11 +304,10 @@ static rsw_status load_json(const char *text, scene **out, rsw_err *err) {
 static void test_loader(void) {
   scene *s = NULL;
   rsw_err err = {0};
-  rsw_status st = load_json(
-      "{\"type\": \"scene\", \"a\": {\"type\": \"rpv\", \"id\": \"a\"},"
-      " \"b\": {\"type\": \"bilambertian\", \"id\": \"b\"},"
-      " \"c\": {\"type\": \"hapke\", \"id\": \"c\"}}",
-      &s, &err);
+  rsw_status st = load_json("{\"type\": \"scene\", \"a\": {\"type\": \"rpv\", \"id\": \"a\"},"
+                            " \"b\": {\"type\": \"bilambertian\", \"id\": \"b\"},"
+                            " \"c\": {\"type\": \"hapke\", \"id\": \"c\"}}",
+                            &s, &err);
   CHECK(st == RSW_OK, "defaults load: %s", err.msg);
   if (s) scene_free(s);
   const char *bad[] = {

@@ -9,9 +9,9 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "../support/test.h"
 #include "http/encode.h"
 #include "kernel/image_exr.h"
-#include "../support/test.h"
 
 RSW_TEST_DEFINE_GLOBALS
 
@@ -149,7 +149,8 @@ static void test_exr_round_trip(void) {
             (double)img.data[i * 3 + k], (double)data[i * 3 + c]);
   }
   const char *sensor_meta = exr_image_meta(&img, "raysweep:sensor");
-  CHECK(sensor_meta && strcmp(sensor_meta, "cam \"a\"") == 0, "sensor meta %s", sensor_meta ? sensor_meta : "(none)");
+  CHECK(sensor_meta && strcmp(sensor_meta, "cam \"a\"") == 0, "sensor meta %s",
+        sensor_meta ? sensor_meta : "(none)");
   const char *rev = exr_image_meta(&img, "raysweep:revision");
   CHECK(rev && strcmp(rev, "3") == 0, "revision meta");
   exr_image_free(&img);
@@ -157,7 +158,8 @@ static void test_exr_round_trip(void) {
   /* Bad arguments fail with a message and leave the outputs alone. */
   bytes = (void *)&len;
   err = (rsw_err){0};
-  CHECK(exr_encode_image(0, 1, 1, names, data, false, NULL, &bytes, &len, &err) == RSW_ERR_INVALID, "0 width");
+  CHECK(exr_encode_image(0, 1, 1, names, data, false, NULL, &bytes, &len, &err) == RSW_ERR_INVALID,
+        "0 width");
   CHECK(bytes == (void *)&len && err.msg[0], "outputs untouched, message set");
 }
 
@@ -196,7 +198,8 @@ static void test_problem(void) {
   REQUIRE(t, "problem");
   cJSON *j = cJSON_Parse(t);
   REQUIRE(j, "problem does not parse: %s", t);
-  CHECK(strcmp(cJSON_GetObjectItem(j, "type")->valuestring, "https://raysweep.dev/problems/RSW_ERR_INVALID") == 0,
+  CHECK(strcmp(cJSON_GetObjectItem(j, "type")->valuestring,
+               "https://raysweep.dev/problems/RSW_ERR_INVALID") == 0,
         "type");
   CHECK(strcmp(cJSON_GetObjectItem(j, "title")->valuestring, "Unprocessable Content") == 0, "title");
   CHECK(cJSON_GetObjectItem(j, "status")->valueint == 422, "status");
@@ -218,7 +221,8 @@ static void test_problem(void) {
   REQUIRE(j, "does not parse");
   CHECK(status == 404 && cJSON_GetObjectItem(j, "status")->valueint == 404, "404 from the code");
   CHECK(strcmp(cJSON_GetObjectItem(j, "code")->valuestring, "RSW_ERR_NOT_FOUND") == 0, "code");
-  CHECK(strcmp(cJSON_GetObjectItem(j, "title")->valuestring, "not found") == 0, "title is the code's message");
+  CHECK(strcmp(cJSON_GetObjectItem(j, "title")->valuestring, "not found") == 0,
+        "title is the code's message");
   CHECK(!cJSON_GetObjectItem(j, "pointer") && !cJSON_GetObjectItem(j, "key"), "no pointer, no key");
   cJSON_Delete(j);
   free(t);
@@ -253,7 +257,8 @@ static void test_problem(void) {
   j = t ? cJSON_Parse(t) : NULL;
   REQUIRE(j, "does not parse");
   CHECK(strcmp(cJSON_GetObjectItem(j, "code")->valuestring, "CONTENT_TOO_LARGE") == 0, "code from status");
-  CHECK(strcmp(cJSON_GetObjectItem(j, "type")->valuestring, "https://raysweep.dev/problems/CONTENT_TOO_LARGE") == 0,
+  CHECK(strcmp(cJSON_GetObjectItem(j, "type")->valuestring,
+               "https://raysweep.dev/problems/CONTENT_TOO_LARGE") == 0,
         "type from status");
   cJSON_Delete(j);
   free(t);

@@ -63,19 +63,15 @@ static void test_float_rgb_roundtrip(void) {
   CHECK(img.width == w && img.height == h, "size %dx%d", img.width, img.height);
   REQUIRE(img.n_channels == 3, "channels %d", img.n_channels);
   /* EXR stores channels alphabetically: B, G, R. */
-  CHECK(strcmp(img.channel_names[0], "B") == 0, "first channel %s",
-        img.channel_names[0]);
-  int ir = exr_image_channel(&img, "R"), ig = exr_image_channel(&img, "G"),
-      ib = exr_image_channel(&img, "B");
+  CHECK(strcmp(img.channel_names[0], "B") == 0, "first channel %s", img.channel_names[0]);
+  int ir = exr_image_channel(&img, "R"), ig = exr_image_channel(&img, "G"), ib = exr_image_channel(&img, "B");
   REQUIRE(ir >= 0 && ig >= 0 && ib >= 0, "missing channel");
   CHECK(exr_image_channel(&img, "A") == -1, "phantom A channel");
   int bad = 0;
   for (int y = 0; y < h; y++)
     for (int x = 0; x < w; x++) {
       const float *px = img.data + (y * w + x) * 3;
-      if (px[ir] != pattern(x, y, 0) || px[ig] != pattern(x, y, 1) ||
-          px[ib] != pattern(x, y, 2))
-        bad++;
+      if (px[ir] != pattern(x, y, 0) || px[ig] != pattern(x, y, 1) || px[ib] != pattern(x, y, 2)) bad++;
     }
   CHECK(bad == 0, "%d pixels differ after a float32 round trip", bad);
   exr_image_free(&img);
@@ -91,13 +87,10 @@ static void test_half_y_roundtrip(void) {
    *   70000 -> +inf (beyond 65520); 1/3 -> nearest half 0x3555;
    *   1 + 2^-11 is a tie between 1 and 1 + 2^-10: rounds to even, 1;
    *   2^-26 -> 0 (below half the smallest subnormal). */
-  const float in[8] = {1.0f,        65504.0f,        -0x1p-24f, 70000.0f,
-                       1.0f / 3.0f, 1.0f + 0x1p-11f, 0x1p-26f,  -0.0f};
-  const float want[8] = {1.0f, 65504.0f, -0x1p-24f, INFINITY, 0.333251953125f,
-                         1.0f, 0.0f,     -0.0f};
+  const float in[8] = {1.0f, 65504.0f, -0x1p-24f, 70000.0f, 1.0f / 3.0f, 1.0f + 0x1p-11f, 0x1p-26f, -0.0f};
+  const float want[8] = {1.0f, 65504.0f, -0x1p-24f, INFINITY, 0.333251953125f, 1.0f, 0.0f, -0.0f};
   const char *names[] = {"Y"};
-  exr_meta_entry me[] = {{"raysweep_variant", "mono"},
-                         {"comments", "spectral radiance, nm 550"}};
+  exr_meta_entry me[] = {{"raysweep_variant", "mono"}, {"comments", "spectral radiance, nm 550"}};
   exr_meta meta = {.entries = me, .count = 2, .uncompressed = true};
   rsw_err err = {0};
   const char *p = tpath("y16.exr");
@@ -106,19 +99,16 @@ static void test_half_y_roundtrip(void) {
   exr_image img;
   s = exr_read_image(p, &img, &err);
   REQUIRE(s == RSW_OK, "read: %s", err.msg);
-  REQUIRE(img.n_channels == 1 && img.width == 4 && img.height == 2,
-          "shape %d %d %d", img.n_channels, img.width, img.height);
-  CHECK(strcmp(img.channel_names[0], "Y") == 0, "name %s",
-        img.channel_names[0]);
+  REQUIRE(img.n_channels == 1 && img.width == 4 && img.height == 2, "shape %d %d %d", img.n_channels,
+          img.width, img.height);
+  CHECK(strcmp(img.channel_names[0], "Y") == 0, "name %s", img.channel_names[0]);
   for (int i = 0; i < 8; i++)
-    CHECK(img.data[i] == want[i], "sample %d: %.9g, want %.9g", i, img.data[i],
-          want[i]);
+    CHECK(img.data[i] == want[i], "sample %d: %.9g, want %.9g", i, img.data[i], want[i]);
   CHECK(signbit(img.data[7]), "-0 lost its sign");
   const char *v = exr_image_meta(&img, "raysweep_variant");
   CHECK(v && strcmp(v, "mono") == 0, "metadata variant = %s", v ? v : "NULL");
   v = exr_image_meta(&img, "comments");
-  CHECK(v && strcmp(v, "spectral radiance, nm 550") == 0, "comments = %s",
-        v ? v : "NULL");
+  CHECK(v && strcmp(v, "spectral radiance, nm 550") == 0, "comments = %s", v ? v : "NULL");
   CHECK(exr_image_meta(&img, "nope") == NULL, "phantom metadata");
   exr_image_free(&img);
 }
@@ -131,12 +121,10 @@ static void test_half_rgb_rounding(void) {
   const char *names[] = {"G", "R", "B"}; /* any order is accepted */
   rsw_err err = {0};
   const char *p = tpath("rgb16.exr");
-  REQUIRE(exr_write_image(p, w, h, 3, names, data, true, NULL, &err) == RSW_OK,
-          "write: %s", err.msg);
+  REQUIRE(exr_write_image(p, w, h, 3, names, data, true, NULL, &err) == RSW_OK, "write: %s", err.msg);
   exr_image img;
   REQUIRE(exr_read_image(p, &img, &err) == RSW_OK, "read: %s", err.msg);
-  int map[3] = {exr_image_channel(&img, "G"), exr_image_channel(&img, "R"),
-                exr_image_channel(&img, "B")};
+  int map[3] = {exr_image_channel(&img, "G"), exr_image_channel(&img, "R"), exr_image_channel(&img, "B")};
   REQUIRE(map[0] >= 0 && map[1] >= 0 && map[2] >= 0, "channel missing");
   double worst = 0;
   for (int i = 0; i < w * h; i++)
@@ -184,13 +172,11 @@ static void test_failed_write_keeps_old_file(void) {
   char buf[64] = {0};
   f = fopen(p, "r");
   REQUIRE(f, "old file gone");
-  CHECK(fgets(buf, sizeof buf, f) && strcmp(buf, "old contents") == 0,
-        "old file changed: %s", buf);
+  CHECK(fgets(buf, sizeof buf, f) && strcmp(buf, "old contents") == 0, "old file changed: %s", buf);
   fclose(f);
   /* A good write replaces it. */
   rsw_err_clear(&err);
-  REQUIRE(exr_write_image(p, 1, 1, 1, names, px, false, NULL, &err) == RSW_OK,
-          "overwrite: %s", err.msg);
+  REQUIRE(exr_write_image(p, 1, 1, 1, names, px, false, NULL, &err) == RSW_OK, "overwrite: %s", err.msg);
   exr_image img;
   REQUIRE(exr_read_image(p, &img, &err) == RSW_OK, "read: %s", err.msg);
   CHECK(img.data[0] == 0.5f, "value %g", img.data[0]);
@@ -202,18 +188,15 @@ static void test_bad_arguments(void) {
   const float px[2] = {0, 0};
   const char *dup[] = {"R", "R"};
   rsw_err err = {0};
-  CHECK(exr_write_image(tpath("a.exr"), 1, 1, 2, dup, px, false, NULL, &err) ==
-            RSW_ERR_INVALID,
+  CHECK(exr_write_image(tpath("a.exr"), 1, 1, 2, dup, px, false, NULL, &err) == RSW_ERR_INVALID,
         "duplicate names accepted");
   CHECK(strstr(err.msg, "twice") != NULL, "msg: %s", err.msg);
   rsw_err_clear(&err);
   const char *one[] = {"Y"};
-  CHECK(exr_write_image(tpath("a.exr"), 0, 1, 1, one, px, false, NULL, &err) ==
-            RSW_ERR_INVALID,
+  CHECK(exr_write_image(tpath("a.exr"), 0, 1, 1, one, px, false, NULL, &err) == RSW_ERR_INVALID,
         "zero width accepted");
   rsw_err_clear(&err);
-  CHECK(exr_write_image(tpath("a.exr"), 1 << 20, 1 << 20, 1, one, px, false,
-                        NULL, &err) == RSW_ERR_LIMIT,
+  CHECK(exr_write_image(tpath("a.exr"), 1 << 20, 1 << 20, 1, one, px, false, NULL, &err) == RSW_ERR_LIMIT,
         "huge image accepted");
   CHECK(!file_exists(tpath("a.exr")), "file created on bad arguments");
 }
@@ -233,30 +216,24 @@ static void test_corrupt_files(void) {
   fclose(f);
   rsw_err_clear(&err);
   CHECK(exr_read_image(junk, &img, &err) == RSW_ERR_FILE, "junk accepted");
-  CHECK(strcmp(err.where, junk) == 0 && err.msg[0], "where = %s msg = %s",
-        err.where, err.msg);
+  CHECK(strcmp(err.where, junk) == 0 && err.msg[0], "where = %s msg = %s", err.where, err.msg);
   /* A valid file cut in half: the header survives, the chunks do not. */
   const int w = 40, h = 40;
   float *data = calloc((size_t)w * h, sizeof(float));
   for (int i = 0; i < w * h; i++) data[i] = (float)i;
   const char *names[] = {"Y"};
   const char *cut = tpath("cut.exr");
-  REQUIRE(exr_write_image(cut, w, h, 1, names, data, false, NULL, &err) ==
-              RSW_OK,
-          "write: %s", err.msg);
+  REQUIRE(exr_write_image(cut, w, h, 1, names, data, false, NULL, &err) == RSW_OK, "write: %s", err.msg);
   struct stat sb;
   REQUIRE(stat(cut, &sb) == 0, "stat");
   REQUIRE(truncate(cut, sb.st_size / 2) == 0, "truncate");
   rsw_err_clear(&err);
   CHECK(exr_read_image(cut, &img, &err) == RSW_ERR_FILE, "truncated accepted");
-  CHECK(strcmp(err.where, cut) == 0 && err.msg[0], "where = %s msg = %s",
-        err.where, err.msg);
+  CHECK(strcmp(err.where, cut) == 0 && err.msg[0], "where = %s msg = %s", err.where, err.msg);
   /* Scribbled chunk data (ZIP stream): an error or some pixels, never a
    * crash (ASan checks the "never"). */
   const char *scr = tpath("scribbled.exr");
-  REQUIRE(exr_write_image(scr, w, h, 1, names, data, false, NULL, &err) ==
-              RSW_OK,
-          "write");
+  REQUIRE(exr_write_image(scr, w, h, 1, names, data, false, NULL, &err) == RSW_OK, "write");
   REQUIRE(stat(scr, &sb) == 0, "stat");
   f = fopen(scr, "r+b");
   REQUIRE(f, "fopen");
@@ -270,8 +247,7 @@ static void test_corrupt_files(void) {
   if (s == RSW_OK)
     exr_image_free(&img);
   else
-    CHECK(s == RSW_ERR_FILE && strcmp(err.where, scr) == 0, "status %d %s",
-          (int)s, err.where);
+    CHECK(s == RSW_ERR_FILE && strcmp(err.where, scr) == 0, "status %d %s", (int)s, err.where);
   free(data);
   unlink(junk);
   unlink(cut);
@@ -293,23 +269,18 @@ static bool write_tiled(const char *p) {
   exr_attr_v2f_t swc;
   swc.x = swc.y = 0.f;
   bool ok = !exr_add_part(ctx, NULL, EXR_STORAGE_TILED, &part) &&
-            !exr_initialize_required_attr(ctx, part, &dw, &dw, 1.f, &swc, 1.f,
-                                          EXR_LINEORDER_INCREASING_Y,
+            !exr_initialize_required_attr(ctx, part, &dw, &dw, 1.f, &swc, 1.f, EXR_LINEORDER_INCREASING_Y,
                                           EXR_COMPRESSION_NONE) &&
-            !exr_set_tile_descriptor(ctx, part, 8, 8, EXR_TILE_ONE_LEVEL,
-                                     EXR_TILE_ROUND_DOWN) &&
-            !exr_add_channel(ctx, part, "Y", EXR_PIXEL_FLOAT,
-                             EXR_PERCEPTUALLY_LOGARITHMIC, 1, 1) &&
+            !exr_set_tile_descriptor(ctx, part, 8, 8, EXR_TILE_ONE_LEVEL, EXR_TILE_ROUND_DOWN) &&
+            !exr_add_channel(ctx, part, "Y", EXR_PIXEL_FLOAT, EXR_PERCEPTUALLY_LOGARITHMIC, 1, 1) &&
             !exr_write_header(ctx);
   float tile[64];
   for (int ty = 0; ok && ty < 2; ty++)
     for (int tx = 0; ok && tx < 3; tx++) {
       int tw = tx == 2 ? W - 16 : 8, th = ty == 1 ? H - 8 : 8;
       for (int y = 0; y < th; y++)
-        for (int x = 0; x < tw; x++)
-          tile[y * tw + x] = (float)(100 * (ty * 8 + y) + tx * 8 + x);
-      ok = !exr_write_tile_chunk(ctx, part, tx, ty, 0, 0, tile,
-                                 sizeof(float) * (uint64_t)(tw * th));
+        for (int x = 0; x < tw; x++) tile[y * tw + x] = (float)(100 * (ty * 8 + y) + tx * 8 + x);
+      ok = !exr_write_tile_chunk(ctx, part, tx, ty, 0, 0, tile, sizeof(float) * (uint64_t)(tw * th));
     }
   return !exr_finish(&ctx) && ok;
 }
@@ -320,8 +291,7 @@ static void test_tiled_read(void) {
   exr_image img;
   rsw_err err = {0};
   REQUIRE(exr_read_image(p, &img, &err) == RSW_OK, "read: %s", err.msg);
-  CHECK(img.width == 20 && img.height == 13, "size %dx%d", img.width,
-        img.height);
+  CHECK(img.width == 20 && img.height == 13, "size %dx%d", img.width, img.height);
   int bad = 0;
   for (int y = 0; y < img.height; y++)
     for (int x = 0; x < img.width; x++)
@@ -336,8 +306,7 @@ static void cleanup_dir(void) {
   if (!d) return;
   struct dirent *e;
   while ((e = readdir(d)))
-    if (strcmp(e->d_name, ".") && strcmp(e->d_name, ".."))
-      unlink(tpath(e->d_name));
+    if (strcmp(e->d_name, ".") && strcmp(e->d_name, "..")) unlink(tpath(e->d_name));
   closedir(d);
   rmdir(tmpdir);
 }

@@ -37,7 +37,9 @@ static uint64_t mix(uint64_t *s) {
   z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
   return z ^ (z >> 31);
 }
-static double unif(uint64_t *s) { return (double)(mix(s) >> 11) * 0x1p-53; }
+static double unif(uint64_t *s) {
+  return (double)(mix(s) >> 11) * 0x1p-53;
+}
 
 enum {
   PAT_NOISE_WIDE, /* random sign and exponent: incompressible */
@@ -54,9 +56,9 @@ enum {
   PAT_COUNT
 };
 
-static const char *pattern_name[PAT_COUNT] = {
-    "noise-wide", "noise-unit", "constant", "gradient", "gradient+1e-6", "gradient+1e-3",
-    "gradient+1e-1", "radiance", "quantized", "sparse", "special"};
+static const char *pattern_name[PAT_COUNT] = {"noise-wide",    "noise-unit",    "constant",      "gradient",
+                                              "gradient+1e-6", "gradient+1e-3", "gradient+1e-1", "radiance",
+                                              "quantized",     "sparse",        "special"};
 
 static float sample(int pat, uint64_t *s, const double g[3], int x, int y, int c) {
   double grad = g[0] + g[1] * x + g[2] * y + 0.25 * c;
@@ -88,7 +90,9 @@ static float sample(int pat, uint64_t *s, const double g[3], int x, int y, int c
 /* What a reader must give back for a written sample: the float itself, or
  * in float16 its nearest half (ties to even; overflow to inf), computed
  * here by the compiler's _Float16, not by the writer's own rounding. */
-static float stored(float v, bool half) { return half ? (float)(_Float16)v : v; }
+static float stored(float v, bool half) {
+  return half ? (float)(_Float16)v : v;
+}
 
 static bool same_bits(float a, float b) {
   if (isnan(a) || isnan(b)) return isnan(a) && isnan(b);
@@ -134,14 +138,16 @@ static void make_film(int i, film *f) {
   f->data = malloc(n * sizeof *f->data);
   for (int y = 0; y < f->h; y++)
     for (int x = 0; x < f->w; x++)
-      for (int c = 0; c < f->nc; c++) f->data[((size_t)y * f->w + x) * f->nc + c] = sample(f->pat, &s, g, x, y, c);
+      for (int c = 0; c < f->nc; c++)
+        f->data[((size_t)y * f->w + x) * f->nc + c] = sample(f->pat, &s, g, x, y, c);
 }
 
 /* Writes the film to path through the writer the film names. */
 static bool write_film(const film *f, const char *path, char *msg, size_t msg_len) {
   rsw_err err = {0};
   if (!f->in_memory) {
-    if (exr_write_image(path, f->w, f->h, f->nc, f->names, f->data, f->half, NULL, &err) == RSW_OK) return true;
+    if (exr_write_image(path, f->w, f->h, f->nc, f->names, f->data, f->half, NULL, &err) == RSW_OK)
+      return true;
     snprintf(msg, msg_len, "exr_write_image: %.400s", err.msg);
     return false;
   }
@@ -203,8 +209,8 @@ static void test_many_films_read_back_exactly(void) {
     } else {
       const char *imf_names[IMF_READ_MAX_CHANNELS];
       for (int c = 0; c < imf.n_channels; c++) imf_names[c] = imf.names[c];
-      long bc = count_wrong(&f, core.width, core.height, core.n_channels, (const char *const *)core.channel_names,
-                            core.data);
+      long bc = count_wrong(&f, core.width, core.height, core.n_channels,
+                            (const char *const *)core.channel_names, core.data);
       long bi = count_wrong(&f, imf.width, imf.height, imf.n_channels, imf_names, imf.data);
       /* The two readers must agree with each other sample for sample too
        * (both give channels in the file's order). */
@@ -216,8 +222,8 @@ static void test_many_films_read_back_exactly(void) {
       disagree += !agree;
       if (bc != 0 || bi != 0) per_pattern[f.pat]++;
       if ((bc != 0 || bi != 0 || !agree) && reported++ < 5)
-        CHECK(false, "film %d: %dx%d %s %s %s via %s: %ld samples wrong through Core, %ld through Imf", i, f.w, f.h,
-              f.names[0], f.half ? "float16" : "float32", pattern_name[f.pat],
+        CHECK(false, "film %d: %dx%d %s %s %s via %s: %ld samples wrong through Core, %ld through Imf", i,
+              f.w, f.h, f.names[0], f.half ? "float16" : "float32", pattern_name[f.pat],
               f.in_memory ? "exr_encode_image" : "exr_write_image", bc, bi);
     }
     exr_image_free(&core);

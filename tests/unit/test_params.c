@@ -68,7 +68,9 @@ static double value_num(const scene *s, const char *key) {
   return d;
 }
 
-static bool render16(scene *s, film_image *out) { return tsup_render(s, 8, 99, 2, out); }
+static bool render16(scene *s, film_image *out) {
+  return tsup_render(s, 8, 99, 2, out);
+}
 
 static bool same_film(const film_image *a, const film_image *b) {
   return a->width == b->width && a->height == b->height && a->channels == b->channels &&
@@ -77,7 +79,8 @@ static bool same_film(const film_image *a, const film_image *b) {
 
 static void xform_json(const xform *t, char *buf, size_t len) {
   size_t n = (size_t)snprintf(buf, len, "[");
-  for (int k = 0; k < 16; k++) n += (size_t)snprintf(buf + n, len - n, "%s%.17g", k ? ", " : "", t->m[k / 4][k % 4]);
+  for (int k = 0; k < 16; k++)
+    n += (size_t)snprintf(buf + n, len - n, "%s%.17g", k ? ", " : "", t->m[k / 4][k % 4]);
   snprintf(buf + n, len - n, "]");
 }
 
@@ -102,9 +105,12 @@ static const char *ERD_SCENE =
 static bool write_quad_ply(const char *path, bool attrs) {
   FILE *f = fopen(path, "w");
   if (!f) return false;
-  fprintf(f, "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n%s"
-             "element face 2\nproperty list uchar int vertex_indices\nend_header\n",
-          attrs ? "property float nx\nproperty float ny\nproperty float nz\nproperty float u\nproperty float v\n" : "");
+  fprintf(
+      f,
+      "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n%s"
+      "element face 2\nproperty list uchar int vertex_indices\nend_header\n",
+      attrs ? "property float nx\nproperty float ny\nproperty float nz\nproperty float u\nproperty float v\n"
+            : "");
   static const double q[4][2] = {{-1, -1}, {1, -1}, {1, 1}, {-1, 1}};
   for (int i = 0; i < 4; i++) {
     fprintf(f, "%g %g 0", q[i][0], q[i][1]);
@@ -124,23 +130,29 @@ static char ply_plain[256], ply_attrs[256];
 
 static scene *misc_scene(const char *variant) {
   char buf[8192];
-  snprintf(buf, sizeof buf,
-           "{\"type\": \"scene\","
-           " \"cam\": {\"type\": \"perspective\", \"fov\": 60, \"to_world\": [{\"lookat\": {\"origin\": [0.3, -4, 4],"
-           "   \"target\": [0, 0, 0], \"up\": [0, 0, 1]}}], \"sampler\": {\"type\": \"independent\", \"sample_count\": 8},"
-           "   \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16, \"rfilter\": {\"type\": \"box\"}}},"
-           " \"emitter\": {\"type\": \"directional\", \"direction\": [0.3, 0.2, -1], \"irradiance\": 1.0},"
-           " \"my_shape\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.3}},"
-           " \"m\": {\"type\": \"ply\", \"filename\": \"%s\", \"to_world\": [{\"translate\": [1.5, 0, 0.2]}],"
-           "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.6}},"
-           " \"n\": {\"type\": \"ply\", \"filename\": \"%s\", \"to_world\": [{\"translate\": [-1.5, 0, 0.2]}]},"
-           " \"ball\": {\"type\": \"sphere\", \"to_world\": [{\"scale\": 0.4}, {\"translate\": [0, 1.2, 0.5]}],"
-           "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": {\"type\": \"rgb\", \"value\": [0.2, 0.5, 0.8]}}},"
-           " \"metal\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 0.5}, {\"translate\": [0, -1.5, 0.1]}],"
-           "   \"bsdf\": {\"type\": \"roughconductor\", \"alpha\": 0.2, \"eta\": 1.5, \"k\": 3}},"
-           " \"ts\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 0.3}, {\"translate\": [1.5, 1.5, 0.3]}],"
-           "   \"bsdf\": {\"type\": \"twosided\", \"inner\": {\"type\": \"diffuse\", \"reflectance\": 0.4}}}}",
-           ply_plain, ply_attrs);
+  snprintf(
+      buf, sizeof buf,
+      "{\"type\": \"scene\","
+      " \"cam\": {\"type\": \"perspective\", \"fov\": 60, \"to_world\": [{\"lookat\": {\"origin\": [0.3, -4, "
+      "4],"
+      "   \"target\": [0, 0, 0], \"up\": [0, 0, 1]}}], \"sampler\": {\"type\": \"independent\", "
+      "\"sample_count\": 8},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16, \"rfilter\": {\"type\": "
+      "\"box\"}}},"
+      " \"emitter\": {\"type\": \"directional\", \"direction\": [0.3, 0.2, -1], \"irradiance\": 1.0},"
+      " \"my_shape\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.3}},"
+      " \"m\": {\"type\": \"ply\", \"filename\": \"%s\", \"to_world\": [{\"translate\": [1.5, 0, 0.2]}],"
+      "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.6}},"
+      " \"n\": {\"type\": \"ply\", \"filename\": \"%s\", \"to_world\": [{\"translate\": [-1.5, 0, 0.2]}]},"
+      " \"ball\": {\"type\": \"sphere\", \"to_world\": [{\"scale\": 0.4}, {\"translate\": [0, 1.2, 0.5]}],"
+      "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": {\"type\": \"rgb\", \"value\": [0.2, 0.5, "
+      "0.8]}}},"
+      " \"metal\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 0.5}, {\"translate\": [0, -1.5, "
+      "0.1]}],"
+      "   \"bsdf\": {\"type\": \"roughconductor\", \"alpha\": 0.2, \"eta\": 1.5, \"k\": 3}},"
+      " \"ts\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 0.3}, {\"translate\": [1.5, 1.5, 0.3]}],"
+      "   \"bsdf\": {\"type\": \"twosided\", \"inner\": {\"type\": \"diffuse\", \"reflectance\": 0.4}}}}",
+      ply_plain, ply_attrs);
   return tsup_load(buf, variant);
 }
 
@@ -181,16 +193,18 @@ static void test_naming_eradiate_example(void) {
    * order they were declared. */
   CHECK(ix[0] == 0, "allow_thread_reordering is entry %zu, expected 0", ix[0]);
   CHECK(ix[1] < ix[2] && ix[2] < ix[4] && ix[4] < ix[6] && ix[6] < ix[8],
-        "children out of declaration order: my_bsdf %zu, rectangle_1 %zu, rectangle_2 %zu, disk_1 %zu, disk_2 %zu",
+        "children out of declaration order: my_bsdf %zu, rectangle_1 %zu, rectangle_2 %zu, disk_1 %zu, "
+        "disk_2 %zu",
         ix[1], ix[2], ix[4], ix[6], ix[8]);
   CHECK(!params_info(s, n, &(param_info){0}), "params_info past the end must fail");
 
   /* Shared BSDF: listed once, its other paths are aliases. */
-  static const char *const aliases[] = {"rectangle_1.bsdf.reflectance.value", "rectangle_2.bsdf.reflectance.value",
+  static const char *const aliases[] = {"rectangle_1.bsdf.reflectance.value",
+                                        "rectangle_2.bsdf.reflectance.value",
                                         "disk_1.bsdf.reflectance.value"};
   for (size_t k = 0; k < 3; k++)
-    CHECK(idx_of(s, aliases[k]) == ix[1], "alias %s -> %zu, expected %zu (my_bsdf.reflectance.value)", aliases[k],
-          idx_of(s, aliases[k]), ix[1]);
+    CHECK(idx_of(s, aliases[k]) == ix[1], "alias %s -> %zu, expected %zu (my_bsdf.reflectance.value)",
+          aliases[k], idx_of(s, aliases[k]), ix[1]);
   param_info pi = {0};
   if (ix[1] != SIZE_MAX && params_info(s, ix[1], &pi)) {
     CHECK(pi.n_aliases == 3, "my_bsdf.reflectance.value has %zu aliases, expected 3", pi.n_aliases);
@@ -199,7 +213,8 @@ static void test_naming_eradiate_example(void) {
       for (size_t a = 0; a < pi.n_aliases; a++) found = found || strcmp(pi.aliases[a], aliases[k]) == 0;
       CHECK(found, "alias %s not listed by params_info", aliases[k]);
     }
-    CHECK(strcmp(pi.object_class, "texture") == 0, "owner class of my_bsdf.reflectance.value: %s", pi.object_class);
+    CHECK(strcmp(pi.object_class, "texture") == 0, "owner class of my_bsdf.reflectance.value: %s",
+          pi.object_class);
   }
   CHECK(ix[10] != ix[1], "disk_2's own BSDF must be a separate entry");
   if (ix[10] != SIZE_MAX && params_info(s, ix[10], &pi))
@@ -211,13 +226,29 @@ static void test_naming_misc(void) {
   scene *s = misc_scene(NULL);
   REQUIRE(s, "load");
   static const char *const present[] = {
-      "my_shape.bsdf.reflectance.value", "my_shape.to_world", "my_shape.silhouette_sampling_weight",
-      "emitter.irradiance.value", "emitter.to_world", "emitter.sampling_weight", "emitter.direction",
-      "m.vertex_positions", "m.faces", "m.to_world", "m.bsdf.reflectance.value",
-      "n.vertex_positions", "n.faces", "n.vertex_normals", "n.vertex_texcoords",
-      "ball.to_world", "ball.bsdf.reflectance.value",
-      "metal.bsdf.alpha.value", "metal.bsdf.eta.value", "metal.bsdf.k.value",
-      "ts.bsdf.brdf_0.reflectance.value", "cam.to_world", "allow_thread_reordering",
+      "my_shape.bsdf.reflectance.value",
+      "my_shape.to_world",
+      "my_shape.silhouette_sampling_weight",
+      "emitter.irradiance.value",
+      "emitter.to_world",
+      "emitter.sampling_weight",
+      "emitter.direction",
+      "m.vertex_positions",
+      "m.faces",
+      "m.to_world",
+      "m.bsdf.reflectance.value",
+      "n.vertex_positions",
+      "n.faces",
+      "n.vertex_normals",
+      "n.vertex_texcoords",
+      "ball.to_world",
+      "ball.bsdf.reflectance.value",
+      "metal.bsdf.alpha.value",
+      "metal.bsdf.eta.value",
+      "metal.bsdf.k.value",
+      "ts.bsdf.brdf_0.reflectance.value",
+      "cam.to_world",
+      "allow_thread_reordering",
   };
   for (size_t k = 0; k < sizeof present / sizeof *present; k++)
     CHECK(idx_of(s, present[k]) != SIZE_MAX, "missing key '%s'", present[k]);
@@ -306,7 +337,8 @@ static void test_info_types_classes(void) {
   size_t i = idx_of(s, "my_shape.to_world");
   if (i != SIZE_MAX && params_info(s, i, &pi)) {
     CHECK(strcmp(pi.object_type, "rectangle") == 0, "owner type %s", pi.object_type);
-    CHECK(pi.object_id && strcmp(pi.object_id, "my_shape") == 0, "owner id %s", pi.object_id ? pi.object_id : "(null)");
+    CHECK(pi.object_id && strcmp(pi.object_id, "my_shape") == 0, "owner id %s",
+          pi.object_id ? pi.object_id : "(null)");
   }
   i = idx_of(s, "metal.bsdf.alpha.value");
   if (i != SIZE_MAX && params_info(s, i, &pi)) CHECK(pi.cls == UPDATE_SPECTRAL, "alpha: spectral");
@@ -321,7 +353,8 @@ static void test_info_types_classes(void) {
 
 /* ---- lookup ------------------------------------------------------------------ */
 
-static bool match_set(const scene *s, const char *glob, unsigned mask, bool none, const char *const *keys, size_t nk) {
+static bool match_set(const scene *s, const char *glob, unsigned mask, bool none, const char *const *keys,
+                      size_t nk) {
   size_t *out = NULL, count = 0;
   rsw_err err = {0};
   if (params_match(s, glob, mask, none, &out, &count, &err) != RSW_OK) {
@@ -330,7 +363,8 @@ static bool match_set(const scene *s, const char *glob, unsigned mask, bool none
     return false;
   }
   bool ok = count == nk;
-  CHECK(count == nk, "params_match(%s, mask %u, none %d): %zu entries, expected %zu", glob, mask, none, count, nk);
+  CHECK(count == nk, "params_match(%s, mask %u, none %d): %zu entries, expected %zu", glob, mask, none, count,
+        nk);
   for (size_t k = 0; k < nk; k++) {
     size_t want = idx_of(s, keys[k]);
     bool found = false;
@@ -362,11 +396,15 @@ static void test_lookup(void) {
   static const char *const sil[] = {"rectangle_1.silhouette_sampling_weight",
                                     "rectangle_2.silhouette_sampling_weight"};
   match_set(s, "rectangle_?.sil*", 0, true, sil, 2);
-  static const char *const geo_none[] = {"allow_thread_reordering", "rectangle_1.to_world", "rectangle_2.to_world",
-                                         "disk_1.to_world", "disk_2.to_world",
+  static const char *const geo_none[] = {"allow_thread_reordering",
+                                         "rectangle_1.to_world",
+                                         "rectangle_2.to_world",
+                                         "disk_1.to_world",
+                                         "disk_2.to_world",
                                          "rectangle_1.silhouette_sampling_weight",
                                          "rectangle_2.silhouette_sampling_weight",
-                                         "disk_1.silhouette_sampling_weight", "disk_2.silhouette_sampling_weight"};
+                                         "disk_1.silhouette_sampling_weight",
+                                         "disk_2.silhouette_sampling_weight"};
   match_set(s, "*", UPDATE_GEOMETRIC, true, geo_none, 9);
   size_t *out = NULL, count = 0;
   rsw_err err = {0};
@@ -377,21 +415,23 @@ static void test_lookup(void) {
   out = NULL;
   /* Read-only entries are left out unless include_none. */
   err = (rsw_err){0};
-  CHECK(params_match(s, "*.silhouette_sampling_weight", UPDATE_SPECTRAL | UPDATE_GEOMETRIC, false, &out, &count,
-                     &err) == RSW_ERR_NOT_FOUND,
+  CHECK(params_match(s, "*.silhouette_sampling_weight", UPDATE_SPECTRAL | UPDATE_GEOMETRIC, false, &out,
+                     &count, &err) == RSW_ERR_NOT_FOUND,
         "read-only entries must not match without include_none");
   free(out);
   out = NULL;
   err = (rsw_err){0};
-  CHECK(params_match(s, "zzz*", UPDATE_SPECTRAL | UPDATE_GEOMETRIC, true, &out, &count, &err) == RSW_ERR_NOT_FOUND,
+  CHECK(params_match(s, "zzz*", UPDATE_SPECTRAL | UPDATE_GEOMETRIC, true, &out, &count, &err) ==
+            RSW_ERR_NOT_FOUND,
         "no match must be RSW_ERR_NOT_FOUND");
   free(out);
   out = NULL;
 
   /* Eradiate's search TYPE:ID:PATH: by object class or plugin name, and
    * through a shape to its (shared) BSDF. */
-  CHECK(idx_of(s, "bsdf:my_bsdf:reflectance.value") == mb, "bsdf:my_bsdf:reflectance.value -> %zu, expected %zu",
-        idx_of(s, "bsdf:my_bsdf:reflectance.value"), mb);
+  CHECK(idx_of(s, "bsdf:my_bsdf:reflectance.value") == mb,
+        "bsdf:my_bsdf:reflectance.value -> %zu, expected %zu", idx_of(s, "bsdf:my_bsdf:reflectance.value"),
+        mb);
   CHECK(idx_of(s, "diffuse:my_bsdf:reflectance.value") == mb, "diffuse:my_bsdf:reflectance.value -> %zu",
         idx_of(s, "diffuse:my_bsdf:reflectance.value"));
   CHECK(idx_of(s, "shape:disk_2:bsdf.reflectance.value") == d2, "shape:disk_2:bsdf.reflectance.value -> %zu",
@@ -404,7 +444,8 @@ static void test_lookup(void) {
   match_set(s, "bsdf:my_bsdf:reflectance.value", UPDATE_SPECTRAL, false, one, 1);
   size_t ix;
   err = (rsw_err){0};
-  CHECK(params_lookup(s, "bsdf:nope:reflectance.value", &ix, &err) == RSW_ERR_NOT_FOUND, "search: unknown id");
+  CHECK(params_lookup(s, "bsdf:nope:reflectance.value", &ix, &err) == RSW_ERR_NOT_FOUND,
+        "search: unknown id");
   err = (rsw_err){0};
   CHECK(params_lookup(s, "shape:my_bsdf:reflectance.value", &ix, &err) == RSW_ERR_NOT_FOUND,
         "search: my_bsdf is not a shape");
@@ -417,10 +458,12 @@ static void test_lookup(void) {
   CHECK(err_mentions(&err, "nope"), "error must name the key: %s", err.msg);
   err = (rsw_err){0};
   CHECK(params_lookup(s, "disk_2.bsdf.reflectanse.value", &ix, &err) == RSW_ERR_NOT_FOUND, "misspelt key");
-  CHECK(err_mentions(&err, "disk_2.bsdf.reflectance.value"), "suggestions must include the right key: %s", err.msg);
+  CHECK(err_mentions(&err, "disk_2.bsdf.reflectance.value"), "suggestions must include the right key: %s",
+        err.msg);
   err = (rsw_err){0};
   CHECK(params_lookup(s, "rectangle_1.to_wrld", &ix, &err) == RSW_ERR_NOT_FOUND, "misspelt key 2");
-  CHECK(err_mentions(&err, "rectangle_1.to_world"), "suggestions must include rectangle_1.to_world: %s", err.msg);
+  CHECK(err_mentions(&err, "rectangle_1.to_world"), "suggestions must include rectangle_1.to_world: %s",
+        err.msg);
   err = (rsw_err){0};
   CHECK(params_lookup(s, "", &ix, &err) == RSW_ERR_NOT_FOUND, "empty key");
   scene_free(s);
@@ -497,16 +540,18 @@ static void test_value_json(void) {
   scene_free(s);
 
   /* Mono: a tabulated spectrum comes back as {"wavelengths", "values"}. */
-  s = tsup_load("{\"type\": \"scene\", \"p\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\","
-                " \"reflectance\": {\"type\": \"spectrum\", \"wavelengths\": [400, 700], \"values\": [0.25, 0.75]}}}}",
-                "mono");
+  s = tsup_load(
+      "{\"type\": \"scene\", \"p\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\","
+      " \"reflectance\": {\"type\": \"spectrum\", \"wavelengths\": [400, 700], \"values\": [0.25, 0.75]}}}}",
+      "mono");
   REQUIRE(s, "load mono");
   j = value_json(s, "p.bsdf.reflectance.value");
   v = j ? cJSON_Parse(j) : NULL;
   cJSON *wl = v ? cJSON_GetObjectItemCaseSensitive(v, "wavelengths") : NULL;
   cJSON *va = v ? cJSON_GetObjectItemCaseSensitive(v, "values") : NULL;
-  CHECK(cJSON_IsArray(wl) && cJSON_IsArray(va) && cJSON_GetArraySize(wl) == 2 && cJSON_GetArraySize(va) == 2 &&
-            cJSON_GetArrayItem(wl, 1)->valuedouble == 700 && cJSON_GetArrayItem(va, 0)->valuedouble == 0.25,
+  CHECK(cJSON_IsArray(wl) && cJSON_IsArray(va) && cJSON_GetArraySize(wl) == 2 &&
+            cJSON_GetArraySize(va) == 2 && cJSON_GetArrayItem(wl, 1)->valuedouble == 700 &&
+            cJSON_GetArrayItem(va, 0)->valuedouble == 0.25,
         "table JSON: %s", j ? j : "(null)");
   cJSON_Delete(v);
   free(j);
@@ -530,25 +575,27 @@ static void test_value_parse(void) {
   REQUIRE(param_value_parse("[0.1, 0.2, 0.3]", "t", &v, &err) == RSW_OK, "array");
   CHECK(v.kind == PV_ARRAY && v.n == 3 && v.rows == 0 && v.arr[0] == 0.1 && v.arr[2] == 0.3, "array 3");
   param_value_free(&v);
-  REQUIRE(param_value_parse("[[1, 2, 3, 4], [5, 6, 7, 8], [9, 10, 11, 12], [0, 0, 0, 1]]", "t", &v, &err) == RSW_OK,
+  REQUIRE(param_value_parse("[[1, 2, 3, 4], [5, 6, 7, 8], [9, 10, 11, 12], [0, 0, 0, 1]]", "t", &v, &err) ==
+              RSW_OK,
           "nested 4x4");
   bool ok = v.kind == PV_ARRAY && v.n == 16 && v.rows == 4;
   static const double m[16] = {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 0, 0, 0, 1};
   for (int k = 0; ok && k < 16; k++) ok = v.arr[k] == m[k];
   CHECK(ok, "nested 4x4: kind %d n %zu rows %zu, row-major flattening", v.kind, v.n, v.rows);
   param_value_free(&v);
-  REQUIRE(param_value_parse("[1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 0, 0, 0, 1]", "t", &v, &err) == RSW_OK, "flat 16");
+  REQUIRE(param_value_parse("[1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 0, 0, 0, 1]", "t", &v, &err) == RSW_OK,
+          "flat 16");
   CHECK(v.kind == PV_ARRAY && v.n == 16 && v.rows == 0 && v.arr[4] == 5, "flat 16");
   param_value_free(&v);
-  REQUIRE(param_value_parse("{\"wavelengths\": [400, 500, 600], \"values\": [0.1, 0.2, 0.4]}", "t", &v, &err) ==
-              RSW_OK,
+  REQUIRE(param_value_parse("{\"wavelengths\": [400, 500, 600], \"values\": [0.1, 0.2, 0.4]}", "t", &v,
+                            &err) == RSW_OK,
           "table (wavelengths/values)");
   CHECK(v.kind == PV_TABLE && v.table.kind == SPEC_TABLE && v.table.n == 3 && v.table.wl[2] == 600 &&
             v.table.val[1] == 0.2,
         "table 1");
   param_value_free(&v);
-  REQUIRE(param_value_parse("{\"type\": \"spectrum\", \"value\": [[400, 0.1], [500, 0.2], [600, 0.4]]}", "t", &v,
-                            &err) == RSW_OK,
+  REQUIRE(param_value_parse("{\"type\": \"spectrum\", \"value\": [[400, 0.1], [500, 0.2], [600, 0.4]]}", "t",
+                            &v, &err) == RSW_OK,
           "table (pairs)");
   CHECK(v.kind == PV_TABLE && v.table.n == 3 && v.table.wl[1] == 500 && v.table.val[2] == 0.4, "table 2");
   param_value_free(&v);
@@ -603,27 +650,28 @@ static void test_atomic_bad_entry(void) {
   char *m0 = value_json(s, "m.to_world");
   REQUIRE(v0 && m0, "value_json");
   static const bad_case bad[] = {
-      {"my_shape.bsdf.reflectanse.value", "0.5"},                 /* unknown key */
-      {"my_shape.to_world", "[1, 2]"},                            /* wrong shape */
+      {"my_shape.bsdf.reflectanse.value", "0.5"},                          /* unknown key */
+      {"my_shape.to_world", "[1, 2]"},                                     /* wrong shape */
       {"my_shape.to_world", "[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0]]"}, /* 3 rows */
-      {"emitter.irradiance.value", NULL},                         /* NaN */
-      {"emitter.sampling_weight", NULL},                          /* NaN */
-      {"my_shape.silhouette_sampling_weight", "2"},               /* read-only */
-      {"allow_thread_reordering", "false"},                       /* read-only */
-      {"ball.bsdf.reflectance.value", "[-0.1, 0.2, 0.3]"},        /* negative reflectance */
-      {"ball.bsdf.reflectance.value", "[0.1, 0.2]"},              /* rgb of 2 */
-      {"metal.bsdf.alpha.value", "0"},                            /* alpha 0 */
+      {"emitter.irradiance.value", NULL},                                  /* NaN */
+      {"emitter.sampling_weight", NULL},                                   /* NaN */
+      {"my_shape.silhouette_sampling_weight", "2"},                        /* read-only */
+      {"allow_thread_reordering", "false"},                                /* read-only */
+      {"ball.bsdf.reflectance.value", "[-0.1, 0.2, 0.3]"},                 /* negative reflectance */
+      {"ball.bsdf.reflectance.value", "[0.1, 0.2]"},                       /* rgb of 2 */
+      {"metal.bsdf.alpha.value", "0"},                                     /* alpha 0 */
       {"metal.bsdf.alpha.value", "-0.2"},
       {"my_shape.to_world", "[0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1]"}, /* singular */
-      {"ball.to_world", "[1, 0, 0, 0, 0, 2, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]"},     /* sphere: non-uniform scale */
-      {"m.vertex_positions", "[0, 0, 0, 1, 0, 0, 1, 1, 0]"},      /* wrong count */
-      {"m.faces", "[0, 1, 2, 0, 2, 9]"},                          /* index out of range */
-      {"emitter.direction", "[0, 0, 0]"},                         /* zero direction */
+      {"ball.to_world", "[1, 0, 0, 0, 0, 2, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]"}, /* sphere: non-uniform scale */
+      {"m.vertex_positions", "[0, 0, 0, 1, 0, 0, 1, 1, 0]"},                 /* wrong count */
+      {"m.faces", "[0, 1, 2, 0, 2, 9]"},                                     /* index out of range */
+      {"emitter.direction", "[0, 0, 0]"},                                    /* zero direction */
       {"emitter.sampling_weight", "-1"},
-      {"cam.to_world", "[0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]"},     /* singular */
-      {"my_shape.to_world", "true"},                              /* bool for a transform */
-      {"emitter.sampling_weight", "[1, 2, 3]"},                   /* array for a float */
-      {"my_shape.bsdf.reflectance.value", "{\"wavelengths\": [400, 500], \"values\": [0.1, 0.2]}"}, /* table in rgb */
+      {"cam.to_world", "[0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]"}, /* singular */
+      {"my_shape.to_world", "true"},                                        /* bool for a transform */
+      {"emitter.sampling_weight", "[1, 2, 3]"},                             /* array for a float */
+      {"my_shape.bsdf.reflectance.value",
+       "{\"wavelengths\": [400, 500], \"values\": [0.1, 0.2]}"}, /* table in rgb */
   };
   for (size_t k = 0; k < sizeof bad / sizeof *bad; k++) {
     /* Good entry first, then the bad one; and the bad one first. */
@@ -637,8 +685,8 @@ static void test_atomic_bad_entry(void) {
       if (bad[k].json) {
         if (param_value_parse(bad[k].json, bad[k].key, &bd->value, &err) != RSW_OK) {
           char buf[1200];
-          CHECK(false, "%s = %s: the value must parse (the update should reject it): %s", bad[k].key, bad[k].json,
-                rsw_err_format(&err, buf, sizeof buf));
+          CHECK(false, "%s = %s: the value must parse (the update should reject it): %s", bad[k].key,
+                bad[k].json, rsw_err_format(&err, buf, sizeof buf));
           param_value_free(&good->value);
           continue;
         }
@@ -648,7 +696,8 @@ static void test_atomic_bad_entry(void) {
       update_report rep = {.changed = 12345};
       rsw_status st = scene_update(s, items, 2, &rep, &err);
       CHECK(st != RSW_OK, "update with bad %s = %s must fail", bad[k].key, bad[k].json ? bad[k].json : "NaN");
-      CHECK(st != RSW_OK && err_mentions(&err, bad[k].key), "error for %s must name it: %s", bad[k].key, err.msg);
+      CHECK(st != RSW_OK && err_mentions(&err, bad[k].key), "error for %s must name it: %s", bad[k].key,
+            err.msg);
       param_value_free(&items[0].value);
       param_value_free(&items[1].value);
       char *v1 = value_json(s, "my_shape.bsdf.reflectance.value");
@@ -682,8 +731,8 @@ static void test_atomic_bad_entry(void) {
 /* ---- no-ops, classes, counters --------------------------------------------------- */
 
 static bool same_counters(const accel_counters *a, const accel_counters *b) {
-  return a->top_commits == b->top_commits && a->instance_updates == b->instance_updates && a->refits == b->refits &&
-         a->rebuilds == b->rebuilds;
+  return a->top_commits == b->top_commits && a->instance_updates == b->instance_updates &&
+         a->refits == b->refits && a->rebuilds == b->rebuilds;
 }
 
 static void test_equal_values_noop(void) {
@@ -693,15 +742,18 @@ static void test_equal_values_noop(void) {
   accel_get_counters(s->accel, &c0);
   update_report rep = {.changed = 99, .classes = 99};
   if (upd1_ok(s, "my_shape.bsdf.reflectance.value", "0.3", &rep))
-    CHECK(rep.changed == 0 && rep.classes == 0, "equal reflectance: changed %zu classes %u", rep.changed, rep.classes);
+    CHECK(rep.changed == 0 && rep.classes == 0, "equal reflectance: changed %zu classes %u", rep.changed,
+          rep.classes);
   rep = (update_report){.changed = 99, .classes = 99};
   if (upd1_ok(s, "ball.bsdf.reflectance.value", "[0.2, 0.5, 0.8]", &rep))
-    CHECK(rep.changed == 0 && rep.classes == 0, "equal rgb: changed %zu classes %u", rep.changed, rep.classes);
+    CHECK(rep.changed == 0 && rep.classes == 0, "equal rgb: changed %zu classes %u", rep.changed,
+          rep.classes);
   /* The current to_world written back, read from the table itself. */
   char *mj = value_json(s, "ball.to_world");
   rep = (update_report){.changed = 99, .classes = 99};
   if (mj && upd1_ok(s, "ball.to_world", mj, &rep))
-    CHECK(rep.changed == 0 && rep.classes == 0, "equal to_world: changed %zu classes %u", rep.changed, rep.classes);
+    CHECK(rep.changed == 0 && rep.classes == 0, "equal to_world: changed %zu classes %u", rep.changed,
+          rep.classes);
   free(mj);
   char *vp = value_json(s, "m.vertex_positions");
   rep = (update_report){.changed = 99, .classes = 99};
@@ -724,8 +776,11 @@ static void test_update_classes_counters(void) {
   accel_get_counters(s->accel, &c0);
 
   /* Spectral: no Embree work at all. */
-  param_update u[5] = {{.key = "my_shape.bsdf.reflectance.value"}, {.key = "emitter.irradiance.value"},
-                       {.key = "emitter.direction"}, {.key = "cam.to_world"}, {.key = "metal.bsdf.alpha.value"}};
+  param_update u[5] = {{.key = "my_shape.bsdf.reflectance.value"},
+                       {.key = "emitter.irradiance.value"},
+                       {.key = "emitter.direction"},
+                       {.key = "cam.to_world"},
+                       {.key = "metal.bsdf.alpha.value"}};
   static const char *const vals[5] = {"0.55", "[2, 1, 0.5]", "[0.1, -0.3, -1]",
                                       "[[-1, 0, 0, 0], [0, 1, 0, 0], [0, 0, -1, 5], [0, 0, 0, 1]]", "0.1"};
   rsw_err err = {0};
@@ -755,9 +810,10 @@ static void test_update_classes_counters(void) {
   if (upd1_ok(s, "my_shape.to_world", "[1, 0, 0, 0.25, 0, 1, 0, -0.5, 0, 0, 1, 0.1, 0, 0, 0, 1]", &rep)) {
     accel_get_counters(s->accel, &c1);
     CHECK(rep.classes == UPDATE_GEOMETRIC, "to_world: classes %u", rep.classes);
-    CHECK(c1.top_commits == c0.top_commits + 1, "to_world: top commits %lu -> %lu", c0.top_commits, c1.top_commits);
-    CHECK(c1.instance_updates > c0.instance_updates, "to_world: instance updates %lu -> %lu", c0.instance_updates,
-          c1.instance_updates);
+    CHECK(c1.top_commits == c0.top_commits + 1, "to_world: top commits %lu -> %lu", c0.top_commits,
+          c1.top_commits);
+    CHECK(c1.instance_updates > c0.instance_updates, "to_world: instance updates %lu -> %lu",
+          c0.instance_updates, c1.instance_updates);
     CHECK(c1.refits == c0.refits && c1.rebuilds == c0.rebuilds, "to_world: refits %lu->%lu rebuilds %lu->%lu",
           c0.refits, c1.refits, c0.rebuilds, c1.rebuilds);
     CHECK(rep.instance_updates >= 1 && rep.refits == 0 && rep.rebuilds == 0, "to_world report: %u/%u/%u",
@@ -768,8 +824,8 @@ static void test_update_classes_counters(void) {
   if (upd1_ok(s, "m.to_world", "[1, 0, 0, 1.25, 0, 1, 0, 0, 0, 0, 1, 0.3, 0, 0, 0, 1]", &rep)) {
     accel_get_counters(s->accel, &c1);
     CHECK(c1.refits == c0.refits && c1.rebuilds == c0.rebuilds && c1.top_commits == c0.top_commits + 1,
-          "mesh to_world: refits %lu->%lu rebuilds %lu->%lu commits %lu->%lu", c0.refits, c1.refits, c0.rebuilds,
-          c1.rebuilds, c0.top_commits, c1.top_commits);
+          "mesh to_world: refits %lu->%lu rebuilds %lu->%lu commits %lu->%lu", c0.refits, c1.refits,
+          c0.rebuilds, c1.rebuilds, c0.top_commits, c1.top_commits);
     c0 = c1;
   }
   /* Vertex positions: a refit of that mesh only. */
@@ -794,11 +850,11 @@ static void test_update_classes_counters(void) {
   param_update mix[2] = {{.key = "my_shape.bsdf.reflectance.value"}, {.key = "ball.to_world"}};
   err = (rsw_err){0};
   if (param_value_parse("0.65", "a", &mix[0].value, &err) == RSW_OK &&
-      param_value_parse("[0.5, 0, 0, 0.1, 0, 0.5, 0, 1.2, 0, 0, 0.5, 0.5, 0, 0, 0, 1]", "b", &mix[1].value, &err) ==
-          RSW_OK) {
+      param_value_parse("[0.5, 0, 0, 0.1, 0, 0.5, 0, 1.2, 0, 0, 0.5, 0.5, 0, 0, 0, 1]", "b", &mix[1].value,
+                        &err) == RSW_OK) {
     CHECK(scene_update(s, mix, 2, &rep, &err) == RSW_OK, "mixed update: %s", err.msg);
-    CHECK(rep.classes == (UPDATE_SPECTRAL | UPDATE_GEOMETRIC) && rep.changed == 2, "mixed: classes %u changed %zu",
-          rep.classes, rep.changed);
+    CHECK(rep.classes == (UPDATE_SPECTRAL | UPDATE_GEOMETRIC) && rep.changed == 2,
+          "mixed: classes %u changed %zu", rep.classes, rep.changed);
   } else {
     CHECK(false, "parse mixed: %s", err.msg);
   }
@@ -808,8 +864,10 @@ static void test_update_classes_counters(void) {
   /* Updates are visible in the table: the written values read back. */
   char *j = value_json(s, "my_shape.bsdf.reflectance.value");
   cJSON *v = j ? cJSON_Parse(j) : NULL;
-  bool ok = v && ((cJSON_IsNumber(v) && v->valuedouble == 0.65) ||
-                  (cJSON_IsArray(v) && cJSON_GetArraySize(v) == 3 && cJSON_GetArrayItem(v, 1)->valuedouble == 0.65));
+  bool ok =
+      v &&
+      ((cJSON_IsNumber(v) && v->valuedouble == 0.65) ||
+       (cJSON_IsArray(v) && cJSON_GetArraySize(v) == 3 && cJSON_GetArrayItem(v, 1)->valuedouble == 0.65));
   CHECK(ok, "reflectance reads back as %s, expected 0.65", j ? j : "(null)");
   cJSON_Delete(v);
   free(j);
@@ -823,8 +881,8 @@ static void test_update_by_alias_and_search(void) {
   if (upd1_ok(s, "rectangle_2.bsdf.reflectance.value", "0.25", &rep)) {
     CHECK(value_num(s, "my_bsdf.reflectance.value") == 0.25, "after an update by alias: %g",
           value_num(s, "my_bsdf.reflectance.value"));
-    CHECK(rep.changed == 1 && rep.classes == UPDATE_SPECTRAL, "alias update: changed %zu classes %u", rep.changed,
-          rep.classes);
+    CHECK(rep.changed == 1 && rep.classes == UPDATE_SPECTRAL, "alias update: changed %zu classes %u",
+          rep.changed, rep.classes);
   }
   if (upd1_ok(s, "bsdf:my_bsdf:reflectance.value", "0.75", &rep)) {
     CHECK(value_num(s, "disk_1.bsdf.reflectance.value") == 0.75, "after an update by search: %g",
@@ -833,7 +891,8 @@ static void test_update_by_alias_and_search(void) {
           value_num(s, "disk_2.bsdf.reflectance.value"));
   }
   /* Mono: a number becomes a tabulated spectrum and back. */
-  if (upd1_ok(s, "disk_2.bsdf.reflectance.value", "{\"wavelengths\": [400, 800], \"values\": [0.1, 0.9]}", &rep)) {
+  if (upd1_ok(s, "disk_2.bsdf.reflectance.value", "{\"wavelengths\": [400, 800], \"values\": [0.1, 0.9]}",
+              &rep)) {
     CHECK(rep.changed == 1, "table update changed %zu", rep.changed);
     char *j = value_json(s, "disk_2.bsdf.reflectance.value");
     CHECK(j && strstr(j, "wavelengths"), "table reads back as %s", j ? j : "(null)");
@@ -847,7 +906,8 @@ static void test_update_by_alias_and_search(void) {
 static void test_bsphere_refresh(void) {
   const char *fmt = "{\"type\": \"scene\", \"cam\": {\"type\": \"hdistant\","
                     "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 64},"
-                    "   \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16, \"rfilter\": {\"type\": \"box\"}}},"
+                    "   \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16, \"rfilter\": "
+                    "{\"type\": \"box\"}}},"
                     " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1], \"irradiance\": 1.0},"
                     " \"plate\": {\"type\": \"rectangle\", \"to_world\": %s,"
                     "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}";
@@ -866,10 +926,11 @@ static void test_bsphere_refresh(void) {
     CHECK(s->bsphere_center.x != c0.x && s->bsphere_radius != r0, "bounding sphere not refreshed");
     CHECK(memcmp(&s->bsphere_center, &s2->bsphere_center, sizeof(vec3)) == 0 &&
               s->bsphere_radius == s2->bsphere_radius,
-          "bounding sphere (%.17g %.17g %.17g; %.17g) != reload's (%.17g %.17g %.17g; %.17g)", s->bsphere_center.x,
-          s->bsphere_center.y, s->bsphere_center.z, s->bsphere_radius, s2->bsphere_center.x, s2->bsphere_center.y,
-          s2->bsphere_center.z, s2->bsphere_radius);
-    CHECK(memcmp(&s->bbox_min, &s2->bbox_min, sizeof(vec3)) == 0 && memcmp(&s->bbox_max, &s2->bbox_max, sizeof(vec3)) == 0,
+          "bounding sphere (%.17g %.17g %.17g; %.17g) != reload's (%.17g %.17g %.17g; %.17g)",
+          s->bsphere_center.x, s->bsphere_center.y, s->bsphere_center.z, s->bsphere_radius,
+          s2->bsphere_center.x, s2->bsphere_center.y, s2->bsphere_center.z, s2->bsphere_radius);
+    CHECK(memcmp(&s->bbox_min, &s2->bbox_min, sizeof(vec3)) == 0 &&
+              memcmp(&s->bbox_max, &s2->bbox_max, sizeof(vec3)) == 0,
           "bounding box != reload's");
     /* hdistant without a target still sees the plate: a fraction 2/pi of
      * its rays hit (test_radiometry's no-target case), radiance
@@ -878,8 +939,8 @@ static void test_bsphere_refresh(void) {
     if (tsup_render(s, 0, 4, 2, &img)) {
       double mean, sem, expect = 2.0 / M_PI * 0.5 / M_PI;
       tsup_stats(&img, 0, &mean, &sem);
-      CHECK(fabs(mean - expect) <= 3 * sem + 1e-12, "moved plate: mean %.6g vs %.6g (3 sigma %.3g)", mean, expect,
-            3 * sem);
+      CHECK(fabs(mean - expect) <= 3 * sem + 1e-12, "moved plate: mean %.6g vs %.6g (3 sigma %.3g)", mean,
+            expect, 3 * sem);
       CHECK(sem < 0.05 * expect, "standard error %.3g too large", sem);
       film_image_free(&img);
     }
@@ -899,11 +960,12 @@ static void test_mono_table_range(void) {
   /* A tabulated value is evaluated at the render's wavelength by linear
    * interpolation; outside the table it is an error, not zero (issue 3,
    * item 5) — after an update as after a load. */
-  scene *s = tsup_load("{\"type\": \"scene\", \"cam\": {\"type\": \"hdistant\", \"target\": {\"type\": \"rectangle\"},"
-                       " \"film\": {\"type\": \"hdrfilm\", \"width\": 4, \"height\": 4, \"rfilter\": {\"type\": \"box\"}}},"
-                       " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1], \"irradiance\": 1},"
-                       " \"p\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}",
-                       "mono");
+  scene *s = tsup_load(
+      "{\"type\": \"scene\", \"cam\": {\"type\": \"hdistant\", \"target\": {\"type\": \"rectangle\"},"
+      " \"film\": {\"type\": \"hdrfilm\", \"width\": 4, \"height\": 4, \"rfilter\": {\"type\": \"box\"}}},"
+      " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1], \"irradiance\": 1},"
+      " \"p\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}",
+      "mono");
   REQUIRE(s, "load");
   update_report rep;
   film_image img;
@@ -921,7 +983,8 @@ static void test_mono_table_range(void) {
     CHECK(!ok, "render at 650 nm outside the table [400, 500] must fail");
     if (ok) film_image_free(&img);
   }
-  if (upd1_ok(s, "p.bsdf.reflectance.value", "{\"type\": \"spectrum\", \"value\": [[600, 0.3], [700, 0.7]]}", &rep)) {
+  if (upd1_ok(s, "p.bsdf.reflectance.value", "{\"type\": \"spectrum\", \"value\": [[600, 0.3], [700, 0.7]]}",
+              &rep)) {
     err = (rsw_err){0};
     if (render_at(s, 650, &img, &err)) {
       CHECK_REL(img.data[0], 0.5 / M_PI, 1e-5);

@@ -28,7 +28,8 @@ static const char *const TEMPLATE =
     "#include <stdio.h>\n"
     "#include <stdlib.h>\n"
     "static const rsw_plugin_host *H;\n"
-    "static const rsw_plugin_param P[] = {{\"radiance\", RSW_PARAM_FLOAT, {1, 0, 0}, RSW_UPDATE_SPECTRAL, 0, 1e6},\n"
+    "static const rsw_plugin_param P[] = {{\"radiance\", RSW_PARAM_FLOAT, {1, 0, 0}, RSW_UPDATE_SPECTRAL, 0, "
+    "1e6},\n"
     "  {\"axis\", RSW_PARAM_VECTOR3, {0, 0, 1}, RSW_UPDATE_SPECTRAL, 0, 0}};\n"
     "typedef struct inst { double L, axis[3], wl; } inst;\n"
     "static int cr(const double *const *v, void **o, char *e, size_t n) {\n"
@@ -55,7 +56,8 @@ static const char *const TEMPLATE =
     "static double sa(const void *p, const double u[2], double d[3]) {\n"
     "  (void)p; H->square_to_uniform_sphere(u, d); return %4$s; }\n"
     "static double pd(const void *p, const double d[3]) { (void)p, (void)d; return %5$s; }\n"
-    "static const rsw_env_plugin T = {%1$s, \"%2$s\", \"Test plugin\", P, 2, cr, de, NULL, sp, gp, pr, ar, sa, pd};\n"
+    "static const rsw_env_plugin T = {%1$s, \"%2$s\", \"Test plugin\", P, 2, cr, de, NULL, sp, gp, pr, ar, "
+    "sa, pd};\n"
     "const rsw_env_plugin *%6$s(const rsw_plugin_host *h) { H = h; return &T; }\n";
 
 typedef struct spec {
@@ -71,8 +73,10 @@ static char include_dir[1024];
 
 static void find_include_dir(void) {
   const char *td = getenv("RSW_TEST_DIR"); /* tests/ (set by tests/run.sh) */
-  if (td) snprintf(include_dir, sizeof include_dir, "%s/../include", td);
-  else snprintf(include_dir, sizeof include_dir, "include");
+  if (td)
+    snprintf(include_dir, sizeof include_dir, "%s/../include", td);
+  else
+    snprintf(include_dir, sizeof include_dir, "include");
 }
 
 /* A fresh directory under /tmp (caller removes it with rm_dir). */
@@ -96,8 +100,8 @@ static bool build_plugin(const char *dir, const char *file, spec s) {
   if (!f) return false;
   fprintf(f, TEMPLATE, s.abi, s.type, s.radiance, s.sample_pdf, s.pdf, s.entry);
   fclose(f);
-  snprintf(cmd, sizeof cmd, "cc -std=c11 -Wall -Wextra -Werror -shared -fPIC -I '%s' -o '%s' '%s'", include_dir,
-           so, src);
+  snprintf(cmd, sizeof cmd, "cc -std=c11 -Wall -Wextra -Werror -shared -fPIC -I '%s' -o '%s' '%s'",
+           include_dir, so, src);
   return system(cmd) == 0;
 }
 
@@ -125,7 +129,8 @@ static void test_good_plugin_loads(void) {
   spec s = good("ptest");
   const char *files[] = {"good"};
   char msg[1200] = "", dir[256];
-  REQUIRE(load_specs(&s, files, 1, msg, sizeof msg, dir, sizeof dir) == RSW_OK, "good plugin refused: %s", msg);
+  REQUIRE(load_specs(&s, files, 1, msg, sizeof msg, dir, sizeof dir) == RSW_OK, "good plugin refused: %s",
+          msg);
   CHECK(plugins_count() == 1, "count %zu", plugins_count());
   const plugin *p = registry_find("ptest");
   REQUIRE(p != NULL, "registry_find does not see the plugin");
@@ -136,7 +141,8 @@ static void test_good_plugin_loads(void) {
   /* Loading the same type again clashes with the loaded one. */
   char dir2[256];
   rsw_status st = load_specs(&s, files, 1, msg, sizeof msg, dir2, sizeof dir2);
-  CHECK(st == RSW_ERR_DUPLICATE && strstr(msg, "already provided") && strstr(msg, "good.so"), "second load: %s", msg);
+  CHECK(st == RSW_ERR_DUPLICATE && strstr(msg, "already provided") && strstr(msg, "good.so"),
+        "second load: %s", msg);
   CHECK(plugins_count() == 1, "count after refused load %zu", plugins_count());
   plugins_unload();
   CHECK(plugins_count() == 0 && registry_find("ptest") == NULL, "unload left the type registered");
@@ -177,23 +183,25 @@ static void test_bad_plugins_refused(void) {
   check_refused(&s, f5, 1, "invalid type name", "badname.so", "invalid type name");
 
   rsw_err err = {0};
-  CHECK(plugins_load_dir("/nonexistent/rsw_plugins", &err) != RSW_OK && strstr(err.msg, "/nonexistent/rsw_plugins"),
+  CHECK(plugins_load_dir("/nonexistent/rsw_plugins", &err) != RSW_OK &&
+            strstr(err.msg, "/nonexistent/rsw_plugins"),
         "missing directory: %s", err.msg);
 }
 
 /* A grey diffuse sphere seen from +y under environment ENV (JSON). */
 static rsw_status load_scene(const char *env_json, const char *variant, scene **out, rsw_err *err) {
   char doc[2048];
-  snprintf(doc, sizeof doc,
-           "{\"type\": \"scene\","
-           " \"sensor\": {\"type\": \"perspective\", \"fov\": 40,"
-           "  \"to_world\": [{\"lookat\": {\"origin\": [0, 5, 0], \"target\": [0, 0, 0], \"up\": [0, 0, 1]}}],"
-           "  \"film\": {\"type\": \"hdrfilm\", \"width\": 8, \"height\": 8},"
-           "  \"sampler\": {\"type\": \"independent\", \"sample_count\": 4}},"
-           " \"integrator\": {\"type\": \"path\", \"max_depth\": 3},"
-           " \"ball\": {\"type\": \"sphere\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}},"
-           " \"env\": %s}",
-           env_json);
+  snprintf(
+      doc, sizeof doc,
+      "{\"type\": \"scene\","
+      " \"sensor\": {\"type\": \"perspective\", \"fov\": 40,"
+      "  \"to_world\": [{\"lookat\": {\"origin\": [0, 5, 0], \"target\": [0, 0, 0], \"up\": [0, 0, 1]}}],"
+      "  \"film\": {\"type\": \"hdrfilm\", \"width\": 8, \"height\": 8},"
+      "  \"sampler\": {\"type\": \"independent\", \"sample_count\": 4}},"
+      " \"integrator\": {\"type\": \"path\", \"max_depth\": 3},"
+      " \"ball\": {\"type\": \"sphere\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}},"
+      " \"env\": %s}",
+      env_json);
   scene_load_opts lo = {.size = sizeof lo, .variant = variant};
   return scene_load_memory(doc, strlen(doc), "plugin_test.json", false, &lo, out, err);
 }
@@ -244,7 +252,8 @@ static void test_plugin_matches_constant_and_updates(void) {
   /* The plugin's parameters are in the table (spectral) and updatable:
    * radiance 1.5 -> 3 doubles the film. */
   size_t idx;
-  CHECK(params_lookup(sp, "env.radiance", &idx, &err) == RSW_OK, "env.radiance not in the table: %s", err.msg);
+  CHECK(params_lookup(sp, "env.radiance", &idx, &err) == RSW_OK, "env.radiance not in the table: %s",
+        err.msg);
   param_info info;
   if (params_info(sp, idx, &info)) CHECK(info.cls == UPDATE_SPECTRAL, "class %d", (int)info.cls);
   CHECK(params_lookup(sp, "env.axis", &idx, &err) == RSW_OK, "env.axis not in the table: %s", err.msg);

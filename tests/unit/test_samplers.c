@@ -47,8 +47,8 @@ static void h_free(harness *h) {
 }
 
 /* Draw n values (alternating 1-D and 2-D) of one sample. */
-static void draw(const sampler *s, uint64_t seed, uint64_t pixel, uint32_t idx, uint32_t spp,
-                 double *out, int n) {
+static void draw(const sampler *s, uint64_t seed, uint64_t pixel, uint32_t idx, uint32_t spp, double *out,
+                 int n) {
   sampler_state st;
   s->ops->start(s, &st, seed, pixel, idx, spp);
   for (int i = 0; i < n;) {
@@ -67,7 +67,9 @@ static bool same(const double *a, const double *b, int n) {
 }
 
 static void check_determinism(const sampler *s, uint32_t spp) {
-  enum { N = 12 };
+  enum {
+    N = 12
+  };
   double a[N], b[N];
   draw(s, 7, 1234, 3, spp, a, N);
   draw(s, 7, 1234, 3, spp, b, N);
@@ -111,7 +113,9 @@ static void test_independent_determinism(void) {
  * sample indices: U[0,1) has mean 1/2 and variance 1/12; each mean must lie
  * within 3 standard errors sqrt(1/12/N) (fixed seed, deterministic). */
 static void check_uniform(const sampler *s, uint32_t spp) {
-  enum { PIXELS = 4096 };
+  enum {
+    PIXELS = 4096
+  };
   double sum[3] = {0}, sum2[3] = {0};
   long n = 0;
   for (uint64_t px = 0; px < PIXELS; px++)
@@ -141,7 +145,9 @@ static void test_independent_uniform(void) {
   check_uniform(h.s, 8);
   /* 2-D uniformity: 8x8 histogram of next_2d, chi-square against uniform
    * with 63 d.o.f.; 110 is above the 0.9999 quantile (~104.2). */
-  enum { N = 64000 };
+  enum {
+    N = 64000
+  };
   int cell[64] = {0};
   for (uint32_t i = 0; i < N; i++) {
     sampler_state st;
@@ -195,11 +201,10 @@ static void test_stratified_strata(void) {
     }
     for (int d = 0; d < 4; d++)
       for (int c = 0; c < 16; c++)
-        CHECK(hit2[d][c] == 1, "pixel %llu dim %d: cell %d has %d samples",
-              (unsigned long long)px, d, c, hit2[d][c]);
+        CHECK(hit2[d][c] == 1, "pixel %llu dim %d: cell %d has %d samples", (unsigned long long)px, d, c,
+              hit2[d][c]);
     for (int c = 0; c < 16; c++)
-      CHECK(hit1[c] == 1, "pixel %llu 1-D stratum %d has %d samples", (unsigned long long)px, c,
-            hit1[c]);
+      CHECK(hit1[c] == 1, "pixel %llu 1-D stratum %d has %d samples", (unsigned long long)px, c, hit1[c]);
     if (memcmp(order[0], order[1], sizeof order[0]) != 0) differing++;
   }
   /* Dimensions use independent permutations (else dimensions correlate). */

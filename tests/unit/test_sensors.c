@@ -95,12 +95,11 @@ static sensor *build_sensor(harness *h, node *doc, vec3 c, double r) {
   return s;
 }
 
-#define CHECK_VEC(a, b, tol)                                                   \
-  do {                                                                         \
-    vec3 a__ = (a), b__ = (b);                                                 \
-    CHECK(v3_len(v3_sub(a__, b__)) <= (tol),                                   \
-          "%s = (%.9f, %.9f, %.9f) vs %s = (%.9f, %.9f, %.9f)", #a, a__.x,     \
-          a__.y, a__.z, #b, b__.x, b__.y, b__.z);                              \
+#define CHECK_VEC(a, b, tol)                                                                                 \
+  do {                                                                                                       \
+    vec3 a__ = (a), b__ = (b);                                                                               \
+    CHECK(v3_len(v3_sub(a__, b__)) <= (tol), "%s = (%.9f, %.9f, %.9f) vs %s = (%.9f, %.9f, %.9f)", #a,       \
+          a__.x, a__.y, a__.z, #b, b__.x, b__.y, b__.z);                                                     \
   } while (0)
 
 /* ---- hdistant ------------------------------------------------------------ */
@@ -125,8 +124,8 @@ static void test_hdistant_vectors_identity(void) {
   CHECK(all_used(h.doc), "unused property");
   for (size_t i = 0; i < N_VECTORS; i++) {
     ray3 r;
-    double w = s->ops->sample_ray(s, v2(hdistant_vectors[i].u[0], hdistant_vectors[i].u[1]),
-                                  v2(0.5, 0.5), &r);
+    double w =
+        s->ops->sample_ray(s, v2(hdistant_vectors[i].u[0], hdistant_vectors[i].u[1]), v2(0.5, 0.5), &r);
     CHECK_VEC(r.d, hdistant_vectors[i].d, 1e-6);
     CHECK_ABS(w, 1.0, 0);
     CHECK_ABS(v3_len(r.d), 1.0, 1e-12);
@@ -145,8 +144,7 @@ static void test_hdistant_vectors_rotated(void) {
   REQUIRE(s, "build failed: %s", h.err.msg);
   for (size_t i = 0; i < N_VECTORS; i++) {
     ray3 r;
-    s->ops->sample_ray(s, v2(hdistant_vectors[i].u[0], hdistant_vectors[i].u[1]), v2(0.5, 0.5),
-                       &r);
+    s->ops->sample_ray(s, v2(hdistant_vectors[i].u[0], hdistant_vectors[i].u[1]), v2(0.5, 0.5), &r);
     CHECK_VEC(r.d, xf_vector(&rot, hdistant_vectors[i].d), 1e-6);
   }
   ray3 r;
@@ -238,7 +236,7 @@ static void test_hdistant_shape_target(void) {
   for (int i = 0; i < 32; i++) {
     ray3 r;
     double w = s->ops->sample_ray(s, v2(0.3, 0.6), v2((i + 0.5) / 32.0, 0.77), &r);
-    CHECK_REL(w, 1.0, 1e-9); /* uniform area sampling: 1/(pdf A) = 1 */
+    CHECK_REL(w, 1.0, 1e-9);         /* uniform area sampling: 1/(pdf A) = 1 */
     vec3 ps = v3_fma(r.o, 6.0, r.d); /* default offset 2R = 6 */
     CHECK_ABS(ps.z, 0.0, 1e-9);
     CHECK(hypot(ps.x, ps.y) <= 1.0 + 1e-9, "target sample off the disk");
@@ -335,8 +333,7 @@ static void test_distant_film_must_be_1x1(void) {
   CHECK(h_build(&h, doc, VARIANT_MONO) == RSW_ERR_INVALID, "2x2 film accepted");
   h_free(&h);
   /* The default film is 768x576: also an error. */
-  CHECK(h_build(&h, mk("distant", "m"), VARIANT_MONO) == RSW_ERR_INVALID,
-        "default film accepted");
+  CHECK(h_build(&h, mk("distant", "m"), VARIANT_MONO) == RSW_ERR_INVALID, "default film accepted");
   h_free(&h);
 }
 
@@ -457,8 +454,7 @@ static void test_perspective_fov(void) {
   s = build_sensor(&h, doc, v3(0, 0, 0), 1.0);
   REQUIRE(s, "build failed: %s", h.err.msg);
   s->ops->sample_ray(s, v2(0.0, 0.0), v2(0.5, 0.5), &r);
-  CHECK_ABS(angle_deg(r.d, v3(0, 0, 1)), atan(sqrt(36.0 * 36 + 24 * 24) / 70.0) * 180 / RSW_PI,
-            1e-9);
+  CHECK_ABS(angle_deg(r.d, v3(0, 0, 1)), atan(sqrt(36.0 * 36 + 24 * 24) / 70.0) * 180 / RSW_PI, 1e-9);
   h_free(&h);
 }
 
@@ -552,8 +548,7 @@ static void test_hdrfilm_formats(void) {
   CHECK(build_film(&h, "component_format", "float32", VARIANT_MONO) == RSW_OK, "float32");
   CHECK(((film *)h.obj)->component_format == COMPFMT_FLOAT32, "float32");
   h_free(&h);
-  CHECK(build_film(&h, "component_format", "uint32", VARIANT_MONO) == RSW_ERR_UNSUPPORTED,
-        "uint32");
+  CHECK(build_film(&h, "component_format", "uint32", VARIANT_MONO) == RSW_ERR_UNSUPPORTED, "uint32");
   h_free(&h);
   CHECK(build_film(&h, "file_format", "pfm", VARIANT_MONO) == RSW_ERR_UNSUPPORTED, "pfm");
   h_free(&h);

@@ -64,8 +64,8 @@ static bool trace(const scene *s, ray3 r, surface_interaction *si) {
  * convex: the shape is a sphere of radius r_sphere (rays entering it
  * must reach the far side). Hits are aimed at points within `aim` of
  * `centre` (before the shift). */
-static void self_hits(const char *name, const char *scene_fmt, vec3 centre, double aim, double r_sphere, double D,
-                      int n_hits) {
+static void self_hits(const char *name, const char *scene_fmt, vec3 centre, double aim, double r_sphere,
+                      double D, int n_hits) {
   char shift[200], text[4096];
   snprintf(shift, sizeof shift, ", {\"translate\": [%.17g, %.17g, %.17g]}", D * U[0], D * U[1], D * U[2]);
   snprintf(text, sizeof text, scene_fmt, shift, shift);
@@ -110,29 +110,29 @@ static void self_hits(const char *name, const char *scene_fmt, vec3 centre, doub
   for (size_t k = 0; k < N_K; k++) printf(" %g: %lu", K_TRY[k], bad[k]);
   printf("\n");
   CHECK(hits >= (unsigned long)n_hits / 2, "%s: too few hits (%lu)", name, hits);
-  CHECK(bad[N_K - 1] == 0, "%s shifted by %g m: %lu of %lu spawned rays self-intersect", name, D, bad[N_K - 1],
-        rays);
+  CHECK(bad[N_K - 1] == 0, "%s shifted by %g m: %lu of %lu spawned rays self-intersect", name, D,
+        bad[N_K - 1], rays);
   scene_free(s);
 }
 
 #define SCENE_HEAD "{\"type\": \"scene\", "
 
-static const char *RECT = SCENE_HEAD
-    "\"a\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [3, 0.5, 1]}, "
-    "{\"rotate\": {\"axis\": [1, 2, 3], \"angle\": 37}}%s]}}";
-static const char *SPHERE = SCENE_HEAD
-    "\"a\": {\"type\": \"sphere\", \"radius\": 2, \"to_world\": [{\"rotate\": {\"axis\": [1, 1, 0], \"angle\": 20}}%s]}}";
-static const char *DISK = SCENE_HEAD
-    "\"a\": {\"type\": \"disk\", \"to_world\": [{\"scale\": 0.05}, "
-    "{\"rotate\": {\"axis\": [0, 1, 1], \"angle\": 70}}%s]}}";
+static const char *RECT =
+    SCENE_HEAD "\"a\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [3, 0.5, 1]}, "
+               "{\"rotate\": {\"axis\": [1, 2, 3], \"angle\": 37}}%s]}}";
+static const char *SPHERE = SCENE_HEAD "\"a\": {\"type\": \"sphere\", \"radius\": 2, \"to_world\": "
+                                       "[{\"rotate\": {\"axis\": [1, 1, 0], \"angle\": 20}}%s]}}";
+static const char *DISK = SCENE_HEAD "\"a\": {\"type\": \"disk\", \"to_world\": [{\"scale\": 0.05}, "
+                                     "{\"rotate\": {\"axis\": [0, 1, 1], \"angle\": 70}}%s]}}";
 static const char *INST = SCENE_HEAD
-    "\"g\": {\"type\": \"shapegroup\", \"m\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [0.2, 0.04, 1]}, "
+    "\"g\": {\"type\": \"shapegroup\", \"m\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [0.2, "
+    "0.04, 1]}, "
     "{\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 50}}, {\"translate\": [0.3, 0, 0]}]}}, "
     "\"i\": {\"type\": \"instance\", \"shapegroup\": {\"type\": \"ref\", \"id\": \"g\"}, \"to_world\": "
     "[{\"rotate\": {\"axis\": [0, 0, 1], \"angle\": 33}}, {\"translate\": [-0.3, 0.1, 2]}%s]}}";
-static const char *BIG = SCENE_HEAD
-    "\"a\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [5000, 5000, 1]}, "
-    "{\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 10}}%s]}}";
+static const char *BIG =
+    SCENE_HEAD "\"a\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [5000, 5000, 1]}, "
+               "{\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 10}}%s]}}";
 
 static void test_no_self_intersection(void) {
   const double shifts[] = {0, 1e5};
@@ -166,8 +166,9 @@ static void test_no_self_intersection_files(void) {
     double D = shifts[i];
     char fmt[2048];
     snprintf(fmt, sizeof fmt,
-             SCENE_HEAD "\"a\": {\"type\": \"obj\", \"filename\": \"%s\", \"face_normals\": true, \"to_world\": "
-                        "[{\"rotate\": {\"axis\": [1, 2, 0], \"angle\": 25}}%%s]}}",
+             SCENE_HEAD
+             "\"a\": {\"type\": \"obj\", \"filename\": \"%s\", \"face_normals\": true, \"to_world\": "
+             "[{\"rotate\": {\"axis\": [1, 2, 0], \"angle\": 25}}%%s]}}",
              obj);
     self_hits("OBJ, face normals", fmt, v3(0, 0, 0), 1.0, 0, D, 3000);
     /* The list's rows hold the shift themselves: write it again. */
@@ -194,9 +195,10 @@ static void test_no_skipped_geometry(void) {
     double D = shifts[i];
     char text[2048];
     snprintf(text, sizeof text,
-             SCENE_HEAD "\"lo\": {\"type\": \"rectangle\", \"to_world\": [{\"translate\": [%.17g, %.17g, %.17g]}]}, "
-                        "\"hi\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 3}, {\"translate\": "
-                        "[%.17g, %.17g, %.17g]}]}}",
+             SCENE_HEAD
+             "\"lo\": {\"type\": \"rectangle\", \"to_world\": [{\"translate\": [%.17g, %.17g, %.17g]}]}, "
+             "\"hi\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 3}, {\"translate\": "
+             "[%.17g, %.17g, %.17g]}]}}",
              D * U[0], D * U[1], D * U[2], D * U[0], D * U[1], 50e-6 + D * U[2]);
     scene *s = tsup_load(text, NULL);
     REQUIRE(s, "plates load");
@@ -204,8 +206,8 @@ static void test_no_skipped_geometry(void) {
     pcg32_seed(&g, 5, 9);
     unsigned long missed = 0, n = 0;
     for (int k = 0; k < 3000; k++) {
-      vec3 p = v3(D * U[0] + 1.8 * (pcg32_next_double(&g) - 0.5), D * U[1] + 1.8 * (pcg32_next_double(&g) - 0.5),
-                  D * U[2] - 1.0);
+      vec3 p = v3(D * U[0] + 1.8 * (pcg32_next_double(&g) - 0.5),
+                  D * U[1] + 1.8 * (pcg32_next_double(&g) - 0.5), D * U[2] - 1.0);
       ray3 r = {p, v3(0, 0, 1), 0, INFINITY};
       surface_interaction si;
       if (!trace(s, r, &si) || si.shape != s->shapes[0]) continue;
@@ -218,7 +220,8 @@ static void test_no_skipped_geometry(void) {
       missed += !(trace(s, q, &s2) && s2.shape == s->shapes[1]);
     }
     printf("  plates 50 um apart, shift %6.0f m: %lu of %lu rays miss the upper plate\n", D, missed, n);
-    CHECK(n > 2000 && missed == 0, "shifted by %g m: %lu of %lu rays skip the plate 50 um above", D, missed, n);
+    CHECK(n > 2000 && missed == 0, "shifted by %g m: %lu of %lu rays skip the plate 50 um above", D, missed,
+          n);
     scene_free(s);
   }
 }
@@ -232,10 +235,11 @@ static void test_shadow_segments(void) {
     char sh[200], text[2048];
     snprintf(sh, sizeof sh, ", {\"translate\": [%.17g, %.17g, %.17g]}", D * U[0], D * U[1], D * U[2]);
     snprintf(text, sizeof text,
-             SCENE_HEAD "\"plate\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 2}%s]}, "
-                        "\"lamp\": {\"type\": \"rectangle\", \"emitter\": {\"type\": \"area\"}, \"to_world\": "
-                        "[{\"scale\": 0.5}, {\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 160}}, "
-                        "{\"translate\": [0.3, 0, 1.2]}%s]}}",
+             SCENE_HEAD
+             "\"plate\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 2}%s]}, "
+             "\"lamp\": {\"type\": \"rectangle\", \"emitter\": {\"type\": \"area\"}, \"to_world\": "
+             "[{\"scale\": 0.5}, {\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 160}}, "
+             "{\"translate\": [0.3, 0, 1.2]}%s]}}",
              sh, sh);
     scene *s = tsup_load(text, NULL);
     REQUIRE(s, "scene loads");
@@ -245,19 +249,21 @@ static void test_shadow_segments(void) {
     pcg32_seed(&g, 8, 1);
     unsigned long occluded = 0, n = 0;
     for (int k = 0; k < 4000; k++) {
-      vec3 p = v3(D * U[0] + 3.8 * (pcg32_next_double(&g) - 0.5), D * U[1] + 3.8 * (pcg32_next_double(&g) - 0.5),
-                  D * U[2] + 3);
+      vec3 p = v3(D * U[0] + 3.8 * (pcg32_next_double(&g) - 0.5),
+                  D * U[1] + 3.8 * (pcg32_next_double(&g) - 0.5), D * U[2] + 3);
       ray3 r = {p, v3(0, 0, -1), 0, INFINITY};
       surface_interaction si;
       if (!trace(s, r, &si) || si.shape != s->shapes[0]) continue;
       position_sample ps = shape_sample_position(lamp, v2(pcg32_next_double(&g), pcg32_next_double(&g)));
       if (!(v3_dot(ps.n, v3_sub(si.p, ps.p)) > 0)) continue;
-      ray3 q = spawn_ray_between(&si, ps.p, ps.n, accel_surface_error(s->accel, lamp->index, &lamp->to_world, ps.p, ps.n));
+      ray3 q = spawn_ray_between(&si, ps.p, ps.n,
+                                 accel_surface_error(s->accel, lamp->index, &lamp->to_world, ps.p, ps.n));
       n++;
       occluded += scene_occluded(s, &q);
     }
     printf("  plate to lamp, shift %6.0f m: %lu of %lu shadow segments occluded\n", D, occluded, n);
-    CHECK(n > 1000 && occluded == 0, "shifted by %g m: %lu of %lu shadow segments are occluded", D, occluded, n);
+    CHECK(n > 1000 && occluded == 0, "shifted by %g m: %lu of %lu shadow segments are occluded", D, occluded,
+          n);
     scene_free(s);
   }
 }

@@ -26,14 +26,17 @@ static const char *PLUGIN =
     "static void add(const void *i, rsw_stokes_context *c, const double d[3]) {\n"
     "  (void)i, (void)d;\n"
     "  for (size_t k = 0; k < c->count; k++) {\n"
-    "    c->stokes[0][k] += 1.0; c->stokes[1][k] += 0.5; c->stokes[2][k] += -0.25; c->stokes[3][k] += 0.125; } }\n"
+    "    c->stokes[0][k] += 1.0; c->stokes[1][k] += 0.5; c->stokes[2][k] += -0.25; c->stokes[3][k] += 0.125; "
+    "} }\n"
     "static double sample(const void *i, const double u[2], double d[3]) {\n"
     "  (void)i; H->square_to_uniform_sphere(u, d); return H->uniform_sphere_pdf(); }\n"
-    "static double pdf(const void *i, const double d[3]) { (void)i, (void)d; return H->uniform_sphere_pdf(); }\n"
+    "static double pdf(const void *i, const double d[3]) { (void)i, (void)d; return H->uniform_sphere_pdf(); "
+    "}\n"
     "static const rsw_env_plugin T = {.abi_version = RSW_PLUGIN_ABI_VERSION, .type_name = \"polsky\",\n"
     "  .pretty_name = \"Polarised sky\", .create = create, .destroy = destroy, .add_radiance = add,\n"
     "  .sample = sample, .pdf = pdf};\n"
-    "RSW_PLUGIN_EXPORT const rsw_env_plugin *rsw_env_plugin_entry(const rsw_plugin_host *h) { H = h; return &T; }\n";
+    "RSW_PLUGIN_EXPORT const rsw_env_plugin *rsw_env_plugin_entry(const rsw_plugin_host *h) { H = h; return "
+    "&T; }\n";
 
 static char dir[64];
 
@@ -49,8 +52,8 @@ static bool build(void) {
   const char *td = getenv("RSW_TEST_DIR");
   char inc[512];
   snprintf(inc, sizeof inc, "%s/../include", td && *td ? td : "tests");
-  snprintf(cmd, sizeof cmd, "cc -std=c11 -Wall -Wextra -Werror -shared -fPIC -I '%s' -o '%s/polsky.so' '%s'", inc, dir,
-           src);
+  snprintf(cmd, sizeof cmd, "cc -std=c11 -Wall -Wextra -Werror -shared -fPIC -I '%s' -o '%s/polsky.so' '%s'",
+           inc, dir, src);
   return system(cmd) == 0;
 }
 
@@ -70,11 +73,13 @@ static void test_escaped_rays_carry_the_stokes_vector(void) {
   REQUIRE(s, "scene");
   film_image img;
   REQUIRE(tsup_render(s, 0, 1, 1, &img), "render");
-  REQUIRE(img.channels == 4 && strcmp(img.channel_names[0], "S0") == 0 && strcmp(img.channel_names[3], "S3") == 0,
+  REQUIRE(img.channels == 4 && strcmp(img.channel_names[0], "S0") == 0 &&
+              strcmp(img.channel_names[3], "S3") == 0,
           "S0..S3 channels");
   const double want[4] = {1.0, 0.5, -0.25, 0.125};
   for (int i = 0; i < img.width * img.height; i++)
-    for (int k = 0; k < 4; k++) CHECK(img.data[4 * i + k] == (float)want[k], "pixel %d S%d = %g", i, k, img.data[4 * i + k]);
+    for (int k = 0; k < 4; k++)
+      CHECK(img.data[4 * i + k] == (float)want[k], "pixel %d S%d = %g", i, k, img.data[4 * i + k]);
   film_image_free(&img);
   scene_free(s);
 }
@@ -82,7 +87,8 @@ static void test_escaped_rays_carry_the_stokes_vector(void) {
 static void test_reflected_light_keeps_the_ratios(void) {
   char sc[2048];
   snprintf(sc, sizeof sc, SCENE,
-           ", \"ball\": {\"type\": \"sphere\", \"radius\": 1.5, \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}");
+           ", \"ball\": {\"type\": \"sphere\", \"radius\": 1.5, \"bsdf\": {\"type\": \"diffuse\", "
+           "\"reflectance\": 0.5}}");
   scene *s = tsup_load(sc, NULL);
   REQUIRE(s, "scene");
   film_image img;

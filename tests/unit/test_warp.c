@@ -15,13 +15,12 @@ RSW_TEST_DEFINE_GLOBALS
 #define SQRT1_2 0.70710678118654752440
 
 static void check_v2(vec2 got, double x, double y, double tol, const char *what) {
-  CHECK(fabs(got.x - x) <= tol && fabs(got.y - y) <= tol,
-        "%s: got (%.17g, %.17g), want (%.17g, %.17g)", what, got.x, got.y, x, y);
+  CHECK(fabs(got.x - x) <= tol && fabs(got.y - y) <= tol, "%s: got (%.17g, %.17g), want (%.17g, %.17g)", what,
+        got.x, got.y, x, y);
 }
 static void check_v3(vec3 got, double x, double y, double z, double tol, const char *what) {
   CHECK(fabs(got.x - x) <= tol && fabs(got.y - y) <= tol && fabs(got.z - z) <= tol,
-        "%s: got (%.17g, %.17g, %.17g), want (%.17g, %.17g, %.17g)", what, got.x,
-        got.y, got.z, x, y, z);
+        "%s: got (%.17g, %.17g, %.17g), want (%.17g, %.17g, %.17g)", what, got.x, got.y, got.z, x, y, z);
 }
 
 /* --- fixed vectors ------------------------------------------------------ */
@@ -46,16 +45,14 @@ static void test_fixed_vectors(void) {
   check_v3(warp_square_to_uniform_sphere(v2(0.25, 0.5)), 0, 1, 0, t, "sphere(.25,.5)");
   check_v3(warp_square_to_uniform_sphere(v2(0.7, 1)), 0, 0, -1, t, "sphere(.7,1)");
   /* Cosine power: cos theta = u.y^(1/(n+1)): u.y = 1/8, n = 2 -> 1/2. */
-  check_v3(warp_square_to_cosine_power_hemisphere(v2(0, 0.125), 2), sqrt(0.75), 0, 0.5, t,
-           "cospow(0,1/8;2)");
+  check_v3(warp_square_to_cosine_power_hemisphere(v2(0, 0.125), 2), sqrt(0.75), 0, 0.5, t, "cospow(0,1/8;2)");
   check_v3(warp_square_to_cosine_power_hemisphere(v2(0.3, 1), 7), 0, 0, 1, t, "cospow pole");
   /* Cone: the centre is the pole, the edge of the disk the rim z = c. */
   check_v3(warp_square_to_uniform_cone(v2(0.5, 0.5), 0.3), 0, 0, 1, t, "cone centre");
   check_v3(warp_square_to_uniform_cone(v2(1, 0.5), 0.3), sqrt(1 - 0.09), 0, 0.3, t, "cone rim");
   /* Castle convention about +z: phi = 0 at +x, phi = pi/2 at +y. */
   check_v3(warp_phi_theta_to_xyz(v2(0, RSW_PI / 2), v3(0, 0, 1)), 1, 0, 0, t, "phi 0");
-  check_v3(warp_phi_theta_to_xyz(v2(RSW_PI / 2, RSW_PI / 2), v3(0, 0, 1)), 0, 1, 0, t,
-           "phi pi/2");
+  check_v3(warp_phi_theta_to_xyz(v2(RSW_PI / 2, RSW_PI / 2), v3(0, 0, 1)), 0, 1, 0, t, "phi pi/2");
   check_v3(warp_phi_theta_to_xyz(v2(1.3, 0), v3(0, 0, 2)), 0, 0, 2, t, "theta 0, radius 2");
   check_v3(warp_phi_theta_to_xyz(v2(0.4, RSW_PI), v3(0, 3, 0)), 0, -3, 0, t, "theta pi");
 }
@@ -89,7 +86,7 @@ static void test_pdf_values_and_domains(void) {
 /* --- inverse round trips ------------------------------------------------ */
 
 /* Mitsuba test_warp.py: 10 x 10 grid in [1e-6, 1 - 1e-6]^2, atol 1e-5. */
-#define GRID 10
+#define GRID    10
 #define RT_ATOL 1e-5
 
 static vec2 grid_point(int i, int j) {
@@ -98,15 +95,14 @@ static vec2 grid_point(int i, int j) {
 }
 
 static void check_round_trip(vec2 u, vec2 back, const char *what) {
-  CHECK(fabs(back.x - u.x) <= RT_ATOL && fabs(back.y - u.y) <= RT_ATOL,
-        "%s: (%.9g, %.9g) -> (%.9g, %.9g)", what, u.x, u.y, back.x, back.y);
+  CHECK(fabs(back.x - u.x) <= RT_ATOL && fabs(back.y - u.y) <= RT_ATOL, "%s: (%.9g, %.9g) -> (%.9g, %.9g)",
+        what, u.x, u.y, back.x, back.y);
 }
 
 /* A sampled direction must be unit and have a positive pdf. */
 static void check_sampled_dir(vec3 v, double pdf, const char *what) {
   CHECK(fabs(v3_len(v) - 1.0) <= 1e-12, "%s: |v| = %.17g", what, v3_len(v));
-  CHECK(pdf > 0.0, "%s: pdf %g at a sampled direction (%g, %g, %g)", what, pdf, v.x,
-        v.y, v.z);
+  CHECK(pdf > 0.0, "%s: pdf %g at a sampled direction (%g, %g, %g)", what, pdf, v.x, v.y, v.z);
 }
 
 static void test_round_trips_planar_and_fixed(void) {
@@ -160,7 +156,7 @@ static void test_round_trips_parametric(void) {
 /* --- phi / theta -------------------------------------------------------- */
 
 static void test_phi_theta_round_trips(void) {
-  const vec3 axes[] = {v3(0, 0, 1), v3(0, 0, -1), v3(1, 0, 0),   v3(0, -2, 0),
+  const vec3 axes[] = {v3(0, 0, 1), v3(0, 0, -1), v3(1, 0, 0),       v3(0, -2, 0),
                        v3(1, 2, 3), v3(0, 0, -5), v3(-0.3, 0.1, -2), v3(1e-3, 0, -1)};
   for (size_t a = 0; a < sizeof axes / sizeof axes[0]; a++) {
     vec3 axis = axes[a];
@@ -187,10 +183,8 @@ static void test_phi_theta_round_trips(void) {
   vec3 p2 = warp_phi_theta_to_xyz(v2(0.7, 1.1), v3(2, 4, 6));
   check_v3(v3_scale(p1, 2.0), p2.x, p2.y, p2.z, 1e-12, "radius scales only");
   /* About -z the frame is coordinate_system(-z) = ((1,0,0), (0,-1,0)). */
-  check_v3(warp_phi_theta_to_xyz(v2(0, RSW_PI / 2), v3(0, 0, -1)), 1, 0, 0, 1e-12,
-           "-z phi 0");
-  check_v3(warp_phi_theta_to_xyz(v2(RSW_PI / 2, RSW_PI / 2), v3(0, 0, -1)), 0, -1, 0,
-           1e-12, "-z phi pi/2");
+  check_v3(warp_phi_theta_to_xyz(v2(0, RSW_PI / 2), v3(0, 0, -1)), 1, 0, 0, 1e-12, "-z phi 0");
+  check_v3(warp_phi_theta_to_xyz(v2(RSW_PI / 2, RSW_PI / 2), v3(0, 0, -1)), 0, -1, 0, 1e-12, "-z phi pi/2");
   /* A zero axis has no pole: zero vector, no NaN. */
   check_v3(warp_phi_theta_to_xyz(v2(1, 1), v3(0, 0, 0)), 0, 0, 0, 0, "zero axis");
 }
@@ -199,7 +193,7 @@ static void test_phi_theta_round_trips(void) {
 
 /* Every chi-square test below in one Sidak family: 2 disks, 2 hemispheres,
  * 4 cosine powers, 1 sphere, 3 cones. alpha = 0.01 for the family. */
-#define CHI2_TESTS 12
+#define CHI2_TESTS   12
 /* 1e6 samples, as Mitsuba's default. */
 #define CHI2_SAMPLES 1000000
 
@@ -250,7 +244,9 @@ static bool s_sphere(void *user, const double *u, vec3 *out, double *w) {
   *w = 1;
   return true;
 }
-static double p_sphere(void *user, vec3 v) { return warp_square_to_uniform_sphere_pdf(v); }
+static double p_sphere(void *user, vec3 v) {
+  return warp_square_to_uniform_sphere_pdf(v);
+}
 static bool s_cone(void *user, const double *u, vec3 *out, double *w) {
   *out = warp_square_to_uniform_cone(v2(u[0], u[1]), *(const double *)user);
   *w = 1;
@@ -267,11 +263,9 @@ static chi2_config family_config(chi2_domain d) {
   return c;
 }
 
-static void run_chi2(const char *what, const chi2_config *c, chi2_sample_fn s,
-                     chi2_pdf_fn p, void *user) {
+static void run_chi2(const char *what, const chi2_config *c, chi2_sample_fn s, chi2_pdf_fn p, void *user) {
   chi2_result r = chi2_run(c, s, p, user);
-  CHECK(r.passed, "%s: %s (chi2 %g, dof %d, p %g)", what, r.reason, r.chi2, r.dof,
-        r.p_value);
+  CHECK(r.passed, "%s: %s (chi2 %g, dof %d, p %g)", what, r.reason, r.chi2, r.dof, r.p_value);
 }
 
 static void test_chi2_disks(void) {

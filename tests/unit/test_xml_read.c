@@ -46,8 +46,8 @@ static char *slurp(const char *path, size_t *len) {
   return buf;
 }
 
-static rsw_status parse_str(const char *xml, const scene_define *defs, size_t n_defs,
-                            node **root, rsw_err *err) {
+static rsw_status parse_str(const char *xml, const scene_define *defs, size_t n_defs, node **root,
+                            rsw_err *err) {
   *root = NULL;
   rsw_err_clear(err);
   return scene_read_xml(xml, strlen(xml), "t.xml", defs, n_defs, root, NULL, err);
@@ -97,14 +97,13 @@ static double xf_diff(const xform *a, const double b[4][4]) {
   return d;
 }
 
-#define CHECK_XF(ops, ...)                                                    \
-  do {                                                                        \
-    xform xf_;                                                                \
-    const double want_[4][4] = __VA_ARGS__;                                   \
-    CHECK(parse_xf(ops, &xf_), "transform %s did not parse", ops);            \
-    double d_ = xf_diff(&xf_, want_);                                         \
-    CHECK(d_ < 1e-12, "transform %s differs from the expected matrix by %g",  \
-          ops, d_);                                                           \
+#define CHECK_XF(ops, ...)                                                                                   \
+  do {                                                                                                       \
+    xform xf_;                                                                                               \
+    const double want_[4][4] = __VA_ARGS__;                                                                  \
+    CHECK(parse_xf(ops, &xf_), "transform %s did not parse", ops);                                           \
+    double d_ = xf_diff(&xf_, want_);                                                                        \
+    CHECK(d_ < 1e-12, "transform %s differs from the expected matrix by %g", ops, d_);                       \
   } while (0)
 
 /* ---- the seed scene ---------------------------------------------------------- */
@@ -127,22 +126,19 @@ static void test_seed_scene(void) {
   CHECK(strcmp(root->loc, "hdistant_seed.xml:1") == 0, "root loc %s", root->loc);
 
   /* sensor, integrator, 3 emitters, shape, in document order */
-  static const char *const tags[] = {"sensor", "integrator", "emitter",
-                                     "emitter", "emitter", "shape"};
-  static const char *const types[] = {"hdistant", "path", "directional",
+  static const char *const tags[] = {"sensor", "integrator", "emitter", "emitter", "emitter", "shape"};
+  static const char *const types[] = {"hdistant",    "path",        "directional",
                                       "directional", "directional", "rectangle"};
-  static const char *const ids[] = {"hdistant", "path", "directional",
+  static const char *const ids[] = {"hdistant",      "path",          "directional",
                                     "directional_1", "directional_2", "rectangle"};
   REQUIRE(root->n_props == 6, "root has %zu children, expected 6", root->n_props);
   for (size_t i = 0; i < 6; i++) {
     node *n = child(root, i);
     REQUIRE(n, "child %zu is not an object", i);
-    CHECK(strcmp(root->props[i].name, "") == 0, "unnamed child %zu has name %s", i,
-          root->props[i].name);
+    CHECK(strcmp(root->props[i].name, "") == 0, "unnamed child %zu has name %s", i, root->props[i].name);
     CHECK(strcmp(n->tag, tags[i]) == 0, "child %zu tag %s != %s", i, n->tag, tags[i]);
     CHECK(strcmp(n->type, types[i]) == 0, "child %zu type %s != %s", i, n->type, types[i]);
-    CHECK(n->id && strcmp(n->id, ids[i]) == 0, "child %zu id %s != %s", i,
-          n->id ? n->id : "(null)", ids[i]);
+    CHECK(n->id && strcmp(n->id, ids[i]) == 0, "child %zu id %s != %s", i, n->id ? n->id : "(null)", ids[i]);
     CHECK(n->id_explicit == (i == 0), "child %zu id_explicit", i);
   }
 
@@ -175,8 +171,8 @@ static void test_seed_scene(void) {
   CHECK(pf && pf->kind == PROP_STRING && strcmp(pf->str, "rgb") == 0, "pixel_format");
   CHECK(cf && cf->kind == PROP_STRING && strcmp(cf->str, "float32") == 0, "component_format");
   node *rf = child(film, 4);
-  CHECK(rf && strcmp(rf->tag, "rfilter") == 0 && strcmp(rf->type, "box") == 0 &&
-            strcmp(rf->id, "box") == 0 && rf->n_props == 0,
+  CHECK(rf && strcmp(rf->tag, "rfilter") == 0 && strcmp(rf->type, "box") == 0 && strcmp(rf->id, "box") == 0 &&
+            rf->n_props == 0,
         "rfilter box");
 
   /* emitters: direction vectors and rgb irradiance */
@@ -188,8 +184,7 @@ static void test_seed_scene(void) {
     REQUIRE(d && d->kind == PROP_VEC3, "emitter %d direction", e);
     CHECK(d->vec.x == dirs[e][0] && d->vec.y == dirs[e][1] && d->vec.z == dirs[e][2],
           "emitter %d direction (%g %g %g)", e, d->vec.x, d->vec.y, d->vec.z);
-    REQUIRE(irr && irr->kind == PROP_SPECTRUM && irr->spec.kind == SPEC_RGB,
-            "emitter %d irradiance", e);
+    REQUIRE(irr && irr->kind == PROP_SPECTRUM && irr->spec.kind == SPEC_RGB, "emitter %d irradiance", e);
     for (int k = 0; k < 3; k++)
       CHECK(irr->spec.rgb[k] == rgbs[e][k], "emitter %d rgb[%d] = %g", e, k, irr->spec.rgb[k]);
   }
@@ -209,20 +204,16 @@ static void test_seed_scene(void) {
 
 static void test_transform_ops(void) {
   CHECK_XF("", {{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}, {0, 0, 0, 1}});
-  CHECK_XF("<translate x=\"1\" y=\"2\" z=\"3\"/>",
-           {{1, 0, 0, 1}, {0, 1, 0, 2}, {0, 0, 1, 3}, {0, 0, 0, 1}});
+  CHECK_XF("<translate x=\"1\" y=\"2\" z=\"3\"/>", {{1, 0, 0, 1}, {0, 1, 0, 2}, {0, 0, 1, 3}, {0, 0, 0, 1}});
   CHECK_XF("<translate y=\"-2\"/>", {{1, 0, 0, 0}, {0, 1, 0, -2}, {0, 0, 1, 0}, {0, 0, 0, 1}});
-  CHECK_XF("<translate value=\"1, 2 3\"/>",
-           {{1, 0, 0, 1}, {0, 1, 0, 2}, {0, 0, 1, 3}, {0, 0, 0, 1}});
+  CHECK_XF("<translate value=\"1, 2 3\"/>", {{1, 0, 0, 1}, {0, 1, 0, 2}, {0, 0, 1, 3}, {0, 0, 0, 1}});
   /* rotate 90 degrees counter-clockwise about z: x -> y, y -> -x */
-  CHECK_XF("<rotate z=\"1\" angle=\"90\"/>",
-           {{0, -1, 0, 0}, {1, 0, 0, 0}, {0, 0, 1, 0}, {0, 0, 0, 1}});
+  CHECK_XF("<rotate z=\"1\" angle=\"90\"/>", {{0, -1, 0, 0}, {1, 0, 0, 0}, {0, 0, 1, 0}, {0, 0, 0, 1}});
   /* about x (axis via value=, unnormalised): y -> z, z -> -y */
   CHECK_XF("<rotate value=\"2, 0, 0\" angle=\"90\"/>",
            {{1, 0, 0, 0}, {0, 0, -1, 0}, {0, 1, 0, 0}, {0, 0, 0, 1}});
   /* about y by 180: x -> -x, z -> -z */
-  CHECK_XF("<rotate y=\"1\" angle=\"180\"/>",
-           {{-1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, -1, 0}, {0, 0, 0, 1}});
+  CHECK_XF("<rotate y=\"1\" angle=\"180\"/>", {{-1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, -1, 0}, {0, 0, 0, 1}});
   CHECK_XF("<scale value=\"2\"/>", {{2, 0, 0, 0}, {0, 2, 0, 0}, {0, 0, 2, 0}, {0, 0, 0, 1}});
   CHECK_XF("<scale value=\"1 2 3\"/>", {{1, 0, 0, 0}, {0, 2, 0, 0}, {0, 0, 3, 0}, {0, 0, 0, 1}});
   CHECK_XF("<scale x=\"4\"/>", {{4, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}, {0, 0, 0, 1}});
@@ -285,29 +276,28 @@ static void test_transform_ops(void) {
 /* ---- properties ---------------------------------------------------------------- */
 
 static void test_properties(void) {
-  const char *xml =
-      "<?xml version=\"1.0\" encoding=\"utf-8\"?>\n"
-      "<scene version=\"3.0.0\" variant=\"mono\">\n"      /* 2 */
-      "  <!-- a comment -->\n"                            /* 3 */
-      "  <bsdf type=\"diffuse\" id=\"white\">\n"          /* 4 */
-      "    <rgb name=\"reflectance\" value=\"0.25\"/>\n"  /* 5 */
-      "  </bsdf>\n"
-      "  <shape type=\"sphere\" name=\"ball\">\n"         /* 7 */
-      "    <integer name=\"a\" value=\"-9007199254740992\"/>\n"
-      "    <integer name=\"b\" value=\" +7 \"/>\n"
-      "    <float name=\"c\" value=\"-1.5e-3\"/>\n"       /* 10 */
-      "    <boolean name=\"d\" value=\"TRUE\"/>\n"
-      "    <boolean name=\"e\" value=\"false\"/>\n"
-      "    <string name=\"f\" value=\"a b &amp; c\"/>\n"
-      "    <point name=\"g\" value=\"1.5\"/>\n"
-      "    <vector name=\"h\" y=\"2\"/>\n"                /* 15 */
-      "    <spectrum name=\"i\" value=\"0.75\"/>\n"
-      "    <spectrum name=\"j\" value=\"400:0.1, 500:0.2,600:0.4\n 700:0.8\"/>\n"
-      "    <ref id=\"white\"/>\n"                         /* 19: j spans two lines */
-      "    <ref name=\"interior\" id=\"white\"/>\n"
-      "    <texture type=\"checkerboard\" name=\"k\"/>\n" /* 21 */
-      "  </shape>\n"
-      "</scene>\n";
+  const char *xml = "<?xml version=\"1.0\" encoding=\"utf-8\"?>\n"
+                    "<scene version=\"3.0.0\" variant=\"mono\">\n"     /* 2 */
+                    "  <!-- a comment -->\n"                           /* 3 */
+                    "  <bsdf type=\"diffuse\" id=\"white\">\n"         /* 4 */
+                    "    <rgb name=\"reflectance\" value=\"0.25\"/>\n" /* 5 */
+                    "  </bsdf>\n"
+                    "  <shape type=\"sphere\" name=\"ball\">\n" /* 7 */
+                    "    <integer name=\"a\" value=\"-9007199254740992\"/>\n"
+                    "    <integer name=\"b\" value=\" +7 \"/>\n"
+                    "    <float name=\"c\" value=\"-1.5e-3\"/>\n" /* 10 */
+                    "    <boolean name=\"d\" value=\"TRUE\"/>\n"
+                    "    <boolean name=\"e\" value=\"false\"/>\n"
+                    "    <string name=\"f\" value=\"a b &amp; c\"/>\n"
+                    "    <point name=\"g\" value=\"1.5\"/>\n"
+                    "    <vector name=\"h\" y=\"2\"/>\n" /* 15 */
+                    "    <spectrum name=\"i\" value=\"0.75\"/>\n"
+                    "    <spectrum name=\"j\" value=\"400:0.1, 500:0.2,600:0.4\n 700:0.8\"/>\n"
+                    "    <ref id=\"white\"/>\n" /* 19: j spans two lines */
+                    "    <ref name=\"interior\" id=\"white\"/>\n"
+                    "    <texture type=\"checkerboard\" name=\"k\"/>\n" /* 21 */
+                    "  </shape>\n"
+                    "</scene>\n";
   node *root = NULL;
   char *variant = NULL;
   rsw_err err;
@@ -320,11 +310,10 @@ static void test_properties(void) {
   REQUIRE(bsdf && shape, "two objects");
   CHECK(strcmp(bsdf->id, "white") == 0 && bsdf->id_explicit, "explicit id");
   prop *refl = node_find(bsdf, "reflectance");
-  CHECK(refl && refl->spec.kind == SPEC_RGB && refl->spec.rgb[0] == 0.25 &&
-            refl->spec.rgb[1] == 0.25 && refl->spec.rgb[2] == 0.25,
+  CHECK(refl && refl->spec.kind == SPEC_RGB && refl->spec.rgb[0] == 0.25 && refl->spec.rgb[1] == 0.25 &&
+            refl->spec.rgb[2] == 0.25,
         "single-value rgb is replicated");
-  CHECK(strcmp(root->props[1].name, "ball") == 0, "named object prop name %s",
-        root->props[1].name);
+  CHECK(strcmp(root->props[1].name, "ball") == 0, "named object prop name %s", root->props[1].name);
   CHECK(strcmp(shape->id, "sphere") == 0, "generated id %s", shape->id);
   CHECK(strcmp(shape->loc, "p.xml:7") == 0, "shape loc %s", shape->loc);
 
@@ -355,8 +344,8 @@ static void test_properties(void) {
           "tabulated spectrum");
   static const double wl[4] = {400, 500, 600, 700}, val[4] = {0.1, 0.2, 0.4, 0.8};
   for (int i = 0; i < 4; i++)
-    CHECK(p->spec.wl[i] == wl[i] && p->spec.val[i] == val[i], "sample %d: %g:%g", i,
-          p->spec.wl[i], p->spec.val[i]);
+    CHECK(p->spec.wl[i] == wl[i] && p->spec.val[i] == val[i], "sample %d: %g:%g", i, p->spec.wl[i],
+          p->spec.val[i]);
   REQUIRE(shape->n_props == 13, "shape has %zu props", shape->n_props);
   p = &shape->props[10];
   CHECK(p->kind == PROP_REF && strcmp(p->name, "") == 0 && strcmp(p->ref, "white") == 0 &&
@@ -400,8 +389,7 @@ static void test_properties(void) {
   };
   for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
     char doc[512];
-    snprintf(doc, sizeof doc, "<scene version=\"3.0.0\">\n<shape type=\"s\">\n%s\n</shape></scene>",
-             bad[i]);
+    snprintf(doc, sizeof doc, "<scene version=\"3.0.0\">\n<shape type=\"s\">\n%s\n</shape></scene>", bad[i]);
     st = parse_str(doc, NULL, 0, &root, &err);
     CHECK(st != RSW_OK && strcmp(err.where, "t.xml:3") == 0 && root == NULL,
           "%s: status %d where \"%s\" msg %s", bad[i], st, err.where, err.msg);
@@ -454,8 +442,7 @@ static void test_params(void) {
   scene_define d1[] = {{"extra", "4"}};
   st = parse_str(xml, d1, 1, &root, &err);
   REQUIRE(st == RSW_OK, "with -D extra: %s %s", err.where, err.msg);
-  CHECK(strcmp(child(root, 0)->type, "sphere") == 0, "type from $kind: %s",
-        child(root, 0)->type);
+  CHECK(strcmp(child(root, 0)->type, "sphere") == 0, "type from $kind: %s", child(root, 0)->type);
   CHECK(float_prop(root, "a") == 2, "a = $r default");
   CHECK(float_prop(root, "b") == 7, "b = $rr (longest name wins)");
   CHECK(float_prop(root, "c") == 12.5, "c = 1$r.5 = 12.5");
@@ -515,8 +502,8 @@ static void test_generated_ids(void) {
   static const char *const want[] = {"d", "s", "d_3", "d_1", "x", "x_1", "d_4"};
   REQUIRE(root->n_props == 7, "%zu children", root->n_props);
   for (size_t i = 0; i < 7; i++)
-    CHECK(strcmp(child(root, i)->id, want[i]) == 0, "child %zu id %s, want %s", i,
-          child(root, i)->id, want[i]);
+    CHECK(strcmp(child(root, i)->id, want[i]) == 0, "child %zu id %s, want %s", i, child(root, i)->id,
+          want[i]);
   node *shape = child(root, 1);
   /* the shape's children come before the later top-level objects */
   CHECK(strcmp(child(shape, 0)->id, "d_2") == 0, "nested id %s", child(shape, 0)->id);
@@ -531,11 +518,16 @@ static void test_versions(void) {
     const char *version;
     rsw_status want;
   } cases[] = {
-      {"2.1.0", RSW_OK},           {"3.0.0", RSW_OK},
-      {"2.0.0", RSW_OK},           {"3.5.12", RSW_OK},
-      {"0.6.0", RSW_ERR_UNSUPPORTED}, {"1.9.9", RSW_ERR_UNSUPPORTED},
-      {"4.0.0", RSW_ERR_UNSUPPORTED}, {"3.0", RSW_ERR_PARSE},
-      {"3.0.0.1", RSW_ERR_PARSE},  {"v3.0.0", RSW_ERR_PARSE},
+      {"2.1.0", RSW_OK},
+      {"3.0.0", RSW_OK},
+      {"2.0.0", RSW_OK},
+      {"3.5.12", RSW_OK},
+      {"0.6.0", RSW_ERR_UNSUPPORTED},
+      {"1.9.9", RSW_ERR_UNSUPPORTED},
+      {"4.0.0", RSW_ERR_UNSUPPORTED},
+      {"3.0", RSW_ERR_PARSE},
+      {"3.0.0.1", RSW_ERR_PARSE},
+      {"v3.0.0", RSW_ERR_PARSE},
       {"", RSW_ERR_PARSE},
   };
   for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
@@ -545,10 +537,9 @@ static void test_versions(void) {
     node *root;
     rsw_err err;
     rsw_status st = parse_str(xml, NULL, 0, &root, &err);
-    CHECK(st == cases[i].want, "version \"%s\": status %d, want %d (%s)", cases[i].version, st,
-          cases[i].want, err.msg);
-    if (st != RSW_OK)
-      CHECK(strcmp(err.where, "t.xml:2") == 0, "version error where %s", err.where);
+    CHECK(st == cases[i].want, "version \"%s\": status %d, want %d (%s)", cases[i].version, st, cases[i].want,
+          err.msg);
+    if (st != RSW_OK) CHECK(strcmp(err.where, "t.xml:2") == 0, "version error where %s", err.where);
     node_free(root);
   }
 }
@@ -560,10 +551,8 @@ static void test_limits(void) {
   /* The size check comes before any byte is read, so a short buffer with a
    * large claimed length exercises it without allocating 256 MiB. */
   static const char tiny[] = "<scene version=\"3.0.0\"/>";
-  rsw_status st = scene_read_xml(tiny, ((size_t)256 << 20) + 1, "big.xml", NULL, 0, &root,
-                                 NULL, &err);
-  CHECK(st == RSW_ERR_LIMIT && strcmp(err.where, "big.xml:1") == 0, "size limit: %d %s", st,
-        err.where);
+  rsw_status st = scene_read_xml(tiny, ((size_t)256 << 20) + 1, "big.xml", NULL, 0, &root, NULL, &err);
+  CHECK(st == RSW_ERR_LIMIT && strcmp(err.where, "big.xml:1") == 0, "size limit: %d %s", st, err.where);
   CHECK(root == (node *)&root, "root_out written on failure");
 
   /* exactly RSW_MAX_DEPTH nested elements are fine, one more is not */
@@ -577,8 +566,7 @@ static void test_limits(void) {
     for (int i = 0; i < levels; i++) n += (size_t)snprintf(doc + n, cap - n, "</bsdf>");
     snprintf(doc + n, cap - n, "</scene>");
     st = parse_str(doc, NULL, 0, &root, &err);
-    CHECK(st == (extra ? RSW_ERR_LIMIT : RSW_OK), "depth %d: status %d (%s)", levels + 1, st,
-          err.msg);
+    CHECK(st == (extra ? RSW_ERR_LIMIT : RSW_OK), "depth %d: status %d (%s)", levels + 1, st, err.msg);
     if (st == RSW_OK) {
       /* generated ids: d, d_1, ..., in depth-first order */
       node *outer = child(root, 0);
@@ -648,8 +636,7 @@ static void test_bad_corpus(void) {
     char where[300];
     snprintf(where, sizeof where, "%s:%lu", nm, want);
     CHECK(st != RSW_OK && root == NULL, "%s must fail (status %d)", nm, st);
-    CHECK(strcmp(err.where, where) == 0, "%s: where \"%s\", want \"%s\" (%s)", nm, err.where,
-          where, err.msg);
+    CHECK(strcmp(err.where, where) == 0, "%s: where \"%s\", want \"%s\" (%s)", nm, err.where, where, err.msg);
     CHECK(err.msg[0] != '\0', "%s: empty message", nm);
     if (st == RSW_OK) node_free(root);
   }

@@ -36,7 +36,7 @@ RSW_TEST_DEFINE_GLOBALS
 extern char **environ;
 
 #define MAX_FILES 512
-#define PATH_LEN 1024
+#define PATH_LEN  1024
 
 /* Fewer than this many corpus scenes means the directory was not found or
  * the corpus lost files (the issue asks for at least 30). */
@@ -64,8 +64,8 @@ static scratch g_scratch;
 /* The child's outcome. */
 typedef struct child_result {
   bool spawned;
-  bool exited;   /* ended through exit(), not a signal */
-  int status;    /* exit status, or the signal number */
+  bool exited; /* ended through exit(), not a signal */
+  int status;  /* exit status, or the signal number */
   char text[8192];
 } child_result;
 
@@ -204,7 +204,8 @@ static void test_corpus_size(void) {
           g_corpus.dir);
   CHECK(g_corpus.n >= MIN_CORPUS, "%d corpus scenes in %s, expected at least %d", g_corpus.n, g_corpus.dir,
         MIN_CORPUS);
-  CHECK(g_corpus.n_json >= MIN_CORPUS, "%d bad JSON scenes, expected at least %d", g_corpus.n_json, MIN_CORPUS);
+  CHECK(g_corpus.n_json >= MIN_CORPUS, "%d bad JSON scenes, expected at least %d", g_corpus.n_json,
+        MIN_CORPUS);
   CHECK(g_corpus.n_xml >= MIN_CORPUS, "%d bad XML scenes, expected at least %d", g_corpus.n_xml, MIN_CORPUS);
 }
 
@@ -264,8 +265,7 @@ static void test_corpus_in_process(void) {
     CHECK(strstr(err.where, name) != NULL || strstr(err.where, "/meshes/") != NULL,
           "%s: error place '%s' names neither the scene nor a mesh file", name, err.where);
     const char *needle = expected_needle(name);
-    if (needle)
-      CHECK(strstr(err.msg, needle) != NULL, "%s: message '%s' lacks '%s'", name, err.msg, needle);
+    if (needle) CHECK(strstr(err.msg, needle) != NULL, "%s: message '%s' lacks '%s'", name, err.msg, needle);
     scene_free(sc); /* NULL here; LSan checks nothing of the failed load leaked */
   }
 }
@@ -297,11 +297,14 @@ static void test_corpus_daemon(void) {
 static const char good_xml_scene[] =
     "<scene version=\"3.0.0\">\n"
     "  <sensor type=\"perspective\">\n"
-    "    <transform name=\"to_world\"><lookat origin=\"0, 0, 5\" target=\"0, 0, 0\" up=\"0, 1, 0\"/></transform>\n"
-    "    <film type=\"hdrfilm\"><integer name=\"width\" value=\"4\"/><integer name=\"height\" value=\"4\"/></film>\n"
+    "    <transform name=\"to_world\"><lookat origin=\"0, 0, 5\" target=\"0, 0, 0\" up=\"0, 1, "
+    "0\"/></transform>\n"
+    "    <film type=\"hdrfilm\"><integer name=\"width\" value=\"4\"/><integer name=\"height\" "
+    "value=\"4\"/></film>\n"
     "  </sensor>\n"
     "  <emitter type=\"directional\"><vector name=\"direction\" x=\"0\" y=\"0\" z=\"-1\"/></emitter>\n"
-    "  <shape type=\"rectangle\"><bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"0.5\"/></bsdf></shape>\n"
+    "  <shape type=\"rectangle\"><bsdf type=\"diffuse\"><rgb name=\"reflectance\" "
+    "value=\"0.5\"/></bsdf></shape>\n"
     "</scene>\n";
 
 static void check_prefixes(const char *text, bool is_xml) {
@@ -310,7 +313,8 @@ static void check_prefixes(const char *text, bool is_xml) {
   rsw_err err = {0};
   scene *sc = NULL;
   rsw_status st = scene_load_memory(text, len, "good", is_xml, NULL, &sc, &err);
-  REQUIRE(st == RSW_OK && sc, "the complete %s scene fails: %s: %s", is_xml ? "XML" : "JSON", err.where, err.msg);
+  REQUIRE(st == RSW_OK && sc, "the complete %s scene fails: %s: %s", is_xml ? "XML" : "JSON", err.where,
+          err.msg);
   scene_free(sc);
   int bad = 0;
   for (size_t n = 0; n < len; n++) {
@@ -355,7 +359,8 @@ static void check_bad_cmdline(const char *what, char **argv, int want) {
   CHECK(!r.exited || r.status == want, "%s: exit status %d, expected %d (%s)", what, r.status, want,
         first_line(r.text, line, sizeof line));
   CHECK(strncmp(r.text, "raysweepd", 9) == 0 || strncmp(r.text, "usage:", 6) == 0,
-        "%s: stderr does not start with a raysweepd message: '%s'", what, first_line(r.text, line, sizeof line));
+        "%s: stderr does not start with a raysweepd message: '%s'", what,
+        first_line(r.text, line, sizeof line));
   CHECK(!has_sanitizer_report(r.text), "%s: sanitizer report from raysweepd:\n%s", what, r.text);
   CHECK(!file_exists(g_scratch.out), "%s: an output image was written", what);
 }
@@ -412,13 +417,16 @@ static void test_bad_command_lines(void) {
       {"--sensor index out of range", {NULL, "render", good, "--sensor", "5", "-o", out, NULL}, 1},
       {"--variant spectral", {NULL, "render", good, "--variant", "spectral", "-o", out, NULL}, 1},
       {"output in a missing directory",
-       {NULL, "render", good, "--spp", "1", "-o", "/nonexistent_rsw_dir/out.exr", NULL}, 1},
+       {NULL, "render", good, "--spp", "1", "-o", "/nonexistent_rsw_dir/out.exr", NULL},
+       1},
   };
   for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++)
     check_bad_cmdline(cases[i].what, cases[i].argv, cases[i].want);
 
   /* More -D definitions than the daemon holds (256). */
-  enum { N_DEFS = 300 };
+  enum {
+    N_DEFS = 300
+  };
   static char defs[N_DEFS][32];
   char *argv[N_DEFS + 8];
   int k = 0;

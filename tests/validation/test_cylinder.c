@@ -46,10 +46,11 @@ static shape *first_shape(scene *s, const char *id) {
 static void test_area(void) {
   /* radius 0.5, axis of length |(1, 2, 2)| = 3, then scaled by 2:
    * r = 1, L = 6, area = 12 pi. */
-  scene *s = tsup_load("{\"type\": \"scene\", \"tube\": {\"type\": \"cylinder\", \"p0\": [1, -1, 0.5],"
-                       " \"p1\": [2, 1, 2.5], \"radius\": 0.5, \"to_world\": [{\"rotate\": {\"axis\": [1, 1, 0],"
-                       " \"angle\": 33}}, {\"scale\": 2}, {\"translate\": [3, 0, -1]}]}}",
-                       NULL);
+  scene *s =
+      tsup_load("{\"type\": \"scene\", \"tube\": {\"type\": \"cylinder\", \"p0\": [1, -1, 0.5],"
+                " \"p1\": [2, 1, 2.5], \"radius\": 0.5, \"to_world\": [{\"rotate\": {\"axis\": [1, 1, 0],"
+                " \"angle\": 33}}, {\"scale\": 2}, {\"translate\": [3, 0, -1]}]}}",
+                NULL);
   REQUIRE(s, "load");
   shape *t = first_shape(s, "tube");
   REQUIRE(t, "tube");
@@ -95,14 +96,17 @@ static void test_errors(void) {
                "/tube/radius", "radius must be > 0");
   expect_error("{\"type\": \"scene\", \"tube\": {\"type\": \"cylinder\", \"radius\": -2}}", RSW_ERR_RANGE,
                "/tube/radius", "radius must be > 0");
-  expect_error("{\"type\": \"scene\", \"tube\": {\"type\": \"cylinder\", \"p0\": [1, 2, 3], \"p1\": [1, 2, 3]}}",
-               RSW_ERR_INVALID, "/tube/p1", "p0 and p1 must differ");
-  expect_error("<scene version=\"3.0.0\"><shape type=\"cylinder\"><point name=\"p1\" x=\"0\" y=\"0\" z=\"0\"/>"
-               "</shape></scene>",
-               RSW_ERR_INVALID, "c.json:1", "p0 and p1 must differ");
+  expect_error(
+      "{\"type\": \"scene\", \"tube\": {\"type\": \"cylinder\", \"p0\": [1, 2, 3], \"p1\": [1, 2, 3]}}",
+      RSW_ERR_INVALID, "/tube/p1", "p0 and p1 must differ");
+  expect_error(
+      "<scene version=\"3.0.0\"><shape type=\"cylinder\"><point name=\"p1\" x=\"0\" y=\"0\" z=\"0\"/>"
+      "</shape></scene>",
+      RSW_ERR_INVALID, "c.json:1", "p0 and p1 must differ");
   /* Shear / an elliptic cross-section. */
-  expect_error("{\"type\": \"scene\", \"tube\": {\"type\": \"cylinder\", \"to_world\": [{\"scale\": [1, 2, 1]}]}}",
-               RSW_ERR_INVALID, "/tube", "circular and right");
+  expect_error(
+      "{\"type\": \"scene\", \"tube\": {\"type\": \"cylinder\", \"to_world\": [{\"scale\": [1, 2, 1]}]}}",
+      RSW_ERR_INVALID, "/tube", "circular and right");
   expect_error("{\"type\": \"scene\", \"tube\": {\"type\": \"cylinder\", \"to_world\": "
                "[[1, 0.5, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]}}",
                RSW_ERR_INVALID, "/tube", "circular and right");
@@ -118,7 +122,8 @@ static void test_emitter_seen_directly(void) {
   const char *doc =
       "{\"type\": \"scene\","
       " \"cam\": {\"type\": \"perspective\", \"fov\": 8,"
-      "   \"to_world\": [{\"lookat\": {\"origin\": [0, -6, 0.5], \"target\": [0, 0, 0.5], \"up\": [0, 0, 1]}}],"
+      "   \"to_world\": [{\"lookat\": {\"origin\": [0, -6, 0.5], \"target\": [0, 0, 0.5], \"up\": [0, 0, "
+      "1]}}],"
       "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 4},"
       "   \"film\": {\"type\": \"hdrfilm\", \"width\": 8, \"height\": 8, \"rfilter\": {\"type\": \"box\"}}},"
       " \"integrator\": {\"type\": \"path\"},"
@@ -185,8 +190,9 @@ static double projected_reading(double rho, double E, double r, double l, double
 static void distant_tube(bool grouped, double ts_deg, double *mean, double *sem) {
   double ts = ts_deg * PI / 180;
   char tube[1024], doc[4096];
-  const char *tube_body = "\"type\": \"cylinder\", \"p0\": [-1.5, 0, 0], \"p1\": [1.5, 0, 0], \"radius\": 0.4,"
-                          " \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.6}";
+  const char *tube_body =
+      "\"type\": \"cylinder\", \"p0\": [-1.5, 0, 0], \"p1\": [1.5, 0, 0], \"radius\": 0.4,"
+      " \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.6}";
   if (grouped)
     snprintf(tube, sizeof tube,
              "\"grp\": {\"type\": \"shapegroup\", \"tube\": {%s}},"
@@ -195,16 +201,17 @@ static void distant_tube(bool grouped, double ts_deg, double *mean, double *sem)
              tube_body);
   else
     snprintf(tube, sizeof tube, "\"tube\": {%s, \"to_world\": [{\"translate\": [0, 0, 0.25]}]}", tube_body);
-  snprintf(doc, sizeof doc,
-           "{\"type\": \"scene\","
-           " \"cam\": {\"type\": \"distant\", \"direction\": [0, 0, -1],"
-           "   \"target\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [2, 1, 1]}]},"
-           "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 40000},"
-           "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},"
-           " \"integrator\": {\"type\": \"path\"},"
-           " \"sun\": {\"type\": \"directional\", \"direction\": [0, %.17g, %.17g], \"irradiance\": 1.5},"
-           " %s}",
-           -sin(ts), -cos(ts), tube);
+  snprintf(
+      doc, sizeof doc,
+      "{\"type\": \"scene\","
+      " \"cam\": {\"type\": \"distant\", \"direction\": [0, 0, -1],"
+      "   \"target\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [2, 1, 1]}]},"
+      "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 40000},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},"
+      " \"integrator\": {\"type\": \"path\"},"
+      " \"sun\": {\"type\": \"directional\", \"direction\": [0, %.17g, %.17g], \"irradiance\": 1.5},"
+      " %s}",
+      -sin(ts), -cos(ts), tube);
   scene *s = tsup_load(doc, "mono");
   *mean = *sem = NAN;
   if (!s) return;
@@ -229,10 +236,10 @@ static void test_projected_reflected_power(void) {
     for (int g = 0; g < 2; g++) {
       double m, sem;
       distant_tube(g, angles[i], &m, &sem);
-      printf("  %s tube, sun %g deg: %.6f +- %.6f (expected %.6f)\n", g ? "instanced" : "plain", angles[i], m, sem,
-             expect);
-      CHECK(fabs(m - expect) <= 3 * sem, "%s, sun %g: mean %.6g vs %.6g (3 sigma %.3g)", g ? "instanced" : "plain",
-            angles[i], m, expect, 3 * sem);
+      printf("  %s tube, sun %g deg: %.6f +- %.6f (expected %.6f)\n", g ? "instanced" : "plain", angles[i], m,
+             sem, expect);
+      CHECK(fabs(m - expect) <= 3 * sem, "%s, sun %g: mean %.6g vs %.6g (3 sigma %.3g)",
+            g ? "instanced" : "plain", angles[i], m, expect, 3 * sem);
       CHECK(sem < 0.01 * expect, "standard error %.3g too large", sem);
     }
   }
@@ -326,10 +333,11 @@ static void test_direction_sampling_chi2(void) {
   /* From inside a tube emitting inwards: the density is bounded (seen
    * from outside it diverges at the silhouette, where cos_e -> 0, beyond
    * what the cell integration can follow) and cut off at the openings. */
-  scene *s = tsup_load("{\"type\": \"scene\", \"tube\": {\"type\": \"cylinder\", \"p0\": [0, 0, -4],"
-                       " \"p1\": [0, 0, 4.5], \"radius\": 0.8, \"flip_normals\": true, \"to_world\": [{\"rotate\":"
-                       " {\"axis\": [1, 0, 0], \"angle\": 20}}], \"emitter\": {\"type\": \"area\"}}}",
-                       NULL);
+  scene *s =
+      tsup_load("{\"type\": \"scene\", \"tube\": {\"type\": \"cylinder\", \"p0\": [0, 0, -4],"
+                " \"p1\": [0, 0, 4.5], \"radius\": 0.8, \"flip_normals\": true, \"to_world\": [{\"rotate\":"
+                " {\"axis\": [1, 0, 0], \"angle\": 20}}], \"emitter\": {\"type\": \"area\"}}}",
+                NULL);
   REQUIRE(s, "scene");
   REQUIRE(s->n_emitters == 1, "one emitter");
   chi2_ctx c = {.e = s->emitters[0], .sh = first_shape(s, "tube")};
@@ -367,20 +375,25 @@ static void test_update_equals_reload(void) {
   const char *fmt =
       "{\"type\": \"scene\","
       " \"cam\": {\"type\": \"perspective\", \"fov\": 60,"
-      "   \"to_world\": [{\"lookat\": {\"origin\": [0.5, -3.5, 2.5], \"target\": [0, 0, 0.3], \"up\": [0, 0, 1]}}],"
+      "   \"to_world\": [{\"lookat\": {\"origin\": [0.5, -3.5, 2.5], \"target\": [0, 0, 0.3], \"up\": [0, 0, "
+      "1]}}],"
       "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 16},"
-      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16, \"rfilter\": {\"type\": \"box\"}}},"
-      " \"sun\": {\"type\": \"directional\", \"direction\": [0.5, 0.1, -0.86602540378443864676], \"irradiance\": 1},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16, \"rfilter\": {\"type\": "
+      "\"box\"}}},"
+      " \"sun\": {\"type\": \"directional\", \"direction\": [0.5, 0.1, -0.86602540378443864676], "
+      "\"irradiance\": 1},"
       " \"ground\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 3}],"
       "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.4}},"
       " \"tube\": {\"type\": \"cylinder\", %s, \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.8}}}";
   /* The new to_world: a trunk of radius 0.3 and length 1.7, tilted. */
-  xform sc = xf_scale(v3(0.3, 0.3, 1.7)), rx = xf_rotate(v3(1, 0.2, 0), 25), tr = xf_translate(v3(0.2, -0.1, 0));
+  xform sc = xf_scale(v3(0.3, 0.3, 1.7)), rx = xf_rotate(v3(1, 0.2, 0), 25),
+        tr = xf_translate(v3(0.2, -0.1, 0));
   xform t1 = xf_mul(&rx, &sc);
   xform t = xf_mul(&tr, &t1);
   char m[1024], a[4096], b[4096], tw[1100];
   size_t n = (size_t)snprintf(m, sizeof m, "[");
-  for (int i = 0; i < 16; i++) n += (size_t)snprintf(m + n, sizeof m - n, "%s%.17g", i ? ", " : "", t.m[i / 4][i % 4]);
+  for (int i = 0; i < 16; i++)
+    n += (size_t)snprintf(m + n, sizeof m - n, "%s%.17g", i ? ", " : "", t.m[i / 4][i % 4]);
   snprintf(m + n, sizeof m - n, "]");
   snprintf(a, sizeof a, fmt, "\"p0\": [0, 0, 0], \"p1\": [0.3, 0.2, 1.2], \"radius\": 0.5");
   snprintf(tw, sizeof tw, "\"to_world\": %s", m);
@@ -397,16 +410,16 @@ static void test_update_equals_reload(void) {
   param_value_free(&item.value);
   REQUIRE(st == RSW_OK, "update: %s", err.msg);
   CHECK(rep.classes == UPDATE_GEOMETRIC, "classes %u", rep.classes);
-  CHECK(rep.instance_updates == 1 && rep.rebuilds == 0, "instance updates %u, rebuilds %u", rep.instance_updates,
-        rep.rebuilds);
+  CHECK(rep.instance_updates == 1 && rep.rebuilds == 0, "instance updates %u, rebuilds %u",
+        rep.instance_updates, rep.rebuilds);
   CHECK_REL(first_shape(s, "tube")->area, 2 * PI * 0.3 * 1.7, 1e-12);
   REQUIRE(render_once(s, &post) && render_once(s2, &ref), "render");
   size_t cnt = (size_t)pre.width * pre.height * pre.channels;
   CHECK(memcmp(pre.data, post.data, cnt * sizeof(float)) != 0, "the update did not change the film");
   CHECK(memcmp(post.data, ref.data, cnt * sizeof(float)) == 0, "updated film differs from the reloaded one");
   /* A shearing to_world is refused, naming the key, and changes nothing. */
-  REQUIRE(param_value_parse("[1, 0.5, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]", item.key, &item.value, &err) ==
-              RSW_OK,
+  REQUIRE(param_value_parse("[1, 0.5, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]", item.key, &item.value,
+                            &err) == RSW_OK,
           "parse");
   memset(&err, 0, sizeof err);
   st = scene_update(s, &item, 1, &rep, &err);

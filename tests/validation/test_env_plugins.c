@@ -28,7 +28,7 @@
 
 RSW_TEST_DEFINE_GLOBALS
 
-#define PI 3.14159265358979323846
+#define PI            3.14159265358979323846
 #define HEMI_RADIANCE 5.108 /* two_hemispheres.c's RADIANCE */
 
 /* ---- helpers ----------------------------------------------------------------- */
@@ -59,8 +59,8 @@ static void check_no_failures(const scene *s, const char *what) {
  * +x on the LEFT of the image (film x grows towards -left). So image
  * columns left of the centre show world x > 0. */
 #define CAM_D 4.0
-#define FOV 40.0
-#define RES 32
+#define FOV   40.0
+#define RES   32
 
 static const char *hemi_scene =
     "{\"type\": \"scene\", \"variant\": \"mono\","
@@ -171,13 +171,18 @@ static void hemi_case(double wavelength, int lit_sign) {
   double lit_sem = sqrt(fmax(sum2[lit][1] / cnt[lit][1] - lit_mean * lit_mean, 0) / cnt[lit][1]);
   double dark_sem = sqrt(fmax(sum2[dark][1] / cnt[dark][1] - dark_mean * dark_mean, 0) / cnt[dark][1]);
   CHECK(lit_mean - dark_mean > 3 * sqrt(lit_sem * lit_sem + dark_sem * dark_sem) && lit_mean > 2 * dark_mean,
-        "%g nm: lit half %.5g is not clearly brighter than the dark half %.5g", wavelength, lit_mean, dark_mean);
+        "%g nm: lit half %.5g is not clearly brighter than the dark half %.5g", wavelength, lit_mean,
+        dark_mean);
   film_image_free(&img);
   scene_free(s);
 }
 
-static void test_two_hemispheres_600nm(void) { hemi_case(600.0, +1); }
-static void test_two_hemispheres_450nm(void) { hemi_case(450.0, -1); }
+static void test_two_hemispheres_600nm(void) {
+  hemi_case(600.0, +1);
+}
+static void test_two_hemispheres_450nm(void) {
+  hemi_case(450.0, -1);
+}
 
 /* At exactly 500 nm neither hemisphere emits: the film is black. */
 static void test_two_hemispheres_500nm_black(void) {
@@ -243,8 +248,12 @@ static void chi2_case(const char *emitter_json, const char *name) {
   scene_free(s);
 }
 
-static void test_chi2_two_hemispheres(void) { chi2_case("{\"type\": \"test\"}", "test"); }
-static void test_chi2_sunsky_defaults(void) { chi2_case("{\"type\": \"sunsky\"}", "sunsky defaults"); }
+static void test_chi2_two_hemispheres(void) {
+  chi2_case("{\"type\": \"test\"}", "test");
+}
+static void test_chi2_sunsky_defaults(void) {
+  chi2_case("{\"type\": \"sunsky\"}", "sunsky defaults");
+}
 static void test_chi2_sunsky_tilted(void) {
   chi2_case("{\"type\": \"sunsky\", \"sun\": 3, \"sky\": 0.2, \"sharpness\": 8,"
             " \"sun_direction\": [0.3, -0.5, 0.6]}",
@@ -280,7 +289,8 @@ static void test_furnace_constant_plugin(void) {
       " \"cam\": {\"type\": \"perspective\", \"fov\": 30,"
       "   \"to_world\": [{\"lookat\": {\"origin\": [0, 0, 5], \"target\": [0, 0, 0], \"up\": [0, 1, 0]}}],"
       "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 16},"
-      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16, \"rfilter\": {\"type\": \"box\"}}},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16, \"rfilter\": {\"type\": "
+      "\"box\"}}},"
       " \"integrator\": {\"type\": \"path\", \"rr_depth\": 5},"
       " \"env\": %s,"
       " \"ball\": {\"type\": \"sphere\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}},"
@@ -311,14 +321,14 @@ static void test_furnace_constant_plugin(void) {
 
 /* ---- parameters: in the table, and an update equals a reload ------------------------- */
 
-#define SUNSKY_SCENE(PARAMS)                                                                            \
-  "{\"type\": \"scene\", \"variant\": \"mono\","                                                        \
-  " \"cam\": {\"type\": \"perspective\", \"fov\": 45,"                                                  \
-  "   \"to_world\": [{\"lookat\": {\"origin\": [0, -4, 1], \"target\": [0, 0, 0], \"up\": [0, 0, 1]}}]," \
-  "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 8},"                                   \
-  "   \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16, \"rfilter\": {\"type\": \"box\"}}}," \
-  " \"integrator\": {\"type\": \"path\", \"max_depth\": 3},"                                            \
-  " \"sky\": {\"type\": \"sunsky\"" PARAMS "},"                                                         \
+#define SUNSKY_SCENE(PARAMS)                                                                                 \
+  "{\"type\": \"scene\", \"variant\": \"mono\","                                                             \
+  " \"cam\": {\"type\": \"perspective\", \"fov\": 45,"                                                       \
+  "   \"to_world\": [{\"lookat\": {\"origin\": [0, -4, 1], \"target\": [0, 0, 0], \"up\": [0, 0, 1]}}],"     \
+  "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 8},"                                        \
+  "   \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16, \"rfilter\": {\"type\": \"box\"}}},"  \
+  " \"integrator\": {\"type\": \"path\", \"max_depth\": 3},"                                                 \
+  " \"sky\": {\"type\": \"sunsky\"" PARAMS "},"                                                              \
   " \"ball\": {\"type\": \"sphere\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.6}}}"
 
 static void test_sunsky_params_in_table(void) {
@@ -418,7 +428,8 @@ static void test_sunsky_bad_values(void) {
   scene *bad = NULL;
   const char *txt = SUNSKY_SCENE(", \"sun_direction\": [0, 0, 0]");
   scene_load_opts o = {.size = sizeof o};
-  CHECK(scene_load_memory(txt, strlen(txt), "bad", false, &o, &bad, &e2) != RSW_OK, "zero sun_direction loaded");
+  CHECK(scene_load_memory(txt, strlen(txt), "bad", false, &o, &bad, &e2) != RSW_OK,
+        "zero sun_direction loaded");
   char buf[1200];
   CHECK(strstr(rsw_err_format(&e2, buf, sizeof buf), "sun_direction") != NULL, "message: %s", buf);
   scene_free(bad);
@@ -475,7 +486,8 @@ static void test_readme_holds_example(void) {
   if (readme && src) {
     CHECK(strstr(readme, src) != NULL, "README.md does not hold tests/plugins/two_hemispheres.c verbatim");
     /* (tests/integration/test_docs_examples.sh runs it, from the repository root.) */
-    CHECK(strstr(readme, "cc -shared -fPIC -I include -o plugins/test.so tests/plugins/two_hemispheres.c") != NULL,
+    CHECK(strstr(readme, "cc -shared -fPIC -I include -o plugins/test.so tests/plugins/two_hemispheres.c") !=
+              NULL,
           "README.md lacks the one-line build command");
   }
   free(readme);

@@ -23,8 +23,8 @@
 
 RSW_TEST_DEFINE_GLOBALS
 
-#define PI 3.14159265358979323846
-#define RHO 0.5
+#define PI    3.14159265358979323846
+#define RHO   0.5
 #define COS30 0.86602540378443864676
 
 /* Plate (rectangle [-1,1]^2) with `bsdf` under a directional emitter of
@@ -50,15 +50,17 @@ static double film_sum(const film_image *img) {
 /* ---- mdistant ------------------------------------------------------------ */
 
 #define MD_DIRS "0 0 -1, 0.5 0 -0.8660254037844386, -0.3,0.4,-0.866  0.1 -0.7 -0.5"
-static const double md_dirs[4][3] = {{0, 0, -1}, {0.5, 0, -0.8660254037844386}, {-0.3, 0.4, -0.866}, {0.1, -0.7, -0.5}};
+static const double md_dirs[4][3] = {
+    {0, 0, -1}, {0.5, 0, -0.8660254037844386}, {-0.3, 0.4, -0.866}, {0.1, -0.7, -0.5}};
 
 static void test_mdistant_lambertian_exact(void) {
-  scene *s = plate_scene("{\"type\": \"mdistant\", \"directions\": \"" MD_DIRS "\","
-                         " \"target\": {\"type\": \"rectangle\"},"
-                         " \"sampler\": {\"type\": \"independent\", \"sample_count\": 32},"
-                         " \"film\": {\"type\": \"hdrfilm\", \"width\": 4, \"height\": 1,"
-                         "  \"rfilter\": {\"type\": \"box\"}}}",
-                         "{\"type\": \"diffuse\", \"reflectance\": 0.5}", "[0.5, 0, -0.86602540378443864676]", 2.0);
+  scene *s =
+      plate_scene("{\"type\": \"mdistant\", \"directions\": \"" MD_DIRS "\","
+                  " \"target\": {\"type\": \"rectangle\"},"
+                  " \"sampler\": {\"type\": \"independent\", \"sample_count\": 32},"
+                  " \"film\": {\"type\": \"hdrfilm\", \"width\": 4, \"height\": 1,"
+                  "  \"rfilter\": {\"type\": \"box\"}}}",
+                  "{\"type\": \"diffuse\", \"reflectance\": 0.5}", "[0.5, 0, -0.86602540378443864676]", 2.0);
   REQUIRE(s, "scene");
   film_image img;
   REQUIRE(tsup_render(s, 0, 1, 0, &img), "render");
@@ -73,7 +75,8 @@ static void test_mdistant_lambertian_exact(void) {
     double zen = acos(z / len) * 180 / PI, az = atan2(y, x) * 180 / PI;
     if (az < 0) az += 360;
     CHECK(fabs(img.angles[2 * i] - zen) < 1e-9, "dir %d zenith %.12g vs %.12g", i, img.angles[2 * i], zen);
-    CHECK(fabs(img.angles[2 * i + 1] - az) < 1e-9, "dir %d azimuth %.12g vs %.12g", i, img.angles[2 * i + 1], az);
+    CHECK(fabs(img.angles[2 * i + 1] - az) < 1e-9, "dir %d azimuth %.12g vs %.12g", i, img.angles[2 * i + 1],
+          az);
   }
   film_image_free(&img);
   scene_free(s);
@@ -106,11 +109,12 @@ static void test_mdistant_errors(void) {
 /* ---- mradiancemeter ------------------------------------------------------ */
 
 static void test_mradiancemeter_two_meters(void) {
-  scene *s = plate_scene("{\"type\": \"mradiancemeter\", \"origins\": \"0 0 2, 0.5 0.3 1\","
-                         " \"directions\": \"0 0 -1, -0.2 0.1 -1\","
-                         " \"film\": {\"type\": \"hdrfilm\", \"width\": 2, \"height\": 1,"
-                         "  \"rfilter\": {\"type\": \"box\"}}}",
-                         "{\"type\": \"diffuse\", \"reflectance\": 0.5}", "[0.5, 0, -0.86602540378443864676]", 1.0);
+  scene *s =
+      plate_scene("{\"type\": \"mradiancemeter\", \"origins\": \"0 0 2, 0.5 0.3 1\","
+                  " \"directions\": \"0 0 -1, -0.2 0.1 -1\","
+                  " \"film\": {\"type\": \"hdrfilm\", \"width\": 2, \"height\": 1,"
+                  "  \"rfilter\": {\"type\": \"box\"}}}",
+                  "{\"type\": \"diffuse\", \"reflectance\": 0.5}", "[0.5, 0, -0.86602540378443864676]", 1.0);
   REQUIRE(s, "scene");
   film_image img;
   REQUIRE(tsup_render(s, 4, 1, 0, &img), "render");
@@ -162,17 +166,18 @@ static void check_flux(scene *s, uint32_t spp, int K, double expect, const char 
   double rel = fabs(m - expect) / expect;
   printf("  %s: sum %.9g expect %.9g rel %.3g 3sigma/expect %.3g\n", what, m, expect, rel, 3 * sem / expect);
   CHECK(rel <= 1e-3, "%s: pixel sum %.9g vs %.9g (rel %.3g > 1e-3)", what, m, expect, rel);
-  CHECK(fabs(m - expect) <= 3 * sem + 1e-5 * expect, "%s: sum %.9g vs %.9g beyond 3 sigma (%.3g)", what, m, expect,
-        3 * sem);
+  CHECK(fabs(m - expect) <= 3 * sem + 1e-5 * expect, "%s: sum %.9g vs %.9g beyond 3 sigma (%.3g)", what, m,
+        expect, 3 * sem);
   CHECK(3 * sem <= 1e-3 * expect, "%s: 3 sigma %.3g too large for a 1e-3 test", what, 3 * sem);
 }
 
 static void test_distantflux_lambertian(void) {
-  scene *s = plate_scene("{\"type\": \"distantflux\", \"target\": {\"type\": \"rectangle\"},"
-                         " \"sampler\": {\"type\": \"independent\", \"sample_count\": 16},"
-                         " \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16,"
-                         "  \"rfilter\": {\"type\": \"box\"}}}",
-                         "{\"type\": \"diffuse\", \"reflectance\": 1.0}", "[0.5, 0, -0.86602540378443864676]", 1.7);
+  scene *s =
+      plate_scene("{\"type\": \"distantflux\", \"target\": {\"type\": \"rectangle\"},"
+                  " \"sampler\": {\"type\": \"independent\", \"sample_count\": 16},"
+                  " \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16,"
+                  "  \"rfilter\": {\"type\": \"box\"}}}",
+                  "{\"type\": \"diffuse\", \"reflectance\": 1.0}", "[0.5, 0, -0.86602540378443864676]", 1.7);
   REQUIRE(s, "scene");
   check_flux(s, 256, 4, 1.7 * COS30, "lambertian");
   /* Per-pixel angles from the local hemisphere vector, as hdistant. */
@@ -212,13 +217,14 @@ static void test_distantflux_checkerboard(void) {
    * radiosity 0.75 E. The estimate's error comes from the aperture samples
    * straddling check edges: a stratified sampler makes it fall as
    * N^-3/4 (4096 spp: 3 sigma about 2e-4 relative). */
-  scene *s = plate_scene("{\"type\": \"distantflux\", \"target\": {\"type\": \"rectangle\"},"
-                         " \"sampler\": {\"type\": \"stratified\", \"sample_count\": 4096},"
-                         " \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16,"
-                         "  \"rfilter\": {\"type\": \"box\"}}}",
-                         "{\"type\": \"diffuse\", \"reflectance\": {\"type\": \"checkerboard\", \"color0\": 0.5,"
-                         "  \"color1\": 1.0, \"to_uv\": [{\"scale\": [4, 4, 1]}]}}",
-                         "[0, 0, -1]", 1.3);
+  scene *s =
+      plate_scene("{\"type\": \"distantflux\", \"target\": {\"type\": \"rectangle\"},"
+                  " \"sampler\": {\"type\": \"stratified\", \"sample_count\": 4096},"
+                  " \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16,"
+                  "  \"rfilter\": {\"type\": \"box\"}}}",
+                  "{\"type\": \"diffuse\", \"reflectance\": {\"type\": \"checkerboard\", \"color0\": 0.5,"
+                  "  \"color1\": 1.0, \"to_uv\": [{\"scale\": [4, 4, 1]}]}}",
+                  "[0, 0, -1]", 1.3);
   REQUIRE(s, "scene");
   check_flux(s, 0, 4, 0.75 * 1.3, "checkerboard");
   scene_free(s);

@@ -62,7 +62,8 @@ static void test_rpv_lambertian_bitwise(void) {
   REQUIRE(tsup_render(b, 0, 42, 1, &ib), "render rpv");
   REQUIRE(ia.width == ib.width && ia.height == ib.height && ia.channels == ib.channels, "shapes");
   size_t n = (size_t)ia.width * ia.height * ia.channels;
-  CHECK(memcmp(ia.data, ib.data, n * sizeof ia.data[0]) == 0, "rpv(k=1, g=0, rho_c=1) film differs from diffuse");
+  CHECK(memcmp(ia.data, ib.data, n * sizeof ia.data[0]) == 0,
+        "rpv(k=1, g=0, rho_c=1) film differs from diffuse");
   double sum = 0;
   for (size_t i = 0; i < n; i++) sum += ia.data[i];
   CHECK(sum > 0, "the films are not black");
@@ -106,20 +107,21 @@ static void test_bilambertian_sheet_both_sides(void) {
 static void test_leaf_over_soil_brf(void) {
   const double r = 0.45, t = 0.4, rho_s = 0.3, E = 1.0;
   char buf[4096];
-  snprintf(buf, sizeof buf,
-           "{\"type\": \"scene\","
-           " \"sensor\": {\"type\": \"hdistant\", \"target\": {\"type\": \"rectangle\","
-           "     \"to_world\": [{\"scale\": 0.1}, {\"translate\": [0, 0, 1]}]},"
-           "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 256},"
-           "   \"film\": {\"type\": \"hdrfilm\", \"width\": 8, \"height\": 8,"
-           "     \"rfilter\": {\"type\": \"box\"}}},"
-           " \"integrator\": {\"type\": \"path\"},"
-           " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1], \"irradiance\": %g},"
-           " \"sheet\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 50}, {\"translate\": [0, 0, 1]}],"
-           "   \"bsdf\": {\"type\": \"bilambertian\", \"reflectance\": %g, \"transmittance\": %g}},"
-           " \"soil\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 50}],"
-           "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": %g}}}",
-           E, r, t, rho_s);
+  snprintf(
+      buf, sizeof buf,
+      "{\"type\": \"scene\","
+      " \"sensor\": {\"type\": \"hdistant\", \"target\": {\"type\": \"rectangle\","
+      "     \"to_world\": [{\"scale\": 0.1}, {\"translate\": [0, 0, 1]}]},"
+      "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 256},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 8, \"height\": 8,"
+      "     \"rfilter\": {\"type\": \"box\"}}},"
+      " \"integrator\": {\"type\": \"path\"},"
+      " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1], \"irradiance\": %g},"
+      " \"sheet\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 50}, {\"translate\": [0, 0, 1]}],"
+      "   \"bsdf\": {\"type\": \"bilambertian\", \"reflectance\": %g, \"transmittance\": %g}},"
+      " \"soil\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 50}],"
+      "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": %g}}}",
+      E, r, t, rho_s);
   scene *s = tsup_load(buf, "mono");
   REQUIRE(s, "scene");
   film_image img;

@@ -32,9 +32,9 @@
 
 RSW_TEST_DEFINE_GLOBALS
 
-#define SEED 7u
+#define SEED    7u
 #define THREADS 2
-#define NDISK 1000
+#define NDISK   1000
 
 /* A growing text buffer. */
 typedef struct sbuf {
@@ -91,13 +91,14 @@ static void sb_matrix(sbuf *b, const double *q) {
   sb_printf(b, "]}]");
 }
 
-#define HEAD                                                                                              \
-  "{\"type\": \"scene\", \"variant\": \"mono\",\n"                                                       \
-  "\"cam\": {\"type\": \"hdistant\", \"target\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [8, 8, 1]}]}, " \
-  "\"sampler\": {\"type\": \"independent\", \"sample_count\": 8}, "                                     \
-  "\"film\": {\"type\": \"hdrfilm\", \"width\": 8, \"height\": 8, \"rfilter\": {\"type\": \"box\"}}},\n" \
-  "\"sun\": {\"type\": \"directional\", \"direction\": [0.3, 0.2, -0.9], \"irradiance\": 1.0},\n"        \
-  "\"soil\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [10, 10, 1]}], "                       \
+#define HEAD                                                                                                 \
+  "{\"type\": \"scene\", \"variant\": \"mono\",\n"                                                           \
+  "\"cam\": {\"type\": \"hdistant\", \"target\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [8, "  \
+  "8, 1]}]}, "                                                                                               \
+  "\"sampler\": {\"type\": \"independent\", \"sample_count\": 8}, "                                          \
+  "\"film\": {\"type\": \"hdrfilm\", \"width\": 8, \"height\": 8, \"rfilter\": {\"type\": \"box\"}}},\n"     \
+  "\"sun\": {\"type\": \"directional\", \"direction\": [0.3, 0.2, -0.9], \"irradiance\": 1.0},\n"            \
+  "\"soil\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [10, 10, 1]}], "                           \
   "\"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.2}}"
 
 #define LEAF_BSDF "{\"type\": \"diffuse\", \"reflectance\": 0.45}"
@@ -106,16 +107,23 @@ static void sb_matrix(sbuf *b, const double *q) {
 static char *canopy_scene(int mode, const double (*m)[16], int n, const char *list_path) {
   sbuf b = {0};
   sb_printf(&b, "%s", HEAD);
-  if (mode != 0) sb_printf(&b, ",\n\"leaf\": {\"type\": \"shapegroup\", \"d\": {\"type\": \"disk\", \"bsdf\": %s}}", LEAF_BSDF);
+  if (mode != 0)
+    sb_printf(&b, ",\n\"leaf\": {\"type\": \"shapegroup\", \"d\": {\"type\": \"disk\", \"bsdf\": %s}}",
+              LEAF_BSDF);
   if (mode == 2) {
-    sb_printf(&b, ",\n\"canopy\": {\"type\": \"instancelist\", \"filename\": \"%s\", "
-                  "\"shapegroup\": {\"type\": \"ref\", \"id\": \"leaf\"}}", list_path);
+    sb_printf(&b,
+              ",\n\"canopy\": {\"type\": \"instancelist\", \"filename\": \"%s\", "
+              "\"shapegroup\": {\"type\": \"ref\", \"id\": \"leaf\"}}",
+              list_path);
   } else {
     for (int i = 0; i < n; i++) {
       if (mode == 0)
         sb_printf(&b, ",\n\"s%d\": {\"type\": \"disk\", \"bsdf\": %s, \"to_world\": ", i, LEAF_BSDF);
       else
-        sb_printf(&b, ",\n\"s%d\": {\"type\": \"instance\", \"shapegroup\": {\"type\": \"ref\", \"id\": \"leaf\"}, \"to_world\": ", i);
+        sb_printf(&b,
+                  ",\n\"s%d\": {\"type\": \"instance\", \"shapegroup\": {\"type\": \"ref\", \"id\": "
+                  "\"leaf\"}, \"to_world\": ",
+                  i);
       sb_matrix(&b, m[i]);
       sb_printf(&b, "}");
     }
@@ -124,7 +132,9 @@ static char *canopy_scene(int mode, const double (*m)[16], int n, const char *li
   return b.p;
 }
 
-static bool render(scene *s, uint32_t spp, film_image *out) { return tsup_render(s, spp, SEED, THREADS, out); }
+static bool render(scene *s, uint32_t spp, film_image *out) {
+  return tsup_render(s, spp, SEED, THREADS, out);
+}
 
 static bool same_film(const film_image *a, const film_image *b) {
   return a->width == b->width && a->height == b->height && a->channels == b->channels &&
@@ -163,7 +173,8 @@ static void test_instanced_equals_separate(void) {
   CHECK(same_film(&a, &c), "an instancelist renders bitwise like the separate disks (sums %.9g vs %.9g)",
         film_sum(&a), film_sum(&c));
   /* Bounds (hence the bounding sphere) agree too. */
-  CHECK(v3_len(v3_sub(s0->bbox_min, s1->bbox_min)) < 1e-6 && v3_len(v3_sub(s0->bbox_max, s1->bbox_max)) < 1e-6,
+  CHECK(v3_len(v3_sub(s0->bbox_min, s1->bbox_min)) < 1e-6 &&
+            v3_len(v3_sub(s0->bbox_max, s1->bbox_max)) < 1e-6,
         "same scene bounds");
   film_image_free(&a), film_image_free(&b), film_image_free(&c);
   scene_free(s0), scene_free(s1), scene_free(s2);
@@ -190,7 +201,8 @@ static void test_instance_update_equals_reload(void) {
   int len = snprintf(json, sizeof json, "[");
   for (int r = 0; r < 4; r++) {
     len += snprintf(json + len, sizeof json - len, "%s[", r ? ", " : "");
-    for (int c = 0; c < 4; c++) len += snprintf(json + len, sizeof json - len, "%s%.17g", c ? ", " : "", q[4 * r + c]);
+    for (int c = 0; c < 4; c++)
+      len += snprintf(json + len, sizeof json - len, "%s%.17g", c ? ", " : "", q[4 * r + c]);
     len += snprintf(json + len, sizeof json - len, "]");
   }
   snprintf(json + len, sizeof json - len, "]");
@@ -203,13 +215,15 @@ static void test_instance_update_equals_reload(void) {
   REQUIRE(st == RSW_OK, "update: %s", rsw_err_format(&err, buf, sizeof buf));
   param_value_free(&u.value);
   CHECK(rep.instance_updates == 1 && rep.rebuilds == 0 && rep.refits == 0,
-        "one instance transform, no BVH rebuild (got %u, %u, %u)", rep.instance_updates, rep.rebuilds, rep.refits);
+        "one instance transform, no BVH rebuild (got %u, %u, %u)", rep.instance_updates, rep.rebuilds,
+        rep.refits);
   REQUIRE(render(s, 8, &after), "render after");
   memcpy(m[3], q, sizeof q);
   char *t2 = canopy_scene(1, (const double(*)[16])m, 50, NULL);
   scene *s2 = tsup_load(t2, NULL);
   REQUIRE(s2 && render(s2, 8, &ref), "reload renders");
-  CHECK(same_film(&after, &ref), "update equals reload (sums %.9g vs %.9g)", film_sum(&after), film_sum(&ref));
+  CHECK(same_film(&after, &ref), "update equals reload (sums %.9g vs %.9g)", film_sum(&after),
+        film_sum(&ref));
   CHECK(!same_film(&before, &after), "the update changed the film");
   film_image_free(&before), film_image_free(&after), film_image_free(&ref);
   scene_free(s), scene_free(s2);
@@ -270,21 +284,23 @@ static void test_list_errors(void) {
   char text[1200];
   snprintf(text, sizeof text,
            "{\"type\": \"scene\", \"leaf\": {\"type\": \"shapegroup\", \"d\": {\"type\": \"disk\"}}, "
-           "\"c\": {\"type\": \"instancelist\", \"filename\": \"%s\", \"shapegroup\": {\"type\": \"ref\", \"id\": \"leaf\"}}}",
+           "\"c\": {\"type\": \"instancelist\", \"filename\": \"%s\", \"shapegroup\": {\"type\": \"ref\", "
+           "\"id\": \"leaf\"}}}",
            bad);
   scene *s = NULL;
   scene_load_opts o = {.size = sizeof o};
   rsw_status st = scene_load_memory(text, strlen(text), "t", false, &o, &s, &err);
   char want[400];
   snprintf(want, sizeof want, "%s:2", bad);
-  CHECK(st != RSW_OK && strcmp(err.where, want) == 0, "scene load names %s (got '%s': %s)", want, err.where, err.msg);
+  CHECK(st != RSW_OK && strcmp(err.where, want) == 0, "scene load names %s (got '%s': %s)", want, err.where,
+        err.msg);
   if (s) scene_free(s);
   unlink(bad);
 }
 
 /* ---- periodic ------------------------------------------------------------ */
 
-#define PLOT 5.0 /* the plot is [-5, 5]^2 */
+#define PLOT  5.0 /* the plot is [-5, 5]^2 */
 #define NLEAF 150
 
 /* Leaves fully inside the plot (centres within 4.6, radius 0.3). */
@@ -313,23 +329,24 @@ static void plot_leaves(double (*m)[16], int n) {
 static char *plot_scene(bool periodic, double theta_deg, const char *list_path) {
   sbuf b = {0};
   double th = theta_deg * RSW_PI / 180.0;
-  sb_printf(&b,
-            "{\"type\": \"scene\", \"variant\": \"mono\",\n"
-            "\"cam\": {\"type\": \"distant\", \"direction\": [%.17g, 0.2, %.17g], "
-            "\"target\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [%g, %g, 1]}]}, "
-            "\"sampler\": {\"type\": \"independent\", \"sample_count\": 64}, "
-            "\"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},\n"
-            "\"sun\": {\"type\": \"directional\", \"direction\": [-0.4, 0.3, -0.8], \"irradiance\": 1.0},\n"
-            "\"soil\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [%g, %g, 1]}], "
-            "\"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.3}},\n"
-            "\"leaf\": {\"type\": \"shapegroup\", \"d\": {\"type\": \"disk\", \"bsdf\": %s}},\n"
-            "\"canopy\": {\"type\": \"instancelist\", \"filename\": \"%s\", "
-            "\"shapegroup\": {\"type\": \"ref\", \"id\": \"leaf\"}}",
-            sin(th), -cos(th), PLOT, PLOT, periodic ? PLOT : 3 * PLOT, periodic ? PLOT : 3 * PLOT,
-            "{\"type\": \"twosided\", \"b\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}", list_path);
+  sb_printf(
+      &b,
+      "{\"type\": \"scene\", \"variant\": \"mono\",\n"
+      "\"cam\": {\"type\": \"distant\", \"direction\": [%.17g, 0.2, %.17g], "
+      "\"target\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [%g, %g, 1]}]}, "
+      "\"sampler\": {\"type\": \"independent\", \"sample_count\": 64}, "
+      "\"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},\n"
+      "\"sun\": {\"type\": \"directional\", \"direction\": [-0.4, 0.3, -0.8], \"irradiance\": 1.0},\n"
+      "\"soil\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [%g, %g, 1]}], "
+      "\"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.3}},\n"
+      "\"leaf\": {\"type\": \"shapegroup\", \"d\": {\"type\": \"disk\", \"bsdf\": %s}},\n"
+      "\"canopy\": {\"type\": \"instancelist\", \"filename\": \"%s\", "
+      "\"shapegroup\": {\"type\": \"ref\", \"id\": \"leaf\"}}",
+      sin(th), -cos(th), PLOT, PLOT, periodic ? PLOT : 3 * PLOT, periodic ? PLOT : 3 * PLOT,
+      "{\"type\": \"twosided\", \"b\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}", list_path);
   if (periodic)
-    sb_printf(&b, ",\n\"bounds\": {\"type\": \"periodic\", \"min\": [%g, %g], \"max\": [%g, %g]}", -PLOT, -PLOT,
-              PLOT, PLOT);
+    sb_printf(&b, ",\n\"bounds\": {\"type\": \"periodic\", \"min\": [%g, %g], \"max\": [%g, %g]}", -PLOT,
+              -PLOT, PLOT, PLOT);
   sb_printf(&b, "}\n");
   return b.p;
 }
@@ -387,8 +404,8 @@ static void test_periodic_equals_copies(void) {
     double sig = sqrt(ep * ep + ec * ec);
     printf("  %2.0f deg: periodic %.6f +- %.6f, 3x3 copies %.6f +- %.6f\n", angles[a], mp, ep, mc, ec);
     CHECK(mp > 0.01, "the plot is lit (%g)", mp);
-    CHECK(fabs(mp - mc) <= 3 * sig, "%.0f deg off nadir: periodic %.6f vs copies %.6f (3 sigma = %.6f)", angles[a], mp,
-          mc, 3 * sig);
+    CHECK(fabs(mp - mc) <= 3 * sig, "%.0f deg off nadir: periodic %.6f vs copies %.6f (3 sigma = %.6f)",
+          angles[a], mp, mc, 3 * sig);
     scene_free(sp), scene_free(scp);
     free(tp), free(tc);
   }

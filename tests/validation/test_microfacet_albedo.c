@@ -34,13 +34,13 @@
 #include <stdio.h>
 #include <stdlib.h>
 
+#include "../support/bsdf_test.h"
+#include "../support/test.h"
 #include "kernel/bsdfs/bsdfs_internal.h"
 #include "kernel/bsdfs/microfacet.h"
 #include "kernel/core/rng.h"
 #include "kernel/core/warp.h"
 #include "kernel/textures/texture.h"
-#include "../support/bsdf_test.h"
-#include "../support/test.h"
 
 RSW_TEST_DEFINE_GLOBALS
 
@@ -49,8 +49,7 @@ typedef struct rough_case {
   texture *au, *av, *eta, *k;
 } rough_case;
 
-static rough_case rough_make(mf_type type, double au, double av, bool visible, double eta,
-                             double k) {
+static rough_case rough_make(mf_type type, double au, double av, bool visible, double eta, double k) {
   rough_case r;
   r.au = uniform_texture_const(au, "alpha_u");
   r.av = au == av ? NULL : uniform_texture_const(av, "alpha_v");
@@ -68,7 +67,9 @@ static void rough_free(rough_case *r) {
   tb_free_tex(r->k);
 }
 
-static const char *type_name(mf_type t) { return t == MF_GGX ? "ggx" : "beckmann"; }
+static const char *type_name(mf_type t) {
+  return t == MF_GGX ? "ggx" : "beckmann";
+}
 
 /* Mean of sample()'s weight (channel 0) and its standard error. */
 static void sky_albedo(const bsdf *b, vec3 wi, int n, uint64_t seed, double *mean, double *se) {
@@ -102,8 +103,8 @@ static double sun_albedo(const bsdf *b, mf_type type, double alpha, vec3 wi, int
     /* s(v) and s ds/dv dv/dx, with dv/dx = 2 y. */
     double s, ss_dx;
     if (type == MF_BECKMANN) {
-      s = sqrt(-2.0 * log(y));     /* s^2 = -log(1 - v) */
-      ss_dx = 1.0 / y;             /* 1 / (2 (1 - v)) * 2 y */
+      s = sqrt(-2.0 * log(y)); /* s^2 = -log(1 - v) */
+      ss_dx = 1.0 / y;         /* 1 / (2 (1 - v)) * 2 y */
     } else {
       s = sqrt(x * (2.0 - x)) / y; /* s^2 = v / (1 - v) */
       ss_dx = 1.0 / (y * y * y);   /* 1 / (2 (1 - v)^2) * 2 y */
@@ -129,7 +130,7 @@ static double sun_albedo(const bsdf *b, mf_type type, double alpha, vec3 wi, int
 
 /* Sample counts per configuration: visible normals, D(m) cos sampling. */
 #define SKY_VISIBLE 300000
-#define SKY_DCOS 100000
+#define SKY_DCOS    100000
 
 static void test_sky_equals_sun(void) {
   const mf_type types[2] = {MF_BECKMANN, MF_GGX};
@@ -150,18 +151,18 @@ static void test_sky_equals_sun(void) {
         double quad_err = fabs(q - q_half);
         /* Worst case GGX alpha 0.05, 89 deg: 2.5e-4 (Q_N itself is within
          * ~5e-5 of a 2400 x 2400 grid there). */
-        CHECK(quad_err < 5e-4, "%s alpha %g theta %g: quadrature not converged (%.3g)",
-              type_name(types[t]), alphas[a], thetas[i], quad_err);
+        CHECK(quad_err < 5e-4, "%s alpha %g theta %g: quadrature not converged (%.3g)", type_name(types[t]),
+              alphas[a], thetas[i], quad_err);
         for (int v = 0; v < 2; v++) {
           double m, se;
-          sky_albedo(v == 0 ? rv.b : rn.b, wi, v == 0 ? SKY_VISIBLE : SKY_DCOS,
-                     1000 + 100 * t + 10 * a + i, &m, &se);
+          sky_albedo(v == 0 ? rv.b : rn.b, wi, v == 0 ? SKY_VISIBLE : SKY_DCOS, 1000 + 100 * t + 10 * a + i,
+                     &m, &se);
           double z = fabs(m - q) / (se + quad_err / 3.0 + 1e-300);
           if (getenv("RSW_ALBEDO_VERBOSE"))
             printf("  %-8s alpha %-4g theta %-2g visible %d: sky %.6f +- %.1e  sun %.6f (quad %.1e)"
                    "  %+.2f %%  z %.2f\n",
-                   type_name(types[t]), alphas[a], thetas[i], v == 0, m, se, q, quad_err,
-                   100.0 * (m - q) / q, z);
+                   type_name(types[t]), alphas[a], thetas[i], v == 0, m, se, q, quad_err, 100.0 * (m - q) / q,
+                   z);
           if (z > worst) {
             worst = z;
             worst_t = t, worst_a = a, worst_i = i, worst_v = v;
@@ -169,8 +170,7 @@ static void test_sky_equals_sun(void) {
           CHECK(fabs(m - q) <= 3.0 * se + quad_err,
                 "%s alpha %g theta %g sample_visible %d: sky albedo %.6f +- %.1e vs sun %.6f "
                 "(quadrature %.1e): %+.3f %%",
-                type_name(types[t]), alphas[a], thetas[i], v == 0, m, se, q, quad_err,
-                100.0 * (m - q) / q);
+                type_name(types[t]), alphas[a], thetas[i], v == 0, m, se, q, quad_err, 100.0 * (m - q) / q);
           /* Visible normals (the default, and the sampler at issue): small
            * enough that a 0.3 % bias shows at about 3 sigma (worst se
            * 7.6e-4, Beckmann alpha 1 at normal incidence; the precise test
@@ -181,8 +181,8 @@ static void test_sky_equals_sun(void) {
         rough_free(&rv);
         rough_free(&rn);
       }
-  printf("  worst: %s alpha %g theta %g visible %d at %.2f (sigma + quad/3)\n",
-         type_name(types[worst_t]), alphas[worst_a], thetas[worst_i], worst_v == 0, worst);
+  printf("  worst: %s alpha %g theta %g visible %d at %.2f (sigma + quad/3)\n", type_name(types[worst_t]),
+         alphas[worst_a], thetas[worst_i], worst_v == 0, worst);
 }
 
 /* The case from issue 11 with more samples: Beckmann, alpha 1, 80 deg. */
@@ -194,8 +194,8 @@ static void test_beckmann_grazing_precise(void) {
   double quad_err = fabs(q - sun_albedo(r.b, MF_BECKMANN, 1.0, wi, 500, 500));
   double m, se;
   sky_albedo(r.b, wi, 1000000, 99, &m, &se);
-  printf("  beckmann alpha 1 theta 80: sky %.6f +- %.1e, sun %.6f (quadrature %.1e), %+.3f %%\n",
-         m, se, q, quad_err, 100.0 * (m - q) / q);
+  printf("  beckmann alpha 1 theta 80: sky %.6f +- %.1e, sun %.6f (quadrature %.1e), %+.3f %%\n", m, se, q,
+         quad_err, 100.0 * (m - q) / q);
   CHECK(fabs(m - q) <= 3.0 * se + quad_err, "sky %.6f +- %.1e vs sun %.6f", m, se, q);
   rough_free(&r);
 }
@@ -229,17 +229,18 @@ static void test_weight_is_eval_over_pdf(void) {
           double expect = f / pdf;
           if (!(fabs(w.c[0] - expect) <= 1e-6 * fabs(expect)) || !(fabs(pdf - bs.pdf) <= 1e-6 * pdf)) {
             if (bad++ == 0)
-              CHECK(false, "%s alpha (%g, %g) visible %d, wi (%.4f, %.4f, %.4f): weight %.9g vs "
+              CHECK(false,
+                    "%s alpha (%g, %g) visible %d, wi (%.4f, %.4f, %.4f): weight %.9g vs "
                     "eval/pdf %.9g, pdf %.9g vs pdf() %.9g",
-                    type_name(types[t]), alphas[a][0], alphas[a][1], v == 0, wi.x, wi.y, wi.z,
-                    w.c[0], expect, bs.pdf, pdf);
+                    type_name(types[t]), alphas[a][0], alphas[a][1], v == 0, wi.x, wi.y, wi.z, w.c[0], expect,
+                    bs.pdf, pdf);
           }
           ok++;
         }
-        CHECK(bad == 0, "%s alpha (%g, %g) visible %d: %d inconsistent samples",
-              type_name(types[t]), alphas[a][0], alphas[a][1], v == 0, bad);
-        CHECK(ok > 2500, "%s alpha (%g, %g) visible %d: only %d successful samples",
-              type_name(types[t]), alphas[a][0], alphas[a][1], v == 0, ok);
+        CHECK(bad == 0, "%s alpha (%g, %g) visible %d: %d inconsistent samples", type_name(types[t]),
+              alphas[a][0], alphas[a][1], v == 0, bad);
+        CHECK(ok > 2500, "%s alpha (%g, %g) visible %d: only %d successful samples", type_name(types[t]),
+              alphas[a][0], alphas[a][1], v == 0, ok);
         rough_free(&r);
       }
 }

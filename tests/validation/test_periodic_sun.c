@@ -38,12 +38,14 @@
 
 RSW_TEST_DEFINE_GLOBALS
 
-#define PI 3.14159265358979323846
+#define PI     3.14159265358979323846
 #define R_LEAF 0.45
 #define T_LEAF 0.4
-#define RHO_S 0.3
+#define RHO_S  0.3
 
-static double closed_form(void) { return R_LEAF + T_LEAF * T_LEAF * RHO_S / (1.0 - R_LEAF * RHO_S); }
+static double closed_form(void) {
+  return R_LEAF + T_LEAF * T_LEAF * RHO_S / (1.0 - R_LEAF * RHO_S);
+}
 
 /* The sun (propagation direction) at zenith th (degrees), azimuth 30. */
 static vec3 sun_dir(double th) {
@@ -62,7 +64,8 @@ static scene *sheet_scene(double a, double b, double h, double sun_zen, const ch
            " \"sensor\": %s,"
            " \"integrator\": {\"type\": \"path\"},"
            " \"sun\": {\"type\": \"directional\", \"direction\": [%.17g, %.17g, %.17g], \"irradiance\": 1},"
-           " \"sheet\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [%g, %g, 1]}, {\"translate\": [0, 0, %g]}],"
+           " \"sheet\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [%g, %g, 1]}, {\"translate\": "
+           "[0, 0, %g]}],"
            "   \"bsdf\": {\"type\": \"bilambertian\", \"reflectance\": %g, \"transmittance\": %g}},"
            " \"soil\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [%g, %g, 1]}],"
            "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": %g}},"
@@ -90,7 +93,8 @@ static bool film_brf(scene *s, uint32_t spp, uint64_t seed, double sun_zen, doub
 
 static void check_brf(const char *what, double brf, double sig) {
   double want = closed_form();
-  CHECK(fabs(brf - want) <= 3 * sig, "%s: BRF %.5f vs closed form %.5f (3 sigma = %.5f)", what, brf, want, 3 * sig);
+  CHECK(fabs(brf - want) <= 3 * sig, "%s: BRF %.5f vs closed form %.5f (3 sigma = %.5f)", what, brf, want,
+        3 * sig);
   CHECK(sig < 0.01 * want, "%s: sigma %.3g too large for a meaningful test", what, sig);
 }
 
@@ -101,12 +105,13 @@ static void test_sheet_over_soil_low_sun(void) {
     double a = cells[c][0], b = cells[c][1], h = cells[c][2];
     char sens[1024];
     /* The target is the cell's top: origins 2R above it, outside the slab. */
-    snprintf(sens, sizeof sens,
-             "{\"type\": \"hdistant\", \"target\": {\"type\": \"rectangle\","
-             " \"to_world\": [{\"scale\": [%g, %g, 1]}, {\"translate\": [0, 0, %g]}]},"
-             " \"sampler\": {\"type\": \"independent\", \"sample_count\": 128},"
-             " \"film\": {\"type\": \"hdrfilm\", \"width\": 8, \"height\": 8, \"rfilter\": {\"type\": \"box\"}}}",
-             a, b, h);
+    snprintf(
+        sens, sizeof sens,
+        "{\"type\": \"hdistant\", \"target\": {\"type\": \"rectangle\","
+        " \"to_world\": [{\"scale\": [%g, %g, 1]}, {\"translate\": [0, 0, %g]}]},"
+        " \"sampler\": {\"type\": \"independent\", \"sample_count\": 128},"
+        " \"film\": {\"type\": \"hdrfilm\", \"width\": 8, \"height\": 8, \"rfilter\": {\"type\": \"box\"}}}",
+        a, b, h);
     for (size_t k = 0; k < sizeof zen / sizeof zen[0]; k++) {
       scene *s = sheet_scene(a, b, h, zen[k], sens);
       REQUIRE(s, "scene loads");
@@ -115,7 +120,8 @@ static void test_sheet_over_soil_low_sun(void) {
       REQUIRE(film_brf(s, 0, 100 + k, zen[k], &brf, &sig, &unres), "renders");
       char what[128];
       snprintf(what, sizeof what, "cell %gx%gx%g, sun %g deg", 2 * a, 2 * b, h, zen[k]);
-      if (c == 0 && (zen[k] == 70 || zen[k] == 80)) printf("  %s: BRF %.5f +- %.5f (closed form %.5f)\n", what, brf, sig, closed_form());
+      if (c == 0 && (zen[k] == 70 || zen[k] == 80))
+        printf("  %s: BRF %.5f +- %.5f (closed form %.5f)\n", what, brf, sig, closed_form());
       check_brf(what, brf, sig);
       CHECK(unres == 0, "%s: %llu unresolved rays", what, (unsigned long long)unres);
       scene_free(s);
@@ -129,9 +135,10 @@ static void test_distant_sensors_grazing_view(void) {
   const double a = 1, b = 1, h = 1, zen = 40;
   char sens[1024];
   /* hdistant without a target: every viewing direction of the hemisphere. */
-  snprintf(sens, sizeof sens,
-           "{\"type\": \"hdistant\", \"sampler\": {\"type\": \"independent\", \"sample_count\": 128},"
-           " \"film\": {\"type\": \"hdrfilm\", \"width\": 8, \"height\": 8, \"rfilter\": {\"type\": \"box\"}}}");
+  snprintf(
+      sens, sizeof sens,
+      "{\"type\": \"hdistant\", \"sampler\": {\"type\": \"independent\", \"sample_count\": 128},"
+      " \"film\": {\"type\": \"hdrfilm\", \"width\": 8, \"height\": 8, \"rfilter\": {\"type\": \"box\"}}}");
   scene *s = sheet_scene(a, b, h, zen, sens);
   REQUIRE(s, "scene loads");
   double brf, sig;
@@ -145,14 +152,17 @@ static void test_distant_sensors_grazing_view(void) {
   const char *targets[2] = {"", ", \"target\": [0.3, -0.2, 0]"};
   for (int t = 0; t < 2; t++) {
     double v = 80 * PI / 180;
-    snprintf(sens, sizeof sens,
-             "{\"type\": \"distant\", \"direction\": [%.17g, 0.1, %.17g]%s,"
-             " \"sampler\": {\"type\": \"independent\", \"sample_count\": 256},"
-             " \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}}",
-             -sin(v), -cos(v), targets[t]);
+    snprintf(
+        sens, sizeof sens,
+        "{\"type\": \"distant\", \"direction\": [%.17g, 0.1, %.17g]%s,"
+        " \"sampler\": {\"type\": \"independent\", \"sample_count\": 256},"
+        " \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}}",
+        -sin(v), -cos(v), targets[t]);
     s = sheet_scene(a, b, h, zen, sens);
     REQUIRE(s, "scene loads");
-    enum { NS = 12 };
+    enum {
+      NS = 12
+    };
     double sum = 0, sum2 = 0;
     for (int k = 0; k < NS; k++) {
       double x, e;
@@ -160,7 +170,8 @@ static void test_distant_sensors_grazing_view(void) {
       sum += x, sum2 += x * x;
     }
     double m = sum / NS, sd = sqrt(fmax(0, (sum2 - sum * sum / NS) / (NS - 1)) / NS);
-    printf("  distant at 80 deg, %s: BRF %.5f +- %.5f\n", t ? "point target on the soil" : "no target", m, sd);
+    printf("  distant at 80 deg, %s: BRF %.5f +- %.5f\n", t ? "point target on the soil" : "no target", m,
+           sd);
     check_brf(t ? "distant, point target on the soil" : "distant, no target", m, sd);
     scene_free(s);
   }
@@ -168,7 +179,7 @@ static void test_distant_sensors_grazing_view(void) {
 
 /* ---- a plot with leaves: periodic vs explicit copies --------------------- */
 
-#define PLOT 2.0 /* the plot is [-2, 2]^2 */
+#define PLOT  2.0 /* the plot is [-2, 2]^2 */
 #define NLEAF 24
 
 static void plot_leaves(double (*m)[16], int n) {
@@ -212,23 +223,25 @@ static scene *plot_scene(int K, bool periodic, double sun_zen, const char *list)
   char buf[4096];
   vec3 d = sun_dir(sun_zen);
   double half = PLOT * (2 * K + 1);
-  int n = snprintf(buf, sizeof buf,
-                   "{\"type\": \"scene\", \"variant\": \"mono\","
-                   " \"cam\": {\"type\": \"distant\", \"direction\": [0, 0, -1],"
-                   "   \"target\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [%g, %g, 1]}]},"
-                   "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 512},"
-                   "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},"
-                   " \"sun\": {\"type\": \"directional\", \"direction\": [%.17g, %.17g, %.17g], \"irradiance\": 1},"
-                   " \"soil\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [%g, %g, 1]}],"
-                   "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.3}},"
-                   " \"leaf\": {\"type\": \"shapegroup\", \"d\": {\"type\": \"disk\","
-                   "   \"bsdf\": {\"type\": \"bilambertian\", \"reflectance\": 0.45, \"transmittance\": 0.4}}},"
-                   " \"canopy\": {\"type\": \"instancelist\", \"filename\": \"%s\","
-                   "   \"shapegroup\": {\"type\": \"ref\", \"id\": \"leaf\"}}",
-                   PLOT, PLOT, d.x, d.y, d.z, half, half, list);
+  int n = snprintf(
+      buf, sizeof buf,
+      "{\"type\": \"scene\", \"variant\": \"mono\","
+      " \"cam\": {\"type\": \"distant\", \"direction\": [0, 0, -1],"
+      "   \"target\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [%g, %g, 1]}]},"
+      "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 512},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},"
+      " \"sun\": {\"type\": \"directional\", \"direction\": [%.17g, %.17g, %.17g], \"irradiance\": 1},"
+      " \"soil\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [%g, %g, 1]}],"
+      "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.3}},"
+      " \"leaf\": {\"type\": \"shapegroup\", \"d\": {\"type\": \"disk\","
+      "   \"bsdf\": {\"type\": \"bilambertian\", \"reflectance\": 0.45, \"transmittance\": 0.4}}},"
+      " \"canopy\": {\"type\": \"instancelist\", \"filename\": \"%s\","
+      "   \"shapegroup\": {\"type\": \"ref\", \"id\": \"leaf\"}}",
+      PLOT, PLOT, d.x, d.y, d.z, half, half, list);
   if (periodic)
-    n += snprintf(buf + n, sizeof buf - n, ", \"cell\": {\"type\": \"periodic\", \"min\": [%g, %g], \"max\": [%g, %g]}",
-                  -PLOT, -PLOT, PLOT, PLOT);
+    n += snprintf(buf + n, sizeof buf - n,
+                  ", \"cell\": {\"type\": \"periodic\", \"min\": [%g, %g], \"max\": [%g, %g]}", -PLOT, -PLOT,
+                  PLOT, PLOT);
   snprintf(buf + n, sizeof buf - n, "}");
   return tsup_load(buf, NULL);
 }
@@ -265,11 +278,11 @@ static void test_periodic_equals_copies_low_sun(void) {
     double mp, ep, mc, ec;
     REQUIRE(seed_stats(sp, 1000, &mp, &ep) && seed_stats(sc, 2000, &mc, &ec), "renders");
     double sig = sqrt(ep * ep + ec * ec);
-    printf("  sun %2.0f deg: periodic %.6f +- %.6f, %dx%d copies %.6f +- %.6f\n", zen[a], mp, ep, 2 * K + 1, 2 * K + 1,
-           mc, ec);
+    printf("  sun %2.0f deg: periodic %.6f +- %.6f, %dx%d copies %.6f +- %.6f\n", zen[a], mp, ep, 2 * K + 1,
+           2 * K + 1, mc, ec);
     CHECK(mc > 0.001, "the plot is lit (%g)", mc);
-    CHECK(fabs(mp - mc) <= 3 * sig, "sun %.0f deg: periodic %.6f vs copies %.6f (3 sigma = %.6f)", zen[a], mp, mc,
-          3 * sig);
+    CHECK(fabs(mp - mc) <= 3 * sig, "sun %.0f deg: periodic %.6f vs copies %.6f (3 sigma = %.6f)", zen[a], mp,
+          mc, 3 * sig);
     CHECK(sig < 0.03 * mc, "sun %.0f deg: sigma %.3g too large", zen[a], sig);
     scene_free(sp), scene_free(sc);
   }
@@ -285,23 +298,27 @@ static void test_periodic_equals_copies_low_sun(void) {
  * weight of a strategy that never samples it (the cell was 27% dark). */
 static scene *lamp_scene(bool periodic, int K) {
   static char buf[100000];
-  int n = snprintf(buf, sizeof buf,
-                   "{\"type\": \"scene\", \"variant\": \"mono\","
-                   " \"sensor\": {\"type\": \"distant\", \"direction\": [0, 0, -1], \"target\": {\"type\": \"rectangle\"},"
-                   "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 8192},"
-                   "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},"
-                   " \"integrator\": {\"type\": \"path\", \"max_depth\": 3},"
-                   " \"soil\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [%d, %d, 1]}],"
-                   "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}",
-                   2 * K + 1, 2 * K + 1);
+  int n = snprintf(
+      buf, sizeof buf,
+      "{\"type\": \"scene\", \"variant\": \"mono\","
+      " \"sensor\": {\"type\": \"distant\", \"direction\": [0, 0, -1], \"target\": {\"type\": \"rectangle\"},"
+      "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 8192},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},"
+      " \"integrator\": {\"type\": \"path\", \"max_depth\": 3},"
+      " \"soil\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [%d, %d, 1]}],"
+      "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}",
+      2 * K + 1, 2 * K + 1);
   for (int i = -K; i <= K; i++)
     for (int j = -K; j <= K; j++)
       n += snprintf(buf + n, sizeof buf - n,
                     ", \"lamp_%d_%d\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 0.4},"
                     " {\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 180}}, {\"translate\": [%d, %d, 0.5]}],"
-                    " \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0}, \"emitter\": {\"type\": \"area\", \"radiance\": 1}}",
+                    " \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0}, \"emitter\": {\"type\": "
+                    "\"area\", \"radiance\": 1}}",
                     i + K, j + K, 2 * i, 2 * j);
-  if (periodic) n += snprintf(buf + n, sizeof buf - n, ", \"cell\": {\"type\": \"periodic\", \"min\": [-1, -1], \"max\": [1, 1]}");
+  if (periodic)
+    n += snprintf(buf + n, sizeof buf - n,
+                  ", \"cell\": {\"type\": \"periodic\", \"min\": [-1, -1], \"max\": [1, 1]}");
   snprintf(buf + n, sizeof buf - n, "}");
   return tsup_load(buf, NULL);
 }
@@ -313,7 +330,8 @@ static void test_area_emitter_equals_copies(void) {
   REQUIRE(seed_stats(sp, 3000, &mp, &ep) && seed_stats(sc, 4000, &mc, &ec), "renders");
   double sig = sqrt(ep * ep + ec * ec);
   printf("  area lamps: periodic %.5f +- %.5f, 13x13 lamps %.5f +- %.5f\n", mp, ep, mc, ec);
-  CHECK(fabs(mp - mc) <= 3 * sig, "area lamps: periodic %.5f vs copies %.5f (3 sigma = %.5f)", mp, mc, 3 * sig);
+  CHECK(fabs(mp - mc) <= 3 * sig, "area lamps: periodic %.5f vs copies %.5f (3 sigma = %.5f)", mp, mc,
+        3 * sig);
   CHECK(sig < 0.02 * mc, "area lamps: sigma %.3g too large", sig);
   scene_free(sp), scene_free(sc);
 }
@@ -321,7 +339,8 @@ static void test_area_emitter_equals_copies(void) {
 /* ---- the tracer ------------------------------------------------------------ */
 
 static void test_tracer_grazing(void) {
-  const char *sens = "{\"type\": \"distant\", \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}";
+  const char *sens =
+      "{\"type\": \"distant\", \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}";
   scene *s = sheet_scene(1, 1, 1, 0, sens);
   REQUIRE(s, "scene loads");
   /* From just above the soil, 89.9 degrees from the zenith: ~573 m and
@@ -343,7 +362,8 @@ static void test_tracer_grazing(void) {
   ray3 down = {v3(0.3, -0.4, 50.0), v3(0.6 * sin(t), 0.8 * sin(t), -cos(t)), 0, INFINITY};
   r = down;
   CHECK(scene_trace(s, &r, &h, &off) == TRACE_HIT, "ray from far above hits the sheet");
-  CHECK(fabs(off + h.t - 49.0 / cos(t)) < 1e-6 * (49.0 / cos(t)), "distance %.9g vs %.9g", off + h.t, 49.0 / cos(t));
+  CHECK(fabs(off + h.t - 49.0 / cos(t)) < 1e-6 * (49.0 / cos(t)), "distance %.9g vs %.9g", off + h.t,
+        49.0 / cos(t));
   /* A segment that ends before the slab hits nothing. */
   down.tmax = 40.0 / cos(t);
   CHECK(scene_occluded(s, &down) == TRACE_MISS, "short segment above the slab");
@@ -363,23 +383,25 @@ static void test_tracer_grazing(void) {
    * between soil and sheet, under a constant sky. Its rays never leave the
    * slab: they are counted as unresolved and see no sky (before, they
    * escaped after 100,000 walls and saw it). */
-  scene *hs = tsup_load(
-      "{\"type\": \"scene\", \"variant\": \"mono\","
-      " \"cam\": {\"type\": \"distant\", \"direction\": [0.6, 0.8, 0], \"target\": [0, 0, 0.5],"
-      "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 2},"
-      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}},"
-      " \"sky\": {\"type\": \"constant\", \"radiance\": 1},"
-      " \"sheet\": {\"type\": \"rectangle\", \"to_world\": [{\"translate\": [0, 0, 1]}], \"bsdf\": {\"type\": \"diffuse\"}},"
-      " \"soil\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\"}},"
-      " \"cell\": {\"type\": \"periodic\", \"min\": [-1, -1], \"max\": [1, 1]}}",
-      NULL);
+  scene *hs =
+      tsup_load("{\"type\": \"scene\", \"variant\": \"mono\","
+                " \"cam\": {\"type\": \"distant\", \"direction\": [0.6, 0.8, 0], \"target\": [0, 0, 0.5],"
+                "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 2},"
+                "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}},"
+                " \"sky\": {\"type\": \"constant\", \"radiance\": 1},"
+                " \"sheet\": {\"type\": \"rectangle\", \"to_world\": [{\"translate\": [0, 0, 1]}], \"bsdf\": "
+                "{\"type\": \"diffuse\"}},"
+                " \"soil\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\"}},"
+                " \"cell\": {\"type\": \"periodic\", \"min\": [-1, -1], \"max\": [1, 1]}}",
+                NULL);
   REQUIRE(hs, "horizontal scene loads");
   film_image img = {0};
   rsw_err err = {0};
   render_opts ro = {.size = sizeof ro, .seed = 3, .threads = 1};
   render_result_stats st = {0};
   REQUIRE(render_sensor(hs, &ro, &img, &st, &err) == RSW_OK, "renders");
-  CHECK(st.rays.unresolved == 2, "unresolved camera rays: %llu (want 2)", (unsigned long long)st.rays.unresolved);
+  CHECK(st.rays.unresolved == 2, "unresolved camera rays: %llu (want 2)",
+        (unsigned long long)st.rays.unresolved);
   CHECK(img.data[0] == 0.0f, "an unresolved ray sees no sky (film %g)", img.data[0]);
   film_image_free(&img);
   scene_free(hs);

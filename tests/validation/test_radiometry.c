@@ -17,7 +17,7 @@
 
 RSW_TEST_DEFINE_GLOBALS
 
-#define RHO 0.5
+#define RHO   0.5
 #define COS30 0.86602540378443864676
 
 /* Lambertian plate (rectangle [-1,1]^2, rho = RHO) under a directional
@@ -172,7 +172,8 @@ static void test_white_furnace(void) {
       " \"cam\": {\"type\": \"perspective\", \"fov\": 30,"
       "   \"to_world\": [{\"lookat\": {\"origin\": [0, 0, 5], \"target\": [0, 0, 0], \"up\": [0, 1, 0]}}],"
       "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 32},"
-      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16, \"rfilter\": {\"type\": \"box\"}}},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16, \"rfilter\": {\"type\": "
+      "\"box\"}}},"
       " \"integrator\": {\"type\": \"path\", \"rr_depth\": 5},"
       " \"env\": {\"type\": \"constant\", \"radiance\": 2.5},"
       " \"ball\": {\"type\": \"sphere\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 1.0}}}";
@@ -307,7 +308,7 @@ static void test_bitmap_texture(void) {
   int fd = mkstemps(path, 4);
   REQUIRE(fd >= 0, "temp file");
   close(fd);
-  const float px[12] = {0.1f, 0.2f, 0.3f, 0.4f, 0.5f, 0.6f,   /* top row: (0,0), (1,0) */
+  const float px[12] = {0.1f, 0.2f, 0.3f, 0.4f,  0.5f, 0.6f,   /* top row: (0,0), (1,0) */
                         0.7f, 0.8f, 0.9f, 0.25f, 0.5f, 0.75f}; /* bottom row */
   const char *names[3] = {"R", "G", "B"};
   rsw_err err = {0};
@@ -318,15 +319,17 @@ static void test_bitmap_texture(void) {
   for (int k = 0; k < 3; k++) {
     for (int mono = 0; mono < 2; mono++) {
       char sc[2048];
-      snprintf(sc, sizeof sc,
-               "{\"type\": \"scene\","
-               " \"m\": {\"type\": \"radiancemeter\", \"origin\": [%g, %g, 1], \"direction\": [0, 0, -1],"
-               "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"component_format\": \"float32\","
-               "     \"rfilter\": {\"type\": \"box\"}}},"
-               " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1]},"
-               " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\","
-               "   \"reflectance\": {\"type\": \"bitmap\", \"filename\": \"%s\", \"filter_type\": \"nearest\"}}}}",
-               pts[k][0], pts[k][1], path);
+      snprintf(
+          sc, sizeof sc,
+          "{\"type\": \"scene\","
+          " \"m\": {\"type\": \"radiancemeter\", \"origin\": [%g, %g, 1], \"direction\": [0, 0, -1],"
+          "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"component_format\": "
+          "\"float32\","
+          "     \"rfilter\": {\"type\": \"box\"}}},"
+          " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1]},"
+          " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\","
+          "   \"reflectance\": {\"type\": \"bitmap\", \"filename\": \"%s\", \"filter_type\": \"nearest\"}}}}",
+          pts[k][0], pts[k][1], path);
       scene *s = tsup_load(sc, mono ? "mono" : "rgb");
       REQUIRE(s, "scene");
       film_image img;
@@ -365,16 +368,17 @@ static void test_mesh_plate_without_attributes(void) {
     fputs(plys[k], f);
     fclose(f);
     char sc[2048];
-    snprintf(sc, sizeof sc,
-             "{\"type\": \"scene\","
-             " \"m\": {\"type\": \"radiancemeter\", \"origin\": [0.3, -0.2, 2], \"direction\": [-0.1, 0.05, -1],"
-             "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"component_format\": \"float32\","
-             "     \"rfilter\": {\"type\": \"box\"}}},"
-             " \"sun\": {\"type\": \"directional\", \"direction\": [0.5, 0, -0.86602540378443864676]},"
-             " \"plate\": {\"type\": \"ply\", \"filename\": \"%s\","
-             "   \"to_world\": [{\"rotate\": {\"axis\": [0, 0, 1], \"angle\": 30}}, {\"translate\": [0, 0, 0.1]}],"
-             "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}",
-             path);
+    snprintf(
+        sc, sizeof sc,
+        "{\"type\": \"scene\","
+        " \"m\": {\"type\": \"radiancemeter\", \"origin\": [0.3, -0.2, 2], \"direction\": [-0.1, 0.05, -1],"
+        "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"component_format\": \"float32\","
+        "     \"rfilter\": {\"type\": \"box\"}}},"
+        " \"sun\": {\"type\": \"directional\", \"direction\": [0.5, 0, -0.86602540378443864676]},"
+        " \"plate\": {\"type\": \"ply\", \"filename\": \"%s\","
+        "   \"to_world\": [{\"rotate\": {\"axis\": [0, 0, 1], \"angle\": 30}}, {\"translate\": [0, 0, 0.1]}],"
+        "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}",
+        path);
     scene *s = tsup_load(sc, NULL);
     REQUIRE(s, "scene");
     film_image img;

@@ -45,7 +45,8 @@ static void test_seed_mirror_directions(void) {
   scene *s = tsup_load_file("proto/examples/hdistant_seed.xml", NULL);
   REQUIRE(s, "seed scene must load unchanged");
   REQUIRE(s->n_sensors == 1 && s->n_emitters == 3 && s->n_shapes == 1, "seed scene structure");
-  CHECK(strcmp(s->emitters[0]->base.id, "directional") == 0 && strcmp(s->emitters[2]->base.id, "directional_2") == 0,
+  CHECK(strcmp(s->emitters[0]->base.id, "directional") == 0 &&
+            strcmp(s->emitters[2]->base.id, "directional_2") == 0,
         "deterministic ids for unnamed emitters: %s, %s", s->emitters[0]->base.id, s->emitters[2]->base.id);
   CHECK(strcmp(s->shapes[0]->base.id, "rectangle") == 0, "rectangle id: %s", s->shapes[0]->base.id);
   film_image img;
@@ -99,7 +100,8 @@ static void test_determinism_box_independent(void) {
       "{\"type\": \"scene\","
       " \"cam\": {\"type\": \"perspective\", \"fov\": 45,"
       "   \"to_world\": [{\"lookat\": {\"origin\": [0, -4, 2], \"target\": [0, 0, 0], \"up\": [0, 0, 1]}}],"
-      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 40, \"height\": 36, \"rfilter\": {\"type\": \"box\"}}},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 40, \"height\": 36, \"rfilter\": {\"type\": "
+      "\"box\"}}},"
       " \"env\": {\"type\": \"constant\", \"radiance\": 0.5},"
       " \"sun\": {\"type\": \"directional\", \"direction\": [1, 1, -2]},"
       " \"floor\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 3}]},"
@@ -122,7 +124,8 @@ static void test_determinism_gaussian_stratified(void) {
       " \"sun\": {\"type\": \"directional\", \"direction\": [1, 1, -2]},"
       " \"floor\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 3}],"
       "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": {\"type\": \"checkerboard\"}}},"
-      " \"lamp\": {\"type\": \"disk\", \"to_world\": [{\"scale\": 0.5}, {\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 180}},"
+      " \"lamp\": {\"type\": \"disk\", \"to_world\": [{\"scale\": 0.5}, {\"rotate\": {\"axis\": [1, 0, 0], "
+      "\"angle\": 180}},"
       "   {\"translate\": [0, 0, 2]}], \"emitter\": {\"type\": \"area\", \"radiance\": 4}}}",
       0);
 }

@@ -25,8 +25,8 @@
 
 RSW_TEST_DEFINE_GLOBALS
 
-#define NLEAF 32000
-#define SEED 5u
+#define NLEAF   32000
+#define SEED    5u
 #define THREADS 2
 
 typedef struct sbuf {
@@ -62,7 +62,7 @@ static double now_s(void) {
  * normals, radius 0.08 (LAI about 2.5 over the 16 m plot); row-major 3x4
  * rows of a to_world, printed with %.9g. */
 static double (*leaves(int n))[12] {
-  double (*m)[12] = malloc((size_t)n * sizeof *m);
+  double(*m)[12] = malloc((size_t)n * sizeof *m);
   pcg32 g;
   pcg32_seed(&g, 17, 3);
   for (int i = 0; i < n; i++) {
@@ -81,14 +81,15 @@ static double (*leaves(int n))[12] {
   return m;
 }
 
-#define HEAD                                                                                              \
-  "{\"type\": \"scene\", \"variant\": \"mono\",\n"                                                       \
-  "\"cam\": {\"type\": \"hdistant\", \"target\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [8, 8, 1]}]}, " \
-  "\"sampler\": {\"type\": \"independent\", \"sample_count\": 8}, "                                     \
-  "\"film\": {\"type\": \"hdrfilm\", \"width\": 8, \"height\": 8, \"rfilter\": {\"type\": \"box\"}}},\n" \
-  "\"sun\": {\"type\": \"directional\", \"direction\": [0.3, 0.2, -0.9], \"irradiance\": 1.0},\n"        \
-  "\"soil\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [10, 10, 1]}], "                       \
-  "\"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.2}},\n"                                           \
+#define HEAD                                                                                                 \
+  "{\"type\": \"scene\", \"variant\": \"mono\",\n"                                                           \
+  "\"cam\": {\"type\": \"hdistant\", \"target\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [8, "  \
+  "8, 1]}]}, "                                                                                               \
+  "\"sampler\": {\"type\": \"independent\", \"sample_count\": 8}, "                                          \
+  "\"film\": {\"type\": \"hdrfilm\", \"width\": 8, \"height\": 8, \"rfilter\": {\"type\": \"box\"}}},\n"     \
+  "\"sun\": {\"type\": \"directional\", \"direction\": [0.3, 0.2, -0.9], \"irradiance\": 1.0},\n"            \
+  "\"soil\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [10, 10, 1]}], "                           \
+  "\"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.2}},\n"                                              \
   "\"leaf\": {\"type\": \"bilambertian\", \"reflectance\": 0.45, \"transmittance\": 0.4}"
 
 static void sb_leaf(sbuf *b, int i, const double *q, bool keyed) {
@@ -110,38 +111,45 @@ static char *cloud_json_as(const double (*m)[12], int n, int groups, bool list) 
       sb_printf(&b, "%s\n ", list && i == g * per ? "" : ",");
       sb_leaf(&b, i, m[i], !list);
     }
-    sb_printf(&b, "%s},\n\"i%d\": {\"type\": \"instance\", \"shapegroup\": {\"type\": \"ref\", \"id\": \"g%d\"}}",
+    sb_printf(&b,
+              "%s},\n\"i%d\": {\"type\": \"instance\", \"shapegroup\": {\"type\": \"ref\", \"id\": \"g%d\"}}",
               list ? "]" : "", g, g);
   }
   sb_printf(&b, "}\n");
   return b.p;
 }
 
-static char *cloud_json(const double (*m)[12], int n, int groups) { return cloud_json_as(m, n, groups, false); }
+static char *cloud_json(const double (*m)[12], int n, int groups) {
+  return cloud_json_as(m, n, groups, false);
+}
 
 /* The same scene as Mitsuba XML, one group. */
 static char *cloud_xml(const double (*m)[12], int n) {
   sbuf b = {0};
-  sb_printf(&b,
-            "<scene version=\"3.0.0\" variant=\"mono\">\n"
-            "<sensor type=\"hdistant\"><shape type=\"rectangle\" name=\"target\"><transform name=\"to_world\">"
-            "<scale x=\"8\" y=\"8\" z=\"1\"/></transform></shape>"
-            "<sampler type=\"independent\"><integer name=\"sample_count\" value=\"8\"/></sampler>"
-            "<film type=\"hdrfilm\"><integer name=\"width\" value=\"8\"/><integer name=\"height\" value=\"8\"/>"
-            "<rfilter type=\"box\"/></film></sensor>\n"
-            "<emitter type=\"directional\"><vector name=\"direction\" x=\"0.3\" y=\"0.2\" z=\"-0.9\"/>"
-            "<float name=\"irradiance\" value=\"1\"/></emitter>\n"
-            "<shape type=\"rectangle\" id=\"soil\"><transform name=\"to_world\"><scale x=\"10\" y=\"10\" z=\"1\"/>"
-            "</transform><bsdf type=\"diffuse\"><float name=\"reflectance\" value=\"0.2\"/></bsdf></shape>\n"
-            "<bsdf type=\"bilambertian\" id=\"leaf\"><float name=\"reflectance\" value=\"0.45\"/>"
-            "<float name=\"transmittance\" value=\"0.4\"/></bsdf>\n"
-            "<shape type=\"shapegroup\" id=\"g0\">\n");
+  sb_printf(
+      &b,
+      "<scene version=\"3.0.0\" variant=\"mono\">\n"
+      "<sensor type=\"hdistant\"><shape type=\"rectangle\" name=\"target\"><transform name=\"to_world\">"
+      "<scale x=\"8\" y=\"8\" z=\"1\"/></transform></shape>"
+      "<sampler type=\"independent\"><integer name=\"sample_count\" value=\"8\"/></sampler>"
+      "<film type=\"hdrfilm\"><integer name=\"width\" value=\"8\"/><integer name=\"height\" value=\"8\"/>"
+      "<rfilter type=\"box\"/></film></sensor>\n"
+      "<emitter type=\"directional\"><vector name=\"direction\" x=\"0.3\" y=\"0.2\" z=\"-0.9\"/>"
+      "<float name=\"irradiance\" value=\"1\"/></emitter>\n"
+      "<shape type=\"rectangle\" id=\"soil\"><transform name=\"to_world\"><scale x=\"10\" y=\"10\" z=\"1\"/>"
+      "</transform><bsdf type=\"diffuse\"><float name=\"reflectance\" value=\"0.2\"/></bsdf></shape>\n"
+      "<bsdf type=\"bilambertian\" id=\"leaf\"><float name=\"reflectance\" value=\"0.45\"/>"
+      "<float name=\"transmittance\" value=\"0.4\"/></bsdf>\n"
+      "<shape type=\"shapegroup\" id=\"g0\">\n");
   for (int i = 0; i < n; i++) {
-    sb_printf(&b, "<shape type=\"disk\" id=\"d%d\"><ref id=\"leaf\"/><transform name=\"to_world\"><matrix value=\"", i);
+    sb_printf(
+        &b, "<shape type=\"disk\" id=\"d%d\"><ref id=\"leaf\"/><transform name=\"to_world\"><matrix value=\"",
+        i);
     for (int k = 0; k < 12; k++) sb_printf(&b, "%s%.9g", k ? " " : "", m[i][k]);
     sb_printf(&b, " 0 0 0 1\"/></transform></shape>\n");
   }
-  sb_printf(&b, "</shape>\n<shape type=\"instance\" id=\"i0\"><ref name=\"shapegroup\" id=\"g0\"/></shape>\n</scene>\n");
+  sb_printf(&b, "</shape>\n<shape type=\"instance\" id=\"i0\"><ref name=\"shapegroup\" "
+                "id=\"g0\"/></shape>\n</scene>\n");
   return b.p;
 }
 
@@ -167,7 +175,7 @@ static scene *timed_load(const char *text, const char *what, double *seconds) {
 }
 
 static void test_one_group_equals_eight(void) {
-  double (*m)[12] = leaves(NLEAF);
+  double(*m)[12] = leaves(NLEAF);
   char *one = cloud_json(m, NLEAF, 1), *eight = cloud_json(m, NLEAF, 8), *xml = cloud_xml(m, NLEAF);
   char *lst = cloud_json_as(m, NLEAF, 1, true);
   double t1, t8, tx, tl;
@@ -219,7 +227,7 @@ static void test_one_group_equals_eight(void) {
 }
 
 static void test_load_100k(void) {
-  double (*m)[12] = leaves(100000);
+  double(*m)[12] = leaves(100000);
   char *one = cloud_json(m, 100000, 1);
   double t;
   scene *s = timed_load(one, "100,000 disks in 1 group (JSON)", &t);
@@ -253,18 +261,21 @@ static void test_caps(void) {
   sb_printf(&b, "<scene version=\"3.0.0\"><bsdf type=\"diffuse\" id=\"mat\">\n");
   for (int i = 0; i < 4097; i++) sb_printf(&b, "<float name=\"k%d\" value=\"1\"/>\n", i);
   sb_printf(&b, "</bsdf></scene>");
-  expect_load_error(b.p, true, RSW_ERR_LIMIT, "big.xml:4098", "diffuse 'mat' (opened at big.xml:1) has more than the 4096");
+  expect_load_error(b.p, true, RSW_ERR_LIMIT, "big.xml:4098",
+                    "diffuse 'mat' (opened at big.xml:1) has more than the 4096");
   free(b.p);
 
   /* The list form: only in containers; every element an object. */
-  expect_load_error("{\"type\": \"scene\", \"mat\": {\"type\": \"twosided\", \"b\": [{\"type\": \"diffuse\"}]}}",
-                    false, RSW_ERR_TYPE, "big.json#/mat/b", "accepted only in the scene and in shapegroups");
-  expect_load_error("{\"type\": \"scene\", \"g\": {\"type\": \"shapegroup\", \"members\": [{\"type\": \"disk\"}, 3]}}",
-                    false, RSW_ERR_TYPE, "big.json#/g/members/1", "every element needs a \"type\"");
+  expect_load_error(
+      "{\"type\": \"scene\", \"mat\": {\"type\": \"twosided\", \"b\": [{\"type\": \"diffuse\"}]}}", false,
+      RSW_ERR_TYPE, "big.json#/mat/b", "accepted only in the scene and in shapegroups");
+  expect_load_error(
+      "{\"type\": \"scene\", \"g\": {\"type\": \"shapegroup\", \"members\": [{\"type\": \"disk\"}, 3]}}",
+      false, RSW_ERR_TYPE, "big.json#/g/members/1", "every element needs a \"type\"");
 
   /* The memory cap, lowered to 4 MiB: a 32,000-member group runs over it
    * part way; the error names the key being read and the cap. */
-  double (*m)[12] = leaves(NLEAF);
+  double(*m)[12] = leaves(NLEAF);
   char *one = cloud_json(m, NLEAF, 1), *xml = cloud_xml(m, NLEAF);
   scene_limits lim = scene_limits_default;
   lim.max_tree_bytes = (size_t)4 << 20;
@@ -281,12 +292,14 @@ static void test_caps(void) {
   st = scene_read_xml_limited(xml, strlen(xml), "big.xml", NULL, 0, &lim, &root, NULL, &err);
   CHECK(st == RSW_ERR_LIMIT, "xml: status %d (%s)", (int)st, err.msg);
   CHECK(strstr(err.where, "big.xml:") != NULL, "xml: where '%s'", err.where);
-  CHECK(strstr(err.msg, "memory cap of 4194304 bytes") && strstr(err.msg, "disk 'd"), "xml: message '%s'", err.msg);
+  CHECK(strstr(err.msg, "memory cap of 4194304 bytes") && strstr(err.msg, "disk 'd"), "xml: message '%s'",
+        err.msg);
   printf("  %s: %s\n", err.where, err.msg);
   node_free(root);
   /* With the default cap both read. */
   root = NULL;
-  CHECK(scene_read_json_limited(one, strlen(one), "big.json", NULL, &root, NULL, &err) == RSW_OK, "default cap");
+  CHECK(scene_read_json_limited(one, strlen(one), "big.json", NULL, &root, NULL, &err) == RSW_OK,
+        "default cap");
   node_free(root);
 
   /* A duplicate key among 32,000 (hash check): named. */

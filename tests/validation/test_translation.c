@@ -38,8 +38,8 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "../../server/kernel/core/rng.h"
 #include "../../server/kernel/accel.h"
+#include "../../server/kernel/core/rng.h"
 #include "../../server/kernel/core/transform.h"
 #include "../../server/kernel/scene/params.h"
 #include "../support/test.h"
@@ -47,7 +47,7 @@
 
 RSW_TEST_DEFINE_GLOBALS
 
-#define PI 3.14159265358979323846
+#define PI      3.14159265358979323846
 #define THREADS 2
 #define K_SEEDS 6
 
@@ -81,10 +81,13 @@ static void sb_printf(sbuf *b, const char *fmt, ...) {
 
 /* ", {"translate": base + D u}" to append to a to_world operation list. */
 static void sb_shift_from(sbuf *b, const double base[3], double D) {
-  sb_printf(b, ", {\"translate\": [%.17g, %.17g, %.17g]}", base[0] + D * U[0], base[1] + D * U[1], base[2] + D * U[2]);
+  sb_printf(b, ", {\"translate\": [%.17g, %.17g, %.17g]}", base[0] + D * U[0], base[1] + D * U[1],
+            base[2] + D * U[2]);
 }
 static const double ZERO[3] = {0, 0, 0};
-static void sb_shift(sbuf *b, double D) { sb_shift_from(b, ZERO, D); }
+static void sb_shift(sbuf *b, double D) {
+  sb_shift_from(b, ZERO, D);
+}
 
 /* The box sits off the grid (its floor at z = -0.69), so that its
  * coordinates are not exact in float32 at any shift. */
@@ -105,11 +108,13 @@ static char *plate_scene(double D) {
                 "\"cam\": {\"type\": \"hdistant\", \"target\": {\"type\": \"rectangle\", \"to_world\": "
                 "[{\"scale\": [5, 5, 1]}");
   sb_shift(&b, D);
-  sb_printf(&b, "]}, \"sampler\": {\"type\": \"independent\", \"sample_count\": 8}, "
-                "\"film\": {\"type\": \"hdrfilm\", \"width\": 8, \"height\": 8, \"rfilter\": {\"type\": \"box\"}}},\n"
-                "\"sun\": {\"type\": \"directional\", \"direction\": [0.3, 0.2, -0.9], \"irradiance\": 2.0},\n"
-                "\"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}, "
-                "\"to_world\": [{\"scale\": [20, 20, 1]}");
+  sb_printf(
+      &b,
+      "]}, \"sampler\": {\"type\": \"independent\", \"sample_count\": 8}, "
+      "\"film\": {\"type\": \"hdrfilm\", \"width\": 8, \"height\": 8, \"rfilter\": {\"type\": \"box\"}}},\n"
+      "\"sun\": {\"type\": \"directional\", \"direction\": [0.3, 0.2, -0.9], \"irradiance\": 2.0},\n"
+      "\"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}, "
+      "\"to_world\": [{\"scale\": [20, 20, 1]}");
   sb_shift(&b, D);
   sb_printf(&b, "]}}\n");
   return b.p;
@@ -143,8 +148,9 @@ static void test_plate(void) {
  * box, moved to its side; `rot` is a rotate operation or "". */
 static void sb_wall(sbuf *b, const char *name, const char *rot, double tx, double ty, double tz, double rho,
                     double D) {
-  sb_printf(b, ",\n\"%s\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": %g}, "
-               "\"to_world\": [%s%s{\"translate\": [%g, %g, %g]}",
+  sb_printf(b,
+            ",\n\"%s\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": %g}, "
+            "\"to_world\": [%s%s{\"translate\": [%g, %g, %g]}",
             name, rho, rot, *rot ? ", " : "", tx, ty, tz);
   sb_shift_from(b, BOX, D);
   sb_printf(b, "]}");
@@ -166,26 +172,33 @@ static void meter_ray(double D, int i, vec3 *o, vec3 *d) {
 
 static char *cornell_scene(double D, bool meters) {
   sbuf b = {0};
-  sb_printf(&b, "{\"type\": \"scene\", \"variant\": \"mono\",\n"
-                "\"integrator\": {\"type\": \"path\", \"max_depth\": %d},\n",
+  sb_printf(&b,
+            "{\"type\": \"scene\", \"variant\": \"mono\",\n"
+            "\"integrator\": {\"type\": \"path\", \"max_depth\": %d},\n",
             meters ? 1 : 6);
   if (meters) {
     vec3 o[N_METER], d[N_METER];
     for (int i = 0; i < N_METER; i++) meter_ray(D, i, &o[i], &d[i]);
     sb_printf(&b, "\"cam\": {\"type\": \"mradiancemeter\", \"origins\": \"");
-    for (int i = 0; i < N_METER; i++) sb_printf(&b, "%s%.17g %.17g %.17g", i ? ", " : "", o[i].x, o[i].y, o[i].z);
+    for (int i = 0; i < N_METER; i++)
+      sb_printf(&b, "%s%.17g %.17g %.17g", i ? ", " : "", o[i].x, o[i].y, o[i].z);
     sb_printf(&b, "\", \"directions\": \"");
-    for (int i = 0; i < N_METER; i++) sb_printf(&b, "%s%.17g %.17g %.17g", i ? ", " : "", d[i].x, d[i].y, d[i].z);
-    sb_printf(&b, "\", \"sampler\": {\"type\": \"independent\", \"sample_count\": 1}, "
-                  "\"film\": {\"type\": \"hdrfilm\", \"width\": %d, \"height\": 1, "
-                  "\"rfilter\": {\"type\": \"box\"}}}",
+    for (int i = 0; i < N_METER; i++)
+      sb_printf(&b, "%s%.17g %.17g %.17g", i ? ", " : "", d[i].x, d[i].y, d[i].z);
+    sb_printf(&b,
+              "\", \"sampler\": {\"type\": \"independent\", \"sample_count\": 1}, "
+              "\"film\": {\"type\": \"hdrfilm\", \"width\": %d, \"height\": 1, "
+              "\"rfilter\": {\"type\": \"box\"}}}",
               N_METER);
   } else {
-    sb_printf(&b, "\"cam\": {\"type\": \"perspective\", \"fov\": 70, \"to_world\": [{\"lookat\": {\"origin\": "
-                  "[0, -0.9, 0.1], \"target\": [0, 1, 0], \"up\": [0, 0, 1]}}");
+    sb_printf(&b,
+              "\"cam\": {\"type\": \"perspective\", \"fov\": 70, \"to_world\": [{\"lookat\": {\"origin\": "
+              "[0, -0.9, 0.1], \"target\": [0, 1, 0], \"up\": [0, 0, 1]}}");
     sb_shift_from(&b, BOX, D);
-    sb_printf(&b, "], \"sampler\": {\"type\": \"independent\", \"sample_count\": 48}, "
-                  "\"film\": {\"type\": \"hdrfilm\", \"width\": 8, \"height\": 8, \"rfilter\": {\"type\": \"box\"}}}");
+    sb_printf(
+        &b,
+        "], \"sampler\": {\"type\": \"independent\", \"sample_count\": 48}, "
+        "\"film\": {\"type\": \"hdrfilm\", \"width\": 8, \"height\": 8, \"rfilter\": {\"type\": \"box\"}}}");
   }
   sb_wall(&b, "floor", "", 0, 0, -1, 0.6, D);
   sb_wall(&b, "ceiling", "{\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 180}}", 0, 0, 1, 0.6, D);
@@ -193,16 +206,18 @@ static char *cornell_scene(double D, bool meters) {
   sb_wall(&b, "right", "{\"rotate\": {\"axis\": [0, 1, 0], \"angle\": -90}}", 1, 0, 0, 0.8, D);
   sb_wall(&b, "back", "{\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 90}}", 0, 1, 0, 0.6, D);
   sb_wall(&b, "front", "{\"rotate\": {\"axis\": [1, 0, 0], \"angle\": -90}}", 0, -1, 0, 0.6, D);
-  sb_printf(&b, ",\n\"light\": {\"type\": \"rectangle\", \"emitter\": {\"type\": \"area\", \"radiance\": 8}, "
-                "\"to_world\": [{\"scale\": [0.3, 0.3, 1]}, {\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 180}}, "
-                "{\"translate\": [0, 0.1, 0.98]}");
+  sb_printf(&b,
+            ",\n\"light\": {\"type\": \"rectangle\", \"emitter\": {\"type\": \"area\", \"radiance\": 8}, "
+            "\"to_world\": [{\"scale\": [0.3, 0.3, 1]}, {\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 180}}, "
+            "{\"translate\": [0, 0.1, 0.98]}");
   sb_shift_from(&b, BOX, D);
   sb_printf(&b, "]},\n\"ball\": {\"type\": \"sphere\", \"radius\": 0.35, \"bsdf\": {\"type\": \"diffuse\", "
                 "\"reflectance\": 0.7}, \"to_world\": [{\"translate\": [0.35, 0.3, -0.65]}");
   sb_shift_from(&b, BOX, D);
-  sb_printf(&b, "]},\n\"plaque\": {\"type\": \"disk\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.7}, "
-                "\"to_world\": [{\"scale\": [0.3, 0.3, 1]}, {\"rotate\": {\"axis\": [1, -1, 0], \"angle\": 60}}, "
-                "{\"translate\": [-0.5, 0.4, -0.3]}");
+  sb_printf(&b,
+            "]},\n\"plaque\": {\"type\": \"disk\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.7}, "
+            "\"to_world\": [{\"scale\": [0.3, 0.3, 1]}, {\"rotate\": {\"axis\": [1, -1, 0], \"angle\": 60}}, "
+            "{\"translate\": [-0.5, 0.4, -0.3]}");
   sb_shift_from(&b, BOX, D);
   sb_printf(&b, "]}}\n");
   return b.p;
@@ -240,9 +255,10 @@ static void test_cornell(void) {
     bool ok = render_mean(txt, 1, &mk);
     free(txt);
     REQUIRE(ok, "cornell render at %g m", SHIFTS[k]);
-    printf("  cornell shift %6.0f m: film mean %.6f (%+.2f sigma)\n", SHIFTS[k], mk, (mk - m[0]) / (sqrt(2.0) * sd));
-    CHECK(fabs(mk - m[0]) <= tol, "cornell box shifted by %g m: film mean %.6f vs %.6f (3 sigma = %.3g)", SHIFTS[k],
-          mk, m[0], tol);
+    printf("  cornell shift %6.0f m: film mean %.6f (%+.2f sigma)\n", SHIFTS[k], mk,
+           (mk - m[0]) / (sqrt(2.0) * sd));
+    CHECK(fabs(mk - m[0]) <= tol, "cornell box shifted by %g m: film mean %.6f vs %.6f (3 sigma = %.3g)",
+          SHIFTS[k], mk, m[0], tol);
   }
 }
 
@@ -260,8 +276,10 @@ static void test_radiancemeters_on_surface(void) {
     REQUIRE(ok, "render");
     int wrong = 0;
     for (int i = 0; i < N_METER; i++) wrong += !(fabs(img.data[(size_t)i * img.channels] - 8.0) <= 1e-6);
-    printf("  radiancemeters on a surface, shift %6.0f m: %d of %d do not see the light\n", SHIFTS[k], wrong, N_METER);
-    CHECK(wrong == 0, "shifted by %g m: %d of %d radiancemeters on a surface miss the light", SHIFTS[k], wrong, N_METER);
+    printf("  radiancemeters on a surface, shift %6.0f m: %d of %d do not see the light\n", SHIFTS[k], wrong,
+           N_METER);
+    CHECK(wrong == 0, "shifted by %g m: %d of %d radiancemeters on a surface miss the light", SHIFTS[k],
+          wrong, N_METER);
     film_image_free(&img);
   }
 }
@@ -269,7 +287,7 @@ static void test_radiancemeters_on_surface(void) {
 /* ---- disc canopy hot spot ----------------------------------------------------- */
 
 #define N_LEAF 8000
-#define N_DIR 5
+#define N_DIR  5
 static const double VIEW_ZEN[N_DIR] = {24, 27, 30, 33, 36}; /* degrees, sun side; 30 = hot spot */
 #define SUN_ZEN 30.0
 
@@ -310,17 +328,20 @@ static char *canopy_scene(double D, const char *list, double soil_x) {
   }
   sb_printf(&b, "\", \"target\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [1, 1, 1]}");
   sb_shift(&b, D);
-  sb_printf(&b, "]}, \"sampler\": {\"type\": \"independent\", \"sample_count\": 16000}, "
-                "\"film\": {\"type\": \"hdrfilm\", \"width\": %d, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},\n"
-                "\"sun\": {\"type\": \"directional\", \"direction\": [%.17g, 0, %.17g], \"irradiance\": 1.0},\n"
-                "\"soil\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.15}, "
-                "\"to_world\": [{\"scale\": [4, 4, 1]}, {\"translate\": [%.17g, 0, 0]}",
-            N_DIR, ss, -cs, soil_x);
+  sb_printf(
+      &b,
+      "]}, \"sampler\": {\"type\": \"independent\", \"sample_count\": 16000}, "
+      "\"film\": {\"type\": \"hdrfilm\", \"width\": %d, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},\n"
+      "\"sun\": {\"type\": \"directional\", \"direction\": [%.17g, 0, %.17g], \"irradiance\": 1.0},\n"
+      "\"soil\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.15}, "
+      "\"to_world\": [{\"scale\": [4, 4, 1]}, {\"translate\": [%.17g, 0, 0]}",
+      N_DIR, ss, -cs, soil_x);
   sb_shift(&b, D);
-  sb_printf(&b, "]},\n\"leaf\": {\"type\": \"shapegroup\", \"d\": {\"type\": \"disk\", \"bsdf\": "
-                "{\"type\": \"diffuse\", \"reflectance\": 0.45}}},\n"
-                "\"canopy\": {\"type\": \"instancelist\", \"filename\": \"%s\", "
-                "\"shapegroup\": {\"type\": \"ref\", \"id\": \"leaf\"}}}\n",
+  sb_printf(&b,
+            "]},\n\"leaf\": {\"type\": \"shapegroup\", \"d\": {\"type\": \"disk\", \"bsdf\": "
+            "{\"type\": \"diffuse\", \"reflectance\": 0.45}}},\n"
+            "\"canopy\": {\"type\": \"instancelist\", \"filename\": \"%s\", "
+            "\"shapegroup\": {\"type\": \"ref\", \"id\": \"leaf\"}}}\n",
             list);
   return b.p;
 }
@@ -374,8 +395,8 @@ static void test_canopy_hot_spot(void) {
           shifts[k], b[2], ref[0][2]);
     for (int i = 0; i < N_DIR; i++)
       CHECK(fabs(b[i] - ref[0][i]) <= 3 * sqrt(2.0) * sd[i],
-            "BRF at view zenith %g shifted by %g m: %.5f vs %.5f (3 sigma = %.3g)", VIEW_ZEN[i], shifts[k], b[i],
-            ref[0][i], 3 * sqrt(2.0) * sd[i]);
+            "BRF at view zenith %g shifted by %g m: %.5f vs %.5f (3 sigma = %.3g)", VIEW_ZEN[i], shifts[k],
+            b[i], ref[0][i], 3 * sqrt(2.0) * sd[i]);
   }
 }
 
@@ -404,8 +425,8 @@ static void test_update_moves_frame(void) {
   accel_get_counters(s->accel, &c0);
   rsw_err err = {0};
   param_update u = {.key = "soil.to_world"};
-  REQUIRE(param_value_parse("[[4, 0, 0, 2000], [0, 4, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]", "soil.to_world", &u.value,
-                            &err) == RSW_OK,
+  REQUIRE(param_value_parse("[[4, 0, 0, 2000], [0, 4, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]", "soil.to_world",
+                            &u.value, &err) == RSW_OK,
           "parse: %s", err.msg);
   rsw_status st = scene_update(s, &u, 1, NULL, &err);
   param_value_free(&u.value);
@@ -413,7 +434,8 @@ static void test_update_moves_frame(void) {
   accel_get_counters(s->accel, &c1);
   vec3 o1 = accel_origin(s->accel), oref = accel_origin(r->accel);
   CHECK(c1.origin_moves == c0.origin_moves + 1 && fabs(o1.x - o0.x) > 900,
-        "the update moves the frame (x %.3f -> %.3f, moves %lu -> %lu)", o0.x, o1.x, c0.origin_moves, c1.origin_moves);
+        "the update moves the frame (x %.3f -> %.3f, moves %lu -> %lu)", o0.x, o1.x, c0.origin_moves,
+        c1.origin_moves);
   CHECK(memcmp(&o1, &oref, sizeof o1) == 0, "frame after the update equals the reload's");
   REQUIRE(tsup_render(s, 2000, 3, THREADS, &after) && tsup_render(r, 2000, 3, THREADS, &ref), "renders");
   CHECK(same_film(&after, &ref), "update equals reload");

@@ -21,33 +21,35 @@
 
 RSW_TEST_DEFINE_GLOBALS
 
-#define SPP 16
-#define SEED 20240611u
+#define SPP     16
+#define SEED    20240611u
 #define THREADS 2
 
 /* ---- sensors and emitters used by the cases ------------------------------ */
 
-#define FILM16 "\"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16, \"rfilter\": {\"type\": \"box\"}}"
+#define FILM16                                                                                               \
+  "\"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16, \"rfilter\": {\"type\": \"box\"}}"
 #define SAMPLER "\"sampler\": {\"type\": \"independent\", \"sample_count\": 16}"
 
 /* hdistant aimed at a [-1,1]^2 rectangle target (zero variance on a flat
  * Lambertian plate, full hemisphere for glossy lobes). */
-#define HDIST_T \
+#define HDIST_T                                                                                              \
   "\"cam\": {\"type\": \"hdistant\", \"target\": {\"type\": \"rectangle\"}, " SAMPLER ", " FILM16 "}"
 /* hdistant without target: origins on the bounding sphere's disk. */
 #define HDIST_NT "\"cam\": {\"type\": \"hdistant\", " SAMPLER ", " FILM16 "}"
-#define PERSP                                                                                     \
-  "\"cam\": {\"type\": \"perspective\", \"fov\": 60, \"to_world\": [{\"lookat\": {\"origin\": "   \
+#define PERSP                                                                                                \
+  "\"cam\": {\"type\": \"perspective\", \"fov\": 60, \"to_world\": [{\"lookat\": {\"origin\": "              \
   "[0.5, -2.5, 2.5], \"target\": [0, 0, 0], \"up\": [0, 0, 1]}}], " SAMPLER ", " FILM16 "}"
-#define SUN \
-  "\"sun\": {\"type\": \"directional\", \"direction\": [0.5, 0.1, -0.86602540378443864676], \"irradiance\": 1.0}"
+#define SUN                                                                                                  \
+  "\"sun\": {\"type\": \"directional\", \"direction\": [0.5, 0.1, -0.86602540378443864676], "                \
+  "\"irradiance\": 1.0}"
 
 /* ---- helpers ---------------------------------------------------------------- */
 
 static bool render_wl(scene *s, double wavelength, film_image *out) {
   rsw_err err = {0};
-  render_opts o = {.size = sizeof o, .sensor = 0, .spp = SPP, .seed = SEED, .threads = THREADS,
-                   .wavelength = wavelength};
+  render_opts o = {
+      .size = sizeof o, .sensor = 0, .spp = SPP, .seed = SEED, .threads = THREADS, .wavelength = wavelength};
   if (render_sensor(s, &o, out, NULL, &err)) {
     char buf[1200];
     printf("  render failed: %s\n", rsw_err_format(&err, buf, sizeof buf));
@@ -131,7 +133,8 @@ static void run_case(const reload_case *c) {
   }
   for (size_t i = 0; i < n_parsed; i++) param_value_free(&items[i].value);
   if (ok) {
-    CHECK(rep.classes == c->classes, "%s: report.classes = %u, expected %u", c->name, rep.classes, c->classes);
+    CHECK(rep.classes == c->classes, "%s: report.classes = %u, expected %u", c->name, rep.classes,
+          c->classes);
     CHECK(rep.changed == c->n_upd, "%s: report.changed = %zu, expected %zu", c->name, rep.changed, c->n_upd);
     for (size_t w = 0; w < n_wl && ok; w++) ok = render_wl(s, c->n_wl ? c->wl[w] : 0, &post[w]);
     CHECK(ok, "%s: render S after the update", c->name);
@@ -152,8 +155,8 @@ static void run_case(const reload_case *c) {
             c->name, wl, bad, worst);
     } else {
       CHECK(worst <= c->rel_tol,
-            "%s (wl %g): updated film differs from reloaded film: %zu values, worst rel %.3g > %g", c->name, wl,
-            bad, worst, c->rel_tol);
+            "%s (wl %g): updated film differs from reloaded film: %zu values, worst rel %.3g > %g", c->name,
+            wl, bad, worst, c->rel_tol);
     }
   }
   for (size_t w = 0; w < 2; w++) {
@@ -181,13 +184,18 @@ static void xform_json(const xform *t, bool nested, char *buf, size_t len) {
 /* ---- spectral cases ------------------------------------------------------------ */
 
 static void test_diffuse_number(void) {
-  const char *fmt = "{\"type\": \"scene\", " HDIST_T ", " SUN ","
-                    " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": %s}}}";
+  const char *fmt =
+      "{\"type\": \"scene\", " HDIST_T ", " SUN ","
+      " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": %s}}}";
   char a[4096], b[4096];
   snprintf(a, sizeof a, fmt, "0.3");
   snprintf(b, sizeof b, fmt, "0.7");
-  reload_case c = {.name = "diffuse reflectance (number)", .before = a, .after = b,
-                   .upd = {{"plate.bsdf.reflectance.value", "0.7"}}, .n_upd = 1, .classes = UPDATE_SPECTRAL};
+  reload_case c = {.name = "diffuse reflectance (number)",
+                   .before = a,
+                   .after = b,
+                   .upd = {{"plate.bsdf.reflectance.value", "0.7"}},
+                   .n_upd = 1,
+                   .classes = UPDATE_SPECTRAL};
   run_case(&c);
 }
 
@@ -198,8 +206,11 @@ static void test_diffuse_rgb(void) {
   char a[4096], b[4096];
   snprintf(a, sizeof a, fmt, "[0.2, 0.4, 0.6]");
   snprintf(b, sizeof b, fmt, "[0.7, 0.1, 0.35]");
-  reload_case c = {.name = "diffuse reflectance (rgb)", .before = a, .after = b,
-                   .upd = {{"plate.bsdf.reflectance.value", "[0.7, 0.1, 0.35]"}}, .n_upd = 1,
+  reload_case c = {.name = "diffuse reflectance (rgb)",
+                   .before = a,
+                   .after = b,
+                   .upd = {{"plate.bsdf.reflectance.value", "[0.7, 0.1, 0.35]"}},
+                   .n_upd = 1,
                    .classes = UPDATE_SPECTRAL};
   run_case(&c);
 }
@@ -214,33 +225,46 @@ static void test_twosided_shared_brdf(void) {
   char a[4096], b[4096];
   snprintf(a, sizeof a, fmt, "0.25");
   snprintf(b, sizeof b, fmt, "0.9");
-  reload_case c = {.name = "twosided brdf_0 reflectance", .before = a, .after = b,
-                   .upd = {{"plate.bsdf.brdf_0.reflectance.value", "0.9"}}, .n_upd = 1,
+  reload_case c = {.name = "twosided brdf_0 reflectance",
+                   .before = a,
+                   .after = b,
+                   .upd = {{"plate.bsdf.brdf_0.reflectance.value", "0.9"}},
+                   .n_upd = 1,
                    .classes = UPDATE_SPECTRAL};
   run_case(&c);
 }
 
 static void test_directional_irradiance(void) {
-  const char *fmt = "{\"type\": \"scene\", " HDIST_T ","
-                    " \"sun\": {\"type\": \"directional\", \"direction\": [0.5, 0.1, -0.86602540378443864676],"
-                    "   \"irradiance\": {\"type\": \"rgb\", \"value\": %s}},"
-                    " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}";
+  const char *fmt =
+      "{\"type\": \"scene\", " HDIST_T ","
+      " \"sun\": {\"type\": \"directional\", \"direction\": [0.5, 0.1, -0.86602540378443864676],"
+      "   \"irradiance\": {\"type\": \"rgb\", \"value\": %s}},"
+      " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}";
   char a[4096], b[4096];
   snprintf(a, sizeof a, fmt, "[1, 1, 1]");
   snprintf(b, sizeof b, fmt, "[2.5, 0.5, 1.25]");
-  reload_case c = {.name = "directional irradiance", .before = a, .after = b,
-                   .upd = {{"sun.irradiance.value", "[2.5, 0.5, 1.25]"}}, .n_upd = 1, .classes = UPDATE_SPECTRAL};
+  reload_case c = {.name = "directional irradiance",
+                   .before = a,
+                   .after = b,
+                   .upd = {{"sun.irradiance.value", "[2.5, 0.5, 1.25]"}},
+                   .n_upd = 1,
+                   .classes = UPDATE_SPECTRAL};
   run_case(&c);
 }
 
 static void test_roughconductor_alpha(void) {
-  const char *fmt = "{\"type\": \"scene\", " HDIST_T ", " SUN ","
-                    " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"roughconductor\", \"alpha\": %s}}}";
+  const char *fmt =
+      "{\"type\": \"scene\", " HDIST_T ", " SUN ","
+      " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"roughconductor\", \"alpha\": %s}}}";
   char a[4096], b[4096];
   snprintf(a, sizeof a, fmt, "0.3");
   snprintf(b, sizeof b, fmt, "0.08");
-  reload_case c = {.name = "roughconductor alpha", .before = a, .after = b,
-                   .upd = {{"plate.bsdf.alpha.value", "0.08"}}, .n_upd = 1, .classes = UPDATE_SPECTRAL};
+  reload_case c = {.name = "roughconductor alpha",
+                   .before = a,
+                   .after = b,
+                   .upd = {{"plate.bsdf.alpha.value", "0.08"}},
+                   .n_upd = 1,
+                   .classes = UPDATE_SPECTRAL};
   run_case(&c);
 }
 
@@ -251,8 +275,11 @@ static void test_roughconductor_eta_k(void) {
   char a[4096], b[4096];
   snprintf(a, sizeof a, fmt2, "1.5", "3.0");
   snprintf(b, sizeof b, fmt2, "0.2", "4.5");
-  reload_case c = {.name = "roughconductor eta and k", .before = a, .after = b,
-                   .upd = {{"plate.bsdf.eta.value", "0.2"}, {"plate.bsdf.k.value", "4.5"}}, .n_upd = 2,
+  reload_case c = {.name = "roughconductor eta and k",
+                   .before = a,
+                   .after = b,
+                   .upd = {{"plate.bsdf.eta.value", "0.2"}, {"plate.bsdf.k.value", "4.5"}},
+                   .n_upd = 2,
                    .classes = UPDATE_SPECTRAL};
   run_case(&c);
 }
@@ -266,24 +293,35 @@ static void test_mono_tabulated_reflectance(void) {
   char a[4096], b[4096];
   snprintf(a, sizeof a, fmt, "[0.1, 0.3, 0.5, 0.7]");
   snprintf(b, sizeof b, fmt, "[0.9, 0.6, 0.2, 0.05]");
-  reload_case c = {.name = "mono tabulated reflectance", .variant = "mono", .before = a, .after = b,
+  reload_case c = {.name = "mono tabulated reflectance",
+                   .variant = "mono",
+                   .before = a,
+                   .after = b,
                    .upd = {{"plate.bsdf.reflectance.value",
                             "{\"wavelengths\": [400, 500, 600, 700], \"values\": [0.9, 0.6, 0.2, 0.05]}"}},
-                   .n_upd = 1, .wl = {450, 650}, .n_wl = 2, .classes = UPDATE_SPECTRAL};
+                   .n_upd = 1,
+                   .wl = {450, 650},
+                   .n_wl = 2,
+                   .classes = UPDATE_SPECTRAL};
   run_case(&c);
 }
 
 /* ---- emitter and sensor transforms and directions ---------------------------- */
 
 static void test_directional_direction(void) {
-  const char *fmt = "{\"type\": \"scene\", " HDIST_T ","
-                    " \"sun\": {\"type\": \"directional\", \"direction\": %s, \"irradiance\": 1.0},"
-                    " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}";
+  const char *fmt =
+      "{\"type\": \"scene\", " HDIST_T ","
+      " \"sun\": {\"type\": \"directional\", \"direction\": %s, \"irradiance\": 1.0},"
+      " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}";
   char a[4096], b[4096];
   snprintf(a, sizeof a, fmt, "[0.5, 0.1, -0.86602540378443864676]");
   snprintf(b, sizeof b, fmt, "[-0.2, 0.4, -1]");
-  reload_case c = {.name = "directional direction", .before = a, .after = b,
-                   .upd = {{"sun.direction", "[-0.2, 0.4, -1]"}}, .n_upd = 1, .classes = UPDATE_SPECTRAL};
+  reload_case c = {.name = "directional direction",
+                   .before = a,
+                   .after = b,
+                   .upd = {{"sun.direction", "[-0.2, 0.4, -1]"}},
+                   .n_upd = 1,
+                   .classes = UPDATE_SPECTRAL};
   run_case(&c);
 }
 
@@ -302,8 +340,12 @@ static void test_directional_to_world(void) {
            " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}",
            m);
   CHECK(xf_vector(&r, v3(0, 0, 1)).z < -0.5, "test setup: the rotated sun must shine downwards");
-  reload_case c = {.name = "directional to_world", .before = a, .after = b, .upd = {{"sun.to_world", m}},
-                   .n_upd = 1, .classes = UPDATE_SPECTRAL};
+  reload_case c = {.name = "directional to_world",
+                   .before = a,
+                   .after = b,
+                   .upd = {{"sun.to_world", m}},
+                   .n_upd = 1,
+                   .classes = UPDATE_SPECTRAL};
   run_case(&c);
 }
 
@@ -317,9 +359,10 @@ static void test_hdistant_direction(void) {
   vec3 d = v3_norm(v3(0.3, -0.2, 1));
   vec3 up = v3_norm(v3_cross(d, v3(1, 0, 0)));
   char a[4096], b[4096];
-  snprintf(a, sizeof a,
-           "{\"type\": \"scene\", " HDIST_T ", " SUN ","
-           " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"roughconductor\", \"alpha\": 0.3}}}");
+  snprintf(
+      a, sizeof a,
+      "{\"type\": \"scene\", " HDIST_T ", " SUN ","
+      " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"roughconductor\", \"alpha\": 0.3}}}");
   snprintf(b, sizeof b,
            "{\"type\": \"scene\", \"cam\": {\"type\": \"hdistant\", \"target\": {\"type\": \"rectangle\"},"
            "   \"to_world\": [{\"lookat\": {\"origin\": [0, 0, 0], \"target\": [%.17g, %.17g, %.17g],"
@@ -328,22 +371,31 @@ static void test_hdistant_direction(void) {
            d.x, d.y, d.z, up.x, up.y, up.z);
   char v[256];
   snprintf(v, sizeof v, "[%.17g, %.17g, %.17g]", d.x, d.y, d.z);
-  reload_case c = {.name = "hdistant direction", .before = a, .after = b, .upd = {{"cam.direction", v}},
-                   .n_upd = 1, .classes = UPDATE_SPECTRAL};
+  reload_case c = {.name = "hdistant direction",
+                   .before = a,
+                   .after = b,
+                   .upd = {{"cam.direction", v}},
+                   .n_upd = 1,
+                   .classes = UPDATE_SPECTRAL};
   run_case(&c);
 }
 
 static void test_distant_direction(void) {
-  const char *fmt = "{\"type\": \"scene\", \"cam\": {\"type\": \"distant\", \"direction\": %s,"
-                    "   \"target\": [0.3, 0.3, 0], \"sampler\": {\"type\": \"independent\", \"sample_count\": 4},"
-                    "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},"
-                    " " SUN ","
-                    " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"roughconductor\", \"alpha\": 0.3}}}";
+  const char *fmt =
+      "{\"type\": \"scene\", \"cam\": {\"type\": \"distant\", \"direction\": %s,"
+      "   \"target\": [0.3, 0.3, 0], \"sampler\": {\"type\": \"independent\", \"sample_count\": 4},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},"
+      " " SUN ","
+      " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"roughconductor\", \"alpha\": 0.3}}}";
   char a[4096], b[4096];
   snprintf(a, sizeof a, fmt, "[0.2, 0.1, -1]");
   snprintf(b, sizeof b, fmt, "[-0.45, 0.1, -1]");
-  reload_case c = {.name = "distant direction", .before = a, .after = b,
-                   .upd = {{"cam.direction", "[-0.45, 0.1, -1]"}}, .n_upd = 1, .classes = UPDATE_SPECTRAL};
+  reload_case c = {.name = "distant direction",
+                   .before = a,
+                   .after = b,
+                   .upd = {{"cam.direction", "[-0.45, 0.1, -1]"}},
+                   .n_upd = 1,
+                   .classes = UPDATE_SPECTRAL};
   run_case(&c);
 }
 
@@ -355,13 +407,18 @@ static void test_perspective_to_world(void) {
   snprintf(a, sizeof a,
            "{\"type\": \"scene\", " PERSP ", " SUN ","
            " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}");
-  snprintf(b, sizeof b,
-           "{\"type\": \"scene\", \"cam\": {\"type\": \"perspective\", \"fov\": 60, \"to_world\": %s, " SAMPLER
-           ", " FILM16 "}, " SUN ","
-           " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}",
-           m);
-  reload_case c = {.name = "perspective to_world", .before = a, .after = b, .upd = {{"cam.to_world", m}},
-                   .n_upd = 1, .classes = UPDATE_SPECTRAL};
+  snprintf(
+      b, sizeof b,
+      "{\"type\": \"scene\", \"cam\": {\"type\": \"perspective\", \"fov\": 60, \"to_world\": %s, " SAMPLER
+      ", " FILM16 "}, " SUN ","
+      " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}",
+      m);
+  reload_case c = {.name = "perspective to_world",
+                   .before = a,
+                   .after = b,
+                   .upd = {{"cam.to_world", m}},
+                   .n_upd = 1,
+                   .classes = UPDATE_SPECTRAL};
   run_case(&c);
 }
 
@@ -373,80 +430,107 @@ static void test_checkerboard_color_and_to_uv(void) {
   char a[4096], b[4096];
   snprintf(a, sizeof a, fmt, "0.2", "[{\"scale\": 1}]");
   snprintf(b, sizeof b, fmt, "0.45", "[3, 0, 0, 0.25, 0, 3, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]");
-  reload_case c = {.name = "checkerboard color0 and to_uv", .before = a, .after = b,
-                   .upd = {{"plate.bsdf.reflectance.color0.value", "0.45"},
-                           {"plate.bsdf.reflectance.to_uv", "[3, 0, 0, 0.25, 0, 3, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]"}},
-                   .n_upd = 2, .classes = UPDATE_SPECTRAL};
+  reload_case c = {
+      .name = "checkerboard color0 and to_uv",
+      .before = a,
+      .after = b,
+      .upd = {{"plate.bsdf.reflectance.color0.value", "0.45"},
+              {"plate.bsdf.reflectance.to_uv", "[3, 0, 0, 0.25, 0, 3, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]"}},
+      .n_upd = 2,
+      .classes = UPDATE_SPECTRAL};
   run_case(&c);
 }
 
 static void test_constant_radiance(void) {
-  const char *fmt = "{\"type\": \"scene\", " HDIST_T ","
-                    " \"sky\": {\"type\": \"constant\", \"radiance\": %s},"
-                    " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}";
+  const char *fmt =
+      "{\"type\": \"scene\", " HDIST_T ","
+      " \"sky\": {\"type\": \"constant\", \"radiance\": %s},"
+      " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}";
   char a[4096], b[4096];
   snprintf(a, sizeof a, fmt, "1.0");
   snprintf(b, sizeof b, fmt, "{\"type\": \"rgb\", \"value\": [0.3, 0.6, 1.4]}");
-  reload_case c = {.name = "constant radiance", .before = a, .after = b,
-                   .upd = {{"sky.radiance.value", "[0.3, 0.6, 1.4]"}}, .n_upd = 1, .classes = UPDATE_SPECTRAL};
+  reload_case c = {.name = "constant radiance",
+                   .before = a,
+                   .after = b,
+                   .upd = {{"sky.radiance.value", "[0.3, 0.6, 1.4]"}},
+                   .n_upd = 1,
+                   .classes = UPDATE_SPECTRAL};
   run_case(&c);
 }
 
 static void test_sampling_weight(void) {
   /* Two suns: the emitter-selection distribution must be rebuilt (the
    * expectation does not change, the samples do). */
-  const char *fmt = "{\"type\": \"scene\", " PERSP ", " SUN ","
-                    " \"sun2\": {\"type\": \"directional\", \"direction\": [-0.3, 0.4, -1], \"irradiance\": 0.5,"
-                    "   \"sampling_weight\": %s},"
-                    " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}";
+  const char *fmt =
+      "{\"type\": \"scene\", " PERSP ", " SUN ","
+      " \"sun2\": {\"type\": \"directional\", \"direction\": [-0.3, 0.4, -1], \"irradiance\": 0.5,"
+      "   \"sampling_weight\": %s},"
+      " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}";
   char a[4096], b[4096];
   snprintf(a, sizeof a, fmt, "1");
   snprintf(b, sizeof b, fmt, "5");
-  reload_case c = {.name = "directional sampling_weight", .before = a, .after = b,
-                   .upd = {{"sun2.sampling_weight", "5"}}, .n_upd = 1, .classes = UPDATE_SPECTRAL};
+  reload_case c = {.name = "directional sampling_weight",
+                   .before = a,
+                   .after = b,
+                   .upd = {{"sun2.sampling_weight", "5"}},
+                   .n_upd = 1,
+                   .classes = UPDATE_SPECTRAL};
   run_case(&c);
 }
 
 /* Area light over a floor, seen by a perspective camera; `light_xf` is the
  * light's to_world, `radiance` its radiance. */
-#define AREA_FMT                                                                                                 \
-  "{\"type\": \"scene\", " PERSP ","                                                                             \
-  " \"floor\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 2}],"                                        \
-  "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.6}},"                                                 \
-  " \"light\": {\"type\": \"rectangle\", \"to_world\": %s,"                                                      \
-  "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0},"                                                    \
+#define AREA_FMT                                                                                             \
+  "{\"type\": \"scene\", " PERSP ","                                                                         \
+  " \"floor\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 2}],"                                    \
+  "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.6}},"                                             \
+  " \"light\": {\"type\": \"rectangle\", \"to_world\": %s,"                                                  \
+  "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0},"                                                \
   "   \"emitter\": {\"type\": \"area\", \"radiance\": %s}}}"
 
 static void test_area_radiance(void) {
-  const char *xf = "[{\"scale\": 0.3}, {\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 180}}, {\"translate\": [0, 0, 1]}]";
+  const char *xf =
+      "[{\"scale\": 0.3}, {\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 180}}, {\"translate\": [0, 0, 1]}]";
   char a[4096], b[4096];
   snprintf(a, sizeof a, AREA_FMT, xf, "5");
   snprintf(b, sizeof b, AREA_FMT, xf, "{\"type\": \"rgb\", \"value\": [9, 4, 2]}");
-  reload_case c = {.name = "area radiance", .before = a, .after = b,
-                   .upd = {{"light.emitter.radiance.value", "[9, 4, 2]"}}, .n_upd = 1, .classes = UPDATE_SPECTRAL};
+  reload_case c = {.name = "area radiance",
+                   .before = a,
+                   .after = b,
+                   .upd = {{"light.emitter.radiance.value", "[9, 4, 2]"}},
+                   .n_upd = 1,
+                   .classes = UPDATE_SPECTRAL};
   run_case(&c);
 }
 
 static void test_area_light_to_world(void) {
   /* Moving and resizing an emitting shape: its area (hence the emitted
    * power sampled by next-event estimation) must be refreshed. */
-  xform sc = xf_scale(v3(0.6, 0.2, 1)), rx = xf_rotate(v3(1, 0, 0), 160), tr = xf_translate(v3(0.3, -0.2, 0.8));
+  xform sc = xf_scale(v3(0.6, 0.2, 1)), rx = xf_rotate(v3(1, 0, 0), 160),
+        tr = xf_translate(v3(0.3, -0.2, 0.8));
   xform t1 = xf_mul(&rx, &sc);
   xform t = xf_mul(&tr, &t1);
   char m[1024], a[4096], b[4096];
   xform_json(&t, false, m, sizeof m);
-  snprintf(a, sizeof a, AREA_FMT,
-           "[{\"scale\": 0.3}, {\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 180}}, {\"translate\": [0, 0, 1]}]", "5");
+  snprintf(
+      a, sizeof a, AREA_FMT,
+      "[{\"scale\": 0.3}, {\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 180}}, {\"translate\": [0, 0, 1]}]",
+      "5");
   snprintf(b, sizeof b, AREA_FMT, m, "5");
-  reload_case c = {.name = "area light to_world", .before = a, .after = b, .upd = {{"light.to_world", m}},
-                   .n_upd = 1, .classes = UPDATE_GEOMETRIC};
+  reload_case c = {.name = "area light to_world",
+                   .before = a,
+                   .after = b,
+                   .upd = {{"light.to_world", m}},
+                   .n_upd = 1,
+                   .classes = UPDATE_GEOMETRIC};
   run_case(&c);
 }
 
 static void test_sphere_to_world(void) {
   /* A sphere over a ground plate: a similarity (rotation, uniform scale,
    * translation) is legal for a sphere. */
-  xform sc = xf_scale(v3(0.7, 0.7, 0.7)), rz = xf_rotate(v3(0, 0, 1), 40), tr = xf_translate(v3(-0.3, 0.4, 0.9));
+  xform sc = xf_scale(v3(0.7, 0.7, 0.7)), rz = xf_rotate(v3(0, 0, 1), 40),
+        tr = xf_translate(v3(-0.3, 0.4, 0.9));
   xform t1 = xf_mul(&rz, &sc);
   xform t = xf_mul(&tr, &t1);
   char m[1024], a[4096], b[4096];
@@ -458,8 +542,12 @@ static void test_sphere_to_world(void) {
                     "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.8}}}";
   snprintf(a, sizeof a, fmt, "[{\"scale\": 0.5}, {\"translate\": [0, 0, 0.5]}]");
   snprintf(b, sizeof b, fmt, m);
-  reload_case c = {.name = "sphere to_world", .before = a, .after = b, .upd = {{"ball.to_world", m}},
-                   .n_upd = 1, .classes = UPDATE_GEOMETRIC};
+  reload_case c = {.name = "sphere to_world",
+                   .before = a,
+                   .after = b,
+                   .upd = {{"ball.to_world", m}},
+                   .n_upd = 1,
+                   .classes = UPDATE_GEOMETRIC};
   run_case(&c);
 }
 
@@ -472,17 +560,22 @@ static void test_rectangle_to_world(void) {
   xform t = xf_mul(&tr, &rot);
   char m[1024], a[4096], b[4096];
   xform_json(&t, false, m, sizeof m);
-  const char *fmt = "{\"type\": \"scene\", " PERSP ", " SUN ","
-                    " \"ground\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 3}, {\"translate\": [0, 0, -0.5]}],"
-                    "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.4}},"
-                    " \"plate\": {\"type\": \"rectangle\", \"to_world\": %s,"
-                    "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.8}}}";
+  const char *fmt =
+      "{\"type\": \"scene\", " PERSP ", " SUN ","
+      " \"ground\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 3}, {\"translate\": [0, 0, -0.5]}],"
+      "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.4}},"
+      " \"plate\": {\"type\": \"rectangle\", \"to_world\": %s,"
+      "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.8}}}";
   snprintf(a, sizeof a, fmt, "[{\"scale\": 0.5}]");
   snprintf(b, sizeof b, fmt, m);
   char mn[1024];
   xform_json(&t, true, mn, sizeof mn);
-  reload_case c = {.name = "rectangle to_world", .before = a, .after = b, .upd = {{"plate.to_world", mn}},
-                   .n_upd = 1, .classes = UPDATE_GEOMETRIC};
+  reload_case c = {.name = "rectangle to_world",
+                   .before = a,
+                   .after = b,
+                   .upd = {{"plate.to_world", mn}},
+                   .n_upd = 1,
+                   .classes = UPDATE_GEOMETRIC};
   run_case(&c);
 }
 
@@ -498,8 +591,12 @@ static void test_rectangle_far_hdistant_no_target(void) {
                     "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}";
   snprintf(a, sizeof a, fmt, "[{\"scale\": 1}]");
   snprintf(b, sizeof b, fmt, m);
-  reload_case c = {.name = "rectangle moved far, hdistant without target", .before = a, .after = b,
-                   .upd = {{"plate.to_world", m}}, .n_upd = 1, .classes = UPDATE_GEOMETRIC};
+  reload_case c = {.name = "rectangle moved far, hdistant without target",
+                   .before = a,
+                   .after = b,
+                   .upd = {{"plate.to_world", m}},
+                   .n_upd = 1,
+                   .classes = UPDATE_GEOMETRIC};
   run_case(&c);
 }
 
@@ -551,8 +648,12 @@ static void test_ply_vertex_positions(void) {
   /* Bitwise first: the refit of that mesh's BVH should find the same
    * closest hits as a fresh build (issue 3 allows 1e-6 relative if a refit
    * broke a tie differently; no tie arises here, so none is allowed). */
-  reload_case c = {.name = "ply vertex_positions", .before = a, .after = b, .upd = {{"m.vertex_positions", v}},
-                   .n_upd = 1, .classes = UPDATE_GEOMETRIC};
+  reload_case c = {.name = "ply vertex_positions",
+                   .before = a,
+                   .after = b,
+                   .upd = {{"m.vertex_positions", v}},
+                   .n_upd = 1,
+                   .classes = UPDATE_GEOMETRIC};
   run_case(&c);
   unlink(pa);
   unlink(pb);
@@ -581,7 +682,11 @@ static void test_ply_faces(void) {
                             v0 + 3, v0 + 1, v0 + 4, v0 + 3);
     }
   snprintf(v + n, sizeof v - n, "]");
-  reload_case c = {.name = "ply faces", .before = a, .after = b, .upd = {{"m.faces", v}}, .n_upd = 1,
+  reload_case c = {.name = "ply faces",
+                   .before = a,
+                   .after = b,
+                   .upd = {{"m.faces", v}},
+                   .n_upd = 1,
                    .classes = UPDATE_GEOMETRIC};
   run_case(&c);
   unlink(pa);
@@ -602,7 +707,11 @@ static void test_ply_to_world(void) {
                     "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.6}}}";
   snprintf(a, sizeof a, fmt, pa, "[{\"scale\": 1}]");
   snprintf(b, sizeof b, fmt, pa, m);
-  reload_case c = {.name = "ply to_world", .before = a, .after = b, .upd = {{"m.to_world", m}}, .n_upd = 1,
+  reload_case c = {.name = "ply to_world",
+                   .before = a,
+                   .after = b,
+                   .upd = {{"m.to_world", m}},
+                   .n_upd = 1,
                    .classes = UPDATE_GEOMETRIC};
   run_case(&c);
   unlink(pa);
@@ -630,8 +739,12 @@ static void test_hdistant_direction_rotated(void) {
            d.x, d.y, d.z, up.x, up.y, up.z);
   char v[256];
   snprintf(v, sizeof v, "[%.17g, %.17g, %.17g]", d.x, d.y, d.z);
-  reload_case c = {.name = "hdistant direction from a rotated to_world", .before = a, .after = b,
-                   .upd = {{"cam.direction", v}}, .n_upd = 1, .classes = UPDATE_SPECTRAL};
+  reload_case c = {.name = "hdistant direction from a rotated to_world",
+                   .before = a,
+                   .after = b,
+                   .upd = {{"cam.direction", v}},
+                   .n_upd = 1,
+                   .classes = UPDATE_SPECTRAL};
   run_case(&c);
 }
 
@@ -641,21 +754,26 @@ static void test_distant_ray_offset_refresh(void) {
    * below the plate to high above the target changes R; with the load-time
    * R the origins would start below the blocker and see the plate, with
    * the refreshed one (as a reload) they start above it and see it. */
-  const char *fmt = "{\"type\": \"scene\", \"cam\": {\"type\": \"distant\", \"direction\": [0, 0, -1],"
-                    "   \"target\": [0.3, 0.3, 0], \"sampler\": {\"type\": \"independent\", \"sample_count\": 4},"
-                    "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},"
-                    " " SUN ","
-                    " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}},"
-                    " \"blocker\": {\"type\": \"rectangle\", \"to_world\": %s,"
-                    "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.9}}}";
+  const char *fmt =
+      "{\"type\": \"scene\", \"cam\": {\"type\": \"distant\", \"direction\": [0, 0, -1],"
+      "   \"target\": [0.3, 0.3, 0], \"sampler\": {\"type\": \"independent\", \"sample_count\": 4},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},"
+      " " SUN ","
+      " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}},"
+      " \"blocker\": {\"type\": \"rectangle\", \"to_world\": %s,"
+      "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.9}}}";
   xform sc = xf_scale(v3(0.2, 0.2, 1)), tr = xf_translate(v3(0.3, 0.3, 4));
   xform t = xf_mul(&tr, &sc);
   char m[1024], a[4096], b[4096];
   xform_json(&t, false, m, sizeof m);
   snprintf(a, sizeof a, fmt, "[{\"translate\": [0, 0, -2]}]");
   snprintf(b, sizeof b, fmt, m);
-  reload_case c = {.name = "distant ray_offset after a geometric update", .before = a, .after = b,
-                   .upd = {{"blocker.to_world", m}}, .n_upd = 1, .classes = UPDATE_GEOMETRIC};
+  reload_case c = {.name = "distant ray_offset after a geometric update",
+                   .before = a,
+                   .after = b,
+                   .upd = {{"blocker.to_world", m}},
+                   .n_upd = 1,
+                   .classes = UPDATE_GEOMETRIC};
   run_case(&c);
 }
 

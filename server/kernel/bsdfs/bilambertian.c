@@ -27,8 +27,7 @@ static double prob_reflect(color r, color t) {
   return isnan(p) ? 0.0 : p;
 }
 
-static color bil_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2,
-                        bsdf_sample *bs) {
+static color bil_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2, bsdf_sample *bs) {
   const bilambertian_bsdf *d = (const bilambertian_bsdf *)b;
   double ci = si->wi.z;
   if (ci == 0.0 || !isfinite(ci)) return bsdf_fail(bs);
@@ -68,7 +67,9 @@ static double bil_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
 
 static const bsdf_ops bil_ops = {.sample = bil_sample, .eval = bil_eval, .pdf = bil_pdf};
 
-static void bil_destroy(object *o) { free(o); }
+static void bil_destroy(object *o) {
+  free(o);
+}
 
 /* R, T >= 0; for constants also R + T <= 1 per channel (energy). */
 static rsw_status bil_create(loader *ld, node *n, object **out) {
@@ -81,8 +82,7 @@ static rsw_status bil_create(loader *ld, node *n, object **out) {
     for (int i = 0; i < 3; i++)
       if (rc.c[i] + tc.c[i] > 1.0 + 1e-12)
         return ld_fail(ld, n, "transmittance", RSW_ERR_INVALID,
-                       "reflectance + transmittance = %g exceeds 1 (energy)",
-                       rc.c[i] + tc.c[i]);
+                       "reflectance + transmittance = %g exceeds 1 (energy)", rc.c[i] + tc.c[i]);
   bsdf *b = bilambertian_new(r, t);
   if (!b) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "bilambertian: out of memory");
   b->base.id = n->id;

@@ -28,16 +28,15 @@ bsdf *diffuse_new(texture *reflectance);
 
 /* ---- conductors (smooth and rough share the complex index) -------------- */
 typedef struct conductor_ior {
-  texture *eta, *k;               /* used when material is NULL */
-  const ior_conductor *material;  /* preset, or NULL ("none") */
-  color mat_eta, mat_k;           /* the preset at the render's wavelength
+  texture *eta, *k;              /* used when material is NULL */
+  const ior_conductor *material; /* preset, or NULL ("none") */
+  color mat_eta, mat_k;          /* the preset at the render's wavelength
                                      (set at creation for 550 nm / rgb,
                                      refreshed by prepare()) */
 } conductor_ior;
 
 /* eta and k at si. */
-void conductor_ior_eval(const conductor_ior *c, const surface_interaction *si,
-                        color *eta, color *k);
+void conductor_ior_eval(const conductor_ior *c, const surface_interaction *si, color *eta, color *k);
 /* Reads `material` / `eta` / `k` of a conductor node (Mitsuba's rule: a
  * material other than "none" together with eta is an error; with a
  * material, eta/k are not read, so a stray k is an unused property). */
@@ -46,8 +45,7 @@ rsw_status conductor_ior_load(struct loader *ld, struct node *n, conductor_ior *
 struct param_visitor;
 void conductor_ior_traverse(conductor_ior *c, struct param_visitor *v);
 /* Sets the preset's cached values for rc (no-op without a preset). */
-rsw_status conductor_ior_prepare(conductor_ior *c, const render_ctx *rc,
-                                 rsw_err *err, const char *where);
+rsw_status conductor_ior_prepare(conductor_ior *c, const render_ctx *rc, rsw_err *err, const char *where);
 
 typedef struct conductor_bsdf {
   bsdf base;
@@ -58,27 +56,26 @@ typedef struct conductor_bsdf {
 /* eta/k textures (material NULL) or a preset (eta/k NULL; its values are
  * evaluated for rc, which may be NULL for mono 550 nm). NULL also when
  * rc's wavelength lies outside the preset's table. */
-bsdf *conductor_new(texture *eta, texture *k, const ior_conductor *material,
-                    texture *specular_reflectance, const render_ctx *rc);
+bsdf *conductor_new(texture *eta, texture *k, const ior_conductor *material, texture *specular_reflectance,
+                    const render_ctx *rc);
 
 typedef struct roughconductor_bsdf {
   bsdf base;
   conductor_ior ior;
   texture *specular_reflectance; /* NULL = 1 */
   mf_type type;
-  texture *alpha_u, *alpha_v;    /* the same texture when isotropic */
+  texture *alpha_u, *alpha_v; /* the same texture when isotropic */
   bool sample_visible;
 } roughconductor_bsdf;
 
-bsdf *roughconductor_new(mf_type type, texture *alpha_u, texture *alpha_v,
-                         bool sample_visible, texture *eta, texture *k,
-                         const ior_conductor *material,
-                         texture *specular_reflectance, const render_ctx *rc);
+bsdf *roughconductor_new(mf_type type, texture *alpha_u, texture *alpha_v, bool sample_visible, texture *eta,
+                         texture *k, const ior_conductor *material, texture *specular_reflectance,
+                         const render_ctx *rc);
 
 /* ---- dielectric --------------------------------------------------------- */
 typedef struct dielectric_bsdf {
   bsdf base;
-  double eta; /* int_ior / ext_ior */
+  double eta;                      /* int_ior / ext_ior */
   texture *specular_reflectance;   /* NULL = 1 */
   texture *specular_transmittance; /* NULL = 1 */
 } dielectric_bsdf;
@@ -126,16 +123,14 @@ typedef struct hapke_bsdf {
 
 bsdf *hapke_new(texture *w, texture *b, texture *c, texture *theta, texture *B_0, texture *h);
 /* Hapke f_r(wi, wo) of one channel (no cosine factor; theta in degrees). */
-double hapke_fr(double w, double b, double c, double theta_deg, double B_0, double h,
-                vec3 wi, vec3 wo);
+double hapke_fr(double w, double b, double c, double theta_deg, double B_0, double h, vec3 wi, vec3 wo);
 
 /* Range check of a constant (uniform) texture at load, per channel;
  * varying textures are not checked. Open or closed bounds. */
 struct loader;
 struct node;
-rsw_status bsdf_check_const_range(struct loader *ld, struct node *n, const char *name,
-                                  const texture *t, double lo, bool lo_open, double hi,
-                                  bool hi_open);
+rsw_status bsdf_check_const_range(struct loader *ld, struct node *n, const char *name, const texture *t,
+                                  double lo, bool lo_open, double hi, bool hi_open);
 
 /* Helpers shared by the plugin files. */
 static inline color bsdf_factor(const texture *t, const surface_interaction *si) {

@@ -20,8 +20,7 @@
 
 /* ---- complex index of refraction ---------------------------------------- */
 
-void conductor_ior_eval(const conductor_ior *c, const surface_interaction *si,
-                        color *eta, color *k) {
+void conductor_ior_eval(const conductor_ior *c, const surface_interaction *si, color *eta, color *k) {
   if (c->material) {
     *eta = c->mat_eta;
     *k = c->mat_k;
@@ -31,8 +30,7 @@ void conductor_ior_eval(const conductor_ior *c, const surface_interaction *si,
   }
 }
 
-rsw_status conductor_ior_prepare(conductor_ior *c, const render_ctx *rc, rsw_err *err,
-                                 const char *where) {
+rsw_status conductor_ior_prepare(conductor_ior *c, const render_ctx *rc, rsw_err *err, const char *where) {
   if (!c->material) return RSW_OK;
   return ior_conductor_for_ctx(c->material, rc, &c->mat_eta, &c->mat_k, err, where);
 }
@@ -44,12 +42,10 @@ rsw_status conductor_ior_load(loader *ld, node *n, conductor_ior *out) {
   if (st != RSW_OK) return st;
   if (strcmp(material, "none") != 0) {
     if (ld_has(n, "eta"))
-      return ld_fail(ld, n, "eta", RSW_ERR_INVALID,
-                     "give either 'material' or 'eta'/'k', not both");
+      return ld_fail(ld, n, "eta", RSW_ERR_INVALID, "give either 'material' or 'eta'/'k', not both");
     c.material = ior_conductor_lookup(material);
     if (!c.material)
-      return ld_fail(ld, n, "material", RSW_ERR_INVALID,
-                     "unknown material '%s' (known: %s)", material,
+      return ld_fail(ld, n, "material", RSW_ERR_INVALID, "unknown material '%s' (known: %s)", material,
                      ior_conductor_names());
     /* Initial values for this variant (mono at the default 550 nm);
      * prepare() re-evaluates them for each render. */
@@ -66,8 +62,8 @@ rsw_status conductor_ior_load(loader *ld, node *n, conductor_ior *out) {
 
 /* ---- the smooth conductor ------------------------------------------------ */
 
-static color conductor_sample(const bsdf *b, const surface_interaction *si, double u1,
-                              vec2 u2, bsdf_sample *bs) {
+static color conductor_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2,
+                              bsdf_sample *bs) {
   (void)u1;
   (void)u2;
   const conductor_bsdf *c = (const conductor_bsdf *)b;
@@ -100,7 +96,9 @@ static double conductor_pdf(const bsdf *b, const surface_interaction *si, vec3 w
 static const bsdf_ops conductor_ops = {
     .sample = conductor_sample, .eval = conductor_eval, .pdf = conductor_pdf};
 
-static void conductor_destroy(object *o) { free(o); }
+static void conductor_destroy(object *o) {
+  free(o);
+}
 
 static rsw_status conductor_prepare(object *o, const render_ctx *rc, rsw_err *err) {
   return conductor_ior_prepare(&((conductor_bsdf *)o)->ior, rc, err, o->id);
@@ -135,7 +133,8 @@ void conductor_ior_traverse(conductor_ior *c, param_visitor *v) {
 static void conductor_traverse(object *o, param_visitor *v) {
   conductor_bsdf *c = (conductor_bsdf *)o;
   conductor_ior_traverse(&c->ior, v);
-  if (c->specular_reflectance) pv_object(v, "specular_reflectance", &c->specular_reflectance->base, 0.0, INFINITY);
+  if (c->specular_reflectance)
+    pv_object(v, "specular_reflectance", &c->specular_reflectance->base, 0.0, INFINITY);
 }
 
 const plugin plugin_conductor = {
@@ -148,8 +147,8 @@ const plugin plugin_conductor = {
     .traverse = conductor_traverse,
 };
 
-bsdf *conductor_new(texture *eta, texture *k, const ior_conductor *material,
-                    texture *specular_reflectance, const render_ctx *rc) {
+bsdf *conductor_new(texture *eta, texture *k, const ior_conductor *material, texture *specular_reflectance,
+                    const render_ctx *rc) {
   conductor_bsdf *c = calloc(1, sizeof *c);
   if (!c) return NULL;
   c->base.base.plugin = &plugin_conductor;

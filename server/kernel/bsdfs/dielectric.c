@@ -21,8 +21,8 @@
 #include "bsdfs_internal.h"
 #include "fresnel.h"
 
-static color dielectric_sample(const bsdf *b, const surface_interaction *si, double u1,
-                               vec2 u2, bsdf_sample *bs) {
+static color dielectric_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2,
+                               bsdf_sample *bs) {
   (void)u2;
   const dielectric_bsdf *d = (const dielectric_bsdf *)b;
   double cos_i = si->wi.z;
@@ -61,20 +61,20 @@ static double dielectric_pdf(const bsdf *b, const surface_interaction *si, vec3 
 static const bsdf_ops dielectric_ops = {
     .sample = dielectric_sample, .eval = dielectric_eval, .pdf = dielectric_pdf};
 
-static void dielectric_destroy(object *o) { free(o); }
+static void dielectric_destroy(object *o) {
+  free(o);
+}
 
 /* An index given as a number or as a material name (Mitsuba's
  * lookup_ior()): absent -> the named default. */
-static rsw_status read_ior(loader *ld, node *n, const char *name, const char *def,
-                           double *out) {
+static rsw_status read_ior(loader *ld, node *n, const char *name, const char *def, double *out) {
   const prop *p = node_find(n, name);
   const char *mat = def;
   if (p && p->kind != PROP_STRING) {
     rsw_status st = ld_float(ld, n, name, 0.0, out);
     if (st != RSW_OK) return st;
     if (!(*out > 0.0))
-      return ld_fail(ld, n, name, RSW_ERR_RANGE,
-                     "'%s' must be positive (got %g)", name, *out);
+      return ld_fail(ld, n, name, RSW_ERR_RANGE, "'%s' must be positive (got %g)", name, *out);
     return RSW_OK;
   }
   if (p) {
@@ -82,8 +82,7 @@ static rsw_status read_ior(loader *ld, node *n, const char *name, const char *de
     if (st != RSW_OK) return st;
   }
   if (!ior_dielectric_lookup(mat, out))
-    return ld_fail(ld, n, name, RSW_ERR_INVALID,
-                   "unknown material '%s' for '%s' (known: %s)", mat, name,
+    return ld_fail(ld, n, name, RSW_ERR_INVALID, "unknown material '%s' for '%s' (known: %s)", mat, name,
                    ior_dielectric_names());
   return RSW_OK;
 }
@@ -107,7 +106,8 @@ static void dielectric_traverse(object *o, param_visitor *v) {
   dielectric_bsdf *d = (dielectric_bsdf *)o;
   /* eta = int_ior / ext_ior, as Mitsuba reports it. */
   pv_float(v, "eta", &d->eta, UPDATE_SPECTRAL, 1e-6, INFINITY);
-  if (d->specular_reflectance) pv_object(v, "specular_reflectance", &d->specular_reflectance->base, 0.0, INFINITY);
+  if (d->specular_reflectance)
+    pv_object(v, "specular_reflectance", &d->specular_reflectance->base, 0.0, INFINITY);
   if (d->specular_transmittance)
     pv_object(v, "specular_transmittance", &d->specular_transmittance->base, 0.0, INFINITY);
 }

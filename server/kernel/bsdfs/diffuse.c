@@ -12,8 +12,8 @@
 #include "../scene/params.h"
 #include "bsdfs_internal.h"
 
-static color diffuse_sample(const bsdf *b, const surface_interaction *si, double u1,
-                            vec2 u2, bsdf_sample *bs) {
+static color diffuse_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2,
+                            bsdf_sample *bs) {
   (void)u1;
   const diffuse_bsdf *d = (const diffuse_bsdf *)b;
   if (!(si->wi.z > 0.0)) return bsdf_fail(bs);
@@ -37,10 +37,11 @@ static double diffuse_pdf(const bsdf *b, const surface_interaction *si, vec3 wo)
   return warp_square_to_cosine_hemisphere_pdf(wo);
 }
 
-static const bsdf_ops diffuse_ops = {
-    .sample = diffuse_sample, .eval = diffuse_eval, .pdf = diffuse_pdf};
+static const bsdf_ops diffuse_ops = {.sample = diffuse_sample, .eval = diffuse_eval, .pdf = diffuse_pdf};
 
-static void diffuse_destroy(object *o) { free(o); }
+static void diffuse_destroy(object *o) {
+  free(o);
+}
 
 static rsw_status diffuse_create(loader *ld, node *n, object **out) {
   texture *refl;

@@ -20,8 +20,7 @@ double fresnel_conductor(double cos_i, double eta, double k) {
 }
 
 color fresnel_conductor_col(double cos_i, color eta, color k) {
-  return col(fresnel_conductor(cos_i, eta.c[0], k.c[0]),
-             fresnel_conductor(cos_i, eta.c[1], k.c[1]),
+  return col(fresnel_conductor(cos_i, eta.c[0], k.c[0]), fresnel_conductor(cos_i, eta.c[1], k.c[1]),
              fresnel_conductor(cos_i, eta.c[2], k.c[2]));
 }
 
@@ -31,8 +30,7 @@ color fresnel_conductor_col(double cos_i, color eta, color k) {
  *   r_p = (c_t - eta_it c_i) / (c_t + eta_it c_i),
  *   R   = (r_s^2 + r_p^2) / 2.
  * Special cases: index-matched (R = 0) and grazing incidence (R = 1). */
-double fresnel_dielectric(double cos_i, double eta, double *cos_t,
-                          double *eta_it_out, double *eta_ti_out) {
+double fresnel_dielectric(double cos_i, double eta, double *cos_t, double *eta_it_out, double *eta_ti_out) {
   bool outside = cos_i >= 0.0;
   double eta_it = outside ? eta : 1.0 / eta;
   double eta_ti = outside ? 1.0 / eta : eta;

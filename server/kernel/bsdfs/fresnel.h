@@ -35,11 +35,12 @@ color fresnel_conductor_col(double cos_i, color eta, color k);
  *   eta_ti: 1 / eta_it.
  * Returns R in [0, 1] (1 under total internal reflection; 0 when
  * eta == 1). */
-double fresnel_dielectric(double cos_i, double eta, double *cos_t,
-                          double *eta_it, double *eta_ti);
+double fresnel_dielectric(double cos_i, double eta, double *cos_t, double *eta_it, double *eta_ti);
 
 /* Mirror reflection about the local normal +z. */
-static inline vec3 reflect_local(vec3 wi) { return v3(-wi.x, -wi.y, wi.z); }
+static inline vec3 reflect_local(vec3 wi) {
+  return v3(-wi.x, -wi.y, wi.z);
+}
 
 /* Mirror reflection of wi about the unit vector m: 2 (wi.m) m - wi. */
 static inline vec3 reflect_about(vec3 wi, vec3 m) {

@@ -50,8 +50,8 @@ static double e2(const hapke_geom *g, double cot_x) {
 }
 
 /* Mu(x; a, b, C, s) of the header, with cos/sin of x and cot of a, b. */
-static double mu_eff(const hapke_geom *g, double cos_x, double sin_x, double cot_a,
-                     double cot_b, double cc, double s) {
+static double mu_eff(const hapke_geom *g, double cos_x, double sin_x, double cot_a, double cot_b, double cc,
+                     double s) {
   double sh = sin(0.5 * g->psi);
   double num = cc * e2(g, cot_a) + s * sh * sh * e2(g, cot_b);
   double den = 2.0 - e1(g, cot_a) - g->psi * RSW_INV_PI * e1(g, cot_b);
@@ -64,8 +64,7 @@ static double chandra_h(double w, double x) {
   return 1.0 / (1.0 - w * x * (r0 + 0.5 * (1.0 - 2.0 * r0 * x) * log((1.0 + x) / x)));
 }
 
-double hapke_fr(double w, double b, double c, double theta_deg, double B_0, double h,
-                vec3 wi, vec3 wo) {
+double hapke_fr(double w, double b, double c, double theta_deg, double B_0, double h, vec3 wi, vec3 wo) {
   double mu0 = wi.z, mu = wo.z;
   if (!(mu0 > 0.0) || !(mu > 0.0)) return 0.0;
   double sin_i = sqrt(wi.x * wi.x + wi.y * wi.y), sin_e = sqrt(wo.x * wo.x + wo.y * wo.y);
@@ -127,8 +126,7 @@ static color hapke_value(const hapke_bsdf *hb, const surface_interaction *si, ve
   return out;
 }
 
-static color hapke_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2,
-                          bsdf_sample *bs) {
+static color hapke_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2, bsdf_sample *bs) {
   (void)u1;
   if (!(si->wi.z > 0.0)) return bsdf_fail(bs);
   bs->wo = warp_square_to_cosine_hemisphere(u2);
@@ -152,7 +150,9 @@ static double hapke_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
 
 static const bsdf_ops hapke_ops = {.sample = hapke_sample, .eval = hapke_eval, .pdf = hapke_pdf};
 
-static void hapke_destroy(object *o) { free(o); }
+static void hapke_destroy(object *o) {
+  free(o);
+}
 
 /* Ranges (Eradiate / Hapke): w in [0, 1], b in [0, 1), c in [0, 1],
  * theta in [0, 90) degrees, B_0 >= 0, h >= 0. */
@@ -161,14 +161,13 @@ static rsw_status hapke_create(loader *ld, node *n, object **out) {
     const char *name;
     double def, lo, hi;
     bool hi_open;
-  } spec[6] = {{"w", 0.5, 0.0, 1.0, false},      {"b", 0.2, 0.0, 1.0, true},
-               {"c", 0.5, 0.0, 1.0, false},      {"theta", 30.0, 0.0, 90.0, true},
+  } spec[6] = {{"w", 0.5, 0.0, 1.0, false},       {"b", 0.2, 0.0, 1.0, true},
+               {"c", 0.5, 0.0, 1.0, false},       {"theta", 30.0, 0.0, 90.0, true},
                {"B_0", 0.0, 0.0, INFINITY, true}, {"h", 0.0, 0.0, INFINITY, true}};
   texture *t[6];
   rsw_status st;
   for (int k = 0; k < 6; k++) {
-    if ((st = ld_texture(ld, n, spec[k].name, spec[k].def, spec[k].lo, &t[k])) != RSW_OK)
-      return st;
+    if ((st = ld_texture(ld, n, spec[k].name, spec[k].def, spec[k].lo, &t[k])) != RSW_OK) return st;
     if ((st = bsdf_check_const_range(ld, n, spec[k].name, t[k], spec[k].lo, false, spec[k].hi,
                                      spec[k].hi_open)) != RSW_OK)
       return st;

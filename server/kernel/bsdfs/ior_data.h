@@ -25,7 +25,7 @@ typedef struct ior_sample {
 } ior_sample;
 
 typedef struct ior_conductor {
-  const char *name;  /* Mitsuba's material name ("Au", case-sensitive) */
+  const char *name; /* Mitsuba's material name ("Au", case-sensitive) */
   const ior_sample *s;
   size_t n;
 } ior_conductor;
@@ -53,8 +53,7 @@ bool ior_conductor_eval(const ior_conductor *c, double wl, double *eta, double *
  * in rgb at the three wavelengths above. On a wavelength outside the
  * table, fails with RSW_ERR_RANGE naming the material (where = object
  * id, may be NULL). */
-rsw_status ior_conductor_for_ctx(const ior_conductor *c, const render_ctx *rc,
-                                 color *eta, color *k, rsw_err *err,
-                                 const char *where);
+rsw_status ior_conductor_for_ctx(const ior_conductor *c, const render_ctx *rc, color *eta, color *k,
+                                 rsw_err *err, const char *where);
 
 #endif

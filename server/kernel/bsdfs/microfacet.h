@@ -17,7 +17,10 @@
 #include "../core/vec.h"
 #include "../core/warp.h"
 
-typedef enum mf_type { MF_BECKMANN, MF_GGX } mf_type;
+typedef enum mf_type {
+  MF_BECKMANN,
+  MF_GGX
+} mf_type;
 
 typedef struct mf_distr {
   mf_type type;

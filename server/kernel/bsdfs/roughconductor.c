@@ -26,9 +26,9 @@
  * Source: mitsuba3 src/bsdfs/roughconductor.cpp and
  * include/mitsuba/render/microfacet.h; kernel-behavior.md §2.3 (incl.
  * "Where we differ"). */
+#include <ctype.h>
 #include <stdlib.h>
 #include <string.h>
-#include <ctype.h>
 
 #include "../scene/loader.h"
 #include "../scene/params.h"
@@ -43,8 +43,7 @@ static mf_distr distr_at(const roughconductor_bsdf *r, const surface_interaction
   return mf_make(r->type, au, av, r->sample_visible);
 }
 
-static color rough_sample(const bsdf *b, const surface_interaction *si, double u1,
-                          vec2 u2, bsdf_sample *bs) {
+static color rough_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2, bsdf_sample *bs) {
   (void)u1;
   const roughconductor_bsdf *r = (const roughconductor_bsdf *)b;
   vec3 wi = si->wi;
@@ -96,10 +95,11 @@ static double rough_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
   return mf_pdf(&d, wi, h) / (4.0 * wo_h);
 }
 
-static const bsdf_ops rough_ops = {
-    .sample = rough_sample, .eval = rough_eval, .pdf = rough_pdf};
+static const bsdf_ops rough_ops = {.sample = rough_sample, .eval = rough_eval, .pdf = rough_pdf};
 
-static void rough_destroy(object *o) { free(o); }
+static void rough_destroy(object *o) {
+  free(o);
+}
 
 static rsw_status rough_prepare(object *o, const render_ctx *rc, rsw_err *err) {
   return conductor_ior_prepare(&((roughconductor_bsdf *)o)->ior, rc, err, o->id);
@@ -127,7 +127,8 @@ static rsw_status rough_create(loader *ld, node *n, object **out) {
   else
     return ld_fail(ld, n, "distribution", RSW_ERR_INVALID,
                    "unknown distribution '%s' (expected "
-                   "\"beckmann\" or \"ggx\")", dist);
+                   "\"beckmann\" or \"ggx\")",
+                   dist);
 
   /* Roughness must be positive: Mitsuba silently clamps alpha to 1e-4;
    * we refuse smaller values (use `conductor` for a perfect mirror). */
@@ -186,7 +187,8 @@ static void rough_traverse(object *o, param_visitor *v) {
     pv_object(v, "alpha_v", &r->alpha_v->base, 1e-4, INFINITY);
   }
   conductor_ior_traverse(&r->ior, v);
-  if (r->specular_reflectance) pv_object(v, "specular_reflectance", &r->specular_reflectance->base, 0.0, INFINITY);
+  if (r->specular_reflectance)
+    pv_object(v, "specular_reflectance", &r->specular_reflectance->base, 0.0, INFINITY);
 }
 
 const plugin plugin_roughconductor = {
@@ -199,10 +201,9 @@ const plugin plugin_roughconductor = {
     .traverse = rough_traverse,
 };
 
-bsdf *roughconductor_new(mf_type type, texture *alpha_u, texture *alpha_v,
-                         bool sample_visible, texture *eta, texture *k,
-                         const ior_conductor *material,
-                         texture *specular_reflectance, const render_ctx *rc) {
+bsdf *roughconductor_new(mf_type type, texture *alpha_u, texture *alpha_v, bool sample_visible, texture *eta,
+                         texture *k, const ior_conductor *material, texture *specular_reflectance,
+                         const render_ctx *rc) {
   roughconductor_bsdf *r = calloc(1, sizeof *r);
   if (!r) return NULL;
   r->base.base.plugin = &plugin_roughconductor;

@@ -75,8 +75,7 @@ static color rpv_value(const rpv_bsdf *r, const surface_interaction *si, vec3 wo
   return out;
 }
 
-static color rpv_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2,
-                        bsdf_sample *bs) {
+static color rpv_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2, bsdf_sample *bs) {
   (void)u1;
   if (!(si->wi.z > 0.0)) return bsdf_fail(bs);
   bs->wo = warp_square_to_cosine_hemisphere(u2);
@@ -100,10 +99,12 @@ static double rpv_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
 
 static const bsdf_ops rpv_ops = {.sample = rpv_sample, .eval = rpv_eval, .pdf = rpv_pdf};
 
-static void rpv_destroy(object *o) { free(o); }
+static void rpv_destroy(object *o) {
+  free(o);
+}
 
-rsw_status bsdf_check_const_range(loader *ld, node *n, const char *name, const texture *t,
-                                  double lo, bool lo_open, double hi, bool hi_open) {
+rsw_status bsdf_check_const_range(loader *ld, node *n, const char *name, const texture *t, double lo,
+                                  bool lo_open, double hi, bool hi_open) {
   color c;
   if (!t || !uniform_texture_value(t, &c)) return RSW_OK; /* varying: not checked */
   for (int i = 0; i < 3; i++) {
@@ -125,8 +126,7 @@ static rsw_status rpv_create(loader *ld, node *n, object **out) {
   if ((st = ld_texture(ld, n, "k", 0.1, 0.0, &k)) != RSW_OK) return st;
   if ((st = ld_texture(ld, n, "g", 0.0, -INFINITY, &g)) != RSW_OK) return st;
   if ((st = ld_texture_opt(ld, n, "rho_c", 0.0, &rho_c)) != RSW_OK) return st;
-  if ((st = bsdf_check_const_range(ld, n, "k", k, 0.0, false, INFINITY, true)) != RSW_OK)
-    return st;
+  if ((st = bsdf_check_const_range(ld, n, "k", k, 0.0, false, INFINITY, true)) != RSW_OK) return st;
   if ((st = bsdf_check_const_range(ld, n, "g", g, -1.0, true, 1.0, true)) != RSW_OK) return st;
   bsdf *b = rpv_new(rho_0, k, g, rho_c);
   if (!b) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "rpv: out of memory");

@@ -15,13 +15,14 @@
 #include "../scene/params.h"
 #include "bsdfs_internal.h"
 
-#define TRANSMISSION_LOBES                                                     \
-  (BSDF_DIFFUSE_TRANSMISSION | BSDF_GLOSSY_TRANSMISSION | BSDF_DELTA_TRANSMISSION)
+#define TRANSMISSION_LOBES (BSDF_DIFFUSE_TRANSMISSION | BSDF_GLOSSY_TRANSMISSION | BSDF_DELTA_TRANSMISSION)
 
-static vec3 flip_z(vec3 v) { return v3(v.x, v.y, -v.z); }
+static vec3 flip_z(vec3 v) {
+  return v3(v.x, v.y, -v.z);
+}
 
-static color twosided_sample(const bsdf *b, const surface_interaction *si, double u1,
-                             vec2 u2, bsdf_sample *bs) {
+static color twosided_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2,
+                             bsdf_sample *bs) {
   const twosided_bsdf *t = (const twosided_bsdf *)b;
   if (si->wi.z > 0.0) return t->brdf[0]->ops->sample(t->brdf[0], si, u1, u2, bs);
   if (!(si->wi.z < 0.0)) return bsdf_fail(bs);
@@ -50,10 +51,11 @@ static double twosided_pdf(const bsdf *b, const surface_interaction *si, vec3 wo
   return t->brdf[1]->ops->pdf(t->brdf[1], &s, flip_z(wo));
 }
 
-static const bsdf_ops twosided_ops = {
-    .sample = twosided_sample, .eval = twosided_eval, .pdf = twosided_pdf};
+static const bsdf_ops twosided_ops = {.sample = twosided_sample, .eval = twosided_eval, .pdf = twosided_pdf};
 
-static void twosided_destroy(object *o) { free(o); }
+static void twosided_destroy(object *o) {
+  free(o);
+}
 
 static rsw_status twosided_create(loader *ld, node *n, object **out) {
   object **kids = NULL;
@@ -63,8 +65,7 @@ static rsw_status twosided_create(loader *ld, node *n, object **out) {
   if (count == 0 || count > 2) {
     free(kids);
     return ld_fail(ld, n, NULL, count == 0 ? RSW_ERR_MISSING : RSW_ERR_INVALID,
-                   "twosided '%s': expected one or two nested BSDFs, got %zu",
-                   n->id ? n->id : "", count);
+                   "twosided '%s': expected one or two nested BSDFs, got %zu", n->id ? n->id : "", count);
   }
   bsdf *front = (bsdf *)kids[0];
   bsdf *back = count == 2 ? (bsdf *)kids[1] : front;

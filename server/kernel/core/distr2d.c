@@ -13,12 +13,14 @@ void distr2d_free(distr2d *d) {
 }
 
 rsw_status distr2d_init(distr2d *d, const double *weights, int w, int h, const char *where, rsw_err *err) {
-  if (w < 1 || h < 1) return rsw_fail(err, RSW_ERR_INVALID, where, "distribution needs at least 1x1 cells (got %dx%d)", w, h);
+  if (w < 1 || h < 1)
+    return rsw_fail(err, RSW_ERR_INVALID, where, "distribution needs at least 1x1 cells (got %dx%d)", w, h);
   size_t n = (size_t)w * (size_t)h;
   for (size_t k = 0; k < n; k++)
     if (!(weights[k] >= 0) || !isfinite(weights[k]))
-      return rsw_fail(err, RSW_ERR_INVALID, where, "weight %zu (column %zu, row %zu) is negative or not finite", k,
-                      k % (size_t)w, k / (size_t)w);
+      return rsw_fail(err, RSW_ERR_INVALID, where,
+                      "weight %zu (column %zu, row %zu) is negative or not finite", k, k % (size_t)w,
+                      k / (size_t)w);
   distr2d t = {.w = w, .h = h};
   t.col_cdf = malloc(sizeof(double) * (size_t)h * ((size_t)w + 1));
   t.row_cdf = malloc(sizeof(double) * ((size_t)h + 1));
@@ -60,8 +62,10 @@ static int find_interval(const double *cdf, int n, double u) {
   int lo = 0, hi = n - 1;
   while (lo < hi) {
     int mid = (lo + hi + 1) / 2;
-    if (cdf[mid] <= u) lo = mid;
-    else hi = mid - 1;
+    if (cdf[mid] <= u)
+      lo = mid;
+    else
+      hi = mid - 1;
   }
   return lo;
 }

@@ -36,8 +36,7 @@ int rsw_status_http(rsw_status s) {
   return status_http[s];
 }
 
-rsw_status rsw_fail(rsw_err *err, rsw_status code, const char *where,
-                    const char *fmt, ...) {
+rsw_status rsw_fail(rsw_err *err, rsw_status code, const char *where, const char *fmt, ...) {
   if (!err || err->code != RSW_OK) return code;
   err->code = code;
   snprintf(err->where, sizeof err->where, "%s", where ? where : "");

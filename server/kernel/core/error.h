@@ -3,8 +3,8 @@
 #ifndef RSW_CORE_ERROR_H
 #define RSW_CORE_ERROR_H
 
-#include <stdarg.h>
 #include "raysweep/status.h"
+#include <stdarg.h>
 
 typedef struct rsw_err {
   rsw_status code;
@@ -16,8 +16,7 @@ typedef struct rsw_err {
  * in one statement:  return rsw_fail(err, RSW_ERR_TYPE, loc, "...", ...);
  * err may be NULL (then only the code is returned). The first error
  * recorded wins: later calls do not overwrite a set error. */
-rsw_status rsw_fail(rsw_err *err, rsw_status code, const char *where,
-                    const char *fmt, ...)
+rsw_status rsw_fail(rsw_err *err, rsw_status code, const char *where, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));
 
 /* Clear an error record. */

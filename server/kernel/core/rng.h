@@ -7,9 +7,9 @@
 
 #include <stdint.h>
 
-#define PCG32_DEFAULT_STATE 0x853c49e6748fea9bULL
+#define PCG32_DEFAULT_STATE  0x853c49e6748fea9bULL
 #define PCG32_DEFAULT_STREAM 0xda3e39cb94b95bdbULL
-#define PCG32_MULT 0x5851f42d4c957f2dULL
+#define PCG32_MULT           0x5851f42d4c957f2dULL
 
 typedef struct pcg32 {
   uint64_t state, inc;

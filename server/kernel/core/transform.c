@@ -150,15 +150,13 @@ vec3 xf_point(const xform *t, vec3 p) {
 
 vec3 xf_vector(const xform *t, vec3 v) {
   const double(*m)[4] = t->m;
-  return v3(m[0][0] * v.x + m[0][1] * v.y + m[0][2] * v.z,
-            m[1][0] * v.x + m[1][1] * v.y + m[1][2] * v.z,
+  return v3(m[0][0] * v.x + m[0][1] * v.y + m[0][2] * v.z, m[1][0] * v.x + m[1][1] * v.y + m[1][2] * v.z,
             m[2][0] * v.x + m[2][1] * v.y + m[2][2] * v.z);
 }
 
 vec3 xf_normal(const xform *t, vec3 n) {
   const double(*m)[4] = t->inv;
-  return v3(m[0][0] * n.x + m[1][0] * n.y + m[2][0] * n.z,
-            m[0][1] * n.x + m[1][1] * n.y + m[2][1] * n.z,
+  return v3(m[0][0] * n.x + m[1][0] * n.y + m[2][0] * n.z, m[0][1] * n.x + m[1][1] * n.y + m[2][1] * n.z,
             m[0][2] * n.x + m[1][2] * n.y + m[2][2] * n.z);
 }
 
@@ -169,8 +167,7 @@ vec3 xf_inv_point(const xform *t, vec3 p) {
 
 vec3 xf_inv_vector(const xform *t, vec3 v) {
   const double(*m)[4] = t->inv;
-  return v3(m[0][0] * v.x + m[0][1] * v.y + m[0][2] * v.z,
-            m[1][0] * v.x + m[1][1] * v.y + m[1][2] * v.z,
+  return v3(m[0][0] * v.x + m[0][1] * v.y + m[0][2] * v.z, m[1][0] * v.x + m[1][1] * v.y + m[1][2] * v.z,
             m[2][0] * v.x + m[2][1] * v.y + m[2][2] * v.z);
 }
 

@@ -3,11 +3,11 @@
 #ifndef RSW_CORE_TRANSFORM_H
 #define RSW_CORE_TRANSFORM_H
 
-#include <stdbool.h>
 #include "vec.h"
+#include <stdbool.h>
 
 typedef struct xform {
-  double m[4][4];   /* row-major: p' = m p (column vectors) */
+  double m[4][4]; /* row-major: p' = m p (column vectors) */
   double inv[4][4];
 } xform;
 
@@ -18,7 +18,7 @@ bool xf_from_matrix(const double m[4][4], xform *out);
 xform xf_mul(const xform *a, const xform *b); /* a * b */
 xform xf_inverse(const xform *a);
 xform xf_translate(vec3 t);
-xform xf_scale(vec3 s);                   /* caller checks no zero factor */
+xform xf_scale(vec3 s);                       /* caller checks no zero factor */
 xform xf_rotate(vec3 axis, double angle_deg); /* counter-clockwise, as Mitsuba */
 /* Mitsuba's look_at: columns (left, new_up, dir, origin) with
  * dir = normalize(target - origin), left = normalize(cross(up, dir)),

@@ -7,8 +7,8 @@
 #include <math.h>
 #include <stdbool.h>
 
-#define RSW_PI 3.14159265358979323846
-#define RSW_INV_PI 0.31830988618379067154
+#define RSW_PI      3.14159265358979323846
+#define RSW_INV_PI  0.31830988618379067154
 #define RSW_INV_2PI 0.15915494309189533577
 #define RSW_INV_4PI 0.07957747154594766788
 
@@ -23,7 +23,7 @@
  * radiancemeter's nudge, unit-vector tolerances). Spawned rays do NOT use
  * Mitsuba's (1 + max|p|) RayEpsilon offset, which grows with the distance
  * from the world origin: see spawn_ray in shapes/shape.h. */
-#define RSW_RAY_EPSILON (1500.0 * RSW_F32_UNIT)
+#define RSW_RAY_EPSILON    (1500.0 * RSW_F32_UNIT)
 #define RSW_SHADOW_EPSILON (10.0 * RSW_RAY_EPSILON)
 
 typedef struct vec3 {
@@ -34,20 +34,36 @@ static inline vec3 v3(double x, double y, double z) {
   vec3 r = {x, y, z};
   return r;
 }
-static inline vec3 v3_add(vec3 a, vec3 b) { return v3(a.x + b.x, a.y + b.y, a.z + b.z); }
-static inline vec3 v3_sub(vec3 a, vec3 b) { return v3(a.x - b.x, a.y - b.y, a.z - b.z); }
-static inline vec3 v3_mul(vec3 a, vec3 b) { return v3(a.x * b.x, a.y * b.y, a.z * b.z); }
-static inline vec3 v3_scale(vec3 a, double s) { return v3(a.x * s, a.y * s, a.z * s); }
-static inline vec3 v3_neg(vec3 a) { return v3(-a.x, -a.y, -a.z); }
+static inline vec3 v3_add(vec3 a, vec3 b) {
+  return v3(a.x + b.x, a.y + b.y, a.z + b.z);
+}
+static inline vec3 v3_sub(vec3 a, vec3 b) {
+  return v3(a.x - b.x, a.y - b.y, a.z - b.z);
+}
+static inline vec3 v3_mul(vec3 a, vec3 b) {
+  return v3(a.x * b.x, a.y * b.y, a.z * b.z);
+}
+static inline vec3 v3_scale(vec3 a, double s) {
+  return v3(a.x * s, a.y * s, a.z * s);
+}
+static inline vec3 v3_neg(vec3 a) {
+  return v3(-a.x, -a.y, -a.z);
+}
 static inline vec3 v3_fma(vec3 a, double s, vec3 b) { /* a + s*b */
   return v3(a.x + s * b.x, a.y + s * b.y, a.z + s * b.z);
 }
-static inline double v3_dot(vec3 a, vec3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+static inline double v3_dot(vec3 a, vec3 b) {
+  return a.x * b.x + a.y * b.y + a.z * b.z;
+}
 static inline vec3 v3_cross(vec3 a, vec3 b) {
   return v3(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
 }
-static inline double v3_len2(vec3 a) { return v3_dot(a, a); }
-static inline double v3_len(vec3 a) { return sqrt(v3_dot(a, a)); }
+static inline double v3_len2(vec3 a) {
+  return v3_dot(a, a);
+}
+static inline double v3_len(vec3 a) {
+  return sqrt(v3_dot(a, a));
+}
 static inline vec3 v3_norm(vec3 a) {
   double l = v3_len(a);
   return l > 0 ? v3_scale(a, 1.0 / l) : a;
@@ -58,7 +74,9 @@ static inline double v3_max_abs(vec3 a) {
   if (fabs(a.z) > m) m = fabs(a.z);
   return m;
 }
-static inline bool v3_finite(vec3 a) { return isfinite(a.x) && isfinite(a.y) && isfinite(a.z); }
+static inline bool v3_finite(vec3 a) {
+  return isfinite(a.x) && isfinite(a.y) && isfinite(a.z);
+}
 
 /* Orthonormal basis (s, t, n). */
 typedef struct frame {
@@ -102,7 +120,9 @@ static inline color col(double r, double g, double b) {
   color x = {{r, g, b}};
   return x;
 }
-static inline color col1(double v) { return col(v, v, v); }
+static inline color col1(double v) {
+  return col(v, v, v);
+}
 static inline color col_add(color a, color b) {
   return col(a.c[0] + b.c[0], a.c[1] + b.c[1], a.c[2] + b.c[2]);
 }
@@ -121,7 +141,9 @@ static inline double col_max(color a) {
 static inline bool col_is_black(color a) {
   return a.c[0] == 0.0 && a.c[1] == 0.0 && a.c[2] == 0.0;
 }
-static inline double col_mean(color a) { return (a.c[0] + a.c[1] + a.c[2]) / 3.0; }
+static inline double col_mean(color a) {
+  return (a.c[0] + a.c[1] + a.c[2]) / 3.0;
+}
 /* Rec. 709 / sRGB luminance weights, as Mitsuba's luminance(). */
 static inline double col_luminance(color a) {
   return 0.212671 * a.c[0] + 0.715160 * a.c[1] + 0.072169 * a.c[2];

@@ -207,8 +207,7 @@ vec3 warp_phi_theta_to_xyz(vec2 phi_theta, vec3 axis) {
   coordinate_system(n, &s, &t);
   double sin_theta = sin(phi_theta.y), cos_theta = cos(phi_theta.y);
   vec3 local = v3(sin_theta * cos(phi_theta.x), sin_theta * sin(phi_theta.x), cos_theta);
-  vec3 dir = v3_add(v3_add(v3_scale(s, local.x), v3_scale(t, local.y)),
-                    v3_scale(n, local.z));
+  vec3 dir = v3_add(v3_add(v3_scale(s, local.x), v3_scale(t, local.y)), v3_scale(n, local.z));
   return v3_scale(dir, radius);
 }
 

@@ -50,9 +50,12 @@ static color area_eval(const emitter *e, const surface_interaction *hit, vec3 d)
   return tex_eval(a->radiance, hit);
 }
 
-static const emitter_ops area_ops = {.sample_direction = area_sample, .pdf_direction = area_pdf, .eval = area_eval};
+static const emitter_ops area_ops = {
+    .sample_direction = area_sample, .pdf_direction = area_pdf, .eval = area_eval};
 
-static void area_destroy(object *o) { free(o); }
+static void area_destroy(object *o) {
+  free(o);
+}
 
 static rsw_status area_create(loader *ld, node *n, object **out) {
   area_light *a = calloc(1, sizeof *a);
@@ -75,5 +78,9 @@ static void area_traverse(object *o, param_visitor *v) {
   pv_float(v, "sampling_weight", &a->base.sampling_weight, UPDATE_SPECTRAL, 0.0, INFINITY);
 }
 
-const plugin plugin_area = {.name = "area", .cls = CLS_EMITTER, .create = area_create, .destroy = area_destroy,
-                            .ops = &area_ops, .traverse = area_traverse};
+const plugin plugin_area = {.name = "area",
+                            .cls = CLS_EMITTER,
+                            .create = area_create,
+                            .destroy = area_destroy,
+                            .ops = &area_ops,
+                            .traverse = area_traverse};

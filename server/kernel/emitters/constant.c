@@ -35,9 +35,12 @@ static color const_eval(const emitter *e, const surface_interaction *hit, vec3 d
   return tex_eval(c->radiance, hit);
 }
 
-static const emitter_ops constant_ops = {.sample_direction = const_sample, .pdf_direction = const_pdf, .eval = const_eval};
+static const emitter_ops constant_ops = {
+    .sample_direction = const_sample, .pdf_direction = const_pdf, .eval = const_eval};
 
-static void const_destroy(object *o) { free(o); }
+static void const_destroy(object *o) {
+  free(o);
+}
 
 static rsw_status const_create(loader *ld, node *n, object **out) {
   constant_env *c = calloc(1, sizeof *c);
@@ -63,5 +66,9 @@ static void const_traverse(object *o, param_visitor *v) {
   pv_float(v, "sampling_weight", &c->base.sampling_weight, UPDATE_SPECTRAL, 0.0, INFINITY);
 }
 
-const plugin plugin_constant = {.name = "constant", .cls = CLS_EMITTER, .create = const_create,
-                                .destroy = const_destroy, .ops = &constant_ops, .traverse = const_traverse};
+const plugin plugin_constant = {.name = "constant",
+                                .cls = CLS_EMITTER,
+                                .create = const_create,
+                                .destroy = const_destroy,
+                                .ops = &constant_ops,
+                                .traverse = const_traverse};

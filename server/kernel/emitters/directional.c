@@ -58,7 +58,9 @@ static void dir_set_scene(emitter *e, const scene *s) {
 static const emitter_ops directional_ops = {
     .sample_direction = dir_sample, .pdf_direction = dir_pdf, .eval = dir_eval, .set_scene = dir_set_scene};
 
-static void dir_destroy(object *o) { free(o); }
+static void dir_destroy(object *o) {
+  free(o);
+}
 
 /* Mitsuba: to_world = look_at(0, normalize(direction), up) with up the
  * first vector of coordinate_system(direction). */
@@ -70,9 +72,13 @@ static bool look_at_direction(vec3 d, xform *out) {
 
 /* d always comes from to_world, whichever way it was set, so that an
  * update of `direction` or `to_world` equals a reload with it. */
-static void derive_direction(directional *dl) { dl->d = v3_norm(xf_vector(&dl->to_world, v3(0, 0, 1))); }
+static void derive_direction(directional *dl) {
+  dl->d = v3_norm(xf_vector(&dl->to_world, v3(0, 0, 1)));
+}
 
-static vec3 dir_get_direction(const object *o) { return ((const directional *)o)->d; }
+static vec3 dir_get_direction(const object *o) {
+  return ((const directional *)o)->d;
+}
 
 static void dir_set_direction(object *o, vec3 d) {
   directional *dl = (directional *)o;
@@ -89,7 +95,9 @@ static void dir_traverse(object *o, param_visitor *v) {
   pv_float(v, "sampling_weight", &dl->base.sampling_weight, UPDATE_SPECTRAL, 0.0, INFINITY);
 }
 
-static void dir_parameters_changed(object *o) { derive_direction((directional *)o); }
+static void dir_parameters_changed(object *o) {
+  derive_direction((directional *)o);
+}
 
 static rsw_status dir_create(loader *ld, node *n, object **out) {
   directional *dl = calloc(1, sizeof *dl);
@@ -130,6 +138,10 @@ static rsw_status dir_create(loader *ld, node *n, object **out) {
   return RSW_OK;
 }
 
-const plugin plugin_directional = {.name = "directional", .cls = CLS_EMITTER, .create = dir_create,
-                                   .destroy = dir_destroy, .ops = &directional_ops, .traverse = dir_traverse,
+const plugin plugin_directional = {.name = "directional",
+                                   .cls = CLS_EMITTER,
+                                   .create = dir_create,
+                                   .destroy = dir_destroy,
+                                   .ops = &directional_ops,
+                                   .traverse = dir_traverse,
                                    .parameters_changed = dir_parameters_changed};

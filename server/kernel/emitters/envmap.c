@@ -44,8 +44,8 @@
 
 typedef struct envmap {
   emitter base;
-  int w, h;      /* image size: w >= 2, h >= 3 (as Mitsuba) */
-  float *rgb;    /* w*h*3, row 0 = v 0 (the +y pole) */
+  int w, h;   /* image size: w >= 2, h >= 3 (as Mitsuba) */
+  float *rgb; /* w*h*3, row 0 = v 0 (the +y pole) */
   double scale;
   xform to_world; /* local (+y up) -> world */
   distr2d distr;  /* over w x (h-1) cells; unused when black */
@@ -66,7 +66,9 @@ static vec3 uv_to_direction(vec2 uv, double *sin_theta) {
   return v3(sin(phi) * st, cos(theta), -cos(phi) * st);
 }
 
-static double half_texel(const envmap *m) { return 0.5 / m->w; }
+static double half_texel(const envmap *m) {
+  return 0.5 / m->w;
+}
 
 static color texel(const envmap *m, int x, int y) {
   x %= m->w;
@@ -94,7 +96,9 @@ static color lookup(const envmap *m, vec2 uv) {
   return m->mono ? col1(col_luminance(c)) : c;
 }
 
-static vec3 local_direction(const envmap *m, vec3 d) { return v3_norm(xf_inv_vector(&m->to_world, d)); }
+static vec3 local_direction(const envmap *m, vec3 d) {
+  return v3_norm(xf_inv_vector(&m->to_world, d));
+}
 
 static color env_eval(const emitter *e, const surface_interaction *hit, vec3 d) {
   const envmap *m = (const envmap *)e;
@@ -134,7 +138,8 @@ static double env_pdf(const emitter *e, const surface_interaction *ref, const di
   return distr2d_pdf(&m->distr, v2(x, uv.y)) / (2.0 * RSW_PI * RSW_PI * sin_theta);
 }
 
-static const emitter_ops envmap_ops = {.sample_direction = env_sample, .pdf_direction = env_pdf, .eval = env_eval};
+static const emitter_ops envmap_ops = {
+    .sample_direction = env_sample, .pdf_direction = env_pdf, .eval = env_eval};
 
 static void env_destroy(object *o) {
   envmap *m = (envmap *)o;
@@ -155,8 +160,8 @@ static rsw_status env_check_xf(const object *o, const xform *t, const char *key,
   (void)o;
   double scale;
   if (!xf_is_similarity(t, &scale) || !(scale > 0))
-    return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': an envmap's to_world must be a rotation (times a uniform scale)",
-                    key);
+    return rsw_fail(err, RSW_ERR_INVALID, key,
+                    "'%s': an envmap's to_world must be a rotation (times a uniform scale)", key);
   return RSW_OK;
 }
 
@@ -165,10 +170,12 @@ static rsw_status load_pixels(loader *ld, node *n, envmap *m, const exr_image *i
   int r = exr_image_channel(img, "R"), g = exr_image_channel(img, "G"), b = exr_image_channel(img, "B");
   int y = exr_image_channel(img, "Y");
   bool rgb = r >= 0 && g >= 0 && b >= 0;
-  if (!rgb && y < 0) return ld_fail(ld, n, "filename", RSW_ERR_INVALID, "'%s' has neither R,G,B nor Y channels", path);
+  if (!rgb && y < 0)
+    return ld_fail(ld, n, "filename", RSW_ERR_INVALID, "'%s' has neither R,G,B nor Y channels", path);
   if (img->width < 2 || img->height < 3)
     return ld_fail(ld, n, "filename", RSW_ERR_INVALID,
-                   "'%s' is %dx%d; an environment map must be at least 2x3 pixels", path, img->width, img->height);
+                   "'%s' is %dx%d; an environment map must be at least 2x3 pixels", path, img->width,
+                   img->height);
   m->w = img->width;
   m->h = img->height;
   m->rgb = malloc((size_t)m->w * m->h * 3 * sizeof(float));
@@ -176,8 +183,10 @@ static rsw_status load_pixels(loader *ld, node *n, envmap *m, const exr_image *i
   for (size_t i = 0; i < (size_t)m->w * m->h; i++) {
     const float *px = &img->data[i * img->n_channels];
     float v[3];
-    if (rgb) v[0] = px[r], v[1] = px[g], v[2] = px[b];
-    else v[0] = v[1] = v[2] = px[y];
+    if (rgb)
+      v[0] = px[r], v[1] = px[g], v[2] = px[b];
+    else
+      v[0] = v[1] = v[2] = px[y];
     for (int k = 0; k < 3; k++) {
       if (!isfinite(v[k]) || v[k] < 0)
         return ld_fail(ld, n, "filename", RSW_ERR_INVALID,
@@ -230,7 +239,8 @@ static rsw_status env_create(loader *ld, node *n, object **out) {
   if (!st) {
     double s;
     if (!xf_is_similarity(&m->to_world, &s) || !(s > 0))
-      st = ld_fail(ld, n, "to_world", RSW_ERR_INVALID, "an envmap's to_world must be a rotation (times a uniform scale)");
+      st = ld_fail(ld, n, "to_world", RSW_ERR_INVALID,
+                   "an envmap's to_world must be a rotation (times a uniform scale)");
   }
   if (!st) st = ld_path(ld, n, "filename", &path);
   if (!st) {
@@ -257,5 +267,10 @@ static void env_traverse(object *o, param_visitor *v) {
   pv_float(v, "sampling_weight", &m->base.sampling_weight, UPDATE_SPECTRAL, 0.0, INFINITY);
 }
 
-const plugin plugin_envmap = {.name = "envmap", .cls = CLS_EMITTER, .create = env_create, .destroy = env_destroy,
-                              .prepare = env_prepare, .ops = &envmap_ops, .traverse = env_traverse};
+const plugin plugin_envmap = {.name = "envmap",
+                              .cls = CLS_EMITTER,
+                              .create = env_create,
+                              .destroy = env_destroy,
+                              .prepare = env_prepare,
+                              .ops = &envmap_ops,
+                              .traverse = env_traverse};

@@ -18,7 +18,7 @@
 #include "../scene/loader.h"
 
 /* Bounds that keep a hostile document from asking for a huge buffer. */
-#define HDRFILM_MAX_DIM 65536
+#define HDRFILM_MAX_DIM    65536
 #define HDRFILM_MAX_PIXELS (1LL << 26)
 
 typedef struct hdrfilm {
@@ -26,7 +26,9 @@ typedef struct hdrfilm {
   pixel_format requested; /* what the document asked for (before mono) */
 } hdrfilm;
 
-static void hdrfilm_destroy(object *o) { free(o); }
+static void hdrfilm_destroy(object *o) {
+  free(o);
+}
 
 /* The variant is known per render: mono forces one luminance channel. */
 static rsw_status hdrfilm_prepare(object *o, const render_ctx *rc, rsw_err *err) {
@@ -55,8 +57,7 @@ typedef struct name_code {
 
 /* The entry named `value` (case-insensitive, as Mitsuba lower-cases these
  * strings), or NULL. */
-static const name_code *find_name(const char *value, const name_code *table,
-                                  size_t count) {
+static const name_code *find_name(const char *value, const name_code *table, size_t count) {
   for (size_t i = 0; i < count; i++)
     if (strcasecmp(value, table[i].name) == 0) return &table[i];
   return NULL;
@@ -64,25 +65,24 @@ static const name_code *find_name(const char *value, const name_code *table,
 
 /* Look `value` up: unknown names are invalid, names Mitsuba knows but this
  * kernel does not produce are unsupported. */
-static rsw_status lookup(loader *ld, node *n, const char *key, const char *value,
-                         const name_code *table, size_t count, const char *valid,
-                         int *out) {
+static rsw_status lookup(loader *ld, node *n, const char *key, const char *value, const name_code *table,
+                         size_t count, const char *valid, int *out) {
   const name_code *e = find_name(value, table, count);
   if (!e)
-    return ld_fail(ld, n, key, RSW_ERR_INVALID, "hdrfilm: unknown %s '%s' (supported: %s)",
-                   key, value, valid);
+    return ld_fail(ld, n, key, RSW_ERR_INVALID, "hdrfilm: unknown %s '%s' (supported: %s)", key, value,
+                   valid);
   if (e->code < 0)
-    return ld_fail(ld, n, key, RSW_ERR_UNSUPPORTED,
-                   "hdrfilm: %s '%s' is not supported (supported: %s)", key, value, valid);
+    return ld_fail(ld, n, key, RSW_ERR_UNSUPPORTED, "hdrfilm: %s '%s' is not supported (supported: %s)", key,
+                   value, valid);
   *out = e->code;
   return RSW_OK;
 }
 
-static const name_code file_formats[] = {
-    {"openexr", 0}, {"exr", 0}, {"rgbe", -1}, {"pfm", -1}};
+static const name_code file_formats[] = {{"openexr", 0}, {"exr", 0}, {"rgbe", -1}, {"pfm", -1}};
 static const name_code pixel_formats[] = {
-    {"rgb", PIXFMT_RGB}, {"luminance", PIXFMT_LUMINANCE}, {"stokes", PIXFMT_STOKES}, {"rgba", -1},
-    {"luminance_alpha", -1}, {"xyz", -1}, {"xyza", -1}};
+    {"rgb", PIXFMT_RGB}, {"luminance", PIXFMT_LUMINANCE}, {"stokes", PIXFMT_STOKES},
+    {"rgba", -1},        {"luminance_alpha", -1},         {"xyz", -1},
+    {"xyza", -1}};
 static const name_code component_formats[] = {
     {"float16", COMPFMT_FLOAT16}, {"float32", COMPFMT_FLOAT32}, {"uint32", -1}};
 #define COUNT(a) (sizeof(a) / sizeof((a)[0]))
@@ -93,8 +93,8 @@ static rsw_status hdrfilm_read(loader *ld, node *n, hdrfilm *f) {
   if (st == RSW_OK) st = ld_int(ld, n, "height", 576, 1, HDRFILM_MAX_DIM, &h);
   if (st != RSW_OK) return st;
   if (w * h > HDRFILM_MAX_PIXELS)
-    return ld_fail(ld, n, NULL, RSW_ERR_LIMIT, "hdrfilm: %lldx%lld pixels exceed the limit of %lld",
-                   w, h, HDRFILM_MAX_PIXELS);
+    return ld_fail(ld, n, NULL, RSW_ERR_LIMIT, "hdrfilm: %lldx%lld pixels exceed the limit of %lld", w, h,
+                   HDRFILM_MAX_PIXELS);
   f->base.width = (int)w;
   f->base.height = (int)h;
 
@@ -130,8 +130,7 @@ static rsw_status hdrfilm_read(loader *ld, node *n, hdrfilm *f) {
   const char *s = NULL;
   int code = 0;
   st = ld_string(ld, n, "file_format", "openexr", &s);
-  if (st == RSW_OK)
-    st = lookup(ld, n, "file_format", s, file_formats, COUNT(file_formats), "openexr", &code);
+  if (st == RSW_OK) st = lookup(ld, n, "file_format", s, file_formats, COUNT(file_formats), "openexr", &code);
   if (st != RSW_OK) return st;
 
   st = ld_string(ld, n, "pixel_format", "rgb", &s);
@@ -140,16 +139,15 @@ static rsw_status hdrfilm_read(loader *ld, node *n, hdrfilm *f) {
     /* Mitsuba forces Y in monochrome variants whatever was asked (with a
      * warning); a name Mitsuba does not know is still an error here. */
     if (!find_name(s, pixel_formats, COUNT(pixel_formats)))
-      return ld_fail(ld, n, "pixel_format", RSW_ERR_INVALID,
-                     "hdrfilm: unknown pixel_format '%s'", s);
+      return ld_fail(ld, n, "pixel_format", RSW_ERR_INVALID, "hdrfilm: unknown pixel_format '%s'", s);
     /* "stokes": channels S0..S3 (I, Q, U, V) — kept in mono. */
     code = strcmp(s, "stokes") == 0 ? PIXFMT_STOKES : PIXFMT_LUMINANCE;
   } else if (strcmp(s, "stokes") == 0) {
-    return ld_fail(ld, n, "pixel_format", RSW_ERR_UNSUPPORTED,
-                   "hdrfilm: pixel_format 'stokes' needs the mono variant (Stokes vectors are per wavelength)");
+    return ld_fail(
+        ld, n, "pixel_format", RSW_ERR_UNSUPPORTED,
+        "hdrfilm: pixel_format 'stokes' needs the mono variant (Stokes vectors are per wavelength)");
   } else {
-    st = lookup(ld, n, "pixel_format", s, pixel_formats, COUNT(pixel_formats),
-                "rgb, luminance", &code);
+    st = lookup(ld, n, "pixel_format", s, pixel_formats, COUNT(pixel_formats), "rgb, luminance", &code);
     if (st != RSW_OK) return st;
   }
   f->requested = (pixel_format)code;
@@ -158,8 +156,8 @@ static rsw_status hdrfilm_read(loader *ld, node *n, hdrfilm *f) {
 
   st = ld_string(ld, n, "component_format", "float16", &s);
   if (st == RSW_OK)
-    st = lookup(ld, n, "component_format", s, component_formats, COUNT(component_formats),
-                "float16, float32", &code);
+    st = lookup(ld, n, "component_format", s, component_formats, COUNT(component_formats), "float16, float32",
+                &code);
   if (st != RSW_OK) return st;
   f->base.component_format = (component_format)code;
 

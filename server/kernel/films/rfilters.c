@@ -28,7 +28,9 @@ static double gaussian_eval(const rfilter *f, double x) {
   return v > 0.0 ? v : 0.0;
 }
 
-static void rfilter_destroy(object *o) { free(o); }
+static void rfilter_destroy(object *o) {
+  free(o);
+}
 
 static rsw_status box_create(loader *ld, node *n, object **out);
 static rsw_status gaussian_create(loader *ld, node *n, object **out);

@@ -34,7 +34,8 @@ static ray3 spawn_ray_to(const scene *sc, const surface_interaction *si, const e
                          const direction_sample *ds) {
   if ((e->flags & EMITTER_SURFACE) && e->shape) {
     const shape *ls = e->shape;
-    return spawn_ray_between(si, ds->p, ds->n, accel_surface_error(sc->accel, ls->index, &ls->to_world, ds->p, ds->n));
+    return spawn_ray_between(si, ds->p, ds->n,
+                             accel_surface_error(sc->accel, ls->index, &ls->to_world, ds->p, ds->n));
   }
   ray3 r = spawn_ray(si, ds->d);
   r.tmax = isfinite(ds->dist) ? ds->dist * (1.0 - RSW_SHADOW_EPSILON) : INFINITY;
@@ -195,7 +196,9 @@ static color path_Li(const integrator *it, const scene *sc, sampler_state *st, r
 
 static const integrator_ops path_ops = {.Li = path_Li};
 
-static void path_destroy(object *o) { free(o); }
+static void path_destroy(object *o) {
+  free(o);
+}
 
 static rsw_status path_create(loader *ld, node *n, object **out) {
   integrator *it = calloc(1, sizeof *it);
@@ -215,4 +218,5 @@ static rsw_status path_create(loader *ld, node *n, object **out) {
   return RSW_OK;
 }
 
-const plugin plugin_path = {.name = "path", .cls = CLS_INTEGRATOR, .create = path_create, .destroy = path_destroy, .ops = &path_ops};
+const plugin plugin_path = {
+    .name = "path", .cls = CLS_INTEGRATOR, .create = path_create, .destroy = path_destroy, .ops = &path_ops};

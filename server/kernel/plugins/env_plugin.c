@@ -27,7 +27,7 @@
 /* Vector parameters are reported through pv_vector(), whose get/set
  * callbacks receive only the owner: one trampoline per vector slot. */
 #define MAX_VECTOR_PARAMS 8
-#define MAX_PARAMS 64
+#define MAX_PARAMS        64
 
 typedef struct loaded_plugin {
   plugin rec; /* what registry_find() returns; first member */
@@ -44,15 +44,31 @@ static size_t g_n_loaded;
 
 /* ---- host services ------------------------------------------------------- */
 
-static void out3(vec3 v, double d[3]) { d[0] = v.x, d[1] = v.y, d[2] = v.z; }
-static vec3 in3(const double d[3]) { return v3(d[0], d[1], d[2]); }
+static void out3(vec3 v, double d[3]) {
+  d[0] = v.x, d[1] = v.y, d[2] = v.z;
+}
+static vec3 in3(const double d[3]) {
+  return v3(d[0], d[1], d[2]);
+}
 
-static void h_sphere(const double u[2], double d[3]) { out3(warp_square_to_uniform_sphere(v2(u[0], u[1])), d); }
-static double h_sphere_pdf(void) { return RSW_INV_4PI; }
-static void h_hemi(const double u[2], double d[3]) { out3(warp_square_to_uniform_hemisphere(v2(u[0], u[1])), d); }
-static double h_hemi_pdf(const double d[3]) { return warp_square_to_uniform_hemisphere_pdf(in3(d)); }
-static void h_cos(const double u[2], double d[3]) { out3(warp_square_to_cosine_hemisphere(v2(u[0], u[1])), d); }
-static double h_cos_pdf(const double d[3]) { return warp_square_to_cosine_hemisphere_pdf(in3(d)); }
+static void h_sphere(const double u[2], double d[3]) {
+  out3(warp_square_to_uniform_sphere(v2(u[0], u[1])), d);
+}
+static double h_sphere_pdf(void) {
+  return RSW_INV_4PI;
+}
+static void h_hemi(const double u[2], double d[3]) {
+  out3(warp_square_to_uniform_hemisphere(v2(u[0], u[1])), d);
+}
+static double h_hemi_pdf(const double d[3]) {
+  return warp_square_to_uniform_hemisphere_pdf(in3(d));
+}
+static void h_cos(const double u[2], double d[3]) {
+  out3(warp_square_to_cosine_hemisphere(v2(u[0], u[1])), d);
+}
+static double h_cos_pdf(const double d[3]) {
+  return warp_square_to_cosine_hemisphere_pdf(in3(d));
+}
 static void h_cospow(const double u[2], double n, double d[3]) {
   out3(warp_square_to_cosine_power_hemisphere(v2(u[0], u[1]), n), d);
 }
@@ -62,7 +78,9 @@ static double h_cospow_pdf(const double d[3], double n) {
 static void h_cone(const double u[2], double c, double d[3]) {
   out3(warp_square_to_uniform_cone(v2(u[0], u[1]), c), d);
 }
-static double h_cone_pdf(const double d[3], double c) { return warp_square_to_uniform_cone_pdf(in3(d), c); }
+static double h_cone_pdf(const double d[3], double c) {
+  return warp_square_to_uniform_cone_pdf(in3(d), c);
+}
 static void h_pt2xyz(const double pt[2], const double axis[3], double d[3]) {
   out3(warp_phi_theta_to_xyz(v2(pt[0], pt[1]), in3(axis)), d);
 }
@@ -123,8 +141,9 @@ static void record_failure(const env_adapter *ca, const char *fmt, ...) {
   atomic_fetch_add_explicit(&a->failures, 1, memory_order_relaxed);
   int expected = 0;
   if (!atomic_compare_exchange_strong(&a->msg_state, &expected, 1)) return;
-  int k = snprintf(a->msg, sizeof a->msg, "emitter '%s' (plugin type '%s'): ", a->base.base.id ? a->base.base.id : "?",
-                   a->lp->rec.name);
+  int k =
+      snprintf(a->msg, sizeof a->msg,
+               "emitter '%s' (plugin type '%s'): ", a->base.base.id ? a->base.base.id : "?", a->lp->rec.name);
   if (k < 0 || (size_t)k >= sizeof a->msg) k = 0;
   va_list ap;
   va_start(ap, fmt);
@@ -139,12 +158,15 @@ static void record_failure(const env_adapter *ca, const char *fmt, ...) {
 static double radiance_I(const env_adapter *a, vec3 d) {
   double s[4] = {0, 0, 0, 0}, dir[3];
   out3(d, dir);
-  rsw_stokes_context ctx = {.wavelengths = &a->wavelength, .count = 1,
-                            .stokes = {&s[0], &s[1], &s[2], &s[3]}};
+  rsw_stokes_context ctx = {
+      .wavelengths = &a->wavelength, .count = 1, .stokes = {&s[0], &s[1], &s[2], &s[3]}};
   a->lp->api->add_radiance(a->inst, &ctx, dir);
   if (!isfinite(s[0]) || s[0] < 0) {
-    record_failure(a, "add_radiance returned I = %g at %g nm for direction (%g, %g, %g) (must be finite and >= 0); "
-                      "used 0", s[0], a->wavelength, d.x, d.y, d.z);
+    record_failure(
+        a,
+        "add_radiance returned I = %g at %g nm for direction (%g, %g, %g) (must be finite and >= 0); "
+        "used 0",
+        s[0], a->wavelength, d.x, d.y, d.z);
     return 0.0;
   }
   return s[0];
@@ -167,7 +189,8 @@ static color adapter_sample(const emitter *e, const surface_interaction *ref, ve
   vec3 dir = in3(d);
   double len = v3_len(dir);
   if (!isfinite(len) || fabs(len - 1.0) > 1e-3) {
-    record_failure(a, "sample returned direction (%g, %g, %g), not a unit vector; sample dropped", d[0], d[1], d[2]);
+    record_failure(a, "sample returned direction (%g, %g, %g), not a unit vector; sample dropped", d[0], d[1],
+                   d[2]);
     return col1(0);
   }
   dir = v3_scale(dir, 1.0 / len);
@@ -184,8 +207,8 @@ static double adapter_pdf(const emitter *e, const surface_interaction *ref, cons
   out3(ds->d, d);
   double pdf = a->lp->api->pdf(a->inst, d);
   if (!isfinite(pdf) || pdf < 0) {
-    record_failure(a, "pdf returned %g for direction (%g, %g, %g) (must be finite and >= 0); used 0", pdf, d[0], d[1],
-                   d[2]);
+    record_failure(a, "pdf returned %g for direction (%g, %g, %g) (must be finite and >= 0); used 0", pdf,
+                   d[0], d[1], d[2]);
     return 0.0;
   }
   return pdf;
@@ -206,7 +229,8 @@ static void adapter_eval_polarization(const emitter *e, vec3 d, double quv[3]) {
   if (!(len > 0) || !isfinite(len)) return;
   double s[4] = {0, 0, 0, 0}, dir[3];
   out3(v3_scale(d, 1.0 / len), dir);
-  rsw_stokes_context ctx = {.wavelengths = &a->wavelength, .count = 1, .stokes = {&s[0], &s[1], &s[2], &s[3]}};
+  rsw_stokes_context ctx = {
+      .wavelengths = &a->wavelength, .count = 1, .stokes = {&s[0], &s[1], &s[2], &s[3]}};
   a->lp->api->add_radiance(a->inst, &ctx, dir);
   if (!isfinite(s[1]) || !isfinite(s[2]) || !isfinite(s[3])) {
     record_failure(a, "add_radiance returned a non-finite Q, U or V at %g nm; used 0", a->wavelength);
@@ -233,7 +257,9 @@ static void adapter_destroy(object *o) {
   free(a);
 }
 
-static bool unbounded(const rsw_plugin_param *p) { return p->min == 0 && p->max == 0; }
+static bool unbounded(const rsw_plugin_param *p) {
+  return p->min == 0 && p->max == 0;
+}
 
 static rsw_status adapter_create(loader *ld, node *n, object **out) {
   const loaded_plugin *lp = find_loaded(n->type);
@@ -273,7 +299,8 @@ static rsw_status adapter_create(loader *ld, node *n, object **out) {
         out3(r, v);
         for (int k = 0; k < 3 && !st; k++)
           if (v[k] < lo || v[k] > hi)
-            st = ld_fail(ld, n, p->name, RSW_ERR_RANGE, "component %d is %g, outside [%g, %g]", k, v[k], lo, hi);
+            st = ld_fail(ld, n, p->name, RSW_ERR_RANGE, "component %d is %g, outside [%g, %g]", k, v[k], lo,
+                         hi);
       }
     }
   }
@@ -300,15 +327,18 @@ static rsw_status adapter_prepare(object *o, const render_ctx *rc, rsw_err *err)
   atomic_store(&a->failures, 0);
   atomic_store(&a->msg_state, 0);
   if (rc->variant != VARIANT_MONO)
-    return rsw_fail(err, RSW_ERR_UNSUPPORTED, "", "emitter '%s' (plugin type '%s') serves only the mono variant",
-                    o->id ? o->id : "?", a->lp->rec.name);
+    return rsw_fail(err, RSW_ERR_UNSUPPORTED, "",
+                    "emitter '%s' (plugin type '%s') serves only the mono variant", o->id ? o->id : "?",
+                    a->lp->rec.name);
   a->wavelength = rc->wavelength > 0 ? rc->wavelength : 550.0;
-  rsw_prepare_context pc = {.wavelength_min = a->wavelength, .wavelength_max = a->wavelength, .variant = "mono"};
+  rsw_prepare_context pc = {
+      .wavelength_min = a->wavelength, .wavelength_max = a->wavelength, .variant = "mono"};
   char eb[512] = "";
   if (a->lp->api->prepare && a->lp->api->prepare(a->inst, &pc, eb, sizeof eb)) {
     eb[sizeof eb - 1] = 0;
-    return rsw_fail(err, RSW_ERR_INVALID, "", "emitter '%s' (plugin type '%s', %s): prepare failed at %g nm: %s",
-                    o->id ? o->id : "?", a->lp->rec.name, a->lp->file, a->wavelength, eb[0] ? eb : "(no message)");
+    return rsw_fail(err, RSW_ERR_INVALID, "",
+                    "emitter '%s' (plugin type '%s', %s): prepare failed at %g nm: %s", o->id ? o->id : "?",
+                    a->lp->rec.name, a->lp->file, a->wavelength, eb[0] ? eb : "(no message)");
   }
   return RSW_OK;
 }
@@ -342,7 +372,7 @@ static size_t vec_param_index(const env_adapter *a, int slot) {
   return 0; /* unreachable: slots are assigned at load */
 }
 #define VEC_TRAMPOLINE(k)                                                                                    \
-  static vec3 vget_##k(const object *o) {                                                                  \
+  static vec3 vget_##k(const object *o) {                                                                    \
     const env_adapter *a = (const env_adapter *)o;                                                           \
     return in3(&a->values[3 * vec_param_index(a, k)]);                                                       \
   }                                                                                                          \
@@ -416,16 +446,18 @@ static void unload_one(loaded_plugin *lp) {
 /* Check the table a plugin returned; on failure fill err naming file. */
 static rsw_status check_table(const rsw_env_plugin *api, const char *file, loaded_plugin *lp, rsw_err *err) {
   if (!api)
-    return rsw_fail(err, RSW_ERR_INVALID, file, "plugin %s: its entry %s() returned NULL (plugin refused to load)",
-                    file, RSW_ENV_PLUGIN_ENTRY);
+    return rsw_fail(err, RSW_ERR_INVALID, file,
+                    "plugin %s: its entry %s() returned NULL (plugin refused to load)", file,
+                    RSW_ENV_PLUGIN_ENTRY);
   if (api->abi_version != RSW_PLUGIN_ABI_VERSION)
     return rsw_fail(err, RSW_ERR_UNSUPPORTED, file,
                     "plugin %s: ABI version %u, but this raysweepd speaks ABI version %d "
                     "(rebuild it against this raysweepd's include/raysweep/plugin.h)",
                     file, (unsigned)api->abi_version, RSW_PLUGIN_ABI_VERSION);
   if (!valid_name(api->type_name, false))
-    return rsw_fail(err, RSW_ERR_INVALID, file, "plugin %s: invalid type name '%s' (must match [a-z][a-z0-9_]*)",
-                    file, api->type_name ? api->type_name : "(null)");
+    return rsw_fail(err, RSW_ERR_INVALID, file,
+                    "plugin %s: invalid type name '%s' (must match [a-z][a-z0-9_]*)", file,
+                    api->type_name ? api->type_name : "(null)");
   const char *missing = !api->create         ? "create"
                         : !api->destroy      ? "destroy"
                         : !api->add_radiance ? "add_radiance"
@@ -434,36 +466,40 @@ static rsw_status check_table(const rsw_env_plugin *api, const char *file, loade
                                              : NULL;
   if (!missing && api->n_params && !api->set_param) missing = "set_param (the plugin declares parameters)";
   if (missing)
-    return rsw_fail(err, RSW_ERR_INVALID, file, "plugin %s (type '%s'): callback %s is NULL", file, api->type_name,
-                    missing);
+    return rsw_fail(err, RSW_ERR_INVALID, file, "plugin %s (type '%s'): callback %s is NULL", file,
+                    api->type_name, missing);
   if (api->n_params > MAX_PARAMS || (api->n_params && !api->params))
-    return rsw_fail(err, RSW_ERR_INVALID, file, "plugin %s (type '%s'): %zu parameters (at most %d, params non-NULL)",
-                    file, api->type_name, api->n_params, MAX_PARAMS);
+    return rsw_fail(err, RSW_ERR_INVALID, file,
+                    "plugin %s (type '%s'): %zu parameters (at most %d, params non-NULL)", file,
+                    api->type_name, api->n_params, MAX_PARAMS);
   int n_vec = 0;
   for (size_t i = 0; i < api->n_params; i++) {
     const rsw_plugin_param *p = &api->params[i];
     lp->vec_slot[i] = -1;
     if (!valid_name(p->name, true) || strcmp(p->name, "sampling_weight") == 0)
-      return rsw_fail(err, RSW_ERR_INVALID, file,
-                      "plugin %s (type '%s'): parameter %zu has invalid name '%s' (must match [a-z_][a-z0-9_]*, "
-                      "not sampling_weight)", file, api->type_name, i, p->name ? p->name : "(null)");
+      return rsw_fail(
+          err, RSW_ERR_INVALID, file,
+          "plugin %s (type '%s'): parameter %zu has invalid name '%s' (must match [a-z_][a-z0-9_]*, "
+          "not sampling_weight)",
+          file, api->type_name, i, p->name ? p->name : "(null)");
     for (size_t j = 0; j < i; j++)
       if (strcmp(api->params[j].name, p->name) == 0)
-        return rsw_fail(err, RSW_ERR_DUPLICATE, file, "plugin %s (type '%s'): parameter '%s' declared twice", file,
-                        api->type_name, p->name);
+        return rsw_fail(err, RSW_ERR_DUPLICATE, file, "plugin %s (type '%s'): parameter '%s' declared twice",
+                        file, api->type_name, p->name);
     if (p->type != RSW_PARAM_FLOAT && p->type != RSW_PARAM_VECTOR3)
-      return rsw_fail(err, RSW_ERR_INVALID, file, "plugin %s (type '%s'): parameter '%s' has unknown type %d", file,
-                      api->type_name, p->name, p->type);
+      return rsw_fail(err, RSW_ERR_INVALID, file, "plugin %s (type '%s'): parameter '%s' has unknown type %d",
+                      file, api->type_name, p->name, p->type);
     if (p->update_class != RSW_UPDATE_SPECTRAL && p->update_class != RSW_UPDATE_NONE)
-      return rsw_fail(err, RSW_ERR_INVALID, file, "plugin %s (type '%s'): parameter '%s' has unknown update class %d",
-                      file, api->type_name, p->name, p->update_class);
+      return rsw_fail(err, RSW_ERR_INVALID, file,
+                      "plugin %s (type '%s'): parameter '%s' has unknown update class %d", file,
+                      api->type_name, p->name, p->update_class);
     if (!(p->min <= p->max))
-      return rsw_fail(err, RSW_ERR_INVALID, file, "plugin %s (type '%s'): parameter '%s' has min %g > max %g", file,
-                      api->type_name, p->name, p->min, p->max);
+      return rsw_fail(err, RSW_ERR_INVALID, file, "plugin %s (type '%s'): parameter '%s' has min %g > max %g",
+                      file, api->type_name, p->name, p->min, p->max);
     if (p->type == RSW_PARAM_VECTOR3) {
       if (n_vec == MAX_VECTOR_PARAMS)
-        return rsw_fail(err, RSW_ERR_LIMIT, file, "plugin %s (type '%s'): more than %d vector parameters", file,
-                        api->type_name, MAX_VECTOR_PARAMS);
+        return rsw_fail(err, RSW_ERR_LIMIT, file, "plugin %s (type '%s'): more than %d vector parameters",
+                        file, api->type_name, MAX_VECTOR_PARAMS);
       lp->vec_slot[i] = n_vec++;
     }
   }
@@ -490,7 +526,8 @@ static rsw_status load_one(const char *path, rsw_err *err) {
   if (!sym) {
     rsw_fail(err, RSW_ERR_NOT_FOUND, path,
              "plugin %s: no exported symbol %s (define `const rsw_env_plugin *%s(const rsw_plugin_host *)` "
-             "with C linkage)", path, RSW_ENV_PLUGIN_ENTRY, RSW_ENV_PLUGIN_ENTRY);
+             "with C linkage)",
+             path, RSW_ENV_PLUGIN_ENTRY, RSW_ENV_PLUGIN_ENTRY);
     unload_one(lp);
     return err->code;
   }
@@ -511,11 +548,12 @@ static rsw_status load_one(const char *path, rsw_err *err) {
     }
     const loaded_plugin *other = find_loaded(name);
     if (builtin)
-      st = rsw_fail(err, RSW_ERR_DUPLICATE, path, "plugin %s: type name '%s' clashes with the built-in %s '%s'", path,
-                    name, obj_class_name(builtin->cls), name);
+      st = rsw_fail(err, RSW_ERR_DUPLICATE, path,
+                    "plugin %s: type name '%s' clashes with the built-in %s '%s'", path, name,
+                    obj_class_name(builtin->cls), name);
     else if (other)
-      st = rsw_fail(err, RSW_ERR_DUPLICATE, path, "plugin %s: type name '%s' is already provided by plugin %s", path,
-                    name, other->file);
+      st = rsw_fail(err, RSW_ERR_DUPLICATE, path,
+                    "plugin %s: type name '%s' is already provided by plugin %s", path, name, other->file);
   }
   if (st) {
     unload_one(lp);
@@ -540,7 +578,9 @@ static rsw_status load_one(const char *path, rsw_err *err) {
   return RSW_OK;
 }
 
-static int cmp_str(const void *a, const void *b) { return strcmp(*(char *const *)a, *(char *const *)b); }
+static int cmp_str(const void *a, const void *b) {
+  return strcmp(*(char *const *)a, *(char *const *)b);
+}
 
 /* The `*.so` files of dir, sorted (owned: free each and the array). */
 static rsw_status list_dir(const char *dir, char ***out, size_t *count, rsw_err *err) {
@@ -621,7 +661,9 @@ const plugin *plugins_find(const char *name) {
   return lp ? &lp->rec : NULL;
 }
 
-size_t plugins_count(void) { return g_n_loaded; }
+size_t plugins_count(void) {
+  return g_n_loaded;
+}
 
 const plugin *plugins_at(size_t i, const char **pretty_name, const char **file) {
   if (i >= g_n_loaded) return NULL;

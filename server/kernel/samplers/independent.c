@@ -7,8 +7,8 @@
 #include "../scene/loader.h"
 #include "sampler_common.h"
 
-static void independent_start(const sampler *s, sampler_state *st, uint64_t seed,
-                              uint64_t pixel, uint32_t sample_index, uint32_t spp) {
+static void independent_start(const sampler *s, sampler_state *st, uint64_t seed, uint64_t pixel,
+                              uint32_t sample_index, uint32_t spp) {
   sampler_seed_stream(s, st, seed, pixel, sample_index, spp);
 }
 
@@ -36,7 +36,9 @@ static const sampler_ops independent_ops = {
     .adjust_spp = independent_adjust_spp,
 };
 
-static void independent_destroy(object *o) { free(o); }
+static void independent_destroy(object *o) {
+  free(o);
+}
 
 static rsw_status independent_create(loader *ld, node *n, object **out);
 

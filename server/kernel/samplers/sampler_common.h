@@ -21,9 +21,8 @@ static inline uint64_t sampler_pixel_key(uint64_t seed, uint64_t pixel) {
   return mix64(mix64(seed) ^ pixel);
 }
 
-static inline void sampler_seed_stream(const sampler *s, sampler_state *st, uint64_t seed,
-                                       uint64_t pixel, uint32_t sample_index,
-                                       uint32_t spp) {
+static inline void sampler_seed_stream(const sampler *s, sampler_state *st, uint64_t seed, uint64_t pixel,
+                                       uint32_t sample_index, uint32_t spp) {
   st->s = s;
   st->pixel_key = sampler_pixel_key(seed + s->seed, pixel);
   st->sample_index = sample_index;

@@ -66,8 +66,7 @@ static uint32_t stratified_adjust_spp(const sampler *s, uint32_t spp) {
 
 /* Permutation seed of dimension d: a 32-bit hash of (seed, pixel, d). */
 static uint32_t dim_seed(const sampler_state *st) {
-  return (uint32_t)(mix64(st->pixel_key ^ (0x9e3779b97f4a7c15ULL * ((uint64_t)st->dim + 1))) >>
-                    32);
+  return (uint32_t)(mix64(st->pixel_key ^ (0x9e3779b97f4a7c15ULL * ((uint64_t)st->dim + 1))) >> 32);
 }
 
 /* Stratum of the current sample in the current dimension, in [0, n^2). */
@@ -79,8 +78,8 @@ static double jitter(sampler_state *st) {
   return st->s->jitter ? pcg32_next_double(&st->rng) : 0.5;
 }
 
-static void stratified_start(const sampler *s, sampler_state *st, uint64_t seed,
-                             uint64_t pixel, uint32_t sample_index, uint32_t spp) {
+static void stratified_start(const sampler *s, sampler_state *st, uint64_t seed, uint64_t pixel,
+                             uint32_t sample_index, uint32_t spp) {
   sampler_seed_stream(s, st, seed, pixel, sample_index, spp);
 }
 
@@ -109,7 +108,9 @@ static const sampler_ops stratified_ops = {
     .adjust_spp = stratified_adjust_spp,
 };
 
-static void stratified_destroy(object *o) { free(o); }
+static void stratified_destroy(object *o) {
+  free(o);
+}
 
 static rsw_status stratified_create(loader *ld, node *n, object **out);
 

@@ -39,8 +39,7 @@ rsw_status ld_fail(loader *ld, node *n, const char *name, rsw_status code, const
   va_start(ap, fmt);
   vsnprintf(msg, sizeof msg, fmt, ap);
   va_end(ap);
-  if (n && n->id && name)
-    return rsw_fail(ld->err, code, where, "%s '%s': %s", n->type, n->id, msg);
+  if (n && n->id && name) return rsw_fail(ld->err, code, where, "%s '%s': %s", n->type, n->id, msg);
   return rsw_fail(ld->err, code, where, "%s", msg);
 }
 
@@ -60,8 +59,8 @@ static const char *prop_kind_name(prop_kind k) {
 }
 
 static rsw_status wrong_type(loader *ld, node *n, prop *p, const char *expected) {
-  return ld_fail(ld, n, p->name, RSW_ERR_TYPE, "property '%s' must be %s, got %s", p->name,
-                 expected, prop_kind_name(p->kind));
+  return ld_fail(ld, n, p->name, RSW_ERR_TYPE, "property '%s' must be %s, got %s", p->name, expected,
+                 prop_kind_name(p->kind));
 }
 
 /* ---- id table and plugin lookup ----------------------------------------------- */
@@ -244,12 +243,11 @@ static rsw_status ld_build(loader *ld, node *n, obj_class cls, object **out) {
         return rsw_fail(ld->err, RSW_ERR_UNUSED_PROPERTY, p->loc,
                         "%s '%s' takes no %s%s%s: %s%s%s is the %s plugin '%s' (unused)", n->type,
                         n->id ? n->id : "", cname, p->name[0] ? " as '" : "", p->name, p->name[0] ? "'" : "",
-                        p->kind == PROP_REF ? "the reference resolves to " : "", p->kind == PROP_REF ? p->ref : "it",
-                        cname, t ? t->type : "?");
+                        p->kind == PROP_REF ? "the reference resolves to " : "",
+                        p->kind == PROP_REF ? p->ref : "it", cname, t ? t->type : "?");
       }
       return rsw_fail(ld->err, RSW_ERR_UNUSED_PROPERTY, p->loc,
-                      "%s '%s' has no property '%s' (unused property)", n->type, n->id ? n->id : "",
-                      p->name);
+                      "%s '%s' has no property '%s' (unused property)", n->type, n->id ? n->id : "", p->name);
     }
   }
   n->build_state = 2;
@@ -260,7 +258,9 @@ static rsw_status ld_build(loader *ld, node *n, obj_class cls, object **out) {
 
 /* ---- property getters ------------------------------------------------------------ */
 
-bool ld_has(const node *n, const char *name) { return node_find(n, name) != NULL; }
+bool ld_has(const node *n, const char *name) {
+  return node_find(n, name) != NULL;
+}
 
 rsw_status ld_float(loader *ld, node *n, const char *name, double def, double *out) {
   prop *p = node_find(n, name);
@@ -269,8 +269,7 @@ rsw_status ld_float(loader *ld, node *n, const char *name, double def, double *o
     return RSW_OK;
   }
   if (p->kind != PROP_NUMBER) return wrong_type(ld, n, p, "a number");
-  if (!isfinite(p->num))
-    return ld_fail(ld, n, name, RSW_ERR_INVALID, "property '%s' must be finite", name);
+  if (!isfinite(p->num)) return ld_fail(ld, n, name, RSW_ERR_INVALID, "property '%s' must be finite", name);
   p->used = true;
   *out = p->num;
   return RSW_OK;
@@ -299,11 +298,12 @@ rsw_status ld_int(loader *ld, node *n, const char *name, long long def, long lon
   }
   if (p->kind != PROP_NUMBER) return wrong_type(ld, n, p, "an integer");
   if (!(p->num == floor(p->num)) || !(fabs(p->num) < TWO_POW_53))
-    return ld_fail(ld, n, name, RSW_ERR_TYPE, "property '%s' must be an integer (|x| < 2^53), got %g",
-                   name, p->num);
+    return ld_fail(ld, n, name, RSW_ERR_TYPE, "property '%s' must be an integer (|x| < 2^53), got %g", name,
+                   p->num);
   long long v = (long long)p->num;
   if (v < lo || v > hi)
-    return ld_fail(ld, n, name, RSW_ERR_RANGE, "property '%s' = %lld must lie in [%lld, %lld]", name, v, lo, hi);
+    return ld_fail(ld, n, name, RSW_ERR_RANGE, "property '%s' = %lld must lie in [%lld, %lld]", name, v, lo,
+                   hi);
   p->used = true;
   *out = v;
   return RSW_OK;
@@ -341,8 +341,7 @@ rsw_status ld_vec3(loader *ld, node *n, const char *name, vec3 def, vec3 *out, b
     return RSW_OK;
   }
   if (p->kind != PROP_VEC3) return wrong_type(ld, n, p, "a 3-vector");
-  if (!v3_finite(p->vec))
-    return ld_fail(ld, n, name, RSW_ERR_INVALID, "property '%s' must be finite", name);
+  if (!v3_finite(p->vec)) return ld_fail(ld, n, name, RSW_ERR_INVALID, "property '%s' must be finite", name);
   p->used = true;
   *out = p->vec;
   return RSW_OK;
@@ -378,7 +377,8 @@ rsw_status ld_path(loader *ld, node *n, const char *name, char **out) {
   const char *f;
   rsw_status st = ld_string(ld, n, name, NULL, &f);
   if (st) return st;
-  if (!f) return ld_fail(ld, n, NULL, RSW_ERR_MISSING, "%s '%s': missing property '%s'", n->type, n->id, name);
+  if (!f)
+    return ld_fail(ld, n, NULL, RSW_ERR_MISSING, "%s '%s': missing property '%s'", n->type, n->id, name);
   if (!f[0]) return ld_fail(ld, n, name, RSW_ERR_INVALID, "property '%s' is empty", name);
   if (ld->resolve) {
     rsw_err local = {0};
@@ -432,7 +432,8 @@ static rsw_status check_spectrum(loader *ld, node *n, prop *p, double lo) {
     if (!isfinite(arr[i]))
       return ld_fail(ld, n, p->name, RSW_ERR_INVALID, "property '%s' must be finite", p->name);
     if (arr[i] < lo)
-      return ld_fail(ld, n, p->name, RSW_ERR_RANGE, "property '%s' must be >= %g (got %g)", p->name, lo, arr[i]);
+      return ld_fail(ld, n, p->name, RSW_ERR_RANGE, "property '%s' must be >= %g (got %g)", p->name, lo,
+                     arr[i]);
   }
   return RSW_OK;
 }
@@ -470,9 +471,11 @@ rsw_status ld_texture_opt(loader *ld, node *n, const char *name, double lo, text
     s.rgb[1] = p->vec.y;
     s.rgb[2] = p->vec.z;
     for (int i = 0; i < 3; i++) {
-      if (!isfinite(s.rgb[i])) return ld_fail(ld, n, name, RSW_ERR_INVALID, "property '%s' must be finite", name);
+      if (!isfinite(s.rgb[i]))
+        return ld_fail(ld, n, name, RSW_ERR_INVALID, "property '%s' must be finite", name);
       if (s.rgb[i] < lo)
-        return ld_fail(ld, n, name, RSW_ERR_RANGE, "property '%s' must be >= %g (got %g)", name, lo, s.rgb[i]);
+        return ld_fail(ld, n, name, RSW_ERR_RANGE, "property '%s' must be >= %g (got %g)", name, lo,
+                       s.rgb[i]);
     }
     break;
   case PROP_SPECTRUM:
@@ -492,8 +495,7 @@ rsw_status ld_texture_opt(loader *ld, node *n, const char *name, double lo, text
     *out = (texture *)o;
     return RSW_OK;
   }
-  default:
-    return wrong_type(ld, n, p, "a spectrum (number, rgb, spectrum) or a texture");
+  default: return wrong_type(ld, n, p, "a spectrum (number, rgb, spectrum) or a texture");
   }
   st = make_uniform(ld, n, p, &s, out);
   if (st) return st;
@@ -606,11 +608,10 @@ rsw_status ld_create_default(loader *ld, const char *type, obj_class cls, const 
 
 /* ---- spectra ----------------------------------------------------------------------- */
 
-rsw_status spectrum_eval(const spectrum *s, const render_ctx *rc, color *out, rsw_err *err, const char *where) {
+rsw_status spectrum_eval(const spectrum *s, const render_ctx *rc, color *out, rsw_err *err,
+                         const char *where) {
   switch (s->kind) {
-  case SPEC_UNIFORM:
-    *out = col1(s->value);
-    return RSW_OK;
+  case SPEC_UNIFORM: *out = col1(s->value); return RSW_OK;
   case SPEC_RGB:
     /* Mono: Mitsuba converts an rgb value to its luminance
      * (kernel-behavior.md §2.2). */
@@ -664,7 +665,8 @@ static rsw_status add_emitter(loader *ld, scene *s, emitter *e, const char *wher
                       e->base.id);
     s->environment = e;
   }
-  if (push_ptr((void ***)&s->emitters, &s->n_emitters, e)) return rsw_fail(ld->err, RSW_ERR_NOMEM, where, "out of memory");
+  if (push_ptr((void ***)&s->emitters, &s->n_emitters, e))
+    return rsw_fail(ld->err, RSW_ERR_NOMEM, where, "out of memory");
   return RSW_OK;
 }
 
@@ -686,7 +688,8 @@ static rsw_status scene_create(loader *ld, node *n, object **out) {
     switch (c) {
     case CLS_SHAPE: {
       shape *sh = (shape *)o;
-      if (push_ptr((void ***)&s->shapes, &s->n_shapes, sh)) return rsw_fail(ld->err, RSW_ERR_NOMEM, p->loc, "out of memory");
+      if (push_ptr((void ***)&s->shapes, &s->n_shapes, sh))
+        return rsw_fail(ld->err, RSW_ERR_NOMEM, p->loc, "out of memory");
       if (sh->emitter) {
         st = add_emitter(ld, s, sh->emitter, p->loc);
         if (st) return st;
@@ -700,26 +703,26 @@ static rsw_status scene_create(loader *ld, node *n, object **out) {
       if (st) return st;
       break;
     case CLS_SENSOR:
-      if (push_ptr((void ***)&s->sensors, &s->n_sensors, o)) return rsw_fail(ld->err, RSW_ERR_NOMEM, p->loc, "out of memory");
+      if (push_ptr((void ***)&s->sensors, &s->n_sensors, o))
+        return rsw_fail(ld->err, RSW_ERR_NOMEM, p->loc, "out of memory");
       break;
     case CLS_INTEGRATOR:
-      if (s->integrator)
-        return rsw_fail(ld->err, RSW_ERR_DUPLICATE, p->loc, "a scene takes one integrator");
+      if (s->integrator) return rsw_fail(ld->err, RSW_ERR_DUPLICATE, p->loc, "a scene takes one integrator");
       s->integrator = (integrator *)o;
       break;
     case CLS_BSDF:
-    case CLS_TEXTURE:
-      break; /* declared at the top level to be referenced */
+    case CLS_TEXTURE: break; /* declared at the top level to be referenced */
     case CLS_SCENE:
       if (o->plugin == &plugin_periodic) {
-        if (s->periodic.on) return rsw_fail(ld->err, RSW_ERR_DUPLICATE, p->loc, "a scene takes one periodic boundary");
+        if (s->periodic.on)
+          return rsw_fail(ld->err, RSW_ERR_DUPLICATE, p->loc, "a scene takes one periodic boundary");
         s->periodic = *periodic_of(o);
         break;
       }
       return rsw_fail(ld->err, RSW_ERR_INVALID, p->loc, "a scene cannot be a child of the scene");
     default:
-      return rsw_fail(ld->err, RSW_ERR_INVALID, p->loc, "a %s cannot be a child of the scene (nest it in a sensor)",
-                      obj_class_name(c));
+      return rsw_fail(ld->err, RSW_ERR_INVALID, p->loc,
+                      "a %s cannot be a child of the scene (nest it in a sensor)", obj_class_name(c));
     }
   }
   *out = &s->base;
@@ -829,8 +832,12 @@ rsw_status scene_build(node *root, const char *doc_variant, const scene_load_opt
   s->base.plugin = &plugin_scene;
   s->variant = var;
   s->doc = root;
-  loader ld = {.variant = var, .err = err, .base_dir = opts && opts->base_dir ? opts->base_dir : ".",
-               .root = root, .scene = s, .resolve = opts ? opts->resolve : NULL,
+  loader ld = {.variant = var,
+               .err = err,
+               .base_dir = opts && opts->base_dir ? opts->base_dir : ".",
+               .root = root,
+               .scene = s,
+               .resolve = opts ? opts->resolve : NULL,
                .resolve_user = opts ? opts->resolve_user : NULL};
   rsw_status st = index_ids(&ld, root);
   if (!st) st = index_refs(&ld);

@@ -149,11 +149,14 @@ static rsw_status read_op(jctx *c, const cJSON *o, const char *where, xform *out
       return fail(c, RSW_ERR_INVALID, w, "scale factors must be non-zero");
     *out = xf_scale(s);
   } else if (strcmp(name, "rotate") == 0) {
-    if (!cJSON_IsObject(a)) return fail(c, RSW_ERR_TYPE, w, "rotate: expected {\"axis\": [x,y,z], \"angle\": degrees}");
+    if (!cJSON_IsObject(a))
+      return fail(c, RSW_ERR_TYPE, w, "rotate: expected {\"axis\": [x,y,z], \"angle\": degrees}");
     const cJSON *axis = NULL, *angle = NULL;
     for (const cJSON *k = a->child; k; k = k->next) {
-      if (strcmp(k->string, "axis") == 0 && !axis) axis = k;
-      else if (strcmp(k->string, "angle") == 0 && !angle) angle = k;
+      if (strcmp(k->string, "axis") == 0 && !axis)
+        axis = k;
+      else if (strcmp(k->string, "angle") == 0 && !angle)
+        angle = k;
       else {
         char wk[600];
         ptr_join(wk, sizeof wk, w, k->string);
@@ -173,7 +176,8 @@ static rsw_status read_op(jctx *c, const cJSON *o, const char *where, xform *out
     }
     *out = xf_rotate(ax, angle->valuedouble);
   } else if (strcmp(name, "lookat") == 0) {
-    if (!cJSON_IsObject(a)) return fail(c, RSW_ERR_TYPE, w, "lookat: expected {\"origin\", \"target\", \"up\"}");
+    if (!cJSON_IsObject(a))
+      return fail(c, RSW_ERR_TYPE, w, "lookat: expected {\"origin\", \"target\", \"up\"}");
     vec3 v[3];
     bool got[3] = {false, false, false};
     static const char *const keys[3] = {"origin", "target", "up"};
@@ -284,17 +288,19 @@ static rsw_status account(jctx *c, size_t bytes, const char *where) {
 }
 
 /* {"type":"spectrum", ...} / rgb / uniform -> spectrum. */
-static rsw_status read_spectrum(jctx *c, const cJSON *o, const char *type, const char *where,
-                                spectrum *out) {
+static rsw_status read_spectrum(jctx *c, const cJSON *o, const char *type, const char *where, spectrum *out) {
   memset(out, 0, sizeof *out);
   const cJSON *value = NULL, *wls = NULL, *vals = NULL;
   for (const cJSON *k = o->child; k; k = k->next) {
     if (strcmp(k->string, "type") == 0) continue;
     char w[512];
     ptr_join(w, sizeof w, where, k->string);
-    if (strcmp(k->string, "value") == 0) value = k;
-    else if (strcmp(type, "spectrum") == 0 && strcmp(k->string, "wavelengths") == 0) wls = k;
-    else if (strcmp(type, "spectrum") == 0 && strcmp(k->string, "values") == 0) vals = k;
+    if (strcmp(k->string, "value") == 0)
+      value = k;
+    else if (strcmp(type, "spectrum") == 0 && strcmp(k->string, "wavelengths") == 0)
+      wls = k;
+    else if (strcmp(type, "spectrum") == 0 && strcmp(k->string, "values") == 0)
+      vals = k;
     else if (strcmp(k->string, "filename") == 0)
       return fail(c, RSW_ERR_UNSUPPORTED, w, "spectrum files are not supported: give the values inline");
     else
@@ -321,7 +327,8 @@ static rsw_status read_spectrum(jctx *c, const cJSON *o, const char *type, const
     ptr_join(w, sizeof w, where, "value");
     if (!value) return fail(c, RSW_ERR_MISSING, where, "%s: missing 'value'", type);
     if (!cJSON_IsNumber(value)) return fail(c, RSW_ERR_TYPE, w, "%s: 'value' must be a number", type);
-    if (wls || vals) return fail(c, RSW_ERR_INVALID, where, "spectrum: give either 'value' or 'wavelengths'+'values'");
+    if (wls || vals)
+      return fail(c, RSW_ERR_INVALID, where, "spectrum: give either 'value' or 'wavelengths'+'values'");
     out->kind = SPEC_UNIFORM;
     out->value = value->valuedouble;
     return RSW_OK;
@@ -329,22 +336,30 @@ static rsw_status read_spectrum(jctx *c, const cJSON *o, const char *type, const
   /* Tabulated: value = [[wl, v], ...] or wavelengths + values. */
   size_t n = 0;
   if (value) {
-    if (wls || vals) return fail(c, RSW_ERR_INVALID, where, "spectrum: give either 'value' or 'wavelengths'+'values'");
+    if (wls || vals)
+      return fail(c, RSW_ERR_INVALID, where, "spectrum: give either 'value' or 'wavelengths'+'values'");
     ptr_join(w, sizeof w, where, "value");
-    if (!cJSON_IsArray(value)) return fail(c, RSW_ERR_TYPE, w, "spectrum: 'value' must be a number or a list of [wavelength, value] pairs");
+    if (!cJSON_IsArray(value))
+      return fail(c, RSW_ERR_TYPE, w,
+                  "spectrum: 'value' must be a number or a list of [wavelength, value] pairs");
     n = (size_t)array_size(value);
   } else {
-    if (!wls || !vals) return fail(c, RSW_ERR_MISSING, where, "spectrum: needs 'value', or 'wavelengths' and 'values'");
+    if (!wls || !vals)
+      return fail(c, RSW_ERR_MISSING, where, "spectrum: needs 'value', or 'wavelengths' and 'values'");
     ptr_join(w, sizeof w, where, "wavelengths");
-    if (!cJSON_IsArray(wls) || !all_numbers(wls)) return fail(c, RSW_ERR_TYPE, w, "spectrum: 'wavelengths' must be a list of numbers");
+    if (!cJSON_IsArray(wls) || !all_numbers(wls))
+      return fail(c, RSW_ERR_TYPE, w, "spectrum: 'wavelengths' must be a list of numbers");
     ptr_join(w, sizeof w, where, "values");
-    if (!cJSON_IsArray(vals) || !all_numbers(vals)) return fail(c, RSW_ERR_TYPE, w, "spectrum: 'values' must be a list of numbers");
+    if (!cJSON_IsArray(vals) || !all_numbers(vals))
+      return fail(c, RSW_ERR_TYPE, w, "spectrum: 'values' must be a list of numbers");
     n = (size_t)array_size(wls);
     if ((size_t)array_size(vals) != n)
-      return fail(c, RSW_ERR_INVALID, where, "spectrum: 'wavelengths' has %zu entries but 'values' has %d", n, array_size(vals));
+      return fail(c, RSW_ERR_INVALID, where, "spectrum: 'wavelengths' has %zu entries but 'values' has %d", n,
+                  array_size(vals));
   }
   if (n < 2) return fail(c, RSW_ERR_INVALID, where, "spectrum: a table needs at least 2 samples");
-  if (n > RSW_MAX_SPECTRUM) return fail(c, RSW_ERR_LIMIT, where, "spectrum: more than %d samples", RSW_MAX_SPECTRUM);
+  if (n > RSW_MAX_SPECTRUM)
+    return fail(c, RSW_ERR_LIMIT, where, "spectrum: more than %d samples", RSW_MAX_SPECTRUM);
   out->kind = SPEC_TABLE;
   out->n = n;
   out->wl = malloc(n * sizeof(double));
@@ -380,11 +395,10 @@ static rsw_status read_spectrum(jctx *c, const cJSON *o, const char *type, const
   return RSW_OK;
 }
 
-static rsw_status read_object(jctx *c, const cJSON *obj, const char *key, const char *where,
-                              int depth, node **out);
+static rsw_status read_object(jctx *c, const cJSON *obj, const char *key, const char *where, int depth,
+                              node **out);
 
-static rsw_status read_value(jctx *c, node *n, const cJSON *v, const char *key, const char *where,
-                             int depth);
+static rsw_status read_value(jctx *c, node *n, const cJSON *v, const char *key, const char *where, int depth);
 
 /* A list of objects in a container (the scene, a shapegroup):
  * "members": [{"type": "disk", ...}, {"type": "ref", "id": "x"}, ...] adds
@@ -394,7 +408,8 @@ static rsw_status read_value(jctx *c, node *n, const cJSON *v, const char *key, 
 static rsw_status read_list(jctx *c, node *n, const cJSON *v, const char *key, const char *where, int depth) {
   if (!node_type_is_container(n->type))
     return fail(c, RSW_ERR_TYPE, where,
-                "a list of objects is accepted only in the scene and in shapegroups ('%s' is a %s)", key, n->type);
+                "a list of objects is accepted only in the scene and in shapegroups ('%s' is a %s)", key,
+                n->type);
   int i = 0;
   for (const cJSON *e = v->child; e; e = e->next, i++) {
     char w[512];
@@ -436,12 +451,12 @@ static rsw_status read_value(jctx *c, node *n, const cJSON *v, const char *key, 
   if (strlen(key) >= RSW_MAX_NAME)
     return fail(c, RSW_ERR_LIMIT, where, "key longer than %d characters", RSW_MAX_NAME - 1);
   prop *p;
-#define ADD_(kind)                                                             \
-  do {                                                                         \
-    p = node_add_prop(n, key, kind, where);                                    \
-    if (!p && n->n_props >= RSW_MAX_NODES)                                     \
-      return fail(c, RSW_ERR_LIMIT, where, "more than %d properties in one object", RSW_MAX_NODES); \
-    if (!p) return fail(c, RSW_ERR_NOMEM, where, "out of memory");             \
+#define ADD_(kind)                                                                                           \
+  do {                                                                                                       \
+    p = node_add_prop(n, key, kind, where);                                                                  \
+    if (!p && n->n_props >= RSW_MAX_NODES)                                                                   \
+      return fail(c, RSW_ERR_LIMIT, where, "more than %d properties in one object", RSW_MAX_NODES);          \
+    if (!p) return fail(c, RSW_ERR_NOMEM, where, "out of memory");                                           \
   } while (0)
   if (cJSON_IsBool(v)) {
     ADD_(PROP_BOOL);
@@ -515,7 +530,8 @@ static rsw_status read_value(jctx *c, node *n, const cJSON *v, const char *key, 
         char wk[600];
         ptr_join(wk, sizeof wk, where, k->string);
         if (strcmp(k->string, "id") != 0)
-          return fail(c, RSW_ERR_INVALID, wk, "ref: unexpected key '%s' (a ref has only \"type\" and \"id\")", k->string);
+          return fail(c, RSW_ERR_INVALID, wk, "ref: unexpected key '%s' (a ref has only \"type\" and \"id\")",
+                      k->string);
         id = k;
       }
       if (!id || !cJSON_IsString(id) || !id->valuestring[0])
@@ -551,8 +567,8 @@ static rsw_status read_value(jctx *c, node *n, const cJSON *v, const char *key, 
   return RSW_OK;
 }
 
-static rsw_status read_object(jctx *c, const cJSON *obj, const char *key, const char *where,
-                              int depth, node **out) {
+static rsw_status read_object(jctx *c, const cJSON *obj, const char *key, const char *where, int depth,
+                              node **out) {
   if (depth > RSW_MAX_DEPTH)
     return fail(c, RSW_ERR_LIMIT, where, "nesting deeper than %d levels", RSW_MAX_DEPTH);
   if (++c->n_nodes > RSW_MAX_NODES)
@@ -614,15 +630,16 @@ static void line_col(const char *text, size_t off, int *line, int *colno) {
   *colno = cc;
 }
 
-rsw_status scene_read_json(const char *text, size_t len, const char *source_name,
-                           node **root_out, char **variant_out, rsw_err *err) {
+rsw_status scene_read_json(const char *text, size_t len, const char *source_name, node **root_out,
+                           char **variant_out, rsw_err *err) {
   return scene_read_json_limited(text, len, source_name, NULL, root_out, variant_out, err);
 }
 
 rsw_status scene_read_json_limited(const char *text, size_t len, const char *source_name,
                                    const scene_limits *lim, node **root_out, char **variant_out,
                                    rsw_err *err) {
-  jctx c = {.source = source_name ? source_name : "scene.json", .err = err,
+  jctx c = {.source = source_name ? source_name : "scene.json",
+            .err = err,
             .lim = lim ? lim : &scene_limits_default};
   char where[512];
   snprintf(where, sizeof where, "%s#", c.source);

@@ -19,7 +19,7 @@ typedef struct loader {
   rsw_status (*resolve)(void *user, const char *name, char **path_out, rsw_err *err);
   void *resolve_user;
   node *root;
-  scene *scene;         /* the scene being built (objects are added here) */
+  scene *scene; /* the scene being built (objects are added here) */
   /* id -> node index (builder-private) */
   node **ids;
   size_t n_ids, cap_ids;
@@ -31,26 +31,23 @@ typedef struct loader {
 
 /* Report an error about property `name` of n (or about n itself when name
  * is NULL) and return code. */
-rsw_status ld_fail(loader *ld, node *n, const char *name, rsw_status code,
-                   const char *fmt, ...) __attribute__((format(printf, 5, 6)));
+rsw_status ld_fail(loader *ld, node *n, const char *name, rsw_status code, const char *fmt, ...)
+    __attribute__((format(printf, 5, 6)));
 
 bool ld_has(const node *n, const char *name); /* does not mark used */
 
 rsw_status ld_float(loader *ld, node *n, const char *name, double def, double *out);
 /* As ld_float, and the value must lie in [lo, hi]. */
-rsw_status ld_float_range(loader *ld, node *n, const char *name, double def,
-                          double lo, double hi, double *out);
-rsw_status ld_int(loader *ld, node *n, const char *name, long long def,
-                  long long lo, long long hi, long long *out);
+rsw_status ld_float_range(loader *ld, node *n, const char *name, double def, double lo, double hi,
+                          double *out);
+rsw_status ld_int(loader *ld, node *n, const char *name, long long def, long long lo, long long hi,
+                  long long *out);
 rsw_status ld_bool(loader *ld, node *n, const char *name, bool def, bool *out);
 /* *out is borrowed from the document (valid while the scene lives). */
-rsw_status ld_string(loader *ld, node *n, const char *name, const char *def,
-                     const char **out);
+rsw_status ld_string(loader *ld, node *n, const char *name, const char *def, const char **out);
 /* *present (may be NULL) tells whether the property was given. */
-rsw_status ld_vec3(loader *ld, node *n, const char *name, vec3 def, vec3 *out,
-                   bool *present);
-rsw_status ld_transform(loader *ld, node *n, const char *name, xform *out,
-                        bool *present);
+rsw_status ld_vec3(loader *ld, node *n, const char *name, vec3 def, vec3 *out, bool *present);
+rsw_status ld_transform(loader *ld, node *n, const char *name, xform *out, bool *present);
 /* A file name resolved against the scene's directory; must exist and be
  * readable. *out is owned by the caller (free()). */
 rsw_status ld_path(loader *ld, node *n, const char *name, char **out);
@@ -60,35 +57,30 @@ rsw_status ld_path(loader *ld, node *n, const char *name, char **out);
  * texture object or a ref to one -> that texture. `lo` is the smallest
  * allowed value for constant inputs (0 for reflectances; -INFINITY for no
  * check). *out is owned by the scene. */
-rsw_status ld_texture(loader *ld, node *n, const char *name, double def,
-                      double lo, texture **out);
+rsw_status ld_texture(loader *ld, node *n, const char *name, double def, double lo, texture **out);
 /* As ld_texture but *out = NULL when absent. */
-rsw_status ld_texture_opt(loader *ld, node *n, const char *name, double lo,
-                          texture **out);
+rsw_status ld_texture_opt(loader *ld, node *n, const char *name, double lo, texture **out);
 
 /* The nested object (or referenced object) of class cls. With name NULL,
  * the one child of that class whatever its key (error if several); with a
  * name, the property of that name (error if it is another class).
  * *out = NULL when absent. */
-rsw_status ld_child(loader *ld, node *n, const char *name, obj_class cls,
-                    object **out);
+rsw_status ld_child(loader *ld, node *n, const char *name, obj_class cls, object **out);
 /* All children of class cls in declaration order. *out is malloc'ed (free
  * it); the objects are owned by the scene. */
-rsw_status ld_children(loader *ld, node *n, obj_class cls, object ***out,
-                       size_t *count);
+rsw_status ld_children(loader *ld, node *n, obj_class cls, object ***out, size_t *count);
 
 /* Register an object created outside a node (e.g. a default film) with the
  * scene, which then owns it. */
 rsw_status ld_adopt(loader *ld, object *o);
 /* Create a plugin instance of `type` with no properties (defaults). */
-rsw_status ld_create_default(loader *ld, const char *type, obj_class cls,
-                             const char *id, object **out);
+rsw_status ld_create_default(loader *ld, const char *type, obj_class cls, const char *id, object **out);
 
 /* Evaluate a spectrum property for a render context (mono: value at the
  * wavelength, linear interpolation, error outside the table; rgb: the
  * triple; uniform: the value everywhere). */
-rsw_status spectrum_eval(const spectrum *s, const render_ctx *rc, color *out,
-                         rsw_err *err, const char *where);
+rsw_status spectrum_eval(const spectrum *s, const render_ctx *rc, color *out, rsw_err *err,
+                         const char *where);
 
 /* Registry lookup (scene/registry.c). NULL if unknown. */
 const plugin *registry_find(const char *name);

@@ -55,8 +55,7 @@ void node_free(node *n) {
   free(n);
 }
 
-const scene_limits scene_limits_default = {.max_props = RSW_MAX_PROPS,
-                                           .max_tree_bytes = RSW_MAX_TREE_BYTES};
+const scene_limits scene_limits_default = {.max_props = RSW_MAX_PROPS, .max_tree_bytes = RSW_MAX_TREE_BYTES};
 
 bool node_type_is_container(const char *type) {
   return type && (strcmp(type, "scene") == 0 || strcmp(type, "shapegroup") == 0);
@@ -137,7 +136,9 @@ prop *node_find(const node *n, const char *name) {
   return NULL;
 }
 
-static size_t str_mem(const char *s) { return s ? strlen(s) + 1 : 0; }
+static size_t str_mem(const char *s) {
+  return s ? strlen(s) + 1 : 0;
+}
 
 size_t node_mem_self(const node *n) {
   return sizeof *n + str_mem(n->tag) + str_mem(n->type) + str_mem(n->id) + str_mem(n->loc) +

@@ -17,23 +17,24 @@
 #include "../core/vec.h"
 
 /* Limits that keep hostile documents bounded. */
-#define RSW_MAX_DEPTH 64          /* nesting of objects/arrays */
-#define RSW_MAX_PROPS 4096        /* properties per ordinary object; containers
+#define RSW_MAX_DEPTH 64 /* nesting of objects/arrays */
+#define RSW_MAX_PROPS                                                                                        \
+  4096                             /* properties per ordinary object; containers
                                      (the scene, a shapegroup) take any number of
                                      children, bounded by RSW_MAX_NODES and the
                                      document's memory cap below */
-#define RSW_MAX_NODES 1000000     /* nodes per document */
+#define RSW_MAX_NODES      1000000 /* nodes per document */
 /* Memory of one document tree (nodes, properties and their strings and
  * arrays, as counted by node_mem_*): it stays resident with the scene. A
  * shapegroup member (a disk with a to_world and a bsdf ref) takes about
  * 1.5 KiB, so 1 GiB holds some 700,000 such members. */
 #define RSW_MAX_TREE_BYTES ((size_t)1 << 30)
-#define RSW_MAX_SPECTRUM 100000   /* samples in a tabulated spectrum */
-#define RSW_MAX_NAME 256          /* property names, ids, plugin types */
+#define RSW_MAX_SPECTRUM   100000 /* samples in a tabulated spectrum */
+#define RSW_MAX_NAME       256    /* property names, ids, plugin types */
 
 typedef enum prop_kind {
   PROP_BOOL,
-  PROP_NUMBER,    /* JSON number, XML <float>/<integer>; is_int tells which */
+  PROP_NUMBER, /* JSON number, XML <float>/<integer>; is_int tells which */
   PROP_STRING,
   PROP_VEC3,      /* JSON 3-array, XML <point>/<vector> */
   PROP_SPECTRUM,  /* rgb / uniform / tabulated spectrum */
@@ -44,28 +45,28 @@ typedef enum prop_kind {
 } prop_kind;
 
 typedef enum spectrum_kind {
-  SPEC_UNIFORM,   /* one value at every wavelength */
-  SPEC_RGB,       /* linear sRGB triple */
-  SPEC_TABLE,     /* (wavelength nm, value) pairs, increasing wavelengths */
+  SPEC_UNIFORM, /* one value at every wavelength */
+  SPEC_RGB,     /* linear sRGB triple */
+  SPEC_TABLE,   /* (wavelength nm, value) pairs, increasing wavelengths */
 } spectrum_kind;
 
 typedef struct spectrum {
   spectrum_kind kind;
-  double value;   /* SPEC_UNIFORM */
-  double rgb[3];  /* SPEC_RGB */
-  size_t n;       /* SPEC_TABLE: number of samples */
-  double *wl;     /* owned, nm, strictly increasing */
-  double *val;    /* owned */
+  double value;  /* SPEC_UNIFORM */
+  double rgb[3]; /* SPEC_RGB */
+  size_t n;      /* SPEC_TABLE: number of samples */
+  double *wl;    /* owned, nm, strictly increasing */
+  double *val;   /* owned */
 } spectrum;
 
 struct node;
 
 typedef struct prop {
-  char *name;     /* property name; "" for an unnamed nested XML object */
+  char *name; /* property name; "" for an unnamed nested XML object */
   prop_kind kind;
   char *loc;
-  bool used;      /* set by the builder's getters; unused => error */
-  bool is_int;    /* PROP_NUMBER written as an integer (XML <integer>, or an
+  bool used;   /* set by the builder's getters; unused => error */
+  bool is_int; /* PROP_NUMBER written as an integer (XML <integer>, or an
                      integral JSON number) */
   bool b;
   double num;
@@ -73,16 +74,16 @@ typedef struct prop {
   vec3 vec;
   spectrum spec;
   xform xf;
-  double *nums;   /* PROP_NUMBERS (owned) */
+  double *nums; /* PROP_NUMBERS (owned) */
   size_t n_nums;
   struct node *child; /* PROP_NODE (owned) */
-  char *ref;      /* PROP_REF: the id referred to */
+  char *ref;          /* PROP_REF: the id referred to */
 } prop;
 
 typedef struct node {
-  char *tag;      /* XML element name ("shape", "bsdf", ...); NULL for JSON */
-  char *type;     /* plugin type name; "scene" for the root */
-  char *id;       /* explicit id, or the JSON key, or generated */
+  char *tag;  /* XML element name ("shape", "bsdf", ...); NULL for JSON */
+  char *type; /* plugin type name; "scene" for the root */
+  char *id;   /* explicit id, or the JSON key, or generated */
   bool id_explicit;
   char *loc;
   prop *props;
@@ -92,8 +93,8 @@ typedef struct node {
    * and duplicate checks stay O(1) on containers of 100,000 members. */
   size_t *name_index;
   size_t index_cap; /* 0 or a power of two */
-  void *built;    /* set by the builder: the object made from this node */
-  int build_state; /* builder-private: 0 new, 1 in progress, 2 done */
+  void *built;      /* set by the builder: the object made from this node */
+  int build_state;  /* builder-private: 0 new, 1 in progress, 2 done */
 } node;
 
 /* Per-document limits. scene_limits_default holds the RSW_MAX_* values;
@@ -135,19 +136,17 @@ typedef struct scene_define {
   const char *name, *value;
 } scene_define;
 
-rsw_status scene_read_json(const char *text, size_t len, const char *source_name,
-                           node **root_out, char **variant_out, rsw_err *err);
-rsw_status scene_read_xml(const char *text, size_t len, const char *source_name,
-                          const scene_define *defines, size_t n_defines,
-                          node **root_out, char **variant_out, rsw_err *err);
+rsw_status scene_read_json(const char *text, size_t len, const char *source_name, node **root_out,
+                           char **variant_out, rsw_err *err);
+rsw_status scene_read_xml(const char *text, size_t len, const char *source_name, const scene_define *defines,
+                          size_t n_defines, node **root_out, char **variant_out, rsw_err *err);
 /* The same with explicit limits (NULL: scene_limits_default). */
 rsw_status scene_read_json_limited(const char *text, size_t len, const char *source_name,
                                    const scene_limits *lim, node **root_out, char **variant_out,
                                    rsw_err *err);
 rsw_status scene_read_xml_limited(const char *text, size_t len, const char *source_name,
-                                  const scene_define *defines, size_t n_defines,
-                                  const scene_limits *lim, node **root_out, char **variant_out,
-                                  rsw_err *err);
+                                  const scene_define *defines, size_t n_defines, const scene_limits *lim,
+                                  node **root_out, char **variant_out, rsw_err *err);
 
 /* Parse a transform op list / matrix shared by both readers.
  * Applies ops in order, each left-multiplied onto the accumulated

@@ -18,8 +18,20 @@
 
 /* ---- entries and the table ------------------------------------------------------ */
 
-typedef enum entry_kind { EK_FLOAT, EK_BOOL, EK_TRANSFORM, EK_VECTOR, EK_SPECTRUM, EK_MESHBUF } entry_kind;
-typedef enum mesh_buf { MB_POSITIONS, MB_FACES, MB_NORMALS, MB_TEXCOORDS } mesh_buf;
+typedef enum entry_kind {
+  EK_FLOAT,
+  EK_BOOL,
+  EK_TRANSFORM,
+  EK_VECTOR,
+  EK_SPECTRUM,
+  EK_MESHBUF
+} entry_kind;
+typedef enum mesh_buf {
+  MB_POSITIONS,
+  MB_FACES,
+  MB_NORMALS,
+  MB_TEXCOORDS
+} mesh_buf;
 
 typedef struct entry {
   char *key;
@@ -73,10 +85,14 @@ const char *update_class_name(update_class c) {
 }
 
 bool update_class_parse(const char *s, update_class *out) {
-  if (strcmp(s, "none") == 0) *out = UPDATE_NONE;
-  else if (strcmp(s, "spectral") == 0) *out = UPDATE_SPECTRAL;
-  else if (strcmp(s, "geometric") == 0) *out = UPDATE_GEOMETRIC;
-  else return false;
+  if (strcmp(s, "none") == 0)
+    *out = UPDATE_NONE;
+  else if (strcmp(s, "spectral") == 0)
+    *out = UPDATE_SPECTRAL;
+  else if (strcmp(s, "geometric") == 0)
+    *out = UPDATE_GEOMETRIC;
+  else
+    return false;
   return true;
 }
 
@@ -222,11 +238,16 @@ void pv_spectrum(param_visitor *v, const char *name, texture *t) {
 void pv_mesh_buffer(param_visitor *v, const char *name, shape *sh) {
   mesh_buf b;
   update_class cls = UPDATE_GEOMETRIC;
-  if (strcmp(name, "vertex_positions") == 0) b = MB_POSITIONS;
-  else if (strcmp(name, "faces") == 0) b = MB_FACES;
-  else if (strcmp(name, "vertex_normals") == 0) b = MB_NORMALS, cls = UPDATE_SPECTRAL;
-  else if (strcmp(name, "vertex_texcoords") == 0) b = MB_TEXCOORDS, cls = UPDATE_SPECTRAL;
-  else return;
+  if (strcmp(name, "vertex_positions") == 0)
+    b = MB_POSITIONS;
+  else if (strcmp(name, "faces") == 0)
+    b = MB_FACES;
+  else if (strcmp(name, "vertex_normals") == 0)
+    b = MB_NORMALS, cls = UPDATE_SPECTRAL;
+  else if (strcmp(name, "vertex_texcoords") == 0)
+    b = MB_TEXCOORDS, cls = UPDATE_SPECTRAL;
+  else
+    return;
   entry *e = add_entry(v, name, EK_MESHBUF, cls);
   if (!e) return;
   e->sh = sh;
@@ -425,7 +446,9 @@ rsw_status params_build(scene *s, rsw_err *err) {
 
 /* ---- lookup --------------------------------------------------------------------- */
 
-size_t params_count(const scene *s) { return s->params ? s->params->n : 0; }
+size_t params_count(const scene *s) {
+  return s->params ? s->params->n : 0;
+}
 
 static void entry_shape(const entry *e, size_t dims[2]) {
   dims[0] = 1;
@@ -435,14 +458,17 @@ static void entry_shape(const entry *e, size_t dims[2]) {
   case EK_VECTOR: dims[0] = 3; break;
   case EK_SPECTRUM: {
     const spectrum *sp = uniform_texture_spectrum(e->tex);
-    if (sp && sp->kind == SPEC_TABLE) dims[0] = sp->n, dims[1] = 2;
-    else if (sp && sp->kind == SPEC_RGB) dims[0] = 3;
+    if (sp && sp->kind == SPEC_TABLE)
+      dims[0] = sp->n, dims[1] = 2;
+    else if (sp && sp->kind == SPEC_RGB)
+      dims[0] = 3;
     break;
   }
   case EK_MESHBUF: {
     const mesh *m = &e->sh->mesh;
-    dims[0] = e->buf == MB_FACES ? 3 * (size_t)m->n_faces
-               : e->buf == MB_TEXCOORDS ? 2 * (size_t)m->n_verts : 3 * (size_t)m->n_verts;
+    dims[0] = e->buf == MB_FACES       ? 3 * (size_t)m->n_faces
+              : e->buf == MB_TEXCOORDS ? 2 * (size_t)m->n_verts
+                                       : 3 * (size_t)m->n_verts;
     break;
   }
   default: break;
@@ -510,7 +536,8 @@ static rsw_status not_found(const scene *s, const char *key, rsw_err *err) {
   }
   /* Mitsuba silently ignores unknown keys; an unknown key here is an error
    * so that a misspelt update cannot go unnoticed. */
-  if (!best[0]) return rsw_fail(err, RSW_ERR_NOT_FOUND, key, "unknown parameter '%s' (the scene has none)", key);
+  if (!best[0])
+    return rsw_fail(err, RSW_ERR_NOT_FOUND, key, "unknown parameter '%s' (the scene has none)", key);
   return rsw_fail(err, RSW_ERR_NOT_FOUND, key, "unknown parameter '%s'; closest: %s%s%s%s%s", key, best[0],
                   best[1] ? ", " : "", best[1] ? best[1] : "", best[2] ? ", " : "", best[2] ? best[2] : "");
 }
@@ -521,7 +548,8 @@ static rsw_status resolve_search(const scene *s, const char *spec, char **key_ou
   const char *c1 = strchr(spec, ':');
   const char *c2 = c1 ? strchr(c1 + 1, ':') : NULL;
   if (!c1 || !c2 || c1 == spec || c2 == c1 + 1 || !c2[1])
-    return rsw_fail(err, RSW_ERR_INVALID, spec, "a search is written TYPE:ID:PATH (e.g. bsdf:surface_bsdf:reflectance.value)");
+    return rsw_fail(err, RSW_ERR_INVALID, spec,
+                    "a search is written TYPE:ID:PATH (e.g. bsdf:surface_bsdf:reflectance.value)");
   size_t lt = (size_t)(c1 - spec), li = (size_t)(c2 - c1 - 1);
   const param_table *t = s->params;
   for (size_t i = 0; t && i < t->n_objs; i++) {
@@ -529,12 +557,14 @@ static rsw_status resolve_search(const scene *s, const char *spec, char **key_ou
     if (!o->id || strlen(o->id) != li || strncmp(o->id, c1 + 1, li) != 0) continue;
     const char *cls = o->plugin ? obj_class_name(o->plugin->cls) : "scene";
     const char *pname = o->plugin ? o->plugin->name : "scene";
-    if ((strlen(cls) == lt && strncmp(cls, spec, lt) == 0) || (strlen(pname) == lt && strncmp(pname, spec, lt) == 0)) {
+    if ((strlen(cls) == lt && strncmp(cls, spec, lt) == 0) ||
+        (strlen(pname) == lt && strncmp(pname, spec, lt) == 0)) {
       *key_out = join(t->objs[i].path, c2 + 1);
       return *key_out ? RSW_OK : rsw_fail(err, RSW_ERR_NOMEM, spec, "out of memory");
     }
   }
-  return rsw_fail(err, RSW_ERR_NOT_FOUND, spec, "no %.*s with id '%.*s' in the scene", (int)lt, spec, (int)li, c1 + 1);
+  return rsw_fail(err, RSW_ERR_NOT_FOUND, spec, "no %.*s with id '%.*s' in the scene", (int)lt, spec, (int)li,
+                  c1 + 1);
 }
 
 rsw_status params_lookup(const scene *s, const char *key, size_t *index, rsw_err *err) {
@@ -561,8 +591,8 @@ rsw_status params_lookup(const scene *s, const char *key, size_t *index, rsw_err
   return not_found(s, key, err);
 }
 
-rsw_status params_match(const scene *s, const char *glob, unsigned class_mask, bool include_none, size_t **out,
-                        size_t *count, rsw_err *err) {
+rsw_status params_match(const scene *s, const char *glob, unsigned class_mask, bool include_none,
+                        size_t **out, size_t *count, rsw_err *err) {
   *out = NULL;
   *count = 0;
   const param_table *t = s->params;
@@ -701,7 +731,10 @@ char *params_value_json(const scene *s, size_t i, size_t max_items) {
       if (e->buf == MB_FACES)
         sb_printf(&b, "%u", m->faces[k]);
       else
-        sb_printf(&b, "%.9g", (double)(e->buf == MB_POSITIONS ? m->pos[k] : e->buf == MB_NORMALS ? m->nrm[k] : m->uv[k]));
+        sb_printf(&b, "%.9g",
+                  (double)(e->buf == MB_POSITIONS ? m->pos[k]
+                           : e->buf == MB_NORMALS ? m->nrm[k]
+                                                  : m->uv[k]));
     }
     sb_printf(&b, "]");
     break;
@@ -743,21 +776,27 @@ static rsw_status parse_table(const cJSON *o, const char *where, spectrum *out, 
   size_t n = 0;
   if (wl && vals) {
     size_t n2;
-    if (!cJSON_IsArray(wl) || !cJSON_IsArray(vals) || !json_numbers(wl, NULL, &n) || !json_numbers(vals, NULL, &n2) ||
-        n != n2)
-      return rsw_fail(err, RSW_ERR_TYPE, where, "a tabulated spectrum needs \"wavelengths\" and \"values\": two lists of numbers of the same length");
+    if (!cJSON_IsArray(wl) || !cJSON_IsArray(vals) || !json_numbers(wl, NULL, &n) ||
+        !json_numbers(vals, NULL, &n2) || n != n2)
+      return rsw_fail(err, RSW_ERR_TYPE, where,
+                      "a tabulated spectrum needs \"wavelengths\" and \"values\": two lists of numbers of "
+                      "the same length");
   } else if (value && cJSON_IsArray(value)) {
     for (const cJSON *x = value->child; x; x = x->next) {
       size_t k;
       if (!cJSON_IsArray(x) || !json_numbers(x, NULL, &k) || k != 2)
-        return rsw_fail(err, RSW_ERR_TYPE, where, "a spectrum \"value\" list holds [wavelength_nm, value] pairs");
+        return rsw_fail(err, RSW_ERR_TYPE, where,
+                        "a spectrum \"value\" list holds [wavelength_nm, value] pairs");
       n++;
     }
   } else {
-    return rsw_fail(err, RSW_ERR_TYPE, where, "expected {\"wavelengths\": [...], \"values\": [...]} or {\"type\": \"spectrum\", \"value\": [[wl, v], ...]}");
+    return rsw_fail(err, RSW_ERR_TYPE, where,
+                    "expected {\"wavelengths\": [...], \"values\": [...]} or {\"type\": \"spectrum\", "
+                    "\"value\": [[wl, v], ...]}");
   }
   if (n < 2 || n > RSW_MAX_SPECTRUM)
-    return rsw_fail(err, RSW_ERR_INVALID, where, "a tabulated spectrum needs between 2 and %d samples", RSW_MAX_SPECTRUM);
+    return rsw_fail(err, RSW_ERR_INVALID, where, "a tabulated spectrum needs between 2 and %d samples",
+                    RSW_MAX_SPECTRUM);
   out->n = n;
   out->wl = malloc(n * sizeof(double));
   out->val = malloc(n * sizeof(double));
@@ -779,7 +818,8 @@ static rsw_status parse_table(const cJSON *o, const char *where, spectrum *out, 
   for (size_t i = 0; i < n; i++)
     if (!(out->wl[i] > 0) || (i && !(out->wl[i] > out->wl[i - 1]))) {
       spectrum_free(out);
-      return rsw_fail(err, RSW_ERR_INVALID, where, "spectrum wavelengths must be positive and strictly increasing");
+      return rsw_fail(err, RSW_ERR_INVALID, where,
+                      "spectrum wavelengths must be positive and strictly increasing");
     }
   return RSW_OK;
 }
@@ -802,8 +842,10 @@ rsw_status param_value_parse(const char *json, const char *where, param_value *o
     size_t n = 0;
     if (json_numbers(j, NULL, &n)) {
       out->arr = malloc((n ? n : 1) * sizeof(double));
-      if (!out->arr) st = rsw_fail(err, RSW_ERR_NOMEM, where, "out of memory");
-      else json_numbers(j, out->arr, &out->n);
+      if (!out->arr)
+        st = rsw_fail(err, RSW_ERR_NOMEM, where, "out of memory");
+      else
+        json_numbers(j, out->arr, &out->n);
     } else {
       /* Nested rows of equal length (a 4x4 matrix). */
       size_t rows = 0, cols = 0, total = 0;
@@ -832,7 +874,8 @@ rsw_status param_value_parse(const char *json, const char *where, param_value *o
   } else if (cJSON_IsObject(j)) {
     const cJSON *type = cJSON_GetObjectItemCaseSensitive(j, "type");
     const cJSON *value = cJSON_GetObjectItemCaseSensitive(j, "value");
-    if (type && cJSON_IsString(type) && (strcmp(type->valuestring, "rgb") == 0 || strcmp(type->valuestring, "uniform") == 0)) {
+    if (type && cJSON_IsString(type) &&
+        (strcmp(type->valuestring, "rgb") == 0 || strcmp(type->valuestring, "uniform") == 0)) {
       /* {"type": "rgb", "value": [r, g, b]} / {"type": "uniform", "value": x} */
       if (value && cJSON_IsNumber(value)) {
         out->kind = PV_NUMBER;
@@ -896,7 +939,7 @@ typedef struct staged {
   xform xf;
   spectrum spec; /* borrowed from the item (copied on apply) */
   vec3 vec;
-  float *fpos;   /* vertex_positions converted to float (owned until applied) */
+  float *fpos; /* vertex_positions converted to float (owned until applied) */
   bool changed;
 } staged;
 
@@ -933,10 +976,12 @@ static rsw_status validate(const scene *s, staged *sg, const staged *all, size_t
       return rsw_fail(err, RSW_ERR_TYPE, key, "'%s' takes %s", key, kind_expect(s, e));
     double m[4][4];
     for (int i = 0; i < 16; i++) {
-      if (!isfinite(v->arr[i])) return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': matrix entries must be finite", key);
+      if (!isfinite(v->arr[i]))
+        return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': matrix entries must be finite", key);
       m[i / 4][i % 4] = v->arr[i];
     }
-    if (!xf_from_matrix(m, &sg->xf)) return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': matrix is singular", key);
+    if (!xf_from_matrix(m, &sg->xf))
+      return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': matrix is singular", key);
     if (e->check) {
       rsw_status st = e->check(e->owner, &sg->xf, key, err);
       if (st) return st;
@@ -1001,9 +1046,11 @@ static rsw_status validate(const scene *s, staged *sg, const staged *all, size_t
     case MB_POSITIONS:
       if (v->n % 3 || !v->n || (v->n != 3 * (size_t)m->n_verts && !faces))
         return rsw_fail(err, RSW_ERR_INVALID, key,
-                        "'%s' takes %u numbers (3 per vertex); changing the vertex count needs 'faces' in the same update",
+                        "'%s' takes %u numbers (3 per vertex); changing the vertex count needs 'faces' in "
+                        "the same update",
                         key, 3 * m->n_verts);
-      if (v->n / 3 > MESH_MAX_ELEMENTS) return rsw_fail(err, RSW_ERR_LIMIT, key, "'%s': too many vertices", key);
+      if (v->n / 3 > MESH_MAX_ELEMENTS)
+        return rsw_fail(err, RSW_ERR_LIMIT, key, "'%s': too many vertices", key);
       {
         /* Branch-free scan first (vectorises), then locate the culprit. */
         int bad = 0;
@@ -1015,19 +1062,22 @@ static rsw_status validate(const scene *s, staged *sg, const staged *all, size_t
       break;
     case MB_FACES:
       if (!v->n || v->n % 3 || v->n / 3 > MESH_MAX_ELEMENTS)
-        return rsw_fail(err, RSW_ERR_INVALID, key, "'%s' takes a non-empty list of vertex indices, 3 per face", key);
+        return rsw_fail(err, RSW_ERR_INVALID, key,
+                        "'%s' takes a non-empty list of vertex indices, 3 per face", key);
       for (size_t i = 0; i < v->n; i++)
         if (!(v->arr[i] >= 0 && v->arr[i] < (double)nv && v->arr[i] == floor(v->arr[i])))
-          return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': index %zu (%g) is not a vertex index below %zu", key, i,
-                          v->arr[i], nv);
+          return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': index %zu (%g) is not a vertex index below %zu",
+                          key, i, v->arr[i], nv);
       break;
     case MB_NORMALS:
     case MB_TEXCOORDS: {
       size_t per = e->buf == MB_NORMALS ? 3 : 2;
       if (v->n != per * nv)
-        return rsw_fail(err, RSW_ERR_INVALID, key, "'%s' takes %zu numbers (%zu per vertex)", key, per * nv, per);
+        return rsw_fail(err, RSW_ERR_INVALID, key, "'%s' takes %zu numbers (%zu per vertex)", key, per * nv,
+                        per);
       for (size_t i = 0; i < v->n; i++)
-        if (!isfinite(v->arr[i])) return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': values must be finite", key);
+        if (!isfinite(v->arr[i]))
+          return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': values must be finite", key);
       break;
     }
     }
@@ -1089,7 +1139,6 @@ static double now_s(void) {
   return ts.tv_sec + 1e-9 * ts.tv_nsec;
 }
 
-
 rsw_status scene_update(scene *s, const param_update *items, size_t n, update_report *report, rsw_err *err) {
   double t0 = now_s();
   if (report) memset(report, 0, sizeof *report);
@@ -1104,8 +1153,8 @@ rsw_status scene_update(scene *s, const param_update *items, size_t n, update_re
     st = params_lookup(s, items[i].key, &sg[i].index, err);
     for (size_t k = 0; k < i && !st; k++)
       if (sg[k].index == sg[i].index)
-        st = rsw_fail(err, RSW_ERR_DUPLICATE, items[i].key, "'%s' is given twice in one update (also as '%s')",
-                      items[i].key, items[k].key);
+        st = rsw_fail(err, RSW_ERR_DUPLICATE, items[i].key,
+                      "'%s' is given twice in one update (also as '%s')", items[i].key, items[k].key);
   }
   /* 2. Validate everything before writing anything. */
   for (size_t i = 0; i < n && !st; i++) st = validate(s, &sg[i], sg, n, err);
@@ -1142,7 +1191,8 @@ rsw_status scene_update(scene *s, const param_update *items, size_t n, update_re
         }
         fpos = sg[k].fpos;
       }
-      if (o->kind == EK_MESHBUF && o->buf == MB_FACES) fc = sg[k].item->value.arr, nf = sg[k].item->value.n / 3;
+      if (o->kind == EK_MESHBUF && o->buf == MB_FACES)
+        fc = sg[k].item->value.arr, nf = sg[k].item->value.n / 3;
       if (o->kind == EK_TRANSFORM) xf = &sg[k].xf;
     }
     if (st) break;
@@ -1172,8 +1222,8 @@ rsw_status scene_update(scene *s, const param_update *items, size_t n, update_re
       msh->tri_cdf_next[f] = area;
     }
     if (!(area > 0) || !isfinite(area)) {
-      st = rsw_fail(err, RSW_ERR_INVALID, sg[i].item->key, "'%s': the mesh would have zero or non-finite area",
-                    sg[i].item->key);
+      st = rsw_fail(err, RSW_ERR_INVALID, sg[i].item->key,
+                    "'%s': the mesh would have zero or non-finite area", sg[i].item->key);
     } else {
       msh->area_next = area;
       msh->tri_cdf_next_n = (uint32_t)nf; /* entries valid (buffer may be larger) */

@@ -48,8 +48,8 @@ typedef enum update_class {
   UPDATE_GEOMETRIC = 1u << 1,
 } update_class;
 
-const char *param_type_name(param_type t);       /* "float", "spectrum", ... */
-const char *update_class_name(update_class c);   /* "none", "spectral", "geometric" */
+const char *param_type_name(param_type t);     /* "float", "spectrum", ... */
+const char *update_class_name(update_class c); /* "none", "spectral", "geometric" */
 /* Parse "none" / "spectral" / "geometric"; false if unknown. */
 bool update_class_parse(const char *s, update_class *out);
 
@@ -57,10 +57,10 @@ bool update_class_parse(const char *s, update_class *out);
 
 /* A value given for an update, as parsed from JSON (see param_value_parse). */
 typedef enum param_value_kind {
-  PV_NUMBER,  /* 0.3 */
-  PV_BOOL,    /* true */
-  PV_ARRAY,   /* [0.1, 0.2, 0.3], [16 numbers], [[4 rows of 4]] (flattened) */
-  PV_TABLE,   /* {"wavelengths": [...], "values": [...]} or
+  PV_NUMBER, /* 0.3 */
+  PV_BOOL,   /* true */
+  PV_ARRAY,  /* [0.1, 0.2, 0.3], [16 numbers], [[4 rows of 4]] (flattened) */
+  PV_TABLE,  /* {"wavelengths": [...], "values": [...]} or
                  {"type": "spectrum", "value": [[wl, v], ...]} */
 } param_value_kind;
 
@@ -68,9 +68,9 @@ typedef struct param_value {
   param_value_kind kind;
   double num;
   bool b;
-  double *arr;  /* PV_ARRAY: n numbers (owned) */
+  double *arr; /* PV_ARRAY: n numbers (owned) */
   size_t n;
-  size_t rows;  /* PV_ARRAY given as nested rows: number of rows, else 0 */
+  size_t rows;    /* PV_ARRAY given as nested rows: number of rows, else 0 */
   spectrum table; /* PV_TABLE (owned) */
 } param_value;
 
@@ -87,8 +87,8 @@ typedef struct param_info {
   const char *key;
   param_type type;
   update_class cls;
-  size_t shape[2];   /* dims; shape[1] = 0 for 1-D */
-  const char *object_type; /* plugin name of the owner ("diffuse", ...) */
+  size_t shape[2];          /* dims; shape[1] = 0 for 1-D */
+  const char *object_type;  /* plugin name of the owner ("diffuse", ...) */
   const char *object_class; /* "bsdf", "shape", "texture", ... */
   const char *object_id;
   const char *const *aliases;
@@ -127,15 +127,15 @@ char *params_value_json(const scene *s, size_t i, size_t max_items);
 /* ---- updates -------------------------------------------------------------------- */
 
 typedef struct param_update {
-  const char *key;   /* key, alias or TYPE:ID:PATH */
+  const char *key; /* key, alias or TYPE:ID:PATH */
   param_value value;
 } param_update;
 
 typedef struct update_report {
-  unsigned classes;   /* UPDATE_* bits of the entries that changed */
-  size_t changed;     /* entries whose value changed (equal values are
+  unsigned classes;                            /* UPDATE_* bits of the entries that changed */
+  size_t changed;                              /* entries whose value changed (equal values are
                          no-ops) */
-  double seconds;     /* wall time of the whole update */
+  double seconds;                              /* wall time of the whole update */
   unsigned refits, rebuilds, instance_updates; /* acceleration work done */
 } update_report;
 

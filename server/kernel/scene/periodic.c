@@ -5,7 +5,9 @@
 
 #include "loader.h"
 
-static void periodic_destroy(object *o) { free(o); }
+static void periodic_destroy(object *o) {
+  free(o);
+}
 
 /* The plugin only carries the box; scene_create copies it into
  * scene->periodic. */
@@ -16,7 +18,8 @@ typedef struct periodic_obj {
 
 static rsw_status read_xy(loader *ld, node *n, const char *name, double out[2]) {
   prop *p = node_find(n, name);
-  if (!p) return ld_fail(ld, n, NULL, RSW_ERR_MISSING, "%s '%s': missing property '%s'", n->type, n->id, name);
+  if (!p)
+    return ld_fail(ld, n, NULL, RSW_ERR_MISSING, "%s '%s': missing property '%s'", n->type, n->id, name);
   if (p->kind != PROP_NUMBERS || p->n_nums != 2)
     return ld_fail(ld, n, name, RSW_ERR_TYPE, "property '%s' must be a list of 2 numbers [x, y]", name);
   out[0] = p->nums[0];
@@ -30,9 +33,10 @@ static rsw_status periodic_create(loader *ld, node *n, object **out) {
   if (!o) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
   rsw_status st = read_xy(ld, n, "min", o->b.min);
   if (!st) st = read_xy(ld, n, "max", o->b.max);
-  if (!st && !(o->b.max[0] > o->b.min[0] && o->b.max[1] > o->b.min[1] && isfinite(o->b.max[0] - o->b.min[0]) &&
-               isfinite(o->b.max[1] - o->b.min[1])))
-    st = ld_fail(ld, n, "max", RSW_ERR_RANGE, "periodic '%s': max must exceed min in x and y (finite)", n->id);
+  if (!st && !(o->b.max[0] > o->b.min[0] && o->b.max[1] > o->b.min[1] &&
+               isfinite(o->b.max[0] - o->b.min[0]) && isfinite(o->b.max[1] - o->b.min[1])))
+    st =
+        ld_fail(ld, n, "max", RSW_ERR_RANGE, "periodic '%s': max must exceed min in x and y (finite)", n->id);
   if (st) {
     free(o);
     return st;
@@ -42,10 +46,12 @@ static rsw_status periodic_create(loader *ld, node *n, object **out) {
   return RSW_OK;
 }
 
-const plugin plugin_periodic = {.name = "periodic", .cls = CLS_SCENE, .create = periodic_create,
-                                .destroy = periodic_destroy};
+const plugin plugin_periodic = {
+    .name = "periodic", .cls = CLS_SCENE, .create = periodic_create, .destroy = periodic_destroy};
 
-const periodic_bounds *periodic_of(const object *o) { return &((const periodic_obj *)o)->b; }
+const periodic_bounds *periodic_of(const object *o) {
+  return &((const periodic_obj *)o)->b;
+}
 
 /* x brought into [lo, hi) modulo the period. */
 static double wrap(double x, double lo, double hi) {
@@ -73,8 +79,12 @@ double periodic_slab_offset(const periodic_bounds *b, vec3 p, vec3 d) {
 /* Distance along r to the side wall it leaves the column through, and
  * which walls (bit 0: x, bit 1: y). */
 static double side_exit(const periodic_bounds *b, const ray3 *r, int *walls) {
-  double tx = r->d.x > 0 ? (b->max[0] - r->o.x) / r->d.x : r->d.x < 0 ? (b->min[0] - r->o.x) / r->d.x : INFINITY;
-  double ty = r->d.y > 0 ? (b->max[1] - r->o.y) / r->d.y : r->d.y < 0 ? (b->min[1] - r->o.y) / r->d.y : INFINITY;
+  double tx = r->d.x > 0   ? (b->max[0] - r->o.x) / r->d.x
+              : r->d.x < 0 ? (b->min[0] - r->o.x) / r->d.x
+                           : INFINITY;
+  double ty = r->d.y > 0   ? (b->max[1] - r->o.y) / r->d.y
+              : r->d.y < 0 ? (b->min[1] - r->o.y) / r->d.y
+                           : INFINITY;
   tx = fmax(tx, 0.0), ty = fmax(ty, 0.0);
   *walls = (tx <= ty ? 1 : 0) | (ty <= tx ? 2 : 0);
   return fmin(tx, ty);
@@ -133,7 +143,9 @@ static bool advance(const periodic_bounds *b, ray3 *q, double ts, int walls) {
  * it. Only a ray within about (zmax - zmin) / (PERIODIC_MAX_WALLS * cell)
  * radians of horizontal, inside the slab, can run into this guard; such a
  * ray is reported as unresolved (see periodic.h), never as escaped. */
-enum { PERIODIC_MAX_WALLS = 1 << 16 };
+enum {
+  PERIODIC_MAX_WALLS = 1 << 16
+};
 
 trace_result scene_trace(const scene *s, ray3 *r, accel_hit *h, double *t_offset) {
   *t_offset = 0;

@@ -37,7 +37,11 @@ const periodic_bounds *periodic_of(const object *o);
  * escaped. It is never counted as escaped: scene_occluded's callers treat
  * it as blocked (it is non-zero) and the path tracer ends the path there
  * without environment light, and counts it (render_stats.unresolved). */
-typedef enum trace_result { TRACE_MISS = 0, TRACE_HIT = 1, TRACE_UNRESOLVED = 2 } trace_result;
+typedef enum trace_result {
+  TRACE_MISS = 0,
+  TRACE_HIT = 1,
+  TRACE_UNRESOLVED = 2
+} trace_result;
 
 /* Closest hit honouring the periodic boundary (plain accel_intersect
  * without one). On a hit, *r is the ray segment that hit (its origin

@@ -1,12 +1,14 @@
 /* The one list of plugins. Adding a plugin is one new file defining
  * `const plugin plugin_<name>` and one line here. */
-#include "loader.h"
 #include "../plugins/env_plugin.h"
+#include "loader.h"
 
 #include <string.h>
 
 /* Declared weak while the plugin set is being assembled across branches:
  * a plugin whose file is absent resolves to NULL and is skipped. */
+/* One line per plugin family: kept out of clang-format, which reflows it. */
+// clang-format off
 #define PLUGINS(X)                                                            \
   X(scene)                                                                    \
   X(rectangle) X(disk) X(sphere) X(cylinder) X(cube) X(obj) X(ply)           \
@@ -20,6 +22,7 @@
   X(path)                                                                     \
   X(uniform) X(checkerboard) X(bitmap)                                       \
   X(shapegroup) X(instance) X(instancelist) X(periodic)
+// clang-format on
 
 #define DECLARE_(name) extern const plugin plugin_##name __attribute__((weak));
 PLUGINS(DECLARE_)
@@ -29,7 +32,7 @@ const plugin *const rsw_plugins[] = {
 #define ENTRY_(name) &plugin_##name,
     PLUGINS(ENTRY_)
 #undef ENTRY_
-    NULL};
+        NULL};
 
 const plugin *registry_find(const char *name) {
   size_t n = sizeof rsw_plugins / sizeof rsw_plugins[0] - 1;
@@ -39,11 +42,10 @@ const plugin *registry_find(const char *name) {
 }
 
 static const char *const class_names[CLS__COUNT] = {
-    [CLS_SCENE] = "scene",       [CLS_SHAPE] = "shape",
-    [CLS_BSDF] = "bsdf",         [CLS_EMITTER] = "emitter",
-    [CLS_SENSOR] = "sensor",     [CLS_FILM] = "film",
-    [CLS_SAMPLER] = "sampler",   [CLS_RFILTER] = "rfilter",
-    [CLS_INTEGRATOR] = "integrator", [CLS_TEXTURE] = "texture",
+    [CLS_SCENE] = "scene",     [CLS_SHAPE] = "shape",     [CLS_BSDF] = "bsdf",
+    [CLS_EMITTER] = "emitter", [CLS_SENSOR] = "sensor",   [CLS_FILM] = "film",
+    [CLS_SAMPLER] = "sampler", [CLS_RFILTER] = "rfilter", [CLS_INTEGRATOR] = "integrator",
+    [CLS_TEXTURE] = "texture",
 };
 
 const char *obj_class_name(obj_class c) {

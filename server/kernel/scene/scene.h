@@ -10,7 +10,7 @@ typedef struct scene_load_opts {
   const char *variant;         /* "mono"/"rgb" overriding the document's, or NULL */
   const scene_define *defines; /* XML -D overrides */
   size_t n_defines;
-  const char *base_dir;        /* where relative file names resolve; NULL: "." */
+  const char *base_dir; /* where relative file names resolve; NULL: "." */
   /* Optional: resolve a file name written in the scene (a mesh, a bitmap)
    * to a readable path (malloc'ed into *path_out), or fail naming it. The
    * daemon confines names to its data root and maps "sha256:<hex>" to its
@@ -22,13 +22,12 @@ typedef struct scene_load_opts {
 /* Build a scene from a document tree. Takes ownership of root (freed on
  * failure too). doc_variant is the variant the document declared (or NULL);
  * opts->variant overrides it; default rgb. */
-rsw_status scene_build(node *root, const char *doc_variant, const scene_load_opts *opts,
-                       scene **out, rsw_err *err);
+rsw_status scene_build(node *root, const char *doc_variant, const scene_load_opts *opts, scene **out,
+                       rsw_err *err);
 
 /* Read a JSON or XML file (by extension; .xml is XML, anything else is
  * sniffed: a leading '<' means XML) and build it. */
-rsw_status scene_load_file(const char *path, const scene_load_opts *opts, scene **out,
-                           rsw_err *err);
+rsw_status scene_load_file(const char *path, const scene_load_opts *opts, scene **out, rsw_err *err);
 /* Same from memory; `name` is used in error locations. */
 rsw_status scene_load_memory(const char *text, size_t len, const char *name, bool is_xml,
                              const scene_load_opts *opts, scene **out, rsw_err *err);

@@ -45,14 +45,19 @@
 #include <string.h>
 #include <strings.h>
 
-#define XML_MAX_DOC ((size_t)256 << 20)       /* bytes of XML text */
-#define XML_MAX_ATTRS 16                      /* attributes on one element */
-#define XML_MAX_ATTR_LEN ((size_t)16 << 20)   /* one value after $ expansion */
-#define XML_MAX_PARAMS RSW_MAX_PROPS          /* defines + <default>s */
-#define XML_MAX_TOKEN 128                     /* characters in one number */
-#define XML_INT_LIMIT 9007199254740992.0      /* 2^53 */
+#define XML_MAX_DOC      ((size_t)256 << 20) /* bytes of XML text */
+#define XML_MAX_ATTRS    16                  /* attributes on one element */
+#define XML_MAX_ATTR_LEN ((size_t)16 << 20)  /* one value after $ expansion */
+#define XML_MAX_PARAMS   RSW_MAX_PROPS       /* defines + <default>s */
+#define XML_MAX_TOKEN    128                 /* characters in one number */
+#define XML_INT_LIMIT    9007199254740992.0  /* 2^53 */
 
-typedef enum frame_kind { FR_SCENE, FR_OBJECT, FR_TRANSFORM, FR_LEAF } frame_kind;
+typedef enum frame_kind {
+  FR_SCENE,
+  FR_OBJECT,
+  FR_TRANSFORM,
+  FR_LEAF
+} frame_kind;
 
 typedef struct xml_frame {
   frame_kind kind;
@@ -85,10 +90,10 @@ typedef struct id_table {
 
 typedef struct xml_ctx {
   XML_Parser parser;
-  const char *file;    /* source name as used in locations */
-  unsigned long line;  /* line of the element or text being handled */
-  const char *elem;    /* element being handled, for messages */
-  char loc[256];       /* "file:line" of that element */
+  const char *file;   /* source name as used in locations */
+  unsigned long line; /* line of the element or text being handled */
+  const char *elem;   /* element being handled, for messages */
+  char loc[256];      /* "file:line" of that element */
   rsw_err err;
   bool failed;
   node *root;
@@ -198,7 +203,9 @@ static bool parse_int(const char *raw, double *out) {
   return true;
 }
 
-static bool is_sep(char ch) { return ch == ',' || isspace((unsigned char)ch); }
+static bool is_sep(char ch) {
+  return ch == ',' || isspace((unsigned char)ch);
+}
 
 /* Copy the next token (a run of non-separators) into buf; false at the end.
  * Separators are runs of commas and/or whitespace, as Mitsuba's
@@ -222,14 +229,13 @@ static bool next_token(const char **s, char *buf, size_t cap, bool *too_long) {
 }
 
 /* Parse up to `max` numbers from attribute `what`; *n gets the count. */
-static rsw_status parse_numbers(xml_ctx *c, const char *what, const char *s, double *out,
-                                size_t max, size_t *n) {
+static rsw_status parse_numbers(xml_ctx *c, const char *what, const char *s, double *out, size_t max,
+                                size_t *n) {
   char tok[XML_MAX_TOKEN];
   bool too_long;
   *n = 0;
   while (next_token(&s, tok, sizeof tok, &too_long)) {
-    if (*n == max)
-      return xfail(c, RSW_ERR_INVALID, "%s has more than %zu numbers", what, max);
+    if (*n == max) return xfail(c, RSW_ERR_INVALID, "%s has more than %zu numbers", what, max);
     if (too_long || !parse_double(tok, &out[*n]))
       return xfail(c, RSW_ERR_INVALID, "%s: could not parse number \"%s%s\"", what, tok,
                    too_long ? "..." : "");
@@ -253,8 +259,7 @@ static const char *attr(const xml_ctx *c, const char *name) {
 
 /* Every attribute present must be in `allowed` (NULL-terminated); every
  * name in `required` (NULL-terminated, may be NULL) must be present. */
-static rsw_status attrs_check(xml_ctx *c, const char *const *allowed,
-                              const char *const *required) {
+static rsw_status attrs_check(xml_ctx *c, const char *const *allowed, const char *const *required) {
   for (size_t i = 0; i < c->n_attrs; i++) {
     bool ok = false;
     for (const char *const *a = allowed; *a && !ok; a++) ok = strcmp(*a, c->attr_name[i]) == 0;
@@ -270,11 +275,9 @@ static rsw_status attrs_check(xml_ctx *c, const char *const *allowed,
 static rsw_status check_ident(xml_ctx *c, const char *what, const char *s) {
   if (!s[0]) return xfail(c, RSW_ERR_INVALID, "attribute \"%s\" is empty", what);
   if (strlen(s) > RSW_MAX_NAME)
-    return xfail(c, RSW_ERR_LIMIT, "attribute \"%s\" is longer than %d characters", what,
-                 RSW_MAX_NAME);
+    return xfail(c, RSW_ERR_LIMIT, "attribute \"%s\" is longer than %d characters", what, RSW_MAX_NAME);
   if (s[0] == '_')
-    return xfail(c, RSW_ERR_INVALID,
-                 "attribute \"%s\" = \"%s\": a leading underscore is reserved", what, s);
+    return xfail(c, RSW_ERR_INVALID, "attribute \"%s\" = \"%s\": a leading underscore is reserved", what, s);
   return RSW_OK;
 }
 
@@ -348,8 +351,7 @@ static char *substitute(xml_ctx *c, const char *attr_name, const char *raw) {
     }
     if (!best) {
       size_t id = 0;
-      while (d[1 + id] && (isalnum((unsigned char)d[1 + id]) || d[1 + id] == '_') && id < 64)
-        id++;
+      while (d[1 + id] && (isalnum((unsigned char)d[1 + id]) || d[1 + id] == '_') && id < 64) id++;
       xfail(c, RSW_ERR_INVALID,
             "attribute \"%s\": undefined parameter \"$%.*s\" (declare it with <default> "
             "or pass -D)",
@@ -359,8 +361,8 @@ static char *substitute(xml_ctx *c, const char *attr_name, const char *raw) {
     }
     size_t vlen = strlen(best->value);
     if (b.n + vlen > XML_MAX_ATTR_LEN) {
-      xfail(c, RSW_ERR_LIMIT, "attribute \"%s\" is longer than %zu bytes after substitution",
-            attr_name, XML_MAX_ATTR_LEN);
+      xfail(c, RSW_ERR_LIMIT, "attribute \"%s\" is longer than %zu bytes after substitution", attr_name,
+            XML_MAX_ATTR_LEN);
       free(b.s);
       return NULL;
     }
@@ -377,8 +379,7 @@ nomem:
 
 static rsw_status attrs_load(xml_ctx *c, const XML_Char **atts) {
   for (size_t i = 0; atts[2 * i]; i++) {
-    if (c->n_attrs == XML_MAX_ATTRS)
-      return xfail(c, RSW_ERR_LIMIT, "more than %d attributes", XML_MAX_ATTRS);
+    if (c->n_attrs == XML_MAX_ATTRS) return xfail(c, RSW_ERR_LIMIT, "more than %d attributes", XML_MAX_ATTRS);
     char *v = substitute(c, atts[2 * i], atts[2 * i + 1]);
     if (!v) return c->err.code;
     c->attr_name[c->n_attrs] = atts[2 * i]; /* valid during the start handler */
@@ -403,8 +404,8 @@ static id_slot *ids_lookup(id_table *t, const char *id) {
 
 /* Insert id (borrowed); if present, *prev_line gets the first line and false
  * is returned with *nomem false. */
-static bool ids_insert(id_table *t, const char *id, unsigned long line,
-                       unsigned long *prev_line, bool *nomem) {
+static bool ids_insert(id_table *t, const char *id, unsigned long line, unsigned long *prev_line,
+                       bool *nomem) {
   *nomem = false;
   if (2 * (t->n + 1) > t->cap) {
     size_t cap = t->cap ? 2 * t->cap : 64;
@@ -458,8 +459,7 @@ static prop *add_prop(xml_ctx *c, node *owner, const char *name, prop_kind kind)
   if (name[0]) {
     const prop *old = node_find(owner, name);
     if (old) {
-      xfail(c, RSW_ERR_DUPLICATE, "duplicate property \"%s\" (first given at %s)", name,
-            old->loc);
+      xfail(c, RSW_ERR_DUPLICATE, "duplicate property \"%s\" (first given at %s)", name, old->loc);
       return NULL;
     }
   }
@@ -484,8 +484,8 @@ static prop *add_prop(xml_ctx *c, node *owner, const char *name, prop_kind kind)
     xfail(c, RSW_ERR_LIMIT,
           "the scene document needs more than its memory cap of %zu bytes (%.0f MiB) here, in %s '%s' "
           "(opened at %s); split the scene or raise the cap",
-          c->lim->max_tree_bytes, c->lim->max_tree_bytes / 1048576.0, owner->type,
-          owner->id ? owner->id : "", owner->loc);
+          c->lim->max_tree_bytes, c->lim->max_tree_bytes / 1048576.0, owner->type, owner->id ? owner->id : "",
+          owner->loc);
     return NULL;
   }
   return p;
@@ -516,21 +516,19 @@ static rsw_status start_scene(xml_ctx *c, xml_frame *parent, xml_frame *self) {
     char *end;
     part[i] = strtoul(p, &end, 10);
     p = end;
-    if (i < 2 && *p++ != '.')
-      return xfail(c, RSW_ERR_PARSE, "version \"%s\" is not of the form X.Y.Z", v);
+    if (i < 2 && *p++ != '.') return xfail(c, RSW_ERR_PARSE, "version \"%s\" is not of the form X.Y.Z", v);
   }
   if (*p) return xfail(c, RSW_ERR_PARSE, "version \"%s\" is not of the form X.Y.Z", v);
   if (part[0] != 2 && part[0] != 3)
-    return xfail(c, RSW_ERR_UNSUPPORTED,
-                 "scene version %s is not supported (versions 2.x.x and 3.x.x are)", v);
+    return xfail(c, RSW_ERR_UNSUPPORTED, "scene version %s is not supported (versions 2.x.x and 3.x.x are)",
+                 v);
   const char *variant = attr(c, "variant");
   if (variant) {
     if (strcmp(variant, "mono") != 0 && strcmp(variant, "rgb") != 0)
       return xfail(c, RSW_ERR_INVALID, "variant \"%s\" is not \"mono\" or \"rgb\"", variant);
     if (!(c->variant = rsw_strdup(variant))) return xfail(c, RSW_ERR_NOMEM, "out of memory");
   }
-  if (!(c->root = node_new("scene", "scene", c->loc)))
-    return xfail(c, RSW_ERR_NOMEM, "out of memory");
+  if (!(c->root = node_new("scene", "scene", c->loc))) return xfail(c, RSW_ERR_NOMEM, "out of memory");
   c->n_nodes = 1;
   self->kind = FR_SCENE;
   self->obj = c->root;
@@ -563,8 +561,8 @@ static rsw_status start_object(xml_ctx *c, xml_frame *parent, xml_frame *self) {
     bool nomem;
     if (!ids_insert(&c->ids, n->id, c->line, &first, &nomem))
       return nomem ? xfail(c, RSW_ERR_NOMEM, "out of memory")
-                   : xfail(c, RSW_ERR_DUPLICATE, "duplicate id \"%s\" (first used at %s:%lu)",
-                           id, c->file, first);
+                   : xfail(c, RSW_ERR_DUPLICATE, "duplicate id \"%s\" (first used at %s:%lu)", id, c->file,
+                           first);
   }
   self->kind = FR_OBJECT;
   self->obj = n;
@@ -588,8 +586,7 @@ static rsw_status start_integer(xml_ctx *c, xml_frame *parent, xml_frame *self) 
   prop *p = start_simple(c, parent, PROP_NUMBER, &v);
   if (!p) return c->err.code;
   if (!parse_int(v, &p->num))
-    return xfail(c, RSW_ERR_INVALID,
-                 "could not parse integer \"%s\" (decimal digits, |value| <= 2^53)", v);
+    return xfail(c, RSW_ERR_INVALID, "could not parse integer \"%s\" (decimal digits, |value| <= 2^53)", v);
   p->is_int = true;
   return RSW_OK;
 }
@@ -598,8 +595,7 @@ static rsw_status start_float(xml_ctx *c, xml_frame *parent, xml_frame *self) {
   const char *v;
   prop *p = start_simple(c, parent, PROP_NUMBER, &v);
   if (!p) return c->err.code;
-  if (!parse_double(v, &p->num))
-    return xfail(c, RSW_ERR_INVALID, "could not parse finite number \"%s\"", v);
+  if (!parse_double(v, &p->num)) return xfail(c, RSW_ERR_INVALID, "could not parse finite number \"%s\"", v);
   return RSW_OK;
 }
 
@@ -633,7 +629,8 @@ static rsw_status start_rgb(xml_ctx *c, xml_frame *parent, xml_frame *self) {
   double rgb[3];
   size_t n;
   if (parse_numbers(c, "value", v, rgb, 3, &n)) return c->err.code;
-  if (n == 1) rgb[1] = rgb[2] = rgb[0];
+  if (n == 1)
+    rgb[1] = rgb[2] = rgb[0];
   else if (n != 3)
     return xfail(c, RSW_ERR_INVALID, "value \"%s\" must have 1 or 3 numbers", v);
   p->spec.kind = SPEC_RGB;
@@ -691,23 +688,19 @@ static rsw_status start_spectrum(xml_ctx *c, xml_frame *parent, xml_frame *self)
   while (next_token(&q, tok, sizeof tok, &too_long)) {
     if (too_long) return xfail(c, RSW_ERR_INVALID, "value: token \"%s...\" is too long", tok);
     char *colon = strchr(tok, ':');
-    if (!colon)
-      return xfail(c, RSW_ERR_INVALID, "\"%s\" is not a wavelength:value pair", tok);
+    if (!colon) return xfail(c, RSW_ERR_INVALID, "\"%s\" is not a wavelength:value pair", tok);
     *colon = '\0';
     double wl, val;
     if (!parse_double(tok, &wl) || !parse_double(colon + 1, &val))
-      return xfail(c, RSW_ERR_INVALID, "could not parse wavelength:value pair \"%s:%s\"", tok,
-                   colon + 1);
+      return xfail(c, RSW_ERR_INVALID, "could not parse wavelength:value pair \"%s:%s\"", tok, colon + 1);
     if (!(wl > 0)) return xfail(c, RSW_ERR_INVALID, "wavelength %g nm is not positive", wl);
     if (s->n > 0 && !(wl > s->wl[s->n - 1]))
-      return xfail(c, RSW_ERR_INVALID,
-                   "wavelengths must be strictly increasing (%g nm follows %g nm)", wl,
+      return xfail(c, RSW_ERR_INVALID, "wavelengths must be strictly increasing (%g nm follows %g nm)", wl,
                    s->wl[s->n - 1]);
     if (spec_push(c, s, &cap, wl, val)) return c->err.code;
   }
   if (s->n < 2)
-    return xfail(c, RSW_ERR_INVALID,
-                 "a tabulated spectrum needs at least two wavelength:value pairs");
+    return xfail(c, RSW_ERR_INVALID, "a tabulated spectrum needs at least two wavelength:value pairs");
   return RSW_OK;
 }
 
@@ -723,7 +716,8 @@ static rsw_status read_xyz(xml_ctx *c, double def, vec3 *out) {
     double a[3];
     size_t n;
     if (parse_numbers(c, "value", v, a, 3, &n)) return c->err.code;
-    if (n == 1) a[1] = a[2] = a[0];
+    if (n == 1)
+      a[1] = a[2] = a[0];
     else if (n != 3)
       return xfail(c, RSW_ERR_INVALID, "value \"%s\" must have 1 or 3 numbers", v);
     *out = v3(a[0], a[1], a[2]);
@@ -733,8 +727,7 @@ static rsw_status read_xyz(xml_ctx *c, double def, vec3 *out) {
   static const char *const names[3] = {"x", "y", "z"};
   for (int i = 0; i < 3; i++)
     if (xyz[i] && !parse_double(xyz[i], &a[i]))
-      return xfail(c, RSW_ERR_INVALID, "%s: could not parse finite number \"%s\"", names[i],
-                   xyz[i]);
+      return xfail(c, RSW_ERR_INVALID, "%s: could not parse finite number \"%s\"", names[i], xyz[i]);
   *out = v3(a[0], a[1], a[2]);
   return RSW_OK;
 }
@@ -778,16 +771,14 @@ static rsw_status start_default(xml_ctx *c, xml_frame *parent, xml_frame *self) 
     return xfail(c, RSW_ERR_LIMIT, "name is longer than %d characters", RSW_MAX_NAME);
   param *old = param_find(c, name);
   if (old) {
-    if (old->declared)
-      return xfail(c, RSW_ERR_DUPLICATE, "parameter \"%s\" declared twice", name);
+    if (old->declared) return xfail(c, RSW_ERR_DUPLICATE, "parameter \"%s\" declared twice", name);
     old->declared = true; /* the define overrides this default */
     return RSW_OK;
   }
   param *p = param_add(c);
   if (!p)
-    return c->n_params >= XML_MAX_PARAMS
-               ? xfail(c, RSW_ERR_LIMIT, "more than %d parameters", XML_MAX_PARAMS)
-               : xfail(c, RSW_ERR_NOMEM, "out of memory");
+    return c->n_params >= XML_MAX_PARAMS ? xfail(c, RSW_ERR_LIMIT, "more than %d parameters", XML_MAX_PARAMS)
+                                         : xfail(c, RSW_ERR_NOMEM, "out of memory");
   p->own_name = rsw_strdup(name);
   p->own_value = rsw_strdup(value);
   p->name = p->own_name;
@@ -848,8 +839,7 @@ static rsw_status start_rotate(xml_ctx *c, xml_frame *parent, xml_frame *self) {
   double angle;
   if (read_xyz(c, 0.0, &axis)) return c->err.code;
   if (!parse_double(attr(c, "angle"), &angle))
-    return xfail(c, RSW_ERR_INVALID, "angle: could not parse finite number \"%s\"",
-                 attr(c, "angle"));
+    return xfail(c, RSW_ERR_INVALID, "angle: could not parse finite number \"%s\"", attr(c, "angle"));
   if (!(v3_len(axis) > 0) || !isfinite(v3_len(axis)))
     return xfail(c, RSW_ERR_INVALID, "rotation axis is zero or not finite");
   xform op = xf_rotate(axis, angle);
@@ -908,12 +898,10 @@ static rsw_status start_lookat(xml_ctx *c, xml_frame *parent, xml_frame *self) {
   static const char *const required[] = {"origin", "target", NULL};
   if (attrs_check(c, allowed, required)) return c->err.code;
   vec3 origin, target, up = v3(0, 0, 0);
-  if (named_vec3(c, "origin", &origin) || named_vec3(c, "target", &target))
-    return c->err.code;
+  if (named_vec3(c, "origin", &origin) || named_vec3(c, "target", &target)) return c->err.code;
   if (attr(c, "up") && named_vec3(c, "up", &up)) return c->err.code;
   vec3 dir = v3_sub(target, origin);
-  if (!(v3_len(dir) > 0) || !v3_finite(dir))
-    return xfail(c, RSW_ERR_INVALID, "origin and target coincide");
+  if (!(v3_len(dir) > 0) || !v3_finite(dir)) return xfail(c, RSW_ERR_INVALID, "origin and target coincide");
   if (v3_len2(up) == 0) {
     vec3 second;
     coordinate_system(v3_norm(dir), &up, &second);
@@ -925,8 +913,9 @@ static rsw_status start_lookat(xml_ctx *c, xml_frame *parent, xml_frame *self) {
 }
 
 static rsw_status start_unsupported(xml_ctx *c, xml_frame *parent, xml_frame *self) {
-  return xfail(c, RSW_ERR_UNSUPPORTED, "this element is not supported (scenes must be "
-                                       "self-contained, without includes or aliases)");
+  return xfail(c, RSW_ERR_UNSUPPORTED,
+               "this element is not supported (scenes must be "
+               "self-contained, without includes or aliases)");
 }
 
 static const tag_def tag_table[] = {
@@ -970,17 +959,12 @@ static const tag_def *find_tag(const char *name) {
 /* Is an element placed as `t` allowed under `parent` (NULL: the root)? */
 static rsw_status check_placement(xml_ctx *c, const tag_def *t, const xml_frame *parent) {
   if (!parent)
-    return t->place == IN_ROOT
-               ? RSW_OK
-               : xfail(c, RSW_ERR_PARSE, "the root element must be <scene>");
-  if (t->place == IN_ROOT)
-    return xfail(c, RSW_ERR_PARSE, "<scene> can only be the root element");
+    return t->place == IN_ROOT ? RSW_OK : xfail(c, RSW_ERR_PARSE, "the root element must be <scene>");
+  if (t->place == IN_ROOT) return xfail(c, RSW_ERR_PARSE, "<scene> can only be the root element");
   if (parent->kind == FR_LEAF)
-    return xfail(c, RSW_ERR_PARSE, "cannot occur inside <%s> (it takes no child elements)",
-                 parent->elem);
+    return xfail(c, RSW_ERR_PARSE, "cannot occur inside <%s> (it takes no child elements)", parent->elem);
   if (parent->kind == FR_TRANSFORM && t->place != IN_TRANSFORM)
-    return xfail(c, RSW_ERR_PARSE,
-                 "<transform> can only contain translate, rotate, scale, matrix, lookat");
+    return xfail(c, RSW_ERR_PARSE, "<transform> can only contain translate, rotate, scale, matrix, lookat");
   if (t->place == IN_TRANSFORM && parent->kind != FR_TRANSFORM)
     return xfail(c, RSW_ERR_PARSE, "transform operations can only occur inside <transform>");
   if (t->place == IN_SCENE && parent->kind != FR_SCENE)
@@ -1041,8 +1025,8 @@ static void XMLCALL on_text(void *ud, const XML_Char *s, int len) {
 
 /* DTDs can declare entities (and with them expansion bombs); Mitsuba scenes
  * never need one. */
-static void XMLCALL on_doctype(void *ud, const XML_Char *name, const XML_Char *sysid,
-                               const XML_Char *pubid, int has_internal_subset) {
+static void XMLCALL on_doctype(void *ud, const XML_Char *name, const XML_Char *sysid, const XML_Char *pubid,
+                               int has_internal_subset) {
   xml_ctx *c = ud;
   if (c->failed) return;
   set_loc(c, (unsigned long)XML_GetCurrentLineNumber(c->parser));
@@ -1070,15 +1054,13 @@ static rsw_status load_defines(xml_ctx *c, const scene_define *defines, size_t n
     if (!d->name || !d->name[0] || !d->value)
       return rsw_fail(&c->err, RSW_ERR_USAGE, "-D", "define %zu has no name or value", i);
     if (strlen(d->name) > RSW_MAX_NAME)
-      return rsw_fail(&c->err, RSW_ERR_USAGE, "-D", "define name longer than %d characters",
-                      RSW_MAX_NAME);
+      return rsw_fail(&c->err, RSW_ERR_USAGE, "-D", "define name longer than %d characters", RSW_MAX_NAME);
     if (param_find(c, d->name))
-      return rsw_fail(&c->err, RSW_ERR_USAGE, "-D", "parameter \"%s\" defined twice",
-                      d->name);
+      return rsw_fail(&c->err, RSW_ERR_USAGE, "-D", "parameter \"%s\" defined twice", d->name);
     param *p = param_add(c);
     if (!p)
-      return rsw_fail(&c->err, c->n_params >= XML_MAX_PARAMS ? RSW_ERR_LIMIT : RSW_ERR_NOMEM,
-                      "-D", "cannot store %zu defines", n_defines);
+      return rsw_fail(&c->err, c->n_params >= XML_MAX_PARAMS ? RSW_ERR_LIMIT : RSW_ERR_NOMEM, "-D",
+                      "cannot store %zu defines", n_defines);
     p->name = d->name;
     p->value = d->value;
     p->from_define = true;
@@ -1094,17 +1076,14 @@ static const char *short_name(const char *source_name) {
   return n > 200 ? s + (n - 200) : s;
 }
 
-rsw_status scene_read_xml(const char *text, size_t len, const char *source_name,
-                          const scene_define *defines, size_t n_defines,
-                          node **root_out, char **variant_out, rsw_err *err) {
-  return scene_read_xml_limited(text, len, source_name, defines, n_defines, NULL, root_out,
-                                variant_out, err);
+rsw_status scene_read_xml(const char *text, size_t len, const char *source_name, const scene_define *defines,
+                          size_t n_defines, node **root_out, char **variant_out, rsw_err *err) {
+  return scene_read_xml_limited(text, len, source_name, defines, n_defines, NULL, root_out, variant_out, err);
 }
 
 rsw_status scene_read_xml_limited(const char *text, size_t len, const char *source_name,
-                                  const scene_define *defines, size_t n_defines,
-                                  const scene_limits *lim, node **root_out, char **variant_out,
-                                  rsw_err *err) {
+                                  const scene_define *defines, size_t n_defines, const scene_limits *lim,
+                                  node **root_out, char **variant_out, rsw_err *err) {
   xml_ctx c;
   memset(&c, 0, sizeof c);
   c.lim = lim ? lim : &scene_limits_default;
@@ -1113,8 +1092,8 @@ rsw_status scene_read_xml_limited(const char *text, size_t len, const char *sour
   rsw_status st = RSW_OK;
 
   if (len > XML_MAX_DOC) {
-    rsw_fail(&c.err, RSW_ERR_LIMIT, c.loc, "XML document of %zu bytes exceeds the %zu-byte limit",
-             len, XML_MAX_DOC);
+    rsw_fail(&c.err, RSW_ERR_LIMIT, c.loc, "XML document of %zu bytes exceeds the %zu-byte limit", len,
+             XML_MAX_DOC);
     goto done;
   }
   if (!text) len = 0;
@@ -1129,8 +1108,7 @@ rsw_status scene_read_xml_limited(const char *text, size_t len, const char *sour
   XML_SetElementHandler(c.parser, on_start, on_end);
   XML_SetCharacterDataHandler(c.parser, on_text);
   XML_SetStartDoctypeDeclHandler(c.parser, on_doctype);
-  if (XML_Parse(c.parser, text ? text : "", (int)len, XML_TRUE) == XML_STATUS_ERROR &&
-      !c.failed) {
+  if (XML_Parse(c.parser, text ? text : "", (int)len, XML_TRUE) == XML_STATUS_ERROR && !c.failed) {
     enum XML_Error code = XML_GetErrorCode(c.parser);
     set_loc(&c, (unsigned long)XML_GetCurrentLineNumber(c.parser));
     rsw_fail(&c.err, code == XML_ERROR_NO_MEMORY ? RSW_ERR_NOMEM : RSW_ERR_PARSE, c.loc,

@@ -17,13 +17,12 @@
 typedef struct distant {
   sensor base;
   ray_target target;
-  vec3 d;       /* unit, into the scene */
-  vec3 center;  /* scene bounding sphere */
+  vec3 d;      /* unit, into the scene */
+  vec3 center; /* scene bounding sphere */
   double radius;
 } distant;
 
-static double distant_sample_ray(const sensor *s, vec2 film_u, vec2 aperture_u,
-                                 ray3 *ray) {
+static double distant_sample_ray(const sensor *s, vec2 film_u, vec2 aperture_u, ray3 *ray) {
   (void)film_u;
   const distant *ds = (const distant *)s;
   /* Point/shape targets start 2R away (the sphere's diameter: the origin is
@@ -31,8 +30,8 @@ static double distant_sample_ray(const sensor *s, vec2 film_u, vec2 aperture_u,
    * through the centre, so R suffices. */
   double offset = ds->target.kind == RAY_TARGET_NONE ? ds->radius : 2.0 * ds->radius;
   vec3 o;
-  double w = ray_target_origin(&ds->target, &s->to_world, ds->center, ds->radius,
-                               offset, ds->d, aperture_u, &o);
+  double w =
+      ray_target_origin(&ds->target, &s->to_world, ds->center, ds->radius, offset, ds->d, aperture_u, &o);
   ray->o = o;
   ray->d = ds->d;
   ray->tmin = 0.0;
@@ -62,7 +61,9 @@ static const sensor_ops distant_ops = {
     .pixel_angles = distant_pixel_angles,
 };
 
-static void distant_destroy(object *o) { free(o); }
+static void distant_destroy(object *o) {
+  free(o);
+}
 
 static rsw_status distant_create(loader *ld, node *n, object **out);
 
@@ -74,7 +75,9 @@ static bool distant_frame(vec3 dir, xform *out) {
   return xf_look_at(v3(0, 0, 0), dn, up, out);
 }
 
-static vec3 distant_get_direction(const object *o) { return ((const distant *)o)->d; }
+static vec3 distant_get_direction(const object *o) {
+  return ((const distant *)o)->d;
+}
 
 static void distant_set_direction(object *o, vec3 dir) {
   distant *ds = (distant *)o;
@@ -122,13 +125,11 @@ static rsw_status distant_read(loader *ld, node *n, distant *ds) {
   if (st != RSW_OK) return st;
   if (has_dir) {
     if (!(v3_len(dir) > 0.0))
-      return ld_fail(ld, n, "direction", RSW_ERR_INVALID,
-                     "distant: 'direction' must not be the zero vector");
+      return ld_fail(ld, n, "direction", RSW_ERR_INVALID, "distant: 'direction' must not be the zero vector");
     /* Mitsuba: to_world = look_at(0, normalize(direction), up) with up the
      * second vector of coordinate_system(direction). */
     if (!distant_frame(dir, &ds->base.to_world))
-      return ld_fail(ld, n, "direction", RSW_ERR_INVALID,
-                     "distant: cannot build a frame from 'direction'");
+      return ld_fail(ld, n, "direction", RSW_ERR_INVALID, "distant: cannot build a frame from 'direction'");
   } else {
     st = ld_transform(ld, n, "to_world", &ds->base.to_world, NULL);
     if (st != RSW_OK) return st;
@@ -137,8 +138,7 @@ static rsw_status distant_read(loader *ld, node *n, distant *ds) {
    * expect a unit ray direction. */
   vec3 d = xf_vector(&ds->base.to_world, v3(0, 0, 1));
   if (!(v3_len(d) > 0.0) || !v3_finite(d))
-    return ld_fail(ld, n, "to_world", RSW_ERR_INVALID,
-                   "distant: 'to_world' maps +z to a zero vector");
+    return ld_fail(ld, n, "to_world", RSW_ERR_INVALID, "distant: 'to_world' maps +z to a zero vector");
   ds->d = v3_norm(d);
   return sensor_read_target(ld, n, &ds->target);
 }

@@ -34,7 +34,8 @@ static double distantflux_sample_ray(const sensor *s, vec2 film_u, vec2 aperture
   vec3 n_ref = v3_norm(xf_vector(&s->to_world, v3(0, 0, 1)));
   vec3 d = v3_neg(omega);
   vec3 o;
-  double w = ray_target_origin(&f->target, &s->to_world, f->center, f->radius, f->ray_offset, d, aperture_u, &o);
+  double w =
+      ray_target_origin(&f->target, &s->to_world, f->center, f->radius, f->ray_offset, d, aperture_u, &o);
   double n_pix = (double)s->film->width * (double)s->film->height;
   w *= 2.0 * 3.14159265358979323846 * v3_dot(omega, n_ref) / n_pix;
   ray->o = o;
@@ -66,7 +67,9 @@ static const sensor_ops distantflux_ops = {
     .pixel_angles = distantflux_pixel_angles,
 };
 
-static void distantflux_destroy(object *o) { free(o); }
+static void distantflux_destroy(object *o) {
+  free(o);
+}
 
 static rsw_status distantflux_create(loader *ld, node *n, object **out);
 

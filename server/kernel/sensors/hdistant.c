@@ -28,8 +28,7 @@ typedef struct hdistant {
   double radius;
 } hdistant;
 
-static double hdistant_sample_ray(const sensor *s, vec2 film_u, vec2 aperture_u,
-                                  ray3 *ray) {
+static double hdistant_sample_ray(const sensor *s, vec2 film_u, vec2 aperture_u, ray3 *ray) {
   const hdistant *h = (const hdistant *)s;
   vec3 v_local = warp_square_to_uniform_hemisphere(film_u);
   /* Normalised so that a to_world with a scale still gives a unit ray
@@ -37,8 +36,8 @@ static double hdistant_sample_ray(const sensor *s, vec2 film_u, vec2 aperture_u,
   vec3 omega = v3_norm(xf_vector(&s->to_world, v_local));
   vec3 d = v3_neg(omega);
   vec3 o;
-  double w = ray_target_origin(&h->target, &s->to_world, h->center, h->radius,
-                               h->ray_offset, d, aperture_u, &o);
+  double w =
+      ray_target_origin(&h->target, &s->to_world, h->center, h->radius, h->ray_offset, d, aperture_u, &o);
   ray->o = o;
   ray->d = d;
   ray->tmin = 0.0;
@@ -70,7 +69,9 @@ static const sensor_ops hdistant_ops = {
     .pixel_angles = hdistant_pixel_angles,
 };
 
-static void hdistant_destroy(object *o) { free(o); }
+static void hdistant_destroy(object *o) {
+  free(o);
+}
 
 static rsw_status hdistant_create(loader *ld, node *n, object **out);
 

@@ -20,8 +20,8 @@ typedef struct mdistant {
   sensor base;
   ray_target target;
   size_t n;
-  vec3 *d;        /* n unit directions, into the scene */
-  xform *frames;  /* n: look_at(0, d_i, first vector of coordinate_system) */
+  vec3 *d;                 /* n unit directions, into the scene */
+  xform *frames;           /* n: look_at(0, d_i, first vector of coordinate_system) */
   double ray_offset_param; /* as given; < 0: resolve from the scene */
   double ray_offset;
   vec3 center;
@@ -118,7 +118,8 @@ static rsw_status mdistant_read(loader *ld, node *n, mdistant *m) {
     vec3 up, unused;
     coordinate_system(m->d[i], &up, &unused);
     if (!xf_look_at(v3(0, 0, 0), m->d[i], up, &m->frames[i]))
-      return ld_fail(ld, n, "directions", RSW_ERR_INVALID, "mdistant: cannot build a frame for direction %zu", i);
+      return ld_fail(ld, n, "directions", RSW_ERR_INVALID, "mdistant: cannot build a frame for direction %zu",
+                     i);
   }
   st = sensor_read_target(ld, n, &m->target);
   if (st != RSW_OK) return st;

@@ -79,7 +79,8 @@ static rsw_status mradiancemeter_read(loader *ld, node *n, mradiancemeter *m) {
                    m->base.film->width, m->base.film->height);
   for (size_t i = 0; i < m->n; i++) {
     if (!(v3_len(m->d[i]) > 0.0))
-      return ld_fail(ld, n, "directions", RSW_ERR_INVALID, "mradiancemeter: direction %zu is the zero vector", i);
+      return ld_fail(ld, n, "directions", RSW_ERR_INVALID, "mradiancemeter: direction %zu is the zero vector",
+                     i);
     m->d[i] = v3_norm(m->d[i]);
   }
   return RSW_OK;

@@ -27,8 +27,7 @@ typedef struct perspective {
   double pp_offset_x, pp_offset_y; /* principal point offset (film units) */
 } perspective;
 
-static double perspective_sample_ray(const sensor *s, vec2 film_u, vec2 aperture_u,
-                                     ray3 *ray) {
+static double perspective_sample_ray(const sensor *s, vec2 film_u, vec2 aperture_u, ray3 *ray) {
   (void)aperture_u;
   const perspective *p = (const perspective *)s;
   double sx = film_u.x + p->pp_offset_x, sy = film_u.y + p->pp_offset_y;
@@ -56,7 +55,9 @@ static const sensor_ops perspective_ops = {
     .set_scene = perspective_set_scene,
 };
 
-static void perspective_destroy(object *o) { free(o); }
+static void perspective_destroy(object *o) {
+  free(o);
+}
 
 static rsw_status perspective_create(loader *ld, node *n, object **out);
 
@@ -65,7 +66,8 @@ static rsw_status perspective_check_xf(const object *o, const xform *t, const ch
   (void)o;
   double scale;
   if (!xf_is_similarity(t, &scale) || fabs(scale - 1.0) > 1e-4)
-    return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': a perspective camera's to_world must be a rotation and translation", key);
+    return rsw_fail(err, RSW_ERR_INVALID, key,
+                    "'%s': a perspective camera's to_world must be a rotation and translation", key);
   return RSW_OK;
 }
 
@@ -103,8 +105,7 @@ static rsw_status read_focal_length(loader *ld, node *n, double *mm) {
   }
   if (!end || *end != '\0' || end == buf || !(v > 0.0) || !isfinite(v))
     return ld_fail(ld, n, "focal_length", RSW_ERR_INVALID,
-                   "perspective: cannot parse the focal length '%s' (expected <x>mm, x > 0)",
-                   str);
+                   "perspective: cannot parse the focal length '%s' (expected <x>mm, x > 0)", str);
   *mm = v;
   return RSW_OK;
 }
@@ -194,8 +195,7 @@ static rsw_status perspective_read(loader *ld, node *n, perspective *p) {
   if (st == RSW_OK) st = ld_float(ld, n, "far_clip", 1e4, &p->far_clip);
   if (st != RSW_OK) return st;
   if (!(p->near_clip > 0.0))
-    return ld_fail(ld, n, "near_clip", RSW_ERR_RANGE,
-                   "perspective: 'near_clip' must be greater than zero");
+    return ld_fail(ld, n, "near_clip", RSW_ERR_RANGE, "perspective: 'near_clip' must be greater than zero");
   if (!(p->near_clip < p->far_clip))
     return ld_fail(ld, n, "near_clip", RSW_ERR_RANGE,
                    "perspective: 'near_clip' must be smaller than 'far_clip'");

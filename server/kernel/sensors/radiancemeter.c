@@ -18,12 +18,11 @@
 
 typedef struct radiancemeter {
   sensor base;
-  vec3 o, d; /* d unit */
-  vec3 frame;  /* accel_origin() (set_scene) */
+  vec3 o, d;  /* d unit */
+  vec3 frame; /* accel_origin() (set_scene) */
 } radiancemeter;
 
-static double radiancemeter_sample_ray(const sensor *s, vec2 film_u,
-                                       vec2 aperture_u, ray3 *ray) {
+static double radiancemeter_sample_ray(const sensor *s, vec2 film_u, vec2 aperture_u, ray3 *ray) {
   (void)film_u;
   (void)aperture_u;
   const radiancemeter *r = (const radiancemeter *)s;
@@ -45,7 +44,9 @@ static const sensor_ops radiancemeter_ops = {
     .set_scene = radiancemeter_set_scene,
 };
 
-static void radiancemeter_destroy(object *o) { free(o); }
+static void radiancemeter_destroy(object *o) {
+  free(o);
+}
 
 static rsw_status radiancemeter_create(loader *ld, node *n, object **out);
 
@@ -90,8 +91,7 @@ static rsw_status radiancemeter_read(loader *ld, node *n, radiancemeter *r) {
   }
   vec3 d = xf_vector(&r->base.to_world, v3(0, 0, 1));
   if (!(v3_len(d) > 0.0) || !v3_finite(d))
-    return ld_fail(ld, n, "to_world", RSW_ERR_INVALID,
-                   "radiancemeter: 'to_world' maps +z to a zero vector");
+    return ld_fail(ld, n, "to_world", RSW_ERR_INVALID, "radiancemeter: 'to_world' maps +z to a zero vector");
   r->d = v3_norm(d);
   r->o = xf_point(&r->base.to_world, v3(0, 0, 0));
   return RSW_OK;

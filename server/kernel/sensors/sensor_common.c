@@ -13,9 +13,8 @@
 /* The nested object of class cls, or a default instance of `def_type`
  * when the document gives none (mitsuba3 src/render/sensor.cpp creates an
  * hdrfilm and an independent sampler the same way). */
-static rsw_status child_or_default(loader *ld, node *n, obj_class cls,
-                                   const char *def_type, const char *def_id,
-                                   object **out) {
+static rsw_status child_or_default(loader *ld, node *n, obj_class cls, const char *def_type,
+                                   const char *def_id, object **out) {
   object *o = NULL;
   rsw_status st = ld_child(ld, n, NULL, cls, &o);
   if (st != RSW_OK) return st;
@@ -24,8 +23,7 @@ static rsw_status child_or_default(loader *ld, node *n, obj_class cls,
     if (st != RSW_OK) return st;
   }
   if (!o || o->plugin == NULL || o->plugin->cls != cls)
-    return ld_fail(ld, n, NULL, RSW_ERR_TYPE, "%s: expected a %s", n->type,
-                   obj_class_name(cls));
+    return ld_fail(ld, n, NULL, RSW_ERR_TYPE, "%s: expected a %s", n->type, obj_class_name(cls));
   *out = o;
   return RSW_OK;
 }
@@ -46,8 +44,7 @@ rsw_status sensor_read_base(loader *ld, node *n, sensor *s) {
   if (st != RSW_OK) return st;
   if (close < open)
     return ld_fail(ld, n, "shutter_close", RSW_ERR_RANGE,
-                   "%s: shutter_close (%g) is before shutter_open (%g)", n->type,
-                   close, open);
+                   "%s: shutter_close (%g) is before shutter_open (%g)", n->type, close, open);
 
   s->film = (film *)f;
   s->sampler = (sampler *)smp;
@@ -57,8 +54,8 @@ rsw_status sensor_read_base(loader *ld, node *n, sensor *s) {
 rsw_status sensor_require_1x1_film(loader *ld, node *n, const sensor *s) {
   if (s->film->width != 1 || s->film->height != 1)
     return ld_fail(ld, n, NULL, RSW_ERR_INVALID,
-                   "%s: this sensor only supports films of 1x1 pixels (got %dx%d)",
-                   n->type, s->film->width, s->film->height);
+                   "%s: this sensor only supports films of 1x1 pixels (got %dx%d)", n->type, s->film->width,
+                   s->film->height);
   return RSW_OK;
 }
 
@@ -75,16 +72,14 @@ rsw_status sensor_read_target(loader *ld, node *n, ray_target *t) {
       rsw_status st = ld_child(ld, n, "target", CLS_SHAPE, &o);
       if (st != RSW_OK) return st;
       if (!o)
-        return ld_fail(ld, n, "target", RSW_ERR_TYPE,
-                       "%s: 'target' must be a point or a shape", n->type);
+        return ld_fail(ld, n, "target", RSW_ERR_TYPE, "%s: 'target' must be a point or a shape", n->type);
       r.kind = RAY_TARGET_SHAPE;
       r.shape = (const shape *)o;
       st = shape_enable_sampling((shape *)o, ld->err, n->loc);
       if (st != RSW_OK) return st;
     } else {
       return ld_fail(ld, n, "target", RSW_ERR_TYPE,
-                     "%s: unsupported 'target' type (must be a point or a shape)",
-                     n->type);
+                     "%s: unsupported 'target' type (must be a point or a shape)", n->type);
     }
   }
   *t = r;
@@ -95,8 +90,7 @@ rsw_status ray_target_check(const ray_target *t, const char *where, rsw_err *err
   if (t->kind != RAY_TARGET_SHAPE) return RSW_OK;
   double a = t->shape->area;
   if (!(a > 0.0) || !isfinite(a))
-    return rsw_fail(err, RSW_ERR_INVALID, where,
-                    "target shape '%s' has no usable surface area (%g)",
+    return rsw_fail(err, RSW_ERR_INVALID, where, "target shape '%s' has no usable surface area (%g)",
                     t->shape->base.id ? t->shape->base.id : "?", a);
   return RSW_OK;
 }
@@ -112,12 +106,10 @@ static double slab_offset(const ray_target *t, vec3 p, vec3 d, double offset) {
   return t->slab.on ? fmax(offset, periodic_slab_offset(&t->slab, p, d)) : offset;
 }
 
-double ray_target_origin(const ray_target *t, const xform *to_world, vec3 center,
-                         double radius, double offset, vec3 d, vec2 u, vec3 *o) {
+double ray_target_origin(const ray_target *t, const xform *to_world, vec3 center, double radius,
+                         double offset, vec3 d, vec2 u, vec3 *o) {
   switch (t->kind) {
-  case RAY_TARGET_POINT:
-    *o = v3_fma(t->point, -slab_offset(t, t->point, d, offset), d);
-    return 1.0;
+  case RAY_TARGET_POINT: *o = v3_fma(t->point, -slab_offset(t, t->point, d, offset), d); return 1.0;
   case RAY_TARGET_SHAPE: {
     position_sample ps = shape_sample_position(t->shape, u);
     *o = v3_fma(ps.p, -slab_offset(t, ps.p, d, offset), d);
@@ -146,7 +138,8 @@ rsw_status sensor_read_vec3_list(loader *ld, node *n, const char *name, vec3 **o
   rsw_status st = ld_string(ld, n, name, NULL, &text);
   if (st != RSW_OK) return st;
   if (!text)
-    return ld_fail(ld, n, name, RSW_ERR_MISSING, "%s: '%s' is required (a string of 3N numbers)", n->type, name);
+    return ld_fail(ld, n, name, RSW_ERR_MISSING, "%s: '%s' is required (a string of 3N numbers)", n->type,
+                   name);
   size_t cap = 16, k = 0;
   double *v = malloc(cap * sizeof *v);
   if (!v) return ld_fail(ld, n, name, RSW_ERR_NOMEM, "out of memory");
@@ -158,8 +151,8 @@ rsw_status sensor_read_vec3_list(loader *ld, node *n, const char *name, vec3 **o
     double x = strtod(p, &end);
     if (end == p || !isfinite(x)) {
       free(v);
-      return ld_fail(ld, n, name, RSW_ERR_INVALID, "%s: '%s': entry %zu is not a finite number (near \"%.20s\")",
-                     n->type, name, k, p);
+      return ld_fail(ld, n, name, RSW_ERR_INVALID,
+                     "%s: '%s': entry %zu is not a finite number (near \"%.20s\")", n->type, name, k, p);
     }
     if (k == cap) {
       cap *= 2;
@@ -175,8 +168,8 @@ rsw_status sensor_read_vec3_list(loader *ld, node *n, const char *name, vec3 **o
   }
   if (k == 0 || k % 3 != 0) {
     free(v);
-    return ld_fail(ld, n, name, RSW_ERR_INVALID, "%s: '%s' must hold 3N numbers, N >= 1 (got %zu)", n->type, name,
-                   k);
+    return ld_fail(ld, n, name, RSW_ERR_INVALID, "%s: '%s' must hold 3N numbers, N >= 1 (got %zu)", n->type,
+                   name, k);
   }
   vec3 *r = malloc(k / 3 * sizeof *r);
   if (!r) {

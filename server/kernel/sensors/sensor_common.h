@@ -28,8 +28,8 @@ typedef enum ray_target_kind {
 
 typedef struct ray_target {
   ray_target_kind kind;
-  vec3 point;          /* RAY_TARGET_POINT */
-  const shape *shape;  /* RAY_TARGET_SHAPE (owned by the scene) */
+  vec3 point;         /* RAY_TARGET_POINT */
+  const shape *shape; /* RAY_TARGET_SHAPE (owned by the scene) */
   /* The scene's periodic boundary (ray_target_bind), when origins are to
    * be put outside its geometry's slab; .on false otherwise. */
   periodic_bounds slab;
@@ -69,8 +69,8 @@ void ray_target_bind(ray_target *t, const scene *sc, bool explicit_offset);
  * so without a target the origins fill the disk of radius R around the
  * bounding-sphere centre c in the plane orthogonal to the sensor axis
  * to_world (0,0,1), shifted back by offset. */
-double ray_target_origin(const ray_target *t, const xform *to_world, vec3 center,
-                         double radius, double offset, vec3 d, vec2 u, vec3 *o);
+double ray_target_origin(const ray_target *t, const xform *to_world, vec3 center, double radius,
+                         double offset, vec3 d, vec2 u, vec3 *o);
 
 /* Read a string property of 3N numbers separated by commas and/or white
  * space (Eradiate's mdistant `directions`, mradiancemeter `origins`) into

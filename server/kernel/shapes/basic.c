@@ -45,7 +45,8 @@ static rsw_status rectangle_create(loader *ld, node *n, object **out) {
   shape *s = shape_alloc(GEOM_MESH);
   if (!s) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
   rsw_status st = shape_read_common(ld, n, s, false);
-  if (!st && mesh_alloc(&s->mesh, 4, 2, true, true)) st = ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+  if (!st && mesh_alloc(&s->mesh, 4, 2, true, true))
+    st = ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
   if (st) {
     shape_release(s);
     free(s);
@@ -71,7 +72,8 @@ static rsw_status cube_create(loader *ld, node *n, object **out) {
   shape *s = shape_alloc(GEOM_MESH);
   if (!s) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
   rsw_status st = shape_read_common(ld, n, s, true);
-  if (!st && mesh_alloc(&s->mesh, 24, 12, true, true)) st = ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+  if (!st && mesh_alloc(&s->mesh, 24, 12, true, true))
+    st = ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
   if (st) {
     shape_release(s);
     free(s);
@@ -141,11 +143,27 @@ static rsw_status disk_create(loader *ld, node *n, object **out) {
   return finish(ld, n, s, out);
 }
 
-const plugin plugin_rectangle = {.name = "rectangle", .cls = CLS_SHAPE, .create = rectangle_create, .destroy = shape_destroy,
-                                   .traverse = shape_traverse, .parameters_changed = shape_parameters_changed};
-const plugin plugin_cube = {.name = "cube", .cls = CLS_SHAPE, .create = cube_create, .destroy = shape_destroy,
-                                   .traverse = shape_traverse, .parameters_changed = shape_parameters_changed};
-const plugin plugin_sphere = {.name = "sphere", .cls = CLS_SHAPE, .create = sphere_create, .destroy = shape_destroy,
-                                   .traverse = shape_traverse, .parameters_changed = shape_parameters_changed};
-const plugin plugin_disk = {.name = "disk", .cls = CLS_SHAPE, .create = disk_create, .destroy = shape_destroy,
-                                   .traverse = shape_traverse, .parameters_changed = shape_parameters_changed};
+const plugin plugin_rectangle = {.name = "rectangle",
+                                 .cls = CLS_SHAPE,
+                                 .create = rectangle_create,
+                                 .destroy = shape_destroy,
+                                 .traverse = shape_traverse,
+                                 .parameters_changed = shape_parameters_changed};
+const plugin plugin_cube = {.name = "cube",
+                            .cls = CLS_SHAPE,
+                            .create = cube_create,
+                            .destroy = shape_destroy,
+                            .traverse = shape_traverse,
+                            .parameters_changed = shape_parameters_changed};
+const plugin plugin_sphere = {.name = "sphere",
+                              .cls = CLS_SHAPE,
+                              .create = sphere_create,
+                              .destroy = shape_destroy,
+                              .traverse = shape_traverse,
+                              .parameters_changed = shape_parameters_changed};
+const plugin plugin_disk = {.name = "disk",
+                            .cls = CLS_SHAPE,
+                            .create = disk_create,
+                            .destroy = shape_destroy,
+                            .traverse = shape_traverse,
+                            .parameters_changed = shape_parameters_changed};

@@ -72,6 +72,9 @@ static rsw_status cylinder_create(loader *ld, node *n, object **out) {
   return RSW_OK;
 }
 
-const plugin plugin_cylinder = {.name = "cylinder", .cls = CLS_SHAPE, .create = cylinder_create,
-                                .destroy = shape_destroy, .traverse = shape_traverse,
+const plugin plugin_cylinder = {.name = "cylinder",
+                                .cls = CLS_SHAPE,
+                                .create = cylinder_create,
+                                .destroy = shape_destroy,
+                                .traverse = shape_traverse,
                                 .parameters_changed = shape_parameters_changed};

@@ -68,13 +68,15 @@ static rsw_status group_create(loader *ld, node *n, object **out) {
   for (size_t i = 0; i < cnt && !st; i++) {
     shape *m = g->members[i];
     if (shape_is_group(m) || shape_is_instancing(m))
-      st = ld_fail(ld, n, NULL, RSW_ERR_UNSUPPORTED,
-                   "shapegroup '%s': member '%s' is a %s; groups do not nest (Embree allows one instance level)",
-                   n->id, m->base.id, m->base.plugin->name);
+      st = ld_fail(
+          ld, n, NULL, RSW_ERR_UNSUPPORTED,
+          "shapegroup '%s': member '%s' is a %s; groups do not nest (Embree allows one instance level)",
+          n->id, m->base.id, m->base.plugin->name);
     else if (m->emitter)
-      st = ld_fail(ld, n, NULL, RSW_ERR_UNSUPPORTED,
-                   "shapegroup '%s': member '%s' carries an area emitter; instanced emitters are not supported",
-                   n->id, m->base.id);
+      st = ld_fail(
+          ld, n, NULL, RSW_ERR_UNSUPPORTED,
+          "shapegroup '%s': member '%s' carries an area emitter; instanced emitters are not supported", n->id,
+          m->base.id);
     else
       member_bbox(m, &g->lo, &g->hi);
   }
@@ -100,8 +102,11 @@ static void group_traverse(object *o, param_visitor *v) {
   }
 }
 
-const plugin plugin_shapegroup = {.name = "shapegroup", .cls = CLS_SHAPE, .create = group_create,
-                                  .destroy = group_destroy, .traverse = group_traverse};
+const plugin plugin_shapegroup = {.name = "shapegroup",
+                                  .cls = CLS_SHAPE,
+                                  .create = group_create,
+                                  .destroy = group_destroy,
+                                  .traverse = group_traverse};
 
 /* ---- instance -------------------------------------------------------------------------- */
 
@@ -116,7 +121,8 @@ static rsw_status read_group(loader *ld, node *n, shape_group **out) {
   object *o;
   rsw_status st = ld_child(ld, n, "shapegroup", CLS_SHAPE, &o);
   if (st) return st;
-  if (!o) return ld_fail(ld, n, NULL, RSW_ERR_MISSING, "%s '%s': missing property 'shapegroup'", n->type, n->id);
+  if (!o)
+    return ld_fail(ld, n, NULL, RSW_ERR_MISSING, "%s '%s': missing property 'shapegroup'", n->type, n->id);
   if (!shape_is_group((shape *)o))
     return ld_fail(ld, n, "shapegroup", RSW_ERR_TYPE, "property 'shapegroup' must be a shapegroup, got '%s'",
                    o->plugin->name);
@@ -152,10 +158,15 @@ static void instance_traverse(object *o, param_visitor *v) {
   pv_transform(v, "to_world", &s->base.to_world, UPDATE_GEOMETRIC, instance_check_transform);
 }
 
-static void instance_parameters_changed(object *o) { (void)o; }
+static void instance_parameters_changed(object *o) {
+  (void)o;
+}
 
-const plugin plugin_instance = {.name = "instance", .cls = CLS_SHAPE, .create = instance_create,
-                                .destroy = instance_destroy, .traverse = instance_traverse,
+const plugin plugin_instance = {.name = "instance",
+                                .cls = CLS_SHAPE,
+                                .create = instance_create,
+                                .destroy = instance_destroy,
+                                .traverse = instance_traverse,
                                 .parameters_changed = instance_parameters_changed};
 
 /* ---- instancelist ---------------------------------------------------------------------- */
@@ -180,12 +191,14 @@ static void leaf_matrix(const double v[7], float out[12], double tr[3]) {
 /* The parser behind instance_list_parse: also returns the translations in
  * double precision (n x 3, malloc'ed): a float keeps only ~7 digits, 8 mm
  * steps at 100 km, so placements in georeferenced coordinates would move. */
-static rsw_status list_parse(const char *path, float **xf_out, double **tr_out, uint32_t *n_out, rsw_err *err) {
+static rsw_status list_parse(const char *path, float **xf_out, double **tr_out, uint32_t *n_out,
+                             rsw_err *err) {
   *xf_out = NULL;
   *tr_out = NULL;
   *n_out = 0;
   FILE *f = fopen(path, "r");
-  if (!f) return rsw_fail(err, RSW_ERR_FILE, path, "cannot open instance list '%s': %s", path, strerror(errno));
+  if (!f)
+    return rsw_fail(err, RSW_ERR_FILE, path, "cannot open instance list '%s': %s", path, strerror(errno));
   size_t cap = 1024, n = 0;
   float *xf = malloc(cap * 12 * sizeof(float));
   double *tr = malloc(cap * 3 * sizeof(double));
@@ -312,8 +325,8 @@ static rsw_status instancelist_create(loader *ld, node *n, object **out) {
   return RSW_OK;
 }
 
-const plugin plugin_instancelist = {.name = "instancelist", .cls = CLS_SHAPE, .create = instancelist_create,
-                                    .destroy = instance_destroy};
+const plugin plugin_instancelist = {
+    .name = "instancelist", .cls = CLS_SHAPE, .create = instancelist_create, .destroy = instance_destroy};
 
 /* ---- shared ------------------------------------------------------------------------------ */
 
@@ -321,7 +334,8 @@ xform instance_transform(const instance_shape *s, uint32_t k) {
   if (!s->xf) return s->base.to_world;
   const float *m = &s->xf[12 * (size_t)k];
   const double *tr = &s->tr[3 * (size_t)k];
-  double mm[4][4] = {{m[0], m[1], m[2], tr[0]}, {m[4], m[5], m[6], tr[1]}, {m[8], m[9], m[10], tr[2]}, {0, 0, 0, 1}};
+  double mm[4][4] = {
+      {m[0], m[1], m[2], tr[0]}, {m[4], m[5], m[6], tr[1]}, {m[8], m[9], m[10], tr[2]}, {0, 0, 0, 1}};
   xform t;
   if (!xf_from_matrix(mm, &t)) t = xf_identity(); /* checked at load */
   return t;
@@ -337,7 +351,9 @@ void instance_bbox(const shape *sh, vec3 *lo, vec3 *hi) {
   const shape_group *g = s->group;
   if (!s->xf) {
     for (int c = 0; c < 8; c++)
-      box_add(lo, hi, xf_point(&sh->to_world, v3(c & 1 ? g->hi.x : g->lo.x, c & 2 ? g->hi.y : g->lo.y, c & 4 ? g->hi.z : g->lo.z)));
+      box_add(lo, hi,
+              xf_point(&sh->to_world,
+                       v3(c & 1 ? g->hi.x : g->lo.x, c & 2 ? g->hi.y : g->lo.y, c & 4 ? g->hi.z : g->lo.z)));
     return;
   }
   /* Placements applied directly (instance_transform would also invert
@@ -347,9 +363,10 @@ void instance_bbox(const shape *sh, vec3 *lo, vec3 *hi) {
     const double *t = &s->tr[3 * (size_t)k];
     for (int c = 0; c < 8; c++) {
       double q[3] = {c & 1 ? g->hi.x : g->lo.x, c & 2 ? g->hi.y : g->lo.y, c & 4 ? g->hi.z : g->lo.z};
-      box_add(lo, hi, v3((double)m[0] * q[0] + (double)m[1] * q[1] + (double)m[2] * q[2] + t[0],
-                         (double)m[4] * q[0] + (double)m[5] * q[1] + (double)m[6] * q[2] + t[1],
-                         (double)m[8] * q[0] + (double)m[9] * q[1] + (double)m[10] * q[2] + t[2]));
+      box_add(lo, hi,
+              v3((double)m[0] * q[0] + (double)m[1] * q[1] + (double)m[2] * q[2] + t[0],
+                 (double)m[4] * q[0] + (double)m[5] * q[1] + (double)m[6] * q[2] + t[1],
+                 (double)m[8] * q[0] + (double)m[9] * q[1] + (double)m[10] * q[2] + t[2]));
     }
   }
 }

@@ -22,22 +22,24 @@
 extern const plugin plugin_shapegroup, plugin_instance, plugin_instancelist;
 
 typedef struct shape_group {
-  shape base;        /* base.to_world unused (identity) */
-  shape **members;   /* owned array; the shapes are owned by the scene */
+  shape base;      /* base.to_world unused (identity) */
+  shape **members; /* owned array; the shapes are owned by the scene */
   size_t n_members;
-  vec3 lo, hi;       /* bounds of the members in group space */
+  vec3 lo, hi; /* bounds of the members in group space */
 } shape_group;
 
 typedef struct instance_shape {
-  shape base;        /* `instance`: base.to_world is the placement */
+  shape base; /* `instance`: base.to_world is the placement */
   shape_group *group;
-  uint32_t n;        /* placements: 1 for `instance` */
-  float *xf;         /* `instancelist`: n row-major 3x4 matrices; NULL for `instance` */
-  double *tr;        /* `instancelist`: n translations (x, y, z), exact as read; the
+  uint32_t n; /* placements: 1 for `instance` */
+  float *xf;  /* `instancelist`: n row-major 3x4 matrices; NULL for `instance` */
+  double *tr; /* `instancelist`: n translations (x, y, z), exact as read; the
                         float ones in xf are not used for tracing */
 } instance_shape;
 
-static inline bool shape_is_group(const shape *s) { return s->base.plugin == &plugin_shapegroup; }
+static inline bool shape_is_group(const shape *s) {
+  return s->base.plugin == &plugin_shapegroup;
+}
 static inline bool shape_is_instancing(const shape *s) {
   return s->base.plugin == &plugin_instance || s->base.plugin == &plugin_instancelist;
 }

@@ -30,8 +30,7 @@
  * Writes *out only on success (owned: release with mesh_free).
  * Errors: RSW_ERR_FILE (cannot read, or bad content), RSW_ERR_LIMIT,
  * RSW_ERR_NOMEM. Thread-safe. */
-rsw_status mesh_load_obj(const char *path, bool flip_tex_coords, mesh *out,
-                         rsw_err *err);
+rsw_status mesh_load_obj(const char *path, bool flip_tex_coords, mesh *out, rsw_err *err);
 
 /* Load a PLY 1.0 file, ascii or binary_little_endian (binary_big_endian is
  * RSW_ERR_UNSUPPORTED). Element `vertex`: x, y, z (any scalar type),

@@ -37,10 +37,22 @@ static rsw_status meshfile_create(loader *ld, node *n, object **out, bool is_obj
   return RSW_OK;
 }
 
-static rsw_status obj_create(loader *ld, node *n, object **out) { return meshfile_create(ld, n, out, true); }
-static rsw_status ply_create(loader *ld, node *n, object **out) { return meshfile_create(ld, n, out, false); }
+static rsw_status obj_create(loader *ld, node *n, object **out) {
+  return meshfile_create(ld, n, out, true);
+}
+static rsw_status ply_create(loader *ld, node *n, object **out) {
+  return meshfile_create(ld, n, out, false);
+}
 
-const plugin plugin_obj = {.name = "obj", .cls = CLS_SHAPE, .create = obj_create, .destroy = shape_destroy,
-                                   .traverse = shape_traverse, .parameters_changed = shape_parameters_changed};
-const plugin plugin_ply = {.name = "ply", .cls = CLS_SHAPE, .create = ply_create, .destroy = shape_destroy,
-                                   .traverse = shape_traverse, .parameters_changed = shape_parameters_changed};
+const plugin plugin_obj = {.name = "obj",
+                           .cls = CLS_SHAPE,
+                           .create = obj_create,
+                           .destroy = shape_destroy,
+                           .traverse = shape_traverse,
+                           .parameters_changed = shape_parameters_changed};
+const plugin plugin_ply = {.name = "ply",
+                           .cls = CLS_SHAPE,
+                           .create = ply_create,
+                           .destroy = shape_destroy,
+                           .traverse = shape_traverse,
+                           .parameters_changed = shape_parameters_changed};

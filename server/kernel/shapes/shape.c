@@ -34,7 +34,8 @@ rsw_status shape_read_common(loader *ld, node *n, shape *s, bool mesh_like) {
   }
   s->bsdf = (bsdf *)o;
   s->mesh_params = mesh_like;
-  return ld_float_range(ld, n, "silhouette_sampling_weight", 1.0, 0.0, INFINITY, &s->silhouette_sampling_weight);
+  return ld_float_range(ld, n, "silhouette_sampling_weight", 1.0, 0.0, INFINITY,
+                        &s->silhouette_sampling_weight);
 }
 
 /* What a to_world must satisfy for this shape (as checked at load). */
@@ -157,7 +158,8 @@ rsw_status shape_finalize(shape *s, rsw_err *err, const char *where) {
     double acc = 0, det = xf_abs_det3(&s->to_world);
     for (uint32_t f = 0; f < m->n_faces; f++) {
       const uint32_t *ix = &m->faces[3 * (size_t)f];
-      acc += tri_world_area(&s->to_world, det, mesh_vertex(m, ix[0]), mesh_vertex(m, ix[1]), mesh_vertex(m, ix[2]));
+      acc += tri_world_area(&s->to_world, det, mesh_vertex(m, ix[0]), mesh_vertex(m, ix[1]),
+                            mesh_vertex(m, ix[2]));
       s->tri_cdf[f] = acc;
     }
     s->area = acc;
@@ -181,8 +183,7 @@ rsw_status shape_finalize(shape *s, rsw_err *err, const char *where) {
     vec3 ex = xf_vector(&s->to_world, v3(1, 0, 0));
     vec3 ey = xf_vector(&s->to_world, v3(0, 1, 0));
     double lx = v3_len(ex), ly = v3_len(ey);
-    if (!(lx > 0) || !(ly > 0) || fabs(lx - ly) > 1e-6 * (lx + ly) ||
-        fabs(v3_dot(ex, ey)) > 1e-6 * lx * ly)
+    if (!(lx > 0) || !(ly > 0) || fabs(lx - ly) > 1e-6 * (lx + ly) || fabs(v3_dot(ex, ey)) > 1e-6 * lx * ly)
       return rsw_fail(err, RSW_ERR_INVALID, where,
                       "disk: to_world must not shear or scale non-uniformly within the disk's plane");
     s->area = RSW_PI * v3_len(v3_cross(ex, ey));
@@ -252,7 +253,8 @@ position_sample shape_sample_position(const shape *s, vec2 u) {
     vec3 w0 = xf_point(&s->to_world, p0), w1 = xf_point(&s->to_world, p1), w2 = xf_point(&s->to_world, p2);
     ps.n = v3_norm(v3_cross(v3_sub(w1, w0), v3_sub(w2, w0)));
     if (m->uv) {
-      const float *a = &m->uv[2 * (size_t)ix[0]], *b = &m->uv[2 * (size_t)ix[1]], *c = &m->uv[2 * (size_t)ix[2]];
+      const float *a = &m->uv[2 * (size_t)ix[0]], *b = &m->uv[2 * (size_t)ix[1]],
+                  *c = &m->uv[2 * (size_t)ix[2]];
       ps.uv[0] = (1 - b1 - b2) * a[0] + b1 * b[0] + b2 * c[0];
       ps.uv[1] = (1 - b1 - b2) * a[1] + b1 * b[1] + b2 * c[1];
     } else {
@@ -292,7 +294,9 @@ position_sample shape_sample_position(const shape *s, vec2 u) {
   return ps;
 }
 
-double shape_pdf_position(const shape *s) { return 1.0 / s->area; }
+double shape_pdf_position(const shape *s) {
+  return 1.0 / s->area;
+}
 
 /* ---- hit -> interaction --------------------------------------------------------- */
 
@@ -328,7 +332,8 @@ void shape_fill_interaction(const shape *s, const ray3 *r, const accel_hit *h, s
     /* Face normal = (p1 - p0) x (p2 - p0), as Mitsuba's Mesh. */
     n = v3_norm(xf_normal(&s->to_world, v3_cross(v3_sub(p1, p0), v3_sub(p2, p0))));
     if (m->nrm && !s->face_normals) {
-      const float *a = &m->nrm[3 * (size_t)ix[0]], *b = &m->nrm[3 * (size_t)ix[1]], *c = &m->nrm[3 * (size_t)ix[2]];
+      const float *a = &m->nrm[3 * (size_t)ix[0]], *b = &m->nrm[3 * (size_t)ix[1]],
+                  *c = &m->nrm[3 * (size_t)ix[2]];
       vec3 no = v3(b0 * a[0] + b1 * b[0] + b2 * c[0], b0 * a[1] + b1 * b[1] + b2 * c[1],
                    b0 * a[2] + b1 * b[2] + b2 * c[2]);
       sn = v3_norm(xf_normal(&s->to_world, no));
@@ -338,7 +343,8 @@ void shape_fill_interaction(const shape *s, const ray3 *r, const accel_hit *h, s
     }
     tangent = v3(0, 0, 0);
     if (m->uv) {
-      const float *a = &m->uv[2 * (size_t)ix[0]], *b = &m->uv[2 * (size_t)ix[1]], *c = &m->uv[2 * (size_t)ix[2]];
+      const float *a = &m->uv[2 * (size_t)ix[0]], *b = &m->uv[2 * (size_t)ix[1]],
+                  *c = &m->uv[2 * (size_t)ix[2]];
       si->uv[0] = b0 * a[0] + b1 * b[0] + b2 * c[0];
       si->uv[1] = b0 * a[1] + b1 * b[1] + b2 * c[1];
       /* dp/du from the uv parameterisation (Mitsuba's Mesh): it orients the
@@ -347,7 +353,8 @@ void shape_fill_interaction(const shape *s, const ray3 *r, const accel_hit *h, s
       double det = du0 * dv1 - dv0 * du1;
       if (det != 0) {
         vec3 dp0 = v3_sub(p1, p0), dp1 = v3_sub(p2, p0);
-        tangent = xf_vector(&s->to_world, v3_scale(v3_sub(v3_scale(dp0, dv1), v3_scale(dp1, dv0)), 1.0 / det));
+        tangent =
+            xf_vector(&s->to_world, v3_scale(v3_sub(v3_scale(dp0, dv1), v3_scale(dp1, dv0)), 1.0 / det));
       }
     } else {
       si->uv[0] = b1;
@@ -377,8 +384,10 @@ void shape_fill_interaction(const shape *s, const ray3 *r, const accel_hit *h, s
     vec3 pw = v3_fma(r->o, h->t, r->d);
     vec3 po = xf_inv_point(&s->to_world, pw);
     double rr = sqrt(po.x * po.x + po.y * po.y);
-    if (rr > 0) po.x /= rr, po.y /= rr;
-    else po.x = 1, po.y = 0;
+    if (rr > 0)
+      po.x /= rr, po.y /= rr;
+    else
+      po.x = 1, po.y = 0;
     po.z = fmin(1.0, fmax(0.0, po.z));
     si->p = xf_point(&s->to_world, po);
     n = sn = v3_norm(xf_normal(&s->to_world, v3(po.x, po.y, 0)));

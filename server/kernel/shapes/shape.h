@@ -9,10 +9,10 @@
 
 /* A sampled point on a shape's surface. */
 typedef struct position_sample {
-  vec3 p;      /* world */
-  vec3 n;      /* unit world normal (after flip_normals) */
+  vec3 p; /* world */
+  vec3 n; /* unit world normal (after flip_normals) */
   double uv[2];
-  double pdf;  /* area density, 1/area for uniform sampling */
+  double pdf; /* area density, 1/area for uniform sampling */
 } position_sample;
 
 /* Uniformly sample a point on the shape (world-space area measure):
@@ -36,7 +36,8 @@ rsw_status shape_finalize(shape *s, rsw_err *err, const char *where);
 /* |det| of the linear part of t (for triangle areas below). */
 static inline double xf_abs_det3(const xform *t) {
   const double(*m)[4] = t->m;
-  return fabs(m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
+  return fabs(m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) -
+              m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
               m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]));
 }
 

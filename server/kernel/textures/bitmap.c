@@ -12,7 +12,11 @@
 #include "../scene/loader.h"
 #include "../scene/params.h"
 
-typedef enum wrap_mode { WRAP_REPEAT, WRAP_MIRROR, WRAP_CLAMP } wrap_mode;
+typedef enum wrap_mode {
+  WRAP_REPEAT,
+  WRAP_MIRROR,
+  WRAP_CLAMP
+} wrap_mode;
 
 typedef struct bitmap_tex {
   texture base;
@@ -53,12 +57,15 @@ static color bm_eval(const texture *t, const surface_interaction *si) {
   if (!b->bilinear) return texel(b, (int)floor(x + 0.5), (int)floor(y + 0.5));
   int x0 = (int)floor(x), y0 = (int)floor(y);
   double fx = x - x0, fy = y - y0;
-  color c00 = texel(b, x0, y0), c10 = texel(b, x0 + 1, y0), c01 = texel(b, x0, y0 + 1), c11 = texel(b, x0 + 1, y0 + 1);
+  color c00 = texel(b, x0, y0), c10 = texel(b, x0 + 1, y0), c01 = texel(b, x0, y0 + 1),
+        c11 = texel(b, x0 + 1, y0 + 1);
   return col_add(col_add(col_scale(c00, (1 - fx) * (1 - fy)), col_scale(c10, fx * (1 - fy))),
                  col_add(col_scale(c01, (1 - fx) * fy), col_scale(c11, fx * fy)));
 }
 
-static color bm_mean(const texture *t) { return ((const bitmap_tex *)t)->mean; }
+static color bm_mean(const texture *t) {
+  return ((const bitmap_tex *)t)->mean;
+}
 
 static const texture_ops bitmap_ops = {.eval = bm_eval, .mean = bm_mean};
 
@@ -89,15 +96,24 @@ static rsw_status bm_create(loader *ld, node *n, object **out) {
   if (!st) st = ld_bool(ld, n, "raw", false, &raw);
   if (!st) st = ld_transform(ld, n, "to_uv", &b->to_uv, NULL);
   if (!st) {
-    if (strcmp(filter, "bilinear") == 0) b->bilinear = true;
-    else if (strcmp(filter, "nearest") == 0) b->bilinear = false;
-    else st = ld_fail(ld, n, "filter_type", RSW_ERR_INVALID, "filter_type must be \"bilinear\" or \"nearest\" (got \"%s\")", filter);
+    if (strcmp(filter, "bilinear") == 0)
+      b->bilinear = true;
+    else if (strcmp(filter, "nearest") == 0)
+      b->bilinear = false;
+    else
+      st = ld_fail(ld, n, "filter_type", RSW_ERR_INVALID,
+                   "filter_type must be \"bilinear\" or \"nearest\" (got \"%s\")", filter);
   }
   if (!st) {
-    if (strcmp(wrap, "repeat") == 0) b->wrap = WRAP_REPEAT;
-    else if (strcmp(wrap, "mirror") == 0) b->wrap = WRAP_MIRROR;
-    else if (strcmp(wrap, "clamp") == 0) b->wrap = WRAP_CLAMP;
-    else st = ld_fail(ld, n, "wrap_mode", RSW_ERR_INVALID, "wrap_mode must be \"repeat\", \"mirror\" or \"clamp\" (got \"%s\")", wrap);
+    if (strcmp(wrap, "repeat") == 0)
+      b->wrap = WRAP_REPEAT;
+    else if (strcmp(wrap, "mirror") == 0)
+      b->wrap = WRAP_MIRROR;
+    else if (strcmp(wrap, "clamp") == 0)
+      b->wrap = WRAP_CLAMP;
+    else
+      st = ld_fail(ld, n, "wrap_mode", RSW_ERR_INVALID,
+                   "wrap_mode must be \"repeat\", \"mirror\" or \"clamp\" (got \"%s\")", wrap);
   }
   if (!st) {
     st = exr_read_image(path, &img, ld->err);
@@ -151,5 +167,10 @@ static void bm_traverse(object *o, param_visitor *v) {
   pv_transform(v, "to_uv", &((bitmap_tex *)o)->to_uv, UPDATE_SPECTRAL, NULL);
 }
 
-const plugin plugin_bitmap = {.name = "bitmap", .cls = CLS_TEXTURE, .create = bm_create, .destroy = bm_destroy,
-                              .prepare = bm_prepare, .ops = &bitmap_ops, .traverse = bm_traverse};
+const plugin plugin_bitmap = {.name = "bitmap",
+                              .cls = CLS_TEXTURE,
+                              .create = bm_create,
+                              .destroy = bm_destroy,
+                              .prepare = bm_prepare,
+                              .ops = &bitmap_ops,
+                              .traverse = bm_traverse};

@@ -13,7 +13,9 @@ typedef struct checkerboard {
   xform to_uv;
 } checkerboard;
 
-static double frac(double x) { return x - floor(x); }
+static double frac(double x) {
+  return x - floor(x);
+}
 
 static color cb_eval(const texture *t, const surface_interaction *si) {
   const checkerboard *c = (const checkerboard *)t;
@@ -29,7 +31,9 @@ static color cb_mean(const texture *t) {
 
 static const texture_ops checkerboard_ops = {.eval = cb_eval, .mean = cb_mean};
 
-static void cb_destroy(object *o) { free(o); }
+static void cb_destroy(object *o) {
+  free(o);
+}
 
 static rsw_status cb_create(loader *ld, node *n, object **out) {
   checkerboard *c = calloc(1, sizeof *c);
@@ -53,5 +57,9 @@ static void cb_traverse(object *o, param_visitor *v) {
   pv_transform(v, "to_uv", &c->to_uv, UPDATE_SPECTRAL, NULL);
 }
 
-const plugin plugin_checkerboard = {.name = "checkerboard", .cls = CLS_TEXTURE, .create = cb_create,
-                                    .destroy = cb_destroy, .ops = &checkerboard_ops, .traverse = cb_traverse};
+const plugin plugin_checkerboard = {.name = "checkerboard",
+                                    .cls = CLS_TEXTURE,
+                                    .create = cb_create,
+                                    .destroy = cb_destroy,
+                                    .ops = &checkerboard_ops,
+                                    .traverse = cb_traverse};

@@ -11,9 +11,9 @@
 
 typedef struct uniform_tex {
   texture base;
-  spectrum spec;  /* owned copy */
-  color value;    /* current value (after prepare) */
-  char *where;    /* document location of the property it came from (owned) */
+  spectrum spec; /* owned copy */
+  color value;   /* current value (after prepare) */
+  char *where;   /* document location of the property it came from (owned) */
 } uniform_tex;
 
 static color uniform_eval(const texture *t, const surface_interaction *si) {
@@ -21,7 +21,9 @@ static color uniform_eval(const texture *t, const surface_interaction *si) {
   return ((const uniform_tex *)t)->value;
 }
 
-static color uniform_mean(const texture *t) { return ((const uniform_tex *)t)->value; }
+static color uniform_mean(const texture *t) {
+  return ((const uniform_tex *)t)->value;
+}
 
 static const texture_ops uniform_ops = {.eval = uniform_eval, .mean = uniform_mean};
 
@@ -41,7 +43,9 @@ static bool spectrum_copy(spectrum *dst, const spectrum *src);
 static rsw_status uniform_create(loader *ld, node *n, object **out);
 
 /* Mitsuba's uniform spectrum reports its value as `value`. */
-static void uniform_traverse(object *o, param_visitor *v) { pv_spectrum(v, "value", (texture *)o); }
+static void uniform_traverse(object *o, param_visitor *v) {
+  pv_spectrum(v, "value", (texture *)o);
+}
 
 const plugin plugin_uniform = {
     .name = "uniform",
