@@ -6,53 +6,10 @@
 # 2 usage, 3 cannot connect, 4 job cancelled, 5 timeout, 6 local I/O).
 # Ends with "test_cli_client: N passed, N failed" (tests/run.sh sums it).
 set -u
-root=$(cd "$(dirname "$0")/../.." && pwd)
-bin=$(cd "${RSW_BIN_DIR:-$root/build/bin}" 2>/dev/null && pwd)
 name=test_cli_client
-pass=0
-fail=0
-ok() { pass=$((pass + 1)); }
-bad() {
-  fail=$((fail + 1))
-  echo "FAIL $name: $*"
-}
-finish() {
-  echo "$name: $pass passed, $fail failed"
-  [ "$fail" -eq 0 ]
-  exit $?
-}
-if [ -z "$bin" ] || [ ! -x "$bin/raysweep" ] || [ ! -x "$bin/raysweepd" ]; then
-  bad "raysweep and raysweepd must be built in ${RSW_BIN_DIR:-build/bin} (make build/bin/raysweep)"
-  finish
-fi
-command -v python3 >/dev/null || {
-  bad "python3 is needed for the checks"
-  finish
-}
-
-tmp=$(mktemp -d)
-pids=()
-cleanup() {
-  for p in "${pids[@]}"; do kill "$p" 2>/dev/null && wait "$p" 2>/dev/null; done
-  rm -rf "$tmp"
-}
-trap cleanup EXIT
-
-# start_daemon DIR [raysweepd options]: sets $started_port ("" on failure).
-# Not in a command substitution: the daemon must be a child of this shell
-# (so cleanup can stop it) and must not hold a pipe open.
-start_daemon() {
-  local d=$1
-  shift
-  mkdir -p "$d/data"
-  "$bin/raysweepd" serve --listen 127.0.0.1:0 --port-file "$d/port" --data-root "$d/data" "$@" >"$d/log" 2>&1 &
-  pids+=($!)
-  for _ in $(seq 200); do
-    [ -s "$d/port" ] && break
-    sleep 0.05
-  done
-  started_port=$(cat "$d/port" 2>/dev/null)
-}
+source "$(dirname "$0")/../support/shtest.sh"
+need_bins raysweep raysweepd
+need_cmd python3 "for the checks"
 
 start_daemon "$tmp/d1"
 port=$started_port

@@ -14,41 +14,11 @@
 # raysweep:context (the job's context id, or "render").
 # Ends with "test_exr_attrs: N passed, N failed" (tests/run.sh sums it).
 set -u
-root=$(cd "$(dirname "$0")/../.." && pwd)
-bin=$(cd "${RSW_BIN_DIR:-$root/build/bin}" 2>/dev/null && pwd)
 name=test_exr_attrs
-pass=0
-fail=0
-ok() { pass=$((pass + 1)); }
-bad() {
-  fail=$((fail + 1))
-  echo "FAIL $name: $*"
-}
-finish() {
-  echo "$name: $pass passed, $fail failed"
-  [ "$fail" -eq 0 ]
-  exit $?
-}
-if [ -z "$bin" ] || [ ! -x "$bin/raysweep" ] || [ ! -x "$bin/raysweepd" ]; then
-  bad "raysweep and raysweepd must be built in ${RSW_BIN_DIR:-build/bin}"
-  finish
-fi
-command -v python3 >/dev/null || {
-  bad "python3 is needed to read the EXR headers"
-  finish
-}
-command -v curl >/dev/null || {
-  bad "curl is needed to ask the daemon for EXR films"
-  finish
-}
-
-tmp=$(mktemp -d)
-pid=
-cleanup() {
-  [ -n "$pid" ] && kill "$pid" 2>/dev/null && wait "$pid" 2>/dev/null
-  rm -rf "$tmp"
-}
-trap cleanup EXIT
+source "$(dirname "$0")/../support/shtest.sh"
+need_bins raysweep raysweepd
+need_cmd python3 "to read the EXR headers"
+need_cmd curl "to ask the daemon for EXR films"
 cd "$tmp" || exit 1
 scene=$root/proto/examples/hdistant_lambertian.json
 
@@ -62,16 +32,10 @@ run() {
 # The reference: one process, no daemon.
 run "raysweepd render" "$bin/raysweepd" render "$scene" --spp 4 --seed 7 --wavelength 550 --threads 2 -o ref.exr
 
-mkdir -p d/data
-"$bin/raysweepd" serve --listen 127.0.0.1:0 --port-file d/port --data-root d/data >d/log 2>&1 &
-pid=$!
-for _ in $(seq 200); do
-  [ -s d/port ] && break
-  sleep 0.05
-done
-port=$(cat d/port 2>/dev/null)
+start_daemon "$tmp/d"
+port=$started_port
 if [ -z "$port" ]; then
-  bad "the daemon did not start: $(cat d/log)"
+  bad "the daemon did not start: $(cat "$tmp/d/log")"
   finish
 fi
 url="http://127.0.0.1:$port"

@@ -1,5 +1,7 @@
 #include "bsdf_test.h"
 
+#include "../../server/kernel/textures/texture.h"
+
 #include <string.h>
 
 vec3 tb_dir_deg(double theta_deg, double phi_deg) {
@@ -39,4 +41,26 @@ bool chi2_bsdf_sample(void *user, const double *u, vec3 *out, double *weight) {
 double chi2_bsdf_pdf(void *user, vec3 wo) {
   chi2_bsdf *c = user;
   return c->b->ops->pdf(c->b, &c->si, wo);
+}
+
+rough_case rough_make(mf_type type, double au, double av, bool visible, double eta, double k) {
+  rough_case r;
+  r.au = uniform_texture_const(au, "alpha_u");
+  r.av = au == av ? NULL : uniform_texture_const(av, "alpha_v");
+  r.eta = uniform_texture_const(eta, "eta");
+  r.k = uniform_texture_const(k, "k");
+  r.b = roughconductor_new(type, r.au, r.av, visible, r.eta, r.k, NULL, NULL, NULL);
+  return r;
+}
+
+void rough_free(rough_case *r) {
+  tb_free_bsdf(r->b);
+  tb_free_tex(r->au);
+  tb_free_tex(r->av);
+  tb_free_tex(r->eta);
+  tb_free_tex(r->k);
+}
+
+const char *mf_type_name(mf_type t) {
+  return t == MF_GGX ? "ggx" : "beckmann";
 }

@@ -4,6 +4,7 @@
 #ifndef RSW_TEST_BSDF_TEST_H
 #define RSW_TEST_BSDF_TEST_H
 
+#include "../../server/kernel/bsdfs/bsdfs_internal.h"
 #include "../../server/kernel/kernel.h"
 
 /* Unit direction from zenith and azimuth in degrees (local frame, +z up). */
@@ -13,6 +14,17 @@ surface_interaction tb_si_with(vec3 wi);
 /* plugin->destroy on a BSDF or texture; NULL is a no-op. */
 void tb_free_bsdf(bsdf *b);
 void tb_free_tex(texture *t);
+
+/* A roughconductor with constant alpha_u, alpha_v (the same value: one
+ * isotropic texture), eta and k, and the textures it holds. */
+typedef struct rough_case {
+  bsdf *b;
+  texture *au, *av, *eta, *k;
+} rough_case;
+rough_case rough_make(mf_type type, double au, double av, bool visible, double eta, double k);
+void rough_free(rough_case *r);
+/* "ggx" or "beckmann". */
+const char *mf_type_name(mf_type t);
 
 typedef struct chi2_bsdf {
   const bsdf *b;

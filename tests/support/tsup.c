@@ -1,7 +1,9 @@
 #include "tsup.h"
 
 #include <math.h>
+#include <stdarg.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 scene *tsup_load(const char *text, const char *variant_name) {
@@ -52,4 +54,30 @@ void tsup_stats(const film_image *img, int c, double *mean, double *sem) {
   *mean = s / n;
   double var = n > 1 ? (s2 - s * s / n) / (n - 1) : 0;
   *sem = sqrt(fmax(var, 0) / n);
+}
+
+void sb_printf(sbuf *b, const char *fmt, ...) {
+  for (;;) {
+    va_list ap;
+    va_start(ap, fmt);
+    int k = vsnprintf(b->p ? b->p + b->n : NULL, b->p ? b->cap - b->n : 0, fmt, ap);
+    va_end(ap);
+    if (k < 0) {
+      fprintf(stderr, "sb_printf: bad format\n");
+      abort();
+    }
+    if (b->p && b->n + (size_t)k < b->cap) {
+      b->n += (size_t)k;
+      return;
+    }
+    size_t cap = b->cap ? 2 * b->cap : 65536;
+    while (cap < b->n + (size_t)k + 1) cap *= 2;
+    char *p = realloc(b->p, cap);
+    if (!p) {
+      fprintf(stderr, "sb_printf: out of memory (%zu bytes)\n", cap);
+      abort();
+    }
+    b->p = p;
+    b->cap = cap;
+  }
 }

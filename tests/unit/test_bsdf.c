@@ -226,33 +226,6 @@ static void test_diffuse(void) {
 
 /* ---- rough conductor ------------------------------------------------------------------ */
 
-typedef struct rough_case {
-  bsdf *b;
-  texture *au, *av, *eta, *k;
-} rough_case;
-
-static rough_case rough_make(mf_type type, double au, double av, bool visible, double eta, double k) {
-  rough_case r;
-  r.au = uniform_texture_const(au, "alpha_u");
-  r.av = au == av ? NULL : uniform_texture_const(av, "alpha_v");
-  r.eta = uniform_texture_const(eta, "eta");
-  r.k = uniform_texture_const(k, "k");
-  r.b = roughconductor_new(type, r.au, r.av, visible, r.eta, r.k, NULL, NULL, NULL);
-  return r;
-}
-
-static void rough_free(rough_case *r) {
-  tb_free_bsdf(r->b);
-  tb_free_tex(r->au);
-  tb_free_tex(r->av);
-  tb_free_tex(r->eta);
-  tb_free_tex(r->k);
-}
-
-static const char *type_name(mf_type t) {
-  return t == MF_GGX ? "ggx" : "beckmann";
-}
-
 static void test_roughconductor_chi2_isotropic(void) {
   const mf_type types[2] = {MF_BECKMANN, MF_GGX};
   const double alphas[3] = {0.05, 0.3, 0.8};
@@ -262,7 +235,7 @@ static void test_roughconductor_chi2_isotropic(void) {
         rough_case r = rough_make(types[t], alphas[a], alphas[a], v == 0, 0.0, 1.0);
         REQUIRE(r.b, "allocation");
         char what[96];
-        snprintf(what, sizeof what, "roughconductor %s alpha %g sample_visible %d", type_name(types[t]),
+        snprintf(what, sizeof what, "roughconductor %s alpha %g sample_visible %d", mf_type_name(types[t]),
                  alphas[a], v == 0);
         for (int i = 0; i < 3; i++)
           run_chi2(r.b, tb_dir_deg(incidence_deg[i], 40.0), what, alphas[a] < 0.1 ? 32 : 8);
@@ -277,8 +250,8 @@ static void test_roughconductor_chi2_anisotropic(void) {
       rough_case r = rough_make(types[t], 0.1, 0.5, v == 0, 0.0, 1.0);
       REQUIRE(r.b, "allocation");
       char what[96];
-      snprintf(what, sizeof what, "roughconductor %s alpha (0.1, 0.5) sample_visible %d", type_name(types[t]),
-               v == 0);
+      snprintf(what, sizeof what, "roughconductor %s alpha (0.1, 0.5) sample_visible %d",
+               mf_type_name(types[t]), v == 0);
       for (int i = 0; i < 3; i++) run_chi2(r.b, tb_dir_deg(incidence_deg[i], 40.0), what, 8);
       rough_free(&r);
     }
@@ -391,10 +364,10 @@ static void test_white_furnace(void) {
           }
           double mean = sum / n, se = sqrt(fmax(0.0, sum2 / n - mean * mean) / n);
           CHECK(mean <= 1.0 + 4.0 * se + 1e-12, "%s alpha %g visible %d theta %g: albedo %g > 1",
-                type_name(types[t]), alphas[a], v == 0, incidence_deg[i], mean);
+                mf_type_name(types[t]), alphas[a], v == 0, incidence_deg[i], mean);
           if (alphas[a] <= 0.05)
             CHECK(mean >= 0.99, "%s alpha %g visible %d theta %g: albedo %g not close to 1",
-                  type_name(types[t]), alphas[a], v == 0, incidence_deg[i], mean);
+                  mf_type_name(types[t]), alphas[a], v == 0, incidence_deg[i], mean);
         }
         rough_free(&r);
       }

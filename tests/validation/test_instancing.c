@@ -36,31 +36,6 @@ RSW_TEST_DEFINE_GLOBALS
 #define THREADS 2
 #define NDISK   1000
 
-/* A growing text buffer. */
-typedef struct sbuf {
-  char *p;
-  size_t n, cap;
-} sbuf;
-
-static void sb_printf(sbuf *b, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-#include <stdarg.h>
-static void sb_printf(sbuf *b, const char *fmt, ...) {
-  for (;;) {
-    va_list ap;
-    va_start(ap, fmt);
-    int k = vsnprintf(b->p ? b->p + b->n : NULL, b->p ? b->cap - b->n : 0, fmt, ap);
-    va_end(ap);
-    if (k >= 0 && b->p && b->n + (size_t)k < b->cap) {
-      b->n += (size_t)k;
-      return;
-    }
-    size_t cap = b->cap ? 2 * b->cap : 65536;
-    while (cap < b->n + (size_t)k + 1) cap *= 2;
-    b->p = realloc(b->p, cap);
-    b->cap = cap;
-  }
-}
-
 /* Disk placements: random centres in [-8, 8]^2 x [0.5, 1.5], random
  * upward normals, radius 0.3, as a row-major 4x4 (values rounded to float
  * so that the float copy in an instancelist is the same matrix). */

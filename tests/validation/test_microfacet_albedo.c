@@ -44,33 +44,6 @@
 
 RSW_TEST_DEFINE_GLOBALS
 
-typedef struct rough_case {
-  bsdf *b;
-  texture *au, *av, *eta, *k;
-} rough_case;
-
-static rough_case rough_make(mf_type type, double au, double av, bool visible, double eta, double k) {
-  rough_case r;
-  r.au = uniform_texture_const(au, "alpha_u");
-  r.av = au == av ? NULL : uniform_texture_const(av, "alpha_v");
-  r.eta = uniform_texture_const(eta, "eta");
-  r.k = uniform_texture_const(k, "k");
-  r.b = roughconductor_new(type, r.au, r.av, visible, r.eta, r.k, NULL, NULL, NULL);
-  return r;
-}
-
-static void rough_free(rough_case *r) {
-  tb_free_bsdf(r->b);
-  tb_free_tex(r->au);
-  tb_free_tex(r->av);
-  tb_free_tex(r->eta);
-  tb_free_tex(r->k);
-}
-
-static const char *type_name(mf_type t) {
-  return t == MF_GGX ? "ggx" : "beckmann";
-}
-
 /* Mean of sample()'s weight (channel 0) and its standard error. */
 static void sky_albedo(const bsdf *b, vec3 wi, int n, uint64_t seed, double *mean, double *se) {
   surface_interaction si = tb_si_with(wi);
@@ -151,8 +124,8 @@ static void test_sky_equals_sun(void) {
         double quad_err = fabs(q - q_half);
         /* Worst case GGX alpha 0.05, 89 deg: 2.5e-4 (Q_N itself is within
          * ~5e-5 of a 2400 x 2400 grid there). */
-        CHECK(quad_err < 5e-4, "%s alpha %g theta %g: quadrature not converged (%.3g)", type_name(types[t]),
-              alphas[a], thetas[i], quad_err);
+        CHECK(quad_err < 5e-4, "%s alpha %g theta %g: quadrature not converged (%.3g)",
+              mf_type_name(types[t]), alphas[a], thetas[i], quad_err);
         for (int v = 0; v < 2; v++) {
           double m, se;
           sky_albedo(v == 0 ? rv.b : rn.b, wi, v == 0 ? SKY_VISIBLE : SKY_DCOS, 1000 + 100 * t + 10 * a + i,
@@ -161,8 +134,8 @@ static void test_sky_equals_sun(void) {
           if (getenv("RSW_ALBEDO_VERBOSE"))
             printf("  %-8s alpha %-4g theta %-2g visible %d: sky %.6f +- %.1e  sun %.6f (quad %.1e)"
                    "  %+.2f %%  z %.2f\n",
-                   type_name(types[t]), alphas[a], thetas[i], v == 0, m, se, q, quad_err, 100.0 * (m - q) / q,
-                   z);
+                   mf_type_name(types[t]), alphas[a], thetas[i], v == 0, m, se, q, quad_err,
+                   100.0 * (m - q) / q, z);
           if (z > worst) {
             worst = z;
             worst_t = t, worst_a = a, worst_i = i, worst_v = v;
@@ -170,7 +143,8 @@ static void test_sky_equals_sun(void) {
           CHECK(fabs(m - q) <= 3.0 * se + quad_err,
                 "%s alpha %g theta %g sample_visible %d: sky albedo %.6f +- %.1e vs sun %.6f "
                 "(quadrature %.1e): %+.3f %%",
-                type_name(types[t]), alphas[a], thetas[i], v == 0, m, se, q, quad_err, 100.0 * (m - q) / q);
+                mf_type_name(types[t]), alphas[a], thetas[i], v == 0, m, se, q, quad_err,
+                100.0 * (m - q) / q);
           /* Visible normals (the default, and the sampler at issue): small
            * enough that a 0.3 % bias shows at about 3 sigma (worst se
            * 7.6e-4, Beckmann alpha 1 at normal incidence; the precise test
@@ -181,7 +155,7 @@ static void test_sky_equals_sun(void) {
         rough_free(&rv);
         rough_free(&rn);
       }
-  printf("  worst: %s alpha %g theta %g visible %d at %.2f (sigma + quad/3)\n", type_name(types[worst_t]),
+  printf("  worst: %s alpha %g theta %g visible %d at %.2f (sigma + quad/3)\n", mf_type_name(types[worst_t]),
          alphas[worst_a], thetas[worst_i], worst_v == 0, worst);
 }
 
@@ -232,14 +206,14 @@ static void test_weight_is_eval_over_pdf(void) {
               CHECK(false,
                     "%s alpha (%g, %g) visible %d, wi (%.4f, %.4f, %.4f): weight %.9g vs "
                     "eval/pdf %.9g, pdf %.9g vs pdf() %.9g",
-                    type_name(types[t]), alphas[a][0], alphas[a][1], v == 0, wi.x, wi.y, wi.z, w.c[0], expect,
-                    bs.pdf, pdf);
+                    mf_type_name(types[t]), alphas[a][0], alphas[a][1], v == 0, wi.x, wi.y, wi.z, w.c[0],
+                    expect, bs.pdf, pdf);
           }
           ok++;
         }
-        CHECK(bad == 0, "%s alpha (%g, %g) visible %d: %d inconsistent samples", type_name(types[t]),
+        CHECK(bad == 0, "%s alpha (%g, %g) visible %d: %d inconsistent samples", mf_type_name(types[t]),
               alphas[a][0], alphas[a][1], v == 0, bad);
-        CHECK(ok > 2500, "%s alpha (%g, %g) visible %d: only %d successful samples", type_name(types[t]),
+        CHECK(ok > 2500, "%s alpha (%g, %g) visible %d: only %d successful samples", mf_type_name(types[t]),
               alphas[a][0], alphas[a][1], v == 0, ok);
         rough_free(&r);
       }

@@ -29,29 +29,6 @@ RSW_TEST_DEFINE_GLOBALS
 #define SEED    5u
 #define THREADS 2
 
-typedef struct sbuf {
-  char *p;
-  size_t n, cap;
-} sbuf;
-
-static void sb_printf(sbuf *b, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-static void sb_printf(sbuf *b, const char *fmt, ...) {
-  for (;;) {
-    va_list ap;
-    va_start(ap, fmt);
-    int k = vsnprintf(b->p ? b->p + b->n : NULL, b->p ? b->cap - b->n : 0, fmt, ap);
-    va_end(ap);
-    if (k >= 0 && b->p && b->n + (size_t)k < b->cap) {
-      b->n += (size_t)k;
-      return;
-    }
-    size_t cap = b->cap ? 2 * b->cap : 1 << 20;
-    while (cap < b->n + (size_t)k + 1) cap *= 2;
-    b->p = realloc(b->p, cap);
-    b->cap = cap;
-  }
-}
-
 static double now_s(void) {
   struct timespec t;
   clock_gettime(CLOCK_MONOTONIC, &t);

@@ -56,29 +56,6 @@ static const double U[3] = {0.6, 0.48, 0.64};
 static const double SHIFTS[] = {0.0, 1e3, 1e4, 1e5};
 #define N_SHIFTS (sizeof SHIFTS / sizeof SHIFTS[0])
 
-typedef struct sbuf {
-  char *p;
-  size_t n, cap;
-} sbuf;
-
-static void sb_printf(sbuf *b, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-static void sb_printf(sbuf *b, const char *fmt, ...) {
-  for (;;) {
-    va_list ap;
-    va_start(ap, fmt);
-    int k = vsnprintf(b->p ? b->p + b->n : NULL, b->p ? b->cap - b->n : 0, fmt, ap);
-    va_end(ap);
-    if (k >= 0 && b->p && b->n + (size_t)k < b->cap) {
-      b->n += (size_t)k;
-      return;
-    }
-    size_t cap = b->cap ? 2 * b->cap : 65536;
-    while (cap < b->n + (size_t)k + 1) cap *= 2;
-    b->p = realloc(b->p, cap);
-    b->cap = cap;
-  }
-}
-
 /* ", {"translate": base + D u}" to append to a to_world operation list. */
 static void sb_shift_from(sbuf *b, const double base[3], double D) {
   sb_printf(b, ", {\"translate\": [%.17g, %.17g, %.17g]}", base[0] + D * U[0], base[1] + D * U[1],

@@ -1,0 +1,64 @@
+# Sourced by the shell tests in tests/integration (set `name` first): the
+# pass/fail counters and the closing "NAME: N passed, N failed" line that
+# tests/run.sh sums, the built binaries ($bin), a temporary directory ($tmp)
+# removed on exit, and daemons on ephemeral loopback ports stopped on exit.
+# shellcheck shell=bash
+root=$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)
+bin=$(cd "${RSW_BIN_DIR:-$root/build/bin}" 2>/dev/null && pwd)
+pass=0
+fail=0
+ok() { pass=$((pass + 1)); }
+bad() {
+  fail=$((fail + 1))
+  echo "FAIL $name: $*"
+}
+finish() {
+  echo "$name: $pass passed, $fail failed"
+  [ "$fail" -eq 0 ]
+  exit $?
+}
+
+# need_bins PROG...: the programs must be built in $bin, else fail and finish.
+need_bins() {
+  local p
+  for p in "$@"; do
+    if [ -z "$bin" ] || [ ! -x "$bin/$p" ]; then
+      bad "$* must be built in ${RSW_BIN_DIR:-build/bin} (make build/bin/$p)"
+      finish
+    fi
+  done
+}
+
+# need_cmd CMD WHY: CMD must be on PATH, else fail (saying WHY) and finish.
+need_cmd() {
+  command -v "$1" >/dev/null || {
+    bad "$1 is needed $2"
+    finish
+  }
+}
+
+tmp=$(mktemp -d)
+pids=()
+shtest_cleanup() {
+  local p
+  for p in "${pids[@]}"; do kill "$p" 2>/dev/null && wait "$p" 2>/dev/null; done
+  rm -rf "$tmp"
+}
+trap shtest_cleanup EXIT
+
+# start_daemon DIR [raysweepd serve options]: a daemon on an ephemeral
+# loopback port with its data root and log in DIR; sets $started_port ("" on
+# failure). Not in a command substitution: the daemon must be a child of
+# this shell (so the exit trap stops it) and must not hold a pipe open.
+start_daemon() {
+  local d=$1
+  shift
+  mkdir -p "$d/data"
+  "$bin/raysweepd" serve --listen 127.0.0.1:0 --port-file "$d/port" --data-root "$d/data" "$@" >"$d/log" 2>&1 &
+  pids+=($!)
+  for _ in $(seq 200); do
+    [ -s "$d/port" ] && break
+    sleep 0.05
+  done
+  started_port=$(cat "$d/port" 2>/dev/null)
+}
