@@ -4,13 +4,15 @@
  *
  *  - self-intersection: each scene holds one flat or convex shape (a
  *    rotated, non-uniformly scaled rectangle; a sphere; a 5 cm disk; a
+ *    thin open cylinder (a 5 cm trunk, hit inside and out); a
  *    face-normal OBJ mesh, whose hit point comes from o + t d; an instance
  *    of a group holding a transformed mesh; an instancelist disk; a 10 km
  *    plate hit near its edges). Rays are shot at it from outside; from
  *    each hit, rays leave into random directions down to grazing
  *    (cos = 1e-4) on both sides. A ray leaving a flat or convex shape on
- *    its outside can hit nothing; one entering the sphere must reach the
- *    far side (t >= half the chord). Every violation counts. The counts
+ *    its outside can hit nothing; one entering the sphere, or crossing the
+ *    cylinder's inside, must reach the far wall (t >= half the chord) or
+ *    leave through an open end. Every violation counts. The counts
  *    for smaller multiples of the error bound than RSW_SPAWN_ERRORS are
  *    printed, to show the margin.
  *  - no skipped geometry: two parallel plates 50 um apart; every ray
@@ -60,12 +62,37 @@ static bool trace(const scene *s, ray3 r, surface_interaction *si) {
   return true;
 }
 
-/* scene_json: printf format with one %s for the shift ", {translate}";
- * convex: the shape is a sphere of radius r_sphere (rays entering it
- * must reach the far side). Hits are aimed at points within `aim` of
- * `centre` (before the shift). */
-static void self_hits(const char *name, const char *scene_fmt, vec3 centre, double aim, double r_sphere,
-                      double D, int n_hits) {
+/* The shape under test: flat (or convex, seen from outside), a sphere of
+ * radius r, or an open tube of radius r along the unit axis (its normals
+ * point away from the axis). */
+typedef struct shape_kind {
+  enum {
+    K_FLAT,
+    K_SPHERE,
+    K_TUBE
+  } kind;
+  double r;
+  vec3 axis;
+} shape_kind;
+static const shape_kind FLAT_SHAPE = {K_FLAT, 0, {0, 0, 0}};
+
+/* The distance a ray leaving the surface point with normal ng into d
+ * travels inside the shape before it meets the far wall; 0 when it leaves
+ * on the free side (then it must hit nothing). */
+static double far_wall(const shape_kind *k, vec3 ng, vec3 d) {
+  double dn = v3_dot(d, ng);
+  if (k->kind == K_SPHERE) return 2 * k->r * fabs(dn); /* d is on the side it entered from */
+  if (k->kind == K_TUBE && dn < 0) {
+    double da = v3_dot(d, k->axis), perp2 = 1 - da * da;
+    return perp2 > 0 ? 2 * k->r * -dn / perp2 : INFINITY;
+  }
+  return 0;
+}
+
+/* scene_json: printf format with one %s for the shift ", {translate}".
+ * Hits are aimed at points within `aim` of `centre` (before the shift). */
+static void self_hits(const char *name, const char *scene_fmt, vec3 centre, double aim,
+                      const shape_kind *kind, double D, int n_hits) {
   char shift[200], text[4096];
   snprintf(shift, sizeof shift, ", {\"translate\": [%.17g, %.17g, %.17g]}", D * U[0], D * U[1], D * U[2]);
   snprintf(text, sizeof text, scene_fmt, shift, shift);
@@ -95,9 +122,11 @@ static void self_hits(const char *name, const char *scene_fmt, vec3 centre, doub
         surface_interaction s2;
         bool hit = trace(s, q, &s2);
         bool ok;
-        if (r_sphere > 0 && inward) {
-          double chord = 2 * r_sphere * fabs(v3_dot(d, si.ng));
-          ok = hit && s2.t >= 0.5 * chord;
+        if (kind->kind == K_SPHERE) {
+          ok = inward ? hit && s2.t >= 0.5 * far_wall(kind, si.ng, d) : !hit;
+        } else if (kind->kind == K_TUBE) {
+          double chord = far_wall(kind, si.ng, d); /* the tube's inside, or 0 */
+          ok = chord > 0 ? !hit || s2.t >= 0.5 * chord : !hit;
         } else {
           ok = !hit;
         }
@@ -134,16 +163,25 @@ static const char *BIG =
     SCENE_HEAD "\"a\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [5000, 5000, 1]}, "
                "{\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 10}}%s]}}";
 
+/* A 5 cm trunk 1.2 m long on a slanted axis (p1 - p0 = (0.3, 0.6, 1.0)),
+ * open at both ends, so rays also hit its inside. */
+static const char *TUBE_FMT =
+    SCENE_HEAD "\"a\": {\"type\": \"cylinder\", \"radius\": 0.05, \"p0\": [-0.15, "
+               "-0.3, -0.5], \"p1\": [0.15, 0.3, 0.5], \"to_world\": [{\"scale\": 1}%s]}}";
+
 static void test_no_self_intersection(void) {
   const double shifts[] = {0, 1e5};
+  const shape_kind sphere = {K_SPHERE, 2, {0, 0, 0}};
+  const shape_kind tube = {K_TUBE, 0.05, v3_norm(v3(0.3, 0.6, 1.0))};
   for (int i = 0; i < 2; i++) {
     double D = shifts[i];
-    self_hits("rotated rectangle", RECT, v3(0, 0, 0), 1.5, 0, D, 3000);
-    self_hits("sphere r=2", SPHERE, v3(0, 0, 0), 2.5, 2, D, 3000);
-    self_hits("disk r=5cm", DISK, v3(0, 0, 0), 0.05, 0, D, 3000);
-    self_hits("instance of a mesh", INST, v3(0, 0.1, 2), 0.25, 0, D, 3000);
+    self_hits("rotated rectangle", RECT, v3(0, 0, 0), 1.5, &FLAT_SHAPE, D, 3000);
+    self_hits("sphere r=2", SPHERE, v3(0, 0, 0), 2.5, &sphere, D, 3000);
+    self_hits("cylinder r=5cm", TUBE_FMT, v3(0, 0, 0), 0.4, &tube, D, 3000);
+    self_hits("disk r=5cm", DISK, v3(0, 0, 0), 0.05, &FLAT_SHAPE, D, 3000);
+    self_hits("instance of a mesh", INST, v3(0, 0.1, 2), 0.25, &FLAT_SHAPE, D, 3000);
     /* A 10 km plate, aimed 4.5 km from its centre. */
-    self_hits("10 km plate, edge", BIG, v3(4500, 0, 0), 400, 0, D, 2000);
+    self_hits("10 km plate, edge", BIG, v3(4500, 0, 0), 400, &FLAT_SHAPE, D, 2000);
   }
 }
 
@@ -170,7 +208,7 @@ static void test_no_self_intersection_files(void) {
              "\"a\": {\"type\": \"obj\", \"filename\": \"%s\", \"face_normals\": true, \"to_world\": "
              "[{\"rotate\": {\"axis\": [1, 2, 0], \"angle\": 25}}%%s]}}",
              obj);
-    self_hits("OBJ, face normals", fmt, v3(0, 0, 0), 1.0, 0, D, 3000);
+    self_hits("OBJ, face normals", fmt, v3(0, 0, 0), 1.0, &FLAT_SHAPE, D, 3000);
     /* The list's rows hold the shift themselves: write it again. */
     f = fopen(lst, "w");
     REQUIRE(f, "list");
@@ -181,7 +219,7 @@ static void test_no_self_intersection_files(void) {
                         "\"l\": {\"type\": \"instancelist\", \"filename\": \"%s\", "
                         "\"shapegroup\": {\"type\": \"ref\", \"id\": \"g\"}}}",
              lst);
-    self_hits("instancelist disk 5cm", fmt, v3(0.5, 0.25, 1.5), 0.05, 0, D, 3000);
+    self_hits("instancelist disk 5cm", fmt, v3(0.5, 0.25, 1.5), 0.05, &FLAT_SHAPE, D, 3000);
   }
   unlink(obj);
   unlink(lst);
