@@ -15,8 +15,8 @@
 # A periodic scene whose distant sensor looks exactly horizontally inside
 # the slab (4 unresolved rays at 4 spp) adds raysweep:unresolved_rays = 4
 # to every writer's file, "unresolved_rays": 4 to the daemon's JSON meta,
-# job results and /metrics total, and a warning to raysweepd render's
-# stderr; the films above (none unresolved) have no such attribute or key.
+# job results and /metrics total, and a warning to the stderr of raysweepd
+# render and raysweep render; the films above (none unresolved) have no such attribute or key.
 # Ends with "test_exr_attrs: N passed, N failed" (tests/run.sh sums it).
 set -u
 name=test_exr_attrs
@@ -179,6 +179,9 @@ run "job results unresolved" curl -sf "$url/v1/jobs/$job_unres/results" -o resul
 run "job results resolved" curl -sf "$url/v1/jobs/$job/results" -o results_res.json
 run "metrics" curl -sf "$url/metrics" -o metrics.txt
 run "raysweep render -o x.exr unresolved" rs -q render "$id_unres" --spp 4 --seed 3 -o cli_unres.exr
+if grep -q "warning: 4 rays .*periodic.*unresolved" err; then ok; else bad "raysweep render: no unresolved-ray warning: $(head -c 600 err)"; fi
+run "raysweep render -o x.exr resolved" rs -q render "$id" --spp 4 --seed 7 --wavelength 550 -o cli_res.exr
+if [ ! -s err ]; then ok; else bad "raysweep -q render without unresolved rays printed: $(head -c 600 err)"; fi
 cat >check_json.py <<'EOF'
 import json
 errors = []
