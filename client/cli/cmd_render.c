@@ -30,6 +30,16 @@ static int output_format(const cli_ctx *ctx, const char *out, cli_format *fmt) {
 }
 
 static void report_written(const cli_ctx *ctx, const rsw_film *f, const char *path, double seconds) {
+  /* A warning, not progress: printed even with --quiet. */
+  cJSON *m = cJSON_Parse(rsw_film_meta(f));
+  const cJSON *u = cJSON_GetObjectItemCaseSensitive(m, "unresolved_rays");
+  if (cJSON_IsNumber(u) && u->valuedouble > 0)
+    fprintf(stderr,
+            "raysweep %s: warning: %.0f rays of %s stayed within ~1e-5 rad of horizontal inside the periodic "
+            "slab for 65,536 cell walls and were counted as blocked (unresolved); the film depends on that "
+            "policy\n",
+            ctx->cmd, u->valuedouble, path);
+  cJSON_Delete(m);
   if (ctx->json) {
     cJSON *o = cJSON_CreateObject();
     cJSON_AddStringToObject(o, "file", path);

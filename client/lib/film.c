@@ -204,6 +204,9 @@ rsw_status rsw_film_save_exr(const rsw_film *f, const char *path) {
               meta_uint(meta, "spp", 4294967295.0, &info.has_spp, &spp) &&
               meta_uint(meta, "seed", 18446744073709549568.0, &info.has_seed, &info.seed) &&
               (!wl || cJSON_IsNull(wl) || cJSON_IsNumber(wl));
+    bool has_unresolved; /* absent or null: 0, which writes no attribute */
+    ok = ok &&
+         meta_uint(meta, "unresolved_rays", 18446744073709549568.0, &has_unresolved, &info.unresolved_rays);
     info.spp = (uint32_t)spp;
     if (ok && cJSON_IsNumber(wl)) info.wavelength_nm = wl->valuedouble;
     if (ok && !meta_angles(meta, (size_t)f->width * (size_t)f->height, &angles)) ok = false;

@@ -175,6 +175,9 @@ rsw_status http_film_json(const svc_film *f, char **bytes_out, size_t *len_out, 
     }
     http_buf_puts(&b, "]");
   }
+  /* Only when non-zero: rays the periodic boundary could not resolve. */
+  if (im->unresolved_rays)
+    http_buf_printf(&b, ",\"unresolved_rays\":%llu", (unsigned long long)im->unresolved_rays);
   http_buf_puts(&b, "}}");
   size_t len = 0;
   char *text = http_buf_take(&b, &len);

@@ -12,15 +12,15 @@
 #include "render.h"
 
 /* Most attributes an info gives: scene, revision, context, sensor, spp,
- * seed, variant, wavelength, zenith, azimuth. */
-#define FILM_EXR_MAX_ATTRS 10
+ * seed, variant, wavelength, zenith, azimuth, unresolved rays. */
+#define FILM_EXR_MAX_ATTRS 11
 
 /* The attribute list of one info: entries point into info, the number
  * buffers here and the two angle lists (owned). */
 typedef struct attrs {
   exr_meta_entry e[FILM_EXR_MAX_ATTRS];
   size_t count;
-  char revision[24], spp[16], seed[24], wavelength[32];
+  char revision[24], spp[16], seed[24], wavelength[32], unresolved[24];
   char *zenith, *azimuth;
 } attrs;
 
@@ -58,6 +58,7 @@ static rsw_status build_attrs(const film_exr_info *info, int width, int height, 
   snprintf(a->spp, sizeof a->spp, "%" PRIu32, info->spp);
   snprintf(a->seed, sizeof a->seed, "%" PRIu64, info->seed);
   snprintf(a->wavelength, sizeof a->wavelength, "%.17g", info->wavelength_nm);
+  snprintf(a->unresolved, sizeof a->unresolved, "%" PRIu64, info->unresolved_rays);
   bool rgb = info->variant && strcmp(info->variant, "rgb") == 0;
   add(a, "raysweep:scene", info->scene);
   if (info->has_revision) add(a, "raysweep:revision", a->revision);
@@ -79,6 +80,7 @@ static rsw_status build_attrs(const film_exr_info *info, int width, int height, 
     add(a, "raysweep:zenith_deg", a->zenith);
     add(a, "raysweep:azimuth_deg", a->azimuth);
   }
+  if (info->unresolved_rays) add(a, "raysweep:unresolved_rays", a->unresolved);
   return RSW_OK;
 }
 
@@ -120,6 +122,7 @@ film_exr_info film_image_exr_info(const film_image *img, const char *sensor_id) 
   info.variant = img->variant == VARIANT_MONO ? "mono" : "rgb";
   if (img->variant == VARIANT_MONO) info.wavelength_nm = img->wavelength;
   info.angles = img->angles;
+  info.unresolved_rays = img->unresolved_rays;
   return info;
 }
 

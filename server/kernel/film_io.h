@@ -19,6 +19,9 @@
  *                           zenith and azimuth in degrees (Eradiate's
  *                           east-right convention), %.9g, comma-separated,
  *                           row-major
+ *   raysweep:unresolved_rays
+ *                           only when non-zero: rays the periodic boundary
+ *                           could not resolve (render.h), decimal
  *
  * The number formats are those of the daemon's JSON film meta, so a film
  * fetched as JSON and saved by the client library gives the same strings.
@@ -36,6 +39,7 @@ typedef struct film_exr_info {
   const char *scene, *context, *sensor, *variant; /* NULL or "": not written */
   bool has_revision, has_spp, has_seed;
   uint64_t revision, seed;
+  uint64_t unresolved_rays; /* written when non-zero */
   uint32_t spp;
   double wavelength_nm; /* written when finite and variant is not "rgb" */
   /* NULL, or 2 per pixel (zenith, azimuth), row-major, degrees. */

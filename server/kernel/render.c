@@ -347,6 +347,7 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
     }
     se->ops->pixel_angles(se, jb.W, jb.H, img.angles);
   }
+  img.unresolved_rays = jb.rays.unresolved;
   if (stats) {
     stats->rays = jb.rays;
     stats->samples = jb.samples;

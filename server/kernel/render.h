@@ -44,10 +44,15 @@ typedef struct film_image {
   /* Viewing zenith, azimuth (degrees) of each pixel, 2 per pixel,
    * row-major (owned); NULL when the sensor has no pixel_angles op. */
   double *angles;
+  /* Rays the periodic boundary could not resolve (render_stats.unresolved:
+   * within ~1e-5 rad of horizontal, still inside the slab after 65,536
+   * walls), each counted as blocked / ending its path. Non-zero means the
+   * film depends on that policy; written to the film's metadata. */
+  uint64_t unresolved_rays;
 } film_image;
 
 typedef struct render_result_stats {
-  render_stats rays;
+  render_stats rays; /* rays.unresolved: see film_image.unresolved_rays */
   uint64_t samples;
   uint64_t invalid_samples; /* NaN/inf contributions dropped */
   double wall_s;
@@ -60,7 +65,7 @@ void film_image_free(film_image *img);
 
 /* The EXR attributes of a rendered film (film_io.h): sensor, spp, seed,
  * variant, the wavelength in mono, the per-pixel viewing angles when the
- * film has them. Borrows img and sensor_id (the info points into them). */
+ * film has them, the unresolved-ray count when non-zero. Borrows img and sensor_id (the info points into them). */
 film_exr_info film_image_exr_info(const film_image *img, const char *sensor_id);
 
 /* Write a developed film as OpenEXR (float32, or float16 when the film asks

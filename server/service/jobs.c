@@ -663,6 +663,8 @@ rsw_status service_job_results(service *svc, const char *id, char **json_out, sv
       char href[512];
       snprintf(href, sizeof href, "/v1/jobs/%s/results/%s/%s", j->id, it->context, it->sensor);
       cJSON_AddStringToObject(x, "href", href);
+      if (it->film.img.unresolved_rays)
+        cJSON_AddNumberToObject(x, "unresolved_rays", (double)it->film.img.unresolved_rays);
     }
     if (it->error[0]) cJSON_AddStringToObject(x, "error", it->error);
     cJSON_AddItemToArray(a, x);

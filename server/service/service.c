@@ -336,6 +336,10 @@ char *service_metrics_text(service *svc) {
   mb_printf(&b, "# HELP raysweep_render_seconds_total Wall time spent rendering.\n");
   mb_printf(&b, "# TYPE raysweep_render_seconds_total counter\nraysweep_render_seconds_total %.6f\n",
             svc->render_seconds);
+  mb_printf(&b, "# HELP raysweep_unresolved_rays_total Rays a periodic boundary could not resolve (counted "
+                "as blocked).\n");
+  mb_printf(&b, "# TYPE raysweep_unresolved_rays_total counter\nraysweep_unresolved_rays_total %llu\n",
+            (unsigned long long)svc->unresolved_rays);
   static const char *const classes[] = {"none", "spectral", "geometric"};
   mb_printf(&b, "# HELP raysweep_update_seconds_total Time spent applying parameter updates, by the "
                 "costliest class touched.\n");
@@ -1034,6 +1038,7 @@ rsw_status svc_render_locked(service *svc, resident *r, const render_spec *rs, s
     } else {
       pthread_mutex_lock(&svc->lock);
       svc->render_seconds += stats.wall_s;
+      svc->unresolved_rays += stats.rays.unresolved;
       pthread_mutex_unlock(&svc->lock);
       memcpy(out->scene, r->id, 65);
       out->revision = r->revision;

@@ -118,6 +118,7 @@ struct service {
   uint64_t contexts_rendered, renders_failed;
   size_t sync_renders; /* synchronous renders (POST :render) in progress */
   double render_seconds;
+  uint64_t unresolved_rays; /* render_stats.unresolved over all renders */
   double update_seconds[3]; /* none(+unchanged), spectral, geometric */
   uint64_t updates[3];
 };

@@ -12,6 +12,11 @@
 # variant, wavelength_nm, the per-pixel zenith_deg / azimuth_deg), and the
 # daemon's films add exactly raysweep:scene, raysweep:revision and
 # raysweep:context (the job's context id, or "render").
+# A periodic scene whose distant sensor looks exactly horizontally inside
+# the slab (4 unresolved rays at 4 spp) adds raysweep:unresolved_rays = 4
+# to every writer's file, "unresolved_rays": 4 to the daemon's JSON meta,
+# job results and /metrics total, and a warning to the stderr of raysweepd
+# render and raysweep render; the films above (none unresolved) have no such attribute or key.
 # Ends with "test_exr_attrs: N passed, N failed" (tests/run.sh sums it).
 set -u
 name=test_exr_attrs
@@ -144,4 +149,64 @@ check ref_rgb.exr '{"raysweep:sensor": "hdistant", "raysweep:spp": "4", "rayswee
   "raysweep:variant": "rgb"}' "$id_rgb" \
   "daemon render rgb (image/x-exr)=daemon_rgb.exr=render" \
   "raysweep render -o rgb (rsw_film_save_exr)=cli_rgb.exr=render"
+
+# Unresolved rays under a periodic boundary: a distant sensor looking exactly
+# horizontally between the soil and a sheet (tests/validation/test_periodic_sun.c).
+cat >horizontal.json <<'EOF'
+{"type": "scene", "variant": "mono",
+ "cam": {"type": "distant", "direction": [0.6, 0.8, 0], "target": [0, 0, 0.5],
+   "sampler": {"type": "independent", "sample_count": 2},
+   "film": {"type": "hdrfilm", "width": 1, "height": 1}},
+ "sky": {"type": "constant", "radiance": 1},
+ "sheet": {"type": "rectangle", "to_world": [{"translate": [0, 0, 1]}], "bsdf": {"type": "diffuse"}},
+ "soil": {"type": "rectangle", "bsdf": {"type": "diffuse"}},
+ "cell": {"type": "periodic", "min": [-1, -1], "max": [1, 1]}}
+EOF
+run "raysweepd render unresolved" "$bin/raysweepd" render horizontal.json --spp 4 --seed 3 --threads 2 -o ref_unres.exr
+if grep -q "warning: 4 rays .*periodic.*unresolved" err; then ok; else bad "raysweepd render: no unresolved-ray warning: $(head -c 600 err)"; fi
+run "scene push unresolved" rs -q scene push horizontal.json
+id_unres=$(cat out)
+run "daemon render EXR unresolved" curl -sf -X POST "$url/v1/scenes/$id_unres:render" \
+  -H 'Content-Type: application/json' -H 'Accept: image/x-exr' -d '{"spp": 4, "seed": 3}' -o daemon_unres.exr
+run "daemon render JSON unresolved" curl -sf -X POST "$url/v1/scenes/$id_unres:render" \
+  -H 'Content-Type: application/json' -d '{"spp": 4, "seed": 3}' -o daemon_unres.json
+run "daemon render JSON resolved" curl -sf -X POST "$url/v1/scenes/$id:render" \
+  -H 'Content-Type: application/json' -d '{"spp": 4, "seed": 7, "wavelength": 550}' -o daemon_res.json
+printf '%s\n' '{"id": "h", "spp": 4, "seed": 3}' >ctx_unres.jsonl
+run "sweep unresolved" rs --json sweep "$id_unres" --contexts ctx_unres.jsonl --format exr -o sw_unres
+job_unres=$(python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["job"])' out 2>/dev/null)
+run "job results unresolved" curl -sf "$url/v1/jobs/$job_unres/results" -o results_unres.json
+run "job results resolved" curl -sf "$url/v1/jobs/$job/results" -o results_res.json
+run "metrics" curl -sf "$url/metrics" -o metrics.txt
+run "raysweep render -o x.exr unresolved" rs -q render "$id_unres" --spp 4 --seed 3 -o cli_unres.exr
+if grep -q "warning: 4 rays .*periodic.*unresolved" err; then ok; else bad "raysweep render: no unresolved-ray warning: $(head -c 600 err)"; fi
+run "raysweep render -o x.exr resolved" rs -q render "$id" --spp 4 --seed 7 --wavelength 550 -o cli_res.exr
+if [ ! -s err ]; then ok; else bad "raysweep -q render without unresolved rays printed: $(head -c 600 err)"; fi
+cat >check_json.py <<'EOF'
+import json
+errors = []
+meta = json.load(open("daemon_unres.json"))["meta"]
+if meta.get("unresolved_rays") != 4:
+    errors.append("daemon JSON meta unresolved_rays = %r, want 4" % meta.get("unresolved_rays"))
+if "unresolved_rays" in json.load(open("daemon_res.json"))["meta"]:
+    errors.append("daemon JSON meta of a film without unresolved rays has unresolved_rays")
+res = json.load(open("results_unres.json"))["results"]
+if [r.get("unresolved_rays") for r in res] != [4]:
+    errors.append("job results unresolved_rays %r, want [4]" % [r.get("unresolved_rays") for r in res])
+if any("unresolved_rays" in r for r in json.load(open("results_res.json"))["results"]):
+    errors.append("job results of films without unresolved rays have unresolved_rays")
+# 4 each: the EXR and JSON synchronous renders and the job (the CLI's render comes after).
+total = [l.split()[1] for l in open("metrics.txt") if l.startswith("raysweep_unresolved_rays_total ")]
+if total != ["12"]:
+    errors.append("/metrics raysweep_unresolved_rays_total %r, want 12" % total)
+if errors:
+    print("\n".join(errors))
+    raise SystemExit(1)
+EOF
+if python3 check_json.py >"$tmp/py" 2>&1; then ok; else bad "$(cat "$tmp/py")"; fi
+check ref_unres.exr '{"raysweep:sensor": "cam", "raysweep:spp": "4", "raysweep:seed": "3",
+  "raysweep:variant": "mono", "raysweep:wavelength_nm": "550", "raysweep:unresolved_rays": "4"}' "$id_unres" \
+  "daemon render unresolved (image/x-exr)=daemon_unres.exr=render" \
+  "daemon job result unresolved (sweep --format exr)=sw_unres/h/cam.exr=h" \
+  "raysweep render -o unresolved (rsw_film_save_exr)=cli_unres.exr=render"
 finish

@@ -75,8 +75,22 @@ static void test_film_json(void) {
   CHECK(cJSON_GetObjectItem(m, "spp")->valueint == 16, "spp");
   CHECK(cJSON_GetObjectItem(m, "seed")->valueint == 42, "seed");
   CHECK(cJSON_IsNull(cJSON_GetObjectItem(m, "wavelength")), "rgb film: wavelength null");
+  CHECK(!cJSON_GetObjectItem(m, "unresolved_rays"), "no unresolved rays: no unresolved_rays key");
   cJSON_Delete(j);
   free(text);
+
+  /* Unresolved periodic rays: the count, an integer, in the meta. */
+  f.img.unresolved_rays = 12345678901ULL;
+  REQUIRE(http_film_json(&f, &text, &len, &err) == RSW_OK, "film json: %s", err.msg);
+  j = cJSON_Parse(text);
+  REQUIRE(j, "does not parse");
+  cJSON *u = cJSON_GetObjectItem(cJSON_GetObjectItem(j, "meta"), "unresolved_rays");
+  CHECK(cJSON_IsNumber(u) && u->valuedouble == 12345678901.0, "unresolved_rays %s",
+        u ? cJSON_PrintUnformatted(u) : "(none)");
+  CHECK(strstr(text, "\"unresolved_rays\":12345678901}") != NULL, "unresolved_rays printed as an integer");
+  cJSON_Delete(j);
+  free(text);
+  f.img.unresolved_rays = 0;
 
   /* A synchronous render has no context: null. */
   f.context[0] = '\0';
@@ -153,6 +167,23 @@ static void test_exr_round_trip(void) {
         sensor_meta ? sensor_meta : "(none)");
   const char *rev = exr_image_meta(&img, "raysweep:revision");
   CHECK(rev && strcmp(rev, "3") == 0, "revision meta");
+  CHECK(!exr_image_meta(&img, "raysweep:unresolved_rays"), "no unresolved rays: no attribute");
+  exr_image_free(&img);
+
+  /* Unresolved periodic rays: the count as an attribute. */
+  f.img.unresolved_rays = 7;
+  REQUIRE(http_film_exr(&f, &bytes, &len, &err) == RSW_OK, "exr: %s", err.msg);
+  snprintf(path, sizeof path, "/tmp/test_http_encode_XXXXXX");
+  fd = mkstemp(path);
+  REQUIRE(fd >= 0, "mkstemp");
+  CHECK(write(fd, bytes, len) == (ssize_t)len, "write");
+  close(fd);
+  free(bytes);
+  s = exr_read_image(path, &img, &err);
+  unlink(path);
+  REQUIRE(s == RSW_OK, "read back: %s", err.msg);
+  const char *unres = exr_image_meta(&img, "raysweep:unresolved_rays");
+  CHECK(unres && strcmp(unres, "7") == 0, "unresolved_rays attribute %s", unres ? unres : "(none)");
   exr_image_free(&img);
 
   /* Bad arguments fail with a message and leave the outputs alone. */

@@ -403,6 +403,12 @@ static void test_tracer_grazing(void) {
   CHECK(st.rays.unresolved == 2, "unresolved camera rays: %llu (want 2)",
         (unsigned long long)st.rays.unresolved);
   CHECK(img.data[0] == 0.0f, "an unresolved ray sees no sky (film %g)", img.data[0]);
+  /* The film says so: its metadata (EXR attribute, JSON meta) carries the count. */
+  CHECK(img.unresolved_rays == 2, "film unresolved_rays %llu (want 2)",
+        (unsigned long long)img.unresolved_rays);
+  film_exr_info info = film_image_exr_info(&img, "cam");
+  CHECK(info.unresolved_rays == 2, "EXR info unresolved_rays %llu (want 2)",
+        (unsigned long long)info.unresolved_rays);
   film_image_free(&img);
   scene_free(hs);
 }
