@@ -42,6 +42,11 @@ static ray3 spawn_ray_to(const scene *sc, const surface_interaction *si, const e
   return r;
 }
 
+/* p lies in the periodic column (walls included). */
+static inline bool in_column(const periodic_bounds *b, vec3 p) {
+  return p.x >= b->min[0] && p.x <= b->max[0] && p.y >= b->min[1] && p.y <= b->max[1];
+}
+
 /* TRACE_UNRESOLVED (periodic scenes, scene/periodic.h): the ray neither
  * hit nor escaped; the path ends there, without environment light.
  * *wrapped: the hit was reached through the periodic boundary (a copy of
@@ -148,6 +153,12 @@ static color path_Li(const integrator *it, const scene *sc, sampler_state *st, r
       const emitter *e = sc->emitters[k];
       direction_sample ds;
       color value = e->ops->sample_direction(e, &si, sops->next_2d(st), &ds);
+      /* Under `periodic`, the part of a surface emitter outside the column
+       * is not in the scene (scene/periodic.h): a light sample there
+       * counts zero. The in-column part keeps its density 1/area, which
+       * is what pdf_direction gives an unwrapped emitter hit; its copies
+       * beyond the walls are reached by BSDF sampling alone (weight 1). */
+      if (sc->periodic.on && (e->flags & EMITTER_SURFACE) && !in_column(&sc->periodic, ds.p)) ds.pdf = 0;
       if (ds.pdf > 0 && !col_is_black(value)) {
         ray3 sr = spawn_ray_to(sc, &si, e, &ds);
         stats->shadow_rays++;
