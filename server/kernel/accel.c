@@ -335,6 +335,8 @@ static void shape_bounds(accel *a, size_t i) {
       box_add(&lo, &hi, v3(q[0], q[1], q[2]));
     }
     if (!(lo.x <= hi.x)) lo = hi = v3(0, 0, 0);
+  } else if (sh->geom == GEOM_CYLINDER) {
+    lo = v3(-1, -1, 0), hi = v3(1, 1, 1); /* the unit tube, 0 <= z <= 1 */
   } else {
     double z = sh->geom == GEOM_SPHERE ? 1.0 : 0.0;
     lo = v3(-1, -1, -z), hi = v3(1, 1, z);

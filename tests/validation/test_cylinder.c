@@ -24,6 +24,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../../server/kernel/accel.h"
 #include "../../server/kernel/core/transform.h"
 #include "../../server/kernel/scene/params.h"
 #include "../../server/kernel/shapes/shape.h"
@@ -434,6 +435,21 @@ static void test_update_equals_reload(void) {
   scene_free(s2);
 }
 
+/* The Embree frame is centred on the geometry's bounds (accel.h): a lone
+ * 100 m trunk from z = 0 to z = 100 centres it half way up, not at its
+ * foot (the unit tube spans 0 <= z <= 1 in object space). */
+static void test_frame_centre(void) {
+  scene *s = tsup_load("{\"type\": \"scene\", \"t\": {\"type\": \"cylinder\", \"p0\": [5, 0, 0],"
+                       " \"p1\": [5, 0, 100], \"radius\": 0.5}}",
+                       NULL);
+  REQUIRE(s, "scene loads");
+  vec3 c = accel_origin(s->accel);
+  printf("  frame centre (%g, %g, %g)\n", c.x, c.y, c.z);
+  CHECK(fabs(c.x - 5) < 1e-9 && fabs(c.y) < 1e-9 && fabs(c.z - 50) < 1e-9,
+        "the frame centre is the trunk's middle (5, 0, 50), got (%g, %g, %g)", c.x, c.y, c.z);
+  scene_free(s);
+}
+
 int main(void) {
   RSW_TEST_RUN(test_area);
   RSW_TEST_RUN(test_errors);
@@ -443,5 +459,6 @@ int main(void) {
   RSW_TEST_RUN(test_sensor_target);
   RSW_TEST_RUN(test_direction_sampling_chi2);
   RSW_TEST_RUN(test_update_equals_reload);
+  RSW_TEST_RUN(test_frame_centre);
   RSW_TEST_END("test_cylinder");
 }
