@@ -237,6 +237,7 @@ static const expect_msg expected_messages[] = {
     {"bad_json_conductor_unknown_material.json", "Unobtainium"},
     {"bad_json_tabulated_in_rgb.json", "mono"},
     {"bad_json_trailing_garbage.json", "after the JSON document"},
+    {"bad_json_list_id_clash.json", "already names"},
 };
 
 static const char *expected_needle(const char *file) {

@@ -567,6 +567,25 @@ static rsw_status read_value(jctx *c, node *n, const cJSON *v, const char *key, 
   return RSW_OK;
 }
 
+/* A list element's generated id "<key>_<index>" must not be a key of the
+ * same container too (the two objects would share an id, and one of them
+ * would silently be renamed in the parameter table). Checked once the
+ * whole container is read, since the key may come after the list. */
+static rsw_status check_list_ids(jctx *c, const node *n) {
+  for (size_t i = 0; i < n->n_props; i++) {
+    const prop *p = &n->props[i];
+    if (p->kind != PROP_NODE || p->child->id_explicit || !p->child->id || strcmp(p->child->id, p->name) == 0)
+      continue;
+    const prop *q = node_find(n, p->child->id);
+    if (q)
+      return fail(c, RSW_ERR_INVALID, p->loc,
+                  "this element of the list '%s' gets the id '%s', which the key '%s' already names: "
+                  "give the element an \"id\" (or rename the key)",
+                  p->name, p->child->id, q->name);
+  }
+  return RSW_OK;
+}
+
 static rsw_status read_object(jctx *c, const cJSON *obj, const char *key, const char *where, int depth,
                               node **out) {
   if (depth > RSW_MAX_DEPTH)
@@ -606,6 +625,7 @@ static rsw_status read_object(jctx *c, const cJSON *obj, const char *key, const 
     /* (a list accounts for its elements itself) */
     if (!st && n->n_props == before + 1) st = account(c, node_mem_prop(&n->props[n->n_props - 1]), w);
   }
+  if (!st && node_type_is_container(n->type)) st = check_list_ids(c, n);
 done:
   if (st) {
     node_free(n);
