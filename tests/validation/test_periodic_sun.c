@@ -336,6 +336,52 @@ static void test_area_emitter_equals_copies(void) {
   scene_free(sp), scene_free(sc);
 }
 
+/* ---- a radiancemeter far outside the column ---------------------------------
+ * Column [-1, 1]^2, Lambertian soil (rho 0.5) at z = 0 under an overhead
+ * sun of irradiance 1: L = rho E / pi everywhere above the soil. A meter
+ * 1 cm above the soil looking down at x = 0.3 and at x = 200000.3 (the
+ * same point modulo the period) must read the same. Before the fix its
+ * nudge along the view direction was sized by the unwrapped origin
+ * (4.8 cm at 2e5 m from the frame origin), which put the origin under the
+ * soil: 0 instead of 0.159155. */
+static void test_radiancemeter_outside_column(void) {
+  const double xs[] = {0.3, 200000.3, -199999.7, 0.3};
+  const double ys[] = {0.0, 0.0, 0.0, -300000.0};
+  const char *kinds[] = {"radiancemeter", "mradiancemeter"};
+  for (int k = 0; k < 2; k++)
+    for (size_t i = 0; i < sizeof xs / sizeof xs[0]; i++) {
+      char buf[2048], sens[512];
+      if (k == 0)
+        snprintf(sens, sizeof sens,
+                 "{\"type\": \"radiancemeter\", \"origin\": [%.17g, %.17g, 0.01], \"direction\": [0, 0, -1],"
+                 " \"sampler\": {\"type\": \"independent\", \"sample_count\": 4},"
+                 " \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}",
+                 xs[i], ys[i]);
+      else
+        snprintf(sens, sizeof sens,
+                 "{\"type\": \"mradiancemeter\", \"origins\": \"%.17g, %.17g, 0.01\", \"directions\": \"0, 0, "
+                 "-1\", \"sampler\": {\"type\": \"independent\", \"sample_count\": 4},"
+                 " \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}",
+                 xs[i], ys[i]);
+      snprintf(buf, sizeof buf,
+               "{\"type\": \"scene\", \"variant\": \"mono\", \"sensor\": %s,"
+               " \"integrator\": {\"type\": \"path\"},"
+               " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1], \"irradiance\": 1},"
+               " \"soil\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}},"
+               " \"cell\": {\"type\": \"periodic\", \"min\": [-1, -1], \"max\": [1, 1]}}",
+               sens);
+      scene *s = tsup_load(buf, NULL);
+      REQUIRE(s, "%s scene loads", kinds[k]);
+      film_image img = {0};
+      REQUIRE(tsup_render(s, 4, 7, 1, &img), "renders");
+      double want = 0.5 / PI;
+      CHECK(fabs(img.data[0] - want) <= 1e-5, "%s at (%.1f, %.1f, 0.01): L %.6f vs rho E / pi = %.6f", kinds[k],
+            xs[i], ys[i], img.data[0], want);
+      film_image_free(&img);
+      scene_free(s);
+    }
+}
+
 /* ---- the tracer ------------------------------------------------------------ */
 
 static void test_tracer_grazing(void) {
@@ -419,5 +465,6 @@ int main(void) {
   RSW_TEST_RUN(test_periodic_equals_copies_low_sun);
   RSW_TEST_RUN(test_area_emitter_equals_copies);
   RSW_TEST_RUN(test_tracer_grazing);
+  RSW_TEST_RUN(test_radiancemeter_outside_column);
   RSW_TEST_END("test_periodic_sun");
 }

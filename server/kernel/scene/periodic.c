@@ -62,6 +62,13 @@ static double wrap(double x, double lo, double hi) {
   return w < hi ? w : lo;
 }
 
+vec3 periodic_wrap_point(const periodic_bounds *b, vec3 p) {
+  if (!b->on) return p;
+  p.x = wrap(p.x, b->min[0], b->max[0]);
+  p.y = wrap(p.y, b->min[1], b->max[1]);
+  return p;
+}
+
 /* A margin around the geometry's slab [zmin, zmax] inside which nothing
  * lies either (it covers the float rounding of Embree's vertices), so that
  * cutting a ray at the margin is exact. */

@@ -58,4 +58,9 @@ trace_result scene_occluded(const scene *s, const ray3 *r);
  * or without a periodic boundary). Exact: nothing lies there. */
 double periodic_slab_offset(const periodic_bounds *b, vec3 p, vec3 d);
 
+/* p brought into the column (x, y modulo the period, into [min, max));
+ * p unchanged without a periodic boundary or when already inside. This is
+ * what scene_trace and scene_occluded do to a ray's origin first. */
+vec3 periodic_wrap_point(const periodic_bounds *b, vec3 p);
+
 #endif
