@@ -363,8 +363,8 @@ static int cmp_walk(scene *s, vec3 o, vec3 d, unsigned long *q_on, unsigned long
   }
   periodic_set_early_out(true);
   CHECK(occ[0] == occ[1] && tr[0] == tr[1] && dist[0] == dist[1],
-        "o (%g, %g, %.9g) d (%g, %g, %.6g): early decision occluded %d trace %d (%.9g) vs walk %d %d (%.9g)", o.x,
-        o.y, o.z, d.x, d.y, d.z, occ[0], tr[0], dist[0], occ[1], tr[1], dist[1]);
+        "o (%g, %g, %.9g) d (%g, %g, %.6g): early decision occluded %d trace %d (%.9g) vs walk %d %d (%.9g)",
+        o.x, o.y, o.z, d.x, d.y, d.z, occ[0], tr[0], dist[0], occ[1], tr[1], dist[1]);
   return tr[1];
 }
 
@@ -379,11 +379,16 @@ static void test_early_unresolved(void) {
   const struct {
     vec3 o, d;
   } lv[] = {
-      {{0.1, 0.2, 1e-6}, {1, 0, 0}},          {{0.1, 0.2, 1e-6}, {-1, 0, 1e-7}},
-      {{0.1, 0.2, 1e-6}, {0.6, 0.8, 0}},      {{0.1, 0.2, 1 + 1e-6}, {1, 0, 0}},
-      {{0.1, 0.2, 1 + 1e-6}, {0.6, 0.8, 0}},  {{0.1, 0.2, 1 - 1e-6}, {0, -1, 0}},
-      {{0.1, 0.2, 1 - 1e-6}, {0.6, -0.8, -1e-9}}, {{-0.7, 0.9, 0.5}, {1, 0, 0}},
-      {{-0.7, 0.9, 0.5}, {-0.6, 0.8, 1e-9}},  {{-0.7, 0.9, 0.5}, {0.8, 0.6, -1e-9}},
+      {{0.1, 0.2, 1e-6}, {1, 0, 0}},
+      {{0.1, 0.2, 1e-6}, {-1, 0, 1e-7}},
+      {{0.1, 0.2, 1e-6}, {0.6, 0.8, 0}},
+      {{0.1, 0.2, 1 + 1e-6}, {1, 0, 0}},
+      {{0.1, 0.2, 1 + 1e-6}, {0.6, 0.8, 0}},
+      {{0.1, 0.2, 1 - 1e-6}, {0, -1, 0}},
+      {{0.1, 0.2, 1 - 1e-6}, {0.6, -0.8, -1e-9}},
+      {{-0.7, 0.9, 0.5}, {1, 0, 0}},
+      {{-0.7, 0.9, 0.5}, {-0.6, 0.8, 1e-9}},
+      {{-0.7, 0.9, 0.5}, {0.8, 0.6, -1e-9}},
   };
   unsigned long q_on = 0, q_off = 0;
   for (size_t i = 0; i < sizeof lv / sizeof lv[0]; i++) {
@@ -488,25 +493,27 @@ static void test_radiancemeter_outside_column(void) {
                  " \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}",
                  xs[i], ys[i]);
       else
-        snprintf(sens, sizeof sens,
-                 "{\"type\": \"mradiancemeter\", \"origins\": \"%.17g, %.17g, 0.01\", \"directions\": \"0, 0, "
-                 "-1\", \"sampler\": {\"type\": \"independent\", \"sample_count\": 4},"
-                 " \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}",
-                 xs[i], ys[i]);
-      snprintf(buf, sizeof buf,
-               "{\"type\": \"scene\", \"variant\": \"mono\", \"sensor\": %s,"
-               " \"integrator\": {\"type\": \"path\"},"
-               " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1], \"irradiance\": 1},"
-               " \"soil\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}},"
-               " \"cell\": {\"type\": \"periodic\", \"min\": [-1, -1], \"max\": [1, 1]}}",
-               sens);
+        snprintf(
+            sens, sizeof sens,
+            "{\"type\": \"mradiancemeter\", \"origins\": \"%.17g, %.17g, 0.01\", \"directions\": \"0, 0, "
+            "-1\", \"sampler\": {\"type\": \"independent\", \"sample_count\": 4},"
+            " \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}",
+            xs[i], ys[i]);
+      snprintf(
+          buf, sizeof buf,
+          "{\"type\": \"scene\", \"variant\": \"mono\", \"sensor\": %s,"
+          " \"integrator\": {\"type\": \"path\"},"
+          " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1], \"irradiance\": 1},"
+          " \"soil\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}},"
+          " \"cell\": {\"type\": \"periodic\", \"min\": [-1, -1], \"max\": [1, 1]}}",
+          sens);
       scene *s = tsup_load(buf, NULL);
       REQUIRE(s, "%s scene loads", kinds[k]);
       film_image img = {0};
       REQUIRE(tsup_render(s, 4, 7, 1, &img), "renders");
       double want = 0.5 / PI;
-      CHECK(fabs(img.data[0] - want) <= 1e-5, "%s at (%.1f, %.1f, 0.01): L %.6f vs rho E / pi = %.6f", kinds[k],
-            xs[i], ys[i], img.data[0], want);
+      CHECK(fabs(img.data[0] - want) <= 1e-5, "%s at (%.1f, %.1f, 0.01): L %.6f vs rho E / pi = %.6f",
+            kinds[k], xs[i], ys[i], img.data[0], want);
       film_image_free(&img);
       scene_free(s);
     }

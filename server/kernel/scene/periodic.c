@@ -226,8 +226,8 @@ static bool never_resolves(const scene *s, const ray3 *q) {
   const double *z = s->periodic_z;
   for (size_t i = 0; i < s->n_shapes; i++) {
     double lo = z[2 * i], hi = z[2 * i + 1];
-    bool clear = (dz >= 0 && hi < z0) || (dz <= 0 && lo > z0) || (dz > 0 && lo > z1 + m) ||
-                 (dz < 0 && hi < z1 - m);
+    bool clear =
+        (dz >= 0 && hi < z0) || (dz <= 0 && lo > z0) || (dz > 0 && lo > z1 + m) || (dz < 0 && hi < z1 - m);
     if (!clear) return false;
   }
   return true;

@@ -17,7 +17,7 @@
 typedef struct mradiancemeter {
   sensor base;
   size_t n;
-  vec3 *o, *d; /* n each; d unit */
+  vec3 *o, *d;       /* n each; d unit */
   meter_frame frame; /* set_scene */
 } mradiancemeter;
 

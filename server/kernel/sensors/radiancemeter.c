@@ -18,7 +18,7 @@
 
 typedef struct radiancemeter {
   sensor base;
-  vec3 o, d;  /* d unit */
+  vec3 o, d;         /* d unit */
   meter_frame frame; /* set_scene */
 } radiancemeter;
 
