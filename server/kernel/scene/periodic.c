@@ -217,7 +217,7 @@ static bool never_resolves(const scene *s, const ray3 *q) {
   double cx = q->d.x != 0 ? (b->max[0] - b->min[0]) / fabs(q->d.x) : INFINITY;
   double cy = q->d.y != 0 ? (b->max[1] - b->min[1]) / fabs(q->d.y) : INFINITY;
   double D = (double)PERIODIC_MAX_WALLS * fmin(cx, cy) * (1.0 + 1e-6);
-  if (!early_out || !isfinite(D) || !(q->tmax > D)) return false;
+  if (!early_out || !isfinite(D) || !(q->tmax > D) || isnan(q->d.z) || isnan(q->o.z)) return false;
   double m = slab_margin(b), z0 = q->o.z, dz = q->d.z, z1 = z0 + D * dz;
   /* advance() stops a ray going up above zmax + m, one going down below
    * zmin - m, a level one at neither (its z never changes, and
