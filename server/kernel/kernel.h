@@ -379,6 +379,8 @@ typedef struct scene {
   struct node *doc;           /* the document the scene was built from (owned) */
   struct param_table *params; /* the parameter table (owned) */
   periodic_bounds periodic;   /* the `periodic` object, if any */
+  double *periodic_z;         /* periodic scenes: each shape's world z-range, lo and hi
+                                 (2 per shape; scene/periodic.c) */
 } scene;
 
 #endif

@@ -336,6 +336,189 @@ static void test_area_emitter_equals_copies(void) {
   scene_free(sp), scene_free(sc);
 }
 
+/* ---- the early decision: rays that can neither leave the slab nor hit ----
+ * A horizontal sun's shadow rays (and a distant sensor looking
+ * horizontally) used to walk all 65,536 walls, one Embree query each,
+ * before being reported unresolved. Now a ray that provably can neither
+ * leave the slab nor hit a shape within the wall limit is classified at
+ * once (scene/periodic.c never_resolves). Checked: the query count of
+ * such rays (before: 65,536 each), and that the classification (and any
+ * hit) equals the walk's (the decision switched off) for directions
+ * swept across the threshold, from origins on and between the surfaces,
+ * in the sheet scene and in a canopy of leaves (where a level ray hits a
+ * leaf and must still do so). */
+static int cmp_walk(scene *s, vec3 o, vec3 d, unsigned long *q_on, unsigned long *q_off) {
+  trace_result occ[2], tr[2];
+  double dist[2] = {0, 0};
+  for (int k = 0; k < 2; k++) {
+    periodic_set_early_out(k == 0);
+    unsigned long q0 = periodic_query_count();
+    ray3 r = {o, d, 0, INFINITY};
+    occ[k] = scene_occluded(s, &r);
+    accel_hit h;
+    double off;
+    tr[k] = scene_trace(s, &r, &h, &off);
+    if (tr[k] == TRACE_HIT) dist[k] = off + h.t;
+    *(k == 0 ? q_on : q_off) += periodic_query_count() - q0;
+  }
+  periodic_set_early_out(true);
+  CHECK(occ[0] == occ[1] && tr[0] == tr[1] && dist[0] == dist[1],
+        "o (%g, %g, %.9g) d (%g, %g, %.6g): early decision occluded %d trace %d (%.9g) vs walk %d %d (%.9g)",
+        o.x, o.y, o.z, d.x, d.y, d.z, occ[0], tr[0], dist[0], occ[1], tr[1], dist[1]);
+  return tr[1];
+}
+
+static void test_early_unresolved(void) {
+  const char *sens =
+      "{\"type\": \"distant\", \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}";
+  scene *s = sheet_scene(1, 1, 1, 0, sens); /* cell [-1, 1]^2, sheet at z = 1, soil at z = 0 */
+  REQUIRE(s, "scene loads");
+  /* Query counts of level and nearly level shadow rays off the soil, off
+   * either side of the sheet (origins as spawn_ray puts them: 1e-6 off
+   * the surface, moving away or level) and mid-way. */
+  const struct {
+    vec3 o, d;
+  } lv[] = {
+      {{0.1, 0.2, 1e-6}, {1, 0, 0}},
+      {{0.1, 0.2, 1e-6}, {-1, 0, 1e-7}},
+      {{0.1, 0.2, 1e-6}, {0.6, 0.8, 0}},
+      {{0.1, 0.2, 1 + 1e-6}, {1, 0, 0}},
+      {{0.1, 0.2, 1 + 1e-6}, {0.6, 0.8, 0}},
+      {{0.1, 0.2, 1 - 1e-6}, {0, -1, 0}},
+      {{0.1, 0.2, 1 - 1e-6}, {0.6, -0.8, -1e-9}},
+      {{-0.7, 0.9, 0.5}, {1, 0, 0}},
+      {{-0.7, 0.9, 0.5}, {-0.6, 0.8, 1e-9}},
+      {{-0.7, 0.9, 0.5}, {0.8, 0.6, -1e-9}},
+  };
+  unsigned long q_on = 0, q_off = 0;
+  for (size_t i = 0; i < sizeof lv / sizeof lv[0]; i++) {
+    unsigned long a = 0, b = 0;
+    int t = cmp_walk(s, lv[i].o, lv[i].d, &a, &b);
+    CHECK(t == TRACE_UNRESOLVED, "o z %.9g d (%g, %g, %g): unresolved (%d)", lv[i].o.z, lv[i].d.x, lv[i].d.y,
+          lv[i].d.z, t);
+    CHECK(a == 0, "o z %.9g d (%g, %g, %g): %lu Embree queries with the early decision (want 0)", lv[i].o.z,
+          lv[i].d.x, lv[i].d.y, lv[i].d.z, a);
+    CHECK(b == 2ul * 65536, "walk: %lu queries (want 2 x 65536)", b);
+    q_on += a, q_off += b;
+  }
+  printf("  level rays: %lu Embree queries (walk: %lu)\n", q_on, q_off);
+
+  /* Directions swept across the threshold: elevation e * e0 where e0 is
+   * where the exact ray meets the plane it heads for after 65,536
+   * crossings of the nearest wall (a hit on the sheet or soil, or leaving
+   * the slab). */
+  struct {
+    vec3 o;
+    double dz_sign, gap;
+  } starts[] = {
+      {v3(0.1, 0.2, 1e-6), 1, 1 - 1e-6},            /* off the soil, up to the sheet */
+      {v3(0.3, -0.4, 0.5), 1, 0.5},                 /* mid-way, up to the sheet */
+      {v3(0.3, -0.4, 0.5), -1, 0.5},                /* mid-way, down to the soil */
+      {v3(-0.2, 0.1, 1 + 1e-6), 1, 1.02e-4 - 1e-6}, /* off the sheet, up out of the slab (margin 1.02e-4) */
+      {v3(-0.2, 0.1, -1e-6), -1, 1.02e-4 - 1e-6},   /* under the soil, down out of the slab */
+  };
+  const double az[] = {0, 37, 90};
+  const double fac[] = {0, 0.3, 0.49, 0.51, 0.9, 0.999, 1, 1.001, 1.1, 2};
+  int n_unres = 0, n_other = 0, n_early = 0;
+  q_on = q_off = 0;
+  for (size_t i = 0; i < sizeof starts / sizeof starts[0]; i++)
+    for (size_t a = 0; a < sizeof az / sizeof az[0]; a++)
+      for (size_t f = 0; f < sizeof fac / sizeof fac[0]; f++) {
+        double p = az[a] * PI / 180, cx = cos(p), cy = sin(p);
+        double c = fmin(fabs(cx) > 0 ? 2 / fabs(cx) : INFINITY, fabs(cy) > 1e-12 ? 2 / fabs(cy) : INFINITY);
+        double e = starts[i].gap / (65536.0 * c) * fac[f];
+        vec3 d = v3(cx, fabs(cy) > 1e-12 ? cy : 0, starts[i].dz_sign * e);
+        unsigned long q = q_on;
+        int t = cmp_walk(s, starts[i].o, d, &q_on, &q_off);
+        n_early += q_on == q;
+        if (t == TRACE_UNRESOLVED)
+          n_unres++;
+        else
+          n_other++;
+      }
+  printf("  threshold sweep: %d unresolved (%d decided early), %d hit or left the slab; %lu queries (walk: "
+         "%lu)\n",
+         n_unres, n_early, n_other, q_on, q_off);
+  CHECK(n_unres > 30 && n_other > 30 && n_early > 30, "the sweep straddles the threshold (%d, %d, %d early)",
+        n_unres, n_other, n_early);
+  scene_free(s);
+
+  /* Inside a canopy (the leaves plot): a level ray through the leaf layer
+   * is not decided early; it hits a leaf, as the walk does. */
+  char p1[] = "/tmp/rsw_pearly_XXXXXX";
+  int f1 = mkstemp(p1);
+  REQUIRE(f1 >= 0, "mkstemp");
+  close(f1);
+  write_plot_list(p1, 0);
+  scene *sp = plot_scene(0, true, 30, p1);
+  REQUIRE(sp, "plot scene loads");
+  int hits = 0;
+  q_on = q_off = 0;
+  for (int k = 0; k < 8; k++) {
+    double p = (10 + 40 * k) * PI / 180;
+    int t = cmp_walk(sp, v3(0.1 * k - 0.3, 0.2, 0.5 + 0.1 * k), v3(cos(p), sin(p), 0), &q_on, &q_off);
+    hits += t == TRACE_HIT;
+  }
+  /* Level rays off the soil, under the lowest leaf: decided early (the
+   * soil lies behind them, the leaves above their level); both agree. */
+  for (int k = 0; k < 4; k++) {
+    double p = (20 + 90 * k) * PI / 180;
+    cmp_walk(sp, v3(0.5, -0.5, 1e-6), v3(cos(p), sin(p), 0), &q_on, &q_off);
+  }
+  printf("  canopy: %d of 8 level rays hit a leaf; %lu queries (walk: %lu)\n", hits, q_on, q_off);
+  CHECK(hits >= 6, "level rays through the canopy hit leaves (%d of 8)", hits);
+  scene_free(sp);
+  unlink(p1);
+}
+
+/* ---- a radiancemeter far outside the column ---------------------------------
+ * Column [-1, 1]^2, Lambertian soil (rho 0.5) at z = 0 under an overhead
+ * sun of irradiance 1: L = rho E / pi everywhere above the soil. A meter
+ * 1 cm above the soil looking down at x = 0.3 and at x = 200000.3 (the
+ * same point modulo the period) must read the same. Before the fix its
+ * nudge along the view direction was sized by the unwrapped origin
+ * (4.8 cm at 2e5 m from the frame origin), which put the origin under the
+ * soil: 0 instead of 0.159155. */
+static void test_radiancemeter_outside_column(void) {
+  const double xs[] = {0.3, 200000.3, -199999.7, 0.3};
+  const double ys[] = {0.0, 0.0, 0.0, -300000.0};
+  const char *kinds[] = {"radiancemeter", "mradiancemeter"};
+  for (int k = 0; k < 2; k++)
+    for (size_t i = 0; i < sizeof xs / sizeof xs[0]; i++) {
+      char buf[2048], sens[512];
+      if (k == 0)
+        snprintf(sens, sizeof sens,
+                 "{\"type\": \"radiancemeter\", \"origin\": [%.17g, %.17g, 0.01], \"direction\": [0, 0, -1],"
+                 " \"sampler\": {\"type\": \"independent\", \"sample_count\": 4},"
+                 " \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}",
+                 xs[i], ys[i]);
+      else
+        snprintf(
+            sens, sizeof sens,
+            "{\"type\": \"mradiancemeter\", \"origins\": \"%.17g, %.17g, 0.01\", \"directions\": \"0, 0, "
+            "-1\", \"sampler\": {\"type\": \"independent\", \"sample_count\": 4},"
+            " \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}",
+            xs[i], ys[i]);
+      snprintf(
+          buf, sizeof buf,
+          "{\"type\": \"scene\", \"variant\": \"mono\", \"sensor\": %s,"
+          " \"integrator\": {\"type\": \"path\"},"
+          " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1], \"irradiance\": 1},"
+          " \"soil\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}},"
+          " \"cell\": {\"type\": \"periodic\", \"min\": [-1, -1], \"max\": [1, 1]}}",
+          sens);
+      scene *s = tsup_load(buf, NULL);
+      REQUIRE(s, "%s scene loads", kinds[k]);
+      film_image img = {0};
+      REQUIRE(tsup_render(s, 4, 7, 1, &img), "renders");
+      double want = 0.5 / PI;
+      CHECK(fabs(img.data[0] - want) <= 1e-5, "%s at (%.1f, %.1f, 0.01): L %.6f vs rho E / pi = %.6f",
+            kinds[k], xs[i], ys[i], img.data[0], want);
+      film_image_free(&img);
+      scene_free(s);
+    }
+}
+
 /* ---- the tracer ------------------------------------------------------------ */
 
 static void test_tracer_grazing(void) {
@@ -419,5 +602,7 @@ int main(void) {
   RSW_TEST_RUN(test_periodic_equals_copies_low_sun);
   RSW_TEST_RUN(test_area_emitter_equals_copies);
   RSW_TEST_RUN(test_tracer_grazing);
+  RSW_TEST_RUN(test_radiancemeter_outside_column);
+  RSW_TEST_RUN(test_early_unresolved);
   RSW_TEST_END("test_periodic_sun");
 }

@@ -751,6 +751,8 @@ rsw_status scene_refresh_bounds(scene *s, rsw_err *err) {
      * place their origins outside the slab (scene/periodic.h). */
     s->periodic.zmin = lo.z;
     s->periodic.zmax = hi.z;
+    rsw_status zst = periodic_refresh_shapes(s, err);
+    if (zst) return zst;
     lo.x = s->periodic.min[0], lo.y = s->periodic.min[1];
     hi.x = s->periodic.max[0], hi.y = s->periodic.max[1];
   }
@@ -1004,6 +1006,7 @@ void scene_free(scene *s) {
   free(s->emitters);
   free(s->emitter_cdf);
   free(s->sensors);
+  free(s->periodic_z);
   node_free(s->doc);
   free(s);
 }

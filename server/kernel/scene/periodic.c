@@ -3,6 +3,7 @@
 
 #include <stdlib.h>
 
+#include "../shapes/instance.h"
 #include "loader.h"
 
 static void periodic_destroy(object *o) {
@@ -60,6 +61,13 @@ static double wrap(double x, double lo, double hi) {
   if (r < 0) r += L;
   double w = lo + r;
   return w < hi ? w : lo;
+}
+
+vec3 periodic_wrap_point(const periodic_bounds *b, vec3 p) {
+  if (!b->on) return p;
+  p.x = wrap(p.x, b->min[0], b->max[0]);
+  p.y = wrap(p.y, b->min[1], b->max[1]);
+  return p;
 }
 
 /* A margin around the geometry's slab [zmin, zmax] inside which nothing
@@ -147,6 +155,84 @@ enum {
   PERIODIC_MAX_WALLS = 1 << 16
 };
 
+rsw_status periodic_refresh_shapes(scene *s, rsw_err *err) {
+  size_t n = s->n_shapes ? s->n_shapes : 1;
+  double *z = realloc(s->periodic_z, 2 * n * sizeof *z);
+  if (!z) return rsw_fail(err, RSW_ERR_NOMEM, "periodic", "out of memory");
+  s->periodic_z = z;
+  for (size_t i = 0; i < s->n_shapes; i++) {
+    vec3 lo = v3(INFINITY, INFINITY, INFINITY), hi = v3(-INFINITY, -INFINITY, -INFINITY);
+    instance_bbox(s->shapes[i], &lo, &hi); /* nothing (not rendered): lo > hi, never in the way */
+    z[2 * i] = lo.z, z[2 * i + 1] = hi.z;
+  }
+  return RSW_OK;
+}
+
+/* The early decision (issue: a horizontal sun cost 65,536 queries per
+ * shadow ray). q: the ray as the walk starts (origin wrapped, inside the
+ * slab). True only when the walk below would provably end in
+ * TRACE_UNRESOLVED, decided without tracing:
+ *
+ * 1. It cannot end by leaving the slab or at tmax. The side walls of the
+ *    axis with the shortest crossing distance c = min(Lx / |dx|,
+ *    Ly / |dy|) are crossed at most c apart from the start (the origin is
+ *    inside the column), and every crossing is one step of the walk, so
+ *    the walk's PERIODIC_MAX_WALLS steps end within D = MAX * c. If the
+ *    ray (exact arithmetic) stays inside the slab's margin planes, with
+ *    half the margin to spare, up to D (1 + 1e-6) (only the plane it
+ *    heads for counts, as in advance()), and tmax exceeds that,
+ *    every step of the walk advances: the float drift of the walk's
+ *    positions over 65,536 steps (~1e-11 |z|) is far below the spare
+ *    half margin (>= 5e-7 (1 + |z|)), and the 1e-6 covers its drift in
+ *    distance. Otherwise (a ray that may leave the slab within the limit,
+ *    including every boundary case) the walk decides, as before.
+ * 2. It can hit nothing on the way: the z-range it sweeps over [0, D]
+ *    misses every shape's world z-range (scene->periodic_z, the shapes'
+ *    bounding boxes). A shape behind the origin (entirely below it for a
+ *    ray going up or level, above it for a ray going down or level) is
+ *    compared strictly: a ray spawned off a flat surface (a soil, a leaf
+ *    sheet) lies beyond it by the spawn offset and moves away or level. A
+ *    shape ahead must lie beyond the swept range by the slab margin.
+ *    Otherwise (a ray that sweeps through a layer of geometry) the walk
+ *    decides, as before: it usually hits something within a few walls.
+ *
+ * So the decision is the walk's in exact arithmetic. In float it can only
+ * differ for a ray passing level within Embree's float error of a shape's
+ * bounding box (where the walk's own answer is rounding noise), never for
+ * one spawned off a surface. test_periodic_sun compares both (with the
+ * decision switched off) for directions around the threshold. */
+static bool early_out = true;
+static _Thread_local unsigned long n_queries;
+
+void periodic_set_early_out(bool on) {
+  early_out = on;
+}
+
+unsigned long periodic_query_count(void) {
+  return n_queries;
+}
+
+static bool never_resolves(const scene *s, const ray3 *q) {
+  const periodic_bounds *b = &s->periodic;
+  double cx = q->d.x != 0 ? (b->max[0] - b->min[0]) / fabs(q->d.x) : INFINITY;
+  double cy = q->d.y != 0 ? (b->max[1] - b->min[1]) / fabs(q->d.y) : INFINITY;
+  double D = (double)PERIODIC_MAX_WALLS * fmin(cx, cy) * (1.0 + 1e-6);
+  if (!early_out || !isfinite(D) || !(q->tmax > D) || isnan(q->d.z) || isnan(q->o.z)) return false;
+  double m = slab_margin(b), z0 = q->o.z, dz = q->d.z, z1 = z0 + D * dz;
+  /* advance() stops a ray going up above zmax + m, one going down below
+   * zmin - m, a level one at neither (its z never changes, and
+   * enter_slab() put it inside). */
+  if (dz > 0 ? !(z1 < b->zmax + 0.5 * m) : dz < 0 ? !(z1 > b->zmin - 0.5 * m) : false) return false;
+  const double *z = s->periodic_z;
+  for (size_t i = 0; i < s->n_shapes; i++) {
+    double lo = z[2 * i], hi = z[2 * i + 1];
+    bool clear =
+        (dz >= 0 && hi < z0) || (dz <= 0 && lo > z0) || (dz > 0 && lo > z1 + m) || (dz < 0 && hi < z1 - m);
+    if (!clear) return false;
+  }
+  return true;
+}
+
 trace_result scene_trace(const scene *s, ray3 *r, accel_hit *h, double *t_offset) {
   *t_offset = 0;
   const periodic_bounds *b = &s->periodic;
@@ -156,15 +242,19 @@ trace_result scene_trace(const scene *s, ray3 *r, accel_hit *h, double *t_offset
   q.o.y = wrap(q.o.y, b->min[1], b->max[1]);
   double off = 0;
   if (!enter_slab(b, &q, &off)) return TRACE_MISS;
+  if (never_resolves(s, &q)) return TRACE_UNRESOLVED;
   for (int k = 0; k < PERIODIC_MAX_WALLS; k++) {
     int walls;
     double ts = side_exit(b, &q, &walls);
     ray3 seg = q;
     seg.tmax = fmin(q.tmax, ts);
-    if (seg.tmax >= seg.tmin && accel_intersect(s->accel, &seg, h)) {
-      *r = q;
-      *t_offset = off;
-      return TRACE_HIT;
+    if (seg.tmax >= seg.tmin) {
+      n_queries++;
+      if (accel_intersect(s->accel, &seg, h)) {
+        *r = q;
+        *t_offset = off;
+        return TRACE_HIT;
+      }
     }
     if (!advance(b, &q, ts, walls)) return TRACE_MISS;
     off += ts;
@@ -180,12 +270,16 @@ trace_result scene_occluded(const scene *s, const ray3 *r) {
   q.o.y = wrap(q.o.y, b->min[1], b->max[1]);
   double off = 0;
   if (!enter_slab(b, &q, &off)) return TRACE_MISS;
+  if (never_resolves(s, &q)) return TRACE_UNRESOLVED;
   for (int k = 0; k < PERIODIC_MAX_WALLS; k++) {
     int walls;
     double ts = side_exit(b, &q, &walls);
     ray3 seg = q;
     seg.tmax = fmin(q.tmax, ts);
-    if (seg.tmax >= seg.tmin && accel_occluded(s->accel, &seg)) return TRACE_HIT;
+    if (seg.tmax >= seg.tmin) {
+      n_queries++;
+      if (accel_occluded(s->accel, &seg)) return TRACE_HIT;
+    }
     if (!advance(b, &q, ts, walls)) return TRACE_MISS;
   }
   return TRACE_UNRESOLVED;

@@ -36,12 +36,22 @@ const periodic_bounds *periodic_of(const object *o);
  * width) radians of horizontal can) is UNRESOLVED: it neither hit nor
  * escaped. It is never counted as escaped: scene_occluded's callers treat
  * it as blocked (it is non-zero) and the path tracer ends the path there
- * without environment light, and counts it (render_stats.unresolved). */
+ * without environment light, and counts it (render_stats.unresolved).
+ * A ray that provably can neither leave the slab nor hit a shape within
+ * the limit (a level shadow ray between a soil and a leaf sheet) is
+ * classified so at once, without walking (periodic.c never_resolves). */
 typedef enum trace_result {
   TRACE_MISS = 0,
   TRACE_HIT = 1,
   TRACE_UNRESOLVED = 2
 } trace_result;
+
+/* Each shape's world z-range into scene->periodic_z (scene_refresh_bounds,
+ * with zmin/zmax): what lets a ray that can neither leave the slab nor hit
+ * anything within the wall limit be classified UNRESOLVED at once, without
+ * walking the 65536 walls (a horizontal sun's shadow rays, a distant
+ * sensor looking horizontally). */
+rsw_status periodic_refresh_shapes(scene *s, rsw_err *err);
 
 /* Closest hit honouring the periodic boundary (plain accel_intersect
  * without one). On a hit, *r is the ray segment that hit (its origin
@@ -57,5 +67,16 @@ trace_result scene_occluded(const scene *s, const ray3 *r);
  * d.z < 0, below for d.z > 0; 0 when already there, when d is horizontal
  * or without a periodic boundary). Exact: nothing lies there. */
 double periodic_slab_offset(const periodic_bounds *b, vec3 p, vec3 d);
+
+/* p brought into the column (x, y modulo the period, into [min, max));
+ * p unchanged without a periodic boundary or when already inside. This is
+ * what scene_trace and scene_occluded do to a ray's origin first. */
+vec3 periodic_wrap_point(const periodic_bounds *b, vec3 p);
+
+/* Test hooks: Embree queries made by scene_trace/scene_occluded on the
+ * calling thread (a running count), and the early decision on or off
+ * (on by default; off: every ray walks, as before it existed). */
+unsigned long periodic_query_count(void);
+void periodic_set_early_out(bool on);
 
 #endif

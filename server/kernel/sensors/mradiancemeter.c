@@ -17,8 +17,8 @@
 typedef struct mradiancemeter {
   sensor base;
   size_t n;
-  vec3 *o, *d; /* n each; d unit */
-  vec3 frame;  /* accel_origin() (set_scene) */
+  vec3 *o, *d;       /* n each; d unit */
+  meter_frame frame; /* set_scene */
 } mradiancemeter;
 
 static double mradiancemeter_sample_ray(const sensor *s, vec2 film_u, vec2 aperture_u, ray3 *ray) {
@@ -26,7 +26,7 @@ static double mradiancemeter_sample_ray(const sensor *s, vec2 film_u, vec2 apert
   const mradiancemeter *m = (const mradiancemeter *)s;
   double f = floor(film_u.x * (double)m->n);
   size_t i = !(f >= 0.0) ? 0 : (f >= (double)m->n ? m->n - 1 : (size_t)f);
-  ray->o = radiancemeter_ray_origin(m->o[i], m->d[i], m->frame);
+  ray->o = radiancemeter_ray_origin(m->o[i], m->d[i], &m->frame);
   ray->d = m->d[i];
   ray->tmin = 0.0;
   ray->tmax = INFINITY;
@@ -35,7 +35,7 @@ static double mradiancemeter_sample_ray(const sensor *s, vec2 film_u, vec2 apert
 
 static rsw_status mradiancemeter_set_scene(sensor *s, const scene *sc, rsw_err *err) {
   (void)err;
-  ((mradiancemeter *)s)->frame = accel_origin(sc->accel);
+  meter_frame_bind(&((mradiancemeter *)s)->frame, sc);
   return RSW_OK;
 }
 

@@ -18,15 +18,15 @@
 
 typedef struct radiancemeter {
   sensor base;
-  vec3 o, d;  /* d unit */
-  vec3 frame; /* accel_origin() (set_scene) */
+  vec3 o, d;         /* d unit */
+  meter_frame frame; /* set_scene */
 } radiancemeter;
 
 static double radiancemeter_sample_ray(const sensor *s, vec2 film_u, vec2 aperture_u, ray3 *ray) {
   (void)film_u;
   (void)aperture_u;
   const radiancemeter *r = (const radiancemeter *)s;
-  ray->o = radiancemeter_ray_origin(r->o, r->d, r->frame);
+  ray->o = radiancemeter_ray_origin(r->o, r->d, &r->frame);
   ray->d = r->d;
   ray->tmin = 0.0;
   ray->tmax = INFINITY;
@@ -35,7 +35,7 @@ static double radiancemeter_sample_ray(const sensor *s, vec2 film_u, vec2 apertu
 
 static rsw_status radiancemeter_set_scene(sensor *s, const scene *sc, rsw_err *err) {
   (void)err;
-  ((radiancemeter *)s)->frame = accel_origin(sc->accel);
+  meter_frame_bind(&((radiancemeter *)s)->frame, sc);
   return RSW_OK;
 }
 

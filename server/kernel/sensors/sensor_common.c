@@ -239,8 +239,14 @@ double sensor_ray_offset(const ray_target *t, double param, double radius) {
   return t->kind == RAY_TARGET_NONE ? radius : 2.0 * radius;
 }
 
-vec3 radiancemeter_ray_origin(vec3 o, vec3 d, vec3 frame_origin) {
+void meter_frame_bind(meter_frame *f, const scene *sc) {
+  f->origin = accel_origin(sc->accel);
+  f->slab = sc->periodic;
+}
+
+vec3 radiancemeter_ray_origin(vec3 o, vec3 d, const meter_frame *f) {
+  o = periodic_wrap_point(&f->slab, o);
   double d1 = fabs(d.x) + fabs(d.y) + fabs(d.z);
-  double e = RSW_SPAWN_ERRORS * RSW_F32_UNIT * d1 * v3_max_abs(v3_sub(o, frame_origin));
+  double e = RSW_SPAWN_ERRORS * RSW_F32_UNIT * d1 * v3_max_abs(v3_sub(o, f->origin));
   return v3_fma(o, fmax(RSW_RAY_EPSILON, e), d);
 }

@@ -107,12 +107,24 @@ void sensor_traverse_axis(object *o, struct param_visitor *v);
  * with one; a given value (>= 0) wins. */
 double sensor_ray_offset(const ray_target *t, double param, double radius);
 
-/* Ray origin of a radiancemeter at o looking along unit d: o nudged along
- * d by Mitsuba's RayEpsilon, or, where Embree's float32 frame (centred on
- * `frame_origin`, accel_origin() at set_scene) is coarser there, by
- * RSW_SPAWN_ERRORS times its rounding error along d, so that a meter
+/* What a radiancemeter's ray origin depends on in the scene (set at
+ * set_scene by meter_frame_bind): Embree's frame origin (accel_origin())
+ * and the periodic boundary, if any. */
+typedef struct meter_frame {
+  vec3 origin;
+  periodic_bounds slab;
+} meter_frame;
+void meter_frame_bind(meter_frame *f, const scene *sc);
+
+/* Ray origin of a radiancemeter at o looking along unit d: o, first
+ * brought into the periodic column (periodic scenes: exact, and what
+ * scene_trace does anyway), nudged along d by Mitsuba's RayEpsilon, or,
+ * where Embree's float32 frame (centred on f->origin) is coarser there,
+ * by RSW_SPAWN_ERRORS times its rounding error along d, so that a meter
  * lying on a surface does not see that surface whatever the scene's size;
- * unchanged by a translation of the whole scene. */
-vec3 radiancemeter_ray_origin(vec3 o, vec3 d, vec3 frame_origin);
+ * unchanged by a translation of the whole scene. The nudge is sized by
+ * the wrapped origin: an origin many periods away from the column is
+ * traced from inside it, where the float error is that of the column. */
+vec3 radiancemeter_ray_origin(vec3 o, vec3 d, const meter_frame *f);
 
 #endif
