@@ -102,7 +102,9 @@ typedef struct xml_ctx {
   size_t depth;
   size_t n_nodes;
   const scene_limits *lim;
-  size_t bytes; /* document tree memory so far (node_mem_*) */
+  size_t bytes;    /* document tree memory so far (node_mem_*), counted
+                     before (or as) it is allocated */
+  size_t expanded; /* bytes $ substitution has produced in this document */
   param *params;
   size_t n_params, cap_params;
   id_table ids;
@@ -366,6 +368,17 @@ static char *substitute(xml_ctx *c, const char *attr_name, const char *raw) {
       free(b.s);
       return NULL;
     }
+    /* A few bytes of $a$a$a... make up to XML_MAX_ATTR_LEN each: the
+     * total a document may produce is bounded by its memory cap. */
+    if (vlen > c->lim->max_tree_bytes - c->expanded) {
+      xfail(c, RSW_ERR_LIMIT,
+            "attribute \"%s\": $ substitution has added more text to the document's attributes than "
+            "its memory cap of %zu bytes (%.0f MiB); split the scene or raise the cap",
+            attr_name, c->lim->max_tree_bytes, c->lim->max_tree_bytes / 1048576.0);
+      free(b.s);
+      return NULL;
+    }
+    c->expanded += vlen;
     if (!sb_put(&b, best->value, vlen)) goto nomem;
     p = d + 1 + best_len;
   }
@@ -450,6 +463,19 @@ typedef struct tag_def {
   tag_start_fn start;
 } tag_def;
 
+/* Count `bytes` more of document tree (in `owner`) against the memory
+ * cap; callers count what they are about to allocate, or have just grown. */
+static rsw_status charge(xml_ctx *c, const node *owner, size_t bytes) {
+  if (bytes > c->lim->max_tree_bytes - c->bytes) /* (c->bytes <= the cap) */
+    return xfail(c, RSW_ERR_LIMIT,
+                 "the scene document needs more than its memory cap of %zu bytes (%.0f MiB) here, in %s "
+                 "'%s' (opened at %s); split the scene or raise the cap",
+                 c->lim->max_tree_bytes, c->lim->max_tree_bytes / 1048576.0, owner->type,
+                 owner->id ? owner->id : "", owner->loc);
+  c->bytes += bytes;
+  return RSW_OK;
+}
+
 /* Add a property to `owner`, rejecting a second property of the same
  * (non-empty) name, as Mitsuba's Properties does (node_find is hashed on
  * large objects, so a group of 100,000 named members stays linear). An
@@ -470,6 +496,7 @@ static prop *add_prop(xml_ctx *c, node *owner, const char *name, prop_kind kind)
           owner->type, owner->id ? owner->id : "", owner->loc, c->lim->max_props);
     return NULL;
   }
+  size_t arrays = node_mem_arrays(owner);
   prop *p = node_add_prop(owner, name, kind, c->loc);
   if (!p) {
     if (owner->n_props >= RSW_MAX_NODES)
@@ -479,15 +506,10 @@ static prop *add_prop(xml_ctx *c, node *owner, const char *name, prop_kind kind)
       xfail(c, RSW_ERR_NOMEM, "out of memory");
     return NULL;
   }
-  c->bytes += node_mem_prop(p);
-  if (c->bytes > c->lim->max_tree_bytes) {
-    xfail(c, RSW_ERR_LIMIT,
-          "the scene document needs more than its memory cap of %zu bytes (%.0f MiB) here, in %s '%s' "
-          "(opened at %s); split the scene or raise the cap",
-          c->lim->max_tree_bytes, c->lim->max_tree_bytes / 1048576.0, owner->type, owner->id ? owner->id : "",
-          owner->loc);
-    return NULL;
-  }
+  /* The new slot and index growth, the name and loc; the value's own
+   * memory (a string, spectrum samples, a child node) is counted by the
+   * caller as it is made. */
+  if (charge(c, owner, node_mem_arrays(owner) - arrays + node_mem_prop(p))) return NULL;
   return p;
 }
 
@@ -530,6 +552,7 @@ static rsw_status start_scene(xml_ctx *c, xml_frame *parent, xml_frame *self) {
   }
   if (!(c->root = node_new("scene", "scene", c->loc))) return xfail(c, RSW_ERR_NOMEM, "out of memory");
   c->n_nodes = 1;
+  if (charge(c, c->root, node_mem_self(c->root))) return c->err.code;
   self->kind = FR_SCENE;
   self->obj = c->root;
   return RSW_OK;
@@ -553,9 +576,9 @@ static rsw_status start_object(xml_ctx *c, xml_frame *parent, xml_frame *self) {
   if (!n) return xfail(c, RSW_ERR_NOMEM, "out of memory");
   p->child = n; /* the tree owns n from here on */
   c->n_nodes++;
-  c->bytes += node_mem_self(n);
+  if (id && !(n->id = rsw_strdup(id))) return xfail(c, RSW_ERR_NOMEM, "out of memory");
+  if (charge(c, parent->obj, node_mem_self(n))) return c->err.code;
   if (id) {
-    if (!(n->id = rsw_strdup(id))) return xfail(c, RSW_ERR_NOMEM, "out of memory");
     n->id_explicit = true;
     unsigned long first = 0;
     bool nomem;
@@ -617,6 +640,7 @@ static rsw_status start_string(xml_ctx *c, xml_frame *parent, xml_frame *self) {
   const char *v;
   prop *p = start_simple(c, parent, PROP_STRING, &v);
   if (!p) return c->err.code;
+  if (charge(c, parent->obj, strlen(v) + 1)) return c->err.code;
   if (!(p->str = rsw_strdup(v))) return xfail(c, RSW_ERR_NOMEM, "out of memory");
   return RSW_OK;
 }
@@ -638,12 +662,14 @@ static rsw_status start_rgb(xml_ctx *c, xml_frame *parent, xml_frame *self) {
   return RSW_OK;
 }
 
-/* Append one wavelength:value pair, growing the owned arrays. */
-static rsw_status spec_push(xml_ctx *c, spectrum *s, size_t *cap, double wl, double val) {
+/* Append one wavelength:value pair, growing the owned arrays (counted
+ * against the cap of `owner`'s document as they grow). */
+static rsw_status spec_push(xml_ctx *c, const node *owner, spectrum *s, size_t *cap, double wl, double val) {
   if (s->n == RSW_MAX_SPECTRUM)
     return xfail(c, RSW_ERR_LIMIT, "more than %d spectrum samples", RSW_MAX_SPECTRUM);
   if (s->n == *cap) {
     size_t nc = *cap ? 2 * *cap : 16;
+    if (charge(c, owner, 2 * (nc - *cap) * sizeof(double))) return c->err.code;
     double *wl_new = realloc(s->wl, nc * sizeof *wl_new);
     if (!wl_new) return xfail(c, RSW_ERR_NOMEM, "out of memory");
     s->wl = wl_new;
@@ -697,10 +723,17 @@ static rsw_status start_spectrum(xml_ctx *c, xml_frame *parent, xml_frame *self)
     if (s->n > 0 && !(wl > s->wl[s->n - 1]))
       return xfail(c, RSW_ERR_INVALID, "wavelengths must be strictly increasing (%g nm follows %g nm)", wl,
                    s->wl[s->n - 1]);
-    if (spec_push(c, s, &cap, wl, val)) return c->err.code;
+    if (spec_push(c, parent->obj, s, &cap, wl, val)) return c->err.code;
   }
   if (s->n < 2)
     return xfail(c, RSW_ERR_INVALID, "a tabulated spectrum needs at least two wavelength:value pairs");
+  /* Trim to size, so that the tree holds (and node_mem_prop counts)
+   * exactly n samples. */
+  double *wl = realloc(s->wl, s->n * sizeof *wl);
+  if (wl) s->wl = wl;
+  double *val = realloc(s->val, s->n * sizeof *val);
+  if (val) s->val = val;
+  if (wl && val) c->bytes -= 2 * (cap - s->n) * sizeof(double);
   return RSW_OK;
 }
 
@@ -758,6 +791,7 @@ static rsw_status start_ref(xml_ctx *c, xml_frame *parent, xml_frame *self) {
   if (name && check_ident(c, "name", name)) return c->err.code;
   prop *p = add_prop(c, parent->obj, name ? name : "", PROP_REF);
   if (!p) return c->err.code;
+  if (charge(c, parent->obj, strlen(id) + 1)) return c->err.code;
   if (!(p->ref = rsw_strdup(id))) return xfail(c, RSW_ERR_NOMEM, "out of memory");
   return RSW_OK;
 }
