@@ -304,9 +304,11 @@ static double peak_rss(void) {
 }
 
 /* Read `doc` as XML under a 4 MiB cap: the error must be the cap's, at
- * big.xml:`line`, containing `msg_part`, and the process's peak memory
- * must not grow past 6 x the cap. */
-static void expect_xml_cap(const char *what, const char *doc, unsigned line, const char *msg_part) {
+ * big.xml:`line`, containing `msg_part`; with `amplified` (a small
+ * document that $ substitution makes large) the process's peak memory
+ * must not grow past 6 x the cap either. */
+static void expect_xml_cap(const char *what, const char *doc, unsigned line, const char *msg_part,
+                           bool amplified) {
   scene_limits lim = scene_limits_default;
   lim.max_tree_bytes = (size_t)4 << 20;
   node *root = NULL;
@@ -322,8 +324,8 @@ static void expect_xml_cap(const char *what, const char *doc, unsigned line, con
   CHECK(strcmp(err.where, where) == 0, "%s: where '%s', expected '%s'", what, err.where, where);
   CHECK(strstr(err.msg, "memory cap of 4194304 bytes (4 MiB)") && strstr(err.msg, msg_part),
         "%s: message '%s' lacks the cap or '%s'", what, err.msg, msg_part);
-  CHECK(grew < 6.0 * lim.max_tree_bytes, "%s: peak memory grew by %.1f MiB under a 4 MiB cap", what,
-        grew / 1048576.0);
+  CHECK(!amplified || grew < 6.0 * lim.max_tree_bytes, "%s: peak memory grew by %.1f MiB under a 4 MiB cap",
+        what, grew / 1048576.0);
   node_free(root);
 }
 
@@ -345,10 +347,12 @@ static void test_xml_cap_values(void) {
   sb_printf(&b, "%s\"/>\n<bsdf type=\"diffuse\">\n", pad);
   for (int k = 0; k < 10; k++) sb_printf(&b, "<string name=\"s%d\" value=\"$p$p$p$p$p$p$p$p\"/>\n", k);
   sb_printf(&b, "</bsdf>\n</scene>\n");
-  expect_xml_cap("8 x $p strings", b.p, 4, "in diffuse '' (opened at big.xml:3)");
+  expect_xml_cap("8 x $p strings", b.p, 4, "in diffuse '' (opened at big.xml:3)", true);
   free(b.p);
 
-  /* The same without $: two 3 MiB literal strings. Fails at the second. */
+  /* The same without $: two 3 MiB literal strings. Fails at the second.
+   * (Memory here follows the document's own size: expat's copies, and
+   * under ASan its quarantine.) */
   b = (sbuf){0};
   sb_printf(&b, "<scene version=\"3.0.0\">\n<bsdf type=\"diffuse\">\n");
   for (int k = 0; k < 2; k++) {
@@ -357,7 +361,7 @@ static void test_xml_cap_values(void) {
     sb_printf(&b, "\"/>\n");
   }
   sb_printf(&b, "</bsdf>\n</scene>\n");
-  expect_xml_cap("3 MiB literal strings", b.p, 4, "in diffuse ''");
+  expect_xml_cap("3 MiB literal strings", b.p, 4, "in diffuse ''", false);
   free(b.p);
 
   /* Substitution into values that are parsed and dropped: "0.5" and
@@ -368,7 +372,7 @@ static void test_xml_cap_values(void) {
             pad);
   for (int k = 0; k < 10; k++) sb_printf(&b, "<rgb name=\"c%d\" value=\"$p\"/>\n", k);
   sb_printf(&b, "</bsdf>\n</scene>\n");
-  expect_xml_cap("$p into <rgb>", b.p, 11, "$ substitution");
+  expect_xml_cap("$p into <rgb>", b.p, 11, "$ substitution", true);
   free(b.p);
   free(pad);
 }

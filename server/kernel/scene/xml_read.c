@@ -305,52 +305,40 @@ static param *param_add(xml_ctx *c) {
   return p;
 }
 
-typedef struct strbuf {
-  char *s;
-  size_t n, cap;
-} strbuf;
-
-static bool sb_put(strbuf *b, const char *s, size_t n) {
-  if (b->n + n + 1 > b->cap) {
-    size_t cap = b->cap ? b->cap : 64;
-    while (cap < b->n + n + 1) cap *= 2;
-    char *p = realloc(b->s, cap);
-    if (!p) return false;
-    b->s = p;
-    b->cap = cap;
+/* The parameter whose name starts at s (just after a '$'), the longest
+ * such name winning, or NULL; *name_len gets its length. */
+static const param *param_at(const xml_ctx *c, const char *s, size_t *name_len) {
+  const param *best = NULL;
+  *name_len = 0;
+  for (size_t i = 0; i < c->n_params; i++) {
+    size_t len = strlen(c->params[i].name);
+    if (len > *name_len && strncmp(s, c->params[i].name, len) == 0) {
+      best = &c->params[i];
+      *name_len = len;
+    }
   }
-  memcpy(b->s + b->n, s, n);
-  b->n += n;
-  b->s[b->n] = '\0';
-  return true;
+  return best;
 }
 
 /* Replace every $name in raw by its parameter value; owned result or NULL
  * (error recorded). At each '$' the longest parameter name that follows
  * wins, which is what Mitsuba's replace-longest-names-first amounts to.
- * Substituted text is not rescanned, so expansion is bounded. */
+ * Substituted text is not rescanned, so expansion is bounded: one value by
+ * XML_MAX_ATTR_LEN, and what substitution adds to the whole document by
+ * its memory cap (a few bytes of "$p$p$p..." would otherwise make up to
+ * 16 MiB per attribute, over and over). The first pass measures and
+ * checks, so a value over a bound is never allocated. */
 static char *substitute(xml_ctx *c, const char *attr_name, const char *raw) {
   if (!strchr(raw, '$')) {
     char *r = rsw_strdup(raw);
     if (!r) xfail(c, RSW_ERR_NOMEM, "out of memory");
     return r;
   }
-  strbuf b = {0};
-  const char *p = raw;
-  while (*p) {
-    const char *d = strchr(p, '$');
-    size_t lit = d ? (size_t)(d - p) : strlen(p);
-    if (!sb_put(&b, p, lit)) goto nomem;
-    if (!d) break;
-    const param *best = NULL;
-    size_t best_len = 0;
-    for (size_t i = 0; i < c->n_params; i++) {
-      size_t len = strlen(c->params[i].name);
-      if (len > best_len && strncmp(d + 1, c->params[i].name, len) == 0) {
-        best = &c->params[i];
-        best_len = len;
-      }
-    }
+  size_t out = 0, added = 0, name_len;
+  const char *p = raw, *d;
+  for (; (d = strchr(p, '$')); p = d + 1 + name_len) {
+    out += (size_t)(d - p);
+    const param *best = param_at(c, d + 1, &name_len);
     if (!best) {
       size_t id = 0;
       while (d[1 + id] && (isalnum((unsigned char)d[1 + id]) || d[1 + id] == '_') && id < 64) id++;
@@ -358,36 +346,42 @@ static char *substitute(xml_ctx *c, const char *attr_name, const char *raw) {
             "attribute \"%s\": undefined parameter \"$%.*s\" (declare it with <default> "
             "or pass -D)",
             attr_name, (int)id, d + 1);
-      free(b.s);
       return NULL;
     }
     size_t vlen = strlen(best->value);
-    if (b.n + vlen > XML_MAX_ATTR_LEN) {
+    if (out + vlen > XML_MAX_ATTR_LEN) {
       xfail(c, RSW_ERR_LIMIT, "attribute \"%s\" is longer than %zu bytes after substitution", attr_name,
             XML_MAX_ATTR_LEN);
-      free(b.s);
       return NULL;
     }
-    /* A few bytes of $a$a$a... make up to XML_MAX_ATTR_LEN each: the
-     * total a document may produce is bounded by its memory cap. */
-    if (vlen > c->lim->max_tree_bytes - c->expanded) {
+    if (vlen > c->lim->max_tree_bytes - c->expanded - added) { /* (c->expanded + added <= the cap) */
       xfail(c, RSW_ERR_LIMIT,
             "attribute \"%s\": $ substitution has added more text to the document's attributes than "
             "its memory cap of %zu bytes (%.0f MiB); split the scene or raise the cap",
             attr_name, c->lim->max_tree_bytes, c->lim->max_tree_bytes / 1048576.0);
-      free(b.s);
       return NULL;
     }
-    c->expanded += vlen;
-    if (!sb_put(&b, best->value, vlen)) goto nomem;
-    p = d + 1 + best_len;
+    out += vlen;
+    added += vlen;
   }
-  if (!b.s && !sb_put(&b, "", 0)) goto nomem;
-  return b.s;
-nomem:
-  free(b.s);
-  xfail(c, RSW_ERR_NOMEM, "out of memory");
-  return NULL;
+  out += strlen(p);
+  char *r = malloc(out + 1);
+  if (!r) {
+    xfail(c, RSW_ERR_NOMEM, "out of memory");
+    return NULL;
+  }
+  c->expanded += added;
+  char *w = r;
+  for (p = raw; (d = strchr(p, '$')); p = d + 1 + name_len) {
+    memcpy(w, p, (size_t)(d - p));
+    w += d - p;
+    const param *best = param_at(c, d + 1, &name_len);
+    size_t vlen = strlen(best->value);
+    memcpy(w, best->value, vlen);
+    w += vlen;
+  }
+  strcpy(w, p);
+  return r;
 }
 
 static rsw_status attrs_load(xml_ctx *c, const XML_Char **atts) {
