@@ -587,6 +587,76 @@ static void test_limits(void) {
   CHECK(st == RSW_ERR_PARSE && strstr(err.where, ":1") != NULL, "NULL text: %s", err.where);
 }
 
+/* ---- the memory cap counts the whole tree --------------------------------------- */
+
+static size_t str_bytes(const char *s) {
+  return s ? strlen(s) + 1 : 0;
+}
+
+/* Memory of a tree as allocated, recounted from its fields: structs,
+ * strings, the property arrays and name indexes at their capacity, and
+ * what each property owns. Generated ids (given after reading) are left
+ * out. */
+static size_t tree_bytes(const node *n) {
+  size_t b = sizeof *n + str_bytes(n->tag) + str_bytes(n->type) + str_bytes(n->loc) +
+             (n->id_explicit ? str_bytes(n->id) : 0) + n->cap_props * sizeof(prop) +
+             n->index_cap * sizeof(size_t);
+  for (size_t i = 0; i < n->n_props; i++) {
+    const prop *p = &n->props[i];
+    b += str_bytes(p->name) + str_bytes(p->loc) + str_bytes(p->str) + str_bytes(p->ref) +
+         p->n_nums * sizeof(double) + 2 * p->spec.n * sizeof(double);
+    if (p->child) b += tree_bytes(p->child);
+  }
+  return b;
+}
+
+/* The reader's count equals that recount: a cap of exactly the tree's
+ * memory reads, one byte less fails. Before the fix the count left out
+ * string values, spectrum samples, explicit ids, the root, and the
+ * growth of property arrays and name indexes (a shapegroup of 40 members
+ * has a 128-slot index), so the cap could be passed unnoticed. */
+static void test_memory_count(void) {
+  size_t cap = 64 << 10, n = 0;
+  char *doc = malloc(cap);
+  REQUIRE(doc, "oom");
+  n += (size_t)snprintf(doc + n, cap - n,
+                        "<scene version=\"3.0.0\">\n<default name=\"p\" value=\"a longer string value\"/>\n"
+                        "<bsdf type=\"diffuse\" id=\"leaf\"><spectrum name=\"reflectance\" "
+                        "value=\"400:0.1, 500:0.2, 600:0.3, 700:0.4, 800:0.5, 900:0.6, 1000:0.7, 1100:0.8, "
+                        "1200:0.9, 1300:0.9, 1400:0.9, 1500:0.9, 1600:0.9, 1700:0.9, 1800:0.9, 1900:0.9, "
+                        "2000:0.9\"/></bsdf>\n<shape type=\"shapegroup\" id=\"g\">\n");
+  for (int i = 0; i < 40; i++)
+    n += (size_t)snprintf(
+        doc + n, cap - n,
+        "<shape type=\"disk\" name=\"d%d\"><string name=\"note\" value=\"$p $p %d\"/><ref id=\"leaf\"/>"
+        "<transform name=\"to_world\"><translate x=\"%d\"/></transform></shape>\n",
+        i, i, i);
+  n += (size_t)snprintf(doc + n, cap - n, "</shape>\n</scene>\n");
+  REQUIRE(n < cap, "document buffer too small");
+  node *root = NULL;
+  rsw_err err;
+  rsw_err_clear(&err);
+  REQUIRE(scene_read_xml(doc, strlen(doc), "m.xml", NULL, 0, &root, NULL, &err) == RSW_OK, "read: %s: %s",
+          err.where, err.msg);
+  size_t total = tree_bytes(root);
+  node *g = child(root, 1);
+  CHECK(g && g->index_cap >= 80, "the group has a name index (index_cap %zu)", g ? g->index_cap : 0);
+  node_free(root);
+  printf("  tree of %zu bytes\n", total);
+  scene_limits lim = scene_limits_default;
+  for (int less = 0; less <= 1; less++) {
+    lim.max_tree_bytes = total - (size_t)less;
+    root = NULL;
+    rsw_err_clear(&err);
+    rsw_status st = scene_read_xml_limited(doc, strlen(doc), "m.xml", NULL, 0, &lim, &root, NULL, &err);
+    CHECK(st == (less ? RSW_ERR_LIMIT : RSW_OK), "cap of %zu bytes: status %d (%s: %s)", lim.max_tree_bytes,
+          (int)st, err.where, err.msg);
+    if (less) CHECK(strstr(err.msg, "memory cap of") != NULL, "message '%s'", err.msg);
+    node_free(root);
+  }
+  free(doc);
+}
+
 /* ---- malformed corpus ------------------------------------------------------------ */
 
 /* Expected line of a corpus file from its README entry "name: ... -- line N";
@@ -653,6 +723,7 @@ int main(void) {
   RSW_TEST_RUN(test_generated_ids);
   RSW_TEST_RUN(test_versions);
   RSW_TEST_RUN(test_limits);
+  RSW_TEST_RUN(test_memory_count);
   RSW_TEST_RUN(test_bad_corpus);
   RSW_TEST_END("test_xml_read");
 }

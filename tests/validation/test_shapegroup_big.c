@@ -15,6 +15,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
 #include <time.h>
 
 #include "../../server/kernel/core/rng.h"
@@ -295,7 +296,89 @@ static void test_caps(void) {
   free(m);
 }
 
+/* Peak resident set of this process so far, in bytes (Linux: KiB). */
+static double peak_rss(void) {
+  struct rusage u;
+  getrusage(RUSAGE_SELF, &u);
+  return 1024.0 * (double)u.ru_maxrss;
+}
+
+/* Read `doc` as XML under a 4 MiB cap: the error must be the cap's, at
+ * big.xml:`line`, containing `msg_part`; with `amplified` (a small
+ * document that $ substitution makes large) the process's peak memory
+ * must not grow past 6 x the cap either. */
+static void expect_xml_cap(const char *what, const char *doc, unsigned line, const char *msg_part,
+                           bool amplified) {
+  scene_limits lim = scene_limits_default;
+  lim.max_tree_bytes = (size_t)4 << 20;
+  node *root = NULL;
+  rsw_err err = {0};
+  double rss0 = peak_rss(), t0 = now_s();
+  rsw_status st = scene_read_xml_limited(doc, strlen(doc), "big.xml", NULL, 0, &lim, &root, NULL, &err);
+  double t = now_s() - t0, grew = peak_rss() - rss0;
+  char where[32];
+  snprintf(where, sizeof where, "big.xml:%u", line);
+  printf("  %s: %zu-byte document, status %d in %.3f s, peak memory +%.1f MiB; %s: %s\n", what, strlen(doc),
+         (int)st, t, grew / 1048576.0, err.where, err.msg);
+  CHECK(st == RSW_ERR_LIMIT, "%s: status %d, expected the cap's %d", what, (int)st, (int)RSW_ERR_LIMIT);
+  CHECK(strcmp(err.where, where) == 0, "%s: where '%s', expected '%s'", what, err.where, where);
+  CHECK(strstr(err.msg, "memory cap of 4194304 bytes (4 MiB)") && strstr(err.msg, msg_part),
+        "%s: message '%s' lacks the cap or '%s'", what, err.msg, msg_part);
+  CHECK(!amplified || grew < 6.0 * lim.max_tree_bytes, "%s: peak memory grew by %.1f MiB under a 4 MiB cap",
+        what, grew / 1048576.0);
+  node_free(root);
+}
+
+/* The XML reader's memory cap counts what a property's value holds, and
+ * $ substitution (a few bytes of "$p$p$p" make up to 16 MiB per
+ * attribute) is bounded by the cap too. Run first, while the process's
+ * peak memory is still low. Before the fix all three documents read
+ * (status 0), the first holding 40 MiB under a 4 MiB cap. */
+static void test_xml_cap_values(void) {
+  /* 512 KiB parameter, ten <string>s of 8 x $p each: 40 MiB of strings
+   * from a 0.5 MiB document. Fails at the first string (line 4). */
+  const size_t pn = (size_t)512 << 10;
+  sbuf b = {0};
+  sb_printf(&b, "<scene version=\"3.0.0\">\n<default name=\"p\" value=\"");
+  char *pad = malloc(pn + 1);
+  REQUIRE(pad, "oom");
+  memset(pad, 'x', pn);
+  pad[pn] = '\0';
+  sb_printf(&b, "%s\"/>\n<bsdf type=\"diffuse\">\n", pad);
+  for (int k = 0; k < 10; k++) sb_printf(&b, "<string name=\"s%d\" value=\"$p$p$p$p$p$p$p$p\"/>\n", k);
+  sb_printf(&b, "</bsdf>\n</scene>\n");
+  expect_xml_cap("8 x $p strings", b.p, 4, "in diffuse '' (opened at big.xml:3)", true);
+  free(b.p);
+
+  /* The same without $: two 3 MiB literal strings. Fails at the second.
+   * (Memory here follows the document's own size: expat's copies, and
+   * under ASan its quarantine.) */
+  b = (sbuf){0};
+  sb_printf(&b, "<scene version=\"3.0.0\">\n<bsdf type=\"diffuse\">\n");
+  for (int k = 0; k < 2; k++) {
+    sb_printf(&b, "<string name=\"s%d\" value=\"", k);
+    for (int r = 0; r < 6; r++) sb_printf(&b, "%s", pad);
+    sb_printf(&b, "\"/>\n");
+  }
+  sb_printf(&b, "</bsdf>\n</scene>\n");
+  expect_xml_cap("3 MiB literal strings", b.p, 4, "in diffuse ''", false);
+  free(b.p);
+
+  /* Substitution into values that are parsed and dropped: "0.5" and
+   * 512 KiB of blanks, ten times; the eighth passes 4 MiB (line 11). */
+  b = (sbuf){0};
+  memset(pad, ' ', pn);
+  sb_printf(&b, "<scene version=\"3.0.0\">\n<default name=\"p\" value=\"0.5%s\"/>\n<bsdf type=\"diffuse\">\n",
+            pad);
+  for (int k = 0; k < 10; k++) sb_printf(&b, "<rgb name=\"c%d\" value=\"$p\"/>\n", k);
+  sb_printf(&b, "</bsdf>\n</scene>\n");
+  expect_xml_cap("$p into <rgb>", b.p, 11, "$ substitution", true);
+  free(b.p);
+  free(pad);
+}
+
 int main(void) {
+  RSW_TEST_RUN(test_xml_cap_values);
   RSW_TEST_RUN(test_one_group_equals_eight);
   RSW_TEST_RUN(test_load_100k);
   RSW_TEST_RUN(test_caps);

@@ -489,9 +489,10 @@ rsw_status ld_texture_opt(loader *ld, node *n, const char *name, double lo, text
     st = prop_target(ld, n, p, &t);
     if (st) return st;
     object *o;
+    size_t pi = (size_t)(p - n->props);
     st = ld_build(ld, t, CLS_TEXTURE, &o);
     if (st) return st;
-    p->used = true;
+    n->props[pi].used = true; /* (building may grow the root's property array) */
     *out = (texture *)o;
     return RSW_OK;
   }
@@ -549,9 +550,10 @@ rsw_status ld_child(loader *ld, node *n, const char *name, obj_class cls, object
     if (p) return wrong_type(ld, n, p, "an object");
   }
   if (!found) return RSW_OK;
+  size_t fi = (size_t)(found - n->props);
   rsw_status st = ld_build(ld, target, cls, out);
   if (st) return st;
-  found->used = true;
+  n->props[fi].used = true; /* building may grow the root's property array (defaults) */
   return RSW_OK;
 }
 
@@ -577,7 +579,7 @@ rsw_status ld_children(loader *ld, node *n, obj_class cls, object ***out, size_t
       free(arr);
       return st;
     }
-    p->used = true;
+    n->props[i].used = true; /* (building may grow the root's property array) */
     k++;
   }
   *out = arr;

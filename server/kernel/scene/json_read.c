@@ -400,6 +400,12 @@ static rsw_status read_object(jctx *c, const cJSON *obj, const char *key, const 
 
 static rsw_status read_value(jctx *c, node *n, const cJSON *v, const char *key, const char *where, int depth);
 
+/* A JSON array of objects with a "type": a list of container members. */
+static bool is_list(const cJSON *v) {
+  return cJSON_IsArray(v) && v->child && cJSON_IsObject(v->child) &&
+         cJSON_GetObjectItemCaseSensitive(v->child, "type");
+}
+
 /* A list of objects in a container (the scene, a shapegroup):
  * "members": [{"type": "disk", ...}, {"type": "ref", "id": "x"}, ...] adds
  * one child per element, as if each had its own key; an element without
@@ -417,7 +423,7 @@ static rsw_status read_list(jctx *c, node *n, const cJSON *v, const char *key, c
     const cJSON *type = cJSON_IsObject(e) ? cJSON_GetObjectItemCaseSensitive(e, "type") : NULL;
     if (!type || !cJSON_IsString(type))
       return fail(c, RSW_ERR_TYPE, w, "'%s' is a list of objects: every element needs a \"type\"", key);
-    size_t before = n->n_props;
+    size_t before = n->n_props, arrays = node_mem_arrays(n);
     rsw_status st = read_value(c, n, e, key, w, depth + 1);
     if (st) return st;
     prop *p = n->n_props > before ? &n->props[n->n_props - 1] : NULL;
@@ -433,7 +439,7 @@ static rsw_status read_list(jctx *c, node *n, const cJSON *v, const char *key, c
       return fail(c, RSW_ERR_TYPE, w, "'%s' is a list of objects: a %s value is not an object", key,
                   type->valuestring);
     if (p) {
-      st = account(c, node_mem_prop(p), w);
+      st = account(c, node_mem_arrays(n) - arrays + node_mem_prop(p), w);
       if (st) return st;
     }
   }
@@ -492,7 +498,7 @@ static rsw_status read_value(jctx *c, node *n, const cJSON *v, const char *key, 
       if (st) return st;
       ADD_(PROP_TRANSFORM);
       p->xf = xf;
-    } else if (len > 0 && cJSON_IsObject(v->child) && cJSON_GetObjectItemCaseSensitive(v->child, "type")) {
+    } else if (is_list(v)) {
       return read_list(c, n, v, key, where, depth);
     } else if (len > 0 && cJSON_IsObject(v->child)) {
       xform xf;
@@ -620,10 +626,11 @@ static rsw_status read_object(jctx *c, const cJSON *obj, const char *key, const 
     if (strcmp(k->string, "type") == 0 || strcmp(k->string, "id") == 0) continue;
     char w[512];
     ptr_join(w, sizeof w, where, k->string);
-    size_t before = n->n_props;
+    size_t before = n->n_props, arrays = node_mem_arrays(n);
     st = read_value(c, n, k, k->string, w, depth);
     /* (a list accounts for its elements itself) */
-    if (!st && n->n_props == before + 1) st = account(c, node_mem_prop(&n->props[n->n_props - 1]), w);
+    if (!st && !is_list(k) && n->n_props == before + 1)
+      st = account(c, node_mem_arrays(n) - arrays + node_mem_prop(&n->props[n->n_props - 1]), w);
   }
   if (!st && node_type_is_container(n->type)) st = check_list_ids(c, n);
 done:

@@ -104,7 +104,9 @@ static bool index_add(node *n, size_t k) {
 prop *node_add_prop(node *n, const char *name, prop_kind kind, const char *loc) {
   if (n->n_props >= RSW_MAX_NODES) return NULL;
   if (n->n_props == n->cap_props) {
-    size_t cap = n->cap_props ? 2 * n->cap_props : 8;
+    /* small first: most objects have a handful of properties, and a
+     * 100,000-member group is 100,000 such objects (each prop is ~400 B) */
+    size_t cap = n->cap_props ? 2 * n->cap_props : 2;
     prop *p = realloc(n->props, cap * sizeof *p);
     if (!p) return NULL;
     n->props = p;
@@ -141,13 +143,16 @@ static size_t str_mem(const char *s) {
 }
 
 size_t node_mem_self(const node *n) {
-  return sizeof *n + str_mem(n->tag) + str_mem(n->type) + str_mem(n->id) + str_mem(n->loc) +
-         n->index_cap * sizeof *n->name_index;
+  return sizeof *n + str_mem(n->tag) + str_mem(n->type) + str_mem(n->id) + str_mem(n->loc);
+}
+
+size_t node_mem_arrays(const node *n) {
+  return n->cap_props * sizeof *n->props + n->index_cap * sizeof *n->name_index;
 }
 
 size_t node_mem_prop(const prop *p) {
-  return sizeof *p + str_mem(p->name) + str_mem(p->loc) + str_mem(p->str) + str_mem(p->ref) +
-         p->n_nums * sizeof(double) + 2 * p->spec.n * sizeof(double);
+  return str_mem(p->name) + str_mem(p->loc) + str_mem(p->str) + str_mem(p->ref) + p->n_nums * sizeof(double) +
+         2 * p->spec.n * sizeof(double);
 }
 
 /* ---- deterministic ids ---------------------------------------------------- */

@@ -24,10 +24,12 @@
                                      children, bounded by RSW_MAX_NODES and the
                                      document's memory cap below */
 #define RSW_MAX_NODES      1000000 /* nodes per document */
-/* Memory of one document tree (nodes, properties and their strings and
- * arrays, as counted by node_mem_*): it stays resident with the scene. A
- * shapegroup member (a disk with a to_world and a bsdf ref) takes about
- * 1.5 KiB, so 1 GiB holds some 700,000 such members. */
+/* Memory of one document tree (nodes, property arrays and name indexes at
+ * their capacity, strings and numbers, as counted by node_mem_*): it stays
+ * resident with the scene. A shapegroup member (a disk with a to_world and
+ * a bsdf ref) takes about 1.8 KiB, so 1 GiB holds some 600,000 such
+ * members. The XML reader also bounds the text $ substitution adds to a
+ * document by this cap. */
 #define RSW_MAX_TREE_BYTES ((size_t)1 << 30)
 #define RSW_MAX_SPECTRUM   100000 /* samples in a tabulated spectrum */
 #define RSW_MAX_NAME       256    /* property names, ids, plugin types */
@@ -119,9 +121,14 @@ void node_free(node *n); /* recursive; NULL is a no-op */
 prop *node_add_prop(node *n, const char *name, prop_kind kind, const char *loc);
 /* First property with this name, or NULL. O(1) on large nodes. */
 prop *node_find(const node *n, const char *name);
-/* Bytes a node / a property holds by itself (struct, strings, arrays; not
- * the children), for the readers' memory cap. */
+/* Memory of the tree, for the readers' memory cap, in three parts that
+ * add up without overlap: node_mem_self, a node's struct and strings;
+ * node_mem_arrays, its property array and name index (allocated
+ * capacity, which node_add_prop grows: readers count the growth of each
+ * add); node_mem_prop, what a property owns besides its slot in that array
+ * (strings, numbers, spectrum samples; not its child node). */
 size_t node_mem_self(const node *n);
+size_t node_mem_arrays(const node *n);
 size_t node_mem_prop(const prop *p);
 void spectrum_free(spectrum *s);
 char *rsw_strdup(const char *s);

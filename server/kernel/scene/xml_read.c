@@ -102,7 +102,9 @@ typedef struct xml_ctx {
   size_t depth;
   size_t n_nodes;
   const scene_limits *lim;
-  size_t bytes; /* document tree memory so far (node_mem_*) */
+  size_t bytes;    /* document tree memory so far (node_mem_*), counted
+                     before (or as) it is allocated */
+  size_t expanded; /* bytes $ substitution has produced in this document */
   param *params;
   size_t n_params, cap_params;
   id_table ids;
@@ -303,52 +305,40 @@ static param *param_add(xml_ctx *c) {
   return p;
 }
 
-typedef struct strbuf {
-  char *s;
-  size_t n, cap;
-} strbuf;
-
-static bool sb_put(strbuf *b, const char *s, size_t n) {
-  if (b->n + n + 1 > b->cap) {
-    size_t cap = b->cap ? b->cap : 64;
-    while (cap < b->n + n + 1) cap *= 2;
-    char *p = realloc(b->s, cap);
-    if (!p) return false;
-    b->s = p;
-    b->cap = cap;
+/* The parameter whose name starts at s (just after a '$'), the longest
+ * such name winning, or NULL; *name_len gets its length. */
+static const param *param_at(const xml_ctx *c, const char *s, size_t *name_len) {
+  const param *best = NULL;
+  *name_len = 0;
+  for (size_t i = 0; i < c->n_params; i++) {
+    size_t len = strlen(c->params[i].name);
+    if (len > *name_len && strncmp(s, c->params[i].name, len) == 0) {
+      best = &c->params[i];
+      *name_len = len;
+    }
   }
-  memcpy(b->s + b->n, s, n);
-  b->n += n;
-  b->s[b->n] = '\0';
-  return true;
+  return best;
 }
 
 /* Replace every $name in raw by its parameter value; owned result or NULL
  * (error recorded). At each '$' the longest parameter name that follows
  * wins, which is what Mitsuba's replace-longest-names-first amounts to.
- * Substituted text is not rescanned, so expansion is bounded. */
+ * Substituted text is not rescanned, so expansion is bounded: one value by
+ * XML_MAX_ATTR_LEN, and what substitution adds to the whole document by
+ * its memory cap (a few bytes of "$p$p$p..." would otherwise make up to
+ * 16 MiB per attribute, over and over). The first pass measures and
+ * checks, so a value over a bound is never allocated. */
 static char *substitute(xml_ctx *c, const char *attr_name, const char *raw) {
   if (!strchr(raw, '$')) {
     char *r = rsw_strdup(raw);
     if (!r) xfail(c, RSW_ERR_NOMEM, "out of memory");
     return r;
   }
-  strbuf b = {0};
-  const char *p = raw;
-  while (*p) {
-    const char *d = strchr(p, '$');
-    size_t lit = d ? (size_t)(d - p) : strlen(p);
-    if (!sb_put(&b, p, lit)) goto nomem;
-    if (!d) break;
-    const param *best = NULL;
-    size_t best_len = 0;
-    for (size_t i = 0; i < c->n_params; i++) {
-      size_t len = strlen(c->params[i].name);
-      if (len > best_len && strncmp(d + 1, c->params[i].name, len) == 0) {
-        best = &c->params[i];
-        best_len = len;
-      }
-    }
+  size_t out = 0, added = 0, name_len;
+  const char *p = raw, *d;
+  for (; (d = strchr(p, '$')); p = d + 1 + name_len) {
+    out += (size_t)(d - p);
+    const param *best = param_at(c, d + 1, &name_len);
     if (!best) {
       size_t id = 0;
       while (d[1 + id] && (isalnum((unsigned char)d[1 + id]) || d[1 + id] == '_') && id < 64) id++;
@@ -356,25 +346,42 @@ static char *substitute(xml_ctx *c, const char *attr_name, const char *raw) {
             "attribute \"%s\": undefined parameter \"$%.*s\" (declare it with <default> "
             "or pass -D)",
             attr_name, (int)id, d + 1);
-      free(b.s);
       return NULL;
     }
     size_t vlen = strlen(best->value);
-    if (b.n + vlen > XML_MAX_ATTR_LEN) {
+    if (out + vlen > XML_MAX_ATTR_LEN) {
       xfail(c, RSW_ERR_LIMIT, "attribute \"%s\" is longer than %zu bytes after substitution", attr_name,
             XML_MAX_ATTR_LEN);
-      free(b.s);
       return NULL;
     }
-    if (!sb_put(&b, best->value, vlen)) goto nomem;
-    p = d + 1 + best_len;
+    if (vlen > c->lim->max_tree_bytes - c->expanded - added) { /* (c->expanded + added <= the cap) */
+      xfail(c, RSW_ERR_LIMIT,
+            "attribute \"%s\": $ substitution has added more text to the document's attributes than "
+            "its memory cap of %zu bytes (%.0f MiB); split the scene or raise the cap",
+            attr_name, c->lim->max_tree_bytes, c->lim->max_tree_bytes / 1048576.0);
+      return NULL;
+    }
+    out += vlen;
+    added += vlen;
   }
-  if (!b.s && !sb_put(&b, "", 0)) goto nomem;
-  return b.s;
-nomem:
-  free(b.s);
-  xfail(c, RSW_ERR_NOMEM, "out of memory");
-  return NULL;
+  out += strlen(p);
+  char *r = malloc(out + 1);
+  if (!r) {
+    xfail(c, RSW_ERR_NOMEM, "out of memory");
+    return NULL;
+  }
+  c->expanded += added;
+  char *w = r;
+  for (p = raw; (d = strchr(p, '$')); p = d + 1 + name_len) {
+    memcpy(w, p, (size_t)(d - p));
+    w += d - p;
+    const param *best = param_at(c, d + 1, &name_len);
+    size_t vlen = strlen(best->value);
+    memcpy(w, best->value, vlen);
+    w += vlen;
+  }
+  strcpy(w, p);
+  return r;
 }
 
 static rsw_status attrs_load(xml_ctx *c, const XML_Char **atts) {
@@ -450,6 +457,19 @@ typedef struct tag_def {
   tag_start_fn start;
 } tag_def;
 
+/* Count `bytes` more of document tree (in `owner`) against the memory
+ * cap; callers count what they are about to allocate, or have just grown. */
+static rsw_status charge(xml_ctx *c, const node *owner, size_t bytes) {
+  if (bytes > c->lim->max_tree_bytes - c->bytes) /* (c->bytes <= the cap) */
+    return xfail(c, RSW_ERR_LIMIT,
+                 "the scene document needs more than its memory cap of %zu bytes (%.0f MiB) here, in %s "
+                 "'%s' (opened at %s); split the scene or raise the cap",
+                 c->lim->max_tree_bytes, c->lim->max_tree_bytes / 1048576.0, owner->type,
+                 owner->id ? owner->id : "", owner->loc);
+  c->bytes += bytes;
+  return RSW_OK;
+}
+
 /* Add a property to `owner`, rejecting a second property of the same
  * (non-empty) name, as Mitsuba's Properties does (node_find is hashed on
  * large objects, so a group of 100,000 named members stays linear). An
@@ -470,6 +490,7 @@ static prop *add_prop(xml_ctx *c, node *owner, const char *name, prop_kind kind)
           owner->type, owner->id ? owner->id : "", owner->loc, c->lim->max_props);
     return NULL;
   }
+  size_t arrays = node_mem_arrays(owner);
   prop *p = node_add_prop(owner, name, kind, c->loc);
   if (!p) {
     if (owner->n_props >= RSW_MAX_NODES)
@@ -479,15 +500,10 @@ static prop *add_prop(xml_ctx *c, node *owner, const char *name, prop_kind kind)
       xfail(c, RSW_ERR_NOMEM, "out of memory");
     return NULL;
   }
-  c->bytes += node_mem_prop(p);
-  if (c->bytes > c->lim->max_tree_bytes) {
-    xfail(c, RSW_ERR_LIMIT,
-          "the scene document needs more than its memory cap of %zu bytes (%.0f MiB) here, in %s '%s' "
-          "(opened at %s); split the scene or raise the cap",
-          c->lim->max_tree_bytes, c->lim->max_tree_bytes / 1048576.0, owner->type, owner->id ? owner->id : "",
-          owner->loc);
-    return NULL;
-  }
+  /* The new slot and index growth, the name and loc; the value's own
+   * memory (a string, spectrum samples, a child node) is counted by the
+   * caller as it is made. */
+  if (charge(c, owner, node_mem_arrays(owner) - arrays + node_mem_prop(p))) return NULL;
   return p;
 }
 
@@ -530,6 +546,7 @@ static rsw_status start_scene(xml_ctx *c, xml_frame *parent, xml_frame *self) {
   }
   if (!(c->root = node_new("scene", "scene", c->loc))) return xfail(c, RSW_ERR_NOMEM, "out of memory");
   c->n_nodes = 1;
+  if (charge(c, c->root, node_mem_self(c->root))) return c->err.code;
   self->kind = FR_SCENE;
   self->obj = c->root;
   return RSW_OK;
@@ -553,9 +570,9 @@ static rsw_status start_object(xml_ctx *c, xml_frame *parent, xml_frame *self) {
   if (!n) return xfail(c, RSW_ERR_NOMEM, "out of memory");
   p->child = n; /* the tree owns n from here on */
   c->n_nodes++;
-  c->bytes += node_mem_self(n);
+  if (id && !(n->id = rsw_strdup(id))) return xfail(c, RSW_ERR_NOMEM, "out of memory");
+  if (charge(c, parent->obj, node_mem_self(n))) return c->err.code;
   if (id) {
-    if (!(n->id = rsw_strdup(id))) return xfail(c, RSW_ERR_NOMEM, "out of memory");
     n->id_explicit = true;
     unsigned long first = 0;
     bool nomem;
@@ -617,6 +634,7 @@ static rsw_status start_string(xml_ctx *c, xml_frame *parent, xml_frame *self) {
   const char *v;
   prop *p = start_simple(c, parent, PROP_STRING, &v);
   if (!p) return c->err.code;
+  if (charge(c, parent->obj, strlen(v) + 1)) return c->err.code;
   if (!(p->str = rsw_strdup(v))) return xfail(c, RSW_ERR_NOMEM, "out of memory");
   return RSW_OK;
 }
@@ -638,12 +656,14 @@ static rsw_status start_rgb(xml_ctx *c, xml_frame *parent, xml_frame *self) {
   return RSW_OK;
 }
 
-/* Append one wavelength:value pair, growing the owned arrays. */
-static rsw_status spec_push(xml_ctx *c, spectrum *s, size_t *cap, double wl, double val) {
+/* Append one wavelength:value pair, growing the owned arrays (counted
+ * against the cap of `owner`'s document as they grow). */
+static rsw_status spec_push(xml_ctx *c, const node *owner, spectrum *s, size_t *cap, double wl, double val) {
   if (s->n == RSW_MAX_SPECTRUM)
     return xfail(c, RSW_ERR_LIMIT, "more than %d spectrum samples", RSW_MAX_SPECTRUM);
   if (s->n == *cap) {
     size_t nc = *cap ? 2 * *cap : 16;
+    if (charge(c, owner, 2 * (nc - *cap) * sizeof(double))) return c->err.code;
     double *wl_new = realloc(s->wl, nc * sizeof *wl_new);
     if (!wl_new) return xfail(c, RSW_ERR_NOMEM, "out of memory");
     s->wl = wl_new;
@@ -697,10 +717,17 @@ static rsw_status start_spectrum(xml_ctx *c, xml_frame *parent, xml_frame *self)
     if (s->n > 0 && !(wl > s->wl[s->n - 1]))
       return xfail(c, RSW_ERR_INVALID, "wavelengths must be strictly increasing (%g nm follows %g nm)", wl,
                    s->wl[s->n - 1]);
-    if (spec_push(c, s, &cap, wl, val)) return c->err.code;
+    if (spec_push(c, parent->obj, s, &cap, wl, val)) return c->err.code;
   }
   if (s->n < 2)
     return xfail(c, RSW_ERR_INVALID, "a tabulated spectrum needs at least two wavelength:value pairs");
+  /* Trim to size, so that the tree holds (and node_mem_prop counts)
+   * exactly n samples. */
+  double *wl = realloc(s->wl, s->n * sizeof *wl);
+  if (wl) s->wl = wl;
+  double *val = realloc(s->val, s->n * sizeof *val);
+  if (val) s->val = val;
+  if (wl && val) c->bytes -= 2 * (cap - s->n) * sizeof(double);
   return RSW_OK;
 }
 
@@ -758,6 +785,7 @@ static rsw_status start_ref(xml_ctx *c, xml_frame *parent, xml_frame *self) {
   if (name && check_ident(c, "name", name)) return c->err.code;
   prop *p = add_prop(c, parent->obj, name ? name : "", PROP_REF);
   if (!p) return c->err.code;
+  if (charge(c, parent->obj, strlen(id) + 1)) return c->err.code;
   if (!(p->ref = rsw_strdup(id))) return xfail(c, RSW_ERR_NOMEM, "out of memory");
   return RSW_OK;
 }
