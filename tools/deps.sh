@@ -12,8 +12,9 @@ pkgs=(
   libcjson-dev libcurl4-openssl-dev libexpat1-dev libssl-dev
   # tests: curl and python3 (integration scripts, docs examples); python3-yaml
   # and python3-jsonschema (tests/openapi/check.py); clang-format (make
-  # format, tools/check-format.sh)
-  curl python3 python3-yaml python3-jsonschema clang-format
+  # format, tools/check-format.sh); groff-base and man-db (the man pages are
+  # checked with groff and read back with man: test_usage, test_install)
+  curl python3 python3-yaml python3-jsonschema clang-format groff-base man-db
 )
 
 missing() {

@@ -106,6 +106,8 @@ if command -v man >/dev/null; then
     out=$(MANPATH="$prefix/share/man" man -P cat "$p" 2>/dev/null | grep -c "^SYNOPSIS")
     [ "$out" = 1 ] && ok || bad "man $p (MANPATH=$prefix/share/man) shows no SYNOPSIS"
   done
+else
+  bad "man is not installed (man-db: make deps installs it)"
 fi
 
 # ---- DESTDIR: a staged tree for packaging ---------------------------------------

@@ -147,6 +147,8 @@ for prog in raysweepd raysweep; do
   if command -v groff >/dev/null; then
     warn=$(groff -man -ww -z "$page" 2>&1)
     [ -z "$warn" ] && ok || bad "$page: groff warnings: $warn"
+  else
+    bad "groff is not installed (groff-base: make deps installs it)"
   fi
 done
 
