@@ -28,28 +28,15 @@ case $bin in /*) ;; *) bin=$root/$bin ;; esac
 lib=$(cd "$bin/.." && pwd)/lib
 examples=$root/docs/examples
 
-pass=0
-fail=0
-ok() { pass=$((pass + 1)); }
-bad() { echo "FAIL $*"; fail=$((fail + 1)); }
-finish() {
-  echo "test_docs_examples: $pass passed, $fail failed"
-  [ "$fail" -eq 0 ]
-  exit
-}
-
-tmp=$(mktemp -d "${TMPDIR:-/tmp}/rsw_docs.XXXXXX") || { bad "mktemp"; finish; }
+name=test_docs_examples
+source "$root/tests/support/shtest.sh"
 daemon=
-cleanup() {
-  [ -n "$daemon" ] && kill "$daemon" 2>/dev/null && wait "$daemon" 2>/dev/null
-  rm -rf "$tmp"
-}
-trap cleanup EXIT
 
 # ---- the daemon ------------------------------------------------------------
 "$bin/raysweepd" serve --listen 127.0.0.1:0 --port-file "$tmp/port" --data-root "$tmp" --threads 1 \
   >"$tmp/daemon.log" 2>&1 &
 daemon=$!
+pids+=("$daemon")
 for _ in $(seq 100); do
   [ -s "$tmp/port" ] && break
   kill -0 "$daemon" 2>/dev/null || break

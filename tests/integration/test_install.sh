@@ -16,22 +16,9 @@ set -u
 root=$(cd "$(dirname "$0")/../.." && pwd)
 cd "$root" || exit 1
 
-pass=0
-fail=0
-ok() { pass=$((pass + 1)); }
-bad() { echo "FAIL $*"; fail=$((fail + 1)); }
-finish() {
-  echo "test_install: $pass passed, $fail failed"
-  [ "$fail" -eq 0 ]
-  exit
-}
-tmp=$(mktemp -d "${TMPDIR:-/tmp}/rsw_install.XXXXXX") || { bad "mktemp"; finish; }
+name=test_install
+source "$root/tests/support/shtest.sh"
 daemon=
-cleanup() {
-  [ -n "$daemon" ] && kill "$daemon" 2>/dev/null && wait "$daemon" 2>/dev/null
-  rm -rf "$tmp"
-}
-trap cleanup EXIT
 version=$(sed -n 's/^#define RSW_VERSION "\([^"]*\)"$/\1/p' include/raysweep/version.h)
 
 # The make variables of a `make test` that runs this script are dropped, so
@@ -86,6 +73,7 @@ if (cd "$tmp" && raysweepd render "$root/proto/examples/hdistant_lambertian.json
 fi
 (cd "$tmp" && raysweepd serve --listen 127.0.0.1:0 --port-file "$tmp/port" --threads 1) >"$tmp/daemon.log" 2>&1 &
 daemon=$!
+pids+=("$daemon")
 for _ in $(seq 100); do
   [ -s "$tmp/port" ] && break
   kill -0 "$daemon" 2>/dev/null || break

@@ -22,22 +22,9 @@ bin=${RSW_BIN_DIR:-build/bin}
 case $bin in /*) ;; *) bin=$root/$bin ;; esac
 tool=(python3 "$root/tests/support/docs_check.py")
 
-pass=0
-fail=0
-ok() { pass=$((pass + 1)); }
-bad() { echo "FAIL $*"; fail=$((fail + 1)); }
-finish() {
-  echo "test_usage: $pass passed, $fail failed"
-  [ "$fail" -eq 0 ]
-  exit
-}
-tmp=$(mktemp -d "${TMPDIR:-/tmp}/rsw_usage.XXXXXX") || { bad "mktemp"; finish; }
+name=test_usage
+source "$root/tests/support/shtest.sh"
 daemon=
-cleanup() {
-  [ -n "$daemon" ] && kill "$daemon" 2>/dev/null && wait "$daemon" 2>/dev/null
-  rm -rf "$tmp"
-}
-trap cleanup EXIT
 
 # helps NAME CMD...: CMD exits 0, prints something on stdout and nothing on
 # stderr; its stdout is left in $tmp/out.
@@ -95,6 +82,7 @@ if helps "raysweep --version" "$bin/raysweep" --version; then
 fi
 "$bin/raysweepd" serve --listen 127.0.0.1:0 --port-file "$tmp/port" --threads 1 >"$tmp/daemon.log" 2>&1 &
 daemon=$!
+pids+=("$daemon")
 for _ in $(seq 100); do
   [ -s "$tmp/port" ] && break
   kill -0 "$daemon" 2>/dev/null || break
