@@ -44,21 +44,6 @@ os.execv(sys.argv[1], sys.argv[1:])' "$bin/raysweep" "$@" >"$o" 2>"$e" &
 }
 cd "$tmp" || exit 1
 
-expect() {
-  local want=$1 label=$2
-  shift 2
-  "$@" >"$tmp/out" 2>"$tmp/err"
-  local got=$?
-  if [ "$got" -eq "$want" ]; then ok; else bad "$label: exit $got, wanted $want; stderr: $(head -c 600 "$tmp/err")"; fi
-}
-contains() {
-  if grep -qF -- "$3" "$2"; then ok; else bad "$1: '$3' not in $(head -c 600 "$2")"; fi
-}
-py() {
-  local label=$1 code=$2
-  shift 2
-  if python3 -c "$code" "$@" 2>"$tmp/pyerr"; then ok; else bad "$label: $(tail -n 3 "$tmp/pyerr")"; fi
-}
 # job_field JOB FIELD: one field of GET /v1/jobs/JOB ("" when unreadable).
 job_field() {
   rs job show "$1" --json 2>/dev/null | python3 -c 'import json,sys; print(json.load(sys.stdin).get(sys.argv[1], ""))' "$2" 2>/dev/null

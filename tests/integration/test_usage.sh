@@ -24,7 +24,6 @@ tool=(python3 "$root/tests/support/docs_check.py")
 
 name=test_usage
 source "$root/tests/support/shtest.sh"
-daemon=
 
 # helps NAME CMD...: CMD exits 0, prints something on stdout and nothing on
 # stderr; its stdout is left in $tmp/out.
@@ -80,20 +79,13 @@ fi
 if helps "raysweep --version" "$bin/raysweep" --version; then
   [ "$(cat "$tmp/out")" = "raysweep $version" ] && ok || bad "raysweep --version: '$(cat "$tmp/out")', want raysweep $version"
 fi
-"$bin/raysweepd" serve --listen 127.0.0.1:0 --port-file "$tmp/port" --threads 1 >"$tmp/daemon.log" 2>&1 &
-daemon=$!
-pids+=("$daemon")
-for _ in $(seq 100); do
-  [ -s "$tmp/port" ] && break
-  kill -0 "$daemon" 2>/dev/null || break
-  sleep 0.1
-done
-if [ -s "$tmp/port" ]; then
-  info=$(curl -sS --fail-with-body "http://127.0.0.1:$(cat "$tmp/port")/v1")
+start_daemon "$tmp/d" --threads 1
+if [ -n "$started_port" ]; then
+  info=$(curl -sS --fail-with-body "http://127.0.0.1:$started_port/v1")
   got=$(echo "$info" | sed -n 's/.*"version":"\([^"]*\)".*/\1/p')
   [ "$got" = "$version" ] && ok || bad "GET /v1 says version '$got', version.h says $version"
 else
-  bad "daemon: no port file after 10 s: $(tail -n 5 "$tmp/daemon.log")"
+  bad "daemon: no port file after 10 s: $(tail -n 5 "$tmp/d/log")"
 fi
 
 # ---- README usage blocks and man pages == --help -----------------------------

@@ -62,3 +62,23 @@ start_daemon() {
   done
   started_port=$(cat "$d/port" 2>/dev/null)
 }
+
+# expect RC LABEL CMD...: run CMD (stdout to $tmp/out, stderr to $tmp/err)
+# and check its exit status.
+expect() {
+  local want=$1 label=$2
+  shift 2
+  "$@" >"$tmp/out" 2>"$tmp/err"
+  local got=$?
+  if [ "$got" -eq "$want" ]; then ok; else bad "$label: exit $got, wanted $want; stderr: $(head -c 600 "$tmp/err")"; fi
+}
+# contains LABEL FILE TEXT: FILE holds TEXT.
+contains() {
+  if grep -qF -- "$3" "$2"; then ok; else bad "$1: '$3' not in $(head -c 600 "$2")"; fi
+}
+# py LABEL CODE [args]: a python3 assertion (exit 0 = pass).
+py() {
+  local label=$1 code=$2
+  shift 2
+  if python3 -c "$code" "$@" 2>"$tmp/pyerr"; then ok; else bad "$label: $(tail -n 3 "$tmp/pyerr")"; fi
+}

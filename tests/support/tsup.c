@@ -1,5 +1,7 @@
 #include "tsup.h"
 
+#include "../../server/kernel/core/rng.h"
+
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -79,5 +81,26 @@ void sb_printf(sbuf *b, const char *fmt, ...) {
     }
     b->p = p;
     b->cap = cap;
+  }
+}
+
+void tsup_random_leaves(double (*m)[16], int n, uint64_t seed, uint64_t stream, double half, double z0,
+                        double dz, double radius) {
+  pcg32 g;
+  pcg32_seed(&g, seed, stream);
+  for (int i = 0; i < n; i++) {
+    double x = -half + 2 * half * pcg32_next_double(&g), y = -half + 2 * half * pcg32_next_double(&g);
+    double z = z0 + dz * pcg32_next_double(&g);
+    vec3 nn = v3_norm(v3(pcg32_next_double(&g) - 0.5, pcg32_next_double(&g) - 0.5, 0.6));
+    frame f = frame_from_normal(nn);
+    vec3 c[3] = {f.s, f.t, f.n};
+    double *q = m[i];
+    for (int k = 0; k < 3; k++) {
+      q[0 * 4 + k] = radius * c[k].x;
+      q[1 * 4 + k] = radius * c[k].y;
+      q[2 * 4 + k] = radius * c[k].z;
+    }
+    q[3] = x, q[7] = y, q[11] = z;
+    q[12] = q[13] = q[14] = 0, q[15] = 1;
   }
 }

@@ -278,27 +278,6 @@ static void test_list_errors(void) {
 #define PLOT  5.0 /* the plot is [-5, 5]^2 */
 #define NLEAF 150
 
-/* Leaves fully inside the plot (centres within 4.6, radius 0.3). */
-static void plot_leaves(double (*m)[16], int n) {
-  pcg32 g;
-  pcg32_seed(&g, 5, 3);
-  for (int i = 0; i < n; i++) {
-    double x = -4.6 + 9.2 * pcg32_next_double(&g), y = -4.6 + 9.2 * pcg32_next_double(&g);
-    double z = 0.3 + 1.2 * pcg32_next_double(&g);
-    vec3 nn = v3_norm(v3(pcg32_next_double(&g) - 0.5, pcg32_next_double(&g) - 0.5, 0.6));
-    frame f = frame_from_normal(nn);
-    vec3 c[3] = {f.s, f.t, f.n};
-    double *q = m[i];
-    for (int k = 0; k < 3; k++) {
-      q[0 * 4 + k] = 0.3 * c[k].x;
-      q[1 * 4 + k] = 0.3 * c[k].y;
-      q[2 * 4 + k] = 0.3 * c[k].z;
-    }
-    q[3] = x, q[7] = y, q[11] = z;
-    q[12] = q[13] = q[14] = 0, q[15] = 1;
-  }
-}
-
 /* periodic = true: the plot with the boundary; false: the plot and its 8
  * neighbours written out (leaves as an instancelist of 9 x NLEAF rows). */
 static char *plot_scene(bool periodic, double theta_deg, const char *list_path) {
@@ -328,7 +307,7 @@ static char *plot_scene(bool periodic, double theta_deg, const char *list_path) 
 
 static void write_plot_list(const char *path, bool copies) {
   static double m[NLEAF][16];
-  plot_leaves(m, NLEAF);
+  tsup_random_leaves(m, NLEAF, 5, 3, 4.6, 0.3, 1.2, 0.3);
   FILE *f = fopen(path, "w");
   for (int cx = -1; cx <= 1; cx++)
     for (int cy = -1; cy <= 1; cy++) {

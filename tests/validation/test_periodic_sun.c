@@ -182,30 +182,10 @@ static void test_distant_sensors_grazing_view(void) {
 #define PLOT  2.0 /* the plot is [-2, 2]^2 */
 #define NLEAF 24
 
-static void plot_leaves(double (*m)[16], int n) {
-  pcg32 g;
-  pcg32_seed(&g, 11, 5);
-  for (int i = 0; i < n; i++) {
-    double x = -1.7 + 3.4 * pcg32_next_double(&g), y = -1.7 + 3.4 * pcg32_next_double(&g);
-    double z = 0.3 + 1.0 * pcg32_next_double(&g);
-    vec3 nn = v3_norm(v3(pcg32_next_double(&g) - 0.5, pcg32_next_double(&g) - 0.5, 0.6));
-    frame f = frame_from_normal(nn);
-    vec3 c[3] = {f.s, f.t, f.n};
-    double *q = m[i];
-    for (int k = 0; k < 3; k++) {
-      q[0 * 4 + k] = 0.3 * c[k].x;
-      q[1 * 4 + k] = 0.3 * c[k].y;
-      q[2 * 4 + k] = 0.3 * c[k].z;
-    }
-    q[3] = x, q[7] = y, q[11] = z;
-    q[12] = q[13] = q[14] = 0, q[15] = 1;
-  }
-}
-
 /* K: copies on each side (0 = the plot alone). */
 static void write_plot_list(const char *path, int K) {
   static double m[NLEAF][16];
-  plot_leaves(m, NLEAF);
+  tsup_random_leaves(m, NLEAF, 11, 5, 1.7, 0.3, 1.0, 0.3);
   FILE *f = fopen(path, "w");
   for (int cx = -K; cx <= K; cx++)
     for (int cy = -K; cy <= K; cy++)
