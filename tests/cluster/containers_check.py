@@ -677,6 +677,8 @@ def check_drain():
     j = submit(6, 128)
     if not check(j, "drain: job submission failed"):
         return False
+    before = job_state(j)
+    check(before in ("queued", "running"), f"drain: the job was {before} before the drain started (too short to test)")
     t0 = time.time()
     r = run(drain + ["--linger", "0", "--interval", "0.1", "--timeout", "120"], timeout=150)
     waited = time.time() - t0

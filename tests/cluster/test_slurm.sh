@@ -211,6 +211,18 @@ arr, mrg = open(sys.argv[1]).read().split("\n\n")
 ends = re.findall(r"EndTime=(\S+)", arr)
 start = re.search(r"StartTime=(\S+)", mrg).group(1)
 assert len(ends) == 4 and all(e <= start for e in ends), (ends, start)' "$tmp/jobs"
+# Where the time went (Slurm's times have 1 s resolution).
+slurm_times=$(python3 -c '
+import re, sys
+from datetime import datetime as D
+t = lambda s: D.fromisoformat(s).timestamp()
+arr, mrg = open(sys.argv[1]).read().split("\n\n")
+rec = [(t(a), t(b), t(c)) for a, b, c in re.findall(r"SubmitTime=(\S+).*?StartTime=(\S+) EndTime=(\S+)", arr)]
+m = re.search(r"SubmitTime=(\S+).*?StartTime=(\S+) EndTime=(\S+)", mrg)
+sub = min(r[0] for r in rec)
+print("tasks ran %s s each, first start %.0f s after submit, last task end to merge start %.0f s, merge %.0f s" % (
+    "/".join("%.0f" % (r[2] - r[1]) for r in sorted(rec, key=lambda r: r[1])), min(r[1] for r in rec) - sub,
+    t(m.group(2)) - max(r[2] for r in rec), t(m.group(3)) - t(m.group(2))))' "$tmp/jobs" 2>&1)
 for i in 0 1 2 3; do
   py "shard-$i/sweep.json" '
 import json, sys
@@ -257,5 +269,5 @@ else
 fi
 
 echo "$name: 31 contexts x spp 128 (hdistant_lambertian, mono): unsharded on one daemon ${t_ref2} s with 2 threads, ${t_ref1} s with 1;" \
-  "Slurm 4-task array (2 CPUs, 1 thread per task) + merge, submit to merge end: ${t_slurm} s"
+  "Slurm 4-task array (2 CPUs, 1 thread per task) + merge, submit to merge end: ${t_slurm} s ($slurm_times)"
 finish
