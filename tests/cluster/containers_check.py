@@ -291,10 +291,23 @@ def replay_build_stage(instrs, ignore):
                     r = run(["make", "deps"], cwd=host("."))
                     check(r.returncode == 0, f"Dockerfile: `make deps` with only the files copied before it: {r.stderr[-800:]}")
                 elif words[0] == "make":
-                    r = run(["make", "-n"] + [w for w in words[1:] if not w.startswith("-j")], cwd=host("."))
+                    # make -n -B: every command of a from-scratch build, without
+                    # running it. It must compile the same sources as in the
+                    # repository (a directory the image does not copy has no
+                    # sources to find), and every -I directory must exist.
+                    goals = [w for w in words[1:] if not w.startswith("-j")]
+                    r = run(["make", "-n", "-B"] + goals, cwd=host("."))
                     if check(r.returncode == 0, f"Dockerfile: `{step}` (as make -n) in the copied tree: {r.stderr[-800:]}"):
                         for b in ("raysweepd", "raysweep"):
                             check(f"-o build/bin/{b} " in r.stdout, f"Dockerfile: `{step}` does not build build/bin/{b}")
+                        ref = run(["make", "-n", "-B"] + goals, cwd=ROOT)
+                        srcs = lambda out: set(re.findall(r" -c (\S+\.c(?:pp)?) ", out))
+                        missing = sorted(srcs(ref.stdout) - srcs(r.stdout))
+                        check(ref.returncode == 0 and not missing,
+                              f"Dockerfile: `{step}` in the image would not compile {missing[:8]} (not copied?)")
+                        incs = set(re.findall(r" -I([\w./-]+)(?=\s)", r.stdout))
+                        gone = sorted(i for i in incs if not i.startswith("/") and not os.path.isdir(host(i)))
+                        check(not gone, f"Dockerfile: include directories {gone} are not copied into the image")
                 elif words[0] == "install" and "-D" in words:
                     src, dst = words[-2], words[-1]
                     check(src.startswith("build/bin/") and os.path.exists(os.path.join(ROOT, src)) or
