@@ -131,9 +131,10 @@ MinJobAge=600
 NodeName=localhost NodeAddr=127.0.0.1 CPUs=2 State=UNKNOWN
 PartitionName=test Nodes=localhost Default=YES MaxTime=INFINITE State=UP
 EOF
+# A cluster (or a job) of the caller's must not leak in.
+# shellcheck disable=SC2046
+unset $(compgen -e | grep -E '^(SLURM|SBATCH|SALLOC|SRUN|SQUEUE|SINFO|SCONTROL)_') RAYSWEEP_URL RAYSWEEP_TOKEN
 export SLURM_CONF=$S/slurm.conf
-# A cluster of the caller's must not leak in.
-unset SBATCH_PARTITION SBATCH_ACCOUNT SBATCH_TIMELIMIT SBATCH_QOS SBATCH_RESERVATION RAYSWEEP_URL RAYSWEEP_TOKEN
 
 slurmctld -D -i -f "$S/slurm.conf" >"$S/log/slurmctld.out" 2>&1 &
 slurm_pids+=($!)
