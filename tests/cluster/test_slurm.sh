@@ -24,7 +24,9 @@ done
 shard_sh=$root/docker/slurm/raysweep-shard.sbatch
 submit_sh=$root/docker/slurm/submit.sh
 scene=$root/proto/examples/hdistant_lambertian.json
-sweep_args=(--grid wavelength=400:700:10 --spp 128) # 31 contexts: shards of 8, 8, 8, 7
+# 31 contexts: shards of 8, 8, 8, 7. RSW_SLURM_SPP=N: a longer sweep, to time.
+spp=${RSW_SLURM_SPP:-128}
+sweep_args=(--grid wavelength=400:700:10 --spp "$spp")
 now() { date +%s.%N; }
 secs() { python3 -c 'import sys; print("%.2f" % (float(sys.argv[2]) - float(sys.argv[1])))' "$1" "$2"; }
 
@@ -269,6 +271,6 @@ else
   bad "submit.sh (failing sweep) failed: $(cat "$tmp/err")"
 fi
 
-echo "$name: 31 contexts x spp 128 (hdistant_lambertian, mono): unsharded on one daemon ${t_ref2} s with 2 threads, ${t_ref1} s with 1;" \
+echo "$name: 31 contexts x spp $spp (hdistant_lambertian, mono): unsharded on one daemon ${t_ref2} s with 2 threads, ${t_ref1} s with 1;" \
   "Slurm 4-task array (2 CPUs, 1 thread per task) + merge, submit to merge end: ${t_slurm} s ($slurm_times)"
 finish
