@@ -140,12 +140,12 @@ class Daemon:
                     f.write(token + "\n")
                 self.paths[v] = t
                 mapped += [a, t]
-            elif a == "--blob-dir":
-                b = os.path.join(d, "blobs")
+            elif a in ("--blob-dir", "--state-dir", "--data-root", "--plugin-dir"):
+                b = os.path.join(d, a.lstrip("-"))  # an empty directory in its place
                 os.mkdir(b)
                 self.paths[v] = b
                 mapped += [a, b]
-            elif a in ("--data-root", "--scene", "--plugin-dir", "--port-file"):
+            elif a in ("--scene", "--port-file"):
                 bad(f"{label}: {a} {v}: the test does not map this option yet (teach it)")
                 return
             else:
