@@ -25,7 +25,7 @@ die() {
   echo "submit.sh: $*" >&2
   exit 2
 }
-shards= out= cpus=1 limit=
+shards='' out='' cpus=1 limit=''
 while [ $# -gt 0 ]; do
   case $1 in
   --shards) shards=${2:-}; shift 2 || die "--shards needs a value" ;;
