@@ -243,3 +243,12 @@ all test: $(PLUGIN_SO)
 $(BUILD)/plugins/%.so: tests/plugins/%.c include/raysweep/plugin.h | deps
 	@mkdir -p $(dir $@)
 	$(CC) -shared -fPIC -I include $(PLUGIN_CFLAGS) -o $@ $< -lm
+
+# ---- make test-cluster-slurm: the Slurm and container recipes (docker/) ----
+# A single-node Slurm started by the test itself (slurm-wlm, munge: make
+# deps) and the Dockerfile/compose/Kubernetes files checked against the
+# daemon. Folded into make test-cluster.
+CLUSTER_SLURM_TESTS := $(wildcard tests/cluster/test_slurm.sh tests/cluster/test_containers.sh)
+.PHONY: test-cluster-slurm
+test-cluster-slurm: deps $(BUILD)/bin/raysweepd $(BUILD)/bin/raysweep
+	@RSW_BIN_DIR=$(BUILD)/bin BUILD=$(BUILD) SAN=$(SAN) tests/run.sh $(CLUSTER_SLURM_TESTS)
