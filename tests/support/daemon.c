@@ -143,6 +143,50 @@ int tdaemon_stop(tdaemon *d, double limit_s, double *secs) {
   return rc;
 }
 
+int tdaemon_run(const char *const *args, char *errbuf, size_t len) {
+  char exe[512];
+  snprintf(exe, sizeof exe, "%s/raysweepd", tdaemon_bin_dir());
+  int pipefd[2];
+  if (pipe(pipefd)) return -2;
+  pid_t pid = fork();
+  if (pid < 0) {
+    close(pipefd[0]);
+    close(pipefd[1]);
+    return -2;
+  }
+  if (pid == 0) {
+    dup2(pipefd[1], 2);
+    close(pipefd[0]);
+    const char *argv[64];
+    int n = 0;
+    argv[n++] = exe;
+    for (int i = 0; args[i] && n < 62; i++) argv[n++] = args[i];
+    argv[n] = NULL;
+    execv(exe, (char *const *)argv);
+    _exit(127);
+  }
+  close(pipefd[1]);
+  size_t got = 0;
+  ssize_t r;
+  while (len > 1 && (r = read(pipefd[0], errbuf + got, len - 1 - got)) != 0) {
+    if (r < 0) {
+      if (errno == EINTR) continue;
+      break;
+    }
+    got += (size_t)r;
+    if (got == len - 1) { /* full: drain the rest so the child never blocks */
+      char sink[4096];
+      while ((r = read(pipefd[0], sink, sizeof sink)) > 0 || (r < 0 && errno == EINTR)) {}
+      break;
+    }
+  }
+  if (len) errbuf[got] = '\0';
+  close(pipefd[0]);
+  int status;
+  while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {}
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
 int tdaemon_connect(const tdaemon *d) {
   int fd = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
   if (fd < 0) return -1;

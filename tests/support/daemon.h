@@ -39,6 +39,12 @@ int tdaemon_stop(tdaemon *d, double limit_s, double *secs);
 /* The daemon's log so far (malloc'ed, NUL-terminated; NULL when none). */
 char *tdaemon_log(const tdaemon *d);
 
+/* Run raysweepd once (not serve: render, routes, ...) with args
+ * (NULL-terminated, without argv[0]) and wait. Its stderr goes to errbuf
+ * (len bytes, NUL-terminated; stdout is inherited). Returns the exit
+ * status, -1 on a signal, -2 when it could not be started. */
+int tdaemon_run(const char *const *args, char *errbuf, size_t len);
+
 /* ---- a blocking HTTP/1.1 client (one connection per request) ------------- */
 
 typedef struct thttp_resp {
