@@ -86,6 +86,8 @@
 #define CONNECTION_MEMORY    ((size_t)256 << 10)
 /* Event-loop threads (they only parse, route and copy bytes). */
 #define EVENT_THREADS        2
+/* How long an idle handler thread waits for the next task. */
+#define HANDLER_IDLE_MS      2000
 /* How often the reaper looks for connections past their header deadline. */
 #define REAPER_PERIOD_MS     200
 
@@ -118,7 +120,19 @@ struct http_server {
   pthread_mutex_t lock;
   pthread_cond_t cond;
   int n_streams;      /* event streams not yet freed */
-  int n_tasks;        /* handler threads that have not resumed yet */
+  int n_tasks;        /* handlers whose connection has not resumed yet */
+  /* Handler threads: one finished with its task waits up to
+   * HANDLER_IDLE_MS for another before it exits, so a busy server does
+   * not create a thread per request; a task with no waiting thread gets a
+   * new one. Not a fixed pool: a render holds its thread for as long as
+   * it runs, and a fixed pool would let long renders starve short
+   * requests. */
+  pthread_cond_t task_cond;
+  struct task *queue;  /* handed over, not yet taken (FIFO) */
+  struct task **queue_tail;
+  int n_queued;
+  int n_idle;          /* threads waiting on task_cond */
+  int n_threads;       /* handler threads alive */
   int n_inflight;     /* requests between their URI and their completion */
   unsigned n_open;    /* open connections */
   conn_track *tracks; /* every open connection */
@@ -825,13 +839,13 @@ static void run_handler(http_server *srv, struct MHD_Connection *c, const http_r
 
 /* A handler on its own thread, its connection suspended meanwhile. */
 typedef struct task {
+  struct task *next;
   conn *cn;
   struct MHD_Connection *c;
   http_req r;
 } task;
 
-static void *task_main(void *arg) {
-  task *t = arg;
+static void task_run(task *t) {
   conn *cn = t->cn;
   http_server *srv = cn->srv;
   struct MHD_Connection *c = t->c;
@@ -845,7 +859,64 @@ static void *task_main(void *arg) {
   srv->n_tasks--;
   pthread_cond_broadcast(&srv->cond);
   pthread_mutex_unlock(&srv->lock);
-  return NULL;
+}
+
+static void *handler_main(void *arg) {
+  task *t = arg;
+  http_server *srv = t->cn->srv;
+  for (;;) {
+    task_run(t);
+    t = NULL;
+    pthread_mutex_lock(&srv->lock);
+    srv->n_idle++;
+    int64_t until = now_ms() + HANDLER_IDLE_MS;
+    struct timespec ts = {.tv_sec = (time_t)(until / 1000), .tv_nsec = (long)(until % 1000) * 1000000L};
+    while (!srv->queue && !atomic_load(&srv->stopping))
+      if (pthread_cond_timedwait(&srv->task_cond, &srv->lock, &ts) == ETIMEDOUT) break;
+    srv->n_idle--;
+    if (srv->queue) {
+      t = srv->queue;
+      srv->queue = t->next;
+      if (!srv->queue) srv->queue_tail = &srv->queue;
+      srv->n_queued--;
+    }
+    if (!t) {
+      srv->n_threads--;
+      pthread_cond_broadcast(&srv->cond);
+    }
+    pthread_mutex_unlock(&srv->lock);
+    if (!t) return NULL;
+  }
+}
+
+/* Hand t to a waiting thread or a new one. False when no thread could be
+ * had (then t is not taken). */
+static bool task_start(http_server *srv, task *t) {
+  t->next = NULL;
+  pthread_mutex_lock(&srv->lock);
+  if (srv->n_idle > srv->n_queued) {
+    *srv->queue_tail = t;
+    srv->queue_tail = &t->next;
+    srv->n_queued++;
+    pthread_cond_signal(&srv->task_cond);
+    pthread_mutex_unlock(&srv->lock);
+    return true;
+  }
+  srv->n_threads++;
+  pthread_mutex_unlock(&srv->lock);
+  pthread_t th;
+  pthread_attr_t at;
+  pthread_attr_init(&at);
+  pthread_attr_setdetachstate(&at, PTHREAD_CREATE_DETACHED);
+  bool ok = pthread_create(&th, &at, handler_main, t) == 0;
+  pthread_attr_destroy(&at);
+  if (!ok) {
+    pthread_mutex_lock(&srv->lock);
+    srv->n_threads--;
+    pthread_cond_broadcast(&srv->cond);
+    pthread_mutex_unlock(&srv->lock);
+  }
+  return ok;
 }
 
 /* The whole request is in: last checks, then the handler (on the event
@@ -904,18 +975,19 @@ static enum MHD_Result dispatch(struct MHD_Connection *c, conn *cn, const char *
   t->cn = cn;
   t->c = c;
   t->r = r;
+  /* Counted under the lock with the stopping check, so that stopping
+   * (which sets the flag, then waits for the count) never misses one. */
   pthread_mutex_lock(&srv->lock);
-  srv->n_tasks++;
+  bool stopping = atomic_load(&srv->stopping);
+  if (!stopping) srv->n_tasks++;
   pthread_mutex_unlock(&srv->lock);
+  if (stopping) {
+    free(t);
+    return send_problem_ra(c, cn, 503, "RSW_ERR_UNAVAILABLE", "the server is shutting down", NULL, false, 1);
+  }
   cn->task_started = true;
   MHD_suspend_connection(c);
-  pthread_t th;
-  pthread_attr_t at;
-  pthread_attr_init(&at);
-  pthread_attr_setdetachstate(&at, PTHREAD_CREATE_DETACHED);
-  bool ok = pthread_create(&th, &at, task_main, t) == 0;
-  pthread_attr_destroy(&at);
-  if (!ok) { /* answer 503 on the next call */
+  if (!task_start(srv, t)) { /* answer 503 on the next call */
     free(t);
     http_req q = {.svc = srv->svc};
     http_resp_problem(&q, 503, NULL, "the server cannot start a thread for this request; retry shortly");
@@ -1121,7 +1193,9 @@ rsw_status http_server_start(service *svc, const http_opts *opts, http_server **
   pthread_condattr_setclock(&ca, CLOCK_MONOTONIC);
   pthread_mutex_init(&srv->lock, NULL);
   pthread_cond_init(&srv->cond, &ca);
+  pthread_cond_init(&srv->task_cond, &ca);
   pthread_condattr_destroy(&ca);
+  srv->queue_tail = &srv->queue;
   /* The logger goes first so that it sees the other options' messages. */
   srv->mhd = MHD_start_daemon(
       flags, 0, NULL, NULL, on_request, srv, MHD_OPTION_EXTERNAL_LOGGER, on_log, NULL,
@@ -1134,6 +1208,7 @@ rsw_status http_server_start(service *svc, const http_opts *opts, http_server **
   if (srv->mhd) srv->reaper_started = pthread_create(&srv->reaper, NULL, reaper_main, srv) == 0;
   if (!srv->mhd || !srv->reaper_started) {
     if (srv->mhd) MHD_stop_daemon(srv->mhd);
+    pthread_cond_destroy(&srv->task_cond);
     pthread_cond_destroy(&srv->cond);
     pthread_mutex_destroy(&srv->lock);
     close(fd);
@@ -1186,6 +1261,9 @@ void http_server_stop(http_server *srv) {
    * resumed before MHD may free its connections. Renders stop within a
    * moment of the stop pipe; other handlers finish their short work. */
   wait_zero(srv, &srv->n_tasks, -1);
+  /* Idle handler threads leave now (stopping is set). */
+  pthread_cond_broadcast(&srv->task_cond);
+  wait_zero(srv, &srv->n_threads, -1);
   /* Event streams end with their job's `end` event (the service cancelled
    * the jobs) or at the deadline, and answers made go on being sent until
    * then: MHD's stop cuts every socket. */
@@ -1197,6 +1275,7 @@ void http_server_stop(http_server *srv) {
   pthread_mutex_lock(&srv->lock);
   wait_zero(srv, &srv->n_streams, -1);
   pthread_mutex_unlock(&srv->lock);
+  pthread_cond_destroy(&srv->task_cond);
   pthread_cond_destroy(&srv->cond);
   pthread_mutex_destroy(&srv->lock);
   close(srv->stop_pipe[0]);
