@@ -55,6 +55,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
+#include <sys/epoll.h>
 #include <sys/socket.h>
 #include <time.h>
 #include <unistd.h>
@@ -116,6 +117,14 @@ struct http_server {
   int stop_pipe[2];
   pthread_t reaper;
   bool reaper_started;
+  /* Client watches (see client_watch): an epoll set, its thread, and the
+   * watches in it (guarded by lock). */
+  int watch_ep;
+  pthread_t watcher;
+  bool watcher_started;
+  bool watch_closed; /* stopping: new watches are cancelled at once */
+  uint64_t watch_seq;
+  struct client_watch *watches;
   /* Guards what follows; cond is broadcast whenever a count drops. */
   pthread_mutex_t lock;
   pthread_cond_t cond;
@@ -751,77 +760,118 @@ static void take_body(conn *cn, const char *data, size_t n) {
 /* ---- clients that hang up, and shutdown ---------------------------------------- */
 
 /* While a long handler (a synchronous render) runs, nobody reads its
- * socket (the connection is suspended): a small thread polls it and sets
- * `gone` when the peer closed it (POLLRDHUP: the client's FIN; HUP/ERR:
- * reset), so the render stops instead of finishing for nobody. The request
- * body is fully read by then, and HTTP clients do not half-close, so an
- * end of stream here means the client went away. The same thread watches
- * the server's stop pipe: on SIGTERM the render is cancelled too
- * (`by_shutdown`), and its client is answered 503. */
+ * socket (the connection is suspended, and MHD does not notice a
+ * suspended connection's client leaving): the server's watcher thread
+ * holds the socket in an epoll set for EPOLLRDHUP (the client's FIN) and
+ * HUP/ERR (reset), and sets the watch's `gone` when one comes, so the
+ * render stops instead of finishing for nobody. The request body is fully
+ * read by then, and HTTP clients do not half-close, so an end of stream
+ * here means the client went away. The same thread watches the server's
+ * stop pipe: on SIGTERM every watched request is cancelled too
+ * (`by_shutdown`), and its client is answered 503. One thread for all
+ * watches, not one per render: a thread start and join per request would
+ * cost more than a small render.
+ *
+ * Watches are found by id, not by pointer, in the watcher thread: an event
+ * fetched before watch_stop removed its watch (which lives on the handler
+ * thread's stack) finds no id and is dropped. */
 typedef struct client_watch {
+  struct client_watch *next;
   http_server *srv;
   struct MHD_Connection *conn;
-  int fd;
-  int wake[2]; /* a pipe: watch_stop writes, so the watcher leaves poll at once */
-  bool running;
+  uint64_t id;
+  bool registered;
   atomic_int gone;
   atomic_int by_shutdown;
-  pthread_t thread;
 } client_watch;
 
-static void *watch_main(void *arg) {
-  client_watch *w = arg;
+/* srv->lock held: take w out of the epoll set and the list. */
+static void watch_unlink_locked(http_server *srv, client_watch *w, int fd) {
+  if (!w->registered) return;
+  epoll_ctl(srv->watch_ep, EPOLL_CTL_DEL, fd, NULL);
+  for (client_watch **pp = &srv->watches; *pp; pp = &(*pp)->next)
+    if (*pp == w) {
+      *pp = w->next;
+      break;
+    }
+  w->registered = false;
+}
+
+static int watch_fd(const client_watch *w) {
+  const union MHD_ConnectionInfo *ci = MHD_get_connection_info(w->conn, MHD_CONNECTION_INFO_CONNECTION_FD);
+  return ci ? ci->connect_fd : -1;
+}
+
+static void *watcher_main(void *arg) {
+  http_server *srv = arg;
+  struct epoll_event evs[64];
   for (;;) {
-    struct pollfd p[3] = {{.fd = w->fd, .events = POLLRDHUP},
-                          {.fd = w->wake[0], .events = POLLIN},
-                          {.fd = w->srv->stop_pipe[0], .events = POLLIN}};
-    int n = poll(p, 3, -1);
+    int n = epoll_wait(srv->watch_ep, evs, 64, -1);
     if (n < 0 && errno == EINTR) continue;
-    if (n < 0 || p[1].revents) break; /* stopped: the handler is done */
-    if (p[2].revents) {
-      atomic_store(&w->by_shutdown, 1);
-      atomic_store(&w->gone, 1);
-      break;
+    bool stop = n < 0;
+    pthread_mutex_lock(&srv->lock);
+    for (int i = 0; i < n; i++) {
+      if (evs[i].data.u64 == 0) { /* the stop pipe */
+        stop = true;
+        continue;
+      }
+      for (client_watch *w = srv->watches; w; w = w->next)
+        if (w->id == evs[i].data.u64) {
+          atomic_store(&w->gone, 1);
+          watch_unlink_locked(srv, w, watch_fd(w));
+          break;
+        }
     }
-    if (p[0].revents & (POLLRDHUP | POLLHUP | POLLERR | POLLNVAL)) {
-      atomic_store(&w->gone, 1);
-      break;
+    if (stop) { /* cancel every watched request; later ones are cancelled at once */
+      srv->watch_closed = true;
+      while (srv->watches) {
+        client_watch *w = srv->watches;
+        atomic_store(&w->by_shutdown, 1);
+        atomic_store(&w->gone, 1);
+        watch_unlink_locked(srv, w, watch_fd(w));
+      }
     }
+    pthread_mutex_unlock(&srv->lock);
+    if (stop) return NULL;
   }
-  return NULL;
 }
 
 /* http_req.watch_client: start the watch once per request. */
 static const atomic_int *watch_start(http_req *r) {
   client_watch *w = r->watch_ctx;
-  if (w->running) return &w->gone;
-  const union MHD_ConnectionInfo *ci = MHD_get_connection_info(w->conn, MHD_CONNECTION_INFO_CONNECTION_FD);
-  if (!ci) return NULL;
-  w->fd = ci->connect_fd;
-  if (pipe2(w->wake, O_CLOEXEC) != 0) return NULL;
-  w->running = pthread_create(&w->thread, NULL, watch_main, w) == 0;
-  if (!w->running) {
-    close(w->wake[0]);
-    close(w->wake[1]);
-    return NULL;
+  http_server *srv = w->srv;
+  if (w->registered || atomic_load(&w->gone)) return &w->gone;
+  int fd = watch_fd(w);
+  if (fd < 0) return NULL;
+  pthread_mutex_lock(&srv->lock);
+  if (srv->watch_closed) {
+    atomic_store(&w->by_shutdown, 1);
+    atomic_store(&w->gone, 1);
+  } else {
+    w->id = ++srv->watch_seq;
+    struct epoll_event ev = {.events = EPOLLRDHUP, .data.u64 = w->id};
+    if (epoll_ctl(srv->watch_ep, EPOLL_CTL_ADD, fd, &ev) == 0) {
+      w->registered = true;
+      w->next = srv->watches;
+      srv->watches = w;
+    }
   }
-  return &w->gone;
+  bool ok = w->registered || atomic_load(&w->gone);
+  pthread_mutex_unlock(&srv->lock);
+  return ok ? &w->gone : NULL;
 }
 
 static void watch_stop(client_watch *w) {
-  if (!w->running) return;
-  char c = 1;
-  while (write(w->wake[1], &c, 1) < 0 && errno == EINTR) {}
-  pthread_join(w->thread, NULL);
-  close(w->wake[0]);
-  close(w->wake[1]);
-  w->running = false;
+  http_server *srv = w->srv;
+  pthread_mutex_lock(&srv->lock);
+  if (w->registered) watch_unlink_locked(srv, w, watch_fd(w));
+  pthread_mutex_unlock(&srv->lock);
 }
 
 /* Run the route's handler with a client watch; a request cancelled by the
  * server's shutdown is answered 503 whatever the handler made of it. */
 static void run_handler(http_server *srv, struct MHD_Connection *c, const http_route *rt, http_req *r) {
-  client_watch w = {.srv = srv, .conn = c};
+  client_watch w = {.srv = srv, .conn = c, .registered = false};
   atomic_init(&w.gone, 0);
   atomic_init(&w.by_shutdown, 0);
   r->watch_client = watch_start;
@@ -1155,9 +1205,20 @@ rsw_status http_server_start(service *svc, const http_opts *opts, http_server **
   srv->stop_pipe[0] = srv->stop_pipe[1] = -1;
   atomic_init(&srv->stopping, false);
   atomic_init(&srv->stop_deadline_ms, 0);
+  srv->watch_ep = -1;
   if (pipe2(srv->stop_pipe, O_CLOEXEC) != 0) {
     free(srv);
     return rsw_fail(err, RSW_ERR_IO, "http_server_start", "cannot create a pipe: %s", strerror(errno));
+  }
+  srv->watch_ep = epoll_create1(EPOLL_CLOEXEC);
+  struct epoll_event stop_ev = {.events = EPOLLIN, .data.u64 = 0};
+  if (srv->watch_ep < 0 || epoll_ctl(srv->watch_ep, EPOLL_CTL_ADD, srv->stop_pipe[0], &stop_ev) != 0) {
+    int e = errno;
+    if (srv->watch_ep >= 0) close(srv->watch_ep);
+    close(srv->stop_pipe[0]);
+    close(srv->stop_pipe[1]);
+    free(srv);
+    return rsw_fail(err, RSW_ERR_IO, "http_server_start", "cannot create an epoll set: %s", strerror(e));
   }
   if (has_token) {
     srv->token = strdup(opts->token);
@@ -1175,6 +1236,7 @@ rsw_status http_server_start(service *svc, const http_opts *opts, http_server **
       bind(fd, (const struct sockaddr *)&sin, sizeof sin) != 0 || listen(fd, 128) != 0) {
     int e = errno;
     if (fd >= 0) close(fd);
+    close(srv->watch_ep);
     close(srv->stop_pipe[0]);
     close(srv->stop_pipe[1]);
     free(srv->token);
@@ -1206,12 +1268,20 @@ rsw_status http_server_start(service *svc, const http_opts *opts, http_server **
       MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)CONNECTION_TIMEOUT_S, MHD_OPTION_CONNECTION_MEMORY_LIMIT,
       CONNECTION_MEMORY, MHD_OPTION_LISTEN_BACKLOG_SIZE, 512u, MHD_OPTION_END);
   if (srv->mhd) srv->reaper_started = pthread_create(&srv->reaper, NULL, reaper_main, srv) == 0;
-  if (!srv->mhd || !srv->reaper_started) {
+  if (srv->reaper_started) srv->watcher_started = pthread_create(&srv->watcher, NULL, watcher_main, srv) == 0;
+  if (!srv->mhd || !srv->reaper_started || !srv->watcher_started) {
+    if (srv->reaper_started || srv->watcher_started) {
+      char wake = 1;
+      while (write(srv->stop_pipe[1], &wake, 1) < 0 && errno == EINTR) {}
+    }
+    if (srv->reaper_started) pthread_join(srv->reaper, NULL);
+    if (srv->watcher_started) pthread_join(srv->watcher, NULL);
     if (srv->mhd) MHD_stop_daemon(srv->mhd);
     pthread_cond_destroy(&srv->task_cond);
     pthread_cond_destroy(&srv->cond);
     pthread_mutex_destroy(&srv->lock);
     close(fd);
+    close(srv->watch_ep);
     close(srv->stop_pipe[0]);
     close(srv->stop_pipe[1]);
     free(srv->token);
@@ -1256,6 +1326,7 @@ void http_server_stop(http_server *srv) {
   char one = 1;
   while (write(srv->stop_pipe[1], &one, 1) < 0 && errno == EINTR) {}
   if (srv->reaper_started) pthread_join(srv->reaper, NULL);
+  if (srv->watcher_started) pthread_join(srv->watcher, NULL);
   pthread_mutex_lock(&srv->lock);
   /* Handler threads hold suspended connections: every one must have
    * resumed before MHD may free its connections. Renders stop within a
@@ -1278,6 +1349,7 @@ void http_server_stop(http_server *srv) {
   pthread_cond_destroy(&srv->task_cond);
   pthread_cond_destroy(&srv->cond);
   pthread_mutex_destroy(&srv->lock);
+  close(srv->watch_ep);
   close(srv->stop_pipe[0]);
   close(srv->stop_pipe[1]);
   free(srv->token);

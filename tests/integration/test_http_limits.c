@@ -311,7 +311,7 @@ static void test_idempotency_key_length(void) {
   /* 255 is fine. */
   memset(key, 'k', 255);
   key[255] = '\0';
-  char hdr[300];
+  char hdr[420];
   snprintf(hdr, sizeof hdr, "Idempotency-Key: %s", key);
   const char *h[] = {"Content-Type: application/json", hdr, NULL};
   thttp_resp r;
@@ -448,6 +448,11 @@ static void test_render_client_gone(void) {
   double dt = tdaemon_now() - t0;
   fprintf(stdout, "  render after a client hung up on a 6 s render: %d in %.2f s\n", r.status, dt);
   CHECK(r.status == 200 && dt < 2.0, "next render: %d after %.2f s", r.status, dt);
+  thttp_resp_free(&r);
+  /* And nothing is left rendering. */
+  req(&main_d, "GET", "/metrics", NULL, &r);
+  CHECK(r.status == 200 && r.body && strstr(r.body, "\nraysweep_sync_renders 0\n"), "sync renders still running: %.200s",
+        r.body && strstr(r.body, "raysweep_sync_renders ") ? strstr(r.body, "raysweep_sync_renders ") : "?");
   thttp_resp_free(&r);
 }
 
