@@ -206,7 +206,8 @@ static void test_header_deadline(void) {
   send(nul, "\0\1\2\3\r\n", 6, MSG_NOSIGNAL);
   double t0 = tdaemon_now(), closed_slow = -1;
   for (int k = 0; k < 30 && closed_slow < 0; k++) { /* a byte every 100 ms */
-    send(slow, "GET /v1 HTTP/1.1\r\nX: aaaaaaaaaaaaaaaaaaaaaaaaaaaa" + (k % 40), 1, MSG_NOSIGNAL);
+    static const char line[] = "GET /v1 HTTP/1.1\r\nX: aaaaaaaaaaaaaaaaaaaaaaaaaaaa";
+    send(slow, &line[k % (int)(sizeof line - 1)], 1, MSG_NOSIGNAL);
     double c = secs_until_closed(slow, 0.1);
     if (c >= 0) closed_slow = tdaemon_now() - t0;
   }
