@@ -146,9 +146,9 @@ $(CLIENT_PC): include/raysweep/version.h
 	printf '%s\n' $(call client_pc_lines,$(PREFIX)) > $@
 
 # The client test sees only the public header and the static library.
-$(BUILD)/tests/test_client: $(BUILD)/obj/tests/integration/test_client.o $(CLIENT_A)
+$(BUILD)/tests/test_client: $(BUILD)/obj/tests/integration/test_client.o $(BUILD)/obj/tests/support/daemon.o $(CLIENT_A)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $< $(CLIENT_A) $(CLIENT_LIBS)
+	$(CC) $(LDFLAGS) -o $@ $< $(BUILD)/obj/tests/support/daemon.o $(CLIENT_A) $(CLIENT_LIBS)
 
 # make install [PREFIX=/usr/local] [DESTDIR=staging root]: raysweepd and
 # raysweep in bin/, their man pages in share/man/man1/, the client and

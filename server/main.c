@@ -428,6 +428,10 @@ static const command commands[] = {
      "  --result-ttl S      seconds job results are kept (default 3600)\n"
      "  --port-file F       write the port listened on to F once listening\n"
      "  --plugin-dir DIR    load every *.so in DIR as an environment plugin at start\n"
+     "  --max-connections N open connections at most, 8 to 100000 (default 1024); near the\n"
+     "                      limit requests other than the health probes get 503 + Retry-After\n"
+     "  --header-timeout S  seconds a connection may take to send a request's headers\n"
+     "                      (default 10); slower ones are closed\n"
      "Stops on SIGTERM or SIGINT.\n",
      cmd_serve},
     {"routes", "routes", "print the routes the daemon serves, one \"METHOD PATH\" per line", "", cmd_routes},
