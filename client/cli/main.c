@@ -44,7 +44,7 @@ static const cli_command commands[] = {
      cli_opts_render, 1, 1, true, cmd_render},
     {"sweep", NULL,
      "ID (--contexts FILE.jsonl | --grid NAME=START:STOP:STEP...) [--set KEY=VALUE]... [--sensor S]... "
-     "[--spp N] [--seed N] [--shard I/N] [--format exr|npy|json] [--timeout S] -o DIR [--force]",
+     "[--spp N] [--seed N] [--shard I/N] [--spread K] [--format exr|npy|json] [--timeout S] -o DIR [--force]",
      "submit a job over many contexts, show progress, fetch every film into DIR with DIR/index.jsonl and "
      "DIR/sweep.json (Ctrl-C cancels the job)",
      cli_opts_sweep, 1, 1, true, cmd_sweep},
@@ -347,6 +347,7 @@ int main(int argc, char **argv) {
     ctx.server_url = server ? server : getenv("RAYSWEEP_URL");
     if (!ctx.server_url || !*ctx.server_url) ctx.server_url = DEFAULT_URL;
     rc = read_token(&ctx, token_file, &token);
+    ctx.token = token;
     if (!rc) {
       rsw_client_opts o = {
           .size = sizeof o, .base_url = ctx.server_url, .token = token, .interrupt = &cli_interrupted};

@@ -48,6 +48,7 @@ typedef struct shard {
   size_t *idx; /* context indices of x in this shard */
   size_t n;
   int attempt;
+  char base[64]; /* first key; resubmissions append ".r<n>" */
   char key[96];
   char job[40];        /* the job of this attempt, "" before submission */
   size_t job_contexts; /* contexts in that job */
@@ -127,10 +128,78 @@ static void journal_line(spread *sp, cJSON *o) {
 }
 
 static void shard_key(shard *sh) {
+  if (!sh->base[0]) snprintf(sh->base, sizeof sh->base, "%s-%d", sh->sp->prefix, sh->k);
   if (sh->attempt == 0)
-    snprintf(sh->key, sizeof sh->key, "%s-%d", sh->sp->prefix, sh->k);
+    snprintf(sh->key, sizeof sh->key, "%s", sh->base);
   else
-    snprintf(sh->key, sizeof sh->key, "%s-%d.r%d", sh->sp->prefix, sh->k, sh->attempt);
+    snprintf(sh->key, sizeof sh->key, "%s.r%d", sh->base, sh->attempt);
+}
+
+/* The replica a key reaches: GET /v1 through the balancer and read the
+ * daemon's "instance" (random per process). "" when the answer has none. */
+static rsw_status probe_instance(rsw_client *c, const char *key, char out[64]) {
+  out[0] = '\0';
+  rsw_status s = rsw_client_set_route(c, key);
+  char *text = NULL;
+  if (!s) s = rsw_server_info(c, &text);
+  if (s) return s;
+  cJSON *o = cJSON_Parse(text);
+  rsw_free(text);
+  const char *id = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "instance"));
+  if (id) snprintf(out, 64, "%s", id);
+  cJSON_Delete(o);
+  return RSW_OK;
+}
+
+/* Consistent hashing places K keys on R replicas at random: with K = R = 3
+ * all three differ only 2 times in 9. So each shard tries keys
+ * "<prefix>-<k>", "<prefix>-<k>.p1", ... (at most 32) and takes the first
+ * that reaches a replica fewer shards use than any other seen so far. The
+ * balancer stays stateless; the keys are kept in the state file. */
+static rsw_status choose_keys(spread *sp, rsw_client *c) {
+  enum { MAX_TRIES = 32, MAX_SEEN = 256 };
+  char (*seen)[64] = calloc(MAX_SEEN, 64);
+  int *used = calloc(MAX_SEEN, sizeof *used);
+  size_t n_seen = 0;
+  rsw_status s = seen && used ? RSW_OK : RSW_ERR_NOMEM;
+  for (int k = 0; k < sp->n_shards && !s; k++) {
+    shard *sh = &sp->shards[k];
+    if (sh->base[0]) continue; /* from the state file */
+    char key[64], inst[64], best_key[64] = "";
+    int best_use = -1;
+    size_t best_i = 0;
+    for (int t = 0; t < MAX_TRIES && !s; t++) {
+      if (t == 0)
+        snprintf(key, sizeof key, "%s-%d", sp->prefix, k);
+      else
+        snprintf(key, sizeof key, "%s-%d.p%d", sp->prefix, k, t);
+      if ((s = probe_instance(c, key, inst))) break;
+      if (!inst[0]) { /* no instance ids: nothing to choose from */
+        snprintf(best_key, sizeof best_key, "%s", key);
+        best_use = 0, best_i = (size_t)-1;
+        break;
+      }
+      size_t i = 0;
+      while (i < n_seen && strcmp(seen[i], inst) != 0) i++;
+      if (i == n_seen && n_seen < MAX_SEEN) snprintf(seen[n_seen++], 64, "%s", inst);
+      int use = i < MAX_SEEN ? used[i] : 0;
+      if (best_use < 0 || use < best_use) {
+        best_use = use, best_i = i;
+        snprintf(best_key, sizeof best_key, "%s", key);
+      }
+      /* Least used of all the replicas seen: good enough once every
+       * shard so far has a replica of its own or this one is unused. */
+      int min_use = use;
+      for (size_t j = 0; j < n_seen; j++) min_use = used[j] < min_use ? used[j] : min_use;
+      if (use == 0 || (use == min_use && t >= 8)) break;
+    }
+    if (s) break;
+    if (best_i < MAX_SEEN) used[best_i]++;
+    snprintf(sh->base, sizeof sh->base, "%s", best_key);
+  }
+  free(seen);
+  free(used);
+  return s;
 }
 
 /* ---- progress over every shard ---- */
@@ -166,7 +235,7 @@ static failure classify(shard *sh, rsw_client *c, rsw_status s) {
   const rsw_error_info *e = rsw_client_last_error(c);
   if (s == RSW_ERR_CANCELLED || s == RSW_ERR_TIMEOUT || atomic_load(&sh->sp->stop)) return F_STOP;
   int h = e->http_status;
-  if (h == 404 || h == 502 || h == 503 || h == 504 || s == RSW_ERR_NOT_FOUND) return F_LOST;
+  if (h == 404 || h == 429 || h == 502 || h == 503 || h == 504 || s == RSW_ERR_NOT_FOUND) return F_LOST;
   if (h == 0 && s == RSW_ERR_UNAVAILABLE) {
     /* No answer at all. A stream that dropped because its replica died
      * reads the same: ask the balancer itself (any HTTP answer will do). */
@@ -301,6 +370,7 @@ static rsw_status submit(shard *sh, rsw_client *c, size_t *n_out) {
   cJSON *line = cJSON_CreateObject();
   cJSON_AddNumberToObject(line, "shard", sh->k);
   cJSON_AddNumberToObject(line, "attempt", sh->attempt);
+  cJSON_AddStringToObject(line, "base", sh->base);
   cJSON_AddStringToObject(line, "key", sh->key);
   cJSON_AddStringToObject(line, "job", sh->job);
   cJSON_AddNumberToObject(line, "contexts", (double)np);
@@ -521,6 +591,7 @@ static rsw_status journal_open(spread *sp, uint64_t request) {
       } else if (cJSON_IsNumber(sh)) {
         int k = (int)sh->valuedouble;
         const char *key = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "key"));
+        const char *base = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "base"));
         const char *job = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "job"));
         const cJSON *at = cJSON_GetObjectItemCaseSensitive(o, "attempt");
         const cJSON *nc = cJSON_GetObjectItemCaseSensitive(o, "contexts");
@@ -528,6 +599,7 @@ static rsw_status journal_open(spread *sp, uint64_t request) {
             cJSON_IsNumber(nc)) {
           shard *x = &sp->shards[k];
           snprintf(x->key, sizeof x->key, "%s", key);
+          snprintf(x->base, sizeof x->base, "%s", base ? base : key);
           snprintf(x->job, sizeof x->job, "%s", job);
           x->attempt = (int)at->valuedouble;
           x->job_contexts = (size_t)nc->valuedouble;
@@ -668,25 +740,32 @@ rsw_status rsw_spread_run(const rsw_client_opts *copts, const char *scene_id, co
   uint64_t request = fnv1a64(req) ^ fnv1a64(scene_id ? scene_id : o.scene_file);
   free(req);
   if (o.state_path && (s = journal_open(&sp, request))) goto done;
-  if (scene_id) {
-    snprintf(sp.scene_id, sizeof sp.scene_id, "%s", scene_id);
-  } else {
-    /* The scene's id, once, through the first key (every replica computes
-     * the same content address). */
+  {
+    /* Keys first (GET /v1 through each candidate), then the scene's id,
+     * once, through shard 0's key (every replica computes the same content
+     * address; each shard pushes again through its own key). */
     rsw_client *c = NULL;
     co.route_key = NULL;
     s = rsw_client_new(&co, &c);
-    char key[96];
-    snprintf(key, sizeof key, "%s-0", sp.prefix);
-    if (!s) s = rsw_client_set_route(c, key);
-    if (!s) s = rsw_scene_push_file(c, o.scene_file, o.variant, sp.scene_id, NULL);
+    const char *what = "choosing routing keys";
+    if (!s) s = choose_keys(&sp, c);
+    if (!s && scene_id) {
+      snprintf(sp.scene_id, sizeof sp.scene_id, "%s", scene_id);
+    } else if (!s) {
+      what = "pushing the scene";
+      shard_key(&sp.shards[0]);
+      s = rsw_client_set_route(c, sp.shards[0].base);
+      if (!s) s = rsw_scene_push_file(c, o.scene_file, o.variant, sp.scene_id, NULL);
+    }
     if (s) {
       const rsw_error_info *e = rsw_client_last_error(c);
-      snprintf(sp.err, sizeof sp.err, "pushing %s: %s", o.scene_file, e->message[0] ? e->message : rsw_strerror(s));
-      if (e->http_status == 0 && s == RSW_ERR_UNAVAILABLE)
+      if (c && e->http_status == 0 && s == RSW_ERR_UNAVAILABLE)
         snprintf(sp.err, sizeof sp.err, "cannot reach %s (%s): the balancer is gone%s",
                  co.base_url ? co.base_url : "the server", e->message,
                  o.state_path ? "; the same call resumes from the state file" : "");
+      else
+        snprintf(sp.err, sizeof sp.err, "%s%s%s: %s", what, o.scene_file ? " " : "", o.scene_file ? o.scene_file : "",
+                 c && e->message[0] ? e->message : rsw_strerror(s));
       rsw_client_free(c);
       goto done;
     }
