@@ -31,7 +31,7 @@ const cli_opt cli_opts_sweep[] = {
     {"--shard", "I/N", false, "keep contexts I, I+N, I+2N, ... (ids unchanged)"},
     {"--spread", "K", false,
      "run K shards at once through one load balancer (--server), each routed to its own replica by "
-     "X-Raysweep-Shard; ID may then be a scene FILE, pushed to every replica; rerun to resume"},
+     "X-Raysweep-Shard; a scene FILE is pushed to every replica; a balancer that went away: rerun to resume"},
     {"--format", "exr|npy|json", false, "film files: exr (default), npy or json"},
     {"--timeout", "S", false, "stop waiting after S seconds (exit 5; the job keeps running)"},
     {"-o", "DIR", false, "output directory: new or empty (see --force)"},
@@ -1140,7 +1140,7 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
   rsw_contexts *x = NULL;
   index_entry *entries = NULL;
   size_t n_entries = 0, failed = 0;
-  char job[40] = "", fingerprint[17] = "";
+  char job[40] = "", fingerprint[17] = "", scene_id[65] = "";
   cJSON *incomplete = NULL;
   if (contexts_file) {
     rc = read_contexts(ctx, contexts_file, shard_i, shard_n, &l);
@@ -1185,6 +1185,18 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
   }
   /* The job lists the contexts in the order the user described them. */
   if ((rc = build_contexts(ctx, a, l.items, l.n, job_params, (long long)spp, (long long)seed, &x))) goto out;
+  struct stat sst;
+  if (!spread && stat(scene, &sst) == 0 && S_ISREG(sst.st_mode)) {
+    /* A scene FILE: push it (blobs it references too) and sweep its id. */
+    int created = 0;
+    rsw_status ps = rsw_scene_push_file(ctx->client, scene, NULL, scene_id, &created);
+    if (ps) {
+      rc = cli_report(ctx, ps, scene);
+      goto out;
+    }
+    scene = scene_id;
+    sweep_fingerprint(a, scene, fingerprint);
+  }
   if (spread) {
     rc = run_spread(ctx, a, (int)spread, resume, fmt, timeout, &l, sorted, job_params, x, fingerprint,
                     (size_t)shard_i, (size_t)shard_n);
