@@ -180,8 +180,8 @@ if grep -Eq '[1-9][0-9]* resubmissions? of [1-9]' "$tmp/k.err"; then ok; else ba
 # ---- the shipped configurations are the generator's ----
 three=(--replica raysweep-1:8350 --replica raysweep-2:8350 --replica raysweep-3:8350)
 python3 "$gen" haproxy --listen '*:8350' "${three[@]}" -o "$tmp/shipped.cfg"
-if cmp -s "$tmp/shipped.cfg" "$root/docker/haproxy/haproxy.cfg"; then ok; else bad "docker/haproxy/haproxy.cfg is not docker/lb/gen.py's output (regenerate it: see docker/README.md)"; fi
+if cmp -s "$tmp/shipped.cfg" "$root/docker/haproxy/haproxy.cfg"; then ok; else bad "docker/haproxy/haproxy.cfg is not docker/lb/gen.py's output (regenerate it with the command in docker/lb/gen.py)"; fi
 python3 "$gen" nginx --listen 0.0.0.0:8350 "${three[@]}" -o "$tmp/shipped.conf"
-if cmp -s "$tmp/shipped.conf" "$root/docker/nginx/nginx.conf"; then ok; else bad "docker/nginx/nginx.conf is not docker/lb/gen.py's output (regenerate it: see docker/README.md)"; fi
+if cmp -s "$tmp/shipped.conf" "$root/docker/nginx/nginx.conf"; then ok; else bad "docker/nginx/nginx.conf is not docker/lb/gen.py's output (regenerate it with the command in docker/lb/gen.py)"; fi
 if haproxy -c -f "$root/docker/haproxy/haproxy.cfg" >"$tmp/hc" 2>&1; then ok; else bad "haproxy -c docker/haproxy/haproxy.cfg: $(tail -n 3 "$tmp/hc")"; fi
 finish
