@@ -510,6 +510,13 @@ static void *shard_main(void *arg) {
       size_t np = 0;
       shard_key(sh);
       s = submit(sh, c, &np);
+      if (s && !sp->o->scene_file && rsw_client_last_error(c)->http_status == 404) {
+        set_fatal(sp, s,
+                  "scene %s is not resident on the replica behind key %s: give the scene FILE instead of its "
+                  "id, so that every replica gets it",
+                  sp->scene_id, sh->key);
+        break;
+      }
       if (s) {
         failure f = classify(sh, c, s);
         if (f != F_LOST) {
