@@ -5,7 +5,9 @@
 # A daemon with --max-queue 1 and one render thread: job A runs, job B
 # waits (queue full: 503 naming the queue), both cancelled: 200. Also:
 # GET /v1 names the process's "instance" (16 hex digits), different for two
-# daemons (raysweep sweep --spread tells replicas apart by it).
+# daemons (raysweep sweep --spread tells replicas apart by it), and the
+# first job ids of two daemons differ (a request rerouted to another
+# replica must not find a job of the same id there).
 name=test_ready_queue
 source "$(dirname "$0")/../support/shtest.sh"
 need_bins raysweepd
@@ -42,5 +44,9 @@ done
 start_daemon "$tmp/e" --threads 1
 i1=$(curl -s "$url/v1" | python3 -c 'import json,sys; print(json.load(sys.stdin).get("instance", ""))')
 i2=$(curl -s "http://127.0.0.1:$started_port/v1" | python3 -c 'import json,sys; print(json.load(sys.stdin).get("instance", ""))')
+j2=$(curl -sf -X POST -H 'Content-Type: application/json' --data-binary @"$root/proto/examples/hdistant_lambertian.json" "http://127.0.0.1:$started_port/v1/scenes" >/dev/null &&
+  curl -sf -X POST -H 'Content-Type: application/json' --data '{"contexts": [{"id": "a", "wavelength": 550}], "defaults": {"spp": 1}}' \
+    "http://127.0.0.1:$started_port/v1/scenes/$scene/jobs" | python3 -c 'import json,sys; print(json.load(sys.stdin)["id"])')
+if [ -n "$a" ] && [ -n "$j2" ] && [ "$a" != "$j2" ]; then ok; else bad "the first jobs of two daemons: '$a' and '$j2': want two different ids"; fi
 if [[ $i1 =~ ^[0-9a-f]{16}$ ]] && [[ $i2 =~ ^[0-9a-f]{16}$ ]] && [ "$i1" != "$i2" ]; then ok; else bad "instances '$i1' and '$i2': want two different 16-hex-digit ids"; fi
 finish
