@@ -1036,6 +1036,8 @@ static int run_spread(cli_ctx *ctx, const cli_args *a, int k_shards, bool resume
                     why, sink.ne, state);
     else if (s == RSW_ERR_TIMEOUT)
       rc = cli_fail(ctx, CLI_TIMEOUT, "%s; rerun the same command to resume (state in %s)", why, state);
+    else if (s == RSW_ERR_PRECONDITION)
+      rc = cli_usage(ctx, "%s: resume with the same --spread, or start over with --force", why);
     else
       rc = cli_fail(ctx, s == RSW_ERR_NOMEM || s == RSW_ERR_IO ? CLI_IO : CLI_SERVER, "%s", why);
     goto out;
