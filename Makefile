@@ -2,6 +2,8 @@
 #   make            build build/bin/raysweepd
 #   make test       build and run every test (SAN=1: ASan + UBSan build)
 #   make bench      benchmarks, one JSON object per line
+#   make test-cluster  replicas behind HAProxy/nginx, a Slurm job array, the
+#                      container recipes (tests/cluster)
 #   make run        start the daemon with the embedded default scene (PORT=8350)
 #   make deps       install missing Debian packages (no-op when all present)
 #   make install    raysweepd, raysweep, man pages, headers, libraysweep
@@ -70,6 +72,7 @@ TEST_SCRIPTS := $(sort $(wildcard tests/integration/test_*.sh))
 
 BENCH_SRC := $(wildcard tests/bench/*.c)
 BENCH_BIN := $(patsubst %.c,$(BUILD)/bench/%,$(notdir $(BENCH_SRC)))
+BENCH_SCRIPTS := $(sort $(wildcard tests/bench/bench_*.py))
 
 # ---- libraysweep (client/lib): the C client library ------------------------
 # libraysweep.a / .so link in common/ (the project's one EXR writer, the
@@ -96,7 +99,7 @@ client_pc_lines = 'prefix=$(1)' 'includedir=$${prefix}/include' 'libdir=$${prefi
   'Version: $(VERSION)' 'Cflags: -I$${includedir}' \
   'Libs: -L$${libdir} -lraysweep' 'Libs.private: -lcurl -lcjson -lexpat -lcrypto -lOpenEXRCore -lpthread -lm'
 
-.PHONY: all deps test bench run clean format install
+.PHONY: all deps test bench run clean format install test-cluster
 .SECONDARY:
 
 all: deps $(BUILD)/bin/raysweepd $(CLIENT_A) $(CLIENT_SO) $(CLIENT_PC)
@@ -200,8 +203,15 @@ $(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
 test: deps $(BUILD)/bin/raysweepd $(TEST_BIN)
 	@RSW_BIN_DIR=$(BUILD)/bin BUILD=$(BUILD) SAN=$(SAN) tests/run.sh $(TEST_BIN) $(TEST_SCRIPTS)
 
-bench: deps $(BUILD)/bin/raysweepd $(BENCH_BIN)
+bench: deps $(BUILD)/bin/raysweepd $(BUILD)/bin/raysweep $(BENCH_BIN)
 	@for b in $(BENCH_BIN); do $$b || exit 1; done
+	@for s in $(BENCH_SCRIPTS); do RSW_BIN_DIR=$(BUILD)/bin $$s || exit 1; done
+
+# make test-cluster: replicas behind real load balancers and schedulers
+# (tests/cluster; the engines come from `make deps`). Also run by .ci/run.
+CLUSTER_SCRIPTS := $(sort $(wildcard tests/cluster/test_*.sh))
+test-cluster: deps $(BUILD)/bin/raysweepd $(BUILD)/bin/raysweep
+	@RSW_BIN_DIR=$(BUILD)/bin BUILD=$(BUILD) SAN=$(SAN) tests/run.sh $(CLUSTER_SCRIPTS)
 
 # make run PORT=N: another port. A port that is taken is said plainly, with
 # a free one to try (bash's /dev/tcp: something answers there).
@@ -243,12 +253,3 @@ all test: $(PLUGIN_SO)
 $(BUILD)/plugins/%.so: tests/plugins/%.c include/raysweep/plugin.h | deps
 	@mkdir -p $(dir $@)
 	$(CC) -shared -fPIC -I include $(PLUGIN_CFLAGS) -o $@ $< -lm
-
-# ---- make test-cluster-slurm: the Slurm and container recipes (docker/) ----
-# A single-node Slurm started by the test itself (slurm-wlm, munge: make
-# deps) and the Dockerfile/compose/Kubernetes files checked against the
-# daemon. Folded into make test-cluster.
-CLUSTER_SLURM_TESTS := $(wildcard tests/cluster/test_slurm.sh tests/cluster/test_containers.sh)
-.PHONY: test-cluster-slurm
-test-cluster-slurm: deps $(BUILD)/bin/raysweepd $(BUILD)/bin/raysweep
-	@RSW_BIN_DIR=$(BUILD)/bin BUILD=$(BUILD) SAN=$(SAN) tests/run.sh $(CLUSTER_SLURM_TESTS)

@@ -15,9 +15,11 @@ pkgs=(
   # format, tools/check-format.sh); groff-base and man-db (the man pages are
   # checked with groff and read back with man: test_usage, test_install)
   curl python3 python3-yaml python3-jsonschema clang-format groff-base man-db
-  # make test-cluster-slurm: a single-node Slurm (slurmctld, slurmd, sbatch)
-  # and its authentication daemon, started by tests/cluster/test_slurm.sh
-  slurm-wlm munge
+  # make test-cluster: the load balancers in front of replicas (run as the
+  # current user with configurations in a temp directory), and a
+  # single-node Slurm (slurmctld, slurmd, sbatch) with its authentication
+  # daemon (tests/cluster/test_slurm.sh)
+  haproxy nginx slurm-wlm munge
 )
 
 missing() {

@@ -61,6 +61,7 @@ typedef struct cli_args {
 typedef struct cli_ctx {
   const char *cmd;        /* "scene push", for messages */
   const char *server_url; /* effective base URL */
+  const char *token;      /* bearer token or NULL (for extra clients: sweep --spread) */
   bool json, quiet;
   bool stderr_tty;
   rsw_client *client; /* created before the handler when the command needs it */

@@ -29,6 +29,9 @@ const cli_opt cli_opts_sweep[] = {
     {"--spp", "N", false, "samples per pixel"},
     {"--seed", "N", false, "job seed (default 0)"},
     {"--shard", "I/N", false, "keep contexts I, I+N, I+2N, ... (ids unchanged)"},
+    {"--spread", "K", false,
+     "run K shards at once through one load balancer (--server), each routed to its own replica by "
+     "X-Raysweep-Shard; a scene FILE is pushed to every replica; a balancer that went away: rerun to resume"},
     {"--format", "exr|npy|json", false, "film files: exr (default), npy or json"},
     {"--timeout", "S", false, "stop waiting after S seconds (exit 5; the job keeps running)"},
     {"-o", "DIR", false, "output directory: new or empty (see --force)"},
@@ -424,6 +427,40 @@ static int build_contexts(const cli_ctx *ctx, const cli_args *a, const sweep_ite
   return 0;
 }
 
+/* One index.jsonl line for result r (the job's result object) of film
+ * rel: wavelength and seed as the server used them; params the effective
+ * overrides (job-level, then the context's own). */
+static cJSON *index_line(const cJSON *r, const char *c, const char *sn, const char *rel, sweep_item **sorted,
+                         size_t n, const cJSON *job_params) {
+    cJSON *line = cJSON_CreateObject();
+    cJSON_AddStringToObject(line, "context", c);
+    cJSON_AddStringToObject(line, "sensor", sn);
+    const cJSON *wl = cJSON_GetObjectItemCaseSensitive(r, "wavelength");
+    sweep_item key, *kp = &key;
+    snprintf(key.id, sizeof key.id, "%s", c);
+    sweep_item **found = bsearch(&kp, sorted, n, sizeof *sorted, cmp_item_id);
+    if (cJSON_IsNumber(wl))
+      cJSON_AddNumberToObject(line, "wavelength", wl->valuedouble);
+    else if (found && (*found)->has_wl)
+      cJSON_AddNumberToObject(line, "wavelength", (*found)->wl);
+    else
+      cJSON_AddNullToObject(line, "wavelength");
+    cJSON *params = job_params ? cJSON_Duplicate(job_params, 1) : cJSON_CreateObject();
+    const cJSON *p;
+    if (found) cJSON_ArrayForEach(p, (*found)->params) {
+        cJSON_DeleteItemFromObjectCaseSensitive(params, p->string);
+        cJSON_AddItemToObject(params, p->string, cJSON_Duplicate(p, 1));
+      }
+    cJSON_AddItemToObject(line, "params", params);
+    const cJSON *seed = cJSON_GetObjectItemCaseSensitive(r, "seed");
+    if (cJSON_IsNumber(seed))
+      cJSON_AddNumberToObject(line, "seed", seed->valuedouble);
+    else
+      cJSON_AddNullToObject(line, "seed");
+    cJSON_AddStringToObject(line, "file", rel);
+    return line;
+}
+
 /* Films of a finished job into dir/<context>/<sensor>.<ext>, one index
  * entry each. Failed renders are reported and counted. */
 static int fetch_all(cli_ctx *ctx, const char *job, const char *dir, cli_format fmt, sweep_item **sorted,
@@ -485,34 +522,7 @@ static int fetch_all(cli_ctx *ctx, const char *job, const char *dir, cli_format 
     rc = cli_save_film(ctx, film, path, fmt);
     rsw_film_free(film);
     if (rc) break;
-    /* Index line: wavelength and seed as the server used them; params the
-     * effective overrides (job-level, then the context's own). */
-    cJSON *line = cJSON_CreateObject();
-    cJSON_AddStringToObject(line, "context", c);
-    cJSON_AddStringToObject(line, "sensor", sn);
-    const cJSON *wl = cJSON_GetObjectItemCaseSensitive(r, "wavelength");
-    sweep_item key, *kp = &key;
-    snprintf(key.id, sizeof key.id, "%s", c);
-    sweep_item **found = bsearch(&kp, sorted, n, sizeof *sorted, cmp_item_id);
-    if (cJSON_IsNumber(wl))
-      cJSON_AddNumberToObject(line, "wavelength", wl->valuedouble);
-    else if (found && (*found)->has_wl)
-      cJSON_AddNumberToObject(line, "wavelength", (*found)->wl);
-    else
-      cJSON_AddNullToObject(line, "wavelength");
-    cJSON *params = job_params ? cJSON_Duplicate(job_params, 1) : cJSON_CreateObject();
-    const cJSON *p;
-    if (found) cJSON_ArrayForEach(p, (*found)->params) {
-        cJSON_DeleteItemFromObjectCaseSensitive(params, p->string);
-        cJSON_AddItemToObject(params, p->string, cJSON_Duplicate(p, 1));
-      }
-    cJSON_AddItemToObject(line, "params", params);
-    const cJSON *seed = cJSON_GetObjectItemCaseSensitive(r, "seed");
-    if (cJSON_IsNumber(seed))
-      cJSON_AddNumberToObject(line, "seed", seed->valuedouble);
-    else
-      cJSON_AddNullToObject(line, "seed");
-    cJSON_AddStringToObject(line, "file", rel);
+    cJSON *line = index_line(r, c, sn, rel, sorted, n, job_params);
     e[ne].line = line;
     e[ne].context = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(line, "context"));
     e[ne].sensor = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(line, "sensor"));
@@ -543,6 +553,9 @@ static int fetch_all(cli_ctx *ctx, const char *job, const char *dir, cli_format 
  * directories must cover; `sweep --force` to know what an earlier sweep
  * wrote. "incomplete" lists contexts with a render that did not succeed. */
 #define MANIFEST_NAME   "sweep.json"
+/* The journal of a --spread sweep (rsw_spread_opts.state_path): there
+ * while the sweep is unfinished, removed when it completes. */
+#define SPREAD_STATE "sweep.spread.jsonl"
 #define MANIFEST_FORMAT "raysweep-sweep/1"
 
 static uint64_t fnv1a(uint64_t h, const char *s, size_t n) {
@@ -806,6 +819,9 @@ static int prepare_output(const cli_ctx *ctx, const char *dir, bool force) {
     return cli_fail(ctx, CLI_IO, "out of memory");
   }
   bool has_index = is_regular(index), has_manifest = is_regular(manifest);
+  char *state = dir_file(dir, SPREAD_STATE);
+  if (state && is_regular(state)) unlink(state); /* the journal of an earlier --spread */
+  free(state);
   if (!has_index && !has_manifest) {
     free(index), free(manifest);
     return cli_usage(ctx,
@@ -862,6 +878,225 @@ static int prepare_output(const cli_ctx *ctx, const char *dir, bool force) {
   return 0;
 }
 
+/* ---- --spread K: the shards of one sweep at once, through a balancer ---- */
+
+/* DIR holds an unfinished --spread run of this very sweep: rerunning the
+ * command resumes it instead of refusing a non-empty directory. */
+static bool spread_resumable(const char *dir, const char *fingerprint) {
+  char *state = dir_file(dir, SPREAD_STATE);
+  bool has = state && is_regular(state);
+  free(state);
+  if (!has) return false;
+  sweep_manifest m;
+  cli_ctx quiet = {.cmd = "sweep", .quiet = true};
+  if (manifest_read(&quiet, dir, &m) != 0) return false;
+  bool same = strcmp(m.sweep, fingerprint) == 0 && !m.finished;
+  manifest_free(&m);
+  return same;
+}
+
+typedef struct spread_sink {
+  cli_ctx *ctx;
+  const char *dir;
+  cli_format fmt;
+  sweep_item **sorted;
+  size_t n;
+  const cJSON *job_params;
+  index_entry *e;
+  size_t ne, cap;
+  cJSON *incomplete; /* context ids, may repeat */
+  size_t failed;
+  int rc;
+  cli_progress *progress;
+} spread_sink;
+
+/* rsw_spread_film_fn: save the film (or, resumed, find the one an earlier
+ * run saved) and keep its index line. */
+static int spread_film(void *user, const char *c, const char *sn, const char *result_json, const rsw_film *film,
+                       int resumed) {
+  spread_sink *k = user;
+  if (k->rc) return 1;
+  cJSON *r = cJSON_Parse(result_json);
+  const char *state = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "state"));
+  if (!state || strcmp(state, "succeeded") != 0) {
+    const char *err = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "error"));
+    if (k->progress && k->progress->drawn && k->ctx->stderr_tty) fputc('\n', stderr);
+    fprintf(stderr, "raysweep sweep: %s/%s %s%s%s\n", c, sn, state ? state : "lost", err ? ": " : "",
+            err ? err : "");
+    k->failed++;
+    cJSON_AddItemToArray(k->incomplete, cJSON_CreateString(c));
+    cJSON_Delete(r);
+    return 0;
+  }
+  if (!cli_safe_component(c) || !cli_safe_component(sn)) {
+    k->rc = cli_fail(k->ctx, CLI_IO, "%s/%s: not usable as a file name", c, sn);
+    cJSON_Delete(r);
+    return 1;
+  }
+  char rel[600], path[4096];
+  snprintf(path, sizeof path, "%s/%s", k->dir, c);
+  snprintf(rel, sizeof rel, "%s/%s.%s", c, sn, cli_format_ext(k->fmt));
+  if (film) {
+    if (cli_mkdirs(path)) {
+      k->rc = cli_fail(k->ctx, CLI_IO, "cannot create '%s': %s", path, strerror(errno));
+    } else {
+      snprintf(path, sizeof path, "%s/%s", k->dir, rel);
+      k->rc = cli_save_film(k->ctx, film, path, k->fmt);
+    }
+  } else if (resumed) {
+    snprintf(path, sizeof path, "%s/%s", k->dir, rel);
+    if (!is_regular(path))
+      k->rc = cli_fail(k->ctx, CLI_IO,
+                       "%s: %s says an earlier run saved it, but it is not there (start over with --force)",
+                       path, SPREAD_STATE);
+  }
+  if (k->rc) {
+    cJSON_Delete(r);
+    return 1;
+  }
+  if (k->ne == k->cap) {
+    size_t nc = k->cap ? 2 * k->cap : 64;
+    index_entry *ne = realloc(k->e, nc * sizeof *ne);
+    if (!ne) {
+      k->rc = cli_fail(k->ctx, CLI_IO, "out of memory");
+      cJSON_Delete(r);
+      return 1;
+    }
+    k->e = ne, k->cap = nc;
+  }
+  cJSON *line = index_line(r, c, sn, rel, k->sorted, k->n, k->job_params);
+  cJSON_Delete(r);
+  index_entry *e = &k->e[k->ne];
+  memset(e, 0, sizeof *e);
+  e->line = line;
+  e->context = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(line, "context"));
+  e->sensor = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(line, "sensor"));
+  e->order = k->ne++;
+  return 0;
+}
+
+static int run_spread(cli_ctx *ctx, const cli_args *a, int k_shards, bool resume, cli_format fmt, double timeout,
+                      const sweep_list *l, sweep_item **sorted, const cJSON *job_params, const rsw_contexts *x,
+                      const char *fingerprint, size_t shard_i, size_t shard_n) {
+  const char *scene = a->pos[0], *dir = cli_get(a, "-o");
+  struct stat sst;
+  bool scene_is_file = stat(scene, &sst) == 0 && S_ISREG(sst.st_mode);
+  char *state = dir_file(dir, SPREAD_STATE);
+  cli_progress p;
+  cli_progress_init(&p, ctx);
+  spread_sink sink = {.ctx = ctx,
+                      .dir = dir,
+                      .fmt = fmt,
+                      .sorted = sorted,
+                      .n = l->n,
+                      .job_params = job_params,
+                      .incomplete = cJSON_CreateArray(),
+                      .progress = &p};
+  int rc = 0;
+  if (!state || !sink.incomplete) {
+    rc = cli_fail(ctx, CLI_IO, "out of memory");
+    goto out;
+  }
+  /* Written before any film: an interrupted sweep says so (merge lists it
+   * as unfinished; a rerun of the command resumes it). */
+  if (!resume &&
+      (rc = manifest_write(ctx, dir, fingerprint, scene, shard_i, shard_n, l, NULL, false, NULL)))
+    goto out;
+  if (!ctx->quiet)
+    fprintf(stderr, "raysweep sweep: %s%zu contexts in %d shards through %s\n", resume ? "resuming: " : "", l->n,
+            k_shards, ctx->server_url);
+  rsw_client_opts co = {.size = sizeof co, .base_url = ctx->server_url, .token = ctx->token,
+                        .interrupt = &cli_interrupted};
+  rsw_spread_opts so = {.size = sizeof so,
+                        .shards = k_shards,
+                        .scene_file = scene_is_file ? scene : NULL,
+                        .state_path = state,
+                        .timeout_s = timeout,
+                        .progress = ctx->quiet ? NULL : cli_progress_cb,
+                        .progress_user = &p,
+                        .on_film = spread_film,
+                        .film_user = &sink};
+  rsw_spread_result res;
+  cli_catch_interrupt();
+  rsw_status s = rsw_spread_run(&co, scene_is_file ? NULL : scene, x, &so, &res);
+  if (p.drawn && ctx->stderr_tty && s) fputc('\n', stderr);
+  if (sink.rc) {
+    rc = sink.rc;
+    goto out;
+  }
+  if (s) {
+    const char *why = rsw_spread_last_error();
+    if (s == RSW_ERR_CANCELLED && cli_interrupted)
+      rc = cli_fail(ctx, CLI_INTERRUPTED,
+                    "interrupted; the shards' jobs keep running on the replicas: rerun the same command to "
+                    "fetch what finished and render only the rest (state in %s)",
+                    state);
+    else if (s == RSW_ERR_UNAVAILABLE)
+      rc = cli_fail(ctx, CLI_CONNECT, "%s; %zu films saved so far; rerun the same command to resume (state in %s)",
+                    why, sink.ne, state);
+    else if (s == RSW_ERR_TIMEOUT)
+      rc = cli_fail(ctx, CLI_TIMEOUT, "%s; rerun the same command to resume (state in %s)", why, state);
+    else if (s == RSW_ERR_PRECONDITION)
+      rc = cli_usage(ctx, "%s: resume with the same --spread, or start over with --force", why);
+    else
+      rc = cli_fail(ctx, s == RSW_ERR_NOMEM || s == RSW_ERR_IO ? CLI_IO : CLI_SERVER, "%s", why);
+    goto out;
+  }
+  p.done = p.total = res.films + res.failed + res.resumed;
+  p.failed = res.failed;
+  if (!ctx->quiet) cli_progress_finish(&p);
+  /* The same directory an unsharded sweep of the scene id writes: index
+   * sorted by context and sensor, sweep.json with that sweep's
+   * fingerprint. */
+  char fp2[17];
+  sweep_fingerprint(a, res.scene_id, fp2);
+  if ((rc = write_index(ctx, dir, sink.e, sink.ne))) goto out;
+  cJSON *inc = cJSON_CreateArray();
+  const char *prev = NULL;
+  /* incomplete ids sorted, each once */
+  size_t ni = (size_t)cJSON_GetArraySize(sink.incomplete);
+  const char **ids = malloc((ni ? ni : 1) * sizeof *ids);
+  size_t m = 0;
+  const cJSON *it;
+  cJSON_ArrayForEach(it, sink.incomplete) if (ids) ids[m++] = it->valuestring;
+  if (ids && m) qsort(ids, m, sizeof *ids, cmp_str);
+  for (size_t i = 0; ids && i < m; i++)
+    if (!prev || strcmp(prev, ids[i]) != 0) cJSON_AddItemToArray(inc, cJSON_CreateString(prev = ids[i]));
+  free(ids);
+  rc = manifest_write(ctx, dir, fp2, res.scene_id, shard_i, shard_n, l, NULL, true, inc);
+  cJSON_Delete(inc);
+  if (rc) goto out;
+  unlink(state);
+  rc = res.failed ? CLI_JOB : CLI_OK;
+  if (ctx->json) {
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "scene", res.scene_id);
+    cJSON_AddStringToObject(o, "dir", dir);
+    cJSON_AddNumberToObject(o, "contexts", (double)l->n);
+    cJSON_AddNumberToObject(o, "films", (double)sink.ne);
+    cJSON_AddNumberToObject(o, "failed", (double)res.failed);
+    cJSON_AddNumberToObject(o, "shards", k_shards);
+    cJSON_AddNumberToObject(o, "resubmitted", (double)res.resubmitted);
+    cJSON_AddNumberToObject(o, "contexts_resubmitted", (double)res.contexts_resubmitted);
+    cJSON_AddNumberToObject(o, "resumed", (double)res.resumed);
+    char *t = cJSON_PrintUnformatted(o);
+    if (t) printf("%s\n", t);
+    free(t);
+    cJSON_Delete(o);
+  } else if (!ctx->quiet) {
+    fprintf(stderr,
+            "raysweep sweep: %zu films in %s%s (%d shards; %zu resubmission%s of %zu contexts; %zu films from an "
+            "earlier run)\n",
+            sink.ne, dir, res.failed ? " (some renders failed)" : "", k_shards, res.resubmitted,
+            res.resubmitted == 1 ? "" : "s", res.contexts_resubmitted, res.resumed);
+  }
+out:
+  entries_free(sink.e, sink.ne);
+  cJSON_Delete(sink.incomplete);
+  free(state);
+  return rc;
+}
+
 int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
   const char *scene = a->pos[0], *dir = cli_get(a, "-o"), *contexts_file = cli_get(a, "--contexts");
   size_t n_grids;
@@ -889,6 +1124,9 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
         shard_n == 0 || shard_i >= shard_n)
       return cli_usage(ctx, "--shard needs I/N with 0 <= I < N (got '%s')", v);
   }
+  unsigned long long spread = 0;
+  if ((v = cli_get(a, "--spread")) && (!cli_parse_u64(v, 4096, &spread) || spread == 0))
+    return cli_usage(ctx, "--spread needs a number of shards from 1 to 4096 (got '%s')", v);
   double timeout = 0;
   if ((v = cli_get(a, "--timeout")) && (!cli_parse_double(v, &timeout) || !(timeout > 0)))
     return cli_usage(ctx, "--timeout needs a positive number of seconds (got '%s')", v);
@@ -904,7 +1142,7 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
   rsw_contexts *x = NULL;
   index_entry *entries = NULL;
   size_t n_entries = 0, failed = 0;
-  char job[40] = "", fingerprint[17] = "";
+  char job[40] = "", fingerprint[17] = "", scene_id[65] = "";
   cJSON *incomplete = NULL;
   if (contexts_file) {
     rc = read_contexts(ctx, contexts_file, shard_i, shard_n, &l);
@@ -936,8 +1174,9 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
     }
   }
   /* Everything the user described is checked: now the directory. */
-  if ((rc = prepare_output(ctx, dir, cli_has(a, "--force")))) goto out;
   sweep_fingerprint(a, scene, fingerprint);
+  bool resume = spread && !cli_has(a, "--force") && spread_resumable(dir, fingerprint);
+  if (!resume && (rc = prepare_output(ctx, dir, cli_has(a, "--force")))) goto out;
   if (l.n == 0) {
     /* A shard past the end of a short list: nothing to submit, an empty
      * index keeps `merge` simple. */
@@ -948,6 +1187,23 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
   }
   /* The job lists the contexts in the order the user described them. */
   if ((rc = build_contexts(ctx, a, l.items, l.n, job_params, (long long)spp, (long long)seed, &x))) goto out;
+  struct stat sst;
+  if (!spread && stat(scene, &sst) == 0 && S_ISREG(sst.st_mode)) {
+    /* A scene FILE: push it (blobs it references too) and sweep its id. */
+    int created = 0;
+    rsw_status ps = rsw_scene_push_file(ctx->client, scene, NULL, scene_id, &created);
+    if (ps) {
+      rc = cli_report(ctx, ps, scene);
+      goto out;
+    }
+    scene = scene_id;
+    sweep_fingerprint(a, scene, fingerprint);
+  }
+  if (spread) {
+    rc = run_spread(ctx, a, (int)spread, resume, fmt, timeout, &l, sorted, job_params, x, fingerprint,
+                    (size_t)shard_i, (size_t)shard_n);
+    goto out;
+  }
   cli_catch_interrupt();
   rsw_status s = rsw_job_submit(ctx->client, scene, x, NULL, job);
   if (s && cli_interrupted) {

@@ -43,8 +43,8 @@ static const cli_command commands[] = {
      "render)",
      cli_opts_render, 1, 1, true, cmd_render},
     {"sweep", NULL,
-     "ID (--contexts FILE.jsonl | --grid NAME=START:STOP:STEP...) [--set KEY=VALUE]... [--sensor S]... "
-     "[--spp N] [--seed N] [--shard I/N] [--format exr|npy|json] [--timeout S] -o DIR [--force]",
+     "ID|FILE (--contexts FILE.jsonl | --grid NAME=START:STOP:STEP...) [--set KEY=VALUE]... [--sensor S]... "
+     "[--spp N] [--seed N] [--shard I/N] [--spread K] [--format exr|npy|json] [--timeout S] -o DIR [--force]",
      "submit a job over many contexts, show progress, fetch every film into DIR with DIR/index.jsonl and "
      "DIR/sweep.json (Ctrl-C cancels the job)",
      cli_opts_sweep, 1, 1, true, cmd_sweep},
@@ -77,11 +77,12 @@ static const char global_help[] =
     "  0  ok\n"
     "  1  the server said no (its problem is printed: code, message, place, candidates)\n"
     "  2  usage error\n"
-    "  3  cannot connect to the daemon\n"
+    "  3  cannot connect to the daemon (sweep --spread: to the balancer; rerun to resume)\n"
     "  4  job failed or was cancelled (or some of its renders failed)\n"
     "  5  timeout\n"
     "  6  local I/O error (files, directories, inconsistent shard directories)\n"
-    "  130 interrupted (Ctrl-C): sweep cancels its job first, job watch leaves it running\n";
+    "  130 interrupted (Ctrl-C): sweep cancels its job first (with --spread it leaves its jobs for a\n"
+    "      rerun to resume), job watch leaves it running\n";
 
 static void command_name(const cli_command *c, char *buf, size_t n) {
   snprintf(buf, n, "%s%s%s", c->group, c->name ? " " : "", c->name ? c->name : "");
@@ -347,6 +348,7 @@ int main(int argc, char **argv) {
     ctx.server_url = server ? server : getenv("RAYSWEEP_URL");
     if (!ctx.server_url || !*ctx.server_url) ctx.server_url = DEFAULT_URL;
     rc = read_token(&ctx, token_file, &token);
+    ctx.token = token;
     if (!rc) {
       rsw_client_opts o = {
           .size = sizeof o, .base_url = ctx.server_url, .token = token, .interrupt = &cli_interrupted};

@@ -95,6 +95,10 @@ rsw_status rsw_client_new(const rsw_client_opts *opts, rsw_client **out) {
   c->max_retries = o.max_retries == 0 ? 3 : o.max_retries < 0 ? 0 : o.max_retries;
   c->retry_backoff_s = o.retry_backoff_s > 0 ? o.retry_backoff_s : 0.2;
   c->interrupt = o.interrupt;
+  if (o.route_key && rsw_client_set_route(c, o.route_key)) {
+    rsw_client_free(c);
+    return RSW_ERR_INVALID;
+  }
   rsw_status s = http_client_init(c);
   if (s) {
     rsw_client_free(c);
@@ -109,7 +113,28 @@ void rsw_client_free(rsw_client *c) {
   http_client_cleanup(c);
   free(c->base_url);
   free(c->token);
+  free(c->route);
   free(c);
+}
+
+bool client_valid_route(const char *key) {
+  size_t n = 0;
+  for (const char *p = key; *p; p++, n++) {
+    bool ok = (*p >= 'A' && *p <= 'Z') || (*p >= 'a' && *p <= 'z') || (*p >= '0' && *p <= '9') || *p == '.' ||
+              *p == '_' || *p == '-';
+    if (!ok) return false;
+  }
+  return n >= 1 && n <= 64;
+}
+
+rsw_status rsw_client_set_route(rsw_client *c, const char *key) {
+  if (!c) return RSW_ERR_INVALID;
+  if (key && !client_valid_route(key)) return RSW_ERR_INVALID;
+  char *k = key ? dup_str(key) : NULL;
+  if (key && !k) return RSW_ERR_NOMEM;
+  free(c->route);
+  c->route = k;
+  return RSW_OK;
 }
 
 void rsw_free(void *p) {

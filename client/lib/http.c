@@ -138,6 +138,8 @@ static rsw_status setup(rsw_client *c, const http_req *q, exchange *x, char *url
     return client_fail(c, RSW_ERR_INVALID, "URL too long: %s%s", c->base_url, q->path);
   bool ok = add_header(x, "Accept: %s", q->accept ? q->accept : "application/json");
   if (c->token) ok = ok && add_header(x, "Authorization: Bearer %s", c->token);
+  /* The balancer's consistent-hash key (docker/haproxy, docker/nginx). */
+  if (c->route) ok = ok && add_header(x, "X-Raysweep-Shard: %s", c->route);
   if (q->content_type) ok = ok && add_header(x, "Content-Type: %s", q->content_type);
   if (q->if_match) ok = ok && add_header(x, "If-Match: %s", q->if_match);
   if (q->idempotency_key) ok = ok && add_header(x, "Idempotency-Key: %s", q->idempotency_key);

@@ -22,6 +22,7 @@
 struct rsw_client {
   char *base_url; /* without a trailing '/' */
   char *token;    /* NULL: no Authorization header */
+  char *route;    /* X-Raysweep-Shard routing key, or NULL: none */
   double connect_timeout_s, timeout_s;
   int max_retries; /* >= 0 after rsw_client_new */
   double retry_backoff_s;
@@ -102,6 +103,8 @@ void http_client_cleanup(rsw_client *c);
 /* Percent-encode s (everything outside A-Z a-z 0-9 - . _ ~) into out;
  * false when it does not fit. */
 bool client_escape(const char *s, char *out, size_t cap);
+/* A routing key: [A-Za-z0-9._-]{1,64}. */
+bool client_valid_route(const char *key);
 /* GET path and hand back the body as an owned string (rsw_free). */
 rsw_status client_get_text(rsw_client *c, const char *path, char **json_out);
 /* Monotonic seconds. */
@@ -113,6 +116,15 @@ void client_sleep_s(const rsw_client *c, double s);
 bool client_interrupted(const rsw_client *c);
 /* Record "interrupted" (RSW_ERR_CANCELLED) and return it. */
 rsw_status client_fail_interrupted(rsw_client *c, const char *what);
+
+/* ---- contexts (jobs.c), for spread.c ----------------------------------------- */
+
+/* The id of context i (borrowed), or NULL. */
+const char *client_contexts_id(const rsw_contexts *x, size_t i);
+/* The whole JobRequest as JSON text (owned: free). */
+char *client_contexts_print(const rsw_contexts *x);
+/* A new list with the job settings of x and its contexts idx[0..n). */
+rsw_status client_contexts_subset(const rsw_contexts *x, const size_t *idx, size_t n, rsw_contexts **out);
 
 /* ---- films (film.c) -------------------------------------------------------- */
 

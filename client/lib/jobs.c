@@ -596,3 +596,49 @@ rsw_status rsw_job_wait(rsw_client *c, const char *job_id, rsw_progress_fn progr
   if (final_out) *final_out = st;
   return RSW_OK;
 }
+
+/* ---- for spread.c ------------------------------------------------------------------------ */
+
+const char *client_contexts_id(const rsw_contexts *x, size_t i) {
+  return x && i < x->n ? cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(x->items[i], "id")) : NULL;
+}
+
+char *client_contexts_print(const rsw_contexts *x) {
+  return x ? cJSON_PrintUnformatted(x->root) : NULL;
+}
+
+rsw_status client_contexts_subset(const rsw_contexts *x, const size_t *idx, size_t n, rsw_contexts **out) {
+  if (!x || !out) return RSW_ERR_INVALID;
+  rsw_contexts *y = calloc(1, sizeof *y);
+  if (!y) return RSW_ERR_NOMEM;
+  /* Everything of the JobRequest but the contexts, then the chosen ones. */
+  y->root = cJSON_CreateObject();
+  const cJSON *f;
+  bool ok = y->root != NULL;
+  cJSON_ArrayForEach(f, x->root) {
+    if (!ok) break;
+    if (strcmp(f->string, "contexts") == 0) continue;
+    cJSON *d = cJSON_Duplicate(f, 1);
+    ok = d && cJSON_AddItemToObject(y->root, f->string, d);
+    if (!ok) cJSON_Delete(d);
+  }
+  y->list = ok ? cJSON_AddArrayToObject(y->root, "contexts") : NULL;
+  y->items = malloc((n ? n : 1) * sizeof *y->items);
+  ok = ok && y->list && y->items;
+  for (size_t i = 0; i < n && ok; i++) {
+    cJSON *d = idx[i] < x->n ? cJSON_Duplicate(x->items[idx[i]], 1) : NULL;
+    ok = d && cJSON_AddItemToArray(y->list, d);
+    if (!ok) {
+      cJSON_Delete(d);
+      break;
+    }
+    y->items[y->n++] = d;
+  }
+  y->cap = n;
+  if (!ok) {
+    rsw_contexts_free(y);
+    return RSW_ERR_NOMEM;
+  }
+  *out = y;
+  return RSW_OK;
+}

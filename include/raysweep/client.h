@@ -58,6 +58,11 @@ typedef struct rsw_client_opts {
                                 RSW_ERR_CANCELLED, and later calls fail the
                                 same way until it is zero again. A signal
                                 handler may set it (the CLI's Ctrl-C). */
+  const char *route_key;                  /* or NULL: sent as the X-Raysweep-Shard header on
+                                every request: the key a load balancer in front
+                                of several replicas hashes (docker/haproxy,
+                                docker/nginx) so that all requests of one shard
+                                reach the same replica; [A-Za-z0-9._-]{1,64} */
 } rsw_client_opts;
 
 /* Create a client. Borrows opts (strings are copied). *out is owned: free
@@ -65,6 +70,11 @@ typedef struct rsw_client_opts {
 rsw_status rsw_client_new(const rsw_client_opts *opts, rsw_client **out);
 /* Free a client; NULL is a no-op. */
 void rsw_client_free(rsw_client *c);
+/* Change the routing key (X-Raysweep-Shard) of later requests; NULL: send
+ * none. RSW_ERR_INVALID unless [A-Za-z0-9._-]{1,64}. Job ids are local to a
+ * replica: the requests that follow a job (events, results, films) must
+ * carry the key its submission carried. */
+rsw_status rsw_client_set_route(rsw_client *c, const char *key);
 
 /* The last error of this client, valid until its next call. All strings
  * are borrowed from the client ("" when absent). */
@@ -214,6 +224,73 @@ rsw_status rsw_job_results(rsw_client *c, const char *job_id, char **json_out);
 /* One film of a job. *film_out is owned: rsw_film_free. */
 rsw_status rsw_job_fetch(rsw_client *c, const char *job_id, const char *context, const char *sensor,
                          rsw_film **film_out);
+
+/* ---- one job spread over several replicas ------------------------------------------ */
+
+/* rsw_spread_run cuts a context list into `shards` shards (context k goes
+ * to shard k mod shards, as `raysweep sweep --shard`), gives each shard its
+ * own routing key ("<prefix>-<shard>", then "<prefix>-<shard>.r<n>" for
+ * the n-th resubmission) and runs them concurrently, one client per shard,
+ * through one base URL: a load balancer that hashes X-Raysweep-Shard
+ * consistently sends every request of a shard to one replica. Films are
+ * the same as the unsharded job's: seeds derive from (job seed, context id,
+ * sensor) on the daemon.
+ *
+ * A shard whose replica is lost (its job answers 404, 502, 503 or 504, or
+ * ended cancelled because the replica shut down) is resubmitted, without
+ * the contexts already delivered, under its next routing key, so the
+ * balancer places it elsewhere. When the base URL cannot be reached at
+ * all (connection refused: the balancer is gone) the run stops with
+ * RSW_ERR_UNAVAILABLE; with a state file the same call later resumes: the
+ * jobs it names are followed again (through their keys) and only contexts
+ * that were not delivered are rendered. */
+
+/* Called once per (context, sensor) of the list, serialised (never two at
+ * once), in no particular order. result_json: the job's result object
+ * ({context, sensor, state, wavelength?, seed?, error?}). film: the film
+ * when state is "succeeded", else NULL; also NULL with resumed = 1 for a
+ * film an earlier run with the same state file delivered (the caller kept
+ * it then). Return non-zero to stop the run (RSW_ERR_CANCELLED). */
+typedef int (*rsw_spread_film_fn)(void *user, const char *context, const char *sensor, const char *result_json,
+                                  const rsw_film *film, int resumed);
+
+typedef struct rsw_spread_opts {
+  size_t size;                /* sizeof(rsw_spread_opts) */
+  int shards;                 /* K >= 1 */
+  const char *scene_file;     /* pushed through every routing key before its job (blobs as in
+                                 rsw_scene_push_file); NULL: scene_id must be resident on every
+                                 replica */
+  const char *variant;        /* for scene_file; may be NULL */
+  const char *route_prefix;   /* NULL: "rs" + 12 random hex digits (kept in the state file) */
+  const char *state_path;     /* NULL: no resume; otherwise a journal (JSON lines) written as the
+                                 run goes and read first when it exists */
+  int max_resubmits;          /* per shard; 0: 8 */
+  double timeout_s;           /* whole run; <= 0: none */
+  rsw_progress_fn progress;   /* may be NULL; done/total over every shard, serialised */
+  void *progress_user;
+  rsw_spread_film_fn on_film; /* required */
+  void *film_user;
+} rsw_spread_opts;
+
+typedef struct rsw_spread_result {
+  size_t films;          /* delivered by this run (state succeeded) */
+  size_t failed;         /* renders that did not succeed (delivered with film NULL) */
+  size_t resumed;        /* delivered by an earlier run (from the state file) */
+  size_t resubmitted;    /* shard resubmissions after a lost replica */
+  size_t contexts_resubmitted;
+  char scene_id[65];     /* the scene the jobs used */
+  char route_prefix[32];
+} rsw_spread_result;
+
+/* copts: how to reach the balancer (base_url, token, ...; route_key is
+ * ignored). scene_id: the scene, or NULL with opts->scene_file. x: the
+ * contexts and job settings (borrowed). *out (may be NULL) is filled also
+ * on failure. Thread-safe; starts opts->shards threads. */
+rsw_status rsw_spread_run(const rsw_client_opts *copts, const char *scene_id, const rsw_contexts *x,
+                          const rsw_spread_opts *opts, rsw_spread_result *out);
+/* The message of the last rsw_spread_run failure of this thread ("" when
+ * none). */
+const char *rsw_spread_last_error(void);
 
 #ifdef __cplusplus
 }

@@ -198,10 +198,11 @@ static void h_live(http_req *r) {
 }
 
 static void h_ready(http_req *r) {
-  if (service_ready(r->svc))
+  const char *why = NULL;
+  if (service_accepts_jobs(r->svc, &why))
     http_resp_json(r, 200, strdup("{\"status\":\"ready\"}"));
   else
-    http_resp_problem(r, 503, NULL, "the server is shutting down or not ready to accept work");
+    http_resp_problem(r, 503, NULL, "%s", why);
 }
 
 static void h_metrics(http_req *r) {

@@ -397,7 +397,10 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     e->retry_after_s = 1;
     return st;
   }
-  snprintf(jb->id, sizeof jb->id, "job-%06llu", (unsigned long long)++svc->next_job);
+  /* The process's instance in the id: replicas behind one balancer never
+   * hand out the same job id, so a request rerouted to another replica
+   * (its own replica lost) gets 404, not somebody else's job. */
+  snprintf(jb->id, sizeof jb->id, "job-%.8s-%06llu", svc->instance, (unsigned long long)++svc->next_job);
   jb->revision = r->revision;
   bool ok = svc_grow((void **)&svc->jobs, &svc->cap_jobs, svc->n_jobs + 1, sizeof *svc->jobs, 0) &&
             svc_grow((void **)&svc->queue, &svc->cap_queue, svc->n_queue + 1, sizeof *svc->queue, 0);

@@ -2,12 +2,14 @@
  * shares (service_internal.h). Resources have their own files: scenes.c,
  * params.c, renders.c, blobs.c, jobs.c, metrics.c. */
 #include <errno.h>
+#include <fcntl.h>
 #include <limits.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "../kernel/plugins/env_plugin.h"
@@ -55,6 +57,21 @@ char *svc_print_json(cJSON *o) {
   return s;
 }
 
+/* 16 hex digits from /dev/urandom (the clock and the pid when it cannot
+ * be read): tells replicas apart, nothing more. */
+static void random_instance(char out[17]) {
+  unsigned char b[8] = {0};
+  int fd = open("/dev/urandom", O_RDONLY | O_CLOEXEC);
+  if (fd < 0 || read(fd, b, sizeof b) != (ssize_t)sizeof b) {
+    struct timespec ts;
+    clock_gettime(CLOCK_REALTIME, &ts);
+    uint64_t v = ((uint64_t)ts.tv_sec * 1000000007ull) ^ (uint64_t)ts.tv_nsec ^ ((uint64_t)getpid() << 40);
+    memcpy(b, &v, sizeof b);
+  }
+  if (fd >= 0) close(fd);
+  for (int i = 0; i < 8; i++) snprintf(out + 2 * i, 3, "%02x", b[i]);
+}
+
 rsw_status service_new(const service_opts *opts, service **out, rsw_err *err) {
   service *svc = calloc(1, sizeof *svc);
   if (!svc) return rsw_fail(err, RSW_ERR_NOMEM, "service", "out of memory");
@@ -90,6 +107,7 @@ rsw_status service_new(const service_opts *opts, service **out, rsw_err *err) {
   svc->opts.data_root = svc->data_root[0] ? svc->data_root : NULL;
   pthread_mutex_init(&svc->lock, NULL);
   pthread_cond_init(&svc->cond, NULL);
+  random_instance(svc->instance);
   atomic_store(&svc->ready, true);
   if (pthread_create(&svc->worker, NULL, svc_worker_main, svc) != 0) {
     service_free(svc);
@@ -112,6 +130,19 @@ void service_shutdown(service *svc) {
 
 bool service_ready(const service *svc) {
   return svc && atomic_load(&svc->ready);
+}
+
+bool service_accepts_jobs(service *svc, const char **why_out) {
+  const char *why = NULL;
+  if (!service_ready(svc)) {
+    why = "the server is shutting down";
+  } else {
+    pthread_mutex_lock(&svc->lock);
+    if (svc->n_queue >= svc->opts.max_queue) why = "the job queue is full (--max-queue)";
+    pthread_mutex_unlock(&svc->lock);
+  }
+  if (why_out) *why_out = why;
+  return !why;
 }
 
 void svc_resident_free(resident *r) {
@@ -143,6 +174,7 @@ char *service_info_json(service *svc) {
   cJSON_AddStringToObject(o, "version", RSW_VERSION);
   cJSON_AddStringToObject(o, "build", __DATE__ " " __TIME__);
   cJSON_AddStringToObject(o, "api_version", "v1");
+  cJSON_AddStringToObject(o, "instance", svc->instance);
   cJSON *v = cJSON_AddArrayToObject(o, "variants");
   cJSON_AddItemToArray(v, cJSON_CreateString("mono"));
   cJSON_AddItemToArray(v, cJSON_CreateString("rgb"));

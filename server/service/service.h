@@ -49,6 +49,10 @@ void service_free(service *svc);
 /* Stop accepting work (ready goes false); running jobs are cancelled. */
 void service_shutdown(service *svc);
 bool service_ready(const service *svc);
+/* GET /v1/health/ready: ready, and room in the job queue (--max-queue), so
+ * that a load balancer's health check takes a full replica out of its ring
+ * until it has room again. *why_out (may be NULL) says which is missing. */
+bool service_accepts_jobs(service *svc, const char **why_out);
 
 /* ---- JSON documents ---------------------------------------------------------
  * Results that are JSON documents come back as malloc'ed, NUL-terminated

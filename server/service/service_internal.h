@@ -110,6 +110,7 @@ struct service {
   bool worker_started;
   bool stopping;
   atomic_bool ready;
+  char instance[17]; /* random per process: GET /v1 "instance" (which replica a balancer key reaches) */
   /* metrics */
   struct req_count {
     char route[96];

@@ -682,6 +682,7 @@ struct fake_server {
   char *body[8]; /* request bodies (owned), by request number */
   size_t body_len[8];
   char ctype[8][64]; /* their Content-Type */
+  char route[8][80];  /* their X-Raysweep-Shard ("" when absent) */
 };
 
 static void *fake_main(void *arg) {
@@ -729,6 +730,9 @@ static void *fake_main(void *arg) {
       const char *l = strcasestr(req, "\r\nLast-Event-ID:");
       fs->last_event_id[n][0] = '\0';
       if (l) sscanf(l + 16, " %31[^\r\n]", fs->last_event_id[n]);
+      const char *rt = strcasestr(req, "\r\nX-Raysweep-Shard:");
+      fs->route[n][0] = '\0';
+      if (rt) sscanf(rt + 19, " %79[^\r\n]", fs->route[n]);
       const char *ct = strcasestr(req, "\r\nContent-Type:");
       fs->ctype[n][0] = '\0';
       if (ct) sscanf(ct + 15, " %63[^\r\n]", fs->ctype[n]);
@@ -936,6 +940,110 @@ static void test_push_wire(void) {
   fake_stop(&fs);
 }
 
+/* The routing key: sent on every request once set (options or
+ * rsw_client_set_route), not sent after it is cleared, refused when it is
+ * not [A-Za-z0-9._-]{1,64}. */
+static void test_route_header(void) {
+  fake_server fs;
+  REQUIRE(fake_start(&fs, script_busy), "fake server");
+  char url[64];
+  snprintf(url, sizeof url, "http://127.0.0.1:%d", fs.port);
+  rsw_client_opts o = {.size = sizeof o, .base_url = url, .retry_backoff_s = 0.01, .route_key = "shard-7.r1"};
+  rsw_client *c = NULL;
+  REQUIRE(rsw_client_new(&o, &c) == RSW_OK, "client with a route key");
+  char *json = NULL;
+  rsw_status s = rsw_server_info(c, &json); /* 429, 503, then 200: three requests */
+  rsw_free(json);
+  CHECK(s == RSW_OK && fs.n_requests == 3 && strcmp(fs.route[0], "shard-7.r1") == 0 &&
+            strcmp(fs.route[2], "shard-7.r1") == 0,
+        "every request (retries too) carries the key: %s, %d requests, '%s' '%s'", rsw_strerror(s),
+        fs.n_requests, fs.route[0], fs.route[2]);
+  CHECK(rsw_client_set_route(c, "bad key") == RSW_ERR_INVALID && rsw_client_set_route(c, "") == RSW_ERR_INVALID,
+        "a key with a space or an empty key is refused");
+  REQUIRE(rsw_client_set_route(c, NULL) == RSW_OK, "clear the key");
+  json = NULL;
+  s = rsw_server_info(c, &json);
+  rsw_free(json);
+  CHECK(s == RSW_OK && fs.n_requests == 4 && fs.route[3][0] == '\0', "no key after clearing: '%s'", fs.route[3]);
+  rsw_client_free(c);
+  o.route_key = "x/y";
+  c = NULL;
+  CHECK(rsw_client_new(&o, &c) == RSW_ERR_INVALID && !c, "rsw_client_new refuses a bad route_key");
+  fake_stop(&fs);
+}
+
+typedef struct spread_log {
+  int films, resumed, failed, bad;
+  char seen[32][8];
+} spread_log;
+
+static int on_spread_film(void *user, const char *context, const char *sensor, const char *result_json,
+                          const rsw_film *film, int resumed) {
+  spread_log *l = user;
+  if (resumed) {
+    l->resumed++;
+    if (film) l->bad++;
+  } else if (film) {
+    int i = atoi(context + 1);
+    double wl = 400.0 + 300.0 * i / 11, rho = 0.2 + 0.6 * (wl - 400.0) / 300.0, want = rho / PI;
+    if (strcmp(sensor, "meter") != 0 || fabs(rsw_film_data(film)[0] - want) > 1e-5 * want ||
+        !strstr(result_json, "\"succeeded\""))
+      l->bad++;
+    l->films++;
+  } else {
+    l->failed++;
+  }
+  return 0;
+}
+
+/* rsw_spread_run against one daemon (no balancer: every key reaches it):
+ * 12 contexts in 3 shards, each film delivered once and right; a second
+ * run with the same state file renders nothing and hands every film back
+ * as resumed; a state file of another sweep is refused. */
+static void test_spread(void) {
+  rsw_client *c = client_for(main_d.url, NULL, 0);
+  REQUIRE(c, "client");
+  char id[65];
+  REQUIRE(plate_scene(c, "0.5", id), "scene");
+  rsw_contexts *x = NULL;
+  REQUIRE(rsw_contexts_new(&x) == RSW_OK, "contexts");
+  for (int i = 0; i < 12; i++) {
+    char ctx[16];
+    snprintf(ctx, sizeof ctx, "w%02d", i);
+    rsw_contexts_add(x, ctx, 400.0 + 300.0 * i / 11, NULL);
+  }
+  rsw_contexts_set_job_param(x, "plate.bsdf.reflectance.value",
+                             "{\"wavelengths\": [400, 700], \"values\": [0.2, 0.8]}");
+  rsw_contexts_add_default_sensor(x, "meter");
+  rsw_contexts_set_default_spp(x, 2);
+  char state[200];
+  snprintf(state, sizeof state, "%s/spread.state", tmpdir);
+  rsw_client_opts co = {.size = sizeof co, .base_url = main_d.url, .retry_backoff_s = 0.01};
+  spread_log l = {0};
+  rsw_spread_opts so = {.size = sizeof so, .shards = 3, .state_path = state, .on_film = on_spread_film,
+                        .film_user = &l};
+  rsw_spread_result r;
+  rsw_status s = rsw_spread_run(&co, id, x, &so, &r);
+  CHECK(s == RSW_OK && l.films == 12 && l.bad == 0 && l.resumed == 0 && r.films == 12 && r.resubmitted == 0 &&
+            strcmp(r.scene_id, id) == 0,
+        "spread: %s (%s), %d films, %d wrong, %d resumed", rsw_strerror(s), rsw_spread_last_error(), l.films,
+        l.bad, l.resumed);
+  spread_log l2 = {0};
+  so.film_user = &l2;
+  s = rsw_spread_run(&co, id, x, &so, &r);
+  CHECK(s == RSW_OK && l2.films == 0 && l2.resumed == 12 && l2.bad == 0 && r.resumed == 12,
+        "resumed from the state file: %s (%s), %d rendered, %d resumed", rsw_strerror(s), rsw_spread_last_error(),
+        l2.films, l2.resumed);
+  so.shards = 2; /* another sweep (a different cut) with the same state file */
+  s = rsw_spread_run(&co, id, x, &so, &r);
+  CHECK(s == RSW_ERR_PRECONDITION && strstr(rsw_spread_last_error(), "another sweep"),
+        "a foreign state file: %s (%s)", rsw_strerror(s), rsw_spread_last_error());
+  so.on_film = NULL;
+  CHECK(rsw_spread_run(&co, id, x, &so, &r) == RSW_ERR_INVALID, "no on_film: invalid");
+  rsw_contexts_free(x);
+  rsw_client_free(c);
+}
+
 static void test_wait_reconnects(void) {
   fake_server fs;
   REQUIRE(fake_start(&fs, script_drop), "fake server");
@@ -1127,6 +1235,8 @@ int main(void) {
     RSW_TEST_RUN(test_unknown_ids);
     RSW_TEST_RUN(test_push_wire);
     RSW_TEST_RUN(test_wait_reconnects);
+    RSW_TEST_RUN(test_route_header);
+    RSW_TEST_RUN(test_spread);
     RSW_TEST_RUN(test_wait_polls_without_events);
     RSW_TEST_RUN(test_retry_after);
     RSW_TEST_RUN(test_connection_refused);

@@ -1,0 +1,817 @@
+/* rsw_spread_run: one job spread over several replicas behind a load
+ * balancer that hashes the X-Raysweep-Shard header consistently
+ * (docker/haproxy, docker/nginx). No state in the balancer: a shard's
+ * routing key alone decides its replica, so the key is all a shard's
+ * follow-up requests (events, results, films) need to find their job.
+ *
+ * Shard k holds contexts k, k+K, k+2K, ... (as `raysweep sweep --shard
+ * k/K`). Its n-th (re)submission is routed by "<prefix>-<k>.r<n>" (n = 0:
+ * "<prefix>-<k>"), so a resubmission after a lost replica hashes to a
+ * fresh point of the ring and usually lands on another replica, while
+ * the balancer's own health checks take the lost one out.
+ *
+ * The state file is a journal of JSON lines, appended and flushed as the
+ * run goes:
+ *   {"format": "raysweep-spread/1", "prefix": P, "shards": K,
+ *    "contexts": N, "request": FNV-1a 64 of the JobRequest, "scene": ID?}
+ *   {"shard": k, "attempt": n, "key": KEY, "job": JOB, "contexts": C}
+ *   {"context": ID, "results": [result objects]}   one per delivered context
+ * A rerun reads it: delivered contexts are handed back (film NULL,
+ * resumed 1) and not rendered again; the last job of each shard is
+ * followed again through its key when the replica still has it. */
+#include <cjson/cJSON.h>
+#include <errno.h>
+#include <fcntl.h>
+#include <pthread.h>
+#include <stdarg.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "internal.h"
+
+#define SPREAD_FORMAT "raysweep-spread/1"
+
+static _Thread_local char spread_err[1024];
+
+const char *rsw_spread_last_error(void) {
+  return spread_err;
+}
+
+typedef struct spread spread;
+
+typedef struct shard {
+  spread *sp;
+  int k;
+  size_t *idx; /* context indices of x in this shard */
+  size_t n;
+  int attempt;
+  char base[64]; /* first key; resubmissions append ".r<n>" */
+  char key[96];
+  char job[40];        /* the job of this attempt, "" before submission */
+  size_t job_contexts; /* contexts in that job */
+  size_t prior;        /* renders delivered by earlier attempts */
+  size_t cur_done, cur_total;
+  rsw_status status;
+} shard;
+
+struct spread {
+  const rsw_client_opts *copts;
+  const rsw_spread_opts *o;
+  const rsw_contexts *x;
+  char prefix[32];
+  char scene_id[65];
+  size_t n_ctx;
+  const char **sorted_ids; /* ids sorted, for lookups */
+  size_t *sorted_idx;      /* index in x of sorted_ids[i] */
+  unsigned char *done;     /* per context index of x: delivered */
+  double deadline;
+  FILE *journal;
+  pthread_mutex_t lock; /* journal, callbacks, counters, done[] */
+  atomic_int stop;      /* a shard hit something the run cannot go past */
+  rsw_status fatal;
+  char err[1024];
+  shard *shards;
+  int n_shards;
+  size_t resumed, films, failed, resubmitted, contexts_resubmitted;
+};
+
+static void set_fatal(spread *sp, rsw_status s, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+static void set_fatal(spread *sp, rsw_status s, const char *fmt, ...) {
+  pthread_mutex_lock(&sp->lock);
+  if (!sp->fatal) {
+    sp->fatal = s;
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(sp->err, sizeof sp->err, fmt, ap);
+    va_end(ap);
+  }
+  atomic_store(&sp->stop, 1);
+  pthread_mutex_unlock(&sp->lock);
+}
+
+static int cmp_id(const void *a, const void *b) {
+  const spread *sp = NULL;
+  (void)sp;
+  return strcmp(*(const char *const *)a, *(const char *const *)b);
+}
+
+/* Index in x of context id, or (size_t)-1. */
+static size_t lookup(const spread *sp, const char *id) {
+  if (!id) return (size_t)-1;
+  const char **hit = bsearch(&id, sp->sorted_ids, sp->n_ctx, sizeof *sp->sorted_ids, cmp_id);
+  return hit ? sp->sorted_idx[hit - sp->sorted_ids] : (size_t)-1;
+}
+
+static uint64_t fnv1a64(const char *s) {
+  uint64_t h = 0xcbf29ce484222325ull;
+  for (; s && *s; s++) h = (h ^ (unsigned char)*s) * 0x100000001b3ull;
+  return h;
+}
+
+/* Append one line to the journal (caller holds the lock). */
+static void journal_line(spread *sp, cJSON *o) {
+  if (!sp->journal) {
+    cJSON_Delete(o);
+    return;
+  }
+  char *t = cJSON_PrintUnformatted(o);
+  cJSON_Delete(o);
+  if (t) {
+    fprintf(sp->journal, "%s\n", t);
+    fflush(sp->journal);
+    fsync(fileno(sp->journal));
+  }
+  free(t);
+}
+
+static void shard_key(shard *sh) {
+  if (!sh->base[0]) snprintf(sh->base, sizeof sh->base, "%s-%d", sh->sp->prefix, sh->k);
+  if (sh->attempt == 0)
+    snprintf(sh->key, sizeof sh->key, "%s", sh->base);
+  else
+    snprintf(sh->key, sizeof sh->key, "%s.r%d", sh->base, sh->attempt);
+}
+
+/* The replica a key reaches: GET /v1 through the balancer and read the
+ * daemon's "instance" (random per process). "" when the answer has none. */
+static rsw_status probe_instance(rsw_client *c, const char *key, char out[64]) {
+  out[0] = '\0';
+  rsw_status s = rsw_client_set_route(c, key);
+  char *text = NULL;
+  if (!s) s = rsw_server_info(c, &text);
+  if (s) return s;
+  cJSON *o = cJSON_Parse(text);
+  rsw_free(text);
+  const char *id = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "instance"));
+  if (id) snprintf(out, 64, "%s", id);
+  cJSON_Delete(o);
+  return RSW_OK;
+}
+
+/* Consistent hashing places K keys on R replicas at random: with K = R = 3
+ * all three differ only 2 times in 9. So each shard tries keys
+ * "<prefix>-<k>", "<prefix>-<k>.p1", ... (at most 32) and takes the first
+ * that reaches a replica fewer shards use than any other seen so far. The
+ * balancer stays stateless; the keys are kept in the state file. */
+static rsw_status choose_keys(spread *sp, rsw_client *c) {
+  enum { MAX_TRIES = 32, MAX_SEEN = 256 };
+  char (*seen)[64] = calloc(MAX_SEEN, 64);
+  int *used = calloc(MAX_SEEN, sizeof *used);
+  size_t n_seen = 0;
+  rsw_status s = seen && used ? RSW_OK : RSW_ERR_NOMEM;
+  for (int k = 0; k < sp->n_shards && !s; k++) {
+    shard *sh = &sp->shards[k];
+    if (sh->base[0]) continue; /* from the state file */
+    char key[64], inst[64], best_key[64] = "";
+    int best_use = -1;
+    size_t best_i = 0;
+    for (int t = 0; t < MAX_TRIES && !s; t++) {
+      if (t == 0)
+        snprintf(key, sizeof key, "%s-%d", sp->prefix, k);
+      else
+        snprintf(key, sizeof key, "%s-%d.p%d", sp->prefix, k, t);
+      if ((s = probe_instance(c, key, inst))) break;
+      if (!inst[0]) { /* no instance ids: nothing to choose from */
+        snprintf(best_key, sizeof best_key, "%s", key);
+        best_use = 0, best_i = (size_t)-1;
+        break;
+      }
+      size_t i = 0;
+      while (i < n_seen && strcmp(seen[i], inst) != 0) i++;
+      if (i == n_seen && n_seen < MAX_SEEN) snprintf(seen[n_seen++], 64, "%s", inst);
+      int use = i < MAX_SEEN ? used[i] : 0;
+      if (best_use < 0 || use < best_use) {
+        best_use = use, best_i = i;
+        snprintf(best_key, sizeof best_key, "%s", key);
+      }
+      /* Least used of all the replicas seen: good enough once every
+       * shard so far has a replica of its own or this one is unused. */
+      int min_use = use;
+      for (size_t j = 0; j < n_seen; j++) min_use = used[j] < min_use ? used[j] : min_use;
+      if (use == 0 || (use == min_use && t >= 8)) break;
+    }
+    if (s) break;
+    if (best_i < MAX_SEEN) used[best_i]++;
+    snprintf(sh->base, sizeof sh->base, "%s", best_key);
+  }
+  free(seen);
+  free(used);
+  return s;
+}
+
+/* ---- progress over every shard ---- */
+
+static int on_progress(void *user, const char *context, const char *sensor, size_t done, size_t total,
+                       int failed) {
+  shard *sh = user;
+  spread *sp = sh->sp;
+  if (atomic_load(&sp->stop)) return 1;
+  if (!context) return 0; /* the end-of-job call: the results decide */
+  pthread_mutex_lock(&sp->lock);
+  if (done > sh->cur_done) sh->cur_done = done;
+  if (total) sh->cur_total = total;
+  size_t d = sp->resumed, t = sp->resumed;
+  for (int i = 0; i < sp->n_shards; i++) {
+    d += sp->shards[i].prior + sp->shards[i].cur_done;
+    t += sp->shards[i].prior + sp->shards[i].cur_total;
+  }
+  int rc = 0;
+  if (sp->o->progress) rc = sp->o->progress(sp->o->progress_user, context, sensor ? sensor : "", d, t, failed);
+  pthread_mutex_unlock(&sp->lock);
+  if (rc) atomic_store(&sp->stop, 1);
+  return rc;
+}
+
+/* ---- what a failure means ---- */
+
+typedef enum { F_LOST, F_GONE, F_STOP, F_FATAL } failure;
+
+/* A request of shard sh failed with s: is its replica lost (resubmit), the
+ * balancer gone (stop, resumable), the run stopped, or something else? */
+static failure classify(shard *sh, rsw_client *c, rsw_status s) {
+  const rsw_error_info *e = rsw_client_last_error(c);
+  if (s == RSW_ERR_CANCELLED || s == RSW_ERR_TIMEOUT || atomic_load(&sh->sp->stop)) return F_STOP;
+  int h = e->http_status;
+  if (h == 404 || h == 429 || h == 502 || h == 503 || h == 504 || s == RSW_ERR_NOT_FOUND) return F_LOST;
+  if (h == 0 && s == RSW_ERR_UNAVAILABLE) {
+    /* No answer at all. A stream that dropped because its replica died
+     * reads the same: ask the balancer itself (any HTTP answer will do). */
+    char *text = NULL;
+    rsw_status p = rsw_server_ready(c);
+    (void)text;
+    if (p == RSW_OK || rsw_client_last_error(c)->http_status != 0) return F_LOST;
+    return F_GONE;
+  }
+  return F_FATAL;
+}
+
+static void fail_shard(shard *sh, rsw_client *c, rsw_status s, failure f, const char *what) {
+  spread *sp = sh->sp;
+  const rsw_error_info *e = rsw_client_last_error(c);
+  if (f == F_GONE)
+    set_fatal(sp, RSW_ERR_UNAVAILABLE, "cannot reach %s (%s): the balancer is gone; %s",
+              sp->copts->base_url ? sp->copts->base_url : "the server", e->message,
+              sp->o->state_path ? "the same call resumes from the state file" : "no state file: nothing to resume");
+  else if (f == F_STOP)
+    set_fatal(sp, s, "%s: %s", what, e->message[0] ? e->message : rsw_strerror(s));
+  else
+    set_fatal(sp, s, "shard %d (%s) %s: %s", sh->k, sh->key, what, e->message[0] ? e->message : rsw_strerror(s));
+}
+
+/* ---- one shard ---- */
+
+/* Hand every result of one context to the caller and journal it. list:
+ * the job's results; only those of context `id`. */
+static int deliver_context(shard *sh, rsw_client *c, const cJSON *list, const char *id, size_t cidx,
+                           rsw_status *st_out) {
+  spread *sp = sh->sp;
+  cJSON *mine = cJSON_CreateArray();
+  rsw_film **films = NULL;
+  size_t nf = 0, cap = 0;
+  const cJSON *r;
+  *st_out = RSW_OK;
+  /* Fetch first, then deliver under the lock: a lost replica half-way
+   * leaves the context undelivered. */
+  cJSON_ArrayForEach(r, list) {
+    const char *rc = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "context"));
+    if (!rc || strcmp(rc, id) != 0) continue;
+    const char *sensor = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "sensor"));
+    const char *state = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "state"));
+    if (nf == cap) {
+      cap = cap ? 2 * cap : 4;
+      rsw_film **nfm = realloc(films, cap * sizeof *nfm);
+      if (!nfm) {
+        *st_out = RSW_ERR_NOMEM;
+        break;
+      }
+      films = nfm;
+    }
+    films[nf] = NULL;
+    if (state && sensor && strcmp(state, "succeeded") == 0) {
+      rsw_status s = rsw_job_fetch(c, sh->job, id, sensor, &films[nf]);
+      if (s) {
+        nf++;
+        *st_out = s;
+        break;
+      }
+    }
+    nf++;
+    cJSON_AddItemToArray(mine, cJSON_Duplicate(r, 1));
+  }
+  int stop = 0;
+  if (!*st_out) {
+    pthread_mutex_lock(&sp->lock);
+    size_t i = 0;
+    cJSON_ArrayForEach(r, mine) {
+      const char *sensor = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "sensor"));
+      char *t = cJSON_PrintUnformatted(r);
+      if (!stop && sp->o->on_film(sp->o->film_user, id, sensor ? sensor : "", t ? t : "{}", films[i], 0)) stop = 1;
+      free(t);
+      if (films[i])
+        sp->films++;
+      else
+        sp->failed++;
+      i++;
+    }
+    sh->prior += i;
+    sp->done[cidx] = 1;
+    cJSON *line = cJSON_CreateObject();
+    cJSON_AddStringToObject(line, "context", id);
+    cJSON_AddItemToObject(line, "results", mine);
+    mine = NULL;
+    journal_line(sp, line);
+    pthread_mutex_unlock(&sp->lock);
+  }
+  for (size_t i = 0; i < nf; i++) rsw_film_free(films[i]);
+  free(films);
+  cJSON_Delete(mine);
+  return stop;
+}
+
+/* Submit the undelivered contexts of sh under its current key. Returns
+ * RSW_OK with sh->job set, or the failure (nothing left: job ""). */
+static rsw_status submit(shard *sh, rsw_client *c, size_t *n_out) {
+  spread *sp = sh->sp;
+  size_t *pending = malloc((sh->n ? sh->n : 1) * sizeof *pending), np = 0;
+  if (!pending) return RSW_ERR_NOMEM;
+  pthread_mutex_lock(&sp->lock);
+  for (size_t i = 0; i < sh->n; i++)
+    if (!sp->done[sh->idx[i]]) pending[np++] = sh->idx[i];
+  pthread_mutex_unlock(&sp->lock);
+  *n_out = np;
+  sh->job[0] = '\0';
+  if (!np) {
+    free(pending);
+    return RSW_OK;
+  }
+  rsw_status s = rsw_client_set_route(c, sh->key);
+  if (!s && sp->o->scene_file) {
+    char id[65];
+    s = rsw_scene_push_file(c, sp->o->scene_file, sp->o->variant, id, NULL);
+    if (!s && strcmp(id, sp->scene_id) != 0) {
+      free(pending);
+      set_fatal(sp, RSW_ERR_CONFLICT, "shard %d: %s is scene %s on this replica but %s on another", sh->k,
+                sp->o->scene_file, id, sp->scene_id);
+      return RSW_ERR_CONFLICT;
+    }
+  }
+  rsw_contexts *y = NULL;
+  if (!s) s = client_contexts_subset(sp->x, pending, np, &y);
+  free(pending);
+  if (!s) s = rsw_job_submit(c, sp->scene_id, y, sh->key, sh->job);
+  rsw_contexts_free(y);
+  if (s) return s;
+  sh->job_contexts = np;
+  sh->cur_done = sh->cur_total = 0;
+  pthread_mutex_lock(&sp->lock);
+  cJSON *line = cJSON_CreateObject();
+  cJSON_AddNumberToObject(line, "shard", sh->k);
+  cJSON_AddNumberToObject(line, "attempt", sh->attempt);
+  cJSON_AddStringToObject(line, "base", sh->base);
+  cJSON_AddStringToObject(line, "key", sh->key);
+  cJSON_AddStringToObject(line, "job", sh->job);
+  cJSON_AddNumberToObject(line, "contexts", (double)np);
+  journal_line(sp, line);
+  pthread_mutex_unlock(&sp->lock);
+  return RSW_OK;
+}
+
+/* Wait for sh's job and deliver its results. RSW_OK: every context of the
+ * job delivered; F_LOST-type failures come back as their status with
+ * *lost set. */
+static rsw_status follow(shard *sh, rsw_client *c, bool *lost) {
+  spread *sp = sh->sp;
+  *lost = false;
+  double left = 0;
+  if (sp->deadline > 0) {
+    left = sp->deadline - client_now_s();
+    if (left <= 0) {
+      set_fatal(sp, RSW_ERR_TIMEOUT, "the spread sweep did not end within %.3g s", sp->o->timeout_s);
+      return RSW_ERR_TIMEOUT;
+    }
+  }
+  rsw_job_status st;
+  rsw_status s = rsw_job_wait(c, sh->job, on_progress, sh, left, &st);
+  /* A replica that restarted (or another behind the same key) may have a
+   * job of the same id: check it is ours by its size. */
+  if (!s && st.contexts_total != sh->job_contexts) {
+    *lost = true;
+    return RSW_ERR_NOT_FOUND;
+  }
+  char *text = NULL;
+  if (!s) s = rsw_job_results(c, sh->job, &text);
+  if (s) {
+    failure f = classify(sh, c, s);
+    if (f == F_LOST) {
+      *lost = true;
+      return s;
+    }
+    fail_shard(sh, c, s, f, "waiting for its job");
+    return s;
+  }
+  cJSON *res = cJSON_Parse(text);
+  rsw_free(text);
+  const cJSON *list = cJSON_GetObjectItemCaseSensitive(res, "results");
+  /* Ours: every result names a context of this shard that is pending. */
+  const cJSON *r;
+  bool ours = cJSON_IsArray(list);
+  cJSON_ArrayForEach(r, list) {
+    size_t ci = lookup(sp, cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "context")));
+    if (ci == (size_t)-1 || ci % (size_t)sp->n_shards != (size_t)sh->k) ours = false;
+  }
+  if (!ours) {
+    cJSON_Delete(res);
+    *lost = true;
+    return RSW_ERR_NOT_FOUND;
+  }
+  bool cancelled = st.state == RSW_JOB_CANCELLED;
+  s = RSW_OK;
+  for (size_t i = 0; i < sh->n && !s; i++) {
+    size_t ci = sh->idx[i];
+    pthread_mutex_lock(&sp->lock);
+    bool d = sp->done[ci];
+    pthread_mutex_unlock(&sp->lock);
+    if (d) continue;
+    const char *id = client_contexts_id(sp->x, ci);
+    /* A job cancelled by its replica (shutting down): what did not
+     * succeed is rendered again elsewhere. */
+    bool complete = false, all_ok = true;
+    cJSON_ArrayForEach(r, list) {
+      const char *rc = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "context"));
+      if (!rc || strcmp(rc, id) != 0) continue;
+      complete = true;
+      const char *state = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "state"));
+      if (!state || strcmp(state, "succeeded") != 0) all_ok = false;
+    }
+    if (!complete || (cancelled && !all_ok)) continue;
+    rsw_status fs;
+    if (deliver_context(sh, c, list, id, ci, &fs)) {
+      set_fatal(sp, RSW_ERR_CANCELLED, "stopped by the film callback");
+      s = RSW_ERR_CANCELLED;
+      break;
+    }
+    if (fs) {
+      failure f = classify(sh, c, fs);
+      if (f == F_LOST) {
+        *lost = true;
+        s = fs;
+      } else {
+        fail_shard(sh, c, fs, f, "fetching films");
+        s = fs;
+      }
+    }
+  }
+  cJSON_Delete(res);
+  if (!s && cancelled) {
+    pthread_mutex_lock(&sp->lock);
+    bool left_over = false;
+    for (size_t i = 0; i < sh->n; i++) left_over = left_over || !sp->done[sh->idx[i]];
+    pthread_mutex_unlock(&sp->lock);
+    if (left_over) {
+      *lost = true;
+      return RSW_ERR_CANCELLED;
+    }
+  }
+  return s;
+}
+
+static void *shard_main(void *arg) {
+  shard *sh = arg;
+  spread *sp = sh->sp;
+  rsw_client_opts co = *sp->copts;
+  co.size = sizeof co;
+  co.route_key = NULL;
+  rsw_client *c = NULL;
+  rsw_status s = rsw_client_new(&co, &c);
+  if (s) {
+    set_fatal(sp, s, "shard %d: cannot create a client: %s", sh->k, rsw_strerror(s));
+    sh->status = s;
+    return NULL;
+  }
+  int max = sp->o->max_resubmits > 0 ? sp->o->max_resubmits : 8;
+  while (!atomic_load(&sp->stop)) {
+    bool lost = false;
+    if (sh->job[0]) { /* resumed: is the job still there, behind its key? */
+      rsw_client_set_route(c, sh->key);
+      rsw_job_status st;
+      s = rsw_job_get(c, sh->job, &st);
+      if (s) {
+        failure f = classify(sh, c, s);
+        if (f != F_LOST) {
+          fail_shard(sh, c, s, f, "following its job");
+          break;
+        }
+        lost = true;
+      }
+    } else {
+      size_t np = 0;
+      shard_key(sh);
+      s = submit(sh, c, &np);
+      if (s && !sp->o->scene_file && rsw_client_last_error(c)->http_status == 404) {
+        set_fatal(sp, s,
+                  "scene %s is not resident on the replica behind key %s: give the scene FILE instead of its "
+                  "id, so that every replica gets it",
+                  sp->scene_id, sh->key);
+        break;
+      }
+      if (s) {
+        failure f = classify(sh, c, s);
+        if (f != F_LOST) {
+          fail_shard(sh, c, s, f, "submitting its job");
+          break;
+        }
+        lost = true;
+      } else if (!np) {
+        break; /* everything delivered */
+      }
+    }
+    if (!lost) {
+      s = follow(sh, c, &lost);
+      if (!s) break;
+      if (!lost) break; /* follow() recorded the failure */
+    }
+    /* The replica behind this key is lost (or full): next key. */
+    if (sh->attempt >= max) {
+      set_fatal(sp, RSW_ERR_UNAVAILABLE, "shard %d: resubmitted %d times without finishing (last key %s)", sh->k,
+                sh->attempt, sh->key);
+      break;
+    }
+    pthread_mutex_lock(&sp->lock);
+    size_t left = 0;
+    for (size_t i = 0; i < sh->n; i++) left += !sp->done[sh->idx[i]];
+    sp->resubmitted++;
+    sp->contexts_resubmitted += left;
+    pthread_mutex_unlock(&sp->lock);
+    sh->attempt++;
+    sh->job[0] = '\0';
+    client_sleep_s(c, 0.2 * sh->attempt);
+  }
+  rsw_client_free(c);
+  return NULL;
+}
+
+/* ---- the state file ---- */
+
+static rsw_status journal_open(spread *sp, uint64_t request) {
+  const char *path = sp->o->state_path;
+  FILE *f = fopen(path, "r");
+  if (f) {
+    char *line = NULL;
+    size_t cap = 0;
+    ssize_t len;
+    size_t lineno = 0;
+    rsw_status s = RSW_OK;
+    while ((len = getline(&line, &cap, f)) > 0 && !s) {
+      lineno++;
+      cJSON *o = cJSON_Parse(line);
+      if (!o) {
+        if (line[len - 1] != '\n') break; /* a torn last line: the run died writing it */
+        snprintf(sp->err, sizeof sp->err, "%s:%zu: not JSON", path, lineno);
+        s = RSW_ERR_PARSE;
+        break;
+      }
+      const cJSON *fmt = cJSON_GetObjectItemCaseSensitive(o, "format");
+      const cJSON *sh = cJSON_GetObjectItemCaseSensitive(o, "shard");
+      const cJSON *ctx = cJSON_GetObjectItemCaseSensitive(o, "context");
+      if (lineno == 1) {
+        const char *pre = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "prefix"));
+        const char *req = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "request"));
+        const cJSON *k = cJSON_GetObjectItemCaseSensitive(o, "shards");
+        char want[17];
+        snprintf(want, sizeof want, "%016llx", (unsigned long long)request);
+        if (!cJSON_IsString(fmt) || strcmp(fmt->valuestring, SPREAD_FORMAT) != 0 || !pre ||
+            strlen(pre) >= sizeof sp->prefix || !cJSON_IsNumber(k)) {
+          snprintf(sp->err, sizeof sp->err, "%s: not a %s state file", path, SPREAD_FORMAT);
+          s = RSW_ERR_PARSE;
+        } else if (!req || strcmp(req, want) != 0 || (int)k->valuedouble != sp->n_shards) {
+          snprintf(sp->err, sizeof sp->err,
+                   "%s: the state of another sweep (different contexts, settings or shard count); "
+                   "nothing was resumed",
+                   path);
+          s = RSW_ERR_PRECONDITION;
+        } else {
+          snprintf(sp->prefix, sizeof sp->prefix, "%s", pre);
+        }
+      } else if (cJSON_IsNumber(sh)) {
+        int k = (int)sh->valuedouble;
+        const char *key = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "key"));
+        const char *base = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "base"));
+        const char *job = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "job"));
+        const cJSON *at = cJSON_GetObjectItemCaseSensitive(o, "attempt");
+        const cJSON *nc = cJSON_GetObjectItemCaseSensitive(o, "contexts");
+        if (k >= 0 && k < sp->n_shards && key && job && strlen(job) < 40 && cJSON_IsNumber(at) &&
+            cJSON_IsNumber(nc)) {
+          shard *x = &sp->shards[k];
+          snprintf(x->key, sizeof x->key, "%s", key);
+          snprintf(x->base, sizeof x->base, "%s", base ? base : key);
+          snprintf(x->job, sizeof x->job, "%s", job);
+          x->attempt = (int)at->valuedouble;
+          x->job_contexts = (size_t)nc->valuedouble;
+        }
+      } else if (cJSON_IsString(ctx)) {
+        size_t ci = lookup(sp, ctx->valuestring);
+        const cJSON *res = cJSON_GetObjectItemCaseSensitive(o, "results");
+        if (ci != (size_t)-1 && !sp->done[ci] && cJSON_IsArray(res)) {
+          const cJSON *r;
+          cJSON_ArrayForEach(r, res) {
+            const char *sensor = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "sensor"));
+            char *t = cJSON_PrintUnformatted(r);
+            sp->o->on_film(sp->o->film_user, ctx->valuestring, sensor ? sensor : "", t ? t : "{}", NULL, 1);
+            free(t);
+            sp->resumed++;
+          }
+          sp->done[ci] = 1;
+        }
+      }
+      cJSON_Delete(o);
+    }
+    free(line);
+    fclose(f);
+    if (s) return s;
+    if (lineno == 0) goto fresh;
+    sp->journal = fopen(path, "a");
+    if (!sp->journal) {
+      snprintf(sp->err, sizeof sp->err, "%s: %s", path, strerror(errno));
+      return RSW_ERR_IO;
+    }
+    return RSW_OK;
+  }
+  if (errno != ENOENT) {
+    snprintf(sp->err, sizeof sp->err, "%s: %s", path, strerror(errno));
+    return RSW_ERR_IO;
+  }
+fresh:
+  sp->journal = fopen(path, "w");
+  if (!sp->journal) {
+    snprintf(sp->err, sizeof sp->err, "%s: %s", path, strerror(errno));
+    return RSW_ERR_IO;
+  }
+  cJSON *h = cJSON_CreateObject();
+  char req[17];
+  snprintf(req, sizeof req, "%016llx", (unsigned long long)request);
+  cJSON_AddStringToObject(h, "format", SPREAD_FORMAT);
+  cJSON_AddStringToObject(h, "prefix", sp->prefix);
+  cJSON_AddNumberToObject(h, "shards", sp->n_shards);
+  cJSON_AddNumberToObject(h, "contexts", (double)sp->n_ctx);
+  cJSON_AddStringToObject(h, "request", req);
+  journal_line(sp, h);
+  return RSW_OK;
+}
+
+static void random_prefix(char out[32]) {
+  unsigned char b[6] = {0};
+  int fd = open("/dev/urandom", O_RDONLY | O_CLOEXEC);
+  if (fd < 0 || read(fd, b, sizeof b) != (ssize_t)sizeof b) {
+    uint64_t t = (uint64_t)(client_now_s() * 1e9) ^ (uint64_t)getpid();
+    memcpy(b, &t, sizeof b);
+  }
+  if (fd >= 0) close(fd);
+  snprintf(out, 32, "rs%02x%02x%02x%02x%02x%02x", b[0], b[1], b[2], b[3], b[4], b[5]);
+}
+
+rsw_status rsw_spread_run(const rsw_client_opts *copts, const char *scene_id, const rsw_contexts *x,
+                          const rsw_spread_opts *opts, rsw_spread_result *out) {
+  spread_err[0] = '\0';
+  rsw_spread_opts o = {0};
+  if (opts) {
+    size_t n = opts->size ? opts->size : sizeof o;
+    memcpy(&o, opts, n < sizeof o ? n : sizeof o);
+  }
+  rsw_client_opts co = {0};
+  if (copts) {
+    size_t n = copts->size ? copts->size : sizeof co;
+    memcpy(&co, copts, n < sizeof co ? n : sizeof co);
+  }
+  co.size = sizeof co;
+  if (out) memset(out, 0, sizeof *out);
+  if (!x || !o.on_film || o.shards < 1 || o.shards > 4096 || (!scene_id && !o.scene_file) ||
+      (o.route_prefix && (!client_valid_route(o.route_prefix) || strlen(o.route_prefix) > 24))) {
+    snprintf(spread_err, sizeof spread_err,
+             "rsw_spread_run: needs contexts, on_film, 1 <= shards <= 4096, a scene id or file, and a route "
+             "prefix of [A-Za-z0-9._-]{1,24}");
+    return RSW_ERR_INVALID;
+  }
+  spread sp = {.copts = &co, .o = &o, .x = x, .n_shards = o.shards};
+  sp.n_ctx = rsw_contexts_count(x);
+  if (!sp.n_ctx) {
+    snprintf(spread_err, sizeof spread_err, "rsw_spread_run: no contexts");
+    return RSW_ERR_INVALID;
+  }
+  pthread_mutex_init(&sp.lock, NULL);
+  rsw_status s = RSW_OK;
+  sp.sorted_ids = malloc(sp.n_ctx * sizeof *sp.sorted_ids);
+  sp.sorted_idx = malloc(sp.n_ctx * sizeof *sp.sorted_idx);
+  sp.done = calloc(sp.n_ctx, 1);
+  sp.shards = calloc((size_t)o.shards, sizeof *sp.shards);
+  pthread_t *th = calloc((size_t)o.shards, sizeof *th);
+  if (!sp.sorted_ids || !sp.sorted_idx || !sp.done || !sp.shards || !th) {
+    s = RSW_ERR_NOMEM;
+    snprintf(sp.err, sizeof sp.err, "out of memory");
+    goto done;
+  }
+  for (size_t i = 0; i < sp.n_ctx; i++) sp.sorted_ids[i] = client_contexts_id(x, i);
+  qsort(sp.sorted_ids, sp.n_ctx, sizeof *sp.sorted_ids, cmp_id);
+  for (size_t i = 0; i < sp.n_ctx; i++) {
+    if (i && strcmp(sp.sorted_ids[i], sp.sorted_ids[i - 1]) == 0) {
+      s = RSW_ERR_INVALID;
+      snprintf(sp.err, sizeof sp.err, "context id '%s' appears twice", sp.sorted_ids[i]);
+      goto done;
+    }
+  }
+  for (size_t i = 0; i < sp.n_ctx; i++) {
+    const char *id = client_contexts_id(x, i);
+    const char **hit = bsearch(&id, sp.sorted_ids, sp.n_ctx, sizeof *sp.sorted_ids, cmp_id);
+    sp.sorted_idx[hit - sp.sorted_ids] = i;
+  }
+  for (int k = 0; k < o.shards; k++) {
+    shard *sh = &sp.shards[k];
+    sh->sp = &sp, sh->k = k;
+    sh->idx = malloc(((sp.n_ctx + (size_t)o.shards - 1) / (size_t)o.shards + 1) * sizeof *sh->idx);
+    if (!sh->idx) {
+      s = RSW_ERR_NOMEM;
+      snprintf(sp.err, sizeof sp.err, "out of memory");
+      goto done;
+    }
+    for (size_t i = (size_t)k; i < sp.n_ctx; i += (size_t)o.shards) sh->idx[sh->n++] = i;
+  }
+  if (o.route_prefix)
+    snprintf(sp.prefix, sizeof sp.prefix, "%s", o.route_prefix);
+  else
+    random_prefix(sp.prefix);
+  /* The request's fingerprint and the scene: the state file must belong
+   * to this very sweep. */
+  char *req = client_contexts_print(x);
+  uint64_t request = fnv1a64(req) ^ fnv1a64(scene_id ? scene_id : o.scene_file);
+  free(req);
+  if (o.state_path && (s = journal_open(&sp, request))) goto done;
+  {
+    /* Keys first (GET /v1 through each candidate), then the scene's id,
+     * once, through shard 0's key (every replica computes the same content
+     * address; each shard pushes again through its own key). */
+    rsw_client *c = NULL;
+    co.route_key = NULL;
+    s = rsw_client_new(&co, &c);
+    const char *what = "choosing routing keys";
+    if (!s) s = choose_keys(&sp, c);
+    if (!s && scene_id) {
+      snprintf(sp.scene_id, sizeof sp.scene_id, "%s", scene_id);
+    } else if (!s) {
+      what = "pushing the scene";
+      shard_key(&sp.shards[0]);
+      s = rsw_client_set_route(c, sp.shards[0].base);
+      if (!s) s = rsw_scene_push_file(c, o.scene_file, o.variant, sp.scene_id, NULL);
+    }
+    if (s) {
+      const rsw_error_info *e = rsw_client_last_error(c);
+      if (c && e->http_status == 0 && s == RSW_ERR_UNAVAILABLE)
+        snprintf(sp.err, sizeof sp.err, "cannot reach %s (%s): the balancer is gone%s",
+                 co.base_url ? co.base_url : "the server", e->message,
+                 o.state_path ? "; the same call resumes from the state file" : "");
+      else
+        snprintf(sp.err, sizeof sp.err, "%s%s%s: %s", what, o.scene_file ? " " : "", o.scene_file ? o.scene_file : "",
+                 c && e->message[0] ? e->message : rsw_strerror(s));
+      rsw_client_free(c);
+      goto done;
+    }
+    rsw_client_free(c);
+  }
+  sp.deadline = o.timeout_s > 0 ? client_now_s() + o.timeout_s : 0;
+  int started = 0;
+  for (int k = 0; k < o.shards; k++) {
+    if (pthread_create(&th[k], NULL, shard_main, &sp.shards[k]) != 0) {
+      set_fatal(&sp, RSW_ERR_NOMEM, "cannot start a thread for shard %d", k);
+      break;
+    }
+    started++;
+  }
+  for (int k = 0; k < started; k++) pthread_join(th[k], NULL);
+  s = sp.fatal;
+  if (!s)
+    for (size_t i = 0; i < sp.n_ctx; i++)
+      if (!sp.done[i]) {
+        s = RSW_ERR_MISSING;
+        snprintf(sp.err, sizeof sp.err, "context %s was never delivered", client_contexts_id(x, i));
+        break;
+      }
+done:
+  if (sp.journal) fclose(sp.journal);
+  if (out) {
+    out->films = sp.films, out->failed = sp.failed, out->resumed = sp.resumed;
+    out->resubmitted = sp.resubmitted, out->contexts_resubmitted = sp.contexts_resubmitted;
+    snprintf(out->scene_id, sizeof out->scene_id, "%s", sp.scene_id);
+    snprintf(out->route_prefix, sizeof out->route_prefix, "%s", sp.prefix);
+  }
+  if (sp.shards)
+    for (int k = 0; k < o.shards; k++) free(sp.shards[k].idx);
+  free(sp.shards);
+  free(th);
+  free(sp.sorted_ids);
+  free(sp.sorted_idx);
+  free(sp.done);
+  snprintf(spread_err, sizeof spread_err, "%s", sp.err);
+  pthread_mutex_destroy(&sp.lock);
+  return s;
+}

@@ -1,0 +1,172 @@
+#!/usr/bin/env python3
+"""make bench: scaling out behind a load balancer, one JSON line:
+  {"bench": "scale_out", "contexts": 200, "one_daemon_contexts_per_s",
+   "two_daemons_contexts_per_s", "efficiency", "balancer_added_ms_p50",
+   "balancer_added_ms_p99", ...}
+Throughput: `raysweep sweep` of one job of 200 small contexts (32x32 mono
+hdistant film, 16 spp) against one raysweepd (--threads 1), then
+`raysweep sweep --spread 2` through HAProxy (docker/lb/gen.py) in front of
+two raysweepd (--threads 1 each); wall time of the whole command (scene
+push, submission, progress, every film fetched and written), best of 3,
+the two set-ups alternating. The client (film fetches, EXR writes) and
+HAProxy share the machine's cores with the daemons.
+efficiency = throughput(2) / (2 x throughput(1)); the target is >= 0.85
+on two free cores.
+Added latency: GET /v1/health/live on a kept-alive connection, 2000 times
+straight to a daemon and 2000 times through HAProxy (the routing header
+set); the difference of the percentiles.
+"""
+import http.client
+import json
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+
+root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+bindir = os.environ.get("RSW_BIN_DIR", os.path.join(root, "build", "bin"))
+scene = os.path.join(root, "proto", "examples", "hdistant_lambertian.json")
+N_CONTEXTS = 200
+SPP = 16
+
+
+def free_port():
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    p = s.getsockname()[1]
+    s.close()
+    return p
+
+
+def daemon(tmp, name, procs):
+    d = os.path.join(tmp, name)
+    os.makedirs(d)
+    pf = os.path.join(d, "port")
+    p = subprocess.Popen([os.path.join(bindir, "raysweepd"), "serve", "--listen", "127.0.0.1:0", "--port-file", pf,
+                          "--threads", "1"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    procs.append(p)
+    for _ in range(400):
+        if os.path.exists(pf) and open(pf).read().strip():
+            return int(open(pf).read())
+        time.sleep(0.01)
+    sys.exit(f"bench_scale_out: raysweepd did not start")
+
+
+def wait_ready(port):
+    for _ in range(200):
+        try:
+            c = http.client.HTTPConnection("127.0.0.1", port, timeout=2)
+            c.request("GET", "/v1/health/ready")
+            if c.getresponse().status == 200:
+                return
+        except OSError:
+            pass
+        time.sleep(0.05)
+    sys.exit(f"bench_scale_out: nothing ready on port {port}")
+
+
+def sweep(url, out, extra):
+    # 200 contexts: wavelengths 400, 401.5, ..., 698.5 nm
+    cmd = [os.path.join(bindir, "raysweep"), "--server", url, "-q", "sweep", scene, "--grid",
+           "wavelength=400:698.5:1.5", "--spp", str(SPP), "-o", out] + extra
+    t0 = time.monotonic()
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    dt = time.monotonic() - t0
+    if r.returncode != 0:
+        sys.exit(f"bench_scale_out: {' '.join(cmd)}: exit {r.returncode}: {r.stderr[-500:]}")
+    n = sum(1 for _ in open(os.path.join(out, "index.jsonl")))
+    if n != N_CONTEXTS:
+        sys.exit(f"bench_scale_out: {n} films, wanted {N_CONTEXTS}")
+    return dt
+
+
+def latencies(direct, via, n):
+    """Alternating requests straight to a daemon and through the balancer,
+    so both see the same noise of a shared machine."""
+    cd = http.client.HTTPConnection("127.0.0.1", direct, timeout=10)
+    cv = http.client.HTTPConnection("127.0.0.1", via, timeout=10)
+    out = ([], [])
+    for i in range(n + 50):
+        for k, (c, h) in enumerate(((cd, {}), (cv, {"X-Raysweep-Shard": "bench-1"}))):
+            t0 = time.perf_counter()
+            c.request("GET", "/v1/health/live", headers=h)
+            r = c.getresponse()
+            r.read()
+            dt = time.perf_counter() - t0
+            if r.status != 200:
+                sys.exit(f"bench_scale_out: /v1/health/live answered {r.status}")
+            if i >= 50:  # warm-up
+                out[k].append(dt * 1e3)
+    res = []
+    for v in out:
+        v.sort()
+        res += [v[len(v) // 2], v[min(len(v) - 1, int(len(v) * 0.99))]]
+    return res
+
+
+def main():
+    if not shutil.which("haproxy"):
+        sys.exit("bench_scale_out: haproxy is needed (make deps)")
+    tmp = tempfile.mkdtemp()
+    procs = []
+    load0 = os.getloadavg()[0]
+    try:
+        one = daemon(tmp, "one", procs)
+        url1 = f"http://127.0.0.1:{one}"
+        a, b = daemon(tmp, "a", procs), daemon(tmp, "b", procs)
+        lb = free_port()
+        cfg = os.path.join(tmp, "haproxy.cfg")
+        subprocess.run([sys.executable, os.path.join(root, "docker", "lb", "gen.py"), "haproxy", "--listen",
+                        f"127.0.0.1:{lb}", "--replica", f"127.0.0.1:{a}", "--replica", f"127.0.0.1:{b}", "-o", cfg],
+                       check=True)
+        procs.append(subprocess.Popen(["haproxy", "-f", cfg, "-db"], stdout=subprocess.DEVNULL,
+                                      stderr=subprocess.DEVNULL))
+        wait_ready(lb)
+        url2 = f"http://127.0.0.1:{lb}"
+        # Warm-up (the scene is pushed, then resident), then the two set-ups
+        # alternately, so a shared machine's load falls on both alike.
+        sweep(url1, os.path.join(tmp, "o"), ["--spread", "1"])
+        sweep(url2, os.path.join(tmp, "t"), ["--spread", "2"])
+        runs1, runs2 = [], []
+        for i in range(3):
+            runs1.append(sweep(url1, os.path.join(tmp, f"o{i}"), ["--spread", "1"]))
+            runs2.append(sweep(url2, os.path.join(tmp, f"t{i}"), ["--spread", "2"]))
+        t1, t2 = min(runs1), min(runs2)
+        th1, th2 = N_CONTEXTS / t1, N_CONTEXTS / t2
+        d50, d99, v50, v99 = latencies(a, lb, 2000)
+        print(json.dumps({
+            "bench": "scale_out",
+            "contexts": N_CONTEXTS,
+            "spp": SPP,
+            "threads_per_daemon": 1,
+            "one_daemon_s": round(t1, 3),
+            "two_daemons_s": round(t2, 3),
+            "one_daemon_runs_s": [round(t, 3) for t in runs1],
+            "two_daemons_runs_s": [round(t, 3) for t in runs2],
+            "one_daemon_contexts_per_s": round(th1, 1),
+            "two_daemons_contexts_per_s": round(th2, 1),
+            "efficiency": round(th2 / (2 * th1), 3),
+            "direct_ms_p50": round(d50, 3),
+            "direct_ms_p99": round(d99, 3),
+            "via_haproxy_ms_p50": round(v50, 3),
+            "via_haproxy_ms_p99": round(v99, 3),
+            "balancer_added_ms_p50": round(v50 - d50, 3),
+            "balancer_added_ms_p99": round(v99 - d99, 3),
+            "cores": os.cpu_count(),
+            # Other work on the machine (1-minute load average before and
+            # after): on a shared machine, compare runs of similar load.
+            "load_avg": [round(load0, 2), round(os.getloadavg()[0], 2)],
+        }))
+    finally:
+        for p in procs:
+            p.terminate()
+        for p in procs:
+            p.wait()
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
