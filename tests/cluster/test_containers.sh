@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# make test-cluster-slurm: docker/Dockerfile, docker/compose/compose.yaml,
+# make test-cluster: docker/Dockerfile, docker/compose/compose.yaml,
 # docker/k8s/*.yaml and docker/raysweepd-drain checked against the real
 # daemon (tests/cluster/containers_check.py says how; no Docker engine or
 # Kubernetes is needed).

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# make test-cluster-slurm: the Slurm recipe of docker/slurm/ on a real
+# make test-cluster: the Slurm recipe of docker/slurm/ on a real
 # single-node Slurm (Debian's slurm-wlm and munge, `make deps`) that this
 # test starts in a temporary directory: munged on a private socket with a
 # key generated here, slurmctld and slurmd on localhost with a minimal
