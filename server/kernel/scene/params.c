@@ -980,6 +980,12 @@ static rsw_status validate(const scene *s, staged *sg, const staged *all, size_t
         return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': matrix entries must be finite", key);
       m[i / 4][i % 4] = v->arr[i];
     }
+    /* A shape's transform (the geometric ones) must be one float32 tracing
+     * can represent: checked on the matrix itself first, so that a tiny
+     * scale is reported as such rather than as "singular". */
+    char msg[512];
+    if (e->cls == UPDATE_GEOMETRIC && !xf_traceable(m, key, msg, sizeof msg))
+      return rsw_fail(err, RSW_ERR_RANGE, key, "%s", msg);
     if (!xf_from_matrix(m, &sg->xf))
       return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': matrix is singular", key);
     if (e->check) {
@@ -1054,10 +1060,23 @@ static rsw_status validate(const scene *s, staged *sg, const staged *all, size_t
       {
         /* Branch-free scan first (vectorises), then locate the culprit. */
         int bad = 0;
-        for (size_t i = 0; i < v->n; i++) bad |= !(fabs(v->arr[i]) <= 3.0e38);
+        for (size_t i = 0; i < v->n; i++) bad |= !(fabs(v->arr[i]) <= RSW_TRACE_MAX_COORD);
         for (size_t i = 0; bad && i < v->n; i++)
-          if (!(fabs(v->arr[i]) <= 3.0e38))
-            return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': coordinate %zu is not a finite float", key, i);
+          if (!(fabs(v->arr[i]) <= RSW_TRACE_MAX_COORD))
+            return rsw_fail(err, isfinite(v->arr[i]) ? RSW_ERR_RANGE : RSW_ERR_INVALID, key,
+                            "'%s': coordinate %zu (%g) is not finite or exceeds %g, the largest float32 "
+                            "tracing accepts",
+                            key, i, v->arr[i], RSW_TRACE_MAX_COORD);
+        /* Their image under the shape's to_world (core/transform.h). */
+        const xform *t = &e->sh->to_world;
+        double w = 0;
+        for (size_t i = 0; i + 2 < v->n; i += 3)
+          w = fmax(w, v3_max_abs(xf_point(t, v3(v->arr[i], v->arr[i + 1], v->arr[i + 2]))));
+        if (!(w <= RSW_TRACE_MAX_COORD))
+          return rsw_fail(err, RSW_ERR_RANGE, key,
+                          "'%s': the mesh would reach a world coordinate of %g, beyond %g, the largest float32 "
+                          "tracing accepts",
+                          key, w, RSW_TRACE_MAX_COORD);
       }
       break;
     case MB_FACES:
