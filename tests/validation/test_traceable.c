@@ -264,13 +264,13 @@ static void test_update_rolled_back(void) {
 
 /* ---- rays from far away --------------------------------------------------------- */
 
-/* A camera 1e13 from a 1e-5 sphere: the ray origin in the sphere's object
- * space is 1e18 scene units away, beyond Embree's range before accel.c
- * advanced far origins to the scene (the binary aborted). The sphere is
- * below a pixel from there: the film is the sky. */
+/* A camera 5e13 from a 1e-5 sphere: the ray origin in the sphere's object
+ * space is 5e18 units away, beyond Embree's range before accel.c advanced
+ * far origins to the scene (the binary aborted). The sphere is far below
+ * a pixel from there: the film is the sky. */
 static void test_far_camera(void) {
   const char *text = "{\"type\": \"scene\", \"variant\": \"mono\", \"cam\": {\"type\": \"perspective\", "
-                     "\"fov\": 40, \"to_world\": [1,0,0,0, 0,1,0,0, 0,0,-1,1e13, 0,0,0,1], \"sampler\": "
+                     "\"fov\": 40, \"to_world\": [1,0,0,0, 0,1,0,0, 0,0,-1,5e13, 0,0,0,1], \"sampler\": "
                      "{\"type\": \"independent\", \"sample_count\": 4}, " FILM8 "}, " SKY ", "
                      "\"ball\": {\"type\": \"sphere\", \"radius\": 1e-5}}";
   scene *s = tsup_load(text, NULL);
@@ -284,13 +284,14 @@ static void test_far_camera(void) {
   scene_free(s);
 }
 
-/* An instancelist row float32 tracing cannot place: refused with its line. */
+/* An instancelist row float32 tracing cannot place (a scale of 1e-10, which
+ * the old invertibility check let through): refused with its line. */
 static void test_instancelist_row(void) {
   char path[] = "/tmp/rsw_traceable_XXXXXX";
   int fd = mkstemp(path);
   REQUIRE(fd >= 0, "mkstemp");
   FILE *f = fdopen(fd, "w");
-  fprintf(f, "1 0 0 0  0 1 0 0  0 0 1 0  0 0 0 1\n1e-30 0 0 0  0 1e-30 0 0  0 0 1e-30 0  0 0 0 1\n");
+  fprintf(f, "1 0 0 0  0 1 0 0  0 0 1 0  0 0 0 1\n1e-10 0 0 0  0 1e-10 0 0  0 0 1e-10 0  0 0 0 1\n");
   fclose(f);
   char text[2048];
   snprintf(text, sizeof text,
