@@ -428,6 +428,7 @@ static const command commands[] = {
      "  --result-ttl S      seconds job results are kept (default 3600)\n"
      "  --port-file F       write the port listened on to F once listening\n"
      "  --plugin-dir DIR    load every *.so in DIR as an environment plugin at start\n"
+     "  --max-film-bytes B  film memory one render may take (default 1G); larger films get 413\n"
      "Stops on SIGTERM or SIGINT.\n",
      cmd_serve},
     {"routes", "routes", "print the routes the daemon serves, one \"METHOD PATH\" per line", "", cmd_routes},

@@ -8,6 +8,7 @@
 
 #include "../accel.h"
 #include "../scene/periodic.h"
+#include "../scene/scene.h"
 #include "../shapes/shape.h"
 
 /* The nested object of class cls, or a default instance of `def_type`

@@ -89,15 +89,6 @@ void direction_angles(vec3 w, double *zenith, double *azimuth);
  * (eradiate src/eradiate/warp.py; kernel-behavior.md §1.2). */
 void hemisphere_pixel_angles(int W, int H, double *zen_az);
 
-/* What rendering sensor se's film takes in memory, in bytes, at most
- * (checked before a render allocates anything, so that a film too large
- * for the server is refused up front): per pixel the accumulator (4
- * doubles, 7 for a Stokes film), the developed film (channels floats) and
- * its encoded copy, and for the distant family the viewing angles (2
- * doubles) twice (film and encoded metadata). *channels (optional) gets
- * the film's channel count. Saturates at UINT64_MAX. */
-uint64_t sensor_film_bytes(const sensor *se, rsw_variant variant, int *channels);
-
 /* ---- the hemispherical sensors' shared parameters (hdistant, distantflux) --
  * Mitsuba does not expose these sensors' transforms; we do, with the
  * `direction` convenience key (the hemisphere axis, pointing away from the
