@@ -432,6 +432,7 @@ static const command commands[] = {
      "                      limit requests other than the health probes get 503 + Retry-After\n"
      "  --header-timeout S  seconds a connection may take to send a request's headers\n"
      "                      (default 10); slower ones are closed\n"
+     "  --max-film-bytes B  film memory one render may take (default 1G); larger films get 422\n"
      "Stops on SIGTERM or SIGINT.\n",
      cmd_serve},
     {"routes", "routes", "print the routes the daemon serves, one \"METHOD PATH\" per line", "", cmd_routes},

@@ -31,7 +31,7 @@ typedef struct serve_args {
   const char *listen, *data_root, *blob_dir, *token_file, *port_file, *plugin_dir;
   const char *scenes[MAX_SCENES];
   size_t n_scenes;
-  unsigned long long threads, max_queue, max_body, max_connections;
+  unsigned long long threads, max_queue, max_body, max_connections, max_film;
   double result_ttl, header_timeout;
 } serve_args;
 
@@ -90,6 +90,7 @@ typedef enum opt_id {
   OPT_PLUGIN_DIR,
   OPT_MAX_CONNECTIONS,
   OPT_HEADER_TIMEOUT,
+  OPT_MAX_FILM,
 } opt_id;
 
 static const struct {
@@ -101,6 +102,7 @@ static const struct {
     {"--max-body", OPT_MAX_BODY},   {"--max-queue", OPT_MAX_QUEUE},   {"--result-ttl", OPT_RESULT_TTL},
     {"--port-file", OPT_PORT_FILE}, {"--plugin-dir", OPT_PLUGIN_DIR},
     {"--max-connections", OPT_MAX_CONNECTIONS}, {"--header-timeout", OPT_HEADER_TIMEOUT},
+    {"--max-film-bytes", OPT_MAX_FILM},
 };
 
 static int parse_args(int argc, char **argv, serve_args *a) {
@@ -151,6 +153,11 @@ static int parse_args(int argc, char **argv, serve_args *a) {
         return fail_usage("--header-timeout needs a number of seconds in (0, 3600] (got '%s')", v);
       break;
     }
+    case OPT_MAX_FILM:
+      if (!parse_bytes(v, &a->max_film))
+        return fail_usage("--max-film-bytes needs a positive byte count such as 1073741824 or 1G (got '%s')",
+                          v);
+      break;
     case OPT_RESULT_TTL: {
       char *end;
       errno = 0;
@@ -300,7 +307,8 @@ int cmd_serve(int argc, char **argv) {
                      .blob_dir = blob_dir,
                      .max_queue = (size_t)a.max_queue,
                      .result_ttl_s = a.result_ttl,
-                     .max_body_bytes = a.max_body ? (size_t)a.max_body : HTTP_DEFAULT_MAX_BODY};
+                     .max_body_bytes = a.max_body ? (size_t)a.max_body : HTTP_DEFAULT_MAX_BODY,
+                     .max_film_bytes = a.max_film};
   if (service_new(&so, &svc, &err)) {
     fprintf(stderr, "raysweepd serve: %s\n", rsw_err_format(&err, msg, sizeof msg));
     goto out;

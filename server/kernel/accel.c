@@ -36,6 +36,7 @@ struct accel {
   /* Top-level ids >= n_sub are instancelist placements: their shape
    * index and placement number. */
   uint32_t *list_shape, *list_sub;
+  double *list_binv; /* |A^-1|_inf of each placement's float linear part (check_traceable) */
   size_t n_list;
   /* Precision (accel.h): Embree's frame is centred on `origin`; per
    * shape, the object-space bounds of meshes (what the origin is computed
@@ -43,6 +44,11 @@ struct accel {
    * space. */
   const scene *scene;
   vec3 origin;
+  /* Rays reach Embree only within clip_r of the origin (fill_ray): a ray
+   * starting farther out is advanced along itself to that sphere first, so
+   * no ray origin Embree sees, in the top level or in any instance, grows
+   * with where a sensor sits. */
+  double clip_r;
   vec3 *obox_lo, *obox_hi;
   double *ext;
   accel_counters counters;
@@ -346,8 +352,10 @@ static void shape_bounds(accel *a, size_t i) {
 }
 
 /* The centre of the geometry's world bounds (object boxes under to_world,
- * group boxes under each placement): a function of the scene's state only. */
-static vec3 frame_origin(const accel *a) {
+ * group boxes under each placement): a function of the scene's state only.
+ * *radius gets the bounds' half diagonal (infinite when they are not
+ * finite). */
+static vec3 frame_origin(const accel *a, double *radius) {
   const scene *s = a->scene;
   vec3 lo = v3(INFINITY, INFINITY, INFINITY), hi = v3(-INFINITY, -INFINITY, -INFINITY);
   for (size_t i = 0; i < s->n_shapes; i++) {
@@ -361,8 +369,125 @@ static vec3 frame_origin(const accel *a) {
     for (int c = 0; c < 8; c++)
       box_add(&lo, &hi, xf_point(&sh->to_world, v3(c & 1 ? h.x : l.x, c & 2 ? h.y : l.y, c & 4 ? h.z : l.z)));
   }
-  if (!(lo.x <= hi.x) || !v3_finite(lo) || !v3_finite(hi)) return v3(0, 0, 0);
+  *radius = 0;
+  if (!(lo.x <= hi.x)) return v3(0, 0, 0);
+  if (!v3_finite(lo) || !v3_finite(hi)) {
+    *radius = INFINITY;
+    return v3(0, 0, 0);
+  }
+  *radius = 0.5 * v3_len(v3_sub(hi, lo));
+  if (!isfinite(*radius)) *radius = INFINITY;
   return v3_scale(v3_add(lo, hi), 0.5);
+}
+
+/* ---- the last defence: nothing Embree would assert on --------------------------
+ * Embree asserts (aborts) on a ray with a coordinate of its origin or
+ * direction beyond FLT_LARGE = 1.844e18 (embree common/sys/platform.h,
+ * RayK<1>::valid()), and silently drops geometry beyond it. The loaders
+ * and parameter updates refuse transforms and coordinates outside
+ * core/transform.h's limits, naming the key; this check, run before every
+ * commit, is the exact condition for the whole scene, so that whatever
+ * slipped past them (an update of vertices and to_world that are each
+ * fine alone, an instancelist placement) is an error and never an abort.
+ *
+ * What Embree computes, with c the origin and R = clip_r: top-level ray
+ * origins |o - c| <= R (fill_ray) and directions of length <= ACCEL_MAX_DIR;
+ * in instance space, with (A, t) the instance transform and B = A^-1,
+ * origins B (o - t), |.|_inf <= |B|_inf (R + |t - c|_inf), and directions
+ * B d, <= |B|_inf ACCEL_MAX_DIR; the geometry Embree holds, in instance and
+ * world space. Each must stay below FLT_LARGE / 16 (margin for Embree's own
+ * arithmetic on them: bounds, o + t d). */
+#define ACCEL_FLT_LARGE 1.844e18
+#define ACCEL_LIMIT     (ACCEL_FLT_LARGE / 16)
+#define ACCEL_MAX_DIR   1024.0 /* fill_ray rescales longer or shorter directions */
+#define ACCEL_CLIP      64.0   /* clip_r = ACCEL_CLIP times the bounds' half diagonal */
+
+static double inv_norm_inf(const xform *X) {
+  double w = 0;
+  for (int r = 0; r < 3; r++) w = fmax(w, fabs(X->inv[r][0]) + fabs(X->inv[r][1]) + fabs(X->inv[r][2]));
+  return w;
+}
+
+/* One instance transform X of shape `id`; `ext` the largest |coordinate|
+ * of what Embree holds in its instance space. */
+static rsw_status check_instance(const accel *a, const xform *X, double ext, const char *id, rsw_err *err) {
+  const char *name = id ? id : "shape";
+  if (X->m[3][0] != 0 || X->m[3][1] != 0 || X->m[3][2] != 0 || X->m[3][3] != 1)
+    return rsw_fail(err, RSW_ERR_RANGE, name, "'%s': to_world is not affine; Embree cannot trace it", name);
+  for (int r = 0; r < 4; r++)
+    for (int c = 0; c < 4; c++)
+      if (!isfinite(X->m[r][c]) || !isfinite(X->inv[r][c]))
+        return rsw_fail(err, RSW_ERR_RANGE, name, "'%s': to_world is singular or not finite", name);
+  double b = inv_norm_inf(X);
+  vec3 t = v3(X->m[0][3], X->m[1][3], X->m[2][3]);
+  double o_bound = b * (a->clip_r + v3_max_abs(v3_sub(t, a->origin)));
+  double d_bound = b * ACCEL_MAX_DIR;
+  if (!(o_bound <= ACCEL_LIMIT) || !(d_bound <= ACCEL_LIMIT) || !(ext <= ACCEL_LIMIT))
+    return rsw_fail(err, RSW_ERR_RANGE, name,
+                    "'%s': float32 tracing cannot represent it in this scene (rays in its object space would "
+                    "reach %.3g, geometry %.3g; the limit is %.3g): its scale is too small for the scene's "
+                    "extent, or its coordinates too large",
+                    name, fmax(o_bound, d_bound), ext, ACCEL_LIMIT);
+  return RSW_OK;
+}
+
+/* |A^-1|_inf of a placement's row-major 3x4 float matrix, by cofactors in
+ * double (a 4x4 inverse per placement would cost a 100,000-leaf canopy
+ * 0.1 s per commit); infinite when singular. */
+static double placement_binv(const float *m) {
+  double a[3][3];
+  for (int r = 0; r < 3; r++)
+    for (int c = 0; c < 3; c++) a[r][c] = m[4 * r + c];
+  double c[3][3];
+  for (int i = 0; i < 3; i++)
+    for (int j = 0; j < 3; j++) {
+      int i1 = (i + 1) % 3, i2 = (i + 2) % 3, j1 = (j + 1) % 3, j2 = (j + 2) % 3;
+      c[j][i] = a[i1][j1] * a[i2][j2] - a[i1][j2] * a[i2][j1];
+    }
+  double det = a[0][0] * c[0][0] + a[0][1] * c[1][0] + a[0][2] * c[2][0];
+  if (!(fabs(det) > 0) || !isfinite(det)) return INFINITY;
+  double w = 0;
+  for (int r = 0; r < 3; r++) w = fmax(w, (fabs(c[r][0]) + fabs(c[r][1]) + fabs(c[r][2])) / fabs(det));
+  return isfinite(w) ? w : INFINITY;
+}
+
+/* The whole scene as Embree would hold it after the next commit. */
+static rsw_status check_traceable(const accel *a, rsw_err *err) {
+  const scene *s = a->scene;
+  if (!(a->clip_r <= ACCEL_LIMIT))
+    return rsw_fail(err, RSW_ERR_RANGE, "",
+                    "the scene's geometry spans %.3g, beyond what float32 tracing can represent (%.3g)",
+                    a->clip_r / ACCEL_CLIP, ACCEL_LIMIT / ACCEL_CLIP);
+  for (size_t i = 0; i < s->n_shapes; i++) {
+    const shape *sh = s->shapes[i];
+    if (shape_is_group(sh)) {
+      const shape_group *g = (const shape_group *)sh;
+      if (!(fmax(v3_max_abs(g->lo), v3_max_abs(g->hi)) <= ACCEL_LIMIT))
+        return rsw_fail(err, RSW_ERR_RANGE, sh->base.id ? sh->base.id : "shapegroup",
+                        "shapegroup '%s': its members reach coordinates float32 tracing cannot represent",
+                        sh->base.id ? sh->base.id : "");
+      continue;
+    }
+    if (shape_is_instancing(sh) && ((const instance_shape *)sh)->xf) continue; /* below */
+    rsw_status st = check_instance(a, &sh->to_world, a->ext[i], sh->base.id, err);
+    if (st) return st;
+  }
+  /* instancelist placements: fixed at load, their inverse norms computed once. */
+  for (size_t j = 0; j < a->n_list; j++) {
+    const instance_shape *is = (const instance_shape *)s->shapes[a->list_shape[j]];
+    const double *t = &is->tr[3 * (size_t)a->list_sub[j]];
+    double tc = fmax(fabs(t[0] - a->origin.x), fmax(fabs(t[1] - a->origin.y), fabs(t[2] - a->origin.z)));
+    double b = a->list_binv[j], o_bound = b * (a->clip_r + tc), d_bound = b * ACCEL_MAX_DIR;
+    double ext = a->ext[a->list_shape[j]];
+    if (!(o_bound <= ACCEL_LIMIT) || !(d_bound <= ACCEL_LIMIT) || !(ext <= ACCEL_LIMIT)) {
+      const char *name = is->base.base.id ? is->base.base.id : "instancelist";
+      return rsw_fail(err, RSW_ERR_RANGE, name,
+                      "'%s': placement %u: float32 tracing cannot represent it in this scene (rays in its "
+                      "object space would reach %.3g, geometry %.3g; the limit is %.3g)",
+                      name, a->list_sub[j], fmax(o_bound, d_bound), ext, ACCEL_LIMIT);
+    }
+  }
+  return RSW_OK;
 }
 
 /* Every top-level instance transform again, for a new origin. */
@@ -478,7 +603,8 @@ static RTCScene group_scene(accel *a, const shape_group *g) {
   RTCScene sc = rtcNewScene(a->device);
   if (!sc) return NULL;
   rtcSetSceneBuildQuality(sc, RTC_BUILD_QUALITY_HIGH);
-  for (size_t i = 0; i < g->n_members; i++) {
+  size_t i;
+  for (i = 0; i < g->n_members; i++) {
     const shape *m = g->members[i];
     RTCGeometry geo;
     if (m->geom == GEOM_MESH) {
@@ -517,6 +643,12 @@ static RTCScene group_scene(accel *a, const shape_group *g) {
     }
     rtcAttachGeometryByID(sc, geo, (unsigned)i);
     rtcReleaseGeometry(geo); /* the scene holds it */
+  }
+  if (i < g->n_members) {
+    /* A member could not be created: the group is an error, never a
+     * group with a member missing. */
+    rtcReleaseScene(sc);
+    return NULL;
   }
   rtcCommitScene(sc);
   a->grp[a->n_grp] = g;
@@ -590,7 +722,9 @@ rsw_status accel_build(scene *s, rsw_err *err) {
   a->n_sub = s->n_shapes;
   a->scene = s;
   for (size_t i = 0; i < s->n_shapes; i++) shape_bounds(a, i);
-  a->origin = frame_origin(a);
+  double radius;
+  a->origin = frame_origin(a, &radius);
+  a->clip_r = ACCEL_CLIP * radius;
   size_t n_list = 0;
   for (size_t i = 0; i < s->n_shapes; i++)
     if (shape_is_instancing(s->shapes[i]) && ((const instance_shape *)s->shapes[i])->xf)
@@ -599,8 +733,23 @@ rsw_status accel_build(scene *s, rsw_err *err) {
   if (n_list) {
     a->list_shape = malloc(n_list * sizeof *a->list_shape);
     a->list_sub = malloc(n_list * sizeof *a->list_sub);
-    if (!a->list_shape || !a->list_sub) return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+    a->list_binv = malloc(n_list * sizeof *a->list_binv);
+    if (!a->list_shape || !a->list_sub || !a->list_binv) return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
     a->n_list = n_list;
+    /* Placements in top-level id order (as build_instances attaches them). */
+    size_t j = 0;
+    for (size_t i = 0; i < s->n_shapes; i++) {
+      const instance_shape *is = (const instance_shape *)s->shapes[i];
+      if (!shape_is_instancing(s->shapes[i]) || !is->xf) continue;
+      for (uint32_t k = 0; k < is->n; k++, j++) {
+        a->list_shape[j] = (uint32_t)i, a->list_sub[j] = k;
+        a->list_binv[j] = placement_binv(&is->xf[12 * (size_t)k]);
+      }
+    }
+  }
+  {
+    rsw_status cst = check_traceable(a, err);
+    if (cst) return cst;
   }
   size_t next_id = s->n_shapes;
   for (size_t i = 0; i < s->n_shapes; i++) {
@@ -663,6 +812,7 @@ void accel_free(accel *a) {
   free(a->grp_scene);
   free(a->list_shape);
   free(a->list_sub);
+  free(a->list_binv);
   free(a->sub);
   free(a->geom);
   free(a->inst);
@@ -741,11 +891,19 @@ rsw_status accel_commit(accel *a, rsw_err *err) {
   t_embree_error[0] = '\0';
   /* The geometry moved: so may the frame's origin (the same function of
    * the scene's state as at load, so that an update equals a reload). */
-  vec3 o = frame_origin(a);
-  if (memcmp(&o, &a->origin, sizeof o) != 0) {
-    a->origin = o;
-    rewrite_instances(a);
+  double radius;
+  vec3 o = frame_origin(a, &radius);
+  vec3 o_was = a->origin;
+  double clip_was = a->clip_r;
+  a->origin = o, a->clip_r = ACCEL_CLIP * radius;
+  rsw_status cst = check_traceable(a, err);
+  if (cst) {
+    /* Nothing is committed: the caller restores the scene's state and
+     * commits that again (scene_update). */
+    a->origin = o_was, a->clip_r = clip_was;
+    return cst;
   }
+  if (memcmp(&o, &o_was, sizeof o) != 0) rewrite_instances(a);
   rtcCommitScene(a->top);
   a->top_dirty = false;
   a->counters.top_commits++;
@@ -761,31 +919,64 @@ void accel_get_counters(const accel *a, accel_counters *out) {
 
 /* ---- queries ------------------------------------------------------------------------------- */
 
-static void fill_ray(struct RTCRay *ray, const ray3 *r, vec3 origin) {
-  ray->org_x = (float)(r->o.x - origin.x);
-  ray->org_y = (float)(r->o.y - origin.y);
-  ray->org_z = (float)(r->o.z - origin.z);
-  ray->dir_x = (float)r->d.x;
-  ray->dir_y = (float)r->d.y;
-  ray->dir_z = (float)r->d.z;
-  ray->tnear = (float)r->tmin;
-  ray->tfar = r->tmax >= 3.0e38 ? INFINITY : (float)r->tmax;
+/* The ray Embree traces for r: origin relative to the frame's origin c;
+ * a direction longer than ACCEL_MAX_DIR or shorter than its inverse
+ * rescaled to unit length; an origin farther than clip_r from c advanced
+ * along the ray to that sphere (in double, so hits keep their distance).
+ * World distance t = *t0 + (Embree's t) * *ts. False when the ray cannot
+ * meet the geometry or is not finite: nothing invalid reaches Embree.
+ * Rays within the sphere with ordinary directions are passed unchanged. */
+static bool fill_ray(const accel *a, struct RTCRay *ray, const ray3 *r, double *t0, double *ts) {
+  vec3 d = r->d, oc = v3_sub(r->o, a->origin);
+  double tmin = r->tmin, tmax = r->tmax;
+  *t0 = 0, *ts = 1;
+  double len = v3_len(d);
+  if (!v3_finite(oc) || !(len > 0) || !isfinite(len) || isnan(tmin) || !(tmax >= tmin)) return false;
+  tmin = fmax(tmin, 0.0); /* Embree's segment starts at the origin or later */
+  if (len > ACCEL_MAX_DIR || len < 1.0 / ACCEL_MAX_DIR) {
+    d = v3_scale(d, 1.0 / len);
+    tmin *= len, tmax *= len; /* in units of the unit direction */
+    *ts = 1.0 / len;
+  }
+  double q = v3_dot(oc, oc) - a->clip_r * a->clip_r;
+  if (q > 0) {
+    /* |oc + t d|^2 = clip_r^2, the nearer root t_in. */
+    double dd = v3_dot(d, d), b = v3_dot(oc, d);
+    double disc = b * b - dd * q;
+    if (!(disc >= 0) || b >= 0) return false; /* misses the sphere, or points away from it */
+    double t_in = q / (-b + sqrt(disc));        /* = (-b - sqrt(disc)) / dd, stably */
+    if (!(t_in < tmax)) return false;
+    oc = v3_fma(oc, t_in, d);
+    tmin = fmax(tmin - t_in, 0.0);
+    tmax -= t_in;
+    *t0 = t_in * *ts;
+  }
+  ray->org_x = (float)oc.x;
+  ray->org_y = (float)oc.y;
+  ray->org_z = (float)oc.z;
+  ray->dir_x = (float)d.x;
+  ray->dir_y = (float)d.y;
+  ray->dir_z = (float)d.z;
+  ray->tnear = (float)tmin;
+  ray->tfar = tmax >= 3.0e38 ? INFINITY : (float)tmax;
   ray->time = 0;
   ray->mask = 0xFFFFFFFFu;
   ray->id = 0;
   ray->flags = 0;
+  return true;
 }
 
 bool accel_intersect(const accel *a, const ray3 *r, accel_hit *h) {
   struct RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   struct RTCRayHit rh;
-  fill_ray(&rh.ray, r, a->origin);
+  double t0, ts;
+  if (!fill_ray(a, &rh.ray, r, &t0, &ts)) return false;
   rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
   rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
   rtcIntersect1(a->top, &ctx, &rh);
   if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
-  h->t = rh.ray.tfar;
+  h->t = t0 + rh.ray.tfar * ts;
   uint32_t id = rh.hit.instID[0];
   if (id < a->n_sub) {
     h->shape = id;
@@ -806,7 +997,8 @@ bool accel_occluded(const accel *a, const ray3 *r) {
   struct RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   struct RTCRay ray;
-  fill_ray(&ray, r, a->origin);
+  double t0, ts;
+  if (!fill_ray(a, &ray, r, &t0, &ts)) return false;
   rtcOccluded1(a->top, &ctx, &ray);
   return ray.tfar < 0;
 }

@@ -269,6 +269,9 @@ typedef struct sensor_ops {
    * degrees, zen_az[2 (iy W + ix)] and [2 (iy W + ix) + 1], azimuth in
    * [0, 360) in Eradiate's east-right convention (atan2(y, x)). */
   void (*pixel_angles)(const sensor *s, int W, int H, double *zen_az);
+  /* Optional, with pixel_angles: each pixel centre's exitant direction
+   * (towards the sensor) as a unit world vector, xyz[3 (iy W + ix) + k]. */
+  void (*pixel_directions)(const sensor *s, int W, int H, double *xyz);
 } sensor_ops;
 struct sensor {
   object base;

@@ -8,9 +8,13 @@
  * (job seed, context id, sensor id), never of the call order, so a sweep
  * split into several jobs gives bitwise the films of one job. */
 #include <math.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/random.h>
+#include <time.h>
+#include <unistd.h>
 
 #include "buf.h"
 #include "rsw_sha256.h"
@@ -26,6 +30,99 @@ static uint64_t default_seed(uint64_t job_seed, const char *ctx, const char *sen
   h = (h ^ 0xff) * 1099511628211ULL; /* separator */
   for (const char *c = sensor_id; *c; c++) h = (h ^ (unsigned char)*c) * 1099511628211ULL;
   return (h ^ (h >> 32)) & 0xffffffffULL;
+}
+
+/* ---- a set of context ids ------------------------------------------------------------
+ * Duplicate context ids are found with a hash set, so that a job's
+ * validation is linear in its contexts (a pairwise scan took 153 s for
+ * 100,000). The hash is SipHash-2-4 (Aumasson and Bernstein, "SipHash: a
+ * fast short-input PRF", 2012) under a key drawn at random once per
+ * process, so that a client cannot choose ids that all collide. */
+static uint8_t g_sip_key[16];
+static pthread_once_t g_sip_once = PTHREAD_ONCE_INIT;
+
+static void sip_key_init(void) {
+  if (getrandom(g_sip_key, sizeof g_sip_key, 0) != (ssize_t)sizeof g_sip_key) {
+    /* No entropy source: the clock and the pid still differ per process. */
+    struct timespec ts;
+    clock_gettime(CLOCK_REALTIME, &ts);
+    uint64_t a = (uint64_t)ts.tv_nsec * 0x9E3779B97F4A7C15ULL ^ (uint64_t)ts.tv_sec;
+    uint64_t b = (uint64_t)getpid() * 0xC2B2AE3D27D4EB4FULL ^ (uint64_t)(uintptr_t)&ts;
+    memcpy(g_sip_key, &a, 8);
+    memcpy(g_sip_key + 8, &b, 8);
+  }
+}
+
+static uint64_t rotl64(uint64_t x, int b) {
+  return (x << b) | (x >> (64 - b));
+}
+
+static uint64_t load_le64(const uint8_t *p) {
+  uint64_t v = 0;
+  for (int i = 7; i >= 0; i--) v = (v << 8) | p[i];
+  return v;
+}
+
+#define SIPROUND                                                                                             \
+  do {                                                                                                       \
+    v0 += v1, v1 = rotl64(v1, 13), v1 ^= v0, v0 = rotl64(v0, 32);                                            \
+    v2 += v3, v3 = rotl64(v3, 16), v3 ^= v2;                                                                 \
+    v0 += v3, v3 = rotl64(v3, 21), v3 ^= v0;                                                                 \
+    v2 += v1, v1 = rotl64(v1, 17), v1 ^= v2, v2 = rotl64(v2, 32);                                            \
+  } while (0)
+
+static uint64_t siphash24(const char *s, size_t len) {
+  pthread_once(&g_sip_once, sip_key_init);
+  uint64_t k0 = load_le64(g_sip_key), k1 = load_le64(g_sip_key + 8);
+  uint64_t v0 = k0 ^ 0x736f6d6570736575ULL, v1 = k1 ^ 0x646f72616e646f6dULL;
+  uint64_t v2 = k0 ^ 0x6c7967656e657261ULL, v3 = k1 ^ 0x7465646279746573ULL;
+  const uint8_t *p = (const uint8_t *)s;
+  size_t full = len & ~(size_t)7;
+  for (size_t i = 0; i < full; i += 8) {
+    uint64_t m = load_le64(p + i);
+    v3 ^= m;
+    SIPROUND;
+    SIPROUND;
+    v0 ^= m;
+  }
+  uint64_t b = (uint64_t)len << 56;
+  for (size_t i = 0; i < (len & 7); i++) b |= (uint64_t)p[full + i] << (8 * i);
+  v3 ^= b;
+  SIPROUND;
+  SIPROUND;
+  v0 ^= b;
+  v2 ^= 0xff;
+  SIPROUND;
+  SIPROUND;
+  SIPROUND;
+  SIPROUND;
+  return v0 ^ v1 ^ v2 ^ v3;
+}
+
+/* Open addressing over borrowed strings; capacity a power of two at least
+ * twice the entries. */
+typedef struct id_set {
+  const char **slot;
+  size_t mask;
+} id_set;
+
+static bool id_set_init(id_set *set, size_t n) {
+  size_t cap = 16;
+  while (cap < 2 * n) cap *= 2;
+  set->slot = calloc(cap, sizeof *set->slot);
+  set->mask = cap - 1;
+  return set->slot != NULL;
+}
+
+/* Adds s; false when it was already there. */
+static bool id_set_add(id_set *set, const char *s) {
+  size_t i = (size_t)siphash24(s, strlen(s)) & set->mask;
+  while (set->slot[i]) {
+    if (strcmp(set->slot[i], s) == 0) return false;
+    i = (i + 1) & set->mask;
+  }
+  set->slot[i] = s;
+  return true;
 }
 
 static bool valid_context_id(const char *s) {
@@ -226,6 +323,15 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   }
   if (!st && (!cJSON_IsArray(contexts) || !contexts->child))
     st = svc_fail(e, RSW_ERR_MISSING, "/contexts", "a job needs a non-empty \"contexts\" list");
+  /* The caps before any context is read: a request over them costs one
+   * pass over the list. */
+  size_t n_listed = 0;
+  for (const cJSON *c = !st ? contexts->child : NULL; c; c = c->next) n_listed++;
+  if (!st && n_listed > SVC_MAX_JOB_CONTEXTS)
+    st = svc_fail(e, RSW_ERR_LIMIT, "/contexts", "%zu contexts; a job may have at most %d", n_listed,
+                  SVC_MAX_JOB_CONTEXTS);
+  id_set ids = {0};
+  if (!st && !id_set_init(&ids, n_listed)) st = svc_fail(e, RSW_ERR_NOMEM, "/contexts", "out of memory");
   if (!st && defaults && !cJSON_IsObject(defaults))
     st = svc_fail(e, RSW_ERR_TYPE, "/defaults", "defaults must be an object");
   /* Validation reads the parameter table's keys, the sensors' ids and
@@ -255,8 +361,18 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
         st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, w2, "unknown field '%s' in defaults", k->string);
       }
   }
-  /* Count renders and validate every context before accepting. */
+  /* Count renders and validate every context before accepting. A sensor
+   * may appear once per context (seen[] holds the context number that
+   * last named it), and each sensor's film is checked against the film
+   * memory limit once (film_ok). */
   size_t n_ctx = 0, n_items = 0;
+  size_t *seen = NULL;
+  bool *film_ok = NULL;
+  if (!st) {
+    seen = calloc(sc->n_sensors ? sc->n_sensors : 1, sizeof *seen);
+    film_ok = calloc(sc->n_sensors ? sc->n_sensors : 1, sizeof *film_ok);
+    if (!seen || !film_ok) st = svc_fail(e, RSW_ERR_NOMEM, "/contexts", "out of memory");
+  }
   for (const cJSON *c = !st ? contexts->child : NULL; c && !st; c = c->next, n_ctx++) {
     char ptr[64];
     snprintf(ptr, sizeof ptr, "/contexts/%zu", n_ctx);
@@ -269,12 +385,9 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       st = svc_fail(e, RSW_ERR_INVALID, ptr, "context \"id\" must match [A-Za-z0-9._-]{1,64}");
       break;
     }
-    for (const cJSON *p = contexts->child; p != c; p = p->next) {
-      const cJSON *pid = cJSON_GetObjectItemCaseSensitive(p, "id");
-      if (strcmp(pid->valuestring, id->valuestring) == 0) {
-        st = svc_fail(e, RSW_ERR_DUPLICATE, ptr, "context id '%s' appears twice", id->valuestring);
-        break;
-      }
+    if (!id_set_add(&ids, id->valuestring)) {
+      st = svc_fail(e, RSW_ERR_DUPLICATE, ptr, "context id '%s' appears twice", id->valuestring);
+      break;
     }
     for (const cJSON *k = c->child; k && !st; k = k->next)
       if (strcmp(k->string, "id") && strcmp(k->string, "wavelength") && strcmp(k->string, "params") &&
@@ -305,25 +418,57 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     if (!st) get_uint(c, "seed", 9007199254740991.0, &dummy, &present, ptr, e, &st);
     if (st) break;
     const cJSON *sens = cJSON_GetObjectItemCaseSensitive(c, "sensors");
-    if (!sens) sens = d_sensors;
+    const char *sens_ptr = ptr;
+    char sp[80];
+    if (sens) {
+      snprintf(sp, sizeof sp, "%s/sensors", ptr);
+      sens_ptr = sp;
+    } else if (d_sensors) {
+      sens = d_sensors;
+      sens_ptr = "/defaults/sensors";
+    }
     if (sens) {
       if (!cJSON_IsArray(sens) || !sens->child) {
-        st = svc_fail(e, RSW_ERR_TYPE, ptr, "sensors must be a non-empty list of sensor ids");
+        st = svc_fail(e, RSW_ERR_TYPE, sens_ptr, "sensors must be a non-empty list of sensor ids");
         break;
       }
-      for (const cJSON *s = sens->child; s && !st; s = s->next) {
+      size_t k = 0;
+      for (const cJSON *s = sens->child; s && !st; s = s->next, k++) {
         size_t si;
-        if (!cJSON_IsString(s) || !svc_find_sensor(sc, s->valuestring, &si))
-          st = svc_fail(e, RSW_ERR_UNKNOWN_NAME, ptr, "no sensor '%s' in the scene",
+        char ep[120];
+        snprintf(ep, sizeof ep, "%s/%zu", sens_ptr, k);
+        if (!cJSON_IsString(s) || !svc_find_sensor(sc, s->valuestring, &si)) {
+          st = svc_fail(e, RSW_ERR_UNKNOWN_NAME, ep, "no sensor '%s' in the scene",
                         cJSON_IsString(s) ? s->valuestring : "?");
+          break;
+        }
+        if (seen[si] == n_ctx + 1) {
+          st = svc_fail(e, RSW_ERR_DUPLICATE, ep, "sensor '%s' appears twice in one context", s->valuestring);
+          break;
+        }
+        seen[si] = n_ctx + 1;
+        if (!film_ok[si]) {
+          st = svc_check_film(svc, sc, si, ep, e);
+          film_ok[si] = !st;
+        }
         n_items++;
       }
     } else {
       if (!sc->n_sensors) st = svc_fail(e, RSW_ERR_INVALID, ptr, "the scene has no sensor");
+      for (size_t si = 0; si < sc->n_sensors && !st; si++)
+        if (!film_ok[si]) {
+          st = svc_check_film(svc, sc, si, ptr, e);
+          film_ok[si] = !st;
+        }
       n_items += sc->n_sensors;
     }
+    if (!st && n_items > SVC_MAX_JOB_RENDERS)
+      st = svc_fail(e, RSW_ERR_LIMIT, ptr, "the job's renders (contexts times sensors) exceed %d",
+                    SVC_MAX_JOB_RENDERS);
   }
-  if (!st && n_ctx > 100000) st = svc_fail(e, RSW_ERR_LIMIT, "/contexts", "at most 100000 contexts per job");
+  free(ids.slot);
+  free(seen);
+  free(film_ok);
   /* Build the job. */
   if (!st) {
     jb = calloc(1, sizeof *jb);

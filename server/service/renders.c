@@ -5,13 +5,24 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../kernel/core/warp.h"
 #include "buf.h"
 #include "rsw_sha256.h"
 #include "service_internal.h"
 
 bool svc_find_sensor(const scene *sc, const char *name, size_t *index) {
   return scene_find_sensor(sc, name, index) != NULL;
+}
+
+rsw_status svc_check_film(const service *svc, const scene *sc, size_t si, const char *where, svc_error *e) {
+  const sensor *se = sc->sensors[si];
+  int channels;
+  uint64_t need = sensor_film_bytes(se, sc->variant, &channels);
+  if (need <= svc->opts.max_film_bytes) return RSW_OK;
+  return svc_fail(e, RSW_ERR_LIMIT, where,
+                  "sensor '%s': rendering its %dx%d film (%d channel%s) takes %.3g MB, more than this server's "
+                  "limit of %.3g MB (--max-film-bytes)",
+                  se->base.id, se->film->width, se->film->height, channels, channels > 1 ? "s" : "",
+                  (double)need / 1e6, (double)svc->opts.max_film_bytes / 1e6);
 }
 
 void svc_film_free(svc_film *f) {
@@ -163,6 +174,9 @@ rsw_status service_render(service *svc, const char *id, const char *body, size_t
   if (!st && rs.wavelength > 0 && r->sc->variant != VARIANT_MONO)
     st = svc_fail(e, RSW_ERR_INVALID, "/wavelength", "wavelength applies to mono scenes; this scene is rgb");
   if (!st && r->sc->n_sensors == 0) st = svc_fail(e, RSW_ERR_INVALID, "/sensor", "the scene has no sensor");
+  /* Limits before anything is allocated: the film's memory, then its
+   * samples. */
+  if (!st) st = svc_check_film(svc, r->sc, rs.sensor_index, "/sensor", e);
   if (!st) {
     const sensor *se = r->sc->sensors[rs.sensor_index];
     uint64_t spp = rs.spp ? rs.spp : se->sampler->sample_count;
@@ -187,65 +201,68 @@ rsw_status service_render(service *svc, const char *id, const char *body, size_t
   return st;
 }
 
+/* Each pixel's viewing direction as the sensor maps it (its
+ * pixel_directions and pixel_angles ops), printed straight into a capped
+ * buffer: some 150 bytes of JSON per pixel and 40 of scratch, where a
+ * cJSON tree took a kilobyte. Films beyond SVC_MAX_DIRECTION_PIXELS are
+ * refused before anything is allocated. */
 rsw_status service_directions(service *svc, const char *id, const char *sensor_name, char **json_out,
                               svc_error *e) {
   resident *r = svc_scene_acquire(svc, id);
   if (!r) return svc_no_scene(e, id);
   size_t si;
-  rsw_status st = RSW_OK;
   if (!svc_find_sensor(r->sc, sensor_name, &si)) {
     svc_scene_release(svc, r);
     return svc_fail(e, RSW_ERR_NOT_FOUND, sensor_name, "no sensor '%s' in scene %s", sensor_name, id);
   }
-  pthread_mutex_lock(&r->lock);
   const sensor *se = r->sc->sensors[si];
-  const char *type = se->base.plugin->name;
-  cJSON *o = NULL;
-  if (strcmp(type, "hdistant") != 0 && strcmp(type, "distant") != 0) {
+  int W = se->film->width, H = se->film->height;
+  size_t n = (size_t)W * (size_t)H;
+  rsw_status st = RSW_OK;
+  if (!se->ops->pixel_directions || !se->ops->pixel_angles)
     st = svc_fail(
         e, RSW_ERR_UNSUPPORTED, sensor_name,
         "sensor '%s' is a %s; per-pixel directions exist for distant-family sensors (hdistant, distant)",
-        sensor_name, type);
-  } else {
-    int W = se->film->width, H = se->film->height;
-    o = cJSON_CreateObject();
-    cJSON_AddStringToObject(o, "sensor", se->base.id);
-    cJSON_AddNumberToObject(o, "width", W);
-    cJSON_AddNumberToObject(o, "height", H);
-    cJSON_AddStringToObject(o, "convention", "east_right");
-    cJSON *px = cJSON_AddArrayToObject(o, "pixels");
-    for (int iy = 0; iy < H; iy++)
-      for (int ix = 0; ix < W; ix++) {
-        /* hdistant: omega = to_world H(u) at the pixel centre
-         * (kernel-behavior.md §1.2); angles from the local vector, as
-         * Eradiate's post-processing (theta = acos z, phi = atan2(y, x),
-         * east-right). distant: omega = -(to_world z). */
-        vec3 local, w;
-        if (strcmp(type, "hdistant") == 0) {
-          local = warp_square_to_uniform_hemisphere(v2((ix + 0.5) / W, (iy + 0.5) / H));
-          w = v3_norm(xf_vector(&se->to_world, local));
-        } else {
-          local = v3(0, 0, 1);
-          w = v3_neg(v3_norm(xf_vector(&se->to_world, v3(0, 0, 1))));
-          local = w;
-        }
-        double zen = acos(fmax(-1.0, fmin(1.0, local.z))) * 180.0 / RSW_PI;
-        double az = atan2(local.y, local.x) * 180.0 / RSW_PI;
-        if (az < 0) az += 360.0;
-        cJSON *p = cJSON_CreateObject();
-        cJSON_AddNumberToObject(p, "ix", ix);
-        cJSON_AddNumberToObject(p, "iy", iy);
-        cJSON_AddNumberToObject(p, "x", w.x);
-        cJSON_AddNumberToObject(p, "y", w.y);
-        cJSON_AddNumberToObject(p, "z", w.z);
-        cJSON_AddNumberToObject(p, "zenith_deg", zen);
-        cJSON_AddNumberToObject(p, "azimuth_deg", az);
-        cJSON_AddItemToArray(px, p);
-      }
+        sensor_name, se->base.plugin->name);
+  else if (n > SVC_MAX_DIRECTION_PIXELS)
+    st = svc_fail(e, RSW_ERR_LIMIT, sensor_name,
+                  "sensor '%s': its film has %dx%d = %zu pixels; directions are served for at most %d pixels",
+                  sensor_name, W, H, n, SVC_MAX_DIRECTION_PIXELS);
+  double *xyz = NULL, *za = NULL;
+  if (!st) {
+    xyz = malloc(3 * n * sizeof *xyz);
+    za = malloc(2 * n * sizeof *za);
+    if (!xyz || !za) st = svc_fail(e, RSW_ERR_NOMEM, sensor_name, "out of memory");
   }
-  pthread_mutex_unlock(&r->lock);
+  if (!st) {
+    /* The sensor's transform is parameter state: read under the scene's
+     * lock (a render may be applying an override). */
+    pthread_mutex_lock(&r->lock);
+    se->ops->pixel_directions(se, W, H, xyz);
+    se->ops->pixel_angles(se, W, H, za);
+    pthread_mutex_unlock(&r->lock);
+    svc_buf b = svc_buf_make(160 * n + 4096);
+    svc_buf_printf(&b, "{\"sensor\":");
+    char *esc = NULL;
+    cJSON *name = cJSON_CreateString(se->base.id);
+    if (name) esc = cJSON_PrintUnformatted(name);
+    cJSON_Delete(name);
+    svc_buf_printf(&b, "%s,\"width\":%d,\"height\":%d,\"convention\":\"east_right\",\"pixels\":[",
+                   esc ? esc : "\"\"", W, H);
+    free(esc);
+    for (size_t i = 0; i < n && !b.failed; i++) {
+      const double *w = &xyz[3 * i], *a = &za[2 * i];
+      svc_buf_printf(&b,
+                     "%s{\"ix\":%zu,\"iy\":%zu,\"x\":%.17g,\"y\":%.17g,\"z\":%.17g,\"zenith_deg\":%.17g,"
+                     "\"azimuth_deg\":%.17g}",
+                     i ? "," : "", i % (size_t)W, i / (size_t)W, w[0], w[1], w[2], a[0], a[1]);
+    }
+    svc_buf_printf(&b, "]}");
+    *json_out = svc_buf_take(&b);
+    if (!*json_out) st = svc_fail(e, RSW_ERR_NOMEM, sensor_name, "out of memory");
+  }
+  free(xyz);
+  free(za);
   svc_scene_release(svc, r);
-  if (st) return st;
-  *json_out = svc_print_json(o);
-  return RSW_OK;
+  return st;
 }

@@ -79,6 +79,7 @@ rsw_status service_new(const service_opts *opts, service **out, rsw_err *err) {
   if (!svc->opts.max_queue) svc->opts.max_queue = 64;
   if (!(svc->opts.result_ttl_s > 0)) svc->opts.result_ttl_s = 3600;
   if (!svc->opts.max_pixel_samples) svc->opts.max_pixel_samples = (uint64_t)1 << 32;
+  if (!svc->opts.max_film_bytes) svc->opts.max_film_bytes = (uint64_t)1 << 30;
   if (svc->opts.data_root) {
     char *rp = realpath(svc->opts.data_root, NULL);
     if (!rp) {
@@ -204,6 +205,10 @@ char *service_info_json(service *svc) {
   cJSON_AddNumberToObject(lim, "max_depth", RSW_MAX_DEPTH);
   cJSON_AddNumberToObject(lim, "max_queue", (double)svc->opts.max_queue);
   cJSON_AddNumberToObject(lim, "max_pixel_samples", (double)svc->opts.max_pixel_samples);
+  cJSON_AddNumberToObject(lim, "max_film_bytes", (double)svc->opts.max_film_bytes);
+  cJSON_AddNumberToObject(lim, "max_job_contexts", SVC_MAX_JOB_CONTEXTS);
+  cJSON_AddNumberToObject(lim, "max_job_renders", SVC_MAX_JOB_RENDERS);
+  cJSON_AddNumberToObject(lim, "max_direction_pixels", SVC_MAX_DIRECTION_PIXELS);
   cJSON_AddNumberToObject(lim, "result_ttl_s", svc->opts.result_ttl_s);
   return svc_print_json(o);
 }

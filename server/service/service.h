@@ -41,6 +41,9 @@ typedef struct service_opts {
                                   (default 2^32) */
   size_t max_body_bytes;      /* reported in GET /v1 (the HTTP layer
                                   enforces it) */
+  uint64_t max_film_bytes;    /* memory one render's film may take
+                                  (sensor_film_bytes), checked before
+                                  anything is allocated (default 1 GiB) */
 } service_opts;
 
 rsw_status service_new(const service_opts *opts, service **out, rsw_err *err);

@@ -126,6 +126,19 @@ struct service {
   uint64_t updates[3];
 };
 
+/* Request limits besides the options (GET /v1 reports them). A job's
+ * contexts are counted before any is read; a context id or a sensor may
+ * appear once; the directions route answers for films of at most
+ * SVC_MAX_DIRECTION_PIXELS pixels (~150 bytes of JSON each). */
+#define SVC_MAX_JOB_CONTEXTS     100000
+#define SVC_MAX_JOB_RENDERS      1000000
+#define SVC_MAX_DIRECTION_PIXELS (1024 * 1024)
+
+/* RSW_ERR_LIMIT when rendering sensor si of sc would take more film memory
+ * than the server allows (--max-film-bytes); `where` is the request field
+ * that chose the sensor. */
+rsw_status svc_check_film(const service *svc, const scene *sc, size_t si, const char *where, svc_error *e);
+
 /* Helpers shared by the service files. */
 double svc_now(void);
 void svc_iso_time(time_t t, char out[32]);

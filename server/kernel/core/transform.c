@@ -1,5 +1,6 @@
 #include "transform.h"
 
+#include <stdio.h>
 #include <string.h>
 
 static void mat_mul(const double a[4][4], const double b[4][4], double r[4][4]) {
@@ -189,5 +190,69 @@ bool xf_is_similarity(const xform *t, double *scale) {
     return false;
   if (t->m[3][0] != 0 || t->m[3][1] != 0 || t->m[3][2] != 0 || t->m[3][3] != 1) return false;
   if (scale) *scale = (l0 + l1 + l2) / 3.0;
+  return true;
+}
+
+bool xf_traceable(const double m[4][4], const char *what, char *buf, unsigned long len) {
+  for (int i = 0; i < 4; i++)
+    for (int j = 0; j < 4; j++)
+      if (!isfinite(m[i][j])) {
+        snprintf(buf, len, "%s: matrix entry [%d][%d] is not finite", what, i, j);
+        return false;
+      }
+  if (m[3][0] != 0 || m[3][1] != 0 || m[3][2] != 0 || m[3][3] != 1) {
+    snprintf(buf, len,
+             "%s: the last row is [%g, %g, %g, %g]; a to_world must be affine (last row 0 0 0 1): a "
+             "projective transform cannot be traced",
+             what, m[3][0], m[3][1], m[3][2], m[3][3]);
+    return false;
+  }
+  for (int i = 0; i < 3; i++)
+    if (!(fabs(m[i][3]) <= RSW_TRACE_MAX_COORD)) {
+      snprintf(buf, len, "%s: translation %g exceeds %g, the largest coordinate float32 tracing accepts", what,
+               m[i][3], RSW_TRACE_MAX_COORD);
+      return false;
+    }
+  /* The linear part's inverse by cofactors (A^-1 = adj(A) / det A). */
+  const double(*a)[4] = m;
+  double c[3][3];
+  for (int i = 0; i < 3; i++)
+    for (int j = 0; j < 3; j++) {
+      int i1 = (i + 1) % 3, i2 = (i + 2) % 3, j1 = (j + 1) % 3, j2 = (j + 2) % 3;
+      c[j][i] = a[i1][j1] * a[i2][j2] - a[i1][j2] * a[i2][j1]; /* adjugate: transposed cofactor */
+    }
+  double det = a[0][0] * c[0][0] + a[0][1] * c[1][0] + a[0][2] * c[2][0];
+  double fa = 0, fi = 0;
+  for (int i = 0; i < 3; i++)
+    for (int j = 0; j < 3; j++) fa += a[i][j] * a[i][j];
+  fa = sqrt(fa);
+  if (det != 0 && isfinite(det)) {
+    for (int i = 0; i < 3; i++)
+      for (int j = 0; j < 3; j++) {
+        double x = c[i][j] / det;
+        fi += x * x;
+      }
+    fi = sqrt(fi);
+  }
+  double smax = fa / sqrt(3.0);
+  double smin = fi > 0 && isfinite(fi) ? sqrt(3.0) / fi : 0.0;
+  if (!(smin >= RSW_TRACE_MIN_SCALE)) {
+    snprintf(buf, len,
+             "%s: scales down to %.3g (singular or nearly so); float32 tracing needs every scale >= %g", what,
+             smin, RSW_TRACE_MIN_SCALE);
+    return false;
+  }
+  if (!(smax <= RSW_TRACE_MAX_SCALE)) {
+    snprintf(buf, len, "%s: scales up to %.3g; float32 tracing needs every scale <= %g", what, smax,
+             RSW_TRACE_MAX_SCALE);
+    return false;
+  }
+  if (!(smax <= RSW_TRACE_MAX_COND * smin)) {
+    snprintf(buf, len,
+             "%s: scales range from %.3g to %.3g (condition %.3g); float32 tracing needs a ratio <= %g "
+             "(nearly singular)",
+             what, smin, smax, smax / smin, RSW_TRACE_MAX_COND);
+    return false;
+  }
   return true;
 }

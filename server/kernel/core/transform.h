@@ -35,4 +35,39 @@ bool xf_is_identity(const xform *t);
  * relative tolerance); *scale gets that scale. */
 bool xf_is_similarity(const xform *t, double *scale);
 
+/* ---- what float32 tracing can represent ----------------------------------------
+ * Embree traces in single precision and asserts (aborts the process) on a
+ * ray whose origin or direction has a coordinate beyond FLT_LARGE =
+ * 1.844e18 (embree common/sys/platform.h; RayK<1>::valid()), and drops
+ * geometry beyond it. Every instance transform (A, t) maps the ray into
+ * object space as A^-1 (o - t), A^-1 d, in float, so a tiny scale turns an
+ * ordinary ray into an invalid one (a scale of 1e-20 makes a unit direction
+ * 1e20 long), and a projective matrix, which Embree cannot express, is
+ * silently cut down to its affine part. A shape's to_world (and an
+ * instance placement) is therefore held to these limits, at load, at
+ * PATCH and at per-render override time; accel.c checks the exact
+ * condition for the whole scene once more before any commit.
+ *
+ * The limits leave the realistic range of radiative-transfer scenes (a
+ * 1 um detail, a 1,000,000 km extent) inside and keep every float Embree
+ * computes orders of magnitude below FLT_LARGE: with world coordinates
+ * below RSW_TRACE_MAX_COORD and scales above RSW_TRACE_MIN_SCALE, an
+ * object-space ray coordinate stays below about 1e16. */
+#define RSW_TRACE_MAX_COORD 1e9  /* |world|, |object| coordinates, |translation| */
+#define RSW_TRACE_MIN_SCALE 1e-6 /* smallest scale of a linear part */
+#define RSW_TRACE_MAX_SCALE 1e9  /* largest scale of a linear part */
+/* Largest condition number (largest over smallest scale) of a nearly
+ * singular matrix: beyond it the float inverse Embree forms can be off by
+ * more than half the smallest dimension (2^-24 times 1e7 = 0.6). */
+#define RSW_TRACE_MAX_COND 1e7
+
+/* Check the 4x4 row-major matrix m as a shape's to_world for float32
+ * tracing: finite, affine (last row exactly 0 0 0 1), translation within
+ * RSW_TRACE_MAX_COORD, the linear part's scales within [MIN_SCALE,
+ * MAX_SCALE] and its condition within MAX_COND (scales estimated from
+ * Frobenius norms: sqrt(3)/|A^-1|_F and |A|_F/sqrt(3), exact for a rotation
+ * times a uniform scale). On failure writes a message that starts with
+ * `what` (the key or property name) into buf and returns false. */
+bool xf_traceable(const double m[4][4], const char *what, char *buf, unsigned long len);
+
 #endif

@@ -941,6 +941,18 @@ typedef struct staged {
   vec3 vec;
   float *fpos; /* vertex_positions converted to float (owned until applied) */
   bool changed;
+  /* Prepared before anything is written (prepare()), so that applying
+   * cannot fail; and what applying replaced, so that a failure after it
+   * (Embree, the scene-wide float32 check, a sensor) puts it all back. */
+  spectrum new_spec;      /* owned copy of the new spectrum; after apply: the old one */
+  bool spec_ready;
+  void *buf;              /* faces (uint32), normals or texcoords (float), owned */
+  bool applied;
+  double old_f;
+  xform old_xf;
+  vec3 old_vec;
+  void *old_buf;          /* the mesh buffer replaced (positions, faces, normals, uvs) */
+  uint32_t old_count;     /* n_verts (positions) or n_faces (faces) before */
 } staged;
 
 static bool spectrum_equal(const spectrum *a, const spectrum *b) {
@@ -980,6 +992,12 @@ static rsw_status validate(const scene *s, staged *sg, const staged *all, size_t
         return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': matrix entries must be finite", key);
       m[i / 4][i % 4] = v->arr[i];
     }
+    /* A shape's transform (the geometric ones) must be one float32 tracing
+     * can represent: checked on the matrix itself first, so that a tiny
+     * scale is reported as such rather than as "singular". */
+    char msg[512];
+    if (e->cls == UPDATE_GEOMETRIC && !xf_traceable(m, key, msg, sizeof msg))
+      return rsw_fail(err, RSW_ERR_RANGE, key, "%s", msg);
     if (!xf_from_matrix(m, &sg->xf))
       return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': matrix is singular", key);
     if (e->check) {
@@ -1054,10 +1072,23 @@ static rsw_status validate(const scene *s, staged *sg, const staged *all, size_t
       {
         /* Branch-free scan first (vectorises), then locate the culprit. */
         int bad = 0;
-        for (size_t i = 0; i < v->n; i++) bad |= !(fabs(v->arr[i]) <= 3.0e38);
+        for (size_t i = 0; i < v->n; i++) bad |= !(fabs(v->arr[i]) <= RSW_TRACE_MAX_COORD);
         for (size_t i = 0; bad && i < v->n; i++)
-          if (!(fabs(v->arr[i]) <= 3.0e38))
-            return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': coordinate %zu is not a finite float", key, i);
+          if (!(fabs(v->arr[i]) <= RSW_TRACE_MAX_COORD))
+            return rsw_fail(err, isfinite(v->arr[i]) ? RSW_ERR_RANGE : RSW_ERR_INVALID, key,
+                            "'%s': coordinate %zu (%g) is not finite or exceeds %g, the largest float32 "
+                            "tracing accepts",
+                            key, i, v->arr[i], RSW_TRACE_MAX_COORD);
+        /* Their image under the shape's to_world (core/transform.h). */
+        const xform *t = &e->sh->to_world;
+        double w = 0;
+        for (size_t i = 0; i + 2 < v->n; i += 3)
+          w = fmax(w, v3_max_abs(xf_point(t, v3(v->arr[i], v->arr[i + 1], v->arr[i + 2]))));
+        if (!(w <= RSW_TRACE_MAX_COORD))
+          return rsw_fail(err, RSW_ERR_RANGE, key,
+                          "'%s': the mesh would reach a world coordinate of %g, beyond %g, the largest float32 "
+                          "tracing accepts",
+                          key, w, RSW_TRACE_MAX_COORD);
       }
       break;
     case MB_FACES:
@@ -1097,46 +1128,174 @@ static rsw_status validate(const scene *s, staged *sg, const staged *all, size_t
   return rsw_fail(err, RSW_ERR_INVALID, key, "'%s' is read-only", e->key);
 }
 
-static rsw_status apply_meshbuf(const entry *e, const param_value *v, rsw_err *err) {
-  mesh *m = &e->sh->mesh;
-  switch (e->buf) {
-  case MB_POSITIONS: {
-    if (v->n != 3 * (size_t)m->n_verts) {
-      float *p = realloc(m->pos, v->n * sizeof(float));
-      if (!p) return rsw_fail(err, RSW_ERR_NOMEM, e->key, "out of memory");
-      m->pos = p;
-      m->n_verts = (uint32_t)(v->n / 3);
-    }
-    for (size_t i = 0; i < v->n; i++) m->pos[i] = (float)v->arr[i];
-    break;
+/* Everything applying needs that could fail (allocations), done before
+ * anything is written. */
+static rsw_status prepare(staged *sg, const entry *e, rsw_err *err) {
+  const param_value *v = &sg->item->value;
+  if (e->kind == EK_SPECTRUM) {
+    if (!uniform_spectrum_copy(&sg->new_spec, &sg->spec))
+      return rsw_fail(err, RSW_ERR_NOMEM, e->key, "out of memory");
+    sg->spec_ready = true;
+    return RSW_OK;
   }
-  case MB_FACES: {
-    if (v->n != 3 * (size_t)m->n_faces) {
-      uint32_t *f = realloc(m->faces, v->n * sizeof(uint32_t));
-      if (!f) return rsw_fail(err, RSW_ERR_NOMEM, e->key, "out of memory");
-      m->faces = f;
-      m->n_faces = (uint32_t)(v->n / 3);
+  if (e->kind != EK_MESHBUF) return RSW_OK;
+  switch (e->buf) {
+  case MB_POSITIONS:
+    if (!sg->fpos) {
+      sg->fpos = malloc((v->n ? v->n : 1) * sizeof(float));
+      if (!sg->fpos) return rsw_fail(err, RSW_ERR_NOMEM, e->key, "out of memory");
+      for (size_t q = 0; q < v->n; q++) sg->fpos[q] = (float)v->arr[q];
     }
-    for (size_t i = 0; i < v->n; i++) m->faces[i] = (uint32_t)v->arr[i];
+    break;
+  case MB_FACES: {
+    uint32_t *f = malloc((v->n ? v->n : 1) * sizeof(uint32_t));
+    if (!f) return rsw_fail(err, RSW_ERR_NOMEM, e->key, "out of memory");
+    for (size_t i = 0; i < v->n; i++) f[i] = (uint32_t)v->arr[i];
+    sg->buf = f;
     break;
   }
   case MB_NORMALS:
   case MB_TEXCOORDS: {
-    float **dst = e->buf == MB_NORMALS ? &m->nrm : &m->uv;
-    float *p = realloc(*dst, v->n * sizeof(float));
-    if (!p) return rsw_fail(err, RSW_ERR_NOMEM, e->key, "out of memory");
-    *dst = p;
-    for (size_t i = 0; i < v->n; i++) p[i] = (float)v->arr[i];
+    float *f = malloc((v->n ? v->n : 1) * sizeof(float));
+    if (!f) return rsw_fail(err, RSW_ERR_NOMEM, e->key, "out of memory");
+    for (size_t i = 0; i < v->n; i++) f[i] = (float)v->arr[i];
+    sg->buf = f;
     break;
   }
   }
   return RSW_OK;
 }
 
+/* Write one prepared value, remembering what it replaced. Cannot fail. */
+static void apply_one(staged *sg, const entry *e) {
+  switch (e->kind) {
+  case EK_FLOAT:
+    sg->old_f = *e->fptr;
+    *e->fptr = sg->item->value.num;
+    break;
+  case EK_TRANSFORM:
+    sg->old_xf = *e->xptr;
+    *e->xptr = sg->xf;
+    break;
+  case EK_VECTOR:
+    sg->old_vec = e->vget(e->owner);
+    e->vset(e->owner, sg->vec);
+    break;
+  case EK_SPECTRUM: uniform_texture_swap_spectrum(e->tex, &sg->new_spec); break;
+  case EK_MESHBUF: {
+    mesh *m = &e->sh->mesh;
+    size_t n = sg->item->value.n;
+    switch (e->buf) {
+    case MB_POSITIONS:
+      sg->old_buf = m->pos, sg->old_count = m->n_verts;
+      m->pos = sg->fpos, m->n_verts = (uint32_t)(n / 3);
+      sg->fpos = NULL;
+      break;
+    case MB_FACES:
+      sg->old_buf = m->faces, sg->old_count = m->n_faces;
+      m->faces = sg->buf, m->n_faces = (uint32_t)(n / 3);
+      sg->buf = NULL;
+      break;
+    case MB_NORMALS:
+      sg->old_buf = m->nrm;
+      m->nrm = sg->buf;
+      sg->buf = NULL;
+      break;
+    case MB_TEXCOORDS:
+      sg->old_buf = m->uv;
+      m->uv = sg->buf;
+      sg->buf = NULL;
+      break;
+    }
+    break;
+  }
+  case EK_BOOL: break;
+  }
+  sg->applied = true;
+}
+
+/* Put back what apply_one replaced (the new value is freed). */
+static void undo_one(staged *sg, const entry *e) {
+  if (!sg->applied) return;
+  switch (e->kind) {
+  case EK_FLOAT: *e->fptr = sg->old_f; break;
+  case EK_TRANSFORM: *e->xptr = sg->old_xf; break;
+  case EK_VECTOR: e->vset(e->owner, sg->old_vec); break;
+  case EK_SPECTRUM: uniform_texture_swap_spectrum(e->tex, &sg->new_spec); break;
+  case EK_MESHBUF: {
+    mesh *m = &e->sh->mesh;
+    void *cur = NULL;
+    switch (e->buf) {
+    case MB_POSITIONS: cur = m->pos, m->pos = sg->old_buf, m->n_verts = sg->old_count; break;
+    case MB_FACES: cur = m->faces, m->faces = sg->old_buf, m->n_faces = sg->old_count; break;
+    case MB_NORMALS: cur = m->nrm, m->nrm = sg->old_buf; break;
+    case MB_TEXCOORDS: cur = m->uv, m->uv = sg->old_buf; break;
+    }
+    free(cur);
+    sg->old_buf = NULL;
+    break;
+  }
+  case EK_BOOL: break;
+  }
+  sg->applied = false;
+}
+
+/* Free what the staged entries still own: prepared values not applied,
+ * values replaced by a successful update. */
+static void staged_free(staged *sg, size_t n) {
+  for (size_t i = 0; i < n; i++) {
+    free(sg[i].fpos);
+    free(sg[i].buf);
+    free(sg[i].old_buf);
+    if (sg[i].spec_ready) spectrum_free(&sg[i].new_spec);
+  }
+  free(sg);
+}
+
 static double now_s(void) {
   struct timespec ts;
   clock_gettime(CLOCK_MONOTONIC, &ts);
   return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+/* The acceleration structure and the scene's bounds after the values of
+ * sg were written (restore = false) or put back (restore = true: every
+ * touched mesh is rebuilt, whatever its update was). */
+static rsw_status update_geometry(scene *s, staged *sg, size_t n, bool restore, rsw_err *err) {
+  rsw_status st = RSW_OK;
+  for (size_t i = 0; i < n && !st; i++) {
+    if (!sg[i].changed) continue;
+    const entry *e = &s->params->e[sg[i].index];
+    if (e->cls != UPDATE_GEOMETRIC) continue;
+    const shape *sh = (const shape *)e->owner;
+    if (e->kind == EK_TRANSFORM) {
+      accel_update_transform(s->accel, sh);
+    } else if (e->kind == EK_MESHBUF) {
+      bool topology = restore;
+      for (size_t k = 0; k < n; k++) {
+        const entry *o = &s->params->e[sg[k].index];
+        if (sg[k].changed && o->kind == EK_MESHBUF && o->sh == e->sh && o->buf == MB_FACES) topology = true;
+      }
+      if (restore) {
+        /* Once per mesh: at its first changed buffer. */
+        bool first = true;
+        for (size_t k = 0; k < i && first; k++) {
+          const entry *o = &s->params->e[sg[k].index];
+          first = !(sg[k].changed && o->kind == EK_MESHBUF && o->sh == e->sh);
+        }
+        if (first) st = accel_rebuild_shape(s->accel, sh, err);
+      } else if (e->buf == MB_FACES || (topology && e->buf == MB_POSITIONS)) {
+        if (e->buf == MB_FACES) st = accel_rebuild_shape(s->accel, sh, err);
+      } else if (e->buf == MB_POSITIONS) {
+        st = accel_update_vertices(s->accel, sh, err);
+      }
+    }
+  }
+  if (!st) st = accel_commit(s->accel, err);
+  /* Bounds, emitters and sensors: the same code as a load, so that an
+   * update equals a reload. */
+  if (!st) st = scene_refresh_bounds(s, err);
+  return st;
 }
 
 rsw_status scene_update(scene *s, const param_update *items, size_t n, update_report *report, rsw_err *err) {
@@ -1230,54 +1389,33 @@ rsw_status scene_update(scene *s, const param_update *items, size_t n, update_re
       msh->cdf_staged = true;
     }
   }
+  /* Prepare every value that needs memory, still before writing. */
+  for (size_t i = 0; i < n && !st; i++)
+    if (sg[i].changed) st = prepare(&sg[i], &s->params->e[sg[i].index], err);
   if (st) {
     for (size_t i = 0; i < n; i++) {
       const entry *e = &s->params->e[sg[i].index];
       if (e->kind == EK_MESHBUF) e->sh->cdf_staged = false;
-      free(sg[i].fpos);
     }
-  }
-  if (st) {
-    free(sg);
+    staged_free(sg, n);
     return st;
   }
   accel_counters before;
   accel_get_counters(s->accel, &before);
-  /* 3. Apply. */
+  /* 3. Apply: nothing here can fail. */
   unsigned classes = 0;
   size_t changed = 0;
   bool geometry = false;
-  for (size_t i = 0; i < n && !st; i++) {
+  for (size_t i = 0; i < n; i++) {
     if (!sg[i].changed) continue;
     const entry *e = &s->params->e[sg[i].index];
     changed++;
     classes |= e->cls;
-    switch (e->kind) {
-    case EK_FLOAT: *e->fptr = sg[i].item->value.num; break;
-    case EK_TRANSFORM: *e->xptr = sg[i].xf; break;
-    case EK_VECTOR: e->vset(e->owner, sg[i].vec); break;
-    case EK_SPECTRUM:
-      if (!uniform_texture_set_spectrum(e->tex, &sg[i].spec))
-        st = rsw_fail(err, RSW_ERR_NOMEM, e->key, "out of memory");
-      break;
-    case EK_MESHBUF:
-      if (sg[i].fpos) {
-        /* Positions were converted during validation: swap them in. */
-        mesh *m = &e->sh->mesh;
-        free(m->pos);
-        m->pos = sg[i].fpos;
-        m->n_verts = (uint32_t)(sg[i].item->value.n / 3);
-        sg[i].fpos = NULL;
-      } else {
-        st = apply_meshbuf(e, &sg[i].item->value, err);
-      }
-      break;
-    case EK_BOOL: break;
-    }
+    apply_one(&sg[i], e);
     if (e->cls == UPDATE_GEOMETRIC) geometry = true;
   }
   /* 4. Derived state, each touched object once. */
-  for (size_t i = 0; i < n && !st; i++) {
+  for (size_t i = 0; i < n; i++) {
     if (!sg[i].changed) continue;
     object *o = s->params->e[sg[i].index].owner;
     bool seen = false;
@@ -1285,32 +1423,33 @@ rsw_status scene_update(scene *s, const param_update *items, size_t n, update_re
     if (seen) continue;
     if (o->plugin && o->plugin->parameters_changed) o->plugin->parameters_changed(o);
   }
-  /* Embree: instance transforms, refits and rebuilds, then one commit. */
-  for (size_t i = 0; i < n && !st && geometry; i++) {
-    if (!sg[i].changed) continue;
-    const entry *e = &s->params->e[sg[i].index];
-    if (e->cls != UPDATE_GEOMETRIC) continue;
-    const shape *sh = (const shape *)e->owner;
-    if (e->kind == EK_TRANSFORM) {
-      accel_update_transform(s->accel, sh);
-    } else if (e->kind == EK_MESHBUF) {
-      bool topology = false;
-      for (size_t k = 0; k < n; k++) {
-        const entry *o = &s->params->e[sg[k].index];
-        if (sg[k].changed && o->kind == EK_MESHBUF && o->sh == e->sh && o->buf == MB_FACES) topology = true;
-      }
-      if (e->buf == MB_FACES || (topology && e->buf == MB_POSITIONS)) {
-        if (e->buf == MB_FACES) st = accel_rebuild_shape(s->accel, sh, err);
-      } else if (e->buf == MB_POSITIONS) {
-        st = accel_update_vertices(s->accel, sh, err);
+  /* Embree: instance transforms, refits and rebuilds, then one commit.
+   * These can still fail (Embree, accel.c's scene-wide float32 check, a
+   * sensor refusing the new bounds): then every value goes back, and the
+   * structure is brought back to it, so that a failed update changes
+   * nothing. */
+  if (geometry) st = update_geometry(s, sg, n, false, err);
+  if (st) {
+    for (size_t i = 0; i < n; i++) undo_one(&sg[i], &s->params->e[sg[i].index]);
+    for (size_t i = 0; i < n; i++) {
+      const entry *e = &s->params->e[sg[i].index];
+      if (e->kind == EK_MESHBUF) e->sh->cdf_staged = false;
+    }
+    for (size_t i = 0; i < n; i++) {
+      if (!sg[i].changed) continue;
+      object *o = s->params->e[sg[i].index].owner;
+      bool seen = false;
+      for (size_t k = 0; k < i && !seen; k++) seen = sg[k].changed && s->params->e[sg[k].index].owner == o;
+      if (!seen && o->plugin && o->plugin->parameters_changed) o->plugin->parameters_changed(o);
+    }
+    if (geometry) {
+      rsw_err again = {0};
+      if (update_geometry(s, sg, n, true, &again) && err) {
+        size_t used = strlen(err->msg);
+        snprintf(err->msg + used, sizeof err->msg - used, " (and restoring the previous state failed: %s)",
+                 again.msg);
       }
     }
-  }
-  if (!st && geometry) {
-    st = accel_commit(s->accel, err);
-    /* Bounds, emitters and sensors: the same code as a load, so that an
-     * update equals a reload. */
-    if (!st) st = scene_refresh_bounds(s, err);
   }
   /* Emitter selection by sampling_weight (cheap: one pass). */
   if (!st && changed) {
@@ -1321,8 +1460,7 @@ rsw_status scene_update(scene *s, const param_update *items, size_t n, update_re
     }
     s->emitter_weight_sum = sum;
   }
-  for (size_t i = 0; i < n; i++) free(sg[i].fpos);
-  free(sg);
+  staged_free(sg, n);
   if (report) {
     accel_counters after;
     accel_get_counters(s->accel, &after);

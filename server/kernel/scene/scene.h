@@ -41,6 +41,14 @@ rsw_status scene_prepare(scene *s, const render_ctx *rc, rsw_err *err);
 
 /* Sensor by id, or by decimal index when `id` is all digits. NULL if none. */
 sensor *scene_find_sensor(const scene *s, const char *id, size_t *index_out);
+/* What rendering sensor se's film takes in memory, in bytes, at most
+ * (checked before a render allocates anything, so that a film too large
+ * for the server is refused up front): per pixel the accumulator (4
+ * doubles, 7 for a Stokes film), the developed film (channels floats) and
+ * its encoded copy, and for the distant family the viewing angles (2
+ * doubles) twice (film and encoded metadata). *channels (optional) gets
+ * the film's channel count. Saturates at UINT64_MAX. */
+uint64_t sensor_film_bytes(const sensor *se, rsw_variant variant, int *channels);
 
 /* Free the scene, every object it owns and its document. NULL is a no-op. */
 void scene_free(scene *s);

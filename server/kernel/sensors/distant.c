@@ -55,10 +55,16 @@ static void distant_pixel_angles(const sensor *s, int W, int H, double *zen_az) 
   for (size_t i = 0; i < (size_t)W * H; i++) direction_angles(w, &zen_az[2 * i], &zen_az[2 * i + 1]);
 }
 
+static void distant_pixel_directions(const sensor *s, int W, int H, double *xyz) {
+  vec3 w = v3_neg(((const distant *)s)->d);
+  for (size_t i = 0; i < (size_t)W * H; i++) xyz[3 * i] = w.x, xyz[3 * i + 1] = w.y, xyz[3 * i + 2] = w.z;
+}
+
 static const sensor_ops distant_ops = {
     .sample_ray = distant_sample_ray,
     .set_scene = distant_set_scene,
     .pixel_angles = distant_pixel_angles,
+    .pixel_directions = distant_pixel_directions,
 };
 
 static void distant_destroy(object *o) {

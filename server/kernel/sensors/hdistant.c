@@ -63,10 +63,22 @@ static void hdistant_pixel_angles(const sensor *s, int W, int H, double *zen_az)
   hemisphere_pixel_angles(W, H, zen_az);
 }
 
+/* omega = to_world H(u) at the pixel centre, as sample_ray maps it. */
+static void hdistant_pixel_directions(const sensor *s, int W, int H, double *xyz) {
+  for (int iy = 0; iy < H; iy++)
+    for (int ix = 0; ix < W; ix++) {
+      vec3 v = warp_square_to_uniform_hemisphere(v2((ix + 0.5) / W, (iy + 0.5) / H));
+      vec3 w = v3_norm(xf_vector(&s->to_world, v));
+      double *o = &xyz[3 * ((size_t)iy * W + (size_t)ix)];
+      o[0] = w.x, o[1] = w.y, o[2] = w.z;
+    }
+}
+
 static const sensor_ops hdistant_ops = {
     .sample_ray = hdistant_sample_ray,
     .set_scene = hdistant_set_scene,
     .pixel_angles = hdistant_pixel_angles,
+    .pixel_directions = hdistant_pixel_directions,
 };
 
 static void hdistant_destroy(object *o) {

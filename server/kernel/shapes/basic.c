@@ -120,6 +120,14 @@ static rsw_status sphere_create(loader *ld, node *n, object **out) {
   if (!st) st = ld_vec3(ld, n, "center", v3(0, 0, 0), &c, NULL);
   if (!st) st = ld_float(ld, n, "radius", 1.0, &r);
   if (!st && !(r > 0)) st = ld_fail(ld, n, "radius", RSW_ERR_RANGE, "radius must be > 0 (got %g)", r);
+  if (!st && !(r >= RSW_TRACE_MIN_SCALE && r <= RSW_TRACE_MAX_SCALE))
+    st = ld_fail(ld, n, "radius", RSW_ERR_RANGE,
+                 "radius %g is outside [%g, %g], what float32 tracing can represent", r, RSW_TRACE_MIN_SCALE,
+                 RSW_TRACE_MAX_SCALE);
+  if (!st && !(v3_max_abs(c) <= RSW_TRACE_MAX_COORD))
+    st = ld_fail(ld, n, "center", RSW_ERR_RANGE,
+                 "center coordinate %g exceeds %g, the largest float32 tracing accepts", v3_max_abs(c),
+                 RSW_TRACE_MAX_COORD);
   if (st) {
     free(s);
     return st;

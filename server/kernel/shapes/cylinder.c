@@ -41,6 +41,10 @@ static rsw_status cylinder_create(loader *ld, node *n, object **out) {
   if (!st) st = ld_vec3(ld, n, "p1", v3(0, 0, 1), &p1, NULL);
   if (!st) st = ld_float(ld, n, "radius", 1.0, &r);
   if (!st && !(r > 0)) st = ld_fail(ld, n, "radius", RSW_ERR_RANGE, "radius must be > 0 (got %g)", r);
+  if (!st && !(r >= RSW_TRACE_MIN_SCALE && r <= RSW_TRACE_MAX_SCALE))
+    st = ld_fail(ld, n, "radius", RSW_ERR_RANGE,
+                 "radius %g is outside [%g, %g], what float32 tracing can represent", r, RSW_TRACE_MIN_SCALE,
+                 RSW_TRACE_MAX_SCALE);
   vec3 d = v3_sub(p1, p0);
   double len = v3_len(d);
   if (!st && !(len > 0))

@@ -130,6 +130,9 @@ static rsw_status read_group(loader *ld, node *n, shape_group **out) {
   return RSW_OK;
 }
 
+static rsw_status placement_check(const shape_group *g, const xform *t, const char *what, rsw_err *err,
+                                  const char *where);
+
 static rsw_status instance_create(loader *ld, node *n, object **out) {
   instance_shape *s = calloc(1, sizeof *s);
   if (!s) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
@@ -137,6 +140,7 @@ static rsw_status instance_create(loader *ld, node *n, object **out) {
   s->n = 1;
   rsw_status st = ld_transform(ld, n, "to_world", &s->base.to_world, NULL);
   if (!st) st = read_group(ld, n, &s->group);
+  if (!st) st = placement_check(s->group, &s->base.to_world, "to_world", ld->err, n->loc);
   if (st) {
     free(s);
     return st;
@@ -145,10 +149,27 @@ static rsw_status instance_create(loader *ld, node *n, object **out) {
   return RSW_OK;
 }
 
-/* Any invertible placement is valid (the loader checked invertibility). */
-static rsw_status instance_check_transform(const object *o, const xform *t, const char *key, rsw_err *err) {
-  (void)o, (void)t, (void)key, (void)err;
+/* A placement float32 tracing can represent (core/transform.h): affine,
+ * scales and translation within the limits, and the group's box placed
+ * within RSW_TRACE_MAX_COORD. */
+static rsw_status placement_check(const shape_group *g, const xform *t, const char *what, rsw_err *err,
+                                  const char *where) {
+  char msg[512];
+  if (!xf_traceable(t->m, what, msg, sizeof msg)) return rsw_fail(err, RSW_ERR_RANGE, where, "%s", msg);
+  double w = 0;
+  for (int c = 0; c < 8; c++)
+    w = fmax(w, v3_max_abs(xf_point(t, v3(c & 1 ? g->hi.x : g->lo.x, c & 2 ? g->hi.y : g->lo.y,
+                                          c & 4 ? g->hi.z : g->lo.z))));
+  if (!(w <= RSW_TRACE_MAX_COORD))
+    return rsw_fail(err, RSW_ERR_RANGE, where,
+                    "%s: the placed group reaches a world coordinate of %g, beyond %g, the largest float32 "
+                    "tracing accepts",
+                    what, w, RSW_TRACE_MAX_COORD);
   return RSW_OK;
+}
+
+static rsw_status instance_check_transform(const object *o, const xform *t, const char *key, rsw_err *err) {
+  return placement_check(((const instance_shape *)o)->group, t, key, err, key);
 }
 
 /* to_world is geometric: the instance transform and one top-level commit
@@ -268,11 +289,27 @@ static rsw_status list_parse(const char *path, float **xf_out, double **tr_out, 
         st = rsw_fail(err, RSW_ERR_INVALID, where, "singular to_world");
         break;
       }
+      char msg[512];
+      if (!xf_traceable(mm, "to_world", msg, sizeof msg)) {
+        st = rsw_fail(err, RSW_ERR_RANGE, where, "%s", msg);
+        break;
+      }
       for (int i = 0; i < 12; i++) m[i] = (float)v[i];
       tn[0] = v[3], tn[1] = v[7], tn[2] = v[11];
     } else {
       if (!(v[6] > 0)) {
         st = rsw_fail(err, RSW_ERR_INVALID, where, "radius must be > 0 (got %g)", v[6]);
+        break;
+      }
+      if (!(v[6] >= RSW_TRACE_MIN_SCALE && v[6] <= RSW_TRACE_MAX_SCALE)) {
+        st = rsw_fail(err, RSW_ERR_RANGE, where, "radius %g is outside [%g, %g], what float32 tracing can represent",
+                      v[6], RSW_TRACE_MIN_SCALE, RSW_TRACE_MAX_SCALE);
+        break;
+      }
+      if (!(fabs(v[0]) <= RSW_TRACE_MAX_COORD && fabs(v[1]) <= RSW_TRACE_MAX_COORD &&
+            fabs(v[2]) <= RSW_TRACE_MAX_COORD)) {
+        st = rsw_fail(err, RSW_ERR_RANGE, where, "a position coordinate exceeds %g, the largest float32 tracing accepts",
+                      RSW_TRACE_MAX_COORD);
         break;
       }
       if (!(v[3] * v[3] + v[4] * v[4] + v[5] * v[5] > 0)) {

@@ -38,9 +38,48 @@ rsw_status shape_read_common(loader *ld, node *n, shape *s, bool mesh_like) {
                         &s->silhouette_sampling_weight);
 }
 
+rsw_status shape_check_traceable(const shape *s, const xform *t, const char *what, rsw_err *err,
+                                 const char *where) {
+  char msg[512];
+  if (!xf_traceable(t->m, what, msg, sizeof msg)) return rsw_fail(err, RSW_ERR_RANGE, where, "%s", msg);
+  const double L = RSW_TRACE_MAX_COORD;
+  vec3 lo = v3(INFINITY, INFINITY, INFINITY), hi = v3(-INFINITY, -INFINITY, -INFINITY);
+  if (s->geom == GEOM_MESH) {
+    const mesh *m = &s->mesh;
+    float ext = 0;
+    for (size_t i = 0; i < 3 * (size_t)m->n_verts; i++) ext = fmaxf(ext, fabsf(m->pos[i]));
+    if (!(ext <= L))
+      return rsw_fail(err, RSW_ERR_RANGE, where,
+                      "%s: a vertex coordinate of %g exceeds %g, the largest float32 tracing accepts", what,
+                      (double)ext, L);
+    for (uint32_t k = 0; k < m->n_verts; k++) {
+      vec3 w = xf_point(t, mesh_vertex(m, k));
+      lo = v3(fmin(lo.x, w.x), fmin(lo.y, w.y), fmin(lo.z, w.z));
+      hi = v3(fmax(hi.x, w.x), fmax(hi.y, w.y), fmax(hi.z, w.z));
+    }
+  } else {
+    /* The unit sphere, disk or tube: its box [-1,1]^2 x [-1,1] bounds them all. */
+    for (int c = 0; c < 8; c++) {
+      vec3 w = xf_point(t, v3(c & 1 ? 1 : -1, c & 2 ? 1 : -1, c & 4 ? 1 : -1));
+      lo = v3(fmin(lo.x, w.x), fmin(lo.y, w.y), fmin(lo.z, w.z));
+      hi = v3(fmax(hi.x, w.x), fmax(hi.y, w.y), fmax(hi.z, w.z));
+    }
+  }
+  double w = fmax(v3_max_abs(lo), v3_max_abs(hi));
+  if (s->geom != GEOM_MESH || s->mesh.n_verts)
+    if (!(w <= L))
+      return rsw_fail(err, RSW_ERR_RANGE, where,
+                      "%s: the shape reaches a world coordinate of %g, beyond %g, the largest float32 "
+                      "tracing accepts",
+                      what, w, L);
+  return RSW_OK;
+}
+
 /* What a to_world must satisfy for this shape (as checked at load). */
 static rsw_status shape_check_transform(const object *o, const xform *t, const char *key, rsw_err *err) {
   const shape *s = (const shape *)o;
+  rsw_status tst = shape_check_traceable(s, t, key, err, key);
+  if (tst) return tst;
   shape tmp = *s;
   tmp.to_world = *t;
   tmp.tri_cdf = NULL;
@@ -143,6 +182,8 @@ rsw_status shape_finalize(shape *s, rsw_err *err, const char *where) {
     int bad = 0;
     for (size_t i = 0; i < 3 * (size_t)m->n_verts; i++) bad |= !(fabsf(m->pos[i]) <= 3.0e38f);
     if (bad) return rsw_fail(err, RSW_ERR_INVALID, where, "mesh has a non-finite vertex");
+    rsw_status tst = shape_check_traceable(s, &s->to_world, "to_world", err, where);
+    if (tst) return tst;
     if (!s->emitter && !s->sampled) {
       s->area = 0;
       return RSW_OK;
@@ -166,6 +207,8 @@ rsw_status shape_finalize(shape *s, rsw_err *err, const char *where) {
     break;
   }
   case GEOM_SPHERE: {
+    rsw_status tst = shape_check_traceable(s, &s->to_world, "to_world", err, where);
+    if (tst) return tst;
     double r;
     if (!xf_is_similarity(&s->to_world, &r))
       return rsw_fail(err, RSW_ERR_INVALID, where,
@@ -175,6 +218,8 @@ rsw_status shape_finalize(shape *s, rsw_err *err, const char *where) {
     break;
   }
   case GEOM_DISK: {
+    rsw_status tst = shape_check_traceable(s, &s->to_world, "to_world", err, where);
+    if (tst) return tst;
     /* Area of the image of the unit disk: pi |ex x ey|, exact for any
      * linear map that keeps it an ellipse. Mitsuba rejects non-uniform
      * scale within the plane only through its sampling; we accept ellipses
@@ -190,6 +235,8 @@ rsw_status shape_finalize(shape *s, rsw_err *err, const char *where) {
     break;
   }
   case GEOM_CYLINDER: {
+    rsw_status tst = shape_check_traceable(s, &s->to_world, "to_world", err, where);
+    if (tst) return tst;
     /* Uniform (phi, z) sampling is uniform in area only on a circular,
      * right tube: to_world's x and y columns of equal length, all three
      * orthogonal (Mitsuba warns and drops the shear; we refuse it). */

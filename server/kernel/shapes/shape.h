@@ -89,6 +89,15 @@ static inline ray3 spawn_ray_between(const surface_interaction *si, vec3 q, vec3
   return r;
 }
 
+/* Can float32 tracing represent shape s under to_world t (core/transform.h
+ * xf_traceable: affine, scales and translation within the limits), with
+ * every object-space coordinate of its geometry and every world-space
+ * coordinate of its image under t within RSW_TRACE_MAX_COORD? `what`
+ * names the property or key in the message (e.g. "to_world" or
+ * "rectangle.to_world"); where goes into err. O(vertices) for a mesh. */
+rsw_status shape_check_traceable(const shape *s, const xform *t, const char *what, rsw_err *err,
+                                 const char *where);
+
 /* Mark a shape as sampled (a sensor target) and compute what sampling
  * needs; fails when it has no area. */
 rsw_status shape_enable_sampling(shape *s, rsw_err *err, const char *where);

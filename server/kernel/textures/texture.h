@@ -21,6 +21,13 @@ const spectrum *uniform_texture_spectrum(const texture *t);
  * next prepare(); uniform and rgb values take effect at once as well.
  * Returns false when out of memory (then nothing changed). */
 bool uniform_texture_set_spectrum(texture *t, const spectrum *s);
+/* Copy s into *out (owned: spectrum_free), or false when out of memory. */
+bool uniform_spectrum_copy(spectrum *out, const spectrum *s);
+/* Exchange the texture's spectrum with *s (both owned), without
+ * allocating: so that an update can prepare the new value first and undo
+ * it without a failure. Returns false (nothing changed) if t is not a
+ * uniform texture. */
+bool uniform_texture_swap_spectrum(texture *t, spectrum *s);
 /* The uniform texture's current value (for parameter tables/tests). */
 bool uniform_texture_value(const texture *t, color *out);
 

@@ -110,6 +110,21 @@ bool uniform_texture_set_spectrum(texture *t, const spectrum *s) {
   return true;
 }
 
+bool uniform_spectrum_copy(spectrum *out, const spectrum *s) {
+  return spectrum_copy(out, s);
+}
+
+bool uniform_texture_swap_spectrum(texture *t, spectrum *s) {
+  if (t->base.plugin != &plugin_uniform) return false;
+  uniform_tex *u = (uniform_tex *)t;
+  spectrum tmp = u->spec;
+  u->spec = *s;
+  *s = tmp;
+  if (u->spec.kind == SPEC_UNIFORM) u->value = col1(u->spec.value);
+  if (u->spec.kind == SPEC_RGB) u->value = col(u->spec.rgb[0], u->spec.rgb[1], u->spec.rgb[2]);
+  return true;
+}
+
 bool uniform_texture_set_where(texture *t, const char *where) {
   if (t->base.plugin != &plugin_uniform) return false;
   uniform_tex *u = (uniform_tex *)t;
