@@ -421,13 +421,19 @@ static const command commands[] = {
      "  --threads N         render threads, 1 to 256 (default: every online core)\n"
      "  --scene FILE        preload a scene (repeatable; default: the embedded default scene)\n"
      "  --data-root DIR     plain file names in scenes resolve inside DIR (default: none, blobs only)\n"
-     "  --blob-dir DIR      where uploaded blobs are kept (default: a temporary directory)\n"
+     "  --blob-dir DIR      where uploaded blobs are kept (default: DIR/blobs of --state-dir, else a\n"
+     "                      temporary directory removed at exit)\n"
      "  --token-file F      require 'Authorization: Bearer <token>' (needed off loopback)\n"
      "  --max-body BYTES    largest request body, e.g. 1048576 or 1024k (default 256M)\n"
      "  --max-queue N       most queued jobs before 429 (default 64)\n"
      "  --result-ttl S      seconds job results are kept (default 3600)\n"
      "  --port-file F       write the port listened on to F once listening\n"
      "  --plugin-dir DIR    load every *.so in DIR as an environment plugin at start\n"
+     "  --state-dir DIR     keep blobs, scenes, job records and finished films in DIR (fsync'ed), so a\n"
+     "                      restart, crash or SIGKILL loses nothing; interrupted jobs resume (default:\n"
+     "                      all in memory)\n"
+     "  --max-scene-bytes BYTES  evict idle scenes, least recently used, beyond BYTES (default: no budget)\n"
+     "  --max-result-bytes BYTES  films kept in memory; beyond, on disk (--state-dir) or 507 (default: no cap)\n"
      "Stops on SIGTERM or SIGINT.\n",
      cmd_serve},
     {"routes", "routes", "print the routes the daemon serves, one \"METHOD PATH\" per line", "", cmd_routes},

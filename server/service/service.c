@@ -2,6 +2,7 @@
  * shares (service_internal.h). Resources have their own files: scenes.c,
  * params.c, renders.c, blobs.c, jobs.c, metrics.c. */
 #include <errno.h>
+#include <ftw.h>
 #include <limits.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -72,9 +73,28 @@ rsw_status service_new(const service_opts *opts, service **out, rsw_err *err) {
     snprintf(svc->data_root, sizeof svc->data_root, "%s", rp);
     free(rp);
   }
-  if (svc->opts.blob_dir) {
-    snprintf(svc->blob_dir, sizeof svc->blob_dir, "%s", svc->opts.blob_dir);
+  svc->state_lock_fd = -1;
+  if (svc->opts.state_dir && strlen(svc->opts.state_dir) > 3000) {
+    free(svc);
+    return rsw_fail(err, RSW_ERR_USAGE, "--state-dir", "the state directory's path is too long");
+  }
+  if (svc->opts.state_dir) {
+    snprintf(svc->state_dir, sizeof svc->state_dir, "%s", svc->opts.state_dir);
+    rsw_status sst = svc_state_open(svc, err);
+    if (sst) {
+      if (svc->state_lock_fd >= 0) close(svc->state_lock_fd);
+      free(svc);
+      return sst;
+    }
+    svc->opts.state_dir = svc->state_dir;
+  }
+  if (svc->opts.blob_dir || svc->state_dir[0]) {
+    if (svc->opts.blob_dir)
+      snprintf(svc->blob_dir, sizeof svc->blob_dir, "%s", svc->opts.blob_dir);
+    else
+      snprintf(svc->blob_dir, sizeof svc->blob_dir, "%.3000s/blobs", svc->state_dir);
     if (mkdir(svc->blob_dir, 0700) != 0 && errno != EEXIST) {
+      if (svc->state_lock_fd >= 0) close(svc->state_lock_fd);
       free(svc);
       return rsw_fail(err, RSW_ERR_IO, "--blob-dir", "cannot create blob directory '%s': %s", opts->blob_dir,
                       strerror(errno));
@@ -85,6 +105,7 @@ rsw_status service_new(const service_opts *opts, service **out, rsw_err *err) {
       free(svc);
       return rsw_fail(err, RSW_ERR_IO, "--blob-dir", "cannot create a blob directory: %s", strerror(errno));
     }
+    svc->blob_dir_temp = true; /* removed by service_free */
   }
   svc->opts.blob_dir = svc->blob_dir;
   svc->opts.data_root = svc->data_root[0] ? svc->data_root : NULL;
@@ -117,10 +138,21 @@ bool service_ready(const service *svc) {
 void svc_resident_free(resident *r) {
   if (!r) return;
   scene_free(r->sc);
+  cJSON_Delete(r->patched);
   cJSON_Delete(r->base_params);
   pthread_mutex_destroy(&r->lock);
   pthread_mutex_destroy(&r->cache_lock);
   free(r);
+}
+
+static int remove_entry(const char *path, const struct stat *sb, int flag, struct FTW *ftw) {
+  (void)sb, (void)flag, (void)ftw;
+  remove(path);
+  return 0;
+}
+
+void service_restore(service *svc) {
+  if (svc) svc_state_restore(svc);
 }
 
 void service_free(service *svc) {
@@ -132,6 +164,9 @@ void service_free(service *svc) {
   free(svc->scenes);
   free(svc->raw);
   free(svc->reqs);
+  free(svc->evicted);
+  if (svc->blob_dir_temp) nftw(svc->blob_dir, remove_entry, 16, FTW_DEPTH | FTW_PHYS);
+  if (svc->state_lock_fd >= 0) close(svc->state_lock_fd);
   pthread_mutex_destroy(&svc->lock);
   pthread_cond_destroy(&svc->cond);
   free(svc);
@@ -173,5 +208,9 @@ char *service_info_json(service *svc) {
   cJSON_AddNumberToObject(lim, "max_queue", (double)svc->opts.max_queue);
   cJSON_AddNumberToObject(lim, "max_pixel_samples", (double)svc->opts.max_pixel_samples);
   cJSON_AddNumberToObject(lim, "result_ttl_s", svc->opts.result_ttl_s);
+  /* 0: no budget / no cap. */
+  cJSON_AddNumberToObject(lim, "max_scene_bytes", (double)svc->opts.max_scene_bytes);
+  cJSON_AddNumberToObject(lim, "max_result_bytes", (double)svc->opts.max_result_bytes);
+  cJSON_AddBoolToObject(lim, "state_dir", svc->state_dir[0] != 0);
   return svc_print_json(o);
 }
