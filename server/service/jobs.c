@@ -7,13 +7,10 @@
  * and the base revision: each (context, sensor) seed defaults to a hash of
  * (job seed, context id, sensor id), never of the call order, so a sweep
  * split into several jobs gives bitwise the films of one job. */
-#include <fcntl.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
-#include <unistd.h>
 
 #include "buf.h"
 #include "rsw_sha256.h"
@@ -819,23 +816,18 @@ rsw_status service_job_result_npy_fd(service *svc, const char *id, const char *c
     pthread_mutex_unlock(&svc->lock);
     return no_job(e, id);
   }
-  char path[8400] = "";
+  char jid[40];
+  size_t k = SIZE_MAX;
+  snprintf(jid, sizeof jid, "%s", j->id);
   for (size_t i = 0; i < j->n_items; i++) {
     const render_item *it = &j->items[i];
     if (strcmp(it->context, context) != 0 || strcmp(it->sensor, sensor_id) != 0) continue;
-    if (it->on_disk) snprintf(path, sizeof path, "%s/results/%s/%zu.npy", svc->state_dir, j->id, i);
+    if (it->on_disk) k = i;
     break;
   }
   pthread_mutex_unlock(&svc->lock);
-  if (!path[0]) return RSW_OK;
-  int fd = open(path, O_RDONLY | O_CLOEXEC);
-  struct stat sb;
-  if (fd < 0 || fstat(fd, &sb) != 0) {
-    if (fd >= 0) close(fd);
-    return RSW_OK; /* deleted meanwhile: the in-memory path answers */
-  }
-  *fd_out = fd;
-  *len_out = (uint64_t)sb.st_size;
+  /* Deleted meanwhile: -1, and the in-memory path answers. */
+  if (k != SIZE_MAX) *fd_out = svc_state_film_npy_fd(svc, jid, k, len_out);
   return RSW_OK;
 }
 

@@ -235,6 +235,9 @@ void svc_state_job_remove(service *svc, const job *j);
 rsw_status svc_state_film_write(service *svc, const job *j, size_t k, const svc_film *f, svc_error *e);
 rsw_status svc_state_film_read(service *svc, const job *j, size_t k, svc_film *out, svc_error *e);
 bool svc_state_film_header(service *svc, const char *job_id, size_t k, svc_film *out);
+/* Item k's film as .npy: a descriptor at offset 0 and the length to
+ * send; -1 when not on disk. */
+int svc_state_film_npy_fd(service *svc, const char *job_id, size_t k, uint64_t *len);
 void svc_state_restore(service *svc);
 /* A job being resumed (svc->restore_id): its renders whose film is on
  * disk count done. svc->lock held, before it is queued. */

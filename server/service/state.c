@@ -12,14 +12,15 @@
  *                              job request body as it came
  *   DIR/jobs/<id>.done         the outcome of a finished job (state, error,
  *                              times, one entry per render)
- *   DIR/results/<id>/<k>.npy   render k's film, exactly the bytes of
+ *   DIR/results/<id>/<k>.film  render k's film: first exactly the bytes of
  *                              GET .../results/{context}/{sensor} as .npy
- *   DIR/results/<id>/<k>.meta  its metadata (JSON); <k>.ang its per-pixel
- *                              viewing angles (float64, host byte order)
+ *                              (streamed from the file), then its angles,
+ *                              metadata and a trailer (svc_state_film_write)
  *
  * Every file is written to a temporary name, fsync'ed, renamed over its
- * name and the directory fsync'ed, so a file is either whole or absent. A
- * film's .npy is written last: its presence means the render is done.
+ * name and the directory fsync'ed, so a file is either whole or absent
+ * (films: the directory once per job, see svc_state_film_write). A film
+ * file with a whole trailer means the render is done.
  *
  * A restart restores every job: a finished one from its .done (its films
  * stay on disk and are read when fetched); one without .done was queued or
@@ -294,9 +295,62 @@ static bool little_endian(void) {
   return c == 1;
 }
 
-static void job_item_path(const service *svc, char *out, size_t n, const char *job_id, size_t k,
-                          const char *ext) {
-  state_path(svc, out, n, "results/%s/%zu.%s", job_id, k, ext);
+/* A film file: the .npy bytes (what GET .../results answers as .npy),
+ * then the per-pixel angles (float64, host order; none when the sensor has
+ * none), the metadata (JSON), and a trailer of three little-endian uint64
+ * lengths (npy, angles, meta) and the magic "RSWFILM1". A file whose size
+ * or trailer does not add up is not a film (a write a crash cut short):
+ * the render runs again. */
+#define FILM_MAGIC "RSWFILM1"
+
+typedef struct film_trailer {
+  uint64_t npy, angles, meta;
+} film_trailer;
+
+static void film_path(const service *svc, char *out, size_t n, const char *job_id, size_t k) {
+  state_path(svc, out, n, "results/%s/%zu.film", job_id, k);
+}
+
+static void put_u64(unsigned char *p, uint64_t v) {
+  for (int i = 0; i < 8; i++) p[i] = (unsigned char)(v >> (8 * i));
+}
+
+static uint64_t get_u64(const unsigned char *p) {
+  uint64_t v = 0;
+  for (int i = 0; i < 8; i++) v |= (uint64_t)p[i] << (8 * i);
+  return v;
+}
+
+/* Open item k's film and check its trailer; -1 when absent or torn. */
+static int film_open(const service *svc, const char *job_id, size_t k, film_trailer *t) {
+  char p[4200];
+  film_path(svc, p, sizeof p, job_id, k);
+  int fd = open(p, O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return -1;
+  struct stat sb;
+  unsigned char tr[32];
+  if (fstat(fd, &sb) != 0 || sb.st_size < 32 || pread(fd, tr, 32, sb.st_size - 32) != 32 ||
+      memcmp(tr + 24, FILM_MAGIC, 8) != 0) {
+    close(fd);
+    return -1;
+  }
+  t->npy = get_u64(tr), t->angles = get_u64(tr + 8), t->meta = get_u64(tr + 16);
+  if (t->npy < 64 || t->meta > (1u << 20) || t->npy + t->angles + t->meta + 32 != (uint64_t)sb.st_size) {
+    close(fd);
+    return -1;
+  }
+  return fd;
+}
+
+static bool read_at(int fd, void *buf, size_t n, off_t off) {
+  char *c = buf;
+  while (n) {
+    ssize_t r = pread(fd, c, n, off);
+    if (r < 0 && errno == EINTR) continue;
+    if (r <= 0) return false;
+    c += r, n -= (size_t)r, off += r;
+  }
+  return true;
 }
 
 rsw_status svc_state_film_write(service *svc, const job *j, size_t k, const svc_film *f, svc_error *e) {
@@ -307,11 +361,6 @@ rsw_status svc_state_film_write(service *svc, const job *j, size_t k, const svc_
   if (mkdir(p, 0700) != 0 && errno != EEXIST)
     return svc_fail(e, RSW_ERR_IO, "--state-dir", "cannot create '%s': %s", p, strerror(errno));
   size_t px = (size_t)im->width * (size_t)im->height;
-  if (im->angles) {
-    job_item_path(svc, p, sizeof p, j->id, k, "ang");
-    if (!write_atomic(p, im->angles, px * 2 * sizeof(double), "", 0))
-      return svc_fail(e, RSW_ERR_IO, "--state-dir", "cannot store the film: %s", strerror(errno));
-  }
   cJSON *m = cJSON_CreateObject();
   cJSON_AddStringToObject(m, "scene", f->scene);
   cJSON_AddNumberToObject(m, "revision", (double)f->revision);
@@ -331,46 +380,67 @@ rsw_status svc_state_film_write(service *svc, const job *j, size_t k, const svc_
   cJSON_AddStringToObject(m, "variant", im->variant == VARIANT_MONO ? "mono" : "rgb");
   snprintf(num, sizeof num, "%" PRIu64, im->unresolved_rays);
   cJSON_AddStringToObject(m, "unresolved_rays", num);
-  cJSON_AddBoolToObject(m, "angles", im->angles != NULL);
   char *ms = svc_print_json(m);
-  job_item_path(svc, p, sizeof p, j->id, k, "meta");
-  bool ok = ms && write_atomic(p, ms, strlen(ms), "", 0);
-  free(ms);
-  if (!ok) return svc_fail(e, RSW_ERR_IO, "--state-dir", "cannot store the film: %s", strerror(errno));
+  if (!ms) return svc_fail(e, RSW_ERR_NOMEM, "--state-dir", "out of memory");
   char head[256];
   size_t nh = npy_header(im, head);
   size_t n = px * (size_t)im->channels;
-  const float *data = im->data;
-  float *swapped = NULL;
-  if (!little_endian()) {
-    swapped = malloc(n * sizeof(float));
-    if (!swapped) return svc_fail(e, RSW_ERR_NOMEM, "--state-dir", "out of memory");
+  size_t na = im->angles ? px * 2 * sizeof(double) : 0, nm = strlen(ms);
+  size_t total = nh + n * sizeof(float) + na + nm + 32;
+  unsigned char *out = malloc(total);
+  if (!out) {
+    free(ms);
+    return svc_fail(e, RSW_ERR_NOMEM, "--state-dir", "out of memory for a %zu-byte film", total);
+  }
+  unsigned char *q = out;
+  memcpy(q, head, nh), q += nh;
+  memcpy(q, im->data, n * sizeof(float));
+  if (!little_endian())
     for (size_t i = 0; i < n; i++) {
       uint32_t u;
-      memcpy(&u, &data[i], 4);
+      memcpy(&u, q + 4 * i, 4);
       u = __builtin_bswap32(u);
-      memcpy(&swapped[i], &u, 4);
+      memcpy(q + 4 * i, &u, 4);
     }
-    data = swapped;
+  q += n * sizeof(float);
+  if (na) memcpy(q, im->angles, na), q += na;
+  memcpy(q, ms, nm), q += nm;
+  free(ms);
+  put_u64(q, nh + n * sizeof(float));
+  put_u64(q + 8, na);
+  put_u64(q + 16, nm);
+  memcpy(q + 24, FILM_MAGIC, 8);
+  /* The data is fsync'ed before the rename; the directory once per job
+   * (svc_state_job_finished): a film whose rename a power cut loses is
+   * rendered again on resume, bitwise the same. */
+  film_path(svc, p, sizeof p, j->id, k);
+  char tmp[4300];
+  snprintf(tmp, sizeof tmp, "%s.tmp", p);
+  int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
+  bool ok = fd >= 0 && write_all(fd, out, total) && fdatasync(fd) == 0;
+  int saved = errno;
+  if (fd >= 0) ok = close(fd) == 0 && ok;
+  ok = ok && rename(tmp, p) == 0;
+  if (!ok) saved = errno ? errno : saved;
+  free(out);
+  if (!ok) {
+    unlink(tmp);
+    return svc_fail(e, RSW_ERR_IO, "--state-dir", "cannot store the film: %s", strerror(saved));
   }
-  job_item_path(svc, p, sizeof p, j->id, k, "npy");
-  ok = write_atomic(p, head, nh, data, n * sizeof(float));
-  free(swapped);
-  if (!ok) return svc_fail(e, RSW_ERR_IO, "--state-dir", "cannot store the film: %s", strerror(errno));
   return RSW_OK;
 }
 
-/* The header of item k's film from its .meta (no data). */
+/* Item k's film header from its metadata (no data); false when absent. */
 bool svc_state_film_header(service *svc, const char *job_id, size_t k, svc_film *out) {
   if (!svc_state_on(svc)) return false;
-  char p[4200];
-  job_item_path(svc, p, sizeof p, job_id, k, "npy");
-  struct stat sb;
-  if (stat(p, &sb) != 0) return false;
-  job_item_path(svc, p, sizeof p, job_id, k, "meta");
-  char *t = read_whole(p, NULL);
-  cJSON *m = t ? cJSON_Parse(t) : NULL;
-  free(t);
+  film_trailer t;
+  int fd = film_open(svc, job_id, k, &t);
+  if (fd < 0) return false;
+  char *ms = malloc(t.meta + 1);
+  bool got = ms && read_at(fd, ms, t.meta, (off_t)(t.npy + t.angles));
+  close(fd);
+  cJSON *m = got ? cJSON_ParseWithLength(ms, t.meta) : NULL;
+  free(ms);
   if (!m) return false;
   memset(out, 0, sizeof *out);
   bool ok = true;
@@ -418,8 +488,8 @@ bool svc_state_film_header(service *svc, const char *job_id, size_t k, svc_film 
     out->img.channel_names[c] = s;
   }
   out->img.channels = c;
-  if (out->img.width < 1 || out->img.height < 1 || c < 1) ok = false;
-  /* angles: the caller reads them with the data (svc_state_film_read) */
+  uint64_t px = (uint64_t)(out->img.width > 0 ? out->img.width : 0) * (uint64_t)(out->img.height > 0 ? out->img.height : 0);
+  if (px == 0 || c < 1 || t.npy < px * (uint64_t)c * 4 || (t.angles && t.angles != px * 16)) ok = false;
   cJSON_Delete(m);
   return ok;
 }
@@ -429,23 +499,19 @@ rsw_status svc_state_film_read(service *svc, const job *j, size_t k, svc_film *o
     return svc_fail(e, RSW_ERR_IO, j->id, "the stored film of render %zu of job %s is missing or unreadable",
                     k, j->id);
   film_image *im = &out->img;
-  char p[4200];
-  job_item_path(svc, p, sizeof p, j->id, k, "npy");
-  size_t n;
-  char *t = read_whole(p, &n);
+  film_trailer t;
+  int fd = film_open(svc, j->id, k, &t);
   size_t want = (size_t)im->width * (size_t)im->height * (size_t)im->channels;
-  size_t hl = t && n >= 10 ? 10 + ((size_t)(unsigned char)t[8] | (size_t)(unsigned char)t[9] << 8) : 0;
-  if (!t || n < hl || n - hl != want * sizeof(float)) {
-    free(t);
-    return svc_fail(e, RSW_ERR_IO, j->id, "the stored film of render %zu of job %s is truncated", k, j->id);
+  im->data = fd >= 0 ? malloc(want * sizeof(float)) : NULL;
+  if (t.angles && im->data) im->angles = malloc(t.angles);
+  bool ok = im->data && (!t.angles || im->angles) &&
+            read_at(fd, im->data, want * sizeof(float), (off_t)(t.npy - want * sizeof(float))) &&
+            (!t.angles || read_at(fd, im->angles, t.angles, (off_t)t.npy));
+  if (fd >= 0) close(fd);
+  if (!ok) {
+    film_image_free(im);
+    return svc_fail(e, RSW_ERR_IO, j->id, "cannot read the stored film of render %zu of job %s", k, j->id);
   }
-  im->data = malloc(want * sizeof(float) + 1);
-  if (!im->data) {
-    free(t);
-    return svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
-  }
-  memcpy(im->data, t + hl, want * sizeof(float));
-  free(t);
   if (!little_endian())
     for (size_t i = 0; i < want; i++) {
       uint32_t u;
@@ -453,19 +519,14 @@ rsw_status svc_state_film_read(service *svc, const job *j, size_t k, svc_film *o
       u = __builtin_bswap32(u);
       memcpy(&im->data[i], &u, 4);
     }
-  job_item_path(svc, p, sizeof p, j->id, k, "ang");
-  char *a = read_whole(p, &n);
-  if (a) {
-    size_t na = (size_t)im->width * (size_t)im->height * 2 * sizeof(double);
-    if (n != na) {
-      free(a);
-      film_image_free(im);
-      return svc_fail(e, RSW_ERR_IO, j->id, "the stored angles of render %zu of job %s are truncated", k,
-                      j->id);
-    }
-    im->angles = (double *)(void *)a; /* malloc'ed, suitably aligned */
-  }
   return RSW_OK;
+}
+
+int svc_state_film_npy_fd(service *svc, const char *job_id, size_t k, uint64_t *len) {
+  film_trailer t;
+  int fd = film_open(svc, job_id, k, &t);
+  if (fd >= 0) *len = t.npy;
+  return fd;
 }
 
 /* ---- jobs -------------------------------------------------------------------- */
@@ -543,6 +604,8 @@ void svc_state_job_finished(service *svc, const job *j) {
   }
   char *s = svc_print_json(o);
   char p[4200];
+  state_path(svc, p, sizeof p, "results/%s/x", j->id);
+  fsync_dir(p); /* the films' renames, before the record that counts them */
   state_path(svc, p, sizeof p, "jobs/%s.done", j->id);
   if (!s || !write_atomic(p, s, strlen(s), "", 0))
     warn("cannot store job %s's outcome: %s; a restart runs it again", j->id, strerror(errno));

@@ -176,7 +176,12 @@ wait "${pids[-1]}" 2>/dev/null
 [ "$done_before" -ge 2 ] && [ "$done_before" -lt 10 ] && ok || bad "the kill came mid-job (renders done: $done_before of 10)"
 # the films finished before the kill, as the state directory holds them
 mkdir -p "$tmp/killed"
-cp "$sd"/results/"$jk"/*.npy "$tmp/killed/" 2>/dev/null
+# (a film file begins with the .npy bytes; its trailer's first uint64 is their length)
+for f in "$sd"/results/"$jk"/*.film; do
+  [ -e "$f" ] || continue
+  python3 -c 'import struct,sys; b=open(sys.argv[1],"rb").read(); n=struct.unpack("<Q",b[-32:-24])[0]; assert b[-8:]==b"RSWFILM1"; open(sys.argv[2],"wb").write(b[:n])' \
+    "$f" "$tmp/killed/$(basename "$f" .film).npy"
+done
 n_killed=$(ls "$tmp/killed" | wc -l)
 rm -f "$sd"/scenes/"$A".* # the second job cannot resume: its scene is gone
 rm -f "$tmp/d3/port"
