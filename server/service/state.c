@@ -242,7 +242,7 @@ void svc_state_scene_patched(service *svc, resident *r) {
 }
 
 void svc_state_scene_remove(service *svc, const char *id) {
-  if (!svc_state_on(svc)) return;
+  if (!svc_state_on(svc) || !rsw_is_sha256_hex(id)) return;
   char p[4200];
   state_path(svc, p, sizeof p, "scenes/%s.scene", id);
   unlink(p);
