@@ -247,4 +247,11 @@ kill -TERM "${pids[-1]}" && wait "${pids[-1]}" 2>/dev/null
 after=$(ls -d /tmp/raysweepd-blobs-*/"$bh2" 2>/dev/null | wc -l)
 [ "$during" = 1 ] && [ "$after" = 0 ] && ok || bad "temporary blob directory after exit: $during while running, $after after"
 
+# No daemon reported a sanitizer error (SAN=1 builds) or a crash.
+if grep -lE "AddressSanitizer|LeakSanitizer|runtime error:" "$tmp"/d*/log >/dev/null 2>&1; then
+  bad "sanitizer report in a daemon log: $(grep -hE -A5 "AddressSanitizer|LeakSanitizer|runtime error:" "$tmp"/d*/log | head -c 1500)"
+else
+  ok
+fi
+
 finish
