@@ -46,7 +46,8 @@ char *service_metrics_text(service *svc) {
   for (size_t i = 0; i < svc->n_reqs; i++)
     svc_buf_printf(&b, "raysweep_http_requests_total{route=\"%s\",status=\"%d\"} %llu\n", svc->reqs[i].route,
                    svc->reqs[i].status, (unsigned long long)svc->reqs[i].n);
-  size_t bytes = svc->scene_bytes;
+  size_t bytes = 0;
+  for (size_t i = 0; i < svc->n_scenes; i++) bytes += svc_scene_bytes(svc->scenes[i]->sc);
   svc_buf_printf(
       &b, "# HELP raysweep_scenes_resident Scenes held in memory.\n# TYPE raysweep_scenes_resident gauge\n");
   svc_buf_printf(&b, "raysweep_scenes_resident %zu\n", svc->n_scenes);
@@ -95,6 +96,10 @@ char *service_metrics_text(service *svc) {
   svc_buf_printf(&b, "# HELP raysweep_scene_bytes_limit The resident-scene budget (--max-scene-bytes; 0: "
                      "none).\n# TYPE raysweep_scene_bytes_limit gauge\n");
   svc_buf_printf(&b, "raysweep_scene_bytes_limit %llu\n", (unsigned long long)svc->opts.max_scene_bytes);
+  svc_buf_printf(&b, "# HELP raysweep_scene_budget_bytes Resident scenes' bytes as the budget counts them "
+                     "(geometry, acceleration and a measured per-scene and per-shape overhead).\n"
+                     "# TYPE raysweep_scene_budget_bytes gauge\n");
+  svc_buf_printf(&b, "raysweep_scene_budget_bytes %zu\n", svc->scene_bytes);
   svc_buf_printf(&b, "# HELP raysweep_scenes_evicted_total Idle scenes evicted to stay within the budget.\n"
                      "# TYPE raysweep_scenes_evicted_total counter\n");
   svc_buf_printf(&b, "raysweep_scenes_evicted_total %llu\n", (unsigned long long)svc->scenes_evicted);
