@@ -146,9 +146,9 @@ $(CLIENT_PC): include/raysweep/version.h
 	printf '%s\n' $(call client_pc_lines,$(PREFIX)) > $@
 
 # The client test sees only the public header and the static library.
-$(BUILD)/tests/test_client: $(BUILD)/obj/tests/integration/test_client.o $(CLIENT_A)
+$(BUILD)/tests/test_client: $(BUILD)/obj/tests/integration/test_client.o $(BUILD)/obj/tests/support/daemon.o $(CLIENT_A)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $< $(CLIENT_A) $(CLIENT_LIBS)
+	$(CC) $(LDFLAGS) -o $@ $< $(BUILD)/obj/tests/support/daemon.o $(CLIENT_A) $(CLIENT_LIBS)
 
 # make install [PREFIX=/usr/local] [DESTDIR=staging root]: raysweepd and
 # raysweep in bin/, their man pages in share/man/man1/, the client and
@@ -243,3 +243,12 @@ all test: $(PLUGIN_SO)
 $(BUILD)/plugins/%.so: tests/plugins/%.c include/raysweep/plugin.h | deps
 	@mkdir -p $(dir $@)
 	$(CC) -shared -fPIC -I include $(PLUGIN_CFLAGS) -o $@ $< -lm
+
+# ---- make test-cluster-slurm: the Slurm and container recipes (docker/) ----
+# A single-node Slurm started by the test itself (slurm-wlm, munge: make
+# deps) and the Dockerfile/compose/Kubernetes files checked against the
+# daemon. Folded into make test-cluster.
+CLUSTER_SLURM_TESTS := $(wildcard tests/cluster/test_slurm.sh tests/cluster/test_containers.sh)
+.PHONY: test-cluster-slurm
+test-cluster-slurm: deps $(BUILD)/bin/raysweepd $(BUILD)/bin/raysweep
+	@RSW_BIN_DIR=$(BUILD)/bin BUILD=$(BUILD) SAN=$(SAN) tests/run.sh $(CLUSTER_SLURM_TESTS)

@@ -434,6 +434,10 @@ static const command commands[] = {
      "                      all in memory)\n"
      "  --max-scene-bytes BYTES  evict idle scenes, least recently used, beyond BYTES (default: no budget)\n"
      "  --max-result-bytes BYTES  films kept in memory; beyond, on disk (--state-dir) or 507 (default: no cap)\n"
+     "  --max-connections N open connections at most, 8 to 100000 (default 1024); near the\n"
+     "                      limit requests other than the health probes get 503 + Retry-After\n"
+     "  --header-timeout S  seconds a connection may take to send a request's headers\n"
+     "                      (default 10); slower ones are closed\n"
      "Stops on SIGTERM or SIGINT.\n",
      cmd_serve},
     {"routes", "routes", "print the routes the daemon serves, one \"METHOD PATH\" per line", "", cmd_routes},

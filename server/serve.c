@@ -30,8 +30,8 @@ typedef struct serve_args {
   const char *listen, *data_root, *blob_dir, *token_file, *port_file, *plugin_dir, *state_dir;
   const char *scenes[MAX_SCENES];
   size_t n_scenes;
-  unsigned long long threads, max_queue, max_body, max_scene_bytes, max_result_bytes;
-  double result_ttl;
+  unsigned long long threads, max_queue, max_body, max_scene_bytes, max_result_bytes, max_connections;
+  double result_ttl, header_timeout;
 } serve_args;
 
 static int fail_usage(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
@@ -90,6 +90,8 @@ typedef enum opt_id {
   OPT_STATE_DIR,
   OPT_MAX_SCENE_BYTES,
   OPT_MAX_RESULT_BYTES,
+  OPT_MAX_CONNECTIONS,
+  OPT_HEADER_TIMEOUT,
 } opt_id;
 
 static const struct {
@@ -101,6 +103,8 @@ static const struct {
     {"--max-body", OPT_MAX_BODY},   {"--max-queue", OPT_MAX_QUEUE},   {"--result-ttl", OPT_RESULT_TTL},
     {"--port-file", OPT_PORT_FILE}, {"--plugin-dir", OPT_PLUGIN_DIR},   {"--state-dir", OPT_STATE_DIR},
     {"--max-scene-bytes", OPT_MAX_SCENE_BYTES}, {"--max-result-bytes", OPT_MAX_RESULT_BYTES},
+    {"--port-file", OPT_PORT_FILE}, {"--plugin-dir", OPT_PLUGIN_DIR},
+    {"--max-connections", OPT_MAX_CONNECTIONS}, {"--header-timeout", OPT_HEADER_TIMEOUT},
 };
 
 static int parse_args(int argc, char **argv, serve_args *a) {
@@ -150,6 +154,18 @@ static int parse_args(int argc, char **argv, serve_args *a) {
       if (!parse_bytes(v, &a->max_body))
         return fail_usage("--max-body needs a positive byte count such as 268435456 or 256M (got '%s')", v);
       break;
+    case OPT_MAX_CONNECTIONS:
+      if (!parse_ull(v, 100000, &a->max_connections) || a->max_connections < 8)
+        return fail_usage("--max-connections needs an integer in [8, 100000] (got '%s')", v);
+      break;
+    case OPT_HEADER_TIMEOUT: {
+      char *end;
+      errno = 0;
+      a->header_timeout = strtod(v, &end);
+      if (errno || end == v || *end || !(a->header_timeout > 0) || !(a->header_timeout <= 3600))
+        return fail_usage("--header-timeout needs a number of seconds in (0, 3600] (got '%s')", v);
+      break;
+    }
     case OPT_RESULT_TTL: {
       char *end;
       errno = 0;
@@ -323,7 +339,9 @@ int cmd_serve(int argc, char **argv) {
                   .host = host,
                   .port = port,
                   .token = token[0] ? token : NULL,
-                  .max_body = (size_t)a.max_body};
+                  .max_body = (size_t)a.max_body,
+                  .max_connections = (unsigned)a.max_connections,
+                  .header_timeout_s = a.header_timeout};
   rsw_status s = http_server_start(svc, &ho, &srv, &err);
   if (s) {
     fprintf(stderr, "raysweepd serve: %s\n", rsw_err_format(&err, msg, sizeof msg));

@@ -15,6 +15,9 @@ pkgs=(
   # format, tools/check-format.sh); groff-base and man-db (the man pages are
   # checked with groff and read back with man: test_usage, test_install)
   curl python3 python3-yaml python3-jsonschema clang-format groff-base man-db
+  # make test-cluster-slurm: a single-node Slurm (slurmctld, slurmd, sbatch)
+  # and its authentication daemon, started by tests/cluster/test_slurm.sh
+  slurm-wlm munge
 )
 
 missing() {

@@ -67,12 +67,46 @@ void http_buf_printf(http_buf *b, const char *fmt, ...) {
   b->len += (size_t)n;
 }
 
+/* Length of the well-formed UTF-8 sequence at s (RFC 3629: no overlong
+ * forms, no surrogates, nothing above U+10FFFF), or 0 when it is not one. */
+static size_t utf8_seq_len(const unsigned char *s) {
+  unsigned char c = s[0];
+  size_t n;
+  unsigned lo = 0x80, hi = 0xBF; /* allowed range of the second byte */
+  if (c >= 0xC2 && c <= 0xDF)
+    n = 2;
+  else if (c >= 0xE0 && c <= 0xEF) {
+    n = 3;
+    if (c == 0xE0) lo = 0xA0;
+    if (c == 0xED) hi = 0x9F;
+  } else if (c >= 0xF0 && c <= 0xF4) {
+    n = 4;
+    if (c == 0xF0) lo = 0x90;
+    if (c == 0xF4) hi = 0x8F;
+  } else
+    return 0;
+  if (s[1] < lo || s[1] > hi) return 0;
+  for (size_t i = 2; i < n; i++)
+    if (s[i] < 0x80 || s[i] > 0xBF) return 0;
+  return n;
+}
+
 void http_buf_json_string(http_buf *b, const char *s) {
   http_buf_append(b, "\"", 1);
   const char *run = s;
-  for (; *s; s++) {
+  while (*s) {
     unsigned char ch = (unsigned char)*s;
-    if (ch >= 0x20 && ch != '"' && ch != '\\') continue;
+    if (ch >= 0x20 && ch < 0x80 && ch != '"' && ch != '\\') {
+      s++;
+      continue;
+    }
+    if (ch >= 0x80) {
+      size_t n = utf8_seq_len((const unsigned char *)s);
+      if (n) {
+        s += n;
+        continue;
+      }
+    }
     http_buf_append(b, run, (size_t)(s - run));
     char esc[8];
     switch (ch) {
@@ -81,9 +115,19 @@ void http_buf_json_string(http_buf *b, const char *s) {
     case '\n': http_buf_append(b, "\\n", 2); break;
     case '\r': http_buf_append(b, "\\r", 2); break;
     case '\t': http_buf_append(b, "\\t", 2); break;
-    default: snprintf(esc, sizeof esc, "\\u%04x", ch); http_buf_append(b, esc, 6);
+    default:
+      /* A control character, or a byte that starts no well-formed UTF-8
+       * sequence (a client's raw key echoed in a detail): U+FFFD, so the
+       * body stays valid UTF-8 JSON whatever the input was. */
+      if (ch >= 0x80)
+        http_buf_append(b, "\\ufffd", 6);
+      else {
+        snprintf(esc, sizeof esc, "\\u%04x", ch);
+        http_buf_append(b, esc, 6);
+      }
     }
-    run = s + 1;
+    s++;
+    run = s;
   }
   http_buf_append(b, run, (size_t)(s - run));
   http_buf_append(b, "\"", 1);

@@ -29,7 +29,9 @@ void http_buf_append(http_buf *b, const char *s, size_t n);
 void http_buf_puts(http_buf *b, const char *s);
 void http_buf_printf(http_buf *b, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 /* A JSON string literal (quotes included) of s: escapes '"', '\\' and
- * control characters; other bytes (UTF-8) pass through. */
+ * control characters; well-formed UTF-8 passes through and every byte that
+ * starts no well-formed sequence becomes \ufffd, so the result is valid
+ * UTF-8 JSON for any input. */
 void http_buf_json_string(http_buf *b, const char *s);
 /* Hand the text over (malloc'ed, NUL-terminated; caller frees) and reset b;
  * NULL when the buffer failed (then its memory is released). */

@@ -1,8 +1,8 @@
 /* The HTTP front of raysweepd: a libmicrohttpd daemon serving the routes of
- * proto/API-NOTES.md over a service (server/service/service.h). It parses
- * and checks requests on its connection threads (one per connection, so a
- * synchronous render or an event stream may block its own thread) and
- * leaves the CPU work to the service's worker pool.
+ * proto/API-NOTES.md over a service (server/service/service.h). A few
+ * event-loop threads parse and check requests; each handler that may block
+ * runs on a thread of its own (see server.c for why), and the CPU work is
+ * the service's.
  *
  * This header mentions no microhttpd type; server/http/server.c is the one
  * file that includes microhttpd.h. */
@@ -25,10 +25,19 @@ typedef struct http_opts {
   const char *token;        /* bearer token (NULL or "": no auth); copied */
   size_t max_body;          /* request bodies over this many bytes get 413
                          (0: HTTP_DEFAULT_MAX_BODY) */
-  unsigned max_connections; /* 0: 256 */
+  unsigned max_connections; /* open connections at most (0: HTTP_DEFAULT_MAX_CONNECTIONS);
+                               above all but HTTP_RESERVED_CONNECTIONS of them, requests
+                               other than the health probes get 503 + Retry-After */
+  double header_timeout_s;  /* a connection must send a request's headers within this
+                               long of connecting or of its previous request's end
+                               (0: HTTP_DEFAULT_HEADER_TIMEOUT_S) */
+  unsigned max_connections_per_ip; /* 0: no per-address limit */
 } http_opts;
 
-#define HTTP_DEFAULT_MAX_BODY ((size_t)256 << 20)
+#define HTTP_DEFAULT_MAX_BODY            ((size_t)256 << 20)
+#define HTTP_DEFAULT_MAX_CONNECTIONS     1024u
+#define HTTP_DEFAULT_HEADER_TIMEOUT_S    10.0
+#define HTTP_RESERVED_CONNECTIONS        16u
 
 /* Start listening. Borrows svc (which must outlive the server) and opts.
  * A non-loopback host without a token is refused (RSW_ERR_USAGE), as is an

@@ -307,6 +307,14 @@ static void h_directions(http_req *r) {
 }
 
 static void h_job_submit(http_req *r) {
+  if (r->idempotency_key) {
+    size_t n = strlen(r->idempotency_key);
+    if (n == 0 || n > HTTP_MAX_IDEMPOTENCY_KEY) {
+      http_resp_problem(r, 400, NULL, "the Idempotency-Key header must be 1 to %d characters (got %zu)",
+                        HTTP_MAX_IDEMPOTENCY_KEY, n);
+      return;
+    }
+  }
   svc_error e = {0};
   char *job = NULL, *json = NULL;
   rsw_status s =
@@ -446,29 +454,29 @@ static void h_blobs_missing(http_req *r) {
 /* ---- the table ------------------------------------------------------------- */
 
 const http_route http_routes[] = {
-    {"GET", "/v1", HTTP_BODY_NONE, false, h_info},
-    {"GET", "/v1/health/live", HTTP_BODY_NONE, true, h_live},
-    {"GET", "/v1/health/ready", HTTP_BODY_NONE, true, h_ready},
-    {"GET", "/metrics", HTTP_BODY_NONE, false, h_metrics},
-    {"POST", "/v1/scenes", HTTP_BODY_SCENE, false, h_scene_post},
-    {"GET", "/v1/scenes", HTTP_BODY_NONE, false, h_scene_list},
-    {"GET", "/v1/scenes/{id}", HTTP_BODY_NONE, false, h_scene_get},
-    {"DELETE", "/v1/scenes/{id}", HTTP_BODY_NONE, false, h_scene_delete},
-    {"GET", "/v1/scenes/{id}/params", HTTP_BODY_NONE, false, h_params_get},
-    {"PATCH", "/v1/scenes/{id}/params", HTTP_BODY_JSON, false, h_params_patch},
-    {"POST", "/v1/scenes/{id}:render", HTTP_BODY_JSON, false, h_render},
-    {"GET", "/v1/scenes/{id}/sensors/{sensor}/directions", HTTP_BODY_NONE, false, h_directions},
-    {"POST", "/v1/scenes/{id}/jobs", HTTP_BODY_JSON, false, h_job_submit},
-    {"GET", "/v1/jobs", HTTP_BODY_NONE, false, h_job_list},
-    {"GET", "/v1/jobs/{id}", HTTP_BODY_NONE, false, h_job_get},
-    {"DELETE", "/v1/jobs/{id}", HTTP_BODY_NONE, false, h_job_delete},
-    {"POST", "/v1/jobs/{id}:cancel", HTTP_BODY_NONE, false, h_job_cancel},
-    {"GET", "/v1/jobs/{id}/events", HTTP_BODY_NONE, false, h_job_events},
-    {"GET", "/v1/jobs/{id}/results", HTTP_BODY_NONE, false, h_job_results},
-    {"GET", "/v1/jobs/{id}/results/{context}/{sensor}", HTTP_BODY_NONE, false, h_job_result},
-    {"PUT", "/v1/blobs/{sha256}", HTTP_BODY_RAW, false, h_blob_put},
-    {"HEAD", "/v1/blobs/{sha256}", HTTP_BODY_NONE, false, h_blob_head},
-    {"POST", "/v1/blobs:missing", HTTP_BODY_JSON, false, h_blobs_missing},
+    {"GET", "/v1", HTTP_BODY_NONE, false, h_info, false},
+    {"GET", "/v1/health/live", HTTP_BODY_NONE, true, h_live, true},
+    {"GET", "/v1/health/ready", HTTP_BODY_NONE, true, h_ready, true},
+    {"GET", "/metrics", HTTP_BODY_NONE, false, h_metrics, false},
+    {"POST", "/v1/scenes", HTTP_BODY_SCENE, false, h_scene_post, false},
+    {"GET", "/v1/scenes", HTTP_BODY_NONE, false, h_scene_list, false},
+    {"GET", "/v1/scenes/{id}", HTTP_BODY_NONE, false, h_scene_get, false},
+    {"DELETE", "/v1/scenes/{id}", HTTP_BODY_NONE, false, h_scene_delete, false},
+    {"GET", "/v1/scenes/{id}/params", HTTP_BODY_NONE, false, h_params_get, false},
+    {"PATCH", "/v1/scenes/{id}/params", HTTP_BODY_JSON, false, h_params_patch, false},
+    {"POST", "/v1/scenes/{id}:render", HTTP_BODY_JSON, false, h_render, false},
+    {"GET", "/v1/scenes/{id}/sensors/{sensor}/directions", HTTP_BODY_NONE, false, h_directions, false},
+    {"POST", "/v1/scenes/{id}/jobs", HTTP_BODY_JSON, false, h_job_submit, false},
+    {"GET", "/v1/jobs", HTTP_BODY_NONE, false, h_job_list, false},
+    {"GET", "/v1/jobs/{id}", HTTP_BODY_NONE, false, h_job_get, false},
+    {"DELETE", "/v1/jobs/{id}", HTTP_BODY_NONE, false, h_job_delete, false},
+    {"POST", "/v1/jobs/{id}:cancel", HTTP_BODY_NONE, false, h_job_cancel, false},
+    {"GET", "/v1/jobs/{id}/events", HTTP_BODY_NONE, false, h_job_events, false},
+    {"GET", "/v1/jobs/{id}/results", HTTP_BODY_NONE, false, h_job_results, false},
+    {"GET", "/v1/jobs/{id}/results/{context}/{sensor}", HTTP_BODY_NONE, false, h_job_result, false},
+    {"PUT", "/v1/blobs/{sha256}", HTTP_BODY_RAW, false, h_blob_put, false},
+    {"HEAD", "/v1/blobs/{sha256}", HTTP_BODY_NONE, false, h_blob_head, false},
+    {"POST", "/v1/blobs:missing", HTTP_BODY_JSON, false, h_blobs_missing, false},
 };
 const size_t http_n_routes = sizeof http_routes / sizeof http_routes[0];
 
@@ -520,20 +528,32 @@ bool http_route_match(const char *tmpl, const char *path, char *seg_buf,
   return true;
 }
 
+static void allow_add(char *allow, size_t allow_len, const char *method) {
+  if (!allow_len || strstr(allow, method)) return;
+  if (allow[0]) strncat(allow, ", ", allow_len - strlen(allow) - 1);
+  strncat(allow, method, allow_len - strlen(allow) - 1);
+}
+
 const http_route *http_route_find(const char *method, const char *path, char *seg_buf,
                                   const char *params[HTTP_MAX_PATH_PARAMS], bool *path_known, char *allow,
                                   size_t allow_len) {
   *path_known = false;
   if (allow_len) allow[0] = '\0';
+  bool head = strcmp(method, "HEAD") == 0;
+  const http_route *get = NULL;
   for (size_t i = 0; i < http_n_routes; i++) {
     const http_route *rt = &http_routes[i];
     if (!http_route_match(rt->path, path, seg_buf, params)) continue;
     if (strcmp(rt->method, method) == 0) return rt;
+    if (head && !get && strcmp(rt->method, "GET") == 0) get = rt;
     *path_known = true;
-    if (!strstr(allow, rt->method)) {
-      if (allow[0]) strncat(allow, ", ", allow_len - strlen(allow) - 1);
-      strncat(allow, rt->method, allow_len - strlen(allow) - 1);
-    }
+    allow_add(allow, allow_len, rt->method);
+    if (strcmp(rt->method, "GET") == 0) allow_add(allow, allow_len, "HEAD");
   }
-  return NULL;
+  if (get) { /* match again: a later template may have overwritten seg_buf */
+    http_route_match(get->path, path, seg_buf, params);
+    *path_known = false;
+    if (allow_len) allow[0] = '\0';
+  }
+  return get;
 }

@@ -15,6 +15,12 @@
 
 #define HTTP_MAX_PATH_PARAMS 3
 #define HTTP_MAX_JSON_DEPTH  64
+/* Request targets longer than this, or with more query parameters, get
+ * 414 (the API's routes take at most three parameters). */
+#define HTTP_MAX_URI          8192
+#define HTTP_MAX_QUERY_PARAMS 32
+/* Idempotency-Key length (proto/openapi.yaml). */
+#define HTTP_MAX_IDEMPOTENCY_KEY 255
 
 /* What a route's body must be (checked before the handler runs). */
 typedef enum http_body_kind {
@@ -80,6 +86,7 @@ typedef struct http_route {
   http_body_kind body;
   bool public_route; /* no token needed (health) */
   http_handler handler;
+  bool quick; /* never blocks (no service lock): runs on MHD's event loop */
 } http_route;
 
 /* The table, in the order `raysweepd routes` prints it. */
@@ -91,9 +98,11 @@ extern const size_t http_n_routes;
 bool http_route_match(const char *tmpl, const char *path, char *seg_buf,
                       const char *params[HTTP_MAX_PATH_PARAMS]);
 
-/* Find the route for (method, path). Returns it, or NULL with *path_known
- * telling whether another method would match (then allow receives the
- * comma-separated methods, for a 405). */
+/* Find the route for (method, path). HEAD finds the GET route of a path
+ * without a HEAD route of its own (the server sends the headers only).
+ * Returns it, or NULL with *path_known telling whether another method
+ * would match (then allow receives the comma-separated methods, HEAD
+ * included where GET is, for a 405). */
 const http_route *http_route_find(const char *method, const char *path, char *seg_buf,
                                   const char *params[HTTP_MAX_PATH_PARAMS], bool *path_known, char *allow,
                                   size_t allow_len);

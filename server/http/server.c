@@ -1,13 +1,44 @@
 /* libmicrohttpd glue: the one file of raysweepd that includes
- * microhttpd.h. It owns the listening socket, one thread per connection
- * (MHD_USE_THREAD_PER_CONNECTION: a synchronous render or an event stream
- * blocks only its own connection), body accumulation, the generic checks
- * that run before any handler (auth, 404/405, 413, 415, JSON depth), the
- * translation of an http_resp into an MHD response, and server-sent events.
+ * microhttpd.h. It owns the listening socket, the connection limits, body
+ * accumulation, the generic checks that run before any handler (auth,
+ * 404/405, 413, 414, 415, JSON depth), the translation of an http_resp
+ * into an MHD response, and server-sent events.
+ *
+ * Threads. MHD runs a small pool of event-loop threads (thread-pool mode,
+ * epoll): a connection costs a socket and its memory pool, not a thread,
+ * so a client that trickles its headers one byte a second holds nothing
+ * that other clients need. The cost of that mode is that a handler which
+ * blocks stalls every connection of its event-loop thread, and most
+ * handlers can block (a synchronous render for minutes, a scene load or a
+ * PATCH commit for seconds, any service call waiting on a lock that a long
+ * job submission holds). So only the two health routes run on the event
+ * loop (they read one atomic and take no lock: a probe is answered however
+ * busy the service is); every other handler runs on a thread of its own
+ * while its connection is suspended (MHD_suspend_connection), and the
+ * connection is resumed when the answer is ready. An event stream likewise
+ * has a thread that waits for the job's events and resumes the connection
+ * when it has text to send; its content reader never blocks. Thread
+ * creation (tens of microseconds) is small next to any handler that needs
+ * the service, and a fixed handler pool would be starved by long renders.
+ *
+ * Limits, so that no client can lock the others out:
+ *   - at most max_connections open connections (MHD refuses more);
+ *   - above max_connections - HTTP_RESERVED_CONNECTIONS, every request but
+ *     the health probes is answered 503 with Retry-After at once, which
+ *     leaves room for the probes;
+ *   - a connection must complete its request headers within
+ *     header_timeout_s of connecting (or of the end of its previous
+ *     request): a reaper thread shuts down the socket of any that does
+ *     not, which ends slow-loris clients, garbage that MHD keeps reading
+ *     (blank or NUL-led request lines) and idle keep-alive connections;
+ *   - request targets of at most HTTP_MAX_URI bytes and HTTP_MAX_QUERY
+ *     query parameters (414 otherwise).
  *
  * Per-request state lives in a struct conn hung on MHD's per-request
- * pointer and freed in the completion callback; the server has no global
- * state. */
+ * pointer (created by the URI log callback, which also keeps the raw,
+ * still percent-encoded path to route on) and freed in the completion
+ * callback; per-connection state (for the header deadline) in a
+ * conn_track on MHD's socket context. The server has no global state. */
 #include "http.h"
 
 #include <arpa/inet.h>
@@ -24,10 +55,12 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
+#include <sys/epoll.h>
 #include <sys/socket.h>
 #include <time.h>
 #include <unistd.h>
 
+#include <cjson/cJSON.h>
 #include <microhttpd.h>
 
 #include "encode.h"
@@ -39,12 +72,34 @@
 #define SSE_POLL_MS          500
 #define SSE_PING_MS          15000
 /* On shutdown, event streams go on this long for their jobs' final
- * `end` event (the service cancels running jobs) before they are cut. */
+ * `end` event (the service cancels running jobs), and answers already
+ * made go on being sent, before every socket is cut. */
 #define SSE_GRACE_MS         3000
 /* Most body memory reserved from Content-Length before the bytes arrive. */
 #define PREALLOC_MAX         ((size_t)16 << 20)
-/* Idle connections close after this (seconds). */
-#define CONNECTION_TIMEOUT_S 120
+/* A connection with no traffic at all closes after this (seconds); the
+ * header deadline (http_opts.header_timeout_s) is usually shorter. */
+#define CONNECTION_TIMEOUT_S 60
+/* MHD's per-connection memory pool: request line, headers, parsed query
+ * arguments and the write buffer. Large enough for HTTP_MAX_QUERY_PARAMS
+ * (and many more, so that a long query reaches our 414 instead of MHD's
+ * own answer); beyond it MHD answers 431 itself. */
+#define CONNECTION_MEMORY    ((size_t)256 << 10)
+/* Event-loop threads (they only parse, route and copy bytes). */
+#define EVENT_THREADS        2
+/* How long an idle handler thread waits for the next task. */
+#define HANDLER_IDLE_MS      2000
+/* How often the reaper looks for connections past their header deadline. */
+#define REAPER_PERIOD_MS     200
+
+/* One open connection (MHD's socket context), for the header deadline. */
+typedef struct conn_track {
+  struct conn_track *prev, *next;
+  int fd;
+  int64_t since_ms; /* accepted, or the previous request ended */
+  bool in_request;  /* headers complete: the deadline no longer applies */
+  bool cut;         /* the reaper shut the socket down already */
+} conn_track;
 
 struct http_server {
   service *svc;
@@ -53,13 +108,43 @@ struct http_server {
   size_t token_len;
   size_t max_body;
   int port;
+  unsigned max_connections;
+  int64_t header_timeout_ms;
   atomic_bool stopping;
   _Atomic int64_t stop_deadline_ms; /* monotonic ms; streams end after it */
-  /* Open event streams, so that stopping can wait for them to send their
-   * jobs' `end` before MHD closes every socket. */
+  /* Written once when stopping, never read: readable from then on, so
+   * every poll() that includes it (render watches, the reaper) wakes. */
+  int stop_pipe[2];
+  pthread_t reaper;
+  bool reaper_started;
+  /* Client watches (see client_watch): an epoll set, its thread, and the
+   * watches in it (guarded by lock). */
+  int watch_ep;
+  pthread_t watcher;
+  bool watcher_started;
+  bool watch_closed; /* stopping: new watches are cancelled at once */
+  uint64_t watch_seq;
+  struct client_watch *watches;
+  /* Guards what follows; cond is broadcast whenever a count drops. */
   pthread_mutex_t lock;
-  pthread_cond_t streams_done;
-  int n_streams;
+  pthread_cond_t cond;
+  int n_streams;      /* event streams not yet freed */
+  int n_tasks;        /* handlers whose connection has not resumed yet */
+  /* Handler threads: one finished with its task waits up to
+   * HANDLER_IDLE_MS for another before it exits, so a busy server does
+   * not create a thread per request; a task with no waiting thread gets a
+   * new one. Not a fixed pool: a render holds its thread for as long as
+   * it runs, and a fixed pool would let long renders starve short
+   * requests. */
+  pthread_cond_t task_cond;
+  struct task *queue;  /* handed over, not yet taken (FIFO) */
+  struct task **queue_tail;
+  int n_queued;
+  int n_idle;          /* threads waiting on task_cond */
+  int n_threads;       /* handler threads alive */
+  int n_inflight;     /* requests between their URI and their completion */
+  unsigned n_open;    /* open connections */
+  conn_track *tracks; /* every open connection */
 };
 
 /* One request in flight. */
@@ -67,15 +152,28 @@ typedef struct conn {
   http_server *srv;
   const http_route *route; /* NULL when answered at the first call */
   const char *params[HTTP_MAX_PATH_PARAMS];
-  char *seg_buf; /* owns the strings params point into */
+  char *raw_path;  /* the path as sent, percent-encoding intact */
+  size_t uri_len;  /* the whole request target, in bytes */
+  size_t n_query;  /* query parameters in it */
+  char *seg_buf;   /* owns the strings params point into */
   char *body;
   size_t len, cap;
   bool too_large;  /* body passed max_body: read and dropped, then 413 */
   bool answered;   /* a response is queued already */
   bool seen_first; /* the first call (headers only) is over */
   bool has_early;  /* early holds a problem to send at the last call */
+  bool task_done;  /* the handler thread finished: resp is ready */
+  bool task_started;
+  bool close_after; /* answered while full: close the connection */
   http_resp early;
+  http_resp resp; /* the handler thread's answer */
 } conn;
+
+static int64_t now_ms(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
+}
 
 /* ---- responses ------------------------------------------------------------ */
 
@@ -83,17 +181,12 @@ static void count(http_server *srv, const http_route *rt, int status) {
   service_count_request(srv->svc, rt ? rt->path : "unmatched", status);
 }
 
-typedef struct sse_stream {
-  http_server *srv;
-  char job[128];
-  uint64_t after;
-  http_buf out; /* formatted and not yet handed to MHD */
-  size_t out_off;
-  bool ended;
-} sse_stream;
-
+typedef struct sse_stream sse_stream;
+static sse_stream *sse_new(http_server *srv, struct MHD_Connection *c, const char *job, uint64_t after);
 static ssize_t sse_read(void *cls, uint64_t pos, char *buf, size_t max);
 static void sse_free(void *cls);
+static void sse_release(sse_stream *st);
+static bool sse_start(sse_stream *st);
 
 static void add_headers(struct MHD_Response *mr, const http_resp *resp) {
   if (resp->content_type) MHD_add_response_header(mr, MHD_HTTP_HEADER_CONTENT_TYPE, resp->content_type);
@@ -109,23 +202,18 @@ static void add_headers(struct MHD_Response *mr, const http_resp *resp) {
   }
 }
 
-/* Queue r->resp on the connection (taking its body) and count it. */
-static enum MHD_Result send_resp(struct MHD_Connection *c, conn *cn, http_req *r) {
-  http_resp *resp = &r->resp;
+/* Queue resp on the connection (taking its body) and count it. */
+static enum MHD_Result send_http_resp(struct MHD_Connection *c, conn *cn, http_resp *resp) {
   struct MHD_Response *mr = NULL;
   if (resp->sse) {
-    sse_stream *st = calloc(1, sizeof *st);
+    sse_stream *st = sse_new(cn->srv, c, resp->sse_job, resp->sse_after);
     if (st) {
-      st->srv = cn->srv;
-      snprintf(st->job, sizeof st->job, "%s", resp->sse_job);
-      st->after = resp->sse_after;
       mr = MHD_create_response_from_callback(MHD_SIZE_UNKNOWN, 4096, sse_read, st, sse_free);
       if (!mr) {
-        free(st);
-      } else {
-        pthread_mutex_lock(&cn->srv->lock);
-        cn->srv->n_streams++;
-        pthread_mutex_unlock(&cn->srv->lock);
+        sse_release(st);
+      } else if (!sse_start(st)) {
+        MHD_destroy_response(mr); /* sse_free releases the stream */
+        mr = NULL;
       }
     }
     if (mr) {
@@ -137,12 +225,14 @@ static enum MHD_Result send_resp(struct MHD_Connection *c, conn *cn, http_req *r
     if (mr) {
       resp->has_fd = false; /* microhttpd closes it */
       add_headers(mr, resp);
+      if (cn->close_after) MHD_add_response_header(mr, MHD_HTTP_HEADER_CONNECTION, "close");
     }
   } else {
     mr = resp->len ? MHD_create_response_from_buffer(resp->len, resp->body, MHD_RESPMEM_MUST_FREE)
                    : MHD_create_response_from_buffer(0, NULL, MHD_RESPMEM_PERSISTENT);
     if (mr && resp->len) resp->body = NULL; /* MHD frees it with free() */
     if (mr) add_headers(mr, resp);
+    if (mr && cn->close_after) MHD_add_response_header(mr, MHD_HTTP_HEADER_CONNECTION, "close");
   }
   http_resp_clear(resp);
   cn->answered = true;
@@ -167,24 +257,25 @@ static bool has_body(struct MHD_Connection *c) {
  * body, the answer goes out at once and MHD closes the connection without
  * reading the body; without a body it waits for the request's last call
  * (cn->early), so the connection stays open for the next request. */
-static enum MHD_Result send_problem(struct MHD_Connection *c, conn *cn, int status, const char *code,
-                                    const char *detail, const char *allow, bool www_auth) {
+static enum MHD_Result send_problem_ra(struct MHD_Connection *c, conn *cn, int status, const char *code,
+                                       const char *detail, const char *allow, bool www_auth,
+                                       int retry_after_s) {
   http_req r = {.svc = cn->srv->svc};
   http_resp_problem(&r, status, code, "%s", detail);
   if (allow) snprintf(r.resp.allow, sizeof r.resp.allow, "%s", allow);
   r.resp.www_authenticate = www_auth;
+  r.resp.retry_after_s = retry_after_s;
   if (!cn->seen_first && !has_body(c)) {
     cn->early = r.resp;
     cn->has_early = true;
     return MHD_YES;
   }
-  return send_resp(c, cn, &r);
+  return send_http_resp(c, cn, &r.resp);
 }
 
-static int64_t now_ms(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
+static enum MHD_Result send_problem(struct MHD_Connection *c, conn *cn, int status, const char *code,
+                                    const char *detail, const char *allow, bool www_auth) {
+  return send_problem_ra(c, cn, status, code, detail, allow, www_auth, 0);
 }
 
 static bool streams_must_end(http_server *srv) {
@@ -195,7 +286,29 @@ static bool streams_must_end(http_server *srv) {
  * event: context | end
  * id: <sequence>
  * data: <json>            (one data: line per line of the JSON)
- * <blank line> */
+ * <blank line>
+ *
+ * A stream has a thread of its own that waits for the job's events and
+ * appends their text to `out`; the content reader (on MHD's event loop)
+ * copies what is there, and when nothing is, suspends the connection and
+ * returns 0; the thread resumes it once it appended something. The stream
+ * is freed by whichever of the two (the thread, MHD's sse_free) lets go
+ * last. */
+
+struct sse_stream {
+  http_server *srv;
+  struct MHD_Connection *conn;
+  char job[128];
+  uint64_t after;
+  pthread_mutex_t mu;
+  http_buf out; /* formatted and not yet handed to MHD */
+  size_t out_off;
+  bool ended;     /* nothing will be appended any more */
+  bool failed;    /* out of memory: end with an error */
+  bool suspended; /* the reader suspended the connection */
+  bool released;  /* MHD let go (sse_free): do not touch conn */
+  int refs;       /* the thread and MHD */
+};
 
 static void sse_format(http_buf *b, const char *event, uint64_t id, const char *data) {
   http_buf_printf(b, "event: %s\n", event);
@@ -212,54 +325,243 @@ static void sse_format(http_buf *b, const char *event, uint64_t id, const char *
   http_buf_puts(b, "\n");
 }
 
-/* Block (this connection's own thread) until there is something to send:
- * the next event, a keep-alive comment, or the end of the stream. */
-static ssize_t sse_read(void *cls, uint64_t pos, char *buf, size_t max) {
-  sse_stream *st = cls;
-  (void)pos;
+static sse_stream *sse_new(http_server *srv, struct MHD_Connection *c, const char *job, uint64_t after) {
+  sse_stream *st = calloc(1, sizeof *st);
+  if (!st) return NULL;
+  st->srv = srv;
+  st->conn = c;
+  snprintf(st->job, sizeof st->job, "%s", job);
+  st->after = after;
+  st->refs = 1; /* MHD's, until sse_free */
+  pthread_mutex_init(&st->mu, NULL);
+  pthread_mutex_lock(&srv->lock);
+  srv->n_streams++;
+  pthread_mutex_unlock(&srv->lock);
+  return st;
+}
+
+static void sse_release(sse_stream *st) {
+  pthread_mutex_lock(&st->mu);
+  bool last = --st->refs == 0;
+  pthread_mutex_unlock(&st->mu);
+  if (!last) return;
+  http_server *srv = st->srv;
+  http_buf_free(&st->out);
+  pthread_mutex_destroy(&st->mu);
+  free(st);
+  pthread_mutex_lock(&srv->lock);
+  srv->n_streams--;
+  pthread_cond_broadcast(&srv->cond);
+  pthread_mutex_unlock(&srv->lock);
+}
+
+/* Append text (or end the stream) and wake the reader. */
+static void sse_push(sse_stream *st, const http_buf *text, bool end) {
+  pthread_mutex_lock(&st->mu);
+  if (text && text->len) {
+    /* Compact what the reader consumed, then append. */
+    if (st->out_off) {
+      memmove(st->out.p, st->out.p + st->out_off, st->out.len - st->out_off);
+      st->out.len -= st->out_off;
+      if (st->out.p) st->out.p[st->out.len] = '\0';
+      st->out_off = 0;
+    }
+    http_buf_append(&st->out, text->p, text->len);
+    if (st->out.failed) st->failed = true;
+  }
+  if (end) st->ended = true;
+  if (st->suspended && !st->released) {
+    st->suspended = false;
+    MHD_resume_connection(st->conn);
+  }
+  pthread_mutex_unlock(&st->mu);
+}
+
+/* Is the job over (its `end` event, if any, appended already: the service
+ * sets the state and appends `end` under one lock)? */
+static bool job_is_terminal(service *svc, const char *job) {
+  svc_error e = {0};
+  char *json = NULL;
+  if (service_job_get(svc, job, &json, &e) != RSW_OK) {
+    free(json);
+    return true; /* gone: next_event reports it */
+  }
+  cJSON *j = json ? cJSON_Parse(json) : NULL;
+  free(json);
+  const cJSON *st = cJSON_GetObjectItemCaseSensitive(j, "state");
+  bool done = cJSON_IsString(st) && (strcmp(st->valuestring, "succeeded") == 0 ||
+                                     strcmp(st->valuestring, "failed") == 0 ||
+                                     strcmp(st->valuestring, "cancelled") == 0);
+  cJSON_Delete(j);
+  return done;
+}
+
+static void *sse_main(void *arg) {
+  sse_stream *st = arg;
+  http_server *srv = st->srv;
   int waited_ms = 0;
-  while (st->out_off >= st->out.len) {
-    http_buf_free(&st->out);
-    st->out_off = 0;
-    if (st->ended || streams_must_end(st->srv)) return MHD_CONTENT_READER_END_OF_STREAM;
+  bool end = false;
+  while (!end) {
+    pthread_mutex_lock(&st->mu);
+    bool gone = st->released;
+    pthread_mutex_unlock(&st->mu);
+    if (gone) break;
+    if (streams_must_end(srv)) {
+      sse_push(st, NULL, true);
+      break;
+    }
+    http_buf text = {0};
     uint64_t seq = 0;
     char *json = NULL;
     bool is_end = false;
     svc_error e = {0};
-    rsw_status s =
-        service_job_next_event(st->srv->svc, st->job, st->after, SSE_POLL_MS, &seq, &json, &is_end, &e);
+    /* Resumed at or past the last event of a finished job: nothing more
+     * will come, so the stream ends at once. The `end` event is not sent
+     * again: its id is at most Last-Event-ID, so the client has it. The
+     * state is read before looking for an event, so an end that arrives
+     * in between is still sent. */
+    bool terminal = job_is_terminal(srv->svc, st->job);
+    rsw_status s = service_job_next_event(srv->svc, st->job, st->after, terminal ? 0 : SSE_POLL_MS, &seq,
+                                          &json, &is_end, &e);
     if (s != RSW_OK) { /* the job went away (deleted): say why, then end */
       int status;
       char *problem = http_problem_from_svc(&e, &status);
-      sse_format(&st->out, "error", 0, problem ? problem : "{}");
+      sse_format(&text, "error", 0, problem ? problem : "{}");
       free(problem);
-      st->ended = true;
+      end = true;
     } else if (json) {
-      sse_format(&st->out, is_end ? "end" : "context", seq, json);
+      sse_format(&text, is_end ? "end" : "context", seq, json);
       free(json);
       if (seq > st->after) st->after = seq;
-      st->ended = is_end;
+      end = is_end;
+      waited_ms = 0;
+    } else if (terminal) {
+      end = true;
     } else if ((waited_ms += SSE_POLL_MS) >= SSE_PING_MS) {
-      http_buf_puts(&st->out, ": ping\n\n");
+      http_buf_puts(&text, ": ping\n\n");
       waited_ms = 0;
     }
-    if (st->out.failed) return MHD_CONTENT_READER_END_WITH_ERROR;
+    if (text.failed) end = true;
+    if (text.len || end) sse_push(st, &text, end);
+    http_buf_free(&text);
   }
-  size_t n = st->out.len - st->out_off;
-  if (n > max) n = max;
-  memcpy(buf, st->out.p + st->out_off, n);
-  st->out_off += n;
-  return (ssize_t)n;
+  sse_release(st);
+  return NULL;
+}
+
+static bool sse_start(sse_stream *st) {
+  pthread_t t;
+  pthread_attr_t at;
+  pthread_attr_init(&at);
+  pthread_attr_setdetachstate(&at, PTHREAD_CREATE_DETACHED);
+  pthread_mutex_lock(&st->mu);
+  st->refs++;
+  pthread_mutex_unlock(&st->mu);
+  bool ok = pthread_create(&t, &at, sse_main, st) == 0;
+  pthread_attr_destroy(&at);
+  if (!ok) {
+    pthread_mutex_lock(&st->mu);
+    st->refs--;
+    pthread_mutex_unlock(&st->mu);
+  }
+  return ok;
+}
+
+/* MHD's event loop: copy what the thread formatted, or suspend. */
+static ssize_t sse_read(void *cls, uint64_t pos, char *buf, size_t max) {
+  sse_stream *st = cls;
+  (void)pos;
+  pthread_mutex_lock(&st->mu);
+  ssize_t ret;
+  if (st->out_off < st->out.len) {
+    size_t n = st->out.len - st->out_off;
+    if (n > max) n = max;
+    memcpy(buf, st->out.p + st->out_off, n);
+    st->out_off += n;
+    ret = (ssize_t)n;
+  } else if (st->failed) {
+    ret = MHD_CONTENT_READER_END_WITH_ERROR;
+  } else if (st->ended) {
+    ret = MHD_CONTENT_READER_END_OF_STREAM;
+  } else {
+    st->suspended = true;
+    MHD_suspend_connection(st->conn);
+    ret = 0;
+  }
+  pthread_mutex_unlock(&st->mu);
+  return ret;
 }
 
 static void sse_free(void *cls) {
   sse_stream *st = cls;
-  http_server *srv = st->srv;
-  http_buf_free(&st->out);
-  free(st);
-  pthread_mutex_lock(&srv->lock);
-  if (--srv->n_streams == 0) pthread_cond_broadcast(&srv->streams_done);
-  pthread_mutex_unlock(&srv->lock);
+  pthread_mutex_lock(&st->mu);
+  st->released = true;
+  pthread_mutex_unlock(&st->mu);
+  sse_release(st);
+}
+
+/* ---- connections ---------------------------------------------------------------- */
+
+static void on_connection(void *cls, struct MHD_Connection *c, void **socket_context,
+                          enum MHD_ConnectionNotificationCode code) {
+  http_server *srv = cls;
+  if (code == MHD_CONNECTION_NOTIFY_STARTED) {
+    conn_track *t = calloc(1, sizeof *t);
+    if (t) {
+      const union MHD_ConnectionInfo *ci = MHD_get_connection_info(c, MHD_CONNECTION_INFO_CONNECTION_FD);
+      t->fd = ci ? ci->connect_fd : -1;
+      t->since_ms = now_ms();
+    }
+    pthread_mutex_lock(&srv->lock);
+    srv->n_open++;
+    if (t) {
+      t->next = srv->tracks;
+      if (srv->tracks) srv->tracks->prev = t;
+      srv->tracks = t;
+    }
+    pthread_mutex_unlock(&srv->lock);
+    *socket_context = t;
+  } else if (code == MHD_CONNECTION_NOTIFY_CLOSED) {
+    /* MHD calls this before it closes the socket, so the reaper never
+     * shuts down a descriptor that was reused by another connection. */
+    conn_track *t = *socket_context;
+    pthread_mutex_lock(&srv->lock);
+    srv->n_open--;
+    if (t) {
+      if (t->prev) t->prev->next = t->next;
+      else srv->tracks = t->next;
+      if (t->next) t->next->prev = t->prev;
+    }
+    pthread_mutex_unlock(&srv->lock);
+    free(t);
+    *socket_context = NULL;
+  }
+}
+
+static conn_track *track_of(struct MHD_Connection *c) {
+  const union MHD_ConnectionInfo *ci = MHD_get_connection_info(c, MHD_CONNECTION_INFO_SOCKET_CONTEXT);
+  return ci ? ci->socket_context : NULL;
+}
+
+/* The header deadline: shut down the socket of every connection that did
+ * not complete its request headers in time. MHD then sees the end of the
+ * stream and closes the connection itself (we never close its socket). */
+static void *reaper_main(void *arg) {
+  http_server *srv = arg;
+  for (;;) {
+    struct pollfd p = {.fd = srv->stop_pipe[0], .events = POLLIN};
+    int n = poll(&p, 1, REAPER_PERIOD_MS);
+    if (n > 0) break;
+    int64_t now = now_ms();
+    pthread_mutex_lock(&srv->lock);
+    for (conn_track *t = srv->tracks; t; t = t->next)
+      if (!t->in_request && !t->cut && t->fd >= 0 && now - t->since_ms > srv->header_timeout_ms) {
+        shutdown(t->fd, SHUT_RDWR);
+        t->cut = true;
+      }
+    pthread_mutex_unlock(&srv->lock);
+  }
+  return NULL;
 }
 
 /* ---- generic checks ----------------------------------------------------------- */
@@ -311,20 +613,63 @@ static const char *media_expected(http_body_kind kind) {
   }
 }
 
+static int hex_digit(char ch) {
+  if (ch >= '0' && ch <= '9') return ch - '0';
+  if (ch >= 'a' && ch <= 'f') return ch - 'a' + 10;
+  if (ch >= 'A' && ch <= 'F') return ch - 'A' + 10;
+  return -1;
+}
+
+/* Percent-decode a path segment in place. False on a malformed escape or
+ * an encoded NUL (which no identifier may hold). */
+static bool pct_decode(char *s) {
+  char *o = s;
+  for (const char *p = s; *p; p++) {
+    if (*p != '%') {
+      *o++ = *p;
+      continue;
+    }
+    int hi = hex_digit(p[1]), lo = hi < 0 ? -1 : hex_digit(p[2]);
+    if (lo < 0 || (hi == 0 && lo == 0)) return false;
+    *o++ = (char)(hi * 16 + lo);
+    p += 2;
+  }
+  *o = '\0';
+  return true;
+}
+
+/* Reserve connections for the health probes: above this many open
+ * connections, other requests get 503 at once. */
+static unsigned soft_limit(const http_server *srv) {
+  unsigned reserve = srv->max_connections / 4;
+  if (reserve > HTTP_RESERVED_CONNECTIONS) reserve = HTTP_RESERVED_CONNECTIONS;
+  return srv->max_connections - reserve;
+}
+
 /* First call for a request: headers are in, the body is not. Answers
- * at once what needs no body; returns false when it did. */
-static bool first_checks(struct MHD_Connection *c, conn *cn, const char *url, const char *method,
-                         enum MHD_Result *ret) {
+ * at once what needs no body; returns false when it did. The route is
+ * found on the path as sent (cn->raw_path), so that "%2F" inside an id
+ * cannot split it into two segments; the {placeholders} are decoded after
+ * matching. */
+static bool first_checks(struct MHD_Connection *c, conn *cn, const char *method, enum MHD_Result *ret) {
   http_server *srv = cn->srv;
   char allow[64];
   bool path_known = false;
-  cn->seg_buf = malloc(strlen(url) + 1);
+  const char *path = cn->raw_path;
+  char detail[600];
+  if (cn->uri_len > HTTP_MAX_URI || cn->n_query > HTTP_MAX_QUERY_PARAMS) {
+    snprintf(detail, sizeof detail,
+             "the request target has %zu bytes and %zu query parameters (at most %d and %d)", cn->uri_len,
+             cn->n_query, HTTP_MAX_URI, HTTP_MAX_QUERY_PARAMS);
+    *ret = send_problem(c, cn, 414, NULL, detail, NULL, false);
+    return false;
+  }
+  cn->seg_buf = malloc(strlen(path) + 1);
   if (!cn->seg_buf) {
     *ret = MHD_NO;
     return false;
   }
-  const http_route *rt =
-      http_route_find(method, url, cn->seg_buf, cn->params, &path_known, allow, sizeof allow);
+  const http_route *rt = http_route_find(method, path, cn->seg_buf, cn->params, &path_known, allow, sizeof allow);
   /* Health stays open to probes; everything else, known path or not, asks
    * for the token first so that unauthenticated clients learn nothing. */
   if (!(rt && rt->public_route) && !authorized(srv, c)) {
@@ -333,20 +678,39 @@ static bool first_checks(struct MHD_Connection *c, conn *cn, const char *url, co
     return false;
   }
   if (!rt) {
-    char detail[600];
     if (path_known) {
-      snprintf(detail, sizeof detail, "%s is not allowed on %.400s (allowed: %s)", method, url, allow);
+      snprintf(detail, sizeof detail, "%s is not allowed on %.400s (allowed: %s)", method, path, allow);
       *ret = send_problem(c, cn, 405, NULL, detail, allow, false);
     } else {
-      snprintf(detail, sizeof detail, "no route %.400s (see GET /v1 and proto/openapi.yaml)", url);
+      snprintf(detail, sizeof detail, "no route %.400s (see GET /v1 and proto/openapi.yaml)", path);
       *ret = send_problem(c, cn, 404, NULL, detail, NULL, false);
     }
     return false;
   }
   cn->route = rt;
+  for (int i = 0; i < HTTP_MAX_PATH_PARAMS; i++)
+    if (cn->params[i] && !pct_decode((char *)cn->params[i])) {
+      snprintf(detail, sizeof detail, "malformed percent-encoding in the path %.400s", path);
+      *ret = send_problem(c, cn, 400, NULL, detail, NULL, false);
+      return false;
+    }
+  /* Nearly full: keep the last connections for the health probes. */
+  if (!rt->public_route) {
+    pthread_mutex_lock(&srv->lock);
+    bool full = srv->n_open > soft_limit(srv) || srv->n_tasks >= (int)srv->max_connections;
+    unsigned open = srv->n_open;
+    pthread_mutex_unlock(&srv->lock);
+    if (full) {
+      snprintf(detail, sizeof detail,
+               "the server has %u open connections (at most %u, --max-connections); retry shortly", open,
+               srv->max_connections);
+      cn->close_after = true;
+      *ret = send_problem_ra(c, cn, 503, NULL, detail, NULL, false, 1);
+      return false;
+    }
+  }
   const char *ct = header(c, MHD_HTTP_HEADER_CONTENT_TYPE);
   if (ct && !media_fits(rt->body, ct)) {
-    char detail[400];
     snprintf(detail, sizeof detail, "Content-Type '%.200s' is not accepted here (send %s)", ct,
              media_expected(rt->body));
     *ret = send_problem(c, cn, 415, NULL, detail, NULL, false);
@@ -358,7 +722,6 @@ static bool first_checks(struct MHD_Connection *c, conn *cn, const char *url, co
     errno = 0;
     unsigned long long n = strtoull(cl, &end, 10);
     if (!errno && end != cl && n > srv->max_body) {
-      char detail[200];
       snprintf(detail, sizeof detail, "request body of %llu bytes exceeds the limit of %zu (--max-body)", n,
                srv->max_body);
       *ret = send_problem(c, cn, 413, NULL, detail, NULL, false);
@@ -401,73 +764,226 @@ static void take_body(conn *cn, const char *data, size_t n) {
   cn->body[cn->len] = '\0';
 }
 
-/* The whole request is in: last checks, then the handler. */
-/* ---- clients that hang up ---------------------------------------------------- */
+/* ---- clients that hang up, and shutdown ---------------------------------------- */
 
-/* While a long handler (a synchronous render) runs on a connection's
- * thread, nobody reads its socket: a small thread polls it and sets `gone`
- * when the peer closed it (POLLRDHUP: the client's FIN; HUP/ERR: reset), so
- * the render stops instead of finishing for nobody. The request body is
- * fully read by then, and HTTP clients do not half-close, so an end of
- * stream here means the client went away. */
+/* While a long handler (a synchronous render) runs, nobody reads its
+ * socket (the connection is suspended, and MHD does not notice a
+ * suspended connection's client leaving): the server's watcher thread
+ * holds the socket in an epoll set for EPOLLRDHUP (the client's FIN) and
+ * HUP/ERR (reset), and sets the watch's `gone` when one comes, so the
+ * render stops instead of finishing for nobody. The request body is fully
+ * read by then, and HTTP clients do not half-close, so an end of stream
+ * here means the client went away. The same thread watches the server's
+ * stop pipe: on SIGTERM every watched request is cancelled too
+ * (`by_shutdown`), and its client is answered 503. One thread for all
+ * watches, not one per render: a thread start and join per request would
+ * cost more than a small render.
+ *
+ * Watches are found by id, not by pointer, in the watcher thread: an event
+ * fetched before watch_stop removed its watch (which lives on the handler
+ * thread's stack) finds no id and is dropped. */
 typedef struct client_watch {
+  struct client_watch *next;
+  http_server *srv;
   struct MHD_Connection *conn;
-  int fd;
-  int wake[2]; /* a pipe: watch_stop writes, so the watcher leaves poll at once */
-  bool running;
+  uint64_t id;
+  bool registered;
   atomic_int gone;
-  pthread_t thread;
+  atomic_int by_shutdown;
 } client_watch;
 
-static void *watch_main(void *arg) {
-  client_watch *w = arg;
-  for (;;) {
-    struct pollfd p[2] = {{.fd = w->fd, .events = POLLRDHUP}, {.fd = w->wake[0], .events = POLLIN}};
-    int n = poll(p, 2, -1);
-    if (n < 0 && errno == EINTR) continue;
-    if (n < 0 || p[1].revents) break; /* stopped: the handler is done */
-    if (p[0].revents & (POLLRDHUP | POLLHUP | POLLERR | POLLNVAL)) {
-      atomic_store(&w->gone, 1);
+/* srv->lock held: take w out of the epoll set and the list. */
+static void watch_unlink_locked(http_server *srv, client_watch *w, int fd) {
+  if (!w->registered) return;
+  epoll_ctl(srv->watch_ep, EPOLL_CTL_DEL, fd, NULL);
+  for (client_watch **pp = &srv->watches; *pp; pp = &(*pp)->next)
+    if (*pp == w) {
+      *pp = w->next;
       break;
     }
+  w->registered = false;
+}
+
+static int watch_fd(const client_watch *w) {
+  const union MHD_ConnectionInfo *ci = MHD_get_connection_info(w->conn, MHD_CONNECTION_INFO_CONNECTION_FD);
+  return ci ? ci->connect_fd : -1;
+}
+
+static void *watcher_main(void *arg) {
+  http_server *srv = arg;
+  struct epoll_event evs[64];
+  for (;;) {
+    int n = epoll_wait(srv->watch_ep, evs, 64, -1);
+    if (n < 0 && errno == EINTR) continue;
+    bool stop = n < 0;
+    pthread_mutex_lock(&srv->lock);
+    for (int i = 0; i < n; i++) {
+      if (evs[i].data.u64 == 0) { /* the stop pipe */
+        stop = true;
+        continue;
+      }
+      for (client_watch *w = srv->watches; w; w = w->next)
+        if (w->id == evs[i].data.u64) {
+          atomic_store(&w->gone, 1);
+          watch_unlink_locked(srv, w, watch_fd(w));
+          break;
+        }
+    }
+    if (stop) { /* cancel every watched request; later ones are cancelled at once */
+      srv->watch_closed = true;
+      while (srv->watches) {
+        client_watch *w = srv->watches;
+        atomic_store(&w->by_shutdown, 1);
+        atomic_store(&w->gone, 1);
+        watch_unlink_locked(srv, w, watch_fd(w));
+      }
+    }
+    pthread_mutex_unlock(&srv->lock);
+    if (stop) return NULL;
   }
-  return NULL;
 }
 
 /* http_req.watch_client: start the watch once per request. */
 static const atomic_int *watch_start(http_req *r) {
   client_watch *w = r->watch_ctx;
-  if (w->running) return &w->gone;
-  const union MHD_ConnectionInfo *ci = MHD_get_connection_info(w->conn, MHD_CONNECTION_INFO_CONNECTION_FD);
-  if (!ci) return NULL;
-  w->fd = ci->connect_fd;
-  atomic_init(&w->gone, 0);
-  if (pipe2(w->wake, O_CLOEXEC) != 0) return NULL;
-  w->running = pthread_create(&w->thread, NULL, watch_main, w) == 0;
-  if (!w->running) {
-    close(w->wake[0]);
-    close(w->wake[1]);
-    return NULL;
+  http_server *srv = w->srv;
+  if (w->registered || atomic_load(&w->gone)) return &w->gone;
+  int fd = watch_fd(w);
+  if (fd < 0) return NULL;
+  pthread_mutex_lock(&srv->lock);
+  if (srv->watch_closed) {
+    atomic_store(&w->by_shutdown, 1);
+    atomic_store(&w->gone, 1);
+  } else {
+    w->id = ++srv->watch_seq;
+    struct epoll_event ev = {.events = EPOLLRDHUP, .data.u64 = w->id};
+    if (epoll_ctl(srv->watch_ep, EPOLL_CTL_ADD, fd, &ev) == 0) {
+      w->registered = true;
+      w->next = srv->watches;
+      srv->watches = w;
+    }
   }
-  return &w->gone;
+  bool ok = w->registered || atomic_load(&w->gone);
+  pthread_mutex_unlock(&srv->lock);
+  return ok ? &w->gone : NULL;
 }
 
 static void watch_stop(client_watch *w) {
-  if (!w->running) return;
-  char c = 1;
-  while (write(w->wake[1], &c, 1) < 0 && errno == EINTR) {}
-  pthread_join(w->thread, NULL);
-  close(w->wake[0]);
-  close(w->wake[1]);
-  w->running = false;
+  http_server *srv = w->srv;
+  pthread_mutex_lock(&srv->lock);
+  if (w->registered) watch_unlink_locked(srv, w, watch_fd(w));
+  pthread_mutex_unlock(&srv->lock);
 }
 
+/* Run the route's handler with a client watch; a request cancelled by the
+ * server's shutdown is answered 503 whatever the handler made of it. */
+static void run_handler(http_server *srv, struct MHD_Connection *c, const http_route *rt, http_req *r) {
+  client_watch w = {.srv = srv, .conn = c, .registered = false};
+  atomic_init(&w.gone, 0);
+  atomic_init(&w.by_shutdown, 0);
+  r->watch_client = watch_start;
+  r->watch_ctx = &w;
+  rt->handler(r);
+  watch_stop(&w);
+  r->watch_ctx = NULL;
+  if (atomic_load(&w.by_shutdown) && (r->resp.status < 200 || r->resp.status >= 300)) {
+    http_resp_problem(r, 503, "RSW_ERR_UNAVAILABLE",
+                      "the server is shutting down (SIGTERM): the request was cancelled; retry it on a "
+                      "running server");
+    r->resp.retry_after_s = 1;
+  }
+}
+
+/* A handler on its own thread, its connection suspended meanwhile. */
+typedef struct task {
+  struct task *next;
+  conn *cn;
+  struct MHD_Connection *c;
+  http_req r;
+} task;
+
+static void task_run(task *t) {
+  conn *cn = t->cn;
+  http_server *srv = cn->srv;
+  struct MHD_Connection *c = t->c;
+  run_handler(srv, c, cn->route, &t->r);
+  cn->resp = t->r.resp;
+  cn->task_done = true;
+  free(t);
+  /* From here on cn may be gone (MHD answers and completes the request). */
+  MHD_resume_connection(c);
+  pthread_mutex_lock(&srv->lock);
+  srv->n_tasks--;
+  pthread_cond_broadcast(&srv->cond);
+  pthread_mutex_unlock(&srv->lock);
+}
+
+static void *handler_main(void *arg) {
+  task *t = arg;
+  http_server *srv = t->cn->srv;
+  for (;;) {
+    task_run(t);
+    t = NULL;
+    pthread_mutex_lock(&srv->lock);
+    srv->n_idle++;
+    int64_t until = now_ms() + HANDLER_IDLE_MS;
+    struct timespec ts = {.tv_sec = (time_t)(until / 1000), .tv_nsec = (long)(until % 1000) * 1000000L};
+    while (!srv->queue && !atomic_load(&srv->stopping))
+      if (pthread_cond_timedwait(&srv->task_cond, &srv->lock, &ts) == ETIMEDOUT) break;
+    srv->n_idle--;
+    if (srv->queue) {
+      t = srv->queue;
+      srv->queue = t->next;
+      if (!srv->queue) srv->queue_tail = &srv->queue;
+      srv->n_queued--;
+    }
+    if (!t) {
+      srv->n_threads--;
+      pthread_cond_broadcast(&srv->cond);
+    }
+    pthread_mutex_unlock(&srv->lock);
+    if (!t) return NULL;
+  }
+}
+
+/* Hand t to a waiting thread or a new one. False when no thread could be
+ * had (then t is not taken). */
+static bool task_start(http_server *srv, task *t) {
+  t->next = NULL;
+  pthread_mutex_lock(&srv->lock);
+  if (srv->n_idle > srv->n_queued) {
+    *srv->queue_tail = t;
+    srv->queue_tail = &t->next;
+    srv->n_queued++;
+    pthread_cond_signal(&srv->task_cond);
+    pthread_mutex_unlock(&srv->lock);
+    return true;
+  }
+  srv->n_threads++;
+  pthread_mutex_unlock(&srv->lock);
+  pthread_t th;
+  pthread_attr_t at;
+  pthread_attr_init(&at);
+  pthread_attr_setdetachstate(&at, PTHREAD_CREATE_DETACHED);
+  bool ok = pthread_create(&th, &at, handler_main, t) == 0;
+  pthread_attr_destroy(&at);
+  if (!ok) {
+    pthread_mutex_lock(&srv->lock);
+    srv->n_threads--;
+    pthread_cond_broadcast(&srv->cond);
+    pthread_mutex_unlock(&srv->lock);
+  }
+  return ok;
+}
+
+/* The whole request is in: last checks, then the handler (on the event
+ * loop for the health routes, on a thread of its own otherwise). */
 static enum MHD_Result dispatch(struct MHD_Connection *c, conn *cn, const char *url, const char *method) {
   const http_route *rt = cn->route;
+  http_server *srv = cn->srv;
   if (cn->too_large) {
     char detail[200];
-    snprintf(detail, sizeof detail, "request body exceeds the limit of %zu bytes (--max-body)",
-             cn->srv->max_body);
+    snprintf(detail, sizeof detail, "request body exceeds the limit of %zu bytes (--max-body)", srv->max_body);
     return send_problem(c, cn, 413, NULL, detail, NULL, false);
   }
   const char *ct = header(c, MHD_HTTP_HEADER_CONTENT_TYPE);
@@ -490,7 +1006,7 @@ static enum MHD_Result dispatch(struct MHD_Connection *c, conn *cn, const char *
   if (rt->body == HTTP_BODY_JSON && len == 0) body = "{}", len = 2;
 
   http_req r = {
-      .svc = cn->srv->svc,
+      .svc = srv->svc,
       .method = method,
       .path = url,
       .params = {cn->params[0], cn->params[1], cn->params[2]},
@@ -507,29 +1023,91 @@ static enum MHD_Result dispatch(struct MHD_Connection *c, conn *cn, const char *
       .body_len = len,
       .resp = {.status = 500},
   };
-  client_watch w = {.conn = c};
-  r.watch_client = watch_start;
-  r.watch_ctx = &w;
-  rt->handler(&r);
-  watch_stop(&w);
-  return send_resp(c, cn, &r);
+  if (rt->quick) {
+    run_handler(srv, c, rt, &r);
+    return send_http_resp(c, cn, &r.resp);
+  }
+  task *t = malloc(sizeof *t);
+  if (!t) return send_problem(c, cn, 500, "RSW_ERR_NOMEM", "out of memory", NULL, false);
+  t->cn = cn;
+  t->c = c;
+  t->r = r;
+  /* Counted under the lock with the stopping check, so that stopping
+   * (which sets the flag, then waits for the count) never misses one. */
+  pthread_mutex_lock(&srv->lock);
+  bool stopping = atomic_load(&srv->stopping);
+  if (!stopping) srv->n_tasks++;
+  pthread_mutex_unlock(&srv->lock);
+  if (stopping) {
+    free(t);
+    return send_problem_ra(c, cn, 503, "RSW_ERR_UNAVAILABLE", "the server is shutting down", NULL, false, 1);
+  }
+  cn->task_started = true;
+  MHD_suspend_connection(c);
+  if (!task_start(srv, t)) { /* answer 503 on the next call */
+    free(t);
+    http_req q = {.svc = srv->svc};
+    http_resp_problem(&q, 503, NULL, "the server cannot start a thread for this request; retry shortly");
+    q.resp.retry_after_s = 1;
+    cn->resp = q.resp;
+    cn->task_done = true;
+    MHD_resume_connection(c);
+    pthread_mutex_lock(&srv->lock);
+    srv->n_tasks--;
+    pthread_cond_broadcast(&srv->cond);
+    pthread_mutex_unlock(&srv->lock);
+  }
+  return MHD_YES;
+}
+
+/* MHD_OPTION_URI_LOG_CALLBACK: the first thing MHD reports of a request,
+ * with the request target exactly as sent. Its result becomes the
+ * per-request pointer. */
+static void *on_uri(void *cls, const char *uri, struct MHD_Connection *c) {
+  (void)c;
+  http_server *srv = cls;
+  conn *cn = calloc(1, sizeof *cn);
+  if (!cn) return NULL;
+  cn->srv = srv;
+  cn->uri_len = strlen(uri);
+  size_t n = strcspn(uri, "?");
+  if (uri[n] == '?') {
+    cn->n_query = 1;
+    for (const char *q = uri + n + 1; *q; q++) cn->n_query += *q == '&';
+  }
+  cn->raw_path = strndup(uri, n);
+  if (!cn->raw_path) {
+    free(cn);
+    return NULL;
+  }
+  pthread_mutex_lock(&srv->lock);
+  srv->n_inflight++;
+  pthread_mutex_unlock(&srv->lock);
+  return cn;
 }
 
 static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const char *url, const char *method,
                                   const char *version, const char *upload_data, size_t *upload_data_size,
                                   void **con_cls) {
-  (void)version;
-  http_server *srv = cls;
+  (void)version, (void)cls;
   conn *cn = *con_cls;
-  if (!cn) {
-    cn = calloc(1, sizeof *cn);
-    if (!cn) return MHD_NO;
-    cn->srv = srv;
-    *con_cls = cn;
+  if (!cn) return MHD_NO; /* on_uri ran out of memory: close */
+  if (!cn->seen_first) {
+    conn_track *t = track_of(c);
+    if (t) {
+      pthread_mutex_lock(&cn->srv->lock);
+      t->in_request = true;
+      pthread_mutex_unlock(&cn->srv->lock);
+    }
     enum MHD_Result ret = MHD_YES;
-    first_checks(c, cn, url, method, &ret);
+    first_checks(c, cn, method, &ret);
     cn->seen_first = true;
     return ret;
+  }
+  if (cn->task_started) { /* resumed: the handler thread's answer */
+    if (!cn->task_done) return MHD_YES;
+    cn->task_started = false;
+    return send_http_resp(c, cn, &cn->resp);
   }
   if (cn->answered || cn->has_early) { /* answered already: drop any body */
     if (*upload_data_size) {
@@ -537,9 +1115,8 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
       return MHD_YES;
     }
     if (cn->answered) return MHD_YES;
-    http_req r = {.svc = srv->svc, .resp = cn->early};
     cn->has_early = false;
-    return send_resp(c, cn, &r);
+    return send_http_resp(c, cn, &cn->early);
   }
   if (*upload_data_size) {
     take_body(cn, upload_data, *upload_data_size);
@@ -551,10 +1128,22 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 
 static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls,
                          enum MHD_RequestTerminationCode toe) {
-  (void)cls, (void)c, (void)toe;
+  (void)toe;
+  http_server *srv = cls;
   conn *cn = *con_cls;
+  conn_track *t = track_of(c);
+  pthread_mutex_lock(&srv->lock);
+  if (t) { /* the next request's headers have their own deadline */
+    t->in_request = false;
+    t->since_ms = now_ms();
+  }
+  if (cn) srv->n_inflight--;
+  pthread_cond_broadcast(&srv->cond);
+  pthread_mutex_unlock(&srv->lock);
   if (!cn) return;
   if (cn->has_early) http_resp_clear(&cn->early);
+  http_resp_clear(&cn->resp);
+  free(cn->raw_path);
   free(cn->seg_buf);
   free(cn->body);
   free(cn);
@@ -617,8 +1206,27 @@ rsw_status http_server_start(service *svc, const http_opts *opts, http_server **
   if (!srv) return rsw_fail(err, RSW_ERR_NOMEM, "http_server_start", "out of memory");
   srv->svc = svc;
   srv->max_body = opts->max_body ? opts->max_body : HTTP_DEFAULT_MAX_BODY;
+  srv->max_connections = opts->max_connections ? opts->max_connections : HTTP_DEFAULT_MAX_CONNECTIONS;
+  srv->header_timeout_ms =
+      (int64_t)(1000.0 * (opts->header_timeout_s > 0 ? opts->header_timeout_s : HTTP_DEFAULT_HEADER_TIMEOUT_S));
+  srv->stop_pipe[0] = srv->stop_pipe[1] = -1;
   atomic_init(&srv->stopping, false);
   atomic_init(&srv->stop_deadline_ms, 0);
+  srv->watch_ep = -1;
+  if (pipe2(srv->stop_pipe, O_CLOEXEC) != 0) {
+    free(srv);
+    return rsw_fail(err, RSW_ERR_IO, "http_server_start", "cannot create a pipe: %s", strerror(errno));
+  }
+  srv->watch_ep = epoll_create1(EPOLL_CLOEXEC);
+  struct epoll_event stop_ev = {.events = EPOLLIN, .data.u64 = 0};
+  if (srv->watch_ep < 0 || epoll_ctl(srv->watch_ep, EPOLL_CTL_ADD, srv->stop_pipe[0], &stop_ev) != 0) {
+    int e = errno;
+    if (srv->watch_ep >= 0) close(srv->watch_ep);
+    close(srv->stop_pipe[0]);
+    close(srv->stop_pipe[1]);
+    free(srv);
+    return rsw_fail(err, RSW_ERR_IO, "http_server_start", "cannot create an epoll set: %s", strerror(e));
+  }
   if (has_token) {
     srv->token = strdup(opts->token);
     if (!srv->token) {
@@ -635,6 +1243,9 @@ rsw_status http_server_start(service *svc, const http_opts *opts, http_server **
       bind(fd, (const struct sockaddr *)&sin, sizeof sin) != 0 || listen(fd, 128) != 0) {
     int e = errno;
     if (fd >= 0) close(fd);
+    close(srv->watch_ep);
+    close(srv->stop_pipe[0]);
+    close(srv->stop_pipe[1]);
     free(srv->token);
     free(srv);
     return rsw_fail(
@@ -645,23 +1256,41 @@ rsw_status http_server_start(service *svc, const http_opts *opts, http_server **
   }
 
   unsigned flags =
-      MHD_USE_THREAD_PER_CONNECTION | MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_POLL | MHD_USE_ERROR_LOG;
+      MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_EPOLL | MHD_ALLOW_SUSPEND_RESUME | MHD_USE_ERROR_LOG;
   pthread_condattr_t ca;
   pthread_condattr_init(&ca);
   pthread_condattr_setclock(&ca, CLOCK_MONOTONIC);
   pthread_mutex_init(&srv->lock, NULL);
-  pthread_cond_init(&srv->streams_done, &ca);
+  pthread_cond_init(&srv->cond, &ca);
+  pthread_cond_init(&srv->task_cond, &ca);
   pthread_condattr_destroy(&ca);
+  srv->queue_tail = &srv->queue;
   /* The logger goes first so that it sees the other options' messages. */
-  srv->mhd =
-      MHD_start_daemon(flags, 0, NULL, NULL, on_request, srv, MHD_OPTION_EXTERNAL_LOGGER, on_log, NULL,
-                       MHD_OPTION_LISTEN_SOCKET, fd, MHD_OPTION_NOTIFY_COMPLETED, on_completed, srv,
-                       MHD_OPTION_CONNECTION_LIMIT, opts->max_connections ? opts->max_connections : 256u,
-                       MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)CONNECTION_TIMEOUT_S, MHD_OPTION_END);
-  if (!srv->mhd) {
-    pthread_cond_destroy(&srv->streams_done);
+  srv->mhd = MHD_start_daemon(
+      flags, 0, NULL, NULL, on_request, srv, MHD_OPTION_EXTERNAL_LOGGER, on_log, NULL,
+      MHD_OPTION_LISTEN_SOCKET, fd, MHD_OPTION_THREAD_POOL_SIZE, (unsigned)EVENT_THREADS,
+      MHD_OPTION_URI_LOG_CALLBACK, on_uri, srv, MHD_OPTION_NOTIFY_COMPLETED, on_completed, srv,
+      MHD_OPTION_NOTIFY_CONNECTION, on_connection, srv, MHD_OPTION_CONNECTION_LIMIT, srv->max_connections,
+      MHD_OPTION_PER_IP_CONNECTION_LIMIT, opts->max_connections_per_ip,
+      MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)CONNECTION_TIMEOUT_S, MHD_OPTION_CONNECTION_MEMORY_LIMIT,
+      CONNECTION_MEMORY, MHD_OPTION_LISTEN_BACKLOG_SIZE, 512u, MHD_OPTION_END);
+  if (srv->mhd) srv->reaper_started = pthread_create(&srv->reaper, NULL, reaper_main, srv) == 0;
+  if (srv->reaper_started) srv->watcher_started = pthread_create(&srv->watcher, NULL, watcher_main, srv) == 0;
+  if (!srv->mhd || !srv->reaper_started || !srv->watcher_started) {
+    if (srv->reaper_started || srv->watcher_started) {
+      char wake = 1;
+      while (write(srv->stop_pipe[1], &wake, 1) < 0 && errno == EINTR) {}
+    }
+    if (srv->reaper_started) pthread_join(srv->reaper, NULL);
+    if (srv->watcher_started) pthread_join(srv->watcher, NULL);
+    if (srv->mhd) MHD_stop_daemon(srv->mhd);
+    pthread_cond_destroy(&srv->task_cond);
+    pthread_cond_destroy(&srv->cond);
     pthread_mutex_destroy(&srv->lock);
     close(fd);
+    close(srv->watch_ep);
+    close(srv->stop_pipe[0]);
+    close(srv->stop_pipe[1]);
     free(srv->token);
     free(srv);
     return rsw_fail(err, RSW_ERR_IO, "--listen", "libmicrohttpd could not start on %s:%d", host, opts->port);
@@ -681,25 +1310,55 @@ int http_server_port(const http_server *srv) {
   return srv ? srv->port : 0;
 }
 
+/* Wait (srv->lock held) until *count is 0 or the monotonic deadline. */
+static void wait_zero(http_server *srv, const int *count, int64_t deadline_ms) {
+  while (*count > 0) {
+    if (deadline_ms < 0) {
+      pthread_cond_wait(&srv->cond, &srv->lock);
+      continue;
+    }
+    struct timespec until = {.tv_sec = (time_t)(deadline_ms / 1000),
+                             .tv_nsec = (long)(deadline_ms % 1000) * 1000000L};
+    if (pthread_cond_timedwait(&srv->cond, &srv->lock, &until) == ETIMEDOUT) break;
+  }
+}
+
 void http_server_stop(http_server *srv) {
   if (!srv) return;
   int64_t deadline = now_ms() + SSE_GRACE_MS;
   atomic_store(&srv->stop_deadline_ms, deadline);
   atomic_store(&srv->stopping, true);
-  /* Event streams end with their job's `end` event (the service cancelled
-   * the jobs) or at the deadline (their next poll). Wait for them before
-   * MHD shuts every socket down, or clients would lose the `end`. */
-  struct timespec until = {.tv_sec = (time_t)((deadline + SSE_POLL_MS) / 1000),
-                           .tv_nsec = (long)((deadline + SSE_POLL_MS) % 1000) * 1000000L};
+  /* Wake the render watches (their renders are cancelled and answered
+   * 503) and the reaper. */
+  char one = 1;
+  while (write(srv->stop_pipe[1], &one, 1) < 0 && errno == EINTR) {}
+  if (srv->reaper_started) pthread_join(srv->reaper, NULL);
+  if (srv->watcher_started) pthread_join(srv->watcher, NULL);
   pthread_mutex_lock(&srv->lock);
-  while (srv->n_streams > 0)
-    if (pthread_cond_timedwait(&srv->streams_done, &srv->lock, &until) == ETIMEDOUT) break;
+  /* Handler threads hold suspended connections: every one must have
+   * resumed before MHD may free its connections. Renders stop within a
+   * moment of the stop pipe; other handlers finish their short work. */
+  wait_zero(srv, &srv->n_tasks, -1);
+  /* Idle handler threads leave now (stopping is set). */
+  pthread_cond_broadcast(&srv->task_cond);
+  wait_zero(srv, &srv->n_threads, -1);
+  /* Event streams end with their job's `end` event (the service cancelled
+   * the jobs) or at the deadline, and answers made go on being sent until
+   * then: MHD's stop cuts every socket. */
+  wait_zero(srv, &srv->n_streams, deadline + SSE_POLL_MS);
+  wait_zero(srv, &srv->n_inflight, deadline + SSE_POLL_MS);
   pthread_mutex_unlock(&srv->lock);
-  /* Joins every connection thread; renders return once the service was
-   * shut down. */
   MHD_stop_daemon(srv->mhd);
-  pthread_cond_destroy(&srv->streams_done);
+  /* Stream threads let go of their stream within one poll. */
+  pthread_mutex_lock(&srv->lock);
+  wait_zero(srv, &srv->n_streams, -1);
+  pthread_mutex_unlock(&srv->lock);
+  pthread_cond_destroy(&srv->task_cond);
+  pthread_cond_destroy(&srv->cond);
   pthread_mutex_destroy(&srv->lock);
+  close(srv->watch_ep);
+  close(srv->stop_pipe[0]);
+  close(srv->stop_pipe[1]);
   free(srv->token);
   free(srv);
 }

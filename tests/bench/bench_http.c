@@ -18,6 +18,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "../support/daemon.h"
 #include "../../server/kernel/render.h"
 #include "../../server/kernel/scene/scene.h"
 
@@ -141,33 +142,16 @@ static double in_process_seconds(int n_ctx) {
 
 int main(void) {
   double inproc_s = in_process_seconds(1000);
-  const char *bin = getenv("RSW_BIN_DIR");
-  char exe[512], portfile[] = "/tmp/rsw-bench-port-XXXXXX";
-  snprintf(exe, sizeof exe, "%s/raysweepd", bin && *bin ? bin : "build/bin");
-  int fd = mkstemp(portfile);
-  if (fd < 0) return 1;
-  close(fd);
-  remove(portfile);
-  pid_t pid = fork();
-  if (pid == 0) {
-    execl(exe, exe, "serve", "--listen", "127.0.0.1:0", "--port-file", portfile, "--max-queue", "16",
-          (char *)NULL);
-    _exit(127);
-  }
-  int port = 0;
-  for (int i = 0; i < 500 && !port; i++) {
-    FILE *f = fopen(portfile, "r");
-    if (f) {
-      if (fscanf(f, "%d", &port) != 1) port = 0;
-      fclose(f);
-    }
-    if (!port) usleep(10000);
-  }
-  if (!port) {
+  char dir[] = "/tmp/rsw-bench-XXXXXX";
+  if (!mkdtemp(dir)) return 1;
+  tdaemon d;
+  const char *extra[] = {"--max-queue", "16", NULL};
+  if (!tdaemon_start(&d, dir, "bench", extra, 5.0)) {
     fprintf(stderr, "bench http: the daemon did not start\n");
-    kill(pid, SIGKILL);
+    rmdir(dir);
     return 1;
   }
+  int port = d.port;
   snprintf(base, sizeof base, "http://127.0.0.1:%d", port);
   curl_global_init(CURL_GLOBAL_DEFAULT);
   CURL *c = curl_easy_init();
@@ -269,9 +253,12 @@ out:
   free(b.p);
   curl_easy_cleanup(c);
   curl_global_cleanup();
-  kill(pid, SIGTERM);
-  int status;
-  waitpid(pid, &status, 0);
-  remove(portfile);
+  tdaemon_stop(&d, 30.0, NULL);
+  char file[300];
+  snprintf(file, sizeof file, "%s/bench.log", dir);
+  remove(file);
+  snprintf(file, sizeof file, "%s/bench.port", dir);
+  remove(file);
+  rmdir(dir);
   return rc;
 }

@@ -9,45 +9,17 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include "../support/daemon.h"
 #include "../support/test.h"
 #include "image_exr.h"
 
 RSW_TEST_DEFINE_GLOBALS
 
 static char tmpdir[64];
-static const char *bin_dir(void) {
-  const char *e = getenv("RSW_BIN_DIR");
-  return e && *e ? e : "build/bin";
-}
-
 /* Run raysweepd with args (NULL-terminated); returns the exit status, or
  * -1 on a signal. stderr goes to errbuf. */
 static int run(char *errbuf, size_t len, const char *const *args) {
-  char exe[512];
-  snprintf(exe, sizeof exe, "%s/raysweepd", bin_dir());
-  int pipefd[2];
-  if (pipe(pipefd)) return -2;
-  pid_t pid = fork();
-  if (pid == 0) {
-    dup2(pipefd[1], 2);
-    close(pipefd[0]);
-    const char *argv[64];
-    int n = 0;
-    argv[n++] = exe;
-    for (int i = 0; args[i] && n < 62; i++) argv[n++] = args[i];
-    argv[n] = NULL;
-    execv(exe, (char *const *)argv);
-    _exit(127);
-  }
-  close(pipefd[1]);
-  size_t got = 0;
-  ssize_t r;
-  while ((r = read(pipefd[0], errbuf + got, len - 1 - got)) > 0) got += (size_t)r;
-  errbuf[got] = '\0';
-  close(pipefd[0]);
-  int status;
-  waitpid(pid, &status, 0);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return tdaemon_run(args, errbuf, len);
 }
 
 static bool exists(const char *p) {

@@ -27,6 +27,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "../support/daemon.h"
 #include "../support/test.h"
 #include "image_exr.h"
 #include "raysweep/client.h"
@@ -46,11 +47,6 @@ static double now_s(void) {
   struct timespec ts;
   clock_gettime(CLOCK_MONOTONIC, &ts);
   return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
-static void sleep_ms(int ms) {
-  struct timespec ts = {ms / 1000, (long)(ms % 1000) * 1000000L};
-  nanosleep(&ts, NULL);
 }
 
 static char *read_file(const char *path, size_t *len_out) {
@@ -89,82 +85,23 @@ static char *jq(char *buf, size_t cap, const char *fmt, ...) {
   return buf;
 }
 
-/* ---- daemons (as tests/integration/test_http.c starts them) ------------------- */
+/* ---- daemons (tests/support/daemon.h) ------------------------------------------- */
 
-typedef struct daemon_proc {
-  pid_t pid;
-  int port;
-  char url[64];
-  char log[160];
-} daemon_proc;
+typedef tdaemon daemon_proc;
 
 static bool daemon_start(daemon_proc *d, const char *name, const char *const *extra) {
-  memset(d, 0, sizeof *d);
-  char exe[512], port_file[160], data_root[160], blob_dir[160];
-  snprintf(exe, sizeof exe, "%s/raysweepd", bin_dir());
-  snprintf(port_file, sizeof port_file, "%s/%s.port", tmpdir, name);
+  char data_root[160], blob_dir[160];
   snprintf(data_root, sizeof data_root, "%s/data", tmpdir);
   snprintf(blob_dir, sizeof blob_dir, "%s/%s-blobs", tmpdir, name);
-  snprintf(d->log, sizeof d->log, "%s/%s.log", tmpdir, name);
-  pid_t pid = fork();
-  if (pid < 0) return false;
-  if (pid == 0) {
-    int fd = open(d->log, O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    if (fd >= 0) {
-      dup2(fd, 1);
-      dup2(fd, 2);
-      close(fd);
-    }
-    const char *argv[64] = {exe,       "serve",       "--listen", "127.0.0.1:0", "--port-file",
-                            port_file, "--data-root", data_root,  "--blob-dir",  blob_dir};
-    int n = 10;
-    for (int i = 0; extra && extra[i] && n < 62; i++) argv[n++] = extra[i];
-    argv[n] = NULL;
-    execv(exe, (char *const *)argv);
-    _exit(127);
-  }
-  d->pid = pid;
-  double t0 = now_s();
-  while (now_s() - t0 < 20.0) { /* the sanitizer build is slow to start */
-    int st;
-    if (waitpid(pid, &st, WNOHANG) == pid) {
-      d->pid = 0;
-      char *log = read_file(d->log, NULL);
-      fprintf(stdout, "  daemon %s exited before listening: %s\n", name, log ? log : "");
-      free(log);
-      return false;
-    }
-    char *txt = read_file(port_file, NULL);
-    int port = txt ? atoi(txt) : 0;
-    bool done = txt && strchr(txt, '\n') != NULL;
-    free(txt);
-    if (port > 0 && (done || now_s() - t0 > 0.2)) {
-      d->port = port;
-      snprintf(d->url, sizeof d->url, "http://127.0.0.1:%d", port);
-      return true;
-    }
-    sleep_ms(10);
-  }
-  kill(pid, SIGKILL);
-  waitpid(pid, NULL, 0);
-  d->pid = 0;
-  return false;
+  const char *argv[64] = {"--data-root", data_root, "--blob-dir", blob_dir};
+  int n = 4;
+  for (int i = 0; extra && extra[i] && n < 62; i++) argv[n++] = extra[i];
+  argv[n] = NULL;
+  return tdaemon_start(d, tmpdir, name, argv, 20.0);
 }
 
 static void daemon_stop(daemon_proc *d) {
-  if (!d->pid) return;
-  kill(d->pid, SIGTERM);
-  double t0 = now_s();
-  while (now_s() - t0 < 5.0) {
-    if (waitpid(d->pid, NULL, WNOHANG) == d->pid) {
-      d->pid = 0;
-      return;
-    }
-    sleep_ms(5);
-  }
-  kill(d->pid, SIGKILL);
-  waitpid(d->pid, NULL, 0);
-  d->pid = 0;
+  tdaemon_stop(d, 5.0, NULL);
 }
 
 static daemon_proc main_d;
@@ -223,7 +160,7 @@ static double meter_value(rsw_client *c, const char *id) {
 }
 
 static void test_info_ready(void) {
-  rsw_client *c = client_for(main_d.url, NULL, 0);
+  rsw_client *c = client_for(main_d.base_url, NULL, 0);
   REQUIRE(c, "client");
   char *json = NULL;
   rsw_status s = rsw_server_info(c, &json);
@@ -268,7 +205,7 @@ static const char *QUAD_XML =
     "</scene>\n";
 
 static void test_push_json_with_blob(void) {
-  rsw_client *c = client_for(main_d.url, NULL, 0);
+  rsw_client *c = client_for(main_d.base_url, NULL, 0);
   REQUIRE(c, "client");
   char dir[160], path[200], doc[2048], id[65], id2[65], id3[65];
   snprintf(dir, sizeof dir, "%s/scene-json", tmpdir);
@@ -321,7 +258,7 @@ static void test_push_json_with_blob(void) {
 }
 
 static void test_push_xml(void) {
-  rsw_client *c = client_for(main_d.url, NULL, 0);
+  rsw_client *c = client_for(main_d.base_url, NULL, 0);
   REQUIRE(c, "client");
   char id[65], dir[160], path[200];
   int created = -1;
@@ -359,7 +296,7 @@ static bool list_has(rsw_client *c, const char *id) {
 }
 
 static void test_list_info_delete(void) {
-  rsw_client *c = client_for(main_d.url, NULL, 0);
+  rsw_client *c = client_for(main_d.base_url, NULL, 0);
   REQUIRE(c, "client");
   char id[65];
   REQUIRE(plate_scene(c, "0.123", id), "scene");
@@ -384,7 +321,7 @@ static void test_list_info_delete(void) {
 }
 
 static void test_params(void) {
-  rsw_client *c = client_for(main_d.url, NULL, 0);
+  rsw_client *c = client_for(main_d.base_url, NULL, 0);
   REQUIRE(c, "client");
   char id[65];
   REQUIRE(plate_scene(c, "0.4", id), "scene");
@@ -463,7 +400,7 @@ static bool read_npy(const char *path, int shape[3], float **data, size_t *heade
 }
 
 static void test_render_save(void) {
-  rsw_client *c = client_for(main_d.url, NULL, 0);
+  rsw_client *c = client_for(main_d.base_url, NULL, 0);
   REQUIRE(c, "client");
   char id[65];
   REQUIRE(plate_scene(c, "0.3", id), "scene");
@@ -598,7 +535,7 @@ static bool submit_sweep(rsw_client *c, const char *id, int n, const char *idem,
 }
 
 static void test_job_sweep(void) {
-  rsw_client *c = client_for(main_d.url, NULL, 0);
+  rsw_client *c = client_for(main_d.base_url, NULL, 0);
   REQUIRE(c, "client");
   char id[65], job[40], again[40];
   REQUIRE(plate_scene(c, "0.5", id), "scene");
@@ -685,7 +622,7 @@ static bool submit_long(rsw_client *c, const char *id, char job[40]) {
 }
 
 static void test_wait_timeout_stop_cancel(void) {
-  rsw_client *c = client_for(main_d.url, NULL, 0);
+  rsw_client *c = client_for(main_d.base_url, NULL, 0);
   REQUIRE(c, "client");
   char id[65], job[40];
   REQUIRE(plate_scene(c, "0.45", id), "scene");
@@ -1073,7 +1010,7 @@ static void test_retry_after(void) {
 }
 
 static void test_unknown_ids(void) {
-  rsw_client *c = client_for(main_d.url, NULL, 0);
+  rsw_client *c = client_for(main_d.base_url, NULL, 0);
   REQUIRE(c, "client");
   const char *zero = "0000000000000000000000000000000000000000000000000000000000000000";
   rsw_film *f = NULL;
@@ -1147,7 +1084,7 @@ static void test_unauthorized(void) {
   daemon_proc d;
   const char *extra[] = {"--token-file", tok_path, "--threads", "1", NULL};
   REQUIRE(daemon_start(&d, "token", extra), "daemon with --token-file");
-  rsw_client *c = client_for(d.url, "wrong-token", 0);
+  rsw_client *c = client_for(d.base_url, "wrong-token", 0);
   char *json = NULL;
   rsw_status s = c ? rsw_scene_list(c, &json) : RSW_ERR_NOMEM;
   const rsw_error_info *e = c ? rsw_client_last_error(c) : NULL;
@@ -1155,10 +1092,10 @@ static void test_unauthorized(void) {
         e ? e->http_status : 0);
   CHECK(c && rsw_server_ready(c) == RSW_OK, "health is open without the right token");
   rsw_client_free(c);
-  c = client_for(d.url, NULL, 0);
+  c = client_for(d.base_url, NULL, 0);
   CHECK(c && rsw_server_info(c, &json) == RSW_ERR_UNAUTHORIZED, "no token");
   rsw_client_free(c);
-  c = client_for(d.url, "client-secret-42", 0);
+  c = client_for(d.base_url, "client-secret-42", 0);
   s = c ? rsw_server_info(c, &json) : RSW_ERR_NOMEM;
   CHECK(s == RSW_OK && json && strstr(json, "raysweepd"), "right token: %s", rsw_strerror(s));
   rsw_free(json);

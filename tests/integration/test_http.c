@@ -32,6 +32,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "../support/daemon.h"
 #include "../support/test.h"
 #include "image_exr.h"
 
@@ -100,12 +101,10 @@ static void sha256_hex(const void *data, size_t len, char out[65]) {
 
 /* ---- daemons ----------------------------------------------------------------- */
 
+/* tests/support/daemon.h runs the process; a token rides along. */
 typedef struct daemon_proc {
-  pid_t pid;
-  int port;
+  tdaemon t;      /* pid, port, log */
   char token[64]; /* sent as a bearer token when non-empty */
-  char name[32];
-  char log[160];
 } daemon_proc;
 
 /* Start `raysweepd serve` on 127.0.0.1:0 with the common options plus
@@ -113,89 +112,24 @@ typedef struct daemon_proc {
  * slow to start) for the port file. */
 static bool daemon_start(daemon_proc *d, const char *name, const char *const *extra) {
   memset(d, 0, sizeof *d);
-  snprintf(d->name, sizeof d->name, "%s", name);
-  char exe[512], port_file[160], data_root[160], blob_dir[160];
-  snprintf(exe, sizeof exe, "%s/raysweepd", bin_dir());
-  snprintf(port_file, sizeof port_file, "%s/%s.port", tmpdir, name);
+  char data_root[160], blob_dir[160];
   snprintf(data_root, sizeof data_root, "%s/data", tmpdir);
   snprintf(blob_dir, sizeof blob_dir, "%s/%s-blobs", tmpdir, name);
-  snprintf(d->log, sizeof d->log, "%s/%s.log", tmpdir, name);
-  unlink(port_file);
-  pid_t pid = fork();
-  if (pid < 0) return false;
-  if (pid == 0) {
-    int fd = open(d->log, O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    if (fd >= 0) {
-      dup2(fd, 1);
-      dup2(fd, 2);
-      close(fd);
-    }
-    const char *argv[64];
-    int n = 0;
-    argv[n++] = exe;
-    argv[n++] = "serve";
-    argv[n++] = "--listen";
-    argv[n++] = "127.0.0.1:0";
-    argv[n++] = "--port-file";
-    argv[n++] = port_file;
-    argv[n++] = "--data-root";
-    argv[n++] = data_root;
-    argv[n++] = "--blob-dir";
-    argv[n++] = blob_dir;
-    for (int i = 0; extra && extra[i] && n < 62; i++) argv[n++] = extra[i];
-    argv[n] = NULL;
-    execv(exe, (char *const *)argv);
-    _exit(127);
-  }
-  d->pid = pid;
-  double t0 = now_s();
-  while (now_s() - t0 < 20.0) {
-    int st;
-    if (waitpid(pid, &st, WNOHANG) == pid) {
-      d->pid = 0;
-      char *log = read_file(d->log, NULL);
-      fprintf(stdout, "  daemon %s exited before listening: %s\n", name, log ? log : "");
-      free(log);
-      return false;
-    }
-    char *txt = read_file(port_file, NULL);
-    int port = txt ? atoi(txt) : 0;
-    bool done = txt && strchr(txt, '\n') != NULL;
-    free(txt);
-    if (port > 0 && (done || now_s() - t0 > 0.2)) {
-      d->port = port;
-      return true;
-    }
-    sleep_ms(10);
-  }
-  kill(pid, SIGKILL);
-  waitpid(pid, NULL, 0);
-  d->pid = 0;
-  fprintf(stdout, "  daemon %s: no port file after 20 s\n", name);
-  return false;
+  const char *argv[64];
+  int n = 0;
+  argv[n++] = "--data-root";
+  argv[n++] = data_root;
+  argv[n++] = "--blob-dir";
+  argv[n++] = blob_dir;
+  for (int i = 0; extra && extra[i] && n < 62; i++) argv[n++] = extra[i];
+  argv[n] = NULL;
+  return tdaemon_start(&d->t, tmpdir, name, argv, 20.0);
 }
 
 /* SIGTERM; wait up to limit_s. Returns the exit status, -1 for a signal,
  * -2 when it had to be killed. *secs: how long it took. */
 static int daemon_stop(daemon_proc *d, double limit_s, double *secs) {
-  if (!d->pid) return -3;
-  double t0 = now_s();
-  kill(d->pid, SIGTERM);
-  int st = 0, rc = -2;
-  while (now_s() - t0 < limit_s) {
-    if (waitpid(d->pid, &st, WNOHANG) == d->pid) {
-      rc = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-      break;
-    }
-    sleep_ms(5);
-  }
-  if (secs) *secs = now_s() - t0;
-  if (rc == -2) {
-    kill(d->pid, SIGKILL);
-    waitpid(d->pid, NULL, 0);
-  }
-  d->pid = 0;
-  return rc;
+  return tdaemon_stop(&d->t, limit_s, secs);
 }
 
 /* ---- HTTP -------------------------------------------------------------------- */
@@ -282,7 +216,7 @@ static resp do_req(const daemon_proc *d, req q) {
   CURL *c = curl_easy_init();
   if (!c) return r;
   char url[2048], auth[128], ct[128], acc[128];
-  snprintf(url, sizeof url, "http://127.0.0.1:%d%s", d->port, q.path);
+  snprintf(url, sizeof url, "%s%s", d->t.base_url, q.path);
   curl_easy_setopt(c, CURLOPT_URL, url);
   curl_easy_setopt(c, CURLOPT_NOSIGNAL, 1L);
   curl_easy_setopt(c, CURLOPT_TIMEOUT_MS, (long)(1000 * (q.timeout_s > 0 ? q.timeout_s : 30)));
@@ -1869,7 +1803,7 @@ static void test_error_401(void) {
 }
 
 static void test_error_413(void) {
-  REQUIRE(lim_d.pid, "limits daemon");
+  REQUIRE(lim_d.t.pid, "limits daemon");
   /* A valid scene padded with whitespace past --max-body 4096. */
   char doc[4096], big[16384];
   jq(doc, sizeof doc, PLATE_FMT, "0.5");
@@ -1892,7 +1826,7 @@ static void test_error_413(void) {
 }
 
 static void test_error_429(void) {
-  REQUIRE(lim_d.pid, "limits daemon");
+  REQUIRE(lim_d.t.pid, "limits daemon");
   /* --threads 1 --max-queue 1: one job running (A), one queued (B), the
    * third (C) refused. Three scenes, so that no submission waits on a busy
    * scene. */
@@ -1916,7 +1850,7 @@ static void test_error_429(void) {
  * ~180 s of renders): exit 0 long before that job could end, so shutdown
  * cancelled it rather than waiting. The 30 s is a limit, not a measurement. */
 static void test_sigterm_with_work(void) {
-  REQUIRE(lim_d.pid, "limits daemon");
+  REQUIRE(lim_d.t.pid, "limits daemon");
   resp r = get(&lim_d, "/metrics");
   CHECK(strstr(r.body, "raysweep_jobs{state=\"running\"} 1"), "a job is running at SIGTERM");
   resp_free(&r);
@@ -1929,7 +1863,7 @@ static void test_sigterm_main(void) {
   double secs = 0;
   int rc = daemon_stop(&main_d, 30, &secs);
   CHECK(rc == 0, "main daemon exit status %d after SIGTERM (%.2f s)", rc, secs);
-  char *log = read_file(main_d.log, NULL);
+  char *log = read_file(main_d.t.log, NULL);
   CHECK(log && strstr(log, "raysweepd: listening on http://127.0.0.1:"),
         "stderr announces the address: %.300s", log ? log : "");
   free(log);
@@ -1995,8 +1929,8 @@ int main(void) {
     }
     RSW_TEST_RUN(test_sigterm_main);
   }
-  if (main_d.pid) daemon_stop(&main_d, 5, NULL);
-  if (lim_d.pid) daemon_stop(&lim_d, 5, NULL);
+  if (main_d.t.pid) daemon_stop(&main_d, 5, NULL);
+  if (lim_d.t.pid) daemon_stop(&lim_d, 5, NULL);
   curl_global_cleanup();
   char cmd[128];
   snprintf(cmd, sizeof cmd, "rm -rf %s", tmpdir);

@@ -3,6 +3,7 @@
  * problem+json, Accept negotiation and the JSON depth scan. */
 #include <cjson/cJSON.h>
 #include <math.h>
+#include <stdbool.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -297,6 +298,66 @@ static void test_problem(void) {
   free(t);
 }
 
+/* Strict UTF-8 check (RFC 3629), written independently of encode.c's. */
+static bool valid_utf8(const unsigned char *s, size_t n) {
+  for (size_t i = 0; i < n;) {
+    uint32_t cp;
+    size_t k;
+    if (s[i] < 0x80) {
+      i++;
+      continue;
+    } else if ((s[i] & 0xE0) == 0xC0)
+      k = 2, cp = s[i] & 0x1F;
+    else if ((s[i] & 0xF0) == 0xE0)
+      k = 3, cp = s[i] & 0x0F;
+    else if ((s[i] & 0xF8) == 0xF0)
+      k = 4, cp = s[i] & 0x07;
+    else
+      return false;
+    if (i + k > n) return false;
+    for (size_t j = 1; j < k; j++) {
+      if ((s[i + j] & 0xC0) != 0x80) return false;
+      cp = cp << 6 | (s[i + j] & 0x3F);
+    }
+    static const uint32_t min_cp[5] = {0, 0, 0x80, 0x800, 0x10000};
+    if (cp < min_cp[k] || cp > 0x10FFFF || (cp >= 0xD800 && cp <= 0xDFFF)) return false;
+    i += k;
+  }
+  return true;
+}
+
+/* A key with invalid UTF-8 (a lone continuation byte, a truncated
+ * sequence, an overlong '/', a surrogate, a code point past U+10FFFF) is
+ * echoed in detail and key: the body must stay valid UTF-8 JSON, with the
+ * bad bytes replaced and the good ones (e-acute, a 4-byte emoji) kept. */
+static void test_problem_utf8(void) {
+  const char *bad = "k\x80" "a\xc3" "b\xc0\xaf" "c\xed\xa0\x80" "d\xf4\x90\x80\x80" "e\xc3\xa9" "f\xf0\x9f\x98\x80" "\xff";
+  char detail[256];
+  snprintf(detail, sizeof detail, "unknown key '%s'", bad);
+  char *t = http_problem_json(422, "RSW_ERR_INVALID", detail, "/params/x", bad, NULL, 0);
+  REQUIRE(t, "problem");
+  CHECK(valid_utf8((const unsigned char *)t, strlen(t)), "body is not valid UTF-8: %s", t);
+  cJSON *j = cJSON_Parse(t);
+  REQUIRE(j, "problem does not parse: %s", t);
+  const char *key = cJSON_GetObjectItem(j, "key")->valuestring;
+  CHECK(strstr(key, "e\xc3\xa9" "f\xf0\x9f\x98\x80") != NULL, "good UTF-8 kept: %s", key);
+  CHECK(strncmp(key, "k\xef\xbf\xbd" "a\xef\xbf\xbd" "b", 9) == 0, "bad bytes become U+FFFD: %s", key);
+  cJSON_Delete(j);
+  free(t);
+  /* The same through the service path (detail = "where: message"). */
+  svc_error e;
+  memset(&e, 0, sizeof e);
+  rsw_fail(&e.err, RSW_ERR_NOT_FOUND, bad, "no key '%s'", bad);
+  int status = 0;
+  t = http_problem_from_svc(&e, &status);
+  REQUIRE(t, "from svc");
+  CHECK(valid_utf8((const unsigned char *)t, strlen(t)), "svc body is not valid UTF-8: %s", t);
+  j = cJSON_Parse(t);
+  CHECK(j != NULL, "svc problem does not parse");
+  cJSON_Delete(j);
+  free(t);
+}
+
 static void test_accept(void) {
   CHECK(http_accept_film(NULL) == HTTP_FILM_JSON, "missing");
   CHECK(http_accept_film("") == HTTP_FILM_JSON, "empty");
@@ -335,6 +396,7 @@ int main(void) {
   RSW_TEST_RUN(test_exr_round_trip);
   RSW_TEST_RUN(test_exr_half_large);
   RSW_TEST_RUN(test_problem);
+  RSW_TEST_RUN(test_problem_utf8);
   RSW_TEST_RUN(test_accept);
   RSW_TEST_RUN(test_depth_and_media);
   RSW_TEST_END("test_http_encode");
