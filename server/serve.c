@@ -9,7 +9,6 @@
 #include "serve.h"
 
 #include <errno.h>
-#include <ftw.h>
 #include <math.h>
 #include <pthread.h>
 #include <signal.h>
@@ -28,10 +27,11 @@
 #define MAX_TOKEN  4096
 
 typedef struct serve_args {
-  const char *listen, *data_root, *blob_dir, *token_file, *port_file, *plugin_dir;
+  const char *listen, *data_root, *blob_dir, *token_file, *port_file, *plugin_dir, *state_dir;
   const char *scenes[MAX_SCENES];
   size_t n_scenes;
-  unsigned long long threads, max_queue, max_body, max_connections, max_film;
+  unsigned long long threads, max_queue, max_body, max_scene_bytes, max_result_bytes, max_connections,
+      max_film;
   double result_ttl, header_timeout;
 } serve_args;
 
@@ -88,6 +88,9 @@ typedef enum opt_id {
   OPT_RESULT_TTL,
   OPT_PORT_FILE,
   OPT_PLUGIN_DIR,
+  OPT_STATE_DIR,
+  OPT_MAX_SCENE_BYTES,
+  OPT_MAX_RESULT_BYTES,
   OPT_MAX_CONNECTIONS,
   OPT_HEADER_TIMEOUT,
   OPT_MAX_FILM,
@@ -100,7 +103,8 @@ static const struct {
     {"--listen", OPT_LISTEN},       {"--threads", OPT_THREADS},       {"--scene", OPT_SCENE},
     {"--data-root", OPT_DATA_ROOT}, {"--blob-dir", OPT_BLOB_DIR},     {"--token-file", OPT_TOKEN_FILE},
     {"--max-body", OPT_MAX_BODY},   {"--max-queue", OPT_MAX_QUEUE},   {"--result-ttl", OPT_RESULT_TTL},
-    {"--port-file", OPT_PORT_FILE}, {"--plugin-dir", OPT_PLUGIN_DIR},
+    {"--port-file", OPT_PORT_FILE}, {"--plugin-dir", OPT_PLUGIN_DIR},   {"--state-dir", OPT_STATE_DIR},
+    {"--max-scene-bytes", OPT_MAX_SCENE_BYTES}, {"--max-result-bytes", OPT_MAX_RESULT_BYTES},
     {"--max-connections", OPT_MAX_CONNECTIONS}, {"--header-timeout", OPT_HEADER_TIMEOUT},
     {"--max-film-bytes", OPT_MAX_FILM},
 };
@@ -125,6 +129,17 @@ static int parse_args(int argc, char **argv, serve_args *a) {
     case OPT_TOKEN_FILE: a->token_file = v; break;
     case OPT_PORT_FILE: a->port_file = v; break;
     case OPT_PLUGIN_DIR: a->plugin_dir = v; break;
+    case OPT_STATE_DIR: a->state_dir = v; break;
+    case OPT_MAX_SCENE_BYTES:
+      if (!parse_bytes(v, &a->max_scene_bytes))
+        return fail_usage("--max-scene-bytes needs a positive byte count such as 1073741824 or 1G (got '%s')",
+                          v);
+      break;
+    case OPT_MAX_RESULT_BYTES:
+      if (!parse_bytes(v, &a->max_result_bytes))
+        return fail_usage("--max-result-bytes needs a positive byte count such as 1073741824 or 1G (got '%s')",
+                          v);
+      break;
     case OPT_SCENE:
       if (a->n_scenes == MAX_SCENES) return fail_usage("too many --scene (at most %d)", MAX_SCENES);
       a->scenes[a->n_scenes++] = v;
@@ -230,12 +245,6 @@ static int write_port_file(const char *path, int port) {
   return 0;
 }
 
-static int remove_entry(const char *path, const struct stat *sb, int flag, struct FTW *ftw) {
-  (void)sb, (void)flag, (void)ftw;
-  remove(path);
-  return 0;
-}
-
 static void svc_error_print(const char *what, const svc_error *e) {
   char msg[1200];
   fprintf(stderr, "raysweepd serve: %s: %s\n", what, rsw_err_format(&e->err, msg, sizeof msg));
@@ -285,17 +294,6 @@ int cmd_serve(int argc, char **argv) {
     }
   }
 
-  char blob_tmp[] = "/tmp/raysweepd-blobs-XXXXXX";
-  const char *blob_dir = a.blob_dir;
-  if (!blob_dir) {
-    if (!mkdtemp(blob_tmp)) {
-      fprintf(stderr, "raysweepd serve: cannot create a blob directory under /tmp: %s\n", strerror(errno));
-      plugins_unload();
-      return 1;
-    }
-    blob_dir = blob_tmp;
-  }
-
   service *svc = NULL;
   http_server *srv = NULL;
   rc = 1;
@@ -304,7 +302,11 @@ int cmd_serve(int argc, char **argv) {
   service_opts so = {.size = sizeof so,
                      .render_threads = (int)a.threads,
                      .data_root = a.data_root,
-                     .blob_dir = blob_dir,
+                     .blob_dir = a.blob_dir, /* NULL: under --state-dir, or a temporary
+                                                directory the service removes at exit */
+                     .state_dir = a.state_dir,
+                     .max_scene_bytes = a.max_scene_bytes,
+                     .max_result_bytes = a.max_result_bytes,
                      .max_queue = (size_t)a.max_queue,
                      .result_ttl_s = a.result_ttl,
                      .max_body_bytes = a.max_body ? (size_t)a.max_body : HTTP_DEFAULT_MAX_BODY,
@@ -337,6 +339,10 @@ int cmd_serve(int argc, char **argv) {
     free(id);
   }
 
+  /* Jobs in the state directory come back after the startup scenes are
+   * loaded (a job on a --scene scene resumes when it is given again). */
+  service_restore(svc);
+
   http_opts ho = {.size = sizeof ho,
                   .host = host,
                   .port = port,
@@ -361,7 +367,6 @@ out:
   if (svc) service_shutdown(svc); /* ready -> 503, running work cancelled */
   http_server_stop(srv);          /* joins the connection threads */
   service_free(svc);
-  if (!a.blob_dir) nftw(blob_tmp, remove_entry, 16, FTW_DEPTH | FTW_PHYS);
   plugins_unload(); /* after service_free: no scene uses them any more */
   return rc;
 }

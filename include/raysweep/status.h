@@ -47,7 +47,9 @@ extern "C" {
   X(RSW_ERR_METHOD, "method not allowed", 405)                                                               \
   X(RSW_ERR_TOO_LARGE, "request body too large", 413)                                                        \
   X(RSW_ERR_UNKNOWN_NAME, "names nothing in the scene", 422)                                                 \
-  X(RSW_ERR_BAD_REQUEST, "invalid request parameter", 400)
+  X(RSW_ERR_BAD_REQUEST, "invalid request parameter", 400)                                                   \
+  X(RSW_ERR_EVICTED, "scene evicted from memory; post it again", 404)                                        \
+  X(RSW_ERR_STORAGE, "result storage full", 507)
 
 typedef enum rsw_status {
 #define RSW_STATUS_ENUM_(name, msg, http) name,

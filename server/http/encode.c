@@ -310,6 +310,7 @@ static const struct {
     {501, "Not Implemented", "NOT_IMPLEMENTED"},
     {503, "Service Unavailable", "SERVICE_UNAVAILABLE"},
     {504, "Gateway Timeout", "GATEWAY_TIMEOUT"},
+    {507, "Insufficient Storage", "INSUFFICIENT_STORAGE"},
 };
 
 const char *http_reason(int status) {

@@ -11,6 +11,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "encode.h"
 #include "http.h"
@@ -20,6 +21,8 @@
 void http_resp_clear(http_resp *resp) {
   free(resp->body);
   resp->body = NULL;
+  if (resp->has_fd) close(resp->fd);
+  resp->has_fd = false;
   resp->len = 0;
   resp->content_type = NULL;
 }
@@ -396,6 +399,24 @@ static void h_job_result(http_req *r) {
   http_film_format fmt;
   if (!negotiate_film(r, &fmt)) return;
   svc_error e = {0};
+  if (fmt == HTTP_FILM_NPY) { /* a film on disk streams from its file */
+    int fd;
+    uint64_t len;
+    if (service_job_result_npy_fd(r->svc, r->params[0], r->params[1], r->params[2], &fd, &len, &e) !=
+        RSW_OK) {
+      http_resp_svc_error(r, &e);
+      return;
+    }
+    if (fd >= 0) {
+      http_resp_clear(&r->resp);
+      r->resp.status = 200;
+      r->resp.content_type = http_film_content_type(fmt);
+      r->resp.has_fd = true;
+      r->resp.fd = fd;
+      r->resp.fd_len = len;
+      return;
+    }
+  }
   svc_film f;
   memset(&f, 0, sizeof f);
   if (service_job_result(r->svc, r->params[0], r->params[1], r->params[2], &f, &e) != RSW_OK) {

@@ -47,6 +47,12 @@ typedef struct http_resp {
   bool sse;
   char sse_job[128];
   uint64_t sse_after;
+  /* A body streamed from a file instead (a film on disk): fd_len bytes
+   * from offset 0; server.c hands the descriptor to microhttpd, which
+   * closes it. */
+  bool has_fd;
+  int fd;
+  uint64_t fd_len;
 } http_resp;
 
 /* One request, as the handler sees it: everything server.c looked up from

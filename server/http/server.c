@@ -220,6 +220,13 @@ static enum MHD_Result send_http_resp(struct MHD_Connection *c, conn *cn, http_r
       MHD_add_response_header(mr, MHD_HTTP_HEADER_CONTENT_TYPE, "text/event-stream");
       MHD_add_response_header(mr, MHD_HTTP_HEADER_CACHE_CONTROL, "no-cache");
     }
+  } else if (resp->has_fd) {
+    mr = MHD_create_response_from_fd64(resp->fd_len, resp->fd);
+    if (mr) {
+      resp->has_fd = false; /* microhttpd closes it */
+      add_headers(mr, resp);
+      if (cn->close_after) MHD_add_response_header(mr, MHD_HTTP_HEADER_CONNECTION, "close");
+    }
   } else {
     mr = resp->len ? MHD_create_response_from_buffer(resp->len, resp->body, MHD_RESPMEM_MUST_FREE)
                    : MHD_create_response_from_buffer(0, NULL, MHD_RESPMEM_PERSISTENT);

@@ -1,6 +1,7 @@
 /* Content-addressed blobs: PUT /v1/blobs/{sha256}, HEAD, and
  * POST /v1/blobs:missing. */
 #include <errno.h>
+#include <fcntl.h>
 #include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -31,11 +32,17 @@ rsw_status service_blob_put(service *svc, const char *h, const void *data, size_
   snprintf(tmp, sizeof tmp, "%s.tmp.%ld.%lu", path, (long)getpid(), (unsigned long)pthread_self());
   FILE *f = fopen(tmp, "wb");
   if (!f) return svc_fail(e, RSW_ERR_IO, h, "cannot store the blob: %s", strerror(errno));
-  bool ok = fwrite(data, 1, len, f) == len;
+  /* Durable before it is acknowledged: fsync, rename, fsync the directory. */
+  bool ok = fwrite(data, 1, len, f) == len && fflush(f) == 0 && fsync(fileno(f)) == 0;
   ok = fclose(f) == 0 && ok;
   if (!ok || rename(tmp, path) != 0) {
     remove(tmp);
     return svc_fail(e, RSW_ERR_IO, h, "cannot store the blob");
+  }
+  int dfd = open(svc->blob_dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (dfd >= 0) {
+    fsync(dfd);
+    close(dfd);
   }
   *created = true;
   return RSW_OK;

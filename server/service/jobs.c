@@ -294,7 +294,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     pthread_mutex_unlock(&svc->lock);
   }
   resident *r = svc_scene_acquire(svc, scene_id);
-  if (!r) return svc_fail(e, RSW_ERR_NOT_FOUND, scene_id, "no resident scene '%s'", scene_id);
+  if (!r) return svc_no_scene(e, scene_id);
   cJSON *req = cJSON_ParseWithLength(body, len);
   rsw_status st = RSW_OK;
   job *jb = NULL;
@@ -514,6 +514,9 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     }
   }
   cJSON_Delete(req);
+  /* The bytes its films will hold, for --max-result-bytes. */
+  uint64_t reserve = 0;
+  for (size_t i = 0; !st && i < n_items; i++) reserve += svc_film_bytes(sc, jb->items[i].sensor_index);
   if (st) {
     if (jb) {
       jb->n_items = n_items;
@@ -533,7 +536,21 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   svc_iso_time(jb->created, jb->created_iso);
   jb->state = JOB_QUEUED;
   pthread_mutex_lock(&svc->lock);
-  if (svc->n_queue >= svc->opts.max_queue) {
+  /* Without a state directory films live in memory: a job whose films
+   * cannot fit under --max-result-bytes is refused now, not after
+   * rendering (with one, films beyond the cap go to disk). */
+  uint64_t cap = svc->opts.max_result_bytes;
+  if (cap && !svc_state_on(svc) && reserve > cap - (svc->result_committed < cap ? svc->result_committed : cap)) {
+    uint64_t used = svc->result_committed;
+    pthread_mutex_unlock(&svc->lock);
+    job_free(jb);
+    svc_scene_release(svc, r);
+    return svc_fail(e, RSW_ERR_STORAGE, "/contexts",
+                    "the job's films take %llu bytes; %llu of this server's %llu bytes of result storage "
+                    "(--max-result-bytes) are held by other jobs: fetch and delete finished jobs, or retry later",
+                    (unsigned long long)reserve, (unsigned long long)used, (unsigned long long)cap);
+  }
+  if (svc->n_queue >= svc->opts.max_queue && !svc->restore_id) {
     size_t q = svc->n_queue;
     pthread_mutex_unlock(&svc->lock);
     job_free(jb);
@@ -542,10 +559,15 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     e->retry_after_s = 1;
     return st;
   }
-  /* The process's instance in the id: replicas behind one balancer never
-   * hand out the same job id, so a request rerouted to another replica
-   * (its own replica lost) gets 404, not somebody else's job. */
-  snprintf(jb->id, sizeof jb->id, "job-%.8s-%06llu", svc->instance, (unsigned long long)++svc->next_job);
+  if (svc->restore_id) {
+    snprintf(jb->id, sizeof jb->id, "%s", svc->restore_id);
+    svc_state_resume_items(svc, jb);
+  } else {
+    /* The process's instance in the id: replicas behind one balancer never
+     * hand out the same job id, so a request rerouted to another replica
+     * (its own replica lost) gets 404, not somebody else's job. */
+    snprintf(jb->id, sizeof jb->id, "job-%.8s-%06llu", svc->instance, (unsigned long long)++svc->next_job);
+  }
   jb->revision = r->revision;
   bool ok = svc_grow((void **)&svc->jobs, &svc->cap_jobs, svc->n_jobs + 1, sizeof *svc->jobs, 0) &&
             svc_grow((void **)&svc->queue, &svc->cap_queue, svc->n_queue + 1, sizeof *svc->queue, 0);
@@ -558,6 +580,11 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   svc->jobs[svc->n_jobs++] = jb;
   svc->queue[svc->n_queue++] = jb;
   r->active_jobs++;
+  if (!svc_state_on(svc)) {
+    jb->result_reserve = reserve;
+    svc->result_committed += reserve;
+  }
+  svc_state_job_saved(svc, jb, body, len);
   *job_id_out = strdup(jb->id);
   *json_out = NULL;
   cJSON *jj = job_json(jb);
@@ -582,7 +609,13 @@ static void finish_job(service *svc, job *j) {
     j->state = JOB_SUCCEEDED;
   j->t_finished = svc_now();
   svc_iso_time(time(NULL), j->finished_iso);
-  j->res->active_jobs--;
+  /* A finished job no longer holds its scene (it may be evicted). */
+  resident *r = j->res;
+  j->res = NULL;
+  r->active_jobs--;
+  if (--r->refs == 0 && r->deleted) svc_resident_free(r);
+  svc_free_evicted(svc_evict_locked(svc, NULL));
+  svc_state_job_finished(svc, j);
   cJSON *d = cJSON_CreateObject();
   cJSON_AddStringToObject(d, "state", state_names[j->state]);
   cJSON_AddNumberToObject(d, "done", (double)j->items_done);
@@ -619,6 +652,7 @@ void *svc_worker_main(void *arg) {
     for (size_t i = 0; i < j->n_items; i++) {
       if (atomic_load(&j->cancel) || svc->stopping) break;
       render_item *it = &j->items[i];
+      if (it->state != JOB_QUEUED) continue; /* done before a restart */
       pthread_mutex_unlock(&svc->lock);
       svc_error e = {0};
       render_spec rs = {.sensor_index = it->sensor_index,
@@ -628,6 +662,13 @@ void *svc_worker_main(void *arg) {
                         .overrides = it->params,
                         .cancel = &j->cancel};
       rsw_status st = svc_render_locked(svc, j->res, &rs, &it->film, &e);
+      if (!st) {
+        /* With a state directory every film goes to disk first. */
+        snprintf(it->film.context, sizeof it->film.context, "%s", it->context);
+        st = svc_state_film_write(svc, j, i, &it->film, &e);
+        if (st) svc_film_free(&it->film);
+        it->on_disk = !st && svc_state_on(svc);
+      }
       pthread_mutex_lock(&svc->lock);
       if (st == RSW_ERR_CANCELLED) break;
       cJSON *d = cJSON_CreateObject();
@@ -643,7 +684,18 @@ void *svc_worker_main(void *arg) {
       } else {
         it->state = JOB_SUCCEEDED;
         it->has_film = true;
-        snprintf(it->film.context, sizeof it->film.context, "%s", it->context);
+        uint64_t mem = svc_film_mem(&it->film), cap = svc->opts.max_result_bytes;
+        if (it->on_disk) {
+          svc->result_disk_bytes += mem;
+          svc->results_on_disk++;
+        }
+        if (it->on_disk && cap && svc->result_bytes + mem > cap) {
+          /* Beyond the memory cap: served from disk only. */
+          film_image_free(&it->film.img);
+          it->has_film = false;
+        } else {
+          svc->result_bytes += mem;
+        }
         svc->contexts_rendered++;
         cJSON_AddStringToObject(d, "state", "succeeded");
       }
@@ -668,8 +720,12 @@ void svc_jobs_expire(service *svc) {
     if (done && now - j->t_finished > svc->opts.result_ttl_s) j->deleted = true;
     if (j->deleted && done) {
       svc->jobs[i] = svc->jobs[--svc->n_jobs];
-      resident *r = j->res;
-      bool free_scene = --r->refs == 0 && r->deleted;
+      resident *r = j->res; /* NULL once finished */
+      bool free_scene = r && --r->refs == 0 && r->deleted;
+      for (size_t k = 0; k < j->n_items; k++)
+        if (j->items[k].has_film) svc->result_bytes -= svc_film_mem(&j->items[k].film);
+      svc->result_committed -= j->result_reserve;
+      svc_state_job_remove(svc, j);
       job_free(j);
       if (free_scene) svc_resident_free(r);
       continue;
@@ -682,7 +738,7 @@ void svc_jobs_free(service *svc) {
   for (size_t i = 0; i < svc->n_jobs; i++) {
     resident *r = svc->jobs[i]->res;
     job_free(svc->jobs[i]);
-    if (--r->refs == 0 && r->deleted) {
+    if (r && --r->refs == 0 && r->deleted) {
       /* Deleted while its jobs still held it: no longer in svc->scenes. */
       svc_resident_free(r);
     }
@@ -788,7 +844,7 @@ rsw_status service_job_results(service *svc, const char *id, char **json_out, sv
     cJSON_AddStringToObject(x, "state", state_names[it->state]);
     if (it->wavelength > 0) cJSON_AddNumberToObject(x, "wavelength", it->wavelength);
     cJSON_AddNumberToObject(x, "seed", (double)it->seed);
-    if (it->has_film) {
+    if (it->has_film || it->on_disk) {
       cJSON_AddNumberToObject(x, "spp", it->film.img.spp);
       cJSON_AddNumberToObject(x, "width", it->film.img.width);
       cJSON_AddNumberToObject(x, "height", it->film.img.height);
@@ -822,6 +878,13 @@ rsw_status service_job_result(service *svc, const char *id, const char *context,
   for (size_t i = 0; i < j->n_items; i++) {
     const render_item *it = &j->items[i];
     if (strcmp(it->context, context) != 0 || strcmp(it->sensor, sensor_name) != 0) continue;
+    if (!it->has_film && it->on_disk) {
+      /* Beyond the memory cap or restored: read from the state directory. */
+      job copy;
+      snprintf(copy.id, sizeof copy.id, "%s", j->id);
+      pthread_mutex_unlock(&svc->lock);
+      return svc_state_film_read(svc, &copy, i, out, e);
+    }
     if (!it->has_film) {
       pthread_mutex_unlock(&svc->lock);
       if (it->state == JOB_FAILED)
@@ -888,4 +951,48 @@ rsw_status service_job_next_event(service *svc, const char *id, uint64_t after, 
   }
   pthread_mutex_unlock(&svc->lock);
   return RSW_OK;
+}
+
+rsw_status service_job_result_npy_fd(service *svc, const char *id, const char *context, const char *sensor_id,
+                                     int *fd_out, uint64_t *len_out, svc_error *e) {
+  *fd_out = -1;
+  *len_out = 0;
+  if (!svc_state_on(svc)) return RSW_OK;
+  pthread_mutex_lock(&svc->lock);
+  job *j = find_job_locked(svc, id);
+  if (!j) {
+    pthread_mutex_unlock(&svc->lock);
+    return no_job(e, id);
+  }
+  char jid[40];
+  size_t k = SIZE_MAX;
+  snprintf(jid, sizeof jid, "%s", j->id);
+  for (size_t i = 0; i < j->n_items; i++) {
+    const render_item *it = &j->items[i];
+    if (strcmp(it->context, context) != 0 || strcmp(it->sensor, sensor_id) != 0) continue;
+    if (it->on_disk) k = i;
+    break;
+  }
+  pthread_mutex_unlock(&svc->lock);
+  /* Deleted meanwhile: -1, and the in-memory path answers. */
+  if (k != SIZE_MAX) *fd_out = svc_state_film_npy_fd(svc, jid, k, len_out);
+  return RSW_OK;
+}
+
+uint64_t svc_film_mem(const svc_film *f) {
+  const film_image *im = &f->img;
+  uint64_t px = (uint64_t)im->width * (uint64_t)im->height;
+  return px * (uint64_t)im->channels * 4 + (im->angles ? px * 16 : 0);
+}
+
+void svc_job_free(job *j) {
+  job_free(j);
+}
+
+void svc_job_push_event(service *svc, job *j, cJSON *data, bool end) {
+  push_event(svc, j, data, end);
+}
+
+job *svc_find_job_locked(service *svc, const char *id) {
+  return find_job_locked(svc, id);
 }

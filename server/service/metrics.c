@@ -92,6 +92,46 @@ char *service_metrics_text(service *svc) {
   for (int c = 0; c < 3; c++)
     svc_buf_printf(&b, "raysweep_updates_total{class=\"%s\"} %llu\n", classes[c],
                    (unsigned long long)svc->updates[c]);
+  /* Memory budget, result storage and durable state. 0: no limit. */
+  svc_buf_printf(&b, "# HELP raysweep_scene_bytes_limit The resident-scene budget (--max-scene-bytes; 0: "
+                     "none).\n# TYPE raysweep_scene_bytes_limit gauge\n");
+  svc_buf_printf(&b, "raysweep_scene_bytes_limit %llu\n", (unsigned long long)svc->opts.max_scene_bytes);
+  svc_buf_printf(&b, "# HELP raysweep_scene_budget_bytes Resident scenes' bytes as the budget counts them "
+                     "(geometry, acceleration and a measured per-scene and per-shape overhead).\n"
+                     "# TYPE raysweep_scene_budget_bytes gauge\n");
+  svc_buf_printf(&b, "raysweep_scene_budget_bytes %zu\n", svc->scene_bytes);
+  svc_buf_printf(&b, "# HELP raysweep_scenes_evicted_total Idle scenes evicted to stay within the budget.\n"
+                     "# TYPE raysweep_scenes_evicted_total counter\n");
+  svc_buf_printf(&b, "raysweep_scenes_evicted_total %llu\n", (unsigned long long)svc->scenes_evicted);
+  svc_buf_printf(&b, "# HELP raysweep_scenes_reloaded_total Scenes reloaded from the state directory.\n"
+                     "# TYPE raysweep_scenes_reloaded_total counter\n");
+  svc_buf_printf(&b, "raysweep_scenes_reloaded_total %llu\n", (unsigned long long)svc->scenes_reloaded);
+  svc_buf_printf(&b, "# HELP raysweep_result_bytes Finished films held in memory.\n"
+                     "# TYPE raysweep_result_bytes gauge\n");
+  svc_buf_printf(&b, "raysweep_result_bytes %llu\n", (unsigned long long)svc->result_bytes);
+  svc_buf_printf(&b, "# HELP raysweep_result_bytes_reserved Film bytes reserved by live jobs (no state "
+                     "directory).\n# TYPE raysweep_result_bytes_reserved gauge\n");
+  svc_buf_printf(&b, "raysweep_result_bytes_reserved %llu\n", (unsigned long long)svc->result_committed);
+  svc_buf_printf(&b, "# HELP raysweep_result_bytes_limit The in-memory result cap (--max-result-bytes; 0: "
+                     "none).\n# TYPE raysweep_result_bytes_limit gauge\n");
+  svc_buf_printf(&b, "raysweep_result_bytes_limit %llu\n", (unsigned long long)svc->opts.max_result_bytes);
+  svc_buf_printf(&b, "# HELP raysweep_results_written_total Films written to the state directory.\n"
+                     "# TYPE raysweep_results_written_total counter\n");
+  svc_buf_printf(&b, "raysweep_results_written_total %llu\n", (unsigned long long)svc->results_on_disk);
+  svc_buf_printf(&b, "# HELP raysweep_result_disk_bytes_total Bytes of films written to the state "
+                     "directory.\n# TYPE raysweep_result_disk_bytes_total counter\n");
+  svc_buf_printf(&b, "raysweep_result_disk_bytes_total %llu\n", (unsigned long long)svc->result_disk_bytes);
+  svc_buf_printf(&b, "# HELP raysweep_jobs_resumed_total Jobs resumed after a restart.\n"
+                     "# TYPE raysweep_jobs_resumed_total counter\n");
+  svc_buf_printf(&b, "raysweep_jobs_resumed_total %llu\n", (unsigned long long)svc->jobs_resumed);
+  svc_buf_printf(&b, "# HELP raysweep_jobs_restore_failed_total Interrupted jobs that could not resume "
+                     "after a restart (failed with the reason).\n# TYPE raysweep_jobs_restore_failed_total "
+                     "counter\n");
+  svc_buf_printf(&b, "raysweep_jobs_restore_failed_total %llu\n",
+                 (unsigned long long)svc->jobs_failed_on_restore);
+  svc_buf_printf(&b, "# HELP raysweep_restore_seconds Time the last start spent restoring the state "
+                     "directory.\n# TYPE raysweep_restore_seconds gauge\n");
+  svc_buf_printf(&b, "raysweep_restore_seconds %.6f\n", svc->restore_s);
   svc_buf_printf(&b, "# HELP raysweep_ready Whether the server accepts work.\n# TYPE raysweep_ready gauge\n");
   svc_buf_printf(&b, "raysweep_ready %d\n", atomic_load(&svc->ready) ? 1 : 0);
   pthread_mutex_unlock(&svc->lock);

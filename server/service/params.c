@@ -181,6 +181,7 @@ rsw_status service_params_patch(service *svc, const char *id, const char *body, 
   if (!st && rep.changed) {
     r->revision++;
     svc_refresh_param_cache(r);
+    svc_scene_patched(svc, r, j); /* kept for a reload, stored with --state-dir */
   }
   *revision_out = r->revision;
   cJSON *o = NULL;

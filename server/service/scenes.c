@@ -92,12 +92,157 @@ resident *svc_find_scene_locked(service *svc, const char *id) {
   return NULL;
 }
 
+/* The bytes a resident scene counts against --max-scene-bytes: its
+ * geometry and acceleration structures (svc_scene_bytes) plus what the
+ * object graph, the parameter table and Embree's per-scene objects take,
+ * which svc_scene_bytes does not see: measured as resident-set growth over
+ * 200-300 distinct loads (2026-11-23), 47 KB for a one-rectangle scene and
+ * 103 KB for a five-rectangle one, i.e. about 33 KB a scene and 14 KB a
+ * shape; rounded up. */
+#define SCENE_OVERHEAD_BYTES ((size_t)36 << 10)
+#define SHAPE_OVERHEAD_BYTES ((size_t)16 << 10)
+
+static size_t budget_bytes(const scene *sc) {
+  return svc_scene_bytes(sc) + SCENE_OVERHEAD_BYTES + SHAPE_OVERHEAD_BYTES * sc->n_shapes;
+}
+
+/* Whether this thread's last svc_scene_acquire missed a scene that was
+ * evicted (and could not be reloaded): svc_no_scene, which every caller
+ * answers a miss with, then says so (RSW_ERR_EVICTED). */
+static _Thread_local bool last_miss_evicted;
+
+static rsw_status scene_post(service *svc, const char *body, size_t len, bool is_xml, const char *variant,
+                             const char *name, const struct post_extra *x, bool *created, resident **out,
+                             svc_error *e);
+
+/* Reload a scene from the state directory by id: its posted text and the
+ * parameters PATCHed since, at its revision. */
+static resident *scene_reload(service *svc, const char *id) {
+  char *body;
+  size_t len;
+  bool is_xml;
+  char variant[8];
+  cJSON *patched;
+  uint64_t revision;
+  if (!svc_state_scene_read(svc, id, &body, &len, &is_xml, variant, &patched, &revision)) return NULL;
+  struct post_extra x = {.expect_id = id, .patched = patched, .revision = revision};
+  svc_error e = {0};
+  bool created;
+  resident *r = NULL;
+  if (scene_post(svc, body, len, is_xml, variant[0] ? variant : NULL, is_xml ? "scene.xml" : "scene.json", &x,
+                 &created, &r, &e) != RSW_OK) {
+    char msg[1200];
+    fprintf(stderr, "raysweepd: state: cannot reload scene %s: %s\n", id,
+            rsw_err_format(&e.err, msg, sizeof msg));
+    r = NULL;
+  } else if (created) {
+    pthread_mutex_lock(&svc->lock);
+    svc->scenes_reloaded++;
+    pthread_mutex_unlock(&svc->lock);
+  }
+  cJSON_Delete(patched);
+  free(body);
+  return r;
+}
+
 resident *svc_scene_acquire(service *svc, const char *id) {
   pthread_mutex_lock(&svc->lock);
   resident *r = svc_find_scene_locked(svc, id);
-  if (r) r->refs++;
+  if (r) {
+    r->refs++;
+    r->last_used = ++svc->use_clock;
+  }
+  bool evicted = !r && svc_was_evicted_locked(svc, id);
   pthread_mutex_unlock(&svc->lock);
+  if (!r) r = scene_reload(svc, id); /* NULL without a state directory */
+  last_miss_evicted = !r && evicted;
   return r;
+}
+
+bool svc_was_evicted_locked(service *svc, const char *id) {
+  for (size_t i = 0; i < svc->n_evicted; i++)
+    if (strcmp(svc->evicted[i], id) == 0) return true;
+  return false;
+}
+
+void svc_forget_evicted_locked(service *svc, const char *id) {
+  for (size_t i = 0; i < svc->n_evicted; i++)
+    if (strcmp(svc->evicted[i], id) == 0) svc->evicted[i][0] = '\0';
+}
+
+/* The ids of evicted scenes, remembered so a request for one says why it
+ * is gone: a ring of the last EVICTED_MEMORY evictions. */
+#define EVICTED_MEMORY 4096
+
+static void remember_evicted_locked(service *svc, const char *id) {
+  if (!svc->evicted) {
+    svc->evicted = calloc(EVICTED_MEMORY, sizeof *svc->evicted);
+    if (!svc->evicted) return;
+  }
+  memcpy(svc->evicted[svc->evicted_next], id, 65);
+  svc->evicted_next = (svc->evicted_next + 1) % EVICTED_MEMORY;
+  if (svc->n_evicted < EVICTED_MEMORY) svc->n_evicted++;
+}
+
+/* Remove r from the registry (svc->lock held); the caller frees it when
+ * no one holds it. */
+static void unregister_locked(service *svc, resident *r) {
+  for (size_t i = 0; i < svc->n_scenes; i++)
+    if (svc->scenes[i] == r) {
+      svc->scenes[i] = svc->scenes[--svc->n_scenes];
+      break;
+    }
+  for (size_t i = 0; i < svc->n_raw;)
+    if (strcmp(svc->raw[i].id, r->id) == 0)
+      svc->raw[i] = svc->raw[--svc->n_raw];
+    else
+      i++;
+  svc->scene_bytes -= r->bytes;
+  r->deleted = true;
+}
+
+resident **svc_evict_locked(service *svc, const resident *keep) {
+  uint64_t budget = svc->opts.max_scene_bytes;
+  resident **ev = NULL;
+  size_t n = 0, cap = 0;
+  while (budget && svc->scene_bytes > budget) {
+    resident *lru = NULL;
+    for (size_t i = 0; i < svc->n_scenes; i++) {
+      resident *c = svc->scenes[i];
+      if (c == keep || c->pinned || c->refs || c->active_jobs) continue;
+      if (!lru || c->last_used < lru->last_used) lru = c;
+    }
+    if (!lru || !svc_grow((void **)&ev, &cap, n + 2, sizeof *ev, 0)) break;
+    unregister_locked(svc, lru);
+    remember_evicted_locked(svc, lru->id);
+    svc->scenes_evicted++;
+    ev[n++] = lru;
+    ev[n] = NULL;
+  }
+  return ev;
+}
+
+void svc_free_evicted(resident **ev) {
+  for (size_t i = 0; ev && ev[i]; i++) svc_resident_free(ev[i]);
+  free(ev);
+}
+
+void svc_scene_patched(service *svc, resident *r, const cJSON *map) {
+  if (!r->patched) r->patched = cJSON_CreateObject();
+  for (const cJSON *k = map ? map->child : NULL; k && r->patched; k = k->next) {
+    cJSON *v = cJSON_Duplicate(k, 1);
+    if (!v) continue;
+    if (cJSON_GetObjectItemCaseSensitive(r->patched, k->string))
+      cJSON_ReplaceItemInObjectCaseSensitive(r->patched, k->string, v);
+    else
+      cJSON_AddItemToObject(r->patched, k->string, v);
+  }
+  svc_state_scene_patched(svc, r);
+  size_t b = budget_bytes(r->sc);
+  pthread_mutex_lock(&svc->lock);
+  svc->scene_bytes += b - r->bytes;
+  r->bytes = b;
+  pthread_mutex_unlock(&svc->lock);
 }
 
 void svc_scene_release(service *svc, resident *r) {
@@ -124,9 +269,12 @@ static void scene_error(svc_error *e, const rsw_err *err) {
   if (err->code == RSW_ERR_IO || err->code == RSW_ERR_NOT_FOUND) e->err.code = RSW_ERR_FILE;
 }
 
-/* Load, compute the id, register (or find the existing one). */
+/* Load, compute the id, register (or find the existing one). x (may be
+ * NULL): a startup scene (pinned, not stored) or a reload from the state
+ * directory (the id it must have, the parameters to apply first). */
 static rsw_status scene_post(service *svc, const char *body, size_t len, bool is_xml, const char *variant,
-                             const char *name, bool *created, resident **out, svc_error *e) {
+                             const char *name, const struct post_extra *x, bool *created, resident **out,
+                             svc_error *e) {
   if (variant && strcmp(variant, "mono") != 0 && strcmp(variant, "rgb") != 0)
     return svc_fail(e, RSW_ERR_BAD_REQUEST, "variant", "variant must be mono or rgb (got '%s')", variant);
   /* Same text and variant as an earlier post: the same scene (cheap path;
@@ -142,7 +290,7 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
     rsw_sha256_end(&c, raw);
   }
   bool has_files = memmem(body, len, "filename", 8) != NULL;
-  if (!has_files) {
+  if (!has_files && !x) {
     pthread_mutex_lock(&svc->lock);
     for (size_t i = 0; i < svc->n_raw; i++)
       if (memcmp(svc->raw[i].digest, raw, 32) == 0) {
@@ -199,10 +347,40 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
   free(canon);
   char id[65];
   rsw_hex(d, 32, id);
+  if (x && x->expect_id && strcmp(id, x->expect_id) != 0) {
+    scene_free(sc);
+    return svc_fail(e, RSW_ERR_FILE, x->expect_id,
+                    "the files scene %s refers to changed since it was stored (it now loads as %s)",
+                    x->expect_id, id);
+  }
+  if (x && x->patched) { /* a reload: its base state at its revision */
+    param_update *u = NULL;
+    size_t nu = 0;
+    rsw_status pst = svc_map_to_updates(x->patched, sc, "params", &u, &nu, e);
+    if (!pst && nu) {
+      rsw_err uerr = {0};
+      pst = scene_update(sc, u, nu, NULL, &uerr);
+      if (pst) pst = svc_update_error(e, sc, u, nu, &uerr);
+    }
+    svc_free_updates(u, nu);
+    if (pst) {
+      scene_free(sc);
+      return pst;
+    }
+  }
+  if (!x) { /* posted: stored before it is answered */
+    rsw_status sst = svc_state_scene_save(svc, id, is_xml, variant, body, len, e);
+    if (sst) {
+      scene_free(sc);
+      return sst;
+    }
+  }
+  size_t bytes = budget_bytes(sc);
   pthread_mutex_lock(&svc->lock);
   resident *r = svc_find_scene_locked(svc, id);
   if (r) {
     r->refs++;
+    r->last_used = ++svc->use_clock;
     pthread_mutex_unlock(&svc->lock);
     scene_free(sc);
     *created = false;
@@ -219,6 +397,13 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
   }
   memcpy(r->id, id, 65);
   r->sc = sc;
+  r->bytes = bytes;
+  r->last_used = ++svc->use_clock;
+  r->pinned = x && x->pinned;
+  if (x && x->patched) {
+    r->revision = x->revision;
+    r->patched = cJSON_Duplicate(x->patched, 1);
+  }
   r->load_s = load_s;
   r->created = time(NULL);
   pthread_mutex_init(&r->lock, NULL);
@@ -226,12 +411,16 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
   svc_refresh_param_cache(r);
   r->refs = 1;
   svc->scenes[svc->n_scenes++] = r;
-  if (!has_files && svc_grow((void **)&svc->raw, &svc->cap_raw, svc->n_raw + 1, sizeof *svc->raw, 0)) {
+  if (!has_files && !x && svc_grow((void **)&svc->raw, &svc->cap_raw, svc->n_raw + 1, sizeof *svc->raw, 0)) {
     memcpy(svc->raw[svc->n_raw].digest, raw, 32);
     memcpy(svc->raw[svc->n_raw].id, id, 65);
     svc->n_raw++;
   }
+  svc->scene_bytes += bytes;
+  svc_forget_evicted_locked(svc, id);
+  resident **ev = svc_evict_locked(svc, r);
   pthread_mutex_unlock(&svc->lock);
+  svc_free_evicted(ev);
   *created = true;
   *out = r;
   return RSW_OK;
@@ -242,7 +431,7 @@ rsw_status service_scene_post(service *svc, const char *body, size_t len, bool i
   if (!service_ready(svc)) return svc_fail(e, RSW_ERR_UNAVAILABLE, "", "the server is shutting down");
   resident *r;
   rsw_status st =
-      scene_post(svc, body, len, is_xml, variant, is_xml ? "scene.xml" : "scene.json", created, &r, e);
+      scene_post(svc, body, len, is_xml, variant, is_xml ? "scene.xml" : "scene.json", NULL, created, &r, e);
   if (st) return st;
   cJSON *o = cJSON_CreateObject();
   svc_scene_summary(r, o);
@@ -256,7 +445,8 @@ rsw_status service_scene_load_text(service *svc, const char *text, size_t len, b
                                    char **id_out, svc_error *e) {
   bool created;
   resident *r;
-  rsw_status st = scene_post(svc, text, len, is_xml, NULL, name, &created, &r, e);
+  struct post_extra x = {.pinned = true}; /* startup scenes: never evicted */
+  rsw_status st = scene_post(svc, text, len, is_xml, NULL, name, &x, &created, &r, e);
   if (st) return st;
   if (id_out) *id_out = strdup(r->id);
   svc_scene_release(svc, r);
@@ -306,7 +496,8 @@ rsw_status service_scene_load_file(service *svc, const char *path, char **id_out
       snprintf(svc->data_root, sizeof svc->data_root, "%s", rp);
       free(rp);
     }
-    st = scene_post(svc, buf, n, is_xml, NULL, path, &created, &r, e);
+    struct post_extra x = {.pinned = true};
+    st = scene_post(svc, buf, n, is_xml, NULL, path, &x, &created, &r, e);
     svc->data_root[0] = '\0';
     if (!st) {
       if (id_out) *id_out = strdup(r->id);
@@ -347,10 +538,16 @@ rsw_status service_scene_list(service *svc, char **json_out, svc_error *e) {
 }
 
 rsw_status svc_no_scene(svc_error *e, const char *id) {
+  if (last_miss_evicted)
+    return svc_fail(e, RSW_ERR_EVICTED, id,
+                    "scene '%s' was evicted from memory (the server's --max-scene-bytes budget); post it "
+                    "again",
+                    id);
   return svc_fail(e, RSW_ERR_NOT_FOUND, id, "no resident scene '%s'", id);
 }
 
 rsw_status service_scene_get(service *svc, const char *id, char **json_out, svc_error *e) {
+  svc_scene_release(svc, svc_scene_acquire(svc, id)); /* reloads an evicted or stored one */
   pthread_mutex_lock(&svc->lock);
   resident *r = svc_find_scene_locked(svc, id);
   cJSON *o = r ? scene_info(svc, r) : NULL;
@@ -364,7 +561,23 @@ rsw_status service_scene_delete(service *svc, const char *id, bool force, svc_er
   pthread_mutex_lock(&svc->lock);
   resident *r = svc_find_scene_locked(svc, id);
   if (!r) {
+    bool evicted = svc_was_evicted_locked(svc, id);
+    svc_forget_evicted_locked(svc, id);
     pthread_mutex_unlock(&svc->lock);
+    char *b = NULL;
+    size_t bl;
+    bool xml;
+    char v[8];
+    cJSON *pp = NULL;
+    uint64_t rev;
+    bool stored = svc_state_scene_read(svc, id, &b, &bl, &xml, v, &pp, &rev);
+    free(b);
+    cJSON_Delete(pp);
+    if (stored || evicted) { /* not resident: forgetting it is all there is to do */
+      svc_state_scene_remove(svc, id);
+      return RSW_OK;
+    }
+    last_miss_evicted = false;
     return svc_no_scene(e, id);
   }
   if (r->active_jobs && !force) {
@@ -388,18 +601,9 @@ rsw_status service_scene_delete(service *svc, const char *id, bool force, svc_er
   for (size_t i = 0; i < svc->n_jobs; i++)
     if (svc->jobs[i]->res == r && (svc->jobs[i]->state == JOB_QUEUED || svc->jobs[i]->state == JOB_RUNNING))
       atomic_store(&svc->jobs[i]->cancel, 1);
-  for (size_t i = 0; i < svc->n_scenes; i++)
-    if (svc->scenes[i] == r) {
-      svc->scenes[i] = svc->scenes[--svc->n_scenes];
-      break;
-    }
-  for (size_t i = 0; i < svc->n_raw;)
-    if (strcmp(svc->raw[i].id, id) == 0)
-      svc->raw[i] = svc->raw[--svc->n_raw];
-    else
-      i++;
-  r->deleted = true;
+  unregister_locked(svc, r);
   bool free_now = r->refs == 0;
+  svc_state_scene_remove(svc, id);
   pthread_cond_broadcast(&svc->cond);
   pthread_mutex_unlock(&svc->lock);
   if (free_now) svc_resident_free(r);

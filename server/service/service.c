@@ -3,6 +3,7 @@
  * params.c, renders.c, blobs.c, jobs.c, metrics.c. */
 #include <errno.h>
 #include <fcntl.h>
+#include <ftw.h>
 #include <limits.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -90,9 +91,28 @@ rsw_status service_new(const service_opts *opts, service **out, rsw_err *err) {
     snprintf(svc->data_root, sizeof svc->data_root, "%s", rp);
     free(rp);
   }
-  if (svc->opts.blob_dir) {
-    snprintf(svc->blob_dir, sizeof svc->blob_dir, "%s", svc->opts.blob_dir);
+  svc->state_lock_fd = -1;
+  if (svc->opts.state_dir && strlen(svc->opts.state_dir) > 3000) {
+    free(svc);
+    return rsw_fail(err, RSW_ERR_USAGE, "--state-dir", "the state directory's path is too long");
+  }
+  if (svc->opts.state_dir) {
+    snprintf(svc->state_dir, sizeof svc->state_dir, "%s", svc->opts.state_dir);
+    rsw_status sst = svc_state_open(svc, err);
+    if (sst) {
+      if (svc->state_lock_fd >= 0) close(svc->state_lock_fd);
+      free(svc);
+      return sst;
+    }
+    svc->opts.state_dir = svc->state_dir;
+  }
+  if (svc->opts.blob_dir || svc->state_dir[0]) {
+    if (svc->opts.blob_dir)
+      snprintf(svc->blob_dir, sizeof svc->blob_dir, "%s", svc->opts.blob_dir);
+    else
+      snprintf(svc->blob_dir, sizeof svc->blob_dir, "%.3000s/blobs", svc->state_dir);
     if (mkdir(svc->blob_dir, 0700) != 0 && errno != EEXIST) {
+      if (svc->state_lock_fd >= 0) close(svc->state_lock_fd);
       free(svc);
       return rsw_fail(err, RSW_ERR_IO, "--blob-dir", "cannot create blob directory '%s': %s", opts->blob_dir,
                       strerror(errno));
@@ -103,6 +123,7 @@ rsw_status service_new(const service_opts *opts, service **out, rsw_err *err) {
       free(svc);
       return rsw_fail(err, RSW_ERR_IO, "--blob-dir", "cannot create a blob directory: %s", strerror(errno));
     }
+    svc->blob_dir_temp = true; /* removed by service_free */
   }
   svc->opts.blob_dir = svc->blob_dir;
   svc->opts.data_root = svc->data_root[0] ? svc->data_root : NULL;
@@ -149,10 +170,21 @@ bool service_accepts_jobs(service *svc, const char **why_out) {
 void svc_resident_free(resident *r) {
   if (!r) return;
   scene_free(r->sc);
+  cJSON_Delete(r->patched);
   cJSON_Delete(r->base_params);
   pthread_mutex_destroy(&r->lock);
   pthread_mutex_destroy(&r->cache_lock);
   free(r);
+}
+
+static int remove_entry(const char *path, const struct stat *sb, int flag, struct FTW *ftw) {
+  (void)sb, (void)flag, (void)ftw;
+  remove(path);
+  return 0;
+}
+
+void service_restore(service *svc) {
+  if (svc) svc_state_restore(svc);
 }
 
 void service_free(service *svc) {
@@ -164,6 +196,9 @@ void service_free(service *svc) {
   free(svc->scenes);
   free(svc->raw);
   free(svc->reqs);
+  free(svc->evicted);
+  if (svc->blob_dir_temp) nftw(svc->blob_dir, remove_entry, 16, FTW_DEPTH | FTW_PHYS);
+  if (svc->state_lock_fd >= 0) close(svc->state_lock_fd);
   pthread_mutex_destroy(&svc->lock);
   pthread_cond_destroy(&svc->cond);
   free(svc);
@@ -210,5 +245,9 @@ char *service_info_json(service *svc) {
   cJSON_AddNumberToObject(lim, "max_job_renders", SVC_MAX_JOB_RENDERS);
   cJSON_AddNumberToObject(lim, "max_direction_pixels", SVC_MAX_DIRECTION_PIXELS);
   cJSON_AddNumberToObject(lim, "result_ttl_s", svc->opts.result_ttl_s);
+  /* 0: no budget / no cap. */
+  cJSON_AddNumberToObject(lim, "max_scene_bytes", (double)svc->opts.max_scene_bytes);
+  cJSON_AddNumberToObject(lim, "max_result_bytes", (double)svc->opts.max_result_bytes);
+  cJSON_AddBoolToObject(lim, "state_dir", svc->state_dir[0] != 0);
   return svc_print_json(o);
 }

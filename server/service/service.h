@@ -44,6 +44,19 @@ typedef struct service_opts {
   uint64_t max_film_bytes;    /* memory one render's film may take
                                   (sensor_film_bytes), checked before
                                   anything is allocated (default 1 GiB) */
+  /* Durable state (state.c): blobs (unless blob_dir is given), scene
+   * documents, job records and finished films live under it, written
+   * through a temporary file, fsync and rename; a restart restores them.
+   * NULL: everything in memory (blob_dir NULL then means a temporary
+   * directory removed by service_free). */
+  const char *state_dir;
+  /* Resident scenes' bytes (geometry and acceleration) beyond which idle
+   * scenes are evicted least recently used (0: no budget). */
+  uint64_t max_scene_bytes;
+  /* Finished films held in memory, in bytes (0: no cap). Beyond it films
+   * live on disk only (with state_dir) or a job whose films cannot fit is
+   * refused up front (RSW_ERR_STORAGE, 507). */
+  uint64_t max_result_bytes;
 } service_opts;
 
 rsw_status service_new(const service_opts *opts, service **out, rsw_err *err);
@@ -56,6 +69,10 @@ bool service_ready(const service *svc);
  * that a load balancer's health check takes a full replica out of its ring
  * until it has room again. *why_out (may be NULL) says which is missing. */
 bool service_accepts_jobs(service *svc, const char **why_out);
+/* With a state directory: restore its jobs (finished ones fetchable,
+ * interrupted ones resumed or failed with the reason). Call once, after
+ * the startup scenes are loaded and before serving requests. */
+void service_restore(service *svc);
 
 /* ---- JSON documents ---------------------------------------------------------
  * Results that are JSON documents come back as malloc'ed, NUL-terminated
@@ -131,6 +148,12 @@ rsw_status service_job_delete(service *svc, const char *job_id, svc_error *e);
 rsw_status service_job_results(service *svc, const char *job_id, char **json_out, svc_error *e);
 rsw_status service_job_result(service *svc, const char *job_id, const char *context, const char *sensor_id,
                               svc_film *out, svc_error *e);
+/* The same result as a NumPy .npy file on disk (state directory), for
+ * streaming: *fd_out (the caller closes it) reads *len_out bytes from
+ * offset 0, exactly what http_film_npy would encode. RSW_OK with
+ * *fd_out = -1 when the film is not on disk (use service_job_result). */
+rsw_status service_job_result_npy_fd(service *svc, const char *job_id, const char *context,
+                                     const char *sensor_id, int *fd_out, uint64_t *len_out, svc_error *e);
 
 /* Server-sent events: wait until the job has an event with sequence number
  * > after (or has ended), up to timeout_ms. Fills *json_out with the next

@@ -32,6 +32,12 @@ typedef struct resident {
   int active_jobs; /* queued or running jobs on this scene (svc->lock) */
   int refs;        /* holders outside svc->lock (svc->lock) */
   bool deleted;    /* removed from the registry; freed at refs == 0 */
+  /* Memory budget and durable state (state.c). */
+  size_t bytes;       /* svc_scene_bytes at load and after each PATCH */
+  uint64_t last_used; /* svc->use_clock at the last acquire (LRU) */
+  bool pinned;        /* loaded at startup (--scene): never evicted */
+  cJSON *patched;     /* {key: value} of every PATCH applied (last value
+                         per key), persisted with the revision (r->lock) */
 } resident;
 
 /* One render of a job: a (context, sensor) pair. */
@@ -55,6 +61,8 @@ typedef struct render_item {
   job_state state;
   svc_film film;
   bool has_film;
+  bool on_disk;    /* the film's files are in the state directory; when
+                      !has_film, film.img holds its header (no data) */
   char error[600];
 } render_item;
 
@@ -85,6 +93,7 @@ typedef struct job {
   unsigned char body_digest[32];
   char error[600];
   bool deleted;
+  uint64_t result_reserve; /* bytes counted in svc->result_committed */
 } job;
 
 struct service {
@@ -124,6 +133,21 @@ struct service {
   uint64_t unresolved_rays; /* render_stats.unresolved over all renders */
   double update_seconds[3]; /* none(+unchanged), spectral, geometric */
   uint64_t updates[3];
+  /* Memory budget and durable state (state.c). */
+  char state_dir[4096]; /* "" without --state-dir */
+  int state_lock_fd;    /* flock'ed DIR/lock (-1: none) */
+  bool blob_dir_temp;   /* blob_dir is a temporary directory: removed */
+  uint64_t use_clock;   /* LRU clock (svc->lock) */
+  size_t scene_bytes;   /* sum of resident scenes' bytes (svc->lock) */
+  uint64_t scenes_evicted, scenes_reloaded;
+  char (*evicted)[65];  /* ids evicted from memory, a ring (svc->lock) */
+  size_t n_evicted, evicted_next;
+  uint64_t result_bytes;     /* films held in memory (svc->lock) */
+  uint64_t result_committed; /* estimates reserved by live jobs, no state dir */
+  uint64_t result_disk_bytes, results_on_disk; /* films written to disk */
+  const char *restore_id; /* while restoring: the id a submission takes */
+  uint64_t jobs_resumed, jobs_failed_on_restore;
+  double restore_s;
 };
 
 /* Request limits besides the options (GET /v1 reports them). A job's
@@ -189,9 +213,59 @@ rsw_status svc_render_locked(service *svc, resident *r, const render_spec *rs, s
 bool svc_find_sensor(const scene *sc, const char *name, size_t *index);
 /* Fill a JSON object with a scene's summary (id, variant, sensors, revision). */
 void svc_scene_summary(const resident *r, cJSON *o);
+/* Memory budget (scenes.c): the resident scene's bytes changed or a
+ * scene arrived; evict idle scenes least recently used while over
+ * --max-scene-bytes (never `keep`, a pinned one, one with refs or active
+ * jobs). svc->lock held. Returns the evicted residents, for the caller to
+ * free after unlocking (NULL-terminated, malloc'ed; NULL when none). */
+resident **svc_evict_locked(service *svc, const resident *keep);
+/* A PATCH changed r's base state (r->lock held): remember the values
+ * (map: the PATCH body) for a reload, store them, recount its bytes. */
+void svc_scene_patched(service *svc, resident *r, const cJSON *map);
+/* How a scene is loaded besides a plain POST (scenes.c). */
+struct post_extra {
+  bool pinned;             /* a startup scene: never evicted, not stored */
+  const char *expect_id;   /* a reload: the id it must get */
+  const cJSON *patched;    /* a reload: parameters to apply first */
+  uint64_t revision;       /* a reload: the revision they make */
+};
+void svc_free_evicted(resident **ev);
+bool svc_was_evicted_locked(service *svc, const char *id);
+void svc_forget_evicted_locked(service *svc, const char *id);
+/* Durable state (state.c); every function is a no-op without a state
+ * directory. */
+rsw_status svc_state_open(service *svc, rsw_err *err);
+bool svc_state_on(const service *svc);
+rsw_status svc_state_scene_save(service *svc, const char *id, bool is_xml, const char *variant,
+                                const char *body, size_t len, svc_error *e);
+bool svc_state_scene_read(service *svc, const char *id, char **body, size_t *len, bool *is_xml,
+                          char variant[8], cJSON **patched, uint64_t *revision);
+void svc_state_scene_patched(service *svc, resident *r); /* r->lock held */
+void svc_state_scene_remove(service *svc, const char *id);
+void svc_state_job_saved(service *svc, const job *j, const char *body, size_t len);
+void svc_state_job_finished(service *svc, const job *j); /* svc->lock held */
+void svc_state_job_remove(service *svc, const job *j);
+/* Write item k's film (svc->lock NOT held). */
+rsw_status svc_state_film_write(service *svc, const job *j, size_t k, const svc_film *f, svc_error *e);
+rsw_status svc_state_film_read(service *svc, const job *j, size_t k, svc_film *out, svc_error *e);
+bool svc_state_film_header(service *svc, const char *job_id, size_t k, svc_film *out);
+/* Item k's film as .npy: a descriptor at offset 0 and the length to
+ * send; -1 when not on disk. */
+int svc_state_film_npy_fd(service *svc, const char *job_id, size_t k, uint64_t *len);
+void svc_state_restore(service *svc);
+/* A job being resumed (svc->restore_id): its renders whose film is on
+ * disk count done. svc->lock held, before it is queued. */
+void svc_state_resume_items(service *svc, job *j);
+/* Bytes a film of this sensor takes in memory (data and angles). */
+uint64_t svc_film_bytes(const scene *sc, size_t sensor_index);
 /* Jobs (jobs.c). */
 void *svc_worker_main(void *arg);
 void svc_jobs_free(service *svc);
 void svc_jobs_expire(service *svc); /* svc->lock held */
+void svc_job_free(job *j);
+void svc_job_push_event(service *svc, job *j, cJSON *data, bool end); /* svc->lock held */
+job *svc_find_job_locked(service *svc, const char *id);
+/* Bytes a film holds in memory (data and angles). */
+uint64_t svc_film_mem(const svc_film *f);
 
 #endif
