@@ -47,7 +47,8 @@ SERVICE_LIB := $(BUILD)/lib/librswservice.a
 DAEMON_SRC := server/main.c $(shell find server/http -name '*.c' 2>/dev/null | sort) $(wildcard server/serve.c)
 DAEMON_OBJ := $(DAEMON_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/obj/$(BUILD)/gen/default_scene.o
 
-TEST_SUPPORT_SRC := $(wildcard tests/support/*.c)
+# failmalloc.c replaces malloc: only test_oom and raysweepd-failmalloc link it.
+TEST_SUPPORT_SRC := $(filter-out tests/support/failmalloc.c,$(wildcard tests/support/*.c))
 TEST_SUPPORT_OBJ := $(TEST_SUPPORT_SRC:%.c=$(BUILD)/obj/%.o)
 TEST_SRC := $(sort $(wildcard tests/unit/test_*.c tests/validation/test_*.c tests/integration/test_*.c))
 TEST_BIN := $(patsubst %.c,$(BUILD)/tests/%,$(notdir $(TEST_SRC)))
@@ -150,6 +151,22 @@ install: $(BUILD)/bin/raysweepd $(BUILD)/bin/raysweep $(CLIENT_A) $(CLIENT_SO)
 $(BUILD)/tests/test_http_encode: $(BUILD)/obj/tests/unit/test_http_encode.o $(BUILD)/obj/server/http/encode.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS)
+
+# test_oom fails each allocation in turn (tests/support/failmalloc.c, a
+# build-time malloc hook: not instrumented itself; under SAN it forwards to
+# ASan's allocator). It drives the HTTP layer in process, and spawns
+# raysweepd-failmalloc (the daemon with the hook linked in).
+FAILMALLOC_OBJ := $(BUILD)/obj/tests/support/failmalloc.o
+$(FAILMALLOC_OBJ): tests/support/failmalloc.c | deps
+	@mkdir -p $(dir $@)
+	$(CC) -std=c11 -O2 -g -fPIC $(WARN) $(if $(filter 1,$(SAN)),-DFAILMALLOC_ASAN) -c $< -o $@
+HTTP_OBJ := $(patsubst %.c,$(BUILD)/obj/%.o,$(shell find server/http -name '*.c' 2>/dev/null | sort))
+$(BUILD)/tests/test_oom: $(BUILD)/obj/tests/integration/test_oom.o $(FAILMALLOC_OBJ) $(HTTP_OBJ) $(TEST_SUPPORT_OBJ) $(SERVICE_LIB) $(KERNEL_LIB) $(BUILD)/tests/raysweepd-failmalloc
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) -o $@ $(filter %.o,$^) $(SERVICE_LIB) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS) $(DAEMON_LIBS) $(TEST_LIBS)
+$(BUILD)/tests/raysweepd-failmalloc: $(DAEMON_OBJ) $(FAILMALLOC_OBJ) $(SERVICE_LIB) $(KERNEL_LIB)
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) -o $@ $(DAEMON_OBJ) $(FAILMALLOC_OBJ) $(SERVICE_LIB) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS) $(DAEMON_LIBS)
 
 # test_image_exr_stress also reads every film through OpenEXR's C++ library
 # (tests/support/imf_read.cpp), whose decoder is independent of OpenEXR Core.

@@ -1,0 +1,469 @@
+/* Allocation-failure testing (issue 13), as curl's and redis's suites do:
+ * every operation below runs once with allocation n failing, for
+ * n = 1, 2, 3, ... until a run completes without reaching allocation n
+ * (tests/support/failmalloc.c: a malloc hook linked into this binary,
+ * armed only around the operation). Every run must end either in a clean
+ * error (a non-OK status with a message, state left as it was) or, when
+ * the failure was absorbed on the way (a retry, an optional cache), in the
+ * exact result of the run without a failure; never a crash, an abort, a
+ * hang (each run has a 30 s alarm) or, in the SAN build, an invalid
+ * access.
+ *
+ * Sampling (run time): every n up to FULL_N, then every STRIDE-th; the
+ * figures printed for each operation say how many allocations it makes
+ * and how many runs were made.
+ *
+ * Operations: scene load from JSON (with an OBJ and a PLY mesh file) and
+ * from XML; a parameter update (spectral and geometric: Embree refit);
+ * a render on 2 threads; the film's EXR written to a file and encoded in
+ * memory (a distant sensor's film, with its per-pixel angle metadata). */
+#include <errno.h>
+#include <signal.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "../support/failmalloc.h"
+#include "../support/test.h"
+#include "kernel/film_io.h"
+#include "kernel/image_exr.h"
+#include "kernel/render.h"
+#include "kernel/scene/params.h"
+#include "kernel/scene/scene.h"
+
+RSW_TEST_DEFINE_GLOBALS
+
+/* Every allocation up to FULL_N is failed in turn, then every STRIDE-th. */
+#define FULL_N 3000
+#define STRIDE 7
+#define RUN_LIMIT_S 30
+
+static char tmpdir[256];
+static char data_dir[512];
+
+/* ---- what a crash or a hang names ------------------------------------------------------ */
+
+static volatile sig_atomic_t cur_n;
+static const char *volatile cur_op = "";
+
+static void put(const char *s) {
+  ssize_t w = write(2, s, strlen(s));
+  (void)w;
+}
+
+static void on_fatal(int sig) {
+  char num[24];
+  int k = 0;
+  long n = cur_n;
+  char d[24];
+  do d[k++] = (char)('0' + n % 10), n /= 10;
+  while (n);
+  int j = 0;
+  while (k) num[j++] = d[--k];
+  num[j] = '\0';
+  put("\ntest_oom: ");
+  put(sig == SIGALRM ? "HANG (30 s)" : "CRASH");
+  put(" in operation ");
+  put((const char *)cur_op);
+  put(" with allocation ");
+  put(num);
+  put(" failing\n");
+  signal(sig, SIG_DFL);
+  raise(sig == SIGALRM ? SIGABRT : sig);
+}
+
+/* ---- the scenes ------------------------------------------------------------------------- */
+
+#define JSON_SCENE                                                                                           \
+  "{\"type\": \"scene\", \"variant\": \"mono\","                                                             \
+  " \"meter\": {\"type\": \"hdistant\", \"target\": {\"type\": \"rectangle\"},"                              \
+  "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 4},"                                        \
+  "   \"film\": {\"type\": \"hdrfilm\", \"width\": 6, \"height\": 5, \"rfilter\": {\"type\": \"box\"}}},"    \
+  " \"integrator\": {\"type\": \"path\", \"max_depth\": 3},"                                                 \
+  " \"sun\": {\"type\": \"directional\", \"direction\": [0.5, 0.1, -0.866],"                                 \
+  "   \"irradiance\": {\"type\": \"spectrum\", \"wavelengths\": [400, 500, 600, 700],"                       \
+  "                    \"values\": [1.6, 1.9, 1.8, 1.4]}},"                                                  \
+  " \"plate\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [10, 10, 1]}],"                          \
+  "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": {\"type\": \"spectrum\","                           \
+  "              \"value\": [[400, 0.05], [550, 0.1], [700, 0.45]]}}},"                                      \
+  " \"quad\": {\"type\": \"obj\", \"filename\": \"quad.obj\", \"to_world\": [{\"translate\": [0, 0, 0.5]}],"  \
+  "   \"bsdf\": {\"type\": \"roughconductor\"}},"                                                            \
+  " \"tri\": {\"type\": \"ply\", \"filename\": \"quad_le.ply\","                                             \
+  "   \"to_world\": [{\"translate\": [1, 1, 0.2]}, {\"scale\": 0.5}]},"                                       \
+  " \"ball\": {\"type\": \"sphere\", \"center\": [0, 0, 1], \"radius\": 0.3,"                                \
+  "   \"bsdf\": {\"type\": \"dielectric\"}}}"
+
+static const char *XML_SCENE =
+    "<scene version=\"3.0.0\">\n"
+    "  <default name=\"spp\" value=\"4\"/>\n"
+    "  <sensor type=\"hdistant\" id=\"meter\">\n"
+    "    <sampler type=\"independent\"><integer name=\"sample_count\" value=\"$spp\"/></sampler>\n"
+    "    <film type=\"hdrfilm\"><integer name=\"width\" value=\"3\"/><integer name=\"height\" value=\"2\"/>\n"
+    "      <rfilter type=\"box\"/></film>\n"
+    "  </sensor>\n"
+    "  <integrator type=\"path\"><integer name=\"max_depth\" value=\"2\"/></integrator>\n"
+    "  <emitter type=\"directional\"><vector name=\"direction\" x=\"1\" y=\"0\" z=\"-1\"/>\n"
+    "    <rgb name=\"irradiance\" value=\"1, 0.5, 0.25\"/></emitter>\n"
+    "  <shape type=\"rectangle\" id=\"plate\">\n"
+    "    <transform name=\"to_world\"><scale value=\"5\"/></transform>\n"
+    "    <bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"0.2, 0.3, 0.4\"/></bsdf>\n"
+    "  </shape>\n"
+    "  <shape type=\"obj\" id=\"quad\"><string name=\"filename\" value=\"quad.obj\"/>\n"
+    "    <transform name=\"to_world\"><translate z=\"0.5\"/></transform></shape>\n"
+    "</scene>\n";
+
+static scene *load(const char *text, bool xml, rsw_err *err) {
+  scene_load_opts o = {.size = sizeof o, .base_dir = data_dir};
+  scene *s = NULL;
+  if (scene_load_memory(text, strlen(text), xml ? "oom.xml" : "oom.json", xml, &o, &s, err) != RSW_OK)
+    return NULL;
+  return s;
+}
+
+static rsw_status render(scene *s, film_image *out, rsw_err *err) {
+  render_opts o = {.size = sizeof o, .spp = 4, .seed = 7, .threads = 2, .wavelength = 550};
+  return render_sensor(s, &o, out, NULL, err);
+}
+
+static bool same_film(const film_image *a, const film_image *b) {
+  return a->data && b->data && a->width == b->width && a->height == b->height && a->channels == b->channels &&
+         memcmp(a->data, b->data, sizeof(float) * (size_t)a->width * a->height * a->channels) == 0;
+}
+
+/* ---- the sweep ----------------------------------------------------------------------------- */
+
+/* One operation: setup and teardown run disarmed, run() armed. After a
+ * failed run, failed_ok() checks that the state is as before (NULL: no
+ * check); after an OK run that absorbed the failure, same() checks the
+ * result is the one of a clean run. */
+typedef struct oom_op {
+  const char *name;
+  void *(*setup)(void);
+  rsw_status (*run)(void *st, rsw_err *err);
+  bool (*failed_ok)(void *st);
+  bool (*same)(void *st);
+  void (*teardown)(void *st);
+} oom_op;
+
+static void sweep(const oom_op *op) {
+  cur_op = op->name;
+  cur_n = 0;
+  /* A clean run: the allocation count. */
+  void *st = op->setup();
+  REQUIRE(st, "%s: setup", op->name);
+  rsw_err err = {0};
+  failmalloc_arm(0);
+  rsw_status s = op->run(st, &err);
+  long total = failmalloc_disarm();
+  op->teardown(st);
+  char buf[1100];
+  REQUIRE(s == RSW_OK, "%s: clean run: %s", op->name, rsw_err_format(&err, buf, sizeof buf));
+
+  long runs = 0, errors = 0, absorbed = 0, bad = 0;
+  for (long n = 1;; n = n < FULL_N ? n + 1 : n + STRIDE) {
+    cur_n = n;
+    st = op->setup();
+    REQUIRE(st, "%s: setup for n = %ld", op->name, n);
+    rsw_err_clear(&err);
+    alarm(RUN_LIMIT_S);
+    failmalloc_arm(n);
+    s = op->run(st, &err);
+    failmalloc_disarm();
+    alarm(0);
+    bool injected = failmalloc_failed() > 0;
+    if (!injected) { /* ran to completion before allocation n */
+      op->teardown(st);
+      CHECK(s == RSW_OK, "%s: n = %ld, no failure injected but: %s", op->name, n,
+            rsw_err_format(&err, buf, sizeof buf));
+      break;
+    }
+    runs++;
+    if (s != RSW_OK) {
+      errors++;
+      if (!err.msg[0] || err.code != s) {
+        bad++;
+        CHECK(false, "%s: allocation %ld failing: status %d without a message (code %d)", op->name, n, (int)s,
+              (int)err.code);
+      } else if (op->failed_ok && !op->failed_ok(st)) {
+        bad++;
+        CHECK(false, "%s: allocation %ld failing: state changed by the failed call (%s)", op->name, n,
+              rsw_err_format(&err, buf, sizeof buf));
+      }
+    } else {
+      absorbed++;
+      if (op->same && !op->same(st)) {
+        bad++;
+        CHECK(false, "%s: allocation %ld failing: reported success with a different result", op->name, n);
+      }
+    }
+    op->teardown(st);
+    if (bad > 5) {
+      CHECK(false, "%s: stopping after 5 bad runs", op->name);
+      break;
+    }
+  }
+  printf("    %-14s %6ld allocations (clean run); %ld runs (each of 1..%d, then every %d-th): %ld clean errors, "
+         "%ld absorbed (result identical)\n",
+         op->name, total, runs, FULL_N, STRIDE, errors, absorbed);
+}
+
+/* ---- kernel operations ------------------------------------------------------------------ */
+
+typedef struct kstate {
+  scene *s;
+  film_image film;
+  void *bytes;
+  size_t len;
+  char path[600];
+} kstate;
+
+static film_image ref_json, ref_json_updated, ref_xml;
+static void *ref_exr;
+static size_t ref_exr_len;
+
+static void *setup_empty(void) { return calloc(1, sizeof(kstate)); }
+
+static void teardown(void *p) {
+  kstate *k = p;
+  scene_free(k->s);
+  film_image_free(&k->film);
+  free(k->bytes);
+  if (k->path[0]) unlink(k->path);
+  free(k);
+}
+
+static rsw_status run_load_json(void *p, rsw_err *err) {
+  kstate *k = p;
+  k->s = load(JSON_SCENE, false, err);
+  return k->s ? RSW_OK : err->code;
+}
+
+static rsw_status run_load_xml(void *p, rsw_err *err) {
+  kstate *k = p;
+  k->s = load(XML_SCENE, true, err);
+  return k->s ? RSW_OK : err->code;
+}
+
+/* An absorbed failure must still load the same scene: it renders the
+ * same film. */
+static bool same_json_render(void *p) {
+  kstate *k = p;
+  rsw_err err = {0};
+  film_image f = {0};
+  bool ok = k->s && render(k->s, &f, &err) == RSW_OK && same_film(&f, &ref_json);
+  film_image_free(&f);
+  return ok;
+}
+
+static bool same_xml_render(void *p) {
+  kstate *k = p;
+  rsw_err err = {0};
+  film_image f = {0};
+  bool ok = k->s && render(k->s, &f, &err) == RSW_OK && same_film(&f, &ref_xml);
+  film_image_free(&f);
+  return ok;
+}
+
+static void *setup_scene(void) {
+  kstate *k = calloc(1, sizeof *k);
+  rsw_err err = {0};
+  if (k) k->s = load(JSON_SCENE, false, &err);
+  if (!k || !k->s) {
+    free(k);
+    return NULL;
+  }
+  return k;
+}
+
+/* Three entries of three update classes: spectral (a reflectance),
+ * geometric (a mesh's transform: an Embree instance update) and the
+ * sun's direction. */
+static rsw_status run_update(void *p, rsw_err *err) {
+  kstate *k = p;
+  static const char *keys[] = {"plate.bsdf.reflectance.value", "quad.to_world", "sun.direction"};
+  static const char *vals[] = {"0.3", "[1,0,0,0.1, 0,1,0,0, 0,0,1,0.6, 0,0,0,1]", "[0.3, 0, -1]"};
+  param_update items[3];
+  size_t n = 0;
+  rsw_status s = RSW_OK;
+  for (; n < 3; n++) {
+    items[n].key = keys[n];
+    s = param_value_parse(vals[n], keys[n], &items[n].value, err);
+    if (s != RSW_OK) break;
+  }
+  if (s == RSW_OK) s = scene_update(k->s, items, 3, NULL, err);
+  for (size_t i = 0; i < n; i++) param_value_free(&items[i].value);
+  return s;
+}
+
+/* A failed update changes nothing: the scene renders as before. */
+static bool update_left_scene_alone(void *p) {
+  kstate *k = p;
+  rsw_err err = {0};
+  film_image f = {0};
+  bool ok = render(k->s, &f, &err) == RSW_OK && same_film(&f, &ref_json);
+  film_image_free(&f);
+  return ok;
+}
+
+static bool update_applied(void *p) {
+  kstate *k = p;
+  rsw_err err = {0};
+  film_image f = {0};
+  bool ok = render(k->s, &f, &err) == RSW_OK && same_film(&f, &ref_json_updated);
+  film_image_free(&f);
+  return ok;
+}
+
+static rsw_status run_render(void *p, rsw_err *err) {
+  kstate *k = p;
+  return render(k->s, &k->film, err);
+}
+
+static bool render_same(void *p) {
+  kstate *k = p;
+  return same_film(&k->film, &ref_json);
+}
+
+/* A failed render leaves the scene usable. */
+static bool render_failed_ok(void *p) { return update_left_scene_alone(p); }
+
+static void *setup_film(void) {
+  kstate *k = setup_scene();
+  rsw_err err = {0};
+  if (k && render(k->s, &k->film, &err) != RSW_OK) {
+    teardown(k);
+    return NULL;
+  }
+  if (k) snprintf(k->path, sizeof k->path, "%s/film.exr", tmpdir);
+  return k;
+}
+
+static rsw_status run_exr_file(void *p, rsw_err *err) {
+  kstate *k = p;
+  return film_image_write_exr(&k->film, k->path, "meter", err);
+}
+
+static bool slurp(const char *path, void **bytes, size_t *len) {
+  FILE *f = fopen(path, "rb");
+  if (!f) return false;
+  fseek(f, 0, SEEK_END);
+  long n = ftell(f);
+  fseek(f, 0, SEEK_SET);
+  *bytes = malloc(n > 0 ? (size_t)n : 1);
+  *len = *bytes && n >= 0 && fread(*bytes, 1, (size_t)n, f) == (size_t)n ? (size_t)n : 0;
+  fclose(f);
+  return *len > 0;
+}
+
+/* No file (and no temp file) after a failed write. */
+static bool exr_file_absent(void *p) {
+  kstate *k = p;
+  struct stat sb;
+  char tmp[700];
+  snprintf(tmp, sizeof tmp, "%s.tmp.%ld", k->path, (long)getpid());
+  return stat(k->path, &sb) != 0 && stat(tmp, &sb) != 0;
+}
+
+static bool exr_file_same(void *p) {
+  kstate *k = p;
+  void *b = NULL;
+  size_t n = 0;
+  bool ok = slurp(k->path, &b, &n) && n == ref_exr_len && memcmp(b, ref_exr, n) == 0;
+  free(b);
+  return ok;
+}
+
+static rsw_status run_exr_mem(void *p, rsw_err *err) {
+  kstate *k = p;
+  film_exr_info info = film_image_exr_info(&k->film, "meter");
+  return film_exr_encode(k->film.width, k->film.height, k->film.channels, k->film.channel_names, k->film.data,
+                         k->film.half, &info, &k->bytes, &k->len, err);
+}
+
+static bool exr_mem_same(void *p) {
+  kstate *k = p;
+  return k->bytes && k->len == ref_exr_len && memcmp(k->bytes, ref_exr, k->len) == 0;
+}
+
+static bool make_references(void) {
+  rsw_err err = {0};
+  char buf[1100];
+  scene *s = load(JSON_SCENE, false, &err);
+  if (!s || render(s, &ref_json, &err) != RSW_OK) goto fail;
+  kstate k = {.s = s};
+  if (run_update(&k, &err) != RSW_OK || render(s, &ref_json_updated, &err) != RSW_OK) goto fail;
+  scene_free(s);
+  s = load(XML_SCENE, true, &err);
+  if (!s || render(s, &ref_xml, &err) != RSW_OK) goto fail;
+  scene_free(s);
+  film_exr_info info = film_image_exr_info(&ref_json, "meter");
+  if (film_exr_encode(ref_json.width, ref_json.height, ref_json.channels, ref_json.channel_names, ref_json.data,
+                      ref_json.half, &info, &ref_exr, &ref_exr_len, &err) != RSW_OK)
+    goto fail;
+  if (!ref_json.angles) {
+    printf("  the JSON scene's film has no per-pixel angles\n");
+    return false;
+  }
+  return true;
+fail:
+  printf("  references: %s\n", rsw_err_format(&err, buf, sizeof buf));
+  scene_free(s);
+  return false;
+}
+
+static void test_kernel_load(void) {
+  static const oom_op json = {"load_json", setup_empty, run_load_json, NULL, same_json_render, teardown};
+  static const oom_op xml = {"load_xml", setup_empty, run_load_xml, NULL, same_xml_render, teardown};
+  sweep(&json);
+  sweep(&xml);
+}
+
+static void test_kernel_update(void) {
+  static const oom_op op = {"update", setup_scene, run_update, update_left_scene_alone, update_applied,
+                            teardown};
+  sweep(&op);
+}
+
+static void test_kernel_render(void) {
+  static const oom_op op = {"render", setup_scene, run_render, render_failed_ok, render_same, teardown};
+  sweep(&op);
+}
+
+static void test_exr_encode(void) {
+  static const oom_op file = {"exr_file", setup_film, run_exr_file, exr_file_absent, exr_file_same, teardown};
+  static const oom_op mem = {"exr_memory", setup_film, run_exr_mem, NULL, exr_mem_same, teardown};
+  sweep(&file);
+  sweep(&mem);
+}
+
+int main(void) {
+  setvbuf(stdout, NULL, _IOLBF, 0);
+  signal(SIGALRM, on_fatal);
+  signal(SIGSEGV, on_fatal);
+  signal(SIGBUS, on_fatal);
+  signal(SIGABRT, on_fatal);
+  const char *td = getenv("RSW_TEST_DIR");
+  snprintf(data_dir, sizeof data_dir, "%s/data", td && *td ? td : "tests");
+  snprintf(tmpdir, sizeof tmpdir, "%s/rsw_oom_XXXXXX", getenv("TMPDIR") ? getenv("TMPDIR") : "/tmp");
+  if (!mkdtemp(tmpdir)) {
+    perror("mkdtemp");
+    return 1;
+  }
+  if (!make_references()) {
+    printf("FAIL references\ntest_oom: 0 passed, 1 failed\n");
+    return 1;
+  }
+  RSW_TEST_RUN(test_kernel_load);
+  RSW_TEST_RUN(test_kernel_update);
+  RSW_TEST_RUN(test_kernel_render);
+  RSW_TEST_RUN(test_exr_encode);
+  rmdir(tmpdir);
+  film_image_free(&ref_json);
+  film_image_free(&ref_json_updated);
+  film_image_free(&ref_xml);
+  free(ref_exr);
+  RSW_TEST_END("test_oom");
+}
