@@ -14,7 +14,8 @@
  * and how many runs were made.
  *
  * Operations: scene load from JSON (with an OBJ and a PLY mesh file) and
- * from XML; a parameter update (spectral and geometric: Embree refit);
+ * from XML; a parameter update (a spectrum, a mesh's transform, a
+ * direction, a mesh's vertex positions: Embree instance update and refit);
  * a render on 2 threads; the film's EXR written to a file and encoded in
  * memory (a distant sensor's film, with its per-pixel angle metadata). */
 #include <errno.h>
@@ -72,6 +73,7 @@ static void on_fatal(int sig) {
   put(num);
   put(" failing\n");
   signal(sig, SIG_DFL);
+  signal(SIGABRT, SIG_DFL);
   raise(sig == SIGALRM ? SIGABRT : sig);
 }
 
@@ -149,6 +151,13 @@ typedef struct oom_op {
 } oom_op;
 
 static void sweep(const oom_op *op) {
+  /* OOM_ONLY=name,name: only those operations (debugging). */
+  const char *only = getenv("OOM_ONLY");
+  if (only && *only) {
+    size_t len = strlen(op->name);
+    const char *p = strstr(only, op->name);
+    if (!p || (p[len] && p[len] != ',')) return;
+  }
   cur_op = op->name;
   cur_n = 0;
   /* A clean run: the allocation count. */
@@ -283,17 +292,20 @@ static void *setup_scene(void) {
  * sun's direction. */
 static rsw_status run_update(void *p, rsw_err *err) {
   kstate *k = p;
-  static const char *keys[] = {"plate.bsdf.reflectance.value", "quad.to_world", "sun.direction"};
-  static const char *vals[] = {"0.3", "[1,0,0,0.1, 0,1,0,0, 0,0,1,0.6, 0,0,0,1]", "[0.3, 0, -1]"};
-  param_update items[3];
+  static const char *keys[] = {"plate.bsdf.reflectance.value", "quad.to_world", "sun.direction",
+                               "tri.vertex_positions"};
+  static const char *vals[] = {"0.3", "[1,0,0,0.1, 0,1,0,0, 0,0,1,0.6, 0,0,0,1]", "[0.3, 0, -1]",
+                               "[-1,-1,0, 1,-1,0.1, 1,1,0, -1,1,0.2]"};
+  enum { N_UPD = sizeof keys / sizeof *keys };
+  param_update items[N_UPD];
   size_t n = 0;
   rsw_status s = RSW_OK;
-  for (; n < 3; n++) {
+  for (; n < N_UPD; n++) {
     items[n].key = keys[n];
     s = param_value_parse(vals[n], keys[n], &items[n].value, err);
     if (s != RSW_OK) break;
   }
-  if (s == RSW_OK) s = scene_update(k->s, items, 3, NULL, err);
+  if (s == RSW_OK) s = scene_update(k->s, items, N_UPD, NULL, err);
   for (size_t i = 0; i < n; i++) param_value_free(&items[i].value);
   return s;
 }

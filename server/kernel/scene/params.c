@@ -1133,6 +1133,135 @@ static rsw_status apply_meshbuf(const entry *e, const param_value *v, rsw_err *e
   return RSW_OK;
 }
 
+/* ---- all or nothing: what an update overwrites, kept until it succeeded ---- */
+
+/* The old value of one changed entry. */
+typedef struct undo {
+  double num;
+  xform xf;
+  vec3 vec;
+  spectrum spec; /* owned copy */
+  void *buf;     /* a copy of the mesh buffer (owned) */
+  uint32_t count; /* n_verts (positions) or n_faces (faces) */
+} undo;
+
+static void *dup_bytes(const void *p, size_t n, bool *ok) {
+  *ok = true;
+  if (!p || !n) return NULL;
+  void *d = malloc(n);
+  if (d) memcpy(d, p, n);
+  else *ok = false;
+  return d;
+}
+
+static rsw_status undo_save(undo *u, const entry *e, rsw_err *err) {
+  bool ok = true;
+  switch (e->kind) {
+  case EK_FLOAT: u->num = *e->fptr; break;
+  case EK_TRANSFORM: u->xf = *e->xptr; break;
+  case EK_VECTOR: u->vec = e->vget(e->owner); break;
+  case EK_SPECTRUM: {
+    const spectrum *cur = uniform_texture_spectrum(e->tex);
+    if (!cur) break;
+    u->spec = *cur;
+    u->spec.wl = NULL, u->spec.val = NULL;
+    if (cur->kind == SPEC_TABLE) {
+      bool ok2;
+      u->spec.wl = dup_bytes(cur->wl, cur->n * sizeof(double), &ok);
+      u->spec.val = dup_bytes(cur->val, cur->n * sizeof(double), &ok2);
+      ok = ok && ok2;
+    }
+    break;
+  }
+  case EK_MESHBUF: {
+    const mesh *m = &e->sh->mesh;
+    switch (e->buf) {
+    case MB_POSITIONS:
+      u->buf = dup_bytes(m->pos, 3 * (size_t)m->n_verts * sizeof(float), &ok);
+      u->count = m->n_verts;
+      break;
+    case MB_FACES:
+      u->buf = dup_bytes(m->faces, 3 * (size_t)m->n_faces * sizeof(uint32_t), &ok);
+      u->count = m->n_faces;
+      break;
+    case MB_NORMALS: u->buf = dup_bytes(m->nrm, 3 * (size_t)m->n_verts * sizeof(float), &ok); break;
+    case MB_TEXCOORDS: u->buf = dup_bytes(m->uv, 2 * (size_t)m->n_verts * sizeof(float), &ok); break;
+    }
+    break;
+  }
+  case EK_BOOL: break;
+  }
+  return ok ? RSW_OK : rsw_fail(err, RSW_ERR_NOMEM, e->key, "out of memory");
+}
+
+static void undo_free(undo *un, size_t n) {
+  for (size_t i = 0; un && i < n; i++) {
+    spectrum_free(&un[i].spec);
+    free(un[i].buf);
+  }
+  free(un);
+}
+
+/* Put back every value an update wrote (it failed part-way: out of
+ * memory, or Embree could not build), then redo the derived state and the
+ * Embree work for the old values. Writing the values back allocates
+ * nothing; if the Embree work fails again, the structure stays marked
+ * incomplete (accel_ready) and renders refuse the scene until an update or
+ * a reload succeeds, instead of tracing a half-built BVH. */
+static void update_rollback(scene *s, staged *sg, undo *un, size_t n) {
+  for (size_t i = n; i-- > 0;) {
+    if (!sg[i].changed) continue;
+    const entry *e = &s->params->e[sg[i].index];
+    undo *u = &un[i];
+    switch (e->kind) {
+    case EK_FLOAT: *e->fptr = u->num; break;
+    case EK_TRANSFORM: *e->xptr = u->xf; break;
+    case EK_VECTOR: e->vset(e->owner, u->vec); break;
+    case EK_SPECTRUM:
+      if (uniform_texture_spectrum(e->tex)) uniform_texture_adopt_spectrum(e->tex, &u->spec);
+      break;
+    case EK_MESHBUF: {
+      mesh *m = &e->sh->mesh;
+      float **fb = e->buf == MB_POSITIONS ? &m->pos : e->buf == MB_NORMALS ? &m->nrm : &m->uv;
+      if (e->buf == MB_FACES) {
+        free(m->faces);
+        m->faces = u->buf;
+        m->n_faces = u->count;
+      } else {
+        free(*fb);
+        *fb = u->buf;
+        if (e->buf == MB_POSITIONS) m->n_verts = u->count;
+      }
+      u->buf = NULL;
+      e->sh->cdf_staged = false;
+      break;
+    }
+    case EK_BOOL: break;
+    }
+  }
+  bool geometry = false;
+  for (size_t i = 0; i < n; i++) {
+    if (!sg[i].changed) continue;
+    const entry *e = &s->params->e[sg[i].index];
+    if (e->cls == UPDATE_GEOMETRIC) geometry = true;
+    object *o = e->owner;
+    bool seen = false;
+    for (size_t k = 0; k < i && !seen; k++) seen = sg[k].changed && s->params->e[sg[k].index].owner == o;
+    if (!seen && o->plugin && o->plugin->parameters_changed) o->plugin->parameters_changed(o);
+  }
+  if (!geometry) return;
+  rsw_err ignored = {0};
+  for (size_t i = 0; i < n; i++) {
+    if (!sg[i].changed) continue;
+    const entry *e = &s->params->e[sg[i].index];
+    if (e->cls != UPDATE_GEOMETRIC) continue;
+    if (e->kind == EK_TRANSFORM) accel_update_transform(s->accel, (const shape *)e->owner);
+    else if (e->kind == EK_MESHBUF && (e->buf == MB_POSITIONS || e->buf == MB_FACES))
+      (void)accel_rebuild_shape(s->accel, e->sh, &ignored);
+  }
+  if (accel_commit(s->accel, &ignored) == RSW_OK) (void)scene_refresh_bounds(s, &ignored);
+}
+
 static double now_s(void) {
   struct timespec ts;
   clock_gettime(CLOCK_MONOTONIC, &ts);
@@ -1241,6 +1370,22 @@ rsw_status scene_update(scene *s, const param_update *items, size_t n, update_re
     free(sg);
     return st;
   }
+  /* The old values, copied before anything is written: a failure from
+   * here on puts them back (update_rollback). */
+  undo *un = calloc(n ? n : 1, sizeof *un);
+  if (!un) st = rsw_fail(err, RSW_ERR_NOMEM, "params", "out of memory");
+  for (size_t i = 0; i < n && !st; i++)
+    if (sg[i].changed) st = undo_save(&un[i], &s->params->e[sg[i].index], err);
+  if (st) {
+    for (size_t i = 0; i < n; i++) {
+      const entry *e = &s->params->e[sg[i].index];
+      if (e->kind == EK_MESHBUF) e->sh->cdf_staged = false;
+      free(sg[i].fpos);
+    }
+    undo_free(un, n);
+    free(sg);
+    return st;
+  }
   accel_counters before;
   accel_get_counters(s->accel, &before);
   /* 3. Apply. */
@@ -1321,6 +1466,8 @@ rsw_status scene_update(scene *s, const param_update *items, size_t n, update_re
     }
     s->emitter_weight_sum = sum;
   }
+  if (st) update_rollback(s, sg, un, n);
+  undo_free(un, n);
   for (size_t i = 0; i < n; i++) free(sg[i].fpos);
   free(sg);
   if (report) {

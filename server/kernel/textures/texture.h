@@ -21,6 +21,9 @@ const spectrum *uniform_texture_spectrum(const texture *t);
  * next prepare(); uniform and rgb values take effect at once as well.
  * Returns false when out of memory (then nothing changed). */
 bool uniform_texture_set_spectrum(texture *t, const spectrum *s);
+/* Replace it by *s, taking its arrays (no allocation: cannot fail); *s is
+ * zeroed. */
+void uniform_texture_adopt_spectrum(texture *t, spectrum *s);
 /* The uniform texture's current value (for parameter tables/tests). */
 bool uniform_texture_value(const texture *t, color *out);
 

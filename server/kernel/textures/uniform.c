@@ -110,6 +110,16 @@ bool uniform_texture_set_spectrum(texture *t, const spectrum *s) {
   return true;
 }
 
+void uniform_texture_adopt_spectrum(texture *t, spectrum *s) {
+  if (t->base.plugin != &plugin_uniform) return;
+  uniform_tex *u = (uniform_tex *)t;
+  spectrum_free(&u->spec);
+  u->spec = *s;
+  memset(s, 0, sizeof *s);
+  if (u->spec.kind == SPEC_UNIFORM) u->value = col1(u->spec.value);
+  if (u->spec.kind == SPEC_RGB) u->value = col(u->spec.rgb[0], u->spec.rgb[1], u->spec.rgb[2]);
+}
+
 bool uniform_texture_set_where(texture *t, const char *where) {
   if (t->base.plugin != &plugin_uniform) return false;
   uniform_tex *u = (uniform_tex *)t;
