@@ -161,7 +161,9 @@ $(FAILMALLOC_OBJ): tests/support/failmalloc.c | deps
 	@mkdir -p $(dir $@)
 	$(CC) -std=c11 -O2 -g -fPIC $(WARN) $(if $(filter 1,$(SAN)),-DFAILMALLOC_ASAN) -c $< -o $@
 HTTP_OBJ := $(patsubst %.c,$(BUILD)/obj/%.o,$(shell find server/http -name '*.c' 2>/dev/null | sort))
-$(BUILD)/tests/test_oom: $(BUILD)/obj/tests/integration/test_oom.o $(FAILMALLOC_OBJ) $(HTTP_OBJ) $(TEST_SUPPORT_OBJ) $(SERVICE_LIB) $(KERNEL_LIB) $(BUILD)/tests/raysweepd-failmalloc
+# (libraysweep's own objects only: the EXR writer, film attributes and
+# status tables it shares come from the kernel library.)
+$(BUILD)/tests/test_oom: $(BUILD)/obj/tests/integration/test_oom.o $(FAILMALLOC_OBJ) $(HTTP_OBJ) $(CLIENT_SRC:%.c=$(BUILD)/obj/%.o) $(TEST_SUPPORT_OBJ) $(SERVICE_LIB) $(KERNEL_LIB)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $(filter %.o,$^) $(SERVICE_LIB) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS) $(DAEMON_LIBS) $(TEST_LIBS)
 $(BUILD)/tests/raysweepd-failmalloc: $(DAEMON_OBJ) $(FAILMALLOC_OBJ) $(SERVICE_LIB) $(KERNEL_LIB)

@@ -34,6 +34,9 @@
 #include "kernel/render.h"
 #include "kernel/scene/params.h"
 #include "kernel/scene/scene.h"
+#include "http/http.h"
+#include "raysweep/client.h"
+#include "service/service.h"
 
 RSW_TEST_DEFINE_GLOBALS
 
@@ -148,6 +151,9 @@ typedef struct oom_op {
   bool (*failed_ok)(void *st);
   bool (*same)(void *st);
   void (*teardown)(void *st);
+  /* The API returns a status only (rsw_film_save_exr: no client to carry
+   * a message): a non-OK status is the whole clean error. */
+  bool status_only;
 } oom_op;
 
 static void sweep(const oom_op *op) {
@@ -155,8 +161,9 @@ static void sweep(const oom_op *op) {
   const char *only = getenv("OOM_ONLY");
   if (only && *only) {
     size_t len = strlen(op->name);
-    const char *p = strstr(only, op->name);
-    if (!p || (p[len] && p[len] != ',')) return;
+    const char *p = only;
+    while ((p = strstr(p, op->name)) && ((p != only && p[-1] != ',') || (p[len] && p[len] != ','))) p += len;
+    if (!p) return;
   }
   cur_op = op->name;
   cur_n = 0;
@@ -192,7 +199,7 @@ static void sweep(const oom_op *op) {
     runs++;
     if (s != RSW_OK) {
       errors++;
-      if (!err.msg[0] || err.code != s) {
+      if (!op->status_only && (!err.msg[0] || err.code != s)) {
         bad++;
         CHECK(false, "%s: allocation %ld failing: status %d without a message (code %d)", op->name, n, (int)s,
               (int)err.code);
@@ -427,28 +434,333 @@ fail:
 }
 
 static void test_kernel_load(void) {
-  static const oom_op json = {"load_json", setup_empty, run_load_json, NULL, same_json_render, teardown};
-  static const oom_op xml = {"load_xml", setup_empty, run_load_xml, NULL, same_xml_render, teardown};
+  static const oom_op json = {"load_json", setup_empty, run_load_json, NULL, same_json_render, teardown, false};
+  static const oom_op xml = {"load_xml", setup_empty, run_load_xml, NULL, same_xml_render, teardown, false};
   sweep(&json);
   sweep(&xml);
 }
 
 static void test_kernel_update(void) {
-  static const oom_op op = {"update", setup_scene, run_update, update_left_scene_alone, update_applied,
-                            teardown};
+  static const oom_op op = {"update", setup_scene, run_update, update_left_scene_alone, update_applied, teardown, false};
   sweep(&op);
 }
 
 static void test_kernel_render(void) {
-  static const oom_op op = {"render", setup_scene, run_render, render_failed_ok, render_same, teardown};
+  static const oom_op op = {"render", setup_scene, run_render, render_failed_ok, render_same, teardown, false};
   sweep(&op);
 }
 
 static void test_exr_encode(void) {
-  static const oom_op file = {"exr_file", setup_film, run_exr_file, exr_file_absent, exr_file_same, teardown};
-  static const oom_op mem = {"exr_memory", setup_film, run_exr_mem, NULL, exr_mem_same, teardown};
+  static const oom_op file = {"exr_file", setup_film, run_exr_file, exr_file_absent, exr_file_same, teardown, false};
+  static const oom_op mem = {"exr_memory", setup_film, run_exr_mem, NULL, exr_mem_same, teardown, false};
   sweep(&file);
   sweep(&mem);
+}
+
+/* ---- the daemon in process, driven by the client library ------------------------------------ *
+ * One service and HTTP server (server/service, server/http on
+ * 127.0.0.1, an ephemeral port) and libraysweep calls against it: a failed
+ * allocation may fall in the client (libraysweep, libcurl), in the
+ * connection thread (libmicrohttpd, request parsing, the service), in a
+ * render or job worker, or in the kernel. The client's error must be a
+ * clean one (a status and a message), and the daemon must still answer
+ * afterwards (checked disarmed after every run). */
+
+static service *d_svc;
+static http_server *d_srv;
+static char d_url[64];
+static char d_blobs[300];
+static char d_scene_id[65];
+
+/* The JSON scene with its mesh files: pushed by the client, which uploads
+ * the meshes as blobs and rewrites the references. */
+static const char *SCENE_TEXT = JSON_SCENE;
+
+static rsw_client *client_new(void) {
+  rsw_client_opts o = {.size = sizeof o, .base_url = d_url, .timeout_s = 20, .max_retries = -1};
+  rsw_client *c = NULL;
+  return rsw_client_new(&o, &c) == RSW_OK ? c : NULL;
+}
+
+typedef struct cstate {
+  rsw_client *c;
+  rsw_film *film;
+  char id[65];
+  char job[40];
+  char *json;
+  uint64_t rev;
+} cstate;
+
+static rsw_film *ref_c_render, *ref_c_job;
+static char *ref_c_params;
+
+static void *c_setup(void) {
+  cstate *k = calloc(1, sizeof *k);
+  if (k && !(k->c = client_new())) {
+    free(k);
+    return NULL;
+  }
+  return k;
+}
+
+/* Disarmed: the daemon answers and the base scene is there. */
+static bool daemon_alive(rsw_client *c) {
+  char *json = NULL;
+  bool ok = rsw_server_ready(c) == RSW_OK && rsw_scene_info(c, d_scene_id, &json) == RSW_OK;
+  rsw_free(json);
+  return ok;
+}
+
+static void c_teardown(void *p) {
+  cstate *k = p;
+  bool alive = daemon_alive(k->c);
+  CHECK(alive, "%s: allocation %ld failing: the daemon does not answer any more", cur_op, (long)cur_n);
+  if (k->job[0]) rsw_job_delete(k->c, k->job);
+  rsw_film_free(k->film);
+  rsw_free(k->json);
+  rsw_client_free(k->c);
+  free(k);
+}
+
+static rsw_status c_status(cstate *k, rsw_status s, rsw_err *err) {
+  if (s != RSW_OK) {
+    const rsw_error_info *ei = rsw_client_last_error(k->c);
+    rsw_fail(err, s, ei->pointer, "%s%s(HTTP %d)", ei->message, ei->message[0] ? " " : "", ei->http_status);
+    if (!ei->message[0]) err->msg[0] = '\0'; /* no message: the sweep reports it */
+  }
+  return s;
+}
+
+/* Push: each run loads a scene anew (the base scene with another
+ * max_depth, so another id; deleted again in teardown). */
+static char push_text[4096];
+
+static rsw_status c_run_push(void *p, rsw_err *err) {
+  cstate *k = p;
+  int created = 0;
+  return c_status(k, rsw_scene_push_buffer(k->c, push_text, strlen(push_text), data_dir, NULL, k->id, &created),
+                  err);
+}
+
+static void c_teardown_push(void *p) {
+  cstate *k = p;
+  if (k->id[0]) rsw_scene_delete(k->c, k->id, 1);
+  c_teardown(p);
+}
+
+/* A spectrum (tabulated) and a mesh's transform; PATCH_BACK writes the
+ * scene's own values again (same table, same matrix). */
+static const char *PATCH = "{\"plate.bsdf.reflectance.value\": {\"wavelengths\": [400, 700], \"values\": [0.2, 0.3]},"
+                           " \"quad.to_world\": [1,0,0,0.1, 0,1,0,0, 0,0,1,0.6, 0,0,0,1]}";
+static const char *PATCH_BACK = "{\"plate.bsdf.reflectance.value\": {\"wavelengths\": [400, 550, 700],"
+                                " \"values\": [0.05, 0.1, 0.45]}, \"quad.to_world\": [1,0,0,0, 0,1,0,0, 0,0,1,0.5, 0,0,0,1]}";
+
+/* The table's values (not its revision) as text, to compare. */
+static char *params_values(rsw_client *c) {
+  char *json = NULL;
+  uint64_t rev = 0;
+  if (rsw_params_get(c, d_scene_id, NULL, NULL, &json, &rev) != RSW_OK) return NULL;
+  return json;
+}
+
+static rsw_status c_run_patch(void *p, rsw_err *err) {
+  cstate *k = p;
+  return c_status(k, rsw_params_update(k->c, d_scene_id, PATCH, -1, &k->rev), err);
+}
+
+static bool strip_revision_equal(const char *a, const char *b) {
+  /* {"revision": N, ...}: compare what follows the first comma. */
+  const char *ca = a ? strchr(a, ',') : NULL, *cb = b ? strchr(b, ',') : NULL;
+  return ca && cb && strcmp(ca, cb) == 0;
+}
+
+static char *ref_c_params_patched;
+
+/* All or nothing: the table is the base one, or (when the failure hit the
+ * answer after the update was applied: a 500 "the response could not be
+ * built", a reply the client could not read) the patched one; never a
+ * mix. */
+static bool c_patch_unchanged(void *p) {
+  cstate *k = p;
+  char *now = params_values(k->c);
+  bool ok = strip_revision_equal(now, ref_c_params) || strip_revision_equal(now, ref_c_params_patched);
+  if (!ok && getenv("OOM_DEBUG")) {
+    FILE *f = fopen("/tmp/oom_now.json", "w");
+    if (f) fprintf(f, "%s\n%s\n", now ? now : "(null)", ref_c_params);
+    if (f) fclose(f);
+  }
+  rsw_free(now);
+  return ok;
+}
+
+static bool c_patch_applied(void *p) {
+  cstate *k = p;
+  char *now = params_values(k->c);
+  bool ok = strip_revision_equal(now, ref_c_params_patched);
+  if (!ok && getenv("OOM_DEBUG")) {
+    FILE *f = fopen("/tmp/oom_now.json", "w");
+    if (f) fprintf(f, "%s\n%s\n", now ? now : "(null)", ref_c_params_patched);
+    if (f) fclose(f);
+  }
+  rsw_free(now);
+  return ok;
+}
+
+static void c_teardown_patch(void *p) {
+  cstate *k = p;
+  rsw_params_update(k->c, d_scene_id, PATCH_BACK, -1, NULL);
+  c_teardown(p);
+}
+
+static const char *RENDER_REQ = "{\"spp\": 4, \"seed\": 7, \"params\": {\"plate.bsdf.reflectance.value\": 0.25}}";
+
+static rsw_status c_run_render(void *p, rsw_err *err) {
+  cstate *k = p;
+  return c_status(k, rsw_render(k->c, d_scene_id, RENDER_REQ, &k->film), err);
+}
+
+static bool same_rsw_film(const rsw_film *a, const rsw_film *b) {
+  if (!a || !b) return false;
+  int w = rsw_film_width(a), h = rsw_film_height(a), c = rsw_film_channels(a);
+  return w == rsw_film_width(b) && h == rsw_film_height(b) && c == rsw_film_channels(b) &&
+         memcmp(rsw_film_data(a), rsw_film_data(b), sizeof(float) * (size_t)w * h * c) == 0;
+}
+
+static bool c_render_same(void *p) {
+  cstate *k = p;
+  return same_rsw_film(k->film, ref_c_render);
+}
+
+/* A failed render with an override leaves the base values alone. */
+static bool c_render_base_intact(void *p) {
+  cstate *k = p;
+  char *now = params_values(k->c);
+  bool ok = strip_revision_equal(now, ref_c_params);
+  rsw_free(now);
+  return ok;
+}
+
+static rsw_status c_run_job(void *p, rsw_err *err) {
+  cstate *k = p;
+  rsw_contexts *x = NULL;
+  rsw_status s = rsw_contexts_new(&x);
+  size_t i0 = 0, i1 = 0;
+  if (s == RSW_OK) s = rsw_contexts_add(x, "a", 500, &i0);
+  if (s == RSW_OK) s = rsw_contexts_add(x, "b", 650, &i1);
+  if (s == RSW_OK) s = rsw_contexts_set_param(x, i1, "plate.bsdf.reflectance.value", "0.4");
+  if (s == RSW_OK) s = rsw_contexts_set_default_spp(x, 4);
+  if (s == RSW_OK) s = rsw_contexts_set_job_seed(x, 3);
+  if (s != RSW_OK) {
+    rsw_contexts_free(x);
+    return rsw_fail(err, s, "contexts", "building the contexts failed");
+  }
+  s = rsw_job_submit(k->c, d_scene_id, x, NULL, k->job);
+  rsw_contexts_free(x);
+  if (s != RSW_OK) return c_status(k, s, err);
+  rsw_job_status js;
+  s = rsw_job_wait(k->c, k->job, NULL, NULL, 20, &js);
+  if (s != RSW_OK) return c_status(k, s, err);
+  if (js.state != RSW_JOB_SUCCEEDED)
+    return rsw_fail(err, RSW_ERR_RENDER, k->job, "job ended %d: %s", (int)js.state,
+                    js.error[0] ? js.error : "");
+  return c_status(k, rsw_job_fetch(k->c, k->job, "b", "meter", &k->film), err);
+}
+
+static bool c_job_same(void *p) {
+  cstate *k = p;
+  return same_rsw_film(k->film, ref_c_job);
+}
+
+static rsw_status c_run_save(void *p, rsw_err *err) {
+  cstate *k = p;
+  char path[600];
+  snprintf(path, sizeof path, "%s/client.exr", tmpdir);
+  rsw_status s = rsw_film_save_exr(ref_c_render, path);
+  unlink(path);
+  return c_status(k, s, err);
+}
+
+static bool daemon_start(void) {
+  snprintf(d_blobs, sizeof d_blobs, "%s/blobs", tmpdir);
+  snprintf(push_text, sizeof push_text, "%s", SCENE_TEXT);
+  char *md = strstr(push_text, "\"max_depth\": 3");
+  if (md) md[strlen("\"max_depth\": ")] = '4';
+  service_opts so = {.size = sizeof so, .render_threads = 2, .blob_dir = d_blobs};
+  rsw_err err = {0};
+  char buf[1100];
+  if (service_new(&so, &d_svc, &err) != RSW_OK) {
+    printf("  service_new: %s\n", rsw_err_format(&err, buf, sizeof buf));
+    return false;
+  }
+  http_opts ho = {.size = sizeof ho, .host = "127.0.0.1", .port = 0};
+  if (http_server_start(d_svc, &ho, &d_srv, &err) != RSW_OK) {
+    printf("  http_server_start: %s\n", rsw_err_format(&err, buf, sizeof buf));
+    return false;
+  }
+  snprintf(d_url, sizeof d_url, "http://127.0.0.1:%d", http_server_port(d_srv));
+  rsw_client *c = client_new();
+  int created = 0;
+  const char *step = "client";
+  bool ok = c != NULL;
+  if (ok) {
+    step = "push";
+    ok = rsw_scene_push_buffer(c, SCENE_TEXT, strlen(SCENE_TEXT), data_dir, NULL, d_scene_id, &created) == RSW_OK;
+  }
+  if (ok) {
+    step = "render";
+    ok = rsw_render(c, d_scene_id, RENDER_REQ, &ref_c_render) == RSW_OK;
+  }
+  if (ok) {
+    step = "params";
+    ok = (ref_c_params = params_values(c)) != NULL;
+  }
+  if (ok) {
+    step = "patch";
+    ok = rsw_params_update(c, d_scene_id, PATCH, -1, NULL) == RSW_OK &&
+         (ref_c_params_patched = params_values(c)) != NULL &&
+         rsw_params_update(c, d_scene_id, PATCH_BACK, -1, NULL) == RSW_OK;
+    char *back = ok ? params_values(c) : NULL;
+    if (ok && !strip_revision_equal(back, ref_c_params)) {
+      printf("  PATCH_BACK does not restore the scene's values\n");
+      ok = false;
+    }
+    rsw_free(back);
+  }
+  if (ok) {
+    step = "job";
+    cstate k = {.c = c};
+    ok = c_run_job(&k, &err) == RSW_OK;
+    ref_c_job = k.film;
+    if (k.job[0]) rsw_job_delete(c, k.job);
+  }
+  if (!ok)
+    printf("  daemon references: %s: %s %s\n", step, c ? rsw_client_last_error(c)->message : "", err.msg);
+  rsw_client_free(c);
+  return ok;
+}
+
+static void daemon_stop(void) {
+  if (d_svc) service_shutdown(d_svc);
+  http_server_stop(d_srv);
+  service_free(d_svc);
+  rsw_film_free(ref_c_render);
+  rsw_film_free(ref_c_job);
+  rsw_free(ref_c_params);
+  rsw_free(ref_c_params_patched);
+}
+
+static void test_daemon(void) {
+  REQUIRE(daemon_start(), "the in-process daemon");
+  static const oom_op push = {"d_scene_push", c_setup, c_run_push, NULL, NULL, c_teardown_push, false};
+  static const oom_op patch = {"d_params_patch", c_setup, c_run_patch, c_patch_unchanged, c_patch_applied, c_teardown_patch, false};
+  static const oom_op render = {"d_render", c_setup, c_run_render, c_render_base_intact, c_render_same, c_teardown, false};
+  static const oom_op job = {"d_job", c_setup, c_run_job, c_render_base_intact, c_job_same, c_teardown, false};
+  static const oom_op save = {"c_film_save", c_setup, c_run_save, NULL, NULL, c_teardown, .status_only = true};
+  sweep(&push);
+  sweep(&patch);
+  sweep(&render);
+  sweep(&job);
+  sweep(&save);
 }
 
 int main(void) {
@@ -472,7 +784,11 @@ int main(void) {
   RSW_TEST_RUN(test_kernel_update);
   RSW_TEST_RUN(test_kernel_render);
   RSW_TEST_RUN(test_exr_encode);
-  rmdir(tmpdir);
+  RSW_TEST_RUN(test_daemon);
+  daemon_stop();
+  char cmd[300];
+  snprintf(cmd, sizeof cmd, "rm -rf '%s'", tmpdir);
+  if (system(cmd) != 0) printf("could not remove %s\n", tmpdir);
   film_image_free(&ref_json);
   film_image_free(&ref_json_updated);
   film_image_free(&ref_xml);

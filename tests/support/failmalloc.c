@@ -44,6 +44,7 @@
 #define _GNU_SOURCE
 #include <errno.h>
 #include <fcntl.h>
+#include <pthread.h>
 #include <signal.h>
 #include <stdatomic.h>
 #include <stdbool.h>
@@ -82,9 +83,47 @@ static atomic_long g_count;  /* allocations since armed */
 static atomic_long g_failed; /* failures injected since armed */
 static _Thread_local bool t_excluded;
 
+#ifdef FAILMALLOC_ASAN
+/* ASan sets up each new thread (pthread_getattr_np, its own bookkeeping)
+ * before the thread's start routine runs, and an allocation failing there
+ * is a CHECK failure (abort) inside ASan by design, not a failure of the
+ * code under test. So under ASan a thread's allocations count only once
+ * its start routine runs: pthread_create is wrapped (this definition
+ * preempts ASan's, which it calls) with a trampoline that marks the thread
+ * started. The thread that arms is marked by failmalloc_arm. */
+extern int __interceptor_pthread_create(pthread_t *, const pthread_attr_t *, void *(*)(void *), void *);
+static _Thread_local bool t_started;
+
+typedef struct trampoline {
+  void *(*fn)(void *);
+  void *arg;
+} trampoline;
+
+static void *thread_start(void *p) {
+  trampoline t = *(trampoline *)p;
+  free(p);
+  t_started = true;
+  return t.fn(t.arg);
+}
+
+int pthread_create(pthread_t *th, const pthread_attr_t *attr, void *(*fn)(void *), void *arg) {
+  trampoline *t = REAL_MALLOC(sizeof *t);
+  if (!t) return EAGAIN;
+  t->fn = fn, t->arg = arg;
+  int rc = __interceptor_pthread_create(th, attr, thread_start, t);
+  if (rc) free(t);
+  return rc;
+}
+#define THREAD_COUNTS() t_started
+#define MARK_STARTED() (t_started = true)
+#else
+#define THREAD_COUNTS() true
+#define MARK_STARTED() ((void)0)
+#endif
+
 /* True when this allocation is to fail. */
 static bool should_fail(void) {
-  if (!atomic_load_explicit(&g_armed, memory_order_relaxed) || t_excluded) return false;
+  if (!atomic_load_explicit(&g_armed, memory_order_relaxed) || t_excluded || !THREAD_COUNTS()) return false;
   long n = atomic_fetch_add(&g_count, 1) + 1;
   if (n != atomic_load(&g_target)) return false;
   atomic_fetch_add(&g_failed, 1);
@@ -92,6 +131,7 @@ static bool should_fail(void) {
 }
 
 FM_EXPORT void failmalloc_arm(long n) {
+  MARK_STARTED();
   atomic_store(&g_armed, false);
   atomic_store(&g_count, 0);
   atomic_store(&g_failed, 0);
