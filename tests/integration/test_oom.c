@@ -29,8 +29,8 @@
 
 #include "../support/failmalloc.h"
 #include "../support/test.h"
-#include "kernel/film_io.h"
-#include "kernel/image_exr.h"
+#include "film_io.h"
+#include "image_exr.h"
 #include "kernel/render.h"
 #include "kernel/scene/params.h"
 #include "kernel/scene/scene.h"

@@ -24,8 +24,8 @@
 #include <unistd.h>
 
 #include "../support/test.h"
-#include "kernel/film_io.h"
-#include "kernel/image_exr.h"
+#include "film_io.h"
+#include "image_exr.h"
 
 RSW_TEST_DEFINE_GLOBALS
 
