@@ -131,9 +131,9 @@ static cJSON *merge_params(const cJSON *job_params, const cJSON *ctx_params) {
   if (!m) return NULL;
   for (const cJSON *k = job_params ? job_params->child : NULL; k; k = k->next)
     if (!ctx_params || !cJSON_GetObjectItemCaseSensitive(ctx_params, k->string))
-      cJSON_AddItemToObject(m, k->string, cJSON_Duplicate(k, 1));
+      svc_json_put(m, k->string, cJSON_Duplicate(k, 1));
   for (const cJSON *k = ctx_params ? ctx_params->child : NULL; k; k = k->next)
-    cJSON_AddItemToObject(m, k->string, cJSON_Duplicate(k, 1));
+    svc_json_put(m, k->string, cJSON_Duplicate(k, 1));
   if (!svc_json_ok(jm)) {
     cJSON_Delete(m);
     return NULL;
@@ -594,7 +594,7 @@ rsw_status service_job_list(service *svc, char **json_out, svc_error *e) {
   pthread_mutex_lock(&svc->lock);
   svc_jobs_expire(svc);
   for (size_t i = 0; i < svc->n_jobs; i++)
-    if (!svc->jobs[i]->deleted) cJSON_AddItemToArray(a, job_json(svc->jobs[i]));
+    if (!svc->jobs[i]->deleted) svc_json_push(a, job_json(svc->jobs[i]));
   pthread_mutex_unlock(&svc->lock);
   return svc_json_out(json_out, o, jm, e);
 }
@@ -682,7 +682,7 @@ rsw_status service_job_results(service *svc, const char *id, char **json_out, sv
       cJSON_AddNumberToObject(x, "height", it->film.img.height);
       cJSON *ch = cJSON_AddArrayToObject(x, "channels");
       for (int c = 0; c < it->film.img.channels; c++)
-        cJSON_AddItemToArray(ch, cJSON_CreateString(it->film.img.channel_names[c]));
+        svc_json_push(ch, cJSON_CreateString(it->film.img.channel_names[c]));
       char href[512];
       snprintf(href, sizeof href, "/v1/jobs/%s/results/%s/%s", j->id, it->context, it->sensor);
       cJSON_AddStringToObject(x, "href", href);
@@ -690,7 +690,7 @@ rsw_status service_job_results(service *svc, const char *id, char **json_out, sv
         cJSON_AddNumberToObject(x, "unresolved_rays", (double)it->film.img.unresolved_rays);
     }
     if (it->error[0]) cJSON_AddStringToObject(x, "error", it->error);
-    cJSON_AddItemToArray(a, x);
+    svc_json_push(a, x);
   }
   pthread_mutex_unlock(&svc->lock);
   return svc_json_out(json_out, o, jm, e);

@@ -17,8 +17,8 @@ static cJSON *param_entry_json(const scene *sc, size_t i) {
   cJSON_AddStringToObject(o, "type", param_type_name(pi.type));
   cJSON_AddStringToObject(o, "class", update_class_name(pi.cls));
   cJSON *sh = cJSON_AddArrayToObject(o, "shape");
-  cJSON_AddItemToArray(sh, cJSON_CreateNumber((double)pi.shape[0]));
-  if (pi.shape[1]) cJSON_AddItemToArray(sh, cJSON_CreateNumber((double)pi.shape[1]));
+  svc_json_push(sh, cJSON_CreateNumber((double)pi.shape[0]));
+  if (pi.shape[1]) svc_json_push(sh, cJSON_CreateNumber((double)pi.shape[1]));
   cJSON_AddStringToObject(o, "object_type", pi.object_type);
   cJSON_AddStringToObject(o, "object_class", pi.object_class);
   cJSON_AddStringToObject(o, "object_id", pi.object_id);
@@ -31,9 +31,9 @@ static cJSON *param_entry_json(const scene *sc, size_t i) {
     cJSON_Delete(o);
     return NULL;
   }
-  cJSON_AddItemToObject(o, "value", val);
+  svc_json_put(o, "value", val);
   cJSON *al = cJSON_AddArrayToObject(o, "aliases");
-  for (size_t a = 0; a < pi.n_aliases; a++) cJSON_AddItemToArray(al, cJSON_CreateString(pi.aliases[a]));
+  for (size_t a = 0; a < pi.n_aliases; a++) svc_json_push(al, cJSON_CreateString(pi.aliases[a]));
   return o;
 }
 
@@ -121,7 +121,7 @@ rsw_status service_params_get(service *svc, const char *id, const char *match, c
     cJSON *a = cJSON_AddArrayToObject(o, "params");
     for (size_t k = 0; k < n; k++) {
       cJSON *p = cJSON_GetArrayItem(r->base_params, (int)idx[k]);
-      if (p) cJSON_AddItemToArray(a, cJSON_Duplicate(p, 1));
+      if (p) svc_json_push(a, cJSON_Duplicate(p, 1));
     }
   } else if (st == RSW_ERR_NOT_FOUND && !strchr(match, ':')) {
     /* A glob matching nothing is an empty table, not an error, over HTTP. */
@@ -225,8 +225,8 @@ rsw_status service_params_patch(service *svc, const char *id, const char *body, 
     cJSON_AddNumberToObject(o, "revision", (double)r->revision);
     cJSON_AddNumberToObject(o, "changed", (double)rep.changed);
     cJSON *c = cJSON_AddArrayToObject(o, "classes");
-    if (rep.classes & UPDATE_SPECTRAL) cJSON_AddItemToArray(c, cJSON_CreateString("spectral"));
-    if (rep.classes & UPDATE_GEOMETRIC) cJSON_AddItemToArray(c, cJSON_CreateString("geometric"));
+    if (rep.classes & UPDATE_SPECTRAL) svc_json_push(c, cJSON_CreateString("spectral"));
+    if (rep.classes & UPDATE_GEOMETRIC) svc_json_push(c, cJSON_CreateString("geometric"));
     cJSON_AddNumberToObject(o, "seconds", rep.seconds);
   }
   pthread_mutex_unlock(&r->lock);

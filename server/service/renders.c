@@ -260,7 +260,7 @@ rsw_status service_directions(service *svc, const char *id, const char *sensor_n
         cJSON_AddNumberToObject(p, "z", w.z);
         cJSON_AddNumberToObject(p, "zenith_deg", zen);
         cJSON_AddNumberToObject(p, "azimuth_deg", az);
-        cJSON_AddItemToArray(px, p);
+        svc_json_push(px, p);
       }
   }
   pthread_mutex_unlock(&r->lock);

@@ -113,7 +113,7 @@ void svc_scene_summary(const resident *r, cJSON *o) {
   cJSON_AddStringToObject(o, "variant", r->sc->variant == VARIANT_MONO ? "mono" : "rgb");
   cJSON *s = cJSON_AddArrayToObject(o, "sensors");
   for (size_t i = 0; i < r->sc->n_sensors; i++)
-    cJSON_AddItemToArray(s, cJSON_CreateString(r->sc->sensors[i]->base.id));
+    svc_json_push(s, cJSON_CreateString(r->sc->sensors[i]->base.id));
   cJSON_AddNumberToObject(o, "revision", (double)r->revision);
 }
 
@@ -354,7 +354,7 @@ rsw_status service_scene_list(service *svc, char **json_out, svc_error *e) {
   cJSON *o = cJSON_CreateObject();
   cJSON *a = cJSON_AddArrayToObject(o, "scenes");
   pthread_mutex_lock(&svc->lock);
-  for (size_t i = 0; i < svc->n_scenes; i++) cJSON_AddItemToArray(a, scene_info(svc, svc->scenes[i]));
+  for (size_t i = 0; i < svc->n_scenes; i++) svc_json_push(a, scene_info(svc, svc->scenes[i]));
   pthread_mutex_unlock(&svc->lock);
   return svc_json_out(json_out, o, jm, e);
 }

@@ -89,6 +89,14 @@ char *svc_print_json(cJSON *o, unsigned mark) {
   return s;
 }
 
+void svc_json_push(cJSON *array, cJSON *item) {
+  if (!cJSON_AddItemToArray(array, item)) cJSON_Delete(item);
+}
+
+void svc_json_put(cJSON *obj, const char *key, cJSON *item) {
+  if (!cJSON_AddItemToObject(obj, key, item)) cJSON_Delete(item);
+}
+
 rsw_status svc_json_out(char **json_out, cJSON *o, unsigned mark, svc_error *e) {
   *json_out = svc_print_json(o, mark);
   if (*json_out) return RSW_OK;
@@ -186,8 +194,8 @@ char *service_info_json(service *svc) {
   cJSON_AddStringToObject(o, "build", __DATE__ " " __TIME__);
   cJSON_AddStringToObject(o, "api_version", "v1");
   cJSON *v = cJSON_AddArrayToObject(o, "variants");
-  cJSON_AddItemToArray(v, cJSON_CreateString("mono"));
-  cJSON_AddItemToArray(v, cJSON_CreateString("rgb"));
+  svc_json_push(v, cJSON_CreateString("mono"));
+  svc_json_push(v, cJSON_CreateString("rgb"));
   cJSON *pl = cJSON_AddArrayToObject(o, "plugins");
   for (size_t i = 0; rsw_plugins[i] || i == 0; i++) {
     const plugin *p = rsw_plugins[i];
@@ -196,7 +204,7 @@ char *service_info_json(service *svc) {
     cJSON *e = cJSON_CreateObject();
     cJSON_AddStringToObject(e, "name", p->name);
     cJSON_AddStringToObject(e, "class", obj_class_name(p->cls));
-    cJSON_AddItemToArray(pl, e);
+    svc_json_push(pl, e);
   }
   for (size_t i = 0; i < plugins_count(); i++) { /* --plugin-dir environment plugins */
     const char *pretty = NULL;
@@ -206,7 +214,7 @@ char *service_info_json(service *svc) {
     cJSON_AddStringToObject(e, "class", obj_class_name(p->cls));
     cJSON_AddStringToObject(e, "pretty_name", pretty);
     cJSON_AddBoolToObject(e, "external", 1);
-    cJSON_AddItemToArray(pl, e);
+    svc_json_push(pl, e);
   }
   cJSON *lim = cJSON_AddObjectToObject(o, "limits");
   if (svc->opts.max_body_bytes)

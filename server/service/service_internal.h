@@ -152,6 +152,11 @@ rsw_status svc_request_code(rsw_status kernel_code);
 unsigned svc_json_mark(void);
 bool svc_json_ok(unsigned mark);
 char *svc_print_json(cJSON *o, unsigned mark);
+/* cJSON_AddItemToArray / cJSON_AddItemToObject that free the item when
+ * the add fails (a NULL array or object, no memory for the key): the
+ * plain calls leak it then. */
+void svc_json_push(cJSON *array, cJSON *item);
+void svc_json_put(cJSON *obj, const char *key, cJSON *item);
 /* *json_out = svc_print_json(o, mark); RSW_OK, or RSW_ERR_NOMEM (set in e). */
 rsw_status svc_json_out(char **json_out, cJSON *o, unsigned mark, svc_error *e);
 /* Metrics (metrics.c): an applied parameter update. */
