@@ -13,11 +13,18 @@
  * figures printed for each operation say how many allocations it makes
  * and how many runs were made.
  *
- * Operations: scene load from JSON (with an OBJ and a PLY mesh file) and
+ * The daemon (service and HTTP server in this process) is driven through
+ * libraysweep (scene push with mesh blobs, PATCH, render with an override,
+ * a two-context job followed over server-sent events, a film saved as
+ * EXR by the client) and through libcurl (a render answered as
+ * image/x-exr: the in-memory EXR encoder).
+ *
+ * Kernel operations: scene load from JSON (with an OBJ and a PLY mesh file) and
  * from XML; a parameter update (a spectrum, a mesh's transform, a
  * direction, a mesh's vertex positions: Embree instance update and refit);
  * a render on 2 threads; the film's EXR written to a file and encoded in
  * memory (a distant sensor's film, with its per-pixel angle metadata). */
+#include <curl/curl.h>
 #include <errno.h>
 #include <signal.h>
 #include <stdint.h>
@@ -25,6 +32,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "../support/failmalloc.h"
@@ -44,6 +52,9 @@ RSW_TEST_DEFINE_GLOBALS
 #define FULL_N 3000
 #define STRIDE 7
 #define RUN_LIMIT_S 30
+/* A run that takes longer than this is a hang cut short by a client
+ * timeout (normal runs take milliseconds). */
+#define SLOW_S 5.0
 
 static char tmpdir[256];
 static char data_dir[512];
@@ -78,6 +89,12 @@ static void on_fatal(int sig) {
   signal(sig, SIG_DFL);
   signal(SIGABRT, SIG_DFL);
   raise(sig == SIGALRM ? SIGABRT : sig);
+}
+
+static double now_s(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
 /* ---- the scenes ------------------------------------------------------------------------- */
@@ -154,6 +171,9 @@ typedef struct oom_op {
   /* The API returns a status only (rsw_film_save_exr: no client to carry
    * a message): a non-OK status is the whole clean error. */
   bool status_only;
+  /* Optional: called after the clean run, to keep its result as the
+   * reference (one that depends on the daemon's state, e.g. a revision). */
+  void (*capture)(void *st);
 } oom_op;
 
 static void sweep(const oom_op *op) {
@@ -174,6 +194,7 @@ static void sweep(const oom_op *op) {
   failmalloc_arm(0);
   rsw_status s = op->run(st, &err);
   long total = failmalloc_disarm();
+  if (s == RSW_OK && op->capture) op->capture(st);
   op->teardown(st);
   char buf[1100];
   REQUIRE(s == RSW_OK, "%s: clean run: %s", op->name, rsw_err_format(&err, buf, sizeof buf));
@@ -185,10 +206,18 @@ static void sweep(const oom_op *op) {
     REQUIRE(st, "%s: setup for n = %ld", op->name, n);
     rsw_err_clear(&err);
     alarm(RUN_LIMIT_S);
+    double t0 = now_s();
     failmalloc_arm(n);
     s = op->run(st, &err);
     failmalloc_disarm();
+    double secs = now_s() - t0;
     alarm(0);
+    if (secs > SLOW_S) { /* e.g. a request that timed out on a hung server thread */
+      op->teardown(st);
+      CHECK(false, "%s: allocation %ld failing: the call took %.1f s (a hang cut short by a timeout)", op->name,
+            n, secs);
+      break;
+    }
     bool injected = failmalloc_failed() > 0;
     if (!injected) { /* ran to completion before allocation n */
       op->teardown(st);
@@ -434,25 +463,25 @@ fail:
 }
 
 static void test_kernel_load(void) {
-  static const oom_op json = {"load_json", setup_empty, run_load_json, NULL, same_json_render, teardown, false};
-  static const oom_op xml = {"load_xml", setup_empty, run_load_xml, NULL, same_xml_render, teardown, false};
+  static const oom_op json = {"load_json", setup_empty, run_load_json, NULL, same_json_render, teardown, false, NULL};
+  static const oom_op xml = {"load_xml", setup_empty, run_load_xml, NULL, same_xml_render, teardown, false, NULL};
   sweep(&json);
   sweep(&xml);
 }
 
 static void test_kernel_update(void) {
-  static const oom_op op = {"update", setup_scene, run_update, update_left_scene_alone, update_applied, teardown, false};
+  static const oom_op op = {"update", setup_scene, run_update, update_left_scene_alone, update_applied, teardown, false, NULL};
   sweep(&op);
 }
 
 static void test_kernel_render(void) {
-  static const oom_op op = {"render", setup_scene, run_render, render_failed_ok, render_same, teardown, false};
+  static const oom_op op = {"render", setup_scene, run_render, render_failed_ok, render_same, teardown, false, NULL};
   sweep(&op);
 }
 
 static void test_exr_encode(void) {
-  static const oom_op file = {"exr_file", setup_film, run_exr_file, exr_file_absent, exr_file_same, teardown, false};
-  static const oom_op mem = {"exr_memory", setup_film, run_exr_mem, NULL, exr_mem_same, teardown, false};
+  static const oom_op file = {"exr_file", setup_film, run_exr_file, exr_file_absent, exr_file_same, teardown, false, NULL};
+  static const oom_op mem = {"exr_memory", setup_film, run_exr_mem, NULL, exr_mem_same, teardown, false, NULL};
   sweep(&file);
   sweep(&mem);
 }
@@ -477,7 +506,7 @@ static char d_scene_id[65];
 static const char *SCENE_TEXT = JSON_SCENE;
 
 static rsw_client *client_new(void) {
-  rsw_client_opts o = {.size = sizeof o, .base_url = d_url, .timeout_s = 20, .max_retries = -1};
+  rsw_client_opts o = {.size = sizeof o, .base_url = d_url, .timeout_s = 10, .max_retries = -1};
   rsw_client *c = NULL;
   return rsw_client_new(&o, &c) == RSW_OK ? c : NULL;
 }
@@ -658,7 +687,7 @@ static rsw_status c_run_job(void *p, rsw_err *err) {
   rsw_contexts_free(x);
   if (s != RSW_OK) return c_status(k, s, err);
   rsw_job_status js;
-  s = rsw_job_wait(k->c, k->job, NULL, NULL, 20, &js);
+  s = rsw_job_wait(k->c, k->job, NULL, NULL, 10, &js);
   if (s != RSW_OK) return c_status(k, s, err);
   if (js.state != RSW_JOB_SUCCEEDED)
     return rsw_fail(err, RSW_ERR_RENDER, k->job, "job ended %d: %s", (int)js.state,
@@ -678,6 +707,125 @@ static rsw_status c_run_save(void *p, rsw_err *err) {
   rsw_status s = rsw_film_save_exr(ref_c_render, path);
   unlink(path);
   return c_status(k, s, err);
+}
+
+/* POST :render with Accept: image/x-exr, through libcurl: the daemon's
+ * in-memory EXR encoder (film_exr_encode) behind HTTP. The answer is the
+ * reference EXR, or an error status with a problem+json body, or a
+ * transport error (a connection the daemon had to drop). */
+typedef struct rawbuf {
+  char *p;
+  size_t n;
+  bool oom;
+} rawbuf;
+
+static size_t raw_write(char *data, size_t size, size_t nmemb, void *user) {
+  rawbuf *b = user;
+  size_t add = size * nmemb;
+  char *q = realloc(b->p, b->n + add + 1);
+  if (!q) {
+    b->oom = true;
+    return 0;
+  }
+  b->p = q;
+  memcpy(b->p + b->n, data, add);
+  b->n += add;
+  b->p[b->n] = '\0';
+  return add;
+}
+
+static rawbuf ref_exr_body;
+
+static rsw_status exr_request(rawbuf *out, long *http, rsw_err *err) {
+  char url[400];
+  snprintf(url, sizeof url, "%s/v1/scenes/%s:render", d_url, d_scene_id);
+  CURL *h = curl_easy_init();
+  if (!h) return rsw_fail(err, RSW_ERR_NOMEM, "curl", "curl_easy_init failed");
+  struct curl_slist *hd = curl_slist_append(NULL, "Accept: image/x-exr");
+  struct curl_slist *hd2 = hd ? curl_slist_append(hd, "Content-Type: application/json") : NULL;
+  if (!hd2) {
+    curl_slist_free_all(hd);
+    curl_easy_cleanup(h);
+    return rsw_fail(err, RSW_ERR_NOMEM, "curl", "curl_slist_append failed");
+  }
+  hd = hd2;
+  curl_easy_setopt(h, CURLOPT_URL, url);
+  curl_easy_setopt(h, CURLOPT_HTTPHEADER, hd);
+  curl_easy_setopt(h, CURLOPT_POSTFIELDS, RENDER_REQ);
+  curl_easy_setopt(h, CURLOPT_WRITEFUNCTION, raw_write);
+  curl_easy_setopt(h, CURLOPT_WRITEDATA, out);
+  curl_easy_setopt(h, CURLOPT_TIMEOUT, 10L);
+  curl_easy_setopt(h, CURLOPT_NOSIGNAL, 1L);
+  CURLcode rc = curl_easy_perform(h);
+  *http = 0;
+  curl_easy_getinfo(h, CURLINFO_RESPONSE_CODE, http);
+  char ctype[128] = "";
+  char *ct = NULL;
+  if (rc == CURLE_OK && curl_easy_getinfo(h, CURLINFO_CONTENT_TYPE, &ct) == CURLE_OK && ct)
+    snprintf(ctype, sizeof ctype, "%s", ct);
+  curl_slist_free_all(hd);
+  curl_easy_cleanup(h);
+  if (rc != CURLE_OK)
+    return rsw_fail(err, RSW_ERR_UNAVAILABLE, "curl", "transport error: %s", curl_easy_strerror(rc));
+  if (*http == 200) return RSW_OK;
+  if (*http >= 400 && strstr(ctype, "problem+json") && out->p && strstr(out->p, "\"detail\""))
+    return rsw_fail(err, RSW_ERR_RENDER, "http", "HTTP %ld: %.200s", *http, out->p);
+  return rsw_fail(err, RSW_ERR_PARSE, "http", "HTTP %ld without a problem+json body (%s)", *http, ctype);
+}
+
+typedef struct estate {
+  cstate c;
+  rawbuf body;
+} estate;
+
+static void *e_setup(void) {
+  estate *k = calloc(1, sizeof *k);
+  if (k && !(k->c.c = client_new())) {
+    free(k);
+    return NULL;
+  }
+  return k;
+}
+
+static rsw_status e_run(void *p, rsw_err *err) {
+  estate *k = p;
+  long http = 0;
+  rsw_status s = exr_request(&k->body, &http, err);
+  /* An error status must be a problem+json; anything else is not clean. */
+  if (s == RSW_ERR_PARSE) err->msg[0] = '\0';
+  return s;
+}
+
+static void e_capture(void *p) {
+  estate *k = p;
+  free(ref_exr_body.p);
+  ref_exr_body = k->body;
+  k->body = (rawbuf){0};
+}
+
+static bool e_same(void *p) {
+  estate *k = p;
+  return k->body.n == ref_exr_body.n && k->body.p && memcmp(k->body.p, ref_exr_body.p, k->body.n) == 0;
+}
+
+static bool c_render_base_intact_e(void *p) {
+  estate *k = p;
+  return c_render_base_intact(&k->c);
+}
+
+static void e_teardown(void *p) {
+  estate *k = p;
+  free(k->body.p);
+  k->body.p = NULL;
+  rsw_client *c = k->c.c;
+  free(k);
+  cstate *cs = calloc(1, sizeof *cs);
+  if (!cs) {
+    rsw_client_free(c);
+    return;
+  }
+  cs->c = c;
+  c_teardown(cs);
 }
 
 static bool daemon_start(void) {
@@ -733,6 +881,12 @@ static bool daemon_start(void) {
     ref_c_job = k.film;
     if (k.job[0]) rsw_job_delete(c, k.job);
   }
+  if (ok) {
+    step = "render as EXR";
+    long http = 0;
+    ok = exr_request(&ref_exr_body, &http, &err) == RSW_OK && ref_exr_body.n > 4 &&
+         memcmp(ref_exr_body.p, "\x76\x2f\x31\x01", 4) == 0;
+  }
   if (!ok)
     printf("  daemon references: %s: %s %s\n", step, c ? rsw_client_last_error(c)->message : "", err.msg);
   rsw_client_free(c);
@@ -747,19 +901,22 @@ static void daemon_stop(void) {
   rsw_film_free(ref_c_job);
   rsw_free(ref_c_params);
   rsw_free(ref_c_params_patched);
+  free(ref_exr_body.p);
 }
 
 static void test_daemon(void) {
   REQUIRE(daemon_start(), "the in-process daemon");
-  static const oom_op push = {"d_scene_push", c_setup, c_run_push, NULL, NULL, c_teardown_push, false};
-  static const oom_op patch = {"d_params_patch", c_setup, c_run_patch, c_patch_unchanged, c_patch_applied, c_teardown_patch, false};
-  static const oom_op render = {"d_render", c_setup, c_run_render, c_render_base_intact, c_render_same, c_teardown, false};
-  static const oom_op job = {"d_job", c_setup, c_run_job, c_render_base_intact, c_job_same, c_teardown, false};
-  static const oom_op save = {"c_film_save", c_setup, c_run_save, NULL, NULL, c_teardown, .status_only = true};
+  static const oom_op push = {"d_scene_push", c_setup, c_run_push, NULL, NULL, c_teardown_push, false, NULL};
+  static const oom_op patch = {"d_params_patch", c_setup, c_run_patch, c_patch_unchanged, c_patch_applied, c_teardown_patch, false, NULL};
+  static const oom_op render = {"d_render", c_setup, c_run_render, c_render_base_intact, c_render_same, c_teardown, false, NULL};
+  static const oom_op job = {"d_job", c_setup, c_run_job, c_render_base_intact, c_job_same, c_teardown, false, NULL};
+  static const oom_op exr = {"d_render_exr", e_setup, e_run, c_render_base_intact_e, e_same, e_teardown, false, e_capture};
+  static const oom_op save = {"c_film_save", c_setup, c_run_save, NULL, NULL, c_teardown, .status_only = true, NULL};
   sweep(&push);
   sweep(&patch);
   sweep(&render);
   sweep(&job);
+  sweep(&exr);
   sweep(&save);
 }
 
@@ -785,7 +942,11 @@ int main(void) {
   RSW_TEST_RUN(test_kernel_render);
   RSW_TEST_RUN(test_exr_encode);
   RSW_TEST_RUN(test_daemon);
+  cur_op = "stopping the daemon";
+  cur_n = 0;
+  alarm(RUN_LIMIT_S); /* a server thread stuck for good would hang the join */
   daemon_stop();
+  alarm(0);
   char cmd[300];
   snprintf(cmd, sizeof cmd, "rm -rf '%s'", tmpdir);
   if (system(cmd) != 0) printf("could not remove %s\n", tmpdir);
