@@ -178,15 +178,19 @@ FAILMALLOC_OBJ := $(BUILD)/obj/tests/support/failmalloc.o
 $(FAILMALLOC_OBJ): tests/support/failmalloc.c | deps
 	@mkdir -p $(dir $@)
 	$(CC) -std=c11 -O2 -g -fPIC $(WARN) $(if $(filter 1,$(SAN)),-DFAILMALLOC_ASAN) -c $< -o $@
+# The hook's definitions must be in the executable's dynamic symbol table
+# for the libraries to bind to them (pthread_create is not referenced by a
+# library the executable links directly: oneTBB's is found through Embree).
+FAILMALLOC_LDFLAGS := -Wl,--export-dynamic-symbol=pthread_create -Wl,--export-dynamic-symbol='failmalloc_*'
 HTTP_OBJ := $(patsubst %.c,$(BUILD)/obj/%.o,$(shell find server/http -name '*.c' 2>/dev/null | sort))
 # (libraysweep's own objects only: what it shares with the daemon comes
 # from the common library.)
 $(BUILD)/tests/test_oom: $(BUILD)/obj/tests/integration/test_oom.o $(FAILMALLOC_OBJ) $(HTTP_OBJ) $(CLIENT_SRC:%.c=$(BUILD)/obj/%.o) $(TEST_SUPPORT_OBJ) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $(filter %.o,$^) $(SERVICE_LIB) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS) $(DAEMON_LIBS) $(TEST_LIBS)
+	$(CC) $(LDFLAGS) $(FAILMALLOC_LDFLAGS) -o $@ $(filter %.o,$^) $(SERVICE_LIB) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS) $(DAEMON_LIBS) $(TEST_LIBS)
 $(BUILD)/tests/raysweepd-failmalloc: $(DAEMON_OBJ) $(FAILMALLOC_OBJ) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $(DAEMON_OBJ) $(FAILMALLOC_OBJ) $(SERVICE_LIB) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS) $(DAEMON_LIBS)
+	$(CC) $(LDFLAGS) $(FAILMALLOC_LDFLAGS) -o $@ $(DAEMON_OBJ) $(FAILMALLOC_OBJ) $(SERVICE_LIB) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS) $(DAEMON_LIBS)
 
 # test_image_exr_stress also reads every film through OpenEXR's C++ library
 # (tests/support/imf_read.cpp), whose decoder is independent of OpenEXR Core.

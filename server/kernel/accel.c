@@ -445,6 +445,7 @@ double accel_surface_error(const accel *a, uint32_t index, const xform *X, vec3 
 /* ---- build ------------------------------------------------------------------------------ */
 
 static rsw_status embree_fail(accel *a, rsw_err *err, const char *where, const char *what) {
+  a->stale = true;
   if (!a->error[0]) snprintf(a->error, sizeof a->error, "%s", t_embree_error);
   return rsw_fail(err, RSW_ERR_EMBREE, where, "%s%s%s", what, a->error[0] ? ": " : "", a->error);
 }
@@ -458,7 +459,10 @@ static RTCGeometry shape_geometry(accel *a, const shape *s) {
                                        s->mesh.n_verts);
     unsigned *ix = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
                                            3 * sizeof(unsigned), s->mesh.n_faces);
-    if (!v || !ix) {
+    /* Out of memory inside rtcSetNewGeometryBuffer can still return a
+     * buffer while the geometry is left inconsistent (its commit then never
+     * returned: test_oom_cli): the reported error counts too. */
+    if (!v || !ix || t_embree_error[0]) {
       rtcReleaseGeometry(g);
       return NULL;
     }
@@ -508,7 +512,8 @@ static RTCScene group_scene(accel *a, const shape_group *g) {
   RTCScene sc = rtcNewScene(a->device);
   if (!sc) return NULL;
   rtcSetSceneBuildQuality(sc, RTC_BUILD_QUALITY_HIGH);
-  for (size_t i = 0; i < g->n_members; i++) {
+  size_t i = 0;
+  for (; i < g->n_members; i++) {
     const shape *m = g->members[i];
     RTCGeometry geo;
     if (m->geom == GEOM_MESH) {
@@ -518,7 +523,7 @@ static RTCScene group_scene(accel *a, const shape_group *g) {
                                          m->mesh.n_verts);
       unsigned *ix = rtcSetNewGeometryBuffer(geo, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
                                              3 * sizeof(unsigned), m->mesh.n_faces);
-      if (!v || !ix) {
+      if (!v || !ix || t_embree_error[0]) {
         rtcReleaseGeometry(geo);
         break;
       }
@@ -547,6 +552,12 @@ static RTCScene group_scene(accel *a, const shape_group *g) {
     }
     rtcAttachGeometryByID(sc, geo, (unsigned)i);
     rtcReleaseGeometry(geo); /* the scene holds it */
+  }
+  /* A member that could not be made (out of memory) fails the group:
+   * committing the others would trace a group with a member missing. */
+  if (i < g->n_members || t_embree_error[0]) {
+    rtcReleaseScene(sc);
+    return NULL;
   }
   rtcCommitScene(sc);
   a->grp[a->n_grp] = g;
@@ -682,13 +693,21 @@ rsw_status accel_build(scene *s, rsw_err *err) {
 
 void accel_free(accel *a) {
   if (!a) return;
-  if (a->top) rtcReleaseScene(a->top);
-  for (size_t i = 0; i < a->n_sub; i++) {
+  /* A commit that failed part-way (out of memory inside Embree's parallel
+   * build) leaves the scene's TBB task group un-waited: releasing the
+   * scene then terminates the process (TBB's missing_wait thrown from a
+   * destructor), and joining the commit first never returns (test_oom_cli,
+   * Embree 3.13 with oneTBB 2021). So the Embree objects of a structure
+   * whose build or update failed are left allocated (a leak, only after an
+   * out-of-memory failure) and only our own arrays are freed. */
+  bool release = !a->stale;
+  if (release && a->top) rtcReleaseScene(a->top);
+  for (size_t i = 0; release && i < a->n_sub; i++) {
     if (a->inst[i]) rtcReleaseGeometry(a->inst[i]);
     if (a->geom[i]) rtcReleaseGeometry(a->geom[i]);
     if (a->sub[i]) rtcReleaseScene(a->sub[i]);
   }
-  for (size_t i = 0; i < a->n_grp; i++) rtcReleaseScene(a->grp_scene[i]);
+  for (size_t i = 0; release && i < a->n_grp; i++) rtcReleaseScene(a->grp_scene[i]);
   free(a->grp);
   free(a->grp_scene);
   free(a->list_shape);

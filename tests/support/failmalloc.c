@@ -31,7 +31,11 @@
  *  - a daemon (build/tests/raysweepd-failmalloc): with FAILMALLOC_N=n in
  *    its environment, SIGUSR1 arms it with n (the test sends it once the
  *    daemon is listening, so start-up is not counted), SIGUSR2 disarms it
- *    and appends "<allocations> <failed>" to FAILMALLOC_REPORT.
+ *    and appends "<allocations> <failed>" to FAILMALLOC_REPORT;
+ *  - a command (raysweepd render): FAILMALLOC_N=n FAILMALLOC_AT_START=1
+ *    arms it when main() is about to run (this file's constructor is the
+ *    executable's, run after every library's), and the counts are written
+ *    at exit (tests/integration/test_oom_cli.sh).
  * Armed with n >= 1, the nth allocation from then on (counted across all
  * threads) returns NULL with errno ENOMEM and every other one succeeds
  * (one failure per run: what a recovery path must survive). n = 0 only
@@ -42,6 +46,7 @@
  * This file is compiled without sanitizer instrumentation (its code may run
  * before ASan has initialised). */
 #define _GNU_SOURCE
+#include <dlfcn.h>
 #include <errno.h>
 #include <fcntl.h>
 #include <pthread.h>
@@ -83,43 +88,65 @@ static atomic_long g_count;  /* allocations since armed */
 static atomic_long g_failed; /* failures injected since armed */
 static _Thread_local bool t_excluded;
 
-#ifdef FAILMALLOC_ASAN
-/* ASan sets up each new thread (pthread_getattr_np, its own bookkeeping)
- * before the thread's start routine runs, and an allocation failing there
- * is a CHECK failure (abort) inside ASan by design, not a failure of the
- * code under test. So under ASan a thread's allocations count only once
- * its start routine runs: pthread_create is wrapped (this definition
- * preempts ASan's, which it calls) with a trampoline that marks the thread
- * started. The thread that arms is marked by failmalloc_arm. */
-extern int __interceptor_pthread_create(pthread_t *, const pthread_attr_t *, void *(*)(void *), void *);
+/* Threads. pthread_create is wrapped (this definition preempts libc's, or
+ * ASan's, which it calls) so that each new thread starts in a trampoline:
+ *  - under ASan, a thread's allocations count only once its start routine
+ *    runs: ASan sets the thread up first (pthread_getattr_np, its own
+ *    bookkeeping), and an allocation failing there is a CHECK failure
+ *    (abort) inside ASan by design, not a failure of the code under test;
+ *  - threads that oneTBB starts (Embree's build workers) are excluded:
+ *    Embree 3.13's parallel builders do not survive a std::bad_alloc
+ *    thrown on a worker (the builder waits for that worker forever, or
+ *    TBB terminates the process with missing_wait), a limitation of the
+ *    library that no caller can handle, so failing there would only
+ *    measure Embree. Failures on the thread that calls Embree (which takes
+ *    part in the build too) still surface as RTC_ERROR_OUT_OF_MEMORY. */
 static _Thread_local bool t_started;
 
 typedef struct trampoline {
   void *(*fn)(void *);
   void *arg;
+  bool excluded;
 } trampoline;
 
 static void *thread_start(void *p) {
   trampoline t = *(trampoline *)p;
   free(p);
+  t_excluded = t.excluded;
   t_started = true;
   return t.fn(t.arg);
 }
+
+#ifdef FAILMALLOC_ASAN
+extern int __interceptor_pthread_create(pthread_t *, const pthread_attr_t *, void *(*)(void *), void *);
+#define REAL_PTHREAD_CREATE __interceptor_pthread_create
+#define THREAD_COUNTS() t_started
+#else
+typedef int (*pthread_create_fn)(pthread_t *, const pthread_attr_t *, void *(*)(void *), void *);
+static pthread_create_fn real_pthread_create(void) {
+  static _Atomic(pthread_create_fn) f;
+  pthread_create_fn r = atomic_load(&f);
+  if (!r) {
+    r = (pthread_create_fn)dlsym(RTLD_NEXT, "pthread_create");
+    atomic_store(&f, r);
+  }
+  return r;
+}
+#define REAL_PTHREAD_CREATE real_pthread_create()
+#define THREAD_COUNTS() true
+#endif
+#define MARK_STARTED() (t_started = true)
 
 int pthread_create(pthread_t *th, const pthread_attr_t *attr, void *(*fn)(void *), void *arg) {
   trampoline *t = REAL_MALLOC(sizeof *t);
   if (!t) return EAGAIN;
   t->fn = fn, t->arg = arg;
-  int rc = __interceptor_pthread_create(th, attr, thread_start, t);
+  Dl_info di;
+  t->excluded = dladdr(__builtin_return_address(0), &di) && di.dli_fname && strstr(di.dli_fname, "libtbb");
+  int rc = REAL_PTHREAD_CREATE(th, attr, thread_start, t);
   if (rc) free(t);
   return rc;
 }
-#define THREAD_COUNTS() t_started
-#define MARK_STARTED() (t_started = true)
-#else
-#define THREAD_COUNTS() true
-#define MARK_STARTED() ((void)0)
-#endif
 
 /* True when this allocation is to fail. */
 static bool should_fail(void) {
@@ -253,11 +280,24 @@ static void on_disarm_signal(int sig) {
   close(fd);
 }
 
+/* FAILMALLOC_AT_START: armed from main() on (a command that runs and
+ * exits, e.g. raysweepd render); "<allocations> <failed>" is written to
+ * FAILMALLOC_REPORT at exit. */
+static void report_at_exit(void) {
+  on_disarm_signal(0);
+}
+
 __attribute__((constructor)) static void failmalloc_init(void) {
   const char *e = getenv("FAILMALLOC_N");
   if (!e) return;
   g_env_n = atol(e);
   g_report = getenv("FAILMALLOC_REPORT");
+  if (getenv("FAILMALLOC_AT_START")) {
+    /* This constructor is the executable's: every library's ran before. */
+    atexit(report_at_exit);
+    failmalloc_arm(g_env_n);
+    return;
+  }
   struct sigaction sa;
   memset(&sa, 0, sizeof sa);
   sigemptyset(&sa.sa_mask);
