@@ -79,6 +79,17 @@ static bool on_embree_memory(void *user, ssize_t bytes, bool post) {
   return true;
 }
 
+#if defined(__SANITIZE_ADDRESS__)
+#include <sanitizer/lsan_interface.h>
+static void lsan_ignore(const void *p) {
+  if (p) __lsan_ignore_object(p);
+}
+#else
+static void lsan_ignore(const void *p) {
+  (void)p;
+}
+#endif
+
 /* The device, created on first use. Not pthread_once: a creation that
  * failed (out of memory) is tried again by the next build instead of
  * leaving the process without Embree for good. */
@@ -701,6 +712,15 @@ void accel_free(accel *a) {
    * whose build or update failed are left allocated (a leak, only after an
    * out-of-memory failure) and only our own arrays are freed. */
   bool release = !a->stale;
+  if (!release) { /* the leak is deliberate: LeakSanitizer is told so */
+    lsan_ignore(a->top);
+    for (size_t i = 0; i < a->n_sub; i++) {
+      lsan_ignore(a->sub ? a->sub[i] : NULL);
+      lsan_ignore(a->geom ? a->geom[i] : NULL);
+      lsan_ignore(a->inst ? a->inst[i] : NULL);
+    }
+    for (size_t i = 0; i < a->n_grp; i++) lsan_ignore(a->grp_scene[i]);
+  }
   if (release && a->top) rtcReleaseScene(a->top);
   for (size_t i = 0; release && i < a->n_sub; i++) {
     if (a->inst[i]) rtcReleaseGeometry(a->inst[i]);
