@@ -64,7 +64,8 @@ SERVICE_LIB := $(BUILD)/lib/librswservice.a
 DAEMON_SRC := server/main.c $(shell find server/http -name '*.c' 2>/dev/null | sort) $(wildcard server/serve.c)
 DAEMON_OBJ := $(DAEMON_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/obj/$(BUILD)/gen/default_scene.o
 
-TEST_SUPPORT_SRC := $(wildcard tests/support/*.c)
+# failmalloc.c replaces malloc: only test_oom and raysweepd-failmalloc link it.
+TEST_SUPPORT_SRC := $(filter-out tests/support/failmalloc.c,$(wildcard tests/support/*.c))
 TEST_SUPPORT_OBJ := $(TEST_SUPPORT_SRC:%.c=$(BUILD)/obj/%.o)
 TEST_SRC := $(sort $(wildcard tests/unit/test_*.c tests/validation/test_*.c tests/integration/test_*.c))
 TEST_BIN := $(patsubst %.c,$(BUILD)/tests/%,$(notdir $(TEST_SRC)))
@@ -172,6 +173,28 @@ $(BUILD)/tests/test_http_encode: $(BUILD)/obj/tests/unit/test_http_encode.o $(BU
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS)
 
+# test_oom fails each allocation in turn (tests/support/failmalloc.c, a
+# build-time malloc hook: not instrumented itself; under SAN it forwards to
+# ASan's allocator). It drives the HTTP layer in process, and spawns
+# raysweepd-failmalloc (the daemon with the hook linked in).
+FAILMALLOC_OBJ := $(BUILD)/obj/tests/support/failmalloc.o
+$(FAILMALLOC_OBJ): tests/support/failmalloc.c | deps
+	@mkdir -p $(dir $@)
+	$(CC) -std=c11 -O2 -g -fPIC $(WARN) $(if $(filter 1,$(SAN)),-DFAILMALLOC_ASAN) -c $< -o $@
+# The hook's definitions must be in the executable's dynamic symbol table
+# for the libraries to bind to them (pthread_create is not referenced by a
+# library the executable links directly: oneTBB's is found through Embree).
+FAILMALLOC_LDFLAGS := -Wl,--export-dynamic-symbol=pthread_create -Wl,--export-dynamic-symbol='failmalloc_*'
+HTTP_OBJ := $(patsubst %.c,$(BUILD)/obj/%.o,$(shell find server/http -name '*.c' 2>/dev/null | sort))
+# (libraysweep's own objects only: what it shares with the daemon comes
+# from the common library.)
+$(BUILD)/tests/test_oom: $(BUILD)/obj/tests/integration/test_oom.o $(FAILMALLOC_OBJ) $(HTTP_OBJ) $(CLIENT_SRC:%.c=$(BUILD)/obj/%.o) $(TEST_SUPPORT_OBJ) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB)
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) $(FAILMALLOC_LDFLAGS) -o $@ $(filter %.o,$^) $(SERVICE_LIB) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS) $(DAEMON_LIBS) $(TEST_LIBS)
+$(BUILD)/tests/raysweepd-failmalloc: $(DAEMON_OBJ) $(FAILMALLOC_OBJ) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB)
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) $(FAILMALLOC_LDFLAGS) -o $@ $(DAEMON_OBJ) $(FAILMALLOC_OBJ) $(SERVICE_LIB) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS) $(DAEMON_LIBS)
+
 # test_image_exr_stress also reads every film through OpenEXR's C++ library
 # (tests/support/imf_read.cpp), whose decoder is independent of OpenEXR Core.
 IMF_CXXFLAGS := -std=c++17 $(OPT) -g -Wall -Wextra $(SANFLAGS) -I/usr/include/OpenEXR -I/usr/include/Imath -pthread
@@ -200,7 +223,7 @@ $(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS) $(TEST_LIBS)
 
-test: deps $(BUILD)/bin/raysweepd $(TEST_BIN)
+test: deps $(BUILD)/bin/raysweepd $(TEST_BIN) $(BUILD)/tests/raysweepd-failmalloc
 	@RSW_BIN_DIR=$(BUILD)/bin BUILD=$(BUILD) SAN=$(SAN) tests/run.sh $(TEST_BIN) $(TEST_SCRIPTS)
 
 bench: deps $(BUILD)/bin/raysweepd $(BUILD)/bin/raysweep $(BENCH_BIN)

@@ -3,10 +3,10 @@
  * This is the only file in the server that includes openexr.h. We give the
  * library our own stream functions (pread/pwrite on a descriptor we own)
  * rather than its default file I/O, for two reasons: the default file
- * implementation keeps its handle in the context's user_data slot, and we
- * need that slot to carry the first error message from the library's error
- * callback back to the caller (no global state); and it lets the writer
- * own the temporary file and the final rename(). */
+ * implementation keeps its handle in the context's user_data slot, which
+ * is where our stream (and the first error message the library reports)
+ * lives; and it lets the writer own the temporary file and the final
+ * rename(). */
 #include "image_exr.h"
 
 #include <errno.h>
@@ -85,10 +85,21 @@ typedef struct exr_stream {
   size_t mem_len, mem_cap;
 } exr_stream;
 
+/* The stream of the library call running on this thread, for the error
+ * handler. The handler must not ask the context for its user data: it is
+ * called with the context's mutex held (e.g. exr_write_header reporting a
+ * failed write, exr_encoding_run a failed allocation), and
+ * exr_get_user_data takes that mutex again; the non-recursive lock never
+ * returned (issue 13: a full disk or an allocation failure hung the
+ * render and the request forever). The library calls the handler
+ * synchronously on the caller's thread, so a thread-local pointer set
+ * around our calls into it is the context's stream. */
+static _Thread_local exr_stream *t_stream;
+
 static void stream_error_handler(exr_const_context_t ctxt, exr_result_t code, const char *msg) {
-  void *ud = NULL;
-  if (!ctxt || exr_get_user_data(ctxt, &ud) != EXR_ERR_SUCCESS || !ud) return;
-  exr_stream *st = ud;
+  (void)ctxt;
+  exr_stream *st = t_stream;
+  if (!st) return;
   if (st->msg[0]) return; /* the first error is the cause; keep it */
   snprintf(st->msg, sizeof st->msg, "%s [%s]", msg ? msg : "", exr_get_error_code_as_string(code));
 }
@@ -314,6 +325,8 @@ static rsw_status write_to_stream(exr_stream *st, const char *label, int width, 
     for (size_t i = 0; i < n_samples; i++) halves[i] = half_from_float(data[i]);
   }
 
+  exr_stream *outer = t_stream;
+  t_stream = st;
   exr_context_initializer_t init = stream_init(st);
   exr_context_t ctx = NULL;
   const char *what = "cannot start EXR file";
@@ -353,6 +366,7 @@ static rsw_status write_to_stream(exr_stream *st, const char *label, int width, 
       rv = frv;
     }
   }
+  t_stream = outer;
   free(halves);
   if (rv != EXR_ERR_SUCCESS) return exr_fail(err, RSW_ERR_IO, label, st, rv, what);
   return RSW_OK;
@@ -631,10 +645,13 @@ rsw_status exr_read_image(const char *path, exr_image *out, rsw_err *err) {
   /* Fail on a damaged chunk table instead of guessing at the chunks. */
   init.flags |= EXR_CONTEXT_FLAG_DISABLE_CHUNK_RECONSTRUCTION;
   exr_context_t ctx = NULL;
+  exr_stream *outer = t_stream;
+  t_stream = &st;
   exr_result_t rv = exr_start_read(&ctx, path, &init);
   if (rv != EXR_ERR_SUCCESS) {
     rsw_status s = exr_fail(err, RSW_ERR_FILE, path, &st, rv, "not a readable EXR file");
     if (ctx) exr_finish(&ctx);
+    t_stream = outer;
     close(st.fd);
     return s;
   }
@@ -646,6 +663,7 @@ rsw_status exr_read_image(const char *path, exr_image *out, rsw_err *err) {
   if (s == RSW_OK) s = read_meta(ctx, &img, path, err);
   if (s == RSW_OK) s = read_pixels(ctx, &st, storage, &dw, chl, &img, path, err);
   exr_finish(&ctx);
+  t_stream = outer;
   close(st.fd);
   if (s != RSW_OK) {
     exr_image_free(&img);

@@ -11,6 +11,10 @@ bool rsw_sha256_begin(rsw_sha256_ctx *c) {
   EVP_MD_CTX *md = EVP_MD_CTX_new();
   c->md = md;
   c->failed = !md || EVP_DigestInit_ex(md, EVP_sha256(), NULL) != 1;
+  if (c->failed) { /* callers return at once on failure: nothing to end */
+    EVP_MD_CTX_free(md);
+    c->md = NULL;
+  }
   return !c->failed;
 }
 

@@ -28,6 +28,11 @@ struct accel {
   uint32_t *nverts;  /* vertex count Embree holds for each mesh */
   size_t n_sub;
   bool top_dirty;
+  /* An update's Embree work failed (out of memory): a shape scene or the
+   * top level may be left uncommitted, and tracing it would crash.
+   * Cleared by the next accel_commit that succeeds; accel_ready() is false
+   * meanwhile, and renders refuse the scene. */
+  bool stale;
   /* Shape groups: one Embree scene each, built once however many
    * instances use it. */
   const shape_group **grp;
@@ -62,7 +67,6 @@ struct accel {
  * thread-local slot, since builds of different scenes may run on different
  * threads at once. */
 static RTCDevice g_device;
-static pthread_once_t g_device_once = PTHREAD_ONCE_INIT;
 static _Thread_local char t_embree_error[512];
 
 static void on_embree_error(void *user, enum RTCError code, const char *str) {
@@ -81,12 +85,49 @@ static bool on_embree_memory(void *user, ssize_t bytes, bool post) {
   return true;
 }
 
-static void device_init(void) {
-  g_device = rtcNewDevice(NULL);
-  if (g_device) {
-    rtcSetDeviceErrorFunction(g_device, on_embree_error, NULL);
-    rtcSetDeviceMemoryMonitorFunction(g_device, on_embree_memory, NULL);
+#if defined(__SANITIZE_ADDRESS__)
+#include <sanitizer/lsan_interface.h>
+static void lsan_ignore(const void *p) {
+  if (p) __lsan_ignore_object(p);
+}
+#else
+static void lsan_ignore(const void *p) {
+  (void)p;
+}
+#endif
+
+/* The device, created on first use. Not pthread_once: a creation that
+ * failed (out of memory) is tried again by the next build instead of
+ * leaving the process without Embree for good. */
+static pthread_mutex_t g_device_lock = PTHREAD_MUTEX_INITIALIZER;
+
+static RTCDevice device_get(void) {
+  pthread_mutex_lock(&g_device_lock);
+  if (!g_device) {
+    RTCDevice d = rtcNewDevice(NULL);
+    if (d && rtcGetDeviceError(d) != RTC_ERROR_NONE) {
+      rtcReleaseDevice(d);
+      d = NULL;
+    }
+    if (!d) (void)rtcGetDeviceError(NULL); /* the failed creation's code */
+    if (d) {
+      rtcSetDeviceErrorFunction(d, on_embree_error, NULL);
+      rtcSetDeviceMemoryMonitorFunction(d, on_embree_memory, NULL);
+    }
+    g_device = d;
   }
+  RTCDevice d = g_device;
+  pthread_mutex_unlock(&g_device_lock);
+  return d;
+}
+
+/* Forget errors from before this operation: the message slot, and the
+ * device's per-thread error code, which Embree keeps until it is read: an
+ * operation that failed early (a NULL from rtcNew*, out of memory) left it
+ * set, and the next build on the thread, clean, reported failure. */
+static void embree_error_reset(RTCDevice d) {
+  t_embree_error[0] = '\0';
+  if (d) (void)rtcGetDeviceError(d);
 }
 
 size_t accel_embree_bytes(void) {
@@ -540,6 +581,7 @@ double accel_surface_error(const accel *a, uint32_t index, const xform *X, vec3 
 /* ---- build ------------------------------------------------------------------------------ */
 
 static rsw_status embree_fail(accel *a, rsw_err *err, const char *where, const char *what) {
+  a->stale = true;
   if (!a->error[0]) snprintf(a->error, sizeof a->error, "%s", t_embree_error);
   return rsw_fail(err, RSW_ERR_EMBREE, where, "%s%s%s", what, a->error[0] ? ": " : "", a->error);
 }
@@ -553,7 +595,10 @@ static RTCGeometry shape_geometry(accel *a, const shape *s) {
                                        s->mesh.n_verts);
     unsigned *ix = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
                                            3 * sizeof(unsigned), s->mesh.n_faces);
-    if (!v || !ix) {
+    /* Out of memory inside rtcSetNewGeometryBuffer can still return a
+     * buffer while the geometry is left inconsistent (its commit then never
+     * returned: test_oom_cli): the reported error counts too. */
+    if (!v || !ix || t_embree_error[0]) {
       rtcReleaseGeometry(g);
       return NULL;
     }
@@ -603,8 +648,8 @@ static RTCScene group_scene(accel *a, const shape_group *g) {
   RTCScene sc = rtcNewScene(a->device);
   if (!sc) return NULL;
   rtcSetSceneBuildQuality(sc, RTC_BUILD_QUALITY_HIGH);
-  size_t i;
-  for (i = 0; i < g->n_members; i++) {
+  size_t i = 0;
+  for (; i < g->n_members; i++) {
     const shape *m = g->members[i];
     RTCGeometry geo;
     if (m->geom == GEOM_MESH) {
@@ -614,7 +659,7 @@ static RTCScene group_scene(accel *a, const shape_group *g) {
                                          m->mesh.n_verts);
       unsigned *ix = rtcSetNewGeometryBuffer(geo, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
                                              3 * sizeof(unsigned), m->mesh.n_faces);
-      if (!v || !ix) {
+      if (!v || !ix || t_embree_error[0]) {
         rtcReleaseGeometry(geo);
         break;
       }
@@ -644,9 +689,9 @@ static RTCScene group_scene(accel *a, const shape_group *g) {
     rtcAttachGeometryByID(sc, geo, (unsigned)i);
     rtcReleaseGeometry(geo); /* the scene holds it */
   }
-  if (i < g->n_members) {
-    /* A member could not be created: the group is an error, never a
-     * group with a member missing. */
+  /* A member that could not be made (out of memory) fails the group:
+   * committing the others would trace a group with a member missing. */
+  if (i < g->n_members || t_embree_error[0]) {
     rtcReleaseScene(sc);
     return NULL;
   }
@@ -700,13 +745,13 @@ static rsw_status build_instances(accel *a, const instance_shape *is, size_t i, 
 rsw_status accel_build(scene *s, rsw_err *err) {
   accel *a = calloc(1, sizeof *a);
   if (!a) return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
-  pthread_once(&g_device_once, device_init);
-  a->device = g_device;
+  a->device = device_get();
   if (!a->device) {
     free(a);
-    return rsw_fail(err, RSW_ERR_EMBREE, "", "cannot create the Embree device");
+    return rsw_fail(err, RSW_ERR_EMBREE, "", "cannot create the Embree device%s%s", t_embree_error[0] ? ": " : "",
+                    t_embree_error);
   }
-  t_embree_error[0] = '\0';
+  embree_error_reset(a->device);
   s->accel = a;
   a->top = rtcNewScene(a->device);
   size_t ns = s->n_shapes ? s->n_shapes : 1;
@@ -801,13 +846,30 @@ rsw_status accel_build(scene *s, rsw_err *err) {
 
 void accel_free(accel *a) {
   if (!a) return;
-  if (a->top) rtcReleaseScene(a->top);
-  for (size_t i = 0; i < a->n_sub; i++) {
+  /* A commit that failed part-way (out of memory inside Embree's parallel
+   * build) leaves the scene's TBB task group un-waited: releasing the
+   * scene then terminates the process (TBB's missing_wait thrown from a
+   * destructor), and joining the commit first never returns (test_oom_cli,
+   * Embree 3.13 with oneTBB 2021). So the Embree objects of a structure
+   * whose build or update failed are left allocated (a leak, only after an
+   * out-of-memory failure) and only our own arrays are freed. */
+  bool release = !a->stale;
+  if (!release) { /* the leak is deliberate: LeakSanitizer is told so */
+    lsan_ignore(a->top);
+    for (size_t i = 0; i < a->n_sub; i++) {
+      lsan_ignore(a->sub ? a->sub[i] : NULL);
+      lsan_ignore(a->geom ? a->geom[i] : NULL);
+      lsan_ignore(a->inst ? a->inst[i] : NULL);
+    }
+    for (size_t i = 0; i < a->n_grp; i++) lsan_ignore(a->grp_scene[i]);
+  }
+  if (release && a->top) rtcReleaseScene(a->top);
+  for (size_t i = 0; release && i < a->n_sub; i++) {
     if (a->inst[i]) rtcReleaseGeometry(a->inst[i]);
     if (a->geom[i]) rtcReleaseGeometry(a->geom[i]);
     if (a->sub[i]) rtcReleaseScene(a->sub[i]);
   }
-  for (size_t i = 0; i < a->n_grp; i++) rtcReleaseScene(a->grp_scene[i]);
+  for (size_t i = 0; release && i < a->n_grp; i++) rtcReleaseScene(a->grp_scene[i]);
   free(a->grp);
   free(a->grp_scene);
   free(a->list_shape);
@@ -842,6 +904,7 @@ static rsw_status check_embree(accel *a, rsw_err *err, const char *where, const 
   if (t_embree_error[0] || rtcGetDeviceError(a->device) != RTC_ERROR_NONE) {
     snprintf(a->error, sizeof a->error, "%s", t_embree_error);
     t_embree_error[0] = '\0';
+    a->stale = true;
     return embree_fail(a, err, where, what);
   }
   return RSW_OK;
@@ -849,9 +912,13 @@ static rsw_status check_embree(accel *a, rsw_err *err, const char *where, const 
 
 rsw_status accel_rebuild_shape(accel *a, const shape *sh, rsw_err *err) {
   unsigned i = sh->index;
-  t_embree_error[0] = '\0';
+  embree_error_reset(a->device);
+  a->error[0] = '\0';
   RTCGeometry g = shape_geometry(a, sh);
-  if (!g) return embree_fail(a, err, sh->base.id, "cannot create geometry");
+  if (!g) {
+    a->stale = true;
+    return embree_fail(a, err, sh->base.id, "cannot create geometry");
+  }
   rtcDetachGeometry(a->sub[i], 0);
   rtcReleaseGeometry(a->geom[i]);
   rtcAttachGeometryByID(a->sub[i], g, 0);
@@ -872,7 +939,8 @@ rsw_status accel_update_vertices(accel *a, const shape *sh, rsw_err *err) {
   size_t bytes = 3 * (size_t)sh->mesh.n_verts * sizeof(float);
   float *v = rtcGetGeometryBufferData(a->geom[i], RTC_BUFFER_TYPE_VERTEX, 0);
   if (!v || a->nverts[i] != sh->mesh.n_verts) return accel_rebuild_shape(a, sh, err);
-  t_embree_error[0] = '\0';
+  embree_error_reset(a->device);
+  a->error[0] = '\0';
   memcpy(v, sh->mesh.pos, bytes);
   shape_bounds(a, i);
   rtcUpdateGeometryBuffer(a->geom[i], RTC_BUFFER_TYPE_VERTEX, 0);
@@ -887,8 +955,12 @@ rsw_status accel_update_vertices(accel *a, const shape *sh, rsw_err *err) {
 }
 
 rsw_status accel_commit(accel *a, rsw_err *err) {
-  if (!a->top_dirty) return RSW_OK;
-  t_embree_error[0] = '\0';
+  if (!a->top_dirty && !a->stale) return RSW_OK;
+  embree_error_reset(a->device);
+  a->error[0] = '\0';
+  if (a->stale) /* a failed update may have left shape scenes uncommitted */
+    for (size_t i = 0; i < a->n_sub; i++)
+      if (a->sub[i]) rtcCommitScene(a->sub[i]);
   /* The geometry moved: so may the frame's origin (the same function of
    * the scene's state as at load, so that an update equals a reload). */
   double radius;
@@ -905,9 +977,14 @@ rsw_status accel_commit(accel *a, rsw_err *err) {
   }
   if (memcmp(&o, &o_was, sizeof o) != 0) rewrite_instances(a);
   rtcCommitScene(a->top);
-  a->top_dirty = false;
   a->counters.top_commits++;
-  return check_embree(a, err, "", "committing the top-level scene failed");
+  rsw_status st = check_embree(a, err, "", "committing the top-level scene failed");
+  if (st == RSW_OK) a->top_dirty = a->stale = false;
+  return st;
+}
+
+bool accel_ready(const accel *a) {
+  return !a || (!a->top_dirty && !a->stale);
 }
 
 void accel_get_counters(const accel *a, accel_counters *out) {

@@ -82,8 +82,12 @@ void accel_update_transform(accel *a, const shape *sh);
 rsw_status accel_update_vertices(accel *a, const shape *sh, rsw_err *err);
 /* sh's topology changed (faces, vertex count): rebuild that shape's BVH. */
 rsw_status accel_rebuild_shape(accel *a, const shape *sh, rsw_err *err);
-/* Commit the top level if any update was staged. */
+/* Commit the top level if any update was staged (and, after a failed
+ * update, every shape scene again). */
 rsw_status accel_commit(accel *a, rsw_err *err);
+/* False while staged updates are uncommitted or a failed one left the
+ * structure incomplete (tracing it then is not safe): renders refuse. */
+bool accel_ready(const accel *a);
 
 /* Counters of Embree work since the structure was built (test hook and
  * update reports). */

@@ -18,6 +18,7 @@
 #include <unistd.h>
 
 #include "scene/scene.h"
+#include "accel.h"
 
 #define TILE 8
 
@@ -226,6 +227,10 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
                     sc->n_sensors ? "no sensor with index %zu (the scene has %zu)"
                                   : "the scene has no sensor%.0zu%.0zu",
                     opts->sensor, sc->n_sensors);
+  if (!accel_ready(sc->accel))
+    return rsw_fail(err, RSW_ERR_EMBREE, "scene",
+                    "the scene's acceleration structure is incomplete after a failed update: update or "
+                    "reload the scene");
   const sensor *se = sc->sensors[opts->sensor];
   const film *fm = se->film;
   render_ctx rc = {.variant = sc->variant, .wavelength = opts->wavelength > 0 ? opts->wavelength : 550.0};

@@ -65,6 +65,7 @@ bool service_blob_exists(service *svc, const char *h) {
 }
 
 rsw_status service_blobs_missing(service *svc, const char *body, size_t len, char **json_out, svc_error *e) {
+  unsigned jm = svc_json_mark();
   cJSON *j = cJSON_ParseWithLength(body, len);
   if (!j) return svc_fail(e, RSW_ERR_PARSE, "", "the body is not valid JSON");
   const cJSON *d = cJSON_GetObjectItemCaseSensitive(j, "digests");
@@ -84,9 +85,8 @@ rsw_status service_blobs_missing(service *svc, const char *body, size_t len, cha
       return svc_fail(e, RSW_ERR_INVALID, ptr, "not a SHA-256 hex digest");
     }
     if (!service_blob_exists(svc, x->valuestring))
-      cJSON_AddItemToArray(m, cJSON_CreateString(x->valuestring));
+      svc_json_push(m, cJSON_CreateString(x->valuestring));
   }
   cJSON_Delete(j);
-  *json_out = svc_print_json(o);
-  return RSW_OK;
+  return svc_json_out(json_out, o, jm, e);
 }

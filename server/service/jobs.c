@@ -151,17 +151,30 @@ static void job_free(job *j) {
   free(j);
 }
 
-/* svc->lock held. */
-static void push_event(service *svc, job *j, cJSON *data, bool end) {
-  if (!svc_grow((void **)&j->events, &j->cap_events, j->n_events + 1, sizeof *j->events, 0)) {
-    cJSON_Delete(data);
+/* svc->lock held. Out of memory, a progress event is dropped, but the end
+ * event never is: a progress event is stored only when the array also has
+ * room for the end event after it, and the end event's payload falls back
+ * to a fixed text; a stream that never got its end event would never
+ * close. */
+static void push_event(service *svc, job *j, cJSON *data, bool end, unsigned jm) {
+  char *txt = svc_print_json(data, jm);
+  if (!end && (!txt || !svc_grow((void **)&j->events, &j->cap_events, j->n_events + 2, sizeof *j->events, 0))) {
+    free(txt);
     return;
+  }
+  if (end && !svc_grow((void **)&j->events, &j->cap_events, j->n_events + 1, sizeof *j->events, 0)) {
+    free(txt); /* cannot happen: the slot was kept free (or is the first) */
+    return;
+  }
+  if (end && !txt) {
+    char fb[160];
+    snprintf(fb, sizeof fb, "{\"job\":\"%s\",\"state\":\"%s\"}", j->id, state_names[j->state]);
+    txt = strdup(fb); /* NULL: next_event answers "{}" */
   }
   job_event *ev = &j->events[j->n_events];
   ev->seq = j->n_events + 1;
-  ev->json = cJSON_PrintUnformatted(data);
+  ev->json = txt;
   ev->end = end;
-  cJSON_Delete(data);
   j->n_events++;
   pthread_cond_broadcast(&svc->cond);
 }
@@ -207,14 +220,21 @@ static rsw_status no_job(svc_error *e, const char *id) {
 }
 
 /* Merge job-level and context-level overrides: context keys win. */
+/* NULL when out of memory (an override silently missing would render the
+ * context with the base value and report success). */
 static cJSON *merge_params(const cJSON *job_params, const cJSON *ctx_params) {
+  unsigned jm = svc_json_mark();
   cJSON *m = cJSON_CreateObject();
   if (!m) return NULL;
   for (const cJSON *k = job_params ? job_params->child : NULL; k; k = k->next)
     if (!ctx_params || !cJSON_GetObjectItemCaseSensitive(ctx_params, k->string))
-      cJSON_AddItemToObject(m, k->string, cJSON_Duplicate(k, 1));
+      svc_json_put(m, k->string, cJSON_Duplicate(k, 1));
   for (const cJSON *k = ctx_params ? ctx_params->child : NULL; k; k = k->next)
-    cJSON_AddItemToObject(m, k->string, cJSON_Duplicate(k, 1));
+    svc_json_put(m, k->string, cJSON_Duplicate(k, 1));
+  if (!svc_json_ok(jm)) {
+    cJSON_Delete(m);
+    return NULL;
+  }
   return m;
 }
 
@@ -239,7 +259,8 @@ static rsw_status check_params(const scene *sc, const cJSON *p, const char *ptr,
     }
     char *txt = cJSON_PrintUnformatted(k);
     param_value v;
-    rsw_status st = txt ? param_value_parse(txt, k->string, &v, &err) : RSW_ERR_NOMEM;
+    rsw_status st = txt ? param_value_parse(txt, k->string, &v, &err)
+                        : rsw_fail(&err, RSW_ERR_NOMEM, k->string, "out of memory");
     free(txt);
     if (st) {
       char w[512];
@@ -270,6 +291,7 @@ static bool get_uint(const cJSON *o, const char *name, double max, uint64_t *out
 rsw_status service_job_submit(service *svc, const char *scene_id, const char *body, size_t len,
                               const char *idem_key, char **job_id_out, char **json_out, svc_error *e) {
   if (!service_ready(svc)) return svc_fail(e, RSW_ERR_UNAVAILABLE, "", "the server is shutting down");
+  unsigned jm = svc_json_mark();
   unsigned char digest[32];
   if (!rsw_sha256(body, len, digest)) return svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
   if (idem_key) {
@@ -284,12 +306,15 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
         return svc_fail(e, RSW_ERR_CONFLICT, "Idempotency-Key",
                         "Idempotency-Key '%s' was used for another request body", idem_key);
       }
-      *job_id_out = strdup(j->id);
-      cJSON *jj = job_json(j);
-      *json_out = cJSON_PrintUnformatted(jj);
-      cJSON_Delete(jj);
+      rsw_status st = svc_json_out(json_out, job_json(j), jm, e);
+      *job_id_out = st ? NULL : strdup(j->id);
       pthread_mutex_unlock(&svc->lock);
-      return RSW_OK;
+      if (!st && !*job_id_out) {
+        free(*json_out);
+        *json_out = NULL;
+        st = svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
+      }
+      return st;
     }
     pthread_mutex_unlock(&svc->lock);
   }
@@ -502,6 +527,10 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       it->spp = (uint32_t)spp;
       it->seed = has_seed ? seed : default_seed(job_seed, it->context, it->sensor);
       it->params = merge_params(jparams, cJSON_GetObjectItemCaseSensitive(c, "params"));
+      if (!it->params) {
+        st = svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
+        break;
+      }
       const sensor *se = sc->sensors[it->sensor_index];
       uint64_t eff = spp ? spp : se->sampler->sample_count;
       uint64_t ps = (uint64_t)se->film->width * (uint64_t)se->film->height * eff;
@@ -519,7 +548,9 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   for (size_t i = 0; !st && i < n_items; i++) reserve += svc_film_bytes(sc, jb->items[i].sensor_index);
   if (st) {
     if (jb) {
-      jb->n_items = n_items;
+      /* Items exist only if their array was allocated (job_free walks
+       * n_items of them). */
+      jb->n_items = jb->items ? n_items : 0;
       job_free(jb);
     }
     svc_scene_release(svc, r);
@@ -530,7 +561,11 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   jb->res = r; /* keeps the ref taken above */
   memcpy(jb->scene_id, r->id, 65);
   memcpy(jb->body_digest, digest, 32);
-  if (idem_key) jb->idem_key = strdup(idem_key);
+  if (idem_key && !(jb->idem_key = strdup(idem_key))) {
+    job_free(jb);
+    svc_scene_release(svc, r);
+    return svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
+  }
   jb->created = time(NULL);
   jb->t_created = svc_now();
   svc_iso_time(jb->created, jb->created_iso);
@@ -571,8 +606,13 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   jb->revision = r->revision;
   bool ok = svc_grow((void **)&svc->jobs, &svc->cap_jobs, svc->n_jobs + 1, sizeof *svc->jobs, 0) &&
             svc_grow((void **)&svc->queue, &svc->cap_queue, svc->n_queue + 1, sizeof *svc->queue, 0);
-  if (!ok) {
+  /* The answer is built before the job is queued: a job must not run
+   * behind an error answer (the client would submit it again). */
+  char *id_copy = ok ? strdup(jb->id) : NULL;
+  char *answer = id_copy ? svc_print_json(job_json(jb), jm) : NULL;
+  if (!answer) {
     pthread_mutex_unlock(&svc->lock);
+    free(id_copy);
     job_free(jb);
     svc_scene_release(svc, r);
     return svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
@@ -585,11 +625,8 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     svc->result_committed += reserve;
   }
   svc_state_job_saved(svc, jb, body, len);
-  *job_id_out = strdup(jb->id);
-  *json_out = NULL;
-  cJSON *jj = job_json(jb);
-  *json_out = cJSON_PrintUnformatted(jj);
-  cJSON_Delete(jj);
+  *job_id_out = id_copy;
+  *json_out = answer;
   pthread_cond_broadcast(&svc->cond);
   pthread_mutex_unlock(&svc->lock);
   return RSW_OK;
@@ -616,11 +653,12 @@ static void finish_job(service *svc, job *j) {
   if (--r->refs == 0 && r->deleted) svc_resident_free(r);
   svc_free_evicted(svc_evict_locked(svc, NULL));
   svc_state_job_finished(svc, j);
+  unsigned jm = svc_json_mark();
   cJSON *d = cJSON_CreateObject();
   cJSON_AddStringToObject(d, "state", state_names[j->state]);
   cJSON_AddNumberToObject(d, "done", (double)j->items_done);
   cJSON_AddNumberToObject(d, "total", (double)j->n_items);
-  push_event(svc, j, d, true);
+  push_event(svc, j, d, true, jm);
 }
 
 void *svc_worker_main(void *arg) {
@@ -671,6 +709,7 @@ void *svc_worker_main(void *arg) {
       }
       pthread_mutex_lock(&svc->lock);
       if (st == RSW_ERR_CANCELLED) break;
+      unsigned jm = svc_json_mark();
       cJSON *d = cJSON_CreateObject();
       cJSON_AddStringToObject(d, "context", it->context);
       cJSON_AddStringToObject(d, "sensor", it->sensor);
@@ -703,7 +742,7 @@ void *svc_worker_main(void *arg) {
       if (--j->context_remaining[it->context_index] == 0) j->contexts_done++;
       cJSON_AddNumberToObject(d, "done", (double)j->items_done);
       cJSON_AddNumberToObject(d, "total", (double)j->n_items);
-      push_event(svc, j, d, false);
+      push_event(svc, j, d, false, jm);
     }
     finish_job(svc, j);
   }
@@ -753,28 +792,25 @@ void svc_jobs_free(service *svc) {
 /* ---- queries --------------------------------------------------------------------- */
 
 rsw_status service_job_list(service *svc, char **json_out, svc_error *e) {
-  (void)e;
+  unsigned jm = svc_json_mark();
   cJSON *o = cJSON_CreateObject();
   cJSON *a = cJSON_AddArrayToObject(o, "jobs");
   pthread_mutex_lock(&svc->lock);
   svc_jobs_expire(svc);
   for (size_t i = 0; i < svc->n_jobs; i++)
-    if (!svc->jobs[i]->deleted) cJSON_AddItemToArray(a, job_json(svc->jobs[i]));
+    if (!svc->jobs[i]->deleted) svc_json_push(a, job_json(svc->jobs[i]));
   pthread_mutex_unlock(&svc->lock);
-  *json_out = cJSON_PrintUnformatted(o);
-  cJSON_Delete(o);
-  return RSW_OK;
+  return svc_json_out(json_out, o, jm, e);
 }
 
 rsw_status service_job_get(service *svc, const char *id, char **json_out, svc_error *e) {
+  unsigned jm = svc_json_mark();
   pthread_mutex_lock(&svc->lock);
   job *j = find_job_locked(svc, id);
   cJSON *o = j ? job_json(j) : NULL;
   pthread_mutex_unlock(&svc->lock);
   if (!o) return no_job(e, id);
-  *json_out = cJSON_PrintUnformatted(o);
-  cJSON_Delete(o);
-  return RSW_OK;
+  return svc_json_out(json_out, o, jm, e);
 }
 
 /* Cancel: a queued job leaves the queue and ends now; a running one stops
@@ -795,6 +831,7 @@ static void stop_job(service *svc, job *j) {
 }
 
 rsw_status service_job_cancel(service *svc, const char *id, char **json_out, svc_error *e) {
+  unsigned jm = svc_json_mark();
   pthread_mutex_lock(&svc->lock);
   job *j = find_job_locked(svc, id);
   if (!j) {
@@ -804,9 +841,7 @@ rsw_status service_job_cancel(service *svc, const char *id, char **json_out, svc
   stop_job(svc, j);
   cJSON *o = job_json(j);
   pthread_mutex_unlock(&svc->lock);
-  *json_out = cJSON_PrintUnformatted(o);
-  cJSON_Delete(o);
-  return RSW_OK;
+  return svc_json_out(json_out, o, jm, e);
 }
 
 rsw_status service_job_delete(service *svc, const char *id, svc_error *e) {
@@ -826,6 +861,7 @@ rsw_status service_job_delete(service *svc, const char *id, svc_error *e) {
 }
 
 rsw_status service_job_results(service *svc, const char *id, char **json_out, svc_error *e) {
+  unsigned jm = svc_json_mark();
   pthread_mutex_lock(&svc->lock);
   job *j = find_job_locked(svc, id);
   if (!j) {
@@ -850,7 +886,7 @@ rsw_status service_job_results(service *svc, const char *id, char **json_out, sv
       cJSON_AddNumberToObject(x, "height", it->film.img.height);
       cJSON *ch = cJSON_AddArrayToObject(x, "channels");
       for (int c = 0; c < it->film.img.channels; c++)
-        cJSON_AddItemToArray(ch, cJSON_CreateString(it->film.img.channel_names[c]));
+        svc_json_push(ch, cJSON_CreateString(it->film.img.channel_names[c]));
       char href[512];
       snprintf(href, sizeof href, "/v1/jobs/%s/results/%s/%s", j->id, it->context, it->sensor);
       cJSON_AddStringToObject(x, "href", href);
@@ -858,12 +894,10 @@ rsw_status service_job_results(service *svc, const char *id, char **json_out, sv
         cJSON_AddNumberToObject(x, "unresolved_rays", (double)it->film.img.unresolved_rays);
     }
     if (it->error[0]) cJSON_AddStringToObject(x, "error", it->error);
-    cJSON_AddItemToArray(a, x);
+    svc_json_push(a, x);
   }
   pthread_mutex_unlock(&svc->lock);
-  *json_out = cJSON_PrintUnformatted(o);
-  cJSON_Delete(o);
-  return RSW_OK;
+  return svc_json_out(json_out, o, jm, e);
 }
 
 rsw_status service_job_result(service *svc, const char *id, const char *context, const char *sensor_id,
@@ -990,7 +1024,7 @@ void svc_job_free(job *j) {
 }
 
 void svc_job_push_event(service *svc, job *j, cJSON *data, bool end) {
-  push_event(svc, j, data, end);
+  push_event(svc, j, data, end, svc_json_mark());
 }
 
 job *svc_find_job_locked(service *svc, const char *id) {

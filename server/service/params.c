@@ -17,33 +17,50 @@ static cJSON *param_entry_json(const scene *sc, size_t i) {
   cJSON_AddStringToObject(o, "type", param_type_name(pi.type));
   cJSON_AddStringToObject(o, "class", update_class_name(pi.cls));
   cJSON *sh = cJSON_AddArrayToObject(o, "shape");
-  cJSON_AddItemToArray(sh, cJSON_CreateNumber((double)pi.shape[0]));
-  if (pi.shape[1]) cJSON_AddItemToArray(sh, cJSON_CreateNumber((double)pi.shape[1]));
+  svc_json_push(sh, cJSON_CreateNumber((double)pi.shape[0]));
+  if (pi.shape[1]) svc_json_push(sh, cJSON_CreateNumber((double)pi.shape[1]));
   cJSON_AddStringToObject(o, "object_type", pi.object_type);
   cJSON_AddStringToObject(o, "object_class", pi.object_class);
   cJSON_AddStringToObject(o, "object_id", pi.object_id);
+  /* The value's text is NULL, or does not parse, only when out of
+   * memory: then the entry is not made (no "value": null in its place). */
   char *v = params_value_json(sc, i, 16);
   cJSON *val = v ? cJSON_Parse(v) : NULL;
   free(v);
-  cJSON_AddItemToObject(o, "value", val ? val : cJSON_CreateNull());
+  if (!val) {
+    cJSON_Delete(o);
+    return NULL;
+  }
+  svc_json_put(o, "value", val);
   cJSON *al = cJSON_AddArrayToObject(o, "aliases");
-  for (size_t a = 0; a < pi.n_aliases; a++) cJSON_AddItemToArray(al, cJSON_CreateString(pi.aliases[a]));
+  for (size_t a = 0; a < pi.n_aliases; a++) svc_json_push(al, cJSON_CreateString(pi.aliases[a]));
   return o;
 }
 
-/* Rebuild the base-state cache; r->lock held (no overrides applied). */
-void svc_refresh_param_cache(resident *r) {
+/* Rebuild the base-state cache; r->lock held (no overrides applied). A
+ * rebuild that ran out of memory (an entry or a field missing) is
+ * dropped: the old cache stays, marked stale. */
+bool svc_refresh_param_cache(resident *r) {
+  unsigned jm = svc_json_mark();
   cJSON *a = cJSON_CreateArray();
   size_t n = params_count(r->sc);
-  for (size_t i = 0; a && i < n; i++) {
+  bool ok = a != NULL;
+  for (size_t i = 0; ok && i < n; i++) {
     cJSON *p = param_entry_json(r->sc, i);
-    cJSON_AddItemToArray(a, p ? p : cJSON_CreateNull());
+    ok = p && cJSON_AddItemToArray(a, p);
+    if (!ok) cJSON_Delete(p);
   }
+  ok = ok && svc_json_ok(jm);
+  if (!ok) cJSON_Delete(a);
   pthread_mutex_lock(&r->cache_lock);
-  cJSON_Delete(r->base_params);
-  r->base_params = a;
-  r->cache_revision = r->revision;
+  if (ok) {
+    cJSON_Delete(r->base_params);
+    r->base_params = a;
+    r->cache_revision = r->revision;
+  }
+  r->cache_stale = !ok;
   pthread_mutex_unlock(&r->cache_lock);
+  return ok;
 }
 
 /* An unknown-key error with the closest keys, for problem+json. */
@@ -61,6 +78,7 @@ static rsw_status key_error(svc_error *e, const scene *sc, const char *key, cons
 
 rsw_status service_params_get(service *svc, const char *id, const char *match, const char *cls,
                               char **json_out, uint64_t *revision_out, svc_error *e) {
+  unsigned jm = svc_json_mark();
   resident *r = svc_scene_acquire(svc, id);
   if (!r) return svc_no_scene(e, id);
   unsigned mask = UPDATE_SPECTRAL | UPDATE_GEOMETRIC;
@@ -78,6 +96,19 @@ rsw_status service_params_get(service *svc, const char *id, const char *match, c
   /* Matching reads only the table's keys and classes (fixed at load);
    * values come from the base-state cache, so this never waits for a
    * render. */
+  /* A stale cache (its rebuild after an update ran out of memory) is
+   * rebuilt now, if no render holds the scene; else this answers 503. */
+  pthread_mutex_lock(&r->cache_lock);
+  bool stale = r->cache_stale;
+  pthread_mutex_unlock(&r->cache_lock);
+  if (stale && pthread_mutex_trylock(&r->lock) == 0) {
+    stale = !svc_refresh_param_cache(r);
+    pthread_mutex_unlock(&r->lock);
+  }
+  if (stale) {
+    svc_scene_release(svc, r);
+    return svc_fail(e, RSW_ERR_UNAVAILABLE, "", "the parameter table is being rebuilt (the last rebuild ran out of memory); retry");
+  }
   size_t *idx = NULL, n = 0;
   rsw_err err = {0};
   rsw_status st = params_match(r->sc, match && *match ? match : "*", mask, none, &idx, &n, &err);
@@ -90,7 +121,7 @@ rsw_status service_params_get(service *svc, const char *id, const char *match, c
     cJSON *a = cJSON_AddArrayToObject(o, "params");
     for (size_t k = 0; k < n; k++) {
       cJSON *p = cJSON_GetArrayItem(r->base_params, (int)idx[k]);
-      if (p) cJSON_AddItemToArray(a, cJSON_Duplicate(p, 1));
+      if (p) svc_json_push(a, cJSON_Duplicate(p, 1));
     }
   } else if (st == RSW_ERR_NOT_FOUND && !strchr(match, ':')) {
     /* A glob matching nothing is an empty table, not an error, over HTTP. */
@@ -106,8 +137,7 @@ rsw_status service_params_get(service *svc, const char *id, const char *match, c
   free(idx);
   svc_scene_release(svc, r);
   if (st) return st;
-  *json_out = svc_print_json(o);
-  return RSW_OK;
+  return svc_json_out(json_out, o, jm, e);
 }
 
 /* Parse a JSON object {key: value} into updates. Keys borrowed from j. */
@@ -125,7 +155,8 @@ rsw_status svc_map_to_updates(const cJSON *j, const scene *sc, const char *where
     u[i].key = k->string;
     char *txt = cJSON_PrintUnformatted(k);
     rsw_err err = {0};
-    rsw_status st = txt ? param_value_parse(txt, k->string, &u[i].value, &err) : RSW_ERR_NOMEM;
+    rsw_status st = txt ? param_value_parse(txt, k->string, &u[i].value, &err)
+                        : rsw_fail(&err, RSW_ERR_NOMEM, k->string, "out of memory");
     free(txt);
     if (st) {
       for (size_t q = 0; q < i; q++) param_value_free(&u[q].value);
@@ -156,6 +187,7 @@ rsw_status svc_update_error(svc_error *e, const scene *sc, const param_update *u
 
 rsw_status service_params_patch(service *svc, const char *id, const char *body, size_t len, int64_t if_match,
                                 char **json_out, uint64_t *revision_out, svc_error *e) {
+  unsigned jm = svc_json_mark();
   resident *r = svc_scene_acquire(svc, id);
   if (!r) return svc_no_scene(e, id);
   cJSON *j = cJSON_ParseWithLength(body, len);
@@ -168,7 +200,11 @@ rsw_status service_params_patch(service *svc, const char *id, const char *body, 
   param_update *u = NULL;
   size_t n = 0;
   update_report rep = {0};
-  if (if_match >= 0 && (uint64_t)if_match != r->revision)
+  if (r->broken)
+    st = svc_fail(e, RSW_ERR_UNAVAILABLE, r->id,
+                  "the scene's base state was lost (restoring it after a render ran out of memory): delete "
+                  "the scene and post it again");
+  else if (if_match >= 0 && (uint64_t)if_match != r->revision)
     st =
         svc_fail(e, RSW_ERR_PRECONDITION, "If-Match", "revision %lld is stale: the scene is at revision %llu",
                  (long long)if_match, (unsigned long long)r->revision);
@@ -180,7 +216,7 @@ rsw_status service_params_patch(service *svc, const char *id, const char *body, 
   }
   if (!st && rep.changed) {
     r->revision++;
-    svc_refresh_param_cache(r);
+    (void)svc_refresh_param_cache(r); /* out of memory: stale, rebuilt by the next GET */
     svc_scene_patched(svc, r, j); /* kept for a reload, stored with --state-dir */
   }
   *revision_out = r->revision;
@@ -190,8 +226,8 @@ rsw_status service_params_patch(service *svc, const char *id, const char *body, 
     cJSON_AddNumberToObject(o, "revision", (double)r->revision);
     cJSON_AddNumberToObject(o, "changed", (double)rep.changed);
     cJSON *c = cJSON_AddArrayToObject(o, "classes");
-    if (rep.classes & UPDATE_SPECTRAL) cJSON_AddItemToArray(c, cJSON_CreateString("spectral"));
-    if (rep.classes & UPDATE_GEOMETRIC) cJSON_AddItemToArray(c, cJSON_CreateString("geometric"));
+    if (rep.classes & UPDATE_SPECTRAL) svc_json_push(c, cJSON_CreateString("spectral"));
+    if (rep.classes & UPDATE_GEOMETRIC) svc_json_push(c, cJSON_CreateString("geometric"));
     cJSON_AddNumberToObject(o, "seconds", rep.seconds);
   }
   pthread_mutex_unlock(&r->lock);
@@ -200,6 +236,5 @@ rsw_status service_params_patch(service *svc, const char *id, const char *body, 
   cJSON_Delete(j);
   svc_scene_release(svc, r);
   if (st) return st;
-  *json_out = svc_print_json(o);
-  return RSW_OK;
+  return svc_json_out(json_out, o, jm, e);
 }

@@ -62,7 +62,11 @@ rsw_status svc_render_locked(service *svc, resident *r, const render_spec *rs, s
   rsw_status st = RSW_OK;
   rsw_err err = {0};
   pthread_mutex_lock(&r->lock);
-  if (rs->overrides) st = svc_map_to_updates(rs->overrides, sc, "params", &u, &n, e);
+  if (r->broken)
+    st = svc_fail(e, RSW_ERR_UNAVAILABLE, r->id,
+                  "the scene's base state was lost (restoring it after a render ran out of memory): delete "
+                  "the scene and post it again");
+  if (!st && rs->overrides) st = svc_map_to_updates(rs->overrides, sc, "params", &u, &n, e);
   if (!st && n) {
     st = snapshot(sc, u, n, &restore, &err);
     if (st) st = svc_update_error(e, sc, u, n, &err);
@@ -101,10 +105,25 @@ rsw_status svc_render_locked(service *svc, resident *r, const render_spec *rs, s
     }
   }
   if (restore) {
-    /* Back to the base state: the same values, so bitwise the base. */
+    /* Back to the base state: the same values, so bitwise the base. An
+     * update is all or nothing (scene_update), so a failed restore left
+     * the overrides in place: it is tried again (a transient shortage),
+     * and if it keeps failing the scene is marked broken instead of
+     * serving the overridden values as its base state under the same
+     * revision. */
     rsw_err rerr = {0};
-    if (scene_update(sc, restore, n, NULL, &rerr) != RSW_OK && !st)
-      st = svc_fail(e, RSW_ERR_RENDER, rerr.where, "restoring the base state failed: %s", rerr.msg);
+    rsw_status rst = RSW_ERR_NOMEM;
+    for (int attempt = 0; attempt < 3 && rst != RSW_OK; attempt++) {
+      rsw_err_clear(&rerr);
+      rst = scene_update(sc, restore, n, NULL, &rerr);
+    }
+    if (rst != RSW_OK) {
+      r->broken = true;
+      if (!st) {
+        film_image_free(&out->img);
+        st = svc_fail(e, RSW_ERR_RENDER, rerr.where, "restoring the base state failed: %s", rerr.msg);
+      }
+    }
     for (size_t i = 0; i < n; i++) param_value_free(&restore[i].value);
     free(restore);
   }

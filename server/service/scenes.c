@@ -258,7 +258,7 @@ void svc_scene_summary(const resident *r, cJSON *o) {
   cJSON_AddStringToObject(o, "variant", r->sc->variant == VARIANT_MONO ? "mono" : "rgb");
   cJSON *s = cJSON_AddArrayToObject(o, "sensors");
   for (size_t i = 0; i < r->sc->n_sensors; i++)
-    cJSON_AddItemToArray(s, cJSON_CreateString(r->sc->sensors[i]->base.id));
+    svc_json_push(s, cJSON_CreateString(r->sc->sensors[i]->base.id));
   cJSON_AddNumberToObject(o, "revision", (double)r->revision);
 }
 
@@ -408,7 +408,14 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
   r->created = time(NULL);
   pthread_mutex_init(&r->lock, NULL);
   pthread_mutex_init(&r->cache_lock, NULL);
-  svc_refresh_param_cache(r);
+  if (!svc_refresh_param_cache(r)) {
+    pthread_mutex_unlock(&svc->lock);
+    pthread_mutex_destroy(&r->lock);
+    pthread_mutex_destroy(&r->cache_lock);
+    free(r);
+    scene_free(sc);
+    return svc_fail(e, RSW_ERR_NOMEM, "scene", "out of memory");
+  }
   r->refs = 1;
   svc->scenes[svc->n_scenes++] = r;
   if (!has_files && !x && svc_grow((void **)&svc->raw, &svc->cap_raw, svc->n_raw + 1, sizeof *svc->raw, 0)) {
@@ -433,12 +440,19 @@ rsw_status service_scene_post(service *svc, const char *body, size_t len, bool i
   rsw_status st =
       scene_post(svc, body, len, is_xml, variant, is_xml ? "scene.xml" : "scene.json", NULL, created, &r, e);
   if (st) return st;
+  unsigned jm = svc_json_mark();
   cJSON *o = cJSON_CreateObject();
   svc_scene_summary(r, o);
   *id_out = strdup(r->id);
-  *json_out = svc_print_json(o);
+  st = svc_json_out(json_out, o, jm, e);
+  if (!st && !*id_out) st = svc_fail(e, RSW_ERR_NOMEM, "", "out of memory while building the answer");
+  if (st) {
+    free(*id_out);
+    free(*json_out);
+    *id_out = *json_out = NULL;
+  }
   svc_scene_release(svc, r);
-  return RSW_OK;
+  return st;
 }
 
 rsw_status service_scene_load_text(service *svc, const char *text, size_t len, bool is_xml, const char *name,
@@ -527,14 +541,13 @@ static cJSON *scene_info(service *svc, resident *r) {
 }
 
 rsw_status service_scene_list(service *svc, char **json_out, svc_error *e) {
-  (void)e;
+  unsigned jm = svc_json_mark();
   cJSON *o = cJSON_CreateObject();
   cJSON *a = cJSON_AddArrayToObject(o, "scenes");
   pthread_mutex_lock(&svc->lock);
-  for (size_t i = 0; i < svc->n_scenes; i++) cJSON_AddItemToArray(a, scene_info(svc, svc->scenes[i]));
+  for (size_t i = 0; i < svc->n_scenes; i++) svc_json_push(a, scene_info(svc, svc->scenes[i]));
   pthread_mutex_unlock(&svc->lock);
-  *json_out = svc_print_json(o);
-  return RSW_OK;
+  return svc_json_out(json_out, o, jm, e);
 }
 
 rsw_status svc_no_scene(svc_error *e, const char *id) {
@@ -548,13 +561,13 @@ rsw_status svc_no_scene(svc_error *e, const char *id) {
 
 rsw_status service_scene_get(service *svc, const char *id, char **json_out, svc_error *e) {
   svc_scene_release(svc, svc_scene_acquire(svc, id)); /* reloads an evicted or stored one */
+  unsigned jm = svc_json_mark();
   pthread_mutex_lock(&svc->lock);
   resident *r = svc_find_scene_locked(svc, id);
   cJSON *o = r ? scene_info(svc, r) : NULL;
   pthread_mutex_unlock(&svc->lock);
   if (!o) return svc_no_scene(e, id);
-  *json_out = svc_print_json(o);
-  return RSW_OK;
+  return svc_json_out(json_out, o, jm, e);
 }
 
 rsw_status service_scene_delete(service *svc, const char *id, bool force, svc_error *e) {

@@ -52,8 +52,42 @@ rsw_status svc_request_code(rsw_status kernel_code) {
   }
 }
 
-char *svc_print_json(cJSON *o) {
-  char *s = cJSON_PrintUnformatted(o);
+/* ---- JSON documents when memory runs out ------------------------------------------------
+ * cJSON_Add*, cJSON_Create* and cJSON_Duplicate report an allocation
+ * failure only by a NULL that the add functions then ignore, so a document
+ * built under memory pressure silently lacks a field or an entry (test_oom
+ * found parameter entries without "type" in GET params and job overrides
+ * dropped from a job). Rather than checking every call, the service gives
+ * cJSON an allocator that counts failures per thread, and a document is
+ * checked once where it is printed or kept: no failure since the mark taken
+ * before building it. (The hooks are process-wide; the count is per
+ * thread, so other cJSON users are unaffected.) */
+static _Thread_local unsigned t_json_failures;
+
+static void *json_malloc(size_t n) {
+  void *p = malloc(n);
+  if (!p) t_json_failures++;
+  return p;
+}
+
+static pthread_once_t g_json_once = PTHREAD_ONCE_INIT;
+
+static void json_hooks_install(void) {
+  cJSON_Hooks h = {.malloc_fn = json_malloc, .free_fn = free};
+  cJSON_InitHooks(&h);
+}
+
+unsigned svc_json_mark(void) {
+  pthread_once(&g_json_once, json_hooks_install);
+  return t_json_failures;
+}
+
+bool svc_json_ok(unsigned mark) {
+  return t_json_failures == mark;
+}
+
+char *svc_print_json(cJSON *o, unsigned mark) {
+  char *s = o && svc_json_ok(mark) ? cJSON_PrintUnformatted(o) : NULL;
   cJSON_Delete(o);
   return s;
 }
@@ -73,7 +107,22 @@ static void random_instance(char out[17]) {
   for (int i = 0; i < 8; i++) snprintf(out + 2 * i, 3, "%02x", b[i]);
 }
 
+void svc_json_push(cJSON *array, cJSON *item) {
+  if (!cJSON_AddItemToArray(array, item)) cJSON_Delete(item);
+}
+
+void svc_json_put(cJSON *obj, const char *key, cJSON *item) {
+  if (!cJSON_AddItemToObject(obj, key, item)) cJSON_Delete(item);
+}
+
+rsw_status svc_json_out(char **json_out, cJSON *o, unsigned mark, svc_error *e) {
+  *json_out = svc_print_json(o, mark);
+  if (*json_out) return RSW_OK;
+  return svc_fail(e, RSW_ERR_NOMEM, "", "out of memory while building the answer");
+}
+
 rsw_status service_new(const service_opts *opts, service **out, rsw_err *err) {
+  (void)svc_json_mark(); /* installs the counting allocator before any thread starts */
   service *svc = calloc(1, sizeof *svc);
   if (!svc) return rsw_fail(err, RSW_ERR_NOMEM, "service", "out of memory");
   if (opts) svc->opts = *opts;
@@ -205,6 +254,7 @@ void service_free(service *svc) {
 }
 
 char *service_info_json(service *svc) {
+  unsigned jm = svc_json_mark();
   cJSON *o = cJSON_CreateObject();
   cJSON_AddStringToObject(o, "name", "raysweepd");
   cJSON_AddStringToObject(o, "version", RSW_VERSION);
@@ -212,8 +262,8 @@ char *service_info_json(service *svc) {
   cJSON_AddStringToObject(o, "api_version", "v1");
   cJSON_AddStringToObject(o, "instance", svc->instance);
   cJSON *v = cJSON_AddArrayToObject(o, "variants");
-  cJSON_AddItemToArray(v, cJSON_CreateString("mono"));
-  cJSON_AddItemToArray(v, cJSON_CreateString("rgb"));
+  svc_json_push(v, cJSON_CreateString("mono"));
+  svc_json_push(v, cJSON_CreateString("rgb"));
   cJSON *pl = cJSON_AddArrayToObject(o, "plugins");
   for (size_t i = 0; rsw_plugins[i] || i == 0; i++) {
     const plugin *p = rsw_plugins[i];
@@ -222,7 +272,7 @@ char *service_info_json(service *svc) {
     cJSON *e = cJSON_CreateObject();
     cJSON_AddStringToObject(e, "name", p->name);
     cJSON_AddStringToObject(e, "class", obj_class_name(p->cls));
-    cJSON_AddItemToArray(pl, e);
+    svc_json_push(pl, e);
   }
   for (size_t i = 0; i < plugins_count(); i++) { /* --plugin-dir environment plugins */
     const char *pretty = NULL;
@@ -232,7 +282,7 @@ char *service_info_json(service *svc) {
     cJSON_AddStringToObject(e, "class", obj_class_name(p->cls));
     cJSON_AddStringToObject(e, "pretty_name", pretty);
     cJSON_AddBoolToObject(e, "external", 1);
-    cJSON_AddItemToArray(pl, e);
+    svc_json_push(pl, e);
   }
   cJSON *lim = cJSON_AddObjectToObject(o, "limits");
   if (svc->opts.max_body_bytes)
@@ -249,5 +299,5 @@ char *service_info_json(service *svc) {
   cJSON_AddNumberToObject(lim, "max_scene_bytes", (double)svc->opts.max_scene_bytes);
   cJSON_AddNumberToObject(lim, "max_result_bytes", (double)svc->opts.max_result_bytes);
   cJSON_AddBoolToObject(lim, "state_dir", svc->state_dir[0] != 0);
-  return svc_print_json(o);
+  return svc_print_json(o, jm);
 }

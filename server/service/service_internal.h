@@ -29,6 +29,9 @@ typedef struct resident {
   pthread_mutex_t cache_lock;
   cJSON *base_params;
   uint64_t cache_revision;
+  /* The last rebuild failed (out of memory): base_params is older than
+   * the scene's values; GET params rebuilds it first (or fails). */
+  bool cache_stale;
   int active_jobs; /* queued or running jobs on this scene (svc->lock) */
   int refs;        /* holders outside svc->lock (svc->lock) */
   bool deleted;    /* removed from the registry; freed at refs == 0 */
@@ -38,6 +41,11 @@ typedef struct resident {
   bool pinned;        /* loaded at startup (--scene): never evicted */
   cJSON *patched;     /* {key: value} of every PATCH applied (last value
                          per key), persisted with the revision (r->lock) */
+  /* A render's overrides could not be undone (out of memory, every
+   * retry): the scene's values are no longer its base state, so renders
+   * and updates of it are refused until it is deleted and posted again
+   * (r->lock). */
+  bool broken;
 } resident;
 
 /* One render of a job: a (context, sensor) pair. */
@@ -176,12 +184,25 @@ rsw_status svc_fail(svc_error *e, rsw_status code, const char *where, const char
  * value that does not parse is RSW_ERR_INVALID; others are kept. */
 rsw_status svc_request_code(rsw_status kernel_code);
 /* Print and free a JSON document (NULL when out of memory). */
-char *svc_print_json(cJSON *o);
+/* Documents built under memory pressure (service.c): take a mark before
+ * building, then print (o is deleted; NULL when any cJSON allocation of
+ * this thread failed since the mark, or printing failed), or check it. */
+unsigned svc_json_mark(void);
+bool svc_json_ok(unsigned mark);
+char *svc_print_json(cJSON *o, unsigned mark);
+/* cJSON_AddItemToArray / cJSON_AddItemToObject that free the item when
+ * the add fails (a NULL array or object, no memory for the key): the
+ * plain calls leak it then. */
+void svc_json_push(cJSON *array, cJSON *item);
+void svc_json_put(cJSON *obj, const char *key, cJSON *item);
+/* *json_out = svc_print_json(o, mark); RSW_OK, or RSW_ERR_NOMEM (set in e). */
+rsw_status svc_json_out(char **json_out, cJSON *o, unsigned mark, svc_error *e);
 /* Metrics (metrics.c): an applied parameter update. */
 struct update_report;
 void svc_count_update(service *svc, const struct update_report *rep);
 /* Parameters (params.c). */
-void svc_refresh_param_cache(resident *r);
+/* False when out of memory: the old cache stays, marked stale. */
+bool svc_refresh_param_cache(resident *r);
 rsw_status svc_no_scene(svc_error *e, const char *id);
 rsw_status svc_map_to_updates(const cJSON *j, const scene *sc, const char *where, param_update **out,
                               size_t *n, svc_error *e);

@@ -380,7 +380,7 @@ rsw_status svc_state_film_write(service *svc, const job *j, size_t k, const svc_
   cJSON_AddStringToObject(m, "variant", im->variant == VARIANT_MONO ? "mono" : "rgb");
   snprintf(num, sizeof num, "%" PRIu64, im->unresolved_rays);
   cJSON_AddStringToObject(m, "unresolved_rays", num);
-  char *ms = svc_print_json(m);
+  char *ms = svc_print_json(m, svc_json_mark());
   if (!ms) return svc_fail(e, RSW_ERR_NOMEM, "--state-dir", "out of memory");
   char head[256];
   size_t nh = npy_header(im, head);
@@ -550,7 +550,7 @@ void svc_state_job_saved(service *svc, const job *j, const char *body, size_t le
   char dh[65];
   rsw_hex(j->body_digest, 32, dh);
   cJSON_AddStringToObject(h, "body_sha256", dh);
-  char *hs = svc_print_json(h);
+  char *hs = svc_print_json(h, svc_json_mark());
   char p[4200];
   state_path(svc, p, sizeof p, "jobs/%s.req", j->id);
   bool ok = false;
@@ -602,7 +602,7 @@ void svc_state_job_finished(service *svc, const job *j) {
     }
     cJSON_AddItemToArray(a, x);
   }
-  char *s = svc_print_json(o);
+  char *s = svc_print_json(o, svc_json_mark());
   char p[4200];
   state_path(svc, p, sizeof p, "results/%s/x", j->id);
   fsync_dir(p); /* the films' renames, before the record that counts them */

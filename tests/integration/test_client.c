@@ -1001,7 +1001,7 @@ static int on_spread_film(void *user, const char *context, const char *sensor, c
  * run with the same state file renders nothing and hands every film back
  * as resumed; a state file of another sweep is refused. */
 static void test_spread(void) {
-  rsw_client *c = client_for(main_d.url, NULL, 0);
+  rsw_client *c = client_for(main_d.base_url, NULL, 0);
   REQUIRE(c, "client");
   char id[65];
   REQUIRE(plate_scene(c, "0.5", id), "scene");
@@ -1018,7 +1018,7 @@ static void test_spread(void) {
   rsw_contexts_set_default_spp(x, 2);
   char state[200];
   snprintf(state, sizeof state, "%s/spread.state", tmpdir);
-  rsw_client_opts co = {.size = sizeof co, .base_url = main_d.url, .retry_backoff_s = 0.01};
+  rsw_client_opts co = {.size = sizeof co, .base_url = main_d.base_url, .retry_backoff_s = 0.01};
   spread_log l = {0};
   rsw_spread_opts so = {.size = sizeof so, .shards = 3, .state_path = state, .on_film = on_spread_film,
                         .film_user = &l};

@@ -719,7 +719,12 @@ rsw_status scene_read_json_limited(const char *text, size_t len, const char *sou
       st = fail(&c, RSW_ERR_TYPE, w, "\"variant\" must be a string (\"mono\" or \"rgb\")");
       goto out;
     }
-    variant = rsw_strdup(var->valuestring);
+    /* Unchecked, a failed copy read as "no variant": the scene loaded
+     * as rgb (test_oom_cli). */
+    if (!(variant = rsw_strdup(var->valuestring))) {
+      st = fail(&c, RSW_ERR_NOMEM, w, "out of memory");
+      goto out;
+    }
   }
   /* Build the root without the "variant" key: detach it temporarily. */
   cJSON *detached = var ? cJSON_DetachItemViaPointer(doc, (cJSON *)var) : NULL;

@@ -1,0 +1,17 @@
+/* failmalloc (failmalloc.c): fail the nth heap allocation of the process.
+ * Only in binaries that link tests/support/failmalloc.c (test_oom,
+ * raysweepd-failmalloc); see that file for how it hooks in. */
+#ifndef RSW_TEST_FAILMALLOC_H
+#define RSW_TEST_FAILMALLOC_H
+#include <stdbool.h>
+
+/* Count allocations from now on (every thread but excluded ones) and fail
+ * the nth (1-based) with NULL/ENOMEM; n = 0: count only. */
+void failmalloc_arm(long n);
+/* Stop counting; returns the allocations counted since failmalloc_arm. */
+long failmalloc_disarm(void);
+/* Failures injected since failmalloc_arm (0 or 1). */
+long failmalloc_failed(void);
+/* Exclude (or include again) the calling thread's allocations. */
+void failmalloc_exclude_thread(bool excluded);
+#endif
