@@ -1,9 +1,10 @@
 /* Jobs of kernel contexts: validation, the queue, the worker that renders
  * them, results, and the event log behind server-sent events.
  *
- * One worker renders one (context, sensor) at a time with every render
- * thread: the CPU belongs to the render, and jobs on one scene never share
- * its parameter state. A job's results are a pure function of the request
+ * Several workers (service.c) each run one job at a time, one (context,
+ * sensor) after another; the renders of concurrent jobs share the kernel's
+ * worker pool, and each renders on the base or a private view of its
+ * scene (renders.c), so jobs never share parameter state. A job's results are a pure function of the request
  * and the base revision: each (context, sensor) seed defaults to a hash of
  * (job seed, context id, sensor id), never of the call order, so a sweep
  * split into several jobs gives bitwise the films of one job. */

@@ -164,6 +164,9 @@ rsw_status service_params_patch(service *svc, const char *id, const char *body, 
     return svc_fail(e, RSW_ERR_PARSE, "", "the body is not valid JSON");
   }
   pthread_mutex_lock(&r->lock);
+  /* Wait out a render that borrows the base (renders.c); views keep
+   * rendering the revision they were built at. */
+  while (r->base_busy) pthread_cond_wait(&r->cond, &r->lock);
   rsw_status st = RSW_OK;
   param_update *u = NULL;
   size_t n = 0;
@@ -181,6 +184,13 @@ rsw_status service_params_patch(service *svc, const char *id, const char *body, 
   if (!st && rep.changed) {
     r->revision++;
     svc_refresh_param_cache(r);
+    svc_views_free(r); /* idle views of the old revision */
+    if (!svc_keep_patch(r, j)) {
+      /* Views could no longer reproduce the base: build none (renders
+       * then wait for the base). */
+      cJSON_Delete(r->patches);
+      r->patches = NULL;
+    }
   }
   *revision_out = r->revision;
   cJSON *o = NULL;
