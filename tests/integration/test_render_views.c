@@ -10,6 +10,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <unistd.h>
 
 #include "../../server/service/service.h"
 #include "../support/test.h"
@@ -200,6 +201,53 @@ static void test_views_follow_patches(void) {
   svc_film_free(&a), svc_film_free(&b);
 }
 
+/* Jobs of different scenes run at the same time: a short job finishes
+ * while a long one on another scene is still running. */
+static bool job_state_is(const char *jid, const char *state) {
+  char *json = NULL;
+  svc_error e = {0};
+  if (service_job_get(svc, jid, &json, &e) != RSW_OK) return false;
+  char want[64];
+  snprintf(want, sizeof want, "\"state\":\"%s\"", state);
+  bool yes = strstr(json, want) != NULL;
+  free(json);
+  return yes;
+}
+
+static void test_jobs_run_concurrently(void) {
+  if (sysconf(_SC_NPROCESSORS_ONLN) < 2) {
+    printf("  (one core: one job worker; nothing to test)\n");
+    return;
+  }
+  bool created;
+  char *other = NULL, *json = NULL, *ja = NULL, *jb = NULL;
+  svc_error e = {0};
+  REQUIRE(service_scene_post(svc, SCENE, strlen(SCENE), false, "rgb", &created, &other, &json, &e) == RSW_OK,
+          "second scene");
+  free(json);
+  const char *longjob = "{\"contexts\": [{\"id\": \"a\", \"sensors\": [\"meter\"], \"spp\": 400000000}]}";
+  const char *shortjob = "{\"contexts\": [{\"id\": \"b\", \"sensors\": [\"meter\"], \"spp\": 2}]}";
+  REQUIRE(service_job_submit(svc, scene_id, longjob, strlen(longjob), NULL, &ja, &json, &e) == RSW_OK,
+          "long job: %s", e.err.msg);
+  free(json);
+  for (int i = 0; i < 200 && !job_state_is(ja, "running"); i++) usleep(10000);
+  REQUIRE(service_job_submit(svc, other, shortjob, strlen(shortjob), NULL, &jb, &json, &e) == RSW_OK,
+          "short job: %s", e.err.msg);
+  free(json);
+  double t0 = now_s();
+  while (!job_state_is(jb, "succeeded") && now_s() - t0 < 5) usleep(5000);
+  double short_s = now_s() - t0;
+  bool long_running = job_state_is(ja, "running");
+  CHECK(short_s < 2.0 && long_running, "the short job took %.2f s beside a running job (long job running: %d)",
+        short_s, long_running);
+  char *cj = NULL;
+  service_job_cancel(svc, ja, &cj, &e);
+  free(cj);
+  for (int i = 0; i < 500 && !job_state_is(ja, "cancelled"); i++) usleep(10000);
+  CHECK(job_state_is(ja, "cancelled"), "the long job ends cancelled");
+  free(ja), free(jb), free(other);
+}
+
 int main(void) {
   service_opts o = {.size = sizeof o, .render_threads = 0};
   rsw_err err = {0};
@@ -218,6 +266,7 @@ int main(void) {
   RSW_TEST_RUN(test_concurrent_overrides_bitwise);
   RSW_TEST_RUN(test_no_wait_for_other_render);
   RSW_TEST_RUN(test_views_follow_patches);
+  RSW_TEST_RUN(test_jobs_run_concurrently);
   for (int k = 0; k < N_OV; k++) svc_film_free(&serial[k]);
   free(scene_id);
   service_free(svc);
