@@ -55,19 +55,25 @@ static void job_free(job *j) {
   free(j);
 }
 
-/* svc->lock held. */
-static void push_event(service *svc, job *j, cJSON *data, bool end) {
+/* svc->lock held; takes json (printed event data, may be NULL). */
+static void push_event_text(service *svc, job *j, char *json, bool end) {
   if (!svc_grow((void **)&j->events, &j->cap_events, j->n_events + 1, sizeof *j->events, 0)) {
-    cJSON_Delete(data);
+    free(json);
     return;
   }
   job_event *ev = &j->events[j->n_events];
   ev->seq = j->n_events + 1;
-  ev->json = cJSON_PrintUnformatted(data);
+  ev->json = json;
   ev->end = end;
-  cJSON_Delete(data);
   j->n_events++;
   pthread_cond_broadcast(&svc->cond);
+}
+
+/* svc->lock held. */
+static void push_event(service *svc, job *j, cJSON *data, bool end) {
+  char *json = cJSON_PrintUnformatted(data);
+  cJSON_Delete(data);
+  push_event_text(svc, j, json, end);
 }
 
 static cJSON *job_json(const job *j) {
@@ -417,6 +423,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   *json_out = cJSON_PrintUnformatted(jj);
   cJSON_Delete(jj);
   pthread_cond_broadcast(&svc->cond);
+  pthread_cond_signal(&svc->work_cond);
   pthread_mutex_unlock(&svc->lock);
   return RSW_OK;
 }
@@ -451,7 +458,7 @@ void *svc_worker_main(void *arg) {
       struct timespec ts;
       clock_gettime(CLOCK_REALTIME, &ts);
       ts.tv_sec += 5;
-      pthread_cond_timedwait(&svc->cond, &svc->lock, &ts);
+      pthread_cond_timedwait(&svc->work_cond, &svc->lock, &ts);
       svc_jobs_expire(svc);
     }
     if (svc->stopping) {
@@ -481,30 +488,37 @@ void *svc_worker_main(void *arg) {
                         .overrides = it->params,
                         .cancel = &j->cancel};
       rsw_status st = svc_render_locked(svc, j->res, &rs, &it->film, &e);
-      pthread_mutex_lock(&svc->lock);
-      if (st == RSW_ERR_CANCELLED) break;
+      if (st == RSW_ERR_CANCELLED) {
+        pthread_mutex_lock(&svc->lock);
+        break;
+      }
+      /* The event is built before taking svc->lock (only this worker
+       * writes the job's counters), so a job of tiny renders holds the
+       * lock for moments and requests are not starved of it. */
+      if (st) rsw_err_format(&e.err, it->error, sizeof it->error);
       cJSON *d = cJSON_CreateObject();
       cJSON_AddStringToObject(d, "context", it->context);
       cJSON_AddStringToObject(d, "sensor", it->sensor);
+      cJSON_AddStringToObject(d, "state", st ? "failed" : "succeeded");
+      if (st) cJSON_AddStringToObject(d, "error", it->error);
+      cJSON_AddNumberToObject(d, "done", (double)(i + 1));
+      cJSON_AddNumberToObject(d, "total", (double)j->n_items);
+      char *ev = cJSON_PrintUnformatted(d);
+      cJSON_Delete(d);
+      pthread_mutex_lock(&svc->lock);
       if (st) {
         it->state = JOB_FAILED;
-        rsw_err_format(&e.err, it->error, sizeof it->error);
         j->items_failed++;
         svc->renders_failed++;
-        cJSON_AddStringToObject(d, "state", "failed");
-        cJSON_AddStringToObject(d, "error", it->error);
       } else {
         it->state = JOB_SUCCEEDED;
         it->has_film = true;
         snprintf(it->film.context, sizeof it->film.context, "%s", it->context);
         svc->contexts_rendered++;
-        cJSON_AddStringToObject(d, "state", "succeeded");
       }
       j->items_done++;
       if (--j->context_remaining[it->context_index] == 0) j->contexts_done++;
-      cJSON_AddNumberToObject(d, "done", (double)j->items_done);
-      cJSON_AddNumberToObject(d, "total", (double)j->n_items);
-      push_event(svc, j, d, false);
+      push_event_text(svc, j, ev, false);
     }
     finish_job(svc, j);
   }

@@ -90,6 +90,7 @@ rsw_status service_new(const service_opts *opts, service **out, rsw_err *err) {
   svc->opts.data_root = svc->data_root[0] ? svc->data_root : NULL;
   pthread_mutex_init(&svc->lock, NULL);
   pthread_cond_init(&svc->cond, NULL);
+  pthread_cond_init(&svc->work_cond, NULL);
   atomic_store(&svc->ready, true);
   /* Job workers: one job each at a time, so jobs (of one scene or of
    * several) run concurrently; their renders share the kernel's worker
@@ -119,6 +120,7 @@ void service_shutdown(service *svc) {
   svc->stopping = true;
   for (size_t i = 0; i < svc->n_jobs; i++) atomic_store(&svc->jobs[i]->cancel, 1);
   pthread_cond_broadcast(&svc->cond);
+  pthread_cond_broadcast(&svc->work_cond);
   pthread_mutex_unlock(&svc->lock);
 }
 
@@ -152,6 +154,7 @@ void service_free(service *svc) {
   free(svc->reqs);
   pthread_mutex_destroy(&svc->lock);
   pthread_cond_destroy(&svc->cond);
+  pthread_cond_destroy(&svc->work_cond);
   free(svc);
 }
 

@@ -119,7 +119,9 @@ struct service {
   char blob_dir[4096];
   char data_root[4096]; /* realpath, "" when none */
   pthread_mutex_t lock;
-  pthread_cond_t cond; /* queue and job events */
+  pthread_cond_t cond;      /* job events */
+  pthread_cond_t work_cond; /* a job was queued, or shutdown (job workers wait on it
+                               alone, so events do not wake idle workers) */
   resident **scenes;
   size_t n_scenes, cap_scenes;
   /* body digest -> scene id, so reposting the same text skips a load */
