@@ -269,6 +269,11 @@ typedef struct sensor_ops {
    * degrees, zen_az[2 (iy W + ix)] and [2 (iy W + ix) + 1], azimuth in
    * [0, 360) in Eradiate's east-right convention (atan2(y, x)). */
   void (*pixel_angles)(const sensor *s, int W, int H, double *zen_az);
+  /* Optional (distant family): the unit world direction that pixel (ix,
+   * iy) of a W x H film sees radiance leave along (towards the sensor):
+   * hdistant's to_world H(u) at the pixel centre, distant's -d. The one
+   * copy of the film mapping besides sample_ray (kapi.h directions). */
+  vec3 (*pixel_direction)(const sensor *s, int ix, int iy, int W, int H);
 } sensor_ops;
 struct sensor {
   object base;

@@ -7,7 +7,7 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "../kernel/core/warp.h"
+#include "../kernel/kapi.h"
 #include "buf.h"
 #include "rsw_sha256.h"
 #include "service_internal.h"
@@ -374,50 +374,48 @@ rsw_status service_directions(service *svc, const char *id, const char *sensor_n
     return svc_fail(e, RSW_ERR_NOT_FOUND, sensor_name, "no sensor '%s' in scene %s", sensor_name, id);
   }
   pthread_mutex_lock(&r->lock);
-  const sensor *se = r->sc->sensors[si];
-  const char *type = se->base.plugin->name;
+  const scene *sc = r->sc;
   cJSON *o = NULL;
-  if (strcmp(type, "hdistant") != 0 && strcmp(type, "distant") != 0) {
+  if (!kapi_has_directions(sc, si)) {
+    const char *type = kapi_sensor_type(sc, si);
     st = svc_fail(
         e, RSW_ERR_UNSUPPORTED, sensor_name,
         "sensor '%s' is a %s; per-pixel directions exist for distant-family sensors (hdistant, distant)",
         sensor_name, type);
   } else {
-    int W = se->film->width, H = se->film->height;
-    o = cJSON_CreateObject();
-    cJSON_AddStringToObject(o, "sensor", se->base.id);
-    cJSON_AddNumberToObject(o, "width", W);
-    cJSON_AddNumberToObject(o, "height", H);
-    cJSON_AddStringToObject(o, "convention", "east_right");
-    cJSON *px = cJSON_AddArrayToObject(o, "pixels");
-    for (int iy = 0; iy < H; iy++)
-      for (int ix = 0; ix < W; ix++) {
-        /* hdistant: omega = to_world H(u) at the pixel centre
-         * (kernel-behavior.md §1.2); angles from the local vector, as
-         * Eradiate's post-processing (theta = acos z, phi = atan2(y, x),
-         * east-right). distant: omega = -(to_world z). */
-        vec3 local, w;
-        if (strcmp(type, "hdistant") == 0) {
-          local = warp_square_to_uniform_hemisphere(v2((ix + 0.5) / W, (iy + 0.5) / H));
-          w = v3_norm(xf_vector(&se->to_world, local));
-        } else {
-          local = v3(0, 0, 1);
-          w = v3_neg(v3_norm(xf_vector(&se->to_world, v3(0, 0, 1))));
-          local = w;
+    /* The kernel's own film mapping (kapi.h): hdistant omega = to_world
+     * H(u) at the pixel centre, angles from the local vector as Eradiate's
+     * post-processing; distant omega = -(to_world z). */
+    int W, H;
+    kapi_film_size(sc, si, &W, &H);
+    double *px = malloc((size_t)W * (size_t)H * 5 * sizeof *px);
+    rsw_err kerr = {0};
+    if (!px)
+      st = svc_fail(e, RSW_ERR_NOMEM, sensor_name, "out of memory for %dx%d directions", W, H);
+    else if ((st = kapi_pixel_directions(sc, si, px, &kerr)) != RSW_OK)
+      st = svc_fail(e, st, sensor_name, "%s", kerr.msg);
+    if (!st) {
+      o = cJSON_CreateObject();
+      cJSON_AddStringToObject(o, "sensor", kapi_sensor_id(sc, si));
+      cJSON_AddNumberToObject(o, "width", W);
+      cJSON_AddNumberToObject(o, "height", H);
+      cJSON_AddStringToObject(o, "convention", "east_right");
+      cJSON *arr = cJSON_AddArrayToObject(o, "pixels");
+      for (int iy = 0; iy < H; iy++)
+        for (int ix = 0; ix < W; ix++) {
+          const double *d = px + 5 * ((size_t)iy * (size_t)W + (size_t)ix);
+          cJSON *p = cJSON_CreateObject();
+          cJSON_AddNumberToObject(p, "ix", ix);
+          cJSON_AddNumberToObject(p, "iy", iy);
+          cJSON_AddNumberToObject(p, "x", d[0]);
+          cJSON_AddNumberToObject(p, "y", d[1]);
+          cJSON_AddNumberToObject(p, "z", d[2]);
+          cJSON_AddNumberToObject(p, "zenith_deg", d[3]);
+          cJSON_AddNumberToObject(p, "azimuth_deg", d[4]);
+          cJSON_AddItemToArray(arr, p);
         }
-        double zen = acos(fmax(-1.0, fmin(1.0, local.z))) * 180.0 / RSW_PI;
-        double az = atan2(local.y, local.x) * 180.0 / RSW_PI;
-        if (az < 0) az += 360.0;
-        cJSON *p = cJSON_CreateObject();
-        cJSON_AddNumberToObject(p, "ix", ix);
-        cJSON_AddNumberToObject(p, "iy", iy);
-        cJSON_AddNumberToObject(p, "x", w.x);
-        cJSON_AddNumberToObject(p, "y", w.y);
-        cJSON_AddNumberToObject(p, "z", w.z);
-        cJSON_AddNumberToObject(p, "zenith_deg", zen);
-        cJSON_AddNumberToObject(p, "azimuth_deg", az);
-        cJSON_AddItemToArray(px, p);
-      }
+    }
+    free(px);
   }
   pthread_mutex_unlock(&r->lock);
   svc_scene_release(svc, r);

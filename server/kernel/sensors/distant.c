@@ -55,10 +55,16 @@ static void distant_pixel_angles(const sensor *s, int W, int H, double *zen_az) 
   for (size_t i = 0; i < (size_t)W * H; i++) direction_angles(w, &zen_az[2 * i], &zen_az[2 * i + 1]);
 }
 
+static vec3 distant_pixel_direction(const sensor *s, int ix, int iy, int W, int H) {
+  (void)ix, (void)iy, (void)W, (void)H;
+  return v3_neg(((const distant *)s)->d);
+}
+
 static const sensor_ops distant_ops = {
     .sample_ray = distant_sample_ray,
     .set_scene = distant_set_scene,
     .pixel_angles = distant_pixel_angles,
+    .pixel_direction = distant_pixel_direction,
 };
 
 static void distant_destroy(object *o) {

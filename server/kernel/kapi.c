@@ -1,0 +1,72 @@
+/* The service's view of the kernel (kapi.h). */
+#include "kapi.h"
+
+#include "accel.h"
+#include "scene/scene.h"
+
+bool kapi_is_mono(const scene *sc) {
+  return sc->variant == VARIANT_MONO;
+}
+
+size_t kapi_sensor_count(const scene *sc) {
+  return sc->n_sensors;
+}
+
+const char *kapi_sensor_id(const scene *sc, size_t i) {
+  return i < sc->n_sensors ? sc->sensors[i]->base.id : NULL;
+}
+
+const char *kapi_sensor_type(const scene *sc, size_t i) {
+  return i < sc->n_sensors ? sc->sensors[i]->base.plugin->name : NULL;
+}
+
+bool kapi_find_sensor(const scene *sc, const char *name, size_t *index) {
+  return scene_find_sensor(sc, name, index) != NULL;
+}
+
+void kapi_film_size(const scene *sc, size_t i, int *width, int *height) {
+  const film *f = i < sc->n_sensors ? sc->sensors[i]->film : NULL;
+  *width = f ? f->width : 0;
+  *height = f ? f->height : 0;
+}
+
+uint32_t kapi_sensor_spp(const scene *sc, size_t i) {
+  return i < sc->n_sensors ? sc->sensors[i]->sampler->sample_count : 0;
+}
+
+size_t kapi_scene_bytes(const scene *sc) {
+  size_t b = accel_memory(sc->accel);
+  for (size_t i = 0; i < sc->n_shapes; i++) {
+    const mesh *m = &sc->shapes[i]->mesh;
+    b += (size_t)m->n_verts * (12 + (m->nrm ? 12 : 0) + (m->uv ? 8 : 0)) + (size_t)m->n_faces * 12;
+    if (sc->shapes[i]->tri_cdf) b += (size_t)sc->shapes[i]->tri_cdf_n * 8;
+  }
+  return b;
+}
+
+bool kapi_has_directions(const scene *sc, size_t i) {
+  return i < sc->n_sensors && sc->sensors[i]->ops->pixel_direction && sc->sensors[i]->ops->pixel_angles;
+}
+
+rsw_status kapi_pixel_directions(const scene *sc, size_t i, double *out, rsw_err *err) {
+  if (!kapi_has_directions(sc, i))
+    return rsw_fail(err, RSW_ERR_UNSUPPORTED, i < sc->n_sensors ? sc->sensors[i]->base.id : "sensor",
+                    "this sensor has no per-pixel directions");
+  const sensor *se = sc->sensors[i];
+  int W = se->film->width, H = se->film->height;
+  /* Angles first into the tail of out (2 per pixel), then spread to 5
+   * per pixel from the front: pixel p's angles sit at 3 W H + 2 p, which
+   * pixel q <= p's 5 slots never reach before p's are read. */
+  size_t n = (size_t)W * (size_t)H;
+  double *za = out + 3 * n;
+  se->ops->pixel_angles(se, W, H, za);
+  for (int iy = 0; iy < H; iy++)
+    for (int ix = 0; ix < W; ix++) {
+      size_t p = (size_t)iy * (size_t)W + (size_t)ix;
+      double zen = za[2 * p], az = za[2 * p + 1];
+      vec3 w = se->ops->pixel_direction(se, ix, iy, W, H);
+      double *o = out + 5 * p;
+      o[0] = w.x, o[1] = w.y, o[2] = w.z, o[3] = zen, o[4] = az;
+    }
+  return RSW_OK;
+}
