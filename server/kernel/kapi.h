@@ -3,9 +3,9 @@
  * A scene is an opaque `struct scene`; everything the service asks of it
  * goes through these functions (sensors and their films, memory use,
  * per-pixel viewing directions), so the service needs none of the kernel's
- * internal headers for them. Loading, parameters, updates and renders are
- * declared here too, as thin names over scene/scene.h, scene/params.h and
- * render.h, for the service files to move to one at a time. */
+ * internal headers for them. Not yet here (the service still includes
+ * scene/scene.h, scene/params.h and render.h for them): loading,
+ * parameters (the table, values, updates) and renders. */
 #ifndef RSW_KERNEL_KAPI_H
 #define RSW_KERNEL_KAPI_H
 

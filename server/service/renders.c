@@ -13,7 +13,7 @@
 #include "service_internal.h"
 
 bool svc_find_sensor(const scene *sc, const char *name, size_t *index) {
-  return scene_find_sensor(sc, name, index) != NULL;
+  return kapi_find_sensor(sc, name, index);
 }
 
 void svc_film_free(svc_film *f) {
@@ -260,7 +260,7 @@ rsw_status svc_render_locked(service *svc, resident *r, const render_spec *rs, s
       pthread_mutex_unlock(&svc->lock);
       memcpy(out->scene, r->id, 65);
       out->revision = revision;
-      snprintf(out->sensor, sizeof out->sensor, "%s", sc->sensors[rs->sensor_index]->base.id);
+      snprintf(out->sensor, sizeof out->sensor, "%s", kapi_sensor_id(sc, rs->sensor_index));
     }
   }
   if (restore) {
