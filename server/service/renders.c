@@ -42,7 +42,10 @@ void svc_film_free(svc_film *f) {
  * built once and reused: after a render the keys it overrode are set back
  * to the view's own earlier values (a view whose reset fails is dropped;
  * the base never sees it). Views per scene are capped (view_cap); renders
- * beyond the cap wait for one. */
+ * beyond the cap wait for one. A render without overrides takes a view
+ * only for a small scene (VIEW_FREE_BYTES of geometry, kapi_scene_bytes):
+ * on a big one it waits for the base rather than load the scene again. */
+#define VIEW_FREE_BYTES ((size_t)16 << 20)
 
 static int view_cap(void) {
   static atomic_int cap;
@@ -128,7 +131,8 @@ static rsw_status take_scene(service *svc, resident *r, bool base_ok, const rend
       pthread_mutex_unlock(&r->lock);
       return RSW_OK;
     }
-    if (r->n_views < view_cap() && r->patches) {
+    bool may_build = !base_ok || kapi_scene_bytes(r->sc) <= VIEW_FREE_BYTES;
+    if (may_build && r->n_views < view_cap() && r->patches) {
       r->n_views++;
       uint64_t rev = r->revision;
       cJSON *p = cJSON_Duplicate(r->patches, true);
