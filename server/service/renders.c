@@ -115,6 +115,7 @@ static bool stop_waiting(const render_spec *rs) {
  * at the current revision. */
 static rsw_status take_scene(service *svc, resident *r, bool base_ok, const render_spec *rs, svc_view **v,
                              uint64_t *revision, svc_error *e) {
+  bool build_failed = false;
   pthread_mutex_lock(&r->lock);
   for (;;) {
     if (base_ok && !r->base_busy) {
@@ -131,7 +132,13 @@ static rsw_status take_scene(service *svc, resident *r, bool base_ok, const rend
       pthread_mutex_unlock(&r->lock);
       return RSW_OK;
     }
-    bool may_build = !base_ok || kapi_scene_bytes(r->sc) <= VIEW_FREE_BYTES;
+    if (!base_ok && !r->patches) {
+      /* Out of memory while recording a PATCH: views can no longer
+       * reproduce the base. */
+      pthread_mutex_unlock(&r->lock);
+      return svc_fail(e, RSW_ERR_NOMEM, "params", "out of memory: this scene can no longer take overrides");
+    }
+    bool may_build = !build_failed && (!base_ok || kapi_scene_bytes(r->sc) <= VIEW_FREE_BYTES);
     if (may_build && r->n_views < view_cap() && r->patches) {
       r->n_views++;
       uint64_t rev = r->revision;
@@ -147,6 +154,11 @@ static rsw_status take_scene(service *svc, resident *r, bool base_ok, const rend
       }
       r->n_views--;
       pthread_cond_broadcast(&r->cond);
+      if (st && base_ok) { /* wait for the base instead */
+        build_failed = true;
+        memset(e, 0, sizeof *e);
+        continue;
+      }
       if (st) {
         pthread_mutex_unlock(&r->lock);
         return st;
