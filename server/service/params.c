@@ -187,7 +187,7 @@ rsw_status service_params_patch(service *svc, const char *id, const char *body, 
     svc_views_free(r); /* idle views of the old revision */
     if (!svc_keep_patch(r, j)) {
       /* Views could no longer reproduce the base: build none (renders
-       * then wait for the base). */
+       * without overrides wait for the base, those with fail). */
       cJSON_Delete(r->patches);
       r->patches = NULL;
     }

@@ -226,6 +226,7 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
   pthread_mutex_init(&r->lock, NULL);
   pthread_cond_init(&r->cond, NULL);
   pthread_mutex_init(&r->cache_lock, NULL);
+  memcpy(r->src_files, fd, 32);
   if (!svc_keep_source(svc, r, body, len, is_xml)) {
     pthread_mutex_unlock(&svc->lock);
     svc_resident_free(r);
@@ -430,11 +431,23 @@ bool svc_keep_source(service *svc, resident *r, const char *text, size_t len, bo
 }
 
 rsw_status svc_scene_reload(service *svc, const resident *r, scene **out, rsw_err *err) {
-  /* No digests: the id is already known; a blob that was deleted since
-   * fails here as it would on a fresh load. r->src_root keeps a start-up
-   * scene's own directory (service_scene_load_file). */
-  load_ctx lc = {.svc = svc, .files = NULL, .root = r->src_root ? r->src_root : ""};
+  /* A blob deleted since fails here as it would on a fresh load; a file
+   * under the data root that changed since is refused (its digest is part
+   * of the scene's id, so the view would not be this scene). r->src_root
+   * keeps a start-up scene's own directory (service_scene_load_file). */
+  rsw_sha256_ctx files;
+  if (!rsw_sha256_begin(&files)) return rsw_fail(err, RSW_ERR_NOMEM, "scene", "out of memory");
+  load_ctx lc = {.svc = svc, .files = &files, .root = r->src_root ? r->src_root : ""};
   scene_load_opts lo = {
       .size = sizeof lo, .variant = r->src_variant, .resolve = resolve_file, .resolve_user = &lc};
-  return scene_load_memory(r->src, r->src_len, r->id, r->src_xml, &lo, out, err);
+  scene *sc = NULL;
+  rsw_status st = scene_load_memory(r->src, r->src_len, r->id, r->src_xml, &lo, &sc, err);
+  unsigned char fd[32];
+  rsw_sha256_end(&files, fd);
+  if (!st && memcmp(fd, r->src_files, 32) != 0) {
+    scene_free(sc);
+    return rsw_fail(err, RSW_ERR_FILE, "scene", "a file the scene names changed since it was loaded");
+  }
+  if (!st) *out = sc;
+  return st;
 }

@@ -49,6 +49,7 @@ typedef struct resident {
   bool src_xml;
   char src_variant[8];
   char *src_root; /* NULL: the daemon's data root */
+  unsigned char src_files[32]; /* digest of the referenced files' digests */
   cJSON *patches;
   /* The parameter table's entries at the base state (JSON, table order)
    * and their revision, so GET params answers without waiting for a
