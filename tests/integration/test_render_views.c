@@ -248,6 +248,62 @@ static void test_jobs_run_concurrently(void) {
   free(ja), free(jb), free(other);
 }
 
+/* A view is the scene it stands for: a file under the data root that
+ * changed since the load is refused, not silently rendered. */
+static void write_obj(const char *path, double z) {
+  FILE *f = fopen(path, "w");
+  if (!f) return;
+  fprintf(f, "v -1 -1 %g\nv 1 -1 %g\nv 0 1 %g\nf 1 2 3\n", z, z, z);
+  fclose(f);
+}
+
+static void test_view_refuses_changed_file(void) {
+  char dir[] = "/tmp/rsw-views-XXXXXX";
+  REQUIRE(mkdtemp(dir), "temp dir");
+  char obj[300];
+  snprintf(obj, sizeof obj, "%s/tri.obj", dir);
+  write_obj(obj, 0);
+  service *s2 = NULL;
+  service_opts o = {.size = sizeof o, .data_root = dir};
+  rsw_err err = {0};
+  REQUIRE(service_new(&o, &s2, &err) == RSW_OK, "service: %s", err.msg);
+  const char *doc = "{\"type\": \"scene\", \"variant\": \"mono\","
+                    " \"meter\": {\"type\": \"distant\", \"direction\": [0, 0, -1],"
+                    "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}},"
+                    " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1]},"
+                    " \"tri\": {\"type\": \"obj\", \"filename\": \"tri.obj\","
+                    "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}";
+  bool created;
+  char *id = NULL, *json = NULL;
+  svc_error e = {0};
+  REQUIRE(service_scene_post(s2, doc, strlen(doc), false, NULL, &created, &id, &json, &e) == RSW_OK,
+          "post: %s: %s", e.err.where, e.err.msg);
+  free(json);
+  const char *q = "{\"spp\": 2, \"params\": {\"tri.bsdf.reflectance.value\": 0.25}}";
+  svc_film f;
+  REQUIRE(service_render(s2, id, q, strlen(q), NULL, &f, &e) == RSW_OK, "override render: %s", e.err.msg);
+  svc_film_free(&f);
+  /* Another view is needed once the first is busy or gone: change the file
+   * and PATCH (which drops the idle views). */
+  write_obj(obj, 0.5);
+  const char *patch = "{\"tri.bsdf.reflectance.value\": 0.4}";
+  uint64_t rev;
+  REQUIRE(service_params_patch(s2, id, patch, strlen(patch), -1, &json, &rev, &e) == RSW_OK, "patch");
+  free(json);
+  svc_error e2 = {0};
+  CHECK(service_render(s2, id, q, strlen(q), NULL, &f, &e2) != RSW_OK && strstr(e2.err.msg, "changed"),
+        "a view of a changed file was rendered (%s)", e2.err.msg);
+  const char *plain = "{\"spp\": 2}";
+  svc_error e3 = {0};
+  CHECK(service_render(s2, id, plain, strlen(plain), NULL, &f, &e3) == RSW_OK, "the base still renders: %s",
+        e3.err.msg);
+  if (!e3.err.code) svc_film_free(&f);
+  free(id);
+  service_free(s2);
+  remove(obj);
+  rmdir(dir);
+}
+
 int main(void) {
   service_opts o = {.size = sizeof o, .render_threads = 0};
   rsw_err err = {0};
@@ -267,6 +323,7 @@ int main(void) {
   RSW_TEST_RUN(test_no_wait_for_other_render);
   RSW_TEST_RUN(test_views_follow_patches);
   RSW_TEST_RUN(test_jobs_run_concurrently);
+  RSW_TEST_RUN(test_view_refuses_changed_file);
   for (int k = 0; k < N_OV; k++) svc_film_free(&serial[k]);
   free(scene_id);
   service_free(svc);
