@@ -418,7 +418,7 @@ static const command commands[] = {
      cmd_params},
     {"serve", RSW_SERVE_USAGE, "the HTTP/JSON daemon (contract: proto/openapi.yaml)",
      "  --listen HOST:PORT  default 127.0.0.1:8350; port 0 picks a free one (see --port-file)\n"
-     "  --threads N         render threads, 1 to 256 (default: every online core)\n"
+     "  --threads N         threads per render and jobs run at once, 1 to 256 (default: every online core)\n"
      "  --scene FILE        preload a scene (repeatable; default: the embedded default scene)\n"
      "  --data-root DIR     plain file names in scenes resolve inside DIR (default: none, blobs only)\n"
      "  --blob-dir DIR      where uploaded blobs are kept (default: DIR/blobs of --state-dir, else a\n"

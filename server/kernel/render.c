@@ -44,16 +44,23 @@ typedef struct job {
   bool stokes;      /* Stokes film: Q, U, V accumulated too */
   int stride;       /* doubles per pixel in accumulators: 4 or 7 */
   double *film_acc; /* W*H*4 */
-  /* Work distribution and ordered merge. */
+  /* Ordered merge (under `lock`). */
   pthread_mutex_t lock;
-  size_t next_tile;
   size_t next_commit;
   tile_buf **done; /* finished, not yet merged */
-  bool failed;
+  atomic_bool failed;
   atomic_bool stopped; /* deadline passed (set by any worker) */
   /* Stats (merged under lock). */
   render_stats rays;
   uint64_t samples, invalid;
+  /* Work distribution (under the pool's lock; see "the worker pool"). */
+  size_t next_tile;
+  int max_workers;        /* threads that may work on it at once, caller included */
+  int active;             /* threads working on it now, caller included */
+  int peak;               /* most threads that worked on it at once */
+  bool listed;            /* in the pool's list of jobs with tiles to claim */
+  struct job *prev, *next;
+  pthread_cond_t idle;    /* active dropped to 0 (the caller waits on it) */
 } job;
 
 static void splat(const job *jb, tile_buf *tb, double px, double py, color v, const double *quv) {
@@ -176,41 +183,171 @@ static void merge_tile(job *jb, tile_buf *tb) {
   free(tb);
 }
 
-static void *worker(void *arg) {
-  job *jb = arg;
+/* Render tile t and merge every finished tile that is next in tile order,
+ * so floating-point sums never depend on scheduling. */
+static void run_tile(job *jb, size_t t) {
   render_stats rs = {0};
   uint64_t samples = 0, invalid = 0;
-  for (;;) {
-    pthread_mutex_lock(&jb->lock);
-    size_t t = jb->next_tile++;
-    bool stop = jb->failed || atomic_load(&jb->stopped) || t >= jb->n_tiles || job_should_stop(jb);
-    pthread_mutex_unlock(&jb->lock);
-    if (stop) break;
-    tile_buf *tb = render_tile(jb, t, &rs, &samples, &invalid);
-    pthread_mutex_lock(&jb->lock);
-    if (!tb) {
-      jb->failed = true;
-    } else {
-      /* Merge in tile order so floating-point sums never depend on
-       * scheduling. */
-      jb->done[t] = tb;
-      while (jb->next_commit < jb->n_tiles && jb->done[jb->next_commit]) {
-        merge_tile(jb, jb->done[jb->next_commit]);
-        jb->done[jb->next_commit] = NULL;
-        jb->next_commit++;
-      }
-      if (jb->opts->progress) jb->opts->progress(jb->opts->progress_user, jb->next_commit, jb->n_tiles);
-    }
-    pthread_mutex_unlock(&jb->lock);
-  }
+  tile_buf *tb = render_tile(jb, t, &rs, &samples, &invalid);
   pthread_mutex_lock(&jb->lock);
   jb->rays.rays += rs.rays;
   jb->rays.shadow_rays += rs.shadow_rays;
   jb->rays.unresolved += rs.unresolved;
   jb->samples += samples;
   jb->invalid += invalid;
+  if (!tb) {
+    atomic_store(&jb->failed, true);
+  } else {
+    jb->done[t] = tb;
+    while (jb->next_commit < jb->n_tiles && jb->done[jb->next_commit]) {
+      merge_tile(jb, jb->done[jb->next_commit]);
+      jb->done[jb->next_commit] = NULL;
+      jb->next_commit++;
+    }
+    if (jb->opts->progress) jb->opts->progress(jb->opts->progress_user, jb->next_commit, jb->n_tiles);
+  }
   pthread_mutex_unlock(&jb->lock);
+}
+
+/* ---- the worker pool ------------------------------------------------------
+ *
+ * One process-wide set of threads (cores - 1 of them, started on the first
+ * render that can use them) serves every render: no thread is started or
+ * joined per render. A render lists itself while it has tiles left to
+ * claim; the caller's thread works on its own render too, so a render
+ * always progresses even when every pool thread is busy elsewhere, and a
+ * one-tile or one-thread render (a 1x1 film) never touches the pool at all.
+ * Pool threads take one tile at a time, from the listed renders in turn
+ * (round robin, each render capped at its `threads`), so concurrent renders
+ * share the cores tile by tile. Which thread renders a tile never changes
+ * the film: tiles are merged in tile order (run_tile). */
+static struct {
+  pthread_mutex_t lock;
+  pthread_cond_t work; /* a render was listed */
+  job *head;           /* listed renders; the next claim starts here */
+  int n_threads;
+} g_pool = {PTHREAD_MUTEX_INITIALIZER, PTHREAD_COND_INITIALIZER, NULL, 0};
+static pthread_once_t g_pool_once = PTHREAD_ONCE_INIT;
+
+static void pool_unlist(job *jb) { /* pool lock held */
+  if (!jb->listed) return;
+  jb->listed = false;
+  if (jb->next == jb) {
+    g_pool.head = NULL;
+  } else {
+    jb->prev->next = jb->next;
+    jb->next->prev = jb->prev;
+    if (g_pool.head == jb) g_pool.head = jb->next;
+  }
+  jb->prev = jb->next = NULL;
+}
+
+static void pool_list(job *jb) { /* pool lock held */
+  job *h = g_pool.head;
+  if (!h) {
+    jb->prev = jb->next = jb;
+    g_pool.head = jb;
+  } else { /* at the tail: the renders listed before it keep their turn */
+    jb->next = h;
+    jb->prev = h->prev;
+    h->prev->next = jb;
+    h->prev = jb;
+  }
+  jb->listed = true;
+}
+
+/* Claim the next tile of jb (pool lock held); false when none is left or
+ * the render must stop (it is unlisted then). */
+static bool pool_claim(job *jb, size_t *t) {
+  if (jb->next_tile >= jb->n_tiles || atomic_load(&jb->failed) || atomic_load(&jb->stopped) ||
+      job_should_stop(jb)) {
+    jb->next_tile = jb->n_tiles;
+    pool_unlist(jb);
+    return false;
+  }
+  *t = jb->next_tile++;
+  if (jb->next_tile >= jb->n_tiles) pool_unlist(jb);
+  return true;
+}
+
+static void *pool_main(void *arg) {
+  (void)arg;
+  pthread_mutex_lock(&g_pool.lock);
+  for (;;) {
+    job *jb = NULL;
+    size_t t = 0;
+    while (!jb) {
+      /* One turn of the ring from the head; `last` is taken before the
+       * claim, which may unlist c (and move the head past it). */
+      for (job *c = g_pool.head; c;) {
+        job *nx = c->next;
+        bool last = nx == g_pool.head;
+        if (c->active < c->max_workers && pool_claim(c, &t)) {
+          jb = c;
+          if (c->listed) g_pool.head = c->next; /* the next claim starts after it */
+          break;
+        }
+        c = last || !g_pool.head ? NULL : nx;
+      }
+      if (!jb) pthread_cond_wait(&g_pool.work, &g_pool.lock);
+    }
+    jb->active++;
+    if (jb->active > jb->peak) jb->peak = jb->active;
+    pthread_mutex_unlock(&g_pool.lock);
+    run_tile(jb, t);
+    pthread_mutex_lock(&g_pool.lock);
+    if (--jb->active == 0) pthread_cond_signal(&jb->idle);
+  }
   return NULL;
+}
+
+static void pool_start(void) {
+  long n = sysconf(_SC_NPROCESSORS_ONLN) - 1;
+  if (n > 255) n = 255;
+  pthread_attr_t at;
+  pthread_attr_init(&at);
+  pthread_attr_setdetachstate(&at, PTHREAD_CREATE_DETACHED);
+  for (long i = 0; i < n; i++) {
+    pthread_t th;
+    if (pthread_create(&th, &at, pool_main, NULL) != 0) break;
+    g_pool.n_threads++;
+  }
+  pthread_attr_destroy(&at);
+}
+
+/* Render every tile of jb: on the caller's thread alone when only one
+ * thread may or can work on it, else with the pool's help. */
+static void run_job(job *jb) {
+  if (jb->max_workers > 1 && jb->n_tiles > 1) pthread_once(&g_pool_once, pool_start);
+  pthread_mutex_lock(&g_pool.lock);
+  bool alone = jb->max_workers <= 1 || jb->n_tiles <= 1 || g_pool.n_threads == 0;
+  pthread_mutex_unlock(&g_pool.lock);
+  jb->peak = 1;
+  if (alone) {
+    for (size_t t = 0; t < jb->n_tiles; t++) {
+      if (atomic_load(&jb->failed) || atomic_load(&jb->stopped) || job_should_stop(jb)) break;
+      run_tile(jb, t);
+    }
+    return;
+  }
+  pthread_mutex_lock(&g_pool.lock);
+  jb->active = 1; /* the caller */
+  pool_list(jb);
+  if (jb->max_workers - 1 >= g_pool.n_threads)
+    pthread_cond_broadcast(&g_pool.work);
+  else
+    for (int i = 1; i < jb->max_workers; i++) pthread_cond_signal(&g_pool.work);
+  for (;;) {
+    size_t t;
+    if (!pool_claim(jb, &t)) break;
+    pthread_mutex_unlock(&g_pool.lock);
+    run_tile(jb, t);
+    pthread_mutex_lock(&g_pool.lock);
+  }
+  jb->active--;
+  while (jb->active > 0) pthread_cond_wait(&jb->idle, &g_pool.lock);
+  pool_unlist(jb);
+  pthread_mutex_unlock(&g_pool.lock);
 }
 
 static double now_s(void) {
@@ -266,23 +403,19 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
     return rsw_fail(err, RSW_ERR_NOMEM, "film", "out of memory for a %dx%d film", jb.W, jb.H);
   }
   pthread_mutex_init(&jb.lock, NULL);
+  pthread_cond_init(&jb.idle, NULL);
   int nt = opts->threads > 0 ? opts->threads : (int)sysconf(_SC_NPROCESSORS_ONLN);
   if (nt < 1) nt = 1;
   if (nt > 256) nt = 256;
   if ((size_t)nt > jb.n_tiles) nt = (int)jb.n_tiles;
-  pthread_t th[256];
-  int started = 0;
-  for (int i = 0; i < nt; i++) {
-    if (pthread_create(&th[i], NULL, worker, &jb) != 0) break;
-    started++;
-  }
-  if (started == 0) worker(&jb);
-  for (int i = 0; i < started; i++) pthread_join(th[i], NULL);
+  jb.max_workers = nt;
+  run_job(&jb);
+  pthread_cond_destroy(&jb.idle);
   pthread_mutex_destroy(&jb.lock);
   for (size_t i = 0; i < jb.n_tiles; i++)
     if (jb.done[i]) merge_tile(&jb, jb.done[i]);
   free(jb.done);
-  if (jb.failed) {
+  if (atomic_load(&jb.failed)) {
     free(jb.film_acc);
     return rsw_fail(err, RSW_ERR_NOMEM, "render", "out of memory while rendering");
   }
@@ -357,7 +490,7 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
     stats->rays = jb.rays;
     stats->samples = jb.samples;
     stats->invalid_samples = jb.invalid;
-    stats->threads = started ? started : 1;
+    stats->threads = jb.peak;
     stats->wall_s = now_s() - t0;
   }
   *out = img;

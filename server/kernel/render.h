@@ -2,7 +2,7 @@
  *
  * Determinism: every sample's random numbers come from the sampler seeded
  * by (seed, pixel index, sample index) only; pixels are accumulated in a
- * fixed order inside fixed 16x16 tiles, and tiles are merged into the film
+ * fixed order inside fixed 8x8 tiles, and tiles are merged into the film
  * in tile order; so 1 thread and N threads give bitwise-identical films. */
 #ifndef RSW_RENDER_H
 #define RSW_RENDER_H

@@ -1,9 +1,10 @@
 /* Jobs of kernel contexts: validation, the queue, the worker that renders
  * them, results, and the event log behind server-sent events.
  *
- * One worker renders one (context, sensor) at a time with every render
- * thread: the CPU belongs to the render, and jobs on one scene never share
- * its parameter state. A job's results are a pure function of the request
+ * Several workers (service.c) each run one job at a time, one (context,
+ * sensor) after another; the renders of concurrent jobs share the kernel's
+ * worker pool, and each renders on the base or a private view of its
+ * scene (renders.c), so jobs never share parameter state. A job's results are a pure function of the request
  * and the base revision: each (context, sensor) seed defaults to a hash of
  * (job seed, context id, sensor id), never of the call order, so a sweep
  * split into several jobs gives bitwise the films of one job. */
@@ -151,13 +152,12 @@ static void job_free(job *j) {
   free(j);
 }
 
-/* svc->lock held. Out of memory, a progress event is dropped, but the end
- * event never is: a progress event is stored only when the array also has
- * room for the end event after it, and the end event's payload falls back
- * to a fixed text; a stream that never got its end event would never
- * close. */
-static void push_event(service *svc, job *j, cJSON *data, bool end, unsigned jm) {
-  char *txt = svc_print_json(data, jm);
+/* svc->lock held; takes txt (printed event data, NULL when out of
+ * memory). Out of memory, a progress event is dropped, but the end event
+ * never is: a progress event is stored only when the array also has room
+ * for the end event after it, and the end event's payload falls back to a
+ * fixed text; a stream that never got its end event would never close. */
+static void push_event_text(service *svc, job *j, char *txt, bool end) {
   if (!end && (!txt || !svc_grow((void **)&j->events, &j->cap_events, j->n_events + 2, sizeof *j->events, 0))) {
     free(txt);
     return;
@@ -178,6 +178,13 @@ static void push_event(service *svc, job *j, cJSON *data, bool end, unsigned jm)
   j->n_events++;
   pthread_cond_broadcast(&svc->cond);
 }
+
+/* svc->lock held; takes data. */
+static void push_event(service *svc, job *j, cJSON *data, bool end, unsigned jm) {
+  push_event_text(svc, j, svc_print_json(data, jm), end);
+}
+
+/* svc->lock held. */
 
 static cJSON *job_json(const job *j) {
   cJSON *o = cJSON_CreateObject();
@@ -628,6 +635,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   *job_id_out = id_copy;
   *json_out = answer;
   pthread_cond_broadcast(&svc->cond);
+  pthread_cond_signal(&svc->work_cond);
   pthread_mutex_unlock(&svc->lock);
   return RSW_OK;
 }
@@ -669,7 +677,7 @@ void *svc_worker_main(void *arg) {
       struct timespec ts;
       clock_gettime(CLOCK_REALTIME, &ts);
       ts.tv_sec += 5;
-      pthread_cond_timedwait(&svc->cond, &svc->lock, &ts);
+      pthread_cond_timedwait(&svc->work_cond, &svc->lock, &ts);
       svc_jobs_expire(svc);
     }
     if (svc->stopping) {
@@ -691,6 +699,7 @@ void *svc_worker_main(void *arg) {
       if (atomic_load(&j->cancel) || svc->stopping) break;
       render_item *it = &j->items[i];
       if (it->state != JOB_QUEUED) continue; /* done before a restart */
+      size_t done = j->items_done + 1;     /* only this worker writes it */
       pthread_mutex_unlock(&svc->lock);
       svc_error e = {0};
       render_spec rs = {.sensor_index = it->sensor_index,
@@ -707,19 +716,28 @@ void *svc_worker_main(void *arg) {
         if (st) svc_film_free(&it->film);
         it->on_disk = !st && svc_state_on(svc);
       }
-      pthread_mutex_lock(&svc->lock);
-      if (st == RSW_ERR_CANCELLED) break;
+      if (st == RSW_ERR_CANCELLED) {
+        pthread_mutex_lock(&svc->lock);
+        break;
+      }
+      /* The event is built before taking svc->lock (only this worker
+       * writes the job's counters), so a job of tiny renders holds the
+       * lock for moments and requests are not starved of it. */
+      if (st) rsw_err_format(&e.err, it->error, sizeof it->error);
       unsigned jm = svc_json_mark();
       cJSON *d = cJSON_CreateObject();
       cJSON_AddStringToObject(d, "context", it->context);
       cJSON_AddStringToObject(d, "sensor", it->sensor);
+      cJSON_AddStringToObject(d, "state", st ? "failed" : "succeeded");
+      if (st) cJSON_AddStringToObject(d, "error", it->error);
+      cJSON_AddNumberToObject(d, "done", (double)done);
+      cJSON_AddNumberToObject(d, "total", (double)j->n_items);
+      char *ev = svc_print_json(d, jm);
+      pthread_mutex_lock(&svc->lock);
       if (st) {
         it->state = JOB_FAILED;
-        rsw_err_format(&e.err, it->error, sizeof it->error);
         j->items_failed++;
         svc->renders_failed++;
-        cJSON_AddStringToObject(d, "state", "failed");
-        cJSON_AddStringToObject(d, "error", it->error);
       } else {
         it->state = JOB_SUCCEEDED;
         it->has_film = true;
@@ -736,13 +754,10 @@ void *svc_worker_main(void *arg) {
           svc->result_bytes += mem;
         }
         svc->contexts_rendered++;
-        cJSON_AddStringToObject(d, "state", "succeeded");
       }
       j->items_done++;
       if (--j->context_remaining[it->context_index] == 0) j->contexts_done++;
-      cJSON_AddNumberToObject(d, "done", (double)j->items_done);
-      cJSON_AddNumberToObject(d, "total", (double)j->n_items);
-      push_event(svc, j, d, false, jm);
+      push_event_text(svc, j, ev, false);
     }
     finish_job(svc, j);
   }

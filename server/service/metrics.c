@@ -4,7 +4,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../kernel/accel.h"
+#include "../kernel/kapi.h"
 #include "buf.h"
 #include "rsw_sha256.h"
 #include "service_internal.h"
@@ -29,13 +29,7 @@ void service_count_request(service *svc, const char *route, int status) {
 }
 
 size_t svc_scene_bytes(const scene *sc) {
-  size_t b = accel_memory(sc->accel);
-  for (size_t i = 0; i < sc->n_shapes; i++) {
-    const mesh *m = &sc->shapes[i]->mesh;
-    b += (size_t)m->n_verts * (12 + (m->nrm ? 12 : 0) + (m->uv ? 8 : 0)) + (size_t)m->n_faces * 12;
-    if (sc->shapes[i]->tri_cdf) b += (size_t)sc->shapes[i]->tri_cdf_n * 8;
-  }
-  return b;
+  return kapi_scene_bytes(sc);
 }
 
 char *service_metrics_text(service *svc) {

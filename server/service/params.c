@@ -196,6 +196,9 @@ rsw_status service_params_patch(service *svc, const char *id, const char *body, 
     return svc_fail(e, RSW_ERR_PARSE, "", "the body is not valid JSON");
   }
   pthread_mutex_lock(&r->lock);
+  /* Wait out a render that borrows the base (renders.c); views keep
+   * rendering the revision they were built at. */
+  while (r->base_busy) pthread_cond_wait(&r->cond, &r->lock);
   rsw_status st = RSW_OK;
   param_update *u = NULL;
   size_t n = 0;
@@ -218,6 +221,13 @@ rsw_status service_params_patch(service *svc, const char *id, const char *body, 
     r->revision++;
     (void)svc_refresh_param_cache(r); /* out of memory: stale, rebuilt by the next GET */
     svc_scene_patched(svc, r, j); /* kept for a reload, stored with --state-dir */
+    svc_views_free(r); /* idle views of the old revision */
+    if (!svc_keep_patch(r, j)) {
+      /* Views could no longer reproduce the base: build none (renders
+       * without overrides wait for the base, those with fail). */
+      cJSON_Delete(r->patches);
+      r->patches = NULL;
+    }
   }
   *revision_out = r->revision;
   cJSON *o = NULL;

@@ -1,16 +1,19 @@
 /* Synchronous renders (POST :render) and the one render path jobs use
  * too (svc_render_locked), plus per-pixel viewing directions. */
 #include <math.h>
+#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
+#include "../kernel/kapi.h"
 #include "buf.h"
 #include "rsw_sha256.h"
 #include "service_internal.h"
 
 bool svc_find_sensor(const scene *sc, const char *name, size_t *index) {
-  return scene_find_sensor(sc, name, index) != NULL;
+  return kapi_find_sensor(sc, name, index);
 }
 
 rsw_status svc_check_film(const service *svc, const scene *sc, size_t si, const char *where, svc_error *e) {
@@ -29,8 +32,192 @@ void svc_film_free(svc_film *f) {
   if (f) film_image_free(&f->img);
 }
 
-/* The current values of the overridden keys, to restore the base state
- * after a render (values round-trip exactly through their JSON text). */
+/* ---- render views -------------------------------------------------------------
+ *
+ * Copy-on-write parameter state per render. A render with overrides, or
+ * one that finds the base borrowed by another render, renders on a view: a
+ * private scene loaded from the resident's text with every PATCH since
+ * replayed (so bitwise the base revision: an update equals a reload,
+ * params.h), then the render's overrides applied to the view alone. The
+ * base is never written by a render, so a render cannot leave the base
+ * changed under its revision, and renders of one scene with different
+ * overrides run at the same time.
+ *
+ * Why whole-scene views and not per-object clones sharing geometry and
+ * Embree: a render writes wavelength-dependent state into the objects
+ * themselves (scene_prepare: uniform textures, conductors, envmaps,
+ * bitmaps, films), objects point at each other (shape -> bsdf -> texture,
+ * emitter <-> shape, sensor -> film) and no plugin has a clone operation;
+ * a geometric override (a shape's to_world, vertex positions) needs its
+ * own acceleration data in any design. A view costs one load of the scene
+ * (memory and time of a POST /v1/scenes, with the same files); it is
+ * built once and reused: after a render the keys it overrode are set back
+ * to the view's own earlier values (a view whose reset fails is dropped;
+ * the base never sees it). Views per scene are capped (view_cap); renders
+ * beyond the cap wait for one. A render without overrides takes a view
+ * only for a small scene (VIEW_FREE_BYTES of geometry, kapi_scene_bytes):
+ * on a big one it waits for the base rather than load the scene again. */
+#define VIEW_FREE_BYTES ((size_t)16 << 20)
+
+static int view_cap(void) {
+  static atomic_int cap;
+  int c = atomic_load(&cap);
+  if (!c) {
+    long n = sysconf(_SC_NPROCESSORS_ONLN);
+    c = n < 2 ? 2 : n > 8 ? 8 : (int)n;
+    atomic_store(&cap, c);
+  }
+  return c;
+}
+
+void svc_views_free(resident *r) {
+  while (r->views) {
+    svc_view *v = r->views;
+    r->views = v->next;
+    scene_free(v->sc);
+    free(v);
+    r->n_views--;
+  }
+}
+
+bool svc_keep_patch(resident *r, const cJSON *body) {
+  if (!r->patches) return false;
+  for (const cJSON *k = body->child; k; k = k->next) {
+    cJSON *d = cJSON_Duplicate(k, true);
+    if (!d) return false;
+    cJSON_DeleteItemFromObjectCaseSensitive(r->patches, k->string);
+    cJSON_AddItemToObject(r->patches, k->string, d);
+  }
+  return true;
+}
+
+/* Build a view of r at the revision whose PATCHes `patches` holds. */
+static rsw_status view_build(service *svc, resident *r, const cJSON *patches, uint64_t revision, svc_view **out,
+                             svc_error *e) {
+  rsw_err err = {0};
+  scene *sc = NULL;
+  rsw_status st = svc_scene_reload(svc, r, &sc, &err);
+  if (st) return svc_fail(e, RSW_ERR_RENDER, err.where, "cannot build a render view of the scene: %s", err.msg);
+  param_update *u = NULL;
+  size_t n = 0;
+  if (patches && patches->child) {
+    st = svc_map_to_updates(patches, sc, "params", &u, &n, e);
+    if (!st && scene_update(sc, u, n, NULL, &err) != RSW_OK)
+      st = svc_fail(e, RSW_ERR_RENDER, err.where, "cannot replay the scene's updates on a render view: %s",
+                    err.msg);
+    svc_free_updates(u, n);
+  }
+  svc_view *v = st ? NULL : calloc(1, sizeof *v);
+  if (!st && !v) st = svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
+  if (st) {
+    scene_free(sc);
+    return st;
+  }
+  v->sc = sc;
+  v->revision = revision;
+  *out = v;
+  return RSW_OK;
+}
+
+static bool stop_waiting(const render_spec *rs) {
+  return (rs->cancel && atomic_load(rs->cancel)) || (rs->deadline > 0 && svc_now() > rs->deadline);
+}
+
+/* The scene to render on: the base (*v NULL; only when base_ok) or a view
+ * at the current revision. */
+static rsw_status take_scene(service *svc, resident *r, bool base_ok, const render_spec *rs, svc_view **v,
+                             uint64_t *revision, svc_error *e) {
+  bool build_failed = false;
+  pthread_mutex_lock(&r->lock);
+  for (;;) {
+    if (base_ok && !r->base_busy) {
+      r->base_busy = true;
+      *v = NULL;
+      *revision = r->revision;
+      pthread_mutex_unlock(&r->lock);
+      return RSW_OK;
+    }
+    if (r->views) {
+      *v = r->views;
+      r->views = (*v)->next;
+      *revision = r->revision;
+      pthread_mutex_unlock(&r->lock);
+      return RSW_OK;
+    }
+    if (!base_ok && !r->patches) {
+      /* Out of memory while recording a PATCH: views can no longer
+       * reproduce the base. */
+      pthread_mutex_unlock(&r->lock);
+      return svc_fail(e, RSW_ERR_NOMEM, "params", "out of memory: this scene can no longer take overrides");
+    }
+    bool may_build = !build_failed && (!base_ok || kapi_scene_bytes(r->sc) <= VIEW_FREE_BYTES);
+    if (may_build && r->n_views < view_cap() && r->patches) {
+      r->n_views++;
+      uint64_t rev = r->revision;
+      cJSON *p = cJSON_Duplicate(r->patches, true);
+      pthread_mutex_unlock(&r->lock);
+      rsw_status st = p ? view_build(svc, r, p, rev, v, e) : svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
+      cJSON_Delete(p);
+      pthread_mutex_lock(&r->lock);
+      if (!st && r->revision == rev) {
+        *revision = rev;
+        pthread_mutex_unlock(&r->lock);
+        return RSW_OK;
+      }
+      r->n_views--;
+      pthread_cond_broadcast(&r->cond);
+      if (st && base_ok) { /* wait for the base instead */
+        build_failed = true;
+        memset(e, 0, sizeof *e);
+        continue;
+      }
+      if (st) {
+        pthread_mutex_unlock(&r->lock);
+        return st;
+      }
+      /* A PATCH landed while it was built: build again. */
+      pthread_mutex_unlock(&r->lock);
+      scene_free((*v)->sc);
+      free(*v);
+      pthread_mutex_lock(&r->lock);
+      continue;
+    }
+    if (stop_waiting(rs)) {
+      pthread_mutex_unlock(&r->lock);
+      if (rs->cancel && atomic_load(rs->cancel)) return svc_fail(e, RSW_ERR_CANCELLED, "render", "render cancelled");
+      return svc_fail(e, RSW_ERR_TIMEOUT, "timeout_s", "the render's deadline passed while it waited for the scene");
+    }
+    struct timespec ts;
+    clock_gettime(CLOCK_REALTIME, &ts);
+    ts.tv_nsec += 20 * 1000000L;
+    if (ts.tv_nsec >= 1000000000L) ts.tv_sec++, ts.tv_nsec -= 1000000000L;
+    pthread_cond_timedwait(&r->cond, &r->lock, &ts);
+  }
+}
+
+/* Give the base or a view back; a view that is stale (a PATCH since) or
+ * whose reset failed is freed. */
+static void give_back(resident *r, svc_view *v, bool keep) {
+  pthread_mutex_lock(&r->lock);
+  if (!v) {
+    r->base_busy = false;
+  } else if (keep && v->revision == r->revision) {
+    v->next = r->views;
+    r->views = v;
+    v = NULL;
+  } else {
+    r->n_views--;
+  }
+  pthread_cond_broadcast(&r->cond);
+  pthread_mutex_unlock(&r->lock);
+  if (v) {
+    scene_free(v->sc);
+    free(v);
+  }
+}
+
+/* The view's current values of the overridden keys, to set it back after
+ * the render (values round-trip exactly through their JSON text). */
 static rsw_status snapshot(const scene *sc, const param_update *u, size_t n, param_update **out,
                            rsw_err *err) {
   param_update *s = calloc(n ? n : 1, sizeof *s);
@@ -56,21 +243,21 @@ static rsw_status snapshot(const scene *sc, const param_update *u, size_t n, par
 }
 
 rsw_status svc_render_locked(service *svc, resident *r, const render_spec *rs, svc_film *out, svc_error *e) {
-  scene *sc = r->sc;
+  bool overrides = rs->overrides && rs->overrides->child;
+  svc_view *v = NULL;
+  uint64_t revision = 0;
+  rsw_status st = take_scene(svc, r, !overrides, rs, &v, &revision, e);
+  if (st) return st;
+  scene *sc = v ? v->sc : r->sc;
   param_update *u = NULL, *restore = NULL;
   size_t n = 0;
-  rsw_status st = RSW_OK;
   rsw_err err = {0};
-  pthread_mutex_lock(&r->lock);
-  if (r->broken)
-    st = svc_fail(e, RSW_ERR_UNAVAILABLE, r->id,
-                  "the scene's base state was lost (restoring it after a render ran out of memory): delete "
-                  "the scene and post it again");
-  if (!st && rs->overrides) st = svc_map_to_updates(rs->overrides, sc, "params", &u, &n, e);
+  if (overrides) st = svc_map_to_updates(rs->overrides, sc, "params", &u, &n, e);
   if (!st && n) {
     st = snapshot(sc, u, n, &restore, &err);
     if (st) st = svc_update_error(e, sc, u, n, &err);
   }
+  bool keep = true;
   if (!st && n) {
     update_report rep;
     st = scene_update(sc, u, n, &rep, &err);
@@ -100,34 +287,21 @@ rsw_status svc_render_locked(service *svc, resident *r, const render_spec *rs, s
       svc->unresolved_rays += stats.rays.unresolved;
       pthread_mutex_unlock(&svc->lock);
       memcpy(out->scene, r->id, 65);
-      out->revision = r->revision;
-      snprintf(out->sensor, sizeof out->sensor, "%s", sc->sensors[rs->sensor_index]->base.id);
+      out->revision = revision;
+      snprintf(out->sensor, sizeof out->sensor, "%s", kapi_sensor_id(sc, rs->sensor_index));
     }
   }
   if (restore) {
-    /* Back to the base state: the same values, so bitwise the base. An
-     * update is all or nothing (scene_update), so a failed restore left
-     * the overrides in place: it is tried again (a transient shortage),
-     * and if it keeps failing the scene is marked broken instead of
-     * serving the overridden values as its base state under the same
-     * revision. */
+    /* The view back to its revision (the same values, so bitwise); on
+     * failure it is dropped, never used again. */
     rsw_err rerr = {0};
-    rsw_status rst = RSW_ERR_NOMEM;
-    for (int attempt = 0; attempt < 3 && rst != RSW_OK; attempt++) {
-      rsw_err_clear(&rerr);
-      rst = scene_update(sc, restore, n, NULL, &rerr);
-    }
-    if (rst != RSW_OK) {
-      r->broken = true;
-      if (!st) {
-        film_image_free(&out->img);
-        st = svc_fail(e, RSW_ERR_RENDER, rerr.where, "restoring the base state failed: %s", rerr.msg);
-      }
-    }
+    keep = scene_update(sc, restore, n, NULL, &rerr) == RSW_OK;
     for (size_t i = 0; i < n; i++) param_value_free(&restore[i].value);
     free(restore);
+  } else if (n) {
+    keep = false; /* overrides were (maybe partly) applied without a snapshot */
   }
-  pthread_mutex_unlock(&r->lock);
+  give_back(r, v, keep);
   svc_free_updates(u, n);
   return st;
 }

@@ -19,11 +19,13 @@
 typedef struct load_ctx {
   service *svc;
   rsw_sha256_ctx *files; /* digests of referenced files, in reference order */
+  const char *root;      /* the data root (NULL: svc->data_root) */
 } load_ctx;
 
 static rsw_status resolve_file(void *user, const char *name, char **path_out, rsw_err *err) {
   load_ctx *lc = user;
   service *svc = lc->svc;
+  const char *data_root = lc->root ? lc->root : svc->data_root;
   char path[8192];
   unsigned char d[32];
   char dh[65];
@@ -37,7 +39,7 @@ static rsw_status resolve_file(void *user, const char *name, char **path_out, rs
                       name + 7);
     snprintf(dh, sizeof dh, "%s", name + 7);
   } else {
-    if (!svc->data_root[0])
+    if (!data_root[0])
       return rsw_fail(
           err, RSW_ERR_FILE, name,
           "file '%s': this daemon has no --data-root; upload it as a blob and refer to it as sha256:<hex>",
@@ -45,11 +47,11 @@ static rsw_status resolve_file(void *user, const char *name, char **path_out, rs
     if (name[0] == '/')
       snprintf(path, sizeof path, "%s", name);
     else
-      snprintf(path, sizeof path, "%s/%s", svc->data_root, name);
+      snprintf(path, sizeof path, "%s/%s", data_root, name);
     char *rp = realpath(path, NULL);
     if (!rp) return rsw_fail(err, RSW_ERR_FILE, name, "file '%s' not found under the data root", name);
-    size_t lr = strlen(svc->data_root);
-    bool inside = strncmp(rp, svc->data_root, lr) == 0 && rp[lr] == '/';
+    size_t lr = strlen(data_root);
+    bool inside = strncmp(rp, data_root, lr) == 0 && rp[lr] == '/';
     if (!inside) {
       free(rp);
       return rsw_fail(err, RSW_ERR_FILE, name, "file '%s' lies outside the data root", name);
@@ -407,13 +409,12 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
   r->load_s = load_s;
   r->created = time(NULL);
   pthread_mutex_init(&r->lock, NULL);
+  pthread_cond_init(&r->cond, NULL);
   pthread_mutex_init(&r->cache_lock, NULL);
-  if (!svc_refresh_param_cache(r)) {
+  memcpy(r->src_files, fd, 32);
+  if (!svc_keep_source(svc, r, body, len, is_xml) || !svc_refresh_param_cache(r)) {
     pthread_mutex_unlock(&svc->lock);
-    pthread_mutex_destroy(&r->lock);
-    pthread_mutex_destroy(&r->cache_lock);
-    free(r);
-    scene_free(sc);
+    svc_resident_free(r);
     return svc_fail(e, RSW_ERR_NOMEM, "scene", "out of memory");
   }
   r->refs = 1;
@@ -621,4 +622,41 @@ rsw_status service_scene_delete(service *svc, const char *id, bool force, svc_er
   pthread_mutex_unlock(&svc->lock);
   if (free_now) svc_resident_free(r);
   return RSW_OK;
+}
+
+/* ---- what render views are built from (renders.c) ---------------------------- */
+
+bool svc_keep_source(service *svc, resident *r, const char *text, size_t len, bool is_xml) {
+  r->src = malloc(len + 1);
+  r->patches = cJSON_CreateObject();
+  r->src_root = svc->data_root[0] ? strdup(svc->data_root) : NULL;
+  if (!r->src || !r->patches || (svc->data_root[0] && !r->src_root)) return false;
+  memcpy(r->src, text, len);
+  r->src[len] = '\0';
+  r->src_len = len;
+  r->src_xml = is_xml;
+  snprintf(r->src_variant, sizeof r->src_variant, "%s", r->sc->variant == VARIANT_MONO ? "mono" : "rgb");
+  return true;
+}
+
+rsw_status svc_scene_reload(service *svc, const resident *r, scene **out, rsw_err *err) {
+  /* A blob deleted since fails here as it would on a fresh load; a file
+   * under the data root that changed since is refused (its digest is part
+   * of the scene's id, so the view would not be this scene). r->src_root
+   * keeps a start-up scene's own directory (service_scene_load_file). */
+  rsw_sha256_ctx files;
+  if (!rsw_sha256_begin(&files)) return rsw_fail(err, RSW_ERR_NOMEM, "scene", "out of memory");
+  load_ctx lc = {.svc = svc, .files = &files, .root = r->src_root ? r->src_root : ""};
+  scene_load_opts lo = {
+      .size = sizeof lo, .variant = r->src_variant, .resolve = resolve_file, .resolve_user = &lc};
+  scene *sc = NULL;
+  rsw_status st = scene_load_memory(r->src, r->src_len, r->id, r->src_xml, &lo, &sc, err);
+  unsigned char fd[32];
+  rsw_sha256_end(&files, fd);
+  if (!st && memcmp(fd, r->src_files, 32) != 0) {
+    scene_free(sc);
+    return rsw_fail(err, RSW_ERR_FILE, "scene", "a file the scene names changed since it was loaded");
+  }
+  if (!st) *out = sc;
+  return st;
 }

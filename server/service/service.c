@@ -179,12 +179,25 @@ rsw_status service_new(const service_opts *opts, service **out, rsw_err *err) {
   pthread_mutex_init(&svc->lock, NULL);
   pthread_cond_init(&svc->cond, NULL);
   random_instance(svc->instance);
+  pthread_cond_init(&svc->work_cond, NULL);
   atomic_store(&svc->ready, true);
-  if (pthread_create(&svc->worker, NULL, svc_worker_main, svc) != 0) {
-    service_free(svc);
-    return rsw_fail(err, RSW_ERR_NOMEM, "service", "cannot start the worker thread");
+  /* Job workers: one job each at a time, so jobs (of one scene or of
+   * several) run concurrently; their renders share the kernel's worker
+   * pool tile by tile (render.c), and a job of 1x1 contexts keeps a core
+   * busy per worker. As many as render threads: --threads 1 means one
+   * core's worth of jobs. */
+  long nw = svc->opts.render_threads > 0 ? svc->opts.render_threads : sysconf(_SC_NPROCESSORS_ONLN);
+  if (nw < 1) nw = 1;
+  if (nw > 64) nw = 64;
+  svc->workers = calloc((size_t)nw, sizeof *svc->workers);
+  for (long i = 0; svc->workers && i < nw; i++) {
+    if (pthread_create(&svc->workers[i], NULL, svc_worker_main, svc) != 0) break;
+    svc->n_workers++;
   }
-  svc->worker_started = true;
+  if (svc->n_workers == 0) {
+    service_free(svc);
+    return rsw_fail(err, RSW_ERR_NOMEM, "service", "cannot start the worker threads");
+  }
   *out = svc;
   return RSW_OK;
 }
@@ -196,6 +209,7 @@ void service_shutdown(service *svc) {
   svc->stopping = true;
   for (size_t i = 0; i < svc->n_jobs; i++) atomic_store(&svc->jobs[i]->cancel, 1);
   pthread_cond_broadcast(&svc->cond);
+  pthread_cond_broadcast(&svc->work_cond);
   pthread_mutex_unlock(&svc->lock);
 }
 
@@ -218,9 +232,14 @@ bool service_accepts_jobs(service *svc, const char **why_out) {
 
 void svc_resident_free(resident *r) {
   if (!r) return;
+  svc_views_free(r);
   scene_free(r->sc);
   cJSON_Delete(r->patched);
   cJSON_Delete(r->base_params);
+  cJSON_Delete(r->patches);
+  free(r->src);
+  free(r->src_root);
+  pthread_cond_destroy(&r->cond);
   pthread_mutex_destroy(&r->lock);
   pthread_mutex_destroy(&r->cache_lock);
   free(r);
@@ -239,7 +258,8 @@ void service_restore(service *svc) {
 void service_free(service *svc) {
   if (!svc) return;
   service_shutdown(svc);
-  if (svc->worker_started) pthread_join(svc->worker, NULL);
+  for (int i = 0; i < svc->n_workers; i++) pthread_join(svc->workers[i], NULL);
+  free(svc->workers);
   svc_jobs_free(svc);
   for (size_t i = 0; i < svc->n_scenes; i++) svc_resident_free(svc->scenes[i]);
   free(svc->scenes);
@@ -250,6 +270,7 @@ void service_free(service *svc) {
   if (svc->state_lock_fd >= 0) close(svc->state_lock_fd);
   pthread_mutex_destroy(&svc->lock);
   pthread_cond_destroy(&svc->cond);
+  pthread_cond_destroy(&svc->work_cond);
   free(svc);
 }
 

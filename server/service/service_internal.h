@@ -13,9 +13,22 @@
 #include "../kernel/scene/scene.h"
 #include "service.h"
 
-/* A resident scene. `lock` serialises everything that touches the scene's
- * parameter state: renders (which apply per-context overrides and restore
- * the base state), PATCHes. */
+/* A private copy of a resident scene for one render at a time
+ * (renders.c). */
+typedef struct svc_view {
+  scene *sc;
+  uint64_t revision; /* the base revision it reproduces */
+  struct svc_view *next;
+} svc_view;
+
+/* A resident scene. The base scene `sc` is written only by PATCH (under
+ * `lock`, once no render borrows it). A render never writes the base's
+ * parameters: it borrows the base when it has no overrides and no other
+ * render holds it (base_busy; a render still writes the base's
+ * wavelength-dependent state), else takes a private view (renders.c), so
+ * renders of one scene, with or without overrides, run concurrently.
+ * `lock` guards base_busy, the views and the base's parameters; `cond`
+ * says the base or a view came back. */
 typedef struct resident {
   char id[65];
   scene *sc;
@@ -23,6 +36,21 @@ typedef struct resident {
   double load_s;
   time_t created;
   pthread_mutex_t lock;
+  pthread_cond_t cond;
+  bool base_busy;
+  svc_view *views; /* idle views */
+  int n_views;     /* views alive, idle or rendering */
+  /* What a view is built from: the scene's text as posted, its variant,
+   * the data root its file names resolved in, and every PATCH since the
+   * load merged into one {key: value} object (a later value of a key
+   * replaces the earlier, moved to the end). */
+  char *src;
+  size_t src_len;
+  bool src_xml;
+  char src_variant[8];
+  char *src_root; /* NULL: the daemon's data root */
+  unsigned char src_files[32]; /* digest of the referenced files' digests */
+  cJSON *patches;
   /* The parameter table's entries at the base state (JSON, table order)
    * and their revision, so GET params answers without waiting for a
    * render that holds `lock` (renders apply per-context overrides). */
@@ -109,7 +137,9 @@ struct service {
   char blob_dir[4096];
   char data_root[4096]; /* realpath, "" when none */
   pthread_mutex_t lock;
-  pthread_cond_t cond; /* queue and job events */
+  pthread_cond_t cond;      /* job events */
+  pthread_cond_t work_cond; /* a job was queued, or shutdown (job workers wait on it
+                               alone, so events do not wake idle workers) */
   resident **scenes;
   size_t n_scenes, cap_scenes;
   /* body digest -> scene id, so reposting the same text skips a load */
@@ -123,8 +153,8 @@ struct service {
   job **queue;
   size_t n_queue, cap_queue;
   uint64_t next_job;
-  pthread_t worker;
-  bool worker_started;
+  pthread_t *workers; /* job workers: jobs run concurrently, one per worker */
+  int n_workers;
   bool stopping;
   atomic_bool ready;
   char instance[17]; /* random per process: GET /v1 "instance" (which replica a balancer key reaches) */
@@ -217,9 +247,17 @@ resident *svc_scene_acquire(service *svc, const char *id);
 void svc_scene_release(service *svc, resident *r);
 /* Free a resident scene (no refs left). */
 void svc_resident_free(resident *r);
-/* Render one context on a resident scene: apply `overrides` (a JSON
- * object {key: value}, may be NULL) on top of the base state, render,
- * restore the base state. Takes r->lock. */
+/* Keep what a view of r is built from (scenes.c; false: out of memory). */
+bool svc_keep_source(service *svc, resident *r, const char *text, size_t len, bool is_xml);
+/* Load the scene r was loaded from again (scenes.c). */
+rsw_status svc_scene_reload(service *svc, const resident *r, scene **out, rsw_err *err);
+/* Free r's idle views (renders.c; r->lock held or r unreachable). */
+void svc_views_free(resident *r);
+/* Record an applied PATCH body for later views (r->lock held). */
+bool svc_keep_patch(resident *r, const cJSON *body);
+/* Render one context on a resident scene with `overrides` (a JSON object
+ * {key: value}, may be NULL) on top of the base state, on the base or a
+ * private view (the base state is never written). */
 typedef struct render_spec {
   size_t sensor_index;
   uint32_t spp;

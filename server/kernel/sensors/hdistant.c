@@ -28,12 +28,18 @@ typedef struct hdistant {
   double radius;
 } hdistant;
 
+/* The film mapping (kernel-behavior.md section 1.2): film sample u in
+ * [0,1)^2 sees the radiance leaving along omega = to_world H(u), H the
+ * concentric uniform-hemisphere map. Normalised so that a to_world with a
+ * scale still gives a unit ray direction (Mitsuba leaves it scaled; the
+ * integrators assume |d| = 1). */
+static vec3 hdistant_omega(const sensor *s, vec2 film_u) {
+  return v3_norm(xf_vector(&s->to_world, warp_square_to_uniform_hemisphere(film_u)));
+}
+
 static double hdistant_sample_ray(const sensor *s, vec2 film_u, vec2 aperture_u, ray3 *ray) {
   const hdistant *h = (const hdistant *)s;
-  vec3 v_local = warp_square_to_uniform_hemisphere(film_u);
-  /* Normalised so that a to_world with a scale still gives a unit ray
-   * direction (Mitsuba leaves it scaled; the integrators assume |d| = 1). */
-  vec3 omega = v3_norm(xf_vector(&s->to_world, v_local));
+  vec3 omega = hdistant_omega(s, film_u);
   vec3 d = v3_neg(omega);
   vec3 o;
   double w =
