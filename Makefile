@@ -252,7 +252,7 @@ FUZZ_SAN := -fsanitize=address,undefined -fno-sanitize-recover=undefined -fno-om
 FUZZ_CFLAGS := -std=c11 -O1 -g -fno-math-errno $(FUZZ_SAN) -fsanitize=fuzzer-no-link
 FUZZ_LIB_SRC := $(KERNEL_SRC) $(SERVICE_SRC) $(filter server/http/%,$(DAEMON_SRC))
 FUZZ_LIB_OBJ := $(FUZZ_LIB_SRC:%.c=build-fuzz/obj/%.o)
-build-fuzz/obj/%.o: %.c | deps
+build-fuzz/obj/%.o: %.c | deps fuzz-check-cc
 	@mkdir -p $(dir $@)
 	$(FUZZ_CC) $(CPPFLAGS) $(FUZZ_CFLAGS) -c $< -o $@
 build-fuzz/lib/libfuzzsrc.a: $(FUZZ_LIB_OBJ)
@@ -262,7 +262,11 @@ build-fuzz/bin/fuzz_%: build-fuzz/obj/tests/fuzz/fuzz_%.o build-fuzz/lib/libfuzz
 	@mkdir -p $(dir $@)
 	$(FUZZ_CC) $(FUZZ_SAN) -fsanitize=fuzzer -o $@ $< -Wl,--whole-archive build-fuzz/lib/libfuzzsrc.a -Wl,--no-whole-archive $(LIBS) $(DAEMON_LIBS)
 
-.PHONY: fuzz fuzz-build
+.PHONY: fuzz fuzz-build fuzz-check-cc
+fuzz-check-cc:
+	@printf 'int LLVMFuzzerTestOneInput(const char *d, unsigned long n) { return 0; }\n' | \
+	  $(FUZZ_CC) -x c - -fsanitize=fuzzer -o build-fuzz.check 2>/dev/null && rm -f build-fuzz.check || \
+	  { rm -f build-fuzz.check; echo "make fuzz: needs $(FUZZ_CC) with libFuzzer (apt-get install clang libclang-rt-14-dev)" >&2; exit 1; }
 fuzz-build: $(FUZZ:%=build-fuzz/bin/fuzz_%)
 fuzz: fuzz-build
 	@tests/fuzz/run.sh $(FUZZ_SECONDS) $(FUZZ)

@@ -1,8 +1,9 @@
 /* HTTP request handling: raw request bytes into the real server
  * (server/http over the service), started once per process on an
  * ephemeral loopback port. Each input is written to a fresh connection
- * ("{SCENE}" in it is replaced by the harness scene's id, so routes under
- * a scene are reached), the write side is shut, and the answer read (at
+ * (placeholders as in tests/corpus/http: "{SCENE}" becomes the harness
+ * scene's id, so routes under a scene are reached; {AUTH} nothing; {CL}
+ * the body length), the write side is shut, and the answer read (at
  * most 2 s). Invariants:
  *  - an answer, if any, starts with an HTTP/1.x status line;
  *  - a problem+json answer is valid UTF-8 and valid JSON (FUZZ_HTTP_LAX=1
@@ -117,20 +118,53 @@ static char resp[1 << 20];
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
   if (size > FUZZ_MAX_INPUT) return 0;
-  /* Substitute {SCENE}. */
-  static const char tok[] = "{SCENE}";
-  size_t tl = sizeof tok - 1, il = strlen(fuzz_scene_id);
-  char *req = malloc(size * (il > tl ? il : tl) + 1);
+  /* Placeholders of tests/corpus/http (whose cases are seeds here):
+   * {SCENE} the harness scene's id, {AUTH} nothing (no token), {CL} the
+   * length of what follows the first blank line. */
+  char *req = malloc(size * 64 + 64);
   if (!req) return 0;
   size_t n = 0;
+  bool has_cl = false;
   for (size_t i = 0; i < size;) {
-    if (i + tl <= size && memcmp(data + i, tok, tl) == 0) {
+    if (i + 7 <= size && memcmp(data + i, "{SCENE}", 7) == 0) {
+      size_t il = strlen(fuzz_scene_id);
       memcpy(req + n, fuzz_scene_id, il);
       n += il;
-      i += tl;
+      i += 7;
+    } else if (i + 6 <= size && memcmp(data + i, "{AUTH}", 6) == 0) {
+      i += 6;
+    } else if (i + 4 <= size && memcmp(data + i, "{CL}", 4) == 0) {
+      has_cl = true;
+      memcpy(req + n, "{CL}", 4);
+      n += 4;
+      i += 4;
     } else {
       req[n++] = (char)data[i++];
     }
+  }
+  if (has_cl) {
+    char *sep = memmem(req, n, "\r\n\r\n", 4);
+    size_t body = sep ? n - (size_t)(sep + 4 - req) : 0;
+    char num[24];
+    int nl = snprintf(num, sizeof num, "%zu", body);
+    char *out = malloc(n * 5 + 1); /* each 4-byte {CL} becomes at most 20 */
+    if (!out) {
+      free(req);
+      return 0;
+    }
+    size_t m = 0;
+    for (size_t i = 0; i < n;) {
+      if (i + 4 <= n && memcmp(req + i, "{CL}", 4) == 0 && (!sep || req + i < sep)) {
+        memcpy(out + m, num, (size_t)nl);
+        m += (size_t)nl;
+        i += 4;
+      } else {
+        out[m++] = req[i++];
+      }
+    }
+    free(req);
+    req = out;
+    n = m;
   }
   size_t got = exchange(req, n, resp, sizeof resp);
   free(req);
