@@ -24,7 +24,9 @@ for h in "$@"; do
   [ -d tests/fuzz/crashes/"$h" ] && seeds+=(tests/fuzz/crashes/"$h")
   log=build-fuzz/fuzz_$h.log
   before=$(find "$art" -type f | wc -l)
-  "$bin" -max_total_time="$secs" -timeout=30 -rss_limit_mb=3072 -max_len=16384 -print_final_stats=1 \
+  dict=()
+  case $h in scene_json | scene_xml | scene_render) dict=(-dict=tests/fuzz/scene.dict) ;; esac
+  "$bin" "${dict[@]}" -max_total_time="$secs" -timeout=30 -rss_limit_mb=3072 -max_len=16384 -print_final_stats=1 \
     -artifact_prefix="$art/" "$work" "${seeds[@]}" >"$log" 2>&1
   rc=$?
   runs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -n 1)
