@@ -30,12 +30,27 @@ ifeq ($(WERROR),1)
 WARN += -Werror
 endif
 
-CPPFLAGS := -Iinclude -Iserver -D_GNU_SOURCE -MMD -MP
+# Each directory sees only the headers it may use: common/ (shared by the
+# daemon and libraysweep) sees the public headers; the daemon sees
+# common/ and server/; libraysweep and the CLI never see server/ (the CLI
+# sees only the public API); tests see everything.
+BASE_CPPFLAGS := -D_GNU_SOURCE -MMD -MP
+CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude -Icommon -Iserver
+$(BUILD)/obj/common/%.o: CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude -Icommon
+$(BUILD)/obj/server/%.o: CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude -Icommon -Iserver
+$(BUILD)/obj/client/lib/%.o: CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude -Icommon
+$(BUILD)/obj/client/cli/%.o: CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude
 CFLAGS := -std=c11 $(OPT) -g -fno-math-errno $(WARN) $(SANFLAGS) -fPIC
 LDFLAGS := $(SANFLAGS)
 LIBS := -lembree3 -lOpenEXRCore -lexpat -lcjson -lpthread -ldl -lm
 DAEMON_LIBS := -lmicrohttpd -lcrypto
 TEST_LIBS := -lcurl -lcrypto
+
+# common/: the code the daemon and libraysweep share (status table and
+# error records, SHA-256, the EXR writer and film attributes).
+COMMON_SRC := $(sort $(wildcard common/*.c))
+COMMON_OBJ := $(COMMON_SRC:%.c=$(BUILD)/obj/%.o)
+COMMON_LIB := $(BUILD)/lib/librswcommon.a
 
 KERNEL_SRC := $(shell find server/kernel -name '*.c' | sort)
 KERNEL_OBJ := $(KERNEL_SRC:%.c=$(BUILD)/obj/%.o)
@@ -67,12 +82,11 @@ BENCH_SRC := $(wildcard tests/bench/*.c)
 BENCH_BIN := $(patsubst %.c,$(BUILD)/bench/%,$(notdir $(BENCH_SRC)))
 
 # ---- libraysweep (client/lib): the C client library ------------------------
-# libraysweep.a / .so link in the project's one EXR writer, the film
-# attributes and the status tables (server/kernel/image_exr.c, film_io.c,
-# core/error.c) rather than copying them.
+# libraysweep.a / .so link in common/ (the project's one EXR writer, the
+# film attributes, the status tables, SHA-256) rather than copying them.
 # The .so exports only the public API (client/lib/libraysweep.map).
 CLIENT_SRC := $(sort $(wildcard client/lib/*.c))
-CLIENT_OBJ := $(CLIENT_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/obj/server/kernel/image_exr.o $(BUILD)/obj/server/kernel/film_io.o $(BUILD)/obj/server/kernel/core/error.o
+CLIENT_OBJ := $(CLIENT_SRC:%.c=$(BUILD)/obj/%.o) $(COMMON_OBJ)
 CLIENT_A := $(BUILD)/lib/libraysweep.a
 CLIENT_SO := $(BUILD)/lib/libraysweep.so
 CLIENT_PC := $(BUILD)/lib/pkgconfig/raysweep.pc
@@ -108,13 +122,17 @@ $(KERNEL_LIB): $(KERNEL_OBJ)
 	@mkdir -p $(dir $@)
 	@rm -f $@ && ar rcs $@ $^
 
+$(COMMON_LIB): $(COMMON_OBJ)
+	@mkdir -p $(dir $@)
+	@rm -f $@ && ar rcs $@ $^
+
 $(SERVICE_LIB): $(SERVICE_OBJ)
 	@mkdir -p $(dir $@)
 	@rm -f $@ && ar rcs $@ $^
 
-$(BUILD)/bin/raysweepd: $(DAEMON_OBJ) $(SERVICE_LIB) $(KERNEL_LIB)
+$(BUILD)/bin/raysweepd: $(DAEMON_OBJ) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $(DAEMON_OBJ) $(SERVICE_LIB) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS) $(DAEMON_LIBS)
+	$(CC) $(LDFLAGS) -o $@ $(DAEMON_OBJ) $(SERVICE_LIB) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS) $(DAEMON_LIBS)
 
 # The embedded default scene (raysweepd serve without --scene): the XML as
 # one C string literal (backslash, quote and '?' escaped: no trigraphs).
@@ -157,9 +175,9 @@ install: $(BUILD)/bin/raysweepd $(BUILD)/bin/raysweep $(CLIENT_A) $(CLIENT_SO)
 	printf '%s\n' $(call client_pc_lines,$(PREFIX)) > $(DESTDIR)$(PREFIX)/lib/pkgconfig/raysweep.pc
 
 # The HTTP encoders are not in the kernel library: link them in.
-$(BUILD)/tests/test_http_encode: $(BUILD)/obj/tests/unit/test_http_encode.o $(BUILD)/obj/server/http/encode.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
+$(BUILD)/tests/test_http_encode: $(BUILD)/obj/tests/unit/test_http_encode.o $(BUILD)/obj/server/http/encode.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS)
+	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS)
 
 # test_image_exr_stress also reads every film through OpenEXR's C++ library
 # (tests/support/imf_read.cpp), whose decoder is independent of OpenEXR Core.
@@ -169,25 +187,25 @@ $(BUILD)/obj/tests/support/imf_read.o: tests/support/imf_read.cpp tests/support/
 	@mkdir -p $(dir $@)
 	$(CXX) $(IMF_CXXFLAGS) -c $< -o $@
 
-$(BUILD)/tests/test_image_exr_stress: $(BUILD)/obj/tests/unit/test_image_exr_stress.o $(BUILD)/obj/tests/support/imf_read.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
+$(BUILD)/tests/test_image_exr_stress: $(BUILD)/obj/tests/unit/test_image_exr_stress.o $(BUILD)/obj/tests/support/imf_read.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
-	$(CXX) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS) $(IMF_LIBS)
+	$(CXX) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS) $(IMF_LIBS)
 
-$(BUILD)/tests/%: $(BUILD)/obj/tests/unit/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
+$(BUILD)/tests/%: $(BUILD)/obj/tests/unit/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS)
+	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS)
 
-$(BUILD)/tests/%: $(BUILD)/obj/tests/validation/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
+$(BUILD)/tests/%: $(BUILD)/obj/tests/validation/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS)
+	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS)
 
-$(BUILD)/tests/%: $(BUILD)/obj/tests/integration/%.o $(TEST_SUPPORT_OBJ) $(SERVICE_LIB) $(KERNEL_LIB)
+$(BUILD)/tests/%: $(BUILD)/obj/tests/integration/%.o $(TEST_SUPPORT_OBJ) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(SERVICE_LIB),$^) $(SERVICE_LIB) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS) $(TEST_LIBS) -lcrypto
+	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB) $(SERVICE_LIB),$^) $(SERVICE_LIB) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS) $(TEST_LIBS) -lcrypto
 
-$(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
+$(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS) $(TEST_LIBS)
+	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS) $(TEST_LIBS)
 
 test: deps $(BUILD)/bin/raysweepd $(TEST_BIN)
 	@RSW_BIN_DIR=$(BUILD)/bin BUILD=$(BUILD) SAN=$(SAN) tests/run.sh $(TEST_BIN) $(TEST_SCRIPTS)

@@ -15,7 +15,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "kernel/image_exr.h"
+#include "image_exr.h"
 #include "kernel/plugins/env_plugin.h"
 #include "kernel/render.h"
 #include "kernel/scene/params.h"

@@ -9,9 +9,9 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "film_io.h"
+#include "image_exr.h"
 #include "internal.h"
-#include "kernel/film_io.h"
-#include "kernel/image_exr.h"
 
 /* Most channels a film may have (the EXR writer's cap as well). */
 #define FILM_MAX_CHANNELS 64

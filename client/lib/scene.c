@@ -12,12 +12,12 @@
 #include <cjson/cJSON.h>
 #include <errno.h>
 #include <expat.h>
-#include <openssl/evp.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "internal.h"
+#include "rsw_sha256.h"
 
 #define SHA_PREFIX "sha256:"
 /* Most distinct files one scene may reference. */
@@ -44,27 +44,14 @@ static void refs_free(ref_list *l) {
 
 /* SHA-256 of a file, streamed, as lowercase hex. */
 static rsw_status hash_file(rsw_client *c, const char *path, char hex[65]) {
-  FILE *f = fopen(path, "rb");
-  if (!f) return client_fail(c, RSW_ERR_IO, "%s: cannot open referenced file: %s", path, strerror(errno));
-  EVP_MD_CTX *md = EVP_MD_CTX_new();
-  if (!md || !EVP_DigestInit_ex(md, EVP_sha256(), NULL)) {
-    EVP_MD_CTX_free(md);
-    fclose(f);
-    return client_fail(c, RSW_ERR_NOMEM, "%s: cannot start SHA-256", path);
+  unsigned char digest[32];
+  errno = 0;
+  if (!rsw_sha256_file(path, digest)) {
+    if (errno)
+      return client_fail(c, RSW_ERR_IO, "%s: cannot read referenced file: %s", path, strerror(errno));
+    return client_fail(c, RSW_ERR_IO, "%s: SHA-256 failed", path);
   }
-  unsigned char buf[1 << 16];
-  size_t n;
-  bool ok = true;
-  while ((n = fread(buf, 1, sizeof buf, f)) > 0) ok = ok && EVP_DigestUpdate(md, buf, n);
-  bool read_error = ferror(f);
-  fclose(f);
-  unsigned char digest[EVP_MAX_MD_SIZE];
-  unsigned int len = 0;
-  ok = ok && EVP_DigestFinal_ex(md, digest, &len) && len == 32;
-  EVP_MD_CTX_free(md);
-  if (read_error) return client_fail(c, RSW_ERR_IO, "%s: read error", path);
-  if (!ok) return client_fail(c, RSW_ERR_IO, "%s: SHA-256 failed", path);
-  for (unsigned i = 0; i < 32; i++) snprintf(hex + 2 * i, 3, "%02x", digest[i]);
+  rsw_hex(digest, 32, hex);
   return RSW_OK;
 }
 

@@ -29,7 +29,7 @@ extern "C" {
   X(RSW_ERR_NOT_FOUND, "not found", 404)                                                                     \
   X(RSW_ERR_FILE, "cannot read referenced file", 422)                                                        \
   X(RSW_ERR_UNSUPPORTED, "unsupported feature", 422)                                                         \
-  X(RSW_ERR_LIMIT, "limit exceeded", 413)                                                                    \
+  X(RSW_ERR_LIMIT, "limit exceeded", 422)                                                                    \
   X(RSW_ERR_EMBREE, "ray-tracing backend error", 500)                                                        \
   X(RSW_ERR_RENDER, "render failed", 500)                                                                    \
   X(RSW_ERR_USAGE, "invalid command-line usage", 400)                                                        \
@@ -45,7 +45,9 @@ extern "C" {
   X(RSW_ERR_NOT_ACCEPTABLE, "no acceptable representation", 406)                                             \
   X(RSW_ERR_UNAUTHORIZED, "authentication required", 401)                                                    \
   X(RSW_ERR_METHOD, "method not allowed", 405)                                                               \
-  X(RSW_ERR_TOO_LARGE, "request body too large", 413)
+  X(RSW_ERR_TOO_LARGE, "request body too large", 413)                                                        \
+  X(RSW_ERR_UNKNOWN_NAME, "names nothing in the scene", 422)                                                 \
+  X(RSW_ERR_BAD_REQUEST, "invalid request parameter", 400)
 
 typedef enum rsw_status {
 #define RSW_STATUS_ENUM_(name, msg, http) name,

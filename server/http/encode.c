@@ -10,7 +10,7 @@
 #include <string.h>
 #include <strings.h>
 
-#include "../kernel/film_io.h"
+#include "film_io.h"
 
 /* ---- growable text buffer ------------------------------------------------ */
 
@@ -332,7 +332,7 @@ static bool is_place(const char *where) {
 }
 
 char *http_problem_from_svc(const svc_error *e, int *status_out) {
-  int status = e->http_status ? e->http_status : rsw_status_http(e->err.code);
+  int status = rsw_status_http(e->err.code);
   if (status < 400 || status > 599) status = 500; /* an error must not read as success */
   char detail[1200];
   if (e->err.msg[0])

@@ -9,8 +9,8 @@
 #include <stdbool.h>
 #include <stddef.h>
 
-#include "../kernel/core/error.h"
 #include "../service/service.h"
+#include "rsw_error.h"
 
 /* ---- growable text buffer ------------------------------------------------
  * Always NUL-terminated once anything is appended; on allocation failure or
@@ -71,8 +71,8 @@ rsw_status http_film_exr(const svc_film *f, void **bytes_out, size_t *len_out, r
  * Returns malloc'ed text or NULL when out of memory. */
 char *http_problem_json(int status, const char *code, const char *detail, const char *pointer,
                         const char *key, const char *const *candidates, size_t n_candidates);
-/* The same from a service error: status is e->http_status or
- * rsw_status_http(e->err.code); code is the status name (RSW_ERR_...)
+/* The same from a service error: status is rsw_status_http(e->err.code)
+ * (the status table decides, include/raysweep/status.h); code is the status name (RSW_ERR_...)
  * and title its message (rsw_strerror: "unknown plugin");
  * detail is "where: message"; pointer is err.where when it names a place
  * in the document (a JSON pointer "/..." or "file:line"). *status_out

@@ -13,8 +13,8 @@
 #include <stddef.h>
 #include <stdio.h>
 
-#include "../kernel/core/error.h"
 #include "../service/service.h"
+#include "rsw_error.h"
 
 typedef struct http_server http_server;
 

@@ -17,11 +17,11 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "core/error.h"
 #include "core/rng.h"
 #include "core/transform.h"
 #include "core/vec.h"
 #include "core/warp.h"
+#include "rsw_error.h"
 
 typedef enum obj_class {
   CLS_SCENE,

@@ -8,11 +8,12 @@
  * (job seed, context id, sensor id), never of the call order, so a sweep
  * split into several jobs gives bitwise the films of one job. */
 #include <math.h>
-#include <openssl/evp.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "buf.h"
+#include "rsw_sha256.h"
 #include "service_internal.h"
 
 static const char *const state_names[] = {"queued", "running", "succeeded", "failed", "cancelled"};
@@ -55,15 +56,9 @@ static void job_free(job *j) {
 
 /* svc->lock held. */
 static void push_event(service *svc, job *j, cJSON *data, bool end) {
-  if (j->n_events == j->cap_events) {
-    size_t cap = j->cap_events ? 2 * j->cap_events : 16;
-    job_event *p = realloc(j->events, cap * sizeof *p);
-    if (!p) {
-      cJSON_Delete(data);
-      return;
-    }
-    j->events = p;
-    j->cap_events = cap;
+  if (!svc_grow((void **)&j->events, &j->cap_events, j->n_events + 1, sizeof *j->events, 0)) {
+    cJSON_Delete(data);
+    return;
   }
   job_event *ev = &j->events[j->n_events];
   ev->seq = j->n_events + 1;
@@ -111,7 +106,7 @@ static job *find_job_locked(service *svc, const char *id) {
 }
 
 static rsw_status no_job(svc_error *e, const char *id) {
-  return svc_fail(e, RSW_ERR_NOT_FOUND, 404, id, "no job '%s' (unknown, deleted or expired)", id);
+  return svc_fail(e, RSW_ERR_NOT_FOUND, id, "no job '%s' (unknown, deleted or expired)", id);
 }
 
 /* Merge job-level and context-level overrides: context keys win. */
@@ -131,19 +126,19 @@ static cJSON *merge_params(const cJSON *job_params, const cJSON *ctx_params) {
  * its error and the others keep their results). */
 static rsw_status check_params(const scene *sc, const cJSON *p, const char *ptr, svc_error *e) {
   if (!p) return RSW_OK;
-  if (!cJSON_IsObject(p)) return svc_fail(e, RSW_ERR_TYPE, 422, ptr, "params must be an object {key: value}");
+  if (!cJSON_IsObject(p)) return svc_fail(e, RSW_ERR_TYPE, ptr, "params must be an object {key: value}");
   for (const cJSON *k = p->child; k; k = k->next) {
     size_t idx;
     rsw_err err = {0};
     if (params_lookup(sc, k->string, &idx, &err) != RSW_OK) {
       e->err = err;
-      e->http_status = 422;
+      e->err.code = svc_request_code(err.code);
       snprintf(e->err.where, sizeof e->err.where, "%s/%s", ptr, k->string);
       snprintf(e->key, sizeof e->key, "%s", k->string);
       const char *c[3];
       size_t n = params_closest(sc, k->string, c);
       for (size_t i = 0; i < n; i++) snprintf(e->candidates[i], sizeof e->candidates[i], "%s", c[i]);
-      return err.code;
+      return e->err.code;
     }
     char *txt = cJSON_PrintUnformatted(k);
     param_value v;
@@ -152,7 +147,7 @@ static rsw_status check_params(const scene *sc, const cJSON *p, const char *ptr,
     if (st) {
       char w[512];
       snprintf(w, sizeof w, "%s/%s", ptr, k->string);
-      return svc_fail(e, st, 422, w, "%s", err.msg);
+      return svc_fail(e, svc_request_code(st), w, "%s", err.msg);
     }
     param_value_free(&v);
   }
@@ -168,7 +163,7 @@ static bool get_uint(const cJSON *o, const char *name, double max, uint64_t *out
       x->valuedouble != floor(x->valuedouble)) {
     char w[300];
     snprintf(w, sizeof w, "%s/%s", ptr, name);
-    *st = svc_fail(e, RSW_ERR_INVALID, 422, w, "%s must be a non-negative integer", name);
+    *st = svc_fail(e, RSW_ERR_INVALID, w, "%s must be a non-negative integer", name);
     return false;
   }
   *out = (uint64_t)x->valuedouble;
@@ -177,10 +172,9 @@ static bool get_uint(const cJSON *o, const char *name, double max, uint64_t *out
 
 rsw_status service_job_submit(service *svc, const char *scene_id, const char *body, size_t len,
                               const char *idem_key, char **job_id_out, char **json_out, svc_error *e) {
-  if (!service_ready(svc)) return svc_fail(e, RSW_ERR_UNAVAILABLE, 503, "", "the server is shutting down");
+  if (!service_ready(svc)) return svc_fail(e, RSW_ERR_UNAVAILABLE, "", "the server is shutting down");
   unsigned char digest[32];
-  unsigned int dl = 32;
-  EVP_Digest(body, len, digest, &dl, EVP_sha256(), NULL);
+  if (!rsw_sha256(body, len, digest)) return svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
   if (idem_key) {
     pthread_mutex_lock(&svc->lock);
     for (size_t i = 0; i < svc->n_jobs; i++) {
@@ -190,7 +184,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
         continue;
       if (memcmp(j->body_digest, digest, 32) != 0) {
         pthread_mutex_unlock(&svc->lock);
-        return svc_fail(e, RSW_ERR_CONFLICT, 409, "Idempotency-Key",
+        return svc_fail(e, RSW_ERR_CONFLICT, "Idempotency-Key",
                         "Idempotency-Key '%s' was used for another request body", idem_key);
       }
       *job_id_out = strdup(j->id);
@@ -203,14 +197,14 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     pthread_mutex_unlock(&svc->lock);
   }
   resident *r = svc_scene_acquire(svc, scene_id);
-  if (!r) return svc_fail(e, RSW_ERR_NOT_FOUND, 404, scene_id, "no resident scene '%s'", scene_id);
+  if (!r) return svc_fail(e, RSW_ERR_NOT_FOUND, scene_id, "no resident scene '%s'", scene_id);
   cJSON *req = cJSON_ParseWithLength(body, len);
   rsw_status st = RSW_OK;
   job *jb = NULL;
   if (!req)
-    st = svc_fail(e, RSW_ERR_PARSE, 400, "", "the body is not valid JSON");
+    st = svc_fail(e, RSW_ERR_PARSE, "", "the body is not valid JSON");
   else if (!cJSON_IsObject(req))
-    st = svc_fail(e, RSW_ERR_TYPE, 422, "", "the body must be a JSON object");
+    st = svc_fail(e, RSW_ERR_TYPE, "", "the body must be a JSON object");
   const cJSON *contexts = NULL, *defaults = NULL, *jparams = NULL;
   uint64_t job_seed = 0;
   for (const cJSON *k = !st ? req->child : NULL; k && !st; k = k->next) {
@@ -226,14 +220,14 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     } else {
       char w[300];
       snprintf(w, sizeof w, "/%s", k->string);
-      st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, 422, w,
+      st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, w,
                     "unknown field '%s' (expected contexts, defaults, params, seed)", k->string);
     }
   }
   if (!st && (!cJSON_IsArray(contexts) || !contexts->child))
-    st = svc_fail(e, RSW_ERR_MISSING, 422, "/contexts", "a job needs a non-empty \"contexts\" list");
+    st = svc_fail(e, RSW_ERR_MISSING, "/contexts", "a job needs a non-empty \"contexts\" list");
   if (!st && defaults && !cJSON_IsObject(defaults))
-    st = svc_fail(e, RSW_ERR_TYPE, 422, "/defaults", "defaults must be an object");
+    st = svc_fail(e, RSW_ERR_TYPE, "/defaults", "defaults must be an object");
   /* Validation reads the parameter table's keys, the sensors' ids and
    * films: all fixed at load, so no scene lock is needed (a running render
    * holds it for its whole duration). */
@@ -249,8 +243,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     const cJSON *w = cJSON_GetObjectItemCaseSensitive(defaults, "wavelength");
     if (!st && w) {
       if (!cJSON_IsNumber(w) || !(w->valuedouble > 0))
-        st =
-            svc_fail(e, RSW_ERR_INVALID, 422, "/defaults/wavelength", "wavelength must be a positive number");
+        st = svc_fail(e, RSW_ERR_INVALID, "/defaults/wavelength", "wavelength must be a positive number");
       else
         d_wl = w->valuedouble;
     }
@@ -259,7 +252,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       if (strcmp(k->string, "spp") && strcmp(k->string, "wavelength") && strcmp(k->string, "sensors")) {
         char w2[300];
         snprintf(w2, sizeof w2, "/defaults/%s", k->string);
-        st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, 422, w2, "unknown field '%s' in defaults", k->string);
+        st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, w2, "unknown field '%s' in defaults", k->string);
       }
   }
   /* Count renders and validate every context before accepting. */
@@ -268,18 +261,18 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     char ptr[64];
     snprintf(ptr, sizeof ptr, "/contexts/%zu", n_ctx);
     if (!cJSON_IsObject(c)) {
-      st = svc_fail(e, RSW_ERR_TYPE, 422, ptr, "a context must be an object");
+      st = svc_fail(e, RSW_ERR_TYPE, ptr, "a context must be an object");
       break;
     }
     const cJSON *id = cJSON_GetObjectItemCaseSensitive(c, "id");
     if (!cJSON_IsString(id) || !valid_context_id(id->valuestring)) {
-      st = svc_fail(e, RSW_ERR_INVALID, 422, ptr, "context \"id\" must match [A-Za-z0-9._-]{1,64}");
+      st = svc_fail(e, RSW_ERR_INVALID, ptr, "context \"id\" must match [A-Za-z0-9._-]{1,64}");
       break;
     }
     for (const cJSON *p = contexts->child; p != c; p = p->next) {
       const cJSON *pid = cJSON_GetObjectItemCaseSensitive(p, "id");
       if (strcmp(pid->valuestring, id->valuestring) == 0) {
-        st = svc_fail(e, RSW_ERR_DUPLICATE, 422, ptr, "context id '%s' appears twice", id->valuestring);
+        st = svc_fail(e, RSW_ERR_DUPLICATE, ptr, "context id '%s' appears twice", id->valuestring);
         break;
       }
     }
@@ -288,18 +281,18 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
           strcmp(k->string, "sensors") && strcmp(k->string, "spp") && strcmp(k->string, "seed")) {
         char w[300];
         snprintf(w, sizeof w, "%s/%s", ptr, k->string);
-        st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, 422, w, "unknown field '%s' in a context", k->string);
+        st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, w, "unknown field '%s' in a context", k->string);
       }
     if (st) break;
     const cJSON *w = cJSON_GetObjectItemCaseSensitive(c, "wavelength");
     if (w && (!cJSON_IsNumber(w) || !(w->valuedouble > 0))) {
       char p2[80];
       snprintf(p2, sizeof p2, "%s/wavelength", ptr);
-      st = svc_fail(e, RSW_ERR_INVALID, 422, p2, "wavelength must be a positive number of nm");
+      st = svc_fail(e, RSW_ERR_INVALID, p2, "wavelength must be a positive number of nm");
       break;
     }
     if ((w || d_wl > 0) && sc->variant != VARIANT_MONO) {
-      st = svc_fail(e, RSW_ERR_INVALID, 422, ptr, "wavelength applies to mono scenes; this scene is rgb");
+      st = svc_fail(e, RSW_ERR_INVALID, ptr, "wavelength applies to mono scenes; this scene is rgb");
       break;
     }
     char pp[80];
@@ -315,23 +308,22 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     if (!sens) sens = d_sensors;
     if (sens) {
       if (!cJSON_IsArray(sens) || !sens->child) {
-        st = svc_fail(e, RSW_ERR_TYPE, 422, ptr, "sensors must be a non-empty list of sensor ids");
+        st = svc_fail(e, RSW_ERR_TYPE, ptr, "sensors must be a non-empty list of sensor ids");
         break;
       }
       for (const cJSON *s = sens->child; s && !st; s = s->next) {
         size_t si;
         if (!cJSON_IsString(s) || !svc_find_sensor(sc, s->valuestring, &si))
-          st = svc_fail(e, RSW_ERR_NOT_FOUND, 422, ptr, "no sensor '%s' in the scene",
+          st = svc_fail(e, RSW_ERR_UNKNOWN_NAME, ptr, "no sensor '%s' in the scene",
                         cJSON_IsString(s) ? s->valuestring : "?");
         n_items++;
       }
     } else {
-      if (!sc->n_sensors) st = svc_fail(e, RSW_ERR_INVALID, 422, ptr, "the scene has no sensor");
+      if (!sc->n_sensors) st = svc_fail(e, RSW_ERR_INVALID, ptr, "the scene has no sensor");
       n_items += sc->n_sensors;
     }
   }
-  if (!st && n_ctx > 100000)
-    st = svc_fail(e, RSW_ERR_LIMIT, 422, "/contexts", "at most 100000 contexts per job");
+  if (!st && n_ctx > 100000) st = svc_fail(e, RSW_ERR_LIMIT, "/contexts", "at most 100000 contexts per job");
   /* Build the job. */
   if (!st) {
     jb = calloc(1, sizeof *jb);
@@ -339,8 +331,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       jb->items = calloc(n_items, sizeof *jb->items);
       jb->context_remaining = calloc(n_ctx, sizeof *jb->context_remaining);
     }
-    if (!jb || !jb->items || !jb->context_remaining)
-      st = svc_fail(e, RSW_ERR_NOMEM, 500, "", "out of memory");
+    if (!jb || !jb->items || !jb->context_remaining) st = svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
   }
   size_t k = 0, ci = 0;
   for (const cJSON *c = !st ? contexts->child : NULL; c && !st; c = c->next, ci++) {
@@ -372,7 +363,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       if (ps > svc->opts.max_pixel_samples) {
         char p2[80];
         snprintf(p2, sizeof p2, "/contexts/%zu", ci);
-        st = svc_fail(e, RSW_ERR_LIMIT, 422, p2, "%llu pixel samples exceed this server's limit of %llu",
+        st = svc_fail(e, RSW_ERR_LIMIT, p2, "%llu pixel samples exceed this server's limit of %llu",
                       (unsigned long long)ps, (unsigned long long)svc->opts.max_pixel_samples);
       }
     }
@@ -402,23 +393,19 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     pthread_mutex_unlock(&svc->lock);
     job_free(jb);
     svc_scene_release(svc, r);
-    st = svc_fail(e, RSW_ERR_BUSY, 429, "", "%zu jobs are already queued (the limit); retry later", q);
+    st = svc_fail(e, RSW_ERR_BUSY, "", "%zu jobs are already queued (the limit); retry later", q);
     e->retry_after_s = 1;
     return st;
   }
   snprintf(jb->id, sizeof jb->id, "job-%06llu", (unsigned long long)++svc->next_job);
   jb->revision = r->revision;
-  bool ok = (svc->n_jobs < svc->cap_jobs ||
-             (svc->jobs = realloc(svc->jobs, (svc->cap_jobs = svc->cap_jobs ? 2 * svc->cap_jobs : 16) *
-                                                 sizeof *svc->jobs))) &&
-            (svc->n_queue < svc->cap_queue ||
-             (svc->queue = realloc(svc->queue, (svc->cap_queue = svc->cap_queue ? 2 * svc->cap_queue : 16) *
-                                                   sizeof *svc->queue)));
+  bool ok = svc_grow((void **)&svc->jobs, &svc->cap_jobs, svc->n_jobs + 1, sizeof *svc->jobs, 0) &&
+            svc_grow((void **)&svc->queue, &svc->cap_queue, svc->n_queue + 1, sizeof *svc->queue, 0);
   if (!ok) {
     pthread_mutex_unlock(&svc->lock);
     job_free(jb);
     svc_scene_release(svc, r);
-    return svc_fail(e, RSW_ERR_NOMEM, 500, "", "out of memory");
+    return svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
   }
   svc->jobs[svc->n_jobs++] = jb;
   svc->queue[svc->n_queue++] = jb;
@@ -690,11 +677,10 @@ rsw_status service_job_result(service *svc, const char *id, const char *context,
     if (!it->has_film) {
       pthread_mutex_unlock(&svc->lock);
       if (it->state == JOB_FAILED)
-        return svc_fail(e, RSW_ERR_NOT_FOUND, 404, context,
-                        "context '%s' sensor '%s' has no film: it failed: %s", context, sensor_name,
-                        it->error);
-      return svc_fail(e, RSW_ERR_NOT_FOUND, 404, context, "context '%s' sensor '%s' has no film yet (%s)",
-                      context, sensor_name, state_names[it->state]);
+        return svc_fail(e, RSW_ERR_NOT_FOUND, context, "context '%s' sensor '%s' has no film: it failed: %s",
+                        context, sensor_name, it->error);
+      return svc_fail(e, RSW_ERR_NOT_FOUND, context, "context '%s' sensor '%s' has no film yet (%s)", context,
+                      sensor_name, state_names[it->state]);
     }
     /* A copy: the job may be deleted while the response is written. */
     *out = it->film;
@@ -703,7 +689,7 @@ rsw_status service_job_result(service *svc, const char *id, const char *context,
     out->img.data = malloc(n * sizeof(float));
     if (!out->img.data) {
       pthread_mutex_unlock(&svc->lock);
-      return svc_fail(e, RSW_ERR_NOMEM, 500, "", "out of memory");
+      return svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
     }
     memcpy(out->img.data, it->film.img.data, n * sizeof(float));
     /* The per-pixel viewing angles (distant-family films) are owned too. */
@@ -714,7 +700,7 @@ rsw_status service_job_result(service *svc, const char *id, const char *context,
         free(out->img.data);
         out->img.data = NULL;
         pthread_mutex_unlock(&svc->lock);
-        return svc_fail(e, RSW_ERR_NOMEM, 500, "", "out of memory");
+        return svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
       }
       memcpy(out->img.angles, it->film.img.angles, na * sizeof(double));
     }
@@ -722,8 +708,8 @@ rsw_status service_job_result(service *svc, const char *id, const char *context,
     return RSW_OK;
   }
   pthread_mutex_unlock(&svc->lock);
-  return svc_fail(e, RSW_ERR_NOT_FOUND, 404, context, "job %s has no result for context '%s' and sensor '%s'",
-                  id, context, sensor_name);
+  return svc_fail(e, RSW_ERR_NOT_FOUND, context, "job %s has no result for context '%s' and sensor '%s'", id,
+                  context, sensor_name);
 }
 
 rsw_status service_job_next_event(service *svc, const char *id, uint64_t after, int timeout_ms,

@@ -5,7 +5,9 @@
  *
  * Every function is thread-safe unless noted. Errors come back as an
  * rsw_status with an svc_error naming the place (JSON pointer, parameter
- * key) and, for unknown keys, candidate keys. */
+ * key) and, for unknown keys, candidate keys. The HTTP status follows
+ * from the code alone (rsw_status_http): server/http decides it, never the
+ * service. */
 #ifndef RSW_SERVICE_H
 #define RSW_SERVICE_H
 
@@ -14,15 +16,13 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "../kernel/core/error.h"
 #include "../kernel/render.h"
+#include "rsw_error.h"
 
 typedef struct service service;
 
 typedef struct svc_error {
   rsw_err err;             /* code, where (pointer or key), message */
-  int http_status;         /* the status the HTTP layer should answer with
-                             (0: derive from err.code via rsw_status_http) */
   char key[256];           /* parameter key when the error is about one */
   char candidates[3][256]; /* closest keys for an unknown key ("" unused) */
   int retry_after_s;       /* for 429 */

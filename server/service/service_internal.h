@@ -1,4 +1,6 @@
-/* Private state of the service layer, shared by service.c and jobs.c. */
+/* Private state of the service layer, shared by its files (one per
+ * resource: service.c, scenes.c, params.c, renders.c, blobs.c, jobs.c,
+ * metrics.c). */
 #ifndef RSW_SERVICE_INTERNAL_H
 #define RSW_SERVICE_INTERNAL_H
 
@@ -123,11 +125,34 @@ struct service {
   uint64_t updates[3];
 };
 
-/* Helpers shared by service.c and jobs.c. */
+/* Helpers shared by the service files. */
 double svc_now(void);
 void svc_iso_time(time_t t, char out[32]);
-rsw_status svc_fail(svc_error *e, rsw_status code, int http, const char *where, const char *fmt, ...)
-    __attribute__((format(printf, 5, 6)));
+/* Record an error (the first one wins) and return its code. The HTTP
+ * status follows from the code alone (rsw_status_http, status.h): pick the
+ * code that says what went wrong; never a status. */
+rsw_status svc_fail(svc_error *e, rsw_status code, const char *where, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+/* The code for a kernel error about something a request named: an
+ * unknown key or sensor (kernel NOT_FOUND) is RSW_ERR_UNKNOWN_NAME, a
+ * value that does not parse is RSW_ERR_INVALID; others are kept. */
+rsw_status svc_request_code(rsw_status kernel_code);
+/* Print and free a JSON document (NULL when out of memory). */
+char *svc_print_json(cJSON *o);
+/* Metrics (metrics.c): an applied parameter update. */
+struct update_report;
+void svc_count_update(service *svc, const struct update_report *rep);
+/* Parameters (params.c). */
+void svc_refresh_param_cache(resident *r);
+rsw_status svc_no_scene(svc_error *e, const char *id);
+rsw_status svc_map_to_updates(const cJSON *j, const scene *sc, const char *where, param_update **out,
+                              size_t *n, svc_error *e);
+void svc_free_updates(param_update *u, size_t n);
+rsw_status svc_update_error(svc_error *e, const scene *sc, const param_update *u, size_t n,
+                            const rsw_err *err);
+/* The bytes a resident scene holds (metrics.c). */
+size_t svc_scene_bytes(const scene *sc);
+resident *svc_find_scene_locked(service *svc, const char *id); /* svc->lock held */
 /* Find a resident scene and take a ref (svc->lock must NOT be held). */
 resident *svc_scene_acquire(service *svc, const char *id);
 void svc_scene_release(service *svc, resident *r);

@@ -9,8 +9,8 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include "../../server/kernel/image_exr.h"
 #include "../support/test.h"
+#include "image_exr.h"
 
 RSW_TEST_DEFINE_GLOBALS
 

@@ -32,8 +32,8 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "../../server/kernel/image_exr.h"
 #include "../support/test.h"
+#include "image_exr.h"
 
 RSW_TEST_DEFINE_GLOBALS
 

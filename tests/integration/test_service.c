@@ -48,8 +48,8 @@ static void test_scene_ids(void) {
   CHECK(service_scene_post(svc, "{\"s\": {\"type\": \"nope\"}}", 23, false, NULL, &created, &i3, &j3, &e2) !=
             RSW_OK,
         "unknown plugin rejected");
-  CHECK(e2.http_status == 422 && strstr(e2.err.where, "/s"), "422 with pointer: %d %s", e2.http_status,
-        e2.err.where);
+  CHECK(rsw_status_http(e2.err.code) == 422 && strstr(e2.err.where, "/s"), "422 with pointer: %d %s",
+        rsw_status_http(e2.err.code), e2.err.where);
 }
 
 static char *post_plate(void) {
@@ -105,7 +105,7 @@ static void test_patch_revisions(void) {
   CHECK(service_params_patch(svc, id, patch, strlen(patch), (int64_t)rev, &json, &rev2, &e2) ==
             RSW_ERR_PRECONDITION,
         "stale If-Match");
-  CHECK(e2.http_status == 412, "412");
+  CHECK(rsw_status_http(e2.err.code) == 412, "412");
   /* Back to 0.5 so the other tests see the base scene. */
   const char *back = "{\"plate.bsdf.reflectance.value\": 0.5}";
   svc_error e3 = {0};

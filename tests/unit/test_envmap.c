@@ -13,8 +13,8 @@
 #include "../support/chi2.h"
 #include "../support/test.h"
 #include "../support/tsup.h"
+#include "image_exr.h"
 #include "kernel/core/distr2d.h"
-#include "kernel/image_exr.h"
 #include "kernel/scene/params.h"
 
 RSW_TEST_DEFINE_GLOBALS

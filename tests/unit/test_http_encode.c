@@ -11,7 +11,7 @@
 
 #include "../support/test.h"
 #include "http/encode.h"
-#include "kernel/image_exr.h"
+#include "image_exr.h"
 
 RSW_TEST_DEFINE_GLOBALS
 
@@ -258,9 +258,11 @@ static void test_problem(void) {
   cJSON_Delete(j);
   free(t);
 
-  e.http_status = 409; /* explicit status wins */
+  /* The status follows from the code alone (no service-chosen status). */
+  memset(&e, 0, sizeof e);
+  rsw_fail(&e.err, RSW_ERR_UNKNOWN_NAME, "/sensor", "no sensor 'x'");
   t = http_problem_from_svc(&e, &status);
-  CHECK(t && status == 409, "explicit status %d", status);
+  CHECK(t && status == 422, "unknown name: %d", status);
   free(t);
 
   /* file:line is a place (pointer); a digest in where is not. */

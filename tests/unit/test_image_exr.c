@@ -13,7 +13,7 @@
 #include <OpenEXR/openexr.h>
 
 #include "../support/test.h"
-#include "kernel/image_exr.h"
+#include "image_exr.h"
 
 RSW_TEST_DEFINE_GLOBALS
 

@@ -24,7 +24,7 @@
 
 #include "../support/imf_read.h"
 #include "../support/test.h"
-#include "kernel/image_exr.h"
+#include "image_exr.h"
 
 RSW_TEST_DEFINE_GLOBALS
 

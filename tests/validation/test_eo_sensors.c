@@ -17,9 +17,9 @@
 #include <unistd.h>
 
 #include "../../server/kernel/core/warp.h"
-#include "../../server/kernel/image_exr.h"
 #include "../support/test.h"
 #include "../support/tsup.h"
+#include "image_exr.h"
 
 RSW_TEST_DEFINE_GLOBALS
 

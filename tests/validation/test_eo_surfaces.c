@@ -18,9 +18,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../../server/kernel/image_exr.h"
 #include "../support/test.h"
 #include "../support/tsup.h"
+#include "image_exr.h"
 
 RSW_TEST_DEFINE_GLOBALS
 

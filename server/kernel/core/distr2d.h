@@ -13,7 +13,7 @@
 
 #include <stddef.h>
 
-#include "error.h"
+#include "rsw_error.h"
 #include "warp.h"
 
 typedef struct distr2d {

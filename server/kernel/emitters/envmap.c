@@ -38,9 +38,9 @@
 #include <stdlib.h>
 
 #include "../core/distr2d.h"
-#include "../image_exr.h"
 #include "../scene/loader.h"
 #include "../scene/params.h"
+#include "image_exr.h"
 
 typedef struct envmap {
   emitter base;

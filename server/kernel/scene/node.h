@@ -12,9 +12,9 @@
 #include <stdbool.h>
 #include <stddef.h>
 
-#include "../core/error.h"
 #include "../core/transform.h"
 #include "../core/vec.h"
+#include "rsw_error.h"
 
 /* Limits that keep hostile documents bounded. */
 #define RSW_MAX_DEPTH 64 /* nesting of objects/arrays */

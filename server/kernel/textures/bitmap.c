@@ -8,9 +8,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../image_exr.h"
 #include "../scene/loader.h"
 #include "../scene/params.h"
+#include "image_exr.h"
 
 typedef enum wrap_mode {
   WRAP_REPEAT,

@@ -11,7 +11,7 @@
 #include <stdbool.h>
 #include <stddef.h>
 
-#include "core/error.h"
+#include "rsw_error.h"
 
 /* Largest image either direction accepts, in samples (width x height x
  * channels): 2^28 floats = 1 GiB. */

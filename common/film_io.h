@@ -33,7 +33,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "core/error.h"
+#include "rsw_error.h"
 
 typedef struct film_exr_info {
   const char *scene, *context, *sensor, *variant; /* NULL or "": not written */

@@ -1,0 +1,85 @@
+/* Content-addressed blobs: PUT /v1/blobs/{sha256}, HEAD, and
+ * POST /v1/blobs:missing. */
+#include <errno.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "buf.h"
+#include "rsw_sha256.h"
+#include "service_internal.h"
+
+rsw_status service_blob_put(service *svc, const char *h, const void *data, size_t len, bool *created,
+                            svc_error *e) {
+  if (!rsw_is_sha256_hex(h))
+    return svc_fail(e, RSW_ERR_BAD_REQUEST, h, "a blob is named by its SHA-256: 64 lowercase hex digits");
+  unsigned char d[32];
+  char dh[65];
+  if (!rsw_sha256(data, len, d)) return svc_fail(e, RSW_ERR_NOMEM, h, "hashing failed");
+  rsw_hex(d, 32, dh);
+  if (strcmp(dh, h) != 0) return svc_fail(e, RSW_ERR_INVALID, h, "the body's SHA-256 is %s, not %s", dh, h);
+  char path[8192], tmp[8300];
+  snprintf(path, sizeof path, "%s/%s", svc->blob_dir, h);
+  struct stat sb;
+  if (stat(path, &sb) == 0) {
+    *created = false;
+    return RSW_OK;
+  }
+  snprintf(tmp, sizeof tmp, "%s.tmp.%ld.%lu", path, (long)getpid(), (unsigned long)pthread_self());
+  FILE *f = fopen(tmp, "wb");
+  if (!f) return svc_fail(e, RSW_ERR_IO, h, "cannot store the blob: %s", strerror(errno));
+  bool ok = fwrite(data, 1, len, f) == len;
+  ok = fclose(f) == 0 && ok;
+  if (!ok || rename(tmp, path) != 0) {
+    remove(tmp);
+    return svc_fail(e, RSW_ERR_IO, h, "cannot store the blob");
+  }
+  *created = true;
+  return RSW_OK;
+}
+
+long long service_blob_size(service *svc, const char *h) {
+  if (!rsw_is_sha256_hex(h)) return -1;
+  char path[8192];
+  snprintf(path, sizeof path, "%s/%s", svc->blob_dir, h);
+  struct stat sb;
+  return stat(path, &sb) == 0 ? (long long)sb.st_size : -1;
+}
+
+bool service_blob_exists(service *svc, const char *h) {
+  if (!rsw_is_sha256_hex(h)) return false;
+  char path[8192];
+  snprintf(path, sizeof path, "%s/%s", svc->blob_dir, h);
+  struct stat sb;
+  return stat(path, &sb) == 0;
+}
+
+rsw_status service_blobs_missing(service *svc, const char *body, size_t len, char **json_out, svc_error *e) {
+  cJSON *j = cJSON_ParseWithLength(body, len);
+  if (!j) return svc_fail(e, RSW_ERR_PARSE, "", "the body is not valid JSON");
+  const cJSON *d = cJSON_GetObjectItemCaseSensitive(j, "digests");
+  if (!cJSON_IsArray(d)) {
+    cJSON_Delete(j);
+    return svc_fail(e, RSW_ERR_TYPE, "/digests", "expected {\"digests\": [sha256 hex, ...]}");
+  }
+  cJSON *o = cJSON_CreateObject();
+  cJSON *m = cJSON_AddArrayToObject(o, "missing");
+  int i = 0;
+  for (const cJSON *x = d->child; x; x = x->next, i++) {
+    if (!cJSON_IsString(x) || !rsw_is_sha256_hex(x->valuestring)) {
+      cJSON_Delete(o);
+      cJSON_Delete(j);
+      char ptr[32];
+      snprintf(ptr, sizeof ptr, "/digests/%d", i);
+      return svc_fail(e, RSW_ERR_INVALID, ptr, "not a SHA-256 hex digest");
+    }
+    if (!service_blob_exists(svc, x->valuestring))
+      cJSON_AddItemToArray(m, cJSON_CreateString(x->valuestring));
+  }
+  cJSON_Delete(j);
+  *json_out = svc_print_json(o);
+  return RSW_OK;
+}

@@ -1,0 +1,107 @@
+/* GET /metrics: request counts by route and status, scenes, jobs,
+ * renders and updates, in Prometheus's text format. */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../kernel/accel.h"
+#include "buf.h"
+#include "rsw_sha256.h"
+#include "service_internal.h"
+
+void service_count_request(service *svc, const char *route, int status) {
+  pthread_mutex_lock(&svc->lock);
+  size_t i = 0;
+  for (; i < svc->n_reqs; i++)
+    if (svc->reqs[i].status == status && strcmp(svc->reqs[i].route, route) == 0) break;
+  if (i == svc->n_reqs) {
+    if (!svc_grow((void **)&svc->reqs, &svc->cap_reqs, svc->n_reqs + 1, sizeof *svc->reqs, 0)) {
+      pthread_mutex_unlock(&svc->lock);
+      return;
+    }
+    snprintf(svc->reqs[i].route, sizeof svc->reqs[i].route, "%s", route);
+    svc->reqs[i].status = status;
+    svc->reqs[i].n = 0;
+    svc->n_reqs++;
+  }
+  svc->reqs[i].n++;
+  pthread_mutex_unlock(&svc->lock);
+}
+
+size_t svc_scene_bytes(const scene *sc) {
+  size_t b = accel_memory(sc->accel);
+  for (size_t i = 0; i < sc->n_shapes; i++) {
+    const mesh *m = &sc->shapes[i]->mesh;
+    b += (size_t)m->n_verts * (12 + (m->nrm ? 12 : 0) + (m->uv ? 8 : 0)) + (size_t)m->n_faces * 12;
+    if (sc->shapes[i]->tri_cdf) b += (size_t)sc->shapes[i]->tri_cdf_n * 8;
+  }
+  return b;
+}
+
+char *service_metrics_text(service *svc) {
+  svc_buf b = svc_buf_make(0);
+  pthread_mutex_lock(&svc->lock);
+  svc_buf_printf(&b, "# HELP raysweep_http_requests_total HTTP requests by route template and status.\n");
+  svc_buf_printf(&b, "# TYPE raysweep_http_requests_total counter\n");
+  for (size_t i = 0; i < svc->n_reqs; i++)
+    svc_buf_printf(&b, "raysweep_http_requests_total{route=\"%s\",status=\"%d\"} %llu\n", svc->reqs[i].route,
+                   svc->reqs[i].status, (unsigned long long)svc->reqs[i].n);
+  size_t bytes = 0;
+  for (size_t i = 0; i < svc->n_scenes; i++) bytes += svc_scene_bytes(svc->scenes[i]->sc);
+  svc_buf_printf(
+      &b, "# HELP raysweep_scenes_resident Scenes held in memory.\n# TYPE raysweep_scenes_resident gauge\n");
+  svc_buf_printf(&b, "raysweep_scenes_resident %zu\n", svc->n_scenes);
+  svc_buf_printf(&b, "# HELP raysweep_scene_bytes Bytes held by resident scenes' geometry.\n# TYPE "
+                     "raysweep_scene_bytes gauge\n");
+  svc_buf_printf(&b, "raysweep_scene_bytes %zu\n", bytes);
+  static const char *const states[] = {"queued", "running", "succeeded", "failed", "cancelled"};
+  size_t by_state[5] = {0};
+  for (size_t i = 0; i < svc->n_jobs; i++) by_state[svc->jobs[i]->state]++;
+  svc_buf_printf(&b, "# HELP raysweep_jobs Jobs by state.\n# TYPE raysweep_jobs gauge\n");
+  for (int s = 0; s < 5; s++) svc_buf_printf(&b, "raysweep_jobs{state=\"%s\"} %zu\n", states[s], by_state[s]);
+  svc_buf_printf(
+      &b, "# HELP raysweep_queue_depth Jobs waiting for the worker.\n# TYPE raysweep_queue_depth gauge\n");
+  svc_buf_printf(&b, "raysweep_queue_depth %zu\n", svc->n_queue);
+  svc_buf_printf(&b, "# HELP raysweep_sync_renders Synchronous renders (POST :render) in progress.\n");
+  svc_buf_printf(&b, "# TYPE raysweep_sync_renders gauge\nraysweep_sync_renders %zu\n", svc->sync_renders);
+  svc_buf_printf(&b, "# HELP raysweep_contexts_rendered_total Renders of (context, sensor) completed.\n");
+  svc_buf_printf(&b,
+                 "# TYPE raysweep_contexts_rendered_total counter\nraysweep_contexts_rendered_total %llu\n",
+                 (unsigned long long)svc->contexts_rendered);
+  svc_buf_printf(&b, "# HELP raysweep_renders_failed_total Renders that failed.\n");
+  svc_buf_printf(&b, "# TYPE raysweep_renders_failed_total counter\nraysweep_renders_failed_total %llu\n",
+                 (unsigned long long)svc->renders_failed);
+  svc_buf_printf(&b, "# HELP raysweep_render_seconds_total Wall time spent rendering.\n");
+  svc_buf_printf(&b, "# TYPE raysweep_render_seconds_total counter\nraysweep_render_seconds_total %.6f\n",
+                 svc->render_seconds);
+  svc_buf_printf(&b,
+                 "# HELP raysweep_unresolved_rays_total Rays a periodic boundary could not resolve (counted "
+                 "as blocked).\n");
+  svc_buf_printf(&b, "# TYPE raysweep_unresolved_rays_total counter\nraysweep_unresolved_rays_total %llu\n",
+                 (unsigned long long)svc->unresolved_rays);
+  static const char *const classes[] = {"none", "spectral", "geometric"};
+  svc_buf_printf(&b, "# HELP raysweep_update_seconds_total Time spent applying parameter updates, by the "
+                     "costliest class touched.\n");
+  svc_buf_printf(&b, "# TYPE raysweep_update_seconds_total counter\n");
+  for (int c = 0; c < 3; c++)
+    svc_buf_printf(&b, "raysweep_update_seconds_total{class=\"%s\"} %.6f\n", classes[c],
+                   svc->update_seconds[c]);
+  svc_buf_printf(
+      &b, "# HELP raysweep_updates_total Parameter updates applied, by the costliest class touched.\n");
+  svc_buf_printf(&b, "# TYPE raysweep_updates_total counter\n");
+  for (int c = 0; c < 3; c++)
+    svc_buf_printf(&b, "raysweep_updates_total{class=\"%s\"} %llu\n", classes[c],
+                   (unsigned long long)svc->updates[c]);
+  svc_buf_printf(&b, "# HELP raysweep_ready Whether the server accepts work.\n# TYPE raysweep_ready gauge\n");
+  svc_buf_printf(&b, "raysweep_ready %d\n", atomic_load(&svc->ready) ? 1 : 0);
+  pthread_mutex_unlock(&svc->lock);
+  return svc_buf_take(&b);
+}
+
+void svc_count_update(service *svc, const struct update_report *rep) {
+  int c = (rep->classes & UPDATE_GEOMETRIC) ? 2 : (rep->classes & UPDATE_SPECTRAL) ? 1 : 0;
+  pthread_mutex_lock(&svc->lock);
+  svc->update_seconds[c] += rep->seconds;
+  svc->updates[c]++;
+  pthread_mutex_unlock(&svc->lock);
+}

@@ -1,0 +1,204 @@
+/* A scene's parameter table: GET (from a base-state cache that never
+ * waits for a render) and PATCH, and the {key: value} maps that
+ * renders and job contexts carry as overrides. */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "buf.h"
+#include "rsw_sha256.h"
+#include "service_internal.h"
+
+static cJSON *param_entry_json(const scene *sc, size_t i) {
+  param_info pi;
+  if (!params_info(sc, i, &pi)) return NULL;
+  cJSON *o = cJSON_CreateObject();
+  cJSON_AddStringToObject(o, "key", pi.key);
+  cJSON_AddStringToObject(o, "type", param_type_name(pi.type));
+  cJSON_AddStringToObject(o, "class", update_class_name(pi.cls));
+  cJSON *sh = cJSON_AddArrayToObject(o, "shape");
+  cJSON_AddItemToArray(sh, cJSON_CreateNumber((double)pi.shape[0]));
+  if (pi.shape[1]) cJSON_AddItemToArray(sh, cJSON_CreateNumber((double)pi.shape[1]));
+  cJSON_AddStringToObject(o, "object_type", pi.object_type);
+  cJSON_AddStringToObject(o, "object_class", pi.object_class);
+  cJSON_AddStringToObject(o, "object_id", pi.object_id);
+  char *v = params_value_json(sc, i, 16);
+  cJSON *val = v ? cJSON_Parse(v) : NULL;
+  free(v);
+  cJSON_AddItemToObject(o, "value", val ? val : cJSON_CreateNull());
+  cJSON *al = cJSON_AddArrayToObject(o, "aliases");
+  for (size_t a = 0; a < pi.n_aliases; a++) cJSON_AddItemToArray(al, cJSON_CreateString(pi.aliases[a]));
+  return o;
+}
+
+/* Rebuild the base-state cache; r->lock held (no overrides applied). */
+void svc_refresh_param_cache(resident *r) {
+  cJSON *a = cJSON_CreateArray();
+  size_t n = params_count(r->sc);
+  for (size_t i = 0; a && i < n; i++) {
+    cJSON *p = param_entry_json(r->sc, i);
+    cJSON_AddItemToArray(a, p ? p : cJSON_CreateNull());
+  }
+  pthread_mutex_lock(&r->cache_lock);
+  cJSON_Delete(r->base_params);
+  r->base_params = a;
+  r->cache_revision = r->revision;
+  pthread_mutex_unlock(&r->cache_lock);
+}
+
+/* An unknown-key error with the closest keys, for problem+json. */
+static rsw_status key_error(svc_error *e, const scene *sc, const char *key, const rsw_err *err) {
+  e->err = *err;
+  e->err.code = svc_request_code(err->code);
+  snprintf(e->key, sizeof e->key, "%s", key);
+  if (err->code == RSW_ERR_NOT_FOUND) {
+    const char *c[3];
+    size_t n = params_closest(sc, key, c);
+    for (size_t i = 0; i < n; i++) snprintf(e->candidates[i], sizeof e->candidates[i], "%s", c[i]);
+  }
+  return e->err.code;
+}
+
+rsw_status service_params_get(service *svc, const char *id, const char *match, const char *cls,
+                              char **json_out, uint64_t *revision_out, svc_error *e) {
+  resident *r = svc_scene_acquire(svc, id);
+  if (!r) return svc_no_scene(e, id);
+  unsigned mask = UPDATE_SPECTRAL | UPDATE_GEOMETRIC;
+  bool none = true;
+  if (cls && *cls) {
+    update_class c;
+    if (!update_class_parse(cls, &c)) {
+      svc_scene_release(svc, r);
+      return svc_fail(e, RSW_ERR_BAD_REQUEST, "class", "class must be spectral, geometric or none (got '%s')",
+                      cls);
+    }
+    mask = c == UPDATE_NONE ? 0 : (unsigned)c;
+    none = c == UPDATE_NONE;
+  }
+  /* Matching reads only the table's keys and classes (fixed at load);
+   * values come from the base-state cache, so this never waits for a
+   * render. */
+  size_t *idx = NULL, n = 0;
+  rsw_err err = {0};
+  rsw_status st = params_match(r->sc, match && *match ? match : "*", mask, none, &idx, &n, &err);
+  cJSON *o = NULL;
+  pthread_mutex_lock(&r->cache_lock);
+  uint64_t rev = r->cache_revision;
+  if (st == RSW_OK) {
+    o = cJSON_CreateObject();
+    cJSON_AddNumberToObject(o, "revision", (double)rev);
+    cJSON *a = cJSON_AddArrayToObject(o, "params");
+    for (size_t k = 0; k < n; k++) {
+      cJSON *p = cJSON_GetArrayItem(r->base_params, (int)idx[k]);
+      if (p) cJSON_AddItemToArray(a, cJSON_Duplicate(p, 1));
+    }
+  } else if (st == RSW_ERR_NOT_FOUND && !strchr(match, ':')) {
+    /* A glob matching nothing is an empty table, not an error, over HTTP. */
+    o = cJSON_CreateObject();
+    cJSON_AddNumberToObject(o, "revision", (double)rev);
+    cJSON_AddArrayToObject(o, "params");
+    st = RSW_OK;
+  } else {
+    st = key_error(e, r->sc, match, &err);
+  }
+  pthread_mutex_unlock(&r->cache_lock);
+  *revision_out = rev;
+  free(idx);
+  svc_scene_release(svc, r);
+  if (st) return st;
+  *json_out = svc_print_json(o);
+  return RSW_OK;
+}
+
+/* Parse a JSON object {key: value} into updates. Keys borrowed from j. */
+rsw_status svc_map_to_updates(const cJSON *j, const scene *sc, const char *where, param_update **out,
+                              size_t *n, svc_error *e) {
+  *out = NULL;
+  *n = 0;
+  if (!cJSON_IsObject(j)) return svc_fail(e, RSW_ERR_TYPE, where, "%s must be an object {key: value}", where);
+  size_t cnt = 0;
+  for (const cJSON *k = j->child; k; k = k->next) cnt++;
+  param_update *u = calloc(cnt ? cnt : 1, sizeof *u);
+  if (!u) return svc_fail(e, RSW_ERR_NOMEM, where, "out of memory");
+  size_t i = 0;
+  for (const cJSON *k = j->child; k; k = k->next, i++) {
+    u[i].key = k->string;
+    char *txt = cJSON_PrintUnformatted(k);
+    rsw_err err = {0};
+    rsw_status st = txt ? param_value_parse(txt, k->string, &u[i].value, &err) : RSW_ERR_NOMEM;
+    free(txt);
+    if (st) {
+      for (size_t q = 0; q < i; q++) param_value_free(&u[q].value);
+      free(u);
+      key_error(e, sc, k->string, &err);
+      if (e->err.code == RSW_ERR_UNKNOWN_NAME) e->candidates[0][0] = '\0';
+      return e->err.code;
+    }
+  }
+  *out = u;
+  *n = cnt;
+  return RSW_OK;
+}
+
+void svc_free_updates(param_update *u, size_t n) {
+  for (size_t i = 0; i < n; i++) param_value_free(&u[i].value);
+  free(u);
+}
+
+rsw_status svc_update_error(svc_error *e, const scene *sc, const param_update *u, size_t n,
+                            const rsw_err *err) {
+  /* Name the key the kernel complained about (err->where is the key). */
+  const char *key = err->where;
+  for (size_t i = 0; i < n; i++)
+    if (strcmp(u[i].key, err->where) == 0) key = u[i].key;
+  return key_error(e, sc, key, err);
+}
+
+rsw_status service_params_patch(service *svc, const char *id, const char *body, size_t len, int64_t if_match,
+                                char **json_out, uint64_t *revision_out, svc_error *e) {
+  resident *r = svc_scene_acquire(svc, id);
+  if (!r) return svc_no_scene(e, id);
+  cJSON *j = cJSON_ParseWithLength(body, len);
+  if (!j) {
+    svc_scene_release(svc, r);
+    return svc_fail(e, RSW_ERR_PARSE, "", "the body is not valid JSON");
+  }
+  pthread_mutex_lock(&r->lock);
+  rsw_status st = RSW_OK;
+  param_update *u = NULL;
+  size_t n = 0;
+  update_report rep = {0};
+  if (if_match >= 0 && (uint64_t)if_match != r->revision)
+    st =
+        svc_fail(e, RSW_ERR_PRECONDITION, "If-Match", "revision %lld is stale: the scene is at revision %llu",
+                 (long long)if_match, (unsigned long long)r->revision);
+  if (!st) st = svc_map_to_updates(j, r->sc, "body", &u, &n, e);
+  if (!st) {
+    rsw_err err = {0};
+    st = scene_update(r->sc, u, n, &rep, &err);
+    if (st) st = svc_update_error(e, r->sc, u, n, &err);
+  }
+  if (!st && rep.changed) {
+    r->revision++;
+    svc_refresh_param_cache(r);
+  }
+  *revision_out = r->revision;
+  cJSON *o = NULL;
+  if (!st) {
+    o = cJSON_CreateObject();
+    cJSON_AddNumberToObject(o, "revision", (double)r->revision);
+    cJSON_AddNumberToObject(o, "changed", (double)rep.changed);
+    cJSON *c = cJSON_AddArrayToObject(o, "classes");
+    if (rep.classes & UPDATE_SPECTRAL) cJSON_AddItemToArray(c, cJSON_CreateString("spectral"));
+    if (rep.classes & UPDATE_GEOMETRIC) cJSON_AddItemToArray(c, cJSON_CreateString("geometric"));
+    cJSON_AddNumberToObject(o, "seconds", rep.seconds);
+  }
+  pthread_mutex_unlock(&r->lock);
+  if (!st) svc_count_update(svc, &rep);
+  svc_free_updates(u, n);
+  cJSON_Delete(j);
+  svc_scene_release(svc, r);
+  if (st) return st;
+  *json_out = svc_print_json(o);
+  return RSW_OK;
+}
