@@ -258,9 +258,9 @@ $(BUILD)/plugins/%.so: tests/plugins/%.c include/raysweep/plugin.h | deps
 # Replay builds: the harness, the standalone driver, and everything the
 # daemon links but main.c and serve.c.
 FUZZ_HTTP_OBJ := $(filter $(BUILD)/obj/server/http/%,$(DAEMON_OBJ))
-$(FUZZ_REPLAY): $(BUILD)/tests/fuzz_%: $(BUILD)/obj/tests/fuzz/fuzz_%.o $(BUILD)/obj/tests/fuzz/driver.o $(FUZZ_HTTP_OBJ) $(SERVICE_LIB) $(KERNEL_LIB)
+$(FUZZ_REPLAY): $(BUILD)/tests/fuzz_%: $(BUILD)/obj/tests/fuzz/fuzz_%.o $(BUILD)/obj/tests/fuzz/driver.o $(FUZZ_HTTP_OBJ) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(SERVICE_LIB),$^) $(SERVICE_LIB) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(LIBS) $(DAEMON_LIBS)
+	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(SERVICE_LIB) $(COMMON_LIB),$^) $(SERVICE_LIB) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS) $(DAEMON_LIBS)
 
 # libFuzzer builds (clang 14): every source with ASan + UBSan and coverage.
 FUZZ_CC ?= clang
@@ -268,7 +268,7 @@ FUZZ_SECONDS ?= 60
 FUZZ ?= $(FUZZ_NAMES)
 FUZZ_SAN := -fsanitize=address,undefined -fno-sanitize-recover=undefined -fno-omit-frame-pointer
 FUZZ_CFLAGS := -std=c11 -O1 -g -fno-math-errno $(FUZZ_SAN) -fsanitize=fuzzer-no-link
-FUZZ_LIB_SRC := $(KERNEL_SRC) $(SERVICE_SRC) $(filter server/http/%,$(DAEMON_SRC))
+FUZZ_LIB_SRC := $(KERNEL_SRC) $(SERVICE_SRC) $(COMMON_SRC) $(filter server/http/%,$(DAEMON_SRC))
 FUZZ_LIB_OBJ := $(FUZZ_LIB_SRC:%.c=build-fuzz/obj/%.o)
 build-fuzz/obj/%.o: %.c | deps fuzz-check-cc
 	@mkdir -p $(dir $@)

@@ -58,8 +58,20 @@ bool service_blob_exists(service *svc, const char *h) {
 }
 
 rsw_status service_blobs_missing(service *svc, const char *body, size_t len, char **json_out, svc_error *e) {
-  cJSON *j = cJSON_ParseWithLength(body, len);
-  if (!j) return svc_fail(e, RSW_ERR_PARSE, "", "the body is not valid JSON");
+  cJSON *j;
+  rsw_status st = svc_parse_body(body, len, &j, e);
+  if (st) return st;
+  if (!cJSON_IsObject(j)) {
+    cJSON_Delete(j);
+    return svc_fail(e, RSW_ERR_TYPE, "", "the body must be a JSON object {\"digests\": [...]}");
+  }
+  for (const cJSON *k = j->child; k; k = k->next)
+    if (strcmp(k->string, "digests") != 0) {
+      char w[300];
+      snprintf(w, sizeof w, "/%s", k->string);
+      cJSON_Delete(j);
+      return svc_fail(e, RSW_ERR_UNUSED_PROPERTY, w, "unknown field '%s' (expected digests)", w + 1);
+    }
   const cJSON *d = cJSON_GetObjectItemCaseSensitive(j, "digests");
   if (!cJSON_IsArray(d)) {
     cJSON_Delete(j);

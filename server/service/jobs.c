@@ -121,9 +121,8 @@ static cJSON *merge_params(const cJSON *job_params, const cJSON *ctx_params) {
   return m;
 }
 
-/* Keys of an override map must exist and their values parse; their legal
- * values are checked when each context renders (a failed context records
- * its error and the others keep their results). */
+/* Keys of an override map must exist and their values parse (their legal
+ * values: check_values, with the job-level map under each context's). */
 static rsw_status check_params(const scene *sc, const cJSON *p, const char *ptr, svc_error *e) {
   if (!p) return RSW_OK;
   if (!cJSON_IsObject(p)) return svc_fail(e, RSW_ERR_TYPE, ptr, "params must be an object {key: value}");
@@ -152,6 +151,33 @@ static rsw_status check_params(const scene *sc, const cJSON *p, const char *ptr,
     param_value_free(&v);
   }
   return RSW_OK;
+}
+
+/* The values of job-level overrides (jp) merged under a context's own (cp)
+ * against the scene (scene_update_check): an illegal value is refused at
+ * submit, named by its pointer (/params/KEY or CTX/params/KEY). */
+static rsw_status check_values(const scene *sc, const cJSON *jp, const cJSON *cp, const char *ctx_ptr,
+                               svc_error *e) {
+  cJSON *m = merge_params(jp, cp);
+  if (!m) return svc_fail(e, RSW_ERR_NOMEM, ctx_ptr, "out of memory");
+  param_update *u = NULL;
+  size_t n = 0;
+  rsw_status st = svc_map_to_updates(m, sc, "params", &u, &n, e);
+  if (!st) {
+    rsw_err err = {0};
+    st = scene_update_check(sc, u, n, &err);
+    if (st) {
+      st = svc_update_error(e, sc, u, n, &err);
+      bool own = cp && cJSON_GetObjectItemCaseSensitive(cp, e->key);
+      if (own)
+        snprintf(e->err.where, sizeof e->err.where, "%.64s/params/%.180s", ctx_ptr, e->key);
+      else
+        snprintf(e->err.where, sizeof e->err.where, "/params/%.240s", e->key);
+    }
+  }
+  svc_free_updates(u, n);
+  cJSON_Delete(m);
+  return st;
 }
 
 static bool get_uint(const cJSON *o, const char *name, double max, uint64_t *out, bool *present,
@@ -198,12 +224,10 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   }
   resident *r = svc_scene_acquire(svc, scene_id);
   if (!r) return svc_fail(e, RSW_ERR_NOT_FOUND, scene_id, "no resident scene '%s'", scene_id);
-  cJSON *req = cJSON_ParseWithLength(body, len);
-  rsw_status st = RSW_OK;
+  cJSON *req = NULL;
   job *jb = NULL;
-  if (!req)
-    st = svc_fail(e, RSW_ERR_PARSE, "", "the body is not valid JSON");
-  else if (!cJSON_IsObject(req))
+  rsw_status st = svc_parse_body(body, len, &req, e);
+  if (!st && !cJSON_IsObject(req))
     st = svc_fail(e, RSW_ERR_TYPE, "", "the body must be a JSON object");
   const cJSON *contexts = NULL, *defaults = NULL, *jparams = NULL;
   uint64_t job_seed = 0;
@@ -240,10 +264,11 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   if (!st && defaults) {
     bool present;
     get_uint(defaults, "spp", 4294967295.0, &d_spp, &present, "/defaults", e, &st);
+    if (!st && present && d_spp == 0) st = svc_fail(e, RSW_ERR_INVALID, "/defaults/spp", "spp must be at least 1");
     const cJSON *w = cJSON_GetObjectItemCaseSensitive(defaults, "wavelength");
     if (!st && w) {
-      if (!cJSON_IsNumber(w) || !(w->valuedouble > 0))
-        st = svc_fail(e, RSW_ERR_INVALID, "/defaults/wavelength", "wavelength must be a positive number");
+      if (!cJSON_IsNumber(w) || !(w->valuedouble > 0) || !isfinite(w->valuedouble))
+        st = svc_fail(e, RSW_ERR_INVALID, "/defaults/wavelength", "wavelength must be a positive finite number");
       else
         d_wl = w->valuedouble;
     }
@@ -257,6 +282,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   }
   /* Count renders and validate every context before accepting. */
   size_t n_ctx = 0, n_items = 0;
+  bool job_params_ok = false;
   for (const cJSON *c = !st ? contexts->child : NULL; c && !st; c = c->next, n_ctx++) {
     char ptr[64];
     snprintf(ptr, sizeof ptr, "/contexts/%zu", n_ctx);
@@ -285,10 +311,10 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       }
     if (st) break;
     const cJSON *w = cJSON_GetObjectItemCaseSensitive(c, "wavelength");
-    if (w && (!cJSON_IsNumber(w) || !(w->valuedouble > 0))) {
+    if (w && (!cJSON_IsNumber(w) || !(w->valuedouble > 0) || !isfinite(w->valuedouble))) {
       char p2[80];
       snprintf(p2, sizeof p2, "%s/wavelength", ptr);
-      st = svc_fail(e, RSW_ERR_INVALID, p2, "wavelength must be a positive number of nm");
+      st = svc_fail(e, RSW_ERR_INVALID, p2, "wavelength must be a positive finite number of nm");
       break;
     }
     if ((w || d_wl > 0) && sc->variant != VARIANT_MONO) {
@@ -297,11 +323,25 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     }
     char pp[80];
     snprintf(pp, sizeof pp, "%s/params", ptr);
-    st = check_params(sc, cJSON_GetObjectItemCaseSensitive(c, "params"), pp, e);
+    const cJSON *cparams = cJSON_GetObjectItemCaseSensitive(c, "params");
+    st = check_params(sc, cparams, pp, e);
     if (st) break;
+    /* The values this context renders with must be legal now, not only
+     * when it renders: job-level overrides under its own (checked once
+     * for all contexts that have none of their own). */
+    if (cparams || (jparams && !job_params_ok)) {
+      st = check_values(sc, jparams, cparams, ptr, e);
+      if (st) break;
+      if (!cparams) job_params_ok = true;
+    }
     uint64_t dummy;
     bool present;
     get_uint(c, "spp", 4294967295.0, &dummy, &present, ptr, e, &st);
+    if (!st && present && dummy == 0) {
+      char p3[80];
+      snprintf(p3, sizeof p3, "%s/spp", ptr);
+      st = svc_fail(e, RSW_ERR_INVALID, p3, "spp must be at least 1");
+    }
     if (!st) get_uint(c, "seed", 9007199254740991.0, &dummy, &present, ptr, e, &st);
     if (st) break;
     const cJSON *sens = cJSON_GetObjectItemCaseSensitive(c, "sensors");

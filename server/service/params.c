@@ -158,10 +158,11 @@ rsw_status service_params_patch(service *svc, const char *id, const char *body, 
                                 char **json_out, uint64_t *revision_out, svc_error *e) {
   resident *r = svc_scene_acquire(svc, id);
   if (!r) return svc_no_scene(e, id);
-  cJSON *j = cJSON_ParseWithLength(body, len);
-  if (!j) {
+  cJSON *j;
+  rsw_status pst = svc_parse_body(body, len, &j, e);
+  if (pst) {
     svc_scene_release(svc, r);
-    return svc_fail(e, RSW_ERR_PARSE, "", "the body is not valid JSON");
+    return pst;
   }
   pthread_mutex_lock(&r->lock);
   rsw_status st = RSW_OK;
