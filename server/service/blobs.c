@@ -58,9 +58,13 @@ bool service_blob_exists(service *svc, const char *h) {
 }
 
 rsw_status service_blobs_missing(service *svc, const char *body, size_t len, char **json_out, svc_error *e) {
-  cJSON *j;
-  rsw_status st = svc_parse_body(body, len, &j, e);
-  if (st) return st;
+  cJSON *j = cJSON_ParseWithLength(body, len);
+  if (!j) return svc_fail(e, RSW_ERR_PARSE, "", "the body is not valid JSON");
+  rsw_status st = svc_check_body(body, len, e);
+  if (st) {
+    cJSON_Delete(j);
+    return st;
+  }
   if (!cJSON_IsObject(j)) {
     cJSON_Delete(j);
     return svc_fail(e, RSW_ERR_TYPE, "", "the body must be a JSON object {\"digests\": [...]}");

@@ -10,7 +10,6 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include "../kernel/core/jsonscan.h"
 #include "../kernel/plugins/env_plugin.h"
 #include "../kernel/scene/loader.h"
 #include "buf.h"
@@ -48,36 +47,6 @@ rsw_status svc_request_code(rsw_status kernel_code) {
   case RSW_ERR_PARSE: return RSW_ERR_INVALID;
   default: return kernel_code;
   }
-}
-
-rsw_status svc_parse_body(const char *body, size_t len, cJSON **out, svc_error *e) {
-  *out = NULL;
-  if (!body || len == 0) return svc_fail(e, RSW_ERR_PARSE, "", "the body is empty: a JSON object is required");
-  const char *end = NULL;
-  cJSON *j = cJSON_ParseWithLengthOpts(body, len, &end, 0);
-  if (!j) {
-    size_t off = end && end >= body && end <= body + len ? (size_t)(end - body) : 0;
-    return svc_fail(e, RSW_ERR_PARSE, "", "the body is not valid JSON (near byte %zu)", off);
-  }
-  /* cJSON stops after the first value: the rest must be blank ("{} xyz"
-   * and "{}{}" were accepted as {}). */
-  const char *p = end ? end : body + len;
-  while (p < body + len && (*p == ' ' || *p == '\t' || *p == '\n' || *p == '\r')) p++;
-  if (p < body + len) {
-    cJSON_Delete(j);
-    return svc_fail(e, RSW_ERR_PARSE, "", "the body is not valid JSON: unexpected content after the document at byte %zu",
-                    (size_t)(p - body));
-  }
-  char member[128];
-  if (json_find_nul_escape(body, len, member, sizeof member) >= 0) {
-    cJSON_Delete(j);
-    rsw_status st = svc_fail(e, RSW_ERR_INVALID, "", "%s%s%sa string contains \\u0000 (NUL), which no key, id or value may hold",
-                             member[0] ? "'" : "", member, member[0] ? "': " : "");
-    snprintf(e->key, sizeof e->key, "%s", member);
-    return st;
-  }
-  *out = j;
-  return RSW_OK;
 }
 
 char *svc_print_json(cJSON *o) {

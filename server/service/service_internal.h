@@ -139,6 +139,8 @@ rsw_status svc_fail(svc_error *e, rsw_status code, const char *where, const char
  * naming the member (cJSON would cut the string at the NUL). *out (free
  * with cJSON_Delete) only on success. */
 rsw_status svc_parse_body(const char *body, size_t len, cJSON **out, svc_error *e);
+/* The same checks on a body parsed elsewhere (body.c). */
+rsw_status svc_check_body(const char *body, size_t len, svc_error *e);
 /* The code for a kernel error about something a request named: an
  * unknown key or sensor (kernel NOT_FOUND) is RSW_ERR_UNKNOWN_NAME, a
  * value that does not parse is RSW_ERR_INVALID; others are kept. */

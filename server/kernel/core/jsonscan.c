@@ -53,3 +53,23 @@ long json_find_nul_escape(const char *text, size_t len, char *name, size_t name_
   }
   return -1;
 }
+
+long json_value_end(const char *text, size_t len) {
+  size_t i = 0;
+  while (i < len && (text[i] == ' ' || text[i] == '\t' || text[i] == '\n' || text[i] == '\r')) i++;
+  if (i >= len || (text[i] != '{' && text[i] != '[')) return -1;
+  size_t depth = 0;
+  for (; i < len; i++) {
+    char c = text[i];
+    if (c == '"') {
+      for (i++; i < len && text[i] != '"'; i++)
+        if (text[i] == '\\') i++;
+      if (i >= len) return -1;
+    } else if (c == '{' || c == '[') {
+      depth++;
+    } else if (c == '}' || c == ']') {
+      if (--depth == 0) return (long)(i + 1);
+    }
+  }
+  return -1;
+}

@@ -17,4 +17,9 @@
  * text, at most name_size - 1 bytes, escapes as written. */
 long json_find_nul_escape(const char *text, size_t len, char *name, size_t name_size);
 
+/* Offset just past the first value of the text when it is an object or
+ * an array (brackets matched outside strings), or -1 when the text does
+ * not start (after blanks) with one or the value does not close. */
+long json_value_end(const char *text, size_t len);
+
 #endif
