@@ -224,10 +224,14 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   }
   resident *r = svc_scene_acquire(svc, scene_id);
   if (!r) return svc_fail(e, RSW_ERR_NOT_FOUND, scene_id, "no resident scene '%s'", scene_id);
-  cJSON *req = NULL;
+  cJSON *req = cJSON_ParseWithLength(body, len);
+  rsw_status st = RSW_OK;
   job *jb = NULL;
-  rsw_status st = svc_parse_body(body, len, &req, e);
-  if (!st && !cJSON_IsObject(req))
+  if (!req)
+    st = svc_fail(e, RSW_ERR_PARSE, "", "the body is not valid JSON");
+  else if (svc_check_body(body, len, e) != RSW_OK)
+    st = e->err.code;
+  else if (!cJSON_IsObject(req))
     st = svc_fail(e, RSW_ERR_TYPE, "", "the body must be a JSON object");
   const cJSON *contexts = NULL, *defaults = NULL, *jparams = NULL;
   uint64_t job_seed = 0;
