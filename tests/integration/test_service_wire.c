@@ -9,7 +9,9 @@
  *    accepted job must not fail on them later);
  *  - a \u0000 in a key, a sensor id or a scene's file name is refused, not
  *    cut short;
- *  - an unreadable blob's error does not show the server's blob directory.
+ *  - an unreadable blob's error does not show the server's blob directory;
+ *  - one sensor named twice in a context's list (10,000 copies queued
+ *    10,000 renders) is refused.
  * Each check names the field in the error (where, key or message). */
 #include <stdio.h>
 #include <stdlib.h>
@@ -178,6 +180,14 @@ static void test_blob_dir_not_shown(void) {
   rmdir(path);
 }
 
+static void test_duplicate_sensor(void) {
+  svc_error e;
+  REFUSED(submit("{\"contexts\":[{\"id\":\"a\",\"sensors\":[\"hd\",\"0\"]}]}", &e), e, "/contexts/0/sensors/1",
+          "one sensor twice (by id and index)");
+  REFUSED(submit("{\"contexts\":[{\"id\":\"a\"}],\"defaults\":{\"sensors\":[\"hd\",\"hd\"]}}", &e), e, "sensors",
+          "one sensor twice in defaults");
+}
+
 static void test_strict_fields(void) {
   svc_error e;
   REFUSED(missing("{\"digests\":[],\"x\":1}", &e), e, "x", "blobs:missing unknown field");
@@ -208,6 +218,7 @@ int main(void) {
   RSW_TEST_RUN(test_nul);
   RSW_TEST_RUN(test_blob_dir_not_shown);
   RSW_TEST_RUN(test_strict_fields);
+  RSW_TEST_RUN(test_duplicate_sensor);
   service_shutdown(svc);
   service_free(svc);
   rmdir(blob_dir);
