@@ -87,4 +87,10 @@ a = json.load(open(sys.argv[1])); b = json.load(open(sys.argv[2]))
 assert a["data"] == b["data"], "films differ"
 assert a["meta"]["revision"] == b["meta"]["revision"], "revision changed"
 ' "$tmp/before.json" "$tmp/after.json"
+# No sanitizer report from the daemon (SAN=1 builds).
+if grep -qE 'ERROR: (AddressSanitizer|LeakSanitizer)|runtime error:' "$tmp/d/log"; then
+  bad "sanitizer report in the daemon's log: $(grep -m 3 -E 'ERROR: |runtime error:' "$tmp/d/log")"
+else
+  ok
+fi
 finish
