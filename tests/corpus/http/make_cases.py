@@ -106,7 +106,7 @@ for m, p, kind in ROUTES:
     om = OTHER[m]
     if (om, p) in [(r[0], r[1]) for r in ROUTES]:
         om = "PATCH"
-    add("method_%s_on_%s" % (om.lower(), slug(m, p)), "405", "-", req(om, p))
+    add("method_%s_on_%s" % (om.lower(), slug(m, p)), "405", om, req(om, p))
 for p in HEALTH:
     add("method_post_on_" + slug("GET", p), "405|401", "-", req("POST", p, "{}", auth=False))
 add("method_unknown_verb", "405|501|400", "-", req("FROB", "/v1/scenes"))
@@ -265,8 +265,14 @@ BAD_JSON = [
     ("number_top", "42", "400|422", "-"),
     ("null_top", "null", "400|422", "-"),
 ]
+NAMES_JSON = ("truncated", "trailing_garbage", "trailing_second_object", "trailing_comma", "single_quotes",
+              "nan_literal")
 for m, p, rn in JSON_ROUTES:
     for bn, body, st, chk in BAD_JSON:
+        if bn in NAMES_JSON:
+            chk = "JSON"  # the problem says the body is not JSON
+        elif bn.endswith("_top"):
+            chk = "object"  # ... or not an object
         if bn == "empty":
             # server.c reads an empty JSON body as {} (POST :render with no
             # body renders with the defaults); the scene route needs a document.
