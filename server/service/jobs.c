@@ -180,6 +180,90 @@ static rsw_status check_values(const scene *sc, const cJSON *jp, const cJSON *cp
   return st;
 }
 
+/* A tabulated spectrum's range (nm): {"wavelengths": [...], ...} or
+ * [[wl, value], ...], increasing. False for anything else. */
+static bool table_range(const cJSON *v, double *lo, double *hi) {
+  const cJSON *first = NULL, *last = NULL;
+  const cJSON *wl = cJSON_IsObject(v) ? cJSON_GetObjectItemCaseSensitive(v, "wavelengths") : NULL;
+  if (cJSON_IsArray(wl) && wl->child) {
+    first = wl->child;
+    for (last = first; last->next; last = last->next) {
+    }
+  } else if (cJSON_IsArray(v) && cJSON_IsArray(v->child)) {
+    const cJSON *fp = v->child, *lp = fp;
+    while (lp->next) lp = lp->next;
+    first = fp->child, last = cJSON_IsArray(lp) ? lp->child : NULL;
+  }
+  if (!cJSON_IsNumber(first) || !cJSON_IsNumber(last)) return false;
+  *lo = first->valuedouble, *hi = last->valuedouble;
+  return true;
+}
+
+/* The tabulated spectra of the scene's base state (from the parameter
+ * cache, so no render is waited for): index, range and key. */
+typedef struct spec_range {
+  size_t index;
+  double lo, hi;
+  char key[200];
+} spec_range;
+
+static spec_range *base_ranges(resident *r, size_t *n_out) {
+  spec_range *out = NULL;
+  size_t n = 0, cap = 0;
+  pthread_mutex_lock(&r->cache_lock);
+  size_t i = 0;
+  for (const cJSON *p = r->base_params ? r->base_params->child : NULL; p; p = p->next, i++) {
+    const cJSON *type = cJSON_GetObjectItemCaseSensitive(p, "type");
+    const cJSON *key = cJSON_GetObjectItemCaseSensitive(p, "key");
+    double lo, hi;
+    if (!cJSON_IsString(type) || strcmp(type->valuestring, "spectrum") != 0 || !cJSON_IsString(key) ||
+        !table_range(cJSON_GetObjectItemCaseSensitive(p, "value"), &lo, &hi))
+      continue;
+    if (n == cap) {
+      size_t nc = cap ? 2 * cap : 8;
+      spec_range *g = realloc(out, nc * sizeof *g);
+      if (!g) break;
+      out = g, cap = nc;
+    }
+    out[n] = (spec_range){.index = i, .lo = lo, .hi = hi};
+    snprintf(out[n].key, sizeof out[n].key, "%s", key->valuestring);
+    n++;
+  }
+  pthread_mutex_unlock(&r->cache_lock);
+  *n_out = n;
+  return out;
+}
+
+/* A context's wavelength against every tabulated spectrum it renders
+ * with: the base state's, less those its overrides replace, and the
+ * overrides' own tables (context keys over job-level keys). Out of range
+ * failed only when the context rendered. */
+static rsw_status check_wavelength(const scene *sc, const spec_range *br, size_t nbr, const cJSON *jp,
+                                   const cJSON *cp, double wl, const char *wptr, svc_error *e) {
+  const cJSON *maps[2] = {cp, jp};
+  for (size_t b = 0; b < nbr; b++) {
+    bool replaced = false;
+    for (int m = 0; m < 2 && !replaced; m++)
+      for (const cJSON *k = cJSON_IsObject(maps[m]) ? maps[m]->child : NULL; k && !replaced; k = k->next) {
+        size_t idx;
+        rsw_err err = {0};
+        replaced = params_lookup(sc, k->string, &idx, &err) == RSW_OK && idx == br[b].index;
+      }
+    if (!replaced && !(wl >= br[b].lo && wl <= br[b].hi))
+      return svc_fail(e, RSW_ERR_RANGE, wptr, "wavelength %g nm lies outside the table of '%s' [%g, %g] nm", wl,
+                      br[b].key, br[b].lo, br[b].hi);
+  }
+  for (int m = 0; m < 2; m++)
+    for (const cJSON *k = cJSON_IsObject(maps[m]) ? maps[m]->child : NULL; k; k = k->next) {
+      if (m == 1 && cJSON_IsObject(cp) && cJSON_GetObjectItemCaseSensitive(cp, k->string)) continue;
+      double lo, hi;
+      if (table_range(k, &lo, &hi) && !(wl >= lo && wl <= hi))
+        return svc_fail(e, RSW_ERR_RANGE, wptr, "wavelength %g nm lies outside the table of '%s' [%g, %g] nm",
+                        wl, k->string, lo, hi);
+    }
+  return RSW_OK;
+}
+
 static bool get_uint(const cJSON *o, const char *name, double max, uint64_t *out, bool *present,
                      const char *ptr, svc_error *e, rsw_status *st) {
   const cJSON *x = cJSON_GetObjectItemCaseSensitive(o, name);
@@ -287,6 +371,8 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   /* Count renders and validate every context before accepting. */
   size_t n_ctx = 0, n_items = 0;
   bool job_params_ok = false;
+  size_t n_ranges = 0;
+  spec_range *ranges = !st && sc->variant == VARIANT_MONO ? base_ranges(r, &n_ranges) : NULL;
   unsigned char *seen = NULL; /* per context: sensors already named */
   for (const cJSON *c = !st ? contexts->child : NULL; c && !st; c = c->next, n_ctx++) {
     char ptr[64];
@@ -339,6 +425,13 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       if (st) break;
       if (!cparams) job_params_ok = true;
     }
+    if (sc->variant == VARIANT_MONO) {
+      char p5[80];
+      snprintf(p5, sizeof p5, w ? "%s/wavelength" : d_wl > 0 ? "/defaults/wavelength" : "%s", ptr);
+      st = check_wavelength(sc, ranges, n_ranges, jparams, cparams, w ? w->valuedouble : d_wl > 0 ? d_wl : 550,
+                            p5, e);
+      if (st) break;
+    }
     uint64_t dummy;
     bool present;
     get_uint(c, "spp", 4294967295.0, &dummy, &present, ptr, e, &st);
@@ -382,6 +475,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     }
   }
   free(seen);
+  free(ranges);
   if (!st && n_ctx > 100000) st = svc_fail(e, RSW_ERR_LIMIT, "/contexts", "at most 100000 contexts per job");
   /* Build the job. */
   if (!st) {

@@ -11,7 +11,9 @@
  *    cut short;
  *  - an unreadable blob's error does not show the server's blob directory;
  *  - one sensor named twice in a context's list (10,000 copies queued
- *    10,000 renders) is refused.
+ *    10,000 renders) is refused;
+ *  - a context wavelength outside a tabulated spectrum it renders with is
+ *    refused at submit (found by fuzz_job_body).
  * Each check names the field in the error (where, key or message). */
 #include <stdio.h>
 #include <stdlib.h>
@@ -188,6 +190,31 @@ static void test_duplicate_sensor(void) {
           "one sensor twice in defaults");
 }
 
+/* Found by fuzz_job_body: a context wavelength outside a tabulated
+ * spectrum's table was accepted and its renders failed. Runs last: it
+ * PATCHes the scene's reflectance to a table over [400, 700] nm. */
+static void test_wavelength_in_tables(void) {
+  svc_error e;
+  REQUIRE(patch("{\"rectangle.bsdf.reflectance.value\":{\"wavelengths\":[400,700],\"values\":[0.2,0.8]}}", &e) ==
+              RSW_OK,
+          "PATCH a table: %s", e.err.msg);
+  REFUSED(submit("{\"contexts\":[{\"id\":\"a\",\"wavelength\":260}]}", &e), e, "rectangle.bsdf.reflectance.value",
+          "260 nm against the base table");
+  CHECK(strstr(e.err.where, "/contexts/0/wavelength") != NULL, "where '%s'", e.err.where);
+  REFUSED(submit("{\"contexts\":[{\"id\":\"a\"}],\"defaults\":{\"wavelength\":800}}", &e), e,
+          "/defaults/wavelength", "800 nm by default");
+  REFUSED(submit("{\"contexts\":[{\"id\":\"a\",\"wavelength\":500}],\"params\":{\"sun.irradiance.value\":"
+                 "{\"wavelengths\":[510,600],\"values\":[1,1]}}}",
+                 &e),
+          e, "sun.irradiance.value", "500 nm against a job-level table");
+  CHECK(submit("{\"contexts\":[{\"id\":\"a\",\"wavelength\":500},{\"id\":\"b\"}]}", &e) == RSW_OK,
+        "500 nm and the default 550 nm: %s", e.err.msg);
+  CHECK(submit("{\"contexts\":[{\"id\":\"a\",\"wavelength\":260,\"params\":"
+               "{\"rectangle.bsdf.reflectance.value\":0.3}}]}",
+               &e) == RSW_OK,
+        "260 nm with the table overridden by a number: %s", e.err.msg);
+}
+
 static void test_strict_fields(void) {
   svc_error e;
   REFUSED(missing("{\"digests\":[],\"x\":1}", &e), e, "x", "blobs:missing unknown field");
@@ -219,6 +246,7 @@ int main(void) {
   RSW_TEST_RUN(test_blob_dir_not_shown);
   RSW_TEST_RUN(test_strict_fields);
   RSW_TEST_RUN(test_duplicate_sensor);
+  RSW_TEST_RUN(test_wavelength_in_tables);
   service_shutdown(svc);
   service_free(svc);
   rmdir(blob_dir);
