@@ -62,6 +62,22 @@ static int connect_lo(void) {
   return fd;
 }
 
+/* Is the (NUL-terminated) text one complete final response: headers and a
+ * Content-Length body, a chunked body up to its last chunk, or the headers
+ * of an answer to HEAD or of a 204/304? (Otherwise read until close.) */
+static bool response_complete(const char *buf, size_t n, bool head) {
+  const char *end = strstr(buf, "\r\n\r\n");
+  if (!end || n < 12) return false;
+  if (buf[9] == '1') return false; /* 100 Continue: a final answer follows */
+  size_t hl = (size_t)(end + 4 - buf);
+  if (head || strncmp(buf + 9, "204", 3) == 0 || strncmp(buf + 9, "304", 3) == 0) return true;
+  const char *cl = strcasestr(buf, "\r\ncontent-length:");
+  if (cl && cl < end) return n >= hl + strtoull(cl + 17, NULL, 10);
+  const char *te = strcasestr(buf, "\r\ntransfer-encoding: chunked");
+  if (te && te < end) return n >= hl + 5 && memcmp(buf + n - 5, "0\r\n\r\n", 5) == 0;
+  return false;
+}
+
 /* Send req, shut the write side, read the answer (up to cap-1 bytes, NUL
  * terminated) until the server closes or 2 s pass. Returns its length. */
 static size_t exchange(const char *req, size_t len, char *out, size_t cap) {
@@ -74,11 +90,14 @@ static size_t exchange(const char *req, size_t len, char *out, size_t cap) {
     off += (size_t)w;
   }
   shutdown(fd, SHUT_WR);
+  bool head = len >= 5 && memcmp(req, "HEAD ", 5) == 0;
   size_t got = 0;
   while (got + 1 < cap) {
     ssize_t r = recv(fd, out + got, cap - 1 - got, 0);
     if (r <= 0) break;
     got += (size_t)r;
+    out[got] = '\0';
+    if (response_complete(out, got, head)) break; /* do not wait for a keep-alive close */
   }
   out[got] = '\0';
   close(fd);
