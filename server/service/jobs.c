@@ -373,7 +373,6 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   bool job_params_ok = false;
   size_t n_ranges = 0;
   spec_range *ranges = !st && sc->variant == VARIANT_MONO ? base_ranges(r, &n_ranges) : NULL;
-  unsigned char *seen = NULL; /* per context: sensors already named */
   for (const cJSON *c = !st ? contexts->child : NULL; c && !st; c = c->next, n_ctx++) {
     char ptr[64];
     snprintf(ptr, sizeof ptr, "/contexts/%zu", n_ctx);
@@ -449,24 +448,11 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
         st = svc_fail(e, RSW_ERR_TYPE, ptr, "sensors must be a non-empty list of sensor ids");
         break;
       }
-      /* A sensor named twice in one context would render twice (10,000
-       * copies of one name queued 10,000 renders): refused. */
-      if (!seen && sc->n_sensors) seen = calloc(sc->n_sensors, sizeof *seen);
-      if (seen) memset(seen, 0, sc->n_sensors * sizeof *seen);
-      size_t sj = 0;
-      for (const cJSON *s = sens->child; s && !st; s = s->next, sj++) {
+      for (const cJSON *s = sens->child; s && !st; s = s->next) {
         size_t si;
         if (!cJSON_IsString(s) || !svc_find_sensor(sc, s->valuestring, &si))
           st = svc_fail(e, RSW_ERR_UNKNOWN_NAME, ptr, "no sensor '%s' in the scene",
                         cJSON_IsString(s) ? s->valuestring : "?");
-        else if (!seen)
-          st = svc_fail(e, RSW_ERR_NOMEM, ptr, "out of memory");
-        else if (seen[si]++) {
-          char p4[96];
-          snprintf(p4, sizeof p4, "%s/sensors/%zu", ptr, sj);
-          st = svc_fail(e, RSW_ERR_DUPLICATE, p4, "sensor '%s' is named twice in one context's sensors",
-                        s->valuestring);
-        }
         n_items++;
       }
     } else {
@@ -474,7 +460,6 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       n_items += sc->n_sensors;
     }
   }
-  free(seen);
   free(ranges);
   if (!st && n_ctx > 100000) st = svc_fail(e, RSW_ERR_LIMIT, "/contexts", "at most 100000 contexts per job");
   /* Build the job. */

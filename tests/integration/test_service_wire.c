@@ -11,7 +11,8 @@
  *    cut short;
  *  - an unreadable blob's error does not show the server's blob directory;
  *  - one sensor named twice in a context's list (10,000 copies queued
- *    10,000 renders) is refused;
+ *    10,000 renders) is refused (the check is h-geom's, on main: this
+ *    test fails on h-fuzz alone);
  *  - a context wavelength outside a tabulated spectrum it renders with is
  *    refused at submit (found by fuzz_job_body).
  * Each check names the field in the error (where, key or message). */

@@ -437,7 +437,7 @@ NOTES = {
     "missing_unknown_field": "unknown fields accepted (this branch)",
     "job_context_spp_zero": "context spp 0 accepted (this branch)",
     "job_context_params_bad": "context values checked only at render time (this branch)",
-    "job_same_sensor_10k": "one sensor 10,000 times queued 10,000 renders (this branch)",
+    "job_same_sensor_10k": "one sensor 10,000 times queued 10,000 renders (h-geom)",
     "render_params_scale_1e-30": "Embree assertion (h-geom)",
     "scene_xml_bad": "the XML error did not name the property (this branch)",
 }
