@@ -17,8 +17,8 @@ out = "tests/fuzz/corpus"
 # branch: replayed by make test) or pending/ (fixed by another branch, named
 # in the file name; move them to crashes/ once it is merged).
 where = {
-    ("scene_render", "projective.json"): "pending/geom_",
-    ("scene_render", "xml_small.xml"): "pending/geom_",
+    ("scene_render", "projective.json"): "crashes/geom_",
+    ("scene_render", "xml_small.xml"): "crashes/geom_",
     ("job_body", "wl400.json"): "crashes/",
     ("job_body", "job_params_bad.json"): "crashes/",
     ("job_body", "ctx_params_bad.json"): "crashes/",
