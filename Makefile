@@ -71,6 +71,16 @@ TEST_SRC := $(sort $(wildcard tests/unit/test_*.c tests/validation/test_*.c test
 TEST_BIN := $(patsubst %.c,$(BUILD)/tests/%,$(notdir $(TEST_SRC)))
 TEST_SCRIPTS := $(sort $(wildcard tests/integration/test_*.sh))
 
+# ---- fuzz harnesses (tests/fuzz): replayed in `make test`, fuzzed by `make fuzz`
+# Each tests/fuzz/fuzz_NAME.c is built twice: with $(CC) and tests/fuzz/driver.c
+# into $(BUILD)/tests/fuzz_NAME (replays tests/fuzz/corpus/NAME and
+# tests/fuzz/crashes/NAME in make test), and with clang's libFuzzer into
+# build-fuzz/bin/fuzz_NAME (make fuzz: each for FUZZ_SECONDS, FUZZ=NAME... for some).
+FUZZ_SRC := $(sort $(wildcard tests/fuzz/fuzz_*.c))
+FUZZ_NAMES := $(patsubst tests/fuzz/fuzz_%.c,%,$(FUZZ_SRC))
+FUZZ_REPLAY := $(FUZZ_NAMES:%=$(BUILD)/tests/fuzz_%)
+TEST_BIN += $(FUZZ_REPLAY)
+
 BENCH_SRC := $(wildcard tests/bench/*.c)
 BENCH_BIN := $(patsubst %.c,$(BUILD)/bench/%,$(notdir $(BENCH_SRC)))
 BENCH_SCRIPTS := $(sort $(wildcard tests/bench/bench_*.py))
@@ -251,7 +261,7 @@ format: deps
 	tools/check-format.sh --fix
 
 clean:
-	rm -rf build build-san
+	rm -rf build build-san build-fuzz
 
 # ---- raysweep CLI (client/cli): only the public libraysweep API ----
 CLI_SRC := $(sort $(wildcard client/cli/*.c))
@@ -276,3 +286,43 @@ all test: $(PLUGIN_SO)
 $(BUILD)/plugins/%.so: tests/plugins/%.c include/raysweep/plugin.h | deps
 	@mkdir -p $(dir $@)
 	$(CC) -shared -fPIC -I include $(PLUGIN_CFLAGS) -o $@ $< -lm
+
+# ---- fuzzing (tests/fuzz, README.md "Fuzzing") -----------------------------
+# Replay builds: the harness, the standalone driver, and everything the
+# daemon links but main.c and serve.c.
+FUZZ_HTTP_OBJ := $(filter $(BUILD)/obj/server/http/%,$(DAEMON_OBJ))
+$(FUZZ_REPLAY): $(BUILD)/tests/fuzz_%: $(BUILD)/obj/tests/fuzz/fuzz_%.o $(BUILD)/obj/tests/fuzz/driver.o $(FUZZ_HTTP_OBJ) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB)
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(SERVICE_LIB) $(COMMON_LIB),$^) $(SERVICE_LIB) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS) $(DAEMON_LIBS)
+
+# libFuzzer builds (clang 14): every source with ASan + UBSan and coverage.
+FUZZ_CC ?= clang
+FUZZ_SECONDS ?= 60
+FUZZ ?= $(FUZZ_NAMES)
+FUZZ_SAN := -fsanitize=address,undefined -fno-sanitize-recover=undefined -fno-omit-frame-pointer
+FUZZ_CFLAGS := -std=c11 -O1 -g -fno-math-errno $(FUZZ_SAN) -fsanitize=fuzzer-no-link
+FUZZ_LIB_SRC := $(KERNEL_SRC) $(SERVICE_SRC) $(COMMON_SRC) $(filter server/http/%,$(DAEMON_SRC))
+FUZZ_LIB_OBJ := $(FUZZ_LIB_SRC:%.c=build-fuzz/obj/%.o)
+build-fuzz/obj/%.o: %.c | deps fuzz-check-cc
+	@mkdir -p $(dir $@)
+	$(FUZZ_CC) $(CPPFLAGS) $(FUZZ_CFLAGS) -c $< -o $@
+build-fuzz/lib/libfuzzsrc.a: $(FUZZ_LIB_OBJ)
+	@mkdir -p $(dir $@)
+	@rm -f $@ && ar rcs $@ $^
+build-fuzz/bin/fuzz_%: build-fuzz/obj/tests/fuzz/fuzz_%.o build-fuzz/lib/libfuzzsrc.a
+	@mkdir -p $(dir $@)
+	$(FUZZ_CC) $(FUZZ_SAN) -fsanitize=fuzzer -o $@ $< -Wl,--whole-archive build-fuzz/lib/libfuzzsrc.a -Wl,--no-whole-archive $(LIBS) $(DAEMON_LIBS)
+
+.PHONY: fuzz fuzz-build fuzz-check-cc
+fuzz-check-cc:
+	@printf 'int LLVMFuzzerTestOneInput(const char *d, unsigned long n) { return 0; }\n' | \
+	  $(FUZZ_CC) -x c - -fsanitize=fuzzer -o build-fuzz.check 2>/dev/null && rm -f build-fuzz.check || \
+	  { rm -f build-fuzz.check; echo "make fuzz: needs $(FUZZ_CC) with libFuzzer (apt-get install clang libclang-rt-14-dev)" >&2; exit 1; }
+fuzz-build: $(FUZZ:%=build-fuzz/bin/fuzz_%)
+# clang and libFuzzer's runtime come from `tools/deps.sh fuzz` (Debian's
+# clang, libclang-rt-14-dev), installed first when missing.
+fuzz:
+	@tools/deps.sh fuzz
+	@$(MAKE) --no-print-directory fuzz-check-cc fuzz-build
+	@tests/fuzz/run.sh $(FUZZ_SECONDS) $(FUZZ)
+-include $(shell find build-fuzz/obj -name '*.d' 2>/dev/null)

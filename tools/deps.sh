@@ -21,6 +21,10 @@ pkgs=(
   # daemon (tests/cluster/test_slurm.sh)
   haproxy nginx slurm-wlm munge
 )
+# `tools/deps.sh fuzz` (make fuzz): clang with libFuzzer's runtime as well.
+if [ "${1:-}" = fuzz ]; then
+  pkgs+=(clang libclang-rt-14-dev)
+fi
 
 missing() {
   # One dpkg-query for all: a package it does not know is not listed (stderr).

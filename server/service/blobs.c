@@ -68,6 +68,22 @@ rsw_status service_blobs_missing(service *svc, const char *body, size_t len, cha
   unsigned jm = svc_json_mark();
   cJSON *j = cJSON_ParseWithLength(body, len);
   if (!j) return svc_fail(e, RSW_ERR_PARSE, "", "the body is not valid JSON");
+  rsw_status st = svc_check_body(body, len, e);
+  if (st) {
+    cJSON_Delete(j);
+    return st;
+  }
+  if (!cJSON_IsObject(j)) {
+    cJSON_Delete(j);
+    return svc_fail(e, RSW_ERR_TYPE, "", "the body must be a JSON object {\"digests\": [...]}");
+  }
+  for (const cJSON *k = j->child; k; k = k->next)
+    if (strcmp(k->string, "digests") != 0) {
+      char w[300];
+      snprintf(w, sizeof w, "/%s", k->string);
+      cJSON_Delete(j);
+      return svc_fail(e, RSW_ERR_UNUSED_PROPERTY, w, "unknown field '%s' (expected digests)", w + 1);
+    }
   const cJSON *d = cJSON_GetObjectItemCaseSensitive(j, "digests");
   if (!cJSON_IsArray(d)) {
     cJSON_Delete(j);

@@ -245,9 +245,8 @@ static cJSON *merge_params(const cJSON *job_params, const cJSON *ctx_params) {
   return m;
 }
 
-/* Keys of an override map must exist and their values parse; their legal
- * values are checked when each context renders (a failed context records
- * its error and the others keep their results). */
+/* Keys of an override map must exist and their values parse (their legal
+ * values: check_values, with the job-level map under each context's). */
 static rsw_status check_params(const scene *sc, const cJSON *p, const char *ptr, svc_error *e) {
   if (!p) return RSW_OK;
   if (!cJSON_IsObject(p)) return svc_fail(e, RSW_ERR_TYPE, ptr, "params must be an object {key: value}");
@@ -276,6 +275,117 @@ static rsw_status check_params(const scene *sc, const cJSON *p, const char *ptr,
     }
     param_value_free(&v);
   }
+  return RSW_OK;
+}
+
+/* The values of job-level overrides (jp) merged under a context's own (cp)
+ * against the scene (scene_update_check): an illegal value is refused at
+ * submit, named by its pointer (/params/KEY or CTX/params/KEY). */
+static rsw_status check_values(const scene *sc, const cJSON *jp, const cJSON *cp, const char *ctx_ptr,
+                               svc_error *e) {
+  cJSON *m = merge_params(jp, cp);
+  if (!m) return svc_fail(e, RSW_ERR_NOMEM, ctx_ptr, "out of memory");
+  param_update *u = NULL;
+  size_t n = 0;
+  rsw_status st = svc_map_to_updates(m, sc, "params", &u, &n, e);
+  if (!st) {
+    rsw_err err = {0};
+    st = scene_update_check(sc, u, n, &err);
+    if (st) {
+      st = svc_update_error(e, sc, u, n, &err);
+      bool own = cp && cJSON_GetObjectItemCaseSensitive(cp, e->key);
+      if (own)
+        snprintf(e->err.where, sizeof e->err.where, "%.64s/params/%.180s", ctx_ptr, e->key);
+      else
+        snprintf(e->err.where, sizeof e->err.where, "/params/%.240s", e->key);
+    }
+  }
+  svc_free_updates(u, n);
+  cJSON_Delete(m);
+  return st;
+}
+
+/* A tabulated spectrum's range (nm): {"wavelengths": [...], ...} or
+ * [[wl, value], ...], increasing. False for anything else. */
+static bool table_range(const cJSON *v, double *lo, double *hi) {
+  const cJSON *first = NULL, *last = NULL;
+  const cJSON *wl = cJSON_IsObject(v) ? cJSON_GetObjectItemCaseSensitive(v, "wavelengths") : NULL;
+  if (cJSON_IsArray(wl) && wl->child) {
+    first = wl->child;
+    for (last = first; last->next; last = last->next) {
+    }
+  } else if (cJSON_IsArray(v) && cJSON_IsArray(v->child)) {
+    const cJSON *fp = v->child, *lp = fp;
+    while (lp->next) lp = lp->next;
+    first = fp->child, last = cJSON_IsArray(lp) ? lp->child : NULL;
+  }
+  if (!cJSON_IsNumber(first) || !cJSON_IsNumber(last)) return false;
+  *lo = first->valuedouble, *hi = last->valuedouble;
+  return true;
+}
+
+/* The tabulated spectra of the scene's base state (from the parameter
+ * cache, so no render is waited for): index, range and key. */
+typedef struct spec_range {
+  size_t index;
+  double lo, hi;
+  char key[200];
+} spec_range;
+
+static spec_range *base_ranges(resident *r, size_t *n_out) {
+  spec_range *out = NULL;
+  size_t n = 0, cap = 0;
+  pthread_mutex_lock(&r->cache_lock);
+  size_t i = 0;
+  for (const cJSON *p = r->base_params ? r->base_params->child : NULL; p; p = p->next, i++) {
+    const cJSON *type = cJSON_GetObjectItemCaseSensitive(p, "type");
+    const cJSON *key = cJSON_GetObjectItemCaseSensitive(p, "key");
+    double lo, hi;
+    if (!cJSON_IsString(type) || strcmp(type->valuestring, "spectrum") != 0 || !cJSON_IsString(key) ||
+        !table_range(cJSON_GetObjectItemCaseSensitive(p, "value"), &lo, &hi))
+      continue;
+    if (n == cap) {
+      size_t nc = cap ? 2 * cap : 8;
+      spec_range *g = realloc(out, nc * sizeof *g);
+      if (!g) break;
+      out = g, cap = nc;
+    }
+    out[n] = (spec_range){.index = i, .lo = lo, .hi = hi};
+    snprintf(out[n].key, sizeof out[n].key, "%s", key->valuestring);
+    n++;
+  }
+  pthread_mutex_unlock(&r->cache_lock);
+  *n_out = n;
+  return out;
+}
+
+/* A context's wavelength against every tabulated spectrum it renders
+ * with: the base state's, less those its overrides replace, and the
+ * overrides' own tables (context keys over job-level keys). Out of range
+ * failed only when the context rendered. */
+static rsw_status check_wavelength(const scene *sc, const spec_range *br, size_t nbr, const cJSON *jp,
+                                   const cJSON *cp, double wl, const char *wptr, svc_error *e) {
+  const cJSON *maps[2] = {cp, jp};
+  for (size_t b = 0; b < nbr; b++) {
+    bool replaced = false;
+    for (int m = 0; m < 2 && !replaced; m++)
+      for (const cJSON *k = cJSON_IsObject(maps[m]) ? maps[m]->child : NULL; k && !replaced; k = k->next) {
+        size_t idx;
+        rsw_err err = {0};
+        replaced = params_lookup(sc, k->string, &idx, &err) == RSW_OK && idx == br[b].index;
+      }
+    if (!replaced && !(wl >= br[b].lo && wl <= br[b].hi))
+      return svc_fail(e, RSW_ERR_RANGE, wptr, "wavelength %g nm lies outside the table of '%s' [%g, %g] nm", wl,
+                      br[b].key, br[b].lo, br[b].hi);
+  }
+  for (int m = 0; m < 2; m++)
+    for (const cJSON *k = cJSON_IsObject(maps[m]) ? maps[m]->child : NULL; k; k = k->next) {
+      if (m == 1 && cJSON_IsObject(cp) && cJSON_GetObjectItemCaseSensitive(cp, k->string)) continue;
+      double lo, hi;
+      if (table_range(k, &lo, &hi) && !(wl >= lo && wl <= hi))
+        return svc_fail(e, RSW_ERR_RANGE, wptr, "wavelength %g nm lies outside the table of '%s' [%g, %g] nm",
+                        wl, k->string, lo, hi);
+    }
   return RSW_OK;
 }
 
@@ -332,6 +442,8 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   job *jb = NULL;
   if (!req)
     st = svc_fail(e, RSW_ERR_PARSE, "", "the body is not valid JSON");
+  else if (svc_check_body(body, len, e) != RSW_OK)
+    st = e->err.code;
   else if (!cJSON_IsObject(req))
     st = svc_fail(e, RSW_ERR_TYPE, "", "the body must be a JSON object");
   const cJSON *contexts = NULL, *defaults = NULL, *jparams = NULL;
@@ -378,10 +490,11 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   if (!st && defaults) {
     bool present;
     get_uint(defaults, "spp", 4294967295.0, &d_spp, &present, "/defaults", e, &st);
+    if (!st && present && d_spp == 0) st = svc_fail(e, RSW_ERR_INVALID, "/defaults/spp", "spp must be at least 1");
     const cJSON *w = cJSON_GetObjectItemCaseSensitive(defaults, "wavelength");
     if (!st && w) {
-      if (!cJSON_IsNumber(w) || !(w->valuedouble > 0))
-        st = svc_fail(e, RSW_ERR_INVALID, "/defaults/wavelength", "wavelength must be a positive number");
+      if (!cJSON_IsNumber(w) || !(w->valuedouble > 0) || !isfinite(w->valuedouble))
+        st = svc_fail(e, RSW_ERR_INVALID, "/defaults/wavelength", "wavelength must be a positive finite number");
       else
         d_wl = w->valuedouble;
     }
@@ -405,6 +518,9 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     film_ok = calloc(sc->n_sensors ? sc->n_sensors : 1, sizeof *film_ok);
     if (!seen || !film_ok) st = svc_fail(e, RSW_ERR_NOMEM, "/contexts", "out of memory");
   }
+  bool job_params_ok = false;
+  size_t n_ranges = 0;
+  spec_range *ranges = !st && sc->variant == VARIANT_MONO ? base_ranges(r, &n_ranges) : NULL;
   for (const cJSON *c = !st ? contexts->child : NULL; c && !st; c = c->next, n_ctx++) {
     char ptr[64];
     snprintf(ptr, sizeof ptr, "/contexts/%zu", n_ctx);
@@ -430,10 +546,10 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       }
     if (st) break;
     const cJSON *w = cJSON_GetObjectItemCaseSensitive(c, "wavelength");
-    if (w && (!cJSON_IsNumber(w) || !(w->valuedouble > 0))) {
+    if (w && (!cJSON_IsNumber(w) || !(w->valuedouble > 0) || !isfinite(w->valuedouble))) {
       char p2[80];
       snprintf(p2, sizeof p2, "%s/wavelength", ptr);
-      st = svc_fail(e, RSW_ERR_INVALID, p2, "wavelength must be a positive number of nm");
+      st = svc_fail(e, RSW_ERR_INVALID, p2, "wavelength must be a positive finite number of nm");
       break;
     }
     if ((w || d_wl > 0) && sc->variant != VARIANT_MONO) {
@@ -442,11 +558,32 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     }
     char pp[80];
     snprintf(pp, sizeof pp, "%s/params", ptr);
-    st = check_params(sc, cJSON_GetObjectItemCaseSensitive(c, "params"), pp, e);
+    const cJSON *cparams = cJSON_GetObjectItemCaseSensitive(c, "params");
+    st = check_params(sc, cparams, pp, e);
     if (st) break;
+    /* The values this context renders with must be legal now, not only
+     * when it renders: job-level overrides under its own (checked once
+     * for all contexts that have none of their own). */
+    if (cparams || (jparams && !job_params_ok)) {
+      st = check_values(sc, jparams, cparams, ptr, e);
+      if (st) break;
+      if (!cparams) job_params_ok = true;
+    }
+    if (sc->variant == VARIANT_MONO) {
+      char p5[80];
+      snprintf(p5, sizeof p5, w ? "%s/wavelength" : d_wl > 0 ? "/defaults/wavelength" : "%s", ptr);
+      st = check_wavelength(sc, ranges, n_ranges, jparams, cparams, w ? w->valuedouble : d_wl > 0 ? d_wl : 550,
+                            p5, e);
+      if (st) break;
+    }
     uint64_t dummy;
     bool present;
     get_uint(c, "spp", 4294967295.0, &dummy, &present, ptr, e, &st);
+    if (!st && present && dummy == 0) {
+      char p3[80];
+      snprintf(p3, sizeof p3, "%s/spp", ptr);
+      st = svc_fail(e, RSW_ERR_INVALID, p3, "spp must be at least 1");
+    }
     if (!st) get_uint(c, "seed", 9007199254740991.0, &dummy, &present, ptr, e, &st);
     if (st) break;
     const cJSON *sens = cJSON_GetObjectItemCaseSensitive(c, "sensors");
@@ -501,6 +638,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   free(ids.slot);
   free(seen);
   free(film_ok);
+  free(ranges);
   /* Build the job. */
   if (!st) {
     jb = calloc(1, sizeof *jb);

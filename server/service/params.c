@@ -190,10 +190,11 @@ rsw_status service_params_patch(service *svc, const char *id, const char *body, 
   unsigned jm = svc_json_mark();
   resident *r = svc_scene_acquire(svc, id);
   if (!r) return svc_no_scene(e, id);
-  cJSON *j = cJSON_ParseWithLength(body, len);
-  if (!j) {
+  cJSON *j;
+  rsw_status pst = svc_parse_body(body, len, &j, e);
+  if (pst) {
     svc_scene_release(svc, r);
-    return svc_fail(e, RSW_ERR_PARSE, "", "the body is not valid JSON");
+    return pst;
   }
   pthread_mutex_lock(&r->lock);
   /* Wait out a render that borrows the base (renders.c); views keep

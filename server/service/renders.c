@@ -312,12 +312,10 @@ rsw_status service_render(service *svc, const char *id, const char *body, size_t
   resident *r = svc_scene_acquire(svc, id);
   if (!r) return svc_no_scene(e, id);
   memset(out, 0, sizeof *out);
-  cJSON *j = len ? cJSON_ParseWithLength(body, len) : cJSON_CreateObject();
-  rsw_status st = RSW_OK;
+  cJSON *j = NULL;
   render_spec rs = {.seed = 0, .cancel = cancel};
-  if (!j)
-    st = svc_fail(e, RSW_ERR_PARSE, "", "the body is not valid JSON");
-  else if (!cJSON_IsObject(j))
+  rsw_status st = svc_parse_body(body, len, &j, e);
+  if (!st && !cJSON_IsObject(j))
     st = svc_fail(e, RSW_ERR_TYPE, "", "the body must be a JSON object");
   for (const cJSON *k = j && !st ? j->child : NULL; k && !st; k = k->next) {
     char ptr[300];

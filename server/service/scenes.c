@@ -37,6 +37,9 @@ static rsw_status resolve_file(void *user, const char *name, char **path_out, rs
     if (stat(path, &sb) != 0)
       return rsw_fail(err, RSW_ERR_FILE, name, "blob %s has not been uploaded (PUT /v1/blobs/%s)", name + 7,
                       name + 7);
+    if (!S_ISREG(sb.st_mode) || access(path, R_OK) != 0)
+      return rsw_fail(err, RSW_ERR_FILE, name, "blob %s cannot be read on the server (upload it again)",
+                      name + 7);
     snprintf(dh, sizeof dh, "%s", name + 7);
   } else {
     if (!data_root[0])
@@ -264,11 +267,39 @@ void svc_scene_summary(const resident *r, cJSON *o) {
   cJSON_AddNumberToObject(o, "revision", (double)r->revision);
 }
 
-static void scene_error(svc_error *e, const rsw_err *err) {
+/* Replace every "prefix/" in s (a string in cap bytes) by repl, cutting
+ * the end if it no longer fits. */
+static void scrub(char *s, size_t cap, const char *prefix, const char *repl) {
+  size_t lp = strlen(prefix), lr = strlen(repl);
+  if (!lp || !cap) return;
+  char *p = s;
+  while ((p = strstr(p, prefix)) && p[lp] == '/') {
+    size_t at = (size_t)(p - s);
+    if (at + lr >= cap) {
+      *p = '\0';
+      return;
+    }
+    size_t tail = strlen(p + lp + 1);
+    if (at + lr + tail >= cap) tail = cap - 1 - at - lr;
+    memmove(p + lr, p + lp + 1, tail);
+    memcpy(p, repl, lr);
+    p[lr + tail] = '\0';
+    p += lr;
+  }
+}
+
+static void scene_error(svc_error *e, const service *svc, const rsw_err *err) {
   e->err = *err;
   /* A file the scene names that cannot be found or read is the request's
    * fault (422), not the server's. */
   if (err->code == RSW_ERR_IO || err->code == RSW_ERR_NOT_FOUND) e->err.code = RSW_ERR_FILE;
+  /* Errors about a file name its path as the reader opened it: say it the
+   * way the scene did (sha256:<hex>, a name under the data root), never
+   * the server's own directories. */
+  scrub(e->err.where, sizeof e->err.where, svc->blob_dir, "sha256:");
+  scrub(e->err.msg, sizeof e->err.msg, svc->blob_dir, "sha256:");
+  scrub(e->err.where, sizeof e->err.where, svc->data_root, "");
+  scrub(e->err.msg, sizeof e->err.msg, svc->data_root, "");
 }
 
 /* Load, compute the id, register (or find the existing one). x (may be
@@ -325,7 +356,7 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
   rsw_sha256_end(&files, fd);
   if (st) {
     free(canon);
-    scene_error(e, &err);
+    scene_error(e, svc, &err);
     return e->err.code;
   }
   /* id = SHA-256("raysweep-scene-v1\n" format \n variant \n canonical \n

@@ -209,6 +209,14 @@ void svc_iso_time(time_t t, char out[32]);
  * code that says what went wrong; never a status. */
 rsw_status svc_fail(svc_error *e, rsw_status code, const char *where, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));
+/* A request body read strictly as one JSON document: empty bodies,
+ * malformed JSON and anything but blanks after the document are
+ * RSW_ERR_PARSE; a \u0000 (or raw NUL) in any string is RSW_ERR_INVALID
+ * naming the member (cJSON would cut the string at the NUL). *out (free
+ * with cJSON_Delete) only on success. */
+rsw_status svc_parse_body(const char *body, size_t len, cJSON **out, svc_error *e);
+/* The same checks on a body parsed elsewhere (body.c). */
+rsw_status svc_check_body(const char *body, size_t len, svc_error *e);
 /* The code for a kernel error about something a request named: an
  * unknown key or sensor (kernel NOT_FOUND) is RSW_ERR_UNKNOWN_NAME, a
  * value that does not parse is RSW_ERR_INVALID; others are kept. */

@@ -238,6 +238,7 @@ static const expect_msg expected_messages[] = {
     {"bad_json_tabulated_in_rgb.json", "mono"},
     {"bad_json_trailing_garbage.json", "after the JSON document"},
     {"bad_json_list_id_clash.json", "already names"},
+    {"bad_json_nul_in_filename.json", "'filename': a string contains \\u0000"},
 };
 
 static const char *expected_needle(const char *file) {

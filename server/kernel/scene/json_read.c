@@ -27,6 +27,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../core/jsonscan.h"
 #include "node.h"
 
 #define TWO_POW_53 9007199254740992.0
@@ -694,6 +695,18 @@ rsw_status scene_read_json_limited(const char *text, size_t len, const char *sou
       cJSON_Delete(doc);
       return fail(&c, RSW_ERR_PARSE, w, "unexpected content after the JSON document");
     }
+  }
+  /* A NUL in a string would cut it short (a file name, an id). */
+  char member[128];
+  long nul = json_find_nul_escape(text, len, member, sizeof member);
+  if (nul >= 0) {
+    int line, colno;
+    line_col(text, (size_t)nul, &line, &colno);
+    char w[600];
+    snprintf(w, sizeof w, "%s:%d:%d", c.source, line, colno);
+    cJSON_Delete(doc);
+    return fail(&c, RSW_ERR_INVALID, w, "%s%s%sa string contains \\u0000 (NUL), which no name, id or value may hold",
+                member[0] ? "'" : "", member, member[0] ? "': " : "");
   }
   rsw_status st = RSW_OK;
   node *root = NULL;

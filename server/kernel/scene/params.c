@@ -1473,3 +1473,21 @@ rsw_status scene_update(scene *s, const param_update *items, size_t n, update_re
   }
   return st;
 }
+
+rsw_status scene_update_check(const scene *s, const param_update *items, size_t n, rsw_err *err) {
+  if (!s->params) return rsw_fail(err, RSW_ERR_NOT_FOUND, "params", "the scene has no parameter table");
+  staged *sg = calloc(n ? n : 1, sizeof *sg);
+  if (!sg) return rsw_fail(err, RSW_ERR_NOMEM, "params", "out of memory");
+  rsw_status st = RSW_OK;
+  for (size_t i = 0; i < n && !st; i++) {
+    sg[i].item = &items[i];
+    st = params_lookup(s, items[i].key, &sg[i].index, err);
+    for (size_t k = 0; k < i && !st; k++)
+      if (sg[k].index == sg[i].index)
+        st = rsw_fail(err, RSW_ERR_DUPLICATE, items[i].key,
+                      "'%s' is given twice in one update (also as '%s')", items[i].key, items[k].key);
+  }
+  for (size_t i = 0; i < n && !st; i++) st = validate(s, &sg[i], sg, n, err);
+  free(sg);
+  return st;
+}

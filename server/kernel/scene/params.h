@@ -146,6 +146,14 @@ typedef struct update_report {
  * *report (may be NULL). Not thread-safe with renders of the same scene. */
 rsw_status scene_update(scene *s, const param_update *items, size_t n, update_report *report, rsw_err *err);
 
+/* The checks of scene_update without applying anything: every key
+ * resolves (no key twice), is writable, and its value has the right type,
+ * shape and range for the scene as it is. (The mesh-area check that needs
+ * the new vertices together is left to scene_update.) For validating
+ * overrides before they are used, e.g. every context of a job at submit.
+ * Only reads the scene. */
+rsw_status scene_update_check(const scene *s, const param_update *items, size_t n, rsw_err *err);
+
 /* ---- what plugins call from their traverse() --------------------------------- */
 
 typedef struct param_visitor param_visitor;

@@ -603,7 +603,8 @@ static rsw_status start_integer(xml_ctx *c, xml_frame *parent, xml_frame *self) 
   prop *p = start_simple(c, parent, PROP_NUMBER, &v);
   if (!p) return c->err.code;
   if (!parse_int(v, &p->num))
-    return xfail(c, RSW_ERR_INVALID, "could not parse integer \"%s\" (decimal digits, |value| <= 2^53)", v);
+    return xfail(c, RSW_ERR_INVALID, "%s: could not parse integer \"%s\" (decimal digits, |value| <= 2^53)",
+                 attr(c, "name"), v);
   p->is_int = true;
   return RSW_OK;
 }
@@ -612,7 +613,8 @@ static rsw_status start_float(xml_ctx *c, xml_frame *parent, xml_frame *self) {
   const char *v;
   prop *p = start_simple(c, parent, PROP_NUMBER, &v);
   if (!p) return c->err.code;
-  if (!parse_double(v, &p->num)) return xfail(c, RSW_ERR_INVALID, "could not parse finite number \"%s\"", v);
+  if (!parse_double(v, &p->num))
+    return xfail(c, RSW_ERR_INVALID, "%s: could not parse finite number \"%s\"", attr(c, "name"), v);
   return RSW_OK;
 }
 
@@ -626,7 +628,7 @@ static rsw_status start_boolean(xml_ctx *c, xml_frame *parent, xml_frame *self) 
   else if (strcasecmp(v, "false") == 0)
     p->b = false;
   else
-    return xfail(c, RSW_ERR_INVALID, "boolean \"%s\" is not \"true\" or \"false\"", v);
+    return xfail(c, RSW_ERR_INVALID, "%s: boolean \"%s\" is not \"true\" or \"false\"", attr(c, "name"), v);
   return RSW_OK;
 }
 

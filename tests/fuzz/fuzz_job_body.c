@@ -1,0 +1,58 @@
+/* Job request bodies (POST /v1/scenes/{id}/jobs, service_job_submit) on
+ * the harness scene: refused with an error naming the field, or accepted
+ * and run to its end event. Every context is validated before the 202, so
+ * an accepted job must succeed with no failed render. The job is deleted after, and the scene's own
+ * parameters must be unchanged. Inputs over 8 KiB are skipped (a context
+ * costs a render). */
+#include <cjson/cJSON.h>
+
+#include "fuzz_service.h"
+
+int LLVMFuzzerInitialize(int *argc, char ***argv) {
+  (void)argc;
+  (void)argv;
+  fuzz_service_start();
+  return 0;
+}
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
+  if (size > 8192) return 0;
+  char *job_id = NULL, *json = NULL;
+  svc_error e = {0};
+  rsw_status st = service_job_submit(fuzz_svc, fuzz_scene_id, (const char *)data, size, NULL, &job_id, &json, &e);
+  fuzz_check_error(st, &e, "job submit");
+  free(json);
+  if (st == RSW_OK) {
+    FUZZ_CHECK(job_id != NULL, "accepted without a job id");
+    uint64_t after = 0;
+    bool end = false;
+    for (int waited = 0; !end && waited < 200; waited++) {
+      uint64_t seq = 0;
+      char *ev = NULL;
+      e = (svc_error){0};
+      st = service_job_next_event(fuzz_svc, job_id, after, 100, &seq, &ev, &end, &e);
+      FUZZ_CHECK(st == RSW_OK, "events: %s", e.err.msg);
+      if (ev) after = seq;
+      free(ev);
+    }
+    FUZZ_CHECK(end, "the job did not end within 20 s");
+    char *job = NULL;
+    e = (svc_error){0};
+    FUZZ_CHECK(service_job_get(fuzz_svc, job_id, &job, &e) == RSW_OK, "job get: %s", e.err.msg);
+    cJSON *j = cJSON_Parse(job);
+    const cJSON *state = cJSON_GetObjectItemCaseSensitive(j, "state");
+    const cJSON *failed = cJSON_GetObjectItemCaseSensitive(j, "renders_failed");
+    FUZZ_CHECK(cJSON_IsString(state) && strcmp(state->valuestring, "succeeded") == 0 && cJSON_IsNumber(failed) &&
+                   failed->valuedouble == 0,
+               "an accepted job did not succeed (contexts are validated before the 202): %s", job);
+    cJSON_Delete(j);
+    free(job);
+    e = (svc_error){0};
+    FUZZ_CHECK(service_job_delete(fuzz_svc, job_id, &e) == RSW_OK, "job delete: %s", e.err.msg);
+  }
+  free(job_id);
+  char *now = fuzz_params_now();
+  FUZZ_CHECK(strcmp(now, fuzz_params0) == 0, "a job's overrides changed the scene's parameters");
+  free(now);
+  return 0;
+}
