@@ -111,7 +111,9 @@ kill "${pids[-1]}" && wait "${pids[-1]}" 2>/dev/null
 
 # ---- with a state directory: eviction reloads; results beyond the cap from disk --------
 sd=$tmp/state
-start_daemon "$tmp/d3" --state-dir "$sd" --max-scene-bytes 1 --max-result-bytes 2000 --threads 2
+# --threads 1: one job worker (there are as many as render threads), so that
+# the second job below waits in the queue behind the first until the kill.
+start_daemon "$tmp/d3" --state-dir "$sd" --max-scene-bytes 1 --max-result-bytes 2000 --threads 1
 U=127.0.0.1:$started_port
 A=$(post_scene "$tmp/a.json")
 curl -s -o /dev/null -XPATCH "$U/v1/scenes/$A/params" -H 'Content-Type: application/json' -d '{"plate.bsdf.reflectance.value": 0.3}'
@@ -172,9 +174,11 @@ for _ in $(seq 400); do
   [ "${done_before:-0}" -ge 2 ] && break
   sleep 0.02
 done
+curl -s "$U/v1/jobs/$jq2" >"$tmp/jq2.json"
 echo "spp $spp killed at $done_before" >&2; kill -9 "${pids[-1]}"
 wait "${pids[-1]}" 2>/dev/null
 [ "$done_before" -ge 2 ] && [ "$done_before" -lt 16 ] && ok || bad "the kill came mid-job (renders done: $done_before of 16)"
+[ "$(field "$tmp/jq2.json" state)" = queued ] && ok || bad "the second job was still queued at the kill: $(cat "$tmp/jq2.json")"
 # the films finished before the kill, as the state directory holds them
 mkdir -p "$tmp/killed"
 # (a film file begins with the .npy bytes; its trailer's first uint64 is their length)
