@@ -221,14 +221,8 @@ rsw_status service_params_patch(service *svc, const char *id, const char *body, 
   if (!st && rep.changed) {
     r->revision++;
     (void)svc_refresh_param_cache(r); /* out of memory: stale, rebuilt by the next GET */
-    svc_scene_patched(svc, r, j); /* kept for a reload, stored with --state-dir */
-    svc_views_free(r); /* idle views of the old revision */
-    if (!svc_keep_patch(r, j)) {
-      /* Views could no longer reproduce the base: build none (renders
-       * without overrides wait for the base, those with fail). */
-      cJSON_Delete(r->patches);
-      r->patches = NULL;
-    }
+    svc_views_free(r);            /* idle views of the old revision */
+    svc_scene_patched(svc, r, j); /* r->patches: views replay it, --state-dir stores it */
   }
   *revision_out = r->revision;
   cJSON *o = NULL;

@@ -86,7 +86,10 @@ bool svc_keep_patch(resident *r, const cJSON *body) {
     cJSON *d = cJSON_Duplicate(k, true);
     if (!d) return false;
     cJSON_DeleteItemFromObjectCaseSensitive(r->patches, k->string);
-    cJSON_AddItemToObject(r->patches, k->string, d);
+    if (!cJSON_AddItemToObject(r->patches, k->string, d)) { /* its key's copy failed */
+      cJSON_Delete(d);
+      return false;
+    }
   }
   return true;
 }

@@ -233,14 +233,11 @@ void svc_free_evicted(resident **ev) {
 }
 
 void svc_scene_patched(service *svc, resident *r, const cJSON *map) {
-  if (!r->patched) r->patched = cJSON_CreateObject();
-  for (const cJSON *k = map ? map->child : NULL; k && r->patched; k = k->next) {
-    cJSON *v = cJSON_Duplicate(k, 1);
-    if (!v) continue;
-    if (cJSON_GetObjectItemCaseSensitive(r->patched, k->string))
-      cJSON_ReplaceItemInObjectCaseSensitive(r->patched, k->string, v);
-    else
-      cJSON_AddItemToObject(r->patched, k->string, v);
+  if (r->patches && map && !svc_keep_patch(r, map)) {
+    /* Views could no longer reproduce the base: build none (renders
+     * without overrides wait for the base, those with fail). */
+    cJSON_Delete(r->patches);
+    r->patches = NULL;
   }
   svc_state_scene_patched(svc, r);
   size_t b = budget_bytes(r->sc);
@@ -433,17 +430,16 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
   r->bytes = bytes;
   r->last_used = ++svc->use_clock;
   r->pinned = x && x->pinned;
-  if (x && x->patched) {
-    r->revision = x->revision;
-    r->patched = cJSON_Duplicate(x->patched, 1);
-  }
+  if (x && x->patched) r->revision = x->revision;
   r->load_s = load_s;
   r->created = time(NULL);
   pthread_mutex_init(&r->lock, NULL);
   pthread_cond_init(&r->cond, NULL);
   pthread_mutex_init(&r->cache_lock, NULL);
   memcpy(r->src_files, fd, 32);
-  if (!svc_keep_source(svc, r, body, len, is_xml) || !svc_refresh_param_cache(r)) {
+  /* a reload: its views replay the stored PATCHes too */
+  if (!svc_keep_source(svc, r, body, len, is_xml) || (x && x->patched && !svc_keep_patch(r, x->patched)) ||
+      !svc_refresh_param_cache(r)) {
     pthread_mutex_unlock(&svc->lock);
     svc_resident_free(r);
     return svc_fail(e, RSW_ERR_NOMEM, "scene", "out of memory");

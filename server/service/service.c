@@ -234,7 +234,6 @@ void svc_resident_free(resident *r) {
   if (!r) return;
   svc_views_free(r);
   scene_free(r->sc);
-  cJSON_Delete(r->patched);
   cJSON_Delete(r->base_params);
   cJSON_Delete(r->patches);
   free(r->src);

@@ -43,7 +43,11 @@ typedef struct resident {
   /* What a view is built from: the scene's text as posted, its variant,
    * the data root its file names resolved in, and every PATCH since the
    * load merged into one {key: value} object (a later value of a key
-   * replaces the earlier, moved to the end). */
+   * replaces the earlier, moved to the end). The one record of the
+   * scene's PATCHes: views replay it, --state-dir stores it with the
+   * revision and a reload applies it. NULL: out of memory while recording
+   * a PATCH (no views; the stored record stays at the older revision).
+   * Written under r->lock. */
   char *src;
   size_t src_len;
   bool src_xml;
@@ -67,8 +71,6 @@ typedef struct resident {
   size_t bytes;       /* svc_scene_bytes at load and after each PATCH */
   uint64_t last_used; /* svc->use_clock at the last acquire (LRU) */
   bool pinned;        /* loaded at startup (--scene): never evicted */
-  cJSON *patched;     /* {key: value} of every PATCH applied (last value
-                         per key), persisted with the revision (r->lock) */
   /* A render's overrides could not be undone (out of memory, every
    * retry): the scene's values are no longer its base state, so renders
    * and updates of it are refused until it is deleted and posted again
@@ -286,8 +288,9 @@ void svc_scene_summary(const resident *r, cJSON *o);
  * jobs). svc->lock held. Returns the evicted residents, for the caller to
  * free after unlocking (NULL-terminated, malloc'ed; NULL when none). */
 resident **svc_evict_locked(service *svc, const resident *keep);
-/* A PATCH changed r's base state (r->lock held): remember the values
- * (map: the PATCH body) for a reload, store them, recount its bytes. */
+/* A PATCH changed r's base state (r->lock held): merge the values (map:
+ * the PATCH body) into r->patches (views and a reload replay it), store
+ * them with --state-dir, recount its bytes. */
 void svc_scene_patched(service *svc, resident *r, const cJSON *map);
 /* How a scene is loaded besides a plain POST (scenes.c). */
 struct post_extra {

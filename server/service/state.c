@@ -227,10 +227,10 @@ bool svc_state_scene_read(service *svc, const char *id, char **body, size_t *len
 }
 
 void svc_state_scene_patched(service *svc, resident *r) {
-  if (!svc_state_on(svc) || r->pinned || !r->patched) return;
+  if (!svc_state_on(svc) || r->pinned || !r->patches) return;
   cJSON *o = cJSON_CreateObject();
   cJSON_AddNumberToObject(o, "revision", (double)r->revision);
-  cJSON_AddItemReferenceToObject(o, "params", r->patched);
+  cJSON_AddItemReferenceToObject(o, "params", r->patches);
   char *s = cJSON_PrintUnformatted(o);
   cJSON_Delete(o);
   char p[4200];

@@ -111,16 +111,23 @@ kill "${pids[-1]}" && wait "${pids[-1]}" 2>/dev/null
 
 # ---- with a state directory: eviction reloads; results beyond the cap from disk --------
 sd=$tmp/state
-start_daemon "$tmp/d3" --state-dir "$sd" --max-scene-bytes 1 --max-result-bytes 2000 --threads 2
+# --threads 1: one job worker (there are as many as render threads), so that
+# the second job below waits in the queue behind the first until the kill.
+start_daemon "$tmp/d3" --state-dir "$sd" --max-scene-bytes 1 --max-result-bytes 2000 --threads 1
 U=127.0.0.1:$started_port
 A=$(post_scene "$tmp/a.json")
 curl -s -o /dev/null -XPATCH "$U/v1/scenes/$A/params" -H 'Content-Type: application/json' -d '{"plate.bsdf.reflectance.value": 0.3}'
 render_npy "$A" '{"spp":3,"seed":7,"wavelength":550}' "$tmp/before.npy" >/dev/null
+ov='{"spp":3,"seed":7,"wavelength":550,"params":{"sun.irradiance.value":2}}' # renders on a view
+render_npy "$A" "$ov" "$tmp/before_ov.npy" >/dev/null
 B=$(post_scene "$tmp/b.json") # evicts A (its document and PATCH are on disk)
 [ "$(metric raysweep_scenes_evicted_total)" -ge 1 ] 2>/dev/null && ok || bad "A was not evicted"
 st=$(render_npy "$A" '{"spp":3,"seed":7,"wavelength":550}' "$tmp/after.npy")
 [ "$st" = 200 ] && cmp -s "$tmp/before.npy" "$tmp/after.npy" && ok ||
   bad "an evicted scene reloads from the state directory with its PATCH, bitwise: $st"
+st=$(render_npy "$A" "$ov" "$tmp/after_ov.npy")
+[ "$st" = 200 ] && cmp -s "$tmp/before_ov.npy" "$tmp/after_ov.npy" && ok ||
+  bad "a render view of the reloaded scene has its PATCH too (a render with overrides), bitwise: $st"
 curl -s "$U/v1/scenes/$A/params?match=plate.bsdf.reflectance.value" >"$tmp/p.json"
 py "the reloaded scene keeps its revision and PATCHed value" \
   'import json,sys; d=json.load(open(sys.argv[1])); assert d["revision"]==1 and d["params"][0]["value"]==0.3, d' "$tmp/p.json"
@@ -172,9 +179,11 @@ for _ in $(seq 400); do
   [ "${done_before:-0}" -ge 2 ] && break
   sleep 0.02
 done
+curl -s "$U/v1/jobs/$jq2" >"$tmp/jq2.json"
 echo "spp $spp killed at $done_before" >&2; kill -9 "${pids[-1]}"
 wait "${pids[-1]}" 2>/dev/null
 [ "$done_before" -ge 2 ] && [ "$done_before" -lt 16 ] && ok || bad "the kill came mid-job (renders done: $done_before of 16)"
+[ "$(field "$tmp/jq2.json" state)" = queued ] && ok || bad "the second job was still queued at the kill: $(cat "$tmp/jq2.json")"
 # the films finished before the kill, as the state directory holds them
 mkdir -p "$tmp/killed"
 # (a film file begins with the .npy bytes; its trailer's first uint64 is their length)
