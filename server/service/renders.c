@@ -86,7 +86,10 @@ bool svc_keep_patch(resident *r, const cJSON *body) {
     cJSON *d = cJSON_Duplicate(k, true);
     if (!d) return false;
     cJSON_DeleteItemFromObjectCaseSensitive(r->patches, k->string);
-    cJSON_AddItemToObject(r->patches, k->string, d);
+    if (!cJSON_AddItemToObject(r->patches, k->string, d)) { /* the key's copy: out of memory */
+      cJSON_Delete(d);
+      return false; /* the key is gone from patches: they no longer reproduce the base */
+    }
   }
   return true;
 }

@@ -234,10 +234,11 @@ void svc_scene_patched(service *svc, resident *r, const cJSON *map) {
   for (const cJSON *k = map ? map->child : NULL; k && r->patched; k = k->next) {
     cJSON *v = cJSON_Duplicate(k, 1);
     if (!v) continue;
-    if (cJSON_GetObjectItemCaseSensitive(r->patched, k->string))
-      cJSON_ReplaceItemInObjectCaseSensitive(r->patched, k->string, v);
-    else
-      cJSON_AddItemToObject(r->patched, k->string, v);
+    /* Either call fails (key copy out of memory) without taking v. */
+    bool kept = cJSON_GetObjectItemCaseSensitive(r->patched, k->string)
+                    ? cJSON_ReplaceItemInObjectCaseSensitive(r->patched, k->string, v)
+                    : cJSON_AddItemToObject(r->patched, k->string, v);
+    if (!kept) cJSON_Delete(v);
   }
   svc_state_scene_patched(svc, r);
   size_t b = budget_bytes(r->sc);
