@@ -212,6 +212,15 @@ rsw_status service_params_patch(service *svc, const char *id, const char *body, 
         svc_fail(e, RSW_ERR_PRECONDITION, "If-Match", "revision %lld is stale: the scene is at revision %llu",
                  (long long)if_match, (unsigned long long)r->revision);
   if (!st) st = svc_map_to_updates(j, r->sc, "body", &u, &n, e);
+  /* What the update is recorded as (for a reload; for views, which
+   * replay it), built first: a PATCH that could not record itself fails
+   * before it changes anything. */
+  cJSON *patched = NULL, *patches = NULL;
+  if (!st) {
+    patched = svc_patch_merged(r->patched, j);
+    patches = r->patches ? svc_patch_merged(r->patches, j) : NULL;
+    if (!patched || (r->patches && !patches)) st = svc_fail(e, RSW_ERR_NOMEM, "body", "out of memory");
+  }
   if (!st) {
     rsw_err err = {0};
     st = scene_update(r->sc, u, n, &rep, &err);
@@ -220,15 +229,17 @@ rsw_status service_params_patch(service *svc, const char *id, const char *body, 
   if (!st && rep.changed) {
     r->revision++;
     (void)svc_refresh_param_cache(r); /* out of memory: stale, rebuilt by the next GET */
-    svc_scene_patched(svc, r, j); /* kept for a reload, stored with --state-dir */
+    svc_scene_patched(svc, r, patched); /* kept for a reload, stored with --state-dir */
+    patched = NULL;
     svc_views_free(r); /* idle views of the old revision */
-    if (!svc_keep_patch(r, j)) {
-      /* Views could no longer reproduce the base: build none (renders
-       * without overrides wait for the base, those with fail). */
+    if (patches) {
       cJSON_Delete(r->patches);
-      r->patches = NULL;
+      r->patches = patches;
+      patches = NULL;
     }
   }
+  cJSON_Delete(patched);
+  cJSON_Delete(patches);
   *revision_out = r->revision;
   cJSON *o = NULL;
   if (!st) {

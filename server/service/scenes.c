@@ -229,17 +229,9 @@ void svc_free_evicted(resident **ev) {
   free(ev);
 }
 
-void svc_scene_patched(service *svc, resident *r, const cJSON *map) {
-  if (!r->patched) r->patched = cJSON_CreateObject();
-  for (const cJSON *k = map ? map->child : NULL; k && r->patched; k = k->next) {
-    cJSON *v = cJSON_Duplicate(k, 1);
-    if (!v) continue;
-    /* Either call fails (key copy out of memory) without taking v. */
-    bool kept = cJSON_GetObjectItemCaseSensitive(r->patched, k->string)
-                    ? cJSON_ReplaceItemInObjectCaseSensitive(r->patched, k->string, v)
-                    : cJSON_AddItemToObject(r->patched, k->string, v);
-    if (!kept) cJSON_Delete(v);
-  }
+void svc_scene_patched(service *svc, resident *r, cJSON *patched) {
+  cJSON_Delete(r->patched);
+  r->patched = patched;
   svc_state_scene_patched(svc, r);
   size_t b = budget_bytes(r->sc);
   pthread_mutex_lock(&svc->lock);
