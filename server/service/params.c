@@ -213,6 +213,14 @@ rsw_status service_params_patch(service *svc, const char *id, const char *body, 
         svc_fail(e, RSW_ERR_PRECONDITION, "If-Match", "revision %lld is stale: the scene is at revision %llu",
                  (long long)if_match, (unsigned long long)r->revision);
   if (!st) st = svc_map_to_updates(j, r->sc, "body", &u, &n, e);
+  /* What the update is recorded as (for a reload; for views, which
+   * replay it), built first: a PATCH that could not record itself fails
+   * before it changes anything. */
+  cJSON *patches = NULL;
+  if (!st && r->patches) {
+    patches = svc_patch_merged(r->patches, j);
+    if (!patches) st = svc_fail(e, RSW_ERR_NOMEM, "body", "out of memory");
+  }
   if (!st) {
     rsw_err err = {0};
     st = scene_update(r->sc, u, n, &rep, &err);
@@ -221,9 +229,15 @@ rsw_status service_params_patch(service *svc, const char *id, const char *body, 
   if (!st && rep.changed) {
     r->revision++;
     (void)svc_refresh_param_cache(r); /* out of memory: stale, rebuilt by the next GET */
-    svc_views_free(r);            /* idle views of the old revision */
-    svc_scene_patched(svc, r, j); /* r->patches: views replay it, --state-dir stores it */
+    svc_views_free(r); /* idle views of the old revision */
+    if (patches) {
+      cJSON_Delete(r->patches);
+      r->patches = patches; /* views replay it, --state-dir stores it */
+      patches = NULL;
+    }
+    svc_scene_patched(svc, r);
   }
+  cJSON_Delete(patches);
   *revision_out = r->revision;
   cJSON *o = NULL;
   if (!st) {

@@ -82,16 +82,30 @@ void svc_views_free(resident *r) {
 
 bool svc_keep_patch(resident *r, const cJSON *body) {
   if (!r->patches) return false;
-  for (const cJSON *k = body->child; k; k = k->next) {
+  cJSON *m = svc_patch_merged(r->patches, body);
+  if (!m) return false;
+  cJSON_Delete(r->patches);
+  r->patches = m;
+  return true;
+}
+
+cJSON *svc_patch_merged(const cJSON *old, const cJSON *body) {
+  unsigned jm = svc_json_mark();
+  cJSON *m = old ? cJSON_Duplicate(old, true) : cJSON_CreateObject();
+  for (const cJSON *k = body->child; m && k; k = k->next) {
     cJSON *d = cJSON_Duplicate(k, true);
-    if (!d) return false;
-    cJSON_DeleteItemFromObjectCaseSensitive(r->patches, k->string);
-    if (!cJSON_AddItemToObject(r->patches, k->string, d)) { /* its key's copy failed */
+    cJSON_DeleteItemFromObjectCaseSensitive(m, k->string);
+    if (!d || !cJSON_AddItemToObject(m, k->string, d)) { /* the key's copy: out of memory */
       cJSON_Delete(d);
-      return false;
+      cJSON_Delete(m);
+      m = NULL;
     }
   }
-  return true;
+  if (m && !svc_json_ok(jm)) {
+    cJSON_Delete(m);
+    m = NULL;
+  }
+  return m;
 }
 
 /* Build a view of r at the revision whose PATCHes `patches` holds. */

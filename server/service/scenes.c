@@ -232,13 +232,7 @@ void svc_free_evicted(resident **ev) {
   free(ev);
 }
 
-void svc_scene_patched(service *svc, resident *r, const cJSON *map) {
-  if (r->patches && map && !svc_keep_patch(r, map)) {
-    /* Views could no longer reproduce the base: build none (renders
-     * without overrides wait for the base, those with fail). */
-    cJSON_Delete(r->patches);
-    r->patches = NULL;
-  }
+void svc_scene_patched(service *svc, resident *r) {
   svc_state_scene_patched(svc, r);
   size_t b = budget_bytes(r->sc);
   pthread_mutex_lock(&svc->lock);

@@ -263,7 +263,12 @@ bool svc_keep_source(service *svc, resident *r, const char *text, size_t len, bo
 rsw_status svc_scene_reload(service *svc, const resident *r, scene **out, rsw_err *err);
 /* Free r's idle views (renders.c; r->lock held or r unreachable). */
 void svc_views_free(resident *r);
-/* Record an applied PATCH body for later views (r->lock held). */
+/* A copy of `old` (NULL: none) with the keys of a PATCH body set to its
+ * values; NULL when out of memory (built before the update, so that a
+ * PATCH that cannot record itself changes nothing). */
+cJSON *svc_patch_merged(const cJSON *old, const cJSON *body);
+/* Merge body's values into r->patches (false, r->patches unchanged, when
+ * out of memory or when r has no record). */
 bool svc_keep_patch(resident *r, const cJSON *body);
 /* Render one context on a resident scene with `overrides` (a JSON object
  * {key: value}, may be NULL) on top of the base state, on the base or a
@@ -288,10 +293,10 @@ void svc_scene_summary(const resident *r, cJSON *o);
  * jobs). svc->lock held. Returns the evicted residents, for the caller to
  * free after unlocking (NULL-terminated, malloc'ed; NULL when none). */
 resident **svc_evict_locked(service *svc, const resident *keep);
-/* A PATCH changed r's base state (r->lock held): merge the values (map:
- * the PATCH body) into r->patches (views and a reload replay it), store
- * them with --state-dir, recount its bytes. */
-void svc_scene_patched(service *svc, resident *r, const cJSON *map);
+/* A PATCH changed r's base state (r->lock held; r->patches already holds
+ * every PATCHed value, svc_patch_merged): store it with --state-dir,
+ * recount its bytes. */
+void svc_scene_patched(service *svc, resident *r);
 /* How a scene is loaded besides a plain POST (scenes.c). */
 struct post_extra {
   bool pinned;             /* a startup scene: never evicted, not stored */

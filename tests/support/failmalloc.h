@@ -14,4 +14,7 @@ long failmalloc_disarm(void);
 long failmalloc_failed(void);
 /* Exclude (or include again) the calling thread's allocations. */
 void failmalloc_exclude_thread(bool excluded);
+/* While on, a target allocation made with Embree's code on the stack
+ * succeeds and the next one fails instead (failmalloc.c says why). */
+void failmalloc_skip_embree(bool on);
 #endif
