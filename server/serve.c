@@ -100,12 +100,22 @@ static const struct {
   const char *name;
   opt_id id;
 } options[] = {
-    {"--listen", OPT_LISTEN},       {"--threads", OPT_THREADS},       {"--scene", OPT_SCENE},
-    {"--data-root", OPT_DATA_ROOT}, {"--blob-dir", OPT_BLOB_DIR},     {"--token-file", OPT_TOKEN_FILE},
-    {"--max-body", OPT_MAX_BODY},   {"--max-queue", OPT_MAX_QUEUE},   {"--result-ttl", OPT_RESULT_TTL},
-    {"--port-file", OPT_PORT_FILE}, {"--plugin-dir", OPT_PLUGIN_DIR},   {"--state-dir", OPT_STATE_DIR},
-    {"--max-scene-bytes", OPT_MAX_SCENE_BYTES}, {"--max-result-bytes", OPT_MAX_RESULT_BYTES},
-    {"--max-connections", OPT_MAX_CONNECTIONS}, {"--header-timeout", OPT_HEADER_TIMEOUT},
+    {"--listen", OPT_LISTEN},
+    {"--threads", OPT_THREADS},
+    {"--scene", OPT_SCENE},
+    {"--data-root", OPT_DATA_ROOT},
+    {"--blob-dir", OPT_BLOB_DIR},
+    {"--token-file", OPT_TOKEN_FILE},
+    {"--max-body", OPT_MAX_BODY},
+    {"--max-queue", OPT_MAX_QUEUE},
+    {"--result-ttl", OPT_RESULT_TTL},
+    {"--port-file", OPT_PORT_FILE},
+    {"--plugin-dir", OPT_PLUGIN_DIR},
+    {"--state-dir", OPT_STATE_DIR},
+    {"--max-scene-bytes", OPT_MAX_SCENE_BYTES},
+    {"--max-result-bytes", OPT_MAX_RESULT_BYTES},
+    {"--max-connections", OPT_MAX_CONNECTIONS},
+    {"--header-timeout", OPT_HEADER_TIMEOUT},
     {"--max-film-bytes", OPT_MAX_FILM},
 };
 
@@ -137,8 +147,8 @@ static int parse_args(int argc, char **argv, serve_args *a) {
       break;
     case OPT_MAX_RESULT_BYTES:
       if (!parse_bytes(v, &a->max_result_bytes))
-        return fail_usage("--max-result-bytes needs a positive byte count such as 1073741824 or 1G (got '%s')",
-                          v);
+        return fail_usage(
+            "--max-result-bytes needs a positive byte count such as 1073741824 or 1G (got '%s')", v);
       break;
     case OPT_SCENE:
       if (a->n_scenes == MAX_SCENES) return fail_usage("too many --scene (at most %d)", MAX_SCENES);

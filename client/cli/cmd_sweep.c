@@ -432,33 +432,33 @@ static int build_contexts(const cli_ctx *ctx, const cli_args *a, const sweep_ite
  * overrides (job-level, then the context's own). */
 static cJSON *index_line(const cJSON *r, const char *c, const char *sn, const char *rel, sweep_item **sorted,
                          size_t n, const cJSON *job_params) {
-    cJSON *line = cJSON_CreateObject();
-    cJSON_AddStringToObject(line, "context", c);
-    cJSON_AddStringToObject(line, "sensor", sn);
-    const cJSON *wl = cJSON_GetObjectItemCaseSensitive(r, "wavelength");
-    sweep_item key, *kp = &key;
-    snprintf(key.id, sizeof key.id, "%s", c);
-    sweep_item **found = bsearch(&kp, sorted, n, sizeof *sorted, cmp_item_id);
-    if (cJSON_IsNumber(wl))
-      cJSON_AddNumberToObject(line, "wavelength", wl->valuedouble);
-    else if (found && (*found)->has_wl)
-      cJSON_AddNumberToObject(line, "wavelength", (*found)->wl);
-    else
-      cJSON_AddNullToObject(line, "wavelength");
-    cJSON *params = job_params ? cJSON_Duplicate(job_params, 1) : cJSON_CreateObject();
-    const cJSON *p;
-    if (found) cJSON_ArrayForEach(p, (*found)->params) {
-        cJSON_DeleteItemFromObjectCaseSensitive(params, p->string);
-        cJSON_AddItemToObject(params, p->string, cJSON_Duplicate(p, 1));
-      }
-    cJSON_AddItemToObject(line, "params", params);
-    const cJSON *seed = cJSON_GetObjectItemCaseSensitive(r, "seed");
-    if (cJSON_IsNumber(seed))
-      cJSON_AddNumberToObject(line, "seed", seed->valuedouble);
-    else
-      cJSON_AddNullToObject(line, "seed");
-    cJSON_AddStringToObject(line, "file", rel);
-    return line;
+  cJSON *line = cJSON_CreateObject();
+  cJSON_AddStringToObject(line, "context", c);
+  cJSON_AddStringToObject(line, "sensor", sn);
+  const cJSON *wl = cJSON_GetObjectItemCaseSensitive(r, "wavelength");
+  sweep_item key, *kp = &key;
+  snprintf(key.id, sizeof key.id, "%s", c);
+  sweep_item **found = bsearch(&kp, sorted, n, sizeof *sorted, cmp_item_id);
+  if (cJSON_IsNumber(wl))
+    cJSON_AddNumberToObject(line, "wavelength", wl->valuedouble);
+  else if (found && (*found)->has_wl)
+    cJSON_AddNumberToObject(line, "wavelength", (*found)->wl);
+  else
+    cJSON_AddNullToObject(line, "wavelength");
+  cJSON *params = job_params ? cJSON_Duplicate(job_params, 1) : cJSON_CreateObject();
+  const cJSON *p;
+  if (found) cJSON_ArrayForEach(p, (*found)->params) {
+      cJSON_DeleteItemFromObjectCaseSensitive(params, p->string);
+      cJSON_AddItemToObject(params, p->string, cJSON_Duplicate(p, 1));
+    }
+  cJSON_AddItemToObject(line, "params", params);
+  const cJSON *seed = cJSON_GetObjectItemCaseSensitive(r, "seed");
+  if (cJSON_IsNumber(seed))
+    cJSON_AddNumberToObject(line, "seed", seed->valuedouble);
+  else
+    cJSON_AddNullToObject(line, "seed");
+  cJSON_AddStringToObject(line, "file", rel);
+  return line;
 }
 
 /* Films of a finished job into dir/<context>/<sensor>.<ext>, one index
@@ -555,7 +555,7 @@ static int fetch_all(cli_ctx *ctx, const char *job, const char *dir, cli_format 
 #define MANIFEST_NAME   "sweep.json"
 /* The journal of a --spread sweep (rsw_spread_opts.state_path): there
  * while the sweep is unfinished, removed when it completes. */
-#define SPREAD_STATE "sweep.spread.jsonl"
+#define SPREAD_STATE    "sweep.spread.jsonl"
 #define MANIFEST_FORMAT "raysweep-sweep/1"
 
 static uint64_t fnv1a(uint64_t h, const char *s, size_t n) {
@@ -912,8 +912,8 @@ typedef struct spread_sink {
 
 /* rsw_spread_film_fn: save the film (or, resumed, find the one an earlier
  * run saved) and keep its index line. */
-static int spread_film(void *user, const char *c, const char *sn, const char *result_json, const rsw_film *film,
-                       int resumed) {
+static int spread_film(void *user, const char *c, const char *sn, const char *result_json,
+                       const rsw_film *film, int resumed) {
   spread_sink *k = user;
   if (k->rc) return 1;
   cJSON *r = cJSON_Parse(result_json);
@@ -975,9 +975,9 @@ static int spread_film(void *user, const char *c, const char *sn, const char *re
   return 0;
 }
 
-static int run_spread(cli_ctx *ctx, const cli_args *a, int k_shards, bool resume, cli_format fmt, double timeout,
-                      const sweep_list *l, sweep_item **sorted, const cJSON *job_params, const rsw_contexts *x,
-                      const char *fingerprint, size_t shard_i, size_t shard_n) {
+static int run_spread(cli_ctx *ctx, const cli_args *a, int k_shards, bool resume, cli_format fmt,
+                      double timeout, const sweep_list *l, sweep_item **sorted, const cJSON *job_params,
+                      const rsw_contexts *x, const char *fingerprint, size_t shard_i, size_t shard_n) {
   const char *scene = a->pos[0], *dir = cli_get(a, "-o");
   struct stat sst;
   bool scene_is_file = stat(scene, &sst) == 0 && S_ISREG(sst.st_mode);
@@ -999,14 +999,13 @@ static int run_spread(cli_ctx *ctx, const cli_args *a, int k_shards, bool resume
   }
   /* Written before any film: an interrupted sweep says so (merge lists it
    * as unfinished; a rerun of the command resumes it). */
-  if (!resume &&
-      (rc = manifest_write(ctx, dir, fingerprint, scene, shard_i, shard_n, l, NULL, false, NULL)))
+  if (!resume && (rc = manifest_write(ctx, dir, fingerprint, scene, shard_i, shard_n, l, NULL, false, NULL)))
     goto out;
   if (!ctx->quiet)
-    fprintf(stderr, "raysweep sweep: %s%zu contexts in %d shards through %s\n", resume ? "resuming: " : "", l->n,
-            k_shards, ctx->server_url);
-  rsw_client_opts co = {.size = sizeof co, .base_url = ctx->server_url, .token = ctx->token,
-                        .interrupt = &cli_interrupted};
+    fprintf(stderr, "raysweep sweep: %s%zu contexts in %d shards through %s\n", resume ? "resuming: " : "",
+            l->n, k_shards, ctx->server_url);
+  rsw_client_opts co = {
+      .size = sizeof co, .base_url = ctx->server_url, .token = ctx->token, .interrupt = &cli_interrupted};
   rsw_spread_opts so = {.size = sizeof so,
                         .shards = k_shards,
                         .scene_file = scene_is_file ? scene : NULL,
@@ -1032,8 +1031,9 @@ static int run_spread(cli_ctx *ctx, const cli_args *a, int k_shards, bool resume
                     "fetch what finished and render only the rest (state in %s)",
                     state);
     else if (s == RSW_ERR_UNAVAILABLE)
-      rc = cli_fail(ctx, CLI_CONNECT, "%s; %zu films saved so far; rerun the same command to resume (state in %s)",
-                    why, sink.ne, state);
+      rc = cli_fail(ctx, CLI_CONNECT,
+                    "%s; %zu films saved so far; rerun the same command to resume (state in %s)", why,
+                    sink.ne, state);
     else if (s == RSW_ERR_TIMEOUT)
       rc = cli_fail(ctx, CLI_TIMEOUT, "%s; rerun the same command to resume (state in %s)", why, state);
     else if (s == RSW_ERR_PRECONDITION)
@@ -1084,11 +1084,12 @@ static int run_spread(cli_ctx *ctx, const cli_args *a, int k_shards, bool resume
     free(t);
     cJSON_Delete(o);
   } else if (!ctx->quiet) {
-    fprintf(stderr,
-            "raysweep sweep: %zu films in %s%s (%d shards; %zu resubmission%s of %zu contexts; %zu films from an "
-            "earlier run)\n",
-            sink.ne, dir, res.failed ? " (some renders failed)" : "", k_shards, res.resubmitted,
-            res.resubmitted == 1 ? "" : "s", res.contexts_resubmitted, res.resumed);
+    fprintf(
+        stderr,
+        "raysweep sweep: %zu films in %s%s (%d shards; %zu resubmission%s of %zu contexts; %zu films from an "
+        "earlier run)\n",
+        sink.ne, dir, res.failed ? " (some renders failed)" : "", k_shards, res.resubmitted,
+        res.resubmitted == 1 ? "" : "s", res.contexts_resubmitted, res.resumed);
   }
 out:
   entries_free(sink.e, sink.ne);

@@ -157,8 +157,11 @@ static rsw_status probe_instance(rsw_client *c, const char *key, char out[64]) {
  * that reaches a replica fewer shards use than any other seen so far. The
  * balancer stays stateless; the keys are kept in the state file. */
 static rsw_status choose_keys(spread *sp, rsw_client *c) {
-  enum { MAX_TRIES = 32, MAX_SEEN = 256 };
-  char (*seen)[64] = calloc(MAX_SEEN, 64);
+  enum {
+    MAX_TRIES = 32,
+    MAX_SEEN = 256
+  };
+  char(*seen)[64] = calloc(MAX_SEEN, 64);
   int *used = calloc(MAX_SEEN, sizeof *used);
   size_t n_seen = 0;
   rsw_status s = seen && used ? RSW_OK : RSW_ERR_NOMEM;
@@ -219,7 +222,8 @@ static int on_progress(void *user, const char *context, const char *sensor, size
     t += sp->shards[i].prior + sp->shards[i].cur_total;
   }
   int rc = 0;
-  if (sp->o->progress) rc = sp->o->progress(sp->o->progress_user, context, sensor ? sensor : "", d, t, failed);
+  if (sp->o->progress)
+    rc = sp->o->progress(sp->o->progress_user, context, sensor ? sensor : "", d, t, failed);
   pthread_mutex_unlock(&sp->lock);
   if (rc) atomic_store(&sp->stop, 1);
   return rc;
@@ -227,7 +231,12 @@ static int on_progress(void *user, const char *context, const char *sensor, size
 
 /* ---- what a failure means ---- */
 
-typedef enum { F_LOST, F_GONE, F_STOP, F_FATAL } failure;
+typedef enum {
+  F_LOST,
+  F_GONE,
+  F_STOP,
+  F_FATAL
+} failure;
 
 /* A request of shard sh failed with s: is its replica lost (resubmit), the
  * balancer gone (stop, resumable), the run stopped, or something else? */
@@ -254,11 +263,13 @@ static void fail_shard(shard *sh, rsw_client *c, rsw_status s, failure f, const 
   if (f == F_GONE)
     set_fatal(sp, RSW_ERR_UNAVAILABLE, "cannot reach %s (%s): the balancer is gone; %s",
               sp->copts->base_url ? sp->copts->base_url : "the server", e->message,
-              sp->o->state_path ? "the same call resumes from the state file" : "no state file: nothing to resume");
+              sp->o->state_path ? "the same call resumes from the state file"
+                                : "no state file: nothing to resume");
   else if (f == F_STOP)
     set_fatal(sp, s, "%s: %s", what, e->message[0] ? e->message : rsw_strerror(s));
   else
-    set_fatal(sp, s, "shard %d (%s) %s: %s", sh->k, sh->key, what, e->message[0] ? e->message : rsw_strerror(s));
+    set_fatal(sp, s, "shard %d (%s) %s: %s", sh->k, sh->key, what,
+              e->message[0] ? e->message : rsw_strerror(s));
 }
 
 /* ---- one shard ---- */
@@ -308,7 +319,8 @@ static int deliver_context(shard *sh, rsw_client *c, const cJSON *list, const ch
     cJSON_ArrayForEach(r, mine) {
       const char *sensor = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "sensor"));
       char *t = cJSON_PrintUnformatted(r);
-      if (!stop && sp->o->on_film(sp->o->film_user, id, sensor ? sensor : "", t ? t : "{}", films[i], 0)) stop = 1;
+      if (!stop && sp->o->on_film(sp->o->film_user, id, sensor ? sensor : "", t ? t : "{}", films[i], 0))
+        stop = 1;
       free(t);
       if (films[i])
         sp->films++;
@@ -535,8 +547,8 @@ static void *shard_main(void *arg) {
     }
     /* The replica behind this key is lost (or full): next key. */
     if (sh->attempt >= max) {
-      set_fatal(sp, RSW_ERR_UNAVAILABLE, "shard %d: resubmitted %d times without finishing (last key %s)", sh->k,
-                sh->attempt, sh->key);
+      set_fatal(sp, RSW_ERR_UNAVAILABLE, "shard %d: resubmitted %d times without finishing (last key %s)",
+                sh->k, sh->attempt, sh->key);
       break;
     }
     pthread_mutex_lock(&sp->lock);
@@ -771,8 +783,8 @@ rsw_status rsw_spread_run(const rsw_client_opts *copts, const char *scene_id, co
                  co.base_url ? co.base_url : "the server", e->message,
                  o.state_path ? "; the same call resumes from the state file" : "");
       else
-        snprintf(sp.err, sizeof sp.err, "%s%s%s: %s", what, o.scene_file ? " " : "", o.scene_file ? o.scene_file : "",
-                 c && e->message[0] ? e->message : rsw_strerror(s));
+        snprintf(sp.err, sizeof sp.err, "%s%s%s: %s", what, o.scene_file ? " " : "",
+                 o.scene_file ? o.scene_file : "", c && e->message[0] ? e->message : rsw_strerror(s));
       rsw_client_free(c);
       goto done;
     }

@@ -251,34 +251,34 @@ rsw_status rsw_job_fetch(rsw_client *c, const char *job_id, const char *context,
  * when state is "succeeded", else NULL; also NULL with resumed = 1 for a
  * film an earlier run with the same state file delivered (the caller kept
  * it then). Return non-zero to stop the run (RSW_ERR_CANCELLED). */
-typedef int (*rsw_spread_film_fn)(void *user, const char *context, const char *sensor, const char *result_json,
-                                  const rsw_film *film, int resumed);
+typedef int (*rsw_spread_film_fn)(void *user, const char *context, const char *sensor,
+                                  const char *result_json, const rsw_film *film, int resumed);
 
 typedef struct rsw_spread_opts {
-  size_t size;                /* sizeof(rsw_spread_opts) */
-  int shards;                 /* K >= 1 */
-  const char *scene_file;     /* pushed through every routing key before its job (blobs as in
+  size_t size;              /* sizeof(rsw_spread_opts) */
+  int shards;               /* K >= 1 */
+  const char *scene_file;   /* pushed through every routing key before its job (blobs as in
                                  rsw_scene_push_file); NULL: scene_id must be resident on every
                                  replica */
-  const char *variant;        /* for scene_file; may be NULL */
-  const char *route_prefix;   /* NULL: "rs" + 12 random hex digits (kept in the state file) */
-  const char *state_path;     /* NULL: no resume; otherwise a journal (JSON lines) written as the
+  const char *variant;      /* for scene_file; may be NULL */
+  const char *route_prefix; /* NULL: "rs" + 12 random hex digits (kept in the state file) */
+  const char *state_path;   /* NULL: no resume; otherwise a journal (JSON lines) written as the
                                  run goes and read first when it exists */
-  int max_resubmits;          /* per shard; 0: 8 */
-  double timeout_s;           /* whole run; <= 0: none */
-  rsw_progress_fn progress;   /* may be NULL; done/total over every shard, serialised */
+  int max_resubmits;        /* per shard; 0: 8 */
+  double timeout_s;         /* whole run; <= 0: none */
+  rsw_progress_fn progress; /* may be NULL; done/total over every shard, serialised */
   void *progress_user;
   rsw_spread_film_fn on_film; /* required */
   void *film_user;
 } rsw_spread_opts;
 
 typedef struct rsw_spread_result {
-  size_t films;          /* delivered by this run (state succeeded) */
-  size_t failed;         /* renders that did not succeed (delivered with film NULL) */
-  size_t resumed;        /* delivered by an earlier run (from the state file) */
-  size_t resubmitted;    /* shard resubmissions after a lost replica */
+  size_t films;       /* delivered by this run (state succeeded) */
+  size_t failed;      /* renders that did not succeed (delivered with film NULL) */
+  size_t resumed;     /* delivered by an earlier run (from the state file) */
+  size_t resubmitted; /* shard resubmissions after a lost replica */
   size_t contexts_resubmitted;
-  char scene_id[65];     /* the scene the jobs used */
+  char scene_id[65]; /* the scene the jobs used */
   char route_prefix[32];
 } rsw_spread_result;
 

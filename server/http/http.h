@@ -19,25 +19,25 @@
 typedef struct http_server http_server;
 
 typedef struct http_opts {
-  size_t size;              /* sizeof(http_opts) */
-  const char *host;         /* IPv4 literal or name resolving to IPv4 ("127.0.0.1") */
-  int port;                 /* 0: an ephemeral port (see http_server_port) */
-  const char *token;        /* bearer token (NULL or "": no auth); copied */
-  size_t max_body;          /* request bodies over this many bytes get 413
+  size_t size;                     /* sizeof(http_opts) */
+  const char *host;                /* IPv4 literal or name resolving to IPv4 ("127.0.0.1") */
+  int port;                        /* 0: an ephemeral port (see http_server_port) */
+  const char *token;               /* bearer token (NULL or "": no auth); copied */
+  size_t max_body;                 /* request bodies over this many bytes get 413
                          (0: HTTP_DEFAULT_MAX_BODY) */
-  unsigned max_connections; /* open connections at most (0: HTTP_DEFAULT_MAX_CONNECTIONS);
+  unsigned max_connections;        /* open connections at most (0: HTTP_DEFAULT_MAX_CONNECTIONS);
                                above all but HTTP_RESERVED_CONNECTIONS of them, requests
                                other than the health probes get 503 + Retry-After */
-  double header_timeout_s;  /* a connection must send a request's headers within this
+  double header_timeout_s;         /* a connection must send a request's headers within this
                                long of connecting or of its previous request's end
                                (0: HTTP_DEFAULT_HEADER_TIMEOUT_S) */
   unsigned max_connections_per_ip; /* 0: no per-address limit */
 } http_opts;
 
-#define HTTP_DEFAULT_MAX_BODY            ((size_t)256 << 20)
-#define HTTP_DEFAULT_MAX_CONNECTIONS     1024u
-#define HTTP_DEFAULT_HEADER_TIMEOUT_S    10.0
-#define HTTP_RESERVED_CONNECTIONS        16u
+#define HTTP_DEFAULT_MAX_BODY         ((size_t)256 << 20)
+#define HTTP_DEFAULT_MAX_CONNECTIONS  1024u
+#define HTTP_DEFAULT_HEADER_TIMEOUT_S 10.0
+#define HTTP_RESERVED_CONNECTIONS     16u
 
 /* Start listening. Borrows svc (which must outlive the server) and opts.
  * A non-loopback host without a token is refused (RSW_ERR_USAGE), as is an

@@ -13,12 +13,12 @@
 
 #include "../service/service.h"
 
-#define HTTP_MAX_PATH_PARAMS 3
-#define HTTP_MAX_JSON_DEPTH  64
+#define HTTP_MAX_PATH_PARAMS     3
+#define HTTP_MAX_JSON_DEPTH      64
 /* Request targets longer than this, or with more query parameters, get
  * 414 (the API's routes take at most three parameters). */
-#define HTTP_MAX_URI          8192
-#define HTTP_MAX_QUERY_PARAMS 32
+#define HTTP_MAX_URI             8192
+#define HTTP_MAX_QUERY_PARAMS    32
 /* Idempotency-Key length (proto/openapi.yaml). */
 #define HTTP_MAX_IDEMPOTENCY_KEY 255
 

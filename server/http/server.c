@@ -128,8 +128,8 @@ struct http_server {
   /* Guards what follows; cond is broadcast whenever a count drops. */
   pthread_mutex_t lock;
   pthread_cond_t cond;
-  int n_streams;      /* event streams not yet freed */
-  int n_tasks;        /* handlers whose connection has not resumed yet */
+  int n_streams; /* event streams not yet freed */
+  int n_tasks;   /* handlers whose connection has not resumed yet */
   /* Handler threads: one finished with its task waits up to
    * HANDLER_IDLE_MS for another before it exits, so a busy server does
    * not create a thread per request; a task with no waiting thread gets a
@@ -137,11 +137,11 @@ struct http_server {
    * it runs, and a fixed pool would let long renders starve short
    * requests. */
   pthread_cond_t task_cond;
-  struct task *queue;  /* handed over, not yet taken (FIFO) */
+  struct task *queue; /* handed over, not yet taken (FIFO) */
   struct task **queue_tail;
   int n_queued;
-  int n_idle;          /* threads waiting on task_cond */
-  int n_threads;       /* handler threads alive */
+  int n_idle;         /* threads waiting on task_cond */
+  int n_threads;      /* handler threads alive */
   int n_inflight;     /* requests between their URI and their completion */
   unsigned n_open;    /* open connections */
   conn_track *tracks; /* every open connection */
@@ -152,10 +152,10 @@ typedef struct conn {
   http_server *srv;
   const http_route *route; /* NULL when answered at the first call */
   const char *params[HTTP_MAX_PATH_PARAMS];
-  char *raw_path;  /* the path as sent, percent-encoding intact */
-  size_t uri_len;  /* the whole request target, in bytes */
-  size_t n_query;  /* query parameters in it */
-  char *seg_buf;   /* owns the strings params point into */
+  char *raw_path; /* the path as sent, percent-encoding intact */
+  size_t uri_len; /* the whole request target, in bytes */
+  size_t n_query; /* query parameters in it */
+  char *seg_buf;  /* owns the strings params point into */
   char *body;
   size_t len, cap;
   bool too_large;  /* body passed max_body: read and dropped, then 413 */
@@ -389,9 +389,9 @@ static bool job_is_terminal(service *svc, const char *job) {
   cJSON *j = json ? cJSON_Parse(json) : NULL;
   free(json);
   const cJSON *st = cJSON_GetObjectItemCaseSensitive(j, "state");
-  bool done = cJSON_IsString(st) && (strcmp(st->valuestring, "succeeded") == 0 ||
-                                     strcmp(st->valuestring, "failed") == 0 ||
-                                     strcmp(st->valuestring, "cancelled") == 0);
+  bool done = cJSON_IsString(st) &&
+              (strcmp(st->valuestring, "succeeded") == 0 || strcmp(st->valuestring, "failed") == 0 ||
+               strcmp(st->valuestring, "cancelled") == 0);
   cJSON_Delete(j);
   return done;
 }
@@ -528,8 +528,10 @@ static void on_connection(void *cls, struct MHD_Connection *c, void **socket_con
     pthread_mutex_lock(&srv->lock);
     srv->n_open--;
     if (t) {
-      if (t->prev) t->prev->next = t->next;
-      else srv->tracks = t->next;
+      if (t->prev)
+        t->prev->next = t->next;
+      else
+        srv->tracks = t->next;
       if (t->next) t->next->prev = t->prev;
     }
     pthread_mutex_unlock(&srv->lock);
@@ -669,7 +671,8 @@ static bool first_checks(struct MHD_Connection *c, conn *cn, const char *method,
     *ret = MHD_NO;
     return false;
   }
-  const http_route *rt = http_route_find(method, path, cn->seg_buf, cn->params, &path_known, allow, sizeof allow);
+  const http_route *rt =
+      http_route_find(method, path, cn->seg_buf, cn->params, &path_known, allow, sizeof allow);
   /* Health stays open to probes; everything else, known path or not, asks
    * for the token first so that unauthenticated clients learn nothing. */
   if (!(rt && rt->public_route) && !authorized(srv, c)) {
@@ -983,7 +986,8 @@ static enum MHD_Result dispatch(struct MHD_Connection *c, conn *cn, const char *
   http_server *srv = cn->srv;
   if (cn->too_large) {
     char detail[200];
-    snprintf(detail, sizeof detail, "request body exceeds the limit of %zu bytes (--max-body)", srv->max_body);
+    snprintf(detail, sizeof detail, "request body exceeds the limit of %zu bytes (--max-body)",
+             srv->max_body);
     return send_problem(c, cn, 413, NULL, detail, NULL, false);
   }
   const char *ct = header(c, MHD_HTTP_HEADER_CONTENT_TYPE);
@@ -1207,8 +1211,8 @@ rsw_status http_server_start(service *svc, const http_opts *opts, http_server **
   srv->svc = svc;
   srv->max_body = opts->max_body ? opts->max_body : HTTP_DEFAULT_MAX_BODY;
   srv->max_connections = opts->max_connections ? opts->max_connections : HTTP_DEFAULT_MAX_CONNECTIONS;
-  srv->header_timeout_ms =
-      (int64_t)(1000.0 * (opts->header_timeout_s > 0 ? opts->header_timeout_s : HTTP_DEFAULT_HEADER_TIMEOUT_S));
+  srv->header_timeout_ms = (int64_t)(1000.0 * (opts->header_timeout_s > 0 ? opts->header_timeout_s
+                                                                          : HTTP_DEFAULT_HEADER_TIMEOUT_S));
   srv->stop_pipe[0] = srv->stop_pipe[1] = -1;
   atomic_init(&srv->stopping, false);
   atomic_init(&srv->stop_deadline_ms, 0);
@@ -1271,9 +1275,9 @@ rsw_status http_server_start(service *svc, const http_opts *opts, http_server **
       MHD_OPTION_LISTEN_SOCKET, fd, MHD_OPTION_THREAD_POOL_SIZE, (unsigned)EVENT_THREADS,
       MHD_OPTION_URI_LOG_CALLBACK, on_uri, srv, MHD_OPTION_NOTIFY_COMPLETED, on_completed, srv,
       MHD_OPTION_NOTIFY_CONNECTION, on_connection, srv, MHD_OPTION_CONNECTION_LIMIT, srv->max_connections,
-      MHD_OPTION_PER_IP_CONNECTION_LIMIT, opts->max_connections_per_ip,
-      MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)CONNECTION_TIMEOUT_S, MHD_OPTION_CONNECTION_MEMORY_LIMIT,
-      CONNECTION_MEMORY, MHD_OPTION_LISTEN_BACKLOG_SIZE, 512u, MHD_OPTION_END);
+      MHD_OPTION_PER_IP_CONNECTION_LIMIT, opts->max_connections_per_ip, MHD_OPTION_CONNECTION_TIMEOUT,
+      (unsigned)CONNECTION_TIMEOUT_S, MHD_OPTION_CONNECTION_MEMORY_LIMIT, CONNECTION_MEMORY,
+      MHD_OPTION_LISTEN_BACKLOG_SIZE, 512u, MHD_OPTION_END);
   if (srv->mhd) srv->reaper_started = pthread_create(&srv->reaper, NULL, reaper_main, srv) == 0;
   if (srv->reaper_started) srv->watcher_started = pthread_create(&srv->watcher, NULL, watcher_main, srv) == 0;
   if (!srv->mhd || !srv->reaper_started || !srv->watcher_started) {

@@ -748,8 +748,8 @@ rsw_status accel_build(scene *s, rsw_err *err) {
   a->device = device_get();
   if (!a->device) {
     free(a);
-    return rsw_fail(err, RSW_ERR_EMBREE, "", "cannot create the Embree device%s%s", t_embree_error[0] ? ": " : "",
-                    t_embree_error);
+    return rsw_fail(err, RSW_ERR_EMBREE, "", "cannot create the Embree device%s%s",
+                    t_embree_error[0] ? ": " : "", t_embree_error);
   }
   embree_error_reset(a->device);
   s->accel = a;
@@ -779,7 +779,8 @@ rsw_status accel_build(scene *s, rsw_err *err) {
     a->list_shape = malloc(n_list * sizeof *a->list_shape);
     a->list_sub = malloc(n_list * sizeof *a->list_sub);
     a->list_binv = malloc(n_list * sizeof *a->list_binv);
-    if (!a->list_shape || !a->list_sub || !a->list_binv) return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+    if (!a->list_shape || !a->list_sub || !a->list_binv)
+      return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
     a->n_list = n_list;
     /* Placements in top-level id order (as build_instances attaches them). */
     size_t j = 0;
@@ -1021,7 +1022,7 @@ static bool fill_ray(const accel *a, struct RTCRay *ray, const ray3 *r, double *
     double dd = v3_dot(d, d), b = v3_dot(oc, d);
     double disc = b * b - dd * q;
     if (!(disc >= 0) || b >= 0) return false; /* misses the sphere, or points away from it */
-    double t_in = q / (-b + sqrt(disc));        /* = (-b - sqrt(disc)) / dd, stably */
+    double t_in = q / (-b + sqrt(disc));      /* = (-b - sqrt(disc)) / dd, stably */
     if (!(t_in < tmax)) return false;
     oc = v3_fma(oc, t_in, d);
     tmin = fmax(tmin - t_in, 0.0);

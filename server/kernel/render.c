@@ -17,8 +17,8 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "scene/scene.h"
 #include "accel.h"
+#include "scene/scene.h"
 
 #define TILE 8
 
@@ -55,12 +55,12 @@ typedef struct job {
   uint64_t samples, invalid;
   /* Work distribution (under the pool's lock; see "the worker pool"). */
   size_t next_tile;
-  int max_workers;        /* threads that may work on it at once, caller included */
-  int active;             /* threads working on it now, caller included */
-  int peak;               /* most threads that worked on it at once */
-  bool listed;            /* in the pool's list of jobs with tiles to claim */
+  int max_workers; /* threads that may work on it at once, caller included */
+  int active;      /* threads working on it now, caller included */
+  int peak;        /* most threads that worked on it at once */
+  bool listed;     /* in the pool's list of jobs with tiles to claim */
   struct job *prev, *next;
-  pthread_cond_t idle;    /* active dropped to 0 (the caller waits on it) */
+  pthread_cond_t idle; /* active dropped to 0 (the caller waits on it) */
 } job;
 
 static void splat(const job *jb, tile_buf *tb, double px, double py, color v, const double *quv) {

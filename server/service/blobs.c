@@ -100,8 +100,7 @@ rsw_status service_blobs_missing(service *svc, const char *body, size_t len, cha
       snprintf(ptr, sizeof ptr, "/digests/%d", i);
       return svc_fail(e, RSW_ERR_INVALID, ptr, "not a SHA-256 hex digest");
     }
-    if (!service_blob_exists(svc, x->valuestring))
-      svc_json_push(m, cJSON_CreateString(x->valuestring));
+    if (!service_blob_exists(svc, x->valuestring)) svc_json_push(m, cJSON_CreateString(x->valuestring));
   }
   cJSON_Delete(j);
   return svc_json_out(json_out, o, jm, e);

@@ -6,7 +6,8 @@
 #include "service_internal.h"
 
 rsw_status svc_check_body(const char *body, size_t len, svc_error *e) {
-  if (!body || len == 0) return svc_fail(e, RSW_ERR_PARSE, "", "the body is empty: a JSON object is required");
+  if (!body || len == 0)
+    return svc_fail(e, RSW_ERR_PARSE, "", "the body is empty: a JSON object is required");
   /* cJSON stops after the first value: the rest must be blank ("{} xyz"
    * and "{}{}" were accepted as {}). */
   long end = json_value_end(body, len);

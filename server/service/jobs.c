@@ -158,7 +158,8 @@ static void job_free(job *j) {
  * for the end event after it, and the end event's payload falls back to a
  * fixed text; a stream that never got its end event would never close. */
 static void push_event_text(service *svc, job *j, char *txt, bool end) {
-  if (!end && (!txt || !svc_grow((void **)&j->events, &j->cap_events, j->n_events + 2, sizeof *j->events, 0))) {
+  if (!end &&
+      (!txt || !svc_grow((void **)&j->events, &j->cap_events, j->n_events + 2, sizeof *j->events, 0))) {
     free(txt);
     return;
   }
@@ -312,8 +313,7 @@ static bool table_range(const cJSON *v, double *lo, double *hi) {
   const cJSON *wl = cJSON_IsObject(v) ? cJSON_GetObjectItemCaseSensitive(v, "wavelengths") : NULL;
   if (cJSON_IsArray(wl) && wl->child) {
     first = wl->child;
-    for (last = first; last->next; last = last->next) {
-    }
+    for (last = first; last->next; last = last->next) {}
   } else if (cJSON_IsArray(v) && cJSON_IsArray(v->child)) {
     const cJSON *fp = v->child, *lp = fp;
     while (lp->next) lp = lp->next;
@@ -375,8 +375,8 @@ static rsw_status check_wavelength(const scene *sc, const spec_range *br, size_t
         replaced = params_lookup(sc, k->string, &idx, &err) == RSW_OK && idx == br[b].index;
       }
     if (!replaced && !(wl >= br[b].lo && wl <= br[b].hi))
-      return svc_fail(e, RSW_ERR_RANGE, wptr, "wavelength %g nm lies outside the table of '%s' [%g, %g] nm", wl,
-                      br[b].key, br[b].lo, br[b].hi);
+      return svc_fail(e, RSW_ERR_RANGE, wptr, "wavelength %g nm lies outside the table of '%s' [%g, %g] nm",
+                      wl, br[b].key, br[b].lo, br[b].hi);
   }
   for (int m = 0; m < 2; m++)
     for (const cJSON *k = cJSON_IsObject(maps[m]) ? maps[m]->child : NULL; k; k = k->next) {
@@ -490,11 +490,13 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   if (!st && defaults) {
     bool present;
     get_uint(defaults, "spp", 4294967295.0, &d_spp, &present, "/defaults", e, &st);
-    if (!st && present && d_spp == 0) st = svc_fail(e, RSW_ERR_INVALID, "/defaults/spp", "spp must be at least 1");
+    if (!st && present && d_spp == 0)
+      st = svc_fail(e, RSW_ERR_INVALID, "/defaults/spp", "spp must be at least 1");
     const cJSON *w = cJSON_GetObjectItemCaseSensitive(defaults, "wavelength");
     if (!st && w) {
       if (!cJSON_IsNumber(w) || !(w->valuedouble > 0) || !isfinite(w->valuedouble))
-        st = svc_fail(e, RSW_ERR_INVALID, "/defaults/wavelength", "wavelength must be a positive finite number");
+        st = svc_fail(e, RSW_ERR_INVALID, "/defaults/wavelength",
+                      "wavelength must be a positive finite number");
       else
         d_wl = w->valuedouble;
     }
@@ -572,7 +574,10 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     if (sc->variant == VARIANT_MONO) {
       char p5[80];
       snprintf(p5, sizeof p5, w ? "%s/wavelength" : d_wl > 0 ? "/defaults/wavelength" : "%s", ptr);
-      st = check_wavelength(sc, ranges, n_ranges, jparams, cparams, w ? w->valuedouble : d_wl > 0 ? d_wl : 550,
+      st = check_wavelength(sc, ranges, n_ranges, jparams, cparams,
+                            w          ? w->valuedouble
+                            : d_wl > 0 ? d_wl
+                                       : 550,
                             p5, e);
       if (st) break;
     }
@@ -720,15 +725,17 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
    * cannot fit under --max-result-bytes is refused now, not after
    * rendering (with one, films beyond the cap go to disk). */
   uint64_t cap = svc->opts.max_result_bytes;
-  if (cap && !svc_state_on(svc) && reserve > cap - (svc->result_committed < cap ? svc->result_committed : cap)) {
+  if (cap && !svc_state_on(svc) &&
+      reserve > cap - (svc->result_committed < cap ? svc->result_committed : cap)) {
     uint64_t used = svc->result_committed;
     pthread_mutex_unlock(&svc->lock);
     job_free(jb);
     svc_scene_release(svc, r);
-    return svc_fail(e, RSW_ERR_STORAGE, "/contexts",
-                    "the job's films take %llu bytes; %llu of this server's %llu bytes of result storage "
-                    "(--max-result-bytes) are held by other jobs: fetch and delete finished jobs, or retry later",
-                    (unsigned long long)reserve, (unsigned long long)used, (unsigned long long)cap);
+    return svc_fail(
+        e, RSW_ERR_STORAGE, "/contexts",
+        "the job's films take %llu bytes; %llu of this server's %llu bytes of result storage "
+        "(--max-result-bytes) are held by other jobs: fetch and delete finished jobs, or retry later",
+        (unsigned long long)reserve, (unsigned long long)used, (unsigned long long)cap);
   }
   if (svc->n_queue >= svc->opts.max_queue && !svc->restore_id) {
     size_t q = svc->n_queue;
@@ -837,7 +844,7 @@ void *svc_worker_main(void *arg) {
       if (atomic_load(&j->cancel) || svc->stopping) break;
       render_item *it = &j->items[i];
       if (it->state != JOB_QUEUED) continue; /* done before a restart */
-      size_t done = j->items_done + 1;     /* only this worker writes it */
+      size_t done = j->items_done + 1;       /* only this worker writes it */
       pthread_mutex_unlock(&svc->lock);
       svc_error e = {0};
       render_spec rs = {.sensor_index = it->sensor_index,

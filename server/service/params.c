@@ -107,7 +107,8 @@ rsw_status service_params_get(service *svc, const char *id, const char *match, c
   }
   if (stale) {
     svc_scene_release(svc, r);
-    return svc_fail(e, RSW_ERR_UNAVAILABLE, "", "the parameter table is being rebuilt (the last rebuild ran out of memory); retry");
+    return svc_fail(e, RSW_ERR_UNAVAILABLE, "",
+                    "the parameter table is being rebuilt (the last rebuild ran out of memory); retry");
   }
   size_t *idx = NULL, n = 0;
   rsw_err err = {0};
@@ -229,7 +230,7 @@ rsw_status service_params_patch(service *svc, const char *id, const char *body, 
   if (!st && rep.changed) {
     r->revision++;
     (void)svc_refresh_param_cache(r); /* out of memory: stale, rebuilt by the next GET */
-    svc_views_free(r); /* idle views of the old revision */
+    svc_views_free(r);                /* idle views of the old revision */
     if (patches) {
       cJSON_Delete(r->patches);
       r->patches = patches; /* views replay it, --state-dir stores it */

@@ -21,11 +21,12 @@ rsw_status svc_check_film(const service *svc, const scene *sc, size_t si, const 
   int channels;
   uint64_t need = sensor_film_bytes(se, sc->variant, &channels);
   if (need <= svc->opts.max_film_bytes) return RSW_OK;
-  return svc_fail(e, RSW_ERR_LIMIT, where,
-                  "sensor '%s': rendering its %dx%d film (%d channel%s) takes %.3g MB, more than this server's "
-                  "limit of %.3g MB (--max-film-bytes)",
-                  se->base.id, se->film->width, se->film->height, channels, channels > 1 ? "s" : "",
-                  (double)need / 1e6, (double)svc->opts.max_film_bytes / 1e6);
+  return svc_fail(
+      e, RSW_ERR_LIMIT, where,
+      "sensor '%s': rendering its %dx%d film (%d channel%s) takes %.3g MB, more than this server's "
+      "limit of %.3g MB (--max-film-bytes)",
+      se->base.id, se->film->width, se->film->height, channels, channels > 1 ? "s" : "", (double)need / 1e6,
+      (double)svc->opts.max_film_bytes / 1e6);
 }
 
 void svc_film_free(svc_film *f) {
@@ -109,12 +110,13 @@ cJSON *svc_patch_merged(const cJSON *old, const cJSON *body) {
 }
 
 /* Build a view of r at the revision whose PATCHes `patches` holds. */
-static rsw_status view_build(service *svc, resident *r, const cJSON *patches, uint64_t revision, svc_view **out,
-                             svc_error *e) {
+static rsw_status view_build(service *svc, resident *r, const cJSON *patches, uint64_t revision,
+                             svc_view **out, svc_error *e) {
   rsw_err err = {0};
   scene *sc = NULL;
   rsw_status st = svc_scene_reload(svc, r, &sc, &err);
-  if (st) return svc_fail(e, RSW_ERR_RENDER, err.where, "cannot build a render view of the scene: %s", err.msg);
+  if (st)
+    return svc_fail(e, RSW_ERR_RENDER, err.where, "cannot build a render view of the scene: %s", err.msg);
   param_update *u = NULL;
   size_t n = 0;
   if (patches && patches->child) {
@@ -201,8 +203,10 @@ static rsw_status take_scene(service *svc, resident *r, bool base_ok, const rend
     }
     if (stop_waiting(rs)) {
       pthread_mutex_unlock(&r->lock);
-      if (rs->cancel && atomic_load(rs->cancel)) return svc_fail(e, RSW_ERR_CANCELLED, "render", "render cancelled");
-      return svc_fail(e, RSW_ERR_TIMEOUT, "timeout_s", "the render's deadline passed while it waited for the scene");
+      if (rs->cancel && atomic_load(rs->cancel))
+        return svc_fail(e, RSW_ERR_CANCELLED, "render", "render cancelled");
+      return svc_fail(e, RSW_ERR_TIMEOUT, "timeout_s",
+                      "the render's deadline passed while it waited for the scene");
     }
     struct timespec ts;
     clock_gettime(CLOCK_REALTIME, &ts);
@@ -332,8 +336,7 @@ rsw_status service_render(service *svc, const char *id, const char *body, size_t
   cJSON *j = NULL;
   render_spec rs = {.seed = 0, .cancel = cancel};
   rsw_status st = svc_parse_body(body, len, &j, e);
-  if (!st && !cJSON_IsObject(j))
-    st = svc_fail(e, RSW_ERR_TYPE, "", "the body must be a JSON object");
+  if (!st && !cJSON_IsObject(j)) st = svc_fail(e, RSW_ERR_TYPE, "", "the body must be a JSON object");
   for (const cJSON *k = j && !st ? j->child : NULL; k && !st; k = k->next) {
     char ptr[300];
     snprintf(ptr, sizeof ptr, "/%s", k->string);

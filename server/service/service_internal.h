@@ -52,7 +52,7 @@ typedef struct resident {
   size_t src_len;
   bool src_xml;
   char src_variant[8];
-  char *src_root; /* NULL: the daemon's data root */
+  char *src_root;              /* NULL: the daemon's data root */
   unsigned char src_files[32]; /* digest of the referenced files' digests */
   cJSON *patches;
   /* The parameter table's entries at the base state (JSON, table order)
@@ -99,7 +99,7 @@ typedef struct render_item {
   job_state state;
   svc_film film;
   bool has_film;
-  bool on_disk;    /* the film's files are in the state directory; when
+  bool on_disk; /* the film's files are in the state directory; when
                       !has_film, film.img holds its header (no data) */
   char error[600];
 } render_item;
@@ -180,12 +180,12 @@ struct service {
   uint64_t use_clock;   /* LRU clock (svc->lock) */
   size_t scene_bytes;   /* sum of resident scenes' bytes (svc->lock) */
   uint64_t scenes_evicted, scenes_reloaded;
-  char (*evicted)[65];  /* ids evicted from memory, a ring (svc->lock) */
+  char (*evicted)[65]; /* ids evicted from memory, a ring (svc->lock) */
   size_t n_evicted, evicted_next;
-  uint64_t result_bytes;     /* films held in memory (svc->lock) */
-  uint64_t result_committed; /* estimates reserved by live jobs, no state dir */
+  uint64_t result_bytes;                       /* films held in memory (svc->lock) */
+  uint64_t result_committed;                   /* estimates reserved by live jobs, no state dir */
   uint64_t result_disk_bytes, results_on_disk; /* films written to disk */
-  const char *restore_id; /* while restoring: the id a submission takes */
+  const char *restore_id;                      /* while restoring: the id a submission takes */
   uint64_t jobs_resumed, jobs_failed_on_restore;
   double restore_s;
 };
@@ -299,10 +299,10 @@ resident **svc_evict_locked(service *svc, const resident *keep);
 void svc_scene_patched(service *svc, resident *r);
 /* How a scene is loaded besides a plain POST (scenes.c). */
 struct post_extra {
-  bool pinned;             /* a startup scene: never evicted, not stored */
-  const char *expect_id;   /* a reload: the id it must get */
-  const cJSON *patched;    /* a reload: parameters to apply first */
-  uint64_t revision;       /* a reload: the revision they make */
+  bool pinned;           /* a startup scene: never evicted, not stored */
+  const char *expect_id; /* a reload: the id it must get */
+  const cJSON *patched;  /* a reload: parameters to apply first */
+  uint64_t revision;     /* a reload: the revision they make */
 };
 void svc_free_evicted(resident **ev);
 bool svc_was_evicted_locked(service *svc, const char *id);

@@ -256,7 +256,7 @@ void svc_state_scene_remove(service *svc, const char *id) {
 uint64_t svc_film_bytes(const scene *sc, size_t sensor_index) {
   const sensor *se = sc->sensors[sensor_index];
   const film *fm = se->film;
-  int ch = fm->pixel_format == PIXFMT_STOKES && sc->variant == VARIANT_MONO ? 4
+  int ch = fm->pixel_format == PIXFMT_STOKES && sc->variant == VARIANT_MONO      ? 4
            : sc->variant == VARIANT_MONO || fm->pixel_format == PIXFMT_LUMINANCE ? 1
                                                                                  : 3;
   uint64_t px = (uint64_t)fm->width * (uint64_t)fm->height;
@@ -488,7 +488,8 @@ bool svc_state_film_header(service *svc, const char *job_id, size_t k, svc_film 
     out->img.channel_names[c] = s;
   }
   out->img.channels = c;
-  uint64_t px = (uint64_t)(out->img.width > 0 ? out->img.width : 0) * (uint64_t)(out->img.height > 0 ? out->img.height : 0);
+  uint64_t px = (uint64_t)(out->img.width > 0 ? out->img.width : 0) *
+                (uint64_t)(out->img.height > 0 ? out->img.height : 0);
   if (px == 0 || c < 1 || t.npy < px * (uint64_t)c * 4 || (t.angles && t.angles != px * 16)) ok = false;
   cJSON_Delete(m);
   return ok;
@@ -572,8 +573,8 @@ void svc_state_job_finished(service *svc, const job *j) {
   cJSON_AddStringToObject(o, "started_iso", j->started_iso);
   cJSON_AddStringToObject(o, "finished_iso", j->finished_iso);
   cJSON_AddNumberToObject(o, "finished", (double)time(NULL));
-  cJSON_AddNumberToObject(o, "seconds",
-                          j->started_iso[0] && j->t_finished > j->t_started ? j->t_finished - j->t_started : 0);
+  cJSON_AddNumberToObject(
+      o, "seconds", j->started_iso[0] && j->t_finished > j->t_started ? j->t_finished - j->t_started : 0);
   cJSON_AddNumberToObject(o, "contexts_total", (double)j->n_contexts);
   cJSON_AddNumberToObject(o, "contexts_done", (double)j->contexts_done);
   cJSON *a = cJSON_AddArrayToObject(o, "items");
@@ -596,7 +597,8 @@ void svc_state_job_finished(service *svc, const job *j) {
       cJSON_AddNumberToObject(x, "W", im->width);
       cJSON_AddNumberToObject(x, "H", im->height);
       cJSON *ch = cJSON_AddArrayToObject(x, "ch");
-      for (int c = 0; c < im->channels; c++) cJSON_AddItemToArray(ch, cJSON_CreateString(im->channel_names[c]));
+      for (int c = 0; c < im->channels; c++)
+        cJSON_AddItemToArray(ch, cJSON_CreateString(im->channel_names[c]));
       if (im->unresolved_rays) cJSON_AddNumberToObject(x, "unres", (double)im->unresolved_rays);
       cJSON_AddBoolToObject(x, "disk", it->on_disk);
     }

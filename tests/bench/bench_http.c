@@ -29,9 +29,9 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "../support/daemon.h"
 #include "../../server/kernel/render.h"
 #include "../../server/kernel/scene/scene.h"
+#include "../support/daemon.h"
 
 static const char *SCENE =
     "{\"type\": \"scene\", \"variant\": \"mono\","
@@ -164,7 +164,8 @@ static char *job_body(int n) {
   size_t cap = 64 * (size_t)n + 256, k = 0;
   char *job = malloc(cap);
   if (!job) abort();
-  k += (size_t)snprintf(job + k, cap - k, "{\"defaults\": {\"sensors\": [\"meter\"], \"spp\": 1}, \"contexts\": [");
+  k += (size_t)snprintf(job + k, cap - k,
+                        "{\"defaults\": {\"sensors\": [\"meter\"], \"spp\": 1}, \"contexts\": [");
   for (int i = 0; i < n; i++)
     k += (size_t)snprintf(job + k, cap - k, "%s{\"id\": \"c%d\", \"wavelength\": %d}", i ? ", " : "", i,
                           400 + i % 300);
@@ -331,15 +332,17 @@ int main(void) {
     if (rs == 504) deadline_ms = (now_s() - t0) * 1e3;
   }
   double p99 = rt[(N_SYNC * 99) / 100];
-  printf(
-      "{\"bench\": \"http\", \"job_overhead_us_per_context\": %.1f, \"job_overhead_us_min\": %.1f, "
-      "\"job_overhead_us_max\": %.1f, \"job_overhead_cpu_us_per_context\": %.1f, \"repeats\": %d, \"job_s\": %.4f, \"in_process_s\": %.4f, "
-      "\"submit_us_per_context_1k\": %.2f, \"submit_us_per_context_20k\": %.2f, "
-      "\"sync_roundtrip_ms_p50\": %.3f, \"sync_roundtrip_ms_p99\": %.3f, \"cancel_latency_ms\": %.1f, "
-      "\"deadline_latency_ms\": %.1f, "
-      "\"contexts\": %d, \"target_us_per_context\": 30, \"target_roundtrip_ms_p99\": 1, \"meets_target\": %s}\n",
-      per_ctx_us, diff_sorted[0], diff_sorted[REPS - 1], cpu_ctx_us, REPS, daemon_s, inproc_s, submit_1k, submit_20k,
-      rt[N_SYNC / 2], p99, cancel_ms, deadline_ms, N_CTX, per_ctx_us <= 30 && p99 <= 1.0 ? "true" : "false");
+  printf("{\"bench\": \"http\", \"job_overhead_us_per_context\": %.1f, \"job_overhead_us_min\": %.1f, "
+         "\"job_overhead_us_max\": %.1f, \"job_overhead_cpu_us_per_context\": %.1f, \"repeats\": %d, "
+         "\"job_s\": %.4f, \"in_process_s\": %.4f, "
+         "\"submit_us_per_context_1k\": %.2f, \"submit_us_per_context_20k\": %.2f, "
+         "\"sync_roundtrip_ms_p50\": %.3f, \"sync_roundtrip_ms_p99\": %.3f, \"cancel_latency_ms\": %.1f, "
+         "\"deadline_latency_ms\": %.1f, "
+         "\"contexts\": %d, \"target_us_per_context\": 30, \"target_roundtrip_ms_p99\": 1, \"meets_target\": "
+         "%s}\n",
+         per_ctx_us, diff_sorted[0], diff_sorted[REPS - 1], cpu_ctx_us, REPS, daemon_s, inproc_s, submit_1k,
+         submit_20k, rt[N_SYNC / 2], p99, cancel_ms, deadline_ms, N_CTX,
+         per_ctx_us <= 30 && p99 <= 1.0 ? "true" : "false");
 out:
   free(b.p);
   curl_easy_cleanup(c);

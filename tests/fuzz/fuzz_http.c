@@ -37,7 +37,8 @@ int LLVMFuzzerInitialize(int *argc, char ***argv) {
   (void)argv;
   signal(SIGPIPE, SIG_IGN);
   fuzz_service_start();
-  http_opts ho = {.size = sizeof ho, .host = "127.0.0.1", .port = 0, .max_body = 1 << 20, .max_connections = 64};
+  http_opts ho = {
+      .size = sizeof ho, .host = "127.0.0.1", .port = 0, .max_body = 1 << 20, .max_connections = 64};
   rsw_err err = {0};
   FUZZ_CHECK(http_server_start(fuzz_svc, &ho, &srv, &err) == RSW_OK, "http_server_start: %s", err.msg);
   port = http_server_port(srv);
@@ -52,7 +53,8 @@ static int connect_lo(void) {
   if (fd < 0) return -1;
   struct sockaddr_in a = {.sin_family = AF_INET, .sin_port = htons((uint16_t)port)};
   a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  struct timeval tv = {1, 0}; /* loopback answers take microseconds; a request the server waits on costs this */
+  struct timeval tv = {1,
+                       0}; /* loopback answers take microseconds; a request the server waits on costs this */
   setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
   setsockopt(fd, SOL_SOCKET, SO_SNDTIMEO, &tv, sizeof tv);
   if (connect(fd, (struct sockaddr *)&a, sizeof a) != 0) {
@@ -198,8 +200,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
       const char *body = hdr_end + 4;
       size_t blen = got - (size_t)(body - resp);
       if (problem && !chunked && blen > 0) {
-        FUZZ_CHECK(utf8_valid((const unsigned char *)body, blen), "a problem+json body that is not UTF-8: %.300s",
-                   body);
+        FUZZ_CHECK(utf8_valid((const unsigned char *)body, blen),
+                   "a problem+json body that is not UTF-8: %.300s", body);
         cJSON *j = cJSON_ParseWithLength(body, blen);
         FUZZ_CHECK(j != NULL, "a problem+json body that is not JSON: %.300s", body);
         cJSON_Delete(j);

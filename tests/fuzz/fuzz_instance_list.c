@@ -16,7 +16,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
   rsw_status st = instance_list_parse(path, &xf, &n, &err);
   if (st == RSW_OK) {
     FUZZ_CHECK(n == 0 || xf != NULL, "%u placements without data", n);
-    for (size_t i = 0; i < (size_t)n * 12; i++) FUZZ_CHECK(isfinite(xf[i]), "placement %zu not finite", i / 12);
+    for (size_t i = 0; i < (size_t)n * 12; i++)
+      FUZZ_CHECK(isfinite(xf[i]), "placement %zu not finite", i / 12);
   } else {
     FUZZ_CHECK(err.msg[0] != '\0', "an error without a message");
   }

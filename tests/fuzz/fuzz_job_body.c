@@ -19,7 +19,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
   if (size > 8192) return 0;
   char *job_id = NULL, *json = NULL;
   svc_error e = {0};
-  rsw_status st = service_job_submit(fuzz_svc, fuzz_scene_id, (const char *)data, size, NULL, &job_id, &json, &e);
+  rsw_status st =
+      service_job_submit(fuzz_svc, fuzz_scene_id, (const char *)data, size, NULL, &job_id, &json, &e);
   fuzz_check_error(st, &e, "job submit");
   free(json);
   if (st == RSW_OK) {
@@ -42,8 +43,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     cJSON *j = cJSON_Parse(job);
     const cJSON *state = cJSON_GetObjectItemCaseSensitive(j, "state");
     const cJSON *failed = cJSON_GetObjectItemCaseSensitive(j, "renders_failed");
-    FUZZ_CHECK(cJSON_IsString(state) && strcmp(state->valuestring, "succeeded") == 0 && cJSON_IsNumber(failed) &&
-                   failed->valuedouble == 0,
+    FUZZ_CHECK(cJSON_IsString(state) && strcmp(state->valuestring, "succeeded") == 0 &&
+                   cJSON_IsNumber(failed) && failed->valuedouble == 0,
                "an accepted job did not succeed (contexts are validated before the 202): %s", job);
     cJSON_Delete(j);
     free(job);

@@ -17,7 +17,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
   char *json = NULL;
   uint64_t rev = 0;
   svc_error e = {0};
-  rsw_status st = service_params_patch(fuzz_svc, fuzz_scene_id, (const char *)data, size, -1, &json, &rev, &e);
+  rsw_status st =
+      service_params_patch(fuzz_svc, fuzz_scene_id, (const char *)data, size, -1, &json, &rev, &e);
   fuzz_check_error(st, &e, "PATCH");
   free(json);
   if (st == RSW_OK) {

@@ -682,7 +682,7 @@ struct fake_server {
   char *body[8]; /* request bodies (owned), by request number */
   size_t body_len[8];
   char ctype[8][64]; /* their Content-Type */
-  char route[8][80];  /* their X-Raysweep-Shard ("" when absent) */
+  char route[8][80]; /* their X-Raysweep-Shard ("" when absent) */
 };
 
 static void *fake_main(void *arg) {
@@ -958,13 +958,15 @@ static void test_route_header(void) {
             strcmp(fs.route[2], "shard-7.r1") == 0,
         "every request (retries too) carries the key: %s, %d requests, '%s' '%s'", rsw_strerror(s),
         fs.n_requests, fs.route[0], fs.route[2]);
-  CHECK(rsw_client_set_route(c, "bad key") == RSW_ERR_INVALID && rsw_client_set_route(c, "") == RSW_ERR_INVALID,
+  CHECK(rsw_client_set_route(c, "bad key") == RSW_ERR_INVALID &&
+            rsw_client_set_route(c, "") == RSW_ERR_INVALID,
         "a key with a space or an empty key is refused");
   REQUIRE(rsw_client_set_route(c, NULL) == RSW_OK, "clear the key");
   json = NULL;
   s = rsw_server_info(c, &json);
   rsw_free(json);
-  CHECK(s == RSW_OK && fs.n_requests == 4 && fs.route[3][0] == '\0', "no key after clearing: '%s'", fs.route[3]);
+  CHECK(s == RSW_OK && fs.n_requests == 4 && fs.route[3][0] == '\0', "no key after clearing: '%s'",
+        fs.route[3]);
   rsw_client_free(c);
   o.route_key = "x/y";
   c = NULL;
@@ -1020,8 +1022,8 @@ static void test_spread(void) {
   snprintf(state, sizeof state, "%s/spread.state", tmpdir);
   rsw_client_opts co = {.size = sizeof co, .base_url = main_d.base_url, .retry_backoff_s = 0.01};
   spread_log l = {0};
-  rsw_spread_opts so = {.size = sizeof so, .shards = 3, .state_path = state, .on_film = on_spread_film,
-                        .film_user = &l};
+  rsw_spread_opts so = {
+      .size = sizeof so, .shards = 3, .state_path = state, .on_film = on_spread_film, .film_user = &l};
   rsw_spread_result r;
   rsw_status s = rsw_spread_run(&co, id, x, &so, &r);
   CHECK(s == RSW_OK && l.films == 12 && l.bad == 0 && l.resumed == 0 && r.films == 12 && r.resubmitted == 0 &&
@@ -1032,8 +1034,8 @@ static void test_spread(void) {
   so.film_user = &l2;
   s = rsw_spread_run(&co, id, x, &so, &r);
   CHECK(s == RSW_OK && l2.films == 0 && l2.resumed == 12 && l2.bad == 0 && r.resumed == 12,
-        "resumed from the state file: %s (%s), %d rendered, %d resumed", rsw_strerror(s), rsw_spread_last_error(),
-        l2.films, l2.resumed);
+        "resumed from the state file: %s (%s), %d rendered, %d resumed", rsw_strerror(s),
+        rsw_spread_last_error(), l2.films, l2.resumed);
   so.shards = 2; /* another sweep (a different cut) with the same state file */
   s = rsw_spread_run(&co, id, x, &so, &r);
   CHECK(s == RSW_ERR_PRECONDITION && strstr(rsw_spread_last_error(), "another sweep"),

@@ -104,7 +104,8 @@ static void slow_open(const tdaemon *d, slow_set *s, int n) {
 
 /* One more header byte on every connection (the slow-loris tick). */
 static void slow_tick(slow_set *s, int k) {
-  static const char hdr[] = "ET /v1/health/live HTTP/1.1\r\nHost: x\r\nX-Slow: aaaaaaaaaaaaaaaaaaaaaaaaaaaaaa";
+  static const char hdr[] =
+      "ET /v1/health/live HTTP/1.1\r\nHost: x\r\nX-Slow: aaaaaaaaaaaaaaaaaaaaaaaaaaaaaa";
   char ch = hdr[k % (int)(sizeof hdr - 1)];
   for (int i = 0; i < s->n; i++) send(s->fd[i], &ch, 1, MSG_NOSIGNAL);
 }
@@ -296,7 +297,8 @@ static void test_idempotency_key_length(void) {
   REQUIRE(main_ok, "main daemon");
   char path[160], key[400];
   snprintf(path, sizeof path, "/v1/scenes/%s/jobs", plate_id);
-  const char *body = "{\"contexts\": [{\"id\": \"k\"}], \"defaults\": {\"sensors\": [\"meter\"], \"spp\": 1}}";
+  const char *body =
+      "{\"contexts\": [{\"id\": \"k\"}], \"defaults\": {\"sensors\": [\"meter\"], \"spp\": 1}}";
   for (int len = 0; len <= 300; len += 300) {
     memset(key, 'k', (size_t)len);
     key[len] = '\0';
@@ -366,7 +368,8 @@ static void test_invalid_utf8_key(void) {
   snprintf(path, sizeof path, "/v1/scenes/%s:render", plate_id);
   req(&main_d, "POST", path, "{\"sensor\": \"meter\", \"params\": {\"\xc0\xaf\": 1}}", &r);
   CHECK(r.status >= 400 && r.status < 500, "render with a bad key: %d", r.status);
-  CHECK(valid_utf8((const unsigned char *)r.body, r.len), "render problem is not valid UTF-8: %.300s", r.body);
+  CHECK(valid_utf8((const unsigned char *)r.body, r.len), "render problem is not valid UTF-8: %.300s",
+        r.body);
   thttp_resp_free(&r);
 }
 
@@ -376,8 +379,8 @@ static void test_sse_resume_past_end(void) {
   REQUIRE(main_ok, "main daemon");
   char path[160];
   snprintf(path, sizeof path, "/v1/scenes/%s/jobs", plate_id);
-  const char *body =
-      "{\"contexts\": [{\"id\": \"a\"}, {\"id\": \"b\"}], \"defaults\": {\"sensors\": [\"meter\"], \"spp\": 1}}";
+  const char *body = "{\"contexts\": [{\"id\": \"a\"}, {\"id\": \"b\"}], \"defaults\": {\"sensors\": "
+                     "[\"meter\"], \"spp\": 1}}";
   thttp_resp r;
   req(&main_d, "POST", path, body, &r);
   REQUIRE(r.status == 202, "submit: %d %.200s", r.status, r.body);
@@ -437,9 +440,10 @@ static void test_render_client_gone(void) {
   snprintf(body, sizeof body, "{\"sensor\": \"hemi\", \"spp\": %ld}", hemi_spp(6.0));
   int fd = tdaemon_connect(&main_d);
   REQUIRE(fd >= 0, "connect");
-  int n = snprintf(head, sizeof head,
-                   "POST %s HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: %zu\r\n\r\n%s",
-                   path, strlen(body), body);
+  int n = snprintf(
+      head, sizeof head,
+      "POST %s HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: %zu\r\n\r\n%s", path,
+      strlen(body), body);
   send(fd, head, (size_t)n, MSG_NOSIGNAL);
   sleep_ms(300);
   close(fd);
@@ -463,7 +467,8 @@ static void test_render_client_gone(void) {
     }
   }
   CHECK(idle, "sync renders still running 2 s after the client hung up: %.120s",
-        r.body && strstr(r.body, "\nraysweep_sync_renders ") ? strstr(r.body, "\nraysweep_sync_renders ") + 1 : "?");
+        r.body && strstr(r.body, "\nraysweep_sync_renders ") ? strstr(r.body, "\nraysweep_sync_renders ") + 1
+                                                             : "?");
   thttp_resp_free(&r);
 }
 
@@ -488,8 +493,8 @@ static void test_sigterm_sync_render(void) {
   double secs = 0, t0 = tdaemon_now();
   int rc = tdaemon_stop(&d, 15, &secs);
   pthread_join(t, NULL);
-  fprintf(stdout, "  SIGTERM during a sync render: exit %d after %.2f s; render answered %d after %.2f s\n", rc,
-          secs, c.r.status, c.t_end - t0);
+  fprintf(stdout, "  SIGTERM during a sync render: exit %d after %.2f s; render answered %d after %.2f s\n",
+          rc, secs, c.r.status, c.t_end - t0);
   CHECK(rc == 0 && secs < 5.0, "exit %d after %.2f s", rc, secs);
   CHECK(is_problem(&c.r, 503), "the render's answer: %d %.300s", c.r.status, c.r.body ? c.r.body : "");
   CHECK(c.t_end - t0 < 5.0, "answered %.2f s after SIGTERM", c.t_end - t0);

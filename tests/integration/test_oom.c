@@ -38,23 +38,23 @@
 #include "../support/failmalloc.h"
 #include "../support/test.h"
 #include "film_io.h"
+#include "http/http.h"
 #include "image_exr.h"
 #include "kernel/render.h"
 #include "kernel/scene/params.h"
 #include "kernel/scene/scene.h"
-#include "http/http.h"
 #include "raysweep/client.h"
 #include "service/service.h"
 
 RSW_TEST_DEFINE_GLOBALS
 
 /* Every allocation up to FULL_N is failed in turn, then every STRIDE-th. */
-#define FULL_N 3000
-#define STRIDE 7
+#define FULL_N      3000
+#define STRIDE      7
 #define RUN_LIMIT_S 30
 /* A run that takes longer than this is a hang cut short by a client
  * timeout (normal runs take milliseconds). */
-#define SLOW_S 5.0
+#define SLOW_S      5.0
 
 static char tmpdir[256];
 static char data_dir[512];
@@ -111,10 +111,10 @@ static double now_s(void) {
   " \"plate\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [10, 10, 1]}],"                          \
   "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": {\"type\": \"spectrum\","                           \
   "              \"value\": [[400, 0.05], [550, 0.1], [700, 0.45]]}}},"                                      \
-  " \"quad\": {\"type\": \"obj\", \"filename\": \"quad.obj\", \"to_world\": [{\"translate\": [0, 0, 0.5]}],"  \
+  " \"quad\": {\"type\": \"obj\", \"filename\": \"quad.obj\", \"to_world\": [{\"translate\": [0, 0, 0.5]}]," \
   "   \"bsdf\": {\"type\": \"roughconductor\"}},"                                                            \
   " \"tri\": {\"type\": \"ply\", \"filename\": \"quad_le.ply\","                                             \
-  "   \"to_world\": [{\"translate\": [1, 1, 0.2]}, {\"scale\": 0.5}]},"                                       \
+  "   \"to_world\": [{\"translate\": [1, 1, 0.2]}, {\"scale\": 0.5}]},"                                      \
   " \"ball\": {\"type\": \"sphere\", \"center\": [0, 0, 1], \"radius\": 0.3,"                                \
   "   \"bsdf\": {\"type\": \"dielectric\"}}}"
 
@@ -218,8 +218,8 @@ static void sweep(const oom_op *op) {
     alarm(0);
     if (secs > SLOW_S) { /* e.g. a request that timed out on a hung server thread */
       op->teardown(st);
-      CHECK(false, "%s: allocation %ld failing: the call took %.1f s (a hang cut short by a timeout)", op->name,
-            n, secs);
+      CHECK(false, "%s: allocation %ld failing: the call took %.1f s (a hang cut short by a timeout)",
+            op->name, n, secs);
       break;
     }
     bool injected = failmalloc_failed() > 0;
@@ -255,9 +255,10 @@ static void sweep(const oom_op *op) {
     }
   }
   failmalloc_skip_embree(false);
-  printf("    %-14s %6ld allocations (clean run); %ld runs (each of 1..%d, then every %d-th): %ld clean errors, "
-         "%ld absorbed (result identical)\n",
-         op->name, total, runs, FULL_N, STRIDE, errors, absorbed);
+  printf(
+      "    %-14s %6ld allocations (clean run); %ld runs (each of 1..%d, then every %d-th): %ld clean errors, "
+      "%ld absorbed (result identical)\n",
+      op->name, total, runs, FULL_N, STRIDE, errors, absorbed);
 }
 
 /* ---- kernel operations ------------------------------------------------------------------ */
@@ -274,7 +275,9 @@ static film_image ref_json, ref_json_updated, ref_xml;
 static void *ref_exr;
 static size_t ref_exr_len;
 
-static void *setup_empty(void) { return calloc(1, sizeof(kstate)); }
+static void *setup_empty(void) {
+  return calloc(1, sizeof(kstate));
+}
 
 static void teardown(void *p) {
   kstate *k = p;
@@ -337,7 +340,9 @@ static rsw_status run_update(void *p, rsw_err *err) {
                                "tri.vertex_positions"};
   static const char *vals[] = {"0.3", "[1,0,0,0.1, 0,1,0,0, 0,0,1,0.6, 0,0,0,1]", "[0.3, 0, -1]",
                                "[-1,-1,0, 1,-1,0.1, 1,1,0, -1,1,0.2]"};
-  enum { N_UPD = sizeof keys / sizeof *keys };
+  enum {
+    N_UPD = sizeof keys / sizeof *keys
+  };
   param_update items[N_UPD];
   size_t n = 0;
   rsw_status s = RSW_OK;
@@ -381,7 +386,9 @@ static bool render_same(void *p) {
 }
 
 /* A failed render leaves the scene usable. */
-static bool render_failed_ok(void *p) { return update_left_scene_alone(p); }
+static bool render_failed_ok(void *p) {
+  return update_left_scene_alone(p);
+}
 
 static void *setup_film(void) {
   kstate *k = setup_scene();
@@ -453,8 +460,8 @@ static bool make_references(void) {
   if (!s || render(s, &ref_xml, &err) != RSW_OK) goto fail;
   scene_free(s);
   film_exr_info info = film_image_exr_info(&ref_json, "meter");
-  if (film_exr_encode(ref_json.width, ref_json.height, ref_json.channels, ref_json.channel_names, ref_json.data,
-                      ref_json.half, &info, &ref_exr, &ref_exr_len, &err) != RSW_OK)
+  if (film_exr_encode(ref_json.width, ref_json.height, ref_json.channels, ref_json.channel_names,
+                      ref_json.data, ref_json.half, &info, &ref_exr, &ref_exr_len, &err) != RSW_OK)
     goto fail;
   if (!ref_json.angles) {
     printf("  the JSON scene's film has no per-pixel angles\n");
@@ -468,25 +475,32 @@ fail:
 }
 
 static void test_kernel_load(void) {
-  static const oom_op json = {"load_json", setup_empty, run_load_json, NULL, same_json_render, teardown, false, NULL, false};
-  static const oom_op xml = {"load_xml", setup_empty, run_load_xml, NULL, same_xml_render, teardown, false, NULL, false};
+  static const oom_op json = {"load_json", setup_empty, run_load_json, NULL, same_json_render,
+                              teardown,    false,       NULL,          false};
+  static const oom_op xml = {"load_xml", setup_empty, run_load_xml, NULL, same_xml_render,
+                             teardown,   false,       NULL,         false};
   sweep(&json);
   sweep(&xml);
 }
 
 static void test_kernel_update(void) {
-  static const oom_op op = {"update", setup_scene, run_update, update_left_scene_alone, update_applied, teardown, false, NULL, false};
+  static const oom_op op = {"update",       setup_scene, run_update, update_left_scene_alone,
+                            update_applied, teardown,    false,      NULL,
+                            false};
   sweep(&op);
 }
 
 static void test_kernel_render(void) {
-  static const oom_op op = {"render", setup_scene, run_render, render_failed_ok, render_same, teardown, false, NULL, false};
+  static const oom_op op = {"render", setup_scene, run_render, render_failed_ok, render_same, teardown,
+                            false,    NULL,        false};
   sweep(&op);
 }
 
 static void test_exr_encode(void) {
-  static const oom_op file = {"exr_file", setup_film, run_exr_file, exr_file_absent, exr_file_same, teardown, false, NULL, false};
-  static const oom_op mem = {"exr_memory", setup_film, run_exr_mem, NULL, exr_mem_same, teardown, false, NULL, false};
+  static const oom_op file = {"exr_file", setup_film, run_exr_file, exr_file_absent, exr_file_same, teardown,
+                              false,      NULL,       false};
+  static const oom_op mem = {"exr_memory", setup_film, run_exr_mem, NULL, exr_mem_same,
+                             teardown,     false,      NULL,        false};
   sweep(&file);
   sweep(&mem);
 }
@@ -572,8 +586,8 @@ static char push_text[4096];
 static rsw_status c_run_push(void *p, rsw_err *err) {
   cstate *k = p;
   int created = 0;
-  return c_status(k, rsw_scene_push_buffer(k->c, push_text, strlen(push_text), data_dir, NULL, k->id, &created),
-                  err);
+  return c_status(
+      k, rsw_scene_push_buffer(k->c, push_text, strlen(push_text), data_dir, NULL, k->id, &created), err);
 }
 
 static void c_teardown_push(void *p) {
@@ -584,10 +598,12 @@ static void c_teardown_push(void *p) {
 
 /* A spectrum (tabulated) and a mesh's transform; PATCH_BACK writes the
  * scene's own values again (same table, same matrix). */
-static const char *PATCH = "{\"plate.bsdf.reflectance.value\": {\"wavelengths\": [400, 700], \"values\": [0.2, 0.3]},"
-                           " \"quad.to_world\": [1,0,0,0.1, 0,1,0,0, 0,0,1,0.6, 0,0,0,1]}";
-static const char *PATCH_BACK = "{\"plate.bsdf.reflectance.value\": {\"wavelengths\": [400, 550, 700],"
-                                " \"values\": [0.05, 0.1, 0.45]}, \"quad.to_world\": [1,0,0,0, 0,1,0,0, 0,0,1,0.5, 0,0,0,1]}";
+static const char *PATCH =
+    "{\"plate.bsdf.reflectance.value\": {\"wavelengths\": [400, 700], \"values\": [0.2, 0.3]},"
+    " \"quad.to_world\": [1,0,0,0.1, 0,1,0,0, 0,0,1,0.6, 0,0,0,1]}";
+static const char *PATCH_BACK =
+    "{\"plate.bsdf.reflectance.value\": {\"wavelengths\": [400, 550, 700],"
+    " \"values\": [0.05, 0.1, 0.45]}, \"quad.to_world\": [1,0,0,0, 0,1,0,0, 0,0,1,0.5, 0,0,0,1]}";
 
 /* The table's values (not its revision) as text, to compare. */
 static char *params_values(rsw_client *c) {
@@ -646,7 +662,8 @@ static void c_teardown_patch(void *p) {
   c_teardown(p);
 }
 
-static const char *RENDER_REQ = "{\"spp\": 4, \"seed\": 7, \"params\": {\"plate.bsdf.reflectance.value\": 0.25}}";
+static const char *RENDER_REQ =
+    "{\"spp\": 4, \"seed\": 7, \"params\": {\"plate.bsdf.reflectance.value\": 0.25}}";
 
 static rsw_status c_run_render(void *p, rsw_err *err) {
   cstate *k = p;
@@ -857,7 +874,8 @@ static bool daemon_start(void) {
   bool ok = c != NULL;
   if (ok) {
     step = "push";
-    ok = rsw_scene_push_buffer(c, SCENE_TEXT, strlen(SCENE_TEXT), data_dir, NULL, d_scene_id, &created) == RSW_OK;
+    ok = rsw_scene_push_buffer(c, SCENE_TEXT, strlen(SCENE_TEXT), data_dir, NULL, d_scene_id, &created) ==
+         RSW_OK;
   }
   if (ok) {
     step = "render";
@@ -911,12 +929,18 @@ static void daemon_stop(void) {
 
 static void test_daemon(void) {
   REQUIRE(daemon_start(), "the in-process daemon");
-  static const oom_op push = {"d_scene_push", c_setup, c_run_push, NULL, NULL, c_teardown_push, false, NULL, false};
-  static const oom_op patch = {"d_params_patch", c_setup, c_run_patch, c_patch_unchanged, c_patch_applied, c_teardown_patch, false, NULL, .skip_embree = true};
-  static const oom_op render = {"d_render", c_setup, c_run_render, c_render_base_intact, c_render_same, c_teardown, false, NULL, false};
-  static const oom_op job = {"d_job", c_setup, c_run_job, c_render_base_intact, c_job_same, c_teardown, false, NULL, false};
-  static const oom_op exr = {"d_render_exr", e_setup, e_run, c_render_base_intact_e, e_same, e_teardown, false, e_capture, false};
-  static const oom_op save = {"c_film_save", c_setup, c_run_save, NULL, NULL, c_teardown, .status_only = true, NULL};
+  static const oom_op push = {"d_scene_push",  c_setup, c_run_push, NULL, NULL,
+                              c_teardown_push, false,   NULL,       false};
+  static const oom_op patch = {"d_params_patch", c_setup, c_run_patch, c_patch_unchanged,  c_patch_applied,
+                               c_teardown_patch, false,   NULL,        .skip_embree = true};
+  static const oom_op render = {
+      "d_render", c_setup, c_run_render, c_render_base_intact, c_render_same, c_teardown, false, NULL, false};
+  static const oom_op job = {"d_job", c_setup, c_run_job, c_render_base_intact, c_job_same, c_teardown,
+                             false,   NULL,    false};
+  static const oom_op exr = {"d_render_exr", e_setup,   e_run, c_render_base_intact_e, e_same, e_teardown,
+                             false,          e_capture, false};
+  static const oom_op save = {"c_film_save", c_setup,    c_run_save,          NULL,
+                              NULL,          c_teardown, .status_only = true, NULL};
   sweep(&push);
   sweep(&patch);
   sweep(&render);

@@ -77,7 +77,7 @@ typedef struct worker {
 } worker;
 
 #define N_THREADS 12
-#define ROUNDS 3
+#define ROUNDS    3
 
 static void *worker_main(void *arg) {
   worker *w = arg;
@@ -106,8 +106,8 @@ static void test_concurrent_overrides_bitwise(void) {
   uint64_t rev = 0;
   svc_error e = {0};
   const char *patch = "{\"plate.bsdf.reflectance.value\": 0.45, \"sun.irradiance.value\": 1.25}";
-  REQUIRE(service_params_patch(svc, scene_id, patch, strlen(patch), -1, &json, &rev, &e) == RSW_OK, "patch: %s",
-          e.err.msg);
+  REQUIRE(service_params_patch(svc, scene_id, patch, strlen(patch), -1, &json, &rev, &e) == RSW_OK,
+          "patch: %s", e.err.msg);
   free(json);
   for (int k = 0; k < N_OV; k++)
     REQUIRE(render(OV[k], &serial[k], &e) == RSW_OK, "serial %d: %s: %s", k, e.err.where, e.err.msg);
@@ -238,8 +238,8 @@ static void test_jobs_run_concurrently(void) {
   while (!job_state_is(jb, "succeeded") && now_s() - t0 < 5) usleep(5000);
   double short_s = now_s() - t0;
   bool long_running = job_state_is(ja, "running");
-  CHECK(short_s < 2.0 && long_running, "the short job took %.2f s beside a running job (long job running: %d)",
-        short_s, long_running);
+  CHECK(short_s < 2.0 && long_running,
+        "the short job took %.2f s beside a running job (long job running: %d)", short_s, long_running);
   char *cj = NULL;
   service_job_cancel(svc, ja, &cj, &e);
   free(cj);

@@ -34,15 +34,16 @@ static double now_s(void) {
  * distant ("meter"). */
 static char *post_scene(int W, int H) {
   char doc[2048];
-  snprintf(doc, sizeof doc,
-           "{\"type\": \"scene\", \"variant\": \"mono\","
-           " \"big\": {\"type\": \"hdistant\", \"film\": {\"type\": \"hdrfilm\", \"width\": %d, \"height\": %d,"
-           "   \"rfilter\": {\"type\": \"box\"}}},"
-           " \"meter\": {\"type\": \"distant\", \"direction\": [0, 0, -1],"
-           "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}},"
-           " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1], \"irradiance\": 1.0},"
-           " \"plate\": {\"type\": \"rectangle\"}}",
-           W, H);
+  snprintf(
+      doc, sizeof doc,
+      "{\"type\": \"scene\", \"variant\": \"mono\","
+      " \"big\": {\"type\": \"hdistant\", \"film\": {\"type\": \"hdrfilm\", \"width\": %d, \"height\": %d,"
+      "   \"rfilter\": {\"type\": \"box\"}}},"
+      " \"meter\": {\"type\": \"distant\", \"direction\": [0, 0, -1],"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}},"
+      " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1], \"irradiance\": 1.0},"
+      " \"plate\": {\"type\": \"rectangle\"}}",
+      W, H);
   bool created;
   char *id = NULL, *json = NULL;
   svc_error e = {0};

@@ -45,8 +45,9 @@ static bool names(const svc_error *e, const char *field) {
 }
 
 #define REFUSED(st, e, field, what)                                                                          \
-  CHECK((st) != RSW_OK && names(&(e), field), "%s: status %d, where '%s', key '%s', message '%s' (wanted '%s')", \
-        what, (int)(st), (e).err.where, (e).key, (e).err.msg, field)
+  CHECK((st) != RSW_OK && names(&(e), field),                                                                \
+        "%s: status %d, where '%s', key '%s', message '%s' (wanted '%s')", what, (int)(st), (e).err.where,   \
+        (e).key, (e).err.msg, field)
 
 static rsw_status patch(const char *body, svc_error *e) {
   char *json = NULL;
@@ -112,7 +113,8 @@ static void test_empty_body(void) {
 
 static void test_job_numbers(void) {
   svc_error e;
-  REFUSED(submit("{\"contexts\":[{\"id\":\"a\",\"wavelength\":1e400}]}", &e), e, "wavelength", "context 1e400");
+  REFUSED(submit("{\"contexts\":[{\"id\":\"a\",\"wavelength\":1e400}]}", &e), e, "wavelength",
+          "context 1e400");
   REFUSED(submit("{\"contexts\":[{\"id\":\"a\"}],\"defaults\":{\"wavelength\":1e400}}", &e), e, "wavelength",
           "defaults 1e400");
   REFUSED(submit("{\"contexts\":[{\"id\":\"a\"}],\"defaults\":{\"spp\":0}}", &e), e, "spp", "defaults.spp 0");
@@ -122,12 +124,12 @@ static void test_job_numbers(void) {
 
 static void test_job_params_at_submit(void) {
   svc_error e;
-  REFUSED(submit("{\"contexts\":[{\"id\":\"a\"}],\"params\":{\"rectangle.bsdf.reflectance.value\":-3}}", &e), e,
-          "rectangle.bsdf.reflectance.value", "job-level reflectance -3");
-  REFUSED(submit("{\"contexts\":[{\"id\":\"a\"}],\"params\":{\"sun.direction\":[0,0,0]}}", &e), e, "sun.direction",
-          "job-level direction 0");
-  REFUSED(submit("{\"contexts\":[{\"id\":\"a\"},{\"id\":\"b\",\"params\":{\"sun.direction\":[0,0,0]}}]}", &e), e,
-          "sun.direction", "context direction 0");
+  REFUSED(submit("{\"contexts\":[{\"id\":\"a\"}],\"params\":{\"rectangle.bsdf.reflectance.value\":-3}}", &e),
+          e, "rectangle.bsdf.reflectance.value", "job-level reflectance -3");
+  REFUSED(submit("{\"contexts\":[{\"id\":\"a\"}],\"params\":{\"sun.direction\":[0,0,0]}}", &e), e,
+          "sun.direction", "job-level direction 0");
+  REFUSED(submit("{\"contexts\":[{\"id\":\"a\"},{\"id\":\"b\",\"params\":{\"sun.direction\":[0,0,0]}}]}", &e),
+          e, "sun.direction", "context direction 0");
   CHECK(strstr(e.err.where, "/contexts/1") != NULL, "the second context is named: where '%s'", e.err.where);
   /* A context may override a job-level value with a legal one. */
   CHECK(submit("{\"contexts\":[{\"id\":\"ok\",\"params\":{\"sun.irradiance.value\":2}}],"
@@ -138,7 +140,8 @@ static void test_job_params_at_submit(void) {
 
 static void test_nul(void) {
   svc_error e;
-  REFUSED(patch("{\"sun.irradiance.value\\u0000x\": 2}", &e), e, "sun.irradiance.value", "PATCH key with NUL");
+  REFUSED(patch("{\"sun.irradiance.value\\u0000x\": 2}", &e), e, "sun.irradiance.value",
+          "PATCH key with NUL");
   REFUSED(render("{\"sensor\":\"hd\\u0000x\"}", &e), e, "sensor", "render sensor with NUL");
   REFUSED(submit("{\"contexts\":[{\"id\":\"a\",\"sensors\":[\"hd\\u0000\"]}]}", &e), e, "sensors",
           "job sensor with NUL");
@@ -167,8 +170,8 @@ static void test_blob_dir_not_shown(void) {
   char *id = NULL, *json = NULL;
   rsw_status st = service_scene_post(svc, doc, strlen(doc), false, NULL, &created, &id, &json, &e);
   CHECK(st != RSW_OK, "a scene with an unreadable blob loaded");
-  CHECK(!strstr(e.err.msg, blob_dir) && !strstr(e.err.where, blob_dir), "the error shows the blob directory: %s: %s",
-        e.err.where, e.err.msg);
+  CHECK(!strstr(e.err.msg, blob_dir) && !strstr(e.err.where, blob_dir),
+        "the error shows the blob directory: %s: %s", e.err.where, e.err.msg);
   CHECK(names(&e, hex), "the error names the blob: %s: %s", e.err.where, e.err.msg);
   free(id);
   free(json);
@@ -185,10 +188,10 @@ static void test_blob_dir_not_shown(void) {
 
 static void test_duplicate_sensor(void) {
   svc_error e;
-  REFUSED(submit("{\"contexts\":[{\"id\":\"a\",\"sensors\":[\"hd\",\"0\"]}]}", &e), e, "/contexts/0/sensors/1",
-          "one sensor twice (by id and index)");
-  REFUSED(submit("{\"contexts\":[{\"id\":\"a\"}],\"defaults\":{\"sensors\":[\"hd\",\"hd\"]}}", &e), e, "sensors",
-          "one sensor twice in defaults");
+  REFUSED(submit("{\"contexts\":[{\"id\":\"a\",\"sensors\":[\"hd\",\"0\"]}]}", &e), e,
+          "/contexts/0/sensors/1", "one sensor twice (by id and index)");
+  REFUSED(submit("{\"contexts\":[{\"id\":\"a\"}],\"defaults\":{\"sensors\":[\"hd\",\"hd\"]}}", &e), e,
+          "sensors", "one sensor twice in defaults");
 }
 
 /* Found by fuzz_job_body: a context wavelength outside a tabulated
@@ -196,11 +199,11 @@ static void test_duplicate_sensor(void) {
  * PATCHes the scene's reflectance to a table over [400, 700] nm. */
 static void test_wavelength_in_tables(void) {
   svc_error e;
-  REQUIRE(patch("{\"rectangle.bsdf.reflectance.value\":{\"wavelengths\":[400,700],\"values\":[0.2,0.8]}}", &e) ==
-              RSW_OK,
+  REQUIRE(patch("{\"rectangle.bsdf.reflectance.value\":{\"wavelengths\":[400,700],\"values\":[0.2,0.8]}}",
+                &e) == RSW_OK,
           "PATCH a table: %s", e.err.msg);
-  REFUSED(submit("{\"contexts\":[{\"id\":\"a\",\"wavelength\":260}]}", &e), e, "rectangle.bsdf.reflectance.value",
-          "260 nm against the base table");
+  REFUSED(submit("{\"contexts\":[{\"id\":\"a\",\"wavelength\":260}]}", &e), e,
+          "rectangle.bsdf.reflectance.value", "260 nm against the base table");
   CHECK(strstr(e.err.where, "/contexts/0/wavelength") != NULL, "where '%s'", e.err.where);
   REFUSED(submit("{\"contexts\":[{\"id\":\"a\"}],\"defaults\":{\"wavelength\":800}}", &e), e,
           "/defaults/wavelength", "800 nm by default");

@@ -83,7 +83,8 @@ static void test_lru_never_in_flight(void) {
   char *c = post(svc, 0.3);
   REQUIRE(c, "post c");
   svc_error e3 = {0};
-  CHECK(service_scene_get(svc, a, &json, &e3) == RSW_ERR_EVICTED, "a evicted: %s", rsw_status_name(e3.err.code));
+  CHECK(service_scene_get(svc, a, &json, &e3) == RSW_ERR_EVICTED, "a evicted: %s",
+        rsw_status_name(e3.err.code));
   CHECK(rsw_status_http(RSW_ERR_EVICTED) == 404 && rsw_status_http(RSW_ERR_STORAGE) == 507,
         "EVICTED is a 404, STORAGE a 507");
   free(json), json = NULL;

@@ -61,7 +61,8 @@ char *tdaemon_log(const tdaemon *d) {
   return slurp(d->log);
 }
 
-bool tdaemon_start(tdaemon *d, const char *dir, const char *name, const char *const *extra, double timeout_s) {
+bool tdaemon_start(tdaemon *d, const char *dir, const char *name, const char *const *extra,
+                   double timeout_s) {
   memset(d, 0, sizeof *d);
   snprintf(d->name, sizeof d->name, "%s", name);
   char exe[512], port_file[256];
@@ -251,9 +252,10 @@ bool tdaemon_http(const tdaemon *d, const char *method, const char *path, const 
     close(fd);
     return false;
   }
-  size_t hl = (size_t)snprintf(req, hcap, "%s %s HTTP/1.1\r\nHost: 127.0.0.1:%d\r\nConnection: close\r\n", method,
-                               path, d->port);
-  for (int i = 0; headers && headers[i]; i++) hl += (size_t)snprintf(req + hl, hcap - hl, "%s\r\n", headers[i]);
+  size_t hl = (size_t)snprintf(req, hcap, "%s %s HTTP/1.1\r\nHost: 127.0.0.1:%d\r\nConnection: close\r\n",
+                               method, path, d->port);
+  for (int i = 0; headers && headers[i]; i++)
+    hl += (size_t)snprintf(req + hl, hcap - hl, "%s\r\n", headers[i]);
   if (body) hl += (size_t)snprintf(req + hl, hcap - hl, "Content-Length: %zu\r\n", len);
   hl += (size_t)snprintf(req + hl, hcap - hl, "\r\n");
   bool ok = send_all(fd, req, hl) && (!body || send_all(fd, body, len));

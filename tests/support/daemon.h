@@ -14,10 +14,10 @@
 #include <sys/types.h>
 
 typedef struct tdaemon {
-  pid_t pid;     /* 0 when not running */
+  pid_t pid; /* 0 when not running */
   int port;
   char name[32];
-  char log[256]; /* stdout and stderr of the daemon */
+  char log[256];     /* stdout and stderr of the daemon */
   char base_url[64]; /* "http://127.0.0.1:PORT" */
 } tdaemon;
 
@@ -52,7 +52,7 @@ typedef struct thttp_resp {
   char *headers; /* the header block as received, NUL-terminated */
   char *body;    /* NUL-terminated (len excludes the NUL) */
   size_t len;
-  double secs;   /* from connect to the end of the answer */
+  double secs; /* from connect to the end of the answer */
 } thttp_resp;
 
 /* Send METHOD PATH with the extra header lines (each "Name: value", NULL-

@@ -47,8 +47,8 @@
  * before ASan has initialised). */
 #define _GNU_SOURCE
 #include <dlfcn.h>
-#include <execinfo.h>
 #include <errno.h>
+#include <execinfo.h>
 #include <fcntl.h>
 #include <pthread.h>
 #include <signal.h>
@@ -66,18 +66,18 @@ extern void *__interceptor_malloc(size_t);
 extern void *__interceptor_calloc(size_t, size_t);
 extern void *__interceptor_realloc(void *, size_t);
 extern void *__interceptor_memalign(size_t, size_t);
-#define REAL_MALLOC(n) __interceptor_malloc(n)
-#define REAL_CALLOC(n, m) __interceptor_calloc(n, m)
-#define REAL_REALLOC(p, n) __interceptor_realloc(p, n)
+#define REAL_MALLOC(n)      __interceptor_malloc(n)
+#define REAL_CALLOC(n, m)   __interceptor_calloc(n, m)
+#define REAL_REALLOC(p, n)  __interceptor_realloc(p, n)
 #define REAL_MEMALIGN(a, n) __interceptor_memalign(a, n)
 #else /* glibc's allocator under the names it exports for this purpose */
 extern void *__libc_malloc(size_t);
 extern void *__libc_calloc(size_t, size_t);
 extern void *__libc_realloc(void *, size_t);
 extern void *__libc_memalign(size_t, size_t);
-#define REAL_MALLOC(n) __libc_malloc(n)
-#define REAL_CALLOC(n, m) __libc_calloc(n, m)
-#define REAL_REALLOC(p, n) __libc_realloc(p, n)
+#define REAL_MALLOC(n)      __libc_malloc(n)
+#define REAL_CALLOC(n, m)   __libc_calloc(n, m)
+#define REAL_REALLOC(p, n)  __libc_realloc(p, n)
 #define REAL_MEMALIGN(a, n) __libc_memalign(a, n)
 #endif
 
@@ -124,7 +124,7 @@ static void *thread_start(void *p) {
 #ifdef FAILMALLOC_ASAN
 extern int __interceptor_pthread_create(pthread_t *, const pthread_attr_t *, void *(*)(void *), void *);
 #define REAL_PTHREAD_CREATE __interceptor_pthread_create
-#define THREAD_COUNTS() t_started
+#define THREAD_COUNTS()     t_started
 #else
 typedef int (*pthread_create_fn)(pthread_t *, const pthread_attr_t *, void *(*)(void *), void *);
 static pthread_create_fn real_pthread_create(void) {
@@ -137,7 +137,7 @@ static pthread_create_fn real_pthread_create(void) {
   return r;
 }
 #define REAL_PTHREAD_CREATE real_pthread_create()
-#define THREAD_COUNTS() true
+#define THREAD_COUNTS()     true
 #endif
 #define MARK_STARTED() (t_started = true)
 
@@ -188,9 +188,13 @@ FM_EXPORT long failmalloc_disarm(void) {
 }
 
 /* Failures injected since the last arm (0 or 1). */
-FM_EXPORT long failmalloc_failed(void) { return atomic_load(&g_failed); }
+FM_EXPORT long failmalloc_failed(void) {
+  return atomic_load(&g_failed);
+}
 
-FM_EXPORT void failmalloc_exclude_thread(bool excluded) { t_excluded = excluded; }
+FM_EXPORT void failmalloc_exclude_thread(bool excluded) {
+  t_excluded = excluded;
+}
 
 /* Embree 3.13 does not survive an allocation failing inside a commit of a
  * scene it has built before (rtcCommitScene after a transform update, and
@@ -200,7 +204,9 @@ FM_EXPORT void failmalloc_exclude_thread(bool excluded) { t_excluded = excluded;
  * ours freed or written in between. Like the TBB worker exclusion above, a
  * limitation no caller can handle; an operation that would only measure it
  * turns this on. */
-FM_EXPORT void failmalloc_skip_embree(bool on) { atomic_store(&g_skip_embree, on); }
+FM_EXPORT void failmalloc_skip_embree(bool on) {
+  atomic_store(&g_skip_embree, on);
+}
 
 void *malloc(size_t n) {
   if (should_fail()) {
@@ -270,7 +276,9 @@ int posix_memalign(void **out, size_t align, size_t n) {
   return 0;
 }
 
-void *aligned_alloc(size_t align, size_t n) { return memalign(align, n); }
+void *aligned_alloc(size_t align, size_t n) {
+  return memalign(align, n);
+}
 
 /* ---- daemons: armed and disarmed by signals ---------------------------------- */
 

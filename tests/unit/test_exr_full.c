@@ -33,7 +33,10 @@ static char tmpdir[256];
 
 /* A film the size of the issue's: 512 x 512 luminance with a distant
  * sensor's per-pixel angles, ~5 MB of header strings. */
-enum { W = 512, H = 512 };
+enum {
+  W = 512,
+  H = 512
+};
 static float *pixels;
 static double *angles;
 
@@ -78,8 +81,7 @@ static int in_child(child_fn fn, void *user, int limit_s, double *secs) {
     _exit(v);
   }
   int st = 0;
-  while (waitpid(pid, &st, 0) < 0 && errno == EINTR) {
-  }
+  while (waitpid(pid, &st, 0) < 0 && errno == EINTR) {}
   *secs = now_s() - t0;
   if (WIFSIGNALED(st)) return 128 + WTERMSIG(st);
   return WEXITSTATUS(st);

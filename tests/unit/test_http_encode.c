@@ -331,7 +331,14 @@ static bool valid_utf8(const unsigned char *s, size_t n) {
  * echoed in detail and key: the body must stay valid UTF-8 JSON, with the
  * bad bytes replaced and the good ones (e-acute, a 4-byte emoji) kept. */
 static void test_problem_utf8(void) {
-  const char *bad = "k\x80" "a\xc3" "b\xc0\xaf" "c\xed\xa0\x80" "d\xf4\x90\x80\x80" "e\xc3\xa9" "f\xf0\x9f\x98\x80" "\xff";
+  const char *bad = "k\x80"
+                    "a\xc3"
+                    "b\xc0\xaf"
+                    "c\xed\xa0\x80"
+                    "d\xf4\x90\x80\x80"
+                    "e\xc3\xa9"
+                    "f\xf0\x9f\x98\x80"
+                    "\xff";
   char detail[256];
   snprintf(detail, sizeof detail, "unknown key '%s'", bad);
   char *t = http_problem_json(422, "RSW_ERR_INVALID", detail, "/params/x", bad, NULL, 0);
@@ -340,8 +347,15 @@ static void test_problem_utf8(void) {
   cJSON *j = cJSON_Parse(t);
   REQUIRE(j, "problem does not parse: %s", t);
   const char *key = cJSON_GetObjectItem(j, "key")->valuestring;
-  CHECK(strstr(key, "e\xc3\xa9" "f\xf0\x9f\x98\x80") != NULL, "good UTF-8 kept: %s", key);
-  CHECK(strncmp(key, "k\xef\xbf\xbd" "a\xef\xbf\xbd" "b", 9) == 0, "bad bytes become U+FFFD: %s", key);
+  CHECK(strstr(key, "e\xc3\xa9"
+                    "f\xf0\x9f\x98\x80") != NULL,
+        "good UTF-8 kept: %s", key);
+  CHECK(strncmp(key,
+                "k\xef\xbf\xbd"
+                "a\xef\xbf\xbd"
+                "b",
+                9) == 0,
+        "bad bytes become U+FFFD: %s", key);
   cJSON_Delete(j);
   free(t);
   /* The same through the service path (detail = "where: message"). */

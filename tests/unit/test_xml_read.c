@@ -663,15 +663,16 @@ static void test_value_errors_name_property(void) {
   static const char *const docs[] = {
       "<scene version=\"3.0.0\"><shape type=\"sphere\"><float name=\"radius\" value=\"x\"/></shape></scene>",
       "<scene version=\"3.0.0\"><sensor type=\"p\"><integer name=\"width\" value=\"3.5\"/></sensor></scene>",
-      "<scene version=\"3.0.0\"><shape type=\"obj\"><boolean name=\"flip_normals\" value=\"yes\"/></shape></scene>",
+      "<scene version=\"3.0.0\"><shape type=\"obj\"><boolean name=\"flip_normals\" "
+      "value=\"yes\"/></shape></scene>",
   };
   static const char *const names[] = {"radius", "width", "flip_normals"};
   for (size_t i = 0; i < 3; i++) {
     node *root;
     rsw_err err;
     rsw_status st = parse_str(docs[i], NULL, 0, &root, &err);
-    CHECK(st == RSW_ERR_INVALID && strstr(err.msg, names[i]) != NULL, "%s: status %d, message '%s'", names[i], st,
-          err.msg);
+    CHECK(st == RSW_ERR_INVALID && strstr(err.msg, names[i]) != NULL, "%s: status %d, message '%s'", names[i],
+          st, err.msg);
     node_free(root);
   }
 }

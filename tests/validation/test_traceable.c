@@ -19,7 +19,8 @@
 
 RSW_TEST_DEFINE_GLOBALS
 
-#define FILM8 "\"film\": {\"type\": \"hdrfilm\", \"width\": 8, \"height\": 8, \"rfilter\": {\"type\": \"box\"}}"
+#define FILM8                                                                                                \
+  "\"film\": {\"type\": \"hdrfilm\", \"width\": 8, \"height\": 8, \"rfilter\": {\"type\": \"box\"}}"
 #define CAM                                                                                                  \
   "\"cam\": {\"type\": \"perspective\", \"fov\": 40, \"to_world\": [{\"lookat\": {\"origin\": [0, 0, 6], "   \
   "\"target\": [0, 0, 0], \"up\": [0, 1, 0]}}], \"sampler\": {\"type\": \"independent\", \"sample_count\": " \
@@ -78,16 +79,17 @@ typedef struct load_case {
 #define JS(shape) "{\"type\": \"scene\", " CAM ", " SKY ", \"s\": " shape "}"
 #define XS(shape)                                                                                            \
   "<scene version=\"3.0.0\">\n"                                                                              \
-  "<sensor type=\"perspective\"><transform name=\"to_world\"><lookat origin=\"0,0,6\" target=\"0,0,0\" "    \
+  "<sensor type=\"perspective\"><transform name=\"to_world\"><lookat origin=\"0,0,6\" target=\"0,0,0\" "     \
   "up=\"0,1,0\"/></transform>\n"                                                                             \
-  "<film type=\"hdrfilm\"><integer name=\"width\" value=\"8\"/><integer name=\"height\" value=\"8\"/></film>" \
+  "<film type=\"hdrfilm\"><integer name=\"width\" value=\"8\"/><integer name=\"height\" "                    \
+  "value=\"8\"/></film>"                                                                                     \
   "</sensor>\n" shape "\n</scene>\n"
 
 static const load_case LOADS[] = {
     {"json projective", false,
      JS("{\"type\": \"rectangle\", \"to_world\": [1,0,0,0, 0,1,0,0, 0,0,1,0, 1,0,0,1]}"), "affine", "/s"},
-    {"json scale 1e-20", false, JS("{\"type\": \"rectangle\", \"to_world\": [{\"scale\": 1e-20}]}"), "to_world",
-     "/s"},
+    {"json scale 1e-20", false, JS("{\"type\": \"rectangle\", \"to_world\": [{\"scale\": 1e-20}]}"),
+     "to_world", "/s"},
     {"json scale 1e-30", false, JS("{\"type\": \"sphere\", \"to_world\": [{\"scale\": 1e-30}]}"), "to_world",
      "/s"},
     {"json scale 1e39", false, JS("{\"type\": \"rectangle\", \"to_world\": [{\"scale\": 1e39}]}"), "to_world",
@@ -98,7 +100,8 @@ static const load_case LOADS[] = {
      "translation", "/s"},
     {"json inf", false, JS("{\"type\": \"rectangle\", \"to_world\": [{\"scale\": 1e400}]}"), "", "/s"},
     {"xml scale 1e-30", true,
-     XS("<shape type=\"rectangle\">\n<transform name=\"to_world\"><scale value=\"1e-30\"/></transform></shape>"),
+     XS("<shape type=\"rectangle\">\n<transform name=\"to_world\"><scale "
+        "value=\"1e-30\"/></transform></shape>"),
      "to_world", "case.xml:4"},
     {"xml scale 1e-20", true,
      XS("<shape type=\"cube\">\n<transform name=\"to_world\"><scale value=\"1e-20\"/></transform></shape>"),
@@ -107,11 +110,12 @@ static const load_case LOADS[] = {
      XS("<shape type=\"cube\">\n<transform name=\"to_world\"><scale value=\"1e39\"/></transform></shape>"),
      "to_world", "case.xml:4"},
     {"xml projective", true,
-     XS("<shape type=\"rectangle\">\n<transform name=\"to_world\"><matrix value=\"1 0 0 0 0 1 0 0 0 0 1 0 1 0 "
+     XS("<shape type=\"rectangle\">\n<transform name=\"to_world\"><matrix value=\"1 0 0 0 0 1 0 0 0 0 1 0 1 "
+        "0 "
         "0 1\"/></transform></shape>"),
      "affine", "case.xml:4"},
-    {"xml radius 1e-30", true, XS("<shape type=\"sphere\">\n<float name=\"radius\" value=\"1e-30\"/></shape>"),
-     "radius", "case.xml"},
+    {"xml radius 1e-30", true,
+     XS("<shape type=\"sphere\">\n<float name=\"radius\" value=\"1e-30\"/></shape>"), "radius", "case.xml"},
     {"xml nan", true,
      XS("<shape type=\"cube\">\n<transform name=\"to_world\"><scale value=\"nan\"/></transform></shape>"), "",
      "case.xml"},
@@ -253,7 +257,8 @@ static void test_update_rolled_back(void) {
   film_image_free(&after);
   /* And the scene still takes a good update. */
   param_update ok = {.key = "box.to_world"};
-  REQUIRE(param_value_parse("[0.5,0,0,2.5, 0,0.5,0,0, 0,0,0.5,0, 0,0,0,1]", ok.key, &ok.value, &err) == RSW_OK,
+  REQUIRE(param_value_parse("[0.5,0,0,2.5, 0,0.5,0,0, 0,0,0.5,0, 0,0,0,1]", ok.key, &ok.value, &err) ==
+              RSW_OK,
           "parse");
   CHECK(scene_update(s, &ok, 1, NULL, &err) == RSW_OK, "good update: %s", err.msg);
   param_value_free(&ok.value);

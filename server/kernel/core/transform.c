@@ -209,8 +209,8 @@ bool xf_traceable(const double m[4][4], const char *what, char *buf, unsigned lo
   }
   for (int i = 0; i < 3; i++)
     if (!(fabs(m[i][3]) <= RSW_TRACE_MAX_COORD)) {
-      snprintf(buf, len, "%s: translation %g exceeds %g, the largest coordinate float32 tracing accepts", what,
-               m[i][3], RSW_TRACE_MAX_COORD);
+      snprintf(buf, len, "%s: translation %g exceeds %g, the largest coordinate float32 tracing accepts",
+               what, m[i][3], RSW_TRACE_MAX_COORD);
       return false;
     }
   /* The linear part's inverse by cofactors (A^-1 = adj(A) / det A). */

@@ -59,7 +59,7 @@ bool xf_is_similarity(const xform *t, double *scale);
 /* Largest condition number (largest over smallest scale) of a nearly
  * singular matrix: beyond it the float inverse Embree forms can be off by
  * more than half the smallest dimension (2^-24 times 1e7 = 0.6). */
-#define RSW_TRACE_MAX_COND 1e7
+#define RSW_TRACE_MAX_COND  1e7
 
 /* Check the 4x4 row-major matrix m as a shape's to_world for float32
  * tracing: finite, affine (last row exactly 0 0 0 1), translation within

@@ -705,7 +705,8 @@ rsw_status scene_read_json_limited(const char *text, size_t len, const char *sou
     char w[600];
     snprintf(w, sizeof w, "%s:%d:%d", c.source, line, colno);
     cJSON_Delete(doc);
-    return fail(&c, RSW_ERR_INVALID, w, "%s%s%sa string contains \\u0000 (NUL), which no name, id or value may hold",
+    return fail(&c, RSW_ERR_INVALID, w,
+                "%s%s%sa string contains \\u0000 (NUL), which no name, id or value may hold",
                 member[0] ? "'" : "", member, member[0] ? "': " : "");
   }
   rsw_status st = RSW_OK;

@@ -944,15 +944,15 @@ typedef struct staged {
   /* Prepared before anything is written (prepare()), so that applying
    * cannot fail; and what applying replaced, so that a failure after it
    * (Embree, the scene-wide float32 check, a sensor) puts it all back. */
-  spectrum new_spec;      /* owned copy of the new spectrum; after apply: the old one */
+  spectrum new_spec; /* owned copy of the new spectrum; after apply: the old one */
   bool spec_ready;
-  void *buf;              /* faces (uint32), normals or texcoords (float), owned */
+  void *buf; /* faces (uint32), normals or texcoords (float), owned */
   bool applied;
   double old_f;
   xform old_xf;
   vec3 old_vec;
-  void *old_buf;          /* the mesh buffer replaced (positions, faces, normals, uvs) */
-  uint32_t old_count;     /* n_verts (positions) or n_faces (faces) before */
+  void *old_buf;      /* the mesh buffer replaced (positions, faces, normals, uvs) */
+  uint32_t old_count; /* n_verts (positions) or n_faces (faces) before */
 } staged;
 
 static bool spectrum_equal(const spectrum *a, const spectrum *b) {
@@ -1085,10 +1085,11 @@ static rsw_status validate(const scene *s, staged *sg, const staged *all, size_t
         for (size_t i = 0; i + 2 < v->n; i += 3)
           w = fmax(w, v3_max_abs(xf_point(t, v3(v->arr[i], v->arr[i + 1], v->arr[i + 2]))));
         if (!(w <= RSW_TRACE_MAX_COORD))
-          return rsw_fail(err, RSW_ERR_RANGE, key,
-                          "'%s': the mesh would reach a world coordinate of %g, beyond %g, the largest float32 "
-                          "tracing accepts",
-                          key, w, RSW_TRACE_MAX_COORD);
+          return rsw_fail(
+              err, RSW_ERR_RANGE, key,
+              "'%s': the mesh would reach a world coordinate of %g, beyond %g, the largest float32 "
+              "tracing accepts",
+              key, w, RSW_TRACE_MAX_COORD);
       }
       break;
     case MB_FACES:

@@ -260,7 +260,8 @@ uint64_t sensor_film_bytes(const sensor *se, rsw_variant variant, int *channels)
   if (channels) *channels = c;
   /* Mirrors render.c's allocations (accumulator, film, angles) and the
    * encoders' copy of the film and its angles. */
-  uint64_t per_pixel = (stokes ? 7u : 4u) * 8u + 2u * 4u * (uint64_t)c + (se->ops->pixel_angles ? 2u * 16u : 0u);
+  uint64_t per_pixel =
+      (stokes ? 7u : 4u) * 8u + 2u * 4u * (uint64_t)c + (se->ops->pixel_angles ? 2u * 16u : 0u);
   uint64_t pixels = (uint64_t)(fm->width > 0 ? fm->width : 0) * (uint64_t)(fm->height > 0 ? fm->height : 0);
   if (pixels && per_pixel > UINT64_MAX / pixels) return UINT64_MAX;
   return pixels * per_pixel;

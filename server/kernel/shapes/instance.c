@@ -158,8 +158,8 @@ static rsw_status placement_check(const shape_group *g, const xform *t, const ch
   if (!xf_traceable(t->m, what, msg, sizeof msg)) return rsw_fail(err, RSW_ERR_RANGE, where, "%s", msg);
   double w = 0;
   for (int c = 0; c < 8; c++)
-    w = fmax(w, v3_max_abs(xf_point(t, v3(c & 1 ? g->hi.x : g->lo.x, c & 2 ? g->hi.y : g->lo.y,
-                                          c & 4 ? g->hi.z : g->lo.z))));
+    w = fmax(w, v3_max_abs(xf_point(
+                    t, v3(c & 1 ? g->hi.x : g->lo.x, c & 2 ? g->hi.y : g->lo.y, c & 4 ? g->hi.z : g->lo.z))));
   if (!(w <= RSW_TRACE_MAX_COORD))
     return rsw_fail(err, RSW_ERR_RANGE, where,
                     "%s: the placed group reaches a world coordinate of %g, beyond %g, the largest float32 "
@@ -302,13 +302,15 @@ static rsw_status list_parse(const char *path, float **xf_out, double **tr_out, 
         break;
       }
       if (!(v[6] >= RSW_TRACE_MIN_SCALE && v[6] <= RSW_TRACE_MAX_SCALE)) {
-        st = rsw_fail(err, RSW_ERR_RANGE, where, "radius %g is outside [%g, %g], what float32 tracing can represent",
-                      v[6], RSW_TRACE_MIN_SCALE, RSW_TRACE_MAX_SCALE);
+        st = rsw_fail(err, RSW_ERR_RANGE, where,
+                      "radius %g is outside [%g, %g], what float32 tracing can represent", v[6],
+                      RSW_TRACE_MIN_SCALE, RSW_TRACE_MAX_SCALE);
         break;
       }
       if (!(fabs(v[0]) <= RSW_TRACE_MAX_COORD && fabs(v[1]) <= RSW_TRACE_MAX_COORD &&
             fabs(v[2]) <= RSW_TRACE_MAX_COORD)) {
-        st = rsw_fail(err, RSW_ERR_RANGE, where, "a position coordinate exceeds %g, the largest float32 tracing accepts",
+        st = rsw_fail(err, RSW_ERR_RANGE, where,
+                      "a position coordinate exceeds %g, the largest float32 tracing accepts",
                       RSW_TRACE_MAX_COORD);
         break;
       }
