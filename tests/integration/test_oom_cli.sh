@@ -10,6 +10,10 @@
 #    a "raysweepd render:" message and leave no output and no temp file,
 #    or (the failure absorbed) exit 0 with the reference EXR byte for byte;
 #    never a signal, a hang (timeout 20 s), or a sanitizer report.
+#    An allocation that falls inside Embree's own code is moved to the next
+#    allocation (FAILMALLOC_SKIP_EMBREE): Embree 3.13 with oneTBB can hang
+#    in a build whose allocation fails on the calling thread (seen at about
+#    1 run in 5, timing-dependent), which no caller can recover from.
 # 2. The disk fills while the EXR header is written: a 512x512 hdistant
 #    film (~5 MB of per-pixel angles in its header) under a 64 KiB file
 #    size limit (ulimit -f, SIGXFSZ ignored: EFBIG), and, when this shell
@@ -47,7 +51,7 @@ runs=0 errors=0 absorbed=0 problems=0
 n=1
 while :; do
   rm -f rep out.exr
-  FAILMALLOC_N=$n FAILMALLOC_AT_START=1 FAILMALLOC_REPORT=rep timeout 20 "$fm" render small.json -o out.exr \
+  FAILMALLOC_N=$n FAILMALLOC_AT_START=1 FAILMALLOC_SKIP_EMBREE=1 FAILMALLOC_REPORT=rep timeout 20 "$fm" render small.json -o out.exr \
     >/dev/null 2>err
   rc=$?
   failed=$(cut -d' ' -f2 rep 2>/dev/null)

@@ -325,6 +325,8 @@ __attribute__((constructor)) static void failmalloc_init(void) {
   if (!e) return;
   g_env_n = atol(e);
   g_report = getenv("FAILMALLOC_REPORT");
+  /* FAILMALLOC_SKIP_EMBREE=1: as failmalloc_skip_embree(true). */
+  if (getenv("FAILMALLOC_SKIP_EMBREE")) atomic_store(&g_skip_embree, true);
   if (getenv("FAILMALLOC_AT_START")) {
     /* This constructor is the executable's: every library's ran before. */
     atexit(report_at_exit);
