@@ -676,9 +676,12 @@ def check_drain():
     sid = json.loads(body)["id"]
 
     def submit(n, spp):
-        ctx = [{"id": f"w{i}", "wavelength": 400 + 10 * i} for i in range(n)]
+        # hdistant_lambertian tabulates the sun over [400, 700] nm, and a job
+        # whose wavelength leaves the table is refused at submission.
+        ctx = [{"id": f"w{i}", "wavelength": 400 + 300 * i / max(n - 1, 1)} for i in range(n)]
         st, body = http(d.port, f"/v1/scenes/{sid}/jobs", d.token, "POST",
                         json.dumps({"defaults": {"spp": spp}, "contexts": ctx}).encode())
+        check(st == 202, f"drain: job submission ({n} contexts) answered {st}: {body[:300]!r}")
         return json.loads(body)["id"] if st == 202 else None
 
     def job_state(j):
