@@ -653,6 +653,24 @@ static unsigned soft_limit(const http_server *srv) {
  * found on the path as sent (cn->raw_path), so that "%2F" inside an id
  * cannot split it into two segments; the {placeholders} are decoded after
  * matching. */
+/* Every Content-Length header of a request (MHD_get_connection_values). */
+typedef struct cl_scan {
+  unsigned n;
+  const char *first;
+  bool differ;
+} cl_scan;
+
+static enum MHD_Result cl_visit(void *cls, enum MHD_ValueKind kind, const char *key, const char *value) {
+  (void)kind;
+  cl_scan *cs = cls;
+  if (!key || strcasecmp(key, MHD_HTTP_HEADER_CONTENT_LENGTH) != 0) return MHD_YES;
+  if (cs->n++ == 0)
+    cs->first = value ? value : "";
+  else if (strcmp(cs->first, value ? value : "") != 0)
+    cs->differ = true;
+  return MHD_YES;
+}
+
 static bool first_checks(struct MHD_Connection *c, conn *cn, const char *method, enum MHD_Result *ret) {
   http_server *srv = cn->srv;
   char allow[64];
@@ -717,6 +735,21 @@ static bool first_checks(struct MHD_Connection *c, conn *cn, const char *method,
     snprintf(detail, sizeof detail, "Content-Type '%.200s' is not accepted here (send %s)", ct,
              media_expected(rt->body));
     *ret = send_problem(c, cn, 415, NULL, detail, NULL, false);
+    return false;
+  }
+  /* Body framing must be unambiguous (RFC 9112 6.3): a Content-Length
+   * repeated with different values, or one beside Transfer-Encoding, is
+   * how requests are smuggled past a proxy that reads the other framing.
+   * libmicrohttpd would take one of them; refuse both and close. */
+  cl_scan cs = {0};
+  MHD_get_connection_values(c, MHD_HEADER_KIND, cl_visit, &cs);
+  if (cs.differ || (cs.n > 0 && header(c, MHD_HTTP_HEADER_TRANSFER_ENCODING))) {
+    snprintf(detail, sizeof detail,
+             cs.differ ? "Content-Length is given %u times with different values: the body's length is ambiguous"
+                       : "Content-Length and Transfer-Encoding are both given (%u): the body's length is ambiguous",
+             cs.n);
+    cn->close_after = true;
+    *ret = send_problem(c, cn, 400, NULL, detail, NULL, false);
     return false;
   }
   const char *cl = header(c, MHD_HTTP_HEADER_CONTENT_LENGTH);
