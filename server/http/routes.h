@@ -41,6 +41,8 @@ typedef struct http_resp {
   char etag[32];
   int retry_after_s;     /* > 0: Retry-After */
   bool www_authenticate; /* WWW-Authenticate: Bearer */
+  const char *cache_control; /* static string or NULL: Cache-Control */
+  const char *csp;           /* static string or NULL: Content-Security-Policy, with nosniff */
   char allow[64];        /* for 405 */
   /* Server-sent events instead of a body: server.c streams
    * service_job_next_event for sse_job after sse_after. */
@@ -66,7 +68,7 @@ struct http_req {
   /* query */
   const char *q_match, *q_class, *q_force, *q_variant;
   /* headers */
-  const char *content_type, *accept, *if_match, *idempotency_key, *last_event_id;
+  const char *content_type, *accept, *if_match, *idempotency_key, *last_event_id, *if_none_match;
   const char *body;
   size_t body_len;
   /* For a long handler (a synchronous render): start watching the
