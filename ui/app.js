@@ -106,19 +106,19 @@ async function selectScene(id) {
   for (const li of $('scenes').children) li.classList.toggle('selected', li.dataset.scene === id);
   $('scene-title').textContent = `${short(id)} · ${state.scene.variant}`;
   const sel = $('r-sensor');
-  sel.replaceChildren(...state.scene.sensors.map((s) => el('option', { value: s }, `${s} (${state.sensorTypes.get(id)?.get(s) || '?'})`)));
+  const types = state.sensorTypes.get(id) || new Map();
+  sel.replaceChildren(...state.scene.sensors.map((s) => el('option', { value: s }, types.has(s) ? `${s} (${types.get(s)})` : s)));
   $('r-wl-label').hidden = state.scene.variant !== 'mono';
 }
 
 async function loadParams(flashKey) {
   const id = state.scene.id;
-  const { data, res } = await api('GET', `/v1/scenes/${encodeURIComponent(id)}/params`);
+  const { data } = await api('GET', `/v1/scenes/${encodeURIComponent(id)}/params`);
   state.params = data.params;
   state.revision = data.revision;
   state.sensorTypes.set(id, typesFrom(data.params));
   $('params').dataset.revision = data.revision;
-  $('scene-title').textContent = `${short(id)} · ${state.scene.variant} · revision ${data.revision}` +
-    (res.headers.get('ETag') ? '' : '');
+  $('scene-title').textContent = `${short(id)} · ${state.scene.variant} · revision ${data.revision}`;
   renderParams(flashKey);
 }
 
@@ -192,6 +192,7 @@ function editParam(td, p) {
     }
     try {
       await loadParams(p.key);
+      await loadScenes(); // their revisions
     } catch (e) {
       report(e, 'reloading the parameters');
     }
@@ -296,7 +297,7 @@ function redraw() {
   const probe = displayModel(film, mode, 1);
   const white = autoWhite(probe.values) / Math.pow(2, ev);
   const model = displayModel(film, mode, white);
-  drawFilm($('film'), film, model, 384);
+  drawFilm($('film'), film, model, 320);
   $('film').dataset.ready = '1';
   drawColorbar($('colorbar'), white, model.rgb, 'radiance');
   $('colorbar-unit').textContent = model.rgb ? 'radiance (sRGB, clipped)' : 'radiance';
@@ -440,7 +441,7 @@ function renderJobs() {
       live ? el('button', { type: 'button', class: 'small danger', title: 'POST :cancel', onclick: (ev) => cancelJob(j.id, ev) }, 'cancel') : null),
     bar,
     el('div', { class: 'meta' }, `${j.renders_done}/${j.renders_total} renders` +
-      (j.renders_failed ? `, ${j.renders_failed} failed` : '') + ` · scene ${short(j.scene)}` +
+      (j.renders_failed ? `, ${j.renders_failed} failed` : '') + ` · scene ${j.scene.slice(0, 8)}…` +
       (j.seconds !== undefined ? ` · ${fmt(j.seconds)} s` : '') + (j.error ? ` · ${j.error}` : ''))));
   }
   if (!jobs.length) ul.append(el('li', { class: 'muted' }, 'no job'));

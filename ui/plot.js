@@ -139,10 +139,10 @@ export class PolarPlot {
     this.canvas = canvas;
     this.film = film;
     this.model = model;
-    this.size = 440;
-    this.R = 180;
+    this.size = 420;
+    this.R = 160; // room around the rim for the azimuth labels
     this.cx = this.size / 2;
-    this.cy = this.size / 2 + 4;
+    this.cy = this.size / 2;
     const m = film.meta, n = film.width * film.height;
     this.px = new Float64Array(n);
     this.py = new Float64Array(n);
@@ -235,7 +235,7 @@ export class PolarPlot {
     ctx.textBaseline = 'middle';
     const names = { 0: '0° (+x)', 90: '90° (+y)', 180: '180°', 270: '270°' };
     for (let a = 0; a < 360; a += 45) {
-      const t = (a * Math.PI) / 180, rr = R + 18;
+      const t = (a * Math.PI) / 180, rr = R + 22;
       ctx.fillText(names[a] || a + '°', cx + rr * Math.cos(t), cy - rr * Math.sin(t));
     }
     ctx.fillStyle = 'rgba(255,255,255,0.9)';
@@ -339,6 +339,8 @@ export class PlanePlot {
       }
     }
     this.canvas.dataset.kind = 'plane';
+    this.canvas.dataset.x0 = X(-90); // for the tests: where -90° and +90° are, in CSS pixels
+    this.canvas.dataset.x1 = X(90);
   }
 
   pick(x) {

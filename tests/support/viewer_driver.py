@@ -30,6 +30,21 @@ import zlib
 
 failed = 0
 
+# A principal plane of 9 directions from -80° to +80° in the x-z plane
+# (each triple is the direction a sub-sensor looks, into the scene), over a
+# rough conductor lit from θ = 30° in the x-z plane: the brightest
+# direction is near the specular one, +30° towards φ = 0°.
+MDISTANT_SCENE = {
+    "type": "scene", "variant": "mono",
+    "pp": {"type": "mdistant",
+           "directions": "-0.9848 0 -0.1736 -0.866 0 -0.5 -0.6428 0 -0.766 -0.342 0 -0.9397 0 0 -1 "
+                         "0.342 0 -0.9397 0.6428 0 -0.766 0.866 0 -0.5 0.9848 0 -0.1736",
+           "sampler": {"type": "independent", "sample_count": 64},
+           "film": {"type": "hdrfilm", "width": 9, "height": 1, "rfilter": {"type": "box"}}},
+    "sun": {"type": "directional", "direction": [0.5, 0, -0.866], "irradiance": 2.0},
+    "plate": {"type": "rectangle", "bsdf": {"type": "roughconductor"}},
+}
+
 
 def ok(name):
     print(f"ok   {name}", flush=True)
@@ -492,7 +507,7 @@ def run(a, profile, browser):
             return f"the API says {j['state']}"
     check("cancels a running job", job_cancel)
 
-    page.click(f'#jobs li[data-job]')  # a finished job's results beside the film, for the picture
+    page.click('#jobs li[data-state="succeeded"]')  # a finished job's results, for the picture
     page.type_into("#param-search", "bsdf")
     time.sleep(0.3)
     png = page.screenshot()
@@ -530,6 +545,44 @@ def run(a, profile, browser):
     check("with a token configured, refuses without it and works with it", token)
     if page.errors:
         fail("no script errors (token daemon)", "; ".join(map(str, page.errors[:3])))
+
+    # 7. An mdistant principal plane: value against signed zenith.
+    def plane():
+        st2, sc = http("POST", f"{base}/v1/scenes", MDISTANT_SCENE)
+        if st2 not in (200, 201):
+            return f"posting the mdistant scene: {st2} {sc}"
+        page.goto(f"{base}/ui/")
+        li = f'#scenes li[data-scene="{sc["id"]}"]'
+        if not page.wait(f"document.querySelector('{li}')", 10):
+            return "the mdistant scene is not listed"
+        page.click(li)
+        if not page.wait(f"document.getElementById('scene-title').textContent.startsWith('{sc['id'][:12]}')", 10):
+            return "the mdistant scene was not selected"
+        page.js("document.getElementById('plot').dataset.kind = ''")
+        page.type_into("#r-spp", "64")
+        page.type_into("#r-seed", "0")
+        page.click("#render")
+        if not page.wait("document.getElementById('plot').dataset.kind === 'plane'", 15):
+            return f"no principal-plane plot; banner: {page.js('document.getElementById(`banner`).textContent')}"
+        st2, film = http("POST", f"{base}/v1/scenes/{sc['id']}:render", {"spp": 64, "seed": 0})
+        k = max(range(film["width"]), key=lambda i: film["data"][i])
+        th, ph = film["meta"]["zenith_deg"][k], film["meta"]["azimuth_deg"][k]
+        signed = th if math.cos(math.radians(ph)) >= 0 else -th  # phi0 is 0 here: the first direction's
+        geo = page.js("(() => { const d = document.getElementById('plot').dataset; return {x0: +d.x0, x1: +d.x1}; })()")
+        r = page.rect("#plot")
+        png = page.screenshot(r)
+        open(art("mdistant.png"), "wb").write(png)
+        w, h, rows = png_decode(png)
+        line = [(y, x) for y in range(h) for x in range(w)
+                if max(abs(p - q) for p, q in zip(rows[y][x], (38, 130, 142))) < 30]
+        if len(line) < 50:
+            return f"the plot has no line ({len(line)} pixels of its colour)"
+        top_y, top_x = min(line)
+        want_x = geo["x0"] + (signed + 90) / 180 * (geo["x1"] - geo["x0"])
+        if abs(top_x - want_x) > 6:
+            return (f"the highest point of the line is at x {top_x}, the brightest direction (signed θ {signed:.1f}°) "
+                    f"is at x {want_x:.0f}")
+    check("plots an mdistant principal plane against signed zenith", plane)
     print(f"# browser part: {time.monotonic() - t0:.1f} s", flush=True)
 
 
