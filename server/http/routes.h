@@ -41,9 +41,11 @@ typedef struct http_resp {
   char etag[32];
   int retry_after_s;     /* > 0: Retry-After */
   bool www_authenticate; /* WWW-Authenticate: Bearer */
-  const char *cache_control; /* static string or NULL: Cache-Control */
-  const char *csp;           /* static string or NULL: Content-Security-Policy, with nosniff */
   char allow[64];        /* for 405 */
+  /* Static strings or NULL: Cache-Control, and Content-Security-Policy
+   * (sent with X-Content-Type-Options: nosniff). */
+  const char *cache_control;
+  const char *csp;
   /* Server-sent events instead of a body: server.c streams
    * service_job_next_event for sse_job after sse_after. */
   bool sse;
@@ -86,7 +88,7 @@ typedef struct http_route {
   const char *method;
   const char *path; /* template: literal segments, "{name}", "{name}:verb" */
   http_body_kind body;
-  bool public_route; /* no token needed (health) */
+  bool public_route; /* no token needed (health, the viewer's files) */
   http_handler handler;
   bool quick; /* never blocks (no service lock): runs on MHD's event loop */
 } http_route;

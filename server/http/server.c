@@ -13,7 +13,8 @@
  * PATCH commit for seconds, any service call waiting on a lock that a long
  * job submission holds). So only the two health routes run on the event
  * loop (they read one atomic and take no lock: a probe is answered however
- * busy the service is); every other handler runs on a thread of its own
+ * busy the service is), and so do the web viewer's files (copied from
+ * memory, no service call); every other handler runs on a thread of its own
  * while its connection is suspended (MHD_suspend_connection), and the
  * connection is resumed when the answer is ready. An event stream likewise
  * has a thread that waits for the job's events and resumes the connection

@@ -9,8 +9,8 @@
 
 /* The page may load its own files and talk to its own origin, nothing
  * else: no inline script, no CDN, no framing. */
-#define UI_CSP                                                                                           \
-  "default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data:; connect-src 'self'; " \
+#define UI_CSP                                                                                               \
+  "default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data:; connect-src 'self'; "      \
   "frame-ancestors 'none'; base-uri 'none'; form-action 'none'"
 
 /* Does an If-None-Match header (a list of tags, W/ prefixes allowed, or

@@ -11,7 +11,7 @@
 typedef struct http_ui_asset {
   const char *name;         /* file name under /ui/ ("index.html") */
   const char *content_type; /* from the extension */
-  const char *etag;         /* quoted strong tag: the first 96 bits of the SHA-256 in hex (fits http_resp.etag) */
+  const char *etag; /* quoted strong tag: the first 96 bits of the SHA-256 in hex (fits http_resp.etag) */
   const unsigned char *bytes;
   size_t len;
 } http_ui_asset;
