@@ -255,6 +255,9 @@ async function showFilm(film, title) {
   ch.replaceChildren(...opts.map(([v, t]) => el('option', { value: v }, t)));
   if (opts.some(([v]) => v === keep)) ch.value = keep;
   $('quantity-label').hidden = state.filmType !== 'mdistant';
+  $('film-empty').hidden = true;
+  document.querySelector('.film-row').hidden = false;
+  $('hover').textContent = 'move the pointer over the film or the plot for its values';
   $('exposure').value = 0;
   redraw();
 }
