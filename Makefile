@@ -151,7 +151,8 @@ $(BUILD)/gen/default_scene.c: proto/examples/hdistant_seed.xml
 	  sed -e 's/\\/\\\\/g' -e 's/"/\\"/g' -e 's/?/\\?/g' -e 's/^/  "/' -e 's/$$/\\n"/' $<; \
 	  echo ';'; echo 'const size_t rsw_default_scene_xml_len = sizeof rsw_default_scene_xml - 1;'; } > $@
 
-$(BUILD)/gen/ui_assets.c: $(UI_FILES) tools/embed-ui.sh
+# (ui itself too: its time changes when a file is added or removed.)
+$(BUILD)/gen/ui_assets.c: $(UI_FILES) ui tools/embed-ui.sh
 	@mkdir -p $(dir $@)
 	tools/embed-ui.sh $@ $(UI_FILES)
 
@@ -310,7 +311,7 @@ FUZZ_SECONDS ?= 60
 FUZZ ?= $(FUZZ_NAMES)
 FUZZ_SAN := -fsanitize=address,undefined -fno-sanitize-recover=undefined -fno-omit-frame-pointer
 FUZZ_CFLAGS := -std=c11 -O1 -g -fno-math-errno $(FUZZ_SAN) -fsanitize=fuzzer-no-link
-FUZZ_LIB_SRC := $(KERNEL_SRC) $(SERVICE_SRC) $(COMMON_SRC) $(filter server/http/%,$(DAEMON_SRC)) build/gen/ui_assets.c
+FUZZ_LIB_SRC := $(KERNEL_SRC) $(SERVICE_SRC) $(COMMON_SRC) $(filter server/http/%,$(DAEMON_SRC)) $(BUILD)/gen/ui_assets.c
 FUZZ_LIB_OBJ := $(FUZZ_LIB_SRC:%.c=build-fuzz/obj/%.o)
 build-fuzz/obj/%.o: %.c | deps fuzz-check-cc
 	@mkdir -p $(dir $@)
