@@ -62,7 +62,12 @@ SERVICE_SRC := $(shell find server/service -name '*.c' 2>/dev/null | sort)
 SERVICE_OBJ := $(SERVICE_SRC:%.c=$(BUILD)/obj/%.o)
 SERVICE_LIB := $(BUILD)/lib/librswservice.a
 DAEMON_SRC := server/main.c $(shell find server/http -name '*.c' 2>/dev/null | sort) $(wildcard server/serve.c)
-DAEMON_OBJ := $(DAEMON_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/obj/$(BUILD)/gen/default_scene.o
+# The web viewer's files (ui/), compiled in as byte arrays by
+# tools/embed-ui.sh; server/http/ui.c serves them. Every link of the HTTP
+# objects links this one too.
+UI_FILES := $(sort $(wildcard ui/*.html ui/*.js ui/*.css ui/*.svg ui/*.png))
+UI_OBJ := $(BUILD)/obj/$(BUILD)/gen/ui_assets.o
+DAEMON_OBJ := $(DAEMON_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/obj/$(BUILD)/gen/default_scene.o $(UI_OBJ)
 
 # failmalloc.c replaces malloc: only test_oom and raysweepd-failmalloc link it.
 TEST_SUPPORT_SRC := $(filter-out tests/support/failmalloc.c,$(wildcard tests/support/*.c))
@@ -146,6 +151,11 @@ $(BUILD)/gen/default_scene.c: proto/examples/hdistant_seed.xml
 	  sed -e 's/\\/\\\\/g' -e 's/"/\\"/g' -e 's/?/\\?/g' -e 's/^/  "/' -e 's/$$/\\n"/' $<; \
 	  echo ';'; echo 'const size_t rsw_default_scene_xml_len = sizeof rsw_default_scene_xml - 1;'; } > $@
 
+# (ui itself too: its time changes when a file is added or removed.)
+$(BUILD)/gen/ui_assets.c: $(UI_FILES) ui tools/embed-ui.sh
+	@mkdir -p $(dir $@)
+	tools/embed-ui.sh $@ $(UI_FILES)
+
 # ---- libraysweep rules ------------------------------------------------------
 $(CLIENT_A): $(CLIENT_OBJ)
 	@mkdir -p $(dir $@)
@@ -195,7 +205,7 @@ $(FAILMALLOC_OBJ): tests/support/failmalloc.c | deps
 # for the libraries to bind to them (pthread_create is not referenced by a
 # library the executable links directly: oneTBB's is found through Embree).
 FAILMALLOC_LDFLAGS := -Wl,--export-dynamic-symbol=pthread_create -Wl,--export-dynamic-symbol='failmalloc_*'
-HTTP_OBJ := $(patsubst %.c,$(BUILD)/obj/%.o,$(shell find server/http -name '*.c' 2>/dev/null | sort))
+HTTP_OBJ := $(patsubst %.c,$(BUILD)/obj/%.o,$(shell find server/http -name '*.c' 2>/dev/null | sort)) $(UI_OBJ)
 # (libraysweep's own objects only: what it shares with the daemon comes
 # from the common library.)
 $(BUILD)/tests/test_oom: $(BUILD)/obj/tests/integration/test_oom.o $(FAILMALLOC_OBJ) $(HTTP_OBJ) $(CLIENT_SRC:%.c=$(BUILD)/obj/%.o) $(TEST_SUPPORT_OBJ) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB)
@@ -290,7 +300,7 @@ $(BUILD)/plugins/%.so: tests/plugins/%.c include/raysweep/plugin.h | deps
 # ---- fuzzing (tests/fuzz, README.md "Fuzzing") -----------------------------
 # Replay builds: the harness, the standalone driver, and everything the
 # daemon links but main.c and serve.c.
-FUZZ_HTTP_OBJ := $(filter $(BUILD)/obj/server/http/%,$(DAEMON_OBJ))
+FUZZ_HTTP_OBJ := $(filter $(BUILD)/obj/server/http/%,$(DAEMON_OBJ)) $(UI_OBJ)
 $(FUZZ_REPLAY): $(BUILD)/tests/fuzz_%: $(BUILD)/obj/tests/fuzz/fuzz_%.o $(BUILD)/obj/tests/fuzz/driver.o $(FUZZ_HTTP_OBJ) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(SERVICE_LIB) $(COMMON_LIB),$^) $(SERVICE_LIB) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS) $(DAEMON_LIBS)
@@ -301,7 +311,7 @@ FUZZ_SECONDS ?= 60
 FUZZ ?= $(FUZZ_NAMES)
 FUZZ_SAN := -fsanitize=address,undefined -fno-sanitize-recover=undefined -fno-omit-frame-pointer
 FUZZ_CFLAGS := -std=c11 -O1 -g -fno-math-errno $(FUZZ_SAN) -fsanitize=fuzzer-no-link
-FUZZ_LIB_SRC := $(KERNEL_SRC) $(SERVICE_SRC) $(COMMON_SRC) $(filter server/http/%,$(DAEMON_SRC))
+FUZZ_LIB_SRC := $(KERNEL_SRC) $(SERVICE_SRC) $(COMMON_SRC) $(filter server/http/%,$(DAEMON_SRC)) $(BUILD)/gen/ui_assets.c
 FUZZ_LIB_OBJ := $(FUZZ_LIB_SRC:%.c=build-fuzz/obj/%.o)
 build-fuzz/obj/%.o: %.c | deps fuzz-check-cc
 	@mkdir -p $(dir $@)

@@ -13,8 +13,9 @@ pkgs=(
   # tests: curl and python3 (integration scripts, docs examples); python3-yaml
   # and python3-jsonschema (tests/openapi/check.py); clang-format (make
   # format, tools/check-format.sh); groff-base and man-db (the man pages are
-  # checked with groff and read back with man: test_usage, test_install)
-  curl python3 python3-yaml python3-jsonschema clang-format groff-base man-db
+  # checked with groff and read back with man: test_usage, test_install);
+  # chromium (test_viewer drives the web viewer in it, headless)
+  curl python3 python3-yaml python3-jsonschema clang-format groff-base man-db chromium
   # make test-cluster: the load balancers in front of replicas (run as the
   # current user with configurations in a temp directory), and a
   # single-node Slurm (slurmctld, slurmd, sbatch) with its authentication

@@ -42,6 +42,10 @@ typedef struct http_resp {
   int retry_after_s;     /* > 0: Retry-After */
   bool www_authenticate; /* WWW-Authenticate: Bearer */
   char allow[64];        /* for 405 */
+  /* Static strings or NULL: Cache-Control, and Content-Security-Policy
+   * (sent with X-Content-Type-Options: nosniff). */
+  const char *cache_control;
+  const char *csp;
   /* Server-sent events instead of a body: server.c streams
    * service_job_next_event for sse_job after sse_after. */
   bool sse;
@@ -66,7 +70,7 @@ struct http_req {
   /* query */
   const char *q_match, *q_class, *q_force, *q_variant;
   /* headers */
-  const char *content_type, *accept, *if_match, *idempotency_key, *last_event_id;
+  const char *content_type, *accept, *if_match, *idempotency_key, *last_event_id, *if_none_match;
   const char *body;
   size_t body_len;
   /* For a long handler (a synchronous render): start watching the
@@ -84,7 +88,7 @@ typedef struct http_route {
   const char *method;
   const char *path; /* template: literal segments, "{name}", "{name}:verb" */
   http_body_kind body;
-  bool public_route; /* no token needed (health) */
+  bool public_route; /* no token needed (health, the viewer's files) */
   http_handler handler;
   bool quick; /* never blocks (no service lock): runs on MHD's event loop */
 } http_route;

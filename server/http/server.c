@@ -13,7 +13,8 @@
  * PATCH commit for seconds, any service call waiting on a lock that a long
  * job submission holds). So only the two health routes run on the event
  * loop (they read one atomic and take no lock: a probe is answered however
- * busy the service is); every other handler runs on a thread of its own
+ * busy the service is), and so do the web viewer's files (copied from
+ * memory, no service call); every other handler runs on a thread of its own
  * while its connection is suspended (MHD_suspend_connection), and the
  * connection is resumed when the answer is ready. An event stream likewise
  * has a thread that waits for the job's events and resumes the connection
@@ -195,6 +196,11 @@ static void add_headers(struct MHD_Response *mr, const http_resp *resp) {
   if (resp->allow[0]) MHD_add_response_header(mr, MHD_HTTP_HEADER_ALLOW, resp->allow);
   if (resp->www_authenticate)
     MHD_add_response_header(mr, MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer realm=\"raysweepd\"");
+  if (resp->cache_control) MHD_add_response_header(mr, MHD_HTTP_HEADER_CACHE_CONTROL, resp->cache_control);
+  if (resp->csp) {
+    MHD_add_response_header(mr, "Content-Security-Policy", resp->csp);
+    MHD_add_response_header(mr, "X-Content-Type-Options", "nosniff");
+  }
   if (resp->retry_after_s > 0) {
     char v[16];
     snprintf(v, sizeof v, "%d", resp->retry_after_s);
@@ -715,8 +721,9 @@ static bool first_checks(struct MHD_Connection *c, conn *cn, const char *method,
       *ret = send_problem(c, cn, 400, NULL, detail, NULL, false);
       return false;
     }
-  /* Nearly full: keep the last connections for the health probes. */
-  if (!rt->public_route) {
+  /* Nearly full: keep the last connections for the health probes (not
+   * for the viewer's files, which are public too). */
+  if (strncmp(rt->path, "/v1/health/", 11) != 0) {
     pthread_mutex_lock(&srv->lock);
     bool full = srv->n_open > soft_limit(srv) || srv->n_tasks >= (int)srv->max_connections;
     unsigned open = srv->n_open;
@@ -1056,6 +1063,7 @@ static enum MHD_Result dispatch(struct MHD_Connection *c, conn *cn, const char *
       .if_match = header(c, MHD_HTTP_HEADER_IF_MATCH),
       .idempotency_key = header(c, "Idempotency-Key"),
       .last_event_id = header(c, MHD_HTTP_HEADER_LAST_EVENT_ID),
+      .if_none_match = header(c, MHD_HTTP_HEADER_IF_NONE_MATCH),
       .body = body,
       .body_len = len,
       .resp = {.status = 500},

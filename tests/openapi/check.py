@@ -12,7 +12,8 @@ python3-jsonschema):
     against the routes table of proto/API-NOTES.md;
   - every operation has a unique operationId, every 4xx/5xx response is
     application/problem+json with the Problem schema, and only the health
-    routes are exempt from the bearer scheme.
+    routes and the web viewer's static files (/ui, /ui/...) are exempt from
+    the bearer scheme.
 
 Prints `ok   <name>` or `FAIL <name>: why` per check and ends with
 `test_openapi: N passed, N failed`; exit status 1 when any check failed.
@@ -563,7 +564,7 @@ check("errors_problem_json", c_errors)
 
 
 def c_security():
-    """Bearer everywhere (the document-level requirement) except the health routes."""
+    """Bearer everywhere (the document-level requirement) except the health routes and the viewer's files."""
     problems = []
     bearer = ((raw.get("components") or {}).get("securitySchemes") or {}).get("bearer") or {}
     if bearer.get("type") != "http" or bearer.get("scheme") != "bearer":
@@ -571,7 +572,7 @@ def c_security():
     if raw.get("security") != [{"bearer": []}]:
         problems.append("the document-level security is not [{bearer: []}]")
     for path, m, op, where in operations(raw):
-        health = path.startswith("/v1/health/")
+        health = path.startswith("/v1/health/") or path == "/ui" or path.startswith("/ui/")
         if health and op.get("security") != []:
             problems.append(f"{where} must have security: []")
         if not health and "security" in op:

@@ -415,6 +415,20 @@ for name, body, st, chk, note, ctype in [
 ]:
     add("scene_" + name, st, chk, req("POST", SC, body, ctype=ctype), note)
 
+# ---- 8. the web viewer's files (/ui/: no token needed) -----------------------
+add("ui_index_no_auth", "200", "<html", req("GET", "/ui/", auth=False))
+add("ui_redirect", "301", "-", req("GET", "/ui", auth=False))
+add("ui_head_file", "200", "-", req("HEAD", "/ui/app.js", auth=False))
+add("ui_if_none_match_garbage", "200", "import", req("GET", "/ui/app.js", auth=False,
+                                                    headers=['If-None-Match: ,,W/, "", *x, W/"zz"  ,']))
+add("ui_if_none_match_star", "304", "-", req("GET", "/ui/app.js", auth=False, headers=["If-None-Match: *"]))
+add("ui_unknown_file", "404", "nothing.js", req("GET", "/ui/nothing.js", auth=False))
+add("ui_encoded_dotdot", "404", "-", req("GET", "/ui/..%2F..%2Fetc%2Fpasswd", auth=False))
+add("ui_dotdot_segments", "401|404", "-", req("GET", "/ui/../v1/scenes", auth=False))
+add("ui_file_nul", "400", "-", req("GET", "/ui/app.js%00.css", auth=False))
+add("ui_subdirectory", "401|404", "-", req("GET", "/ui/a/b.js", auth=False))
+add("ui_post", "405", "GET", req("POST", "/ui/app.js", "{}"))
+
 # Which branch fixes a case that fails on main today, and why some
 # expectations allow a success (notes in expect.tsv).
 LENIENT = "libmicrohttpd 0.9.75 accepts it (harmless here; RFC 9112 would say 400)"

@@ -1,0 +1,354 @@
+// Drawing films: tone mapping, a false-colour map, the colour bar, the
+// polar plot of a hemisphere (hdistant) and the line plot of a principal
+// plane (mdistant). Plain 2-D canvas.
+
+// viridis (matplotlib's default map), 9 stops, interpolated linearly.
+const VIRIDIS = [
+  [68, 1, 84], [72, 40, 120], [62, 73, 137], [49, 104, 142], [38, 130, 142],
+  [31, 158, 137], [53, 183, 121], [110, 206, 88], [253, 231, 37],
+];
+
+export function viridis(t) {
+  t = Math.min(1, Math.max(0, t));
+  const x = t * (VIRIDIS.length - 1);
+  const i = Math.min(VIRIDIS.length - 2, Math.floor(x));
+  const f = x - i;
+  const a = VIRIDIS[i], b = VIRIDIS[i + 1];
+  return [a[0] + (b[0] - a[0]) * f, a[1] + (b[1] - a[1]) * f, a[2] + (b[2] - a[2]) * f];
+}
+
+// Linear [0,1] → 8-bit sRGB (IEC 61966-2-1).
+function srgb8(v) {
+  if (!(v > 0)) return 0;
+  if (v >= 1) return 255;
+  const e = v <= 0.0031308 ? 12.92 * v : 1.055 * Math.pow(v, 1 / 2.4) - 0.055;
+  return Math.round(e * 255);
+}
+
+// The film in display form. mode: 'rgb' (the three channels tone-mapped
+// to sRGB) or a channel index / 'lum' shown in false colour. Returns
+// {values: Float64Array per pixel (the displayed quantity), color(k) →
+// [r,g,b] for pixel k}, given white = the value shown at full scale.
+export function displayModel(film, mode, white) {
+  const n = film.width * film.height, c = film.channels.length, d = film.data;
+  const values = new Float64Array(n);
+  const rgbMode = mode === 'rgb' && c === 3;
+  for (let k = 0; k < n; k++) {
+    if (mode === 'lum' || rgbMode) {
+      values[k] = c === 3 ? 0.212671 * d[3 * k] + 0.71516 * d[3 * k + 1] + 0.072169 * d[3 * k + 2] : d[k * c];
+    } else {
+      values[k] = d[k * c + (mode | 0)];
+    }
+  }
+  const inv = white > 0 ? 1 / white : 0;
+  const color = rgbMode
+    ? (k) => [srgb8(d[3 * k] * inv), srgb8(d[3 * k + 1] * inv), srgb8(d[3 * k + 2] * inv)]
+    : (k) => viridis(values[k] * inv);
+  return { values, color, rgb: rgbMode };
+}
+
+// A robust full scale: the 99.5th percentile of the finite values > 0
+// (the maximum for small films), or 1 when there are none.
+export function autoWhite(values) {
+  const v = Array.from(values).filter((x) => Number.isFinite(x) && x > 0).sort((a, b) => a - b);
+  if (!v.length) return 1;
+  return v[Math.min(v.length - 1, Math.floor(0.995 * v.length))];
+}
+
+export function drawFilm(canvas, film, model, maxCss) {
+  canvas.width = film.width;
+  canvas.height = film.height;
+  const ctx = canvas.getContext('2d');
+  const img = ctx.createImageData(film.width, film.height);
+  for (let k = 0; k < film.width * film.height; k++) {
+    const [r, g, b] = model.color(k);
+    img.data[4 * k] = r;
+    img.data[4 * k + 1] = g;
+    img.data[4 * k + 2] = b;
+    img.data[4 * k + 3] = 255;
+  }
+  ctx.putImageData(img, 0, 0);
+  // Whole screen pixels per film pixel where that fits, so pixels stay square.
+  const fit = maxCss / Math.max(film.width, film.height);
+  const scale = fit >= 1 ? Math.floor(fit) : fit;
+  canvas.style.width = film.width * scale + 'px';
+  canvas.style.height = Math.max(film.height * scale, film.height === 1 ? 28 : 0) + 'px';
+}
+
+// Nice tick values for [lo, hi] (about n of them).
+export function ticks(lo, hi, n) {
+  if (!(hi > lo)) return [lo];
+  const raw = (hi - lo) / n, mag = Math.pow(10, Math.floor(Math.log10(raw)));
+  const step = [1, 2, 2.5, 5, 10].map((s) => s * mag).find((s) => s >= raw) || raw;
+  const out = [];
+  for (let v = Math.ceil(lo / step) * step; v <= hi + step * 1e-9; v += step) out.push(Math.abs(v) < step * 1e-9 ? 0 : v);
+  return out;
+}
+
+export function fmt(v) {
+  if (!Number.isFinite(v)) return String(v);
+  const a = Math.abs(v);
+  if (a !== 0 && (a < 1e-3 || a >= 1e5)) return v.toExponential(3);
+  return String(Number(v.toPrecision(5)));
+}
+
+function hiDpi(canvas, w, h) {
+  const dpr = window.devicePixelRatio || 1;
+  canvas.width = Math.round(w * dpr);
+  canvas.height = Math.round(h * dpr);
+  canvas.style.width = w + 'px';
+  canvas.style.height = h + 'px';
+  const ctx = canvas.getContext('2d');
+  ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
+  return ctx;
+}
+
+// The colour bar from 0 to white: the ramp the film uses, with ticks.
+export function drawColorbar(canvas, white, rgb, unit) {
+  const W = 78, H = 260, x0 = 6, bw = 16, y0 = 8, y1 = H - 8;
+  const ctx = hiDpi(canvas, W, H);
+  ctx.clearRect(0, 0, W, H);
+  for (let y = y0; y <= y1; y++) {
+    const t = (y1 - y) / (y1 - y0);
+    const c = rgb ? [srgb8(t), srgb8(t), srgb8(t)] : viridis(t);
+    ctx.fillStyle = `rgb(${c[0]},${c[1]},${c[2]})`;
+    ctx.fillRect(x0, y, bw, 1.5);
+  }
+  ctx.strokeStyle = '#888';
+  ctx.strokeRect(x0 + 0.5, y0 + 0.5, bw, y1 - y0);
+  ctx.fillStyle = '#1d232b';
+  ctx.font = '11px system-ui, sans-serif';
+  ctx.textBaseline = 'middle';
+  for (const v of ticks(0, white, 5)) {
+    const y = y1 - (v / white) * (y1 - y0);
+    ctx.fillRect(x0 + bw, y, 4, 1);
+    ctx.fillText(fmt(v), x0 + bw + 7, y);
+  }
+  canvas.title = `0 … ${fmt(white)} ${unit} (values above are clipped)`;
+}
+
+// ---- polar plot of a hemisphere --------------------------------------------
+// Zenith θ as the radius (linear, 0° at the centre, 90° on the rim) and
+// azimuth φ as the polar angle, 0° to the right (+x, east) and growing
+// counter-clockwise (+y, north, at the top): Eradiate's east_right
+// convention, as matplotlib's polar axes draw it. Each point of the disk
+// takes the film pixel whose centre direction (the film's own zenith_deg,
+// azimuth_deg) is nearest on the plot.
+export class PolarPlot {
+  constructor(canvas, film, model) {
+    this.canvas = canvas;
+    this.film = film;
+    this.model = model;
+    this.size = 420;
+    this.R = 160; // room around the rim for the azimuth labels
+    this.cx = this.size / 2;
+    this.cy = this.size / 2;
+    const m = film.meta, n = film.width * film.height;
+    this.px = new Float64Array(n);
+    this.py = new Float64Array(n);
+    for (let k = 0; k < n; k++) {
+      const r = m.zenith_deg[k] / 90, phi = (m.azimuth_deg[k] * Math.PI) / 180;
+      this.px[k] = r * Math.cos(phi);
+      this.py[k] = r * Math.sin(phi);
+    }
+    // A uniform grid over [-1,1]² of the pixel centres, for nearest look-ups.
+    this.G = Math.max(1, Math.ceil(Math.sqrt(n)));
+    this.cells = Array.from({ length: this.G * this.G }, () => []);
+    for (let k = 0; k < n; k++) this.cells[this.cell(this.px[k]) + this.G * this.cell(this.py[k])].push(k);
+  }
+
+  cell(u) {
+    return Math.min(this.G - 1, Math.max(0, Math.floor(((u + 1) / 2) * this.G)));
+  }
+
+  // The film pixel nearest to plot point (u, v) in unit-disk coordinates.
+  nearest(u, v) {
+    const G = this.G, cu = this.cell(u), cv = this.cell(v);
+    let best = -1, bd = Infinity;
+    for (let ring = 0; ring < G; ring++) {
+      for (let j = cv - ring; j <= cv + ring; j++) {
+        if (j < 0 || j >= G) continue;
+        for (let i = cu - ring; i <= cu + ring; i++) {
+          if (i < 0 || i >= G || (Math.abs(i - cu) !== ring && Math.abs(j - cv) !== ring)) continue;
+          for (const k of this.cells[i + G * j]) {
+            const d = (this.px[k] - u) ** 2 + (this.py[k] - v) ** 2;
+            if (d < bd) (bd = d), (best = k);
+          }
+        }
+      }
+      // Anything in the next ring is at least `ring` cells away.
+      const reach = (ring * 2) / G;
+      if (best >= 0 && reach * reach >= bd) break;
+    }
+    return best;
+  }
+
+  draw() {
+    const { size, R, cx, cy } = this;
+    const ctx = hiDpi(this.canvas, size, size);
+    const dpr = window.devicePixelRatio || 1;
+    ctx.clearRect(0, 0, size, size);
+    // The disk, one device pixel at a time.
+    const D = Math.ceil(2 * R * dpr);
+    const off = document.createElement('canvas');
+    off.width = off.height = D;
+    const octx = off.getContext('2d');
+    const img = octx.createImageData(D, D);
+    for (let j = 0; j < D; j++) {
+      const v = 1 - (2 * (j + 0.5)) / D; // up is +v
+      for (let i = 0; i < D; i++) {
+        const u = (2 * (i + 0.5)) / D - 1;
+        if (u * u + v * v > 1) continue;
+        const k = this.nearest(u, v);
+        if (k < 0) continue;
+        const c = this.model.color(k), o = 4 * (i + D * j);
+        img.data[o] = c[0];
+        img.data[o + 1] = c[1];
+        img.data[o + 2] = c[2];
+        img.data[o + 3] = 255;
+      }
+    }
+    octx.putImageData(img, 0, 0);
+    ctx.drawImage(off, cx - R, cy - R, 2 * R, 2 * R);
+    // Grid: zenith rings every 30°, azimuth spokes every 45°.
+    ctx.strokeStyle = 'rgba(255,255,255,0.55)';
+    ctx.lineWidth = 1;
+    for (const th of [30, 60]) {
+      ctx.beginPath();
+      ctx.arc(cx, cy, (R * th) / 90, 0, 2 * Math.PI);
+      ctx.stroke();
+    }
+    for (let a = 0; a < 360; a += 45) {
+      const t = (a * Math.PI) / 180;
+      ctx.beginPath();
+      ctx.moveTo(cx, cy);
+      ctx.lineTo(cx + R * Math.cos(t), cy - R * Math.sin(t));
+      ctx.stroke();
+    }
+    ctx.strokeStyle = '#555';
+    ctx.beginPath();
+    ctx.arc(cx, cy, R, 0, 2 * Math.PI);
+    ctx.stroke();
+    ctx.fillStyle = '#1d232b';
+    ctx.font = '11px system-ui, sans-serif';
+    ctx.textAlign = 'center';
+    ctx.textBaseline = 'middle';
+    const names = { 0: '0° (+x)', 90: '90° (+y)', 180: '180°', 270: '270°' };
+    for (let a = 0; a < 360; a += 45) {
+      const t = (a * Math.PI) / 180, rr = R + 22;
+      ctx.fillText(names[a] || a + '°', cx + rr * Math.cos(t), cy - rr * Math.sin(t));
+    }
+    ctx.fillStyle = 'rgba(255,255,255,0.9)';
+    ctx.textAlign = 'left';
+    for (const th of [30, 60, 90]) ctx.fillText(`θ ${th}°`, cx + (R * th) / 90 + 3, cy + 8);
+    // For the tests and the hover read-out: where the plot is, in CSS pixels.
+    this.canvas.dataset.cx = cx;
+    this.canvas.dataset.cy = cy;
+    this.canvas.dataset.r = R;
+    this.canvas.dataset.kind = 'polar';
+  }
+
+  // Film pixel under a pointer at CSS (x, y), or -1 outside the disk.
+  pick(x, y) {
+    const u = (x - this.cx) / this.R, v = (this.cy - y) / this.R;
+    return u * u + v * v > 1 ? -1 : this.nearest(u, v);
+  }
+}
+
+// ---- principal plane: value against signed viewing zenith ------------------
+// Directions whose azimuth lies within 90° of φ₀ (the azimuth of the first
+// off-nadir pixel) get +θ, the others -θ: the usual BRF plot of a
+// principal plane, -90° … 90°.
+export class PlanePlot {
+  constructor(canvas, film, series, unit) {
+    this.canvas = canvas;
+    this.film = film;
+    this.series = series; // [{name, color, values: per pixel}]
+    this.unit = unit;
+    const m = film.meta, n = film.width * film.height;
+    let phi0 = null;
+    for (let k = 0; k < n && phi0 === null; k++) if (m.zenith_deg[k] > 1e-6) phi0 = m.azimuth_deg[k];
+    this.phi0 = phi0 || 0;
+    this.x = new Float64Array(n);
+    this.inPlane = true;
+    for (let k = 0; k < n; k++) {
+      const d = ((m.azimuth_deg[k] - this.phi0) * Math.PI) / 180;
+      this.x[k] = Math.cos(d) >= 0 ? m.zenith_deg[k] : -m.zenith_deg[k];
+      if (m.zenith_deg[k] > 1e-6 && Math.abs(Math.sin(d)) > 0.02) this.inPlane = false;
+    }
+    this.order = Array.from({ length: n }, (_, k) => k).sort((a, b) => this.x[a] - this.x[b]);
+  }
+
+  draw() {
+    const W = 560, H = 360, L = 64, Rm = 16, T = 16, B = 44;
+    this.box = { L, T, w: W - L - Rm, h: H - T - B };
+    const ctx = hiDpi(this.canvas, W, H);
+    ctx.clearRect(0, 0, W, H);
+    let hi = 0;
+    for (const s of this.series) for (const v of s.values) if (Number.isFinite(v)) hi = Math.max(hi, v);
+    if (!(hi > 0)) hi = 1;
+    const yt = ticks(0, hi * 1.05, 5);
+    this.ymax = yt[yt.length - 1] < hi ? hi * 1.05 : yt[yt.length - 1];
+    const X = (x) => L + ((x + 90) / 180) * this.box.w, Y = (y) => T + this.box.h * (1 - y / this.ymax);
+    this.X = X;
+    this.Y = Y;
+    ctx.font = '11px system-ui, sans-serif';
+    ctx.strokeStyle = '#e3e6ea';
+    ctx.fillStyle = '#1d232b';
+    ctx.textAlign = 'center';
+    ctx.textBaseline = 'top';
+    for (let x = -90; x <= 90; x += 30) {
+      ctx.beginPath();
+      ctx.moveTo(X(x), T);
+      ctx.lineTo(X(x), T + this.box.h);
+      ctx.stroke();
+      ctx.fillText(x + '°', X(x), T + this.box.h + 5);
+    }
+    ctx.textAlign = 'right';
+    ctx.textBaseline = 'middle';
+    for (const y of yt) {
+      if (y > this.ymax) continue;
+      ctx.beginPath();
+      ctx.moveTo(L, Y(y));
+      ctx.lineTo(L + this.box.w, Y(y));
+      ctx.stroke();
+      ctx.fillText(fmt(y), L - 6, Y(y));
+    }
+    ctx.strokeStyle = '#555';
+    ctx.strokeRect(L + 0.5, T + 0.5, this.box.w, this.box.h);
+    ctx.textAlign = 'center';
+    ctx.textBaseline = 'bottom';
+    ctx.fillText(`signed viewing zenith θ (°), + towards φ = ${fmt(this.phi0)}°`, L + this.box.w / 2, H - 2);
+    ctx.save();
+    ctx.translate(12, T + this.box.h / 2);
+    ctx.rotate(-Math.PI / 2);
+    ctx.textBaseline = 'middle';
+    ctx.fillText(this.unit, 0, 0);
+    ctx.restore();
+    for (const s of this.series) {
+      ctx.strokeStyle = s.color;
+      ctx.fillStyle = s.color;
+      ctx.lineWidth = 1.6;
+      ctx.beginPath();
+      this.order.forEach((k, i) => (i ? ctx.lineTo(X(this.x[k]), Y(s.values[k])) : ctx.moveTo(X(this.x[k]), Y(s.values[k]))));
+      ctx.stroke();
+      for (const k of this.order) {
+        ctx.beginPath();
+        ctx.arc(X(this.x[k]), Y(s.values[k]), 2.5, 0, 2 * Math.PI);
+        ctx.fill();
+      }
+    }
+    this.canvas.dataset.kind = 'plane';
+    this.canvas.dataset.x0 = X(-90); // for the tests: where -90° and +90° are, in CSS pixels
+    this.canvas.dataset.x1 = X(90);
+  }
+
+  pick(x) {
+    let best = -1, bd = Infinity;
+    for (let k = 0; k < this.x.length; k++) {
+      const d = Math.abs(this.X(this.x[k]) - x);
+      if (d < bd) (bd = d), (best = k);
+    }
+    return bd < 12 ? best : -1;
+  }
+}
