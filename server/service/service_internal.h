@@ -11,6 +11,7 @@
 
 #include "../kernel/scene/params.h"
 #include "../kernel/scene/scene.h"
+#include "dataset_nc.h"
 #include "service.h"
 
 /* A private copy of a resident scene for one render at a time
@@ -132,6 +133,11 @@ typedef struct job {
   char error[600];
   bool deleted;
   uint64_t result_reserve; /* bytes counted in svc->result_committed */
+  /* For the dataset (dataset.c): the contexts' coords (columns, n == 0
+   * when none), the job seed, the scene's variant. */
+  nc_coords coords;
+  uint64_t seed;
+  rsw_variant variant;
 } job;
 
 struct service {
