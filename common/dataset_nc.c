@@ -126,7 +126,7 @@ rsw_status nc_coords_build(const void *const *coords_json, size_t n, const char 
     snprintf(w, sizeof w, "%s/%zu/coords", prefix, i);
     if (!cJSON_IsObject(o))
       return rsw_fail(err, RSW_ERR_TYPE, w, "coords must be an object {name: number or string}");
-    if (!first) first = o, first_i = i;
+    if (!first && o->child) first = o, first_i = i;
   }
   if (!first) {
     *out = c;
@@ -163,8 +163,8 @@ rsw_status nc_coords_build(const void *const *coords_json, size_t n, const char 
   }
   for (size_t i = 0; i < n && !st; i++) {
     const cJSON *o = coords_json[i];
-    if (!o) {
-      snprintf(w, sizeof w, "%s/%zu", prefix, i);
+    if (!o || !o->child) {
+      snprintf(w, sizeof w, o ? "%s/%zu/coords" : "%s/%zu", prefix, i);
       st = rsw_fail(err, RSW_ERR_MISSING, w,
                     "this context has no coords; every context of a job with coords needs them (%s...)",
                     c.c[0].name);
