@@ -59,8 +59,9 @@ static const cli_command commands[] = {
     {"job", "cancel", "ID", "cancel a job", cli_opts_none, 1, 1, true, cmd_job_cancel},
     {"job", "rm", "ID", "delete a job and its results (cancels it if running)", cli_opts_none, 1, 1, true,
      cmd_job_rm},
-    {"fetch", NULL, "JOB CONTEXT SENSOR -o FILE.exr|.npy|.json", "download one film of a job", cli_opts_fetch,
-     3, 3, true, cmd_fetch},
+    {"fetch", NULL, "JOB [CONTEXT SENSOR] -o FILE.exr|.npy|.json|.nc",
+     "download one film of a job, or (.nc) the whole job as one dataset", cli_opts_fetch, 1, 3, true,
+     cmd_fetch},
 };
 #define N_COMMANDS (sizeof commands / sizeof commands[0])
 
