@@ -532,6 +532,16 @@ static void cell_start(const writer *w, size_t ctx, size_t *start) {
   for (size_t k = 0; k < w->n_cdims; k++) start[k] = w->ax[k].pos[ctx];
 }
 
+/* An angle as every writer's file holds it: to 9 significant digits,
+ * the precision of the JSON film meta (zenith_deg, azimuth_deg) that
+ * libraysweep builds its datasets from, so the daemon's dataset and one
+ * built on the client from the same films are bitwise equal. */
+static double canonical_angle(double a) {
+  char buf[40];
+  snprintf(buf, sizeof buf, "%.9g", a);
+  return strtod(buf, NULL);
+}
+
 static rsw_status write_all(writer *w, rsw_err *err) {
   const nc_dataset *d = w->d;
   int ncid = w->ncid;
@@ -760,7 +770,8 @@ static rsw_status write_all(writer *w, rsw_err *err) {
         free(sv);
         return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
       }
-      for (size_t p = 0; p < np; p++) za[p] = sh->angles[2 * p], za[np + p] = sh->angles[2 * p + 1];
+      for (size_t p = 0; p < np; p++)
+        za[p] = canonical_angle(sh->angles[2 * p]), za[np + p] = canonical_angle(sh->angles[2 * p + 1]);
       int rc = nc_put_var_double(ncid, v->vza, za);
       if (rc == NC_NOERR) rc = nc_put_var_double(ncid, v->vaa, za + np);
       free(za);
@@ -799,7 +810,8 @@ static rsw_status write_all(writer *w, rsw_err *err) {
           free(sv);
           return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
         }
-        for (size_t p = 0; p < np; p++) za[p] = f->angles[2 * p], za[np + p] = f->angles[2 * p + 1];
+        for (size_t p = 0; p < np; p++)
+          za[p] = canonical_angle(f->angles[2 * p]), za[np + p] = canonical_angle(f->angles[2 * p + 1]);
         int rc = nc_put_vara_double(ncid, v->vza, start, count, za);
         if (rc == NC_NOERR) rc = nc_put_vara_double(ncid, v->vaa, start, count, za + np);
         free(za);

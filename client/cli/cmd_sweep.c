@@ -210,13 +210,18 @@ static int build_grid(const cli_ctx *ctx, const grid_axis *g, size_t n_axes, siz
     sweep_item *it = items_push(l);
     if (!it) return cli_fail(ctx, CLI_IO, "out of memory");
     make_id(it->id, w, i);
-    size_t rest = i;
+    size_t rest = i, ks[MAX_GRIDS];
     for (size_t a = n_axes; a-- > 0;) {
-      size_t k = rest % g[a].n;
+      ks[a] = rest % g[a].n;
       rest /= g[a].n;
-      double v = g[a].start + (double)k * g[a].step;
-      if (!it->coords && !(it->coords = cJSON_CreateObject())) return cli_fail(ctx, CLI_IO, "out of memory");
-      if (!cJSON_AddNumberToObject(it->coords, g[a].coord, v)) return cli_fail(ctx, CLI_IO, "out of memory");
+    }
+    /* The coords in axis order (the dataset's dimensions follow it). */
+    if (n_axes && !(it->coords = cJSON_CreateObject())) return cli_fail(ctx, CLI_IO, "out of memory");
+    for (size_t a = 0; a < n_axes; a++)
+      if (!cJSON_AddNumberToObject(it->coords, g[a].coord, g[a].start + (double)ks[a] * g[a].step))
+        return cli_fail(ctx, CLI_IO, "out of memory");
+    for (size_t a = n_axes; a-- > 0;) {
+      double v = g[a].start + (double)ks[a] * g[a].step;
       if (g[a].is_wavelength) {
         it->has_wl = true, it->wl = v;
       } else {
