@@ -183,7 +183,8 @@ int cmd_fetch(cli_ctx *ctx, const cli_args *a) {
     if ((rc = output_format(ctx, out, &fmt))) return rc;
   }
   if (cli_has(a, "--partial")) return cli_usage(ctx, "--partial applies to a dataset (-o FILE.nc)");
-  if (a->n_pos != 3) return cli_usage(ctx, "one film needs JOB CONTEXT SENSOR (or -o FILE.nc for the dataset)");
+  if (a->n_pos != 3)
+    return cli_usage(ctx, "one film needs JOB CONTEXT SENSOR (or -o FILE.nc for the dataset)");
   rsw_film *film = NULL;
   double t0 = cli_now();
   rsw_status s = rsw_job_fetch(ctx->client, a->pos[0], a->pos[1], a->pos[2], &film);

@@ -44,7 +44,8 @@ const cli_opt cli_opts_sweep[] = {
     {NULL},
 };
 const cli_opt cli_opts_merge[] = {
-    {"-o", "DIR", false, "output directory (with DIR/dataset.nc when the shards were swept with --format nc)"},
+    {"-o", "DIR", false,
+     "output directory (with DIR/dataset.nc when the shards were swept with --format nc)"},
     {"--partial", NULL, false, "merge even when contexts are missing (they are listed; exit 0)"},
     {NULL},
 };
@@ -65,7 +66,7 @@ typedef struct sweep_item {
 } sweep_item;
 
 typedef struct grid_axis {
-  char *name; /* owned */
+  char *name;     /* owned */
   char coord[72]; /* the coord it fills: wavelength, or the key's last name */
   bool is_wavelength;
   double start, step;
@@ -353,7 +354,8 @@ static int read_contexts(const cli_ctx *ctx, const char *path, size_t shard_i, s
         it->seed = (long long)f->valuedouble;
       } else {
         rc = cli_usage(
-            ctx, "%s:%zu: unknown field '%s' (a Context has id, wavelength, params, sensors, spp, seed, coords)",
+            ctx,
+            "%s:%zu: unknown field '%s' (a Context has id, wavelength, params, sensors, spp, seed, coords)",
             path, line, k);
         break;
       }
@@ -1690,7 +1692,8 @@ int cmd_merge(cli_ctx *ctx, const cli_args *a) {
     const cJSON *seed = NULL;
     for (size_t i = 0; i < a->n_pos && !seed; i++)
       if (in[i].has_manifest) seed = cJSON_GetObjectItemCaseSensitive(in[i].m.root, "seed");
-    rc = write_dataset(ctx, out, e, n, json_is_int(seed, 0), json_is_int(seed, 0) ? (long long)seed->valuedouble : 0);
+    rc = write_dataset(ctx, out, e, n, json_is_int(seed, 0),
+                       json_is_int(seed, 0) ? (long long)seed->valuedouble : 0);
   }
   bool legacy = false;
   for (size_t i = 0; i < a->n_pos; i++) legacy = legacy || !in[i].has_manifest;

@@ -129,16 +129,19 @@ rsw_status rsw_dataset_set_seed(rsw_dataset *d, long long seed) {
   return RSW_OK;
 }
 
-rsw_status rsw_dataset_add_context(rsw_dataset *d, const char *id, double wavelength, const char *coords_json) {
+rsw_status rsw_dataset_add_context(rsw_dataset *d, const char *id, double wavelength,
+                                   const char *coords_json) {
   if (!d) return RSW_ERR_INVALID;
   d->error[0] = '\0';
-  if (!id || !*id || strlen(id) > 64) return ds_fail(d, RSW_ERR_INVALID, "a context id needs 1 to 64 characters");
+  if (!id || !*id || strlen(id) > 64)
+    return ds_fail(d, RSW_ERR_INVALID, "a context id needs 1 to 64 characters");
   cJSON *coords = NULL;
   if (coords_json) {
     coords = cJSON_Parse(coords_json);
     if (!cJSON_IsObject(coords)) {
       cJSON_Delete(coords);
-      return ds_fail(d, RSW_ERR_PARSE, "context '%s': coords must be a JSON object {name: number or string}", id);
+      return ds_fail(d, RSW_ERR_PARSE, "context '%s': coords must be a JSON object {name: number or string}",
+                     id);
     }
   }
   if (d->n == d->cap) {
@@ -189,7 +192,8 @@ static bool meta_u64(const cJSON *meta, const char *key, uint64_t *out) {
 }
 
 /* meta's string member key equals *kept, or sets it when still unset. */
-static rsw_status same_string(rsw_dataset *d, const cJSON *meta, const char *key, char **kept, const char *what) {
+static rsw_status same_string(rsw_dataset *d, const cJSON *meta, const char *key, char **kept,
+                              const char *what) {
   const char *v = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(meta, key));
   if (!v) return RSW_OK;
   if (!*kept) return (*kept = strdup(v)) ? RSW_OK : ds_fail(d, RSW_ERR_NOMEM, "out of memory");
@@ -198,7 +202,8 @@ static rsw_status same_string(rsw_dataset *d, const cJSON *meta, const char *key
   return RSW_OK;
 }
 
-rsw_status rsw_dataset_add_film(rsw_dataset *d, const char *context, const char *sensor, const rsw_film *film) {
+rsw_status rsw_dataset_add_film(rsw_dataset *d, const char *context, const char *sensor,
+                                const rsw_film *film) {
   if (!d) return RSW_ERR_INVALID;
   d->error[0] = '\0';
   if (!context || !sensor || !*sensor || !film)
@@ -207,7 +212,8 @@ rsw_status rsw_dataset_add_film(rsw_dataset *d, const char *context, const char 
   snprintf(what, sizeof what, "film %.64s/%.256s", context, sensor);
   size_t ci;
   if (!find_context(d, context, &ci))
-    return ds_fail(d, RSW_ERR_INVALID, "%s: no context '%s' was added (rsw_dataset_add_context)", what, context);
+    return ds_fail(d, RSW_ERR_INVALID, "%s: no context '%s' was added (rsw_dataset_add_context)", what,
+                   context);
   if (d->nf == d->capf) {
     size_t cap = d->capf ? 2 * d->capf : 64;
     ds_film *nf = realloc(d->films, cap * sizeof *nf);
@@ -226,7 +232,8 @@ rsw_status rsw_dataset_add_film(rsw_dataset *d, const char *context, const char 
   f.data = malloc((ns ? ns : 1) * sizeof *f.data);
   if (!f.sensor || !f.names || !f.data) s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");
   for (int i = 0; !s && i < f.channels; i++)
-    if (!(f.names[i] = strdup(rsw_film_channel_name(film, i)))) s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");
+    if (!(f.names[i] = strdup(rsw_film_channel_name(film, i))))
+      s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");
   if (!s) memcpy(f.data, rsw_film_data(film), ns * sizeof *f.data);
   uint64_t spp = 0, rev;
   if (!s && cJSON_IsObject(meta)) {
@@ -275,7 +282,8 @@ rsw_status rsw_dataset_add_film(rsw_dataset *d, const char *context, const char 
   return RSW_OK;
 }
 
-rsw_status rsw_dataset_add_film_file(rsw_dataset *d, const char *context, const char *sensor, const char *path) {
+rsw_status rsw_dataset_add_film_file(rsw_dataset *d, const char *context, const char *sensor,
+                                     const char *path) {
   if (!d) return RSW_ERR_INVALID;
   d->error[0] = '\0';
   if (!path) return ds_fail(d, RSW_ERR_INVALID, "no film path");

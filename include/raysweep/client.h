@@ -251,16 +251,19 @@ void rsw_dataset_free(rsw_dataset *d);
 /* Add a context: id (distinct, 1 to 64 characters), wavelength in nm
  * (<= 0: none; a film's meta fills it in), coords_json a JSON object text
  * {name: number or string} or NULL (the Context's "coords"). Borrows. */
-rsw_status rsw_dataset_add_context(rsw_dataset *d, const char *id, double wavelength, const char *coords_json);
+rsw_status rsw_dataset_add_context(rsw_dataset *d, const char *id, double wavelength,
+                                   const char *coords_json);
 /* The job seed (a global attribute); seed >= 0. */
 rsw_status rsw_dataset_set_seed(rsw_dataset *d, long long seed);
 /* Add the film of (context, sensor), copied: its pixels are the radiance;
  * its meta gives scene, revision and variant (the same for every film:
  * RSW_ERR_INVALID otherwise), spp, seed and the pixel angles. Borrows. */
-rsw_status rsw_dataset_add_film(rsw_dataset *d, const char *context, const char *sensor, const rsw_film *film);
+rsw_status rsw_dataset_add_film(rsw_dataset *d, const char *context, const char *sensor,
+                                const rsw_film *film);
 /* The same from a film saved as JSON (`raysweep fetch -o F.json`,
  * `raysweep sweep --format json|nc`). */
-rsw_status rsw_dataset_add_film_file(rsw_dataset *d, const char *context, const char *sensor, const char *path);
+rsw_status rsw_dataset_add_film_file(rsw_dataset *d, const char *context, const char *sensor,
+                                     const char *path);
 /* Write the dataset (through a temp file renamed on success). Errors: the
  * contexts' coords (RSW_ERR_TYPE, RSW_ERR_INVALID, RSW_ERR_MISSING,
  * RSW_ERR_LIMIT, naming "/contexts/<i>/coords/<name>", i in the order

@@ -30,6 +30,26 @@ typedef struct ds_item {
   nc_var vars[MAX_FILM_VARS];
 } ds_item;
 
+void svc_job_restore_labels(job *j, const char *body, size_t len) {
+  cJSON *req = cJSON_ParseWithLength(body, len);
+  const cJSON *seed = cJSON_GetObjectItemCaseSensitive(req, "seed");
+  if (cJSON_IsNumber(seed) && seed->valuedouble >= 0) j->seed = (uint64_t)seed->valuedouble;
+  const cJSON *contexts = cJSON_GetObjectItemCaseSensitive(req, "contexts");
+  size_t n = (size_t)cJSON_GetArraySize(contexts);
+  const void **cj = n ? malloc(n * sizeof *cj) : NULL;
+  size_t i = 0;
+  for (const cJSON *c = cj ? contexts->child : NULL; c && i < n; c = c->next, i++)
+    cj[i] = cJSON_GetObjectItemCaseSensitive(c, "coords");
+  rsw_err err = {0};
+  if (cj && i == n) {
+    nc_coords_free(&j->coords);
+    if (nc_coords_build(cj, n, "/contexts", &j->coords, &err) != RSW_OK)
+      memset(&j->coords, 0, sizeof j->coords);
+  }
+  free(cj);
+  cJSON_Delete(req);
+}
+
 static const char *const state_names[] = {"queued", "running", "succeeded", "failed", "cancelled"};
 
 rsw_status service_job_dataset(service *svc, const char *id, bool partial, void **bytes_out, size_t *len_out,
@@ -56,12 +76,13 @@ rsw_status service_job_dataset(service *svc, const char *id, bool partial, void 
   rsw_status st = RSW_OK;
   rsw_err err = {0};
   nc_coords coords = {0};
-  char (*ids)[72] = calloc(n_ctx ? n_ctx : 1, sizeof *ids);
+  char(*ids)[72] = calloc(n_ctx ? n_ctx : 1, sizeof *ids);
   const char **id_ptr = calloc(n_ctx ? n_ctx : 1, sizeof *id_ptr);
   double *wl = malloc((n_ctx ? n_ctx : 1) * sizeof *wl);
   ds_item *it = calloc(n_items ? n_items : 1, sizeof *it);
   if (!ids || !id_ptr || !wl || !it) st = svc_fail(e, RSW_ERR_NOMEM, id, "out of memory");
-  if (!st && nc_coords_copy(&j->coords, &coords, &err) != RSW_OK) st = svc_fail(e, err.code, id, "%s", err.msg);
+  if (!st && nc_coords_copy(&j->coords, &coords, &err) != RSW_OK)
+    st = svc_fail(e, err.code, id, "%s", err.msg);
   for (size_t c = 0; !st && c < n_ctx; c++) wl[c] = NAN;
   for (size_t i = 0; !st && i < n_items; i++) {
     const render_item *ri = &j->items[i];
@@ -110,6 +131,7 @@ rsw_status service_job_dataset(service *svc, const char *id, bool partial, void 
     if (!d->present) continue;
     const film_image *im = &d->film.img;
     if (!isfinite(wl[d->context]) && im->wavelength > 0) wl[d->context] = im->wavelength;
+    if (n_films == 0) variant = im->variant; /* a restored job's record has none */
     size_t nv = film_vars(im, d->vars);
     films[n_films++] = (nc_film){.context = d->context,
                                  .sensor = d->sensor,

@@ -9,6 +9,7 @@
 #   - the sweep in two shards, merged (`raysweep merge`): the same dataset
 #     as the unsharded one (every variable bitwise, the attributes equal);
 #   - a job whose coords are not a grid: one "context" dimension;
+#   - a finished job's dataset survives a restart with --state-dir;
 #   - the README's xarray example (docs/examples/dataset.py) runs on it;
 #   - bad coords are 422 naming the JSON pointer; the dataset of a running
 #     job is 409 unless ?partial=1; a film's fetch cannot be .nc.
@@ -142,6 +143,24 @@ code=$(curl -s -o resp -w '%{http_code}' "$url/v1/jobs/$ctxjob/dataset?partial=m
 [ "$code" = 400 ] && ok || bad "?partial=maybe: $code"
 code=$(curl -s -o resp -w '%{http_code}' "$url/v1/jobs/job-nope/dataset")
 [ "$code" = 404 ] && ok || bad "unknown job: $code"
+# A restart with --state-dir: the dataset of a finished job (its films
+# served from disk, its coords and seed from the stored request) is the same.
+start_daemon "$tmp/d2" --state-dir "$tmp/st" --max-result-bytes 100
+url2=http://127.0.0.1:$started_port
+curl -s -o /dev/null -X POST -H 'Content-Type: application/json' --data @scene.json "$url2/v1/scenes"
+sed 's/"contexts"/"seed": 9, "contexts"/' job.json >job9.json
+stjob=$(curl -s -X POST -H 'Content-Type: application/json' --data @job9.json "$url2/v1/scenes/$scene/jobs" |
+  "$py" -c 'import json, sys; print(json.load(sys.stdin)["id"])')
+run "state: job watch" "$bin/raysweep" --server "$url2" job watch "$stjob"
+run "state: dataset before" "$bin/raysweep" --server "$url2" fetch "$stjob" -o before.nc
+kill "${pids[-1]}" && wait "${pids[-1]}" 2>/dev/null
+start_daemon "$tmp/d3" --state-dir "$tmp/st" --max-result-bytes 100
+url2=http://127.0.0.1:$started_port
+run "state: dataset after a restart" "$bin/raysweep" --server "$url2" fetch "$stjob" -o after.nc
+ds "state: the dataset survives a restart" same before.nc after.nc
+"$py" -c 'import sys, xarray; d = xarray.open_dataset(sys.argv[1]); assert int(d.attrs["seed"]) == 9 and "a" in d.coords' \
+  after.nc 2>pyerr && ok || bad "state: seed and coords after a restart: $(tail -n 2 pyerr)"
+
 expect 2 "fetch JOB CONTEXT SENSOR -o F.nc" rs fetch "$ctxjob" k0 sensor -o one.nc
 contains "fetch .nc with a context says why" "$tmp/err" "JOB alone"
 expect 2 "fetch JOB alone to .exr" rs fetch "$ctxjob" -o one.exr
