@@ -6,8 +6,9 @@
 #     per-film JSON results; the daemon's own dataset of the same job
 #     (`raysweep fetch JOB -o F.nc`, GET /v1/jobs/{id}/dataset) holds the
 #     same data bitwise;
-#   - the sweep in two shards, merged (`raysweep merge`): the same dataset
-#     as the unsharded one (every variable bitwise, the attributes equal);
+#   - the sweep in two shards, merged (`raysweep merge`), and run with
+#     --spread 2: the same dataset as the unsharded one (every variable
+#     bitwise, the attributes equal);
 #   - a job whose coords are not a grid: one "context" dimension;
 #   - a finished job's dataset survives a restart with --state-dir;
 #   - the README's xarray example (docs/examples/dataset.py) runs on it;
@@ -79,6 +80,8 @@ run "shard 1/2" rs sweep scene.json "${grid[@]}" --format nc --shard 1/2 -o s1
 run "merge" rs merge s0 s1 -o merged
 ds "merged shards = unsharded" same merged/dataset.nc full/dataset.nc
 ds "merged grid dataset" grid merged/dataset.nc merged "$version" 3
+run "sweep --spread 2 --format nc" rs sweep scene.json "${grid[@]}" --format nc --spread 2 -o spread
+ds "--spread dataset = unsharded" same spread/dataset.nc full/dataset.nc
 
 # Not a grid: a context dimension, the coords along it.
 scene=$(rs scene push scene.json 2>/dev/null)
