@@ -9,13 +9,16 @@ set -euo pipefail
 pkgs=(
   # build: make, cc, ar, nm; the libraries
   build-essential pkg-config libembree-dev libopenexr-dev libmicrohttpd-dev
-  libcjson-dev libcurl4-openssl-dev libexpat1-dev libssl-dev
+  libcjson-dev libcurl4-openssl-dev libexpat1-dev libssl-dev libnetcdf-dev
   # tests: curl and python3 (integration scripts, docs examples); python3-yaml
   # and python3-jsonschema (tests/openapi/check.py); clang-format (make
   # format, tools/check-format.sh); groff-base and man-db (the man pages are
   # checked with groff and read back with man: test_usage, test_install);
   # chromium (test_viewer drives the web viewer in it, headless)
   curl python3 python3-yaml python3-jsonschema clang-format groff-base man-db chromium
+  # python3-xarray, python3-netcdf4 and python3-numpy read the sweep datasets
+  # back (tests/integration/test_dataset.sh)
+  python3-xarray python3-netcdf4 python3-numpy
   # make test-cluster: the load balancers in front of replicas (run as the
   # current user with configurations in a temp directory), and a
   # single-node Slurm (slurmctld, slurmd, sbatch) with its authentication

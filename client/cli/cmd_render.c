@@ -17,7 +17,11 @@ const cli_opt cli_opts_render[] = {
     {NULL},
 };
 const cli_opt cli_opts_fetch[] = {
-    {"-o", "FILE", false, "output file: .exr, .npy or .json (the film JSON)"},
+    {"-o", "FILE", false,
+     "output file: .exr, .npy or .json (the film JSON); .nc: the whole job as one NetCDF-4 dataset "
+     "(give JOB alone)"},
+    {"--format", "exr|npy|json|nc", false, "the format, whatever FILE's extension"},
+    {"--partial", NULL, false, "nc: the dataset of a job still running (films not there yet are NaN)"},
     {NULL},
 };
 
@@ -145,11 +149,42 @@ out:
   return rc;
 }
 
+/* fetch JOB -o F.nc: the job's dataset (GET /v1/jobs/{id}/dataset). */
+static int fetch_dataset(cli_ctx *ctx, const cli_args *a, const char *out) {
+  if (a->n_pos != 1)
+    return cli_usage(ctx, "a dataset (.nc) is the whole job: give JOB alone, without CONTEXT SENSOR");
+  rsw_status s = rsw_job_fetch_dataset(ctx->client, a->pos[0], cli_has(a, "--partial"), out);
+  if (s) return cli_report(ctx, s, a->pos[0]);
+  if (ctx->json) {
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "file", out);
+    cJSON_AddStringToObject(o, "job", a->pos[0]);
+    char *t = cJSON_PrintUnformatted(o);
+    if (t) printf("%s\n", t);
+    free(t);
+    cJSON_Delete(o);
+  } else if (!ctx->quiet)
+    fprintf(stderr, "raysweep fetch: dataset of %s written to %s\n", a->pos[0], out);
+  return CLI_OK;
+}
+
 int cmd_fetch(cli_ctx *ctx, const cli_args *a) {
-  const char *out = cli_get(a, "-o");
+  const char *out = cli_get(a, "-o"), *v = cli_get(a, "--format");
+  if (!out) return cli_usage(ctx, "missing -o FILE.exr|.npy|.json|.nc");
   cli_format fmt;
-  int rc = output_format(ctx, out, &fmt);
-  if (rc) return rc;
+  int rc = 0;
+  if (v) {
+    if (strcmp(v, "nc") == 0) return fetch_dataset(ctx, a, out);
+    if ((fmt = cli_format_from_name(v)) == CLI_FMT_NONE)
+      return cli_usage(ctx, "--format needs exr, npy, json or nc (got '%s')", v);
+  } else {
+    const char *dot = strrchr(out, '.');
+    if (dot && strcmp(dot, ".nc") == 0 && !strchr(dot, '/')) return fetch_dataset(ctx, a, out);
+    if ((rc = output_format(ctx, out, &fmt))) return rc;
+  }
+  if (cli_has(a, "--partial")) return cli_usage(ctx, "--partial applies to a dataset (-o FILE.nc)");
+  if (a->n_pos != 3)
+    return cli_usage(ctx, "one film needs JOB CONTEXT SENSOR (or -o FILE.nc for the dataset)");
   rsw_film *film = NULL;
   double t0 = cli_now();
   rsw_status s = rsw_job_fetch(ctx->client, a->pos[0], a->pos[1], a->pos[2], &film);

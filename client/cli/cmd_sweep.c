@@ -23,7 +23,8 @@
 const cli_opt cli_opts_sweep[] = {
     {"--contexts", "FILE.jsonl", false, "one Context object per line (id optional)"},
     {"--grid", "NAME=START:STOP:STEP", true,
-     "a range, end included; NAME is wavelength or a parameter key; several form a product"},
+     "a range, end included; NAME is wavelength or a parameter key; several form a product (each also "
+     "a coord of the contexts: wavelength, or the key's last name before .value)"},
     {"--set", "KEY=VALUE", true, "job-level parameter for every context (VALUE is JSON)"},
     {"--sensor", "S", true, "sensor to render (default: every sensor)"},
     {"--spp", "N", false, "samples per pixel"},
@@ -32,7 +33,9 @@ const cli_opt cli_opts_sweep[] = {
     {"--spread", "K", false,
      "run K shards at once through one load balancer (--server), each routed to its own replica by "
      "X-Raysweep-Shard; a scene FILE is pushed to every replica; a balancer that went away: rerun to resume"},
-    {"--format", "exr|npy|json", false, "film files: exr (default), npy or json"},
+    {"--format", "exr|npy|json|nc", false,
+     "film files: exr (default), npy or json; nc: json films plus DIR/dataset.nc, the sweep as one "
+     "NetCDF-4 dataset (xarray.open_dataset)"},
     {"--timeout", "S", false, "stop waiting after S seconds (exit 5; the job keeps running)"},
     {"-o", "DIR", false, "output directory: new or empty (see --force)"},
     {"--force", NULL, false,
@@ -41,7 +44,8 @@ const cli_opt cli_opts_sweep[] = {
     {NULL},
 };
 const cli_opt cli_opts_merge[] = {
-    {"-o", "DIR", false, "output directory"},
+    {"-o", "DIR", false,
+     "output directory (with DIR/dataset.nc when the shards were swept with --format nc)"},
     {"--partial", NULL, false, "merge even when contexts are missing (they are listed; exit 0)"},
     {NULL},
 };
@@ -57,11 +61,13 @@ typedef struct sweep_item {
   double wl;
   cJSON *params;       /* object or NULL, owned */
   cJSON *sensors;      /* array of strings or NULL, owned */
+  cJSON *coords;       /* object or NULL, owned: the context's coords */
   long long spp, seed; /* -1: unset */
 } sweep_item;
 
 typedef struct grid_axis {
-  char *name; /* owned */
+  char *name;     /* owned */
+  char coord[72]; /* the coord it fills: wavelength, or the key's last name */
   bool is_wavelength;
   double start, step;
   size_t n;
@@ -76,12 +82,15 @@ typedef struct sweep_list {
    * of the other shards. NULL when every id is numbered. */
   char **all_ids;
   int id_width;
+  long long seed; /* --seed (0 by default): the job seed, in sweep.json */
+  bool dataset;   /* --format nc: DIR/dataset.nc besides the (JSON) films */
 } sweep_list;
 
 static void items_free(sweep_list *l) {
   for (size_t i = 0; i < l->n; i++) {
     cJSON_Delete(l->items[i].params);
     cJSON_Delete(l->items[i].sensors);
+    cJSON_Delete(l->items[i].coords);
   }
   free(l->items);
   if (l->all_ids)
@@ -157,6 +166,35 @@ static int parse_grid(const cli_ctx *ctx, const char *spec, grid_axis *g) {
   return 0;
 }
 
+/* The coord an axis fills: "wavelength", or a parameter key's last
+ * dot-separated name that is not "value" ("plate.bsdf.reflectance.value"
+ * -> "reflectance"), characters other than [A-Za-z0-9_] made '_'; when two
+ * axes would share one, each of those takes its whole key so. */
+static void axis_coords(grid_axis *g, size_t n) {
+  for (size_t a = 0; a < n; a++) {
+    const char *name = g[a].name;
+    size_t len = strlen(name);
+    if (len > 6 && strcmp(name + len - 6, ".value") == 0) len -= 6;
+    const char *start = name + len;
+    while (start > name && start[-1] != '.') start--;
+    snprintf(g[a].coord, sizeof g[a].coord, "%.*s", (int)(name + len - start), start);
+  }
+  for (size_t a = 0; a < n; a++)
+    for (size_t b = 0; b < n; b++)
+      if (a != b && strcmp(g[a].coord, g[b].coord) == 0 && strchr(g[a].name, '.'))
+        snprintf(g[a].coord, sizeof g[a].coord, "%.64s", g[a].name);
+  for (size_t a = 0; a < n; a++) {
+    char *c = g[a].coord;
+    for (char *p = c; *p; p++)
+      if (!((*p >= 'A' && *p <= 'Z') || (*p >= 'a' && *p <= 'z') || (*p >= '0' && *p <= '9') || *p == '_'))
+        *p = '_';
+    if (!((c[0] >= 'A' && c[0] <= 'Z') || (c[0] >= 'a' && c[0] <= 'z'))) {
+      memmove(c + 1, c, strnlen(c, sizeof g[a].coord - 2) + 1);
+      c[0] = 'p';
+    }
+  }
+}
+
 /* The Cartesian product of the axes, first axis slowest; only the indices
  * this shard keeps are materialised. */
 static int build_grid(const cli_ctx *ctx, const grid_axis *g, size_t n_axes, size_t shard_i, size_t shard_n,
@@ -173,11 +211,18 @@ static int build_grid(const cli_ctx *ctx, const grid_axis *g, size_t n_axes, siz
     sweep_item *it = items_push(l);
     if (!it) return cli_fail(ctx, CLI_IO, "out of memory");
     make_id(it->id, w, i);
-    size_t rest = i;
+    size_t rest = i, ks[MAX_GRIDS];
     for (size_t a = n_axes; a-- > 0;) {
-      size_t k = rest % g[a].n;
+      ks[a] = rest % g[a].n;
       rest /= g[a].n;
-      double v = g[a].start + (double)k * g[a].step;
+    }
+    /* The coords in axis order (the dataset's dimensions follow it). */
+    if (n_axes && !(it->coords = cJSON_CreateObject())) return cli_fail(ctx, CLI_IO, "out of memory");
+    for (size_t a = 0; a < n_axes; a++)
+      if (!cJSON_AddNumberToObject(it->coords, g[a].coord, g[a].start + (double)ks[a] * g[a].step))
+        return cli_fail(ctx, CLI_IO, "out of memory");
+    for (size_t a = n_axes; a-- > 0;) {
+      double v = g[a].start + (double)ks[a] * g[a].step;
       if (g[a].is_wavelength) {
         it->has_wl = true, it->wl = v;
       } else {
@@ -289,6 +334,12 @@ static int read_contexts(const cli_ctx *ctx, const char *path, size_t shard_i, s
           break;
         }
         it->sensors = cJSON_Duplicate(f, 1);
+      } else if (strcmp(k, "coords") == 0) {
+        if (!cJSON_IsObject(f)) {
+          rc = cli_usage(ctx, "%s:%zu: coords must be an object {name: number or string}", path, line);
+          break;
+        }
+        it->coords = cJSON_Duplicate(f, 1);
       } else if (strcmp(k, "spp") == 0) {
         if (!json_is_int(f, 1)) {
           rc = cli_usage(ctx, "%s:%zu: spp must be a positive integer", path, line);
@@ -303,7 +354,8 @@ static int read_contexts(const cli_ctx *ctx, const char *path, size_t shard_i, s
         it->seed = (long long)f->valuedouble;
       } else {
         rc = cli_usage(
-            ctx, "%s:%zu: unknown field '%s' (a Context has id, wavelength, params, sensors, spp, seed)",
+            ctx,
+            "%s:%zu: unknown field '%s' (a Context has id, wavelength, params, sensors, spp, seed, coords)",
             path, line, k);
         break;
       }
@@ -395,6 +447,13 @@ static int build_contexts(const cli_ctx *ctx, const cli_args *a, const sweep_ite
       free(v);
       if (s) break;
     }
+    cJSON_ArrayForEach(p, it->coords) {
+      if (s) break;
+      snprintf(what, sizeof what, "context '%s' coord '%s'", it->id, p->string);
+      char *v = cJSON_PrintUnformatted(p);
+      s = v ? rsw_contexts_set_coord(x, idx, p->string, v) : RSW_ERR_NOMEM;
+      free(v);
+    }
     cJSON_ArrayForEach(p, it->sensors) if (!s) s = rsw_contexts_add_sensor(x, idx, p->valuestring);
     if (!s && it->spp >= 0) s = rsw_contexts_set_spp(x, idx, it->spp);
     if (!s && it->seed >= 0) s = rsw_contexts_set_seed(x, idx, it->seed);
@@ -452,6 +511,7 @@ static cJSON *index_line(const cJSON *r, const char *c, const char *sn, const ch
       cJSON_AddItemToObject(params, p->string, cJSON_Duplicate(p, 1));
     }
   cJSON_AddItemToObject(line, "params", params);
+  if (found && (*found)->coords) cJSON_AddItemToObject(line, "coords", cJSON_Duplicate((*found)->coords, 1));
   const cJSON *seed = cJSON_GetObjectItemCaseSensitive(r, "seed");
   if (cJSON_IsNumber(seed))
     cJSON_AddNumberToObject(line, "seed", seed->valuedouble);
@@ -553,6 +613,7 @@ static int fetch_all(cli_ctx *ctx, const char *job, const char *dir, cli_format 
  * directories must cover; `sweep --force` to know what an earlier sweep
  * wrote. "incomplete" lists contexts with a render that did not succeed. */
 #define MANIFEST_NAME   "sweep.json"
+#define DATASET_NAME    "dataset.nc"
 /* The journal of a --spread sweep (rsw_spread_opts.state_path): there
  * while the sweep is unfinished, removed when it completes. */
 #define SPREAD_STATE    "sweep.spread.jsonl"
@@ -706,6 +767,7 @@ static int manifest_write(const cli_ctx *ctx, const char *dir, const char *finge
   cJSON_AddItemToArray(sh, cJSON_CreateNumber((double)shard_i));
   cJSON_AddItemToArray(sh, cJSON_CreateNumber((double)shard_n));
   cJSON_AddNumberToObject(o, "contexts_total", (double)l->total);
+  cJSON_AddNumberToObject(o, "seed", (double)l->seed);
   if (l->all_ids) {
     cJSON *ids = cJSON_AddArrayToObject(o, "ids");
     char buf[72];
@@ -763,6 +825,54 @@ static bool sweep_file_name(const char *name) {
   if (strstr(name, ".tmp.")) return true;
   const char *dot = strrchr(name, '.');
   return dot && (strcmp(dot, ".exr") == 0 || strcmp(dot, ".npy") == 0 || strcmp(dot, ".json") == 0);
+}
+
+/* DIR/dataset.nc: the films of index entries e (sorted: write_index) as
+ * one NetCDF-4 dataset, built by libraysweep from the JSON films, so the
+ * dataset of merged shards is the unsharded one's. Contexts come in index
+ * order with the wavelength and coords of their index lines; a context
+ * without any film is not in it. */
+static int write_dataset(const cli_ctx *ctx, const char *dir, const index_entry *e, size_t n, bool has_seed,
+                         long long seed) {
+  rsw_dataset *d = NULL;
+  if (rsw_dataset_new(&d)) return cli_fail(ctx, CLI_IO, "out of memory");
+  char *out = dir_file(dir, DATASET_NAME);
+  rsw_status s = out ? RSW_OK : RSW_ERR_NOMEM;
+  if (!s && has_seed) s = rsw_dataset_set_seed(d, seed);
+  const char *prev = NULL;
+  char where[4200] = "";
+  for (size_t i = 0; !s && i < n; i++) {
+    const cJSON *line = e[i].line;
+    const char *c = e[i].context, *sn = e[i].sensor;
+    const char *file = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(line, "file"));
+    if (!prev || strcmp(prev, c) != 0) {
+      const cJSON *wl = cJSON_GetObjectItemCaseSensitive(line, "wavelength");
+      const cJSON *co = cJSON_GetObjectItemCaseSensitive(line, "coords");
+      char *ctext = co ? cJSON_PrintUnformatted(co) : NULL;
+      snprintf(where, sizeof where, "index.jsonl context '%s'", c);
+      s = co && !ctext ? RSW_ERR_NOMEM
+                       : rsw_dataset_add_context(d, c, cJSON_IsNumber(wl) ? wl->valuedouble : 0, ctext);
+      free(ctext);
+      prev = c;
+    }
+    if (!s) {
+      snprintf(where, sizeof where, "%s/%s", dir, file ? file : "?");
+      s = file ? rsw_dataset_add_film_file(d, c, sn, where) : RSW_ERR_INVALID;
+    }
+  }
+  if (!s) {
+    snprintf(where, sizeof where, "%s", out);
+    s = rsw_dataset_write(d, out);
+  }
+  int rc = CLI_OK;
+  if (s)
+    rc = cli_fail(ctx, s == RSW_ERR_IO ? CLI_IO : CLI_USAGE, "%s: %s", where,
+                  rsw_dataset_last_error(d)[0] ? rsw_dataset_last_error(d) : rsw_strerror(s));
+  else if (!ctx->quiet)
+    fprintf(stderr, "raysweep %s: dataset %s\n", ctx->cmd, out);
+  free(out);
+  rsw_dataset_free(d);
+  return rc;
 }
 
 /* Remove DIR/<context>/'s sweep files and the directory when that empties
@@ -854,6 +964,9 @@ static int prepare_output(const cli_ctx *ctx, const char *dir, bool force) {
       removed += remove_context_dir(dir, manifest_id(&m, k, buf));
     manifest_free(&m);
   }
+  char *dataset = dir_file(dir, DATASET_NAME);
+  if (dataset && is_regular(dataset)) unlink(dataset);
+  free(dataset);
   if (has_index && unlink(index) != 0 && errno != ENOENT) {
     int rc = cli_fail(ctx, CLI_IO, "cannot remove '%s': %s", index, strerror(errno));
     free(index), free(manifest);
@@ -1051,6 +1164,7 @@ static int run_spread(cli_ctx *ctx, const cli_args *a, int k_shards, bool resume
   char fp2[17];
   sweep_fingerprint(a, res.scene_id, fp2);
   if ((rc = write_index(ctx, dir, sink.e, sink.ne))) goto out;
+  if (l->dataset && (rc = write_dataset(ctx, dir, sink.e, sink.ne, true, l->seed))) goto out;
   cJSON *inc = cJSON_CreateArray();
   const char *prev = NULL;
   /* incomplete ids sorted, each once */
@@ -1108,8 +1222,11 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
   if (n_grids > MAX_GRIDS) return cli_usage(ctx, "at most %d --grid axes", MAX_GRIDS);
   const char *v;
   cli_format fmt = CLI_FMT_EXR;
-  if ((v = cli_get(a, "--format")) && (fmt = cli_format_from_name(v)) == CLI_FMT_NONE)
-    return cli_usage(ctx, "--format needs exr, npy or json (got '%s')", v);
+  bool want_nc = (v = cli_get(a, "--format")) && strcmp(v, "nc") == 0;
+  if (want_nc)
+    fmt = CLI_FMT_JSON; /* the films the dataset is built from (and merge rebuilds it from) */
+  else if (v && (fmt = cli_format_from_name(v)) == CLI_FMT_NONE)
+    return cli_usage(ctx, "--format needs exr, npy, json or nc (got '%s')", v);
   unsigned long long spp = 0, seed = 0, shard_i = 0, shard_n = 1;
   if ((v = cli_get(a, "--spp")) && (!cli_parse_u64(v, 1ull << 31, &spp) || spp == 0))
     return cli_usage(ctx, "--spp needs a positive integer (got '%s')", v);
@@ -1137,7 +1254,7 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
   int rc = cli_build_param_map(ctx, "--set", sets, n_sets, &job_params);
   if (rc) return rc;
 
-  sweep_list l = {0};
+  sweep_list l = {.seed = (long long)seed, .dataset = want_nc};
   grid_axis axes[MAX_GRIDS] = {{0}};
   sweep_item **sorted = NULL;
   rsw_contexts *x = NULL;
@@ -1154,6 +1271,7 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
         if (strcmp(axes[k].name, axes[i].name) == 0)
           rc = cli_usage(ctx, "--grid %s given twice", axes[i].name);
     }
+    if (!rc) axis_coords(axes, n_grids);
     if (!rc) rc = build_grid(ctx, axes, n_grids, shard_i, shard_n, &l);
   }
   if (rc) goto out;
@@ -1241,6 +1359,7 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
     goto out;
   }
   if ((rc = write_index(ctx, dir, entries, n_entries))) goto out;
+  if (want_nc && (rc = write_dataset(ctx, dir, entries, n_entries, true, l.seed))) goto out;
   if ((rc = manifest_write(ctx, dir, fingerprint, scene, shard_i, shard_n, &l, job, true, incomplete)))
     goto out;
   rc = job_rc;
@@ -1561,6 +1680,21 @@ int cmd_merge(cli_ctx *ctx, const cli_args *a) {
     free(dst);
   }
   if (!rc) rc = write_index(ctx, out, e, n);
+  /* Inputs swept with --format nc: the merged dataset, rebuilt from the
+   * films (bitwise the unsharded sweep's data). */
+  bool all_nc = a->n_pos > 0;
+  for (size_t i = 0; i < a->n_pos && all_nc; i++) {
+    char *p = dir_file(a->pos[i], DATASET_NAME);
+    all_nc = p && is_regular(p);
+    free(p);
+  }
+  if (!rc && all_nc) {
+    const cJSON *seed = NULL;
+    for (size_t i = 0; i < a->n_pos && !seed; i++)
+      if (in[i].has_manifest) seed = cJSON_GetObjectItemCaseSensitive(in[i].m.root, "seed");
+    rc = write_dataset(ctx, out, e, n, json_is_int(seed, 0),
+                       json_is_int(seed, 0) ? (long long)seed->valuedouble : 0);
+  }
   bool legacy = false;
   for (size_t i = 0; i < a->n_pos; i++) legacy = legacy || !in[i].has_manifest;
   if (!rc && n_sweeps == 1 && !legacy) {

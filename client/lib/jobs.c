@@ -128,6 +128,15 @@ rsw_status rsw_contexts_set_param(rsw_contexts *x, size_t index, const char *key
   return set_in_map(child(x->items[index], "params", false), key, value_json);
 }
 
+rsw_status rsw_contexts_set_coord(rsw_contexts *x, size_t index, const char *name, const char *value_json) {
+  if (!x || index >= x->n || !name || !value_json) return RSW_ERR_INVALID;
+  cJSON *v = cJSON_Parse(value_json);
+  bool ok = cJSON_IsNumber(v) || cJSON_IsString(v);
+  cJSON_Delete(v);
+  if (!ok) return v ? RSW_ERR_TYPE : RSW_ERR_PARSE;
+  return set_in_map(child(x->items[index], "coords", false), name, value_json);
+}
+
 rsw_status rsw_contexts_add_sensor(rsw_contexts *x, size_t index, const char *sensor) {
   if (!x || index >= x->n) return RSW_ERR_INVALID;
   return add_string(child(x->items[index], "sensors", true), sensor);

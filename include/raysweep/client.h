@@ -172,8 +172,12 @@ void rsw_contexts_free(rsw_contexts *x);
  * Returns its index through *index (may be NULL). */
 rsw_status rsw_contexts_add(rsw_contexts *x, const char *id, double wavelength, size_t *index);
 /* Per-context settings (index from rsw_contexts_add). value_json is JSON
- * text (borrowed). spp/seed < 0: unset. */
+ * text (borrowed). spp/seed < 0: unset. set_coord labels the context in
+ * the job's dataset: name [A-Za-z][A-Za-z0-9_]{0,63}, value_json a JSON
+ * number or string (the daemon checks that every context names the same
+ * coords, each of one type). */
 rsw_status rsw_contexts_set_param(rsw_contexts *x, size_t index, const char *key, const char *value_json);
+rsw_status rsw_contexts_set_coord(rsw_contexts *x, size_t index, const char *name, const char *value_json);
 rsw_status rsw_contexts_add_sensor(rsw_contexts *x, size_t index, const char *sensor);
 rsw_status rsw_contexts_set_spp(rsw_contexts *x, size_t index, long long spp);
 rsw_status rsw_contexts_set_seed(rsw_contexts *x, size_t index, long long seed);
@@ -224,6 +228,49 @@ rsw_status rsw_job_results(rsw_client *c, const char *job_id, char **json_out);
 /* One film of a job. *film_out is owned: rsw_film_free. */
 rsw_status rsw_job_fetch(rsw_client *c, const char *job_id, const char *context, const char *sensor,
                          rsw_film **film_out);
+
+/* ---- sweep datasets ------------------------------------------------------------------ */
+
+/* A job's films as one NetCDF-4 dataset (CF conventions; xarray opens it
+ * with xarray.open_dataset(path) and no options): GET
+ * /v1/jobs/{id}/dataset written to path (through a temp file renamed on
+ * success). RSW_ERR_CONFLICT while the job is queued or running, unless
+ * partial is non-zero (films not rendered yet are NaN). Borrows
+ * everything. */
+rsw_status rsw_job_fetch_dataset(rsw_client *c, const char *job_id, int partial, const char *path);
+
+/* The same dataset built on the client from films it holds (a sweep spread
+ * over several jobs, shards merged): contexts in order, then films, then
+ * rsw_dataset_write. The file is the one raysweepd serves for the same
+ * contexts and films, written by the same code. Not thread-safe per
+ * handle; handles are independent. */
+typedef struct rsw_dataset rsw_dataset;
+/* *out owned: rsw_dataset_free. */
+rsw_status rsw_dataset_new(rsw_dataset **out);
+void rsw_dataset_free(rsw_dataset *d);
+/* Add a context: id (distinct, 1 to 64 characters), wavelength in nm
+ * (<= 0: none; a film's meta fills it in), coords_json a JSON object text
+ * {name: number or string} or NULL (the Context's "coords"). Borrows. */
+rsw_status rsw_dataset_add_context(rsw_dataset *d, const char *id, double wavelength,
+                                   const char *coords_json);
+/* The job seed (a global attribute); seed >= 0. */
+rsw_status rsw_dataset_set_seed(rsw_dataset *d, long long seed);
+/* Add the film of (context, sensor), copied: its pixels are the radiance;
+ * its meta gives scene, revision and variant (the same for every film:
+ * RSW_ERR_INVALID otherwise), spp, seed and the pixel angles. Borrows. */
+rsw_status rsw_dataset_add_film(rsw_dataset *d, const char *context, const char *sensor,
+                                const rsw_film *film);
+/* The same from a film saved as JSON (`raysweep fetch -o F.json`,
+ * `raysweep sweep --format json|nc`). */
+rsw_status rsw_dataset_add_film_file(rsw_dataset *d, const char *context, const char *sensor,
+                                     const char *path);
+/* Write the dataset (through a temp file renamed on success). Errors: the
+ * contexts' coords (RSW_ERR_TYPE, RSW_ERR_INVALID, RSW_ERR_MISSING,
+ * RSW_ERR_LIMIT, naming "/contexts/<i>/coords/<name>", i in the order
+ * added), films of one sensor with different shapes, RSW_ERR_IO. */
+rsw_status rsw_dataset_write(rsw_dataset *d, const char *path);
+/* What the last failing call of d said ("" when none; borrowed). */
+const char *rsw_dataset_last_error(const rsw_dataset *d);
 
 /* ---- one job spread over several replicas ------------------------------------------ */
 

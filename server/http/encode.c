@@ -448,6 +448,31 @@ static void next_range(const char **s, media_range *r) {
   *s = p;
 }
 
+bool http_accepts(const char *accept, const char *type) {
+  if (!accept) return true;
+  const char *p = accept;
+  while (*p == ' ' || *p == '\t') p++;
+  if (!*p) return true;
+  char major[64];
+  size_t ml = strcspn(type, "/");
+  snprintf(major, sizeof major, "%.*s/*", (int)ml, type);
+  bool exact = false, exact_excluded = false, wild = false;
+  for (int guard = 0; *p && guard < 256; guard++) {
+    media_range r;
+    next_range(&p, &r);
+    if (!r.type[0]) continue;
+    if (strcmp(r.type, type) == 0) {
+      if (r.excluded)
+        exact_excluded = true;
+      else
+        exact = true;
+    } else if (!r.excluded && (strcmp(r.type, "*/*") == 0 || strcmp(r.type, major) == 0)) {
+      wild = true;
+    }
+  }
+  return !exact_excluded && (exact || wild);
+}
+
 http_film_format http_accept_film(const char *accept) {
   static const struct {
     const char *type;

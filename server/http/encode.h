@@ -101,6 +101,10 @@ typedef enum http_film_format {
  * JSON, EXR, NPY not excluded), "image/" + "*" gives EXR. q-values are
  * ignored except q=0, which excludes a type. */
 http_film_format http_accept_film(const char *accept);
+/* Whether an Accept header value (NULL or empty: anything) allows the one
+ * media type `type` ("application/x-netcdf"): listed, or matched by
+ * "*" + "/" + "*" or its major type's wildcard, and not excluded by q=0. */
+bool http_accepts(const char *accept, const char *type);
 const char *http_film_content_type(http_film_format f);
 
 /* True when the JSON text nests arrays/objects at most max_depth deep

@@ -428,6 +428,29 @@ static void h_job_result(http_req *r) {
   svc_film_free(&f);
 }
 
+/* The job as one NetCDF-4 dataset (application/x-netcdf): 409 while it
+ * runs unless ?partial=1. */
+static void h_job_dataset(http_req *r) {
+  bool partial;
+  if (!query_bool(r, "partial", r->q_partial, &partial)) return;
+  if (!http_accepts(r->accept, "application/x-netcdf")) {
+    http_resp_problem(r, 406, NULL, "Accept '%s' does not allow application/x-netcdf", r->accept);
+    return;
+  }
+  svc_error e = {0};
+  void *bytes = NULL;
+  size_t len = 0;
+  if (service_job_dataset(r->svc, r->params[0], partial, &bytes, &len, &e) != RSW_OK) {
+    http_resp_svc_error(r, &e);
+    return;
+  }
+  http_resp_clear(&r->resp);
+  r->resp.status = 200;
+  r->resp.content_type = "application/x-netcdf";
+  r->resp.body = bytes;
+  r->resp.len = len;
+}
+
 static void h_blob_put(http_req *r) {
   svc_error e = {0};
   bool created = false;
@@ -476,6 +499,7 @@ const http_route http_routes[] = {
     {"GET", "/v1/jobs/{id}/events", HTTP_BODY_NONE, false, h_job_events, false},
     {"GET", "/v1/jobs/{id}/results", HTTP_BODY_NONE, false, h_job_results, false},
     {"GET", "/v1/jobs/{id}/results/{context}/{sensor}", HTTP_BODY_NONE, false, h_job_result, false},
+    {"GET", "/v1/jobs/{id}/dataset", HTTP_BODY_NONE, false, h_job_dataset, false},
     {"PUT", "/v1/blobs/{sha256}", HTTP_BODY_RAW, false, h_blob_put, false},
     {"HEAD", "/v1/blobs/{sha256}", HTTP_BODY_NONE, false, h_blob_head, false},
     {"POST", "/v1/blobs:missing", HTTP_BODY_JSON, false, h_blobs_missing, false},

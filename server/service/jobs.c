@@ -149,6 +149,7 @@ static void job_free(job *j) {
   free(j->items);
   free(j->context_remaining);
   free(j->idem_key);
+  nc_coords_free(&j->coords);
   free(j);
 }
 
@@ -541,7 +542,8 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     }
     for (const cJSON *k = c->child; k && !st; k = k->next)
       if (strcmp(k->string, "id") && strcmp(k->string, "wavelength") && strcmp(k->string, "params") &&
-          strcmp(k->string, "sensors") && strcmp(k->string, "spp") && strcmp(k->string, "seed")) {
+          strcmp(k->string, "sensors") && strcmp(k->string, "spp") && strcmp(k->string, "seed") &&
+          strcmp(k->string, "coords")) {
         char w[300];
         snprintf(w, sizeof w, "%s/%s", ptr, k->string);
         st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, w, "unknown field '%s' in a context", k->string);
@@ -644,6 +646,20 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   free(seen);
   free(film_ok);
   free(ranges);
+  /* The contexts' coords (labels for the dataset): the same names in
+   * every context, one type per name (nc_coords_build). */
+  nc_coords coords = {0};
+  if (!st) {
+    const void **cj = malloc(n_ctx * sizeof *cj);
+    if (!cj) st = svc_fail(e, RSW_ERR_NOMEM, "/contexts", "out of memory");
+    size_t i = 0;
+    for (const cJSON *c = cj ? contexts->child : NULL; c; c = c->next, i++)
+      cj[i] = cJSON_GetObjectItemCaseSensitive(c, "coords");
+    rsw_err cerr = {0};
+    if (cj && nc_coords_build(cj, n_ctx, "/contexts", &coords, &cerr) != RSW_OK)
+      st = svc_fail(e, cerr.code, cerr.where, "%s", cerr.msg);
+    free(cj);
+  }
   /* Build the job. */
   if (!st) {
     jb = calloc(1, sizeof *jb);
@@ -693,6 +709,13 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     }
   }
   cJSON_Delete(req);
+  if (jb) {
+    jb->coords = coords;
+    jb->seed = job_seed;
+    jb->variant = sc->variant;
+  } else {
+    nc_coords_free(&coords);
+  }
   /* The bytes its films will hold, for --max-result-bytes. */
   uint64_t reserve = 0;
   for (size_t i = 0; !st && i < n_items; i++) reserve += svc_film_bytes(sc, jb->items[i].sensor_index);

@@ -146,6 +146,11 @@ rsw_status service_job_get(service *svc, const char *job_id, char **json_out, sv
 rsw_status service_job_cancel(service *svc, const char *job_id, char **json_out, svc_error *e);
 rsw_status service_job_delete(service *svc, const char *job_id, svc_error *e);
 rsw_status service_job_results(service *svc, const char *job_id, char **json_out, svc_error *e);
+/* GET /v1/jobs/{id}/dataset: the job's films as one NetCDF-4 dataset
+ * (common/dataset_nc.h), *bytes_out owned (free()). RSW_ERR_CONFLICT while
+ * the job is queued or running, unless partial (films not there are NaN). */
+rsw_status service_job_dataset(service *svc, const char *job_id, bool partial, void **bytes_out,
+                               size_t *len_out, svc_error *e);
 rsw_status service_job_result(service *svc, const char *job_id, const char *context, const char *sensor_id,
                               svc_film *out, svc_error *e);
 /* The same result as a NumPy .npy file on disk (state directory), for

@@ -11,6 +11,7 @@
 
 #include "../kernel/scene/params.h"
 #include "../kernel/scene/scene.h"
+#include "dataset_nc.h"
 #include "service.h"
 
 /* A private copy of a resident scene for one render at a time
@@ -132,6 +133,11 @@ typedef struct job {
   char error[600];
   bool deleted;
   uint64_t result_reserve; /* bytes counted in svc->result_committed */
+  /* For the dataset (dataset.c): the contexts' coords (columns, n == 0
+   * when none), the job seed, the scene's variant. */
+  nc_coords coords;
+  uint64_t seed;
+  rsw_variant variant;
 } job;
 
 struct service {
@@ -307,6 +313,10 @@ struct post_extra {
 void svc_free_evicted(resident **ev);
 bool svc_was_evicted_locked(service *svc, const char *id);
 void svc_forget_evicted_locked(service *svc, const char *id);
+/* A finished job restored from the state directory (its submission body):
+ * the contexts' coords and the job seed, which its dataset needs
+ * (dataset.c; left empty when the body does not give them). */
+void svc_job_restore_labels(job *j, const char *body, size_t len);
 /* Durable state (state.c); every function is a no-op without a state
  * directory. */
 rsw_status svc_state_open(service *svc, rsw_err *err);

@@ -710,9 +710,10 @@ static void register_terminal(service *svc, job *j) {
   pthread_mutex_unlock(&svc->lock);
 }
 
-static void restore_finished(service *svc, const req_header *h, cJSON *done) {
+static void restore_finished(service *svc, const req_header *h, cJSON *done, const char *body, size_t len) {
   job *j = new_terminal_job(svc, h);
   if (!j) return;
+  svc_job_restore_labels(j, body, len); /* coords and seed, for its dataset */
   const cJSON *x;
   x = cJSON_GetObjectItemCaseSensitive(done, "state");
   j->state = parse_state(cJSON_IsString(x) ? x->valuestring : NULL);
@@ -909,7 +910,7 @@ void svc_state_restore(service *svc) {
     cJSON *done = dt ? cJSON_Parse(dt) : NULL;
     free(dt);
     if (done)
-      restore_finished(svc, &h, done);
+      restore_finished(svc, &h, done, text + off, len - off);
     else
       restore_resume(svc, &h, text + off, len - off);
     cJSON_Delete(done);

@@ -1,6 +1,6 @@
 /* Job request bodies (POST /v1/scenes/{id}/jobs, service_job_submit) on
  * the harness scene: refused with an error naming the field, or accepted
- * and run to its end event. Every context is validated before the 202, so
+ * and run to its end event, and its dataset encodes. Every context is validated before the 202, so
  * an accepted job must succeed with no failed render. The job is deleted after, and the scene's own
  * parameters must be unchanged. Inputs over 8 KiB are skipped (a context
  * costs a render). */
@@ -48,6 +48,13 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
                "an accepted job did not succeed (contexts are validated before the 202): %s", job);
     cJSON_Delete(j);
     free(job);
+    /* Its dataset (coords, grid or not) encodes. */
+    void *nc = NULL;
+    size_t nc_len = 0;
+    e = (svc_error){0};
+    FUZZ_CHECK(service_job_dataset(fuzz_svc, job_id, false, &nc, &nc_len, &e) == RSW_OK && nc_len > 0,
+               "the dataset of a finished job: %s", e.err.msg);
+    free(nc);
     e = (svc_error){0};
     FUZZ_CHECK(service_job_delete(fuzz_svc, job_id, &e) == RSW_OK, "job delete: %s", e.err.msg);
   }

@@ -195,6 +195,10 @@ jobs = {
     "bad_id": '{"contexts":[{"id":"a/b"}]}',
     "spectral": '{"contexts":[{"id":"a","params":{"rectangle.bsdf.reflectance.value":{"wavelengths":[400,700],"values":[0.1,0.9]}}}]}',
     "unknown_field": '{"contexts":[{"id":"a"}],"x":1}',
+    "coords_grid": '{"contexts":[{"id":"a","coords":{"k":1,"s":"x"}},{"id":"b","coords":{"k":2,"s":"x"}}]}',
+    "coords_list": '{"contexts":[{"id":"a","coords":{"k":1}},{"id":"b","coords":{"k":1}}]}',
+    "coords_mixed": '{"contexts":[{"id":"a","coords":{"k":1}},{"id":"b","coords":{"k":"s"}}]}',
+    "coords_missing": '{"contexts":[{"id":"a","coords":{"k":1}},{"id":"b"}]}',
 }
 for k, v in jobs.items():
     put("job_body", k + ".json", v)

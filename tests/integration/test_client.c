@@ -513,6 +513,43 @@ static void test_contexts_builder(void) {
   rsw_contexts_free(NULL);
 }
 
+/* The dataset builder's local checks: coords on contexts (set_coord takes
+ * numbers and strings only), bad coords at write time named by their
+ * pointer, a film of an unknown context, and a dataset of no film. */
+static void test_dataset_builder(void) {
+  rsw_contexts *x = NULL;
+  REQUIRE(rsw_contexts_new(&x) == RSW_OK && rsw_contexts_add(x, "a", 500, NULL) == RSW_OK, "contexts");
+  CHECK(rsw_contexts_set_coord(x, 0, "alpha", "0.3") == RSW_OK, "a number coord");
+  CHECK(rsw_contexts_set_coord(x, 0, "kind", "\"leaf\"") == RSW_OK, "a string coord");
+  CHECK(rsw_contexts_set_coord(x, 0, "k", "true") == RSW_ERR_TYPE, "a boolean coord");
+  CHECK(rsw_contexts_set_coord(x, 0, "k", "{\"a\": 1}") == RSW_ERR_TYPE, "an object coord");
+  CHECK(rsw_contexts_set_coord(x, 0, "k", "nope") == RSW_ERR_PARSE, "not JSON");
+  CHECK(rsw_contexts_set_coord(x, 3, "k", "1") == RSW_ERR_INVALID, "index out of range");
+  rsw_contexts_free(x);
+
+  rsw_dataset *d = NULL;
+  REQUIRE(rsw_dataset_new(&d) == RSW_OK, "new");
+  CHECK(rsw_dataset_add_context(d, "c0", 500, "{\"k\": 1}") == RSW_OK, "context 0");
+  CHECK(rsw_dataset_add_context(d, "c1", 600, "[1]") == RSW_ERR_PARSE, "coords not an object");
+  CHECK(rsw_dataset_add_context(d, "c1", 600, "{\"k\": \"s\"}") == RSW_OK, "context 1");
+  CHECK(rsw_dataset_add_film_file(d, "c0", "meter", "/nonexistent/film.json") == RSW_ERR_IO, "no film file");
+  char path[128];
+  snprintf(path, sizeof path, "%s/builder.nc", tmpdir);
+  CHECK(rsw_dataset_write(d, path) == RSW_ERR_TYPE &&
+            strstr(rsw_dataset_last_error(d), "/contexts/1/coords/k") != NULL,
+        "mixed coord types name the pointer: %s", rsw_dataset_last_error(d));
+  rsw_dataset_free(d);
+  REQUIRE(rsw_dataset_new(&d) == RSW_OK, "new");
+  CHECK(rsw_dataset_add_context(d, "c0", 0, NULL) == RSW_OK && rsw_dataset_set_seed(d, 4) == RSW_OK,
+        "one context");
+  CHECK(rsw_dataset_set_seed(d, -1) == RSW_ERR_INVALID, "a negative seed");
+  CHECK(rsw_dataset_write(d, path) == RSW_OK, "a dataset without films: %s", rsw_dataset_last_error(d));
+  struct stat st;
+  CHECK(stat(path, &st) == 0 && st.st_size > 0, "written");
+  rsw_dataset_free(d);
+  rsw_dataset_free(NULL);
+}
+
 /* Submit the wavelength sweep: n contexts over [400, 700] nm on `meter`,
  * job-level tabulated reflectance. */
 static bool submit_sweep(rsw_client *c, const char *id, int n, const char *idem, char job[40]) {
@@ -592,6 +629,17 @@ static void test_job_sweep(void) {
   rsw_film *f = NULL;
   s = rsw_job_fetch(c, job, "w00", "hemi", &f);
   CHECK(s == RSW_ERR_NOT_FOUND && !f, "a sensor the job did not render: %s", rsw_strerror(s));
+  /* The job as one dataset: an HDF5 (NetCDF-4) file. */
+  char nc[128];
+  snprintf(nc, sizeof nc, "%s/job.nc", tmpdir);
+  s = rsw_job_fetch_dataset(c, job, 0, nc);
+  CHECK(s == RSW_OK, "fetch dataset: %s %s", rsw_strerror(s), why(c));
+  FILE *fp = fopen(nc, "rb");
+  unsigned char magic[4] = {0};
+  CHECK(fp && fread(magic, 1, 4, fp) == 4 && memcmp(magic, "\x89HDF", 4) == 0, "the dataset is HDF5");
+  if (fp) fclose(fp);
+  s = rsw_job_fetch_dataset(c, "job-none", 0, nc);
+  CHECK(s == RSW_ERR_NOT_FOUND, "dataset of an unknown job: %s", rsw_strerror(s));
 
   s = rsw_job_delete(c, job);
   CHECK(s == RSW_OK, "delete: %s %s", rsw_strerror(s), why(c));
@@ -1232,6 +1280,7 @@ int main(void) {
     RSW_TEST_RUN(test_params);
     RSW_TEST_RUN(test_render_save);
     RSW_TEST_RUN(test_contexts_builder);
+    RSW_TEST_RUN(test_dataset_builder);
     RSW_TEST_RUN(test_job_sweep);
     RSW_TEST_RUN(test_wait_timeout_stop_cancel);
     RSW_TEST_RUN(test_unknown_ids);

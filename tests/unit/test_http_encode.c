@@ -404,7 +404,22 @@ static void test_depth_and_media(void) {
   CHECK(!http_media_type_is(NULL, "application/json"), "missing");
 }
 
+/* One media type against Accept (the dataset route): listed, wildcards,
+ * q=0 exclusions; media types are case-insensitive. */
+static void test_accepts(void) {
+  const char *nc = "application/x-netcdf";
+  CHECK(http_accepts(NULL, nc) && http_accepts("", nc) && http_accepts("  ", nc), "no Accept: anything");
+  CHECK(http_accepts("application/x-netcdf", nc), "exact");
+  CHECK(http_accepts("Application/X-NetCDF", nc), "case");
+  CHECK(http_accepts("*/*", nc) && http_accepts("application/*", nc), "wildcards");
+  CHECK(http_accepts("application/json, application/x-netcdf;q=0.5", nc), "in a list");
+  CHECK(!http_accepts("application/json", nc), "another type");
+  CHECK(!http_accepts("image/*", nc), "another major type's wildcard");
+  CHECK(!http_accepts("*/*, application/x-netcdf;q=0", nc), "excluded by q=0");
+}
+
 int main(void) {
+  RSW_TEST_RUN(test_accepts);
   RSW_TEST_RUN(test_film_json);
   RSW_TEST_RUN(test_film_npy);
   RSW_TEST_RUN(test_exr_round_trip);

@@ -1,0 +1,377 @@
+/* Sweep datasets on the client: the daemon's GET /v1/jobs/{id}/dataset
+ * saved to a file, and rsw_dataset, which builds the same NetCDF-4 file
+ * from films the client holds (a sweep spread over several jobs, shards
+ * merged) through the project's one writer, common/dataset_nc.c. */
+#include <cjson/cJSON.h>
+#include <errno.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "dataset_nc.h"
+#include "internal.h"
+
+rsw_status rsw_job_fetch_dataset(rsw_client *c, const char *job_id, int partial, const char *path) {
+  if (!c) return RSW_ERR_INVALID;
+  client_clear_error(c);
+  char rpath[320];
+  if (!job_id || !*job_id || strlen(job_id) > 200 || strchr(job_id, '/'))
+    return client_fail(c, RSW_ERR_INVALID, "job id missing or too long");
+  if (!path || !*path) return client_fail(c, RSW_ERR_INVALID, "fetch dataset: no output path");
+  char esc[256];
+  if (!client_escape(job_id, esc, sizeof esc)) return client_fail(c, RSW_ERR_INVALID, "job id too long");
+  snprintf(rpath, sizeof rpath, "/v1/jobs/%s/dataset%s", esc, partial ? "?partial=1" : "");
+  http_resp r;
+  rsw_status s =
+      http_request(c, &(http_req){.method = "GET", .path = rpath, .accept = "application/x-netcdf"}, &r);
+  if (s) return s;
+  size_t n = strlen(path) + 32;
+  char *tmp = malloc(n);
+  if (!tmp) {
+    http_resp_free(&r);
+    return client_fail(c, RSW_ERR_NOMEM, "out of memory");
+  }
+  snprintf(tmp, n, "%s.tmp.%ld", path, (long)getpid());
+  FILE *f = fopen(tmp, "wb");
+  bool ok = f && fwrite(r.body, 1, r.len, f) == r.len;
+  if (f) ok = fclose(f) == 0 && ok;
+  ok = ok && rename(tmp, path) == 0;
+  int e = errno;
+  if (!ok) unlink(tmp);
+  free(tmp);
+  http_resp_free(&r);
+  if (!ok) return client_fail(c, RSW_ERR_IO, "cannot write '%s': %s", path, strerror(e));
+  return RSW_OK;
+}
+
+/* ---- rsw_dataset -------------------------------------------------------------------- */
+
+typedef struct ds_film {
+  size_t context;
+  char *sensor;
+  int width, height, channels;
+  char **names;
+  float *data;
+  double *angles;
+  uint32_t spp;
+  uint64_t seed, unresolved;
+  nc_var var;
+} ds_film;
+
+struct rsw_dataset {
+  char **ids;
+  double *wl;
+  cJSON **coords;
+  size_t n, cap;
+  size_t last; /* the context the last film went to (films come in order) */
+  ds_film *films;
+  size_t nf, capf;
+  char *scene, *variant;
+  bool has_revision, has_seed;
+  uint64_t revision, seed;
+  char error[1024];
+};
+
+static rsw_status ds_fail(rsw_dataset *d, rsw_status s, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
+static rsw_status ds_fail(rsw_dataset *d, rsw_status s, const char *fmt, ...) {
+  va_list ap;
+  va_start(ap, fmt);
+  vsnprintf(d->error, sizeof d->error, fmt, ap);
+  va_end(ap);
+  return s;
+}
+
+rsw_status rsw_dataset_new(rsw_dataset **out) {
+  if (!out) return RSW_ERR_INVALID;
+  rsw_dataset *d = calloc(1, sizeof *d);
+  if (!d) return RSW_ERR_NOMEM;
+  *out = d;
+  return RSW_OK;
+}
+
+static void film_clear(ds_film *f) {
+  free(f->sensor);
+  for (int i = 0; f->names && i < f->channels; i++) free(f->names[i]);
+  free(f->names);
+  free(f->data);
+  free(f->angles);
+}
+
+void rsw_dataset_free(rsw_dataset *d) {
+  if (!d) return;
+  for (size_t i = 0; i < d->n; i++) {
+    free(d->ids[i]);
+    cJSON_Delete(d->coords[i]);
+  }
+  free(d->ids);
+  free(d->wl);
+  free(d->coords);
+  for (size_t i = 0; i < d->nf; i++) film_clear(&d->films[i]);
+  free(d->films);
+  free(d->scene);
+  free(d->variant);
+  free(d);
+}
+
+const char *rsw_dataset_last_error(const rsw_dataset *d) {
+  return d ? d->error : "";
+}
+
+rsw_status rsw_dataset_set_seed(rsw_dataset *d, long long seed) {
+  if (!d) return RSW_ERR_INVALID;
+  if (seed < 0) return ds_fail(d, RSW_ERR_INVALID, "the job seed must be a non-negative integer");
+  d->has_seed = true;
+  d->seed = (uint64_t)seed;
+  return RSW_OK;
+}
+
+rsw_status rsw_dataset_add_context(rsw_dataset *d, const char *id, double wavelength,
+                                   const char *coords_json) {
+  if (!d) return RSW_ERR_INVALID;
+  d->error[0] = '\0';
+  if (!id || !*id || strlen(id) > 64)
+    return ds_fail(d, RSW_ERR_INVALID, "a context id needs 1 to 64 characters");
+  cJSON *coords = NULL;
+  if (coords_json) {
+    coords = cJSON_Parse(coords_json);
+    if (!cJSON_IsObject(coords)) {
+      cJSON_Delete(coords);
+      return ds_fail(d, RSW_ERR_PARSE, "context '%s': coords must be a JSON object {name: number or string}",
+                     id);
+    }
+  }
+  if (d->n == d->cap) {
+    size_t cap = d->cap ? 2 * d->cap : 64;
+    char **ni = realloc(d->ids, cap * sizeof *ni);
+    if (ni) d->ids = ni;
+    double *nw = ni ? realloc(d->wl, cap * sizeof *nw) : NULL;
+    if (nw) d->wl = nw;
+    cJSON **nc = nw ? realloc(d->coords, cap * sizeof *nc) : NULL;
+    if (nc) d->coords = nc;
+    if (!nc) {
+      cJSON_Delete(coords);
+      return ds_fail(d, RSW_ERR_NOMEM, "out of memory");
+    }
+    d->cap = cap;
+  }
+  char *copy = strdup(id);
+  if (!copy) {
+    cJSON_Delete(coords);
+    return ds_fail(d, RSW_ERR_NOMEM, "out of memory");
+  }
+  d->ids[d->n] = copy;
+  d->wl[d->n] = wavelength > 0 ? wavelength : NAN;
+  d->coords[d->n] = coords;
+  d->n++;
+  return RSW_OK;
+}
+
+static bool find_context(rsw_dataset *d, const char *id, size_t *out) {
+  for (size_t k = 0; k < d->n; k++) {
+    size_t i = (d->last + k) % d->n;
+    if (strcmp(d->ids[i], id) == 0) {
+      *out = d->last = i;
+      return true;
+    }
+  }
+  return false;
+}
+
+/* A meta member that must be an integer in [0, max] (absent or null: false). */
+static bool meta_u64(const cJSON *meta, const char *key, uint64_t *out) {
+  const cJSON *v = cJSON_GetObjectItemCaseSensitive(meta, key);
+  if (!cJSON_IsNumber(v) || !(v->valuedouble >= 0) || v->valuedouble != floor(v->valuedouble) ||
+      v->valuedouble >= 18446744073709551616.0)
+    return false;
+  *out = (uint64_t)v->valuedouble;
+  return true;
+}
+
+/* meta's string member key equals *kept, or sets it when still unset. */
+static rsw_status same_string(rsw_dataset *d, const cJSON *meta, const char *key, char **kept,
+                              const char *what) {
+  const char *v = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(meta, key));
+  if (!v) return RSW_OK;
+  if (!*kept) return (*kept = strdup(v)) ? RSW_OK : ds_fail(d, RSW_ERR_NOMEM, "out of memory");
+  if (strcmp(*kept, v) != 0)
+    return ds_fail(d, RSW_ERR_INVALID, "%s: %s '%s' differs from the other films' '%s'", what, key, v, *kept);
+  return RSW_OK;
+}
+
+rsw_status rsw_dataset_add_film(rsw_dataset *d, const char *context, const char *sensor,
+                                const rsw_film *film) {
+  if (!d) return RSW_ERR_INVALID;
+  d->error[0] = '\0';
+  if (!context || !sensor || !*sensor || !film)
+    return ds_fail(d, RSW_ERR_INVALID, "a film needs its context, sensor and film");
+  char what[400];
+  snprintf(what, sizeof what, "film %.64s/%.256s", context, sensor);
+  size_t ci;
+  if (!find_context(d, context, &ci))
+    return ds_fail(d, RSW_ERR_INVALID, "%s: no context '%s' was added (rsw_dataset_add_context)", what,
+                   context);
+  if (d->nf == d->capf) {
+    size_t cap = d->capf ? 2 * d->capf : 64;
+    ds_film *nf = realloc(d->films, cap * sizeof *nf);
+    if (!nf) return ds_fail(d, RSW_ERR_NOMEM, "out of memory");
+    d->films = nf, d->capf = cap;
+  }
+  ds_film f = {.context = ci,
+               .width = rsw_film_width(film),
+               .height = rsw_film_height(film),
+               .channels = rsw_film_channels(film)};
+  size_t np = (size_t)f.width * (size_t)f.height, ns = np * (size_t)f.channels;
+  cJSON *meta = cJSON_Parse(rsw_film_meta(film));
+  rsw_status s = RSW_OK;
+  f.sensor = strdup(sensor);
+  f.names = calloc((size_t)(f.channels > 0 ? f.channels : 1), sizeof *f.names);
+  f.data = malloc((ns ? ns : 1) * sizeof *f.data);
+  if (!f.sensor || !f.names || !f.data) s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");
+  for (int i = 0; !s && i < f.channels; i++)
+    if (!(f.names[i] = strdup(rsw_film_channel_name(film, i))))
+      s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");
+  if (!s) memcpy(f.data, rsw_film_data(film), ns * sizeof *f.data);
+  uint64_t spp = 0, rev;
+  if (!s && cJSON_IsObject(meta)) {
+    meta_u64(meta, "spp", &spp);
+    meta_u64(meta, "seed", &f.seed);
+    meta_u64(meta, "unresolved_rays", &f.unresolved);
+    f.spp = spp > 0xffffffffu ? 0xffffffffu : (uint32_t)spp;
+    if (meta_u64(meta, "revision", &rev)) {
+      if (d->has_revision && rev != d->revision)
+        s = ds_fail(d, RSW_ERR_INVALID, "%s: revision %llu differs from the other films' %llu", what,
+                    (unsigned long long)rev, (unsigned long long)d->revision);
+      d->has_revision = true, d->revision = rev;
+    }
+    if (!s) s = same_string(d, meta, "scene", &d->scene, what);
+    if (!s) s = same_string(d, meta, "variant", &d->variant, what);
+    const cJSON *wl = cJSON_GetObjectItemCaseSensitive(meta, "wavelength");
+    if (!s && cJSON_IsNumber(wl) && !isfinite(d->wl[ci])) d->wl[ci] = wl->valuedouble;
+    const cJSON *zen = cJSON_GetObjectItemCaseSensitive(meta, "zenith_deg");
+    const cJSON *az = cJSON_GetObjectItemCaseSensitive(meta, "azimuth_deg");
+    if (!s && (zen || az)) {
+      if (!cJSON_IsArray(zen) || !cJSON_IsArray(az) || (size_t)cJSON_GetArraySize(zen) != np ||
+          (size_t)cJSON_GetArraySize(az) != np)
+        s = ds_fail(d, RSW_ERR_PARSE, "%s: zenith_deg and azimuth_deg must list one angle per pixel", what);
+      else if (!(f.angles = malloc(2 * np * sizeof *f.angles)))
+        s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");
+      const cJSON *arr[2] = {zen, az};
+      for (int k = 0; !s && k < 2; k++) {
+        size_t i = 0;
+        const cJSON *it;
+        cJSON_ArrayForEach(it, arr[k]) {
+          if (!cJSON_IsNumber(it)) {
+            s = ds_fail(d, RSW_ERR_PARSE, "%s: an angle is not a number", what);
+            break;
+          }
+          f.angles[2 * i++ + (size_t)k] = it->valuedouble;
+        }
+      }
+    }
+  }
+  cJSON_Delete(meta);
+  if (s) {
+    film_clear(&f);
+    return s;
+  }
+  d->films[d->nf++] = f;
+  return RSW_OK;
+}
+
+rsw_status rsw_dataset_add_film_file(rsw_dataset *d, const char *context, const char *sensor,
+                                     const char *path) {
+  if (!d) return RSW_ERR_INVALID;
+  d->error[0] = '\0';
+  if (!path) return ds_fail(d, RSW_ERR_INVALID, "no film path");
+  FILE *fp = fopen(path, "rb");
+  if (!fp) return ds_fail(d, RSW_ERR_IO, "cannot open '%s': %s", path, strerror(errno));
+  char *text = NULL;
+  size_t len = 0, cap = 0;
+  rsw_status s = RSW_OK;
+  for (;;) {
+    if (len + 65536 + 1 > cap) {
+      size_t nc = cap ? 2 * cap : 1 << 20;
+      if (nc > CLIENT_MAX_BODY) {
+        s = ds_fail(d, RSW_ERR_LIMIT, "'%s' is larger than a film may be", path);
+        break;
+      }
+      char *nt = realloc(text, nc);
+      if (!nt) {
+        s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");
+        break;
+      }
+      text = nt, cap = nc;
+    }
+    size_t got = fread(text + len, 1, cap - len - 1, fp);
+    len += got;
+    if (got == 0) break;
+  }
+  if (!s && ferror(fp)) s = ds_fail(d, RSW_ERR_IO, "cannot read '%s'", path);
+  fclose(fp);
+  /* film_from_json reports through a client's last-error slot: a
+   * client that never connects. */
+  rsw_client *tmp = s ? NULL : calloc(1, sizeof *tmp);
+  if (!s && !tmp) s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");
+  rsw_film *film = NULL;
+  if (!s && (s = film_from_json(tmp, text, len, path, &film)))
+    ds_fail(d, s, "%s", rsw_client_last_error(tmp)->message);
+  free(text);
+  free(tmp);
+  if (!s) s = rsw_dataset_add_film(d, context, sensor, film);
+  rsw_film_free(film);
+  return s;
+}
+
+rsw_status rsw_dataset_write(rsw_dataset *d, const char *path) {
+  if (!d) return RSW_ERR_INVALID;
+  d->error[0] = '\0';
+  if (!path || !*path) return ds_fail(d, RSW_ERR_INVALID, "no output path");
+  rsw_err err = {0};
+  nc_coords coords = {0};
+  rsw_status s = nc_coords_build((const void *const *)d->coords, d->n, "/contexts", &coords, &err);
+  nc_film *films = s ? NULL : calloc(d->nf ? d->nf : 1, sizeof *films);
+  if (!s && !films) s = rsw_fail(&err, RSW_ERR_NOMEM, "", "out of memory");
+  for (size_t i = 0; !s && i < d->nf; i++) {
+    ds_film *f = &d->films[i];
+    f->var = (nc_var){"radiance", f->data};
+    films[i] = (nc_film){.context = f->context,
+                         .sensor = f->sensor,
+                         .width = f->width,
+                         .height = f->height,
+                         .channels = f->channels,
+                         .channel_names = (const char *const *)f->names,
+                         .spp = f->spp,
+                         .seed = f->seed,
+                         .unresolved_rays = f->unresolved,
+                         .angles = f->angles,
+                         .vars = &f->var,
+                         .n_vars = 1};
+  }
+  if (!s) {
+    nc_dataset ds = {.size = sizeof ds,
+                     .scene = d->scene,
+                     .variant = d->variant,
+                     .has_revision = d->has_revision,
+                     .revision = d->revision,
+                     .has_seed = d->has_seed,
+                     .seed = d->seed,
+                     .n_contexts = d->n,
+                     .context_ids = (const char *const *)d->ids,
+                     .wavelengths = d->wl,
+                     .coords = &coords,
+                     .films = films,
+                     .n_films = d->nf};
+    s = nc_dataset_write(path, &ds, &err);
+  }
+  if (s) {
+    char buf[1100];
+    ds_fail(d, s, "%s", rsw_err_format(&err, buf, sizeof buf));
+  }
+  free(films);
+  nc_coords_free(&coords);
+  return s;
+}

@@ -1,0 +1,895 @@
+/* A sweep as one NetCDF-4 dataset (see dataset_nc.h for the layout). The
+ * one file that includes libnetcdf's headers.
+ *
+ * CF conventions (CF-1.10, cfconventions.org): every variable has units
+ * and long_name; the coords of a complete grid are coordinate variables
+ * (a 1-D variable named as its dimension), everything else that labels
+ * the data (context ids, wavelengths, coords of a non-grid job, pixel
+ * angles) is an auxiliary coordinate listed in the data variables'
+ * "coordinates" attribute, which is also what makes xarray open them as
+ * coordinates. */
+#include "dataset_nc.h"
+
+#include <cjson/cJSON.h>
+#include <math.h>
+#include <netcdf.h>
+#include <netcdf_mem.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "raysweep/version.h"
+
+/* The quantities a dataset variable may hold. Radiance: W m^-2 sr^-1
+ * nm^-1 in mono (spectral, at the context's wavelength), W m^-2 sr^-1 in
+ * rgb. BRDF = L / E_h (sr^-1) and BRF = pi L / E_h (dimensionless), with
+ * E_h the horizontal irradiance of the directional emitters (Eradiate's
+ * definitions); radiance_stderr: the standard error of the mean radiance,
+ * same units. */
+static const nc_quantity quantities[] = {
+    {"radiance", "radiance", "W m-2 sr-1 nm-1", "W m-2 sr-1"},
+    {"radiance_stderr", "standard error of the mean radiance", "W m-2 sr-1 nm-1", "W m-2 sr-1"},
+    {"brdf", "bidirectional reflectance distribution function", "sr-1", "sr-1"},
+    {"brf", "bidirectional reflectance factor", "1", "1"},
+};
+#define N_QUANTITIES (sizeof quantities / sizeof quantities[0])
+
+const nc_quantity *nc_quantity_find(const char *name) {
+  for (size_t i = 0; i < N_QUANTITIES; i++)
+    if (strcmp(quantities[i].name, name) == 0) return &quantities[i];
+  return NULL;
+}
+
+/* Names the writer uses itself (besides the quantities): a coord may not
+ * take them. "wavelength" is allowed: a coord of that name replaces the
+ * wavelength variable. */
+static const char *const reserved[] = {"x", "y", "channel", "context", "seed", "spp", "vza", "vaa",
+                                       "unresolved_rays"};
+
+static bool valid_coord_name(const char *s) {
+  size_t n = strlen(s);
+  if (n < 1 || n > NC_MAX_COORD_NAME) return false;
+  if (!((s[0] >= 'A' && s[0] <= 'Z') || (s[0] >= 'a' && s[0] <= 'z'))) return false;
+  for (size_t i = 1; i < n; i++) {
+    char c = s[i];
+    if (!((c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '_'))
+      return false;
+  }
+  return true;
+}
+
+static bool reserved_name(const char *s) {
+  for (size_t i = 0; i < sizeof reserved / sizeof reserved[0]; i++)
+    if (strcmp(reserved[i], s) == 0) return true;
+  return nc_quantity_find(s) != NULL;
+}
+
+void nc_coords_free(nc_coords *c) {
+  if (!c) return;
+  for (size_t k = 0; k < c->n; k++) {
+    free(c->c[k].name);
+    free(c->c[k].num);
+    if (c->c[k].str)
+      for (size_t i = 0; i < c->n_contexts; i++) free(c->c[k].str[i]);
+    free(c->c[k].str);
+  }
+  free(c->c);
+  memset(c, 0, sizeof *c);
+}
+
+rsw_status nc_coords_copy(const nc_coords *src, nc_coords *out, rsw_err *err) {
+  nc_coords c = {.n_contexts = src->n_contexts};
+  size_t n = src->n_contexts;
+  if (src->n && !(c.c = calloc(src->n, sizeof *c.c))) return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+  bool ok = true;
+  for (size_t k = 0; k < src->n && ok; k++, c.n++) {
+    const nc_coord *s = &src->c[k];
+    nc_coord *d = &c.c[k];
+    d->is_string = s->is_string;
+    d->name = strdup(s->name);
+    if (s->is_string) {
+      d->str = calloc(n ? n : 1, sizeof *d->str);
+      for (size_t i = 0; d->str && i < n && ok; i++) ok = (d->str[i] = strdup(s->str[i])) != NULL;
+    } else if ((d->num = malloc((n ? n : 1) * sizeof *d->num))) {
+      memcpy(d->num, s->num, n * sizeof *d->num);
+    }
+    ok = ok && d->name && (d->str || d->num);
+  }
+  if (!ok) {
+    nc_coords_free(&c);
+    return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+  }
+  *out = c;
+  return RSW_OK;
+}
+
+static bool valid_coord_string(const char *s) {
+  size_t n = strlen(s);
+  if (n < 1 || n > NC_MAX_COORD_STR) return false;
+  for (size_t i = 0; i < n; i++)
+    if ((unsigned char)s[i] < 0x20 || s[i] == 0x7f) return false;
+  return true;
+}
+
+rsw_status nc_coords_build(const void *const *coords_json, size_t n, const char *prefix, nc_coords *out,
+                           rsw_err *err) {
+  nc_coords c = {.n_contexts = n};
+  char w[320];
+  /* The first context's names set the list; every other must match. */
+  const cJSON *first = NULL;
+  size_t first_i = 0;
+  for (size_t i = 0; i < n; i++) {
+    const cJSON *o = coords_json[i];
+    if (!o) continue;
+    snprintf(w, sizeof w, "%s/%zu/coords", prefix, i);
+    if (!cJSON_IsObject(o))
+      return rsw_fail(err, RSW_ERR_TYPE, w, "coords must be an object {name: number or string}");
+    if (!first && o->child) first = o, first_i = i;
+  }
+  if (!first) {
+    *out = c;
+    return RSW_OK;
+  }
+  rsw_status st = RSW_OK;
+  size_t nn = 0;
+  for (const cJSON *k = first->child; k; k = k->next) nn++;
+  if (nn > NC_MAX_COORDS) {
+    snprintf(w, sizeof w, "%s/%zu/coords", prefix, first_i);
+    return rsw_fail(err, RSW_ERR_LIMIT, w, "%zu coords; a context may have at most %d", nn, NC_MAX_COORDS);
+  }
+  c.c = calloc(nn ? nn : 1, sizeof *c.c);
+  if (!c.c) return rsw_fail(err, RSW_ERR_NOMEM, prefix, "out of memory");
+  for (const cJSON *k = first->child; k && !st; k = k->next) {
+    snprintf(w, sizeof w, "%s/%zu/coords/%.64s", prefix, first_i, k->string);
+    if (!valid_coord_name(k->string))
+      st = rsw_fail(err, RSW_ERR_INVALID, w, "coord name '%.64s' must match [A-Za-z][A-Za-z0-9_]{0,63}",
+                    k->string);
+    else if (reserved_name(k->string))
+      st = rsw_fail(err, RSW_ERR_INVALID, w, "coord name '%s' is a name the dataset uses itself", k->string);
+    for (size_t j = 0; j < c.n && !st; j++)
+      if (strcmp(c.c[j].name, k->string) == 0)
+        st = rsw_fail(err, RSW_ERR_DUPLICATE, w, "coord '%s' appears twice", k->string);
+    if (st) break;
+    nc_coord *cc = &c.c[c.n++];
+    cc->is_string = cJSON_IsString(k);
+    cc->name = strdup(k->string);
+    if (cc->is_string)
+      cc->str = calloc(n, sizeof *cc->str);
+    else
+      cc->num = calloc(n, sizeof *cc->num);
+    if (!cc->name || (!cc->str && !cc->num)) st = rsw_fail(err, RSW_ERR_NOMEM, prefix, "out of memory");
+  }
+  for (size_t i = 0; i < n && !st; i++) {
+    const cJSON *o = coords_json[i];
+    if (!o || !o->child) {
+      snprintf(w, sizeof w, o ? "%s/%zu/coords" : "%s/%zu", prefix, i);
+      st = rsw_fail(err, RSW_ERR_MISSING, w,
+                    "this context has no coords; every context of a job with coords needs them (%s...)",
+                    c.c[0].name);
+      break;
+    }
+    size_t seen = 0;
+    for (const cJSON *k = o->child; k && !st; k = k->next) {
+      snprintf(w, sizeof w, "%s/%zu/coords/%.64s", prefix, i, k->string);
+      size_t j = 0;
+      while (j < c.n && strcmp(c.c[j].name, k->string) != 0) j++;
+      if (j == c.n) {
+        st = rsw_fail(err, RSW_ERR_INVALID, w,
+                      "coord '%.64s' is not one of context %zu's: every context must name the same coords",
+                      k->string, first_i);
+        break;
+      }
+      seen++;
+      nc_coord *cc = &c.c[j];
+      if (cJSON_IsNumber(k)) {
+        if (cc->is_string)
+          st = rsw_fail(err, RSW_ERR_TYPE, w, "coord '%s' is a string in context %zu and a number here",
+                        cc->name, first_i);
+        else if (!isfinite(k->valuedouble))
+          st = rsw_fail(err, RSW_ERR_INVALID, w, "a coord's number must be finite");
+        else
+          cc->num[i] = k->valuedouble;
+      } else if (cJSON_IsString(k)) {
+        if (!cc->is_string)
+          st = rsw_fail(err, RSW_ERR_TYPE, w, "coord '%s' is a number in context %zu and a string here",
+                        cc->name, first_i);
+        else if (!valid_coord_string(k->valuestring))
+          st = rsw_fail(err, RSW_ERR_INVALID, w,
+                        "a coord's string must have 1 to %d bytes and no control characters", NC_MAX_COORD_STR);
+        else if (!(cc->str[i] = strdup(k->valuestring)))
+          st = rsw_fail(err, RSW_ERR_NOMEM, w, "out of memory");
+      } else {
+        st = rsw_fail(err, RSW_ERR_TYPE, w, "a coord's value must be a number or a string");
+      }
+      if (!st && seen > c.n) st = rsw_fail(err, RSW_ERR_DUPLICATE, w, "coord '%s' appears twice", k->string);
+    }
+    if (!st && seen < c.n) {
+      for (size_t j = 0; j < c.n; j++)
+        if (!cJSON_GetObjectItemCaseSensitive(o, c.c[j].name)) {
+          snprintf(w, sizeof w, "%s/%zu/coords/%s", prefix, i, c.c[j].name);
+          st = rsw_fail(err, RSW_ERR_MISSING, w, "coord '%s' is missing (context %zu has it)", c.c[j].name,
+                        first_i);
+          break;
+        }
+      if (!st) {
+        snprintf(w, sizeof w, "%s/%zu/coords", prefix, i);
+        st = rsw_fail(err, RSW_ERR_DUPLICATE, w, "a coord appears twice");
+      }
+    }
+  }
+  if (st) {
+    nc_coords_free(&c);
+    return st;
+  }
+  *out = c;
+  return RSW_OK;
+}
+
+/* ---- the writer ------------------------------------------------------------------- */
+
+static pthread_mutex_t g_nc_lock = PTHREAD_MUTEX_INITIALIZER;
+
+/* Report a libnetcdf error and return RSW_ERR_IO. */
+static rsw_status nc_fail(rsw_err *err, int rc, const char *what) {
+  if (rc == NC_ENAMEINUSE)
+    return rsw_fail(err, RSW_ERR_INVALID, what, "the name '%s' is used twice in the dataset", what);
+  if (rc == NC_ENOMEM) return rsw_fail(err, RSW_ERR_NOMEM, what, "out of memory");
+  return rsw_fail(err, RSW_ERR_IO, what, "NetCDF: %s", nc_strerror(rc));
+}
+
+#define NC_TRY(call, what)                                                                                   \
+  do {                                                                                                       \
+    int rc_ = (call);                                                                                        \
+    if (rc_ != NC_NOERR) return nc_fail(err, rc_, (what));                                                   \
+  } while (0)
+
+/* Sorted distinct values of one coord, and each context's position. */
+typedef struct axis {
+  size_t n;          /* distinct values */
+  size_t *first;     /* n: a context holding each value, in sorted order */
+  size_t *pos;       /* n_contexts: the context's index along the axis */
+  const nc_coord *c; /* borrowed */
+} axis;
+
+static const nc_coord *g_sort_coord; /* under g_nc_lock */
+
+static int cmp_ctx(const void *a, const void *b) {
+  size_t i = *(const size_t *)a, j = *(const size_t *)b;
+  const nc_coord *c = g_sort_coord;
+  int r;
+  if (c->is_string)
+    r = strcmp(c->str[i], c->str[j]);
+  else
+    r = c->num[i] < c->num[j] ? -1 : c->num[i] > c->num[j];
+  if (r) return r;
+  return i < j ? -1 : i > j;
+}
+
+static bool same_value(const nc_coord *c, size_t i, size_t j) {
+  return c->is_string ? strcmp(c->str[i], c->str[j]) == 0 : c->num[i] == c->num[j];
+}
+
+/* One sensor's films and what its variables look like. */
+typedef struct sensor_set {
+  const char *id;
+  char prefix[80]; /* "" or "<sanitized id>_" */
+  const nc_film *shape;
+  const nc_film **by_ctx; /* n_contexts, NULL where missing */
+  size_t n_present;
+  bool any_angles, same_angles, spp_varies, any_unresolved;
+  char **qnames; /* quantities, table order */
+  size_t n_q;
+  int dim_y, dim_x, dim_ch;
+} sensor_set;
+
+typedef struct writer {
+  const nc_dataset *d;
+  int ncid;
+  bool grid;
+  size_t n_cdims; /* dims of the context layout: coords (grid) or 1 */
+  int cdim[NC_MAX_COORDS];
+  axis ax[NC_MAX_COORDS];
+  size_t *cell; /* n_contexts: linear index of each context in the layout */
+  size_t n_cells;
+  sensor_set *s;
+  size_t n_s;
+  bool spp_uniform;
+  uint32_t spp;
+  size_t missing;
+  char coordinates[1024]; /* auxiliary coordinates every data variable lists */
+} writer;
+
+static void writer_free(writer *w) {
+  for (size_t k = 0; k < NC_MAX_COORDS; k++) {
+    free(w->ax[k].first);
+    free(w->ax[k].pos);
+  }
+  free(w->cell);
+  for (size_t i = 0; i < w->n_s; i++) {
+    free(w->s[i].by_ctx);
+    free(w->s[i].qnames);
+  }
+  free(w->s);
+}
+
+static int cmp_film_sensor(const void *a, const void *b) {
+  return strcmp((*(const nc_film *const *)a)->sensor, (*(const nc_film *const *)b)->sensor);
+}
+
+/* Context layout: a complete grid over the coords, or a list. */
+static rsw_status plan_layout(writer *w, rsw_err *err) {
+  const nc_dataset *d = w->d;
+  size_t n = d->n_contexts;
+  const nc_coords *cs = d->coords && d->coords->n ? d->coords : NULL;
+  w->cell = calloc(n ? n : 1, sizeof *w->cell);
+  if (!w->cell) return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+  if (cs && cs->n_contexts != n)
+    return rsw_fail(err, RSW_ERR_INVALID, "coords", "coords for %zu contexts, the dataset has %zu",
+                    cs->n_contexts, n);
+  bool grid = cs != NULL && n > 0;
+  size_t *order = grid ? malloc(n * sizeof *order) : NULL;
+  if (grid && !order) return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+  unsigned long long cells = 1;
+  for (size_t k = 0; grid && k < cs->n; k++) {
+    axis *a = &w->ax[k];
+    a->c = &cs->c[k];
+    a->pos = malloc(n * sizeof *a->pos);
+    a->first = malloc(n * sizeof *a->first);
+    if (!a->pos || !a->first) {
+      free(order);
+      return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+    }
+    for (size_t i = 0; i < n; i++) order[i] = i;
+    g_sort_coord = a->c;
+    qsort(order, n, sizeof *order, cmp_ctx);
+    a->n = 0;
+    for (size_t r = 0; r < n; r++) {
+      if (r == 0 || !same_value(a->c, order[r], order[r - 1])) a->first[a->n++] = order[r];
+      a->pos[order[r]] = a->n - 1;
+    }
+    cells *= a->n;
+    if (cells > n) grid = false;
+  }
+  free(order);
+  if (grid && cells == n) {
+    /* Every combination at most once: then n cells, n contexts = complete. */
+    bool *used = calloc(n, 1);
+    if (!used) return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+    for (size_t i = 0; i < n && grid; i++) {
+      size_t lin = 0;
+      for (size_t k = 0; k < cs->n; k++) lin = lin * w->ax[k].n + w->ax[k].pos[i];
+      if (used[lin]) grid = false;
+      used[lin] = true;
+      w->cell[i] = lin;
+    }
+    free(used);
+  } else {
+    grid = false;
+  }
+  w->grid = grid;
+  if (!grid)
+    for (size_t i = 0; i < n; i++) w->cell[i] = i;
+  w->n_cells = n;
+  w->n_cdims = grid ? cs->n : 1;
+  return RSW_OK;
+}
+
+static void sanitize(const char *id, char *out, size_t cap) {
+  size_t o = 0;
+  if (!((id[0] >= 'A' && id[0] <= 'Z') || (id[0] >= 'a' && id[0] <= 'z'))) out[o++] = 's';
+  for (const char *p = id; *p && o + 2 < cap; p++) {
+    char c = *p;
+    bool ok = (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '_';
+    out[o++] = ok ? c : '_';
+  }
+  out[o++] = '_';
+  out[o] = '\0';
+}
+
+/* Group the films by sensor (sorted by id, so the order of the films
+ * never matters) and check that each sensor's agree. */
+static rsw_status plan_sensors(writer *w, rsw_err *err) {
+  const nc_dataset *d = w->d;
+  const nc_film **f = malloc((d->n_films ? d->n_films : 1) * sizeof *f);
+  if (!f) return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+  for (size_t i = 0; i < d->n_films; i++) f[i] = &d->films[i];
+  qsort(f, d->n_films, sizeof *f, cmp_film_sensor);
+  size_t ns = 0;
+  for (size_t i = 0; i < d->n_films; i++)
+    if (i == 0 || strcmp(f[i]->sensor, f[i - 1]->sensor) != 0) ns++;
+  w->s = calloc(ns ? ns : 1, sizeof *w->s);
+  if (!w->s) {
+    free(f);
+    return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+  }
+  rsw_status st = RSW_OK;
+  w->spp_uniform = true;
+  bool spp_set = false;
+  for (size_t i = 0; i < d->n_films && !st; i++) {
+    const nc_film *x = f[i];
+    char where[320];
+    snprintf(where, sizeof where, "film %s/%.200s", x->context < d->n_contexts ? d->context_ids[x->context] : "?",
+             x->sensor);
+    if (i == 0 || strcmp(x->sensor, f[i - 1]->sensor) != 0) {
+      sensor_set *s = &w->s[w->n_s++];
+      s->id = x->sensor;
+      s->shape = x;
+      s->same_angles = true;
+      if (ns > 1) sanitize(x->sensor, s->prefix, sizeof s->prefix);
+      s->by_ctx = calloc(d->n_contexts ? d->n_contexts : 1, sizeof *s->by_ctx);
+      s->qnames = calloc(N_QUANTITIES, sizeof *s->qnames);
+      if (!s->by_ctx || !s->qnames) {
+        st = rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+        break;
+      }
+    }
+    sensor_set *s = &w->s[w->n_s - 1];
+    if (x->context >= d->n_contexts) {
+      st = rsw_fail(err, RSW_ERR_INVALID, where, "context index %zu out of range", x->context);
+      break;
+    }
+    if (x->width < 1 || x->height < 1 || x->channels < 1 || !x->channel_names) {
+      st = rsw_fail(err, RSW_ERR_INVALID, where, "a film needs a size and channel names");
+      break;
+    }
+    if (s->by_ctx[x->context]) {
+      st = rsw_fail(err, RSW_ERR_INVALID, where, "two films of one context and sensor");
+      break;
+    }
+    const nc_film *sh = s->shape;
+    bool same = x->width == sh->width && x->height == sh->height && x->channels == sh->channels;
+    for (int c = 0; same && c < x->channels; c++) same = strcmp(x->channel_names[c], sh->channel_names[c]) == 0;
+    if (!same) {
+      st = rsw_fail(err, RSW_ERR_INVALID, where, "its shape or channels differ from the sensor's other films");
+      break;
+    }
+    s->by_ctx[x->context] = x;
+    s->n_present++;
+    if (x->angles) {
+      if (!s->any_angles)
+        s->any_angles = true;
+      else if (memcmp(x->angles, sh->angles ? sh->angles : x->angles,
+                      (size_t)x->width * (size_t)x->height * 2 * sizeof(double)) != 0)
+        s->same_angles = false;
+      if (!sh->angles) s->same_angles = false;
+    } else if (s->any_angles || sh->angles) {
+      s->same_angles = false;
+    }
+    if (x->unresolved_rays) s->any_unresolved = true;
+    if (!spp_set)
+      w->spp = x->spp, spp_set = true;
+    else if (x->spp != w->spp)
+      w->spp_uniform = false;
+    if (x->n_vars < 1) {
+      st = rsw_fail(err, RSW_ERR_INVALID, where, "a film needs at least one quantity");
+      break;
+    }
+    for (size_t v = 0; v < x->n_vars && !st; v++) {
+      const nc_quantity *q = x->vars[v].name ? nc_quantity_find(x->vars[v].name) : NULL;
+      if (!q || !x->vars[v].data) {
+        st = rsw_fail(err, RSW_ERR_INVALID, where, "no quantity '%s' (dataset_nc.c's table)",
+                      x->vars[v].name ? x->vars[v].name : "(null)");
+        break;
+      }
+      s->qnames[q - quantities] = (char *)q->name;
+    }
+  }
+  free(f);
+  if (st) return st;
+  /* Quantities in table order. */
+  for (size_t i = 0; i < w->n_s; i++) {
+    sensor_set *s = &w->s[i];
+    for (size_t q = 0; q < N_QUANTITIES; q++)
+      if (s->qnames[q]) s->qnames[s->n_q++] = s->qnames[q];
+    for (size_t c = 0; c < d->n_contexts; c++)
+      if (!s->by_ctx[c]) w->missing++;
+    /* A sensor whose angles are in some films only varies. */
+    if (s->any_angles && s->n_present < d->n_contexts) s->same_angles = false;
+  }
+  return RSW_OK;
+}
+
+static rsw_status put_text_att(int ncid, int var, const char *name, const char *value, rsw_err *err) {
+  NC_TRY(nc_put_att_text(ncid, var, name, strlen(value), value), name);
+  return RSW_OK;
+}
+
+#define TRY(x)                                                                                               \
+  do {                                                                                                       \
+    rsw_status st_ = (x);                                                                                    \
+    if (st_) return st_;                                                                                     \
+  } while (0)
+
+static void name_cat(char *out, size_t cap, const char *prefix, const char *name) {
+  snprintf(out, cap, "%s%s", prefix, name);
+}
+
+/* Append a name to the coordinates attribute list. */
+static void coords_add(writer *w, const char *name) {
+  size_t l = strlen(w->coordinates);
+  snprintf(w->coordinates + l, sizeof w->coordinates - l, "%s%s", l ? " " : "", name);
+}
+
+/* Define a variable over the context layout dims plus `extra` more. */
+static rsw_status def_ctx_var(writer *w, const char *name, nc_type type, int n_extra, const int *extra, int *varid,
+                              rsw_err *err) {
+  int dims[NC_MAX_COORDS + 3];
+  int nd = 0;
+  for (size_t k = 0; k < w->n_cdims; k++) dims[nd++] = w->cdim[k];
+  for (int k = 0; k < n_extra; k++) dims[nd++] = extra[k];
+  NC_TRY(nc_def_var(w->ncid, name, type, nd, dims, varid), name);
+  return RSW_OK;
+}
+
+/* start[] of a context's cell in the layout dims. */
+static void cell_start(const writer *w, size_t ctx, size_t *start) {
+  if (!w->grid) {
+    start[0] = w->cell[ctx];
+    return;
+  }
+  for (size_t k = 0; k < w->n_cdims; k++) start[k] = w->ax[k].pos[ctx];
+}
+
+/* An angle as every writer's file holds it: to 9 significant digits,
+ * the precision of the JSON film meta (zenith_deg, azimuth_deg) that
+ * libraysweep builds its datasets from, so the daemon's dataset and one
+ * built on the client from the same films are bitwise equal. */
+static double canonical_angle(double a) {
+  char buf[40];
+  snprintf(buf, sizeof buf, "%.9g", a);
+  return strtod(buf, NULL);
+}
+
+static rsw_status write_all(writer *w, rsw_err *err) {
+  const nc_dataset *d = w->d;
+  int ncid = w->ncid;
+  const nc_coords *cs = d->coords && d->coords->n ? d->coords : NULL;
+  bool rgb = d->variant && strcmp(d->variant, "rgb") == 0;
+  char nm[160];
+  /* Global attributes. */
+  TRY(put_text_att(ncid, NC_GLOBAL, "Conventions", "CF-1.10", err));
+  TRY(put_text_att(ncid, NC_GLOBAL, "title", "raysweep sweep", err));
+  TRY(put_text_att(ncid, NC_GLOBAL, "source", "raysweep " RSW_VERSION, err));
+  TRY(put_text_att(ncid, NC_GLOBAL, "raysweep_version", RSW_VERSION, err));
+  if (d->scene) TRY(put_text_att(ncid, NC_GLOBAL, "scene", d->scene, err));
+  if (d->has_revision) {
+    unsigned long long v = d->revision;
+    NC_TRY(nc_put_att_ulonglong(ncid, NC_GLOBAL, "revision", NC_UINT64, 1, &v), "revision");
+  }
+  if (d->variant) TRY(put_text_att(ncid, NC_GLOBAL, "variant", d->variant, err));
+  if (d->has_seed) {
+    unsigned long long v = d->seed;
+    NC_TRY(nc_put_att_ulonglong(ncid, NC_GLOBAL, "seed", NC_UINT64, 1, &v), "seed");
+  }
+  if (w->spp_uniform && d->n_films) {
+    unsigned v = w->spp;
+    NC_TRY(nc_put_att_uint(ncid, NC_GLOBAL, "spp", NC_UINT, 1, &v), "spp");
+  }
+  if (d->job) TRY(put_text_att(ncid, NC_GLOBAL, "job", d->job, err));
+  if (w->missing) {
+    unsigned long long v = w->missing;
+    NC_TRY(nc_put_att_ulonglong(ncid, NC_GLOBAL, "films_missing", NC_UINT64, 1, &v), "films_missing");
+  }
+
+  /* The context layout. */
+  int v_coord[NC_MAX_COORDS], v_ctx, v_wl = -1;
+  bool wl_coord = false;
+  if (w->grid) {
+    for (size_t k = 0; k < cs->n; k++) {
+      const nc_coord *c = &cs->c[k];
+      NC_TRY(nc_def_dim(ncid, c->name, w->ax[k].n, &w->cdim[k]), c->name);
+      NC_TRY(nc_def_var(ncid, c->name, c->is_string ? NC_STRING : NC_DOUBLE, 1, &w->cdim[k], &v_coord[k]),
+             c->name);
+    }
+  } else {
+    NC_TRY(nc_def_dim(ncid, "context", d->n_contexts, &w->cdim[0]), "context");
+    for (size_t k = 0; cs && k < cs->n; k++) {
+      const nc_coord *c = &cs->c[k];
+      NC_TRY(nc_def_var(ncid, c->name, c->is_string ? NC_STRING : NC_DOUBLE, 1, &w->cdim[0], &v_coord[k]),
+             c->name);
+      coords_add(w, c->name);
+    }
+  }
+  for (size_t k = 0; cs && k < cs->n; k++) {
+    const nc_coord *c = &cs->c[k];
+    bool is_wl = strcmp(c->name, "wavelength") == 0;
+    wl_coord |= is_wl;
+    TRY(put_text_att(ncid, v_coord[k], "long_name", is_wl ? "wavelength" : c->name, err));
+    if (is_wl && !c->is_string) {
+      TRY(put_text_att(ncid, v_coord[k], "units", "nm", err));
+      TRY(put_text_att(ncid, v_coord[k], "standard_name", "radiation_wavelength", err));
+    } else if (!c->is_string) {
+      TRY(put_text_att(ncid, v_coord[k], "units", "1", err));
+    }
+  }
+  TRY(def_ctx_var(w, "context", NC_STRING, 0, NULL, &v_ctx, err));
+  TRY(put_text_att(ncid, v_ctx, "long_name", "kernel context id", err));
+  if (w->grid) coords_add(w, "context");
+  bool any_wl = false;
+  for (size_t i = 0; d->wavelengths && !rgb && i < d->n_contexts; i++) any_wl |= isfinite(d->wavelengths[i]);
+  if (any_wl && !wl_coord) {
+    TRY(def_ctx_var(w, "wavelength", NC_DOUBLE, 0, NULL, &v_wl, err));
+    double fill = NAN;
+    NC_TRY(nc_def_var_fill(ncid, v_wl, 0, &fill), "wavelength");
+    TRY(put_text_att(ncid, v_wl, "long_name", "wavelength", err));
+    TRY(put_text_att(ncid, v_wl, "standard_name", "radiation_wavelength", err));
+    TRY(put_text_att(ncid, v_wl, "units", "nm", err));
+    coords_add(w, "wavelength");
+  }
+  size_t base_coords_len = strlen(w->coordinates);
+
+  /* Per sensor: dims, coordinates, data variables. */
+  typedef struct sensor_vars {
+    int ch, vza, vaa, seed, spp, unres;
+    int q[N_QUANTITIES];
+  } sensor_vars;
+  sensor_vars *sv = calloc(w->n_s ? w->n_s : 1, sizeof *sv);
+  if (!sv) return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+#define STRY(x)                                                                                              \
+  do {                                                                                                       \
+    rsw_status st_ = (x);                                                                                    \
+    if (st_) {                                                                                               \
+      free(sv);                                                                                              \
+      return st_;                                                                                            \
+    }                                                                                                        \
+  } while (0)
+#define SNC(call, what)                                                                                      \
+  do {                                                                                                       \
+    int rc_ = (call);                                                                                        \
+    if (rc_ != NC_NOERR) {                                                                                   \
+      free(sv);                                                                                              \
+      return nc_fail(err, rc_, (what));                                                                      \
+    }                                                                                                        \
+  } while (0)
+  for (size_t i = 0; i < w->n_s; i++) {
+    sensor_set *s = &w->s[i];
+    sensor_vars *v = &sv[i];
+    const nc_film *sh = s->shape;
+    w->coordinates[base_coords_len] = '\0';
+    name_cat(nm, sizeof nm, s->prefix, "y");
+    SNC(nc_def_dim(ncid, nm, (size_t)sh->height, &s->dim_y), nm);
+    name_cat(nm, sizeof nm, s->prefix, "x");
+    SNC(nc_def_dim(ncid, nm, (size_t)sh->width, &s->dim_x), nm);
+    s->dim_ch = -1;
+    if (sh->channels > 1) {
+      name_cat(nm, sizeof nm, s->prefix, "channel");
+      SNC(nc_def_dim(ncid, nm, (size_t)sh->channels, &s->dim_ch), nm);
+      SNC(nc_def_var(ncid, nm, NC_STRING, 1, &s->dim_ch, &v->ch), nm);
+      STRY(put_text_att(ncid, v->ch, "long_name", "film channel", err));
+    }
+    if (s->any_angles) {
+      int dyx[2] = {s->dim_y, s->dim_x};
+      const char *names[2] = {"vza", "vaa"};
+      const char *std[2] = {"sensor_zenith_angle", "sensor_azimuth_angle"};
+      const char *longn[2] = {"viewing zenith angle", "viewing azimuth angle"};
+      int *ids[2] = {&v->vza, &v->vaa};
+      for (int a = 0; a < 2; a++) {
+        name_cat(nm, sizeof nm, s->prefix, names[a]);
+        if (s->same_angles)
+          SNC(nc_def_var(ncid, nm, NC_DOUBLE, 2, dyx, ids[a]), nm);
+        else
+          STRY(def_ctx_var(w, nm, NC_DOUBLE, 2, dyx, ids[a], err));
+        double fill = NAN;
+        SNC(nc_def_var_fill(ncid, *ids[a], 0, &fill), nm);
+        STRY(put_text_att(ncid, *ids[a], "long_name", longn[a], err));
+        STRY(put_text_att(ncid, *ids[a], "standard_name", std[a], err));
+        STRY(put_text_att(ncid, *ids[a], "units", "degree", err));
+        STRY(put_text_att(ncid, *ids[a], "comment",
+                          a == 0 ? "zenith of the direction the pixel looks from (the reverse of its ray)"
+                                 : "azimuth of that direction, Eradiate's convention: counter-clockwise "
+                                   "from the +x (east) axis",
+                          err));
+        coords_add(w, nm);
+      }
+    }
+    int extra[3] = {s->dim_y, s->dim_x, s->dim_ch};
+    int n_extra = s->dim_ch >= 0 ? 3 : 2;
+    size_t chunk[NC_MAX_COORDS + 3];
+    size_t nd = 0;
+    for (size_t k = 0; k < w->n_cdims; k++) chunk[nd++] = 1;
+    chunk[nd++] = (size_t)sh->height;
+    chunk[nd++] = (size_t)sh->width;
+    if (n_extra == 3) chunk[nd++] = (size_t)sh->channels;
+    for (size_t q = 0; q < s->n_q; q++) {
+      const nc_quantity *qq = nc_quantity_find(s->qnames[q]);
+      name_cat(nm, sizeof nm, s->prefix, qq->name);
+      int id;
+      STRY(def_ctx_var(w, nm, NC_FLOAT, n_extra, extra, &id, err));
+      v->q[q] = id;
+      float fill = NAN;
+      SNC(nc_def_var_fill(ncid, id, 0, &fill), nm);
+      SNC(nc_def_var_chunking(ncid, id, NC_CHUNKED, chunk), nm);
+      STRY(put_text_att(ncid, id, "long_name", qq->long_name, err));
+      STRY(put_text_att(ncid, id, "units", rgb ? qq->units_rgb : qq->units_mono, err));
+      STRY(put_text_att(ncid, id, "sensor", s->id, err));
+      if (w->coordinates[0]) STRY(put_text_att(ncid, id, "coordinates", w->coordinates, err));
+    }
+    name_cat(nm, sizeof nm, s->prefix, "seed");
+    STRY(def_ctx_var(w, nm, NC_UINT64, 0, NULL, &v->seed, err));
+    STRY(put_text_att(ncid, v->seed, "long_name", "render seed", err));
+    STRY(put_text_att(ncid, v->seed, "units", "1", err));
+    if (w->missing) {
+      unsigned long long fill = 0;
+      SNC(nc_def_var_fill(ncid, v->seed, 0, &fill), nm);
+    }
+    v->spp = -1;
+    if (!w->spp_uniform) {
+      name_cat(nm, sizeof nm, s->prefix, "spp");
+      STRY(def_ctx_var(w, nm, NC_UINT, 0, NULL, &v->spp, err));
+      STRY(put_text_att(ncid, v->spp, "long_name", "samples per pixel", err));
+      STRY(put_text_att(ncid, v->spp, "units", "1", err));
+      if (w->missing) {
+        unsigned fill = 0;
+        SNC(nc_def_var_fill(ncid, v->spp, 0, &fill), nm);
+      }
+    }
+    v->unres = -1;
+    if (s->any_unresolved) {
+      name_cat(nm, sizeof nm, s->prefix, "unresolved_rays");
+      STRY(def_ctx_var(w, nm, NC_UINT64, 0, NULL, &v->unres, err));
+      STRY(put_text_att(ncid, v->unres, "long_name", "rays the periodic boundary could not resolve", err));
+      STRY(put_text_att(ncid, v->unres, "units", "1", err));
+    }
+  }
+  SNC(nc_enddef(ncid), "enddef");
+
+  /* Values: coords, contexts, wavelengths. */
+  size_t start[NC_MAX_COORDS + 3], count[NC_MAX_COORDS + 3];
+  for (size_t k = 0; cs && k < cs->n; k++) {
+    const nc_coord *c = &cs->c[k];
+    size_t len = w->grid ? w->ax[k].n : d->n_contexts;
+    for (size_t r = 0; r < len; r++) {
+      size_t ctx = w->grid ? w->ax[k].first[r] : r;
+      start[0] = r;
+      if (c->is_string) {
+        const char *p = c->str[ctx];
+        SNC(nc_put_var1_string(ncid, v_coord[k], start, &p), c->name);
+      } else {
+        SNC(nc_put_var1_double(ncid, v_coord[k], start, &c->num[ctx]), c->name);
+      }
+    }
+  }
+  for (size_t ctx = 0; ctx < d->n_contexts; ctx++) {
+    cell_start(w, ctx, start);
+    const char *p = d->context_ids[ctx];
+    SNC(nc_put_var1_string(ncid, v_ctx, start, &p), "context");
+    if (v_wl >= 0 && isfinite(d->wavelengths[ctx]))
+      SNC(nc_put_var1_double(ncid, v_wl, start, &d->wavelengths[ctx]), "wavelength");
+  }
+  /* Films. */
+  for (size_t i = 0; i < w->n_s; i++) {
+    sensor_set *s = &w->s[i];
+    sensor_vars *v = &sv[i];
+    const nc_film *sh = s->shape;
+    if (s->any_angles && s->same_angles) {
+      size_t np = (size_t)sh->width * (size_t)sh->height;
+      double *za = malloc(np * 2 * sizeof *za);
+      if (!za) {
+        free(sv);
+        return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+      }
+      for (size_t p = 0; p < np; p++)
+        za[p] = canonical_angle(sh->angles[2 * p]), za[np + p] = canonical_angle(sh->angles[2 * p + 1]);
+      int rc = nc_put_var_double(ncid, v->vza, za);
+      if (rc == NC_NOERR) rc = nc_put_var_double(ncid, v->vaa, za + np);
+      free(za);
+      if (rc != NC_NOERR) {
+        free(sv);
+        return nc_fail(err, rc, "vza");
+      }
+    }
+    for (size_t ctx = 0; ctx < d->n_contexts; ctx++) {
+      const nc_film *f = s->by_ctx[ctx];
+      if (!f) continue;
+      cell_start(w, ctx, start);
+      size_t nd = w->n_cdims;
+      for (size_t k = 0; k < nd; k++) count[k] = 1;
+      unsigned long long seed = f->seed;
+      SNC(nc_put_var1_ulonglong(ncid, v->seed, start, &seed), "seed");
+      if (v->spp >= 0) {
+        unsigned spp = f->spp;
+        SNC(nc_put_var1_uint(ncid, v->spp, start, &spp), "spp");
+      }
+      if (v->unres >= 0) {
+        unsigned long long u = f->unresolved_rays;
+        SNC(nc_put_var1_ulonglong(ncid, v->unres, start, &u), "unresolved_rays");
+      }
+      start[nd] = start[nd + 1] = start[nd + 2] = 0;
+      count[nd] = (size_t)f->height, count[nd + 1] = (size_t)f->width, count[nd + 2] = (size_t)f->channels;
+      for (size_t q = 0; q < f->n_vars; q++) {
+        size_t qi = 0;
+        while (strcmp(s->qnames[qi], f->vars[q].name) != 0) qi++;
+        SNC(nc_put_vara_float(ncid, v->q[qi], start, count, f->vars[q].data), f->vars[q].name);
+      }
+      if (s->any_angles && !s->same_angles && f->angles) {
+        size_t np = (size_t)f->width * (size_t)f->height;
+        double *za = malloc(np * 2 * sizeof *za);
+        if (!za) {
+          free(sv);
+          return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+        }
+        for (size_t p = 0; p < np; p++)
+          za[p] = canonical_angle(f->angles[2 * p]), za[np + p] = canonical_angle(f->angles[2 * p + 1]);
+        int rc = nc_put_vara_double(ncid, v->vza, start, count, za);
+        if (rc == NC_NOERR) rc = nc_put_vara_double(ncid, v->vaa, start, count, za + np);
+        free(za);
+        if (rc != NC_NOERR) {
+          free(sv);
+          return nc_fail(err, rc, "vza");
+        }
+      }
+    }
+  }
+  free(sv);
+#undef STRY
+#undef SNC
+  return RSW_OK;
+}
+
+/* Plan and write d into the open ncid. */
+static rsw_status build(int ncid, const nc_dataset *d, rsw_err *err) {
+  writer w = {.d = d, .ncid = ncid};
+  rsw_status st = RSW_OK;
+  if (!d || d->size < sizeof *d || (d->n_contexts && !d->context_ids))
+    st = rsw_fail(err, RSW_ERR_INVALID, "", "a dataset needs its size and context ids");
+  if (!st) st = plan_layout(&w, err);
+  if (!st) st = plan_sensors(&w, err);
+  if (!st) st = write_all(&w, err);
+  writer_free(&w);
+  return st;
+}
+
+/* A rough size of the file, for the in-memory buffer's first allocation. */
+static size_t size_hint(const nc_dataset *d) {
+  size_t b = 1 << 16;
+  for (size_t i = 0; d && i < d->n_films; i++)
+    b += (size_t)d->films[i].width * d->films[i].height * d->films[i].channels * 4 * d->films[i].n_vars;
+  return b;
+}
+
+rsw_status nc_dataset_write(const char *path, const nc_dataset *d, rsw_err *err) {
+  if (!path || !*path) return rsw_fail(err, RSW_ERR_INVALID, "", "no path for the dataset");
+  char tmp[4200];
+  if ((size_t)snprintf(tmp, sizeof tmp, "%s.tmp.%ld", path, (long)getpid()) >= sizeof tmp)
+    return rsw_fail(err, RSW_ERR_INVALID, path, "path too long");
+  pthread_mutex_lock(&g_nc_lock);
+  int ncid;
+  int rc = nc_create(tmp, NC_NETCDF4 | NC_CLOBBER, &ncid);
+  if (rc != NC_NOERR) {
+    pthread_mutex_unlock(&g_nc_lock);
+    return rsw_fail(err, RSW_ERR_IO, path, "cannot create the dataset: %s", nc_strerror(rc));
+  }
+  rsw_status st = build(ncid, d, err);
+  rc = nc_close(ncid);
+  pthread_mutex_unlock(&g_nc_lock);
+  if (!st && rc != NC_NOERR) st = rsw_fail(err, RSW_ERR_IO, path, "cannot write the dataset: %s", nc_strerror(rc));
+  if (!st && rename(tmp, path) != 0) st = rsw_fail(err, RSW_ERR_IO, path, "cannot rename the dataset into place");
+  if (st) unlink(tmp);
+  return st;
+}
+
+rsw_status nc_dataset_encode(const nc_dataset *d, void **bytes_out, size_t *len_out, rsw_err *err) {
+  pthread_mutex_lock(&g_nc_lock);
+  int ncid;
+  int rc = nc_create_mem("raysweep.nc", NC_NETCDF4, size_hint(d), &ncid);
+  if (rc != NC_NOERR) {
+    pthread_mutex_unlock(&g_nc_lock);
+    return rsw_fail(err, rc == NC_ENOMEM ? RSW_ERR_NOMEM : RSW_ERR_IO, "(dataset in memory)",
+                    "cannot create the dataset: %s", nc_strerror(rc));
+  }
+  rsw_status st = build(ncid, d, err);
+  NC_memio mio = {0};
+  rc = nc_close_memio(ncid, &mio);
+  pthread_mutex_unlock(&g_nc_lock);
+  if (!st && rc != NC_NOERR)
+    st = rsw_fail(err, RSW_ERR_IO, "(dataset in memory)", "cannot write the dataset: %s", nc_strerror(rc));
+  if (st) {
+    free(mio.memory);
+    return st;
+  }
+  *bytes_out = mio.memory;
+  *len_out = mio.size;
+  return RSW_OK;
+}

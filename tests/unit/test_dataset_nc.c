@@ -1,0 +1,267 @@
+/* common/dataset_nc: the contexts' coords (validation and the errors'
+ * JSON pointers), grid detection (a complete grid gives one dimension per
+ * coord, anything else one "context" dimension), film values placed in
+ * their grid cell whatever the order of the contexts, missing films NaN,
+ * and bad films refused. Datasets are encoded in memory and read back with
+ * libnetcdf. */
+#include <cjson/cJSON.h>
+#include <math.h>
+#include <netcdf.h>
+#include <netcdf_mem.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../support/test.h"
+#include "dataset_nc.h"
+
+RSW_TEST_DEFINE_GLOBALS
+
+/* Build coords from a JSON array of the contexts' coords objects (null:
+ * none); returns the status, err filled. */
+static rsw_status coords_of(const char *json, nc_coords *out, rsw_err *err) {
+  cJSON *a = cJSON_Parse(json);
+  size_t n = (size_t)cJSON_GetArraySize(a);
+  const void *p[16] = {0};
+  size_t i = 0;
+  for (const cJSON *c = a ? a->child : NULL; c && i < 16; c = c->next, i++) p[i] = cJSON_IsNull(c) ? NULL : c;
+  memset(err, 0, sizeof *err);
+  rsw_status st = nc_coords_build(p, n, "/contexts", out, err);
+  cJSON_Delete(a);
+  return st;
+}
+
+static void test_coords_errors(void) {
+  static const struct {
+    const char *json;
+    rsw_status code;
+    const char *where;
+  } cases[] = {
+      {"[[1]]", RSW_ERR_TYPE, "/contexts/0/coords"},
+      {"[{\"k\": true}]", RSW_ERR_TYPE, "/contexts/0/coords/k"},
+      {"[{\"k\": 1}, {\"k\": \"s\"}]", RSW_ERR_TYPE, "/contexts/1/coords/k"},
+      {"[{\"k\": \"s\"}, {\"k\": 2}]", RSW_ERR_TYPE, "/contexts/1/coords/k"},
+      {"[{\"k\": 1}, null]", RSW_ERR_MISSING, "/contexts/1"},
+      {"[{\"k\": 1}, {}]", RSW_ERR_MISSING, "/contexts/1/coords"},
+      {"[{\"k\": 1, \"m\": 2}, {\"k\": 2}]", RSW_ERR_MISSING, "/contexts/1/coords/m"},
+      {"[{\"k\": 1}, {\"k\": 2, \"m\": 3}]", RSW_ERR_INVALID, "/contexts/1/coords/m"},
+      {"[{\"y\": 1}]", RSW_ERR_INVALID, "/contexts/0/coords/y"},
+      {"[{\"radiance\": 1}]", RSW_ERR_INVALID, "/contexts/0/coords/radiance"},
+      {"[{\"9a\": 1}]", RSW_ERR_INVALID, "/contexts/0/coords/9a"},
+      {"[{\"a-b\": 1}]", RSW_ERR_INVALID, "/contexts/0/coords/a-b"},
+      {"[{\"k\": \"\"}]", RSW_ERR_INVALID, "/contexts/0/coords/k"},
+      {"[{\"k\": \"a\\nb\"}]", RSW_ERR_INVALID, "/contexts/0/coords/k"},
+      {"[{\"a\":1,\"b\":1,\"c\":1,\"d\":1,\"e\":1,\"f\":1,\"g\":1,\"h\":1,\"i\":1}]", RSW_ERR_LIMIT,
+       "/contexts/0/coords"},
+  };
+  for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+    nc_coords c = {0};
+    rsw_err err;
+    rsw_status st = coords_of(cases[i].json, &c, &err);
+    CHECK(st == cases[i].code, "%s: status %d, wanted %d (%s)", cases[i].json, st, cases[i].code, err.msg);
+    CHECK(strcmp(err.where, cases[i].where) == 0, "%s: where '%s', wanted '%s'", cases[i].json, err.where,
+          cases[i].where);
+    nc_coords_free(&c);
+  }
+  nc_coords c = {0};
+  rsw_err err;
+  CHECK(coords_of("[null, null]", &c, &err) == RSW_OK && c.n == 0, "no coords at all is fine");
+  nc_coords_free(&c);
+  CHECK(coords_of("[{}, {}]", &c, &err) == RSW_OK && c.n == 0, "empty coords everywhere is fine");
+  nc_coords_free(&c);
+  REQUIRE(coords_of("[{\"wavelength\": 550, \"s\": \"a\"}, {\"wavelength\": 600, \"s\": \"b\"}]", &c, &err) ==
+              RSW_OK,
+          "%s", err.msg);
+  CHECK(c.n == 2 && !c.c[0].is_string && c.c[1].is_string && c.c[0].num[1] == 600 &&
+            strcmp(c.c[1].str[0], "a") == 0,
+        "columns built");
+  nc_coords copy;
+  REQUIRE(nc_coords_copy(&c, &copy, &err) == RSW_OK, "copy");
+  CHECK(copy.n == 2 && copy.c[0].num[0] == 550 && strcmp(copy.c[1].str[1], "b") == 0,
+        "copy holds the values");
+  nc_coords_free(&copy);
+  nc_coords_free(&c);
+}
+
+/* A 1x2-pixel one-channel film per context whose values encode it. */
+typedef struct fixture {
+  const char *ids[8];
+  float data[8][2];
+  nc_var vars[8];
+  nc_film films[8];
+  const char *ch[1];
+} fixture;
+
+static void make_films(fixture *fx, size_t n, const size_t *skip, size_t n_skip, size_t *n_films) {
+  fx->ch[0] = "Y";
+  size_t k = 0;
+  for (size_t i = 0; i < n; i++) {
+    bool skipped = false;
+    for (size_t s = 0; s < n_skip; s++) skipped |= skip[s] == i;
+    fx->data[i][0] = (float)i + 0.25f;
+    fx->data[i][1] = (float)i + 0.5f;
+    if (skipped) continue;
+    fx->vars[k] = (nc_var){"radiance", fx->data[i]};
+    fx->films[k] = (nc_film){.context = i,
+                             .sensor = "cam",
+                             .width = 2,
+                             .height = 1,
+                             .channels = 1,
+                             .channel_names = fx->ch,
+                             .spp = 4,
+                             .seed = 100 + i,
+                             .vars = &fx->vars[k],
+                             .n_vars = 1};
+    k++;
+  }
+  *n_films = k;
+}
+
+/* Encode, open in memory; -1 on failure. */
+static int encode_open(const nc_dataset *d, void **bytes, rsw_err *err) {
+  size_t len;
+  if (nc_dataset_encode(d, bytes, &len, err) != RSW_OK) return -1;
+  int ncid;
+  if (nc_open_mem("t.nc", NC_NOWRITE, len, *bytes, &ncid) != NC_NOERR) return -1;
+  return ncid;
+}
+
+static void test_grid_any_order(void) {
+  /* 2 x 3 over (a, b), listed out of order: b descending, a mixed. */
+  const char *json = "[{\"a\": 2, \"b\": \"z\"}, {\"a\": 1, \"b\": \"z\"}, {\"a\": 2, \"b\": \"x\"},"
+                     " {\"a\": 1, \"b\": \"y\"}, {\"a\": 1, \"b\": \"x\"}, {\"a\": 2, \"b\": \"y\"}]";
+  nc_coords c;
+  rsw_err err;
+  REQUIRE(coords_of(json, &c, &err) == RSW_OK, "%s", err.msg);
+  fixture fx;
+  const char *ids[6] = {"c0", "c1", "c2", "c3", "c4", "c5"};
+  size_t nf;
+  make_films(&fx, 6, NULL, 0, &nf);
+  nc_dataset d = {.size = sizeof d,
+                  .scene = "s",
+                  .variant = "mono",
+                  .n_contexts = 6,
+                  .context_ids = ids,
+                  .coords = &c,
+                  .films = fx.films,
+                  .n_films = nf};
+  void *bytes = NULL;
+  int ncid = encode_open(&d, &bytes, &err);
+  REQUIRE(ncid >= 0, "encode: %s", err.msg);
+  int dim_a, dim_b, dim_ctx, var;
+  size_t na = 0, nb = 0;
+  CHECK(nc_inq_dimid(ncid, "a", &dim_a) == NC_NOERR && nc_inq_dimlen(ncid, dim_a, &na) == NC_NOERR && na == 2,
+        "dimension a of 2");
+  CHECK(nc_inq_dimid(ncid, "b", &dim_b) == NC_NOERR && nc_inq_dimlen(ncid, dim_b, &nb) == NC_NOERR && nb == 3,
+        "dimension b of 3");
+  CHECK(nc_inq_dimid(ncid, "context", &dim_ctx) != NC_NOERR, "no context dimension in a grid");
+  double av[2];
+  CHECK(nc_inq_varid(ncid, "a", &var) == NC_NOERR && nc_get_var_double(ncid, var, av) == NC_NOERR &&
+            av[0] == 1 && av[1] == 2,
+        "a sorted: %g %g", av[0], av[1]);
+  char *bv[3] = {0};
+  CHECK(nc_inq_varid(ncid, "b", &var) == NC_NOERR && nc_get_var_string(ncid, var, bv) == NC_NOERR &&
+            strcmp(bv[0], "x") == 0 && strcmp(bv[2], "z") == 0,
+        "b sorted bytewise");
+  nc_free_string(3, bv);
+  float r[2][3][1][2];
+  REQUIRE(nc_inq_varid(ncid, "radiance", &var) == NC_NOERR &&
+              nc_get_var_float(ncid, var, &r[0][0][0][0]) == NC_NOERR,
+          "radiance");
+  /* Context i holds i + 0.25: (a=2,b=z) is c0, (a=1,b=x) is c4. */
+  CHECK(r[1][2][0][0] == 0.25f && r[0][0][0][0] == 4.25f && r[0][1][0][1] == 3.5f, "values in their cells");
+  unsigned long long seeds[2][3];
+  CHECK(nc_inq_varid(ncid, "seed", &var) == NC_NOERR &&
+            nc_get_var_ulonglong(ncid, var, &seeds[0][0]) == NC_NOERR && seeds[1][2] == 100 &&
+            seeds[0][0] == 104,
+        "seeds in their cells");
+  unsigned spp = 0;
+  CHECK(nc_get_att_uint(ncid, NC_GLOBAL, "spp", &spp) == NC_NOERR && spp == 4, "spp attribute");
+  nc_close(ncid);
+  free(bytes);
+  nc_coords_free(&c);
+}
+
+static void dims_of(const char *json, size_t n, const size_t *skip, size_t n_skip, bool *grid, float *first,
+                    float *missing) {
+  nc_coords c;
+  rsw_err err;
+  *grid = false;
+  if (coords_of(json, &c, &err) != RSW_OK) return;
+  fixture fx;
+  const char *ids[8] = {"c0", "c1", "c2", "c3", "c4", "c5", "c6", "c7"};
+  size_t nf;
+  make_films(&fx, n, skip, n_skip, &nf);
+  nc_dataset d = {
+      .size = sizeof d, .n_contexts = n, .context_ids = ids, .coords = &c, .films = fx.films, .n_films = nf};
+  void *bytes = NULL;
+  int ncid = encode_open(&d, &bytes, &err);
+  if (ncid >= 0) {
+    int dim, var;
+    *grid = nc_inq_dimid(ncid, "context", &dim) != NC_NOERR;
+    float v[16];
+    if (nc_inq_varid(ncid, "radiance", &var) == NC_NOERR && nc_get_var_float(ncid, var, v) == NC_NOERR) {
+      *first = v[0];
+      if (missing) *missing = v[2 * skip[0]];
+    }
+    nc_close(ncid);
+  }
+  free(bytes);
+  nc_coords_free(&c);
+}
+
+static void test_not_a_grid(void) {
+  bool grid;
+  float first = 0, missing = 0;
+  /* A combination twice and one missing: 4 contexts, 2 x 2 values. */
+  dims_of("[{\"a\":1,\"b\":1},{\"a\":1,\"b\":2},{\"a\":2,\"b\":1},{\"a\":1,\"b\":1}]", 4, NULL, 0, &grid,
+          &first, NULL);
+  CHECK(!grid, "a repeated combination is not a grid");
+  dims_of("[{\"a\":1,\"b\":1},{\"a\":1,\"b\":2},{\"a\":2,\"b\":1}]", 3, NULL, 0, &grid, &first, NULL);
+  CHECK(!grid && first == 0.25f, "an incomplete grid: context dimension in context order");
+  dims_of("[null, null]", 2, NULL, 0, &grid, &first, NULL);
+  CHECK(!grid, "no coords: context dimension");
+  dims_of("[{\"a\":3},{\"a\":1}]", 2, NULL, 0, &grid, &first, NULL);
+  CHECK(grid && first == 1.25f, "one coord of distinct values is a 1-D grid, sorted");
+  size_t skip[1] = {1};
+  dims_of("[{\"a\":1},{\"a\":2},{\"a\":3}]", 3, skip, 1, &grid, &first, &missing);
+  CHECK(grid && isnan(missing), "a missing film is NaN");
+}
+
+static void test_bad_films(void) {
+  fixture fx;
+  const char *ids[2] = {"c0", "c1"};
+  size_t nf;
+  make_films(&fx, 2, NULL, 0, &nf);
+  nc_dataset d = {.size = sizeof d, .n_contexts = 2, .context_ids = ids, .films = fx.films, .n_films = nf};
+  void *bytes = NULL;
+  size_t len;
+  rsw_err err = {0};
+  fx.films[1].width = 3;
+  CHECK(nc_dataset_encode(&d, &bytes, &len, &err) == RSW_ERR_INVALID, "films of one sensor with two shapes");
+  fx.films[1].width = 2;
+  fx.films[1].context = 0;
+  memset(&err, 0, sizeof err);
+  CHECK(nc_dataset_encode(&d, &bytes, &len, &err) == RSW_ERR_INVALID, "two films of one context and sensor");
+  fx.films[1].context = 7;
+  memset(&err, 0, sizeof err);
+  CHECK(nc_dataset_encode(&d, &bytes, &len, &err) == RSW_ERR_INVALID, "a context out of range");
+  fx.films[1].context = 1;
+  fx.vars[1].name = "temperature";
+  memset(&err, 0, sizeof err);
+  CHECK(nc_dataset_encode(&d, &bytes, &len, &err) == RSW_ERR_INVALID && strstr(err.msg, "temperature"),
+        "an unknown quantity: %s", err.msg);
+  fx.vars[1].name = "brf";
+  memset(&err, 0, sizeof err);
+  REQUIRE(nc_dataset_encode(&d, &bytes, &len, &err) == RSW_OK, "radiance and brf: %s", err.msg);
+  free(bytes);
+  CHECK(nc_quantity_find("radiance_stderr") && nc_quantity_find("brdf") && !nc_quantity_find("x"),
+        "the quantity table");
+}
+
+int main(void) {
+  RSW_TEST_RUN(test_coords_errors);
+  RSW_TEST_RUN(test_grid_any_order);
+  RSW_TEST_RUN(test_not_a_grid);
+  RSW_TEST_RUN(test_bad_films);
+  RSW_TEST_END("test_dataset_nc");
+}
