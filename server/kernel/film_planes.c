@@ -57,6 +57,34 @@ bool render_quantity_bit(const char *name, unsigned *bit) {
   return false;
 }
 
+rsw_status render_check_planes(const scene *sc, size_t sensor_index, uint32_t spp, unsigned quantities,
+                               bool variance, rsw_err *err) {
+  if (variance && sensor_index < sc->n_sensors) {
+    const sensor *se = sc->sensors[sensor_index];
+    const rfilter *f = se->film->filter;
+    if (!(f->radius <= 0.5 + 1e-12))
+      return rsw_fail(err, RSW_ERR_INVALID, "variance",
+                      "variance needs the box rfilter (radius 0.5); sensor '%s' splats with '%s' (radius %g), "
+                      "which spreads each sample over neighbouring pixels with unequal weights, so a pixel "
+                      "is no plain mean of its own independent samples and has no standard error",
+                      se->base.id ? se->base.id : "", f->base.plugin ? f->base.plugin->name : "?", f->radius);
+    uint32_t n = spp ? spp : se->sampler->sample_count;
+    if (se->sampler->ops->adjust_spp) n = se->sampler->ops->adjust_spp(se->sampler, n);
+    if (n < 2)
+      return rsw_fail(err, RSW_ERR_INVALID, "variance", "variance needs at least 2 samples per pixel (spp is %u)",
+                      n);
+  }
+  if (quantities & (RENDER_Q_BRDF | RENDER_Q_BRF)) {
+    bool any = false;
+    for (size_t i = 0; i < sc->n_emitters && !any; i++) any = sc->emitters[i]->flags & EMITTER_DELTA_DIRECTION;
+    if (!any)
+      return rsw_fail(err, RSW_ERR_INVALID, "quantities",
+                      "brdf and brf divide by the horizontal irradiance of the scene's directional emitters; "
+                      "the scene has none");
+  }
+  return RSW_OK;
+}
+
 rsw_status render_horizontal_irradiance(const scene *sc, color *e_h, rsw_err *err) {
   color sum = col1(0);
   size_t n_dir = 0, n_lit = 0;
@@ -137,6 +165,35 @@ bool film_image_split(film_image *img, const char *const *names, int n_planes, c
       memcpy(&img->planes[p].data[i * C], &all[i * T + C * (size_t)(1 + p)], C * sizeof(float));
   }
   return true;
+}
+
+static void *dup_bytes(const void *p, size_t n) {
+  void *q = malloc(n ? n : 1);
+  if (q && n) memcpy(q, p, n);
+  return q;
+}
+
+bool film_image_copy(const film_image *src, film_image *dst) {
+  size_t n = (size_t)src->width * (size_t)src->height * (size_t)src->channels;
+  film_image d = *src;
+  d.data = NULL, d.angles = NULL;
+  for (int p = 0; p < src->n_planes; p++) d.planes[p].data = NULL;
+  bool ok = (d.data = dup_bytes(src->data, n * sizeof(float))) != NULL;
+  if (ok && src->angles)
+    ok = (d.angles = dup_bytes(src->angles, (size_t)src->width * (size_t)src->height * 2 * sizeof(double))) !=
+         NULL;
+  for (int p = 0; ok && p < src->n_planes; p++)
+    ok = (d.planes[p].data = dup_bytes(src->planes[p].data, n * sizeof(float))) != NULL;
+  if (!ok) {
+    film_image_free(&d);
+    return false;
+  }
+  *dst = d;
+  return true;
+}
+
+bool film_plane_known(const char *name) {
+  return plane_index(name) >= 0;
 }
 
 const film_plane *film_image_plane(const film_image *img, const char *name) {

@@ -404,16 +404,8 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
   if (se->sampler->ops->adjust_spp) spp = se->sampler->ops->adjust_spp(se->sampler, spp);
   if (spp == 0) return rsw_fail(err, RSW_ERR_RANGE, "spp", "spp must be at least 1");
   bool box = fm->filter->radius <= 0.5 + 1e-12;
-  if (opts->variance && !box)
-    return rsw_fail(err, RSW_ERR_INVALID, "variance",
-                    "variance needs the box rfilter (radius 0.5); sensor '%s' splats with '%s' (radius %g), "
-                    "which mixes samples of neighbouring pixels with unequal weights, so a pixel's samples "
-                    "are not one independent set and have no standard error of their mean",
-                    se->base.id ? se->base.id : "", fm->filter->base.plugin ? fm->filter->base.plugin->name : "?",
-                    fm->filter->radius);
-  if (opts->variance && spp < 2)
-    return rsw_fail(err, RSW_ERR_INVALID, "variance",
-                    "variance needs at least 2 samples per pixel (spp is %u)", spp);
+  st = render_check_planes(sc, opts->sensor, spp, opts->quantities, opts->variance, err);
+  if (st) return st;
   color e_h = col1(0);
   if (opts->quantities & (RENDER_Q_BRDF | RENDER_Q_BRF)) {
     st = render_horizontal_irradiance(sc, &e_h, err);

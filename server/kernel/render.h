@@ -115,6 +115,14 @@ void film_image_free(film_image *img);
  * from above. */
 rsw_status render_horizontal_irradiance(const scene *sc, color *e_h, rsw_err *err);
 
+/* What a render with these planes needs, checked before it starts (so a
+ * job can refuse a request up front): variance needs sensor's film to use
+ * the box rfilter and spp (after the sampler's rounding; 0: the sampler's
+ * sample_count) >= 2; brdf and brf need a directional emitter in the
+ * scene. RSW_ERR_INVALID with where "variance" or "quantities". */
+rsw_status render_check_planes(const scene *sc, size_t sensor, uint32_t spp, unsigned quantities,
+                               bool variance, rsw_err *err);
+
 /* A film's channels, radiance then every plane's: names (static) into
  * names[] (room for 4 * (1 + FILM_MAX_PLANES)) and the count. */
 int film_image_all_channels(const film_image *img, const char **names);
@@ -130,6 +138,12 @@ bool film_image_split(film_image *img, const char *const *plane_names, int n_pla
 /* Name, units, long name and channel names of plane `name` (one of
  * "brdf", "brf", "radiance_stderr") for img's channels; p->data untouched. */
 void film_plane_init(const film_image *img, const char *name, film_plane *p);
+/* Deep copy of src into *dst (pixels, angles, planes: release with
+ * film_image_free); false when out of memory (then *dst holds nothing to
+ * free). */
+bool film_image_copy(const film_image *src, film_image *dst);
+/* True when name is a plane ("brdf", "brf", "radiance_stderr"). */
+bool film_plane_known(const char *name);
 /* The plane called name, or NULL. */
 const film_plane *film_image_plane(const film_image *img, const char *name);
 

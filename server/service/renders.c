@@ -263,6 +263,39 @@ static rsw_status snapshot(const scene *sc, const param_update *u, size_t n, par
   return RSW_OK;
 }
 
+rsw_status svc_parse_quantities(const cJSON *v, const char *ptr, unsigned *out, svc_error *e) {
+  unsigned q = 0;
+  if (!cJSON_IsArray(v))
+    return svc_fail(e, RSW_ERR_TYPE, ptr, "quantities must be a list of %s", RENDER_QUANTITY_NAMES);
+  int i = 0;
+  for (const cJSON *x = v->child; x; x = x->next, i++) {
+    unsigned bit;
+    if (!cJSON_IsString(x) || !render_quantity_bit(x->valuestring, &bit)) {
+      char w[320];
+      snprintf(w, sizeof w, "%s/%d", ptr, i);
+      return svc_fail(e, RSW_ERR_INVALID, w, "unknown quantity '%s' (one of %s)",
+                      cJSON_IsString(x) ? x->valuestring : "?", RENDER_QUANTITY_NAMES);
+    }
+    q |= bit;
+  }
+  *out = q;
+  return RSW_OK;
+}
+
+rsw_status svc_parse_variance(const cJSON *v, const char *ptr, bool *out, svc_error *e) {
+  if (!cJSON_IsBool(v)) return svc_fail(e, RSW_ERR_TYPE, ptr, "variance must be true or false");
+  *out = cJSON_IsTrue(v);
+  return RSW_OK;
+}
+
+rsw_status svc_check_planes(const scene *sc, size_t si, uint32_t spp, unsigned quantities, bool variance,
+                            const char *ptr_q, const char *ptr_v, svc_error *e) {
+  rsw_err err = {0};
+  rsw_status st = render_check_planes(sc, si, spp, quantities, variance, &err);
+  if (!st) return RSW_OK;
+  return svc_fail(e, st, strcmp(err.where, "variance") == 0 ? ptr_v : ptr_q, "%s", err.msg);
+}
+
 rsw_status svc_render_locked(service *svc, resident *r, const render_spec *rs, svc_film *out, svc_error *e) {
   bool overrides = rs->overrides && rs->overrides->child;
   svc_view *v = NULL;
@@ -295,7 +328,9 @@ rsw_status svc_render_locked(service *svc, resident *r, const render_spec *rs, s
                       .wavelength = rs->wavelength,
                       .threads = svc->opts.render_threads,
                       .cancel = rs->cancel,
-                      .deadline = rs->deadline};
+                      .deadline = rs->deadline,
+                      .quantities = rs->quantities,
+                      .variance = rs->variance};
     render_result_stats stats;
     rsw_err rerr = {0};
     st = render_sensor(sc, &ro, &out->img, &stats, &rerr);
@@ -376,12 +411,20 @@ rsw_status service_render(service *svc, const char *id, const char *body, size_t
         st = svc_fail(e, RSW_ERR_INVALID, ptr, "timeout_s must be a positive number");
       else
         rs.deadline = svc_now() + k->valuedouble;
+    } else if (strcmp(k->string, "quantities") == 0) {
+      st = svc_parse_quantities(k, ptr, &rs.quantities, e);
+    } else if (strcmp(k->string, "variance") == 0) {
+      st = svc_parse_variance(k, ptr, &rs.variance, e);
     } else {
       st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, ptr,
-                    "unknown field '%s' (expected sensor, spp, seed, wavelength, params, timeout_s)",
+                    "unknown field '%s' (expected sensor, spp, seed, wavelength, params, timeout_s, quantities, "
+                    "variance)",
                     k->string);
     }
   }
+  if (!st && r->sc->n_sensors && (rs.quantities || rs.variance))
+    st = svc_check_planes(r->sc, rs.sensor_index, rs.spp, rs.quantities, rs.variance, "/quantities", "/variance",
+                          e);
   if (!st && rs.wavelength > 0 && r->sc->variant != VARIANT_MONO)
     st = svc_fail(e, RSW_ERR_INVALID, "/wavelength", "wavelength applies to mono scenes; this scene is rgb");
   if (!st && r->sc->n_sensors == 0) st = svc_fail(e, RSW_ERR_INVALID, "/sensor", "the scene has no sensor");
