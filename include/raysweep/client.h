@@ -155,6 +155,19 @@ const char *rsw_film_meta(const rsw_film *f);
  * meta member has the wrong type or an angle list the wrong length. */
 rsw_status rsw_film_save_exr(const rsw_film *f, const char *path);
 rsw_status rsw_film_save_npy(const rsw_film *f, const char *path);
+/* A film asked for with "quantities" or "variance" has more channels after
+ * its radiance ones, "<plane>.<channel>" ("brf.Y", "radiance_stderr.R"),
+ * and its meta lists "planes" (and "irradiance" with brdf/brf); both
+ * savers keep them (EXR channels, the .npy's last axis) and the EXR adds
+ * "raysweep:irradiance". */
+/* A tone-mapped 8-bit sRGB PNG quick-look of the film's radiance (R, G, B;
+ * else Y; else S0) through a temp file renamed on success: the brightest
+ * finite value maps to white, then times 2^exposure (stops), clamped; a
+ * one-channel film may use colormap "gray" (NULL: the default), "viridis"
+ * or "inferno". RSW_ERR_INVALID for an unknown colormap, a colormap on an
+ * RGB film or a non-finite exposure; RSW_ERR_IO when the file cannot be
+ * written. Borrows everything. */
+rsw_status rsw_film_save_png(const rsw_film *f, const char *path, double exposure, const char *colormap);
 void rsw_film_free(rsw_film *f);
 
 /* One synchronous render. request_json is a RenderRequest text

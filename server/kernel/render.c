@@ -582,9 +582,9 @@ void film_image_free(film_image *img) {
   img->data = NULL;
   free(img->angles);
   img->angles = NULL;
+  /* The planes' descriptions stay, like the film's size and channels. */
   for (int p = 0; p < img->n_planes; p++) {
     free(img->planes[p].data);
     img->planes[p].data = NULL;
   }
-  img->n_planes = 0;
 }

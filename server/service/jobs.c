@@ -1063,8 +1063,9 @@ rsw_status service_job_results(service *svc, const char *id, char **json_out, sv
       cJSON_AddNumberToObject(x, "width", it->film.img.width);
       cJSON_AddNumberToObject(x, "height", it->film.img.height);
       cJSON *ch = cJSON_AddArrayToObject(x, "channels");
-      for (int c = 0; c < it->film.img.channels; c++)
-        svc_json_push(ch, cJSON_CreateString(it->film.img.channel_names[c]));
+      const char *names[4 * (1 + FILM_MAX_PLANES)];
+      int nc = film_image_all_channels(&it->film.img, names);
+      for (int c = 0; c < nc; c++) svc_json_push(ch, cJSON_CreateString(names[c]));
       char href[512];
       snprintf(href, sizeof href, "/v1/jobs/%s/results/%s/%s", j->id, it->context, it->sensor);
       cJSON_AddStringToObject(x, "href", href);
@@ -1180,7 +1181,7 @@ rsw_status service_job_result_npy_fd(service *svc, const char *id, const char *c
 uint64_t svc_film_mem(const svc_film *f) {
   const film_image *im = &f->img;
   uint64_t px = (uint64_t)im->width * (uint64_t)im->height;
-  return px * (uint64_t)im->channels * 4 + (im->angles ? px * 16 : 0);
+  return px * (uint64_t)im->channels * 4 * (uint64_t)(1 + im->n_planes) + (im->angles ? px * 16 : 0);
 }
 
 void svc_job_free(job *j) {
