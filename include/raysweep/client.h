@@ -196,6 +196,11 @@ rsw_status rsw_contexts_set_job_param(rsw_contexts *x, const char *key, const ch
 rsw_status rsw_contexts_add_default_sensor(rsw_contexts *x, const char *sensor);
 rsw_status rsw_contexts_set_default_spp(rsw_contexts *x, long long spp);
 rsw_status rsw_contexts_set_job_seed(rsw_contexts *x, long long seed);
+/* Film planes for every render of the job: "quantities" (names borrowed:
+ * "radiance", "brdf", "brf"; n 0 removes it) and "variance" (on != 0: the
+ * radiance_stderr plane). The server checks them at submission. */
+rsw_status rsw_contexts_set_quantities(rsw_contexts *x, const char *const *names, size_t n);
+rsw_status rsw_contexts_set_variance(rsw_contexts *x, int on);
 size_t rsw_contexts_count(const rsw_contexts *x);
 
 /* Submit a job. idempotency_key may be NULL. job_id_out: 40 bytes. */

@@ -8,7 +8,8 @@
 #    the same channels;
 #  - a job with them stores its films with the planes: fetched from memory,
 #    from a state directory (films beyond --max-result-bytes live on disk
-#    only) and after a restart, the .npy is the same bytes;
+#    only) and after a restart, the .npy is the same bytes; raysweep sweep
+#    --quantities --variance writes films with them;
 #  - refusals name their field: an unknown quantity, variance with a
 #    gaussian rfilter or 1 spp, brf in a scene with no directional emitter
 #    (HTTP 422 and the CLIs' exit status 1 / 2);
@@ -195,6 +196,16 @@ contains "fetched film has the planes" fetched.json '"radiance_stderr.Y"'
 st=$(curl -s -o e.json -w '%{http_code}' -X POST "$url/v1/scenes/$gauss/jobs" -H 'Content-Type: application/json' \
   -d '{"contexts": [{"id": "a"}], "variance": true}')
 [ "$st" = 422 ] && contains "job refused up front" e.json '"pointer":"/variance"' || bad "job variance gaussian: $st"
+
+printf '%s\n' '{"id": "s1", "seed": 1}' '{"id": "s2", "seed": 2}' >ctx.jsonl
+run "raysweep sweep --quantities --variance" rs -q sweep "$id" --contexts ctx.jsonl --quantities brf,brdf --variance \
+  --format json -o sw
+py "sweep films carry the planes" '
+import json, sys
+d = json.load(open(sys.argv[1] + "/" + [l for l in map(json.loads, open(sys.argv[1] + "/index.jsonl"))][0]["file"]))
+assert d["channels"] == ["Y", "brdf.Y", "brf.Y", "radiance_stderr.Y"], d["channels"]
+' sw
+expect 2 "raysweep sweep --quantities typo" rs sweep "$id" --contexts ctx.jsonl --quantities brfx -o sw2
 
 sd=$tmp/state
 start_daemon "$tmp/s" --state-dir "$sd" --max-result-bytes 1 --threads 2
