@@ -135,7 +135,8 @@ static int cmd_render(int argc, char **argv) {
       snprintf(list, sizeof list, "%s", val);
       for (char *save = NULL, *q = strtok_r(list, ",", &save); q; q = strtok_r(NULL, ",", &save)) {
         unsigned bit;
-        if (!render_quantity_bit(q, &bit)) USAGE("--quantities: unknown quantity '%s' (one of %s)", q, RENDER_QUANTITY_NAMES);
+        if (!render_quantity_bit(q, &bit))
+          USAGE("--quantities: unknown quantity '%s' (one of %s)", q, RENDER_QUANTITY_NAMES);
         quantities |= bit;
       }
       i++;
@@ -241,8 +242,8 @@ static int cmd_render(int argc, char **argv) {
     fprintf(stderr,
             "raysweepd render: warning: %zu environment plugin failures were replaced by black; first: %s\n",
             pfail, pmsg);
-  if (is_png ? png_write_film(out_path, img.width, img.height, img.channels, img.channel_names, img.data, &look,
-                              &err)
+  if (is_png ? png_write_film(out_path, img.width, img.height, img.channels, img.channel_names, img.data,
+                              &look, &err)
              : film_image_write_exr(&img, out_path, sc->sensors[sensor_index]->base.id, &err)) {
     fprintf(stderr, "raysweepd render: %s\n", rsw_err_format(&err, msg, sizeof msg));
     goto out;

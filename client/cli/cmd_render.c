@@ -72,7 +72,8 @@ static int save(const cli_ctx *ctx, const rsw_film *f, const char *out, cli_form
   if (!po->png) return cli_save_film(ctx, f, out, fmt);
   rsw_status s = rsw_film_save_png(f, out, po->exposure, po->colormap);
   if (s == RSW_ERR_INVALID)
-    return cli_usage(ctx, "cannot make a PNG of this film: --colormap is for one-channel films (this one has %d)",
+    return cli_usage(ctx,
+                     "cannot make a PNG of this film: --colormap is for one-channel films (this one has %d)",
                      rsw_film_channels(f));
   if (s) return cli_fail(ctx, CLI_IO, "cannot write '%s': %s", out, rsw_strerror(s));
   return CLI_OK;

@@ -32,7 +32,8 @@ const cli_opt cli_opts_sweep[] = {
     {"--spread", "K", false,
      "run K shards at once through one load balancer (--server), each routed to its own replica by "
      "X-Raysweep-Shard; a scene FILE is pushed to every replica; a balancer that went away: rerun to resume"},
-    {"--quantities", "LIST", false, "comma-separated, of radiance, brdf, brf: films add brdf and brf channels"},
+    {"--quantities", "LIST", false,
+     "comma-separated, of radiance, brdf, brf: films add brdf and brf channels"},
     {"--variance", NULL, false, "films add radiance_stderr channels (standard error of each pixel's mean)"},
     {"--format", "exr|npy|json", false, "film files: exr (default), npy or json"},
     {"--timeout", "S", false, "stop waiting after S seconds (exit 5; the job keeps running)"},
@@ -436,7 +437,8 @@ static int build_contexts(const cli_ctx *ctx, const cli_args *a, const sweep_ite
     if (!nq) s = RSW_ERR_INVALID;
     if (!s) s = rsw_contexts_set_quantities(x, names, nq);
   }
-  if (!s && cli_get(a, "--variance")) snprintf(what, sizeof what, "--variance"), s = rsw_contexts_set_variance(x, 1);
+  if (!s && cli_get(a, "--variance"))
+    snprintf(what, sizeof what, "--variance"), s = rsw_contexts_set_variance(x, 1);
   if (s) {
     rc = s == RSW_ERR_NOMEM ? cli_fail(ctx, CLI_IO, "out of memory")
                             : cli_usage(ctx, "%s: %s", what, rsw_strerror(s));
@@ -598,8 +600,8 @@ static void sweep_fingerprint(const cli_args *a, const char *scene, char out[17]
     h = fnv1a(h, text ? text : "", text ? len : 0);
     free(text);
   }
-  static const char *const keyed[] = {"--grid",   "--set",       "--sensor",   "--spp",
-                                      "--seed",   "--format",    "--quantities", "--variance"};
+  static const char *const keyed[] = {"--grid", "--set",    "--sensor",     "--spp",
+                                      "--seed", "--format", "--quantities", "--variance"};
   for (size_t k = 0; k < sizeof keyed / sizeof keyed[0]; k++) {
     size_t n;
     const char *const *v = cli_get_all(a, keyed[k], &n);

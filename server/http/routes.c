@@ -6,8 +6,8 @@
 #include "routes.h"
 
 #include <errno.h>
-#include <math.h>
 #include <inttypes.h>
+#include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -133,9 +133,9 @@ static void resp_film(http_req *r, const svc_film *f, http_film_format fmt) {
 static bool negotiate_film(http_req *r, http_film_format *fmt) {
   *fmt = http_accept_film(r->accept);
   if (*fmt == HTTP_FILM_NONE) {
-    http_resp_problem(r, 406, NULL,
-                      "Accept '%s' allows none of application/json, image/x-exr, application/x-npy, image/png",
-                      r->accept);
+    http_resp_problem(
+        r, 406, NULL,
+        "Accept '%s' allows none of application/json, image/x-exr, application/x-npy, image/png", r->accept);
     return false;
   }
   if (r->q_exposure) {
@@ -148,8 +148,8 @@ static bool negotiate_film(http_req *r, http_film_format *fmt) {
     }
   }
   if (r->q_colormap && !png_colormap_known(r->q_colormap)) {
-    http_resp_problem(r, 400, NULL, "query parameter colormap must be one of %s (got '%s')", png_colormap_list(),
-                      r->q_colormap);
+    http_resp_problem(r, 400, NULL, "query parameter colormap must be one of %s (got '%s')",
+                      png_colormap_list(), r->q_colormap);
     return false;
   }
   return true;

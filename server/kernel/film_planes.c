@@ -14,8 +14,8 @@ static const char *const plane_names[FILM_MAX_PLANES] = {"brdf", "brf", "radianc
 static const char *const plane_channels[FILM_MAX_PLANES][8] = {
     {"brdf.R", "brdf.G", "brdf.B", "brdf.Y", "brdf.S0", "brdf.S1", "brdf.S2", "brdf.S3"},
     {"brf.R", "brf.G", "brf.B", "brf.Y", "brf.S0", "brf.S1", "brf.S2", "brf.S3"},
-    {"radiance_stderr.R", "radiance_stderr.G", "radiance_stderr.B", "radiance_stderr.Y",
-     "radiance_stderr.S0", "radiance_stderr.S1", "radiance_stderr.S2", "radiance_stderr.S3"},
+    {"radiance_stderr.R", "radiance_stderr.G", "radiance_stderr.B", "radiance_stderr.Y", "radiance_stderr.S0",
+     "radiance_stderr.S1", "radiance_stderr.S2", "radiance_stderr.S3"},
 };
 
 static int plane_index(const char *name) {
@@ -27,13 +27,13 @@ static int plane_index(const char *name) {
 /* Name, units, long name and channel names of plane `which` (index into
  * plane_names) for img's channels; data stays as it is. */
 static void plane_describe(const film_image *img, int which, film_plane *p) {
-  static const char *const long_names[FILM_MAX_PLANES] = {
-      "bi-directional reflection distribution function", "bi-directional reflectance factor",
-      "standard error of the mean radiance"};
+  static const char *const long_names[FILM_MAX_PLANES] = {"bi-directional reflection distribution function",
+                                                          "bi-directional reflectance factor",
+                                                          "standard error of the mean radiance"};
   p->name = plane_names[which];
   p->long_name = long_names[which];
-  p->units = which == 0   ? "sr-1"
-             : which == 1 ? "1"
+  p->units = which == 0                     ? "sr-1"
+             : which == 1                   ? "1"
              : img->variant == VARIANT_MONO ? "W m-2 sr-1 nm-1"
                                             : "W m-2 sr-1";
   for (int c = 0; c < img->channels && c < 4; c++) {
@@ -63,20 +63,22 @@ rsw_status render_check_planes(const scene *sc, size_t sensor_index, uint32_t sp
     const sensor *se = sc->sensors[sensor_index];
     const rfilter *f = se->film->filter;
     if (!(f->radius <= 0.5 + 1e-12))
-      return rsw_fail(err, RSW_ERR_INVALID, "variance",
-                      "variance needs the box rfilter (radius 0.5); sensor '%s' splats with '%s' (radius %g), "
-                      "which spreads each sample over neighbouring pixels with unequal weights, so a pixel "
-                      "is no plain mean of its own independent samples and has no standard error",
-                      se->base.id ? se->base.id : "", f->base.plugin ? f->base.plugin->name : "?", f->radius);
+      return rsw_fail(
+          err, RSW_ERR_INVALID, "variance",
+          "variance needs the box rfilter (radius 0.5); sensor '%s' splats with '%s' (radius %g), "
+          "which spreads each sample over neighbouring pixels with unequal weights, so a pixel "
+          "is no plain mean of its own independent samples and has no standard error",
+          se->base.id ? se->base.id : "", f->base.plugin ? f->base.plugin->name : "?", f->radius);
     uint32_t n = spp ? spp : se->sampler->sample_count;
     if (se->sampler->ops->adjust_spp) n = se->sampler->ops->adjust_spp(se->sampler, n);
     if (n < 2)
-      return rsw_fail(err, RSW_ERR_INVALID, "variance", "variance needs at least 2 samples per pixel (spp is %u)",
-                      n);
+      return rsw_fail(err, RSW_ERR_INVALID, "variance",
+                      "variance needs at least 2 samples per pixel (spp is %u)", n);
   }
   if (quantities & (RENDER_Q_BRDF | RENDER_Q_BRF)) {
     bool any = false;
-    for (size_t i = 0; i < sc->n_emitters && !any; i++) any = sc->emitters[i]->flags & EMITTER_DELTA_DIRECTION;
+    for (size_t i = 0; i < sc->n_emitters && !any; i++)
+      any = sc->emitters[i]->flags & EMITTER_DELTA_DIRECTION;
     if (!any)
       return rsw_fail(err, RSW_ERR_INVALID, "quantities",
                       "brdf and brf divide by the horizontal irradiance of the scene's directional emitters; "

@@ -58,8 +58,8 @@ bool render_quantity_bit(const char *name, unsigned *bit);
 #define FILM_MAX_PLANES 3
 typedef struct film_plane {
   const char *name;
-  const char *units;     /* CF/UDUNITS text: "sr-1", "1", radiance's units */
-  const char *long_name; /* CF long_name */
+  const char *units;            /* CF/UDUNITS text: "sr-1", "1", radiance's units */
+  const char *long_name;        /* CF long_name */
   const char *channel_names[4]; /* "<name>.<film channel>", static */
   float *data;                  /* owned */
 } film_plane;

@@ -687,8 +687,8 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       it->variance = variance;
       /* Refused up front (the message names the sensor and spp) rather
        * than failing render by render. */
-      if ((quantities || variance) &&
-          svc_check_planes(sc, it->sensor_index, it->spp, quantities, variance, "/quantities", "/variance", e))
+      if ((quantities || variance) && svc_check_planes(sc, it->sensor_index, it->spp, quantities, variance,
+                                                       "/quantities", "/variance", e))
         st = e->err.code;
       it->params = merge_params(jparams, cJSON_GetObjectItemCaseSensitive(c, "params"));
       if (!it->params) {
@@ -709,7 +709,8 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   cJSON_Delete(req);
   /* The bytes its films will hold, for --max-result-bytes. */
   uint64_t reserve = 0;
-  uint64_t planes = (uint64_t)((quantities & RENDER_Q_BRDF) != 0) + ((quantities & RENDER_Q_BRF) != 0) + variance;
+  uint64_t planes =
+      (uint64_t)((quantities & RENDER_Q_BRDF) != 0) + ((quantities & RENDER_Q_BRF) != 0) + variance;
   for (size_t i = 0; !st && i < n_items; i++) /* each plane as large as the film (angles overcounted) */
     reserve += svc_film_bytes(sc, jb->items[i].sensor_index) * (1 + planes);
   if (st) {

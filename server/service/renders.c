@@ -416,15 +416,16 @@ rsw_status service_render(service *svc, const char *id, const char *body, size_t
     } else if (strcmp(k->string, "variance") == 0) {
       st = svc_parse_variance(k, ptr, &rs.variance, e);
     } else {
-      st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, ptr,
-                    "unknown field '%s' (expected sensor, spp, seed, wavelength, params, timeout_s, quantities, "
-                    "variance)",
-                    k->string);
+      st = svc_fail(
+          e, RSW_ERR_UNUSED_PROPERTY, ptr,
+          "unknown field '%s' (expected sensor, spp, seed, wavelength, params, timeout_s, quantities, "
+          "variance)",
+          k->string);
     }
   }
   if (!st && r->sc->n_sensors && (rs.quantities || rs.variance))
-    st = svc_check_planes(r->sc, rs.sensor_index, rs.spp, rs.quantities, rs.variance, "/quantities", "/variance",
-                          e);
+    st = svc_check_planes(r->sc, rs.sensor_index, rs.spp, rs.quantities, rs.variance, "/quantities",
+                          "/variance", e);
   if (!st && rs.wavelength > 0 && r->sc->variant != VARIANT_MONO)
     st = svc_fail(e, RSW_ERR_INVALID, "/wavelength", "wavelength applies to mono scenes; this scene is rgb");
   if (!st && r->sc->n_sensors == 0) st = svc_fail(e, RSW_ERR_INVALID, "/sensor", "the scene has no sensor");

@@ -97,7 +97,7 @@ typedef struct render_item {
   uint64_t seed;
   unsigned quantities; /* RENDER_Q_*: the job's "quantities" */
   bool variance;       /* the job's "variance" */
-  cJSON *params; /* merged overrides (job-level, then context-level), owned */
+  cJSON *params;       /* merged overrides (job-level, then context-level), owned */
   job_state state;
   svc_film film;
   bool has_film;

@@ -646,7 +646,8 @@ void svc_state_job_finished(service *svc, const job *j) {
         cJSON_AddItemToArray(ch, cJSON_CreateString(im->channel_names[c]));
       if (im->n_planes) {
         cJSON *pl = cJSON_AddArrayToObject(x, "pl");
-        for (int q = 0; q < im->n_planes; q++) cJSON_AddItemToArray(pl, cJSON_CreateString(im->planes[q].name));
+        for (int q = 0; q < im->n_planes; q++)
+          cJSON_AddItemToArray(pl, cJSON_CreateString(im->planes[q].name));
       }
       if (im->unresolved_rays) cJSON_AddNumberToObject(x, "unres", (double)im->unresolved_rays);
       cJSON_AddBoolToObject(x, "disk", it->on_disk);
@@ -829,7 +830,8 @@ static void restore_finished(service *svc, const req_header *h, cJSON *done) {
           im->channel_names[c++] = static_channel(z->valuestring);
       im->channels = c;
       y = cJSON_GetObjectItemCaseSensitive(it, "pl");
-      for (const cJSON *z = cJSON_IsArray(y) ? y->child : NULL; z && im->n_planes < FILM_MAX_PLANES; z = z->next)
+      for (const cJSON *z = cJSON_IsArray(y) ? y->child : NULL; z && im->n_planes < FILM_MAX_PLANES;
+           z = z->next)
         if (cJSON_IsString(z) && film_plane_known(z->valuestring))
           film_plane_init(im, z->valuestring, &im->planes[im->n_planes++]);
       ri->on_disk = cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(it, "disk"));

@@ -245,7 +245,14 @@ static void test_film_planes(void) {
   REQUIRE(http_film_json(&f, &text, &len, &err) == RSW_OK, "film json: %s", err.msg);
   cJSON *j = cJSON_Parse(text);
   REQUIRE(j, "does not parse");
-  const char *want[9] = {"R", "G", "B", "brf.R", "brf.G", "brf.B", "radiance_stderr.R", "radiance_stderr.G",
+  const char *want[9] = {"R",
+                         "G",
+                         "B",
+                         "brf.R",
+                         "brf.G",
+                         "brf.B",
+                         "radiance_stderr.R",
+                         "radiance_stderr.G",
                          "radiance_stderr.B"};
   cJSON *ch = cJSON_GetObjectItem(j, "channels");
   REQUIRE(cJSON_GetArraySize(ch) == 9, "%d channels", cJSON_GetArraySize(ch));
@@ -321,8 +328,8 @@ static void check_png(const void *bytes, size_t len, int W, int H, int want_chan
     if (px[i] > best) best = px[i], at = i, n_best = 0;
     if (px[i] == best) n_best++;
   }
-  CHECK(at == bright_y * W + bright_x && n_best == 1, "brightest png pixel %d (x %d) of %d, want (%d, %d)", at,
-        n_best, best, bright_x, bright_y);
+  CHECK(at == bright_y * W + bright_x && n_best == 1, "brightest png pixel %d (x %d) of %d, want (%d, %d)",
+        at, n_best, best, bright_x, bright_y);
   free(px);
 }
 

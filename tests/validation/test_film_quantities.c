@@ -53,17 +53,18 @@ static scene *lambertian_plate(const char *variant, const char *rho, const char 
     snprintf(moon, sizeof moon,
              " \"moon\": {\"type\": \"directional\", \"direction\": [0, -0.6, -0.8], \"irradiance\": %s},",
              e2);
-  snprintf(buf, sizeof buf,
-           "{\"type\": \"scene\", \"variant\": \"%s\","
-           " \"sensor\": {\"type\": \"hdistant\", \"target\": [0, 0, 0],"
-           "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 8},"
-           "   \"film\": {\"type\": \"hdrfilm\", \"width\": 12, \"height\": 10, \"component_format\": \"float32\","
-           "     \"rfilter\": {\"type\": \"box\"}}},"
-           " \"sun\": {\"type\": \"directional\", \"direction\": [0.5, 0, -0.8660254037844386],"
-           "   \"irradiance\": %s},%s"
-           " \"plate\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [10, 10, 1]}],"
-           "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": %s}}}",
-           variant, e1, moon, rho);
+  snprintf(
+      buf, sizeof buf,
+      "{\"type\": \"scene\", \"variant\": \"%s\","
+      " \"sensor\": {\"type\": \"hdistant\", \"target\": [0, 0, 0],"
+      "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 8},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 12, \"height\": 10, \"component_format\": \"float32\","
+      "     \"rfilter\": {\"type\": \"box\"}}},"
+      " \"sun\": {\"type\": \"directional\", \"direction\": [0.5, 0, -0.8660254037844386],"
+      "   \"irradiance\": %s},%s"
+      " \"plate\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [10, 10, 1]}],"
+      "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": %s}}}",
+      variant, e1, moon, rho);
   return tsup_load(buf, NULL);
 }
 
@@ -165,16 +166,17 @@ static double rpv_brf(const double *wi, const double *wo) {
 
 static scene *rpv_plate(int w, int h, int spp) {
   char buf[4096];
-  snprintf(buf, sizeof buf,
-           "{\"type\": \"scene\", \"variant\": \"mono\","
-           " \"sensor\": {\"type\": \"hdistant\", \"target\": [0, 0, 0],"
-           "   \"sampler\": {\"type\": \"independent\", \"sample_count\": %d},"
-           "   \"film\": {\"type\": \"hdrfilm\", \"width\": %d, \"height\": %d, \"component_format\": \"float32\","
-           "     \"rfilter\": {\"type\": \"box\"}}},"
-           " \"sun\": {\"type\": \"directional\", \"direction\": [%.17g, %.17g, %.17g], \"irradiance\": 2.5},"
-           " \"plate\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [10, 10, 1]}],"
-           "   \"bsdf\": {\"type\": \"rpv\", \"rho_0\": %g, \"k\": %g, \"g\": %g, \"rho_c\": %g}}}",
-           spp, w, h, SUN[0], SUN[1], SUN[2], RHO0, K, G, RHOC);
+  snprintf(
+      buf, sizeof buf,
+      "{\"type\": \"scene\", \"variant\": \"mono\","
+      " \"sensor\": {\"type\": \"hdistant\", \"target\": [0, 0, 0],"
+      "   \"sampler\": {\"type\": \"independent\", \"sample_count\": %d},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": %d, \"height\": %d, \"component_format\": \"float32\","
+      "     \"rfilter\": {\"type\": \"box\"}}},"
+      " \"sun\": {\"type\": \"directional\", \"direction\": [%.17g, %.17g, %.17g], \"irradiance\": 2.5},"
+      " \"plate\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [10, 10, 1]}],"
+      "   \"bsdf\": {\"type\": \"rpv\", \"rho_0\": %g, \"k\": %g, \"g\": %g, \"rho_c\": %g}}}",
+      spp, w, h, SUN[0], SUN[1], SUN[2], RHO0, K, G, RHOC);
   return tsup_load(buf, NULL);
 }
 
