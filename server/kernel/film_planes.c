@@ -87,6 +87,21 @@ rsw_status render_check_planes(const scene *sc, size_t sensor_index, uint32_t sp
   return RSW_OK;
 }
 
+uint64_t render_planes_bytes(const sensor *se, rsw_variant variant, unsigned quantities, bool variance) {
+  int c;
+  (void)sensor_film_bytes(se, variant, &c);
+  uint64_t n = (uint64_t)((quantities & RENDER_Q_BRDF) != 0) + ((quantities & RENDER_Q_BRF) != 0) + variance;
+  if (!n) return 0;
+  /* render.c: 3 doubles per channel of moments; a float per channel per
+   * plane, twice (film and encoding), and the interleaved copy of all. */
+  uint64_t per_pixel =
+      (variance ? 3u * 8u * (uint64_t)c : 0) + 2u * 4u * (uint64_t)c * n + 4u * (uint64_t)c * (1 + n);
+  const film *fm = se->film;
+  uint64_t pixels = (uint64_t)(fm->width > 0 ? fm->width : 0) * (uint64_t)(fm->height > 0 ? fm->height : 0);
+  if (pixels && per_pixel > UINT64_MAX / pixels) return UINT64_MAX;
+  return pixels * per_pixel;
+}
+
 rsw_status render_horizontal_irradiance(const scene *sc, color *e_h, rsw_err *err) {
   color sum = col1(0);
   size_t n_dir = 0, n_lit = 0;

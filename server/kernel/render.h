@@ -123,6 +123,12 @@ rsw_status render_horizontal_irradiance(const scene *sc, color *e_h, rsw_err *er
 rsw_status render_check_planes(const scene *sc, size_t sensor, uint32_t spp, unsigned quantities,
                                bool variance, rsw_err *err);
 
+/* The memory planes add to a render of sensor se beyond sensor_film_bytes
+ * (scene.h), in bytes: the moment accumulators (variance), each plane and
+ * its encoded copy, and the interleaved copy the encoders make.
+ * Saturates at UINT64_MAX. */
+uint64_t render_planes_bytes(const sensor *se, rsw_variant variant, unsigned quantities, bool variance);
+
 /* A film's channels, radiance then every plane's: names (static) into
  * names[] (room for 4 * (1 + FILM_MAX_PLANES)) and the count. */
 int film_image_all_channels(const film_image *img, const char **names);

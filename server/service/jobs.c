@@ -629,7 +629,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
         }
         seen[si] = n_ctx + 1;
         if (!film_ok[si]) {
-          st = svc_check_film(svc, sc, si, ep, e);
+          st = svc_check_film(svc, sc, si, quantities, variance, ep, e);
           film_ok[si] = !st;
         }
         n_items++;
@@ -638,7 +638,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       if (!sc->n_sensors) st = svc_fail(e, RSW_ERR_INVALID, ptr, "the scene has no sensor");
       for (size_t si = 0; si < sc->n_sensors && !st; si++)
         if (!film_ok[si]) {
-          st = svc_check_film(svc, sc, si, ptr, e);
+          st = svc_check_film(svc, sc, si, quantities, variance, ptr, e);
           film_ok[si] = !st;
         }
       n_items += sc->n_sensors;

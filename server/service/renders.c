@@ -16,10 +16,13 @@ bool svc_find_sensor(const scene *sc, const char *name, size_t *index) {
   return kapi_find_sensor(sc, name, index);
 }
 
-rsw_status svc_check_film(const service *svc, const scene *sc, size_t si, const char *where, svc_error *e) {
+rsw_status svc_check_film(const service *svc, const scene *sc, size_t si, unsigned quantities, bool variance,
+                          const char *where, svc_error *e) {
   const sensor *se = sc->sensors[si];
   int channels;
   uint64_t need = sensor_film_bytes(se, sc->variant, &channels);
+  uint64_t extra = render_planes_bytes(se, sc->variant, quantities, variance);
+  need = need > UINT64_MAX - extra ? UINT64_MAX : need + extra;
   if (need <= svc->opts.max_film_bytes) return RSW_OK;
   return svc_fail(
       e, RSW_ERR_LIMIT, where,
@@ -431,7 +434,7 @@ rsw_status service_render(service *svc, const char *id, const char *body, size_t
   if (!st && r->sc->n_sensors == 0) st = svc_fail(e, RSW_ERR_INVALID, "/sensor", "the scene has no sensor");
   /* Limits before anything is allocated: the film's memory, then its
    * samples. */
-  if (!st) st = svc_check_film(svc, r->sc, rs.sensor_index, "/sensor", e);
+  if (!st) st = svc_check_film(svc, r->sc, rs.sensor_index, rs.quantities, rs.variance, "/sensor", e);
   if (!st) {
     const sensor *se = r->sc->sensors[rs.sensor_index];
     uint64_t spp = rs.spp ? rs.spp : se->sampler->sample_count;

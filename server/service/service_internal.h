@@ -203,7 +203,8 @@ struct service {
 /* RSW_ERR_LIMIT when rendering sensor si of sc would take more film memory
  * than the server allows (--max-film-bytes); `where` is the request field
  * that chose the sensor. */
-rsw_status svc_check_film(const service *svc, const scene *sc, size_t si, const char *where, svc_error *e);
+rsw_status svc_check_film(const service *svc, const scene *sc, size_t si, unsigned quantities, bool variance,
+                          const char *where, svc_error *e);
 
 /* Helpers shared by the service files. */
 double svc_now(void);
