@@ -517,8 +517,8 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
    * compute_bidirectional_reflectance); the standard error of a pixel's
    * mean of n samples is sqrt((sum d^2 - (sum d)^2 / n) / (n (n - 1))),
    * d = x - K (the unbiased sample variance over n). */
-  double eh[4];
-  for (int c = 0; c < 4; c++)
+  double eh[4] = {0, 0, 0, 0}; /* per developed channel, as develop maps colours */
+  for (int c = 0; c < img.channels; c++)
     eh[c] = jb.stokes || sc->variant == VARIANT_MONO ? e_h.c[0] : lum ? col_luminance(e_h) : e_h.c[c];
   const char *want[FILM_MAX_PLANES];
   int n_want = 0;
