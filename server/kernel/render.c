@@ -51,7 +51,7 @@ typedef struct job {
   int m_ch;         /* variance: developed channels with moments (0: none) */
   int m_off;        /* offset of the first moment triple */
   int stride;       /* doubles per pixel in accumulators */
-  double *film_acc; /* W*H*4 */
+  double *film_acc; /* W*H*stride */
   /* Ordered merge (under `lock`). */
   pthread_mutex_t lock;
   size_t next_commit;
@@ -536,13 +536,14 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
       film_image_free(&img);
       return rsw_fail(err, RSW_ERR_NOMEM, "film", "out of memory");
     }
+    bool is_stderr = strcmp(want[p], "radiance_stderr") == 0;
+    double scale = strcmp(want[p], "brf") == 0 ? M_PI : 1.0; /* over E_h */
     for (size_t i = 0; i < (size_t)jb.W * jb.H; i++) {
       const double *a = &jb.film_acc[(size_t)jb.stride * i];
       for (int c = 0; c < img.channels; c++) {
         size_t q = i * (size_t)img.channels + (size_t)c;
-        if (strcmp(want[p], "radiance_stderr") != 0) {
-          double f = strcmp(want[p], "brf") == 0 ? M_PI / eh[c] : 1.0 / eh[c];
-          pl->data[q] = (float)(f * (double)img.data[q]);
+        if (!is_stderr) {
+          pl->data[q] = (float)(scale / eh[c] * (double)img.data[q]);
           continue;
         }
         const double *m = &a[jb.m_off + ACC_MOMENT * c];
