@@ -44,7 +44,7 @@ $(BUILD)/obj/client/lib/%.o: CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude -Icommon
 $(BUILD)/obj/client/cli/%.o: CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude
 CFLAGS := -std=c11 $(OPT) -g -fno-math-errno $(WARN) $(SANFLAGS) -fPIC
 LDFLAGS := $(SANFLAGS)
-LIBS := -lembree3 -lOpenEXRCore -lnetcdf -lexpat -lcjson -lpthread -ldl -lm
+LIBS := -lembree3 -lOpenEXRCore -lnetcdf -lpng16 -lexpat -lcjson -lpthread -ldl -lm
 DAEMON_LIBS := -lmicrohttpd -lcrypto
 TEST_LIBS := -lcurl -lcrypto
 
@@ -100,7 +100,7 @@ CLIENT_OBJ := $(CLIENT_SRC:%.c=$(BUILD)/obj/%.o) $(COMMON_OBJ)
 CLIENT_A := $(BUILD)/lib/libraysweep.a
 CLIENT_SO := $(BUILD)/lib/libraysweep.so
 CLIENT_PC := $(BUILD)/lib/pkgconfig/raysweep.pc
-CLIENT_LIBS := -lcurl -lcjson -lexpat -lcrypto -lOpenEXRCore -lnetcdf -lpthread -lm
+CLIENT_LIBS := -lcurl -lcjson -lexpat -lcrypto -lOpenEXRCore -lnetcdf -lpng16 -lpthread -lm
 CLIENT_HEADERS := include/raysweep/client.h include/raysweep/status.h include/raysweep/version.h \
   include/raysweep/plugin.h
 PREFIX ?= /usr/local
@@ -114,7 +114,7 @@ MAN_PAGES := $(sort $(wildcard docs/man/*.1))
 client_pc_lines = 'prefix=$(1)' 'includedir=$${prefix}/include' 'libdir=$${prefix}/lib' '' \
   'Name: raysweep' 'Description: C client library for raysweepd, the raysweep radiometric kernel daemon' \
   'Version: $(VERSION)' 'Cflags: -I$${includedir}' \
-  'Libs: -L$${libdir} -lraysweep' 'Libs.private: -lcurl -lcjson -lexpat -lcrypto -lOpenEXRCore -lnetcdf -lpthread -lm'
+  'Libs: -L$${libdir} -lraysweep' 'Libs.private: -lcurl -lcjson -lexpat -lcrypto -lOpenEXRCore -lnetcdf -lpng16 -lpthread -lm'
 
 .PHONY: all deps test bench run clean format install test-cluster
 .SECONDARY:
@@ -277,7 +277,7 @@ clean:
 # ---- raysweep CLI (client/cli): only the public libraysweep API ----
 CLI_SRC := $(sort $(wildcard client/cli/*.c))
 CLI_OBJ := $(CLI_SRC:%.c=$(BUILD)/obj/%.o)
-CLI_LIBS := -lcurl -lcjson -lexpat -lcrypto -lOpenEXRCore -lnetcdf -lm -lpthread
+CLI_LIBS := -lcurl -lcjson -lexpat -lcrypto -lOpenEXRCore -lnetcdf -lpng16 -lm -lpthread
 .PHONY: cli-objs
 all test: $(BUILD)/bin/raysweep
 cli-objs: $(CLI_OBJ)

@@ -11,15 +11,16 @@
 #include "image_exr.h"
 
 /* Most attributes an info gives: scene, revision, context, sensor, spp,
- * seed, variant, wavelength, zenith, azimuth, unresolved rays. */
-#define FILM_EXR_MAX_ATTRS 11
+ * seed, variant, wavelength, zenith, azimuth, unresolved rays,
+ * irradiance. */
+#define FILM_EXR_MAX_ATTRS 12
 
 /* The attribute list of one info: entries point into info, the number
  * buffers here and the two angle lists (owned). */
 typedef struct attrs {
   exr_meta_entry e[FILM_EXR_MAX_ATTRS];
   size_t count;
-  char revision[24], spp[16], seed[24], wavelength[32], unresolved[24];
+  char revision[24], spp[16], seed[24], wavelength[32], unresolved[24], irradiance[4 * 26];
   char *zenith, *azimuth;
 } attrs;
 
@@ -80,6 +81,13 @@ static rsw_status build_attrs(const film_exr_info *info, int width, int height, 
     add(a, "raysweep:azimuth_deg", a->azimuth);
   }
   if (info->unresolved_rays) add(a, "raysweep:unresolved_rays", a->unresolved);
+  if (info->irradiance && info->n_irradiance > 0 && info->n_irradiance <= 4) {
+    size_t len = 0;
+    for (int c = 0; c < info->n_irradiance; c++)
+      len += (size_t)snprintf(a->irradiance + len, sizeof a->irradiance - len, c ? ",%.17g" : "%.17g",
+                              info->irradiance[c]);
+    add(a, "raysweep:irradiance", a->irradiance);
+  }
   return RSW_OK;
 }
 

@@ -22,6 +22,12 @@
  *   raysweep:unresolved_rays
  *                           only when non-zero: rays the periodic boundary
  *                           could not resolve (render.h), decimal
+ *   raysweep:irradiance     films with brdf/brf channels: the horizontal
+ *                           irradiance E_h they divide by, per radiance
+ *                           channel, %.17g, comma-separated
+ *
+ * Planes beyond radiance are channels "<plane>.<channel>" (brf.Y,
+ * radiance_stderr.R, ...), EXR's layer naming.
  *
  * The number formats are those of the daemon's JSON film meta, so a film
  * fetched as JSON and saved by the client library gives the same strings.
@@ -44,6 +50,10 @@ typedef struct film_exr_info {
   double wavelength_nm; /* written when finite and variant is not "rgb" */
   /* NULL, or 2 per pixel (zenith, azimuth), row-major, degrees. */
   const double *angles;
+  /* n_irradiance (0: not written) horizontal irradiances, one per
+   * radiance channel. */
+  const double *irradiance;
+  int n_irradiance;
 } film_exr_info;
 
 /* An info that writes nothing (wavelength NaN); set what is known. */

@@ -14,8 +14,10 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 
 #include "image_exr.h"
+#include "image_png.h"
 #include "kernel/plugins/env_plugin.h"
 #include "kernel/render.h"
 #include "kernel/scene/params.h"
@@ -91,6 +93,9 @@ static int cmd_render(int argc, char **argv) {
   size_t n_sets = 0;
   unsigned long long spp = 0, seed = 0, threads = 0;
   double wavelength = 0;
+  unsigned quantities = 0;
+  bool variance = false;
+  png_look look = {0};
   int rc = 1;
   scene *sc = NULL;
   film_image img = {0};
@@ -124,6 +129,29 @@ static int cmd_render(int argc, char **argv) {
       if (!parse_pos_double(val, &wavelength))
         USAGE("--wavelength needs a positive number of nm (got '%s')", val ? val : "");
       i++;
+    } else if (strcmp(a, "--quantities") == 0) {
+      if (!val || !*val) USAGE("--quantities needs a comma-separated list of %s", RENDER_QUANTITY_NAMES);
+      char list[256];
+      snprintf(list, sizeof list, "%s", val);
+      for (char *save = NULL, *q = strtok_r(list, ",", &save); q; q = strtok_r(NULL, ",", &save)) {
+        unsigned bit;
+        if (!render_quantity_bit(q, &bit))
+          USAGE("--quantities: unknown quantity '%s' (one of %s)", q, RENDER_QUANTITY_NAMES);
+        quantities |= bit;
+      }
+      i++;
+    } else if (strcmp(a, "--variance") == 0) {
+      variance = true;
+    } else if (strcmp(a, "--exposure") == 0) {
+      char *end = NULL;
+      look.exposure = val ? strtod(val, &end) : NAN;
+      if (!val || end == val || *end || !isfinite(look.exposure) || fabs(look.exposure) > 1000)
+        USAGE("--exposure needs a number of stops (got '%s')", val ? val : "");
+      i++;
+    } else if (strcmp(a, "--colormap") == 0) {
+      if (!val || !png_colormap_known(val))
+        USAGE("--colormap needs one of %s (got '%s')", png_colormap_list(), val ? val : "");
+      look.colormap = val, i++;
     } else if (strcmp(a, "--variant") == 0) {
       if (!val) USAGE("%s needs mono or rgb", a);
       variant_name = val, i++;
@@ -157,6 +185,12 @@ static int cmd_render(int argc, char **argv) {
     rc = usage_error("render", "missing -o OUT.exr%s", "");
     goto out;
   }
+  size_t olen = strlen(out_path);
+  bool is_png = olen > 4 && strcasecmp(out_path + olen - 4, ".png") == 0;
+  if (!is_png && (look.exposure != 0 || look.colormap)) {
+    rc = usage_error("render", "--exposure and --colormap are for a PNG output (-o OUT.png)%s", "");
+    goto out;
+  }
   rsw_err err = {0};
   char msg[1200];
   if (plugin_dir && plugins_load_dir(plugin_dir, &err)) {
@@ -185,7 +219,9 @@ static int cmd_render(int argc, char **argv) {
                     .spp = (uint32_t)spp,
                     .seed = seed,
                     .wavelength = wavelength,
-                    .threads = (int)threads};
+                    .threads = (int)threads,
+                    .quantities = quantities,
+                    .variance = variance};
   render_result_stats rs;
   if (render_sensor(sc, &ro, &img, &rs, &err)) {
     fprintf(stderr, "raysweepd render: %s\n", rsw_err_format(&err, msg, sizeof msg));
@@ -206,7 +242,9 @@ static int cmd_render(int argc, char **argv) {
     fprintf(stderr,
             "raysweepd render: warning: %zu environment plugin failures were replaced by black; first: %s\n",
             pfail, pmsg);
-  if (film_image_write_exr(&img, out_path, sc->sensors[sensor_index]->base.id, &err)) {
+  if (is_png ? png_write_film(out_path, img.width, img.height, img.channels, img.channel_names, img.data,
+                              &look, &err)
+             : film_image_write_exr(&img, out_path, sc->sensors[sensor_index]->base.id, &err)) {
     fprintf(stderr, "raysweepd render: %s\n", rsw_err_format(&err, msg, sizeof msg));
     goto out;
   }
@@ -390,10 +428,12 @@ static int cmd_version(int argc, char **argv) {
 static const command commands[] = {
     {"render",
      "render SCENE [-D name=value]... [--set KEY=VALUE]... [--sensor ID] [--spp N] [--seed S] "
-     "[--wavelength NM] [--threads N] [--variant mono|rgb] [--plugin-dir DIR] -o OUT.exr",
-     "load a scene, apply parameter updates, render one sensor to OpenEXR",
+     "[--wavelength NM] [--threads N] [--variant mono|rgb] [--plugin-dir DIR] [--quantities LIST] "
+     "[--variance] [--exposure EV] [--colormap MAP] -o OUT.exr|OUT.png",
+     "load a scene, apply parameter updates, render one sensor to OpenEXR or a PNG quick-look",
      "  SCENE               a .xml (Mitsuba XML) or .json scene file\n"
-     "  -o, --output OUT    the film; written next to it and renamed once complete\n"
+     "  -o, --output OUT    the film; written next to it and renamed once complete; a name ending\n"
+     "                      in .png writes a tone-mapped 8-bit quick-look, anything else OpenEXR\n"
      "  -D name=value       sets an XML $name parameter (not for JSON scenes)\n"
      "  --set KEY=VALUE     a parameter update after loading; VALUE is JSON (all --set form one update)\n"
      "  --sensor ID         a sensor id or index (default: the first sensor)\n"
@@ -403,6 +443,12 @@ static const command commands[] = {
      "  --threads N         1 to 256 (default: every online core; the film does not depend on N)\n"
      "  --variant mono|rgb  overrides the document's variant (default rgb)\n"
      "  --plugin-dir DIR    load every *.so in DIR as an environment plugin first\n"
+     "  --quantities LIST   comma-separated, of radiance, brdf, brf: adds brdf = L/E_h and brf = pi L/E_h\n"
+     "                      channels (E_h: horizontal irradiance of the directional emitters)\n"
+     "  --variance          adds radiance_stderr channels, the standard error of each pixel's mean\n"
+     "                      (box rfilter, spp >= 2)\n"
+     "  --exposure EV       PNG only: scale by 2^EV after mapping the brightest value to white (default 0)\n"
+     "  --colormap MAP      PNG only, one-channel films: gray (default), viridis or inferno\n"
      "Exit status: 0 ok, 1 the scene failed to load or render, 2 command-line mistake.\n",
      cmd_render},
     {"params",

@@ -9,7 +9,7 @@ set -euo pipefail
 pkgs=(
   # build: make, cc, ar, nm; the libraries
   build-essential pkg-config libembree-dev libopenexr-dev libmicrohttpd-dev
-  libcjson-dev libcurl4-openssl-dev libexpat1-dev libssl-dev libnetcdf-dev
+  libcjson-dev libcurl4-openssl-dev libexpat1-dev libssl-dev libnetcdf-dev libpng-dev
   # tests: curl and python3 (integration scripts, docs examples); python3-yaml
   # and python3-jsonschema (tests/openapi/check.py); clang-format (make
   # format, tools/check-format.sh); groff-base and man-db (the man pages are

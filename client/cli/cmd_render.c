@@ -1,8 +1,10 @@
 /* raysweep render (one synchronous render) and fetch (one film of a job). */
 #include <cjson/cJSON.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 
 #include "cli.h"
 
@@ -13,24 +15,72 @@ const cli_opt cli_opts_render[] = {
     {"--wavelength", "NM", false, "wavelength in nm (mono variant; default 550)"},
     {"--set", "KEY=VALUE", true, "parameter override for this render only (VALUE is JSON)"},
     {"--timeout", "S", false, "seconds the server may spend (exit 5 past it)"},
-    {"-o", "FILE", false, "output file: .exr, .npy or .json (the film JSON)"},
+    {"--quantities", "LIST", false, "comma-separated, of radiance, brdf, brf: adds brdf and brf channels"},
+    {"--variance", NULL, false, "adds radiance_stderr channels (standard error of each pixel's mean)"},
+    {"--exposure", "EV", false, "PNG: scale by 2^EV after mapping the brightest value to white (default 0)"},
+    {"--colormap", "MAP", false, "PNG of a one-channel film: gray (default), viridis or inferno"},
+    {"-o", "FILE", false, "output file: .exr, .npy, .json (the film JSON) or .png (a quick-look)"},
     {NULL},
 };
 const cli_opt cli_opts_fetch[] = {
+    {"--exposure", "EV", false, "PNG: scale by 2^EV after mapping the brightest value to white (default 0)"},
+    {"--colormap", "MAP", false, "PNG of a one-channel film: gray (default), viridis or inferno"},
     {"-o", "FILE", false,
-     "output file: .exr, .npy or .json (the film JSON); .nc: the whole job as one NetCDF-4 dataset "
-     "(give JOB alone)"},
+     "output file: .exr, .npy, .json (the film JSON) or .png (a quick-look); .nc: the whole job as one "
+     "NetCDF-4 dataset (give JOB alone)"},
     {"--format", "exr|npy|json|nc", false, "the format, whatever FILE's extension"},
     {"--partial", NULL, false, "nc: the dataset of a job still running (films not there yet are NaN)"},
     {NULL},
 };
 
-static int output_format(const cli_ctx *ctx, const char *out, cli_format *fmt) {
-  if (!out) return cli_usage(ctx, "missing -o OUT.exr|.npy|.json");
+/* The PNG quick-look's options (-o OUT.png), or a usage error. */
+typedef struct png_out {
+  bool png;
+  double exposure;
+  const char *colormap;
+} png_out;
+
+static bool ends_png(const char *path) {
+  size_t n = strlen(path);
+  return n > 4 && strcasecmp(path + n - 4, ".png") == 0;
+}
+
+static int output_format(const cli_ctx *ctx, const cli_args *a, const char *out, cli_format *fmt,
+                         png_out *po) {
+  if (!out) return cli_usage(ctx, "missing -o OUT.exr|.npy|.json|.png");
+  memset(po, 0, sizeof *po);
+  po->png = ends_png(out);
+  const char *v;
+  if ((v = cli_get(a, "--exposure"))) {
+    if (!cli_parse_double(v, &po->exposure) || fabs(po->exposure) > 1000)
+      return cli_usage(ctx, "--exposure needs a number of stops (got '%s')", v);
+  }
+  if ((v = cli_get(a, "--colormap"))) {
+    if (strcmp(v, "gray") && strcmp(v, "viridis") && strcmp(v, "inferno"))
+      return cli_usage(ctx, "--colormap needs gray, viridis or inferno (got '%s')", v);
+    po->colormap = v;
+  }
+  if (!po->png && (cli_get(a, "--exposure") || cli_get(a, "--colormap")))
+    return cli_usage(ctx, "--exposure and --colormap are for a PNG output (-o OUT.png)");
+  if (po->png) {
+    *fmt = CLI_FMT_NONE;
+    return 0;
+  }
   *fmt = cli_format_from_path(out);
   if (*fmt == CLI_FMT_NONE)
-    return cli_usage(ctx, "-o '%s': the format is chosen by extension: .exr, .npy or .json", out);
+    return cli_usage(ctx, "-o '%s': the format is chosen by extension: .exr, .npy, .json or .png", out);
   return 0;
+}
+
+static int save(const cli_ctx *ctx, const rsw_film *f, const char *out, cli_format fmt, const png_out *po) {
+  if (!po->png) return cli_save_film(ctx, f, out, fmt);
+  rsw_status s = rsw_film_save_png(f, out, po->exposure, po->colormap);
+  if (s == RSW_ERR_INVALID)
+    return cli_usage(ctx,
+                     "cannot make a PNG of this film: --colormap is for one-channel films (this one has %d)",
+                     rsw_film_channels(f));
+  if (s) return cli_fail(ctx, CLI_IO, "cannot write '%s': %s", out, rsw_strerror(s));
+  return CLI_OK;
 }
 
 static void report_written(const cli_ctx *ctx, const rsw_film *f, const char *path, double seconds) {
@@ -69,7 +119,8 @@ static void report_written(const cli_ctx *ctx, const rsw_film *f, const char *pa
 int cmd_render(cli_ctx *ctx, const cli_args *a) {
   const char *out = cli_get(a, "-o");
   cli_format fmt;
-  int rc = output_format(ctx, out, &fmt);
+  png_out po;
+  int rc = output_format(ctx, a, out, &fmt, &po);
   if (rc) return rc;
   cJSON *req = cJSON_CreateObject();
   if (!req) return cli_fail(ctx, CLI_IO, "out of memory");
@@ -112,6 +163,23 @@ int cmd_render(cli_ctx *ctx, const cli_args *a) {
     }
     cJSON_AddNumberToObject(req, "timeout_s", d);
   }
+  if ((v = cli_get(a, "--quantities"))) {
+    cJSON *q = cJSON_AddArrayToObject(req, "quantities");
+    char list[256];
+    snprintf(list, sizeof list, "%s", v);
+    for (char *save = NULL, *t = strtok_r(list, ",", &save); t; t = strtok_r(NULL, ",", &save)) {
+      if (strcmp(t, "radiance") && strcmp(t, "brdf") && strcmp(t, "brf")) {
+        rc = cli_usage(ctx, "--quantities: unknown quantity '%s' (one of radiance, brdf, brf)", t);
+        goto out;
+      }
+      cJSON_AddItemToArray(q, cJSON_CreateString(t));
+    }
+    if (!q->child) {
+      rc = cli_usage(ctx, "--quantities needs a comma-separated list of radiance, brdf, brf");
+      goto out;
+    }
+  }
+  if (cli_get(a, "--variance")) cJSON_AddBoolToObject(req, "variance", true);
   size_t n_sets;
   const char *const *sets = cli_get_all(a, "--set", &n_sets);
   if (n_sets) {
@@ -141,7 +209,7 @@ int cmd_render(cli_ctx *ctx, const cli_args *a) {
     rc = cli_report(ctx, s, a->pos[0]);
     goto out;
   }
-  rc = cli_save_film(ctx, film, out, fmt);
+  rc = save(ctx, film, out, fmt, &po);
   if (!rc) report_written(ctx, film, out, seconds);
   rsw_film_free(film);
 out:
@@ -170,17 +238,21 @@ static int fetch_dataset(cli_ctx *ctx, const cli_args *a, const char *out) {
 
 int cmd_fetch(cli_ctx *ctx, const cli_args *a) {
   const char *out = cli_get(a, "-o"), *v = cli_get(a, "--format");
-  if (!out) return cli_usage(ctx, "missing -o FILE.exr|.npy|.json|.nc");
+  if (!out) return cli_usage(ctx, "missing -o FILE.exr|.npy|.json|.png|.nc");
   cli_format fmt;
+  png_out po;
+  memset(&po, 0, sizeof po);
   int rc = 0;
   if (v) {
     if (strcmp(v, "nc") == 0) return fetch_dataset(ctx, a, out);
     if ((fmt = cli_format_from_name(v)) == CLI_FMT_NONE)
       return cli_usage(ctx, "--format needs exr, npy, json or nc (got '%s')", v);
+    if (cli_get(a, "--exposure") || cli_get(a, "--colormap"))
+      return cli_usage(ctx, "--exposure and --colormap are for a PNG output (-o OUT.png, no --format)");
   } else {
     const char *dot = strrchr(out, '.');
     if (dot && strcmp(dot, ".nc") == 0 && !strchr(dot, '/')) return fetch_dataset(ctx, a, out);
-    if ((rc = output_format(ctx, out, &fmt))) return rc;
+    if ((rc = output_format(ctx, a, out, &fmt, &po))) return rc;
   }
   if (cli_has(a, "--partial")) return cli_usage(ctx, "--partial applies to a dataset (-o FILE.nc)");
   if (a->n_pos != 3)
@@ -193,7 +265,7 @@ int cmd_fetch(cli_ctx *ctx, const cli_args *a) {
     snprintf(what, sizeof what, "%s %s %s", a->pos[0], a->pos[1], a->pos[2]);
     return cli_report(ctx, s, what);
   }
-  rc = cli_save_film(ctx, film, out, fmt);
+  rc = save(ctx, film, out, fmt, &po);
   if (!rc) report_written(ctx, film, out, cli_now() - t0);
   rsw_film_free(film);
   return rc;

@@ -33,6 +33,9 @@ const cli_opt cli_opts_sweep[] = {
     {"--spread", "K", false,
      "run K shards at once through one load balancer (--server), each routed to its own replica by "
      "X-Raysweep-Shard; a scene FILE is pushed to every replica; a balancer that went away: rerun to resume"},
+    {"--quantities", "LIST", false,
+     "comma-separated, of radiance, brdf, brf: films add brdf and brf channels"},
+    {"--variance", NULL, false, "films add radiance_stderr channels (standard error of each pixel's mean)"},
     {"--format", "exr|npy|json|nc", false,
      "film files: exr (default), npy or json; nc: json films plus DIR/dataset.nc, the sweep as one "
      "NetCDF-4 dataset (xarray.open_dataset)"},
@@ -476,6 +479,25 @@ static int build_contexts(const cli_ctx *ctx, const cli_args *a, const sweep_ite
   }
   if (!s && spp > 0) snprintf(what, sizeof what, "--spp"), s = rsw_contexts_set_default_spp(x, spp);
   if (!s) snprintf(what, sizeof what, "--seed"), s = rsw_contexts_set_job_seed(x, seed);
+  const char *qv = cli_get(a, "--quantities");
+  if (!s && qv) {
+    char list[256];
+    const char *names[8];
+    size_t nq = 0;
+    snprintf(list, sizeof list, "%s", qv);
+    snprintf(what, sizeof what, "--quantities '%s'", qv);
+    for (char *save = NULL, *t = strtok_r(list, ",", &save); t && !s; t = strtok_r(NULL, ",", &save)) {
+      if ((strcmp(t, "radiance") && strcmp(t, "brdf") && strcmp(t, "brf")) || nq == 8) {
+        rsw_contexts_free(x);
+        return cli_usage(ctx, "--quantities: unknown quantity '%s' (one of radiance, brdf, brf)", t);
+      }
+      names[nq++] = t;
+    }
+    if (!nq) s = RSW_ERR_INVALID;
+    if (!s) s = rsw_contexts_set_quantities(x, names, nq);
+  }
+  if (!s && cli_get(a, "--variance"))
+    snprintf(what, sizeof what, "--variance"), s = rsw_contexts_set_variance(x, 1);
   if (s) {
     rc = s == RSW_ERR_NOMEM ? cli_fail(ctx, CLI_IO, "out of memory")
                             : cli_usage(ctx, "%s: %s", what, rsw_strerror(s));
@@ -608,7 +630,7 @@ static int fetch_all(cli_ctx *ctx, const char *job, const char *dir, cli_format 
  *    "job": JOB | null, "finished": BOOL, "incomplete": [context ids]}
  * FINGERPRINT is FNV-1a 64 over everything that defines the unsharded
  * sweep (scene, contexts file or grid, --set, --sensor, --spp, --seed,
- * --format) and not over --shard, so every shard of one sweep carries the
+ * --format, --quantities, --variance) and not over --shard, so every shard of one sweep carries the
  * same value. `merge` uses it to know which contexts a set of shard
  * directories must cover; `sweep --force` to know what an earlier sweep
  * wrote. "incomplete" lists contexts with a render that did not succeed. */
@@ -639,7 +661,8 @@ static void sweep_fingerprint(const cli_args *a, const char *scene, char out[17]
     h = fnv1a(h, text ? text : "", text ? len : 0);
     free(text);
   }
-  static const char *const keyed[] = {"--grid", "--set", "--sensor", "--spp", "--seed", "--format"};
+  static const char *const keyed[] = {"--grid", "--set",    "--sensor",     "--spp",
+                                      "--seed", "--format", "--quantities", "--variance"};
   for (size_t k = 0; k < sizeof keyed / sizeof keyed[0]; k++) {
     size_t n;
     const char *const *v = cli_get_all(a, keyed[k], &n);

@@ -38,14 +38,14 @@ static const cli_command commands[] = {
      true, cmd_set},
     {"render", NULL,
      "ID [--sensor S] [--spp N] [--seed N] [--wavelength NM] [--set KEY=VALUE]... [--timeout S] "
-     "-o OUT.exr|.npy|.json",
-     "render one context synchronously (format by extension; .json is the film JSON; Ctrl-C stops the "
-     "render)",
+     "[--quantities LIST] [--variance] [--exposure EV] [--colormap MAP] -o OUT.exr|.npy|.json|.png",
+     "render one context synchronously (format by extension; .json is the film JSON, .png a tone-mapped "
+     "quick-look; Ctrl-C stops the render)",
      cli_opts_render, 1, 1, true, cmd_render},
     {"sweep", NULL,
      "ID|FILE (--contexts FILE.jsonl | --grid NAME=START:STOP:STEP...) [--set KEY=VALUE]... [--sensor S]... "
-     "[--spp N] [--seed N] [--shard I/N] [--spread K] [--format exr|npy|json|nc] [--timeout S] -o DIR "
-     "[--force]",
+     "[--spp N] [--seed N] [--shard I/N] [--spread K] [--quantities LIST] [--variance] "
+     "[--format exr|npy|json|nc] [--timeout S] -o DIR [--force]",
      "submit a job over many contexts, show progress, fetch every film into DIR with DIR/index.jsonl and "
      "DIR/sweep.json (Ctrl-C cancels the job)",
      cli_opts_sweep, 1, 1, true, cmd_sweep},
@@ -60,7 +60,9 @@ static const cli_command commands[] = {
     {"job", "cancel", "ID", "cancel a job", cli_opts_none, 1, 1, true, cmd_job_cancel},
     {"job", "rm", "ID", "delete a job and its results (cancels it if running)", cli_opts_none, 1, 1, true,
      cmd_job_rm},
-    {"fetch", NULL, "JOB [CONTEXT SENSOR] -o FILE.exr|.npy|.json|.nc [--format exr|npy|json|nc] [--partial]",
+    {"fetch", NULL,
+     "JOB [CONTEXT SENSOR] [--exposure EV] [--colormap MAP] -o FILE.exr|.npy|.json|.png|.nc "
+     "[--format exr|npy|json|nc] [--partial]",
      "download one film of a job, or (.nc) the whole job as one dataset", cli_opts_fetch, 1, 3, true,
      cmd_fetch},
 };

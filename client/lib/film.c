@@ -11,6 +11,7 @@
 
 #include "film_io.h"
 #include "image_exr.h"
+#include "image_png.h"
 #include "internal.h"
 
 /* Most channels a film may have (the EXR writer's cap as well). */
@@ -193,7 +194,7 @@ rsw_status rsw_film_save_exr(const rsw_film *f, const char *path) {
   if (!f || !path) return RSW_ERR_INVALID;
   cJSON *meta = cJSON_Parse(f->meta);
   film_exr_info info = film_exr_info_none();
-  double *angles = NULL;
+  double *angles = NULL, irradiance[4];
   rsw_status s = RSW_OK;
   if (cJSON_IsObject(meta)) {
     uint64_t spp = 0;
@@ -211,6 +212,19 @@ rsw_status rsw_film_save_exr(const rsw_film *f, const char *path) {
     if (ok && cJSON_IsNumber(wl)) info.wavelength_nm = wl->valuedouble;
     if (ok && !meta_angles(meta, (size_t)f->width * (size_t)f->height, &angles)) ok = false;
     info.angles = angles;
+    /* brdf / brf films: the horizontal irradiance, one per radiance
+     * channel. */
+    const cJSON *ir = cJSON_GetObjectItemCaseSensitive(meta, "irradiance");
+    if (ok && ir && !cJSON_IsNull(ir)) {
+      int n = cJSON_GetArraySize(ir), k = 0;
+      ok = cJSON_IsArray(ir) && n >= 1 && n <= 4;
+      for (const cJSON *x = ok ? ir->child : NULL; x; x = x->next, k++) {
+        if (!cJSON_IsNumber(x)) ok = false;
+        irradiance[k] = cJSON_IsNumber(x) ? x->valuedouble : 0;
+      }
+      info.irradiance = irradiance;
+      info.n_irradiance = ok ? n : 0;
+    }
     if (!ok) s = RSW_ERR_PARSE;
   } else if (f->meta && strcmp(f->meta, "{}") != 0) {
     s = RSW_ERR_PARSE;
@@ -223,6 +237,14 @@ rsw_status rsw_film_save_exr(const rsw_film *f, const char *path) {
   free(angles);
   cJSON_Delete(meta);
   return s;
+}
+
+rsw_status rsw_film_save_png(const rsw_film *f, const char *path, double exposure, const char *colormap) {
+  if (!f || !path) return RSW_ERR_INVALID;
+  png_look look = {.exposure = exposure, .colormap = colormap};
+  rsw_err err = {0};
+  return png_write_film(path, f->width, f->height, f->channels, (const char *const *)f->names, f->data, &look,
+                        &err);
 }
 
 static void put_le32(unsigned char *p, float v) {

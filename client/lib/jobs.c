@@ -173,6 +173,37 @@ rsw_status rsw_contexts_set_job_seed(rsw_contexts *x, long long seed) {
   return set_int(x->root, "seed", seed);
 }
 
+rsw_status rsw_contexts_set_quantities(rsw_contexts *x, const char *const *names, size_t n) {
+  if (!x || (n && !names)) return RSW_ERR_INVALID;
+  cJSON *a = cJSON_CreateArray();
+  for (size_t i = 0; a && i < n; i++) {
+    cJSON *q = names[i] ? cJSON_CreateString(names[i]) : NULL;
+    if (!q || !cJSON_AddItemToArray(a, q)) {
+      cJSON_Delete(q);
+      cJSON_Delete(a);
+      return names[i] ? RSW_ERR_NOMEM : RSW_ERR_INVALID;
+    }
+  }
+  if (!a) return RSW_ERR_NOMEM;
+  cJSON_DeleteItemFromObjectCaseSensitive(x->root, "quantities");
+  if (!n) {
+    cJSON_Delete(a);
+    return RSW_OK;
+  }
+  if (!cJSON_AddItemToObject(x->root, "quantities", a)) {
+    cJSON_Delete(a);
+    return RSW_ERR_NOMEM;
+  }
+  return RSW_OK;
+}
+
+rsw_status rsw_contexts_set_variance(rsw_contexts *x, int on) {
+  if (!x) return RSW_ERR_INVALID;
+  cJSON_DeleteItemFromObjectCaseSensitive(x->root, "variance");
+  if (on && !cJSON_AddBoolToObject(x->root, "variance", 1)) return RSW_ERR_NOMEM;
+  return RSW_OK;
+}
+
 /* ---- submit and status ---------------------------------------------------------------- */
 
 /* "/v1/jobs/<escaped id><suffix>" into path; false when too long. */

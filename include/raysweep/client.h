@@ -155,6 +155,19 @@ const char *rsw_film_meta(const rsw_film *f);
  * meta member has the wrong type or an angle list the wrong length. */
 rsw_status rsw_film_save_exr(const rsw_film *f, const char *path);
 rsw_status rsw_film_save_npy(const rsw_film *f, const char *path);
+/* A film asked for with "quantities" or "variance" has more channels after
+ * its radiance ones, "<plane>.<channel>" ("brf.Y", "radiance_stderr.R"),
+ * and its meta lists "planes" (and "irradiance" with brdf/brf); both
+ * savers keep them (EXR channels, the .npy's last axis) and the EXR adds
+ * "raysweep:irradiance". */
+/* A tone-mapped 8-bit sRGB PNG quick-look of the film's radiance (R, G, B;
+ * else Y; else S0) through a temp file renamed on success: the brightest
+ * finite value maps to white, then times 2^exposure (stops), clamped; a
+ * one-channel film may use colormap "gray" (NULL: the default), "viridis"
+ * or "inferno". RSW_ERR_INVALID for an unknown colormap, a colormap on an
+ * RGB film or a non-finite exposure; RSW_ERR_IO when the file cannot be
+ * written. Borrows everything. */
+rsw_status rsw_film_save_png(const rsw_film *f, const char *path, double exposure, const char *colormap);
 void rsw_film_free(rsw_film *f);
 
 /* One synchronous render. request_json is a RenderRequest text
@@ -187,6 +200,11 @@ rsw_status rsw_contexts_set_job_param(rsw_contexts *x, const char *key, const ch
 rsw_status rsw_contexts_add_default_sensor(rsw_contexts *x, const char *sensor);
 rsw_status rsw_contexts_set_default_spp(rsw_contexts *x, long long spp);
 rsw_status rsw_contexts_set_job_seed(rsw_contexts *x, long long seed);
+/* Film planes for every render of the job: "quantities" (names borrowed:
+ * "radiance", "brdf", "brf"; n 0 removes it) and "variance" (on != 0: the
+ * radiance_stderr plane). The server checks them at submission. */
+rsw_status rsw_contexts_set_quantities(rsw_contexts *x, const char *const *names, size_t n);
+rsw_status rsw_contexts_set_variance(rsw_contexts *x, int on);
 size_t rsw_contexts_count(const rsw_contexts *x);
 
 /* Submit a job. idempotency_key may be NULL. job_id_out: 40 bytes. */

@@ -11,6 +11,7 @@
 #include <strings.h>
 
 #include "film_io.h"
+#include "image_png.h"
 
 /* ---- growable text buffer ------------------------------------------------ */
 
@@ -163,8 +164,19 @@ static rsw_status check_film(const svc_film *f, const char *what, rsw_err *err) 
   return RSW_OK;
 }
 
+/* Every channel of the film: radiance, then the planes' (render.h). */
 static size_t film_samples(const film_image *im) {
-  return (size_t)im->width * (size_t)im->height * (size_t)im->channels;
+  return (size_t)im->width * (size_t)im->height * (size_t)im->channels * (size_t)(1 + im->n_planes);
+}
+
+/* The film's samples, all channels interleaved (film_image_all_channels's
+ * order): the film's own data when it has no planes (*owned NULL), else a
+ * malloc'ed copy in *owned. NULL when out of memory. */
+static const float *film_all(const film_image *im, float **owned) {
+  *owned = NULL;
+  if (!im->n_planes) return im->data;
+  *owned = film_image_interleaved(im);
+  return *owned;
 }
 
 static const char *variant_name(rsw_variant v) {
@@ -175,18 +187,23 @@ rsw_status http_film_json(const svc_film *f, char **bytes_out, size_t *len_out, 
   rsw_status s = check_film(f, "film JSON", err);
   if (s) return s;
   const film_image *im = &f->img;
+  float *owned;
+  const float *all = film_all(im, &owned);
+  size_t n = film_samples(im);
+  if (!all) return rsw_fail(err, RSW_ERR_NOMEM, "film JSON", "no memory for %zu samples", n);
+  const char *names[4 * (1 + FILM_MAX_PLANES)];
+  int nc = film_image_all_channels(im, names);
   http_buf b = {0};
   http_buf_printf(&b, "{\"width\":%d,\"height\":%d,\"channels\":[", im->width, im->height);
-  for (int c = 0; c < im->channels; c++) {
+  for (int c = 0; c < nc; c++) {
     if (c) http_buf_append(&b, ",", 1);
-    http_buf_json_string(&b, im->channel_names[c]);
+    http_buf_json_string(&b, names[c]);
   }
   http_buf_puts(&b, "],\"layout\":\"HWC\",\"data\":[");
-  size_t n = film_samples(im);
   /* Reserve roughly what the samples take, so the loop rarely reallocates. */
   if (buf_reserve(&b, n * 12)) {
     for (size_t i = 0; i < n && !b.failed; i++) {
-      float v = im->data[i];
+      float v = all[i];
       char num[32];
       int k = isfinite(v) ? snprintf(num, sizeof num, "%.9g", (double)v) : snprintf(num, sizeof num, "null");
       if (i) http_buf_append(&b, ",", 1);
@@ -222,7 +239,28 @@ rsw_status http_film_json(const svc_film *f, char **bytes_out, size_t *len_out, 
   /* Only when non-zero: rays the periodic boundary could not resolve. */
   if (im->unresolved_rays)
     http_buf_printf(&b, ",\"unresolved_rays\":%llu", (unsigned long long)im->unresolved_rays);
+  /* Films with planes: what each is (its channels are "<name>.<channel>"),
+   * and for brdf / brf the horizontal irradiance they divide by. */
+  if (im->n_planes) {
+    http_buf_puts(&b, ",\"planes\":[");
+    for (int p = 0; p < im->n_planes; p++) {
+      http_buf_printf(&b, "%s{\"name\":", p ? "," : "");
+      http_buf_json_string(&b, im->planes[p].name);
+      http_buf_puts(&b, ",\"units\":");
+      http_buf_json_string(&b, im->planes[p].units);
+      http_buf_puts(&b, ",\"long_name\":");
+      http_buf_json_string(&b, im->planes[p].long_name);
+      http_buf_puts(&b, "}");
+    }
+    http_buf_puts(&b, "]");
+  }
+  if (im->has_irradiance) {
+    http_buf_puts(&b, ",\"irradiance\":[");
+    for (int c = 0; c < im->channels; c++) http_buf_printf(&b, "%s%.17g", c ? "," : "", im->irradiance[c]);
+    http_buf_puts(&b, "]");
+  }
   http_buf_puts(&b, "}}");
+  free(owned);
   size_t len = 0;
   char *text = http_buf_take(&b, &len);
   if (!text) return rsw_fail(err, RSW_ERR_NOMEM, "film JSON", "no memory for %zu samples as JSON", n);
@@ -237,15 +275,20 @@ rsw_status http_film_npy(const svc_film *f, void **bytes_out, size_t *len_out, r
   const film_image *im = &f->img;
   char dict[128];
   int dn = snprintf(dict, sizeof dict, "{'descr': '<f4', 'fortran_order': False, 'shape': (%d, %d, %d), }",
-                    im->height, im->width, im->channels);
+                    im->height, im->width, im->channels * (1 + im->n_planes));
   /* 10 bytes of preamble (magic 6, version 2, header length 2), then the
    * dict, spaces, '\n', to a multiple of 64 (numpy's ARRAY_ALIGN). */
   size_t header = 10 + (size_t)dn + 1;
   header = (header + 63) / 64 * 64;
   size_t n = film_samples(im);
   size_t len = header + n * 4;
-  uint8_t *p = malloc(len);
-  if (!p) return rsw_fail(err, RSW_ERR_NOMEM, "film NPY", "no memory for %zu bytes", len);
+  float *owned;
+  const float *all = film_all(im, &owned);
+  uint8_t *p = all ? malloc(len) : NULL;
+  if (!p) {
+    free(owned);
+    return rsw_fail(err, RSW_ERR_NOMEM, "film NPY", "no memory for %zu bytes", len);
+  }
   memcpy(p, "\x93NUMPY\x01\x00", 8);
   size_t hlen = header - 10;
   p[8] = (uint8_t)(hlen & 0xff);
@@ -256,12 +299,13 @@ rsw_status http_film_npy(const svc_film *f, void **bytes_out, size_t *len_out, r
   uint8_t *d = p + header;
   for (size_t i = 0; i < n; i++) { /* little-endian whatever the host */
     uint32_t u;
-    memcpy(&u, &im->data[i], 4);
+    memcpy(&u, &all[i], 4);
     d[4 * i + 0] = (uint8_t)u;
     d[4 * i + 1] = (uint8_t)(u >> 8);
     d[4 * i + 2] = (uint8_t)(u >> 16);
     d[4 * i + 3] = (uint8_t)(u >> 24);
   }
+  free(owned);
   *bytes_out = p;
   *len_out = len;
   return RSW_OK;
@@ -277,8 +321,23 @@ rsw_status http_film_exr(const svc_film *f, void **bytes_out, size_t *len_out, r
   info.has_revision = true;
   info.revision = f->revision;
   info.context = f->context;
-  return film_exr_encode(im->width, im->height, im->channels, im->channel_names, im->data, false, &info,
-                         bytes_out, len_out, err);
+  float *owned;
+  const float *all = film_all(im, &owned);
+  if (!all) return rsw_fail(err, RSW_ERR_NOMEM, "film EXR", "out of memory");
+  const char *names[4 * (1 + FILM_MAX_PLANES)];
+  int nc = film_image_all_channels(im, names);
+  s = film_exr_encode(im->width, im->height, nc, names, all, false, &info, bytes_out, len_out, err);
+  free(owned);
+  return s;
+}
+
+rsw_status http_film_png(const svc_film *f, const png_look *look, void **bytes_out, size_t *len_out,
+                         rsw_err *err) {
+  rsw_status s = check_film(f, "film PNG", err);
+  if (s) return s;
+  const film_image *im = &f->img;
+  return png_encode_film(im->width, im->height, im->channels, im->channel_names, im->data, look, bytes_out,
+                         len_out, err);
 }
 
 /* ---- problem+json ---------------------------------------------------------- */
@@ -400,6 +459,7 @@ const char *http_film_content_type(http_film_format f) {
   switch (f) {
   case HTTP_FILM_EXR: return "image/x-exr";
   case HTTP_FILM_NPY: return "application/x-npy";
+  case HTTP_FILM_PNG: return "image/png";
   case HTTP_FILM_JSON: return "application/json";
   default: return NULL;
   }
@@ -481,6 +541,7 @@ http_film_format http_accept_film(const char *accept) {
       {"application/json", HTTP_FILM_JSON},
       {"image/x-exr", HTTP_FILM_EXR},
       {"application/x-npy", HTTP_FILM_NPY},
+      {"image/png", HTTP_FILM_PNG},
   };
   enum {
     N_EXACT = sizeof exact / sizeof exact[0]

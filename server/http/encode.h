@@ -10,6 +10,7 @@
 #include <stddef.h>
 
 #include "../service/service.h"
+#include "image_png.h"
 #include "rsw_error.h"
 
 /* ---- growable text buffer ------------------------------------------------
@@ -44,6 +45,11 @@ void http_buf_free(http_buf *b);
 
 /* {"width", "height", "channels": [...], "layout": "HWC", "data": [...],
  *  "meta": {scene, revision, context, sensor, wavelength, spp, seed}}.
+ * A film with planes (render.h) lists their channels after the radiance
+ * ones ("brf.Y", "radiance_stderr.Y") and its meta adds "planes" ([{name,
+ * units, long_name}]) and, with brdf or brf, "irradiance" (E_h per
+ * radiance channel); the .npy and EXR encodings carry the same channels
+ * in the same order.
  * Samples print with 9 significant digits (round-trips float32); NaN and
  * infinities, which JSON cannot hold, print as null. context is null for a
  * synchronous render (empty f->context). */
@@ -63,6 +69,11 @@ rsw_status http_film_npy(const svc_film *f, void **bytes_out, size_t *len_out, r
  * zenith_deg and azimuth_deg for distant-family sensors): those of
  * raysweepd render -o plus scene, revision and context. */
 rsw_status http_film_exr(const svc_film *f, void **bytes_out, size_t *len_out, rsw_err *err);
+
+/* A tone-mapped 8-bit quick-look of the film's radiance (image_png.h;
+ * look may be NULL: exposure 0, grey). */
+rsw_status http_film_png(const svc_film *f, const png_look *look, void **bytes_out, size_t *len_out,
+                         rsw_err *err);
 
 /* ---- problem+json ----------------------------------------------------------
  * RFC 9457 body: {"type": "https://raysweep.dev/problems/<code>", "title":
@@ -93,12 +104,13 @@ typedef enum http_film_format {
   HTTP_FILM_JSON,
   HTTP_FILM_EXR,
   HTTP_FILM_NPY,
+  HTTP_FILM_PNG,
 } http_film_format;
 
 /* Pick a film representation from an Accept header value (NULL or empty:
  * JSON). Exact media types are preferred over ranges in the client's
  * order; "*" + "/" + "*" and "application/" + "*" give JSON (or the first of
- * JSON, EXR, NPY not excluded), "image/" + "*" gives EXR. q-values are
+ * JSON, EXR, NPY, PNG not excluded), "image/" + "*" gives EXR. q-values are
  * ignored except q=0, which excludes a type. */
 http_film_format http_accept_film(const char *accept);
 /* Whether an Accept header value (NULL or empty: anything) allows the one

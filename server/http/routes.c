@@ -7,6 +7,7 @@
 
 #include <errno.h>
 #include <inttypes.h>
+#include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -97,7 +98,16 @@ static void resp_film(http_req *r, const svc_film *f, http_film_format fmt) {
   void *bytes = NULL;
   size_t len = 0;
   rsw_status s;
-  if (fmt == HTTP_FILM_EXR)
+  if (fmt == HTTP_FILM_PNG) {
+    png_look look = {.colormap = r->q_colormap};
+    if (r->q_exposure) look.exposure = strtod(r->q_exposure, NULL); /* checked by negotiate_film */
+    s = http_film_png(f, &look, &bytes, &len, &err);
+    if (s == RSW_ERR_INVALID) { /* colormap for an rgb film, a film with nothing to show */
+      char msg[1200];
+      http_resp_problem(r, 422, rsw_status_name(s), "%s", rsw_err_format(&err, msg, sizeof msg));
+      return;
+    }
+  } else if (fmt == HTTP_FILM_EXR)
     s = http_film_exr(f, &bytes, &len, &err);
   else if (fmt == HTTP_FILM_NPY)
     s = http_film_npy(f, &bytes, &len, &err);
@@ -118,13 +128,32 @@ static void resp_film(http_req *r, const svc_film *f, http_film_format fmt) {
 
 /* ---- request pieces ------------------------------------------------------- */
 
-/* Negotiate a film format or answer 406; false when answered. */
+/* Negotiate a film format or answer 406; false when answered. The PNG
+ * look's query parameters (?exposure=EV&colormap=NAME) are checked here,
+ * before any work: 400 when malformed. */
 static bool negotiate_film(http_req *r, http_film_format *fmt) {
   *fmt = http_accept_film(r->accept);
-  if (*fmt != HTTP_FILM_NONE) return true;
-  http_resp_problem(r, 406, NULL,
-                    "Accept '%s' allows none of application/json, image/x-exr, application/x-npy", r->accept);
-  return false;
+  if (*fmt == HTTP_FILM_NONE) {
+    http_resp_problem(
+        r, 406, NULL,
+        "Accept '%s' allows none of application/json, image/x-exr, application/x-npy, image/png", r->accept);
+    return false;
+  }
+  if (r->q_exposure) {
+    char *end = NULL;
+    double ev = strtod(r->q_exposure, &end);
+    if (end == r->q_exposure || *end || !isfinite(ev) || fabs(ev) > 1000) {
+      http_resp_problem(r, 400, NULL, "query parameter exposure must be a number of stops (got '%s')",
+                        r->q_exposure);
+      return false;
+    }
+  }
+  if (r->q_colormap && !png_colormap_known(r->q_colormap)) {
+    http_resp_problem(r, 400, NULL, "query parameter colormap must be one of %s (got '%s')",
+                      png_colormap_list(), r->q_colormap);
+    return false;
+  }
+  return true;
 }
 
 /* ?force=true|false|1|0 (absent: false); false after answering 400. */

@@ -69,6 +69,7 @@ struct http_req {
   const char *params[HTTP_MAX_PATH_PARAMS];
   /* query */
   const char *q_match, *q_class, *q_force, *q_variant, *q_partial;
+  const char *q_exposure, *q_colormap; /* PNG films (image/png) */
   /* headers */
   const char *content_type, *accept, *if_match, *idempotency_key, *last_event_id, *if_none_match;
   const char *body;

@@ -1059,6 +1059,8 @@ static enum MHD_Result dispatch(struct MHD_Connection *c, conn *cn, const char *
       .q_force = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "force"),
       .q_variant = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "variant"),
       .q_partial = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "partial"),
+      .q_exposure = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "exposure"),
+      .q_colormap = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "colormap"),
       .content_type = ct,
       .accept = header(c, MHD_HTTP_HEADER_ACCEPT),
       .if_match = header(c, MHD_HTTP_HEADER_IF_MATCH),

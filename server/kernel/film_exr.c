@@ -1,5 +1,7 @@
 /* A rendered film's EXR attributes and file (render.h), through the one
  * EXR writer of the project (common/film_io.h). */
+#include <stdlib.h>
+
 #include "film_io.h"
 #include "render.h"
 
@@ -13,12 +15,24 @@ film_exr_info film_image_exr_info(const film_image *img, const char *sensor_id) 
   if (img->variant == VARIANT_MONO) info.wavelength_nm = img->wavelength;
   info.angles = img->angles;
   info.unresolved_rays = img->unresolved_rays;
+  if (img->has_irradiance) {
+    info.irradiance = img->irradiance;
+    info.n_irradiance = img->channels;
+  }
   return info;
 }
 
 rsw_status film_image_write_exr(const film_image *img, const char *path, const char *sensor_id,
                                 rsw_err *err) {
   film_exr_info info = film_image_exr_info(img, sensor_id);
-  return film_exr_write(path, img->width, img->height, img->channels, img->channel_names, img->data,
-                        img->half, &info, err);
+  if (!img->n_planes)
+    return film_exr_write(path, img->width, img->height, img->channels, img->channel_names, img->data,
+                          img->half, &info, err);
+  const char *names[4 * (1 + FILM_MAX_PLANES)];
+  int n = film_image_all_channels(img, names);
+  float *all = film_image_interleaved(img);
+  if (!all) return rsw_fail(err, RSW_ERR_NOMEM, path, "out of memory for the film's planes");
+  rsw_status st = film_exr_write(path, img->width, img->height, n, names, all, img->half, &info, err);
+  free(all);
+  return st;
 }

@@ -23,8 +23,13 @@
 #define TILE 8
 
 /* Accumulator layout per pixel: sum(f w L) rgb, sum(f), and for Stokes
- * films sum(f w (Q, U, V)). */
-#define ACC_MAX 7
+ * films sum(f w (Q, U, V)); then, for a film with variance, per developed
+ * channel k (Y; R, G, B; or S0..S3) the triple (K, sum(x - K),
+ * sum((x - K)^2)) of its samples x, K being the pixel's first sample (the
+ * shifted-data algorithm: no cancellation, and exactly 0 for a constant
+ * pixel). */
+#define ACC_MAX    7
+#define ACC_MOMENT 3
 
 typedef struct tile_buf {
   int x0, y0, w, h; /* region covered, margin included, clipped to film */
@@ -42,8 +47,11 @@ typedef struct job {
   int margin;       /* pixels a splat can reach beyond its own */
   bool box;         /* box filter of radius 0.5: own pixel only */
   bool stokes;      /* Stokes film: Q, U, V accumulated too */
-  int stride;       /* doubles per pixel in accumulators: 4 or 7 */
-  double *film_acc; /* W*H*4 */
+  bool lum;         /* one luminance channel (develop's mapping) */
+  int m_ch;         /* variance: developed channels with moments (0: none) */
+  int m_off;        /* offset of the first moment triple */
+  int stride;       /* doubles per pixel in accumulators */
+  double *film_acc; /* W*H*stride */
   /* Ordered merge (under `lock`). */
   pthread_mutex_t lock;
   size_t next_commit;
@@ -70,8 +78,25 @@ static void splat(const job *jb, tile_buf *tb, double px, double py, color v, co
     if (ix >= jb->W) ix = jb->W - 1;
     if (iy >= jb->H) iy = jb->H - 1;
     double *a = &tb->acc[(size_t)S * ((size_t)(iy - tb->y0) * tb->w + (ix - tb->x0))];
+    if (jb->m_ch) {
+      /* The sample as develop sees it (Y, R G B or S0..S3), then its
+       * shifted first and second moments (Eradiate's `moment` integrator
+       * keeps the raw E[x^2]; see ACC_MOMENT). */
+      double x[4] = {v.c[0], v.c[1], v.c[2], 0};
+      if (jb->stokes)
+        x[1] = quv[0], x[2] = quv[1], x[3] = quv[2];
+      else if (jb->lum && jb->sc->variant != VARIANT_MONO)
+        x[0] = col_luminance(v);
+      bool first = a[3] == 0;
+      for (int k = 0; k < jb->m_ch; k++) {
+        double *m = &a[jb->m_off + ACC_MOMENT * k];
+        if (first) m[0] = x[k];
+        double d = x[k] - m[0];
+        m[1] += d, m[2] += d * d;
+      }
+    }
     a[0] += v.c[0], a[1] += v.c[1], a[2] += v.c[2], a[3] += 1.0;
-    if (S == ACC_MAX) a[4] += quv[0], a[5] += quv[1], a[6] += quv[2];
+    if (jb->stokes) a[4] += quv[0], a[5] += quv[1], a[6] += quv[2];
     return;
   }
   const rfilter *f = jb->fm->filter;
@@ -90,7 +115,7 @@ static void splat(const job *jb, tile_buf *tb, double px, double py, color v, co
       if (wgt == 0) continue;
       double *a = &tb->acc[(size_t)S * ((size_t)(y - tb->y0) * tb->w + (x - tb->x0))];
       a[0] += wgt * v.c[0], a[1] += wgt * v.c[1], a[2] += wgt * v.c[2], a[3] += wgt;
-      if (S == ACC_MAX) a[4] += wgt * quv[0], a[5] += wgt * quv[1], a[6] += wgt * quv[2];
+      if (jb->stokes) a[4] += wgt * quv[0], a[5] += wgt * quv[1], a[6] += wgt * quv[2];
     }
   }
 }
@@ -378,6 +403,14 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
   uint32_t spp = opts->spp ? opts->spp : se->sampler->sample_count;
   if (se->sampler->ops->adjust_spp) spp = se->sampler->ops->adjust_spp(se->sampler, spp);
   if (spp == 0) return rsw_fail(err, RSW_ERR_RANGE, "spp", "spp must be at least 1");
+  bool box = fm->filter->radius <= 0.5 + 1e-12;
+  st = render_check_planes(sc, opts->sensor, spp, opts->quantities, opts->variance, err);
+  if (st) return st;
+  color e_h = col1(0);
+  if (opts->quantities & (RENDER_Q_BRDF | RENDER_Q_BRF)) {
+    st = render_horizontal_irradiance(sc, &e_h, err);
+    if (st) return st;
+  }
 
   job jb;
   memset(&jb, 0, sizeof jb);
@@ -391,9 +424,12 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
   jb.tiles_x = (jb.W + TILE - 1) / TILE;
   jb.tiles_y = (jb.H + TILE - 1) / TILE;
   jb.n_tiles = (size_t)jb.tiles_x * jb.tiles_y;
-  jb.box = fm->filter->radius <= 0.5 + 1e-12;
+  jb.box = box;
   jb.stokes = fm->pixel_format == PIXFMT_STOKES && sc->variant == VARIANT_MONO;
-  jb.stride = jb.stokes ? ACC_MAX : 4;
+  jb.lum = !jb.stokes && (sc->variant == VARIANT_MONO || fm->pixel_format == PIXFMT_LUMINANCE);
+  jb.m_ch = !opts->variance ? 0 : jb.stokes ? 4 : jb.lum ? 1 : 3;
+  jb.m_off = jb.stokes ? ACC_MAX : 4;
+  jb.stride = jb.m_off + ACC_MOMENT * jb.m_ch;
   jb.margin = jb.box ? 0 : (int)ceil(fm->filter->radius + 0.5);
   jb.film_acc = calloc((size_t)jb.W * jb.H * (size_t)jb.stride, sizeof(double));
   jb.done = calloc(jb.n_tiles, sizeof *jb.done);
@@ -476,11 +512,55 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
       img.data[3 * i + 2] = (float)c.c[2];
     }
   }
+  /* Planes, in the order brdf, brf, radiance_stderr. The BRDF is L / E_h
+   * and the BRF pi L / E_h per developed channel (Eradiate's
+   * compute_bidirectional_reflectance); the standard error of a pixel's
+   * mean of n samples is sqrt((sum d^2 - (sum d)^2 / n) / (n (n - 1))),
+   * d = x - K (the unbiased sample variance over n). */
+  double eh[4] = {0, 0, 0, 0}; /* per developed channel, as develop maps colours */
+  for (int c = 0; c < img.channels; c++)
+    eh[c] = jb.stokes || sc->variant == VARIANT_MONO ? e_h.c[0] : lum ? col_luminance(e_h) : e_h.c[c];
+  const char *want[FILM_MAX_PLANES];
+  int n_want = 0;
+  if (opts->quantities & RENDER_Q_BRDF) want[n_want++] = "brdf";
+  if (opts->quantities & RENDER_Q_BRF) want[n_want++] = "brf";
+  if (opts->variance) want[n_want++] = "radiance_stderr";
+  size_t nv = (size_t)jb.W * jb.H * img.channels;
+  for (int p = 0; p < n_want; p++) {
+    film_plane *pl = &img.planes[p];
+    film_plane_init(&img, want[p], pl);
+    pl->data = malloc(nv * sizeof(float));
+    img.n_planes = p + 1;
+    if (!pl->data) {
+      free(jb.film_acc);
+      film_image_free(&img);
+      return rsw_fail(err, RSW_ERR_NOMEM, "film", "out of memory");
+    }
+    bool is_stderr = strcmp(want[p], "radiance_stderr") == 0;
+    double scale = strcmp(want[p], "brf") == 0 ? M_PI : 1.0; /* over E_h */
+    for (size_t i = 0; i < (size_t)jb.W * jb.H; i++) {
+      const double *a = &jb.film_acc[(size_t)jb.stride * i];
+      for (int c = 0; c < img.channels; c++) {
+        size_t q = i * (size_t)img.channels + (size_t)c;
+        if (!is_stderr) {
+          pl->data[q] = (float)(scale / eh[c] * (double)img.data[q]);
+          continue;
+        }
+        const double *m = &a[jb.m_off + ACC_MOMENT * c];
+        double n = a[3], var = n > 1 ? (m[2] - m[1] * m[1] / n) / (n - 1) : 0;
+        pl->data[q] = (float)(var > 0 ? sqrt(var / n) : 0.0);
+      }
+    }
+  }
+  if (n_want && (opts->quantities & (RENDER_Q_BRDF | RENDER_Q_BRF))) {
+    img.has_irradiance = true;
+    for (int c = 0; c < 4; c++) img.irradiance[c] = eh[c];
+  }
   free(jb.film_acc);
   if (se->ops->pixel_angles) {
     img.angles = malloc((size_t)jb.W * jb.H * 2 * sizeof(double));
     if (!img.angles) {
-      free(img.data);
+      film_image_free(&img);
       return rsw_fail(err, RSW_ERR_NOMEM, "film", "out of memory");
     }
     se->ops->pixel_angles(se, jb.W, jb.H, img.angles);
@@ -503,4 +583,9 @@ void film_image_free(film_image *img) {
   img->data = NULL;
   free(img->angles);
   img->angles = NULL;
+  /* The planes' descriptions stay, like the film's size and channels. */
+  for (int p = 0; p < img->n_planes; p++) {
+    free(img->planes[p].data);
+    img->planes[p].data = NULL;
+  }
 }

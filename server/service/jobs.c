@@ -449,6 +449,8 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     st = svc_fail(e, RSW_ERR_TYPE, "", "the body must be a JSON object");
   const cJSON *contexts = NULL, *defaults = NULL, *jparams = NULL;
   uint64_t job_seed = 0;
+  unsigned quantities = 0;
+  bool variance = false;
   for (const cJSON *k = !st ? req->child : NULL; k && !st; k = k->next) {
     if (strcmp(k->string, "contexts") == 0)
       contexts = k;
@@ -459,11 +461,16 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     else if (strcmp(k->string, "seed") == 0) {
       bool present;
       get_uint(req, "seed", 9007199254740991.0, &job_seed, &present, "", e, &st);
+    } else if (strcmp(k->string, "quantities") == 0) {
+      st = svc_parse_quantities(k, "/quantities", &quantities, e);
+    } else if (strcmp(k->string, "variance") == 0) {
+      st = svc_parse_variance(k, "/variance", &variance, e);
     } else {
       char w[300];
       snprintf(w, sizeof w, "/%s", k->string);
       st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, w,
-                    "unknown field '%s' (expected contexts, defaults, params, seed)", k->string);
+                    "unknown field '%s' (expected contexts, defaults, params, seed, quantities, variance)",
+                    k->string);
     }
   }
   if (!st && (!cJSON_IsArray(contexts) || !contexts->child))
@@ -624,7 +631,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
         }
         seen[si] = n_ctx + 1;
         if (!film_ok[si]) {
-          st = svc_check_film(svc, sc, si, ep, e);
+          st = svc_check_film(svc, sc, si, quantities, variance, ep, e);
           film_ok[si] = !st;
         }
         n_items++;
@@ -633,7 +640,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       if (!sc->n_sensors) st = svc_fail(e, RSW_ERR_INVALID, ptr, "the scene has no sensor");
       for (size_t si = 0; si < sc->n_sensors && !st; si++)
         if (!film_ok[si]) {
-          st = svc_check_film(svc, sc, si, ptr, e);
+          st = svc_check_film(svc, sc, si, quantities, variance, ptr, e);
           film_ok[si] = !st;
         }
       n_items += sc->n_sensors;
@@ -692,6 +699,13 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       it->wavelength = w ? w->valuedouble : d_wl;
       it->spp = (uint32_t)spp;
       it->seed = has_seed ? seed : default_seed(job_seed, it->context, it->sensor);
+      it->quantities = quantities;
+      it->variance = variance;
+      /* Refused up front (the message names the sensor and spp) rather
+       * than failing render by render. */
+      if ((quantities || variance) && svc_check_planes(sc, it->sensor_index, it->spp, quantities, variance,
+                                                       "/quantities", "/variance", e))
+        st = e->err.code;
       it->params = merge_params(jparams, cJSON_GetObjectItemCaseSensitive(c, "params"));
       if (!it->params) {
         st = svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
@@ -718,7 +732,10 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   }
   /* The bytes its films will hold, for --max-result-bytes. */
   uint64_t reserve = 0;
-  for (size_t i = 0; !st && i < n_items; i++) reserve += svc_film_bytes(sc, jb->items[i].sensor_index);
+  uint64_t planes =
+      (uint64_t)((quantities & RENDER_Q_BRDF) != 0) + ((quantities & RENDER_Q_BRF) != 0) + variance;
+  for (size_t i = 0; !st && i < n_items; i++) /* each plane as large as the film (angles overcounted) */
+    reserve += svc_film_bytes(sc, jb->items[i].sensor_index) * (1 + planes);
   if (st) {
     if (jb) {
       /* Items exist only if their array was allocated (job_free walks
@@ -875,7 +892,9 @@ void *svc_worker_main(void *arg) {
                         .seed = it->seed,
                         .wavelength = it->wavelength,
                         .overrides = it->params,
-                        .cancel = &j->cancel};
+                        .cancel = &j->cancel,
+                        .quantities = it->quantities,
+                        .variance = it->variance};
       rsw_status st = svc_render_locked(svc, j->res, &rs, &it->film, &e);
       if (!st) {
         /* With a state directory every film goes to disk first. */
@@ -1068,8 +1087,9 @@ rsw_status service_job_results(service *svc, const char *id, char **json_out, sv
       cJSON_AddNumberToObject(x, "width", it->film.img.width);
       cJSON_AddNumberToObject(x, "height", it->film.img.height);
       cJSON *ch = cJSON_AddArrayToObject(x, "channels");
-      for (int c = 0; c < it->film.img.channels; c++)
-        svc_json_push(ch, cJSON_CreateString(it->film.img.channel_names[c]));
+      const char *names[4 * (1 + FILM_MAX_PLANES)];
+      int nc = film_image_all_channels(&it->film.img, names);
+      for (int c = 0; c < nc; c++) svc_json_push(ch, cJSON_CreateString(names[c]));
       char href[512];
       snprintf(href, sizeof href, "/v1/jobs/%s/results/%s/%s", j->id, it->context, it->sensor);
       cJSON_AddStringToObject(x, "href", href);
@@ -1110,27 +1130,13 @@ rsw_status service_job_result(service *svc, const char *id, const char *context,
       return svc_fail(e, RSW_ERR_NOT_FOUND, context, "context '%s' sensor '%s' has no film yet (%s)", context,
                       sensor_name, state_names[it->state]);
     }
-    /* A copy: the job may be deleted while the response is written. */
+    /* A copy (pixels, angles and planes owned): the job may be deleted
+     * while the response is written. */
     *out = it->film;
-    out->img.angles = NULL; /* deep-copied below, never shared */
-    size_t n = (size_t)it->film.img.width * it->film.img.height * it->film.img.channels;
-    out->img.data = malloc(n * sizeof(float));
-    if (!out->img.data) {
+    if (!film_image_copy(&it->film.img, &out->img)) {
+      memset(&out->img, 0, sizeof out->img);
       pthread_mutex_unlock(&svc->lock);
       return svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
-    }
-    memcpy(out->img.data, it->film.img.data, n * sizeof(float));
-    /* The per-pixel viewing angles (distant-family films) are owned too. */
-    if (it->film.img.angles) {
-      size_t na = (size_t)it->film.img.width * it->film.img.height * 2;
-      out->img.angles = malloc(na * sizeof(double));
-      if (!out->img.angles) {
-        free(out->img.data);
-        out->img.data = NULL;
-        pthread_mutex_unlock(&svc->lock);
-        return svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
-      }
-      memcpy(out->img.angles, it->film.img.angles, na * sizeof(double));
     }
     pthread_mutex_unlock(&svc->lock);
     return RSW_OK;
@@ -1199,7 +1205,7 @@ rsw_status service_job_result_npy_fd(service *svc, const char *id, const char *c
 uint64_t svc_film_mem(const svc_film *f) {
   const film_image *im = &f->img;
   uint64_t px = (uint64_t)im->width * (uint64_t)im->height;
-  return px * (uint64_t)im->channels * 4 + (im->angles ? px * 16 : 0);
+  return px * (uint64_t)im->channels * 4 * (uint64_t)(1 + im->n_planes) + (im->angles ? px * 16 : 0);
 }
 
 void svc_job_free(job *j) {

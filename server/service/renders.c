@@ -16,10 +16,13 @@ bool svc_find_sensor(const scene *sc, const char *name, size_t *index) {
   return kapi_find_sensor(sc, name, index);
 }
 
-rsw_status svc_check_film(const service *svc, const scene *sc, size_t si, const char *where, svc_error *e) {
+rsw_status svc_check_film(const service *svc, const scene *sc, size_t si, unsigned quantities, bool variance,
+                          const char *where, svc_error *e) {
   const sensor *se = sc->sensors[si];
   int channels;
   uint64_t need = sensor_film_bytes(se, sc->variant, &channels);
+  uint64_t extra = render_planes_bytes(se, sc->variant, quantities, variance);
+  need = need > UINT64_MAX - extra ? UINT64_MAX : need + extra;
   if (need <= svc->opts.max_film_bytes) return RSW_OK;
   return svc_fail(
       e, RSW_ERR_LIMIT, where,
@@ -263,6 +266,39 @@ static rsw_status snapshot(const scene *sc, const param_update *u, size_t n, par
   return RSW_OK;
 }
 
+rsw_status svc_parse_quantities(const cJSON *v, const char *ptr, unsigned *out, svc_error *e) {
+  unsigned q = 0;
+  if (!cJSON_IsArray(v))
+    return svc_fail(e, RSW_ERR_TYPE, ptr, "quantities must be a list of %s", RENDER_QUANTITY_NAMES);
+  int i = 0;
+  for (const cJSON *x = v->child; x; x = x->next, i++) {
+    unsigned bit;
+    if (!cJSON_IsString(x) || !render_quantity_bit(x->valuestring, &bit)) {
+      char w[320];
+      snprintf(w, sizeof w, "%s/%d", ptr, i);
+      return svc_fail(e, RSW_ERR_INVALID, w, "unknown quantity '%s' (one of %s)",
+                      cJSON_IsString(x) ? x->valuestring : "?", RENDER_QUANTITY_NAMES);
+    }
+    q |= bit;
+  }
+  *out = q;
+  return RSW_OK;
+}
+
+rsw_status svc_parse_variance(const cJSON *v, const char *ptr, bool *out, svc_error *e) {
+  if (!cJSON_IsBool(v)) return svc_fail(e, RSW_ERR_TYPE, ptr, "variance must be true or false");
+  *out = cJSON_IsTrue(v);
+  return RSW_OK;
+}
+
+rsw_status svc_check_planes(const scene *sc, size_t si, uint32_t spp, unsigned quantities, bool variance,
+                            const char *ptr_q, const char *ptr_v, svc_error *e) {
+  rsw_err err = {0};
+  rsw_status st = render_check_planes(sc, si, spp, quantities, variance, &err);
+  if (!st) return RSW_OK;
+  return svc_fail(e, st, strcmp(err.where, "variance") == 0 ? ptr_v : ptr_q, "%s", err.msg);
+}
+
 rsw_status svc_render_locked(service *svc, resident *r, const render_spec *rs, svc_film *out, svc_error *e) {
   bool overrides = rs->overrides && rs->overrides->child;
   svc_view *v = NULL;
@@ -295,7 +331,9 @@ rsw_status svc_render_locked(service *svc, resident *r, const render_spec *rs, s
                       .wavelength = rs->wavelength,
                       .threads = svc->opts.render_threads,
                       .cancel = rs->cancel,
-                      .deadline = rs->deadline};
+                      .deadline = rs->deadline,
+                      .quantities = rs->quantities,
+                      .variance = rs->variance};
     render_result_stats stats;
     rsw_err rerr = {0};
     st = render_sensor(sc, &ro, &out->img, &stats, &rerr);
@@ -376,18 +414,27 @@ rsw_status service_render(service *svc, const char *id, const char *body, size_t
         st = svc_fail(e, RSW_ERR_INVALID, ptr, "timeout_s must be a positive number");
       else
         rs.deadline = svc_now() + k->valuedouble;
+    } else if (strcmp(k->string, "quantities") == 0) {
+      st = svc_parse_quantities(k, ptr, &rs.quantities, e);
+    } else if (strcmp(k->string, "variance") == 0) {
+      st = svc_parse_variance(k, ptr, &rs.variance, e);
     } else {
-      st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, ptr,
-                    "unknown field '%s' (expected sensor, spp, seed, wavelength, params, timeout_s)",
-                    k->string);
+      st = svc_fail(
+          e, RSW_ERR_UNUSED_PROPERTY, ptr,
+          "unknown field '%s' (expected sensor, spp, seed, wavelength, params, timeout_s, quantities, "
+          "variance)",
+          k->string);
     }
   }
+  if (!st && r->sc->n_sensors && (rs.quantities || rs.variance))
+    st = svc_check_planes(r->sc, rs.sensor_index, rs.spp, rs.quantities, rs.variance, "/quantities",
+                          "/variance", e);
   if (!st && rs.wavelength > 0 && r->sc->variant != VARIANT_MONO)
     st = svc_fail(e, RSW_ERR_INVALID, "/wavelength", "wavelength applies to mono scenes; this scene is rgb");
   if (!st && r->sc->n_sensors == 0) st = svc_fail(e, RSW_ERR_INVALID, "/sensor", "the scene has no sensor");
   /* Limits before anything is allocated: the film's memory, then its
    * samples. */
-  if (!st) st = svc_check_film(svc, r->sc, rs.sensor_index, "/sensor", e);
+  if (!st) st = svc_check_film(svc, r->sc, rs.sensor_index, rs.quantities, rs.variance, "/sensor", e);
   if (!st) {
     const sensor *se = r->sc->sensors[rs.sensor_index];
     uint64_t spp = rs.spp ? rs.spp : se->sampler->sample_count;

@@ -96,7 +96,9 @@ typedef struct render_item {
   double wavelength;
   uint32_t spp;
   uint64_t seed;
-  cJSON *params; /* merged overrides (job-level, then context-level), owned */
+  unsigned quantities; /* RENDER_Q_*: the job's "quantities" */
+  bool variance;       /* the job's "variance" */
+  cJSON *params;       /* merged overrides (job-level, then context-level), owned */
   job_state state;
   svc_film film;
   bool has_film;
@@ -207,7 +209,8 @@ struct service {
 /* RSW_ERR_LIMIT when rendering sensor si of sc would take more film memory
  * than the server allows (--max-film-bytes); `where` is the request field
  * that chose the sensor. */
-rsw_status svc_check_film(const service *svc, const scene *sc, size_t si, const char *where, svc_error *e);
+rsw_status svc_check_film(const service *svc, const scene *sc, size_t si, unsigned quantities, bool variance,
+                          const char *where, svc_error *e);
 
 /* Helpers shared by the service files. */
 double svc_now(void);
@@ -287,7 +290,18 @@ typedef struct render_spec {
   const cJSON *overrides;
   const atomic_int *cancel;
   double deadline;
+  unsigned quantities; /* RENDER_Q_* */
+  bool variance;
 } render_spec;
+/* A request's "quantities" (a list of "radiance", "brdf", "brf") into
+ * RENDER_Q_* bits, or its "variance" (a boolean); ptr is the member's JSON
+ * pointer for errors. */
+rsw_status svc_parse_quantities(const cJSON *v, const char *ptr, unsigned *out, svc_error *e);
+rsw_status svc_parse_variance(const cJSON *v, const char *ptr, bool *out, svc_error *e);
+/* render_check_planes for sensor si with the request's pointers: ptr_q
+ * ("/quantities") and ptr_v ("/variance") name the field at fault. */
+rsw_status svc_check_planes(const scene *sc, size_t si, uint32_t spp, unsigned quantities, bool variance,
+                            const char *ptr_q, const char *ptr_v, svc_error *e);
 rsw_status svc_render_locked(service *svc, resident *r, const render_spec *rs, svc_film *out, svc_error *e);
 /* Resolve a sensor given by id or decimal index. */
 bool svc_find_sensor(const scene *sc, const char *name, size_t *index);

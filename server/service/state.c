@@ -276,7 +276,7 @@ static const char *static_channel(const char *name) {
 static size_t npy_header(const film_image *im, char out[256]) {
   char dict[128];
   int dn = snprintf(dict, sizeof dict, "{'descr': '<f4', 'fortran_order': False, 'shape': (%d, %d, %d), }",
-                    im->height, im->width, im->channels);
+                    im->height, im->width, im->channels * (1 + im->n_planes));
   size_t header = (10 + (size_t)dn + 1 + 63) / 64 * 64;
   memcpy(out, "\x93NUMPY\x01\x00", 8);
   size_t hlen = header - 10;
@@ -380,21 +380,36 @@ rsw_status svc_state_film_write(service *svc, const job *j, size_t k, const svc_
   cJSON_AddStringToObject(m, "variant", im->variant == VARIANT_MONO ? "mono" : "rgb");
   snprintf(num, sizeof num, "%" PRIu64, im->unresolved_rays);
   cJSON_AddStringToObject(m, "unresolved_rays", num);
+  if (im->n_planes) { /* their channels follow the radiance ones in the .npy */
+    cJSON *pl = cJSON_AddArrayToObject(m, "planes");
+    for (int q = 0; q < im->n_planes; q++) cJSON_AddItemToArray(pl, cJSON_CreateString(im->planes[q].name));
+  }
+  if (im->has_irradiance) {
+    cJSON *ir = cJSON_AddArrayToObject(m, "irradiance");
+    for (int c = 0; c < im->channels; c++) {
+      snprintf(num, sizeof num, "%.17g", im->irradiance[c]);
+      cJSON_AddItemToArray(ir, cJSON_CreateString(num));
+    }
+  }
   char *ms = svc_print_json(m, svc_json_mark());
   if (!ms) return svc_fail(e, RSW_ERR_NOMEM, "--state-dir", "out of memory");
   char head[256];
   size_t nh = npy_header(im, head);
-  size_t n = px * (size_t)im->channels;
+  size_t n = px * (size_t)im->channels * (size_t)(1 + im->n_planes);
   size_t na = im->angles ? px * 2 * sizeof(double) : 0, nm = strlen(ms);
   size_t total = nh + n * sizeof(float) + na + nm + 32;
   unsigned char *out = malloc(total);
-  if (!out) {
+  float *all = im->n_planes ? film_image_interleaved(im) : NULL;
+  if (!out || (im->n_planes && !all)) {
+    free(out);
+    free(all);
     free(ms);
     return svc_fail(e, RSW_ERR_NOMEM, "--state-dir", "out of memory for a %zu-byte film", total);
   }
   unsigned char *q = out;
   memcpy(q, head, nh), q += nh;
-  memcpy(q, im->data, n * sizeof(float));
+  memcpy(q, all ? all : im->data, n * sizeof(float));
+  free(all);
   if (!little_endian())
     for (size_t i = 0; i < n; i++) {
       uint32_t u;
@@ -488,10 +503,31 @@ bool svc_state_film_header(service *svc, const char *job_id, size_t k, svc_film 
     out->img.channel_names[c] = s;
   }
   out->img.channels = c;
+  /* Planes: described here (names, units, channels), their data comes
+   * with the radiance (svc_state_film_read). */
+  const cJSON *pl = cJSON_GetObjectItemCaseSensitive(m, "planes");
+  int np = 0;
+  for (const cJSON *y = cJSON_IsArray(pl) ? pl->child : NULL; y && ok; y = y->next, np++) {
+    if (np == FILM_MAX_PLANES || !cJSON_IsString(y) || !film_plane_known(y->valuestring)) {
+      ok = false;
+      break;
+    }
+    film_plane_init(&out->img, y->valuestring, &out->img.planes[np]);
+  }
+  out->img.n_planes = ok ? np : 0;
+  const cJSON *ir = cJSON_GetObjectItemCaseSensitive(m, "irradiance");
+  if (cJSON_IsArray(ir) && cJSON_GetArraySize(ir) == c) {
+    out->img.has_irradiance = true;
+    int ki = 0;
+    for (const cJSON *y = ir->child; y && ki < 4; y = y->next, ki++)
+      out->img.irradiance[ki] = cJSON_IsString(y) ? strtod(y->valuestring, NULL) : NAN;
+  }
   uint64_t px = (uint64_t)(out->img.width > 0 ? out->img.width : 0) *
                 (uint64_t)(out->img.height > 0 ? out->img.height : 0);
-  if (px == 0 || c < 1 || t.npy < px * (uint64_t)c * 4 || (t.angles && t.angles != px * 16)) ok = false;
+  uint64_t tc = (uint64_t)c * (uint64_t)(1 + out->img.n_planes);
+  if (px == 0 || c < 1 || t.npy < px * tc * 4 || (t.angles && t.angles != px * 16)) ok = false;
   cJSON_Delete(m);
+  if (!ok) out->img.n_planes = 0;
   return ok;
 }
 
@@ -502,24 +538,33 @@ rsw_status svc_state_film_read(service *svc, const job *j, size_t k, svc_film *o
   film_image *im = &out->img;
   film_trailer t;
   int fd = film_open(svc, j->id, k, &t);
-  size_t want = (size_t)im->width * (size_t)im->height * (size_t)im->channels;
-  im->data = fd >= 0 ? malloc(want * sizeof(float)) : NULL;
-  if (t.angles && im->data) im->angles = malloc(t.angles);
-  bool ok = im->data && (!t.angles || im->angles) &&
-            read_at(fd, im->data, want * sizeof(float), (off_t)(t.npy - want * sizeof(float))) &&
+  size_t want = (size_t)im->width * (size_t)im->height * (size_t)im->channels * (size_t)(1 + im->n_planes);
+  float *all = fd >= 0 ? malloc(want * sizeof(float)) : NULL;
+  if (t.angles && all) im->angles = malloc(t.angles);
+  bool ok = all && (!t.angles || im->angles) &&
+            read_at(fd, all, want * sizeof(float), (off_t)(t.npy - want * sizeof(float))) &&
             (!t.angles || read_at(fd, im->angles, t.angles, (off_t)t.npy));
   if (fd >= 0) close(fd);
+  if (ok && !little_endian())
+    for (size_t i = 0; i < want; i++) {
+      uint32_t u;
+      memcpy(&u, &all[i], 4);
+      u = __builtin_bswap32(u);
+      memcpy(&all[i], &u, 4);
+    }
+  if (ok && !im->n_planes) {
+    im->data = all;
+    all = NULL;
+  } else if (ok) { /* radiance and planes apart again */
+    const char *names[FILM_MAX_PLANES];
+    for (int p = 0; p < im->n_planes; p++) names[p] = im->planes[p].name;
+    ok = film_image_split(im, names, im->n_planes, all);
+  }
+  free(all);
   if (!ok) {
     film_image_free(im);
     return svc_fail(e, RSW_ERR_IO, j->id, "cannot read the stored film of render %zu of job %s", k, j->id);
   }
-  if (!little_endian())
-    for (size_t i = 0; i < want; i++) {
-      uint32_t u;
-      memcpy(&u, &im->data[i], 4);
-      u = __builtin_bswap32(u);
-      memcpy(&im->data[i], &u, 4);
-    }
   return RSW_OK;
 }
 
@@ -599,6 +644,11 @@ void svc_state_job_finished(service *svc, const job *j) {
       cJSON *ch = cJSON_AddArrayToObject(x, "ch");
       for (int c = 0; c < im->channels; c++)
         cJSON_AddItemToArray(ch, cJSON_CreateString(im->channel_names[c]));
+      if (im->n_planes) {
+        cJSON *pl = cJSON_AddArrayToObject(x, "pl");
+        for (int q = 0; q < im->n_planes; q++)
+          cJSON_AddItemToArray(pl, cJSON_CreateString(im->planes[q].name));
+      }
       if (im->unresolved_rays) cJSON_AddNumberToObject(x, "unres", (double)im->unresolved_rays);
       cJSON_AddBoolToObject(x, "disk", it->on_disk);
     }
@@ -780,6 +830,11 @@ static void restore_finished(service *svc, const req_header *h, cJSON *done, con
         if (cJSON_IsString(z) && static_channel(z->valuestring))
           im->channel_names[c++] = static_channel(z->valuestring);
       im->channels = c;
+      y = cJSON_GetObjectItemCaseSensitive(it, "pl");
+      for (const cJSON *z = cJSON_IsArray(y) ? y->child : NULL; z && im->n_planes < FILM_MAX_PLANES;
+           z = z->next)
+        if (cJSON_IsString(z) && film_plane_known(z->valuestring))
+          film_plane_init(im, z->valuestring, &im->planes[im->n_planes++]);
       ri->on_disk = cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(it, "disk"));
       if (!ri->on_disk) { /* kept in memory only (its write failed): gone */
         ri->state = JOB_FAILED;

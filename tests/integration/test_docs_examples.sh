@@ -183,7 +183,7 @@ run() {
 # ---- C with libraysweep -------------------------------------------------------
 cflags=(-std=c11 -Wall -Wextra -Werror -pedantic)
 [ "${SAN:-}" = 1 ] && cflags+=(-fsanitize=address,undefined -fno-omit-frame-pointer)
-syslibs=(-lcurl -lcjson -lexpat -lcrypto -lOpenEXRCore -lnetcdf -lm -lpthread)
+syslibs=(-lcurl -lcjson -lexpat -lcrypto -lOpenEXRCore -lnetcdf -lpng16 -lm -lpthread)
 if [ ! -f "$lib/libraysweep.a" ]; then
   bad "sweep.c: $lib/libraysweep.a is missing (build the library first)"
 elif ! cc "${cflags[@]}" -I"$root/include" "$examples/sweep.c" "$lib/libraysweep.a" "${syslibs[@]}" \

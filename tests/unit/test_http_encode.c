@@ -13,6 +13,7 @@
 #include "../support/test.h"
 #include "http/encode.h"
 #include "image_exr.h"
+#include <png.h>
 
 RSW_TEST_DEFINE_GLOBALS
 
@@ -224,6 +225,155 @@ static void test_exr_half_large(void) {
   free(px);
 }
 
+/* A film with planes (brf, radiance_stderr): JSON lists their channels
+ * after the radiance's with the meta's planes and irradiance; the .npy's
+ * last axis and the EXR's channels hold the same values. */
+static void test_film_planes(void) {
+  float data[18], brf[18], se[18];
+  svc_film f = make_film(data);
+  for (int i = 0; i < 18; i++) brf[i] = 10.0f + (float)i, se[i] = 100.0f + (float)i;
+  film_plane_init(&f.img, "brf", &f.img.planes[0]);
+  film_plane_init(&f.img, "radiance_stderr", &f.img.planes[1]);
+  f.img.planes[0].data = brf;
+  f.img.planes[1].data = se;
+  f.img.n_planes = 2;
+  f.img.has_irradiance = true;
+  f.img.irradiance[0] = 1.5, f.img.irradiance[1] = 2.5, f.img.irradiance[2] = 3.5;
+  char *text = NULL;
+  size_t len = 0;
+  rsw_err err = {0};
+  REQUIRE(http_film_json(&f, &text, &len, &err) == RSW_OK, "film json: %s", err.msg);
+  cJSON *j = cJSON_Parse(text);
+  REQUIRE(j, "does not parse");
+  const char *want[9] = {"R",
+                         "G",
+                         "B",
+                         "brf.R",
+                         "brf.G",
+                         "brf.B",
+                         "radiance_stderr.R",
+                         "radiance_stderr.G",
+                         "radiance_stderr.B"};
+  cJSON *ch = cJSON_GetObjectItem(j, "channels");
+  REQUIRE(cJSON_GetArraySize(ch) == 9, "%d channels", cJSON_GetArraySize(ch));
+  for (int c = 0; c < 9; c++)
+    CHECK(strcmp(cJSON_GetArrayItem(ch, c)->valuestring, want[c]) == 0, "channel %d: %s", c,
+          cJSON_GetArrayItem(ch, c)->valuestring);
+  cJSON *d = cJSON_GetObjectItem(j, "data");
+  REQUIRE(cJSON_GetArraySize(d) == 54, "%d samples", cJSON_GetArraySize(d));
+  for (int px = 0; px < 6; px++)
+    for (int c = 0; c < 3; c++) {
+      CHECK((float)cJSON_GetArrayItem(d, px * 9 + c)->valuedouble == data[px * 3 + c], "radiance");
+      CHECK((float)cJSON_GetArrayItem(d, px * 9 + 3 + c)->valuedouble == brf[px * 3 + c], "brf");
+      CHECK((float)cJSON_GetArrayItem(d, px * 9 + 6 + c)->valuedouble == se[px * 3 + c], "stderr");
+    }
+  cJSON *m = cJSON_GetObjectItem(j, "meta");
+  cJSON *pl = cJSON_GetObjectItem(m, "planes");
+  CHECK(cJSON_GetArraySize(pl) == 2 &&
+            strcmp(cJSON_GetObjectItem(cJSON_GetArrayItem(pl, 0), "name")->valuestring, "brf") == 0 &&
+            strcmp(cJSON_GetObjectItem(cJSON_GetArrayItem(pl, 0), "units")->valuestring, "1") == 0,
+        "meta planes");
+  cJSON *ir = cJSON_GetObjectItem(m, "irradiance");
+  CHECK(cJSON_GetArraySize(ir) == 3 && cJSON_GetArrayItem(ir, 2)->valuedouble == 3.5, "meta irradiance");
+  cJSON_Delete(j);
+  free(text);
+
+  void *bytes = NULL;
+  REQUIRE(http_film_npy(&f, &bytes, &len, &err) == RSW_OK, "npy: %s", err.msg);
+  const uint8_t *p = bytes;
+  size_t start = 10 + ((size_t)p[8] | (size_t)p[9] << 8);
+  CHECK(strstr((const char *)p + 10, "'shape': (2, 3, 9)") != NULL, "npy shape (H, W, 9)");
+  CHECK(len == start + 54 * 4, "npy length");
+  float v;
+  memcpy(&v, p + start + 4 * (9 * 5 + 7), 4); /* pixel 5, radiance_stderr.G (little-endian host) */
+  CHECK(v == se[5 * 3 + 1], "npy stderr sample %g", (double)v);
+  free(bytes);
+
+  REQUIRE(http_film_exr(&f, &bytes, &len, &err) == RSW_OK, "exr: %s", err.msg);
+  char path[] = "/tmp/rsw_planes_XXXXXX";
+  int fd = mkstemp(path);
+  REQUIRE(fd >= 0, "temp file");
+  CHECK(write(fd, bytes, len) == (ssize_t)len, "write");
+  close(fd);
+  free(bytes);
+  exr_image im;
+  REQUIRE(exr_read_image(path, &im, &err) == RSW_OK, "read back: %s", err.msg);
+  unlink(path);
+  CHECK(im.n_channels == 9, "exr channels %d", im.n_channels);
+  int kb = exr_image_channel(&im, "brf.G"), ks = exr_image_channel(&im, "radiance_stderr.B");
+  REQUIRE(kb >= 0 && ks >= 0, "exr has brf.G and radiance_stderr.B");
+  CHECK(im.data[4 * 9 + kb] == brf[4 * 3 + 1] && im.data[4 * 9 + ks] == se[4 * 3 + 2], "exr plane values");
+  const char *irr = exr_image_meta(&im, "raysweep:irradiance");
+  CHECK(irr && strcmp(irr, "1.5,2.5,3.5") == 0, "raysweep:irradiance '%s'", irr ? irr : "(none)");
+  exr_image_free(&im);
+}
+
+/* The quick-look decodes (libpng) to the film's size, 8-bit, and its
+ * brightest pixel is where the film's brightest value is: at exposure 0
+ * only that pixel is white (255). */
+static void check_png(const void *bytes, size_t len, int W, int H, int want_channels, int bright_x,
+                      int bright_y) {
+  png_image im;
+  memset(&im, 0, sizeof im);
+  im.version = PNG_IMAGE_VERSION;
+  REQUIRE(png_image_begin_read_from_memory(&im, bytes, len), "png does not decode: %s", im.message);
+  CHECK((int)im.width == W && (int)im.height == H, "png is %ux%u, want %dx%d", im.width, im.height, W, H);
+  CHECK((int)PNG_IMAGE_SAMPLE_CHANNELS(im.format) == want_channels, "png has %d channels, want %d",
+        (int)PNG_IMAGE_SAMPLE_CHANNELS(im.format), want_channels);
+  im.format = PNG_FORMAT_GRAY;
+  unsigned char *px = malloc(PNG_IMAGE_SIZE(im));
+  REQUIRE(px && png_image_finish_read(&im, NULL, px, 0, NULL), "png pixels: %s", im.message);
+  int best = -1, at = -1, n_best = 0;
+  for (int i = 0; i < W * H; i++) {
+    if (px[i] > best) best = px[i], at = i, n_best = 0;
+    if (px[i] == best) n_best++;
+  }
+  CHECK(at == bright_y * W + bright_x && n_best == 1, "brightest png pixel %d (x %d) of %d, want (%d, %d)",
+        at, n_best, best, bright_x, bright_y);
+  free(px);
+}
+
+static void test_film_png(void) {
+  enum {
+    W = 7,
+    H = 5
+  };
+  float y[W * H];
+  for (int i = 0; i < W * H; i++) y[i] = 0.01f * (float)((i * 7) % 13);
+  y[3 * W + 5] = 2.0f; /* the brightest value, at (5, 3) */
+  y[1] = NAN;
+  svc_film f;
+  memset(&f, 0, sizeof f);
+  f.img.width = W, f.img.height = H, f.img.channels = 1;
+  f.img.channel_names[0] = "Y";
+  f.img.data = y;
+  f.img.variant = VARIANT_MONO;
+  void *bytes = NULL;
+  size_t len = 0;
+  rsw_err err = {0};
+  REQUIRE(http_film_png(&f, NULL, &bytes, &len, &err) == RSW_OK, "png: %s", err.msg);
+  check_png(bytes, len, W, H, 1, 5, 3);
+  free(bytes);
+  png_look look = {.exposure = -1, .colormap = "viridis"};
+  REQUIRE(http_film_png(&f, &look, &bytes, &len, &err) == RSW_OK, "viridis png: %s", err.msg);
+  check_png(bytes, len, W, H, 3, 5, 3);
+  free(bytes);
+  /* RGB: the brightest pixel of the three channels. */
+  float rgb[18];
+  svc_film c = make_film(rgb);
+  rgb[3 * 4 + 1] = 9.0f; /* pixel 4 = (1, 1), G */
+  REQUIRE(http_film_png(&c, NULL, &bytes, &len, &err) == RSW_OK, "rgb png: %s", err.msg);
+  check_png(bytes, len, 3, 2, 3, 1, 1);
+  free(bytes);
+  err = (rsw_err){0};
+  CHECK(http_film_png(&c, &look, &bytes, &len, &err) == RSW_ERR_INVALID && strstr(err.msg, "one-channel"),
+        "a colormap on an rgb film is refused: %s", err.msg);
+  err = (rsw_err){0};
+  png_look bad = {.colormap = "jet"};
+  CHECK(http_film_png(&f, &bad, &bytes, &len, &err) == RSW_ERR_INVALID && strstr(err.msg, "jet"),
+        "unknown colormap refused: %s", err.msg);
+}
+
 static void test_problem(void) {
   const char *cands[3] = {"a.value", "", "b.value"};
   char *t = http_problem_json(422, "RSW_ERR_INVALID", "bad \"x\"", "/shapes/0", "x.value", cands, 3);
@@ -383,7 +533,10 @@ static void test_accept(void) {
   CHECK(http_accept_film("image/*") == HTTP_FILM_EXR, "image/*");
   CHECK(http_accept_film("application/*") == HTTP_FILM_JSON, "application/*");
   CHECK(http_accept_film("*/*, application/json;q=0") == HTTP_FILM_EXR, "json excluded");
-  CHECK(http_accept_film("image/x-exr;q=0, image/*") == HTTP_FILM_NONE, "exr excluded under image/*");
+  CHECK(http_accept_film("image/x-exr;q=0, image/*") == HTTP_FILM_PNG, "exr excluded under image/*: png");
+  CHECK(http_accept_film("image/x-exr;q=0, image/png;q=0, image/*") == HTTP_FILM_NONE, "both excluded");
+  CHECK(http_accept_film("image/png") == HTTP_FILM_PNG, "png");
+  CHECK(strcmp(http_film_content_type(HTTP_FILM_PNG), "image/png") == 0, "png content type");
   CHECK(http_accept_film("text/html") == HTTP_FILM_NONE, "406");
   CHECK(http_accept_film("application/json;q=0") == HTTP_FILM_NONE, "only json, excluded");
   CHECK(http_accept_film("application/json; charset=\"utf-8,x\"; q=1") == HTTP_FILM_JSON, "quoted param");
@@ -424,6 +577,8 @@ int main(void) {
   RSW_TEST_RUN(test_film_npy);
   RSW_TEST_RUN(test_exr_round_trip);
   RSW_TEST_RUN(test_exr_half_large);
+  RSW_TEST_RUN(test_film_planes);
+  RSW_TEST_RUN(test_film_png);
   RSW_TEST_RUN(test_problem);
   RSW_TEST_RUN(test_problem_utf8);
   RSW_TEST_RUN(test_accept);

@@ -197,7 +197,11 @@ add("hdr_last_event_id_negative", "400", "Last-Event-ID", req("GET", J + "/event
 add("hdr_last_event_id_huge", "400", "Last-Event-ID",
     req("GET", J + "/events", headers=["Last-Event-ID: 999999999999999999999999"]))
 add("hdr_accept_none_of_ours_render", "406", "-", req("POST", S + ":render", '{"spp":1}', headers=["Accept: text/html"]))
-add("hdr_accept_none_of_ours_result", "406", "-", req("GET", J + "/results/c1/hd", headers=["Accept: image/png"]))
+add("hdr_accept_none_of_ours_result", "406", "-", req("GET", J + "/results/c1/hd", headers=["Accept: image/tiff"]))
+add("hdr_png_colormap_unknown", "400", "colormap", req("GET", J + "/results/c1/hd?colormap=jet", headers=["Accept: image/png"]))
+add("hdr_png_exposure_nan", "400", "exposure", req("GET", J + "/results/c1/hd?exposure=nan", headers=["Accept: image/png"]))
+add("hdr_png_exposure_text", "400", "exposure", req("POST", S + ":render?exposure=bright", '{"spp":1}',
+                                                    headers=["Accept: image/png"]))
 add("hdr_accept_q0", "406", "-", req("POST", S + ":render", '{"spp":1}',
                                      headers=["Accept: application/json;q=0, image/x-exr;q=0, application/x-npy;q=0"]))
 add("hdr_accept_garbage", "406|400", "-", req("GET", J + "/results/c1/hd", headers=["Accept: ;;;,,,/"]))
@@ -333,6 +337,12 @@ for name, body, st, chk in [
     ("sensor_index_out", '{"sensor":"9"}', "422|404|400", "9"),
     ("sensor_nul", '{"sensor":"hd\\u0000x"}', "422|404|400", "sensor"),
     ("unknown_field", '{"spq":1}', "422|400", "spq"),
+    ("quantities_unknown", '{"quantities":["albedo"]}', "422", "quantities"),
+    ("quantities_not_list", '{"quantities":"brf"}', "422", "quantities"),
+    ("quantities_number", '{"quantities":[1]}', "422", "quantities"),
+    ("variance_string", '{"variance":"yes"}', "422", "variance"),
+    ("variance_one_spp", '{"variance":true,"spp":1}', "422", "variance"),
+    ("variance_ok", '{"variance":true,"spp":2,"quantities":["brf","brdf"]}', "200", "-"),
     ("params_not_object", '{"params":[1]}', "422|400", "params"),
     ("params_unknown_key", '{"params":{"nope.value":1}}', "422|400|404", "nope.value"),
     ("params_bad_value", '{"params":{"rectangle.bsdf.reflectance.value":-1}}', "422|400", "rectangle.bsdf.reflectance.value"),

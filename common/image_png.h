@@ -1,0 +1,49 @@
+/* Quick-look PNGs of a film: tone-mapped 8-bit sRGB through libpng. This
+ * header mentions none of libpng's types; the one file that includes
+ * png.h is image_png.c.
+ *
+ * The mapping (a look, not a measurement): every value is multiplied by
+ * 2^exposure / white, with white the largest finite value of the channels
+ * shown (so at exposure 0 the brightest pixel is full white and nothing
+ * clips), clamped to [0, 1], then
+ *   - three channels (R, G, B): each sRGB-encoded (IEC 61966-2-1 transfer
+ *     curve), an RGB PNG;
+ *   - one channel (Y, or S0 of a Stokes film): with colormap "gray", the
+ *     sRGB-encoded grey (a grayscale PNG); with "viridis" or "inferno",
+ *     the linear value through that perceptually uniform map (matplotlib's,
+ *     tabulated at 9 points and interpolated linearly), an RGB PNG.
+ * NaN, infinite and negative values show as black. Row 0 is the top. */
+#ifndef RSW_IMAGE_PNG_H
+#define RSW_IMAGE_PNG_H
+
+#include <stdbool.h>
+#include <stddef.h>
+
+#include "rsw_error.h"
+
+typedef struct png_look {
+  double exposure;      /* stops; 0 by default */
+  const char *colormap; /* NULL or "gray", "viridis", "inferno" */
+} png_look;
+
+/* True when name is a colormap png_look takes (NULL counts as gray). */
+bool png_colormap_known(const char *name);
+/* The colormap names, for messages: "gray, viridis, inferno". */
+const char *png_colormap_list(void);
+
+/* Encode / write the quick-look of a film (width x height x n_channels
+ * float32 HWC, channel_names as the film's). The channels shown are the
+ * film's radiance: R, G, B when it has them, else Y, else S0; other
+ * channels (planes such as brf.Y) are ignored. look may be NULL
+ * (defaults). png_write_film writes "<path>.tmp.<pid>" and renames it over
+ * path once complete. Errors: RSW_ERR_INVALID (no R/G/B, Y or S0 channel;
+ * unknown colormap; exposure not finite), RSW_ERR_NOMEM, RSW_ERR_IO
+ * (naming path). Borrows everything; thread-safe. */
+rsw_status png_encode_film(int width, int height, int n_channels, const char *const *channel_names,
+                           const float *data, const png_look *look, void **bytes_out, size_t *len_out,
+                           rsw_err *err);
+rsw_status png_write_film(const char *path, int width, int height, int n_channels,
+                          const char *const *channel_names, const float *data, const png_look *look,
+                          rsw_err *err);
+
+#endif

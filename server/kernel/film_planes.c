@@ -1,0 +1,224 @@
+/* A film's planes beyond radiance (render.h): their names, channel names,
+ * interleaving for the one-array formats (EXR channels, .npy), and the
+ * horizontal irradiance the BRDF and BRF divide by. */
+#include <stdlib.h>
+#include <string.h>
+
+#include "render.h"
+#include "scene/scene.h"
+
+/* Every channel a film can have, and each plane's channel names in the
+ * same order: "<plane>.<channel>" (EXR's layer.channel convention). */
+static const char *const base_channels[8] = {"R", "G", "B", "Y", "S0", "S1", "S2", "S3"};
+static const char *const plane_names[FILM_MAX_PLANES] = {"brdf", "brf", "radiance_stderr"};
+static const char *const plane_channels[FILM_MAX_PLANES][8] = {
+    {"brdf.R", "brdf.G", "brdf.B", "brdf.Y", "brdf.S0", "brdf.S1", "brdf.S2", "brdf.S3"},
+    {"brf.R", "brf.G", "brf.B", "brf.Y", "brf.S0", "brf.S1", "brf.S2", "brf.S3"},
+    {"radiance_stderr.R", "radiance_stderr.G", "radiance_stderr.B", "radiance_stderr.Y", "radiance_stderr.S0",
+     "radiance_stderr.S1", "radiance_stderr.S2", "radiance_stderr.S3"},
+};
+
+static int plane_index(const char *name) {
+  for (int i = 0; i < FILM_MAX_PLANES; i++)
+    if (strcmp(plane_names[i], name) == 0) return i;
+  return -1;
+}
+
+/* Name, units, long name and channel names of plane `which` (index into
+ * plane_names) for img's channels; data stays as it is. */
+static void plane_describe(const film_image *img, int which, film_plane *p) {
+  static const char *const long_names[FILM_MAX_PLANES] = {"bi-directional reflection distribution function",
+                                                          "bi-directional reflectance factor",
+                                                          "standard error of the mean radiance"};
+  p->name = plane_names[which];
+  p->long_name = long_names[which];
+  p->units = which == 0                     ? "sr-1"
+             : which == 1                   ? "1"
+             : img->variant == VARIANT_MONO ? "W m-2 sr-1 nm-1"
+                                            : "W m-2 sr-1";
+  for (int c = 0; c < img->channels && c < 4; c++) {
+    p->channel_names[c] = NULL;
+    for (int k = 0; k < 8; k++)
+      if (img->channel_names[c] && strcmp(img->channel_names[c], base_channels[k]) == 0)
+        p->channel_names[c] = plane_channels[which][k];
+  }
+}
+
+bool render_quantity_bit(const char *name, unsigned *bit) {
+  static const struct {
+    const char *name;
+    unsigned bit;
+  } q[] = {{"radiance", 0}, {"brdf", RENDER_Q_BRDF}, {"brf", RENDER_Q_BRF}};
+  for (size_t i = 0; i < sizeof q / sizeof q[0]; i++)
+    if (strcmp(q[i].name, name) == 0) {
+      *bit = q[i].bit;
+      return true;
+    }
+  return false;
+}
+
+rsw_status render_check_planes(const scene *sc, size_t sensor_index, uint32_t spp, unsigned quantities,
+                               bool variance, rsw_err *err) {
+  if (variance && sensor_index < sc->n_sensors) {
+    const sensor *se = sc->sensors[sensor_index];
+    const rfilter *f = se->film->filter;
+    if (!(f->radius <= 0.5 + 1e-12))
+      return rsw_fail(
+          err, RSW_ERR_INVALID, "variance",
+          "variance needs the box rfilter (radius 0.5); sensor '%s' splats with '%s' (radius %g), "
+          "which spreads each sample over neighbouring pixels with unequal weights, so a pixel "
+          "is no plain mean of its own independent samples and has no standard error",
+          se->base.id ? se->base.id : "", f->base.plugin ? f->base.plugin->name : "?", f->radius);
+    uint32_t n = spp ? spp : se->sampler->sample_count;
+    if (se->sampler->ops->adjust_spp) n = se->sampler->ops->adjust_spp(se->sampler, n);
+    if (n < 2)
+      return rsw_fail(err, RSW_ERR_INVALID, "variance",
+                      "variance needs at least 2 samples per pixel (spp is %u)", n);
+  }
+  if (quantities & (RENDER_Q_BRDF | RENDER_Q_BRF)) {
+    bool any = false;
+    for (size_t i = 0; i < sc->n_emitters && !any; i++)
+      any = sc->emitters[i]->flags & EMITTER_DELTA_DIRECTION;
+    if (!any)
+      return rsw_fail(err, RSW_ERR_INVALID, "quantities",
+                      "brdf and brf divide by the horizontal irradiance of the scene's directional emitters; "
+                      "the scene has none");
+  }
+  return RSW_OK;
+}
+
+uint64_t render_planes_bytes(const sensor *se, rsw_variant variant, unsigned quantities, bool variance) {
+  int c;
+  (void)sensor_film_bytes(se, variant, &c);
+  uint64_t n = (uint64_t)((quantities & RENDER_Q_BRDF) != 0) + ((quantities & RENDER_Q_BRF) != 0) + variance;
+  if (!n) return 0;
+  /* render.c: 3 doubles per channel of moments; a float per channel per
+   * plane, twice (film and encoding), and the interleaved copy of all. */
+  uint64_t per_pixel =
+      (variance ? 3u * 8u * (uint64_t)c : 0) + 2u * 4u * (uint64_t)c * n + 4u * (uint64_t)c * (1 + n);
+  const film *fm = se->film;
+  uint64_t pixels = (uint64_t)(fm->width > 0 ? fm->width : 0) * (uint64_t)(fm->height > 0 ? fm->height : 0);
+  if (pixels && per_pixel > UINT64_MAX / pixels) return UINT64_MAX;
+  return pixels * per_pixel;
+}
+
+rsw_status render_horizontal_irradiance(const scene *sc, color *e_h, rsw_err *err) {
+  color sum = col1(0);
+  size_t n_dir = 0, n_lit = 0;
+  surface_interaction ref;
+  memset(&ref, 0, sizeof ref);
+  ref.p = sc->bsphere_center;
+  for (size_t i = 0; i < sc->n_emitters; i++) {
+    const emitter *em = sc->emitters[i];
+    if (!(em->flags & EMITTER_DELTA_DIRECTION)) continue;
+    n_dir++;
+    direction_sample ds;
+    memset(&ds, 0, sizeof ds);
+    /* A delta emitter's sample is its irradiance normal to the beam (pdf
+     * 1), ds.d the unit direction towards it. */
+    color e = em->ops->sample_direction(em, &ref, v2(0.5, 0.5), &ds);
+    double mu = ds.d.z;
+    if (mu <= 0) continue;
+    n_lit++;
+    sum = col_add(sum, col_scale(e, mu));
+  }
+  if (n_dir == 0)
+    return rsw_fail(err, RSW_ERR_INVALID, "quantities",
+                    "brdf and brf divide by the horizontal irradiance of the scene's directional emitters; "
+                    "the scene has none");
+  if (n_lit == 0)
+    return rsw_fail(err, RSW_ERR_INVALID, "quantities",
+                    "brdf and brf divide by the horizontal irradiance of the scene's directional emitters; "
+                    "every one of its %zu lies at or below the horizon",
+                    n_dir);
+  *e_h = sum;
+  return RSW_OK;
+}
+
+int film_image_all_channels(const film_image *img, const char **names) {
+  int n = 0;
+  for (int c = 0; c < img->channels; c++) names[n++] = img->channel_names[c];
+  for (int p = 0; p < img->n_planes; p++)
+    for (int c = 0; c < img->channels; c++) names[n++] = img->planes[p].channel_names[c];
+  return n;
+}
+
+float *film_image_interleaved(const film_image *img) {
+  size_t px = (size_t)img->width * (size_t)img->height, C = (size_t)img->channels;
+  size_t T = C * (size_t)(1 + img->n_planes);
+  float *out = malloc(px * T * sizeof *out);
+  if (!out) return NULL;
+  for (size_t i = 0; i < px; i++) {
+    memcpy(&out[i * T], &img->data[i * C], C * sizeof *out);
+    for (int p = 0; p < img->n_planes; p++)
+      memcpy(&out[i * T + C * (size_t)(1 + p)], &img->planes[p].data[i * C], C * sizeof *out);
+  }
+  return out;
+}
+
+bool film_image_split(film_image *img, const char *const *names, int n_planes, const float *all) {
+  if (n_planes < 0 || n_planes > FILM_MAX_PLANES) return false;
+  size_t px = (size_t)img->width * (size_t)img->height, C = (size_t)img->channels;
+  size_t T = C * (size_t)(1 + n_planes);
+  img->n_planes = 0;
+  for (int p = 0; p < n_planes; p++) {
+    int w = plane_index(names[p]);
+    if (w < 0 || (p > 0 && w <= plane_index(img->planes[p - 1].name))) return false;
+    plane_describe(img, w, &img->planes[p]);
+    for (size_t c = 0; c < C; c++)
+      if (!img->planes[p].channel_names[c]) return false;
+  }
+  img->data = malloc(px * C * sizeof(float));
+  bool ok = img->data != NULL;
+  for (int p = 0; p < n_planes; p++) {
+    img->planes[p].data = malloc(px * C * sizeof(float));
+    if (!img->planes[p].data) ok = false;
+    img->n_planes = p + 1; /* so film_image_free releases what exists */
+  }
+  if (!ok) return false;
+  for (size_t i = 0; i < px; i++) {
+    memcpy(&img->data[i * C], &all[i * T], C * sizeof(float));
+    for (int p = 0; p < n_planes; p++)
+      memcpy(&img->planes[p].data[i * C], &all[i * T + C * (size_t)(1 + p)], C * sizeof(float));
+  }
+  return true;
+}
+
+static void *dup_bytes(const void *p, size_t n) {
+  void *q = malloc(n ? n : 1);
+  if (q && n) memcpy(q, p, n);
+  return q;
+}
+
+bool film_image_copy(const film_image *src, film_image *dst) {
+  size_t n = (size_t)src->width * (size_t)src->height * (size_t)src->channels;
+  film_image d = *src;
+  d.data = NULL, d.angles = NULL;
+  for (int p = 0; p < src->n_planes; p++) d.planes[p].data = NULL;
+  bool ok = (d.data = dup_bytes(src->data, n * sizeof(float))) != NULL;
+  if (ok && src->angles)
+    ok = (d.angles = dup_bytes(src->angles, (size_t)src->width * (size_t)src->height * 2 * sizeof(double))) !=
+         NULL;
+  for (int p = 0; ok && p < src->n_planes; p++)
+    ok = (d.planes[p].data = dup_bytes(src->planes[p].data, n * sizeof(float))) != NULL;
+  if (!ok) {
+    film_image_free(&d);
+    return false;
+  }
+  *dst = d;
+  return true;
+}
+
+bool film_plane_known(const char *name) {
+  return plane_index(name) >= 0;
+}
+
+const film_plane *film_image_plane(const film_image *img, const char *name) {
+  for (int p = 0; p < img->n_planes; p++)
+    if (strcmp(img->planes[p].name, name) == 0) return &img->planes[p];
+  return NULL;
+}
+
+void film_plane_init(const film_image *img, const char *name, film_plane *p) {
+  plane_describe(img, plane_index(name), p);
+}
