@@ -49,6 +49,7 @@ rsw_status rsw_job_fetch_dataset(rsw_client *c, const char *job_id, int partial,
 
 /* ---- rsw_dataset -------------------------------------------------------------------- */
 
+#define DS_MAX_PLANES 3
 typedef struct ds_film {
   size_t context;
   char *sensor;
@@ -58,7 +59,13 @@ typedef struct ds_film {
   double *angles;
   uint32_t spp;
   uint64_t seed, unresolved;
-  nc_var var;
+  /* Planes after the radiance channels ("brf.Y", "radiance_stderr.R"):
+   * each its own quantity, de-interleaved as the daemon keeps them
+   * (render.h film_plane), so both write the same dataset. */
+  int n_planes;
+  char *plane_names[DS_MAX_PLANES];
+  float *plane_data[DS_MAX_PLANES];
+  nc_var vars[1 + DS_MAX_PLANES];
 } ds_film;
 
 struct rsw_dataset {
@@ -99,6 +106,10 @@ static void film_clear(ds_film *f) {
   free(f->names);
   free(f->data);
   free(f->angles);
+  for (int k = 0; k < f->n_planes; k++) {
+    free(f->plane_names[k]);
+    free(f->plane_data[k]);
+  }
 }
 
 void rsw_dataset_free(rsw_dataset *d) {
@@ -220,21 +231,50 @@ rsw_status rsw_dataset_add_film(rsw_dataset *d, const char *context, const char 
     if (!nf) return ds_fail(d, RSW_ERR_NOMEM, "out of memory");
     d->films = nf, d->capf = cap;
   }
-  ds_film f = {.context = ci,
-               .width = rsw_film_width(film),
-               .height = rsw_film_height(film),
-               .channels = rsw_film_channels(film)};
+  int all = rsw_film_channels(film);
+  ds_film f = {.context = ci, .width = rsw_film_width(film), .height = rsw_film_height(film), .channels = all};
+  /* The radiance channels come first; every channel after them is
+   * "<plane>.<channel>", the planes one after another, each with as many
+   * channels as the radiance. */
+  int base = 0;
+  while (base < all && !strchr(rsw_film_channel_name(film, base), '.')) base++;
+  f.channels = base;
   size_t np = (size_t)f.width * (size_t)f.height, ns = np * (size_t)f.channels;
   cJSON *meta = cJSON_Parse(rsw_film_meta(film));
   rsw_status s = RSW_OK;
+  if (base < 1 || (all - base) % base != 0 || (all - base) / base > DS_MAX_PLANES)
+    s = ds_fail(d, RSW_ERR_INVALID, "%s: channels are not the radiance's followed by whole planes", what);
   f.sensor = strdup(sensor);
   f.names = calloc((size_t)(f.channels > 0 ? f.channels : 1), sizeof *f.names);
   f.data = malloc((ns ? ns : 1) * sizeof *f.data);
-  if (!f.sensor || !f.names || !f.data) s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");
+  if (!s && (!f.sensor || !f.names || !f.data)) s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");
   for (int i = 0; !s && i < f.channels; i++)
     if (!(f.names[i] = strdup(rsw_film_channel_name(film, i))))
       s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");
-  if (!s) memcpy(f.data, rsw_film_data(film), ns * sizeof *f.data);
+  const float *src = rsw_film_data(film);
+  for (size_t px = 0; !s && px < np; px++)
+    memcpy(f.data + px * (size_t)base, src + px * (size_t)all, (size_t)base * sizeof *f.data);
+  for (int k = 0; !s && base > 0 && k < (all - base) / base; k++) {
+    const char *first = rsw_film_channel_name(film, base * (k + 1));
+    const char *dot = strchr(first, '.');
+    size_t len = dot ? (size_t)(dot - first) : 0;
+    for (int c = 0; !s && c < base; c++) {
+      const char *nm = rsw_film_channel_name(film, base * (k + 1) + c);
+      if (!dot || strncmp(nm, first, len + 1) != 0 || strcmp(nm + len + 1, f.names[c]) != 0)
+        s = ds_fail(d, RSW_ERR_INVALID, "%s: channel '%s' does not follow the plane layout", what, nm);
+    }
+    if (s) break;
+    if (!(f.plane_names[k] = strndup(first, len)) || !(f.plane_data[k] = malloc((ns ? ns : 1) * sizeof(float)))) {
+      free(f.plane_names[k]);
+      f.plane_names[k] = NULL;
+      s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");
+      break;
+    }
+    f.n_planes = k + 1;
+    for (size_t px = 0; px < np; px++)
+      memcpy(f.plane_data[k] + px * (size_t)base, src + px * (size_t)all + (size_t)base * (size_t)(k + 1),
+             (size_t)base * sizeof(float));
+  }
   uint64_t spp = 0, rev;
   if (!s && cJSON_IsObject(meta)) {
     meta_u64(meta, "spp", &spp);
@@ -337,7 +377,8 @@ rsw_status rsw_dataset_write(rsw_dataset *d, const char *path) {
   if (!s && !films) s = rsw_fail(&err, RSW_ERR_NOMEM, "", "out of memory");
   for (size_t i = 0; !s && i < d->nf; i++) {
     ds_film *f = &d->films[i];
-    f->var = (nc_var){"radiance", f->data};
+    f->vars[0] = (nc_var){"radiance", f->data};
+    for (int k = 0; k < f->n_planes; k++) f->vars[1 + k] = (nc_var){f->plane_names[k], f->plane_data[k]};
     films[i] = (nc_film){.context = f->context,
                          .sensor = f->sensor,
                          .width = f->width,
@@ -348,8 +389,8 @@ rsw_status rsw_dataset_write(rsw_dataset *d, const char *path) {
                          .seed = f->seed,
                          .unresolved_rays = f->unresolved,
                          .angles = f->angles,
-                         .vars = &f->var,
-                         .n_vars = 1};
+                         .vars = f->vars,
+                         .n_vars = 1 + (size_t)f->n_planes};
   }
   if (!s) {
     nc_dataset ds = {.size = sizeof ds,

@@ -14,12 +14,16 @@
 /* The quantities of a film, as the dataset's variables: radiance always.
  * A film that carries another quantity (dataset_nc.c's table) hands it
  * over here, one line each. */
+#define MAX_FILM_VARS (1 + FILM_MAX_PLANES)
 static size_t film_vars(const film_image *im, nc_var *out) {
   size_t n = 0;
   out[n++] = (nc_var){"radiance", im->data};
+  /* brdf, brf, radiance_stderr (render.h film_plane): their names are the
+   * dataset's quantity names (common/dataset_nc.c). */
+  for (int k = 0; k < im->n_planes && n < MAX_FILM_VARS; k++)
+    if (im->planes[k].data) out[n++] = (nc_var){im->planes[k].name, im->planes[k].data};
   return n;
 }
-#define MAX_FILM_VARS 8
 
 typedef struct ds_item {
   size_t context;
@@ -99,9 +103,16 @@ rsw_status service_job_dataset(service *svc, const char *id, bool partial, void 
       d->film.img.data = NULL;
       d->film.img.angles = NULL;
       size_t np = (size_t)src->width * (size_t)src->height;
-      d->film.img.data = malloc(np * (size_t)src->channels * sizeof(float));
+      size_t plane_bytes = np * (size_t)src->channels * sizeof(float);
+      bool planes_ok = true;
+      for (int k = 0; k < src->n_planes; k++) {
+        d->film.img.planes[k].data = src->planes[k].data ? malloc(plane_bytes) : NULL;
+        if (src->planes[k].data && !d->film.img.planes[k].data) planes_ok = false;
+        else if (src->planes[k].data) memcpy(d->film.img.planes[k].data, src->planes[k].data, plane_bytes);
+      }
+      d->film.img.data = malloc(plane_bytes);
       if (src->angles) d->film.img.angles = malloc(np * 2 * sizeof(double));
-      if (!d->film.img.data || (src->angles && !d->film.img.angles)) {
+      if (!planes_ok || !d->film.img.data || (src->angles && !d->film.img.angles)) {
         svc_film_free(&d->film);
         st = svc_fail(e, RSW_ERR_NOMEM, id, "out of memory for the dataset");
         break;

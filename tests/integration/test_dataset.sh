@@ -83,6 +83,15 @@ ds "merged grid dataset" grid merged/dataset.nc merged "$version" 3
 run "sweep --spread 2 --format nc" rs sweep scene.json "${grid[@]}" --format nc --spread 2 -o spread
 ds "--spread dataset = unsharded" same spread/dataset.nc full/dataset.nc
 
+# brf, brdf and radiance_stderr are dataset variables too (the daemon's
+# planes, the client's "<plane>.<channel>" film channels: the same file).
+run "sweep --quantities --variance --format nc" rs sweep scene.json "${grid[@]}" --quantities brf,brdf \
+  --variance --format nc -o planes
+ds "planes: variables and values" planes planes/dataset.nc planes
+pjob=$("$py" -c 'import json; print(json.load(open("planes/sweep.json"))["job"])')
+run "fetch JOB -o F.nc (planes)" rs fetch "$pjob" -o planes_daemon.nc
+ds "planes: daemon's dataset = the client's" same planes_daemon.nc planes/dataset.nc --ignore-attr job
+
 # Not a grid: a context dimension, the coords along it.
 scene=$(rs scene push scene.json 2>/dev/null)
 cat >job.json <<'JSON'

@@ -112,6 +112,36 @@ def context(path, n):
     check(not np.isnan(ds.radiance.values).any(), "NaN in a complete job")
 
 
+def planes(path, sweep_dir):
+    """brf, brdf and radiance_stderr beside radiance, with the values of the
+    films' plane channels (brf.Y ...) and brf = pi brdf."""
+    ds = xr.open_dataset(path)
+    for q in ("brf", "brdf", "radiance_stderr"):
+        check(q in ds.data_vars, f"no {q} variable: {sorted(ds.data_vars)}")
+        if q in ds.data_vars:
+            check(ds[q].dims == ds.radiance.dims, f"{q} dims {ds[q].dims} != radiance {ds.radiance.dims}")
+    check(ds.brf.attrs.get("units") == "1" and ds.brdf.attrs.get("units") == "sr-1",
+          f"units brf {ds.brf.attrs.get('units')}, brdf {ds.brdf.attrs.get('units')}")
+    brf, brdf = ds.brf.values.astype(np.float64), ds.brdf.values.astype(np.float64)
+    check(np.allclose(brf, np.pi * brdf, rtol=1e-6), "brf != pi brdf")
+    # A Lambertian plate under a sun is the zero-variance case.
+    check((ds.radiance_stderr.values == 0).all(), "radiance_stderr of a Lambertian plate is not 0")
+    # Every value against the films' own channels.
+    n = 0
+    for line in open(os.path.join(sweep_dir, "index.jsonl")):
+        e = json.loads(line)
+        film = json.load(open(os.path.join(sweep_dir, e["file"])))
+        names = film["channels"]
+        data = np.asarray(film["data"], dtype=np.float32).reshape(film["height"], film["width"], len(names))
+        sel = {k: v for k, v in e.get("coords", {}).items()}
+        for q in ("brf", "brdf", "radiance_stderr"):
+            got = ds[q].sel(sel).values
+            want = data[:, :, names.index(q + ".Y")]
+            check(got.tobytes() == want.tobytes(), f"{q} at {sel} differs from {e['file']}")
+        n += 1
+    check(n == 6, f"{n} films in index.jsonl, wanted 6")
+
+
 def main():
     cmd = sys.argv[1]
     if cmd == "grid":
@@ -119,6 +149,8 @@ def main():
     elif cmd == "same":
         ignore = [sys.argv[i + 1] for i in range(4, len(sys.argv) - 1) if sys.argv[i] == "--ignore-attr"]
         same(sys.argv[2], sys.argv[3], ignore)
+    elif cmd == "planes":
+        planes(sys.argv[2], sys.argv[3])
     elif cmd == "context":
         context(sys.argv[2], int(sys.argv[3]))
     else:
