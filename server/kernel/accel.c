@@ -1081,6 +1081,169 @@ bool accel_occluded(const accel *a, const ray3 *r) {
   return ray.tfar < 0;
 }
 
+/* ---- packet queries ---------------------------------------------------------------------------- */
+
+/* Widest packet the device traces natively: 16 (AVX-512), 8 (AVX/AVX2),
+ * 4 (SSE), or 1 when Embree was built without packet support. Asked once
+ * per process: it depends on the CPU and on how Embree was built only. */
+static int g_packet_width;
+static pthread_once_t g_packet_once = PTHREAD_ONCE_INIT;
+static int g_packet_pin; /* accel_set_packet_width (0: native) */
+
+static void packet_width_init(void) {
+  RTCDevice d = device_get();
+  int w = 1;
+  if (d) {
+    if (rtcGetDeviceProperty(d, RTC_DEVICE_PROPERTY_NATIVE_RAY16_SUPPORTED))
+      w = 16;
+    else if (rtcGetDeviceProperty(d, RTC_DEVICE_PROPERTY_NATIVE_RAY8_SUPPORTED))
+      w = 8;
+    else if (rtcGetDeviceProperty(d, RTC_DEVICE_PROPERTY_NATIVE_RAY4_SUPPORTED))
+      w = 4;
+    (void)rtcGetDeviceError(d);
+  }
+  g_packet_width = w;
+}
+
+int accel_packet_width(void) {
+  pthread_once(&g_packet_once, packet_width_init);
+  int w = g_packet_width;
+  if (g_packet_pin > 0 && g_packet_pin < w) w = g_packet_pin;
+  return w;
+}
+
+void accel_set_packet_width(int w) {
+  g_packet_pin = w == 16 || w == 8 || w == 4 || w == 1 ? w : 0;
+}
+
+/* One SOA packet of up to 16 rays with their hits (RTCRayHit16's layout,
+ * addressed through RAYN_F/HITN_*: the same memory serves N = 4, 8, 16). */
+typedef struct packet_buf {
+  _Alignas(64) float f[(RAY_FIELDS + HIT_INST + 1) * 16];
+  _Alignas(64) int valid[16];
+  double t0[16], ts[16];
+} packet_buf;
+
+/* Fill lane i of an N-wide packet from r (fill_ray's rules); false leaves
+ * the lane invalid. */
+static bool packet_fill(const accel *a, packet_buf *pb, unsigned N, unsigned i, const ray3 *r) {
+  struct RTCRay ray;
+  if (!fill_ray(a, &ray, r, &pb->t0[i], &pb->ts[i])) {
+    pb->valid[i] = 0;
+    return false;
+  }
+  float *p = pb->f;
+  RAYN_F(p, N, RAY_ORG, i) = ray.org_x;
+  RAYN_F(p, N, RAY_ORG + 1, i) = ray.org_y;
+  RAYN_F(p, N, RAY_ORG + 2, i) = ray.org_z;
+  RAYN_F(p, N, RAY_TNEAR, i) = ray.tnear;
+  RAYN_F(p, N, RAY_DIR, i) = ray.dir_x;
+  RAYN_F(p, N, RAY_DIR + 1, i) = ray.dir_y;
+  RAYN_F(p, N, RAY_DIR + 2, i) = ray.dir_z;
+  RAYN_F(p, N, 7, i) = 0; /* time */
+  RAYN_F(p, N, RAY_TFAR, i) = ray.tfar;
+  ((unsigned *)p)[9 * N + i] = 0xFFFFFFFFu; /* mask */
+  ((unsigned *)p)[10 * N + i] = i;          /* id */
+  ((unsigned *)p)[11 * N + i] = 0;          /* flags */
+  float *hit = p + (size_t)RAY_FIELDS * N;
+  HITN_U(hit, N, HIT_GEOM, i) = RTC_INVALID_GEOMETRY_ID;
+  HITN_U(hit, N, HIT_INST, i) = RTC_INVALID_GEOMETRY_ID;
+  pb->valid[i] = -1;
+  return true;
+}
+
+static unsigned packet_n(int n) {
+  int w = accel_packet_width();
+  return n <= 4 && w >= 4 ? 4u : n <= 8 && w >= 8 ? 8u : (unsigned)w;
+}
+
+void accel_intersect_packet(const accel *a, const ray3 *const *r, int n, accel_hit *h, bool *hit,
+                            bool coherent) {
+  unsigned N = packet_n(n);
+  if (n > (int)N && N > 1) { /* more rays than one packet holds */
+    for (int k = 0; k < n; k += (int)N)
+      accel_intersect_packet(a, r + k, n - k < (int)N ? n - k : (int)N, h + k, hit + k, coherent);
+    return;
+  }
+  if (N == 1 || n == 1) {
+    for (int i = 0; i < n; i++) hit[i] = accel_intersect(a, r[i], &h[i]);
+    return;
+  }
+  struct RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  if (coherent) ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+  packet_buf pb;
+  bool any = false;
+  for (unsigned i = 0; i < N; i++) {
+    if ((int)i < n)
+      any |= packet_fill(a, &pb, N, i, r[i]);
+    else
+      pb.valid[i] = 0;
+  }
+  if (any) {
+    if (N == 16)
+      rtcIntersect16(pb.valid, a->top, &ctx, (struct RTCRayHit16 *)pb.f);
+    else if (N == 8)
+      rtcIntersect8(pb.valid, a->top, &ctx, (struct RTCRayHit8 *)pb.f);
+    else
+      rtcIntersect4(pb.valid, a->top, &ctx, (struct RTCRayHit4 *)pb.f);
+  }
+  const float *p = pb.f;
+  const float *hb = p + (size_t)RAY_FIELDS * N;
+  for (int i = 0; i < n; i++) {
+    unsigned geom = HITN_U(hb, N, HIT_GEOM, i);
+    hit[i] = pb.valid[i] && geom != RTC_INVALID_GEOMETRY_ID;
+    if (!hit[i]) continue;
+    accel_hit *o = &h[i];
+    o->t = pb.t0[i] + RAYN_F(p, N, RAY_TFAR, i) * pb.ts[i];
+    uint32_t id = HITN_U(hb, N, HIT_INST, i);
+    if (id < a->n_sub) {
+      o->shape = id;
+      o->sub = 0;
+    } else {
+      o->shape = a->list_shape[id - a->n_sub];
+      o->sub = a->list_sub[id - a->n_sub];
+    }
+    o->member = geom;
+    o->prim = HITN_U(hb, N, HIT_PRIM, i);
+    o->u = HITN_F(hb, N, HIT_U, i);
+    o->v = HITN_F(hb, N, HIT_V, i);
+    o->ng = v3(HITN_F(hb, N, HIT_NG, i), HITN_F(hb, N, HIT_NG + 1, i), HITN_F(hb, N, HIT_NG + 2, i));
+  }
+}
+
+void accel_occluded_packet(const accel *a, const ray3 *const *r, int n, bool *occ) {
+  unsigned N = packet_n(n);
+  if (n > (int)N && N > 1) {
+    for (int k = 0; k < n; k += (int)N)
+      accel_occluded_packet(a, r + k, n - k < (int)N ? n - k : (int)N, occ + k);
+    return;
+  }
+  if (N == 1 || n == 1) {
+    for (int i = 0; i < n; i++) occ[i] = accel_occluded(a, r[i]);
+    return;
+  }
+  struct RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  packet_buf pb;
+  bool any = false;
+  for (unsigned i = 0; i < N; i++) {
+    if ((int)i < n)
+      any |= packet_fill(a, &pb, N, i, r[i]);
+    else
+      pb.valid[i] = 0;
+  }
+  if (any) {
+    if (N == 16)
+      rtcOccluded16(pb.valid, a->top, &ctx, (struct RTCRay16 *)pb.f);
+    else if (N == 8)
+      rtcOccluded8(pb.valid, a->top, &ctx, (struct RTCRay8 *)pb.f);
+    else
+      rtcOccluded4(pb.valid, a->top, &ctx, (struct RTCRay4 *)pb.f);
+  }
+  for (int i = 0; i < n; i++) occ[i] = pb.valid[i] && RAYN_F(pb.f, N, RAY_TFAR, i) < 0;
+}
+
 /* ---- measurement ------------------------------------------------------------------------------ */
 
 #include <time.h>

@@ -51,6 +51,25 @@ bool accel_intersect(const accel *a, const ray3 *r, accel_hit *h);
 /* Any hit on [r->tmin, r->tmax]. Thread-safe. */
 bool accel_occluded(const accel *a, const ray3 *r);
 
+/* Packet queries (the wavefront integrator, integrators/path.c): n rays
+ * traced together, up to 16 at a time, as Embree packets of 4, 8 or 16 lanes (the
+ * widest the CPU and Embree support, or accel_set_packet_width's pin);
+ * the rays should belong together (same bounce of neighbouring paths).
+ * Per ray the same queries as accel_intersect / accel_occluded (fill_ray's
+ * rules, same hit record); Embree's packet kernels may round a hit
+ * distance differently from its single-ray kernel, so results agree with
+ * the single-ray calls to float precision, not bitwise. hit[i] / occ[i]:
+ * ray i hit something (h[i] filled) / is blocked. coherent: the rays share
+ * an origin region and nearly a direction (camera rays), an Embree hint. */
+void accel_intersect_packet(const accel *a, const ray3 *const *r, int n, accel_hit *h, bool *hit,
+                            bool coherent);
+void accel_occluded_packet(const accel *a, const ray3 *const *r, int n, bool *occ);
+/* Lanes of the packets those calls trace (16, 8, 4, or 1 without packet
+ * support), and a pin to a narrower width for the process (1, 4, 8 or 16;
+ * anything else: back to the widest). */
+int accel_packet_width(void);
+void accel_set_packet_width(int w);
+
 /* ---- float32 error bounds ---------------------------------------------------- */
 
 /* The world point Embree's frame is centred on (see above; the origin

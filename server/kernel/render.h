@@ -20,8 +20,8 @@ typedef struct render_opts {
   double wavelength;        /* nm, mono only; 0 means 550 */
   int threads;              /* 0: all cores */
   const atomic_int *cancel; /* optional: non-zero stops the render
-                               (checked between pixels and every 64
-                               samples within one): RSW_ERR_CANCELLED */
+                               (checked before each wave of 256
+                               samples): RSW_ERR_CANCELLED */
   double deadline;          /* optional: CLOCK_MONOTONIC seconds after which
                                the render stops: RSW_ERR_TIMEOUT (0: none) */
   /* Optional progress callback: tiles done of total (called from worker

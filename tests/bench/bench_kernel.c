@@ -83,12 +83,14 @@ static int report(const char *name, scene *s, uint32_t spp, int threads, double 
   }
   double w = median(wall, REPEATS), ceiling = median(ceil_v, REPEATS), flat = median(flat_v, REPEATS);
   double rps = rays / w;
-  printf("{\"bench\": \"%s\", \"wall_s\": %.4f, \"samples_per_s\": %.4g, \"rays_per_s\": %.4g, "
+  printf("{\"bench\": \"%s\", \"wall_s\": %.4f, \"samples_per_s\": %.4g, \"ns_per_sample_per_core\": %.1f, "
+         "\"rays_per_s\": %.4g, "
          "\"ceiling_rays_per_s\": %.4g, \"ratio_to_ceiling\": %.3f, \"threads\": %d, \"spp\": %u, "
          "\"rays\": %.0f, \"shadow_rays\": %llu, \"flat_ceiling_rays_per_s\": %.4g, "
          "\"two_level_over_flat\": %.3f, \"repeats\": %d",
-         name, w, samples / w, rps, ceiling, ceiling > 0 ? rps / ceiling : 0, used_threads, spp, rays,
-         (unsigned long long)shadow, flat, flat > 0 ? ceiling / flat : 0, REPEATS);
+         name, w, samples / w, samples > 0 ? w * used_threads * 1e9 / (double)samples : 0, rps, ceiling,
+         ceiling > 0 ? rps / ceiling : 0, used_threads, spp, rays, (unsigned long long)shadow, flat,
+         flat > 0 ? ceiling / flat : 0, REPEATS);
   if (target_wall > 0)
     printf(", \"target_wall_s\": %.2f, \"meets_target\": %s", target_wall,
            w < target_wall ? "true" : "false");
@@ -109,6 +111,37 @@ static int bench_seed(int threads) {
     return 1;
   }
   int rc = report("seed_hdistant", s, 3200, threads, 1.0, 0);
+  scene_free(s);
+  return rc;
+}
+
+/* cornell_box: proto/examples/cornell_box.json with its film at 256x256
+ * (the example's 128x128 doubled), 64 spp, max_depth 8 (as the example). */
+static int bench_cornell(int threads) {
+  FILE *f = fopen("proto/examples/cornell_box.json", "rb");
+  if (!f) {
+    fprintf(stderr, "bench cornell_box: cannot open proto/examples/cornell_box.json\n");
+    return 1;
+  }
+  static char text[1 << 16];
+  size_t n = fread(text, 1, sizeof text - 1, f);
+  fclose(f);
+  text[n] = 0;
+  const char *from = "\"width\": 128, \"height\": 128";
+  char *at = strstr(text, from);
+  if (!at) {
+    fprintf(stderr, "bench cornell_box: the example's film is no longer 128x128\n");
+    return 1;
+  }
+  memcpy(at, "\"width\": 256, \"height\": 256", strlen(from));
+  rsw_err err = {0};
+  scene *s = NULL;
+  scene_load_opts lo = {.size = sizeof lo};
+  if (scene_load_memory(text, n, "cornell_box", false, &lo, &s, &err)) {
+    fprintf(stderr, "bench cornell_box: %s: %s\n", err.where, err.msg);
+    return 1;
+  }
+  int rc = report("cornell_box", s, 64, threads, 2.3, 0);
   scene_free(s);
   return rc;
 }
@@ -287,6 +320,7 @@ int main(void) {
   int threads = bench_threads();
   int rc = 0;
   if (wanted("seed_hdistant")) rc |= bench_seed(threads);
+  if (wanted("cornell_box")) rc |= bench_cornell(threads);
   if (wanted("mesh_1m")) rc |= bench_mesh(threads);
   if (wanted("params_1m")) rc |= bench_params();
   return rc;
