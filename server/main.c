@@ -91,6 +91,7 @@ static int cmd_render(int argc, char **argv) {
   size_t n_sets = 0;
   unsigned long long spp = 0, seed = 0, threads = 0;
   double wavelength = 0;
+  bool stats = false;
   int rc = 1;
   scene *sc = NULL;
   film_image img = {0};
@@ -135,6 +136,8 @@ static int cmd_render(int argc, char **argv) {
     } else if (strcmp(a, "--plugin-dir") == 0) {
       if (!val) USAGE("%s needs a directory", a);
       plugin_dir = val, i++;
+    } else if (strcmp(a, "--stats") == 0) {
+      stats = true;
     } else if (strncmp(a, "-D", 2) == 0) {
       const char *def = a[2] ? a + 2 : val;
       if (!a[2]) i++;
@@ -190,6 +193,11 @@ static int cmd_render(int argc, char **argv) {
   if (render_sensor(sc, &ro, &img, &rs, &err)) {
     fprintf(stderr, "raysweepd render: %s\n", rsw_err_format(&err, msg, sizeof msg));
     goto out;
+  }
+  if (stats) {
+    char line[600];
+    render_stats_line(&rs, line, sizeof line);
+    fprintf(stderr, "raysweepd render: stats: %s\n", line);
   }
   if (rs.invalid_samples)
     fprintf(stderr, "raysweepd render: warning: %llu samples were NaN or infinite and were dropped\n",
@@ -390,7 +398,7 @@ static int cmd_version(int argc, char **argv) {
 static const command commands[] = {
     {"render",
      "render SCENE [-D name=value]... [--set KEY=VALUE]... [--sensor ID] [--spp N] [--seed S] "
-     "[--wavelength NM] [--threads N] [--variant mono|rgb] [--plugin-dir DIR] -o OUT.exr",
+     "[--wavelength NM] [--threads N] [--variant mono|rgb] [--plugin-dir DIR] [--stats] -o OUT.exr",
      "load a scene, apply parameter updates, render one sensor to OpenEXR",
      "  SCENE               a .xml (Mitsuba XML) or .json scene file\n"
      "  -o, --output OUT    the film; written next to it and renamed once complete\n"
@@ -403,6 +411,7 @@ static const command commands[] = {
      "  --threads N         1 to 256 (default: every online core; the film does not depend on N)\n"
      "  --variant mono|rgb  overrides the document's variant (default rgb)\n"
      "  --plugin-dir DIR    load every *.so in DIR as an environment plugin first\n"
+     "  --stats             one summary line on stderr: samples/s, rays by kind, time tracing vs shading\n"
      "Exit status: 0 ok, 1 the scene failed to load or render, 2 command-line mistake.\n",
      cmd_render},
     {"params",

@@ -12,6 +12,7 @@
 #include "render.h"
 
 #include <pthread.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
@@ -53,6 +54,7 @@ typedef struct job {
   /* Stats (merged under lock). */
   render_stats rays;
   uint64_t samples, invalid;
+  double busy_s;
   /* Work distribution (under the pool's lock; see "the worker pool"). */
   size_t next_tile;
   int max_workers; /* threads that may work on it at once, caller included */
@@ -256,8 +258,11 @@ static void merge_tile(job *jb, tile_buf *tb) {
 static void run_tile(job *jb, size_t t) {
   render_stats rs = {0};
   uint64_t samples = 0, invalid = 0;
+  double t0 = now_s();
   tile_buf *tb = render_tile(jb, t, &rs, &samples, &invalid);
+  double busy = now_s() - t0;
   pthread_mutex_lock(&jb->lock);
+  jb->busy_s += busy;
   jb->rays.rays += rs.rays;
   jb->rays.shadow_rays += rs.shadow_rays;
   jb->rays.unresolved += rs.unresolved;
@@ -561,6 +566,8 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
     stats->samples = jb.samples;
     stats->invalid_samples = jb.invalid;
     stats->threads = jb.peak;
+    stats->busy_s = jb.busy_s;
+    stats->packet_width = accel_packet_width();
     stats->wall_s = now_s() - t0;
   }
   *out = img;
@@ -573,4 +580,20 @@ void film_image_free(film_image *img) {
   img->data = NULL;
   free(img->angles);
   img->angles = NULL;
+}
+
+void render_stats_line(const render_result_stats *st, char *buf, size_t size) {
+  const render_stats *r = &st->rays;
+  uint64_t cont = r->rays >= r->camera_rays ? r->rays - r->camera_rays : 0;
+  double w = st->wall_s > 0 ? st->wall_s : 1e-9;
+  double other = st->busy_s > r->trace_s ? st->busy_s - r->trace_s : 0;
+  double busy = st->busy_s > 0 ? st->busy_s : 1e-9;
+  snprintf(buf, size,
+           "%llu samples in %.3f s (%.4g samples/s, %d threads); rays: %llu camera, %llu continuation, %llu "
+           "shadow (%.4g rays/s, Embree packets of %d); thread time %.3f s: tracing %.3f s (%.0f%%), "
+           "shading and the rest %.3f s (%.0f%%)",
+           (unsigned long long)st->samples, st->wall_s, (double)st->samples / w, st->threads,
+           (unsigned long long)r->camera_rays, (unsigned long long)cont, (unsigned long long)r->shadow_rays,
+           (double)(r->rays + r->shadow_rays) / w, st->packet_width, st->busy_s, r->trace_s,
+           100.0 * r->trace_s / busy, other, 100.0 * other / busy);
 }

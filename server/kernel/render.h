@@ -57,7 +57,16 @@ typedef struct render_result_stats {
   uint64_t invalid_samples; /* NaN/inf contributions dropped */
   double wall_s;
   int threads;
+  /* Thread time spent on tiles, summed over threads; rays.trace_s of it
+   * in ray queries (the rest: camera rays, shading, splatting). */
+  double busy_s;
+  int packet_width; /* lanes of the Embree packets the wave traced (accel_packet_width) */
 } render_result_stats;
+
+/* One line summing up a render (raysweepd render --stats): samples and
+ * samples/s, rays by kind (camera, continuation, shadow) and rays/s, time
+ * tracing vs the rest. Written into buf (NUL-terminated). */
+void render_stats_line(const render_result_stats *st, char *buf, size_t size);
 
 rsw_status render_sensor(scene *s, const render_opts *opts, film_image *out, render_result_stats *stats,
                          rsw_err *err);

@@ -145,12 +145,15 @@ static double clock_s(void) {
 /* Trace the rays of the live lanes idx[0..n): packets of consecutive live
  * lanes, or one by one under a periodic boundary (scene_trace walks the
  * walls per ray). */
-static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_stats *stats, bool coherent) {
-  if (sc->periodic.on) {
+static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_stats *stats, bool coherent,
+                       bool timed) {
+  if (sc->periodic.on) { /* the hit fill is counted as tracing here */
+    double t0 = timed ? clock_s() : 0;
     for (int k = 0; k < n; k++) {
       lane *l = &ln[idx[k]];
       l->hit = intersect(sc, &l->ray, &l->si, stats, &l->wrapped);
     }
+    if (timed) stats->trace_s += clock_s() - t0;
     return;
   }
   enum {
@@ -162,7 +165,9 @@ static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_
     accel_hit h[P];
     bool hit[P];
     for (int k = 0; k < m; k++) rp[k] = &ln[idx[k0 + k]].ray;
+    double t0 = timed ? clock_s() : 0;
     accel_intersect_packet(sc->accel, rp, m, h, hit, coherent);
+    if (timed) stats->trace_s += clock_s() - t0;
     stats->rays += (uint64_t)m;
     for (int k = 0; k < m; k++) {
       lane *l = &ln[idx[k0 + k]];
@@ -178,8 +183,9 @@ static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_
 }
 
 /* Trace the shadow rays of lanes idx[0..n) (each has nee set). */
-static void wave_occluded(const scene *sc, lane *ln, const int *idx, int n, render_stats *stats) {
+static void wave_occluded(const scene *sc, lane *ln, const int *idx, int n, render_stats *stats, bool timed) {
   stats->shadow_rays += (uint64_t)n;
+  double t0 = timed ? clock_s() : 0;
   if (sc->periodic.on) {
     for (int k = 0; k < n; k++) {
       lane *l = &ln[idx[k]];
@@ -189,6 +195,7 @@ static void wave_occluded(const scene *sc, lane *ln, const int *idx, int n, rend
       l->occ = scene_occluded(sc, &l->sray);
       if (l->occ == TRACE_UNRESOLVED) stats->unresolved++;
     }
+    if (timed) stats->trace_s += clock_s() - t0;
     return;
   }
   enum {
@@ -202,6 +209,7 @@ static void wave_occluded(const scene *sc, lane *ln, const int *idx, int n, rend
     accel_occluded_packet(sc->accel, rp, m, occ);
     for (int k = 0; k < m; k++) ln[idx[k0 + k]].occ = occ[k] ? TRACE_HIT : TRACE_MISS;
   }
+  if (timed) stats->trace_s += clock_s() - t0;
 }
 
 /* Emission seen by lane l's ray, and the first half of its vertex: the
@@ -327,12 +335,10 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
     idx[i] = i;
   }
   int live = it->max_depth == 0 ? 0 : n;
-  bool timed = n > 1; /* a one-path wave (Li) is not worth two clock reads per bounce */
+  bool timed = n > 1; /* Li's one-path waves are not timed (two clock reads per query) */
   bool camera = true;
   while (live > 0) {
-    double t0 = timed ? clock_s() : 0;
-    wave_trace(sc, ln, idx, live, stats, camera);
-    double t1 = timed ? clock_s() : 0;
+    wave_trace(sc, ln, idx, live, stats, camera, timed);
     camera = false;
     int next = 0, n_sh = 0;
     for (int k = 0; k < live; k++) {
@@ -341,9 +347,7 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
       idx[next++] = i;
       if (ln[i].nee) sh[n_sh++] = i;
     }
-    double t2 = timed ? clock_s() : 0;
-    if (n_sh) wave_occluded(sc, ln, sh, n_sh, stats);
-    double t3 = timed ? clock_s() : 0;
+    if (n_sh) wave_occluded(sc, ln, sh, n_sh, stats, timed);
     live = next;
     next = 0;
     for (int k = 0; k < live; k++) {
@@ -351,7 +355,6 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
       if (shade_continue(it, &st[i], &ln[i], quv ? &quv[3 * i] : NULL)) idx[next++] = i;
     }
     live = next;
-    stats->trace_s += (t1 - t0) + (t3 - t2);
   }
   for (int i = 0; i < n; i++) L[i] = ln[i].L;
 }
