@@ -995,6 +995,72 @@ void accel_get_counters(const accel *a, accel_counters *out) {
     memset(out, 0, sizeof *out);
 }
 
+/* ---- ray recording (make bench's replay ceiling) ------------------------------------------ */
+
+/* One recorded query, as Embree saw it (after fill_ray). */
+typedef struct rec_ray {
+  float o[3], d[3], tnear, tfar;
+  uint8_t occluded; /* an occlusion query */
+  uint8_t width;    /* first ray of a query: the lanes of its packet (1: rtcIntersect1/Occluded1) */
+} rec_ray;
+
+struct accel_ray_log {
+  rec_ray *r;
+  size_t cap;
+  _Atomic size_t n;
+};
+
+static accel_ray_log *_Atomic g_rec; /* the log being recorded into, or NULL */
+
+accel_ray_log *accel_record_begin(size_t max_rays) {
+  accel_ray_log *lg = calloc(1, sizeof *lg);
+  if (!lg) return NULL;
+  lg->r = malloc((max_rays ? max_rays : 1) * sizeof *lg->r);
+  if (!lg->r) {
+    free(lg);
+    return NULL;
+  }
+  lg->cap = max_rays;
+  atomic_store(&lg->n, 0);
+  atomic_store(&g_rec, lg);
+  return lg;
+}
+
+void accel_record_end(void) {
+  atomic_store(&g_rec, NULL);
+}
+
+size_t accel_ray_log_count(const accel_ray_log *lg) {
+  size_t n = atomic_load(&((accel_ray_log *)lg)->n);
+  return n < lg->cap ? n : lg->cap;
+}
+
+void accel_ray_log_free(accel_ray_log *lg) {
+  if (!lg) return;
+  free(lg->r);
+  free(lg);
+}
+
+/* Record k rays (lanes of one query); the whole query or nothing. */
+static void record_rays(const struct RTCRay *const *rays, unsigned k, unsigned width, bool occluded) {
+  accel_ray_log *lg = atomic_load(&g_rec);
+  if (!lg || k == 0) return;
+  size_t at = atomic_fetch_add(&lg->n, k);
+  if (at + k > lg->cap) {
+    atomic_store(&lg->n, lg->cap); /* full: later queries are not recorded */
+    return;
+  }
+  for (unsigned i = 0; i < k; i++) {
+    const struct RTCRay *ray = rays[i];
+    rec_ray *q = &lg->r[at + i];
+    q->o[0] = ray->org_x, q->o[1] = ray->org_y, q->o[2] = ray->org_z;
+    q->d[0] = ray->dir_x, q->d[1] = ray->dir_y, q->d[2] = ray->dir_z;
+    q->tnear = ray->tnear, q->tfar = ray->tfar;
+    q->occluded = occluded;
+    q->width = i == 0 ? (uint8_t)width : 0;
+  }
+}
+
 /* ---- queries ------------------------------------------------------------------------------- */
 
 /* The ray Embree traces for r: origin relative to the frame's origin c;
@@ -1050,6 +1116,10 @@ bool accel_intersect(const accel *a, const ray3 *r, accel_hit *h) {
   struct RTCRayHit rh;
   double t0, ts;
   if (!fill_ray(a, &rh.ray, r, &t0, &ts)) return false;
+  if (atomic_load_explicit(&g_rec, memory_order_relaxed)) {
+    const struct RTCRay *rp = &rh.ray;
+    record_rays(&rp, 1, 1, false);
+  }
   rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
   rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
   rtcIntersect1(a->top, &ctx, &rh);
@@ -1077,6 +1147,10 @@ bool accel_occluded(const accel *a, const ray3 *r) {
   struct RTCRay ray;
   double t0, ts;
   if (!fill_ray(a, &ray, r, &t0, &ts)) return false;
+  if (atomic_load_explicit(&g_rec, memory_order_relaxed)) {
+    const struct RTCRay *rp = &ray;
+    record_rays(&rp, 1, 1, true);
+  }
   rtcOccluded1(a->top, &ctx, &ray);
   return ray.tfar < 0;
 }
@@ -1122,7 +1196,17 @@ typedef struct packet_buf {
   _Alignas(64) float f[(RAY_FIELDS + HIT_INST + 1) * 16];
   _Alignas(64) int valid[16];
   double t0[16], ts[16];
+  struct RTCRay rec[16]; /* the lanes' rays, for accel_record_begin's log */
 } packet_buf;
+
+static void packet_record(const packet_buf *pb, unsigned N, int n, bool occluded) {
+  if (!atomic_load_explicit(&g_rec, memory_order_relaxed)) return;
+  const struct RTCRay *rp[16];
+  unsigned k = 0;
+  for (int i = 0; i < n; i++)
+    if (pb->valid[i]) rp[k++] = &pb->rec[i];
+  record_rays(rp, k, N, occluded);
+}
 
 /* Fill lane i of an N-wide packet from r (fill_ray's rules); false leaves
  * the lane invalid. */
@@ -1132,6 +1216,7 @@ static bool packet_fill(const accel *a, packet_buf *pb, unsigned N, unsigned i, 
     pb->valid[i] = 0;
     return false;
   }
+  pb->rec[i] = ray;
   float *p = pb->f;
   RAYN_F(p, N, RAY_ORG, i) = ray.org_x;
   RAYN_F(p, N, RAY_ORG + 1, i) = ray.org_y;
@@ -1181,6 +1266,7 @@ void accel_intersect_packet(const accel *a, const ray3 *const *r, int n, accel_h
       pb.valid[i] = 0;
   }
   if (any) {
+    packet_record(&pb, N, n, false);
     if (N == 16)
       rtcIntersect16(pb.valid, a->top, &ctx, (struct RTCRayHit16 *)pb.f);
     else if (N == 8)
@@ -1234,6 +1320,7 @@ void accel_occluded_packet(const accel *a, const ray3 *const *r, int n, bool *oc
       pb.valid[i] = 0;
   }
   if (any) {
+    packet_record(&pb, N, n, true);
     if (N == 16)
       rtcOccluded16(pb.valid, a->top, &ctx, (struct RTCRay16 *)pb.f);
     else if (N == 8)
@@ -1386,4 +1473,129 @@ double accel_ceiling_rays_per_s(const scene *s, bool flat, uint64_t n_rays, int 
   if (flat) rtcReleaseScene(sc);
   double dt = (t1.tv_sec - t0.tv_sec) + 1e-9 * (t1.tv_nsec - t0.tv_nsec);
   return ok && dt > 0 ? (double)(n_rays / (uint64_t)threads) * started / dt : 0;
+}
+
+/* ---- replay ceiling ------------------------------------------------------------------------- */
+
+typedef struct replay_job {
+  const accel *a;
+  const rec_ray *r;
+  size_t lo, hi; /* queries starting in [lo, hi) */
+  size_t n_end;  /* records in the log */
+  ceiling_sync *sync;
+  uint64_t hits;
+} replay_job;
+
+static void *replay_worker(void *arg) {
+  replay_job *j = arg;
+  pthread_mutex_lock(&j->sync->lock);
+  j->sync->ready++;
+  pthread_cond_broadcast(&j->sync->cond);
+  while (!j->sync->go) pthread_cond_wait(&j->sync->cond, &j->sync->lock);
+  pthread_mutex_unlock(&j->sync->lock);
+  struct RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  uint64_t hits = 0;
+  size_t i = j->lo;
+  while (i < j->hi) {
+    const rec_ray *q = &j->r[i];
+    unsigned w = q->width ? q->width : 1;
+    size_t k = 1;
+    while (i + k < j->n_end && k < w && j->r[i + k].width == 0) k++;
+    if (w == 1) {
+      struct RTCRayHit rh;
+      rh.ray.org_x = q->o[0], rh.ray.org_y = q->o[1], rh.ray.org_z = q->o[2];
+      rh.ray.dir_x = q->d[0], rh.ray.dir_y = q->d[1], rh.ray.dir_z = q->d[2];
+      rh.ray.tnear = q->tnear, rh.ray.tfar = q->tfar, rh.ray.time = 0, rh.ray.mask = 0xFFFFFFFFu;
+      rh.ray.id = 0, rh.ray.flags = 0;
+      if (q->occluded) {
+        rtcOccluded1(j->a->top, &ctx, &rh.ray);
+        hits += rh.ray.tfar < 0;
+      } else {
+        rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+        rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+        rtcIntersect1(j->a->top, &ctx, &rh);
+        hits += rh.hit.geomID != RTC_INVALID_GEOMETRY_ID;
+      }
+    } else {
+      packet_buf pb;
+      for (unsigned l = 0; l < w; l++) {
+        if (l >= k) {
+          pb.valid[l] = 0;
+          continue;
+        }
+        const rec_ray *p = &j->r[i + l];
+        float *f = pb.f;
+        RAYN_F(f, w, RAY_ORG, l) = p->o[0], RAYN_F(f, w, RAY_ORG + 1, l) = p->o[1];
+        RAYN_F(f, w, RAY_ORG + 2, l) = p->o[2];
+        RAYN_F(f, w, RAY_DIR, l) = p->d[0], RAYN_F(f, w, RAY_DIR + 1, l) = p->d[1];
+        RAYN_F(f, w, RAY_DIR + 2, l) = p->d[2];
+        RAYN_F(f, w, RAY_TNEAR, l) = p->tnear, RAYN_F(f, w, 7, l) = 0, RAYN_F(f, w, RAY_TFAR, l) = p->tfar;
+        ((unsigned *)f)[9 * w + l] = 0xFFFFFFFFu;
+        ((unsigned *)f)[10 * w + l] = l;
+        ((unsigned *)f)[11 * w + l] = 0;
+        float *hb = f + (size_t)RAY_FIELDS * w;
+        HITN_U(hb, w, HIT_GEOM, l) = RTC_INVALID_GEOMETRY_ID;
+        HITN_U(hb, w, HIT_INST, l) = RTC_INVALID_GEOMETRY_ID;
+        pb.valid[l] = -1;
+      }
+      if (q->occluded) {
+        if (w == 16)
+          rtcOccluded16(pb.valid, j->a->top, &ctx, (struct RTCRay16 *)pb.f);
+        else if (w == 8)
+          rtcOccluded8(pb.valid, j->a->top, &ctx, (struct RTCRay8 *)pb.f);
+        else
+          rtcOccluded4(pb.valid, j->a->top, &ctx, (struct RTCRay4 *)pb.f);
+        for (size_t l = 0; l < k; l++) hits += RAYN_F(pb.f, w, RAY_TFAR, l) < 0;
+      } else {
+        if (w == 16)
+          rtcIntersect16(pb.valid, j->a->top, &ctx, (struct RTCRayHit16 *)pb.f);
+        else if (w == 8)
+          rtcIntersect8(pb.valid, j->a->top, &ctx, (struct RTCRayHit8 *)pb.f);
+        else
+          rtcIntersect4(pb.valid, j->a->top, &ctx, (struct RTCRayHit4 *)pb.f);
+        const float *hb = pb.f + (size_t)RAY_FIELDS * w;
+        for (size_t l = 0; l < k; l++) hits += HITN_U(hb, w, HIT_GEOM, l) != RTC_INVALID_GEOMETRY_ID;
+      }
+    }
+    i += k;
+  }
+  j->hits = hits;
+  return NULL;
+}
+
+double accel_replay_rays_per_s(const accel *a, const accel_ray_log *lg, int threads) {
+  size_t n = accel_ray_log_count(lg);
+  if (!a || n == 0 || threads < 1 || threads > 256) return 0;
+  replay_job jobs[256];
+  pthread_t th[256];
+  ceiling_sync sync = {.ready = 0};
+  pthread_mutex_init(&sync.lock, NULL);
+  pthread_cond_init(&sync.cond, NULL);
+  /* Contiguous shares, cut at query starts. */
+  size_t lo = 0;
+  int started = 0;
+  for (int t = 0; t < threads; t++) {
+    size_t hi = t == threads - 1 ? n : n * (size_t)(t + 1) / (size_t)threads;
+    while (hi < n && lg->r[hi].width == 0) hi++;
+    if (hi < lo) hi = lo;
+    jobs[t] = (replay_job){.a = a, .r = lg->r, .lo = lo, .hi = hi, .n_end = n, .sync = &sync};
+    lo = hi;
+    if (pthread_create(&th[t], NULL, replay_worker, &jobs[t]) != 0) break;
+    started++;
+  }
+  pthread_mutex_lock(&sync.lock);
+  while (sync.ready < started) pthread_cond_wait(&sync.cond, &sync.lock);
+  sync.go = true;
+  pthread_cond_broadcast(&sync.cond);
+  pthread_mutex_unlock(&sync.lock);
+  struct timespec t0, t1;
+  clock_gettime(CLOCK_MONOTONIC, &t0);
+  for (int t = 0; t < started; t++) pthread_join(th[t], NULL);
+  clock_gettime(CLOCK_MONOTONIC, &t1);
+  pthread_mutex_destroy(&sync.lock);
+  pthread_cond_destroy(&sync.cond);
+  double dt = (t1.tv_sec - t0.tv_sec) + 1e-9 * (t1.tv_nsec - t0.tv_nsec);
+  size_t done = started == threads ? n : 0;
+  return done && dt > 0 ? (double)done / dt : 0;
 }

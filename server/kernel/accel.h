@@ -139,4 +139,19 @@ size_t accel_embree_bytes(void);
  * layout costs. Returns 0 on failure. */
 double accel_ceiling_rays_per_s(const scene *s, bool flat, uint64_t n_rays, int threads, uint64_t seed);
 
+/* The replay ceiling: a render's own queries recorded once, as Embree saw
+ * them (float rays in its frame, each query's packet width and kind), then
+ * traced again by Embree alone with no shading, in the recorded packets and
+ * order, split into contiguous shares over `threads` threads. Recording is
+ * process-wide (one log at a time) and meant for one-thread renders (queries
+ * of concurrent threads would interleave); queries past max_rays are not
+ * recorded. Off (the default), each query pays one relaxed atomic load. */
+typedef struct accel_ray_log accel_ray_log;
+accel_ray_log *accel_record_begin(size_t max_rays); /* NULL: out of memory */
+void accel_record_end(void);
+size_t accel_ray_log_count(const accel_ray_log *lg);
+void accel_ray_log_free(accel_ray_log *lg);
+/* Recorded rays per second; 0 on failure or an empty log. */
+double accel_replay_rays_per_s(const accel *a, const accel_ray_log *lg, int threads);
+
 #endif

@@ -1,10 +1,22 @@
 /* make bench: kernel throughput, one JSON object per line.
  *
  *  seed_hdistant  the hdistant seed scene (proto/examples/hdistant_seed.xml),
- *                 32x32, 3200 spp; target: under 1 s wall on 2 cores.
+ *                 32x32, 3200 spp; target: under 1 s wall on 2 cores (issue
+ *                 12's: 0.21 s).
+ *  cornell_box    proto/examples/cornell_box.json at 256x256, 64 spp,
+ *                 max_depth 8; target (issue 12): under 2.3 s on 2 cores.
  *  mesh_1m        a 1,002,528-triangle heightfield (written as a binary PLY
  *                 into a temporary directory) under a perspective sensor,
- *                 path integrator with max_depth 5; target: ratio >= 0.6.
+ *                 path integrator with max_depth 5; target: 0.85 of the
+ *                 replay ceiling.
+ *
+ * ns_per_sample_per_core = wall * threads / samples. isa: the instruction
+ * set the shading code runs (scalar double, the x86-64 baseline: no
+ * vectorised shading yet); packet_width: Embree's packet lanes (16 with
+ * AVX-512). trace_share: the thread time spent in Embree queries. The
+ * replay ceiling: the render's own queries, recorded once from a
+ * one-thread render and traced again by Embree alone (accel.h), and
+ * ratio_to_replay_ceiling = rays_per_s over it.
  *
  * For each: wall time, samples/s, rays/s (intersection + occlusion queries
  * the integrator made), and in the same run, same threads, same geometry,
@@ -52,6 +64,29 @@ static double median(double *v, size_t n) {
  * ceiling interleaved, so a slow spell of the machine hits all three). */
 #define REPEATS 3
 
+/* The replay ceiling (accel.h): the render's own queries, recorded once
+ * from a one-thread render at an spp giving about REPLAY_RAYS queries,
+ * traced again by Embree alone on `threads` threads; median of REPEATS. */
+#define REPLAY_RAYS 3000000u
+
+static double bench_replay_ceiling(scene *s, uint32_t spp, double rays_per_sample, int threads) {
+  uint32_t rspp = (uint32_t)fmax(1, fmin(spp, REPLAY_RAYS / fmax(1, rays_per_sample) /
+                                              ((double)s->sensors[0]->film->width * s->sensors[0]->film->height)));
+  accel_ray_log *lg = accel_record_begin(REPLAY_RAYS);
+  if (!lg) return 0;
+  render_opts o = {.size = sizeof o, .spp = rspp, .seed = 2, .threads = 1};
+  film_image img;
+  render_result_stats st;
+  rsw_err err = {0};
+  bool ok = render_sensor(s, &o, &img, &st, &err) == RSW_OK;
+  accel_record_end();
+  if (ok) film_image_free(&img);
+  double v[REPEATS];
+  for (int r = 0; r < REPEATS; r++) v[r] = ok ? accel_replay_rays_per_s(s->accel, lg, threads) : 0;
+  accel_ray_log_free(lg);
+  return median(v, REPEATS);
+}
+
 static int report(const char *name, scene *s, uint32_t spp, int threads, double target_wall,
                   double target_ratio) {
   rsw_err err = {0};
@@ -63,7 +98,7 @@ static int report(const char *name, scene *s, uint32_t spp, int threads, double 
   warm.spp = 1;
   if (render_sensor(s, &warm, &img, &st, &err) == RSW_OK) film_image_free(&img);
   double wall[REPEATS], ceil_v[REPEATS], flat_v[REPEATS];
-  double rays = 0;
+  double rays = 0, trace = 0, busy = 0;
   uint64_t samples = 0, shadow = 0;
   int used_threads = threads;
   for (int r = 0; r < REPEATS; r++) {
@@ -77,12 +112,15 @@ static int report(const char *name, scene *s, uint32_t spp, int threads, double 
     shadow = st.rays.shadow_rays;
     samples = st.samples;
     used_threads = st.threads;
+    trace = st.rays.trace_s;
+    busy = st.busy_s;
     uint64_t n = (uint64_t)fmax(2e6, rays / 2);
     ceil_v[r] = accel_ceiling_rays_per_s(s, false, n, threads, 7 + (uint64_t)r);
     flat_v[r] = accel_ceiling_rays_per_s(s, true, n, threads, 7 + (uint64_t)r);
   }
   double w = median(wall, REPEATS), ceiling = median(ceil_v, REPEATS), flat = median(flat_v, REPEATS);
   double rps = rays / w;
+  double replay = bench_replay_ceiling(s, spp, samples ? rays / (double)samples : 1, threads);
   printf("{\"bench\": \"%s\", \"wall_s\": %.4f, \"samples_per_s\": %.4g, \"ns_per_sample_per_core\": %.1f, "
          "\"rays_per_s\": %.4g, "
          "\"ceiling_rays_per_s\": %.4g, \"ratio_to_ceiling\": %.3f, \"threads\": %d, \"spp\": %u, "
@@ -91,12 +129,15 @@ static int report(const char *name, scene *s, uint32_t spp, int threads, double 
          name, w, samples / w, samples > 0 ? w * used_threads * 1e9 / (double)samples : 0, rps, ceiling,
          ceiling > 0 ? rps / ceiling : 0, used_threads, spp, rays, (unsigned long long)shadow, flat,
          flat > 0 ? ceiling / flat : 0, REPEATS);
+  printf(", \"replay_ceiling_rays_per_s\": %.4g, \"ratio_to_replay_ceiling\": %.3f, \"packet_width\": %d, "
+         "\"trace_share\": %.3f, \"isa\": \"sse2\"",
+         replay, replay > 0 ? rps / replay : 0, accel_packet_width(), busy > 0 ? trace / busy : 0);
   if (target_wall > 0)
     printf(", \"target_wall_s\": %.2f, \"meets_target\": %s", target_wall,
            w < target_wall ? "true" : "false");
-  if (target_ratio > 0)
-    printf(", \"target_ratio\": %.2f, \"meets_target\": %s", target_ratio,
-           ceiling > 0 && rps / ceiling >= target_ratio ? "true" : "false");
+  if (target_ratio > 0) /* of the replay ceiling */
+    printf(", \"target_ratio_to_replay\": %.2f, \"meets_target\": %s", target_ratio,
+           replay > 0 && rps / replay >= target_ratio ? "true" : "false");
   printf("}\n");
   fflush(stdout);
   return 0;
@@ -206,7 +247,7 @@ static int bench_mesh(int threads) {
   if (scene_load_memory(json, strlen(json), "mesh_1m", false, &lo, &s, &err)) {
     fprintf(stderr, "bench mesh_1m: %s: %s\n", err.where, err.msg);
   } else {
-    rc = report("mesh_1m", s, 64, threads, 0, 0.6);
+    rc = report("mesh_1m", s, 64, threads, 0, 0.85);
   }
   scene_free(s);
   remove(ply);
