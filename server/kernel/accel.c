@@ -1216,7 +1216,7 @@ static bool packet_fill(const accel *a, packet_buf *pb, unsigned N, unsigned i, 
     pb->valid[i] = 0;
     return false;
   }
-  pb->rec[i] = ray;
+  if (atomic_load_explicit(&g_rec, memory_order_relaxed)) pb->rec[i] = ray;
   float *p = pb->f;
   RAYN_F(p, N, RAY_ORG, i) = ray.org_x;
   RAYN_F(p, N, RAY_ORG + 1, i) = ray.org_y;
@@ -1478,7 +1478,7 @@ double accel_ceiling_rays_per_s(const scene *s, bool flat, uint64_t n_rays, int 
 /* ---- replay ceiling ------------------------------------------------------------------------- */
 
 typedef struct replay_job {
-  const accel *a;
+  RTCScene top;
   const rec_ray *r;
   size_t lo, hi; /* queries starting in [lo, hi) */
   size_t n_end;  /* records in the log */
@@ -1509,12 +1509,12 @@ static void *replay_worker(void *arg) {
       rh.ray.tnear = q->tnear, rh.ray.tfar = q->tfar, rh.ray.time = 0, rh.ray.mask = 0xFFFFFFFFu;
       rh.ray.id = 0, rh.ray.flags = 0;
       if (q->occluded) {
-        rtcOccluded1(j->a->top, &ctx, &rh.ray);
+        rtcOccluded1(j->top, &ctx, &rh.ray);
         hits += rh.ray.tfar < 0;
       } else {
         rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
         rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-        rtcIntersect1(j->a->top, &ctx, &rh);
+        rtcIntersect1(j->top, &ctx, &rh);
         hits += rh.hit.geomID != RTC_INVALID_GEOMETRY_ID;
       }
     } else {
@@ -1541,19 +1541,19 @@ static void *replay_worker(void *arg) {
       }
       if (q->occluded) {
         if (w == 16)
-          rtcOccluded16(pb.valid, j->a->top, &ctx, (struct RTCRay16 *)pb.f);
+          rtcOccluded16(pb.valid, j->top, &ctx, (struct RTCRay16 *)pb.f);
         else if (w == 8)
-          rtcOccluded8(pb.valid, j->a->top, &ctx, (struct RTCRay8 *)pb.f);
+          rtcOccluded8(pb.valid, j->top, &ctx, (struct RTCRay8 *)pb.f);
         else
-          rtcOccluded4(pb.valid, j->a->top, &ctx, (struct RTCRay4 *)pb.f);
+          rtcOccluded4(pb.valid, j->top, &ctx, (struct RTCRay4 *)pb.f);
         for (size_t l = 0; l < k; l++) hits += RAYN_F(pb.f, w, RAY_TFAR, l) < 0;
       } else {
         if (w == 16)
-          rtcIntersect16(pb.valid, j->a->top, &ctx, (struct RTCRayHit16 *)pb.f);
+          rtcIntersect16(pb.valid, j->top, &ctx, (struct RTCRayHit16 *)pb.f);
         else if (w == 8)
-          rtcIntersect8(pb.valid, j->a->top, &ctx, (struct RTCRayHit8 *)pb.f);
+          rtcIntersect8(pb.valid, j->top, &ctx, (struct RTCRayHit8 *)pb.f);
         else
-          rtcIntersect4(pb.valid, j->a->top, &ctx, (struct RTCRayHit4 *)pb.f);
+          rtcIntersect4(pb.valid, j->top, &ctx, (struct RTCRayHit4 *)pb.f);
         const float *hb = pb.f + (size_t)RAY_FIELDS * w;
         for (size_t l = 0; l < k; l++) hits += HITN_U(hb, w, HIT_GEOM, l) != RTC_INVALID_GEOMETRY_ID;
       }
@@ -1564,9 +1564,12 @@ static void *replay_worker(void *arg) {
   return NULL;
 }
 
-double accel_replay_rays_per_s(const accel *a, const accel_ray_log *lg, int threads) {
+double accel_replay_rays_per_s(const scene *s, const accel_ray_log *lg, int threads, bool flat) {
   size_t n = accel_ray_log_count(lg);
+  const accel *a = s->accel;
   if (!a || n == 0 || threads < 1 || threads > 256) return 0;
+  RTCScene top = flat ? build_flat(s) : a->top;
+  if (!top) return 0;
   replay_job jobs[256];
   pthread_t th[256];
   ceiling_sync sync = {.ready = 0};
@@ -1579,7 +1582,7 @@ double accel_replay_rays_per_s(const accel *a, const accel_ray_log *lg, int thre
     size_t hi = t == threads - 1 ? n : n * (size_t)(t + 1) / (size_t)threads;
     while (hi < n && lg->r[hi].width == 0) hi++;
     if (hi < lo) hi = lo;
-    jobs[t] = (replay_job){.a = a, .r = lg->r, .lo = lo, .hi = hi, .n_end = n, .sync = &sync};
+    jobs[t] = (replay_job){.top = top, .r = lg->r, .lo = lo, .hi = hi, .n_end = n, .sync = &sync};
     lo = hi;
     if (pthread_create(&th[t], NULL, replay_worker, &jobs[t]) != 0) break;
     started++;
@@ -1595,6 +1598,7 @@ double accel_replay_rays_per_s(const accel *a, const accel_ray_log *lg, int thre
   clock_gettime(CLOCK_MONOTONIC, &t1);
   pthread_mutex_destroy(&sync.lock);
   pthread_cond_destroy(&sync.cond);
+  if (flat) rtcReleaseScene(top);
   double dt = (t1.tv_sec - t0.tv_sec) + 1e-9 * (t1.tv_nsec - t0.tv_nsec);
   size_t done = started == threads ? n : 0;
   return done && dt > 0 ? (double)done / dt : 0;

@@ -151,7 +151,10 @@ accel_ray_log *accel_record_begin(size_t max_rays); /* NULL: out of memory */
 void accel_record_end(void);
 size_t accel_ray_log_count(const accel_ray_log *lg);
 void accel_ray_log_free(accel_ray_log *lg);
-/* Recorded rays per second; 0 on failure or an empty log. */
-double accel_replay_rays_per_s(const accel *a, const accel_ray_log *lg, int threads);
+/* Recorded rays per second on s's structure; 0 on failure or an empty log.
+ * flat: on a single-level copy of s's triangles instead (world space,
+ * analytic shapes and instances left out, as accel_ceiling_rays_per_s):
+ * what a flat BVH would give on the render's own rays. */
+double accel_replay_rays_per_s(const scene *s, const accel_ray_log *lg, int threads, bool flat);
 
 #endif

@@ -113,7 +113,9 @@ static bool job_should_stop(job *jb) {
 /* Samples per wave (integrator_ops.Li_batch): enough paths that each
  * bounce fills Embree packets and the shading stages stay hot in the
  * instruction cache, few enough that the lanes' state stays in L2. */
+#ifndef WAVE
 #define WAVE 256
+#endif
 
 /* One sample of a wave: where it lands and its camera ray. */
 typedef struct wave_sample {
@@ -122,7 +124,7 @@ typedef struct wave_sample {
 
 typedef struct wave_buf {
   wave_sample ws[WAVE];
-  sampler_state st[WAVE], st_live[WAVE];
+  sampler_state st[WAVE];
   ray3 ray[WAVE];
   color L[WAVE];
   double quv[3 * WAVE];
@@ -135,22 +137,24 @@ typedef struct wave_buf {
 static bool wave_flush(job *jb, tile_buf *tb, wave_buf *wb, int n, render_stats *rs, uint64_t *invalid) {
   const integrator *it = jb->sc->integrator;
   int m = 0;
-  for (int i = 0; i < n; i++)
+  for (int i = 0; i < n; i++) /* compacted in place: live sample k's state and ray move to slot k */
     if (wb->ws[i].w != 0) {
       wb->live[m] = i;
-      wb->st_live[m] = wb->st[i];
-      wb->ray[m] = wb->ray[i];
+      if (m != i) {
+        wb->st[m] = wb->st[i];
+        wb->ray[m] = wb->ray[i];
+      }
       m++;
     }
   rs->camera_rays += (uint64_t)m;
   double *quv = jb->stokes ? wb->quv : NULL;
   if (it->ops->Li_batch) {
-    if (m && !it->ops->Li_batch(it, jb->sc, wb->st_live, wb->ray, m, rs, wb->L, quv)) return false;
+    if (m && !it->ops->Li_batch(it, jb->sc, wb->st, wb->ray, m, rs, wb->L, quv)) return false;
   } else {
     for (int k = 0; k < m; k++) {
       double *q = &wb->quv[3 * k];
       q[0] = q[1] = q[2] = 0;
-      wb->L[k] = it->ops->Li(it, jb->sc, &wb->st_live[k], wb->ray[k], rs, quv ? q : NULL);
+      wb->L[k] = it->ops->Li(it, jb->sc, &wb->st[k], wb->ray[k], rs, quv ? q : NULL);
     }
   }
   int k = 0;

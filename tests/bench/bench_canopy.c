@@ -135,7 +135,7 @@ int main(void) {
     bool ok = render_sensor(s, &ro, &img, &rst, &err) == RSW_OK;
     accel_record_end();
     if (ok) film_image_free(&img);
-    for (int r = 0; ok && r < 3; r++) rv[r] = accel_replay_rays_per_s(s->accel, lg, threads);
+    for (int r = 0; ok && r < 3; r++) rv[r] = accel_replay_rays_per_s(s, lg, threads, false);
     accel_ray_log_free(lg);
     double rmin = fmin(rv[0], fmin(rv[1], rv[2])), rmax = fmax(rv[0], fmax(rv[1], rv[2]));
     replay = rv[0] + rv[1] + rv[2] - rmin - rmax;

@@ -16,7 +16,10 @@
  * AVX-512). trace_share: the thread time spent in Embree queries. The
  * replay ceiling: the render's own queries, recorded once from a
  * one-thread render and traced again by Embree alone (accel.h), and
- * ratio_to_replay_ceiling = rays_per_s over it.
+ * ratio_to_replay_ceiling = rays_per_s over it; flat_replay_rays_per_s: the
+ * same rays on a flat single-level copy of the triangles (what a flat BVH
+ * would give; analytic shapes and instances left out, so meaningful for
+ * all-mesh scenes such as cornell_box and mesh_1m).
  *
  * For each: wall time, samples/s, rays/s (intersection + occlusion queries
  * the integrator made), and in the same run, same threads, same geometry,
@@ -69,7 +72,8 @@ static double median(double *v, size_t n) {
  * traced again by Embree alone on `threads` threads; median of REPEATS. */
 #define REPLAY_RAYS 3000000u
 
-static double bench_replay_ceiling(scene *s, uint32_t spp, double rays_per_sample, int threads) {
+static double bench_replay_ceiling(scene *s, uint32_t spp, double rays_per_sample, int threads,
+                                   double *flat_replay) {
   uint32_t rspp = (uint32_t)fmax(1, fmin(spp, REPLAY_RAYS / fmax(1, rays_per_sample) /
                                               ((double)s->sensors[0]->film->width * s->sensors[0]->film->height)));
   accel_ray_log *lg = accel_record_begin(REPLAY_RAYS);
@@ -81,9 +85,13 @@ static double bench_replay_ceiling(scene *s, uint32_t spp, double rays_per_sampl
   bool ok = render_sensor(s, &o, &img, &st, &err) == RSW_OK;
   accel_record_end();
   if (ok) film_image_free(&img);
-  double v[REPEATS];
-  for (int r = 0; r < REPEATS; r++) v[r] = ok ? accel_replay_rays_per_s(s->accel, lg, threads) : 0;
+  double v[REPEATS], f[REPEATS];
+  for (int r = 0; r < REPEATS; r++) {
+    v[r] = ok ? accel_replay_rays_per_s(s, lg, threads, false) : 0;
+    f[r] = ok ? accel_replay_rays_per_s(s, lg, threads, true) : 0;
+  }
   accel_ray_log_free(lg);
+  *flat_replay = median(f, REPEATS);
   return median(v, REPEATS);
 }
 
@@ -120,7 +128,8 @@ static int report(const char *name, scene *s, uint32_t spp, int threads, double 
   }
   double w = median(wall, REPEATS), ceiling = median(ceil_v, REPEATS), flat = median(flat_v, REPEATS);
   double rps = rays / w;
-  double replay = bench_replay_ceiling(s, spp, samples ? rays / (double)samples : 1, threads);
+  double flat_replay = 0;
+  double replay = bench_replay_ceiling(s, spp, samples ? rays / (double)samples : 1, threads, &flat_replay);
   printf("{\"bench\": \"%s\", \"wall_s\": %.4f, \"samples_per_s\": %.4g, \"ns_per_sample_per_core\": %.1f, "
          "\"rays_per_s\": %.4g, "
          "\"ceiling_rays_per_s\": %.4g, \"ratio_to_ceiling\": %.3f, \"threads\": %d, \"spp\": %u, "
@@ -130,8 +139,9 @@ static int report(const char *name, scene *s, uint32_t spp, int threads, double 
          ceiling > 0 ? rps / ceiling : 0, used_threads, spp, rays, (unsigned long long)shadow, flat,
          flat > 0 ? ceiling / flat : 0, REPEATS);
   printf(", \"replay_ceiling_rays_per_s\": %.4g, \"ratio_to_replay_ceiling\": %.3f, \"packet_width\": %d, "
-         "\"trace_share\": %.3f, \"isa\": \"sse2\"",
-         replay, replay > 0 ? rps / replay : 0, accel_packet_width(), busy > 0 ? trace / busy : 0);
+         "\"trace_share\": %.3f, \"isa\": \"sse2\", \"flat_replay_rays_per_s\": %.4g, \"replay_flat_over_two_level\": %.3f",
+         replay, replay > 0 ? rps / replay : 0, accel_packet_width(), busy > 0 ? trace / busy : 0, flat_replay,
+         replay > 0 ? flat_replay / replay : 0);
   if (target_wall > 0)
     printf(", \"target_wall_s\": %.2f, \"meets_target\": %s", target_wall,
            w < target_wall ? "true" : "false");
