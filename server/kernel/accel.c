@@ -1074,10 +1074,13 @@ static bool fill_ray(const accel *a, struct RTCRay *ray, const ray3 *r, double *
   vec3 d = r->d, oc = v3_sub(r->o, a->origin);
   double tmin = r->tmin, tmax = r->tmax;
   *t0 = 0, *ts = 1;
-  double len = v3_len(d);
-  if (!v3_finite(oc) || !(len > 0) || !isfinite(len) || isnan(tmin) || !(tmax >= tmin)) return false;
+  /* The squared length decides (no square root for the usual direction):
+   * len2 is finite and positive exactly when v3_len is. */
+  double len2 = v3_dot(d, d);
+  if (!v3_finite(oc) || !(len2 > 0) || !isfinite(len2) || isnan(tmin) || !(tmax >= tmin)) return false;
   tmin = fmax(tmin, 0.0); /* Embree's segment starts at the origin or later */
-  if (len > ACCEL_MAX_DIR || len < 1.0 / ACCEL_MAX_DIR) {
+  if (len2 > ACCEL_MAX_DIR * ACCEL_MAX_DIR || len2 < 1.0 / (ACCEL_MAX_DIR * ACCEL_MAX_DIR)) {
+    double len = sqrt(len2);
     d = v3_scale(d, 1.0 / len);
     tmin *= len, tmax *= len; /* in units of the unit direction */
     *ts = 1.0 / len;
