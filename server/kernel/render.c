@@ -8,7 +8,13 @@
  * radius 0.5 it lands in its own pixel with weight 1 (Mitsuba ignores the
  * jitter for placement), so a pixel is the plain mean of its samples; other
  * filters spread it over the pixels whose centres lie within the radius,
- * and a pixel is sum(f w L) / sum(f). */
+ * and a pixel is sum(f w L) / sum(f).
+ *
+ * Samples are taken in waves (render_tile, wave_flush): up to WAVE samples
+ * of a tile, pixel by pixel and sample by sample, get their camera rays,
+ * then go through the integrator's Li_batch together (or Li one by one for
+ * an integrator without it), then are splatted in that same order through
+ * splat(), so the tile's sums are those of a one-sample-at-a-time loop. */
 #include "render.h"
 
 #include <pthread.h>

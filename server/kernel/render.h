@@ -3,7 +3,10 @@
  * Determinism: every sample's random numbers come from the sampler seeded
  * by (seed, pixel index, sample index) only; pixels are accumulated in a
  * fixed order inside fixed 8x8 tiles, and tiles are merged into the film
- * in tile order; so 1 thread and N threads give bitwise-identical films. */
+ * in tile order; so 1 thread and N threads give bitwise-identical films.
+ * Within a tile, samples are traced in waves of up to 256 (integrator_ops
+ * Li_batch: the paths advance bounce by bounce together, their rays traced
+ * as Embree packets) and splatted in sample order afterwards. */
 #ifndef RSW_RENDER_H
 #define RSW_RENDER_H
 

@@ -144,12 +144,14 @@ int main(void) {
          "\"bytes_per_instance\": %.0f, \"embree_bytes_per_instance\": %.0f, \"rays_per_s\": %.4g, "
          "\"ceiling_rays_per_s\": %.4g, \"ratio_to_ceiling\": %.3f, \"threads\": %d, \"spp\": %u, "
          "\"wall_s\": %.3f, \"instances\": %d, \"sensor\": \"mdistant 76\", \"periodic\": true, "
-         "\"replay_ceiling_rays_per_s\": %.4g, \"ratio_to_replay_ceiling\": %.3f, \"target_ratio_to_replay\": 0.6, "
+         "\"replay_ceiling_rays_per_s\": %.4g, \"ratio_to_replay_ceiling\": %.3f, "
+         "\"target_ratio_to_replay\": 0.6, "
          "\"meets_target\": %s}\n",
          load_s, rss1 / 1048576.0, emb1 / 1048576.0, (rss1 - rss0) / N_LEAVES, (emb1 - emb0) / N_LEAVES, rps,
          ceiling, ceiling > 0 ? rps / ceiling : 0, st.threads, spp, st.wall_s, N_LEAVES, replay,
          replay > 0 ? rps / replay : 0,
-         load_s <= 2.0 && (rss1 - rss0) / N_LEAVES <= 1024 && replay > 0 && rps / replay >= 0.6 ? "true" : "false");
+         load_s <= 2.0 && (rss1 - rss0) / N_LEAVES <= 1024 && replay > 0 && rps / replay >= 0.6 ? "true"
+                                                                                                : "false");
   scene_free(s);
   unlink(list);
   unlink(json);

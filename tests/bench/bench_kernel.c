@@ -74,8 +74,9 @@ static double median(double *v, size_t n) {
 
 static double bench_replay_ceiling(scene *s, uint32_t spp, double rays_per_sample, int threads,
                                    double *flat_replay) {
-  uint32_t rspp = (uint32_t)fmax(1, fmin(spp, REPLAY_RAYS / fmax(1, rays_per_sample) /
-                                              ((double)s->sensors[0]->film->width * s->sensors[0]->film->height)));
+  uint32_t rspp =
+      (uint32_t)fmax(1, fmin(spp, REPLAY_RAYS / fmax(1, rays_per_sample) /
+                                      ((double)s->sensors[0]->film->width * s->sensors[0]->film->height)));
   accel_ray_log *lg = accel_record_begin(REPLAY_RAYS);
   if (!lg) return 0;
   render_opts o = {.size = sizeof o, .spp = rspp, .seed = 2, .threads = 1};
@@ -139,9 +140,10 @@ static int report(const char *name, scene *s, uint32_t spp, int threads, double 
          ceiling > 0 ? rps / ceiling : 0, used_threads, spp, rays, (unsigned long long)shadow, flat,
          flat > 0 ? ceiling / flat : 0, REPEATS);
   printf(", \"replay_ceiling_rays_per_s\": %.4g, \"ratio_to_replay_ceiling\": %.3f, \"packet_width\": %d, "
-         "\"trace_share\": %.3f, \"isa\": \"sse2\", \"flat_replay_rays_per_s\": %.4g, \"replay_flat_over_two_level\": %.3f",
-         replay, replay > 0 ? rps / replay : 0, accel_packet_width(), busy > 0 ? trace / busy : 0, flat_replay,
-         replay > 0 ? flat_replay / replay : 0);
+         "\"trace_share\": %.3f, \"isa\": \"sse2\", \"flat_replay_rays_per_s\": %.4g, "
+         "\"replay_flat_over_two_level\": %.3f",
+         replay, replay > 0 ? rps / replay : 0, accel_packet_width(), busy > 0 ? trace / busy : 0,
+         flat_replay, replay > 0 ? flat_replay / replay : 0);
   if (target_wall > 0)
     printf(", \"target_wall_s\": %.2f, \"meets_target\": %s", target_wall,
            w < target_wall ? "true" : "false");

@@ -64,18 +64,19 @@ static void test_threads_cornell(void) {
 }
 
 static void test_threads_periodic(void) {
-  scene *s = tsup_load("{\"type\": \"scene\", \"variant\": \"mono\","
-                       " \"cam\": {\"type\": \"hdistant\", \"film\": {\"type\": \"hdrfilm\", \"width\": 12,"
-                       "   \"height\": 12, \"rfilter\": {\"type\": \"box\"}}},"
-                       " \"integrator\": {\"type\": \"path\", \"max_depth\": 5},"
-                       " \"periodic\": {\"type\": \"periodic\", \"min\": [-1, -1], \"max\": [1, 1]},"
-                       " \"sky\": {\"type\": \"constant\", \"radiance\": 0.2},"
-                       " \"sun\": {\"type\": \"directional\", \"direction\": [0.5, 0.2, -1]},"
-                       " \"soil\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": "
-                       "0.3}},"
-                       " \"leaf\": {\"type\": \"disk\", \"to_world\": [{\"scale\": 0.4}, {\"translate\": [0.9, 0, "
-                       "0.5]}], \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}",
-                       NULL);
+  scene *s =
+      tsup_load("{\"type\": \"scene\", \"variant\": \"mono\","
+                " \"cam\": {\"type\": \"hdistant\", \"film\": {\"type\": \"hdrfilm\", \"width\": 12,"
+                "   \"height\": 12, \"rfilter\": {\"type\": \"box\"}}},"
+                " \"integrator\": {\"type\": \"path\", \"max_depth\": 5},"
+                " \"periodic\": {\"type\": \"periodic\", \"min\": [-1, -1], \"max\": [1, 1]},"
+                " \"sky\": {\"type\": \"constant\", \"radiance\": 0.2},"
+                " \"sun\": {\"type\": \"directional\", \"direction\": [0.5, 0.2, -1]},"
+                " \"soil\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": "
+                "0.3}},"
+                " \"leaf\": {\"type\": \"disk\", \"to_world\": [{\"scale\": 0.4}, {\"translate\": [0.9, 0, "
+                "0.5]}], \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}",
+                NULL);
   REQUIRE(s, "periodic scene");
   check_threads(s, 32, "periodic");
   scene_free(s);
@@ -133,16 +134,16 @@ static void test_batch_independent(void) {
     sa += La[i].c[0] + La[i].c[1] + La[i].c[2];
     sc += Lc[i].c[0] + Lc[i].c[1] + Lc[i].c[2];
   }
-  printf("  %d paths: %d bitwise equal split in two batches, %d one by one (single-ray queries)\n", n, same_ab,
-         same_ac);
+  printf("  %d paths: %d bitwise equal split in two batches, %d one by one (single-ray queries)\n", n,
+         same_ab, same_ac);
   CHECK(same_ab >= n - n / 100, "regrouped batches: only %d of %d paths equal", same_ab, n);
   CHECK(same_ac >= n - n / 100, "one path at a time: only %d of %d paths equal", same_ac, n);
   /* A path whose hit rounds differently goes elsewhere from there on (a
    * dielectric's branch, the roulette): its value is another sample of the
    * same estimator, so the sums agree statistically only. */
   printf("  sums %.6f (batch) and %.6f (one by one)\n", sa, sc);
-  CHECK(same_ab == n, "regrouped batches must not change a path (packets of the same width): %d of %d", same_ab,
-        n);
+  CHECK(same_ab == n, "regrouped batches must not change a path (packets of the same width): %d of %d",
+        same_ab, n);
   free(st0), free(st), free(rays), free(La), free(Lb), free(Lc);
   scene_free(s);
 }
@@ -169,7 +170,8 @@ static void test_packet_widths(void) {
     tsup_stats(&img, 0, &m, &e);
     size_t n = (size_t)img.width * img.height * img.channels, same = 0;
     for (size_t i = 0; i < n; i++) same += memcmp(&img.data[i], &ref.data[i], sizeof(float)) == 0;
-    printf("  width %2d: mean %.6f (native %.6f), %zu of %zu values bitwise equal\n", widths[k], m, m0, same, n);
+    printf("  width %2d: mean %.6f (native %.6f), %zu of %zu values bitwise equal\n", widths[k], m, m0, same,
+           n);
     CHECK(fabs(m - m0) <= 3 * sqrt(e * e + e0 * e0) + 1e-12, "width %d: mean %.6f vs %.6f", widths[k], m, m0);
     /* Embree's packet kernels of 4, 8 and 16 lanes round alike here
      * (observed: bitwise-equal films); its single-ray kernel rounds some
@@ -191,7 +193,8 @@ static void test_stats_counters(void) {
   render_result_stats st;
   rsw_err err = {0};
   REQUIRE(render_sensor(s, &o, &img, &st, &err) == RSW_OK, "render: %s", err.msg);
-  CHECK(st.rays.camera_rays == st.samples, "camera rays %llu, samples %llu (every perspective ray has weight)",
+  CHECK(st.rays.camera_rays == st.samples,
+        "camera rays %llu, samples %llu (every perspective ray has weight)",
         (unsigned long long)st.rays.camera_rays, (unsigned long long)st.samples);
   CHECK(st.rays.rays > st.rays.camera_rays, "continuation rays");
   CHECK(st.rays.trace_s > 0 && st.rays.trace_s <= st.busy_s, "trace %.6f s of busy %.6f s", st.rays.trace_s,
