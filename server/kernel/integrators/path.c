@@ -126,6 +126,7 @@ typedef struct lane {
   bool prev_delta, wrapped;
   int depth;
   trace_result hit;
+  accel_hit h; /* the hit, between the packet queries and the surface data */
   /* Next-event estimation between the shading and the shading's end. */
   bool nee;
   trace_result occ;
@@ -159,26 +160,27 @@ static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_
   enum {
     P = 16
   };
+  /* All packets first (timed as one), then every hit's surface data. */
+  double t0 = timed ? clock_s() : 0;
   for (int k0 = 0; k0 < n; k0 += P) {
     int m = n - k0 < P ? n - k0 : P;
     const ray3 *rp[P];
     accel_hit h[P];
     bool hit[P];
     for (int k = 0; k < m; k++) rp[k] = &ln[idx[k0 + k]].ray;
-    double t0 = timed ? clock_s() : 0;
     accel_intersect_packet(sc->accel, rp, m, h, hit, coherent);
-    if (timed) stats->trace_s += clock_s() - t0;
-    stats->rays += (uint64_t)m;
     for (int k = 0; k < m; k++) {
       lane *l = &ln[idx[k0 + k]];
-      l->wrapped = false;
-      if (!hit[k]) {
-        l->hit = TRACE_MISS;
-        continue;
-      }
-      hit_fill_interaction(sc, &l->ray, &h[k], &l->si);
-      l->hit = TRACE_HIT;
+      l->hit = hit[k] ? TRACE_HIT : TRACE_MISS;
+      if (hit[k]) l->h = h[k];
     }
+  }
+  if (timed) stats->trace_s += clock_s() - t0;
+  stats->rays += (uint64_t)n;
+  for (int k = 0; k < n; k++) {
+    lane *l = &ln[idx[k]];
+    l->wrapped = false;
+    if (l->hit == TRACE_HIT) hit_fill_interaction(sc, &l->ray, &l->h, &l->si);
   }
 }
 
