@@ -96,6 +96,7 @@ static int cmd_render(int argc, char **argv) {
   unsigned quantities = 0;
   bool variance = false;
   png_look look = {0};
+  bool stats = false;
   int rc = 1;
   scene *sc = NULL;
   film_image img = {0};
@@ -163,6 +164,8 @@ static int cmd_render(int argc, char **argv) {
     } else if (strcmp(a, "--plugin-dir") == 0) {
       if (!val) USAGE("%s needs a directory", a);
       plugin_dir = val, i++;
+    } else if (strcmp(a, "--stats") == 0) {
+      stats = true;
     } else if (strncmp(a, "-D", 2) == 0) {
       const char *def = a[2] ? a + 2 : val;
       if (!a[2]) i++;
@@ -226,6 +229,11 @@ static int cmd_render(int argc, char **argv) {
   if (render_sensor(sc, &ro, &img, &rs, &err)) {
     fprintf(stderr, "raysweepd render: %s\n", rsw_err_format(&err, msg, sizeof msg));
     goto out;
+  }
+  if (stats) {
+    char line[600];
+    render_stats_line(&rs, line, sizeof line);
+    fprintf(stderr, "raysweepd render: stats: %s\n", line);
   }
   if (rs.invalid_samples)
     fprintf(stderr, "raysweepd render: warning: %llu samples were NaN or infinite and were dropped\n",
@@ -429,7 +437,7 @@ static const command commands[] = {
     {"render",
      "render SCENE [-D name=value]... [--set KEY=VALUE]... [--sensor ID] [--spp N] [--seed S] "
      "[--wavelength NM] [--threads N] [--variant mono|rgb] [--plugin-dir DIR] [--quantities LIST] "
-     "[--variance] [--exposure EV] [--colormap MAP] -o OUT.exr|OUT.png",
+     "[--variance] [--exposure EV] [--colormap MAP] [--stats] -o OUT.exr|OUT.png",
      "load a scene, apply parameter updates, render one sensor to OpenEXR or a PNG quick-look",
      "  SCENE               a .xml (Mitsuba XML) or .json scene file\n"
      "  -o, --output OUT    the film; written next to it and renamed once complete; a name ending\n"
@@ -449,6 +457,7 @@ static const command commands[] = {
      "                      (box rfilter, spp >= 2)\n"
      "  --exposure EV       PNG only: scale by 2^EV after mapping the brightest value to white (default 0)\n"
      "  --colormap MAP      PNG only, one-channel films: gray (default), viridis or inferno\n"
+     "  --stats             one summary line on stderr: samples/s, rays by kind, time tracing vs shading\n"
      "Exit status: 0 ok, 1 the scene failed to load or render, 2 command-line mistake.\n",
      cmd_render},
     {"params",

@@ -995,6 +995,72 @@ void accel_get_counters(const accel *a, accel_counters *out) {
     memset(out, 0, sizeof *out);
 }
 
+/* ---- ray recording (make bench's replay ceiling) ------------------------------------------ */
+
+/* One recorded query, as Embree saw it (after fill_ray). */
+typedef struct rec_ray {
+  float o[3], d[3], tnear, tfar;
+  uint8_t occluded; /* an occlusion query */
+  uint8_t width;    /* first ray of a query: the lanes of its packet (1: rtcIntersect1/Occluded1) */
+} rec_ray;
+
+struct accel_ray_log {
+  rec_ray *r;
+  size_t cap;
+  _Atomic size_t n;
+};
+
+static accel_ray_log *_Atomic g_rec; /* the log being recorded into, or NULL */
+
+accel_ray_log *accel_record_begin(size_t max_rays) {
+  accel_ray_log *lg = calloc(1, sizeof *lg);
+  if (!lg) return NULL;
+  lg->r = malloc((max_rays ? max_rays : 1) * sizeof *lg->r);
+  if (!lg->r) {
+    free(lg);
+    return NULL;
+  }
+  lg->cap = max_rays;
+  atomic_store(&lg->n, 0);
+  atomic_store(&g_rec, lg);
+  return lg;
+}
+
+void accel_record_end(void) {
+  atomic_store(&g_rec, NULL);
+}
+
+size_t accel_ray_log_count(const accel_ray_log *lg) {
+  size_t n = atomic_load(&((accel_ray_log *)lg)->n);
+  return n < lg->cap ? n : lg->cap;
+}
+
+void accel_ray_log_free(accel_ray_log *lg) {
+  if (!lg) return;
+  free(lg->r);
+  free(lg);
+}
+
+/* Record k rays (lanes of one query); the whole query or nothing. */
+static void record_rays(const struct RTCRay *const *rays, unsigned k, unsigned width, bool occluded) {
+  accel_ray_log *lg = atomic_load(&g_rec);
+  if (!lg || k == 0) return;
+  size_t at = atomic_fetch_add(&lg->n, k);
+  if (at + k > lg->cap) {
+    atomic_store(&lg->n, lg->cap); /* full: later queries are not recorded */
+    return;
+  }
+  for (unsigned i = 0; i < k; i++) {
+    const struct RTCRay *ray = rays[i];
+    rec_ray *q = &lg->r[at + i];
+    q->o[0] = ray->org_x, q->o[1] = ray->org_y, q->o[2] = ray->org_z;
+    q->d[0] = ray->dir_x, q->d[1] = ray->dir_y, q->d[2] = ray->dir_z;
+    q->tnear = ray->tnear, q->tfar = ray->tfar;
+    q->occluded = occluded;
+    q->width = i == 0 ? (uint8_t)width : 0;
+  }
+}
+
 /* ---- queries ------------------------------------------------------------------------------- */
 
 /* The ray Embree traces for r: origin relative to the frame's origin c;
@@ -1008,10 +1074,13 @@ static bool fill_ray(const accel *a, struct RTCRay *ray, const ray3 *r, double *
   vec3 d = r->d, oc = v3_sub(r->o, a->origin);
   double tmin = r->tmin, tmax = r->tmax;
   *t0 = 0, *ts = 1;
-  double len = v3_len(d);
-  if (!v3_finite(oc) || !(len > 0) || !isfinite(len) || isnan(tmin) || !(tmax >= tmin)) return false;
+  /* The squared length decides (no square root for the usual direction):
+   * len2 is finite and positive exactly when v3_len is. */
+  double len2 = v3_dot(d, d);
+  if (!v3_finite(oc) || !(len2 > 0) || !isfinite(len2) || isnan(tmin) || !(tmax >= tmin)) return false;
   tmin = fmax(tmin, 0.0); /* Embree's segment starts at the origin or later */
-  if (len > ACCEL_MAX_DIR || len < 1.0 / ACCEL_MAX_DIR) {
+  if (len2 > ACCEL_MAX_DIR * ACCEL_MAX_DIR || len2 < 1.0 / (ACCEL_MAX_DIR * ACCEL_MAX_DIR)) {
+    double len = sqrt(len2);
     d = v3_scale(d, 1.0 / len);
     tmin *= len, tmax *= len; /* in units of the unit direction */
     *ts = 1.0 / len;
@@ -1050,6 +1119,10 @@ bool accel_intersect(const accel *a, const ray3 *r, accel_hit *h) {
   struct RTCRayHit rh;
   double t0, ts;
   if (!fill_ray(a, &rh.ray, r, &t0, &ts)) return false;
+  if (atomic_load_explicit(&g_rec, memory_order_relaxed)) {
+    const struct RTCRay *rp = &rh.ray;
+    record_rays(&rp, 1, 1, false);
+  }
   rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
   rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
   rtcIntersect1(a->top, &ctx, &rh);
@@ -1077,8 +1150,188 @@ bool accel_occluded(const accel *a, const ray3 *r) {
   struct RTCRay ray;
   double t0, ts;
   if (!fill_ray(a, &ray, r, &t0, &ts)) return false;
+  if (atomic_load_explicit(&g_rec, memory_order_relaxed)) {
+    const struct RTCRay *rp = &ray;
+    record_rays(&rp, 1, 1, true);
+  }
   rtcOccluded1(a->top, &ctx, &ray);
   return ray.tfar < 0;
+}
+
+/* ---- packet queries ---------------------------------------------------------------------------- */
+
+/* Widest packet the device traces natively: 16 (AVX-512), 8 (AVX/AVX2),
+ * 4 (SSE), or 1 when Embree was built without packet support. Asked once
+ * per process: it depends on the CPU and on how Embree was built only. */
+static int g_packet_width;
+static pthread_once_t g_packet_once = PTHREAD_ONCE_INIT;
+static int g_packet_pin; /* accel_set_packet_width (0: native) */
+
+static void packet_width_init(void) {
+  RTCDevice d = device_get();
+  int w = 1;
+  if (d) {
+    if (rtcGetDeviceProperty(d, RTC_DEVICE_PROPERTY_NATIVE_RAY16_SUPPORTED))
+      w = 16;
+    else if (rtcGetDeviceProperty(d, RTC_DEVICE_PROPERTY_NATIVE_RAY8_SUPPORTED))
+      w = 8;
+    else if (rtcGetDeviceProperty(d, RTC_DEVICE_PROPERTY_NATIVE_RAY4_SUPPORTED))
+      w = 4;
+    (void)rtcGetDeviceError(d);
+  }
+  g_packet_width = w;
+}
+
+int accel_packet_width(void) {
+  pthread_once(&g_packet_once, packet_width_init);
+  int w = g_packet_width;
+  if (g_packet_pin > 0 && g_packet_pin < w) w = g_packet_pin;
+  return w;
+}
+
+void accel_set_packet_width(int w) {
+  g_packet_pin = w == 16 || w == 8 || w == 4 || w == 1 ? w : 0;
+}
+
+/* One SOA packet of up to 16 rays with their hits (RTCRayHit16's layout,
+ * addressed through RAYN_F/HITN_*: the same memory serves N = 4, 8, 16). */
+typedef struct packet_buf {
+  _Alignas(64) float f[(RAY_FIELDS + HIT_INST + 1) * 16];
+  _Alignas(64) int valid[16];
+  double t0[16], ts[16];
+  struct RTCRay rec[16]; /* the lanes' rays, for accel_record_begin's log */
+} packet_buf;
+
+static void packet_record(const packet_buf *pb, unsigned N, int n, bool occluded) {
+  if (!atomic_load_explicit(&g_rec, memory_order_relaxed)) return;
+  const struct RTCRay *rp[16];
+  unsigned k = 0;
+  for (int i = 0; i < n; i++)
+    if (pb->valid[i]) rp[k++] = &pb->rec[i];
+  record_rays(rp, k, N, occluded);
+}
+
+/* Fill lane i of an N-wide packet from r (fill_ray's rules); false leaves
+ * the lane invalid. */
+static bool packet_fill(const accel *a, packet_buf *pb, unsigned N, unsigned i, const ray3 *r) {
+  struct RTCRay ray;
+  if (!fill_ray(a, &ray, r, &pb->t0[i], &pb->ts[i])) {
+    pb->valid[i] = 0;
+    return false;
+  }
+  if (atomic_load_explicit(&g_rec, memory_order_relaxed)) pb->rec[i] = ray;
+  float *p = pb->f;
+  RAYN_F(p, N, RAY_ORG, i) = ray.org_x;
+  RAYN_F(p, N, RAY_ORG + 1, i) = ray.org_y;
+  RAYN_F(p, N, RAY_ORG + 2, i) = ray.org_z;
+  RAYN_F(p, N, RAY_TNEAR, i) = ray.tnear;
+  RAYN_F(p, N, RAY_DIR, i) = ray.dir_x;
+  RAYN_F(p, N, RAY_DIR + 1, i) = ray.dir_y;
+  RAYN_F(p, N, RAY_DIR + 2, i) = ray.dir_z;
+  RAYN_F(p, N, 7, i) = 0; /* time */
+  RAYN_F(p, N, RAY_TFAR, i) = ray.tfar;
+  ((unsigned *)p)[9 * N + i] = 0xFFFFFFFFu; /* mask */
+  ((unsigned *)p)[10 * N + i] = i;          /* id */
+  ((unsigned *)p)[11 * N + i] = 0;          /* flags */
+  float *hit = p + (size_t)RAY_FIELDS * N;
+  HITN_U(hit, N, HIT_GEOM, i) = RTC_INVALID_GEOMETRY_ID;
+  HITN_U(hit, N, HIT_INST, i) = RTC_INVALID_GEOMETRY_ID;
+  pb->valid[i] = -1;
+  return true;
+}
+
+static unsigned packet_n(int n) {
+  int w = accel_packet_width();
+  return n <= 4 && w >= 4 ? 4u : n <= 8 && w >= 8 ? 8u : (unsigned)w;
+}
+
+void accel_intersect_packet(const accel *a, const ray3 *const *r, int n, accel_hit *h, bool *hit,
+                            bool coherent) {
+  unsigned N = packet_n(n);
+  if (n > (int)N && N > 1) { /* more rays than one packet holds */
+    for (int k = 0; k < n; k += (int)N)
+      accel_intersect_packet(a, r + k, n - k < (int)N ? n - k : (int)N, h + k, hit + k, coherent);
+    return;
+  }
+  if (N == 1 || n == 1) {
+    for (int i = 0; i < n; i++) hit[i] = accel_intersect(a, r[i], &h[i]);
+    return;
+  }
+  struct RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  if (coherent) ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+  packet_buf pb;
+  bool any = false;
+  for (unsigned i = 0; i < N; i++) {
+    if ((int)i < n)
+      any |= packet_fill(a, &pb, N, i, r[i]);
+    else
+      pb.valid[i] = 0;
+  }
+  if (any) {
+    packet_record(&pb, N, n, false);
+    if (N == 16)
+      rtcIntersect16(pb.valid, a->top, &ctx, (struct RTCRayHit16 *)pb.f);
+    else if (N == 8)
+      rtcIntersect8(pb.valid, a->top, &ctx, (struct RTCRayHit8 *)pb.f);
+    else
+      rtcIntersect4(pb.valid, a->top, &ctx, (struct RTCRayHit4 *)pb.f);
+  }
+  const float *p = pb.f;
+  const float *hb = p + (size_t)RAY_FIELDS * N;
+  for (int i = 0; i < n; i++) {
+    unsigned geom = HITN_U(hb, N, HIT_GEOM, i);
+    hit[i] = pb.valid[i] && geom != RTC_INVALID_GEOMETRY_ID;
+    if (!hit[i]) continue;
+    accel_hit *o = &h[i];
+    o->t = pb.t0[i] + RAYN_F(p, N, RAY_TFAR, i) * pb.ts[i];
+    uint32_t id = HITN_U(hb, N, HIT_INST, i);
+    if (id < a->n_sub) {
+      o->shape = id;
+      o->sub = 0;
+    } else {
+      o->shape = a->list_shape[id - a->n_sub];
+      o->sub = a->list_sub[id - a->n_sub];
+    }
+    o->member = geom;
+    o->prim = HITN_U(hb, N, HIT_PRIM, i);
+    o->u = HITN_F(hb, N, HIT_U, i);
+    o->v = HITN_F(hb, N, HIT_V, i);
+    o->ng = v3(HITN_F(hb, N, HIT_NG, i), HITN_F(hb, N, HIT_NG + 1, i), HITN_F(hb, N, HIT_NG + 2, i));
+  }
+}
+
+void accel_occluded_packet(const accel *a, const ray3 *const *r, int n, bool *occ) {
+  unsigned N = packet_n(n);
+  if (n > (int)N && N > 1) {
+    for (int k = 0; k < n; k += (int)N)
+      accel_occluded_packet(a, r + k, n - k < (int)N ? n - k : (int)N, occ + k);
+    return;
+  }
+  if (N == 1 || n == 1) {
+    for (int i = 0; i < n; i++) occ[i] = accel_occluded(a, r[i]);
+    return;
+  }
+  struct RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  packet_buf pb;
+  bool any = false;
+  for (unsigned i = 0; i < N; i++) {
+    if ((int)i < n)
+      any |= packet_fill(a, &pb, N, i, r[i]);
+    else
+      pb.valid[i] = 0;
+  }
+  if (any) {
+    packet_record(&pb, N, n, true);
+    if (N == 16)
+      rtcOccluded16(pb.valid, a->top, &ctx, (struct RTCRay16 *)pb.f);
+    else if (N == 8)
+      rtcOccluded8(pb.valid, a->top, &ctx, (struct RTCRay8 *)pb.f);
+    else
+      rtcOccluded4(pb.valid, a->top, &ctx, (struct RTCRay4 *)pb.f);
+  }
+  for (int i = 0; i < n; i++) occ[i] = pb.valid[i] && RAYN_F(pb.f, N, RAY_TFAR, i) < 0;
 }
 
 /* ---- measurement ------------------------------------------------------------------------------ */
@@ -1223,4 +1476,133 @@ double accel_ceiling_rays_per_s(const scene *s, bool flat, uint64_t n_rays, int 
   if (flat) rtcReleaseScene(sc);
   double dt = (t1.tv_sec - t0.tv_sec) + 1e-9 * (t1.tv_nsec - t0.tv_nsec);
   return ok && dt > 0 ? (double)(n_rays / (uint64_t)threads) * started / dt : 0;
+}
+
+/* ---- replay ceiling ------------------------------------------------------------------------- */
+
+typedef struct replay_job {
+  RTCScene top;
+  const rec_ray *r;
+  size_t lo, hi; /* queries starting in [lo, hi) */
+  size_t n_end;  /* records in the log */
+  ceiling_sync *sync;
+  uint64_t hits;
+} replay_job;
+
+static void *replay_worker(void *arg) {
+  replay_job *j = arg;
+  pthread_mutex_lock(&j->sync->lock);
+  j->sync->ready++;
+  pthread_cond_broadcast(&j->sync->cond);
+  while (!j->sync->go) pthread_cond_wait(&j->sync->cond, &j->sync->lock);
+  pthread_mutex_unlock(&j->sync->lock);
+  struct RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  uint64_t hits = 0;
+  size_t i = j->lo;
+  while (i < j->hi) {
+    const rec_ray *q = &j->r[i];
+    unsigned w = q->width ? q->width : 1;
+    size_t k = 1;
+    while (i + k < j->n_end && k < w && j->r[i + k].width == 0) k++;
+    if (w == 1) {
+      struct RTCRayHit rh;
+      rh.ray.org_x = q->o[0], rh.ray.org_y = q->o[1], rh.ray.org_z = q->o[2];
+      rh.ray.dir_x = q->d[0], rh.ray.dir_y = q->d[1], rh.ray.dir_z = q->d[2];
+      rh.ray.tnear = q->tnear, rh.ray.tfar = q->tfar, rh.ray.time = 0, rh.ray.mask = 0xFFFFFFFFu;
+      rh.ray.id = 0, rh.ray.flags = 0;
+      if (q->occluded) {
+        rtcOccluded1(j->top, &ctx, &rh.ray);
+        hits += rh.ray.tfar < 0;
+      } else {
+        rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+        rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+        rtcIntersect1(j->top, &ctx, &rh);
+        hits += rh.hit.geomID != RTC_INVALID_GEOMETRY_ID;
+      }
+    } else {
+      packet_buf pb;
+      for (unsigned l = 0; l < w; l++) {
+        if (l >= k) {
+          pb.valid[l] = 0;
+          continue;
+        }
+        const rec_ray *p = &j->r[i + l];
+        float *f = pb.f;
+        RAYN_F(f, w, RAY_ORG, l) = p->o[0], RAYN_F(f, w, RAY_ORG + 1, l) = p->o[1];
+        RAYN_F(f, w, RAY_ORG + 2, l) = p->o[2];
+        RAYN_F(f, w, RAY_DIR, l) = p->d[0], RAYN_F(f, w, RAY_DIR + 1, l) = p->d[1];
+        RAYN_F(f, w, RAY_DIR + 2, l) = p->d[2];
+        RAYN_F(f, w, RAY_TNEAR, l) = p->tnear, RAYN_F(f, w, 7, l) = 0, RAYN_F(f, w, RAY_TFAR, l) = p->tfar;
+        ((unsigned *)f)[9 * w + l] = 0xFFFFFFFFu;
+        ((unsigned *)f)[10 * w + l] = l;
+        ((unsigned *)f)[11 * w + l] = 0;
+        float *hb = f + (size_t)RAY_FIELDS * w;
+        HITN_U(hb, w, HIT_GEOM, l) = RTC_INVALID_GEOMETRY_ID;
+        HITN_U(hb, w, HIT_INST, l) = RTC_INVALID_GEOMETRY_ID;
+        pb.valid[l] = -1;
+      }
+      if (q->occluded) {
+        if (w == 16)
+          rtcOccluded16(pb.valid, j->top, &ctx, (struct RTCRay16 *)pb.f);
+        else if (w == 8)
+          rtcOccluded8(pb.valid, j->top, &ctx, (struct RTCRay8 *)pb.f);
+        else
+          rtcOccluded4(pb.valid, j->top, &ctx, (struct RTCRay4 *)pb.f);
+        for (size_t l = 0; l < k; l++) hits += RAYN_F(pb.f, w, RAY_TFAR, l) < 0;
+      } else {
+        if (w == 16)
+          rtcIntersect16(pb.valid, j->top, &ctx, (struct RTCRayHit16 *)pb.f);
+        else if (w == 8)
+          rtcIntersect8(pb.valid, j->top, &ctx, (struct RTCRayHit8 *)pb.f);
+        else
+          rtcIntersect4(pb.valid, j->top, &ctx, (struct RTCRayHit4 *)pb.f);
+        const float *hb = pb.f + (size_t)RAY_FIELDS * w;
+        for (size_t l = 0; l < k; l++) hits += HITN_U(hb, w, HIT_GEOM, l) != RTC_INVALID_GEOMETRY_ID;
+      }
+    }
+    i += k;
+  }
+  j->hits = hits;
+  return NULL;
+}
+
+double accel_replay_rays_per_s(const scene *s, const accel_ray_log *lg, int threads, bool flat) {
+  size_t n = accel_ray_log_count(lg);
+  const accel *a = s->accel;
+  if (!a || n == 0 || threads < 1 || threads > 256) return 0;
+  RTCScene top = flat ? build_flat(s) : a->top;
+  if (!top) return 0;
+  replay_job jobs[256];
+  pthread_t th[256];
+  ceiling_sync sync = {.ready = 0};
+  pthread_mutex_init(&sync.lock, NULL);
+  pthread_cond_init(&sync.cond, NULL);
+  /* Contiguous shares, cut at query starts. */
+  size_t lo = 0;
+  int started = 0;
+  for (int t = 0; t < threads; t++) {
+    size_t hi = t == threads - 1 ? n : n * (size_t)(t + 1) / (size_t)threads;
+    while (hi < n && lg->r[hi].width == 0) hi++;
+    if (hi < lo) hi = lo;
+    jobs[t] = (replay_job){.top = top, .r = lg->r, .lo = lo, .hi = hi, .n_end = n, .sync = &sync};
+    lo = hi;
+    if (pthread_create(&th[t], NULL, replay_worker, &jobs[t]) != 0) break;
+    started++;
+  }
+  pthread_mutex_lock(&sync.lock);
+  while (sync.ready < started) pthread_cond_wait(&sync.cond, &sync.lock);
+  sync.go = true;
+  pthread_cond_broadcast(&sync.cond);
+  pthread_mutex_unlock(&sync.lock);
+  struct timespec t0, t1;
+  clock_gettime(CLOCK_MONOTONIC, &t0);
+  for (int t = 0; t < started; t++) pthread_join(th[t], NULL);
+  clock_gettime(CLOCK_MONOTONIC, &t1);
+  pthread_mutex_destroy(&sync.lock);
+  pthread_cond_destroy(&sync.cond);
+  if (flat) rtcReleaseScene(top);
+  double dt = (t1.tv_sec - t0.tv_sec) + 1e-9 * (t1.tv_nsec - t0.tv_nsec);
+  size_t done = started == threads ? n : 0;
+  return done && dt > 0 ? (double)done / dt : 0;
 }

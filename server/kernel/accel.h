@@ -51,6 +51,25 @@ bool accel_intersect(const accel *a, const ray3 *r, accel_hit *h);
 /* Any hit on [r->tmin, r->tmax]. Thread-safe. */
 bool accel_occluded(const accel *a, const ray3 *r);
 
+/* Packet queries (the wavefront integrator, integrators/path.c): n rays
+ * traced together, up to 16 at a time, as Embree packets of 4, 8 or 16 lanes (the
+ * widest the CPU and Embree support, or accel_set_packet_width's pin);
+ * the rays should belong together (same bounce of neighbouring paths).
+ * Per ray the same queries as accel_intersect / accel_occluded (fill_ray's
+ * rules, same hit record); Embree's packet kernels may round a hit
+ * distance differently from its single-ray kernel, so results agree with
+ * the single-ray calls to float precision, not bitwise. hit[i] / occ[i]:
+ * ray i hit something (h[i] filled) / is blocked. coherent: the rays share
+ * an origin region and nearly a direction (camera rays), an Embree hint. */
+void accel_intersect_packet(const accel *a, const ray3 *const *r, int n, accel_hit *h, bool *hit,
+                            bool coherent);
+void accel_occluded_packet(const accel *a, const ray3 *const *r, int n, bool *occ);
+/* Lanes of the packets those calls trace (16, 8, 4, or 1 without packet
+ * support), and a pin to a narrower width for the process (1, 4, 8 or 16;
+ * anything else: back to the widest). */
+int accel_packet_width(void);
+void accel_set_packet_width(int w);
+
 /* ---- float32 error bounds ---------------------------------------------------- */
 
 /* The world point Embree's frame is centred on (see above; the origin
@@ -119,5 +138,23 @@ size_t accel_embree_bytes(void);
  * world space, analytic shapes skipped) to measure what the two-level
  * layout costs. Returns 0 on failure. */
 double accel_ceiling_rays_per_s(const scene *s, bool flat, uint64_t n_rays, int threads, uint64_t seed);
+
+/* The replay ceiling: a render's own queries recorded once, as Embree saw
+ * them (float rays in its frame, each query's packet width and kind), then
+ * traced again by Embree alone with no shading, in the recorded packets and
+ * order, split into contiguous shares over `threads` threads. Recording is
+ * process-wide (one log at a time) and meant for one-thread renders (queries
+ * of concurrent threads would interleave); queries past max_rays are not
+ * recorded. Off (the default), each query pays one relaxed atomic load. */
+typedef struct accel_ray_log accel_ray_log;
+accel_ray_log *accel_record_begin(size_t max_rays); /* NULL: out of memory */
+void accel_record_end(void);
+size_t accel_ray_log_count(const accel_ray_log *lg);
+void accel_ray_log_free(accel_ray_log *lg);
+/* Recorded rays per second on s's structure; 0 on failure or an empty log.
+ * flat: on a single-level copy of s's triangles instead (world space,
+ * analytic shapes and instances left out, as accel_ceiling_rays_per_s):
+ * what a flat BVH would give on the render's own rays. */
+double accel_replay_rays_per_s(const scene *s, const accel_ray_log *lg, int threads, bool flat);
 
 #endif

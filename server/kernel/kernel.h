@@ -286,6 +286,8 @@ typedef struct render_stats {
   uint64_t rays;        /* intersection queries */
   uint64_t shadow_rays; /* occlusion queries */
   uint64_t unresolved;  /* periodic rays that neither hit nor left the slab (scene/periodic.h) */
+  double trace_s;       /* thread time spent in ray queries (batched integrators measure it; 0 otherwise) */
+  uint64_t camera_rays; /* paths started (sensor rays with a non-zero weight), counted in rays too */
 } render_stats;
 
 typedef struct integrator integrator;
@@ -294,6 +296,14 @@ typedef struct integrator_ops {
    * films), the Q, U, V of that radiance are added to quv[0..2]. */
   color (*Li)(const integrator *it, const struct scene *sc, sampler_state *st, ray3 ray, render_stats *stats,
               double *quv);
+  /* Optional: Li for n camera rays at once (a wave: the paths advance
+   * bounce by bounce together, their rays traced as packets). Path i uses
+   * st[i] alone, in the same order of draws as Li, so its result does not
+   * depend on the batch it is in (up to Embree's packet rounding, accel.h).
+   * L[i] (and quv[3 i .. 3 i + 2], zeroed first, when quv is not NULL) are
+   * written. False: out of memory (nothing is valid). */
+  bool (*Li_batch)(const integrator *it, const struct scene *sc, sampler_state *st, const ray3 *rays, int n,
+                   render_stats *stats, color *L, double *quv);
 } integrator_ops;
 struct integrator {
   object base;

@@ -8,10 +8,17 @@
  * radius 0.5 it lands in its own pixel with weight 1 (Mitsuba ignores the
  * jitter for placement), so a pixel is the plain mean of its samples; other
  * filters spread it over the pixels whose centres lie within the radius,
- * and a pixel is sum(f w L) / sum(f). */
+ * and a pixel is sum(f w L) / sum(f).
+ *
+ * Samples are taken in waves (render_tile, wave_flush): up to WAVE samples
+ * of a tile, pixel by pixel and sample by sample, get their camera rays,
+ * then go through the integrator's Li_batch together (or Li one by one for
+ * an integrator without it), then are splatted in that same order through
+ * splat(), so the tile's sums are those of a one-sample-at-a-time loop. */
 #include "render.h"
 
 #include <pthread.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
@@ -61,6 +68,7 @@ typedef struct job {
   /* Stats (merged under lock). */
   render_stats rays;
   uint64_t samples, invalid;
+  double busy_s;
   /* Work distribution (under the pool's lock; see "the worker pool"). */
   size_t next_tile;
   int max_workers; /* threads that may work on it at once, caller included */
@@ -122,10 +130,6 @@ static void splat(const job *jb, tile_buf *tb, double px, double py, color v, co
 
 static double now_s(void);
 
-/* How often (in samples) a pixel's sample loop looks for a cancel or a
- * passed deadline: a clock read per 64 paths costs nothing measurable. */
-#define STOP_CHECK_SAMPLES 64
-
 /* True when the render must stop: cancelled, or past its deadline (which
  * marks the job stopped, so the render answers RSW_ERR_TIMEOUT). */
 static bool job_should_stop(job *jb) {
@@ -137,13 +141,87 @@ static bool job_should_stop(job *jb) {
   return false;
 }
 
+/* Samples per wave (integrator_ops.Li_batch): enough paths that each
+ * bounce fills Embree packets and the shading stages stay hot in the
+ * instruction cache, few enough that the lanes' state stays in L2. */
+#ifndef WAVE
+#define WAVE 256
+#endif
+
+/* One sample of a wave: where it lands and its camera ray. */
+typedef struct wave_sample {
+  double px, py, w;
+} wave_sample;
+
+typedef struct wave_buf {
+  wave_sample ws[WAVE];
+  sampler_state st[WAVE];
+  ray3 ray[WAVE];
+  color L[WAVE];
+  double quv[3 * WAVE];
+  int live[WAVE];
+} wave_buf;
+
+/* Trace and splat samples [0, n) of wb: the live ones (w != 0) go through
+ * the integrator together; every sample is splatted in order, so the tile's
+ * sums are those of the one-sample loop. False: out of memory. */
+static bool wave_flush(job *jb, tile_buf *tb, wave_buf *wb, int n, render_stats *rs, uint64_t *invalid) {
+  const integrator *it = jb->sc->integrator;
+  int m = 0;
+  for (int i = 0; i < n; i++) /* compacted in place: live sample k's state and ray move to slot k */
+    if (wb->ws[i].w != 0) {
+      wb->live[m] = i;
+      if (m != i) {
+        wb->st[m] = wb->st[i];
+        wb->ray[m] = wb->ray[i];
+      }
+      m++;
+    }
+  rs->camera_rays += (uint64_t)m;
+  double *quv = jb->stokes ? wb->quv : NULL;
+  if (it->ops->Li_batch) {
+    if (m && !it->ops->Li_batch(it, jb->sc, wb->st, wb->ray, m, rs, wb->L, quv)) return false;
+  } else {
+    for (int k = 0; k < m; k++) {
+      double *q = &wb->quv[3 * k];
+      q[0] = q[1] = q[2] = 0;
+      wb->L[k] = it->ops->Li(it, jb->sc, &wb->st[k], wb->ray[k], rs, quv ? q : NULL);
+    }
+  }
+  int k = 0;
+  for (int i = 0; i < n; i++) {
+    const wave_sample *s = &wb->ws[i];
+    color v = col1(0);
+    double q[3] = {0, 0, 0};
+    if (k < m && wb->live[k] == i) {
+      v = col_scale(wb->L[k], s->w);
+      if (jb->stokes)
+        for (int c = 0; c < 3; c++) q[c] = wb->quv[3 * k + c] * s->w;
+      if (!isfinite(v.c[0]) || !isfinite(v.c[1]) || !isfinite(v.c[2]) || !isfinite(q[0]) || !isfinite(q[1]) ||
+          !isfinite(q[2])) {
+        (*invalid)++;
+        v = col1(0);
+        q[0] = q[1] = q[2] = 0;
+      }
+      k++;
+    }
+    splat(jb, tb, s->px, s->py, v, q);
+  }
+  return true;
+}
+
 static tile_buf *render_tile(job *jb, size_t t, render_stats *rs, uint64_t *samples, uint64_t *invalid) {
   int tx = (int)(t % (size_t)jb->tiles_x), ty = (int)(t / (size_t)jb->tiles_x);
   int px0 = tx * TILE, py0 = ty * TILE;
   int px1 = px0 + TILE < jb->W ? px0 + TILE : jb->W;
   int py1 = py0 + TILE < jb->H ? py0 + TILE : jb->H;
   tile_buf *tb = malloc(sizeof *tb);
-  if (!tb) return NULL;
+  wave_buf *wb = malloc(sizeof *wb);
+  if (!tb || !wb) {
+    free(tb);
+    free(wb);
+    return NULL;
+  }
   tb->x0 = px0 - jb->margin > 0 ? px0 - jb->margin : 0;
   tb->y0 = py0 - jb->margin > 0 ? py0 - jb->margin : 0;
   int x1 = px1 + jb->margin < jb->W ? px1 + jb->margin : jb->W;
@@ -153,47 +231,49 @@ static tile_buf *render_tile(job *jb, size_t t, render_stats *rs, uint64_t *samp
   tb->acc = calloc((size_t)tb->w * tb->h * (size_t)jb->stride, sizeof(double));
   if (!tb->acc) {
     free(tb);
+    free(wb);
     return NULL;
   }
   const sampler *smp = jb->se->sampler;
-  const integrator *it = jb->sc->integrator;
-  sampler_state st;
+  /* Samples are taken pixel by pixel, sample by sample, WAVE at a time
+   * (a wave may span pixels). Cancellation and deadlines are honoured
+   * before each wave, so a film of a few pixels with a huge spp stops
+   * too; the partial tile is discarded with the render. */
+  int n = 0;
   for (int iy = py0; iy < py1; iy++) {
     for (int ix = px0; ix < px1; ix++) {
-      /* Cancellation and deadlines are honoured between pixels and every
-       * STOP_CHECK_SAMPLES samples inside one, so a film of a few pixels
-       * with a huge spp stops too; the partial tile is discarded with the
-       * render. */
-      if (job_should_stop(jb)) return tb;
       uint64_t pixel = (uint64_t)iy * (uint64_t)jb->W + (uint64_t)ix;
       for (uint32_t s = 0; s < jb->spp; s++) {
-        if (s % STOP_CHECK_SAMPLES == STOP_CHECK_SAMPLES - 1 && job_should_stop(jb)) return tb;
-        smp->ops->start(smp, &st, jb->opts->seed, pixel, s, jb->spp);
-        vec2 j = smp->ops->next_2d(&st);
+        if (n == 0 && job_should_stop(jb)) goto out;
+        sampler_state *st = &wb->st[n];
+        smp->ops->start(smp, st, jb->opts->seed, pixel, s, jb->spp);
+        vec2 j = smp->ops->next_2d(st);
         double px = ix + j.x, py = iy + j.y;
         vec2 film_u = v2(px / jb->W, py / jb->H);
-        vec2 ap = smp->ops->next_2d(&st);
-        ray3 ray;
-        double w = jb->se->ops->sample_ray(jb->se, film_u, ap, &ray);
-        color v = col1(0);
-        double quv[3] = {0, 0, 0};
-        if (w != 0) {
-          color L = it->ops->Li(it, jb->sc, &st, ray, rs, jb->stokes ? quv : NULL);
-          v = col_scale(L, w);
-          for (int k = 0; k < 3; k++) quv[k] *= w;
-          if (!isfinite(v.c[0]) || !isfinite(v.c[1]) || !isfinite(v.c[2]) || !isfinite(quv[0]) ||
-              !isfinite(quv[1]) || !isfinite(quv[2])) {
-            (*invalid)++;
-            v = col1(0);
-            quv[0] = quv[1] = quv[2] = 0;
-          }
+        vec2 ap = smp->ops->next_2d(st);
+        wb->ws[n].px = px;
+        wb->ws[n].py = py;
+        wb->ws[n].w = jb->se->ops->sample_ray(jb->se, film_u, ap, &wb->ray[n]);
+        if (++n == WAVE) {
+          if (!wave_flush(jb, tb, wb, n, rs, invalid)) goto fail;
+          *samples += (uint64_t)n;
+          n = 0;
         }
-        splat(jb, tb, px, py, v, quv);
       }
-      *samples += jb->spp;
     }
   }
+  if (n) {
+    if (!wave_flush(jb, tb, wb, n, rs, invalid)) goto fail;
+    *samples += (uint64_t)n;
+  }
+out:
+  free(wb);
   return tb;
+fail:
+  free(wb);
+  free(tb->acc);
+  free(tb);
+  return NULL;
 }
 
 static void merge_tile(job *jb, tile_buf *tb) {
@@ -213,11 +293,16 @@ static void merge_tile(job *jb, tile_buf *tb) {
 static void run_tile(job *jb, size_t t) {
   render_stats rs = {0};
   uint64_t samples = 0, invalid = 0;
+  double t0 = now_s();
   tile_buf *tb = render_tile(jb, t, &rs, &samples, &invalid);
+  double busy = now_s() - t0;
   pthread_mutex_lock(&jb->lock);
+  jb->busy_s += busy;
   jb->rays.rays += rs.rays;
   jb->rays.shadow_rays += rs.shadow_rays;
   jb->rays.unresolved += rs.unresolved;
+  jb->rays.trace_s += rs.trace_s;
+  jb->rays.camera_rays += rs.camera_rays;
   jb->samples += samples;
   jb->invalid += invalid;
   if (!tb) {
@@ -571,6 +656,8 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
     stats->samples = jb.samples;
     stats->invalid_samples = jb.invalid;
     stats->threads = jb.peak;
+    stats->busy_s = jb.busy_s;
+    stats->packet_width = accel_packet_width();
     stats->wall_s = now_s() - t0;
   }
   *out = img;
@@ -588,4 +675,20 @@ void film_image_free(film_image *img) {
     free(img->planes[p].data);
     img->planes[p].data = NULL;
   }
+}
+
+void render_stats_line(const render_result_stats *st, char *buf, size_t size) {
+  const render_stats *r = &st->rays;
+  uint64_t cont = r->rays >= r->camera_rays ? r->rays - r->camera_rays : 0;
+  double w = st->wall_s > 0 ? st->wall_s : 1e-9;
+  double other = st->busy_s > r->trace_s ? st->busy_s - r->trace_s : 0;
+  double busy = st->busy_s > 0 ? st->busy_s : 1e-9;
+  snprintf(buf, size,
+           "%llu samples in %.3f s (%.4g samples/s, %d threads); rays: %llu camera, %llu continuation, %llu "
+           "shadow (%.4g rays/s, Embree packets of %d); thread time %.3f s: tracing %.3f s (%.0f%%), "
+           "shading and the rest %.3f s (%.0f%%)",
+           (unsigned long long)st->samples, st->wall_s, (double)st->samples / w, st->threads,
+           (unsigned long long)r->camera_rays, (unsigned long long)cont, (unsigned long long)r->shadow_rays,
+           (double)(r->rays + r->shadow_rays) / w, st->packet_width, st->busy_s, r->trace_s,
+           100.0 * r->trace_s / busy, other, 100.0 * other / busy);
 }

@@ -3,7 +3,10 @@
  * Determinism: every sample's random numbers come from the sampler seeded
  * by (seed, pixel index, sample index) only; pixels are accumulated in a
  * fixed order inside fixed 8x8 tiles, and tiles are merged into the film
- * in tile order; so 1 thread and N threads give bitwise-identical films. */
+ * in tile order; so 1 thread and N threads give bitwise-identical films.
+ * Within a tile, samples are traced in waves of up to 256 (integrator_ops
+ * Li_batch: the paths advance bounce by bounce together, their rays traced
+ * as Embree packets) and splatted in sample order afterwards. */
 #ifndef RSW_RENDER_H
 #define RSW_RENDER_H
 
@@ -20,8 +23,8 @@ typedef struct render_opts {
   double wavelength;        /* nm, mono only; 0 means 550 */
   int threads;              /* 0: all cores */
   const atomic_int *cancel; /* optional: non-zero stops the render
-                               (checked between pixels and every 64
-                               samples within one): RSW_ERR_CANCELLED */
+                               (checked before each wave of 256
+                               samples): RSW_ERR_CANCELLED */
   double deadline;          /* optional: CLOCK_MONOTONIC seconds after which
                                the render stops: RSW_ERR_TIMEOUT (0: none) */
   /* Optional progress callback: tiles done of total (called from worker
@@ -99,7 +102,16 @@ typedef struct render_result_stats {
   uint64_t invalid_samples; /* NaN/inf contributions dropped */
   double wall_s;
   int threads;
+  /* Thread time spent on tiles, summed over threads; rays.trace_s of it
+   * in ray queries (the rest: camera rays, shading, splatting). */
+  double busy_s;
+  int packet_width; /* lanes of the Embree packets the wave traced (accel_packet_width) */
 } render_result_stats;
+
+/* One line summing up a render (raysweepd render --stats): samples and
+ * samples/s, rays by kind (camera, continuation, shadow) and rays/s, time
+ * tracing vs the rest. Written into buf (NUL-terminated). */
+void render_stats_line(const render_result_stats *st, char *buf, size_t size);
 
 rsw_status render_sensor(scene *s, const render_opts *opts, film_image *out, render_result_stats *stats,
                          rsw_err *err);

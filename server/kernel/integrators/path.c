@@ -10,6 +10,7 @@
  * Russian roulette from depth rr_depth with survival probability
  * q = min(max(T) eta^2, 0.95). */
 #include <stdlib.h>
+#include <time.h>
 
 #include "../accel.h"
 #include "../scene/loader.h"
@@ -99,113 +100,296 @@ static void add_polarization(double *quv, const emitter *e, vec3 d, double scale
   for (int k = 0; k < 3; k++) quv[k] += scale * q[k];
 }
 
+/* ---- the wave ------------------------------------------------------------
+ *
+ * Paths advance together, bounce by bounce (a wavefront): every live path's
+ * ray is traced (as Embree packets of neighbouring paths, accel.h, or one
+ * by one through the periodic boundary), then every hit is shaded and its
+ * next-event shadow ray emitted, the shadow rays are traced together, then
+ * each path finishes its light sample, samples its BSDF and emits its
+ * continuation ray; paths that ended drop out of the live list (kept in
+ * lane order). Each path draws its random numbers from its own sampler
+ * state in exactly the order of the one-path loop (light pick, light
+ * sample, BSDF lobe, BSDF direction, roulette), and the shading arithmetic
+ * is the same per lane, so a path's value does not depend on its batch;
+ * Li is the wave of one path.
+ *
+ * Precision: shading stays in double (the plugins' scalar ops); Embree
+ * traces in float32 behind fill_ray (accel.c). Contributions are summed
+ * per path in double, in bounce order. */
+
+typedef struct lane {
+  ray3 ray;
+  surface_interaction si, prev_si;
+  color T, L;
+  double eta, prev_pdf;
+  bool prev_delta, wrapped;
+  int depth;
+  trace_result hit;
+  accel_hit h; /* the hit, between the packet queries and the surface data */
+  /* Next-event estimation between the shading and the shading's end. */
+  bool nee;
+  trace_result occ;
+  const emitter *ne;
+  direction_sample ds;
+  color value;
+  double pe;
+  ray3 sray;
+} lane;
+
+static double clock_s(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+/* Trace the rays of the live lanes idx[0..n): packets of consecutive live
+ * lanes, or one by one under a periodic boundary (scene_trace walks the
+ * walls per ray). */
+static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_stats *stats, bool coherent,
+                       bool timed) {
+  if (sc->periodic.on) { /* the hit fill is counted as tracing here */
+    double t0 = timed ? clock_s() : 0;
+    for (int k = 0; k < n; k++) {
+      lane *l = &ln[idx[k]];
+      l->hit = intersect(sc, &l->ray, &l->si, stats, &l->wrapped);
+    }
+    if (timed) stats->trace_s += clock_s() - t0;
+    return;
+  }
+  enum {
+    P = 16
+  };
+  /* All packets first (timed as one), then every hit's surface data. */
+  double t0 = timed ? clock_s() : 0;
+  for (int k0 = 0; k0 < n; k0 += P) {
+    int m = n - k0 < P ? n - k0 : P;
+    const ray3 *rp[P];
+    accel_hit h[P];
+    bool hit[P];
+    for (int k = 0; k < m; k++) rp[k] = &ln[idx[k0 + k]].ray;
+    accel_intersect_packet(sc->accel, rp, m, h, hit, coherent);
+    for (int k = 0; k < m; k++) {
+      lane *l = &ln[idx[k0 + k]];
+      l->hit = hit[k] ? TRACE_HIT : TRACE_MISS;
+      if (hit[k]) l->h = h[k];
+    }
+  }
+  if (timed) stats->trace_s += clock_s() - t0;
+  stats->rays += (uint64_t)n;
+  for (int k = 0; k < n; k++) {
+    lane *l = &ln[idx[k]];
+    l->wrapped = false;
+    if (l->hit == TRACE_HIT) hit_fill_interaction(sc, &l->ray, &l->h, &l->si);
+  }
+}
+
+/* Trace the shadow rays of lanes idx[0..n) (each has nee set). */
+static void wave_occluded(const scene *sc, lane *ln, const int *idx, int n, render_stats *stats, bool timed) {
+  stats->shadow_rays += (uint64_t)n;
+  double t0 = timed ? clock_s() : 0;
+  if (sc->periodic.on) {
+    for (int k = 0; k < n; k++) {
+      lane *l = &ln[idx[k]];
+      /* Infinitely distant emitters give dist = INFINITY: the shadow ray
+       * is unbounded (in a periodic scene, cut only by leaving the slab).
+       * An unresolved one counts as blocked, never as lit. */
+      l->occ = scene_occluded(sc, &l->sray);
+      if (l->occ == TRACE_UNRESOLVED) stats->unresolved++;
+    }
+    if (timed) stats->trace_s += clock_s() - t0;
+    return;
+  }
+  enum {
+    P = 16
+  };
+  for (int k0 = 0; k0 < n; k0 += P) {
+    int m = n - k0 < P ? n - k0 : P;
+    const ray3 *rp[P];
+    bool occ[P];
+    for (int k = 0; k < m; k++) rp[k] = &ln[idx[k0 + k]].sray;
+    accel_occluded_packet(sc->accel, rp, m, occ);
+    for (int k = 0; k < m; k++) ln[idx[k0 + k]].occ = occ[k] ? TRACE_HIT : TRACE_MISS;
+  }
+  if (timed) stats->trace_s += clock_s() - t0;
+}
+
+/* Emission seen by lane l's ray, and the first half of its vertex: the
+ * light sample and its shadow ray (l->nee). False: the path ends here. */
+static bool shade_emit_and_light(const integrator *it, const scene *sc, sampler_state *st, lane *l,
+                                 double *quv) {
+  const sampler_ops *sops = st->s->ops;
+  l->nee = false;
+  /* Emission seen by this ray (area light or the environment). */
+  bool visible_emitter = !(it->hide_emitters && l->depth == 0);
+  if (l->hit != TRACE_HIT) {
+    const emitter *env = sc->environment;
+    if (env && visible_emitter && l->hit == TRACE_MISS) {
+      double em_pdf = 0.0;
+      if (!l->prev_delta) {
+        direction_sample ds = {.d = v3_norm(l->ray.d), .dist = INFINITY};
+        em_pdf = env->ops->pdf_direction(env, &l->prev_si, &ds) * emitter_prob(sc, env);
+      }
+      color Le = env->ops->eval(env, NULL, l->ray.d);
+      double w = mis_weight(l->prev_pdf, em_pdf);
+      l->L = col_add(l->L, col_scale(col_mul(l->T, Le), w));
+      add_polarization(quv, env, v3_norm(l->ray.d), l->T.c[0] * w);
+    }
+    return false;
+  }
+  const surface_interaction *si = &l->si;
+  const emitter *em = si->shape->emitter;
+  if (em && visible_emitter) {
+    color Le = em->ops->eval(em, si, l->ray.d);
+    if (!col_is_black(Le)) {
+      double em_pdf = 0.0;
+      /* Next-event estimation samples the emitter in the column only,
+       * along a segment that never wraps: a copy reached through the
+       * periodic boundary is BSDF sampling's alone (weight 1). */
+      if (!l->prev_delta && !l->wrapped) {
+        direction_sample ds = {
+            .p = si->p, .n = si->ng, .d = v3_norm(l->ray.d), .dist = si->t * v3_len(l->ray.d)};
+        em_pdf = em->ops->pdf_direction(em, &l->prev_si, &ds) * emitter_prob(sc, em);
+      }
+      l->L = col_add(l->L, col_scale(col_mul(l->T, Le), mis_weight(l->prev_pdf, em_pdf)));
+    }
+  }
+  if (!(it->max_depth < 0 || l->depth + 1 < it->max_depth)) return false;
+  const bsdf *b = si->shape->bsdf;
+
+  /* Next-event estimation towards one emitter. */
+  if ((b->flags & BSDF_SMOOTH) && sc->n_emitters > 0) {
+    size_t k = pick_emitter(sc, sops->next_1d(st), &l->pe);
+    const emitter *e = sc->emitters[k];
+    l->value = e->ops->sample_direction(e, si, sops->next_2d(st), &l->ds);
+    /* Under `periodic`, the part of a surface emitter outside the column
+     * is not in the scene (scene/periodic.h): a light sample there counts
+     * zero. The in-column part keeps its density 1/area, which is what
+     * pdf_direction gives an unwrapped emitter hit; its copies beyond the
+     * walls are reached by BSDF sampling alone (weight 1). */
+    if (sc->periodic.on && (e->flags & EMITTER_SURFACE) && !in_column(&sc->periodic, l->ds.p)) l->ds.pdf = 0;
+    if (l->ds.pdf > 0 && !col_is_black(l->value)) {
+      l->ne = e;
+      l->sray = spawn_ray_to(sc, si, e, &l->ds);
+      l->nee = true;
+    }
+  }
+  return true;
+}
+
+/* The second half of lane l's vertex: the light sample's contribution if
+ * its shadow ray was clear, then the BSDF sample, the continuation ray and
+ * the roulette. False: the path ends here. */
+static bool shade_continue(const integrator *it, sampler_state *st, lane *l, double *quv) {
+  const sampler_ops *sops = st->s->ops;
+  const surface_interaction *si = &l->si;
+  const bsdf *b = si->shape->bsdf;
+  if (l->nee && l->occ == TRACE_MISS) {
+    const direction_sample *ds = &l->ds;
+    const emitter *e = l->ne;
+    vec3 wo = frame_to_local(&si->sh, ds->d);
+    color f = b->ops->eval(b, si, wo);
+    if (!col_is_black(f)) {
+      double w = ds->delta ? 1.0 : mis_weight(ds->pdf * l->pe, b->ops->pdf(b, si, wo));
+      l->L = col_add(l->L, col_scale(col_mul(l->T, col_mul(f, l->value)), w / l->pe));
+      if (quv && (e->flags & EMITTER_INFINITE))
+        add_polarization(quv, e, ds->d, l->T.c[0] * f.c[0] * w / (l->pe * ds->pdf));
+    }
+  }
+
+  /* Continue the path by sampling the BSDF. */
+  bsdf_sample bs;
+  double u1 = sops->next_1d(st);
+  vec2 u2 = sops->next_2d(st);
+  color weight = b->ops->sample(b, si, u1, u2, &bs);
+  if (!(bs.pdf > 0) || col_is_black(weight)) return false;
+  vec3 wo_world = frame_to_world(&si->sh, bs.wo);
+  l->ray = spawn_ray(si, wo_world);
+  l->T = col_mul(l->T, weight);
+  l->eta *= bs.eta;
+  l->prev_si = *si;
+  l->prev_pdf = bs.pdf;
+  l->prev_delta = (bs.sampled_type & BSDF_DELTA) != 0;
+  l->depth++;
+  if (l->depth >= it->rr_depth) {
+    double q = fmin(col_max(l->T) * l->eta * l->eta, 0.95);
+    if (!(sops->next_1d(st) < q)) return false;
+    l->T = col_scale(l->T, 1.0 / q);
+  }
+  return col_max(l->T) > 0;
+}
+
+/* Run the wave over n lanes (ln, with idx and sh of n entries as scratch). */
+static void wave_run(const integrator *it, const scene *sc, sampler_state *st, const ray3 *rays, int n,
+                     render_stats *stats, color *L, double *quv, lane *ln, int *idx, int *sh) {
+  if (quv)
+    for (int i = 0; i < 3 * n; i++) quv[i] = 0;
+  for (int i = 0; i < n; i++) {
+    lane *l = &ln[i];
+    l->ray = rays[i];
+    l->T = col1(1);
+    l->L = col1(0);
+    l->eta = 1.0;
+    l->prev_pdf = 1.0;
+    l->prev_delta = true;
+    l->wrapped = false;
+    l->depth = 0;
+    idx[i] = i;
+  }
+  int live = it->max_depth == 0 ? 0 : n;
+  bool timed = n > 1; /* Li's one-path waves are not timed (two clock reads per query) */
+  bool camera = true;
+  while (live > 0) {
+    wave_trace(sc, ln, idx, live, stats, camera, timed);
+    camera = false;
+    int next = 0, n_sh = 0;
+    for (int k = 0; k < live; k++) {
+      int i = idx[k];
+      if (!shade_emit_and_light(it, sc, &st[i], &ln[i], quv ? &quv[3 * i] : NULL)) continue;
+      idx[next++] = i;
+      if (ln[i].nee) sh[n_sh++] = i;
+    }
+    if (n_sh) wave_occluded(sc, ln, sh, n_sh, stats, timed);
+    live = next;
+    next = 0;
+    for (int k = 0; k < live; k++) {
+      int i = idx[k];
+      if (shade_continue(it, &st[i], &ln[i], quv ? &quv[3 * i] : NULL)) idx[next++] = i;
+    }
+    live = next;
+  }
+  for (int i = 0; i < n; i++) L[i] = ln[i].L;
+}
+
+static bool path_Li_batch(const integrator *it, const scene *sc, sampler_state *st, const ray3 *rays, int n,
+                          render_stats *stats, color *L, double *quv) {
+  if (n <= 0) return true;
+  lane *ln = malloc((size_t)n * sizeof *ln);
+  int *idx = malloc(2 * (size_t)n * sizeof *idx);
+  if (!ln || !idx) {
+    free(ln);
+    free(idx);
+    return false;
+  }
+  wave_run(it, sc, st, rays, n, stats, L, quv, ln, idx, idx + n);
+  free(ln);
+  free(idx);
+  return true;
+}
+
 static color path_Li(const integrator *it, const scene *sc, sampler_state *st, ray3 ray, render_stats *stats,
                      double *quv) {
-  const sampler_ops *sops = st->s->ops;
-  color L = col1(0), T = col1(1);
-  if (it->max_depth == 0) return L;
-  double eta = 1.0, prev_pdf = 1.0;
-  bool prev_delta = true;
-  surface_interaction si, prev_si;
-  int depth = 0;
-  bool wrapped = false;
-  trace_result hit = intersect(sc, &ray, &si, stats, &wrapped);
-  for (;;) {
-    /* Emission seen by this ray (area light or the environment). */
-    bool visible_emitter = !(it->hide_emitters && depth == 0);
-    if (hit != TRACE_HIT) {
-      const emitter *env = sc->environment;
-      if (env && visible_emitter && hit == TRACE_MISS) {
-        double em_pdf = 0.0;
-        if (!prev_delta) {
-          direction_sample ds = {.d = v3_norm(ray.d), .dist = INFINITY};
-          em_pdf = env->ops->pdf_direction(env, &prev_si, &ds) * emitter_prob(sc, env);
-        }
-        color Le = env->ops->eval(env, NULL, ray.d);
-        double w = mis_weight(prev_pdf, em_pdf);
-        L = col_add(L, col_scale(col_mul(T, Le), w));
-        add_polarization(quv, env, v3_norm(ray.d), T.c[0] * w);
-      }
-      break;
-    }
-    const emitter *em = si.shape->emitter;
-    if (em && visible_emitter) {
-      color Le = em->ops->eval(em, &si, ray.d);
-      if (!col_is_black(Le)) {
-        double em_pdf = 0.0;
-        /* Next-event estimation samples the emitter in the column only,
-         * along a segment that never wraps: a copy reached through the
-         * periodic boundary is BSDF sampling's alone (weight 1). */
-        if (!prev_delta && !wrapped) {
-          direction_sample ds = {.p = si.p, .n = si.ng, .d = v3_norm(ray.d), .dist = si.t * v3_len(ray.d)};
-          em_pdf = em->ops->pdf_direction(em, &prev_si, &ds) * emitter_prob(sc, em);
-        }
-        L = col_add(L, col_scale(col_mul(T, Le), mis_weight(prev_pdf, em_pdf)));
-      }
-    }
-    if (!(it->max_depth < 0 || depth + 1 < it->max_depth)) break;
-    const bsdf *b = si.shape->bsdf;
-
-    /* Next-event estimation towards one emitter. */
-    if ((b->flags & BSDF_SMOOTH) && sc->n_emitters > 0) {
-      double pe;
-      size_t k = pick_emitter(sc, sops->next_1d(st), &pe);
-      const emitter *e = sc->emitters[k];
-      direction_sample ds;
-      color value = e->ops->sample_direction(e, &si, sops->next_2d(st), &ds);
-      /* Under `periodic`, the part of a surface emitter outside the column
-       * is not in the scene (scene/periodic.h): a light sample there
-       * counts zero. The in-column part keeps its density 1/area, which
-       * is what pdf_direction gives an unwrapped emitter hit; its copies
-       * beyond the walls are reached by BSDF sampling alone (weight 1). */
-      if (sc->periodic.on && (e->flags & EMITTER_SURFACE) && !in_column(&sc->periodic, ds.p)) ds.pdf = 0;
-      if (ds.pdf > 0 && !col_is_black(value)) {
-        ray3 sr = spawn_ray_to(sc, &si, e, &ds);
-        stats->shadow_rays++;
-        /* Infinitely distant emitters give dist = INFINITY: the shadow ray
-         * is unbounded (in a periodic scene, cut only by leaving the
-         * slab). An unresolved one counts as blocked, never as lit. */
-        trace_result occ = scene_occluded(sc, &sr);
-        if (occ == TRACE_UNRESOLVED) stats->unresolved++;
-        if (occ == TRACE_MISS) {
-          vec3 wo = frame_to_local(&si.sh, ds.d);
-          color f = b->ops->eval(b, &si, wo);
-          if (!col_is_black(f)) {
-            double w = ds.delta ? 1.0 : mis_weight(ds.pdf * pe, b->ops->pdf(b, &si, wo));
-            L = col_add(L, col_scale(col_mul(T, col_mul(f, value)), w / pe));
-            if (quv && (e->flags & EMITTER_INFINITE))
-              add_polarization(quv, e, ds.d, T.c[0] * f.c[0] * w / (pe * ds.pdf));
-          }
-        }
-      }
-    }
-
-    /* Continue the path by sampling the BSDF. */
-    bsdf_sample bs;
-    double u1 = sops->next_1d(st);
-    vec2 u2 = sops->next_2d(st);
-    color weight = b->ops->sample(b, &si, u1, u2, &bs);
-    if (!(bs.pdf > 0) || col_is_black(weight)) break;
-    vec3 wo_world = frame_to_world(&si.sh, bs.wo);
-    ray = spawn_ray(&si, wo_world);
-    T = col_mul(T, weight);
-    eta *= bs.eta;
-    prev_si = si;
-    prev_pdf = bs.pdf;
-    prev_delta = (bs.sampled_type & BSDF_DELTA) != 0;
-    depth++;
-    if (depth >= it->rr_depth) {
-      double q = fmin(col_max(T) * eta * eta, 0.95);
-      if (!(sops->next_1d(st) < q)) break;
-      T = col_scale(T, 1.0 / q);
-    }
-    if (!(col_max(T) > 0)) break;
-    hit = intersect(sc, &ray, &si, stats, &wrapped);
-  }
+  lane ln;
+  int idx[2];
+  color L;
+  double q[3];
+  wave_run(it, sc, st, &ray, 1, stats, &L, quv ? q : NULL, &ln, idx, idx + 1);
+  if (quv)
+    for (int k = 0; k < 3; k++) quv[k] += q[k];
   return L;
 }
 
-static const integrator_ops path_ops = {.Li = path_Li};
+static const integrator_ops path_ops = {.Li = path_Li, .Li_batch = path_Li_batch};
 
 static void path_destroy(object *o) {
   free(o);
