@@ -11,6 +11,7 @@
  * j ~ U[0,1) from the sample's PCG32 stream when jitter is on (default),
  * 0.5 (stratum centre) otherwise. Parameters: sample_count (4), seed (0),
  * jitter (true). */
+#include <math.h>
 #include <stdlib.h>
 
 #include "../scene/loader.h"
@@ -51,11 +52,14 @@ static uint32_t permute(uint32_t i, uint32_t l, uint32_t p) {
   return (i + p) % l;
 }
 
-/* Smallest n with n^2 >= spp. */
+/* Smallest n with n^2 >= spp. Called for every draw: the double square
+ * root is exact for perfect squares (what adjust_spp hands the render)
+ * and within one of the answer otherwise, which the loops correct. */
 static uint32_t ceil_sqrt(uint32_t spp) {
-  uint32_t n = 1;
+  uint32_t n = (uint32_t)sqrt((double)spp);
+  while (n > 1 && (uint64_t)(n - 1) * (n - 1) >= spp) n--;
   while ((uint64_t)n * n < spp) n++;
-  return n;
+  return n ? n : 1;
 }
 
 static uint32_t stratified_adjust_spp(const sampler *s, uint32_t spp) {
