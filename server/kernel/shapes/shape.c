@@ -268,7 +268,22 @@ rsw_status shape_enable_sampling(shape *s, rsw_err *err, const char *where) {
 
 /* ---- sampling ---------------------------------------------------------------- */
 
+void shape_world_triangle(const shape *s, uint32_t f, double out[SHAPE_TRI_DOUBLES]) {
+  const mesh *m = &s->mesh;
+  const uint32_t *ix = &m->faces[3 * (size_t)f];
+  vec3 w0 = xf_point(&s->to_world, mesh_vertex(m, ix[0]));
+  vec3 e1 = v3_sub(xf_point(&s->to_world, mesh_vertex(m, ix[1])), w0);
+  vec3 e2 = v3_sub(xf_point(&s->to_world, mesh_vertex(m, ix[2])), w0);
+  vec3 n = v3_norm(v3_cross(e1, e2));
+  const double v[SHAPE_TRI_DOUBLES] = {w0.x, w0.y, w0.z, e1.x, e1.y, e1.z, e2.x, e2.y, e2.z, n.x, n.y, n.z};
+  memcpy(out, v, sizeof v);
+}
+
 position_sample shape_sample_position(const shape *s, vec2 u) {
+  return shape_sample_position_tris(s, u, NULL);
+}
+
+position_sample shape_sample_position_tris(const shape *s, vec2 u, const double *tris) {
   position_sample ps;
   memset(&ps, 0, sizeof ps);
   switch (s->geom) {
@@ -293,12 +308,15 @@ position_sample shape_sample_position(const shape *s, vec2 u) {
     /* Uniform barycentrics (Mitsuba's square_to_uniform_triangle). */
     double t = sqrt(1.0 - ux);
     double b1 = 1.0 - t, b2 = t * u.y;
+    /* The world triangle, precomputed (area lights) or made here by the
+     * same code: the same bits either way. */
+    double here[SHAPE_TRI_DOUBLES];
+    const double *T = tris ? &tris[SHAPE_TRI_DOUBLES * (size_t)f] : here;
+    if (!tris) shape_world_triangle(s, f, here);
+    vec3 w0 = v3(T[0], T[1], T[2]), e1 = v3(T[3], T[4], T[5]), e2 = v3(T[6], T[7], T[8]);
+    ps.p = v3_add(v3_add(w0, v3_scale(e1, b1)), v3_scale(e2, b2));
+    ps.n = v3(T[9], T[10], T[11]);
     const uint32_t *ix = &m->faces[3 * (size_t)f];
-    vec3 p0 = mesh_vertex(m, ix[0]), p1 = mesh_vertex(m, ix[1]), p2 = mesh_vertex(m, ix[2]);
-    vec3 po = v3_add(v3_add(v3_scale(p0, 1 - b1 - b2), v3_scale(p1, b1)), v3_scale(p2, b2));
-    ps.p = xf_point(&s->to_world, po);
-    vec3 w0 = xf_point(&s->to_world, p0), w1 = xf_point(&s->to_world, p1), w2 = xf_point(&s->to_world, p2);
-    ps.n = v3_norm(v3_cross(v3_sub(w1, w0), v3_sub(w2, w0)));
     if (m->uv) {
       const float *a = &m->uv[2 * (size_t)ix[0]], *b = &m->uv[2 * (size_t)ix[1]],
                   *c = &m->uv[2 * (size_t)ix[2]];

@@ -20,6 +20,19 @@ typedef struct position_sample {
  * sphere: uniform sphere; cylinder: (cos 2pi u.y, sin 2pi u.y, u.x);
  * mesh: triangle by area then uniform barycentric. */
 position_sample shape_sample_position(const shape *s, vec2 u);
+
+/* A mesh's triangle f in world space, as sampling uses it: the first
+ * vertex w0 = to_world p0, the edges w1 - w0 and w2 - w0, and the unit
+ * normal normalize((w1 - w0) x (w2 - w0)) (before flip_normals), in this
+ * order, 3 doubles each. */
+#define SHAPE_TRI_DOUBLES 12
+void shape_world_triangle(const shape *s, uint32_t f, double out[SHAPE_TRI_DOUBLES]);
+/* shape_sample_position() given a mesh's world triangles (n_faces *
+ * SHAPE_TRI_DOUBLES doubles from shape_world_triangle(), borrowed; NULL:
+ * made as needed). The result is the same, bit for bit, with or without:
+ * precomputing them per update saves four transforms and a normalisation
+ * per sample. */
+position_sample shape_sample_position_tris(const shape *s, vec2 u, const double *tris);
 /* Area pdf of shape_sample_position (1/area). */
 double shape_pdf_position(const shape *s);
 
