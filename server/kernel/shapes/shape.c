@@ -366,6 +366,11 @@ double shape_pdf_position(const shape *s) {
 /* ---- hit -> interaction --------------------------------------------------------- */
 
 void shape_fill_interaction(const shape *s, const ray3 *r, const accel_hit *h, surface_interaction *si) {
+  shape_fill_interaction_xf(s, &s->to_world, r, h, si);
+}
+
+void shape_fill_interaction_xf(const shape *s, const xform *to_world, const ray3 *r, const accel_hit *h,
+                               surface_interaction *si) {
   si->t = h->t;
   si->shape = s;
   si->prim = h->prim;
@@ -382,7 +387,7 @@ void shape_fill_interaction(const shape *s, const ray3 *r, const accel_hit *h, s
       /* Along the ray, p is off by Embree's error in t (and the ray's own
        * rounding): a few float units of t |d|. */
       si->p_error = 5.0 * RSW_F32_UNIT * h->t * v3_max_abs(r->d);
-      n = sn = v3_norm(xf_normal(&s->to_world, h->ng));
+      n = sn = v3_norm(xf_normal(to_world, h->ng));
       si->uv[0] = h->u;
       si->uv[1] = h->v;
       break;
@@ -393,15 +398,15 @@ void shape_fill_interaction(const shape *s, const ray3 *r, const accel_hit *h, s
     /* Position from barycentrics in object space, then to world: more
      * accurate than o + t d for spawning the next ray. */
     vec3 po = v3_add(v3_add(v3_scale(p0, b0), v3_scale(p1, b1)), v3_scale(p2, b2));
-    si->p = xf_point(&s->to_world, po);
+    si->p = xf_point(to_world, po);
     /* Face normal = (p1 - p0) x (p2 - p0), as Mitsuba's Mesh. */
-    n = v3_norm(xf_normal(&s->to_world, v3_cross(v3_sub(p1, p0), v3_sub(p2, p0))));
+    n = v3_norm(xf_normal(to_world, v3_cross(v3_sub(p1, p0), v3_sub(p2, p0))));
     if (m->nrm && !s->face_normals) {
       const float *a = &m->nrm[3 * (size_t)ix[0]], *b = &m->nrm[3 * (size_t)ix[1]],
                   *c = &m->nrm[3 * (size_t)ix[2]];
       vec3 no = v3(b0 * a[0] + b1 * b[0] + b2 * c[0], b0 * a[1] + b1 * b[1] + b2 * c[1],
                    b0 * a[2] + b1 * b[2] + b2 * c[2]);
-      sn = v3_norm(xf_normal(&s->to_world, no));
+      sn = v3_norm(xf_normal(to_world, no));
       if (!(v3_len2(sn) > 0.5)) sn = n;
     } else {
       sn = n;
@@ -419,7 +424,7 @@ void shape_fill_interaction(const shape *s, const ray3 *r, const accel_hit *h, s
       if (det != 0) {
         vec3 dp0 = v3_sub(p1, p0), dp1 = v3_sub(p2, p0);
         tangent =
-            xf_vector(&s->to_world, v3_scale(v3_sub(v3_scale(dp0, dv1), v3_scale(dp1, dv0)), 1.0 / det));
+            xf_vector(to_world, v3_scale(v3_sub(v3_scale(dp0, dv1), v3_scale(dp1, dv0)), 1.0 / det));
       }
     } else {
       si->uv[0] = b1;
@@ -432,14 +437,14 @@ void shape_fill_interaction(const shape *s, const ray3 *r, const accel_hit *h, s
      * float error of the intersection). uv = (phi / 2pi, theta / pi) as
      * Mitsuba's sphere. */
     vec3 pw = v3_fma(r->o, h->t, r->d);
-    vec3 po = v3_norm(xf_inv_point(&s->to_world, pw));
-    si->p = xf_point(&s->to_world, po);
-    n = sn = v3_norm(xf_normal(&s->to_world, po));
+    vec3 po = v3_norm(xf_inv_point(to_world, pw));
+    si->p = xf_point(to_world, po);
+    n = sn = v3_norm(xf_normal(to_world, po));
     double phi = atan2(po.y, po.x);
     if (phi < 0) phi += 2 * RSW_PI;
     si->uv[0] = phi * RSW_INV_2PI;
     si->uv[1] = acos(fmax(-1.0, fmin(1.0, po.z))) * RSW_INV_PI;
-    tangent = xf_vector(&s->to_world, v3(-po.y, po.x, 0));
+    tangent = xf_vector(to_world, v3(-po.y, po.x, 0));
     break;
   }
   case GEOM_CYLINDER: {
@@ -447,30 +452,30 @@ void shape_fill_interaction(const shape *s, const ray3 *r, const accel_hit *h, s
      * the intersection, like Mitsuba's normal shift). uv = (phi / 2pi, z)
      * and dp/du along (-y, x, 0), as Mitsuba's cylinder. */
     vec3 pw = v3_fma(r->o, h->t, r->d);
-    vec3 po = xf_inv_point(&s->to_world, pw);
+    vec3 po = xf_inv_point(to_world, pw);
     double rr = sqrt(po.x * po.x + po.y * po.y);
     if (rr > 0)
       po.x /= rr, po.y /= rr;
     else
       po.x = 1, po.y = 0;
     po.z = fmin(1.0, fmax(0.0, po.z));
-    si->p = xf_point(&s->to_world, po);
-    n = sn = v3_norm(xf_normal(&s->to_world, v3(po.x, po.y, 0)));
+    si->p = xf_point(to_world, po);
+    n = sn = v3_norm(xf_normal(to_world, v3(po.x, po.y, 0)));
     double phi = atan2(po.y, po.x);
     if (phi < 0) phi += 2 * RSW_PI;
     si->uv[0] = phi * RSW_INV_2PI;
     si->uv[1] = po.z;
-    tangent = xf_vector(&s->to_world, v3(-po.y, po.x, 0));
+    tangent = xf_vector(to_world, v3(-po.y, po.x, 0));
     break;
   }
   case GEOM_DISK:
   default: {
     vec3 pw = v3_fma(r->o, h->t, r->d);
-    vec3 po = xf_inv_point(&s->to_world, pw);
+    vec3 po = xf_inv_point(to_world, pw);
     po.z = 0;
     tangent = v3(0, 0, 0);
-    si->p = xf_point(&s->to_world, po);
-    n = sn = v3_norm(xf_normal(&s->to_world, v3(0, 0, 1)));
+    si->p = xf_point(to_world, po);
+    n = sn = v3_norm(xf_normal(to_world, v3(0, 0, 1)));
     /* uv = (r, phi / 2pi) as Mitsuba's disk. */
     double phi = atan2(po.y, po.x);
     if (phi < 0) phi += 2 * RSW_PI;

@@ -41,6 +41,10 @@ double shape_pdf_position(const shape *s);
 struct accel_hit;
 void shape_fill_interaction(const shape *s, const ray3 *r, const struct accel_hit *h,
                             surface_interaction *si);
+/* The same with to_world given apart from the shape (an instanced member
+ * under placement * member.to_world), so no copy of the shape is made. */
+void shape_fill_interaction_xf(const shape *s, const xform *to_world, const ray3 *r,
+                               const struct accel_hit *h, surface_interaction *si);
 
 /* Compute area, triangle cdf; check geometry (degenerate to_world for a
  * disk, non-uniform scale for a sphere, ...). Called by create(). */
