@@ -9,7 +9,7 @@
  * The shape's world-space triangles (vertex, edges, unit normal) are
  * computed once per load and per geometric update (set_scene runs after
  * both, scene_refresh_bounds), not per sample; without them (a mesh above
- * AREA_TRIS_MAX faces, or no memory) each sample makes its triangle with
+ * SHAPE_TRIS_MAX faces, or no memory) each sample makes its triangle with
  * the same code, so the result is the same bit for bit. */
 #include <stdlib.h>
 
@@ -25,39 +25,16 @@ typedef struct area_light {
   uint32_t tris_n; /* faces they were made for (entries: SHAPE_TRI_DOUBLES each) */
 } area_light;
 
-/* 2^16 faces: 6 MiB of world triangles at most. */
-#define AREA_TRIS_MAX (1u << 16)
-
 static void area_set_scene(emitter *e, const scene *sc) {
   (void)sc;
   area_light *a = (area_light *)e;
-  const shape *s = e->shape;
-  uint32_t n = s && s->geom == GEOM_MESH && s->tri_cdf ? s->mesh.n_faces : 0;
-  if (n == 0 || n > AREA_TRIS_MAX) {
-    free(a->tris);
-    a->tris = NULL;
-    a->tris_n = 0;
-    return;
-  }
-  if (a->tris_n != n) {
-    double *t = realloc(a->tris, (size_t)n * SHAPE_TRI_DOUBLES * sizeof(double));
-    if (!t) {
-      /* Slower, same values: sampling makes each triangle itself. */
-      free(a->tris);
-      a->tris = NULL;
-      a->tris_n = 0;
-      return;
-    }
-    a->tris = t;
-    a->tris_n = n;
-  }
-  for (uint32_t f = 0; f < n; f++) shape_world_triangle(s, f, &a->tris[SHAPE_TRI_DOUBLES * (size_t)f]);
+  shape_world_tris_refresh(e->shape, &a->tris, &a->tris_n);
 }
 
 static color area_sample(const emitter *e, const surface_interaction *ref, vec2 u, direction_sample *ds) {
   const area_light *a = (const area_light *)e;
-  const double *tris = a->tris && a->tris_n == e->shape->mesh.n_faces ? a->tris : NULL;
-  position_sample ps = shape_sample_position_tris(e->shape, u, tris);
+  position_sample ps =
+      shape_sample_position_tris(e->shape, u, shape_world_tris_for(e->shape, a->tris, a->tris_n));
   vec3 d = v3_sub(ps.p, ref->p);
   double dist2 = v3_len2(d);
   double dist = sqrt(dist2);

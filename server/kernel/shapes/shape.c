@@ -279,6 +279,28 @@ void shape_world_triangle(const shape *s, uint32_t f, double out[SHAPE_TRI_DOUBL
   memcpy(out, v, sizeof v);
 }
 
+void shape_world_tris_refresh(const shape *s, double **tris, uint32_t *n) {
+  uint32_t nf = s && s->geom == GEOM_MESH && s->tri_cdf ? s->mesh.n_faces : 0;
+  if (nf == 0 || nf > SHAPE_TRIS_MAX) {
+    free(*tris);
+    *tris = NULL;
+    *n = 0;
+    return;
+  }
+  if (*n != nf || !*tris) {
+    double *t = realloc(*tris, (size_t)nf * SHAPE_TRI_DOUBLES * sizeof(double));
+    if (!t) {
+      free(*tris);
+      *tris = NULL;
+      *n = 0;
+      return;
+    }
+    *tris = t;
+    *n = nf;
+  }
+  for (uint32_t f = 0; f < nf; f++) shape_world_triangle(s, f, &(*tris)[SHAPE_TRI_DOUBLES * (size_t)f]);
+}
+
 position_sample shape_sample_position(const shape *s, vec2 u) {
   return shape_sample_position_tris(s, u, NULL);
 }

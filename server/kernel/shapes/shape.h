@@ -33,6 +33,19 @@ void shape_world_triangle(const shape *s, uint32_t f, double out[SHAPE_TRI_DOUBL
  * precomputing them per update saves four transforms and a normalisation
  * per sample. */
 position_sample shape_sample_position_tris(const shape *s, vec2 u, const double *tris);
+/* Refresh a cache of s's world triangles for shape_sample_position_tris():
+ * *tris (owned by the caller, realloc'ed; free() it) and *n, its face
+ * count. For a sampled mesh of at most SHAPE_TRIS_MAX faces it is
+ * (re)computed; otherwise, or when out of memory, it is freed and left
+ * NULL (sampling then makes each triangle itself: the same values). Call
+ * it whenever s's to_world or vertices may have changed (the set_scene of
+ * emitters and sensors runs after every load and geometric update). */
+#define SHAPE_TRIS_MAX (1u << 16) /* 6 MiB of triangles at most */
+void shape_world_tris_refresh(const shape *s, double **tris, uint32_t *n);
+/* *tris when it was made for s as it is now (face count), else NULL. */
+static inline const double *shape_world_tris_for(const shape *s, const double *tris, uint32_t n) {
+  return tris && s->geom == GEOM_MESH && n == s->mesh.n_faces ? tris : NULL;
+}
 /* Area pdf of shape_sample_position (1/area). */
 double shape_pdf_position(const shape *s);
 
