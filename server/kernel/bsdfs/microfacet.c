@@ -61,7 +61,7 @@ double mf_G(const mf_distr *d, vec3 wi, vec3 wo, vec3 m) {
   return mf_smith_g1(d, wi, m) * mf_smith_g1(d, wo, m);
 }
 
-double mf_pdf_g1(const mf_distr *d, vec3 wi, vec3 m, double *g1vis) {
+static inline double pdf_g1(const mf_distr *d, vec3 wi, vec3 m, double *g1vis) {
   *g1vis = 1.0;
   double D = mf_D(d, m);
   if (D == 0.0) return 0.0;
@@ -77,9 +77,13 @@ double mf_pdf_g1(const mf_distr *d, vec3 wi, vec3 m, double *g1vis) {
   return D * m.z;
 }
 
+double mf_pdf_g1(const mf_distr *d, vec3 wi, vec3 m, double *g1vis) {
+  return pdf_g1(d, wi, m, g1vis);
+}
+
 double mf_pdf(const mf_distr *d, vec3 wi, vec3 m) {
   double g1vis;
-  return mf_pdf_g1(d, wi, m, &g1vis);
+  return pdf_g1(d, wi, m, &g1vis);
 }
 
 /* ---- single-precision sampling helpers -----------------------------------
@@ -290,7 +294,7 @@ vec3 mf_sample_g1(const mf_distr *d, vec3 wi, vec2 u, double *pdf, double *g1vis
   /* The density is evaluated by the same code as mf_pdf() so that sample
    * and pdf agree to the last bit (Mitsuba computes the D cos form in
    * closed form; it is the same quantity). */
-  *pdf = mf_pdf_g1(d, wi, m, g1vis);
+  *pdf = pdf_g1(d, wi, m, g1vis);
   return m;
 }
 

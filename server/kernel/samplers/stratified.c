@@ -52,14 +52,18 @@ static uint32_t permute(uint32_t i, uint32_t l, uint32_t p) {
   return (i + p) % l;
 }
 
-/* Smallest n with n^2 >= spp. Called for every draw: the double square
- * root is exact for perfect squares (what adjust_spp hands the render)
- * and within one of the answer otherwise, which the loops correct. */
+/* Smallest n with n^2 >= spp. Called for every draw: counting up is
+ * cheapest for the usual few dozen samples; from 1024 on, the double
+ * square root (exact for the perfect squares adjust_spp hands the render,
+ * within one otherwise, which the loops correct) is. */
 static uint32_t ceil_sqrt(uint32_t spp) {
-  uint32_t n = (uint32_t)sqrt((double)spp);
-  while (n > 1 && (uint64_t)(n - 1) * (n - 1) >= spp) n--;
+  uint32_t n = 1;
+  if (spp > 1024) {
+    n = (uint32_t)sqrt((double)spp);
+    while ((uint64_t)(n - 1) * (n - 1) >= spp) n--;
+  }
   while ((uint64_t)n * n < spp) n++;
-  return n ? n : 1;
+  return n;
 }
 
 static uint32_t stratified_adjust_spp(const sampler *s, uint32_t spp) {
