@@ -68,8 +68,8 @@ static bool wanted(const char *name) {
 }
 
 static void emit(const char *name, double ns, double sink) {
-  printf("{\"bench\": \"%s\", \"ns_per_call\": %.2f, \"repeats\": %d, \"checksum\": %.6g}\n", name, ns, REPEATS,
-         sink);
+  printf("{\"bench\": \"%s\", \"ns_per_call\": %.2f, \"repeats\": %d, \"checksum\": %.6g}\n", name, ns,
+         REPEATS, sink);
   fflush(stdout);
 }
 
@@ -89,7 +89,11 @@ static void make_inputs(void) {
   }
 }
 
-enum { OP_SAMPLE, OP_EVAL, OP_PDF };
+enum {
+  OP_SAMPLE,
+  OP_EVAL,
+  OP_PDF
+};
 
 static void bench_bsdf(const char *name, const bsdf *b, int op) {
   if (!wanted(name)) return;
@@ -250,8 +254,8 @@ static void bench_render(const char *name, scene *s) {
   double w = median(t, 3), cpu = median(c, 3);
   printf("{\"bench\": \"%s\", \"wall_s\": %.4f, \"cpu_s\": %.4f, \"samples_per_s\": %.4g, "
          "\"ns_per_sample_per_core\": %.1f, \"ns_per_sample_cpu\": %.1f, \"threads\": %d, \"repeats\": 3}\n",
-         name, w, cpu, st.samples / w, w * 1e9 * st.threads / (double)st.samples, cpu * 1e9 / (double)st.samples,
-         st.threads);
+         name, w, cpu, st.samples / w, w * 1e9 * st.threads / (double)st.samples,
+         cpu * 1e9 / (double)st.samples, st.threads);
   fflush(stdout);
 }
 

@@ -118,13 +118,12 @@ float mf_erff(float x) {
 float mf_erfinvf(float xf) {
   if (!(xf > -1.0f)) return xf == -1.0f ? -INFINITY : NAN;
   if (!(xf < 1.0f)) return xf == 1.0f ? INFINITY : NAN;
-/* Giles, "Approximating the erfinv function" (GPU Computing Gems, 2010),
+  /* Giles, "Approximating the erfinv function" (GPU Computing Gems, 2010),
    * single-precision branch: relative error ~1e-7 (erf of the result is
-   * within 2e-7 of x, tested). log dominates the cost. */
-  /* The polynomials are evaluated in Estrin's form (pairs, then w^2 and
-   * w^4 steps) rather than Horner's: the same terms, a third of the
-   * dependent latency; the Newton chain of the Beckmann sampler is
-   * latency-bound. */
+   * within 2e-7 of x, tested). The polynomials are evaluated in Estrin's
+   * form (pairs, then w^2 and w^4 steps) rather than Horner's: the same
+   * terms, a third of the dependent latency (the Newton chain of the
+   * Beckmann sampler is latency-bound). */
   float w = -logf((1.0f - xf) * (1.0f + xf)), p;
   if (w < 5.0f) {
     w -= 2.5f;

@@ -65,8 +65,10 @@ static color area_eval(const emitter *e, const surface_interaction *hit, vec3 d)
   return tex_eval(a->radiance, hit);
 }
 
-static const emitter_ops area_ops = {
-    .sample_direction = area_sample, .pdf_direction = area_pdf, .eval = area_eval, .set_scene = area_set_scene};
+static const emitter_ops area_ops = {.sample_direction = area_sample,
+                                     .pdf_direction = area_pdf,
+                                     .eval = area_eval,
+                                     .set_scene = area_set_scene};
 
 static void area_destroy(object *o) {
   if (o) free(((area_light *)o)->tris);

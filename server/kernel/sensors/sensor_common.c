@@ -119,7 +119,8 @@ double ray_target_origin(const ray_target *t, const xform *to_world, vec3 center
   switch (t->kind) {
   case RAY_TARGET_POINT: *o = v3_fma(t->point, -slab_offset(t, t->point, d, offset), d); return 1.0;
   case RAY_TARGET_SHAPE: {
-    position_sample ps = shape_sample_position_tris(t->shape, u, shape_world_tris_for(t->shape, t->tris, t->tris_n));
+    position_sample ps =
+        shape_sample_position_tris(t->shape, u, shape_world_tris_for(t->shape, t->tris, t->tris_n));
     *o = v3_fma(ps.p, -slab_offset(t, ps.p, d, offset), d);
     double denom = ps.pdf * t->shape->area;
     return denom > 0.0 ? 1.0 / denom : 0.0;

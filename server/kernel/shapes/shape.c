@@ -445,8 +445,7 @@ void shape_fill_interaction_xf(const shape *s, const xform *to_world, const ray3
       double det = du0 * dv1 - dv0 * du1;
       if (det != 0) {
         vec3 dp0 = v3_sub(p1, p0), dp1 = v3_sub(p2, p0);
-        tangent =
-            xf_vector(to_world, v3_scale(v3_sub(v3_scale(dp0, dv1), v3_scale(dp1, dv0)), 1.0 / det));
+        tangent = xf_vector(to_world, v3_scale(v3_sub(v3_scale(dp0, dv1), v3_scale(dp1, dv0)), 1.0 / det));
       }
     } else {
       si->uv[0] = b1;
