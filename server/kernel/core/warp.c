@@ -56,7 +56,8 @@ static inline void sincos_2pi(double u, double *s, double *c) {
   double q = floor(4.0 * u + 0.5);
   double ss, cc;
   sincos_quarter(2.0 * (4.0 * u - q), &ss, &cc);
-  switch ((int)q & 3) {
+  /* A NaN u gives NaN below; the cast must not see it (undefined). */
+  switch (q >= 0.0 && q <= 4.0 ? (int)q & 3 : 0) {
   case 0: *s = ss, *c = cc; break;
   case 1: *s = cc, *c = -ss; break;
   case 2: *s = -ss, *c = -cc; break;
