@@ -122,6 +122,37 @@ static void test_erfinv(void) {
   for (double x = -0.999999; x < 1.0; x += 0.0123) CHECK_ABS(erf(mf_erfinv(x)), x, 2e-7);
   CHECK(mf_erfinv(0.0) == 0.0, "erfinv(0) = 0");
   CHECK(isinf(mf_erfinv(1.0)), "erfinv(1) = inf");
+  /* The float version over the whole domain, densely (2e6 points; both
+   * branches of Giles' fit: |x| > 0.9966 is the tail branch), and near +-1
+   * where the tail branch takes over. */
+  double worst = 0.0;
+  for (int i = 1; i < 2000000; i++) {
+    float x = (float)(-1.0 + i * 1e-6);
+    worst = fmax(worst, fabs(erf(mf_erfinvf(x)) - x));
+  }
+  for (int k = 1; k <= 7; k++) {
+    float x = (float)(1.0 - pow(10.0, -k));
+    worst = fmax(worst, fabs(erf(mf_erfinvf(x)) - x));
+    worst = fmax(worst, fabs(erf(mf_erfinvf(-x)) + x));
+  }
+  CHECK(worst <= 2e-7, "erfinvf: max |erf(erfinvf(x)) - x| = %g > 2e-7", worst);
+  CHECK(isinf(mf_erfinvf(-1.0f)) && mf_erfinvf(-1.0f) < 0, "erfinvf(-1) = -inf");
+  CHECK(isnan(mf_erfinvf(1.5f)), "erfinvf outside [-1, 1] is NaN");
+}
+
+/* The polynomial erf of the samplers (A&S 7.1.28) against libm's erf on
+ * [-8, 8] (beyond, both are +-1 in float): 1.6e6 points. */
+static void test_erff(void) {
+  double worst = 0.0;
+  for (int i = 0; i <= 1600000; i++) {
+    float x = (float)(-8.0 + i * 1e-5);
+    worst = fmax(worst, fabs((double)mf_erff(x) - erf(x)));
+  }
+  CHECK(worst <= 4e-7, "erff: max abs error %g > 4e-7", worst);
+  CHECK(mf_erff(0.0f) == 0.0f, "erff(0) = 0");
+  CHECK(mf_erff(INFINITY) == 1.0f && mf_erff(-INFINITY) == -1.0f, "erff(+-inf) = +-1");
+  CHECK(isnan(mf_erff(NAN)), "erff(NaN) = NaN");
+  CHECK(mf_erff(-0.3f) == -mf_erff(0.3f), "erff is odd");
 }
 
 /* Midpoint quadrature over the upper hemisphere in (cos theta, phi):
@@ -726,6 +757,7 @@ int main(void) {
   RSW_TEST_RUN(test_fresnel_conductor);
   RSW_TEST_RUN(test_fresnel_dielectric);
   RSW_TEST_RUN(test_erfinv);
+  RSW_TEST_RUN(test_erff);
   RSW_TEST_RUN(test_microfacet_normalisation);
   RSW_TEST_RUN(test_diffuse);
   RSW_TEST_RUN(test_roughconductor_edges);

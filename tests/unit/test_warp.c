@@ -23,6 +23,40 @@ static void check_v3(vec3 got, double x, double y, double z, double tol, const c
         "%s: got (%.17g, %.17g, %.17g), want (%.17g, %.17g, %.17g)", what, got.x, got.y, got.z, x, y, z);
 }
 
+/* --- the polynomial sine and cosine of warp.c --------------------------- */
+
+/* The warps evaluate sin/cos by polynomials on a reduced range; against
+ * the formulas written with libm they agree within 1e-15 (4.5 ulp of 1)
+ * on a dense grid, both branches of the concentric map and all four
+ * quarter turns of the polar maps included. Most of that is the
+ * reference's own error: libm is handed 2 pi u rounded to double, up to
+ * 4.4e-16 off for angles near 2 pi. */
+static void test_trig_against_libm(void) {
+  const double tol = 1e-15;
+  double worst = 0.0;
+  for (int i = 0; i <= 1000; i++)
+    for (int j = 0; j <= 1000; j += 7) {
+      vec2 u = v2(i / 1000.0, j / 1000.0);
+      double a = 2.0 * u.x - 1.0, b = 2.0 * u.y - 1.0, r, phi;
+      if (fabs(a) < fabs(b)) {
+        r = b;
+        phi = 0.5 * RSW_PI - 0.25 * RSW_PI * (a / b);
+      } else {
+        r = a;
+        phi = a == 0.0 ? 0.0 : 0.25 * RSW_PI * (b / a);
+      }
+      vec2 p = warp_square_to_disk_concentric(u);
+      worst = fmax(worst, fmax(fabs(p.x - r * cos(phi)), fabs(p.y - r * sin(phi))));
+      double ang = 2.0 * RSW_PI * u.x;
+      vec2 d = warp_square_to_uniform_disk(u);
+      worst = fmax(worst, fmax(fabs(d.x - sqrt(u.y) * cos(ang)), fabs(d.y - sqrt(u.y) * sin(ang))));
+      vec3 s = warp_square_to_uniform_sphere(u);
+      double z = 1.0 - 2.0 * u.y, rs = sqrt(fmax(0.0, 1.0 - z * z));
+      worst = fmax(worst, fmax(fabs(s.x - rs * cos(ang)), fabs(s.y - rs * sin(ang))));
+    }
+  CHECK(worst <= tol, "warps vs libm sin/cos: max abs difference %g > %g", worst, tol);
+}
+
 /* --- fixed vectors ------------------------------------------------------ */
 
 static void test_fixed_vectors(void) {
@@ -324,6 +358,7 @@ static void test_chi2_has_power(void) {
 }
 
 int main(void) {
+  RSW_TEST_RUN(test_trig_against_libm);
   RSW_TEST_RUN(test_fixed_vectors);
   RSW_TEST_RUN(test_pdf_values_and_domains);
   RSW_TEST_RUN(test_round_trips_planar_and_fixed);

@@ -659,6 +659,61 @@ static void test_ply_vertex_positions(void) {
   unlink(pb);
 }
 
+/* The same grid as an area light above a floor (flipped to face it): its
+ * world triangles, precomputed by the area emitter for sampling, must
+ * follow the new vertices (and then its transform). */
+static void test_emitting_ply_vertex_positions(void) {
+  char pa[256], pb[256];
+  snprintf(pa, sizeof pa, "/tmp/rsw_etest_%ld_a.ply", (long)getpid());
+  snprintf(pb, sizeof pb, "/tmp/rsw_etest_%ld_b.ply", (long)getpid());
+  double pos_a[27], pos_b[27];
+  REQUIRE(write_grid_ply(pa, 0, 0, false, pos_a), "write %s", pa);
+  REQUIRE(write_grid_ply(pb, 0.625, -0.375, false, pos_b), "write %s", pb);
+  const char *fmt = "{\"type\": \"scene\", " PERSP ","
+                    " \"floor\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 2}],"
+                    "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.6}},"
+                    " \"m\": {\"type\": \"ply\", \"filename\": \"%s\", \"flip_normals\": true,"
+                    "   \"to_world\": [{\"scale\": 0.4}, {\"translate\": [0, 0, %s]}],"
+                    "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0},"
+                    "   \"emitter\": {\"type\": \"area\", \"radiance\": 3}}}";
+  char a[4096], b[4096], v[2048];
+  snprintf(a, sizeof a, fmt, pa, "1");
+  snprintf(b, sizeof b, fmt, pb, "1");
+  size_t n = (size_t)snprintf(v, sizeof v, "[");
+  for (int i = 0; i < 27; i++) n += (size_t)snprintf(v + n, sizeof v - n, "%s%.17g", i ? ", " : "", pos_b[i]);
+  snprintf(v + n, sizeof v - n, "]");
+  reload_case c = {.name = "emitting ply vertex_positions",
+                   .before = a,
+                   .after = b,
+                   .upd = {{"m.vertex_positions", v}},
+                   .n_upd = 1,
+                   .classes = UPDATE_GEOMETRIC};
+  run_case(&c);
+  /* The transform of the same emitting mesh. */
+  xform t = xf_scale(v3(0.5, 0.3, 0.4));
+  xform tr = xf_translate(v3(0.1, 0, 1.2));
+  t = xf_mul(&tr, &t);
+  char m[1024], b2[4096];
+  xform_json(&t, false, m, sizeof m);
+  const char *fmt2 = "{\"type\": \"scene\", " PERSP ","
+                     " \"floor\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 2}],"
+                     "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.6}},"
+                     " \"m\": {\"type\": \"ply\", \"filename\": \"%s\", \"flip_normals\": true,"
+                     "   \"to_world\": %s,"
+                     "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0},"
+                     "   \"emitter\": {\"type\": \"area\", \"radiance\": 3}}}";
+  snprintf(b2, sizeof b2, fmt2, pa, m);
+  reload_case c2 = {.name = "emitting ply to_world",
+                    .before = a,
+                    .after = b2,
+                    .upd = {{"m.to_world", m}},
+                    .n_upd = 1,
+                    .classes = UPDATE_GEOMETRIC};
+  run_case(&c2);
+  unlink(pa);
+  unlink(pb);
+}
+
 static void test_ply_faces(void) {
   /* Same vertices (a non-planar grid), the other diagonal in every cell:
    * a topology change (that mesh's BVH rebuilt). */
@@ -799,6 +854,7 @@ int main(void) {
   RSW_TEST_RUN(test_rectangle_to_world);
   RSW_TEST_RUN(test_rectangle_far_hdistant_no_target);
   RSW_TEST_RUN(test_ply_vertex_positions);
+  RSW_TEST_RUN(test_emitting_ply_vertex_positions);
   RSW_TEST_RUN(test_ply_faces);
   RSW_TEST_RUN(test_ply_to_world);
   RSW_TEST_RUN(test_sphere_to_world);

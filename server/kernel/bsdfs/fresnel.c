@@ -20,6 +20,16 @@ double fresnel_conductor(double cos_i, double eta, double k) {
 }
 
 color fresnel_conductor_col(double cos_i, color eta, color k) {
+  /* Shortcuts with the same values as the general case, bit for bit:
+   * eta = 0, k = 1 (Mitsuba's `material: none` default) is a perfect
+   * mirror, F = 1 exactly (t1 = -1 - s^2, A = 1 + s^2, a = 0, so Rs = Rp
+   * = 1); and grey indices (mono renders, uniform spectra) need one
+   * channel, not three. */
+  bool grey = eta.c[0] == eta.c[1] && eta.c[0] == eta.c[2] && k.c[0] == k.c[1] && k.c[0] == k.c[2];
+  if (grey) {
+    if (eta.c[0] == 0.0 && k.c[0] == 1.0) return col1(1.0);
+    return col1(fresnel_conductor(cos_i, eta.c[0], k.c[0]));
+  }
   return col(fresnel_conductor(cos_i, eta.c[0], k.c[0]), fresnel_conductor(cos_i, eta.c[1], k.c[1]),
              fresnel_conductor(cos_i, eta.c[2], k.c[2]));
 }

@@ -61,7 +61,8 @@ double mf_G(const mf_distr *d, vec3 wi, vec3 wo, vec3 m) {
   return mf_smith_g1(d, wi, m) * mf_smith_g1(d, wo, m);
 }
 
-double mf_pdf(const mf_distr *d, vec3 wi, vec3 m) {
+static inline double pdf_g1(const mf_distr *d, vec3 wi, vec3 m, double *g1vis) {
+  *g1vis = 1.0;
   double D = mf_D(d, m);
   if (D == 0.0) return 0.0;
   if (d->sample_visible) {
@@ -69,77 +70,146 @@ double mf_pdf(const mf_distr *d, vec3 wi, vec3 m) {
     /* The exact Smith G1: the visible-normal samplers below draw this
      * density exactly (Beckmann's rational fit would be off by up to
      * 0.35 %, see microfacet.h). */
-    return D * mf_visible_g1(d, wi, m) * fabs(v3_dot(wi, m)) / wi.z;
+    double g = mf_visible_g1(d, wi, m);
+    *g1vis = g;
+    return D * g * fabs(v3_dot(wi, m)) / wi.z;
   }
   return D * m.z;
+}
+
+double mf_pdf_g1(const mf_distr *d, vec3 wi, vec3 m, double *g1vis) {
+  return pdf_g1(d, wi, m, g1vis);
+}
+
+double mf_pdf(const mf_distr *d, vec3 wi, vec3 m) {
+  double g1vis;
+  return pdf_g1(d, wi, m, &g1vis);
+}
+
+/* ---- single-precision sampling helpers -----------------------------------
+ *
+ * Error budget. The values below only decide *where* a microfacet normal
+ * lands; the pdf and the weight of a sample are evaluated afterwards in
+ * double precision from the normal actually drawn (mf_sample_g1()). An
+ * error e in the sampled CDF therefore moves probability mass by at most e
+ * (here ~1e-6): the estimator's bias is of that relative order, far below
+ * the Monte Carlo noise of any render (1e-3 at thousands of spp) and below
+ * what the chi-square tests resolve (they stay at 3 sigma, fixed seeds).
+ * Mitsuba's scalar variants sample in single precision as well. */
+
+/* erf(x) in single precision: Abramowitz & Stegun 7.1.28,
+ *   erf(x) = 1 - (1 + a1 x + ... + a6 x^6)^-16 for x >= 0, odd in x,
+ * polynomial only (no exp). Max absolute error 3e-7 (A&S); with the
+ * rounding to float, below 4e-7 over the real line (tested against libm's
+ * erf, tests/unit/test_bsdf.c). */
+float mf_erff(float x) {
+  float ax = fabsf(x);
+  if (!(ax < 6.0f)) return x != x ? x : copysignf(1.0f, x); /* erf = 1 in float; NaN passes */
+  /* The polynomial and its 16th power in double: in float, 1 - p^-16
+   * loses ~3e-6 to rounding near x = 0.1 (16 roundings of p compounded);
+   * in double only the approximation's own 3e-7 remains. */
+  double a = ax, a2 = a * a, a4 = a2 * a2;
+  double p = (1.0 + 0.0705230784 * a) + (0.0422820123 + 0.0092705272 * a) * a2 +
+             ((0.0001520143 + 0.0002765672 * a) + 0.0000430638 * a2) * a4;
+  double p2 = p * p, p4 = p2 * p2, p8 = p4 * p4, p16 = p8 * p8;
+  return copysignf((float)(1.0 - 1.0 / p16), x);
+}
+
+float mf_erfinvf(float xf) {
+  if (!(xf > -1.0f)) return xf == -1.0f ? -INFINITY : NAN;
+  if (!(xf < 1.0f)) return xf == 1.0f ? INFINITY : NAN;
+  /* Giles, "Approximating the erfinv function" (GPU Computing Gems, 2010),
+   * single-precision branch: relative error ~1e-7 (erf of the result is
+   * within 2e-7 of x, tested). The polynomials are evaluated in Estrin's
+   * form (pairs, then w^2 and w^4 steps) rather than Horner's: the same
+   * terms, a third of the dependent latency (the Newton chain of the
+   * Beckmann sampler is latency-bound). */
+  float w = -logf((1.0f - xf) * (1.0f + xf)), p;
+  if (w < 5.0f) {
+    w -= 2.5f;
+    float w2 = w * w, w4 = w2 * w2;
+    float q01 = 1.50140941f + 0.246640727f * w, q23 = -0.00417768164f + -0.00125372503f * w;
+    float q45 = 0.00021858087f + -4.39150654e-06f * w, q67 = -3.5233877e-06f + 3.43273939e-07f * w;
+    float r03 = q01 + q23 * w2, r47 = q45 + q67 * w2;
+    p = r03 + (r47 + 2.81022636e-08f * w4) * w4;
+  } else {
+    w = sqrtf(w) - 3.0f;
+    float w2 = w * w, w4 = w2 * w2;
+    float q01 = 2.83297682f + 1.00167406f * w, q23 = 0.00943887047f + -0.0076224613f * w;
+    float q45 = 0.00573950773f + -0.00367342844f * w, q67 = 0.00134934322f + 0.000100950558f * w;
+    float r03 = q01 + q23 * w2, r47 = q45 + q67 * w2;
+    p = r03 + (r47 + -0.000200214257f * w4) * w4;
+  }
+  return p * xf;
 }
 
 double mf_erfinv(double x) {
   if (!(x > -1.0)) return x == -1.0 ? -INFINITY : NAN;
   if (!(x < 1.0)) return x == 1.0 ? INFINITY : NAN;
-  /* Giles, "Approximating the erfinv function" (GPU Computing Gems, 2010),
-   * single-precision branch: relative error ~1e-7 as a first guess. */
-  /* In single precision, as Mitsuba's scalar variants: the polynomial is
-   * a float approximation and log dominates the cost. */
-  float xf = (float)x;
-  float w = -logf((1.0f - xf) * (1.0f + xf)), p;
-  if (w < 5.0f) {
-    w -= 2.5f;
-    p = 2.81022636e-08f;
-    p = 3.43273939e-07f + p * w;
-    p = -3.5233877e-06f + p * w;
-    p = -4.39150654e-06f + p * w;
-    p = 0.00021858087f + p * w;
-    p = -0.00125372503f + p * w;
-    p = -0.00417768164f + p * w;
-    p = 0.246640727f + p * w;
-    p = 1.50140941f + p * w;
-  } else {
-    w = sqrtf(w) - 3.0f;
-    p = -0.000200214257f;
-    p = 0.000100950558f + p * w;
-    p = 0.00134934322f + p * w;
-    p = -0.00367342844f + p * w;
-    p = 0.00573950773f + p * w;
-    p = -0.0076224613f + p * w;
-    p = 0.00943887047f + p * w;
-    p = 1.00167406f + p * w;
-    p = 2.83297682f + p * w;
-  }
-  /* Mitsuba's erfinv stops here too (single-precision accuracy is ample
-   * for sampling: sample() weights come from eval/pdf of the direction
-   * actually produced). */
-  double y = (double)(p * xf);
-  return y;
+  return (double)mf_erfinvf((float)x);
+}
+
+/* Branch-free in practice (fmin/fmax are libm calls at -O2 because of
+ * their NaN rules; these are not, and NaN goes to the bound or 0). */
+static inline float clampf(float v, float lo, float hi) {
+  return v > lo ? (v < hi ? v : hi) : lo;
+}
+static inline float maxf0(float v) {
+  return v > 0.0f ? v : 0.0f;
+}
+static inline double clampd(double v, double lo, double hi) {
+  return v > lo ? (v < hi ? v : hi) : lo;
+}
+static inline double maxd0(double v) {
+  return v > 0.0 ? v : 0.0;
 }
 
 /* Slopes of a visible-normal sample of the Beckmann distribution with
- * alpha = 1 for incidence cosine cos_i (Jakob 2014). The marginal CDF in
- * the erf() domain x = erf(slope_x) is, up to normalisation,
+ * alpha = 1 for incidence cosine cos_i (Jakob 2014), in single precision
+ * (see the error budget above). The marginal CDF in the erf() domain
+ * x = erf(slope_x) is, up to normalisation,
  *   C(x) = 1 + x + tan(theta_i) exp(-erfinv(x)^2) / sqrt(pi),
  * normalised by C(erf(cot theta_i)); it is inverted with three Newton steps
  * from the analytic solution for theta_i = pi/2. The slope along y is
  * Gaussian: erfinv(2 u.y - 1). Mitsuba uses the same scheme because the
  * original 2014 inversion (Heitz & d'Eon) has discontinuities. */
 static vec2 beckmann_visible_11(double cos_i, vec2 u) {
-  double tan_i = sqrt(fmax(0.0, 1.0 - cos_i * cos_i)) / cos_i;
-  double cot_i = 1.0 / tan_i;
-  double maxval = erf(cot_i);
-  u.x = fmin(fmax(u.x, 1e-6), 1.0 - 1e-6);
-  u.y = fmin(fmax(u.y, 1e-6), 1.0 - 1e-6);
-  double x = maxval - (maxval + 1.0) * erf(sqrt(-log(u.x)));
-  /* tan_i * exp(-cot_i^2) is 0 at normal incidence (tan_i = 0). */
-  double tail = tan_i > 0.0 ? INV_SQRT_PI * tan_i * exp(-cot_i * cot_i) : 0.0;
-  double ux = u.x * (1.0 + maxval + tail);
+  const float inv_sqrt_pi = 0.564189584f;
+  float ci = (float)cos_i;
+  float sin_i = sqrtf(maxf0(1.0f - ci * ci));
+  float tan_i = sin_i / ci, cot_i = ci / sin_i; /* cot = inf at normal incidence */
+  float maxval = mf_erff(cot_i);
+  float ux0 = clampf((float)u.x, 1e-6f, 1.0f - 1e-6f);
+  float uy0 = clampf((float)u.y, 1e-6f, 1.0f - 1e-6f);
+  float x = maxval - (maxval + 1.0f) * mf_erff(sqrtf(-logf(ux0)));
+  /* tan_i * exp(-cot_i^2) is 0 at normal incidence (tan_i = 0), and below
+   * float resolution for cot_i > 9 (also keeps expf off its slow
+   * underflow path). */
+  float tail = tan_i > 0.0f && cot_i < 9.0f ? inv_sqrt_pi * tan_i * expf(-cot_i * cot_i) : 0.0f;
+  float ux = ux0 * (1.0f + maxval + tail);
+  /* Newton steps stop once the residual C(x) - ux is at float resolution
+   * (4e-7 ux): the sample's CDF is then off by at most that, and further
+   * steps only reshuffle rounding. The residual, not the step in x, is
+   * what bounds the error of the distribution drawn. */
+  float slope = 0.0f;
+  bool converged = false;
   for (int i = 0; i < 3; i++) {
-    double slope = mf_erfinv(x);
-    double value = 1.0 + x + INV_SQRT_PI * tan_i * exp(-slope * slope) - ux;
-    double deriv = 1.0 - slope * tan_i;
+    slope = mf_erfinvf(x);
+    float value = 1.0f + x + inv_sqrt_pi * tan_i * expf(-slope * slope) - ux;
+    if (fabsf(value) <= 4e-7f * ux) {
+      converged = true;
+      break;
+    }
+    float deriv = 1.0f - slope * tan_i;
     x -= value / deriv;
   }
-  /* Keep x inside erfinv's domain after the Newton steps. */
-  x = fmin(fmax(x, -1.0 + 1e-15), 1.0 - 1e-15);
-  return v2(mf_erfinv(x), mf_erfinv(2.0 * u.y - 1.0));
+  float sy = mf_erfinvf(2.0f * uy0 - 1.0f);
+  if (!converged) {
+    /* Keep x inside erfinv's domain after the Newton steps. */
+    x = clampf(x, -1.0f + 6e-8f, 1.0f - 6e-8f);
+    slope = mf_erfinvf(x);
+  }
+  return v2(slope, sy);
 }
 
 /* Beckmann visible normals: stretch wi to the alpha = 1 configuration,
@@ -147,11 +217,11 @@ static vec2 beckmann_visible_11(double cos_i, vec2 u) {
  * (Heitz & d'Eon 2014, §4). */
 static vec3 beckmann_sample_visible(const mf_distr *d, vec3 wi, vec2 u) {
   vec3 wi_p = v3_norm(v3(d->alpha_u * wi.x, d->alpha_v * wi.y, wi.z));
-  double sin_t = sqrt(fmax(0.0, 1.0 - wi_p.z * wi_p.z));
+  double sin_t = sqrt(maxd0(1.0 - wi_p.z * wi_p.z));
   double cos_phi = 1.0, sin_phi = 0.0;
   if (sin_t > 0.0) {
-    cos_phi = fmin(fmax(wi_p.x / sin_t, -1.0), 1.0);
-    sin_phi = fmin(fmax(wi_p.y / sin_t, -1.0), 1.0);
+    cos_phi = clampd(wi_p.x / sin_t, -1.0, 1.0);
+    sin_phi = clampd(wi_p.y / sin_t, -1.0, 1.0);
   }
   vec2 s = beckmann_visible_11(wi_p.z, u);
   double sx = (cos_phi * s.x - sin_phi * s.y) * d->alpha_u;
@@ -168,13 +238,17 @@ static vec3 ggx_sample_visible(const mf_distr *d, vec3 wi, vec2 u) {
   double lensq = vh.x * vh.x + vh.y * vh.y;
   vec3 t1 = lensq > 0.0 ? v3_scale(v3(-vh.y, vh.x, 0.0), 1.0 / sqrt(lensq)) : v3(1.0, 0.0, 0.0);
   vec3 t2 = v3_cross(vh, t1);
-  double r = sqrt(u.x), phi = 2.0 * RSW_PI * u.y;
-  double p1 = r * cos(phi), p2 = r * sin(phi);
+  /* The azimuth of the disk point in single precision: it only places the
+   * sample (error budget above; the pdf is evaluated from the m drawn). */
+  float cf, sf;
+  sincosf(2.0f * (float)RSW_PI * (float)u.y, &sf, &cf);
+  double r = sqrt(u.x);
+  double p1 = r * cf, p2 = r * sf;
   double s = 0.5 * (1.0 + vh.z);
-  p2 = (1.0 - s) * sqrt(fmax(0.0, 1.0 - p1 * p1)) + s * p2;
-  double pz = sqrt(fmax(0.0, 1.0 - p1 * p1 - p2 * p2));
+  p2 = (1.0 - s) * sqrt(maxd0(1.0 - p1 * p1)) + s * p2;
+  double pz = sqrt(maxd0(1.0 - p1 * p1 - p2 * p2));
   vec3 nh = v3_add(v3_add(v3_scale(t1, p1), v3_scale(t2, p2)), v3_scale(vh, pz));
-  return v3_norm(v3(d->alpha_u * nh.x, d->alpha_v * nh.y, fmax(0.0, nh.z)));
+  return v3_norm(v3(d->alpha_u * nh.x, d->alpha_v * nh.y, maxd0(nh.z)));
 }
 
 /* Sampling D(m) cos(theta_m) directly (Walter et al. 2007 with Mitsuba's
@@ -204,11 +278,11 @@ static vec3 sample_all_normals(const mf_distr *d, vec2 u) {
   else
     tan2 = alpha2 * u.x / (1.0 - u.x);
   double cos_t = 1.0 / sqrt(1.0 + tan2);
-  double sin_t = sqrt(fmax(0.0, 1.0 - cos_t * cos_t));
+  double sin_t = sqrt(maxd0(1.0 - cos_t * cos_t));
   return v3(cos_phi * sin_t, sin_phi * sin_t, cos_t);
 }
 
-vec3 mf_sample(const mf_distr *d, vec3 wi, vec2 u, double *pdf) {
+vec3 mf_sample_g1(const mf_distr *d, vec3 wi, vec2 u, double *pdf, double *g1vis) {
   vec3 m;
   if (!d->sample_visible)
     m = sample_all_normals(d, u);
@@ -219,6 +293,11 @@ vec3 mf_sample(const mf_distr *d, vec3 wi, vec2 u, double *pdf) {
   /* The density is evaluated by the same code as mf_pdf() so that sample
    * and pdf agree to the last bit (Mitsuba computes the D cos form in
    * closed form; it is the same quantity). */
-  *pdf = mf_pdf(d, wi, m);
+  *pdf = pdf_g1(d, wi, m, g1vis);
   return m;
+}
+
+vec3 mf_sample(const mf_distr *d, vec3 wi, vec2 u, double *pdf) {
+  double g1vis;
+  return mf_sample_g1(d, wi, u, pdf, &g1vis);
 }

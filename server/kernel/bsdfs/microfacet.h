@@ -71,17 +71,32 @@ double mf_visible_g1(const mf_distr *d, vec3 v, vec3 m);
 double mf_G(const mf_distr *d, vec3 wi, vec3 wo, vec3 m);
 
 /* Sample a microfacet normal m for incident direction wi (wi.z > 0) and
- * write its solid-angle density in *pdf (see mf_pdf). */
+ * write its solid-angle density in *pdf (see mf_pdf). The placement of m
+ * is computed in single precision (error budget in microfacet.c); *pdf is
+ * evaluated in double from the m returned, by mf_pdf()'s code. */
 vec3 mf_sample(const mf_distr *d, vec3 wi, vec2 u, double *pdf);
+/* The same, also writing the G1vis(wi, m) factor of the pdf (1 when not
+ * sampling visible normals) so that a sample weight can reuse it. */
+vec3 mf_sample_g1(const mf_distr *d, vec3 wi, vec2 u, double *pdf, double *g1vis);
 
 /* Density of mf_sample() producing m (solid angle, over m):
  *   visible:     D_wi(m) = G1vis(wi, m) |wi.m| D(m) / wi.z, with the
  *                exact G1vis = mf_visible_g1() (not Mitsuba's fit);
  *   not visible: D(m) cos(theta_m). */
 double mf_pdf(const mf_distr *d, vec3 wi, vec3 m);
+/* mf_pdf() that also writes its G1vis(wi, m) factor (1 when not visible). */
+double mf_pdf_g1(const mf_distr *d, vec3 wi, vec3 m, double *g1vis);
 
-/* Inverse error function on (-1, 1) (double precision: Giles' 2010
- * approximation refined by Newton steps on erf()). */
+/* Inverse error function on (-1, 1), in single precision (Giles 2010, as
+ * Mitsuba's): erf(mf_erfinvf(x)) is within 2e-7 of x (tested over the
+ * domain); +-inf at +-1, NaN outside. mf_erfinv() is the same value for a
+ * double argument. */
+float mf_erfinvf(float x);
 double mf_erfinv(double x);
+
+/* Error function in single precision (Abramowitz & Stegun 7.1.28, no
+ * exp): absolute error below 4e-7 on the whole real line (tested against
+ * libm's erf). For sampling only; densities use libm's double erf. */
+float mf_erff(float x);
 
 #endif

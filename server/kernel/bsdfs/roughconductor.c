@@ -49,8 +49,10 @@ static color rough_sample(const bsdf *b, const surface_interaction *si, double u
   vec3 wi = si->wi;
   if (!(wi.z > 0.0)) return bsdf_fail(bs);
   mf_distr d = distr_at(r, si);
-  double pdf_m;
-  vec3 m = mf_sample(&d, wi, u2, &pdf_m);
+  /* D and G1vis(wi, m) are computed once, for the pdf, and the weight
+   * reuses G1vis (it is the same factor). */
+  double pdf_m, g1vis;
+  vec3 m = mf_sample_g1(&d, wi, u2, &pdf_m, &g1vis);
   vec3 wo = reflect_about(wi, m);
   double wo_m = v3_dot(wo, m);
   if (!(pdf_m > 0.0) || !(wo.z > 0.0) || !(wo_m > 0.0)) return bsdf_fail(bs);
@@ -60,7 +62,7 @@ static color rough_sample(const bsdf *b, const surface_interaction *si, double u
   bs->sampled_type = BSDF_GLOSSY_REFLECTION;
   double weight;
   if (d.sample_visible)
-    weight = mf_smith_g1(&d, wo, m) * (mf_smith_g1(&d, wi, m) / mf_visible_g1(&d, wi, m));
+    weight = mf_smith_g1(&d, wo, m) * (mf_smith_g1(&d, wi, m) / g1vis);
   else
     weight = mf_G(&d, wi, wo, m) * v3_dot(wi, m) / (wi.z * m.z);
   color eta, k;

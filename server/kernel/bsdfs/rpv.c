@@ -39,37 +39,62 @@ static void dir_angles(vec3 w, double *sin_t, double *cos_p, double *sin_p) {
   }
 }
 
-/* pi f_r = rho_0 M F H (the BRF) for one channel. */
-static double rpv_brf(double rho_0, double k, double g, double rho_c, vec3 wi, vec3 wo) {
+/* The terms of pi f_r that depend on the directions only: computed once
+ * per evaluation, not once per channel. */
+typedef struct rpv_geom {
+  double cos_big; /* cos(Theta) */
+  double gg;      /* G */
+  double mbase;   /* cos(theta_i) cos(theta_o) (cos(theta_i) + cos(theta_o)) */
+} rpv_geom;
+
+static rpv_geom rpv_geometry(vec3 wi, vec3 wo) {
   double ci = wi.z, co = wo.z;
   double si, cpi, spi, so, cpo, spo;
   dir_angles(wi, &si, &cpi, &spi);
   dir_angles(wo, &so, &cpo, &spo);
   double cos_dphi = cpi * cpo + spi * spo; /* cos(phi_i - phi_o) */
-  double cos_big = ci * co + si * so * cos_dphi;
-  double f = (1.0 - g * g) / pow(1.0 + g * g + 2.0 * g * cos_big, 1.5);
+  rpv_geom t;
+  t.cos_big = ci * co + si * so * cos_dphi;
   double ti = si / ci, to = so / co;
   double g2 = ti * ti + to * to - 2.0 * ti * to * cos_dphi;
-  double gg = sqrt(fmax(g2, 0.0));
-  double h = 1.0 + (1.0 - rho_c) / (1.0 + gg);
-  double m = pow(ci * co * (ci + co), k - 1.0);
+  t.gg = sqrt(fmax(g2, 0.0));
+  t.mbase = ci * co * (ci + co);
+  return t;
+}
+
+/* pi f_r = rho_0 M F H (the BRF) for one channel. */
+static double rpv_brf_geom(double rho_0, double k, double g, double rho_c, const rpv_geom *t) {
+  double f = (1.0 - g * g) / pow(1.0 + g * g + 2.0 * g * t->cos_big, 1.5);
+  double h = 1.0 + (1.0 - rho_c) / (1.0 + t->gg);
+  double m = pow(t->mbase, k - 1.0);
   return rho_0 * m * f * h;
 }
 
 double rpv_fr(double rho_0, double k, double g, double rho_c, vec3 wi, vec3 wo) {
-  return rpv_brf(rho_0, k, g, rho_c, wi, wo) * RSW_INV_PI;
+  rpv_geom t = rpv_geometry(wi, wo);
+  return rpv_brf_geom(rho_0, k, g, rho_c, &t) * RSW_INV_PI;
+}
+
+static bool grey(color c) {
+  return c.c[0] == c.c[1] && c.c[0] == c.c[2];
 }
 
 /* pi f_r per channel, which is also the sampling weight eval / pdf =
  * f_r cos / (cos / pi). Kept apart from the cosine so that k = 1, g = 0,
- * rho_c = 1 gives exactly diffuse's numbers (M = F = H = 1 exactly). */
+ * rho_c = 1 gives exactly diffuse's numbers (M = F = H = 1 exactly).
+ * Grey parameters (every mono render) take one channel's work. */
 static color rpv_value(const rpv_bsdf *r, const surface_interaction *si, vec3 wo) {
   vec3 wi = si->wi;
   color rho_0 = tex_eval(r->rho_0, si), k = tex_eval(r->k, si), g = tex_eval(r->g, si);
   color rho_c = r->rho_c == r->rho_0 ? rho_0 : tex_eval(r->rho_c, si);
+  rpv_geom t = rpv_geometry(wi, wo);
+  if (grey(rho_0) && grey(k) && grey(g) && grey(rho_c)) {
+    double v = rpv_brf_geom(rho_0.c[0], k.c[0], g.c[0], rho_c.c[0], &t);
+    return col1(isfinite(v) ? v : 0.0);
+  }
   color out;
   for (int i = 0; i < 3; i++) {
-    double v = rpv_brf(rho_0.c[i], k.c[i], g.c[i], rho_c.c[i], wi, wo);
+    double v = rpv_brf_geom(rho_0.c[i], k.c[i], g.c[i], rho_c.c[i], &t);
     out.c[i] = isfinite(v) ? v : 0.0;
   }
   return out;

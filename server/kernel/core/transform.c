@@ -139,39 +139,6 @@ bool xf_look_at(vec3 origin, vec3 target, vec3 up, xform *out) {
   return xf_from_matrix(m, out);
 }
 
-vec3 xf_point(const xform *t, vec3 p) {
-  const double(*m)[4] = t->m;
-  double x = m[0][0] * p.x + m[0][1] * p.y + m[0][2] * p.z + m[0][3];
-  double y = m[1][0] * p.x + m[1][1] * p.y + m[1][2] * p.z + m[1][3];
-  double z = m[2][0] * p.x + m[2][1] * p.y + m[2][2] * p.z + m[2][3];
-  double w = m[3][0] * p.x + m[3][1] * p.y + m[3][2] * p.z + m[3][3];
-  if (w != 1.0) return v3(x / w, y / w, z / w);
-  return v3(x, y, z);
-}
-
-vec3 xf_vector(const xform *t, vec3 v) {
-  const double(*m)[4] = t->m;
-  return v3(m[0][0] * v.x + m[0][1] * v.y + m[0][2] * v.z, m[1][0] * v.x + m[1][1] * v.y + m[1][2] * v.z,
-            m[2][0] * v.x + m[2][1] * v.y + m[2][2] * v.z);
-}
-
-vec3 xf_normal(const xform *t, vec3 n) {
-  const double(*m)[4] = t->inv;
-  return v3(m[0][0] * n.x + m[1][0] * n.y + m[2][0] * n.z, m[0][1] * n.x + m[1][1] * n.y + m[2][1] * n.z,
-            m[0][2] * n.x + m[1][2] * n.y + m[2][2] * n.z);
-}
-
-vec3 xf_inv_point(const xform *t, vec3 p) {
-  xform i = xf_inverse(t);
-  return xf_point(&i, p);
-}
-
-vec3 xf_inv_vector(const xform *t, vec3 v) {
-  const double(*m)[4] = t->inv;
-  return v3(m[0][0] * v.x + m[0][1] * v.y + m[0][2] * v.z, m[1][0] * v.x + m[1][1] * v.y + m[1][2] * v.z,
-            m[2][0] * v.x + m[2][1] * v.y + m[2][2] * v.z);
-}
-
 bool xf_is_identity(const xform *t) {
   for (int i = 0; i < 4; i++)
     for (int j = 0; j < 4; j++)

@@ -4,7 +4,13 @@
  * Next-event estimation samples a point uniformly on the shape's area and
  * converts the density to solid angle at the reference point:
  * pdf_omega = pdf_A dist^2 / |cos theta_e|, with cos theta_e between the
- * emitter normal and the direction back to the reference point. */
+ * emitter normal and the direction back to the reference point.
+ *
+ * The shape's world-space triangles (vertex, edges, unit normal) are
+ * computed once per load and per geometric update (set_scene runs after
+ * both, scene_refresh_bounds), not per sample; without them (a mesh above
+ * SHAPE_TRIS_MAX faces, or no memory) each sample makes its triangle with
+ * the same code, so the result is the same bit for bit. */
 #include <stdlib.h>
 
 #include "../scene/loader.h"
@@ -15,11 +21,20 @@
 typedef struct area_light {
   emitter base;
   texture *radiance;
+  double *tris;    /* world triangles of base.shape (owned), or NULL */
+  uint32_t tris_n; /* faces they were made for (entries: SHAPE_TRI_DOUBLES each) */
 } area_light;
+
+static void area_set_scene(emitter *e, const scene *sc) {
+  (void)sc;
+  area_light *a = (area_light *)e;
+  shape_world_tris_refresh(e->shape, &a->tris, &a->tris_n);
+}
 
 static color area_sample(const emitter *e, const surface_interaction *ref, vec2 u, direction_sample *ds) {
   const area_light *a = (const area_light *)e;
-  position_sample ps = shape_sample_position(e->shape, u);
+  position_sample ps =
+      shape_sample_position_tris(e->shape, u, shape_world_tris_for(e->shape, a->tris, a->tris_n));
   vec3 d = v3_sub(ps.p, ref->p);
   double dist2 = v3_len2(d);
   double dist = sqrt(dist2);
@@ -50,10 +65,13 @@ static color area_eval(const emitter *e, const surface_interaction *hit, vec3 d)
   return tex_eval(a->radiance, hit);
 }
 
-static const emitter_ops area_ops = {
-    .sample_direction = area_sample, .pdf_direction = area_pdf, .eval = area_eval};
+static const emitter_ops area_ops = {.sample_direction = area_sample,
+                                     .pdf_direction = area_pdf,
+                                     .eval = area_eval,
+                                     .set_scene = area_set_scene};
 
 static void area_destroy(object *o) {
+  if (o) free(((area_light *)o)->tris);
   free(o);
 }
 

@@ -68,6 +68,7 @@ static const sensor_ops distant_ops = {
 };
 
 static void distant_destroy(object *o) {
+  if (o) ray_target_release(&((distant *)o)->target);
   free(o);
 }
 

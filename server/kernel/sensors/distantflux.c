@@ -68,6 +68,7 @@ static const sensor_ops distantflux_ops = {
 };
 
 static void distantflux_destroy(object *o) {
+  if (o) ray_target_release(&((distantflux *)o)->target);
   free(o);
 }
 

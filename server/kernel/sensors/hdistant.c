@@ -88,6 +88,7 @@ static const sensor_ops hdistant_ops = {
 };
 
 static void hdistant_destroy(object *o) {
+  if (o) ray_target_release(&((hdistant *)o)->target);
   free(o);
 }
 

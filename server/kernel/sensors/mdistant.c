@@ -82,6 +82,7 @@ static const sensor_ops mdistant_ops = {
 static void mdistant_destroy(object *o) {
   mdistant *m = (mdistant *)o;
   if (!m) return;
+  ray_target_release(&m->target);
   free(m->d);
   free(m->frames);
   free(m);

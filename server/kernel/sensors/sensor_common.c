@@ -99,6 +99,13 @@ rsw_status ray_target_check(const ray_target *t, const char *where, rsw_err *err
 void ray_target_bind(ray_target *t, const scene *sc, bool explicit_offset) {
   t->slab = sc->periodic;
   if (explicit_offset) t->slab.on = false;
+  if (t->kind == RAY_TARGET_SHAPE) shape_world_tris_refresh(t->shape, &t->tris, &t->tris_n);
+}
+
+void ray_target_release(ray_target *t) {
+  free(t->tris);
+  t->tris = NULL;
+  t->tris_n = 0;
 }
 
 /* The offset, raised (periodic scenes) to put p - offset d outside the
@@ -112,7 +119,8 @@ double ray_target_origin(const ray_target *t, const xform *to_world, vec3 center
   switch (t->kind) {
   case RAY_TARGET_POINT: *o = v3_fma(t->point, -slab_offset(t, t->point, d, offset), d); return 1.0;
   case RAY_TARGET_SHAPE: {
-    position_sample ps = shape_sample_position(t->shape, u);
+    position_sample ps =
+        shape_sample_position_tris(t->shape, u, shape_world_tris_for(t->shape, t->tris, t->tris_n));
     *o = v3_fma(ps.p, -slab_offset(t, ps.p, d, offset), d);
     double denom = ps.pdf * t->shape->area;
     return denom > 0.0 ? 1.0 / denom : 0.0;

@@ -33,6 +33,10 @@ typedef struct ray_target {
   /* The scene's periodic boundary (ray_target_bind), when origins are to
    * be put outside its geometry's slab; .on false otherwise. */
   periodic_bounds slab;
+  /* RAY_TARGET_SHAPE: its world triangles (shape_world_tris_refresh, by
+   * ray_target_bind), owned; NULL when not made. */
+  double *tris;
+  uint32_t tris_n;
 } ray_target;
 
 /* Read the optional `target` property: a 3-vector is a point target, a
@@ -55,8 +59,12 @@ rsw_status ray_target_check(const ray_target *t, const char *where, rsw_err *err
  *     d enters through (exact average over the infinite canopy, which a
  *     disk of radius R is not), origin just outside it; weight 1. A
  *     horizontal d keeps the disk.
- * Without a periodic boundary nothing changes. */
+ * Without a periodic boundary nothing changes. A shape target's world
+ * triangles are made here too (its to_world and vertices only change in
+ * updates, after which set_scene runs again). */
 void ray_target_bind(ray_target *t, const scene *sc, bool explicit_offset);
+/* Frees what ray_target_bind made (the sensor's destroy). */
+void ray_target_release(ray_target *t);
 
 /* Origin of a ray with unit direction d (pointing into the scene) for the
  * aperture sample u; returns the ray weight (eradiate/mitsuba3

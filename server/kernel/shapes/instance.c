@@ -373,10 +373,24 @@ xform instance_transform(const instance_shape *s, uint32_t k) {
   if (!s->xf) return s->base.to_world;
   const float *m = &s->xf[12 * (size_t)k];
   const double *tr = &s->tr[3 * (size_t)k];
-  double mm[4][4] = {
-      {m[0], m[1], m[2], tr[0]}, {m[4], m[5], m[6], tr[1]}, {m[8], m[9], m[10], tr[2]}, {0, 0, 0, 1}};
-  xform t;
-  if (!xf_from_matrix(mm, &t)) t = xf_identity(); /* checked at load */
+  /* Called for every hit on a placement: the inverse of the affine map
+   * [A | t] in closed form, A^-1 = adj(A) / det(A) and -A^-1 t, not a
+   * pivoting 4x4 inversion; list_parse() checked at load that A is
+   * invertible (xf_from_matrix). Nothing is stored per placement (its
+   * record stays 72 bytes). */
+  double a00 = m[0], a01 = m[1], a02 = m[2], a10 = m[4], a11 = m[5], a12 = m[6], a20 = m[8], a21 = m[9],
+         a22 = m[10];
+  double c00 = a11 * a22 - a12 * a21, c01 = a02 * a21 - a01 * a22, c02 = a01 * a12 - a02 * a11;
+  double c10 = a12 * a20 - a10 * a22, c11 = a00 * a22 - a02 * a20, c12 = a02 * a10 - a00 * a12;
+  double c20 = a10 * a21 - a11 * a20, c21 = a01 * a20 - a00 * a21, c22 = a00 * a11 - a01 * a10;
+  double id = 1.0 / (a00 * c00 + a01 * c10 + a02 * c20);
+  xform t = {.m = {{a00, a01, a02, tr[0]}, {a10, a11, a12, tr[1]}, {a20, a21, a22, tr[2]}, {0, 0, 0, 1}},
+             .inv = {{c00 * id, c01 * id, c02 * id, 0},
+                     {c10 * id, c11 * id, c12 * id, 0},
+                     {c20 * id, c21 * id, c22 * id, 0},
+                     {0, 0, 0, 1}}};
+  for (int i = 0; i < 3; i++)
+    t.inv[i][3] = -(t.inv[i][0] * tr[0] + t.inv[i][1] * tr[1] + t.inv[i][2] * tr[2]);
   return t;
 }
 
@@ -419,12 +433,12 @@ void hit_fill_interaction(const scene *sc, const ray3 *r, const accel_hit *h, su
   }
   const instance_shape *is = (const instance_shape *)top;
   const shape *m = is->group->members[h->member];
-  /* The member seen through placement * member.to_world: a copy with that
-   * transform shades exactly as a plain shape would (barycentrics are
-   * invariant under the affine maps involved). */
-  shape tmp = *m;
+  /* The member seen through placement * member.to_world: shaded with that
+   * transform exactly as a plain shape would be (barycentrics are
+   * invariant under the affine maps involved). A member at the group's
+   * origin (identity to_world, the usual leaf) skips the product. */
   xform place = instance_transform(is, h->sub);
-  tmp.to_world = xf_mul(&place, &m->to_world);
+  xform to_world = xf_is_identity(&m->to_world) ? place : xf_mul(&place, &m->to_world);
   accel_hit hh = *h;
   if (m->geom == GEOM_MESH) {
     /* Embree's Ng is in group space (member to_world baked in): back to
@@ -435,8 +449,7 @@ void hit_fill_interaction(const scene *sc, const ray3 *r, const accel_hit *h, su
     hh.ng = v3(a[0][0] * g.x + a[1][0] * g.y + a[2][0] * g.z, a[0][1] * g.x + a[1][1] * g.y + a[2][1] * g.z,
                a[0][2] * g.x + a[1][2] * g.y + a[2][2] * g.z);
   }
-  shape_fill_interaction(&tmp, r, &hh, si);
-  si->shape = m;
+  shape_fill_interaction_xf(m, &to_world, r, &hh, si);
   /* The position is computed from the member's own coordinates (object
    * space barycentrics or re-projection) under placement * member, so its
    * error is that of Embree's instance frame, not of the world offset. */

@@ -20,6 +20,32 @@ typedef struct position_sample {
  * sphere: uniform sphere; cylinder: (cos 2pi u.y, sin 2pi u.y, u.x);
  * mesh: triangle by area then uniform barycentric. */
 position_sample shape_sample_position(const shape *s, vec2 u);
+
+/* A mesh's triangle f in world space, as sampling uses it: the first
+ * vertex w0 = to_world p0, the edges w1 - w0 and w2 - w0, and the unit
+ * normal normalize((w1 - w0) x (w2 - w0)) (before flip_normals), in this
+ * order, 3 doubles each. */
+#define SHAPE_TRI_DOUBLES 12
+void shape_world_triangle(const shape *s, uint32_t f, double out[SHAPE_TRI_DOUBLES]);
+/* shape_sample_position() given a mesh's world triangles (n_faces *
+ * SHAPE_TRI_DOUBLES doubles from shape_world_triangle(), borrowed; NULL:
+ * made as needed). The result is the same, bit for bit, with or without:
+ * precomputing them per update saves four transforms and a normalisation
+ * per sample. */
+position_sample shape_sample_position_tris(const shape *s, vec2 u, const double *tris);
+/* Refresh a cache of s's world triangles for shape_sample_position_tris():
+ * *tris (owned by the caller, realloc'ed; free() it) and *n, its face
+ * count. For a sampled mesh of at most SHAPE_TRIS_MAX faces it is
+ * (re)computed; otherwise, or when out of memory, it is freed and left
+ * NULL (sampling then makes each triangle itself: the same values). Call
+ * it whenever s's to_world or vertices may have changed (the set_scene of
+ * emitters and sensors runs after every load and geometric update). */
+#define SHAPE_TRIS_MAX (1u << 16) /* 6 MiB of triangles at most */
+void shape_world_tris_refresh(const shape *s, double **tris, uint32_t *n);
+/* *tris when it was made for s as it is now (face count), else NULL. */
+static inline const double *shape_world_tris_for(const shape *s, const double *tris, uint32_t n) {
+  return tris && s->geom == GEOM_MESH && n == s->mesh.n_faces ? tris : NULL;
+}
 /* Area pdf of shape_sample_position (1/area). */
 double shape_pdf_position(const shape *s);
 
@@ -28,6 +54,10 @@ double shape_pdf_position(const shape *s);
 struct accel_hit;
 void shape_fill_interaction(const shape *s, const ray3 *r, const struct accel_hit *h,
                             surface_interaction *si);
+/* The same with to_world given apart from the shape (an instanced member
+ * under placement * member.to_world), so no copy of the shape is made. */
+void shape_fill_interaction_xf(const shape *s, const xform *to_world, const ray3 *r,
+                               const struct accel_hit *h, surface_interaction *si);
 
 /* Compute area, triangle cdf; check geometry (degenerate to_world for a
  * disk, non-uniform scale for a sphere, ...). Called by create(). */

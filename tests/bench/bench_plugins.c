@@ -1,0 +1,278 @@
+/* make bench: per-plugin costs, one JSON object per line.
+ *
+ *  rough_*        ns per roughconductor sample / eval / pdf call (one
+ *                 thread; Beckmann and GGX, visible normals, material
+ *                 none = F 1, and a gold preset in rgb)
+ *  sampler_*      ns per sample start plus the two 2-D draws a camera ray
+ *                 takes (independent, stratified)
+ *  sensor_*       ns per sample_ray (hdistant of the seed scene,
+ *                 perspective of the Cornell box)
+ *  area_sample    ns per area-light sample_direction (the Cornell box
+ *                 light, from the floor's centre)
+ *  scene_*        whole renders: the seed scene (32x32, 3200 spp) and the
+ *                 Cornell box example (128x128, 64 spp, max_depth 8), all
+ *                 cores ($RSW_BENCH_THREADS): wall seconds, and the CPU
+ *                 seconds of all threads (cpu_s, ns_per_sample_cpu: what
+ *                 a shared machine's other load does not inflate)
+ *
+ * Each figure is the median of REPEATS timings within one run (the machine
+ * is shared: medians resist a busy spell). $RSW_BENCH_ONLY=prefix runs the
+ * figures whose name starts with it. */
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "../../server/kernel/bsdfs/bsdfs_internal.h"
+#include "../../server/kernel/core/rng.h"
+#include "../../server/kernel/core/warp.h"
+#include "../../server/kernel/render.h"
+#include "../../server/kernel/scene/scene.h"
+#include "../../server/kernel/textures/texture.h"
+#include "../support/bsdf_test.h"
+
+#define REPEATS 5
+#define NDIR    4096
+
+/* Per-call figures use this thread's CPU time, not wall time: on a shared
+ * machine a thread that is descheduled does not count against the code. */
+static double now_s(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+/* CPU seconds of the whole process (all render threads). */
+static double process_cpu_s(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+static int cmp_double(const void *a, const void *b) {
+  double x = *(const double *)a, y = *(const double *)b;
+  return x < y ? -1 : x > y;
+}
+
+static double median(double *v, size_t n) {
+  qsort(v, n, sizeof *v, cmp_double);
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+static bool wanted(const char *name) {
+  const char *only = getenv("RSW_BENCH_ONLY");
+  return !only || !*only || strncmp(name, only, strlen(only)) == 0;
+}
+
+static void emit(const char *name, double ns, double sink) {
+  printf("{\"bench\": \"%s\", \"ns_per_call\": %.2f, \"repeats\": %d, \"checksum\": %.6g}\n", name, ns,
+         REPEATS, sink);
+  fflush(stdout);
+}
+
+/* Inputs drawn once: incident directions over the hemisphere (cosine
+ * weighted, as a path meets them) and uniform pairs. */
+static vec3 dirs[NDIR];
+static vec2 us[NDIR];
+
+static void make_inputs(void) {
+  pcg32 r;
+  pcg32_seed(&r, 42, 7);
+  for (int i = 0; i < NDIR; i++) {
+    vec2 u = v2(pcg32_next_double(&r), pcg32_next_double(&r));
+    dirs[i] = warp_square_to_cosine_hemisphere(u);
+    if (!(dirs[i].z > 1e-4)) dirs[i] = v3(0, 0, 1);
+    us[i] = v2(pcg32_next_double(&r), pcg32_next_double(&r));
+  }
+}
+
+enum {
+  OP_SAMPLE,
+  OP_EVAL,
+  OP_PDF
+};
+
+static void bench_bsdf(const char *name, const bsdf *b, int op) {
+  if (!wanted(name)) return;
+  const int N = 400000;
+  double t[REPEATS], sink = 0;
+  surface_interaction si = tb_si_with(v3(0, 0, 1));
+  for (int rep = 0; rep < REPEATS; rep++) {
+    double t0 = now_s();
+    for (int i = 0; i < N; i++) {
+      si.wi = dirs[i & (NDIR - 1)];
+      vec2 u = us[(i * 7 + 3) & (NDIR - 1)];
+      if (op == OP_SAMPLE) {
+        bsdf_sample bs;
+        color w = b->ops->sample(b, &si, 0.5, u, &bs);
+        sink += w.c[0] + bs.pdf;
+      } else if (op == OP_EVAL) {
+        sink += b->ops->eval(b, &si, dirs[(i * 5 + 1) & (NDIR - 1)]).c[1];
+      } else {
+        sink += b->ops->pdf(b, &si, dirs[(i * 5 + 1) & (NDIR - 1)]);
+      }
+    }
+    t[rep] = (now_s() - t0) * 1e9 / N;
+  }
+  emit(name, median(t, REPEATS), sink);
+}
+
+static void bench_rough(void) {
+  const char *names[2] = {"beckmann", "ggx"};
+  for (int ty = 0; ty < 2; ty++) {
+    rough_case r = rough_make(ty ? MF_GGX : MF_BECKMANN, 0.1, 0.1, true, 0.0, 1.0);
+    if (!r.b) continue;
+    char n[64];
+    snprintf(n, sizeof n, "rough_%s_sample", names[ty]);
+    bench_bsdf(n, r.b, OP_SAMPLE);
+    snprintf(n, sizeof n, "rough_%s_eval", names[ty]);
+    bench_bsdf(n, r.b, OP_EVAL);
+    snprintf(n, sizeof n, "rough_%s_pdf", names[ty]);
+    bench_bsdf(n, r.b, OP_PDF);
+    rough_free(&r);
+  }
+  /* A coloured preset in rgb: three Fresnel channels are needed here. */
+  texture *a = uniform_texture_const(0.1, "alpha");
+  render_ctx rc = {.variant = VARIANT_RGB, .wavelength = 550.0};
+  const ior_conductor *au = ior_conductor_lookup("Au");
+  bsdf *b = a && au ? roughconductor_new(MF_BECKMANN, a, a, true, NULL, NULL, au, NULL, &rc) : NULL;
+  if (b) {
+    bench_bsdf("rough_beckmann_gold_rgb_sample", b, OP_SAMPLE);
+    bench_bsdf("rough_beckmann_gold_rgb_eval", b, OP_EVAL);
+    tb_free_bsdf(b);
+  }
+  tb_free_tex(a);
+  texture *rho = uniform_texture_const(0.5, "rho");
+  bsdf *d = rho ? diffuse_new(rho) : NULL;
+  if (d) {
+    bench_bsdf("diffuse_sample", d, OP_SAMPLE);
+    bench_bsdf("diffuse_eval", d, OP_EVAL);
+    tb_free_bsdf(d);
+  }
+  tb_free_tex(rho);
+}
+
+static scene *load(const char *path) {
+  rsw_err err = {0};
+  scene *s = NULL;
+  scene_load_opts lo = {.size = sizeof lo};
+  if (scene_load_file(path, &lo, &s, &err)) {
+    fprintf(stderr, "bench_plugins: %s: %s: %s\n", path, err.where, err.msg);
+    return NULL;
+  }
+  /* One render prepares the scene (prepare(), set_scene()). */
+  render_opts o = {.size = sizeof o, .spp = 1, .seed = 1, .threads = 1};
+  film_image img;
+  render_result_stats st;
+  if (render_sensor(s, &o, &img, &st, &err) == RSW_OK) film_image_free(&img);
+  return s;
+}
+
+/* Start of a sample and the two 2-D draws of a camera ray. */
+static void bench_sampler(const char *name, const sampler *smp) {
+  if (!wanted(name)) return;
+  const int N = 1000000;
+  double t[REPEATS], sink = 0;
+  for (int rep = 0; rep < REPEATS; rep++) {
+    double t0 = now_s();
+    for (int i = 0; i < N; i++) {
+      sampler_state st;
+      smp->ops->start(smp, &st, 1, (uint64_t)(i >> 6), (uint32_t)(i & 63), 64);
+      vec2 a = smp->ops->next_2d(&st), b = smp->ops->next_2d(&st);
+      sink += a.x + b.y;
+    }
+    t[rep] = (now_s() - t0) * 1e9 / N;
+  }
+  emit(name, median(t, REPEATS), sink);
+}
+
+static void bench_sensor(const char *name, const sensor *se) {
+  if (!wanted(name)) return;
+  const int N = 1000000;
+  double t[REPEATS], sink = 0;
+  for (int rep = 0; rep < REPEATS; rep++) {
+    double t0 = now_s();
+    for (int i = 0; i < N; i++) {
+      ray3 ray;
+      double w = se->ops->sample_ray(se, us[i & (NDIR - 1)], us[(i * 3 + 1) & (NDIR - 1)], &ray);
+      sink += w + ray.d.x + ray.o.y;
+    }
+    t[rep] = (now_s() - t0) * 1e9 / N;
+  }
+  emit(name, median(t, REPEATS), sink);
+}
+
+static void bench_area(const scene *s) {
+  if (!wanted("area_sample")) return;
+  const emitter *e = NULL;
+  for (size_t i = 0; i < s->n_emitters; i++)
+    if (s->emitters[i]->flags & EMITTER_SURFACE) e = s->emitters[i];
+  if (!e) return;
+  const int N = 1000000;
+  double t[REPEATS], sink = 0;
+  surface_interaction ref = tb_si_with(v3(0, 0, 1));
+  ref.p = v3(0, -0.99, 0);
+  for (int rep = 0; rep < REPEATS; rep++) {
+    double t0 = now_s();
+    for (int i = 0; i < N; i++) {
+      direction_sample ds;
+      color c = e->ops->sample_direction(e, &ref, us[i & (NDIR - 1)], &ds);
+      sink += c.c[0] + ds.pdf;
+    }
+    t[rep] = (now_s() - t0) * 1e9 / N;
+  }
+  emit("area_sample", median(t, REPEATS), sink);
+}
+
+static int bench_threads(void) {
+  const char *e = getenv("RSW_BENCH_THREADS");
+  int t = e ? atoi(e) : 0;
+  if (t <= 0) t = (int)sysconf(_SC_NPROCESSORS_ONLN);
+  return t < 1 ? 1 : t;
+}
+
+static void bench_render(const char *name, scene *s) {
+  if (!wanted(name)) return;
+  rsw_err err = {0};
+  render_opts o = {.size = sizeof o, .spp = 0, .seed = 1, .threads = bench_threads()};
+  double t[3], c[3];
+  render_result_stats st = {0};
+  for (int rep = 0; rep < 3; rep++) {
+    film_image img;
+    double c0 = process_cpu_s();
+    if (render_sensor(s, &o, &img, &st, &err)) {
+      fprintf(stderr, "bench %s: %s\n", name, err.msg);
+      return;
+    }
+    c[rep] = process_cpu_s() - c0;
+    film_image_free(&img);
+    t[rep] = st.wall_s;
+  }
+  double w = median(t, 3), cpu = median(c, 3);
+  printf("{\"bench\": \"%s\", \"wall_s\": %.4f, \"cpu_s\": %.4f, \"samples_per_s\": %.4g, "
+         "\"ns_per_sample_per_core\": %.1f, \"ns_per_sample_cpu\": %.1f, \"threads\": %d, \"repeats\": 3}\n",
+         name, w, cpu, st.samples / w, w * 1e9 * st.threads / (double)st.samples,
+         cpu * 1e9 / (double)st.samples, st.threads);
+  fflush(stdout);
+}
+
+int main(void) {
+  make_inputs();
+  bench_rough();
+  scene *seed = load("proto/examples/hdistant_seed.xml");
+  scene *cb = load("proto/examples/cornell_box.json");
+  if (!seed || !cb) return 1;
+  bench_sampler("sampler_independent", seed->sensors[0]->sampler);
+  bench_sampler("sampler_stratified", cb->sensors[0]->sampler);
+  bench_sensor("sensor_hdistant", seed->sensors[0]);
+  bench_sensor("sensor_perspective", cb->sensors[0]);
+  bench_area(cb);
+  bench_render("scene_seed_hdistant", seed);
+  bench_render("scene_cornell_box", cb);
+  scene_free(seed);
+  scene_free(cb);
+  return 0;
+}
