@@ -220,8 +220,37 @@ typedef enum component_format {
   COMPFMT_FLOAT16
 } component_format;
 
+/* The renderer's accumulated sums of a film, as its develop op reads
+ * them. Per pixel, `stride` doubles: sum(f w L) rgb, sum(f), and for
+ * Stokes films sum(f w (Q, U, V)); then, for a film with variance, from
+ * `m_off`, per developed channel k the triple (K, sum(x - K),
+ * sum((x - K)^2)) of its samples x, K being the pixel's first sample. */
+#define FILM_ACC_MOMENT 3
+typedef struct film_sums {
+  const double *acc; /* width*height*stride */
+  int width, height, stride, m_off;
+  bool stokes;       /* S0..S3 */
+  bool lum;          /* one luminance channel Y */
+  rsw_variant variant;
+  uint32_t spp;
+  uint64_t seed;
+  double wavelength; /* nm (mono) */
+  unsigned quantities; /* RENDER_Q_* planes asked for (render.h) */
+  bool variance;       /* the radiance_stderr plane */
+  color e_h;           /* horizontal irradiance (brdf / brf) */
+} film_sums;
+
+struct film;
+struct film_image;
+typedef struct film_ops {
+  /* From the accumulated sums to the developed image (radiance, then the
+   * planes asked for). On failure nothing stays allocated in *out. */
+  rsw_status (*develop)(const struct film *f, const film_sums *sums, struct film_image *out, rsw_err *err);
+} film_ops;
+
 typedef struct film {
   object base;
+  const film_ops *ops;
   int width, height;
   pixel_format pixel_format; /* forced to luminance in mono */
   component_format component_format;
