@@ -343,12 +343,9 @@ struct integrator {
 };
 
 /* ---- shapes -------------------------------------------------------------- */
-typedef enum geom_kind {
-  GEOM_MESH,
-  GEOM_SPHERE,
-  GEOM_DISK,
-  GEOM_CYLINDER
-} geom_kind;
+/* What a kind of geometry does (bounds, intersection, surface data,
+ * position sampling, area): shapes/shape.h. */
+struct shape_ops;
 
 /* Triangle mesh in object space (before to_world). */
 typedef struct mesh {
@@ -361,7 +358,7 @@ typedef struct mesh {
 
 typedef struct shape {
   object base;
-  geom_kind geom;
+  const struct shape_ops *ops; /* its geometry's ops (shapes/shape.h) */
   xform to_world; /* object -> world; the Embree instance transform */
   bool flip_normals;
   bool face_normals;                 /* ignore vertex normals */
@@ -369,7 +366,7 @@ typedef struct shape {
   double silhouette_sampling_weight; /* Mitsuba's; no effect here */
   bsdf *bsdf;
   emitter *emitter; /* area light, or NULL */
-  mesh mesh;        /* GEOM_MESH */
+  mesh mesh;        /* triangle meshes (ops == &shape_ops_mesh) */
   bool sampled;     /* positions are sampled on it (a sensor's target) */
   /* Derived by shape_finalize(). A mesh's area and area cdf are computed
    * only when something samples it (an area emitter, a sensor target): an
