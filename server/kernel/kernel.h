@@ -229,12 +229,12 @@ typedef enum component_format {
 typedef struct film_sums {
   const double *acc; /* width*height*stride */
   int width, height, stride, m_off;
-  bool stokes;       /* S0..S3 */
-  bool lum;          /* one luminance channel Y */
+  bool stokes; /* S0..S3 */
+  bool lum;    /* one luminance channel Y */
   rsw_variant variant;
   uint32_t spp;
   uint64_t seed;
-  double wavelength; /* nm (mono) */
+  double wavelength;   /* nm (mono) */
   unsigned quantities; /* RENDER_Q_* planes asked for (render.h) */
   bool variance;       /* the radiance_stderr plane */
   color e_h;           /* horizontal irradiance (brdf / brf) */
@@ -359,7 +359,7 @@ typedef struct mesh {
 typedef struct shape {
   object base;
   const struct shape_ops *ops; /* its geometry's ops (shapes/shape.h) */
-  xform to_world; /* object -> world; the Embree instance transform */
+  xform to_world;              /* object -> world; the Embree instance transform */
   bool flip_normals;
   bool face_normals;                 /* ignore vertex normals */
   bool mesh_params;                  /* exposes its buffers (cube, obj, ply; not rectangle) */
@@ -381,6 +381,12 @@ typedef struct shape {
   double area_next;
   bool cdf_staged;
   unsigned index; /* position in scene->shapes */
+  /* Meshes of at most SHAPE_FACE_CACHE_MAX faces (shapes/shape.h): per
+   * face, the world geometric normal and world dp/du under to_world, 6
+   * doubles, as a hit's surface data computes them (the same bits);
+   * refreshed by shape_finalize and parameters_changed. NULL otherwise. */
+  double *face_cache;
+  uint32_t face_cache_n;
 } shape;
 
 /* ---- the scene ----------------------------------------------------------- */

@@ -21,10 +21,12 @@ RSW_TEST_DEFINE_GLOBALS
  * a cylinder of radius 0.4 from (0, 0, 1) to (1, 1, 3); a rectangle
  * scaled by (2, 0.5). */
 static const char *scene_text =
-    "{\"type\": \"scene\", \"cam\": {\"type\": \"perspective\", \"film\": {\"type\": \"hdrfilm\", \"width\": 2, "
+    "{\"type\": \"scene\", \"cam\": {\"type\": \"perspective\", \"film\": {\"type\": \"hdrfilm\", \"width\": "
+    "2, "
     "\"height\": 2}},"
     " \"ball\": {\"type\": \"sphere\", \"center\": [1, -2, 0.5], \"radius\": 0.7},"
-    " \"plate\": {\"type\": \"disk\", \"to_world\": [{\"scale\": [1.5, 1.5, 1.5]}, {\"rotate\": {\"axis\": [1, 2, "
+    " \"plate\": {\"type\": \"disk\", \"to_world\": [{\"scale\": [1.5, 1.5, 1.5]}, {\"rotate\": {\"axis\": "
+    "[1, 2, "
     "0], \"angle\": 40}}, {\"translate\": [0.3, 0.2, -1]}]},"
     " \"tube\": {\"type\": \"cylinder\", \"p0\": [0, 0, 1], \"p1\": [1, 1, 3], \"radius\": 0.4},"
     " \"quad\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [2, 0.5, 1]}, {\"translate\": [0, 0, "
@@ -34,7 +36,8 @@ static scene *g_scene;
 
 static const shape *find(const char *id) {
   for (size_t i = 0; i < g_scene->n_shapes; i++)
-    if (g_scene->shapes[i]->base.id && strcmp(g_scene->shapes[i]->base.id, id) == 0) return g_scene->shapes[i];
+    if (g_scene->shapes[i]->base.id && strcmp(g_scene->shapes[i]->base.id, id) == 0)
+      return g_scene->shapes[i];
   return NULL;
 }
 
@@ -122,7 +125,8 @@ static void check_intersect(const char *id, const implicit *im) {
   for (int i = 0; i < 600; i++) {
     /* Origins in [-2.5, 2.5]^3, directions of length in [0.5, 2] (not
      * normalised, as Embree hands them in instance space). */
-    vec3 o = v3(5 * pcg32_next_double(&g) - 2.5, 5 * pcg32_next_double(&g) - 2.5, 5 * pcg32_next_double(&g) - 2.5);
+    vec3 o =
+        v3(5 * pcg32_next_double(&g) - 2.5, 5 * pcg32_next_double(&g) - 2.5, 5 * pcg32_next_double(&g) - 2.5);
     vec3 d = v3_sub(v3(1.6 * pcg32_next_double(&g) - 0.8, 1.6 * pcg32_next_double(&g) - 0.8,
                        1.6 * pcg32_next_double(&g) - 0.8),
                     o);
@@ -152,7 +156,8 @@ static void check_intersect(const char *id, const implicit *im) {
     vec3 want_n = im->f == f_plane ? v3(0, 0, 1) : im->f == f_tube ? v3_norm(v3(p.x, p.y, 0)) : v3_norm(p);
     if (v3_len(v3_sub(nn, want_n)) > 1e-9) wrong++;
   }
-  CHECK(wrong == 0, "%s: %d of %d rays disagree with the brute-force answer", id, wrong, hits + misses + wrong);
+  CHECK(wrong == 0, "%s: %d of %d rays disagree with the brute-force answer", id, wrong,
+        hits + misses + wrong);
   CHECK(hits > 40 && misses > 40, "%s: too few hits (%d) or misses (%d) to test", id, hits, misses);
   CHECK(skipped < 60, "%s: %d grazing rays skipped", id, skipped);
 }
@@ -185,7 +190,8 @@ static void check_fill(const char *id, const implicit *im) {
   int n_hit = 0, bad = 0;
   for (int i = 0; i < 400; i++) {
     vec3 to = v3(1.2 * pcg32_next_double(&g) - 0.6, 1.2 * pcg32_next_double(&g) - 0.6, pcg32_next_double(&g));
-    vec3 from = v3_scale(warp_square_to_uniform_sphere(v2(pcg32_next_double(&g), pcg32_next_double(&g))), 6.0);
+    vec3 from =
+        v3_scale(warp_square_to_uniform_sphere(v2(pcg32_next_double(&g), pcg32_next_double(&g))), 6.0);
     ray3 r = {xf_point(&s->to_world, from), xf_vector(&s->to_world, v3_sub(to, from)), 0, INFINITY};
     vec3 oo = xf_inv_point(&s->to_world, r.o), dd = xf_inv_vector(&s->to_world, r.d);
     double o3[3] = {oo.x, oo.y, oo.z}, d3[3] = {dd.x, dd.y, dd.z}, t, n[3];
@@ -255,8 +261,9 @@ static bool s_pos(void *user, const double *u, vec3 *out, double *weight) {
   pos_ctx *c = user;
   position_sample ps = shape_sample_position(c->s, v2(u[0], u[1]));
   vec3 po = xf_inv_point(&c->s->to_world, ps.p);
-  vec3 want_n = v3_norm(
-      xf_normal(&c->s->to_world, c->kind == 0 ? po : c->kind == 1 ? v3(0, 0, 1) : v3(po.x, po.y, 0)));
+  vec3 want_n = v3_norm(xf_normal(&c->s->to_world, c->kind == 0   ? po
+                                                   : c->kind == 1 ? v3(0, 0, 1)
+                                                                  : v3(po.x, po.y, 0)));
   if (v3_len(v3_sub(want_n, ps.n)) > 1e-9 || !(ps.pdf > 0)) c->bad++;
   if (c->kind == 0) {
     if (fabs(v3_len(po) - 1) > 1e-12) c->bad++;

@@ -97,9 +97,7 @@ static rsw_status hdrfilm_develop(const film *fm, const film_sums *s, film_image
   }
   double eh[4] = {0, 0, 0, 0}; /* per developed channel, as the radiance maps colours */
   for (int c = 0; c < img.channels; c++)
-    eh[c] = s->stokes || s->variant == VARIANT_MONO ? s->e_h.c[0]
-            : lum                                   ? col_luminance(s->e_h)
-                                                    : s->e_h.c[c];
+    eh[c] = s->stokes || s->variant == VARIANT_MONO ? s->e_h.c[0] : lum ? col_luminance(s->e_h) : s->e_h.c[c];
   const char *want[FILM_MAX_PLANES];
   int n_want = 0;
   if (s->quantities & RENDER_Q_BRDF) want[n_want++] = "brdf";

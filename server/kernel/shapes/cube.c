@@ -48,8 +48,8 @@ static rsw_status cube_create(loader *ld, node *n, object **out) {
 }
 
 const plugin plugin_cube = {.name = "cube",
-                             .cls = CLS_SHAPE,
-                             .create = cube_create,
-                             .destroy = shape_destroy,
-                             .traverse = shape_traverse,
-                             .parameters_changed = shape_parameters_changed};
+                            .cls = CLS_SHAPE,
+                            .create = cube_create,
+                            .destroy = shape_destroy,
+                            .traverse = shape_traverse,
+                            .parameters_changed = shape_parameters_changed};

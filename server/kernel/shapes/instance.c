@@ -379,8 +379,8 @@ void instance_bbox(const shape *sh, vec3 *lo, vec3 *hi) {
   if (!s->xf) {
     for (int c = 0; c < 8; c++)
       shape_box_add(lo, hi,
-              xf_point(&sh->to_world,
-                       v3(c & 1 ? g->hi.x : g->lo.x, c & 2 ? g->hi.y : g->lo.y, c & 4 ? g->hi.z : g->lo.z)));
+                    xf_point(&sh->to_world, v3(c & 1 ? g->hi.x : g->lo.x, c & 2 ? g->hi.y : g->lo.y,
+                                               c & 4 ? g->hi.z : g->lo.z)));
     return;
   }
   /* Placements applied directly (instance_transform would also invert
@@ -391,9 +391,9 @@ void instance_bbox(const shape *sh, vec3 *lo, vec3 *hi) {
     for (int c = 0; c < 8; c++) {
       double q[3] = {c & 1 ? g->hi.x : g->lo.x, c & 2 ? g->hi.y : g->lo.y, c & 4 ? g->hi.z : g->lo.z};
       shape_box_add(lo, hi,
-              v3((double)m[0] * q[0] + (double)m[1] * q[1] + (double)m[2] * q[2] + t[0],
-                 (double)m[4] * q[0] + (double)m[5] * q[1] + (double)m[6] * q[2] + t[1],
-                 (double)m[8] * q[0] + (double)m[9] * q[1] + (double)m[10] * q[2] + t[2]));
+                    v3((double)m[0] * q[0] + (double)m[1] * q[1] + (double)m[2] * q[2] + t[0],
+                       (double)m[4] * q[0] + (double)m[5] * q[1] + (double)m[6] * q[2] + t[1],
+                       (double)m[8] * q[0] + (double)m[9] * q[1] + (double)m[10] * q[2] + t[2]));
     }
   }
 }

@@ -22,7 +22,9 @@ static void mesh_world_bounds(const shape *s, const xform *t, vec3 *lo, vec3 *hi
 
 static void mesh_fill(const shape *s, const xform *to_world, const ray3 *r, const accel_hit *h,
                       surface_interaction *si, vec3 *n, vec3 *sn, vec3 *dpdu) {
-  mesh_fill_inline(s, to_world, r, h, si, n, sn, dpdu);
+  const double *fc =
+      s->face_cache && to_world == &s->to_world ? &s->face_cache[SHAPE_FACE_DOUBLES * (size_t)h->prim] : NULL;
+  mesh_fill_inline(s, to_world, r, h, si, n, sn, dpdu, fc);
 }
 
 static void mesh_sample(const shape *s, vec2 u, const double *tris, position_sample *ps) {
@@ -43,6 +45,7 @@ static rsw_status mesh_finalize(shape *s, rsw_err *err, const char *where) {
   if (bad) return rsw_fail(err, RSW_ERR_INVALID, where, "mesh has a non-finite vertex");
   rsw_status tst = shape_check_traceable(s, &s->to_world, "to_world", err, where);
   if (tst) return tst;
+  shape_face_cache_refresh(s);
   if (!s->emitter && !s->sampled) {
     s->area = 0;
     return RSW_OK;
@@ -58,7 +61,8 @@ static rsw_status mesh_finalize(shape *s, rsw_err *err, const char *where) {
   double acc = 0, det = xf_abs_det3(&s->to_world);
   for (uint32_t f = 0; f < m->n_faces; f++) {
     const uint32_t *ix = &m->faces[3 * (size_t)f];
-    acc += tri_world_area(&s->to_world, det, mesh_vertex(m, ix[0]), mesh_vertex(m, ix[1]), mesh_vertex(m, ix[2]));
+    acc += tri_world_area(&s->to_world, det, mesh_vertex(m, ix[0]), mesh_vertex(m, ix[1]),
+                          mesh_vertex(m, ix[2]));
     s->tri_cdf[f] = acc;
   }
   s->area = acc;
@@ -72,6 +76,46 @@ const shape_ops shape_ops_mesh = {.kind = "mesh",
                                   .fill = mesh_fill,
                                   .sample_position = mesh_sample,
                                   .finalize = mesh_finalize};
+
+void shape_face_cache_refresh(shape *s) {
+  const mesh *m = &s->mesh;
+  /* Only meshes whose hits take the interpolating path (uv or vertex
+   * normals; the other path reads Embree's normal). */
+  bool used = m->uv || (m->nrm && !s->face_normals);
+  uint32_t nf = shape_is_mesh(s) && m->faces && used ? m->n_faces : 0;
+  if (nf == 0 || nf > SHAPE_FACE_CACHE_MAX) {
+    free(s->face_cache);
+    s->face_cache = NULL;
+    s->face_cache_n = 0;
+    return;
+  }
+  if (s->face_cache_n != nf || !s->face_cache) {
+    double *c = realloc(s->face_cache, (size_t)nf * SHAPE_FACE_DOUBLES * sizeof(double));
+    if (!c) {
+      free(s->face_cache);
+      s->face_cache = NULL;
+      s->face_cache_n = 0;
+      return;
+    }
+    s->face_cache = c;
+    s->face_cache_n = nf;
+  }
+  for (uint32_t f = 0; f < nf; f++) {
+    const uint32_t *ix = &m->faces[3 * (size_t)f];
+    vec3 p0 = mesh_vertex(m, ix[0]), p1 = mesh_vertex(m, ix[1]), p2 = mesh_vertex(m, ix[2]);
+    vec3 dp0 = v3_sub(p1, p0), dp1 = v3_sub(p2, p0);
+    vec3 n = mesh_face_normal(&s->to_world, dp0, dp1), t = v3(0, 0, 0);
+    if (m->uv) {
+      const float *a = &m->uv[2 * (size_t)ix[0]], *b = &m->uv[2 * (size_t)ix[1]],
+                  *c = &m->uv[2 * (size_t)ix[2]];
+      double du0 = b[0] - a[0], dv0 = b[1] - a[1], du1 = c[0] - a[0], dv1 = c[1] - a[1];
+      double det = du0 * dv1 - dv0 * du1;
+      if (det != 0) t = mesh_face_dpdu(&s->to_world, dp0, dp1, dv0, dv1, det);
+    }
+    double *o = &s->face_cache[SHAPE_FACE_DOUBLES * (size_t)f];
+    o[0] = n.x, o[1] = n.y, o[2] = n.z, o[3] = t.x, o[4] = t.y, o[5] = t.z;
+  }
+}
 
 void shape_world_triangle(const shape *s, uint32_t f, double out[SHAPE_TRI_DOUBLES]) {
   const mesh *m = &s->mesh;

@@ -12,8 +12,23 @@ static inline vec3 mesh_vertex(const mesh *m, uint32_t i) {
   return v3(p[0], p[1], p[2]);
 }
 
+/* The world geometric normal of face (p0, p1, p2) under to_world, and
+ * its world dp/du from the uv differences (du0, dv0), (du1, dv1) with
+ * determinant det != 0: what a hit computes and the face cache holds. */
+static inline vec3 mesh_face_normal(const xform *to_world, vec3 dp0, vec3 dp1) {
+  /* Face normal = (p1 - p0) x (p2 - p0), as Mitsuba's Mesh. */
+  return v3_norm(xf_normal(to_world, v3_cross(dp0, dp1)));
+}
+static inline vec3 mesh_face_dpdu(const xform *to_world, vec3 dp0, vec3 dp1, double dv0, double dv1,
+                                  double det) {
+  return xf_vector(to_world, v3_scale(v3_sub(v3_scale(dp0, dv1), v3_scale(dp1, dv0)), 1.0 / det));
+}
+
+/* fc: the face's entry in s->face_cache (valid for to_world == &s->to_world
+ * only), or NULL to compute it. */
 static inline void mesh_fill_inline(const shape *s, const xform *to_world, const ray3 *r, const accel_hit *h,
-                                    surface_interaction *si, vec3 *n_out, vec3 *sn_out, vec3 *dpdu) {
+                                    surface_interaction *si, vec3 *n_out, vec3 *sn_out, vec3 *dpdu,
+                                    const double *fc) {
   const mesh *m = &s->mesh;
   vec3 n, sn;
   if (!m->uv && (!m->nrm || s->face_normals)) {
@@ -37,11 +52,11 @@ static inline void mesh_fill_inline(const shape *s, const xform *to_world, const
    * accurate than o + t d for spawning the next ray. */
   vec3 po = v3_add(v3_add(v3_scale(p0, b0), v3_scale(p1, b1)), v3_scale(p2, b2));
   si->p = xf_point(to_world, po);
-  /* Face normal = (p1 - p0) x (p2 - p0), as Mitsuba's Mesh. */
   vec3 dp0 = v3_sub(p1, p0), dp1 = v3_sub(p2, p0);
-  n = v3_norm(xf_normal(to_world, v3_cross(dp0, dp1)));
+  n = fc ? v3(fc[0], fc[1], fc[2]) : mesh_face_normal(to_world, dp0, dp1);
   if (m->nrm && !s->face_normals) {
-    const float *a = &m->nrm[3 * (size_t)ix[0]], *b = &m->nrm[3 * (size_t)ix[1]], *c = &m->nrm[3 * (size_t)ix[2]];
+    const float *a = &m->nrm[3 * (size_t)ix[0]], *b = &m->nrm[3 * (size_t)ix[1]],
+                *c = &m->nrm[3 * (size_t)ix[2]];
     vec3 no = v3(b0 * a[0] + b1 * b[0] + b2 * c[0], b0 * a[1] + b1 * b[1] + b2 * c[1],
                  b0 * a[2] + b1 * b[2] + b2 * c[2]);
     sn = v3_norm(xf_normal(to_world, no));
@@ -50,15 +65,15 @@ static inline void mesh_fill_inline(const shape *s, const xform *to_world, const
     sn = n;
   }
   if (m->uv) {
-    const float *a = &m->uv[2 * (size_t)ix[0]], *b = &m->uv[2 * (size_t)ix[1]], *c = &m->uv[2 * (size_t)ix[2]];
+    const float *a = &m->uv[2 * (size_t)ix[0]], *b = &m->uv[2 * (size_t)ix[1]],
+                *c = &m->uv[2 * (size_t)ix[2]];
     si->uv[0] = b0 * a[0] + b1 * b[0] + b2 * c[0];
     si->uv[1] = b0 * a[1] + b1 * b[1] + b2 * c[1];
     /* dp/du from the uv parameterisation (Mitsuba's Mesh): it orients the
      * shading frame's s axis, which anisotropic BSDFs depend on. */
     double du0 = b[0] - a[0], dv0 = b[1] - a[1], du1 = c[0] - a[0], dv1 = c[1] - a[1];
     double det = du0 * dv1 - dv0 * du1;
-    if (det != 0)
-      *dpdu = xf_vector(to_world, v3_scale(v3_sub(v3_scale(dp0, dv1), v3_scale(dp1, dv0)), 1.0 / det));
+    if (det != 0) *dpdu = fc ? v3(fc[3], fc[4], fc[5]) : mesh_face_dpdu(to_world, dp0, dp1, dv0, dv1, det);
   } else {
     si->uv[0] = b1;
     si->uv[1] = b2;
@@ -100,7 +115,8 @@ static inline void mesh_sample_inline(const shape *s, vec2 u, const double *tris
   ps->n = v3(T[9], T[10], T[11]);
   const uint32_t *ix = &m->faces[3 * (size_t)f];
   if (m->uv) {
-    const float *a = &m->uv[2 * (size_t)ix[0]], *b = &m->uv[2 * (size_t)ix[1]], *c = &m->uv[2 * (size_t)ix[2]];
+    const float *a = &m->uv[2 * (size_t)ix[0]], *b = &m->uv[2 * (size_t)ix[1]],
+                *c = &m->uv[2 * (size_t)ix[2]];
     ps->uv[0] = (1 - b1 - b2) * a[0] + b1 * b[0] + b2 * c[0];
     ps->uv[1] = (1 - b1 - b2) * a[1] + b1 * b[1] + b2 * c[1];
   } else {

@@ -34,8 +34,8 @@ static rsw_status rectangle_create(loader *ld, node *n, object **out) {
 }
 
 const plugin plugin_rectangle = {.name = "rectangle",
-                             .cls = CLS_SHAPE,
-                             .create = rectangle_create,
-                             .destroy = shape_destroy,
-                             .traverse = shape_traverse,
-                             .parameters_changed = shape_parameters_changed};
+                                 .cls = CLS_SHAPE,
+                                 .create = rectangle_create,
+                                 .destroy = shape_destroy,
+                                 .traverse = shape_traverse,
+                                 .parameters_changed = shape_parameters_changed};

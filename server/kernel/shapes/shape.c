@@ -10,7 +10,6 @@
 #include "mesh.h"
 #include "shape_common.h"
 
-
 /* ---- common properties ------------------------------------------------------ */
 
 rsw_status shape_read_common(loader *ld, node *n, shape *s, bool mesh_like) {
@@ -85,6 +84,8 @@ static rsw_status shape_check_transform(const object *o, const xform *t, const c
   tmp.tri_cdf = NULL;
   tmp.tri_cdf_n = 0;
   tmp.tri_cdf_next = NULL;
+  tmp.face_cache = NULL; /* not s's: a finalize of tmp must not touch it */
+  tmp.face_cache_n = 0;
   tmp.emitter = NULL;
   /* shape_finalize on a copy without its cdf computes only the area. */
   if (shape_is_mesh(s)) {
@@ -136,6 +137,7 @@ void shape_parameters_changed(object *o) {
     s->area = s->area_next;
     s->cdf_staged = false;
     if (s->emitter) s->emitter->shape = s;
+    shape_face_cache_refresh(s); /* vertices, faces or uv changed */
     return;
   }
   /* Validated before the update was applied: this cannot fail. */
@@ -149,6 +151,9 @@ void shape_release(shape *s) {
   free(s->mesh.faces);
   free(s->tri_cdf);
   free(s->tri_cdf_next);
+  free(s->face_cache);
+  s->face_cache = NULL;
+  s->face_cache_n = 0;
   memset(&s->mesh, 0, sizeof s->mesh);
   s->tri_cdf = NULL;
   s->tri_cdf_n = 0;
@@ -246,7 +251,10 @@ void shape_fill_interaction_xf(const shape *s, const xform *to_world, const ray3
   vec3 n, sn, tangent = v3(0, 0, 0);
   /* Triangles inline (the common hit), other geometry through its table. */
   if (shape_is_mesh(s))
-    mesh_fill_inline(s, to_world, r, h, si, &n, &sn, &tangent);
+    mesh_fill_inline(s, to_world, r, h, si, &n, &sn, &tangent,
+                     s->face_cache && to_world == &s->to_world
+                         ? &s->face_cache[SHAPE_FACE_DOUBLES * (size_t)h->prim]
+                         : NULL);
   else
     s->ops->fill(s, to_world, r, h, si, &n, &sn, &tangent);
   if (s->flip_normals) {

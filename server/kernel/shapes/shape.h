@@ -95,6 +95,14 @@ void shape_world_tris_refresh(const shape *s, double **tris, uint32_t *n);
 static inline const double *shape_world_tris_for(const shape *s, const double *tris, uint32_t n) {
   return tris && shape_is_mesh(s) && n == s->mesh.n_faces ? tris : NULL;
 }
+/* Per-face world normals and dp/du of small meshes (shape.face_cache):
+ * 48 bytes a face, so only up to this many faces (rectangles, cubes,
+ * small meshes: the walls and lights of a room). */
+#define SHAPE_FACE_CACHE_MAX (1u << 16)
+#define SHAPE_FACE_DOUBLES   6
+/* (Re)compute s's face cache, or free it (too large, out of memory, not a
+ * mesh): fills then compute the same values per hit. */
+void shape_face_cache_refresh(shape *s);
 /* Area pdf of shape_sample_position (1/area). */
 double shape_pdf_position(const shape *s);
 
