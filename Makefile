@@ -142,7 +142,7 @@ $(SERVICE_LIB): $(SERVICE_OBJ)
 
 $(BUILD)/bin/raysweepd: $(DAEMON_OBJ) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $(DAEMON_OBJ) $(SERVICE_LIB) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS) $(DAEMON_LIBS)
+	$(CC) $(LDFLAGS) -o $@ $(DAEMON_OBJ) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB) $(LIBS) $(DAEMON_LIBS)
 
 # The embedded default scene (raysweepd serve without --scene): the XML as
 # one C string literal (backslash, quote and '?' escaped: no trigraphs).
@@ -192,7 +192,7 @@ install: $(BUILD)/bin/raysweepd $(BUILD)/bin/raysweep $(CLIENT_A) $(CLIENT_SO)
 # The HTTP encoders are not in the kernel library: link them in.
 $(BUILD)/tests/test_http_encode: $(BUILD)/obj/tests/unit/test_http_encode.o $(BUILD)/obj/server/http/encode.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS)
+	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB),$^) $(KERNEL_LIB) $(COMMON_LIB) $(LIBS)
 
 # test_oom fails each allocation in turn (tests/support/failmalloc.c, a
 # build-time malloc hook: not instrumented itself; under SAN it forwards to
@@ -211,10 +211,10 @@ HTTP_OBJ := $(patsubst %.c,$(BUILD)/obj/%.o,$(shell find server/http -name '*.c'
 # from the common library.)
 $(BUILD)/tests/test_oom: $(BUILD)/obj/tests/integration/test_oom.o $(FAILMALLOC_OBJ) $(HTTP_OBJ) $(CLIENT_SRC:%.c=$(BUILD)/obj/%.o) $(TEST_SUPPORT_OBJ) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) $(FAILMALLOC_LDFLAGS) -o $@ $(filter %.o,$^) $(SERVICE_LIB) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS) $(DAEMON_LIBS) $(TEST_LIBS)
+	$(CC) $(LDFLAGS) $(FAILMALLOC_LDFLAGS) -o $@ $(filter %.o,$^) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB) $(LIBS) $(DAEMON_LIBS) $(TEST_LIBS)
 $(BUILD)/tests/raysweepd-failmalloc: $(DAEMON_OBJ) $(FAILMALLOC_OBJ) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) $(FAILMALLOC_LDFLAGS) -o $@ $(DAEMON_OBJ) $(FAILMALLOC_OBJ) $(SERVICE_LIB) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS) $(DAEMON_LIBS)
+	$(CC) $(LDFLAGS) $(FAILMALLOC_LDFLAGS) -o $@ $(DAEMON_OBJ) $(FAILMALLOC_OBJ) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB) $(LIBS) $(DAEMON_LIBS)
 
 # test_image_exr_stress also reads every film through OpenEXR's C++ library
 # (tests/support/imf_read.cpp), whose decoder is independent of OpenEXR Core.
@@ -226,23 +226,23 @@ $(BUILD)/obj/tests/support/imf_read.o: tests/support/imf_read.cpp tests/support/
 
 $(BUILD)/tests/test_image_exr_stress: $(BUILD)/obj/tests/unit/test_image_exr_stress.o $(BUILD)/obj/tests/support/imf_read.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
-	$(CXX) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS) $(IMF_LIBS)
+	$(CXX) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB),$^) $(KERNEL_LIB) $(COMMON_LIB) $(LIBS) $(IMF_LIBS)
 
 $(BUILD)/tests/%: $(BUILD)/obj/tests/unit/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS)
+	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB),$^) $(KERNEL_LIB) $(COMMON_LIB) $(LIBS)
 
 $(BUILD)/tests/%: $(BUILD)/obj/tests/validation/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS)
+	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB),$^) $(KERNEL_LIB) $(COMMON_LIB) $(LIBS)
 
 $(BUILD)/tests/%: $(BUILD)/obj/tests/integration/%.o $(TEST_SUPPORT_OBJ) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB) $(SERVICE_LIB),$^) $(SERVICE_LIB) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS) $(TEST_LIBS) -lcrypto
+	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB) $(SERVICE_LIB),$^) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB) $(LIBS) $(TEST_LIBS) -lcrypto
 
 $(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB),$^) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS) $(TEST_LIBS)
+	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB),$^) $(KERNEL_LIB) $(COMMON_LIB) $(LIBS) $(TEST_LIBS)
 
 test: deps $(BUILD)/bin/raysweepd $(TEST_BIN) $(BUILD)/tests/raysweepd-failmalloc
 	@RSW_BIN_DIR=$(BUILD)/bin BUILD=$(BUILD) SAN=$(SAN) tests/run.sh $(TEST_BIN) $(TEST_SCRIPTS)
@@ -304,7 +304,7 @@ $(BUILD)/plugins/%.so: tests/plugins/%.c include/raysweep/plugin.h | deps
 FUZZ_HTTP_OBJ := $(filter $(BUILD)/obj/server/http/%,$(DAEMON_OBJ)) $(UI_OBJ)
 $(FUZZ_REPLAY): $(BUILD)/tests/fuzz_%: $(BUILD)/obj/tests/fuzz/fuzz_%.o $(BUILD)/obj/tests/fuzz/driver.o $(FUZZ_HTTP_OBJ) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(SERVICE_LIB) $(COMMON_LIB),$^) $(SERVICE_LIB) -Wl,--whole-archive $(KERNEL_LIB) -Wl,--no-whole-archive $(COMMON_LIB) $(LIBS) $(DAEMON_LIBS)
+	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(SERVICE_LIB) $(COMMON_LIB),$^) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB) $(LIBS) $(DAEMON_LIBS)
 
 # libFuzzer builds (clang 14): every source with ASan + UBSan and coverage.
 FUZZ_CC ?= clang
@@ -322,7 +322,7 @@ build-fuzz/lib/libfuzzsrc.a: $(FUZZ_LIB_OBJ)
 	@rm -f $@ && ar rcs $@ $^
 build-fuzz/bin/fuzz_%: build-fuzz/obj/tests/fuzz/fuzz_%.o build-fuzz/lib/libfuzzsrc.a
 	@mkdir -p $(dir $@)
-	$(FUZZ_CC) $(FUZZ_SAN) -fsanitize=fuzzer -o $@ $< -Wl,--whole-archive build-fuzz/lib/libfuzzsrc.a -Wl,--no-whole-archive $(LIBS) $(DAEMON_LIBS)
+	$(FUZZ_CC) $(FUZZ_SAN) -fsanitize=fuzzer -o $@ $< build-fuzz/lib/libfuzzsrc.a $(LIBS) $(DAEMON_LIBS)
 
 .PHONY: fuzz fuzz-build fuzz-check-cc
 fuzz-check-cc:

@@ -1,11 +1,12 @@
 /* The two-level Embree acceleration structure (see accel.h for why two
  * levels). The only file that includes Embree.
  *
- * Triangle meshes are Embree triangle geometries in object space. Spheres,
- * disks and cylinders are user geometries whose callbacks intersect the
- * unit sphere / unit disk / unit tube in double precision in the
- * instance's object space (Embree hands the callback the ray already
- * transformed by the instance). */
+ * A generic Embree adapter: it never asks which kind a shape is. Shapes
+ * without an intersect op (triangle meshes) are Embree triangle geometries
+ * in object space; every other shape is a user geometry whose callbacks
+ * call its shape_ops.intersect in double precision in the instance's
+ * object space (Embree hands the callback the ray already transformed by
+ * the instance), with its shape_ops.bounds as the box. */
 #include "accel.h"
 
 #include <stdatomic.h>
@@ -135,94 +136,31 @@ size_t accel_embree_bytes(void) {
   return b > 0 ? (size_t)b : 0;
 }
 
-/* ---- user geometry: unit sphere, unit disk, unit tube ------------------------------ */
+/* ---- user geometry: any shape with an intersect op ------------------------------- */
 
-/* Object-space box of an analytic shape: the unit sphere [-1,1]^3, the
- * unit disk [-1,1]^2 x 0 (padded), the unit tube [-1,1]^2 x [0,1]. */
-static void unit_box(geom_kind g, double lo[3], double hi[3]) {
-  lo[0] = lo[1] = -1.0, hi[0] = hi[1] = 1.0;
-  if (g == GEOM_SPHERE)
-    lo[2] = -1.0, hi[2] = 1.0;
-  else if (g == GEOM_CYLINDER)
-    lo[2] = 0.0, hi[2] = 1.0;
-  else
-    lo[2] = -1e-6, hi[2] = 1e-6;
+/* Embree's box of an analytic shape: its object bounds (shape_ops.bounds),
+ * a flat axis padded to +-1e-6 (a disk's z). */
+static void user_box(const shape *s, double lo[3], double hi[3]) {
+  vec3 l, h;
+  s->ops->bounds(s, &l, &h);
+  lo[0] = l.x, lo[1] = l.y, lo[2] = l.z, hi[0] = h.x, hi[1] = h.y, hi[2] = h.z;
+  for (int k = 0; k < 3; k++)
+    if (lo[k] == hi[k]) lo[k] -= 1e-6, hi[k] += 1e-6;
 }
 
 static void unit_bounds(const struct RTCBoundsFunctionArguments *args) {
   const shape *s = args->geometryUserPtr;
   struct RTCBounds *b = args->bounds_o;
   double lo[3], hi[3];
-  unit_box(s->geom, lo, hi);
+  user_box(s, lo, hi);
   b->lower_x = (float)lo[0], b->lower_y = (float)lo[1], b->lower_z = (float)lo[2];
   b->upper_x = (float)hi[0], b->upper_y = (float)hi[1], b->upper_z = (float)hi[2];
 }
 
-/* Unit tube x^2 + y^2 = 1, 0 <= z <= 1 (open, no caps): the nearer root
- * within (tnear, tfar) whose z lies on the tube, else the farther one
- * (mitsuba3 src/shapes/cylinder.cpp). A ray parallel to the axis never
- * meets the open tube. */
-static bool tube_hit(const double o[3], const double d[3], double tnear, double tfar, double *t_out,
-                     double n_out[3]) {
-  double a = d[0] * d[0] + d[1] * d[1];
-  double b = o[0] * d[0] + o[1] * d[1];
-  double c = o[0] * o[0] + o[1] * o[1] - 1.0;
-  double disc = b * b - a * c;
-  if (!(a > 0) || disc < 0) return false;
-  double sq = sqrt(disc);
-  double q = b < 0 ? -b + sq : -b - sq;
-  double t0 = q / a, t1 = q != 0 ? c / q : t0;
-  if (t0 > t1) {
-    double tmp = t0;
-    t0 = t1;
-    t1 = tmp;
-  }
-  for (int k = 0; k < 2; k++) {
-    double t = k ? t1 : t0;
-    if (!(t > tnear && t < tfar)) continue;
-    double z = o[2] + t * d[2];
-    if (!(z >= 0.0 && z <= 1.0)) continue;
-    *t_out = t;
-    n_out[0] = o[0] + t * d[0], n_out[1] = o[1] + t * d[1], n_out[2] = 0;
-    return true;
-  }
-  return false;
-}
-
-/* Nearest t in (tnear, tfar) where object-space ray (o, d) meets the unit
- * sphere or unit disk; returns false if none. Normal in object space. */
-static bool unit_hit(geom_kind g, const double o[3], const double d[3], double tnear, double tfar,
-                     double *t_out, double n_out[3]) {
-  if (g == GEOM_CYLINDER) return tube_hit(o, d, tnear, tfar, t_out, n_out);
-  if (g == GEOM_SPHERE) {
-    /* |o + t d|^2 = 1: a t^2 + 2 b t + c = 0, solved stably. */
-    double a = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-    double b = o[0] * d[0] + o[1] * d[1] + o[2] * d[2];
-    double c = o[0] * o[0] + o[1] * o[1] + o[2] * o[2] - 1.0;
-    double disc = b * b - a * c;
-    if (disc < 0 || a == 0) return false;
-    double sq = sqrt(disc);
-    double q = b < 0 ? -b + sq : -b - sq; /* q = -(b + sign(b) sq) */
-    double t0 = q / a, t1 = q != 0 ? c / q : t0;
-    if (t0 > t1) {
-      double tmp = t0;
-      t0 = t1;
-      t1 = tmp;
-    }
-    double t = t0 > tnear ? t0 : t1;
-    if (!(t > tnear && t < tfar)) return false;
-    *t_out = t;
-    for (int i = 0; i < 3; i++) n_out[i] = o[i] + t * d[i];
-    return true;
-  }
-  if (d[2] == 0) return false;
-  double t = -o[2] / d[2];
-  if (!(t > tnear && t < tfar)) return false;
-  double x = o[0] + t * d[0], y = o[1] + t * d[1];
-  if (x * x + y * y > 1.0) return false;
-  *t_out = t;
-  n_out[0] = 0, n_out[1] = 0, n_out[2] = 1;
-  return true;
+/* The shape's own intersection, in double precision in its object space. */
+static inline bool unit_hit(const shape *s, const double o[3], const double d[3], double tnear, double tfar,
+                            double *t_out, double n_out[3]) {
+  return s->ops->intersect(s, o, d, tnear, tfar, t_out, n_out);
 }
 
 /* Embree's RTCRayN/RTCHitN accessors are C++ only; in C the SOA layout is
@@ -278,7 +216,7 @@ static void unit_intersect(const struct RTCIntersectFunctionNArguments *args) {
     if (!args->valid[i]) continue;
     double o[3], d[3], t, n[3];
     load_ray(ray, N, i, o, d);
-    if (!unit_hit(s->geom, o, d, RAYN_F(ray, N, RAY_TNEAR, i), RAYN_F(ray, N, RAY_TFAR, i), &t, n)) continue;
+    if (!unit_hit(s, o, d, RAYN_F(ray, N, RAY_TNEAR, i), RAYN_F(ray, N, RAY_TFAR, i), &t, n)) continue;
     store_hit(args, i, t, n);
   }
 }
@@ -291,7 +229,7 @@ static void unit_occluded(const struct RTCOccludedFunctionNArguments *args) {
     if (!args->valid[i]) continue;
     double o[3], d[3], t, n[3];
     load_ray(ray, N, i, o, d);
-    if (unit_hit(s->geom, o, d, RAYN_F(ray, N, RAY_TNEAR, i), RAYN_F(ray, N, RAY_TFAR, i), &t, n))
+    if (unit_hit(s, o, d, RAYN_F(ray, N, RAY_TNEAR, i), RAYN_F(ray, N, RAY_TFAR, i), &t, n))
       RAYN_F(ray, N, RAY_TFAR, i) = -INFINITY;
   }
 }
@@ -304,7 +242,7 @@ static void member_bounds(const struct RTCBoundsFunctionArguments *args) {
   const shape *s = args->geometryUserPtr;
   struct RTCBounds *b = args->bounds_o;
   double ulo[3], uhi[3];
-  unit_box(s->geom, ulo, uhi);
+  user_box(s, ulo, uhi);
   double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
   for (int c = 0; c < 8; c++) {
     vec3 p =
@@ -335,7 +273,7 @@ static void member_intersect(const struct RTCIntersectFunctionNArguments *args) 
     if (!args->valid[i]) continue;
     double o[3], d[3], t, n[3];
     member_ray(s, ray, N, i, o, d);
-    if (!unit_hit(s->geom, o, d, RAYN_F(ray, N, RAY_TNEAR, i), RAYN_F(ray, N, RAY_TFAR, i), &t, n)) continue;
+    if (!unit_hit(s, o, d, RAYN_F(ray, N, RAY_TNEAR, i), RAYN_F(ray, N, RAY_TFAR, i), &t, n)) continue;
     vec3 ng = xf_normal(&s->to_world, v3(n[0], n[1], n[2])); /* group space */
     store_hit(args, i, t, (double[3]){ng.x, ng.y, ng.z});
   }
@@ -349,7 +287,7 @@ static void member_occluded(const struct RTCOccludedFunctionNArguments *args) {
     if (!args->valid[i]) continue;
     double o[3], d[3], t, n[3];
     member_ray(s, ray, N, i, o, d);
-    if (unit_hit(s->geom, o, d, RAYN_F(ray, N, RAY_TNEAR, i), RAYN_F(ray, N, RAY_TFAR, i), &t, n))
+    if (unit_hit(s, o, d, RAYN_F(ray, N, RAY_TNEAR, i), RAYN_F(ray, N, RAY_TFAR, i), &t, n))
       RAYN_F(ray, N, RAY_TFAR, i) = -INFINITY;
   }
 }
@@ -376,17 +314,8 @@ static void shape_bounds(accel *a, size_t i) {
     lo = g->lo, hi = g->hi;
   } else if (shape_is_group(sh)) {
     lo = hi = v3(0, 0, 0);
-  } else if (sh->geom == GEOM_MESH) {
-    for (uint32_t k = 0; k < sh->mesh.n_verts; k++) {
-      const float *q = &sh->mesh.pos[3 * (size_t)k];
-      box_add(&lo, &hi, v3(q[0], q[1], q[2]));
-    }
-    if (!(lo.x <= hi.x)) lo = hi = v3(0, 0, 0);
-  } else if (sh->geom == GEOM_CYLINDER) {
-    lo = v3(-1, -1, 0), hi = v3(1, 1, 1); /* the unit tube, 0 <= z <= 1 */
   } else {
-    double z = sh->geom == GEOM_SPHERE ? 1.0 : 0.0;
-    lo = v3(-1, -1, -z), hi = v3(1, 1, z);
+    sh->ops->bounds(sh, &lo, &hi);
   }
   a->obox_lo[i] = lo, a->obox_hi[i] = hi;
   a->ext[i] = fmax(v3_max_abs(lo), v3_max_abs(hi));
@@ -588,7 +517,7 @@ static rsw_status embree_fail(accel *a, rsw_err *err, const char *where, const c
 
 static RTCGeometry shape_geometry(accel *a, const shape *s) {
   RTCGeometry g;
-  if (s->geom == GEOM_MESH) {
+  if (!s->ops->intersect) { /* triangles */
     g = rtcNewGeometry(a->device, RTC_GEOMETRY_TYPE_TRIANGLE);
     if (!g) return NULL;
     float *v = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float),
@@ -652,7 +581,7 @@ static RTCScene group_scene(accel *a, const shape_group *g) {
   for (; i < g->n_members; i++) {
     const shape *m = g->members[i];
     RTCGeometry geo;
-    if (m->geom == GEOM_MESH) {
+    if (!m->ops->intersect) { /* triangles */
       geo = rtcNewGeometry(a->device, RTC_GEOMETRY_TYPE_TRIANGLE);
       if (!geo) break;
       float *v = rtcSetNewGeometryBuffer(geo, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float),
@@ -817,7 +746,7 @@ rsw_status accel_build(scene *s, rsw_err *err) {
      * RTC_BUILD_QUALITY_REFIT when vertices move, only in a dynamic scene
      * of build quality LOW (its two-level builder); the mesh's own BVH is
      * still built with quality HIGH (shape_geometry). */
-    if (sh->geom == GEOM_MESH) {
+    if (!sh->ops->intersect) {
       rtcSetSceneFlags(sub, RTC_SCENE_FLAG_DYNAMIC);
       rtcSetSceneBuildQuality(sub, RTC_BUILD_QUALITY_LOW);
     } else {
@@ -935,7 +864,7 @@ rsw_status accel_rebuild_shape(accel *a, const shape *sh, rsw_err *err) {
 
 rsw_status accel_update_vertices(accel *a, const shape *sh, rsw_err *err) {
   unsigned i = sh->index;
-  if (sh->geom != GEOM_MESH) return RSW_OK;
+  if (sh->ops->intersect) return RSW_OK; /* no vertices */
   /* A different vertex count is a topology change: rebuild. */
   size_t bytes = 3 * (size_t)sh->mesh.n_verts * sizeof(float);
   float *v = rtcGetGeometryBufferData(a->geom[i], RTC_BUFFER_TYPE_VERTEX, 0);
@@ -1417,7 +1346,7 @@ static RTCScene build_flat(const scene *s) {
   rtcSetSceneBuildQuality(fs, RTC_BUILD_QUALITY_HIGH);
   for (size_t i = 0; i < s->n_shapes; i++) {
     const shape *sh = s->shapes[i];
-    if (sh->geom != GEOM_MESH || shape_is_group(sh) || shape_is_instancing(sh)) continue;
+    if (sh->ops->intersect || shape_is_group(sh) || shape_is_instancing(sh)) continue;
     RTCGeometry g = rtcNewGeometry(s->accel->device, RTC_GEOMETRY_TYPE_TRIANGLE);
     float *v = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float),
                                        sh->mesh.n_verts);

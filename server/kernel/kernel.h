@@ -220,8 +220,37 @@ typedef enum component_format {
   COMPFMT_FLOAT16
 } component_format;
 
+/* The renderer's accumulated sums of a film, as its develop op reads
+ * them. Per pixel, `stride` doubles: sum(f w L) rgb, sum(f), and for
+ * Stokes films sum(f w (Q, U, V)); then, for a film with variance, from
+ * `m_off`, per developed channel k the triple (K, sum(x - K),
+ * sum((x - K)^2)) of its samples x, K being the pixel's first sample. */
+#define FILM_ACC_MOMENT 3
+typedef struct film_sums {
+  const double *acc; /* width*height*stride */
+  int width, height, stride, m_off;
+  bool stokes; /* S0..S3 */
+  bool lum;    /* one luminance channel Y */
+  rsw_variant variant;
+  uint32_t spp;
+  uint64_t seed;
+  double wavelength;   /* nm (mono) */
+  unsigned quantities; /* RENDER_Q_* planes asked for (render.h) */
+  bool variance;       /* the radiance_stderr plane */
+  color e_h;           /* horizontal irradiance (brdf / brf) */
+} film_sums;
+
+struct film;
+struct film_image;
+typedef struct film_ops {
+  /* From the accumulated sums to the developed image (radiance, then the
+   * planes asked for). On failure nothing stays allocated in *out. */
+  rsw_status (*develop)(const struct film *f, const film_sums *sums, struct film_image *out, rsw_err *err);
+} film_ops;
+
 typedef struct film {
   object base;
+  const film_ops *ops;
   int width, height;
   pixel_format pixel_format; /* forced to luminance in mono */
   component_format component_format;
@@ -314,12 +343,9 @@ struct integrator {
 };
 
 /* ---- shapes -------------------------------------------------------------- */
-typedef enum geom_kind {
-  GEOM_MESH,
-  GEOM_SPHERE,
-  GEOM_DISK,
-  GEOM_CYLINDER
-} geom_kind;
+/* What a kind of geometry does (bounds, intersection, surface data,
+ * position sampling, area): shapes/shape.h. */
+struct shape_ops;
 
 /* Triangle mesh in object space (before to_world). */
 typedef struct mesh {
@@ -332,15 +358,15 @@ typedef struct mesh {
 
 typedef struct shape {
   object base;
-  geom_kind geom;
-  xform to_world; /* object -> world; the Embree instance transform */
+  const struct shape_ops *ops; /* its geometry's ops (shapes/shape.h) */
+  xform to_world;              /* object -> world; the Embree instance transform */
   bool flip_normals;
   bool face_normals;                 /* ignore vertex normals */
   bool mesh_params;                  /* exposes its buffers (cube, obj, ply; not rectangle) */
   double silhouette_sampling_weight; /* Mitsuba's; no effect here */
   bsdf *bsdf;
   emitter *emitter; /* area light, or NULL */
-  mesh mesh;        /* GEOM_MESH */
+  mesh mesh;        /* triangle meshes (ops == &shape_ops_mesh) */
   bool sampled;     /* positions are sampled on it (a sensor's target) */
   /* Derived by shape_finalize(). A mesh's area and area cdf are computed
    * only when something samples it (an area emitter, a sensor target): an
@@ -355,6 +381,12 @@ typedef struct shape {
   double area_next;
   bool cdf_staged;
   unsigned index; /* position in scene->shapes */
+  /* Meshes of at most SHAPE_FACE_CACHE_MAX faces (shapes/shape.h): per
+   * face, the world geometric normal and world dp/du under to_world, 6
+   * doubles, as a hit's surface data computes them (the same bits);
+   * refreshed by shape_finalize and parameters_changed. NULL otherwise. */
+  double *face_cache;
+  uint32_t face_cache_n;
 } shape;
 
 /* ---- the scene ----------------------------------------------------------- */

@@ -36,7 +36,7 @@
  * shifted-data algorithm: no cancellation, and exactly 0 for a constant
  * pixel). */
 #define ACC_MAX    7
-#define ACC_MOMENT 3
+#define ACC_MOMENT FILM_ACC_MOMENT
 
 typedef struct tile_buf {
   int x0, y0, w, h; /* region covered, margin included, clipped to film */
@@ -550,96 +550,26 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
                     now_s() - t0);
   }
 
-  /* Develop: normalise by the filter weights; mono films hold one
-   * luminance channel Y (Mitsuba forces it), rgb films R, G, B or Y. */
-  bool lum = !jb.stokes && (sc->variant == VARIANT_MONO || fm->pixel_format == PIXFMT_LUMINANCE);
+  /* Develop: the film's op turns the sums into the image and its planes. */
+  film_sums sums = {.acc = jb.film_acc,
+                    .width = jb.W,
+                    .height = jb.H,
+                    .stride = jb.stride,
+                    .m_off = jb.m_off,
+                    .stokes = jb.stokes,
+                    .lum = jb.lum,
+                    .variant = sc->variant,
+                    .spp = spp,
+                    .seed = opts->seed,
+                    .wavelength = sc->variant == VARIANT_MONO ? rc.wavelength : 0.0,
+                    .quantities = opts->quantities,
+                    .variance = opts->variance,
+                    .e_h = e_h};
   film_image img;
-  memset(&img, 0, sizeof img);
-  img.width = jb.W;
-  img.height = jb.H;
-  if (jb.stokes) {
-    img.channels = 4;
-    img.channel_names[0] = "S0";
-    img.channel_names[1] = "S1";
-    img.channel_names[2] = "S2";
-    img.channel_names[3] = "S3";
-  } else if (lum) {
-    img.channels = 1;
-    img.channel_names[0] = "Y";
-  } else {
-    img.channels = 3;
-    img.channel_names[0] = "R";
-    img.channel_names[1] = "G";
-    img.channel_names[2] = "B";
-  }
-  img.half = fm->component_format == COMPFMT_FLOAT16;
-  img.spp = spp;
-  img.seed = opts->seed;
-  img.wavelength = sc->variant == VARIANT_MONO ? rc.wavelength : 0.0;
-  img.variant = sc->variant;
-  img.data = malloc((size_t)jb.W * jb.H * img.channels * sizeof(float));
-  if (!img.data) {
+  st = fm->ops->develop(fm, &sums, &img, err);
+  if (st) {
     free(jb.film_acc);
-    return rsw_fail(err, RSW_ERR_NOMEM, "film", "out of memory");
-  }
-  for (size_t i = 0; i < (size_t)jb.W * jb.H; i++) {
-    const double *a = &jb.film_acc[(size_t)jb.stride * i];
-    double inv = a[3] != 0 ? 1.0 / a[3] : 0.0;
-    color c = col(a[0] * inv, a[1] * inv, a[2] * inv);
-    if (jb.stokes) {
-      img.data[4 * i] = (float)c.c[0];
-      for (int k = 0; k < 3; k++) img.data[4 * i + 1 + (size_t)k] = (float)(a[4 + k] * inv);
-    } else if (lum) {
-      img.data[i] = (float)(sc->variant == VARIANT_MONO ? c.c[0] : col_luminance(c));
-    } else {
-      img.data[3 * i] = (float)c.c[0];
-      img.data[3 * i + 1] = (float)c.c[1];
-      img.data[3 * i + 2] = (float)c.c[2];
-    }
-  }
-  /* Planes, in the order brdf, brf, radiance_stderr. The BRDF is L / E_h
-   * and the BRF pi L / E_h per developed channel (Eradiate's
-   * compute_bidirectional_reflectance); the standard error of a pixel's
-   * mean of n samples is sqrt((sum d^2 - (sum d)^2 / n) / (n (n - 1))),
-   * d = x - K (the unbiased sample variance over n). */
-  double eh[4] = {0, 0, 0, 0}; /* per developed channel, as develop maps colours */
-  for (int c = 0; c < img.channels; c++)
-    eh[c] = jb.stokes || sc->variant == VARIANT_MONO ? e_h.c[0] : lum ? col_luminance(e_h) : e_h.c[c];
-  const char *want[FILM_MAX_PLANES];
-  int n_want = 0;
-  if (opts->quantities & RENDER_Q_BRDF) want[n_want++] = "brdf";
-  if (opts->quantities & RENDER_Q_BRF) want[n_want++] = "brf";
-  if (opts->variance) want[n_want++] = "radiance_stderr";
-  size_t nv = (size_t)jb.W * jb.H * img.channels;
-  for (int p = 0; p < n_want; p++) {
-    film_plane *pl = &img.planes[p];
-    film_plane_init(&img, want[p], pl);
-    pl->data = malloc(nv * sizeof(float));
-    img.n_planes = p + 1;
-    if (!pl->data) {
-      free(jb.film_acc);
-      film_image_free(&img);
-      return rsw_fail(err, RSW_ERR_NOMEM, "film", "out of memory");
-    }
-    bool is_stderr = strcmp(want[p], "radiance_stderr") == 0;
-    double scale = strcmp(want[p], "brf") == 0 ? M_PI : 1.0; /* over E_h */
-    for (size_t i = 0; i < (size_t)jb.W * jb.H; i++) {
-      const double *a = &jb.film_acc[(size_t)jb.stride * i];
-      for (int c = 0; c < img.channels; c++) {
-        size_t q = i * (size_t)img.channels + (size_t)c;
-        if (!is_stderr) {
-          pl->data[q] = (float)(scale / eh[c] * (double)img.data[q]);
-          continue;
-        }
-        const double *m = &a[jb.m_off + ACC_MOMENT * c];
-        double n = a[3], var = n > 1 ? (m[2] - m[1] * m[1] / n) / (n - 1) : 0;
-        pl->data[q] = (float)(var > 0 ? sqrt(var / n) : 0.0);
-      }
-    }
-  }
-  if (n_want && (opts->quantities & (RENDER_Q_BRDF | RENDER_Q_BRF))) {
-    img.has_irradiance = true;
-    for (int c = 0; c < 4; c++) img.irradiance[c] = eh[c];
+    return st;
   }
   free(jb.film_acc);
   if (se->ops->pixel_angles) {

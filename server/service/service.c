@@ -285,9 +285,8 @@ char *service_info_json(service *svc) {
   svc_json_push(v, cJSON_CreateString("mono"));
   svc_json_push(v, cJSON_CreateString("rgb"));
   cJSON *pl = cJSON_AddArrayToObject(o, "plugins");
-  for (size_t i = 0; rsw_plugins[i] || i == 0; i++) {
+  for (size_t i = 0; rsw_plugins[i]; i++) {
     const plugin *p = rsw_plugins[i];
-    if (!p) break;
     if (p->cls == CLS_SCENE) continue;
     cJSON *e = cJSON_CreateObject();
     cJSON_AddStringToObject(e, "name", p->name);

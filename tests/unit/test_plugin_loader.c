@@ -125,6 +125,22 @@ static rsw_status load_specs(const spec *specs, const char *const *files, size_t
   return st;
 }
 
+/* The built-in registry (scene/registry.c): strong references, so every
+ * entry is there (a missing plugin would not link); names unique, each
+ * found by registry_find, each shape with its geometry's ops. */
+static void test_builtin_registry(void) {
+  size_t n = 0;
+  for (; rsw_plugins[n]; n++) {
+    const plugin *p = rsw_plugins[n];
+    CHECK(p->name && p->name[0], "registry entry %zu has no name", n);
+    CHECK(registry_find(p->name) == p, "registry_find(\"%s\") finds another entry", p->name);
+    for (size_t k = 0; k < n; k++)
+      CHECK(strcmp(rsw_plugins[k]->name, p->name) != 0, "'%s' registered twice", p->name);
+  }
+  CHECK(n >= 40, "only %zu built-in plugins", n);
+  CHECK(registry_find("cylinder") && registry_find("hdrfilm") && registry_find("path"), "core plugins");
+}
+
 static void test_good_plugin_loads(void) {
   spec s = good("ptest");
   const char *files[] = {"good"};
@@ -341,6 +357,7 @@ static void test_bad_values_contained(void) {
 
 int main(void) {
   find_include_dir();
+  RSW_TEST_RUN(test_builtin_registry);
   RSW_TEST_RUN(test_good_plugin_loads);
   RSW_TEST_RUN(test_bad_plugins_refused);
   RSW_TEST_RUN(test_plugin_matches_constant_and_updates);

@@ -4,7 +4,12 @@
 #include "../support/test.h"
 RSW_TEST_DEFINE_GLOBALS
 
-#include "sensor_test_shims.h"
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "kernel/scene/loader.h"
+#include "kernel/shapes/shape.h"
 
 typedef struct harness {
   scene sc;

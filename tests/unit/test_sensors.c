@@ -5,7 +5,12 @@
 #include "../support/test.h"
 RSW_TEST_DEFINE_GLOBALS
 
-#include "sensor_test_shims.h"
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "kernel/scene/loader.h"
+#include "kernel/shapes/shape.h"
 
 /* ---- document helpers --------------------------------------------------- */
 

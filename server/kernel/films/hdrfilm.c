@@ -15,6 +15,9 @@
 #include <string.h>
 #include <strings.h>
 
+#include <math.h>
+
+#include "../render.h"
 #include "../scene/loader.h"
 
 /* Bounds that keep a hostile document from asking for a huge buffer. */
@@ -41,13 +44,108 @@ static rsw_status hdrfilm_prepare(object *o, const render_ctx *rc, rsw_err *err)
 
 static rsw_status hdrfilm_create(loader *ld, node *n, object **out);
 
+/* Develop: normalise by the filter weights; mono films hold one
+ * luminance channel Y (Mitsuba forces it), rgb films R, G, B or Y, Stokes
+ * films S0..S3. Then the planes, in the order brdf, brf, radiance_stderr.
+ * The BRDF is L / E_h and the BRF pi L / E_h per developed channel
+ * (Eradiate's compute_bidirectional_reflectance); the standard error of a
+ * pixel's mean of n samples is sqrt((sum d^2 - (sum d)^2 / n) / (n (n -
+ * 1))), d = x - K (the unbiased sample variance over n). */
+static rsw_status hdrfilm_develop(const film *fm, const film_sums *s, film_image *out, rsw_err *err) {
+  bool lum = s->lum;
+  film_image img;
+  memset(&img, 0, sizeof img);
+  img.width = s->width;
+  img.height = s->height;
+  if (s->stokes) {
+    img.channels = 4;
+    img.channel_names[0] = "S0";
+    img.channel_names[1] = "S1";
+    img.channel_names[2] = "S2";
+    img.channel_names[3] = "S3";
+  } else if (lum) {
+    img.channels = 1;
+    img.channel_names[0] = "Y";
+  } else {
+    img.channels = 3;
+    img.channel_names[0] = "R";
+    img.channel_names[1] = "G";
+    img.channel_names[2] = "B";
+  }
+  img.half = fm->component_format == COMPFMT_FLOAT16;
+  img.spp = s->spp;
+  img.seed = s->seed;
+  img.wavelength = s->wavelength;
+  img.variant = s->variant;
+  size_t np = (size_t)s->width * s->height;
+  img.data = malloc(np * img.channels * sizeof(float));
+  if (!img.data) return rsw_fail(err, RSW_ERR_NOMEM, "film", "out of memory");
+  for (size_t i = 0; i < np; i++) {
+    const double *a = &s->acc[(size_t)s->stride * i];
+    double inv = a[3] != 0 ? 1.0 / a[3] : 0.0;
+    color c = col(a[0] * inv, a[1] * inv, a[2] * inv);
+    if (s->stokes) {
+      img.data[4 * i] = (float)c.c[0];
+      for (int k = 0; k < 3; k++) img.data[4 * i + 1 + (size_t)k] = (float)(a[4 + k] * inv);
+    } else if (lum) {
+      img.data[i] = (float)(s->variant == VARIANT_MONO ? c.c[0] : col_luminance(c));
+    } else {
+      img.data[3 * i] = (float)c.c[0];
+      img.data[3 * i + 1] = (float)c.c[1];
+      img.data[3 * i + 2] = (float)c.c[2];
+    }
+  }
+  double eh[4] = {0, 0, 0, 0}; /* per developed channel, as the radiance maps colours */
+  for (int c = 0; c < img.channels; c++)
+    eh[c] = s->stokes || s->variant == VARIANT_MONO ? s->e_h.c[0] : lum ? col_luminance(s->e_h) : s->e_h.c[c];
+  const char *want[FILM_MAX_PLANES];
+  int n_want = 0;
+  if (s->quantities & RENDER_Q_BRDF) want[n_want++] = "brdf";
+  if (s->quantities & RENDER_Q_BRF) want[n_want++] = "brf";
+  if (s->variance) want[n_want++] = "radiance_stderr";
+  size_t nv = np * img.channels;
+  for (int p = 0; p < n_want; p++) {
+    film_plane *pl = &img.planes[p];
+    film_plane_init(&img, want[p], pl);
+    pl->data = malloc(nv * sizeof(float));
+    img.n_planes = p + 1;
+    if (!pl->data) {
+      film_image_free(&img);
+      return rsw_fail(err, RSW_ERR_NOMEM, "film", "out of memory");
+    }
+    bool is_stderr = strcmp(want[p], "radiance_stderr") == 0;
+    double scale = strcmp(want[p], "brf") == 0 ? M_PI : 1.0; /* over E_h */
+    for (size_t i = 0; i < np; i++) {
+      const double *a = &s->acc[(size_t)s->stride * i];
+      for (int c = 0; c < img.channels; c++) {
+        size_t q = i * (size_t)img.channels + (size_t)c;
+        if (!is_stderr) {
+          pl->data[q] = (float)(scale / eh[c] * (double)img.data[q]);
+          continue;
+        }
+        const double *m = &a[s->m_off + FILM_ACC_MOMENT * c];
+        double n = a[3], var = n > 1 ? (m[2] - m[1] * m[1] / n) / (n - 1) : 0;
+        pl->data[q] = (float)(var > 0 ? sqrt(var / n) : 0.0);
+      }
+    }
+  }
+  if (n_want && (s->quantities & (RENDER_Q_BRDF | RENDER_Q_BRF))) {
+    img.has_irradiance = true;
+    for (int c = 0; c < 4; c++) img.irradiance[c] = eh[c];
+  }
+  *out = img;
+  return RSW_OK;
+}
+
+static const film_ops hdrfilm_ops = {.develop = hdrfilm_develop};
+
 const plugin plugin_hdrfilm = {
     .name = "hdrfilm",
     .cls = CLS_FILM,
     .create = hdrfilm_create,
     .destroy = hdrfilm_destroy,
     .prepare = hdrfilm_prepare,
-    .ops = NULL,
+    .ops = &hdrfilm_ops,
 };
 
 typedef struct name_code {
@@ -176,6 +274,7 @@ static rsw_status hdrfilm_create(loader *ld, node *n, object **out) {
   hdrfilm *f = calloc(1, sizeof *f);
   if (!f) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
   f->base.base.plugin = &plugin_hdrfilm;
+  f->base.ops = &hdrfilm_ops;
   f->base.base.id = n->id;
   rsw_status st = hdrfilm_read(ld, n, f);
   if (st != RSW_OK) {

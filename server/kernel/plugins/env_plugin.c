@@ -538,14 +538,8 @@ static rsw_status load_one(const char *path, rsw_err *err) {
   if (!st) {
     const char *name = api->type_name;
     const plugin *builtin = NULL;
-    for (size_t i = 0; rsw_plugins[i] || i == 0; i++)
-      if (rsw_plugins[i] && strcmp(rsw_plugins[i]->name, name) == 0) builtin = rsw_plugins[i];
-    /* The weak static list can end early on a missing entry; ask the
-     * lookup too (it covers every built-in). */
-    if (!builtin) {
-      const plugin *p = registry_find(name);
-      if (p && !find_loaded(name)) builtin = p;
-    }
+    for (size_t i = 0; rsw_plugins[i]; i++)
+      if (strcmp(rsw_plugins[i]->name, name) == 0) builtin = rsw_plugins[i];
     const loaded_plugin *other = find_loaded(name);
     if (builtin)
       st = rsw_fail(err, RSW_ERR_DUPLICATE, path,

@@ -142,9 +142,8 @@ static node *resolve_ref(loader *ld, const char *id) {
 static rsw_status unknown_plugin(loader *ld, node *n) {
   const char *best = NULL;
   size_t best_d = 3;
-  for (size_t i = 0; rsw_plugins[i] || i == 0; i++) {
+  for (size_t i = 0; rsw_plugins[i]; i++) {
     const plugin *p = rsw_plugins[i];
-    if (!p) continue;
     size_t d = rsw_edit_distance(n->type, p->name);
     if (d < best_d) {
       best_d = d;

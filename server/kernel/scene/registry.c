@@ -5,8 +5,9 @@
 
 #include <string.h>
 
-/* Declared weak while the plugin set is being assembled across branches:
- * a plugin whose file is absent resolves to NULL and is skipped. */
+/* Strong references: every plugin object is pulled out of the kernel
+ * library by this table, so a missing plugin is a link error (no
+ * --whole-archive, no weak symbols). */
 /* One line per plugin family: kept out of clang-format, which reflows it. */
 // clang-format off
 #define PLUGINS(X)                                                            \
@@ -24,7 +25,7 @@
   X(shapegroup) X(instance) X(instancelist) X(periodic)
 // clang-format on
 
-#define DECLARE_(name) extern const plugin plugin_##name __attribute__((weak));
+#define DECLARE_(name) extern const plugin plugin_##name;
 PLUGINS(DECLARE_)
 #undef DECLARE_
 
@@ -37,7 +38,7 @@ const plugin *const rsw_plugins[] = {
 const plugin *registry_find(const char *name) {
   size_t n = sizeof rsw_plugins / sizeof rsw_plugins[0] - 1;
   for (size_t i = 0; i < n; i++)
-    if (rsw_plugins[i] && strcmp(rsw_plugins[i]->name, name) == 0) return rsw_plugins[i];
+    if (strcmp(rsw_plugins[i]->name, name) == 0) return rsw_plugins[i];
   return plugins_find(name); /* environment plugins loaded with --plugin-dir */
 }
 

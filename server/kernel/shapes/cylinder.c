@@ -27,13 +27,118 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../accel.h"
 #include "shape_common.h"
 
+static void cylinder_bounds(const shape *s, vec3 *lo, vec3 *hi) {
+  *lo = v3(-1, -1, 0), *hi = v3(1, 1, 1); /* the unit tube, 0 <= z <= 1 */
+}
+
+/* The two end circles bound the tube: centre c, axes a = A e_x and
+ * b = A e_y, so coordinate k spans c_k +- sqrt(a_k^2 + b_k^2). */
+static void cylinder_world_bounds(const shape *s, const xform *t, vec3 *lo, vec3 *hi) {
+  vec3 a = xf_vector(t, v3(1, 0, 0)), b = xf_vector(t, v3(0, 1, 0));
+  vec3 x = v3(sqrt(a.x * a.x + b.x * b.x), sqrt(a.y * a.y + b.y * b.y), sqrt(a.z * a.z + b.z * b.z));
+  for (int e = 0; e < 2; e++) {
+    vec3 c = xf_point(t, v3(0, 0, e));
+    shape_box_add(lo, hi, v3_sub(c, x));
+    shape_box_add(lo, hi, v3_add(c, x));
+  }
+}
+
+/* Unit tube x^2 + y^2 = 1, 0 <= z <= 1 (open, no caps): the nearer root
+ * within (tnear, tfar) whose z lies on the tube, else the farther one
+ * (mitsuba3 src/shapes/cylinder.cpp). A ray parallel to the axis never
+ * meets the open tube. */
+static bool cylinder_intersect(const shape *s, const double o[3], const double d[3], double tnear,
+                               double tfar, double *t_out, double n_out[3]) {
+  double a = d[0] * d[0] + d[1] * d[1];
+  double b = o[0] * d[0] + o[1] * d[1];
+  double c = o[0] * o[0] + o[1] * o[1] - 1.0;
+  double disc = b * b - a * c;
+  if (!(a > 0) || disc < 0) return false;
+  double sq = sqrt(disc);
+  double q = b < 0 ? -b + sq : -b - sq;
+  double t0 = q / a, t1 = q != 0 ? c / q : t0;
+  if (t0 > t1) {
+    double tmp = t0;
+    t0 = t1;
+    t1 = tmp;
+  }
+  for (int k = 0; k < 2; k++) {
+    double t = k ? t1 : t0;
+    if (!(t > tnear && t < tfar)) continue;
+    double z = o[2] + t * d[2];
+    if (!(z >= 0.0 && z <= 1.0)) continue;
+    *t_out = t;
+    n_out[0] = o[0] + t * d[0], n_out[1] = o[1] + t * d[1], n_out[2] = 0;
+    return true;
+  }
+  return false;
+}
+
+/* Back onto the unit tube in object space (removes the float error of
+ * the intersection, like Mitsuba's normal shift). uv = (phi / 2pi, z)
+ * and dp/du along (-y, x, 0), as Mitsuba's cylinder. */
+static void cylinder_fill(const shape *s, const xform *to_world, const ray3 *r, const accel_hit *h,
+                          surface_interaction *si, vec3 *n, vec3 *sn, vec3 *dpdu) {
+  vec3 pw = v3_fma(r->o, h->t, r->d);
+  vec3 po = xf_inv_point(to_world, pw);
+  double rr = sqrt(po.x * po.x + po.y * po.y);
+  if (rr > 0)
+    po.x /= rr, po.y /= rr;
+  else
+    po.x = 1, po.y = 0;
+  po.z = fmin(1.0, fmax(0.0, po.z));
+  si->p = xf_point(to_world, po);
+  *n = *sn = v3_norm(xf_normal(to_world, v3(po.x, po.y, 0)));
+  double phi = atan2(po.y, po.x);
+  if (phi < 0) phi += 2 * RSW_PI;
+  si->uv[0] = phi * RSW_INV_2PI;
+  si->uv[1] = po.z;
+  *dpdu = xf_vector(to_world, v3(-po.y, po.x, 0));
+}
+
+static void cylinder_sample(const shape *s, vec2 u, const double *tris, position_sample *ps) {
+  double phi = 2.0 * RSW_PI * u.y;
+  double c = cos(phi), sn = sin(phi);
+  ps->p = xf_point(&s->to_world, v3(c, sn, u.x));
+  ps->n = v3_norm(xf_normal(&s->to_world, v3(c, sn, 0)));
+  ps->uv[0] = u.y;
+  ps->uv[1] = u.x;
+}
+
+static rsw_status cylinder_finalize(shape *s, rsw_err *err, const char *where) {
+  rsw_status tst = shape_check_traceable(s, &s->to_world, "to_world", err, where);
+  if (tst) return tst;
+  /* Uniform (phi, z) sampling is uniform in area only on a circular,
+   * right tube: to_world's x and y columns of equal length, all three
+   * orthogonal (Mitsuba warns and drops the shear; we refuse it). */
+  vec3 ex = xf_vector(&s->to_world, v3(1, 0, 0));
+  vec3 ey = xf_vector(&s->to_world, v3(0, 1, 0));
+  vec3 ez = xf_vector(&s->to_world, v3(0, 0, 1));
+  double lx = v3_len(ex), ly = v3_len(ey), lz = v3_len(ez);
+  if (!(lx > 0) || !(ly > 0) || !(lz > 0) || fabs(lx - ly) > 1e-6 * (lx + ly) ||
+      fabs(v3_dot(ex, ey)) > 1e-6 * lx * ly || fabs(v3_dot(ex, ez)) > 1e-6 * lx * lz ||
+      fabs(v3_dot(ey, ez)) > 1e-6 * ly * lz)
+    return rsw_fail(err, RSW_ERR_INVALID, where,
+                    "cylinder: to_world must keep the tube circular and right (no shear, the same "
+                    "scale across the axis)");
+  s->area = 2.0 * RSW_PI * 0.5 * (lx + ly) * lz;
+  return RSW_OK;
+}
+
+const shape_ops shape_ops_cylinder = {.kind = "cylinder",
+                                      .bounds = cylinder_bounds,
+                                      .world_bounds = cylinder_world_bounds,
+                                      .intersect = cylinder_intersect,
+                                      .fill = cylinder_fill,
+                                      .sample_position = cylinder_sample,
+                                      .finalize = cylinder_finalize};
+
 static rsw_status cylinder_create(loader *ld, node *n, object **out) {
-  shape *s = calloc(1, sizeof *s);
+  shape *s = shape_new(&shape_ops_cylinder);
   if (!s) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
-  s->geom = GEOM_CYLINDER;
-  s->to_world = xf_identity();
   vec3 p0, p1;
   double r;
   rsw_status st = shape_read_common(ld, n, s, false);

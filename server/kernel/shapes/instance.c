@@ -12,35 +12,9 @@
 
 /* ---- shapegroup ------------------------------------------------------------ */
 
-static void box_add(vec3 *lo, vec3 *hi, vec3 p) {
-  lo->x = fmin(lo->x, p.x), lo->y = fmin(lo->y, p.y), lo->z = fmin(lo->z, p.z);
-  hi->x = fmax(hi->x, p.x), hi->y = fmax(hi->y, p.y), hi->z = fmax(hi->z, p.z);
-}
-
 /* World (here: group-space) bounds of a plain shape. */
 static void member_bbox(const shape *sh, vec3 *lo, vec3 *hi) {
-  if (sh->geom == GEOM_MESH) {
-    for (uint32_t i = 0; i < sh->mesh.n_verts; i++) {
-      const float *q = &sh->mesh.pos[3 * (size_t)i];
-      box_add(lo, hi, xf_point(&sh->to_world, v3(q[0], q[1], q[2])));
-    }
-    return;
-  }
-  if (sh->geom == GEOM_CYLINDER) {
-    /* The two end circles bound the tube: centre c, axes a = A e_x and
-     * b = A e_y, so coordinate k spans c_k +- sqrt(a_k^2 + b_k^2). */
-    vec3 a = xf_vector(&sh->to_world, v3(1, 0, 0)), b = xf_vector(&sh->to_world, v3(0, 1, 0));
-    vec3 x = v3(sqrt(a.x * a.x + b.x * b.x), sqrt(a.y * a.y + b.y * b.y), sqrt(a.z * a.z + b.z * b.z));
-    for (int e = 0; e < 2; e++) {
-      vec3 c = xf_point(&sh->to_world, v3(0, 0, e));
-      box_add(lo, hi, v3_sub(c, x));
-      box_add(lo, hi, v3_add(c, x));
-    }
-    return;
-  }
-  double zr = sh->geom == GEOM_SPHERE ? 1.0 : 0.0;
-  for (int c = 0; c < 8; c++)
-    box_add(lo, hi, xf_point(&sh->to_world, v3(c & 1 ? 1 : -1, c & 2 ? 1 : -1, c & 4 ? zr : -zr)));
+  sh->ops->world_bounds(sh, &sh->to_world, lo, hi);
 }
 
 static void group_destroy(object *o) {
@@ -52,7 +26,7 @@ static void group_destroy(object *o) {
 static rsw_status group_create(loader *ld, node *n, object **out) {
   shape_group *g = calloc(1, sizeof *g);
   if (!g) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
-  g->base.geom = GEOM_MESH; /* no geometry of its own */
+  g->base.ops = &shape_ops_mesh; /* no geometry of its own */
   g->base.to_world = xf_identity();
   object **arr = NULL;
   size_t cnt = 0;
@@ -136,7 +110,7 @@ static rsw_status placement_check(const shape_group *g, const xform *t, const ch
 static rsw_status instance_create(loader *ld, node *n, object **out) {
   instance_shape *s = calloc(1, sizeof *s);
   if (!s) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
-  s->base.geom = GEOM_MESH;
+  s->base.ops = &shape_ops_mesh; /* no geometry of its own */
   s->n = 1;
   rsw_status st = ld_transform(ld, n, "to_world", &s->base.to_world, NULL);
   if (!st) st = read_group(ld, n, &s->group);
@@ -349,7 +323,7 @@ rsw_status instance_list_parse(const char *path, float **xf_out, uint32_t *n_out
 static rsw_status instancelist_create(loader *ld, node *n, object **out) {
   instance_shape *s = calloc(1, sizeof *s);
   if (!s) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
-  s->base.geom = GEOM_MESH;
+  s->base.ops = &shape_ops_mesh; /* no geometry of its own */
   s->base.to_world = xf_identity();
   char *path = NULL;
   rsw_status st = read_group(ld, n, &s->group);
@@ -404,9 +378,9 @@ void instance_bbox(const shape *sh, vec3 *lo, vec3 *hi) {
   const shape_group *g = s->group;
   if (!s->xf) {
     for (int c = 0; c < 8; c++)
-      box_add(lo, hi,
-              xf_point(&sh->to_world,
-                       v3(c & 1 ? g->hi.x : g->lo.x, c & 2 ? g->hi.y : g->lo.y, c & 4 ? g->hi.z : g->lo.z)));
+      shape_box_add(lo, hi,
+                    xf_point(&sh->to_world, v3(c & 1 ? g->hi.x : g->lo.x, c & 2 ? g->hi.y : g->lo.y,
+                                               c & 4 ? g->hi.z : g->lo.z)));
     return;
   }
   /* Placements applied directly (instance_transform would also invert
@@ -416,10 +390,10 @@ void instance_bbox(const shape *sh, vec3 *lo, vec3 *hi) {
     const double *t = &s->tr[3 * (size_t)k];
     for (int c = 0; c < 8; c++) {
       double q[3] = {c & 1 ? g->hi.x : g->lo.x, c & 2 ? g->hi.y : g->lo.y, c & 4 ? g->hi.z : g->lo.z};
-      box_add(lo, hi,
-              v3((double)m[0] * q[0] + (double)m[1] * q[1] + (double)m[2] * q[2] + t[0],
-                 (double)m[4] * q[0] + (double)m[5] * q[1] + (double)m[6] * q[2] + t[1],
-                 (double)m[8] * q[0] + (double)m[9] * q[1] + (double)m[10] * q[2] + t[2]));
+      shape_box_add(lo, hi,
+                    v3((double)m[0] * q[0] + (double)m[1] * q[1] + (double)m[2] * q[2] + t[0],
+                       (double)m[4] * q[0] + (double)m[5] * q[1] + (double)m[6] * q[2] + t[1],
+                       (double)m[8] * q[0] + (double)m[9] * q[1] + (double)m[10] * q[2] + t[2]));
     }
   }
 }
@@ -440,7 +414,7 @@ void hit_fill_interaction(const scene *sc, const ray3 *r, const accel_hit *h, su
   xform place = instance_transform(is, h->sub);
   xform to_world = xf_is_identity(&m->to_world) ? place : xf_mul(&place, &m->to_world);
   accel_hit hh = *h;
-  if (m->geom == GEOM_MESH) {
+  if (shape_is_mesh(m)) {
     /* Embree's Ng is in group space (member to_world baked in): back to
      * the member's object space, n_obj ~ M^T n_group (normals map by
      * M^-T), the orientation kept. */

@@ -12,9 +12,8 @@
 #include "shape_common.h"
 
 static rsw_status meshfile_create(loader *ld, node *n, object **out, bool is_obj) {
-  shape *s = calloc(1, sizeof *s);
+  shape *s = shape_new(&shape_ops_mesh);
   if (!s) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
-  s->geom = GEOM_MESH;
   char *path = NULL;
   bool flip_tc;
   rsw_status st = shape_read_common(ld, n, s, true);

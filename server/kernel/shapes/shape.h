@@ -15,6 +15,55 @@ typedef struct position_sample {
   double pdf; /* area density, 1/area for uniform sampling */
 } position_sample;
 
+/* ---- one interface per kind of geometry -------------------------------------
+ * Each kind of geometry is one file with one table: mesh.c (triangle
+ * meshes: rectangle, cube, obj, ply), sphere.c, disk.c, cylinder.c. accel.c
+ * and the shading code go through the table and never ask which kind a
+ * shape is; a new kind of geometry is a new file with its table and its
+ * plugin (and the plugin's line in scene/registry.c). */
+struct accel_hit;
+typedef struct shape_ops {
+  const char *kind; /* "mesh", "sphere", "disk", "cylinder" */
+  /* Object-space bounds of the geometry, exact: a flat shape has lo = hi
+   * on its normal axis (accel.c pads it for Embree). */
+  void (*bounds)(const shape *s, vec3 *lo, vec3 *hi);
+  /* Widen *lo, *hi by the geometry's bounds under to_world. */
+  void (*world_bounds)(const shape *s, const xform *to_world, vec3 *lo, vec3 *hi);
+  /* Analytic shapes: the nearest t in (tnear, tfar) where the object-space
+   * ray o + t d (d not normalised) meets the surface, and the object-space
+   * geometric normal there (not normalised); false if none. Exact in
+   * double precision (Embree's user-geometry callbacks call it). NULL for
+   * triangle meshes, which Embree intersects itself. */
+  bool (*intersect)(const shape *s, const double o[3], const double d[3], double tnear, double tfar,
+                    double *t, double n[3]);
+  /* Surface data of hit h on ray r, the shape placed by to_world: si->p
+   * (and si->p_error beyond 0 when p comes from the ray), si->uv, the unit
+   * geometric and shading normals *n, *sn and dp/du *dpdu (world space,
+   * before flip_normals; *dpdu is (0, 0, 0) on entry and stays so when the
+   * shape has none). */
+  void (*fill)(const shape *s, const xform *to_world, const ray3 *r, const struct accel_hit *h,
+               surface_interaction *si, vec3 *n, vec3 *sn, vec3 *dpdu);
+  /* A uniform position sample in world area measure: ps->p, ps->n (unit,
+   * before flip_normals), ps->uv. tris: a mesh's world triangles
+   * (shape_sample_position_tris) or NULL. The pdf is 1 / s->area. */
+  void (*sample_position)(const shape *s, vec2 u, const double *tris, position_sample *ps);
+  /* Check the geometry under s->to_world and compute s->area (a mesh: its
+   * area cdf, when sampled). shape_finalize() calls it. */
+  rsw_status (*finalize)(shape *s, rsw_err *err, const char *where);
+} shape_ops;
+
+extern const shape_ops shape_ops_mesh, shape_ops_sphere, shape_ops_disk, shape_ops_cylinder;
+
+/* A triangle mesh (Embree triangles; shape groups and instances carry the
+ * mesh table with no faces). */
+static inline bool shape_is_mesh(const shape *s) {
+  return s->ops == &shape_ops_mesh;
+}
+
+/* Widen *lo, *hi by the eight corners of s's object bounds under t: the
+ * world_bounds of every analytic shape but the cylinder. */
+void shape_box_world_bounds(const shape *s, const xform *t, vec3 *lo, vec3 *hi);
+
 /* Uniformly sample a point on the shape (world-space area measure):
  * rectangle: to_world (2u.x-1, 2u.y-1, 0); disk: concentric disk;
  * sphere: uniform sphere; cylinder: (cos 2pi u.y, sin 2pi u.y, u.x);
@@ -44,8 +93,16 @@ position_sample shape_sample_position_tris(const shape *s, vec2 u, const double 
 void shape_world_tris_refresh(const shape *s, double **tris, uint32_t *n);
 /* *tris when it was made for s as it is now (face count), else NULL. */
 static inline const double *shape_world_tris_for(const shape *s, const double *tris, uint32_t n) {
-  return tris && s->geom == GEOM_MESH && n == s->mesh.n_faces ? tris : NULL;
+  return tris && shape_is_mesh(s) && n == s->mesh.n_faces ? tris : NULL;
 }
+/* Per-face world normals and dp/du of small meshes (shape.face_cache):
+ * 48 bytes a face, so only up to this many faces (rectangles, cubes,
+ * small meshes: the walls and lights of a room). */
+#define SHAPE_FACE_CACHE_MAX (1u << 16)
+#define SHAPE_FACE_DOUBLES   6
+/* (Re)compute s's face cache, or free it (too large, out of memory, not a
+ * mesh): fills then compute the same values per hit. */
+void shape_face_cache_refresh(shape *s);
 /* Area pdf of shape_sample_position (1/area). */
 double shape_pdf_position(const shape *s);
 
