@@ -151,6 +151,15 @@ typedef struct bsdf_ops {
   color (*eval)(const bsdf *b, const surface_interaction *si, vec3 wo);
   /* Solid-angle pdf of sample() producing wo (smooth lobes only). */
   double (*pdf)(const bsdf *b, const surface_interaction *si, vec3 wo);
+  /* Optional: sample() for n lanes that share this BSDF, lane i at si[i]
+   * with u1[i], u2[i], writing bs[i] and weight[i]; vectorised at the
+   * render's ISA (core/isa.h). A lane's result depends on its own inputs
+   * only (not on n or its neighbours), so a wave's grouping of lanes does
+   * not change a film. It may differ from sample() in the last bits (its
+   * single-precision placement of the sample); pdf() and eval() stay the
+   * densities of both. NULL: the integrator calls sample() per lane. */
+  void (*sample_batch)(const bsdf *b, int n, const surface_interaction *const *si, const double *u1,
+                       const vec2 *u2, bsdf_sample *bs, color *weight);
 } bsdf_ops;
 struct bsdf {
   object base;

@@ -32,6 +32,7 @@
 
 #include "../scene/loader.h"
 #include "../scene/params.h"
+#include "../simd/simd.h"
 #include "bsdfs_internal.h"
 #include "fresnel.h"
 
@@ -43,6 +44,9 @@ static mf_distr distr_at(const roughconductor_bsdf *r, const surface_interaction
   return mf_make(r->type, au, av, r->sample_visible);
 }
 
+static color rough_finish(const roughconductor_bsdf *r, const mf_distr *d, const surface_interaction *si,
+                          vec3 m, double pdf_m, double g1vis, bsdf_sample *bs);
+
 static color rough_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2, bsdf_sample *bs) {
   (void)u1;
   const roughconductor_bsdf *r = (const roughconductor_bsdf *)b;
@@ -53,6 +57,16 @@ static color rough_sample(const bsdf *b, const surface_interaction *si, double u
    * reuses G1vis (it is the same factor). */
   double pdf_m, g1vis;
   vec3 m = mf_sample_g1(&d, wi, u2, &pdf_m, &g1vis);
+  return rough_finish(r, &d, si, m, pdf_m, g1vis, bs);
+}
+
+/* The double-precision end of a visible-normal sample, shared by the
+ * scalar and the batched paths: from the microfacet normal m drawn, the
+ * reflected direction, its pdf (D and G1vis computed once) and the weight
+ * eval / pdf with Fresnel. */
+static color rough_finish(const roughconductor_bsdf *r, const mf_distr *d, const surface_interaction *si,
+                          vec3 m, double pdf_m, double g1vis, bsdf_sample *bs) {
+  vec3 wi = si->wi;
   vec3 wo = reflect_about(wi, m);
   double wo_m = v3_dot(wo, m);
   if (!(pdf_m > 0.0) || !(wo.z > 0.0) || !(wo_m > 0.0)) return bsdf_fail(bs);
@@ -61,14 +75,64 @@ static color rough_sample(const bsdf *b, const surface_interaction *si, double u
   bs->eta = 1.0;
   bs->sampled_type = BSDF_GLOSSY_REFLECTION;
   double weight;
-  if (d.sample_visible)
-    weight = mf_smith_g1(&d, wo, m) * (mf_smith_g1(&d, wi, m) / g1vis);
+  if (d->sample_visible)
+    weight = mf_smith_g1(d, wo, m) * (mf_smith_g1(d, wi, m) / g1vis);
   else
-    weight = mf_G(&d, wi, wo, m) * v3_dot(wi, m) / (wi.z * m.z);
+    weight = mf_G(d, wi, wo, m) * v3_dot(wi, m) / (wi.z * m.z);
   color eta, k;
   conductor_ior_eval(&r->ior, si, &eta, &k);
   color f = fresnel_conductor_col(v3_dot(wi, m), eta, k);
   return col_mul(col_scale(f, weight), bsdf_factor(r->specular_reflectance, si));
+}
+
+/* Batched sampling (bsdf_ops.sample_batch): the visible normals of up to
+ * 64 lanes at a time are placed by the per-ISA single-precision kernels
+ * (simd/microfacet_lanes.h: for Beckmann the Newton inversion runs across
+ * the lanes instead of one chain per sample); pdf and weight are then
+ * evaluated per lane in double from the m drawn, as rough_sample() does,
+ * so weights stay eval / pdf exactly. D cos sampling (sample_visible
+ * false) takes the scalar path per lane. */
+static void rough_sample_batch(const bsdf *b, int n, const surface_interaction *const *si, const double *u1,
+                               const vec2 *u2, bsdf_sample *bs, color *weight) {
+  const roughconductor_bsdf *r = (const roughconductor_bsdf *)b;
+  if (!r->sample_visible) {
+    for (int i = 0; i < n; i++) weight[i] = rough_sample(b, si[i], u1[i], u2[i], &bs[i]);
+    return;
+  }
+  enum {
+    C = 64
+  };
+  rsw_isa isa = rsw_isa_get();
+  for (int i0 = 0; i0 < n; i0 += C) {
+    int m = n - i0 < C ? n - i0 : C;
+    float wx[C], wy[C], wz[C], au[C], av[C], ua[C], ub[C], mx[C], my[C], mz[C];
+    mf_distr d[C];
+    int lane[C], k = 0;
+    for (int j = 0; j < m; j++) {
+      const surface_interaction *s = si[i0 + j];
+      if (!(s->wi.z > 0.0)) {
+        weight[i0 + j] = bsdf_fail(&bs[i0 + j]);
+        continue;
+      }
+      d[k] = distr_at(r, s);
+      wx[k] = (float)s->wi.x;
+      wy[k] = (float)s->wi.y;
+      wz[k] = (float)s->wi.z;
+      au[k] = (float)d[k].alpha_u;
+      av[k] = (float)d[k].alpha_v;
+      ua[k] = (float)u2[i0 + j].x;
+      ub[k] = (float)u2[i0 + j].y;
+      lane[k++] = i0 + j;
+    }
+    mf_sample_visible_batch(isa, r->type == MF_GGX, k, wx, wy, wz, au, av, ua, ub, mx, my, mz);
+    for (int j = 0; j < k; j++) {
+      int i = lane[j];
+      /* m renormalised in double: the pdf is the density of this m. */
+      vec3 mm = v3_norm(v3(mx[j], my[j], mz[j]));
+      double g1vis, pdf_m = mf_pdf_g1(&d[j], si[i]->wi, mm, &g1vis);
+      weight[i] = rough_finish(r, &d[j], si[i], mm, pdf_m, g1vis, &bs[i]);
+    }
+  }
 }
 
 static color rough_eval(const bsdf *b, const surface_interaction *si, vec3 wo) {
@@ -97,7 +161,8 @@ static double rough_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
   return mf_pdf(&d, wi, h) / (4.0 * wo_h);
 }
 
-static const bsdf_ops rough_ops = {.sample = rough_sample, .eval = rough_eval, .pdf = rough_pdf};
+static const bsdf_ops rough_ops = {
+    .sample = rough_sample, .eval = rough_eval, .pdf = rough_pdf, .sample_batch = rough_sample_batch};
 
 static void rough_destroy(object *o) {
   free(o);

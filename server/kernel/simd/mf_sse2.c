@@ -1,0 +1,18 @@
+/* Batched visible-normal microfacet sampling for sse2 (4 lanes):
+ * simd/microfacet_lanes.h compiled with target("sse2"); dispatched by
+ * simd/simd.c. */
+#include <math.h>
+
+#include "simd.h"
+
+#if RSW_SIMD_X86
+#include <immintrin.h>
+
+#define W 4
+#define SIMD_FN static inline __attribute__((always_inline, target("sse2")))
+#define MF_LANES_ATTR __attribute__((target("sse2")))
+#define VSQRT(x) ((vf)_mm_sqrt_ps((x)))
+#define MF_LANES_FN mf_sample_visible_sse2
+#include "lanes.h"
+#include "microfacet_lanes.h"
+#endif

@@ -1,0 +1,140 @@
+/* Visible-normal sampling of the Beckmann and GGX distributions across W
+ * lanes (the per-ISA body of simd/microfacet_simd.c; include after
+ * simd/lanes.h, with MF_LANES_FN naming the entry point).
+ *
+ * The same algorithms as the scalar samplers of bsdfs/microfacet.c
+ * (beckmann_sample_visible: Jakob 2014's Newton inversion; ggx: Heitz
+ * 2018), in single precision throughout. That is safe here for the reason
+ * given in microfacet.c's error budget: these values only place the
+ * microfacet normal m; the caller evaluates pdf and weight in double from
+ * the m drawn (roughconductor.c rough_sample_batch), so a float error only
+ * moves probability mass by ~1e-6 and never makes a weight inconsistent
+ * with its pdf. The Newton steps of the Beckmann inversion run on all
+ * lanes at once; a lane whose residual reached float resolution keeps its
+ * x (masked), and the loop ends early only when every lane has. */
+
+SIMD_FN void mf_beckmann_lanes(const float *wx, const float *wy, const float *wz, const float *au,
+                               const float *av, const float *u0, const float *u1, float *mx, float *my,
+                               float *mz) {
+  const float inv_sqrt_pi = 0.564189584f;
+  vf ax, ay, x0, y0, z0, ux0, uy0;
+  __builtin_memcpy(&ax, au, sizeof ax);
+  __builtin_memcpy(&ay, av, sizeof ay);
+  __builtin_memcpy(&x0, wx, sizeof x0);
+  __builtin_memcpy(&y0, wy, sizeof y0);
+  __builtin_memcpy(&z0, wz, sizeof z0);
+  __builtin_memcpy(&ux0, u0, sizeof ux0);
+  __builtin_memcpy(&uy0, u1, sizeof uy0);
+  /* Stretch wi to the alpha = 1 configuration. */
+  vf px = ax * x0, py = ay * y0, pz = z0;
+  vf inv = 1.0f / VSQRT(px * px + py * py + pz * pz);
+  px *= inv;
+  py *= inv;
+  pz *= inv;
+  vf sin_t = VSQRT(vmax(1.0f - pz * pz, vset(0.0f)));
+  vi has_t = sin_t > 0.0f;
+  vf cos_phi = vsel(has_t, vclamp(px / sin_t, -1.0f, 1.0f), vset(1.0f));
+  vf sin_phi = vsel(has_t, vclamp(py / sin_t, -1.0f, 1.0f), vset(0.0f));
+
+  /* Slopes for alpha = 1 at incidence cosine ci = pz. */
+  vf ci = pz;
+  vf sin_i = sin_t;
+  vf tan_i = sin_i / ci, cot_i = ci / sin_i; /* cot = inf at normal incidence */
+  vf maxval = verf(cot_i);
+  ux0 = vclamp(ux0, 1e-6f, 1.0f - 1e-6f);
+  uy0 = vclamp(uy0, 1e-6f, 1.0f - 1e-6f);
+  vf xx = maxval - (maxval + 1.0f) * verf(VSQRT(-vlog(ux0)));
+  vi has_tail = (tan_i > 0.0f) & (cot_i < 9.0f);
+  vf cc = vmin(cot_i, vset(9.0f));
+  vf tail = vsel(has_tail, inv_sqrt_pi * tan_i * vexp(-cc * cc), vset(0.0f));
+  vf ux = ux0 * (1.0f + maxval + tail);
+  vf slope = vset(0.0f);
+  vi active = (vi){0} - 1; /* lanes still iterating */
+  for (int i = 0; i < 3; i++) {
+    slope = verfinv(xx);
+    vf value = 1.0f + xx + inv_sqrt_pi * tan_i * vexp(-slope * slope) - ux;
+    active &= ~(vabs(value) <= 4e-7f * ux);
+    if (!vany(active)) break;
+    vf deriv = 1.0f - slope * tan_i;
+    xx = vsel(active, xx - value / deriv, xx);
+  }
+  /* Lanes that did not converge: keep x inside erfinv's domain. */
+  vf xc = vclamp(xx, -1.0f + 6e-8f, 1.0f - 6e-8f);
+  slope = vsel(active, verfinv(xc), slope);
+  vf sy = verfinv(2.0f * uy0 - 1.0f);
+
+  /* Rotate back to wi's azimuth, unstretch. */
+  vf gx = -(cos_phi * slope - sin_phi * sy) * ax;
+  vf gy = -(sin_phi * slope + cos_phi * sy) * ay;
+  vf n = 1.0f / VSQRT(gx * gx + gy * gy + 1.0f);
+  gx *= n;
+  gy *= n;
+  __builtin_memcpy(mx, &gx, sizeof gx);
+  __builtin_memcpy(my, &gy, sizeof gy);
+  __builtin_memcpy(mz, &n, sizeof n);
+}
+
+SIMD_FN void mf_ggx_lanes(const float *wx, const float *wy, const float *wz, const float *au, const float *av,
+                          const float *u0, const float *u1, float *mx, float *my, float *mz) {
+  vf ax, ay, x0, y0, z0, ux, uy;
+  __builtin_memcpy(&ax, au, sizeof ax);
+  __builtin_memcpy(&ay, av, sizeof ay);
+  __builtin_memcpy(&x0, wx, sizeof x0);
+  __builtin_memcpy(&y0, wy, sizeof y0);
+  __builtin_memcpy(&z0, wz, sizeof z0);
+  __builtin_memcpy(&ux, u0, sizeof ux);
+  __builtin_memcpy(&uy, u1, sizeof uy);
+  vf hx = ax * x0, hy = ay * y0, hz = z0;
+  vf inv = 1.0f / VSQRT(hx * hx + hy * hy + hz * hz);
+  hx *= inv;
+  hy *= inv;
+  hz *= inv;
+  vf lensq = hx * hx + hy * hy;
+  vi has = lensq > 0.0f;
+  vf il = 1.0f / VSQRT(vsel(has, lensq, vset(1.0f)));
+  vf t1x = vsel(has, -hy * il, vset(1.0f)), t1y = vsel(has, hx * il, vset(0.0f));
+  /* t2 = vh x t1 (t1.z = 0) */
+  vf t2x = -hz * t1y, t2y = hz * t1x, t2z = hx * t1y - hy * t1x;
+  vf sf, cf;
+  vsincos_turns(uy, &sf, &cf);
+  vf r = VSQRT(vmax(ux, vset(0.0f)));
+  vf p1 = r * cf, p2 = r * sf;
+  vf s = 0.5f * (1.0f + hz);
+  p2 = (1.0f - s) * VSQRT(vmax(1.0f - p1 * p1, vset(0.0f))) + s * p2;
+  vf pz = VSQRT(vmax(1.0f - p1 * p1 - p2 * p2, vset(0.0f)));
+  vf nx = t1x * p1 + t2x * p2 + hx * pz;
+  vf ny = t1y * p1 + t2y * p2 + hy * pz;
+  vf nz = t2z * p2 + hz * pz;
+  vf gx = ax * nx, gy = ay * ny, gz = vmax(nz, vset(0.0f));
+  vf n = 1.0f / VSQRT(gx * gx + gy * gy + gz * gz);
+  gx *= n;
+  gy *= n;
+  gz *= n;
+  __builtin_memcpy(mx, &gx, sizeof gx);
+  __builtin_memcpy(my, &gy, sizeof gy);
+  __builtin_memcpy(mz, &gz, sizeof gz);
+}
+
+/* n lanes (any n >= 0), processed W at a time (a partial tail is padded
+ * with normal incidence, u = 1/2, alpha = 1; its results are dropped). */
+MF_LANES_ATTR void MF_LANES_FN(int ggx, int n, const float *wx, const float *wy, const float *wz,
+                              const float *au, const float *av, const float *u0, const float *u1, float *mx,
+                              float *my, float *mz) {
+  for (int k0 = 0; k0 < n; k0 += W) {
+    int m = n - k0 < W ? n - k0 : W;
+    float in[7][W], out[3][W];
+    const float *src[7] = {wx, wy, wz, au, av, u0, u1};
+    const float pad[7] = {0.0f, 0.0f, 1.0f, 1.0f, 1.0f, 0.5f, 0.5f};
+    for (int a = 0; a < 7; a++)
+      for (int k = 0; k < W; k++) in[a][k] = k < m ? src[a][k0 + k] : pad[a];
+    if (ggx)
+      mf_ggx_lanes(in[0], in[1], in[2], in[3], in[4], in[5], in[6], out[0], out[1], out[2]);
+    else
+      mf_beckmann_lanes(in[0], in[1], in[2], in[3], in[4], in[5], in[6], out[0], out[1], out[2]);
+    for (int k = 0; k < m; k++) {
+      mx[k0 + k] = out[0][k];
+      my[k0 + k] = out[1][k];
+      mz[k0 + k] = out[2][k];
+    }
+  }
+}

@@ -1,0 +1,34 @@
+/* Batched (SIMD) kernels compiled per ISA (core/isa.h) and their run-time
+ * dispatch. Each per-ISA file includes the same lane source (lanes.h and a
+ * *_lanes.h body) under __attribute__((target(...))), so one algorithm
+ * serves sse2 (4 lanes), avx2 (8) and avx512 (16). */
+#ifndef RSW_SIMD_SIMD_H
+#define RSW_SIMD_SIMD_H
+
+#include "../core/isa.h"
+
+#if defined(__x86_64__) || defined(__i386__)
+#define RSW_SIMD_X86 1
+#else
+#define RSW_SIMD_X86 0
+#endif
+
+/* Visible microfacet normals m for n lanes (simd/microfacet_lanes.h):
+ * ggx != 0 for GGX, else Beckmann; wi (unit, local, wi.z > 0), alphas and
+ * u in [0,1)^2 per lane; m written unit-length, in float. At `isa`
+ * (which must be supported; rsw_isa_get() for the render's). */
+void mf_sample_visible_batch(rsw_isa isa, int ggx, int n, const float *wx, const float *wy, const float *wz,
+                             const float *au, const float *av, const float *u0, const float *u1, float *mx,
+                             float *my, float *mz);
+
+#if RSW_SIMD_X86
+#define MF_SIMD_DECL(s)                                                                                     \
+  void mf_sample_visible_##s(int ggx, int n, const float *wx, const float *wy, const float *wz,            \
+                             const float *au, const float *av, const float *u0, const float *u1, float *mx, \
+                             float *my, float *mz)
+MF_SIMD_DECL(sse2);
+MF_SIMD_DECL(avx2);
+MF_SIMD_DECL(avx512);
+#endif
+
+#endif
