@@ -25,6 +25,7 @@
 #include <unistd.h>
 
 #include "accel.h"
+#include "core/isa.h"
 #include "scene/scene.h"
 
 #define TILE 8
@@ -651,6 +652,7 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
     se->ops->pixel_angles(se, jb.W, jb.H, img.angles);
   }
   img.unresolved_rays = jb.rays.unresolved;
+  img.isa = rsw_isa_name(rsw_isa_get());
   if (stats) {
     stats->rays = jb.rays;
     stats->samples = jb.samples;
