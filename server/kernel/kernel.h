@@ -281,6 +281,12 @@ typedef struct sensor_ops {
   /* Optional, with pixel_angles: each pixel centre's exitant direction
    * (towards the sensor) as a unit world vector, xyz[3 (iy W + ix) + k]. */
   void (*pixel_directions)(const sensor *s, int W, int H, double *xyz);
+  /* Optional: sample_ray() for n samples at once (film_u[i],
+   * aperture_u[i] -> rays[i], weights w[i]), vectorised at the render's
+   * ISA (core/isa.h); each ray depends on its own sample only. NULL: the
+   * renderer calls sample_ray() per sample. */
+  void (*sample_ray_batch)(const sensor *s, int n, const vec2 *film_u, const vec2 *aperture_u, ray3 *rays,
+                           double *w);
 } sensor_ops;
 struct sensor {
   object base;

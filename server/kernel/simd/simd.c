@@ -20,3 +20,12 @@ void mf_sample_visible_batch(rsw_isa isa, int ggx, int n, const float *wx, const
 #error "the batched kernels need an x86 target (sse2, avx2, avx512)"
 #endif
 }
+
+void hdistant_rays_batch(rsw_isa isa, int n, const double (*m)[4], const double *fu, const double *ap,
+                         const double *center, double radius, double offset, double *out) {
+  switch (isa) {
+  case RSW_ISA_AVX512: hdistant_rays_avx512(n, m, fu, ap, center, radius, offset, out); return;
+  case RSW_ISA_AVX2: hdistant_rays_avx2(n, m, fu, ap, center, radius, offset, out); return;
+  default: hdistant_rays_sse2(n, m, fu, ap, center, radius, offset, out); return;
+  }
+}

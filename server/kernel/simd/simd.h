@@ -21,7 +21,19 @@ void mf_sample_visible_batch(rsw_isa isa, int ggx, int n, const float *wx, const
                              const float *au, const float *av, const float *u0, const float *u1, float *mx,
                              float *my, float *mz);
 
+/* hdistant camera rays without a target (simd/camera_lanes.h, double
+ * lanes): m the rows of to_world; fu, ap 2 per lane (x, y); out 6 per
+ * lane (origin, direction). Bitwise the scalar rays. */
+void hdistant_rays_batch(rsw_isa isa, int n, const double (*m)[4], const double *fu, const double *ap,
+                         const double *center, double radius, double offset, double *out);
+
 #if RSW_SIMD_X86
+#define CAM_SIMD_DECL(s)                                                                                    \
+  void hdistant_rays_##s(int n, const double (*m)[4], const double *fu, const double *ap,                  \
+                         const double *center, double radius, double offset, double *out)
+CAM_SIMD_DECL(sse2);
+CAM_SIMD_DECL(avx2);
+CAM_SIMD_DECL(avx512);
 #define MF_SIMD_DECL(s)                                                                                     \
   void mf_sample_visible_##s(int ggx, int n, const float *wx, const float *wy, const float *wz,            \
                              const float *au, const float *av, const float *u0, const float *u1, float *mx, \
