@@ -160,6 +160,13 @@ typedef struct bsdf_ops {
    * densities of both. NULL: the integrator calls sample() per lane. */
   void (*sample_batch)(const bsdf *b, int n, const surface_interaction *const *si, const double *u1,
                        const vec2 *u2, bsdf_sample *bs, color *weight);
+  /* Optional: eval() and pdf() for n lanes that share this BSDF (lane i:
+   * si[i], local wo[i]), vectorised at the render's ISA; may compute in
+   * single precision (the plugin says where), so equal to eval() and pdf()
+   * up to rounding (~1e-6 relative), lane by lane independent of n. NULL:
+   * eval() and pdf() per lane. */
+  void (*eval_pdf_batch)(const bsdf *b, int n, const surface_interaction *const *si, const vec3 *wo,
+                         color *f, double *pdf);
 } bsdf_ops;
 struct bsdf {
   object base;

@@ -161,8 +161,51 @@ static double rough_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
   return mf_pdf(&d, wi, h) / (4.0 * wo_h);
 }
 
+/* Batched eval and pdf (bsdf_ops.eval_pdf_batch): D, the G1 products, the
+ * visible G1 and the pdf of up to 64 lanes at a time in single precision
+ * (simd/microfacet_lanes.h mf_eval_lanes says why that is safe), then
+ * Fresnel and the specular factor per lane in double, as rough_eval(). */
+static void rough_eval_pdf_batch(const bsdf *b, int n, const surface_interaction *const *si, const vec3 *wo,
+                                 color *f, double *pdf) {
+  const roughconductor_bsdf *r = (const roughconductor_bsdf *)b;
+  enum {
+    C = 64
+  };
+  rsw_isa isa = rsw_isa_get();
+  for (int i0 = 0; i0 < n; i0 += C) {
+    int m = n - i0 < C ? n - i0 : C;
+    float in[8][C], out[3][C];
+    int lane[C], k = 0;
+    for (int j = 0; j < m; j++) {
+      const surface_interaction *s = si[i0 + j];
+      vec3 o = wo[i0 + j];
+      f[i0 + j] = col1(0.0);
+      pdf[i0 + j] = 0.0;
+      if (!(s->wi.z > 0.0) || !(o.z > 0.0)) continue;
+      mf_distr d = distr_at(r, s);
+      in[0][k] = (float)s->wi.x, in[1][k] = (float)s->wi.y, in[2][k] = (float)s->wi.z;
+      in[3][k] = (float)o.x, in[4][k] = (float)o.y, in[5][k] = (float)o.z;
+      in[6][k] = (float)d.alpha_u, in[7][k] = (float)d.alpha_v;
+      lane[k++] = i0 + j;
+    }
+    const float *ip[8] = {in[0], in[1], in[2], in[3], in[4], in[5], in[6], in[7]};
+    float *op[3] = {out[0], out[1], out[2]};
+    mf_eval_batch(isa, r->type == MF_GGX, r->sample_visible, k, ip, op);
+    for (int j = 0; j < k; j++) {
+      int i = lane[j];
+      pdf[i] = out[1][j];
+      if (!(out[0][j] > 0.0f)) continue;
+      color eta, kk;
+      conductor_ior_eval(&r->ior, si[i], &eta, &kk);
+      color fr = fresnel_conductor_col(out[2][j], eta, kk);
+      f[i] = col_mul(col_scale(fr, out[0][j]), bsdf_factor(r->specular_reflectance, si[i]));
+    }
+  }
+}
+
 static const bsdf_ops rough_ops = {
-    .sample = rough_sample, .eval = rough_eval, .pdf = rough_pdf, .sample_batch = rough_sample_batch};
+    .sample = rough_sample, .eval = rough_eval, .pdf = rough_pdf, .sample_batch = rough_sample_batch,
+    .eval_pdf_batch = rough_eval_pdf_batch};
 
 static void rough_destroy(object *o) {
   free(o);

@@ -4,6 +4,7 @@
  * simd/simd.c. */
 #include <math.h>
 
+#include "../core/vec.h"
 #include "simd.h"
 
 #if RSW_SIMD_X86
@@ -14,6 +15,7 @@
 #define MF_LANES_ATTR __attribute__((target("avx2,fma")))
 #define VSQRT(x) ((vf)_mm256_sqrt_ps((x)))
 #define MF_LANES_FN mf_sample_visible_avx2
+#define MF_EVAL_FN mf_eval_avx2
 #include "lanes.h"
 #include "microfacet_lanes.h"
 

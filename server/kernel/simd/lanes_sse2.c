@@ -4,6 +4,7 @@
  * simd/simd.c. */
 #include <math.h>
 
+#include "../core/vec.h"
 #include "simd.h"
 
 #if RSW_SIMD_X86
@@ -14,6 +15,7 @@
 #define MF_LANES_ATTR __attribute__((target("sse2")))
 #define VSQRT(x) ((vf)_mm_sqrt_ps((x)))
 #define MF_LANES_FN mf_sample_visible_sse2
+#define MF_EVAL_FN mf_eval_sse2
 #include "lanes.h"
 #include "microfacet_lanes.h"
 

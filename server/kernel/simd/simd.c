@@ -29,3 +29,11 @@ void hdistant_rays_batch(rsw_isa isa, int n, const double (*m)[4], const double 
   default: hdistant_rays_sse2(n, m, fu, ap, center, radius, offset, out); return;
   }
 }
+
+void mf_eval_batch(rsw_isa isa, int ggx, int visible, int n, const float *const *in, float *const *out) {
+  switch (isa) {
+  case RSW_ISA_AVX512: mf_eval_avx512(ggx, visible, n, in, out); return;
+  case RSW_ISA_AVX2: mf_eval_avx2(ggx, visible, n, in, out); return;
+  default: mf_eval_sse2(ggx, visible, n, in, out); return;
+  }
+}

@@ -21,6 +21,12 @@ void mf_sample_visible_batch(rsw_isa isa, int ggx, int n, const float *wx, const
                              const float *au, const float *av, const float *u0, const float *u1, float *mx,
                              float *my, float *mz);
 
+/* roughconductor eval and pdf without Fresnel for n lanes (simd/
+ * microfacet_lanes.h mf_eval_lanes): in[0..7] wi xyz, wo xyz, alpha_u,
+ * alpha_v (n each; wi.z > 0, wo.z > 0); out[0..2] value D G / (4 wi.z),
+ * pdf, wi.h. Single precision. */
+void mf_eval_batch(rsw_isa isa, int ggx, int visible, int n, const float *const *in, float *const *out);
+
 /* hdistant camera rays without a target (simd/camera_lanes.h, double
  * lanes): m the rows of to_world; fu, ap 2 per lane (x, y); out 6 per
  * lane (origin, direction). Bitwise the scalar rays. */
@@ -38,6 +44,10 @@ CAM_SIMD_DECL(avx512);
   void mf_sample_visible_##s(int ggx, int n, const float *wx, const float *wy, const float *wz,            \
                              const float *au, const float *av, const float *u0, const float *u1, float *mx, \
                              float *my, float *mz)
+#define MF_EVAL_DECL(s) void mf_eval_##s(int ggx, int visible, int n, const float *const *in, float *const *out)
+MF_EVAL_DECL(sse2);
+MF_EVAL_DECL(avx2);
+MF_EVAL_DECL(avx512);
 MF_SIMD_DECL(sse2);
 MF_SIMD_DECL(avx2);
 MF_SIMD_DECL(avx512);
