@@ -10,7 +10,8 @@
  *  - lane independence: a lane's sample does not depend on the batch it is
  *    in (a batch of 1000 equals 1000 batches of one, bitwise), which is
  *    what keeps 1 and N threads bitwise identical at a given ISA;
- *  - weight = eval / pdf for the batched samples (1e-9 relative);
+ *  - weight = eval / pdf for the batched samples (1e-4 relative: pdf and
+ *    weight are single precision, simd/microfacet_lanes.h);
  *  - roughconductor's batched eval/pdf (single precision up to Fresnel)
  *    equals eval() and pdf() within 1e-4 relative (+1e-12 absolute) over
  *    random directions, both distributions, visible or not, isotropic
@@ -133,7 +134,7 @@ static void test_lane_independence_and_weights(void) {
         if (!(bs[i].pdf > 0)) continue;
         ok++;
         double ref = r.b->ops->eval(r.b, &si[i], bs[i].wo).c[0] / r.b->ops->pdf(r.b, &si[i], bs[i].wo);
-        if (!(fabs(w[i].c[0] - ref) <= 1e-9 * fabs(ref))) bad_weight++;
+        if (!(fabs(w[i].c[0] - ref) <= 1e-4 * fabs(ref))) bad_weight++;
       }
       CHECK(differ == 0, "%s %s: %d of %d lanes differ between a batch of %d and batches of 1",
             rsw_isa_name((rsw_isa)isa), mf_type_name(types[t]), differ, N, N);

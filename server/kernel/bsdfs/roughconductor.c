@@ -85,13 +85,13 @@ static color rough_finish(const roughconductor_bsdf *r, const mf_distr *d, const
   return col_mul(col_scale(f, weight), bsdf_factor(r->specular_reflectance, si));
 }
 
-/* Batched sampling (bsdf_ops.sample_batch): the visible normals of up to
- * 64 lanes at a time are placed by the per-ISA single-precision kernels
- * (simd/microfacet_lanes.h: for Beckmann the Newton inversion runs across
- * the lanes instead of one chain per sample); pdf and weight are then
- * evaluated per lane in double from the m drawn, as rough_sample() does,
- * so weights stay eval / pdf exactly. D cos sampling (sample_visible
- * false) takes the scalar path per lane. */
+/* Batched sampling (bsdf_ops.sample_batch): the visible-normal samples of
+ * up to 64 lanes at a time, with their pdf and weight (without Fresnel),
+ * by the per-ISA single-precision kernels (simd/microfacet_lanes.h: for
+ * Beckmann the Newton inversion runs across the lanes instead of one chain
+ * per sample; the tail says why float is safe there); then Fresnel at wi.m
+ * and the specular factor per lane in double, and wo renormalised in
+ * double. D cos sampling (sample_visible false) takes the scalar path. */
 static void rough_sample_batch(const bsdf *b, int n, const surface_interaction *const *si, const double *u1,
                                const vec2 *u2, bsdf_sample *bs, color *weight) {
   const roughconductor_bsdf *r = (const roughconductor_bsdf *)b;
@@ -105,8 +105,7 @@ static void rough_sample_batch(const bsdf *b, int n, const surface_interaction *
   rsw_isa isa = rsw_isa_get();
   for (int i0 = 0; i0 < n; i0 += C) {
     int m = n - i0 < C ? n - i0 : C;
-    float wx[C], wy[C], wz[C], au[C], av[C], ua[C], ub[C], mx[C], my[C], mz[C];
-    mf_distr d[C];
+    float in[7][C], out[6][C];
     int lane[C], k = 0;
     for (int j = 0; j < m; j++) {
       const surface_interaction *s = si[i0 + j];
@@ -114,23 +113,29 @@ static void rough_sample_batch(const bsdf *b, int n, const surface_interaction *
         weight[i0 + j] = bsdf_fail(&bs[i0 + j]);
         continue;
       }
-      d[k] = distr_at(r, s);
-      wx[k] = (float)s->wi.x;
-      wy[k] = (float)s->wi.y;
-      wz[k] = (float)s->wi.z;
-      au[k] = (float)d[k].alpha_u;
-      av[k] = (float)d[k].alpha_v;
-      ua[k] = (float)u2[i0 + j].x;
-      ub[k] = (float)u2[i0 + j].y;
+      mf_distr d = distr_at(r, s);
+      in[0][k] = (float)s->wi.x, in[1][k] = (float)s->wi.y, in[2][k] = (float)s->wi.z;
+      in[3][k] = (float)d.alpha_u, in[4][k] = (float)d.alpha_v;
+      in[5][k] = (float)u2[i0 + j].x, in[6][k] = (float)u2[i0 + j].y;
       lane[k++] = i0 + j;
     }
-    mf_sample_visible_batch(isa, r->type == MF_GGX, k, wx, wy, wz, au, av, ua, ub, mx, my, mz);
+    const float *ip[7] = {in[0], in[1], in[2], in[3], in[4], in[5], in[6]};
+    float *op[6] = {out[0], out[1], out[2], out[3], out[4], out[5]};
+    mf_sample_visible_batch(isa, r->type == MF_GGX, k, ip, op);
     for (int j = 0; j < k; j++) {
       int i = lane[j];
-      /* m renormalised in double: the pdf is the density of this m. */
-      vec3 mm = v3_norm(v3(mx[j], my[j], mz[j]));
-      double g1vis, pdf_m = mf_pdf_g1(&d[j], si[i]->wi, mm, &g1vis);
-      weight[i] = rough_finish(r, &d[j], si[i], mm, pdf_m, g1vis, &bs[i]);
+      if (!(out[3][j] > 0.0f)) {
+        weight[i] = bsdf_fail(&bs[i]);
+        continue;
+      }
+      bs[i].wo = v3_norm(v3(out[0][j], out[1][j], out[2][j]));
+      bs[i].pdf = out[3][j];
+      bs[i].eta = 1.0;
+      bs[i].sampled_type = BSDF_GLOSSY_REFLECTION;
+      color eta, kk;
+      conductor_ior_eval(&r->ior, si[i], &eta, &kk);
+      color f = fresnel_conductor_col(out[5][j], eta, kk);
+      weight[i] = col_mul(col_scale(f, out[4][j]), bsdf_factor(r->specular_reflectance, si[i]));
     }
   }
 }

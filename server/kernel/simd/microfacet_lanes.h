@@ -13,6 +13,65 @@
  * lanes at once; a lane whose residual reached float resolution keeps its
  * x (masked), and the loop ends early only when every lane has. */
 
+/* ---- evaluation: roughconductor's eval() and pdf() without Fresnel ------
+ *
+ * Per lane (wi.z > 0 and wo.z > 0, the caller's test): the half vector
+ * h, D(h), Smith's G1 products (Mitsuba's fit for Beckmann, as
+ * mf_smith_g1) and, for the pdf, the exact visible G1 (mf_visible_g1) or
+ * D cos; out: value = D G / (4 wi.z), pdf = pdf_m(h) / (4 wo.h), and
+ * wi.h (for Fresnel, evaluated by the caller in double). Single precision
+ * here: value feeds the estimator with a relative rounding of ~1e-6 per
+ * sample (not a systematic bias beyond that order), pdf only the MIS
+ * weights; both far below any render's noise. verf and vexp as above. */
+
+SIMD_FN vf mf_g1_lanes(int ggx, vf vx, vf vy, vf vz, vf hx, vf hy, vf hz, vf au, vf av) {
+  vi back = (vx * hx + vy * hy + vz * hz) * vz <= 0.0f;
+  vf ax = au * vx, ay = av * vy;
+  vf xy2 = ax * ax + ay * ay;
+  vf t = xy2 / (vz * vz);
+  vf g;
+  if (ggx) {
+    g = 2.0f / (1.0f + VSQRT(1.0f + t));
+  } else {
+    vf a = 1.0f / VSQRT(t), a2 = a * a;
+    vf fit = (3.535f * a + 2.181f * a2) / (1.0f + 2.276f * a + 2.577f * a2);
+    g = vsel(a >= 1.6f, vset(1.0f), fit);
+  }
+  g = vsel(xy2 == 0.0f, vset(1.0f), g);
+  return vsel(back, vset(0.0f), g);
+}
+
+SIMD_FN vf mf_visible_g1_lanes(int ggx, vf vx, vf vy, vf vz, vf hx, vf hy, vf hz, vf au, vf av) {
+  if (ggx) return mf_g1_lanes(1, vx, vy, vz, hx, hy, hz, au, av);
+  const float inv_sqrt_pi = 0.564189584f;
+  vi back = (vx * hx + vy * hy + vz * hz) * vz <= 0.0f;
+  vf ax = au * vx, ay = av * vy;
+  vf xy2 = ax * ax + ay * ay;
+  vf a = vabs(vz) / VSQRT(vsel(xy2 == 0.0f, vset(1.0f), xy2));
+  vf ea = vexp(-vmin(a * a, vset(87.0f)));
+  vf g = 2.0f / (1.0f + verf(a) + inv_sqrt_pi * ea / a);
+  g = vsel(xy2 == 0.0f, vset(1.0f), g);
+  return vsel(back, vset(0.0f), g);
+}
+
+/* D(h) (mf_D) for unit h: 0 where D cos <= 1e-20 or h.z <= 0; for
+ * Beckmann, exp of less than -87 is 0 (the scalar exp's underflow), which
+ * also keeps a grazing h's tiny c2^2 out of the division. */
+SIMD_FN vf mf_D_lanes(int ggx, vf hx, vf hy, vf hz, vf au, vf av) {
+  vf c = hz, c2 = c * c;
+  vf xu = hx / au, yv = hy / av;
+  vf D;
+  if (ggx) {
+    vf t = xu * xu + yv * yv + c2;
+    D = 1.0f / ((float)RSW_PI * au * av * t * t);
+  } else {
+    vf arg = (xu * xu + yv * yv) / c2;
+    vf e = vexp(-vmin(arg, vset(87.0f)));
+    D = vsel(arg < 87.0f, e / ((float)RSW_PI * au * av * c2 * c2), vset(0.0f));
+  }
+  return vsel((D * c > 1e-20f) & (c > 0.0f), D, vset(0.0f));
+}
+
 SIMD_FN void mf_beckmann_lanes(const float *wx, const float *wy, const float *wz, const float *au,
                                const float *av, const float *u0, const float *u1, float *mx, float *my,
                                float *mz) {
@@ -115,69 +174,62 @@ SIMD_FN void mf_ggx_lanes(const float *wx, const float *wy, const float *wz, con
   __builtin_memcpy(mz, &gz, sizeof gz);
 }
 
+/* The rest of a visible-normal sample from m (unit): wo = 2 (wi.m) m - wi,
+ * pdf = D(m) G1vis(wi, m) |wi.m| / wi.z / (4 wo.m) and weight = eval / pdf
+ * = G1(wo, m) G1(wi, m) / G1vis(wi, m) without Fresnel, all in single
+ * precision: pdf and weight are then consistent with each other to
+ * float rounding (~1e-6 relative), which is what an unbiased estimator
+ * needs; pdf() in double is the density that the chi-square tests check
+ * the m drawn against. pdf = 0 marks a failed sample. */
+SIMD_FN void mf_sample_tail_lanes(int ggx, const float *in, float *out) {
+  vf wx, wy, wz, au, av, mx, my, mz;
+  __builtin_memcpy(&wx, in + 0 * W, sizeof wx);
+  __builtin_memcpy(&wy, in + 1 * W, sizeof wy);
+  __builtin_memcpy(&wz, in + 2 * W, sizeof wz);
+  __builtin_memcpy(&au, in + 3 * W, sizeof au);
+  __builtin_memcpy(&av, in + 4 * W, sizeof av);
+  __builtin_memcpy(&mx, out + 0 * W, sizeof mx);
+  __builtin_memcpy(&my, out + 1 * W, sizeof my);
+  __builtin_memcpy(&mz, out + 2 * W, sizeof mz);
+  vf wi_m = wx * mx + wy * my + wz * mz;
+  vf ox = 2.0f * wi_m * mx - wx, oy = 2.0f * wi_m * my - wy, oz = 2.0f * wi_m * mz - wz;
+  vf wo_m = ox * mx + oy * my + oz * mz;
+  vf D = mf_D_lanes(ggx, mx, my, mz, au, av);
+  vf g1vis = mf_visible_g1_lanes(ggx, wx, wy, wz, mx, my, mz, au, av);
+  vf pdf_m = D * g1vis * vabs(wi_m) / wz;
+  vi ok = (pdf_m > 0.0f) & (oz > 0.0f) & (wo_m > 0.0f);
+  vf pdf = vsel(ok, pdf_m / (4.0f * vsel(ok, wo_m, vset(1.0f))), vset(0.0f));
+  vf g_o = mf_g1_lanes(ggx, ox, oy, oz, mx, my, mz, au, av);
+  vf g_i = mf_g1_lanes(ggx, wx, wy, wz, mx, my, mz, au, av);
+  vf weight = vsel(ok, g_o * (g_i / vsel(ok, g1vis, vset(1.0f))), vset(0.0f));
+  __builtin_memcpy(out + 0 * W, &ox, sizeof ox);
+  __builtin_memcpy(out + 1 * W, &oy, sizeof oy);
+  __builtin_memcpy(out + 2 * W, &oz, sizeof oz);
+  __builtin_memcpy(out + 3 * W, &pdf, sizeof pdf);
+  __builtin_memcpy(out + 4 * W, &weight, sizeof weight);
+  __builtin_memcpy(out + 5 * W, &wi_m, sizeof wi_m);
+}
+
 /* n lanes (any n >= 0), processed W at a time (a partial tail is padded
- * with normal incidence, u = 1/2, alpha = 1; its results are dropped). */
-MF_LANES_ATTR void MF_LANES_FN(int ggx, int n, const float *wx, const float *wy, const float *wz,
-                              const float *au, const float *av, const float *u0, const float *u1, float *mx,
-                              float *my, float *mz) {
+ * with normal incidence, u = 1/2, alpha = 1; its results are dropped).
+ * in[0..6]: wi xyz, alpha_u, alpha_v, u.x, u.y; out[0..5]: wo xyz, pdf,
+ * weight without Fresnel, wi.m. */
+MF_LANES_ATTR void MF_LANES_FN(int ggx, int n, const float *const *in, float *const *out) {
   for (int k0 = 0; k0 < n; k0 += W) {
     int m = n - k0 < W ? n - k0 : W;
-    float in[7][W], out[3][W];
-    const float *src[7] = {wx, wy, wz, au, av, u0, u1};
+    float a[7 * W], b[6 * W];
     const float pad[7] = {0.0f, 0.0f, 1.0f, 1.0f, 1.0f, 0.5f, 0.5f};
-    for (int a = 0; a < 7; a++)
-      for (int k = 0; k < W; k++) in[a][k] = k < m ? src[a][k0 + k] : pad[a];
+    for (int j = 0; j < 7; j++)
+      for (int k = 0; k < W; k++) a[j * W + k] = k < m ? in[j][k0 + k] : pad[j];
+    const float *wx = a, *wy = a + W, *wz = a + 2 * W, *au = a + 3 * W, *av = a + 4 * W;
     if (ggx)
-      mf_ggx_lanes(in[0], in[1], in[2], in[3], in[4], in[5], in[6], out[0], out[1], out[2]);
+      mf_ggx_lanes(wx, wy, wz, au, av, a + 5 * W, a + 6 * W, b, b + W, b + 2 * W);
     else
-      mf_beckmann_lanes(in[0], in[1], in[2], in[3], in[4], in[5], in[6], out[0], out[1], out[2]);
-    for (int k = 0; k < m; k++) {
-      mx[k0 + k] = out[0][k];
-      my[k0 + k] = out[1][k];
-      mz[k0 + k] = out[2][k];
-    }
+      mf_beckmann_lanes(wx, wy, wz, au, av, a + 5 * W, a + 6 * W, b, b + W, b + 2 * W);
+    mf_sample_tail_lanes(ggx, a, b);
+    for (int j = 0; j < 6; j++)
+      for (int k = 0; k < m; k++) out[j][k0 + k] = b[j * W + k];
   }
-}
-
-/* ---- evaluation: roughconductor's eval() and pdf() without Fresnel ------
- *
- * Per lane (wi.z > 0 and wo.z > 0, the caller's test): the half vector
- * h, D(h), Smith's G1 products (Mitsuba's fit for Beckmann, as
- * mf_smith_g1) and, for the pdf, the exact visible G1 (mf_visible_g1) or
- * D cos; out: value = D G / (4 wi.z), pdf = pdf_m(h) / (4 wo.h), and
- * wi.h (for Fresnel, evaluated by the caller in double). Single precision
- * here: value feeds the estimator with a relative rounding of ~1e-6 per
- * sample (not a systematic bias beyond that order), pdf only the MIS
- * weights; both far below any render's noise. verf and vexp as above. */
-
-SIMD_FN vf mf_g1_lanes(int ggx, vf vx, vf vy, vf vz, vf hx, vf hy, vf hz, vf au, vf av) {
-  vi back = (vx * hx + vy * hy + vz * hz) * vz <= 0.0f;
-  vf ax = au * vx, ay = av * vy;
-  vf xy2 = ax * ax + ay * ay;
-  vf t = xy2 / (vz * vz);
-  vf g;
-  if (ggx) {
-    g = 2.0f / (1.0f + VSQRT(1.0f + t));
-  } else {
-    vf a = 1.0f / VSQRT(t), a2 = a * a;
-    vf fit = (3.535f * a + 2.181f * a2) / (1.0f + 2.276f * a + 2.577f * a2);
-    g = vsel(a >= 1.6f, vset(1.0f), fit);
-  }
-  g = vsel(xy2 == 0.0f, vset(1.0f), g);
-  return vsel(back, vset(0.0f), g);
-}
-
-SIMD_FN vf mf_visible_g1_lanes(int ggx, vf vx, vf vy, vf vz, vf hx, vf hy, vf hz, vf au, vf av) {
-  if (ggx) return mf_g1_lanes(1, vx, vy, vz, hx, hy, hz, au, av);
-  const float inv_sqrt_pi = 0.564189584f;
-  vi back = (vx * hx + vy * hy + vz * hz) * vz <= 0.0f;
-  vf ax = au * vx, ay = av * vy;
-  vf xy2 = ax * ax + ay * ay;
-  vf a = vabs(vz) / VSQRT(vsel(xy2 == 0.0f, vset(1.0f), xy2));
-  vf ea = vexp(-vmin(a * a, vset(87.0f)));
-  vf g = 2.0f / (1.0f + verf(a) + inv_sqrt_pi * ea / a);
-  g = vsel(xy2 == 0.0f, vset(1.0f), g);
-  return vsel(back, vset(0.0f), g);
 }
 
 SIMD_FN void mf_eval_lanes(int ggx, int visible, const float *in, float *out) {
@@ -196,21 +248,7 @@ SIMD_FN void mf_eval_lanes(int ggx, int visible, const float *in, float *out) {
   hx *= ih;
   hy *= ih;
   hz *= ih;
-  /* D(h) */
-  vf c = hz, c2 = c * c;
-  vf xu = hx / au, yv = hy / av;
-  vf D;
-  if (ggx) {
-    vf t = xu * xu + yv * yv + c2;
-    D = 1.0f / ((float)RSW_PI * au * av * t * t);
-  } else {
-    /* exp of less than -87 is 0 here (the scalar exp's underflow): also
-     * keeps a grazing h's tiny c2^2 out of the division. */
-    vf arg = (xu * xu + yv * yv) / c2;
-    vf e = vexp(-vmin(arg, vset(87.0f)));
-    D = vsel(arg < 87.0f, e / ((float)RSW_PI * au * av * c2 * c2), vset(0.0f));
-  }
-  D = vsel((D * c > 1e-20f) & (c > 0.0f), D, vset(0.0f));
+  vf D = mf_D_lanes(ggx, hx, hy, hz, au, av);
   vf G = mf_g1_lanes(ggx, wx, wy, wz, hx, hy, hz, au, av) * mf_g1_lanes(ggx, ox, oy, oz, hx, hy, hz, au, av);
   vf value = D * G / (4.0f * wz);
   vf wi_h = wx * hx + wy * hy + wz * hz, wo_h = ox * hx + oy * hy + oz * hz;

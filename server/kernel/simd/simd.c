@@ -1,20 +1,12 @@
 /* Run-time dispatch of the per-ISA batched kernels (simd.h). */
 #include "simd.h"
 
-void mf_sample_visible_batch(rsw_isa isa, int ggx, int n, const float *wx, const float *wy, const float *wz,
-                             const float *au, const float *av, const float *u0, const float *u1, float *mx,
-                             float *my, float *mz) {
+void mf_sample_visible_batch(rsw_isa isa, int ggx, int n, const float *const *in, float *const *out) {
 #if RSW_SIMD_X86
   switch (isa) {
-  case RSW_ISA_AVX512:
-    mf_sample_visible_avx512(ggx, n, wx, wy, wz, au, av, u0, u1, mx, my, mz);
-    return;
-  case RSW_ISA_AVX2:
-    mf_sample_visible_avx2(ggx, n, wx, wy, wz, au, av, u0, u1, mx, my, mz);
-    return;
-  default:
-    mf_sample_visible_sse2(ggx, n, wx, wy, wz, au, av, u0, u1, mx, my, mz);
-    return;
+  case RSW_ISA_AVX512: mf_sample_visible_avx512(ggx, n, in, out); return;
+  case RSW_ISA_AVX2: mf_sample_visible_avx2(ggx, n, in, out); return;
+  default: mf_sample_visible_sse2(ggx, n, in, out); return;
   }
 #else
 #error "the batched kernels need an x86 target (sse2, avx2, avx512)"

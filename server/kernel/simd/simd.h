@@ -13,13 +13,12 @@
 #define RSW_SIMD_X86 0
 #endif
 
-/* Visible microfacet normals m for n lanes (simd/microfacet_lanes.h):
- * ggx != 0 for GGX, else Beckmann; wi (unit, local, wi.z > 0), alphas and
- * u in [0,1)^2 per lane; m written unit-length, in float. At `isa`
- * (which must be supported; rsw_isa_get() for the render's). */
-void mf_sample_visible_batch(rsw_isa isa, int ggx, int n, const float *wx, const float *wy, const float *wz,
-                             const float *au, const float *av, const float *u0, const float *u1, float *mx,
-                             float *my, float *mz);
+/* Visible-normal samples of n lanes (simd/microfacet_lanes.h): ggx != 0
+ * for GGX, else Beckmann; in[0..6]: wi xyz (unit, local, wi.z > 0),
+ * alpha_u, alpha_v, u.x, u.y (n each); out[0..5]: wo xyz, pdf (0: failed),
+ * weight without Fresnel, wi.m. Single precision. At `isa` (supported;
+ * rsw_isa_get() for the render's). */
+void mf_sample_visible_batch(rsw_isa isa, int ggx, int n, const float *const *in, float *const *out);
 
 /* roughconductor eval and pdf without Fresnel for n lanes (simd/
  * microfacet_lanes.h mf_eval_lanes): in[0..7] wi xyz, wo xyz, alpha_u,
@@ -40,17 +39,14 @@ void hdistant_rays_batch(rsw_isa isa, int n, const double (*m)[4], const double 
 CAM_SIMD_DECL(sse2);
 CAM_SIMD_DECL(avx2);
 CAM_SIMD_DECL(avx512);
-#define MF_SIMD_DECL(s)                                                                                     \
-  void mf_sample_visible_##s(int ggx, int n, const float *wx, const float *wy, const float *wz,            \
-                             const float *au, const float *av, const float *u0, const float *u1, float *mx, \
-                             float *my, float *mz)
+#define MF_SIMD_DECL(s) void mf_sample_visible_##s(int ggx, int n, const float *const *in, float *const *out)
+MF_SIMD_DECL(sse2);
+MF_SIMD_DECL(avx2);
+MF_SIMD_DECL(avx512);
 #define MF_EVAL_DECL(s) void mf_eval_##s(int ggx, int visible, int n, const float *const *in, float *const *out)
 MF_EVAL_DECL(sse2);
 MF_EVAL_DECL(avx2);
 MF_EVAL_DECL(avx512);
-MF_SIMD_DECL(sse2);
-MF_SIMD_DECL(avx2);
-MF_SIMD_DECL(avx512);
 #endif
 
 #endif
