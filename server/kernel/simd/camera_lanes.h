@@ -103,3 +103,25 @@ CAM_LANES_ATTR void CAM_LANES_FN(int n, const double (*m)[4], const double *fu, 
     }
   }
 }
+
+/* Cosine-weighted hemisphere directions for n lanes (core/warp.c
+ * warp_square_to_cosine_hemisphere, same operations: bitwise the scalar
+ * directions): u 2 per lane (x, y), out 3 per lane. */
+CAM_LANES_ATTR void COSINE_LANES_FN(int n, const double *u, double *out) {
+  for (int k0 = 0; k0 < n; k0 += WD) {
+    int cnt = n - k0 < WD ? n - k0 : WD;
+    vdn ux = {0}, uy = {0};
+    for (int k = 0; k < cnt; k++) {
+      ux[k] = u[2 * (k0 + k)];
+      uy[k] = u[2 * (k0 + k) + 1];
+    }
+    vdn px, py;
+    d_concentric(ux, uy, &px, &py);
+    vdn r = 1.0 - (px * px + py * py);
+    vdn z = VSQRT_D(dsel(r > 0.0, r, (vdn){0}));
+    for (int k = 0; k < cnt; k++) {
+      double *o = &out[3 * (k0 + k)];
+      o[0] = px[k], o[1] = py[k], o[2] = z[k];
+    }
+  }
+}

@@ -22,5 +22,6 @@
 #define VSQRT_D(x) ((vdn)_mm256_sqrt_pd((x)))
 #define CAM_LANES_ATTR __attribute__((target("avx2,fma")))
 #define CAM_LANES_FN hdistant_rays_avx2
+#define COSINE_LANES_FN cosine_hemisphere_avx2
 #include "camera_lanes.h"
 #endif

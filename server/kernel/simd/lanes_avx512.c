@@ -22,5 +22,6 @@
 #define VSQRT_D(x) ((vdn)_mm512_sqrt_pd((x)))
 #define CAM_LANES_ATTR __attribute__((target("avx512f,avx512vl,avx512dq")))
 #define CAM_LANES_FN hdistant_rays_avx512
+#define COSINE_LANES_FN cosine_hemisphere_avx512
 #include "camera_lanes.h"
 #endif

@@ -22,5 +22,6 @@
 #define VSQRT_D(x) ((vdn)_mm_sqrt_pd((x)))
 #define CAM_LANES_ATTR __attribute__((target("sse2")))
 #define CAM_LANES_FN hdistant_rays_sse2
+#define COSINE_LANES_FN cosine_hemisphere_sse2
 #include "camera_lanes.h"
 #endif

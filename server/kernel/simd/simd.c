@@ -29,3 +29,11 @@ void mf_eval_batch(rsw_isa isa, int ggx, int visible, int n, const float *const 
   default: mf_eval_sse2(ggx, visible, n, in, out); return;
   }
 }
+
+void cosine_hemisphere_batch(rsw_isa isa, int n, const double *u, double *out) {
+  switch (isa) {
+  case RSW_ISA_AVX512: cosine_hemisphere_avx512(n, u, out); return;
+  case RSW_ISA_AVX2: cosine_hemisphere_avx2(n, u, out); return;
+  default: cosine_hemisphere_sse2(n, u, out); return;
+  }
+}

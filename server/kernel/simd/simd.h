@@ -32,7 +32,16 @@ void mf_eval_batch(rsw_isa isa, int ggx, int visible, int n, const float *const 
 void hdistant_rays_batch(rsw_isa isa, int n, const double (*m)[4], const double *fu, const double *ap,
                          const double *center, double radius, double offset, double *out);
 
+/* Cosine-weighted hemisphere directions (simd/camera_lanes.h, double
+ * lanes): u 2 per lane, out 3 per lane; bitwise
+ * warp_square_to_cosine_hemisphere(). */
+void cosine_hemisphere_batch(rsw_isa isa, int n, const double *u, double *out);
+
 #if RSW_SIMD_X86
+#define COS_SIMD_DECL(s) void cosine_hemisphere_##s(int n, const double *u, double *out)
+COS_SIMD_DECL(sse2);
+COS_SIMD_DECL(avx2);
+COS_SIMD_DECL(avx512);
 #define CAM_SIMD_DECL(s)                                                                                    \
   void hdistant_rays_##s(int n, const double (*m)[4], const double *fu, const double *ap,                  \
                          const double *center, double radius, double offset, double *out)
