@@ -443,7 +443,8 @@ static int cmd_version(int argc, char **argv) {
 static const command commands[] = {
     {"render",
      "render SCENE [-D name=value]... [--set KEY=VALUE]... [--sensor ID] [--spp N] [--seed S] "
-     "[--wavelength NM] [--threads N] [--isa auto|avx512|avx2|sse2] [--variant mono|rgb] [--plugin-dir DIR] [--quantities LIST] "
+     "[--wavelength NM] [--threads N] [--isa auto|avx512|avx2|sse2] [--variant mono|rgb] [--plugin-dir DIR] "
+     "[--quantities LIST] "
      "[--variance] [--exposure EV] [--colormap MAP] [--stats] -o OUT.exr|OUT.png",
      "load a scene, apply parameter updates, render one sensor to OpenEXR or a PNG quick-look",
      "  SCENE               a .xml (Mitsuba XML) or .json scene file\n"
@@ -506,7 +507,8 @@ static const command commands[] = {
      "                      (default 10); slower ones are closed\n"
      "  --max-film-bytes B  film memory one render may take (default 1G); larger films get 422\n"
      "  --isa ISA           auto (default: the widest the CPU has), avx512, avx2 or sse2: the instruction\n"
-     "                      set of the vectorised shading (GET /v1 says which); refused when the CPU lacks it\n"
+     "                      set of the vectorised shading (GET /v1 says which); refused when the CPU lacks "
+     "it\n"
      "Stops on SIGTERM or SIGINT.\n",
      cmd_serve},
     {"routes", "routes", "print the routes the daemon serves, one \"METHOD PATH\" per line", "", cmd_routes},

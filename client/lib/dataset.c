@@ -232,7 +232,8 @@ rsw_status rsw_dataset_add_film(rsw_dataset *d, const char *context, const char 
     d->films = nf, d->capf = cap;
   }
   int all = rsw_film_channels(film);
-  ds_film f = {.context = ci, .width = rsw_film_width(film), .height = rsw_film_height(film), .channels = all};
+  ds_film f = {
+      .context = ci, .width = rsw_film_width(film), .height = rsw_film_height(film), .channels = all};
   /* The radiance channels come first; every channel after them is
    * "<plane>.<channel>", the planes one after another, each with as many
    * channels as the radiance. */
@@ -264,7 +265,8 @@ rsw_status rsw_dataset_add_film(rsw_dataset *d, const char *context, const char 
         s = ds_fail(d, RSW_ERR_INVALID, "%s: channel '%s' does not follow the plane layout", what, nm);
     }
     if (s) break;
-    if (!(f.plane_names[k] = strndup(first, len)) || !(f.plane_data[k] = malloc((ns ? ns : 1) * sizeof(float)))) {
+    if (!(f.plane_names[k] = strndup(first, len)) ||
+        !(f.plane_data[k] = malloc((ns ? ns : 1) * sizeof(float)))) {
       free(f.plane_names[k]);
       f.plane_names[k] = NULL;
       s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");

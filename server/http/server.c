@@ -752,8 +752,9 @@ static bool first_checks(struct MHD_Connection *c, conn *cn, const char *method,
   MHD_get_connection_values(c, MHD_HEADER_KIND, cl_visit, &cs);
   if (cs.differ || (cs.n > 0 && header(c, MHD_HTTP_HEADER_TRANSFER_ENCODING))) {
     snprintf(detail, sizeof detail,
-             cs.differ ? "Content-Length is given %u times with different values: the body's length is ambiguous"
-                       : "Content-Length and Transfer-Encoding are both given (%u): the body's length is ambiguous",
+             cs.differ
+                 ? "Content-Length is given %u times with different values: the body's length is ambiguous"
+                 : "Content-Length and Transfer-Encoding are both given (%u): the body's length is ambiguous",
              cs.n);
     cn->close_after = true;
     *ret = send_problem(c, cn, 400, NULL, detail, NULL, false);

@@ -165,8 +165,8 @@ typedef struct bsdf_ops {
    * single precision (the plugin says where), so equal to eval() and pdf()
    * up to rounding (~1e-6 relative), lane by lane independent of n. NULL:
    * eval() and pdf() per lane. */
-  void (*eval_pdf_batch)(const bsdf *b, int n, const surface_interaction *const *si, const vec3 *wo,
-                         color *f, double *pdf);
+  void (*eval_pdf_batch)(const bsdf *b, int n, const surface_interaction *const *si, const vec3 *wo, color *f,
+                         double *pdf);
 } bsdf_ops;
 struct bsdf {
   object base;

@@ -107,8 +107,10 @@ rsw_status service_job_dataset(service *svc, const char *id, bool partial, void 
       bool planes_ok = true;
       for (int k = 0; k < src->n_planes; k++) {
         d->film.img.planes[k].data = src->planes[k].data ? malloc(plane_bytes) : NULL;
-        if (src->planes[k].data && !d->film.img.planes[k].data) planes_ok = false;
-        else if (src->planes[k].data) memcpy(d->film.img.planes[k].data, src->planes[k].data, plane_bytes);
+        if (src->planes[k].data && !d->film.img.planes[k].data)
+          planes_ok = false;
+        else if (src->planes[k].data)
+          memcpy(d->film.img.planes[k].data, src->planes[k].data, plane_bytes);
       }
       d->film.img.data = malloc(plane_bytes);
       if (src->angles) d->film.img.angles = malloc(np * 2 * sizeof(double));

@@ -143,8 +143,8 @@ static void test_diffuse_batch(void) {
           (q.pdf > 0 && (q.eta != bs[i].eta || q.sampled_type != bs[i].sampled_type)))
         differ++;
     }
-    CHECK(differ == 0, "%s: %d of %d batched diffuse samples differ from sample()'s", rsw_isa_name((rsw_isa)isa),
-          differ, N);
+    CHECK(differ == 0, "%s: %d of %d batched diffuse samples differ from sample()'s",
+          rsw_isa_name((rsw_isa)isa), differ, N);
   }
   rsw_isa_set(rsw_isa_best());
   free(si);
@@ -260,11 +260,12 @@ static void test_roughconductor_eval_pdf(void) {
             if (fe > 1e-12) worst = fmax(worst, ef / fe);
             if (pe > 1e-12) worst = fmax(worst, ep / pe);
           }
-          CHECK(bad == 0 && differ == 0 && nonzero > N / 50,
-                "%s %s alpha (%g, %g) visible %d: %d of %d differ from eval/pdf (worst relative %.2g), %d lane "
-                "dependent, %d non-zero",
-                rsw_isa_name((rsw_isa)isa), mf_type_name(types[t]), alphas[a][0], alphas[a][1], v == 0, bad, N,
-                worst, differ, nonzero);
+          CHECK(
+              bad == 0 && differ == 0 && nonzero > N / 50,
+              "%s %s alpha (%g, %g) visible %d: %d of %d differ from eval/pdf (worst relative %.2g), %d lane "
+              "dependent, %d non-zero",
+              rsw_isa_name((rsw_isa)isa), mf_type_name(types[t]), alphas[a][0], alphas[a][1], v == 0, bad, N,
+              worst, differ, nonzero);
           rough_free(&r);
         }
   }

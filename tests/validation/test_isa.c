@@ -76,11 +76,11 @@ static void test_seed_scene(void) {
       sum += one.data[k], sum0 += ref.data[k];
       v += (double)e[k] * e[k], v0 += (double)e0[k] * e0[k];
     }
-    printf("  seed scene %s vs %s: %zu of %zu values beyond 3 sigma, %zu bitwise equal; means %.6g, %.6g\n", name,
-           ref.isa, bad, n, same, sum / n, sum0 / n);
+    printf("  seed scene %s vs %s: %zu of %zu values beyond 3 sigma, %zu bitwise equal; means %.6g, %.6g\n",
+           name, ref.isa, bad, n, same, sum / n, sum0 / n);
     CHECK(bad <= n / 100, "%s vs %s: %zu of %zu pixels beyond 3 sigma", name, ref.isa, bad, n);
-    CHECK(fabs(sum - sum0) / n <= 3 * sqrt(v + v0) / n + 1e-12, "%s vs %s: film means %.6g, %.6g", name, ref.isa,
-          sum / n, sum0 / n);
+    CHECK(fabs(sum - sum0) / n <= 3 * sqrt(v + v0) / n + 1e-12, "%s vs %s: film means %.6g, %.6g", name,
+          ref.isa, sum / n, sum0 / n);
     film_image_free(&one);
   }
   if (have_ref) film_image_free(&ref);

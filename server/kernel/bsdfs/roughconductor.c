@@ -208,9 +208,11 @@ static void rough_eval_pdf_batch(const bsdf *b, int n, const surface_interaction
   }
 }
 
-static const bsdf_ops rough_ops = {
-    .sample = rough_sample, .eval = rough_eval, .pdf = rough_pdf, .sample_batch = rough_sample_batch,
-    .eval_pdf_batch = rough_eval_pdf_batch};
+static const bsdf_ops rough_ops = {.sample = rough_sample,
+                                   .eval = rough_eval,
+                                   .pdf = rough_pdf,
+                                   .sample_batch = rough_sample_batch,
+                                   .eval_pdf_batch = rough_eval_pdf_batch};
 
 static void rough_destroy(object *o) {
   free(o);

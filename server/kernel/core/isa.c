@@ -16,15 +16,12 @@ bool rsw_isa_supported(rsw_isa isa) {
 #if defined(__x86_64__) || defined(__i386__)
   __builtin_cpu_init();
   switch (isa) {
-  case RSW_ISA_SSE2:
-    return __builtin_cpu_supports("sse2");
-  case RSW_ISA_AVX2:
-    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+  case RSW_ISA_SSE2: return __builtin_cpu_supports("sse2");
+  case RSW_ISA_AVX2: return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
   case RSW_ISA_AVX512:
     return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
            __builtin_cpu_supports("avx512dq");
-  default:
-    return false;
+  default: return false;
   }
 #else
   return false;
@@ -45,9 +42,8 @@ rsw_status rsw_isa_parse(const char *name, rsw_isa *out, rsw_err *err) {
   for (int i = 0; i < RSW_ISA__COUNT; i++) {
     if (name && strcmp(name, names[i]) == 0) {
       if (!rsw_isa_supported((rsw_isa)i))
-        return rsw_fail(err, RSW_ERR_INVALID, "--isa",
-                        "this CPU lacks %s (it runs up to %s; use --isa auto)", names[i],
-                        names[rsw_isa_best()]);
+        return rsw_fail(err, RSW_ERR_INVALID, "--isa", "this CPU lacks %s (it runs up to %s; use --isa auto)",
+                        names[i], names[rsw_isa_best()]);
       *out = (rsw_isa)i;
       return RSW_OK;
     }

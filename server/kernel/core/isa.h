@@ -19,7 +19,7 @@
 
 typedef enum rsw_isa {
   RSW_ISA_SSE2,
-  RSW_ISA_AVX2,  /* avx2 + fma */
+  RSW_ISA_AVX2,   /* avx2 + fma */
   RSW_ISA_AVX512, /* avx512f + avx512vl + avx512dq */
   RSW_ISA__COUNT
 } rsw_isa;

@@ -106,13 +106,13 @@ SIMD_FN vf vexp(vf x) {
 /* sin and cos of 2 pi u for any finite u (exact reduction: u - round(u)
  * and the quarter-turn subtraction are exact in float). */
 SIMD_FN void vsincos_turns(vf u, vf *s, vf *c) {
-  vf t = u - vfloor(u + 0.5f); /* [-0.5, 0.5] */
-  vf jf = vfloor(4.0f * t + 0.5f); /* -2..2 */
+  vf t = u - vfloor(u + 0.5f);                    /* [-0.5, 0.5] */
+  vf jf = vfloor(4.0f * t + 0.5f);                /* -2..2 */
   vf r = (t - 0.25f * jf) * 6.28318530717958648f; /* [-pi/4, pi/4] */
   vf z = r * r;
   vf sr = ((-1.9515295891e-4f * z + 8.3321608736e-3f) * z - 1.6666654611e-1f) * z * r + r;
-  vf cr = ((2.443315711809948e-5f * z - 1.388731625493765e-3f) * z + 4.166664568298827e-2f) * z * z - 0.5f * z +
-          1.0f;
+  vf cr = ((2.443315711809948e-5f * z - 1.388731625493765e-3f) * z + 4.166664568298827e-2f) * z * z -
+          0.5f * z + 1.0f;
   vi j = __builtin_convertvector(jf, vi) & 3;
   vi odd = (j & 1) != 0;
   vf ss = vsel(odd, cr, sr), cc = vsel(odd, sr, cr);

@@ -10,18 +10,18 @@
 #if RSW_SIMD_X86
 #include <immintrin.h>
 
-#define W 8
-#define SIMD_FN static inline __attribute__((always_inline, target("avx2,fma")))
+#define W             8
+#define SIMD_FN       static inline __attribute__((always_inline, target("avx2,fma")))
 #define MF_LANES_ATTR __attribute__((target("avx2,fma")))
-#define VSQRT(x) ((vf)_mm256_sqrt_ps((x)))
-#define MF_LANES_FN mf_sample_visible_avx2
-#define MF_EVAL_FN mf_eval_avx2
+#define VSQRT(x)      ((vf)_mm256_sqrt_ps((x)))
+#define MF_LANES_FN   mf_sample_visible_avx2
+#define MF_EVAL_FN    mf_eval_avx2
 #include "lanes.h"
 #include "microfacet_lanes.h"
 
-#define VSQRT_D(x) ((vdn)_mm256_sqrt_pd((x)))
-#define CAM_LANES_ATTR __attribute__((target("avx2,fma")))
-#define CAM_LANES_FN hdistant_rays_avx2
+#define VSQRT_D(x)      ((vdn)_mm256_sqrt_pd((x)))
+#define CAM_LANES_ATTR  __attribute__((target("avx2,fma")))
+#define CAM_LANES_FN    hdistant_rays_avx2
 #define COSINE_LANES_FN cosine_hemisphere_avx2
 #include "camera_lanes.h"
 #endif

@@ -42,8 +42,8 @@ void cosine_hemisphere_batch(rsw_isa isa, int n, const double *u, double *out);
 COS_SIMD_DECL(sse2);
 COS_SIMD_DECL(avx2);
 COS_SIMD_DECL(avx512);
-#define CAM_SIMD_DECL(s)                                                                                    \
-  void hdistant_rays_##s(int n, const double (*m)[4], const double *fu, const double *ap,                  \
+#define CAM_SIMD_DECL(s)                                                                                     \
+  void hdistant_rays_##s(int n, const double(*m)[4], const double *fu, const double *ap,                     \
                          const double *center, double radius, double offset, double *out)
 CAM_SIMD_DECL(sse2);
 CAM_SIMD_DECL(avx2);
@@ -52,7 +52,8 @@ CAM_SIMD_DECL(avx512);
 MF_SIMD_DECL(sse2);
 MF_SIMD_DECL(avx2);
 MF_SIMD_DECL(avx512);
-#define MF_EVAL_DECL(s) void mf_eval_##s(int ggx, int visible, int n, const float *const *in, float *const *out)
+#define MF_EVAL_DECL(s)                                                                                      \
+  void mf_eval_##s(int ggx, int visible, int n, const float *const *in, float *const *out)
 MF_EVAL_DECL(sse2);
 MF_EVAL_DECL(avx2);
 MF_EVAL_DECL(avx512);
