@@ -130,7 +130,7 @@ static int cmd_render(int argc, char **argv) {
     } else if (strcmp(a, "--isa") == 0) {
       rsw_isa isa;
       rsw_err ierr = {0};
-      if (rsw_isa_parse(val, &isa, &ierr) != RSW_OK) USAGE("%s", ierr.msg);
+      if (rsw_isa_parse(val, &isa, &ierr) != RSW_OK) USAGE("%s: %s", ierr.where, ierr.msg);
       rsw_isa_set(isa);
       i++;
     } else if (strcmp(a, "--wavelength") == 0) {

@@ -164,7 +164,7 @@ static int parse_args(int argc, char **argv, serve_args *a) {
     case OPT_ISA: { /* process-wide, set before any thread starts */
       rsw_isa isa;
       rsw_err err = {0};
-      if (rsw_isa_parse(v, &isa, &err) != RSW_OK) return fail_usage("%s", err.msg);
+      if (rsw_isa_parse(v, &isa, &err) != RSW_OK) return fail_usage("%s: %s", err.where, err.msg);
       rsw_isa_set(isa);
       break;
     }
