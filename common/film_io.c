@@ -13,7 +13,7 @@
 /* Most attributes an info gives: scene, revision, context, sensor, spp,
  * seed, variant, wavelength, zenith, azimuth, unresolved rays,
  * irradiance. */
-#define FILM_EXR_MAX_ATTRS 12
+#define FILM_EXR_MAX_ATTRS 14
 
 /* The attribute list of one info: entries point into info, the number
  * buffers here and the two angle lists (owned). */
@@ -81,6 +81,7 @@ static rsw_status build_attrs(const film_exr_info *info, int width, int height, 
     add(a, "raysweep:azimuth_deg", a->azimuth);
   }
   if (info->unresolved_rays) add(a, "raysweep:unresolved_rays", a->unresolved);
+  add(a, "raysweep:isa", info->isa);
   if (info->irradiance && info->n_irradiance > 0 && info->n_irradiance <= 4) {
     size_t len = 0;
     for (int c = 0; c < info->n_irradiance; c++)

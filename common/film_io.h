@@ -22,6 +22,8 @@
  *   raysweep:unresolved_rays
  *                           only when non-zero: rays the periodic boundary
  *                           could not resolve (render.h), decimal
+ *   raysweep:isa            the instruction set the batched shading ran
+ *                           ("avx512", "avx2", "sse2"), when known
  *   raysweep:irradiance     films with brdf/brf channels: the horizontal
  *                           irradiance E_h they divide by, per radiance
  *                           channel, %.17g, comma-separated
@@ -47,6 +49,7 @@ typedef struct film_exr_info {
   uint64_t revision, seed;
   uint64_t unresolved_rays; /* written when non-zero */
   uint32_t spp;
+  const char *isa; /* NULL or "": not written */
   double wavelength_nm; /* written when finite and variant is not "rgb" */
   /* NULL, or 2 per pixel (zenith, azimuth), row-major, degrees. */
   const double *angles;

@@ -18,6 +18,7 @@
 
 #include "image_exr.h"
 #include "image_png.h"
+#include "kernel/core/isa.h"
 #include "kernel/plugins/env_plugin.h"
 #include "kernel/render.h"
 #include "kernel/scene/params.h"
@@ -125,6 +126,12 @@ static int cmd_render(int argc, char **argv) {
     } else if (strcmp(a, "--threads") == 0) {
       if (!parse_u64(val, 256, &threads) || threads == 0)
         USAGE("--threads needs an integer in [1, 256] (got '%s')", val ? val : "");
+      i++;
+    } else if (strcmp(a, "--isa") == 0) {
+      rsw_isa isa;
+      rsw_err ierr = {0};
+      if (rsw_isa_parse(val, &isa, &ierr) != RSW_OK) USAGE("%s: %s", ierr.where, ierr.msg);
+      rsw_isa_set(isa);
       i++;
     } else if (strcmp(a, "--wavelength") == 0) {
       if (!parse_pos_double(val, &wavelength))
@@ -436,7 +443,8 @@ static int cmd_version(int argc, char **argv) {
 static const command commands[] = {
     {"render",
      "render SCENE [-D name=value]... [--set KEY=VALUE]... [--sensor ID] [--spp N] [--seed S] "
-     "[--wavelength NM] [--threads N] [--variant mono|rgb] [--plugin-dir DIR] [--quantities LIST] "
+     "[--wavelength NM] [--threads N] [--isa auto|avx512|avx2|sse2] [--variant mono|rgb] [--plugin-dir DIR] "
+     "[--quantities LIST] "
      "[--variance] [--exposure EV] [--colormap MAP] [--stats] -o OUT.exr|OUT.png",
      "load a scene, apply parameter updates, render one sensor to OpenEXR or a PNG quick-look",
      "  SCENE               a .xml (Mitsuba XML) or .json scene file\n"
@@ -449,6 +457,9 @@ static const command commands[] = {
      "  --seed S            an integer >= 0, added to the sampler's seed (default 0)\n"
      "  --wavelength NM     the render wavelength in nm, mono variant (default 550)\n"
      "  --threads N         1 to 256 (default: every online core; the film does not depend on N)\n"
+     "  --isa ISA           auto (default: the widest the CPU has), avx512, avx2 or sse2: the instruction\n"
+     "                      set of the vectorised shading; films agree across ISAs statistically, not\n"
+     "                      bitwise; refused when the CPU lacks it\n"
      "  --variant mono|rgb  overrides the document's variant (default rgb)\n"
      "  --plugin-dir DIR    load every *.so in DIR as an environment plugin first\n"
      "  --quantities LIST   comma-separated, of radiance, brdf, brf: adds brdf = L/E_h and brf = pi L/E_h\n"
@@ -495,6 +506,9 @@ static const command commands[] = {
      "  --header-timeout S  seconds a connection may take to send a request's headers\n"
      "                      (default 10); slower ones are closed\n"
      "  --max-film-bytes B  film memory one render may take (default 1G); larger films get 422\n"
+     "  --isa ISA           auto (default: the widest the CPU has), avx512, avx2 or sse2: the instruction\n"
+     "                      set of the vectorised shading (GET /v1 says which); refused when the CPU lacks "
+     "it\n"
      "Stops on SIGTERM or SIGINT.\n",
      cmd_serve},
     {"routes", "routes", "print the routes the daemon serves, one \"METHOD PATH\" per line", "", cmd_routes},

@@ -20,6 +20,7 @@
 
 #include "default_scene.h"
 #include "http/http.h"
+#include "kernel/core/isa.h"
 #include "kernel/plugins/env_plugin.h"
 #include "service/service.h"
 
@@ -94,6 +95,7 @@ typedef enum opt_id {
   OPT_MAX_CONNECTIONS,
   OPT_HEADER_TIMEOUT,
   OPT_MAX_FILM,
+  OPT_ISA,
 } opt_id;
 
 static const struct {
@@ -117,6 +119,7 @@ static const struct {
     {"--max-connections", OPT_MAX_CONNECTIONS},
     {"--header-timeout", OPT_HEADER_TIMEOUT},
     {"--max-film-bytes", OPT_MAX_FILM},
+    {"--isa", OPT_ISA},
 };
 
 static int parse_args(int argc, char **argv, serve_args *a) {
@@ -158,6 +161,13 @@ static int parse_args(int argc, char **argv, serve_args *a) {
       if (!parse_ull(v, 256, &a->threads) || !a->threads)
         return fail_usage("--threads needs an integer in [1, 256] (got '%s')", v);
       break;
+    case OPT_ISA: { /* process-wide, set before any thread starts */
+      rsw_isa isa;
+      rsw_err err = {0};
+      if (rsw_isa_parse(v, &isa, &err) != RSW_OK) return fail_usage("%s: %s", err.where, err.msg);
+      rsw_isa_set(isa);
+      break;
+    }
     case OPT_MAX_QUEUE:
       if (!parse_ull(v, 1000000, &a->max_queue) || !a->max_queue)
         return fail_usage("--max-queue needs an integer in [1, 1000000] (got '%s')", v);

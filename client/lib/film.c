@@ -201,6 +201,7 @@ rsw_status rsw_film_save_exr(const rsw_film *f, const char *path) {
     const cJSON *wl = cJSON_GetObjectItemCaseSensitive(meta, "wavelength");
     bool ok = meta_string(meta, "scene", &info.scene) && meta_string(meta, "context", &info.context) &&
               meta_string(meta, "sensor", &info.sensor) && meta_string(meta, "variant", &info.variant) &&
+              meta_string(meta, "isa", &info.isa) &&
               meta_uint(meta, "revision", 18446744073709549568.0, &info.has_revision, &info.revision) &&
               meta_uint(meta, "spp", 4294967295.0, &info.has_spp, &spp) &&
               meta_uint(meta, "seed", 18446744073709549568.0, &info.has_seed, &info.seed) &&

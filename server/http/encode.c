@@ -239,6 +239,8 @@ rsw_status http_film_json(const svc_film *f, char **bytes_out, size_t *len_out, 
   /* Only when non-zero: rays the periodic boundary could not resolve. */
   if (im->unresolved_rays)
     http_buf_printf(&b, ",\"unresolved_rays\":%llu", (unsigned long long)im->unresolved_rays);
+  /* The instruction set the batched shading ran (core/isa.h), when known. */
+  if (im->isa) http_buf_printf(&b, ",\"isa\":\"%s\"", im->isa);
   /* Films with planes: what each is (its channels are "<name>.<channel>"),
    * and for brdf / brf the horizontal irradiance they divide by. */
   if (im->n_planes) {

@@ -15,6 +15,7 @@ film_exr_info film_image_exr_info(const film_image *img, const char *sensor_id) 
   if (img->variant == VARIANT_MONO) info.wavelength_nm = img->wavelength;
   info.angles = img->angles;
   info.unresolved_rays = img->unresolved_rays;
+  info.isa = img->isa;
   if (img->has_irradiance) {
     info.irradiance = img->irradiance;
     info.n_irradiance = img->channels;

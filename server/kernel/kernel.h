@@ -151,6 +151,22 @@ typedef struct bsdf_ops {
   color (*eval)(const bsdf *b, const surface_interaction *si, vec3 wo);
   /* Solid-angle pdf of sample() producing wo (smooth lobes only). */
   double (*pdf)(const bsdf *b, const surface_interaction *si, vec3 wo);
+  /* Optional: sample() for n lanes that share this BSDF, lane i at si[i]
+   * with u1[i], u2[i], writing bs[i] and weight[i]; vectorised at the
+   * render's ISA (core/isa.h). A lane's result depends on its own inputs
+   * only (not on n or its neighbours), so a wave's grouping of lanes does
+   * not change a film. It may differ from sample() in the last bits (its
+   * single-precision placement of the sample); pdf() and eval() stay the
+   * densities of both. NULL: the integrator calls sample() per lane. */
+  void (*sample_batch)(const bsdf *b, int n, const surface_interaction *const *si, const double *u1,
+                       const vec2 *u2, bsdf_sample *bs, color *weight);
+  /* Optional: eval() and pdf() for n lanes that share this BSDF (lane i:
+   * si[i], local wo[i]), vectorised at the render's ISA; may compute in
+   * single precision (the plugin says where), so equal to eval() and pdf()
+   * up to rounding (~1e-6 relative), lane by lane independent of n. NULL:
+   * eval() and pdf() per lane. */
+  void (*eval_pdf_batch)(const bsdf *b, int n, const surface_interaction *const *si, const vec3 *wo, color *f,
+                         double *pdf);
 } bsdf_ops;
 struct bsdf {
   object base;
@@ -301,6 +317,12 @@ typedef struct sensor_ops {
   /* Optional, with pixel_angles: each pixel centre's exitant direction
    * (towards the sensor) as a unit world vector, xyz[3 (iy W + ix) + k]. */
   void (*pixel_directions)(const sensor *s, int W, int H, double *xyz);
+  /* Optional: sample_ray() for n samples at once (film_u[i],
+   * aperture_u[i] -> rays[i], weights w[i]), vectorised at the render's
+   * ISA (core/isa.h); each ray depends on its own sample only. NULL: the
+   * renderer calls sample_ray() per sample. */
+  void (*sample_ray_batch)(const sensor *s, int n, const vec2 *film_u, const vec2 *aperture_u, ray3 *rays,
+                           double *w);
 } sensor_ops;
 struct sensor {
   object base;

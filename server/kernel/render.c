@@ -25,6 +25,7 @@
 #include <unistd.h>
 
 #include "accel.h"
+#include "core/isa.h"
 #include "scene/scene.h"
 
 #define TILE 8
@@ -160,6 +161,8 @@ typedef struct wave_buf {
   color L[WAVE];
   double quv[3 * WAVE];
   int live[WAVE];
+  vec2 film_u[WAVE], aperture_u[WAVE]; /* sensors with sample_ray_batch: the rays are made at the flush */
+  double w[WAVE];
 } wave_buf;
 
 /* Trace and splat samples [0, n) of wb: the live ones (w != 0) go through
@@ -167,6 +170,11 @@ typedef struct wave_buf {
  * sums are those of the one-sample loop. False: out of memory. */
 static bool wave_flush(job *jb, tile_buf *tb, wave_buf *wb, int n, render_stats *rs, uint64_t *invalid) {
   const integrator *it = jb->sc->integrator;
+  const sensor *se = jb->se;
+  if (se->ops->sample_ray_batch) { /* the wave's camera rays together (vectorised, core/isa.h) */
+    se->ops->sample_ray_batch(se, n, wb->film_u, wb->aperture_u, wb->ray, wb->w);
+    for (int i = 0; i < n; i++) wb->ws[i].w = wb->w[i];
+  }
   int m = 0;
   for (int i = 0; i < n; i++) /* compacted in place: live sample k's state and ray move to slot k */
     if (wb->ws[i].w != 0) {
@@ -253,7 +261,10 @@ static tile_buf *render_tile(job *jb, size_t t, render_stats *rs, uint64_t *samp
         vec2 ap = smp->ops->next_2d(st);
         wb->ws[n].px = px;
         wb->ws[n].py = py;
-        wb->ws[n].w = jb->se->ops->sample_ray(jb->se, film_u, ap, &wb->ray[n]);
+        if (jb->se->ops->sample_ray_batch)
+          wb->film_u[n] = film_u, wb->aperture_u[n] = ap;
+        else
+          wb->ws[n].w = jb->se->ops->sample_ray(jb->se, film_u, ap, &wb->ray[n]);
         if (++n == WAVE) {
           if (!wave_flush(jb, tb, wb, n, rs, invalid)) goto fail;
           *samples += (uint64_t)n;
@@ -581,6 +592,7 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
     se->ops->pixel_angles(se, jb.W, jb.H, img.angles);
   }
   img.unresolved_rays = jb.rays.unresolved;
+  img.isa = rsw_isa_name(rsw_isa_get());
   if (stats) {
     stats->rays = jb.rays;
     stats->samples = jb.samples;

@@ -86,6 +86,10 @@ typedef struct film_image {
    * walls), each counted as blocked / ending its path. Non-zero means the
    * film depends on that policy; written to the film's metadata. */
   uint64_t unresolved_rays;
+  /* The instruction set the batched shading ran (core/isa.h: "avx512",
+   * "avx2", "sse2"; static), or NULL when not known (a film restored
+   * from a state directory). */
+  const char *isa;
   /* Planes beyond radiance, in the fixed order brdf, brf,
    * radiance_stderr (those asked for). */
   film_plane planes[FILM_MAX_PLANES];

@@ -13,6 +13,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "../kernel/core/isa.h"
 #include "../kernel/plugins/env_plugin.h"
 #include "../kernel/scene/loader.h"
 #include "buf.h"
@@ -280,6 +281,7 @@ char *service_info_json(service *svc) {
   cJSON_AddStringToObject(o, "version", RSW_VERSION);
   cJSON_AddStringToObject(o, "build", __DATE__ " " __TIME__);
   cJSON_AddStringToObject(o, "api_version", "v1");
+  cJSON_AddStringToObject(o, "isa", rsw_isa_name(rsw_isa_get()));
   cJSON_AddStringToObject(o, "instance", svc->instance);
   cJSON *v = cJSON_AddArrayToObject(o, "variants");
   svc_json_push(v, cJSON_CreateString("mono"));

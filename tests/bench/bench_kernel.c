@@ -11,8 +11,8 @@
  *                 replay ceiling.
  *
  * ns_per_sample_per_core = wall * threads / samples. isa: the instruction
- * set the shading code runs (scalar double, the x86-64 baseline: no
- * vectorised shading yet); packet_width: Embree's packet lanes (16 with
+ * set the batched shading kernels ran (core/isa.h; $RSW_BENCH_ISA pins it:
+ * sse2, avx2, avx512, default the best the CPU has); packet_width: Embree's packet lanes (16 with
  * AVX-512). trace_share: the thread time spent in Embree queries. The
  * replay ceiling: the render's own queries, recorded once from a
  * one-thread render and traced again by Embree alone (accel.h), and
@@ -26,7 +26,9 @@
  * the Embree ceiling (random incoherent rtcIntersect1 rays/s on our
  * two-level structure), the ratio of the two, and the ceiling of a flat
  * single-level structure of the same triangles (what the two levels cost).
- * Threads: $RSW_BENCH_THREADS or all cores. */
+ * cpu_s: the process CPU time of one render (median of the repeats), and
+ * cpu_ns_per_sample = cpu_s / samples: the figure to compare on a loaded
+ * machine. Threads: $RSW_BENCH_THREADS or all cores. */
 #include <math.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -36,6 +38,7 @@
 #include <unistd.h>
 
 #include "../../server/kernel/accel.h"
+#include "../../server/kernel/core/isa.h"
 #include "../../server/kernel/render.h"
 #include "../../server/kernel/scene/params.h"
 #include "../../server/kernel/scene/scene.h"
@@ -106,12 +109,17 @@ static int report(const char *name, scene *s, uint32_t spp, int threads, double 
   render_opts warm = o;
   warm.spp = 1;
   if (render_sensor(s, &warm, &img, &st, &err) == RSW_OK) film_image_free(&img);
-  double wall[REPEATS], ceil_v[REPEATS], flat_v[REPEATS];
+  double wall[REPEATS], cpu[REPEATS], ceil_v[REPEATS], flat_v[REPEATS];
   double rays = 0, trace = 0, busy = 0;
   uint64_t samples = 0, shadow = 0;
   int used_threads = threads;
   for (int r = 0; r < REPEATS; r++) {
-    if (render_sensor(s, &o, &img, &st, &err)) {
+    struct timespec c0, c1;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &c0);
+    rsw_status rst = render_sensor(s, &o, &img, &st, &err);
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &c1);
+    cpu[r] = (double)(c1.tv_sec - c0.tv_sec) + 1e-9 * (double)(c1.tv_nsec - c0.tv_nsec);
+    if (rst) {
       fprintf(stderr, "bench %s: %s\n", name, err.msg);
       return 1;
     }
@@ -140,10 +148,14 @@ static int report(const char *name, scene *s, uint32_t spp, int threads, double 
          ceiling > 0 ? rps / ceiling : 0, used_threads, spp, rays, (unsigned long long)shadow, flat,
          flat > 0 ? ceiling / flat : 0, REPEATS);
   printf(", \"replay_ceiling_rays_per_s\": %.4g, \"ratio_to_replay_ceiling\": %.3f, \"packet_width\": %d, "
-         "\"trace_share\": %.3f, \"isa\": \"sse2\", \"flat_replay_rays_per_s\": %.4g, "
+         "\"trace_share\": %.3f, \"isa\": \"%s\", \"flat_replay_rays_per_s\": %.4g, "
          "\"replay_flat_over_two_level\": %.3f",
          replay, replay > 0 ? rps / replay : 0, accel_packet_width(), busy > 0 ? trace / busy : 0,
-         flat_replay, replay > 0 ? flat_replay / replay : 0);
+         rsw_isa_name(rsw_isa_get()), flat_replay, replay > 0 ? flat_replay / replay : 0);
+  /* Process CPU time of one render (median): what a loaded machine's
+   * wall time hides. */
+  double c = median(cpu, REPEATS);
+  printf(", \"cpu_s\": %.4f, \"cpu_ns_per_sample\": %.1f", c, samples > 0 ? c * 1e9 / (double)samples : 0);
   if (target_wall > 0)
     printf(", \"target_wall_s\": %.2f, \"meets_target\": %s", target_wall,
            w < target_wall ? "true" : "false");
@@ -372,6 +384,16 @@ static bool wanted(const char *name) {
 int main(void) {
   int threads = bench_threads();
   int rc = 0;
+  const char *isa_name = getenv("RSW_BENCH_ISA");
+  if (isa_name && *isa_name) {
+    rsw_isa isa;
+    rsw_err err = {0};
+    if (rsw_isa_parse(isa_name, &isa, &err) != RSW_OK) {
+      fprintf(stderr, "bench: RSW_BENCH_ISA: %s\n", err.msg);
+      return 1;
+    }
+    rsw_isa_set(isa);
+  }
   if (wanted("seed_hdistant")) rc |= bench_seed(threads);
   if (wanted("cornell_box")) rc |= bench_cornell(threads);
   if (wanted("mesh_1m")) rc |= bench_mesh(threads);

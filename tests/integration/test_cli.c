@@ -84,6 +84,38 @@ static void test_variant_and_wavelength(void) {
   exr_image_free(&img);
 }
 
+/* --isa: each ISA the CPU has renders and says so in raysweep:isa; auto
+ * picks one of them; an unknown name is a usage error (exit 2) naming
+ * --isa. (An ISA the CPU lacks is refused the same way: core/isa.c,
+ * tests/unit/test_simd.c.) */
+static void test_isa(void) {
+  char out[128], err[4096];
+  snprintf(out, sizeof out, "%s/isa.exr", tmpdir);
+  const char *names[] = {"sse2", "avx2", "avx512", "auto"};
+  int rendered = 0;
+  for (int k = 0; k < 4; k++) {
+    const char *args[] = {
+        "render", "proto/examples/hdistant_seed.xml", "--spp", "2", "--isa", names[k], "-o", out, NULL};
+    int rc = run(err, sizeof err, args);
+    if (rc == 2 && strstr(err, "lacks")) continue; /* not on this CPU */
+    REQUIRE(rc == 0, "--isa %s: exit %d: %s", names[k], rc, err);
+    exr_image img;
+    rsw_err e = {0};
+    REQUIRE(exr_read_image(out, &img, &e) == RSW_OK, "read back: %s", e.msg);
+    const char *isa = exr_image_meta(&img, "raysweep:isa");
+    bool named =
+        isa && (k == 3 ? strcmp(isa, "sse2") == 0 || strcmp(isa, "avx2") == 0 || strcmp(isa, "avx512") == 0
+                       : strcmp(isa, names[k]) == 0);
+    CHECK(named, "--isa %s: raysweep:isa = %s", names[k], isa ? isa : "(none)");
+    exr_image_free(&img);
+    rendered++;
+  }
+  CHECK(rendered >= 2, "sse2 (the x86-64 baseline) and auto render");
+  const char *bad[] = {"render", "proto/examples/hdistant_seed.xml", "--isa", "avx9", "-o", out, NULL};
+  int rc = run(err, sizeof err, bad);
+  CHECK(rc == 2 && strstr(err, "--isa") && strstr(err, "avx9"), "--isa avx9: exit %d: %s", rc, err);
+}
+
 static void test_defines_and_sensor(void) {
   char scene[128], out[128], err[4096];
   snprintf(scene, sizeof scene, "%s/params.xml", tmpdir);
@@ -158,6 +190,7 @@ int main(void) {
   RSW_TEST_RUN(test_render_seed_exr);
   RSW_TEST_RUN(test_variant_and_wavelength);
   RSW_TEST_RUN(test_defines_and_sensor);
+  RSW_TEST_RUN(test_isa);
   RSW_TEST_RUN(test_failure_leaves_no_file);
   char cmd[128];
   snprintf(cmd, sizeof cmd, "rm -rf %s", tmpdir);

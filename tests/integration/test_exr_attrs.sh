@@ -47,6 +47,10 @@ url="http://127.0.0.1:$port"
 export RAYSWEEP_URL=$url
 unset RAYSWEEP_TOKEN
 rs() { "$bin/raysweep" "$@"; }
+# The ISA the daemon's renders run (GET /v1; raysweepd render picks the
+# same on this CPU): every writer carries it as raysweep:isa.
+isa=$(curl -sf "$url/v1" | python3 -c 'import json, sys; print(json.load(sys.stdin)["isa"])')
+case $isa in avx512 | avx2 | sse2) ok ;; *) bad "GET /v1 isa: '$isa'" ;; esac
 
 run "scene push" rs -q scene push "$scene"
 id=$(cat out)
@@ -130,7 +134,7 @@ check() {
   if python3 check.py "$@" >"$tmp/py" 2>&1; then ok; else bad "$(cat "$tmp/py")"; fi
 }
 check ref.exr '{"raysweep:sensor": "sensor", "raysweep:spp": "4", "raysweep:seed": "7",
-  "raysweep:variant": "mono", "raysweep:wavelength_nm": "550"}' "$id" \
+  "raysweep:variant": "mono", "raysweep:wavelength_nm": "550", "raysweep:isa": "'"$isa"'"}' "$id" \
   "daemon render (image/x-exr)=daemon_render.exr=render" \
   "daemon job result (image/x-exr)=daemon_job.exr=w550" \
   "raysweep render -o (rsw_film_save_exr)=cli_render.exr=render" \
@@ -146,7 +150,7 @@ run "daemon render EXR rgb" curl -sf -X POST "$url/v1/scenes/$id_rgb:render" -H 
   -H 'Accept: image/x-exr' -d '{"spp": 4, "seed": 9}' -o daemon_rgb.exr
 run "raysweep render -o x.exr rgb" rs -q render "$id_rgb" --spp 4 --seed 9 -o cli_rgb.exr
 check ref_rgb.exr '{"raysweep:sensor": "hdistant", "raysweep:spp": "4", "raysweep:seed": "9",
-  "raysweep:variant": "rgb"}' "$id_rgb" \
+  "raysweep:variant": "rgb", "raysweep:isa": "'"$isa"'"}' "$id_rgb" \
   "daemon render rgb (image/x-exr)=daemon_rgb.exr=render" \
   "raysweep render -o rgb (rsw_film_save_exr)=cli_rgb.exr=render"
 
@@ -205,7 +209,8 @@ if errors:
 EOF
 if python3 check_json.py >"$tmp/py" 2>&1; then ok; else bad "$(cat "$tmp/py")"; fi
 check ref_unres.exr '{"raysweep:sensor": "cam", "raysweep:spp": "4", "raysweep:seed": "3",
-  "raysweep:variant": "mono", "raysweep:wavelength_nm": "550", "raysweep:unresolved_rays": "4"}' "$id_unres" \
+  "raysweep:variant": "mono", "raysweep:wavelength_nm": "550", "raysweep:unresolved_rays": "4",
+  "raysweep:isa": "'"$isa"'"}' "$id_unres" \
   "daemon render unresolved (image/x-exr)=daemon_unres.exr=render" \
   "daemon job result unresolved (sweep --format exr)=sw_unres/h/cam.exr=h" \
   "raysweep render -o unresolved (rsw_film_save_exr)=cli_unres.exr=render"

@@ -10,6 +10,7 @@
 
 #include "../scene/loader.h"
 #include "../scene/params.h"
+#include "../simd/simd.h"
 #include "bsdfs_internal.h"
 
 static color diffuse_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2,
@@ -37,7 +38,45 @@ static double diffuse_pdf(const bsdf *b, const surface_interaction *si, vec3 wo)
   return warp_square_to_cosine_hemisphere_pdf(wo);
 }
 
-static const bsdf_ops diffuse_ops = {.sample = diffuse_sample, .eval = diffuse_eval, .pdf = diffuse_pdf};
+/* Batched sampling (bsdf_ops.sample_batch): the cosine-hemisphere warp of
+ * up to 64 lanes at a time in double lanes (simd/camera_lanes.h), bitwise
+ * the scalar warp, so each lane gives diffuse_sample()'s result exactly;
+ * pdf, checks and reflectance per lane. */
+static void diffuse_sample_batch(const bsdf *b, int n, const surface_interaction *const *si, const double *u1,
+                                 const vec2 *u2, bsdf_sample *bs, color *weight) {
+  (void)u1;
+  const diffuse_bsdf *d = (const diffuse_bsdf *)b;
+  enum {
+    C = 64
+  };
+  rsw_isa isa = rsw_isa_get();
+  for (int i0 = 0; i0 < n; i0 += C) {
+    int m = n - i0 < C ? n - i0 : C;
+    double u[2 * C], out[3 * C];
+    int lane[C], k = 0;
+    for (int j = 0; j < m; j++) {
+      if (!(si[i0 + j]->wi.z > 0.0)) {
+        weight[i0 + j] = bsdf_fail(&bs[i0 + j]);
+        continue;
+      }
+      u[2 * k] = u2[i0 + j].x, u[2 * k + 1] = u2[i0 + j].y;
+      lane[k++] = i0 + j;
+    }
+    cosine_hemisphere_batch(isa, k, u, out);
+    for (int j = 0; j < k; j++) {
+      int i = lane[j];
+      bsdf_sample *s = &bs[i];
+      s->wo = v3(out[3 * j], out[3 * j + 1], out[3 * j + 2]);
+      s->pdf = warp_square_to_cosine_hemisphere_pdf(s->wo);
+      s->eta = 1.0;
+      s->sampled_type = BSDF_DIFFUSE_REFLECTION;
+      weight[i] = !(s->pdf > 0.0) || !(s->wo.z > 0.0) ? bsdf_fail(s) : tex_eval(d->reflectance, si[i]);
+    }
+  }
+}
+
+static const bsdf_ops diffuse_ops = {
+    .sample = diffuse_sample, .eval = diffuse_eval, .pdf = diffuse_pdf, .sample_batch = diffuse_sample_batch};
 
 static void diffuse_destroy(object *o) {
   free(o);

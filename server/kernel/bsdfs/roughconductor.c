@@ -32,6 +32,7 @@
 
 #include "../scene/loader.h"
 #include "../scene/params.h"
+#include "../simd/simd.h"
 #include "bsdfs_internal.h"
 #include "fresnel.h"
 
@@ -43,6 +44,9 @@ static mf_distr distr_at(const roughconductor_bsdf *r, const surface_interaction
   return mf_make(r->type, au, av, r->sample_visible);
 }
 
+static color rough_finish(const roughconductor_bsdf *r, const mf_distr *d, const surface_interaction *si,
+                          vec3 m, double pdf_m, double g1vis, bsdf_sample *bs);
+
 static color rough_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2, bsdf_sample *bs) {
   (void)u1;
   const roughconductor_bsdf *r = (const roughconductor_bsdf *)b;
@@ -53,6 +57,16 @@ static color rough_sample(const bsdf *b, const surface_interaction *si, double u
    * reuses G1vis (it is the same factor). */
   double pdf_m, g1vis;
   vec3 m = mf_sample_g1(&d, wi, u2, &pdf_m, &g1vis);
+  return rough_finish(r, &d, si, m, pdf_m, g1vis, bs);
+}
+
+/* The double-precision end of a visible-normal sample, shared by the
+ * scalar and the batched paths: from the microfacet normal m drawn, the
+ * reflected direction, its pdf (D and G1vis computed once) and the weight
+ * eval / pdf with Fresnel. */
+static color rough_finish(const roughconductor_bsdf *r, const mf_distr *d, const surface_interaction *si,
+                          vec3 m, double pdf_m, double g1vis, bsdf_sample *bs) {
+  vec3 wi = si->wi;
   vec3 wo = reflect_about(wi, m);
   double wo_m = v3_dot(wo, m);
   if (!(pdf_m > 0.0) || !(wo.z > 0.0) || !(wo_m > 0.0)) return bsdf_fail(bs);
@@ -61,14 +75,69 @@ static color rough_sample(const bsdf *b, const surface_interaction *si, double u
   bs->eta = 1.0;
   bs->sampled_type = BSDF_GLOSSY_REFLECTION;
   double weight;
-  if (d.sample_visible)
-    weight = mf_smith_g1(&d, wo, m) * (mf_smith_g1(&d, wi, m) / g1vis);
+  if (d->sample_visible)
+    weight = mf_smith_g1(d, wo, m) * (mf_smith_g1(d, wi, m) / g1vis);
   else
-    weight = mf_G(&d, wi, wo, m) * v3_dot(wi, m) / (wi.z * m.z);
+    weight = mf_G(d, wi, wo, m) * v3_dot(wi, m) / (wi.z * m.z);
   color eta, k;
   conductor_ior_eval(&r->ior, si, &eta, &k);
   color f = fresnel_conductor_col(v3_dot(wi, m), eta, k);
   return col_mul(col_scale(f, weight), bsdf_factor(r->specular_reflectance, si));
+}
+
+/* Batched sampling (bsdf_ops.sample_batch): the visible-normal samples of
+ * up to 64 lanes at a time, with their pdf and weight (without Fresnel),
+ * by the per-ISA single-precision kernels (simd/microfacet_lanes.h: for
+ * Beckmann the Newton inversion runs across the lanes instead of one chain
+ * per sample; the tail says why float is safe there); then Fresnel at wi.m
+ * and the specular factor per lane in double, and wo renormalised in
+ * double. D cos sampling (sample_visible false) takes the scalar path. */
+static void rough_sample_batch(const bsdf *b, int n, const surface_interaction *const *si, const double *u1,
+                               const vec2 *u2, bsdf_sample *bs, color *weight) {
+  const roughconductor_bsdf *r = (const roughconductor_bsdf *)b;
+  if (!r->sample_visible) {
+    for (int i = 0; i < n; i++) weight[i] = rough_sample(b, si[i], u1[i], u2[i], &bs[i]);
+    return;
+  }
+  enum {
+    C = 64
+  };
+  rsw_isa isa = rsw_isa_get();
+  for (int i0 = 0; i0 < n; i0 += C) {
+    int m = n - i0 < C ? n - i0 : C;
+    float in[7][C], out[6][C];
+    int lane[C], k = 0;
+    for (int j = 0; j < m; j++) {
+      const surface_interaction *s = si[i0 + j];
+      if (!(s->wi.z > 0.0)) {
+        weight[i0 + j] = bsdf_fail(&bs[i0 + j]);
+        continue;
+      }
+      mf_distr d = distr_at(r, s);
+      in[0][k] = (float)s->wi.x, in[1][k] = (float)s->wi.y, in[2][k] = (float)s->wi.z;
+      in[3][k] = (float)d.alpha_u, in[4][k] = (float)d.alpha_v;
+      in[5][k] = (float)u2[i0 + j].x, in[6][k] = (float)u2[i0 + j].y;
+      lane[k++] = i0 + j;
+    }
+    const float *ip[7] = {in[0], in[1], in[2], in[3], in[4], in[5], in[6]};
+    float *op[6] = {out[0], out[1], out[2], out[3], out[4], out[5]};
+    mf_sample_visible_batch(isa, r->type == MF_GGX, k, ip, op);
+    for (int j = 0; j < k; j++) {
+      int i = lane[j];
+      if (!(out[3][j] > 0.0f)) {
+        weight[i] = bsdf_fail(&bs[i]);
+        continue;
+      }
+      bs[i].wo = v3_norm(v3(out[0][j], out[1][j], out[2][j]));
+      bs[i].pdf = out[3][j];
+      bs[i].eta = 1.0;
+      bs[i].sampled_type = BSDF_GLOSSY_REFLECTION;
+      color eta, kk;
+      conductor_ior_eval(&r->ior, si[i], &eta, &kk);
+      color f = fresnel_conductor_col(out[5][j], eta, kk);
+      weight[i] = col_mul(col_scale(f, out[4][j]), bsdf_factor(r->specular_reflectance, si[i]));
+    }
+  }
 }
 
 static color rough_eval(const bsdf *b, const surface_interaction *si, vec3 wo) {
@@ -97,7 +166,53 @@ static double rough_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
   return mf_pdf(&d, wi, h) / (4.0 * wo_h);
 }
 
-static const bsdf_ops rough_ops = {.sample = rough_sample, .eval = rough_eval, .pdf = rough_pdf};
+/* Batched eval and pdf (bsdf_ops.eval_pdf_batch): D, the G1 products, the
+ * visible G1 and the pdf of up to 64 lanes at a time in single precision
+ * (simd/microfacet_lanes.h mf_eval_lanes says why that is safe), then
+ * Fresnel and the specular factor per lane in double, as rough_eval(). */
+static void rough_eval_pdf_batch(const bsdf *b, int n, const surface_interaction *const *si, const vec3 *wo,
+                                 color *f, double *pdf) {
+  const roughconductor_bsdf *r = (const roughconductor_bsdf *)b;
+  enum {
+    C = 64
+  };
+  rsw_isa isa = rsw_isa_get();
+  for (int i0 = 0; i0 < n; i0 += C) {
+    int m = n - i0 < C ? n - i0 : C;
+    float in[8][C], out[3][C];
+    int lane[C], k = 0;
+    for (int j = 0; j < m; j++) {
+      const surface_interaction *s = si[i0 + j];
+      vec3 o = wo[i0 + j];
+      f[i0 + j] = col1(0.0);
+      pdf[i0 + j] = 0.0;
+      if (!(s->wi.z > 0.0) || !(o.z > 0.0)) continue;
+      mf_distr d = distr_at(r, s);
+      in[0][k] = (float)s->wi.x, in[1][k] = (float)s->wi.y, in[2][k] = (float)s->wi.z;
+      in[3][k] = (float)o.x, in[4][k] = (float)o.y, in[5][k] = (float)o.z;
+      in[6][k] = (float)d.alpha_u, in[7][k] = (float)d.alpha_v;
+      lane[k++] = i0 + j;
+    }
+    const float *ip[8] = {in[0], in[1], in[2], in[3], in[4], in[5], in[6], in[7]};
+    float *op[3] = {out[0], out[1], out[2]};
+    mf_eval_batch(isa, r->type == MF_GGX, r->sample_visible, k, ip, op);
+    for (int j = 0; j < k; j++) {
+      int i = lane[j];
+      pdf[i] = out[1][j];
+      if (!(out[0][j] > 0.0f)) continue;
+      color eta, kk;
+      conductor_ior_eval(&r->ior, si[i], &eta, &kk);
+      color fr = fresnel_conductor_col(out[2][j], eta, kk);
+      f[i] = col_mul(col_scale(fr, out[0][j]), bsdf_factor(r->specular_reflectance, si[i]));
+    }
+  }
+}
+
+static const bsdf_ops rough_ops = {.sample = rough_sample,
+                                   .eval = rough_eval,
+                                   .pdf = rough_pdf,
+                                   .sample_batch = rough_sample_batch,
+                                   .eval_pdf_batch = rough_eval_pdf_batch};
 
 static void rough_destroy(object *o) {
   free(o);

@@ -114,7 +114,17 @@ static void add_polarization(double *quv, const emitter *e, vec3 d, double scale
  * is the same per lane, so a path's value does not depend on its batch;
  * Li is the wave of one path.
  *
- * Precision: shading stays in double (the plugins' scalar ops); Embree
+ * BSDF values and pdfs towards the light samples, then BSDF samples, are
+ * taken for all live lanes together, grouped by BSDF, through
+ * bsdf_ops.eval_pdf_batch and sample_batch where a BSDF has them (vectorised at the
+ * render's ISA, core/isa.h; roughconductor), after every lane has drawn
+ * its numbers; a lane's value still depends on its own state only.
+ *
+ * Precision: shading stays in double (the plugins' scalar ops, and the
+ * batched samplers' pdfs and weights); the batched samplers place a sample
+ * in single precision, and roughconductor's batched eval/pdf towards a
+ * light sample is single precision up to Fresnel (simd/microfacet_lanes.h
+ * says why both are safe); the path throughput and L stay double; Embree
  * traces in float32 behind fill_ray (accel.c). Contributions are summed
  * per path in double, in bounce order. */
 
@@ -135,6 +145,15 @@ typedef struct lane {
   color value;
   double pe;
   ray3 sray;
+  /* The light sample's BSDF value and pdf (wave_eval_bsdfs). */
+  vec3 nwo;
+  color nf;
+  double npdf;
+  /* The BSDF sample: its random numbers, then its result. */
+  double u1;
+  vec2 u2;
+  bsdf_sample bs;
+  color weight;
 } lane;
 
 static double clock_s(void) {
@@ -277,39 +296,138 @@ static bool shade_emit_and_light(const integrator *it, const scene *sc, sampler_
   return true;
 }
 
-/* The second half of lane l's vertex: the light sample's contribution if
- * its shadow ray was clear, then the BSDF sample, the continuation ray and
- * the roulette. False: the path ends here. */
-static bool shade_continue(const integrator *it, sampler_state *st, lane *l, double *quv) {
+/* The light samples of lanes idx[0..n) whose shadow ray was clear: the
+ * BSDF's value and pdf towards each (l->nf, l->npdf), grouped by BSDF
+ * through bsdf_ops.eval_pdf_batch where a BSDF has it, else per lane. A
+ * lane's values depend on its own state only. g: n ints of scratch. */
+static void wave_eval_bsdfs(lane *ln, const int *idx, int n, int *g) {
+  enum {
+    C = 64
+  };
+  int left = 0;
+  for (int k = 0; k < n; k++) {
+    lane *l = &ln[idx[k]];
+    if (!(l->nee && l->occ == TRACE_MISS)) continue;
+    const surface_interaction *si = &l->si;
+    const bsdf *b = si->shape->bsdf;
+    l->nwo = frame_to_local(&si->sh, l->ds.d);
+    if (b->ops->eval_pdf_batch) {
+      g[left++] = idx[k];
+    } else {
+      l->nf = b->ops->eval(b, si, l->nwo);
+      l->npdf = col_is_black(l->nf) || l->ds.delta ? 0.0 : b->ops->pdf(b, si, l->nwo);
+    }
+  }
+  while (left > 0) {
+    const bsdf *b = ln[g[0]].si.shape->bsdf;
+    const surface_interaction *si[C];
+    vec3 wo[C];
+    color f[C];
+    double pdf[C];
+    int take[C], m = 0, rest = 0;
+    for (int k = 0; k < left; k++) {
+      lane *l = &ln[g[k]];
+      if (m < C && l->si.shape->bsdf == b) {
+        take[m] = g[k];
+        si[m] = &l->si;
+        wo[m] = l->nwo;
+        m++;
+      } else {
+        g[rest++] = g[k];
+      }
+    }
+    b->ops->eval_pdf_batch(b, m, si, wo, f, pdf);
+    for (int k = 0; k < m; k++) {
+      ln[take[k]].nf = f[k];
+      ln[take[k]].npdf = pdf[k];
+    }
+    left = rest;
+  }
+}
+
+/* The second half of lane l's vertex, first part: the light sample's
+ * contribution if its shadow ray was clear (its BSDF value and pdf from
+ * wave_eval_bsdfs), then the BSDF sample's random numbers (drawn here, in
+ * the one-path order; the sample itself is taken by wave_sample_bsdfs for
+ * the lanes together). */
+static void shade_light(sampler_state *st, lane *l, double *quv) {
   const sampler_ops *sops = st->s->ops;
-  const surface_interaction *si = &l->si;
-  const bsdf *b = si->shape->bsdf;
   if (l->nee && l->occ == TRACE_MISS) {
     const direction_sample *ds = &l->ds;
     const emitter *e = l->ne;
-    vec3 wo = frame_to_local(&si->sh, ds->d);
-    color f = b->ops->eval(b, si, wo);
+    color f = l->nf;
     if (!col_is_black(f)) {
-      double w = ds->delta ? 1.0 : mis_weight(ds->pdf * l->pe, b->ops->pdf(b, si, wo));
+      double w = ds->delta ? 1.0 : mis_weight(ds->pdf * l->pe, l->npdf);
       l->L = col_add(l->L, col_scale(col_mul(l->T, col_mul(f, l->value)), w / l->pe));
       if (quv && (e->flags & EMITTER_INFINITE))
         add_polarization(quv, e, ds->d, l->T.c[0] * f.c[0] * w / (l->pe * ds->pdf));
     }
   }
+  l->u1 = sops->next_1d(st);
+  l->u2 = sops->next_2d(st);
+}
 
-  /* Continue the path by sampling the BSDF. */
-  bsdf_sample bs;
-  double u1 = sops->next_1d(st);
-  vec2 u2 = sops->next_2d(st);
-  color weight = b->ops->sample(b, si, u1, u2, &bs);
-  if (!(bs.pdf > 0) || col_is_black(weight)) return false;
-  vec3 wo_world = frame_to_world(&si->sh, bs.wo);
+/* BSDF samples of the lanes idx[0..n): lanes whose BSDF has a batched
+ * sample op are grouped by BSDF (one call per BSDF, vectorised at the
+ * render's ISA); the others sample one by one. The grouping does not
+ * change a lane's value (bsdf_ops.sample_batch). g: n ints of scratch. */
+static void wave_sample_bsdfs(lane *ln, const int *idx, int n, int *g) {
+  enum {
+    C = 64
+  };
+  int left = 0;
+  for (int k = 0; k < n; k++) {
+    lane *l = &ln[idx[k]];
+    const bsdf *b = l->si.shape->bsdf;
+    if (b->ops->sample_batch)
+      g[left++] = idx[k];
+    else
+      l->weight = b->ops->sample(b, &l->si, l->u1, l->u2, &l->bs);
+  }
+  while (left > 0) {
+    const bsdf *b = ln[g[0]].si.shape->bsdf;
+    const surface_interaction *si[C];
+    double u1[C];
+    vec2 u2[C];
+    bsdf_sample bs[C];
+    color w[C];
+    int take[C], m = 0, rest = 0;
+    for (int k = 0; k < left; k++) {
+      lane *l = &ln[g[k]];
+      if (m < C && l->si.shape->bsdf == b) {
+        take[m] = g[k];
+        si[m] = &l->si;
+        u1[m] = l->u1;
+        u2[m] = l->u2;
+        m++;
+      } else {
+        g[rest++] = g[k];
+      }
+    }
+    b->ops->sample_batch(b, m, si, u1, u2, bs, w);
+    for (int k = 0; k < m; k++) {
+      ln[take[k]].bs = bs[k];
+      ln[take[k]].weight = w[k];
+    }
+    left = rest;
+  }
+}
+
+/* The end of lane l's vertex: the continuation ray from its BSDF sample
+ * and the roulette. False: the path ends here. */
+static bool shade_continue(const integrator *it, sampler_state *st, lane *l) {
+  const sampler_ops *sops = st->s->ops;
+  const surface_interaction *si = &l->si;
+  const bsdf_sample *bs = &l->bs;
+  color weight = l->weight;
+  if (!(bs->pdf > 0) || col_is_black(weight)) return false;
+  vec3 wo_world = frame_to_world(&si->sh, bs->wo);
   l->ray = spawn_ray(si, wo_world);
   l->T = col_mul(l->T, weight);
-  l->eta *= bs.eta;
+  l->eta *= bs->eta;
   l->prev_si = *si;
-  l->prev_pdf = bs.pdf;
-  l->prev_delta = (bs.sampled_type & BSDF_DELTA) != 0;
+  l->prev_pdf = bs->pdf;
+  l->prev_delta = (bs->sampled_type & BSDF_DELTA) != 0;
   l->depth++;
   if (l->depth >= it->rr_depth) {
     double q = fmin(col_max(l->T) * l->eta * l->eta, 0.95);
@@ -351,10 +469,16 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
     }
     if (n_sh) wave_occluded(sc, ln, sh, n_sh, stats, timed);
     live = next;
+    wave_eval_bsdfs(ln, idx, live, sh);
+    for (int k = 0; k < live; k++) {
+      int i = idx[k];
+      shade_light(&st[i], &ln[i], quv ? &quv[3 * i] : NULL);
+    }
+    wave_sample_bsdfs(ln, idx, live, sh);
     next = 0;
     for (int k = 0; k < live; k++) {
       int i = idx[k];
-      if (shade_continue(it, &st[i], &ln[i], quv ? &quv[3 * i] : NULL)) idx[next++] = i;
+      if (shade_continue(it, &st[i], &ln[i])) idx[next++] = i;
     }
     live = next;
   }
