@@ -175,7 +175,8 @@ static int bench_seed(int threads) {
     fprintf(stderr, "bench seed_hdistant: %s: %s\n", err.where, err.msg);
     return 1;
   }
-  int rc = report("seed_hdistant", s, 3200, threads, 1.0, 0);
+  /* Issue 12's target on 2 cores: 0.8x Mitsuba 3's llvm_rgb (0.27 s). */
+  int rc = report("seed_hdistant", s, 3200, threads, 0.21, 0);
   scene_free(s);
   return rc;
 }
