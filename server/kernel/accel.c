@@ -1174,6 +1174,19 @@ static unsigned packet_n(int n) {
   return n <= 4 && w >= 4 ? 4u : n <= 8 && w >= 8 ? 8u : (unsigned)w;
 }
 
+/* Lanes [0, n) of an N-wide packet from r (the rest invalid); false when
+ * no lane holds a ray Embree can trace. */
+static bool packet_load(const accel *a, packet_buf *pb, unsigned N, const ray3 *const *r, int n) {
+  bool any = false;
+  for (unsigned i = 0; i < N; i++) {
+    if ((int)i < n)
+      any |= packet_fill(a, pb, N, i, r[i]);
+    else
+      pb->valid[i] = 0;
+  }
+  return any;
+}
+
 void accel_intersect_packet(const accel *a, const ray3 *const *r, int n, accel_hit *h, bool *hit,
                             bool coherent) {
   unsigned N = packet_n(n);
@@ -1190,13 +1203,7 @@ void accel_intersect_packet(const accel *a, const ray3 *const *r, int n, accel_h
   rtcInitIntersectContext(&ctx);
   if (coherent) ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
   packet_buf pb;
-  bool any = false;
-  for (unsigned i = 0; i < N; i++) {
-    if ((int)i < n)
-      any |= packet_fill(a, &pb, N, i, r[i]);
-    else
-      pb.valid[i] = 0;
-  }
+  bool any = packet_load(a, &pb, N, r, n);
   if (any) {
     packet_record(&pb, N, n, false);
     if (N == 16)
@@ -1244,13 +1251,7 @@ void accel_occluded_packet(const accel *a, const ray3 *const *r, int n, bool *oc
   struct RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   packet_buf pb;
-  bool any = false;
-  for (unsigned i = 0; i < N; i++) {
-    if ((int)i < n)
-      any |= packet_fill(a, &pb, N, i, r[i]);
-    else
-      pb.valid[i] = 0;
-  }
+  bool any = packet_load(a, &pb, N, r, n);
   if (any) {
     packet_record(&pb, N, n, true);
     if (N == 16)

@@ -26,14 +26,9 @@
 #include "../../server/kernel/core/rng.h"
 #include "../../server/kernel/render.h"
 #include "../../server/kernel/scene/scene.h"
+#include "bench.h"
 
 #define N_LEAVES 100000
-
-static double now_s(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return ts.tv_sec + 1e-9 * ts.tv_nsec;
-}
 
 static double rss_bytes(void) {
   FILE *f = fopen("/proc/self/status", "r");
@@ -104,12 +99,12 @@ int main(void) {
   rsw_err err = {0};
   scene *s = NULL;
   scene_load_opts lo = {.size = sizeof lo};
-  double t0 = now_s();
+  double t0 = bench_wall_s();
   if (scene_load_file(json, &lo, &s, &err)) {
     fprintf(stderr, "bench canopy_100k: %s: %s\n", err.where, err.msg);
     return 1;
   }
-  double load_s = now_s() - t0;
+  double load_s = bench_wall_s() - t0;
   double rss1 = rss_bytes(), emb1 = (double)accel_embree_bytes();
   render_opts o = {.size = sizeof o, .spp = spp, .seed = 1, .threads = threads};
   film_image img;

@@ -13,23 +13,13 @@
 #include <string.h>
 #include <time.h>
 
+#include "bench.h"
 #include "dataset_nc.h"
 
 #define NA 10
 #define NB 20
 #define W  64
 #define H  64
-
-static double now_s(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return ts.tv_sec + 1e-9 * ts.tv_nsec;
-}
-
-static int cmp_d(const void *a, const void *b) {
-  double x = *(const double *)a, y = *(const double *)b;
-  return x < y ? -1 : x > y;
-}
 
 int main(void) {
   enum {
@@ -84,15 +74,15 @@ int main(void) {
   size_t len = 0;
   for (int r = 0; r < 5; r++) {
     void *bytes = NULL;
-    double t0 = now_s();
+    double t0 = bench_wall_s();
     if (nc_dataset_encode(&d, &bytes, &len, &err) != RSW_OK) {
       fprintf(stderr, "bench_dataset_nc: %s\n", err.msg);
       return 1;
     }
-    t[r] = now_s() - t0;
+    t[r] = bench_wall_s() - t0;
     free(bytes);
   }
-  qsort(t, 5, sizeof t[0], cmp_d);
+  qsort(t, 5, sizeof t[0], bench_cmp_double);
   double film_mib = (double)N * W * H * 4 / (1 << 20);
   printf("{\"bench\":\"dataset_nc\",\"contexts\":%d,\"film\":\"%dx%d\",\"encode_s\":%.4f,\"film_mib\":%.2f,"
          "\"file_mib\":%.2f,\"mib_per_s\":%.1f}\n",

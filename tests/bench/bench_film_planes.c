@@ -12,12 +12,7 @@
 
 #include "../../server/kernel/render.h"
 #include "../../server/kernel/scene/scene.h"
-
-static double now_s(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return ts.tv_sec + 1e-9 * ts.tv_nsec;
-}
+#include "bench.h"
 
 int main(void) {
   const char *e = getenv("RSW_BENCH_THREADS");
@@ -52,12 +47,12 @@ int main(void) {
       render_opts o = {
           .size = sizeof o, .spp = spp, .threads = threads, .quantities = v[k].q, .variance = v[k].variance};
       film_image img;
-      double t0 = now_s();
+      double t0 = bench_wall_s();
       if (render_sensor(sc, &o, &img, NULL, &err)) {
         fprintf(stderr, "bench_film_planes: %s\n", err.msg);
         return 1;
       }
-      double t = now_s() - t0;
+      double t = bench_wall_s() - t0;
       if (t < best[k]) best[k] = t;
       film_image_free(&img);
     }

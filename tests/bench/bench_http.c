@@ -32,6 +32,7 @@
 #include "../../server/kernel/render.h"
 #include "../../server/kernel/scene/scene.h"
 #include "../support/daemon.h"
+#include "bench.h"
 
 static const char *SCENE =
     "{\"type\": \"scene\", \"variant\": \"mono\","
@@ -41,12 +42,6 @@ static const char *SCENE =
     " \"big\": {\"type\": \"hdistant\", \"film\": {\"type\": \"hdrfilm\", \"width\": 256, \"height\": 256}},"
     " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1]},"
     " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}";
-
-static double now_s(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return ts.tv_sec + 1e-9 * ts.tv_nsec;
-}
 
 typedef struct buf {
   char *p;
@@ -94,16 +89,11 @@ static long request(CURL *c, const char *method, const char *path, const char *b
   return status;
 }
 
-static int cmp_double(const void *a, const void *b) {
-  double x = *(const double *)a, y = *(const double *)b;
-  return x < y ? -1 : x > y;
-}
-
 /* Poll a job until it leaves queued/running; returns seconds. */
 static double wait_job(CURL *c, const char *job, const char *want, buf *b) {
   char path[128];
   snprintf(path, sizeof path, "/v1/jobs/%s", job);
-  double t0 = now_s();
+  double t0 = bench_wall_s();
   for (int i = 0; i < 200000; i++) {
     if (request(c, "GET", path, NULL, b) != 200) {
       usleep(1000);
@@ -113,7 +103,7 @@ static double wait_job(CURL *c, const char *job, const char *want, buf *b) {
     if (want && b->p && strstr(b->p, want)) break;
     usleep(1000); /* each poll costs the daemon CPU (job_overhead_cpu_us) */
   }
-  return now_s() - t0;
+  return bench_wall_s() - t0;
 }
 
 static bool json_string(const char *json, const char *key, char *out, size_t len) {
@@ -146,16 +136,10 @@ static double proc_cpu_s(pid_t pid) {
   return (double)(ut + st) / (double)sysconf(_SC_CLK_TCK);
 }
 
-static double self_cpu_s(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-  return ts.tv_sec + 1e-9 * ts.tv_nsec;
-}
-
 static double median(double *v, int n) {
   double t[64];
   memcpy(t, v, (size_t)n * sizeof *v);
-  qsort(t, (size_t)n, sizeof *t, cmp_double);
+  qsort(t, (size_t)n, sizeof *t, bench_cmp_double);
   return n % 2 ? t[n / 2] : 0.5 * (t[n / 2 - 1] + t[n / 2]);
 }
 
@@ -189,14 +173,14 @@ static double in_process_seconds(int n_ctx) {
   if (scene_load_memory(SCENE, strlen(SCENE), "bench", false, &lo, &sc, &err) == RSW_OK) {
     size_t si = 0;
     scene_find_sensor(sc, "meter", &si);
-    double t0 = now_s();
+    double t0 = bench_wall_s();
     for (int i = 0; i < n_ctx; i++) {
       render_opts o = {
           .size = sizeof o, .sensor = si, .spp = 1, .seed = (uint64_t)i, .wavelength = 400 + i % 300};
       film_image img;
       if (render_sensor(sc, &o, &img, NULL, &err) == RSW_OK) film_image_free(&img);
     }
-    s = now_s() - t0;
+    s = bench_wall_s() - t0;
     scene_free(sc);
   }
   return s;
@@ -235,16 +219,16 @@ int main(void) {
   snprintf(path, sizeof path, "/v1/scenes/%s:render", id);
   for (int i = 0; i < 20; i++) request(c, "POST", path, "{\"sensor\": \"meter\", \"spp\": 1}", &b);
   for (int i = 0; i < N_SYNC; i++) {
-    double t0 = now_s();
+    double t0 = bench_wall_s();
     st = request(c, "POST", path, "{\"sensor\": \"meter\", \"spp\": 1}", &b);
-    rt[i] = (now_s() - t0) * 1e3;
+    rt[i] = (bench_wall_s() - t0) * 1e3;
     if (st != 200) {
       fprintf(stderr, "bench http: render failed (%ld): %s\n", st, b.p);
       rc = 1;
       goto out;
     }
   }
-  qsort(rt, N_SYNC, sizeof *rt, cmp_double);
+  qsort(rt, N_SYNC, sizeof *rt, bench_cmp_double);
   /* A 1000-context job vs the same renders in process, REPS times. */
   enum {
     N_CTX = 1000,
@@ -255,13 +239,13 @@ int main(void) {
   snprintf(path, sizeof path, "/v1/scenes/%s/jobs", id);
   double diff_us[REPS], cpu_us[REPS], daemon_v[REPS], inproc_v[REPS], sub1k[REPS], sub20k[REPS];
   for (int r = 0; r < REPS && !rc; r++) {
-    double c_in0 = self_cpu_s();
+    double c_in0 = bench_process_cpu_s();
     inproc_v[r] = in_process_seconds(N_CTX);
-    double c_in = self_cpu_s() - c_in0; /* scene load included: a small bias against the daemon */
+    double c_in = bench_process_cpu_s() - c_in0; /* scene load included: a small bias against the daemon */
     double c_d0 = proc_cpu_s(pid);
-    double t0 = now_s();
+    double t0 = bench_wall_s();
     st = request(c, "POST", path, job, &b);
-    sub1k[r] = (now_s() - t0) / N_CTX * 1e6;
+    sub1k[r] = (bench_wall_s() - t0) / N_CTX * 1e6;
     char jid[64] = "";
     if (st != 202 || !json_string(b.p, "id", jid, sizeof jid)) {
       fprintf(stderr, "bench http: job submit failed (%ld): %s\n", st, b.p);
@@ -269,14 +253,14 @@ int main(void) {
       break;
     }
     wait_job(c, jid, NULL, &b);
-    daemon_v[r] = now_s() - t0;
+    daemon_v[r] = bench_wall_s() - t0;
     cpu_us[r] = (proc_cpu_s(pid) - c_d0 - c_in) / N_CTX * 1e6;
     diff_us[r] = (daemon_v[r] - inproc_v[r]) / N_CTX * 1e6;
     delete_job(c, jid, &b);
     /* Submission of 20k contexts: the POST alone; the job is cancelled. */
-    t0 = now_s();
+    t0 = bench_wall_s();
     st = request(c, "POST", path, big_job, &b);
-    sub20k[r] = (now_s() - t0) / N_BIG * 1e6;
+    sub20k[r] = (bench_wall_s() - t0) / N_BIG * 1e6;
     if (st != 202 || !json_string(b.p, "id", jid, sizeof jid)) {
       fprintf(stderr, "bench http: 20k job submit failed (%ld): %.300s\n", st, b.p);
       rc = 1;
@@ -296,7 +280,7 @@ int main(void) {
   double per_ctx_us = median(diff_us, REPS), cpu_ctx_us = median(cpu_us, REPS);
   double daemon_s = median(daemon_v, REPS), inproc_s = median(inproc_v, REPS);
   double submit_1k = median(sub1k, REPS), submit_20k = median(sub20k, REPS);
-  qsort(diff_sorted, REPS, sizeof *diff_sorted, cmp_double);
+  qsort(diff_sorted, REPS, sizeof *diff_sorted, bench_cmp_double);
   double t0;
   /* Cancel latency: a job of long renders. */
   char big[512];
@@ -317,19 +301,19 @@ int main(void) {
     usleep(100000);
     char cp[128];
     snprintf(cp, sizeof cp, "/v1/jobs/%s:cancel", cid);
-    t0 = now_s();
+    t0 = bench_wall_s();
     request(c, "POST", cp, "", &b);
     wait_job(c, cid, "\"state\":\"cancelled\"", &b);
-    cancel_ms = (now_s() - t0) * 1e3;
+    cancel_ms = (bench_wall_s() - t0) * 1e3;
   }
   /* Deadline latency: the long render stops at timeout_s (504). */
   double deadline_ms = -1;
   {
     char rp[256];
     snprintf(rp, sizeof rp, "/v1/scenes/%s:render", id);
-    t0 = now_s();
+    t0 = bench_wall_s();
     long rs = request(c, "POST", rp, "{\"sensor\": \"big\", \"spp\": 4096, \"timeout_s\": 0.05}", &b);
-    if (rs == 504) deadline_ms = (now_s() - t0) * 1e3;
+    if (rs == 504) deadline_ms = (bench_wall_s() - t0) * 1e3;
   }
   double p99 = rt[(N_SYNC * 99) / 100];
   printf("{\"bench\": \"http\", \"job_overhead_us_per_context\": %.1f, \"job_overhead_us_min\": %.1f, "

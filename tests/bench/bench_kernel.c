@@ -42,29 +42,7 @@
 #include "../../server/kernel/render.h"
 #include "../../server/kernel/scene/params.h"
 #include "../../server/kernel/scene/scene.h"
-
-static int bench_threads(void) {
-  const char *e = getenv("RSW_BENCH_THREADS");
-  int t = e ? atoi(e) : 0;
-  if (t <= 0) t = (int)sysconf(_SC_NPROCESSORS_ONLN);
-  return t < 1 ? 1 : t;
-}
-
-static double now_s(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return ts.tv_sec + 1e-9 * ts.tv_nsec;
-}
-
-static int cmp_double(const void *a, const void *b) {
-  double x = *(const double *)a, y = *(const double *)b;
-  return x < y ? -1 : x > y;
-}
-
-static double median(double *v, size_t n) {
-  qsort(v, n, sizeof *v, cmp_double);
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
+#include "bench.h"
 
 /* Each figure is the median of REPEATS runs (render, ceiling and flat
  * ceiling interleaved, so a slow spell of the machine hits all three). */
@@ -95,8 +73,8 @@ static double bench_replay_ceiling(scene *s, uint32_t spp, double rays_per_sampl
     f[r] = ok ? accel_replay_rays_per_s(s, lg, threads, true) : 0;
   }
   accel_ray_log_free(lg);
-  *flat_replay = median(f, REPEATS);
-  return median(v, REPEATS);
+  *flat_replay = bench_median(f, REPEATS);
+  return bench_median(v, REPEATS);
 }
 
 static int report(const char *name, scene *s, uint32_t spp, int threads, double target_wall,
@@ -135,7 +113,8 @@ static int report(const char *name, scene *s, uint32_t spp, int threads, double 
     ceil_v[r] = accel_ceiling_rays_per_s(s, false, n, threads, 7 + (uint64_t)r);
     flat_v[r] = accel_ceiling_rays_per_s(s, true, n, threads, 7 + (uint64_t)r);
   }
-  double w = median(wall, REPEATS), ceiling = median(ceil_v, REPEATS), flat = median(flat_v, REPEATS);
+  double w = bench_median(wall, REPEATS), ceiling = bench_median(ceil_v, REPEATS),
+         flat = bench_median(flat_v, REPEATS);
   double rps = rays / w;
   double flat_replay = 0;
   double replay = bench_replay_ceiling(s, spp, samples ? rays / (double)samples : 1, threads, &flat_replay);
@@ -154,7 +133,7 @@ static int report(const char *name, scene *s, uint32_t spp, int threads, double 
          rsw_isa_name(rsw_isa_get()), flat_replay, replay > 0 ? flat_replay / replay : 0);
   /* Process CPU time of one render (median): what a loaded machine's
    * wall time hides. */
-  double c = median(cpu, REPEATS);
+  double c = bench_median(cpu, REPEATS);
   printf(", \"cpu_s\": %.4f, \"cpu_ns_per_sample\": %.1f", c, samples > 0 ? c * 1e9 / (double)samples : 0);
   if (target_wall > 0)
     printf(", \"target_wall_s\": %.2f, \"meets_target\": %s", target_wall,
@@ -303,12 +282,12 @@ static int bench_params(void) {
   rsw_err err = {0};
   scene *s = NULL;
   scene_load_opts lo = {.size = sizeof lo};
-  double t0 = now_s();
+  double t0 = bench_wall_s();
   if (scene_load_memory(json, strlen(json), "params_1m", false, &lo, &s, &err)) {
     fprintf(stderr, "bench params_1m: %s: %s\n", err.where, err.msg);
     return 1;
   }
-  double load_s = now_s() - t0;
+  double load_s = bench_wall_s() - t0;
   int rc = 0;
   /* Spectral: alternate between two values (equal values are no-ops). */
   enum {
@@ -318,11 +297,11 @@ static int bench_params(void) {
   param_update up = {.key = "terrain.bsdf.reflectance.value", .value = {.kind = PV_NUMBER}};
   for (int i = 0; i < N_SPECTRAL && !rc; i++) {
     up.value.num = (i & 1) ? 0.4 : 0.5;
-    double a = now_s();
+    double a = bench_wall_s();
     if (scene_update(s, &up, 1, NULL, &err)) rc = 1;
-    us[i] = (now_s() - a) * 1e6;
+    us[i] = (bench_wall_s() - a) * 1e6;
   }
-  double spectral_us = median(us, N_SPECTRAL);
+  double spectral_us = bench_median(us, N_SPECTRAL);
   /* to_world: instance transform, top-level rebuild only. */
   double xf_s[5];
   double m1[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1},
@@ -330,9 +309,9 @@ static int bench_params(void) {
   param_update ux = {.key = "terrain.to_world", .value = {.kind = PV_ARRAY, .n = 16}};
   for (int i = 0; i < 5 && !rc; i++) {
     ux.value.arr = (i & 1) ? m1 : m2;
-    double a = now_s();
+    double a = bench_wall_s();
     if (scene_update(s, &ux, 1, NULL, &err)) rc = 1;
-    xf_s[i] = now_s() - a;
+    xf_s[i] = bench_wall_s() - a;
   }
   /* vertex_positions: same count, object space; refit of the mesh's BVH. */
   const shape *sh = s->shapes[0];
@@ -350,9 +329,9 @@ static int bench_params(void) {
   for (int i = 0; i < 3 && !rc && pos[0] && pos[1]; i++) {
     uv.value.arr = pos[i & 1];
     update_report rep;
-    double a = now_s();
+    double a = bench_wall_s();
     if (scene_update(s, &uv, 1, &rep, &err)) rc = 1;
-    vx_s[i] = now_s() - a;
+    vx_s[i] = bench_wall_s() - a;
     refits += rep.refits;
   }
   free(pos[0]);
@@ -360,7 +339,7 @@ static int bench_params(void) {
   if (rc) {
     fprintf(stderr, "bench params_1m: %s: %s\n", err.where, err.msg);
   } else {
-    double xf = median(xf_s, 5), vx = median(vx_s, 3);
+    double xf = bench_median(xf_s, 5), vx = bench_median(vx_s, 3);
     printf("{\"bench\": \"params_1m\", \"triangles\": %u, \"load_s\": %.4f, \"spectral_update_us\": %.3f, "
            "\"to_world_update_s\": %.6f, \"vertex_update_s\": %.4f, \"load_over_spectral_update\": %.4g, "
            "\"vertex_update_over_load\": %.3f, \"refits\": %u, \"target_spectral_update_us\": 50, "

@@ -33,34 +33,10 @@
 #include "../../server/kernel/scene/scene.h"
 #include "../../server/kernel/textures/texture.h"
 #include "../support/bsdf_test.h"
+#include "bench.h"
 
 #define REPEATS 5
 #define NDIR    4096
-
-/* Per-call figures use this thread's CPU time, not wall time: on a shared
- * machine a thread that is descheduled does not count against the code. */
-static double now_s(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return ts.tv_sec + 1e-9 * ts.tv_nsec;
-}
-
-/* CPU seconds of the whole process (all render threads). */
-static double process_cpu_s(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-  return ts.tv_sec + 1e-9 * ts.tv_nsec;
-}
-
-static int cmp_double(const void *a, const void *b) {
-  double x = *(const double *)a, y = *(const double *)b;
-  return x < y ? -1 : x > y;
-}
-
-static double median(double *v, size_t n) {
-  qsort(v, n, sizeof *v, cmp_double);
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
 
 static bool wanted(const char *name) {
   const char *only = getenv("RSW_BENCH_ONLY");
@@ -101,7 +77,7 @@ static void bench_bsdf(const char *name, const bsdf *b, int op) {
   double t[REPEATS], sink = 0;
   surface_interaction si = tb_si_with(v3(0, 0, 1));
   for (int rep = 0; rep < REPEATS; rep++) {
-    double t0 = now_s();
+    double t0 = bench_thread_cpu_s();
     for (int i = 0; i < N; i++) {
       si.wi = dirs[i & (NDIR - 1)];
       vec2 u = us[(i * 7 + 3) & (NDIR - 1)];
@@ -115,9 +91,9 @@ static void bench_bsdf(const char *name, const bsdf *b, int op) {
         sink += b->ops->pdf(b, &si, dirs[(i * 5 + 1) & (NDIR - 1)]);
       }
     }
-    t[rep] = (now_s() - t0) * 1e9 / N;
+    t[rep] = (bench_thread_cpu_s() - t0) * 1e9 / N;
   }
-  emit(name, median(t, REPEATS), sink);
+  emit(name, bench_median(t, REPEATS), sink);
 }
 
 static void bench_rough(void) {
@@ -177,16 +153,16 @@ static void bench_sampler(const char *name, const sampler *smp) {
   const int N = 1000000;
   double t[REPEATS], sink = 0;
   for (int rep = 0; rep < REPEATS; rep++) {
-    double t0 = now_s();
+    double t0 = bench_thread_cpu_s();
     for (int i = 0; i < N; i++) {
       sampler_state st;
       smp->ops->start(smp, &st, 1, (uint64_t)(i >> 6), (uint32_t)(i & 63), 64);
       vec2 a = smp->ops->next_2d(&st), b = smp->ops->next_2d(&st);
       sink += a.x + b.y;
     }
-    t[rep] = (now_s() - t0) * 1e9 / N;
+    t[rep] = (bench_thread_cpu_s() - t0) * 1e9 / N;
   }
-  emit(name, median(t, REPEATS), sink);
+  emit(name, bench_median(t, REPEATS), sink);
 }
 
 static void bench_sensor(const char *name, const sensor *se) {
@@ -194,15 +170,15 @@ static void bench_sensor(const char *name, const sensor *se) {
   const int N = 1000000;
   double t[REPEATS], sink = 0;
   for (int rep = 0; rep < REPEATS; rep++) {
-    double t0 = now_s();
+    double t0 = bench_thread_cpu_s();
     for (int i = 0; i < N; i++) {
       ray3 ray;
       double w = se->ops->sample_ray(se, us[i & (NDIR - 1)], us[(i * 3 + 1) & (NDIR - 1)], &ray);
       sink += w + ray.d.x + ray.o.y;
     }
-    t[rep] = (now_s() - t0) * 1e9 / N;
+    t[rep] = (bench_thread_cpu_s() - t0) * 1e9 / N;
   }
-  emit(name, median(t, REPEATS), sink);
+  emit(name, bench_median(t, REPEATS), sink);
 }
 
 static void bench_area(const scene *s) {
@@ -216,22 +192,15 @@ static void bench_area(const scene *s) {
   surface_interaction ref = tb_si_with(v3(0, 0, 1));
   ref.p = v3(0, -0.99, 0);
   for (int rep = 0; rep < REPEATS; rep++) {
-    double t0 = now_s();
+    double t0 = bench_thread_cpu_s();
     for (int i = 0; i < N; i++) {
       direction_sample ds;
       color c = e->ops->sample_direction(e, &ref, us[i & (NDIR - 1)], &ds);
       sink += c.c[0] + ds.pdf;
     }
-    t[rep] = (now_s() - t0) * 1e9 / N;
+    t[rep] = (bench_thread_cpu_s() - t0) * 1e9 / N;
   }
-  emit("area_sample", median(t, REPEATS), sink);
-}
-
-static int bench_threads(void) {
-  const char *e = getenv("RSW_BENCH_THREADS");
-  int t = e ? atoi(e) : 0;
-  if (t <= 0) t = (int)sysconf(_SC_NPROCESSORS_ONLN);
-  return t < 1 ? 1 : t;
+  emit("area_sample", bench_median(t, REPEATS), sink);
 }
 
 static void bench_render(const char *name, scene *s) {
@@ -242,16 +211,16 @@ static void bench_render(const char *name, scene *s) {
   render_result_stats st = {0};
   for (int rep = 0; rep < 3; rep++) {
     film_image img;
-    double c0 = process_cpu_s();
+    double c0 = bench_process_cpu_s();
     if (render_sensor(s, &o, &img, &st, &err)) {
       fprintf(stderr, "bench %s: %s\n", name, err.msg);
       return;
     }
-    c[rep] = process_cpu_s() - c0;
+    c[rep] = bench_process_cpu_s() - c0;
     film_image_free(&img);
     t[rep] = st.wall_s;
   }
-  double w = median(t, 3), cpu = median(c, 3);
+  double w = bench_median(t, 3), cpu = bench_median(c, 3);
   printf("{\"bench\": \"%s\", \"wall_s\": %.4f, \"cpu_s\": %.4f, \"samples_per_s\": %.4g, "
          "\"ns_per_sample_per_core\": %.1f, \"ns_per_sample_cpu\": %.1f, \"threads\": %d, \"repeats\": 3}\n",
          name, w, cpu, st.samples / w, w * 1e9 * st.threads / (double)st.samples,

@@ -19,20 +19,10 @@
 #include "../../server/kernel/core/rng.h"
 #include "../../server/kernel/shapes/instance.h"
 #include "../support/tsup.h"
+#include "bench.h"
 
 #define REPEATS 5
 #define NHITS   4096
-
-static double now_s(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return ts.tv_sec + 1e-9 * ts.tv_nsec;
-}
-
-static int cmp_double(const void *a, const void *b) {
-  double x = *(const double *)a, y = *(const double *)b;
-  return x < y ? -1 : x > y;
-}
 
 static bool wanted(const char *name) {
   const char *only = getenv("RSW_BENCH_ONLY");
@@ -66,16 +56,16 @@ static int bench_fill(const char *name, scene *s, vec3 lo, vec3 hi) {
   const int N = 1000000;
   double t[REPEATS], sink = 0;
   for (int rep = 0; rep < REPEATS; rep++) {
-    double t0 = now_s();
+    double t0 = bench_thread_cpu_s();
     for (int i = 0; i < N; i++) {
       surface_interaction si;
       int k = i % n;
       hit_fill_interaction(s, &rays[k], &hits[k], &si);
       sink += si.p.x + si.sh.s.y + si.wi.z;
     }
-    t[rep] = (now_s() - t0) * 1e9 / N;
+    t[rep] = (bench_thread_cpu_s() - t0) * 1e9 / N;
   }
-  qsort(t, REPEATS, sizeof t[0], cmp_double);
+  qsort(t, REPEATS, sizeof t[0], bench_cmp_double);
   printf("{\"bench\": \"%s\", \"ns_per_hit\": %.2f, \"hits\": %d, \"repeats\": %d, \"checksum\": %.6g}\n",
          name, t[REPEATS / 2], n, REPEATS, sink);
   fflush(stdout);

@@ -11,6 +11,7 @@
  * restart that lost them fails the bench. job_us_per_context: the
  * 1,000-context job's wall time per context with the state directory
  * (each film written and fdatasync'ed before it counts). */
+#include "bench.h"
 #include <curl/curl.h>
 #include <signal.h>
 #include <stdio.h>
@@ -30,12 +31,6 @@ static const char *SCENE =
 
 #define N_CONTEXTS 1000
 #define REPS       5
-
-static double now_s(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return ts.tv_sec + 1e-9 * ts.tv_nsec;
-}
 
 typedef struct buf {
   char *p;
@@ -107,7 +102,7 @@ static double wait_ready(CURL *c, const char *portfile, double t0) {
     }
     if (port && request(c, "GET", "/v1/health/ready", NULL, &b) == 200) {
       free(b.p);
-      return now_s() - t0;
+      return bench_wall_s() - t0;
     }
     usleep(500);
   }
@@ -120,16 +115,6 @@ static void stop(pid_t pid) {
   waitpid(pid, NULL, 0);
 }
 
-static int cmp_d(const void *a, const void *b) {
-  double x = *(const double *)a, y = *(const double *)b;
-  return x < y ? -1 : x > y;
-}
-
-static double median(double *v, int n) {
-  qsort(v, (size_t)n, sizeof *v, cmp_d);
-  return v[n / 2];
-}
-
 int main(void) {
   curl_global_init(CURL_GLOBAL_DEFAULT);
   CURL *c = curl_easy_init();
@@ -140,7 +125,7 @@ int main(void) {
   buf b = {0};
   /* Fill the state directory: one job of 1,000 contexts. */
   pid_t pid = start(dir, portfile);
-  if (wait_ready(c, portfile, now_s()) < 0) {
+  if (wait_ready(c, portfile, bench_wall_s()) < 0) {
     fprintf(stderr, "bench_state: the daemon did not start\n");
     return 1;
   }
@@ -157,7 +142,7 @@ int main(void) {
   snprintf(body + n, cap - n, "]}");
   char path[256];
   snprintf(path, sizeof path, "/v1/scenes/%s/jobs", id);
-  double t_submit = now_s();
+  double t_submit = bench_wall_s();
   if (request(c, "POST", path, body, &b) != 202) {
     fprintf(stderr, "bench_state: job refused: %s\n", b.p);
     return 1;
@@ -176,11 +161,11 @@ int main(void) {
     fprintf(stderr, "bench_state: the job did not finish: %s\n", b.p);
     return 1;
   }
-  double job_us = (now_s() - t_submit) / N_CONTEXTS * 1e6;
+  double job_us = (bench_wall_s() - t_submit) / N_CONTEXTS * 1e6;
   stop(pid);
   double t[REPS], t0s[REPS], restore = 0;
   for (int r = 0; r < REPS; r++) {
-    double t0 = now_s();
+    double t0 = bench_wall_s();
     pid = start(dir, portfile);
     t[r] = wait_ready(c, portfile, t0);
     snprintf(path, sizeof path, "/v1/jobs/%s/results/c%d/meter", job, N_CONTEXTS - 1);
@@ -193,14 +178,14 @@ int main(void) {
       fprintf(stderr, "bench_state: restart %d: ready %.3f s, result %ld\n", r, t[r], st);
       return 1;
     }
-    t0 = now_s();
+    t0 = bench_wall_s();
     pid = start(empty, portfile);
     t0s[r] = wait_ready(c, portfile, t0);
     stop(pid);
   }
   printf("{\"bench\": \"state\", \"restart_s\": %.4f, \"restart_s_empty\": %.4f, \"restore_s\": %.4f, "
          "\"results\": %d, \"reps\": %d, \"job_us_per_context\": %.0f}\n",
-         median(t, REPS), median(t0s, REPS), restore, N_CONTEXTS, REPS, job_us);
+         bench_median(t, REPS), bench_median(t0s, REPS), restore, N_CONTEXTS, REPS, job_us);
   free(b.p);
   char cmd[256];
   snprintf(cmd, sizeof cmd, "rm -rf '%s' '%s' '%s'", dir, empty, portfile);

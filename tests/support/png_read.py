@@ -8,8 +8,17 @@ import sys
 import zlib
 
 
-def read_png(path):
-    data = open(path, "rb").read()
+CHANNELS = {0: 1, 2: 3, 6: 4}  # PNG colour type: grey, RGB, RGBA
+
+
+def read_png(path, ctypes=(0, 2)):
+    """raysweep's quick-looks: 8-bit grey or RGB only."""
+    return decode_png(open(path, "rb").read(), ctypes)
+
+
+def decode_png(data, ctypes):
+    """(width, height, channels, rows of bytes) of an 8-bit, non-interlaced
+    PNG whose colour type is one of ctypes (0 grey, 2 RGB, 6 RGBA)."""
     if data[:8] != b"\x89PNG\r\n\x1a\n":
         raise ValueError("not a PNG signature")
     pos, idat, ihdr = 8, b"", None
@@ -26,9 +35,10 @@ def read_png(path):
             break
         pos += 12 + n
     w, h, depth, ctype, _, _, interlace = ihdr
-    if depth != 8 or interlace != 0 or ctype not in (0, 2):
-        raise ValueError("want 8-bit grey or RGB, non-interlaced")
-    ch = 1 if ctype == 0 else 3
+    if depth != 8 or interlace != 0 or ctype not in ctypes:
+        raise ValueError("want 8-bit, non-interlaced, colour type in %s (got depth %d, type %d, interlace %d)" %
+                         (ctypes, depth, ctype, interlace))
+    ch = CHANNELS[ctype]
     raw, stride = zlib.decompress(idat), w * ch
     rows, prev = [], bytearray(stride)
     for y in range(h):

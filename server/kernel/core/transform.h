@@ -27,8 +27,7 @@ bool xf_look_at(vec3 origin, vec3 target, vec3 up, xform *out);
 
 /* Applying a transform: inline, as every sample and hit does it several
  * times (the same arithmetic as a call, so the same bits). */
-static inline vec3 xf_point(const xform *t, vec3 p) {
-  const double(*m)[4] = t->m;
+static inline vec3 mat_point(const double (*m)[4], vec3 p) {
   double x = m[0][0] * p.x + m[0][1] * p.y + m[0][2] * p.z + m[0][3];
   double y = m[1][0] * p.x + m[1][1] * p.y + m[1][2] * p.z + m[1][3];
   double z = m[2][0] * p.x + m[2][1] * p.y + m[2][2] * p.z + m[2][3];
@@ -36,10 +35,15 @@ static inline vec3 xf_point(const xform *t, vec3 p) {
   if (w != 1.0) return v3(x / w, y / w, z / w);
   return v3(x, y, z);
 }
-static inline vec3 xf_vector(const xform *t, vec3 v) {
-  const double(*m)[4] = t->m;
+static inline vec3 mat_vector(const double (*m)[4], vec3 v) {
   return v3(m[0][0] * v.x + m[0][1] * v.y + m[0][2] * v.z, m[1][0] * v.x + m[1][1] * v.y + m[1][2] * v.z,
             m[2][0] * v.x + m[2][1] * v.y + m[2][2] * v.z);
+}
+static inline vec3 xf_point(const xform *t, vec3 p) {
+  return mat_point(t->m, p);
+}
+static inline vec3 xf_vector(const xform *t, vec3 v) {
+  return mat_vector(t->m, v);
 }
 /* Inverse transpose, not normalised. */
 static inline vec3 xf_normal(const xform *t, vec3 n) {
@@ -49,18 +53,10 @@ static inline vec3 xf_normal(const xform *t, vec3 n) {
 }
 /* By the stored inverse (the same bits as xf_point of xf_inverse(t)). */
 static inline vec3 xf_inv_point(const xform *t, vec3 p) {
-  const double(*m)[4] = t->inv;
-  double x = m[0][0] * p.x + m[0][1] * p.y + m[0][2] * p.z + m[0][3];
-  double y = m[1][0] * p.x + m[1][1] * p.y + m[1][2] * p.z + m[1][3];
-  double z = m[2][0] * p.x + m[2][1] * p.y + m[2][2] * p.z + m[2][3];
-  double w = m[3][0] * p.x + m[3][1] * p.y + m[3][2] * p.z + m[3][3];
-  if (w != 1.0) return v3(x / w, y / w, z / w);
-  return v3(x, y, z);
+  return mat_point(t->inv, p);
 }
 static inline vec3 xf_inv_vector(const xform *t, vec3 v) {
-  const double(*m)[4] = t->inv;
-  return v3(m[0][0] * v.x + m[0][1] * v.y + m[0][2] * v.z, m[1][0] * v.x + m[1][1] * v.y + m[1][2] * v.z,
-            m[2][0] * v.x + m[2][1] * v.y + m[2][2] * v.z);
+  return mat_vector(t->inv, v);
 }
 bool xf_is_identity(const xform *t);
 /* True when the upper 3x3 is a rotation times a uniform scale (within a

@@ -296,6 +296,22 @@ static bool shade_emit_and_light(const integrator *it, const scene *sc, sampler_
   return true;
 }
 
+/* Lanes g[0..*left) wait for a batched BSDF call: move up to `cap` of
+ * those whose BSDF is g[0]'s into take[] (in lane order), keep the rest in
+ * g (in order), and return how many were taken; *b is their BSDF. */
+static int take_bsdf_group(const lane *ln, int *g, int *left, int *take, int cap, const bsdf **b) {
+  *b = ln[g[0]].si.shape->bsdf;
+  int m = 0, rest = 0;
+  for (int k = 0; k < *left; k++) {
+    if (m < cap && ln[g[k]].si.shape->bsdf == *b)
+      take[m++] = g[k];
+    else
+      g[rest++] = g[k];
+  }
+  *left = rest;
+  return m;
+}
+
 /* The light samples of lanes idx[0..n) whose shadow ray was clear: the
  * BSDF's value and pdf towards each (l->nf, l->npdf), grouped by BSDF
  * through bsdf_ops.eval_pdf_batch where a BSDF has it, else per lane. A
@@ -319,29 +335,22 @@ static void wave_eval_bsdfs(lane *ln, const int *idx, int n, int *g) {
     }
   }
   while (left > 0) {
-    const bsdf *b = ln[g[0]].si.shape->bsdf;
+    const bsdf *b;
     const surface_interaction *si[C];
     vec3 wo[C];
     color f[C];
     double pdf[C];
-    int take[C], m = 0, rest = 0;
-    for (int k = 0; k < left; k++) {
-      lane *l = &ln[g[k]];
-      if (m < C && l->si.shape->bsdf == b) {
-        take[m] = g[k];
-        si[m] = &l->si;
-        wo[m] = l->nwo;
-        m++;
-      } else {
-        g[rest++] = g[k];
-      }
+    int take[C];
+    int m = take_bsdf_group(ln, g, &left, take, C, &b);
+    for (int k = 0; k < m; k++) {
+      si[k] = &ln[take[k]].si;
+      wo[k] = ln[take[k]].nwo;
     }
     b->ops->eval_pdf_batch(b, m, si, wo, f, pdf);
     for (int k = 0; k < m; k++) {
       ln[take[k]].nf = f[k];
       ln[take[k]].npdf = pdf[k];
     }
-    left = rest;
   }
 }
 
@@ -385,31 +394,24 @@ static void wave_sample_bsdfs(lane *ln, const int *idx, int n, int *g) {
       l->weight = b->ops->sample(b, &l->si, l->u1, l->u2, &l->bs);
   }
   while (left > 0) {
-    const bsdf *b = ln[g[0]].si.shape->bsdf;
+    const bsdf *b;
     const surface_interaction *si[C];
     double u1[C];
     vec2 u2[C];
     bsdf_sample bs[C];
     color w[C];
-    int take[C], m = 0, rest = 0;
-    for (int k = 0; k < left; k++) {
-      lane *l = &ln[g[k]];
-      if (m < C && l->si.shape->bsdf == b) {
-        take[m] = g[k];
-        si[m] = &l->si;
-        u1[m] = l->u1;
-        u2[m] = l->u2;
-        m++;
-      } else {
-        g[rest++] = g[k];
-      }
+    int take[C];
+    int m = take_bsdf_group(ln, g, &left, take, C, &b);
+    for (int k = 0; k < m; k++) {
+      si[k] = &ln[take[k]].si;
+      u1[k] = ln[take[k]].u1;
+      u2[k] = ln[take[k]].u2;
     }
     b->ops->sample_batch(b, m, si, u1, u2, bs, w);
     for (int k = 0; k < m; k++) {
       ln[take[k]].bs = bs[k];
       ln[take[k]].weight = w[k];
     }
-    left = rest;
   }
 }
 
