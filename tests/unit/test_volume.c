@@ -557,6 +557,8 @@ static void test_grid_errors(void) {
        "/v/wrap_mode"},
       {"\"shape\": [1, 1, 2], \"data\": [1, 2], \"use_grid_bbox\": true", "needs a .vol 'filename'",
        "/v/use_grid_bbox"},
+      {"\"shape\": [1, 1, 1], \"wavelengths\": 500, \"data\": [1]", "at least 2 wavelengths",
+       "/v/wavelengths"},
       {"\"shape\": [1, 1, 1], \"wavelengths\": [500, 400], \"data\": [1, 2]", "strictly increasing",
        "/v/wavelengths"},
       {"\"shape\": [1, 1, 1, 3], \"wavelengths\": [500, 600], \"data\": [1, 2]",

@@ -150,7 +150,7 @@ static void evaluate(gridvolume *g, double wl) {
       else
         hi = mid;
     }
-    double t = g->n_wl == 1 ? 0.0 : (wl - g->wl[lo]) / (g->wl[hi] - g->wl[lo]);
+    double t = (wl - g->wl[lo]) / (g->wl[hi] - g->wl[lo]);
     for (size_t i = 0; i < cells; i++) {
       const double *s = g->src + i * g->src_ch;
       g->grid[i] = s[lo] + t * (s[hi] - s[lo]);
@@ -424,6 +424,9 @@ static rsw_status gridvolume_fill(loader *ld, node *n, gridvolume *g) {
     if (ld->variant != VARIANT_MONO)
       return ld_fail(ld, n, "wavelengths", RSW_ERR_UNSUPPORTED,
                      "property 'wavelengths': tabulated spectra per cell need the mono variant");
+    if (g->n_wl < 2)
+      return ld_fail(ld, n, "wavelengths", RSW_ERR_INVALID,
+                     "property 'wavelengths' needs at least 2 wavelengths (a table per cell)");
     for (size_t i = 0; i < g->n_wl; i++)
       if (!(g->wl[i] > 0) || (i && !(g->wl[i] > g->wl[i - 1])))
         return ld_fail(ld, n, "wavelengths", RSW_ERR_INVALID,
