@@ -131,6 +131,10 @@ enum bsdf_flags {
   BSDF_GLOSSY_TRANSMISSION = 1u << 4,
   BSDF_DELTA_TRANSMISSION = 1u << 5,
   BSDF_TWO_SIDED = 1u << 6, /* reflects from both sides (twosided) */
+  /* `null`: an index-matched boundary that light crosses unchanged
+   * (Mitsuba's BSDFFlags::Null); volumetric integrators pass through it,
+   * shadow rays included (its sample is a delta transmission). */
+  BSDF_INDEX_MATCHED = 1u << 7,
 };
 #define BSDF_SMOOTH                                                                                          \
   (BSDF_DIFFUSE_REFLECTION | BSDF_GLOSSY_REFLECTION | BSDF_DIFFUSE_TRANSMISSION | BSDF_GLOSSY_TRANSMISSION)
@@ -429,6 +433,10 @@ struct medium {
   bool is_homogeneous;          /* coefficients do not depend on position */
   bool has_spectral_extinction; /* sigma_t differs between channels */
   bool sample_emitters;         /* NEE from scattering events (Mitsuba's sample_emitters, default true) */
+  /* sigma_s = 0 wherever sigma_t > 0 (albedo 0; set by prepare): the
+   * volumetric integrators then weight a flight by its transmittance
+   * instead of sampling collisions (exact for analytic media). */
+  bool absorbing_only;
 };
 
 /* ---- integrators --------------------------------------------------------- */
