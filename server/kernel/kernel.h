@@ -353,6 +353,10 @@ typedef struct volume_ops {
    * one-channel grids in rgb: likewise). Outside the box: the plugin's
    * wrap mode (Mitsuba's default clamps to the nearest cell). */
   color (*eval)(const volume *v, vec3 p);
+  /* Smallest and largest value the volume holds in any cell and channel
+   * (for tabulated spectra per cell: over every sample of the tables),
+   * whatever the wavelength: ld_volume checks it against its slot's range. */
+  void (*value_range)(const volume *v, double *lo, double *hi);
 } volume_ops;
 struct volume {
   object base;
@@ -363,6 +367,10 @@ struct volume {
   uint32_t channels;       /* 1 or 3 */
   const double *data;      /* res[0] res[1] res[2] channels values (owned by the plugin) */
   double max;              /* largest value over cells and channels (majorants) */
+  /* Values the volume may take: the intersection of the ranges of the
+   * slots that hold it (ld_volume), checked again on every update of its
+   * parameters. [-inf, inf] when no slot constrains it. */
+  double lo, hi;
 };
 
 /* ---- phase functions and media ------------------------------------------- */
