@@ -131,6 +131,10 @@ enum bsdf_flags {
   BSDF_GLOSSY_TRANSMISSION = 1u << 4,
   BSDF_DELTA_TRANSMISSION = 1u << 5,
   BSDF_TWO_SIDED = 1u << 6, /* reflects from both sides (twosided) */
+  /* `null`: an index-matched boundary that light crosses unchanged
+   * (Mitsuba's BSDFFlags::Null); volumetric integrators pass through it,
+   * shadow rays included (its sample is a delta transmission). */
+  BSDF_INDEX_MATCHED = 1u << 7,
 };
 #define BSDF_SMOOTH                                                                                          \
   (BSDF_DIFFUSE_REFLECTION | BSDF_GLOSSY_REFLECTION | BSDF_DIFFUSE_TRANSMISSION | BSDF_GLOSSY_TRANSMISSION)
@@ -349,6 +353,10 @@ typedef struct volume_ops {
    * one-channel grids in rgb: likewise). Outside the box: the plugin's
    * wrap mode (Mitsuba's default clamps to the nearest cell). */
   color (*eval)(const volume *v, vec3 p);
+  /* Smallest and largest value the volume holds in any cell and channel
+   * (for tabulated spectra per cell: over every sample of the tables),
+   * whatever the wavelength: ld_volume checks it against its slot's range. */
+  void (*value_range)(const volume *v, double *lo, double *hi);
 } volume_ops;
 struct volume {
   object base;
@@ -359,6 +367,10 @@ struct volume {
   uint32_t channels;       /* 1 or 3 */
   const double *data;      /* res[0] res[1] res[2] channels values (owned by the plugin) */
   double max;              /* largest value over cells and channels (majorants) */
+  /* Values the volume may take: the intersection of the ranges of the
+   * slots that hold it (ld_volume), checked again on every update of its
+   * parameters. [-inf, inf] when no slot constrains it. */
+  double lo, hi;
 };
 
 /* ---- phase functions and media ------------------------------------------- */
@@ -429,6 +441,10 @@ struct medium {
   bool is_homogeneous;          /* coefficients do not depend on position */
   bool has_spectral_extinction; /* sigma_t differs between channels */
   bool sample_emitters;         /* NEE from scattering events (Mitsuba's sample_emitters, default true) */
+  /* sigma_s = 0 wherever sigma_t > 0 (albedo 0; set by prepare): the
+   * volumetric integrators then weight a flight by its transmittance
+   * instead of sampling collisions (exact for analytic media). */
+  bool absorbing_only;
 };
 
 /* ---- integrators --------------------------------------------------------- */

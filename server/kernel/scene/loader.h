@@ -61,6 +61,15 @@ rsw_status ld_texture(loader *ld, node *n, const char *name, double def, double 
 /* As ld_texture but *out = NULL when absent. */
 rsw_status ld_texture_opt(loader *ld, node *n, const char *name, double lo, texture **out);
 
+/* A volume (Mitsuba's props.volume()): absent -> a constvolume of def; a
+ * number, rgb or spectrum (or a nested uniform texture) -> a constvolume
+ * holding it; a nested or referenced volume -> that volume. Every value the
+ * volume holds (any cell, channel, tabulated wavelength) must lie in
+ * [lo, hi] (-INFINITY / INFINITY: no bound), checked here and, through
+ * the volume's lo/hi, on every update of its parameters
+ * (volumes/volume.c). *out is owned by the scene. */
+rsw_status ld_volume(loader *ld, node *n, const char *name, double def, double lo, double hi, volume **out);
+
 /* The nested object (or referenced object) of class cls. With name NULL,
  * the one child of that class whatever its key (error if several); with a
  * name, the property of that name (error if it is another class).

@@ -22,7 +22,9 @@
   X(independent) X(stratified)                                                \
   X(path)                                                                     \
   X(uniform) X(checkerboard) X(bitmap)                                       \
-  X(shapegroup) X(instance) X(instancelist) X(periodic)
+  X(shapegroup) X(instance) X(instancelist) X(periodic)                      \
+  X(isotropic) X(hg) X(blendphase)                                            \
+  X(constvolume)
 // clang-format on
 
 #define DECLARE_(name) extern const plugin plugin_##name;

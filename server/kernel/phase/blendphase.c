@@ -1,0 +1,121 @@
+/* `blendphase`: two phase functions mixed by a weight volume w(p) in
+ * [0, 1] (0: the first only, 1: the second only), so that molecules and
+ * aerosols mix per layer:
+ *
+ *   p(wi, wo) = (1 - w) p_0(wi, wo) + w p_1(wi, wo).
+ *
+ * Sampling picks phase_1 when u1 <= w (reusing u1 / w), else phase_0
+ * (reusing (u1 - w) / (1 - w)), then returns the mixture's pdf and the
+ * weight p / pdf. Mitsuba returns the picked component's own pdf and
+ * weight instead; we return the mixture's (what eval_pdf reports too), so
+ * that MIS and the chi-square test see one density. Components are
+ * ordered by their property names (Mitsuba: alphanumeric order, the
+ * usual `phase_0`, `phase_1`); `weight` defaults to 0.5.
+ *
+ * Source: mitsuba3 src/phase/blendphase.cpp. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../volumes/volume.h"
+#include "phase.h"
+
+typedef struct blendphase {
+  phase base;
+  volume *weight;
+  phase *ph[2];
+} blendphase;
+
+static double blend_weight(const blendphase *b, const medium_interaction *mi) {
+  double w = volume_eval_1(b->weight, mi->p);
+  return fmin(1.0, fmax(0.0, w));
+}
+
+static double blend_eval_pdf(const phase *ph, const medium_interaction *mi, vec3 wo, double *pdf) {
+  const blendphase *b = (const blendphase *)ph;
+  double w = blend_weight(b, mi), p0 = 0, p1 = 0, v0 = 0, v1 = 0;
+  if (w < 1.0) v0 = b->ph[0]->ops->eval_pdf(b->ph[0], mi, wo, &p0);
+  if (w > 0.0) v1 = b->ph[1]->ops->eval_pdf(b->ph[1], mi, wo, &p1);
+  *pdf = (1.0 - w) * p0 + w * p1;
+  return (1.0 - w) * v0 + w * v1;
+}
+
+static double blend_sample(const phase *ph, const medium_interaction *mi, double u1, vec2 u2, vec3 *wo,
+                           double *pdf) {
+  const blendphase *b = (const blendphase *)ph;
+  double w = blend_weight(b, mi), cpdf;
+  int k;
+  if (w >= 1.0 || (w > 0.0 && u1 <= w)) {
+    k = 1;
+    u1 = w >= 1.0 ? u1 : u1 / w;
+  } else {
+    k = 0;
+    u1 = w <= 0.0 ? u1 : (u1 - w) / (1.0 - w);
+  }
+  double cw = b->ph[k]->ops->sample(b->ph[k], mi, fmin(u1, 1.0), u2, wo, &cpdf);
+  if (!(cpdf > 0.0) || !(cw > 0.0)) return phase_fail(pdf);
+  double val = blend_eval_pdf(ph, mi, *wo, pdf);
+  if (!(*pdf > 0.0)) return phase_fail(pdf);
+  return val / *pdf;
+}
+
+static const phase_ops blendphase_ops = {.sample = blend_sample, .eval_pdf = blend_eval_pdf};
+
+static void blendphase_destroy(object *o) {
+  free(o);
+}
+
+static rsw_status blendphase_create(loader *ld, node *n, object **out) {
+  object **kids;
+  size_t count;
+  rsw_status st = ld_children(ld, n, CLS_PHASE, &kids, &count);
+  if (st) return st;
+  if (count != 2) {
+    free(kids);
+    return ld_fail(ld, n, NULL, RSW_ERR_INVALID,
+                   "blendphase '%s': takes exactly two nested phase functions, got %zu", n->id ? n->id : "",
+                   count);
+  }
+  /* Their property names, in the order ld_children marked them used
+   * (before `weight`, the only other object property, is read). */
+  const char *names[2] = {"", ""};
+  for (size_t i = 0, k = 0; i < n->n_props && k < 2; i++)
+    if (n->props[i].used && (n->props[i].kind == PROP_NODE || n->props[i].kind == PROP_REF))
+      names[k++] = n->props[i].name;
+  bool swap = names[0][0] && names[1][0] && strcmp(names[0], names[1]) > 0;
+  blendphase *b = calloc(1, sizeof *b);
+  if (!b) {
+    free(kids);
+    return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "blendphase: out of memory");
+  }
+  b->ph[0] = (phase *)kids[swap ? 1 : 0];
+  b->ph[1] = (phase *)kids[swap ? 0 : 1];
+  free(kids);
+  st = ld_volume(ld, n, "weight", 0.5, 0.0, 1.0, &b->weight);
+  if (st) {
+    free(b);
+    return st;
+  }
+  b->base.ops = &blendphase_ops;
+  b->base.base.id = n->id;
+  *out = &b->base.base;
+  return RSW_OK;
+}
+
+/* Mitsuba's keys: weight, phase_0, phase_1 (the weight of a constant is
+ * `weight.value.value`, of a grid `weight.data`). */
+static void blendphase_traverse(object *o, param_visitor *v) {
+  blendphase *b = (blendphase *)o;
+  pv_object(v, "weight", &b->weight->base, NAN, NAN);
+  pv_object(v, "phase_0", &b->ph[0]->base, NAN, NAN);
+  pv_object(v, "phase_1", &b->ph[1]->base, NAN, NAN);
+}
+
+const plugin plugin_blendphase = {
+    .name = "blendphase",
+    .cls = CLS_PHASE,
+    .create = blendphase_create,
+    .destroy = blendphase_destroy,
+    .ops = &blendphase_ops,
+    .traverse = blendphase_traverse,
+};

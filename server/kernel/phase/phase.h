@@ -1,0 +1,36 @@
+/* What the phase-function plugins share: the scattering angle in the
+ * physics convention and the direction it stands for.
+ *
+ * Mitsuba's convention (kernel.h): mi->wi points back towards where the
+ * path came from, wo where it goes. The scattering angle theta is between
+ * the forward direction -wi and wo, so mu = cos(theta) = -dot(wi, wo) and
+ * mu = 1 is forward scattering (mitsuba3 src/phase/tabphase.cpp notes). A
+ * phase function p(mu) [sr^-1] integrates to 1 over the sphere:
+ * 2 pi int_{-1}^{1} p(mu) dmu = 1. */
+#ifndef RSW_PHASE_PHASE_H
+#define RSW_PHASE_PHASE_H
+
+#include <math.h>
+
+#include "../kernel.h"
+
+/* mu = cos(theta) of the scattering from mi->wi into wo. */
+static inline double phase_mu(const medium_interaction *mi, vec3 wo) {
+  return -v3_dot(mi->wi, wo);
+}
+
+/* The unit world direction at scattering cosine mu and azimuth
+ * phi = 2 pi u around the forward direction -wi. */
+static inline vec3 phase_direction(const medium_interaction *mi, double mu, double u) {
+  frame f = frame_from_normal(v3_neg(mi->wi));
+  double s = sqrt(fmax(0.0, 1.0 - mu * mu)), phi = 2.0 * RSW_PI * u;
+  return frame_to_world(&f, v3(s * cos(phi), s * sin(phi), mu));
+}
+
+/* A failed sample (kernel.h phase_ops.sample). */
+static inline double phase_fail(double *pdf) {
+  *pdf = 0.0;
+  return 0.0;
+}
+
+#endif

@@ -1,0 +1,118 @@
+/* `constvolume`: one value everywhere (Mitsuba's constvolume; also what
+ * ld_volume makes of a number or spectrum). `value` is a spectrum (number,
+ * rgb, uniform or, in mono, tabulated), default 1; its parameter key is
+ * `value.value` (the uniform spectrum's `value`), so a homogeneous
+ * medium's extinction is `<medium>.sigma_t.value.value` as in Mitsuba.
+ *
+ * As a grid it is one cell (res 1 x 1 x 1) of 1 (mono) or 3 (rgb)
+ * channels, refreshed by prepare() at the render's wavelength.
+ *
+ * Source: mitsuba3 src/volumes/const.cpp. */
+#include <math.h>
+#include <stdlib.h>
+
+#include "../textures/texture.h"
+#include "volume.h"
+
+typedef struct constvolume {
+  volume base;
+  texture *value; /* a uniform texture */
+  double cell[3];
+} constvolume;
+
+static color constvolume_eval(const volume *v, vec3 p) {
+  (void)p;
+  return tex_eval(((const constvolume *)v)->value, NULL);
+}
+
+static void constvolume_value_range(const volume *v, double *lo, double *hi) {
+  const spectrum *s = uniform_texture_spectrum(((const constvolume *)v)->value);
+  const double *x = &s->value;
+  size_t n = 1;
+  if (s->kind == SPEC_RGB) x = s->rgb, n = 3;
+  if (s->kind == SPEC_TABLE) x = s->val, n = s->n;
+  *lo = INFINITY, *hi = -INFINITY;
+  for (size_t i = 0; i < n; i++) *lo = fmin(*lo, x[i]), *hi = fmax(*hi, x[i]);
+}
+
+static const volume_ops constvolume_ops = {.eval = constvolume_eval, .value_range = constvolume_value_range};
+
+/* The cell and max from the texture's current value (prepared before the
+ * volume: a texture is created, and so prepared, before its holder). */
+static void constvolume_refresh(constvolume *c) {
+  color x = tex_eval(c->value, NULL);
+  for (int k = 0; k < 3; k++) c->cell[k] = x.c[k];
+  c->base.max = c->base.channels == 3 ? col_max(x) : x.c[0];
+}
+
+static rsw_status constvolume_prepare(object *o, const render_ctx *rc, rsw_err *err) {
+  (void)err;
+  constvolume *c = (constvolume *)o;
+  c->base.channels = rc->variant == VARIANT_RGB ? 3 : 1;
+  constvolume_refresh(c);
+  return RSW_OK;
+}
+
+static void constvolume_destroy(object *o) {
+  free(o);
+}
+
+static void constvolume_traverse(object *o, param_visitor *v) {
+  constvolume *c = (constvolume *)o;
+  pv_object(v, "value", &c->value->base, c->base.lo, c->base.hi);
+  volume_traverse_to_world(&c->base, v);
+}
+
+static void constvolume_parameters_changed(object *o) {
+  volume_update_bbox((volume *)o);
+}
+
+static rsw_status constvolume_create(loader *ld, node *n, object **out);
+
+const plugin plugin_constvolume = {
+    .name = "constvolume",
+    .cls = CLS_VOLUME,
+    .create = constvolume_create,
+    .destroy = constvolume_destroy,
+    .prepare = constvolume_prepare,
+    .ops = &constvolume_ops,
+    .traverse = constvolume_traverse,
+    .parameters_changed = constvolume_parameters_changed,
+};
+
+static volume *constvolume_make(texture *value, rsw_variant variant, const xform *to_world, const char *id) {
+  constvolume *c = calloc(1, sizeof *c);
+  if (!c) return NULL;
+  volume_init(&c->base, &constvolume_ops, to_world);
+  c->base.base.plugin = &plugin_constvolume;
+  c->base.base.id = id;
+  c->value = value;
+  c->base.res[0] = c->base.res[1] = c->base.res[2] = 1;
+  c->base.channels = variant == VARIANT_RGB ? 3 : 1;
+  c->base.data = c->cell;
+  const spectrum *s = uniform_texture_spectrum(value);
+  if (s && s->kind != SPEC_TABLE) constvolume_refresh(c); /* a table waits for prepare() */
+  return &c->base;
+}
+
+volume *constvolume_new(texture *value, rsw_variant variant, const char *id) {
+  xform id_xf = xf_identity();
+  return constvolume_make(value, variant, &id_xf, id);
+}
+
+static rsw_status constvolume_create(loader *ld, node *n, object **out) {
+  texture *t;
+  rsw_status st = ld_texture(ld, n, "value", 1.0, -INFINITY, &t);
+  if (st) return st;
+  if (!uniform_texture_spectrum(t))
+    return ld_fail(ld, n, "value", RSW_ERR_TYPE,
+                   "property 'value' must be a spectrum (number, rgb, spectrum), not the texture plugin '%s'",
+                   t->base.plugin->name);
+  xform xf;
+  st = volume_read_to_world(ld, n, &xf);
+  if (st) return st;
+  volume *v = constvolume_make(t, ld->variant, &xf, n->id);
+  if (!v) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "constvolume: out of memory");
+  *out = &v->base;
+  return RSW_OK;
+}

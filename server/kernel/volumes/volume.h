@@ -1,0 +1,36 @@
+/* Volumes (constvolume, gridvolume): what the plugins share and what media
+ * and phase functions call. The struct and its ops are in kernel.h; the
+ * loader getter ld_volume() is declared in scene/loader.h. */
+#ifndef RSW_VOLUMES_VOLUME_H
+#define RSW_VOLUMES_VOLUME_H
+
+#include "../kernel.h"
+#include "../scene/loader.h"
+#include "../scene/params.h"
+
+/* Value at world point p (kernel.h volume_ops.eval). */
+static inline color volume_eval(const volume *v, vec3 p) {
+  return v->ops->eval(v, p);
+}
+/* Its first channel (Mitsuba's eval_1: a scalar field such as a blend
+ * weight; in mono every channel holds the same value). */
+static inline double volume_eval_1(const volume *v, vec3 p) {
+  return v->ops->eval(v, p).c[0];
+}
+
+/* Set up the common part: ops, to_world (the unit cube -> world), the box,
+ * an unconstrained range. */
+void volume_init(volume *v, const volume_ops *ops, const xform *to_world);
+/* World bounds of the unit cube under v->to_world (after to_world changed). */
+void volume_update_bbox(volume *v);
+/* Reads `to_world` (default identity) and checks it can be inverted. */
+rsw_status volume_read_to_world(loader *ld, node *n, xform *out);
+/* Reports `to_world` (a spectral update: a volume's box is read at
+ * sampling time only, no acceleration structure holds it). */
+void volume_traverse_to_world(volume *v, param_visitor *pv);
+
+/* A constvolume holding the (uniform) texture `value`; NULL when out of
+ * memory. Not yet adopted by a scene. */
+volume *constvolume_new(texture *value, rsw_variant variant, const char *id);
+
+#endif
