@@ -10,6 +10,11 @@ illumination, measure), and its per-wavelength parameter maps.
                                              atmosphere at WL nm (JSON): the
                                              body of a PATCH, or a job
                                              context's "params"
+    tools/make_atmosphere.py --job WL... [--spp N]
+                                             print a job body (JSON): one
+                                             context per wavelength, "wWL",
+                                             each overriding the three
+                                             arrays with its own profiles
     tools/make_atmosphere.py --layers N      another number of layers (the
                                              examples use 2400)
 
@@ -301,12 +306,21 @@ def main():
     ap.add_argument("--layers", type=int, default=2400)
     ap.add_argument("--wavelength", type=float, default=550.0, help="nm, for the scene files (default 550)")
     ap.add_argument("--params", type=float, metavar="WL", help="print the parameter map at WL nm and exit")
+    ap.add_argument("--job", type=float, nargs="+", metavar="WL", help="print a job body over these wavelengths and exit")
+    ap.add_argument("--spp", type=int, default=0, help="the job's samples per pixel (default: the sensor's)")
     a = ap.parse_args()
     if a.layers < 1:
         sys.exit("make_atmosphere.py: --layers must be at least 1")
-    for name, wl in (("--wavelength", a.wavelength), ("--params", a.params)):
+    for name, wl in [("--wavelength", a.wavelength), ("--params", a.params)] + [("--job", w) for w in a.job or []]:
         if wl is not None and not (wl > 0 and math.isfinite(wl)):
             sys.exit("make_atmosphere.py: %s must be a positive number of nm" % name)
+    if a.spp < 0:
+        sys.exit("make_atmosphere.py: --spp must be positive")
+    if a.job:
+        ctx = [{"id": "w%g" % wl, "wavelength": wl, "params": params_map(a.layers, wl)} for wl in a.job]
+        job = {"defaults": {"spp": a.spp}, "contexts": ctx} if a.spp else {"contexts": ctx}
+        sys.stdout.write(json.dumps(job) + "\n")
+        return
     if a.params is not None:
         sys.stdout.write(json.dumps(params_map(a.layers, a.params)) + "\n")
         return
