@@ -371,6 +371,10 @@ struct volume {
    * slots that hold it (ld_volume), checked again on every update of its
    * parameters. [-inf, inf] when no slot constrains it. */
   double lo, hi;
+  /* Bumped whenever data or max change (a parameter update, prepare() at
+   * another wavelength), so that a medium can keep what it derives from
+   * the grid (cumulative optical thickness, majorants) until it does. */
+  uint64_t revision;
 };
 
 /* ---- phase functions and media ------------------------------------------- */
