@@ -137,6 +137,11 @@ static double p_hg(double c, double g) {
   return (1 - g * g) / (4 * PI * pow(1 + g * g - 2 * g * c, 1.5));
 }
 
+static double p_rayleigh(double c, double g) {
+  (void)g;
+  return 3.0 / (16 * PI) * (1 + c * c);
+}
+
 static void single_scattering(const char *integ, const char *phase_json, phase_fn p, double g, double thv_deg,
                               double phv_deg) {
   const double tau = 0.2, w = 0.8, h = 1.0;
@@ -172,6 +177,7 @@ static void test_single_scattering(void) {
       single_scattering(integ[i], "{\"type\": \"isotropic\"}", p_iso, 0, views[v][0], views[v][1]);
       single_scattering(integ[i], "{\"type\": \"hg\", \"g\": 0.7}", p_hg, 0.7, views[v][0], views[v][1]);
       single_scattering(integ[i], "{\"type\": \"hg\", \"g\": -0.7}", p_hg, -0.7, views[v][0], views[v][1]);
+      single_scattering(integ[i], "{\"type\": \"rayleigh\"}", p_rayleigh, 0, views[v][0], views[v][1]);
     }
 }
 
@@ -247,6 +253,111 @@ static void test_integrators_agree(void) {
           "case %d: %.6g +- %.3g vs volpath homogeneous %.6g +- %.3g", k, m[k], se[k], m[0], se[0]);
 }
 
+/* ---- layered media ------------------------------------------------------------ */
+
+/* A [N, 1, 1] gridvolume over the slab's box (z in [0, h]) as JSON. */
+static void layers_json(sbuf *b, const double *v, int n, double h, const char *extra) {
+  sb_printf(b, "{\"type\": \"gridvolume\", \"shape\": [%d, 1, 1], %s \"data\": [", n, extra);
+  for (int i = 0; i < n; i++) sb_printf(b, "%s%.17g", i ? ", " : "", v[i]);
+  sb_printf(b, "], \"to_world\": [{\"translate\": [-0.5, -0.5, 0]}, {\"scale\": [40, 40, %.17g]}]}", h);
+}
+
+/* N unequal layers: exp(-sum sigma_i dz / mu), exact for piecewise (both
+ * integrators), 3 sigma for heterogeneous (nearest filter: ratio
+ * tracking). Also N equal layers. */
+static void test_beer_lambert_layers(void) {
+  enum { N = 37 };
+  double sig[N], eq[N], tau = 0, h = 3.0;
+  for (int i = 0; i < N; i++) {
+    sig[i] = 0.05 + 0.9 * fabs(sin(1.7 * i)) * exp(-i / 15.0);
+    eq[i] = 0.35;
+    tau += sig[i] * h / N;
+  }
+  for (int which = 0; which < 2; which++) {
+    const double *v = which ? eq : sig;
+    double t = which ? 0.35 * h : tau;
+    sbuf b = {0};
+    sb_printf(&b, "{\"type\": \"piecewise\", \"albedo\": 0, \"sigma_t\": ");
+    layers_json(&b, v, N, h, "");
+    sb_printf(&b, "}");
+    for (int i = 0; i < 3; i++) beer_lambert("{\"type\": \"piecewise_volpath\"}", b.p, h, t, 25.0 * i);
+    /* volpath ratio-tracks the same layers: 3 sigma. */
+    double th = 35 * PI / 180;
+    scene *s = slab_scene("{\"type\": \"volpath\"}", b.p, h, "{\"type\": \"constant\", \"radiance\": 1}", NULL,
+                          v3(-2 * tan(th), 0, -2), v3(sin(th), 0, cos(th)));
+    free(b.p);
+    REQUIRE(s, "scene");
+    double m, sem;
+    estimate(s, 1024, &m, &sem);
+    check_3sigma(which ? "volpath, equal layers" : "volpath, unequal layers", m, sem, exp(-t / cos(th)));
+    scene_free(s);
+  }
+  /* Heterogeneous, nearest cells: ratio tracking against the exact value. */
+  sbuf b = {0};
+  sb_printf(&b, "{\"type\": \"heterogeneous\", \"albedo\": 0, \"sigma_t\": ");
+  layers_json(&b, sig, N, h, "\"filter_type\": \"nearest\",");
+  sb_printf(&b, "}");
+  double th = 35 * PI / 180;
+  scene *s = slab_scene("{\"type\": \"volpath\"}", b.p, h, "{\"type\": \"constant\", \"radiance\": 1}", NULL,
+                        v3(-2 * tan(th), 0, -2), v3(sin(th), 0, cos(th)));
+  free(b.p);
+  REQUIRE(s, "scene");
+  double m, sem;
+  estimate(s, 1024, &m, &sem);
+  check_3sigma("heterogeneous layers, ratio tracking", m, sem, exp(-tau / cos(th)));
+  scene_free(s);
+}
+
+/* Scattering: piecewise with N identical layers == homogeneous, and
+ * piecewise_volpath == volpath on unequal layers (3 sigma). */
+static void test_piecewise_agrees(void) {
+  enum { N = 24 };
+  double eq[N], sig[N], alb[N];
+  for (int i = 0; i < N; i++) {
+    eq[i] = 0.6;
+    sig[i] = 1.2 * exp(-i / 6.0);
+    alb[i] = 0.5 + 0.45 * (i % 3) / 2.0;
+  }
+  vec3 to_view = v3(0.3, -0.4, 0.866);
+  const char *sun = "{\"type\": \"directional\", \"direction\": [-0.5, 0.1, -0.86], \"irradiance\": 2}";
+  const char *gnd = "{\"type\": \"diffuse\", \"reflectance\": 0.25}";
+  double m[5], se[5];
+  for (int k = 0; k < 5; k++) {
+    sbuf b = {0};
+    const char *integ = "{\"type\": \"volpath\"}";
+    if (k == 0) {
+      sb_printf(&b, "{\"type\": \"homogeneous\", \"sigma_t\": 0.6, \"albedo\": 0.8,"
+                    " \"phase\": {\"type\": \"hg\", \"g\": 0.5}}");
+    } else {
+      sb_printf(&b, "{\"type\": \"piecewise\", \"phase\": {\"type\": \"hg\", \"g\": 0.5}, \"sigma_t\": ");
+      bool equal = k == 1 || k == 2;
+      layers_json(&b, equal ? eq : sig, N, 2.0, "");
+      if (equal)
+        sb_printf(&b, ", \"albedo\": 0.8}");
+      else {
+        sb_printf(&b, ", \"albedo\": ");
+        layers_json(&b, alb, N, 2.0, "");
+        sb_printf(&b, "}");
+      }
+      if (k == 2 || k == 4) integ = "{\"type\": \"piecewise_volpath\"}";
+    }
+    scene *s = slab_scene(integ, b.p, 2.0, sun, gnd, v3_scale(to_view, 4), v3_neg(to_view));
+    free(b.p);
+    REQUIRE(s, "scene %d", k);
+    estimate(s, 2048, &m[k], &se[k]);
+    scene_free(s);
+  }
+  /* 0 homogeneous, 1 piecewise equal (volpath), 2 equal (piecewise_volpath),
+   * 3 unequal (volpath), 4 unequal (piecewise_volpath). */
+  const int pairs[][2] = {{0, 1}, {0, 2}, {3, 4}};
+  for (int i = 0; i < 3; i++) {
+    int a = pairs[i][0], c = pairs[i][1];
+    CHECK(fabs(m[a] - m[c]) <= 3 * sqrt(se[a] * se[a] + se[c] * se[c]), "case %d %.6g +- %.3g vs case %d %.6g +- %.3g",
+          c, m[c], se[c], a, m[a], se[a]);
+    CHECK(se[c] < 0.02 * m[c], "case %d: standard error %.3g too large", c, se[c]);
+  }
+}
+
 /* ---- scene-level errors ------------------------------------------------------ */
 
 static void expect_error(const char *text, const char *needle, const char *loc) {
@@ -287,6 +398,15 @@ static void test_media_errors(void) {
   scene *s = tsup_load(ok, "mono");
   CHECK(s != NULL, "a sensor inside its medium loads");
   scene_free(s);
+  expect_error("{\"type\": \"scene\", \"ball\": {\"type\": \"sphere\", \"bsdf\": {\"type\": \"null\"},"
+               " \"interior\": {\"type\": \"piecewise\", \"sigma_t\": {\"type\": \"gridvolume\","
+               " \"shape\": [2, 1, 2], \"data\": [1, 2, 3, 4]}}}}",
+               "[1, 1, N] grid", "/ball/interior/sigma_t");
+  expect_error("{\"type\": \"scene\", \"ball\": {\"type\": \"sphere\", \"bsdf\": {\"type\": \"null\"},"
+               " \"interior\": {\"type\": \"piecewise\", \"sigma_t\": {\"type\": \"gridvolume\","
+               " \"shape\": [3, 1, 1], \"data\": [1, 2, 3]}, \"albedo\": {\"type\": \"gridvolume\","
+               " \"shape\": [2, 1, 1], \"data\": [0.5, 0.5]}}}}",
+               "albedo must be constant or a [1, 1, 3] grid", "/ball/interior/albedo");
   expect_error("{\"type\": \"scene\", \"ball\": {\"type\": \"sphere\", \"interior\": {\"type\": \"homogeneous\","
                " \"albedo\": 1.5}}}",
                "albedo", NULL);
@@ -326,5 +446,7 @@ int main(void) {
   RSW_TEST_RUN(test_furnace_sphere);
   RSW_TEST_RUN(test_furnace_atmosphere_white_ground);
   RSW_TEST_RUN(test_integrators_agree);
+  RSW_TEST_RUN(test_beer_lambert_layers);
+  RSW_TEST_RUN(test_piecewise_agrees);
   RSW_TEST_END("test_media");
 }
