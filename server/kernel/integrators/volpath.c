@@ -89,7 +89,38 @@ static double emitter_prob(const scene *sc, const emitter *e) {
   return sc->emitter_weight_sum > 0 ? e->sampling_weight / sc->emitter_weight_sum : 0.0;
 }
 
+/* Can ray r meet the scene's bounding box on [tmin, tmax]? A ray that has
+ * left it (through an atmosphere's top, say) can hit nothing more, so
+ * it needs no query. Not under a periodic boundary (copies beyond the
+ * column). */
+static bool may_hit(const scene *sc, const ray3 *r) {
+  if (sc->periodic.on) return true;
+  const double lo[3] = {sc->bbox_min.x, sc->bbox_min.y, sc->bbox_min.z};
+  const double hi[3] = {sc->bbox_max.x, sc->bbox_max.y, sc->bbox_max.z};
+  const double o[3] = {r->o.x, r->o.y, r->o.z}, d[3] = {r->d.x, r->d.y, r->d.z};
+  double t0 = r->tmin, t1 = r->tmax;
+  for (int a = 0; a < 3; a++) {
+    double pad = 1e-9 * (fabs(lo[a]) + fabs(hi[a]) + 1.0);
+    double l = lo[a] - pad, h = hi[a] + pad;
+    if (d[a] == 0.0) {
+      if (o[a] < l || o[a] > h) return false;
+      continue;
+    }
+    double ta = (l - o[a]) / d[a], tb = (h - o[a]) / d[a];
+    if (ta > tb) {
+      double x = ta;
+      ta = tb;
+      tb = x;
+    }
+    t0 = fmax(t0, ta);
+    t1 = fmin(t1, tb);
+    if (t0 > t1) return false;
+  }
+  return true;
+}
+
 static bool intersect(const scene *sc, const ray3 *r, surface_interaction *si, render_stats *stats) {
+  if (!may_hit(sc, r)) return false;
   accel_hit h;
   stats->rays++;
   ray3 seg = *r;
@@ -170,9 +201,10 @@ static color shadow_tr(const volpath_integrator *vp, const scene *sc, ray3 r, ve
   bool finite = isfinite(r.tmax);
   for (int k = 0; k < MAX_CROSSINGS; k++) {
     surface_interaction si;
-    stats->shadow_rays++;
+    uint64_t before = stats->rays;
     bool hit = intersect(sc, &r, &si, stats);
-    stats->rays--; /* counted as a shadow ray */
+    stats->shadow_rays += stats->rays - before; /* counted as shadow rays */
+    stats->rays = before;
     if (m) {
       vec3 q = hit ? si.p : end;
       ray3 mr = {p0, r.d, 0.0, (hit || finite) ? v3_dot(v3_sub(q, p0), r.d) : INFINITY};
