@@ -371,6 +371,10 @@ struct volume {
    * slots that hold it (ld_volume), checked again on every update of its
    * parameters. [-inf, inf] when no slot constrains it. */
   double lo, hi;
+  /* Bumped whenever data or max change (a parameter update, prepare() at
+   * another wavelength), so that a medium can keep what it derives from
+   * the grid (cumulative optical thickness, majorants) until it does. */
+  uint64_t revision;
 };
 
 /* ---- phase functions and media ------------------------------------------- */
@@ -422,7 +426,8 @@ typedef struct medium_ops {
    * mi->majorant set; Mitsuba's get_scattering_coefficients. */
   void (*coefficients)(const medium *m, medium_interaction *mi);
   /* Optional, analytic media (piecewise): a real collision sampled along r
-   * over [mint, maxt] by inverting the optical thickness in `channel` with
+   * over [mint, maxt] (within intersect_aabb's interval: callers clip
+   * first; r->d unit) by inverting the optical thickness in `channel` with
    * u (Eradiate's sample_interaction_real). Fills mi (t = INFINITY when
    * the flight passes maxt) and returns the transmittance to mi->t (or to
    * maxt) in *tr and its pdf in *pdf (pdf of t: sigma_t tr; of passing:
@@ -430,7 +435,9 @@ typedef struct medium_ops {
   void (*sample_real)(const medium *m, const ray3 *r, double mint, double maxt, double u, int channel,
                       medium_interaction *mi, color *tr, color *pdf);
   /* Optional, analytic media: the exact transmittance along r over
-   * [mint, maxt] (Eradiate's eval_transmittance_pdf_real). */
+   * [mint, maxt] (clipped by intersect_aabb first; r->d unit), Eradiate's
+   * eval_transmittance_pdf_real. heterogeneous: exact only for uniform
+   * grids (is_homogeneous). */
   color (*transmittance)(const medium *m, const ray3 *r, double mint, double maxt);
 } medium_ops;
 struct medium {

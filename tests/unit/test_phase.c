@@ -17,8 +17,8 @@ RSW_TEST_DEFINE_GLOBALS
 
 #define CHI2_SAMPLES 200000
 /* chi2_run calls in this file (Sidak correction): isotropic 2, hg 8 x 2,
- * blendphase 3 x 2. */
-#define CHI2_TESTS   24
+ * blendphase 5 x 2 + 2, rayleigh 2, tabphase 5 x 2 + 1. */
+#define CHI2_TESTS   43
 
 /* ---- helpers ------------------------------------------------------------------ */
 
@@ -203,19 +203,25 @@ static void test_hg_zero_is_isotropic(void) {
 }
 
 static void test_blendphase(void) {
-  const char *cases[3][2] = {
+  const char *cases[5][2] = {
       {"\"weight\": 0.3, \"phase_0\": {\"type\": \"isotropic\"}, \"phase_1\": {\"type\": \"hg\", \"g\": 0.8}",
        "blend(isotropic, hg 0.8; 0.3)"},
       {"\"weight\": 0.6, \"phase_0\": {\"type\": \"hg\", \"g\": -0.5}, \"phase_1\": {\"type\": \"hg\", "
        "\"g\": 0.7}",
        "blend(hg -0.5, hg 0.7; 0.6)"},
       /* Nested blend, given in reverse order: names decide the order. */
+      /* The atmosphere's molecules + aerosols. */
+      {"\"weight\": 0.35, \"phase_0\": {\"type\": \"rayleigh\"}, \"phase_1\": {\"type\": \"hg\", \"g\": 0.7}",
+       "blend(rayleigh, hg 0.7; 0.35)"},
+      {"\"weight\": 0.5, \"phase_0\": {\"type\": \"tabphase\", \"values\": \"0, 1, 0.2, 3\"}, "
+       "\"phase_1\": {\"type\": \"rayleigh\"}",
+       "blend(tabphase, rayleigh; 0.5)"},
       {"\"weight\": 0.5, \"phase_1\": {\"type\": \"blendphase\", \"weight\": 0.25, \"phase_0\": {\"type\": "
        "\"isotropic\"}, \"phase_1\": {\"type\": \"hg\", \"g\": -0.6}}, \"phase_0\": {\"type\": \"hg\", "
        "\"g\": 0.4}",
        "blend(hg 0.4, blend(isotropic, hg -0.6; 0.25); 0.5)"},
   };
-  for (int c = 0; c < 3; c++) {
+  for (int c = 0; c < 5; c++) {
     char objs[1024];
     snprintf(objs, sizeof objs, "\"b\": {\"type\": \"blendphase\", %s}", cases[c][0]);
     scene *s = load_phases(objs);
@@ -243,6 +249,83 @@ static void test_blendphase(void) {
   v = ph->ops->eval_pdf(ph, &mi, v3(0, 0, -1), &pdf);
   CHECK(v == RSW_INV_4PI, "weight 0: isotropic, got %g", v);
   run_chi2(ph, wis[1], "blend weight 0", 4);
+  scene_free(s);
+}
+
+static void test_rayleigh(void) {
+  scene *s = load_phases("\"r\": {\"type\": \"rayleigh\"}");
+  REQUIRE(s, "load");
+  const phase *ph = (const phase *)find_obj(s, "r");
+  for (int k = 0; k < 2; k++) run_chi2(ph, wis[k], "rayleigh", 4);
+  /* A quadratic in mu: Simpson's rule is exact. */
+  CHECK_REL(phase_integral(ph, wis[1], 2), 1.0, 1e-14);
+  CHECK_REL(phase_integral(ph, wis[0], 100), 1.0, 1e-14);
+  medium_interaction mi = mi_at(v3(0, 0, 1));
+  double pdf;
+  CHECK_REL(ph->ops->eval_pdf(ph, &mi, v3(0, 0, -1), &pdf), 3.0 / (8.0 * RSW_PI), 1e-15);
+  CHECK_REL(ph->ops->eval_pdf(ph, &mi, v3(1, 0, 0), &pdf), 3.0 / (16.0 * RSW_PI), 1e-15);
+  CHECK_REL(ph->ops->eval_pdf(ph, &mi, v3(0, 0, 1), &pdf), 3.0 / (8.0 * RSW_PI), 1e-15);
+  /* The sampled cosine is the cdf's inverse: F(mu(u)) = u. */
+  for (int i = 0; i <= 100; i++) {
+    double u = i / 100.0, w;
+    vec3 wo;
+    ph->ops->sample(ph, &mi, 0.5, v2(u, 0.3), &wo, &w);
+    double mu = -wo.z;
+    CHECK_ABS(0.375 * (mu + mu * mu * mu / 3.0) + 0.5, u, 1e-14);
+  }
+  scene_free(s);
+}
+
+static void test_tabphase(void) {
+  const char *tables[5][2] = {
+      {"[1, 1]", "tabphase constant"},
+      {"\"0, 1\"", "tabphase linear 0..1"},
+      {"\"0.02 0.03 0.05 0.08 0.12 0.2 0.35 0.6 1.1 2.5 6.0\"", "tabphase forward peak"},
+      {"[0, 1, 0, 2, 0.5, 0]", "tabphase with zeros"},
+      {"[3, 0.5, 0.2, 0.1]", "tabphase backward"},
+  };
+  for (int c = 0; c < 5; c++) {
+    char objs[512];
+    snprintf(objs, sizeof objs, "\"t\": {\"type\": \"tabphase\", \"values\": %s}", tables[c][0]);
+    scene *s = load_phases(objs);
+    REQUIRE(s, "load %s", tables[c][1]);
+    const phase *ph = (const phase *)find_obj(s, "t");
+    for (int k = 0; k < 2; k++) run_chi2(ph, wis[k], tables[c][1], 8);
+    CHECK_REL(phase_integral(ph, wis[1], 30000), 1.0, 1e-6);
+    scene_free(s);
+  }
+  /* [1, 1] is isotropic; a string and a list are the same table. */
+  scene *s = load_phases("\"t\": {\"type\": \"tabphase\", \"values\": \"1,1\"}, \"a\": {\"type\": "
+                         "\"tabphase\", \"values\": \"1, 2,3\"}, \"b\": {\"type\": \"tabphase\", "
+                         "\"values\": [1, 2, 3]}");
+  REQUIRE(s, "load");
+  const phase *t = (const phase *)find_obj(s, "t"), *a = (const phase *)find_obj(s, "a"),
+              *b = (const phase *)find_obj(s, "b");
+  medium_interaction mi = mi_at(wis[1]);
+  double pa, pb;
+  CHECK_REL(t->ops->eval_pdf(t, &mi, v3(0.6, 0.8, 0), &pa), RSW_INV_4PI, 1e-15);
+  for (int k = 0; k < 10; k++) {
+    vec3 wo = v3_norm(v3(sin(k), cos(3 * k), 0.3 * k - 1));
+    CHECK(a->ops->eval_pdf(a, &mi, wo, &pa) == b->ops->eval_pdf(b, &mi, wo, &pb), "string == list");
+  }
+  /* Forward (mu = 1) holds the last value: 3 / (2 pi I), I = 4. */
+  CHECK_REL(a->ops->eval_pdf(a, &mi, v3_neg(mi.wi), &pa), 3.0 / (2 * RSW_PI * 4.0), 1e-14);
+  CHECK_REL(a->ops->eval_pdf(a, &mi, mi.wi, &pa), 1.0 / (2 * RSW_PI * 4.0), 1e-14);
+  /* Updates: same length, non-negative, finite, not all zero. */
+  rsw_err err = {0};
+  CHECK(upd1(s, "a.values", "[3, 2, 1]", &err) == RSW_OK, "update: %s", err.msg);
+  CHECK_REL(a->ops->eval_pdf(a, &mi, v3_neg(mi.wi), &pa), 1.0 / (2 * RSW_PI * 4.0), 1e-14);
+  run_chi2(a, wis[0], "tabphase after an update", 8);
+  const char *bad[][2] = {{"[1, 2]", "takes 3 numbers"},
+                          {"[1, -2, 1]", "must be >= 0"},
+                          {"[0, 0, 0]", "must not all be zero"},
+                          {"0.5", "takes 3 numbers"}};
+  for (int k = 0; k < 4; k++) {
+    memset(&err, 0, sizeof err);
+    CHECK(upd1(s, "a.values", bad[k][0], &err) != RSW_OK, "%s rejected", bad[k][0]);
+    CHECK(strstr(err.msg, bad[k][1]) && strstr(err.msg, "a.values"), "%s: %s", bad[k][0], err.msg);
+  }
+  CHECK_REL(a->ops->eval_pdf(a, &mi, v3_neg(mi.wi), &pa), 1.0 / (2 * RSW_PI * 4.0), 1e-14);
   scene_free(s);
 }
 
@@ -293,6 +376,13 @@ static void test_load_errors(void) {
        "\"isotropic\"}, \"phase_1\": {\"type\": \"isotropic\"}}",
        "exactly two"},
       {"\"p\": {\"type\": \"mie\"}", "mie"},
+      {"\"p\": {\"type\": \"rayleigh\", \"g\": 0}", "no property 'g'"},
+      {"\"p\": {\"type\": \"tabphase\"}", "missing property 'values'"},
+      {"\"p\": {\"type\": \"tabphase\", \"values\": \"1\"}", "at least 2"},
+      {"\"p\": {\"type\": \"tabphase\", \"values\": \"1, x, 2\"}", "'x' (value 1) is not a number"},
+      {"\"p\": {\"type\": \"tabphase\", \"values\": \"1, -1, 2\"}", "value 1 (-1) must be >= 0"},
+      {"\"p\": {\"type\": \"tabphase\", \"values\": [0, 0]}", "all zeros"},
+      {"\"p\": {\"type\": \"tabphase\", \"values\": true}", "list of numbers"},
   };
   for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
     rsw_err err = {0};
@@ -309,6 +399,8 @@ int main(void) {
   RSW_TEST_RUN(test_hg_convention);
   RSW_TEST_RUN(test_hg_zero_is_isotropic);
   RSW_TEST_RUN(test_blendphase);
+  RSW_TEST_RUN(test_rayleigh);
+  RSW_TEST_RUN(test_tabphase);
   RSW_TEST_RUN(test_parameters);
   RSW_TEST_RUN(test_load_errors);
   RSW_TEST_END("test_phase");

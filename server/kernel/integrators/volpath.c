@@ -89,7 +89,38 @@ static double emitter_prob(const scene *sc, const emitter *e) {
   return sc->emitter_weight_sum > 0 ? e->sampling_weight / sc->emitter_weight_sum : 0.0;
 }
 
+/* Can ray r meet the scene's bounding box on [tmin, tmax]? A ray that has
+ * left it (through an atmosphere's top, say) can hit nothing more, so
+ * it needs no query. Not under a periodic boundary (copies beyond the
+ * column). */
+static bool may_hit(const scene *sc, const ray3 *r) {
+  if (sc->periodic.on) return true;
+  const double lo[3] = {sc->bbox_min.x, sc->bbox_min.y, sc->bbox_min.z};
+  const double hi[3] = {sc->bbox_max.x, sc->bbox_max.y, sc->bbox_max.z};
+  const double o[3] = {r->o.x, r->o.y, r->o.z}, d[3] = {r->d.x, r->d.y, r->d.z};
+  double t0 = r->tmin, t1 = r->tmax;
+  for (int a = 0; a < 3; a++) {
+    double pad = 1e-9 * (fabs(lo[a]) + fabs(hi[a]) + 1.0);
+    double l = lo[a] - pad, h = hi[a] + pad;
+    if (d[a] == 0.0) {
+      if (o[a] < l || o[a] > h) return false;
+      continue;
+    }
+    double ta = (l - o[a]) / d[a], tb = (h - o[a]) / d[a];
+    if (ta > tb) {
+      double x = ta;
+      ta = tb;
+      tb = x;
+    }
+    t0 = fmax(t0, ta);
+    t1 = fmin(t1, tb);
+    if (t0 > t1) return false;
+  }
+  return true;
+}
+
 static bool intersect(const scene *sc, const ray3 *r, surface_interaction *si, render_stats *stats) {
+  if (!may_hit(sc, r)) return false;
   accel_hit h;
   stats->rays++;
   ray3 seg = *r;
@@ -160,18 +191,24 @@ static color segment_tr(const volpath_integrator *vp, const medium *m, const ray
 }
 
 /* Transmittance along the shadow ray r (unit d, r.tmax its length) from a
- * vertex in medium m, crossing null surfaces; 0 when blocked. */
-static color shadow_tr(const volpath_integrator *vp, const scene *sc, ray3 r, const medium *m, sampler_state *st,
-                       render_stats *stats) {
+ * vertex at p0 in medium m, crossing null surfaces; 0 when blocked. The
+ * media see the exact segments between surface points (p0, the hits),
+ * not the traced rays' offset origins. */
+static color shadow_tr(const volpath_integrator *vp, const scene *sc, ray3 r, vec3 p0, const medium *m,
+                       sampler_state *st, render_stats *stats) {
   color tr = col1(1.0);
+  vec3 end = v3_fma(r.o, r.tmax, r.d);
+  bool finite = isfinite(r.tmax);
   for (int k = 0; k < MAX_CROSSINGS; k++) {
     surface_interaction si;
-    stats->shadow_rays++;
+    uint64_t before = stats->rays;
     bool hit = intersect(sc, &r, &si, stats);
-    stats->rays--; /* counted as a shadow ray */
-    double tend = hit ? si.t : r.tmax;
+    stats->shadow_rays += stats->rays - before; /* counted as shadow rays */
+    stats->rays = before;
     if (m) {
-      tr = col_mul(tr, segment_tr(vp, m, &r, tend, st));
+      vec3 q = hit ? si.p : end;
+      ray3 mr = {p0, r.d, 0.0, (hit || finite) ? v3_dot(v3_sub(q, p0), r.d) : INFINITY};
+      tr = col_mul(tr, segment_tr(vp, m, &mr, mr.tmax, st));
       if (col_is_black(tr)) return tr;
     }
     if (!hit) return tr;
@@ -180,6 +217,7 @@ static color shadow_tr(const volpath_integrator *vp, const scene *sc, ray3 r, co
     double left = r.tmax - si.t;
     r = spawn_ray(&si, r.d);
     r.tmax = left;
+    p0 = si.p;
     if (!(left > 0)) return tr;
   }
   return col1(0.0);
@@ -229,6 +267,9 @@ static color volpath_Li(const integrator *it, const scene *sc, sampler_state *st
   surface_interaction prev = {0};
   double prev_pdf = 1.0;
   bool prev_delta = true;
+  /* Where the current ray really starts (the traced ray's origin is
+   * offset off surfaces): media integrate from here to the exact hit. */
+  vec3 seg_o = ray.o;
   if (it->max_depth == 0) return L;
   for (;;) {
     surface_interaction si;
@@ -239,13 +280,11 @@ static color volpath_Li(const integrator *it, const scene *sc, sampler_state *st
     medium_interaction mi;
     bool scattered = false;
     if (m) {
-      ray3 seg = ray;
-      seg.tmin = 0;
-      seg.tmax = tsurf;
+      ray3 seg = {seg_o, ray.d, 0.0, hit ? v3_dot(v3_sub(si.p, seg_o), ray.d) : tsurf};
       double mint, maxt;
       if (m->ops->intersect_aabb(m, &seg, &mint, &maxt)) {
         if (m->absorbing_only) {
-          T = col_mul(T, segment_tr(vp, m, &ray, tsurf, st));
+          T = col_mul(T, segment_tr(vp, m, &seg, seg.tmax, st));
         } else if (analytic_in(vp, m)) {
           int c = pick_channel(m, st);
           color tr, pdf;
@@ -259,14 +298,14 @@ static color volpath_Li(const integrator *it, const scene *sc, sampler_state *st
           }
         } else {
           mi = (medium_interaction){.medium = m, .wi = v3_neg(ray.d), .mint = mint};
-          mi.p = v3_fma(ray.o, mint, ray.d);
+          mi.p = v3_fma(seg.o, mint, ray.d);
           double mu = col_max(m->ops->majorant(m, &mi));
           double t = mint;
           while (mu > 0) {
             t -= log1p(-sops->next_1d(st)) / mu;
             if (!(t < maxt)) break;
             mi.t = t;
-            mi.p = v3_fma(ray.o, t, ray.d);
+            mi.p = v3_fma(seg.o, t, ray.d);
             mi.majorant = col1(mu);
             m->ops->coefficients(m, &mi);
             int c = pick_channel(m, st);
@@ -299,7 +338,7 @@ static color volpath_Li(const integrator *it, const scene *sc, sampler_state *st
           double ppdf;
           double pval = ph->ops->eval_pdf(ph, &mi, ds.d, &ppdf);
           if (pval > 0) {
-            color tr = shadow_tr(vp, sc, shadow_ray(sc, NULL, mi.p, e, &ds), m, st, stats);
+            color tr = shadow_tr(vp, sc, shadow_ray(sc, NULL, mi.p, e, &ds), mi.p, m, st, stats);
             double w = ds.delta ? 1.0 : mis_weight(ds.pdf * pe, ppdf);
             L = col_add(L, col_scale(col_mul(T, col_mul(value, tr)), pval * w / pe));
           }
@@ -311,6 +350,7 @@ static color volpath_Li(const integrator *it, const scene *sc, sampler_state *st
       if (!(ppdf > 0) || !(pw > 0)) return L;
       T = col_scale(T, pw);
       ray = (ray3){mi.p, wo, 0.0, INFINITY};
+      seg_o = mi.p;
       prev = ref;
       prev_pdf = ppdf;
       prev_delta = false;
@@ -347,6 +387,7 @@ static color volpath_Li(const integrator *it, const scene *sc, sampler_state *st
         if (++crossings > MAX_CROSSINGS) return L;
         m = medium_after(&si, ray.d, m);
         ray = spawn_ray(&si, ray.d);
+        seg_o = si.p;
         continue;
       }
       if (!(it->max_depth < 0 || depth + 1 < it->max_depth)) return L;
@@ -360,7 +401,8 @@ static color volpath_Li(const integrator *it, const scene *sc, sampler_state *st
           vec3 wo = frame_to_local(&si.sh, ds.d);
           color f = b->ops->eval(b, &si, wo);
           if (!col_is_black(f)) {
-            color tr = shadow_tr(vp, sc, shadow_ray(sc, &si, si.p, e, &ds), medium_after(&si, ds.d, m), st, stats);
+            color tr = shadow_tr(vp, sc, shadow_ray(sc, &si, si.p, e, &ds), si.p, medium_after(&si, ds.d, m), st,
+                                 stats);
             double bpdf = ds.delta ? 0.0 : b->ops->pdf(b, &si, wo);
             double w = ds.delta ? 1.0 : mis_weight(ds.pdf * pe, bpdf);
             L = col_add(L, col_scale(col_mul(T, col_mul(f, col_mul(value, tr))), w / pe));
@@ -375,6 +417,7 @@ static color volpath_Li(const integrator *it, const scene *sc, sampler_state *st
       eta *= bs.eta;
       m = medium_after(&si, wo, m);
       ray = spawn_ray(&si, wo);
+      seg_o = si.p;
       prev = si;
       prev_pdf = bs.pdf;
       prev_delta = (bs.sampled_type & BSDF_DELTA) != 0;

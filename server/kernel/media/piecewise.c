@@ -79,30 +79,34 @@ static void pw_coefficients(const medium *m, medium_interaction *mi) {
   fill_layer(pw, layer_of(pw, pl.z), mi);
 }
 
+/* Channels to compute: one when every channel holds the same layers (mono,
+ * one-channel grids), the rest copied. */
+static inline int n_channels(const piecewise_medium *pw) {
+  return pw->base.has_spectral_extinction ? 3 : 1;
+}
+
+static inline void spread(color *x, int nc) {
+  if (nc == 1) x->c[1] = x->c[2] = x->c[0];
+}
+
 static void pw_sample_real(const medium *m, const ray3 *r, double mint, double maxt, double u, int channel,
                            medium_interaction *mi, color *tr, color *pdf) {
   const piecewise_medium *pw = (const piecewise_medium *)m;
   const xform *tw = &pw->sigma_t->to_world;
+  int nc = n_channels(pw);
+  double t0 = mint, t1 = maxt; /* within intersect_aabb's interval (the caller clips) */
   mi->medium = m;
   mi->wi = v3_neg(r->d);
   mi->t = INFINITY;
-  double t0, t1;
-  ray3 seg = *r;
-  seg.tmin = mint;
-  seg.tmax = maxt;
-  if (!media_box_clip(tw, &seg, &t0, &t1)) {
-    mi->mint = mint;
-    *tr = *pdf = col1(1.0);
-    return;
-  }
   mi->mint = t0;
   double oz = xf_inv_point(tw, r->o).z, dz = xf_inv_vector(tw, r->d).z;
   double z0 = oz + t0 * dz, z1 = oz + t1 * dz;
-  int c = channel;
+  int c = nc == 1 ? 0 : channel;
   double target = -log1p(-u);
   double total = tau_between(pw, c, z0, z1, dz, t1 - t0);
   if (!(target < total)) { /* the flight passes the box */
-    for (int j = 0; j < 3; j++) tr->c[j] = exp(-tau_between(pw, j, z0, z1, dz, t1 - t0));
+    for (int j = 0; j < nc; j++) tr->c[j] = j == c ? exp(-total) : exp(-tau_between(pw, j, z0, z1, dz, t1 - t0));
+    spread(tr, nc);
     *pdf = *tr;
     return;
   }
@@ -114,8 +118,7 @@ static void pw_sample_real(const medium *m, const ray3 *r, double mint, double m
     t = t0 + target / pw->sig[3 * k + c];
   } else {
     /* C* on the side the ray moves to; search the layer that holds it. */
-    double c0 = cum_at(pw, c, z0);
-    double cs = c0 + target * dz; /* C moves by tau |d_z| in the ray's z direction */
+    double cs = cum_at(pw, c, z0) + target * dz; /* C moves by tau |d_z| in the ray's z direction */
     const double *cum = pw->cum;
     int lo, hi;
     if (dz > 0) { /* smallest j in [1, n] with C_j > C*: k = j - 1 */
@@ -150,24 +153,23 @@ static void pw_sample_real(const medium *m, const ray3 *r, double mint, double m
   mi->p = v3_fma(r->o, t, r->d);
   mi->majorant = col(pw->sig[3 * k], pw->sig[3 * k + 1], pw->sig[3 * k + 2]);
   fill_layer(pw, k, mi);
-  for (int j = 0; j < 3; j++) {
-    tr->c[j] = exp(-tau_between(pw, j, z0, zt, dz, t - t0));
+  for (int j = 0; j < nc; j++) {
+    tr->c[j] = j == c ? 1.0 - u : exp(-tau_between(pw, j, z0, zt, dz, t - t0)); /* exp(-tau*) = 1 - u */
     pdf->c[j] = tr->c[j] * pw->sig[3 * k + j];
   }
+  spread(tr, nc);
+  spread(pdf, nc);
 }
 
 static color pw_transmittance(const medium *m, const ray3 *r, double mint, double maxt) {
   const piecewise_medium *pw = (const piecewise_medium *)m;
   const xform *tw = &pw->sigma_t->to_world;
-  double t0, t1;
-  ray3 seg = *r;
-  seg.tmin = mint;
-  seg.tmax = maxt;
-  if (!media_box_clip(tw, &seg, &t0, &t1)) return col1(1.0);
   double oz = xf_inv_point(tw, r->o).z, dz = xf_inv_vector(tw, r->d).z;
-  double z0 = oz + t0 * dz, z1 = oz + t1 * dz;
+  double z0 = oz + mint * dz, z1 = oz + maxt * dz;
   color tr;
-  for (int j = 0; j < 3; j++) tr.c[j] = exp(-tau_between(pw, j, z0, z1, dz, t1 - t0));
+  int nc = n_channels(pw);
+  for (int j = 0; j < nc; j++) tr.c[j] = exp(-tau_between(pw, j, z0, z1, dz, maxt - mint));
+  spread(&tr, nc);
   return tr;
 }
 

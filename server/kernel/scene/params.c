@@ -24,7 +24,8 @@ typedef enum entry_kind {
   EK_TRANSFORM,
   EK_VECTOR,
   EK_SPECTRUM,
-  EK_MESHBUF
+  EK_MESHBUF,
+  EK_DBUF /* pv_buffer: a plugin's array of doubles, fixed length */
 } entry_kind;
 typedef enum mesh_buf {
   MB_POSITIONS,
@@ -48,6 +49,9 @@ typedef struct entry {
   texture *tex;
   shape *sh;
   mesh_buf buf;
+  double *dptr; /* EK_DBUF */
+  size_t dn;
+  buffer_check_fn dcheck;
   char **aliases;
   size_t n_aliases;
 } entry;
@@ -254,6 +258,17 @@ void pv_mesh_buffer(param_visitor *v, const char *name, shape *sh) {
   e->buf = b;
 }
 
+void pv_buffer(param_visitor *v, const char *name, double *data, size_t n, update_class cls, double lo,
+               double hi, buffer_check_fn check) {
+  entry *e = add_entry(v, name, EK_DBUF, cls);
+  if (!e) return;
+  e->dptr = data;
+  e->dn = n;
+  e->lo = lo;
+  e->hi = hi;
+  e->dcheck = check;
+}
+
 static size_t obj_slot(const param_table *t, const size_t *tab, size_t cap, const object *o) {
   uint64_t h = (uint64_t)(uintptr_t)o * 0x9E3779B97F4A7C15ULL;
   size_t i = (size_t)(h >> 20) & (cap - 1);
@@ -330,13 +345,17 @@ static void visit(param_visitor *v, object *o, char *path, double lo, double hi)
     v->st = rsw_fail(v->err, RSW_ERR_NOMEM, "params", "out of memory");
     return;
   }
-  if (!o->plugin || !o->plugin->traverse) return;
+  /* A sensor's medium (Mitsuba's Endpoint traverses it as "medium"),
+   * whatever the sensor plugin. */
+  object *sensor_medium = o->plugin && o->plugin->cls == CLS_SENSOR ? (object *)((sensor *)o)->medium : NULL;
+  if (!o->plugin || (!o->plugin->traverse && !sensor_medium)) return;
   param_visitor saved = *v;
   v->cur = o;
   v->prefix = path;
   v->lo = lo;
   v->hi = hi;
-  o->plugin->traverse(o, v);
+  if (o->plugin->traverse) o->plugin->traverse(o, v);
+  if (sensor_medium) pv_object(v, "medium", sensor_medium, NAN, NAN);
   saved.st = v->st;
   *v = saved;
   t->objs[k].e_end = t->n;
@@ -471,6 +490,7 @@ static void entry_shape(const entry *e, size_t dims[2]) {
                                        : 3 * (size_t)m->n_verts;
     break;
   }
+  case EK_DBUF: dims[0] = e->dn; break;
   default: break;
   }
 }
@@ -482,7 +502,8 @@ static param_type entry_type(const scene *s, const entry *e) {
   case EK_TRANSFORM: return PARAM_TRANSFORM;
   case EK_VECTOR: return PARAM_VECTOR;
   case EK_SPECTRUM: return s->variant == VARIANT_MONO ? PARAM_SPECTRUM : PARAM_RGB;
-  case EK_MESHBUF: return PARAM_BUFFER;
+  case EK_MESHBUF:
+  case EK_DBUF: return PARAM_BUFFER;
   }
   return PARAM_FLOAT;
 }
@@ -739,6 +760,12 @@ char *params_value_json(const scene *s, size_t i, size_t max_items) {
     sb_printf(&b, "]");
     break;
   }
+  case EK_DBUF:
+    if (max_items && e->dn > max_items)
+      sb_printf(&b, "{\"length\": %zu}", e->dn);
+    else
+      sb_nums(&b, e->dptr, e->dn);
+    break;
   }
   if (b.oom) {
     free(b.p);
@@ -919,6 +946,7 @@ static const char *kind_expect(const scene *s, const entry *e) {
     return s->variant == VARIANT_MONO ? "a number, an [r, g, b] triple or a tabulated spectrum"
                                       : "a number or an [r, g, b] triple";
   case EK_MESHBUF: return "a flat list of numbers";
+  case EK_DBUF: return "a flat list of numbers";
   }
   return "a value";
 }
@@ -1124,6 +1152,32 @@ static rsw_status validate(const scene *s, staged *sg, const staged *all, size_t
     }
     return RSW_OK;
   }
+  case EK_DBUF: {
+    const double *x = v->kind == PV_NUMBER ? &v->num : v->arr;
+    size_t n = v->kind == PV_NUMBER ? 1 : v->n;
+    if (v->kind != PV_NUMBER && v->kind != PV_ARRAY)
+      return rsw_fail(err, RSW_ERR_TYPE, key, "'%s' takes a flat list of %zu numbers", key, e->dn);
+    if (n != e->dn)
+      return rsw_fail(err, RSW_ERR_INVALID, key, "'%s' takes %zu numbers (its shape is fixed), got %zu", key,
+                      e->dn, n);
+    for (size_t i = 0; i < n; i++) {
+      if (!isfinite(x[i]))
+        return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': value at index %zu must be finite", key, i);
+      if (x[i] < e->lo || x[i] > e->hi) {
+        if (isinf(e->hi))
+          return rsw_fail(err, RSW_ERR_RANGE, key, "'%s': value %g at index %zu must be >= %g", key, x[i], i,
+                          e->lo);
+        return rsw_fail(err, RSW_ERR_RANGE, key, "'%s': value %g at index %zu must lie in [%g, %g]", key,
+                        x[i], i, e->lo, e->hi);
+      }
+    }
+    if (e->dcheck) {
+      rsw_status st = e->dcheck(e->owner, x, n, key, err);
+      if (st) return st;
+    }
+    sg->changed = memcmp(x, e->dptr, n * sizeof(double)) != 0;
+    return RSW_OK;
+  }
   case EK_BOOL: break;
   }
   return rsw_fail(err, RSW_ERR_INVALID, key, "'%s' is read-only", e->key);
@@ -1137,6 +1191,12 @@ static rsw_status prepare(staged *sg, const entry *e, rsw_err *err) {
     if (!uniform_spectrum_copy(&sg->new_spec, &sg->spec))
       return rsw_fail(err, RSW_ERR_NOMEM, e->key, "out of memory");
     sg->spec_ready = true;
+    return RSW_OK;
+  }
+  if (e->kind == EK_DBUF) {
+    /* The values it replaces, for undo_one. */
+    sg->old_buf = malloc(e->dn * sizeof(double));
+    if (!sg->old_buf) return rsw_fail(err, RSW_ERR_NOMEM, e->key, "out of memory");
     return RSW_OK;
   }
   if (e->kind != EK_MESHBUF) return RSW_OK;
@@ -1210,6 +1270,12 @@ static void apply_one(staged *sg, const entry *e) {
     }
     break;
   }
+  case EK_DBUF: {
+    const param_value *v = &sg->item->value;
+    memcpy(sg->old_buf, e->dptr, e->dn * sizeof(double));
+    memcpy(e->dptr, v->kind == PV_NUMBER ? &v->num : v->arr, e->dn * sizeof(double));
+    break;
+  }
   case EK_BOOL: break;
   }
   sg->applied = true;
@@ -1236,6 +1302,7 @@ static void undo_one(staged *sg, const entry *e) {
     sg->old_buf = NULL;
     break;
   }
+  case EK_DBUF: memcpy(e->dptr, sg->old_buf, e->dn * sizeof(double)); break;
   case EK_BOOL: break;
   }
   sg->applied = false;

@@ -176,6 +176,19 @@ void pv_spectrum(param_visitor *v, const char *name, texture *t);
 /* Mesh buffers: which = "vertex_positions" | "faces" | "vertex_normals" |
  * "vertex_texcoords". */
 void pv_mesh_buffer(param_visitor *v, const char *name, shape *sh);
+/* Validator for a whole new buffer (pv_buffer), after the length, the
+ * finiteness and the range of every value were checked: e.g. a
+ * tabulated phase function must not be all zeros. Returns an error
+ * naming `key`. */
+typedef rsw_status (*buffer_check_fn)(const object *owner, const double *values, size_t n, const char *key,
+                                      rsw_err *err);
+/* A flat array of n doubles the plugin owns (a volume's grid data, a
+ * tabulated phase function): an update gives exactly n numbers (the
+ * shape is fixed), each finite and in [lo, hi], then `check` (may be
+ * NULL); they are copied into data in place, then the owner's
+ * parameters_changed runs. */
+void pv_buffer(param_visitor *v, const char *name, double *data, size_t n, update_class cls, double lo,
+               double hi, buffer_check_fn check);
 /* A nested object under slot `name`; [lo, hi] constrains the spectral
  * values of a uniform texture reached through it (NaN: no constraint). */
 void pv_object(param_visitor *v, const char *name, object *child, double lo, double hi);

@@ -23,8 +23,10 @@
   X(path)                                                                     \
   X(uniform) X(checkerboard) X(bitmap)                                       \
   X(shapegroup) X(instance) X(instancelist) X(periodic)                      \
-  X(isotropic) X(hg) X(blendphase)                                            \
-  X(constvolume)
+  X(isotropic) X(hg) X(blendphase) X(rayleigh) X(tabphase)                    \
+  X(constvolume) X(gridvolume)                                                \
+  X(null) X(homogeneous) X(heterogeneous) X(piecewise)                       \
+  X(volpath) X(piecewise_volpath)
 // clang-format on
 
 #define DECLARE_(name) extern const plugin plugin_##name;

@@ -10,6 +10,7 @@
  * Source: mitsuba3 src/volumes/const.cpp. */
 #include <math.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "../textures/texture.h"
 #include "volume.h"
@@ -41,8 +42,10 @@ static const volume_ops constvolume_ops = {.eval = constvolume_eval, .value_rang
  * volume: a texture is created, and so prepared, before its holder). */
 static void constvolume_refresh(constvolume *c) {
   color x = tex_eval(c->value, NULL);
+  double m = c->base.channels == 3 ? col_max(x) : x.c[0];
+  if (memcmp(c->cell, x.c, sizeof c->cell) != 0 || m != c->base.max) c->base.revision++;
   for (int k = 0; k < 3; k++) c->cell[k] = x.c[k];
-  c->base.max = c->base.channels == 3 ? col_max(x) : x.c[0];
+  c->base.max = m;
 }
 
 static rsw_status constvolume_prepare(object *o, const render_ctx *rc, rsw_err *err) {

@@ -29,6 +29,18 @@ rsw_status volume_read_to_world(loader *ld, node *n, xform *out);
  * sampling time only, no acceleration structure holds it). */
 void volume_traverse_to_world(volume *v, param_visitor *pv);
 
+/* Most values a list property may hold (2^28: 2 GiB as doubles). */
+#define VOLUME_MAX_VALUES ((size_t)1 << 28)
+
+/* A list of numbers: a JSON array (or a single number, or the 3-vector a
+ * three-number array reads as), or a string of numbers separated by
+ * commas and/or white space (Mitsuba's tabphase `values`; how XML gives
+ * inline data). *out is malloc'ed (free it), *n >= 1; *present (may be
+ * NULL) tells whether the property was given (when absent *out = NULL,
+ * *n = 0). Every value must be finite. */
+rsw_status volume_read_numbers(loader *ld, node *n, const char *name, double **out, size_t *count,
+                               bool *present);
+
 /* A constvolume holding the (uniform) texture `value`; NULL when out of
  * memory. Not yet adopted by a scene. */
 volume *constvolume_new(texture *value, rsw_variant variant, const char *id);

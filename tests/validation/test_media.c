@@ -1,0 +1,452 @@
+/* Participating media against closed forms (issue 14): Beer-Lambert
+ * through absorbing slabs (exact: albedo 0 needs no sampling), single
+ * scattering in a thin slab under a sun (3 sigma), furnaces (an albedo-1
+ * medium under a constant sky gives the sky back), piecewise against
+ * homogeneous and piecewise_volpath against volpath (3 sigma), and the
+ * scene-level media errors.
+ *
+ * Monte Carlo estimates: REPS independent renders (seeds 1..REPS) of a
+ * one-pixel radiancemeter; mean and standard error over the renders;
+ * tolerance 3 standard errors (fixed seeds: deterministic outcome). */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../support/test.h"
+#include "../support/tsup.h"
+#include "image_exr.h"
+
+RSW_TEST_DEFINE_GLOBALS
+
+#define PI   3.14159265358979323846
+#define REPS 24
+
+/* A slab z in [0, h], 40 x 40 wide, bounded by a null cube holding
+ * `medium` (JSON), over an optional ground at z = -0.5. */
+static scene *slab_scene(const char *integ, const char *med, double h, const char *light,
+                         const char *ground, vec3 origin, vec3 dir) {
+  sbuf b = {0};
+  sb_printf(&b,
+            "{\"type\": \"scene\", \"integrator\": %s,"
+            " \"slab\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"}, \"interior\": %s,"
+            "   \"to_world\": [{\"scale\": [20, 20, %.17g]}, {\"translate\": [0, 0, %.17g]}]},"
+            " \"light\": %s,",
+            integ, med, 0.5 * h, 0.5 * h, light);
+  if (ground)
+    sb_printf(&b,
+              " \"ground\": {\"type\": \"rectangle\", \"bsdf\": %s,"
+              "   \"to_world\": [{\"scale\": 40}, {\"translate\": [0, 0, -0.5]}]},",
+              ground);
+  sb_printf(&b,
+            " \"meter\": {\"type\": \"radiancemeter\", \"origin\": [%.17g, %.17g, %.17g],"
+            "   \"direction\": [%.17g, %.17g, %.17g],"
+            "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}}}",
+            origin.x, origin.y, origin.z, dir.x, dir.y, dir.z);
+  scene *s = tsup_load(b.p, "mono");
+  free(b.p);
+  return s;
+}
+
+static double render1(scene *s, uint32_t spp, uint64_t seed) {
+  film_image img;
+  if (!tsup_render(s, spp, seed, 2, &img)) return NAN;
+  double v = img.data[0];
+  film_image_free(&img);
+  return v;
+}
+
+static void estimate(scene *s, uint32_t spp, double *mean, double *sem) {
+  double sum = 0, sum2 = 0;
+  for (int r = 1; r <= REPS; r++) {
+    double v = render1(s, spp, (uint64_t)r);
+    sum += v;
+    sum2 += v * v;
+  }
+  *mean = sum / REPS;
+  *sem = sqrt(fmax(sum2 / REPS - *mean * *mean, 0.0) / (REPS - 1));
+}
+
+static void check_3sigma(const char *what, double m, double sem, double expect) {
+  CHECK(fabs(m - expect) <= 3 * sem + 1e-12, "%s: %.6g vs expected %.6g (3 sigma = %.3g)", what, m, expect,
+        3 * sem);
+  CHECK(sem < 0.05 * fabs(expect) + 1e-9, "%s: standard error %.3g too large for a meaningful test", what, sem);
+}
+
+/* ---- Beer-Lambert ---------------------------------------------------------- */
+
+/* A meter under the slab looks up through it at zenith angle th; the sky
+ * has radiance 1: L = exp(-tau / mu). Exact (no sampling with albedo 0),
+ * up to the boundary's hit points: Embree places them in float32, 1e-6
+ * of the 40-unit-wide slab's coordinates, so 1e-5 relative. */
+static void beer_lambert(const char *integ, const char *med, double h, double tau, double th_deg) {
+  double th = th_deg * PI / 180, mu = cos(th);
+  scene *s = slab_scene(integ, med, h, "{\"type\": \"constant\", \"radiance\": 1}", NULL,
+                        v3(-2 * tan(th), 0, -2), v3(sin(th), 0, mu));
+  REQUIRE(s, "scene");
+  double expect = exp(-tau / mu);
+  for (uint64_t seed = 0; seed < 2; seed++) {
+    double v = render1(s, 4, seed);
+    CHECK(fabs(v - expect) <= 1e-5 * expect, "%s %s at %g deg: %.9g vs exp(-tau/mu) = %.9g", integ, med,
+          th_deg, v, expect);
+  }
+  scene_free(s);
+}
+
+static void test_beer_lambert_homogeneous(void) {
+  const char *med = "{\"type\": \"homogeneous\", \"sigma_t\": 0.7, \"albedo\": 0}";
+  for (int i = 0; i < 3; i++) {
+    double th = 25.0 * i;
+    beer_lambert("{\"type\": \"volpath\"}", med, 1.0, 0.7, th);
+    beer_lambert("{\"type\": \"piecewise_volpath\"}", med, 1.0, 0.7, th);
+  }
+}
+
+static void test_beer_lambert_heterogeneous_constant(void) {
+  /* A constant grid over the slab's box (the unit cube under to_world). */
+  const char *med = "{\"type\": \"heterogeneous\", \"albedo\": 0,"
+                    " \"sigma_t\": {\"type\": \"constvolume\", \"value\": 1.3,"
+                    "   \"to_world\": [{\"translate\": [-0.5, -0.5, 0]}, {\"scale\": [40, 40, 2]}]}}";
+  for (int i = 0; i < 3; i++) {
+    beer_lambert("{\"type\": \"volpath\"}", med, 2.0, 2.6, 25.0 * i);
+    beer_lambert("{\"type\": \"piecewise_volpath\"}", med, 2.0, 2.6, 25.0 * i);
+  }
+}
+
+static void test_beer_lambert_piecewise_one_layer(void) {
+  const char *med = "{\"type\": \"piecewise\", \"albedo\": 0,"
+                    " \"sigma_t\": {\"type\": \"constvolume\", \"value\": 0.4,"
+                    "   \"to_world\": [{\"translate\": [-0.5, -0.5, 0]}, {\"scale\": [40, 40, 3]}]}}";
+  for (int i = 0; i < 3; i++) beer_lambert("{\"type\": \"piecewise_volpath\"}", med, 3.0, 1.2, 25.0 * i);
+}
+
+/* ---- single scattering ------------------------------------------------------ */
+
+/* A slab of optical thickness tau and albedo w over a black ground under a
+ * sun of irradiance 1 from zenith th0 (azimuth 0), seen from zenith thv at
+ * azimuth phv (degrees); max_depth 2 (single scattering):
+ *   L = w p(Theta) mu0 / (mu0 + muv) (1 - exp(-tau (1/mu0 + 1/muv))),
+ * Theta between the sun's propagation and the view direction. */
+typedef double (*phase_fn)(double cos_theta, double g);
+
+static double p_iso(double c, double g) {
+  (void)c, (void)g;
+  return 1.0 / (4 * PI);
+}
+static double p_hg(double c, double g) {
+  return (1 - g * g) / (4 * PI * pow(1 + g * g - 2 * g * c, 1.5));
+}
+
+static double p_rayleigh(double c, double g) {
+  (void)g;
+  return 3.0 / (16 * PI) * (1 + c * c);
+}
+
+static void single_scattering(const char *integ, const char *phase_json, phase_fn p, double g, double thv_deg,
+                              double phv_deg) {
+  const double tau = 0.2, w = 0.8, h = 1.0;
+  const double th0 = 30 * PI / 180, thv = thv_deg * PI / 180, phv = phv_deg * PI / 180;
+  vec3 sun = v3(-sin(th0), 0, -cos(th0)); /* propagation */
+  vec3 to_view = v3(sin(thv) * cos(phv), sin(thv) * sin(phv), cos(thv));
+  char med[512], emit[256];
+  snprintf(med, sizeof med, "{\"type\": \"homogeneous\", \"sigma_t\": %.17g, \"albedo\": %.17g, \"phase\": %s}",
+           tau / h, w, phase_json);
+  snprintf(emit, sizeof emit, "{\"type\": \"directional\", \"direction\": [%.17g, 0, %.17g], \"irradiance\": 1}",
+           sun.x, sun.z);
+  vec3 origin = v3_scale(to_view, 3.0);
+  scene *s = slab_scene(integ, med, h, emit, "{\"type\": \"diffuse\", \"reflectance\": 0}", origin,
+                        v3_neg(to_view));
+  REQUIRE(s, "scene");
+  double mu0 = cos(th0), muv = cos(thv);
+  double expect =
+      w * p(v3_dot(sun, to_view), g) * mu0 / (mu0 + muv) * (1 - exp(-tau * (1 / mu0 + 1 / muv)));
+  double m, sem;
+  estimate(s, 4096, &m, &sem);
+  char what[256];
+  snprintf(what, sizeof what, "single scattering %s %s view (%g, %g)", integ, phase_json, thv_deg, phv_deg);
+  check_3sigma(what, m, sem, expect);
+  scene_free(s);
+}
+
+static void test_single_scattering(void) {
+  const char *integ[] = {"{\"type\": \"volpath\", \"max_depth\": 2}",
+                         "{\"type\": \"piecewise_volpath\", \"max_depth\": 2}"};
+  const double views[][2] = {{0, 0}, {40, 0}, {40, 180}, {65, 90}};
+  for (int i = 0; i < 2; i++)
+    for (int v = 0; v < 4; v++) {
+      single_scattering(integ[i], "{\"type\": \"isotropic\"}", p_iso, 0, views[v][0], views[v][1]);
+      single_scattering(integ[i], "{\"type\": \"hg\", \"g\": 0.7}", p_hg, 0.7, views[v][0], views[v][1]);
+      single_scattering(integ[i], "{\"type\": \"hg\", \"g\": -0.7}", p_hg, -0.7, views[v][0], views[v][1]);
+      single_scattering(integ[i], "{\"type\": \"rayleigh\"}", p_rayleigh, 0, views[v][0], views[v][1]);
+    }
+}
+
+/* ---- furnaces --------------------------------------------------------------- */
+
+static void test_furnace_sphere(void) {
+  /* An albedo-1 medium in a null sphere under a sky of radiance 1: every
+   * path ends in the sky with weight 1 (roulette aside). */
+  const char *integ[] = {"{\"type\": \"volpath\"}", "{\"type\": \"piecewise_volpath\"}"};
+  for (int i = 0; i < 2; i++) {
+    sbuf b = {0};
+    sb_printf(&b, "{\"type\": \"scene\", \"integrator\": %s,"
+                  " \"ball\": {\"type\": \"sphere\", \"bsdf\": {\"type\": \"null\"},"
+                  "   \"interior\": {\"type\": \"homogeneous\", \"sigma_t\": 3, \"albedo\": 1,"
+                  "                  \"phase\": {\"type\": \"hg\", \"g\": 0.5}}},"
+                  " \"sky\": {\"type\": \"constant\", \"radiance\": 1},"
+                  " \"meter\": {\"type\": \"radiancemeter\", \"origin\": [0, 0, 5], \"direction\": [0, 0.1, -1],"
+                  "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}}",
+              integ[i]);
+    scene *s = tsup_load(b.p, "mono");
+    free(b.p);
+    REQUIRE(s, "scene");
+    double m, sem;
+    estimate(s, 1024, &m, &sem);
+    CHECK(fabs(m - 1) <= 3 * sem + 1e-9 && sem < 0.01, "furnace %s: %.6g +- %.3g vs 1", integ[i], m, sem);
+    scene_free(s);
+  }
+}
+
+static void test_furnace_atmosphere_white_ground(void) {
+  /* A non-absorbing slab over a white Lambertian ground under a sky of
+   * radiance 1: the sky's radiance upwards at every angle. */
+  for (int a = 0; a < 3; a++) {
+    double th = 30.0 * a * PI / 180;
+    vec3 to_view = v3(sin(th), 0, cos(th));
+    scene *s = slab_scene("{\"type\": \"volpath\"}",
+                          "{\"type\": \"homogeneous\", \"sigma_t\": 0.5, \"albedo\": 1,"
+                          " \"phase\": {\"type\": \"hg\", \"g\": 0.3}}",
+                          1.0, "{\"type\": \"constant\", \"radiance\": 1}",
+                          "{\"type\": \"diffuse\", \"reflectance\": 1}", v3_scale(to_view, 3), v3_neg(to_view));
+    REQUIRE(s, "scene");
+    double m, sem;
+    estimate(s, 1024, &m, &sem);
+    CHECK(fabs(m - 1) <= 3 * sem + 1e-9 && sem < 0.01, "white furnace at %g deg: %.6g +- %.3g vs 1", 30.0 * a, m,
+          sem);
+    scene_free(s);
+  }
+}
+
+/* ---- integrators and media agree -------------------------------------------- */
+
+/* Multiple scattering over a grey ground under a sun: volpath and
+ * piecewise_volpath, homogeneous and one-layer piecewise media. */
+static void test_integrators_agree(void) {
+  const char *media[] = {"{\"type\": \"homogeneous\", \"sigma_t\": 0.8, \"albedo\": 0.9,"
+                         " \"phase\": {\"type\": \"hg\", \"g\": 0.6}}",
+                         "{\"type\": \"piecewise\", \"albedo\": 0.9, \"phase\": {\"type\": \"hg\", \"g\": 0.6},"
+                         " \"sigma_t\": {\"type\": \"constvolume\", \"value\": 0.8,"
+                         "   \"to_world\": [{\"translate\": [-0.5, -0.5, 0]}, {\"scale\": [40, 40, 1]}]}}"};
+  const char *integ[] = {"{\"type\": \"volpath\"}", "{\"type\": \"piecewise_volpath\"}"};
+  double m[4], se[4];
+  for (int k = 0; k < 4; k++) {
+    vec3 to_view = v3(0.5, 0.2, 0.8427);
+    scene *s = slab_scene(integ[k & 1], media[k >> 1], 1.0,
+                          "{\"type\": \"directional\", \"direction\": [-0.5, 0, -0.8660254], \"irradiance\": 2}",
+                          "{\"type\": \"diffuse\", \"reflectance\": 0.3}", v3_scale(to_view, 3), v3_neg(to_view));
+    REQUIRE(s, "scene");
+    estimate(s, 2048, &m[k], &se[k]);
+    scene_free(s);
+  }
+  for (int k = 1; k < 4; k++)
+    CHECK(fabs(m[k] - m[0]) <= 3 * sqrt(se[k] * se[k] + se[0] * se[0]),
+          "case %d: %.6g +- %.3g vs volpath homogeneous %.6g +- %.3g", k, m[k], se[k], m[0], se[0]);
+}
+
+/* ---- layered media ------------------------------------------------------------ */
+
+/* A [N, 1, 1] gridvolume over the slab's box (z in [0, h]) as JSON. */
+static void layers_json(sbuf *b, const double *v, int n, double h, const char *extra) {
+  sb_printf(b, "{\"type\": \"gridvolume\", \"shape\": [%d, 1, 1], %s \"data\": [", n, extra);
+  for (int i = 0; i < n; i++) sb_printf(b, "%s%.17g", i ? ", " : "", v[i]);
+  sb_printf(b, "], \"to_world\": [{\"translate\": [-0.5, -0.5, 0]}, {\"scale\": [40, 40, %.17g]}]}", h);
+}
+
+/* N unequal layers: exp(-sum sigma_i dz / mu), exact for piecewise (both
+ * integrators), 3 sigma for heterogeneous (nearest filter: ratio
+ * tracking). Also N equal layers. */
+static void test_beer_lambert_layers(void) {
+  enum { N = 37 };
+  double sig[N], eq[N], tau = 0, h = 3.0;
+  for (int i = 0; i < N; i++) {
+    sig[i] = 0.05 + 0.9 * fabs(sin(1.7 * i)) * exp(-i / 15.0);
+    eq[i] = 0.35;
+    tau += sig[i] * h / N;
+  }
+  for (int which = 0; which < 2; which++) {
+    const double *v = which ? eq : sig;
+    double t = which ? 0.35 * h : tau;
+    sbuf b = {0};
+    sb_printf(&b, "{\"type\": \"piecewise\", \"albedo\": 0, \"sigma_t\": ");
+    layers_json(&b, v, N, h, "");
+    sb_printf(&b, "}");
+    for (int i = 0; i < 3; i++) beer_lambert("{\"type\": \"piecewise_volpath\"}", b.p, h, t, 25.0 * i);
+    /* volpath ratio-tracks the same layers: 3 sigma. */
+    double th = 35 * PI / 180;
+    scene *s = slab_scene("{\"type\": \"volpath\"}", b.p, h, "{\"type\": \"constant\", \"radiance\": 1}", NULL,
+                          v3(-2 * tan(th), 0, -2), v3(sin(th), 0, cos(th)));
+    free(b.p);
+    REQUIRE(s, "scene");
+    double m, sem;
+    estimate(s, 1024, &m, &sem);
+    check_3sigma(which ? "volpath, equal layers" : "volpath, unequal layers", m, sem, exp(-t / cos(th)));
+    scene_free(s);
+  }
+  /* Heterogeneous, nearest cells: ratio tracking against the exact value. */
+  sbuf b = {0};
+  sb_printf(&b, "{\"type\": \"heterogeneous\", \"albedo\": 0, \"sigma_t\": ");
+  layers_json(&b, sig, N, h, "\"filter_type\": \"nearest\",");
+  sb_printf(&b, "}");
+  double th = 35 * PI / 180;
+  scene *s = slab_scene("{\"type\": \"volpath\"}", b.p, h, "{\"type\": \"constant\", \"radiance\": 1}", NULL,
+                        v3(-2 * tan(th), 0, -2), v3(sin(th), 0, cos(th)));
+  free(b.p);
+  REQUIRE(s, "scene");
+  double m, sem;
+  estimate(s, 1024, &m, &sem);
+  check_3sigma("heterogeneous layers, ratio tracking", m, sem, exp(-tau / cos(th)));
+  scene_free(s);
+}
+
+/* Scattering: piecewise with N identical layers == homogeneous, and
+ * piecewise_volpath == volpath on unequal layers (3 sigma). */
+static void test_piecewise_agrees(void) {
+  enum { N = 24 };
+  double eq[N], sig[N], alb[N];
+  for (int i = 0; i < N; i++) {
+    eq[i] = 0.6;
+    sig[i] = 1.2 * exp(-i / 6.0);
+    alb[i] = 0.5 + 0.45 * (i % 3) / 2.0;
+  }
+  vec3 to_view = v3(0.3, -0.4, 0.866);
+  const char *sun = "{\"type\": \"directional\", \"direction\": [-0.5, 0.1, -0.86], \"irradiance\": 2}";
+  const char *gnd = "{\"type\": \"diffuse\", \"reflectance\": 0.25}";
+  double m[5], se[5];
+  for (int k = 0; k < 5; k++) {
+    sbuf b = {0};
+    const char *integ = "{\"type\": \"volpath\"}";
+    if (k == 0) {
+      sb_printf(&b, "{\"type\": \"homogeneous\", \"sigma_t\": 0.6, \"albedo\": 0.8,"
+                    " \"phase\": {\"type\": \"hg\", \"g\": 0.5}}");
+    } else {
+      sb_printf(&b, "{\"type\": \"piecewise\", \"phase\": {\"type\": \"hg\", \"g\": 0.5}, \"sigma_t\": ");
+      bool equal = k == 1 || k == 2;
+      layers_json(&b, equal ? eq : sig, N, 2.0, "");
+      if (equal)
+        sb_printf(&b, ", \"albedo\": 0.8}");
+      else {
+        sb_printf(&b, ", \"albedo\": ");
+        layers_json(&b, alb, N, 2.0, "");
+        sb_printf(&b, "}");
+      }
+      if (k == 2 || k == 4) integ = "{\"type\": \"piecewise_volpath\"}";
+    }
+    scene *s = slab_scene(integ, b.p, 2.0, sun, gnd, v3_scale(to_view, 4), v3_neg(to_view));
+    free(b.p);
+    REQUIRE(s, "scene %d", k);
+    estimate(s, 2048, &m[k], &se[k]);
+    scene_free(s);
+  }
+  /* 0 homogeneous, 1 piecewise equal (volpath), 2 equal (piecewise_volpath),
+   * 3 unequal (volpath), 4 unequal (piecewise_volpath). */
+  const int pairs[][2] = {{0, 1}, {0, 2}, {3, 4}};
+  for (int i = 0; i < 3; i++) {
+    int a = pairs[i][0], c = pairs[i][1];
+    CHECK(fabs(m[a] - m[c]) <= 3 * sqrt(se[a] * se[a] + se[c] * se[c]), "case %d %.6g +- %.3g vs case %d %.6g +- %.3g",
+          c, m[c], se[c], a, m[a], se[a]);
+    CHECK(se[c] < 0.02 * m[c], "case %d: standard error %.3g too large", c, se[c]);
+  }
+}
+
+/* ---- scene-level errors ------------------------------------------------------ */
+
+static void expect_error(const char *text, const char *needle, const char *loc) {
+  rsw_err err = {0};
+  scene *s = NULL;
+  scene_load_opts o = {.variant = "mono"};
+  rsw_status st = scene_load_memory(text, strlen(text), NULL, text[0] == '<', &o, &s, &err);
+  CHECK(st != RSW_OK, "loaded a scene that should fail (%s)", needle);
+  if (st == RSW_OK) {
+    scene_free(s);
+    return;
+  }
+  CHECK(strstr(err.msg, needle) != NULL, "error '%s' lacks '%s'", err.msg, needle);
+  size_t lw = strlen(err.where), ll = loc ? strlen(loc) : 0;
+  if (loc)
+    CHECK(lw >= ll && strcmp(err.where + lw - ll, loc) == 0, "error at '%s', expected '...%s'", err.where, loc);
+}
+
+static void test_media_errors(void) {
+  expect_error("{\"type\": \"scene\", \"fog\": {\"type\": \"homogeneous\"},"
+               " \"s\": {\"type\": \"radiancemeter\", \"origin\": [0,0,0], \"direction\": [0,0,1],"
+               "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}}",
+               "has no boundary", "/fog");
+  expect_error("{\"type\": \"scene\", \"fog\": {\"type\": \"homogeneous\"},"
+               " \"ball\": {\"type\": \"sphere\", \"bsdf\": {\"type\": \"null\"}, \"interior\": {\"type\": \"ref\", "
+               "\"id\": \"fog\"}},"
+               " \"s\": {\"type\": \"radiancemeter\", \"origin\": [0,0,5], \"direction\": [0,0,1],"
+               "   \"medium\": {\"type\": \"ref\", \"id\": \"fog\"},"
+               "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}}",
+               "does not sit inside its medium", "/s");
+  /* The same sensor inside the ball loads. */
+  const char *ok = "{\"type\": \"scene\", \"fog\": {\"type\": \"homogeneous\"},"
+                   " \"ball\": {\"type\": \"sphere\", \"bsdf\": {\"type\": \"null\"}, \"interior\": {\"type\": "
+                   "\"ref\", \"id\": \"fog\"}},"
+                   " \"s\": {\"type\": \"radiancemeter\", \"origin\": [0,0,0.5], \"direction\": [0,0,1],"
+                   "   \"medium\": {\"type\": \"ref\", \"id\": \"fog\"},"
+                   "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}}";
+  scene *s = tsup_load(ok, "mono");
+  CHECK(s != NULL, "a sensor inside its medium loads");
+  scene_free(s);
+  expect_error("{\"type\": \"scene\", \"ball\": {\"type\": \"sphere\", \"bsdf\": {\"type\": \"null\"},"
+               " \"interior\": {\"type\": \"piecewise\", \"sigma_t\": {\"type\": \"gridvolume\","
+               " \"shape\": [2, 1, 2], \"data\": [1, 2, 3, 4]}}}}",
+               "[1, 1, N] grid", "/ball/interior/sigma_t");
+  expect_error("{\"type\": \"scene\", \"ball\": {\"type\": \"sphere\", \"bsdf\": {\"type\": \"null\"},"
+               " \"interior\": {\"type\": \"piecewise\", \"sigma_t\": {\"type\": \"gridvolume\","
+               " \"shape\": [3, 1, 1], \"data\": [1, 2, 3]}, \"albedo\": {\"type\": \"gridvolume\","
+               " \"shape\": [2, 1, 1], \"data\": [0.5, 0.5]}}}}",
+               "albedo must be constant or a [1, 1, 3] grid", "/ball/interior/albedo");
+  expect_error("{\"type\": \"scene\", \"ball\": {\"type\": \"sphere\", \"interior\": {\"type\": \"homogeneous\","
+               " \"albedo\": 1.5}}}",
+               "albedo", NULL);
+  expect_error("{\"type\": \"scene\", \"ball\": {\"type\": \"sphere\", \"interior\": {\"type\": \"homogeneous\","
+               " \"sigma_t\": -1}}}",
+               "sigma_t", NULL);
+  expect_error("{\"type\": \"scene\", \"ball\": {\"type\": \"sphere\", \"interior\": {\"type\": \"homogeneous\","
+               " \"phase\": {\"type\": \"nosuchphase\"}}}}",
+               "nosuchphase", NULL);
+}
+
+/* A sensor inside an infinite (unbounded) absorbing medium, looking at a
+ * lit plate: the plate's radiance times exp(-sigma_t d). Exact. */
+static void test_sensor_in_medium(void) {
+  const char *text = "{\"type\": \"scene\", \"integrator\": {\"type\": \"volpath\"},"
+                     " \"fog\": {\"type\": \"homogeneous\", \"sigma_t\": 0.25, \"albedo\": 0},"
+                     " \"lamp\": {\"type\": \"rectangle\", \"emitter\": {\"type\": \"area\", \"radiance\": 2}},"
+                     " \"s\": {\"type\": \"radiancemeter\", \"origin\": [0, 0, 3], \"direction\": [0, 0, -1],"
+                     "   \"medium\": {\"type\": \"ref\", \"id\": \"fog\"},"
+                     "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}}";
+  scene *s = tsup_load(text, "mono");
+  REQUIRE(s, "scene");
+  /* The meter's origin is nudged along its direction by Mitsuba's
+   * RayEpsilon (1500 float32 units: 9e-5 here), so 1e-4 relative. */
+  double v = render1(s, 4, 0), expect = 2 * exp(-0.75);
+  CHECK(fabs(v - expect) <= 1e-4 * expect, "sensor in fog: %.9g vs %.9g", v, expect);
+  scene_free(s);
+}
+
+int main(void) {
+  RSW_TEST_RUN(test_beer_lambert_homogeneous);
+  RSW_TEST_RUN(test_beer_lambert_heterogeneous_constant);
+  RSW_TEST_RUN(test_beer_lambert_piecewise_one_layer);
+  RSW_TEST_RUN(test_sensor_in_medium);
+  RSW_TEST_RUN(test_media_errors);
+  RSW_TEST_RUN(test_single_scattering);
+  RSW_TEST_RUN(test_furnace_sphere);
+  RSW_TEST_RUN(test_furnace_atmosphere_white_ground);
+  RSW_TEST_RUN(test_integrators_agree);
+  RSW_TEST_RUN(test_beer_lambert_layers);
+  RSW_TEST_RUN(test_piecewise_agrees);
+  RSW_TEST_END("test_media");
+}
