@@ -115,7 +115,16 @@ def volume_to_world():
 
 
 def grid(values):
-    return {"type": "gridvolume", "data": values, "shape": [1, 1, len(values)], "to_world": volume_to_world()}
+    """A [1, 1, N] grid along z: `shape` is Mitsuba's tensor shape [Z, Y, X];
+    nearest-cell lookups, so a layer's value holds across the layer (the
+    blendphase evaluates its weight at the scattering point)."""
+    return {
+        "type": "gridvolume",
+        "data": values,
+        "shape": [len(values), 1, 1],
+        "filter_type": "nearest",
+        "to_world": volume_to_world(),
+    }
 
 
 def scene_json(n, wl):
@@ -211,6 +220,7 @@ def scene_xml(n):
         return (
             '        <volume type="gridvolume" name="%s">\n'
             '            <string name="filename" value="%s"/>\n'
+            '            <string name="filter_type" value="nearest"/>\n'
             '            <transform name="to_world">\n'
             '                <scale value="%r, %r, %r"/>\n'
             '                <translate value="%r, %r, 0"/>\n'

@@ -25,7 +25,7 @@ rsw_status medium_read_common(loader *ld, node *n, medium *m) {
 
 void medium_traverse_common(medium *m, param_visitor *v) {
   pv_float(v, "scale", &m->scale, UPDATE_SPECTRAL, 0.0, INFINITY);
-  pv_object(v, "phase", &m->phase->base, NAN, NAN);
+  pv_object(v, "phase_function", &m->phase->base, NAN, NAN);
 }
 
 bool media_box_clip(const xform *to_world, const ray3 *r, double *mint, double *maxt) {
