@@ -169,7 +169,8 @@ static double daemon_job(const char *text, size_t len, int threads, uint32_t spp
   thttp_resp r = {0};
   double secs = -1;
   char id[80] = "";
-  if (tdaemon_http(&d, "POST", "/v1/scenes", hdr, text, len, 600, &r) && (r.status == 201 || r.status == 200)) {
+  if (tdaemon_http(&d, "POST", "/v1/scenes", hdr, text, len, 600, &r) &&
+      (r.status == 201 || r.status == 200)) {
     const char *p = strstr(r.body, "\"id\":\"");
     if (p) sscanf(p + 6, "%64[0-9a-f]", id);
   } else {
@@ -179,7 +180,8 @@ static double daemon_job(const char *text, size_t len, int threads, uint32_t spp
   /* The job: contexts w400 ... w780, each with its three arrays. */
   size_t cap = (size_t)N_CONTEXTS * 3 * LAYERS * 26 + 4096, n = 0;
   char *body = *id ? malloc(cap) : NULL;
-  double *st = malloc(3 * LAYERS * sizeof *st), *al = st ? st + LAYERS : NULL, *wt = st ? st + 2 * LAYERS : NULL;
+  double *st = malloc(3 * LAYERS * sizeof *st), *al = st ? st + LAYERS : NULL,
+         *wt = st ? st + 2 * LAYERS : NULL;
   if (body && st) {
     n += (size_t)snprintf(body + n, cap - n, "{\"defaults\": {\"spp\": %u}, \"contexts\": [", spp);
     for (int c = 0; c < N_CONTEXTS; c++) {
@@ -319,8 +321,8 @@ int main(void) {
          "\"target_update_us\": 200, \"job_contexts\": %d, \"job_spp\": %u, \"job_s\": %.3f, "
          "\"contexts_per_s\": %.3f, \"in_process_s\": %.3f, \"job_overhead_s_per_context\": %.4f, "
          "\"meets_target\": %s}\n",
-         LAYERS, load_s, render_s, rate, rate_cpu, spp, threads, render0_s, rate0, rate0_cpu, slowdown, rate0 / rate,
-         upd_us, upd_parse_us, N_CONTEXTS, job_spp, job_s, N_CONTEXTS / job_s, inproc_s,
+         LAYERS, load_s, render_s, rate, rate_cpu, spp, threads, render0_s, rate0, rate0_cpu, slowdown,
+         rate0 / rate, upd_us, upd_parse_us, N_CONTEXTS, job_spp, job_s, N_CONTEXTS / job_s, inproc_s,
          (job_s - inproc_s) / N_CONTEXTS, slowdown <= 2 && upd_us <= 200 ? "true" : "false");
   return 0;
 }

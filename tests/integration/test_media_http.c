@@ -32,8 +32,8 @@
 
 RSW_TEST_DEFINE_GLOBALS
 
-#define LAYERS 2400
-#define MEDIUM "medium_atmosphere"
+#define LAYERS   2400
+#define MEDIUM   "medium_atmosphere"
 #define K_SIGMA  MEDIUM ".sigma_t.data"
 #define K_ALBEDO MEDIUM ".albedo.data"
 #define K_WEIGHT MEDIUM ".phase_function.weight.data"
@@ -275,7 +275,8 @@ static bool wait_job(const char *job) {
   snprintf(path, sizeof path, "/v1/jobs/%s", job);
   for (int i = 0; i < 6000; i++) {
     thttp_resp r = call("GET", path, NULL, NULL);
-    bool done = r.status == 200 && !strstr(r.body, "\"state\":\"queued\"") && !strstr(r.body, "\"state\":\"running\"");
+    bool done = r.status == 200 && !strstr(r.body, "\"state\":\"queued\"") &&
+                !strstr(r.body, "\"state\":\"running\"");
     bool ok = done && strstr(r.body, "\"state\":\"succeeded\"");
     if (done && !ok) printf("  job: %.600s\n", r.body);
     thttp_resp_free(&r);
@@ -344,7 +345,8 @@ static void refused_job(const char *what, const char *body, const char *pointer)
   char path[160];
   snprintf(path, sizeof path, "/v1/scenes/%s/jobs", scene_id);
   thttp_resp r = call("POST", path, body, NULL);
-  CHECK(r.status == 422, "%s: POST jobs answered %d, expected 422: %.300s", what, r.status, r.body ? r.body : "");
+  CHECK(r.status == 422, "%s: POST jobs answered %d, expected 422: %.300s", what, r.status,
+        r.body ? r.body : "");
   CHECK(r.body && strstr(r.body, pointer), "%s: the problem does not name %s: %.400s", what, pointer,
         r.body ? r.body : "");
   thttp_resp_free(&r);
@@ -359,13 +361,15 @@ static void test_job_refused(void) {
   put_array(&ok, v, LAYERS);
   put(&ok, "}}");
   v[7] = -1;
-  put(&b, "{\"defaults\": {\"spp\": 1}, \"contexts\": [%s, {\"id\": \"b\", \"params\": {\"" K_SIGMA "\": ", ok.p);
+  put(&b,
+      "{\"defaults\": {\"spp\": 1}, \"contexts\": [%s, {\"id\": \"b\", \"params\": {\"" K_SIGMA "\": ", ok.p);
   put_array(&b, v, LAYERS);
   put(&b, "}}]}");
   refused_job("negative sigma_t in context 1", b.p, "/contexts/1/params/" K_SIGMA);
   b.n = 0;
   v[7] = 0.3;
-  put(&b, "{\"defaults\": {\"spp\": 1}, \"contexts\": [%s, {\"id\": \"b\", \"params\": {\"" K_SIGMA "\": ", ok.p);
+  put(&b,
+      "{\"defaults\": {\"spp\": 1}, \"contexts\": [%s, {\"id\": \"b\", \"params\": {\"" K_SIGMA "\": ", ok.p);
   put_array(&b, v, 24);
   put(&b, "}}]}");
   refused_job("sigma_t of 24 values in context 1", b.p, "/contexts/1/params/" K_SIGMA);

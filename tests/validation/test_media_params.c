@@ -38,7 +38,7 @@ RSW_TEST_DEFINE_GLOBALS
 #define THREADS 2
 #define NL      8
 
-#define MEDIUM "medium_atmosphere"
+#define MEDIUM   "medium_atmosphere"
 #define K_SIGMA  MEDIUM ".sigma_t.data"
 #define K_ALBEDO MEDIUM ".albedo.data"
 #define K_WEIGHT MEDIUM ".phase_function.weight.data"
@@ -68,9 +68,11 @@ static void arr(sbuf *b, const double *v, int n) {
 static void grid(sbuf *b, const double *v) {
   sb_printf(b, "{\"type\": \"gridvolume\", \"data\": ");
   arr(b, v, NL);
-  sb_printf(b, ", \"shape\": [%d, 1, 1], \"filter_type\": \"nearest\", \"to_world\": [{\"scale\": [100, 100, 4]}, "
-               "{\"translate\": [-50, -50, 0]}]}",
-            NL);
+  sb_printf(
+      b,
+      ", \"shape\": [%d, 1, 1], \"filter_type\": \"nearest\", \"to_world\": [{\"scale\": [100, 100, 4]}, "
+      "{\"translate\": [-50, -50, 0]}]}",
+      NL);
 }
 
 /* The scene of atmosphere a (malloc'ed text). */
@@ -86,19 +88,21 @@ static char *atmo_scene(const atmo *a) {
             "\"phase_1\": {\"type\": \"hg\", \"g\": %.17g}, \"weight\": ",
             a->g);
   grid(&b, a->weight);
-  sb_printf(&b, "}},\n"
-                " \"shape_atmosphere\": {\"type\": \"cube\", \"to_world\": [{\"scale\": [50, 50, 2.05]}, "
-                "{\"translate\": [0, 0, 1.95]}], \"bsdf\": {\"type\": \"null\"}, \"interior\": {\"type\": \"ref\", "
-                "\"id\": \"" MEDIUM "\"}},\n"
-                " \"surface\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [50, 50, 1]}], \"bsdf\": "
-                "{\"type\": \"diffuse\", \"reflectance\": {\"type\": \"spectrum\", \"wavelengths\": [400, 700], "
-                "\"values\": [0.1, 0.6]}}},\n"
-                " \"sun\": {\"type\": \"directional\", \"direction\": [0.5, 0.1, -0.86602540378443864676], "
-                "\"irradiance\": 1.0},\n"
-                " \"cam\": {\"type\": \"hdistant\", \"target\": {\"type\": \"rectangle\"}, \"sampler\": "
-                "{\"type\": \"independent\", \"sample_count\": 16}, \"film\": {\"type\": \"hdrfilm\", \"width\": 8, "
-                "\"height\": 8, \"rfilter\": {\"type\": \"box\"}}},\n"
-                " \"integrator\": {\"type\": \"piecewise_volpath\", \"max_depth\": 8}}\n");
+  sb_printf(
+      &b,
+      "}},\n"
+      " \"shape_atmosphere\": {\"type\": \"cube\", \"to_world\": [{\"scale\": [50, 50, 2.05]}, "
+      "{\"translate\": [0, 0, 1.95]}], \"bsdf\": {\"type\": \"null\"}, \"interior\": {\"type\": \"ref\", "
+      "\"id\": \"" MEDIUM "\"}},\n"
+      " \"surface\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [50, 50, 1]}], \"bsdf\": "
+      "{\"type\": \"diffuse\", \"reflectance\": {\"type\": \"spectrum\", \"wavelengths\": [400, 700], "
+      "\"values\": [0.1, 0.6]}}},\n"
+      " \"sun\": {\"type\": \"directional\", \"direction\": [0.5, 0.1, -0.86602540378443864676], "
+      "\"irradiance\": 1.0},\n"
+      " \"cam\": {\"type\": \"hdistant\", \"target\": {\"type\": \"rectangle\"}, \"sampler\": "
+      "{\"type\": \"independent\", \"sample_count\": 16}, \"film\": {\"type\": \"hdrfilm\", \"width\": 8, "
+      "\"height\": 8, \"rfilter\": {\"type\": \"box\"}}},\n"
+      " \"integrator\": {\"type\": \"piecewise_volpath\", \"max_depth\": 8}}\n");
   return b.p;
 }
 
@@ -279,8 +283,8 @@ static void refused(const char *name, const upd *u, size_t n, const char *bad_ke
     size_t idx;
     rsw_err e = {0};
     char *now = params_lookup(s, keys[k], &idx, &e) == RSW_OK ? params_value_json(s, idx, 0) : NULL;
-    CHECK(now && before[k] && strcmp(now, before[k]) == 0, "%s: %s changed although the map was refused", name,
-          keys[k]);
+    CHECK(now && before[k] && strcmp(now, before[k]) == 0, "%s: %s changed although the map was refused",
+          name, keys[k]);
     free(now);
     free(before[k]);
   }
@@ -368,11 +372,13 @@ static void test_example_atmosphere(void) {
     param_info info;
     CHECK(params_lookup(j, keys[k], &idx, &e) == RSW_OK && params_info(j, idx, &info), "no key %s", keys[k]);
     if (params_info(j, idx, &info)) {
-      CHECK(info.cls == UPDATE_SPECTRAL, "%s: class %s, expected spectral", keys[k], update_class_name(info.cls));
+      CHECK(info.cls == UPDATE_SPECTRAL, "%s: class %s, expected spectral", keys[k],
+            update_class_name(info.cls));
       CHECK(info.shape[0] == 2400, "%s: shape [%zu], expected [2400]", keys[k], info.shape[0]);
     }
     double *vj = values_of(j, keys[k], &nj), *vx = values_of(x, keys[k], &nx);
-    CHECK(vj && vx && nj == 2400 && nx == 2400, "%s: %zu values in the JSON, %zu in the XML", keys[k], nj, nx);
+    CHECK(vj && vx && nj == 2400 && nx == 2400, "%s: %zu values in the JSON, %zu in the XML", keys[k], nj,
+          nx);
     size_t bad = 0;
     for (size_t i = 0; vj && vx && i < nj && i < nx; i++) bad += (double)(float)vj[i] != vx[i];
     CHECK(bad == 0, "%s: %zu of the XML's values are not the JSON's rounded to float32", keys[k], bad);
