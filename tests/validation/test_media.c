@@ -358,6 +358,91 @@ static void test_piecewise_agrees(void) {
   }
 }
 
+/* ---- piecewise optical thickness, directly ----------------------------------- */
+
+/* tau along o + t d over [t0, t1] summed layer by layer (each layer's
+ * slab cut by the segment), independent of the medium's cumulative sums.
+ * The box is z in [zb, zb + h] (axis-aligned, so local z = (z - zb) / h). */
+static double tau_layers(const double *sig, int n, double zb, double h, vec3 o, vec3 d, double t0, double t1) {
+  double za = o.z + t0 * d.z, zc = o.z + t1 * d.z;
+  if (fabs(d.z) < 1e-300) {
+    int k = (int)floor((za - zb) / h * n);
+    return sig[k < 0 ? 0 : k >= n ? n - 1 : k] * (t1 - t0);
+  }
+  double lo = fmin(za, zc), hi = fmax(za, zc), tau = 0;
+  for (int k = 0; k < n; k++) {
+    double a = fmax(lo, zb + h * k / n), b = fmin(hi, zb + h * (k + 1) / n);
+    if (b > a) tau += sig[k] * (b - a) / fabs(d.z);
+  }
+  return tau;
+}
+
+static void test_piecewise_exact_ops(void) {
+  enum { N = 53 };
+  double sig[N], h = 7.0, zb = -1.0;
+  for (int i = 0; i < N; i++) sig[i] = (i % 7 == 3) ? 0.0 : 0.02 + 0.5 * fabs(cos(0.9 * i));
+  sbuf b = {0};
+  sb_printf(&b, "{\"type\": \"scene\", \"box\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
+                " \"to_world\": [{\"scale\": [5, 5, %.17g]}, {\"translate\": [0, 0, %.17g]}],"
+                " \"interior\": {\"type\": \"piecewise\", \"albedo\": 0.5, \"sigma_t\": {\"type\": \"gridvolume\","
+                " \"shape\": [%d, 1, 1], \"data\": [",
+            h / 2, zb + h / 2, N);
+  for (int i = 0; i < N; i++) sb_printf(&b, "%s%.17g", i ? ", " : "", sig[i]);
+  sb_printf(&b, "], \"to_world\": [{\"translate\": [-0.5, -0.5, 0]}, {\"scale\": [10, 10, %.17g]},"
+                " {\"translate\": [0, 0, %.17g]}]}}}}",
+            h, zb);
+  scene *s = tsup_load(b.p, "mono");
+  free(b.p);
+  REQUIRE(s, "scene");
+  const medium *m = s->shapes[0]->interior;
+  render_ctx rc = {.variant = VARIANT_MONO, .wavelength = 550};
+  rsw_err err = {0};
+  REQUIRE(scene_prepare(s, &rc, &err) == RSW_OK, "prepare: %s", err.msg);
+  pcg32 rng;
+  pcg32_seed(&rng, 7, 1);
+  int bad_tr = 0, bad_inv = 0, n_coll = 0;
+  double worst = 0;
+  for (int k = 0; k < 400; k++) {
+    vec3 o = v3(4 * pcg32_next_double(&rng) - 2, 4 * pcg32_next_double(&rng) - 2, zb + h * pcg32_next_double(&rng));
+    double ct = 2 * pcg32_next_double(&rng) - 1, ph = 2 * PI * pcg32_next_double(&rng);
+    if (k % 50 == 0) ct = 0; /* level rays */
+    if (k % 50 == 1) ct = 1e-9;
+    double st = sqrt(1 - ct * ct);
+    vec3 d = v3(st * cos(ph), st * sin(ph), ct);
+    ray3 r = {o, d, 0, INFINITY};
+    double mint, maxt;
+    REQUIRE(m->ops->intersect_aabb(m, &r, &mint, &maxt), "ray %d meets the box", k);
+    double tau = tau_layers(sig, N, zb, h, o, d, mint, maxt);
+    double tr = m->ops->transmittance(m, &r, mint, maxt).c[0];
+    double e = fabs(tr - exp(-tau));
+    /* Conditioning: a layer boundary's crossing is known to a few ulps of
+     * z over |d.z| in t, which a nearly level ray turns into a large
+     * error in tau (for the reference as much as for the medium). */
+    double cond = d.z != 0 ? 16 * 2.2e-16 * (fabs(o.z) + fabs(zb) + h) * 0.52 / fabs(d.z) : 0;
+    if (e > 1e-12 + 1e-10 * exp(-tau) + cond) bad_tr++;
+    worst = fmax(worst, e);
+    /* Free flights: the collision t at u must satisfy 1 - exp(-tau(mint, t)) = u. */
+    for (int j = 0; j < 8; j++) {
+      double u = pcg32_next_double(&rng);
+      medium_interaction mi;
+      color trc, pdf;
+      m->ops->sample_real(m, &r, mint, maxt, u, 0, &mi, &trc, &pdf);
+      if (!isfinite(mi.t)) {
+        if (!(u >= 1 - exp(-tau) - 1e-12)) bad_inv++;
+        continue;
+      }
+      n_coll++;
+      double tt = tau_layers(sig, N, zb, h, o, d, mint, mi.t);
+      if (fabs((1 - exp(-tt)) - u) > 1e-9 + cond || !(mi.t >= mint && mi.t <= maxt) || !(mi.sigma_t.c[0] > 0))
+        bad_inv++;
+    }
+  }
+  CHECK(bad_tr == 0, "%d transmittances differ from the layer-by-layer product (worst %g)", bad_tr, worst);
+  CHECK(bad_inv == 0, "%d free flights do not invert the optical thickness", bad_inv);
+  CHECK(n_coll > 1000, "only %d collisions sampled", n_coll);
+  scene_free(s);
+}
+
 /* ---- scene-level errors ------------------------------------------------------ */
 
 static void expect_error(const char *text, const char *needle, const char *loc) {
@@ -437,6 +522,7 @@ static void test_sensor_in_medium(void) {
 }
 
 int main(void) {
+  RSW_TEST_RUN(test_piecewise_exact_ops);
   RSW_TEST_RUN(test_beer_lambert_homogeneous);
   RSW_TEST_RUN(test_beer_lambert_heterogeneous_constant);
   RSW_TEST_RUN(test_beer_lambert_piecewise_one_layer);

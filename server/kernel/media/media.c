@@ -96,6 +96,15 @@ rsw_status scene_check_media(const scene *s, node *root, rsw_err *err) {
                       "sensor sits in it, so no ray can enter it",
                       o->id ? o->id : "");
   }
+  /* volpath finds a path's sensor by its sampler (integrators/volpath.c). */
+  for (size_t i = 0; i < s->n_sensors; i++)
+    for (size_t j = 0; j < i; j++)
+      if (s->sensors[i]->sampler == s->sensors[j]->sampler && s->sensors[i]->medium != s->sensors[j]->medium)
+        return rsw_fail(err, RSW_ERR_INVALID, loc_of(root, s->sensors[i]),
+                        "sensor '%s' shares its sampler with sensor '%s' but sits in another medium: give each "
+                        "its own sampler",
+                        s->sensors[i]->base.id ? s->sensors[i]->base.id : "",
+                        s->sensors[j]->base.id ? s->sensors[j]->base.id : "");
   for (size_t i = 0; i < s->n_sensors; i++) {
     const sensor *se = s->sensors[i];
     if (!se->medium || !bounded(s, se->medium)) continue; /* an unbounded medium fills all space */
