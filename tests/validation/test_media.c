@@ -16,6 +16,7 @@
 #include "../support/test.h"
 #include "../support/tsup.h"
 #include "image_exr.h"
+#include "../../server/kernel/scene/params.h"
 
 RSW_TEST_DEFINE_GLOBALS
 
@@ -443,6 +444,186 @@ static void test_piecewise_exact_ops(void) {
   scene_free(s);
 }
 
+/* ---- rgb, determinism, updates ------------------------------------------------ */
+
+/* rgb: a chromatic absorbing slab gives exp(-tau_c / mu) per channel
+ * (homogeneous, and piecewise with a 3-channel grid); a chromatic
+ * scattering slab agrees between volpath and piecewise_volpath. */
+static void test_rgb_chromatic(void) {
+  const char *meds[] = {"{\"type\": \"homogeneous\", \"albedo\": 0, \"sigma_t\": [0.2, 0.5, 1.0]}",
+                        "{\"type\": \"piecewise\", \"albedo\": 0, \"sigma_t\": {\"type\": \"gridvolume\","
+                        " \"shape\": [2, 1, 1, 3], \"data\": [0.1, 0.4, 1.0, 0.3, 0.6, 1.0],"
+                        " \"to_world\": [{\"translate\": [-0.5, -0.5, 0]}, {\"scale\": [40, 40, 1]}]}}"};
+  double th = 30 * PI / 180;
+  for (int k = 0; k < 2; k++) {
+    sbuf b = {0};
+    sb_printf(&b,
+              "{\"type\": \"scene\", \"integrator\": {\"type\": \"piecewise_volpath\"},"
+              " \"slab\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"}, \"interior\": %s,"
+              "   \"to_world\": [{\"scale\": [20, 20, 0.5]}, {\"translate\": [0, 0, 0.5]}]},"
+              " \"sky\": {\"type\": \"constant\", \"radiance\": 1},"
+              " \"meter\": {\"type\": \"radiancemeter\", \"origin\": [%.17g, 0, -2], \"direction\": [%.17g, 0, %.17g],"
+              "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}}",
+              meds[k], -2 * tan(th), sin(th), cos(th));
+    scene *s = tsup_load(b.p, "rgb");
+    free(b.p);
+    REQUIRE(s, "scene");
+    film_image img;
+    REQUIRE(tsup_render(s, 4, 0, 1, &img), "render");
+    const double tau[2][3] = {{0.2, 0.5, 1.0}, {0.2, 0.5, 1.0}};
+    for (int c = 0; c < 3 && c < img.channels; c++) {
+      double expect = exp(-tau[k][c] / cos(th));
+      CHECK(fabs(img.data[c] - expect) <= 1e-5 * expect, "medium %d channel %d: %.9g vs %.9g", k, c, img.data[c],
+            expect);
+    }
+    film_image_free(&img);
+    scene_free(s);
+  }
+  /* Scattering with chromatic extinction (the channel is picked per flight). */
+  double m[2][3], se[2][3];
+  for (int k = 0; k < 2; k++) {
+    vec3 to_view = v3(0.4, 0, 0.9165);
+    sbuf b = {0};
+    sb_printf(&b,
+              "{\"type\": \"scene\", \"integrator\": {\"type\": \"%s\"},"
+              " \"slab\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
+              "   \"interior\": {\"type\": \"piecewise\", \"albedo\": [0.9, 0.7, 0.5], \"sigma_t\": {\"type\": "
+              "\"gridvolume\", \"shape\": [2, 1, 1, 3], \"data\": [0.1, 0.4, 1.0, 0.3, 0.6, 1.0],"
+              "   \"to_world\": [{\"translate\": [-0.5, -0.5, 0]}, {\"scale\": [40, 40, 1]}]}},"
+              "   \"to_world\": [{\"scale\": [20, 20, 0.5]}, {\"translate\": [0, 0, 0.5]}]},"
+              " \"sun\": {\"type\": \"directional\", \"direction\": [-0.5, 0, -0.866], \"irradiance\": 1},"
+              " \"meter\": {\"type\": \"radiancemeter\", \"origin\": [%.17g, 0, %.17g], \"direction\": [%.17g, 0, %.17g],"
+              "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}}",
+              k ? "piecewise_volpath" : "volpath", 3 * to_view.x, 3 * to_view.z, -to_view.x, -to_view.z);
+    scene *s = tsup_load(b.p, "rgb");
+    free(b.p);
+    REQUIRE(s, "scene");
+    double sum[3] = {0}, sum2[3] = {0};
+    for (int r = 1; r <= REPS; r++) {
+      film_image img;
+      REQUIRE(tsup_render(s, 2048, (uint64_t)r, 2, &img), "render");
+      for (int c = 0; c < 3; c++) {
+        sum[c] += img.data[c];
+        sum2[c] += img.data[c] * img.data[c];
+      }
+      film_image_free(&img);
+    }
+    for (int c = 0; c < 3; c++) {
+      m[k][c] = sum[c] / REPS;
+      se[k][c] = sqrt(fmax(sum2[c] / REPS - m[k][c] * m[k][c], 0) / (REPS - 1));
+    }
+    scene_free(s);
+  }
+  for (int c = 0; c < 3; c++)
+    CHECK(fabs(m[0][c] - m[1][c]) <= 3 * sqrt(se[0][c] * se[0][c] + se[1][c] * se[1][c]) && m[0][c] > 0,
+          "channel %d: volpath %.6g +- %.3g vs piecewise_volpath %.6g +- %.3g", c, m[0][c], se[0][c], m[1][c],
+          se[1][c]);
+}
+
+/* The same film, bit for bit, with 1 and 3 threads (a hdistant view of the
+ * slab over a ground, both integrators). */
+static void test_determinism(void) {
+  const char *integ[] = {"volpath", "piecewise_volpath"};
+  for (int k = 0; k < 2; k++) {
+    sbuf b = {0};
+    sb_printf(&b,
+              "{\"type\": \"scene\", \"integrator\": {\"type\": \"%s\"},"
+              " \"slab\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
+              "   \"interior\": {\"type\": \"heterogeneous\", \"albedo\": 0.8, \"phase\": {\"type\": \"hg\", \"g\": 0.4},"
+              "     \"sigma_t\": {\"type\": \"gridvolume\", \"shape\": [3, 2, 2], \"data\": [0.1, 0.5, 0.9, 0.3, 1.1, 0.2,"
+              "       0.7, 0.4, 0.6, 0.8, 0.05, 1.3], \"to_world\": [{\"translate\": [-0.5, -0.5, 0]}, {\"scale\": [4, 4, 1]}]}},"
+              "   \"to_world\": [{\"scale\": [2, 2, 0.5]}, {\"translate\": [0, 0, 0.5]}]},"
+              " \"ground\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 3}, {\"translate\": [0, 0, -0.2]}]},"
+              " \"sun\": {\"type\": \"directional\", \"direction\": [-0.5, 0.2, -0.84], \"irradiance\": 1},"
+              " \"sky\": {\"type\": \"constant\", \"radiance\": 0.3},"
+              " \"cam\": {\"type\": \"hdistant\", \"sampler\": {\"type\": \"independent\", \"sample_count\": 16},"
+              "   \"film\": {\"type\": \"hdrfilm\", \"width\": 24, \"height\": 24}}}",
+              integ[k]);
+    scene *s = tsup_load(b.p, "mono");
+    free(b.p);
+    REQUIRE(s, "scene");
+    film_image a, c;
+    REQUIRE(tsup_render(s, 0, 5, 1, &a), "render 1 thread");
+    REQUIRE(tsup_render(s, 0, 5, 3, &c), "render 3 threads");
+    size_t n = (size_t)a.width * a.height * a.channels;
+    CHECK(memcmp(a.data, c.data, n * sizeof *a.data) == 0, "%s: films differ between 1 and 3 threads", integ[k]);
+    double sum = 0;
+    for (size_t i = 0; i < n; i++) sum += a.data[i];
+    CHECK(sum > 0, "%s: black film", integ[k]);
+    film_image_free(&a);
+    film_image_free(&c);
+    scene_free(s);
+  }
+}
+
+/* Update equals reload, bitwise: sigma_t.data, albedo.data and scale of a
+ * piecewise medium (its cumulative thickness is refreshed), g of its
+ * phase function, at two wavelengths. */
+static char *layered_scene(const double *sig, const double *alb, double scale, double g) {
+  enum { N = 6 };
+  sbuf b = {0};
+  sb_printf(&b, "{\"type\": \"scene\", \"integrator\": {\"type\": \"piecewise_volpath\"},"
+                " \"atmo\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
+                "   \"to_world\": [{\"scale\": [2, 2, 0.5]}, {\"translate\": [0, 0, 0.5]}],"
+                "   \"interior\": {\"type\": \"piecewise\", \"scale\": %.17g, \"phase\": {\"type\": \"hg\", \"g\": %.17g},"
+                "     \"sigma_t\": ",
+            scale, g);
+  layers_json(&b, sig, N, 1.0, "");
+  sb_printf(&b, ", \"albedo\": ");
+  layers_json(&b, alb, N, 1.0, "");
+  sb_printf(&b, "}}, \"ground\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 2}]},"
+                " \"sun\": {\"type\": \"directional\", \"direction\": [-0.3, 0, -0.95], \"irradiance\": 1},"
+                " \"cam\": {\"type\": \"hdistant\", \"sampler\": {\"type\": \"independent\", \"sample_count\": 8},"
+                "   \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16}}}");
+  return b.p;
+}
+
+static void test_update_equals_reload(void) {
+  /* layers_json's box spans 40 units; the cube bounds it laterally. */
+  const double sig0[6] = {0.5, 0.4, 0.3, 0.2, 0.1, 0.05}, sig1[6] = {1.5, 0.2, 0.9, 0.0, 0.3, 0.7};
+  const double alb0[6] = {0.9, 0.9, 0.8, 0.8, 0.7, 0.7}, alb1[6] = {0.3, 1.0, 0.5, 0.95, 0.0, 0.6};
+  char *t0 = layered_scene(sig0, alb0, 1.0, 0.2), *t1 = layered_scene(sig1, alb1, 2.5, -0.4);
+  scene *a = tsup_load(t0, "mono"), *b = tsup_load(t1, "mono");
+  free(t0);
+  free(t1);
+  REQUIRE(a && b, "scenes");
+  char v_sig[256], v_alb[256];
+  snprintf(v_sig, sizeof v_sig, "[%.17g, %.17g, %.17g, %.17g, %.17g, %.17g]", sig1[0], sig1[1], sig1[2], sig1[3],
+           sig1[4], sig1[5]);
+  snprintf(v_alb, sizeof v_alb, "[%.17g, %.17g, %.17g, %.17g, %.17g, %.17g]", alb1[0], alb1[1], alb1[2], alb1[3],
+           alb1[4], alb1[5]);
+  const char *keys[4] = {"atmo.interior_medium.sigma_t.data", "atmo.interior_medium.albedo.data",
+                         "atmo.interior_medium.scale", "atmo.interior_medium.phase.g"};
+  const char *vals[4] = {v_sig, v_alb, "2.5", "-0.4"};
+  param_update items[4];
+  rsw_err err = {0};
+  for (int i = 0; i < 4; i++) {
+    items[i].key = keys[i];
+    REQUIRE(param_value_parse(vals[i], keys[i], &items[i].value, &err) == RSW_OK, "parse %s: %s", keys[i], err.msg);
+  }
+  /* Render a first (derived data computed for the old values), update it. */
+  film_image x;
+  REQUIRE(tsup_render(a, 0, 3, 2, &x), "render");
+  film_image_free(&x);
+  CHECK(scene_update(a, items, 4, NULL, &err) == RSW_OK, "update: %s", err.msg);
+  for (int i = 0; i < 4; i++) param_value_free(&items[i].value);
+  const double wl[2] = {450, 700};
+  for (int w = 0; w < 2; w++) {
+    film_image fa, fb;
+    rsw_err e2 = {0};
+    render_opts o = {.size = sizeof o, .spp = 0, .seed = 9, .threads = 2, .wavelength = wl[w]};
+    REQUIRE(render_sensor(a, &o, &fa, NULL, &e2) == RSW_OK, "render a: %s", e2.msg);
+    REQUIRE(render_sensor(b, &o, &fb, NULL, &e2) == RSW_OK, "render b: %s", e2.msg);
+    size_t n = (size_t)fa.width * fa.height * fa.channels;
+    CHECK(fa.width == fb.width && memcmp(fa.data, fb.data, n * sizeof *fa.data) == 0,
+          "update != reload at %g nm", wl[w]);
+    film_image_free(&fa);
+    film_image_free(&fb);
+  }
+  scene_free(a);
+  scene_free(b);
+}
+
 /* ---- scene-level errors ------------------------------------------------------ */
 
 static void expect_error(const char *text, const char *needle, const char *loc) {
@@ -534,5 +715,8 @@ int main(void) {
   RSW_TEST_RUN(test_integrators_agree);
   RSW_TEST_RUN(test_beer_lambert_layers);
   RSW_TEST_RUN(test_piecewise_agrees);
+  RSW_TEST_RUN(test_rgb_chromatic);
+  RSW_TEST_RUN(test_determinism);
+  RSW_TEST_RUN(test_update_equals_reload);
   RSW_TEST_END("test_media");
 }

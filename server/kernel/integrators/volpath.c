@@ -15,12 +15,14 @@
  * Free flight along a segment [0, t_s] (t_s: the next surface), with
  * unit directions so that t is a length:
  *  - tracking (volpath, media whose coefficients vary): delta tracking
- *    against the scalar majorant mu: tentative collisions t ~ mu e^{-mu t};
- *    with channel c (uniform over the three when sigma_t differs between
- *    them, else 0) a collision is real with probability sigma_t,c / mu
- *    (then T *= sigma_s / sigma_t,c: the albedo in mono) and null
- *    otherwise (T *= sigma_n / (mu - sigma_t,c): 1 in mono); Mitsuba's
- *    weights with tr / tr_pdf = 1 / mu.
+ *    against the scalar majorant mu (the largest over the channels):
+ *    tentative collisions t ~ mu e^{-mu t}, each real with probability
+ *    P = mean_c sigma_t,c / mu (then T *= sigma_s / (mu P): the albedo in
+ *    mono) and null otherwise (T *= sigma_n / (mu (1 - P)): 1 in mono).
+ *    Mitsuba decides with one channel's sigma_t,c / mu instead, which
+ *    never takes a null collision where sigma_t,c = mu although other
+ *    channels have sigma_n > 0 (biased for chromatic extinction); the
+ *    channel mean (Kutz et al. 2017, spectral tracking) covers them all.
  *  - analytic (homogeneous media in both integrators, every medium with
  *    medium_ops.sample_real in piecewise_volpath): t is drawn by
  *    inverting the optical thickness in channel c and T *= tr sigma_s /
@@ -384,13 +386,13 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
           mi.p = v3_fma(seg.o, t, seg.d);
           mi.majorant = col1(mu);
           m->ops->coefficients(m, &mi);
-          int c = pick_channel(m, st);
-          if (sops->next_1d(st) < mi.sigma_t.c[c] / mu) {
-            l->T = col_scale(col_mul(l->T, mi.sigma_s), 1.0 / mi.sigma_t.c[c]);
+          double p_real = col_mean(mi.sigma_t) / mu;
+          if (sops->next_1d(st) < p_real) {
+            l->T = col_scale(col_mul(l->T, mi.sigma_s), 1.0 / (mu * p_real));
             scattered = true;
             break;
           }
-          l->T = col_scale(col_mul(l->T, mi.sigma_n), 1.0 / (mu - mi.sigma_t.c[c]));
+          l->T = col_scale(col_mul(l->T, mi.sigma_n), 1.0 / (mu * (1.0 - p_real)));
           if (col_max(l->T) <= 0) return false;
         }
       }
