@@ -16,6 +16,7 @@
 #include "../support/test.h"
 #include "../support/tsup.h"
 #include "image_exr.h"
+#include "../../server/kernel/scene/params.h"
 
 RSW_TEST_DEFINE_GLOBALS
 
@@ -358,6 +359,271 @@ static void test_piecewise_agrees(void) {
   }
 }
 
+/* ---- piecewise optical thickness, directly ----------------------------------- */
+
+/* tau along o + t d over [t0, t1] summed layer by layer (each layer's
+ * slab cut by the segment), independent of the medium's cumulative sums.
+ * The box is z in [zb, zb + h] (axis-aligned, so local z = (z - zb) / h). */
+static double tau_layers(const double *sig, int n, double zb, double h, vec3 o, vec3 d, double t0, double t1) {
+  double za = o.z + t0 * d.z, zc = o.z + t1 * d.z;
+  if (fabs(d.z) < 1e-300) {
+    int k = (int)floor((za - zb) / h * n);
+    return sig[k < 0 ? 0 : k >= n ? n - 1 : k] * (t1 - t0);
+  }
+  double lo = fmin(za, zc), hi = fmax(za, zc), tau = 0;
+  for (int k = 0; k < n; k++) {
+    double a = fmax(lo, zb + h * k / n), b = fmin(hi, zb + h * (k + 1) / n);
+    if (b > a) tau += sig[k] * (b - a) / fabs(d.z);
+  }
+  return tau;
+}
+
+static void test_piecewise_exact_ops(void) {
+  enum { N = 53 };
+  double sig[N], h = 7.0, zb = -1.0;
+  for (int i = 0; i < N; i++) sig[i] = (i % 7 == 3) ? 0.0 : 0.02 + 0.5 * fabs(cos(0.9 * i));
+  sbuf b = {0};
+  sb_printf(&b, "{\"type\": \"scene\", \"box\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
+                " \"to_world\": [{\"scale\": [5, 5, %.17g]}, {\"translate\": [0, 0, %.17g]}],"
+                " \"interior\": {\"type\": \"piecewise\", \"albedo\": 0.5, \"sigma_t\": {\"type\": \"gridvolume\","
+                " \"shape\": [%d, 1, 1], \"data\": [",
+            h / 2, zb + h / 2, N);
+  for (int i = 0; i < N; i++) sb_printf(&b, "%s%.17g", i ? ", " : "", sig[i]);
+  sb_printf(&b, "], \"to_world\": [{\"translate\": [-0.5, -0.5, 0]}, {\"scale\": [10, 10, %.17g]},"
+                " {\"translate\": [0, 0, %.17g]}]}}}}",
+            h, zb);
+  scene *s = tsup_load(b.p, "mono");
+  free(b.p);
+  REQUIRE(s, "scene");
+  const medium *m = s->shapes[0]->interior;
+  render_ctx rc = {.variant = VARIANT_MONO, .wavelength = 550};
+  rsw_err err = {0};
+  REQUIRE(scene_prepare(s, &rc, &err) == RSW_OK, "prepare: %s", err.msg);
+  pcg32 rng;
+  pcg32_seed(&rng, 7, 1);
+  int bad_tr = 0, bad_inv = 0, n_coll = 0;
+  double worst = 0;
+  for (int k = 0; k < 400; k++) {
+    vec3 o = v3(4 * pcg32_next_double(&rng) - 2, 4 * pcg32_next_double(&rng) - 2, zb + h * pcg32_next_double(&rng));
+    double ct = 2 * pcg32_next_double(&rng) - 1, ph = 2 * PI * pcg32_next_double(&rng);
+    if (k % 50 == 0) ct = 0; /* level rays */
+    if (k % 50 == 1) ct = 1e-9;
+    double st = sqrt(1 - ct * ct);
+    vec3 d = v3(st * cos(ph), st * sin(ph), ct);
+    ray3 r = {o, d, 0, INFINITY};
+    double mint, maxt;
+    REQUIRE(m->ops->intersect_aabb(m, &r, &mint, &maxt), "ray %d meets the box", k);
+    double tau = tau_layers(sig, N, zb, h, o, d, mint, maxt);
+    double tr = m->ops->transmittance(m, &r, mint, maxt).c[0];
+    double e = fabs(tr - exp(-tau));
+    /* Conditioning: a layer boundary's crossing is known to a few ulps of
+     * z over |d.z| in t, which a nearly level ray turns into a large
+     * error in tau (for the reference as much as for the medium). */
+    double cond = d.z != 0 ? 16 * 2.2e-16 * (fabs(o.z) + fabs(zb) + h) * 0.52 / fabs(d.z) : 0;
+    if (e > 1e-12 + 1e-10 * exp(-tau) + cond) bad_tr++;
+    worst = fmax(worst, e);
+    /* Free flights: the collision t at u must satisfy 1 - exp(-tau(mint, t)) = u. */
+    for (int j = 0; j < 8; j++) {
+      double u = pcg32_next_double(&rng);
+      medium_interaction mi;
+      color trc, pdf;
+      m->ops->sample_real(m, &r, mint, maxt, u, 0, &mi, &trc, &pdf);
+      if (!isfinite(mi.t)) {
+        if (!(u >= 1 - exp(-tau) - 1e-12)) bad_inv++;
+        continue;
+      }
+      n_coll++;
+      double tt = tau_layers(sig, N, zb, h, o, d, mint, mi.t);
+      if (fabs((1 - exp(-tt)) - u) > 1e-9 + cond || !(mi.t >= mint && mi.t <= maxt) || !(mi.sigma_t.c[0] > 0))
+        bad_inv++;
+    }
+  }
+  CHECK(bad_tr == 0, "%d transmittances differ from the layer-by-layer product (worst %g)", bad_tr, worst);
+  CHECK(bad_inv == 0, "%d free flights do not invert the optical thickness", bad_inv);
+  CHECK(n_coll > 1000, "only %d collisions sampled", n_coll);
+  scene_free(s);
+}
+
+/* ---- rgb, determinism, updates ------------------------------------------------ */
+
+/* rgb: a chromatic absorbing slab gives exp(-tau_c / mu) per channel
+ * (homogeneous, and piecewise with a 3-channel grid); a chromatic
+ * scattering slab agrees between volpath and piecewise_volpath. */
+static void test_rgb_chromatic(void) {
+  const char *meds[] = {"{\"type\": \"homogeneous\", \"albedo\": 0, \"sigma_t\": [0.2, 0.5, 1.0]}",
+                        "{\"type\": \"piecewise\", \"albedo\": 0, \"sigma_t\": {\"type\": \"gridvolume\","
+                        " \"shape\": [2, 1, 1, 3], \"data\": [0.1, 0.4, 1.0, 0.3, 0.6, 1.0],"
+                        " \"to_world\": [{\"translate\": [-0.5, -0.5, 0]}, {\"scale\": [40, 40, 1]}]}}"};
+  double th = 30 * PI / 180;
+  for (int k = 0; k < 2; k++) {
+    sbuf b = {0};
+    sb_printf(&b,
+              "{\"type\": \"scene\", \"integrator\": {\"type\": \"piecewise_volpath\"},"
+              " \"slab\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"}, \"interior\": %s,"
+              "   \"to_world\": [{\"scale\": [20, 20, 0.5]}, {\"translate\": [0, 0, 0.5]}]},"
+              " \"sky\": {\"type\": \"constant\", \"radiance\": 1},"
+              " \"meter\": {\"type\": \"radiancemeter\", \"origin\": [%.17g, 0, -2], \"direction\": [%.17g, 0, %.17g],"
+              "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}}",
+              meds[k], -2 * tan(th), sin(th), cos(th));
+    scene *s = tsup_load(b.p, "rgb");
+    free(b.p);
+    REQUIRE(s, "scene");
+    film_image img;
+    REQUIRE(tsup_render(s, 4, 0, 1, &img), "render");
+    const double tau[2][3] = {{0.2, 0.5, 1.0}, {0.2, 0.5, 1.0}};
+    for (int c = 0; c < 3 && c < img.channels; c++) {
+      double expect = exp(-tau[k][c] / cos(th));
+      CHECK(fabs(img.data[c] - expect) <= 1e-5 * expect, "medium %d channel %d: %.9g vs %.9g", k, c, img.data[c],
+            expect);
+    }
+    film_image_free(&img);
+    scene_free(s);
+  }
+  /* Scattering with chromatic extinction (the channel is picked per flight). */
+  double m[2][3], se[2][3];
+  for (int k = 0; k < 2; k++) {
+    vec3 to_view = v3(0.4, 0, 0.9165);
+    sbuf b = {0};
+    sb_printf(&b,
+              "{\"type\": \"scene\", \"integrator\": {\"type\": \"%s\"},"
+              " \"slab\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
+              "   \"interior\": {\"type\": \"piecewise\", \"albedo\": [0.9, 0.7, 0.5], \"sigma_t\": {\"type\": "
+              "\"gridvolume\", \"shape\": [2, 1, 1, 3], \"data\": [0.1, 0.4, 1.0, 0.3, 0.6, 1.0],"
+              "   \"to_world\": [{\"translate\": [-0.5, -0.5, 0]}, {\"scale\": [40, 40, 1]}]}},"
+              "   \"to_world\": [{\"scale\": [20, 20, 0.5]}, {\"translate\": [0, 0, 0.5]}]},"
+              " \"sun\": {\"type\": \"directional\", \"direction\": [-0.5, 0, -0.866], \"irradiance\": 1},"
+              " \"meter\": {\"type\": \"radiancemeter\", \"origin\": [%.17g, 0, %.17g], \"direction\": [%.17g, 0, %.17g],"
+              "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}}",
+              k ? "piecewise_volpath" : "volpath", 3 * to_view.x, 3 * to_view.z, -to_view.x, -to_view.z);
+    scene *s = tsup_load(b.p, "rgb");
+    free(b.p);
+    REQUIRE(s, "scene");
+    double sum[3] = {0}, sum2[3] = {0};
+    for (int r = 1; r <= REPS; r++) {
+      film_image img;
+      REQUIRE(tsup_render(s, 2048, (uint64_t)r, 2, &img), "render");
+      for (int c = 0; c < 3; c++) {
+        sum[c] += img.data[c];
+        sum2[c] += img.data[c] * img.data[c];
+      }
+      film_image_free(&img);
+    }
+    for (int c = 0; c < 3; c++) {
+      m[k][c] = sum[c] / REPS;
+      se[k][c] = sqrt(fmax(sum2[c] / REPS - m[k][c] * m[k][c], 0) / (REPS - 1));
+    }
+    scene_free(s);
+  }
+  for (int c = 0; c < 3; c++)
+    CHECK(fabs(m[0][c] - m[1][c]) <= 3 * sqrt(se[0][c] * se[0][c] + se[1][c] * se[1][c]) && m[0][c] > 0,
+          "channel %d: volpath %.6g +- %.3g vs piecewise_volpath %.6g +- %.3g", c, m[0][c], se[0][c], m[1][c],
+          se[1][c]);
+}
+
+/* The same film, bit for bit, with 1 and 3 threads (a hdistant view of the
+ * slab over a ground, both integrators). */
+static void test_determinism(void) {
+  const char *integ[] = {"volpath", "piecewise_volpath"};
+  for (int k = 0; k < 2; k++) {
+    sbuf b = {0};
+    sb_printf(&b,
+              "{\"type\": \"scene\", \"integrator\": {\"type\": \"%s\"},"
+              " \"slab\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
+              "   \"interior\": {\"type\": \"heterogeneous\", \"albedo\": 0.8, \"phase\": {\"type\": \"hg\", \"g\": 0.4},"
+              "     \"sigma_t\": {\"type\": \"gridvolume\", \"shape\": [3, 2, 2], \"data\": [0.1, 0.5, 0.9, 0.3, 1.1, 0.2,"
+              "       0.7, 0.4, 0.6, 0.8, 0.05, 1.3], \"to_world\": [{\"translate\": [-0.5, -0.5, 0]}, {\"scale\": [4, 4, 1]}]}},"
+              "   \"to_world\": [{\"scale\": [2, 2, 0.5]}, {\"translate\": [0, 0, 0.5]}]},"
+              " \"ground\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 3}, {\"translate\": [0, 0, -0.2]}]},"
+              " \"sun\": {\"type\": \"directional\", \"direction\": [-0.5, 0.2, -0.84], \"irradiance\": 1},"
+              " \"sky\": {\"type\": \"constant\", \"radiance\": 0.3},"
+              " \"cam\": {\"type\": \"hdistant\", \"sampler\": {\"type\": \"independent\", \"sample_count\": 16},"
+              "   \"film\": {\"type\": \"hdrfilm\", \"width\": 24, \"height\": 24}}}",
+              integ[k]);
+    scene *s = tsup_load(b.p, "mono");
+    free(b.p);
+    REQUIRE(s, "scene");
+    film_image a, c;
+    REQUIRE(tsup_render(s, 0, 5, 1, &a), "render 1 thread");
+    REQUIRE(tsup_render(s, 0, 5, 3, &c), "render 3 threads");
+    size_t n = (size_t)a.width * a.height * a.channels;
+    CHECK(memcmp(a.data, c.data, n * sizeof *a.data) == 0, "%s: films differ between 1 and 3 threads", integ[k]);
+    double sum = 0;
+    for (size_t i = 0; i < n; i++) sum += a.data[i];
+    CHECK(sum > 0, "%s: black film", integ[k]);
+    film_image_free(&a);
+    film_image_free(&c);
+    scene_free(s);
+  }
+}
+
+/* Update equals reload, bitwise: sigma_t.data, albedo.data and scale of a
+ * piecewise medium (its cumulative thickness is refreshed), g of its
+ * phase function, at two wavelengths. */
+static char *layered_scene(const double *sig, const double *alb, double scale, double g) {
+  enum { N = 6 };
+  sbuf b = {0};
+  sb_printf(&b, "{\"type\": \"scene\", \"integrator\": {\"type\": \"piecewise_volpath\"},"
+                " \"atmo\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
+                "   \"to_world\": [{\"scale\": [2, 2, 0.5]}, {\"translate\": [0, 0, 0.5]}],"
+                "   \"interior\": {\"type\": \"piecewise\", \"scale\": %.17g, \"phase\": {\"type\": \"hg\", \"g\": %.17g},"
+                "     \"sigma_t\": ",
+            scale, g);
+  layers_json(&b, sig, N, 1.0, "");
+  sb_printf(&b, ", \"albedo\": ");
+  layers_json(&b, alb, N, 1.0, "");
+  sb_printf(&b, "}}, \"ground\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 2}]},"
+                " \"sun\": {\"type\": \"directional\", \"direction\": [-0.3, 0, -0.95], \"irradiance\": 1},"
+                " \"cam\": {\"type\": \"hdistant\", \"sampler\": {\"type\": \"independent\", \"sample_count\": 8},"
+                "   \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16}}}");
+  return b.p;
+}
+
+static void test_update_equals_reload(void) {
+  /* layers_json's box spans 40 units; the cube bounds it laterally. */
+  const double sig0[6] = {0.5, 0.4, 0.3, 0.2, 0.1, 0.05}, sig1[6] = {1.5, 0.2, 0.9, 0.0, 0.3, 0.7};
+  const double alb0[6] = {0.9, 0.9, 0.8, 0.8, 0.7, 0.7}, alb1[6] = {0.3, 1.0, 0.5, 0.95, 0.0, 0.6};
+  char *t0 = layered_scene(sig0, alb0, 1.0, 0.2), *t1 = layered_scene(sig1, alb1, 2.5, -0.4);
+  scene *a = tsup_load(t0, "mono"), *b = tsup_load(t1, "mono");
+  free(t0);
+  free(t1);
+  REQUIRE(a && b, "scenes");
+  char v_sig[256], v_alb[256];
+  snprintf(v_sig, sizeof v_sig, "[%.17g, %.17g, %.17g, %.17g, %.17g, %.17g]", sig1[0], sig1[1], sig1[2], sig1[3],
+           sig1[4], sig1[5]);
+  snprintf(v_alb, sizeof v_alb, "[%.17g, %.17g, %.17g, %.17g, %.17g, %.17g]", alb1[0], alb1[1], alb1[2], alb1[3],
+           alb1[4], alb1[5]);
+  const char *keys[4] = {"atmo.interior_medium.sigma_t.data", "atmo.interior_medium.albedo.data",
+                         "atmo.interior_medium.scale", "atmo.interior_medium.phase.g"};
+  const char *vals[4] = {v_sig, v_alb, "2.5", "-0.4"};
+  param_update items[4];
+  rsw_err err = {0};
+  for (int i = 0; i < 4; i++) {
+    items[i].key = keys[i];
+    REQUIRE(param_value_parse(vals[i], keys[i], &items[i].value, &err) == RSW_OK, "parse %s: %s", keys[i], err.msg);
+  }
+  /* Render a first (derived data computed for the old values), update it. */
+  film_image x;
+  REQUIRE(tsup_render(a, 0, 3, 2, &x), "render");
+  film_image_free(&x);
+  CHECK(scene_update(a, items, 4, NULL, &err) == RSW_OK, "update: %s", err.msg);
+  for (int i = 0; i < 4; i++) param_value_free(&items[i].value);
+  const double wl[2] = {450, 700};
+  for (int w = 0; w < 2; w++) {
+    film_image fa, fb;
+    rsw_err e2 = {0};
+    render_opts o = {.size = sizeof o, .spp = 0, .seed = 9, .threads = 2, .wavelength = wl[w]};
+    REQUIRE(render_sensor(a, &o, &fa, NULL, &e2) == RSW_OK, "render a: %s", e2.msg);
+    REQUIRE(render_sensor(b, &o, &fb, NULL, &e2) == RSW_OK, "render b: %s", e2.msg);
+    size_t n = (size_t)fa.width * fa.height * fa.channels;
+    CHECK(fa.width == fb.width && memcmp(fa.data, fb.data, n * sizeof *fa.data) == 0,
+          "update != reload at %g nm", wl[w]);
+    film_image_free(&fa);
+    film_image_free(&fb);
+  }
+  scene_free(a);
+  scene_free(b);
+}
+
 /* ---- scene-level errors ------------------------------------------------------ */
 
 static void expect_error(const char *text, const char *needle, const char *loc) {
@@ -437,6 +703,7 @@ static void test_sensor_in_medium(void) {
 }
 
 int main(void) {
+  RSW_TEST_RUN(test_piecewise_exact_ops);
   RSW_TEST_RUN(test_beer_lambert_homogeneous);
   RSW_TEST_RUN(test_beer_lambert_heterogeneous_constant);
   RSW_TEST_RUN(test_beer_lambert_piecewise_one_layer);
@@ -448,5 +715,8 @@ int main(void) {
   RSW_TEST_RUN(test_integrators_agree);
   RSW_TEST_RUN(test_beer_lambert_layers);
   RSW_TEST_RUN(test_piecewise_agrees);
+  RSW_TEST_RUN(test_rgb_chromatic);
+  RSW_TEST_RUN(test_determinism);
+  RSW_TEST_RUN(test_update_equals_reload);
   RSW_TEST_END("test_media");
 }

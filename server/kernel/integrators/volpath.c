@@ -15,12 +15,14 @@
  * Free flight along a segment [0, t_s] (t_s: the next surface), with
  * unit directions so that t is a length:
  *  - tracking (volpath, media whose coefficients vary): delta tracking
- *    against the scalar majorant mu: tentative collisions t ~ mu e^{-mu t};
- *    with channel c (uniform over the three when sigma_t differs between
- *    them, else 0) a collision is real with probability sigma_t,c / mu
- *    (then T *= sigma_s / sigma_t,c: the albedo in mono) and null
- *    otherwise (T *= sigma_n / (mu - sigma_t,c): 1 in mono); Mitsuba's
- *    weights with tr / tr_pdf = 1 / mu.
+ *    against the scalar majorant mu (the largest over the channels):
+ *    tentative collisions t ~ mu e^{-mu t}, each real with probability
+ *    P = mean_c sigma_t,c / mu (then T *= sigma_s / (mu P): the albedo in
+ *    mono) and null otherwise (T *= sigma_n / (mu (1 - P)): 1 in mono).
+ *    Mitsuba decides with one channel's sigma_t,c / mu instead, which
+ *    never takes a null collision where sigma_t,c = mu although other
+ *    channels have sigma_n > 0 (biased for chromatic extinction); the
+ *    channel mean (Kutz et al. 2017, spectral tracking) covers them all.
  *  - analytic (homogeneous media in both integrators, every medium with
  *    medium_ops.sample_real in piecewise_volpath): t is drawn by
  *    inverting the optical thickness in channel c and T *= tr sigma_s /
@@ -44,8 +46,7 @@
  *
  * The sensor's medium: Li does not receive the sensor, so the path's first
  * medium is that of the sensor whose sampler drives it (st->s); sensors
- * sharing a sampler must share a medium (scene_check_media says so). One
- * path at a time (no Li_batch). */
+ * sharing a sampler must share a medium (scene_check_media says so). */
 #include <math.h>
 #include <stdlib.h>
 
@@ -98,6 +99,8 @@ static bool may_hit(const scene *sc, const ray3 *r) {
   const double lo[3] = {sc->bbox_min.x, sc->bbox_min.y, sc->bbox_min.z};
   const double hi[3] = {sc->bbox_max.x, sc->bbox_max.y, sc->bbox_max.z};
   const double o[3] = {r->o.x, r->o.y, r->o.z}, d[3] = {r->d.x, r->d.y, r->d.z};
+  if (o[0] >= lo[0] && o[0] <= hi[0] && o[1] >= lo[1] && o[1] <= hi[1] && o[2] >= lo[2] && o[2] <= hi[2])
+    return true; /* most rays start inside */
   double t0 = r->tmin, t1 = r->tmax;
   for (int a = 0; a < 3; a++) {
     double pad = 1e-9 * (fabs(lo[a]) + fabs(hi[a]) + 1.0);
@@ -190,39 +193,6 @@ static color segment_tr(const volpath_integrator *vp, const medium *m, const ray
   return tr;
 }
 
-/* Transmittance along the shadow ray r (unit d, r.tmax its length) from a
- * vertex at p0 in medium m, crossing null surfaces; 0 when blocked. The
- * media see the exact segments between surface points (p0, the hits),
- * not the traced rays' offset origins. */
-static color shadow_tr(const volpath_integrator *vp, const scene *sc, ray3 r, vec3 p0, const medium *m,
-                       sampler_state *st, render_stats *stats) {
-  color tr = col1(1.0);
-  vec3 end = v3_fma(r.o, r.tmax, r.d);
-  bool finite = isfinite(r.tmax);
-  for (int k = 0; k < MAX_CROSSINGS; k++) {
-    surface_interaction si;
-    uint64_t before = stats->rays;
-    bool hit = intersect(sc, &r, &si, stats);
-    stats->shadow_rays += stats->rays - before; /* counted as shadow rays */
-    stats->rays = before;
-    if (m) {
-      vec3 q = hit ? si.p : end;
-      ray3 mr = {p0, r.d, 0.0, (hit || finite) ? v3_dot(v3_sub(q, p0), r.d) : INFINITY};
-      tr = col_mul(tr, segment_tr(vp, m, &mr, mr.tmax, st));
-      if (col_is_black(tr)) return tr;
-    }
-    if (!hit) return tr;
-    if (!(si.shape->bsdf->flags & BSDF_INDEX_MATCHED)) return col1(0.0);
-    m = medium_after(&si, r.d, m);
-    double left = r.tmax - si.t;
-    r = spawn_ray(&si, r.d);
-    r.tmax = left;
-    p0 = si.p;
-    if (!(left > 0)) return tr;
-  }
-  return col1(0.0);
-}
-
 /* The shadow ray from a surface vertex si (or a medium point p when si is
  * NULL) towards emitter sample ds (unit direction ds->d). */
 static ray3 shadow_ray(const scene *sc, const surface_interaction *si, vec3 p, const emitter *e,
@@ -249,191 +219,375 @@ static const medium *start_medium(const scene *sc, const sampler_state *st) {
   return NULL;
 }
 
-static color volpath_Li(const integrator *it, const scene *sc, sampler_state *st, ray3 ray, render_stats *stats,
-                        double *quv) {
-  (void)quv; /* no polarisation through media */
-  const volpath_integrator *vp = (const volpath_integrator *)it;
-  const sampler_ops *sops = st->s->ops;
-  color L = col1(0.0), T = col1(1.0);
-  double len = v3_len(ray.d);
-  if (!(len > 0)) return L;
-  ray.d = v3_scale(ray.d, 1.0 / len);
-  ray.tmin *= len;
-  ray.tmax *= len;
-  const medium *m = start_medium(sc, st);
-  int depth = 0, crossings = 0;
-  double eta = 1.0;
-  /* The last scattering vertex, for MIS at emitters found by sampling. */
-  surface_interaction prev = {0};
-  double prev_pdf = 1.0;
-  bool prev_delta = true;
-  /* Where the current ray really starts (the traced ray's origin is
-   * offset off surfaces): media integrate from here to the exact hit. */
-  vec3 seg_o = ray.o;
-  if (it->max_depth == 0) return L;
-  for (;;) {
-    surface_interaction si;
-    bool hit = intersect(sc, &ray, &si, stats);
-    double tsurf = hit ? si.t : ray.tmax;
+/* ---- the wave -------------------------------------------------------------
+ *
+ * Paths advance together, event by event (as `path`'s wave): the rays of
+ * the live lanes are traced as Embree packets (one by one under a
+ * periodic boundary; a ray that has left the scene's bounds is not traced
+ * at all), then each lane handles its segment: the free flight through
+ * its medium, then the scattering event, the surface, the null surface
+ * crossed or the escape, which sets up its shadow ray (next-event
+ * estimation) and its next ray. The shadow rays are then traced together,
+ * round after round while some cross null surfaces, each lane
+ * accumulating its transmittance. A lane draws from its own sampler state
+ * only, always in the same order (free flight, light sample, phase or
+ * BSDF sample, roulette, then the shadow ray's ratio tracking), so its
+ * value does not depend on its batch (up to Embree's packet rounding,
+ * accel.h); Li is the wave of one path. */
 
-    /* ---- the medium along [0, tsurf] ---- */
-    medium_interaction mi;
-    bool scattered = false;
-    if (m) {
-      ray3 seg = {seg_o, ray.d, 0.0, hit ? v3_dot(v3_sub(si.p, seg_o), ray.d) : tsurf};
-      double mint, maxt;
-      if (m->ops->intersect_aabb(m, &seg, &mint, &maxt)) {
-        if (m->absorbing_only) {
-          T = col_mul(T, segment_tr(vp, m, &seg, seg.tmax, st));
-        } else if (analytic_in(vp, m)) {
-          int c = pick_channel(m, st);
-          color tr, pdf;
-          m->ops->sample_real(m, &seg, mint, maxt, sops->next_1d(st), c, &mi, &tr, &pdf);
-          double pc = col_mean(pdf);
-          if (isfinite(mi.t)) {
-            scattered = true;
-            T = pc > 0 ? col_scale(col_mul(T, col_mul(tr, mi.sigma_s)), 1.0 / pc) : col1(0.0);
-          } else {
-            T = pc > 0 ? col_scale(col_mul(T, tr), 1.0 / pc) : col1(0.0);
-          }
-        } else {
-          mi = (medium_interaction){.medium = m, .wi = v3_neg(ray.d), .mint = mint};
-          mi.p = v3_fma(seg.o, mint, ray.d);
-          double mu = col_max(m->ops->majorant(m, &mi));
-          double t = mint;
-          while (mu > 0) {
-            t -= log1p(-sops->next_1d(st)) / mu;
-            if (!(t < maxt)) break;
-            mi.t = t;
-            mi.p = v3_fma(seg.o, t, ray.d);
-            mi.majorant = col1(mu);
-            m->ops->coefficients(m, &mi);
-            int c = pick_channel(m, st);
-            double p_real = mi.sigma_t.c[c] / mu;
-            if (sops->next_1d(st) < p_real) {
-              T = col_scale(col_mul(T, mi.sigma_s), 1.0 / mi.sigma_t.c[c]);
-              scattered = true;
-              break;
-            }
-            T = col_scale(col_mul(T, mi.sigma_n), 1.0 / (mu - mi.sigma_t.c[c]));
-            if (col_max(T) <= 0) return L;
-          }
-        }
-      }
-    }
-    if (col_max(T) <= 0) return L;
+typedef struct vlane {
+  ray3 ray;   /* the ray to trace (its origin offset off the surface it leaves) */
+  vec3 seg_o; /* where the ray really starts: media integrate from here */
+  const medium *m;
+  color T, L;
+  double eta, prev_pdf;
+  bool prev_delta;
+  surface_interaction prev; /* the last scattering vertex (its p), for MIS */
+  int depth, crossings;
+  bool hit;
+  surface_interaction si;
+  accel_hit h;
+  /* The shadow ray of this event, while it is being traced. */
+  bool sh;
+  ray3 sray;
+  vec3 sp0, send; /* its exact start, its end (sfinite) */
+  bool sfinite;
+  const medium *sm;
+  color sval; /* the contribution if unoccluded: T f Le w / pe */
+  color str;  /* transmittance so far */
+  int scross;
+} vlane;
 
-    if (scattered) {
-      /* ---- a scattering event in the medium ---- */
-      if (!(it->max_depth < 0 || depth + 1 < it->max_depth)) return L;
-      const phase *ph = m->phase;
-      surface_interaction ref = {.p = mi.p, .t = mi.t};
-      if (m->sample_emitters && sc->n_emitters > 0) {
-        double pe;
-        size_t k = pick_emitter(sc, sops->next_1d(st), &pe);
-        const emitter *e = sc->emitters[k];
-        direction_sample ds;
-        color value = e->ops->sample_direction(e, &ref, sops->next_2d(st), &ds);
-        if (ds.pdf > 0 && !col_is_black(value)) {
-          double ppdf;
-          double pval = ph->ops->eval_pdf(ph, &mi, ds.d, &ppdf);
-          if (pval > 0) {
-            color tr = shadow_tr(vp, sc, shadow_ray(sc, NULL, mi.p, e, &ds), mi.p, m, st, stats);
-            double w = ds.delta ? 1.0 : mis_weight(ds.pdf * pe, ppdf);
-            L = col_add(L, col_scale(col_mul(T, col_mul(value, tr)), pval * w / pe));
-          }
+/* Trace lanes idx[0..n) (rays in ln[i].ray for shadow == false, ln[i].sray
+ * else): hits into ln[i].hit / ln[i].si (rays) or h / hit flags. */
+static void wave_trace(const scene *sc, vlane *ln, const int *idx, int n, bool shadow, bool coherent, bool *hit,
+                       surface_interaction *si, render_stats *stats) {
+  enum {
+    P = 16
+  };
+  int q[P], nq = 0;
+  for (int k = 0; k <= n; k++) {
+    if (k < n) {
+      vlane *l = &ln[idx[k]];
+      const ray3 *r = shadow ? &l->sray : &l->ray;
+      hit[k] = false;
+      if (!may_hit(sc, r)) continue;
+      if (sc->periodic.on) { /* scene_trace walks the walls per ray */
+        uint64_t before = stats->rays;
+        hit[k] = intersect(sc, r, &si[k], stats); /* counts itself in stats->rays */
+        if (shadow) {
+          stats->shadow_rays += stats->rays - before;
+          stats->rays = before;
         }
-      }
-      vec3 wo;
-      double ppdf;
-      double pw = ph->ops->sample(ph, &mi, sops->next_1d(st), sops->next_2d(st), &wo, &ppdf);
-      if (!(ppdf > 0) || !(pw > 0)) return L;
-      T = col_scale(T, pw);
-      ray = (ray3){mi.p, wo, 0.0, INFINITY};
-      seg_o = mi.p;
-      prev = ref;
-      prev_pdf = ppdf;
-      prev_delta = false;
-      crossings = 0;
-    } else {
-      /* ---- the surface (or the escape) ---- */
-      bool visible = !(it->hide_emitters && depth == 0);
-      if (!hit) {
-        const emitter *env = sc->environment;
-        if (env && visible) {
-          double em_pdf = 0.0;
-          if (!prev_delta) {
-            direction_sample ds = {.d = ray.d, .dist = INFINITY};
-            em_pdf = env->ops->pdf_direction(env, &prev, &ds) * emitter_prob(sc, env);
-          }
-          L = col_add(L, col_scale(col_mul(T, env->ops->eval(env, NULL, ray.d)), mis_weight(prev_pdf, em_pdf)));
-        }
-        return L;
-      }
-      const emitter *em = si.shape->emitter;
-      if (em && visible) {
-        color Le = em->ops->eval(em, &si, ray.d);
-        if (!col_is_black(Le)) {
-          double em_pdf = 0.0;
-          if (!prev_delta) {
-            direction_sample ds = {.p = si.p, .n = si.ng, .d = ray.d, .dist = v3_len(v3_sub(si.p, prev.p))};
-            em_pdf = em->ops->pdf_direction(em, &prev, &ds) * emitter_prob(sc, em);
-          }
-          L = col_add(L, col_scale(col_mul(T, Le), mis_weight(prev_pdf, em_pdf)));
-        }
-      }
-      const bsdf *b = si.shape->bsdf;
-      if (b->flags & BSDF_INDEX_MATCHED) { /* crossed without a bounce */
-        if (++crossings > MAX_CROSSINGS) return L;
-        m = medium_after(&si, ray.d, m);
-        ray = spawn_ray(&si, ray.d);
-        seg_o = si.p;
         continue;
       }
-      if (!(it->max_depth < 0 || depth + 1 < it->max_depth)) return L;
-      if ((b->flags & BSDF_SMOOTH) && sc->n_emitters > 0) {
-        double pe;
-        size_t k = pick_emitter(sc, sops->next_1d(st), &pe);
-        const emitter *e = sc->emitters[k];
-        direction_sample ds;
-        color value = e->ops->sample_direction(e, &si, sops->next_2d(st), &ds);
-        if (ds.pdf > 0 && !col_is_black(value)) {
-          vec3 wo = frame_to_local(&si.sh, ds.d);
-          color f = b->ops->eval(b, &si, wo);
-          if (!col_is_black(f)) {
-            color tr = shadow_tr(vp, sc, shadow_ray(sc, &si, si.p, e, &ds), si.p, medium_after(&si, ds.d, m), st,
-                                 stats);
-            double bpdf = ds.delta ? 0.0 : b->ops->pdf(b, &si, wo);
-            double w = ds.delta ? 1.0 : mis_weight(ds.pdf * pe, bpdf);
-            L = col_add(L, col_scale(col_mul(T, col_mul(f, col_mul(value, tr))), w / pe));
-          }
-        }
-      }
-      bsdf_sample bs;
-      color weight = b->ops->sample(b, &si, sops->next_1d(st), sops->next_2d(st), &bs);
-      if (!(bs.pdf > 0) || col_is_black(weight)) return L;
-      vec3 wo = frame_to_world(&si.sh, bs.wo);
-      T = col_mul(T, weight);
-      eta *= bs.eta;
-      m = medium_after(&si, wo, m);
-      ray = spawn_ray(&si, wo);
-      seg_o = si.p;
-      prev = si;
-      prev_pdf = bs.pdf;
-      prev_delta = (bs.sampled_type & BSDF_DELTA) != 0;
-      crossings = 0;
+      q[nq++] = k;
+      if (nq < P) continue;
     }
-    depth++;
-    if (depth >= it->rr_depth) {
-      double q = fmin(col_max(T) * eta * eta, 0.95);
-      if (!(sops->next_1d(st) < q)) return L;
-      T = col_scale(T, 1.0 / q);
+    if (nq == 0) continue;
+    const ray3 *rp[P];
+    accel_hit h[P];
+    bool ok[P];
+    for (int j = 0; j < nq; j++) rp[j] = shadow ? &ln[idx[q[j]]].sray : &ln[idx[q[j]]].ray;
+    accel_intersect_packet(sc->accel, rp, nq, h, ok, coherent);
+    *(shadow ? &stats->shadow_rays : &stats->rays) += (uint64_t)nq;
+    for (int j = 0; j < nq; j++) {
+      hit[q[j]] = ok[j];
+      if (ok[j]) hit_fill_interaction(sc, rp[j], &h[j], &si[q[j]]);
     }
-    if (!(col_max(T) > 0)) return L;
+    nq = 0;
   }
 }
 
-static const integrator_ops volpath_ops = {.Li = volpath_Li};
+/* Start lane l's shadow ray towards ds from a surface vertex si (or the
+ * medium point p when si is NULL) in medium sm, worth val if clear. */
+static void start_shadow(const scene *sc, vlane *l, const surface_interaction *si, vec3 p, const emitter *e,
+                         const direction_sample *ds, const medium *sm, color val) {
+  l->sray = shadow_ray(sc, si, p, e, ds);
+  l->sp0 = p;
+  l->sfinite = isfinite(l->sray.tmax);
+  l->send = l->sfinite ? v3_fma(l->sray.o, l->sray.tmax, l->sray.d) : p;
+  l->sm = sm;
+  l->sval = val;
+  l->str = col1(1.0);
+  l->scross = 0;
+  l->sh = true;
+}
+
+/* One round of lane l's shadow ray after its query (hit at si): the
+ * segment's transmittance, then done (false) or a null surface crossed
+ * (true: trace again). */
+static bool shadow_step(const volpath_integrator *vp, vlane *l, bool hit, const surface_interaction *si,
+                        sampler_state *st) {
+  if (l->sm) {
+    vec3 q = hit ? si->p : l->send;
+    ray3 mr = {l->sp0, l->sray.d, 0.0, (hit || l->sfinite) ? v3_dot(v3_sub(q, l->sp0), l->sray.d) : INFINITY};
+    l->str = col_mul(l->str, segment_tr(vp, l->sm, &mr, mr.tmax, st));
+  }
+  bool more = hit && !col_is_black(l->str);
+  if (more && !(si->shape->bsdf->flags & BSDF_INDEX_MATCHED)) { /* blocked */
+    l->str = col1(0.0);
+    more = false;
+  }
+  if (more) { /* a null surface crossed: on to the next segment */
+    double left = l->sray.tmax - si->t;
+    if (++l->scross >= MAX_CROSSINGS) l->str = col1(0.0);
+    more = left > 0 && l->scross < MAX_CROSSINGS;
+    if (more) {
+      l->sm = medium_after(si, l->sray.d, l->sm);
+      l->sray = spawn_ray(si, l->sray.d);
+      l->sray.tmax = left;
+      l->sp0 = si->p;
+      return true;
+    }
+  }
+  l->L = col_add(l->L, col_mul(l->sval, l->str));
+  l->sh = false;
+  return false;
+}
+
+/* Lane l's event after its query: the medium along the segment, then the
+ * scattering event or the surface. Sets up the shadow ray (l->sh) and the
+ * next ray. False: the path ends (a pending shadow ray still counts). */
+static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *l) {
+  const integrator *it = &vp->base;
+  const sampler_ops *sops = st->s->ops;
+  surface_interaction *si = &l->si;
+  bool hit = l->hit;
+  const medium *m = l->m;
+  l->sh = false;
+
+  /* ---- the medium along the segment ---- */
+  medium_interaction mi;
+  bool scattered = false;
+  if (m) {
+    ray3 seg = {l->seg_o, l->ray.d, 0.0, hit ? v3_dot(v3_sub(si->p, l->seg_o), l->ray.d) : l->ray.tmax};
+    double mint, maxt;
+    if (m->ops->intersect_aabb(m, &seg, &mint, &maxt)) {
+      if (m->absorbing_only) {
+        l->T = col_mul(l->T, segment_tr(vp, m, &seg, seg.tmax, st));
+      } else if (analytic_in(vp, m)) {
+        int c = pick_channel(m, st);
+        color tr, pdf;
+        m->ops->sample_real(m, &seg, mint, maxt, sops->next_1d(st), c, &mi, &tr, &pdf);
+        double pc = col_mean(pdf);
+        scattered = isfinite(mi.t);
+        color f = scattered ? col_mul(tr, mi.sigma_s) : tr;
+        l->T = pc > 0 ? col_scale(col_mul(l->T, f), 1.0 / pc) : col1(0.0);
+      } else {
+        mi = (medium_interaction){.medium = m, .wi = v3_neg(l->ray.d), .mint = mint};
+        mi.p = v3_fma(seg.o, mint, seg.d);
+        double mu = col_max(m->ops->majorant(m, &mi));
+        double t = mint;
+        while (mu > 0) {
+          t -= log1p(-sops->next_1d(st)) / mu;
+          if (!(t < maxt)) break;
+          mi.t = t;
+          mi.p = v3_fma(seg.o, t, seg.d);
+          mi.majorant = col1(mu);
+          m->ops->coefficients(m, &mi);
+          double p_real = col_mean(mi.sigma_t) / mu;
+          if (sops->next_1d(st) < p_real) {
+            l->T = col_scale(col_mul(l->T, mi.sigma_s), 1.0 / (mu * p_real));
+            scattered = true;
+            break;
+          }
+          l->T = col_scale(col_mul(l->T, mi.sigma_n), 1.0 / (mu * (1.0 - p_real)));
+          if (col_max(l->T) <= 0) return false;
+        }
+      }
+    }
+  }
+  if (!(col_max(l->T) > 0)) return false;
+
+  if (scattered) {
+    /* ---- a scattering event in the medium ---- */
+    if (!(it->max_depth < 0 || l->depth + 1 < it->max_depth)) return false;
+    const phase *ph = m->phase;
+    surface_interaction ref = {.p = mi.p, .t = mi.t};
+    if (m->sample_emitters && sc->n_emitters > 0) {
+      double pe;
+      size_t k = pick_emitter(sc, sops->next_1d(st), &pe);
+      const emitter *e = sc->emitters[k];
+      direction_sample ds;
+      color value = e->ops->sample_direction(e, &ref, sops->next_2d(st), &ds);
+      if (ds.pdf > 0 && !col_is_black(value)) {
+        double ppdf;
+        double pval = ph->ops->eval_pdf(ph, &mi, ds.d, &ppdf);
+        if (pval > 0) {
+          double w = ds.delta ? 1.0 : mis_weight(ds.pdf * pe, ppdf);
+          start_shadow(sc, l, NULL, mi.p, e, &ds, m, col_scale(col_mul(l->T, value), pval * w / pe));
+        }
+      }
+    }
+    vec3 wo;
+    double ppdf;
+    double pw = ph->ops->sample(ph, &mi, sops->next_1d(st), sops->next_2d(st), &wo, &ppdf);
+    if (!(ppdf > 0) || !(pw > 0)) return false;
+    l->T = col_scale(l->T, pw);
+    l->ray = (ray3){mi.p, wo, 0.0, INFINITY};
+    l->seg_o = mi.p;
+    l->prev = ref;
+    l->prev_pdf = ppdf;
+    l->prev_delta = false;
+    l->crossings = 0;
+  } else {
+    /* ---- the surface (or the escape) ---- */
+    bool visible = !(it->hide_emitters && l->depth == 0);
+    if (!hit) {
+      const emitter *env = sc->environment;
+      if (env && visible) {
+        double em_pdf = 0.0;
+        if (!l->prev_delta) {
+          direction_sample ds = {.d = l->ray.d, .dist = INFINITY};
+          em_pdf = env->ops->pdf_direction(env, &l->prev, &ds) * emitter_prob(sc, env);
+        }
+        color Le = env->ops->eval(env, NULL, l->ray.d);
+        l->L = col_add(l->L, col_scale(col_mul(l->T, Le), mis_weight(l->prev_pdf, em_pdf)));
+      }
+      return false;
+    }
+    const emitter *em = si->shape->emitter;
+    if (em && visible) {
+      color Le = em->ops->eval(em, si, l->ray.d);
+      if (!col_is_black(Le)) {
+        double em_pdf = 0.0;
+        if (!l->prev_delta) {
+          direction_sample ds = {.p = si->p, .n = si->ng, .d = l->ray.d, .dist = v3_len(v3_sub(si->p, l->prev.p))};
+          em_pdf = em->ops->pdf_direction(em, &l->prev, &ds) * emitter_prob(sc, em);
+        }
+        l->L = col_add(l->L, col_scale(col_mul(l->T, Le), mis_weight(l->prev_pdf, em_pdf)));
+      }
+    }
+    const bsdf *b = si->shape->bsdf;
+    if (b->flags & BSDF_INDEX_MATCHED) { /* crossed without a bounce */
+      if (++l->crossings > MAX_CROSSINGS) return false;
+      l->m = medium_after(si, l->ray.d, m);
+      l->ray = spawn_ray(si, l->ray.d);
+      l->seg_o = si->p;
+      return true;
+    }
+    if (!(it->max_depth < 0 || l->depth + 1 < it->max_depth)) return false;
+    if ((b->flags & BSDF_SMOOTH) && sc->n_emitters > 0) {
+      double pe;
+      size_t k = pick_emitter(sc, sops->next_1d(st), &pe);
+      const emitter *e = sc->emitters[k];
+      direction_sample ds;
+      color value = e->ops->sample_direction(e, si, sops->next_2d(st), &ds);
+      if (ds.pdf > 0 && !col_is_black(value)) {
+        vec3 wo = frame_to_local(&si->sh, ds.d);
+        color f = b->ops->eval(b, si, wo);
+        if (!col_is_black(f)) {
+          double bpdf = ds.delta ? 0.0 : b->ops->pdf(b, si, wo);
+          double w = ds.delta ? 1.0 : mis_weight(ds.pdf * pe, bpdf);
+          start_shadow(sc, l, si, si->p, e, &ds, medium_after(si, ds.d, m),
+                       col_scale(col_mul(l->T, col_mul(f, value)), w / pe));
+        }
+      }
+    }
+    bsdf_sample bs;
+    color weight = b->ops->sample(b, si, sops->next_1d(st), sops->next_2d(st), &bs);
+    if (!(bs.pdf > 0) || col_is_black(weight)) return false;
+    vec3 wo = frame_to_world(&si->sh, bs.wo);
+    l->T = col_mul(l->T, weight);
+    l->eta *= bs.eta;
+    l->m = medium_after(si, wo, m);
+    l->ray = spawn_ray(si, wo);
+    l->seg_o = si->p;
+    l->prev = *si;
+    l->prev_pdf = bs.pdf;
+    l->prev_delta = (bs.sampled_type & BSDF_DELTA) != 0;
+    l->crossings = 0;
+  }
+  l->depth++;
+  if (l->depth >= it->rr_depth) {
+    double q = fmin(col_max(l->T) * l->eta * l->eta, 0.95);
+    if (!(sops->next_1d(st) < q)) return false;
+    l->T = col_scale(l->T, 1.0 / q);
+  }
+  return col_max(l->T) > 0;
+}
+
+/* Run the wave over n lanes; scratch: ln (n lanes), idx and sh (n ints
+ * each), hit (n), si (n). */
+static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_state *st, const ray3 *rays, int n,
+                     render_stats *stats, color *L, vlane *ln, int *idx, int *sh, bool *hit,
+                     surface_interaction *si) {
+  int live = 0;
+  for (int i = 0; i < n; i++) {
+    vlane *l = &ln[i];
+    *l = (vlane){.T = col1(1.0), .L = col1(0.0), .eta = 1.0, .prev_pdf = 1.0, .prev_delta = true};
+    ray3 r = rays[i];
+    double len = v3_len(r.d);
+    if (!(len > 0) || vp->base.max_depth == 0) continue;
+    r.d = v3_scale(r.d, 1.0 / len);
+    r.tmin *= len;
+    r.tmax *= len;
+    l->ray = r;
+    l->seg_o = r.o;
+    l->m = start_medium(sc, &st[i]);
+    idx[live++] = i;
+  }
+  bool camera = true;
+  while (live > 0) {
+    wave_trace(sc, ln, idx, live, false, camera, hit, si, stats);
+    camera = false;
+    int next = 0, n_sh = 0;
+    for (int k = 0; k < live; k++) {
+      int i = idx[k];
+      ln[i].hit = hit[k];
+      if (hit[k]) ln[i].si = si[k];
+      bool alive = lane_event(vp, sc, &st[i], &ln[i]);
+      if (ln[i].sh) sh[n_sh++] = i;
+      if (alive) idx[next++] = i;
+    }
+    live = next;
+    while (n_sh > 0) {
+      wave_trace(sc, ln, sh, n_sh, true, false, hit, si, stats);
+      int more = 0;
+      for (int k = 0; k < n_sh; k++) {
+        int i = sh[k];
+        if (shadow_step(vp, &ln[i], hit[k], &si[k], &st[i])) sh[more++] = i;
+      }
+      n_sh = more;
+    }
+  }
+  for (int i = 0; i < n; i++) L[i] = ln[i].L;
+}
+
+static bool volpath_Li_batch(const integrator *it, const scene *sc, sampler_state *st, const ray3 *rays, int n,
+                             render_stats *stats, color *L, double *quv) {
+  if (n <= 0) return true;
+  vlane *ln = malloc((size_t)n * sizeof *ln);
+  int *idx = malloc(2 * (size_t)n * sizeof *idx);
+  bool *hit = malloc((size_t)n * sizeof *hit);
+  surface_interaction *si = malloc((size_t)n * sizeof *si);
+  bool ok = ln && idx && hit && si;
+  if (ok) {
+    wave_run((const volpath_integrator *)it, sc, st, rays, n, stats, L, ln, idx, idx + n, hit, si);
+    if (quv)
+      for (int i = 0; i < 3 * n; i++) quv[i] = 0; /* no polarisation through media */
+  }
+  free(ln);
+  free(idx);
+  free(hit);
+  free(si);
+  return ok;
+}
+
+static color volpath_Li(const integrator *it, const scene *sc, sampler_state *st, ray3 ray, render_stats *stats,
+                        double *quv) {
+  (void)quv;
+  vlane ln;
+  int idx[2];
+  bool hit;
+  surface_interaction si;
+  color L;
+  wave_run((const volpath_integrator *)it, sc, st, &ray, 1, stats, &L, &ln, idx, idx + 1, &hit, &si);
+  return L;
+}
+
+static const integrator_ops volpath_ops = {.Li = volpath_Li, .Li_batch = volpath_Li_batch};
 
 static void volpath_destroy(object *o) {
   free(o);

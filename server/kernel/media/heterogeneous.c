@@ -80,7 +80,7 @@ static void het_refresh(heterogeneous_medium *h) {
   grid_range(h->albedo, &alo, &ahi);
   h->maj = col1(h->base.scale * h->sigma_t->max);
   h->base.is_homogeneous = slo == shi && alo == ahi;
-  h->base.has_spectral_extinction = false; /* one scalar majorant for every channel */
+  h->base.has_spectral_extinction = h->sigma_t->channels == 3;
   h->base.absorbing_only = ahi == 0.0;
 }
 

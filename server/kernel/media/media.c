@@ -29,9 +29,23 @@ void medium_traverse_common(medium *m, param_visitor *v) {
 }
 
 bool media_box_clip(const xform *to_world, const ray3 *r, double *mint, double *maxt) {
-  vec3 o = xf_inv_point(to_world, r->o), d = xf_inv_vector(to_world, r->d);
+  const double(*m)[4] = to_world->m;
+  double oo[3], dd[3];
+  if (m[0][1] == 0 && m[0][2] == 0 && m[1][0] == 0 && m[1][2] == 0 && m[2][0] == 0 && m[2][1] == 0 &&
+      m[0][0] != 0 && m[1][1] != 0 && m[2][2] != 0) {
+    /* Axis-aligned box (scale and translation): the local coordinates
+     * without a matrix product. */
+    const double o3[3] = {r->o.x, r->o.y, r->o.z}, d3[3] = {r->d.x, r->d.y, r->d.z};
+    for (int a = 0; a < 3; a++) {
+      oo[a] = (o3[a] - m[a][3]) / m[a][a];
+      dd[a] = d3[a] / m[a][a];
+    }
+  } else {
+    vec3 o = xf_inv_point(to_world, r->o), d = xf_inv_vector(to_world, r->d);
+    oo[0] = o.x, oo[1] = o.y, oo[2] = o.z;
+    dd[0] = d.x, dd[1] = d.y, dd[2] = d.z;
+  }
   double lo = r->tmin, hi = r->tmax;
-  const double oo[3] = {o.x, o.y, o.z}, dd[3] = {d.x, d.y, d.z};
   for (int a = 0; a < 3; a++) {
     if (dd[a] == 0.0) {
       if (oo[a] < 0.0 || oo[a] > 1.0) return false;
@@ -96,6 +110,15 @@ rsw_status scene_check_media(const scene *s, node *root, rsw_err *err) {
                       "sensor sits in it, so no ray can enter it",
                       o->id ? o->id : "");
   }
+  /* volpath finds a path's sensor by its sampler (integrators/volpath.c). */
+  for (size_t i = 0; i < s->n_sensors; i++)
+    for (size_t j = 0; j < i; j++)
+      if (s->sensors[i]->sampler == s->sensors[j]->sampler && s->sensors[i]->medium != s->sensors[j]->medium)
+        return rsw_fail(err, RSW_ERR_INVALID, loc_of(root, s->sensors[i]),
+                        "sensor '%s' shares its sampler with sensor '%s' but sits in another medium: give each "
+                        "its own sampler",
+                        s->sensors[i]->base.id ? s->sensors[i]->base.id : "",
+                        s->sensors[j]->base.id ? s->sensors[j]->base.id : "");
   for (size_t i = 0; i < s->n_sensors; i++) {
     const sensor *se = s->sensors[i];
     if (!se->medium || !bounded(s, se->medium)) continue; /* an unbounded medium fills all space */
