@@ -222,7 +222,7 @@ static rsw_status read_vol(loader *ld, node *n, const char *path, gridvolume *g,
   const char *name = "filename";
   FILE *f = fopen(path, "rb");
   if (!f) return ld_fail(ld, n, name, RSW_ERR_FILE, "cannot open the volume file '%s'", path);
-  unsigned char h[48];
+  unsigned char h[48] = {0};
   rsw_status st = RSW_OK;
   if (fread(h, 1, sizeof h, f) != sizeof h) {
     st =
