@@ -593,7 +593,7 @@ static void test_update_equals_reload(void) {
   snprintf(v_alb, sizeof v_alb, "[%.17g, %.17g, %.17g, %.17g, %.17g, %.17g]", alb1[0], alb1[1], alb1[2], alb1[3],
            alb1[4], alb1[5]);
   const char *keys[4] = {"atmo.interior_medium.sigma_t.data", "atmo.interior_medium.albedo.data",
-                         "atmo.interior_medium.scale", "atmo.interior_medium.phase.g"};
+                         "atmo.interior_medium.scale", "atmo.interior_medium.phase_function.g"};
   const char *vals[4] = {v_sig, v_alb, "2.5", "-0.4"};
   param_update items[4];
   rsw_err err = {0};
