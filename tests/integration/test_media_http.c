@@ -17,7 +17,9 @@
  *    renders the base state;
  *  - a job whose context override is bad (negative, wrong length, albedo
  *    1.5) is refused at submit with the pointer
- *    /contexts/N/params/KEY, and a bad job-level value with /params/KEY.
+ *    /contexts/N/params/KEY, and a bad job-level value with /params/KEY;
+ *  - the daemon exits cleanly on SIGTERM, with no sanitizer report in its
+ *    log (SAN=1).
  * Films are compared as .npy bodies (float32, bitwise). */
 #include <math.h>
 #include <stdarg.h>
@@ -396,7 +398,16 @@ int main(void) {
   RSW_TEST_RUN(test_patch_refused_atomic);
   RSW_TEST_RUN(test_job_overrides);
   RSW_TEST_RUN(test_job_refused);
-  tdaemon_stop(&d, 10, NULL);
+  int rc = tdaemon_stop(&d, 10, NULL);
+  /* The daemon exits cleanly, and (SAN=1) with no sanitizer report. */
+  char *log = tdaemon_log(&d);
+  bool clean = rc == 0 && !(log && (strstr(log, "Sanitizer") || strstr(log, "runtime error")));
+  if (!clean) printf("  FAIL the daemon: exit %d, log:\n%.2000s\n", rc, log ? log : "");
+  free(log);
+  if (clean)
+    rsw_test_passed_++;
+  else
+    rsw_test_failed_++;
   char p[128];
   snprintf(p, sizeof p, "%s/media.log", dir);
   unlink(p);
