@@ -429,7 +429,7 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
     l->seg_o = mi.p;
     l->prev = ref;
     l->prev_pdf = ppdf;
-    l->prev_delta = false;
+    l->prev_delta = !m->sample_emitters; /* no light sample taken here: phase sampling's hits count fully */
     l->crossings = 0;
   } else {
     /* ---- the surface (or the escape) ---- */

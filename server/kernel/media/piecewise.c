@@ -44,7 +44,7 @@ static inline int layer_of(const piecewise_medium *pw, double z) {
 
 static inline double cum_at(const piecewise_medium *pw, int c, double z) {
   int k = layer_of(pw, z);
-  double zc = fmin(fmax(z, 0.0), 1.0);
+  double zc = z < 0.0 ? 0.0 : z > 1.0 ? 1.0 : z;
   return pw->cum[3 * k + c] + pw->sig[3 * k + c] * (zc - (double)k / pw->n);
 }
 
