@@ -627,6 +627,26 @@ static void test_update_equals_reload(void) {
   scene_free(b);
 }
 
+/* A slab in a periodic plot: a slanted ray leaves the cell through its
+ * side walls (null faces) and re-enters through the opposite ones, so its
+ * path of length 2 through the slab crosses four boundaries; exact. */
+static void test_periodic_slab(void) {
+  const char *text = "{\"type\": \"scene\", \"integrator\": {\"type\": \"piecewise_volpath\"},"
+                     " \"plot\": {\"type\": \"periodic\", \"min\": [-1, -1], \"max\": [1, 1]},"
+                     " \"slab\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
+                     "   \"interior\": {\"type\": \"homogeneous\", \"sigma_t\": 0.7, \"albedo\": 0},"
+                     "   \"to_world\": [{\"scale\": [1, 1, 0.5]}, {\"translate\": [0, 0, 0.5]}]},"
+                     " \"sky\": {\"type\": \"constant\", \"radiance\": 1},"
+                     " \"m\": {\"type\": \"radiancemeter\", \"origin\": [0.3, 0.2, -0.5],"
+                     "   \"direction\": [0.8660254037844386, 0, 0.5],"
+                     "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}}";
+  scene *s = tsup_load(text, "mono");
+  REQUIRE(s, "scene");
+  double v = render1(s, 4, 1), expect = exp(-0.7 / 0.5);
+  CHECK(fabs(v - expect) <= 1e-5 * expect, "periodic slab: %.9g vs %.9g", v, expect);
+  scene_free(s);
+}
+
 /* ---- scene-level errors ------------------------------------------------------ */
 
 static void expect_error(const char *text, const char *needle, const char *loc) {
@@ -721,5 +741,6 @@ int main(void) {
   RSW_TEST_RUN(test_rgb_chromatic);
   RSW_TEST_RUN(test_determinism);
   RSW_TEST_RUN(test_update_equals_reload);
+  RSW_TEST_RUN(test_periodic_slab);
   RSW_TEST_END("test_media");
 }

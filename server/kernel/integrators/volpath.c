@@ -299,6 +299,15 @@ static void wave_trace(const scene *sc, vlane *ln, const int *idx, int n, bool s
   }
 }
 
+/* The length from the exact start o0 of ray r's segment to its hit si:
+ * from the hit point itself (exact on the surface, where Embree's t is
+ * float32), or, under a periodic boundary (si->p wrapped into the
+ * column), from the hit distance. */
+static double seg_end(const scene *sc, const ray3 *r, vec3 o0, const surface_interaction *si) {
+  if (sc->periodic.on) return si->t + v3_dot(v3_sub(r->o, o0), r->d);
+  return v3_dot(v3_sub(si->p, o0), r->d);
+}
+
 /* Start lane l's shadow ray towards ds from a surface vertex si (or the
  * medium point p when si is NULL) in medium sm, worth val if clear. */
 static void start_shadow(const scene *sc, vlane *l, const surface_interaction *si, vec3 p, const emitter *e,
@@ -317,11 +326,12 @@ static void start_shadow(const scene *sc, vlane *l, const surface_interaction *s
 /* One round of lane l's shadow ray after its query (hit at si): the
  * segment's transmittance, then done (false) or a null surface crossed
  * (true: trace again). */
-static bool shadow_step(const volpath_integrator *vp, vlane *l, bool hit, const surface_interaction *si,
-                        sampler_state *st) {
+static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l, bool hit,
+                        const surface_interaction *si, sampler_state *st) {
   if (l->sm) {
-    vec3 q = hit ? si->p : l->send;
-    ray3 mr = {l->sp0, l->sray.d, 0.0, (hit || l->sfinite) ? v3_dot(v3_sub(q, l->sp0), l->sray.d) : INFINITY};
+    double tend = hit ? seg_end(sc, &l->sray, l->sp0, si)
+                      : l->sfinite ? v3_dot(v3_sub(l->send, l->sp0), l->sray.d) : INFINITY;
+    ray3 mr = {l->sp0, l->sray.d, 0.0, tend};
     l->str = col_mul(l->str, segment_tr(vp, l->sm, &mr, mr.tmax, st));
   }
   bool more = hit && !col_is_black(l->str);
@@ -361,7 +371,7 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
   medium_interaction mi;
   bool scattered = false;
   if (m) {
-    ray3 seg = {l->seg_o, l->ray.d, 0.0, hit ? v3_dot(v3_sub(si->p, l->seg_o), l->ray.d) : l->ray.tmax};
+    ray3 seg = {l->seg_o, l->ray.d, 0.0, hit ? seg_end(sc, &l->ray, l->seg_o, si) : l->ray.tmax};
     double mint, maxt;
     if (m->ops->intersect_aabb(m, &seg, &mint, &maxt)) {
       if (m->absorbing_only) {
@@ -547,7 +557,7 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
       int more = 0;
       for (int k = 0; k < n_sh; k++) {
         int i = sh[k];
-        if (shadow_step(vp, &ln[i], hit[k], &si[k], &st[i])) sh[more++] = i;
+        if (shadow_step(vp, sc, &ln[i], hit[k], &si[k], &st[i])) sh[more++] = i;
       }
       n_sh = more;
     }
