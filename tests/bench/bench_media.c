@@ -51,7 +51,8 @@ static void atmo_layers(int n, double *sig, double *alb, double *w) {
 static void grid(sbuf *b, const double *v, int n) {
   sb_printf(b,
             "{\"type\": \"gridvolume\", \"shape\": [%d, 1, 1], \"filter_type\": \"nearest\","
-            " \"to_world\": [{\"translate\": [-0.5, -0.5, 0]}, {\"scale\": [2000000, 2000000, 120000]}], \"data\": [",
+            " \"to_world\": [{\"translate\": [-0.5, -0.5, 0]}, {\"scale\": [2000000, 2000000, 120000]}], "
+            "\"data\": [",
             n);
   for (int i = 0; i < n; i++) sb_printf(b, "%s%.9g", i ? "," : "", v[i]);
   sb_printf(b, "]}");
@@ -63,8 +64,10 @@ static char *atmo_scene(int n, const char *integ, bool atmosphere, int spp) {
             "{\"type\": \"scene\", \"integrator\": {\"type\": \"%s\"},"
             " \"sensor\": {\"type\": \"hdistant\", \"target\": [0, 0, 0],"
             "   \"sampler\": {\"type\": \"independent\", \"sample_count\": %d},"
-            "   \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16, \"rfilter\": {\"type\": \"box\"}}},"
-            " \"sun\": {\"type\": \"directional\", \"direction\": [0.5, 0, -0.8660254037844386], \"irradiance\": 1.8},"
+            "   \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16, \"rfilter\": {\"type\": "
+            "\"box\"}}},"
+            " \"sun\": {\"type\": \"directional\", \"direction\": [0.5, 0, -0.8660254037844386], "
+            "\"irradiance\": 1.8},"
             " \"surface\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [1000000, 1000000, 1]}],"
             "   \"bsdf\": {\"type\": \"rpv\", \"rho_0\": 0.1, \"k\": 0.8, \"g\": -0.1}}",
             integ, spp);
@@ -73,9 +76,10 @@ static char *atmo_scene(int n, const char *integ, bool atmosphere, int spp) {
     if (!sig) return NULL;
     atmo_layers(n, sig, sig + n, sig + 2 * n);
     /* The box reaches 1 m below the ground, so the ground lies inside. */
-    sb_printf(&b, ", \"atmosphere\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
-                  " \"to_world\": [{\"scale\": [1000000, 1000000, 60000.5]}, {\"translate\": [0, 0, 59999.5]}],"
-                  " \"interior\": {\"type\": \"piecewise\", \"sigma_t\": ");
+    sb_printf(&b,
+              ", \"atmosphere\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
+              " \"to_world\": [{\"scale\": [1000000, 1000000, 60000.5]}, {\"translate\": [0, 0, 59999.5]}],"
+              " \"interior\": {\"type\": \"piecewise\", \"sigma_t\": ");
     grid(&b, sig, n);
     sb_printf(&b, ", \"albedo\": ");
     grid(&b, sig + n, n);
@@ -105,7 +109,9 @@ static void bench_ops(int n) {
     scene_free(s);
     return;
   }
-  enum { R = 4096 };
+  enum {
+    R = 4096
+  };
   static ray3 rays[R];
   static double lo[R], hi[R], us[R];
   pcg32 rng;
@@ -113,7 +119,8 @@ static void bench_ops(int n) {
   for (int i = 0; i < R; i++) {
     double ct = 2 * pcg32_next_double(&rng) - 1, ph = 2 * 3.141592653589793 * pcg32_next_double(&rng);
     double st = sqrt(1 - ct * ct);
-    rays[i] = (ray3){v3(0, 0, 120000 * pcg32_next_double(&rng)), v3(st * cos(ph), st * sin(ph), ct), 0, INFINITY};
+    rays[i] =
+        (ray3){v3(0, 0, 120000 * pcg32_next_double(&rng)), v3(st * cos(ph), st * sin(ph), ct), 0, INFINITY};
     if (!m->ops->intersect_aabb(m, &rays[i], &lo[i], &hi[i])) lo[i] = hi[i] = 0;
     us[i] = pcg32_next_double(&rng);
   }
@@ -135,8 +142,9 @@ static void bench_ops(int n) {
         }
       t[r] = (bench_thread_cpu_s() - t0) / (50.0 * R) * 1e9;
     }
-    printf("{\"bench\": \"%s\", \"layers\": %d, \"ns_per_call\": %.2f, \"repeats\": %d, \"checksum\": %.6g}\n",
-           which ? name_ff : name_tr, n, bench_median(t, REPEATS), REPEATS, sink);
+    printf(
+        "{\"bench\": \"%s\", \"layers\": %d, \"ns_per_call\": %.2f, \"repeats\": %d, \"checksum\": %.6g}\n",
+        which ? name_ff : name_tr, n, bench_median(t, REPEATS), REPEATS, sink);
     fflush(stdout);
   }
   scene_free(s);

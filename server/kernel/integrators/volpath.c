@@ -204,7 +204,8 @@ static ray3 shadow_ray(const scene *sc, const surface_interaction *si, vec3 p, c
     vec3 q = offset_on_side(ds->p, ds->n, err, v3_sub(p, ds->p));
     vec3 d = v3_sub(q, p);
     double len = v3_len(d);
-    ray3 r = {p, len > 0 ? v3_scale(d, 1.0 / len) : ds->d, 0.0, len * (1.0 - RSW_SPAWN_ERRORS * RSW_F32_UNIT)};
+    ray3 r = {p, len > 0 ? v3_scale(d, 1.0 / len) : ds->d, 0.0,
+              len * (1.0 - RSW_SPAWN_ERRORS * RSW_F32_UNIT)};
     return r;
   }
   ray3 r = si ? spawn_ray(si, ds->d) : (ray3){p, ds->d, 0.0, INFINITY};
@@ -260,8 +261,8 @@ typedef struct vlane {
 
 /* Trace lanes idx[0..n) (rays in ln[i].ray for shadow == false, ln[i].sray
  * else): hits into ln[i].hit / ln[i].si (rays) or h / hit flags. */
-static void wave_trace(const scene *sc, vlane *ln, const int *idx, int n, bool shadow, bool coherent, bool *hit,
-                       surface_interaction *si, render_stats *stats) {
+static void wave_trace(const scene *sc, vlane *ln, const int *idx, int n, bool shadow, bool coherent,
+                       bool *hit, surface_interaction *si, render_stats *stats) {
   enum {
     P = 16
   };
@@ -329,8 +330,9 @@ static void start_shadow(const scene *sc, vlane *l, const surface_interaction *s
 static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l, bool hit,
                         const surface_interaction *si, sampler_state *st) {
   if (l->sm) {
-    double tend = hit ? seg_end(sc, &l->sray, l->sp0, si)
-                      : l->sfinite ? v3_dot(v3_sub(l->send, l->sp0), l->sray.d) : INFINITY;
+    double tend = hit          ? seg_end(sc, &l->sray, l->sp0, si)
+                  : l->sfinite ? v3_dot(v3_sub(l->send, l->sp0), l->sray.d)
+                               : INFINITY;
     ray3 mr = {l->sp0, l->sray.d, 0.0, tend};
     l->str = col_mul(l->str, segment_tr(vp, l->sm, &mr, mr.tmax, st));
   }
@@ -463,7 +465,8 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
       if (!col_is_black(Le)) {
         double em_pdf = 0.0;
         if (!l->prev_delta) {
-          direction_sample ds = {.p = si->p, .n = si->ng, .d = l->ray.d, .dist = v3_len(v3_sub(si->p, l->prev.p))};
+          direction_sample ds = {
+              .p = si->p, .n = si->ng, .d = l->ray.d, .dist = v3_len(v3_sub(si->p, l->prev.p))};
           em_pdf = em->ops->pdf_direction(em, &l->prev, &ds) * emitter_prob(sc, em);
         }
         l->L = col_add(l->L, col_scale(col_mul(l->T, Le), mis_weight(l->prev_pdf, em_pdf)));
@@ -520,8 +523,8 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
 
 /* Run the wave over n lanes; scratch: ln (n lanes), idx and sh (n ints
  * each), hit (n), si (n). */
-static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_state *st, const ray3 *rays, int n,
-                     render_stats *stats, color *L, vlane *ln, int *idx, int *sh, bool *hit,
+static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_state *st, const ray3 *rays,
+                     int n, render_stats *stats, color *L, vlane *ln, int *idx, int *sh, bool *hit,
                      surface_interaction *si) {
   int live = 0;
   for (int i = 0; i < n; i++) {
@@ -565,8 +568,8 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
   for (int i = 0; i < n; i++) L[i] = ln[i].L;
 }
 
-static bool volpath_Li_batch(const integrator *it, const scene *sc, sampler_state *st, const ray3 *rays, int n,
-                             render_stats *stats, color *L, double *quv) {
+static bool volpath_Li_batch(const integrator *it, const scene *sc, sampler_state *st, const ray3 *rays,
+                             int n, render_stats *stats, color *L, double *quv) {
   if (n <= 0) return true;
   vlane *ln = malloc((size_t)n * sizeof *ln);
   int *idx = malloc(2 * (size_t)n * sizeof *idx);
@@ -585,8 +588,8 @@ static bool volpath_Li_batch(const integrator *it, const scene *sc, sampler_stat
   return ok;
 }
 
-static color volpath_Li(const integrator *it, const scene *sc, sampler_state *st, ray3 ray, render_stats *stats,
-                        double *quv) {
+static color volpath_Li(const integrator *it, const scene *sc, sampler_state *st, ray3 ray,
+                        render_stats *stats, double *quv) {
   (void)quv;
   vlane ln;
   int idx[2];
