@@ -116,6 +116,14 @@ put("scene_render", "xml_small.xml",
     '</transform><film type="hdrfilm"><integer name="width" value="2"/><integer name="height" value="2"/></film>'
     '</sensor><emitter type="constant"/><shape type="ply"><string name="filename" value="m.ply"/>'
     '<transform name="to_world"><scale value="1e-30"/></transform></shape></scene>')
+# Phase functions and volumes (top-level objects: create, parameters, prepare).
+media = ('"r":{"type":"rectangle"},"ph":{"type":"blendphase","weight":{"type":"gridvolume","shape":[2,1,1],'
+         '"data":[0.2,0.8]},"phase_0":{"type":"rayleigh"},"phase_1":{"type":"tabphase","values":"1, 2, 4"}},'
+         '"hg":{"type":"hg","g":0.3},"iso":{"type":"isotropic"},"cv":{"type":"constvolume","value":[0.1,0.2,0.3]},'
+         '"gv":{"type":"gridvolume","shape":[1,2,2,%s],%s"data":[1,2,3,4,5,6,7,8%s],"wrap_mode":"mirror",'
+         '"filter_type":"nearest","to_world":[{"scale":[1,2,3]}]}')
+put("scene_render", "media_mono.json", base % ("mono", "hdistant", 2, media % ("2", '"wavelengths":[400,700],', "")))
+put("scene_render", "media_rgb.json", base % ("rgb", "perspective", 3, media % ("3", "", ",9,10,11,12")))
 put("scene_render", "projective.json", base % ("mono", "hdistant", 2,
     '"r":{"type":"rectangle","to_world":[[1,0,0,0],[0,1,0,0],[0,0,1,0],[1,0,0,1]]}'))
 
