@@ -25,15 +25,19 @@
  *    channel mean (Kutz et al. 2017, spectral tracking) covers them all.
  *  - analytic (homogeneous media in both integrators, every medium with
  *    medium_ops.sample_real in piecewise_volpath): t is drawn by
- *    inverting the optical thickness in channel c and T *= tr sigma_s /
- *    pdf_c at a collision (the albedo in mono), tr / pdf_c when the flight
- *    passes t_s (1 in mono).
+ *    inverting the optical thickness in a channel c (uniform over the
+ *    three when sigma_t differs between them, else 0), and with pdf the
+ *    mean of the channels' densities (the density t was drawn with),
+ *    T *= tr sigma_s / pdf at a collision (the albedo in mono) and
+ *    tr / pdf when the flight passes t_s (1 in mono).
  *  - a medium with no scattering (medium.absorbing_only) is not sampled:
  *    T *= transmittance over the segment, exact in analytic media (the
  *    Beer-Lambert tests are noise-free) and ratio-tracked otherwise.
  * Transmittance along shadow rays: exact in analytic media, ratio tracking
- * (T *= sigma_n / mu per tentative collision) otherwise; null surfaces are
- * crossed, any other surface blocks.
+ * (T *= sigma_n / mu per tentative collision, with Russian roulette once
+ * the estimate falls below 0.1) otherwise; null surfaces are crossed, any
+ * other surface blocks. Stokes films get Q = U = V = 0 (no polarisation
+ * through media).
  *
  * Estimator: L = sum over vertices of T (Le w_bsdf + NEE w_em); at a
  * medium vertex, NEE = p(wi, wo) Le tr / (pdf_em p_pick) with MIS weight
@@ -247,7 +251,6 @@ typedef struct vlane {
   int depth, crossings;
   bool hit;
   surface_interaction si;
-  accel_hit h;
   /* The shadow ray of this event, while it is being traced. */
   bool sh;
   ray3 sray;
