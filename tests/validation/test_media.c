@@ -711,6 +711,34 @@ static void test_media_errors(void) {
       "   \"medium\": {\"type\": \"ref\", \"id\": \"fog\"},"
       "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}}",
       "does not sit inside its medium", "/s");
+  /* XML: the error names the medium's line. */
+  expect_error("<scene version=\"3.0.0\">\n"
+               "  <emitter type=\"constant\"/>\n"
+               "  <medium type=\"homogeneous\" id=\"fog\"><float name=\"sigma_t\" value=\"0.5\"/></medium>\n"
+               "</scene>\n",
+               "medium 'fog' has no boundary", ":3");
+  /* The same scene with a null sphere around the medium renders. */
+  const char *xml =
+      "<scene version=\"3.0.0\">\n"
+      "  <integrator type=\"volpath\"/>\n"
+      "  <emitter type=\"constant\"/>\n"
+      "  <medium type=\"homogeneous\" id=\"fog\"><float name=\"sigma_t\" value=\"0.5\"/>\n"
+      "    <float name=\"albedo\" value=\"1\"/><phase type=\"hg\"><float name=\"g\" value=\"0.7\"/></phase>\n"
+      "  </medium>\n"
+      "  <shape type=\"sphere\"><bsdf type=\"null\"/><ref name=\"interior\" id=\"fog\"/></shape>\n"
+      "  <sensor type=\"radiancemeter\"><point name=\"origin\" x=\"0\" y=\"0\" z=\"3\"/>\n"
+      "    <vector name=\"direction\" x=\"0\" y=\"0\" z=\"-1\"/>\n"
+      "    <film type=\"hdrfilm\"><integer name=\"width\" value=\"1\"/><integer name=\"height\" "
+      "value=\"1\"/></film>\n"
+      "  </sensor>\n"
+      "</scene>\n";
+  scene *sx = tsup_load(xml, "mono");
+  CHECK(sx != NULL, "the XML medium scene loads");
+  if (sx) {
+    double v = render1(sx, 256, 1);
+    CHECK(fabs(v - 1) < 0.05, "XML furnace: %.6g vs 1", v);
+    scene_free(sx);
+  }
   /* The same sensor inside the ball loads. */
   const char *ok =
       "{\"type\": \"scene\", \"fog\": {\"type\": \"homogeneous\"},"
