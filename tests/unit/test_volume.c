@@ -469,6 +469,7 @@ static void test_grid_update(void) {
   uint64_t rev = v->revision;
   CHECK(upd1(s, "b.weight.data", "[0.2, 0.3, 0.4]", &err) == RSW_OK, "update: %s", err.msg);
   CHECK(v->data[1] == 0.3 && v->max == 0.4 && v->revision != rev, "data, max and revision refreshed");
+
   /* Atomic with another key: a bad g rejects the whole map. */
   param_update u[2] = {{.key = "b.weight.data"}, {.key = "b.phase_1.g"}};
   REQUIRE(param_value_parse("[1, 1, 1]", "x", &u[0].value, &err) == RSW_OK, "parse");
@@ -477,9 +478,25 @@ static void test_grid_update(void) {
   CHECK(v->data[0] == 0.2 && v->max == 0.4, "nothing written");
   param_value_free(&u[0].value);
   param_value_free(&u[1].value);
+  REQUIRE(params_lookup(s, "b.weight.data", &i, &err) == RSW_OK, "lookup");
   char *json = params_value_json(s, i, 0);
-  scene_free(s);
+  CHECK(json && strcmp(json, "[0.20000000000000001, 0.29999999999999999, 0.40000000000000002]") == 0,
+        "value: %s", json);
   free(json);
+  scene_free(s);
+  /* max_value: a fixed max, and a bound for updates; raw and accel are
+   * accepted (no effect outside spectral and CUDA variants). */
+  s = load("\"g\": {\"type\": \"gridvolume\", \"shape\": [2, 1, 1], \"data\": [1, 2], \"max_value\": 5, "
+           "\"raw\": true, \"accel\": false}",
+           "mono");
+  REQUIRE(s, "load max_value");
+  v = find_vol(s, "g");
+  CHECK(v->max == 5, "fixed max %g", v->max);
+  CHECK(upd1(s, "g.data", "[4, 5]", &err) == RSW_OK && v->max == 5, "update within max_value: %s", err.msg);
+  memset(&err, 0, sizeof err);
+  CHECK(upd1(s, "g.data", "[4, 6]", &err) == RSW_ERR_RANGE && strstr(err.msg, "must be <= 5"),
+        "above max_value: %s", err.msg);
+  scene_free(s);
 }
 
 /* An update of `data` equals loading the updated values, bitwise, at two
@@ -540,11 +557,16 @@ static void test_grid_errors(void) {
        "/v/wrap_mode"},
       {"\"shape\": [1, 1, 2], \"data\": [1, 2], \"use_grid_bbox\": true", "needs a .vol 'filename'",
        "/v/use_grid_bbox"},
+      {"\"shape\": [1, 1, 1], \"wavelengths\": 500, \"data\": [1]", "at least 2 wavelengths",
+       "/v/wavelengths"},
       {"\"shape\": [1, 1, 1], \"wavelengths\": [500, 400], \"data\": [1, 2]", "strictly increasing",
        "/v/wavelengths"},
       {"\"shape\": [1, 1, 1, 3], \"wavelengths\": [500, 600], \"data\": [1, 2]",
        "must match the 2 wavelengths", "/v/shape"},
-      {"\"shape\": [1, 1, 2], \"data\": [1, 2], \"raw\": true", "no property 'raw'", "/v/raw"},
+      {"\"shape\": [1, 1, 2], \"data\": [1, 2], \"raw\": 1", "must be a boolean", "/v/raw"},
+      {"\"shape\": [1, 1, 2], \"data\": [1, 2], \"max_value\": 1.5", "below the grid's largest value (2)",
+       "/v/max_value"},
+      {"\"shape\": [1, 1, 2], \"data\": [1, 2], \"scale\": 2", "no property 'scale'", "/v/scale"},
   };
   for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
     char objs[1024];

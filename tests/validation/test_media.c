@@ -13,10 +13,10 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../../server/kernel/scene/params.h"
 #include "../support/test.h"
 #include "../support/tsup.h"
 #include "image_exr.h"
-#include "../../server/kernel/scene/params.h"
 
 RSW_TEST_DEFINE_GLOBALS
 
@@ -25,8 +25,8 @@ RSW_TEST_DEFINE_GLOBALS
 
 /* A slab z in [0, h], 40 x 40 wide, bounded by a null cube holding
  * `medium` (JSON), over an optional ground at z = -0.5. */
-static scene *slab_scene(const char *integ, const char *med, double h, const char *light,
-                         const char *ground, vec3 origin, vec3 dir) {
+static scene *slab_scene(const char *integ, const char *med, double h, const char *light, const char *ground,
+                         vec3 origin, vec3 dir) {
   sbuf b = {0};
   sb_printf(&b,
             "{\"type\": \"scene\", \"integrator\": %s,"
@@ -39,11 +39,12 @@ static scene *slab_scene(const char *integ, const char *med, double h, const cha
               " \"ground\": {\"type\": \"rectangle\", \"bsdf\": %s,"
               "   \"to_world\": [{\"scale\": 40}, {\"translate\": [0, 0, -0.5]}]},",
               ground);
-  sb_printf(&b,
-            " \"meter\": {\"type\": \"radiancemeter\", \"origin\": [%.17g, %.17g, %.17g],"
-            "   \"direction\": [%.17g, %.17g, %.17g],"
-            "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}}}",
-            origin.x, origin.y, origin.z, dir.x, dir.y, dir.z);
+  sb_printf(
+      &b,
+      " \"meter\": {\"type\": \"radiancemeter\", \"origin\": [%.17g, %.17g, %.17g],"
+      "   \"direction\": [%.17g, %.17g, %.17g],"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}}}",
+      origin.x, origin.y, origin.z, dir.x, dir.y, dir.z);
   scene *s = tsup_load(b.p, "mono");
   free(b.p);
   return s;
@@ -71,7 +72,8 @@ static void estimate(scene *s, uint32_t spp, double *mean, double *sem) {
 static void check_3sigma(const char *what, double m, double sem, double expect) {
   CHECK(fabs(m - expect) <= 3 * sem + 1e-12, "%s: %.6g vs expected %.6g (3 sigma = %.3g)", what, m, expect,
         3 * sem);
-  CHECK(sem < 0.05 * fabs(expect) + 1e-9, "%s: standard error %.3g too large for a meaningful test", what, sem);
+  CHECK(sem < 0.05 * fabs(expect) + 1e-9, "%s: standard error %.3g too large for a meaningful test", what,
+        sem);
 }
 
 /* ---- Beer-Lambert ---------------------------------------------------------- */
@@ -150,17 +152,17 @@ static void single_scattering(const char *integ, const char *phase_json, phase_f
   vec3 sun = v3(-sin(th0), 0, -cos(th0)); /* propagation */
   vec3 to_view = v3(sin(thv) * cos(phv), sin(thv) * sin(phv), cos(thv));
   char med[512], emit[256];
-  snprintf(med, sizeof med, "{\"type\": \"homogeneous\", \"sigma_t\": %.17g, \"albedo\": %.17g, \"phase\": %s}",
-           tau / h, w, phase_json);
-  snprintf(emit, sizeof emit, "{\"type\": \"directional\", \"direction\": [%.17g, 0, %.17g], \"irradiance\": 1}",
-           sun.x, sun.z);
+  snprintf(med, sizeof med,
+           "{\"type\": \"homogeneous\", \"sigma_t\": %.17g, \"albedo\": %.17g, \"phase\": %s}", tau / h, w,
+           phase_json);
+  snprintf(emit, sizeof emit,
+           "{\"type\": \"directional\", \"direction\": [%.17g, 0, %.17g], \"irradiance\": 1}", sun.x, sun.z);
   vec3 origin = v3_scale(to_view, 3.0);
-  scene *s = slab_scene(integ, med, h, emit, "{\"type\": \"diffuse\", \"reflectance\": 0}", origin,
-                        v3_neg(to_view));
+  scene *s =
+      slab_scene(integ, med, h, emit, "{\"type\": \"diffuse\", \"reflectance\": 0}", origin, v3_neg(to_view));
   REQUIRE(s, "scene");
   double mu0 = cos(th0), muv = cos(thv);
-  double expect =
-      w * p(v3_dot(sun, to_view), g) * mu0 / (mu0 + muv) * (1 - exp(-tau * (1 / mu0 + 1 / muv)));
+  double expect = w * p(v3_dot(sun, to_view), g) * mu0 / (mu0 + muv) * (1 - exp(-tau * (1 / mu0 + 1 / muv)));
   double m, sem;
   estimate(s, 4096, &m, &sem);
   char what[256];
@@ -188,22 +190,26 @@ static void test_furnace_sphere(void) {
   /* An albedo-1 medium in a null sphere under a sky of radiance 1: every
    * path ends in the sky with weight 1 (roulette aside). */
   const char *integ[] = {"{\"type\": \"volpath\"}", "{\"type\": \"piecewise_volpath\"}"};
-  for (int i = 0; i < 2; i++) {
+  /* The third: no light samples from the medium (sample_emitters false),
+   * so the sky seen after scattering must count fully (no MIS). */
+  for (int i = 0; i < 3; i++) {
     sbuf b = {0};
-    sb_printf(&b, "{\"type\": \"scene\", \"integrator\": %s,"
-                  " \"ball\": {\"type\": \"sphere\", \"bsdf\": {\"type\": \"null\"},"
-                  "   \"interior\": {\"type\": \"homogeneous\", \"sigma_t\": 3, \"albedo\": 1,"
-                  "                  \"phase\": {\"type\": \"hg\", \"g\": 0.5}}},"
-                  " \"sky\": {\"type\": \"constant\", \"radiance\": 1},"
-                  " \"meter\": {\"type\": \"radiancemeter\", \"origin\": [0, 0, 5], \"direction\": [0, 0.1, -1],"
-                  "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}}",
-              integ[i]);
+    sb_printf(&b,
+              "{\"type\": \"scene\", \"integrator\": %s,"
+              " \"ball\": {\"type\": \"sphere\", \"bsdf\": {\"type\": \"null\"},"
+              "   \"interior\": {\"type\": \"homogeneous\", \"sigma_t\": 3, \"albedo\": 1,"
+              "                  \"sample_emitters\": %s, \"phase\": {\"type\": \"hg\", \"g\": 0.5}}},"
+              " \"sky\": {\"type\": \"constant\", \"radiance\": 1},"
+              " \"meter\": {\"type\": \"radiancemeter\", \"origin\": [0, 0, 5], \"direction\": [0, 0.1, -1],"
+              "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}}",
+              integ[i % 2], i == 2 ? "false" : "true");
     scene *s = tsup_load(b.p, "mono");
     free(b.p);
     REQUIRE(s, "scene");
     double m, sem;
     estimate(s, 1024, &m, &sem);
-    CHECK(fabs(m - 1) <= 3 * sem + 1e-9 && sem < 0.01, "furnace %s: %.6g +- %.3g vs 1", integ[i], m, sem);
+    CHECK(fabs(m - 1) <= 3 * sem + 1e-9 && sem < 0.01, "furnace %s (case %d): %.6g +- %.3g vs 1",
+          integ[i % 2], i, m, sem);
     scene_free(s);
   }
 }
@@ -214,16 +220,17 @@ static void test_furnace_atmosphere_white_ground(void) {
   for (int a = 0; a < 3; a++) {
     double th = 30.0 * a * PI / 180;
     vec3 to_view = v3(sin(th), 0, cos(th));
-    scene *s = slab_scene("{\"type\": \"volpath\"}",
-                          "{\"type\": \"homogeneous\", \"sigma_t\": 0.5, \"albedo\": 1,"
-                          " \"phase\": {\"type\": \"hg\", \"g\": 0.3}}",
-                          1.0, "{\"type\": \"constant\", \"radiance\": 1}",
-                          "{\"type\": \"diffuse\", \"reflectance\": 1}", v3_scale(to_view, 3), v3_neg(to_view));
+    scene *s =
+        slab_scene("{\"type\": \"volpath\"}",
+                   "{\"type\": \"homogeneous\", \"sigma_t\": 0.5, \"albedo\": 1,"
+                   " \"phase\": {\"type\": \"hg\", \"g\": 0.3}}",
+                   1.0, "{\"type\": \"constant\", \"radiance\": 1}",
+                   "{\"type\": \"diffuse\", \"reflectance\": 1}", v3_scale(to_view, 3), v3_neg(to_view));
     REQUIRE(s, "scene");
     double m, sem;
     estimate(s, 1024, &m, &sem);
-    CHECK(fabs(m - 1) <= 3 * sem + 1e-9 && sem < 0.01, "white furnace at %g deg: %.6g +- %.3g vs 1", 30.0 * a, m,
-          sem);
+    CHECK(fabs(m - 1) <= 3 * sem + 1e-9 && sem < 0.01, "white furnace at %g deg: %.6g +- %.3g vs 1", 30.0 * a,
+          m, sem);
     scene_free(s);
   }
 }
@@ -233,18 +240,20 @@ static void test_furnace_atmosphere_white_ground(void) {
 /* Multiple scattering over a grey ground under a sun: volpath and
  * piecewise_volpath, homogeneous and one-layer piecewise media. */
 static void test_integrators_agree(void) {
-  const char *media[] = {"{\"type\": \"homogeneous\", \"sigma_t\": 0.8, \"albedo\": 0.9,"
-                         " \"phase\": {\"type\": \"hg\", \"g\": 0.6}}",
-                         "{\"type\": \"piecewise\", \"albedo\": 0.9, \"phase\": {\"type\": \"hg\", \"g\": 0.6},"
-                         " \"sigma_t\": {\"type\": \"constvolume\", \"value\": 0.8,"
-                         "   \"to_world\": [{\"translate\": [-0.5, -0.5, 0]}, {\"scale\": [40, 40, 1]}]}}"};
+  const char *media[] = {
+      "{\"type\": \"homogeneous\", \"sigma_t\": 0.8, \"albedo\": 0.9,"
+      " \"phase\": {\"type\": \"hg\", \"g\": 0.6}}",
+      "{\"type\": \"piecewise\", \"albedo\": 0.9, \"phase\": {\"type\": \"hg\", \"g\": 0.6},"
+      " \"sigma_t\": {\"type\": \"constvolume\", \"value\": 0.8,"
+      "   \"to_world\": [{\"translate\": [-0.5, -0.5, 0]}, {\"scale\": [40, 40, 1]}]}}"};
   const char *integ[] = {"{\"type\": \"volpath\"}", "{\"type\": \"piecewise_volpath\"}"};
   double m[4], se[4];
   for (int k = 0; k < 4; k++) {
     vec3 to_view = v3(0.5, 0.2, 0.8427);
-    scene *s = slab_scene(integ[k & 1], media[k >> 1], 1.0,
-                          "{\"type\": \"directional\", \"direction\": [-0.5, 0, -0.8660254], \"irradiance\": 2}",
-                          "{\"type\": \"diffuse\", \"reflectance\": 0.3}", v3_scale(to_view, 3), v3_neg(to_view));
+    scene *s =
+        slab_scene(integ[k & 1], media[k >> 1], 1.0,
+                   "{\"type\": \"directional\", \"direction\": [-0.5, 0, -0.8660254], \"irradiance\": 2}",
+                   "{\"type\": \"diffuse\", \"reflectance\": 0.3}", v3_scale(to_view, 3), v3_neg(to_view));
     REQUIRE(s, "scene");
     estimate(s, 2048, &m[k], &se[k]);
     scene_free(s);
@@ -267,7 +276,9 @@ static void layers_json(sbuf *b, const double *v, int n, double h, const char *e
  * integrators), 3 sigma for heterogeneous (nearest filter: ratio
  * tracking). Also N equal layers. */
 static void test_beer_lambert_layers(void) {
-  enum { N = 37 };
+  enum {
+    N = 37
+  };
   double sig[N], eq[N], tau = 0, h = 3.0;
   for (int i = 0; i < N; i++) {
     sig[i] = 0.05 + 0.9 * fabs(sin(1.7 * i)) * exp(-i / 15.0);
@@ -284,8 +295,8 @@ static void test_beer_lambert_layers(void) {
     for (int i = 0; i < 3; i++) beer_lambert("{\"type\": \"piecewise_volpath\"}", b.p, h, t, 25.0 * i);
     /* volpath ratio-tracks the same layers: 3 sigma. */
     double th = 35 * PI / 180;
-    scene *s = slab_scene("{\"type\": \"volpath\"}", b.p, h, "{\"type\": \"constant\", \"radiance\": 1}", NULL,
-                          v3(-2 * tan(th), 0, -2), v3(sin(th), 0, cos(th)));
+    scene *s = slab_scene("{\"type\": \"volpath\"}", b.p, h, "{\"type\": \"constant\", \"radiance\": 1}",
+                          NULL, v3(-2 * tan(th), 0, -2), v3(sin(th), 0, cos(th)));
     free(b.p);
     REQUIRE(s, "scene");
     double m, sem;
@@ -312,7 +323,9 @@ static void test_beer_lambert_layers(void) {
 /* Scattering: piecewise with N identical layers == homogeneous, and
  * piecewise_volpath == volpath on unequal layers (3 sigma). */
 static void test_piecewise_agrees(void) {
-  enum { N = 24 };
+  enum {
+    N = 24
+  };
   double eq[N], sig[N], alb[N];
   for (int i = 0; i < N; i++) {
     eq[i] = 0.6;
@@ -353,8 +366,8 @@ static void test_piecewise_agrees(void) {
   const int pairs[][2] = {{0, 1}, {0, 2}, {3, 4}};
   for (int i = 0; i < 3; i++) {
     int a = pairs[i][0], c = pairs[i][1];
-    CHECK(fabs(m[a] - m[c]) <= 3 * sqrt(se[a] * se[a] + se[c] * se[c]), "case %d %.6g +- %.3g vs case %d %.6g +- %.3g",
-          c, m[c], se[c], a, m[a], se[a]);
+    CHECK(fabs(m[a] - m[c]) <= 3 * sqrt(se[a] * se[a] + se[c] * se[c]),
+          "case %d %.6g +- %.3g vs case %d %.6g +- %.3g", c, m[c], se[c], a, m[a], se[a]);
     CHECK(se[c] < 0.02 * m[c], "case %d: standard error %.3g too large", c, se[c]);
   }
 }
@@ -364,7 +377,8 @@ static void test_piecewise_agrees(void) {
 /* tau along o + t d over [t0, t1] summed layer by layer (each layer's
  * slab cut by the segment), independent of the medium's cumulative sums.
  * The box is z in [zb, zb + h] (axis-aligned, so local z = (z - zb) / h). */
-static double tau_layers(const double *sig, int n, double zb, double h, vec3 o, vec3 d, double t0, double t1) {
+static double tau_layers(const double *sig, int n, double zb, double h, vec3 o, vec3 d, double t0,
+                         double t1) {
   double za = o.z + t0 * d.z, zc = o.z + t1 * d.z;
   if (fabs(d.z) < 1e-300) {
     int k = (int)floor((za - zb) / h * n);
@@ -379,18 +393,23 @@ static double tau_layers(const double *sig, int n, double zb, double h, vec3 o, 
 }
 
 static void test_piecewise_exact_ops(void) {
-  enum { N = 53 };
+  enum {
+    N = 53
+  };
   double sig[N], h = 7.0, zb = -1.0;
   for (int i = 0; i < N; i++) sig[i] = (i % 7 == 3) ? 0.0 : 0.02 + 0.5 * fabs(cos(0.9 * i));
   sbuf b = {0};
-  sb_printf(&b, "{\"type\": \"scene\", \"box\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
-                " \"to_world\": [{\"scale\": [5, 5, %.17g]}, {\"translate\": [0, 0, %.17g]}],"
-                " \"interior\": {\"type\": \"piecewise\", \"albedo\": 0.5, \"sigma_t\": {\"type\": \"gridvolume\","
-                " \"shape\": [%d, 1, 1], \"data\": [",
-            h / 2, zb + h / 2, N);
+  sb_printf(
+      &b,
+      "{\"type\": \"scene\", \"box\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
+      " \"to_world\": [{\"scale\": [5, 5, %.17g]}, {\"translate\": [0, 0, %.17g]}],"
+      " \"interior\": {\"type\": \"piecewise\", \"albedo\": 0.5, \"sigma_t\": {\"type\": \"gridvolume\","
+      " \"shape\": [%d, 1, 1], \"data\": [",
+      h / 2, zb + h / 2, N);
   for (int i = 0; i < N; i++) sb_printf(&b, "%s%.17g", i ? ", " : "", sig[i]);
-  sb_printf(&b, "], \"to_world\": [{\"translate\": [-0.5, -0.5, 0]}, {\"scale\": [10, 10, %.17g]},"
-                " {\"translate\": [0, 0, %.17g]}]}}}}",
+  sb_printf(&b,
+            "], \"to_world\": [{\"translate\": [-0.5, -0.5, 0]}, {\"scale\": [10, 10, %.17g]},"
+            " {\"translate\": [0, 0, %.17g]}]}}}}",
             h, zb);
   scene *s = tsup_load(b.p, "mono");
   free(b.p);
@@ -404,7 +423,8 @@ static void test_piecewise_exact_ops(void) {
   int bad_tr = 0, bad_inv = 0, n_coll = 0;
   double worst = 0;
   for (int k = 0; k < 400; k++) {
-    vec3 o = v3(4 * pcg32_next_double(&rng) - 2, 4 * pcg32_next_double(&rng) - 2, zb + h * pcg32_next_double(&rng));
+    vec3 o = v3(4 * pcg32_next_double(&rng) - 2, 4 * pcg32_next_double(&rng) - 2,
+                zb + h * pcg32_next_double(&rng));
     double ct = 2 * pcg32_next_double(&rng) - 1, ph = 2 * PI * pcg32_next_double(&rng);
     if (k % 50 == 0) ct = 0; /* level rays */
     if (k % 50 == 1) ct = 1e-9;
@@ -462,7 +482,8 @@ static void test_rgb_chromatic(void) {
               " \"slab\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"}, \"interior\": %s,"
               "   \"to_world\": [{\"scale\": [20, 20, 0.5]}, {\"translate\": [0, 0, 0.5]}]},"
               " \"sky\": {\"type\": \"constant\", \"radiance\": 1},"
-              " \"meter\": {\"type\": \"radiancemeter\", \"origin\": [%.17g, 0, -2], \"direction\": [%.17g, 0, %.17g],"
+              " \"meter\": {\"type\": \"radiancemeter\", \"origin\": [%.17g, 0, -2], \"direction\": [%.17g, "
+              "0, %.17g],"
               "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}}",
               meds[k], -2 * tan(th), sin(th), cos(th));
     scene *s = tsup_load(b.p, "rgb");
@@ -473,8 +494,8 @@ static void test_rgb_chromatic(void) {
     const double tau[2][3] = {{0.2, 0.5, 1.0}, {0.2, 0.5, 1.0}};
     for (int c = 0; c < 3 && c < img.channels; c++) {
       double expect = exp(-tau[k][c] / cos(th));
-      CHECK(fabs(img.data[c] - expect) <= 1e-5 * expect, "medium %d channel %d: %.9g vs %.9g", k, c, img.data[c],
-            expect);
+      CHECK(fabs(img.data[c] - expect) <= 1e-5 * expect, "medium %d channel %d: %.9g vs %.9g", k, c,
+            img.data[c], expect);
     }
     film_image_free(&img);
     scene_free(s);
@@ -484,17 +505,19 @@ static void test_rgb_chromatic(void) {
   for (int k = 0; k < 2; k++) {
     vec3 to_view = v3(0.4, 0, 0.9165);
     sbuf b = {0};
-    sb_printf(&b,
-              "{\"type\": \"scene\", \"integrator\": {\"type\": \"%s\"},"
-              " \"slab\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
-              "   \"interior\": {\"type\": \"piecewise\", \"albedo\": [0.9, 0.7, 0.5], \"sigma_t\": {\"type\": "
-              "\"gridvolume\", \"shape\": [2, 1, 1, 3], \"data\": [0.1, 0.4, 1.0, 0.3, 0.6, 1.0],"
-              "   \"to_world\": [{\"translate\": [-0.5, -0.5, 0]}, {\"scale\": [40, 40, 1]}]}},"
-              "   \"to_world\": [{\"scale\": [20, 20, 0.5]}, {\"translate\": [0, 0, 0.5]}]},"
-              " \"sun\": {\"type\": \"directional\", \"direction\": [-0.5, 0, -0.866], \"irradiance\": 1},"
-              " \"meter\": {\"type\": \"radiancemeter\", \"origin\": [%.17g, 0, %.17g], \"direction\": [%.17g, 0, %.17g],"
-              "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}}",
-              k ? "piecewise_volpath" : "volpath", 3 * to_view.x, 3 * to_view.z, -to_view.x, -to_view.z);
+    sb_printf(
+        &b,
+        "{\"type\": \"scene\", \"integrator\": {\"type\": \"%s\"},"
+        " \"slab\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
+        "   \"interior\": {\"type\": \"piecewise\", \"albedo\": [0.9, 0.7, 0.5], \"sigma_t\": {\"type\": "
+        "\"gridvolume\", \"shape\": [2, 1, 1, 3], \"data\": [0.1, 0.4, 1.0, 0.3, 0.6, 1.0],"
+        "   \"to_world\": [{\"translate\": [-0.5, -0.5, 0]}, {\"scale\": [40, 40, 1]}]}},"
+        "   \"to_world\": [{\"scale\": [20, 20, 0.5]}, {\"translate\": [0, 0, 0.5]}]},"
+        " \"sun\": {\"type\": \"directional\", \"direction\": [-0.5, 0, -0.866], \"irradiance\": 1},"
+        " \"meter\": {\"type\": \"radiancemeter\", \"origin\": [%.17g, 0, %.17g], \"direction\": [%.17g, 0, "
+        "%.17g],"
+        "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}}",
+        k ? "piecewise_volpath" : "volpath", 3 * to_view.x, 3 * to_view.z, -to_view.x, -to_view.z);
     scene *s = tsup_load(b.p, "rgb");
     free(b.p);
     REQUIRE(s, "scene");
@@ -526,19 +549,24 @@ static void test_determinism(void) {
   const char *integ[] = {"volpath", "piecewise_volpath"};
   for (int k = 0; k < 2; k++) {
     sbuf b = {0};
-    sb_printf(&b,
-              "{\"type\": \"scene\", \"integrator\": {\"type\": \"%s\"},"
-              " \"slab\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
-              "   \"interior\": {\"type\": \"heterogeneous\", \"albedo\": 0.8, \"phase\": {\"type\": \"hg\", \"g\": 0.4},"
-              "     \"sigma_t\": {\"type\": \"gridvolume\", \"shape\": [3, 2, 2], \"data\": [0.1, 0.5, 0.9, 0.3, 1.1, 0.2,"
-              "       0.7, 0.4, 0.6, 0.8, 0.05, 1.3], \"to_world\": [{\"translate\": [-0.5, -0.5, 0]}, {\"scale\": [4, 4, 1]}]}},"
-              "   \"to_world\": [{\"scale\": [2, 2, 0.5]}, {\"translate\": [0, 0, 0.5]}]},"
-              " \"ground\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 3}, {\"translate\": [0, 0, -0.2]}]},"
-              " \"sun\": {\"type\": \"directional\", \"direction\": [-0.5, 0.2, -0.84], \"irradiance\": 1},"
-              " \"sky\": {\"type\": \"constant\", \"radiance\": 0.3},"
-              " \"cam\": {\"type\": \"hdistant\", \"sampler\": {\"type\": \"independent\", \"sample_count\": 16},"
-              "   \"film\": {\"type\": \"hdrfilm\", \"width\": 24, \"height\": 24}}}",
-              integ[k]);
+    sb_printf(
+        &b,
+        "{\"type\": \"scene\", \"integrator\": {\"type\": \"%s\"},"
+        " \"slab\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
+        "   \"interior\": {\"type\": \"heterogeneous\", \"albedo\": 0.8, \"phase\": {\"type\": \"hg\", "
+        "\"g\": 0.4},"
+        "     \"sigma_t\": {\"type\": \"gridvolume\", \"shape\": [3, 2, 2], \"data\": [0.1, 0.5, 0.9, 0.3, "
+        "1.1, 0.2,"
+        "       0.7, 0.4, 0.6, 0.8, 0.05, 1.3], \"to_world\": [{\"translate\": [-0.5, -0.5, 0]}, {\"scale\": "
+        "[4, 4, 1]}]}},"
+        "   \"to_world\": [{\"scale\": [2, 2, 0.5]}, {\"translate\": [0, 0, 0.5]}]},"
+        " \"ground\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 3}, {\"translate\": [0, 0, "
+        "-0.2]}]},"
+        " \"sun\": {\"type\": \"directional\", \"direction\": [-0.5, 0.2, -0.84], \"irradiance\": 1},"
+        " \"sky\": {\"type\": \"constant\", \"radiance\": 0.3},"
+        " \"cam\": {\"type\": \"hdistant\", \"sampler\": {\"type\": \"independent\", \"sample_count\": 16},"
+        "   \"film\": {\"type\": \"hdrfilm\", \"width\": 24, \"height\": 24}}}",
+        integ[k]);
     scene *s = tsup_load(b.p, "mono");
     free(b.p);
     REQUIRE(s, "scene");
@@ -546,7 +574,8 @@ static void test_determinism(void) {
     REQUIRE(tsup_render(s, 0, 5, 1, &a), "render 1 thread");
     REQUIRE(tsup_render(s, 0, 5, 3, &c), "render 3 threads");
     size_t n = (size_t)a.width * a.height * a.channels;
-    CHECK(memcmp(a.data, c.data, n * sizeof *a.data) == 0, "%s: films differ between 1 and 3 threads", integ[k]);
+    CHECK(memcmp(a.data, c.data, n * sizeof *a.data) == 0, "%s: films differ between 1 and 3 threads",
+          integ[k]);
     double sum = 0;
     for (size_t i = 0; i < n; i++) sum += a.data[i];
     CHECK(sum > 0, "%s: black film", integ[k]);
@@ -560,21 +589,26 @@ static void test_determinism(void) {
  * piecewise medium (its cumulative thickness is refreshed), g of its
  * phase function, at two wavelengths. */
 static char *layered_scene(const double *sig, const double *alb, double scale, double g) {
-  enum { N = 6 };
+  enum {
+    N = 6
+  };
   sbuf b = {0};
-  sb_printf(&b, "{\"type\": \"scene\", \"integrator\": {\"type\": \"piecewise_volpath\"},"
-                " \"atmo\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
-                "   \"to_world\": [{\"scale\": [2, 2, 0.5]}, {\"translate\": [0, 0, 0.5]}],"
-                "   \"interior\": {\"type\": \"piecewise\", \"scale\": %.17g, \"phase\": {\"type\": \"hg\", \"g\": %.17g},"
-                "     \"sigma_t\": ",
+  sb_printf(&b,
+            "{\"type\": \"scene\", \"integrator\": {\"type\": \"piecewise_volpath\"},"
+            " \"atmo\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
+            "   \"to_world\": [{\"scale\": [2, 2, 0.5]}, {\"translate\": [0, 0, 0.5]}],"
+            "   \"interior\": {\"type\": \"piecewise\", \"scale\": %.17g, \"phase\": {\"type\": \"hg\", "
+            "\"g\": %.17g},"
+            "     \"sigma_t\": ",
             scale, g);
   layers_json(&b, sig, N, 1.0, "");
   sb_printf(&b, ", \"albedo\": ");
   layers_json(&b, alb, N, 1.0, "");
-  sb_printf(&b, "}}, \"ground\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 2}]},"
-                " \"sun\": {\"type\": \"directional\", \"direction\": [-0.3, 0, -0.95], \"irradiance\": 1},"
-                " \"cam\": {\"type\": \"hdistant\", \"sampler\": {\"type\": \"independent\", \"sample_count\": 8},"
-                "   \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16}}}");
+  sb_printf(
+      &b, "}}, \"ground\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 2}]},"
+          " \"sun\": {\"type\": \"directional\", \"direction\": [-0.3, 0, -0.95], \"irradiance\": 1},"
+          " \"cam\": {\"type\": \"hdistant\", \"sampler\": {\"type\": \"independent\", \"sample_count\": 8},"
+          "   \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16}}}");
   return b.p;
 }
 
@@ -588,10 +622,10 @@ static void test_update_equals_reload(void) {
   free(t1);
   REQUIRE(a && b, "scenes");
   char v_sig[256], v_alb[256];
-  snprintf(v_sig, sizeof v_sig, "[%.17g, %.17g, %.17g, %.17g, %.17g, %.17g]", sig1[0], sig1[1], sig1[2], sig1[3],
-           sig1[4], sig1[5]);
-  snprintf(v_alb, sizeof v_alb, "[%.17g, %.17g, %.17g, %.17g, %.17g, %.17g]", alb1[0], alb1[1], alb1[2], alb1[3],
-           alb1[4], alb1[5]);
+  snprintf(v_sig, sizeof v_sig, "[%.17g, %.17g, %.17g, %.17g, %.17g, %.17g]", sig1[0], sig1[1], sig1[2],
+           sig1[3], sig1[4], sig1[5]);
+  snprintf(v_alb, sizeof v_alb, "[%.17g, %.17g, %.17g, %.17g, %.17g, %.17g]", alb1[0], alb1[1], alb1[2],
+           alb1[3], alb1[4], alb1[5]);
   const char *keys[4] = {"atmo.interior_medium.sigma_t.data", "atmo.interior_medium.albedo.data",
                          "atmo.interior_medium.scale", "atmo.interior_medium.phase_function.g"};
   const char *vals[4] = {v_sig, v_alb, "2.5", "-0.4"};
@@ -599,7 +633,8 @@ static void test_update_equals_reload(void) {
   rsw_err err = {0};
   for (int i = 0; i < 4; i++) {
     items[i].key = keys[i];
-    REQUIRE(param_value_parse(vals[i], keys[i], &items[i].value, &err) == RSW_OK, "parse %s: %s", keys[i], err.msg);
+    REQUIRE(param_value_parse(vals[i], keys[i], &items[i].value, &err) == RSW_OK, "parse %s: %s", keys[i],
+            err.msg);
   }
   /* Render a first (derived data computed for the old values), update it. */
   film_image x;
@@ -624,6 +659,26 @@ static void test_update_equals_reload(void) {
   scene_free(b);
 }
 
+/* A slab in a periodic plot: a slanted ray leaves the cell through its
+ * side walls (null faces) and re-enters through the opposite ones, so its
+ * path of length 2 through the slab crosses four boundaries; exact. */
+static void test_periodic_slab(void) {
+  const char *text = "{\"type\": \"scene\", \"integrator\": {\"type\": \"piecewise_volpath\"},"
+                     " \"plot\": {\"type\": \"periodic\", \"min\": [-1, -1], \"max\": [1, 1]},"
+                     " \"slab\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
+                     "   \"interior\": {\"type\": \"homogeneous\", \"sigma_t\": 0.7, \"albedo\": 0},"
+                     "   \"to_world\": [{\"scale\": [1, 1, 0.5]}, {\"translate\": [0, 0, 0.5]}]},"
+                     " \"sky\": {\"type\": \"constant\", \"radiance\": 1},"
+                     " \"m\": {\"type\": \"radiancemeter\", \"origin\": [0.3, 0.2, -0.5],"
+                     "   \"direction\": [0.8660254037844386, 0, 0.5],"
+                     "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}}";
+  scene *s = tsup_load(text, "mono");
+  REQUIRE(s, "scene");
+  double v = render1(s, 4, 1), expect = exp(-0.7 / 0.5);
+  CHECK(fabs(v - expect) <= 1e-5 * expect, "periodic slab: %.9g vs %.9g", v, expect);
+  scene_free(s);
+}
+
 /* ---- scene-level errors ------------------------------------------------------ */
 
 static void expect_error(const char *text, const char *needle, const char *loc) {
@@ -639,7 +694,8 @@ static void expect_error(const char *text, const char *needle, const char *loc) 
   CHECK(strstr(err.msg, needle) != NULL, "error '%s' lacks '%s'", err.msg, needle);
   size_t lw = strlen(err.where), ll = loc ? strlen(loc) : 0;
   if (loc)
-    CHECK(lw >= ll && strcmp(err.where + lw - ll, loc) == 0, "error at '%s', expected '...%s'", err.where, loc);
+    CHECK(lw >= ll && strcmp(err.where + lw - ll, loc) == 0, "error at '%s', expected '...%s'", err.where,
+          loc);
 }
 
 static void test_media_errors(void) {
@@ -647,20 +703,50 @@ static void test_media_errors(void) {
                " \"s\": {\"type\": \"radiancemeter\", \"origin\": [0,0,0], \"direction\": [0,0,1],"
                "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}}",
                "has no boundary", "/fog");
-  expect_error("{\"type\": \"scene\", \"fog\": {\"type\": \"homogeneous\"},"
-               " \"ball\": {\"type\": \"sphere\", \"bsdf\": {\"type\": \"null\"}, \"interior\": {\"type\": \"ref\", "
-               "\"id\": \"fog\"}},"
-               " \"s\": {\"type\": \"radiancemeter\", \"origin\": [0,0,5], \"direction\": [0,0,1],"
-               "   \"medium\": {\"type\": \"ref\", \"id\": \"fog\"},"
-               "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}}",
-               "does not sit inside its medium", "/s");
+  expect_error(
+      "{\"type\": \"scene\", \"fog\": {\"type\": \"homogeneous\"},"
+      " \"ball\": {\"type\": \"sphere\", \"bsdf\": {\"type\": \"null\"}, \"interior\": {\"type\": \"ref\", "
+      "\"id\": \"fog\"}},"
+      " \"s\": {\"type\": \"radiancemeter\", \"origin\": [0,0,5], \"direction\": [0,0,1],"
+      "   \"medium\": {\"type\": \"ref\", \"id\": \"fog\"},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}}",
+      "does not sit inside its medium", "/s");
+  /* XML: the error names the medium's line. */
+  expect_error("<scene version=\"3.0.0\">\n"
+               "  <emitter type=\"constant\"/>\n"
+               "  <medium type=\"homogeneous\" id=\"fog\"><float name=\"sigma_t\" value=\"0.5\"/></medium>\n"
+               "</scene>\n",
+               "medium 'fog' has no boundary", ":3");
+  /* The same scene with a null sphere around the medium renders. */
+  const char *xml =
+      "<scene version=\"3.0.0\">\n"
+      "  <integrator type=\"volpath\"/>\n"
+      "  <emitter type=\"constant\"/>\n"
+      "  <medium type=\"homogeneous\" id=\"fog\"><float name=\"sigma_t\" value=\"0.5\"/>\n"
+      "    <float name=\"albedo\" value=\"1\"/><phase type=\"hg\"><float name=\"g\" value=\"0.7\"/></phase>\n"
+      "  </medium>\n"
+      "  <shape type=\"sphere\"><bsdf type=\"null\"/><ref name=\"interior\" id=\"fog\"/></shape>\n"
+      "  <sensor type=\"radiancemeter\"><point name=\"origin\" x=\"0\" y=\"0\" z=\"3\"/>\n"
+      "    <vector name=\"direction\" x=\"0\" y=\"0\" z=\"-1\"/>\n"
+      "    <film type=\"hdrfilm\"><integer name=\"width\" value=\"1\"/><integer name=\"height\" "
+      "value=\"1\"/></film>\n"
+      "  </sensor>\n"
+      "</scene>\n";
+  scene *sx = tsup_load(xml, "mono");
+  CHECK(sx != NULL, "the XML medium scene loads");
+  if (sx) {
+    double v = render1(sx, 256, 1);
+    CHECK(fabs(v - 1) < 0.05, "XML furnace: %.6g vs 1", v);
+    scene_free(sx);
+  }
   /* The same sensor inside the ball loads. */
-  const char *ok = "{\"type\": \"scene\", \"fog\": {\"type\": \"homogeneous\"},"
-                   " \"ball\": {\"type\": \"sphere\", \"bsdf\": {\"type\": \"null\"}, \"interior\": {\"type\": "
-                   "\"ref\", \"id\": \"fog\"}},"
-                   " \"s\": {\"type\": \"radiancemeter\", \"origin\": [0,0,0.5], \"direction\": [0,0,1],"
-                   "   \"medium\": {\"type\": \"ref\", \"id\": \"fog\"},"
-                   "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}}";
+  const char *ok =
+      "{\"type\": \"scene\", \"fog\": {\"type\": \"homogeneous\"},"
+      " \"ball\": {\"type\": \"sphere\", \"bsdf\": {\"type\": \"null\"}, \"interior\": {\"type\": "
+      "\"ref\", \"id\": \"fog\"}},"
+      " \"s\": {\"type\": \"radiancemeter\", \"origin\": [0,0,0.5], \"direction\": [0,0,1],"
+      "   \"medium\": {\"type\": \"ref\", \"id\": \"fog\"},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}}";
   scene *s = tsup_load(ok, "mono");
   CHECK(s != NULL, "a sensor inside its medium loads");
   scene_free(s);
@@ -673,26 +759,30 @@ static void test_media_errors(void) {
                " \"shape\": [3, 1, 1], \"data\": [1, 2, 3]}, \"albedo\": {\"type\": \"gridvolume\","
                " \"shape\": [2, 1, 1], \"data\": [0.5, 0.5]}}}}",
                "albedo must be constant or a [1, 1, 3] grid", "/ball/interior/albedo");
-  expect_error("{\"type\": \"scene\", \"ball\": {\"type\": \"sphere\", \"interior\": {\"type\": \"homogeneous\","
-               " \"albedo\": 1.5}}}",
-               "albedo", NULL);
-  expect_error("{\"type\": \"scene\", \"ball\": {\"type\": \"sphere\", \"interior\": {\"type\": \"homogeneous\","
-               " \"sigma_t\": -1}}}",
-               "sigma_t", NULL);
-  expect_error("{\"type\": \"scene\", \"ball\": {\"type\": \"sphere\", \"interior\": {\"type\": \"homogeneous\","
-               " \"phase\": {\"type\": \"nosuchphase\"}}}}",
-               "nosuchphase", NULL);
+  expect_error(
+      "{\"type\": \"scene\", \"ball\": {\"type\": \"sphere\", \"interior\": {\"type\": \"homogeneous\","
+      " \"albedo\": 1.5}}}",
+      "albedo", NULL);
+  expect_error(
+      "{\"type\": \"scene\", \"ball\": {\"type\": \"sphere\", \"interior\": {\"type\": \"homogeneous\","
+      " \"sigma_t\": -1}}}",
+      "sigma_t", NULL);
+  expect_error(
+      "{\"type\": \"scene\", \"ball\": {\"type\": \"sphere\", \"interior\": {\"type\": \"homogeneous\","
+      " \"phase\": {\"type\": \"nosuchphase\"}}}}",
+      "nosuchphase", NULL);
 }
 
 /* A sensor inside an infinite (unbounded) absorbing medium, looking at a
  * lit plate: the plate's radiance times exp(-sigma_t d). Exact. */
 static void test_sensor_in_medium(void) {
-  const char *text = "{\"type\": \"scene\", \"integrator\": {\"type\": \"volpath\"},"
-                     " \"fog\": {\"type\": \"homogeneous\", \"sigma_t\": 0.25, \"albedo\": 0},"
-                     " \"lamp\": {\"type\": \"rectangle\", \"emitter\": {\"type\": \"area\", \"radiance\": 2}},"
-                     " \"s\": {\"type\": \"radiancemeter\", \"origin\": [0, 0, 3], \"direction\": [0, 0, -1],"
-                     "   \"medium\": {\"type\": \"ref\", \"id\": \"fog\"},"
-                     "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}}";
+  const char *text =
+      "{\"type\": \"scene\", \"integrator\": {\"type\": \"volpath\"},"
+      " \"fog\": {\"type\": \"homogeneous\", \"sigma_t\": 0.25, \"albedo\": 0},"
+      " \"lamp\": {\"type\": \"rectangle\", \"emitter\": {\"type\": \"area\", \"radiance\": 2}},"
+      " \"s\": {\"type\": \"radiancemeter\", \"origin\": [0, 0, 3], \"direction\": [0, 0, -1],"
+      "   \"medium\": {\"type\": \"ref\", \"id\": \"fog\"},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}}";
   scene *s = tsup_load(text, "mono");
   REQUIRE(s, "scene");
   /* The meter's origin is nudged along its direction by Mitsuba's
@@ -718,5 +808,6 @@ int main(void) {
   RSW_TEST_RUN(test_rgb_chromatic);
   RSW_TEST_RUN(test_determinism);
   RSW_TEST_RUN(test_update_equals_reload);
+  RSW_TEST_RUN(test_periodic_slab);
   RSW_TEST_END("test_media");
 }

@@ -48,4 +48,5 @@ static rsw_status null_create(loader *ld, node *n, object **out) {
   return RSW_OK;
 }
 
-const plugin plugin_null = {.name = "null", .cls = CLS_BSDF, .create = null_create, .destroy = null_destroy, .ops = &null_ops};
+const plugin plugin_null = {
+    .name = "null", .cls = CLS_BSDF, .create = null_create, .destroy = null_destroy, .ops = &null_ops};

@@ -25,15 +25,19 @@
  *    channel mean (Kutz et al. 2017, spectral tracking) covers them all.
  *  - analytic (homogeneous media in both integrators, every medium with
  *    medium_ops.sample_real in piecewise_volpath): t is drawn by
- *    inverting the optical thickness in channel c and T *= tr sigma_s /
- *    pdf_c at a collision (the albedo in mono), tr / pdf_c when the flight
- *    passes t_s (1 in mono).
+ *    inverting the optical thickness in a channel c (uniform over the
+ *    three when sigma_t differs between them, else 0), and with pdf the
+ *    mean of the channels' densities (the density t was drawn with),
+ *    T *= tr sigma_s / pdf at a collision (the albedo in mono) and
+ *    tr / pdf when the flight passes t_s (1 in mono).
  *  - a medium with no scattering (medium.absorbing_only) is not sampled:
  *    T *= transmittance over the segment, exact in analytic media (the
  *    Beer-Lambert tests are noise-free) and ratio-tracked otherwise.
  * Transmittance along shadow rays: exact in analytic media, ratio tracking
- * (T *= sigma_n / mu per tentative collision) otherwise; null surfaces are
- * crossed, any other surface blocks.
+ * (T *= sigma_n / mu per tentative collision, with Russian roulette once
+ * the estimate falls below 0.1) otherwise; null surfaces are crossed, any
+ * other surface blocks. Stokes films get Q = U = V = 0 (no polarisation
+ * through media).
  *
  * Estimator: L = sum over vertices of T (Le w_bsdf + NEE w_em); at a
  * medium vertex, NEE = p(wi, wo) Le tr / (pdf_em p_pick) with MIS weight
@@ -204,7 +208,8 @@ static ray3 shadow_ray(const scene *sc, const surface_interaction *si, vec3 p, c
     vec3 q = offset_on_side(ds->p, ds->n, err, v3_sub(p, ds->p));
     vec3 d = v3_sub(q, p);
     double len = v3_len(d);
-    ray3 r = {p, len > 0 ? v3_scale(d, 1.0 / len) : ds->d, 0.0, len * (1.0 - RSW_SPAWN_ERRORS * RSW_F32_UNIT)};
+    ray3 r = {p, len > 0 ? v3_scale(d, 1.0 / len) : ds->d, 0.0,
+              len * (1.0 - RSW_SPAWN_ERRORS * RSW_F32_UNIT)};
     return r;
   }
   ray3 r = si ? spawn_ray(si, ds->d) : (ray3){p, ds->d, 0.0, INFINITY};
@@ -246,7 +251,6 @@ typedef struct vlane {
   int depth, crossings;
   bool hit;
   surface_interaction si;
-  accel_hit h;
   /* The shadow ray of this event, while it is being traced. */
   bool sh;
   ray3 sray;
@@ -260,8 +264,8 @@ typedef struct vlane {
 
 /* Trace lanes idx[0..n) (rays in ln[i].ray for shadow == false, ln[i].sray
  * else): hits into ln[i].hit / ln[i].si (rays) or h / hit flags. */
-static void wave_trace(const scene *sc, vlane *ln, const int *idx, int n, bool shadow, bool coherent, bool *hit,
-                       surface_interaction *si, render_stats *stats) {
+static void wave_trace(const scene *sc, vlane *ln, const int *idx, int n, bool shadow, bool coherent,
+                       bool *hit, surface_interaction *si, render_stats *stats) {
   enum {
     P = 16
   };
@@ -299,6 +303,15 @@ static void wave_trace(const scene *sc, vlane *ln, const int *idx, int n, bool s
   }
 }
 
+/* The length from the exact start o0 of ray r's segment to its hit si:
+ * from the hit point itself (exact on the surface, where Embree's t is
+ * float32), or, under a periodic boundary (si->p wrapped into the
+ * column), from the hit distance. */
+static double seg_end(const scene *sc, const ray3 *r, vec3 o0, const surface_interaction *si) {
+  if (sc->periodic.on) return si->t + v3_dot(v3_sub(r->o, o0), r->d);
+  return v3_dot(v3_sub(si->p, o0), r->d);
+}
+
 /* Start lane l's shadow ray towards ds from a surface vertex si (or the
  * medium point p when si is NULL) in medium sm, worth val if clear. */
 static void start_shadow(const scene *sc, vlane *l, const surface_interaction *si, vec3 p, const emitter *e,
@@ -317,11 +330,13 @@ static void start_shadow(const scene *sc, vlane *l, const surface_interaction *s
 /* One round of lane l's shadow ray after its query (hit at si): the
  * segment's transmittance, then done (false) or a null surface crossed
  * (true: trace again). */
-static bool shadow_step(const volpath_integrator *vp, vlane *l, bool hit, const surface_interaction *si,
-                        sampler_state *st) {
+static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l, bool hit,
+                        const surface_interaction *si, sampler_state *st) {
   if (l->sm) {
-    vec3 q = hit ? si->p : l->send;
-    ray3 mr = {l->sp0, l->sray.d, 0.0, (hit || l->sfinite) ? v3_dot(v3_sub(q, l->sp0), l->sray.d) : INFINITY};
+    double tend = hit          ? seg_end(sc, &l->sray, l->sp0, si)
+                  : l->sfinite ? v3_dot(v3_sub(l->send, l->sp0), l->sray.d)
+                               : INFINITY;
+    ray3 mr = {l->sp0, l->sray.d, 0.0, tend};
     l->str = col_mul(l->str, segment_tr(vp, l->sm, &mr, mr.tmax, st));
   }
   bool more = hit && !col_is_black(l->str);
@@ -361,7 +376,7 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
   medium_interaction mi;
   bool scattered = false;
   if (m) {
-    ray3 seg = {l->seg_o, l->ray.d, 0.0, hit ? v3_dot(v3_sub(si->p, l->seg_o), l->ray.d) : l->ray.tmax};
+    ray3 seg = {l->seg_o, l->ray.d, 0.0, hit ? seg_end(sc, &l->ray, l->seg_o, si) : l->ray.tmax};
     double mint, maxt;
     if (m->ops->intersect_aabb(m, &seg, &mint, &maxt)) {
       if (m->absorbing_only) {
@@ -429,7 +444,7 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
     l->seg_o = mi.p;
     l->prev = ref;
     l->prev_pdf = ppdf;
-    l->prev_delta = false;
+    l->prev_delta = !m->sample_emitters; /* no light sample taken here: phase sampling's hits count fully */
     l->crossings = 0;
   } else {
     /* ---- the surface (or the escape) ---- */
@@ -453,7 +468,8 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
       if (!col_is_black(Le)) {
         double em_pdf = 0.0;
         if (!l->prev_delta) {
-          direction_sample ds = {.p = si->p, .n = si->ng, .d = l->ray.d, .dist = v3_len(v3_sub(si->p, l->prev.p))};
+          direction_sample ds = {
+              .p = si->p, .n = si->ng, .d = l->ray.d, .dist = v3_len(v3_sub(si->p, l->prev.p))};
           em_pdf = em->ops->pdf_direction(em, &l->prev, &ds) * emitter_prob(sc, em);
         }
         l->L = col_add(l->L, col_scale(col_mul(l->T, Le), mis_weight(l->prev_pdf, em_pdf)));
@@ -510,8 +526,8 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
 
 /* Run the wave over n lanes; scratch: ln (n lanes), idx and sh (n ints
  * each), hit (n), si (n). */
-static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_state *st, const ray3 *rays, int n,
-                     render_stats *stats, color *L, vlane *ln, int *idx, int *sh, bool *hit,
+static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_state *st, const ray3 *rays,
+                     int n, render_stats *stats, color *L, vlane *ln, int *idx, int *sh, bool *hit,
                      surface_interaction *si) {
   int live = 0;
   for (int i = 0; i < n; i++) {
@@ -547,7 +563,7 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
       int more = 0;
       for (int k = 0; k < n_sh; k++) {
         int i = sh[k];
-        if (shadow_step(vp, &ln[i], hit[k], &si[k], &st[i])) sh[more++] = i;
+        if (shadow_step(vp, sc, &ln[i], hit[k], &si[k], &st[i])) sh[more++] = i;
       }
       n_sh = more;
     }
@@ -555,8 +571,8 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
   for (int i = 0; i < n; i++) L[i] = ln[i].L;
 }
 
-static bool volpath_Li_batch(const integrator *it, const scene *sc, sampler_state *st, const ray3 *rays, int n,
-                             render_stats *stats, color *L, double *quv) {
+static bool volpath_Li_batch(const integrator *it, const scene *sc, sampler_state *st, const ray3 *rays,
+                             int n, render_stats *stats, color *L, double *quv) {
   if (n <= 0) return true;
   vlane *ln = malloc((size_t)n * sizeof *ln);
   int *idx = malloc(2 * (size_t)n * sizeof *idx);
@@ -575,8 +591,8 @@ static bool volpath_Li_batch(const integrator *it, const scene *sc, sampler_stat
   return ok;
 }
 
-static color volpath_Li(const integrator *it, const scene *sc, sampler_state *st, ray3 ray, render_stats *stats,
-                        double *quv) {
+static color volpath_Li(const integrator *it, const scene *sc, sampler_state *st, ray3 ray,
+                        render_stats *stats, double *quv) {
   (void)quv;
   vlane ln;
   int idx[2];

@@ -103,10 +103,11 @@ static void hom_destroy(object *o) {
 
 static rsw_status constant_only(loader *ld, node *n, const char *name, const volume *v) {
   if (v->res[0] * v->res[1] * v->res[2] != 1)
-    return ld_fail(ld, n, name, RSW_ERR_INVALID,
-                   "homogeneous: '%s' must be constant (a number, a spectrum or a constvolume), got a %ux%ux%u "
-                   "grid (use the heterogeneous or piecewise medium for grids)",
-                   name, v->res[0], v->res[1], v->res[2]);
+    return ld_fail(
+        ld, n, name, RSW_ERR_INVALID,
+        "homogeneous: '%s' must be constant (a number, a spectrum or a constvolume), got a %ux%ux%u "
+        "grid (use the heterogeneous or piecewise medium for grids)",
+        name, v->res[0], v->res[1], v->res[2]);
   return RSW_OK;
 }
 

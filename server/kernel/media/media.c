@@ -114,11 +114,12 @@ rsw_status scene_check_media(const scene *s, node *root, rsw_err *err) {
   for (size_t i = 0; i < s->n_sensors; i++)
     for (size_t j = 0; j < i; j++)
       if (s->sensors[i]->sampler == s->sensors[j]->sampler && s->sensors[i]->medium != s->sensors[j]->medium)
-        return rsw_fail(err, RSW_ERR_INVALID, loc_of(root, s->sensors[i]),
-                        "sensor '%s' shares its sampler with sensor '%s' but sits in another medium: give each "
-                        "its own sampler",
-                        s->sensors[i]->base.id ? s->sensors[i]->base.id : "",
-                        s->sensors[j]->base.id ? s->sensors[j]->base.id : "");
+        return rsw_fail(
+            err, RSW_ERR_INVALID, loc_of(root, s->sensors[i]),
+            "sensor '%s' shares its sampler with sensor '%s' but sits in another medium: give each "
+            "its own sampler",
+            s->sensors[i]->base.id ? s->sensors[i]->base.id : "",
+            s->sensors[j]->base.id ? s->sensors[j]->base.id : "");
   for (size_t i = 0; i < s->n_sensors; i++) {
     const sensor *se = s->sensors[i];
     if (!se->medium || !bounded(s, se->medium)) continue; /* an unbounded medium fills all space */
@@ -150,11 +151,11 @@ rsw_status scene_check_media(const scene *s, node *root, rsw_err *err) {
     }
     if (here != se->medium) {
       const char *mid = se->medium->base.id ? se->medium->base.id : "";
-      return rsw_fail(err, RSW_ERR_INVALID, loc_of(root, se),
-                      "sensor '%s' does not sit inside its medium '%s': %s", se->base.id ? se->base.id : "",
-                      mid,
-                      found ? (here ? "its rays start in another medium" : "its rays start outside the medium")
-                            : "its rays start outside every shape that bounds a medium");
+      return rsw_fail(
+          err, RSW_ERR_INVALID, loc_of(root, se), "sensor '%s' does not sit inside its medium '%s': %s",
+          se->base.id ? se->base.id : "", mid,
+          found ? (here ? "its rays start in another medium" : "its rays start outside the medium")
+                : "its rays start outside every shape that bounds a medium");
     }
   }
   return RSW_OK;

@@ -44,12 +44,13 @@ static inline int layer_of(const piecewise_medium *pw, double z) {
 
 static inline double cum_at(const piecewise_medium *pw, int c, double z) {
   int k = layer_of(pw, z);
-  double zc = fmin(fmax(z, 0.0), 1.0);
+  double zc = z < 0.0 ? 0.0 : z > 1.0 ? 1.0 : z;
   return pw->cum[3 * k + c] + pw->sig[3 * k + c] * (zc - (double)k / pw->n);
 }
 
 /* tau over [t0, t1] in channel c; z0, z1 the local z at both ends. */
-static inline double tau_between(const piecewise_medium *pw, int c, double z0, double z1, double dz, double len) {
+static inline double tau_between(const piecewise_medium *pw, int c, double z0, double z1, double dz,
+                                 double len) {
   int k0 = layer_of(pw, z0), k1 = layer_of(pw, z1);
   if (k0 == k1) return pw->sig[3 * k0 + c] * len;
   return fabs(cum_at(pw, c, z1) - cum_at(pw, c, z0)) / fabs(dz);
@@ -105,7 +106,8 @@ static void pw_sample_real(const medium *m, const ray3 *r, double mint, double m
   double target = -log1p(-u);
   double total = tau_between(pw, c, z0, z1, dz, t1 - t0);
   if (!(target < total)) { /* the flight passes the box */
-    for (int j = 0; j < nc; j++) tr->c[j] = j == c ? exp(-total) : exp(-tau_between(pw, j, z0, z1, dz, t1 - t0));
+    for (int j = 0; j < nc; j++)
+      tr->c[j] = j == c ? exp(-total) : exp(-tau_between(pw, j, z0, z1, dz, t1 - t0));
     spread(tr, nc);
     *pdf = *tr;
     return;
@@ -246,9 +248,10 @@ static rsw_status pw_create(loader *ld, node *n, object **out) {
     bool one = a->res[0] == 1 && a->res[1] == 1 && a->res[2] == 1;
     bool layers = a->res[0] == 1 && a->res[1] == 1 && a->res[2] == pw->sigma_t->res[2];
     if (!one && !layers)
-      st = ld_fail(ld, n, "albedo", RSW_ERR_INVALID,
-                   "piecewise: albedo must be constant or a [1, 1, %u] grid like sigma_t, got %ux%ux%u (x, y, z)",
-                   pw->sigma_t->res[2], a->res[0], a->res[1], a->res[2]);
+      st = ld_fail(
+          ld, n, "albedo", RSW_ERR_INVALID,
+          "piecewise: albedo must be constant or a [1, 1, %u] grid like sigma_t, got %ux%ux%u (x, y, z)",
+          pw->sigma_t->res[2], a->res[0], a->res[1], a->res[2]);
     else if (layers && !one && !same_xform(&a->to_world, &pw->sigma_t->to_world))
       st = ld_fail(ld, n, "albedo", RSW_ERR_INVALID,
                    "piecewise: the albedo grid must have the same to_world as sigma_t (its layers are "
@@ -259,7 +262,8 @@ static rsw_status pw_create(loader *ld, node *n, object **out) {
     pw->sig = malloc(3 * (size_t)pw->n * sizeof *pw->sig);
     pw->alb = malloc(3 * (size_t)pw->n * sizeof *pw->alb);
     pw->cum = malloc(3 * ((size_t)pw->n + 1) * sizeof *pw->cum);
-    if (!pw->sig || !pw->alb || !pw->cum) st = ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "piecewise: out of memory");
+    if (!pw->sig || !pw->alb || !pw->cum)
+      st = ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "piecewise: out of memory");
   }
   if (st) {
     pw_destroy(&pw->base.base);

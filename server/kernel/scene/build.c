@@ -16,10 +16,10 @@
 
 #include "../accel.h"
 #include "../core/strdist.h"
+#include "../media/media.h"
 #include "../shapes/instance.h"
 #include "../shapes/shape.h"
 #include "../textures/texture.h"
-#include "../media/media.h"
 #include "loader.h"
 #include "params.h"
 #include "periodic.h"

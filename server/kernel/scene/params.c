@@ -1167,6 +1167,9 @@ static rsw_status validate(const scene *s, staged *sg, const staged *all, size_t
         if (isinf(e->hi))
           return rsw_fail(err, RSW_ERR_RANGE, key, "'%s': value %g at index %zu must be >= %g", key, x[i], i,
                           e->lo);
+        if (isinf(e->lo))
+          return rsw_fail(err, RSW_ERR_RANGE, key, "'%s': value %g at index %zu must be <= %g", key, x[i], i,
+                          e->hi);
         return rsw_fail(err, RSW_ERR_RANGE, key, "'%s': value %g at index %zu must lie in [%g, %g]", key,
                         x[i], i, e->lo, e->hi);
       }

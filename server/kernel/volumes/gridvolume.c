@@ -19,7 +19,11 @@
  * Evaluation: `filter_type` "trilinear" (default; cell centres at
  * (i + 1/2) / res) or "nearest"; `wrap_mode` "clamp" (default), "repeat"
  * or "mirror" for points outside the box. `use_grid_bbox` (default
- * false) places the file's bounding box under to_world.
+ * false) places the file's bounding box under to_world. `max_value`
+ * fixes `max` (what majorants use) instead of the largest value; every
+ * value must then stay at or below it (checked at load and on update).
+ * Mitsuba's `raw` and `accel` are accepted and change nothing here (they
+ * act in spectral and CUDA variants only).
  *
  * Parameters: `data` (the values as given, a spectral update of fixed
  * length, each in the range the slots holding the volume allow:
@@ -58,6 +62,7 @@ typedef struct gridvolume {
   grid_filter filter;
   grid_wrap wrap;
   double prepared_wl; /* wavelength grid was evaluated at (NAN: never) */
+  double fixed_max;   /* max_value, or NAN */
   char *where;        /* the document location of the values (owned) */
 } gridvolume;
 
@@ -145,7 +150,7 @@ static void evaluate(gridvolume *g, double wl) {
       else
         hi = mid;
     }
-    double t = g->n_wl == 1 ? 0.0 : (wl - g->wl[lo]) / (g->wl[hi] - g->wl[lo]);
+    double t = (wl - g->wl[lo]) / (g->wl[hi] - g->wl[lo]);
     for (size_t i = 0; i < cells; i++) {
       const double *s = g->src + i * g->src_ch;
       g->grid[i] = s[lo] + t * (s[hi] - s[lo]);
@@ -160,7 +165,7 @@ static void evaluate(gridvolume *g, double wl) {
   size_t n = cells * g->base.channels;
   double m = -INFINITY;
   for (size_t i = 0; i < n; i++) m = fmax(m, g->base.data[i]);
-  g->base.max = m;
+  g->base.max = isnan(g->fixed_max) ? m : g->fixed_max;
   g->base.revision++;
 }
 
@@ -191,7 +196,8 @@ static void gridvolume_parameters_changed(object *o) {
 /* The slot's range (lo, hi of the volume) travels with the key. */
 static void gridvolume_traverse(object *o, param_visitor *v) {
   gridvolume *g = (gridvolume *)o;
-  pv_buffer(v, "data", g->src, g->n_src, UPDATE_SPECTRAL, g->base.lo, g->base.hi, NULL);
+  double hi = isnan(g->fixed_max) ? g->base.hi : fmin(g->base.hi, g->fixed_max);
+  pv_buffer(v, "data", g->src, g->n_src, UPDATE_SPECTRAL, g->base.lo, hi, NULL);
   volume_traverse_to_world(&g->base, v);
 }
 
@@ -373,9 +379,16 @@ static rsw_status gridvolume_fill(loader *ld, node *n, gridvolume *g) {
   xform to_world;
   st = volume_read_to_world(ld, n, &to_world);
   if (st) return st;
-  bool use_bbox;
+  bool use_bbox, raw, accel;
   st = ld_bool(ld, n, "use_grid_bbox", false, &use_bbox);
+  if (!st) st = ld_bool(ld, n, "raw", false, &raw);
+  if (!st) st = ld_bool(ld, n, "accel", true, &accel);
   if (st) return st;
+  g->fixed_max = NAN;
+  if (ld_has(n, "max_value")) {
+    st = ld_float(ld, n, "max_value", 0.0, &g->fixed_max);
+    if (st) return st;
+  }
   double bbox[6] = {0, 0, 0, 1, 1, 1};
   const prop *vp = node_find(n, has_data ? "data" : "filename");
   g->where = rsw_strdup(vp->loc);
@@ -411,10 +424,22 @@ static rsw_status gridvolume_fill(loader *ld, node *n, gridvolume *g) {
     if (ld->variant != VARIANT_MONO)
       return ld_fail(ld, n, "wavelengths", RSW_ERR_UNSUPPORTED,
                      "property 'wavelengths': tabulated spectra per cell need the mono variant");
+    if (g->n_wl < 2)
+      return ld_fail(ld, n, "wavelengths", RSW_ERR_INVALID,
+                     "property 'wavelengths' needs at least 2 wavelengths (a table per cell)");
     for (size_t i = 0; i < g->n_wl; i++)
       if (!(g->wl[i] > 0) || (i && !(g->wl[i] > g->wl[i - 1])))
         return ld_fail(ld, n, "wavelengths", RSW_ERR_INVALID,
                        "property 'wavelengths' must be positive and strictly increasing");
+  }
+  if (!isnan(g->fixed_max)) {
+    double lo, hi;
+    gridvolume_value_range(&g->base, &lo, &hi);
+    if (hi > g->fixed_max)
+      return ld_fail(
+          ld, n, "max_value", RSW_ERR_RANGE,
+          "property 'max_value' (%g) is below the grid's largest value (%g): majorants would be wrong",
+          g->fixed_max, hi);
   }
   volume_init(&g->base, &gridvolume_ops, &to_world);
   size_t cells = cells_of(&g->base);
