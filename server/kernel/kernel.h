@@ -131,6 +131,10 @@ enum bsdf_flags {
   BSDF_GLOSSY_TRANSMISSION = 1u << 4,
   BSDF_DELTA_TRANSMISSION = 1u << 5,
   BSDF_TWO_SIDED = 1u << 6, /* reflects from both sides (twosided) */
+  /* `null`: an index-matched boundary that light crosses unchanged
+   * (Mitsuba's BSDFFlags::Null); volumetric integrators pass through it,
+   * shadow rays included (its sample is a delta transmission). */
+  BSDF_INDEX_MATCHED = 1u << 7,
 };
 #define BSDF_SMOOTH                                                                                          \
   (BSDF_DIFFUSE_REFLECTION | BSDF_GLOSSY_REFLECTION | BSDF_DIFFUSE_TRANSMISSION | BSDF_GLOSSY_TRANSMISSION)
@@ -422,7 +426,8 @@ typedef struct medium_ops {
    * mi->majorant set; Mitsuba's get_scattering_coefficients. */
   void (*coefficients)(const medium *m, medium_interaction *mi);
   /* Optional, analytic media (piecewise): a real collision sampled along r
-   * over [mint, maxt] by inverting the optical thickness in `channel` with
+   * over [mint, maxt] (within intersect_aabb's interval: callers clip
+   * first; r->d unit) by inverting the optical thickness in `channel` with
    * u (Eradiate's sample_interaction_real). Fills mi (t = INFINITY when
    * the flight passes maxt) and returns the transmittance to mi->t (or to
    * maxt) in *tr and its pdf in *pdf (pdf of t: sigma_t tr; of passing:
@@ -430,7 +435,9 @@ typedef struct medium_ops {
   void (*sample_real)(const medium *m, const ray3 *r, double mint, double maxt, double u, int channel,
                       medium_interaction *mi, color *tr, color *pdf);
   /* Optional, analytic media: the exact transmittance along r over
-   * [mint, maxt] (Eradiate's eval_transmittance_pdf_real). */
+   * [mint, maxt] (clipped by intersect_aabb first; r->d unit), Eradiate's
+   * eval_transmittance_pdf_real. heterogeneous: exact only for uniform
+   * grids (is_homogeneous). */
   color (*transmittance)(const medium *m, const ray3 *r, double mint, double maxt);
 } medium_ops;
 struct medium {
@@ -441,6 +448,10 @@ struct medium {
   bool is_homogeneous;          /* coefficients do not depend on position */
   bool has_spectral_extinction; /* sigma_t differs between channels */
   bool sample_emitters;         /* NEE from scattering events (Mitsuba's sample_emitters, default true) */
+  /* sigma_s = 0 wherever sigma_t > 0 (albedo 0; set by prepare): the
+   * volumetric integrators then weight a flight by its transmittance
+   * instead of sampling collisions (exact for analytic media). */
+  bool absorbing_only;
 };
 
 /* ---- integrators --------------------------------------------------------- */

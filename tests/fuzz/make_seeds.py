@@ -124,6 +124,12 @@ media = ('"r":{"type":"rectangle"},"ph":{"type":"blendphase","weight":{"type":"g
          '"filter_type":"nearest","to_world":[{"scale":[1,2,3]}]}')
 put("scene_render", "media_mono.json", base % ("mono", "hdistant", 2, media % ("2", '"wavelengths":[400,700],', "")))
 put("scene_render", "media_rgb.json", base % ("rgb", "perspective", 3, media % ("3", "", ",9,10,11,12")))
+# Media and the volumetric integrators (null boundaries, piecewise and
+# heterogeneous media, both integrators, both variants).
+volpath = '{"type":"scene","variant":"mono","s":{"type":"hdistant","sampler":{"type":"independent","sample_count":2},"film":{"type":"hdrfilm","width":3,"height":2}},"integrator":{"type":"piecewise_volpath","max_depth":4},"sun":{"type":"directional","direction":[0.3,0,-1],"irradiance":1},"sky":{"type":"constant","radiance":0.2},"ground":{"type":"rectangle","to_world":[{"scale":2}]},"atmo":{"type":"cube","bsdf":{"type":"null"},"to_world":[{"scale":[2,2,0.6]},{"translate":[0,0,0.5]}],"interior":{"type":"piecewise","albedo":{"type":"gridvolume","shape":[3,1,1],"data":[0.9,0.5,0.1],"to_world":[{"translate":[-0.5,-0.5,0]},{"scale":[4,4,1]}]},"sigma_t":{"type":"gridvolume","shape":[3,1,1],"data":[1.5,0.4,0.1],"to_world":[{"translate":[-0.5,-0.5,0]},{"scale":[4,4,1]}]},"phase":{"type":"hg","g":0.6}}},"ball":{"type":"sphere","radius":0.3,"center":[0,0,1.5],"bsdf":{"type":"null"},"interior":{"type":"heterogeneous","albedo":0.8,"sigma_t":{"type":"gridvolume","shape":[2,2,2],"data":[0,1,2,3,4,5,6,7],"to_world":[{"translate":[-0.5,-0.5,-0.5]},{"scale":0.6},{"translate":[0,0,1.5]}]}}}}'
+put("scene_render", "volpath_mono.json", volpath)
+put("scene_render", "volpath_rgb.json",
+    volpath.replace('"variant":"mono"', '"variant":"rgb"').replace('"piecewise_volpath"', '"volpath"'))
 put("scene_render", "projective.json", base % ("mono", "hdistant", 2,
     '"r":{"type":"rectangle","to_world":[[1,0,0,0],[0,1,0,0],[0,0,1,0],[1,0,0,1]]}'))
 

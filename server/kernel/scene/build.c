@@ -16,6 +16,7 @@
 
 #include "../accel.h"
 #include "../core/strdist.h"
+#include "../media/media.h"
 #include "../shapes/instance.h"
 #include "../shapes/shape.h"
 #include "../textures/texture.h"
@@ -805,6 +806,8 @@ static rsw_status scene_finalize(loader *ld, scene *s) {
     }
   }
   st = scene_refresh_bounds(s, ld->err);
+  if (st) return st;
+  st = scene_check_media(s, ld->root, ld->err);
   if (st) return st;
   return params_build(s, ld->err);
 }

@@ -345,13 +345,17 @@ static void visit(param_visitor *v, object *o, char *path, double lo, double hi)
     v->st = rsw_fail(v->err, RSW_ERR_NOMEM, "params", "out of memory");
     return;
   }
-  if (!o->plugin || !o->plugin->traverse) return;
+  /* A sensor's medium (Mitsuba's Endpoint traverses it as "medium"),
+   * whatever the sensor plugin. */
+  object *sensor_medium = o->plugin && o->plugin->cls == CLS_SENSOR ? (object *)((sensor *)o)->medium : NULL;
+  if (!o->plugin || (!o->plugin->traverse && !sensor_medium)) return;
   param_visitor saved = *v;
   v->cur = o;
   v->prefix = path;
   v->lo = lo;
   v->hi = hi;
-  o->plugin->traverse(o, v);
+  if (o->plugin->traverse) o->plugin->traverse(o, v);
+  if (sensor_medium) pv_object(v, "medium", sensor_medium, NAN, NAN);
   saved.st = v->st;
   *v = saved;
   t->objs[k].e_end = t->n;

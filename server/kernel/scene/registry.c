@@ -24,7 +24,9 @@
   X(uniform) X(checkerboard) X(bitmap)                                       \
   X(shapegroup) X(instance) X(instancelist) X(periodic)                      \
   X(isotropic) X(hg) X(blendphase) X(rayleigh) X(tabphase)                    \
-  X(constvolume) X(gridvolume)
+  X(constvolume) X(gridvolume)                                                \
+  X(null) X(homogeneous) X(heterogeneous) X(piecewise)                       \
+  X(volpath) X(piecewise_volpath)
 // clang-format on
 
 #define DECLARE_(name) extern const plugin plugin_##name;

@@ -127,6 +127,9 @@ void shape_traverse(object *o, param_visitor *v) {
   }
   pv_object(v, "bsdf", &s->bsdf->base, NAN, NAN);
   if (s->emitter) pv_object(v, "emitter", &s->emitter->base, NAN, NAN);
+  /* Mitsuba's Shape::traverse names its media so. */
+  if (s->interior) pv_object(v, "interior_medium", (object *)s->interior, NAN, NAN);
+  if (s->exterior) pv_object(v, "exterior_medium", (object *)s->exterior, NAN, NAN);
 }
 
 void shape_parameters_changed(object *o) {

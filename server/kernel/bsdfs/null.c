@@ -1,0 +1,52 @@
+/* `null`: an index-matched boundary (Mitsuba's null BSDF). It bounds a
+ * participating medium without scattering: light crosses it unchanged.
+ *
+ *   sample: wo = -wi with weight 1 (a delta transmission, eta 1);
+ *   eval = pdf = 0 (no smooth lobe).
+ *
+ * The volumetric integrators (integrators/volpath.c) pass through it
+ * without counting a bounce and let shadow rays through it
+ * (BSDF_INDEX_MATCHED, Mitsuba's eval_null_transmission = 1); `path`
+ * sees a delta transmission and treats it as an opaque surface to shadow
+ * rays. Source: mitsuba3 src/bsdfs/null.cpp. */
+#include <stdlib.h>
+
+#include "../scene/loader.h"
+#include "bsdfs_internal.h"
+
+static color null_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2, bsdf_sample *bs) {
+  (void)b, (void)u1, (void)u2;
+  bs->wo = v3_neg(si->wi);
+  bs->pdf = 1.0;
+  bs->eta = 1.0;
+  bs->sampled_type = BSDF_DELTA_TRANSMISSION;
+  return col1(1.0);
+}
+
+static color null_eval(const bsdf *b, const surface_interaction *si, vec3 wo) {
+  (void)b, (void)si, (void)wo;
+  return col1(0.0);
+}
+
+static double null_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
+  (void)b, (void)si, (void)wo;
+  return 0.0;
+}
+
+static const bsdf_ops null_ops = {.sample = null_sample, .eval = null_eval, .pdf = null_pdf};
+
+static void null_destroy(object *o) {
+  free(o);
+}
+
+static rsw_status null_create(loader *ld, node *n, object **out) {
+  bsdf *b = calloc(1, sizeof *b);
+  if (!b) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "null: out of memory");
+  b->ops = &null_ops;
+  b->flags = BSDF_INDEX_MATCHED | BSDF_DELTA_TRANSMISSION | BSDF_TWO_SIDED;
+  *out = &b->base;
+  return RSW_OK;
+}
+
+const plugin plugin_null = {
+    .name = "null", .cls = CLS_BSDF, .create = null_create, .destroy = null_destroy, .ops = &null_ops};

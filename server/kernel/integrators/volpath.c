@@ -1,0 +1,649 @@
+/* `volpath` and `piecewise_volpath`: volumetric path tracers (Mitsuba 3's
+ * volpath, mitsuba3 src/integrators/volpath.cpp; Eradiate's
+ * piecewise_volpath, eradiate/mitsuba3
+ * src/eradiate_plugins/integrators/piecewise_volpath.cpp;
+ * kernel-behavior.md §4.5). Surfaces behave as in `path` (NEE towards one
+ * emitter, MIS with BSDF sampling, power heuristic); inside a medium a
+ * path also scatters, with NEE and MIS against phase sampling.
+ *
+ * Media. A path starts in its sensor's medium and changes medium where it
+ * crosses a shape whose interior and exterior differ (Mitsuba's
+ * is_medium_transition): it goes into the exterior when it leaves along
+ * the normal, else into the interior. A `null` BSDF (BSDF_INDEX_MATCHED)
+ * is crossed without a bounce, by camera, scattered and shadow rays.
+ *
+ * Free flight along a segment [0, t_s] (t_s: the next surface), with
+ * unit directions so that t is a length:
+ *  - tracking (volpath, media whose coefficients vary): delta tracking
+ *    against the scalar majorant mu (the largest over the channels):
+ *    tentative collisions t ~ mu e^{-mu t}, each real with probability
+ *    P = mean_c sigma_t,c / mu (then T *= sigma_s / (mu P): the albedo in
+ *    mono) and null otherwise (T *= sigma_n / (mu (1 - P)): 1 in mono).
+ *    Mitsuba decides with one channel's sigma_t,c / mu instead, which
+ *    never takes a null collision where sigma_t,c = mu although other
+ *    channels have sigma_n > 0 (biased for chromatic extinction); the
+ *    channel mean (Kutz et al. 2017, spectral tracking) covers them all.
+ *  - analytic (homogeneous media in both integrators, every medium with
+ *    medium_ops.sample_real in piecewise_volpath): t is drawn by
+ *    inverting the optical thickness in a channel c (uniform over the
+ *    three when sigma_t differs between them, else 0), and with pdf the
+ *    mean of the channels' densities (the density t was drawn with),
+ *    T *= tr sigma_s / pdf at a collision (the albedo in mono) and
+ *    tr / pdf when the flight passes t_s (1 in mono).
+ *  - a medium with no scattering (medium.absorbing_only) is not sampled:
+ *    T *= transmittance over the segment, exact in analytic media (the
+ *    Beer-Lambert tests are noise-free) and ratio-tracked otherwise.
+ * Transmittance along shadow rays: exact in analytic media, ratio tracking
+ * (T *= sigma_n / mu per tentative collision, with Russian roulette once
+ * the estimate falls below 0.1) otherwise; null surfaces are crossed, any
+ * other surface blocks. Stokes films get Q = U = V = 0 (no polarisation
+ * through media).
+ *
+ * Estimator: L = sum over vertices of T (Le w_bsdf + NEE w_em); at a
+ * medium vertex, NEE = p(wi, wo) Le tr / (pdf_em p_pick) with MIS weight
+ * w(pdf_em p_pick, pdf_phase) and phase sampling weight p / pdf (1 for
+ * exact sampling). A bounce is a surface or medium scattering event (null
+ * surfaces and null collisions are not); max_depth counts as in `path`
+ * (2: single scattering). Russian roulette from rr_depth, survival
+ * q = min(max(T) eta^2, 0.95). Emitting media are not supported (none of
+ * the media plugins emits).
+ *
+ * The sensor's medium: Li does not receive the sensor, so the path's first
+ * medium is that of the sensor whose sampler drives it (st->s); sensors
+ * sharing a sampler must share a medium (scene_check_media says so). */
+#include <math.h>
+#include <stdlib.h>
+
+#include "../accel.h"
+#include "../scene/loader.h"
+#include "../scene/periodic.h"
+#include "../shapes/instance.h"
+#include "../shapes/shape.h"
+
+typedef struct volpath_integrator {
+  integrator base;
+  bool analytic; /* piecewise_volpath */
+} volpath_integrator;
+
+enum {
+  MAX_CROSSINGS = 1024 /* null surfaces crossed by one ray before it counts as lost */
+};
+
+static inline double mis_weight(double a, double b) {
+  a *= a;
+  b *= b;
+  double w = a / (a + b);
+  return isfinite(w) ? w : 0.0;
+}
+
+static size_t pick_emitter(const scene *sc, double u, double *prob) {
+  double t = u * sc->emitter_weight_sum;
+  size_t lo = 0, hi = sc->n_emitters - 1;
+  while (lo < hi) {
+    size_t mid = (lo + hi) / 2;
+    if (sc->emitter_cdf[mid] <= t)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  *prob = sc->emitters[lo]->sampling_weight / sc->emitter_weight_sum;
+  return lo;
+}
+
+static double emitter_prob(const scene *sc, const emitter *e) {
+  return sc->emitter_weight_sum > 0 ? e->sampling_weight / sc->emitter_weight_sum : 0.0;
+}
+
+/* Can ray r meet the scene's bounding box on [tmin, tmax]? A ray that has
+ * left it (through an atmosphere's top, say) can hit nothing more, so
+ * it needs no query. Not under a periodic boundary (copies beyond the
+ * column). */
+static bool may_hit(const scene *sc, const ray3 *r) {
+  if (sc->periodic.on) return true;
+  const double lo[3] = {sc->bbox_min.x, sc->bbox_min.y, sc->bbox_min.z};
+  const double hi[3] = {sc->bbox_max.x, sc->bbox_max.y, sc->bbox_max.z};
+  const double o[3] = {r->o.x, r->o.y, r->o.z}, d[3] = {r->d.x, r->d.y, r->d.z};
+  if (o[0] >= lo[0] && o[0] <= hi[0] && o[1] >= lo[1] && o[1] <= hi[1] && o[2] >= lo[2] && o[2] <= hi[2])
+    return true; /* most rays start inside */
+  double t0 = r->tmin, t1 = r->tmax;
+  for (int a = 0; a < 3; a++) {
+    double pad = 1e-9 * (fabs(lo[a]) + fabs(hi[a]) + 1.0);
+    double l = lo[a] - pad, h = hi[a] + pad;
+    if (d[a] == 0.0) {
+      if (o[a] < l || o[a] > h) return false;
+      continue;
+    }
+    double ta = (l - o[a]) / d[a], tb = (h - o[a]) / d[a];
+    if (ta > tb) {
+      double x = ta;
+      ta = tb;
+      tb = x;
+    }
+    t0 = fmax(t0, ta);
+    t1 = fmin(t1, tb);
+    if (t0 > t1) return false;
+  }
+  return true;
+}
+
+static bool intersect(const scene *sc, const ray3 *r, surface_interaction *si, render_stats *stats) {
+  if (!may_hit(sc, r)) return false;
+  accel_hit h;
+  stats->rays++;
+  ray3 seg = *r;
+  double off;
+  trace_result tr = scene_trace(sc, &seg, &h, &off);
+  if (tr != TRACE_HIT) {
+    if (tr == TRACE_UNRESOLVED) stats->unresolved++;
+    return false;
+  }
+  hit_fill_interaction(sc, &seg, &h, si);
+  si->t += off;
+  return true;
+}
+
+/* The medium on the far side of si for a ray leaving along world d. */
+static const medium *medium_after(const surface_interaction *si, vec3 d, const medium *current) {
+  const shape *sh = si->shape;
+  if (sh->interior == sh->exterior) return current;
+  return v3_dot(d, si->ng) > 0 ? sh->exterior : sh->interior;
+}
+
+static int pick_channel(const medium *m, sampler_state *st) {
+  if (!m->has_spectral_extinction) return 0;
+  int c = (int)(st->s->ops->next_1d(st) * 3.0);
+  return c > 2 ? 2 : c;
+}
+
+/* Does this integrator sample m analytically? */
+static bool analytic_in(const volpath_integrator *vp, const medium *m) {
+  return m->ops->sample_real && m->ops->transmittance && (vp->analytic || m->is_homogeneous);
+}
+
+/* Transmittance of m along r over [0, tend] (a shadow ray's segment):
+ * exact where analytic, else ratio tracking. */
+static color segment_tr(const volpath_integrator *vp, const medium *m, const ray3 *r, double tend,
+                        sampler_state *st) {
+  ray3 seg = *r;
+  seg.tmin = 0;
+  seg.tmax = tend;
+  double mint, maxt;
+  if (!m->ops->intersect_aabb(m, &seg, &mint, &maxt)) return col1(1.0);
+  if (m->ops->transmittance && (analytic_in(vp, m) || m->is_homogeneous))
+    return m->ops->transmittance(m, &seg, mint, maxt);
+  const sampler_ops *sops = st->s->ops;
+  color tr = col1(1.0);
+  medium_interaction mi = {.medium = m, .wi = v3_neg(r->d)};
+  mi.p = v3_fma(r->o, mint, r->d);
+  double mu = col_max(m->ops->majorant(m, &mi));
+  if (!(mu > 0)) return tr;
+  double t = mint;
+  for (;;) {
+    t -= log1p(-sops->next_1d(st)) / mu;
+    if (!(t < maxt)) break;
+    mi.t = t;
+    mi.p = v3_fma(r->o, t, r->d);
+    mi.majorant = col1(mu);
+    m->ops->coefficients(m, &mi);
+    tr = col_mul(tr, col_scale(mi.sigma_n, 1.0 / mu));
+    if (col_max(tr) <= 0) return col1(0.0);
+    /* Roulette on low weights keeps long tracks bounded (unbiased). */
+    if (col_max(tr) < 0.1) {
+      double q = col_max(tr);
+      if (!(sops->next_1d(st) < q)) return col1(0.0);
+      tr = col_scale(tr, 1.0 / q);
+    }
+  }
+  return tr;
+}
+
+/* The shadow ray from a surface vertex si (or a medium point p when si is
+ * NULL) towards emitter sample ds (unit direction ds->d). */
+static ray3 shadow_ray(const scene *sc, const surface_interaction *si, vec3 p, const emitter *e,
+                       const direction_sample *ds) {
+  if ((e->flags & EMITTER_SURFACE) && e->shape) {
+    const shape *ls = e->shape;
+    double err = accel_surface_error(sc->accel, ls->index, &ls->to_world, ds->p, ds->n);
+    if (si) return spawn_ray_between(si, ds->p, ds->n, err);
+    vec3 q = offset_on_side(ds->p, ds->n, err, v3_sub(p, ds->p));
+    vec3 d = v3_sub(q, p);
+    double len = v3_len(d);
+    ray3 r = {p, len > 0 ? v3_scale(d, 1.0 / len) : ds->d, 0.0,
+              len * (1.0 - RSW_SPAWN_ERRORS * RSW_F32_UNIT)};
+    return r;
+  }
+  ray3 r = si ? spawn_ray(si, ds->d) : (ray3){p, ds->d, 0.0, INFINITY};
+  r.tmax = isfinite(ds->dist) ? ds->dist * (1.0 - RSW_SHADOW_EPSILON) : INFINITY;
+  return r;
+}
+
+/* The medium the path of sampler state st starts in: its sensor's. */
+static const medium *start_medium(const scene *sc, const sampler_state *st) {
+  for (size_t i = 0; i < sc->n_sensors; i++)
+    if (sc->sensors[i]->sampler == st->s) return sc->sensors[i]->medium;
+  return NULL;
+}
+
+/* ---- the wave -------------------------------------------------------------
+ *
+ * Paths advance together, event by event (as `path`'s wave): the rays of
+ * the live lanes are traced as Embree packets (one by one under a
+ * periodic boundary; a ray that has left the scene's bounds is not traced
+ * at all), then each lane handles its segment: the free flight through
+ * its medium, then the scattering event, the surface, the null surface
+ * crossed or the escape, which sets up its shadow ray (next-event
+ * estimation) and its next ray. The shadow rays are then traced together,
+ * round after round while some cross null surfaces, each lane
+ * accumulating its transmittance. A lane draws from its own sampler state
+ * only, always in the same order (free flight, light sample, phase or
+ * BSDF sample, roulette, then the shadow ray's ratio tracking), so its
+ * value does not depend on its batch (up to Embree's packet rounding,
+ * accel.h); Li is the wave of one path. */
+
+typedef struct vlane {
+  ray3 ray;   /* the ray to trace (its origin offset off the surface it leaves) */
+  vec3 seg_o; /* where the ray really starts: media integrate from here */
+  const medium *m;
+  color T, L;
+  double eta, prev_pdf;
+  bool prev_delta;
+  surface_interaction prev; /* the last scattering vertex (its p), for MIS */
+  int depth, crossings;
+  bool hit;
+  surface_interaction si;
+  /* The shadow ray of this event, while it is being traced. */
+  bool sh;
+  ray3 sray;
+  vec3 sp0, send; /* its exact start, its end (sfinite) */
+  bool sfinite;
+  const medium *sm;
+  color sval; /* the contribution if unoccluded: T f Le w / pe */
+  color str;  /* transmittance so far */
+  int scross;
+} vlane;
+
+/* Trace lanes idx[0..n) (rays in ln[i].ray for shadow == false, ln[i].sray
+ * else): hits into ln[i].hit / ln[i].si (rays) or h / hit flags. */
+static void wave_trace(const scene *sc, vlane *ln, const int *idx, int n, bool shadow, bool coherent,
+                       bool *hit, surface_interaction *si, render_stats *stats) {
+  enum {
+    P = 16
+  };
+  int q[P], nq = 0;
+  for (int k = 0; k <= n; k++) {
+    if (k < n) {
+      vlane *l = &ln[idx[k]];
+      const ray3 *r = shadow ? &l->sray : &l->ray;
+      hit[k] = false;
+      if (!may_hit(sc, r)) continue;
+      if (sc->periodic.on) { /* scene_trace walks the walls per ray */
+        uint64_t before = stats->rays;
+        hit[k] = intersect(sc, r, &si[k], stats); /* counts itself in stats->rays */
+        if (shadow) {
+          stats->shadow_rays += stats->rays - before;
+          stats->rays = before;
+        }
+        continue;
+      }
+      q[nq++] = k;
+      if (nq < P) continue;
+    }
+    if (nq == 0) continue;
+    const ray3 *rp[P];
+    accel_hit h[P];
+    bool ok[P];
+    for (int j = 0; j < nq; j++) rp[j] = shadow ? &ln[idx[q[j]]].sray : &ln[idx[q[j]]].ray;
+    accel_intersect_packet(sc->accel, rp, nq, h, ok, coherent);
+    *(shadow ? &stats->shadow_rays : &stats->rays) += (uint64_t)nq;
+    for (int j = 0; j < nq; j++) {
+      hit[q[j]] = ok[j];
+      if (ok[j]) hit_fill_interaction(sc, rp[j], &h[j], &si[q[j]]);
+    }
+    nq = 0;
+  }
+}
+
+/* The length from the exact start o0 of ray r's segment to its hit si:
+ * from the hit point itself (exact on the surface, where Embree's t is
+ * float32), or, under a periodic boundary (si->p wrapped into the
+ * column), from the hit distance. */
+static double seg_end(const scene *sc, const ray3 *r, vec3 o0, const surface_interaction *si) {
+  if (sc->periodic.on) return si->t + v3_dot(v3_sub(r->o, o0), r->d);
+  return v3_dot(v3_sub(si->p, o0), r->d);
+}
+
+/* Start lane l's shadow ray towards ds from a surface vertex si (or the
+ * medium point p when si is NULL) in medium sm, worth val if clear. */
+static void start_shadow(const scene *sc, vlane *l, const surface_interaction *si, vec3 p, const emitter *e,
+                         const direction_sample *ds, const medium *sm, color val) {
+  l->sray = shadow_ray(sc, si, p, e, ds);
+  l->sp0 = p;
+  l->sfinite = isfinite(l->sray.tmax);
+  l->send = l->sfinite ? v3_fma(l->sray.o, l->sray.tmax, l->sray.d) : p;
+  l->sm = sm;
+  l->sval = val;
+  l->str = col1(1.0);
+  l->scross = 0;
+  l->sh = true;
+}
+
+/* One round of lane l's shadow ray after its query (hit at si): the
+ * segment's transmittance, then done (false) or a null surface crossed
+ * (true: trace again). */
+static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l, bool hit,
+                        const surface_interaction *si, sampler_state *st) {
+  if (l->sm) {
+    double tend = hit          ? seg_end(sc, &l->sray, l->sp0, si)
+                  : l->sfinite ? v3_dot(v3_sub(l->send, l->sp0), l->sray.d)
+                               : INFINITY;
+    ray3 mr = {l->sp0, l->sray.d, 0.0, tend};
+    l->str = col_mul(l->str, segment_tr(vp, l->sm, &mr, mr.tmax, st));
+  }
+  bool more = hit && !col_is_black(l->str);
+  if (more && !(si->shape->bsdf->flags & BSDF_INDEX_MATCHED)) { /* blocked */
+    l->str = col1(0.0);
+    more = false;
+  }
+  if (more) { /* a null surface crossed: on to the next segment */
+    double left = l->sray.tmax - si->t;
+    if (++l->scross >= MAX_CROSSINGS) l->str = col1(0.0);
+    more = left > 0 && l->scross < MAX_CROSSINGS;
+    if (more) {
+      l->sm = medium_after(si, l->sray.d, l->sm);
+      l->sray = spawn_ray(si, l->sray.d);
+      l->sray.tmax = left;
+      l->sp0 = si->p;
+      return true;
+    }
+  }
+  l->L = col_add(l->L, col_mul(l->sval, l->str));
+  l->sh = false;
+  return false;
+}
+
+/* Lane l's event after its query: the medium along the segment, then the
+ * scattering event or the surface. Sets up the shadow ray (l->sh) and the
+ * next ray. False: the path ends (a pending shadow ray still counts). */
+static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *l) {
+  const integrator *it = &vp->base;
+  const sampler_ops *sops = st->s->ops;
+  surface_interaction *si = &l->si;
+  bool hit = l->hit;
+  const medium *m = l->m;
+  l->sh = false;
+
+  /* ---- the medium along the segment ---- */
+  medium_interaction mi;
+  bool scattered = false;
+  if (m) {
+    ray3 seg = {l->seg_o, l->ray.d, 0.0, hit ? seg_end(sc, &l->ray, l->seg_o, si) : l->ray.tmax};
+    double mint, maxt;
+    if (m->ops->intersect_aabb(m, &seg, &mint, &maxt)) {
+      if (m->absorbing_only) {
+        l->T = col_mul(l->T, segment_tr(vp, m, &seg, seg.tmax, st));
+      } else if (analytic_in(vp, m)) {
+        int c = pick_channel(m, st);
+        color tr, pdf;
+        m->ops->sample_real(m, &seg, mint, maxt, sops->next_1d(st), c, &mi, &tr, &pdf);
+        double pc = col_mean(pdf);
+        scattered = isfinite(mi.t);
+        color f = scattered ? col_mul(tr, mi.sigma_s) : tr;
+        l->T = pc > 0 ? col_scale(col_mul(l->T, f), 1.0 / pc) : col1(0.0);
+      } else {
+        mi = (medium_interaction){.medium = m, .wi = v3_neg(l->ray.d), .mint = mint};
+        mi.p = v3_fma(seg.o, mint, seg.d);
+        double mu = col_max(m->ops->majorant(m, &mi));
+        double t = mint;
+        while (mu > 0) {
+          t -= log1p(-sops->next_1d(st)) / mu;
+          if (!(t < maxt)) break;
+          mi.t = t;
+          mi.p = v3_fma(seg.o, t, seg.d);
+          mi.majorant = col1(mu);
+          m->ops->coefficients(m, &mi);
+          double p_real = col_mean(mi.sigma_t) / mu;
+          if (sops->next_1d(st) < p_real) {
+            l->T = col_scale(col_mul(l->T, mi.sigma_s), 1.0 / (mu * p_real));
+            scattered = true;
+            break;
+          }
+          l->T = col_scale(col_mul(l->T, mi.sigma_n), 1.0 / (mu * (1.0 - p_real)));
+          if (col_max(l->T) <= 0) return false;
+        }
+      }
+    }
+  }
+  if (!(col_max(l->T) > 0)) return false;
+
+  if (scattered) {
+    /* ---- a scattering event in the medium ---- */
+    if (!(it->max_depth < 0 || l->depth + 1 < it->max_depth)) return false;
+    const phase *ph = m->phase;
+    surface_interaction ref = {.p = mi.p, .t = mi.t};
+    if (m->sample_emitters && sc->n_emitters > 0) {
+      double pe;
+      size_t k = pick_emitter(sc, sops->next_1d(st), &pe);
+      const emitter *e = sc->emitters[k];
+      direction_sample ds;
+      color value = e->ops->sample_direction(e, &ref, sops->next_2d(st), &ds);
+      if (ds.pdf > 0 && !col_is_black(value)) {
+        double ppdf;
+        double pval = ph->ops->eval_pdf(ph, &mi, ds.d, &ppdf);
+        if (pval > 0) {
+          double w = ds.delta ? 1.0 : mis_weight(ds.pdf * pe, ppdf);
+          start_shadow(sc, l, NULL, mi.p, e, &ds, m, col_scale(col_mul(l->T, value), pval * w / pe));
+        }
+      }
+    }
+    vec3 wo;
+    double ppdf;
+    double pw = ph->ops->sample(ph, &mi, sops->next_1d(st), sops->next_2d(st), &wo, &ppdf);
+    if (!(ppdf > 0) || !(pw > 0)) return false;
+    l->T = col_scale(l->T, pw);
+    l->ray = (ray3){mi.p, wo, 0.0, INFINITY};
+    l->seg_o = mi.p;
+    l->prev = ref;
+    l->prev_pdf = ppdf;
+    l->prev_delta = !m->sample_emitters; /* no light sample taken here: phase sampling's hits count fully */
+    l->crossings = 0;
+  } else {
+    /* ---- the surface (or the escape) ---- */
+    bool visible = !(it->hide_emitters && l->depth == 0);
+    if (!hit) {
+      const emitter *env = sc->environment;
+      if (env && visible) {
+        double em_pdf = 0.0;
+        if (!l->prev_delta) {
+          direction_sample ds = {.d = l->ray.d, .dist = INFINITY};
+          em_pdf = env->ops->pdf_direction(env, &l->prev, &ds) * emitter_prob(sc, env);
+        }
+        color Le = env->ops->eval(env, NULL, l->ray.d);
+        l->L = col_add(l->L, col_scale(col_mul(l->T, Le), mis_weight(l->prev_pdf, em_pdf)));
+      }
+      return false;
+    }
+    const emitter *em = si->shape->emitter;
+    if (em && visible) {
+      color Le = em->ops->eval(em, si, l->ray.d);
+      if (!col_is_black(Le)) {
+        double em_pdf = 0.0;
+        if (!l->prev_delta) {
+          direction_sample ds = {
+              .p = si->p, .n = si->ng, .d = l->ray.d, .dist = v3_len(v3_sub(si->p, l->prev.p))};
+          em_pdf = em->ops->pdf_direction(em, &l->prev, &ds) * emitter_prob(sc, em);
+        }
+        l->L = col_add(l->L, col_scale(col_mul(l->T, Le), mis_weight(l->prev_pdf, em_pdf)));
+      }
+    }
+    const bsdf *b = si->shape->bsdf;
+    if (b->flags & BSDF_INDEX_MATCHED) { /* crossed without a bounce */
+      if (++l->crossings > MAX_CROSSINGS) return false;
+      l->m = medium_after(si, l->ray.d, m);
+      l->ray = spawn_ray(si, l->ray.d);
+      l->seg_o = si->p;
+      return true;
+    }
+    if (!(it->max_depth < 0 || l->depth + 1 < it->max_depth)) return false;
+    if ((b->flags & BSDF_SMOOTH) && sc->n_emitters > 0) {
+      double pe;
+      size_t k = pick_emitter(sc, sops->next_1d(st), &pe);
+      const emitter *e = sc->emitters[k];
+      direction_sample ds;
+      color value = e->ops->sample_direction(e, si, sops->next_2d(st), &ds);
+      if (ds.pdf > 0 && !col_is_black(value)) {
+        vec3 wo = frame_to_local(&si->sh, ds.d);
+        color f = b->ops->eval(b, si, wo);
+        if (!col_is_black(f)) {
+          double bpdf = ds.delta ? 0.0 : b->ops->pdf(b, si, wo);
+          double w = ds.delta ? 1.0 : mis_weight(ds.pdf * pe, bpdf);
+          start_shadow(sc, l, si, si->p, e, &ds, medium_after(si, ds.d, m),
+                       col_scale(col_mul(l->T, col_mul(f, value)), w / pe));
+        }
+      }
+    }
+    bsdf_sample bs;
+    color weight = b->ops->sample(b, si, sops->next_1d(st), sops->next_2d(st), &bs);
+    if (!(bs.pdf > 0) || col_is_black(weight)) return false;
+    vec3 wo = frame_to_world(&si->sh, bs.wo);
+    l->T = col_mul(l->T, weight);
+    l->eta *= bs.eta;
+    l->m = medium_after(si, wo, m);
+    l->ray = spawn_ray(si, wo);
+    l->seg_o = si->p;
+    l->prev = *si;
+    l->prev_pdf = bs.pdf;
+    l->prev_delta = (bs.sampled_type & BSDF_DELTA) != 0;
+    l->crossings = 0;
+  }
+  l->depth++;
+  if (l->depth >= it->rr_depth) {
+    double q = fmin(col_max(l->T) * l->eta * l->eta, 0.95);
+    if (!(sops->next_1d(st) < q)) return false;
+    l->T = col_scale(l->T, 1.0 / q);
+  }
+  return col_max(l->T) > 0;
+}
+
+/* Run the wave over n lanes; scratch: ln (n lanes), idx and sh (n ints
+ * each), hit (n), si (n). */
+static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_state *st, const ray3 *rays,
+                     int n, render_stats *stats, color *L, vlane *ln, int *idx, int *sh, bool *hit,
+                     surface_interaction *si) {
+  int live = 0;
+  for (int i = 0; i < n; i++) {
+    vlane *l = &ln[i];
+    *l = (vlane){.T = col1(1.0), .L = col1(0.0), .eta = 1.0, .prev_pdf = 1.0, .prev_delta = true};
+    ray3 r = rays[i];
+    double len = v3_len(r.d);
+    if (!(len > 0) || vp->base.max_depth == 0) continue;
+    r.d = v3_scale(r.d, 1.0 / len);
+    r.tmin *= len;
+    r.tmax *= len;
+    l->ray = r;
+    l->seg_o = r.o;
+    l->m = start_medium(sc, &st[i]);
+    idx[live++] = i;
+  }
+  bool camera = true;
+  while (live > 0) {
+    wave_trace(sc, ln, idx, live, false, camera, hit, si, stats);
+    camera = false;
+    int next = 0, n_sh = 0;
+    for (int k = 0; k < live; k++) {
+      int i = idx[k];
+      ln[i].hit = hit[k];
+      if (hit[k]) ln[i].si = si[k];
+      bool alive = lane_event(vp, sc, &st[i], &ln[i]);
+      if (ln[i].sh) sh[n_sh++] = i;
+      if (alive) idx[next++] = i;
+    }
+    live = next;
+    while (n_sh > 0) {
+      wave_trace(sc, ln, sh, n_sh, true, false, hit, si, stats);
+      int more = 0;
+      for (int k = 0; k < n_sh; k++) {
+        int i = sh[k];
+        if (shadow_step(vp, sc, &ln[i], hit[k], &si[k], &st[i])) sh[more++] = i;
+      }
+      n_sh = more;
+    }
+  }
+  for (int i = 0; i < n; i++) L[i] = ln[i].L;
+}
+
+static bool volpath_Li_batch(const integrator *it, const scene *sc, sampler_state *st, const ray3 *rays,
+                             int n, render_stats *stats, color *L, double *quv) {
+  if (n <= 0) return true;
+  vlane *ln = malloc((size_t)n * sizeof *ln);
+  int *idx = malloc(2 * (size_t)n * sizeof *idx);
+  bool *hit = malloc((size_t)n * sizeof *hit);
+  surface_interaction *si = malloc((size_t)n * sizeof *si);
+  bool ok = ln && idx && hit && si;
+  if (ok) {
+    wave_run((const volpath_integrator *)it, sc, st, rays, n, stats, L, ln, idx, idx + n, hit, si);
+    if (quv)
+      for (int i = 0; i < 3 * n; i++) quv[i] = 0; /* no polarisation through media */
+  }
+  free(ln);
+  free(idx);
+  free(hit);
+  free(si);
+  return ok;
+}
+
+static color volpath_Li(const integrator *it, const scene *sc, sampler_state *st, ray3 ray,
+                        render_stats *stats, double *quv) {
+  (void)quv;
+  vlane ln;
+  int idx[2];
+  bool hit;
+  surface_interaction si;
+  color L;
+  wave_run((const volpath_integrator *)it, sc, st, &ray, 1, stats, &L, &ln, idx, idx + 1, &hit, &si);
+  return L;
+}
+
+static const integrator_ops volpath_ops = {.Li = volpath_Li, .Li_batch = volpath_Li_batch};
+
+static void volpath_destroy(object *o) {
+  free(o);
+}
+
+static rsw_status create_common(loader *ld, node *n, object **out, bool analytic) {
+  volpath_integrator *vp = calloc(1, sizeof *vp);
+  if (!vp) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+  vp->base.ops = &volpath_ops;
+  vp->analytic = analytic;
+  long long md, rr;
+  rsw_status st = ld_int(ld, n, "max_depth", -1, -1, 1 << 30, &md);
+  if (!st) st = ld_int(ld, n, "rr_depth", 5, 1, 1 << 30, &rr);
+  if (!st) st = ld_bool(ld, n, "hide_emitters", false, &vp->base.hide_emitters);
+  if (st) {
+    free(vp);
+    return st;
+  }
+  vp->base.max_depth = (int)md;
+  vp->base.rr_depth = (int)rr;
+  *out = &vp->base.base;
+  return RSW_OK;
+}
+
+static rsw_status volpath_create(loader *ld, node *n, object **out) {
+  return create_common(ld, n, out, false);
+}
+
+static rsw_status piecewise_volpath_create(loader *ld, node *n, object **out) {
+  return create_common(ld, n, out, true);
+}
+
+const plugin plugin_volpath = {.name = "volpath",
+                               .cls = CLS_INTEGRATOR,
+                               .create = volpath_create,
+                               .destroy = volpath_destroy,
+                               .ops = &volpath_ops};
+
+const plugin plugin_piecewise_volpath = {.name = "piecewise_volpath",
+                                         .cls = CLS_INTEGRATOR,
+                                         .create = piecewise_volpath_create,
+                                         .destroy = volpath_destroy,
+                                         .ops = &volpath_ops};

@@ -1,0 +1,130 @@
+/* `heterogeneous`: a medium whose sigma_t and albedo vary over a grid
+ * (Mitsuba's heterogeneous): sigma_t(p) = scale * sigma_t volume at p,
+ * sigma_s = albedo(p) sigma_t(p), inside the sigma_t volume's box (the
+ * unit cube under its to_world); nothing interacts outside it.
+ *
+ * Collisions are sampled by delta tracking against the majorant
+ * mu = scale * max(sigma_t grid) (null collisions have sigma_n =
+ * mu - sigma_t), and transmittance is estimated by ratio tracking
+ * (integrators/volpath.c). A grid whose sigma_t and albedo are uniform is
+ * a homogeneous box: it is flagged is_homogeneous and its transmittance
+ * is exact (exp(-sigma_t l) over the length l inside the box).
+ * Source: mitsuba3 src/media/heterogeneous.cpp. */
+#include <math.h>
+#include <stdlib.h>
+
+#include "../scene/loader.h"
+#include "../scene/params.h"
+#include "media.h"
+
+typedef struct heterogeneous_medium {
+  medium base;
+  volume *sigma_t, *albedo;
+  color maj; /* scale * max sigma_t */
+} heterogeneous_medium;
+
+static bool het_intersect_aabb(const medium *m, const ray3 *r, double *mint, double *maxt) {
+  const heterogeneous_medium *h = (const heterogeneous_medium *)m;
+  return media_box_clip(&h->sigma_t->to_world, r, mint, maxt);
+}
+
+static color het_majorant(const medium *m, const medium_interaction *mi) {
+  (void)mi;
+  return ((const heterogeneous_medium *)m)->maj;
+}
+
+static void het_coefficients(const medium *m, medium_interaction *mi) {
+  const heterogeneous_medium *h = (const heterogeneous_medium *)m;
+  color st = col_scale(h->sigma_t->ops->eval(h->sigma_t, mi->p), h->base.scale);
+  mi->sigma_t = st;
+  mi->sigma_s = col_mul(st, h->albedo->ops->eval(h->albedo, mi->p));
+  color n;
+  for (int c = 0; c < 3; c++) n.c[c] = fmax(mi->majorant.c[c] - st.c[c], 0.0);
+  mi->sigma_n = n;
+}
+
+/* Exact only when the grid is uniform (is_homogeneous); the integrators
+ * call it only then. */
+static color het_transmittance(const medium *m, const ray3 *r, double mint, double maxt) {
+  const heterogeneous_medium *h = (const heterogeneous_medium *)m;
+  double lo, hi;
+  ray3 seg = *r;
+  seg.tmin = mint;
+  seg.tmax = maxt;
+  if (!media_box_clip(&h->sigma_t->to_world, &seg, &lo, &hi)) return col1(1.0);
+  color s = h->maj;
+  double l = hi - lo;
+  return col(exp(-s.c[0] * l), exp(-s.c[1] * l), exp(-s.c[2] * l));
+}
+
+static const medium_ops het_ops = {.intersect_aabb = het_intersect_aabb,
+                                   .majorant = het_majorant,
+                                   .coefficients = het_coefficients,
+                                   .transmittance = het_transmittance};
+
+/* Smallest and largest value of a volume's grid. */
+static void grid_range(const volume *v, double *lo, double *hi) {
+  size_t n = (size_t)v->res[0] * v->res[1] * v->res[2] * v->channels;
+  double a = INFINITY, b = -INFINITY;
+  for (size_t i = 0; i < n; i++) {
+    a = fmin(a, v->data[i]);
+    b = fmax(b, v->data[i]);
+  }
+  *lo = a;
+  *hi = b;
+}
+
+static void het_refresh(heterogeneous_medium *h) {
+  double slo, shi, alo, ahi;
+  grid_range(h->sigma_t, &slo, &shi);
+  grid_range(h->albedo, &alo, &ahi);
+  h->maj = col1(h->base.scale * h->sigma_t->max);
+  h->base.is_homogeneous = slo == shi && alo == ahi;
+  h->base.has_spectral_extinction = h->sigma_t->channels == 3;
+  h->base.absorbing_only = ahi == 0.0;
+}
+
+static rsw_status het_prepare(object *o, const render_ctx *rc, rsw_err *err) {
+  (void)rc, (void)err;
+  het_refresh((heterogeneous_medium *)o);
+  return RSW_OK;
+}
+
+static void het_parameters_changed(object *o) {
+  het_refresh((heterogeneous_medium *)o);
+}
+
+static void het_destroy(object *o) {
+  free(o);
+}
+
+static rsw_status het_create(loader *ld, node *n, object **out) {
+  heterogeneous_medium *h = calloc(1, sizeof *h);
+  if (!h) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "heterogeneous: out of memory");
+  h->base.ops = &het_ops;
+  rsw_status st = medium_read_common(ld, n, &h->base);
+  if (!st) st = ld_volume(ld, n, "sigma_t", 1.0, 0.0, INFINITY, &h->sigma_t);
+  if (!st) st = ld_volume(ld, n, "albedo", 0.75, 0.0, 1.0, &h->albedo);
+  if (st) {
+    free(h);
+    return st;
+  }
+  *out = &h->base.base;
+  return RSW_OK;
+}
+
+static void het_traverse(object *o, param_visitor *v) {
+  heterogeneous_medium *h = (heterogeneous_medium *)o;
+  medium_traverse_common(&h->base, v);
+  pv_object(v, "sigma_t", &h->sigma_t->base, 0.0, INFINITY);
+  pv_object(v, "albedo", &h->albedo->base, 0.0, 1.0);
+}
+
+const plugin plugin_heterogeneous = {.name = "heterogeneous",
+                                     .cls = CLS_MEDIUM,
+                                     .create = het_create,
+                                     .destroy = het_destroy,
+                                     .prepare = het_prepare,
+                                     .ops = &het_ops,
+                                     .traverse = het_traverse,
+                                     .parameters_changed = het_parameters_changed};

@@ -1,0 +1,162 @@
+/* Common medium code: properties, box clipping, scene-level checks. */
+#include <math.h>
+#include <stdlib.h>
+
+#include "../accel.h"
+#include "../scene/loader.h"
+#include "../scene/params.h"
+#include "../scene/periodic.h"
+#include "../shapes/instance.h"
+#include "media.h"
+
+rsw_status medium_read_common(loader *ld, node *n, medium *m) {
+  object *o = NULL;
+  rsw_status st = ld_child(ld, n, NULL, CLS_PHASE, &o);
+  if (st) return st;
+  if (!o) {
+    st = ld_create_default(ld, "isotropic", CLS_PHASE, NULL, &o);
+    if (st) return st;
+  }
+  m->phase = (phase *)o;
+  st = ld_float_range(ld, n, "scale", 1.0, 0.0, INFINITY, &m->scale);
+  if (st) return st;
+  return ld_bool(ld, n, "sample_emitters", true, &m->sample_emitters);
+}
+
+void medium_traverse_common(medium *m, param_visitor *v) {
+  pv_float(v, "scale", &m->scale, UPDATE_SPECTRAL, 0.0, INFINITY);
+  pv_object(v, "phase_function", &m->phase->base, NAN, NAN);
+}
+
+bool media_box_clip(const xform *to_world, const ray3 *r, double *mint, double *maxt) {
+  const double(*m)[4] = to_world->m;
+  double oo[3], dd[3];
+  if (m[0][1] == 0 && m[0][2] == 0 && m[1][0] == 0 && m[1][2] == 0 && m[2][0] == 0 && m[2][1] == 0 &&
+      m[0][0] != 0 && m[1][1] != 0 && m[2][2] != 0) {
+    /* Axis-aligned box (scale and translation): the local coordinates
+     * without a matrix product. */
+    const double o3[3] = {r->o.x, r->o.y, r->o.z}, d3[3] = {r->d.x, r->d.y, r->d.z};
+    for (int a = 0; a < 3; a++) {
+      oo[a] = (o3[a] - m[a][3]) / m[a][a];
+      dd[a] = d3[a] / m[a][a];
+    }
+  } else {
+    vec3 o = xf_inv_point(to_world, r->o), d = xf_inv_vector(to_world, r->d);
+    oo[0] = o.x, oo[1] = o.y, oo[2] = o.z;
+    dd[0] = d.x, dd[1] = d.y, dd[2] = d.z;
+  }
+  double lo = r->tmin, hi = r->tmax;
+  for (int a = 0; a < 3; a++) {
+    if (dd[a] == 0.0) {
+      if (oo[a] < 0.0 || oo[a] > 1.0) return false;
+      continue;
+    }
+    double inv = 1.0 / dd[a];
+    double t0 = (0.0 - oo[a]) * inv, t1 = (1.0 - oo[a]) * inv;
+    if (t0 > t1) {
+      double tmp = t0;
+      t0 = t1;
+      t1 = tmp;
+    }
+    if (t0 > lo) lo = t0;
+    if (t1 < hi) hi = t1;
+  }
+  if (!(lo < hi)) return false;
+  *mint = lo;
+  *maxt = hi;
+  return true;
+}
+
+/* ---- scene-level checks ---------------------------------------------------- */
+
+/* The document node an object was built from (depth-first), or NULL. */
+static node *node_of(node *n, const void *o, int depth) {
+  if (n->built == o) return n;
+  if (depth > RSW_MAX_DEPTH) return NULL;
+  for (size_t i = 0; i < n->n_props; i++)
+    if (n->props[i].kind == PROP_NODE) {
+      node *r = node_of(n->props[i].child, o, depth + 1);
+      if (r) return r;
+    }
+  return NULL;
+}
+
+static const char *loc_of(node *root, const void *o) {
+  node *n = root ? node_of(root, o, 0) : NULL;
+  return n ? n->loc : "";
+}
+
+/* Does any shape (or sensor) use medium m? */
+static bool bounded(const scene *s, const medium *m) {
+  for (size_t i = 0; i < s->n_shapes; i++)
+    if (s->shapes[i]->interior == m || s->shapes[i]->exterior == m) return true;
+  return false;
+}
+
+static bool held_by_sensor(const scene *s, const medium *m) {
+  for (size_t i = 0; i < s->n_sensors; i++)
+    if (s->sensors[i]->medium == m) return true;
+  return false;
+}
+
+rsw_status scene_check_media(const scene *s, node *root, rsw_err *err) {
+  for (size_t i = 0; i < s->n_objects; i++) {
+    const object *o = s->objects[i];
+    if (!o->plugin || o->plugin->cls != CLS_MEDIUM) continue;
+    const medium *m = (const medium *)o;
+    if (!bounded(s, m) && !held_by_sensor(s, m))
+      return rsw_fail(err, RSW_ERR_INVALID, loc_of(root, o),
+                      "medium '%s' has no boundary: no shape has it as its interior or exterior and no "
+                      "sensor sits in it, so no ray can enter it",
+                      o->id ? o->id : "");
+  }
+  /* volpath finds a path's sensor by its sampler (integrators/volpath.c). */
+  for (size_t i = 0; i < s->n_sensors; i++)
+    for (size_t j = 0; j < i; j++)
+      if (s->sensors[i]->sampler == s->sensors[j]->sampler && s->sensors[i]->medium != s->sensors[j]->medium)
+        return rsw_fail(
+            err, RSW_ERR_INVALID, loc_of(root, s->sensors[i]),
+            "sensor '%s' shares its sampler with sensor '%s' but sits in another medium: give each "
+            "its own sampler",
+            s->sensors[i]->base.id ? s->sensors[i]->base.id : "",
+            s->sensors[j]->base.id ? s->sensors[j]->base.id : "");
+  for (size_t i = 0; i < s->n_sensors; i++) {
+    const sensor *se = s->sensors[i];
+    if (!se->medium || !bounded(s, se->medium)) continue; /* an unbounded medium fills all space */
+    ray3 r;
+    if (!(se->ops->sample_ray(se, v2(0.5, 0.5), v2(0.5, 0.5), &r) > 0)) continue;
+    double len = v3_len(r.d);
+    if (!(len > 0)) continue;
+    r.d = v3_scale(r.d, 1.0 / len);
+    r.tmin = 0;
+    r.tmax = INFINITY;
+    /* Walk the ray to the first surface that bounds a medium. */
+    const medium *here = NULL;
+    bool found = false;
+    for (int k = 0; k < 4096 && !found; k++) {
+      ray3 seg = r;
+      accel_hit h;
+      double off;
+      if (scene_trace(s, &seg, &h, &off) != TRACE_HIT) break;
+      surface_interaction si;
+      hit_fill_interaction(s, &seg, &h, &si);
+      const shape *sh = si.shape;
+      if (sh->interior || sh->exterior) {
+        here = v3_dot(r.d, si.ng) > 0 ? sh->interior : sh->exterior;
+        found = true;
+        break;
+      }
+      r.o = v3_fma(r.o, si.t + off, r.d);
+      r.o = v3_fma(r.o, 8 * si.p_error + 1e-9 * (1 + v3_len(r.o)), r.d);
+    }
+    if (here != se->medium) {
+      const char *mid = se->medium->base.id ? se->medium->base.id : "";
+      return rsw_fail(
+          err, RSW_ERR_INVALID, loc_of(root, se), "sensor '%s' does not sit inside its medium '%s': %s",
+          se->base.id ? se->base.id : "", mid,
+          found ? (here ? "its rays start in another medium" : "its rays start outside the medium")
+                : "its rays start outside every shape that bounds a medium");
+    }
+  }
+  return RSW_OK;
+}

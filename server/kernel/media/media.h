@@ -1,0 +1,38 @@
+/* What the medium plugins (homogeneous.c, heterogeneous.c, piecewise.c)
+ * share: reading the common properties, a volume's box along a ray, the
+ * scene-level checks of media.
+ *
+ * Rays given to medium_ops come from the volumetric integrators with unit
+ * directions, so ray parameters are lengths in scene units and optical
+ * thickness is coefficient x length. */
+#ifndef RSW_MEDIA_MEDIA_H
+#define RSW_MEDIA_MEDIA_H
+
+#include "../kernel.h"
+
+struct loader;
+struct node;
+struct param_visitor;
+
+/* Mitsuba's Medium base properties: the nested phase function (any key;
+ * default `isotropic`), `scale` (>= 0, default 1) and `sample_emitters`
+ * (default true). */
+rsw_status medium_read_common(struct loader *ld, struct node *n, medium *m);
+
+/* `scale` and the phase function as parameters (scale is spectral-class:
+ * the plugin's parameters_changed refreshes what depends on it). */
+void medium_traverse_common(medium *m, struct param_visitor *v);
+
+/* The part [*mint, *maxt] of ray r over [r->tmin, r->tmax] inside the unit
+ * cube under to_world (a volume's box). False when empty. */
+bool media_box_clip(const xform *to_world, const ray3 *r, double *mint, double *maxt);
+
+/* Scene-level checks (scene/build.c calls it once the acceleration
+ * structure exists): every medium in the document is bounded by a shape
+ * (as its interior or exterior) or holds a sensor, and a sensor with a
+ * medium sits inside it (the first surface its film-centre ray meets that
+ * bounds a medium has the sensor's medium on the ray's origin side).
+ * Errors name the medium's or the sensor's JSON pointer / XML line. */
+rsw_status scene_check_media(const scene *s, struct node *root, rsw_err *err);
+
+#endif
