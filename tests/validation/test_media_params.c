@@ -419,7 +419,7 @@ static void test_corpus_media_errors(void) {
       {"bad_json_medium_no_boundary.json", "medium_atmosphere"},
       {"bad_json_medium_hg_g_one.json", "/g|g ="},
       {"bad_json_medium_piecewise_3d_grid.json", "sigma_t"},
-      {"bad_json_medium_as_bsdf.json", "interior"},
+      {"bad_json_medium_as_bsdf.json", "'interior' must be a medium"},
       {"bad_json_medium_blend_weight_negative.json", "weight"},
       {"bad_json_sensor_medium_outside.json", "medium"},
       {"bad_scene_medium_negative_scale.xml", "scale"},

@@ -18,6 +18,14 @@ rsw_status shape_read_common(loader *ld, node *n, shape *s, bool mesh_like) {
   st = ld_bool(ld, n, "flip_normals", false, &s->flip_normals);
   if (st) return st;
   object *o;
+  /* The media first: a wrong object under `interior` / `exterior` is named
+   * as such, not counted as a second nested BSDF or emitter. */
+  st = ld_child(ld, n, "interior", CLS_MEDIUM, &o);
+  if (st) return st;
+  s->interior = (struct medium *)o;
+  st = ld_child(ld, n, "exterior", CLS_MEDIUM, &o);
+  if (st) return st;
+  s->exterior = (struct medium *)o;
   st = ld_child(ld, n, NULL, CLS_EMITTER, &o);
   if (st) return st;
   s->emitter = (emitter *)o;
@@ -32,12 +40,6 @@ rsw_status shape_read_common(loader *ld, node *n, shape *s, bool mesh_like) {
     if (st) return st;
   }
   s->bsdf = (bsdf *)o;
-  st = ld_child(ld, n, "interior", CLS_MEDIUM, &o);
-  if (st) return st;
-  s->interior = (struct medium *)o;
-  st = ld_child(ld, n, "exterior", CLS_MEDIUM, &o);
-  if (st) return st;
-  s->exterior = (struct medium *)o;
   s->mesh_params = mesh_like;
   return ld_float_range(ld, n, "silhouette_sampling_weight", 1.0, 0.0, INFINITY,
                         &s->silhouette_sampling_weight);
