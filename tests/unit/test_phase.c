@@ -344,6 +344,9 @@ static void test_parameters(void) {
   memset(&err, 0, sizeof err);
   CHECK(upd1(s, "b.phase_1.g", "1", &err) == RSW_ERR_RANGE, "g = 1 rejected");
   CHECK(strstr(err.msg, "b.phase_1.g") != NULL, "error names the key: %s", err.msg);
+  /* The open interval's bound is not printed as the excluded 1. */
+  CHECK(strstr(err.msg, "0.99999999999999989") != NULL && strstr(err.msg, "[-1, 1]") == NULL,
+        "the range says g < 1: %s", err.msg);
   CHECK(upd1(s, "b.phase_1.g", "-1.5", &err) == RSW_ERR_RANGE, "g = -1.5 rejected");
   memset(&err, 0, sizeof err);
   CHECK(upd1(s, "b.weight.value.value", "1.2", &err) == RSW_ERR_RANGE, "weight 1.2 rejected");

@@ -951,11 +951,23 @@ static const char *kind_expect(const scene *s, const entry *e) {
   return "a value";
 }
 
+/* A range bound as text: %g when that reads back exactly, else all 17
+ * digits (an open interval's bound, e.g. hg's g < 1, is the closed one
+ * just inside it, which %g would print as the excluded 1). */
+static const char *bound_text(double b, char buf[32]) {
+  snprintf(buf, 32, "%g", b);
+  if (strtod(buf, NULL) != b) snprintf(buf, 32, "%.17g", b);
+  return buf;
+}
+
 static rsw_status check_range(const entry *e, const char *key, double x, rsw_err *err) {
   if (!isfinite(x)) return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': value must be finite", key);
   if (x < e->lo || x > e->hi) {
-    if (isinf(e->hi)) return rsw_fail(err, RSW_ERR_RANGE, key, "'%s': value %g must be >= %g", key, x, e->lo);
-    return rsw_fail(err, RSW_ERR_RANGE, key, "'%s': value %g must lie in [%g, %g]", key, x, e->lo, e->hi);
+    char lo[32], hi[32];
+    if (isinf(e->hi))
+      return rsw_fail(err, RSW_ERR_RANGE, key, "'%s': value %g must be >= %s", key, x, bound_text(e->lo, lo));
+    return rsw_fail(err, RSW_ERR_RANGE, key, "'%s': value %g must lie in [%s, %s]", key, x,
+                    bound_text(e->lo, lo), bound_text(e->hi, hi));
   }
   return RSW_OK;
 }
