@@ -447,6 +447,47 @@ static void test_corpus_media_errors(void) {
   }
 }
 
+/* A sensor inside a medium stays inside it: an update that moves the
+ * boundary away from it is refused (naming the sensor) and changes
+ * nothing; one that keeps it inside passes. */
+static void test_refuse_sensor_leaving_medium(void) {
+  const char *doc =
+      "{\"type\": \"scene\", \"integrator\": {\"type\": \"volpath\"},"
+      " \"fog\": {\"type\": \"homogeneous\", \"id\": \"fog\", \"sigma_t\": 0.5, \"albedo\": 0.0},"
+      " \"box\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"}, \"interior\": {\"type\": \"ref\", "
+      "\"id\": \"fog\"}},"
+      " \"sky\": {\"type\": \"constant\", \"radiance\": 1.0},"
+      " \"meter\": {\"type\": \"radiancemeter\", \"origin\": [0, 0, 0], \"direction\": [0, 0, 1],"
+      "   \"medium\": {\"type\": \"ref\", \"id\": \"fog\"},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}}";
+  scene *s = tsup_load(doc, NULL);
+  REQUIRE(s, "load");
+  size_t idx;
+  rsw_err e = {0};
+  REQUIRE(params_lookup(s, "box.to_world", &idx, &e) == RSW_OK, "box.to_world: %s", e.msg);
+  char *before = params_value_json(s, idx, 0);
+  param_update u = {.key = "box.to_world"};
+  const char *away = "[[1,0,0,10],[0,1,0,0],[0,0,1,0],[0,0,0,1]]";
+  REQUIRE(param_value_parse(away, "test", &u.value, &e) == RSW_OK, "parse: %s", e.msg);
+  rsw_err err = {0};
+  rsw_status st = scene_update(s, &u, 1, NULL, &err);
+  char buf[1400];
+  rsw_err_format(&err, buf, sizeof buf);
+  CHECK(st != RSW_OK, "moving the box away from the sensor inside it was accepted");
+  CHECK(strstr(buf, "meter") && strstr(buf, "does not sit inside its medium"), "the error: %s", buf);
+  char *now = params_value_json(s, idx, 0);
+  CHECK(before && now && strcmp(before, now) == 0, "the refused update changed box.to_world");
+  free(now);
+  param_value_free(&u.value);
+  const char *still = "[[2,0,0,0.5],[0,2,0,0],[0,0,2,0],[0,0,0,1]]";
+  REQUIRE(param_value_parse(still, "test", &u.value, &e) == RSW_OK, "parse: %s", e.msg);
+  memset(&err, 0, sizeof err);
+  CHECK(scene_update(s, &u, 1, NULL, &err) == RSW_OK, "a box still around the sensor refused: %s", err.msg);
+  param_value_free(&u.value);
+  free(before);
+  scene_free(s);
+}
+
 int main(void) {
   RSW_TEST_RUN(test_reload_sigma_t);
   RSW_TEST_RUN(test_reload_albedo);
@@ -460,5 +501,6 @@ int main(void) {
   RSW_TEST_RUN(test_refuse_atomic);
   RSW_TEST_RUN(test_example_atmosphere);
   RSW_TEST_RUN(test_corpus_media_errors);
+  RSW_TEST_RUN(test_refuse_sensor_leaving_medium);
   RSW_TEST_END("test_media_params");
 }

@@ -99,6 +99,12 @@ static bool held_by_sensor(const scene *s, const medium *m) {
   return false;
 }
 
+bool scene_has_sensor_media(const scene *s) {
+  for (size_t i = 0; i < s->n_sensors; i++)
+    if (s->sensors[i]->medium) return true;
+  return false;
+}
+
 rsw_status scene_check_media(const scene *s, node *root, rsw_err *err) {
   for (size_t i = 0; i < s->n_objects; i++) {
     const object *o = s->objects[i];

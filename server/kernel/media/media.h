@@ -34,5 +34,8 @@ bool media_box_clip(const xform *to_world, const ray3 *r, double *mint, double *
  * bounds a medium has the sensor's medium on the ray's origin side).
  * Errors name the medium's or the sensor's JSON pointer / XML line. */
 rsw_status scene_check_media(const scene *s, struct node *root, rsw_err *err);
+/* Does a sensor of s sit in a medium (so that an update must check it
+ * still does)? */
+bool scene_has_sensor_media(const scene *s);
 
 #endif

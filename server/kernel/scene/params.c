@@ -11,6 +11,7 @@
 
 #include "../accel.h"
 #include "../core/strdist.h"
+#include "../media/media.h"
 #include "../shapes/mesh_io.h"
 #include "../shapes/shape.h"
 #include "../textures/texture.h"
@@ -1512,6 +1513,19 @@ rsw_status scene_update(scene *s, const param_update *items, size_t n, update_re
    * structure is brought back to it, so that a failed update changes
    * nothing. */
   if (geometry) st = update_geometry(s, sg, n, false, err);
+  /* A sensor inside a medium must still be inside it (a moved boundary or
+   * sensor): the load-time check again, undone like the rest. */
+  if (!st && changed && scene_has_sensor_media(s)) {
+    st = scene_check_media(s, NULL, err);
+    if (st && err) {
+      static const char pre[] = "after the update, ";
+      size_t pl = sizeof pre - 1, len = strlen(err->msg);
+      if (len + pl >= sizeof err->msg) len = sizeof err->msg - pl - 1;
+      memmove(err->msg + pl, err->msg, len);
+      memcpy(err->msg, pre, pl);
+      err->msg[pl + len] = '\0';
+    }
+  }
   if (st) {
     for (size_t i = 0; i < n; i++) undo_one(&sg[i], &s->params->e[sg[i].index]);
     for (size_t i = 0; i < n; i++) {
