@@ -404,11 +404,13 @@ typedef struct shape {
   bool cdf_staged;
   unsigned index; /* position in scene->shapes */
   /* Meshes of at most SHAPE_FACE_CACHE_MAX faces (shapes/shape.h): per
-   * face, the world geometric normal and world dp/du under to_world, 6
+   * face, the world geometric normal and world dp/du under to_world, and
+   * (face_cache_frames) the hit's shading frame, SHAPE_FACE_DOUBLES
    * doubles, as a hit's surface data computes them (the same bits);
    * refreshed by shape_finalize and parameters_changed. NULL otherwise. */
   double *face_cache;
   uint32_t face_cache_n;
+  bool face_cache_frames;
 } shape;
 
 /* ---- the scene ----------------------------------------------------------- */

@@ -196,11 +196,25 @@ static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_
   }
   if (timed) stats->trace_s += clock_s() - t0;
   stats->rays += (uint64_t)n;
+  /* The hits' surface data together (their frames vectorised). */
+  enum {
+    C = 64
+  };
+  const ray3 *rr[C];
+  const accel_hit *hh[C];
+  surface_interaction *ss[C];
+  int m = 0;
   for (int k = 0; k < n; k++) {
     lane *l = &ln[idx[k]];
     l->wrapped = false;
-    if (l->hit == TRACE_HIT) hit_fill_interaction(sc, &l->ray, &l->h, &l->si);
+    if (l->hit != TRACE_HIT) continue;
+    rr[m] = &l->ray, hh[m] = &l->h, ss[m] = &l->si;
+    if (++m == C) {
+      hit_fill_interaction_batch(sc, m, rr, hh, ss);
+      m = 0;
+    }
   }
+  if (m) hit_fill_interaction_batch(sc, m, rr, hh, ss);
 }
 
 /* Trace the shadow rays of lanes idx[0..n) (each has nee set). */
