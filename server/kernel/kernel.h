@@ -292,6 +292,16 @@ typedef struct sampler_ops {
   /* spp actually used for a requested count (stratified rounds to a
    * square). */
   uint32_t (*adjust_spp)(const sampler *s, uint32_t spp);
+  /* Optional batched forms for a wave (samplers/sampler_batch.h calls
+   * them, or loops over the ops above when NULL): start() for samples
+   * st[0..n) (pixel[i], sample_index[i]); next_1d() and next_2d() for
+   * the lanes st[idx[k]] (idx NULL: st[k]), k < n, into out[k]. Each
+   * lane's numbers are exactly those of its own per-lane calls in the
+   * same order (determinism: nothing depends on n or the neighbours). */
+  void (*start_batch)(const sampler *s, sampler_state *st, int n, uint64_t seed, const uint64_t *pixel,
+                      const uint32_t *sample_index, uint32_t spp);
+  void (*next_1d_batch)(sampler_state *st, const int *idx, int n, double *out);
+  void (*next_2d_batch)(sampler_state *st, const int *idx, int n, vec2 *out);
 } sampler_ops;
 struct sampler {
   object base;

@@ -26,6 +26,7 @@
 
 #include "accel.h"
 #include "core/isa.h"
+#include "samplers/sampler_batch.h"
 #include "scene/scene.h"
 
 #define TILE 8
@@ -161,9 +162,33 @@ typedef struct wave_buf {
   color L[WAVE];
   double quv[3 * WAVE];
   int live[WAVE];
-  vec2 film_u[WAVE], aperture_u[WAVE]; /* sensors with sample_ray_batch: the rays are made at the flush */
+  vec2 film_u[WAVE], aperture_u[WAVE];
   double w[WAVE];
+  /* Which sample each slot takes (render_tile), for wave_start. */
+  uint64_t pixel[WAVE];
+  uint32_t index[WAVE];
+  int ix[WAVE], iy[WAVE];
 } wave_buf;
+
+/* Samples [0, n) of wb begin: their sampler streams, film jitter and
+ * aperture draws, together (samplers/sampler_batch.h: each sample's
+ * numbers are those of its own per-sample calls), then film positions and
+ * camera rays (the sensor's batched op where it has one). */
+static void wave_start(job *jb, wave_buf *wb, int n) {
+  const sampler *smp = jb->se->sampler;
+  const sensor *se = jb->se;
+  sampler_start_batch(smp, wb->st, n, jb->opts->seed, wb->pixel, wb->index, jb->spp);
+  sampler_next_2d_batch(smp, wb->st, NULL, n, wb->film_u);
+  sampler_next_2d_batch(smp, wb->st, NULL, n, wb->aperture_u);
+  for (int i = 0; i < n; i++) {
+    double px = wb->ix[i] + wb->film_u[i].x, py = wb->iy[i] + wb->film_u[i].y;
+    wb->ws[i].px = px;
+    wb->ws[i].py = py;
+    wb->film_u[i] = v2(px / jb->W, py / jb->H);
+  }
+  if (!se->ops->sample_ray_batch)
+    for (int i = 0; i < n; i++) wb->ws[i].w = se->ops->sample_ray(se, wb->film_u[i], wb->aperture_u[i], &wb->ray[i]);
+}
 
 /* Trace and splat samples [0, n) of wb: the live ones (w != 0) go through
  * the integrator together; every sample is splatted in order, so the tile's
@@ -242,7 +267,6 @@ static tile_buf *render_tile(job *jb, size_t t, render_stats *rs, uint64_t *samp
     free(wb);
     return NULL;
   }
-  const sampler *smp = jb->se->sampler;
   /* Samples are taken pixel by pixel, sample by sample, WAVE at a time
    * (a wave may span pixels). Cancellation and deadlines are honoured
    * before each wave, so a film of a few pixels with a huge spp stops
@@ -253,19 +277,12 @@ static tile_buf *render_tile(job *jb, size_t t, render_stats *rs, uint64_t *samp
       uint64_t pixel = (uint64_t)iy * (uint64_t)jb->W + (uint64_t)ix;
       for (uint32_t s = 0; s < jb->spp; s++) {
         if (n == 0 && job_should_stop(jb)) goto out;
-        sampler_state *st = &wb->st[n];
-        smp->ops->start(smp, st, jb->opts->seed, pixel, s, jb->spp);
-        vec2 j = smp->ops->next_2d(st);
-        double px = ix + j.x, py = iy + j.y;
-        vec2 film_u = v2(px / jb->W, py / jb->H);
-        vec2 ap = smp->ops->next_2d(st);
-        wb->ws[n].px = px;
-        wb->ws[n].py = py;
-        if (jb->se->ops->sample_ray_batch)
-          wb->film_u[n] = film_u, wb->aperture_u[n] = ap;
-        else
-          wb->ws[n].w = jb->se->ops->sample_ray(jb->se, film_u, ap, &wb->ray[n]);
+        wb->pixel[n] = pixel;
+        wb->index[n] = s;
+        wb->ix[n] = ix;
+        wb->iy[n] = iy;
         if (++n == WAVE) {
+          wave_start(jb, wb, n);
           if (!wave_flush(jb, tb, wb, n, rs, invalid)) goto fail;
           *samples += (uint64_t)n;
           n = 0;
@@ -274,6 +291,7 @@ static tile_buf *render_tile(job *jb, size_t t, render_stats *rs, uint64_t *samp
     }
   }
   if (n) {
+    wave_start(jb, wb, n);
     if (!wave_flush(jb, tb, wb, n, rs, invalid)) goto fail;
     *samples += (uint64_t)n;
   }

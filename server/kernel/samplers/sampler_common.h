@@ -21,15 +21,33 @@ static inline uint64_t sampler_pixel_key(uint64_t seed, uint64_t pixel) {
   return mix64(mix64(seed) ^ pixel);
 }
 
-static inline void sampler_seed_stream(const sampler *s, sampler_state *st, uint64_t seed, uint64_t pixel,
-                                       uint32_t sample_index, uint32_t spp) {
+/* sampler_seed_stream given the pixel's key (sampler_pixel_key(seed +
+ * s->seed, pixel)), which the samples of one pixel share. */
+static inline void sampler_seed_stream_key(const sampler *s, sampler_state *st, uint64_t key, uint32_t sample_index,
+                                           uint32_t spp) {
   st->s = s;
-  st->pixel_key = sampler_pixel_key(seed + s->seed, pixel);
+  st->pixel_key = key;
   st->sample_index = sample_index;
   st->spp = spp;
   st->dim = 0;
   uint32_t fold = (uint32_t)(st->pixel_key ^ (st->pixel_key >> 32));
   pcg32_seed(&st->rng, tea64(fold, sample_index, 4), mix64(st->pixel_key + sample_index));
+}
+
+static inline void sampler_seed_stream(const sampler *s, sampler_state *st, uint64_t seed, uint64_t pixel,
+                                       uint32_t sample_index, uint32_t spp) {
+  sampler_seed_stream_key(s, st, sampler_pixel_key(seed + s->seed, pixel), sample_index, spp);
+}
+
+/* start_batch of both samplers: the pixel's key once per run of samples
+ * of the same pixel (a wave holds consecutive samples of few pixels). */
+static inline void sampler_seed_streams(const sampler *s, sampler_state *st, int n, uint64_t seed,
+                                        const uint64_t *pixel, const uint32_t *sample_index, uint32_t spp) {
+  uint64_t key = 0;
+  for (int k = 0; k < n; k++) {
+    if (k == 0 || pixel[k] != pixel[k - 1]) key = sampler_pixel_key(seed + s->seed, pixel[k]);
+    sampler_seed_stream_key(s, &st[k], key, sample_index[k], spp);
+  }
 }
 
 #endif

@@ -109,11 +109,27 @@ static vec2 stratified_next_2d(sampler_state *st) {
   return v2(((double)x + jx) / (double)n, ((double)y + jy) / (double)n);
 }
 
+static void stratified_start_batch(const sampler *s, sampler_state *st, int n, uint64_t seed, const uint64_t *pixel,
+                                   const uint32_t *sample_index, uint32_t spp) {
+  sampler_seed_streams(s, st, n, seed, pixel, sample_index, spp);
+}
+
+static void stratified_next_1d_batch(sampler_state *st, const int *idx, int n, double *out) {
+  for (int k = 0; k < n; k++) out[k] = stratified_next_1d(&st[idx ? idx[k] : k]);
+}
+
+static void stratified_next_2d_batch(sampler_state *st, const int *idx, int n, vec2 *out) {
+  for (int k = 0; k < n; k++) out[k] = stratified_next_2d(&st[idx ? idx[k] : k]);
+}
+
 static const sampler_ops stratified_ops = {
     .start = stratified_start,
     .next_1d = stratified_next_1d,
     .next_2d = stratified_next_2d,
     .adjust_spp = stratified_adjust_spp,
+    .start_batch = stratified_start_batch,
+    .next_1d_batch = stratified_next_1d_batch,
+    .next_2d_batch = stratified_next_2d_batch,
 };
 
 static void stratified_destroy(object *o) {
