@@ -57,13 +57,13 @@ typedef double vd4 __attribute__((vector_size(32)));
 #define FRAME_SQRT(x) SQRT8_PLAIN(x)
 #include "frame_lanes.h"
 
-void shape_frames_batch(int n, const double *in, double *out) {
+void shape_frames_batch(int n, int stride, const double *in, double *out) {
 #if defined(__x86_64__) || defined(__i386__)
   switch (rsw_isa_get()) {
-  case RSW_ISA_AVX512: frames_avx512(n, in, out); return;
-  case RSW_ISA_AVX2: frames_avx2(n, in, out); return;
+  case RSW_ISA_AVX512: frames_avx512(n, stride, in, out); return;
+  case RSW_ISA_AVX2: frames_avx2(n, stride, in, out); return;
   default: break;
   }
 #endif
-  frames_plain(n, in, out);
+  frames_plain(n, stride, in, out);
 }

@@ -10,13 +10,10 @@
  * the same in a vector lane, and -std=c11 turns FMA contraction off, so a
  * lane is bitwise the scalar result. Both branches are computed and the
  * right one selected (the unselected one may divide by zero; harmless). */
-FRAME_ATTR void FRAME_FN(int n, const double *in, double *out) {
+FRAME_ATTR void FRAME_FN(int n, int stride, const double *in, double *out) {
   for (int k0 = 0; k0 < n; k0 += 8) {
-    int cnt = n - k0 < 8 ? n - k0 : 8;
     vd8 v[SHAPE_FRAME_IN];
-    for (int c = 0; c < SHAPE_FRAME_IN; c++) v[c] = (vd8){0};
-    for (int k = 0; k < cnt; k++)
-      for (int c = 0; c < SHAPE_FRAME_IN; c++) v[c][k] = in[SHAPE_FRAME_IN * (k0 + k) + c];
+    for (int c = 0; c < SHAPE_FRAME_IN; c++) __builtin_memcpy(&v[c], &in[(size_t)c * stride + k0], sizeof v[c]);
     vd8 nx = v[0], ny = v[1], nz = v[2], tx = v[3], ty = v[4], tz = v[5], dx = v[6], dy = v[7], dz = v[8];
     const vd8 zero = (vd8){0}, one = zero + 1.0;
     /* A deferred shading normal: v3_norm(raw), or the fallback (nx, ny,
@@ -56,12 +53,7 @@ FRAME_ATTR void FRAME_FN(int n, const double *in, double *out) {
     vd8 ix = wx * sx + wy * sy + wz * sz;
     vd8 iy = wx * cx + wy * cy + wz * cz;
     vd8 iz = wx * nx + wy * ny + wz * nz;
-    for (int k = 0; k < cnt; k++) {
-      double *o = &out[12 * (k0 + k)];
-      o[0] = sx[k], o[1] = sy[k], o[2] = sz[k];
-      o[3] = cx[k], o[4] = cy[k], o[5] = cz[k];
-      o[6] = nx[k], o[7] = ny[k], o[8] = nz[k];
-      o[9] = ix[k], o[10] = iy[k], o[11] = iz[k];
-    }
+    const vd8 res[12] = {sx, sy, sz, cx, cy, cz, nx, ny, nz, ix, iy, iz};
+    for (int c = 0; c < 12; c++) __builtin_memcpy(&out[(size_t)c * stride + k0], &res[c], sizeof res[c]);
   }
 }

@@ -444,7 +444,7 @@ void hit_fill_interaction(const scene *sc, const ray3 *r, const accel_hit *h, su
 void hit_fill_interaction_batch(const scene *sc, int n, const ray3 *const *r, const accel_hit *const *h,
                                 surface_interaction *const *si) {
   enum {
-    C = 64
+    C = 64 /* lanes per call, a multiple of 8 */
   };
   double in[SHAPE_FRAME_IN * C], out[12 * C];
   int lane[C];
@@ -455,19 +455,25 @@ void hit_fill_interaction_batch(const scene *sc, int n, const ray3 *const *r, co
       bool deferred = false;
       if (hit_fill_begin(sc, r[k0 + k], h[k0 + k], si[k0 + k], &sn, &tg, &raw, &deferred)) continue;
       vec3 d = r[k0 + k]->d;
-      const double v[SHAPE_FRAME_IN] = {sn.x,  sn.y,  sn.z,  tg.x,  tg.y, tg.z, d.x, d.y, d.z,
-                                        raw.x, raw.y, raw.z, deferred ? 1.0 : 0.0};
-      memcpy(&in[SHAPE_FRAME_IN * m], v, sizeof v);
+      double *q = &in[m];
+      q[0 * C] = sn.x, q[1 * C] = sn.y, q[2 * C] = sn.z;
+      q[3 * C] = tg.x, q[4 * C] = tg.y, q[5 * C] = tg.z;
+      q[6 * C] = d.x, q[7 * C] = d.y, q[8 * C] = d.z;
+      q[9 * C] = raw.x, q[10 * C] = raw.y, q[11 * C] = raw.z;
+      q[12 * C] = deferred ? 1.0 : 0.0;
       lane[m++] = k0 + k;
     }
-    shape_frames_batch(m, in, out);
+    if (m == 0) continue;
+    for (int j = m; j < ((m + 7) & ~7); j++) /* the last vector's unused lanes */
+      for (int c = 0; c < SHAPE_FRAME_IN; c++) in[c * C + j] = 0;
+    shape_frames_batch(m, C, in, out);
     for (int j = 0; j < m; j++) {
       surface_interaction *o = si[lane[j]];
-      const double *f = &out[12 * j];
-      o->sh.s = v3(f[0], f[1], f[2]);
-      o->sh.t = v3(f[3], f[4], f[5]);
-      o->sh.n = v3(f[6], f[7], f[8]);
-      o->wi = v3(f[9], f[10], f[11]);
+      const double *f = &out[j];
+      o->sh.s = v3(f[0 * C], f[1 * C], f[2 * C]);
+      o->sh.t = v3(f[3 * C], f[4 * C], f[5 * C]);
+      o->sh.n = v3(f[6 * C], f[7 * C], f[8 * C]);
+      o->wi = v3(f[9 * C], f[10 * C], f[11 * C]);
     }
   }
 }

@@ -150,16 +150,18 @@ void shape_fill_interaction_xf(const shape *s, const xform *to_world, const ray3
  * 0.5). */
 bool shape_fill_begin(const shape *s, const xform *to_world, const ray3 *r, const struct accel_hit *h,
                       surface_interaction *si, vec3 *sn, vec3 *tangent, vec3 *sn_raw, bool *sn_raw_set);
-/* For n lanes: in[SHAPE_FRAME_IN i ..] = sn, tangent, the ray direction d
- * (as shape_fill_begin leaves them), then the raw shading normal and a
- * flag (1: sn is to be made from it as shape_fill_begin says, with sn as
- * the fallback; 0: sn is final); out[12 i ..] = the frame's s, t, n and
- * wi. Vectorised at the render's ISA (core/isa.h) in double precision with
- * the scalar operations in the scalar order (no FMA contraction), so each
- * lane is bitwise the scalar fill whatever the ISA and n
- * (tests/unit/test_simd.c). */
+/* For n lanes, as structures of arrays (component c of lane i at
+ * [c stride + i]; stride a multiple of 8, every array readable and
+ * writable up to n rounded up to 8): in holds SHAPE_FRAME_IN components,
+ * sn xyz, tangent xyz, the ray direction d xyz (as shape_fill_begin leaves
+ * them), the raw shading normal xyz and a flag (1: sn is to be made from
+ * the raw normal as shape_fill_begin says, with sn as the fallback; 0: sn
+ * is final); out receives 12, the frame's s, t, n and wi. Vectorised at
+ * the render's ISA (core/isa.h) in double precision with the scalar
+ * operations in the scalar order (no FMA contraction), so each lane is
+ * bitwise the scalar fill whatever the ISA and n (tests/unit/test_simd.c). */
 #define SHAPE_FRAME_IN 13
-void shape_frames_batch(int n, const double *in, double *out);
+void shape_frames_batch(int n, int stride, const double *in, double *out);
 
 /* Compute area, triangle cdf; check geometry (degenerate to_world for a
  * disk, non-uniform scale for a sphere, ...). Called by create(). */
