@@ -1,61 +1,78 @@
 /* shape_frames_batch (shapes/shape.h): the shading frames and local wi of
- * a wave's hits, 8 double lanes at a time, compiled per ISA from
- * shapes/frame_lanes.h and picked at run time (core/isa.h). Every ISA
- * gives the scalar bits (see frame_lanes.h), so the choice changes speed
- * only. */
+ * a wave's hits, a vector of doubles at a time (8 avx512, 4 avx2, 2
+ * sse2), compiled per ISA from shapes/frame_lanes.h and picked at run time
+ * (core/isa.h). Every ISA gives the scalar bits (see frame_lanes.h), so
+ * the choice changes speed only. */
 #include <math.h>
 
 #include "../core/isa.h"
 #include "shape.h"
 
-typedef double vd8 __attribute__((vector_size(64)));
-typedef long long vl8 __attribute__((vector_size(64)));
-
-/* m ? a : b, lane by lane (m all-ones or zero). */
-#define fsel8(m, a, b) ((vd8)((((vl8)(a)) & (m)) | (((vl8)(b)) & ~(m))))
-
 #if defined(__x86_64__) || defined(__i386__)
 #include <immintrin.h>
 
-#define FRAME_FN   frames_avx512
-#define FRAME_ATTR static __attribute__((target("avx512f,avx512vl,avx512dq")))
-#define FRAME_SQRT(x) ((vd8)_mm512_sqrt_pd((__m512d)(x)))
+typedef double vd_8 __attribute__((vector_size(64)));
+typedef long long vl_8 __attribute__((vector_size(64)));
+typedef double vd_4 __attribute__((vector_size(32)));
+typedef long long vl_4 __attribute__((vector_size(32)));
+typedef double vd_2 __attribute__((vector_size(16)));
+typedef long long vl_2 __attribute__((vector_size(16)));
+
+#define VW            8
+#define VD            vd_8
+#define VL            vl_8
+#define FSEL(m, a, b) ((VD)((((VL)(a)) & (m)) | (((VL)(b)) & ~(m))))
+#define FRAME_FN      frames_avx512
+#define FRAME_ATTR    static __attribute__((target("avx512f,avx512vl,avx512dq")))
+#define FRAME_SQRT(x) ((VD)_mm512_sqrt_pd((__m512d)(x)))
 #include "frame_lanes.h"
+#undef VW
+#undef VD
+#undef VL
 #undef FRAME_FN
 #undef FRAME_ATTR
 #undef FRAME_SQRT
 
-/* Two 4-lane halves (a statement expression: a 64-byte vector is no
- * AVX2 function argument). */
-typedef double vd4 __attribute__((vector_size(32)));
-#define SQRT8_AVX2(x)                                                                                        \
-  __extension__({                                                                                            \
-    vd8 x_ = (x);                                                                                            \
-    vd4 lo_ = (vd4)_mm256_sqrt_pd((__m256d)(vd4){x_[0], x_[1], x_[2], x_[3]});                               \
-    vd4 hi_ = (vd4)_mm256_sqrt_pd((__m256d)(vd4){x_[4], x_[5], x_[6], x_[7]});                               \
-    (vd8){lo_[0], lo_[1], lo_[2], lo_[3], hi_[0], hi_[1], hi_[2], hi_[3]};                                   \
-  })
+#define VW            4
+#define VD            vd_4
+#define VL            vl_4
 #define FRAME_FN      frames_avx2
 #define FRAME_ATTR    static __attribute__((target("avx2,fma")))
-#define FRAME_SQRT(x) SQRT8_AVX2(x)
+#define FRAME_SQRT(x) ((VD)_mm256_sqrt_pd((__m256d)(x)))
 #include "frame_lanes.h"
+#undef VW
+#undef VD
+#undef VL
 #undef FRAME_FN
 #undef FRAME_ATTR
 #undef FRAME_SQRT
-#endif
 
-/* Portable (sse2 and other targets): the same lanes with a scalar square
- * root per lane (sqrt is correctly rounded either way). */
-#define SQRT8_PLAIN(x)                                                                                       \
-  __extension__({                                                                                            \
-    vd8 x_ = (x);                                                                                            \
-    for (int k_ = 0; k_ < 8; k_++) x_[k_] = sqrt(x_[k_]);                                                    \
-    x_;                                                                                                      \
-  })
-#define FRAME_FN      frames_plain
+#define VW            2
+#define VD            vd_2
+#define VL            vl_2
+#define FRAME_FN      frames_sse2
 #define FRAME_ATTR    static
-#define FRAME_SQRT(x) SQRT8_PLAIN(x)
+#define FRAME_SQRT(x) ((VD)_mm_sqrt_pd((__m128d)(x)))
 #include "frame_lanes.h"
+#undef VW
+#undef VD
+#undef VL
+#undef FRAME_FN
+#undef FRAME_ATTR
+#undef FRAME_SQRT
+#else
+/* Other targets: one lane at a time through the same body. */
+typedef double vd_1 __attribute__((vector_size(8)));
+typedef long long vl_1 __attribute__((vector_size(8)));
+#define VW            1
+#define VD            vd_1
+#define VL            vl_1
+#define FSEL(m, a, b) ((VD)((((VL)(a)) & (m)) | (((VL)(b)) & ~(m))))
+#define FRAME_FN      frames_sse2
+#define FRAME_ATTR    static
+#define FRAME_SQRT(x) ((VD){sqrt((x)[0])})
+#include "frame_lanes.h"
+#endif
 
 void shape_frames_batch(int n, int stride, const double *in, double *out) {
 #if defined(__x86_64__) || defined(__i386__)
@@ -65,5 +82,5 @@ void shape_frames_batch(int n, int stride, const double *in, double *out) {
   default: break;
   }
 #endif
-  frames_plain(n, stride, in, out);
+  frames_sse2(n, stride, in, out);
 }
