@@ -39,14 +39,41 @@ static inline void sampler_seed_stream(const sampler *s, sampler_state *st, uint
   sampler_seed_stream_key(s, st, sampler_pixel_key(seed + s->seed, pixel), sample_index, spp);
 }
 
+/* For n lanes (pcg_simd.c, vectorised at the render's ISA; bitwise the
+ * scalar code): the PCG32 state and increment that sampler_seed_stream_key
+ * gives pixel key key[k] and sample index[k]; and `draws`
+ * pcg32_next_double() of each lane st[idx[k]] (idx NULL: st[k]), in order,
+ * into out[draws k + j], advancing the states (dim untouched). */
+void sampler_pcg_seed_batch(int n, const uint64_t *key, const uint32_t *index, uint64_t *state, uint64_t *inc);
+void sampler_pcg_draw_batch(sampler_state *st, const int *idx, int n, int draws, double *out);
+
 /* start_batch of both samplers: the pixel's key once per run of samples
- * of the same pixel (a wave holds consecutive samples of few pixels). */
+ * of the same pixel (a wave holds consecutive samples of few pixels), the
+ * streams seeded together. */
 static inline void sampler_seed_streams(const sampler *s, sampler_state *st, int n, uint64_t seed,
                                         const uint64_t *pixel, const uint32_t *sample_index, uint32_t spp) {
-  uint64_t key = 0;
-  for (int k = 0; k < n; k++) {
-    if (k == 0 || pixel[k] != pixel[k - 1]) key = sampler_pixel_key(seed + s->seed, pixel[k]);
-    sampler_seed_stream_key(s, &st[k], key, sample_index[k], spp);
+  enum {
+    C = 64
+  };
+  uint64_t key[C], state[C], inc[C], last = 0;
+  for (int k0 = 0; k0 < n; k0 += C) {
+    int m = n - k0 < C ? n - k0 : C;
+    for (int k = 0; k < m; k++) {
+      int i = k0 + k;
+      if (i == 0 || pixel[i] != pixel[i - 1]) last = sampler_pixel_key(seed + s->seed, pixel[i]);
+      key[k] = last;
+    }
+    sampler_pcg_seed_batch(m, key, sample_index + k0, state, inc);
+    for (int k = 0; k < m; k++) {
+      sampler_state *q = &st[k0 + k];
+      q->s = s;
+      q->pixel_key = key[k];
+      q->sample_index = sample_index[k0 + k];
+      q->spp = spp;
+      q->dim = 0;
+      q->rng.state = state[k];
+      q->rng.inc = inc[k];
+    }
   }
 }
 
