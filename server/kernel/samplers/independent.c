@@ -29,18 +29,24 @@ static void independent_start_batch(const sampler *s, sampler_state *st, int n, 
   sampler_seed_streams(s, st, n, seed, pixel, sample_index, spp);
 }
 
-/* The lanes' draws together, vectorised at the render's ISA
- * (sampler_pcg_draw_batch): each lane's numbers are bitwise its own
- * next_1d()/next_2d()'s. */
+/* The lanes' draws together, vectorised where the render's ISA gains by it
+ * (sampler_pcg_draw_batch), else in one loop: each lane's numbers are
+ * bitwise its own next_1d()/next_2d()'s. */
 static void independent_next_1d_batch(sampler_state *st, const int *idx, int n, double *out) {
-  sampler_pcg_draw_batch(st, idx, n, 1, out);
+  if (!sampler_pcg_draw_batch(st, idx, n, 1, out)) {
+    for (int k = 0; k < n; k++) out[k] = independent_next_1d(&st[idx ? idx[k] : k]);
+    return;
+  }
   for (int k = 0; k < n; k++) st[idx ? idx[k] : k].dim++;
 }
 
 static void independent_next_2d_batch(sampler_state *st, const int *idx, int n, vec2 *out) {
   /* vec2 is two doubles, x then y: the draws land in place. */
   _Static_assert(sizeof(vec2) == 2 * sizeof(double), "vec2 layout");
-  sampler_pcg_draw_batch(st, idx, n, 2, (double *)out);
+  if (!sampler_pcg_draw_batch(st, idx, n, 2, (double *)out)) {
+    for (int k = 0; k < n; k++) out[k] = independent_next_2d(&st[idx ? idx[k] : k]);
+    return;
+  }
   for (int k = 0; k < n; k++) st[idx ? idx[k] : k].dim++;
 }
 

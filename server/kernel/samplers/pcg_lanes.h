@@ -1,7 +1,7 @@
 /* The body of pcg_simd.c's batched PCG32 seeding and draws for one ISA:
  * VW 64-bit lanes (VU, with VU32 the same lanes as 32-bit words for the
  * TEA rounds, VD as doubles), included once per ISA after PCG_SEED_FN,
- * PCG_DRAW_FN and PCG_ATTR are defined. Integer arithmetic wraps exactly
+ * PCG_DRAW_FN (or PCG_NO_DRAW) and PCG_ATTR are defined. Integer arithmetic wraps exactly
  * as core/rng.h's scalar code (unsigned, modulo 2^32 or 2^64), and the
  * conversion of a 32-bit draw to double is exact, so every lane is
  * bitwise the scalar stream. */
@@ -33,6 +33,7 @@ PCG_ATTR void PCG_SEED_FN(int n, const uint64_t *key, const uint32_t *index, uin
   }
 }
 
+#ifndef PCG_NO_DRAW
 /* `draws` pcg32_next_double() per lane st[idx[k]] (idx NULL: st[k]), in
  * order, into out[draws k + j]; the states advance. */
 PCG_ATTR void PCG_DRAW_FN(sampler_state *st, const int *idx, int n, int draws, double *out) {
@@ -56,3 +57,4 @@ PCG_ATTR void PCG_DRAW_FN(sampler_state *st, const int *idx, int n, int draws, d
     for (int k = 0; k < cnt; k++) st[idx ? idx[k0 + k] : k0 + k].rng.state = s[k];
   }
 }
+#endif
