@@ -1017,7 +1017,10 @@ static inline __attribute__((always_inline)) bool fill_ray_f(const accel *a, con
    * len2 is finite and positive exactly when v3_len is. */
   double len2 = v3_dot(d, d);
   if (!v3_finite(oc) || !(len2 > 0) || !isfinite(len2) || isnan(tmin) || !(tmax >= tmin)) return false;
-  tmin = fmax(tmin, 0.0); /* Embree's segment starts at the origin or later */
+  /* Embree's segment starts at the origin or later: fmax(tmin, 0) as libm
+   * computes it (a NaN gives 0), inline (a libm call per ray cost 5% of a
+   * render's instructions). */
+  tmin = tmin > 0.0 ? tmin : 0.0;
   if (__builtin_expect(len2 > ACCEL_MAX_DIR * ACCEL_MAX_DIR || len2 < 1.0 / (ACCEL_MAX_DIR * ACCEL_MAX_DIR),
                        0)) {
     double len = sqrt(len2);
@@ -1034,7 +1037,7 @@ static inline __attribute__((always_inline)) bool fill_ray_f(const accel *a, con
     double t_in = q / (-b + sqrt(disc));      /* = (-b - sqrt(disc)) / dd, stably */
     if (!(t_in < tmax)) return false;
     oc = v3_fma(oc, t_in, d);
-    tmin = fmax(tmin - t_in, 0.0);
+    tmin = tmin - t_in > 0.0 ? tmin - t_in : 0.0;
     tmax -= t_in;
     *t0 = t_in * *ts;
   }
