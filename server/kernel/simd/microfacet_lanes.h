@@ -219,18 +219,16 @@ MF_LANES_ATTR void MF_LANES_FN(int ggx, int n, const float *const *in, float *co
     int m = n - k0 < W ? n - k0 : W;
     float a[7 * W], b[6 * W];
     const float pad[7] = {0.0f, 0.0f, 1.0f, 1.0f, 1.0f, 0.5f, 0.5f};
-    for (int j = 0; j < 7; j++) /* a full vector's lanes in one copy, a tail's padded */
-      if (m == W)
-        __builtin_memcpy(&a[j * W], &in[j][k0], W * sizeof(float));
-      else
-        for (int k = 0; k < W; k++) a[j * W + k] = k < m ? in[j][k0 + k] : pad[j];
+    for (int j = 0; j < 7; j++)
+      for (int k = 0; k < W; k++) a[j * W + k] = k < m ? in[j][k0 + k] : pad[j];
     const float *wx = a, *wy = a + W, *wz = a + 2 * W, *au = a + 3 * W, *av = a + 4 * W;
     if (ggx)
       mf_ggx_lanes(wx, wy, wz, au, av, a + 5 * W, a + 6 * W, b, b + W, b + 2 * W);
     else
       mf_beckmann_lanes(wx, wy, wz, au, av, a + 5 * W, a + 6 * W, b, b + W, b + 2 * W);
     mf_sample_tail_lanes(ggx, a, b);
-    for (int j = 0; j < 6; j++) __builtin_memcpy(&out[j][k0], &b[j * W], (size_t)m * sizeof(float));
+    for (int j = 0; j < 6; j++)
+      for (int k = 0; k < m; k++) out[j][k0 + k] = b[j * W + k];
   }
 }
 
@@ -273,11 +271,9 @@ MF_LANES_ATTR void MF_EVAL_FN(int ggx, int visible, int n, const float *const *i
     float a[8 * W], b[3 * W];
     const float pad[8] = {0.0f, 0.0f, 1.0f, 0.0f, 0.0f, 1.0f, 1.0f, 1.0f};
     for (int j = 0; j < 8; j++)
-      if (m == W)
-        __builtin_memcpy(&a[j * W], &in[j][k0], W * sizeof(float));
-      else
-        for (int k = 0; k < W; k++) a[j * W + k] = k < m ? in[j][k0 + k] : pad[j];
+      for (int k = 0; k < W; k++) a[j * W + k] = k < m ? in[j][k0 + k] : pad[j];
     mf_eval_lanes(ggx, visible, a, b);
-    for (int j = 0; j < 3; j++) __builtin_memcpy(&out[j][k0], &b[j * W], (size_t)m * sizeof(float));
+    for (int j = 0; j < 3; j++)
+      for (int k = 0; k < m; k++) out[j][k0 + k] = b[j * W + k];
   }
 }
