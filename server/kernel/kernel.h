@@ -1,6 +1,6 @@
 /* Runtime interfaces of the radiometric kernel: object classes, the plugin
  * record, and one small ops table per concept (texture, BSDF, emitter,
- * sensor, sampler, integrator). Every implementation lives in its class's
+ * sensor, sampler, integrator, volume, phase function, medium). Every implementation lives in its class's
  * directory, one plugin per file, and is listed once in scene/registry.c.
  *
  * Conventions (Mitsuba 3, kernel-behavior.md §0):
@@ -34,6 +34,9 @@ typedef enum obj_class {
   CLS_RFILTER,
   CLS_INTEGRATOR,
   CLS_TEXTURE,
+  CLS_MEDIUM,
+  CLS_PHASE,
+  CLS_VOLUME,
   CLS__COUNT
 } obj_class;
 
@@ -345,6 +348,102 @@ struct sensor {
   film *film;
   sampler *sampler;
   xform to_world;
+  struct medium *medium; /* the medium the sensor sits in (Mitsuba's `medium`), or NULL */
+};
+
+/* ---- volumes ------------------------------------------------------------- */
+/* A field over a box (Mitsuba's Volume: constvolume, gridvolume). The box
+ * is the unit cube [0,1]^3 under to_world; cell (ix, iy, iz) of an
+ * res[0] x res[1] x res[2] grid holds `channels` values at
+ * data[((iz res[1] + iy) res[0] + ix) channels + c] (x fastest: Mitsuba's
+ * .vol order). After prepare() the grid is what a render sees (in mono a
+ * tabulated spectrum per cell is evaluated at the context's wavelength). */
+typedef struct volume volume;
+typedef struct volume_ops {
+  /* Value at world point p (mono: the value in every channel of the color;
+   * one-channel grids in rgb: likewise). Outside the box: the plugin's
+   * wrap mode (Mitsuba's default clamps to the nearest cell). */
+  color (*eval)(const volume *v, vec3 p);
+} volume_ops;
+struct volume {
+  object base;
+  const volume_ops *ops;
+  xform to_world;          /* unit cube -> world */
+  vec3 bbox_min, bbox_max; /* world bounds of the box */
+  uint32_t res[3];         /* 1 x 1 x 1 for constvolume */
+  uint32_t channels;       /* 1 or 3 */
+  const double *data;      /* res[0] res[1] res[2] channels values (owned by the plugin) */
+  double max;              /* largest value over cells and channels (majorants) */
+};
+
+/* ---- phase functions and media ------------------------------------------- */
+struct medium;
+
+/* A point in a medium, as the volumetric integrators see it (Mitsuba's
+ * MediumInteraction). */
+typedef struct medium_interaction {
+  double t;    /* distance along the ray; INFINITY: no interaction */
+  double mint; /* where the sampled free-flight segment began (ray distance) */
+  vec3 p;      /* world position */
+  vec3 wi;     /* unit world direction towards where the path came from (-ray.d) */
+  const struct medium *medium;
+  color sigma_t, sigma_s, sigma_n; /* at p (after the medium's scale); sigma_n = majorant - sigma_t */
+  color majorant;                  /* Mitsuba's combined_extinction used for the free flight */
+} medium_interaction;
+
+/* Phase functions use Mitsuba's convention: wi (mi->wi) points back
+ * towards where the path came from, wo where it goes, both world and unit,
+ * so forward scattering is wo = -wi and hg's value is
+ * (1 - g^2) / (4 pi (1 + g^2 + 2 g dot(wi, wo))^1.5). */
+typedef struct phase phase;
+typedef struct phase_ops {
+  /* Sample wo for the scattering at mi: u1 picks a component (blendphase),
+   * u2 the direction. Returns the weight value / pdf and writes *pdf (solid
+   * angle); a failed sample returns 0 with *pdf = 0. */
+  double (*sample)(const phase *ph, const medium_interaction *mi, double u1, vec2 u2, vec3 *wo, double *pdf);
+  /* The value p(wi, wo) [sr^-1] and, in *pdf, the density sample() picks
+   * wo with. */
+  double (*eval_pdf)(const phase *ph, const medium_interaction *mi, vec3 wo, double *pdf);
+} phase_ops;
+struct phase {
+  object base;
+  const phase_ops *ops;
+};
+
+/* A participating medium (Mitsuba's Medium: homogeneous, heterogeneous;
+ * Eradiate's piecewise). Coefficients in inverse scene length units. */
+typedef struct medium medium;
+typedef struct medium_ops {
+  /* The part [*mint, *maxt] of ray r (within [0, r->tmax]) where the
+   * medium can interact: its volumes' box for grid media, the whole ray
+   * for homogeneous. False when empty. */
+  bool (*intersect_aabb)(const medium *m, const ray3 *r, double *mint, double *maxt);
+  /* The majorant (combined extinction) for a free flight starting at mi
+   * (mi->p, mi->wi set), Mitsuba's get_majorant. */
+  color (*majorant)(const medium *m, const medium_interaction *mi);
+  /* sigma_t, sigma_s and sigma_n (majorant - sigma_t) at mi->p, with
+   * mi->majorant set; Mitsuba's get_scattering_coefficients. */
+  void (*coefficients)(const medium *m, medium_interaction *mi);
+  /* Optional, analytic media (piecewise): a real collision sampled along r
+   * over [mint, maxt] by inverting the optical thickness in `channel` with
+   * u (Eradiate's sample_interaction_real). Fills mi (t = INFINITY when
+   * the flight passes maxt) and returns the transmittance to mi->t (or to
+   * maxt) in *tr and its pdf in *pdf (pdf of t: sigma_t tr; of passing:
+   * tr), per channel. */
+  void (*sample_real)(const medium *m, const ray3 *r, double mint, double maxt, double u, int channel,
+                      medium_interaction *mi, color *tr, color *pdf);
+  /* Optional, analytic media: the exact transmittance along r over
+   * [mint, maxt] (Eradiate's eval_transmittance_pdf_real). */
+  color (*transmittance)(const medium *m, const ray3 *r, double mint, double maxt);
+} medium_ops;
+struct medium {
+  object base;
+  const medium_ops *ops;
+  phase *phase;                 /* nested phase (default isotropic) */
+  double scale;                 /* multiplies sigma_t (Mitsuba's `scale`, default 1) */
+  bool is_homogeneous;          /* coefficients do not depend on position */
+  bool has_spectral_extinction; /* sigma_t differs between channels */
+  bool sample_emitters;         /* NEE from scattering events (Mitsuba's sample_emitters, default true) */
 };
 
 /* ---- integrators --------------------------------------------------------- */
@@ -403,8 +502,11 @@ typedef struct shape {
   double silhouette_sampling_weight; /* Mitsuba's; no effect here */
   bsdf *bsdf;
   emitter *emitter; /* area light, or NULL */
-  mesh mesh;        /* triangle meshes (ops == &shape_ops_mesh) */
-  bool sampled;     /* positions are sampled on it (a sensor's target) */
+  /* Media on either side of the surface (Mitsuba's interior/exterior:
+   * interior on the side the normal points away from), or NULL. */
+  struct medium *interior, *exterior;
+  mesh mesh;    /* triangle meshes (ops == &shape_ops_mesh) */
+  bool sampled; /* positions are sampled on it (a sensor's target) */
   /* Derived by shape_finalize(). A mesh's area and area cdf are computed
    * only when something samples it (an area emitter, a sensor target): an
    * O(faces) pass that plain geometry does not need. */

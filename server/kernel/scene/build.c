@@ -712,7 +712,10 @@ static rsw_status scene_create(loader *ld, node *n, object **out) {
       s->integrator = (integrator *)o;
       break;
     case CLS_BSDF:
-    case CLS_TEXTURE: break; /* declared at the top level to be referenced */
+    case CLS_TEXTURE:
+    case CLS_MEDIUM:
+    case CLS_PHASE:
+    case CLS_VOLUME: break; /* declared at the top level to be referenced */
     case CLS_SCENE:
       if (o->plugin == &plugin_periodic) {
         if (s->periodic.on)

@@ -46,7 +46,8 @@ static const char *const class_names[CLS__COUNT] = {
     [CLS_SCENE] = "scene",     [CLS_SHAPE] = "shape",     [CLS_BSDF] = "bsdf",
     [CLS_EMITTER] = "emitter", [CLS_SENSOR] = "sensor",   [CLS_FILM] = "film",
     [CLS_SAMPLER] = "sampler", [CLS_RFILTER] = "rfilter", [CLS_INTEGRATOR] = "integrator",
-    [CLS_TEXTURE] = "texture",
+    [CLS_TEXTURE] = "texture", [CLS_MEDIUM] = "medium",   [CLS_PHASE] = "phase",
+    [CLS_VOLUME] = "volume",
 };
 
 const char *obj_class_name(obj_class c) {

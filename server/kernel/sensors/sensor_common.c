@@ -35,6 +35,10 @@ rsw_status sensor_read_base(loader *ld, node *n, sensor *s) {
   if (st != RSW_OK) return st;
   st = child_or_default(ld, n, CLS_SAMPLER, "independent", "sampler", &smp);
   if (st != RSW_OK) return st;
+  object *med = NULL;
+  st = ld_child(ld, n, "medium", CLS_MEDIUM, &med);
+  if (st != RSW_OK) return st;
+  s->medium = (struct medium *)med;
 
   /* Mitsuba: shutter_open (0), shutter_close (0), the open time must not be
    * negative. Nothing in a scene moves, so the values change nothing. */

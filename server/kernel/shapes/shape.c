@@ -32,6 +32,12 @@ rsw_status shape_read_common(loader *ld, node *n, shape *s, bool mesh_like) {
     if (st) return st;
   }
   s->bsdf = (bsdf *)o;
+  st = ld_child(ld, n, "interior", CLS_MEDIUM, &o);
+  if (st) return st;
+  s->interior = (struct medium *)o;
+  st = ld_child(ld, n, "exterior", CLS_MEDIUM, &o);
+  if (st) return st;
+  s->exterior = (struct medium *)o;
   s->mesh_params = mesh_like;
   return ld_float_range(ld, n, "silhouette_sampling_weight", 1.0, 0.0, INFINITY,
                         &s->silhouette_sampling_weight);
