@@ -316,7 +316,7 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, int
    * each emitter) for one batched call per emitter and chunk; a lane's
    * sample does not depend on its group. Scenes with many emitters sample
    * lane by lane. */
-  if (1 || sc->n_emitters > EMITTER_GROUPS) {
+  if (sc->n_emitters > EMITTER_GROUPS) {
     for (int k = 0; k < n; k++) {
       lane *l = &ln[g[k]];
       l->ne = sc->emitters[ek[k]];
