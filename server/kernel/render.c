@@ -230,8 +230,9 @@ static bool wave_flush(job *jb, tile_buf *tb, wave_buf *wb, int n, render_stats 
       v = col_scale(wb->L[k], s->w);
       if (jb->stokes)
         for (int c = 0; c < 3; c++) q[c] = wb->quv[3 * k + c] * s->w;
-      if (!isfinite(v.c[0]) || !isfinite(v.c[1]) || !isfinite(v.c[2]) || !isfinite(q[0]) || !isfinite(q[1]) ||
-          !isfinite(q[2])) {
+      /* All six finite, without a branch each: x * 0 is +-0 for a finite
+       * x and NaN for an infinite or NaN one. */
+      if (!(v.c[0] * 0.0 + v.c[1] * 0.0 + v.c[2] * 0.0 + q[0] * 0.0 + q[1] * 0.0 + q[2] * 0.0 == 0.0)) {
         (*invalid)++;
         v = col1(0);
         q[0] = q[1] = q[2] = 0;
