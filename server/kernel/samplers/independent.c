@@ -29,25 +29,16 @@ static void independent_start_batch(const sampler *s, sampler_state *st, int n, 
   sampler_seed_streams(s, st, n, seed, pixel, sample_index, spp);
 }
 
-/* The lanes' draws together, vectorised where the render's ISA gains by it
- * (sampler_pcg_draw_batch), else in one loop: each lane's numbers are
- * bitwise its own next_1d()/next_2d()'s. */
+/* The lanes' draws in one loop: each lane's PCG32 step is a serial chain,
+ * but the lanes' chains are independent, so the loop overlaps them (the
+ * per-lane calls could not, each behind an indirect call); bitwise each
+ * lane's own next_1d()/next_2d(). */
 static void independent_next_1d_batch(sampler_state *st, const int *idx, int n, double *out) {
-  if (!sampler_pcg_draw_batch(st, idx, n, 1, out)) {
-    for (int k = 0; k < n; k++) out[k] = independent_next_1d(&st[idx ? idx[k] : k]);
-    return;
-  }
-  for (int k = 0; k < n; k++) st[idx ? idx[k] : k].dim++;
+  for (int k = 0; k < n; k++) out[k] = independent_next_1d(&st[idx ? idx[k] : k]);
 }
 
 static void independent_next_2d_batch(sampler_state *st, const int *idx, int n, vec2 *out) {
-  /* vec2 is two doubles, x then y: the draws land in place. */
-  _Static_assert(sizeof(vec2) == 2 * sizeof(double), "vec2 layout");
-  if (!sampler_pcg_draw_batch(st, idx, n, 2, (double *)out)) {
-    for (int k = 0; k < n; k++) out[k] = independent_next_2d(&st[idx ? idx[k] : k]);
-    return;
-  }
-  for (int k = 0; k < n; k++) st[idx ? idx[k] : k].dim++;
+  for (int k = 0; k < n; k++) out[k] = independent_next_2d(&st[idx ? idx[k] : k]);
 }
 
 /* Any count works; 0 means "the scene's sample_count". */

@@ -41,13 +41,8 @@ static inline void sampler_seed_stream(const sampler *s, sampler_state *st, uint
 
 /* For n lanes (pcg_simd.c, vectorised at the render's ISA; bitwise the
  * scalar code): the PCG32 state and increment that sampler_seed_stream_key
- * gives pixel key key[k] and sample index[k]; and `draws`
- * pcg32_next_double() of each lane st[idx[k]] (idx NULL: st[k]), in order,
- * into out[draws k + j], advancing the states (dim untouched) -- or false
- * without doing anything when the render's ISA has no faster way than the
- * caller's scalar loop. */
+ * gives pixel key key[k] and sample index[k]. */
 void sampler_pcg_seed_batch(int n, const uint64_t *key, const uint32_t *index, uint64_t *state, uint64_t *inc);
-bool sampler_pcg_draw_batch(sampler_state *st, const int *idx, int n, int draws, double *out);
 
 /* start_batch of both samplers: the pixel's key once per run of samples
  * of the same pixel (a wave holds consecutive samples of few pixels), the
