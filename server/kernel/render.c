@@ -117,11 +117,19 @@ static void splat(const job *jb, tile_buf *tb, double px, double py, color v, co
   if (ylo < tb->y0) ylo = tb->y0;
   if (xhi > tb->x0 + tb->w - 1) xhi = tb->x0 + tb->w - 1;
   if (yhi > tb->y0 + tb->h - 1) yhi = tb->y0 + tb->h - 1;
+  /* The filter's column weights once (the same values for every row). */
+  enum {
+    FX_MAX = 64
+  };
+  double fxs[FX_MAX];
+  bool cached = xhi - xlo < FX_MAX;
+  if (cached)
+    for (int x = xlo; x <= xhi; x++) fxs[x - xlo] = f->eval(f, px - (x + 0.5));
   for (int y = ylo; y <= yhi; y++) {
     double fy = f->eval(f, py - (y + 0.5));
     if (fy == 0) continue;
     for (int x = xlo; x <= xhi; x++) {
-      double wgt = fy * f->eval(f, px - (x + 0.5));
+      double wgt = fy * (cached ? fxs[x - xlo] : f->eval(f, px - (x + 0.5)));
       if (wgt == 0) continue;
       double *a = &tb->acc[(size_t)S * ((size_t)(y - tb->y0) * tb->w + (x - tb->x0))];
       a[0] += wgt * v.c[0], a[1] += wgt * v.c[1], a[2] += wgt * v.c[2], a[3] += wgt;

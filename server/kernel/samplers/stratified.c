@@ -91,16 +91,22 @@ static void stratified_start(const sampler *s, sampler_state *st, uint64_t seed,
   sampler_seed_stream(s, st, seed, pixel, sample_index, spp);
 }
 
-static double stratified_next_1d(sampler_state *st) {
-  uint32_t n = ceil_sqrt(st->spp ? st->spp : 1), n2 = n * n;
+/* next_1d and next_2d given n = ceil_sqrt(spp) (the batches compute it
+ * once for a run of lanes with the same spp). */
+static inline double next_1d_n(sampler_state *st, uint32_t n) {
+  uint32_t n2 = n * n;
   uint32_t p = stratum(st, n2);
   double j = jitter(st);
   st->dim++;
   return ((double)p + j) / (double)n2;
 }
 
-static vec2 stratified_next_2d(sampler_state *st) {
-  uint32_t n = ceil_sqrt(st->spp ? st->spp : 1), n2 = n * n;
+static double stratified_next_1d(sampler_state *st) {
+  return next_1d_n(st, ceil_sqrt(st->spp ? st->spp : 1));
+}
+
+static inline vec2 next_2d_n(sampler_state *st, uint32_t n) {
+  uint32_t n2 = n * n;
   uint32_t p = stratum(st, n2);
   uint32_t y = p / n, x = p - y * n;
   double jx = jitter(st);
@@ -109,17 +115,33 @@ static vec2 stratified_next_2d(sampler_state *st) {
   return v2(((double)x + jx) / (double)n, ((double)y + jy) / (double)n);
 }
 
+static vec2 stratified_next_2d(sampler_state *st) {
+  return next_2d_n(st, ceil_sqrt(st->spp ? st->spp : 1));
+}
+
 static void stratified_start_batch(const sampler *s, sampler_state *st, int n, uint64_t seed, const uint64_t *pixel,
                                    const uint32_t *sample_index, uint32_t spp) {
   sampler_seed_streams(s, st, n, seed, pixel, sample_index, spp);
 }
 
+/* The batches: ceil_sqrt(spp) once for each run of lanes with the same
+ * spp (a render's lanes all have the render's). */
 static void stratified_next_1d_batch(sampler_state *st, const int *idx, int n, double *out) {
-  for (int k = 0; k < n; k++) out[k] = stratified_next_1d(&st[idx ? idx[k] : k]);
+  uint32_t spp = 0, sq = 1;
+  for (int k = 0; k < n; k++) {
+    sampler_state *q = &st[idx ? idx[k] : k];
+    if (k == 0 || q->spp != spp) spp = q->spp, sq = ceil_sqrt(spp ? spp : 1);
+    out[k] = next_1d_n(q, sq);
+  }
 }
 
 static void stratified_next_2d_batch(sampler_state *st, const int *idx, int n, vec2 *out) {
-  for (int k = 0; k < n; k++) out[k] = stratified_next_2d(&st[idx ? idx[k] : k]);
+  uint32_t spp = 0, sq = 1;
+  for (int k = 0; k < n; k++) {
+    sampler_state *q = &st[idx ? idx[k] : k];
+    if (k == 0 || q->spp != spp) spp = q->spp, sq = ceil_sqrt(spp ? spp : 1);
+    out[k] = next_2d_n(q, sq);
+  }
 }
 
 static const sampler_ops stratified_ops = {
