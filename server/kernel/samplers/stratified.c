@@ -91,22 +91,16 @@ static void stratified_start(const sampler *s, sampler_state *st, uint64_t seed,
   sampler_seed_stream(s, st, seed, pixel, sample_index, spp);
 }
 
-/* next_1d and next_2d given n = ceil_sqrt(spp) (the batches compute it
- * once for a run of lanes with the same spp). */
-static inline double next_1d_n(sampler_state *st, uint32_t n) {
-  uint32_t n2 = n * n;
+static double stratified_next_1d(sampler_state *st) {
+  uint32_t n = ceil_sqrt(st->spp ? st->spp : 1), n2 = n * n;
   uint32_t p = stratum(st, n2);
   double j = jitter(st);
   st->dim++;
   return ((double)p + j) / (double)n2;
 }
 
-static double stratified_next_1d(sampler_state *st) {
-  return next_1d_n(st, ceil_sqrt(st->spp ? st->spp : 1));
-}
-
-static inline vec2 next_2d_n(sampler_state *st, uint32_t n) {
-  uint32_t n2 = n * n;
+static vec2 stratified_next_2d(sampler_state *st) {
+  uint32_t n = ceil_sqrt(st->spp ? st->spp : 1), n2 = n * n;
   uint32_t p = stratum(st, n2);
   uint32_t y = p / n, x = p - y * n;
   double jx = jitter(st);
@@ -115,32 +109,72 @@ static inline vec2 next_2d_n(sampler_state *st, uint32_t n) {
   return v2(((double)x + jx) / (double)n, ((double)y + jy) / (double)n);
 }
 
-static vec2 stratified_next_2d(sampler_state *st) {
-  return next_2d_n(st, ceil_sqrt(st->spp ? st->spp : 1));
-}
-
 static void stratified_start_batch(const sampler *s, sampler_state *st, int n, uint64_t seed, const uint64_t *pixel,
                                    const uint32_t *sample_index, uint32_t spp) {
   sampler_seed_streams(s, st, n, seed, pixel, sample_index, spp);
 }
 
-/* The batches: ceil_sqrt(spp) once for each run of lanes with the same
- * spp (a render's lanes all have the render's). */
+/* The batches: each lane's stratum by the vectorised permutation
+ * (stratified_permute_batch, bitwise permute()), C lanes at a time, then
+ * its jitter and dimension as next_1d()/next_2d() do; ceil_sqrt(spp) once
+ * per chunk (a render's lanes share its spp; a chunk whose lanes do not
+ * takes the per-lane path). */
+enum {
+  STRAT_C = 64
+};
+
+/* Strata of lanes q[0..m) in the current dimension; false when their spp
+ * differ (nothing written). */
+static bool strata_batch(sampler_state *const *q, int m, uint32_t *sq, uint32_t *p) {
+  uint32_t spp = q[0]->spp, in[STRAT_C], seed[STRAT_C];
+  for (int k = 1; k < m; k++)
+    if (q[k]->spp != spp) return false;
+  uint32_t n = ceil_sqrt(spp ? spp : 1), n2 = n * n;
+  for (int k = 0; k < m; k++) {
+    in[k] = q[k]->sample_index % n2;
+    seed[k] = dim_seed(q[k]);
+  }
+  stratified_permute_batch(m, in, n2, seed, p);
+  *sq = n;
+  return true;
+}
+
 static void stratified_next_1d_batch(sampler_state *st, const int *idx, int n, double *out) {
-  uint32_t spp = 0, sq = 1;
-  for (int k = 0; k < n; k++) {
-    sampler_state *q = &st[idx ? idx[k] : k];
-    if (k == 0 || q->spp != spp) spp = q->spp, sq = ceil_sqrt(spp ? spp : 1);
-    out[k] = next_1d_n(q, sq);
+  for (int k0 = 0; k0 < n; k0 += STRAT_C) {
+    int m = n - k0 < STRAT_C ? n - k0 : STRAT_C;
+    sampler_state *q[STRAT_C];
+    uint32_t p[STRAT_C], sq;
+    for (int k = 0; k < m; k++) q[k] = &st[idx ? idx[k0 + k] : k0 + k];
+    if (!strata_batch(q, m, &sq, p)) {
+      for (int k = 0; k < m; k++) out[k0 + k] = stratified_next_1d(q[k]);
+      continue;
+    }
+    uint32_t n2 = sq * sq;
+    for (int k = 0; k < m; k++) {
+      double j = jitter(q[k]);
+      q[k]->dim++;
+      out[k0 + k] = ((double)p[k] + j) / (double)n2;
+    }
   }
 }
 
 static void stratified_next_2d_batch(sampler_state *st, const int *idx, int n, vec2 *out) {
-  uint32_t spp = 0, sq = 1;
-  for (int k = 0; k < n; k++) {
-    sampler_state *q = &st[idx ? idx[k] : k];
-    if (k == 0 || q->spp != spp) spp = q->spp, sq = ceil_sqrt(spp ? spp : 1);
-    out[k] = next_2d_n(q, sq);
+  for (int k0 = 0; k0 < n; k0 += STRAT_C) {
+    int m = n - k0 < STRAT_C ? n - k0 : STRAT_C;
+    sampler_state *q[STRAT_C];
+    uint32_t p[STRAT_C], sq;
+    for (int k = 0; k < m; k++) q[k] = &st[idx ? idx[k0 + k] : k0 + k];
+    if (!strata_batch(q, m, &sq, p)) {
+      for (int k = 0; k < m; k++) out[k0 + k] = stratified_next_2d(q[k]);
+      continue;
+    }
+    for (int k = 0; k < m; k++) {
+      uint32_t y = p[k] / sq, x = p[k] - y * sq;
+      double jx = jitter(q[k]);
+      double jy = jitter(q[k]);
+      q[k]->dim++;
+      out[k0 + k] = v2(((double)x + jx) / (double)sq, ((double)y + jy) / (double)sq);
+    }
   }
 }
 
