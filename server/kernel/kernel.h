@@ -214,8 +214,8 @@ typedef struct emitter_ops {
   /* Optional: sample_direction() for n reference points (ref[i], u[i] ->
    * ds[i], value[i]) in one call (the wave's next-event estimation); each
    * lane bitwise its own sample_direction(). NULL: one call per lane. */
-  void (*sample_direction_batch)(const emitter *e, int n, const surface_interaction *const *ref, const vec2 *u,
-                                 direction_sample *ds, color *value);
+  void (*sample_direction_batch)(const emitter *e, int n, const surface_interaction *const *ref,
+                                 const vec2 *u, direction_sample *ds, color *value);
 } emitter_ops;
 struct emitter {
   object base;

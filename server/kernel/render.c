@@ -195,7 +195,8 @@ static void wave_start(job *jb, wave_buf *wb, int n) {
     wb->film_u[i] = v2(px / jb->W, py / jb->H);
   }
   if (!se->ops->sample_ray_batch)
-    for (int i = 0; i < n; i++) wb->ws[i].w = se->ops->sample_ray(se, wb->film_u[i], wb->aperture_u[i], &wb->ray[i]);
+    for (int i = 0; i < n; i++)
+      wb->ws[i].w = se->ops->sample_ray(se, wb->film_u[i], wb->aperture_u[i], &wb->ray[i]);
 }
 
 /* Trace and splat samples [0, n) of wb: the live ones (w != 0) go through

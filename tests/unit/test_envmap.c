@@ -205,7 +205,8 @@ static void test_sampling_chi2(void) {
     vec2 us[N];
     direction_sample dss[N];
     color vs[N];
-    for (int i = 0; i < N; i++) refs[i] = &c.ref, us[i] = v2(pcg32_next_double(&rng), pcg32_next_double(&rng));
+    for (int i = 0; i < N; i++)
+      refs[i] = &c.ref, us[i] = v2(pcg32_next_double(&rng), pcg32_next_double(&rng));
     c.e->ops->sample_direction_batch(c.e, N, refs, us, dss, vs);
     for (int i = 0; i < N; i++) {
       direction_sample ds;

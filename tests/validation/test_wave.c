@@ -223,15 +223,16 @@ static void test_stats_counters(void) {
 
 static const char *sampler_scene(const char *type) {
   static char buf[700];
-  snprintf(buf, sizeof buf,
-           "{\"type\": \"scene\","
-           " \"cam\": {\"type\": \"hdistant\", \"sampler\": {\"type\": \"%s\", \"sample_count\": 49},"
-           "   \"film\": {\"type\": \"hdrfilm\", \"width\": 10, \"height\": 6, \"rfilter\": {\"type\": \"box\"}}},"
-           " \"integrator\": {\"type\": \"path\", \"max_depth\": 4},"
-           " \"sky\": {\"type\": \"constant\", \"radiance\": 0.3},"
-           " \"sun\": {\"type\": \"directional\", \"direction\": [1, 0.5, -1]},"
-           " \"floor\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"roughconductor\", \"alpha\": 0.3}}}",
-           type);
+  snprintf(
+      buf, sizeof buf,
+      "{\"type\": \"scene\","
+      " \"cam\": {\"type\": \"hdistant\", \"sampler\": {\"type\": \"%s\", \"sample_count\": 49},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 10, \"height\": 6, \"rfilter\": {\"type\": \"box\"}}},"
+      " \"integrator\": {\"type\": \"path\", \"max_depth\": 4},"
+      " \"sky\": {\"type\": \"constant\", \"radiance\": 0.3},"
+      " \"sun\": {\"type\": \"directional\", \"direction\": [1, 0.5, -1]},"
+      " \"floor\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"roughconductor\", \"alpha\": 0.3}}}",
+      type);
   return buf;
 }
 
@@ -463,7 +464,8 @@ static void test_frames_batch(void) {
   pcg32 rng;
   pcg32_seed(&rng, 23, 9);
   for (int k = 0; k < N; k++) {
-    vec3 a = v3(2 * pcg32_next_double(&rng) - 1, 2 * pcg32_next_double(&rng) - 1, 2 * pcg32_next_double(&rng) - 1);
+    vec3 a =
+        v3(2 * pcg32_next_double(&rng) - 1, 2 * pcg32_next_double(&rng) - 1, 2 * pcg32_next_double(&rng) - 1);
     sn[k] = v3_norm(a);
     tg[k] = v3(3 * pcg32_next_double(&rng) - 1.5, pcg32_next_double(&rng), pcg32_next_double(&rng) - 0.5);
     d[k] = v3(pcg32_next_double(&rng) - 0.5, pcg32_next_double(&rng) - 0.5, -pcg32_next_double(&rng));
@@ -474,8 +476,8 @@ static void test_frames_batch(void) {
     if (k == 5) d[k] = v3(0, 0, 0);
     if (k == 9) raw[k] = v3(1e-200, 0, 0), def[k] = true;
     if (k == 13) sn[k] = v3(0, 0, -1);
-    const double v[SHAPE_FRAME_IN] = {sn[k].x,  sn[k].y,  sn[k].z,  tg[k].x,  tg[k].y, tg[k].z, d[k].x,
-                                      d[k].y,   d[k].z,   raw[k].x, raw[k].y, raw[k].z, def[k] ? 1 : 0};
+    const double v[SHAPE_FRAME_IN] = {sn[k].x, sn[k].y, sn[k].z,  tg[k].x,  tg[k].y,  tg[k].z,       d[k].x,
+                                      d[k].y,  d[k].z,  raw[k].x, raw[k].y, raw[k].z, def[k] ? 1 : 0};
     for (int c = 0; c < SHAPE_FRAME_IN; c++) in[c * S + k] = v[c];
   }
   for (int k = N; k < S; k++)
@@ -492,7 +494,8 @@ static void test_frames_batch(void) {
       }
       frame f = shape_frame_from_tangent(n, tg[k]);
       vec3 wi = frame_to_local(&f, v3_neg(v3_norm(d[k])));
-      const double want[12] = {f.s.x, f.s.y, f.s.z, f.t.x, f.t.y, f.t.z, f.n.x, f.n.y, f.n.z, wi.x, wi.y, wi.z};
+      const double want[12] = {f.s.x, f.s.y, f.s.z, f.t.x, f.t.y, f.t.z,
+                               f.n.x, f.n.y, f.n.z, wi.x,  wi.y,  wi.z};
       for (int c = 0; c < 12; c++) bad += memcmp(&want[c], &out[c * S + k], sizeof(double)) != 0;
     }
     CHECK(bad == 0, "%s: shape_frames_batch differs from the scalar fill in %d values",

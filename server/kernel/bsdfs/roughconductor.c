@@ -100,7 +100,8 @@ typedef struct rough_shared {
 
 static void rough_shared_at(const roughconductor_bsdf *r, const surface_interaction *si0, rough_shared *c) {
   color v;
-  c->distr = uniform_texture_value(r->alpha_u, &v) && (r->alpha_v == r->alpha_u || uniform_texture_value(r->alpha_v, &v));
+  c->distr = uniform_texture_value(r->alpha_u, &v) &&
+             (r->alpha_v == r->alpha_u || uniform_texture_value(r->alpha_v, &v));
   if (c->distr) c->d = distr_at(r, si0);
   c->ior = r->ior.material || (uniform_texture_value(r->ior.eta, &v) && uniform_texture_value(r->ior.k, &v));
   c->f_one = false;

@@ -13,8 +13,8 @@
 #include <time.h>
 
 #include "../accel.h"
-#include "../scene/loader.h"
 #include "../samplers/sampler_batch.h"
+#include "../scene/loader.h"
 #include "../scene/periodic.h"
 #include "../shapes/instance.h"
 #include "../shapes/shape.h"

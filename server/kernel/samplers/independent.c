@@ -24,8 +24,8 @@ static vec2 independent_next_2d(sampler_state *st) {
   return v2(x, y);
 }
 
-static void independent_start_batch(const sampler *s, sampler_state *st, int n, uint64_t seed, const uint64_t *pixel,
-                                    const uint32_t *sample_index, uint32_t spp) {
+static void independent_start_batch(const sampler *s, sampler_state *st, int n, uint64_t seed,
+                                    const uint64_t *pixel, const uint32_t *sample_index, uint32_t spp) {
   sampler_seed_streams(s, st, n, seed, pixel, sample_index, spp);
 }
 

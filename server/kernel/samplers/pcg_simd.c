@@ -57,7 +57,8 @@ typedef uint32_t vu32_p __attribute__((vector_size(4 * VW)));
 #define PCG_ATTR    static
 #include "pcg_lanes.h"
 
-void sampler_pcg_seed_batch(int n, const uint64_t *key, const uint32_t *index, uint64_t *state, uint64_t *inc) {
+void sampler_pcg_seed_batch(int n, const uint64_t *key, const uint32_t *index, uint64_t *state,
+                            uint64_t *inc) {
 #if defined(__x86_64__) || defined(__i386__)
   switch (rsw_isa_get()) {
   case RSW_ISA_AVX512: pcg_seed_avx512(n, key, index, state, inc); return;

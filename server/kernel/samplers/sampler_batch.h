@@ -25,7 +25,8 @@ static inline void sampler_next_1d_batch(const sampler *s, sampler_state *st, co
   for (int k = 0; k < n; k++) out[k] = s->ops->next_1d(&st[idx ? idx[k] : k]);
 }
 
-static inline void sampler_next_2d_batch(const sampler *s, sampler_state *st, const int *idx, int n, vec2 *out) {
+static inline void sampler_next_2d_batch(const sampler *s, sampler_state *st, const int *idx, int n,
+                                         vec2 *out) {
   if (s->ops->next_2d_batch) {
     s->ops->next_2d_batch(st, idx, n, out);
     return;

@@ -23,8 +23,8 @@ static inline uint64_t sampler_pixel_key(uint64_t seed, uint64_t pixel) {
 
 /* sampler_seed_stream given the pixel's key (sampler_pixel_key(seed +
  * s->seed, pixel)), which the samples of one pixel share. */
-static inline void sampler_seed_stream_key(const sampler *s, sampler_state *st, uint64_t key, uint32_t sample_index,
-                                           uint32_t spp) {
+static inline void sampler_seed_stream_key(const sampler *s, sampler_state *st, uint64_t key,
+                                           uint32_t sample_index, uint32_t spp) {
   st->s = s;
   st->pixel_key = key;
   st->sample_index = sample_index;
@@ -42,7 +42,8 @@ static inline void sampler_seed_stream(const sampler *s, sampler_state *st, uint
 /* For n lanes (pcg_simd.c, vectorised at the render's ISA; bitwise the
  * scalar code): the PCG32 state and increment that sampler_seed_stream_key
  * gives pixel key key[k] and sample index[k]. */
-void sampler_pcg_seed_batch(int n, const uint64_t *key, const uint32_t *index, uint64_t *state, uint64_t *inc);
+void sampler_pcg_seed_batch(int n, const uint64_t *key, const uint32_t *index, uint64_t *state,
+                            uint64_t *inc);
 
 /* out[k] = the stratified sampler's permute(in[k], l, seed[k]) (Kensler's
  * hash permutation of [0, l), samplers/stratified.c) for k < n, l >= 1;

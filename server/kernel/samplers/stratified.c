@@ -109,8 +109,8 @@ static vec2 stratified_next_2d(sampler_state *st) {
   return v2(((double)x + jx) / (double)n, ((double)y + jy) / (double)n);
 }
 
-static void stratified_start_batch(const sampler *s, sampler_state *st, int n, uint64_t seed, const uint64_t *pixel,
-                                   const uint32_t *sample_index, uint32_t spp) {
+static void stratified_start_batch(const sampler *s, sampler_state *st, int n, uint64_t seed,
+                                   const uint64_t *pixel, const uint32_t *sample_index, uint32_t spp) {
   sampler_seed_streams(s, st, n, seed, pixel, sample_index, spp);
 }
 

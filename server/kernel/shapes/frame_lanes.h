@@ -13,7 +13,8 @@
 FRAME_ATTR void FRAME_FN(int n, int stride, const double *in, double *out) {
   for (int k0 = 0; k0 < n; k0 += VW) {
     VD v[SHAPE_FRAME_IN];
-    for (int c = 0; c < SHAPE_FRAME_IN; c++) __builtin_memcpy(&v[c], &in[(size_t)c * stride + k0], sizeof v[c]);
+    for (int c = 0; c < SHAPE_FRAME_IN; c++)
+      __builtin_memcpy(&v[c], &in[(size_t)c * stride + k0], sizeof v[c]);
     VD nx = v[0], ny = v[1], nz = v[2], tx = v[3], ty = v[4], tz = v[5], dx = v[6], dy = v[7], dz = v[8];
     const VD zero = (VD){0}, one = zero + 1.0;
     /* A deferred shading normal: v3_norm(raw), or the fallback (nx, ny,

@@ -400,8 +400,8 @@ void instance_bbox(const shape *sh, vec3 *lo, vec3 *hi) {
 
 /* hit_fill_interaction but for si's shading frame and wi, which
  * shape_fill_begin leaves to *sn and *tangent unless it returns true. */
-static bool hit_fill_begin(const scene *sc, const ray3 *r, const accel_hit *h, surface_interaction *si, vec3 *sn,
-                           vec3 *tangent, vec3 *sn_raw, bool *sn_raw_set) {
+static bool hit_fill_begin(const scene *sc, const ray3 *r, const accel_hit *h, surface_interaction *si,
+                           vec3 *sn, vec3 *tangent, vec3 *sn_raw, bool *sn_raw_set) {
   const shape *top = sc->shapes[h->shape];
   if (!shape_is_instancing(top)) {
     bool done = shape_fill_begin(top, &top->to_world, r, h, si, sn, tangent, sn_raw, sn_raw_set);

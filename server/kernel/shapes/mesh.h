@@ -29,9 +29,10 @@ static inline vec3 mesh_face_dpdu(const xform *to_world, vec3 dp0, vec3 dp1, dou
  * shading normal is left unnormalised (*sn_raw_set true; *sn_out is then
  * n) for the caller to finish as this code does: sn = v3_norm(*sn_raw),
  * n where !(v3_len2(sn) > 0.5). */
-static inline void mesh_fill_inline_raw(const shape *s, const xform *to_world, const ray3 *r, const accel_hit *h,
-                                        surface_interaction *si, vec3 *n_out, vec3 *sn_out, vec3 *dpdu,
-                                        const double *fc, vec3 *sn_raw, bool *sn_raw_set) {
+static inline void mesh_fill_inline_raw(const shape *s, const xform *to_world, const ray3 *r,
+                                        const accel_hit *h, surface_interaction *si, vec3 *n_out,
+                                        vec3 *sn_out, vec3 *dpdu, const double *fc, vec3 *sn_raw,
+                                        bool *sn_raw_set) {
   const mesh *m = &s->mesh;
   vec3 n, sn;
   if (!m->uv && (!m->nrm || s->face_normals)) {
