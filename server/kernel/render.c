@@ -81,7 +81,10 @@ typedef struct job {
   pthread_cond_t idle; /* active dropped to 0 (the caller waits on it) */
 } job;
 
-static void splat(const job *jb, tile_buf *tb, double px, double py, color v, const double *quv) {
+static void splat_filter(const job *jb, tile_buf *tb, double px, double py, color v, const double *quv);
+
+/* The box filter inline (every sample of most renders), others out of line. */
+static inline void splat(const job *jb, tile_buf *tb, double px, double py, color v, const double *quv) {
   int S = jb->stride;
   if (jb->box) {
     int ix = (int)px, iy = (int)py;
@@ -109,6 +112,11 @@ static void splat(const job *jb, tile_buf *tb, double px, double py, color v, co
     if (jb->stokes) a[4] += quv[0], a[5] += quv[1], a[6] += quv[2];
     return;
   }
+  splat_filter(jb, tb, px, py, v, quv);
+}
+
+static void splat_filter(const job *jb, tile_buf *tb, double px, double py, color v, const double *quv) {
+  int S = jb->stride;
   const rfilter *f = jb->fm->filter;
   double r = f->radius;
   int xlo = (int)ceil(px - r - 0.5), xhi = (int)floor(px + r - 0.5);
