@@ -73,7 +73,7 @@ static trace_result intersect(const scene *sc, const ray3 *r, surface_interactio
 /* Pick an emitter proportionally to sampling_weight; returns its index and
  * the selection probability. The search is written for conditional moves
  * (which way a random number goes is unpredictable). */
-static size_t pick_emitter(const scene *sc, double u, double *prob) {
+static size_t pick_emitter_index(const scene *sc, double u) {
   double t = u * sc->emitter_weight_sum;
   size_t lo = 0, hi = sc->n_emitters - 1;
   while (lo < hi) {
@@ -82,8 +82,11 @@ static size_t pick_emitter(const scene *sc, double u, double *prob) {
     lo = right ? mid + 1 : lo;
     hi = right ? hi : mid;
   }
-  *prob = sc->emitters[lo]->sampling_weight / sc->emitter_weight_sum;
   return lo;
+}
+
+static double pick_probability(const scene *sc, size_t k) {
+  return sc->emitters[k]->sampling_weight / sc->emitter_weight_sum;
 }
 
 static double emitter_prob(const scene *sc, const emitter *e) {
@@ -311,7 +314,7 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, int
   const sampler *smp = st[g[0]].s;
   sampler_next_1d_batch(smp, st, g, n, d1);
   sampler_next_2d_batch(smp, st, g, n, d2);
-  for (int k = 0; k < n; k++) ek[k] = (int)pick_emitter(sc, d1[k], &ln[g[k]].pe);
+  for (int k = 0; k < n; k++) ek[k] = (int)pick_emitter_index(sc, d1[k]);
   /* The lanes grouped by emitter (a counting sort, in lane order within
    * each emitter) for one batched call per emitter and chunk; a lane's
    * sample does not depend on its group. Scenes with many emitters sample
@@ -319,6 +322,7 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, int
   if (sc->n_emitters > EMITTER_GROUPS) {
     for (int k = 0; k < n; k++) {
       lane *l = &ln[g[k]];
+      l->pe = pick_probability(sc, (size_t)ek[k]);
       l->ne = sc->emitters[ek[k]];
       l->value = l->ne->ops->sample_direction(l->ne, &l->si, d2[k], &l->ds);
     }
@@ -331,6 +335,7 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, int
     for (int k = 0; k < n; k++) ord[fill[ek[k]]++] = k;
     for (size_t e_i = 0; e_i < sc->n_emitters; e_i++) {
       const emitter *e = sc->emitters[e_i];
+      double pe = pick_probability(sc, e_i); /* every lane's own quotient */
       for (int j0 = start[e_i]; j0 < start[e_i + 1]; j0 += C) {
         int m = start[e_i + 1] - j0 < C ? start[e_i + 1] - j0 : C;
         const surface_interaction *ref[C];
@@ -347,6 +352,7 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, int
           for (int j = 0; j < m; j++) val[j] = e->ops->sample_direction(e, ref[j], u[j], &ds[j]);
         for (int j = 0; j < m; j++) {
           lane *l = &ln[g[ord[j0 + j]]];
+          l->pe = pe;
           l->ne = e;
           l->ds = ds[j];
           l->value = val[j];
