@@ -999,7 +999,17 @@ static void record_rays(const struct RTCRay *const *rays, unsigned k, unsigned w
  * World distance t = *t0 + (Embree's t) * *ts. False when the ray cannot
  * meet the geometry or is not finite: nothing invalid reaches Embree.
  * Rays within the sphere with ordinary directions are passed unchanged. */
-static bool fill_ray(const accel *a, struct RTCRay *ray, const ray3 *r, double *t0, double *ts) {
+enum {
+  F_ORG = 0,
+  F_TNEAR = 3,
+  F_DIR = 4,
+  F_TFAR = 7
+};
+/* fill_ray's values as 8 floats: org xyz, tnear, dir xyz, tfar. Inline, so
+ * a packet's lanes are filled in one loop straight into Embree's SOA
+ * layout (packet_load). */
+static inline __attribute__((always_inline)) bool fill_ray_f(const accel *a, const ray3 *r, float f[8],
+                                                             double *t0, double *ts) {
   vec3 d = r->d, oc = v3_sub(r->o, a->origin);
   double tmin = r->tmin, tmax = r->tmax;
   *t0 = 0, *ts = 1;
@@ -1007,8 +1017,12 @@ static bool fill_ray(const accel *a, struct RTCRay *ray, const ray3 *r, double *
    * len2 is finite and positive exactly when v3_len is. */
   double len2 = v3_dot(d, d);
   if (!v3_finite(oc) || !(len2 > 0) || !isfinite(len2) || isnan(tmin) || !(tmax >= tmin)) return false;
-  tmin = fmax(tmin, 0.0); /* Embree's segment starts at the origin or later */
-  if (len2 > ACCEL_MAX_DIR * ACCEL_MAX_DIR || len2 < 1.0 / (ACCEL_MAX_DIR * ACCEL_MAX_DIR)) {
+  /* Embree's segment starts at the origin or later: fmax(tmin, 0) as libm
+   * computes it (a NaN gives 0), inline (a libm call per ray cost 5% of a
+   * render's instructions). */
+  tmin = tmin > 0.0 ? tmin : 0.0;
+  if (__builtin_expect(len2 > ACCEL_MAX_DIR * ACCEL_MAX_DIR || len2 < 1.0 / (ACCEL_MAX_DIR * ACCEL_MAX_DIR),
+                       0)) {
     double len = sqrt(len2);
     d = v3_scale(d, 1.0 / len);
     tmin *= len, tmax *= len; /* in units of the unit direction */
@@ -1023,18 +1037,32 @@ static bool fill_ray(const accel *a, struct RTCRay *ray, const ray3 *r, double *
     double t_in = q / (-b + sqrt(disc));      /* = (-b - sqrt(disc)) / dd, stably */
     if (!(t_in < tmax)) return false;
     oc = v3_fma(oc, t_in, d);
-    tmin = fmax(tmin - t_in, 0.0);
+    tmin = tmin - t_in > 0.0 ? tmin - t_in : 0.0;
     tmax -= t_in;
     *t0 = t_in * *ts;
   }
-  ray->org_x = (float)oc.x;
-  ray->org_y = (float)oc.y;
-  ray->org_z = (float)oc.z;
-  ray->dir_x = (float)d.x;
-  ray->dir_y = (float)d.y;
-  ray->dir_z = (float)d.z;
-  ray->tnear = (float)tmin;
-  ray->tfar = tmax >= 3.0e38 ? INFINITY : (float)tmax;
+  f[F_ORG] = (float)oc.x;
+  f[F_ORG + 1] = (float)oc.y;
+  f[F_ORG + 2] = (float)oc.z;
+  f[F_TNEAR] = (float)tmin;
+  f[F_DIR] = (float)d.x;
+  f[F_DIR + 1] = (float)d.y;
+  f[F_DIR + 2] = (float)d.z;
+  f[F_TFAR] = tmax >= 3.0e38 ? INFINITY : (float)tmax;
+  return true;
+}
+
+static bool fill_ray(const accel *a, struct RTCRay *ray, const ray3 *r, double *t0, double *ts) {
+  float f[8];
+  if (!fill_ray_f(a, r, f, t0, ts)) return false;
+  ray->org_x = f[F_ORG];
+  ray->org_y = f[F_ORG + 1];
+  ray->org_z = f[F_ORG + 2];
+  ray->dir_x = f[F_DIR];
+  ray->dir_y = f[F_DIR + 1];
+  ray->dir_z = f[F_DIR + 2];
+  ray->tnear = f[F_TNEAR];
+  ray->tfar = f[F_TFAR];
   ray->time = 0;
   ray->mask = 0xFFFFFFFFu;
   ray->id = 0;
@@ -1128,45 +1156,30 @@ typedef struct packet_buf {
   _Alignas(64) float f[(RAY_FIELDS + HIT_INST + 1) * 16];
   _Alignas(64) int valid[16];
   double t0[16], ts[16];
-  struct RTCRay rec[16]; /* the lanes' rays, for accel_record_begin's log */
 } packet_buf;
 
+/* The valid lanes of a filled packet into accel_record_begin's log. */
 static void packet_record(const packet_buf *pb, unsigned N, int n, bool occluded) {
   if (!atomic_load_explicit(&g_rec, memory_order_relaxed)) return;
+  struct RTCRay rays[16];
   const struct RTCRay *rp[16];
   unsigned k = 0;
-  for (int i = 0; i < n; i++)
-    if (pb->valid[i]) rp[k++] = &pb->rec[i];
-  record_rays(rp, k, N, occluded);
-}
-
-/* Fill lane i of an N-wide packet from r (fill_ray's rules); false leaves
- * the lane invalid. */
-static bool packet_fill(const accel *a, packet_buf *pb, unsigned N, unsigned i, const ray3 *r) {
-  struct RTCRay ray;
-  if (!fill_ray(a, &ray, r, &pb->t0[i], &pb->ts[i])) {
-    pb->valid[i] = 0;
-    return false;
+  const float *p = pb->f;
+  for (int i = 0; i < n; i++) {
+    if (!pb->valid[i]) continue;
+    struct RTCRay *ray = &rays[k];
+    ray->org_x = RAYN_F(p, N, RAY_ORG, i);
+    ray->org_y = RAYN_F(p, N, RAY_ORG + 1, i);
+    ray->org_z = RAYN_F(p, N, RAY_ORG + 2, i);
+    ray->tnear = RAYN_F(p, N, RAY_TNEAR, i);
+    ray->dir_x = RAYN_F(p, N, RAY_DIR, i);
+    ray->dir_y = RAYN_F(p, N, RAY_DIR + 1, i);
+    ray->dir_z = RAYN_F(p, N, RAY_DIR + 2, i);
+    ray->tfar = RAYN_F(p, N, RAY_TFAR, i);
+    rp[k] = ray;
+    k++;
   }
-  if (atomic_load_explicit(&g_rec, memory_order_relaxed)) pb->rec[i] = ray;
-  float *p = pb->f;
-  RAYN_F(p, N, RAY_ORG, i) = ray.org_x;
-  RAYN_F(p, N, RAY_ORG + 1, i) = ray.org_y;
-  RAYN_F(p, N, RAY_ORG + 2, i) = ray.org_z;
-  RAYN_F(p, N, RAY_TNEAR, i) = ray.tnear;
-  RAYN_F(p, N, RAY_DIR, i) = ray.dir_x;
-  RAYN_F(p, N, RAY_DIR + 1, i) = ray.dir_y;
-  RAYN_F(p, N, RAY_DIR + 2, i) = ray.dir_z;
-  RAYN_F(p, N, 7, i) = 0; /* time */
-  RAYN_F(p, N, RAY_TFAR, i) = ray.tfar;
-  ((unsigned *)p)[9 * N + i] = 0xFFFFFFFFu; /* mask */
-  ((unsigned *)p)[10 * N + i] = i;          /* id */
-  ((unsigned *)p)[11 * N + i] = 0;          /* flags */
-  float *hit = p + (size_t)RAY_FIELDS * N;
-  HITN_U(hit, N, HIT_GEOM, i) = RTC_INVALID_GEOMETRY_ID;
-  HITN_U(hit, N, HIT_INST, i) = RTC_INVALID_GEOMETRY_ID;
-  pb->valid[i] = -1;
-  return true;
+  record_rays(rp, k, N, occluded);
 }
 
 static unsigned packet_n(int n) {
@@ -1174,15 +1187,35 @@ static unsigned packet_n(int n) {
   return n <= 4 && w >= 4 ? 4u : n <= 8 && w >= 8 ? 8u : (unsigned)w;
 }
 
-/* Lanes [0, n) of an N-wide packet from r (the rest invalid); false when
- * no lane holds a ray Embree can trace. */
+/* Lanes [0, n) of an N-wide packet from r (fill_ray's rules; the rest,
+ * and rays fill_ray refuses, invalid); false when no lane holds a ray
+ * Embree can trace. The lanes are written straight into the SOA layout. */
 static bool packet_load(const accel *a, packet_buf *pb, unsigned N, const ray3 *const *r, int n) {
-  bool any = false;
+  float *p = pb->f;
+  float *hit = p + (size_t)RAY_FIELDS * N;
   for (unsigned i = 0; i < N; i++) {
-    if ((int)i < n)
-      any |= packet_fill(a, pb, N, i, r[i]);
-    else
-      pb->valid[i] = 0;
+    RAYN_F(p, N, 7, i) = 0;                   /* time */
+    ((unsigned *)p)[9 * N + i] = 0xFFFFFFFFu; /* mask */
+    ((unsigned *)p)[10 * N + i] = i;          /* id */
+    ((unsigned *)p)[11 * N + i] = 0;          /* flags */
+    HITN_U(hit, N, HIT_GEOM, i) = RTC_INVALID_GEOMETRY_ID;
+    HITN_U(hit, N, HIT_INST, i) = RTC_INVALID_GEOMETRY_ID;
+    pb->valid[i] = 0;
+  }
+  bool any = false;
+  for (int i = 0; i < n; i++) {
+    float f[8];
+    if (!fill_ray_f(a, r[i], f, &pb->t0[i], &pb->ts[i])) continue;
+    RAYN_F(p, N, RAY_ORG, i) = f[F_ORG];
+    RAYN_F(p, N, RAY_ORG + 1, i) = f[F_ORG + 1];
+    RAYN_F(p, N, RAY_ORG + 2, i) = f[F_ORG + 2];
+    RAYN_F(p, N, RAY_TNEAR, i) = f[F_TNEAR];
+    RAYN_F(p, N, RAY_DIR, i) = f[F_DIR];
+    RAYN_F(p, N, RAY_DIR + 1, i) = f[F_DIR + 1];
+    RAYN_F(p, N, RAY_DIR + 2, i) = f[F_DIR + 2];
+    RAYN_F(p, N, RAY_TFAR, i) = f[F_TFAR];
+    pb->valid[i] = -1;
+    any = true;
   }
   return any;
 }

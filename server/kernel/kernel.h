@@ -215,6 +215,11 @@ typedef struct emitter_ops {
   /* Optional (infinite emitters): the Q, U, V Stokes components of the
    * radiance arriving along ray direction d (I is what eval returns). */
   void (*eval_polarization)(const emitter *e, vec3 d, double quv[3]);
+  /* Optional: sample_direction() for n reference points (ref[i], u[i] ->
+   * ds[i], value[i]) in one call (the wave's next-event estimation); each
+   * lane bitwise its own sample_direction(). NULL: one call per lane. */
+  void (*sample_direction_batch)(const emitter *e, int n, const surface_interaction *const *ref,
+                                 const vec2 *u, direction_sample *ds, color *value);
 } emitter_ops;
 struct emitter {
   object base;
@@ -299,6 +304,16 @@ typedef struct sampler_ops {
   /* spp actually used for a requested count (stratified rounds to a
    * square). */
   uint32_t (*adjust_spp)(const sampler *s, uint32_t spp);
+  /* Optional batched forms for a wave (samplers/sampler_batch.h calls
+   * them, or loops over the ops above when NULL): start() for samples
+   * st[0..n) (pixel[i], sample_index[i]); next_1d() and next_2d() for
+   * the lanes st[idx[k]] (idx NULL: st[k]), k < n, into out[k]. Each
+   * lane's numbers are exactly those of its own per-lane calls in the
+   * same order (determinism: nothing depends on n or the neighbours). */
+  void (*start_batch)(const sampler *s, sampler_state *st, int n, uint64_t seed, const uint64_t *pixel,
+                      const uint32_t *sample_index, uint32_t spp);
+  void (*next_1d_batch)(sampler_state *st, const int *idx, int n, double *out);
+  void (*next_2d_batch)(sampler_state *st, const int *idx, int n, vec2 *out);
 } sampler_ops;
 struct sampler {
   object base;
@@ -529,11 +544,13 @@ typedef struct shape {
   bool cdf_staged;
   unsigned index; /* position in scene->shapes */
   /* Meshes of at most SHAPE_FACE_CACHE_MAX faces (shapes/shape.h): per
-   * face, the world geometric normal and world dp/du under to_world, 6
+   * face, the world geometric normal and world dp/du under to_world, and
+   * (face_cache_frames) the hit's shading frame, SHAPE_FACE_DOUBLES
    * doubles, as a hit's surface data computes them (the same bits);
    * refreshed by shape_finalize and parameters_changed. NULL otherwise. */
   double *face_cache;
   uint32_t face_cache_n;
+  bool face_cache_frames;
 } shape;
 
 /* ---- the scene ----------------------------------------------------------- */

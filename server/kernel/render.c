@@ -26,6 +26,7 @@
 
 #include "accel.h"
 #include "core/isa.h"
+#include "samplers/sampler_batch.h"
 #include "scene/scene.h"
 
 #define TILE 8
@@ -80,7 +81,10 @@ typedef struct job {
   pthread_cond_t idle; /* active dropped to 0 (the caller waits on it) */
 } job;
 
-static void splat(const job *jb, tile_buf *tb, double px, double py, color v, const double *quv) {
+static void splat_filter(const job *jb, tile_buf *tb, double px, double py, color v, const double *quv);
+
+/* The box filter inline (every sample of most renders), others out of line. */
+static inline void splat(const job *jb, tile_buf *tb, double px, double py, color v, const double *quv) {
   int S = jb->stride;
   if (jb->box) {
     int ix = (int)px, iy = (int)py;
@@ -108,6 +112,11 @@ static void splat(const job *jb, tile_buf *tb, double px, double py, color v, co
     if (jb->stokes) a[4] += quv[0], a[5] += quv[1], a[6] += quv[2];
     return;
   }
+  splat_filter(jb, tb, px, py, v, quv);
+}
+
+static void splat_filter(const job *jb, tile_buf *tb, double px, double py, color v, const double *quv) {
+  int S = jb->stride;
   const rfilter *f = jb->fm->filter;
   double r = f->radius;
   int xlo = (int)ceil(px - r - 0.5), xhi = (int)floor(px + r - 0.5);
@@ -116,11 +125,19 @@ static void splat(const job *jb, tile_buf *tb, double px, double py, color v, co
   if (ylo < tb->y0) ylo = tb->y0;
   if (xhi > tb->x0 + tb->w - 1) xhi = tb->x0 + tb->w - 1;
   if (yhi > tb->y0 + tb->h - 1) yhi = tb->y0 + tb->h - 1;
+  /* The filter's column weights once (the same values for every row). */
+  enum {
+    FX_MAX = 64
+  };
+  double fxs[FX_MAX];
+  bool cached = xhi - xlo < FX_MAX;
+  if (cached)
+    for (int x = xlo; x <= xhi; x++) fxs[x - xlo] = f->eval(f, px - (x + 0.5));
   for (int y = ylo; y <= yhi; y++) {
     double fy = f->eval(f, py - (y + 0.5));
     if (fy == 0) continue;
     for (int x = xlo; x <= xhi; x++) {
-      double wgt = fy * f->eval(f, px - (x + 0.5));
+      double wgt = fy * (cached ? fxs[x - xlo] : f->eval(f, px - (x + 0.5)));
       if (wgt == 0) continue;
       double *a = &tb->acc[(size_t)S * ((size_t)(y - tb->y0) * tb->w + (x - tb->x0))];
       a[0] += wgt * v.c[0], a[1] += wgt * v.c[1], a[2] += wgt * v.c[2], a[3] += wgt;
@@ -161,9 +178,34 @@ typedef struct wave_buf {
   color L[WAVE];
   double quv[3 * WAVE];
   int live[WAVE];
-  vec2 film_u[WAVE], aperture_u[WAVE]; /* sensors with sample_ray_batch: the rays are made at the flush */
+  vec2 film_u[WAVE], aperture_u[WAVE];
   double w[WAVE];
+  /* Which sample each slot takes (render_tile), for wave_start. */
+  uint64_t pixel[WAVE];
+  uint32_t index[WAVE];
+  int ix[WAVE], iy[WAVE];
 } wave_buf;
+
+/* Samples [0, n) of wb begin: their sampler streams, film jitter and
+ * aperture draws, together (samplers/sampler_batch.h: each sample's
+ * numbers are those of its own per-sample calls), then film positions and
+ * camera rays (the sensor's batched op where it has one). */
+static void wave_start(job *jb, wave_buf *wb, int n) {
+  const sampler *smp = jb->se->sampler;
+  const sensor *se = jb->se;
+  sampler_start_batch(smp, wb->st, n, jb->opts->seed, wb->pixel, wb->index, jb->spp);
+  sampler_next_2d_batch(smp, wb->st, NULL, n, wb->film_u);
+  sampler_next_2d_batch(smp, wb->st, NULL, n, wb->aperture_u);
+  for (int i = 0; i < n; i++) {
+    double px = wb->ix[i] + wb->film_u[i].x, py = wb->iy[i] + wb->film_u[i].y;
+    wb->ws[i].px = px;
+    wb->ws[i].py = py;
+    wb->film_u[i] = v2(px / jb->W, py / jb->H);
+  }
+  if (!se->ops->sample_ray_batch)
+    for (int i = 0; i < n; i++)
+      wb->ws[i].w = se->ops->sample_ray(se, wb->film_u[i], wb->aperture_u[i], &wb->ray[i]);
+}
 
 /* Trace and splat samples [0, n) of wb: the live ones (w != 0) go through
  * the integrator together; every sample is splatted in order, so the tile's
@@ -205,8 +247,9 @@ static bool wave_flush(job *jb, tile_buf *tb, wave_buf *wb, int n, render_stats 
       v = col_scale(wb->L[k], s->w);
       if (jb->stokes)
         for (int c = 0; c < 3; c++) q[c] = wb->quv[3 * k + c] * s->w;
-      if (!isfinite(v.c[0]) || !isfinite(v.c[1]) || !isfinite(v.c[2]) || !isfinite(q[0]) || !isfinite(q[1]) ||
-          !isfinite(q[2])) {
+      /* All six finite, without a branch each: x * 0 is +-0 for a finite
+       * x and NaN for an infinite or NaN one. */
+      if (!(v.c[0] * 0.0 + v.c[1] * 0.0 + v.c[2] * 0.0 + q[0] * 0.0 + q[1] * 0.0 + q[2] * 0.0 == 0.0)) {
         (*invalid)++;
         v = col1(0);
         q[0] = q[1] = q[2] = 0;
@@ -242,7 +285,6 @@ static tile_buf *render_tile(job *jb, size_t t, render_stats *rs, uint64_t *samp
     free(wb);
     return NULL;
   }
-  const sampler *smp = jb->se->sampler;
   /* Samples are taken pixel by pixel, sample by sample, WAVE at a time
    * (a wave may span pixels). Cancellation and deadlines are honoured
    * before each wave, so a film of a few pixels with a huge spp stops
@@ -253,19 +295,12 @@ static tile_buf *render_tile(job *jb, size_t t, render_stats *rs, uint64_t *samp
       uint64_t pixel = (uint64_t)iy * (uint64_t)jb->W + (uint64_t)ix;
       for (uint32_t s = 0; s < jb->spp; s++) {
         if (n == 0 && job_should_stop(jb)) goto out;
-        sampler_state *st = &wb->st[n];
-        smp->ops->start(smp, st, jb->opts->seed, pixel, s, jb->spp);
-        vec2 j = smp->ops->next_2d(st);
-        double px = ix + j.x, py = iy + j.y;
-        vec2 film_u = v2(px / jb->W, py / jb->H);
-        vec2 ap = smp->ops->next_2d(st);
-        wb->ws[n].px = px;
-        wb->ws[n].py = py;
-        if (jb->se->ops->sample_ray_batch)
-          wb->film_u[n] = film_u, wb->aperture_u[n] = ap;
-        else
-          wb->ws[n].w = jb->se->ops->sample_ray(jb->se, film_u, ap, &wb->ray[n]);
+        wb->pixel[n] = pixel;
+        wb->index[n] = s;
+        wb->ix[n] = ix;
+        wb->iy[n] = iy;
         if (++n == WAVE) {
+          wave_start(jb, wb, n);
           if (!wave_flush(jb, tb, wb, n, rs, invalid)) goto fail;
           *samples += (uint64_t)n;
           n = 0;
@@ -274,6 +309,7 @@ static tile_buf *render_tile(job *jb, size_t t, render_stats *rs, uint64_t *samp
     }
   }
   if (n) {
+    wave_start(jb, wb, n);
     if (!wave_flush(jb, tb, wb, n, rs, invalid)) goto fail;
     *samples += (uint64_t)n;
   }

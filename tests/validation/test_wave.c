@@ -11,11 +11,24 @@
  *    single rays) renders the same film statistically (means within 3
  *    standard errors) and nearly every pixel bitwise;
  *  - the --stats counters: camera rays = samples with a ray, tracing time
- *    within the thread time. */
+ *    within the thread time;
+ *  - the wave's batched ops give each lane bitwise what its per-lane call
+ *    gives, at every ISA the CPU has: the samplers' start/next_1d/next_2d
+ *    batches (independent, stratified; any subset and order of lanes), the
+ *    emitters' sample_direction_batch (directional, constant, area), the
+ *    hits' shading frames (shape_frames_batch, edge cases included); the
+ *    batched draws pass a chi-square test of uniformity, the constant
+ *    emitter's batched directions one against its pdf_direction (the area
+ *    emitter's: tests/unit/test_area_light.c);
+ *    a stratified film is bitwise the same for 1, 2 and 3 threads. */
 #include <stdlib.h>
 #include <string.h>
 
 #include "../../server/kernel/accel.h"
+#include "../../server/kernel/core/isa.h"
+#include "../../server/kernel/samplers/sampler_batch.h"
+#include "../../server/kernel/shapes/shape.h"
+#include "../support/chi2.h"
 #include "../support/test.h"
 #include "../support/tsup.h"
 
@@ -206,11 +219,301 @@ static void test_stats_counters(void) {
   scene_free(s);
 }
 
+/* ---- the wave's batched ops, lane by lane ------------------------------------ */
+
+static const char *sampler_scene(const char *type) {
+  static char buf[700];
+  snprintf(
+      buf, sizeof buf,
+      "{\"type\": \"scene\","
+      " \"cam\": {\"type\": \"hdistant\", \"sampler\": {\"type\": \"%s\", \"sample_count\": 49},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 10, \"height\": 6, \"rfilter\": {\"type\": \"box\"}}},"
+      " \"integrator\": {\"type\": \"path\", \"max_depth\": 4},"
+      " \"sky\": {\"type\": \"constant\", \"radiance\": 0.3},"
+      " \"sun\": {\"type\": \"directional\", \"direction\": [1, 0.5, -1]},"
+      " \"floor\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"roughconductor\", \"alpha\": 0.3}}}",
+      type);
+  return buf;
+}
+
+static bool same_state(const sampler_state *a, const sampler_state *b) {
+  return a->s == b->s && a->rng.state == b->rng.state && a->rng.inc == b->rng.inc &&
+         a->pixel_key == b->pixel_key && a->sample_index == b->sample_index && a->spp == b->spp &&
+         a->dim == b->dim;
+}
+
+/* start_batch, then batched draws over changing subsets of lanes in
+ * changing orders, against the per-lane ops. */
+static void check_sampler_batches(const sampler *smp, const char *what) {
+  enum {
+    N = 77
+  };
+  sampler_state a[N], b[N];
+  uint64_t pixel[N];
+  uint32_t index[N];
+  for (int k = 0; k < N; k++) pixel[k] = 1000 + (uint64_t)(k / 9), index[k] = (uint32_t)(k * 5 % 49);
+  sampler_start_batch(smp, a, N, 3, pixel, index, 49);
+  for (int k = 0; k < N; k++) smp->ops->start(smp, &b[k], 3, pixel[k], index[k], 49);
+  int bad = 0;
+  for (int k = 0; k < N; k++) bad += !same_state(&a[k], &b[k]);
+  CHECK(bad == 0, "%s: start_batch differs in %d of %d lanes", what, bad, N);
+  int idx[N];
+  double d1[N];
+  vec2 d2[N];
+  for (int round = 0; round < 12; round++) {
+    int n = 0; /* a subset, in a scrambled order */
+    for (int k = 0; k < N; k++) {
+      int i = (k * 31 + round * 7) % N;
+      if ((i + round) % 3 != 0) idx[n++] = i;
+    }
+    const int *use = round % 4 == 0 ? NULL : idx;
+    int m = use ? n : N;
+    bool two = round % 2 == 1;
+    if (two)
+      sampler_next_2d_batch(smp, a, use, m, d2);
+    else
+      sampler_next_1d_batch(smp, a, use, m, d1);
+    for (int k = 0; k < m; k++) {
+      sampler_state *q = &b[use ? use[k] : k];
+      if (two) {
+        vec2 v = smp->ops->next_2d(q);
+        bad += memcmp(&v, &d2[k], sizeof v) != 0;
+      } else {
+        double v = smp->ops->next_1d(q);
+        bad += memcmp(&v, &d1[k], sizeof v) != 0;
+      }
+    }
+  }
+  for (int k = 0; k < N; k++) bad += !same_state(&a[k], &b[k]);
+  CHECK(bad == 0, "%s: batched draws differ from per-lane draws (%d mismatches)", what, bad);
+}
+
+static void test_sampler_batches(void) {
+  static const char *types[] = {"independent", "stratified"};
+  for (size_t t = 0; t < 2; t++) {
+    scene *s = tsup_load(sampler_scene(types[t]), NULL);
+    REQUIRE(s, "%s scene", types[t]);
+    const sampler *smp = s->sensors[0]->sampler;
+    CHECK(smp->ops->start_batch && smp->ops->next_1d_batch && smp->ops->next_2d_batch, "%s has batch ops",
+          types[t]);
+    for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
+      if (!rsw_isa_set((rsw_isa)isa)) continue;
+      char what[64];
+      snprintf(what, sizeof what, "%s at %s", types[t], rsw_isa_name((rsw_isa)isa));
+      check_sampler_batches(smp, what);
+    }
+    rsw_isa_set(rsw_isa_best());
+    if (t == 1) check_threads(s, 49, "stratified sampler");
+    scene_free(s);
+  }
+}
+
+/* The batched draws of the independent sampler are uniform on [0,1)^2:
+ * 16 x 16 cells, 2^18 draws (many samples of a few pixels, each sample
+ * drawing a few numbers), Pearson's chi-square with 255 degrees of
+ * freedom at significance 0.01. */
+static void test_sampler_batch_chi2(void) {
+  scene *s = tsup_load(sampler_scene("independent"), NULL);
+  REQUIRE(s, "scene");
+  const sampler *smp = s->sensors[0]->sampler;
+  enum {
+    B = 16,
+    N = 256,
+    ROUNDS = 256
+  };
+  static double count[B * B];
+  memset(count, 0, sizeof count);
+  sampler_state st[N];
+  uint64_t pixel[N];
+  uint32_t index[N];
+  vec2 u[N];
+  double total = 0;
+  for (int r = 0; r < ROUNDS; r++) {
+    for (int k = 0; k < N; k++) pixel[k] = (uint64_t)r, index[k] = (uint32_t)k;
+    sampler_start_batch(smp, st, N, 5, pixel, index, N);
+    for (int j = 0; j < 4; j++) {
+      sampler_next_2d_batch(smp, st, NULL, N, u);
+      for (int k = 0; k < N; k++) {
+        int cx = (int)(u[k].x * B), cy = (int)(u[k].y * B);
+        CHECK(cx >= 0 && cx < B && cy >= 0 && cy < B, "draw outside [0,1)^2: %g %g", u[k].x, u[k].y);
+        if (cx >= 0 && cx < B && cy >= 0 && cy < B) count[cy * B + cx]++, total++;
+      }
+    }
+  }
+  double expect = total / (B * B), x2 = 0;
+  for (int c = 0; c < B * B; c++) x2 += (count[c] - expect) * (count[c] - expect) / expect;
+  double p = 1.0 - chi2_gamma_p(0.5 * (B * B - 1), 0.5 * x2);
+  printf("  batched draws: chi2 %.1f (255 dof), p = %.3f\n", x2, p);
+  CHECK(p > 0.01, "batched independent draws are not uniform: chi2 %.1f, p %.4f", x2, p);
+  scene_free(s);
+}
+
+static bool same_ds(const direction_sample *a, const direction_sample *b) {
+  return memcmp(&a->p, &b->p, sizeof a->p) == 0 && memcmp(&a->n, &b->n, sizeof a->n) == 0 &&
+         memcmp(&a->d, &b->d, sizeof a->d) == 0 && memcmp(&a->dist, &b->dist, sizeof a->dist) == 0 &&
+         memcmp(&a->pdf, &b->pdf, sizeof a->pdf) == 0 && a->delta == b->delta;
+}
+
+/* Every emitter of MIXED with a batched op: lanes at random reference
+ * points, batched against per-lane sample_direction(). */
+static void test_emitter_batches(void) {
+  scene *s = tsup_load(MIXED, NULL);
+  REQUIRE(s, "scene");
+  film_image warm;
+  REQUIRE(tsup_render(s, 1, 1, 1, &warm), "prepare");
+  film_image_free(&warm);
+  enum {
+    N = 70
+  };
+  surface_interaction si[N];
+  const surface_interaction *ref[N];
+  vec2 u[N];
+  pcg32 rng;
+  pcg32_seed(&rng, 17, 5);
+  memset(si, 0, sizeof si);
+  for (int k = 0; k < N; k++) {
+    si[k].p = v3(4 * pcg32_next_double(&rng) - 2, 4 * pcg32_next_double(&rng) - 2, pcg32_next_double(&rng));
+    si[k].ng = si[k].sh.n = v3(0, 0, 1);
+    ref[k] = &si[k];
+    u[k] = v2(pcg32_next_double(&rng), pcg32_next_double(&rng));
+  }
+  int tested = 0;
+  for (size_t e_i = 0; e_i < s->n_emitters; e_i++) {
+    const emitter *e = s->emitters[e_i];
+    if (!e->ops->sample_direction_batch) continue;
+    direction_sample ds[N], one;
+    color v[N];
+    e->ops->sample_direction_batch(e, N, ref, u, ds, v);
+    int bad = 0;
+    for (int k = 0; k < N; k++) {
+      memset(&one, 0, sizeof one);
+      color w = e->ops->sample_direction(e, ref[k], u[k], &one);
+      bad += memcmp(&w, &v[k], sizeof w) != 0 || (ds[k].pdf > 0 && !same_ds(&one, &ds[k]));
+    }
+    CHECK(bad == 0, "emitter %s: batched samples differ in %d of %d lanes", e->base.plugin->name, bad, N);
+    tested++;
+  }
+  CHECK(tested == 3, "directional, constant and area have batched ops (%d tested)", tested);
+  scene_free(s);
+}
+
+/* chi2 of an emitter's batched direction sampling from a fixed point. */
+typedef struct emitter_chi2 {
+  const emitter *e;
+  surface_interaction ref;
+} emitter_chi2;
+
+static bool emitter_chi2_sample(void *user, const double *u, vec3 *out, double *weight) {
+  emitter_chi2 *c = user;
+  const surface_interaction *ref = &c->ref;
+  vec2 uu = v2(u[0], u[1]);
+  direction_sample ds;
+  color v;
+  c->e->ops->sample_direction_batch(c->e, 1, &ref, &uu, &ds, &v);
+  if (!(ds.pdf > 0)) return false;
+  *out = ds.d;
+  *weight = 1;
+  return true;
+}
+
+/* The constant emitter's density: uniform on the sphere. */
+static double emitter_chi2_pdf(void *user, vec3 d) {
+  emitter_chi2 *c = user;
+  direction_sample ds = {.d = d, .dist = INFINITY};
+  return c->e->ops->pdf_direction(c->e, &c->ref, &ds);
+}
+
+static void test_emitter_batch_chi2(void) {
+  scene *s = tsup_load(MIXED, NULL);
+  REQUIRE(s, "scene");
+  film_image warm;
+  REQUIRE(tsup_render(s, 1, 1, 1, &warm), "prepare");
+  film_image_free(&warm);
+  int tested = 0;
+  for (size_t e_i = 0; e_i < s->n_emitters; e_i++) {
+    const emitter *e = s->emitters[e_i];
+    /* The area light's batched op is tested against its density in
+     * tests/unit/test_area_light.c. */
+    if (!e->ops->sample_direction_batch || !(e->flags & EMITTER_INFINITE)) continue;
+    emitter_chi2 c = {.e = e};
+    c.ref.p = v3(-0.95, 0.05, 1.85);
+    c.ref.ng = c.ref.sh.n = v3(0, 0, 1);
+    chi2_config cfg = chi2_defaults(CHI2_SPHERE, 2);
+    cfg.sample_count = 1000000;
+    chi2_result r = chi2_run(&cfg, emitter_chi2_sample, emitter_chi2_pdf, &c);
+    printf("  %s batched directions: chi2 p = %.3f%s%s\n", e->base.plugin->name, r.p_value,
+           r.passed ? "" : ": ", r.passed ? "" : r.reason);
+    CHECK(r.passed, "%s batched direction sampling fails chi-square: %s", e->base.plugin->name, r.reason);
+    tested++;
+  }
+  CHECK(tested == 1, "constant tested (%d)", tested);
+  scene_free(s);
+}
+
+/* shape_frames_batch against shape_frame_from_tangent and the scalar wi,
+ * lane by lane, with the edge cases: no tangent, a tangent along the
+ * normal, a zero direction, deferred normals (one too short to keep). */
+static void test_frames_batch(void) {
+  enum {
+    N = 61,
+    S = 64
+  };
+  static double in[SHAPE_FRAME_IN * S], out[12 * S];
+  vec3 sn[N], tg[N], d[N], raw[N];
+  bool def[N];
+  pcg32 rng;
+  pcg32_seed(&rng, 23, 9);
+  for (int k = 0; k < N; k++) {
+    vec3 a =
+        v3(2 * pcg32_next_double(&rng) - 1, 2 * pcg32_next_double(&rng) - 1, 2 * pcg32_next_double(&rng) - 1);
+    sn[k] = v3_norm(a);
+    tg[k] = v3(3 * pcg32_next_double(&rng) - 1.5, pcg32_next_double(&rng), pcg32_next_double(&rng) - 0.5);
+    d[k] = v3(pcg32_next_double(&rng) - 0.5, pcg32_next_double(&rng) - 0.5, -pcg32_next_double(&rng));
+    raw[k] = v3_scale(v3(pcg32_next_double(&rng), pcg32_next_double(&rng) - 0.5, 1), 0.3 + k % 3);
+    def[k] = k % 4 == 1;
+    if (k % 7 == 0) tg[k] = v3(0, 0, 0);
+    if (k % 7 == 3) tg[k] = v3_scale(sn[k], 2.5);
+    if (k == 5) d[k] = v3(0, 0, 0);
+    if (k == 9) raw[k] = v3(1e-200, 0, 0), def[k] = true;
+    if (k == 13) sn[k] = v3(0, 0, -1);
+    const double v[SHAPE_FRAME_IN] = {sn[k].x, sn[k].y, sn[k].z,  tg[k].x,  tg[k].y,  tg[k].z,       d[k].x,
+                                      d[k].y,  d[k].z,  raw[k].x, raw[k].y, raw[k].z, def[k] ? 1 : 0};
+    for (int c = 0; c < SHAPE_FRAME_IN; c++) in[c * S + k] = v[c];
+  }
+  for (int k = N; k < S; k++)
+    for (int c = 0; c < SHAPE_FRAME_IN; c++) in[c * S + k] = 0;
+  for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
+    if (!rsw_isa_set((rsw_isa)isa)) continue;
+    shape_frames_batch(N, S, in, out);
+    int bad = 0;
+    for (int k = 0; k < N; k++) {
+      vec3 n = sn[k];
+      if (def[k]) { /* as mesh_fill_inline makes an interpolated normal */
+        vec3 q = v3_norm(raw[k]);
+        if (v3_len2(q) > 0.5) n = q;
+      }
+      frame f = shape_frame_from_tangent(n, tg[k]);
+      vec3 wi = frame_to_local(&f, v3_neg(v3_norm(d[k])));
+      const double want[12] = {f.s.x, f.s.y, f.s.z, f.t.x, f.t.y, f.t.z,
+                               f.n.x, f.n.y, f.n.z, wi.x,  wi.y,  wi.z};
+      for (int c = 0; c < 12; c++) bad += memcmp(&want[c], &out[c * S + k], sizeof(double)) != 0;
+    }
+    CHECK(bad == 0, "%s: shape_frames_batch differs from the scalar fill in %d values",
+          rsw_isa_name((rsw_isa)isa), bad);
+  }
+  rsw_isa_set(rsw_isa_best());
+}
+
 int main(void) {
   RSW_TEST_RUN(test_threads_cornell);
   RSW_TEST_RUN(test_threads_periodic);
   RSW_TEST_RUN(test_batch_independent);
   RSW_TEST_RUN(test_packet_widths);
   RSW_TEST_RUN(test_stats_counters);
+  RSW_TEST_RUN(test_sampler_batches);
+  RSW_TEST_RUN(test_sampler_batch_chi2);
+  RSW_TEST_RUN(test_emitter_batches);
+  RSW_TEST_RUN(test_emitter_batch_chi2);
+  RSW_TEST_RUN(test_frames_batch);
   RSW_TEST_END("test_wave");
 }

@@ -33,6 +33,7 @@
 #include "../scene/loader.h"
 #include "../scene/params.h"
 #include "../simd/simd.h"
+#include "../textures/texture.h"
 #include "bsdfs_internal.h"
 #include "fresnel.h"
 
@@ -85,6 +86,49 @@ static color rough_finish(const roughconductor_bsdf *r, const mf_distr *d, const
   return col_mul(col_scale(f, weight), bsdf_factor(r->specular_reflectance, si));
 }
 
+/* What every lane of a batch shares when the textures involved are
+ * uniform (a uniform texture's eval ignores si, so one evaluation gives
+ * each lane's own bits): the distribution, the conductor's indices with
+ * whether Fresnel is 1 (`material: none`, eta 0 and k 1:
+ * fresnel_conductor_col returns col1(1) there whatever the angle), and the
+ * specular factor. si0: any lane's interaction. */
+typedef struct rough_shared {
+  bool distr, ior, f_one, factor;
+  mf_distr d;
+  color eta, k, fac;
+} rough_shared;
+
+static void rough_shared_at(const roughconductor_bsdf *r, const surface_interaction *si0, rough_shared *c) {
+  color v;
+  c->distr = uniform_texture_value(r->alpha_u, &v) &&
+             (r->alpha_v == r->alpha_u || uniform_texture_value(r->alpha_v, &v));
+  if (c->distr) c->d = distr_at(r, si0);
+  c->ior = r->ior.material || (uniform_texture_value(r->ior.eta, &v) && uniform_texture_value(r->ior.k, &v));
+  c->f_one = false;
+  if (c->ior) {
+    conductor_ior_eval(&r->ior, si0, &c->eta, &c->k);
+    c->f_one = c->eta.c[0] == 0.0 && c->eta.c[1] == 0.0 && c->eta.c[2] == 0.0 && c->k.c[0] == 1.0 &&
+               c->k.c[1] == 1.0 && c->k.c[2] == 1.0;
+  }
+  c->factor = !r->specular_reflectance || uniform_texture_value(r->specular_reflectance, &v);
+  if (c->factor) c->fac = bsdf_factor(r->specular_reflectance, si0);
+}
+
+/* Fresnel at cos_i times the specular factor, for lane si: the shared
+ * values where there are some, else the per-lane evaluations. */
+static inline color rough_fresnel_factor(const roughconductor_bsdf *r, const rough_shared *c,
+                                         const surface_interaction *si, double cos_i, double value) {
+  color f;
+  if (c->f_one) {
+    f = col1(1.0);
+  } else {
+    color eta = c->eta, k = c->k;
+    if (!c->ior) conductor_ior_eval(&r->ior, si, &eta, &k);
+    f = fresnel_conductor_col(cos_i, eta, k);
+  }
+  return col_mul(col_scale(f, value), c->factor ? c->fac : bsdf_factor(r->specular_reflectance, si));
+}
+
 /* Batched sampling (bsdf_ops.sample_batch): the visible-normal samples of
  * up to 64 lanes at a time, with their pdf and weight (without Fresnel),
  * by the per-ISA single-precision kernels (simd/microfacet_lanes.h: for
@@ -103,6 +147,8 @@ static void rough_sample_batch(const bsdf *b, int n, const surface_interaction *
     C = 64
   };
   rsw_isa isa = rsw_isa_get();
+  rough_shared sh;
+  if (n > 0) rough_shared_at(r, si[0], &sh);
   for (int i0 = 0; i0 < n; i0 += C) {
     int m = n - i0 < C ? n - i0 : C;
     float in[7][C], out[6][C];
@@ -113,7 +159,7 @@ static void rough_sample_batch(const bsdf *b, int n, const surface_interaction *
         weight[i0 + j] = bsdf_fail(&bs[i0 + j]);
         continue;
       }
-      mf_distr d = distr_at(r, s);
+      mf_distr d = sh.distr ? sh.d : distr_at(r, s);
       in[0][k] = (float)s->wi.x, in[1][k] = (float)s->wi.y, in[2][k] = (float)s->wi.z;
       in[3][k] = (float)d.alpha_u, in[4][k] = (float)d.alpha_v;
       in[5][k] = (float)u2[i0 + j].x, in[6][k] = (float)u2[i0 + j].y;
@@ -132,10 +178,7 @@ static void rough_sample_batch(const bsdf *b, int n, const surface_interaction *
       bs[i].pdf = out[3][j];
       bs[i].eta = 1.0;
       bs[i].sampled_type = BSDF_GLOSSY_REFLECTION;
-      color eta, kk;
-      conductor_ior_eval(&r->ior, si[i], &eta, &kk);
-      color f = fresnel_conductor_col(out[5][j], eta, kk);
-      weight[i] = col_mul(col_scale(f, out[4][j]), bsdf_factor(r->specular_reflectance, si[i]));
+      weight[i] = rough_fresnel_factor(r, &sh, si[i], out[5][j], out[4][j]);
     }
   }
 }
@@ -177,6 +220,8 @@ static void rough_eval_pdf_batch(const bsdf *b, int n, const surface_interaction
     C = 64
   };
   rsw_isa isa = rsw_isa_get();
+  rough_shared sh;
+  if (n > 0) rough_shared_at(r, si[0], &sh);
   for (int i0 = 0; i0 < n; i0 += C) {
     int m = n - i0 < C ? n - i0 : C;
     float in[8][C], out[3][C];
@@ -187,7 +232,7 @@ static void rough_eval_pdf_batch(const bsdf *b, int n, const surface_interaction
       f[i0 + j] = col1(0.0);
       pdf[i0 + j] = 0.0;
       if (!(s->wi.z > 0.0) || !(o.z > 0.0)) continue;
-      mf_distr d = distr_at(r, s);
+      mf_distr d = sh.distr ? sh.d : distr_at(r, s);
       in[0][k] = (float)s->wi.x, in[1][k] = (float)s->wi.y, in[2][k] = (float)s->wi.z;
       in[3][k] = (float)o.x, in[4][k] = (float)o.y, in[5][k] = (float)o.z;
       in[6][k] = (float)d.alpha_u, in[7][k] = (float)d.alpha_v;
@@ -200,10 +245,7 @@ static void rough_eval_pdf_batch(const bsdf *b, int n, const surface_interaction
       int i = lane[j];
       pdf[i] = out[1][j];
       if (!(out[0][j] > 0.0f)) continue;
-      color eta, kk;
-      conductor_ior_eval(&r->ior, si[i], &eta, &kk);
-      color fr = fresnel_conductor_col(out[2][j], eta, kk);
-      f[i] = col_mul(col_scale(fr, out[0][j]), bsdf_factor(r->specular_reflectance, si[i]));
+      f[i] = rough_fresnel_factor(r, &sh, si[i], out[2][j], out[0][j]);
     }
   }
 }

@@ -39,6 +39,28 @@ static color dir_sample(const emitter *e, const surface_interaction *ref, vec2 u
   return tex_eval(dl->irradiance, ref);
 }
 
+/* The lanes' distances first (their square roots overlap), then the
+ * samples; the irradiance is uniform (dir_create refuses a texture that
+ * varies), so it is evaluated once: the value every lane's call gives. */
+static void dir_sample_batch(const emitter *e, int n, const surface_interaction *const *ref, const vec2 *u,
+                             direction_sample *ds, color *value) {
+  const directional *dl = (const directional *)e;
+  (void)u;
+  if (n <= 0) return;
+  color v = tex_eval(dl->irradiance, ref[0]);
+  vec3 d = v3_neg(dl->d);
+  for (int k = 0; k < n; k++) {
+    double far = 2.0 * fmax(dl->radius, v3_len(v3_sub(ref[k]->p, dl->center)));
+    ds[k].d = d;
+    ds[k].dist = INFINITY;
+    ds[k].p = v3_fma(ref[k]->p, far, d);
+    ds[k].n = dl->d;
+    ds[k].pdf = 1.0;
+    ds[k].delta = true;
+    value[k] = v;
+  }
+}
+
 static double dir_pdf(const emitter *e, const surface_interaction *ref, const direction_sample *ds) {
   (void)e, (void)ref, (void)ds;
   return 0.0; /* a delta distribution is never hit by chance */
@@ -55,8 +77,11 @@ static void dir_set_scene(emitter *e, const scene *s) {
   dl->radius = s->bsphere_radius;
 }
 
-static const emitter_ops directional_ops = {
-    .sample_direction = dir_sample, .pdf_direction = dir_pdf, .eval = dir_eval, .set_scene = dir_set_scene};
+static const emitter_ops directional_ops = {.sample_direction = dir_sample,
+                                            .pdf_direction = dir_pdf,
+                                            .eval = dir_eval,
+                                            .set_scene = dir_set_scene,
+                                            .sample_direction_batch = dir_sample_batch};
 
 static void dir_destroy(object *o) {
   free(o);

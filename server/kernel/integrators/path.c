@@ -13,6 +13,7 @@
 #include <time.h>
 
 #include "../accel.h"
+#include "../samplers/sampler_batch.h"
 #include "../scene/loader.h"
 #include "../scene/periodic.h"
 #include "../shapes/instance.h"
@@ -70,19 +71,22 @@ static trace_result intersect(const scene *sc, const ray3 *r, surface_interactio
 }
 
 /* Pick an emitter proportionally to sampling_weight; returns its index and
- * the selection probability. */
-static size_t pick_emitter(const scene *sc, double u, double *prob) {
+ * the selection probability. The search is written for conditional moves
+ * (which way a random number goes is unpredictable). */
+static size_t pick_emitter_index(const scene *sc, double u) {
   double t = u * sc->emitter_weight_sum;
   size_t lo = 0, hi = sc->n_emitters - 1;
   while (lo < hi) {
     size_t mid = (lo + hi) / 2;
-    if (sc->emitter_cdf[mid] <= t)
-      lo = mid + 1;
-    else
-      hi = mid;
+    bool right = sc->emitter_cdf[mid] <= t;
+    lo = right ? mid + 1 : lo;
+    hi = right ? hi : mid;
   }
-  *prob = sc->emitters[lo]->sampling_weight / sc->emitter_weight_sum;
   return lo;
+}
+
+static double pick_probability(const scene *sc, size_t k) {
+  return sc->emitters[k]->sampling_weight / sc->emitter_weight_sum;
 }
 
 static double emitter_prob(const scene *sc, const emitter *e) {
@@ -196,11 +200,25 @@ static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_
   }
   if (timed) stats->trace_s += clock_s() - t0;
   stats->rays += (uint64_t)n;
+  /* The hits' surface data together (their frames vectorised). */
+  enum {
+    C = 64
+  };
+  const ray3 *rr[C];
+  const accel_hit *hh[C];
+  surface_interaction *ss[C];
+  int m = 0;
   for (int k = 0; k < n; k++) {
     lane *l = &ln[idx[k]];
     l->wrapped = false;
-    if (l->hit == TRACE_HIT) hit_fill_interaction(sc, &l->ray, &l->h, &l->si);
+    if (l->hit != TRACE_HIT) continue;
+    rr[m] = &l->ray, hh[m] = &l->h, ss[m] = &l->si;
+    if (++m == C) {
+      hit_fill_interaction_batch(sc, m, rr, hh, ss);
+      m = 0;
+    }
   }
+  if (m) hit_fill_interaction_batch(sc, m, rr, hh, ss);
 }
 
 /* Trace the shadow rays of lanes idx[0..n) (each has nee set). */
@@ -233,11 +251,10 @@ static void wave_occluded(const scene *sc, lane *ln, const int *idx, int n, rend
   if (timed) stats->trace_s += clock_s() - t0;
 }
 
-/* Emission seen by lane l's ray, and the first half of its vertex: the
- * light sample and its shadow ray (l->nee). False: the path ends here. */
-static bool shade_emit_and_light(const integrator *it, const scene *sc, sampler_state *st, lane *l,
-                                 double *quv) {
-  const sampler_ops *sops = st->s->ops;
+/* Emission seen by lane l's ray; l->nee: the vertex takes a light sample
+ * (its random numbers and the sample itself come from wave_light_samples,
+ * for the lanes together). False: the path ends here. */
+static bool shade_emit(const integrator *it, const scene *sc, lane *l, double *quv) {
   l->nee = false;
   /* Emission seen by this ray (area light or the environment). */
   bool visible_emitter = !(it->hide_emitters && l->depth == 0);
@@ -274,13 +291,79 @@ static bool shade_emit_and_light(const integrator *it, const scene *sc, sampler_
     }
   }
   if (!(it->max_depth < 0 || l->depth + 1 < it->max_depth)) return false;
-  const bsdf *b = si->shape->bsdf;
-
   /* Next-event estimation towards one emitter. */
-  if ((b->flags & BSDF_SMOOTH) && sc->n_emitters > 0) {
-    size_t k = pick_emitter(sc, sops->next_1d(st), &l->pe);
-    const emitter *e = sc->emitters[k];
-    l->value = e->ops->sample_direction(e, si, sops->next_2d(st), &l->ds);
+  l->nee = (si->shape->bsdf->flags & BSDF_SMOOTH) && sc->n_emitters > 0;
+  return true;
+}
+
+/* Next-event estimation for lanes g[0..n) (each has nee set): the light
+ * pick and light sample numbers of every lane (in the one-path order:
+ * pick, then sample), then the samples grouped by emitter
+ * (emitter_ops.sample_direction_batch where the emitter has it), then the
+ * shadow rays. A lane whose sample counts zero drops its nee; the lanes
+ * that keep it are left in g[0..*n_sh), in order. d1, d2, ek, ord: n
+ * entries of scratch each. */
+#define EMITTER_GROUPS 64
+static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, int *g, int n, int *n_sh,
+                               double *d1, vec2 *d2, int *ek, int *ord) {
+  enum {
+    C = 64
+  };
+  *n_sh = 0;
+  if (n == 0) return;
+  const sampler *smp = st[g[0]].s;
+  sampler_next_1d_batch(smp, st, g, n, d1);
+  sampler_next_2d_batch(smp, st, g, n, d2);
+  for (int k = 0; k < n; k++) ek[k] = (int)pick_emitter_index(sc, d1[k]);
+  /* The lanes grouped by emitter (a counting sort, in lane order within
+   * each emitter) for one batched call per emitter and chunk; a lane's
+   * sample does not depend on its group. Scenes with many emitters sample
+   * lane by lane. */
+  if (sc->n_emitters > EMITTER_GROUPS) {
+    for (int k = 0; k < n; k++) {
+      lane *l = &ln[g[k]];
+      l->pe = pick_probability(sc, (size_t)ek[k]);
+      l->ne = sc->emitters[ek[k]];
+      l->value = l->ne->ops->sample_direction(l->ne, &l->si, d2[k], &l->ds);
+    }
+  } else {
+    int start[EMITTER_GROUPS + 1] = {0};
+    for (int k = 0; k < n; k++) start[ek[k] + 1]++;
+    for (size_t e_i = 0; e_i < sc->n_emitters; e_i++) start[e_i + 1] += start[e_i];
+    int fill[EMITTER_GROUPS];
+    for (size_t e_i = 0; e_i < sc->n_emitters; e_i++) fill[e_i] = start[e_i];
+    for (int k = 0; k < n; k++) ord[fill[ek[k]]++] = k;
+    for (size_t e_i = 0; e_i < sc->n_emitters; e_i++) {
+      const emitter *e = sc->emitters[e_i];
+      double pe = pick_probability(sc, e_i); /* every lane's own quotient */
+      for (int j0 = start[e_i]; j0 < start[e_i + 1]; j0 += C) {
+        int m = start[e_i + 1] - j0 < C ? start[e_i + 1] - j0 : C;
+        const surface_interaction *ref[C];
+        vec2 u[C];
+        direction_sample ds[C];
+        color val[C];
+        for (int j = 0; j < m; j++) {
+          ref[j] = &ln[g[ord[j0 + j]]].si;
+          u[j] = d2[ord[j0 + j]];
+        }
+        if (e->ops->sample_direction_batch)
+          e->ops->sample_direction_batch(e, m, ref, u, ds, val);
+        else
+          for (int j = 0; j < m; j++) val[j] = e->ops->sample_direction(e, ref[j], u[j], &ds[j]);
+        for (int j = 0; j < m; j++) {
+          lane *l = &ln[g[ord[j0 + j]]];
+          l->pe = pe;
+          l->ne = e;
+          l->ds = ds[j];
+          l->value = val[j];
+        }
+      }
+    }
+  }
+  for (int k = 0; k < n; k++) {
+    lane *l = &ln[g[k]];
+    const emitter *e = l->ne;
+    l->nee = false;
     /* Under `periodic`, the part of a surface emitter outside the column
      * is not in the scene (scene/periodic.h): a light sample there counts
      * zero. The in-column part keeps its density 1/area, which is what
@@ -288,12 +371,11 @@ static bool shade_emit_and_light(const integrator *it, const scene *sc, sampler_
      * walls are reached by BSDF sampling alone (weight 1). */
     if (sc->periodic.on && (e->flags & EMITTER_SURFACE) && !in_column(&sc->periodic, l->ds.p)) l->ds.pdf = 0;
     if (l->ds.pdf > 0 && !col_is_black(l->value)) {
-      l->ne = e;
-      l->sray = spawn_ray_to(sc, si, e, &l->ds);
+      l->sray = spawn_ray_to(sc, &l->si, e, &l->ds);
       l->nee = true;
+      g[(*n_sh)++] = g[k];
     }
   }
-  return true;
 }
 
 /* Lanes g[0..*left) wait for a batched BSDF call: move up to `cap` of
@@ -356,11 +438,10 @@ static void wave_eval_bsdfs(lane *ln, const int *idx, int n, int *g) {
 
 /* The second half of lane l's vertex, first part: the light sample's
  * contribution if its shadow ray was clear (its BSDF value and pdf from
- * wave_eval_bsdfs), then the BSDF sample's random numbers (drawn here, in
- * the one-path order; the sample itself is taken by wave_sample_bsdfs for
- * the lanes together). */
-static void shade_light(sampler_state *st, lane *l, double *quv) {
-  const sampler_ops *sops = st->s->ops;
+ * wave_eval_bsdfs). The BSDF sample's random numbers are drawn next, for
+ * the lanes together (wave_run), in the one-path order; the sample itself
+ * is taken by wave_sample_bsdfs. */
+static void shade_light(lane *l, double *quv) {
   if (l->nee && l->occ == TRACE_MISS) {
     const direction_sample *ds = &l->ds;
     const emitter *e = l->ne;
@@ -372,8 +453,6 @@ static void shade_light(sampler_state *st, lane *l, double *quv) {
         add_polarization(quv, e, ds->d, l->T.c[0] * f.c[0] * w / (l->pe * ds->pdf));
     }
   }
-  l->u1 = sops->next_1d(st);
-  l->u2 = sops->next_2d(st);
 }
 
 /* BSDF samples of the lanes idx[0..n): lanes whose BSDF has a batched
@@ -439,9 +518,20 @@ static bool shade_continue(const integrator *it, sampler_state *st, lane *l) {
   return col_max(l->T) > 0;
 }
 
-/* Run the wave over n lanes (ln, with idx and sh of n entries as scratch). */
+/* Scratch for a wave of n lanes: the lanes, two index lists and the
+ * batched draws. */
+typedef struct wave_scratch {
+  lane *ln;
+  int *idx, *sh, *ek, *ord;
+  double *d1;
+  vec2 *d2;
+} wave_scratch;
+
+/* Run the wave over n lanes. */
 static void wave_run(const integrator *it, const scene *sc, sampler_state *st, const ray3 *rays, int n,
-                     render_stats *stats, color *L, double *quv, lane *ln, int *idx, int *sh) {
+                     render_stats *stats, color *L, double *quv, const wave_scratch *ws) {
+  lane *ln = ws->ln;
+  int *idx = ws->idx, *sh = ws->sh;
   if (quv)
     for (int i = 0; i < 3 * n; i++) quv[i] = 0;
   for (int i = 0; i < n; i++) {
@@ -459,22 +549,33 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
   int live = it->max_depth == 0 ? 0 : n;
   bool timed = n > 1; /* Li's one-path waves are not timed (two clock reads per query) */
   bool camera = true;
+  const sampler *smp = n > 0 ? st[0].s : NULL;
   while (live > 0) {
     wave_trace(sc, ln, idx, live, stats, camera, timed);
     camera = false;
-    int next = 0, n_sh = 0;
+    int next = 0, n_nee = 0, n_sh = 0;
     for (int k = 0; k < live; k++) {
       int i = idx[k];
-      if (!shade_emit_and_light(it, sc, &st[i], &ln[i], quv ? &quv[3 * i] : NULL)) continue;
+      if (!shade_emit(it, sc, &ln[i], quv ? &quv[3 * i] : NULL)) continue;
       idx[next++] = i;
-      if (ln[i].nee) sh[n_sh++] = i;
+      if (ln[i].nee) sh[n_nee++] = i;
     }
-    if (n_sh) wave_occluded(sc, ln, sh, n_sh, stats, timed);
     live = next;
+    wave_light_samples(sc, st, ln, sh, n_nee, &n_sh, ws->d1, ws->d2, ws->ek, ws->ord);
+    if (n_sh) wave_occluded(sc, ln, sh, n_sh, stats, timed);
     wave_eval_bsdfs(ln, idx, live, sh);
     for (int k = 0; k < live; k++) {
       int i = idx[k];
-      shade_light(&st[i], &ln[i], quv ? &quv[3 * i] : NULL);
+      shade_light(&ln[i], quv ? &quv[3 * i] : NULL);
+    }
+    /* The BSDF samples' numbers, lobe then direction, for every lane. */
+    if (live) {
+      sampler_next_1d_batch(smp, st, idx, live, ws->d1);
+      sampler_next_2d_batch(smp, st, idx, live, ws->d2);
+      for (int k = 0; k < live; k++) {
+        ln[idx[k]].u1 = ws->d1[k];
+        ln[idx[k]].u2 = ws->d2[k];
+      }
     }
     wave_sample_bsdfs(ln, idx, live, sh);
     next = 0;
@@ -490,26 +591,34 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
 static bool path_Li_batch(const integrator *it, const scene *sc, sampler_state *st, const ray3 *rays, int n,
                           render_stats *stats, color *L, double *quv) {
   if (n <= 0) return true;
-  lane *ln = malloc((size_t)n * sizeof *ln);
-  int *idx = malloc(2 * (size_t)n * sizeof *idx);
-  if (!ln || !idx) {
-    free(ln);
-    free(idx);
-    return false;
+  wave_scratch ws = {.ln = malloc((size_t)n * sizeof *ws.ln),
+                     .idx = malloc(4 * (size_t)n * sizeof *ws.idx),
+                     .d1 = malloc((size_t)n * sizeof *ws.d1),
+                     .d2 = malloc((size_t)n * sizeof *ws.d2)};
+  bool ok = ws.ln && ws.idx && ws.d1 && ws.d2;
+  if (ok) {
+    ws.sh = ws.idx + n;
+    ws.ek = ws.idx + 2 * (size_t)n;
+    ws.ord = ws.idx + 3 * (size_t)n;
+    wave_run(it, sc, st, rays, n, stats, L, quv, &ws);
   }
-  wave_run(it, sc, st, rays, n, stats, L, quv, ln, idx, idx + n);
-  free(ln);
-  free(idx);
-  return true;
+  free(ws.ln);
+  free(ws.idx);
+  free(ws.d1);
+  free(ws.d2);
+  return ok;
 }
 
 static color path_Li(const integrator *it, const scene *sc, sampler_state *st, ray3 ray, render_stats *stats,
                      double *quv) {
   lane ln;
-  int idx[2];
+  int idx[4];
+  double d1[1];
+  vec2 d2[1];
+  wave_scratch ws = {.ln = &ln, .idx = idx, .sh = idx + 1, .ek = idx + 2, .ord = idx + 3, .d1 = d1, .d2 = d2};
   color L;
   double q[3];
-  wave_run(it, sc, st, &ray, 1, stats, &L, quv ? q : NULL, &ln, idx, idx + 1);
+  wave_run(it, sc, st, &ray, 1, stats, &L, quv ? q : NULL, &ws);
   if (quv)
     for (int k = 0; k < 3; k++) quv[k] += q[k];
   return L;

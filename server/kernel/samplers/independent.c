@@ -24,6 +24,23 @@ static vec2 independent_next_2d(sampler_state *st) {
   return v2(x, y);
 }
 
+static void independent_start_batch(const sampler *s, sampler_state *st, int n, uint64_t seed,
+                                    const uint64_t *pixel, const uint32_t *sample_index, uint32_t spp) {
+  sampler_seed_streams(s, st, n, seed, pixel, sample_index, spp);
+}
+
+/* The lanes' draws in one loop: each lane's PCG32 step is a serial chain,
+ * but the lanes' chains are independent, so the loop overlaps them (the
+ * per-lane calls could not, each behind an indirect call); bitwise each
+ * lane's own next_1d()/next_2d(). */
+static void independent_next_1d_batch(sampler_state *st, const int *idx, int n, double *out) {
+  for (int k = 0; k < n; k++) out[k] = independent_next_1d(&st[idx ? idx[k] : k]);
+}
+
+static void independent_next_2d_batch(sampler_state *st, const int *idx, int n, vec2 *out) {
+  for (int k = 0; k < n; k++) out[k] = independent_next_2d(&st[idx ? idx[k] : k]);
+}
+
 /* Any count works; 0 means "the scene's sample_count". */
 static uint32_t independent_adjust_spp(const sampler *s, uint32_t spp) {
   return spp ? spp : s->sample_count;
@@ -34,6 +51,9 @@ static const sampler_ops independent_ops = {
     .next_1d = independent_next_1d,
     .next_2d = independent_next_2d,
     .adjust_spp = independent_adjust_spp,
+    .start_batch = independent_start_batch,
+    .next_1d_batch = independent_next_1d_batch,
+    .next_2d_batch = independent_next_2d_batch,
 };
 
 static void independent_destroy(object *o) {

@@ -21,15 +21,63 @@ static inline uint64_t sampler_pixel_key(uint64_t seed, uint64_t pixel) {
   return mix64(mix64(seed) ^ pixel);
 }
 
-static inline void sampler_seed_stream(const sampler *s, sampler_state *st, uint64_t seed, uint64_t pixel,
-                                       uint32_t sample_index, uint32_t spp) {
+/* sampler_seed_stream given the pixel's key (sampler_pixel_key(seed +
+ * s->seed, pixel)), which the samples of one pixel share. */
+static inline void sampler_seed_stream_key(const sampler *s, sampler_state *st, uint64_t key,
+                                           uint32_t sample_index, uint32_t spp) {
   st->s = s;
-  st->pixel_key = sampler_pixel_key(seed + s->seed, pixel);
+  st->pixel_key = key;
   st->sample_index = sample_index;
   st->spp = spp;
   st->dim = 0;
   uint32_t fold = (uint32_t)(st->pixel_key ^ (st->pixel_key >> 32));
   pcg32_seed(&st->rng, tea64(fold, sample_index, 4), mix64(st->pixel_key + sample_index));
+}
+
+static inline void sampler_seed_stream(const sampler *s, sampler_state *st, uint64_t seed, uint64_t pixel,
+                                       uint32_t sample_index, uint32_t spp) {
+  sampler_seed_stream_key(s, st, sampler_pixel_key(seed + s->seed, pixel), sample_index, spp);
+}
+
+/* For n lanes (pcg_simd.c, vectorised at the render's ISA; bitwise the
+ * scalar code): the PCG32 state and increment that sampler_seed_stream_key
+ * gives pixel key key[k] and sample index[k]. */
+void sampler_pcg_seed_batch(int n, const uint64_t *key, const uint32_t *index, uint64_t *state,
+                            uint64_t *inc);
+
+/* out[k] = the stratified sampler's permute(in[k], l, seed[k]) (Kensler's
+ * hash permutation of [0, l), samplers/stratified.c) for k < n, l >= 1;
+ * vectorised at the render's ISA (permute_simd.c), bitwise the scalar. */
+void stratified_permute_batch(int n, const uint32_t *in, uint32_t l, const uint32_t *seed, uint32_t *out);
+
+/* start_batch of both samplers: the pixel's key once per run of samples
+ * of the same pixel (a wave holds consecutive samples of few pixels), the
+ * streams seeded together. */
+static inline void sampler_seed_streams(const sampler *s, sampler_state *st, int n, uint64_t seed,
+                                        const uint64_t *pixel, const uint32_t *sample_index, uint32_t spp) {
+  enum {
+    C = 64
+  };
+  uint64_t key[C], state[C], inc[C], last = 0;
+  for (int k0 = 0; k0 < n; k0 += C) {
+    int m = n - k0 < C ? n - k0 : C;
+    for (int k = 0; k < m; k++) {
+      int i = k0 + k;
+      if (i == 0 || pixel[i] != pixel[i - 1]) last = sampler_pixel_key(seed + s->seed, pixel[i]);
+      key[k] = last;
+    }
+    sampler_pcg_seed_batch(m, key, sample_index + k0, state, inc);
+    for (int k = 0; k < m; k++) {
+      sampler_state *q = &st[k0 + k];
+      q->s = s;
+      q->pixel_key = key[k];
+      q->sample_index = sample_index[k0 + k];
+      q->spp = spp;
+      q->dim = 0;
+      q->rng.state = state[k];
+      q->rng.inc = inc[k];
+    }
+  }
 }
 
 #endif

@@ -109,11 +109,83 @@ static vec2 stratified_next_2d(sampler_state *st) {
   return v2(((double)x + jx) / (double)n, ((double)y + jy) / (double)n);
 }
 
+static void stratified_start_batch(const sampler *s, sampler_state *st, int n, uint64_t seed,
+                                   const uint64_t *pixel, const uint32_t *sample_index, uint32_t spp) {
+  sampler_seed_streams(s, st, n, seed, pixel, sample_index, spp);
+}
+
+/* The batches: each lane's stratum by the vectorised permutation
+ * (stratified_permute_batch, bitwise permute()), C lanes at a time, then
+ * its jitter and dimension as next_1d()/next_2d() do; ceil_sqrt(spp) once
+ * per chunk (a render's lanes share its spp; a chunk whose lanes do not
+ * takes the per-lane path). */
+enum {
+  STRAT_C = 64
+};
+
+/* Strata of lanes q[0..m) in the current dimension; false when their spp
+ * differ (nothing written). */
+static bool strata_batch(sampler_state *const *q, int m, uint32_t *sq, uint32_t *p) {
+  uint32_t spp = q[0]->spp, in[STRAT_C], seed[STRAT_C];
+  for (int k = 1; k < m; k++)
+    if (q[k]->spp != spp) return false;
+  uint32_t n = ceil_sqrt(spp ? spp : 1), n2 = n * n;
+  for (int k = 0; k < m; k++) {
+    in[k] = q[k]->sample_index % n2;
+    seed[k] = dim_seed(q[k]);
+  }
+  stratified_permute_batch(m, in, n2, seed, p);
+  *sq = n;
+  return true;
+}
+
+static void stratified_next_1d_batch(sampler_state *st, const int *idx, int n, double *out) {
+  for (int k0 = 0; k0 < n; k0 += STRAT_C) {
+    int m = n - k0 < STRAT_C ? n - k0 : STRAT_C;
+    sampler_state *q[STRAT_C];
+    uint32_t p[STRAT_C], sq;
+    for (int k = 0; k < m; k++) q[k] = &st[idx ? idx[k0 + k] : k0 + k];
+    if (!strata_batch(q, m, &sq, p)) {
+      for (int k = 0; k < m; k++) out[k0 + k] = stratified_next_1d(q[k]);
+      continue;
+    }
+    uint32_t n2 = sq * sq;
+    for (int k = 0; k < m; k++) {
+      double j = jitter(q[k]);
+      q[k]->dim++;
+      out[k0 + k] = ((double)p[k] + j) / (double)n2;
+    }
+  }
+}
+
+static void stratified_next_2d_batch(sampler_state *st, const int *idx, int n, vec2 *out) {
+  for (int k0 = 0; k0 < n; k0 += STRAT_C) {
+    int m = n - k0 < STRAT_C ? n - k0 : STRAT_C;
+    sampler_state *q[STRAT_C];
+    uint32_t p[STRAT_C], sq;
+    for (int k = 0; k < m; k++) q[k] = &st[idx ? idx[k0 + k] : k0 + k];
+    if (!strata_batch(q, m, &sq, p)) {
+      for (int k = 0; k < m; k++) out[k0 + k] = stratified_next_2d(q[k]);
+      continue;
+    }
+    for (int k = 0; k < m; k++) {
+      uint32_t y = p[k] / sq, x = p[k] - y * sq;
+      double jx = jitter(q[k]);
+      double jy = jitter(q[k]);
+      q[k]->dim++;
+      out[k0 + k] = v2(((double)x + jx) / (double)sq, ((double)y + jy) / (double)sq);
+    }
+  }
+}
+
 static const sampler_ops stratified_ops = {
     .start = stratified_start,
     .next_1d = stratified_next_1d,
     .next_2d = stratified_next_2d,
     .adjust_spp = stratified_adjust_spp,
+    .start_batch = stratified_start_batch,
+    .next_1d_batch = stratified_next_1d_batch,
+    .next_2d_batch = stratified_next_2d_batch,
 };
 
 static void stratified_destroy(object *o) {

@@ -87,6 +87,7 @@ void shape_face_cache_refresh(shape *s) {
     free(s->face_cache);
     s->face_cache = NULL;
     s->face_cache_n = 0;
+    s->face_cache_frames = false;
     return;
   }
   if (s->face_cache_n != nf || !s->face_cache) {
@@ -95,11 +96,14 @@ void shape_face_cache_refresh(shape *s) {
       free(s->face_cache);
       s->face_cache = NULL;
       s->face_cache_n = 0;
+      s->face_cache_frames = false;
       return;
     }
     s->face_cache = c;
     s->face_cache_n = nf;
   }
+  /* The shading normal is the face normal: the whole frame is the face's. */
+  bool frames = !(m->nrm && !s->face_normals);
   for (uint32_t f = 0; f < nf; f++) {
     const uint32_t *ix = &m->faces[3 * (size_t)f];
     vec3 p0 = mesh_vertex(m, ix[0]), p1 = mesh_vertex(m, ix[1]), p2 = mesh_vertex(m, ix[2]);
@@ -114,7 +118,14 @@ void shape_face_cache_refresh(shape *s) {
     }
     double *o = &s->face_cache[SHAPE_FACE_DOUBLES * (size_t)f];
     o[0] = n.x, o[1] = n.y, o[2] = n.z, o[3] = t.x, o[4] = t.y, o[5] = t.z;
+    /* The frame a hit makes (shape_fill_interaction_xf) when its shading
+     * normal is this face normal. */
+    frame fr = {v3(0, 0, 0), v3(0, 0, 0), v3(0, 0, 0)};
+    if (frames) fr = shape_frame_from_tangent(s->flip_normals ? v3_neg(n) : n, t);
+    const double fv[9] = {fr.s.x, fr.s.y, fr.s.z, fr.t.x, fr.t.y, fr.t.z, fr.n.x, fr.n.y, fr.n.z};
+    memcpy(&o[SHAPE_FACE_FRAME], fv, sizeof fv);
   }
+  s->face_cache_frames = frames;
 }
 
 void shape_world_triangle(const shape *s, uint32_t f, double out[SHAPE_TRI_DOUBLES]) {

@@ -25,10 +25,14 @@ static inline vec3 mesh_face_dpdu(const xform *to_world, vec3 dp0, vec3 dp1, dou
 }
 
 /* fc: the face's entry in s->face_cache (valid for to_world == &s->to_world
- * only), or NULL to compute it. */
-static inline void mesh_fill_inline(const shape *s, const xform *to_world, const ray3 *r, const accel_hit *h,
-                                    surface_interaction *si, vec3 *n_out, vec3 *sn_out, vec3 *dpdu,
-                                    const double *fc) {
+ * only), or NULL to compute it. sn_raw: NULL, or where an interpolated
+ * shading normal is left unnormalised (*sn_raw_set true; *sn_out is then
+ * n) for the caller to finish as this code does: sn = v3_norm(*sn_raw),
+ * n where !(v3_len2(sn) > 0.5). */
+static inline void mesh_fill_inline_raw(const shape *s, const xform *to_world, const ray3 *r,
+                                        const accel_hit *h, surface_interaction *si, vec3 *n_out,
+                                        vec3 *sn_out, vec3 *dpdu, const double *fc, vec3 *sn_raw,
+                                        bool *sn_raw_set) {
   const mesh *m = &s->mesh;
   vec3 n, sn;
   if (!m->uv && (!m->nrm || s->face_normals)) {
@@ -59,8 +63,14 @@ static inline void mesh_fill_inline(const shape *s, const xform *to_world, const
                 *c = &m->nrm[3 * (size_t)ix[2]];
     vec3 no = v3(b0 * a[0] + b1 * b[0] + b2 * c[0], b0 * a[1] + b1 * b[1] + b2 * c[1],
                  b0 * a[2] + b1 * b[2] + b2 * c[2]);
-    sn = v3_norm(xf_normal(to_world, no));
-    if (!(v3_len2(sn) > 0.5)) sn = n;
+    if (sn_raw) {
+      *sn_raw = xf_normal(to_world, no);
+      *sn_raw_set = true;
+      sn = n;
+    } else {
+      sn = v3_norm(xf_normal(to_world, no));
+      if (!(v3_len2(sn) > 0.5)) sn = n;
+    }
   } else {
     sn = n;
   }
@@ -80,6 +90,12 @@ static inline void mesh_fill_inline(const shape *s, const xform *to_world, const
   }
   *n_out = n;
   *sn_out = sn;
+}
+
+static inline void mesh_fill_inline(const shape *s, const xform *to_world, const ray3 *r, const accel_hit *h,
+                                    surface_interaction *si, vec3 *n_out, vec3 *sn_out, vec3 *dpdu,
+                                    const double *fc) {
+  mesh_fill_inline_raw(s, to_world, r, h, si, n_out, sn_out, dpdu, fc, NULL, NULL);
 }
 
 static inline void mesh_sample_inline(const shape *s, vec2 u, const double *tris, position_sample *ps) {

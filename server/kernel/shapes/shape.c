@@ -165,6 +165,7 @@ void shape_release(shape *s) {
   free(s->face_cache);
   s->face_cache = NULL;
   s->face_cache_n = 0;
+  s->face_cache_frames = false;
   memset(&s->mesh, 0, sizeof s->mesh);
   s->tri_cdf = NULL;
   s->tri_cdf_n = 0;
@@ -253,43 +254,53 @@ void shape_fill_interaction(const shape *s, const ray3 *r, const accel_hit *h, s
   shape_fill_interaction_xf(s, &s->to_world, r, h, si);
 }
 
-void shape_fill_interaction_xf(const shape *s, const xform *to_world, const ray3 *r, const accel_hit *h,
-                               surface_interaction *si) {
+bool shape_fill_begin(const shape *s, const xform *to_world, const ray3 *r, const accel_hit *h,
+                      surface_interaction *si, vec3 *sn_out, vec3 *tangent_out, vec3 *sn_raw,
+                      bool *sn_raw_set) {
   si->t = h->t;
   si->shape = s;
   si->prim = h->prim;
   si->p_error = 0; /* hit_fill_interaction adds Embree's rounding */
   vec3 n, sn, tangent = v3(0, 0, 0);
+  if (sn_raw_set) *sn_raw_set = false;
   /* Triangles inline (the common hit), other geometry through its table. */
-  if (shape_is_mesh(s))
-    mesh_fill_inline(s, to_world, r, h, si, &n, &sn, &tangent,
-                     s->face_cache && to_world == &s->to_world
-                         ? &s->face_cache[SHAPE_FACE_DOUBLES * (size_t)h->prim]
-                         : NULL);
-  else
+  if (shape_is_mesh(s)) {
+    const double *fc = s->face_cache && to_world == &s->to_world
+                           ? &s->face_cache[SHAPE_FACE_DOUBLES * (size_t)h->prim]
+                           : NULL;
+    mesh_fill_inline_raw(s, to_world, r, h, si, &n, &sn, &tangent, fc, sn_raw, sn_raw_set);
+    if (fc && s->face_cache_frames) {
+      /* The face's frame, made by shape_face_cache_refresh with
+       * shape_frame_from_tangent from these n and dp/du: the same bits,
+       * without the square roots and the division. */
+      const double *f = &fc[SHAPE_FACE_FRAME];
+      si->ng = s->flip_normals ? v3_neg(n) : n;
+      si->sh.s = v3(f[0], f[1], f[2]);
+      si->sh.t = v3(f[3], f[4], f[5]);
+      si->sh.n = v3(f[6], f[7], f[8]);
+      si->wi = frame_to_local(&si->sh, v3_neg(v3_norm(r->d)));
+      return true;
+    }
+  } else {
     s->ops->fill(s, to_world, r, h, si, &n, &sn, &tangent);
+  }
   if (s->flip_normals) {
+    /* v3_norm(-x) is -v3_norm(x) bit for bit: a deferred raw normal may
+     * be flipped before it is normalised. */
     n = v3_neg(n);
     sn = v3_neg(sn);
+    if (sn_raw_set && *sn_raw_set) *sn_raw = v3_neg(*sn_raw);
   }
   si->ng = n;
-  /* Shading frame: s along dp/du made orthogonal to the normal when
-   * available, else Mitsuba's coordinate_system(n). */
-  if (tangent.x == 0 && tangent.y == 0 && tangent.z == 0) {
-    /* No dp/du (most meshes, disks): the test below would fail on a zero
-     * vector anyway; skip its two square roots. */
-    si->sh = frame_from_normal(sn);
-    si->wi = frame_to_local(&si->sh, v3_neg(v3_norm(r->d)));
-    return;
-  }
-  vec3 ts = v3_sub(tangent, v3_scale(sn, v3_dot(sn, tangent)));
-  double tl = v3_len(ts);
-  if (tl > 1e-9 * (v3_len(tangent) + 1e-300)) {
-    si->sh.n = sn;
-    si->sh.s = v3_scale(ts, 1.0 / tl);
-    si->sh.t = v3_cross(sn, si->sh.s);
-  } else {
-    si->sh = frame_from_normal(sn);
-  }
+  *sn_out = sn;
+  *tangent_out = tangent;
+  return false;
+}
+
+void shape_fill_interaction_xf(const shape *s, const xform *to_world, const ray3 *r, const accel_hit *h,
+                               surface_interaction *si) {
+  vec3 sn, tangent;
+  if (shape_fill_begin(s, to_world, r, h, si, &sn, &tangent, NULL, NULL)) return;
+  si->sh = shape_frame_from_tangent(sn, tangent);
   si->wi = frame_to_local(&si->sh, v3_neg(v3_norm(r->d)));
 }

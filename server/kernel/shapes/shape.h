@@ -95,14 +95,36 @@ void shape_world_tris_refresh(const shape *s, double **tris, uint32_t *n);
 static inline const double *shape_world_tris_for(const shape *s, const double *tris, uint32_t n) {
   return tris && shape_is_mesh(s) && n == s->mesh.n_faces ? tris : NULL;
 }
-/* Per-face world normals and dp/du of small meshes (shape.face_cache):
- * 48 bytes a face, so only up to this many faces (rectangles, cubes,
- * small meshes: the walls and lights of a room). */
+/* Per-face world data of small meshes (shape.face_cache): the geometric
+ * normal and dp/du (6 doubles), then, for meshes whose shading normal is
+ * the face normal (no vertex normals, or face_normals), the hit's whole
+ * shading frame s, t, n after flip_normals (9 doubles; zeros otherwise):
+ * SHAPE_FACE_DOUBLES doubles (120 bytes) a face, so only up to this many
+ * faces (rectangles, cubes, small meshes: the walls and lights of a
+ * room). Each value is computed by the same code a hit runs
+ * (shape_frame_from_tangent), so a hit reads the same bits. */
 #define SHAPE_FACE_CACHE_MAX (1u << 16)
-#define SHAPE_FACE_DOUBLES   6
+#define SHAPE_FACE_DOUBLES   15
+#define SHAPE_FACE_FRAME     6 /* offset of the frame in an entry */
 /* (Re)compute s's face cache, or free it (too large, out of memory, not a
  * mesh): fills then compute the same values per hit. */
 void shape_face_cache_refresh(shape *s);
+/* The shading frame of a hit with unit shading normal sn and world dp/du
+ * `tangent` ((0, 0, 0): none): s along dp/du made orthogonal to sn when
+ * available, else Mitsuba's coordinate_system(sn). */
+static inline frame shape_frame_from_tangent(vec3 sn, vec3 tangent) {
+  /* No dp/du (most meshes, disks): the test below would fail on a zero
+   * vector anyway; skip its two square roots. */
+  if (tangent.x == 0 && tangent.y == 0 && tangent.z == 0) return frame_from_normal(sn);
+  vec3 ts = v3_sub(tangent, v3_scale(sn, v3_dot(sn, tangent)));
+  double tl = v3_len(ts);
+  if (!(tl > 1e-9 * (v3_len(tangent) + 1e-300))) return frame_from_normal(sn);
+  frame f;
+  f.n = sn;
+  f.s = v3_scale(ts, 1.0 / tl);
+  f.t = v3_cross(sn, f.s);
+  return f;
+}
 /* Area pdf of shape_sample_position (1/area). */
 double shape_pdf_position(const shape *s);
 
@@ -115,6 +137,31 @@ void shape_fill_interaction(const shape *s, const ray3 *r, const struct accel_hi
  * under placement * member.to_world), so no copy of the shape is made. */
 void shape_fill_interaction_xf(const shape *s, const xform *to_world, const ray3 *r,
                                const struct accel_hit *h, surface_interaction *si);
+
+/* shape_fill_interaction_xf in two parts, for the batched fill
+ * (hit_fill_interaction_batch): shape_fill_begin fills si but for its
+ * shading frame and wi, and gives the shading normal *sn (unit, after
+ * flip_normals) and dp/du *tangent that make them (shape_frame_from_tangent,
+ * then wi = the frame's local -normalize(r->d)); true when it filled the
+ * whole si itself (a face frame from the face cache). sn_raw: NULL, or
+ * where a mesh's interpolated shading normal is left unnormalised (after
+ * flip_normals; *sn_raw_set true, *sn is then the geometric normal): sn is
+ * then v3_norm(*sn_raw), or the geometric normal where !(v3_len2(that) >
+ * 0.5). */
+bool shape_fill_begin(const shape *s, const xform *to_world, const ray3 *r, const struct accel_hit *h,
+                      surface_interaction *si, vec3 *sn, vec3 *tangent, vec3 *sn_raw, bool *sn_raw_set);
+/* For n lanes, as structures of arrays (component c of lane i at
+ * [c stride + i]; stride a multiple of 8, every array readable and
+ * writable up to n rounded up to 8): in holds SHAPE_FRAME_IN components,
+ * sn xyz, tangent xyz, the ray direction d xyz (as shape_fill_begin leaves
+ * them), the raw shading normal xyz and a flag (1: sn is to be made from
+ * the raw normal as shape_fill_begin says, with sn as the fallback; 0: sn
+ * is final); out receives 12, the frame's s, t, n and wi. Vectorised at
+ * the render's ISA (core/isa.h) in double precision with the scalar
+ * operations in the scalar order (no FMA contraction), so each lane is
+ * bitwise the scalar fill whatever the ISA and n (tests/validation/test_wave.c). */
+#define SHAPE_FRAME_IN 13
+void shape_frames_batch(int n, int stride, const double *in, double *out);
 
 /* Compute area, triangle cdf; check geometry (degenerate to_world for a
  * disk, non-uniform scale for a sphere, ...). Called by create(). */

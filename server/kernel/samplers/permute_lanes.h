@@ -1,0 +1,54 @@
+/* The body of permute_simd.c for one ISA: Kensler's permutation
+ * (samplers/stratified.c permute) of VW lanes at once in 32-bit integer
+ * lanes (VU32), included after PERM_FN and PERM_ATTR are defined. Each
+ * lane runs the scalar rounds; cycle walking continues, masked, until every
+ * lane has landed in [0, l). Integer arithmetic: bitwise the scalar. */
+PERM_ATTR void PERM_FN(int n, const uint32_t *in, uint32_t l, const uint32_t *seed, uint32_t *out) {
+  uint32_t w = l - 1;
+  w |= w >> 1;
+  w |= w >> 2;
+  w |= w >> 4;
+  w |= w >> 8;
+  w |= w >> 16;
+  for (int k0 = 0; k0 < n; k0 += VW) {
+    int cnt = n - k0 < VW ? n - k0 : VW;
+    VU32 i, p;
+    if (cnt == VW) {
+      __builtin_memcpy(&i, &in[k0], sizeof i);
+      __builtin_memcpy(&p, &seed[k0], sizeof p);
+    } else {
+      for (int k = 0; k < VW; k++) {
+        int q = k0 + (k < cnt ? k : cnt - 1);
+        i[k] = in[q], p[k] = seed[q];
+      }
+    }
+    VU32 res = i, active = (VU32){0} + 0xffffffffu;
+    for (;;) {
+      i ^= p;
+      i *= 0xe170893du;
+      i ^= p >> 16;
+      i ^= (i & w) >> 4;
+      i ^= p >> 8;
+      i *= 0x0929eb3fu;
+      i ^= p >> 23;
+      i ^= (i & w) >> 1;
+      i *= 1u | p >> 27;
+      i *= 0x6935fa69u;
+      i ^= (i & w) >> 11;
+      i *= 0x74dcb303u;
+      i ^= (i & w) >> 2;
+      i *= 0x9e501cc3u;
+      i ^= (i & w) >> 2;
+      i *= 0xc860a3dfu;
+      i &= w;
+      i ^= i >> 5;
+      VU32 landed = active & (VU32)(i < l);
+      res = (landed & i) | (~landed & res);
+      active &= ~landed;
+      uint32_t any = 0;
+      for (int k = 0; k < VW; k++) any |= active[k];
+      if (!any) break;
+    }
+    for (int k = 0; k < cnt; k++) out[k0 + k] = (res[k] + p[k]) % l;
+  }
+}

@@ -1,0 +1,37 @@
+/* A wave's sampler draws (kernel.h sampler_ops start_batch, next_1d_batch,
+ * next_2d_batch), or the per-lane ops in a loop for a sampler without
+ * them: either way each lane gets exactly the numbers of its own per-lane
+ * calls. All lanes share the sampler s (one sensor's). */
+#ifndef RSW_SAMPLERS_SAMPLER_BATCH_H
+#define RSW_SAMPLERS_SAMPLER_BATCH_H
+
+#include "../kernel.h"
+
+static inline void sampler_start_batch(const sampler *s, sampler_state *st, int n, uint64_t seed,
+                                       const uint64_t *pixel, const uint32_t *sample_index, uint32_t spp) {
+  if (s->ops->start_batch) {
+    s->ops->start_batch(s, st, n, seed, pixel, sample_index, spp);
+    return;
+  }
+  for (int k = 0; k < n; k++) s->ops->start(s, &st[k], seed, pixel[k], sample_index[k], spp);
+}
+
+static inline void sampler_next_1d_batch(const sampler *s, sampler_state *st, const int *idx, int n,
+                                         double *out) {
+  if (s->ops->next_1d_batch) {
+    s->ops->next_1d_batch(st, idx, n, out);
+    return;
+  }
+  for (int k = 0; k < n; k++) out[k] = s->ops->next_1d(&st[idx ? idx[k] : k]);
+}
+
+static inline void sampler_next_2d_batch(const sampler *s, sampler_state *st, const int *idx, int n,
+                                         vec2 *out) {
+  if (s->ops->next_2d_batch) {
+    s->ops->next_2d_batch(st, idx, n, out);
+    return;
+  }
+  for (int k = 0; k < n; k++) out[k] = s->ops->next_2d(&st[idx ? idx[k] : k]);
+}
+
+#endif
