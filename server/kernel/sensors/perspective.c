@@ -17,6 +17,7 @@
 #include <strings.h>
 
 #include "../scene/params.h"
+#include "../simd/simd.h"
 #include "sensor_common.h"
 
 typedef struct perspective {
@@ -43,6 +44,35 @@ static double perspective_sample_ray(const sensor *s, vec2 film_u, vec2 aperture
   return 1.0;
 }
 
+/* Batched rays (sensor_ops.sample_ray_batch): perspective_sample_ray()'s
+ * operations in double lanes (simd/plugin_lanes.h perspective_rays), so
+ * bit for bit its rays. */
+static void perspective_sample_ray_batch(const sensor *s, int n, const vec2 *film_u, const vec2 *aperture_u,
+                                         ray3 *rays, double *w) {
+  (void)aperture_u;
+  const perspective *p = (const perspective *)s;
+  enum {
+    C = 64
+  };
+  double fu[2 * C], out[8 * C], pp[2] = {p->pp_offset_x, p->pp_offset_y};
+  rsw_isa isa = rsw_isa_get();
+  for (int i0 = 0; i0 < n; i0 += C) {
+    int m = n - i0 < C ? n - i0 : C;
+    for (int k = 0; k < m; k++) fu[2 * k] = film_u[i0 + k].x, fu[2 * k + 1] = film_u[i0 + k].y;
+    perspective_rays_batch(isa, m, (const double(*)[4])s->to_world.m, pp, p->tan_half_fov_x, p->aspect,
+                           p->near_clip, p->far_clip, fu, out);
+    for (int k = 0; k < m; k++) {
+      const double *o = &out[8 * k];
+      ray3 *r = &rays[i0 + k];
+      r->o = v3(o[0], o[1], o[2]);
+      r->d = v3(o[3], o[4], o[5]);
+      r->tmin = o[6];
+      r->tmax = o[7];
+      w[i0 + k] = 1.0;
+    }
+  }
+}
+
 static rsw_status perspective_set_scene(sensor *s, const scene *sc, rsw_err *err) {
   (void)s;
   (void)sc;
@@ -53,6 +83,7 @@ static rsw_status perspective_set_scene(sensor *s, const scene *sc, rsw_err *err
 static const sensor_ops perspective_ops = {
     .sample_ray = perspective_sample_ray,
     .set_scene = perspective_set_scene,
+    .sample_ray_batch = perspective_sample_ray_batch,
 };
 
 static void perspective_destroy(object *o) {
