@@ -9,7 +9,9 @@
 #   make install    raysweepd, raysweep, man pages, headers, libraysweep
 #                   (PREFIX=/usr/local, DESTDIR= for staging)
 #   make format     clang-format the C sources (tools/check-format.sh --fix)
-# Variables: WERROR=1 adds -Werror; SAN=1 builds into build-san/.
+# Variables: WERROR=1 adds -Werror; SAN=1 builds into build-san/;
+# SIMD=generic builds the kernel as for a CPU other than x86 (the portable
+# vector kernels alone, core/isa.h) into build-generic/ (build-san-generic/).
 # On a machine without make or cc, ./make ARGS installs them and runs make ARGS.
 # Every compile waits for `deps` (an order-only prerequisite), so make -jN
 # never starts compiling before the packages are installed.
@@ -27,6 +29,13 @@ SANFLAGS :=
 OPT := -O2
 endif
 
+ifeq ($(SIMD),generic)
+BUILD := $(BUILD)-generic
+SIMD_CPPFLAGS := -DRSW_SIMD_GENERIC_ONLY
+else
+SIMD_CPPFLAGS :=
+endif
+
 WARN := -Wall -Wextra -Wshadow -Wno-unused-parameter -Wstrict-prototypes
 ifeq ($(WERROR),1)
 WARN += -Werror
@@ -36,7 +45,7 @@ endif
 # daemon and libraysweep) sees the public headers; the daemon sees
 # common/ and server/; libraysweep and the CLI never see server/ (the CLI
 # sees only the public API); tests see everything.
-BASE_CPPFLAGS := -D_GNU_SOURCE -MMD -MP
+BASE_CPPFLAGS := -D_GNU_SOURCE -MMD -MP $(SIMD_CPPFLAGS)
 CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude -Icommon -Iserver
 $(BUILD)/obj/common/%.o: CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude -Icommon
 $(BUILD)/obj/server/%.o: CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude -Icommon -Iserver
