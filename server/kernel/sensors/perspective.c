@@ -12,6 +12,7 @@
  * The ray starts at the camera position and is clipped to the near/far
  * planes: tmin = near_clip / d.z, tmax = far_clip / d.z. Weight 1. */
 #include <math.h>
+#include <stddef.h>
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
@@ -45,32 +46,21 @@ static double perspective_sample_ray(const sensor *s, vec2 film_u, vec2 aperture
 }
 
 /* Batched rays (sensor_ops.sample_ray_batch): perspective_sample_ray()'s
- * operations in double lanes (simd/plugin_lanes.h perspective_rays), so
- * bit for bit its rays. */
+ * operations in double lanes (simd/plugin_lanes.h perspective_rays,
+ * written straight into the rays: 8 doubles each), so bit for bit its
+ * rays. */
+_Static_assert(sizeof(ray3) == 8 * sizeof(double) && offsetof(ray3, d) == 3 * sizeof(double) &&
+                   offsetof(ray3, tmin) == 6 * sizeof(double) && offsetof(ray3, tmax) == 7 * sizeof(double),
+               "perspective_rays writes a ray3 as 8 doubles (o, d, tmin, tmax)");
 static void perspective_sample_ray_batch(const sensor *s, int n, const vec2 *film_u, const vec2 *aperture_u,
                                          ray3 *rays, double *w) {
   (void)aperture_u;
   const perspective *p = (const perspective *)s;
-  enum {
-    C = 64
-  };
-  double fu[2 * C], out[8 * C], pp[2] = {p->pp_offset_x, p->pp_offset_y};
-  rsw_isa isa = rsw_isa_get();
-  for (int i0 = 0; i0 < n; i0 += C) {
-    int m = n - i0 < C ? n - i0 : C;
-    for (int k = 0; k < m; k++) fu[2 * k] = film_u[i0 + k].x, fu[2 * k + 1] = film_u[i0 + k].y;
-    perspective_rays_batch(isa, m, (const double(*)[4])s->to_world.m, pp, p->tan_half_fov_x, p->aspect,
-                           p->near_clip, p->far_clip, fu, out);
-    for (int k = 0; k < m; k++) {
-      const double *o = &out[8 * k];
-      ray3 *r = &rays[i0 + k];
-      r->o = v3(o[0], o[1], o[2]);
-      r->d = v3(o[3], o[4], o[5]);
-      r->tmin = o[6];
-      r->tmax = o[7];
-      w[i0 + k] = 1.0;
-    }
-  }
+  _Static_assert(sizeof(vec2) == 2 * sizeof(double), "film samples are (x, y) pairs of doubles");
+  double pp[2] = {p->pp_offset_x, p->pp_offset_y};
+  perspective_rays_batch(rsw_isa_get(), n, (const double(*)[4])s->to_world.m, pp, p->tan_half_fov_x,
+                         p->aspect, p->near_clip, p->far_clip, (const double *)film_u, (double *)rays);
+  for (int i = 0; i < n; i++) w[i] = 1.0;
 }
 
 static rsw_status perspective_set_scene(sensor *s, const scene *sc, rsw_err *err) {

@@ -77,8 +77,15 @@ CAM_LANES_ATTR void PL_NAME(fresnel_conductor)(int n, const double *cos_i, const
                                                double *out) {
   for (int k0 = 0; k0 < n; k0 += WD) {
     int cnt = n - k0 < WD ? n - k0 : WD;
-    vdn ci = (vdn){0} + 1.0, et = {0}, kv = (vdn){0} + 1.0;
-    for (int j = 0; j < cnt; j++) ci[j] = cos_i[k0 + j], et[j] = eta[k0 + j], kv[j] = kk[k0 + j];
+    vdn ci, et, kv;
+    if (cnt == WD) { /* whole vectors: plain loads (element inserts stall on store forwarding) */
+      __builtin_memcpy(&ci, cos_i + k0, sizeof ci);
+      __builtin_memcpy(&et, eta + k0, sizeof et);
+      __builtin_memcpy(&kv, kk + k0, sizeof kv);
+    } else {
+      ci = (vdn){0} + 1.0, et = (vdn){0}, kv = (vdn){0} + 1.0;
+      for (int j = 0; j < cnt; j++) ci[j] = cos_i[k0 + j], et[j] = eta[k0 + j], kv[j] = kk[k0 + j];
+    }
     vdn c = dabs(ci);
     c = dsel(c > 1.0, (vdn){0} + 1.0, c);
     vdn c2 = c * c, s2 = 1.0 - c2, s4 = s2 * s2;
@@ -95,7 +102,10 @@ CAM_LANES_ATTR void PL_NAME(fresnel_conductor)(int n, const double *cos_i, const
     vln rp_ok = rp_den > 0.0;
     vdn rp = dsel(rp_ok, rs * rp_num / dsel(rp_ok, rp_den, (vdn){0} + 1.0), rs);
     vdn r = 0.5 * (rs + rp);
-    for (int j = 0; j < cnt; j++) out[k0 + j] = r[j];
+    if (cnt == WD)
+      __builtin_memcpy(out + k0, &r, sizeof r);
+    else
+      for (int j = 0; j < cnt; j++) out[k0 + j] = r[j];
   }
 }
 
@@ -111,14 +121,34 @@ CAM_LANES_ATTR void PL_NAME(disk_origins)(int n, const double *m9, int m_step, c
                                           double offset, double *out) {
   for (int k0 = 0; k0 < n; k0 += WD) {
     int cnt = n - k0 < WD ? n - k0 : WD;
-    vdn ax = {0}, ay = {0}, mm[9], dx = {0}, dy = {0}, dz = {0};
-    for (int j = 0; j < 9; j++) mm[j] = (vdn){0};
-    for (int k = 0; k < cnt; k++) {
-      const double *mk = m9 + (long)m_step * (k0 + k), *dk = d + (long)d_step * (k0 + k);
-      ax[k] = ap[2 * (k0 + k)];
-      ay[k] = ap[2 * (k0 + k) + 1];
-      for (int j = 0; j < 9; j++) mm[j][k] = mk[j];
-      dx[k] = dk[0], dy[k] = dk[1], dz[k] = dk[2];
+    /* Loops of constant length over the lanes (a partial tail goes through
+     * a padded copy, or repeats its last lane), so lanes move through
+     * registers: element inserts of a variable count went through memory
+     * and stalled store forwarding (2-3x slower). */
+    vdn ax, ay, mm[9], dx, dy, dz;
+    double res[3 * WD];
+    const double *ak = ap + 2 * k0;
+    double apad[2 * WD];
+    if (cnt < WD) {
+      for (int k = 0; k < 2 * WD; k++) apad[k] = k < 2 * cnt ? ak[k] : 0.5;
+      ak = apad;
+    }
+    for (int k = 0; k < WD; k++) ax[k] = ak[2 * k], ay[k] = ak[2 * k + 1];
+    if (m_step == 0) { /* one frame: broadcast */
+      for (int j = 0; j < 9; j++) mm[j] = (vdn){0} + m9[j];
+    } else {
+      for (int k = 0; k < WD; k++) {
+        const double *mk = m9 + (long)m_step * (k0 + (k < cnt ? k : cnt - 1));
+        for (int j = 0; j < 9; j++) mm[j][k] = mk[j];
+      }
+    }
+    if (d_step == 0) {
+      dx = (vdn){0} + d[0], dy = (vdn){0} + d[1], dz = (vdn){0} + d[2];
+    } else {
+      for (int k = 0; k < WD; k++) {
+        const double *dk = d + (long)d_step * (k0 + (k < cnt ? k : cnt - 1));
+        dx[k] = dk[0], dy[k] = dk[1], dz[k] = dk[2];
+      }
     }
     vdn qx, qy;
     d_concentric(ax, ay, &qx, &qy);
@@ -128,10 +158,10 @@ CAM_LANES_ATTR void PL_NAME(disk_origins)(int n, const double *m9, int m_step, c
     vdn ox = (center[0] + radius * rx) + -offset * dx;
     vdn oy = (center[1] + radius * ry) + -offset * dy;
     vdn oz = (center[2] + radius * rz) + -offset * dz;
-    for (int k = 0; k < cnt; k++) {
-      double *o = &out[3 * (k0 + k)];
-      o[0] = ox[k], o[1] = oy[k], o[2] = oz[k];
-    }
+    double *ob = cnt < WD ? res : &out[3 * k0];
+    for (int k = 0; k < WD; k++) ob[3 * k] = ox[k], ob[3 * k + 1] = oy[k], ob[3 * k + 2] = oz[k];
+    if (cnt < WD)
+      for (int k = 0; k < 3 * cnt; k++) out[3 * k0 + k] = res[k];
   }
 }
 
@@ -141,17 +171,22 @@ CAM_LANES_ATTR void PL_NAME(disk_origins)(int n, const double *m9, int m_step, c
  *   ray.d = to_world d, tmin = near / d.z, tmax = far / d.z (as near
  *   (1 / d.z)); origin the translation column (per lane, the same).
  * m: to_world's rows; pp: principal point offset (x, y); fu 2 per lane;
- * out 8 per lane (o xyz, d xyz, tmin, tmax). */
+ * out 8 per lane (o xyz, d xyz, tmin, tmax: a ray3's layout, so the
+ * caller may pass its rays). */
 CAM_LANES_ATTR void PL_NAME(perspective_rays)(int n, const double (*m)[4], const double *pp, double t,
                                               double aspect, double near_clip, double far_clip,
                                               const double *fu, double *out) {
   for (int k0 = 0; k0 < n; k0 += WD) {
     int cnt = n - k0 < WD ? n - k0 : WD;
-    vdn ux = {0}, uy = {0};
-    for (int k = 0; k < cnt; k++) {
-      ux[k] = fu[2 * (k0 + k)];
-      uy[k] = fu[2 * (k0 + k) + 1];
+    vdn ux, uy; /* constant-length loops (see disk_origins) */
+    double res[8 * WD];
+    const double *fk = fu + 2 * k0;
+    double fpad[2 * WD];
+    if (cnt < WD) {
+      for (int k = 0; k < 2 * WD; k++) fpad[k] = k < 2 * cnt ? fk[k] : 0.5;
+      fk = fpad;
     }
+    for (int k = 0; k < WD; k++) ux[k] = fk[2 * k], uy[k] = fk[2 * k + 1];
     vdn sx = ux + pp[0], sy = uy + pp[1];
     vdn vx = (1.0 - 2.0 * sx) * t, vy = (1.0 - 2.0 * sy) * t / aspect, vz = (vdn){0} + 1.0;
     vdn l = VSQRT_D(vx * vx + vy * vy + vz * vz);
@@ -165,11 +200,14 @@ CAM_LANES_ATTR void PL_NAME(perspective_rays)(int n, const double (*m)[4], const
     vdn wz = m[2][0] * vx + m[2][1] * vy + m[2][2] * vz;
     vdn inv_z = 1.0 / vz;
     vdn tmin = near_clip * inv_z, tmax = far_clip * inv_z;
-    for (int k = 0; k < cnt; k++) {
-      double *o = &out[8 * (k0 + k)];
+    double *ob = cnt < WD ? res : &out[8 * k0];
+    for (int k = 0; k < WD; k++) {
+      double *o = &ob[8 * k];
       o[0] = m[0][3], o[1] = m[1][3], o[2] = m[2][3];
       o[3] = wx[k], o[4] = wy[k], o[5] = wz[k];
       o[6] = tmin[k], o[7] = tmax[k];
     }
+    if (cnt < WD)
+      for (int k = 0; k < 8 * cnt; k++) out[8 * k0 + k] = res[k];
   }
 }
