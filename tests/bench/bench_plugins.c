@@ -286,9 +286,10 @@ static void bench_sensors_lanes(void) {
       {"lanes_sensor_perspective", "proto/examples/cornell_box.json"},
   };
   static const char *const inline_scenes[][2] = {
-      {"lanes_sensor_distant", "{\"type\": \"scene\", \"cam\": {\"type\": \"distant\", \"direction\": [0.3, -0.2, -1],"
-                               " \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}},"
-                               " \"ball\": {\"type\": \"sphere\", \"radius\": 2}}"},
+      {"lanes_sensor_distant",
+       "{\"type\": \"scene\", \"cam\": {\"type\": \"distant\", \"direction\": [0.3, -0.2, -1],"
+       " \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}},"
+       " \"ball\": {\"type\": \"sphere\", \"radius\": 2}}"},
       {"lanes_sensor_mdistant", "{\"type\": \"scene\", \"cam\": {\"type\": \"mdistant\","
                                 " \"directions\": \"0 0 -1, 0.5 0.1 -1, -1 0.3 -0.2, 0 1 0\","
                                 " \"film\": {\"type\": \"hdrfilm\", \"width\": 4, \"height\": 1}},"

@@ -455,8 +455,8 @@ static void check_bsdf_batch(const plug_case *c, int mode) {
     for (int i = 0; i < N; i++) {
       b->ops->sample_batch(b, 1, &sp[i], &u1[i], &u2[i], &bs1[i], &w1[i]);
       b->ops->eval_pdf_batch(b, 1, &sp[i], &wo[i], &f1[i], &pdf1[i]);
-      if (!bs_same(&bs[i], &bs1[i]) || memcmp(&w[i], &w1[i], sizeof w[i]) || memcmp(&f[i], &f1[i], sizeof f[i]) ||
-          memcmp(&pdf[i], &pdf1[i], sizeof pdf[i]))
+      if (!bs_same(&bs[i], &bs1[i]) || memcmp(&w[i], &w1[i], sizeof w[i]) ||
+          memcmp(&f[i], &f1[i], sizeof f[i]) || memcmp(&pdf[i], &pdf1[i], sizeof pdf[i]))
         dep++;
       bsdf_sample q;
       color wq = b->ops->sample(b, &si[i], u1[i], u2[i], &q);
@@ -473,7 +473,8 @@ static void check_bsdf_batch(const plug_case *c, int mode) {
       }
       double tol = mode == CMP_VALUE ? 2e-5 : 1e-4;
       if (mode == CMP_VALUE) {
-        if (memcmp(&q.wo, &bs[i].wo, sizeof q.wo) || q.pdf != bs[i].pdf || q.sampled_type != bs[i].sampled_type)
+        if (memcmp(&q.wo, &bs[i].wo, sizeof q.wo) || q.pdf != bs[i].pdf ||
+            q.sampled_type != bs[i].sampled_type)
           bad_s++;
         for (int ch = 0; ch < 3; ch++) {
           double e = fabs(wq.c[ch] - w[i].c[ch]);
@@ -495,10 +496,10 @@ static void check_bsdf_batch(const plug_case *c, int mode) {
       }
       if (!(fabs(pe - pdf[i]) <= tol * pe + 1e-12)) bad_e++;
     }
-    CHECK(dep == 0, "%s at %s: %d of %d lanes differ between a batch of %d and batches of 1", c->what, in, dep,
-          N, N);
-    CHECK(bad_s == 0, "%s at %s: %d batched samples differ from sample()'s (worst relative %.2g)", c->what, in,
-          bad_s, worst);
+    CHECK(dep == 0, "%s at %s: %d of %d lanes differ between a batch of %d and batches of 1", c->what, in,
+          dep, N, N);
+    CHECK(bad_s == 0, "%s at %s: %d batched samples differ from sample()'s (worst relative %.2g)", c->what,
+          in, bad_s, worst);
     CHECK(bad_e == 0, "%s at %s: %d batched eval/pdf differ from eval()/pdf() (worst relative %.2g)", c->what,
           in, bad_e, worst);
     CHECK(valid > N / 5, "%s at %s: only %d of %d samples valid", c->what, in, valid, N);

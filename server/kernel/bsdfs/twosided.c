@@ -70,8 +70,8 @@ static void side_sample(const bsdf *c, int n, const surface_interaction *const *
   for (int i = 0; i < n; i++) w[i] = c->ops->sample(c, si[i], u1[i], u2[i], &bs[i]);
 }
 
-static void side_eval_pdf(const bsdf *c, int n, const surface_interaction *const *si, const vec3 *wo, color *f,
-                          double *pdf) {
+static void side_eval_pdf(const bsdf *c, int n, const surface_interaction *const *si, const vec3 *wo,
+                          color *f, double *pdf) {
   if (c->ops->eval_pdf_batch) {
     c->ops->eval_pdf_batch(c, n, si, wo, f, pdf);
     return;
@@ -104,8 +104,8 @@ static void split_sides(int m, const surface_interaction *const *si, surface_int
   }
 }
 
-static void twosided_sample_batch(const bsdf *b, int n, const surface_interaction *const *si, const double *u1,
-                                  const vec2 *u2, bsdf_sample *bs, color *weight) {
+static void twosided_sample_batch(const bsdf *b, int n, const surface_interaction *const *si,
+                                  const double *u1, const vec2 *u2, bsdf_sample *bs, color *weight) {
   const twosided_bsdf *t = (const twosided_bsdf *)b;
   for (int i0 = 0; i0 < n; i0 += TS_C) {
     int m = n - i0 < TS_C ? n - i0 : TS_C;
@@ -131,8 +131,8 @@ static void twosided_sample_batch(const bsdf *b, int n, const surface_interactio
   }
 }
 
-static void twosided_eval_pdf_batch(const bsdf *b, int n, const surface_interaction *const *si, const vec3 *wo,
-                                    color *f, double *pdf) {
+static void twosided_eval_pdf_batch(const bsdf *b, int n, const surface_interaction *const *si,
+                                    const vec3 *wo, color *f, double *pdf) {
   const twosided_bsdf *t = (const twosided_bsdf *)b;
   for (int i0 = 0; i0 < n; i0 += TS_C) {
     int m = n - i0 < TS_C ? n - i0 : TS_C;

@@ -50,8 +50,8 @@ rsw_status rsw_isa_parse(const char *name, rsw_isa *out, rsw_err *err) {
       return RSW_OK;
     }
   }
-  return rsw_fail(err, RSW_ERR_INVALID, "--isa", "unknown ISA '%s' (expected auto, avx512, avx2, sse2 or generic)",
-                  name ? name : "");
+  return rsw_fail(err, RSW_ERR_INVALID, "--isa",
+                  "unknown ISA '%s' (expected auto, avx512, avx2, sse2 or generic)", name ? name : "");
 }
 
 rsw_isa rsw_isa_get(void) {

@@ -19,8 +19,8 @@
 
 typedef enum rsw_isa {
   RSW_ISA_SSE2,
-  RSW_ISA_AVX2,   /* avx2 + fma */
-  RSW_ISA_AVX512, /* avx512f + avx512vl + avx512dq */
+  RSW_ISA_AVX2,    /* avx2 + fma */
+  RSW_ISA_AVX512,  /* avx512f + avx512vl + avx512dq */
   RSW_ISA_GENERIC, /* GCC vector extensions without target attributes
                       (simd/lanes_generic.c): every CPU; the only one of a
                       non-x86 build (or one made with make SIMD=generic) */

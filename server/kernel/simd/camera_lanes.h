@@ -68,11 +68,13 @@ CAM_LANES_ATTR void CAM_LANES_FN(int n, const double (*m)[4], const double *fu, 
     const double *fk = fu + 2 * k0, *ak = ap + 2 * k0;
     double fpad[2 * WD], apad[2 * WD], res[6 * WD];
     if (cnt < WD) {
-      for (int k = 0; k < 2 * WD; k++) fpad[k] = k < 2 * cnt ? fk[k] : 0.5, apad[k] = k < 2 * cnt ? ak[k] : 0.5;
+      for (int k = 0; k < 2 * WD; k++)
+        fpad[k] = k < 2 * cnt ? fk[k] : 0.5, apad[k] = k < 2 * cnt ? ak[k] : 0.5;
       fk = fpad, ak = apad;
     }
     vdn ux, uy, ax, ay;
-    for (int k = 0; k < WD; k++) ux[k] = fk[2 * k], uy[k] = fk[2 * k + 1], ax[k] = ak[2 * k], ay[k] = ak[2 * k + 1];
+    for (int k = 0; k < WD; k++)
+      ux[k] = fk[2 * k], uy[k] = fk[2 * k + 1], ax[k] = ak[2 * k], ay[k] = ak[2 * k + 1];
     /* omega = norm(to_world hemisphere(fu)), d = -omega */
     vdn px, py;
     d_concentric(ux, uy, &px, &py);

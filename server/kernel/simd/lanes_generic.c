@@ -25,15 +25,15 @@ static inline __attribute__((always_inline)) vdn vsqrt_generic_d(vdn x) {
   return x;
 }
 
-#define SIMD_FN       static inline __attribute__((always_inline))
+#define SIMD_FN static inline __attribute__((always_inline))
 #define MF_LANES_ATTR
-#define VSQRT(x)      vsqrt_generic((x))
-#define MF_LANES_FN   mf_sample_visible_generic
-#define MF_EVAL_FN    mf_eval_generic
+#define VSQRT(x)    vsqrt_generic((x))
+#define MF_LANES_FN mf_sample_visible_generic
+#define MF_EVAL_FN  mf_eval_generic
 #include "lanes.h"
 #include "microfacet_lanes.h"
 
-#define VSQRT_D(x)      vsqrt_generic_d((x))
+#define VSQRT_D(x) vsqrt_generic_d((x))
 #define CAM_LANES_ATTR
 #define CAM_LANES_FN    hdistant_rays_generic
 #define COSINE_LANES_FN cosine_hemisphere_generic

@@ -12,9 +12,9 @@
  * -std=c11), so they give the scalar results bit for bit
  * (tests/unit/test_simd.c checks it). */
 
-#define PL_CAT2(a, b)   a##_##b
-#define PL_CAT(a, b)    PL_CAT2(a, b)
-#define PL_NAME(f)      PL_CAT(f, ISA_SUFFIX)
+#define PL_CAT2(a, b) a##_##b
+#define PL_CAT(a, b)  PL_CAT2(a, b)
+#define PL_NAME(f)    PL_CAT(f, ISA_SUFFIX)
 
 /* ---- rpv: M F H = pi f_r / rho_0, float lanes -----------------------------
  * bsdfs/rpv.c gives the formulas. Single precision: the value feeds the
@@ -33,9 +33,7 @@ SIMD_FN void rpv_dir_angles(vf x, vf y, vf *s, vf *cp, vf *sp) {
   *sp = vsel(pos, y * ir, vset(0.0f));
 }
 
-SIMD_FN vf rpv_factor_lanes(const float *in) {
-  vf v[9];
-  for (int j = 0; j < 9; j++) __builtin_memcpy(&v[j], in + j * W, sizeof v[j]);
+SIMD_FN vf rpv_factor_lanes(const vf *v) {
   vf ci = v[2], co = v[5], k = v[6], g = v[7], rho_c = v[8];
   vf si, cpi, spi, so, cpo, spo;
   rpv_dir_angles(v[0], v[1], &si, &cpi, &spi);
@@ -59,11 +57,19 @@ SIMD_FN vf rpv_factor_lanes(const float *in) {
 CAM_LANES_ATTR void PL_NAME(rpv_factor)(int n, const float *const *in, float *out) {
   for (int k0 = 0; k0 < n; k0 += W) {
     int m = n - k0 < W ? n - k0 : W;
+    vf v[9];
+    if (m == W) { /* whole vectors: plain loads and stores */
+      for (int j = 0; j < 9; j++) __builtin_memcpy(&v[j], in[j] + k0, sizeof v[j]);
+      vf r = rpv_factor_lanes(v);
+      __builtin_memcpy(out + k0, &r, sizeof r);
+      continue;
+    }
     float a[9 * W];
     const float pad[9] = {0.0f, 0.0f, 1.0f, 0.0f, 0.0f, 1.0f, 1.0f, 0.0f, 1.0f};
     for (int j = 0; j < 9; j++)
       for (int k = 0; k < W; k++) a[j * W + k] = k < m ? in[j][k0 + k] : pad[j];
-    vf r = rpv_factor_lanes(a);
+    for (int j = 0; j < 9; j++) __builtin_memcpy(&v[j], a + j * W, sizeof v[j]);
+    vf r = rpv_factor_lanes(v);
     for (int k = 0; k < m; k++) out[k0 + k] = r[k];
   }
 }
@@ -73,8 +79,8 @@ CAM_LANES_ATTR void PL_NAME(rpv_factor)(int n, const float *const *in, float *ou
  * order (fmax(x, 0) as a select, the same for every x but -0, where
  * sqrt(+-0) only changes the sign of a zero that is then added to a
  * positive number): bitwise the scalar value. cos_i, eta, k, out: n each. */
-CAM_LANES_ATTR void PL_NAME(fresnel_conductor)(int n, const double *cos_i, const double *eta, const double *kk,
-                                               double *out) {
+CAM_LANES_ATTR void PL_NAME(fresnel_conductor)(int n, const double *cos_i, const double *eta,
+                                               const double *kk, double *out) {
   for (int k0 = 0; k0 < n; k0 += WD) {
     int cnt = n - k0 < WD ? n - k0 : WD;
     vdn ci, et, kv;

@@ -66,8 +66,8 @@ void perspective_rays_batch(rsw_isa isa, int n, const double (*m)[4], const doub
   void rpv_factor_##s(int n, const float *const *in, float *out);                                            \
   void fresnel_conductor_##s(int n, const double *cos_i, const double *eta, const double *k, double *out);   \
   void disk_origins_##s(int n, const double *m9, int m_step, const double *d, int d_step, const double *ap,  \
-                        const double *center, double radius, double offset, double *out);                   \
-  void perspective_rays_##s(int n, const double(*m)[4], const double *pp, double t, double aspect,          \
+                        const double *center, double radius, double offset, double *out);                    \
+  void perspective_rays_##s(int n, const double(*m)[4], const double *pp, double t, double aspect,           \
                             double near_clip, double far_clip, const double *fu, double *out)
 PL_SIMD_DECL(generic);
 
