@@ -41,7 +41,12 @@ SIMD_FN vf rpv_factor_lanes(const vf *v) {
   vf cos_dphi = cpi * cpo + spi * spo;
   vf cos_big = ci * co + si * so * cos_dphi;
   vf ti = si / ci, to = so / co;
-  vf g2 = ti * ti + to * to - 2.0f * ti * to * cos_dphi;
+  /* G^2 = ti^2 + to^2 - 2 ti to cos(dphi), written without its
+   * cancellation near the hot spot (wi ~ wo, where G -> 0 and float lost
+   * 2e-5 of H): (ti - to)^2 + ti to 2 (1 - cos(dphi)), with 2 (1 -
+   * cos(dphi)) = (cpi - cpo)^2 + (spi - spo)^2 for unit azimuth vectors. */
+  vf dc = cpi - cpo, ds = spi - spo, dt = ti - to;
+  vf g2 = dt * dt + ti * to * (dc * dc + ds * ds);
   vf gg = VSQRT(vmax(g2, vset(0.0f)));
   vf mbase = ci * co * (ci + co);
   vf x = 1.0f + g * g + 2.0f * g * cos_big;
