@@ -9,7 +9,10 @@
 #   make install    raysweepd, raysweep, man pages, headers, libraysweep
 #                   (PREFIX=/usr/local, DESTDIR= for staging)
 #   make format     clang-format the C sources (tools/check-format.sh --fix)
-# Variables: WERROR=1 adds -Werror; SAN=1 builds into build-san/.
+# Variables: WERROR=1 adds -Werror; SAN=1 builds into build-san/;
+# SIMD=generic builds the kernel as for a CPU other than x86 (the portable
+# vector kernels alone, core/isa.h) into build-generic/ (build-san-generic/);
+# make test-generic runs the kernel's SIMD tests on that build.
 # On a machine without make or cc, ./make ARGS installs them and runs make ARGS.
 # Every compile waits for `deps` (an order-only prerequisite), so make -jN
 # never starts compiling before the packages are installed.
@@ -27,6 +30,13 @@ SANFLAGS :=
 OPT := -O2
 endif
 
+ifeq ($(SIMD),generic)
+BUILD := $(BUILD)-generic
+SIMD_CPPFLAGS := -DRSW_SIMD_GENERIC_ONLY
+else
+SIMD_CPPFLAGS :=
+endif
+
 WARN := -Wall -Wextra -Wshadow -Wno-unused-parameter -Wstrict-prototypes
 ifeq ($(WERROR),1)
 WARN += -Werror
@@ -36,7 +46,7 @@ endif
 # daemon and libraysweep) sees the public headers; the daemon sees
 # common/ and server/; libraysweep and the CLI never see server/ (the CLI
 # sees only the public API); tests see everything.
-BASE_CPPFLAGS := -D_GNU_SOURCE -MMD -MP
+BASE_CPPFLAGS := -D_GNU_SOURCE -MMD -MP $(SIMD_CPPFLAGS)
 CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude -Icommon -Iserver
 $(BUILD)/obj/common/%.o: CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude -Icommon
 $(BUILD)/obj/server/%.o: CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude -Icommon -Iserver
@@ -116,7 +126,7 @@ client_pc_lines = 'prefix=$(1)' 'includedir=$${prefix}/include' 'libdir=$${prefi
   'Version: $(VERSION)' 'Cflags: -I$${includedir}' \
   'Libs: -L$${libdir} -lraysweep' 'Libs.private: -lcurl -lcjson -lexpat -lcrypto -lOpenEXRCore -lnetcdf -lpng16 -lpthread -lm'
 
-.PHONY: all deps test bench run clean format install test-cluster
+.PHONY: all deps test bench run clean format install test-cluster test-generic
 .SECONDARY:
 
 all: deps $(BUILD)/bin/raysweepd $(CLIENT_A) $(CLIENT_SO) $(CLIENT_PC)
@@ -246,6 +256,14 @@ $(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
 
 test: deps $(BUILD)/bin/raysweepd $(TEST_BIN) $(BUILD)/tests/raysweepd-failmalloc
 	@RSW_BIN_DIR=$(BUILD)/bin BUILD=$(BUILD) SAN=$(SAN) tests/run.sh $(TEST_BIN) $(TEST_SCRIPTS)
+
+# The kernel built as a CPU other than x86 builds it (SIMD=generic: the
+# portable vector kernels alone, in build-generic/), and the tests of its
+# batched kernels, ISA choice and wave determinism run on it.
+GENERIC_TESTS := test_simd test_isa test_wave test_eo_surfaces
+test-generic: deps
+	$(MAKE) SIMD=generic $(addprefix build-generic/tests/,$(GENERIC_TESTS))
+	@BUILD=build-generic tests/run.sh $(addprefix build-generic/tests/,$(GENERIC_TESTS))
 
 bench: deps $(BUILD)/bin/raysweepd $(BUILD)/bin/raysweep $(BENCH_BIN)
 	@for b in $(BENCH_BIN); do $$b || exit 1; done

@@ -23,7 +23,7 @@
  *                           only when non-zero: rays the periodic boundary
  *                           could not resolve (render.h), decimal
  *   raysweep:isa            the instruction set the batched shading ran
- *                           ("avx512", "avx2", "sse2"), when known
+ *                           ("avx512", "avx2", "sse2", "generic"), when known
  *   raysweep:irradiance     films with brdf/brf channels: the horizontal
  *                           irradiance E_h they divide by, per radiance
  *                           channel, %.17g, comma-separated

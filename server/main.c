@@ -443,7 +443,8 @@ static int cmd_version(int argc, char **argv) {
 static const command commands[] = {
     {"render",
      "render SCENE [-D name=value]... [--set KEY=VALUE]... [--sensor ID] [--spp N] [--seed S] "
-     "[--wavelength NM] [--threads N] [--isa auto|avx512|avx2|sse2] [--variant mono|rgb] [--plugin-dir DIR] "
+     "[--wavelength NM] [--threads N] [--isa auto|avx512|avx2|sse2|generic] [--variant mono|rgb] "
+     "[--plugin-dir DIR] "
      "[--quantities LIST] "
      "[--variance] [--exposure EV] [--colormap MAP] [--stats] -o OUT.exr|OUT.png",
      "load a scene, apply parameter updates, render one sensor to OpenEXR or a PNG quick-look",
@@ -457,9 +458,10 @@ static const command commands[] = {
      "  --seed S            an integer >= 0, added to the sampler's seed (default 0)\n"
      "  --wavelength NM     the render wavelength in nm, mono variant (default 550)\n"
      "  --threads N         1 to 256 (default: every online core; the film does not depend on N)\n"
-     "  --isa ISA           auto (default: the widest the CPU has), avx512, avx2 or sse2: the instruction\n"
-     "                      set of the vectorised shading; films agree across ISAs statistically, not\n"
-     "                      bitwise; refused when the CPU lacks it\n"
+     "  --isa ISA           auto (default: the widest the CPU has), avx512, avx2, sse2 or generic "
+     "(portable,\n"
+     "                      every CPU): the instruction set of the vectorised shading; films agree across\n"
+     "                      ISAs statistically, not bitwise; refused when the CPU lacks it\n"
      "  --variant mono|rgb  overrides the document's variant (default rgb)\n"
      "  --plugin-dir DIR    load every *.so in DIR as an environment plugin first\n"
      "  --quantities LIST   comma-separated, of radiance, brdf, brf: adds brdf = L/E_h and brf = pi L/E_h\n"
@@ -506,9 +508,10 @@ static const command commands[] = {
      "  --header-timeout S  seconds a connection may take to send a request's headers\n"
      "                      (default 10); slower ones are closed\n"
      "  --max-film-bytes B  film memory one render may take (default 1G); larger films get 422\n"
-     "  --isa ISA           auto (default: the widest the CPU has), avx512, avx2 or sse2: the instruction\n"
-     "                      set of the vectorised shading (GET /v1 says which); refused when the CPU lacks "
-     "it\n"
+     "  --isa ISA           auto (default: the widest the CPU has), avx512, avx2, sse2 or generic "
+     "(portable,\n"
+     "                      every CPU): the instruction set of the vectorised shading (GET /v1 says\n"
+     "                      which); refused when the CPU lacks it\n"
      "Stops on SIGTERM or SIGINT.\n",
      cmd_serve},
     {"routes", "routes", "print the routes the daemon serves, one \"METHOD PATH\" per line", "", cmd_routes},

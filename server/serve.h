@@ -11,6 +11,7 @@ int cmd_routes(int argc, char **argv);
   "serve [--listen HOST:PORT] [--threads N] [--scene FILE]... [--data-root DIR] [--blob-dir DIR] "           \
   "[--token-file F] [--max-body BYTES] [--max-queue N] [--result-ttl S] [--port-file F] "                    \
   "[--plugin-dir DIR] [--state-dir DIR] [--max-scene-bytes BYTES] [--max-result-bytes BYTES] "               \
-  "[--max-connections N] [--header-timeout S] [--max-film-bytes BYTES] [--isa auto|avx512|avx2|sse2]"
+  "[--max-connections N] [--header-timeout S] [--max-film-bytes BYTES] [--isa "                              \
+  "auto|avx512|avx2|sse2|generic]"
 
 #endif

@@ -163,7 +163,8 @@ typedef struct bsdf_ops {
    * render's ISA (core/isa.h). A lane's result depends on its own inputs
    * only (not on n or its neighbours), so a wave's grouping of lanes does
    * not change a film. It may differ from sample() in the last bits (its
-   * single-precision placement of the sample); pdf() and eval() stay the
+   * single-precision parts, which the plugin names: roughconductor's
+   * placement of the sample, rpv's weight); pdf() and eval() stay the
    * densities of both. NULL: the integrator calls sample() per lane. */
   void (*sample_batch)(const bsdf *b, int n, const surface_interaction *const *si, const double *u1,
                        const vec2 *u2, bsdf_sample *bs, color *weight);

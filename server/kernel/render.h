@@ -87,7 +87,7 @@ typedef struct film_image {
    * film depends on that policy; written to the film's metadata. */
   uint64_t unresolved_rays;
   /* The instruction set the batched shading ran (core/isa.h: "avx512",
-   * "avx2", "sse2"; static), or NULL when not known (a film restored
+   * "avx2", "sse2", "generic"; static), or NULL when not known (a film restored
    * from a state directory). */
   const char *isa;
   /* Planes beyond radiance, in the fixed order brdf, brf,

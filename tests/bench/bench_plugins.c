@@ -9,6 +9,17 @@
  *                 perspective of the Cornell box)
  *  area_sample    ns per area-light sample_direction (the Cornell box
  *                 light, from the floor's centre)
+ *  lanes_*        ns per lane of the hot plugins' ops as the wave calls
+ *                 them (groups of 64 lanes of one BSDF, waves of 256
+ *                 camera samples): `ns_per_lane_scalar` the scalar op per
+ *                 lane through its pointer (what the wave does for a
+ *                 plugin without a batched op), `ns_per_lane_batch` the
+ *                 batched op, at `isa` (the best the CPU has, or
+ *                 $RSW_BENCH_ISA). BSDFs: diffuse, conductor (mirror and
+ *                 gold in rgb), dielectric, twosided (diffuse both sides),
+ *                 rpv (grey, coloured), bilambertian, roughconductor;
+ *                 sample and eval+pdf. Sensors: hdistant, distant,
+ *                 mdistant, distantflux, perspective, radiancemeter.
  *  scene_*        whole renders: the seed scene (32x32, 3200 spp) and the
  *                 Cornell box example (128x128, 64 spp, max_depth 8), all
  *                 cores ($RSW_BENCH_THREADS): wall seconds, and the CPU
@@ -27,6 +38,7 @@
 #include <unistd.h>
 
 #include "../../server/kernel/bsdfs/bsdfs_internal.h"
+#include "../../server/kernel/core/isa.h"
 #include "../../server/kernel/core/rng.h"
 #include "../../server/kernel/core/warp.h"
 #include "../../server/kernel/render.h"
@@ -131,6 +143,190 @@ static void bench_rough(void) {
   tb_free_tex(rho);
 }
 
+static scene *load(const char *path);
+
+/* ---- batched ops vs the scalar ones, ns per lane ------------------------- */
+
+#define LANES 16384
+#define GROUP 64
+
+static void emit_lanes(const char *name, double ns_scalar, double ns_batch, double sink) {
+  printf("{\"bench\": \"%s\", \"ns_per_lane_scalar\": %.2f, \"ns_per_lane_batch\": %.2f, \"speedup\": %.2f, "
+         "\"isa\": \"%s\", \"repeats\": %d, \"checksum\": %.6g}\n",
+         name, ns_scalar, ns_batch, ns_scalar / ns_batch, rsw_isa_name(rsw_isa_get()), REPEATS, sink);
+  fflush(stdout);
+}
+
+/* wi: the cosine-weighted directions of make_inputs(), every other one
+ * mirrored below the surface when both_sides (twosided, bilambertian). */
+static void bench_bsdf_lanes(const char *name, const bsdf *b, bool both_sides) {
+  char n1[96], n2[96];
+  snprintf(n1, sizeof n1, "lanes_%s_sample", name);
+  snprintf(n2, sizeof n2, "lanes_%s_eval_pdf", name);
+  if (!wanted(n1) && !wanted(n2)) return;
+  static surface_interaction si[LANES];
+  static const surface_interaction *sp[LANES];
+  static double u1[LANES], pdf[LANES];
+  static vec2 u2[LANES];
+  static vec3 wo[LANES];
+  static bsdf_sample bs[LANES];
+  static color w[LANES], f[LANES];
+  for (int i = 0; i < LANES; i++) {
+    vec3 d = dirs[i & (NDIR - 1)];
+    if (both_sides && (i & 1)) d.z = -d.z;
+    si[i] = tb_si_with(d);
+    sp[i] = &si[i];
+    u1[i] = us[(i * 11 + 5) & (NDIR - 1)].x;
+    u2[i] = us[(i * 7 + 3) & (NDIR - 1)];
+    wo[i] = dirs[(i * 5 + 1) & (NDIR - 1)];
+    if (both_sides && (i % 3 == 0)) wo[i].z = -wo[i].z;
+  }
+  for (int op = 0; op < 2; op++) {
+    if (!wanted(op ? n2 : n1)) continue;
+    double ts[REPEATS], tb[REPEATS], sink = 0;
+    for (int rep = 0; rep < REPEATS; rep++) {
+      for (int mode = 0; mode < 2; mode++) {
+        double t0 = bench_thread_cpu_s();
+        for (int k = 0; k < 8; k++)
+          for (int i0 = 0; i0 < LANES; i0 += GROUP) {
+            if (op == 0 && mode == 0)
+              for (int i = i0; i < i0 + GROUP; i++) w[i] = b->ops->sample(b, sp[i], u1[i], u2[i], &bs[i]);
+            else if (op == 0)
+              b->ops->sample_batch(b, GROUP, sp + i0, u1 + i0, u2 + i0, bs + i0, w + i0);
+            else if (mode == 0)
+              for (int i = i0; i < i0 + GROUP; i++) {
+                f[i] = b->ops->eval(b, sp[i], wo[i]);
+                pdf[i] = b->ops->pdf(b, sp[i], wo[i]);
+              }
+            else
+              b->ops->eval_pdf_batch(b, GROUP, sp + i0, wo + i0, f + i0, pdf + i0);
+          }
+        double ns = (bench_thread_cpu_s() - t0) * 1e9 / (8.0 * LANES);
+        if (mode == 0)
+          ts[rep] = ns;
+        else
+          tb[rep] = ns;
+        for (int i = 0; i < LANES; i += 97) sink += op ? f[i].c[0] + pdf[i] : w[i].c[0] + bs[i].pdf;
+      }
+    }
+    emit_lanes(op ? n2 : n1, bench_median(ts, REPEATS), bench_median(tb, REPEATS), sink);
+  }
+}
+
+static void bench_bsdfs_lanes(void) {
+  render_ctx rgb = {.variant = VARIANT_RGB, .wavelength = 550.0};
+  texture *t[8] = {uniform_texture_const(0.5, "a"), uniform_texture_const(0.0, "eta"),
+                   uniform_texture_const(1.0, "k"), uniform_texture_const(0.12, "rho0"),
+                   uniform_texture_const(0.7, "k"), uniform_texture_const(-0.2, "g"),
+                   uniform_texture_const(0.4, "t"), NULL};
+  spectrum s3 = {.kind = SPEC_RGB, .rgb = {0.05, 0.1, 0.3}};
+  t[7] = uniform_texture_new(&s3, "rgb");
+  for (int i = 0; i < 8; i++)
+    if (!t[i]) return;
+  bsdf *b;
+  if ((b = diffuse_new(t[0]))) {
+    bench_bsdf_lanes("diffuse", b, false);
+    bsdf *ts = twosided_new(b, NULL);
+    if (ts) bench_bsdf_lanes("twosided_diffuse", ts, true);
+    tb_free_bsdf(ts);
+    tb_free_bsdf(b);
+  }
+  if ((b = conductor_new(t[1], t[2], NULL, NULL, NULL))) bench_bsdf_lanes("conductor_mirror", b, false);
+  tb_free_bsdf(b);
+  if ((b = conductor_new(NULL, NULL, ior_conductor_lookup("Au"), NULL, &rgb)))
+    bench_bsdf_lanes("conductor_gold_rgb", b, false);
+  tb_free_bsdf(b);
+  if ((b = dielectric_new(1.5, 1.0, NULL, NULL))) bench_bsdf_lanes("dielectric", b, true);
+  tb_free_bsdf(b);
+  if ((b = rpv_new(t[3], t[4], t[5], NULL))) bench_bsdf_lanes("rpv", b, false);
+  tb_free_bsdf(b);
+  if ((b = rpv_new(t[7], t[4], t[5], t[6]))) bench_bsdf_lanes("rpv_rgb", b, false);
+  tb_free_bsdf(b);
+  if ((b = bilambertian_new(t[6], t[6]))) bench_bsdf_lanes("bilambertian", b, true);
+  tb_free_bsdf(b);
+  rough_case r = rough_make(MF_BECKMANN, 0.1, 0.1, true, 0.0, 1.0);
+  if (r.b) bench_bsdf_lanes("roughconductor_beckmann", r.b, false);
+  rough_free(&r);
+  for (int i = 0; i < 8; i++) tb_free_tex(t[i]);
+}
+
+static void bench_sensor_lanes(const char *name, const sensor *se) {
+  if (!wanted(name) || !se->ops->sample_ray_batch) return;
+  enum {
+    WAVE_N = 256
+  };
+  static vec2 fu[LANES], ap[LANES];
+  static ray3 rays[LANES];
+  static double w[LANES];
+  for (int i = 0; i < LANES; i++) fu[i] = us[i & (NDIR - 1)], ap[i] = us[(i * 3 + 1) & (NDIR - 1)];
+  double ts[REPEATS], tb[REPEATS], sink = 0;
+  for (int rep = 0; rep < REPEATS; rep++)
+    for (int mode = 0; mode < 2; mode++) {
+      double t0 = bench_thread_cpu_s();
+      for (int k = 0; k < 8; k++)
+        for (int i0 = 0; i0 < LANES; i0 += WAVE_N) {
+          if (mode == 0)
+            for (int i = i0; i < i0 + WAVE_N; i++) w[i] = se->ops->sample_ray(se, fu[i], ap[i], &rays[i]);
+          else
+            se->ops->sample_ray_batch(se, WAVE_N, fu + i0, ap + i0, rays + i0, w + i0);
+        }
+      double ns = (bench_thread_cpu_s() - t0) * 1e9 / (8.0 * LANES);
+      if (mode == 0)
+        ts[rep] = ns;
+      else
+        tb[rep] = ns;
+      for (int i = 0; i < LANES; i += 97) sink += w[i] + rays[i].d.x + rays[i].o.y;
+    }
+  emit_lanes(name, bench_median(ts, REPEATS), bench_median(tb, REPEATS), sink);
+}
+
+static void bench_sensors_lanes(void) {
+  static const char *const scenes[][2] = {
+      {"lanes_sensor_hdistant", "proto/examples/hdistant_seed.xml"},
+      {"lanes_sensor_perspective", "proto/examples/cornell_box.json"},
+  };
+  static const char *const inline_scenes[][2] = {
+      {"lanes_sensor_distant",
+       "{\"type\": \"scene\", \"cam\": {\"type\": \"distant\", \"direction\": [0.3, -0.2, -1],"
+       " \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}},"
+       " \"ball\": {\"type\": \"sphere\", \"radius\": 2}}"},
+      {"lanes_sensor_mdistant", "{\"type\": \"scene\", \"cam\": {\"type\": \"mdistant\","
+                                " \"directions\": \"0 0 -1, 0.5 0.1 -1, -1 0.3 -0.2, 0 1 0\","
+                                " \"film\": {\"type\": \"hdrfilm\", \"width\": 4, \"height\": 1}},"
+                                " \"ball\": {\"type\": \"sphere\", \"radius\": 2}}"},
+      {"lanes_sensor_distantflux", "{\"type\": \"scene\", \"cam\": {\"type\": \"distantflux\","
+                                   " \"film\": {\"type\": \"hdrfilm\", \"width\": 8, \"height\": 4}},"
+                                   " \"ball\": {\"type\": \"sphere\", \"radius\": 2}}"},
+      {"lanes_sensor_radiancemeter", "{\"type\": \"scene\", \"cam\": {\"type\": \"radiancemeter\","
+                                     " \"origin\": [0, 0, 5], \"direction\": [0, 0, -1],"
+                                     " \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}},"
+                                     " \"ball\": {\"type\": \"sphere\", \"radius\": 2}}"},
+  };
+  for (size_t i = 0; i < 2; i++) {
+    if (!wanted(scenes[i][0])) continue;
+    scene *s = load(scenes[i][1]);
+    if (s) bench_sensor_lanes(scenes[i][0], s->sensors[0]);
+    scene_free(s);
+  }
+  for (size_t i = 0; i < sizeof inline_scenes / sizeof inline_scenes[0]; i++) {
+    if (!wanted(inline_scenes[i][0])) continue;
+    rsw_err err = {0};
+    scene *s = NULL;
+    scene_load_opts lo = {.size = sizeof lo};
+    const char *txt = inline_scenes[i][1];
+    if (scene_load_memory(txt, strlen(txt), inline_scenes[i][0], false, &lo, &s, &err)) {
+      fprintf(stderr, "bench_plugins: %s: %s\n", inline_scenes[i][0], err.msg);
+      continue;
+    }
+    render_opts o = {.size = sizeof o, .spp = 1, .seed = 1, .threads = 1};
+    film_image img;
+    render_result_stats st;
+    if (render_sensor(s, &o, &img, &st, &err) == RSW_OK) film_image_free(&img);
+    bench_sensor_lanes(inline_scenes[i][0], s->sensors[0]);
+    scene_free(s);
+  }
+}
+
 static scene *load(const char *path) {
   rsw_err err = {0};
   scene *s = NULL;
@@ -230,7 +426,18 @@ static void bench_render(const char *name, scene *s) {
 
 int main(void) {
   make_inputs();
+  const char *isa_name = getenv("RSW_BENCH_ISA");
+  if (isa_name && *isa_name) {
+    rsw_isa isa;
+    rsw_err err = {0};
+    if (rsw_isa_parse(isa_name, &isa, &err) != RSW_OK || !rsw_isa_set(isa)) {
+      fprintf(stderr, "bench_plugins: RSW_BENCH_ISA: %s\n", err.msg);
+      return 1;
+    }
+  }
   bench_rough();
+  bench_bsdfs_lanes();
+  bench_sensors_lanes();
   scene *seed = load("proto/examples/hdistant_seed.xml");
   scene *cb = load("proto/examples/cornell_box.json");
   if (!seed || !cb) return 1;

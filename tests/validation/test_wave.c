@@ -1,7 +1,10 @@
 /* The wavefront path integrator (integrators/path.c, render.c):
  *  - a film is bitwise the same for 1, 2 and 3 threads (the Cornell box
  *    example, a gaussian filter across tiles, an area light; a periodic
- *    canopy, whose rays go through scene_trace one by one);
+ *    canopy, whose rays go through scene_trace one by one; every hot BSDF
+ *    with a batched op (rpv, bilambertian, twosided, conductor,
+ *    dielectric, roughconductor, diffuse) under each batched sensor:
+ *    mdistant, distant, distantflux, radiancemeter, perspective);
  *  - a path's value does not depend on the wave it runs in: Li_batch over
  *    a batch of paths and the same batch split in two give bitwise the
  *    same values; Li one path at a time (single-ray Embree queries) the
@@ -93,6 +96,56 @@ static void test_threads_periodic(void) {
   REQUIRE(s, "periodic scene");
   check_threads(s, 32, "periodic");
   scene_free(s);
+}
+
+/* The hot plugins' batched ops (bsdf_ops.sample_batch / eval_pdf_batch,
+ * sensor_ops.sample_ray_batch) in one scene, seen by each batched sensor:
+ * the wave groups lanes differently for each thread count, and a lane's
+ * value must not depend on its group. */
+static const char *EO_SHAPES =
+    " \"integrator\": {\"type\": \"path\", \"max_depth\": 6},"
+    " \"sky\": {\"type\": \"constant\", \"radiance\": 0.3},"
+    " \"sun\": {\"type\": \"directional\", \"direction\": [0.4, 0.3, -1], \"irradiance\": 2},"
+    " \"soil\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 3}],"
+    "   \"bsdf\": {\"type\": \"rpv\", \"rho_0\": 0.1, \"k\": 0.7, \"g\": -0.15, \"rho_c\": 0.3}},"
+    " \"leaf\": {\"type\": \"disk\", \"to_world\": [{\"scale\": 0.5}, {\"rotate\": {\"axis\": [1, 0, 0],"
+    "   \"angle\": 60}}, {\"translate\": [-0.8, 0.2, 0.8]}],"
+    "   \"bsdf\": {\"type\": \"bilambertian\", \"reflectance\": 0.4, \"transmittance\": 0.45}},"
+    " \"leaf2\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 0.4}, {\"rotate\": {\"axis\": [0, 1, "
+    "0],"
+    "   \"angle\": 120}}, {\"translate\": [0.9, -0.6, 0.7]}],"
+    "   \"bsdf\": {\"type\": \"twosided\", \"a\": {\"type\": \"diffuse\", \"reflectance\": 0.6},"
+    "     \"b\": {\"type\": \"roughconductor\", \"alpha\": 0.3}}},"
+    " \"ball\": {\"type\": \"sphere\", \"center\": [0.6, 0.8, 0.5], \"radius\": 0.4,"
+    "   \"bsdf\": {\"type\": \"twosided\", \"c\": {\"type\": \"conductor\", \"material\": \"Au\"}}},"
+    " \"box\": {\"type\": \"cube\", \"to_world\": [{\"scale\": 0.3}, {\"translate\": [-0.5, -0.9, 0.3]}],"
+    "   \"bsdf\": {\"type\": \"dielectric\"}}}";
+
+static void test_threads_batched_plugins(void) {
+  static const char *const sensors[][2] = {
+      {"mdistant", "{\"type\": \"mdistant\", \"directions\": \"0 0 -1, 0.5 0.1 -1, -1 0.3 -0.6, 0.2 1 -0.3\","
+                   " \"film\": {\"type\": \"hdrfilm\", \"width\": 4, \"height\": 1}}"},
+      {"distant", "{\"type\": \"distant\", \"direction\": [0.3, -0.2, -1],"
+                  " \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}"},
+      {"distantflux", "{\"type\": \"distantflux\", \"film\": {\"type\": \"hdrfilm\", \"width\": 8,"
+                      " \"height\": 6}}"},
+      {"radiancemeter", "{\"type\": \"radiancemeter\", \"origin\": [0, 0, 3], \"direction\": [0.1, 0.2, -1],"
+                        " \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}}"},
+      {"perspective", "{\"type\": \"perspective\", \"fov\": 50, \"to_world\": [{\"lookat\": {\"origin\":"
+                      " [1, -4, 3], \"target\": [0, 0, 0.3], \"up\": [0, 0, 1]}}],"
+                      " \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 12}}"},
+  };
+  for (size_t i = 0; i < sizeof sensors / sizeof sensors[0]; i++) {
+    char doc[4096];
+    snprintf(doc, sizeof doc, "{\"type\": \"scene\", \"cam\": %s,%s", sensors[i][1], EO_SHAPES);
+    scene *s = tsup_load(doc, NULL);
+    REQUIRE(s, "%s scene", sensors[i][0]);
+    const sensor *se = s->sensors[0];
+    CHECK(se->ops->sample_ray_batch, "%s has a batched op", sensors[i][0]);
+    uint32_t spp = se->film->width * se->film->height > 16 ? 16 : 512;
+    check_threads(s, spp, sensors[i][0]);
+    scene_free(s);
+  }
 }
 
 /* Camera rays and sampler states of samples 0..n-1 of pixel 7, as render.c
@@ -507,6 +560,7 @@ static void test_frames_batch(void) {
 int main(void) {
   RSW_TEST_RUN(test_threads_cornell);
   RSW_TEST_RUN(test_threads_periodic);
+  RSW_TEST_RUN(test_threads_batched_plugins);
   RSW_TEST_RUN(test_batch_independent);
   RSW_TEST_RUN(test_packet_widths);
   RSW_TEST_RUN(test_stats_counters);

@@ -17,6 +17,7 @@
 
 #include "../scene/loader.h"
 #include "../scene/params.h"
+#include "../simd/simd.h"
 #include "../textures/texture.h"
 #include "bsdfs_internal.h"
 
@@ -27,14 +28,15 @@ static double prob_reflect(color r, color t) {
   return isnan(p) ? 0.0 : p;
 }
 
-static color bil_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2, bsdf_sample *bs) {
-  const bilambertian_bsdf *d = (const bilambertian_bsdf *)b;
+/* The sample from wo = cosine_hemisphere(u2) on: shared by the scalar and
+ * the batched op (which warps its lanes together), so both give the same
+ * bits. */
+static color bil_finish(const bilambertian_bsdf *d, const surface_interaction *si, double u1, vec3 wo,
+                        bsdf_sample *bs) {
   double ci = si->wi.z;
-  if (ci == 0.0 || !isfinite(ci)) return bsdf_fail(bs);
   color r = tex_eval(d->reflectance, si), t = tex_eval(d->transmittance, si);
   double p_r = prob_reflect(r, t);
   bool reflect = u1 < p_r;
-  vec3 wo = warp_square_to_cosine_hemisphere(u2);
   if (!(wo.z > 0.0)) return bsdf_fail(bs);
   /* Reflection stays on wi's side, transmission crosses. */
   bool flip = (ci < 0.0) == reflect;
@@ -46,6 +48,16 @@ static color bil_sample(const bsdf *b, const surface_interaction *si, double u1,
   bs->sampled_type = reflect ? BSDF_DIFFUSE_REFLECTION : BSDF_DIFFUSE_TRANSMISSION;
   if (!(bs->pdf > 0.0)) return bsdf_fail(bs);
   return col_scale(reflect ? r : t, 1.0 / p_lobe);
+}
+
+static bool bil_valid(const surface_interaction *si) {
+  double ci = si->wi.z;
+  return !(ci == 0.0 || !isfinite(ci));
+}
+
+static color bil_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2, bsdf_sample *bs) {
+  if (!bil_valid(si)) return bsdf_fail(bs);
+  return bil_finish((const bilambertian_bsdf *)b, si, u1, warp_square_to_cosine_hemisphere(u2), bs);
 }
 
 static color bil_eval(const bsdf *b, const surface_interaction *si, vec3 wo) {
@@ -65,7 +77,60 @@ static double bil_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
   return RSW_INV_PI * fabs(co) * p_lobe;
 }
 
-static const bsdf_ops bil_ops = {.sample = bil_sample, .eval = bil_eval, .pdf = bil_pdf};
+/* Batched sampling (bsdf_ops.sample_batch): the cosine-hemisphere warp of
+ * up to 64 lanes in double lanes (simd/camera_lanes.h, bitwise the scalar
+ * warp), the rest per lane (bil_finish): bit for bit bil_sample(). */
+static void bil_sample_batch(const bsdf *b, int n, const surface_interaction *const *si, const double *u1,
+                             const vec2 *u2, bsdf_sample *bs, color *weight) {
+  const bilambertian_bsdf *d = (const bilambertian_bsdf *)b;
+  enum {
+    C = 64
+  };
+  rsw_isa isa = rsw_isa_get();
+  for (int i0 = 0; i0 < n; i0 += C) {
+    int m = n - i0 < C ? n - i0 : C;
+    double u[2 * C], out[3 * C];
+    int lane[C], k = 0;
+    for (int j = 0; j < m; j++) {
+      if (!bil_valid(si[i0 + j])) {
+        weight[i0 + j] = bsdf_fail(&bs[i0 + j]);
+        continue;
+      }
+      u[2 * k] = u2[i0 + j].x, u[2 * k + 1] = u2[i0 + j].y;
+      lane[k++] = i0 + j;
+    }
+    cosine_hemisphere_batch(isa, k, u, out);
+    for (int j = 0; j < k; j++) {
+      int i = lane[j];
+      weight[i] = bil_finish(d, si[i], u1[i], v3(out[3 * j], out[3 * j + 1], out[3 * j + 2]), &bs[i]);
+    }
+  }
+}
+
+/* Batched eval and pdf: bil_eval() and bil_pdf() per lane with the two
+ * textures evaluated once (no vector kernel: nothing but the textures and
+ * a few products), bit for bit the scalar values. */
+static void bil_eval_pdf_batch(const bsdf *b, int n, const surface_interaction *const *si, const vec3 *wo,
+                               color *f, double *pdf) {
+  const bilambertian_bsdf *d = (const bilambertian_bsdf *)b;
+  for (int i = 0; i < n; i++) {
+    double ci = si[i]->wi.z, co = wo[i].z;
+    f[i] = col1(0.0);
+    pdf[i] = 0.0;
+    if (ci == 0.0 || co == 0.0) continue;
+    color r = tex_eval(d->reflectance, si[i]), t = tex_eval(d->transmittance, si[i]);
+    bool same = (ci > 0.0) == (co > 0.0);
+    f[i] = col_scale(same ? r : t, RSW_INV_PI * fabs(co));
+    double p_r = prob_reflect(r, t);
+    pdf[i] = RSW_INV_PI * fabs(co) * (same ? p_r : 1.0 - p_r);
+  }
+}
+
+static const bsdf_ops bil_ops = {.sample = bil_sample,
+                                 .eval = bil_eval,
+                                 .pdf = bil_pdf,
+                                 .sample_batch = bil_sample_batch,
+                                 .eval_pdf_batch = bil_eval_pdf_batch};
 
 static void bil_destroy(object *o) {
   free(o);

@@ -15,6 +15,7 @@
 
 #include "../scene/loader.h"
 #include "../scene/params.h"
+#include "../simd/simd.h"
 #include "bsdfs_internal.h"
 #include "fresnel.h"
 
@@ -93,8 +94,68 @@ static double conductor_pdf(const bsdf *b, const surface_interaction *si, vec3 w
   return 0.0;
 }
 
-static const bsdf_ops conductor_ops = {
-    .sample = conductor_sample, .eval = conductor_eval, .pdf = conductor_pdf};
+/* Batched sampling (bsdf_ops.sample_batch): the mirror direction per lane,
+ * the Fresnel terms of up to 64 lanes (three per lane for a coloured
+ * index, none for eta = 0, k = 1: F = 1 exactly, as
+ * fresnel_conductor_col()) in double lanes (simd/plugin_lanes.h, bitwise
+ * fresnel_conductor()): each lane gives conductor_sample()'s result bit
+ * for bit. */
+static void conductor_sample_batch(const bsdf *b, int n, const surface_interaction *const *si,
+                                   const double *u1, const vec2 *u2, bsdf_sample *bs, color *weight) {
+  (void)u1;
+  (void)u2;
+  const conductor_bsdf *c = (const conductor_bsdf *)b;
+  enum {
+    C = 64
+  };
+  rsw_isa isa = rsw_isa_get();
+  for (int i0 = 0; i0 < n; i0 += C) {
+    int m = n - i0 < C ? n - i0 : C;
+    double ci[3 * C], et[3 * C], kk[3 * C], fr[3 * C];
+    int first[C], nch[C], q = 0; /* lane j's terms: fr[first[j] .. first[j] + nch[j]) */
+    for (int j = 0; j < m; j++) {
+      const surface_interaction *s = si[i0 + j];
+      nch[j] = -1;
+      if (!(s->wi.z > 0.0)) continue;
+      color eta, k;
+      conductor_ior_eval(&c->ior, s, &eta, &k);
+      bool grey = eta.c[0] == eta.c[1] && eta.c[0] == eta.c[2] && k.c[0] == k.c[1] && k.c[0] == k.c[2];
+      first[j] = q;
+      nch[j] = grey ? (eta.c[0] == 0.0 && k.c[0] == 1.0 ? 0 : 1) : 3;
+      for (int ch = 0; ch < nch[j]; ch++, q++) ci[q] = s->wi.z, et[q] = eta.c[ch], kk[q] = k.c[ch];
+    }
+    fresnel_conductor_batch(isa, q, ci, et, kk, fr);
+    for (int j = 0; j < m; j++) {
+      int i = i0 + j;
+      if (nch[j] < 0) {
+        weight[i] = bsdf_fail(&bs[i]);
+        continue;
+      }
+      bs[i].wo = reflect_local(si[i]->wi);
+      bs[i].pdf = 1.0;
+      bs[i].eta = 1.0;
+      bs[i].sampled_type = BSDF_DELTA_REFLECTION;
+      const double *f = &fr[first[j]];
+      color F = nch[j] == 0 ? col1(1.0) : nch[j] == 1 ? col1(f[0]) : col(f[0], f[1], f[2]);
+      weight[i] = col_mul(F, bsdf_factor(c->specular_reflectance, si[i]));
+    }
+  }
+}
+
+/* A delta lobe: 0 for every lane. */
+static void conductor_eval_pdf_batch(const bsdf *b, int n, const surface_interaction *const *si,
+                                     const vec3 *wo, color *f, double *pdf) {
+  (void)b;
+  (void)si;
+  (void)wo;
+  for (int i = 0; i < n; i++) f[i] = col1(0.0), pdf[i] = 0.0;
+}
+
+static const bsdf_ops conductor_ops = {.sample = conductor_sample,
+                                       .eval = conductor_eval,
+                                       .pdf = conductor_pdf,
+                                       .sample_batch = conductor_sample_batch,
+                                       .eval_pdf_batch = conductor_eval_pdf_batch};
 
 static void conductor_destroy(object *o) {
   free(o);

@@ -51,7 +51,112 @@ static double twosided_pdf(const bsdf *b, const surface_interaction *si, vec3 wo
   return t->brdf[1]->ops->pdf(t->brdf[1], &s, flip_z(wo));
 }
 
-static const bsdf_ops twosided_ops = {.sample = twosided_sample, .eval = twosided_eval, .pdf = twosided_pdf};
+/* ---- batched ops: each side's lanes through that side's batched op ------
+ * Lanes with wi.z > 0 go to the front BSDF as they are; lanes with
+ * wi.z < 0 to the back one with wi (and wo) mirrored, as the scalar ops
+ * do; wi.z == 0 (or NaN) fails. A side without a batched op runs its
+ * scalar op per lane. A lane's result is then its side's batched result,
+ * which depends on that lane alone. */
+enum {
+  TS_C = 64
+};
+
+static void side_sample(const bsdf *c, int n, const surface_interaction *const *si, const double *u1,
+                        const vec2 *u2, bsdf_sample *bs, color *w) {
+  if (c->ops->sample_batch) {
+    c->ops->sample_batch(c, n, si, u1, u2, bs, w);
+    return;
+  }
+  for (int i = 0; i < n; i++) w[i] = c->ops->sample(c, si[i], u1[i], u2[i], &bs[i]);
+}
+
+static void side_eval_pdf(const bsdf *c, int n, const surface_interaction *const *si, const vec3 *wo,
+                          color *f, double *pdf) {
+  if (c->ops->eval_pdf_batch) {
+    c->ops->eval_pdf_batch(c, n, si, wo, f, pdf);
+    return;
+  }
+  for (int i = 0; i < n; i++) {
+    f[i] = c->ops->eval(c, si[i], wo[i]);
+    pdf[i] = c->ops->pdf(c, si[i], wo[i]);
+  }
+}
+
+/* Up to TS_C lanes split by side: lane[s][j] the lane index of side s's
+ * j-th entry, sp[s] its interactions (the back side's are copies in buf
+ * with wi mirrored); cnt[2] the counts. Lanes with wi.z == 0 (or NaN) are
+ * in neither. */
+static void split_sides(int m, const surface_interaction *const *si, surface_interaction *buf,
+                        const surface_interaction *sp[2][TS_C], int lane[2][TS_C], int cnt[2]) {
+  cnt[0] = cnt[1] = 0;
+  for (int j = 0; j < m; j++) {
+    const surface_interaction *s = si[j];
+    if (s->wi.z > 0.0) {
+      lane[0][cnt[0]] = j;
+      sp[0][cnt[0]++] = s;
+    } else if (s->wi.z < 0.0) {
+      surface_interaction *b = &buf[cnt[1]];
+      *b = *s;
+      b->wi = flip_z(s->wi);
+      lane[1][cnt[1]] = j;
+      sp[1][cnt[1]++] = b;
+    }
+  }
+}
+
+static void twosided_sample_batch(const bsdf *b, int n, const surface_interaction *const *si,
+                                  const double *u1, const vec2 *u2, bsdf_sample *bs, color *weight) {
+  const twosided_bsdf *t = (const twosided_bsdf *)b;
+  for (int i0 = 0; i0 < n; i0 += TS_C) {
+    int m = n - i0 < TS_C ? n - i0 : TS_C;
+    surface_interaction buf[TS_C];
+    const surface_interaction *sp[2][TS_C];
+    int lane[2][TS_C], cnt[2];
+    split_sides(m, si + i0, buf, sp, lane, cnt);
+    for (int j = 0; j < m; j++) weight[i0 + j] = bsdf_fail(&bs[i0 + j]); /* wi.z == 0 lanes keep this */
+    for (int s = 0; s < 2; s++) {
+      double v1[TS_C];
+      vec2 v2[TS_C];
+      bsdf_sample out[TS_C];
+      color w[TS_C];
+      for (int j = 0; j < cnt[s]; j++) v1[j] = u1[i0 + lane[s][j]], v2[j] = u2[i0 + lane[s][j]];
+      if (cnt[s] > 0) side_sample(t->brdf[s], cnt[s], sp[s], v1, v2, out, w);
+      for (int j = 0; j < cnt[s]; j++) {
+        int i = i0 + lane[s][j];
+        bs[i] = out[j];
+        if (s == 1) bs[i].wo = flip_z(out[j].wo);
+        weight[i] = w[j];
+      }
+    }
+  }
+}
+
+static void twosided_eval_pdf_batch(const bsdf *b, int n, const surface_interaction *const *si,
+                                    const vec3 *wo, color *f, double *pdf) {
+  const twosided_bsdf *t = (const twosided_bsdf *)b;
+  for (int i0 = 0; i0 < n; i0 += TS_C) {
+    int m = n - i0 < TS_C ? n - i0 : TS_C;
+    surface_interaction buf[TS_C];
+    const surface_interaction *sp[2][TS_C];
+    int lane[2][TS_C], cnt[2];
+    split_sides(m, si + i0, buf, sp, lane, cnt);
+    for (int j = 0; j < m; j++) f[i0 + j] = col1(0.0), pdf[i0 + j] = 0.0;
+    for (int s = 0; s < 2; s++) {
+      vec3 o[TS_C];
+      color fo[TS_C];
+      double po[TS_C];
+      for (int j = 0; j < cnt[s]; j++) o[j] = s == 1 ? flip_z(wo[i0 + lane[s][j]]) : wo[i0 + lane[s][j]];
+      if (cnt[s] > 0) side_eval_pdf(t->brdf[s], cnt[s], sp[s], o, fo, po);
+      for (int j = 0; j < cnt[s]; j++) f[i0 + lane[s][j]] = fo[j], pdf[i0 + lane[s][j]] = po[j];
+    }
+  }
+}
+
+static const bsdf_ops twosided_ops = {.sample = twosided_sample,
+                                      .eval = twosided_eval,
+                                      .pdf = twosided_pdf,
+                                      .sample_batch = twosided_sample_batch,
+                                      .eval_pdf_batch = twosided_eval_pdf_batch};
 
 static void twosided_destroy(object *o) {
   free(o);

@@ -3,7 +3,7 @@
 
 #include <string.h>
 
-static const char *const names[RSW_ISA__COUNT] = {"sse2", "avx2", "avx512"};
+static const char *const names[RSW_ISA__COUNT] = {"sse2", "avx2", "avx512", "generic"};
 
 /* -1: not chosen yet (the first rsw_isa_get() picks the best). */
 static int current = -1;
@@ -13,7 +13,8 @@ const char *rsw_isa_name(rsw_isa isa) {
 }
 
 bool rsw_isa_supported(rsw_isa isa) {
-#if defined(__x86_64__) || defined(__i386__)
+  if (isa == RSW_ISA_GENERIC) return true;
+#if (defined(__x86_64__) || defined(__i386__)) && !defined(RSW_SIMD_GENERIC_ONLY)
   __builtin_cpu_init();
   switch (isa) {
   case RSW_ISA_SSE2: return __builtin_cpu_supports("sse2");
@@ -31,7 +32,8 @@ bool rsw_isa_supported(rsw_isa isa) {
 rsw_isa rsw_isa_best(void) {
   if (rsw_isa_supported(RSW_ISA_AVX512)) return RSW_ISA_AVX512;
   if (rsw_isa_supported(RSW_ISA_AVX2)) return RSW_ISA_AVX2;
-  return RSW_ISA_SSE2;
+  if (rsw_isa_supported(RSW_ISA_SSE2)) return RSW_ISA_SSE2;
+  return RSW_ISA_GENERIC;
 }
 
 rsw_status rsw_isa_parse(const char *name, rsw_isa *out, rsw_err *err) {
@@ -48,8 +50,8 @@ rsw_status rsw_isa_parse(const char *name, rsw_isa *out, rsw_err *err) {
       return RSW_OK;
     }
   }
-  return rsw_fail(err, RSW_ERR_INVALID, "--isa", "unknown ISA '%s' (expected auto, avx512, avx2 or sse2)",
-                  name ? name : "");
+  return rsw_fail(err, RSW_ERR_INVALID, "--isa",
+                  "unknown ISA '%s' (expected auto, avx512, avx2, sse2 or generic)", name ? name : "");
 }
 
 rsw_isa rsw_isa_get(void) {

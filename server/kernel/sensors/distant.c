@@ -12,6 +12,7 @@
 #include <stdlib.h>
 
 #include "../scene/params.h"
+#include "../simd/simd.h"
 #include "sensor_common.h"
 
 typedef struct distant {
@@ -37,6 +38,41 @@ static double distant_sample_ray(const sensor *s, vec2 film_u, vec2 aperture_u, 
   ray->tmin = 0.0;
   ray->tmax = INFINITY;
   return w;
+}
+
+/* Batched rays (sensor_ops.sample_ray_batch): without a target or a
+ * periodic slab, the origins on the bounding disk in double lanes
+ * (simd/plugin_lanes.h disk_origins, the same operations as
+ * ray_target_origin()), so bit for bit distant_sample_ray()'s rays; the
+ * direction is the sensor's. Otherwise one by one. */
+static void distant_sample_ray_batch(const sensor *s, int n, const vec2 *film_u, const vec2 *aperture_u,
+                                     ray3 *rays, double *w) {
+  const distant *ds = (const distant *)s;
+  if (ds->target.kind != RAY_TARGET_NONE || ds->target.slab.on) {
+    for (int i = 0; i < n; i++) w[i] = distant_sample_ray(s, film_u[i], aperture_u[i], &rays[i]);
+    return;
+  }
+  enum {
+    C = 64
+  };
+  const double(*m)[4] = s->to_world.m;
+  double m9[9] = {m[0][0], m[0][1], m[0][2], m[1][0], m[1][1], m[1][2], m[2][0], m[2][1], m[2][2]};
+  double d[3] = {ds->d.x, ds->d.y, ds->d.z}, c[3] = {ds->center.x, ds->center.y, ds->center.z};
+  double ap[2 * C], out[3 * C];
+  rsw_isa isa = rsw_isa_get();
+  for (int i0 = 0; i0 < n; i0 += C) {
+    int cnt = n - i0 < C ? n - i0 : C;
+    for (int k = 0; k < cnt; k++) ap[2 * k] = aperture_u[i0 + k].x, ap[2 * k + 1] = aperture_u[i0 + k].y;
+    disk_origins_batch(isa, cnt, m9, 0, d, 0, ap, c, ds->radius, ds->radius, out);
+    for (int k = 0; k < cnt; k++) {
+      ray3 *r = &rays[i0 + k];
+      r->o = v3(out[3 * k], out[3 * k + 1], out[3 * k + 2]);
+      r->d = ds->d;
+      r->tmin = 0.0;
+      r->tmax = INFINITY;
+      w[i0 + k] = 1.0;
+    }
+  }
 }
 
 static rsw_status distant_set_scene(sensor *s, const scene *sc, rsw_err *err) {
@@ -65,6 +101,7 @@ static const sensor_ops distant_ops = {
     .set_scene = distant_set_scene,
     .pixel_angles = distant_pixel_angles,
     .pixel_directions = distant_pixel_directions,
+    .sample_ray_batch = distant_sample_ray_batch,
 };
 
 static void distant_destroy(object *o) {

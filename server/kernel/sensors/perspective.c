@@ -12,11 +12,13 @@
  * The ray starts at the camera position and is clipped to the near/far
  * planes: tmin = near_clip / d.z, tmax = far_clip / d.z. Weight 1. */
 #include <math.h>
+#include <stddef.h>
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
 
 #include "../scene/params.h"
+#include "../simd/simd.h"
 #include "sensor_common.h"
 
 typedef struct perspective {
@@ -43,6 +45,24 @@ static double perspective_sample_ray(const sensor *s, vec2 film_u, vec2 aperture
   return 1.0;
 }
 
+/* Batched rays (sensor_ops.sample_ray_batch): perspective_sample_ray()'s
+ * operations in double lanes (simd/plugin_lanes.h perspective_rays,
+ * written straight into the rays: 8 doubles each), so bit for bit its
+ * rays. */
+_Static_assert(sizeof(ray3) == 8 * sizeof(double) && offsetof(ray3, d) == 3 * sizeof(double) &&
+                   offsetof(ray3, tmin) == 6 * sizeof(double) && offsetof(ray3, tmax) == 7 * sizeof(double),
+               "perspective_rays writes a ray3 as 8 doubles (o, d, tmin, tmax)");
+static void perspective_sample_ray_batch(const sensor *s, int n, const vec2 *film_u, const vec2 *aperture_u,
+                                         ray3 *rays, double *w) {
+  (void)aperture_u;
+  const perspective *p = (const perspective *)s;
+  _Static_assert(sizeof(vec2) == 2 * sizeof(double), "film samples are (x, y) pairs of doubles");
+  double pp[2] = {p->pp_offset_x, p->pp_offset_y};
+  perspective_rays_batch(rsw_isa_get(), n, (const double(*)[4])s->to_world.m, pp, p->tan_half_fov_x,
+                         p->aspect, p->near_clip, p->far_clip, (const double *)film_u, (double *)rays);
+  for (int i = 0; i < n; i++) w[i] = 1.0;
+}
+
 static rsw_status perspective_set_scene(sensor *s, const scene *sc, rsw_err *err) {
   (void)s;
   (void)sc;
@@ -53,6 +73,7 @@ static rsw_status perspective_set_scene(sensor *s, const scene *sc, rsw_err *err
 static const sensor_ops perspective_ops = {
     .sample_ray = perspective_sample_ray,
     .set_scene = perspective_set_scene,
+    .sample_ray_batch = perspective_sample_ray_batch,
 };
 
 static void perspective_destroy(object *o) {

@@ -33,6 +33,17 @@ static double radiancemeter_sample_ray(const sensor *s, vec2 film_u, vec2 apertu
   return 1.0;
 }
 
+/* Batched rays (sensor_ops.sample_ray_batch): every sample's ray is the
+ * same (it depends on neither sample), so one scalar ray is made and
+ * copied: nothing to vectorise, bit for bit the scalar rays. */
+static void radiancemeter_sample_ray_batch(const sensor *s, int n, const vec2 *film_u, const vec2 *aperture_u,
+                                           ray3 *rays, double *w) {
+  if (n <= 0) return;
+  ray3 r;
+  double w0 = radiancemeter_sample_ray(s, film_u[0], aperture_u[0], &r);
+  for (int i = 0; i < n; i++) rays[i] = r, w[i] = w0;
+}
+
 static rsw_status radiancemeter_set_scene(sensor *s, const scene *sc, rsw_err *err) {
   (void)err;
   meter_frame_bind(&((radiancemeter *)s)->frame, sc);
@@ -42,6 +53,7 @@ static rsw_status radiancemeter_set_scene(sensor *s, const scene *sc, rsw_err *e
 static const sensor_ops radiancemeter_ops = {
     .sample_ray = radiancemeter_sample_ray,
     .set_scene = radiancemeter_set_scene,
+    .sample_ray_batch = radiancemeter_sample_ray_batch,
 };
 
 static void radiancemeter_destroy(object *o) {

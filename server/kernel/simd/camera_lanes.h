@@ -63,13 +63,18 @@ CAM_LANES_ATTR void CAM_LANES_FN(int n, const double (*m)[4], const double *fu, 
                                  const double *center, double radius, double offset, double *out) {
   for (int k0 = 0; k0 < n; k0 += WD) {
     int cnt = n - k0 < WD ? n - k0 : WD;
-    vdn ux = {0}, uy = {0}, ax = {0}, ay = {0};
-    for (int k = 0; k < cnt; k++) {
-      ux[k] = fu[2 * (k0 + k)];
-      uy[k] = fu[2 * (k0 + k) + 1];
-      ax[k] = ap[2 * (k0 + k)];
-      ay[k] = ap[2 * (k0 + k) + 1];
+    /* Constant-length loops through a padded copy for a partial tail (see
+     * COSINE_LANES_FN below). */
+    const double *fk = fu + 2 * k0, *ak = ap + 2 * k0;
+    double fpad[2 * WD], apad[2 * WD], res[6 * WD];
+    if (cnt < WD) {
+      for (int k = 0; k < 2 * WD; k++)
+        fpad[k] = k < 2 * cnt ? fk[k] : 0.5, apad[k] = k < 2 * cnt ? ak[k] : 0.5;
+      fk = fpad, ak = apad;
     }
+    vdn ux, uy, ax, ay;
+    for (int k = 0; k < WD; k++)
+      ux[k] = fk[2 * k], uy[k] = fk[2 * k + 1], ax[k] = ak[2 * k], ay[k] = ak[2 * k + 1];
     /* omega = norm(to_world hemisphere(fu)), d = -omega */
     vdn px, py;
     d_concentric(ux, uy, &px, &py);
@@ -96,11 +101,14 @@ CAM_LANES_ATTR void CAM_LANES_FN(int n, const double (*m)[4], const double *fu, 
     vdn ox = (center[0] + radius * rx) + -offset * dx;
     vdn oy = (center[1] + radius * ry) + -offset * dy;
     vdn oz = (center[2] + radius * rz) + -offset * dz;
-    for (int k = 0; k < cnt; k++) {
-      double *o = &out[6 * (k0 + k)];
+    double *ob = cnt < WD ? res : &out[6 * k0];
+    for (int k = 0; k < WD; k++) {
+      double *o = &ob[6 * k];
       o[0] = ox[k], o[1] = oy[k], o[2] = oz[k];
       o[3] = dx[k], o[4] = dy[k], o[5] = dz[k];
     }
+    if (cnt < WD)
+      for (int k = 0; k < 6 * cnt; k++) out[6 * k0 + k] = res[k];
   }
 }
 
@@ -110,18 +118,24 @@ CAM_LANES_ATTR void CAM_LANES_FN(int n, const double (*m)[4], const double *fu, 
 CAM_LANES_ATTR void COSINE_LANES_FN(int n, const double *u, double *out) {
   for (int k0 = 0; k0 < n; k0 += WD) {
     int cnt = n - k0 < WD ? n - k0 : WD;
-    vdn ux = {0}, uy = {0};
-    for (int k = 0; k < cnt; k++) {
-      ux[k] = u[2 * (k0 + k)];
-      uy[k] = u[2 * (k0 + k) + 1];
+    /* Loops of constant length (a partial tail goes through a padded
+     * copy), so lanes move through registers: element inserts of a
+     * variable count went through memory and stalled store forwarding. */
+    const double *uk = u + 2 * k0;
+    double pad[2 * WD], res[3 * WD];
+    if (cnt < WD) {
+      for (int k = 0; k < 2 * WD; k++) pad[k] = k < 2 * cnt ? uk[k] : 0.5;
+      uk = pad;
     }
+    vdn ux, uy;
+    for (int k = 0; k < WD; k++) ux[k] = uk[2 * k], uy[k] = uk[2 * k + 1];
     vdn px, py;
     d_concentric(ux, uy, &px, &py);
     vdn r = 1.0 - (px * px + py * py);
     vdn z = VSQRT_D(dsel(r > 0.0, r, (vdn){0}));
-    for (int k = 0; k < cnt; k++) {
-      double *o = &out[3 * (k0 + k)];
-      o[0] = px[k], o[1] = py[k], o[2] = z[k];
-    }
+    double *o = cnt < WD ? res : &out[3 * k0];
+    for (int k = 0; k < WD; k++) o[3 * k] = px[k], o[3 * k + 1] = py[k], o[3 * k + 2] = z[k];
+    if (cnt < WD)
+      for (int k = 0; k < 3 * cnt; k++) out[3 * k0 + k] = res[k];
   }
 }

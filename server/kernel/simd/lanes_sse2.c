@@ -24,4 +24,8 @@
 #define CAM_LANES_FN    hdistant_rays_sse2
 #define COSINE_LANES_FN cosine_hemisphere_sse2
 #include "camera_lanes.h"
+
+/* Batched BSDF and sensor plugins (simd/plugin_lanes.h). */
+#define ISA_SUFFIX sse2
+#include "plugin_lanes.h"
 #endif

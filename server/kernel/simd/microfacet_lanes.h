@@ -219,8 +219,11 @@ MF_LANES_ATTR void MF_LANES_FN(int ggx, int n, const float *const *in, float *co
     int m = n - k0 < W ? n - k0 : W;
     float a[7 * W], b[6 * W];
     const float pad[7] = {0.0f, 0.0f, 1.0f, 1.0f, 1.0f, 0.5f, 0.5f};
-    for (int j = 0; j < 7; j++)
-      for (int k = 0; k < W; k++) a[j * W + k] = k < m ? in[j][k0 + k] : pad[j];
+    for (int j = 0; j < 7; j++) /* whole vectors copied as such: scalar stores then a vector load stall */
+      if (m == W)
+        __builtin_memcpy(a + j * W, in[j] + k0, W * sizeof(float));
+      else
+        for (int k = 0; k < W; k++) a[j * W + k] = k < m ? in[j][k0 + k] : pad[j];
     const float *wx = a, *wy = a + W, *wz = a + 2 * W, *au = a + 3 * W, *av = a + 4 * W;
     if (ggx)
       mf_ggx_lanes(wx, wy, wz, au, av, a + 5 * W, a + 6 * W, b, b + W, b + 2 * W);
@@ -270,8 +273,11 @@ MF_LANES_ATTR void MF_EVAL_FN(int ggx, int visible, int n, const float *const *i
     int m = n - k0 < W ? n - k0 : W;
     float a[8 * W], b[3 * W];
     const float pad[8] = {0.0f, 0.0f, 1.0f, 0.0f, 0.0f, 1.0f, 1.0f, 1.0f};
-    for (int j = 0; j < 8; j++)
-      for (int k = 0; k < W; k++) a[j * W + k] = k < m ? in[j][k0 + k] : pad[j];
+    for (int j = 0; j < 8; j++) /* whole vectors copied as such (as above) */
+      if (m == W)
+        __builtin_memcpy(a + j * W, in[j] + k0, W * sizeof(float));
+      else
+        for (int k = 0; k < W; k++) a[j * W + k] = k < m ? in[j][k0 + k] : pad[j];
     mf_eval_lanes(ggx, visible, a, b);
     for (int j = 0; j < 3; j++)
       for (int k = 0; k < m; k++) out[j][k0 + k] = b[j * W + k];

@@ -1,39 +1,58 @@
-/* Run-time dispatch of the per-ISA batched kernels (simd.h). */
+/* Run-time dispatch of the per-ISA batched kernels (simd.h). On x86 the
+ * ISA picks sse2, avx2, avx512 or generic; elsewhere (or built with
+ * RSW_SIMD_GENERIC_ONLY) every call goes to the generic kernels. */
 #include "simd.h"
 
-void mf_sample_visible_batch(rsw_isa isa, int ggx, int n, const float *const *in, float *const *out) {
 #if RSW_SIMD_X86
-  switch (isa) {
-  case RSW_ISA_AVX512: mf_sample_visible_avx512(ggx, n, in, out); return;
-  case RSW_ISA_AVX2: mf_sample_visible_avx2(ggx, n, in, out); return;
-  default: mf_sample_visible_sse2(ggx, n, in, out); return;
+#define DISPATCH(isa, fn, ...)                                                                               \
+  switch (isa) {                                                                                             \
+  case RSW_ISA_AVX512: fn##_avx512(__VA_ARGS__); return;                                                     \
+  case RSW_ISA_AVX2: fn##_avx2(__VA_ARGS__); return;                                                         \
+  case RSW_ISA_GENERIC: fn##_generic(__VA_ARGS__); return;                                                   \
+  default: fn##_sse2(__VA_ARGS__); return;                                                                   \
   }
 #else
-#error "the batched kernels need an x86 target (sse2, avx2, avx512)"
+#define DISPATCH(isa, fn, ...)                                                                               \
+  do {                                                                                                       \
+    (void)(isa);                                                                                             \
+    fn##_generic(__VA_ARGS__);                                                                               \
+  } while (0)
 #endif
+
+void mf_sample_visible_batch(rsw_isa isa, int ggx, int n, const float *const *in, float *const *out) {
+  DISPATCH(isa, mf_sample_visible, ggx, n, in, out);
 }
 
 void hdistant_rays_batch(rsw_isa isa, int n, const double (*m)[4], const double *fu, const double *ap,
                          const double *center, double radius, double offset, double *out) {
-  switch (isa) {
-  case RSW_ISA_AVX512: hdistant_rays_avx512(n, m, fu, ap, center, radius, offset, out); return;
-  case RSW_ISA_AVX2: hdistant_rays_avx2(n, m, fu, ap, center, radius, offset, out); return;
-  default: hdistant_rays_sse2(n, m, fu, ap, center, radius, offset, out); return;
-  }
+  DISPATCH(isa, hdistant_rays, n, m, fu, ap, center, radius, offset, out);
 }
 
 void mf_eval_batch(rsw_isa isa, int ggx, int visible, int n, const float *const *in, float *const *out) {
-  switch (isa) {
-  case RSW_ISA_AVX512: mf_eval_avx512(ggx, visible, n, in, out); return;
-  case RSW_ISA_AVX2: mf_eval_avx2(ggx, visible, n, in, out); return;
-  default: mf_eval_sse2(ggx, visible, n, in, out); return;
-  }
+  DISPATCH(isa, mf_eval, ggx, visible, n, in, out);
 }
 
 void cosine_hemisphere_batch(rsw_isa isa, int n, const double *u, double *out) {
-  switch (isa) {
-  case RSW_ISA_AVX512: cosine_hemisphere_avx512(n, u, out); return;
-  case RSW_ISA_AVX2: cosine_hemisphere_avx2(n, u, out); return;
-  default: cosine_hemisphere_sse2(n, u, out); return;
-  }
+  DISPATCH(isa, cosine_hemisphere, n, u, out);
+}
+
+/* ---- batched plugins (simd/plugin_lanes.h) -------------------------------- */
+
+void rpv_factor_batch(rsw_isa isa, int n, const float *const *in, float *out) {
+  DISPATCH(isa, rpv_factor, n, in, out);
+}
+
+void fresnel_conductor_batch(rsw_isa isa, int n, const double *cos_i, const double *eta, const double *k,
+                             double *out) {
+  DISPATCH(isa, fresnel_conductor, n, cos_i, eta, k, out);
+}
+
+void disk_origins_batch(rsw_isa isa, int n, const double *m9, int m_step, const double *d, int d_step,
+                        const double *ap, const double *center, double radius, double offset, double *out) {
+  DISPATCH(isa, disk_origins, n, m9, m_step, d, d_step, ap, center, radius, offset, out);
+}
+
+void perspective_rays_batch(rsw_isa isa, int n, const double (*m)[4], const double *pp, double t,
+                            double aspect, double near_clip, double far_clip, const double *fu, double *out) {
+  DISPATCH(isa, perspective_rays, n, m, pp, t, aspect, near_clip, far_clip, fu, out);
 }

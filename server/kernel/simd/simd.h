@@ -7,7 +7,9 @@
 
 #include "../core/isa.h"
 
-#if defined(__x86_64__) || defined(__i386__)
+/* RSW_SIMD_GENERIC_ONLY (make SIMD=generic): build as for a CPU other
+ * than x86, the generic kernels alone (simd/lanes_generic.c). */
+#if (defined(__x86_64__) || defined(__i386__)) && !defined(RSW_SIMD_GENERIC_ONLY)
 #define RSW_SIMD_X86 1
 #else
 #define RSW_SIMD_X86 0
@@ -37,7 +39,49 @@ void hdistant_rays_batch(rsw_isa isa, int n, const double (*m)[4], const double 
  * warp_square_to_cosine_hemisphere(). */
 void cosine_hemisphere_batch(rsw_isa isa, int n, const double *u, double *out);
 
+/* ---- batched plugins (simd/plugin_lanes.h) -------------------------------- */
+
+/* rpv's M F H (pi f_r / rho_0) for n lanes, float: in[0..8] wi xyz, wo
+ * xyz (local, z > 0), k, g, rho_c (n each); out n. */
+void rpv_factor_batch(rsw_isa isa, int n, const float *const *in, float *out);
+
+/* fresnel_conductor() for n lanes (double lanes, bitwise the scalar). */
+void fresnel_conductor_batch(rsw_isa isa, int n, const double *cos_i, const double *eta, const double *k,
+                             double *out);
+
+/* The distant family's origins without a target (double lanes, bitwise
+ * ray_target_origin()): frame rows m9 (9 per lane, m_step 9; or shared,
+ * m_step 0), d 3 per lane (d_step 3) or shared (0), ap 2 per lane; out 3
+ * per lane. */
+void disk_origins_batch(rsw_isa isa, int n, const double *m9, int m_step, const double *d, int d_step,
+                        const double *ap, const double *center, double radius, double offset, double *out);
+
+/* perspective camera rays (double lanes, bitwise perspective_sample_ray()):
+ * m to_world's rows, pp the principal point offset, fu 2 per lane; out 8
+ * per lane (o, d, tmin, tmax). */
+void perspective_rays_batch(rsw_isa isa, int n, const double (*m)[4], const double *pp, double t,
+                            double aspect, double near_clip, double far_clip, const double *fu, double *out);
+
+#define PL_SIMD_DECL(s)                                                                                      \
+  void rpv_factor_##s(int n, const float *const *in, float *out);                                            \
+  void fresnel_conductor_##s(int n, const double *cos_i, const double *eta, const double *k, double *out);   \
+  void disk_origins_##s(int n, const double *m9, int m_step, const double *d, int d_step, const double *ap,  \
+                        const double *center, double radius, double offset, double *out);                    \
+  void perspective_rays_##s(int n, const double(*m)[4], const double *pp, double t, double aspect,           \
+                            double near_clip, double far_clip, const double *fu, double *out)
+PL_SIMD_DECL(generic);
+
+/* The portable kernels (simd/lanes_generic.c), every target. */
+void cosine_hemisphere_generic(int n, const double *u, double *out);
+void hdistant_rays_generic(int n, const double (*m)[4], const double *fu, const double *ap,
+                           const double *center, double radius, double offset, double *out);
+void mf_sample_visible_generic(int ggx, int n, const float *const *in, float *const *out);
+void mf_eval_generic(int ggx, int visible, int n, const float *const *in, float *const *out);
+
 #if RSW_SIMD_X86
+PL_SIMD_DECL(sse2);
+PL_SIMD_DECL(avx2);
+PL_SIMD_DECL(avx512);
 #define COS_SIMD_DECL(s) void cosine_hemisphere_##s(int n, const double *u, double *out)
 COS_SIMD_DECL(sse2);
 COS_SIMD_DECL(avx2);
