@@ -169,6 +169,36 @@ static double clock_s(void) {
 /* Trace the rays of the live lanes idx[0..n): packets of consecutive live
  * lanes, or one by one under a periodic boundary (scene_trace walks the
  * walls per ray). */
+/* Rays that cannot meet the scene's geometry need no query: a continuation
+ * or shadow ray leaving the top of an Earth-observation scene for the sky
+ * (the seed scene's every ray but the camera's). The test is a slab test
+ * in double against the scene's bounding box padded by `pad` (scene_pad):
+ * more than Embree's float32 placement of the geometry can move it, and
+ * less than the RSW_SPAWN_ERRORS surface errors a spawned ray starts off
+ * its surface (shapes/shape.h spawn_ray), so a ray leaving a face of the
+ * box outwards is culled and one that Embree could see hit something never
+ * is. Not under a periodic boundary (copies of the scene beyond the box).
+ * Measured: a full slab test (three divisions per ray) cost more than the
+ * queries it saved on the seed scene. */
+static double scene_pad(const scene *sc) {
+  vec3 lo = sc->bbox_min, hi = sc->bbox_max;
+  double m = fmax(v3_max_abs(lo), v3_max_abs(hi)), e = v3_max_abs(v3_sub(hi, lo));
+  return 4.0 * RSW_F32_UNIT * (m + e);
+}
+
+static inline bool may_hit(const scene *sc, const ray3 *r, double pad) {
+  /* Only the cheap half of a slab test: a ray whose origin lies beyond a
+   * face of the padded box and that points away from it (comparisons, no
+   * division); any other ray is traced. */
+  if (r->o.z > sc->bbox_max.z + pad && r->d.z >= 0) return false;
+  if (r->o.z < sc->bbox_min.z - pad && r->d.z <= 0) return false;
+  if (r->o.x > sc->bbox_max.x + pad && r->d.x >= 0) return false;
+  if (r->o.x < sc->bbox_min.x - pad && r->d.x <= 0) return false;
+  if (r->o.y > sc->bbox_max.y + pad && r->d.y >= 0) return false;
+  if (r->o.y < sc->bbox_min.y - pad && r->d.y <= 0) return false;
+  return true;
+}
+
 static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_stats *stats, bool coherent,
                        bool timed) {
   if (sc->periodic.on) { /* the hit fill is counted as tracing here */
@@ -185,18 +215,30 @@ static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_
   };
   /* All packets first (timed as one), then every hit's surface data. */
   double t0 = timed ? clock_s() : 0;
-  for (int k0 = 0; k0 < n; k0 += P) {
-    int m = n - k0 < P ? n - k0 : P;
+  const double pad = scene_pad(sc);
+  int q[P], nq = 0;
+  for (int k = 0; k <= n; k++) {
+    if (k < n) {
+      lane *l = &ln[idx[k]];
+      if (!may_hit(sc, &l->ray, pad)) {
+        l->hit = TRACE_MISS;
+        continue;
+      }
+      q[nq++] = idx[k];
+      if (nq < P) continue;
+    }
+    if (!nq) continue;
     const ray3 *rp[P];
     accel_hit h[P];
     bool hit[P];
-    for (int k = 0; k < m; k++) rp[k] = &ln[idx[k0 + k]].ray;
-    accel_intersect_packet(sc->accel, rp, m, h, hit, coherent);
-    for (int k = 0; k < m; k++) {
-      lane *l = &ln[idx[k0 + k]];
-      l->hit = hit[k] ? TRACE_HIT : TRACE_MISS;
-      if (hit[k]) l->h = h[k];
+    for (int j = 0; j < nq; j++) rp[j] = &ln[q[j]].ray;
+    accel_intersect_packet(sc->accel, rp, nq, h, hit, coherent);
+    for (int j = 0; j < nq; j++) {
+      lane *l = &ln[q[j]];
+      l->hit = hit[j] ? TRACE_HIT : TRACE_MISS;
+      if (hit[j]) l->h = h[j];
     }
+    nq = 0;
   }
   if (timed) stats->trace_s += clock_s() - t0;
   stats->rays += (uint64_t)n;
@@ -240,13 +282,25 @@ static void wave_occluded(const scene *sc, lane *ln, const int *idx, int n, rend
   enum {
     P = 16
   };
-  for (int k0 = 0; k0 < n; k0 += P) {
-    int m = n - k0 < P ? n - k0 : P;
+  const double pad = scene_pad(sc);
+  int q[P], nq = 0;
+  for (int k = 0; k <= n; k++) {
+    if (k < n) {
+      lane *l = &ln[idx[k]];
+      if (!may_hit(sc, &l->sray, pad)) {
+        l->occ = TRACE_MISS;
+        continue;
+      }
+      q[nq++] = idx[k];
+      if (nq < P) continue;
+    }
+    if (!nq) continue;
     const ray3 *rp[P];
     bool occ[P];
-    for (int k = 0; k < m; k++) rp[k] = &ln[idx[k0 + k]].sray;
-    accel_occluded_packet(sc->accel, rp, m, occ);
-    for (int k = 0; k < m; k++) ln[idx[k0 + k]].occ = occ[k] ? TRACE_HIT : TRACE_MISS;
+    for (int j = 0; j < nq; j++) rp[j] = &ln[q[j]].sray;
+    accel_occluded_packet(sc->accel, rp, nq, occ);
+    for (int j = 0; j < nq; j++) ln[q[j]].occ = occ[j] ? TRACE_HIT : TRACE_MISS;
+    nq = 0;
   }
   if (timed) stats->trace_s += clock_s() - t0;
 }
