@@ -100,8 +100,13 @@ static double emitter_prob(const scene *sc, const emitter *e) {
  * column). */
 static bool may_hit(const scene *sc, const ray3 *r) {
   if (sc->periodic.on) return true;
-  const double lo[3] = {sc->bbox_min.x, sc->bbox_min.y, sc->bbox_min.z};
-  const double hi[3] = {sc->bbox_max.x, sc->bbox_max.y, sc->bbox_max.z};
+  /* With null boxes crossed analytically, the queries leave them out:
+   * the bounds of the rest decide. */
+  vec3 bl = sc->null_boxes.on ? sc->null_boxes.rest_min : sc->bbox_min;
+  vec3 bh = sc->null_boxes.on ? sc->null_boxes.rest_max : sc->bbox_max;
+  if (!(bl.x <= bh.x)) return !sc->null_boxes.on; /* nothing else to hit */
+  const double lo[3] = {bl.x, bl.y, bl.z};
+  const double hi[3] = {bh.x, bh.y, bh.z};
   const double o[3] = {r->o.x, r->o.y, r->o.z}, d[3] = {r->d.x, r->d.y, r->d.z};
   if (o[0] >= lo[0] && o[0] <= hi[0] && o[1] >= lo[1] && o[1] <= hi[1] && o[2] >= lo[2] && o[2] <= hi[2])
     return true; /* most rays start inside */
@@ -149,6 +154,54 @@ static const medium *medium_after(const surface_interaction *si, vec3 d, const m
   return v3_dot(d, si->ng) > 0 ? sh->exterior : sh->interior;
 }
 
+/* Null boxes crossed analytically (scene->null_boxes.on; the queries
+ * leave them out): the next crossing along o + t d (unit d) after the
+ * last one (t > *tc, or t == *tc and a later crossing index than *ic:
+ * crossings at one t are taken in a fixed order) and before tend. Slab
+ * test in the box's object space, in double: *tc, *ic and the medium
+ * beyond (*m) advance; false when there is none. Entering a box leads into
+ * its inside medium, leaving it into the outside one, as the hit's normal
+ * would say (a box with one medium on both sides changes nothing). */
+static bool next_box_crossing(const scene *sc, vec3 o, vec3 d, double tend, double *tc, int *ic,
+                              const medium **m) {
+  double best = INFINITY;
+  int bi = -1;
+  for (unsigned i = 0; i < sc->null_boxes.n; i++) {
+    const struct scene_null_box *b = &sc->null_boxes.box[i];
+    vec3 ol = xf_inv_point(&b->sh->to_world, o), dl = xf_inv_vector(&b->sh->to_world, d);
+    const double oo[3] = {ol.x, ol.y, ol.z}, dd[3] = {dl.x, dl.y, dl.z};
+    double tn = -INFINITY, tf = INFINITY;
+    for (int a = 0; a < 3; a++) {
+      if (dd[a] == 0.0) {
+        if (oo[a] < b->lo[a] || oo[a] > b->hi[a]) tn = INFINITY;
+        continue;
+      }
+      double t0 = (b->lo[a] - oo[a]) / dd[a], t1 = (b->hi[a] - oo[a]) / dd[a];
+      if (t0 > t1) {
+        double x = t0;
+        t0 = t1;
+        t1 = x;
+      }
+      tn = fmax(tn, t0);
+      tf = fmin(tf, t1);
+    }
+    if (!(tn <= tf)) continue;
+    const double tt[2] = {tn, tf};
+    for (int k = 0; k < 2; k++) {
+      int id = 2 * (int)i + k;
+      double t = tt[k];
+      bool after = t > *tc || (t == *tc && id > *ic);
+      if (after && t < tend && t < best) best = t, bi = id;
+    }
+  }
+  if (bi < 0) return false;
+  const struct scene_null_box *b = &sc->null_boxes.box[bi / 2];
+  if (b->sh->interior != b->sh->exterior) *m = (bi & 1) ? b->out : b->in;
+  *tc = best;
+  *ic = bi;
+  return true;
+}
+
 static int pick_channel(const medium *m, sampler_state *st) {
   if (!m->has_spectral_extinction) return 0;
   int c = (int)(st->s->ops->next_1d(st) * 3.0);
@@ -160,12 +213,12 @@ static bool analytic_in(const volpath_integrator *vp, const medium *m) {
   return m->ops->sample_real && m->ops->transmittance && (vp->analytic || m->is_homogeneous);
 }
 
-/* Transmittance of m along r over [0, tend] (a shadow ray's segment):
+/* Transmittance of m along r over [tstart, tend] (a shadow ray's segment):
  * exact where analytic, else ratio tracking. */
-static color segment_tr(const volpath_integrator *vp, const medium *m, const ray3 *r, double tend,
-                        sampler_state *st) {
+static color segment_tr(const volpath_integrator *vp, const medium *m, const ray3 *r, double tstart,
+                        double tend, sampler_state *st) {
   ray3 seg = *r;
-  seg.tmin = 0;
+  seg.tmin = tstart;
   seg.tmax = tend;
   double mint, maxt;
   if (!m->ops->intersect_aabb(m, &seg, &mint, &maxt)) return col1(1.0);
@@ -293,7 +346,8 @@ static void wave_trace(const scene *sc, vlane *ln, const int *idx, int n, bool s
     accel_hit h[P];
     bool ok[P];
     for (int j = 0; j < nq; j++) rp[j] = shadow ? &ln[idx[q[j]]].sray : &ln[idx[q[j]]].ray;
-    accel_intersect_packet(sc->accel, rp, nq, h, ok, coherent);
+    accel_intersect_packet_mask(sc->accel, rp, nq, h, ok, coherent,
+                                sc->null_boxes.on ? ACCEL_RAYS_NO_NULL_BOX : 0xFFFFFFFFu);
     *(shadow ? &stats->shadow_rays : &stats->rays) += (uint64_t)nq;
     for (int j = 0; j < nq; j++) {
       hit[q[j]] = ok[j];
@@ -332,12 +386,22 @@ static void start_shadow(const scene *sc, vlane *l, const surface_interaction *s
  * (true: trace again). */
 static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l, bool hit,
                         const surface_interaction *si, sampler_state *st) {
-  if (l->sm) {
+  if (l->sm || sc->null_boxes.on) {
     double tend = hit          ? seg_end(sc, &l->sray, l->sp0, si)
                   : l->sfinite ? v3_dot(v3_sub(l->send, l->sp0), l->sray.d)
                                : INFINITY;
     ray3 mr = {l->sp0, l->sray.d, 0.0, tend};
-    l->str = col_mul(l->str, segment_tr(vp, l->sm, &mr, mr.tmax, st));
+    double t0 = 0.0, tc = 0.0;
+    int ic = -1;
+    for (;;) { /* the segment piece by piece between null boxes' sides */
+      const medium *next = l->sm;
+      bool cross = sc->null_boxes.on && next_box_crossing(sc, mr.o, mr.d, tend, &tc, &ic, &next);
+      double t1 = cross ? tc : tend;
+      if (l->sm && t1 > t0) l->str = col_mul(l->str, segment_tr(vp, l->sm, &mr, t0, t1, st));
+      if (!cross || col_is_black(l->str)) break;
+      l->sm = next;
+      t0 = t1;
+    }
   }
   bool more = hit && !col_is_black(l->str);
   if (more && !(si->shape->bsdf->flags & BSDF_INDEX_MATCHED)) { /* blocked */
@@ -375,12 +439,17 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
   /* ---- the medium along the segment ---- */
   medium_interaction mi;
   bool scattered = false;
-  if (m) {
-    ray3 seg = {l->seg_o, l->ray.d, 0.0, hit ? seg_end(sc, &l->ray, l->seg_o, si) : l->ray.tmax};
+  double tend = hit ? seg_end(sc, &l->ray, l->seg_o, si) : l->ray.tmax, tc = 0.0;
+  int ic = -1;
+  for (;;) { /* the segment piece by piece between null boxes' sides */
+    double t0 = tc;
+    const medium *next = m;
+    bool cross = sc->null_boxes.on && next_box_crossing(sc, l->seg_o, l->ray.d, tend, &tc, &ic, &next);
+    ray3 seg = {l->seg_o, l->ray.d, t0, cross ? tc : tend};
     double mint, maxt;
-    if (m->ops->intersect_aabb(m, &seg, &mint, &maxt)) {
+    if (m && seg.tmax > seg.tmin && m->ops->intersect_aabb(m, &seg, &mint, &maxt)) {
       if (m->absorbing_only) {
-        l->T = col_mul(l->T, segment_tr(vp, m, &seg, seg.tmax, st));
+        l->T = col_mul(l->T, segment_tr(vp, m, &seg, seg.tmin, seg.tmax, st));
       } else if (analytic_in(vp, m)) {
         int c = pick_channel(m, st);
         color tr, pdf;
@@ -412,6 +481,8 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
         }
       }
     }
+    if (scattered || !cross || !(col_max(l->T) > 0)) break;
+    m = l->m = next; /* a null box's side crossed without a query */
   }
   if (!(col_max(l->T) > 0)) return false;
 
