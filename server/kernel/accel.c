@@ -299,6 +299,13 @@ static void member_occluded(const struct RTCOccludedFunctionNArguments *args) {
 /* ---- Embree's frame and error bounds --------------------------------------------------- */
 
 static void set_instance_transform(RTCGeometry inst, const xform *t, vec3 origin);
+
+static _Atomic bool g_no_null_box_masks; /* accel_set_null_box_masks(false) */
+
+void accel_set_null_box_masks(bool on) {
+  atomic_store(&g_no_null_box_masks, !on);
+}
+
 static void set_placement_transform(RTCGeometry inst, const instance_shape *is, uint32_t k, vec3 origin);
 
 static void box_add(vec3 *lo, vec3 *hi, vec3 p) {
@@ -767,7 +774,7 @@ rsw_status accel_build(scene *s, rsw_err *err) {
     if (!inst) return embree_fail(a, err, sh->base.id, "cannot create an instance");
     rtcSetGeometryInstancedScene(inst, sub);
     set_instance_transform(inst, &sh->to_world, a->origin);
-    if (accel_null_box_candidate(sh) &&
+    if (accel_null_box_candidate(sh) && !atomic_load(&g_no_null_box_masks) &&
         rtcGetDeviceProperty(a->device, RTC_DEVICE_PROPERTY_RAY_MASK_SUPPORTED)) {
       rtcSetGeometryMask(inst, ACCEL_MASK_NULL_BOX);
       a->null_box[i] = 1;

@@ -77,6 +77,9 @@ void accel_occluded_packet(const accel *a, const ray3 *const *r, int n, bool *oc
 #define ACCEL_RAYS_NO_NULL_BOX (~ACCEL_MASK_NULL_BOX)
 bool accel_null_box_candidate(const shape *sh);
 bool accel_null_box_masked(const accel *a, uint32_t index);
+/* Test hook: structures built after accel_set_null_box_masks(false) mask
+ * nothing (every null box is traced as before); true restores the default. */
+void accel_set_null_box_masks(bool on);
 bool accel_intersect_mask(const accel *a, const ray3 *r, accel_hit *h, unsigned mask);
 void accel_intersect_packet_mask(const accel *a, const ray3 *const *r, int n, accel_hit *h, bool *hit,
                                  bool coherent, unsigned mask);

@@ -583,6 +583,8 @@ typedef struct scene {
     struct scene_null_box {
       const struct shape *sh;
       double lo[3], hi[3];           /* object-space box */
+      bool aligned;                  /* to_world scales and translates only: */
+      double wlo[3], whi[3];         /* then the world box */
       const struct medium *in, *out; /* media inside / outside (Mitsuba's interior/exterior) */
     } box[SCENE_NULL_BOXES_MAX];
     vec3 rest_min, rest_max; /* bounds of everything else (empty: min > max) */

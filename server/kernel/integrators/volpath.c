@@ -124,8 +124,8 @@ static bool may_hit(const scene *sc, const ray3 *r) {
       ta = tb;
       tb = x;
     }
-    t0 = fmax(t0, ta);
-    t1 = fmin(t1, tb);
+    t0 = ta > t0 ? ta : t0; /* (no fmin/fmax calls: a NaN never gets here) */
+    t1 = tb < t1 ? tb : t1;
     if (t0 > t1) return false;
   }
   return true;
@@ -155,50 +155,72 @@ static const medium *medium_after(const surface_interaction *si, vec3 d, const m
 }
 
 /* Null boxes crossed analytically (scene->null_boxes.on; the queries
- * leave them out): the next crossing along o + t d (unit d) after the
- * last one (t > *tc, or t == *tc and a later crossing index than *ic:
- * crossings at one t are taken in a fixed order) and before tend. Slab
- * test in the box's object space, in double: *tc, *ic and the medium
- * beyond (*m) advance; false when there is none. Entering a box leads into
- * its inside medium, leaving it into the outside one, as the hit's normal
- * would say (a box with one medium on both sides changes nothing). */
-static bool next_box_crossing(const scene *sc, vec3 o, vec3 d, double tend, double *tc, int *ic,
-                              const medium **m) {
-  double best = INFINITY;
-  int bi = -1;
+ * leave them out). box_walk_start: the slab test of o + t d (unit d)
+ * against every box, in double (in world coordinates for a box under a
+ * scale and translation, else in its object space). box_walk_next: the
+ * next crossing after the last one (t > tc, or t == tc and a later
+ * crossing index: crossings at one t are taken in a fixed order) and
+ * before tend, and the medium beyond it (*m); false when there is none.
+ * Entering a box leads into its inside medium, leaving it into the
+ * outside one, as the hit's normal would say (a box with one medium on
+ * both sides changes nothing). */
+typedef struct box_walk {
+  double t[2 * SCENE_NULL_BOXES_MAX]; /* per box: entry, exit (or +inf: missed) */
+  double tc;                          /* the last crossing taken */
+  int ic;
+} box_walk;
+
+static void box_walk_start(const scene *sc, vec3 o, vec3 d, box_walk *w) {
+  w->tc = 0.0;
+  w->ic = -1;
   for (unsigned i = 0; i < sc->null_boxes.n; i++) {
     const struct scene_null_box *b = &sc->null_boxes.box[i];
-    vec3 ol = xf_inv_point(&b->sh->to_world, o), dl = xf_inv_vector(&b->sh->to_world, d);
-    const double oo[3] = {ol.x, ol.y, ol.z}, dd[3] = {dl.x, dl.y, dl.z};
+    double oo[3], dd[3];
+    const double *lo = b->wlo, *hi = b->whi;
+    if (b->aligned) {
+      oo[0] = o.x, oo[1] = o.y, oo[2] = o.z;
+      dd[0] = d.x, dd[1] = d.y, dd[2] = d.z;
+    } else {
+      vec3 ol = xf_inv_point(&b->sh->to_world, o), dl = xf_inv_vector(&b->sh->to_world, d);
+      oo[0] = ol.x, oo[1] = ol.y, oo[2] = ol.z;
+      dd[0] = dl.x, dd[1] = dl.y, dd[2] = dl.z;
+      lo = b->lo, hi = b->hi;
+    }
     double tn = -INFINITY, tf = INFINITY;
     for (int a = 0; a < 3; a++) {
       if (dd[a] == 0.0) {
-        if (oo[a] < b->lo[a] || oo[a] > b->hi[a]) tn = INFINITY;
+        if (oo[a] < lo[a] || oo[a] > hi[a]) tn = INFINITY;
         continue;
       }
-      double t0 = (b->lo[a] - oo[a]) / dd[a], t1 = (b->hi[a] - oo[a]) / dd[a];
+      double inv = 1.0 / dd[a];
+      double t0 = (lo[a] - oo[a]) * inv, t1 = (hi[a] - oo[a]) * inv;
       if (t0 > t1) {
         double x = t0;
         t0 = t1;
         t1 = x;
       }
-      tn = fmax(tn, t0);
-      tf = fmin(tf, t1);
+      tn = t0 > tn ? t0 : tn;
+      tf = t1 < tf ? t1 : tf;
     }
-    if (!(tn <= tf)) continue;
-    const double tt[2] = {tn, tf};
-    for (int k = 0; k < 2; k++) {
-      int id = 2 * (int)i + k;
-      double t = tt[k];
-      bool after = t > *tc || (t == *tc && id > *ic);
-      if (after && t < tend && t < best) best = t, bi = id;
-    }
+    bool met = tn <= tf;
+    w->t[2 * i] = met ? tn : INFINITY;
+    w->t[2 * i + 1] = met ? tf : INFINITY;
+  }
+}
+
+static bool box_walk_next(const scene *sc, box_walk *w, double tend, const medium **m) {
+  double best = INFINITY;
+  int bi = -1;
+  for (int id = 0; id < 2 * (int)sc->null_boxes.n; id++) {
+    double t = w->t[id];
+    bool after = t > w->tc || (t == w->tc && id > w->ic);
+    if (after && t < tend && t < best) best = t, bi = id;
   }
   if (bi < 0) return false;
   const struct scene_null_box *b = &sc->null_boxes.box[bi / 2];
   if (b->sh->interior != b->sh->exterior) *m = (bi & 1) ? b->out : b->in;
-  *tc = best;
-  *ic = bi;
+  w->tc = best;
+  w->ic = bi;
   return true;
 }
 
@@ -391,12 +413,13 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
                   : l->sfinite ? v3_dot(v3_sub(l->send, l->sp0), l->sray.d)
                                : INFINITY;
     ray3 mr = {l->sp0, l->sray.d, 0.0, tend};
-    double t0 = 0.0, tc = 0.0;
-    int ic = -1;
+    double t0 = 0.0;
+    box_walk bw;
+    if (sc->null_boxes.on) box_walk_start(sc, mr.o, mr.d, &bw);
     for (;;) { /* the segment piece by piece between null boxes' sides */
       const medium *next = l->sm;
-      bool cross = sc->null_boxes.on && next_box_crossing(sc, mr.o, mr.d, tend, &tc, &ic, &next);
-      double t1 = cross ? tc : tend;
+      bool cross = sc->null_boxes.on && box_walk_next(sc, &bw, tend, &next);
+      double t1 = cross ? bw.tc : tend;
       if (l->sm && t1 > t0) l->str = col_mul(l->str, segment_tr(vp, l->sm, &mr, t0, t1, st));
       if (!cross || col_is_black(l->str)) break;
       l->sm = next;
@@ -439,13 +462,13 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
   /* ---- the medium along the segment ---- */
   medium_interaction mi;
   bool scattered = false;
-  double tend = hit ? seg_end(sc, &l->ray, l->seg_o, si) : l->ray.tmax, tc = 0.0;
-  int ic = -1;
+  double tend = hit ? seg_end(sc, &l->ray, l->seg_o, si) : l->ray.tmax, t0 = 0.0;
+  box_walk bw;
+  if (sc->null_boxes.on) box_walk_start(sc, l->seg_o, l->ray.d, &bw);
   for (;;) { /* the segment piece by piece between null boxes' sides */
-    double t0 = tc;
     const medium *next = m;
-    bool cross = sc->null_boxes.on && next_box_crossing(sc, l->seg_o, l->ray.d, tend, &tc, &ic, &next);
-    ray3 seg = {l->seg_o, l->ray.d, t0, cross ? tc : tend};
+    bool cross = sc->null_boxes.on && box_walk_next(sc, &bw, tend, &next);
+    ray3 seg = {l->seg_o, l->ray.d, t0, cross ? bw.tc : tend};
     double mint, maxt;
     if (m && seg.tmax > seg.tmin && m->ops->intersect_aabb(m, &seg, &mint, &maxt)) {
       if (m->absorbing_only) {
@@ -483,6 +506,7 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
     }
     if (scattered || !cross || !(col_max(l->T) > 0)) break;
     m = l->m = next; /* a null box's side crossed without a query */
+    t0 = bw.tc;
   }
   if (!(col_max(l->T) > 0)) return false;
 

@@ -248,6 +248,14 @@ void media_refresh_null_boxes(scene *s) {
       continue;
     }
     b->sh = sh;
+    const double(*m)[4] = sh->to_world.m;
+    b->aligned = m[0][1] == 0 && m[0][2] == 0 && m[1][0] == 0 && m[1][2] == 0 && m[2][0] == 0 &&
+                 m[2][1] == 0 && m[3][0] == 0 && m[3][1] == 0 && m[3][2] == 0 && m[3][3] == 1;
+    for (int a = 0; a < 3; a++) {
+      double x0 = m[a][a] * b->lo[a] + m[a][3], x1 = m[a][a] * b->hi[a] + m[a][3];
+      b->wlo[a] = x0 < x1 ? x0 : x1;
+      b->whi[a] = x0 < x1 ? x1 : x0;
+    }
     /* Interior: the side the normal points away from (inside, for
      * outward triangles), the other way round under flip_normals. */
     b->in = sh->flip_normals ? sh->exterior : sh->interior;
