@@ -30,36 +30,51 @@ void medium_traverse_common(medium *m, param_visitor *v) {
 
 bool media_box_clip(const xform *to_world, const ray3 *r, double *mint, double *maxt) {
   const double(*m)[4] = to_world->m;
-  double oo[3], dd[3];
+  double lo = r->tmin, hi = r->tmax;
   if (m[0][1] == 0 && m[0][2] == 0 && m[1][0] == 0 && m[1][2] == 0 && m[2][0] == 0 && m[2][1] == 0 &&
       m[0][0] != 0 && m[1][1] != 0 && m[2][2] != 0) {
-    /* Axis-aligned box (scale and translation): the local coordinates
-     * without a matrix product. */
+    /* Axis-aligned box (scale and translation): the slab test in world
+     * coordinates, one division per axis. */
     const double o3[3] = {r->o.x, r->o.y, r->o.z}, d3[3] = {r->d.x, r->d.y, r->d.z};
     for (int a = 0; a < 3; a++) {
-      oo[a] = (o3[a] - m[a][3]) / m[a][a];
-      dd[a] = d3[a] / m[a][a];
+      double b0 = m[a][3], b1 = m[a][3] + m[a][a];
+      if (b0 > b1) {
+        double x = b0;
+        b0 = b1;
+        b1 = x;
+      }
+      if (d3[a] == 0.0) {
+        if (o3[a] < b0 || o3[a] > b1) return false;
+        continue;
+      }
+      double inv = 1.0 / d3[a];
+      double t0 = (b0 - o3[a]) * inv, t1 = (b1 - o3[a]) * inv;
+      if (t0 > t1) {
+        double x = t0;
+        t0 = t1;
+        t1 = x;
+      }
+      if (t0 > lo) lo = t0;
+      if (t1 < hi) hi = t1;
     }
   } else {
     vec3 o = xf_inv_point(to_world, r->o), d = xf_inv_vector(to_world, r->d);
-    oo[0] = o.x, oo[1] = o.y, oo[2] = o.z;
-    dd[0] = d.x, dd[1] = d.y, dd[2] = d.z;
-  }
-  double lo = r->tmin, hi = r->tmax;
-  for (int a = 0; a < 3; a++) {
-    if (dd[a] == 0.0) {
-      if (oo[a] < 0.0 || oo[a] > 1.0) return false;
-      continue;
+    const double oo[3] = {o.x, o.y, o.z}, dd[3] = {d.x, d.y, d.z};
+    for (int a = 0; a < 3; a++) {
+      if (dd[a] == 0.0) {
+        if (oo[a] < 0.0 || oo[a] > 1.0) return false;
+        continue;
+      }
+      double inv = 1.0 / dd[a];
+      double t0 = (0.0 - oo[a]) * inv, t1 = (1.0 - oo[a]) * inv;
+      if (t0 > t1) {
+        double tmp = t0;
+        t0 = t1;
+        t1 = tmp;
+      }
+      if (t0 > lo) lo = t0;
+      if (t1 < hi) hi = t1;
     }
-    double inv = 1.0 / dd[a];
-    double t0 = (0.0 - oo[a]) * inv, t1 = (1.0 - oo[a]) * inv;
-    if (t0 > t1) {
-      double tmp = t0;
-      t0 = t1;
-      t1 = tmp;
-    }
-    if (t0 > lo) lo = t0;
-    if (t1 < hi) hi = t1;
   }
   if (!(lo < hi)) return false;
   *mint = lo;

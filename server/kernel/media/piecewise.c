@@ -32,28 +32,35 @@ typedef struct piecewise_medium {
   double *sig; /* 3 n: scaled sigma_t per layer and channel */
   double *alb; /* 3 n: albedo per layer and channel */
   double *cum; /* 3 (n + 1): C_k per channel */
+  double *zk;  /* n + 1: k / n, the layers' bottoms (no division per lookup) */
+  double nd;   /* n as a double */
   color maj;   /* the largest layer's sigma_t */
 } piecewise_medium;
 
 static inline int layer_of(const piecewise_medium *pw, double z) {
-  double f = z * pw->n;
+  double f = z * pw->nd;
   if (!(f > 0)) return 0;
-  if (f >= pw->n) return (int)pw->n - 1;
+  if (f >= pw->nd) return (int)pw->n - 1;
   return (int)f;
 }
 
-static inline double cum_at(const piecewise_medium *pw, int c, double z) {
-  int k = layer_of(pw, z);
+/* C(z), z in layer k. */
+static inline double cum_in(const piecewise_medium *pw, int c, int k, double z) {
   double zc = z < 0.0 ? 0.0 : z > 1.0 ? 1.0 : z;
-  return pw->cum[3 * k + c] + pw->sig[3 * k + c] * (zc - (double)k / pw->n);
+  return pw->cum[3 * k + c] + pw->sig[3 * k + c] * (zc - pw->zk[k]);
 }
 
-/* tau over [t0, t1] in channel c; z0, z1 the local z at both ends. */
+/* tau over [t0, t1] in channel c; z0, z1 the local z at both ends, k0, k1
+ * their layers. */
+static inline double tau_layers(const piecewise_medium *pw, int c, double z0, double z1, int k0, int k1,
+                                double dz, double len) {
+  if (k0 == k1) return pw->sig[3 * k0 + c] * len;
+  return fabs(cum_in(pw, c, k1, z1) - cum_in(pw, c, k0, z0)) / fabs(dz);
+}
+
 static inline double tau_between(const piecewise_medium *pw, int c, double z0, double z1, double dz,
                                  double len) {
-  int k0 = layer_of(pw, z0), k1 = layer_of(pw, z1);
-  if (k0 == k1) return pw->sig[3 * k0 + c] * len;
-  return fabs(cum_at(pw, c, z1) - cum_at(pw, c, z0)) / fabs(dz);
+  return tau_layers(pw, c, z0, z1, layer_of(pw, z0), layer_of(pw, z1), dz, len);
 }
 
 static bool pw_intersect_aabb(const medium *m, const ray3 *r, double *mint, double *maxt) {
@@ -104,15 +111,15 @@ static void pw_sample_real(const medium *m, const ray3 *r, double mint, double m
   double z0 = oz + t0 * dz, z1 = oz + t1 * dz;
   int c = nc == 1 ? 0 : channel;
   double target = -log1p(-u);
-  double total = tau_between(pw, c, z0, z1, dz, t1 - t0);
+  int k0 = layer_of(pw, z0), k1 = layer_of(pw, z1);
+  double total = tau_layers(pw, c, z0, z1, k0, k1, dz, t1 - t0);
   if (!(target < total)) { /* the flight passes the box */
     for (int j = 0; j < nc; j++)
-      tr->c[j] = j == c ? exp(-total) : exp(-tau_between(pw, j, z0, z1, dz, t1 - t0));
+      tr->c[j] = j == c ? exp(-total) : exp(-tau_layers(pw, j, z0, z1, k0, k1, dz, t1 - t0));
     spread(tr, nc);
     *pdf = *tr;
     return;
   }
-  int k0 = layer_of(pw, z0), k1 = layer_of(pw, z1);
   double t;
   int k;
   if (k0 == k1) {
@@ -120,7 +127,7 @@ static void pw_sample_real(const medium *m, const ray3 *r, double mint, double m
     t = t0 + target / pw->sig[3 * k + c];
   } else {
     /* C* on the side the ray moves to; search the layer that holds it. */
-    double cs = cum_at(pw, c, z0) + target * dz; /* C moves by tau |d_z| in the ray's z direction */
+    double cs = cum_in(pw, c, k0, z0) + target * dz; /* C moves by tau |d_z| in the ray's z direction */
     const double *cum = pw->cum;
     int lo, hi;
     if (dz > 0) { /* smallest j in [1, n] with C_j > C*: k = j - 1 */
@@ -145,7 +152,7 @@ static void pw_sample_real(const medium *m, const ray3 *r, double mint, double m
       k = lo;
     }
     double s = pw->sig[3 * k + c];
-    double z = (double)k / pw->n + (s > 0 ? (cs - cum[3 * k + c]) / s : 0.0);
+    double z = pw->zk[k] + (s > 0 ? (cs - cum[3 * k + c]) / s : 0.0);
     t = t0 + (z - z0) / dz;
   }
   t = fmin(fmax(t, t0), t1);
@@ -225,6 +232,7 @@ static void pw_destroy(object *o) {
   free(pw->sig);
   free(pw->alb);
   free(pw->cum);
+  free(pw->zk);
   free(pw);
 }
 
@@ -262,7 +270,11 @@ static rsw_status pw_create(loader *ld, node *n, object **out) {
     pw->sig = malloc(3 * (size_t)pw->n * sizeof *pw->sig);
     pw->alb = malloc(3 * (size_t)pw->n * sizeof *pw->alb);
     pw->cum = malloc(3 * ((size_t)pw->n + 1) * sizeof *pw->cum);
-    if (!pw->sig || !pw->alb || !pw->cum)
+    pw->zk = malloc(((size_t)pw->n + 1) * sizeof *pw->zk);
+    pw->nd = pw->n;
+    if (pw->zk)
+      for (uint32_t k = 0; k <= pw->n; k++) pw->zk[k] = (double)k / pw->n;
+    if (!pw->sig || !pw->alb || !pw->cum || !pw->zk)
       st = ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "piecewise: out of memory");
   }
   if (st) {
