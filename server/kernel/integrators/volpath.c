@@ -118,7 +118,8 @@ static bool may_hit(const scene *sc, const ray3 *r) {
       if (o[a] < l || o[a] > h) return false;
       continue;
     }
-    double ta = (l - o[a]) / d[a], tb = (h - o[a]) / d[a];
+    double inv = 1.0 / d[a]; /* (the padding covers the rounding) */
+    double ta = (l - o[a]) * inv, tb = (h - o[a]) * inv;
     if (ta > tb) {
       double x = ta;
       ta = tb;
