@@ -703,7 +703,8 @@ rsw_status accel_build(scene *s, rsw_err *err) {
   a->obox_lo = calloc(ns, sizeof *a->obox_lo);
   a->obox_hi = calloc(ns, sizeof *a->obox_hi);
   a->ext = calloc(ns, sizeof *a->ext);
-  if (!a->top || !a->sub || !a->geom || !a->inst || !a->nverts || !a->null_box || !a->obox_lo || !a->obox_hi || !a->ext)
+  if (!a->top || !a->sub || !a->geom || !a->inst || !a->nverts || !a->null_box || !a->obox_lo ||
+      !a->obox_hi || !a->ext)
     return embree_fail(a, err, "", "cannot create the top-level scene");
   a->n_sub = s->n_shapes;
   a->scene = s;
@@ -1184,8 +1185,8 @@ static bool packet_fill(const accel *a, packet_buf *pb, unsigned N, unsigned i, 
   RAYN_F(p, N, 7, i) = 0; /* time */
   RAYN_F(p, N, RAY_TFAR, i) = ray.tfar;
   ((unsigned *)p)[9 * N + i] = mask;
-  ((unsigned *)p)[10 * N + i] = i;          /* id */
-  ((unsigned *)p)[11 * N + i] = 0;          /* flags */
+  ((unsigned *)p)[10 * N + i] = i; /* id */
+  ((unsigned *)p)[11 * N + i] = 0; /* flags */
   float *hit = p + (size_t)RAY_FIELDS * N;
   HITN_U(hit, N, HIT_GEOM, i) = RTC_INVALID_GEOMETRY_ID;
   HITN_U(hit, N, HIT_INST, i) = RTC_INVALID_GEOMETRY_ID;
@@ -1222,8 +1223,7 @@ void accel_intersect_packet_mask(const accel *a, const ray3 *const *r, int n, ac
   unsigned N = packet_n(n);
   if (n > (int)N && N > 1) { /* more rays than one packet holds */
     for (int k = 0; k < n; k += (int)N)
-      accel_intersect_packet_mask(a, r + k, n - k < (int)N ? n - k : (int)N, h + k, hit + k, coherent,
-                                  mask);
+      accel_intersect_packet_mask(a, r + k, n - k < (int)N ? n - k : (int)N, h + k, hit + k, coherent, mask);
     return;
   }
   if (N == 1 || n == 1) {

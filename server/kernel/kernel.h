@@ -549,7 +549,9 @@ typedef struct periodic_bounds {
   double zmin, zmax;
 } periodic_bounds;
 
-enum { SCENE_NULL_BOXES_MAX = 4 };
+enum {
+  SCENE_NULL_BOXES_MAX = 4
+};
 
 typedef struct scene {
   object base;

@@ -226,13 +226,14 @@ static bool null_box_shape(const shape *sh, double lo[3], double hi[3]) {
     int side = -1;
     for (int a = 0; a < 3 && side < 0; a++) {
       unsigned b = 1u << a;
-      if ((code[0] & b) == (code[1] & b) && (code[1] & b) == (code[2] & b)) side = 2 * a + ((code[0] & b) ? 1 : 0);
+      if ((code[0] & b) == (code[1] & b) && (code[1] & b) == (code[2] & b))
+        side = 2 * a + ((code[0] & b) ? 1 : 0);
     }
     if (side < 0 || count[side] >= 2) return false;
     int a = side / 2, a1 = (a + 1) % 3, a2 = (a + 2) % 3;
     double e1[3], e2[3];
     for (int c = 0; c < 3; c++) e1[c] = p[1][c] - p[0][c], e2[c] = p[2][c] - p[0][c];
-    double n_a = e1[a1] * e2[a2] - e1[a2] * e2[a1]; /* (e1 x e2)_a */
+    double n_a = e1[a1] * e2[a2] - e1[a2] * e2[a1];      /* (e1 x e2)_a */
     if (!((side & 1) ? n_a > 0 : n_a < 0)) return false; /* facing in */
     sets[side][count[side]++] = (1u << code[0]) | (1u << code[1]) | (1u << code[2]);
   }
@@ -257,7 +258,8 @@ void media_refresh_null_boxes(scene *s) {
       instance_bbox(sh, &lo, &hi);
       continue;
     }
-    struct scene_null_box *b = &s->null_boxes.box[s->null_boxes.n < SCENE_NULL_BOXES_MAX ? s->null_boxes.n : 0];
+    struct scene_null_box *b =
+        &s->null_boxes.box[s->null_boxes.n < SCENE_NULL_BOXES_MAX ? s->null_boxes.n : 0];
     if (!ok || s->null_boxes.n >= SCENE_NULL_BOXES_MAX || !null_box_shape(sh, b->lo, b->hi)) {
       ok = false;
       continue;
