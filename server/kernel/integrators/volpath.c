@@ -11,6 +11,16 @@
  * is_medium_transition): it goes into the exterior when it leaves along
  * the normal, else into the interior. A `null` BSDF (BSDF_INDEX_MATCHED)
  * is crossed without a bounce, by camera, scattered and shadow rays.
+ * Null boxes (a `null` cube, or any 12-triangle mesh that is exactly a
+ * box, scene->null_boxes, media/media.h) are crossed analytically
+ * instead: the queries leave them out (an Embree ray mask, accel.h) and
+ * each segment between two hits is cut where it enters or leaves a box
+ * (a slab test in double), the medium changing there as at a traced
+ * crossing, with the same draws in the same order; rays that cannot meet
+ * the rest of the geometry are not traced at all (may_hit). An
+ * atmosphere's cube then costs no query: a path through it is its camera
+ * ray, and its shadow and escaping rays none. `path` and every other
+ * integrator trace the boxes as before.
  *
  * Free flight along a segment [0, t_s] (t_s: the next surface), with
  * unit directions so that t is a length:
