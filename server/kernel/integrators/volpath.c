@@ -120,14 +120,18 @@ static bool may_hit(const scene *sc, const ray3 *r) {
   const double o[3] = {r->o.x, r->o.y, r->o.z}, d[3] = {r->d.x, r->d.y, r->d.z};
   if (o[0] >= lo[0] && o[0] <= hi[0] && o[1] >= lo[1] && o[1] <= hi[1] && o[2] >= lo[2] && o[2] <= hi[2])
     return true; /* most rays start inside */
-  double t0 = r->tmin, t1 = r->tmax;
+  double pl[3], ph[3];
   for (int a = 0; a < 3; a++) {
     double pad = 1e-9 * (fabs(lo[a]) + fabs(hi[a]) + 1.0);
-    double l = lo[a] - pad, h = hi[a] + pad;
-    if (d[a] == 0.0) {
-      if (o[a] < l || o[a] > h) return false;
-      continue;
-    }
+    pl[a] = lo[a] - pad, ph[a] = hi[a] + pad;
+    /* Outside a slab and moving away from it (a ray leaving the ground
+     * upwards, say): no division needed. */
+    if ((o[a] < pl[a] && !(d[a] > 0)) || (o[a] > ph[a] && !(d[a] < 0))) return false;
+  }
+  double t0 = r->tmin, t1 = r->tmax;
+  for (int a = 0; a < 3; a++) {
+    double l = pl[a], h = ph[a];
+    if (d[a] == 0.0) continue; /* inside that slab (above) */
     double inv = 1.0 / d[a]; /* (the padding covers the rounding) */
     double ta = (l - o[a]) * inv, tb = (h - o[a]) * inv;
     if (ta > tb) {
