@@ -715,6 +715,26 @@ static void test_null_box_analytic(void) {
   film_image_free(&ft3);
   scene_free(t);
 
+  /* flip_normals with the medium as exterior: the same media on the same
+   * sides, so the same film, bitwise. */
+  {
+    const char *in = "\"interior\": {\"type\": \"piecewise\"";
+    char *p = strstr(text, in);
+    REQUIRE(p, "the cube's interior in the scene text");
+    sbuf b = {0};
+    sb_printf(&b, "%.*s\"flip_normals\": true, \"exterior\": {\"type\": \"piecewise\"%s", (int)(p - text),
+              text, p + strlen(in));
+    scene *f = tsup_load(b.p, "mono");
+    free(b.p);
+    REQUIRE(f, "flipped scene");
+    CHECK(f->null_boxes.on, "the flipped cube is crossed analytically");
+    film_image ff;
+    REQUIRE(tsup_render(f, 0, 4, 1, &ff), "render flipped");
+    CHECK(same_film(&ff, &fa), "flip_normals + exterior differs from interior");
+    film_image_free(&ff);
+    scene_free(f);
+  }
+
   /* to_world updates against reloads. */
   const char *xf[2] = {"[[3, 0, 0, 0.25], [0, 2.5, 0, -0.5], [0, 0, 0.75, 0.6], [0, 0, 0, 1]]",
                        "[[1.7320508075688772, -1, 0, 0], [1, 1.7320508075688772, 0, 0], [0, 0, 0.55, 0.45], "
