@@ -132,7 +132,7 @@ static bool may_hit(const scene *sc, const ray3 *r) {
   for (int a = 0; a < 3; a++) {
     double l = pl[a], h = ph[a];
     if (d[a] == 0.0) continue; /* inside that slab (above) */
-    double inv = 1.0 / d[a]; /* (the padding covers the rounding) */
+    double inv = 1.0 / d[a];   /* (the padding covers the rounding) */
     double ta = (l - o[a]) * inv, tb = (h - o[a]) * inv;
     if (ta > tb) {
       double x = ta;

@@ -39,7 +39,7 @@ typedef struct piecewise_medium {
   pw_layer *lay; /* n + 1, 64-byte aligned */
   double *alb;   /* 3 n: albedo per layer and channel */
   double nd;     /* n as a double */
-  color maj;   /* the largest layer's sigma_t */
+  color maj;     /* the largest layer's sigma_t */
 } piecewise_medium;
 
 static inline int layer_of(const piecewise_medium *pw, double z) {
@@ -278,8 +278,7 @@ static rsw_status pw_create(loader *ld, node *n, object **out) {
       memset(pw->lay, 0, ((size_t)pw->n + 1) * sizeof *pw->lay);
       for (uint32_t k = 0; k <= pw->n; k++) pw->lay[k].z = (double)k / pw->n;
     }
-    if (!pw->lay || !pw->alb)
-      st = ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "piecewise: out of memory");
+    if (!pw->lay || !pw->alb) st = ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "piecewise: out of memory");
   }
   if (st) {
     pw_destroy(&pw->base.base);
