@@ -27,6 +27,10 @@ struct accel {
   RTCGeometry *geom; /* the shape's geometry in its scene (held) */
   RTCGeometry *inst; /* its instance in the top level (held) */
   uint32_t *nverts;  /* vertex count Embree holds for each mesh */
+  /* Per shape: its instance carries ACCEL_MASK_NULL_BOX only (a null-BSDF
+   * box candidate, accel_null_box_candidate; only when the device supports
+   * ray masks), so that masked queries do not see it. */
+  uint8_t *null_box;
   size_t n_sub;
   bool top_dirty;
   /* An update's Embree work failed (out of memory): a shape scene or the
@@ -295,6 +299,13 @@ static void member_occluded(const struct RTCOccludedFunctionNArguments *args) {
 /* ---- Embree's frame and error bounds --------------------------------------------------- */
 
 static void set_instance_transform(RTCGeometry inst, const xform *t, vec3 origin);
+
+static _Atomic bool g_no_null_box_masks; /* accel_set_null_box_masks(false) */
+
+void accel_set_null_box_masks(bool on) {
+  atomic_store(&g_no_null_box_masks, !on);
+}
+
 static void set_placement_transform(RTCGeometry inst, const instance_shape *is, uint32_t k, vec3 origin);
 
 static void box_add(vec3 *lo, vec3 *hi, vec3 p) {
@@ -688,10 +699,12 @@ rsw_status accel_build(scene *s, rsw_err *err) {
   a->geom = calloc(ns, sizeof *a->geom);
   a->inst = calloc(ns, sizeof *a->inst);
   a->nverts = calloc(ns, sizeof *a->nverts);
+  a->null_box = calloc(ns, sizeof *a->null_box);
   a->obox_lo = calloc(ns, sizeof *a->obox_lo);
   a->obox_hi = calloc(ns, sizeof *a->obox_hi);
   a->ext = calloc(ns, sizeof *a->ext);
-  if (!a->top || !a->sub || !a->geom || !a->inst || !a->nverts || !a->obox_lo || !a->obox_hi || !a->ext)
+  if (!a->top || !a->sub || !a->geom || !a->inst || !a->nverts || !a->null_box || !a->obox_lo ||
+      !a->obox_hi || !a->ext)
     return embree_fail(a, err, "", "cannot create the top-level scene");
   a->n_sub = s->n_shapes;
   a->scene = s;
@@ -762,6 +775,11 @@ rsw_status accel_build(scene *s, rsw_err *err) {
     if (!inst) return embree_fail(a, err, sh->base.id, "cannot create an instance");
     rtcSetGeometryInstancedScene(inst, sub);
     set_instance_transform(inst, &sh->to_world, a->origin);
+    if (accel_null_box_candidate(sh) && !atomic_load(&g_no_null_box_masks) &&
+        rtcGetDeviceProperty(a->device, RTC_DEVICE_PROPERTY_RAY_MASK_SUPPORTED)) {
+      rtcSetGeometryMask(inst, ACCEL_MASK_NULL_BOX);
+      a->null_box[i] = 1;
+    }
     rtcCommitGeometry(inst);
     rtcAttachGeometryByID(a->top, inst, (unsigned)i);
     a->inst[i] = inst;
@@ -809,6 +827,7 @@ void accel_free(accel *a) {
   free(a->geom);
   free(a->inst);
   free(a->nverts);
+  free(a->null_box);
   free(a->obox_lo);
   free(a->obox_hi);
   free(a->ext);
@@ -1052,7 +1071,8 @@ static inline __attribute__((always_inline)) bool fill_ray_f(const accel *a, con
   return true;
 }
 
-static bool fill_ray(const accel *a, struct RTCRay *ray, const ray3 *r, double *t0, double *ts) {
+static bool fill_ray(const accel *a, struct RTCRay *ray, const ray3 *r, double *t0, double *ts,
+                     unsigned mask) {
   float f[8];
   if (!fill_ray_f(a, r, f, t0, ts)) return false;
   ray->org_x = f[F_ORG];
@@ -1064,18 +1084,22 @@ static bool fill_ray(const accel *a, struct RTCRay *ray, const ray3 *r, double *
   ray->tnear = f[F_TNEAR];
   ray->tfar = f[F_TFAR];
   ray->time = 0;
-  ray->mask = 0xFFFFFFFFu;
+  ray->mask = mask;
   ray->id = 0;
   ray->flags = 0;
   return true;
 }
 
 bool accel_intersect(const accel *a, const ray3 *r, accel_hit *h) {
+  return accel_intersect_mask(a, r, h, 0xFFFFFFFFu);
+}
+
+bool accel_intersect_mask(const accel *a, const ray3 *r, accel_hit *h, unsigned mask) {
   struct RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   struct RTCRayHit rh;
   double t0, ts;
-  if (!fill_ray(a, &rh.ray, r, &t0, &ts)) return false;
+  if (!fill_ray(a, &rh.ray, r, &t0, &ts, mask)) return false;
   if (atomic_load_explicit(&g_rec, memory_order_relaxed)) {
     const struct RTCRay *rp = &rh.ray;
     record_rays(&rp, 1, 1, false);
@@ -1106,7 +1130,7 @@ bool accel_occluded(const accel *a, const ray3 *r) {
   rtcInitIntersectContext(&ctx);
   struct RTCRay ray;
   double t0, ts;
-  if (!fill_ray(a, &ray, r, &t0, &ts)) return false;
+  if (!fill_ray(a, &ray, r, &t0, &ts, 0xFFFFFFFFu)) return false;
   if (atomic_load_explicit(&g_rec, memory_order_relaxed)) {
     const struct RTCRay *rp = &ray;
     record_rays(&rp, 1, 1, true);
@@ -1190,12 +1214,13 @@ static unsigned packet_n(int n) {
 /* Lanes [0, n) of an N-wide packet from r (fill_ray's rules; the rest,
  * and rays fill_ray refuses, invalid); false when no lane holds a ray
  * Embree can trace. The lanes are written straight into the SOA layout. */
-static bool packet_load(const accel *a, packet_buf *pb, unsigned N, const ray3 *const *r, int n) {
+static bool packet_load(const accel *a, packet_buf *pb, unsigned N, const ray3 *const *r, int n,
+                        unsigned mask) {
   float *p = pb->f;
   float *hit = p + (size_t)RAY_FIELDS * N;
   for (unsigned i = 0; i < N; i++) {
     RAYN_F(p, N, 7, i) = 0;                   /* time */
-    ((unsigned *)p)[9 * N + i] = 0xFFFFFFFFu; /* mask */
+    ((unsigned *)p)[9 * N + i] = mask;       /* mask */
     ((unsigned *)p)[10 * N + i] = i;          /* id */
     ((unsigned *)p)[11 * N + i] = 0;          /* flags */
     HITN_U(hit, N, HIT_GEOM, i) = RTC_INVALID_GEOMETRY_ID;
@@ -1222,21 +1247,26 @@ static bool packet_load(const accel *a, packet_buf *pb, unsigned N, const ray3 *
 
 void accel_intersect_packet(const accel *a, const ray3 *const *r, int n, accel_hit *h, bool *hit,
                             bool coherent) {
+  accel_intersect_packet_mask(a, r, n, h, hit, coherent, 0xFFFFFFFFu);
+}
+
+void accel_intersect_packet_mask(const accel *a, const ray3 *const *r, int n, accel_hit *h, bool *hit,
+                                 bool coherent, unsigned mask) {
   unsigned N = packet_n(n);
   if (n > (int)N && N > 1) { /* more rays than one packet holds */
     for (int k = 0; k < n; k += (int)N)
-      accel_intersect_packet(a, r + k, n - k < (int)N ? n - k : (int)N, h + k, hit + k, coherent);
+      accel_intersect_packet_mask(a, r + k, n - k < (int)N ? n - k : (int)N, h + k, hit + k, coherent, mask);
     return;
   }
   if (N == 1 || n == 1) {
-    for (int i = 0; i < n; i++) hit[i] = accel_intersect(a, r[i], &h[i]);
+    for (int i = 0; i < n; i++) hit[i] = accel_intersect_mask(a, r[i], &h[i], mask);
     return;
   }
   struct RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   if (coherent) ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
   packet_buf pb;
-  bool any = packet_load(a, &pb, N, r, n);
+  bool any = packet_load(a, &pb, N, r, n, mask);
   if (any) {
     packet_record(&pb, N, n, false);
     if (N == 16)
@@ -1284,7 +1314,7 @@ void accel_occluded_packet(const accel *a, const ray3 *const *r, int n, bool *oc
   struct RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   packet_buf pb;
-  bool any = packet_load(a, &pb, N, r, n);
+  bool any = packet_load(a, &pb, N, r, n, 0xFFFFFFFFu);
   if (any) {
     packet_record(&pb, N, n, true);
     if (N == 16)
@@ -1568,4 +1598,13 @@ double accel_replay_rays_per_s(const scene *s, const accel_ray_log *lg, int thre
   double dt = (t1.tv_sec - t0.tv_sec) + 1e-9 * (t1.tv_nsec - t0.tv_nsec);
   size_t done = started == threads ? n : 0;
   return done && dt > 0 ? (double)done / dt : 0;
+}
+
+bool accel_null_box_candidate(const shape *sh) {
+  return sh->bsdf && (sh->bsdf->flags & BSDF_INDEX_MATCHED) && !sh->emitter && !sh->ops->intersect &&
+         sh->mesh.n_faces == 12;
+}
+
+bool accel_null_box_masked(const accel *a, uint32_t index) {
+  return a && index < a->n_sub && a->null_box && a->null_box[index];
 }

@@ -64,6 +64,25 @@ bool accel_occluded(const accel *a, const ray3 *r);
 void accel_intersect_packet(const accel *a, const ray3 *const *r, int n, accel_hit *h, bool *hit,
                             bool coherent);
 void accel_occluded_packet(const accel *a, const ray3 *const *r, int n, bool *occ);
+
+/* ---- ray masks: null boxes the volumetric integrators cross analytically --
+ * A top-level shape that may be a box with the `null` BSDF
+ * (accel_null_box_candidate: index-matched BSDF, no emitter, a triangle
+ * mesh of 12 faces) gets the instance mask ACCEL_MASK_NULL_BOX when the
+ * device supports ray masks (accel_null_box_masked). Every query above
+ * uses the full mask and sees it as always; the _mask variants with
+ * ACCEL_RAYS_NO_NULL_BOX do not (integrators/volpath.c, with
+ * media_refresh_null_boxes deciding whether that is exact). */
+#define ACCEL_MASK_NULL_BOX    0x2u
+#define ACCEL_RAYS_NO_NULL_BOX (~ACCEL_MASK_NULL_BOX)
+bool accel_null_box_candidate(const shape *sh);
+bool accel_null_box_masked(const accel *a, uint32_t index);
+/* Test hook: structures built after accel_set_null_box_masks(false) mask
+ * nothing (every null box is traced as before); true restores the default. */
+void accel_set_null_box_masks(bool on);
+bool accel_intersect_mask(const accel *a, const ray3 *r, accel_hit *h, unsigned mask);
+void accel_intersect_packet_mask(const accel *a, const ray3 *const *r, int n, accel_hit *h, bool *hit,
+                                 bool coherent, unsigned mask);
 /* Lanes of the packets those calls trace (16, 8, 4, or 1 without packet
  * support), and a pin to a narrower width for the process (1, 4, 8 or 16;
  * anything else: back to the widest). */

@@ -567,6 +567,10 @@ typedef struct periodic_bounds {
   double zmin, zmax;
 } periodic_bounds;
 
+enum {
+  SCENE_NULL_BOXES_MAX = 4
+};
+
 typedef struct scene {
   object base;
   rsw_variant variant;
@@ -591,6 +595,20 @@ typedef struct scene {
   periodic_bounds periodic;   /* the `periodic` object, if any */
   double *periodic_z;         /* periodic scenes: each shape's world z-range, lo and hi
                                  (2 per shape; scene/periodic.c) */
+  /* Null-BSDF boxes the volumetric integrators cross analytically
+   * (media/media.h media_refresh_null_boxes; refreshed with the bounds). */
+  struct {
+    bool on; /* every masked box is a box now: queries may leave them out */
+    unsigned n;
+    struct scene_null_box {
+      const struct shape *sh;
+      double lo[3], hi[3];           /* object-space box */
+      bool aligned;                  /* to_world scales and translates only: */
+      double wlo[3], whi[3];         /* then the world box */
+      const struct medium *in, *out; /* media inside / outside (Mitsuba's interior/exterior) */
+    } box[SCENE_NULL_BOXES_MAX];
+    vec3 rest_min, rest_max; /* bounds of everything else (empty: min > max) */
+  } null_boxes;
 } scene;
 
 #endif

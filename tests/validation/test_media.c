@@ -13,6 +13,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../../server/kernel/accel.h"
 #include "../../server/kernel/scene/params.h"
 #include "../support/test.h"
 #include "../support/tsup.h"
@@ -659,6 +660,145 @@ static void test_update_equals_reload(void) {
   scene_free(b);
 }
 
+/* Null boxes crossed analytically (accel.h ray masks, media.h
+ * media_refresh_null_boxes): the layered scene's cube is one, and a
+ * render with it analytic matches the same render with it traced (the
+ * same draws in the same order: only the crossing points' rounding
+ * differs, float32 hits against a double slab test); a to_world update
+ * (scale and translation, then a rotation: the object-space path) equals
+ * a reload bitwise; 1 vs 3 threads bitwise; a vertex update that bends
+ * the cube turns the analytic crossing off. */
+static void render_both(scene *s, uint64_t seed, film_image *one, film_image *three) {
+  REQUIRE(tsup_render(s, 0, seed, 1, one), "render 1 thread");
+  REQUIRE(tsup_render(s, 0, seed, 3, three), "render 3 threads");
+}
+
+static bool same_film(const film_image *a, const film_image *b) {
+  size_t n = (size_t)a->width * a->height * a->channels;
+  return a->width == b->width && a->height == b->height && memcmp(a->data, b->data, n * sizeof *a->data) == 0;
+}
+
+static void test_null_box_analytic(void) {
+  const double sig[6] = {0.5, 0.4, 0.3, 0.2, 0.1, 0.05}, alb[6] = {0.9, 0.9, 0.8, 0.8, 0.7, 0.7};
+  /* The cube reaches below the ground (as Eradiate's atmospheres do): a
+   * side on the ground would make the order of the two hits a tie. */
+  char *text0 = layered_scene(sig, alb, 1.0, 0.3);
+  const char *from = "[{\"scale\": [2, 2, 0.5]}, {\"translate\": [0, 0, 0.5]}]";
+  const char *box = "[{\"scale\": [2, 2, 0.55]}, {\"translate\": [0, 0, 0.45]}]";
+  char *p0 = strstr(text0, from);
+  REQUIRE(p0, "the cube's to_world in the scene text");
+  sbuf b0 = {0};
+  sb_printf(&b0, "%.*s%s%s", (int)(p0 - text0), text0, box, p0 + strlen(from));
+  free(text0);
+  char *text = b0.p;
+  scene *a = tsup_load(text, "mono");
+  accel_set_null_box_masks(false);
+  scene *t = tsup_load(text, "mono");
+  accel_set_null_box_masks(true);
+  REQUIRE(a && t, "scenes");
+  CHECK(a->null_boxes.on && a->null_boxes.n == 1, "the cube is crossed analytically");
+  CHECK(!t->null_boxes.on, "without masks the cube is traced");
+  film_image fa, fa3, ft, ft3;
+  render_both(a, 4, &fa, &fa3);
+  render_both(t, 4, &ft, &ft3);
+  CHECK(same_film(&fa, &fa3) && same_film(&ft, &ft3), "1 vs 3 threads");
+  size_t n = (size_t)fa.width * fa.height * fa.channels, close = 0;
+  double sa = 0, st = 0;
+  for (size_t i = 0; i < n; i++) {
+    sa += fa.data[i], st += ft.data[i];
+    close += fabs(fa.data[i] - ft.data[i]) <= 1e-4 * fabs(ft.data[i]) + 1e-9;
+  }
+  CHECK(sa > 0 && fabs(sa - st) <= 1e-3 * st, "analytic %.9g vs traced %.9g", sa, st);
+  CHECK(close >= n - n / 50, "%zu of %zu pixels agree to 1e-4", close, n);
+  film_image_free(&fa3);
+  film_image_free(&ft);
+  film_image_free(&ft3);
+  scene_free(t);
+
+  /* flip_normals with the medium as exterior: the same media on the same
+   * sides, so the same film, bitwise. */
+  {
+    const char *in = "\"interior\": {\"type\": \"piecewise\"";
+    char *p = strstr(text, in);
+    REQUIRE(p, "the cube's interior in the scene text");
+    sbuf b = {0};
+    sb_printf(&b, "%.*s\"flip_normals\": true, \"exterior\": {\"type\": \"piecewise\"%s", (int)(p - text),
+              text, p + strlen(in));
+    scene *f = tsup_load(b.p, "mono");
+    free(b.p);
+    REQUIRE(f, "flipped scene");
+    CHECK(f->null_boxes.on, "the flipped cube is crossed analytically");
+    film_image ff;
+    REQUIRE(tsup_render(f, 0, 4, 1, &ff), "render flipped");
+    CHECK(same_film(&ff, &fa), "flip_normals + exterior differs from interior");
+    film_image_free(&ff);
+    scene_free(f);
+  }
+
+  /* to_world updates against reloads. */
+  const char *xf[2] = {"[[3, 0, 0, 0.25], [0, 2.5, 0, -0.5], [0, 0, 0.75, 0.6], [0, 0, 0, 1]]",
+                       "[[1.7320508075688772, -1, 0, 0], [1, 1.7320508075688772, 0, 0], [0, 0, 0.55, 0.45], "
+                       "[0, 0, 0, 1]]"};
+  const char *xf_load[2] = {"[{\"matrix\": [3, 0, 0, 0.25, 0, 2.5, 0, -0.5, 0, 0, 0.75, 0.6, 0, 0, 0, 1]}]",
+                            "[{\"matrix\": [1.7320508075688772, -1, 0, 0, 1, 1.7320508075688772, 0, 0, 0, 0, "
+                            "0.55, 0.45, 0, 0, 0, 1]}]"};
+  for (int k = 0; k < 2; k++) {
+    param_update u = {.key = "atmo.to_world"};
+    rsw_err err = {0};
+    REQUIRE(param_value_parse(xf[k], u.key, &u.value, &err) == RSW_OK, "parse: %s", err.msg);
+    CHECK(scene_update(a, &u, 1, NULL, &err) == RSW_OK, "update: %s", err.msg);
+    param_value_free(&u.value);
+    CHECK(a->null_boxes.on, "still analytic after a to_world update");
+    char *p = strstr(text, box);
+    sbuf b = {0};
+    sb_printf(&b, "%.*s%s%s", (int)(p - text), text, xf_load[k], p + strlen(box));
+    scene *r = tsup_load(b.p, "mono");
+    free(b.p);
+    REQUIRE(r && r->null_boxes.on, "reload");
+    film_image fu, fu3, fr, fr3;
+    render_both(a, 6, &fu, &fu3);
+    render_both(r, 6, &fr, &fr3);
+    CHECK(same_film(&fu, &fr), "to_world update %d != reload", k);
+    CHECK(same_film(&fu, &fu3) && same_film(&fr, &fr3), "to_world %d: 1 vs 3 threads", k);
+    CHECK(!same_film(&fu, &fa), "to_world %d: the film did not change", k);
+    film_image_free(&fu);
+    film_image_free(&fu3);
+    film_image_free(&fr);
+    film_image_free(&fr3);
+    scene_free(r);
+  }
+  film_image_free(&fa);
+
+  /* A vertex moved off the box: no longer a box, traced again. */
+  {
+    param_update u = {.key = "atmo.vertex_positions"};
+    rsw_err err = {0};
+    sbuf b = {0};
+    sb_printf(&b, "[");
+    const shape *cube = a->null_boxes.box[0].sh;
+    for (uint32_t v = 0; v < cube->mesh.n_verts; v++)
+      for (int c = 0; c < 3; c++) {
+        double x = cube->mesh.pos[3 * v + c];
+        if (v == 0 && c == 0) x *= 1.25;
+        sb_printf(&b, "%s%.9g", v + c ? ", " : "", x);
+      }
+    sb_printf(&b, "]");
+    REQUIRE(param_value_parse(b.p, u.key, &u.value, &err) == RSW_OK, "parse: %s", err.msg);
+    free(b.p);
+    CHECK(scene_update(a, &u, 1, NULL, &err) == RSW_OK, "vertex update: %s", err.msg);
+    param_value_free(&u.value);
+    CHECK(!a->null_boxes.on, "a bent box is not crossed analytically");
+    film_image fv;
+    REQUIRE(tsup_render(a, 0, 2, 2, &fv), "render after the vertex update");
+    double sum = 0;
+    for (size_t i = 0; i < n; i++) sum += fv.data[i];
+    CHECK(sum > 0 && isfinite(sum), "renders");
+    film_image_free(&fv);
+  }
+  free(text);
+  scene_free(a);
+}
+
 /* A slab in a periodic plot: a slanted ray leaves the cell through its
  * side walls (null faces) and re-enters through the opposite ones, so its
  * path of length 2 through the slab crosses four boundaries; exact. */
@@ -809,5 +949,6 @@ int main(void) {
   RSW_TEST_RUN(test_determinism);
   RSW_TEST_RUN(test_update_equals_reload);
   RSW_TEST_RUN(test_periodic_slab);
+  RSW_TEST_RUN(test_null_box_analytic);
   RSW_TEST_END("test_media");
 }

@@ -11,6 +11,16 @@
  * is_medium_transition): it goes into the exterior when it leaves along
  * the normal, else into the interior. A `null` BSDF (BSDF_INDEX_MATCHED)
  * is crossed without a bounce, by camera, scattered and shadow rays.
+ * Null boxes (a `null` cube, or any 12-triangle mesh that is exactly a
+ * box, scene->null_boxes, media/media.h) are crossed analytically
+ * instead: the queries leave them out (an Embree ray mask, accel.h) and
+ * each segment between two hits is cut where it enters or leaves a box
+ * (a slab test in double), the medium changing there as at a traced
+ * crossing, with the same draws in the same order; rays that cannot meet
+ * the rest of the geometry are not traced at all (may_hit). An
+ * atmosphere's cube then costs no query: a path through it is its camera
+ * ray, and its shadow and escaping rays none. `path` and every other
+ * integrator trace the boxes as before.
  *
  * Free flight along a segment [0, t_s] (t_s: the next surface), with
  * unit directions so that t is a length:
@@ -100,27 +110,37 @@ static double emitter_prob(const scene *sc, const emitter *e) {
  * column). */
 static bool may_hit(const scene *sc, const ray3 *r) {
   if (sc->periodic.on) return true;
-  const double lo[3] = {sc->bbox_min.x, sc->bbox_min.y, sc->bbox_min.z};
-  const double hi[3] = {sc->bbox_max.x, sc->bbox_max.y, sc->bbox_max.z};
+  /* With null boxes crossed analytically, the queries leave them out:
+   * the bounds of the rest decide. */
+  vec3 bl = sc->null_boxes.on ? sc->null_boxes.rest_min : sc->bbox_min;
+  vec3 bh = sc->null_boxes.on ? sc->null_boxes.rest_max : sc->bbox_max;
+  if (!(bl.x <= bh.x)) return !sc->null_boxes.on; /* nothing else to hit */
+  const double lo[3] = {bl.x, bl.y, bl.z};
+  const double hi[3] = {bh.x, bh.y, bh.z};
   const double o[3] = {r->o.x, r->o.y, r->o.z}, d[3] = {r->d.x, r->d.y, r->d.z};
   if (o[0] >= lo[0] && o[0] <= hi[0] && o[1] >= lo[1] && o[1] <= hi[1] && o[2] >= lo[2] && o[2] <= hi[2])
     return true; /* most rays start inside */
-  double t0 = r->tmin, t1 = r->tmax;
+  double pl[3], ph[3];
   for (int a = 0; a < 3; a++) {
     double pad = 1e-9 * (fabs(lo[a]) + fabs(hi[a]) + 1.0);
-    double l = lo[a] - pad, h = hi[a] + pad;
-    if (d[a] == 0.0) {
-      if (o[a] < l || o[a] > h) return false;
-      continue;
-    }
-    double ta = (l - o[a]) / d[a], tb = (h - o[a]) / d[a];
+    pl[a] = lo[a] - pad, ph[a] = hi[a] + pad;
+    /* Outside a slab and moving away from it (a ray leaving the ground
+     * upwards, say): no division needed. */
+    if ((o[a] < pl[a] && !(d[a] > 0)) || (o[a] > ph[a] && !(d[a] < 0))) return false;
+  }
+  double t0 = r->tmin, t1 = r->tmax;
+  for (int a = 0; a < 3; a++) {
+    double l = pl[a], h = ph[a];
+    if (d[a] == 0.0) continue; /* inside that slab (above) */
+    double inv = 1.0 / d[a];   /* (the padding covers the rounding) */
+    double ta = (l - o[a]) * inv, tb = (h - o[a]) * inv;
     if (ta > tb) {
       double x = ta;
       ta = tb;
       tb = x;
     }
-    t0 = fmax(t0, ta);
-    t1 = fmin(t1, tb);
+    t0 = ta > t0 ? ta : t0; /* (no fmin/fmax calls: a NaN never gets here) */
+    t1 = tb < t1 ? tb : t1;
     if (t0 > t1) return false;
   }
   return true;
@@ -149,6 +169,76 @@ static const medium *medium_after(const surface_interaction *si, vec3 d, const m
   return v3_dot(d, si->ng) > 0 ? sh->exterior : sh->interior;
 }
 
+/* Null boxes crossed analytically (scene->null_boxes.on; the queries
+ * leave them out). box_walk_start: the slab test of o + t d (unit d)
+ * against every box, in double (in world coordinates for a box under a
+ * scale and translation, else in its object space). box_walk_next: the
+ * next crossing after the last one (t > tc, or t == tc and a later
+ * crossing index: crossings at one t are taken in a fixed order) and
+ * before tend, and the medium beyond it (*m); false when there is none.
+ * Entering a box leads into its inside medium, leaving it into the
+ * outside one, as the hit's normal would say (a box with one medium on
+ * both sides changes nothing). */
+typedef struct box_walk {
+  double t[2 * SCENE_NULL_BOXES_MAX]; /* per box: entry, exit (or +inf: missed) */
+  double tc;                          /* the last crossing taken */
+  int ic;
+} box_walk;
+
+static void box_walk_start(const scene *sc, vec3 o, vec3 d, box_walk *w) {
+  w->tc = 0.0;
+  w->ic = -1;
+  for (unsigned i = 0; i < sc->null_boxes.n; i++) {
+    const struct scene_null_box *b = &sc->null_boxes.box[i];
+    double oo[3], dd[3];
+    const double *lo = b->wlo, *hi = b->whi;
+    if (b->aligned) {
+      oo[0] = o.x, oo[1] = o.y, oo[2] = o.z;
+      dd[0] = d.x, dd[1] = d.y, dd[2] = d.z;
+    } else {
+      vec3 ol = xf_inv_point(&b->sh->to_world, o), dl = xf_inv_vector(&b->sh->to_world, d);
+      oo[0] = ol.x, oo[1] = ol.y, oo[2] = ol.z;
+      dd[0] = dl.x, dd[1] = dl.y, dd[2] = dl.z;
+      lo = b->lo, hi = b->hi;
+    }
+    double tn = -INFINITY, tf = INFINITY;
+    for (int a = 0; a < 3; a++) {
+      if (dd[a] == 0.0) {
+        if (oo[a] < lo[a] || oo[a] > hi[a]) tn = INFINITY;
+        continue;
+      }
+      double inv = 1.0 / dd[a];
+      double t0 = (lo[a] - oo[a]) * inv, t1 = (hi[a] - oo[a]) * inv;
+      if (t0 > t1) {
+        double x = t0;
+        t0 = t1;
+        t1 = x;
+      }
+      tn = t0 > tn ? t0 : tn;
+      tf = t1 < tf ? t1 : tf;
+    }
+    bool met = tn <= tf;
+    w->t[2 * i] = met ? tn : INFINITY;
+    w->t[2 * i + 1] = met ? tf : INFINITY;
+  }
+}
+
+static bool box_walk_next(const scene *sc, box_walk *w, double tend, const medium **m) {
+  double best = INFINITY;
+  int bi = -1;
+  for (int id = 0; id < 2 * (int)sc->null_boxes.n; id++) {
+    double t = w->t[id];
+    bool after = t > w->tc || (t == w->tc && id > w->ic);
+    if (after && t < tend && t < best) best = t, bi = id;
+  }
+  if (bi < 0) return false;
+  const struct scene_null_box *b = &sc->null_boxes.box[bi / 2];
+  if (b->sh->interior != b->sh->exterior) *m = (bi & 1) ? b->out : b->in;
+  w->tc = best;
+  w->ic = bi;
+  return true;
+}
+
 static int pick_channel(const medium *m, sampler_state *st) {
   if (!m->has_spectral_extinction) return 0;
   int c = (int)(st->s->ops->next_1d(st) * 3.0);
@@ -160,12 +250,12 @@ static bool analytic_in(const volpath_integrator *vp, const medium *m) {
   return m->ops->sample_real && m->ops->transmittance && (vp->analytic || m->is_homogeneous);
 }
 
-/* Transmittance of m along r over [0, tend] (a shadow ray's segment):
+/* Transmittance of m along r over [tstart, tend] (a shadow ray's segment):
  * exact where analytic, else ratio tracking. */
-static color segment_tr(const volpath_integrator *vp, const medium *m, const ray3 *r, double tend,
-                        sampler_state *st) {
+static color segment_tr(const volpath_integrator *vp, const medium *m, const ray3 *r, double tstart,
+                        double tend, sampler_state *st) {
   ray3 seg = *r;
-  seg.tmin = 0;
+  seg.tmin = tstart;
   seg.tmax = tend;
   double mint, maxt;
   if (!m->ops->intersect_aabb(m, &seg, &mint, &maxt)) return col1(1.0);
@@ -293,7 +383,8 @@ static void wave_trace(const scene *sc, vlane *ln, const int *idx, int n, bool s
     accel_hit h[P];
     bool ok[P];
     for (int j = 0; j < nq; j++) rp[j] = shadow ? &ln[idx[q[j]]].sray : &ln[idx[q[j]]].ray;
-    accel_intersect_packet(sc->accel, rp, nq, h, ok, coherent);
+    accel_intersect_packet_mask(sc->accel, rp, nq, h, ok, coherent,
+                                sc->null_boxes.on ? ACCEL_RAYS_NO_NULL_BOX : 0xFFFFFFFFu);
     *(shadow ? &stats->shadow_rays : &stats->rays) += (uint64_t)nq;
     for (int j = 0; j < nq; j++) {
       hit[q[j]] = ok[j];
@@ -332,12 +423,23 @@ static void start_shadow(const scene *sc, vlane *l, const surface_interaction *s
  * (true: trace again). */
 static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l, bool hit,
                         const surface_interaction *si, sampler_state *st) {
-  if (l->sm) {
+  if (l->sm || sc->null_boxes.on) {
     double tend = hit          ? seg_end(sc, &l->sray, l->sp0, si)
                   : l->sfinite ? v3_dot(v3_sub(l->send, l->sp0), l->sray.d)
                                : INFINITY;
     ray3 mr = {l->sp0, l->sray.d, 0.0, tend};
-    l->str = col_mul(l->str, segment_tr(vp, l->sm, &mr, mr.tmax, st));
+    double t0 = 0.0;
+    box_walk bw;
+    if (sc->null_boxes.on) box_walk_start(sc, mr.o, mr.d, &bw);
+    for (;;) { /* the segment piece by piece between null boxes' sides */
+      const medium *next = l->sm;
+      bool cross = sc->null_boxes.on && box_walk_next(sc, &bw, tend, &next);
+      double t1 = cross ? bw.tc : tend;
+      if (l->sm && t1 > t0) l->str = col_mul(l->str, segment_tr(vp, l->sm, &mr, t0, t1, st));
+      if (!cross || col_is_black(l->str)) break;
+      l->sm = next;
+      t0 = t1;
+    }
   }
   bool more = hit && !col_is_black(l->str);
   if (more && !(si->shape->bsdf->flags & BSDF_INDEX_MATCHED)) { /* blocked */
@@ -375,12 +477,17 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
   /* ---- the medium along the segment ---- */
   medium_interaction mi;
   bool scattered = false;
-  if (m) {
-    ray3 seg = {l->seg_o, l->ray.d, 0.0, hit ? seg_end(sc, &l->ray, l->seg_o, si) : l->ray.tmax};
+  double tend = hit ? seg_end(sc, &l->ray, l->seg_o, si) : l->ray.tmax, t0 = 0.0;
+  box_walk bw;
+  if (sc->null_boxes.on) box_walk_start(sc, l->seg_o, l->ray.d, &bw);
+  for (;;) { /* the segment piece by piece between null boxes' sides */
+    const medium *next = m;
+    bool cross = sc->null_boxes.on && box_walk_next(sc, &bw, tend, &next);
+    ray3 seg = {l->seg_o, l->ray.d, t0, cross ? bw.tc : tend};
     double mint, maxt;
-    if (m->ops->intersect_aabb(m, &seg, &mint, &maxt)) {
+    if (m && seg.tmax > seg.tmin && m->ops->intersect_aabb(m, &seg, &mint, &maxt)) {
       if (m->absorbing_only) {
-        l->T = col_mul(l->T, segment_tr(vp, m, &seg, seg.tmax, st));
+        l->T = col_mul(l->T, segment_tr(vp, m, &seg, seg.tmin, seg.tmax, st));
       } else if (analytic_in(vp, m)) {
         int c = pick_channel(m, st);
         color tr, pdf;
@@ -412,6 +519,9 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
         }
       }
     }
+    if (scattered || !cross || !(col_max(l->T) > 0)) break;
+    m = l->m = next; /* a null box's side crossed without a query */
+    t0 = bw.tc;
   }
   if (!(col_max(l->T) > 0)) return false;
 

@@ -30,36 +30,51 @@ void medium_traverse_common(medium *m, param_visitor *v) {
 
 bool media_box_clip(const xform *to_world, const ray3 *r, double *mint, double *maxt) {
   const double(*m)[4] = to_world->m;
-  double oo[3], dd[3];
+  double lo = r->tmin, hi = r->tmax;
   if (m[0][1] == 0 && m[0][2] == 0 && m[1][0] == 0 && m[1][2] == 0 && m[2][0] == 0 && m[2][1] == 0 &&
       m[0][0] != 0 && m[1][1] != 0 && m[2][2] != 0) {
-    /* Axis-aligned box (scale and translation): the local coordinates
-     * without a matrix product. */
+    /* Axis-aligned box (scale and translation): the slab test in world
+     * coordinates, one division per axis. */
     const double o3[3] = {r->o.x, r->o.y, r->o.z}, d3[3] = {r->d.x, r->d.y, r->d.z};
     for (int a = 0; a < 3; a++) {
-      oo[a] = (o3[a] - m[a][3]) / m[a][a];
-      dd[a] = d3[a] / m[a][a];
+      double b0 = m[a][3], b1 = m[a][3] + m[a][a];
+      if (b0 > b1) {
+        double x = b0;
+        b0 = b1;
+        b1 = x;
+      }
+      if (d3[a] == 0.0) {
+        if (o3[a] < b0 || o3[a] > b1) return false;
+        continue;
+      }
+      double inv = 1.0 / d3[a];
+      double t0 = (b0 - o3[a]) * inv, t1 = (b1 - o3[a]) * inv;
+      if (t0 > t1) {
+        double x = t0;
+        t0 = t1;
+        t1 = x;
+      }
+      if (t0 > lo) lo = t0;
+      if (t1 < hi) hi = t1;
     }
   } else {
     vec3 o = xf_inv_point(to_world, r->o), d = xf_inv_vector(to_world, r->d);
-    oo[0] = o.x, oo[1] = o.y, oo[2] = o.z;
-    dd[0] = d.x, dd[1] = d.y, dd[2] = d.z;
-  }
-  double lo = r->tmin, hi = r->tmax;
-  for (int a = 0; a < 3; a++) {
-    if (dd[a] == 0.0) {
-      if (oo[a] < 0.0 || oo[a] > 1.0) return false;
-      continue;
+    const double oo[3] = {o.x, o.y, o.z}, dd[3] = {d.x, d.y, d.z};
+    for (int a = 0; a < 3; a++) {
+      if (dd[a] == 0.0) {
+        if (oo[a] < 0.0 || oo[a] > 1.0) return false;
+        continue;
+      }
+      double inv = 1.0 / dd[a];
+      double t0 = (0.0 - oo[a]) * inv, t1 = (1.0 - oo[a]) * inv;
+      if (t0 > t1) {
+        double tmp = t0;
+        t0 = t1;
+        t1 = tmp;
+      }
+      if (t0 > lo) lo = t0;
+      if (t1 < hi) hi = t1;
     }
-    double inv = 1.0 / dd[a];
-    double t0 = (0.0 - oo[a]) * inv, t1 = (1.0 - oo[a]) * inv;
-    if (t0 > t1) {
-      double tmp = t0;
-      t0 = t1;
-      t1 = tmp;
-    }
-    if (t0 > lo) lo = t0;
-    if (t1 < hi) hi = t1;
   }
   if (!(lo < hi)) return false;
   *mint = lo;
@@ -165,4 +180,113 @@ rsw_status scene_check_media(const scene *s, node *root, rsw_err *err) {
     }
   }
   return RSW_OK;
+}
+
+/* ---- null boxes crossed analytically ----------------------------------------- */
+
+/* Is sh (a masked candidate) exactly the surface of its object-space
+ * bounds [lo, hi], 12 triangles, two per side covering it along a
+ * diagonal, all facing out, under a to_world that keeps orientation? Then
+ * a slab test finds every crossing of it exactly as Embree would (up to
+ * its float rounding), and which way a ray crosses (into the box or out)
+ * gives the media as the hit's normal does. */
+static bool null_box_shape(const shape *sh, double lo[3], double hi[3]) {
+  const mesh *me = &sh->mesh;
+  if (me->n_faces != 12 || !me->pos || !me->faces) return false;
+  const double(*m)[4] = sh->to_world.m;
+  double det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) -
+               m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
+               m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+  if (!(det > 0) || !isfinite(det)) return false;
+  for (int a = 0; a < 3; a++) lo[a] = INFINITY, hi[a] = -INFINITY;
+  for (uint32_t f = 0; f < 36; f++) {
+    uint32_t v = me->faces[f];
+    if (v >= me->n_verts) return false;
+    for (int a = 0; a < 3; a++) {
+      double x = me->pos[3 * (size_t)v + a];
+      lo[a] = fmin(lo[a], x);
+      hi[a] = fmax(hi[a], x);
+    }
+  }
+  for (int a = 0; a < 3; a++)
+    if (!(lo[a] < hi[a]) || !isfinite(lo[a]) || !isfinite(hi[a])) return false;
+  /* Per side (axis a, hi or lo: index 2 a + s), the corner sets (bits of
+   * an 8-corner code) of its triangles. */
+  unsigned sets[6][2], count[6] = {0};
+  for (uint32_t f = 0; f < 12; f++) {
+    unsigned code[3];
+    double p[3][3];
+    for (int k = 0; k < 3; k++) {
+      uint32_t v = me->faces[3 * f + k];
+      code[k] = 0;
+      for (int a = 0; a < 3; a++) {
+        double x = me->pos[3 * (size_t)v + a];
+        p[k][a] = x;
+        if (x == hi[a])
+          code[k] |= 1u << a;
+        else if (x != lo[a])
+          return false; /* not a corner */
+      }
+    }
+    if (code[0] == code[1] || code[1] == code[2] || code[0] == code[2]) return false;
+    int side = -1;
+    for (int a = 0; a < 3 && side < 0; a++) {
+      unsigned b = 1u << a;
+      if ((code[0] & b) == (code[1] & b) && (code[1] & b) == (code[2] & b))
+        side = 2 * a + ((code[0] & b) ? 1 : 0);
+    }
+    if (side < 0 || count[side] >= 2) return false;
+    int a = side / 2, a1 = (a + 1) % 3, a2 = (a + 2) % 3;
+    double e1[3], e2[3];
+    for (int c = 0; c < 3; c++) e1[c] = p[1][c] - p[0][c], e2[c] = p[2][c] - p[0][c];
+    double n_a = e1[a1] * e2[a2] - e1[a2] * e2[a1];      /* (e1 x e2)_a */
+    if (!((side & 1) ? n_a > 0 : n_a < 0)) return false; /* facing in */
+    sets[side][count[side]++] = (1u << code[0]) | (1u << code[1]) | (1u << code[2]);
+  }
+  for (int side = 0; side < 6; side++) {
+    if (count[side] != 2) return false;
+    unsigned both = sets[side][0] & sets[side][1], all = sets[side][0] | sets[side][1];
+    if (__builtin_popcount(all) != 4 || __builtin_popcount(both) != 2) return false;
+    unsigned c0 = (unsigned)__builtin_ctz(both), c1 = 31u - (unsigned)__builtin_clz(both);
+    if (__builtin_popcount(c0 ^ c1) != 2) return false; /* they share an edge, not the diagonal */
+  }
+  return true;
+}
+
+void media_refresh_null_boxes(scene *s) {
+  s->null_boxes.on = false;
+  s->null_boxes.n = 0;
+  vec3 lo = v3(INFINITY, INFINITY, INFINITY), hi = v3(-INFINITY, -INFINITY, -INFINITY);
+  bool ok = !s->periodic.on;
+  for (size_t i = 0; i < s->n_shapes; i++) {
+    const shape *sh = s->shapes[i];
+    if (!accel_null_box_masked(s->accel, (uint32_t)i)) {
+      instance_bbox(sh, &lo, &hi);
+      continue;
+    }
+    struct scene_null_box *b =
+        &s->null_boxes.box[s->null_boxes.n < SCENE_NULL_BOXES_MAX ? s->null_boxes.n : 0];
+    if (!ok || s->null_boxes.n >= SCENE_NULL_BOXES_MAX || !null_box_shape(sh, b->lo, b->hi)) {
+      ok = false;
+      continue;
+    }
+    b->sh = sh;
+    const double(*m)[4] = sh->to_world.m;
+    b->aligned = m[0][1] == 0 && m[0][2] == 0 && m[1][0] == 0 && m[1][2] == 0 && m[2][0] == 0 &&
+                 m[2][1] == 0 && m[3][0] == 0 && m[3][1] == 0 && m[3][2] == 0 && m[3][3] == 1;
+    for (int a = 0; a < 3; a++) {
+      double x0 = m[a][a] * b->lo[a] + m[a][3], x1 = m[a][a] * b->hi[a] + m[a][3];
+      b->wlo[a] = x0 < x1 ? x0 : x1;
+      b->whi[a] = x0 < x1 ? x1 : x0;
+    }
+    /* Interior: the side the normal points away from (inside, for
+     * outward triangles), the other way round under flip_normals. */
+    b->in = sh->flip_normals ? sh->exterior : sh->interior;
+    b->out = sh->flip_normals ? sh->interior : sh->exterior;
+    s->null_boxes.n++;
+  }
+  s->null_boxes.rest_min = lo;
+  s->null_boxes.rest_max = hi;
+  s->null_boxes.on = ok && s->null_boxes.n > 0;
+  if (!s->null_boxes.on) s->null_boxes.n = 0;
 }

@@ -38,4 +38,14 @@ rsw_status scene_check_media(const scene *s, struct node *root, rsw_err *err);
  * still does)? */
 bool scene_has_sensor_media(const scene *s);
 
+/* Which masked null boxes (accel.h) the volumetric integrators may cross
+ * analytically (scene->null_boxes): all of them or none. Each must be a
+ * closed axis-aligned box in object space (12 outward triangles, two per
+ * side) under an orientation-preserving to_world, and the scene not
+ * periodic; else (a vertex update that bent one, say) none is, and every
+ * query sees them as before. Also the bounds of every other shape (rays
+ * missing them need no query). Run with the scene's bounds (load and
+ * every geometric update: an update equals a reload). */
+void media_refresh_null_boxes(scene *s);
+
 #endif

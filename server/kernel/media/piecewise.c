@@ -25,35 +25,48 @@
 #include "../scene/params.h"
 #include "media.h"
 
+/* What a lookup in layer k reads, in one 64-byte line: C_k, the scaled
+ * sigma_t per channel and k / n, the layer's bottom (no division per
+ * lookup). n + 1 of them (the last: C_n, the top; sigma_t 0). */
+typedef struct pw_layer {
+  double cum[3], sig[3], z, pad;
+} pw_layer;
+
 typedef struct piecewise_medium {
   medium base;
   volume *sigma_t, *albedo;
-  uint32_t n;  /* layers */
-  double *sig; /* 3 n: scaled sigma_t per layer and channel */
-  double *alb; /* 3 n: albedo per layer and channel */
-  double *cum; /* 3 (n + 1): C_k per channel */
-  color maj;   /* the largest layer's sigma_t */
+  uint32_t n;    /* layers */
+  pw_layer *lay; /* n + 1, 64-byte aligned */
+  double *alb;   /* 3 n: albedo per layer and channel */
+  double nd;     /* n as a double */
+  color maj;     /* the largest layer's sigma_t */
 } piecewise_medium;
 
 static inline int layer_of(const piecewise_medium *pw, double z) {
-  double f = z * pw->n;
+  double f = z * pw->nd;
   if (!(f > 0)) return 0;
-  if (f >= pw->n) return (int)pw->n - 1;
+  if (f >= pw->nd) return (int)pw->n - 1;
   return (int)f;
 }
 
-static inline double cum_at(const piecewise_medium *pw, int c, double z) {
-  int k = layer_of(pw, z);
+/* C(z), z in layer k. */
+static inline double cum_in(const piecewise_medium *pw, int c, int k, double z) {
   double zc = z < 0.0 ? 0.0 : z > 1.0 ? 1.0 : z;
-  return pw->cum[3 * k + c] + pw->sig[3 * k + c] * (zc - (double)k / pw->n);
+  const pw_layer *L = &pw->lay[k];
+  return L->cum[c] + L->sig[c] * (zc - L->z);
 }
 
-/* tau over [t0, t1] in channel c; z0, z1 the local z at both ends. */
+/* tau over [t0, t1] in channel c; z0, z1 the local z at both ends, k0, k1
+ * their layers. */
+static inline double tau_layers(const piecewise_medium *pw, int c, double z0, double z1, int k0, int k1,
+                                double dz, double len) {
+  if (k0 == k1) return pw->lay[k0].sig[c] * len;
+  return fabs(cum_in(pw, c, k1, z1) - cum_in(pw, c, k0, z0)) / fabs(dz);
+}
+
 static inline double tau_between(const piecewise_medium *pw, int c, double z0, double z1, double dz,
                                  double len) {
-  int k0 = layer_of(pw, z0), k1 = layer_of(pw, z1);
-  if (k0 == k1) return pw->sig[3 * k0 + c] * len;
-  return fabs(cum_at(pw, c, z1) - cum_at(pw, c, z0)) / fabs(dz);
+  return tau_layers(pw, c, z0, z1, layer_of(pw, z0), layer_of(pw, z1), dz, len);
 }
 
 static bool pw_intersect_aabb(const medium *m, const ray3 *r, double *mint, double *maxt) {
@@ -67,7 +80,7 @@ static color pw_majorant(const medium *m, const medium_interaction *mi) {
 
 static void fill_layer(const piecewise_medium *pw, int k, medium_interaction *mi) {
   for (int c = 0; c < 3; c++) {
-    double s = pw->sig[3 * k + c];
+    double s = pw->lay[k].sig[c];
     mi->sigma_t.c[c] = s;
     mi->sigma_s.c[c] = s * pw->alb[3 * k + c];
     mi->sigma_n.c[c] = fmax(mi->majorant.c[c] - s, 0.0);
@@ -104,30 +117,30 @@ static void pw_sample_real(const medium *m, const ray3 *r, double mint, double m
   double z0 = oz + t0 * dz, z1 = oz + t1 * dz;
   int c = nc == 1 ? 0 : channel;
   double target = -log1p(-u);
-  double total = tau_between(pw, c, z0, z1, dz, t1 - t0);
+  int k0 = layer_of(pw, z0), k1 = layer_of(pw, z1);
+  double total = tau_layers(pw, c, z0, z1, k0, k1, dz, t1 - t0);
   if (!(target < total)) { /* the flight passes the box */
     for (int j = 0; j < nc; j++)
-      tr->c[j] = j == c ? exp(-total) : exp(-tau_between(pw, j, z0, z1, dz, t1 - t0));
+      tr->c[j] = j == c ? exp(-total) : exp(-tau_layers(pw, j, z0, z1, k0, k1, dz, t1 - t0));
     spread(tr, nc);
     *pdf = *tr;
     return;
   }
-  int k0 = layer_of(pw, z0), k1 = layer_of(pw, z1);
   double t;
   int k;
   if (k0 == k1) {
     k = k0;
-    t = t0 + target / pw->sig[3 * k + c];
+    t = t0 + target / pw->lay[k].sig[c];
   } else {
     /* C* on the side the ray moves to; search the layer that holds it. */
-    double cs = cum_at(pw, c, z0) + target * dz; /* C moves by tau |d_z| in the ray's z direction */
-    const double *cum = pw->cum;
+    double cs = cum_in(pw, c, k0, z0) + target * dz; /* C moves by tau |d_z| in the ray's z direction */
+    const pw_layer *lay = pw->lay;
     int lo, hi;
     if (dz > 0) { /* smallest j in [1, n] with C_j > C*: k = j - 1 */
       lo = 1, hi = (int)pw->n;
       while (lo < hi) {
         int mid = (lo + hi) / 2;
-        if (cum[3 * mid + c] > cs)
+        if (lay[mid].cum[c] > cs)
           hi = mid;
         else
           lo = mid + 1;
@@ -137,15 +150,15 @@ static void pw_sample_real(const medium *m, const ray3 *r, double mint, double m
       lo = 0, hi = (int)pw->n - 1;
       while (lo < hi) {
         int mid = (lo + hi + 1) / 2;
-        if (cum[3 * mid + c] < cs)
+        if (lay[mid].cum[c] < cs)
           lo = mid;
         else
           hi = mid - 1;
       }
       k = lo;
     }
-    double s = pw->sig[3 * k + c];
-    double z = (double)k / pw->n + (s > 0 ? (cs - cum[3 * k + c]) / s : 0.0);
+    double s = lay[k].sig[c];
+    double z = lay[k].z + (s > 0 ? (cs - lay[k].cum[c]) / s : 0.0);
     t = t0 + (z - z0) / dz;
   }
   t = fmin(fmax(t, t0), t1);
@@ -153,11 +166,11 @@ static void pw_sample_real(const medium *m, const ray3 *r, double mint, double m
   k = layer_of(pw, zt);
   mi->t = t;
   mi->p = v3_fma(r->o, t, r->d);
-  mi->majorant = col(pw->sig[3 * k], pw->sig[3 * k + 1], pw->sig[3 * k + 2]);
+  mi->majorant = col(pw->lay[k].sig[0], pw->lay[k].sig[1], pw->lay[k].sig[2]);
   fill_layer(pw, k, mi);
   for (int j = 0; j < nc; j++) {
     tr->c[j] = j == c ? 1.0 - u : exp(-tau_between(pw, j, z0, zt, dz, t - t0)); /* exp(-tau*) = 1 - u */
-    pdf->c[j] = tr->c[j] * pw->sig[3 * k + j];
+    pdf->c[j] = tr->c[j] * pw->lay[k].sig[j];
   }
   spread(tr, nc);
   spread(pdf, nc);
@@ -194,14 +207,14 @@ static void pw_refresh(piecewise_medium *pw) {
   bool alb_grid = pw->albedo->res[2] > 1;
   double amax = 0.0;
   color mx = col1(0.0);
-  for (int c = 0; c < 3; c++) pw->cum[c] = 0.0;
+  for (int c = 0; c < 3; c++) pw->lay[0].cum[c] = 0.0, pw->lay[n].sig[c] = 0.0;
   for (uint32_t k = 0; k < n; k++)
     for (int c = 0; c < 3; c++) {
       double s = pw->base.scale * grid_at(pw->sigma_t, k, c);
       double a = grid_at(pw->albedo, alb_grid ? k : 0, c);
-      pw->sig[3 * k + c] = s;
+      pw->lay[k].sig[c] = s;
       pw->alb[3 * k + c] = a;
-      pw->cum[3 * (k + 1) + c] = pw->cum[3 * k + c] + s / n;
+      pw->lay[k + 1].cum[c] = pw->lay[k].cum[c] + s / n;
       if (s > mx.c[c]) mx.c[c] = s;
       if (a > amax) amax = a;
     }
@@ -222,9 +235,8 @@ static void pw_parameters_changed(object *o) {
 
 static void pw_destroy(object *o) {
   piecewise_medium *pw = (piecewise_medium *)o;
-  free(pw->sig);
+  free(pw->lay);
   free(pw->alb);
-  free(pw->cum);
   free(pw);
 }
 
@@ -259,11 +271,14 @@ static rsw_status pw_create(loader *ld, node *n, object **out) {
   }
   if (!st) {
     pw->n = pw->sigma_t->res[2];
-    pw->sig = malloc(3 * (size_t)pw->n * sizeof *pw->sig);
+    pw->lay = aligned_alloc(64, ((size_t)pw->n + 1) * sizeof *pw->lay);
     pw->alb = malloc(3 * (size_t)pw->n * sizeof *pw->alb);
-    pw->cum = malloc(3 * ((size_t)pw->n + 1) * sizeof *pw->cum);
-    if (!pw->sig || !pw->alb || !pw->cum)
-      st = ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "piecewise: out of memory");
+    pw->nd = pw->n;
+    if (pw->lay) {
+      memset(pw->lay, 0, ((size_t)pw->n + 1) * sizeof *pw->lay);
+      for (uint32_t k = 0; k <= pw->n; k++) pw->lay[k].z = (double)k / pw->n;
+    }
+    if (!pw->lay || !pw->alb) st = ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "piecewise: out of memory");
   }
   if (st) {
     pw_destroy(&pw->base.base);

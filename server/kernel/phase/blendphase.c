@@ -28,16 +28,21 @@ typedef struct blendphase {
 
 static double blend_weight(const blendphase *b, const medium_interaction *mi) {
   double w = volume_eval_1(b->weight, mi->p);
-  return fmin(1.0, fmax(0.0, w));
+  return w > 1.0 ? 1.0 : w > 0.0 ? w : 0.0; /* clamped to [0, 1] (NaN: 0), no libm calls */
 }
 
-static double blend_eval_pdf(const phase *ph, const medium_interaction *mi, vec3 wo, double *pdf) {
-  const blendphase *b = (const blendphase *)ph;
-  double w = blend_weight(b, mi), p0 = 0, p1 = 0, v0 = 0, v1 = 0;
+/* The mixture at weight w. */
+static double blend_mix(const blendphase *b, double w, const medium_interaction *mi, vec3 wo, double *pdf) {
+  double p0 = 0, p1 = 0, v0 = 0, v1 = 0;
   if (w < 1.0) v0 = b->ph[0]->ops->eval_pdf(b->ph[0], mi, wo, &p0);
   if (w > 0.0) v1 = b->ph[1]->ops->eval_pdf(b->ph[1], mi, wo, &p1);
   *pdf = (1.0 - w) * p0 + w * p1;
   return (1.0 - w) * v0 + w * v1;
+}
+
+static double blend_eval_pdf(const phase *ph, const medium_interaction *mi, vec3 wo, double *pdf) {
+  const blendphase *b = (const blendphase *)ph;
+  return blend_mix(b, blend_weight(b, mi), mi, wo, pdf);
 }
 
 static double blend_sample(const phase *ph, const medium_interaction *mi, double u1, vec2 u2, vec3 *wo,
@@ -52,9 +57,9 @@ static double blend_sample(const phase *ph, const medium_interaction *mi, double
     k = 0;
     u1 = w <= 0.0 ? u1 : (u1 - w) / (1.0 - w);
   }
-  double cw = b->ph[k]->ops->sample(b->ph[k], mi, fmin(u1, 1.0), u2, wo, &cpdf);
+  double cw = b->ph[k]->ops->sample(b->ph[k], mi, u1 < 1.0 ? u1 : 1.0, u2, wo, &cpdf);
   if (!(cpdf > 0.0) || !(cw > 0.0)) return phase_fail(pdf);
-  double val = blend_eval_pdf(ph, mi, *wo, pdf);
+  double val = blend_mix(b, w, mi, *wo, pdf); /* (the weight looked up once) */
   if (!(*pdf > 0.0)) return phase_fail(pdf);
   return val / *pdf;
 }

@@ -763,6 +763,7 @@ rsw_status scene_refresh_bounds(scene *s, rsw_err *err) {
   }
   s->bbox_min = lo;
   s->bbox_max = hi;
+  media_refresh_null_boxes(s);
   s->bsphere_center = v3_scale(v3_add(lo, hi), 0.5);
   double r = v3_len(v3_sub(hi, s->bsphere_center));
   /* Mitsuba's sensors and emitters inflate the bounding sphere:

@@ -112,6 +112,11 @@ static color gridvolume_eval(const volume *v, vec3 p) {
   int i0[3], i1[3];
   double f[3];
   for (int a = 0; a < 3; a++) {
+    if (n[a] == 1) { /* one cell along a (a [1, 1, N] profile): weight 1 on it, exactly */
+      f[a] = 0.0;
+      i0[a] = i1[a] = 0;
+      continue;
+    }
     double c = fold(x[a] * n[a] - 0.5, n[a], g->wrap);
     if (!isfinite(c)) c = 0.0;
     double fl = floor(c);
