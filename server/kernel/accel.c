@@ -1219,10 +1219,10 @@ static bool packet_load(const accel *a, packet_buf *pb, unsigned N, const ray3 *
   float *p = pb->f;
   float *hit = p + (size_t)RAY_FIELDS * N;
   for (unsigned i = 0; i < N; i++) {
-    RAYN_F(p, N, 7, i) = 0;                   /* time */
-    ((unsigned *)p)[9 * N + i] = mask;       /* mask */
-    ((unsigned *)p)[10 * N + i] = i;          /* id */
-    ((unsigned *)p)[11 * N + i] = 0;          /* flags */
+    RAYN_F(p, N, 7, i) = 0;            /* time */
+    ((unsigned *)p)[9 * N + i] = mask; /* mask */
+    ((unsigned *)p)[10 * N + i] = i;   /* id */
+    ((unsigned *)p)[11 * N + i] = 0;   /* flags */
     HITN_U(hit, N, HIT_GEOM, i) = RTC_INVALID_GEOMETRY_ID;
     HITN_U(hit, N, HIT_INST, i) = RTC_INVALID_GEOMETRY_ID;
     pb->valid[i] = 0;
