@@ -18,13 +18,7 @@
 #include "../scene/periodic.h"
 #include "../shapes/instance.h"
 #include "../shapes/shape.h"
-
-static inline double mis_weight(double a, double b) {
-  a *= a;
-  b *= b;
-  double w = a / (a + b);
-  return isfinite(w) ? w : 0.0;
-}
+#include "integrator.h"
 
 /* Shadow ray from si towards the emitter sample ds. Spawned rays are
  * offset by the hit point's float error, not by Mitsuba's (1 + max|p|)
@@ -68,29 +62,6 @@ static trace_result intersect(const scene *sc, const ray3 *r, surface_interactio
   si->t += off; /* distance along the whole (possibly wrapped) ray */
   *wrapped = off > 0;
   return TRACE_HIT;
-}
-
-/* Pick an emitter proportionally to sampling_weight; returns its index and
- * the selection probability. The search is written for conditional moves
- * (which way a random number goes is unpredictable). */
-static size_t pick_emitter_index(const scene *sc, double u) {
-  double t = u * sc->emitter_weight_sum;
-  size_t lo = 0, hi = sc->n_emitters - 1;
-  while (lo < hi) {
-    size_t mid = (lo + hi) / 2;
-    bool right = sc->emitter_cdf[mid] <= t;
-    lo = right ? mid + 1 : lo;
-    hi = right ? hi : mid;
-  }
-  return lo;
-}
-
-static double pick_probability(const scene *sc, size_t k) {
-  return sc->emitters[k]->sampling_weight / sc->emitter_weight_sum;
-}
-
-static double emitter_prob(const scene *sc, const emitter *e) {
-  return sc->emitter_weight_sum > 0 ? e->sampling_weight / sc->emitter_weight_sum : 0.0;
 }
 
 /* Stokes films: only an environment that reports polarisation carries Q,

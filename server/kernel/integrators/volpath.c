@@ -69,6 +69,7 @@
 #include "../scene/periodic.h"
 #include "../shapes/instance.h"
 #include "../shapes/shape.h"
+#include "integrator.h"
 
 typedef struct volpath_integrator {
   integrator base;
@@ -79,29 +80,11 @@ enum {
   MAX_CROSSINGS = 1024 /* null surfaces crossed by one ray before it counts as lost */
 };
 
-static inline double mis_weight(double a, double b) {
-  a *= a;
-  b *= b;
-  double w = a / (a + b);
-  return isfinite(w) ? w : 0.0;
-}
-
+/* The emitter u picks and its selection probability. */
 static size_t pick_emitter(const scene *sc, double u, double *prob) {
-  double t = u * sc->emitter_weight_sum;
-  size_t lo = 0, hi = sc->n_emitters - 1;
-  while (lo < hi) {
-    size_t mid = (lo + hi) / 2;
-    if (sc->emitter_cdf[mid] <= t)
-      lo = mid + 1;
-    else
-      hi = mid;
-  }
-  *prob = sc->emitters[lo]->sampling_weight / sc->emitter_weight_sum;
-  return lo;
-}
-
-static double emitter_prob(const scene *sc, const emitter *e) {
-  return sc->emitter_weight_sum > 0 ? e->sampling_weight / sc->emitter_weight_sum : 0.0;
+  size_t k = pick_emitter_index(sc, u);
+  *prob = pick_probability(sc, k);
+  return k;
 }
 
 /* Can ray r meet the scene's bounding box on [tmin, tmax]? A ray that has
