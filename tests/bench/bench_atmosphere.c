@@ -48,6 +48,7 @@
 #include "../../server/kernel/scene/params.h"
 #include "../../server/kernel/scene/scene.h"
 #include "../support/daemon.h"
+#include "../support/tsup.h"
 #include "bench.h"
 
 #define LAYERS     2400
@@ -83,22 +84,6 @@ static char *json_array(const double *v, size_t n) {
   for (size_t i = 0; i < n; i++) len += (size_t)snprintf(s + len, cap - len, "%s%.17g", i ? "," : "", v[i]);
   snprintf(s + len, cap - len, "]");
   return s;
-}
-
-static char *read_text(const char *path, size_t *len) {
-  FILE *f = fopen(path, "rb");
-  if (!f) return NULL;
-  fseek(f, 0, SEEK_END);
-  long n = ftell(f);
-  fseek(f, 0, SEEK_SET);
-  char *t = n >= 0 ? malloc((size_t)n + 1) : NULL;
-  if (t && fread(t, 1, (size_t)n, f) != (size_t)n) {
-    free(t);
-    t = NULL;
-  }
-  fclose(f);
-  if (t) t[n] = '\0', *len = (size_t)n;
-  return t;
 }
 
 static int fail(const char *what, const rsw_err *err) {
@@ -245,7 +230,7 @@ int main(void) {
   const char *path = getenv("RSW_BENCH_ATMO_SCENE");
   if (!path || !*path) path = "proto/examples/atmosphere.json";
   size_t len = 0;
-  char *text = read_text(path, &len);
+  char *text = tsup_read_file(path, &len);
   if (!text) {
     fprintf(stderr, "bench atmosphere_1d: cannot read %s\n", path);
     return 1;

@@ -31,6 +31,7 @@
 
 #include "../support/daemon.h"
 #include "../support/test.h"
+#include "../support/tsup.h"
 
 RSW_TEST_DEFINE_GLOBALS
 
@@ -87,22 +88,6 @@ static void put_array(str *s, const double *v, int n) {
   put(s, "[");
   for (int i = 0; i < n; i++) put(s, "%s%.17g", i ? "," : "", v[i]);
   put(s, "]");
-}
-
-static char *read_file(const char *path, size_t *len) {
-  FILE *f = fopen(path, "rb");
-  if (!f) return NULL;
-  fseek(f, 0, SEEK_END);
-  long n = ftell(f);
-  fseek(f, 0, SEEK_SET);
-  char *t = n >= 0 ? malloc((size_t)n + 1) : NULL;
-  if (t && fread(t, 1, (size_t)n, f) != (size_t)n) {
-    free(t);
-    t = NULL;
-  }
-  fclose(f);
-  if (t) t[n] = '\0', *len = (size_t)n;
-  return t;
 }
 
 static thttp_resp call(const char *method, const char *path, const char *body, const char *accept) {
@@ -168,7 +153,7 @@ static char *three_arrays(double wl) {
 
 static void test_push_and_list(void) {
   size_t len = 0;
-  char *text = read_file("proto/examples/atmosphere.json", &len);
+  char *text = tsup_read_file("proto/examples/atmosphere.json", &len);
   REQUIRE(text, "read proto/examples/atmosphere.json");
   thttp_resp r = call("POST", "/v1/scenes", text, NULL);
   free(text);

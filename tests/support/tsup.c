@@ -34,6 +34,22 @@ scene *tsup_load_file(const char *path, const char *variant_name) {
   return s;
 }
 
+char *tsup_read_file(const char *path, size_t *len) {
+  FILE *f = fopen(path, "rb");
+  if (!f) return NULL;
+  fseek(f, 0, SEEK_END);
+  long n = ftell(f);
+  fseek(f, 0, SEEK_SET);
+  char *t = n >= 0 ? malloc((size_t)n + 1) : NULL;
+  if (t && fread(t, 1, (size_t)n, f) != (size_t)n) {
+    free(t);
+    t = NULL;
+  }
+  fclose(f);
+  if (t) t[n] = '\0', *len = (size_t)n;
+  return t;
+}
+
 bool tsup_render(scene *s, uint32_t spp, uint64_t seed, int threads, film_image *out) {
   rsw_err err = {0};
   render_opts o = {.size = sizeof o, .spp = spp, .seed = seed, .threads = threads};

@@ -10,6 +10,9 @@
 scene *tsup_load(const char *text, const char *variant_name);
 /* Same from a file under the repository root. */
 scene *tsup_load_file(const char *path, const char *variant_name);
+/* A whole file as a NUL-terminated string (malloc'ed; *len its length),
+ * or NULL. */
+char *tsup_read_file(const char *path, size_t *len);
 /* Render sensor 0 (spp 0 = the scene's); returns false (and prints) on
  * failure. */
 bool tsup_render(scene *s, uint32_t spp, uint64_t seed, int threads, film_image *out);

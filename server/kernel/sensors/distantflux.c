@@ -16,7 +16,6 @@
 #include <math.h>
 #include <stdlib.h>
 
-#include "../simd/simd.h"
 #include "sensor_common.h"
 
 typedef struct distantflux {
@@ -58,32 +57,14 @@ static void distantflux_sample_ray_batch(const sensor *s, int n, const vec2 *fil
     for (int i = 0; i < n; i++) w[i] = distantflux_sample_ray(s, film_u[i], aperture_u[i], &rays[i]);
     return;
   }
-  enum {
-    C = 64
-  };
-  double out[6 * C], fu[2 * C], ap[2 * C], c[3] = {f->center.x, f->center.y, f->center.z};
+  hemisphere_rays_batch(s, f->center, f->radius, f->ray_offset, n, film_u, aperture_u, rays);
   vec3 n_ref = v3_norm(xf_vector(&s->to_world, v3(0, 0, 1)));
   double n_pix = (double)s->film->width * (double)s->film->height;
-  rsw_isa isa = rsw_isa_get();
-  for (int i0 = 0; i0 < n; i0 += C) {
-    int m = n - i0 < C ? n - i0 : C;
-    for (int k = 0; k < m; k++) {
-      fu[2 * k] = film_u[i0 + k].x, fu[2 * k + 1] = film_u[i0 + k].y;
-      ap[2 * k] = aperture_u[i0 + k].x, ap[2 * k + 1] = aperture_u[i0 + k].y;
-    }
-    hdistant_rays_batch(isa, m, (const double(*)[4])s->to_world.m, fu, ap, c, f->radius, f->ray_offset, out);
-    for (int k = 0; k < m; k++) {
-      const double *o = &out[6 * k];
-      ray3 *r = &rays[i0 + k];
-      r->o = v3(o[0], o[1], o[2]);
-      r->d = v3(o[3], o[4], o[5]);
-      r->tmin = 0.0;
-      r->tmax = INFINITY;
-      vec3 omega = v3_neg(r->d);
-      double wk = 1.0;
-      wk *= 2.0 * 3.14159265358979323846 * v3_dot(omega, n_ref) / n_pix;
-      w[i0 + k] = wk;
-    }
+  for (int i = 0; i < n; i++) {
+    vec3 omega = v3_neg(rays[i].d);
+    double wk = 1.0;
+    wk *= 2.0 * 3.14159265358979323846 * v3_dot(omega, n_ref) / n_pix;
+    w[i] = wk;
   }
 }
 

@@ -17,7 +17,6 @@
 #include <math.h>
 #include <stdlib.h>
 
-#include "../simd/simd.h"
 #include "sensor_common.h"
 
 typedef struct hdistant {
@@ -62,28 +61,8 @@ static void hdistant_sample_ray_batch(const sensor *s, int n, const vec2 *film_u
     for (int i = 0; i < n; i++) w[i] = hdistant_sample_ray(s, film_u[i], aperture_u[i], &rays[i]);
     return;
   }
-  enum {
-    C = 64
-  };
-  double out[6 * C], fu[2 * C], ap[2 * C], c[3] = {h->center.x, h->center.y, h->center.z};
-  rsw_isa isa = rsw_isa_get();
-  for (int i0 = 0; i0 < n; i0 += C) {
-    int m = n - i0 < C ? n - i0 : C;
-    for (int k = 0; k < m; k++) {
-      fu[2 * k] = film_u[i0 + k].x, fu[2 * k + 1] = film_u[i0 + k].y;
-      ap[2 * k] = aperture_u[i0 + k].x, ap[2 * k + 1] = aperture_u[i0 + k].y;
-    }
-    hdistant_rays_batch(isa, m, (const double(*)[4])s->to_world.m, fu, ap, c, h->radius, h->ray_offset, out);
-    for (int k = 0; k < m; k++) {
-      const double *o = &out[6 * k];
-      ray3 *r = &rays[i0 + k];
-      r->o = v3(o[0], o[1], o[2]);
-      r->d = v3(o[3], o[4], o[5]);
-      r->tmin = 0.0;
-      r->tmax = INFINITY;
-      w[i0 + k] = 1.0;
-    }
-  }
+  hemisphere_rays_batch(s, h->center, h->radius, h->ray_offset, n, film_u, aperture_u, rays);
+  for (int i = 0; i < n; i++) w[i] = 1.0;
 }
 
 static rsw_status hdistant_set_scene(sensor *s, const scene *sc, rsw_err *err) {

@@ -10,6 +10,7 @@
 #include "../scene/periodic.h"
 #include "../scene/scene.h"
 #include "../shapes/shape.h"
+#include "../simd/simd.h"
 
 /* The nested object of class cls, or a default instance of `def_type`
  * when the document gives none (mitsuba3 src/render/sensor.cpp creates an
@@ -277,4 +278,29 @@ uint64_t sensor_film_bytes(const sensor *se, rsw_variant variant, int *channels)
   uint64_t pixels = (uint64_t)(fm->width > 0 ? fm->width : 0) * (uint64_t)(fm->height > 0 ? fm->height : 0);
   if (pixels && per_pixel > UINT64_MAX / pixels) return UINT64_MAX;
   return pixels * per_pixel;
+}
+
+void hemisphere_rays_batch(const sensor *s, vec3 center, double radius, double offset, int n,
+                           const vec2 *film_u, const vec2 *aperture_u, ray3 *rays) {
+  enum {
+    C = 64
+  };
+  double out[6 * C], fu[2 * C], ap[2 * C], c[3] = {center.x, center.y, center.z};
+  rsw_isa isa = rsw_isa_get();
+  for (int i0 = 0; i0 < n; i0 += C) {
+    int m = n - i0 < C ? n - i0 : C;
+    for (int k = 0; k < m; k++) {
+      fu[2 * k] = film_u[i0 + k].x, fu[2 * k + 1] = film_u[i0 + k].y;
+      ap[2 * k] = aperture_u[i0 + k].x, ap[2 * k + 1] = aperture_u[i0 + k].y;
+    }
+    hdistant_rays_batch(isa, m, (const double(*)[4])s->to_world.m, fu, ap, c, radius, offset, out);
+    for (int k = 0; k < m; k++) {
+      const double *o = &out[6 * k];
+      ray3 *r = &rays[i0 + k];
+      r->o = v3(o[0], o[1], o[2]);
+      r->d = v3(o[3], o[4], o[5]);
+      r->tmin = 0.0;
+      r->tmax = INFINITY;
+    }
+  }
 }

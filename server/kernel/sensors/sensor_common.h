@@ -135,4 +135,11 @@ void meter_frame_bind(meter_frame *f, const scene *sc);
  * traced from inside it, where the float error is that of the column. */
 vec3 radiancemeter_ray_origin(vec3 o, vec3 d, const meter_frame *f);
 
+/* hdistant's rays for n film samples without a target (hdistant,
+ * distantflux): the double lanes of simd/camera_lanes.h at the render's
+ * ISA, bit for bit hdistant_sample_ray()'s directions and origins on the
+ * disk of `radius` around `center`, pushed back by `offset`. */
+void hemisphere_rays_batch(const sensor *s, vec3 center, double radius, double offset, int n,
+                           const vec2 *film_u, const vec2 *aperture_u, ray3 *rays);
+
 #endif
