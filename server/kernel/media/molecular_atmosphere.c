@@ -480,7 +480,25 @@ static rsw_status read_thermoprops(loader *ld, node *n, mol_atmo *m) {
   bool present = false;
   rsw_status st = volume_read_numbers(ld, g, "z", &z, &nz, &present);
   if (st) return st;
-  if (!present) return ld_fail(ld, g, NULL, RSW_ERR_MISSING, "thermoprops: needs 'z', the levels in metres");
+  if (present && (ld_has(g, "toa_altitude") || ld_has(g, "n_layers"))) {
+    free(z);
+    return ld_fail(ld, g, "toa_altitude", RSW_ERR_INVALID, "thermoprops: give z, or toa_altitude and n_layers, not both");
+  }
+  if (!present && ld_has(g, "toa_altitude")) { /* N equal layers: z_k = toa k / N */
+    double toa;
+    long long nl;
+    st = ld_float_range(ld, g, "toa_altitude", 120e3, 1e-300, INFINITY, &toa);
+    if (!st) st = ld_int(ld, g, "n_layers", 120, 1, 1 << 24, &nl);
+    if (st) return st;
+    nz = (size_t)nl + 1;
+    z = malloc(nz * sizeof *z);
+    if (!z) return ld_fail(ld, g, NULL, RSW_ERR_NOMEM, "molecular_atmosphere: out of memory");
+    for (size_t k = 0; k < nz; k++) z[k] = toa * (double)k / (double)nl;
+    present = true;
+  }
+  if (!present)
+    return ld_fail(ld, g, NULL, RSW_ERR_MISSING,
+                   "thermoprops: needs 'z', the levels in metres (or toa_altitude and n_layers)");
   m->z = z;
   if (nz < 2) return ld_fail(ld, g, "z", RSW_ERR_INVALID, "thermoprops: z needs at least 2 levels (1 layer)");
   if (z[0] != 0.0) return ld_fail(ld, g, "z", RSW_ERR_INVALID, "thermoprops: z must start at 0 (got z[0] = %g)", z[0]);
