@@ -12,6 +12,8 @@ cm^-3; nm, 1e-20 cm^2; nm, mW m^-2 nm^-1); the kernel converts them
 (server/kernel/media/atmo_data.h). Sources: data/README.md."""
 import csv
 import os
+import shutil
+import subprocess
 import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -47,7 +49,7 @@ def main():
     for name in AFGL:
         _, rows = load("data/afgl_1986/%s.csv" % name)
         fields = ", ".join(".%s = afgl_%s_%s" % (c, name, c) for c in cols)
-        out.append('    {.identifier = "afgl_1986-%s", .n = %d, %s},' % (name.replace("_", "_"), len(rows), fields))
+        out.append('    {.identifier = "afgl_1986-%s", .n = %d, %s},' % (name, len(rows), fields))
     out.append("};")
     out.append("")
     _, rows = load("data/ozone/bogumil_2003.csv")
@@ -65,6 +67,12 @@ def main():
     dst = os.path.join(ROOT, "server/kernel/media/atmo_data.c")
     with open(dst, "w") as f:
         f.write(text)
+    # In the house style (tools/check-format.sh), so that a rerun on
+    # unchanged data changes nothing.
+    if shutil.which("clang-format"):
+        subprocess.run(["clang-format", "-i", "--style=file", dst], cwd=ROOT, check=True)
+    else:
+        print("gen_atmo_data: clang-format not found: run tools/check-format.sh --fix", file=sys.stderr)
     print("wrote", os.path.relpath(dst, ROOT), file=sys.stderr)
 
 

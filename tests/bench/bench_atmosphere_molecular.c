@@ -89,7 +89,8 @@ int main(void) {
   if (!molecular_atmosphere_layers(m, 550, &z, &n, &st, &al, &w, &np) || np != 1) return 1;
   size_t len;
   char *doc = tsup_read_file(SCENE, &len);
-  char *a = doc ? strstr(doc, "\"medium_atmosphere\": {") : NULL, *b = a ? strstr(a, "\"shape_atmosphere\"") : NULL;
+  char *a = doc ? strstr(doc, "\"medium_atmosphere\": {") : NULL,
+       *b = a ? strstr(a, "\"shape_atmosphere\"") : NULL;
   if (!a || !b) return 1;
   sbuf t = {0};
   sb_printf(&t, "%.*s\"medium_atmosphere\": {\"type\": \"piecewise\", ", (int)(a - doc), doc);

@@ -92,16 +92,18 @@ static double medium_tau(const medium *m, double wl) {
 
 static char *us_standard(int n, const char *extra) {
   sbuf b = {0};
-  sb_printf(&b, "{\"type\": \"molecular_atmosphere\", \"thermoprops\": {\"identifier\": \"afgl_1986-us_standard\", "
-                "\"z\": ");
+  sb_printf(
+      &b, "{\"type\": \"molecular_atmosphere\", \"thermoprops\": {\"identifier\": \"afgl_1986-us_standard\", "
+          "\"z\": ");
   levels(&b, n);
   sb_printf(&b, "}%s%s}", extra[0] ? ", " : "", extra);
   return b.p;
 }
 
-static const char *METER_UP = "{\"type\": \"radiancemeter\", \"origin\": [0, 0, -500], \"direction\": [0, 0, 1],"
-                              " \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1,"
-                              " \"rfilter\": {\"type\": \"box\"}}}";
+static const char *METER_UP =
+    "{\"type\": \"radiancemeter\", \"origin\": [0, 0, -500], \"direction\": [0, 0, 1],"
+    " \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1,"
+    " \"rfilter\": {\"type\": \"box\"}}}";
 
 /* ---- Rayleigh and ozone --------------------------------------------------- */
 
@@ -113,14 +115,16 @@ static void test_rayleigh_bodhaine(void) {
     double l = wls[i] * 1e-3, l2 = l * l;
     double fit = (1.0455996 - 341.29061 / l2 - 0.90230850 * l2) / (1 + 0.0027059889 / l2 - 85.968563 * l2);
     double s = atmo_rayleigh_cross_section(wls[i]) * 1e4 / 1e-28;
-    CHECK(fabs(s / fit - 1) < 5e-4, "sigma_R(%g nm) = %.6g e-28 cm^2 vs Bodhaine eq. 29 %.6g", wls[i], s, fit);
+    CHECK(fabs(s / fit - 1) < 5e-4, "sigma_R(%g nm) = %.6g e-28 cm^2 vs Bodhaine eq. 29 %.6g", wls[i], s,
+          fit);
   }
   char *med = us_standard(120, "\"has_absorption\": false");
   scene *s = atmo_scene(med, "{\"type\": \"constant\"}", METER_UP, NULL);
   free(med);
   REQUIRE(s, "scene");
   double tau = medium_tau(find_medium(s), 550);
-  CHECK(fabs(tau - 0.0973) < 0.01 * 0.0973, "Rayleigh tau(550 nm) = %.5f vs Bodhaine 1999 0.0973 (1 %%)", tau);
+  CHECK(fabs(tau - 0.0973) < 0.01 * 0.0973, "Rayleigh tau(550 nm) = %.5f vs Bodhaine 1999 0.0973 (1 %%)",
+        tau);
   printf("  Rayleigh optical thickness, US standard, 550 nm: %.5f\n", tau);
   /* lambda^-4-ish: tau(450) / tau(550) */
   double r = medium_tau(find_medium(s), 450) / tau;
@@ -160,28 +164,31 @@ static void test_direct_transmittance(void) {
   /* Absorption only (O3 + a user sigma_a + an absorbing aerosol): a meter
    * under the atmosphere looking up at a sky of radiance 1 sees
    * exp(-tau / mu) exactly; unequal layers. */
-  const char *med = "{\"type\": \"molecular_atmosphere\", \"has_scattering\": false,"
-                    " \"thermoprops\": {\"identifier\": \"afgl_1986-midlatitude_summer\","
-                    "   \"z\": [0, 500, 1500, 3000, 8000, 15000, 30000, 60000, 120000]},"
-                    " \"sigma_a\": {\"type\": \"spectrum\", \"wavelengths\": [300, 1000], \"values\": [2e-6, 1e-6]},"
-                    " \"particle_layers\": [{\"bottom\": 0, \"top\": 2000, \"tau_ref\": 0.1, \"albedo\": 0,"
-                    "   \"angstrom\": 1.2}]}";
+  const char *med =
+      "{\"type\": \"molecular_atmosphere\", \"has_scattering\": false,"
+      " \"thermoprops\": {\"identifier\": \"afgl_1986-midlatitude_summer\","
+      "   \"z\": [0, 500, 1500, 3000, 8000, 15000, 30000, 60000, 120000]},"
+      " \"sigma_a\": {\"type\": \"spectrum\", \"wavelengths\": [300, 1000], \"values\": [2e-6, 1e-6]},"
+      " \"particle_layers\": [{\"bottom\": 0, \"top\": 2000, \"tau_ref\": 0.1, \"albedo\": 0,"
+      "   \"angstrom\": 1.2}]}";
   const double wls[] = {320, 450, 600, 900}, ths[] = {0, 30, 60};
   for (int j = 0; j < 3; j++) {
     double th = ths[j] * M_PI / 180, mu = cos(th);
     char meter[512];
-    snprintf(meter, sizeof meter,
-             "{\"type\": \"radiancemeter\", \"origin\": [%.17g, 0, -500], \"direction\": [%.17g, 0, %.17g],"
-             " \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}}",
-             -500 * tan(th), sin(th), mu);
+    snprintf(
+        meter, sizeof meter,
+        "{\"type\": \"radiancemeter\", \"origin\": [%.17g, 0, -500], \"direction\": [%.17g, 0, %.17g],"
+        " \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}}",
+        -500 * tan(th), sin(th), mu);
     scene *s = atmo_scene(med, "{\"type\": \"constant\", \"radiance\": 1}", meter, NULL);
     REQUIRE(s, "scene");
     for (size_t i = 0; i < sizeof wls / sizeof wls[0]; i++) {
       film_image img;
       REQUIRE(render_at(s, wls[i], 4, 1, &img), "render");
       double tau = medium_tau(find_medium(s), wls[i]), expect = exp(-tau / mu);
-      CHECK(fabs(img.data[0] - expect) <= 2e-6 * expect, "%g nm, %g deg: L = %.9g vs exp(-tau/mu) = %.9g (tau %.6g)",
-            wls[i], ths[j], img.data[0], expect, tau);
+      CHECK(fabs(img.data[0] - expect) <= 2e-6 * expect,
+            "%g nm, %g deg: L = %.9g vs exp(-tau/mu) = %.9g (tau %.6g)", wls[i], ths[j], img.data[0], expect,
+            tau);
       CHECK(tau > 0.1, "%g nm: tau %.4g suspiciously small", wls[i], tau);
       film_image_free(&img);
     }
@@ -206,7 +213,8 @@ static void test_direct_transmittance(void) {
       double t0, t1;
       REQUIRE(m->ops->intersect_aabb(m, &r, &t0, &t1), "box");
       double tr = m->ops->transmittance(m, &r, t0, t1).c[0], expect = exp(-tau / mu);
-      CHECK(fabs(tr - expect) <= 1e-12, "transmittance %g nm %g deg: %.15g vs %.15g", wls[i], ths[j], tr, expect);
+      CHECK(fabs(tr - expect) <= 1e-12, "transmittance %g nm %g deg: %.15g vs %.15g", wls[i], ths[j], tr,
+            expect);
     }
   }
   scene_free(s);
@@ -219,7 +227,8 @@ static void test_sweep_equals_piecewise(void) {
   char *mol = us_standard(n, "\"width\": 1000000, \"particle_layers\": [{\"bottom\": 0, \"top\": 4000, "
                              "\"tau_ref\": 0.2, \"angstrom\": 1.3, \"albedo\": 0.9, "
                              "\"phase\": {\"type\": \"hg\", \"g\": 0.7}}]");
-  const char *sun = "{\"type\": \"directional\", \"direction\": [-0.5, 0, -0.8660254037844386], \"irradiance\": 1}";
+  const char *sun =
+      "{\"type\": \"directional\", \"direction\": [-0.5, 0, -0.8660254037844386], \"irradiance\": 1}";
   const char *hd = "{\"type\": \"hdistant\", \"target\": [0, 0, 0], \"film\": {\"type\": \"hdrfilm\", "
                    "\"width\": 6, \"height\": 6, \"rfilter\": {\"type\": \"box\"}}}";
   const char *ground = "{\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.3},"
@@ -236,14 +245,16 @@ static void test_sweep_equals_piecewise(void) {
     size_t np;
     REQUIRE(molecular_atmosphere_layers(find_medium(a), wls[i], &z, &nl, &st, &al, &w, &np), "layers");
     sbuf b = {0};
-    const char *grid = "\"shape\": [%u, 1, 1], \"filter_type\": \"nearest\", \"to_world\": [{\"scale\": [%.17g, "
-                       "%.17g, %.17g]}, {\"translate\": [%.17g, %.17g, 0]}]";
+    const char *grid =
+        "\"shape\": [%u, 1, 1], \"filter_type\": \"nearest\", \"to_world\": [{\"scale\": [%.17g, "
+        "%.17g, %.17g]}, {\"translate\": [%.17g, %.17g, 0]}]";
     const double *arr[3] = {st, al, w};
     const char *names[3] = {"sigma_t", "albedo", "weight"};
     sb_printf(&b, "{\"type\": \"piecewise\", ");
     for (int g = 0; g < 3; g++) {
-      if (g == 2) sb_printf(&b, "\"phase\": {\"type\": \"blendphase\", \"phase_0\": {\"type\": \"rayleigh\"}, "
-                                "\"phase_1\": {\"type\": \"hg\", \"g\": 0.7}, ");
+      if (g == 2)
+        sb_printf(&b, "\"phase\": {\"type\": \"blendphase\", \"phase_0\": {\"type\": \"rayleigh\"}, "
+                      "\"phase_1\": {\"type\": \"hg\", \"g\": 0.7}, ");
       sb_printf(&b, "\"%s\": {\"type\": \"gridvolume\", \"data\": [", names[g]);
       for (uint32_t k = 0; k < nl; k++) sb_printf(&b, "%s%.17g", k ? ", " : "", arr[g][k]);
       sb_printf(&b, "], ");
@@ -256,8 +267,8 @@ static void test_sweep_equals_piecewise(void) {
     REQUIRE(render_at(pb, wls[i], 16, 7, &fb), "render piecewise");
     size_t bytes = (size_t)fa.width * fa.height * fa.channels * sizeof(float);
     CHECK(fa.width == fb.width && memcmp(fa.data, fb.data, bytes) == 0,
-          "%g nm: molecular_atmosphere and the same layers as piecewise differ (pixel 0: %.9g vs %.9g)", wls[i],
-          fa.data[0], fb.data[0]);
+          "%g nm: molecular_atmosphere and the same layers as piecewise differ (pixel 0: %.9g vs %.9g)",
+          wls[i], fa.data[0], fb.data[0]);
     double mean = 0;
     for (int p = 0; p < fa.width * fa.height; p++) mean += fa.data[p];
     CHECK(mean > 0, "%g nm: black film", wls[i]);
@@ -287,8 +298,8 @@ static void test_particle_tau(void) {
     const medium *m = find_medium(s);
     double t500 = medium_tau(m, 500), t1000 = medium_tau(m, 1000);
     CHECK(fabs(t500 - 0.35) < 1e-12, "%s: tau(w_ref) = %.15g vs tau_ref 0.35", dists[d], t500);
-    CHECK(fabs(t1000 - 0.35 * pow(2.0, -1.4)) < 1e-12, "%s: tau(1000) = %.15g vs Angstrom %.15g", dists[d], t1000,
-          0.35 * pow(2.0, -1.4));
+    CHECK(fabs(t1000 - 0.35 * pow(2.0, -1.4)) < 1e-12, "%s: tau(1000) = %.15g vs Angstrom %.15g", dists[d],
+          t1000, 0.35 * pow(2.0, -1.4));
     scene_free(s);
   }
   /* an extinction spectrum instead of the Angstrom law; two layers add */
@@ -318,12 +329,14 @@ static void test_parameter_update(void) {
   REQUIRE(render_at(s, 550, 4, 1, &img0), "render");
   CHECK(fabs(img0.data[0] - exp(-0.2)) < 2e-6, "tau_ref 0.2: L = %.9g vs %.9g", img0.data[0], exp(-0.2));
   film_image_free(&img0);
-  param_update up = {.key = "medium_atmosphere.particle_layer_0.tau_ref", .value = {.kind = PV_NUMBER, .num = 0.5}};
+  param_update up = {.key = "medium_atmosphere.particle_layer_0.tau_ref",
+                     .value = {.kind = PV_NUMBER, .num = 0.5}};
   rsw_status st = scene_update(s, &up, 1, NULL, &err);
   CHECK(st == RSW_OK, "update: %s", err.msg);
   film_image img;
   REQUIRE(render_at(s, 550, 4, 1, &img), "render");
-  CHECK(fabs(img.data[0] - exp(-0.5)) < 2e-6, "after tau_ref = 0.5: L = %.9g vs %.9g", img.data[0], exp(-0.5));
+  CHECK(fabs(img.data[0] - exp(-0.5)) < 2e-6, "after tau_ref = 0.5: L = %.9g vs %.9g", img.data[0],
+        exp(-0.5));
   film_image_free(&img);
   scene_free(s);
 }
@@ -345,7 +358,8 @@ static void test_solar_irradiance(void) {
   color e;
   REQUIRE(render_horizontal_irradiance(s, &e, &err) == RSW_OK, "E_h: %s", err.msg);
   double expect = t->mw[i] * 1e-3 / (1.01 * 1.01);
-  CHECK(fabs(e.c[0] - expect) < 1e-12 * expect, "solar E(%g nm) = %.12g vs %.12g W/m2/nm", t->wl[i], e.c[0], expect);
+  CHECK(fabs(e.c[0] - expect) < 1e-12 * expect, "solar E(%g nm) = %.12g vs %.12g W/m2/nm", t->wl[i], e.c[0],
+        expect);
   CHECK(fabs(t->wl[0] - 199.12) < 1e-9 && t->n > 8000, "Thuillier table starts at %g nm, %d values", t->wl[0],
         t->n);
   scene_free(s);
@@ -355,10 +369,11 @@ static void test_solar_irradiance(void) {
 
 static void expect_error(const char *med, const char *variant, const char *needle, const char *loc) {
   sbuf b = {0};
-  sb_printf(&b,
-            "{\"type\": \"scene\", \"medium_atmosphere\": %s, \"shape_atmosphere\": {\"type\": \"cube\", "
-            "\"bsdf\": {\"type\": \"null\"}, \"interior\": {\"type\": \"ref\", \"id\": \"medium_atmosphere\"}}}",
-            med);
+  sb_printf(
+      &b,
+      "{\"type\": \"scene\", \"medium_atmosphere\": %s, \"shape_atmosphere\": {\"type\": \"cube\", "
+      "\"bsdf\": {\"type\": \"null\"}, \"interior\": {\"type\": \"ref\", \"id\": \"medium_atmosphere\"}}}",
+      med);
   rsw_err err = {0};
   scene *s = NULL;
   scene_load_opts o = {.variant = variant};
@@ -396,16 +411,18 @@ static void test_refusals(void) {
                   "\"n_o3\": [0, 0]}",
                   ""),
                "mono", "one per level", "/thermoprops/t");
-  expect_error(MA(US("[0, 1000]"), ", \"thermoprop_typo\": 1"), "mono", "thermoprop_typo", "/thermoprop_typo");
-  expect_error(MA("{\"identifier\": \"afgl_1986-tropical\", \"z\": [0, 1000], \"zz\": 1}", ""), "mono", "'zz'",
-               "/thermoprops/zz");
+  expect_error(MA(US("[0, 1000]"), ", \"thermoprop_typo\": 1"), "mono", "thermoprop_typo",
+               "/thermoprop_typo");
+  expect_error(MA("{\"identifier\": \"afgl_1986-tropical\", \"z\": [0, 1000], \"zz\": 1}", ""), "mono",
+               "'zz'", "/thermoprops/zz");
   expect_error("{\"type\": \"molecular_atmosphere\"}", "mono", "needs \"thermoprops\"", "/medium_atmosphere");
-  expect_error(MA(US("[0, 1000, 5000]"), ", \"particle_layers\": [{\"bottom\": 3000, \"top\": 2000}]"), "mono",
-               "must lie below top", "/particle_layers/0/top");
-  expect_error(MA(US("[0, 1000, 5000]"), ", \"particle_layers\": [{\"bottom\": 3000, \"top\": 9000}]"), "mono",
-               "above the atmosphere's top", "/particle_layers/0/top");
-  expect_error(MA(US("[0, 1000, 5000]"), ", \"particle_layers\": [{\"top\": 2000, \"distribution\": \"lognormal\"}]"),
-               "mono", "unknown distribution 'lognormal'", "/particle_layers/0/distribution");
+  expect_error(MA(US("[0, 1000, 5000]"), ", \"particle_layers\": [{\"bottom\": 3000, \"top\": 2000}]"),
+               "mono", "must lie below top", "/particle_layers/0/top");
+  expect_error(MA(US("[0, 1000, 5000]"), ", \"particle_layers\": [{\"bottom\": 3000, \"top\": 9000}]"),
+               "mono", "above the atmosphere's top", "/particle_layers/0/top");
+  expect_error(
+      MA(US("[0, 1000, 5000]"), ", \"particle_layers\": [{\"top\": 2000, \"distribution\": \"lognormal\"}]"),
+      "mono", "unknown distribution 'lognormal'", "/particle_layers/0/distribution");
   expect_error(MA(US("[0, 1000, 5000]"),
                   ", \"particle_layers\": [{\"top\": 2000, \"distribution\": {\"type\": \"cauchy\"}}]"),
                "mono", "unknown distribution 'cauchy'", "/particle_layers/0/distribution");
@@ -413,8 +430,9 @@ static void test_refusals(void) {
                "tau_ref", "/particle_layers/0/tau_ref");
   expect_error(MA(US("[0, 1000, 5000]"), ", \"particle_layers\": [{\"top\": 2000, \"albedo\": 1.5}]"), "mono",
                "albedo", "/particle_layers/0/albedo");
-  expect_error(MA(US("[0, 1000, 5000]"), ", \"particle_layers\": [{\"top\": 2000, \"angstrom\": 1, \"extinction\": "
-                                         "{\"type\": \"spectrum\", \"value\": [[400, 1], [800, 0.5]]}}]"),
+  expect_error(MA(US("[0, 1000, 5000]"),
+                  ", \"particle_layers\": [{\"top\": 2000, \"angstrom\": 1, \"extinction\": "
+                  "{\"type\": \"spectrum\", \"value\": [[400, 1], [800, 0.5]]}}]"),
                "mono", "not both", "/particle_layers/0/angstrom");
   expect_error(MA(US("[0, 1000, 5000]"), ", \"sigma_a\": {\"type\": \"gridvolume\", \"data\": [1, 2, 3], "
                                          "\"shape\": [3, 1, 1]}"),
@@ -429,7 +447,8 @@ static void test_refusals(void) {
   };
   for (size_t i = 0; i < 3; i++) {
     sbuf b = {0};
-    sb_printf(&b, "{\"type\": \"scene\", \"sun\": {\"type\": \"directional\", \"irradiance\": %s}}", bad_sun[i][0]);
+    sb_printf(&b, "{\"type\": \"scene\", \"sun\": {\"type\": \"directional\", \"irradiance\": %s}}",
+              bad_sun[i][0]);
     rsw_err err = {0};
     scene *s = NULL;
     scene_load_opts o = {.variant = "mono"};
@@ -438,8 +457,8 @@ static void test_refusals(void) {
     CHECK(st != RSW_OK, "solar: loaded %s", bad_sun[i][0]);
     if (st == RSW_OK) scene_free(s);
     size_t lw = strlen(err.where), ll = strlen(bad_sun[i][1]);
-    CHECK(st != RSW_OK && lw >= ll && strcmp(err.where + lw - ll, bad_sun[i][1]) == 0, "solar error at '%s' (%s)",
-          err.where, err.msg);
+    CHECK(st != RSW_OK && lw >= ll && strcmp(err.where + lw - ll, bad_sun[i][1]) == 0,
+          "solar error at '%s' (%s)", err.where, err.msg);
   }
   /* below the ozone table: refused at render, naming the range */
   char *med = us_standard(12, "");

@@ -52,7 +52,11 @@
 #include "media.h"
 #include "molecular_atmosphere.h"
 
-enum { DIST_UNIFORM, DIST_EXPONENTIAL, DIST_GAUSSIAN };
+enum {
+  DIST_UNIFORM,
+  DIST_EXPONENTIAL,
+  DIST_GAUSSIAN
+};
 
 /* A spectral quantity: a constant or a tabulated spectrum of the document. */
 typedef struct ma_spec {
@@ -84,18 +88,18 @@ struct mol_atmo {
   xform box;
   double width;
   uint32_t n;
-  double *z;                         /* n + 1 levels [m] */
-  double *n_air, *n_o3, *t;          /* per layer: m^-3, m^-3, K */
-  double *sig_t, *alb, *w;           /* per layer (w: np per layer, nested blend weights) */
-  double *s_comp;                    /* scratch: per component scattering (1 + np) */
-  double **frac;                     /* per particle layer: its share of tau in each layer */
-  volume *sigma_a;                   /* NULL: none */
+  double *z;                /* n + 1 levels [m] */
+  double *n_air, *n_o3, *t; /* per layer: m^-3, m^-3, K */
+  double *sig_t, *alb, *w;  /* per layer (w: np per layer, nested blend weights) */
+  double *s_comp;           /* scratch: per component scattering (1 + np) */
+  double **frac;            /* per particle layer: its share of tau in each layer */
+  volume *sigma_a;          /* NULL: none */
   bool has_absorption, has_scattering;
   size_t np;
   ma_particle *p;
   phase *rayleigh;
   ma_phase mix;
-  double wl;                         /* wavelength of the layer values; 0: none yet */
+  double wl; /* wavelength of the layer values; 0: none yet */
   uint64_t sa_revision;
   bool dirty;
 };
@@ -192,8 +196,7 @@ static double dist_cdf(const ma_particle *p, double x) {
     double s = p->std * sqrt(2.0), e0 = erf((0.0 - p->mean) / s), e1 = erf((1.0 - p->mean) / s);
     return (erf((x - p->mean) / s) - e0) / (e1 - e0);
   }
-  default:
-    return x;
+  default: return x;
   }
 }
 
@@ -220,8 +223,10 @@ static rsw_status ma_refresh(mol_atmo *m, double wl, rsw_err *err) {
   double c3[3] = {0, 0, 0};
   bool o3 = m->has_absorption;
   if (o3 && !atmo_o3_coefficients(wl, c3))
-    return rsw_fail(err, RSW_ERR_INVALID, "", "molecular_atmosphere '%s': wavelength %g nm is below the ozone "
-                    "cross sections' range (Bogumil et al. 2003: 230-1066.2 nm)", id, wl);
+    return rsw_fail(err, RSW_ERR_INVALID, "",
+                    "molecular_atmosphere '%s': wavelength %g nm is below the ozone "
+                    "cross sections' range (Bogumil et al. 2003: 230-1066.2 nm)",
+                    id, wl);
   /* Particle layers: sigma_t per model layer (in m->frac, scaled below). */
   size_t np = m->np;
   double *pt = m->s_comp + 1 + np, *pssa = pt + np; /* per particle: extinction ratio, albedo */
@@ -234,20 +239,25 @@ static rsw_status ma_refresh(mol_atmo *m, double wl, rsw_err *err) {
     } else {
       double e0 = spec_at(&p->ext, p->w_ref, &ok), e = spec_at(&p->ext, wl, &ok);
       if (ok && !(e0 > 0.0))
-        return rsw_fail(err, RSW_ERR_INVALID, "", "molecular_atmosphere '%s': %s: the extinction spectrum is 0 "
-                        "at w_ref = %g nm", id, p->key, p->w_ref);
+        return rsw_fail(err, RSW_ERR_INVALID, "",
+                        "molecular_atmosphere '%s': %s: the extinction spectrum is 0 "
+                        "at w_ref = %g nm",
+                        id, p->key, p->w_ref);
       ratio = ok ? e / e0 : 0.0;
     }
     double a = spec_at(&p->ssa, wl, &ok);
     if (!ok)
-      return rsw_fail(err, RSW_ERR_INVALID, "", "molecular_atmosphere '%s': %s: wavelength %g nm is outside "
-                      "its tabulated spectra", id, p->key, wl);
+      return rsw_fail(err, RSW_ERR_INVALID, "",
+                      "molecular_atmosphere '%s': %s: wavelength %g nm is outside "
+                      "its tabulated spectra",
+                      id, p->key, wl);
     pt[j] = p->tau_ref * ratio;
     pssa[j] = a < 0.0 ? 0.0 : a > 1.0 ? 1.0 : a;
     /* fractions (bottom/top/distribution may have changed) */
     double span = p->top - p->bottom;
     for (uint32_t k = 0; k < n; k++)
-      m->frac[j][k] = dist_cdf(p, (m->z[k + 1] - p->bottom) / span) - dist_cdf(p, (m->z[k] - p->bottom) / span);
+      m->frac[j][k] =
+          dist_cdf(p, (m->z[k + 1] - p->bottom) / span) - dist_cdf(p, (m->z[k] - p->bottom) / span);
   }
   const double *sa = NULL;
   bool sa_grid = false;
@@ -308,7 +318,8 @@ static double ma_weight(const mol_atmo *m, int k, size_t j) {
 }
 
 /* Components 0..j mixed (0: Rayleigh), as nested blendphases. */
-static double mix_eval(const mol_atmo *m, int k, size_t j, const medium_interaction *mi, vec3 wo, double *pdf) {
+static double mix_eval(const mol_atmo *m, int k, size_t j, const medium_interaction *mi, vec3 wo,
+                       double *pdf) {
   if (j == 0) return m->rayleigh->ops->eval_pdf(m->rayleigh, mi, wo, pdf);
   double w = ma_weight(m, k, j - 1), p0 = 0, p1 = 0, v0 = 0, v1 = 0;
   const phase *ph = m->p[j - 1].ph;
@@ -417,13 +428,13 @@ static void ma_destroy(object *o) {
 static rsw_status group_done(loader *ld, node *g, const char *what) {
   for (size_t i = 0; i < g->n_props; i++)
     if (!g->props[i].used)
-      return ld_fail(ld, g, g->props[i].name, RSW_ERR_UNUSED_PROPERTY, "molecular_atmosphere: %s has no property "
-                     "'%s'", what, g->props[i].name);
+      return ld_fail(ld, g, g->props[i].name, RSW_ERR_UNUSED_PROPERTY, "%s has no property '%s'", what,
+                     g->props[i].name);
   return RSW_OK;
 }
 
-static rsw_status read_spec(loader *ld, node *g, const char *name, double def, double lo, double hi, ma_spec *out,
-                            bool *present) {
+static rsw_status read_spec(loader *ld, node *g, const char *name, double def, double lo, double hi,
+                            ma_spec *out, bool *present) {
   prop *p = node_find(g, name);
   out->spec = NULL;
   out->value = def;
@@ -448,18 +459,19 @@ static rsw_status read_spec(loader *ld, node *g, const char *name, double def, d
   return ld_float_range(ld, g, name, def, lo, hi, &out->value);
 }
 
-static rsw_status numbers_at_levels(loader *ld, node *g, const char *name, size_t n, double lo, double **out) {
+static rsw_status numbers_at_levels(loader *ld, node *g, const char *name, size_t n, double lo,
+                                    double **out) {
   size_t cnt = 0;
   bool present = false;
   rsw_status st = volume_read_numbers(ld, g, name, out, &cnt, &present);
   if (st) return st;
-  if (!present) return ld_fail(ld, g, NULL, RSW_ERR_MISSING, "thermoprops: an inline profile needs '%s'", name);
+  if (!present) return ld_fail(ld, g, NULL, RSW_ERR_MISSING, "an inline profile needs '%s'", name);
   if (cnt != n)
-    return ld_fail(ld, g, name, RSW_ERR_INVALID, "thermoprops: '%s' has %zu values, one per level of z (%zu)", name,
-                   cnt, n);
+    return ld_fail(ld, g, name, RSW_ERR_INVALID, "'%s' has %zu values, one per level of z (%zu)", name, cnt,
+                   n);
   for (size_t i = 0; i < n; i++)
     if (!(out[0][i] >= lo))
-      return ld_fail(ld, g, name, RSW_ERR_RANGE, "thermoprops: %s[%zu] = %g must be >= %g", name, i, out[0][i], lo);
+      return ld_fail(ld, g, name, RSW_ERR_RANGE, "%s[%zu] = %g must be >= %g", name, i, out[0][i], lo);
   return RSW_OK;
 }
 
@@ -470,9 +482,10 @@ static const char AFGL_LIST[] =
 static rsw_status read_thermoprops(loader *ld, node *n, mol_atmo *m) {
   prop *tp = node_find(n, "thermoprops");
   if (!tp || tp->kind != PROP_NODE)
-    return ld_fail(ld, n, tp ? "thermoprops" : NULL, tp ? RSW_ERR_TYPE : RSW_ERR_MISSING,
-                   "molecular_atmosphere: needs \"thermoprops\": {\"identifier\": \"afgl_1986-us_standard\", \"z\": "
-                   "[levels in metres from 0]} or an inline profile (z, p, t, n_air, n_o3)");
+    return ld_fail(
+        ld, n, tp ? "thermoprops" : NULL, tp ? RSW_ERR_TYPE : RSW_ERR_MISSING,
+        "molecular_atmosphere: needs \"thermoprops\": {\"identifier\": \"afgl_1986-us_standard\", \"z\": "
+        "[levels in metres from 0]} or an inline profile (z, p, t, n_air, n_o3)");
   tp->used = true;
   node *g = tp->child;
   double *z = NULL;
@@ -482,7 +495,7 @@ static rsw_status read_thermoprops(loader *ld, node *n, mol_atmo *m) {
   if (st) return st;
   if (present && (ld_has(g, "toa_altitude") || ld_has(g, "n_layers"))) {
     free(z);
-    return ld_fail(ld, g, "toa_altitude", RSW_ERR_INVALID, "thermoprops: give z, or toa_altitude and n_layers, not both");
+    return ld_fail(ld, g, "toa_altitude", RSW_ERR_INVALID, "give z, or toa_altitude and n_layers, not both");
   }
   if (!present && ld_has(g, "toa_altitude")) { /* N equal layers: z_k = toa k / N */
     double toa;
@@ -498,21 +511,22 @@ static rsw_status read_thermoprops(loader *ld, node *n, mol_atmo *m) {
   }
   if (!present)
     return ld_fail(ld, g, NULL, RSW_ERR_MISSING,
-                   "thermoprops: needs 'z', the levels in metres (or toa_altitude and n_layers)");
+                   "needs 'z', the levels in metres (or toa_altitude and n_layers)");
   m->z = z;
-  if (nz < 2) return ld_fail(ld, g, "z", RSW_ERR_INVALID, "thermoprops: z needs at least 2 levels (1 layer)");
-  if (z[0] != 0.0) return ld_fail(ld, g, "z", RSW_ERR_INVALID, "thermoprops: z must start at 0 (got z[0] = %g)", z[0]);
+  if (nz < 2) return ld_fail(ld, g, "z", RSW_ERR_INVALID, "z needs at least 2 levels (1 layer)");
+  if (z[0] != 0.0) return ld_fail(ld, g, "z", RSW_ERR_INVALID, "z must start at 0 (got z[0] = %g)", z[0]);
   for (size_t i = 1; i < nz; i++)
     if (!(z[i] > z[i - 1]))
-      return ld_fail(ld, g, "z", RSW_ERR_INVALID, "thermoprops: z must increase strictly (z[%zu] = %g <= z[%zu] = %g)",
-                     i, z[i], i - 1, z[i - 1]);
-  if (nz - 1 > (1u << 24)) return ld_fail(ld, g, "z", RSW_ERR_LIMIT, "thermoprops: more than 2^24 layers");
+      return ld_fail(ld, g, "z", RSW_ERR_INVALID, "z must increase strictly (z[%zu] = %g <= z[%zu] = %g)", i,
+                     z[i], i - 1, z[i - 1]);
+  if (nz - 1 > (1u << 24)) return ld_fail(ld, g, "z", RSW_ERR_LIMIT, "more than 2^24 layers");
   uint32_t nl = (uint32_t)(nz - 1);
   m->n = nl;
   m->n_air = calloc(nl, sizeof(double));
   m->n_o3 = calloc(nl, sizeof(double));
   m->t = calloc(nl, sizeof(double));
-  if (!m->n_air || !m->n_o3 || !m->t) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "molecular_atmosphere: out of memory");
+  if (!m->n_air || !m->n_o3 || !m->t)
+    return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "molecular_atmosphere: out of memory");
   const char *ident = NULL;
   st = ld_string(ld, g, "identifier", NULL, &ident);
   if (st) return st;
@@ -521,12 +535,14 @@ static rsw_status read_thermoprops(loader *ld, node *n, mol_atmo *m) {
     for (int i = 0; i < ATMO_AFGL_COUNT; i++)
       if (strcmp(atmo_afgl_1986[i].identifier, ident) == 0) a = &atmo_afgl_1986[i];
     if (!a)
-      return ld_fail(ld, g, "identifier", RSW_ERR_INVALID, "thermoprops: unknown identifier '%s' (one of: %s)", ident,
+      return ld_fail(ld, g, "identifier", RSW_ERR_INVALID, "unknown identifier '%s' (one of: %s)", ident,
                      AFGL_LIST);
     double ztop = a->z[a->n - 1] * 1e3;
     if (z[nl] > ztop)
-      return ld_fail(ld, g, "z", RSW_ERR_RANGE, "thermoprops: the top level %g m is above the AFGL 1986 tables' top "
-                     "(%g m)", z[nl], ztop);
+      return ld_fail(ld, g, "z", RSW_ERR_RANGE,
+                     "the top level %g m is above the AFGL 1986 tables' top "
+                     "(%g m)",
+                     z[nl], ztop);
     double zt[64], air[64], o3[64], t[64];
     for (int i = 0; i < a->n && i < 64; i++)
       zt[i] = a->z[i] * 1e3, air[i] = a->air[i] * 1e6, o3[i] = a->o3[i] * 1e6, t[i] = a->t[i];
@@ -561,10 +577,10 @@ static rsw_status read_particle(loader *ld, mol_atmo *m, node *g, ma_particle *p
   if (!st) st = ld_float_range(ld, g, "top", 1000.0, 0.0, INFINITY, &p->top);
   if (st) return st;
   if (!(p->bottom < p->top))
-    return ld_fail(ld, g, "top", RSW_ERR_INVALID, "particle layer: bottom (%g m) must lie below top (%g m)", p->bottom,
+    return ld_fail(ld, g, "top", RSW_ERR_INVALID, "bottom (%g m) must lie below top (%g m)", p->bottom,
                    p->top);
   if (p->top > m->z[m->n])
-    return ld_fail(ld, g, "top", RSW_ERR_RANGE, "particle layer: top (%g m) is above the atmosphere's top level (%g m)",
+    return ld_fail(ld, g, "top", RSW_ERR_RANGE, "top (%g m) is above the atmosphere's top level (%g m)",
                    p->top, m->z[m->n]);
   st = ld_float_range(ld, g, "tau_ref", 0.2, 0.0, INFINITY, &p->tau_ref);
   if (!st) st = ld_float_range(ld, g, "w_ref", 550.0, 1e-300, INFINITY, &p->w_ref);
@@ -584,7 +600,8 @@ static rsw_status read_particle(loader *ld, mol_atmo *m, node *g, ma_particle *p
       dg = dp->child;
       name = dg->type;
     } else {
-      return ld_fail(ld, g, "distribution", RSW_ERR_TYPE, "particle layer: distribution is \"uniform\", "
+      return ld_fail(ld, g, "distribution", RSW_ERR_TYPE,
+                     "distribution is \"uniform\", "
                      "\"exponential\" or \"gaussian\", or {\"type\": one of them, parameters}");
     }
     if (strcmp(name, "uniform") == 0) {
@@ -614,7 +631,7 @@ static rsw_status read_particle(loader *ld, mol_atmo *m, node *g, ma_particle *p
       }
     } else {
       return ld_fail(ld, dg ? dg : g, dg ? "type" : "distribution", RSW_ERR_INVALID,
-                     "particle layer: unknown distribution '%s' (uniform, exponential or gaussian)", name);
+                     "unknown distribution '%s' (uniform, exponential or gaussian)", name);
     }
     if (dg) {
       st = group_done(ld, dg, "a particle distribution");
@@ -626,7 +643,8 @@ static rsw_status read_particle(loader *ld, mol_atmo *m, node *g, ma_particle *p
   st = read_spec(ld, g, "extinction", 1.0, 0.0, INFINITY, &p->ext, &has_ext);
   if (st) return st;
   if (has_ext && p->has_angstrom)
-    return ld_fail(ld, g, "angstrom", RSW_ERR_INVALID, "particle layer: give an extinction spectrum or an "
+    return ld_fail(ld, g, "angstrom", RSW_ERR_INVALID,
+                   "give an extinction spectrum or an "
                    "angstrom exponent, not both");
   if (!has_ext) {
     p->has_angstrom = true;
@@ -648,7 +666,8 @@ static rsw_status read_particle(loader *ld, mol_atmo *m, node *g, ma_particle *p
 
 static rsw_status ma_create(loader *ld, node *n, object **out) {
   if (ld->variant != VARIANT_MONO)
-    return ld_fail(ld, n, NULL, RSW_ERR_INVALID, "molecular_atmosphere is spectral: it needs the mono variant");
+    return ld_fail(ld, n, NULL, RSW_ERR_INVALID,
+                   "molecular_atmosphere is spectral: it needs the mono variant");
   mol_atmo *m = calloc(1, sizeof *m);
   if (!m) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "molecular_atmosphere: out of memory");
   m->base.ops = &ma_ops;
@@ -674,9 +693,11 @@ static rsw_status ma_create(loader *ld, node *n, object **out) {
       const volume *v = m->sigma_a;
       bool one = v->res[0] == 1 && v->res[1] == 1 && v->res[2] == 1;
       if (!one && !(v->res[0] == 1 && v->res[1] == 1 && v->res[2] == nl))
-        st = ld_fail(ld, n, "sigma_a", RSW_ERR_INVALID,
-                     "molecular_atmosphere: sigma_a must be constant or a [1, 1, %u] grid (one value per layer), got "
-                     "%ux%ux%u", nl, v->res[0], v->res[1], v->res[2]);
+        st = ld_fail(
+            ld, n, "sigma_a", RSW_ERR_INVALID,
+            "molecular_atmosphere: sigma_a must be constant or a [1, 1, %u] grid (one value per layer), got "
+            "%ux%ux%u",
+            nl, v->res[0], v->res[1], v->res[2]);
     }
   }
   /* particle layers: every property named particle_layers, in order */
@@ -690,8 +711,9 @@ static rsw_status ma_create(loader *ld, node *n, object **out) {
       prop *pp = &n->props[i];
       if (strcmp(pp->name, "particle_layers") != 0) continue;
       if (pp->kind != PROP_NODE) {
-        st = ld_fail(ld, n, "particle_layers", RSW_ERR_TYPE,
-                     "molecular_atmosphere: particle_layers is a list of objects (bottom, top, tau_ref, ...)");
+        st =
+            ld_fail(ld, n, "particle_layers", RSW_ERR_TYPE,
+                    "molecular_atmosphere: particle_layers is a list of objects (bottom, top, tau_ref, ...)");
         break;
       }
       pp->used = true;
@@ -720,8 +742,7 @@ static rsw_status ma_create(loader *ld, node *n, object **out) {
     m->L.to_world = &m->box;
     /* Equal layers (z_k = k top / N to rounding) take the O(1) layer lookup, the same as piecewise. */
     bool uniform = true;
-    for (uint32_t k = 0; k <= nl && uniform; k++)
-      uniform = fabs(m->z[k] - top * k / nl) <= 1e-12 * top;
+    for (uint32_t k = 0; k <= nl && uniform; k++) uniform = fabs(m->z[k] - top * k / nl) <= 1e-12 * top;
     m->L.uniform = uniform;
     if (!uniform)
       for (uint32_t k = 0; k <= nl; k++) m->L.lay[k].z = k == nl ? 1.0 : m->z[k] / top;

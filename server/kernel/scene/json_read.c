@@ -307,7 +307,8 @@ static rsw_status read_solar(jctx *c, const cJSON *o, const char *where, spectru
         return fail(c, RSW_ERR_INVALID, w, "solar_irradiance: unknown dataset (known: thuillier_2003)");
     } else if (strcmp(k->string, "scale") == 0 || strcmp(k->string, "earth_sun_distance") == 0) {
       bool is_scale = k->string[0] == 's';
-      if (!cJSON_IsNumber(k) || !isfinite(k->valuedouble) || !(is_scale ? k->valuedouble >= 0 : k->valuedouble > 0))
+      if (!cJSON_IsNumber(k) || !isfinite(k->valuedouble) ||
+          !(is_scale ? k->valuedouble >= 0 : k->valuedouble > 0))
         return fail(c, RSW_ERR_RANGE, w, "solar_irradiance: '%s' must be a finite number %s", k->string,
                     is_scale ? ">= 0" : "> 0 (astronomical units)");
       *(is_scale ? &scale : &d) = k->valuedouble;
@@ -462,7 +463,8 @@ static const char *group_type(const char *key) {
 
 /* "particle_layers": [{...}, ...]: one group per element, each a property
  * named particle_layers, in order. */
-static rsw_status read_groups(jctx *c, node *n, const cJSON *v, const char *key, const char *where, int depth) {
+static rsw_status read_groups(jctx *c, node *n, const cJSON *v, const char *key, const char *where,
+                              int depth) {
   int i = 0;
   for (const cJSON *e = v->child; e; e = e->next, i++) {
     char w[512];
@@ -578,7 +580,8 @@ static rsw_status read_value(jctx *c, node *n, const cJSON *v, const char *key, 
       if (st) return st;
       ADD_(PROP_TRANSFORM);
       p->xf = xf;
-    } else if (group_type(key) && strcmp(key, "particle_layers") == 0 && (len == 0 || cJSON_IsObject(v->child))) {
+    } else if (group_type(key) && strcmp(key, "particle_layers") == 0 &&
+               (len == 0 || cJSON_IsObject(v->child))) {
       return read_groups(c, n, v, key, where, depth);
     } else if (is_list(v)) {
       return read_list(c, n, v, key, where, depth);
@@ -644,7 +647,8 @@ static rsw_status read_value(jctx *c, node *n, const cJSON *v, const char *key, 
                 strcmp(t, "solar_irradiance") == 0) &&
                !(strcmp(key, "distribution") == 0)) {
       spectrum s;
-      st = strcmp(t, "solar_irradiance") == 0 ? read_solar(c, v, where, &s) : read_spectrum(c, v, t, where, &s);
+      st = strcmp(t, "solar_irradiance") == 0 ? read_solar(c, v, where, &s)
+                                              : read_spectrum(c, v, t, where, &s);
       if (st) return st;
       p = node_add_prop(n, key, PROP_SPECTRUM, where);
       if (!p) {
@@ -696,7 +700,9 @@ static rsw_status read_object(jctx *c, const cJSON *obj, const char *key, const 
   if (++c->n_nodes > RSW_MAX_NODES)
     return fail(c, RSW_ERR_LIMIT, where, "more than %d objects", RSW_MAX_NODES);
   const cJSON *type = cJSON_GetObjectItemCaseSensitive(obj, "type");
-  const char *tname = type && cJSON_IsString(type) ? type->valuestring : group_type(key) ? group_type(key) : "scene";
+  const char *tname = type && cJSON_IsString(type) ? type->valuestring
+                      : group_type(key)            ? group_type(key)
+                                                   : "scene";
   if (strlen(tname) >= RSW_MAX_NAME) return fail(c, RSW_ERR_LIMIT, where, "type name too long");
   node *n = node_new(NULL, tname, where);
   if (!n) return fail(c, RSW_ERR_NOMEM, where, "out of memory");
