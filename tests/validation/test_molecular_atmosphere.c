@@ -471,6 +471,64 @@ static void test_refusals(void) {
   scene_free(s);
 }
 
+/* ---- XML ----------------------------------------------------------------------- */
+
+static const char *XML_ATMO =
+    "<scene version=\"3.0.0\">\n"
+    "  <medium type=\"molecular_atmosphere\" id=\"medium_atmosphere\">\n"
+    "    <thermoprops>\n"
+    "      <string name=\"identifier\" value=\"%s\"/>\n"
+    "      <string name=\"z\" value=\"0, 1000, 2000, 5000, 10000, 30000, 120000\"/>\n"
+    "    </thermoprops>\n"
+    "    <particle_layer>\n"
+    "      <float name=\"top\" value=\"3000\"/> <float name=\"tau_ref\" value=\"0.3\"/>\n"
+    "      <float name=\"angstrom\" value=\"1\"/>\n"
+    "      <distribution type=\"exponential\"><float name=\"rate\" value=\"2\"/></distribution>\n"
+    "      <phase type=\"hg\" name=\"phase\"><float name=\"g\" value=\"0.6\"/></phase>\n"
+    "    </particle_layer>\n"
+    "    <particle_layer>\n"
+    "      <float name=\"bottom\" value=\"8000\"/> <float name=\"top\" value=\"9000\"/>\n"
+    "      <float name=\"tau_ref\" value=\"0.05\"/>\n"
+    "    </particle_layer>\n"
+    "  </medium>\n"
+    "  <shape type=\"cube\"><bsdf type=\"null\"/><ref name=\"interior\" id=\"medium_atmosphere\"/></shape>\n"
+    "</scene>\n";
+
+static void test_xml(void) {
+  char xml[4096];
+  snprintf(xml, sizeof xml, XML_ATMO, "afgl_1986-tropical");
+  rsw_err err = {0};
+  scene *x = NULL;
+  scene_load_opts o = {.variant = "mono"};
+  rsw_status st = scene_load_memory(xml, strlen(xml), NULL, true, &o, &x, &err);
+  REQUIRE(st == RSW_OK, "XML: %s at %s", err.msg, err.where);
+  const char *js =
+      "{\"type\": \"molecular_atmosphere\", \"thermoprops\": {\"identifier\": \"afgl_1986-tropical\","
+      " \"z\": [0, 1000, 2000, 5000, 10000, 30000, 120000]}, \"particle_layers\": ["
+      "{\"top\": 3000, \"tau_ref\": 0.3, \"angstrom\": 1, \"distribution\": {\"type\": \"exponential\","
+      " \"rate\": 2}, \"phase\": {\"type\": \"hg\", \"g\": 0.6}},"
+      "{\"bottom\": 8000, \"top\": 9000, \"tau_ref\": 0.05}]}";
+  scene *j = atmo_scene(js, "{\"type\": \"constant\"}", METER_UP, NULL);
+  REQUIRE(j, "JSON twin");
+  const double *z1, *s1, *a1, *w1, *z2, *s2, *a2, *w2;
+  uint32_t n1, n2;
+  size_t p1, p2;
+  REQUIRE(molecular_atmosphere_layers(find_medium(x), 500, &z1, &n1, &s1, &a1, &w1, &p1), "XML layers");
+  REQUIRE(molecular_atmosphere_layers(find_medium(j), 500, &z2, &n2, &s2, &a2, &w2, &p2), "JSON layers");
+  CHECK(n1 == 6 && n2 == 6 && p1 == 2 && p2 == 2, "layers %u/%u, particle layers %zu/%zu", n1, n2, p1, p2);
+  CHECK(memcmp(s1, s2, 6 * sizeof *s1) == 0 && memcmp(a1, a2, 6 * sizeof *a1) == 0 &&
+            memcmp(w1, w2, 12 * sizeof *w1) == 0,
+        "XML and JSON give different layers");
+  scene_free(x);
+  scene_free(j);
+  snprintf(xml, sizeof xml, XML_ATMO, "afgl_1986-tropics");
+  err = (rsw_err){0};
+  st = scene_load_memory(xml, strlen(xml), NULL, true, &o, &x, &err);
+  CHECK(st != RSW_OK && strstr(err.msg, "afgl_1986-subarctic_winter") && strstr(err.where, ":4"),
+        "XML unknown identifier: %s at %s", err.msg, err.where);
+  if (st == RSW_OK) scene_free(x);
+}
+
 int main(void) {
   RSW_TEST_RUN(test_rayleigh_bodhaine);
   RSW_TEST_RUN(test_ozone_column);
@@ -480,5 +538,6 @@ int main(void) {
   RSW_TEST_RUN(test_parameter_update);
   RSW_TEST_RUN(test_solar_irradiance);
   RSW_TEST_RUN(test_refusals);
+  RSW_TEST_RUN(test_xml);
   RSW_TEST_END("test_molecular_atmosphere");
 }
