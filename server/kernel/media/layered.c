@@ -59,10 +59,6 @@ static inline double tau_between(const media_layers *L, int c, double z0, double
   return tau_layers(L, c, z0, z1, media_layer_of(L, z0), media_layer_of(L, z1), dz, len);
 }
 
-bool media_layers_intersect(const media_layers *L, const ray3 *r, double *mint, double *maxt) {
-  return media_box_clip(L->to_world, r, mint, maxt);
-}
-
 static void fill_layer(const media_layers *L, int k, medium_interaction *mi) {
   for (int c = 0; c < 3; c++) {
     double s = L->lay[k].sig[c];
@@ -72,7 +68,7 @@ static void fill_layer(const media_layers *L, int k, medium_interaction *mi) {
   }
 }
 
-void media_layers_coefficients(const media_layers *L, medium_interaction *mi) {
+static void layers_coefficients(const media_layers *L, medium_interaction *mi) {
   vec3 pl = xf_inv_point(L->to_world, mi->p);
   fill_layer(L, media_layer_of(L, pl.z), mi);
 }
@@ -81,8 +77,9 @@ static inline void spread(color *x, int nc) {
   if (nc == 1) x->c[1] = x->c[2] = x->c[0];
 }
 
-void media_layers_sample_real(const media_layers *L, const medium *m, const ray3 *r, double mint, double maxt,
-                              double u, int channel, medium_interaction *mi, color *tr, color *pdf) {
+static void layers_sample_real(const media_layers *L, const medium *m, const ray3 *r, double mint,
+                               double maxt, double u, int channel, medium_interaction *mi, color *tr,
+                               color *pdf) {
   const xform *tw = L->to_world;
   int nc = L->nc;
   double t0 = mint, t1 = maxt; /* within intersect_aabb's interval (the caller clips) */
@@ -153,7 +150,7 @@ void media_layers_sample_real(const media_layers *L, const medium *m, const ray3
   spread(pdf, nc);
 }
 
-color media_layers_transmittance(const media_layers *L, const ray3 *r, double mint, double maxt) {
+static color layers_transmittance(const media_layers *L, const ray3 *r, double mint, double maxt) {
   const xform *tw = L->to_world;
   double oz = xf_inv_point(tw, r->o).z, dz = xf_inv_vector(tw, r->d).z;
   double z0 = oz + mint * dz, z1 = oz + maxt * dz;
@@ -163,3 +160,37 @@ color media_layers_transmittance(const media_layers *L, const ray3 *r, double mi
   spread(&tr, nc);
   return tr;
 }
+
+/* ---- the medium_ops ------------------------------------------------------------ */
+
+static inline const media_layers *layers_of(const medium *m) {
+  return &((const layered_medium *)m)->L;
+}
+
+static bool lm_intersect_aabb(const medium *m, const ray3 *r, double *mint, double *maxt) {
+  return media_box_clip(layers_of(m)->to_world, r, mint, maxt);
+}
+
+static color lm_majorant(const medium *m, const medium_interaction *mi) {
+  (void)mi;
+  return layers_of(m)->maj;
+}
+
+static void lm_coefficients(const medium *m, medium_interaction *mi) {
+  layers_coefficients(layers_of(m), mi);
+}
+
+static void lm_sample_real(const medium *m, const ray3 *r, double mint, double maxt, double u, int channel,
+                           medium_interaction *mi, color *tr, color *pdf) {
+  layers_sample_real(layers_of(m), m, r, mint, maxt, u, channel, mi, tr, pdf);
+}
+
+static color lm_transmittance(const medium *m, const ray3 *r, double mint, double maxt) {
+  return layers_transmittance(layers_of(m), r, mint, maxt);
+}
+
+const medium_ops layered_medium_ops = {.intersect_aabb = lm_intersect_aabb,
+                                       .majorant = lm_majorant,
+                                       .coefficients = lm_coefficients,
+                                       .sample_real = lm_sample_real,
+                                       .transmittance = lm_transmittance};

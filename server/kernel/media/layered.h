@@ -70,11 +70,13 @@ static inline int media_layer_of(const media_layers *L, double z) {
   return lo;
 }
 
-/* The medium_ops of a layered medium (L = the medium's layers). */
-bool media_layers_intersect(const media_layers *L, const ray3 *r, double *mint, double *maxt);
-void media_layers_coefficients(const media_layers *L, medium_interaction *mi);
-void media_layers_sample_real(const media_layers *L, const medium *m, const ray3 *r, double mint, double maxt,
-                              double u, int channel, medium_interaction *mi, color *tr, color *pdf);
-color media_layers_transmittance(const media_layers *L, const ray3 *r, double mint, double maxt);
+/* A layered medium: the plugins' structs start with one of these, and
+ * their medium_ops are layered_medium_ops (box clip, majorant,
+ * coefficients, exact free flights and transmittance over the layers). */
+typedef struct layered_medium {
+  medium base;
+  media_layers L;
+} layered_medium;
+extern const medium_ops layered_medium_ops;
 
 #endif

@@ -83,8 +83,7 @@ typedef struct ma_phase {
 } ma_phase;
 
 struct mol_atmo {
-  medium base;
-  media_layers L;
+  layered_medium lm; /* (first: the ops see a layered_medium) */
   xform box;
   double width;
   uint32_t n;
@@ -218,7 +217,7 @@ static double spec_at(const ma_spec *s, double wl, bool *ok) {
 
 static rsw_status ma_refresh(mol_atmo *m, double wl, rsw_err *err) {
   uint32_t n = m->n;
-  const char *id = m->base.base.id ? m->base.base.id : "";
+  const char *id = m->lm.base.base.id ? m->lm.base.base.id : "";
   double sr = m->has_scattering ? atmo_rayleigh_cross_section(wl) : 0.0;
   double c3[3] = {0, 0, 0};
   bool o3 = m->has_absorption;
@@ -294,13 +293,13 @@ static rsw_status ma_refresh(mol_atmo *m, double wl, rsw_err *err) {
     m->sig_t[k] = st;
     m->alb[k] = al;
     for (int c = 0; c < 3; c++) {
-      m->L.lay[k].sig[c] = m->base.scale * st;
-      m->L.alb[3 * k + c] = al;
+      m->lm.L.lay[k].sig[c] = m->lm.base.scale * st;
+      m->lm.L.alb[3 * k + c] = al;
     }
     if (al > amax) amax = al;
   }
-  media_layers_finish(&m->L);
-  m->base.absorbing_only = amax == 0.0;
+  media_layers_finish(&m->lm.L);
+  m->lm.base.absorbing_only = amax == 0.0;
   m->wl = wl;
   m->dirty = false;
   return RSW_OK;
@@ -309,7 +308,7 @@ static rsw_status ma_refresh(mol_atmo *m, double wl, rsw_err *err) {
 /* ---- the mixed phase function ------------------------------------------------ */
 
 static int ma_layer_at(const mol_atmo *m, vec3 p) {
-  return media_layer_of(&m->L, xf_inv_point(m->L.to_world, p).z);
+  return media_layer_of(&m->lm.L, xf_inv_point(m->lm.L.to_world, p).z);
 }
 
 static double ma_weight(const mol_atmo *m, int k, size_t j) {
@@ -360,36 +359,6 @@ static double ma_phase_eval_pdf(const phase *ph, const medium_interaction *mi, v
 
 static const phase_ops ma_phase_ops = {.sample = ma_phase_sample, .eval_pdf = ma_phase_eval_pdf};
 
-/* ---- medium ops -------------------------------------------------------------- */
-
-static bool ma_intersect_aabb(const medium *md, const ray3 *r, double *mint, double *maxt) {
-  return media_layers_intersect(&((const mol_atmo *)md)->L, r, mint, maxt);
-}
-
-static color ma_majorant(const medium *md, const medium_interaction *mi) {
-  (void)mi;
-  return ((const mol_atmo *)md)->L.maj;
-}
-
-static void ma_coefficients(const medium *md, medium_interaction *mi) {
-  media_layers_coefficients(&((const mol_atmo *)md)->L, mi);
-}
-
-static void ma_sample_real(const medium *md, const ray3 *r, double mint, double maxt, double u, int channel,
-                           medium_interaction *mi, color *tr, color *pdf) {
-  media_layers_sample_real(&((const mol_atmo *)md)->L, md, r, mint, maxt, u, channel, mi, tr, pdf);
-}
-
-static color ma_transmittance(const medium *md, const ray3 *r, double mint, double maxt) {
-  return media_layers_transmittance(&((const mol_atmo *)md)->L, r, mint, maxt);
-}
-
-static const medium_ops ma_ops = {.intersect_aabb = ma_intersect_aabb,
-                                  .majorant = ma_majorant,
-                                  .coefficients = ma_coefficients,
-                                  .sample_real = ma_sample_real,
-                                  .transmittance = ma_transmittance};
-
 /* ---- life cycle -------------------------------------------------------------- */
 
 static rsw_status ma_prepare(object *o, const render_ctx *rc, rsw_err *err) {
@@ -407,7 +376,7 @@ static void ma_parameters_changed(object *o) {
 
 static void ma_destroy(object *o) {
   mol_atmo *m = (mol_atmo *)o;
-  media_layers_free(&m->L);
+  media_layers_free(&m->lm.L);
   free(m->z);
   free(m->n_air);
   free(m->n_o3);
@@ -670,13 +639,13 @@ static rsw_status ma_create(loader *ld, node *n, object **out) {
                    "molecular_atmosphere is spectral: it needs the mono variant");
   mol_atmo *m = calloc(1, sizeof *m);
   if (!m) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "molecular_atmosphere: out of memory");
-  m->base.ops = &ma_ops;
+  m->lm.base.ops = &layered_medium_ops;
   m->mix.base.ops = &ma_phase_ops;
   m->mix.base.base.id = "phase_function";
   m->mix.m = m;
-  m->base.phase = &m->mix.base;
-  rsw_status st = ld_float_range(ld, n, "scale", 1.0, 0.0, INFINITY, &m->base.scale);
-  if (!st) st = ld_bool(ld, n, "sample_emitters", true, &m->base.sample_emitters);
+  m->lm.base.phase = &m->mix.base;
+  rsw_status st = ld_float_range(ld, n, "scale", 1.0, 0.0, INFINITY, &m->lm.base.scale);
+  if (!st) st = ld_bool(ld, n, "sample_emitters", true, &m->lm.base.sample_emitters);
   if (!st) st = ld_bool(ld, n, "has_absorption", true, &m->has_absorption);
   if (!st) st = ld_bool(ld, n, "has_scattering", true, &m->has_scattering);
   if (!st) st = ld_float_range(ld, n, "width", 1e9, 1e-300, 1e15, &m->width);
@@ -729,7 +698,7 @@ static rsw_status ma_create(loader *ld, node *n, object **out) {
     m->alb = calloc(nl, sizeof(double));
     m->w = calloc((size_t)nl * (m->np ? m->np : 1), sizeof(double));
     m->s_comp = calloc(1 + 3 * m->np, sizeof(double));
-    if (!m->sig_t || !m->alb || !m->w || !m->s_comp || !media_layers_alloc(&m->L, nl))
+    if (!m->sig_t || !m->alb || !m->w || !m->s_comp || !media_layers_alloc(&m->lm.L, nl))
       st = ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "molecular_atmosphere: out of memory");
   }
   if (!st) {
@@ -739,21 +708,21 @@ static rsw_status ma_create(loader *ld, node *n, object **out) {
     xform id = xf_identity(), sc = xf_scale(v3(w, w, top)), tr = xf_translate(v3(-w / 2, -w / 2, 0.0));
     xform a = xf_mul(&sc, &id);
     m->box = xf_mul(&tr, &a);
-    m->L.to_world = &m->box;
+    m->lm.L.to_world = &m->box;
     /* Equal layers (z_k = k top / N to rounding) take the O(1) layer lookup, the same as piecewise. */
     bool uniform = true;
     for (uint32_t k = 0; k <= nl && uniform; k++) uniform = fabs(m->z[k] - top * k / nl) <= 1e-12 * top;
-    m->L.uniform = uniform;
+    m->lm.L.uniform = uniform;
     if (!uniform)
-      for (uint32_t k = 0; k <= nl; k++) m->L.lay[k].z = k == nl ? 1.0 : m->z[k] / top;
-    m->L.nc = 1;
+      for (uint32_t k = 0; k <= nl; k++) m->lm.L.lay[k].z = k == nl ? 1.0 : m->z[k] / top;
+    m->lm.L.nc = 1;
     m->dirty = true;
   }
   if (st) {
-    ma_destroy(&m->base.base);
+    ma_destroy(&m->lm.base.base);
     return st;
   }
-  *out = &m->base.base;
+  *out = &m->lm.base.base;
   return RSW_OK;
 }
 
@@ -763,7 +732,7 @@ static rsw_status ma_create(loader *ld, node *n, object **out) {
  * are recomputed at the current wavelength. */
 static void ma_traverse(object *o, param_visitor *v) {
   mol_atmo *m = (mol_atmo *)o;
-  pv_float(v, "scale", &m->base.scale, UPDATE_SPECTRAL, 0.0, INFINITY);
+  pv_float(v, "scale", &m->lm.base.scale, UPDATE_SPECTRAL, 0.0, INFINITY);
   pv_bool_ro(v, "has_absorption", m->has_absorption);
   pv_bool_ro(v, "has_scattering", m->has_scattering);
   if (m->sigma_a) pv_object(v, "sigma_a", &m->sigma_a->base, 0.0, INFINITY);
@@ -792,7 +761,7 @@ const plugin plugin_molecular_atmosphere = {.name = "molecular_atmosphere",
                                             .create = ma_create,
                                             .destroy = ma_destroy,
                                             .prepare = ma_prepare,
-                                            .ops = &ma_ops,
+                                            .ops = &layered_medium_ops,
                                             .traverse = ma_traverse,
                                             .parameters_changed = ma_parameters_changed};
 

@@ -16,38 +16,9 @@
 #include "media.h"
 
 typedef struct piecewise_medium {
-  medium base;
+  layered_medium lm; /* (first: the ops see a layered_medium) */
   volume *sigma_t, *albedo;
-  media_layers L;
 } piecewise_medium;
-
-static bool pw_intersect_aabb(const medium *m, const ray3 *r, double *mint, double *maxt) {
-  return media_layers_intersect(&((const piecewise_medium *)m)->L, r, mint, maxt);
-}
-
-static color pw_majorant(const medium *m, const medium_interaction *mi) {
-  (void)mi;
-  return ((const piecewise_medium *)m)->L.maj;
-}
-
-static void pw_coefficients(const medium *m, medium_interaction *mi) {
-  media_layers_coefficients(&((const piecewise_medium *)m)->L, mi);
-}
-
-static void pw_sample_real(const medium *m, const ray3 *r, double mint, double maxt, double u, int channel,
-                           medium_interaction *mi, color *tr, color *pdf) {
-  media_layers_sample_real(&((const piecewise_medium *)m)->L, m, r, mint, maxt, u, channel, mi, tr, pdf);
-}
-
-static color pw_transmittance(const medium *m, const ray3 *r, double mint, double maxt) {
-  return media_layers_transmittance(&((const piecewise_medium *)m)->L, r, mint, maxt);
-}
-
-static const medium_ops pw_ops = {.intersect_aabb = pw_intersect_aabb,
-                                  .majorant = pw_majorant,
-                                  .coefficients = pw_coefficients,
-                                  .sample_real = pw_sample_real,
-                                  .transmittance = pw_transmittance};
 
 /* A grid value of layer k in channel c (one-channel grids: every channel). */
 static inline double grid_at(const volume *v, uint32_t k, int c) {
@@ -58,7 +29,7 @@ static inline double grid_at(const volume *v, uint32_t k, int c) {
  * or scale changed (prepare() runs before every render, after the volumes'
  * own prepare). */
 static void pw_refresh(piecewise_medium *pw) {
-  media_layers *L = &pw->L;
+  media_layers *L = &pw->lm.L;
   uint32_t n = L->n;
   bool alb_grid = pw->albedo->res[2] > 1;
   double amax = 0.0;
@@ -66,14 +37,14 @@ static void pw_refresh(piecewise_medium *pw) {
   for (uint32_t k = 0; k < n; k++)
     for (int c = 0; c < 3; c++) {
       double a = grid_at(pw->albedo, alb_grid ? k : 0, c);
-      L->lay[k].sig[c] = pw->base.scale * grid_at(pw->sigma_t, k, c);
+      L->lay[k].sig[c] = pw->lm.base.scale * grid_at(pw->sigma_t, k, c);
       L->alb[3 * k + c] = a;
       if (a > amax) amax = a;
     }
   media_layers_finish(L);
-  pw->base.absorbing_only = amax == 0.0;
-  pw->base.has_spectral_extinction = pw->sigma_t->channels == 3;
-  L->nc = pw->base.has_spectral_extinction ? 3 : 1;
+  pw->lm.base.absorbing_only = amax == 0.0;
+  pw->lm.base.has_spectral_extinction = pw->sigma_t->channels == 3;
+  L->nc = pw->lm.base.has_spectral_extinction ? 3 : 1;
 }
 
 static rsw_status pw_prepare(object *o, const render_ctx *rc, rsw_err *err) {
@@ -88,7 +59,7 @@ static void pw_parameters_changed(object *o) {
 
 static void pw_destroy(object *o) {
   piecewise_medium *pw = (piecewise_medium *)o;
-  media_layers_free(&pw->L);
+  media_layers_free(&pw->lm.L);
   free(pw);
 }
 
@@ -99,8 +70,8 @@ static bool same_xform(const xform *a, const xform *b) {
 static rsw_status pw_create(loader *ld, node *n, object **out) {
   piecewise_medium *pw = calloc(1, sizeof *pw);
   if (!pw) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "piecewise: out of memory");
-  pw->base.ops = &pw_ops;
-  rsw_status st = medium_read_common(ld, n, &pw->base);
+  pw->lm.base.ops = &layered_medium_ops;
+  rsw_status st = medium_read_common(ld, n, &pw->lm.base);
   if (!st) st = ld_volume(ld, n, "sigma_t", 1.0, 0.0, INFINITY, &pw->sigma_t);
   if (!st) st = ld_volume(ld, n, "albedo", 0.75, 0.0, 1.0, &pw->albedo);
   if (!st && (pw->sigma_t->res[0] != 1 || pw->sigma_t->res[1] != 1))
@@ -122,21 +93,21 @@ static rsw_status pw_create(loader *ld, node *n, object **out) {
                    "sigma_t's)");
   }
   if (!st) {
-    if (!media_layers_alloc(&pw->L, pw->sigma_t->res[2]))
+    if (!media_layers_alloc(&pw->lm.L, pw->sigma_t->res[2]))
       st = ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "piecewise: out of memory");
-    pw->L.to_world = &pw->sigma_t->to_world;
+    pw->lm.L.to_world = &pw->sigma_t->to_world;
   }
   if (st) {
-    pw_destroy(&pw->base.base);
+    pw_destroy(&pw->lm.base.base);
     return st;
   }
-  *out = &pw->base.base;
+  *out = &pw->lm.base.base;
   return RSW_OK;
 }
 
 static void pw_traverse(object *o, param_visitor *v) {
   piecewise_medium *pw = (piecewise_medium *)o;
-  medium_traverse_common(&pw->base, v);
+  medium_traverse_common(&pw->lm.base, v);
   pv_object(v, "sigma_t", &pw->sigma_t->base, 0.0, INFINITY);
   pv_object(v, "albedo", &pw->albedo->base, 0.0, 1.0);
 }
@@ -146,6 +117,6 @@ const plugin plugin_piecewise = {.name = "piecewise",
                                  .create = pw_create,
                                  .destroy = pw_destroy,
                                  .prepare = pw_prepare,
-                                 .ops = &pw_ops,
+                                 .ops = &layered_medium_ops,
                                  .traverse = pw_traverse,
                                  .parameters_changed = pw_parameters_changed};

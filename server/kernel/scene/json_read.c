@@ -449,6 +449,20 @@ static bool is_list(const cJSON *v) {
          cJSON_GetObjectItemCaseSensitive(v->child, "type");
 }
 
+/* Read v as a nested object and append it to n as the property `key`. */
+static rsw_status add_child(jctx *c, node *n, const cJSON *v, const char *key, const char *where, int depth) {
+  node *child = NULL;
+  rsw_status st = read_object(c, v, key, where, depth + 1, &child);
+  if (st) return st;
+  prop *p = node_add_prop(n, key, PROP_NODE, where);
+  if (!p) {
+    node_free(child);
+    return fail(c, RSW_ERR_NOMEM, where, "out of memory");
+  }
+  p->child = child;
+  return RSW_OK;
+}
+
 /* Property groups of `molecular_atmosphere` (docs/atmosphere.md): nested
  * dicts that name no plugin, read by their owner as a group of
  * properties. The type they get ("thermoprops", "particle_layer"); NULL
@@ -472,17 +486,10 @@ static rsw_status read_groups(jctx *c, node *n, const cJSON *v, const char *key,
     if (!cJSON_IsObject(e)) return fail(c, RSW_ERR_TYPE, w, "'%s' is a list of objects", key);
     rsw_status st = check_keys(c, e, group_type(key), w);
     if (st) return st;
-    node *child = NULL;
     size_t arrays = node_mem_arrays(n);
-    st = read_object(c, e, key, w, depth + 1, &child);
+    st = add_child(c, n, e, key, w, depth);
     if (st) return st;
-    prop *p = node_add_prop(n, key, PROP_NODE, w);
-    if (!p) {
-      node_free(child);
-      return fail(c, RSW_ERR_NOMEM, w, "out of memory");
-    }
-    p->child = child;
-    st = account(c, node_mem_arrays(n) - arrays + node_mem_prop(p), w);
+    st = account(c, node_mem_arrays(n) - arrays + node_mem_prop(&n->props[n->n_props - 1]), w);
     if (st) return st;
   }
   return RSW_OK;
@@ -608,16 +615,7 @@ static rsw_status read_value(jctx *c, node *n, const cJSON *v, const char *key, 
       }
       if (group_type(key)) {
         rsw_status st = check_keys(c, v, group_type(key), where);
-        node *child = NULL;
-        if (!st) st = read_object(c, v, key, where, depth + 1, &child);
-        if (st) return st;
-        p = node_add_prop(n, key, PROP_NODE, where);
-        if (!p) {
-          node_free(child);
-          return fail(c, RSW_ERR_NOMEM, where, "out of memory");
-        }
-        p->child = child;
-        return RSW_OK;
+        return st ? st : add_child(c, n, v, key, where, depth);
       }
       return fail(c, RSW_ERR_MISSING, where, "object has no \"type\" (every nested object names its plugin)");
     }
@@ -657,15 +655,8 @@ static rsw_status read_value(jctx *c, node *n, const cJSON *v, const char *key, 
       }
       p->spec = s;
     } else {
-      node *child = NULL;
-      st = read_object(c, v, key, where, depth + 1, &child);
+      st = add_child(c, n, v, key, where, depth);
       if (st) return st;
-      p = node_add_prop(n, key, PROP_NODE, where);
-      if (!p) {
-        node_free(child);
-        return fail(c, RSW_ERR_NOMEM, where, "out of memory");
-      }
-      p->child = child;
     }
   } else {
     return fail(c, RSW_ERR_TYPE, where, "unsupported JSON value");
