@@ -137,8 +137,8 @@ static void test_ozone_column(void) {
    * 1.147e-17 cm^2 (Hearn 1961), 1.137e-17 (Molina and Molina 1986); 3 %. */
   double c[3];
   REQUIRE(atmo_o3_coefficients(253.65, c), "253.65 nm in the table");
-  double s = (c[0] + c[1] * 20 + c[2] * 400) * 1e-20;
-  CHECK(fabs(s - 1.14e-17) < 0.03 * 1.14e-17, "sigma_O3(253.65 nm, 293 K) = %.4g cm^2 vs 1.14e-17", s);
+  double sig = (c[0] + c[1] * 20 + c[2] * 400) * 1e-20;
+  CHECK(fabs(sig - 1.14e-17) < 0.03 * 1.14e-17, "sigma_O3(253.65 nm, 293 K) = %.4g cm^2 vs 1.14e-17", sig);
   CHECK(!atmo_o3_coefficients(229.9, c), "below the table must be refused");
   CHECK(atmo_o3_coefficients(1200, c) && c[0] == 0, "above the table: 0");
   double cols[2];
