@@ -535,6 +535,15 @@ static void test_xml(void) {
   CHECK(st != RSW_OK && strstr(err.msg, "afgl_1986-subarctic_winter") && strstr(err.where, ":4"),
         "XML unknown identifier: %s at %s", err.msg, err.where);
   if (st == RSW_OK) scene_free(x);
+  /* NaN in a list of levels */
+  snprintf(xml, sizeof xml, XML_ATMO, "afgl_1986-tropical");
+  char *z = strstr(xml, "5000, 10000");
+  REQUIRE(z, "template");
+  memcpy(z, " nan,", 5);
+  err = (rsw_err){0};
+  st = scene_load_memory(xml, strlen(xml), NULL, true, &o, &x, &err);
+  CHECK(st != RSW_OK && strstr(err.where, ":5"), "XML NaN level: %s at %s", err.msg, err.where);
+  if (st == RSW_OK) scene_free(x);
 }
 
 int main(void) {
