@@ -434,6 +434,9 @@ static void test_refusals(void) {
   expect_error(MA(US("[0, 1000, 5000]"),
                   ", \"particle_layers\": [{\"top\": 2000, \"distribution\": {\"type\": \"cauchy\"}}]"),
                "mono", "unknown distribution 'cauchy'", "/particle_layers/0/distribution");
+  expect_error(MA(US("[0, 1000, 5000]"), ", \"particle_layers\": [{\"top\": 2000, \"distribution\": "
+                                         "{\"type\": \"gaussian\", \"mean\": 40, \"std\": 0.01}}]"),
+               "mono", "no mass", "/particle_layers/0/distribution/mean");
   expect_error(MA(US("[0, 1000, 5000]"), ", \"particle_layers\": [{\"top\": 2000, \"tau_ref\": -1}]"), "mono",
                "tau_ref", "/particle_layers/0/tau_ref");
   expect_error(MA(US("[0, 1000, 5000]"), ", \"particle_layers\": [{\"top\": 2000, \"albedo\": 1.5}]"), "mono",

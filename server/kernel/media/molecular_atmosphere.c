@@ -597,6 +597,13 @@ static rsw_status read_particle(loader *ld, mol_atmo *m, node *g, ma_particle *p
         st = ld_float_range(ld, dg, "mean", 0.5, -1e6, 1e6, &p->mean);
         if (!st) st = ld_float_range(ld, dg, "std", 1.0 / 6.0, 1e-6, 1e6, &p->std);
         if (st) return st;
+        double s2 = p->std * sqrt(2.0);
+        if (!(erf((1.0 - p->mean) / s2) - erf(-p->mean / s2) > 1e-12))
+          return ld_fail(
+              ld, dg, "mean", RSW_ERR_INVALID,
+              "gaussian: mean %g and std %g (in the layer's normalised altitude, 0 at bottom, 1 at "
+              "top) put no mass inside the layer",
+              p->mean, p->std);
       }
     } else {
       return ld_fail(ld, dg ? dg : g, dg ? "type" : "distribution", RSW_ERR_INVALID,
