@@ -28,6 +28,7 @@
 #include <string.h>
 
 #include "../core/jsonscan.h"
+#include "../media/atmo_data.h"
 #include "node.h"
 
 #define TWO_POW_53 9007199254740992.0
@@ -289,6 +290,47 @@ static rsw_status account(jctx *c, size_t bytes, const char *where) {
 }
 
 /* {"type":"spectrum", ...} / rgb / uniform -> spectrum. */
+/* {"type": "solar_irradiance", "dataset": "thuillier_2003", "scale": s,
+ * "earth_sun_distance": d}: the Thuillier et al. (2003) spectrum at 1 AU
+ * (data/solar, compiled into media/atmo_data.c) in W m^-2 nm^-1, times
+ * s / d^2 (d in astronomical units, default 1; Eradiate's
+ * SolarIrradianceSpectrum). docs/atmosphere.md. */
+static rsw_status read_solar(jctx *c, const cJSON *o, const char *where, spectrum *out) {
+  memset(out, 0, sizeof *out);
+  double scale = 1.0, d = 1.0;
+  for (const cJSON *k = o->child; k; k = k->next) {
+    if (strcmp(k->string, "type") == 0) continue;
+    char w[512];
+    ptr_join(w, sizeof w, where, k->string);
+    if (strcmp(k->string, "dataset") == 0) {
+      if (!cJSON_IsString(k) || strcmp(k->valuestring, "thuillier_2003") != 0)
+        return fail(c, RSW_ERR_INVALID, w, "solar_irradiance: unknown dataset (known: thuillier_2003)");
+    } else if (strcmp(k->string, "scale") == 0 || strcmp(k->string, "earth_sun_distance") == 0) {
+      bool is_scale = k->string[0] == 's';
+      if (!cJSON_IsNumber(k) || !isfinite(k->valuedouble) ||
+          !(is_scale ? k->valuedouble >= 0 : k->valuedouble > 0))
+        return fail(c, RSW_ERR_RANGE, w, "solar_irradiance: '%s' must be a finite number %s", k->string,
+                    is_scale ? ">= 0" : "> 0 (astronomical units)");
+      *(is_scale ? &scale : &d) = k->valuedouble;
+    } else {
+      return fail(c, RSW_ERR_INVALID, w,
+                  "solar_irradiance: unexpected key '%s' (dataset, scale, earth_sun_distance)", k->string);
+    }
+  }
+  const atmo_solar_table *t = &atmo_solar_thuillier_2003;
+  out->kind = SPEC_TABLE;
+  out->n = (size_t)t->n;
+  out->wl = malloc(out->n * sizeof(double));
+  out->val = malloc(out->n * sizeof(double));
+  if (!out->wl || !out->val) {
+    spectrum_free(out);
+    return fail(c, RSW_ERR_NOMEM, where, "out of memory");
+  }
+  double f = 1e-3 * scale / (d * d); /* mW -> W, 1 / d^2 */
+  for (size_t i = 0; i < out->n; i++) out->wl[i] = t->wl[i], out->val[i] = t->mw[i] * f;
+  return RSW_OK;
+}
+
 static rsw_status read_spectrum(jctx *c, const cJSON *o, const char *type, const char *where, spectrum *out) {
   memset(out, 0, sizeof *out);
   const cJSON *value = NULL, *wls = NULL, *vals = NULL;
@@ -407,6 +449,52 @@ static bool is_list(const cJSON *v) {
          cJSON_GetObjectItemCaseSensitive(v->child, "type");
 }
 
+/* Read v as a nested object and append it to n as the property `key`. */
+static rsw_status add_child(jctx *c, node *n, const cJSON *v, const char *key, const char *where, int depth) {
+  node *child = NULL;
+  rsw_status st = read_object(c, v, key, where, depth + 1, &child);
+  if (st) return st;
+  prop *p = node_add_prop(n, key, PROP_NODE, where);
+  if (!p) {
+    node_free(child);
+    return fail(c, RSW_ERR_NOMEM, where, "out of memory");
+  }
+  p->child = child;
+  return RSW_OK;
+}
+
+/* Property groups of `molecular_atmosphere` (docs/atmosphere.md): nested
+ * dicts that name no plugin, read by their owner as a group of
+ * properties. The type they get ("thermoprops", "particle_layer"); NULL
+ * for any other key. */
+static const char *group_type(const char *key) {
+  if (!key) return NULL;
+  if (strcmp(key, "thermoprops") == 0) return "thermoprops";
+  if (strcmp(key, "particle_layers") == 0) return "particle_layer";
+  if (strcmp(key, "distribution") == 0) return "uniform";
+  return NULL;
+}
+
+/* "particle_layers": [{...}, ...]: one group per element, each a property
+ * named particle_layers, in order. */
+static rsw_status read_groups(jctx *c, node *n, const cJSON *v, const char *key, const char *where,
+                              int depth) {
+  int i = 0;
+  for (const cJSON *e = v->child; e; e = e->next, i++) {
+    char w[512];
+    ptr_index(w, sizeof w, where, i);
+    if (!cJSON_IsObject(e)) return fail(c, RSW_ERR_TYPE, w, "'%s' is a list of objects", key);
+    rsw_status st = check_keys(c, e, group_type(key), w);
+    if (st) return st;
+    size_t arrays = node_mem_arrays(n);
+    st = add_child(c, n, e, key, w, depth);
+    if (st) return st;
+    st = account(c, node_mem_arrays(n) - arrays + node_mem_prop(&n->props[n->n_props - 1]), w);
+    if (st) return st;
+  }
+  return RSW_OK;
+}
+
 /* A list of objects in a container (the scene, a shapegroup):
  * "members": [{"type": "disk", ...}, {"type": "ref", "id": "x"}, ...] adds
  * one child per element, as if each had its own key; an element without
@@ -499,6 +587,9 @@ static rsw_status read_value(jctx *c, node *n, const cJSON *v, const char *key, 
       if (st) return st;
       ADD_(PROP_TRANSFORM);
       p->xf = xf;
+    } else if (group_type(key) && strcmp(key, "particle_layers") == 0 &&
+               (len == 0 || cJSON_IsObject(v->child))) {
+      return read_groups(c, n, v, key, where, depth);
     } else if (is_list(v)) {
       return read_list(c, n, v, key, where, depth);
     } else if (len > 0 && cJSON_IsObject(v->child)) {
@@ -521,6 +612,10 @@ static rsw_status read_value(jctx *c, node *n, const cJSON *v, const char *key, 
         ADD_(PROP_TRANSFORM);
         p->xf = xf;
         return RSW_OK;
+      }
+      if (group_type(key)) {
+        rsw_status st = check_keys(c, v, group_type(key), where);
+        return st ? st : add_child(c, n, v, key, where, depth);
       }
       return fail(c, RSW_ERR_MISSING, where, "object has no \"type\" (every nested object names its plugin)");
     }
@@ -546,9 +641,12 @@ static rsw_status read_value(jctx *c, node *n, const cJSON *v, const char *key, 
       ADD_(PROP_REF);
       p->ref = rsw_strdup(id->valuestring);
       if (!p->ref) return fail(c, RSW_ERR_NOMEM, where, "out of memory");
-    } else if (strcmp(t, "rgb") == 0 || strcmp(t, "spectrum") == 0 || strcmp(t, "uniform") == 0) {
+    } else if ((strcmp(t, "rgb") == 0 || strcmp(t, "spectrum") == 0 || strcmp(t, "uniform") == 0 ||
+                strcmp(t, "solar_irradiance") == 0) &&
+               !(strcmp(key, "distribution") == 0)) {
       spectrum s;
-      st = read_spectrum(c, v, t, where, &s);
+      st = strcmp(t, "solar_irradiance") == 0 ? read_solar(c, v, where, &s)
+                                              : read_spectrum(c, v, t, where, &s);
       if (st) return st;
       p = node_add_prop(n, key, PROP_SPECTRUM, where);
       if (!p) {
@@ -557,15 +655,8 @@ static rsw_status read_value(jctx *c, node *n, const cJSON *v, const char *key, 
       }
       p->spec = s;
     } else {
-      node *child = NULL;
-      st = read_object(c, v, key, where, depth + 1, &child);
+      st = add_child(c, n, v, key, where, depth);
       if (st) return st;
-      p = node_add_prop(n, key, PROP_NODE, where);
-      if (!p) {
-        node_free(child);
-        return fail(c, RSW_ERR_NOMEM, where, "out of memory");
-      }
-      p->child = child;
     }
   } else {
     return fail(c, RSW_ERR_TYPE, where, "unsupported JSON value");
@@ -600,7 +691,9 @@ static rsw_status read_object(jctx *c, const cJSON *obj, const char *key, const 
   if (++c->n_nodes > RSW_MAX_NODES)
     return fail(c, RSW_ERR_LIMIT, where, "more than %d objects", RSW_MAX_NODES);
   const cJSON *type = cJSON_GetObjectItemCaseSensitive(obj, "type");
-  const char *tname = type && cJSON_IsString(type) ? type->valuestring : "scene";
+  const char *tname = type && cJSON_IsString(type) ? type->valuestring
+                      : group_type(key)            ? group_type(key)
+                                                   : "scene";
   if (strlen(tname) >= RSW_MAX_NAME) return fail(c, RSW_ERR_LIMIT, where, "type name too long");
   node *n = node_new(NULL, tname, where);
   if (!n) return fail(c, RSW_ERR_NOMEM, where, "out of memory");

@@ -25,7 +25,7 @@
   X(shapegroup) X(instance) X(instancelist) X(periodic)                      \
   X(isotropic) X(hg) X(blendphase) X(rayleigh) X(tabphase)                    \
   X(constvolume) X(gridvolume)                                                \
-  X(null) X(homogeneous) X(heterogeneous) X(piecewise)                       \
+  X(null) X(homogeneous) X(heterogeneous) X(piecewise) X(molecular_atmosphere) \
   X(volpath) X(piecewise_volpath)
 // clang-format on
 

@@ -586,6 +586,48 @@ static rsw_status start_object(xml_ctx *c, xml_frame *parent, xml_frame *self) {
   return RSW_OK;
 }
 
+/* Property groups of `molecular_atmosphere` (docs/atmosphere.md), which
+ * Mitsuba's XML has no element for: <thermoprops>, <particle_layer> (each
+ * one a property named particle_layers, in order) and <distribution
+ * type="...">, holding ordinary properties. Their owner reads them as
+ * groups; they are never built as plugins. */
+static rsw_status start_group(xml_ctx *c, xml_frame *parent, xml_frame *self) {
+  static const char *const allowed[] = {"type", "name", NULL};
+  bool dist = strcmp(self->elem, "distribution") == 0;
+  static const char *const req_type[] = {"type", NULL};
+  static const char *const req_none[] = {NULL};
+  if (attrs_check(c, allowed, dist ? req_type : req_none)) return c->err.code;
+  const char *type = attr(c, "type"), *name = attr(c, "name");
+  const char *def_name = dist                                     ? "distribution"
+                         : strcmp(self->elem, "thermoprops") == 0 ? "thermoprops"
+                                                                  : "particle_layers";
+  if (name && strcmp(name, def_name) != 0)
+    return xfail(c, RSW_ERR_INVALID, "<%s> is the property '%s' (got name=\"%s\")", self->elem, def_name,
+                 name);
+  if (type && check_ident(c, "type", type)) return c->err.code;
+  if (c->n_nodes >= RSW_MAX_NODES)
+    return xfail(c, RSW_ERR_LIMIT, "more than %d objects in one document", RSW_MAX_NODES);
+  /* particle layers repeat their name: added unnamed (no duplicate check), then named */
+  bool repeat = strcmp(def_name, "particle_layers") == 0;
+  prop *p = add_prop(c, parent->obj, repeat ? "" : def_name, PROP_NODE);
+  if (!p) return c->err.code;
+  if (repeat) {
+    char *nm = rsw_strdup(def_name);
+    if (!nm) return xfail(c, RSW_ERR_NOMEM, "out of memory");
+    free(p->name);
+    p->name = nm;
+  }
+  node *n = node_new(NULL, type ? type : dist ? "uniform" : self->elem, c->loc);
+  if (!n) return xfail(c, RSW_ERR_NOMEM, "out of memory");
+  p->child = n;
+  c->n_nodes++;
+  if (!(n->id = rsw_strdup(def_name))) return xfail(c, RSW_ERR_NOMEM, "out of memory");
+  if (charge(c, parent->obj, node_mem_self(n))) return c->err.code;
+  self->kind = FR_OBJECT;
+  self->obj = n;
+  return RSW_OK;
+}
+
 static const char *const name_value[] = {"name", "value", NULL};
 
 /* Shared start of <integer>, <float>, <boolean>, <string>, <rgb>: checks
@@ -962,6 +1004,9 @@ static const tag_def tag_table[] = {
     {"medium", IN_OBJECT, start_object},
     {"phase", IN_OBJECT, start_object},
     {"volume", IN_OBJECT, start_object},
+    {"thermoprops", IN_OBJECT, start_group},
+    {"particle_layer", IN_OBJECT, start_group},
+    {"distribution", IN_OBJECT, start_group},
     {"integer", IN_OBJECT, start_integer},
     {"float", IN_OBJECT, start_float},
     {"boolean", IN_OBJECT, start_boolean},
