@@ -306,9 +306,8 @@ static rsw_status check_merged(const scene *sc, const cJSON *m, const cJSON *cp,
     } else if (tmpl_origin(ts, e->key, tp, sizeof tp)) {
       char msg[sizeof e->err.msg];
       memcpy(msg, e->err.msg, sizeof msg);
-      msg[sizeof msg - 100] = '\0'; /* room for the prefix */
       snprintf(e->err.where, sizeof e->err.where, "%.250s", tp);
-      snprintf(e->err.msg, sizeof e->err.msg, "rendered for %.64s: %s", ctx_ptr, msg);
+      snprintf(e->err.msg, sizeof e->err.msg, "rendered for %.64s: %.660s", ctx_ptr, msg);
     } else {
       snprintf(e->err.where, sizeof e->err.where, "/params/%.240s", e->key);
     }
