@@ -197,6 +197,34 @@ static void test_angles_bitwise(void) {
   CHECK_ABS(f.img.angles[4], 40.0, 1e-9);
   CHECK_ABS(fmod(f.img.angles[5] + 360, 360), 45.0, 1e-9);
   svc_film_free(&f);
+  /* An update equals a reload: c1's directions written into the document
+   * render c1's film. */
+  double sun[3], md[9];
+  toward(sza[1], saa[1], sun);
+  for (int k = 0; k < 3; k++) toward(k == 0 ? -40 : k == 1 ? 0 : 40, saa[1], md + 3 * k);
+  char doc[4096], mds[600], suns[200], body[400];
+  snprintf(doc, sizeof doc, PW_FMT, "");
+  vec_json(suns, sizeof suns, sun, 3);
+  int k = 0;
+  for (int i = 0; i < 9; i++) k += snprintf(mds + k, sizeof mds - (size_t)k, "%s%.17g", i ? ", " : "", md[i]);
+  char *p = strstr(doc, "\"direction\": [0, 0, -1], \"irradiance\"");
+  char *q = strstr(doc, "\"0, 0, -1, 0.5, 0, -0.8, -0.5, 0, -0.8\"");
+  REQUIRE(p && q && p < q, "the document's directions");
+  char re[4600];
+  snprintf(re, sizeof re, "%.*s\"direction\": %s, \"irradiance\"%.*s\"%s\"%s", (int)(p - doc), doc, suns,
+           (int)(q - p - strlen("\"direction\": [0, 0, -1], \"irradiance\"")),
+           p + strlen("\"direction\": [0, 0, -1], \"irradiance\""), mds,
+           q + strlen("\"0, 0, -1, 0.5, 0, -0.8, -0.5, 0, -0.8\""));
+  bool created;
+  char *rid = NULL, *rjson = NULL, *jr = NULL;
+  REQUIRE(service_scene_post(svc, re, strlen(re), false, NULL, &created, &rid, &rjson, &e) == RSW_OK,
+          "reload: %s", e.err.msg);
+  snprintf(body, sizeof body, "{\"seed\": 5, \"defaults\": {\"spp\": 16}, \"contexts\": [{\"id\": \"c1\"}]}");
+  REQUIRE(submit(svc, rid, body, &jr, NULL, &e) == RSW_OK && wait_job(svc, jr), "reloaded job: %s",
+          e.err.msg);
+  static const char *const c1[] = {"c1"};
+  CHECK(same_films(ja, jr, c1, 1), "sun and mdistant directions: an update equals a reload");
+  free(rid), free(rjson), free(jr);
   free(ja), free(jb), free(id);
 }
 
@@ -471,6 +499,45 @@ static void test_warnings(void) {
     CHECK(!strstr(answer, "warnings"), "quiet %zu: no warning: %s", i, answer);
     wait_job(svc, jid);
     free(jid), free(answer);
+  }
+  /* The scene's own spectra (scene_wavelength_dependent): a tabulated
+   * reflectance, a grid with a wavelength axis; a table of one value
+   * everywhere depends on nothing. */
+  static const struct {
+    const char *from, *to;
+    bool spectral;
+  } scenes[] = {
+      {"\"reflectance\": 0.3",
+       "\"reflectance\": {\"type\": \"spectrum\", \"wavelengths\": [400, 800], "
+       "\"values\": [0.2, 0.4]}",
+       true},
+      {"\"reflectance\": 0.3",
+       "\"reflectance\": {\"type\": \"spectrum\", \"wavelengths\": [400, 800], "
+       "\"values\": [0.3, 0.3]}",
+       false},
+      {"\"data\": [0.3, 0.2, 0.1, 0.05], \"shape\": [4, 1, 1]",
+       "\"data\": [0.3, 0.2, 0.2, 0.1, 0.1, 0.05, 0.05, 0.01], \"shape\": [4, 1, 1, 2], \"wavelengths\": "
+       "[400, 800]",
+       true},
+  };
+  for (size_t i = 0; i < sizeof scenes / sizeof scenes[0]; i++) {
+    char doc[4096], alt[4400];
+    snprintf(doc, sizeof doc, PW_FMT, "");
+    char *at = strstr(doc, scenes[i].from);
+    REQUIRE(at, "scene %zu", i);
+    snprintf(alt, sizeof alt, "%.*s%s%s", (int)(at - doc), doc, scenes[i].to, at + strlen(scenes[i].from));
+    bool created;
+    char *sid = NULL, *sjson = NULL, *jid = NULL, *answer = NULL;
+    svc_error ei = {0};
+    REQUIRE(service_scene_post(svc, alt, strlen(alt), false, NULL, &created, &sid, &sjson, &ei) == RSW_OK,
+            "scene %zu: %s %s", i, ei.err.where, ei.err.msg);
+    const char *sweep = "{\"defaults\": {\"spp\": 1}, \"contexts\": [{\"id\": \"a\", \"wavelength\": 450}, "
+                        "{\"id\": \"b\", \"wavelength\": 650}]}";
+    REQUIRE(submit(svc, sid, sweep, &jid, &answer, &ei) == RSW_OK, "scene %zu sweep: %s", i, ei.err.msg);
+    CHECK(has_warning(answer, "wavelength_unused", "wavelength") == !scenes[i].spectral, "scene %zu (%s): %s",
+          i, scenes[i].spectral ? "spectral" : "grey", answer);
+    wait_job(svc, jid);
+    free(sid), free(sjson), free(jid), free(answer);
   }
   free(id);
 }
