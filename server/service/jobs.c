@@ -325,55 +325,9 @@ static rsw_status check_values(const scene *sc, const cJSON *jp, const cJSON *cp
   return st;
 }
 
-/* The coordinate `wavelength` sets the context's wavelength: a positive
- * finite number of nm, in a mono scene, equal to the context's
- * "wavelength" when both are given. */
-static rsw_status check_coord_wavelength(const scene *sc, const cJSON *w, const cJSON *cw, const char *ptr,
-                                         svc_error *e) {
-  char p[96];
-  snprintf(p, sizeof p, "%s/coords/wavelength", ptr);
-  if (!cJSON_IsNumber(cw) || !(cw->valuedouble > 0) || !isfinite(cw->valuedouble))
-    return svc_fail(e, RSW_ERR_INVALID, p,
-                    "the coordinate wavelength (the context's wavelength) must be a "
-                    "positive finite number of nm");
-  if (sc->variant != VARIANT_MONO)
-    return svc_fail(e, RSW_ERR_INVALID, p, "wavelength applies to mono scenes; this scene is rgb");
-  if (w && w->valuedouble != cw->valuedouble)
-    return svc_fail(e, RSW_ERR_INVALID, p,
-                    "the coordinate wavelength (%.17g) differs from %s/wavelength (%.17g)", cw->valuedouble,
-                    ptr, w->valuedouble);
-  return RSW_OK;
-}
-
 /* Whether an override map holds a tabulated spectrum (read at the
  * render's wavelength). */
 static bool has_table(const cJSON *map);
-
-/* A context's fingerprint for the no-op sweep check (templates.h): what
- * it renders with besides a seed it did not choose. Common parts (the
- * job-level overrides) may be left out: only differences matter. */
-static void context_digest(const cJSON *params, double wl, bool spectral, const cJSON *c,
-                           const cJSON *d_sensors, unsigned char out[32]) {
-  rsw_sha256_ctx h;
-  memset(out, 0, 32);
-  if (!rsw_sha256_begin(&h)) return;
-  char *txt = params ? cJSON_PrintUnformatted(params) : NULL;
-  if (txt) rsw_sha256_update(&h, txt, strlen(txt));
-  free(txt);
-  char buf[160];
-  snprintf(buf, sizeof buf, "\n%.17g", spectral ? wl : 0.0);
-  rsw_sha256_update(&h, buf, strlen(buf));
-  static const char *const own[] = {"spp", "seed", "sensors"};
-  for (int i = 0; i < 3; i++) {
-    const cJSON *v = cJSON_GetObjectItemCaseSensitive(c, own[i]);
-    if (!v && i == 2) v = d_sensors;
-    char *t = v ? cJSON_PrintUnformatted(v) : NULL;
-    rsw_sha256_update(&h, "\n", 1);
-    if (t) rsw_sha256_update(&h, t, strlen(t));
-    free(t);
-  }
-  rsw_sha256_end(&h, out);
-}
 
 static bool table_range(const cJSON *v, double *lo, double *hi);
 
@@ -676,7 +630,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     if (st) break;
     const cJSON *coords = cJSON_GetObjectItemCaseSensitive(c, "coords");
     const cJSON *cw = cJSON_IsObject(coords) ? cJSON_GetObjectItemCaseSensitive(coords, "wavelength") : NULL;
-    if (cw && (st = check_coord_wavelength(sc, w, cw, ptr, e))) break;
+    if (cw && (st = tmpl_check_coord_wavelength(sc, w, cw, ptr, e))) break;
     double wl = sc->variant != VARIANT_MONO ? 0
                 : w                         ? w->valuedouble
                 : cw                        ? cw->valuedouble
@@ -718,7 +672,8 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     any_table = any_table || own_table;
     sigs[n_ctx].coords = cJSON_IsObject(coords) ? coords : NULL;
     sigs[n_ctx].wavelength = wl;
-    if (sigs[n_ctx].coords) context_digest(mine, wl, spectral || own_table, c, d_sensors, sigs[n_ctx].digest);
+    if (sigs[n_ctx].coords)
+      tmpl_ctx_digest(mine, wl, spectral || own_table, c, d_sensors, sigs[n_ctx].digest);
     uint64_t dummy;
     bool present;
     get_uint(c, "spp", 4294967295.0, &dummy, &present, ptr, e, &st);

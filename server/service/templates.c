@@ -8,6 +8,7 @@
 
 #include "../kernel/scene/params.h"
 #include "buf.h"
+#include "rsw_sha256.h"
 #include "service_internal.h"
 #include "templates.h"
 
@@ -584,6 +585,52 @@ rsw_status tmpl_render(const tmpl_set *s, const scene *sc, const cJSON *coords, 
 }
 
 /* ---- the silent no-op sweep ------------------------------------------------------ */
+
+/* The coordinate `wavelength` sets the context's wavelength: a positive
+ * finite number of nm, in a mono scene, equal to the context's
+ * "wavelength" when both are given. */
+rsw_status tmpl_check_coord_wavelength(const scene *sc, const cJSON *w, const cJSON *cw, const char *ptr,
+                                       svc_error *e) {
+  char p[96];
+  snprintf(p, sizeof p, "%s/coords/wavelength", ptr);
+  if (!cJSON_IsNumber(cw) || !(cw->valuedouble > 0) || !isfinite(cw->valuedouble))
+    return svc_fail(e, RSW_ERR_INVALID, p,
+                    "the coordinate wavelength (the context's wavelength) must be a "
+                    "positive finite number of nm");
+  if (sc->variant != VARIANT_MONO)
+    return svc_fail(e, RSW_ERR_INVALID, p, "wavelength applies to mono scenes; this scene is rgb");
+  if (w && w->valuedouble != cw->valuedouble)
+    return svc_fail(e, RSW_ERR_INVALID, p,
+                    "the coordinate wavelength (%.17g) differs from %s/wavelength (%.17g)", cw->valuedouble,
+                    ptr, w->valuedouble);
+  return RSW_OK;
+}
+
+/* A context's fingerprint for the no-op sweep check (templates.h): what
+ * it renders with besides a seed it did not choose. Common parts (the
+ * job-level overrides) may be left out: only differences matter. */
+void tmpl_ctx_digest(const cJSON *params, double wl, bool spectral, const cJSON *c, const cJSON *d_sensors,
+                     unsigned char out[32]) {
+  rsw_sha256_ctx h;
+  memset(out, 0, 32);
+  if (!rsw_sha256_begin(&h)) return;
+  char *txt = params ? cJSON_PrintUnformatted(params) : NULL;
+  if (txt) rsw_sha256_update(&h, txt, strlen(txt));
+  free(txt);
+  char buf[160];
+  snprintf(buf, sizeof buf, "\n%.17g", spectral ? wl : 0.0);
+  rsw_sha256_update(&h, buf, strlen(buf));
+  static const char *const own[] = {"spp", "seed", "sensors"};
+  for (int i = 0; i < 3; i++) {
+    const cJSON *v = cJSON_GetObjectItemCaseSensitive(c, own[i]);
+    if (!v && i == 2) v = d_sensors;
+    char *t = v ? cJSON_PrintUnformatted(v) : NULL;
+    rsw_sha256_update(&h, "\n", 1);
+    if (t) rsw_sha256_update(&h, t, strlen(t));
+    free(t);
+  }
+  rsw_sha256_end(&h, out);
+}
 
 typedef struct sort_row {
   const tmpl_ctx_sig *c;

@@ -72,6 +72,13 @@ rsw_status tmpl_render(const tmpl_set *t, const scene *sc, const cJSON *coords, 
  * t, and which pointer names it ("/templates/KEY", or the scene's). */
 bool tmpl_origin(const tmpl_set *t, const char *key, char *ptr, size_t cap);
 
+/* The coordinate `wavelength` (cw) sets the context's wavelength: a
+ * positive finite number of nm, in a mono scene, equal to the context's
+ * "wavelength" (w, may be NULL) when both are given; errors at
+ * "<ptr>/coords/wavelength". */
+rsw_status tmpl_check_coord_wavelength(const scene *sc, const cJSON *w, const cJSON *cw, const char *ptr,
+                                       svc_error *e);
+
 /* ---- the silent no-op sweep -------------------------------------------------------- */
 
 /* One context as the warning check sees it: its coords (may be NULL), its
@@ -93,5 +100,11 @@ typedef struct tmpl_ctx_sig {
  * overrides or a template depends on the wavelength; the digests include
  * the wavelength only when it does). */
 cJSON *tmpl_sweep_warnings(const tmpl_ctx_sig *ctx, size_t n, bool spectral);
+/* A context's digest (tmpl_ctx_sig): params (its overrides, or the part
+ * that differs between contexts), the wavelength when spectral, and the
+ * context's (ctx) spp, explicit seed and sensors (d_sensors: the job's
+ * default sensors). */
+void tmpl_ctx_digest(const cJSON *params, double wl, bool spectral, const cJSON *ctx, const cJSON *d_sensors,
+                     unsigned char out[32]);
 
 #endif
