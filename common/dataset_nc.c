@@ -568,6 +568,7 @@ static rsw_status write_all(writer *w, rsw_err *err) {
     NC_TRY(nc_put_att_uint(ncid, NC_GLOBAL, "spp", NC_UINT, 1, &v), "spp");
   }
   if (d->job) TRY(put_text_att(ncid, NC_GLOBAL, "job", d->job, err));
+  if (d->warnings && d->warnings[0]) TRY(put_text_att(ncid, NC_GLOBAL, "warnings", d->warnings, err));
   if (w->missing) {
     unsigned long long v = w->missing;
     NC_TRY(nc_put_att_ulonglong(ncid, NC_GLOBAL, "films_missing", NC_UINT64, 1, &v), "films_missing");

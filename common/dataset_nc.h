@@ -35,8 +35,9 @@
  *                spp as a global attribute when every film has the same,
  *                else a uint32 variable; unresolved_rays when any is not 0.
  *   attributes   Conventions, title, source, raysweep_version, scene,
- *                revision, variant, seed (the job seed), spp, job, and
- *                films_missing when some film is missing.
+ *                revision, variant, seed (the job seed), spp, job,
+ *                films_missing when some film is missing, and warnings
+ *                (the job's, a sweep that changes nothing, one a line).
  *
  * Thread-safe: libnetcdf is not, so every call here holds one process-wide
  * lock while it runs. */
@@ -135,6 +136,7 @@ typedef struct nc_dataset {
   const nc_coords *coords;        /* NULL or n == 0: no coords */
   const nc_film *films;           /* at most one per (context, sensor) */
   size_t n_films;
+  const char *warnings; /* the job's warnings, one "code (coordinate): detail" a line; NULL: none */
 } nc_dataset;
 
 /* Write d to path (through "<path>.tmp.<pid>", renamed on success) or

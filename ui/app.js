@@ -445,7 +445,9 @@ function renderJobs() {
     bar,
     el('div', { class: 'meta' }, `${j.renders_done}/${j.renders_total} renders` +
       (j.renders_failed ? `, ${j.renders_failed} failed` : '') + ` · scene ${j.scene.slice(0, 8)}…` +
-      (j.seconds !== undefined ? ` · ${fmt(j.seconds)} s` : '') + (j.error ? ` · ${j.error}` : ''))));
+      (j.seconds !== undefined ? ` · ${fmt(j.seconds)} s` : '') + (j.error ? ` · ${j.error}` : '')),
+    // A sweep that changes nothing along a coordinate (docs/experiments.md "Templates").
+    ...(j.warnings || []).map((w) => el('div', { class: 'meta warning', title: w.detail }, `warning: ${w.code} (${w.coordinate})`))));
   }
   if (!jobs.length) ul.append(el('li', { class: 'muted' }, 'no job'));
 }

@@ -96,6 +96,7 @@ int cmd_job_show(cli_ctx *ctx, const cli_args *a) {
     free(t);
     return CLI_OK;
   }
+  cli_print_job_warnings(ctx, "raysweep job", id);
   printf("id:        %s\n", id);
   printf("state:     %s\n", cli_job_state_name(st.state));
   printf("contexts:  %zu/%zu\n", st.contexts_done, st.contexts_total);

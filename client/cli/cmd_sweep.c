@@ -1359,6 +1359,7 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
   }
   if (!ctx->quiet)
     fprintf(stderr, "raysweep sweep: job %s: %zu contexts%s\n", job, l.n, shard_n > 1 ? " (one shard)" : "");
+  cli_print_job_warnings(ctx, "raysweep sweep", job);
   /* Written before any film, so a sweep that dies half-way leaves a
    * directory that says so (merge lists its contexts as missing; --force
    * knows what to clean). */

@@ -73,7 +73,7 @@ static const char global_help[] =
     "  --server URL       daemon base URL (env RAYSWEEP_URL; default " DEFAULT_URL ")\n"
     "  --token-file F     bearer token read from F (env RAYSWEEP_TOKEN holds the token itself)\n"
     "  --json             machine-readable output on stdout\n"
-    "  --quiet, -q        no progress or informational messages on stderr\n"
+    "  --quiet, -q        no progress or informational messages on stderr (warnings stay)\n"
     "  --help, -h         this help; `raysweep COMMAND --help` for one command\n"
     "  --version, -V      print the version and exit\n"
     "\n"

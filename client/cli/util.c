@@ -407,6 +407,17 @@ void cli_progress_finish(cli_progress *p) {
   if (!p->ctx->quiet && (p->drawn || p->total)) progress_draw(p, true);
 }
 
+void cli_print_job_warnings(cli_ctx *ctx, const char *who, const char *job_id) {
+  char *text = NULL;
+  if (rsw_job_warnings(ctx->client, job_id, &text) != RSW_OK || !text) return;
+  for (char *line = text, *next; line && *line; line = next) {
+    next = strchr(line, '\n');
+    if (next) *next++ = '\0';
+    fprintf(stderr, "%s: warning: job %s: %s\n", who, job_id, line);
+  }
+  rsw_free(text);
+}
+
 const char *cli_job_state_name(rsw_job_state s) {
   switch (s) {
   case RSW_JOB_QUEUED: return "queued";

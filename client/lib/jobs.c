@@ -315,6 +315,43 @@ rsw_status rsw_job_get(rsw_client *c, const char *job_id, rsw_job_status *out) {
   return s;
 }
 
+rsw_status rsw_job_warnings(rsw_client *c, const char *job_id, char **text_out) {
+  if (!c) return RSW_ERR_INVALID;
+  client_clear_error(c);
+  char path[320];
+  if (!job_path(job_id, "", path, sizeof path))
+    return client_fail(c, RSW_ERR_INVALID, "job id missing or too long");
+  if (!text_out) return client_fail(c, RSW_ERR_INVALID, "job warnings: text_out is NULL");
+  *text_out = NULL;
+  http_resp r;
+  rsw_status s = http_request(c, &(http_req){.method = "GET", .path = path}, &r);
+  if (s) return s;
+  cJSON *a = cJSON_ParseWithLength(r.body, r.len);
+  http_resp_free(&r);
+  if (!a) return client_fail(c, RSW_ERR_PARSE, "GET %s: the answer is not JSON", path);
+  const cJSON *w = cJSON_GetObjectItemCaseSensitive(a, "warnings");
+  size_t n = 0;
+  for (int pass = 0; pass < 2 && cJSON_IsArray(w) && w->child; pass++) {
+    size_t at = 0;
+    for (const cJSON *x = w->child; x; x = x->next) {
+      const cJSON *code = cJSON_GetObjectItemCaseSensitive(x, "code");
+      const cJSON *coord = cJSON_GetObjectItemCaseSensitive(x, "coordinate");
+      const cJSON *detail = cJSON_GetObjectItemCaseSensitive(x, "detail");
+      int k = snprintf(pass ? *text_out + at : NULL, pass ? n + 1 - at : 0, "%s%s (%s): %s", at ? "\n" : "",
+                       cJSON_IsString(code) ? code->valuestring : "?",
+                       cJSON_IsString(coord) ? coord->valuestring : "?",
+                       cJSON_IsString(detail) ? detail->valuestring : "");
+      at += k > 0 ? (size_t)k : 0;
+    }
+    if (!pass && !(*text_out = malloc((n = at) + 1))) {
+      cJSON_Delete(a);
+      return client_fail(c, RSW_ERR_NOMEM, "out of memory");
+    }
+  }
+  cJSON_Delete(a);
+  return RSW_OK;
+}
+
 rsw_status rsw_job_cancel(rsw_client *c, const char *job_id) {
   if (!c) return RSW_ERR_INVALID;
   client_clear_error(c);

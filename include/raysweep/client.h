@@ -228,6 +228,11 @@ typedef struct rsw_job_status {
 } rsw_job_status;
 
 rsw_status rsw_job_get(rsw_client *c, const char *job_id, rsw_job_status *out);
+/* The job's warnings (a sweep that changes nothing along a coordinate or
+ * the wavelength: docs/experiments.md "Templates"), one "code
+ * (coordinate): detail" a line; *text_out is NULL when there are none,
+ * else owned: rsw_free. */
+rsw_status rsw_job_warnings(rsw_client *c, const char *job_id, char **text_out);
 /* Progress callback: one call per finished (context, sensor) and once at
  * the end. Return non-zero to stop waiting (the job keeps running). */
 typedef int (*rsw_progress_fn)(void *user, const char *context, const char *sensor, size_t done, size_t total,

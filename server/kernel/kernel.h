@@ -82,6 +82,11 @@ typedef struct plugin {
   /* Optional: refresh derived state after an update wrote one of this
    * object's parameters (values were validated before any was written). */
   void (*parameters_changed)(object *o);
+  /* Optional: whether what the object renders with depends on the
+   * render's wavelength (mono): a tabulated spectrum, a grid with a
+   * wavelength axis. A plugin whose prepare() reads rc->wavelength sets
+   * it; scene_wavelength_dependent asks every object. */
+  bool (*spectral)(const object *o);
 } plugin;
 
 /* Every object starts with this header. */

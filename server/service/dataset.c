@@ -56,6 +56,30 @@ void svc_job_restore_labels(job *j, const char *body, size_t len) {
 
 static const char *const state_names[] = {"queued", "running", "succeeded", "failed", "cancelled"};
 
+/* The job's warnings as the dataset's attribute: "code (coordinate):
+ * detail", one a line (NULL: none, or out of memory). */
+static char *warnings_text(const cJSON *w) {
+  size_t n = 0;
+  for (const cJSON *x = w ? w->child : NULL; x; x = x->next) {
+    const cJSON *f[3] = {cJSON_GetObjectItemCaseSensitive(x, "code"),
+                         cJSON_GetObjectItemCaseSensitive(x, "coordinate"),
+                         cJSON_GetObjectItemCaseSensitive(x, "detail")};
+    for (int k = 0; k < 3; k++) n += cJSON_IsString(f[k]) ? strlen(f[k]->valuestring) + 4 : 0;
+  }
+  char *s = n ? malloc(n + 1) : NULL;
+  if (!s) return NULL;
+  size_t at = 0;
+  for (const cJSON *x = w->child; x; x = x->next) {
+    const cJSON *c = cJSON_GetObjectItemCaseSensitive(x, "code"),
+                *k = cJSON_GetObjectItemCaseSensitive(x, "coordinate"),
+                *d = cJSON_GetObjectItemCaseSensitive(x, "detail");
+    at += (size_t)snprintf(s + at, n + 1 - at, "%s%s (%s): %s", at ? "\n" : "",
+                           cJSON_IsString(c) ? c->valuestring : "", cJSON_IsString(k) ? k->valuestring : "",
+                           cJSON_IsString(d) ? d->valuestring : "");
+  }
+  return s;
+}
+
 rsw_status service_job_dataset(service *svc, const char *id, bool partial, void **bytes_out, size_t *len_out,
                                svc_error *e) {
   pthread_mutex_lock(&svc->lock);
@@ -76,6 +100,7 @@ rsw_status service_job_dataset(service *svc, const char *id, bool partial, void 
   snprintf(jid, sizeof jid, "%s", j->id);
   memcpy(scene_id, j->scene_id, sizeof scene_id);
   uint64_t revision = j->revision, seed = j->seed;
+  char *warnings = warnings_text(j->warnings);
   rsw_variant variant = j->variant;
   rsw_status st = RSW_OK;
   rsw_err err = {0};
@@ -174,7 +199,8 @@ rsw_status service_job_dataset(service *svc, const char *id, bool partial, void 
                      .wavelengths = wl,
                      .coords = &coords,
                      .films = films,
-                     .n_films = n_films};
+                     .n_films = n_films,
+                     .warnings = warnings};
     if (nc_dataset_encode(&ds, bytes_out, len_out, &err) != RSW_OK)
       st = svc_fail(e, err.code, err.where, "%s", err.msg);
   }
@@ -184,6 +210,7 @@ rsw_status service_job_dataset(service *svc, const char *id, bool partial, void 
   free(ids);
   free(id_ptr);
   free(wl);
+  free(warnings);
   nc_coords_free(&coords);
   return st;
 }

@@ -20,6 +20,7 @@
 #include "buf.h"
 #include "rsw_sha256.h"
 #include "service_internal.h"
+#include "templates.h"
 
 static const char *const state_names[] = {"queued", "running", "succeeded", "failed", "cancelled"};
 
@@ -150,6 +151,7 @@ static void job_free(job *j) {
   free(j->context_remaining);
   free(j->idem_key);
   nc_coords_free(&j->coords);
+  cJSON_Delete(j->warnings);
   free(j);
 }
 
@@ -210,6 +212,7 @@ static cJSON *job_json(const job *j) {
   if (j->started_iso[0] || j->finished_iso[0])
     cJSON_AddNumberToObject(o, "seconds", seconds > 0 ? seconds : 0);
   if (j->error[0]) cJSON_AddStringToObject(o, "error", j->error);
+  if (j->warnings) svc_json_put(o, "warnings", cJSON_Duplicate(j->warnings, 1));
   char href[128];
   snprintf(href, sizeof href, "/v1/jobs/%s/results", j->id);
   cJSON_AddStringToObject(o, "href_results", href);
@@ -280,31 +283,59 @@ static rsw_status check_params(const scene *sc, const cJSON *p, const char *ptr,
   return RSW_OK;
 }
 
-/* The values of job-level overrides (jp) merged under a context's own (cp)
- * against the scene (scene_update_check): an illegal value is refused at
- * submit, named by its pointer (/params/KEY or CTX/params/KEY). */
-static rsw_status check_values(const scene *sc, const cJSON *jp, const cJSON *cp, const char *ctx_ptr,
-                               svc_error *e) {
-  cJSON *m = merge_params(jp, cp);
-  if (!m) return svc_fail(e, RSW_ERR_NOMEM, ctx_ptr, "out of memory");
+/* The overrides a context renders with (m: job-level, its own (cp) over
+ * them, then templates of ts for the keys neither gives) against the scene
+ * (scene_update_check): an illegal value is refused at submit, named by
+ * its pointer (/params/KEY, CTX/params/KEY, or the template's
+ * /templates/KEY with the context in the message). */
+static rsw_status check_merged(const scene *sc, const cJSON *m, const cJSON *cp, const tmpl_set *ts,
+                               const char *ctx_ptr, svc_error *e) {
   param_update *u = NULL;
   size_t n = 0;
   rsw_status st = svc_map_to_updates(m, sc, "params", &u, &n, e);
   if (!st) {
     rsw_err err = {0};
     st = scene_update_check(sc, u, n, &err);
-    if (st) {
-      st = svc_update_error(e, sc, u, n, &err);
-      bool own = cp && cJSON_GetObjectItemCaseSensitive(cp, e->key);
-      if (own)
-        snprintf(e->err.where, sizeof e->err.where, "%.64s/params/%.180s", ctx_ptr, e->key);
-      else
-        snprintf(e->err.where, sizeof e->err.where, "/params/%.240s", e->key);
+    if (st) st = svc_update_error(e, sc, u, n, &err);
+  }
+  if (st) {
+    char tp[300];
+    bool own = cp && cJSON_GetObjectItemCaseSensitive(cp, e->key);
+    if (own) {
+      snprintf(e->err.where, sizeof e->err.where, "%.64s/params/%.180s", ctx_ptr, e->key);
+    } else if (tmpl_origin(ts, e->key, tp, sizeof tp)) {
+      char msg[sizeof e->err.msg];
+      memcpy(msg, e->err.msg, sizeof msg);
+      snprintf(e->err.where, sizeof e->err.where, "%.250s", tp);
+      snprintf(e->err.msg, sizeof e->err.msg, "rendered for %.64s: %.660s", ctx_ptr, msg);
+    } else {
+      snprintf(e->err.where, sizeof e->err.where, "/params/%.240s", e->key);
     }
   }
   svc_free_updates(u, n);
+  return st;
+}
+
+static rsw_status check_values(const scene *sc, const cJSON *jp, const cJSON *cp, const char *ctx_ptr,
+                               svc_error *e) {
+  cJSON *m = merge_params(jp, cp);
+  if (!m) return svc_fail(e, RSW_ERR_NOMEM, ctx_ptr, "out of memory");
+  rsw_status st = check_merged(sc, m, cp, NULL, ctx_ptr, e);
   cJSON_Delete(m);
   return st;
+}
+
+/* Whether an override map holds a tabulated spectrum (read at the
+ * render's wavelength). */
+static bool has_table(const cJSON *map);
+
+static bool table_range(const cJSON *v, double *lo, double *hi);
+
+static bool has_table(const cJSON *map) {
+  double lo, hi;
+  for (const cJSON *k = cJSON_IsObject(map) ? map->child : NULL; k; k = k->next)
+    if (table_range(k, &lo, &hi)) return true;
+  return false;
 }
 
 /* A tabulated spectrum's range (nm): {"wavelengths": [...], ...} or
@@ -447,7 +478,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     st = e->err.code;
   else if (!cJSON_IsObject(req))
     st = svc_fail(e, RSW_ERR_TYPE, "", "the body must be a JSON object");
-  const cJSON *contexts = NULL, *defaults = NULL, *jparams = NULL;
+  const cJSON *contexts = NULL, *defaults = NULL, *jparams = NULL, *jtemplates = NULL;
   uint64_t job_seed = 0;
   unsigned quantities = 0;
   bool variance = false;
@@ -458,6 +489,8 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       defaults = k;
     else if (strcmp(k->string, "params") == 0)
       jparams = k;
+    else if (strcmp(k->string, "templates") == 0)
+      jtemplates = k;
     else if (strcmp(k->string, "seed") == 0) {
       bool present;
       get_uint(req, "seed", 9007199254740991.0, &job_seed, &present, "", e, &st);
@@ -469,7 +502,8 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       char w[300];
       snprintf(w, sizeof w, "/%s", k->string);
       st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, w,
-                    "unknown field '%s' (expected contexts, defaults, params, seed, quantities, variance)",
+                    "unknown field '%s' (expected contexts, defaults, params, templates, seed, quantities, "
+                    "variance)",
                     k->string);
     }
   }
@@ -491,6 +525,28 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
    * holds it for its whole duration). */
   scene *sc = r->sc;
   if (!st) st = check_params(sc, jparams, "/params", e);
+  /* Templates (the scene's under the job's), rendered for each context
+   * below into the overrides it renders with. */
+  tmpl_set *ts = NULL;
+  if (!st) st = tmpl_compile(sc, r->templates, "/scene/templates", jtemplates, jparams, &ts, e);
+  /* Whether what the contexts render with depends on the wavelength: the
+   * scene (under r->lock: a PATCH may be changing a table), a template
+   * or a job-level table. Contexts' own tables are added as met. */
+  bool spectral = false;
+  if (!st && sc->variant == VARIANT_MONO) {
+    pthread_mutex_lock(&r->lock);
+    spectral = scene_wavelength_dependent(sc);
+    pthread_mutex_unlock(&r->lock);
+    spectral = spectral || tmpl_uses_coord(ts, "wavelength") || has_table(jparams);
+  }
+  /* Per context: the overrides rendered from templates (NULL without
+   * templates) and the fingerprint for the no-op sweep check. */
+  cJSON **ctx_params = NULL;
+  tmpl_ctx_sig *sigs = NULL;
+  if (!st && ((ts && !(ctx_params = calloc(n_listed, sizeof *ctx_params))) ||
+              !(sigs = calloc(n_listed, sizeof *sigs))))
+    st = svc_fail(e, RSW_ERR_NOMEM, "/contexts", "out of memory");
+  bool any_table = false;
   /* Defaults. */
   uint64_t d_spp = 0;
   double d_wl = 0;
@@ -572,24 +628,52 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     const cJSON *cparams = cJSON_GetObjectItemCaseSensitive(c, "params");
     st = check_params(sc, cparams, pp, e);
     if (st) break;
+    const cJSON *coords = cJSON_GetObjectItemCaseSensitive(c, "coords");
+    const cJSON *cw = cJSON_IsObject(coords) ? cJSON_GetObjectItemCaseSensitive(coords, "wavelength") : NULL;
+    if (cw && (st = tmpl_check_coord_wavelength(sc, w, cw, ptr, e))) break;
+    double wl = sc->variant != VARIANT_MONO ? 0
+                : w                         ? w->valuedouble
+                : cw                        ? cw->valuedouble
+                : d_wl > 0                  ? d_wl
+                                            : 550;
     /* The values this context renders with must be legal now, not only
      * when it renders: job-level overrides under its own (checked once
-     * for all contexts that have none of their own). */
-    if (cparams || (jparams && !job_params_ok)) {
+     * for all contexts that have none of their own), and what its
+     * templates render. */
+    const cJSON *mine = cparams;
+    if (ts) {
+      cJSON *m = merge_params(jparams, cparams);
+      if (!m) {
+        st = svc_fail(e, RSW_ERR_NOMEM, ptr, "out of memory");
+        break;
+      }
+      ctx_params[n_ctx] = m;
+      st = tmpl_render(ts, sc, coords, wl, m, ptr, e);
+      if (!st) st = check_merged(sc, m, cparams, ts, ptr, e);
+      if (st) break;
+      mine = m;
+    } else if (cparams || (jparams && !job_params_ok)) {
       st = check_values(sc, jparams, cparams, ptr, e);
       if (st) break;
       if (!cparams) job_params_ok = true;
     }
     if (sc->variant == VARIANT_MONO) {
-      char p5[80];
-      snprintf(p5, sizeof p5, w ? "%s/wavelength" : d_wl > 0 ? "/defaults/wavelength" : "%s", ptr);
-      st = check_wavelength(sc, ranges, n_ranges, jparams, cparams,
-                            w          ? w->valuedouble
-                            : d_wl > 0 ? d_wl
-                                       : 550,
-                            p5, e);
+      char p5[96];
+      snprintf(p5, sizeof p5,
+               w          ? "%s/wavelength"
+               : cw       ? "%s/coords/wavelength"
+               : d_wl > 0 ? "/defaults/wavelength"
+                          : "%s",
+               ptr);
+      st = check_wavelength(sc, ranges, n_ranges, ts ? NULL : jparams, mine, wl, p5, e);
       if (st) break;
     }
+    bool own_table = sc->variant == VARIANT_MONO && has_table(mine);
+    any_table = any_table || own_table;
+    sigs[n_ctx].coords = cJSON_IsObject(coords) ? coords : NULL;
+    sigs[n_ctx].wavelength = wl;
+    if (sigs[n_ctx].coords)
+      tmpl_ctx_digest(mine, wl, spectral || own_table, c, d_sensors, sigs[n_ctx].digest);
     uint64_t dummy;
     bool present;
     get_uint(c, "spp", 4294967295.0, &dummy, &present, ptr, e, &st);
@@ -653,6 +737,10 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   free(seen);
   free(film_ok);
   free(ranges);
+  /* A sweep that changes nothing it renders is flagged (not refused:
+   * replicates differing by seed alone are legitimate). */
+  cJSON *warnings = !st && n_ctx > 1 ? tmpl_sweep_warnings(sigs, n_ctx, spectral || any_table) : NULL;
+  free(sigs);
   /* The contexts' coords (labels for the dataset): the same names in
    * every context, one type per name (nc_coords_build). */
   nc_coords coords = {0};
@@ -696,7 +784,9 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       const char *sname = sens ? cJSON_GetArrayItem(sens, (int)s)->valuestring : sc->sensors[s]->base.id;
       svc_find_sensor(sc, sname, &it->sensor_index);
       snprintf(it->sensor, sizeof it->sensor, "%s", sc->sensors[it->sensor_index]->base.id);
-      it->wavelength = w ? w->valuedouble : d_wl;
+      const cJSON *cc = cJSON_GetObjectItemCaseSensitive(c, "coords");
+      const cJSON *cw = cJSON_IsObject(cc) ? cJSON_GetObjectItemCaseSensitive(cc, "wavelength") : NULL;
+      it->wavelength = w ? w->valuedouble : cw ? cw->valuedouble : d_wl;
       it->spp = (uint32_t)spp;
       it->seed = has_seed ? seed : default_seed(job_seed, it->context, it->sensor);
       it->quantities = quantities;
@@ -706,7 +796,8 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       if ((quantities || variance) && svc_check_planes(sc, it->sensor_index, it->spp, quantities, variance,
                                                        "/quantities", "/variance", e))
         st = e->err.code;
-      it->params = merge_params(jparams, cJSON_GetObjectItemCaseSensitive(c, "params"));
+      it->params = ctx_params ? cJSON_Duplicate(ctx_params[ci], 1)
+                              : merge_params(jparams, cJSON_GetObjectItemCaseSensitive(c, "params"));
       if (!it->params) {
         st = svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
         break;
@@ -723,12 +814,17 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     }
   }
   cJSON_Delete(req);
+  for (size_t i = 0; ctx_params && i < n_listed; i++) cJSON_Delete(ctx_params[i]);
+  free(ctx_params);
+  tmpl_free(ts);
   if (jb) {
     jb->coords = coords;
     jb->seed = job_seed;
     jb->variant = sc->variant;
+    jb->warnings = warnings;
   } else {
     nc_coords_free(&coords);
+    cJSON_Delete(warnings);
   }
   /* The bytes its films will hold, for --max-result-bytes. */
   uint64_t reserve = 0;

@@ -64,7 +64,7 @@ bool svc_refresh_param_cache(resident *r) {
 }
 
 /* An unknown-key error with the closest keys, for problem+json. */
-static rsw_status key_error(svc_error *e, const scene *sc, const char *key, const rsw_err *err) {
+rsw_status svc_key_error(svc_error *e, const scene *sc, const char *key, const rsw_err *err) {
   e->err = *err;
   e->err.code = svc_request_code(err->code);
   snprintf(e->key, sizeof e->key, "%s", key);
@@ -131,7 +131,7 @@ rsw_status service_params_get(service *svc, const char *id, const char *match, c
     cJSON_AddArrayToObject(o, "params");
     st = RSW_OK;
   } else {
-    st = key_error(e, r->sc, match, &err);
+    st = svc_key_error(e, r->sc, match, &err);
   }
   pthread_mutex_unlock(&r->cache_lock);
   *revision_out = rev;
@@ -162,7 +162,7 @@ rsw_status svc_map_to_updates(const cJSON *j, const scene *sc, const char *where
     if (st) {
       for (size_t q = 0; q < i; q++) param_value_free(&u[q].value);
       free(u);
-      key_error(e, sc, k->string, &err);
+      svc_key_error(e, sc, k->string, &err);
       if (e->err.code == RSW_ERR_UNKNOWN_NAME) e->candidates[0][0] = '\0';
       return e->err.code;
     }
@@ -183,7 +183,7 @@ rsw_status svc_update_error(svc_error *e, const scene *sc, const param_update *u
   const char *key = err->where;
   for (size_t i = 0; i < n; i++)
     if (strcmp(u[i].key, err->where) == 0) key = u[i].key;
-  return key_error(e, sc, key, err);
+  return svc_key_error(e, sc, key, err);
 }
 
 rsw_status service_params_patch(service *svc, const char *id, const char *body, size_t len, int64_t if_match,

@@ -13,6 +13,7 @@
 #include "buf.h"
 #include "rsw_sha256.h"
 #include "service_internal.h"
+#include "templates.h"
 
 /* File references while loading: blobs by digest, plain names inside the
  * data root; every digest goes into the scene id. */
@@ -350,6 +351,27 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
     scene_error(e, svc, &err);
     return e->err.code;
   }
+  /* The document's parameter-map templates: every form and key checked
+   * now (422 naming /templates/KEY), rendered per context by jobs. They
+   * are part of the canonical text, hence of the id. */
+  cJSON *templates = NULL;
+  if (!is_xml && memmem(body, len, "\"templates\"", 11)) {
+    cJSON *doc = cJSON_ParseWithLength(body, len); /* parsed once already: NULL is out of memory */
+    templates = doc ? cJSON_DetachItemFromObjectCaseSensitive(doc, "templates") : NULL;
+    cJSON_Delete(doc);
+    tmpl_set *ts = NULL;
+    char tp[300];
+    snprintf(tp, sizeof tp, "%s#/templates", name ? name : "scene.json");
+    st = doc ? tmpl_compile(sc, templates, tp, NULL, NULL, &ts, e)
+             : svc_fail(e, RSW_ERR_NOMEM, "scene", "out of memory");
+    tmpl_free(ts);
+    if (st) {
+      cJSON_Delete(templates);
+      free(canon);
+      scene_free(sc);
+      return st;
+    }
+  }
   /* id = SHA-256("raysweep-scene-v1\n" format \n variant \n canonical \n
    * SHA-256 of the referenced files' digests). */
   unsigned char d[32];
@@ -357,6 +379,7 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
   if (!canon || !rsw_sha256_begin(&c)) {
     free(canon);
     scene_free(sc);
+    cJSON_Delete(templates);
     return svc_fail(e, RSW_ERR_NOMEM, "scene", "out of memory");
   }
   const char *vname = sc->variant == VARIANT_MONO ? "mono" : "rgb";
@@ -373,6 +396,7 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
   rsw_hex(d, 32, id);
   if (x && x->expect_id && strcmp(id, x->expect_id) != 0) {
     scene_free(sc);
+    cJSON_Delete(templates);
     return svc_fail(e, RSW_ERR_FILE, x->expect_id,
                     "the files scene %s refers to changed since it was stored (it now loads as %s)",
                     x->expect_id, id);
@@ -389,6 +413,7 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
     svc_free_updates(u, nu);
     if (pst) {
       scene_free(sc);
+      cJSON_Delete(templates);
       return pst;
     }
   }
@@ -396,6 +421,7 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
     rsw_status sst = svc_state_scene_save(svc, id, is_xml, variant, body, len, e);
     if (sst) {
       scene_free(sc);
+      cJSON_Delete(templates);
       return sst;
     }
   }
@@ -407,6 +433,7 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
     r->last_used = ++svc->use_clock;
     pthread_mutex_unlock(&svc->lock);
     scene_free(sc);
+    cJSON_Delete(templates);
     *created = false;
     *out = r;
     return RSW_OK;
@@ -417,10 +444,12 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
     pthread_mutex_unlock(&svc->lock);
     free(r);
     scene_free(sc);
+    cJSON_Delete(templates);
     return svc_fail(e, RSW_ERR_NOMEM, "scene", "out of memory");
   }
   memcpy(r->id, id, 65);
   r->sc = sc;
+  r->templates = templates;
   r->bytes = bytes;
   r->last_used = ++svc->use_clock;
   r->pinned = x && x->pinned;

@@ -237,6 +237,7 @@ void svc_resident_free(resident *r) {
   scene_free(r->sc);
   cJSON_Delete(r->base_params);
   cJSON_Delete(r->patches);
+  cJSON_Delete(r->templates);
   free(r->src);
   free(r->src_root);
   pthread_cond_destroy(&r->cond);

@@ -77,6 +77,9 @@ typedef struct resident {
    * and updates of it are refused until it is deleted and posted again
    * (r->lock). */
   bool broken;
+  /* The JSON document's top-level "templates" (parameter-map templates,
+   * templates.h), checked at load; NULL when none. Fixed at load. */
+  cJSON *templates;
 } resident;
 
 /* One render of a job: a (context, sensor) pair. */
@@ -140,6 +143,10 @@ typedef struct job {
   nc_coords coords;
   uint64_t seed;
   rsw_variant variant;
+  /* The sweep's warnings (templates.h tmpl_sweep_warnings: a coordinate
+   * or the wavelength that nothing depends on), a JSON array; NULL when
+   * none. In the job's answers, its record and its dataset. */
+  cJSON *warnings;
 } job;
 
 struct service {
@@ -258,6 +265,9 @@ rsw_status svc_map_to_updates(const cJSON *j, const scene *sc, const char *where
 void svc_free_updates(param_update *u, size_t n);
 rsw_status svc_update_error(svc_error *e, const scene *sc, const param_update *u, size_t n,
                             const rsw_err *err);
+/* err (from params_lookup and the like) about key into e, with the
+ * closest keys when it is unknown (did-you-mean); returns the code. */
+rsw_status svc_key_error(svc_error *e, const scene *sc, const char *key, const rsw_err *err);
 /* The bytes a resident scene holds (metrics.c). */
 size_t svc_scene_bytes(const scene *sc);
 resident *svc_find_scene_locked(service *svc, const char *id); /* svc->lock held */

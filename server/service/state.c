@@ -596,6 +596,7 @@ void svc_state_job_saved(service *svc, const job *j, const char *body, size_t le
   char dh[65];
   rsw_hex(j->body_digest, 32, dh);
   cJSON_AddStringToObject(h, "body_sha256", dh);
+  if (j->warnings) cJSON_AddItemToObject(h, "warnings", cJSON_Duplicate(j->warnings, 1));
   char *hs = svc_print_json(h, svc_json_mark());
   char p[4200];
   state_path(svc, p, sizeof p, "jobs/%s.req", j->id);
@@ -692,6 +693,7 @@ typedef struct req_header {
   char idem[256];
   bool has_idem;
   unsigned char digest[32];
+  cJSON *warnings; /* the job's warnings (templates.h), owned; NULL when none */
 } req_header;
 
 static bool parse_req(const char *text, size_t n, req_header *h, size_t *body_off) {
@@ -722,6 +724,8 @@ static bool parse_req(const char *text, size_t n, req_header *h, size_t *body_of
         h->digest[i] = (unsigned char)v;
       }
     *body_off = (size_t)(nl + 1 - text);
+    const cJSON *w = cJSON_GetObjectItemCaseSensitive(o, "warnings");
+    if (cJSON_IsArray(w)) h->warnings = cJSON_DetachItemViaPointer(o, (cJSON *)w);
   }
   cJSON_Delete(o);
   return ok;
@@ -738,6 +742,7 @@ static job *new_terminal_job(service *svc, const req_header *h) {
   svc_iso_time(h->created, j->created_iso);
   memcpy(j->body_digest, h->digest, 32);
   if (h->has_idem) j->idem_key = strdup(h->idem);
+  if (h->warnings) j->warnings = cJSON_Duplicate(h->warnings, 1);
   j->t_created = j->t_finished = svc_now();
   (void)svc;
   return j;
@@ -969,6 +974,7 @@ void svc_state_restore(service *svc) {
     else
       restore_resume(svc, &h, text + off, len - off);
     cJSON_Delete(done);
+    cJSON_Delete(h.warnings);
     free(text);
     restored++;
   }

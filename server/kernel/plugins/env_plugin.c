@@ -322,6 +322,12 @@ static rsw_status adapter_create(loader *ld, node *n, object **out) {
   return RSW_OK;
 }
 
+/* A plugin's emission may depend on the wavelength: assumed so. */
+static bool adapter_spectral(const object *o) {
+  (void)o;
+  return true;
+}
+
 static rsw_status adapter_prepare(object *o, const render_ctx *rc, rsw_err *err) {
   env_adapter *a = (env_adapter *)o;
   atomic_store(&a->failures, 0);
@@ -561,7 +567,8 @@ static rsw_status load_one(const char *path, rsw_err *err) {
                      .prepare = adapter_prepare,
                      .ops = &adapter_ops,
                      .traverse = adapter_traverse,
-                     .parameters_changed = adapter_parameters_changed};
+                     .parameters_changed = adapter_parameters_changed,
+                     .spectral = adapter_spectral};
   loaded_plugin **grown = realloc(g_loaded, (g_n_loaded + 1) * sizeof *grown);
   if (!grown) {
     unload_one(lp);

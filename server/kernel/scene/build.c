@@ -984,6 +984,14 @@ rsw_status scene_prepare(scene *s, const render_ctx *rc, rsw_err *err) {
   return RSW_OK;
 }
 
+bool scene_wavelength_dependent(const scene *s) {
+  for (size_t i = 0; i < s->n_objects; i++) {
+    const object *o = s->objects[i];
+    if (o->plugin && o->plugin->spectral && o->plugin->spectral(o)) return true;
+  }
+  return false;
+}
+
 sensor *scene_find_sensor(const scene *s, const char *id, size_t *index_out) {
   for (size_t i = 0; i < s->n_sensors; i++)
     if (strcmp(s->sensors[i]->base.id, id) == 0) {

@@ -833,6 +833,17 @@ rsw_status scene_read_json_limited(const char *text, size_t len, const char *sou
       goto out;
     }
   }
+  /* "templates" (parameter-map templates, docs/experiments.md) belong to
+   * the service that renders them per context, not to the scene graph:
+   * an object, read by the daemon from the document itself. */
+  const cJSON *tmpl = cJSON_GetObjectItemCaseSensitive(doc, "templates");
+  if (tmpl && !cJSON_IsObject(tmpl)) {
+    char w[600];
+    ptr_join(w, sizeof w, where, "templates");
+    st = fail(&c, RSW_ERR_TYPE, w, "\"templates\" must be an object {parameter key: template}");
+    goto out;
+  }
+  cJSON *detached_tmpl = tmpl ? cJSON_DetachItemViaPointer(doc, (cJSON *)tmpl) : NULL;
   /* Build the root without the "variant" key: detach it temporarily. */
   cJSON *detached = var ? cJSON_DetachItemViaPointer(doc, (cJSON *)var) : NULL;
   if (cJSON_GetObjectItemCaseSensitive(doc, "id")) {
@@ -843,6 +854,7 @@ rsw_status scene_read_json_limited(const char *text, size_t len, const char *sou
     st = read_object(&c, doc, NULL, where, 0, &root);
   }
   cJSON_Delete(detached);
+  cJSON_Delete(detached_tmpl);
   if (st) goto out;
   free(root->id);
   root->id = NULL;

@@ -38,6 +38,11 @@ rsw_status scene_refresh_bounds(scene *s, rsw_err *err);
 
 /* Evaluate every object's wavelength-dependent state for a render. */
 rsw_status scene_prepare(scene *s, const render_ctx *rc, rsw_err *err);
+/* Whether some object's state depends on the render's wavelength (its
+ * plugin's spectral hook says so): a wavelength sweep of a scene where
+ * none does renders the same thing at every wavelength. Reads the scene
+ * only (not thread-safe with an update of it). */
+bool scene_wavelength_dependent(const scene *s);
 
 /* Sensor by id, or by decimal index when `id` is all digits. NULL if none. */
 sensor *scene_find_sensor(const scene *s, const char *id, size_t *index_out);

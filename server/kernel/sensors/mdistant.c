@@ -10,10 +10,12 @@
  * Sub-sensor i's frame is look_at(0, d_i, up) with up the FIRST vector of
  * coordinate_system(d_i); it only orients the no-target disk, which is thus
  * orthogonal to d_i. Targets and ray_offset as hdistant (default offset R
- * without a target, 2R with one). There is no to_world. */
+ * without a target, 2R with one). There is no to_world; the parameter
+ * `directions` (3 N numbers) sets the directions, frames following. */
 #include <math.h>
 #include <stdlib.h>
 
+#include "../scene/params.h"
 #include "../simd/simd.h"
 #include "sensor_common.h"
 
@@ -132,7 +134,45 @@ static void mdistant_destroy(object *o) {
 
 static rsw_status mdistant_create(loader *ld, node *n, object **out);
 
+/* Sub-sensor i's frame from its direction (normalised in place). False
+ * when the direction is the zero vector or no frame can be built. */
+static bool mdistant_frame(mdistant *m, size_t i) {
+  if (!(v3_len(m->d[i]) > 0.0)) return false;
+  m->d[i] = v3_norm(m->d[i]);
+  vec3 up, unused;
+  coordinate_system(m->d[i], &up, &unused);
+  return xf_look_at(v3(0, 0, 0), m->d[i], up, &m->frames[i]);
+}
+
+/* No direction of an update may be the zero vector (or too short to
+ * normalise): checked before anything is written. */
+static rsw_status mdistant_check_directions(const object *o, const double *v, size_t n, const char *key,
+                                            rsw_err *err) {
+  (void)o;
+  for (size_t i = 0; i + 2 < n; i += 3)
+    if (!(v3_len(v3(v[i], v[i + 1], v[i + 2])) > 0.0))
+      return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': direction %zu is the zero vector", key, i / 3);
+  return RSW_OK;
+}
+
+/* `directions`: the N directions as 3 N numbers (the film's width fixes
+ * N), the key viewing-angle templates write (docs/experiments.md); a
+ * spectral update: the frames follow (parameters_changed). Eradiate sets
+ * them from angles the same way (MultiDistantMeasure). */
+static void mdistant_traverse(object *o, param_visitor *v) {
+  mdistant *m = (mdistant *)o;
+  pv_buffer(v, "directions", &m->d[0].x, 3 * m->n, UPDATE_SPECTRAL, -INFINITY, INFINITY,
+            mdistant_check_directions);
+}
+
+static void mdistant_parameters_changed(object *o) {
+  mdistant *m = (mdistant *)o;
+  for (size_t i = 0; i < m->n; i++) (void)mdistant_frame(m, i); /* checked non-zero */
+}
+
 const plugin plugin_mdistant = {
+    .traverse = mdistant_traverse,
+    .parameters_changed = mdistant_parameters_changed,
     .name = "mdistant",
     .cls = CLS_SENSOR,
     .create = mdistant_create,
@@ -157,10 +197,7 @@ static rsw_status mdistant_read(loader *ld, node *n, mdistant *m) {
   for (size_t i = 0; i < m->n; i++) {
     if (!(v3_len(m->d[i]) > 0.0))
       return ld_fail(ld, n, "directions", RSW_ERR_INVALID, "mdistant: direction %zu is the zero vector", i);
-    m->d[i] = v3_norm(m->d[i]);
-    vec3 up, unused;
-    coordinate_system(m->d[i], &up, &unused);
-    if (!xf_look_at(v3(0, 0, 0), m->d[i], up, &m->frames[i]))
+    if (!mdistant_frame(m, i))
       return ld_fail(ld, n, "directions", RSW_ERR_INVALID, "mdistant: cannot build a frame for direction %zu",
                      i);
   }

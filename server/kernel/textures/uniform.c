@@ -42,6 +42,14 @@ static rsw_status uniform_prepare(object *o, const render_ctx *rc, rsw_err *err)
 static bool spectrum_copy(spectrum *dst, const spectrum *src);
 static rsw_status uniform_create(loader *ld, node *n, object **out);
 
+/* A table whose values are not all equal. */
+static bool uniform_spectral(const object *o) {
+  const spectrum *s = &((const uniform_tex *)o)->spec;
+  for (size_t i = 1; s->kind == SPEC_TABLE && i < s->n; i++)
+    if (s->val[i] != s->val[0]) return true;
+  return false;
+}
+
 /* Mitsuba's uniform spectrum reports its value as `value`. */
 static void uniform_traverse(object *o, param_visitor *v) {
   pv_spectrum(v, "value", (texture *)o);
@@ -55,6 +63,7 @@ const plugin plugin_uniform = {
     .prepare = uniform_prepare,
     .ops = &uniform_ops,
     .traverse = uniform_traverse,
+    .spectral = uniform_spectral,
 };
 
 static bool spectrum_copy(spectrum *dst, const spectrum *src) {

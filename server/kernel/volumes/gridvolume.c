@@ -199,6 +199,12 @@ static void gridvolume_parameters_changed(object *o) {
 }
 
 /* The slot's range (lo, hi of the volume) travels with the key. */
+/* A grid with a wavelength axis (values along it are not compared: the
+ * axis is there to be read). */
+static bool gridvolume_spectral(const object *o) {
+  return ((const gridvolume *)o)->n_wl > 1;
+}
+
 static void gridvolume_traverse(object *o, param_visitor *v) {
   gridvolume *g = (gridvolume *)o;
   double hi = isnan(g->fixed_max) ? g->base.hi : fmin(g->base.hi, g->fixed_max);
@@ -481,5 +487,6 @@ const plugin plugin_gridvolume = {
     .prepare = gridvolume_prepare,
     .ops = &gridvolume_ops,
     .traverse = gridvolume_traverse,
+    .spectral = gridvolume_spectral,
     .parameters_changed = gridvolume_parameters_changed,
 };
