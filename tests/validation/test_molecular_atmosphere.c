@@ -549,6 +549,35 @@ static void test_xml(void) {
   if (st == RSW_OK) scene_free(x);
 }
 
+/* ---- the no-op sweep warning: the scene says whether it depends on wavelength */
+
+static void test_wavelength_dependent(void) {
+  static const struct {
+    const char *extra;
+    bool spectral;
+  } cases[] = {
+      {"", true},
+      {"\"has_absorption\": false", true},
+      {"\"has_scattering\": false", true},
+      {"\"has_absorption\": false, \"has_scattering\": false, \"particle_layers\": [{\"bottom\": 0, "
+       "\"top\": 2000, \"tau_ref\": 0.2, \"angstrom\": 1.3}]",
+       true},
+      {"\"has_absorption\": false, \"has_scattering\": false, \"particle_layers\": [{\"bottom\": 0, "
+       "\"top\": 2000, \"tau_ref\": 0.2, \"angstrom\": 0}]",
+       false},
+  };
+  for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+    char *med = us_standard(12, cases[i].extra);
+    scene *s = atmo_scene(med, "{\"type\": \"constant\"}", METER_UP, NULL);
+    free(med);
+    REQUIRE(s, "case %zu", i);
+    CHECK(scene_wavelength_dependent(s) == cases[i].spectral,
+          "case %zu (%s): wavelength dependent %d, want %d", i, cases[i].extra, scene_wavelength_dependent(s),
+          cases[i].spectral);
+    scene_free(s);
+  }
+}
+
 int main(void) {
   RSW_TEST_RUN(test_rayleigh_bodhaine);
   RSW_TEST_RUN(test_ozone_column);
@@ -559,5 +588,6 @@ int main(void) {
   RSW_TEST_RUN(test_solar_irradiance);
   RSW_TEST_RUN(test_refusals);
   RSW_TEST_RUN(test_xml);
+  RSW_TEST_RUN(test_wavelength_dependent);
   RSW_TEST_END("test_molecular_atmosphere");
 }

@@ -763,6 +763,20 @@ static void ma_traverse(object *o, param_visitor *v) {
   }
 }
 
+/* Whether a wavelength sweep changes the medium (the no-op sweep warning,
+ * scene_wavelength_dependent): Rayleigh and ozone always do; particles do
+ * when their extinction follows an Angstrom law or a spectrum, or their
+ * albedo is a spectrum. (A user sigma_a volume answers for itself.) */
+static bool ma_spectral(const object *o) {
+  const mol_atmo *m = (const mol_atmo *)o;
+  if (m->has_scattering || m->has_absorption) return true;
+  for (size_t i = 0; i < m->np; i++) {
+    const ma_particle *p = &m->p[i];
+    if ((p->has_angstrom && p->angstrom != 0.0) || p->ext.spec || p->ssa.spec) return true;
+  }
+  return false;
+}
+
 const plugin plugin_molecular_atmosphere = {.name = "molecular_atmosphere",
                                             .cls = CLS_MEDIUM,
                                             .create = ma_create,
@@ -770,7 +784,8 @@ const plugin plugin_molecular_atmosphere = {.name = "molecular_atmosphere",
                                             .prepare = ma_prepare,
                                             .ops = &layered_medium_ops,
                                             .traverse = ma_traverse,
-                                            .parameters_changed = ma_parameters_changed};
+                                            .parameters_changed = ma_parameters_changed,
+                                            .spectral = ma_spectral};
 
 /* ---- what tests and benches read --------------------------------------------- */
 
