@@ -150,6 +150,7 @@ static void job_free(job *j) {
   free(j->context_remaining);
   free(j->idem_key);
   nc_coords_free(&j->coords);
+  bands_free(j->bands);
   free(j);
 }
 
@@ -451,6 +452,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   uint64_t job_seed = 0;
   unsigned quantities = 0;
   bool variance = false;
+  band_plan *bands = NULL; /* bands.c */
   for (const cJSON *k = !st ? req->child : NULL; k && !st; k = k->next) {
     if (strcmp(k->string, "contexts") == 0)
       contexts = k;
@@ -465,11 +467,13 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       st = svc_parse_quantities(k, "/quantities", &quantities, e);
     } else if (strcmp(k->string, "variance") == 0) {
       st = svc_parse_variance(k, "/variance", &variance, e);
+    } else if (strcmp(k->string, "bands") == 0) {
+      st = bands_parse(k, "/bands", &bands, e);
     } else {
       char w[300];
       snprintf(w, sizeof w, "/%s", k->string);
       st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, w,
-                    "unknown field '%s' (expected contexts, defaults, params, seed, quantities, variance)",
+                    "unknown field '%s' (expected contexts, defaults, params, seed, quantities, variance, bands)",
                     k->string);
     }
   }
@@ -491,6 +495,9 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
    * holds it for its whole duration). */
   scene *sc = r->sc;
   if (!st) st = check_params(sc, jparams, "/params", e);
+  if (!st && bands && sc->variant != VARIANT_MONO)
+    st = svc_fail(e, RSW_ERR_INVALID, "/bands", "bands apply to mono scenes; this scene is rgb");
+  size_t n_nodes = bands ? bands->n_wl : 1;
   /* Defaults. */
   uint64_t d_spp = 0;
   double d_wl = 0;
@@ -507,6 +514,9 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
                       "wavelength must be a positive finite number");
       else
         d_wl = w->valuedouble;
+      if (!st && bands)
+        st = svc_fail(e, RSW_ERR_INVALID, "/defaults/wavelength",
+                      "a job with bands renders each band's wavelengths: it takes no wavelength");
     }
     d_sensors = cJSON_GetObjectItemCaseSensitive(defaults, "sensors");
     for (const cJSON *k = defaults->child; k && !st; k = k->next)
@@ -580,7 +590,18 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       if (st) break;
       if (!cparams) job_params_ok = true;
     }
-    if (sc->variant == VARIANT_MONO) {
+    if (bands) {
+      /* No wavelength of its own, and the scene's tables must cover
+       * every band's support. */
+      st = svc_bands_check_context(bands, c, ptr, e);
+      for (size_t b = 0; !st && b < bands->n; b++) {
+        char p6[80];
+        snprintf(p6, sizeof p6, "/bands/%zu/srf", b);
+        st = check_wavelength(sc, ranges, n_ranges, jparams, cparams, bands->b[b].lo, p6, e);
+        if (!st) st = check_wavelength(sc, ranges, n_ranges, jparams, cparams, bands->b[b].hi, p6, e);
+      }
+      if (st) break;
+    } else if (sc->variant == VARIANT_MONO) {
       char p5[80];
       snprintf(p5, sizeof p5, w ? "%s/wavelength" : d_wl > 0 ? "/defaults/wavelength" : "%s", ptr);
       st = check_wavelength(sc, ranges, n_ranges, jparams, cparams,
@@ -634,7 +655,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
           st = svc_check_film(svc, sc, si, quantities, variance, ep, e);
           film_ok[si] = !st;
         }
-        n_items++;
+        n_items += n_nodes;
       }
     } else {
       if (!sc->n_sensors) st = svc_fail(e, RSW_ERR_INVALID, ptr, "the scene has no sensor");
@@ -643,7 +664,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
           st = svc_check_film(svc, sc, si, quantities, variance, ptr, e);
           film_ok[si] = !st;
         }
-      n_items += sc->n_sensors;
+      n_items += sc->n_sensors * n_nodes;
     }
     if (!st && n_items > SVC_MAX_JOB_RENDERS)
       st = svc_fail(e, RSW_ERR_LIMIT, ptr, "the job's renders (contexts times sensors) exceed %d",
@@ -688,17 +709,23 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     if (!has_spp) spp = d_spp;
     get_uint(c, "seed", 9007199254740991.0, &seed, &has_seed, "", e, &st);
     size_t ns = sens ? (size_t)cJSON_GetArraySize(sens) : sc->n_sensors;
-    jb->context_remaining[ci] = ns;
-    for (size_t s = 0; s < ns && !st; s++, k++) {
+    jb->context_remaining[ci] = ns * n_nodes;
+    for (size_t s = 0; s < ns * n_nodes && !st; s++, k++) {
       render_item *it = &jb->items[k];
+      size_t nk = s / ns; /* node-major within the context */
       snprintf(it->context, sizeof it->context, "%s", id->valuestring);
       it->context_index = ci;
-      const char *sname = sens ? cJSON_GetArrayItem(sens, (int)s)->valuestring : sc->sensors[s]->base.id;
+      const char *sname = sens ? cJSON_GetArrayItem(sens, (int)(s % ns))->valuestring : sc->sensors[s % ns]->base.id;
       svc_find_sensor(sc, sname, &it->sensor_index);
       snprintf(it->sensor, sizeof it->sensor, "%s", sc->sensors[it->sensor_index]->base.id);
       it->wavelength = w ? w->valuedouble : d_wl;
       it->spp = (uint32_t)spp;
       it->seed = has_seed ? seed : default_seed(job_seed, it->context, it->sensor);
+      if (bands) { /* node renders: independent, each its own seed */
+        it->node = nk + 1;
+        it->wavelength = bands->wl[nk];
+        it->seed = bands_node_seed(it->seed, it->wavelength);
+      }
       it->quantities = quantities;
       it->variance = variance;
       /* Refused up front (the message names the sensor and spp) rather
@@ -727,8 +754,10 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     jb->coords = coords;
     jb->seed = job_seed;
     jb->variant = sc->variant;
+    jb->bands = bands;
   } else {
     nc_coords_free(&coords);
+    bands_free(bands);
   }
   /* The bytes its films will hold, for --max-result-bytes. */
   uint64_t reserve = 0;
@@ -1081,6 +1110,7 @@ rsw_status service_job_results(service *svc, const char *id, char **json_out, sv
     cJSON_AddStringToObject(x, "sensor", it->sensor);
     cJSON_AddStringToObject(x, "state", state_names[it->state]);
     if (it->wavelength > 0) cJSON_AddNumberToObject(x, "wavelength", it->wavelength);
+    if (it->node) cJSON_AddNumberToObject(x, "node", (double)(it->node - 1));
     cJSON_AddNumberToObject(x, "seed", (double)it->seed);
     if (it->has_film || it->on_disk) {
       cJSON_AddNumberToObject(x, "spp", it->film.img.spp);
@@ -1091,7 +1121,11 @@ rsw_status service_job_results(service *svc, const char *id, char **json_out, sv
       int nc = film_image_all_channels(&it->film.img, names);
       for (int c = 0; c < nc; c++) svc_json_push(ch, cJSON_CreateString(names[c]));
       char href[512];
-      snprintf(href, sizeof href, "/v1/jobs/%s/results/%s/%s", j->id, it->context, it->sensor);
+      if (it->node)
+        snprintf(href, sizeof href, "/v1/jobs/%s/results/%s/%s?node=%zu", j->id, it->context, it->sensor,
+                 it->node - 1);
+      else
+        snprintf(href, sizeof href, "/v1/jobs/%s/results/%s/%s", j->id, it->context, it->sensor);
       cJSON_AddStringToObject(x, "href", href);
       if (it->film.img.unresolved_rays)
         cJSON_AddNumberToObject(x, "unresolved_rays", (double)it->film.img.unresolved_rays);
@@ -1099,6 +1133,7 @@ rsw_status service_job_results(service *svc, const char *id, char **json_out, sv
     if (it->error[0]) cJSON_AddStringToObject(x, "error", it->error);
     svc_json_push(a, x);
   }
+  if (j->bands) svc_bands_results_json(j, o);
   pthread_mutex_unlock(&svc->lock);
   return svc_json_out(json_out, o, jm, e);
 }
@@ -1111,6 +1146,13 @@ rsw_status service_job_result(service *svc, const char *id, const char *context,
   if (!j) {
     pthread_mutex_unlock(&svc->lock);
     return no_job(e, id);
+  }
+  if (j->bands) {
+    pthread_mutex_unlock(&svc->lock);
+    return svc_fail(e, RSW_ERR_INVALID, "band",
+                    "job %s has bands: ask for a band's film (?band=ID) or a node's (?node=K); its results "
+                    "list both",
+                    id);
   }
   for (size_t i = 0; i < j->n_items; i++) {
     const render_item *it = &j->items[i];
@@ -1190,7 +1232,7 @@ rsw_status service_job_result_npy_fd(service *svc, const char *id, const char *c
   char jid[40];
   size_t k = SIZE_MAX;
   snprintf(jid, sizeof jid, "%s", j->id);
-  for (size_t i = 0; i < j->n_items; i++) {
+  for (size_t i = 0; i < j->n_items && !j->bands; i++) { /* bands: service_job_band_result */
     const render_item *it = &j->items[i];
     if (strcmp(it->context, context) != 0 || strcmp(it->sensor, sensor_id) != 0) continue;
     if (it->on_disk) k = i;

@@ -11,6 +11,7 @@
 
 #include "../kernel/scene/params.h"
 #include "../kernel/scene/scene.h"
+#include "bands.h"
 #include "dataset_nc.h"
 #include "service.h"
 
@@ -94,6 +95,7 @@ typedef struct render_item {
   char sensor[256];
   size_t sensor_index;
   double wavelength;
+  size_t node; /* jobs with bands: 1 + the index of wavelength in job.bands->wl; 0 otherwise */
   uint32_t spp;
   uint64_t seed;
   unsigned quantities; /* RENDER_Q_*: the job's "quantities" */
@@ -140,6 +142,9 @@ typedef struct job {
   nc_coords coords;
   uint64_t seed;
   rsw_variant variant;
+  /* The job's bands (bands.c), NULL without: each context renders once
+   * per node wavelength, items context-major then node then sensor. */
+  band_plan *bands;
 } job;
 
 struct service {
@@ -366,5 +371,11 @@ void svc_job_push_event(service *svc, job *j, cJSON *data, bool end); /* svc->lo
 job *svc_find_job_locked(service *svc, const char *id);
 /* Bytes a film holds in memory (data and angles). */
 uint64_t svc_film_mem(const svc_film *f);
+/* Bands in jobs (bands.c): the checks of a job with bands at submission
+ * of context c at ptr: it may carry no wavelength, in itself or as a
+ * coord. */
+rsw_status svc_bands_check_context(const band_plan *p, const cJSON *c, const char *ptr, svc_error *e);
+/* The "bands" member of a band job's results (svc->lock held). */
+void svc_bands_results_json(const job *j, cJSON *o);
 
 #endif

@@ -391,6 +391,12 @@ rsw_status svc_state_film_write(service *svc, const job *j, size_t k, const svc_
       cJSON_AddItemToArray(ir, cJSON_CreateString(num));
     }
   }
+  if (im->has_sun) {
+    snprintf(num, sizeof num, "%.17g", im->sun_zenith);
+    cJSON_AddStringToObject(m, "sun_zenith", num);
+    snprintf(num, sizeof num, "%.17g", im->sun_azimuth);
+    cJSON_AddStringToObject(m, "sun_azimuth", num);
+  }
   char *ms = svc_print_json(m, svc_json_mark());
   if (!ms) return svc_fail(e, RSW_ERR_NOMEM, "--state-dir", "out of memory");
   char head[256];
@@ -521,6 +527,13 @@ bool svc_state_film_header(service *svc, const char *job_id, size_t k, svc_film 
     int ki = 0;
     for (const cJSON *y = ir->child; y && ki < 4; y = y->next, ki++)
       out->img.irradiance[ki] = cJSON_IsString(y) ? strtod(y->valuestring, NULL) : NAN;
+  }
+  const cJSON *sz = cJSON_GetObjectItemCaseSensitive(m, "sun_zenith");
+  const cJSON *sa = cJSON_GetObjectItemCaseSensitive(m, "sun_azimuth");
+  if (cJSON_IsString(sz) && cJSON_IsString(sa)) {
+    out->img.has_sun = true;
+    out->img.sun_zenith = strtod(sz->valuestring, NULL);
+    out->img.sun_azimuth = strtod(sa->valuestring, NULL);
   }
   uint64_t px = (uint64_t)(out->img.width > 0 ? out->img.width : 0) *
                 (uint64_t)(out->img.height > 0 ? out->img.height : 0);
