@@ -395,23 +395,24 @@ rsw_status rsw_dataset_write(rsw_dataset *d, const char *path) {
     ds_film *f = &d->films[i];
     f->vars[0] = (nc_var){"radiance", f->data};
     for (int k = 0; k < f->n_planes; k++) f->vars[1 + k] = (nc_var){f->plane_names[k], f->plane_data[k]};
-    films[i] = (nc_film){.context = f->context,
-                         .sensor = f->sensor,
-                         .width = f->width,
-                         .height = f->height,
-                         .channels = f->channels,
-                         .channel_names = (const char *const *)f->names,
-                         .spp = f->spp,
-                         .seed = f->seed,
-                         .unresolved_rays = f->unresolved,
-                         .angles = f->angles,
-                         .vars = f->vars,
-                         .n_vars = 1 + (size_t)f->n_planes,
-                         .has_irradiance = f->has_irradiance,
-                         .irradiance = {f->irradiance[0], f->irradiance[1], f->irradiance[2], f->irradiance[3]},
-                         .has_sun = f->has_sun,
-                         .sun_zenith = f->sun_zenith,
-                         .sun_azimuth = f->sun_azimuth};
+    films[i] =
+        (nc_film){.context = f->context,
+                  .sensor = f->sensor,
+                  .width = f->width,
+                  .height = f->height,
+                  .channels = f->channels,
+                  .channel_names = (const char *const *)f->names,
+                  .spp = f->spp,
+                  .seed = f->seed,
+                  .unresolved_rays = f->unresolved,
+                  .angles = f->angles,
+                  .vars = f->vars,
+                  .n_vars = 1 + (size_t)f->n_planes,
+                  .has_irradiance = f->has_irradiance,
+                  .irradiance = {f->irradiance[0], f->irradiance[1], f->irradiance[2], f->irradiance[3]},
+                  .has_sun = f->has_sun,
+                  .sun_zenith = f->sun_zenith,
+                  .sun_azimuth = f->sun_azimuth};
   }
   if (!s) {
     nc_dataset ds = {.size = sizeof ds,

@@ -263,7 +263,8 @@ rsw_status http_film_json(const svc_film *f, char **bytes_out, size_t *len_out, 
   }
   /* One directional emitter: its zenith and azimuth (Eradiate's
    * convention), the dataset's sza and saa. */
-  if (im->has_sun) http_buf_printf(&b, ",\"sun_zenith_deg\":%.9g,\"sun_azimuth_deg\":%.9g", im->sun_zenith, im->sun_azimuth);
+  if (im->has_sun)
+    http_buf_printf(&b, ",\"sun_zenith_deg\":%.9g,\"sun_azimuth_deg\":%.9g", im->sun_zenith, im->sun_azimuth);
   http_buf_puts(&b, "}}");
   free(owned);
   size_t len = 0;

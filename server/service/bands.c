@@ -187,7 +187,8 @@ static rsw_status band_rule(const srf_in *s, int n, band *b, const char *ptr, sv
     size_t panels = s->kind == 1 ? 32 : s->tn - 1;
     size_t M = panels * (size_t)m;
     double *t = malloc(M * sizeof *t), *mass = malloc(M * sizeof *mass);
-    double gx[BAND_MAX_NODES + 1 > 24 ? BAND_MAX_NODES + 1 : 24], gw[BAND_MAX_NODES + 1 > 24 ? BAND_MAX_NODES + 1 : 24];
+    double gx[BAND_MAX_NODES + 1 > 24 ? BAND_MAX_NODES + 1 : 24],
+        gw[BAND_MAX_NODES + 1 > 24 ? BAND_MAX_NODES + 1 : 24];
     if (!t || !mass) {
       free(t), free(mass);
       return svc_fail(e, RSW_ERR_NOMEM, ptr, "out of memory");
@@ -270,8 +271,8 @@ static rsw_status only_members(const cJSON *o, const char *const *names, const c
       for (const char *const *n = names; *n; n++)
         snprintf(list + strlen(list), sizeof list - strlen(list), "%s%s", n == names ? "" : ", ", *n);
       snprintf(w, sizeof w, "%s/%s", ptr, k->string);
-      return svc_fail(e, RSW_ERR_UNUSED_PROPERTY, w, "unknown field '%s' in %s (expected %s)", k->string, what,
-                      list);
+      return svc_fail(e, RSW_ERR_UNUSED_PROPERTY, w, "unknown field '%s' in %s (expected %s)", k->string,
+                      what, list);
     }
   }
   return RSW_OK;
@@ -287,8 +288,8 @@ static rsw_status get_list(const cJSON *o, const char *name, const char *ptr, do
   if (!cJSON_IsArray(a)) return svc_fail(e, RSW_ERR_TYPE, w, "\"%s\" must be a list of numbers", name);
   size_t len = (size_t)cJSON_GetArraySize(a);
   if (len < 2 || len > BAND_MAX_TABLE)
-    return svc_fail(e, RSW_ERR_INVALID, w, "a tabulated SRF needs 2 to %d samples (%zu given)", BAND_MAX_TABLE,
-                    len);
+    return svc_fail(e, RSW_ERR_INVALID, w, "a tabulated SRF needs 2 to %d samples (%zu given)",
+                    BAND_MAX_TABLE, len);
   double *v = malloc(len * sizeof *v);
   if (!v) return svc_fail(e, RSW_ERR_NOMEM, w, "out of memory");
   size_t i = 0;
@@ -318,7 +319,8 @@ static rsw_status parse_band(const cJSON *o, const char *ptr, band *b, svc_error
   const cJSON *id = cJSON_GetObjectItemCaseSensitive(o, "id");
   snprintf(w, sizeof w, "%s/id", ptr);
   if (!cJSON_IsString(id) || !valid_band_id(id->valuestring))
-    return svc_fail(e, id ? RSW_ERR_INVALID : RSW_ERR_MISSING, w, "a band's \"id\" must match [A-Za-z0-9._-]{1,64}");
+    return svc_fail(e, id ? RSW_ERR_INVALID : RSW_ERR_MISSING, w,
+                    "a band's \"id\" must match [A-Za-z0-9._-]{1,64}");
   snprintf(b->id, sizeof b->id, "%s", id->valuestring);
   int n = 0;
   const cJSON *nodes = cJSON_GetObjectItemCaseSensitive(o, "nodes");
@@ -337,8 +339,9 @@ static rsw_status parse_band(const cJSON *o, const char *ptr, band *b, svc_error
   const cJSON *type = cJSON_GetObjectItemCaseSensitive(srf, "type");
   snprintf(w, sizeof w, "%s/type", sp);
   static const char *const types[] = {"uniform", "gaussian", "tabulated"};
-  static const char *const keys[3][4] = {
-      {"type", "wmin", "wmax", NULL}, {"type", "mean", "fwhm", NULL}, {"type", "wavelengths", "values", NULL}};
+  static const char *const keys[3][4] = {{"type", "wmin", "wmax", NULL},
+                                         {"type", "mean", "fwhm", NULL},
+                                         {"type", "wavelengths", "values", NULL}};
   srf_in s = {.kind = -1};
   for (int k = 0; k < 3 && cJSON_IsString(type); k++)
     if (strcmp(type->valuestring, types[k]) == 0) s.kind = k;
@@ -351,7 +354,8 @@ static rsw_status parse_band(const cJSON *o, const char *ptr, band *b, svc_error
   double width = 0;
   double *twl = NULL, *tval = NULL;
   if (s.kind == 0) {
-    if ((st = get_num(srf, "wmin", true, sp, &s.wmin, e)) || (st = get_num(srf, "wmax", true, sp, &s.wmax, e)))
+    if ((st = get_num(srf, "wmin", true, sp, &s.wmin, e)) ||
+        (st = get_num(srf, "wmax", true, sp, &s.wmax, e)))
       return st;
     if (!(s.wmax > s.wmin)) {
       snprintf(w, sizeof w, "%s/wmax", sp);
@@ -441,7 +445,8 @@ rsw_status bands_parse(const cJSON *v, const char *ptr, band_plan **out, svc_err
   if (!cJSON_IsArray(v) || !v->child)
     return svc_fail(e, RSW_ERR_TYPE, ptr, "\"bands\" must be a non-empty list of {\"id\", \"srf\"}");
   size_t n = (size_t)cJSON_GetArraySize(v);
-  if (n > BANDS_MAX) return svc_fail(e, RSW_ERR_LIMIT, ptr, "%zu bands; a job may have at most %d", n, BANDS_MAX);
+  if (n > BANDS_MAX)
+    return svc_fail(e, RSW_ERR_LIMIT, ptr, "%zu bands; a job may have at most %d", n, BANDS_MAX);
   band_plan *p = calloc(1, sizeof *p);
   if (p) p->b = calloc(n, sizeof *p->b);
   if (p && p->b) p->wl = malloc(n * BAND_MAX_NODES * sizeof *p->wl);
@@ -580,8 +585,9 @@ rsw_status svc_bands_check_context(const band_plan *p, const cJSON *c, const cha
   const cJSON *coords = cJSON_GetObjectItemCaseSensitive(c, "coords");
   if (cJSON_IsObject(coords) && cJSON_GetObjectItemCaseSensitive(coords, "wavelength")) {
     snprintf(w, sizeof w, "%s/coords/wavelength", ptr);
-    return svc_fail(e, RSW_ERR_INVALID, w,
-                    "a job with bands renders each band's wavelengths: its contexts take no wavelength coord");
+    return svc_fail(
+        e, RSW_ERR_INVALID, w,
+        "a job with bands renders each band's wavelengths: its contexts take no wavelength coord");
   }
   return RSW_OK;
 }
@@ -637,10 +643,10 @@ static rsw_status item_film_unlock(service *svc, job *j, size_t k, svc_film *out
     return svc_state_film_read(svc, &copy, k, out, e);
   }
   if (!it->has_film) {
-    rsw_status st = svc_fail(e, RSW_ERR_NOT_FOUND, it->context,
-                             "context '%s' sensor '%s' has no film at %g nm (%s)%s%s", it->context, it->sensor,
-                             it->wavelength, it->state == JOB_FAILED ? "failed" : "not rendered yet",
-                             it->error[0] ? ": " : "", it->error);
+    rsw_status st = svc_fail(
+        e, RSW_ERR_NOT_FOUND, it->context, "context '%s' sensor '%s' has no film at %g nm (%s)%s%s",
+        it->context, it->sensor, it->wavelength, it->state == JOB_FAILED ? "failed" : "not rendered yet",
+        it->error[0] ? ": " : "", it->error);
     pthread_mutex_unlock(&svc->lock);
     return st;
   }
@@ -675,8 +681,8 @@ rsw_status service_job_band_result(service *svc, const char *id, const char *con
     if (strcmp(j->items[i].context, context) == 0 && strcmp(j->items[i].sensor, sensor_id) == 0) first = i;
   if (first == SIZE_MAX) {
     pthread_mutex_unlock(&svc->lock);
-    return svc_fail(e, RSW_ERR_NOT_FOUND, context, "job %s has no result for context '%s' and sensor '%s'", id,
-                    context, sensor_id);
+    return svc_fail(e, RSW_ERR_NOT_FOUND, context, "job %s has no result for context '%s' and sensor '%s'",
+                    id, context, sensor_id);
   }
   /* Items are context-major, then node, then sensor: slot s of this
    * (context, sensor) is `stride` items after slot 0. */

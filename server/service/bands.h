@@ -26,13 +26,13 @@
 
 typedef struct band {
   char id[65];
-  const char *type;             /* "uniform", "gaussian", "tabulated" (static) */
-  double lo, hi;                /* the SRF's support (nm): where it is not 0 */
-  size_t n_nodes;               /* nodes of the rule */
-  double wl[BAND_MAX_NODES];    /* node wavelengths (nm), ascending */
-  double w[BAND_MAX_NODES];     /* weights (nm): Σ w = ∫ S dλ */
-  size_t slot[BAND_MAX_NODES];  /* each node's index in band_plan.wl */
-  double integral;              /* Σ w (nm) */
+  const char *type;            /* "uniform", "gaussian", "tabulated" (static) */
+  double lo, hi;               /* the SRF's support (nm): where it is not 0 */
+  size_t n_nodes;              /* nodes of the rule */
+  double wl[BAND_MAX_NODES];   /* node wavelengths (nm), ascending */
+  double w[BAND_MAX_NODES];    /* weights (nm): Σ w = ∫ S dλ */
+  size_t slot[BAND_MAX_NODES]; /* each node's index in band_plan.wl */
+  double integral;             /* Σ w (nm) */
 } band;
 
 /* A job's bands and the distinct node wavelengths they need, ascending. */

@@ -34,7 +34,8 @@ static size_t band_vars(const film_image *im, nc_var *out) {
   out[n++] = (nc_var){"radiance_srf", im->data};
   for (int k = 0; k < im->n_planes && n < MAX_FILM_VARS; k++)
     for (int q = 0; q < 3; q++)
-      if (im->planes[k].data && strcmp(im->planes[k].name, from[q]) == 0) out[n++] = (nc_var){to[q], im->planes[k].data};
+      if (im->planes[k].data && strcmp(im->planes[k].name, from[q]) == 0)
+        out[n++] = (nc_var){to[q], im->planes[k].data};
   return n;
 }
 

@@ -472,9 +472,10 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     } else {
       char w[300];
       snprintf(w, sizeof w, "/%s", k->string);
-      st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, w,
-                    "unknown field '%s' (expected contexts, defaults, params, seed, quantities, variance, bands)",
-                    k->string);
+      st = svc_fail(
+          e, RSW_ERR_UNUSED_PROPERTY, w,
+          "unknown field '%s' (expected contexts, defaults, params, seed, quantities, variance, bands)",
+          k->string);
     }
   }
   if (!st && (!cJSON_IsArray(contexts) || !contexts->child))
@@ -715,7 +716,8 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       size_t nk = s / ns; /* node-major within the context */
       snprintf(it->context, sizeof it->context, "%s", id->valuestring);
       it->context_index = ci;
-      const char *sname = sens ? cJSON_GetArrayItem(sens, (int)(s % ns))->valuestring : sc->sensors[s % ns]->base.id;
+      const char *sname =
+          sens ? cJSON_GetArrayItem(sens, (int)(s % ns))->valuestring : sc->sensors[s % ns]->base.id;
       svc_find_sensor(sc, sname, &it->sensor_index);
       snprintf(it->sensor, sizeof it->sensor, "%s", sc->sensors[it->sensor_index]->base.id);
       it->wavelength = w ? w->valuedouble : d_wl;
