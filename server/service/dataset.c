@@ -243,6 +243,7 @@ rsw_status service_job_dataset(service *svc, const char *id, bool partial, void 
                                    .channel_names = bi->channel_names,
                                    .spp = bi->spp,
                                    .seed = bi->seed,
+                                   .angles = bi->angles, /* the nodes' */
                                    .vars = bvars[n_bimg],
                                    .n_vars = nv,
                                    .band = b + 1};
