@@ -6,7 +6,7 @@ ds = xr.open_dataset("bands.nc")
 print(ds.brf_srf.dims)          # ('context', 'band', 'y', 'x'): contexts without coords
 print(list(ds.band.values))     # the band ids
 print(ds.brf.dims)              # ('context', 'wavelength', 'y', 'x'): the node wavelengths
-print(float(ds.sza), float(ds.saa))  # the sun, in Eradiate's convention
+print(ds.sza.values, ds.saa.values)  # the sun per context, in Eradiate's convention
 # Each band's BRF and its error bar, averaged over the film:
 for b in ds.band.values:
     print(b, float(ds.brf_srf.sel(band=b).mean()), float(ds.brf_srf_stderr.sel(band=b).mean()))

@@ -61,6 +61,9 @@ void svc_job_restore_labels(job *j, const char *body, size_t len) {
   cJSON *req = cJSON_ParseWithLength(body, len);
   const cJSON *seed = cJSON_GetObjectItemCaseSensitive(req, "seed");
   if (cJSON_IsNumber(seed) && seed->valuedouble >= 0) j->seed = (uint64_t)seed->valuedouble;
+  const cJSON *bands = cJSON_GetObjectItemCaseSensitive(req, "bands");
+  svc_error be = {0};
+  if (bands && !j->bands && bands_parse(bands, "/bands", &j->bands, &be) != RSW_OK) j->bands = NULL;
   const cJSON *contexts = cJSON_GetObjectItemCaseSensitive(req, "contexts");
   size_t n = (size_t)cJSON_GetArraySize(contexts);
   const void **cj = n ? malloc(n * sizeof *cj) : NULL;

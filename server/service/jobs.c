@@ -1151,6 +1151,7 @@ rsw_status service_job_result(service *svc, const char *id, const char *context,
   }
   if (j->bands) {
     pthread_mutex_unlock(&svc->lock);
+    snprintf(e->key, sizeof e->key, "band"); /* the query parameter the problem names */
     return svc_fail(e, RSW_ERR_INVALID, "band",
                     "job %s has bands: ask for a band's film (?band=ID) or a node's (?node=K); its results "
                     "list both",

@@ -333,7 +333,7 @@ void svc_free_evicted(resident **ev);
 bool svc_was_evicted_locked(service *svc, const char *id);
 void svc_forget_evicted_locked(service *svc, const char *id);
 /* A finished job restored from the state directory (its submission body):
- * the contexts' coords and the job seed, which its dataset needs
+ * the contexts' coords, the job seed and its bands, which its dataset needs
  * (dataset.c; left empty when the body does not give them). */
 void svc_job_restore_labels(job *j, const char *body, size_t len);
 /* Durable state (state.c); every function is a no-op without a state

@@ -648,6 +648,7 @@ void svc_state_job_finished(service *svc, const job *j) {
     cJSON_AddStringToObject(x, "w", num);
     snprintf(num, sizeof num, "%" PRIu64, it->seed);
     cJSON_AddStringToObject(x, "seed", num);
+    if (it->node) cJSON_AddNumberToObject(x, "n", (double)it->node); /* jobs with bands */
     if (it->error[0]) cJSON_AddStringToObject(x, "err", it->error);
     if (it->state == JOB_SUCCEEDED) {
       const film_image *im = &it->film.img;
@@ -823,6 +824,8 @@ static void restore_finished(service *svc, const req_header *h, cJSON *done, con
     ri->wavelength = cJSON_IsString(y) ? strtod(y->valuestring, NULL) : 0;
     y = cJSON_GetObjectItemCaseSensitive(it, "seed");
     ri->seed = cJSON_IsString(y) ? strtoull(y->valuestring, NULL, 10) : 0;
+    y = cJSON_GetObjectItemCaseSensitive(it, "n");
+    ri->node = cJSON_IsNumber(y) && y->valuedouble >= 1 ? (size_t)y->valuedouble : 0;
     y = cJSON_GetObjectItemCaseSensitive(it, "err");
     if (cJSON_IsString(y)) snprintf(ri->error, sizeof ri->error, "%s", y->valuestring);
     if (ri->state != JOB_QUEUED && ri->state != JOB_RUNNING) j->items_done++;
