@@ -66,9 +66,8 @@ const nc_quantity *nc_quantity_find(const char *name) {
 /* Names the writer uses itself (besides the quantities): a coord may not
  * take them. "wavelength" is allowed: a coord of that name replaces the
  * wavelength variable. */
-static const char *const reserved[] = {"x",   "y",          "channel",    "context",       "seed",
-                                       "spp", "vza",        "vaa",        "unresolved_rays", "band",
-                                       "irradiance", "irradiance_srf"};
+static const char *const reserved[] = {"x", "y", "channel", "context", "seed", "spp", "vza", "vaa",
+                                       "unresolved_rays"};
 
 static bool valid_coord_name(const char *s) {
   size_t n = strlen(s);
@@ -852,6 +851,11 @@ static rsw_status write_all(writer *w, rsw_err *err) {
       if (!(b ? s->any_band_irr : s->any_irr)) continue;
       int *id = b ? &v->irr_srf : &v->irr;
       name_cat(nm, sizeof nm, s->prefix, b ? "irradiance_srf" : "irradiance");
+      /* A coord of that name (a sweep over an irradiance) labels the
+       * contexts already: it wins, as for sza and saa. */
+      bool taken = false;
+      for (size_t k = 0; cs && k < cs->n; k++) taken |= strcmp(cs->c[k].name, nm) == 0;
+      if (taken) continue;
       STRY(def_ctx_var2(w, nm, NC_DOUBLE, b ? w->band_dim : w->wl_dim, s->dim_ch >= 0 ? 1 : 0, &s->dim_ch, id, err));
       double fill = NAN;
       SNC(nc_def_var_fill(ncid, *id, 0, &fill), nm);

@@ -34,9 +34,9 @@
  *                brf_stderr = pi radiance_stderr / E_h where a film has
  *                both brf and radiance_stderr; irradiance (E_h, float64)
  *                per sensor over (contexts... [, channel]) where films
- *                have it; sza, saa (degrees) as coordinates over the
- *                contexts where films name one directional emitter
- *                (unless a coord of that name exists);
+ *                have it (unless a coord of that name exists); sza, saa
+ *                (degrees) as coordinates over the contexts where films
+ *                name one directional emitter (the same);
  *                jobs with bands: per-wavelength variables over
  *                (contexts..., wavelength, y, x [, channel]) with
  *                "wavelength" the node wavelengths, and the band
@@ -101,8 +101,9 @@ typedef struct nc_coords {
  * must name the same coords (or none does), each a number or a string of
  * one type across contexts, at most NC_MAX_COORDS names of
  * [A-Za-z][A-Za-z0-9_]{0,63} that are not names the dataset uses itself
- * (x, y, channel, context, seed, spp, vza, vaa, unresolved_rays, band,
- * irradiance, irradiance_srf, a quantity). Errors name the JSON pointer "<prefix>/<i>/coords[/<name>]":
+ * (x, y, channel, context, seed, spp, vza, vaa, unresolved_rays, a
+ * quantity). A coord named sza, saa, irradiance or irradiance_srf
+ * replaces the dataset's variable of that name. Errors name the JSON pointer "<prefix>/<i>/coords[/<name>]":
  * RSW_ERR_TYPE (not an object; not a number or string; types mixed
  * across contexts), RSW_ERR_INVALID (a name; a string too long or with a
  * control character; a non-finite number), RSW_ERR_MISSING (a context

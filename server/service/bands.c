@@ -589,6 +589,10 @@ rsw_status svc_bands_check_context(const band_plan *p, const cJSON *c, const cha
         e, RSW_ERR_INVALID, w,
         "a job with bands renders each band's wavelengths: its contexts take no wavelength coord");
   }
+  if (cJSON_IsObject(coords) && cJSON_GetObjectItemCaseSensitive(coords, "band")) {
+    snprintf(w, sizeof w, "%s/coords/band", ptr);
+    return svc_fail(e, RSW_ERR_INVALID, w, "\"band\" is the dataset's band dimension in a job with bands");
+  }
   return RSW_OK;
 }
 

@@ -448,6 +448,10 @@ static void test_refusals(void) {
           "{\"bands\": [{\"id\": \"b\", \"srf\": {\"type\": \"uniform\", \"wmin\": 500, \"wmax\": 600}}],"
           " \"contexts\": [{\"id\": \"c\", \"coords\": {\"wavelength\": 550}}]}",
           "/contexts/0/coords/wavelength");
+  refused("coord band",
+          "{\"bands\": [{\"id\": \"b\", \"srf\": {\"type\": \"uniform\", \"wmin\": 500, \"wmax\": 600}}],"
+          " \"contexts\": [{\"id\": \"c\", \"coords\": {\"band\": 1}}]}",
+          "/contexts/0/coords/band");
   refused("default wavelength",
           "{\"bands\": [{\"id\": \"b\", \"srf\": {\"type\": \"uniform\", \"wmin\": 500, \"wmax\": 600}}],"
           " \"defaults\": {\"wavelength\": 550}, " CTX "}",
