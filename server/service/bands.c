@@ -234,18 +234,6 @@ static rsw_status band_rule(const srf_in *s, int n, band *b, const char *ptr, sv
   return RSW_OK;
 }
 
-static bool valid_band_id(const char *s) {
-  size_t n = strlen(s);
-  if (n < 1 || n > 64) return false;
-  for (size_t i = 0; i < n; i++) {
-    char c = s[i];
-    if (!((c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '.' ||
-          c == '_' || c == '-'))
-      return false;
-  }
-  return true;
-}
-
 /* A member that must be a finite number (positive when pos). */
 static rsw_status get_num(const cJSON *o, const char *name, bool pos, const char *ptr, double *out,
                           svc_error *e) {
@@ -318,7 +306,7 @@ static rsw_status parse_band(const cJSON *o, const char *ptr, band *b, svc_error
   char w[200];
   const cJSON *id = cJSON_GetObjectItemCaseSensitive(o, "id");
   snprintf(w, sizeof w, "%s/id", ptr);
-  if (!cJSON_IsString(id) || !valid_band_id(id->valuestring))
+  if (!cJSON_IsString(id) || !svc_valid_id(id->valuestring))
     return svc_fail(e, id ? RSW_ERR_INVALID : RSW_ERR_MISSING, w,
                     "a band's \"id\" must match [A-Za-z0-9._-]{1,64}");
   snprintf(b->id, sizeof b->id, "%s", id->valuestring);

@@ -126,7 +126,7 @@ static bool id_set_add(id_set *set, const char *s) {
   return true;
 }
 
-static bool valid_context_id(const char *s) {
+bool svc_valid_id(const char *s) {
   size_t n = strlen(s);
   if (n < 1 || n > 64) return false;
   for (size_t i = 0; i < n; i++) {
@@ -550,7 +550,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       break;
     }
     const cJSON *id = cJSON_GetObjectItemCaseSensitive(c, "id");
-    if (!cJSON_IsString(id) || !valid_context_id(id->valuestring)) {
+    if (!cJSON_IsString(id) || !svc_valid_id(id->valuestring)) {
       st = svc_fail(e, RSW_ERR_INVALID, ptr, "context \"id\" must match [A-Za-z0-9._-]{1,64}");
       break;
     }

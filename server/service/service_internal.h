@@ -371,6 +371,8 @@ void svc_job_push_event(service *svc, job *j, cJSON *data, bool end); /* svc->lo
 job *svc_find_job_locked(service *svc, const char *id);
 /* Bytes a film holds in memory (data and angles). */
 uint64_t svc_film_mem(const svc_film *f);
+/* An id of a context or a band: [A-Za-z0-9._-]{1,64} (jobs.c). */
+bool svc_valid_id(const char *s);
 /* Bands in jobs (bands.c): the checks of a job with bands at submission
  * of context c at ptr: it may carry no wavelength, in itself or as a
  * coord. */
