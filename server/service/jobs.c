@@ -946,6 +946,7 @@ void *svc_worker_main(void *arg) {
       cJSON *d = cJSON_CreateObject();
       cJSON_AddStringToObject(d, "context", it->context);
       cJSON_AddStringToObject(d, "sensor", it->sensor);
+      if (it->node) cJSON_AddNumberToObject(d, "node", (double)(it->node - 1)); /* jobs with bands */
       cJSON_AddStringToObject(d, "state", st ? "failed" : "succeeded");
       if (st) cJSON_AddStringToObject(d, "error", it->error);
       cJSON_AddNumberToObject(d, "done", (double)done);
