@@ -33,8 +33,29 @@ static const nc_quantity quantities[] = {
     {"radiance_stderr", "standard error of the mean radiance", "W m-2 sr-1 nm-1", "W m-2 sr-1"},
     {"brdf", "bidirectional reflectance distribution function", "sr-1", "sr-1"},
     {"brf", "bidirectional reflectance factor", "1", "1"},
+    {"brf_stderr", "standard error of the bidirectional reflectance factor", "1", "1"},
+    /* Bands (docs/experiments-bands.md): the SRF-weighted means, Eradiate's
+     * *_srf variables. */
+    {"radiance_srf", "radiance (SRF-weighted)", "W m-2 sr-1 nm-1", "W m-2 sr-1"},
+    {"radiance_srf_stderr", "standard error of radiance_srf", "W m-2 sr-1 nm-1", "W m-2 sr-1"},
+    {"brdf_srf", "bidirectional reflectance distribution function (SRF-weighted)", "sr-1", "sr-1"},
+    {"brf_srf", "bidirectional reflectance factor (SRF-weighted)", "1", "1"},
+    {"brf_srf_stderr", "standard error of brf_srf", "1", "1"},
 };
 #define N_QUANTITIES (sizeof quantities / sizeof quantities[0])
+
+/* The quantities over the band dimension. */
+static bool band_quantity(const char *name) {
+  return strstr(name, "_srf") != NULL;
+}
+
+/* The derived standard errors: pi * <stderr> / E (brf_stderr from
+ * radiance_stderr, brf_srf_stderr from radiance_srf_stderr), written
+ * where a film has brf (brf_srf), the stderr and its irradiance. */
+static const struct derived {
+  const char *name, *from, *needs;
+} derived[] = {{"brf_stderr", "radiance_stderr", "brf"}, {"brf_srf_stderr", "radiance_srf_stderr", "brf_srf"}};
+#define N_DERIVED 2
 
 const nc_quantity *nc_quantity_find(const char *name) {
   for (size_t i = 0; i < N_QUANTITIES; i++)
@@ -276,9 +297,10 @@ typedef struct sensor_set {
   const char *id;
   char prefix[80]; /* "" or "<sanitized id>_" */
   const nc_film *shape;
-  const nc_film **by_ctx; /* n_contexts, NULL where missing */
+  const nc_film **by_ctx;  /* n_contexts x slots (node films), NULL where missing */
+  const nc_film **by_band; /* n_contexts x n_bands (band films) */
   size_t n_present;
-  bool any_angles, same_angles, spp_varies, any_unresolved;
+  bool any_angles, same_angles, spp_varies, any_unresolved, any_irr, any_band_irr;
   char **qnames; /* quantities, table order */
   size_t n_q;
   int dim_y, dim_x, dim_ch;
@@ -293,6 +315,8 @@ typedef struct writer {
   axis ax[NC_MAX_COORDS];
   size_t *cell; /* n_contexts: linear index of each context in the layout */
   size_t n_cells;
+  size_t slots;       /* films per (context, sensor): the node wavelengths, or 1 */
+  int wl_dim, band_dim; /* -1: none */
   sensor_set *s;
   size_t n_s;
   bool spp_uniform;
@@ -309,6 +333,7 @@ static void writer_free(writer *w) {
   free(w->cell);
   for (size_t i = 0; i < w->n_s; i++) {
     free(w->s[i].by_ctx);
+    free(w->s[i].by_band);
     free(w->s[i].qnames);
   }
   free(w->s);
@@ -418,9 +443,10 @@ static rsw_status plan_sensors(writer *w, rsw_err *err) {
       s->shape = x;
       s->same_angles = true;
       if (ns > 1) sanitize(x->sensor, s->prefix, sizeof s->prefix);
-      s->by_ctx = calloc(d->n_contexts ? d->n_contexts : 1, sizeof *s->by_ctx);
+      s->by_ctx = calloc(d->n_contexts * w->slots + 1, sizeof *s->by_ctx);
+      s->by_band = calloc(d->n_contexts * d->n_bands + 1, sizeof *s->by_band);
       s->qnames = calloc(N_QUANTITIES, sizeof *s->qnames);
-      if (!s->by_ctx || !s->qnames) {
+      if (!s->by_ctx || !s->by_band || !s->qnames) {
         st = rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
         break;
       }
@@ -434,7 +460,13 @@ static rsw_status plan_sensors(writer *w, rsw_err *err) {
       st = rsw_fail(err, RSW_ERR_INVALID, where, "a film needs a size and channel names");
       break;
     }
-    if (s->by_ctx[x->context]) {
+    if (x->band > d->n_bands || x->node > d->n_nodes || (x->band && x->node) || (d->n_nodes && !x->band && !x->node)) {
+      st = rsw_fail(err, RSW_ERR_INVALID, where, "a film's node or band is out of range");
+      break;
+    }
+    const nc_film **slot = x->band ? &s->by_band[x->context * d->n_bands + x->band - 1]
+                                   : &s->by_ctx[x->context * w->slots + (x->node ? x->node - 1 : 0)];
+    if (*slot) {
       st = rsw_fail(err, RSW_ERR_INVALID, where, "two films of one context and sensor");
       break;
     }
@@ -445,8 +477,13 @@ static rsw_status plan_sensors(writer *w, rsw_err *err) {
       st = rsw_fail(err, RSW_ERR_INVALID, where, "its shape or channels differ from the sensor's other films");
       break;
     }
-    s->by_ctx[x->context] = x;
-    s->n_present++;
+    *slot = x;
+    if (x->band) {
+      s->any_band_irr |= x->has_irradiance;
+    } else {
+      s->n_present++;
+      s->any_irr |= x->has_irradiance;
+    }
     if (x->angles) {
       if (!s->any_angles)
         s->any_angles = true;
@@ -468,6 +505,7 @@ static rsw_status plan_sensors(writer *w, rsw_err *err) {
     }
     for (size_t v = 0; v < x->n_vars && !st; v++) {
       const nc_quantity *q = x->vars[v].name ? nc_quantity_find(x->vars[v].name) : NULL;
+      if (q && band_quantity(q->name) != (x->band != 0)) q = NULL;
       if (!q || !x->vars[v].data) {
         st = rsw_fail(err, RSW_ERR_INVALID, where, "no quantity '%s' (dataset_nc.c's table)",
                       x->vars[v].name ? x->vars[v].name : "(null)");
@@ -481,12 +519,19 @@ static rsw_status plan_sensors(writer *w, rsw_err *err) {
   /* Quantities in table order. */
   for (size_t i = 0; i < w->n_s; i++) {
     sensor_set *s = &w->s[i];
+    for (size_t k = 0; k < N_DERIVED; k++) {
+      size_t qd = (size_t)(nc_quantity_find(derived[k].name) - quantities);
+      size_t qf = (size_t)(nc_quantity_find(derived[k].from) - quantities);
+      size_t qn = (size_t)(nc_quantity_find(derived[k].needs) - quantities);
+      bool irr = k == 0 ? s->any_irr : s->any_band_irr;
+      if (s->qnames[qf] && s->qnames[qn] && irr) s->qnames[qd] = (char *)quantities[qd].name;
+    }
     for (size_t q = 0; q < N_QUANTITIES; q++)
       if (s->qnames[q]) s->qnames[s->n_q++] = s->qnames[q];
-    for (size_t c = 0; c < d->n_contexts; c++)
+    for (size_t c = 0; c < d->n_contexts * w->slots; c++)
       if (!s->by_ctx[c]) w->missing++;
     /* A sensor whose angles are in some films only varies. */
-    if (s->any_angles && s->n_present < d->n_contexts) s->same_angles = false;
+    if (s->any_angles && s->n_present < d->n_contexts * w->slots) s->same_angles = false;
   }
   return RSW_OK;
 }
@@ -512,15 +557,24 @@ static void coords_add(writer *w, const char *name) {
   snprintf(w->coordinates + l, sizeof w->coordinates - l, "%s%s", l ? " " : "", name);
 }
 
-/* Define a variable over the context layout dims plus `extra` more. */
-static rsw_status def_ctx_var(writer *w, const char *name, nc_type type, int n_extra, const int *extra, int *varid,
-                              rsw_err *err) {
-  int dims[NC_MAX_COORDS + 3];
+/* Define a variable over the context layout dims, then `mid` (the
+ * wavelength or band dimension; -1: none), then `extra` more. */
+static rsw_status def_ctx_var2(writer *w, const char *name, nc_type type, int mid, int n_extra, const int *extra,
+                               int *varid, rsw_err *err) {
+  int dims[NC_MAX_COORDS + 4];
   int nd = 0;
   for (size_t k = 0; k < w->n_cdims; k++) dims[nd++] = w->cdim[k];
+  if (mid >= 0) dims[nd++] = mid;
   for (int k = 0; k < n_extra; k++) dims[nd++] = extra[k];
   NC_TRY(nc_def_var(w->ncid, name, type, nd, dims, varid), name);
   return RSW_OK;
+}
+
+/* A variable with one value or image per film: over the wavelength
+ * dimension too in a job with bands. */
+static rsw_status def_ctx_var(writer *w, const char *name, nc_type type, int n_extra, const int *extra, int *varid,
+                              rsw_err *err) {
+  return def_ctx_var2(w, name, type, w->wl_dim, n_extra, extra, varid, err);
 }
 
 /* start[] of a context's cell in the layout dims. */
@@ -605,13 +659,13 @@ static rsw_status write_all(writer *w, rsw_err *err) {
       TRY(put_text_att(ncid, v_coord[k], "units", "1", err));
     }
   }
-  TRY(def_ctx_var(w, "context", NC_STRING, 0, NULL, &v_ctx, err));
+  TRY(def_ctx_var2(w, "context", NC_STRING, -1, 0, NULL, &v_ctx, err));
   TRY(put_text_att(ncid, v_ctx, "long_name", "kernel context id", err));
   if (w->grid) coords_add(w, "context");
   bool any_wl = false;
   for (size_t i = 0; d->wavelengths && !rgb && i < d->n_contexts; i++) any_wl |= isfinite(d->wavelengths[i]);
   if (any_wl && !wl_coord) {
-    TRY(def_ctx_var(w, "wavelength", NC_DOUBLE, 0, NULL, &v_wl, err));
+    TRY(def_ctx_var2(w, "wavelength", NC_DOUBLE, -1, 0, NULL, &v_wl, err));
     double fill = NAN;
     NC_TRY(nc_def_var_fill(ncid, v_wl, 0, &fill), "wavelength");
     TRY(put_text_att(ncid, v_wl, "long_name", "wavelength", err));
@@ -619,20 +673,78 @@ static rsw_status write_all(writer *w, rsw_err *err) {
     TRY(put_text_att(ncid, v_wl, "units", "nm", err));
     coords_add(w, "wavelength");
   }
+  /* Jobs with bands: the node wavelengths and the bands, each a
+   * dimension with its coordinate variable. */
+  int v_nodes = -1, v_bands = -1;
+  if (d->n_nodes) {
+    NC_TRY(nc_def_dim(ncid, "wavelength", d->n_nodes, &w->wl_dim), "wavelength");
+    NC_TRY(nc_def_var(ncid, "wavelength", NC_DOUBLE, 1, &w->wl_dim, &v_nodes), "wavelength");
+    TRY(put_text_att(ncid, v_nodes, "long_name", "wavelength", err));
+    TRY(put_text_att(ncid, v_nodes, "standard_name", "radiation_wavelength", err));
+    TRY(put_text_att(ncid, v_nodes, "units", "nm", err));
+    TRY(put_text_att(ncid, v_nodes, "comment", "the quadrature nodes of the job's bands", err));
+  }
+  if (d->n_bands) {
+    NC_TRY(nc_def_dim(ncid, "band", d->n_bands, &w->band_dim), "band");
+    NC_TRY(nc_def_var(ncid, "band", NC_STRING, 1, &w->band_dim, &v_bands), "band");
+    TRY(put_text_att(ncid, v_bands, "long_name", "spectral band (the job's band ids)", err));
+  }
+  /* The sun's angles per context, from the films (any sensor, any node):
+   * coordinates, unless a coord of the same name labels the contexts. */
+  int v_sun[2] = {-1, -1};
+  double *sun = calloc(2 * (d->n_contexts ? d->n_contexts : 1), sizeof *sun);
+  if (!sun) return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+  bool any_sun = false;
+  for (size_t c = 0; c < 2 * d->n_contexts; c++) sun[c] = NAN;
+  for (size_t i = 0; i < d->n_films; i++) {
+    const nc_film *f = &d->films[i];
+    if (!f->has_sun || f->context >= d->n_contexts || isfinite(sun[2 * f->context])) continue;
+    sun[2 * f->context] = canonical_angle(f->sun_zenith);
+    sun[2 * f->context + 1] = canonical_angle(f->sun_azimuth);
+    any_sun = true;
+  }
+  static const char *const sun_names[2] = {"sza", "saa"};
+  static const char *const sun_std[2] = {"solar_zenith_angle", "solar_azimuth_angle"};
+  static const char *const sun_long[2] = {"solar zenith angle", "solar azimuth angle"};
+  for (int a = 0; any_sun && a < 2; a++) {
+    bool taken = false;
+    for (size_t k = 0; cs && k < cs->n; k++) taken |= strcmp(cs->c[k].name, sun_names[a]) == 0;
+    if (taken) continue;
+    rsw_status st = def_ctx_var2(w, sun_names[a], NC_DOUBLE, -1, 0, NULL, &v_sun[a], err);
+    double fill = NAN;
+    int rc = st ? NC_NOERR : nc_def_var_fill(ncid, v_sun[a], 0, &fill);
+    if (!st && rc != NC_NOERR) st = nc_fail(err, rc, sun_names[a]);
+    if (!st) st = put_text_att(ncid, v_sun[a], "long_name", sun_long[a], err);
+    if (!st) st = put_text_att(ncid, v_sun[a], "standard_name", sun_std[a], err);
+    if (!st) st = put_text_att(ncid, v_sun[a], "units", "degree", err);
+    if (!st)
+      st = put_text_att(ncid, v_sun[a], "comment",
+                        a == 0 ? "zenith of the direction towards the directional emitter (from +z)"
+                               : "its azimuth, counter-clockwise from +x (Eradiate's convention)",
+                        err);
+    if (st) {
+      free(sun);
+      return st;
+    }
+    coords_add(w, sun_names[a]);
+  }
   size_t base_coords_len = strlen(w->coordinates);
 
   /* Per sensor: dims, coordinates, data variables. */
   typedef struct sensor_vars {
-    int ch, vza, vaa, seed, spp, unres;
+    int ch, vza, vaa, seed, spp, unres, irr, irr_srf;
     int q[N_QUANTITIES];
   } sensor_vars;
   sensor_vars *sv = calloc(w->n_s ? w->n_s : 1, sizeof *sv);
-  if (!sv) return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+  if (!sv) {
+    free(sun);
+    return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+  }
 #define STRY(x)                                                                                              \
   do {                                                                                                       \
     rsw_status st_ = (x);                                                                                    \
     if (st_) {                                                                                               \
-      free(sv);                                                                                              \
+      free(sv), free(sun);                                                                                   \
       return st_;                                                                                            \
     }                                                                                                        \
   } while (0)
@@ -640,7 +752,7 @@ static rsw_status write_all(writer *w, rsw_err *err) {
   do {                                                                                                       \
     int rc_ = (call);                                                                                        \
     if (rc_ != NC_NOERR) {                                                                                   \
-      free(sv);                                                                                              \
+      free(sv), free(sun);                                                                                   \
       return nc_fail(err, rc_, (what));                                                                      \
     }                                                                                                        \
   } while (0)
@@ -690,6 +802,7 @@ static rsw_status write_all(writer *w, rsw_err *err) {
     size_t chunk[NC_MAX_COORDS + 3];
     size_t nd = 0;
     for (size_t k = 0; k < w->n_cdims; k++) chunk[nd++] = 1;
+    if (w->wl_dim >= 0 || w->band_dim >= 0) chunk[nd++] = 1;
     chunk[nd++] = (size_t)sh->height;
     chunk[nd++] = (size_t)sh->width;
     if (n_extra == 3) chunk[nd++] = (size_t)sh->channels;
@@ -697,11 +810,17 @@ static rsw_status write_all(writer *w, rsw_err *err) {
       const nc_quantity *qq = nc_quantity_find(s->qnames[q]);
       name_cat(nm, sizeof nm, s->prefix, qq->name);
       int id;
-      STRY(def_ctx_var(w, nm, NC_FLOAT, n_extra, extra, &id, err));
+      bool bq = band_quantity(qq->name);
+      STRY(def_ctx_var2(w, nm, NC_FLOAT, bq ? w->band_dim : w->wl_dim, n_extra, extra, &id, err));
       v->q[q] = id;
       float fill = NAN;
       SNC(nc_def_var_fill(ncid, id, 0, &fill), nm);
-      SNC(nc_def_var_chunking(ncid, id, NC_CHUNKED, chunk), nm);
+      /* Without a band or wavelength dimension chunk[] has one entry less. */
+      size_t ch2[NC_MAX_COORDS + 4], k2 = 0;
+      for (size_t k = 0; k < w->n_cdims; k++) ch2[k2++] = 1;
+      if ((bq ? w->band_dim : w->wl_dim) >= 0) ch2[k2++] = 1;
+      for (size_t k = w->n_cdims + (w->wl_dim >= 0 || w->band_dim >= 0); k < nd; k++) ch2[k2++] = chunk[k];
+      SNC(nc_def_var_chunking(ncid, id, NC_CHUNKED, ch2), nm);
       STRY(put_text_att(ncid, id, "long_name", qq->long_name, err));
       STRY(put_text_att(ncid, id, "units", rgb ? qq->units_rgb : qq->units_mono, err));
       STRY(put_text_att(ncid, id, "sensor", s->id, err));
@@ -726,6 +845,28 @@ static rsw_status write_all(writer *w, rsw_err *err) {
         SNC(nc_def_var_fill(ncid, v->spp, 0, &fill), nm);
       }
     }
+    /* E_h, the irradiance the brdf and brf divide by (Eradiate's
+     * "irradiance": horizontal spectral irradiance), per channel. */
+    v->irr = v->irr_srf = -1;
+    for (int b = 0; b < 2; b++) {
+      if (!(b ? s->any_band_irr : s->any_irr)) continue;
+      int *id = b ? &v->irr_srf : &v->irr;
+      name_cat(nm, sizeof nm, s->prefix, b ? "irradiance_srf" : "irradiance");
+      /* A coord of that name (a sweep over an irradiance) labels the
+       * contexts already: it wins, as for sza and saa. */
+      bool taken = false;
+      for (size_t k = 0; cs && k < cs->n; k++) taken |= strcmp(cs->c[k].name, nm) == 0;
+      if (taken) continue;
+      STRY(def_ctx_var2(w, nm, NC_DOUBLE, b ? w->band_dim : w->wl_dim, s->dim_ch >= 0 ? 1 : 0, &s->dim_ch, id, err));
+      double fill = NAN;
+      SNC(nc_def_var_fill(ncid, *id, 0, &fill), nm);
+      STRY(put_text_att(ncid, *id, "long_name",
+                        b ? "horizontal irradiance of the directional emitters (SRF-weighted)"
+                          : "horizontal irradiance of the directional emitters",
+                        err));
+      STRY(put_text_att(ncid, *id, "units", rgb ? "W m-2" : "W m-2 nm-1", err));
+      STRY(put_text_att(ncid, *id, "sensor", s->id, err));
+    }
     v->unres = -1;
     if (s->any_unresolved) {
       name_cat(nm, sizeof nm, s->prefix, "unresolved_rays");
@@ -737,7 +878,7 @@ static rsw_status write_all(writer *w, rsw_err *err) {
   SNC(nc_enddef(ncid), "enddef");
 
   /* Values: coords, contexts, wavelengths. */
-  size_t start[NC_MAX_COORDS + 3], count[NC_MAX_COORDS + 3];
+  size_t start[NC_MAX_COORDS + 4], count[NC_MAX_COORDS + 4];
   for (size_t k = 0; cs && k < cs->n; k++) {
     const nc_coord *c = &cs->c[k];
     size_t len = w->grid ? w->ax[k].n : d->n_contexts;
@@ -759,16 +900,32 @@ static rsw_status write_all(writer *w, rsw_err *err) {
     if (v_wl >= 0 && isfinite(d->wavelengths[ctx]))
       SNC(nc_put_var1_double(ncid, v_wl, start, &d->wavelengths[ctx]), "wavelength");
   }
+  for (int a = 0; a < 2; a++)
+    for (size_t ctx = 0; v_sun[a] >= 0 && ctx < d->n_contexts; ctx++) {
+      cell_start(w, ctx, start);
+      if (isfinite(sun[2 * ctx + (size_t)a]))
+        SNC(nc_put_var1_double(ncid, v_sun[a], start, &sun[2 * ctx + (size_t)a]), sun_names[a]);
+    }
+  if (v_nodes >= 0) SNC(nc_put_var_double(ncid, v_nodes, d->nodes), "wavelength");
+  for (size_t b = 0; v_bands >= 0 && b < d->n_bands; b++) {
+    const char *p = d->band_ids[b];
+    SNC(nc_put_var1_string(ncid, v_bands, &b, &p), "band");
+  }
   /* Films. */
+  float *deriv = NULL;
   for (size_t i = 0; i < w->n_s; i++) {
     sensor_set *s = &w->s[i];
     sensor_vars *v = &sv[i];
     const nc_film *sh = s->shape;
+    size_t np = (size_t)sh->width * (size_t)sh->height;
+    if (!deriv && !(deriv = malloc(np * (size_t)sh->channels * sizeof *deriv + 1))) {
+      free(sv), free(sun);
+      return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+    }
     if (s->any_angles && s->same_angles) {
-      size_t np = (size_t)sh->width * (size_t)sh->height;
       double *za = malloc(np * 2 * sizeof *za);
       if (!za) {
-        free(sv);
+        free(sv), free(sun), free(deriv);
         return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
       }
       for (size_t p = 0; p < np; p++)
@@ -777,25 +934,39 @@ static rsw_status write_all(writer *w, rsw_err *err) {
       if (rc == NC_NOERR) rc = nc_put_var_double(ncid, v->vaa, za + np);
       free(za);
       if (rc != NC_NOERR) {
-        free(sv);
+        free(sv), free(sun), free(deriv);
         return nc_fail(err, rc, "vza");
       }
     }
-    for (size_t ctx = 0; ctx < d->n_contexts; ctx++) {
-      const nc_film *f = s->by_ctx[ctx];
+    /* Node (or plain) films, then band films. */
+    size_t n_slots = d->n_contexts * w->slots, n_all = n_slots + d->n_contexts * d->n_bands;
+    for (size_t k = 0; k < n_all; k++) {
+      bool is_band = k >= n_slots;
+      const nc_film *f = is_band ? s->by_band[k - n_slots] : s->by_ctx[k];
       if (!f) continue;
+      size_t ctx = is_band ? (k - n_slots) / d->n_bands : k / w->slots;
+      size_t mid = is_band ? (k - n_slots) % d->n_bands : k % w->slots;
+      bool has_mid = is_band ? w->band_dim >= 0 : w->wl_dim >= 0;
       cell_start(w, ctx, start);
       size_t nd = w->n_cdims;
-      for (size_t k = 0; k < nd; k++) count[k] = 1;
-      unsigned long long seed = f->seed;
-      SNC(nc_put_var1_ulonglong(ncid, v->seed, start, &seed), "seed");
-      if (v->spp >= 0) {
-        unsigned spp = f->spp;
-        SNC(nc_put_var1_uint(ncid, v->spp, start, &spp), "spp");
+      if (has_mid) start[nd++] = mid;
+      for (size_t q = 0; q < nd; q++) count[q] = 1;
+      if (!is_band) {
+        unsigned long long seed = f->seed;
+        SNC(nc_put_var1_ulonglong(ncid, v->seed, start, &seed), "seed");
+        if (v->spp >= 0) {
+          unsigned spp = f->spp;
+          SNC(nc_put_var1_uint(ncid, v->spp, start, &spp), "spp");
+        }
+        if (v->unres >= 0) {
+          unsigned long long u = f->unresolved_rays;
+          SNC(nc_put_var1_ulonglong(ncid, v->unres, start, &u), "unresolved_rays");
+        }
       }
-      if (v->unres >= 0) {
-        unsigned long long u = f->unresolved_rays;
-        SNC(nc_put_var1_ulonglong(ncid, v->unres, start, &u), "unresolved_rays");
+      int irr = is_band ? v->irr_srf : v->irr;
+      if (irr >= 0 && f->has_irradiance) {
+        start[nd] = 0, count[nd] = (size_t)f->channels;
+        SNC(nc_put_vara_double(ncid, irr, start, count, f->irradiance), "irradiance");
       }
       start[nd] = start[nd + 1] = start[nd + 2] = 0;
       count[nd] = (size_t)f->height, count[nd + 1] = (size_t)f->width, count[nd + 2] = (size_t)f->channels;
@@ -804,11 +975,24 @@ static rsw_status write_all(writer *w, rsw_err *err) {
         while (strcmp(s->qnames[qi], f->vars[q].name) != 0) qi++;
         SNC(nc_put_vara_float(ncid, v->q[qi], start, count, f->vars[q].data), f->vars[q].name);
       }
-      if (s->any_angles && !s->same_angles && f->angles) {
-        size_t np = (size_t)f->width * (size_t)f->height;
+      /* Derived standard errors: pi * stderr / E per channel. */
+      for (size_t dq = 0; dq < N_DERIVED && f->has_irradiance; dq++) {
+        const float *from = NULL, *needs = NULL;
+        for (size_t q = 0; q < f->n_vars; q++) {
+          if (strcmp(f->vars[q].name, derived[dq].from) == 0) from = f->vars[q].data;
+          if (strcmp(f->vars[q].name, derived[dq].needs) == 0) needs = f->vars[q].data;
+        }
+        size_t qi = 0;
+        while (qi < s->n_q && strcmp(s->qnames[qi], derived[dq].name) != 0) qi++;
+        if (!from || !needs || qi == s->n_q) continue;
+        size_t C = (size_t)f->channels;
+        for (size_t p = 0; p < np * C; p++) deriv[p] = (float)(M_PI * (double)from[p] / f->irradiance[p % C]);
+        SNC(nc_put_vara_float(ncid, v->q[qi], start, count, deriv), derived[dq].name);
+      }
+      if (!is_band && s->any_angles && !s->same_angles && f->angles) {
         double *za = malloc(np * 2 * sizeof *za);
         if (!za) {
-          free(sv);
+          free(sv), free(sun), free(deriv);
           return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
         }
         for (size_t p = 0; p < np; p++)
@@ -817,12 +1001,15 @@ static rsw_status write_all(writer *w, rsw_err *err) {
         if (rc == NC_NOERR) rc = nc_put_vara_double(ncid, v->vaa, start, count, za + np);
         free(za);
         if (rc != NC_NOERR) {
-          free(sv);
+          free(sv), free(sun), free(deriv);
           return nc_fail(err, rc, "vza");
         }
       }
     }
+    free(deriv);
+    deriv = NULL;
   }
+  free(sun);
   free(sv);
 #undef STRY
 #undef SNC
@@ -831,10 +1018,13 @@ static rsw_status write_all(writer *w, rsw_err *err) {
 
 /* Plan and write d into the open ncid. */
 static rsw_status build(int ncid, const nc_dataset *d, rsw_err *err) {
-  writer w = {.d = d, .ncid = ncid};
+  writer w = {.d = d, .ncid = ncid, .wl_dim = -1, .band_dim = -1};
   rsw_status st = RSW_OK;
   if (!d || d->size < sizeof *d || (d->n_contexts && !d->context_ids))
     st = rsw_fail(err, RSW_ERR_INVALID, "", "a dataset needs its size and context ids");
+  if (!st && ((d->n_nodes && !d->nodes) || (d->n_bands && !d->band_ids)))
+    st = rsw_fail(err, RSW_ERR_INVALID, "", "a dataset with bands needs its node wavelengths and band ids");
+  if (!st) w.slots = d->n_nodes ? d->n_nodes : 1;
   if (!st) st = plan_layout(&w, err);
   if (!st) st = plan_sensors(&w, err);
   if (!st) st = write_all(&w, err);

@@ -31,6 +31,19 @@
  *                and those of nc_quantity_find) over (contexts..., y, x
  *                [, channel]); a film that is missing (failed, or not
  *                rendered yet in a partial dataset) is NaN (_FillValue);
+ *                brf_stderr = pi radiance_stderr / E_h where a film has
+ *                both brf and radiance_stderr; irradiance (E_h, float64)
+ *                per sensor over (contexts... [, channel]) where films
+ *                have it (unless a coord of that name exists); sza, saa
+ *                (degrees) as coordinates over the contexts where films
+ *                name one directional emitter (the same);
+ *                jobs with bands: per-wavelength variables over
+ *                (contexts..., wavelength, y, x [, channel]) with
+ *                "wavelength" the node wavelengths, and the band
+ *                variables radiance_srf, radiance_srf_stderr, brdf_srf,
+ *                brf_srf, brf_srf_stderr over (contexts..., band, y, x
+ *                [, channel]) with irradiance_srf over (contexts...,
+ *                band [, channel]);
  *                seed (uint64) per film over the contexts' dimensions;
  *                spp as a global attribute when every film has the same,
  *                else a uint32 variable; unresolved_rays when any is not 0.
@@ -90,7 +103,8 @@ typedef struct nc_coords {
  * one type across contexts, at most NC_MAX_COORDS names of
  * [A-Za-z][A-Za-z0-9_]{0,63} that are not names the dataset uses itself
  * (x, y, channel, context, seed, spp, vza, vaa, unresolved_rays, a
- * quantity). Errors name the JSON pointer "<prefix>/<i>/coords[/<name>]":
+ * quantity). A coord named sza, saa, irradiance or irradiance_srf
+ * replaces the dataset's variable of that name. Errors name the JSON pointer "<prefix>/<i>/coords[/<name>]":
  * RSW_ERR_TYPE (not an object; not a number or string; types mixed
  * across contexts), RSW_ERR_INVALID (a name; a string too long or with a
  * control character; a non-finite number), RSW_ERR_MISSING (a context
@@ -122,6 +136,19 @@ typedef struct nc_film {
   const double *angles; /* NULL, or (zenith, azimuth) per pixel, degrees */
   const nc_var *vars;
   size_t n_vars;
+  /* brdf / brf films: the horizontal irradiance E_h per channel (W m-2
+   * [nm-1]), the variable "irradiance" ("irradiance_srf" for a band). */
+  bool has_irradiance;
+  double irradiance[4];
+  /* One directional emitter: its zenith and azimuth (degrees, Eradiate's
+   * convention), the context's sza and saa. */
+  bool has_sun;
+  double sun_zenith, sun_azimuth;
+  /* Jobs with bands: 1 + the index of the film's wavelength in
+   * nc_dataset.nodes (a node film), or 1 + its band's index in
+   * nc_dataset.band_ids (a band film, whose quantities are the *_srf
+   * ones); 0 otherwise. */
+  size_t node, band;
 } nc_film;
 
 /* What the dataset is about. Zero-initialise, set size, fill. */
@@ -134,9 +161,15 @@ typedef struct nc_dataset {
   const char *const *context_ids; /* n_contexts, distinct */
   const double *wavelengths;      /* n_contexts (NaN: none), or NULL */
   const nc_coords *coords;        /* NULL or n == 0: no coords */
-  const nc_film *films;           /* at most one per (context, sensor) */
+  const nc_film *films;           /* at most one per (context, sensor[, node or band]) */
   size_t n_films;
   const char *warnings; /* the job's warnings, one "code (coordinate): detail" a line; NULL: none */
+  /* Jobs with bands: the node wavelengths (nm, ascending; the dimension
+   * and coordinate "wavelength" of the per-wavelength variables) and the
+   * band ids (the dimension and coordinate "band" of the *_srf ones). */
+  size_t n_nodes, n_bands;
+  const double *nodes;
+  const char *const *band_ids;
 } nc_dataset;
 
 /* Write d to path (through "<path>.tmp.<pid>", renamed on success) or

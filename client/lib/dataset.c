@@ -66,6 +66,9 @@ typedef struct ds_film {
   char *plane_names[DS_MAX_PLANES];
   float *plane_data[DS_MAX_PLANES];
   nc_var vars[1 + DS_MAX_PLANES];
+  /* From the film's meta, as the daemon's dataset takes them. */
+  bool has_irradiance, has_sun;
+  double irradiance[4], sun_zenith, sun_azimuth;
 } ds_film;
 
 struct rsw_dataset {
@@ -293,6 +296,17 @@ rsw_status rsw_dataset_add_film(rsw_dataset *d, const char *context, const char 
     if (!s) s = same_string(d, meta, "variant", &d->variant, what);
     const cJSON *wl = cJSON_GetObjectItemCaseSensitive(meta, "wavelength");
     if (!s && cJSON_IsNumber(wl) && !isfinite(d->wl[ci])) d->wl[ci] = wl->valuedouble;
+    const cJSON *ir = cJSON_GetObjectItemCaseSensitive(meta, "irradiance");
+    if (!s && cJSON_IsArray(ir) && cJSON_GetArraySize(ir) == f.channels && f.channels <= 4) {
+      int k = 0;
+      const cJSON *x;
+      f.has_irradiance = true;
+      cJSON_ArrayForEach(x, ir) f.irradiance[k++] = cJSON_IsNumber(x) ? x->valuedouble : NAN;
+    }
+    const cJSON *sz = cJSON_GetObjectItemCaseSensitive(meta, "sun_zenith_deg");
+    const cJSON *sa = cJSON_GetObjectItemCaseSensitive(meta, "sun_azimuth_deg");
+    if (!s && cJSON_IsNumber(sz) && cJSON_IsNumber(sa))
+      f.has_sun = true, f.sun_zenith = sz->valuedouble, f.sun_azimuth = sa->valuedouble;
     const cJSON *zen = cJSON_GetObjectItemCaseSensitive(meta, "zenith_deg");
     const cJSON *az = cJSON_GetObjectItemCaseSensitive(meta, "azimuth_deg");
     if (!s && (zen || az)) {
@@ -381,18 +395,24 @@ rsw_status rsw_dataset_write(rsw_dataset *d, const char *path) {
     ds_film *f = &d->films[i];
     f->vars[0] = (nc_var){"radiance", f->data};
     for (int k = 0; k < f->n_planes; k++) f->vars[1 + k] = (nc_var){f->plane_names[k], f->plane_data[k]};
-    films[i] = (nc_film){.context = f->context,
-                         .sensor = f->sensor,
-                         .width = f->width,
-                         .height = f->height,
-                         .channels = f->channels,
-                         .channel_names = (const char *const *)f->names,
-                         .spp = f->spp,
-                         .seed = f->seed,
-                         .unresolved_rays = f->unresolved,
-                         .angles = f->angles,
-                         .vars = f->vars,
-                         .n_vars = 1 + (size_t)f->n_planes};
+    films[i] =
+        (nc_film){.context = f->context,
+                  .sensor = f->sensor,
+                  .width = f->width,
+                  .height = f->height,
+                  .channels = f->channels,
+                  .channel_names = (const char *const *)f->names,
+                  .spp = f->spp,
+                  .seed = f->seed,
+                  .unresolved_rays = f->unresolved,
+                  .angles = f->angles,
+                  .vars = f->vars,
+                  .n_vars = 1 + (size_t)f->n_planes,
+                  .has_irradiance = f->has_irradiance,
+                  .irradiance = {f->irradiance[0], f->irradiance[1], f->irradiance[2], f->irradiance[3]},
+                  .has_sun = f->has_sun,
+                  .sun_zenith = f->sun_zenith,
+                  .sun_azimuth = f->sun_azimuth};
   }
   if (!s) {
     nc_dataset ds = {.size = sizeof ds,

@@ -261,6 +261,10 @@ rsw_status http_film_json(const svc_film *f, char **bytes_out, size_t *len_out, 
     for (int c = 0; c < im->channels; c++) http_buf_printf(&b, "%s%.17g", c ? "," : "", im->irradiance[c]);
     http_buf_puts(&b, "]");
   }
+  /* One directional emitter: its zenith and azimuth (Eradiate's
+   * convention), the dataset's sza and saa. */
+  if (im->has_sun)
+    http_buf_printf(&b, ",\"sun_zenith_deg\":%.9g,\"sun_azimuth_deg\":%.9g", im->sun_zenith, im->sun_azimuth);
   http_buf_puts(&b, "}}");
   free(owned);
   size_t len = 0;

@@ -429,6 +429,18 @@ static void h_job_result(http_req *r) {
   http_film_format fmt;
   if (!negotiate_film(r, &fmt)) return;
   svc_error e = {0};
+  if (r->q_band || r->q_node) { /* a job with bands: a band's film, or a node's */
+    svc_film bf;
+    memset(&bf, 0, sizeof bf);
+    if (service_job_band_result(r->svc, r->params[0], r->params[1], r->params[2], r->q_band, r->q_node, &bf,
+                                &e) != RSW_OK) {
+      http_resp_svc_error(r, &e);
+      return;
+    }
+    resp_film(r, &bf, fmt);
+    svc_film_free(&bf);
+    return;
+  }
   if (fmt == HTTP_FILM_NPY) { /* a film on disk streams from its file */
     int fd;
     uint64_t len;

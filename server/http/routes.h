@@ -70,6 +70,7 @@ struct http_req {
   /* query */
   const char *q_match, *q_class, *q_force, *q_variant, *q_partial;
   const char *q_exposure, *q_colormap; /* PNG films (image/png) */
+  const char *q_band, *q_node;         /* job results of a job with bands */
   /* headers */
   const char *content_type, *accept, *if_match, *idempotency_key, *last_event_id, *if_none_match;
   const char *body;

@@ -1,6 +1,7 @@
 /* A film's planes beyond radiance (render.h): their names, channel names,
  * interleaving for the one-array formats (EXR channels, .npy), and the
  * horizontal irradiance the BRDF and BRF divide by. */
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -133,6 +134,28 @@ rsw_status render_horizontal_irradiance(const scene *sc, color *e_h, rsw_err *er
                     n_dir);
   *e_h = sum;
   return RSW_OK;
+}
+
+bool render_sun_angles(const scene *sc, double *zenith_deg, double *azimuth_deg) {
+  const emitter *sun = NULL;
+  for (size_t i = 0; i < sc->n_emitters; i++)
+    if (sc->emitters[i]->flags & EMITTER_DELTA_DIRECTION) {
+      if (sun) return false;
+      sun = sc->emitters[i];
+    }
+  if (!sun) return false;
+  surface_interaction ref;
+  memset(&ref, 0, sizeof ref);
+  ref.p = sc->bsphere_center;
+  direction_sample ds;
+  memset(&ds, 0, sizeof ds);
+  (void)sun->ops->sample_direction(sun, &ref, v2(0.5, 0.5), &ds);
+  /* ds.d points towards the sun: (sin θ cos φ, sin θ sin φ, cos θ). */
+  double z = ds.d.z < -1 ? -1 : ds.d.z > 1 ? 1 : ds.d.z;
+  double az = atan2(ds.d.y, ds.d.x) * 180 / M_PI;
+  *zenith_deg = acos(z) * 180 / M_PI;
+  *azimuth_deg = az < 0 ? az + 360 : az;
+  return true;
 }
 
 int film_image_all_channels(const film_image *img, const char **names) {

@@ -629,6 +629,7 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
   }
   img.unresolved_rays = jb.rays.unresolved;
   img.isa = rsw_isa_name(rsw_isa_get());
+  img.has_sun = render_sun_angles(sc, &img.sun_zenith, &img.sun_azimuth);
   if (stats) {
     stats->rays = jb.rays;
     stats->samples = jb.samples;

@@ -98,6 +98,12 @@ typedef struct film_image {
    * divided by, per film channel (W m^-2 [nm^-1]). */
   bool has_irradiance;
   double irradiance[4];
+  /* Scenes with one directional emitter: the sun's zenith and azimuth
+   * (degrees, Eradiate's convention: zenith from +z, azimuth from +x
+   * counter-clockwise; the light travels along -(sin θ cos φ, sin θ sin φ,
+   * cos θ)), render_sun_angles. */
+  bool has_sun;
+  double sun_zenith, sun_azimuth;
 } film_image;
 
 typedef struct render_result_stats {
@@ -130,6 +136,11 @@ void film_image_free(film_image *img);
  * (where "quantities") when no directional emitter lights the horizontal
  * from above. */
 rsw_status render_horizontal_irradiance(const scene *sc, color *e_h, rsw_err *err);
+
+/* The angles of the scene's one directional emitter (render.h
+ * film_image.has_sun), at the prepared state: false when the scene has
+ * none or several. */
+bool render_sun_angles(const scene *sc, double *zenith_deg, double *azimuth_deg);
 
 /* What a render with these planes needs, checked before it starts (so a
  * job can refuse a request up front): variance needs sensor's film to use

@@ -25,10 +25,33 @@ static size_t film_vars(const film_image *im, nc_var *out) {
   return n;
 }
 
+/* A band film's quantities: the node films' names with "_srf" (Eradiate's
+ * names for SRF-weighted variables). */
+static size_t band_vars(const film_image *im, nc_var *out) {
+  static const char *const from[] = {"brdf", "brf", "radiance_stderr"};
+  static const char *const to[] = {"brdf_srf", "brf_srf", "radiance_srf_stderr"};
+  size_t n = 0;
+  out[n++] = (nc_var){"radiance_srf", im->data};
+  for (int k = 0; k < im->n_planes && n < MAX_FILM_VARS; k++)
+    for (int q = 0; q < 3; q++)
+      if (im->planes[k].data && strcmp(im->planes[k].name, from[q]) == 0)
+        out[n++] = (nc_var){to[q], im->planes[k].data};
+  return n;
+}
+
+/* The labels of a film the writer takes besides its quantities. */
+static void film_labels(const film_image *im, nc_film *f) {
+  f->has_irradiance = im->has_irradiance;
+  memcpy(f->irradiance, im->irradiance, sizeof f->irradiance);
+  f->has_sun = im->has_sun;
+  f->sun_zenith = im->sun_zenith, f->sun_azimuth = im->sun_azimuth;
+}
+
 typedef struct ds_item {
   size_t context;
   char sensor[256];
   size_t index; /* render item */
+  size_t node;  /* render_item.node */
   bool present, from_disk;
   svc_film film;
   nc_var vars[MAX_FILM_VARS];
@@ -38,6 +61,9 @@ void svc_job_restore_labels(job *j, const char *body, size_t len) {
   cJSON *req = cJSON_ParseWithLength(body, len);
   const cJSON *seed = cJSON_GetObjectItemCaseSensitive(req, "seed");
   if (cJSON_IsNumber(seed) && seed->valuedouble >= 0) j->seed = (uint64_t)seed->valuedouble;
+  const cJSON *bands = cJSON_GetObjectItemCaseSensitive(req, "bands");
+  svc_error be = {0};
+  if (bands && !j->bands && bands_parse(bands, "/bands", &j->bands, &be) != RSW_OK) j->bands = NULL;
   const cJSON *contexts = cJSON_GetObjectItemCaseSensitive(req, "contexts");
   size_t n = (size_t)cJSON_GetArraySize(contexts);
   const void **cj = n ? malloc(n * sizeof *cj) : NULL;
@@ -103,6 +129,23 @@ rsw_status service_job_dataset(service *svc, const char *id, bool partial, void 
   char *warnings = warnings_text(j->warnings);
   rsw_variant variant = j->variant;
   rsw_status st = RSW_OK;
+  /* A job with bands: its bands (copied: the job may go) and node
+   * wavelengths. */
+  band_plan bp = {0};
+  const char **band_ids = NULL;
+  if (j->bands) {
+    bp.n = j->bands->n, bp.n_wl = j->bands->n_wl;
+    bp.b = malloc(bp.n * sizeof *bp.b);
+    bp.wl = malloc(bp.n_wl * sizeof *bp.wl);
+    band_ids = malloc(bp.n * sizeof *band_ids);
+    if (!bp.b || !bp.wl || !band_ids) {
+      st = svc_fail(e, RSW_ERR_NOMEM, id, "out of memory");
+    } else {
+      memcpy(bp.b, j->bands->b, bp.n * sizeof *bp.b);
+      memcpy(bp.wl, j->bands->wl, bp.n_wl * sizeof *bp.wl);
+      for (size_t b = 0; b < bp.n; b++) band_ids[b] = bp.b[b].id;
+    }
+  }
   rsw_err err = {0};
   nc_coords coords = {0};
   char(*ids)[72] = calloc(n_ctx ? n_ctx : 1, sizeof *ids);
@@ -118,9 +161,10 @@ rsw_status service_job_dataset(service *svc, const char *id, bool partial, void 
     ds_item *d = &it[i];
     d->context = ri->context_index;
     d->index = i;
+    d->node = ri->node;
     snprintf(d->sensor, sizeof d->sensor, "%s", ri->sensor);
     snprintf(ids[ri->context_index], sizeof ids[0], "%s", ri->context);
-    if (ri->wavelength > 0) wl[ri->context_index] = ri->wavelength;
+    if (ri->wavelength > 0 && !ri->node) wl[ri->context_index] = ri->wavelength;
     if (ri->state != JOB_SUCCEEDED) continue;
     if (ri->has_film) {
       const film_image *src = &ri->film.img;
@@ -168,7 +212,7 @@ rsw_status service_job_dataset(service *svc, const char *id, bool partial, void 
     ds_item *d = &it[i];
     if (!d->present) continue;
     const film_image *im = &d->film.img;
-    if (!isfinite(wl[d->context]) && im->wavelength > 0) wl[d->context] = im->wavelength;
+    if (!isfinite(wl[d->context]) && im->wavelength > 0 && !d->node) wl[d->context] = im->wavelength;
     if (n_films == 0) variant = im->variant; /* a restored job's record has none */
     size_t nv = film_vars(im, d->vars);
     films[n_films++] = (nc_film){.context = d->context,
@@ -182,7 +226,60 @@ rsw_status service_job_dataset(service *svc, const char *id, bool partial, void 
                                  .unresolved_rays = im->unresolved_rays,
                                  .angles = im->angles,
                                  .vars = d->vars,
-                                 .n_vars = nv};
+                                 .n_vars = nv,
+                                 .node = d->node};
+    film_labels(im, &films[n_films - 1]);
+  }
+  /* Band films: per (context, sensor) whose node films are all there,
+   * one per band (items are context-major, then node, then sensor). */
+  film_image *bimg = NULL;
+  nc_var(*bvars)[MAX_FILM_VARS] = NULL;
+  size_t n_bimg = 0;
+  if (!st && bp.n) {
+    nc_film *grown = realloc(films, (n_items + n_items * bp.n + 1) * sizeof *films);
+    bimg = calloc(n_items * bp.n + 1, sizeof *bimg);
+    bvars = calloc(n_items * bp.n + 1, sizeof *bvars);
+    if (grown) films = grown;
+    if (!grown || !bimg || !bvars) st = svc_fail(e, RSW_ERR_NOMEM, id, "out of memory");
+  }
+  for (size_t i = 0; !st && bp.n && i < n_items; i++) {
+    if (it[i].node != 1) continue;
+    size_t ns = 0; /* sensors of this context */
+    while (i + ns < n_items && it[i + ns].node == 1 && it[i + ns].context == it[i].context) ns++;
+    for (size_t s = 0; s < ns && !st; s++) {
+      for (size_t b = 0; b < bp.n && !st; b++) {
+        const band *bd = &bp.b[b];
+        const film_image *imgs[BAND_MAX_NODES];
+        bool all = true;
+        for (size_t k = 0; k < bd->n_nodes && all; k++) {
+          size_t ix = i + s + bd->slot[k] * ns;
+          all = ix < n_items && it[ix].present;
+          if (all) imgs[k] = &it[ix].film.img;
+        }
+        if (!all) continue;
+        film_image *bi = &bimg[n_bimg];
+        if (bands_combine(bd, imgs, bi, &err) != RSW_OK) {
+          st = svc_fail(e, err.code, id, "%s", err.msg);
+          break;
+        }
+        size_t nv = band_vars(bi, bvars[n_bimg]);
+        films[n_films] = (nc_film){.context = it[i + s].context,
+                                   .sensor = it[i + s].sensor,
+                                   .width = bi->width,
+                                   .height = bi->height,
+                                   .channels = bi->channels,
+                                   .channel_names = bi->channel_names,
+                                   .spp = bi->spp,
+                                   .seed = bi->seed,
+                                   .angles = bi->angles, /* the nodes' */
+                                   .vars = bvars[n_bimg],
+                                   .n_vars = nv,
+                                   .band = b + 1};
+        film_labels(bi, &films[n_films]);
+        n_films++, n_bimg++;
+      }
+    }
+    i += ns - 1;
   }
   for (size_t c = 0; !st && c < n_ctx; c++) id_ptr[c] = ids[c];
   if (!st) {
@@ -200,11 +297,21 @@ rsw_status service_job_dataset(service *svc, const char *id, bool partial, void 
                      .coords = &coords,
                      .films = films,
                      .n_films = n_films,
-                     .warnings = warnings};
+                     .warnings = warnings,
+                     .n_nodes = bp.n_wl,
+                     .nodes = bp.wl,
+                     .n_bands = bp.n,
+                     .band_ids = band_ids};
     if (nc_dataset_encode(&ds, bytes_out, len_out, &err) != RSW_OK)
       st = svc_fail(e, err.code, err.where, "%s", err.msg);
   }
   for (size_t i = 0; it && i < n_items; i++) svc_film_free(&it[i].film);
+  for (size_t i = 0; i < n_bimg; i++) film_image_free(&bimg[i]);
+  free(bimg);
+  free(bvars);
+  free(bp.b);
+  free(bp.wl);
+  free(band_ids);
   free(films);
   free(it);
   free(ids);

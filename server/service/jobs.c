@@ -127,7 +127,7 @@ static bool id_set_add(id_set *set, const char *s) {
   return true;
 }
 
-static bool valid_context_id(const char *s) {
+bool svc_valid_id(const char *s) {
   size_t n = strlen(s);
   if (n < 1 || n > 64) return false;
   for (size_t i = 0; i < n; i++) {
@@ -152,6 +152,7 @@ static void job_free(job *j) {
   free(j->idem_key);
   nc_coords_free(&j->coords);
   cJSON_Delete(j->warnings);
+  bands_free(j->bands);
   free(j);
 }
 
@@ -482,6 +483,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   uint64_t job_seed = 0;
   unsigned quantities = 0;
   bool variance = false;
+  band_plan *bands = NULL; /* bands.c */
   for (const cJSON *k = !st ? req->child : NULL; k && !st; k = k->next) {
     if (strcmp(k->string, "contexts") == 0)
       contexts = k;
@@ -498,12 +500,14 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       st = svc_parse_quantities(k, "/quantities", &quantities, e);
     } else if (strcmp(k->string, "variance") == 0) {
       st = svc_parse_variance(k, "/variance", &variance, e);
+    } else if (strcmp(k->string, "bands") == 0) {
+      st = bands_parse(k, "/bands", &bands, e);
     } else {
       char w[300];
       snprintf(w, sizeof w, "/%s", k->string);
       st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, w,
                     "unknown field '%s' (expected contexts, defaults, params, templates, seed, quantities, "
-                    "variance)",
+                    "variance, bands)",
                     k->string);
     }
   }
@@ -525,6 +529,9 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
    * holds it for its whole duration). */
   scene *sc = r->sc;
   if (!st) st = check_params(sc, jparams, "/params", e);
+  if (!st && bands && sc->variant != VARIANT_MONO)
+    st = svc_fail(e, RSW_ERR_INVALID, "/bands", "bands apply to mono scenes; this scene is rgb");
+  size_t n_nodes = bands ? bands->n_wl : 1;
   /* Templates (the scene's under the job's), rendered for each context
    * below into the overrides it renders with. */
   tmpl_set *ts = NULL;
@@ -543,7 +550,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
    * templates) and the fingerprint for the no-op sweep check. */
   cJSON **ctx_params = NULL;
   tmpl_ctx_sig *sigs = NULL;
-  if (!st && ((ts && !(ctx_params = calloc(n_listed, sizeof *ctx_params))) ||
+  if (!st && ((ts && !(ctx_params = calloc(n_listed * n_nodes, sizeof *ctx_params))) ||
               !(sigs = calloc(n_listed, sizeof *sigs))))
     st = svc_fail(e, RSW_ERR_NOMEM, "/contexts", "out of memory");
   bool any_table = false;
@@ -563,6 +570,9 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
                       "wavelength must be a positive finite number");
       else
         d_wl = w->valuedouble;
+      if (!st && bands)
+        st = svc_fail(e, RSW_ERR_INVALID, "/defaults/wavelength",
+                      "a job with bands renders each band's wavelengths: it takes no wavelength");
     }
     d_sensors = cJSON_GetObjectItemCaseSensitive(defaults, "sensors");
     for (const cJSON *k = defaults->child; k && !st; k = k->next)
@@ -595,7 +605,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       break;
     }
     const cJSON *id = cJSON_GetObjectItemCaseSensitive(c, "id");
-    if (!cJSON_IsString(id) || !valid_context_id(id->valuestring)) {
+    if (!cJSON_IsString(id) || !svc_valid_id(id->valuestring)) {
       st = svc_fail(e, RSW_ERR_INVALID, ptr, "context \"id\" must match [A-Za-z0-9._-]{1,64}");
       break;
     }
@@ -642,22 +652,37 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
      * templates render. */
     const cJSON *mine = cparams;
     if (ts) {
-      cJSON *m = merge_params(jparams, cparams);
-      if (!m) {
-        st = svc_fail(e, RSW_ERR_NOMEM, ptr, "out of memory");
-        break;
+      /* With bands, once per node wavelength: a template may read it. */
+      for (size_t nk = 0; nk < n_nodes && !st; nk++) {
+        cJSON *m = merge_params(jparams, cparams);
+        if (!m) {
+          st = svc_fail(e, RSW_ERR_NOMEM, ptr, "out of memory");
+          break;
+        }
+        ctx_params[n_ctx * n_nodes + nk] = m;
+        st = tmpl_render(ts, sc, coords, bands ? bands->wl[nk] : wl, m, ptr, e);
+        if (!st) st = check_merged(sc, m, cparams, ts, ptr, e);
       }
-      ctx_params[n_ctx] = m;
-      st = tmpl_render(ts, sc, coords, wl, m, ptr, e);
-      if (!st) st = check_merged(sc, m, cparams, ts, ptr, e);
       if (st) break;
-      mine = m;
+      mine = ctx_params[n_ctx * n_nodes];
     } else if (cparams || (jparams && !job_params_ok)) {
       st = check_values(sc, jparams, cparams, ptr, e);
       if (st) break;
       if (!cparams) job_params_ok = true;
     }
-    if (sc->variant == VARIANT_MONO) {
+    if (bands) {
+      /* No wavelength of its own, and the scene's tables must cover
+       * every band's support. */
+      st = svc_bands_check_context(bands, c, ptr, e);
+      for (size_t b = 0; !st && b < bands->n; b++) {
+        char p6[80];
+        snprintf(p6, sizeof p6, "/bands/%zu/srf", b);
+        st = check_wavelength(sc, ranges, n_ranges, ts ? NULL : jparams, mine, bands->b[b].lo, p6, e);
+        if (!st)
+          st = check_wavelength(sc, ranges, n_ranges, ts ? NULL : jparams, mine, bands->b[b].hi, p6, e);
+      }
+      if (st) break;
+    } else if (sc->variant == VARIANT_MONO) {
       char p5[96];
       snprintf(p5, sizeof p5,
                w          ? "%s/wavelength"
@@ -718,7 +743,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
           st = svc_check_film(svc, sc, si, quantities, variance, ep, e);
           film_ok[si] = !st;
         }
-        n_items++;
+        n_items += n_nodes;
       }
     } else {
       if (!sc->n_sensors) st = svc_fail(e, RSW_ERR_INVALID, ptr, "the scene has no sensor");
@@ -727,7 +752,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
           st = svc_check_film(svc, sc, si, quantities, variance, ptr, e);
           film_ok[si] = !st;
         }
-      n_items += sc->n_sensors;
+      n_items += sc->n_sensors * n_nodes;
     }
     if (!st && n_items > SVC_MAX_JOB_RENDERS)
       st = svc_fail(e, RSW_ERR_LIMIT, ptr, "the job's renders (contexts times sensors) exceed %d",
@@ -776,12 +801,14 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     if (!has_spp) spp = d_spp;
     get_uint(c, "seed", 9007199254740991.0, &seed, &has_seed, "", e, &st);
     size_t ns = sens ? (size_t)cJSON_GetArraySize(sens) : sc->n_sensors;
-    jb->context_remaining[ci] = ns;
-    for (size_t s = 0; s < ns && !st; s++, k++) {
+    jb->context_remaining[ci] = ns * n_nodes;
+    for (size_t s = 0; s < ns * n_nodes && !st; s++, k++) {
       render_item *it = &jb->items[k];
+      size_t nk = s / ns; /* node-major within the context */
       snprintf(it->context, sizeof it->context, "%s", id->valuestring);
       it->context_index = ci;
-      const char *sname = sens ? cJSON_GetArrayItem(sens, (int)s)->valuestring : sc->sensors[s]->base.id;
+      const char *sname =
+          sens ? cJSON_GetArrayItem(sens, (int)(s % ns))->valuestring : sc->sensors[s % ns]->base.id;
       svc_find_sensor(sc, sname, &it->sensor_index);
       snprintf(it->sensor, sizeof it->sensor, "%s", sc->sensors[it->sensor_index]->base.id);
       const cJSON *cc = cJSON_GetObjectItemCaseSensitive(c, "coords");
@@ -789,6 +816,11 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       it->wavelength = w ? w->valuedouble : cw ? cw->valuedouble : d_wl;
       it->spp = (uint32_t)spp;
       it->seed = has_seed ? seed : default_seed(job_seed, it->context, it->sensor);
+      if (bands) { /* node renders: independent, each its own seed */
+        it->node = nk + 1;
+        it->wavelength = bands->wl[nk];
+        it->seed = bands_node_seed(it->seed, it->wavelength);
+      }
       it->quantities = quantities;
       it->variance = variance;
       /* Refused up front (the message names the sensor and spp) rather
@@ -796,7 +828,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
       if ((quantities || variance) && svc_check_planes(sc, it->sensor_index, it->spp, quantities, variance,
                                                        "/quantities", "/variance", e))
         st = e->err.code;
-      it->params = ctx_params ? cJSON_Duplicate(ctx_params[ci], 1)
+      it->params = ctx_params ? cJSON_Duplicate(ctx_params[ci * n_nodes + nk], 1)
                               : merge_params(jparams, cJSON_GetObjectItemCaseSensitive(c, "params"));
       if (!it->params) {
         st = svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
@@ -814,7 +846,7 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     }
   }
   cJSON_Delete(req);
-  for (size_t i = 0; ctx_params && i < n_listed; i++) cJSON_Delete(ctx_params[i]);
+  for (size_t i = 0; ctx_params && i < n_listed * n_nodes; i++) cJSON_Delete(ctx_params[i]);
   free(ctx_params);
   tmpl_free(ts);
   if (jb) {
@@ -822,9 +854,11 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     jb->seed = job_seed;
     jb->variant = sc->variant;
     jb->warnings = warnings;
+    jb->bands = bands;
   } else {
     nc_coords_free(&coords);
     cJSON_Delete(warnings);
+    bands_free(bands);
   }
   /* The bytes its films will hold, for --max-result-bytes. */
   uint64_t reserve = 0;
@@ -1011,6 +1045,7 @@ void *svc_worker_main(void *arg) {
       cJSON *d = cJSON_CreateObject();
       cJSON_AddStringToObject(d, "context", it->context);
       cJSON_AddStringToObject(d, "sensor", it->sensor);
+      if (it->node) cJSON_AddNumberToObject(d, "node", (double)(it->node - 1)); /* jobs with bands */
       cJSON_AddStringToObject(d, "state", st ? "failed" : "succeeded");
       if (st) cJSON_AddStringToObject(d, "error", it->error);
       cJSON_AddNumberToObject(d, "done", (double)done);
@@ -1177,6 +1212,7 @@ rsw_status service_job_results(service *svc, const char *id, char **json_out, sv
     cJSON_AddStringToObject(x, "sensor", it->sensor);
     cJSON_AddStringToObject(x, "state", state_names[it->state]);
     if (it->wavelength > 0) cJSON_AddNumberToObject(x, "wavelength", it->wavelength);
+    if (it->node) cJSON_AddNumberToObject(x, "node", (double)(it->node - 1));
     cJSON_AddNumberToObject(x, "seed", (double)it->seed);
     if (it->has_film || it->on_disk) {
       cJSON_AddNumberToObject(x, "spp", it->film.img.spp);
@@ -1187,7 +1223,11 @@ rsw_status service_job_results(service *svc, const char *id, char **json_out, sv
       int nc = film_image_all_channels(&it->film.img, names);
       for (int c = 0; c < nc; c++) svc_json_push(ch, cJSON_CreateString(names[c]));
       char href[512];
-      snprintf(href, sizeof href, "/v1/jobs/%s/results/%s/%s", j->id, it->context, it->sensor);
+      if (it->node)
+        snprintf(href, sizeof href, "/v1/jobs/%s/results/%s/%s?node=%zu", j->id, it->context, it->sensor,
+                 it->node - 1);
+      else
+        snprintf(href, sizeof href, "/v1/jobs/%s/results/%s/%s", j->id, it->context, it->sensor);
       cJSON_AddStringToObject(x, "href", href);
       if (it->film.img.unresolved_rays)
         cJSON_AddNumberToObject(x, "unresolved_rays", (double)it->film.img.unresolved_rays);
@@ -1195,6 +1235,7 @@ rsw_status service_job_results(service *svc, const char *id, char **json_out, sv
     if (it->error[0]) cJSON_AddStringToObject(x, "error", it->error);
     svc_json_push(a, x);
   }
+  if (j->bands) svc_bands_results_json(j, o);
   pthread_mutex_unlock(&svc->lock);
   return svc_json_out(json_out, o, jm, e);
 }
@@ -1207,6 +1248,14 @@ rsw_status service_job_result(service *svc, const char *id, const char *context,
   if (!j) {
     pthread_mutex_unlock(&svc->lock);
     return no_job(e, id);
+  }
+  if (j->bands) {
+    pthread_mutex_unlock(&svc->lock);
+    snprintf(e->key, sizeof e->key, "band"); /* the query parameter the problem names */
+    return svc_fail(e, RSW_ERR_INVALID, "band",
+                    "job %s has bands: ask for a band's film (?band=ID) or a node's (?node=K); its results "
+                    "list both",
+                    id);
   }
   for (size_t i = 0; i < j->n_items; i++) {
     const render_item *it = &j->items[i];
@@ -1286,7 +1335,7 @@ rsw_status service_job_result_npy_fd(service *svc, const char *id, const char *c
   char jid[40];
   size_t k = SIZE_MAX;
   snprintf(jid, sizeof jid, "%s", j->id);
-  for (size_t i = 0; i < j->n_items; i++) {
+  for (size_t i = 0; i < j->n_items && !j->bands; i++) { /* bands: service_job_band_result */
     const render_item *it = &j->items[i];
     if (strcmp(it->context, context) != 0 || strcmp(it->sensor, sensor_id) != 0) continue;
     if (it->on_disk) k = i;

@@ -153,6 +153,17 @@ rsw_status service_job_dataset(service *svc, const char *job_id, bool partial, v
                                size_t *len_out, svc_error *e);
 rsw_status service_job_result(service *svc, const char *job_id, const char *context, const char *sensor_id,
                               svc_film *out, svc_error *e);
+/* Jobs with bands (docs/experiments-bands.md): the film of band `band`
+ * (its radiance_srf, brf_srf, radiance_srf_stderr as the radiance, brf
+ * and radiance_stderr planes; wavelength NaN), combined from the node
+ * films on each call, or with `node` (decimal, an index into the job's
+ * node wavelengths) that node's film. Exactly one of band and node.
+ * RSW_ERR_NOT_FOUND (no such job, context, sensor, band or node; a node
+ * film missing), RSW_ERR_INVALID (a job without bands; both or neither
+ * given), RSW_ERR_NOMEM. */
+rsw_status service_job_band_result(service *svc, const char *job_id, const char *context,
+                                   const char *sensor_id, const char *band, const char *node, svc_film *out,
+                                   svc_error *e);
 /* The same result as a NumPy .npy file on disk (state directory), for
  * streaming: *fd_out (the caller closes it) reads *len_out bytes from
  * offset 0, exactly what http_film_npy would encode. RSW_OK with

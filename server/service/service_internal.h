@@ -11,6 +11,7 @@
 
 #include "../kernel/scene/params.h"
 #include "../kernel/scene/scene.h"
+#include "bands.h"
 #include "dataset_nc.h"
 #include "service.h"
 
@@ -97,6 +98,7 @@ typedef struct render_item {
   char sensor[256];
   size_t sensor_index;
   double wavelength;
+  size_t node; /* jobs with bands: 1 + the index of wavelength in job.bands->wl; 0 otherwise */
   uint32_t spp;
   uint64_t seed;
   unsigned quantities; /* RENDER_Q_*: the job's "quantities" */
@@ -147,6 +149,9 @@ typedef struct job {
    * or the wavelength that nothing depends on), a JSON array; NULL when
    * none. In the job's answers, its record and its dataset. */
   cJSON *warnings;
+  /* The job's bands (bands.c), NULL without: each context renders once
+   * per node wavelength, items context-major then node then sensor. */
+  band_plan *bands;
 } job;
 
 struct service {
@@ -338,7 +343,7 @@ void svc_free_evicted(resident **ev);
 bool svc_was_evicted_locked(service *svc, const char *id);
 void svc_forget_evicted_locked(service *svc, const char *id);
 /* A finished job restored from the state directory (its submission body):
- * the contexts' coords and the job seed, which its dataset needs
+ * the contexts' coords, the job seed and its bands, which its dataset needs
  * (dataset.c; left empty when the body does not give them). */
 void svc_job_restore_labels(job *j, const char *body, size_t len);
 /* Durable state (state.c); every function is a no-op without a state
@@ -376,5 +381,13 @@ void svc_job_push_event(service *svc, job *j, cJSON *data, bool end); /* svc->lo
 job *svc_find_job_locked(service *svc, const char *id);
 /* Bytes a film holds in memory (data and angles). */
 uint64_t svc_film_mem(const svc_film *f);
+/* An id of a context or a band: [A-Za-z0-9._-]{1,64} (jobs.c). */
+bool svc_valid_id(const char *s);
+/* Bands in jobs (bands.c): the checks of a job with bands at submission
+ * of context c at ptr: it may carry no wavelength, in itself or as a
+ * coord. */
+rsw_status svc_bands_check_context(const band_plan *p, const cJSON *c, const char *ptr, svc_error *e);
+/* The "bands" member of a band job's results (svc->lock held). */
+void svc_bands_results_json(const job *j, cJSON *o);
 
 #endif

@@ -391,6 +391,12 @@ rsw_status svc_state_film_write(service *svc, const job *j, size_t k, const svc_
       cJSON_AddItemToArray(ir, cJSON_CreateString(num));
     }
   }
+  if (im->has_sun) {
+    snprintf(num, sizeof num, "%.17g", im->sun_zenith);
+    cJSON_AddStringToObject(m, "sun_zenith", num);
+    snprintf(num, sizeof num, "%.17g", im->sun_azimuth);
+    cJSON_AddStringToObject(m, "sun_azimuth", num);
+  }
   char *ms = svc_print_json(m, svc_json_mark());
   if (!ms) return svc_fail(e, RSW_ERR_NOMEM, "--state-dir", "out of memory");
   char head[256];
@@ -522,6 +528,13 @@ bool svc_state_film_header(service *svc, const char *job_id, size_t k, svc_film 
     for (const cJSON *y = ir->child; y && ki < 4; y = y->next, ki++)
       out->img.irradiance[ki] = cJSON_IsString(y) ? strtod(y->valuestring, NULL) : NAN;
   }
+  const cJSON *sz = cJSON_GetObjectItemCaseSensitive(m, "sun_zenith");
+  const cJSON *sa = cJSON_GetObjectItemCaseSensitive(m, "sun_azimuth");
+  if (cJSON_IsString(sz) && cJSON_IsString(sa)) {
+    out->img.has_sun = true;
+    out->img.sun_zenith = strtod(sz->valuestring, NULL);
+    out->img.sun_azimuth = strtod(sa->valuestring, NULL);
+  }
   uint64_t px = (uint64_t)(out->img.width > 0 ? out->img.width : 0) *
                 (uint64_t)(out->img.height > 0 ? out->img.height : 0);
   uint64_t tc = (uint64_t)c * (uint64_t)(1 + out->img.n_planes);
@@ -636,6 +649,7 @@ void svc_state_job_finished(service *svc, const job *j) {
     cJSON_AddStringToObject(x, "w", num);
     snprintf(num, sizeof num, "%" PRIu64, it->seed);
     cJSON_AddStringToObject(x, "seed", num);
+    if (it->node) cJSON_AddNumberToObject(x, "n", (double)it->node); /* jobs with bands */
     if (it->error[0]) cJSON_AddStringToObject(x, "err", it->error);
     if (it->state == JOB_SUCCEEDED) {
       const film_image *im = &it->film.img;
@@ -815,6 +829,8 @@ static void restore_finished(service *svc, const req_header *h, cJSON *done, con
     ri->wavelength = cJSON_IsString(y) ? strtod(y->valuestring, NULL) : 0;
     y = cJSON_GetObjectItemCaseSensitive(it, "seed");
     ri->seed = cJSON_IsString(y) ? strtoull(y->valuestring, NULL, 10) : 0;
+    y = cJSON_GetObjectItemCaseSensitive(it, "n");
+    ri->node = cJSON_IsNumber(y) && y->valuedouble >= 1 ? (size_t)y->valuedouble : 0;
     y = cJSON_GetObjectItemCaseSensitive(it, "err");
     if (cJSON_IsString(y)) snprintf(ri->error, sizeof ri->error, "%s", y->valuestring);
     if (ri->state != JOB_QUEUED && ri->state != JOB_RUNNING) j->items_done++;
