@@ -34,7 +34,7 @@ static const nc_quantity quantities[] = {
     {"brdf", "bidirectional reflectance distribution function", "sr-1", "sr-1"},
     {"brf", "bidirectional reflectance factor", "1", "1"},
     {"brf_stderr", "standard error of the bidirectional reflectance factor", "1", "1"},
-    /* Bands (docs/experiments-bands.md): the SRF-weighted means, Eradiate's
+    /* Bands (docs/experiments.md#spectral-response-functions-bands): the SRF-weighted means, Eradiate's
      * *_srf variables. */
     {"radiance_srf", "radiance (SRF-weighted)", "W m-2 sr-1 nm-1", "W m-2 sr-1"},
     {"radiance_srf_stderr", "standard error of radiance_srf", "W m-2 sr-1 nm-1", "W m-2 sr-1"},

@@ -154,7 +154,7 @@ bool render_sun_angles(const scene *sc, double *zenith_deg, double *azimuth_deg)
   double z = ds.d.z < -1 ? -1 : ds.d.z > 1 ? 1 : ds.d.z;
   double az = atan2(ds.d.y, ds.d.x) * 180 / M_PI;
   *zenith_deg = acos(z) * 180 / M_PI;
-  *azimuth_deg = az < 0 ? az + 360 : az;
+  *azimuth_deg = (az < 0 ? az + 360 : az) + 0.0; /* + 0.0: atan2(-0, x) is -0, printed "-0" */
   return true;
 }
 

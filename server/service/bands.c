@@ -10,7 +10,7 @@
  *
  * so a spectrum that is smooth on the scale of the node spacing is
  * integrated with an error that falls off geometrically with n
- * (docs/experiments-bands.md has the measured figures). The rule comes
+ * (docs/experiments.md#spectral-response-functions-bands has the measured figures). The rule comes
  * from the recurrence of the polynomials orthogonal under S, computed by
  * the discretised Stieltjes procedure (Gautschi, "Orthogonal Polynomials:
  * Computation and Approximation", 2004, §2.2.3) on a discrete measure

@@ -4,7 +4,7 @@
  *
  * A job with bands renders every context once per distinct node
  * wavelength (nodes shared by several bands render once); a band's value
- * is the SRF-weighted mean of its nodes (docs/experiments-bands.md):
+ * is the SRF-weighted mean of its nodes (docs/experiments.md#spectral-response-functions-bands):
  *
  *   radiance_srf = ∫ L(λ) S(λ) dλ / ∫ S(λ) dλ ≈ Σ w_i L(λ_i) / Σ w_i
  *

@@ -153,7 +153,7 @@ rsw_status service_job_dataset(service *svc, const char *job_id, bool partial, v
                                size_t *len_out, svc_error *e);
 rsw_status service_job_result(service *svc, const char *job_id, const char *context, const char *sensor_id,
                               svc_film *out, svc_error *e);
-/* Jobs with bands (docs/experiments-bands.md): the film of band `band`
+/* Jobs with bands (docs/experiments.md#spectral-response-functions-bands): the film of band `band`
  * (its radiance_srf, brf_srf, radiance_srf_stderr as the radiance, brf
  * and radiance_stderr planes; wavelength NaN), combined from the node
  * films on each call, or with `node` (decimal, an index into the job's

@@ -162,7 +162,7 @@ static void test_quadrature(void) {
   CHECK_REL(p->b[1].integral, 0.5 * 30 + 0.75 * 30 + 0.25 * 40, 1e-9);
   bands_free(p);
   /* The default node counts on a smooth spectrum: relative error of the
-   * band mean against the fine trapezoid (docs/experiments-bands.md). */
+   * band mean against the fine trapezoid (docs/experiments.md#spectral-response-functions-bands). */
   REQUIRE(parse_bands(
               "[{\"id\": \"u\", \"srf\": {\"type\": \"uniform\", \"wmin\": 500, \"wmax\": 600}},"
               " {\"id\": \"t\", \"srf\": {\"type\": \"tabulated\", \"wavelengths\": [450, 500, 530, 560, 600,"

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Bands over HTTP (docs/experiments-bands.md), against a real daemon:
+# Bands over HTTP (docs/experiments.md#spectral-response-functions-bands), against a real daemon:
 #   - a job with bands: its results list the nodes, the bands and the band
 #     results; ?band=ID answers the band's film (brf plane = brf_srf,
 #     wavelength null), ?node=K a node's; a band job's plain result is 422

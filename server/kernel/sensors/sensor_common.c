@@ -204,7 +204,7 @@ void direction_angles(vec3 w, double *zenith, double *azimuth) {
   if (phi < 0.0) phi += 360.0;
   if (phi >= 360.0) phi -= 360.0;
   *zenith = acos(z) * deg;
-  *azimuth = phi;
+  *azimuth = phi + 0.0; /* atan2(-0, x) is -0: printed "-0" */
 }
 
 void hemisphere_pixel_angles(int W, int H, double *zen_az) {
