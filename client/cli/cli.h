@@ -16,22 +16,29 @@
 /* Exit codes, documented in `raysweep --help`. */
 enum {
   CLI_OK = 0,
-  CLI_SERVER = 1,       /* the server answered with a problem */
-  CLI_USAGE = 2,        /* bad command line or bad local input description */
-  CLI_CONNECT = 3,      /* cannot connect to the daemon */
-  CLI_JOB = 4,          /* job (or one of its renders) failed or was cancelled */
-  CLI_TIMEOUT = 5,      /* a deadline passed */
-  CLI_IO = 6,           /* local files */
-  CLI_INTERRUPTED = 130 /* Ctrl-C (SIGINT): 128 + 2, the shells' convention */
+  CLI_SERVER = 1,        /* the server answered with a problem */
+  CLI_USAGE = 2,         /* bad command line or bad local input description */
+  CLI_CONNECT = 3,       /* cannot connect to the daemon */
+  CLI_JOB = 4,           /* job (or one of its renders) failed or was cancelled */
+  CLI_TIMEOUT = 5,       /* a deadline passed */
+  CLI_IO = 6,            /* local files */
+  CLI_INTERRUPTED = 130, /* Ctrl-C (SIGINT): 128 + 2, the shells' convention */
+  CLI_TERMINATED = 143   /* SIGTERM: 128 + 15, handled as Ctrl-C */
 };
 
 /* Set by the SIGINT handler (cli_catch_interrupt); the client's transfers
  * watch it (rsw_client_opts.interrupt) and stop within about a second. */
 extern volatile sig_atomic_t cli_interrupted;
-/* Catch the first SIGINT in cli_interrupted (the handler only sets the
- * flag); a second one kills the process as usual (SA_RESETHAND). For the
- * commands that wait on the daemon: sweep, render, job watch. */
+/* The signal that set it (SIGINT or SIGTERM), 0 before any. */
+extern volatile sig_atomic_t cli_signal;
+/* Catch the first SIGINT or SIGTERM in cli_interrupted (the handler only
+ * sets the flags); a second one kills the process as usual (SA_RESETHAND).
+ * For the commands that wait on the daemon: sweep, render, job watch. */
 void cli_catch_interrupt(void);
+/* "interrupted", or "terminated (SIGTERM)", for the messages. */
+const char *cli_interrupted_word(void);
+/* CLI_INTERRUPTED, or CLI_TERMINATED after SIGTERM. */
+int cli_interrupted_code(void);
 
 #define CLI_MAX_OPTS 16
 

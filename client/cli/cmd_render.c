@@ -201,8 +201,9 @@ int cmd_render(cli_ctx *ctx, const cli_args *a) {
   if (s && cli_interrupted) {
     /* The request is dropped, which closes the connection: the daemon
      * stops a synchronous render whose client went away. */
-    rc = cli_fail(ctx, CLI_INTERRUPTED,
-                  "interrupted; the render request was dropped and the daemon stops the render");
+    rc = cli_fail(ctx, cli_interrupted_code(),
+                  "%s; the render request was dropped and the daemon stops the render",
+                  cli_interrupted_word());
     goto out;
   }
   if (s) {

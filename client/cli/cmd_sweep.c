@@ -1162,10 +1162,10 @@ static int run_spread(cli_ctx *ctx, const cli_args *a, int k_shards, bool resume
   if (s) {
     const char *why = rsw_spread_last_error();
     if (s == RSW_ERR_CANCELLED && cli_interrupted)
-      rc = cli_fail(ctx, CLI_INTERRUPTED,
-                    "interrupted; the shards' jobs keep running on the replicas: rerun the same command to "
+      rc = cli_fail(ctx, cli_interrupted_code(),
+                    "%s; the shards' jobs keep running on the replicas: rerun the same command to "
                     "fetch what finished and render only the rest (state in %s)",
-                    state);
+                    cli_interrupted_word(), state);
     else if (s == RSW_ERR_UNAVAILABLE)
       rc = cli_fail(ctx, CLI_CONNECT,
                     "%s; %zu films saved so far; rerun the same command to resume (state in %s)", why,
@@ -1349,8 +1349,9 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
   cli_catch_interrupt();
   rsw_status s = rsw_job_submit(ctx->client, scene, x, NULL, job);
   if (s && cli_interrupted) {
-    rc = cli_fail(ctx, CLI_INTERRUPTED,
-                  "interrupted while submitting the job (if the daemon got it, `raysweep job ls` shows it)");
+    rc = cli_fail(ctx, cli_interrupted_code(),
+                  "%s while submitting the job (if the daemon got it, `raysweep job ls` shows it)",
+                  cli_interrupted_word());
     goto out;
   }
   if (s) {
@@ -1376,10 +1377,10 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
   if ((rc = fetch_all(ctx, job, dir, fmt, sorted, l.n, job_params, incomplete, &entries, &n_entries,
                       &failed))) {
     if (cli_interrupted)
-      rc = cli_fail(ctx, CLI_INTERRUPTED,
-                    "interrupted while fetching films; job %s is over and keeps its results on the daemon "
+      rc = cli_fail(ctx, cli_interrupted_code(),
+                    "%s while fetching films; job %s is over and keeps its results on the daemon "
                     "(`raysweep fetch %s CONTEXT SENSOR`, or sweep again)",
-                    job, job);
+                    cli_interrupted_word(), job, job);
     goto out;
   }
   if ((rc = write_index(ctx, dir, entries, n_entries))) goto out;

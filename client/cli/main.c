@@ -72,6 +72,10 @@ static const char global_help[] =
     "Global options (anywhere on the command line):\n"
     "  --server URL       daemon base URL (env RAYSWEEP_URL; default " DEFAULT_URL ")\n"
     "  --token-file F     bearer token read from F (env RAYSWEEP_TOKEN holds the token itself)\n"
+    "  --connect-timeout S  give up connecting after S seconds (env RAYSWEEP_CONNECT_TIMEOUT; default 10)\n"
+    "  --stall-timeout S  give up a request that moves no byte for S seconds; 0: never (env\n"
+    "                     RAYSWEEP_STALL_TIMEOUT; default 60; a render, scene push, PATCH, job\n"
+    "                     submission or dataset waits for its answer to start)\n"
     "  --json             machine-readable output on stdout\n"
     "  --quiet, -q        no progress or informational messages on stderr (warnings stay)\n"
     "  --help, -h         this help; `raysweep COMMAND --help` for one command\n"
@@ -86,7 +90,8 @@ static const char global_help[] =
     "  5  timeout\n"
     "  6  local I/O error (files, directories, inconsistent shard directories)\n"
     "  130 interrupted (Ctrl-C): sweep cancels its job first (with --spread it leaves its jobs for a\n"
-    "      rerun to resume), job watch leaves it running\n";
+    "      rerun to resume), job watch leaves it running\n"
+    "  143 terminated (SIGTERM, as Slurm or a notebook restart sends): as Ctrl-C\n";
 
 static void command_name(const cli_command *c, char *buf, size_t n) {
   snprintf(buf, n, "%s%s%s", c->group, c->name ? " " : "", c->name ? c->name : "");
@@ -228,6 +233,25 @@ static void free_args(cli_args *a) {
   for (size_t i = 0; i < a->n_opts; i++) free(a->vals[i]);
 }
 
+/* --connect-timeout / --stall-timeout (or their environment variable):
+ * seconds, > 0 (the stall limit also takes 0: none, passed on as -1).
+ * *out stays 0 (the library's default) when neither is given. */
+static int transfer_limit(cli_ctx *ctx, const char *opt, const char *v, const char *env, bool zero_ok,
+                          double *out) {
+  const char *from = opt;
+  if (!v) {
+    v = getenv(env);
+    from = env;
+    if (!v || !*v) return CLI_OK;
+  }
+  double d;
+  if (!cli_parse_double(v, &d) || !(zero_ok ? d >= 0 : d > 0) || d > 1e6)
+    return cli_usage(ctx, "%s needs %s number of seconds (got '%s')", from,
+                     zero_ok ? "a non-negative" : "a positive", v);
+  *out = d == 0 ? -1 : d;
+  return CLI_OK;
+}
+
 /* Token: --token-file wins over RAYSWEEP_TOKEN; trailing white space (the
  * newline of `echo secret > F`) is not part of it. */
 static int read_token(const cli_ctx *ctx, const char *token_file, char **out) {
@@ -252,7 +276,7 @@ static int read_token(const cli_ctx *ctx, const char *token_file, char **out) {
 
 int main(int argc, char **argv) {
   cli_ctx ctx = {.cmd = "", .stderr_tty = isatty(STDERR_FILENO) == 1};
-  const char *server = NULL, *token_file = NULL;
+  const char *server = NULL, *token_file = NULL, *connect_to = NULL, *stall_to = NULL;
   bool help = false, version = false;
   /* Global options anywhere before "--": take them out of argv. */
   char **rest = calloc((size_t)argc + 1, sizeof *rest);
@@ -278,6 +302,16 @@ int main(int argc, char **argv) {
         return cli_usage(&ctx, "%s needs a value", arg);
       }
       *(arg[2] == 's' ? &server : &token_file) = argv[++i];
+    } else if (strcmp(arg, "--connect-timeout") == 0 || strcmp(arg, "--stall-timeout") == 0) {
+      if (i + 1 >= argc) {
+        free(rest);
+        return cli_usage(&ctx, "%s needs a value", arg);
+      }
+      *(arg[2] == 'c' ? &connect_to : &stall_to) = argv[++i];
+    } else if (strncmp(arg, "--connect-timeout=", 18) == 0) {
+      connect_to = arg + 18;
+    } else if (strncmp(arg, "--stall-timeout=", 16) == 0) {
+      stall_to = arg + 16;
     } else if (strncmp(arg, "--server=", 9) == 0) {
       server = arg + 9;
     } else if (strncmp(arg, "--token-file=", 13) == 0) {
@@ -353,9 +387,18 @@ int main(int argc, char **argv) {
     if (!ctx.server_url || !*ctx.server_url) ctx.server_url = DEFAULT_URL;
     rc = read_token(&ctx, token_file, &token);
     ctx.token = token;
+    double connect_s = 0, stall_s = 0;
+    if (!rc)
+      rc = transfer_limit(&ctx, "--connect-timeout", connect_to, "RAYSWEEP_CONNECT_TIMEOUT", false,
+                          &connect_s);
+    if (!rc) rc = transfer_limit(&ctx, "--stall-timeout", stall_to, "RAYSWEEP_STALL_TIMEOUT", true, &stall_s);
     if (!rc) {
-      rsw_client_opts o = {
-          .size = sizeof o, .base_url = ctx.server_url, .token = token, .interrupt = &cli_interrupted};
+      rsw_client_opts o = {.size = sizeof o,
+                           .base_url = ctx.server_url,
+                           .token = token,
+                           .interrupt = &cli_interrupted,
+                           .connect_timeout_s = connect_s,
+                           .stall_timeout_s = stall_s};
       rsw_status s = rsw_client_new(&o, &ctx.client);
       if (s)
         rc = cli_fail(&ctx, s == RSW_ERR_INVALID ? CLI_USAGE : CLI_IO, "cannot create a client for '%s': %s",

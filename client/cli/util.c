@@ -13,28 +13,42 @@
 
 #include "cli.h"
 
-/* ---- Ctrl-C ---- */
+/* ---- Ctrl-C and SIGTERM ---- */
 
 volatile sig_atomic_t cli_interrupted = 0;
+volatile sig_atomic_t cli_signal = 0;
 
-static void on_sigint(int sig) {
-  (void)sig;
+static void on_signal(int sig) {
+  cli_signal = sig;
   cli_interrupted = 1; /* nothing else: the wait loops act on it */
 }
 
 void cli_catch_interrupt(void) {
-  struct sigaction sa, old;
-  /* Ignored at start (`nohup`, a background job of a non-interactive
-   * shell): stay ignored, as the convention for SIGINT goes. */
-  if (sigaction(SIGINT, NULL, &old) == 0 && old.sa_handler == SIG_IGN) return;
-  memset(&sa, 0, sizeof sa);
-  sa.sa_handler = on_sigint;
-  sigemptyset(&sa.sa_mask);
-  /* No SA_RESTART: a blocking call returns EINTR and the loop sees the
-   * flag. SA_RESETHAND: a second Ctrl-C (say, while the cancel request
-   * hangs) ends the process the usual way. */
-  sa.sa_flags = SA_RESETHAND;
-  sigaction(SIGINT, &sa, NULL);
+  /* SIGTERM too: Slurm's scancel, a notebook kernel's restart and
+   * `timeout` send it, and the job should not be left running unseen. */
+  static const int sigs[] = {SIGINT, SIGTERM};
+  for (size_t i = 0; i < sizeof sigs / sizeof sigs[0]; i++) {
+    struct sigaction sa, old;
+    /* Ignored at start (`nohup`, a background job of a non-interactive
+     * shell): stay ignored, as the convention for SIGINT goes. */
+    if (sigaction(sigs[i], NULL, &old) == 0 && old.sa_handler == SIG_IGN) continue;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = on_signal;
+    sigemptyset(&sa.sa_mask);
+    /* No SA_RESTART: a blocking call returns EINTR and the loop sees the
+     * flag. SA_RESETHAND: a second Ctrl-C (say, while the cancel request
+     * hangs) ends the process the usual way. */
+    sa.sa_flags = SA_RESETHAND;
+    sigaction(sigs[i], &sa, NULL);
+  }
+}
+
+const char *cli_interrupted_word(void) {
+  return cli_signal == SIGTERM ? "terminated (SIGTERM)" : "interrupted";
+}
+
+int cli_interrupted_code(void) {
+  return cli_signal == SIGTERM ? CLI_TERMINATED : CLI_INTERRUPTED;
 }
 
 /* ---- messages and exit codes ---- */
@@ -435,23 +449,23 @@ static int wait_interrupted(cli_ctx *ctx, const char *job_id, cli_on_interrupt o
   cli_interrupted = 0;
   if (on_int == CLI_INTERRUPT_DETACH) {
     fprintf(stderr,
-            "raysweep %s: interrupted; job %s keeps running on the daemon "
+            "raysweep %s: %s; job %s keeps running on the daemon "
             "(cancel it with `raysweep job cancel %s`)\n",
-            ctx->cmd, job_id, job_id);
-    return CLI_INTERRUPTED;
+            ctx->cmd, cli_interrupted_word(), job_id, job_id);
+    return cli_interrupted_code();
   }
   rsw_status s = rsw_job_cancel(ctx->client, job_id);
   rsw_job_status st;
   if (!s) s = rsw_job_get(ctx->client, job_id, &st);
   if (s) {
     cli_report(ctx, s, job_id);
-    fprintf(stderr, "raysweep %s: interrupted; cancelling job %s failed (try `raysweep job cancel %s`)\n",
-            ctx->cmd, job_id, job_id);
-    return CLI_INTERRUPTED;
+    fprintf(stderr, "raysweep %s: %s; cancelling job %s failed (try `raysweep job cancel %s`)\n", ctx->cmd,
+            cli_interrupted_word(), job_id, job_id);
+    return cli_interrupted_code();
   }
-  fprintf(stderr, "raysweep %s: interrupted; cancelled job %s on the daemon (%zu of %zu renders were done)\n",
-          ctx->cmd, job_id, st.renders_done, st.renders_total);
-  return CLI_INTERRUPTED;
+  fprintf(stderr, "raysweep %s: %s; cancelled job %s on the daemon (%zu of %zu renders were done)\n",
+          ctx->cmd, cli_interrupted_word(), job_id, st.renders_done, st.renders_total);
+  return cli_interrupted_code();
 }
 
 int cli_wait_job(cli_ctx *ctx, const char *job_id, double timeout_s, cli_on_interrupt on_int,

@@ -92,6 +92,7 @@ rsw_status rsw_client_new(const rsw_client_opts *opts, rsw_client **out) {
   }
   c->connect_timeout_s = o.connect_timeout_s > 0 ? o.connect_timeout_s : 10.0;
   c->timeout_s = o.timeout_s > 0 ? o.timeout_s : 0.0;
+  c->stall_timeout_s = o.stall_timeout_s == 0 ? CLIENT_STALL_TIMEOUT_S : o.stall_timeout_s;
   c->max_retries = o.max_retries == 0 ? 3 : o.max_retries < 0 ? 0 : o.max_retries;
   c->retry_backoff_s = o.retry_backoff_s > 0 ? o.retry_backoff_s : 0.2;
   c->interrupt = o.interrupt;

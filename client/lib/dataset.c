@@ -25,8 +25,8 @@ rsw_status rsw_job_fetch_dataset(rsw_client *c, const char *job_id, int partial,
   if (!client_escape(job_id, esc, sizeof esc)) return client_fail(c, RSW_ERR_INVALID, "job id too long");
   snprintf(rpath, sizeof rpath, "/v1/jobs/%s/dataset%s", esc, partial ? "?partial=1" : "");
   http_resp r;
-  rsw_status s =
-      http_request(c, &(http_req){.method = "GET", .path = rpath, .accept = "application/x-netcdf"}, &r);
+  rsw_status s = http_request(
+      c, &(http_req){.method = "GET", .path = rpath, .accept = "application/x-netcdf", .computed = true}, &r);
   if (s) return s;
   size_t n = strlen(path) + 32;
   char *tmp = malloc(n);

@@ -312,6 +312,15 @@ rsw_status rsw_render(rsw_client *c, const char *id, const char *request_json, r
   if (!film_out) return client_fail(c, RSW_ERR_INVALID, "render: film_out is NULL");
   snprintf(path, sizeof path, "/v1/scenes/%s:render", esc);
   const char *body = request_json && *request_json ? request_json : "{}";
+  /* The request's timeout_s (the daemon stops the render there and
+   * answers) bounds the whole exchange here too, with a grace for the
+   * answer to arrive: a server that never answers is given up. */
+  double deadline = 0;
+  cJSON *req = cJSON_Parse(body);
+  cJSON *t = cJSON_GetObjectItemCaseSensitive(req, "timeout_s");
+  if (cJSON_IsNumber(t) && t->valuedouble > 0 && t->valuedouble < 1e9)
+    deadline = t->valuedouble + CLIENT_RENDER_GRACE_S + t->valuedouble / 10.0;
+  cJSON_Delete(req);
   http_resp r;
   rsw_status s = http_request(c,
                               &(http_req){.method = "POST",
@@ -319,7 +328,9 @@ rsw_status rsw_render(rsw_client *c, const char *id, const char *request_json, r
                                           .content_type = "application/json",
                                           .body = body,
                                           .body_len = strlen(body),
-                                          .accept = "application/json"},
+                                          .accept = "application/json",
+                                          .computed = true,
+                                          .deadline_s = deadline},
                               &r);
   if (s) return s;
   char what[320];

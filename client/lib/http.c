@@ -10,6 +10,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
+#include <time.h>
 
 #include "internal.h"
 #include "raysweep/version.h"
@@ -77,6 +78,7 @@ static size_t on_body(char *data, size_t size, size_t nmemb, void *user) {
 typedef struct hdr_state {
   char etag[80];
   char content_type[128];
+  size_t bytes; /* header bytes received (progress for the stall limit) */
 } hdr_state;
 
 /* Copy the value of "Name: value\r\n" into out when the name matches. */
@@ -96,8 +98,10 @@ static void header_value(const char *line, size_t n, const char *name, char *out
 static size_t on_header(char *data, size_t size, size_t nmemb, void *user) {
   size_t n = size * nmemb;
   hdr_state *h = user;
+  size_t seen = h->bytes + n;
   /* A new status line (after a 100 Continue or a redirect) starts afresh. */
   if (n >= 5 && strncmp(data, "HTTP/", 5) == 0) memset(h, 0, sizeof *h);
+  h->bytes = seen;
   header_value(data, n, "ETag", h->etag, sizeof h->etag);
   header_value(data, n, "Content-Type", h->content_type, sizeof h->content_type);
   return n;
@@ -105,11 +109,30 @@ static size_t on_header(char *data, size_t size, size_t nmemb, void *user) {
 
 /* ---- one exchange ------------------------------------------------------------ */
 
+/* The low-speed limit: progress is any byte sent or received (headers
+ * included); none for stall_s seconds aborts the transfer. */
+typedef struct stall_watch {
+  rsw_client *c;
+  double stall_s; /* <= 0: no limit */
+  bool computed;  /* exempt until the answer starts (http_req.computed) */
+  const hdr_state *hdr;
+  curl_off_t last; /* bytes moved at the last progress */
+  double last_t;   /* when */
+  bool stalled;    /* aborted by the limit */
+} stall_watch;
+
 typedef struct exchange {
   struct curl_slist *headers;
   char errbuf[CURL_ERROR_SIZE];
   hdr_state hdr;
+  stall_watch watch;
 } exchange;
+
+static double mono_s(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
 
 static bool add_header(exchange *x, const char *fmt, const char *value) {
   char line[1200];
@@ -125,8 +148,25 @@ static bool add_header(exchange *x, const char *fmt, const char *value) {
  * idle: a non-zero answer aborts the transfer (CURLE_ABORTED_BY_CALLBACK). */
 static int on_xferinfo(void *user, curl_off_t dltotal, curl_off_t dlnow, curl_off_t ultotal,
                        curl_off_t ulnow) {
-  (void)dltotal, (void)dlnow, (void)ultotal, (void)ulnow;
-  return client_interrupted(user) ? 1 : 0;
+  (void)dltotal, (void)ultotal;
+  stall_watch *w = user;
+  if (client_interrupted(w->c)) return 1;
+  if (w->stall_s <= 0) return 0;
+  double now = mono_s();
+  curl_off_t moved = dlnow + ulnow + (curl_off_t)w->hdr->bytes;
+  if (moved != w->last || w->last_t == 0) {
+    w->last = moved;
+    w->last_t = now;
+    return 0;
+  }
+  /* A computed answer: the daemon works before it sends a byte. */
+  if (w->computed && w->hdr->bytes == 0 && dlnow == 0) {
+    w->last_t = now;
+    return 0;
+  }
+  if (now - w->last_t < w->stall_s) return 0;
+  w->stalled = true;
+  return 1;
 }
 
 /* Set every option of one request on the (reset) handle. */
@@ -157,11 +197,17 @@ static rsw_status setup(rsw_client *c, const http_req *q, exchange *x, char *url
   curl_easy_setopt(h, CURLOPT_CONNECTTIMEOUT_MS, (long)(c->connect_timeout_s * 1000.0));
   curl_easy_setopt(h, CURLOPT_HEADERFUNCTION, on_header);
   curl_easy_setopt(h, CURLOPT_HEADERDATA, &x->hdr);
-  if (c->interrupt) {
-    curl_easy_setopt(h, CURLOPT_XFERINFOFUNCTION, on_xferinfo);
-    curl_easy_setopt(h, CURLOPT_XFERINFODATA, c);
-    curl_easy_setopt(h, CURLOPT_NOPROGRESS, 0L);
-  }
+  /* Interruption and the low-speed limit (stall_watch). */
+  x->watch = (stall_watch){.c = c, .stall_s = c->stall_timeout_s, .computed = q->computed, .hdr = &x->hdr};
+  curl_easy_setopt(h, CURLOPT_XFERINFOFUNCTION, on_xferinfo);
+  curl_easy_setopt(h, CURLOPT_XFERINFODATA, &x->watch);
+  curl_easy_setopt(h, CURLOPT_NOPROGRESS, 0L);
+  /* A peer that went away without a word (a dead host, a dropped route)
+   * is noticed by keep-alive probes within about a minute, also while a
+   * computed answer is exempt from the stall limit. */
+  curl_easy_setopt(h, CURLOPT_TCP_KEEPALIVE, 1L);
+  curl_easy_setopt(h, CURLOPT_TCP_KEEPIDLE, 30L);
+  curl_easy_setopt(h, CURLOPT_TCP_KEEPINTVL, 10L);
   /* The daemon's routes are plain http on a known host: no proxy from the
    * environment should sit between a client and its local daemon. Users
    * with a proxy set it explicitly in the base URL's host. */
@@ -216,7 +262,9 @@ rsw_status http_request(rsw_client *c, const http_req *q, http_resp *r) {
     }
     curl_easy_setopt(c->curl, CURLOPT_WRITEFUNCTION, on_body);
     curl_easy_setopt(c->curl, CURLOPT_WRITEDATA, &b);
-    if (c->timeout_s > 0) curl_easy_setopt(c->curl, CURLOPT_TIMEOUT_MS, (long)(c->timeout_s * 1000.0));
+    double whole = c->timeout_s;
+    if (q->deadline_s > 0 && (whole <= 0 || q->deadline_s < whole)) whole = q->deadline_s;
+    if (whole > 0) curl_easy_setopt(c->curl, CURLOPT_TIMEOUT_MS, (long)(whole * 1000.0));
     CURLcode rc = curl_easy_perform(c->curl);
     curl_slist_free_all(x.headers);
     long status = 0;
@@ -239,7 +287,15 @@ rsw_status http_request(rsw_client *c, const http_req *q, http_resp *r) {
     }
     if (rc != CURLE_OK) {
       free(b.p);
+      if (rc == CURLE_ABORTED_BY_CALLBACK && x.watch.stalled)
+        return client_fail(c, RSW_ERR_TIMEOUT,
+                           "%s %s: no progress for %g s: the server stalled (the low-speed limit, "
+                           "RAYSWEEP_STALL_TIMEOUT / rsw_client_opts.stall_timeout_s)",
+                           q->method, url, x.watch.stall_s);
       if (rc == CURLE_ABORTED_BY_CALLBACK) return client_fail_interrupted(c, q->path);
+      if (rc == CURLE_OPERATION_TIMEDOUT && whole > 0)
+        return client_fail(c, RSW_ERR_TIMEOUT, "%s %s: no complete answer within %g s (%s)", q->method, url,
+                           whole, x.errbuf[0] ? x.errbuf : curl_easy_strerror(rc));
       if (rc == CURLE_WRITE_ERROR && b.too_big)
         return client_fail(c, RSW_ERR_LIMIT, "%s %s: answer larger than %zu bytes", q->method, url,
                            (size_t)CLIENT_MAX_BODY);
@@ -325,6 +381,7 @@ rsw_status http_stream(rsw_client *c, const http_req *q, double timeout_s, http_
     curl_slist_free_all(x.headers);
     return s;
   }
+  x.watch.stall_s = 0; /* the low-speed check below instead */
   stream_state st = {.c = c, .on_line = on_line, .user = user};
   curl_easy_setopt(c->curl, CURLOPT_WRITEFUNCTION, on_stream);
   curl_easy_setopt(c->curl, CURLOPT_WRITEDATA, &st);

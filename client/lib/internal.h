@@ -16,15 +16,21 @@
 
 /* Caps on what the client accepts, so a confused server cannot make it
  * allocate without bound. */
-#define CLIENT_MAX_BODY      ((size_t)1 << 31) /* one response body: 2 GiB */
-#define CLIENT_MAX_SSE_EVENT ((size_t)1 << 20) /* one server-sent event: 1 MiB */
+#define CLIENT_MAX_BODY        ((size_t)1 << 31) /* one response body: 2 GiB */
+#define CLIENT_MAX_SSE_EVENT   ((size_t)1 << 20) /* one server-sent event: 1 MiB */
+/* Defaults of the transfer limits (rsw_client_opts; docs/robustness-h-http.md). */
+#define CLIENT_STALL_TIMEOUT_S 60.0
+/* A render with a timeout_s of T is given up client-side at
+ * T + CLIENT_RENDER_GRACE_S + T / 10: the daemon stops at T and answers. */
+#define CLIENT_RENDER_GRACE_S  2.0
 
 struct rsw_client {
   char *base_url; /* without a trailing '/' */
   char *token;    /* NULL: no Authorization header */
   char *route;    /* X-Raysweep-Shard routing key, or NULL: none */
   double connect_timeout_s, timeout_s;
-  int max_retries; /* >= 0 after rsw_client_new */
+  double stall_timeout_s; /* <= 0: none (rsw_client_opts.stall_timeout_s) */
+  int max_retries;        /* >= 0 after rsw_client_new */
   double retry_backoff_s;
   void *curl;                             /* CURL *: one easy handle, so connections are kept alive */
   const volatile sig_atomic_t *interrupt; /* borrowed; NULL: none */
@@ -65,6 +71,12 @@ typedef struct http_req {
   const char *if_match;        /* If-Match value, or NULL */
   const char *idempotency_key; /* or NULL */
   const char *last_event_id;   /* or NULL */
+  /* The daemon computes the answer before its first byte (a render, a
+   * scene load, a dataset): the stall limit waits for the answer to start. */
+  bool computed;
+  /* > 0: the whole exchange ends after this many seconds (RSW_ERR_TIMEOUT),
+   * whichever of it and the client's timeout_s comes first. */
+  double deadline_s;
 } http_req;
 
 typedef struct http_resp {

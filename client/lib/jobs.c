@@ -233,7 +233,8 @@ rsw_status rsw_job_submit(rsw_client *c, const char *scene_id, const rsw_context
                                           .content_type = "application/json",
                                           .body = body,
                                           .body_len = strlen(body),
-                                          .idempotency_key = idempotency_key},
+                                          .idempotency_key = idempotency_key,
+                                          .computed = true},
                               &r);
   free(body);
   if (s) return s;

@@ -429,7 +429,8 @@ static rsw_status push(rsw_client *c, const char *text, size_t len, const char *
                                  .path = path,
                                  .content_type = is_xml ? "application/xml" : "application/json",
                                  .body = doc ? doc : text,
-                                 .body_len = doc ? doc_len : len},
+                                 .body_len = doc ? doc_len : len,
+                                 .computed = true},
                      &r);
   free(doc);
   if (s) return s;
@@ -563,7 +564,8 @@ rsw_status rsw_params_update(rsw_client *c, const char *id, const char *map_json
                                           .content_type = "application/json",
                                           .body = map_json,
                                           .body_len = strlen(map_json),
-                                          .if_match = if_match >= 0 ? etag : NULL},
+                                          .if_match = if_match >= 0 ? etag : NULL,
+                                          .computed = true},
                               &r);
   if (s) return s;
   cJSON *a = cJSON_ParseWithLength(r.body, r.len);

@@ -63,6 +63,15 @@ typedef struct rsw_client_opts {
                                 of several replicas hashes (docker/haproxy,
                                 docker/nginx) so that all requests of one shard
                                 reach the same replica; [A-Za-z0-9._-]{1,64} */
+  double stall_timeout_s;                 /* the low-speed limit: a request that sends
+                                and receives nothing for this long fails with
+                                RSW_ERR_TIMEOUT and a message naming its URL.
+                                0: 60 s; negative: none. A render, a scene
+                                push and a dataset, whose answers the daemon
+                                computes first, are exempt until their answer
+                                starts (a render's own timeout_s bounds it:
+                                see rsw_render); TCP keep-alive probes still
+                                notice a peer that went away. */
 } rsw_client_opts;
 
 /* Create a client. Borrows opts (strings are copied). *out is owned: free
@@ -172,7 +181,9 @@ void rsw_film_free(rsw_film *f);
 
 /* One synchronous render. request_json is a RenderRequest text
  * ({"sensor", "spp", "seed", "wavelength", "params", "timeout_s"}) or NULL
- * for the defaults. *film_out is owned: rsw_film_free. */
+ * for the defaults. *film_out is owned: rsw_film_free. With a timeout_s
+ * of T the whole exchange is also bounded here, at T + 2 s + T/10 (the
+ * daemon stops at T and answers; RSW_ERR_TIMEOUT naming the URL past it). */
 rsw_status rsw_render(rsw_client *c, const char *id, const char *request_json, rsw_film **film_out);
 
 /* ---- jobs ------------------------------------------------------------------------ */

@@ -201,10 +201,12 @@ rsw_status http_film_json(const svc_film *f, char **bytes_out, size_t *len_out, 
   }
   http_buf_puts(&b, "],\"layout\":\"HWC\",\"data\":[");
   /* Reserve roughly what the samples take, so the loop rarely reallocates. */
+  uint64_t nonfinite = 0; /* written as null, and counted in the meta */
   if (buf_reserve(&b, n * 12)) {
     for (size_t i = 0; i < n && !b.failed; i++) {
       float v = all[i];
       char num[32];
+      nonfinite += !isfinite(v);
       int k = isfinite(v) ? snprintf(num, sizeof num, "%.9g", (double)v) : snprintf(num, sizeof num, "null");
       if (i) http_buf_append(&b, ",", 1);
       http_buf_append(&b, num, (size_t)k);
@@ -239,6 +241,8 @@ rsw_status http_film_json(const svc_film *f, char **bytes_out, size_t *len_out, 
   /* Only when non-zero: rays the periodic boundary could not resolve. */
   if (im->unresolved_rays)
     http_buf_printf(&b, ",\"unresolved_rays\":%llu", (unsigned long long)im->unresolved_rays);
+  /* Only when non-zero: values that are inf or NaN (null in "data"). */
+  if (nonfinite) http_buf_printf(&b, ",\"nonfinite\":%llu", (unsigned long long)nonfinite);
   /* The instruction set the batched shading ran (core/isa.h), when known. */
   if (im->isa) http_buf_printf(&b, ",\"isa\":\"%s\"", im->isa);
   /* Films with planes: what each is (its channels are "<name>.<channel>"),
@@ -368,9 +372,11 @@ static const struct {
     {410, "Gone", "GONE"},
     {412, "Precondition Failed", "PRECONDITION_FAILED"},
     {413, "Content Too Large", "CONTENT_TOO_LARGE"},
+    {414, "URI Too Long", "URI_TOO_LONG"},
     {415, "Unsupported Media Type", "UNSUPPORTED_MEDIA_TYPE"},
     {422, "Unprocessable Content", "UNPROCESSABLE_CONTENT"},
     {429, "Too Many Requests", "TOO_MANY_REQUESTS"},
+    {431, "Request Header Fields Too Large", "REQUEST_HEADER_FIELDS_TOO_LARGE"},
     {500, "Internal Server Error", "INTERNAL_SERVER_ERROR"},
     {501, "Not Implemented", "NOT_IMPLEMENTED"},
     {503, "Service Unavailable", "SERVICE_UNAVAILABLE"},

@@ -19,6 +19,9 @@
  * 414 (the API's routes take at most three parameters). */
 #define HTTP_MAX_URI             8192
 #define HTTP_MAX_QUERY_PARAMS    32
+/* Request header fields beyond this many get 431 (a client of this API
+ * sends about ten; browsers about twenty). */
+#define HTTP_MAX_HEADER_FIELDS   100
 /* Idempotency-Key length (proto/openapi.yaml). */
 #define HTTP_MAX_IDEMPOTENCY_KEY 255
 

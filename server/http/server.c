@@ -677,12 +677,59 @@ static enum MHD_Result cl_visit(void *cls, enum MHD_ValueKind kind, const char *
   return MHD_YES;
 }
 
+/* Every request header field (MHD_get_connection_values): how many, and
+ * the first whose name holds a blank. libmicrohttpd 0.9.75 keeps
+ * "Content-Length : 60" as a field named "Content-Length " (it cuts the
+ * name at the colon only), so such a field frames nothing and its body
+ * would be read as the next request. */
+typedef struct field_scan {
+  unsigned n;
+  const char *blank_name; /* NULL: none */
+} field_scan;
+
+static enum MHD_Result field_visit(void *cls, enum MHD_ValueKind kind, const char *key, const char *value) {
+  (void)kind, (void)value;
+  field_scan *fs = cls;
+  fs->n++;
+  if (!fs->blank_name && key && key[strcspn(key, " \t")]) fs->blank_name = key;
+  return MHD_YES;
+}
+
+/* Answer a problem now and close the connection after it, whether or not
+ * the request announced a body: what follows on the connection cannot be
+ * trusted to start a request. */
+static enum MHD_Result send_problem_close(struct MHD_Connection *c, conn *cn, int status,
+                                          const char *detail) {
+  http_req r = {.svc = cn->srv->svc};
+  http_resp_problem(&r, status, NULL, "%s", detail);
+  cn->close_after = true;
+  return send_http_resp(c, cn, &r.resp);
+}
+
 static bool first_checks(struct MHD_Connection *c, conn *cn, const char *method, enum MHD_Result *ret) {
   http_server *srv = cn->srv;
   char allow[64];
   bool path_known = false;
   const char *path = cn->raw_path;
   char detail[600];
+  /* Framing first (RFC 9112 5.1): no whitespace between a field name and
+   * its colon; a 400 and the connection closed. */
+  field_scan fs = {0};
+  MHD_get_connection_values(c, MHD_HEADER_KIND, field_visit, &fs);
+  if (fs.blank_name) {
+    snprintf(detail, sizeof detail,
+             "header field '%.100s' has whitespace before its colon, which HTTP/1.1 forbids (RFC 9112 "
+             "section 5.1); the connection is closed",
+             fs.blank_name);
+    *ret = send_problem_close(c, cn, 400, detail);
+    return false;
+  }
+  if (fs.n > HTTP_MAX_HEADER_FIELDS) {
+    snprintf(detail, sizeof detail, "the request has %u header fields (at most %d)", fs.n,
+             HTTP_MAX_HEADER_FIELDS);
+    *ret = send_problem(c, cn, 431, NULL, detail, NULL, false);
+    return false;
+  }
   if (cn->uri_len > HTTP_MAX_URI || cn->n_query > HTTP_MAX_QUERY_PARAMS) {
     snprintf(detail, sizeof detail,
              "the request target has %zu bytes and %zu query parameters (at most %d and %d)", cn->uri_len,
@@ -1126,6 +1173,13 @@ static void *on_uri(void *cls, const char *uri, struct MHD_Connection *c) {
     cn->n_query = 1;
     for (const char *q = uri + n + 1; *q; q++) cn->n_query += *q == '&';
   }
+  /* Too many query parameters: answered 414 at the first call (which
+   * needs none of them). libmicrohttpd calls this before it splits the
+   * query into parameters in its per-connection memory pool, from the
+   * same writable buffer, and 5,000 of them exhaust that pool: it then
+   * closes the connection without an answer. An empty query costs it
+   * nothing, so the query is emptied here (the byte after '?'). */
+  if (cn->n_query > HTTP_MAX_QUERY_PARAMS) ((char *)uri)[n + 1] = '\0';
   cn->raw_path = strndup(uri, n);
   if (!cn->raw_path) {
     free(cn);

@@ -23,6 +23,15 @@
 #include "core/warp.h"
 #include "rsw_error.h"
 
+/* The largest magnitude a scene value given as a number, an rgb triple or
+ * a spectrum may have (a radiance, an irradiance, a reflectance, a scale),
+ * at load and in a PATCH. Sane radiometric values are far below it (the
+ * Sun's irradiance is about 1.4e3 W m^-2; photon fluxes about 1e22), and
+ * it keeps every product the kernel forms finite: a radiance of 1e30 times
+ * BSDF, geometry and 1/pdf factors of up to 1e8 still fits a float32 film
+ * (3.4e38), and squares for the variance fit a double. docs/robustness-h-http.md. */
+#define RSW_MAX_MAGNITUDE 1e30
+
 typedef enum obj_class {
   CLS_SCENE,
   CLS_SHAPE,

@@ -628,6 +628,7 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
     se->ops->pixel_angles(se, jb.W, jb.H, img.angles);
   }
   img.unresolved_rays = jb.rays.unresolved;
+  img.nonfinite = film_image_nonfinite(&img);
   img.isa = rsw_isa_name(rsw_isa_get());
   img.has_sun = render_sun_angles(sc, &img.sun_zenith, &img.sun_azimuth);
   if (stats) {
@@ -641,6 +642,15 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
   }
   *out = img;
   return RSW_OK;
+}
+
+uint64_t film_image_nonfinite(const film_image *img) {
+  size_t n = (size_t)img->width * (size_t)img->height * (size_t)img->channels;
+  uint64_t bad = 0;
+  for (size_t i = 0; img->data && i < n; i++) bad += !isfinite(img->data[i]);
+  for (int p = 0; p < img->n_planes; p++)
+    for (size_t i = 0; img->planes[p].data && i < n; i++) bad += !isfinite(img->planes[p].data[i]);
+  return bad;
 }
 
 void film_image_free(film_image *img) {

@@ -86,6 +86,10 @@ typedef struct film_image {
    * walls), each counted as blocked / ending its path. Non-zero means the
    * film depends on that policy; written to the film's metadata. */
   uint64_t unresolved_rays;
+  /* Values of the image and its planes that are not finite (inf, NaN): 0
+   * for any film of a scene within the parameter bounds (RSW_MAX_MAGNITUDE),
+   * but counted rather than assumed (film_image_nonfinite). */
+  uint64_t nonfinite;
   /* The instruction set the batched shading ran (core/isa.h: "avx512",
    * "avx2", "sse2", "generic"; static), or NULL when not known (a film restored
    * from a state directory). */
@@ -126,6 +130,8 @@ void render_stats_line(const render_result_stats *st, char *buf, size_t size);
 rsw_status render_sensor(scene *s, const render_opts *opts, film_image *out, render_result_stats *stats,
                          rsw_err *err);
 void film_image_free(film_image *img);
+/* How many values of the image and its planes are inf or NaN. */
+uint64_t film_image_nonfinite(const film_image *img);
 
 /* E_h, the irradiance of the scene's directional emitters on a horizontal
  * surface (world +z up, Eradiate's convention) at the prepared

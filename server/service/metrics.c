@@ -73,6 +73,10 @@ char *service_metrics_text(service *svc) {
                  "as blocked).\n");
   svc_buf_printf(&b, "# TYPE raysweep_unresolved_rays_total counter\nraysweep_unresolved_rays_total %llu\n",
                  (unsigned long long)svc->unresolved_rays);
+  svc_buf_printf(&b, "# HELP raysweep_films_nonfinite_total Films rendered with an inf or NaN value (their "
+                     "meta has nonfinite).\n");
+  svc_buf_printf(&b, "# TYPE raysweep_films_nonfinite_total counter\nraysweep_films_nonfinite_total %llu\n",
+                 (unsigned long long)svc->films_nonfinite);
   static const char *const classes[] = {"none", "spectral", "geometric"};
   svc_buf_printf(&b, "# HELP raysweep_update_seconds_total Time spent applying parameter updates, by the "
                      "costliest class touched.\n");

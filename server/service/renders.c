@@ -344,6 +344,7 @@ rsw_status svc_render_locked(service *svc, resident *r, const render_spec *rs, s
       pthread_mutex_lock(&svc->lock);
       svc->render_seconds += stats.wall_s;
       svc->unresolved_rays += stats.rays.unresolved;
+      if (out->img.nonfinite) svc->films_nonfinite++;
       pthread_mutex_unlock(&svc->lock);
       memcpy(out->scene, r->id, 65);
       out->revision = revision;

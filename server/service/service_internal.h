@@ -191,6 +191,7 @@ struct service {
   size_t sync_renders; /* synchronous renders (POST :render) in progress */
   double render_seconds;
   uint64_t unresolved_rays; /* render_stats.unresolved over all renders */
+  uint64_t films_nonfinite; /* films rendered with an inf or NaN value */
   double update_seconds[3]; /* none(+unchanged), spectral, geometric */
   uint64_t updates[3];
   /* Memory budget and durable state (state.c). */

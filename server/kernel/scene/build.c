@@ -408,6 +408,12 @@ rsw_status ld_path(loader *ld, node *n, const char *name, char **out) {
   return RSW_OK;
 }
 
+static rsw_status too_large(loader *ld, node *n, const char *name, double x) {
+  return ld_fail(ld, n, name, RSW_ERR_RANGE,
+                 "property '%s': value %g exceeds the largest magnitude a value may have (%g)", name, x,
+                 RSW_MAX_MAGNITUDE);
+}
+
 static rsw_status check_spectrum(loader *ld, node *n, prop *p, double lo) {
   const spectrum *s = &p->spec;
   if (s->kind == SPEC_TABLE && ld->variant == VARIANT_RGB)
@@ -431,6 +437,7 @@ static rsw_status check_spectrum(loader *ld, node *n, prop *p, double lo) {
   for (size_t i = 0; i < cnt; i++) {
     if (!isfinite(arr[i]))
       return ld_fail(ld, n, p->name, RSW_ERR_INVALID, "property '%s' must be finite", p->name);
+    if (fabs(arr[i]) > RSW_MAX_MAGNITUDE) return too_large(ld, n, p->name, arr[i]);
     if (arr[i] < lo)
       return ld_fail(ld, n, p->name, RSW_ERR_RANGE, "property '%s' must be >= %g (got %g)", p->name, lo,
                      arr[i]);
@@ -461,6 +468,7 @@ rsw_status ld_texture_opt(loader *ld, node *n, const char *name, double lo, text
   switch (p->kind) {
   case PROP_NUMBER:
     if (!isfinite(p->num)) return ld_fail(ld, n, name, RSW_ERR_INVALID, "property '%s' must be finite", name);
+    if (fabs(p->num) > RSW_MAX_MAGNITUDE) return too_large(ld, n, name, p->num);
     if (p->num < lo)
       return ld_fail(ld, n, name, RSW_ERR_RANGE, "property '%s' must be >= %g (got %g)", name, lo, p->num);
     s.value = p->num;
@@ -473,6 +481,7 @@ rsw_status ld_texture_opt(loader *ld, node *n, const char *name, double lo, text
     for (int i = 0; i < 3; i++) {
       if (!isfinite(s.rgb[i]))
         return ld_fail(ld, n, name, RSW_ERR_INVALID, "property '%s' must be finite", name);
+      if (fabs(s.rgb[i]) > RSW_MAX_MAGNITUDE) return too_large(ld, n, name, s.rgb[i]);
       if (s.rgb[i] < lo)
         return ld_fail(ld, n, name, RSW_ERR_RANGE, "property '%s' must be >= %g (got %g)", name, lo,
                        s.rgb[i]);

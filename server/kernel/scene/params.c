@@ -963,6 +963,10 @@ static const char *bound_text(double b, char buf[32]) {
 
 static rsw_status check_range(const entry *e, const char *key, double x, rsw_err *err) {
   if (!isfinite(x)) return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': value must be finite", key);
+  if (fabs(x) > RSW_MAX_MAGNITUDE)
+    return rsw_fail(err, RSW_ERR_RANGE, key,
+                    "'%s': value %g exceeds the largest magnitude a value may have (%g)", key, x,
+                    RSW_MAX_MAGNITUDE);
   if (x < e->lo || x > e->hi) {
     char lo[32], hi[32];
     if (isinf(e->hi))

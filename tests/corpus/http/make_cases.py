@@ -175,6 +175,10 @@ add("query_2000_params", "4xx", "-", req("GET", "/v1/scenes?" + "&".join("p%d=%d
     "2,000 query parameters get no answer (h-http)")
 add("query_2000_params_params", "4xx", "-",
     req("GET", S + "/params?" + "&".join("match=%d" % i for i in range(2000))), "(h-http)")
+add("query_5000_params", "414", "query parameters",
+    req("GET", "/v1/scenes?" + "&".join("a%d=1" % i for i in range(5000))),
+    "5,000 query parameters exhausted libmicrohttpd's pool: no answer (h-http, issue 22)")
+add("query_33_params", "414", "query parameters", req("GET", "/v1/scenes?" + "&".join("q%d=1" % i for i in range(33))))
 add("query_repeated_class", "400|200", "-", req("GET", S + "/params?class=spectral&class=bogus"))
 add("query_percent_bad", "400", "-", req("GET", S + "/params?class=%zz"))
 add("query_nul", "400|200", "-", req("GET", S + "/params?match=a%00b"), "%00 truncates the value (h-http)")
@@ -236,10 +240,19 @@ add("proto_version_garbage", "400|505", "mhd-html", req("GET", "/v1/scenes", ver
 add("proto_no_host_11", "400|200", "-", req("GET", "/v1/scenes", host=False), "MHD's own error as HTML (h-http)")
 add("proto_two_hosts", "400|200", "-", req("GET", "/v1/scenes", headers=["Host: other"]), "(h-http)")
 add("proto_header_no_colon", "400", "mhd-html", b"GET /v1/scenes HTTP/1.1\r\nHost: x\r\n{AUTH}NoColonHere\r\nConnection: close\r\n\r\n", "(h-http)")
-add("proto_header_space_before_colon", "400|200", "-", b"GET /v1/scenes HTTP/1.1\r\nHost: x\r\n{AUTH}X-A : b\r\nConnection: close\r\n\r\n", "(h-http)")
+add("proto_header_space_before_colon", "400", "X-A ;RFC 9112;closes", b"GET /v1/scenes HTTP/1.1\r\nHost: x\r\n{AUTH}X-A : b\r\n\r\n", "accepted (h-http, issue 22)")
+add("proto_header_tab_before_colon", "400", "RFC 9112;closes", b"GET /v1/scenes HTTP/1.1\r\nHost: x\r\n{AUTH}X-A\t: b\r\n\r\n", "accepted (h-http, issue 22)")
+# The desync of issue 22: "Content-Length : N" framed nothing, so its body
+# (a whole request) was answered as a second request on the connection.
+add("proto_cl_space_before_colon_smuggle", "400", "Content-Length ;closes",
+    b"POST /v1/scenes HTTP/1.1\r\nHost: x\r\n{AUTH}Content-Type: application/json\r\nContent-Length : {CL}\r\n\r\n"
+    b"GET /v1/health/live HTTP/1.1\r\nHost: x\r\n\r\n", "its body was answered as a second request (h-http, issue 22)")
+add("proto_host_space_before_colon", "400", "Host ;closes", b"GET /v1/health/live HTTP/1.1\r\nHost : x\r\n\r\n", "(h-http, issue 22)")
 add("proto_obs_fold", "400|200", "-", b"GET /v1/scenes HTTP/1.1\r\nHost: x\r\n{AUTH}X-A: b\r\n  folded\r\nConnection: close\r\n\r\n", "(h-http)")
 add("proto_header_64k", "431|400|413|200", "mhd-html", b"GET /v1/scenes HTTP/1.1\r\nHost: x\r\n{AUTH}X-Big: " + b"a" * 65000 + b"\r\nConnection: close\r\n\r\n", "MHD's own error (h-http)")
-add("proto_2000_headers", "431|400|200", "mhd-html", b"GET /v1/scenes HTTP/1.1\r\nHost: x\r\n{AUTH}" + b"".join(b"X-H%d: v\r\n" % i for i in range(2000)) + b"Connection: close\r\n\r\n", "(h-http)")
+add("proto_101_headers", "431", "header fields", b"GET /v1/scenes HTTP/1.1\r\nHost: x\r\n{AUTH}" + b"".join(b"X-H%d: v\r\n" % i for i in range(98)) + b"Connection: close\r\n\r\n", "accepted (h-http, issue 22)")
+add("proto_100_headers", "200", "-", b"GET /v1/scenes HTTP/1.1\r\nHost: x\r\n{AUTH}" + b"".join(b"X-H%d: v\r\n" % i for i in range(97)) + b"Connection: close\r\n\r\n")
+add("proto_2000_headers", "431", "header fields", b"GET /v1/scenes HTTP/1.1\r\nHost: x\r\n{AUTH}" + b"".join(b"X-H%d: v\r\n" % i for i in range(2000)) + b"Connection: close\r\n\r\n", "(h-http)")
 add("proto_absolute_uri_other_host", "400|404", "-", req("GET", "http://example.com/v1/scenes"))
 add("proto_asterisk", "400|404|405|501", "-", req("OPTIONS", "*"))
 add("proto_bare_lf", "400|401|200", "-", b"GET /v1/health/live HTTP/1.1\nHost: x\nConnection: close\n\n")
@@ -303,6 +316,10 @@ for name, body, st, chk in [
     ("direction_zero", '{"sun.direction": [0,0,0]}', "422|400", "sun.direction"),
     ("direction_two", '{"sun.direction": [0,1]}', "422|400", "sun.direction"),
     ("irradiance_negative", '{"sun.irradiance.value": -2}', "422|400", "sun.irradiance.value"),
+    # issue 22: finite, but products of it overflow (RSW_MAX_MAGNITUDE 1e30)
+    ("irradiance_1e308", '{"sun.irradiance.value": 1e308}', "422", "sun.irradiance.value;RSW_ERR_RANGE"),
+    ("irradiance_1e31_table", '{"sun.irradiance.value": {"wavelengths":[400,700],"values":[1,1e31]}}', "422", "sun.irradiance.value;RSW_ERR_RANGE"),
+    ("reflectance_rgb_1e300", '{"rectangle.bsdf.reflectance.value": [0.1, 1e300, 0.1]}', "422", "rectangle.bsdf.reflectance.value"),
     ("weight_negative", '{"sun.sampling_weight": -1}', "422|400", "sun.sampling_weight"),
     ("readonly_bool", '{"allow_thread_reordering": false}', "422|400|409", "allow_thread_reordering"),
     ("alpha_zero", '{"ball.bsdf.alpha.value": 0}', "422|400", "ball.bsdf.alpha.value"),
@@ -421,6 +438,8 @@ for name, body, st, chk, note, ctype in [
     ("xml_as_json", '<scene version="3.0.0"/>', "400|422|415", "-", "", "application/json"),
     ("json_as_xml", '{"type":"scene"}', "400|422|415", "-", "", "application/xml"),
     ("scale_1e-30_xml", '<scene version="3.0.0"><shape type="sphere"><transform name="to_world"><scale value="1e-30"/></transform></shape></scene>', "422|400", "scale", "Embree assertion at render (h-geom)", "application/xml"),
+    ("irradiance_1e308", '{"type":"scene","s":{"type":"directional","irradiance":1e308}}', "422", "irradiance;RSW_ERR_RANGE", "accepted (h-http, issue 22)", "application/json"),
+    ("radiance_rgb_1e35_xml", '<scene version="3.0.0"><emitter type="constant"><rgb name="radiance" value="1, 1e35, 1"/></emitter></scene>', "422", "radiance;RSW_ERR_RANGE", "accepted (h-http, issue 22)", "application/xml"),
     ("radius_1e-30", '{"type":"scene","b":{"type":"sphere","radius":1e-30}}', "422|400", "radius", "(h-geom)", "application/json"),    # participating media (issue 14): each error names its field
     ("medium_negative_sigma_t", '{"type":"scene","variant":"mono","cam":{"type":"hdistant","film":{"type":"hdrfilm","width":2,"height":2}},"integrator":{"type":"volpath"},"m":{"type":"homogeneous","sigma_t":-1},"box":{"type":"cube","bsdf":{"type":"null"},"interior":{"type":"ref","id":"m"}}}', "422", "sigma_t", "", "application/json"),
     ("medium_albedo_1_5", '{"type":"scene","variant":"mono","cam":{"type":"hdistant","film":{"type":"hdrfilm","width":2,"height":2}},"integrator":{"type":"volpath"},"m":{"type":"homogeneous","albedo":1.5},"box":{"type":"cube","bsdf":{"type":"null"},"interior":{"type":"ref","id":"m"}}}', "422", "albedo", "", "application/json"),
@@ -460,7 +479,9 @@ NOTES = {
     "cl_two_different": "refused: ambiguous framing (libmicrohttpd took one Content-Length)",
     "cl_and_chunked": "refused: ambiguous framing, RFC 9112 6.3 (Transfer-Encoding won before)",
     "proto_header_64k": "under the 256 KiB header buffer: accepted (h-http)",
-    "proto_2000_headers": "under the 256 KiB header buffer: accepted (h-http)",
+    "patch_irradiance_1e308": "accepted (h-http, issue 22)",
+    "patch_irradiance_1e31_table": "accepted (h-http, issue 22)",
+    "proto_2000_headers": "under the 256 KiB header buffer: accepted (h-http, issue 22)",
     "query_force_empty": "force= reads as force (h-http decides)",
     "query_nul": "a %00 in a query value: read-only route (h-http)",
     "proto_garbage_request_line": "libmicrohttpd closes or answers HTML itself (documented; h-http)",

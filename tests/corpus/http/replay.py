@@ -17,7 +17,10 @@ STATUS is a code (400), a class (4xx) or alternatives (404|405). CHECKS is
 contain; {VAR} placeholders are filled in), and two flags for what
 libmicrohttpd answers itself before raysweepd sees the request (documented
 in README.md): "mhd-html" (an HTML body instead of a problem) and
-"close-ok" (the connection closed without an answer, within the timeout). Every 4xx/5xx answer must be
+"close-ok" (the connection closed without an answer, within the timeout);
+and "closes": after its answer the server must close the connection and
+send nothing more (a framing error: what follows cannot be trusted to be
+a request, RFC 9112 section 5.1). Every 4xx/5xx answer must be
 application/problem+json, valid UTF-8, a JSON object whose "status" is the
 HTTP status; a HEAD answer has no body. An answer must come within 5 s.
 Prints a line per failure and "http corpus: N passed, N failed"; exit 1 if
@@ -79,6 +82,7 @@ def read_answer(sock, deadline, head_request):
             if not chunk:
                 break
             body += chunk
+        sock.extra = body[n:]
         return status, hdrs, body[:n]
     if "chunked" in hdrs.get("transfer-encoding", "").lower():
         out = b""
@@ -118,29 +122,61 @@ def status_ok(want, got):
     return False
 
 
+class Sock(socket.socket):
+    extra = b""  # bytes read past the answer (its Content-Length)
+
+
+def closed_after(sock, deadline):
+    """None when the server closed the connection with nothing after the
+    answer; else what went wrong."""
+    more = sock.extra
+    try:
+        while True:
+            sock.settimeout(max(0.01, deadline - time.time()))
+            chunk = sock.recv(65536)
+            if not chunk:
+                break
+            more += chunk
+    except (socket.timeout, TimeoutError):
+        return "the connection stayed open after the answer"
+    except OSError:
+        pass  # a reset is a close too
+    if more:
+        return "more bytes after the answer (a second answer?): %r" % more[:120]
+    return None
+
+
 def check_case(name, raw, want, checks, vars_, port, timeout, show):
     req = build_request(raw, vars_)
     head_request = req.startswith(b"HEAD ")
     t0 = time.time()
-    s = socket.create_connection(("127.0.0.1", port), timeout=timeout)
+    s = Sock(socket.AF_INET, socket.SOCK_STREAM)
+    closes = "closes" in checks.split(";")
+    close_err = None
     try:
+        s.settimeout(timeout)
+        s.connect(("127.0.0.1", port))
         try:
             s.sendall(req)
         except OSError:
             pass  # the server may answer and close before reading it all
         status, hdrs, body = read_answer(s, t0 + timeout, head_request)
+        if closes:
+            close_err = closed_after(s, t0 + timeout)
     finally:
         s.close()
     dt = time.time() - t0
     if show:
         print("%s -> %d %s (%.3f s) %s" % (name, status, hdrs.get("content-type", ""), dt, body[:300]))
     errs = []
-    flags = set(c for c in checks.split(";") if c in ("mhd-html", "close-ok"))
+    flags = set(c for c in checks.split(";") if c in ("mhd-html", "close-ok", "closes"))
     if flags:
         checks = ";".join(c for c in checks.split(";") if c not in flags) or "-"
     mhd_html = "mhd-html" in flags and hdrs.get("content-type", "text/html").startswith("text/html")
     if not status_ok(want, status):
         errs.append("status %d, wanted %s" % (status, want))
+    if close_err:
+        errs.append(close_err)
     if head_request and body:
         errs.append("a HEAD answer with a body")
     if status >= 400 and not head_request and not mhd_html:
