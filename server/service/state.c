@@ -258,7 +258,12 @@ static char *read_whole(const char *path, size_t *len) {
   return p;
 }
 
-typedef enum rec_status { REC_OK, REC_ABSENT, REC_LEGACY, REC_BAD } rec_status;
+typedef enum rec_status {
+  REC_OK,
+  REC_ABSENT,
+  REC_LEGACY,
+  REC_BAD
+} rec_status;
 
 /* Check a record's text (n bytes) against its checksum line; on REC_OK
  * *content is n minus the line. REC_LEGACY: no checksum line (written by
@@ -343,8 +348,10 @@ static rsw_status trust_dir(const char *dir, const char *opt, rsw_err *err) {
                   "chmod go-w it",
                   rp, (sb.st_mode & S_IWOTH) ? "others" : "its group", (unsigned)(sb.st_mode & 07777));
   for (char *slash = strrchr(rp, '/'); !st && slash; slash = strrchr(rp, '/')) {
-    if (slash == rp) slash[1] = '\0';
-    else *slash = '\0';
+    if (slash == rp)
+      slash[1] = '\0';
+    else
+      *slash = '\0';
     if (stat(rp, &sb) != 0) break;
     if (sb.st_uid != me && sb.st_uid != 0)
       st = rsw_fail(err, RSW_ERR_IO, opt,
@@ -394,7 +401,8 @@ static bool dir_empty(const service *svc, const char *sub) {
 rsw_status svc_state_open(service *svc, rsw_err *err) {
   if (!svc_state_on(svc)) return RSW_OK;
   if (mkdir(svc->state_dir, 0700) != 0 && errno != EEXIST)
-    return rsw_fail(err, RSW_ERR_IO, "--state-dir", "cannot create '%s': %s", svc->state_dir, strerror(errno));
+    return rsw_fail(err, RSW_ERR_IO, "--state-dir", "cannot create '%s': %s", svc->state_dir,
+                    strerror(errno));
   rsw_status st = trust_dir(svc->state_dir, "--state-dir", err);
   if (st) return st;
   static const char *const sub[] = {"scenes", "jobs", "results"};
@@ -474,8 +482,8 @@ rsw_status svc_state_scene_save(service *svc, const char *id, bool is_xml, const
   if (old) return RSW_OK;
   char head[200];
   int nh = snprintf(head, sizeof head, "{\"format\":\"%s\",\"variant\":%s%s%s,\"id\":\"%s\"}\n",
-                    is_xml ? "xml" : "json", variant ? "\"" : "", variant ? variant : "null", variant ? "\"" : "",
-                    id);
+                    is_xml ? "xml" : "json", variant ? "\"" : "", variant ? variant : "null",
+                    variant ? "\"" : "", id);
   if (!write_record(svc, p, head, (size_t)nh, body, len)) {
     int err = errno;
     unlink(p); /* a rename whose directory sync failed: not acknowledged, not kept */
@@ -616,9 +624,9 @@ static bool little_endian(void) {
  * another film's name) is quarantined. The previous version's films
  * ("RSWFILM1": a 32-byte trailer without the checksum) are upgraded by the
  * restore of a directory without DIR/format. */
-#define FILM_MAGIC "RSWFILM2"
+#define FILM_MAGIC    "RSWFILM2"
 #define FILM_MAGIC_V1 "RSWFILM1"
-#define FILM_TRAILER 64
+#define FILM_TRAILER  64
 
 typedef struct film_trailer {
   uint64_t npy, angles, meta;
@@ -735,8 +743,13 @@ rsw_status svc_state_film_write(service *svc, const job *j, size_t k, const svc_
   const film_image *im = &f->img;
   char p[4200];
   state_path(svc, p, sizeof p, "results/%s", j->id);
+  rsw_err derr = {0};
   if (mkdir(p, 0700) != 0 && errno != EEXIST)
     return svc_fail(e, RSW_ERR_IO, "--state-dir", "cannot create '%s': %s", p, strerror(errno));
+  if (own_subdir(p, &derr) != RSW_OK) { /* a link or someone else's: never written through */
+    quarantine(svc, p, derr.msg);
+    if (own_subdir(p, &derr) != RSW_OK) return svc_fail(e, RSW_ERR_IO, "--state-dir", "%s", derr.msg);
+  }
   size_t px = (size_t)im->width * (size_t)im->height;
   cJSON *m = cJSON_CreateObject();
   cJSON_AddStringToObject(m, "scene", f->scene);
@@ -895,8 +908,8 @@ static bool film_meta(int fd, const film_trailer *t, svc_film *out) {
   uint64_t px = (uint64_t)(out->img.width > 0 ? out->img.width : 0) *
                 (uint64_t)(out->img.height > 0 ? out->img.height : 0);
   uint64_t tc = (uint64_t)c * (uint64_t)(1 + out->img.n_planes);
-  if (out->img.width < 1 || out->img.width > 65536 || out->img.height < 1 || out->img.height > 65536 || c < 1 ||
-      t->npy < px * tc * 4 || (t->angles && t->angles != px * 16) || out->img.spp < 1)
+  if (out->img.width < 1 || out->img.width > 65536 || out->img.height < 1 || out->img.height > 65536 ||
+      c < 1 || t->npy < px * tc * 4 || (t->angles && t->angles != px * 16) || out->img.spp < 1)
     ok = false;
   cJSON_Delete(m);
   if (!ok) out->img.n_planes = 0;
@@ -1221,8 +1234,8 @@ static bool restore_finished(service *svc, const req_header *h, cJSON *done, con
     snprintf(why, wn, "items is not a list of at most %d renders", SVC_MAX_JOB_RENDERS);
   else if (!get_count(done, "contexts_total", n ? 1 : 0, n, &n_ctx) ||
            !get_count(done, "contexts_done", 0, (double)n_ctx, &ctx_done))
-    snprintf(why, wn, "contexts_total must lie in [1, %d] (the renders) and contexts_done in [0, contexts_total]",
-             n);
+    snprintf(why, wn,
+             "contexts_total must lie in [1, %d] (the renders) and contexts_done in [0, contexts_total]", n);
   else
     why[0] = '\0';
   if (why[0]) {
@@ -1243,7 +1256,8 @@ static bool restore_finished(service *svc, const req_header *h, cJSON *done, con
   x = cJSON_GetObjectItemCaseSensitive(done, "seconds");
   double secs = cJSON_IsNumber(x) && x->valuedouble >= 0 && x->valuedouble < 1e9 ? x->valuedouble : 0;
   x = cJSON_GetObjectItemCaseSensitive(done, "finished");
-  double age = cJSON_IsNumber(x) && fabs(x->valuedouble) < 1e12 ? difftime(time(NULL), (time_t)x->valuedouble) : 0;
+  double age =
+      cJSON_IsNumber(x) && fabs(x->valuedouble) < 1e12 ? difftime(time(NULL), (time_t)x->valuedouble) : 0;
   /* The results TTL counts from the finish, across restarts. */
   j->t_finished = svc_now() - (age > 0 ? age : 0);
   j->t_started = j->t_finished - secs;
@@ -1267,7 +1281,8 @@ static bool restore_finished(service *svc, const req_header *h, cJSON *done, con
         !get_str(it, "s", ri->sensor, sizeof ri->sensor) || !get_count(it, "ci", 0, (double)n_ctx - 1, &ci) ||
         !cJSON_IsString(y) || !known_state(y->valuestring)) {
       snprintf(why, wn,
-               "render %zu: needs c and s (strings), ci (an integer below contexts_total = %" PRIu64 ") and st",
+               "render %zu: needs c and s (strings), ci (an integer below contexts_total = %" PRIu64
+               ") and st",
                k, n_ctx);
       break;
     }

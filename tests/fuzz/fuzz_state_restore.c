@@ -124,8 +124,9 @@ static void wait_end(service *svc, const char *jid) {
   FUZZ_CHECK(end, "the template job did not end");
 }
 
-static const char JOB[] = "{\"contexts\": [{\"id\": \"a\", \"wavelength\": 500}, {\"id\": \"b\", \"wavelength\": "
-                          "600, \"coords\": {}}], \"defaults\": {\"spp\": 1}, \"seed\": 3}";
+static const char JOB[] =
+    "{\"contexts\": [{\"id\": \"a\", \"wavelength\": 500}, {\"id\": \"b\", \"wavelength\": "
+    "600, \"coords\": {}}], \"defaults\": {\"spp\": 1}, \"seed\": 3}";
 
 static void make_template(void) {
   snprintf(template_dir, sizeof template_dir, "/tmp/rsw-fuzz-st-XXXXXX");
@@ -136,8 +137,8 @@ static void make_template(void) {
   snprintf(svc->instance, sizeof svc->instance, "f0f0f0f0f0f0f0f0"); /* job ids the seeds can name */
   char *id = NULL;
   svc_error e = {0};
-  FUZZ_CHECK(service_scene_load_text(svc, fuzz_scene_json, sizeof fuzz_scene_json - 1, false, "fuzz.json", &id,
-                                     &e) == RSW_OK,
+  FUZZ_CHECK(service_scene_load_text(svc, fuzz_scene_json, sizeof fuzz_scene_json - 1, false, "fuzz.json",
+                                     &id, &e) == RSW_OK,
              "scene: %s", e.err.msg);
   service_free(svc); /* a startup scene is not stored: post it */
   svc = start(template_dir);
@@ -160,8 +161,8 @@ static void make_template(void) {
   char *jid[2] = {NULL, NULL};
   for (int k = 0; k < 2; k++) {
     json = NULL;
-    FUZZ_CHECK(service_job_submit(svc, id, JOB, sizeof JOB - 1, NULL, &jid[k], &json, &e) == RSW_OK, "job: %s",
-               e.err.msg);
+    FUZZ_CHECK(service_job_submit(svc, id, JOB, sizeof JOB - 1, NULL, &jid[k], &json, &e) == RSW_OK,
+               "job: %s", e.err.msg);
     free(json);
     wait_end(svc, jid[k]);
   }

@@ -241,8 +241,8 @@ static void test_full_disk(void) {
   int jobs = count_jobs(svc);
   svc_error ej = {0};
   char *j2 = submit(svc, id, &ej);
-  CHECK(!j2 && ej.err.code == RSW_ERR_STATE_DIR, "a job on a full disk: %s (%s)", rsw_status_name(ej.err.code),
-        ej.err.msg);
+  CHECK(!j2 && ej.err.code == RSW_ERR_STATE_DIR, "a job on a full disk: %s (%s)",
+        rsw_status_name(ej.err.code), ej.err.msg);
   CHECK(count_jobs(svc) == jobs, "the refused job is not listed (%d jobs, was %d)", count_jobs(svc), jobs);
   char doc[1024];
   snprintf(doc, sizeof doc, PLATE_FMT, 0.9);
@@ -272,12 +272,14 @@ static void test_full_disk(void) {
   CHECK(render(svc, id, after) && memcmp(before, after, sizeof before) == 0,
         "after a restart it renders bitwise as acknowledged");
   char *s1 = j1 ? job_state_of(svc, j1) : NULL;
-  CHECK(s1 && strcmp(s1, "succeeded") == 0, "the acknowledged job exists after a restart: %s", s1 ? s1 : "404");
+  CHECK(s1 && strcmp(s1, "succeeded") == 0, "the acknowledged job exists after a restart: %s",
+        s1 ? s1 : "404");
   free(s1);
   CHECK(count_jobs(svc) == 1, "and no other: %d", count_jobs(svc));
   char p[300];
   snprintf(p, sizeof p, "%s/scenes", dir);
-  CHECK(count_files(p, ".scene") == 1, "the refused scene was not kept: %d documents", count_files(p, ".scene"));
+  CHECK(count_files(p, ".scene") == 1, "the refused scene was not kept: %d documents",
+        count_files(p, ".scene"));
   /* EIO and EROFS are refused the same way. */
   fail_errno = EROFS;
   svc_error e2 = {0};
@@ -317,7 +319,8 @@ static void test_trust(void) {
   CHECK(refused(sub, "writable by its group"), "a group-writable state directory is refused");
   chmod(sub, 0700);
   chmod(dir, 0777); /* the parent: others can replace the directory */
-  CHECK(refused(sub, "without the sticky bit"), "under a world-writable parent without the sticky bit: refused");
+  CHECK(refused(sub, "without the sticky bit"),
+        "under a world-writable parent without the sticky bit: refused");
   chmod(dir, 01777); /* as /tmp */
   service *svc = open_svc(sub, NULL);
   CHECK(svc != NULL, "under a world-writable parent with the sticky bit: accepted");
@@ -371,15 +374,31 @@ static void test_planted_links(void) {
   CHECK(symlink(victim, p) == 0, "plant %s", p);
   snprintf(p, sizeof p, "%s/jobs/%s.done", sd, next);
   CHECK(symlink(victim, p) == 0, "plant %s", p);
+  /* And the next job's film directory as a link to the victim's. */
+  char next2[40], vdir[200];
+  snprintf(next2, sizeof next2, "job-%.8s-%06llu", svc->instance, (unsigned long long)svc->next_job + 2);
+  snprintf(vdir, sizeof vdir, "%s/vdir", dir);
+  REQUIRE(mkdir(vdir, 0700) == 0, "mkdir %s", vdir);
+  snprintf(p, sizeof p, "%s/results/%s", sd, next2);
+  CHECK(symlink(vdir, p) == 0, "plant %s", p);
   svc_error e = {0};
   char *jid = submit(svc, id, &e);
   REQUIRE(jid && strcmp(jid, next) == 0, "the job took the predicted id %s: %s", next, jid ? jid : e.err.msg);
+  char *jid2 = submit(svc, id, &e);
+  REQUIRE(jid2 && strcmp(jid2, next2) == 0, "the job took the predicted id %s", next2);
+  char *s2 = wait_job(svc, jid2);
+  CHECK(s2 && strcmp(s2, "succeeded") == 0, "the second job succeeds: %s", s2 ? s2 : "?");
+  free(s2);
+  CHECK(count_files(vdir, "film") == 0, "nothing written through the directory link: %d files",
+        count_files(vdir, "film"));
+  free(jid2);
   char *s = wait_job(svc, jid);
   CHECK(s && strcmp(s, "succeeded") == 0, "the job succeeds: %s", s ? s : "?");
   free(s);
   char buf[64] = "";
   f = fopen(victim, "r");
-  CHECK(f && fgets(buf, sizeof buf, f) && strcmp(buf, "precious\n") == 0, "the victim is untouched: '%s'", buf);
+  CHECK(f && fgets(buf, sizeof buf, f) && strcmp(buf, "precious\n") == 0, "the victim is untouched: '%s'",
+        buf);
   if (f) fclose(f);
   struct stat sb;
   snprintf(p, sizeof p, "%s/results/%s/0.film", sd, next);
@@ -574,8 +593,10 @@ static void test_record_bounds(void) {
     d = content ? cJSON_Parse(content) : NULL;
     free(content);
     REQUIRE(d, "the outcome record parses (%zu)", k);
-    cJSON *target = strcmp(edits[k][0], "W") == 0 ? cJSON_GetArrayItem(cJSON_GetObjectItem(d, "items"), 0) : d;
-    cJSON_ReplaceItemInObjectCaseSensitive(target, edits[k][0], cJSON_CreateNumber(strtod(edits[k][1], NULL)));
+    cJSON *target =
+        strcmp(edits[k][0], "W") == 0 ? cJSON_GetArrayItem(cJSON_GetObjectItem(d, "items"), 0) : d;
+    cJSON_ReplaceItemInObjectCaseSensitive(target, edits[k][0],
+                                           cJSON_CreateNumber(strtod(edits[k][1], NULL)));
     bad = cJSON_PrintUnformatted(d);
     cJSON_Delete(d);
     REQUIRE(bad && rewrite_record(dir, rel, bad), "rewrite");
@@ -704,7 +725,8 @@ static void test_legacy(void) {
   struct stat sb;
   CHECK(stat(p, &sb) == 0, "DIR/format is written");
   char *c = record_content(dir, rel);
-  CHECK(c && strstr(c, "\"revision\":1") && c[0] == '{', "the record now has its checksum line: %s", c ? c : "");
+  CHECK(c && strstr(c, "\"revision\":1") && c[0] == '{', "the record now has its checksum line: %s",
+        c ? c : "");
   free(c);
   service_free(svc);
   free(id);

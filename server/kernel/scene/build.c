@@ -22,8 +22,8 @@
 #include "../textures/texture.h"
 #include "loader.h"
 #include "params.h"
-#include "rsw_file.h"
 #include "periodic.h"
+#include "rsw_file.h"
 #include "scene.h"
 
 #define TWO_POW_53 9007199254740992.0

@@ -7,8 +7,8 @@
 #include <string.h>
 
 #include "../accel.h"
-#include "rsw_file.h"
 #include "../scene/params.h"
+#include "rsw_file.h"
 #include "shape_common.h"
 
 /* ---- shapegroup ------------------------------------------------------------ */
