@@ -731,6 +731,45 @@ static void test_legacy(void) {
   service_free(svc);
   free(id);
   rmtree(dir);
+  /* A film of the previous version (a 32-byte trailer without checksum):
+   * upgraded, and served bitwise as before. */
+  mkstate(dir, sizeof dir);
+  char *sid;
+  char *jid = finished_job(dir, &svc, &sid);
+  REQUIRE(jid, "a finished job");
+  svc_film before = {0};
+  CHECK(service_job_result(svc, jid, "c1", "meter", &before, &e) == RSW_OK, "c1: %s", e.err.msg);
+  service_free(svc);
+  snprintf(p, sizeof p, "%s/results/%s/1.film", dir, jid);
+  FILE *f = fopen(p, "rb");
+  REQUIRE(f, "open %s", p);
+  static unsigned char buf[1 << 16];
+  size_t n = fread(buf, 1, sizeof buf, f);
+  fclose(f);
+  REQUIRE(n > 64 && n < sizeof buf && memcmp(buf + n - 8, "RSWFILM2", 8) == 0, "a version-2 film");
+  memmove(buf + n - 64 + 24, "RSWFILM1", 8); /* lengths stay, the checksum goes */
+  f = fopen(p, "wb");
+  REQUIRE(f && fwrite(buf, 1, n - 32, f) == n - 32 && fclose(f) == 0, "write the version-1 film");
+  snprintf(rel, sizeof rel, "jobs/%s.done", jid);
+  CHECK(strip(dir, rel), "strip %s", rel);
+  snprintf(rel, sizeof rel, "jobs/%s.req", jid);
+  CHECK(strip(dir, rel), "strip %s", rel);
+  snprintf(p, sizeof p, "%s/format", dir);
+  CHECK(unlink(p) == 0, "remove DIR/format");
+  svc = open_svc(dir, NULL);
+  REQUIRE(svc, "restart");
+  svc_film after = {0};
+  e = (svc_error){0};
+  CHECK(service_job_result(svc, jid, "c1", "meter", &after, &e) == RSW_OK && before.img.data &&
+            after.img.data && memcmp(before.img.data, after.img.data, sizeof(float)) == 0,
+        "the upgraded film is served bitwise as before: %s", e.err.msg);
+  CHECK(metric(svc, "raysweep_state_quarantined_total") == 0, "nothing quarantined");
+  svc_film_free(&before);
+  svc_film_free(&after);
+  service_free(svc);
+  free(jid);
+  free(sid);
+  rmtree(dir);
   alarm(0);
 }
 
