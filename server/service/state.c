@@ -1495,11 +1495,11 @@ static void each_file(service *svc, const char *sub, void (*fn)(service *, const
   for (struct dirent *de; (de = readdir(d));) {
     char p[4600];
     snprintf(p, sizeof p, "%s/%s", dir, de->d_name);
-    if (strstr(de->d_name, ".tmp.")) {
+    if (strstr(de->d_name, ".tmp.") || ends_with(de->d_name, ".tmp")) {
       unlink(p);
       continue;
     }
-    for (const char *const *s = suffixes; *s; s++)
+    for (const char *const *s = suffixes; fn && *s; s++)
       if (ends_with(de->d_name, *s)) {
         fn(svc, p);
         break;
@@ -1508,17 +1508,15 @@ static void each_file(service *svc, const char *sub, void (*fn)(service *, const
   closedir(d);
 }
 
-/* The previous version's directory (no DIR/format): every record gets its
- * checksum line and every film the version-2 trailer, before anything is
- * read or served; then DIR/format says so, and from then on a record or
- * film without a checksum is quarantined. (The previous version wrote the
- * same content: an upgrade trusts what the directory holds, once.) */
-static void upgrade_legacy(service *svc) {
+/* Every directory of records and films, each file given to fn (NULL: only
+ * the temporary files a crash left are removed). */
+static void each_state_file(service *svc, void (*rec)(service *, const char *),
+                            void (*on_film)(service *, const char *)) {
   static const char *const scene_sfx[] = {".scene", ".params", NULL};
   static const char *const job_sfx[] = {".req", ".done", NULL};
   static const char *const film_sfx[] = {".film", NULL};
-  each_file(svc, "scenes", upgrade_record, scene_sfx);
-  each_file(svc, "jobs", upgrade_record, job_sfx);
+  each_file(svc, "scenes", rec, scene_sfx);
+  each_file(svc, "jobs", rec, job_sfx);
   char p[4200];
   state_path(svc, p, sizeof p, "results");
   DIR *d = opendir(p);
@@ -1528,9 +1526,19 @@ static void upgrade_legacy(service *svc) {
     snprintf(sub, sizeof sub, "results/%s", de->d_name);
     snprintf(q, sizeof q, "%s/%s", p, de->d_name);
     if (de->d_name[0] == '.' || lstat(q, &sb) != 0 || !S_ISDIR(sb.st_mode)) continue;
-    each_file(svc, sub, upgrade_film, film_sfx);
+    each_file(svc, sub, on_film, film_sfx);
   }
   if (d) closedir(d);
+}
+
+/* The previous version's directory (no DIR/format): every record gets its
+ * checksum line and every film the version-2 trailer, before anything is
+ * read or served; then DIR/format says so, and from then on a record or
+ * film without a checksum is quarantined. (The previous version wrote the
+ * same content: an upgrade trusts what the directory holds, once.) */
+static void upgrade_legacy(service *svc) {
+  each_state_file(svc, upgrade_record, upgrade_film);
+  char p[4200];
   state_path(svc, p, sizeof p, "format");
   if (svc_write_file(p, FORMAT_LINE, strlen(FORMAT_LINE)))
     svc->state_legacy = false;
@@ -1541,7 +1549,10 @@ static void upgrade_legacy(service *svc) {
 void svc_state_restore(service *svc) {
   if (!svc_state_on(svc)) return;
   double t0 = svc_now();
-  if (svc->state_legacy) upgrade_legacy(svc);
+  if (svc->state_legacy)
+    upgrade_legacy(svc);
+  else
+    each_state_file(svc, NULL, NULL); /* temporary files a crash left */
   char p[4200];
   state_path(svc, p, sizeof p, "jobs");
   DIR *d = opendir(p);
