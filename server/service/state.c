@@ -177,7 +177,7 @@ static void identity_sha(rsw_sha256_ctx *c, const service *svc, const char *path
 #define SUM_TAG "rsw-sha256 "
 #define SUM_LEN (1 + sizeof SUM_TAG - 1 + 64 + 1)
 
-static bool write_record(const service *svc, const char *path, const void *head, size_t nh, const void *body,
+static bool write_record(service *svc, const char *path, const void *head, size_t nh, const void *body,
                          size_t nb) {
   rsw_sha256_ctx c;
   unsigned char d[32];
@@ -196,7 +196,9 @@ static bool write_record(const service *svc, const char *path, const void *head,
   rsw_hex(d, 32, hex);
   snprintf(sum, sizeof sum, "\n" SUM_TAG "%s\n", hex);
   part pt[3] = {{head, nh}, {body, nb}, {sum, SUM_LEN}};
-  return write_parts(path, pt, 3, true);
+  if (!write_parts(path, pt, 3, true)) return false;
+  atomic_store(&svc->state_unwritable, false); /* it takes writes again */
+  return true;
 }
 
 /* Move a file that failed its checks out of the way, to DIR/quarantine/
