@@ -230,7 +230,7 @@ static uint8_t *sign(const char *rel, const uint8_t *content, size_t n, size_t *
   rsw_sha256_end(&c, d);
   char hex[65];
   rsw_hex(d, 32, hex);
-  uint8_t *o = malloc(n + 77);
+  uint8_t *o = malloc(n + 78); /* the line and snprintf's NUL */
   if (!o) return NULL;
   memcpy(o, content, n);
   snprintf((char *)o + n, 78, "\nrsw-sha256 %s\n", hex);
