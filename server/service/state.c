@@ -450,9 +450,17 @@ bool svc_state_writable(service *svc, const char **why) {
   double now = svc_now();
   if (now - svc->state_probe_t >= 1.0 || svc->state_probe_t == 0) {
     svc->state_probe_t = now;
-    char p[4200];
+    /* A small file created, written, fsync'ed and removed: what a record
+     * write needs, without the rename and the directory sync. */
+    char p[4200], tmp[4300];
     state_path(svc, p, sizeof p, "probe");
-    bool ok = svc_write_file(p, "probe\n", 6);
+    int inj = svc_state_fault_hook ? svc_state_fault_hook(p) : 0;
+    int fd = inj ? -1 : temp_create(p, tmp, sizeof tmp);
+    bool ok = fd >= 0 && write_all(fd, "probe\n", 6) && fsync(fd) == 0;
+    if (fd >= 0) {
+      ok = close(fd) == 0 && ok;
+      unlink(tmp);
+    }
     atomic_store(&svc->state_unwritable, !ok);
   }
   pthread_mutex_unlock(&svc->probe_lock);
