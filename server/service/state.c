@@ -116,7 +116,9 @@ static int temp_create(const char *path, char *tmp, size_t cap) {
 }
 
 /* path <- the parts, atomically: a temporary file, fsync, rename, and
- * (sync_dir) fsync of the directory. false with errno set on failure. */
+ * (sync_dir) fsync of the directory; without sync_dir (films, whose
+ * directory is synced once per job) fdatasync, as the data is all that
+ * matters. false with errno set on failure. */
 static bool write_parts(const char *path, const part *pt, size_t np, bool sync_dir) {
   int inj = svc_state_fault_hook ? svc_state_fault_hook(path) : 0;
   if (inj) {
@@ -128,7 +130,7 @@ static bool write_parts(const char *path, const part *pt, size_t np, bool sync_d
   if (fd < 0) return false;
   bool ok = true;
   for (size_t i = 0; ok && i < np; i++) ok = write_all(fd, pt[i].p, pt[i].n);
-  ok = ok && fsync(fd) == 0;
+  ok = ok && (sync_dir ? fsync(fd) : fdatasync(fd)) == 0;
   int saved = errno;
   if (close(fd) != 0 && ok) ok = false, saved = errno;
   if (ok && rename(tmp, path) != 0) ok = false, saved = errno;
@@ -237,7 +239,7 @@ static char *read_whole(const char *path, size_t *len) {
   struct stat sb;
   if (fstat(fd, &sb) != 0 || sb.st_size < 0 || (uint64_t)sb.st_size > RECORD_MAX_BYTES) {
     close(fd);
-    errno = EFBIG;
+    errno = EFBIG; /* (fstat of an open descriptor does not fail) */
     return NULL;
   }
   size_t n = (size_t)sb.st_size;
@@ -264,8 +266,16 @@ typedef enum rec_status {
   REC_OK,
   REC_ABSENT,
   REC_LEGACY,
-  REC_BAD
+  REC_BAD,
+  REC_TRANSIENT /* out of memory: the file is not judged */
 } rec_status;
+
+/* An open or read error that says something about the file (what it is,
+ * who may read it), not about this process's resources (EMFILE, ENOMEM):
+ * only those quarantine it. */
+static bool file_at_fault(int err) {
+  return err == ELOOP || err == EINVAL || err == EFBIG || err == EACCES || err == EPERM || err == EIO;
+}
 
 /* Check a record's text (n bytes) against its checksum line; on REC_OK
  * *content is n minus the line. REC_LEGACY: no checksum line (written by
@@ -283,10 +293,10 @@ static rec_status record_check(const service *svc, const char *path, const char 
   rsw_sha256_ctx c;
   unsigned char d[32];
   char mine[65];
-  if (!rsw_sha256_begin(&c)) return REC_BAD;
+  if (!rsw_sha256_begin(&c)) return REC_TRANSIENT;
   identity_sha(&c, svc, path);
   rsw_sha256_update(&c, text, n - SUM_LEN);
-  if (!rsw_sha256_end(&c, d)) return REC_BAD;
+  if (!rsw_sha256_end(&c, d)) return REC_TRANSIENT;
   rsw_hex(d, 32, mine);
   if (strcmp(mine, hex) != 0) return REC_BAD;
   *content = n - SUM_LEN;
@@ -300,15 +310,22 @@ static char *read_record(service *svc, const char *path, size_t *len) {
   size_t n;
   char *text = read_whole(path, &n);
   if (!text) {
-    if (errno != ENOENT) {
+    if (file_at_fault(errno)) {
       char why[200];
       snprintf(why, sizeof why, "cannot be read as a record: %s", rsw_open_strerror(errno));
       quarantine(svc, path, why);
+    } else if (errno != ENOENT) {
+      warn("%s: cannot be read now: %s", path, strerror(errno));
     }
     return NULL;
   }
   size_t content = n;
   rec_status rs = record_check(svc, path, text, n, &content);
+  if (rs == REC_TRANSIENT) {
+    warn("%s: cannot be checked now: out of memory", path);
+    free(text);
+    return NULL;
+  }
   if (rs == REC_LEGACY && svc->state_legacy) {
     /* The previous version's record (no checksum): the restore upgrades
      * every record of a directory without DIR/format before it serves. */
@@ -684,7 +701,7 @@ static bool film_digest(const service *svc, const char *path, int fd, uint64_t n
 static int film_open_path(service *svc, const char *p, film_trailer *t, bool verify, bool *legacy) {
   int fd = rsw_open_regular(p, true);
   if (fd < 0) {
-    if (errno != ENOENT) {
+    if (file_at_fault(errno)) {
       char why[200];
       snprintf(why, sizeof why, "cannot be read as a film: %s", rsw_open_strerror(errno));
       quarantine(svc, p, why);
@@ -715,7 +732,7 @@ static int film_open_path(service *svc, const char *p, film_trailer *t, bool ver
   if (!bad && verify && !v1) {
     unsigned char d[32];
     if (!film_digest(svc, p, fd, (uint64_t)sb.st_size - FILM_TRAILER, d))
-      bad = "cannot be read through";
+      bad = ""; /* a read error or no memory now: not judged */
     else if (memcmp(d, tr + 24, 32) != 0)
       bad = "its checksum does not match its content and name";
   }
@@ -1456,7 +1473,7 @@ static void upgrade_record(service *svc, const char *path) {
   size_t n, content;
   char *text = read_whole(path, &n);
   if (!text) {
-    if (errno != ENOENT) quarantine(svc, path, "cannot be read as a record");
+    if (file_at_fault(errno)) quarantine(svc, path, "cannot be read as a record");
     return;
   }
   rec_status rs = record_check(svc, path, text, n, &content);
