@@ -10,7 +10,11 @@
 #    crashed GET .../dataset with SIGSEGV) is quarantined, counted in
 #    /metrics, and the job runs again: the dataset answers;
 #  - a FIFO in place of a film: GET of the result answers an error at once,
-#    and SIGTERM still stops the daemon.
+#    and SIGTERM still stops the daemon;
+#  - a real full disk (a 4 MiB tmpfs, when the test may mount one: root):
+#    PATCH and job answer 507 RSW_ERR_STATE_DIR naming the directory, the
+#    scene keeps its revision, /v1/health/ready is 503 until there is room
+#    again, and after SIGKILL and a restart the acknowledged state is back.
 # Every request has a deadline (curl --max-time): a hang is a failure.
 # Prints "test_state_trust: N passed, N failed".
 set -u
@@ -134,4 +138,55 @@ st=$(curl -s --max-time 15 -o "$tmp/out" -w '%{http_code}' "$U/v1/jobs/$J/datase
 [ "$st" != 200 ] && [ "$st" != 000 ] && ok || bad "GET the dataset: $st"
 stop_last
 [ "$rc" = 0 ] && ok || bad "SIGTERM after the FIFO: $rc"
+
+# ---- a real full disk (a 4 MiB tmpfs; needs root: skipped otherwise) ---------------------
+mnt=$tmp/mnt
+mkdir -p "$mnt"
+if mount -t tmpfs -o size=4m tmpfs "$mnt" 2>/dev/null; then
+  trap 'umount "$mnt" 2>/dev/null; shtest_cleanup' EXIT
+  mkdir -m 0700 "$mnt/st"
+  start_daemon "$tmp/d4" --state-dir "$mnt/st"
+  U=127.0.0.1:$started_port
+  curl -s --max-time 30 -o "$tmp/out" -XPOST "$U/v1/scenes" -H 'Content-Type: application/json' -d "$scene"
+  S=$(field "$tmp/out" id)
+  patch() { curl -s --max-time 30 -o "$tmp/out" -w '%{http_code}' -XPATCH "$U/v1/scenes/$S/params" \
+    -H 'Content-Type: application/json' -d "{\"plate.bsdf.reflectance.value\": $1}"; }
+  [ "$(patch 0.3)" = 200 ] && ok || bad "PATCH with room: $(cat "$tmp/out")"
+  curl -s --max-time 30 -o "$tmp/out" -XPOST "$U/v1/scenes/$S/jobs" -H 'Content-Type: application/json' \
+    -d '{"contexts":[{"id":"c0","wavelength":500}],"defaults":{"spp":4}}'
+  J1=$(field "$tmp/out" id)
+  [ "$(wait_job "$J1")" = succeeded ] && ok || bad "a job with room: $(cat "$tmp/job.json")"
+  dd if=/dev/zero of="$mnt/fill" bs=64k 2>/dev/null # until the disk is full
+  st=$(patch 0.7)
+  [ "$st" = 507 ] && [ "$(code_of "$tmp/out")" = RSW_ERR_STATE_DIR ] && grep -q "$mnt/st" "$tmp/out" && ok ||
+    bad "PATCH on a full disk: $st $(head -c 400 "$tmp/out")"
+  curl -s --max-time 30 -o "$tmp/out" "$U/v1/scenes/$S/params"
+  python3 -c 'import json,sys; d=json.load(open(sys.argv[1])); assert d["revision"]==1, d["revision"]' "$tmp/out" && ok ||
+    bad "the scene stays at revision 1: $(head -c 200 "$tmp/out")"
+  st=$(curl -s --max-time 30 -o "$tmp/out" -w '%{http_code}' -XPOST "$U/v1/scenes/$S/jobs" -H 'Content-Type: application/json' \
+    -d '{"contexts":[{"id":"c0","wavelength":600}],"defaults":{"spp":4}}')
+  [ "$st" = 507 ] && [ "$(code_of "$tmp/out")" = RSW_ERR_STATE_DIR ] && ok || bad "a job on a full disk: $st $(head -c 300 "$tmp/out")"
+  st=$(curl -s --max-time 10 -o "$tmp/out" -w '%{http_code}' "$U/v1/health/ready")
+  [ "$st" = 503 ] && grep -q "state directory" "$tmp/out" && ok || bad "ready on a full disk: $st $(cat "$tmp/out")"
+  rm -f "$mnt/fill"
+  sleep 1.1 # the probe runs at most once a second
+  st=$(curl -s --max-time 10 -o "$tmp/out" -w '%{http_code}' "$U/v1/health/ready")
+  [ "$st" = 200 ] && ok || bad "ready again once there is room: $st $(cat "$tmp/out")"
+  [ "$(patch 0.4)" = 200 ] && ok || bad "PATCH with room again: $(cat "$tmp/out")"
+  kill -9 "${pids[-1]}"
+  wait "${pids[-1]}" 2>/dev/null
+  rm -f "$tmp/d4/port"
+  start_daemon "$tmp/d4" --state-dir "$mnt/st"
+  U=127.0.0.1:$started_port
+  curl -s --max-time 30 -o "$tmp/out" "$U/v1/scenes/$S/params"
+  python3 -c 'import json,sys; d=json.load(open(sys.argv[1])); assert d["revision"]==2, d["revision"]' "$tmp/out" && ok ||
+    bad "after SIGKILL and a restart: the acknowledged revision 2: $(head -c 200 "$tmp/out")"
+  [ "$(wait_job "$J1")" = succeeded ] && ok || bad "the acknowledged job after a restart: $(cat "$tmp/job.json")"
+  curl -s --max-time 10 "$U/v1/jobs" | python3 -c 'import json,sys; assert len(json.load(sys.stdin)["jobs"])==1' && ok ||
+    bad "exactly the acknowledged job after a restart"
+  stop_last
+  umount "$mnt"
+else
+  echo "test_state_trust: the real-full-disk part needs root (mount -t tmpfs): skipped" >&2
+fi
 finish
