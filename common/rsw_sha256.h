@@ -18,10 +18,14 @@ bool rsw_sha256_begin(rsw_sha256_ctx *c);
 void rsw_sha256_update(rsw_sha256_ctx *c, const void *data, size_t len);
 bool rsw_sha256_end(rsw_sha256_ctx *c, unsigned char out[32]);
 
-/* One-shot digests. rsw_sha256_file reads the file streamed; false on an
- * open or read error (errno tells) or when the digest cannot be made. */
+/* One-shot digests. rsw_sha256_file reads the file streamed (a regular
+ * file only, opened without blocking: rsw_file.h); false on an open or
+ * read error (errno tells) or when the digest cannot be made. */
 bool rsw_sha256(const void *data, size_t len, unsigned char out[32]);
 bool rsw_sha256_file(const char *path, unsigned char out[32]);
+/* The digest of what is left to read from an open descriptor (read to its
+ * end); false on a read error (errno tells). */
+bool rsw_sha256_fd(int fd, unsigned char out[32]);
 
 /* Lowercase hex of n bytes into out (2n + 1 chars). */
 void rsw_hex(const unsigned char *data, size_t n, char *out);

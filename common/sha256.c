@@ -1,9 +1,12 @@
 /* SHA-256 helpers (rsw_sha256.h) over OpenSSL's EVP interface. */
 #include "rsw_sha256.h"
 
+#include "rsw_file.h"
+
 #include <errno.h>
 #include <stdio.h>
 #include <string.h>
+#include <unistd.h>
 
 #include <openssl/evp.h>
 
@@ -38,21 +41,33 @@ bool rsw_sha256(const void *data, size_t len, unsigned char out[32]) {
   return rsw_sha256_end(&c, out);
 }
 
-bool rsw_sha256_file(const char *path, unsigned char out[32]) {
-  FILE *f = fopen(path, "rb");
-  if (!f) return false;
+bool rsw_sha256_fd(int fd, unsigned char out[32]) {
   rsw_sha256_ctx c;
   rsw_sha256_begin(&c);
   unsigned char buf[1 << 16];
-  size_t n;
-  while ((n = fread(buf, 1, sizeof buf, f)) > 0) rsw_sha256_update(&c, buf, n);
-  int read_error = ferror(f) ? (errno ? errno : EIO) : 0;
-  fclose(f);
+  int read_error = 0;
+  for (;;) {
+    ssize_t r = read(fd, buf, sizeof buf);
+    if (r < 0 && errno == EINTR) continue;
+    if (r < 0) read_error = errno ? errno : EIO;
+    if (r <= 0) break;
+    rsw_sha256_update(&c, buf, (size_t)r);
+  }
   bool ok = rsw_sha256_end(&c, out);
   if (read_error) {
     errno = read_error;
     return false;
   }
+  return ok;
+}
+
+bool rsw_sha256_file(const char *path, unsigned char out[32]) {
+  int fd = rsw_open_regular(path, false);
+  if (fd < 0) return false;
+  bool ok = rsw_sha256_fd(fd, out);
+  int saved = errno;
+  close(fd);
+  errno = saved;
   return ok;
 }
 

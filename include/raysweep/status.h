@@ -49,7 +49,8 @@ extern "C" {
   X(RSW_ERR_UNKNOWN_NAME, "names nothing in the scene", 422)                                                 \
   X(RSW_ERR_BAD_REQUEST, "invalid request parameter", 400)                                                   \
   X(RSW_ERR_EVICTED, "scene evicted from memory; post it again", 404)                                        \
-  X(RSW_ERR_STORAGE, "result storage full", 507)
+  X(RSW_ERR_STORAGE, "result storage full", 507)                                                             \
+  X(RSW_ERR_STATE_DIR, "the state directory cannot take writes", 507)
 
 typedef enum rsw_status {
 #define RSW_STATUS_ENUM_(name, msg, http) name,

@@ -629,10 +629,10 @@ void svc_bands_results_json(const job *j, cJSON *o) {
 static rsw_status item_film_unlock(service *svc, job *j, size_t k, svc_film *out, svc_error *e) {
   const render_item *it = &j->items[k];
   if (!it->has_film && it->on_disk) {
-    job copy;
-    snprintf(copy.id, sizeof copy.id, "%s", j->id);
+    svc_film_ref ref;
+    svc_film_ref_set(&ref, j, k);
     pthread_mutex_unlock(&svc->lock);
-    return svc_state_film_read(svc, &copy, k, out, e);
+    return svc_state_film_read(svc, &ref, out, e);
   }
   if (!it->has_film) {
     rsw_status st = svc_fail(

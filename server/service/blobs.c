@@ -22,27 +22,21 @@ rsw_status service_blob_put(service *svc, const char *h, const void *data, size_
   if (!rsw_sha256(data, len, d)) return svc_fail(e, RSW_ERR_NOMEM, h, "hashing failed");
   rsw_hex(d, 32, dh);
   if (strcmp(dh, h) != 0) return svc_fail(e, RSW_ERR_INVALID, h, "the body's SHA-256 is %s, not %s", dh, h);
-  char path[8192], tmp[8300];
+  char path[8192];
   snprintf(path, sizeof path, "%s/%s", svc->blob_dir, h);
-  struct stat sb;
-  if (stat(path, &sb) == 0) {
+  struct stat sb; /* a regular file of that name: stored already (anything else is replaced) */
+  if (lstat(path, &sb) == 0 && S_ISREG(sb.st_mode)) {
     *created = false;
     return RSW_OK;
   }
-  snprintf(tmp, sizeof tmp, "%s.tmp.%ld.%lu", path, (long)getpid(), (unsigned long)pthread_self());
-  FILE *f = fopen(tmp, "wb");
-  if (!f) return svc_fail(e, RSW_ERR_IO, h, "cannot store the blob: %s", strerror(errno));
-  /* Durable before it is acknowledged: fsync, rename, fsync the directory. */
-  bool ok = fwrite(data, 1, len, f) == len && fflush(f) == 0 && fsync(fileno(f)) == 0;
-  ok = fclose(f) == 0 && ok;
-  if (!ok || rename(tmp, path) != 0) {
-    remove(tmp);
-    return svc_fail(e, RSW_ERR_IO, h, "cannot store the blob");
-  }
-  int dfd = open(svc->blob_dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  if (dfd >= 0) {
-    fsync(dfd);
-    close(dfd);
+  /* Durable before it is acknowledged (temporary file created O_EXCL |
+   * O_NOFOLLOW, fsync, rename, fsync of the directory). */
+  if (!svc_write_file(path, data, len)) {
+    int err = errno;
+    if (err == ENOSPC || err == EDQUOT || err == EROFS || err == EIO)
+      return svc_fail(e, RSW_ERR_STATE_DIR, h, "cannot store the blob in the server's blob directory: %s",
+                      strerror(err));
+    return svc_fail(e, RSW_ERR_IO, h, "cannot store the blob: %s", strerror(err));
   }
   *created = true;
   return RSW_OK;

@@ -53,6 +53,7 @@ typedef struct ds_item {
   size_t index; /* render item */
   size_t node;  /* render_item.node */
   bool present, from_disk;
+  svc_film_ref ref; /* from_disk: the film's place and identity */
   svc_film film;
   nc_var vars[MAX_FILM_VARS];
 } ds_item;
@@ -60,7 +61,8 @@ typedef struct ds_item {
 void svc_job_restore_labels(job *j, const char *body, size_t len) {
   cJSON *req = cJSON_ParseWithLength(body, len);
   const cJSON *seed = cJSON_GetObjectItemCaseSensitive(req, "seed");
-  if (cJSON_IsNumber(seed) && seed->valuedouble >= 0) j->seed = (uint64_t)seed->valuedouble;
+  if (cJSON_IsNumber(seed) && seed->valuedouble >= 0 && seed->valuedouble < 18446744073709551616.0)
+    j->seed = (uint64_t)seed->valuedouble;
   const cJSON *bands = cJSON_GetObjectItemCaseSensitive(req, "bands");
   svc_error be = {0};
   if (bands && !j->bands && bands_parse(bands, "/bands", &j->bands, &be) != RSW_OK) j->bands = NULL;
@@ -193,15 +195,14 @@ rsw_status service_job_dataset(service *svc, const char *id, bool partial, void 
       d->present = true;
     } else if (ri->on_disk) {
       d->from_disk = true;
+      svc_film_ref_set(&d->ref, j, i);
     }
   }
   pthread_mutex_unlock(&svc->lock);
   /* Films beyond the memory cap, or restored: from the state directory. */
   for (size_t i = 0; !st && i < n_items; i++) {
     if (!it[i].from_disk) continue;
-    job copy;
-    snprintf(copy.id, sizeof copy.id, "%s", jid);
-    st = svc_state_film_read(svc, &copy, it[i].index, &it[i].film, e);
+    st = svc_state_film_read(svc, &it[i].ref, &it[i].film, e);
     it[i].present = !st;
   }
   nc_film *films = NULL;

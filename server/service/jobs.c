@@ -932,12 +932,16 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
    * behind an error answer (the client would submit it again). */
   char *id_copy = ok ? strdup(jb->id) : NULL;
   char *answer = id_copy ? svc_print_json(job_json(jb), jm) : NULL;
-  if (!answer) {
+  /* Durable before it is accepted: a job whose request cannot be stored
+   * is refused (507), never acknowledged and then lost by a restart. */
+  rsw_status sst = answer ? svc_state_job_saved(svc, jb, body, len, e) : RSW_OK;
+  if (!answer || sst) {
     pthread_mutex_unlock(&svc->lock);
+    free(answer);
     free(id_copy);
     job_free(jb);
     svc_scene_release(svc, r);
-    return svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
+    return answer ? sst : svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
   }
   svc->jobs[svc->n_jobs++] = jb;
   svc->queue[svc->n_queue++] = jb;
@@ -946,7 +950,6 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
     jb->result_reserve = reserve;
     svc->result_committed += reserve;
   }
-  svc_state_job_saved(svc, jb, body, len);
   *job_id_out = id_copy;
   *json_out = answer;
   pthread_cond_broadcast(&svc->cond);
@@ -1262,10 +1265,10 @@ rsw_status service_job_result(service *svc, const char *id, const char *context,
     if (strcmp(it->context, context) != 0 || strcmp(it->sensor, sensor_name) != 0) continue;
     if (!it->has_film && it->on_disk) {
       /* Beyond the memory cap or restored: read from the state directory. */
-      job copy;
-      snprintf(copy.id, sizeof copy.id, "%s", j->id);
+      svc_film_ref ref;
+      svc_film_ref_set(&ref, j, i);
       pthread_mutex_unlock(&svc->lock);
-      return svc_state_film_read(svc, &copy, i, out, e);
+      return svc_state_film_read(svc, &ref, out, e);
     }
     if (!it->has_film) {
       pthread_mutex_unlock(&svc->lock);
@@ -1332,18 +1335,18 @@ rsw_status service_job_result_npy_fd(service *svc, const char *id, const char *c
     pthread_mutex_unlock(&svc->lock);
     return no_job(e, id);
   }
-  char jid[40];
+  svc_film_ref ref;
   size_t k = SIZE_MAX;
-  snprintf(jid, sizeof jid, "%s", j->id);
   for (size_t i = 0; i < j->n_items && !j->bands; i++) { /* bands: service_job_band_result */
     const render_item *it = &j->items[i];
     if (strcmp(it->context, context) != 0 || strcmp(it->sensor, sensor_id) != 0) continue;
     if (it->on_disk) k = i;
     break;
   }
+  if (k != SIZE_MAX) svc_film_ref_set(&ref, j, k);
   pthread_mutex_unlock(&svc->lock);
   /* Deleted meanwhile: -1, and the in-memory path answers. */
-  if (k != SIZE_MAX) *fd_out = svc_state_film_npy_fd(svc, jid, k, len_out);
+  if (k != SIZE_MAX) *fd_out = svc_state_film_npy_fd(svc, &ref, len_out);
   return RSW_OK;
 }
 

@@ -130,6 +130,19 @@ char *service_metrics_text(service *svc) {
   svc_buf_printf(&b, "# HELP raysweep_restore_seconds Time the last start spent restoring the state "
                      "directory.\n# TYPE raysweep_restore_seconds gauge\n");
   svc_buf_printf(&b, "raysweep_restore_seconds %.6f\n", svc->restore_s);
+  svc_buf_printf(&b, "# HELP raysweep_state_quarantined_total Files of the state directory that failed their "
+                     "checks (checksum, identity, bounds, not a regular file), moved to DIR/quarantine.\n"
+                     "# TYPE raysweep_state_quarantined_total counter\n");
+  svc_buf_printf(&b, "raysweep_state_quarantined_total %llu\n",
+                 (unsigned long long)atomic_load(&svc->state_quarantined));
+  svc_buf_printf(&b, "# HELP raysweep_state_write_failures_total Writes to the state directory that failed "
+                     "(the request answered 507, nothing changed).\n"
+                     "# TYPE raysweep_state_write_failures_total counter\n");
+  svc_buf_printf(&b, "raysweep_state_write_failures_total %llu\n",
+                 (unsigned long long)atomic_load(&svc->state_write_failures));
+  svc_buf_printf(&b, "# HELP raysweep_state_writable Whether the state directory took the last write (1 "
+                     "without one).\n# TYPE raysweep_state_writable gauge\n");
+  svc_buf_printf(&b, "raysweep_state_writable %d\n", atomic_load(&svc->state_unwritable) ? 0 : 1);
   svc_buf_printf(&b, "# HELP raysweep_ready Whether the server accepts work.\n# TYPE raysweep_ready gauge\n");
   svc_buf_printf(&b, "raysweep_ready %d\n", atomic_load(&svc->ready) ? 1 : 0);
   pthread_mutex_unlock(&svc->lock);

@@ -222,22 +222,48 @@ rsw_status service_params_patch(service *svc, const char *id, const char *body, 
     patches = svc_patch_merged(r->patches, j);
     if (!patches) st = svc_fail(e, RSW_ERR_NOMEM, "body", "out of memory");
   }
+  /* With a state directory the PATCH is acknowledged only once stored:
+   * the keys' values before it, to undo it if it cannot be. */
+  param_update *before = NULL;
+  if (!st && svc_state_on(svc) && r->patches) {
+    rsw_err err = {0};
+    st = svc_param_snapshot(r->sc, u, n, &before, &err);
+    if (st) st = svc_update_error(e, r->sc, u, n, &err);
+  }
   if (!st) {
     rsw_err err = {0};
     st = scene_update(r->sc, u, n, &rep, &err);
     if (st) st = svc_update_error(e, r->sc, u, n, &err);
   }
   if (!st && rep.changed) {
+    uint64_t old_revision = r->revision;
+    cJSON *old_patches = NULL;
     r->revision++;
-    (void)svc_refresh_param_cache(r); /* out of memory: stale, rebuilt by the next GET */
-    svc_views_free(r);                /* idle views of the old revision */
     if (patches) {
-      cJSON_Delete(r->patches);
+      old_patches = r->patches;
       r->patches = patches; /* views replay it, --state-dir stores it */
       patches = NULL;
     }
-    svc_scene_patched(svc, r);
+    st = svc_scene_patched(svc, r, e);
+    if (st) {
+      /* Not stored: the scene back to its revision (the same values, so
+       * bitwise), and the record to the previous state in case the
+       * failure came after the rename (best effort). */
+      rsw_err uerr = {0};
+      svc_error ignored = {0};
+      r->revision = old_revision;
+      patches = r->patches;
+      r->patches = old_patches;
+      old_patches = NULL;
+      if (!before || scene_update(r->sc, before, n, NULL, &uerr) != RSW_OK) r->broken = true;
+      (void)svc_state_scene_patched(svc, r, &ignored);
+    }
+    cJSON_Delete(old_patches);
+    (void)svc_refresh_param_cache(r); /* out of memory: stale, rebuilt by the next GET */
+    svc_views_free(r);                /* idle views of the old revision */
   }
+  for (size_t i = 0; before && i < n; i++) param_value_free(&before[i].value);
+  free(before);
   cJSON_Delete(patches);
   *revision_out = r->revision;
   cJSON *o = NULL;

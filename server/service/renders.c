@@ -242,8 +242,8 @@ static void give_back(resident *r, svc_view *v, bool keep) {
 
 /* The view's current values of the overridden keys, to set it back after
  * the render (values round-trip exactly through their JSON text). */
-static rsw_status snapshot(const scene *sc, const param_update *u, size_t n, param_update **out,
-                           rsw_err *err) {
+rsw_status svc_param_snapshot(const scene *sc, const param_update *u, size_t n, param_update **out,
+                              rsw_err *err) {
   param_update *s = calloc(n ? n : 1, sizeof *s);
   if (!s) return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
   for (size_t i = 0; i < n; i++) {
@@ -311,7 +311,7 @@ rsw_status svc_render_locked(service *svc, resident *r, const render_spec *rs, s
   rsw_err err = {0};
   if (overrides) st = svc_map_to_updates(rs->overrides, sc, "params", &u, &n, e);
   if (!st && n) {
-    st = snapshot(sc, u, n, &restore, &err);
+    st = svc_param_snapshot(sc, u, n, &restore, &err);
     if (st) st = svc_update_error(e, sc, u, n, &err);
   }
   bool keep = true;

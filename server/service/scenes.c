@@ -11,6 +11,7 @@
 
 #include "../kernel/scene/loader.h"
 #include "buf.h"
+#include "rsw_file.h"
 #include "rsw_sha256.h"
 #include "service_internal.h"
 #include "templates.h"
@@ -34,14 +35,17 @@ static rsw_status resolve_file(void *user, const char *name, char **path_out, rs
     if (!rsw_is_sha256_hex(name + 7))
       return rsw_fail(err, RSW_ERR_INVALID, name, "'%s' is not sha256:<64 lowercase hex digits>", name);
     snprintf(path, sizeof path, "%s/%s", svc->blob_dir, name + 7);
-    struct stat sb;
-    if (stat(path, &sb) != 0)
+    /* Opened as the kernel will read it (no symbolic link, no FIFO), and
+     * checked against its name: a blob is what its digest says. */
+    int fd = rsw_open_regular(path, true);
+    if (fd < 0 && errno == ENOENT)
       return rsw_fail(err, RSW_ERR_FILE, name, "blob %s has not been uploaded (PUT /v1/blobs/%s)", name + 7,
                       name + 7);
-    if (!S_ISREG(sb.st_mode) || access(path, R_OK) != 0)
+    bool same = fd >= 0 && rsw_sha256_fd(fd, d) && (rsw_hex(d, 32, dh), strcmp(dh, name + 7) == 0);
+    if (fd >= 0) close(fd);
+    if (!same)
       return rsw_fail(err, RSW_ERR_FILE, name, "blob %s cannot be read on the server (upload it again)",
                       name + 7);
-    snprintf(dh, sizeof dh, "%s", name + 7);
   } else {
     if (!data_root[0])
       return rsw_fail(
@@ -52,6 +56,7 @@ static rsw_status resolve_file(void *user, const char *name, char **path_out, rs
       snprintf(path, sizeof path, "%s", name);
     else
       snprintf(path, sizeof path, "%s/%s", data_root, name);
+    /* Symbolic links are followed only while they stay inside the root. */
     char *rp = realpath(path, NULL);
     if (!rp) return rsw_fail(err, RSW_ERR_FILE, name, "file '%s' not found under the data root", name);
     size_t lr = strlen(data_root);
@@ -62,7 +67,14 @@ static rsw_status resolve_file(void *user, const char *name, char **path_out, rs
     }
     snprintf(path, sizeof path, "%s", rp);
     free(rp);
-    if (!rsw_sha256_file(path, d)) return rsw_fail(err, RSW_ERR_FILE, name, "cannot read '%s'", name);
+    /* The resolved path has no link left: O_NOFOLLOW refuses one planted
+     * since; O_NONBLOCK and fstat refuse a FIFO or device (never a hang). */
+    int fd = rsw_open_regular(path, true);
+    if (fd < 0)
+      return rsw_fail(err, RSW_ERR_FILE, name, "cannot read '%s': %s", name, rsw_open_strerror(errno));
+    bool hashed = rsw_sha256_fd(fd, d);
+    close(fd);
+    if (!hashed) return rsw_fail(err, RSW_ERR_FILE, name, "cannot read '%s'", name);
     rsw_hex(d, 32, dh);
   }
   if (lc->files) {
@@ -233,13 +245,15 @@ void svc_free_evicted(resident **ev) {
   free(ev);
 }
 
-void svc_scene_patched(service *svc, resident *r) {
-  svc_state_scene_patched(svc, r);
+rsw_status svc_scene_patched(service *svc, resident *r, svc_error *e) {
+  rsw_status st = svc_state_scene_patched(svc, r, e);
+  if (st) return st;
   size_t b = budget_bytes(r->sc);
   pthread_mutex_lock(&svc->lock);
   svc->scene_bytes += b - r->bytes;
   r->bytes = b;
   pthread_mutex_unlock(&svc->lock);
+  return RSW_OK;
 }
 
 void svc_scene_release(service *svc, resident *r) {

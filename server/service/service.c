@@ -178,6 +178,7 @@ rsw_status service_new(const service_opts *opts, service **out, rsw_err *err) {
   svc->opts.blob_dir = svc->blob_dir;
   svc->opts.data_root = svc->data_root[0] ? svc->data_root : NULL;
   pthread_mutex_init(&svc->lock, NULL);
+  pthread_mutex_init(&svc->probe_lock, NULL);
   pthread_cond_init(&svc->cond, NULL);
   random_instance(svc->instance);
   pthread_cond_init(&svc->work_cond, NULL);
@@ -226,6 +227,9 @@ bool service_accepts_jobs(service *svc, const char **why_out) {
     pthread_mutex_lock(&svc->lock);
     if (svc->n_queue >= svc->opts.max_queue) why = "the job queue is full (--max-queue)";
     pthread_mutex_unlock(&svc->lock);
+    /* A state directory that cannot take writes: PATCHes, scene posts and
+     * jobs would answer 507 (a probe write, at most once a second). */
+    if (!why) svc_state_writable(svc, &why);
   }
   if (why_out) *why_out = why;
   return !why;
@@ -270,6 +274,7 @@ void service_free(service *svc) {
   if (svc->blob_dir_temp) nftw(svc->blob_dir, remove_entry, 16, FTW_DEPTH | FTW_PHYS);
   if (svc->state_lock_fd >= 0) close(svc->state_lock_fd);
   pthread_mutex_destroy(&svc->lock);
+  pthread_mutex_destroy(&svc->probe_lock);
   pthread_cond_destroy(&svc->cond);
   pthread_cond_destroy(&svc->work_cond);
   free(svc);

@@ -209,6 +209,14 @@ struct service {
   const char *restore_id;                      /* while restoring: the id a submission takes */
   uint64_t jobs_resumed, jobs_failed_on_restore;
   double restore_s;
+  /* Trust and durability of the state directory (state.c). */
+  bool state_legacy;               /* no DIR/format yet: records of the previous
+                                      version are upgraded by the restore */
+  atomic_bool state_unwritable;    /* the last write or probe failed: not ready */
+  pthread_mutex_t probe_lock;      /* one readiness probe at a time */
+  double state_probe_t;            /* when the last probe ran (svc_now) */
+  atomic_ullong state_quarantined; /* files moved to DIR/quarantine */
+  atomic_ullong state_write_failures;
 };
 
 /* Request limits besides the options (GET /v1 reports them). A job's
@@ -331,8 +339,14 @@ void svc_scene_summary(const resident *r, cJSON *o);
 resident **svc_evict_locked(service *svc, const resident *keep);
 /* A PATCH changed r's base state (r->lock held; r->patches already holds
  * every PATCHed value, svc_patch_merged): store it with --state-dir,
- * recount its bytes. */
-void svc_scene_patched(service *svc, resident *r);
+ * fsync'ed, and recount its bytes; RSW_ERR_STATE_DIR (507) when it cannot
+ * be stored (the caller undoes the PATCH, and its bytes are not recounted). */
+rsw_status svc_scene_patched(service *svc, resident *r, svc_error *e);
+/* The scene's current values of the keys u names (values round-trip
+ * exactly through their JSON text: applying them restores the scene
+ * bitwise). renders.c */
+rsw_status svc_param_snapshot(const scene *sc, const param_update *u, size_t n, param_update **out,
+                              rsw_err *err);
 /* How a scene is loaded besides a plain POST (scenes.c). */
 struct post_extra {
   bool pinned;           /* a startup scene: never evicted, not stored */
@@ -355,18 +369,43 @@ rsw_status svc_state_scene_save(service *svc, const char *id, bool is_xml, const
                                 const char *body, size_t len, svc_error *e);
 bool svc_state_scene_read(service *svc, const char *id, char **body, size_t *len, bool *is_xml,
                           char variant[8], cJSON **patched, uint64_t *revision);
-void svc_state_scene_patched(service *svc, resident *r); /* r->lock held */
+/* Store r's PATCHed parameters at its revision, fsync'ed; RSW_ERR_STATE_DIR
+ * (507) when they cannot be (the caller undoes the PATCH). r->lock held. */
+rsw_status svc_state_scene_patched(service *svc, resident *r, svc_error *e);
 void svc_state_scene_remove(service *svc, const char *id);
-void svc_state_job_saved(service *svc, const job *j, const char *body, size_t len);
+/* Store job j's request, fsync'ed, before it is accepted; RSW_ERR_STATE_DIR
+ * (507) when it cannot be. svc->lock held. */
+rsw_status svc_state_job_saved(service *svc, const job *j, const char *body, size_t len, svc_error *e);
 void svc_state_job_finished(service *svc, const job *j); /* svc->lock held */
 void svc_state_job_remove(service *svc, const job *j);
 /* Write item k's film (svc->lock NOT held). */
 rsw_status svc_state_film_write(service *svc, const job *j, size_t k, const svc_film *f, svc_error *e);
-rsw_status svc_state_film_read(service *svc, const job *j, size_t k, svc_film *out, svc_error *e);
-bool svc_state_film_header(service *svc, const char *job_id, size_t k, svc_film *out);
+/* Which stored film a reader wants: its address (job, item k) and the
+ * identity it must carry (scene, context, sensor); a film whose checksum
+ * or identity does not match is quarantined, never served. */
+typedef struct svc_film_ref {
+  char job[40];
+  size_t k;
+  char scene[65];
+  char context[72];
+  char sensor[256];
+} svc_film_ref;
+void svc_film_ref_set(svc_film_ref *ref, const job *j, size_t k); /* svc->lock held */
+rsw_status svc_state_film_read(service *svc, const svc_film_ref *ref, svc_film *out, svc_error *e);
+bool svc_state_film_header(service *svc, const svc_film_ref *ref, svc_film *out);
 /* Item k's film as .npy: a descriptor at offset 0 and the length to
- * send; -1 when not on disk. */
-int svc_state_film_npy_fd(service *svc, const char *job_id, size_t k, uint64_t *len);
+ * send; -1 when not on disk (or quarantined). */
+int svc_state_film_npy_fd(service *svc, const svc_film_ref *ref, uint64_t *len);
+/* Whether the state directory takes writes now (a probe write, at most
+ * once a second); false with *why set when it does not. */
+bool svc_state_writable(service *svc, const char **why);
+/* Test hook: when set, every state-directory write first asks it; a
+ * non-zero answer is the errno the write fails with (ENOSPC: a full disk). */
+extern int (*svc_state_fault_hook)(const char *path);
+/* Store a file atomically (temporary file created O_EXCL|O_NOFOLLOW with a
+ * random suffix in the same directory, fsync, rename, fsync of the
+ * directory). false with errno set. (blobs.c) */
+bool svc_write_file(const char *path, const void *data, size_t len);
 void svc_state_restore(service *svc);
 /* A job being resumed (svc->restore_id): its renders whose film is on
  * disk count done. svc->lock held, before it is queued. */

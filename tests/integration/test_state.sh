@@ -186,10 +186,10 @@ wait "${pids[-1]}" 2>/dev/null
 [ "$(field "$tmp/jq2.json" state)" = queued ] && ok || bad "the second job was still queued at the kill: $(cat "$tmp/jq2.json")"
 # the films finished before the kill, as the state directory holds them
 mkdir -p "$tmp/killed"
-# (a film file begins with the .npy bytes; its trailer's first uint64 is their length)
+# (a film file begins with the .npy bytes; its 64-byte trailer's first uint64 is their length)
 for f in "$sd"/results/"$jk"/*.film; do
   [ -e "$f" ] || continue
-  python3 -c 'import struct,sys; b=open(sys.argv[1],"rb").read(); n=struct.unpack("<Q",b[-32:-24])[0]; assert b[-8:]==b"RSWFILM1"; open(sys.argv[2],"wb").write(b[:n])' \
+  python3 -c 'import struct,sys; b=open(sys.argv[1],"rb").read(); n=struct.unpack("<Q",b[-64:-56])[0]; assert b[-8:]==b"RSWFILM2"; open(sys.argv[2],"wb").write(b[:n])' \
     "$f" "$tmp/killed/$(basename "$f" .film).npy"
 done
 n_killed=$(ls "$tmp/killed" | wc -l)

@@ -23,6 +23,7 @@
 #include "loader.h"
 #include "params.h"
 #include "periodic.h"
+#include "rsw_file.h"
 #include "scene.h"
 
 #define TWO_POW_53 9007199254740992.0
@@ -887,9 +888,9 @@ rsw_status scene_build(node *root, const char *doc_variant, const scene_load_opt
 }
 
 static char *read_all(const char *path, size_t *len, rsw_err *err) {
-  FILE *f = fopen(path, "rb");
+  FILE *f = rsw_fopen_regular(path, "rb");
   if (!f) {
-    rsw_fail(err, RSW_ERR_FILE, path, "cannot open scene file: %s", strerror(errno));
+    rsw_fail(err, RSW_ERR_FILE, path, "cannot open scene file: %s", rsw_open_strerror(errno));
     return NULL;
   }
   const size_t cap_max = (size_t)1 << 30;

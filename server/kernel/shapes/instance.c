@@ -8,6 +8,7 @@
 
 #include "../accel.h"
 #include "../scene/params.h"
+#include "rsw_file.h"
 #include "shape_common.h"
 
 /* ---- shapegroup ------------------------------------------------------------ */
@@ -191,9 +192,10 @@ static rsw_status list_parse(const char *path, float **xf_out, double **tr_out, 
   *xf_out = NULL;
   *tr_out = NULL;
   *n_out = 0;
-  FILE *f = fopen(path, "r");
+  FILE *f = rsw_fopen_regular(path, "r");
   if (!f)
-    return rsw_fail(err, RSW_ERR_FILE, path, "cannot open instance list '%s': %s", path, strerror(errno));
+    return rsw_fail(err, RSW_ERR_FILE, path, "cannot open instance list '%s': %s", path,
+                    rsw_open_strerror(errno));
   size_t cap = 1024, n = 0;
   float *xf = malloc(cap * 12 * sizeof(float));
   double *tr = malloc(cap * 3 * sizeof(double));

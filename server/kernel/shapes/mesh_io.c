@@ -17,6 +17,8 @@
 #include <string.h>
 #include <sys/stat.h>
 
+#include "rsw_file.h"
+
 /* ---- shared helpers ------------------------------------------------------ */
 
 /* Largest mesh file we read into memory: 16 GiB. */
@@ -28,8 +30,8 @@ typedef struct file_buf {
 } file_buf;
 
 static rsw_status read_whole_file(const char *path, file_buf *fb, rsw_err *err) {
-  FILE *f = fopen(path, "rb");
-  if (!f) return rsw_fail(err, RSW_ERR_FILE, path, "cannot open mesh file: %s", strerror(errno));
+  FILE *f = rsw_fopen_regular(path, "rb");
+  if (!f) return rsw_fail(err, RSW_ERR_FILE, path, "cannot open mesh file: %s", rsw_open_strerror(errno));
   struct stat sb;
   if (fstat(fileno(f), &sb) != 0 || !S_ISREG(sb.st_mode)) {
     fclose(f);

@@ -33,12 +33,14 @@
  * Source: mitsuba3 src/volumes/grid.cpp, include/mitsuba/render/
  * volumegrid.h (.vol layout); eradiate's piecewise tests (layers as
  * [N, 1, 1]). */
+#include <errno.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "rsw_file.h"
 #include "volume.h"
 
 typedef enum grid_filter {
@@ -237,8 +239,10 @@ static float rd_f32(const unsigned char *b) {
 /* Read a .vol file: res, channels, its bbox and the values as doubles. */
 static rsw_status read_vol(loader *ld, node *n, const char *path, gridvolume *g, double bbox[6]) {
   const char *name = "filename";
-  FILE *f = fopen(path, "rb");
-  if (!f) return ld_fail(ld, n, name, RSW_ERR_FILE, "cannot open the volume file '%s'", path);
+  FILE *f = rsw_fopen_regular(path, "rb");
+  if (!f)
+    return ld_fail(ld, n, name, RSW_ERR_FILE, "cannot open the volume file '%s': %s", path,
+                   rsw_open_strerror(errno));
   unsigned char h[48] = {0};
   rsw_status st = RSW_OK;
   if (fread(h, 1, sizeof h, f) != sizeof h) {
