@@ -18,6 +18,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../../server/kernel/scene/scene.h"
 #include "../support/test.h"
 #include "../support/tsup.h"
 
@@ -201,7 +202,35 @@ static void test_unbounded_lossless_medium_ends(void) {
   scene_free(s);
 }
 
+/* ---- rr_rule ------------------------------------------------------------------ */
+
+static void test_rr_rule(void) {
+  /* Mitsuba's rule on request: the dense slab loses most of its
+   * transmitted flux (T about 1e-3 of its 0.04), and an unknown rule is
+   * refused naming the key. */
+  char *text = slab_json("{\"type\": \"volpath\", \"rr_rule\": \"mitsuba\"}",
+                         "{\"type\": \"homogeneous\", \"sigma_t\": 32, \"albedo\": 1}", 30.0 * PI / 180);
+  scene *s = tsup_load(text, "mono");
+  free(text);
+  REQUIRE(s, "scene");
+  double t = 0;
+  for (uint64_t r = 1; r <= 8; r++) t += render_px(s, 1, 1024, r) / 8;
+  CHECK(t < 0.01, "rr_rule mitsuba: T %.3g, expected starved (< 0.01)", t);
+  scene_free(s);
+  const char *bad =
+      "{\"type\": \"scene\", \"integrator\": {\"type\": \"piecewise_volpath\", \"rr_rule\": \"x\"}}";
+  rsw_err err = {0};
+  scene_load_opts o = {.variant = "mono"};
+  s = NULL;
+  rsw_status st = scene_load_memory(bad, strlen(bad), NULL, false, &o, &s, &err);
+  CHECK(st != RSW_OK, "rr_rule x was accepted");
+  if (st == RSW_OK) scene_free(s);
+  CHECK(strstr(err.msg, "rr_rule") && strstr(err.where, "rr_rule"),
+        "error '%s' at '%s' does not name rr_rule", err.msg, err.where);
+}
+
 int main(void) {
+  RSW_TEST_RUN(test_rr_rule);
   RSW_TEST_RUN(test_far_slab_beer_lambert);
   RSW_TEST_RUN(test_unbounded_lossless_medium_ends);
   RSW_TEST_RUN(test_dense_slab_conserves);

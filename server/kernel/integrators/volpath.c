@@ -59,14 +59,15 @@
  * RR_BACKSTOP_DEPTH bounces on at every bounce (docs/robustness-h-dense.md:
  * Mitsuba's rule, q = min(w, 0.95) at every bounce, starves dense
  * conservative media, where T stays 1 over the ~tau^2 scatterings a path
- * needs to cross them). Emitting media are not supported (none of the
- * media plugins emits).
+ * needs to cross them; rr_rule "mitsuba" keeps it). Emitting media are
+ * not supported (none of the media plugins emits).
  *
  * The sensor's medium: Li does not receive the sensor, so the path's first
  * medium is that of the sensor whose sampler drives it (st->s); sensors
  * sharing a sampler must share a medium (scene_check_media says so). */
 #include <math.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "../accel.h"
 #include "../scene/loader.h"
@@ -78,7 +79,8 @@
 
 typedef struct volpath_integrator {
   integrator base;
-  bool analytic; /* piecewise_volpath */
+  bool analytic;   /* piecewise_volpath */
+  bool rr_mitsuba; /* rr_rule "mitsuba": the roulette at every bounce from rr_depth */
 } volpath_integrator;
 
 enum {
@@ -663,7 +665,7 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
   if (l->depth >= it->rr_depth) { /* roulette: docs/robustness-h-dense.md */
     double u = sops->next_1d(st); /* drawn whether used or not: later draws keep their places */
     double w = col_max(l->T) * l->eta * l->eta;
-    if (w < 1.0 || l->depth >= RR_BACKSTOP_DEPTH) {
+    if (w < 1.0 || l->depth >= RR_BACKSTOP_DEPTH || vp->rr_mitsuba) {
       double q = fmin(w, 0.95);
       if (!(u < q)) return false;
       l->T = col_scale(l->T, 1.0 / q);
@@ -766,6 +768,14 @@ static rsw_status create_common(loader *ld, node *n, object **out, bool analytic
   rsw_status st = ld_int(ld, n, "max_depth", -1, -1, 1 << 30, &md);
   if (!st) st = ld_int(ld, n, "rr_depth", 5, 1, 1 << 30, &rr);
   if (!st) st = ld_bool(ld, n, "hide_emitters", false, &vp->base.hide_emitters);
+  const char *rule = NULL;
+  if (!st) st = ld_string(ld, n, "rr_rule", "throughput", &rule);
+  if (!st && strcmp(rule, "mitsuba") == 0)
+    vp->rr_mitsuba = true;
+  else if (!st && strcmp(rule, "throughput") != 0)
+    st = ld_fail(ld, n, "rr_rule", RSW_ERR_INVALID,
+                 "%s: unknown rr_rule '%s' (expected throughput or mitsuba)",
+                 analytic ? "piecewise_volpath" : "volpath", rule);
   if (st) {
     free(vp);
     return st;
