@@ -198,32 +198,6 @@ static void bench_renders(void) {
   }
 }
 
-/* The dense slab of tests/validation/test_dense_media.c: optical
- * thickness 32, albedo 1, isotropic, over a black ground under a sun at
- * 30 degrees; sensor 0 (distantflux above) gives R, sensor 1 (below) T. */
-static char *dense_scene(const char *rule) {
-  sbuf b = {0};
-  sb_printf(
-      &b,
-      "{\"type\": \"scene\", \"integrator\": {\"type\": \"volpath\", \"rr_rule\": \"%s\"},"
-      " \"slab\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
-      "   \"interior\": {\"type\": \"homogeneous\", \"sigma_t\": 32, \"albedo\": 1},"
-      "   \"to_world\": [{\"scale\": [100, 100, 0.5]}, {\"translate\": [0, 0, 0.5]}]},"
-      " \"ground\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0},"
-      "   \"to_world\": [{\"scale\": 200}, {\"translate\": [0, 0, -0.5]}]},"
-      " \"sun\": {\"type\": \"directional\", \"direction\": [0.5, 0, -0.86602540378443864676],"
-      "   \"irradiance\": 1},"
-      " \"up\": {\"type\": \"distantflux\","
-      "   \"target\": {\"type\": \"rectangle\", \"to_world\": [{\"translate\": [0, 0, 1]}]},"
-      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},"
-      " \"down\": {\"type\": \"distantflux\", \"ray_offset\": 0.25,"
-      "   \"to_world\": [{\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 180}}],"
-      "   \"target\": {\"type\": \"rectangle\"},"
-      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}}}",
-      rule);
-  return b.p;
-}
-
 /* media_dense_slab_<rule>: K renders (seeds 1..K) of both sensors at SPP
  * samples with volpath's rr_rule `throughput` (the default) and `mitsuba`:
  * R, T and R + T (mean over the renders; incident cos 30 = 0.866), the
@@ -241,7 +215,11 @@ static void bench_dense(void) {
   const char *rules[] = {"throughput", "mitsuba"};
   const double E = 0.86602540378443864676;
   for (int k = 0; k < 2; k++) {
-    char *text = dense_scene(rules[k]);
+    char integ[80];
+    snprintf(integ, sizeof integ, "{\"type\": \"volpath\", \"rr_rule\": \"%s\"}", rules[k]);
+    /* Optical thickness 32, albedo 1, isotropic, sun at 30 degrees. */
+    char *text = tsup_dense_slab(integ, "{\"type\": \"homogeneous\", \"sigma_t\": 32, \"albedo\": 1}",
+                                 30.0 * 3.14159265358979323846 / 180);
     scene *s = tsup_load(text, "mono");
     free(text);
     if (!s) return;

@@ -26,35 +26,6 @@ RSW_TEST_DEFINE_GLOBALS
 
 #define PI 3.14159265358979323846
 
-/* The slab z in [0, 1], 200 x 200 wide (the light spreads about one
- * thickness sideways), sigma_t = tau, albedo 1, over a black ground at
- * z = -0.5, under a sun of irradiance 1 at zenith angle th0. Sensor 0: a
- * distantflux above the slab, aimed at a 2 x 2 patch of its top; sensor 1:
- * one below it (its hemisphere around -z), aimed at a patch of its bottom,
- * its rays starting 0.25 under it (above the ground). Each has a 1 x 1
- * film: its pixel is the radiosity leaving the patch. */
-static char *slab_json(const char *integ, const char *med, double th0) {
-  sbuf b = {0};
-  sb_printf(
-      &b,
-      "{\"type\": \"scene\", \"integrator\": %s,"
-      " \"slab\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
-      "   \"interior\": %s,"
-      "   \"to_world\": [{\"scale\": [100, 100, 0.5]}, {\"translate\": [0, 0, 0.5]}]},"
-      " \"ground\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0},"
-      "   \"to_world\": [{\"scale\": 200}, {\"translate\": [0, 0, -0.5]}]},"
-      " \"sun\": {\"type\": \"directional\", \"direction\": [%.17g, 0, %.17g], \"irradiance\": 1},"
-      " \"up\": {\"type\": \"distantflux\","
-      "   \"target\": {\"type\": \"rectangle\", \"to_world\": [{\"translate\": [0, 0, 1]}]},"
-      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},"
-      " \"down\": {\"type\": \"distantflux\", \"ray_offset\": 0.25,"
-      "   \"to_world\": [{\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 180}}],"
-      "   \"target\": {\"type\": \"rectangle\"},"
-      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}}}",
-      integ, med, sin(th0), -cos(th0));
-  return b.p;
-}
-
 static double render_px(scene *s, size_t which, uint32_t spp, uint64_t seed) {
   rsw_err err = {0};
   render_opts o = {.size = sizeof o, .sensor = which, .spp = spp, .seed = seed, .threads = 0};
@@ -76,7 +47,7 @@ static void slab_energy(const char *integ, const char *med, double th0, const ch
     REPS = 16,
     SPP = 2048
   };
-  char *text = slab_json(integ, med, th0);
+  char *text = tsup_dense_slab(integ, med, th0);
   scene *s = tsup_load(text, "mono");
   free(text);
   REQUIRE(s, "scene");
@@ -208,8 +179,9 @@ static void test_rr_rule(void) {
   /* Mitsuba's rule on request: the dense slab loses most of its
    * transmitted flux (T about 1e-3 of its 0.04), and an unknown rule is
    * refused naming the key. */
-  char *text = slab_json("{\"type\": \"volpath\", \"rr_rule\": \"mitsuba\"}",
-                         "{\"type\": \"homogeneous\", \"sigma_t\": 32, \"albedo\": 1}", 30.0 * PI / 180);
+  char *text =
+      tsup_dense_slab("{\"type\": \"volpath\", \"rr_rule\": \"mitsuba\"}",
+                      "{\"type\": \"homogeneous\", \"sigma_t\": 32, \"albedo\": 1}", 30.0 * PI / 180);
   scene *s = tsup_load(text, "mono");
   free(text);
   REQUIRE(s, "scene");
