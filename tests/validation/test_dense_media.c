@@ -9,6 +9,9 @@
  *  - A Beer-Lambert slab 3 km off the origin gives log transmittance
  *    -sigma_t d to 1e-6 (the segment lengths in double, not from float
  *    hit distances).
+ *  - The roulette's backstop ends paths in an unbounded lossless medium;
+ *    rr_rule "mitsuba" restores Mitsuba's rule, and a bad rr_rule is
+ *    refused naming the key.
  *
  * Monte Carlo estimates: REPS independent renders (seeds 1..REPS), mean
  * and standard error over the renders (fixed seeds: a deterministic
