@@ -9,6 +9,8 @@
  *  - A Beer-Lambert slab 3 km off the origin gives log transmittance
  *    -sigma_t d to 1e-6 (the segment lengths in double, not from float
  *    hit distances).
+ *  - The thin atmosphere (proto/examples/atmosphere.json) renders the same
+ *    film mean under both rules (3 standard errors).
  *  - The roulette's backstop ends paths in an unbounded lossless medium;
  *    rr_rule "mitsuba" restores Mitsuba's rule, and a bad rr_rule is
  *    refused naming the key.
@@ -204,7 +206,55 @@ static void test_rr_rule(void) {
         "error '%s' at '%s' does not name rr_rule", err.msg, err.where);
 }
 
+/* ---- the thin atmosphere under both rules ------------------------------------- */
+
+static void test_thin_atmosphere_rules_agree(void) {
+  /* proto/examples/atmosphere.json (Rayleigh layers of albedo 1 over an
+   * RPV ground, piecewise_volpath, hdistant 32 x 32) with rr_rule
+   * throughput (seeds 1..K) and mitsuba (seeds K+1..2K, independent): the
+   * film means agree within 3 standard errors. Measured against the
+   * previous tree's renders at 1,000 spp: docs/robustness-h-dense.md. */
+  enum {
+    K = 8,
+    SPP = 64
+  };
+  size_t len;
+  char *text = tsup_read_file("proto/examples/atmosphere.json", &len);
+  REQUIRE(text, "proto/examples/atmosphere.json");
+  const char *key = "\"integrator\": {\"type\": \"piecewise_volpath\", \"max_depth\": -1}";
+  char *at = strstr(text, key);
+  REQUIRE(at, "the atmosphere's integrator");
+  double m[2], se[2];
+  for (int k = 0; k < 2; k++) {
+    sbuf b = {0};
+    sb_printf(&b, "%.*s\"integrator\": {\"type\": \"piecewise_volpath\", \"rr_rule\": \"%s\"}%s",
+              (int)(at - text), text, k ? "mitsuba" : "throughput", at + strlen(key));
+    scene *s = tsup_load(b.p, "mono");
+    free(b.p);
+    REQUIRE(s, "scene");
+    double sum = 0, sum2 = 0;
+    for (int r = 1; r <= K; r++) {
+      film_image img;
+      REQUIRE(tsup_render(s, SPP, (uint64_t)(r + k * K), 0, &img), "render");
+      double mean, sem;
+      tsup_stats(&img, 0, &mean, &sem);
+      film_image_free(&img);
+      sum += mean, sum2 += mean * mean;
+    }
+    scene_free(s);
+    m[k] = sum / K;
+    se[k] = sqrt(fmax(sum2 / K - m[k] * m[k], 0) / (K - 1));
+  }
+  free(text);
+  double z = (m[0] - m[1]) / sqrt(se[0] * se[0] + se[1] * se[1]);
+  printf("  film mean: throughput %.7g +- %.2g, mitsuba %.7g +- %.2g (z %.2f)\n", m[0], se[0], m[1], se[1],
+         z);
+  CHECK(fabs(z) <= 3, "thin atmosphere: film means differ by %.2f standard errors", z);
+  CHECK(se[0] < 0.01 * m[0], "thin atmosphere: standard error %.3g too large", se[0]);
+}
+
 int main(void) {
+  RSW_TEST_RUN(test_thin_atmosphere_rules_agree);
   RSW_TEST_RUN(test_rr_rule);
   RSW_TEST_RUN(test_far_slab_beer_lambert);
   RSW_TEST_RUN(test_unbounded_lossless_medium_ends);
