@@ -16,6 +16,13 @@
  *                             other load does not inflate), samples per CPU
  *                             second, and the ratio to the no-atmosphere
  *                             `path` render.
+ *  media_dense_slab_RULE      a non-absorbing slab of optical thickness 32
+ *                             under a sun (tests/validation/
+ *                             test_dense_media.c) with volpath's rr_rule
+ *                             `throughput` and `mitsuba`: R + T against
+ *                             the incident irradiance, CPU seconds per
+ *                             render, variance x time and mean squared
+ *                             error x time (docs/robustness-h-dense.md).
  *
  * Medians of REPEATS timings. $RSW_BENCH_ONLY=prefix runs the figures
  * whose name starts with it. */
@@ -191,7 +198,69 @@ static void bench_renders(void) {
   }
 }
 
+/* media_dense_slab_<rule>: K renders (seeds 1..K) of both sensors at SPP
+ * samples with volpath's rr_rule `throughput` (the default) and `mitsuba`:
+ * R, T and R + T (mean over the renders; incident cos 30 = 0.866), the
+ * variance of one render's R + T, the CPU seconds of one render (median),
+ * and efficiency figures: variance x CPU time, and mean squared error
+ * against the incident irradiance x CPU time (lower is better; the
+ * second counts the mitsuba rule's missing flux). */
+static void bench_dense(void) {
+  if (!wanted("media_dense")) return;
+  enum {
+    K = 32,
+    SPP = 1024
+  };
+  const int threads = bench_threads();
+  const char *rules[] = {"throughput", "mitsuba"};
+  const double E = 0.86602540378443864676;
+  for (int k = 0; k < 2; k++) {
+    char integ[80];
+    snprintf(integ, sizeof integ, "{\"type\": \"volpath\", \"rr_rule\": \"%s\"}", rules[k]);
+    /* Optical thickness 32, albedo 1, isotropic, sun at 30 degrees. */
+    char *text = tsup_dense_slab(integ, "{\"type\": \"homogeneous\", \"sigma_t\": 32, \"albedo\": 1}",
+                                 30.0 * 3.14159265358979323846 / 180);
+    scene *s = tsup_load(text, "mono");
+    free(text);
+    if (!s) return;
+    double t[K], v[K], sr = 0, st = 0;
+    for (int r = 0; r < K; r++) {
+      double x[2];
+      double t0 = bench_process_cpu_s();
+      for (int sn = 0; sn < 2; sn++) {
+        rsw_err err = {0};
+        render_opts o = {
+            .size = sizeof o, .sensor = (size_t)sn, .spp = SPP, .seed = (uint64_t)r + 1, .threads = threads};
+        film_image img;
+        if (render_sensor(s, &o, &img, NULL, &err)) {
+          scene_free(s);
+          return;
+        }
+        x[sn] = img.data[0];
+        film_image_free(&img);
+      }
+      t[r] = bench_process_cpu_s() - t0;
+      sr += x[0], st += x[1];
+      v[r] = x[0] + x[1];
+    }
+    scene_free(s);
+    double m = 0, var = 0, mse = 0;
+    for (int r = 0; r < K; r++) m += v[r] / K;
+    for (int r = 0; r < K; r++) {
+      var += (v[r] - m) * (v[r] - m) / (K - 1);
+      mse += (v[r] - E) * (v[r] - E) / K;
+    }
+    double tc = bench_median(t, K);
+    printf("{\"bench\": \"media_dense_slab_%s\", \"tau\": 32, \"spp\": %d, \"renders\": %d, \"threads\": %d,"
+           " \"R\": %.5f, \"T\": %.5f, \"R_plus_T\": %.5f, \"incident\": %.5f, \"var\": %.3g,"
+           " \"cpu_s_per_render\": %.3f, \"var_x_cpu_s\": %.3g, \"mse_x_cpu_s\": %.3g}\n",
+           rules[k], SPP, K, threads, sr / K, st / K, m, E, var, tc, var * tc, mse * tc);
+    fflush(stdout);
+  }
+}
+
 int main(void) {
+  bench_dense();
   bench_ops(1);
   bench_ops(2400);
   bench_ops(240000);

@@ -120,3 +120,32 @@ void tsup_random_leaves(double (*m)[16], int n, uint64_t seed, uint64_t stream, 
     q[12] = q[13] = q[14] = 0, q[15] = 1;
   }
 }
+
+/* The dense slab of tests/validation/test_dense_media.c: z in [0, 1], 200 x 200 wide (the light spreads about one
+ * thickness sideways) holding medium med, over a black ground at
+ * z = -0.5, under a sun of irradiance 1 at zenith angle th0. Sensor 0: a
+ * distantflux above the slab, aimed at a 2 x 2 patch of its top; sensor 1:
+ * one below it (its hemisphere around -z), aimed at a patch of its bottom,
+ * its rays starting 0.25 under it (above the ground). Each has a 1 x 1
+ * film: its pixel is the radiosity leaving the patch. */
+char *tsup_dense_slab(const char *integ, const char *med, double th0) {
+  sbuf b = {0};
+  sb_printf(
+      &b,
+      "{\"type\": \"scene\", \"integrator\": %s,"
+      " \"slab\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
+      "   \"interior\": %s,"
+      "   \"to_world\": [{\"scale\": [100, 100, 0.5]}, {\"translate\": [0, 0, 0.5]}]},"
+      " \"ground\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0},"
+      "   \"to_world\": [{\"scale\": 200}, {\"translate\": [0, 0, -0.5]}]},"
+      " \"sun\": {\"type\": \"directional\", \"direction\": [%.17g, 0, %.17g], \"irradiance\": 1},"
+      " \"up\": {\"type\": \"distantflux\","
+      "   \"target\": {\"type\": \"rectangle\", \"to_world\": [{\"translate\": [0, 0, 1]}]},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},"
+      " \"down\": {\"type\": \"distantflux\", \"ray_offset\": 0.25,"
+      "   \"to_world\": [{\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 180}}],"
+      "   \"target\": {\"type\": \"rectangle\"},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}}}",
+      integ, med, sin(th0), -cos(th0));
+  return b.p;
+}

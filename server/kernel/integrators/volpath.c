@@ -54,30 +54,45 @@
  * w(pdf_em p_pick, pdf_phase) and phase sampling weight p / pdf (1 for
  * exact sampling). A bounce is a surface or medium scattering event (null
  * surfaces and null collisions are not); max_depth counts as in `path`
- * (2: single scattering). Russian roulette from rr_depth, survival
- * q = min(max(T) eta^2, 0.95). Emitting media are not supported (none of
- * the media plugins emits).
+ * (2: single scattering). Russian roulette from rr_depth, only while
+ * w = max(T) eta^2 < 1, with survival q = min(w, 0.95); from
+ * RR_BACKSTOP_DEPTH bounces on at every bounce (docs/robustness-h-dense.md:
+ * Mitsuba's rule, q = min(w, 0.95) at every bounce, starves dense
+ * conservative media, where T stays 1 over the ~tau^2 scatterings a path
+ * needs to cross them; rr_rule "mitsuba" keeps it). Emitting media are
+ * not supported (none of the media plugins emits).
  *
  * The sensor's medium: Li does not receive the sensor, so the path's first
  * medium is that of the sensor whose sampler drives it (st->s); sensors
  * sharing a sampler must share a medium (scene_check_media says so). */
 #include <math.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "../accel.h"
 #include "../scene/loader.h"
 #include "../scene/periodic.h"
 #include "../shapes/instance.h"
+#include "../shapes/mesh.h"
 #include "../shapes/shape.h"
 #include "integrator.h"
 
 typedef struct volpath_integrator {
   integrator base;
-  bool analytic; /* piecewise_volpath */
+  bool analytic;   /* piecewise_volpath */
+  bool rr_mitsuba; /* rr_rule "mitsuba": the roulette at every bounce from rr_depth */
 } volpath_integrator;
 
 enum {
-  MAX_CROSSINGS = 1024 /* null surfaces crossed by one ray before it counts as lost */
+  MAX_CROSSINGS = 1024, /* null surfaces crossed by one ray before it counts as lost */
+  /* From this many bounces on, the roulette runs whatever the throughput
+   * (survival min(max T eta^2, 0.95), Mitsuba's), so that a path in a
+   * lossless medium with no way out (an unbounded albedo-1 medium) ends.
+   * A conservative slab of optical thickness tau holds a path beyond n
+   * scatterings with probability ~ exp(-n pi^2 / (3 tau^2)) (diffusion's
+   * slowest mode): about e^-21 at n = 65536 for tau = 100, so the paths
+   * it reaches carry a negligible share of the flux. */
+  RR_BACKSTOP_DEPTH = 1 << 16
 };
 
 /* The emitter u picks and its selection probability. */
@@ -377,13 +392,49 @@ static void wave_trace(const scene *sc, vlane *ln, const int *idx, int n, bool s
   }
 }
 
-/* The length from the exact start o0 of ray r's segment to its hit si:
- * from the hit point itself (exact on the surface, where Embree's t is
- * float32), or, under a periodic boundary (si->p wrapped into the
- * column), from the hit distance. */
-static double seg_end(const scene *sc, const ray3 *r, vec3 o0, const surface_interaction *si) {
+/* The length from the exact start o0 of ray r's segment (unit direction)
+ * to its hit si: from the hit point, or, under a periodic boundary (si->p
+ * wrapped into the column), from the hit distance. Where a medium lies
+ * along or beyond the segment (media: Beer-Lambert needs the length to
+ * the surface as the scene describes it), a hit on a triangle of a
+ * top-level mesh is moved onto the triangle's plane along the ray, in
+ * double from o0 and the face's vertices under to_world: Embree's float32
+ * hit distance (or barycentrics) are off by a few float units of the
+ * coordinates, 2e-4 at 3 km, which a dense medium far from the origin
+ * turns into a transmittance error (docs/robustness-h-dense.md). A
+ * grazing hit keeps Embree's point. */
+static double seg_end(const scene *sc, const ray3 *r, vec3 o0, surface_interaction *si, bool media) {
   if (sc->periodic.on) return si->t + v3_dot(v3_sub(r->o, o0), r->d);
-  return v3_dot(v3_sub(si->p, o0), r->d);
+  double t = v3_dot(v3_sub(si->p, o0), r->d);
+  const shape *sh = si->shape;
+  if (!media || !shape_is_mesh(sh) || sh->index >= sc->n_shapes || sc->shapes[sh->index] != sh ||
+      si->prim >= sh->mesh.n_faces)
+    return t; /* (an instance's member: its placement is not at hand) */
+  const uint32_t *ix = &sh->mesh.faces[3 * (size_t)si->prim];
+  vec3 a = xf_point(&sh->to_world, mesh_vertex(&sh->mesh, ix[0]));
+  vec3 b = xf_point(&sh->to_world, mesh_vertex(&sh->mesh, ix[1]));
+  vec3 c = xf_point(&sh->to_world, mesh_vertex(&sh->mesh, ix[2]));
+  vec3 n = v3_cross(v3_sub(b, a), v3_sub(c, a));
+  double len = v3_len(n);
+  if (!(len > 0)) return t;
+  n = v3_scale(n, 1.0 / len);
+  double cos_n = v3_dot(r->d, n);
+  if (!(fabs(cos_n) > 1e-3)) return t;
+  double te = v3_dot(v3_sub(a, o0), n) / cos_n;
+  /* Embree works in float relative to the ray's origin: its point is off
+   * the plane by a few float units of the coordinates and of t (p_error),
+   * and along it by as much again; a move beyond 1e-5 of them (about 170
+   * float units) would not be a rounding's. */
+  double scale = fabs(t) + v3_max_abs(o0) + v3_max_abs(a);
+  if (!(fabs((te - t) * cos_n) <= 1e-5 * scale + 4.0 * si->p_error)) return t;
+  si->p = v3_fma(o0, te, r->d);
+  return te;
+}
+
+/* Does a medium lie along a segment in medium m that ends on si, or
+ * beyond it? */
+static bool media_at(const medium *m, const surface_interaction *si) {
+  return m || si->shape->interior || si->shape->exterior;
 }
 
 /* Start lane l's shadow ray towards ds from a surface vertex si (or the
@@ -405,9 +456,11 @@ static void start_shadow(const scene *sc, vlane *l, const surface_interaction *s
  * segment's transmittance, then done (false) or a null surface crossed
  * (true: trace again). */
 static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l, bool hit,
-                        const surface_interaction *si, sampler_state *st) {
+                        surface_interaction *si, sampler_state *st) {
+  if (hit && !(l->sm || sc->null_boxes.on) && media_at(NULL, si))
+    seg_end(sc, &l->sray, l->sp0, si, true); /* the next segment's start (si->p) */
   if (l->sm || sc->null_boxes.on) {
-    double tend = hit          ? seg_end(sc, &l->sray, l->sp0, si)
+    double tend = hit          ? seg_end(sc, &l->sray, l->sp0, si, media_at(l->sm, si))
                   : l->sfinite ? v3_dot(v3_sub(l->send, l->sp0), l->sray.d)
                                : INFINITY;
     ray3 mr = {l->sp0, l->sray.d, 0.0, tend};
@@ -460,7 +513,7 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
   /* ---- the medium along the segment ---- */
   medium_interaction mi;
   bool scattered = false;
-  double tend = hit ? seg_end(sc, &l->ray, l->seg_o, si) : l->ray.tmax, t0 = 0.0;
+  double tend = hit ? seg_end(sc, &l->ray, l->seg_o, si, media_at(m, si)) : l->ray.tmax, t0 = 0.0;
   box_walk bw;
   if (sc->null_boxes.on) box_walk_start(sc, l->seg_o, l->ray.d, &bw);
   for (;;) { /* the segment piece by piece between null boxes' sides */
@@ -609,10 +662,14 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
     l->crossings = 0;
   }
   l->depth++;
-  if (l->depth >= it->rr_depth) {
-    double q = fmin(col_max(l->T) * l->eta * l->eta, 0.95);
-    if (!(sops->next_1d(st) < q)) return false;
-    l->T = col_scale(l->T, 1.0 / q);
+  if (l->depth >= it->rr_depth) { /* roulette: docs/robustness-h-dense.md */
+    double u = sops->next_1d(st); /* drawn whether used or not: later draws keep their places */
+    double w = col_max(l->T) * l->eta * l->eta;
+    if (w < 1.0 || l->depth >= RR_BACKSTOP_DEPTH || vp->rr_mitsuba) {
+      double q = fmin(w, 0.95);
+      if (!(u < q)) return false;
+      l->T = col_scale(l->T, 1.0 / q);
+    }
   }
   return col_max(l->T) > 0;
 }
@@ -711,6 +768,14 @@ static rsw_status create_common(loader *ld, node *n, object **out, bool analytic
   rsw_status st = ld_int(ld, n, "max_depth", -1, -1, 1 << 30, &md);
   if (!st) st = ld_int(ld, n, "rr_depth", 5, 1, 1 << 30, &rr);
   if (!st) st = ld_bool(ld, n, "hide_emitters", false, &vp->base.hide_emitters);
+  const char *rule = NULL;
+  if (!st) st = ld_string(ld, n, "rr_rule", "throughput", &rule);
+  if (!st && strcmp(rule, "mitsuba") == 0)
+    vp->rr_mitsuba = true;
+  else if (!st && strcmp(rule, "throughput") != 0)
+    st = ld_fail(ld, n, "rr_rule", RSW_ERR_INVALID,
+                 "%s: unknown rr_rule '%s' (expected throughput or mitsuba)",
+                 analytic ? "piecewise_volpath" : "volpath", rule);
   if (st) {
     free(vp);
     return st;
