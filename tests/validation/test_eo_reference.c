@@ -67,15 +67,14 @@ typedef struct ad_grid {
 
 typedef double mat[MAXK][MAXK];
 
-/* The phase function, normalised to 1 over 4 pi. */
-typedef struct ad_phase {
-  int kind; /* 0 rayleigh, 1 hg */
-  double g;
-} ad_phase;
+/* The phase functions, normalised to 1 over 4 pi: Rayleigh (the kernel's
+ * `rayleigh`) and Henyey-Greenstein (`hg`). */
+static double rayleigh_p(double c) {
+  return 3.0 / (16.0 * PI) * (1.0 + c * c);
+}
 
-static double ad_phase_eval(const ad_phase *p, double c) {
-  if (p->kind == 0) return 3.0 / (16.0 * PI) * (1.0 + c * c);
-  double g = p->g, q = 1.0 + g * g - 2.0 * g * c;
+static double hg_p(double g, double c) {
+  double q = 1.0 + g * g - 2.0 * g * c;
   return (1.0 - g * g) / (4.0 * PI * q * sqrt(q));
 }
 
@@ -106,21 +105,23 @@ static void ad_grid_make(ad_grid *g, int nq, const double *extra, int ne) {
   for (int i = 0; i < g->k; i++) g->d[i] = 2 * PI * g->w[i] * g->mu[i];
 }
 
-/* The Fourier coefficients m = 0..nm-1 of the phase function between
+/* The Fourier coefficients m = 0..nm-1 of a phase function between
  * direction j (down, incident) and direction i (up for pr, down for pt):
  * p_m = 1/(2 pi) int_0^2pi p(cos Theta) cos(m phi) dphi, by the trapezoid
  * rule on nphi points (exact for trigonometric polynomials of degree below
- * nphi - m: Rayleigh has degree 2). pr, pt: [m][i][j]. */
-static void phase_fourier(const ad_grid *g, const ad_phase *p, int nm, int nphi, mat *pr, mat *pt) {
-  for (int i = 0; i < g->k; i++)
-    for (int j = 0; j < g->k; j++) {
-      double mi = g->mu[i], mj = g->mu[j];
+ * nphi - m: Rayleigh has degree 2). pr, pt: [m][i][j]. g < 0: Rayleigh,
+ * else Henyey-Greenstein with asymmetry g. */
+static void phase_fourier(const ad_grid *gr, double g, int nm, int nphi, mat *pr, mat *pt) {
+  for (int i = 0; i < gr->k; i++)
+    for (int j = 0; j < gr->k; j++) {
+      double mi = gr->mu[i], mj = gr->mu[j];
       double si = sqrt(fmax(0, 1 - mi * mi)), sj = sqrt(fmax(0, 1 - mj * mj));
       for (int m = 0; m < nm; m++) pr[m][i][j] = pt[m][i][j] = 0;
       for (int k = 0; k < nphi; k++) {
         double phi = 2 * PI * k / nphi, h = si * sj * cos(phi);
-        double vr = ad_phase_eval(p, fmax(-1, fmin(1, h - mi * mj))) / nphi;
-        double vt = ad_phase_eval(p, fmax(-1, fmin(1, h + mi * mj))) / nphi;
+        double cr = fmax(-1, fmin(1, h - mi * mj)), ct = fmax(-1, fmin(1, h + mi * mj));
+        double vr = (g < 0 ? rayleigh_p(cr) : hg_p(g, cr)) / nphi;
+        double vt = (g < 0 ? rayleigh_p(ct) : hg_p(g, ct)) / nphi;
         for (int m = 0; m < nm; m++) {
           double c = cos(m * phi);
           pr[m][i][j] += vr * c, pt[m][i][j] += vt * c;
@@ -248,8 +249,9 @@ typedef struct ad_atmo {
   int n;           /* layers, bottom first */
   double tau[256]; /* optical thickness */
   double omega[256];
-  double albedo; /* Lambertian surface */
-  ad_phase phase;
+  double f_hg[256]; /* the Henyey-Greenstein share of the scattering; the rest is Rayleigh */
+  double g;         /* the Henyey-Greenstein asymmetry */
+  double albedo;    /* Lambertian surface */
 } ad_atmo;
 
 typedef struct ad_opts {
@@ -261,7 +263,8 @@ typedef struct ad_opts {
 
 /* BRF = pi sum_m (2 - delta_m0) R_m(mu_v, mu_s) cos(m dphi) for each
  * (mu_v[i], mu_s, dphi[i]), dphi the azimuth of the exitant direction minus
- * that of the sun's travel direction. */
+ * that of the sun's travel direction. Rayleigh has modes 0-2 only: a
+ * layer without Henyey-Greenstein scattering has R = T = 0 above them. */
 static void ad_brf(const ad_atmo *at, const ad_opts *o, double mu_s, int nv, const double *mu_v,
                    const double *dphi, double *brf) {
   double extra[16];
@@ -269,23 +272,40 @@ static void ad_brf(const ad_atmo *at, const ad_opts *o, double mu_s, int nv, con
   for (int i = 0; i < nv; i++) extra[1 + i] = mu_v[i];
   static ad_grid g;
   ad_grid_make(&g, o->nq, extra, 1 + nv);
-  static mat R, T, Rb;
+  static mat R, T, Rb, lr, lt;
   double e[MAXK];
-  mat *pr = malloc(sizeof(mat) * (size_t)o->nmodes), *pt = malloc(sizeof(mat) * (size_t)o->nmodes);
-  REQUIRE(pr && pt, "out of memory");
-  phase_fourier(&g, &at->phase, o->nmodes, o->nphi, pr, pt);
+  int nm = o->nmodes, nr = nm < 3 ? nm : 3;
+  mat *rr = malloc(sizeof(mat) * 3), *rt = malloc(sizeof(mat) * 3);
+  mat *hr = malloc(sizeof(mat) * (size_t)nm), *ht = malloc(sizeof(mat) * (size_t)nm);
+  REQUIRE(rr && rt && hr && ht, "out of memory");
+  bool any_hg = false;
+  for (int l = 0; l < at->n; l++) any_hg |= at->f_hg[l] > 0;
+  phase_fourier(&g, -1, nr, o->nphi, rr, rt);
+  if (any_hg) phase_fourier(&g, at->g, nm, o->nphi, hr, ht);
   for (int i = 0; i < nv; i++) brf[i] = 0;
-  for (int m = 0; m < o->nmodes; m++) {
+  for (int m = 0; m < nm; m++) {
     for (int i = 0; i < g.k; i++)
       for (int j = 0; j < g.k; j++) Rb[i][j] = m == 0 ? at->albedo / PI : 0;
     for (int l = 0; l < at->n; l++) {
-      ad_layer(&g, pr[m], pt[m], at->tau[l], at->omega[l], o->tau0, R, T, e);
+      double f = at->f_hg[l];
+      if (m >= 3 && f == 0) { /* no scattering in this mode: direct transmission only */
+        for (int i = 0; i < g.k; i++) {
+          e[i] = exp(-at->tau[l] / g.mu[i]);
+          for (int j = 0; j < g.k; j++) R[i][j] = T[i][j] = 0;
+        }
+      } else {
+        for (int i = 0; i < g.k; i++)
+          for (int j = 0; j < g.k; j++) {
+            lr[i][j] = (m < 3 ? (1 - f) * rr[m][i][j] : 0) + (f > 0 ? f * hr[m][i][j] : 0);
+            lt[i][j] = (m < 3 ? (1 - f) * rt[m][i][j] : 0) + (f > 0 ? f * ht[m][i][j] : 0);
+          }
+        ad_layer(&g, lr, lt, at->tau[l], at->omega[l], o->tau0, R, T, e);
+      }
       ad_add_on_top(&g, R, T, e, Rb);
     }
     for (int i = 0; i < nv; i++) brf[i] += PI * (m ? 2 : 1) * Rb[o->nq + 1 + i][o->nq] * cos(m * dphi[i]);
   }
-  free(pr);
-  free(pt);
+  free(rr), free(rt), free(hr), free(ht);
 }
 
 /* ---- the solver's own checks ---------------------------------------------- */
@@ -295,7 +315,7 @@ static const ad_opts OPTS = {.nq = 16, .tau0 = 1e-8, .nmodes = 3, .nphi = 16};
 static void test_solver_single_scattering(void) {
   /* One thin Rayleigh layer, black surface: BRF = pi omega p(Theta) /
    * (mu + mu0) (1 - exp(-tau (1/mu + 1/mu0))) + O(tau^2). */
-  ad_atmo at = {.n = 1, .tau = {1e-4}, .omega = {0.9}, .albedo = 0, .phase = {0, 0}};
+  ad_atmo at = {.n = 1, .tau = {1e-4}, .omega = {0.9}, .albedo = 0};
   const double mus = cos(35 * PI / 180), muv[4] = {1, 0.8, 0.5, 0.3}, dphi[4] = {0, 1, 2.5, PI};
   double brf[4];
   ad_brf(&at, &OPTS, mus, 4, muv, dphi, brf);
@@ -303,8 +323,7 @@ static void test_solver_single_scattering(void) {
   for (int i = 0; i < 4; i++) {
     double sv = sqrt(1 - muv[i] * muv[i]), ss = sqrt(1 - mus * mus);
     double c = -muv[i] * mus + sv * ss * cos(dphi[i]);
-    double ss1 =
-        PI * 0.9 * ad_phase_eval(&at.phase, c) / (muv[i] + mus) * -expm1(-at.tau[0] * (1 / muv[i] + 1 / mus));
+    double ss1 = PI * 0.9 * rayleigh_p(c) / (muv[i] + mus) * -expm1(-at.tau[0] * (1 / muv[i] + 1 / mus));
     double rel = fabs(brf[i] / ss1 - 1);
     worst = fmax(worst, rel);
     CHECK(rel < 1e-3, "single scattering mu_v %g: %.9g vs %.9g", muv[i], brf[i], ss1);
@@ -312,8 +331,8 @@ static void test_solver_single_scattering(void) {
   printf("  thin layer (tau 1e-4) vs single scattering: worst relative difference %.2g\n", worst);
   /* Two layers add as one (adding = doubling): tau 0.3 in one piece or in
    * 0.1 + 0.2. */
-  ad_atmo one = {.n = 1, .tau = {0.3}, .omega = {0.95}, .albedo = 0.2, .phase = {0, 0}};
-  ad_atmo two = {.n = 2, .tau = {0.1, 0.2}, .omega = {0.95, 0.95}, .albedo = 0.2, .phase = {0, 0}};
+  ad_atmo one = {.n = 1, .tau = {0.3}, .omega = {0.95}, .albedo = 0.2};
+  ad_atmo two = {.n = 2, .tau = {0.1, 0.2}, .omega = {0.95, 0.95}, .albedo = 0.2};
   double b1[4], b2[4];
   ad_brf(&one, &OPTS, mus, 4, muv, dphi, b1);
   ad_brf(&two, &OPTS, mus, 4, muv, dphi, b2);
@@ -330,8 +349,7 @@ static void test_solver_conservation(void) {
     ad_grid_make(&g, OPTS.nq, &mus[s], 1);
     static mat R, T, pr[1], pt[1];
     double e[MAXK];
-    ad_phase ph = {0, 0};
-    phase_fourier(&g, &ph, 1, OPTS.nphi, pr, pt);
+    phase_fourier(&g, -1, 1, OPTS.nphi, pr, pt);
     ad_layer(&g, pr[0], pt[0], 1.0, 1.0, OPTS.tau0, R, T, e);
     double fr = 0, ft = 0;
     for (int i = 0; i < g.nq; i++) fr += g.d[i] * R[i][g.nq], ft += g.d[i] * T[i][g.nq];
@@ -407,7 +425,7 @@ static bool layers_of(const scene *s, double wl, double albedo, ad_atmo *at) {
   size_t np;
   if (!molecular_atmosphere_layers(find_medium(s), wl, &z, &n, &st, &al, &w, &np) || n > 256) return false;
   memset(at, 0, sizeof *at);
-  at->n = (int)n, at->albedo = albedo, at->phase = (ad_phase){0, 0};
+  at->n = (int)n, at->albedo = albedo;
   for (uint32_t k = 0; k < n; k++) at->tau[k] = st[k] * (z[k + 1] - z[k]), at->omega[k] = al[k];
   return true;
 }
@@ -492,7 +510,8 @@ static void test_eo_experiment(void) {
         for (int k = 0; k < bad.n; k++) bad.tau[k] *= 1.02;
         ad_brf(&bad, &OPTS, mus, NV, mu_v, dphi, c->tau2);
         bad = at;
-        bad.phase = (ad_phase){1, 0.3};
+        bad.g = 0.3;
+        for (int k = 0; k < bad.n; k++) bad.f_hg[k] = 1;
         ad_opts hg = OPTS;
         hg.nmodes = 8, hg.nphi = 32; /* g^8 < 1e-4: truncated, a wrong model anyway */
         ad_brf(&bad, &hg, mus, NV, mu_v, dphi, c->hg);
