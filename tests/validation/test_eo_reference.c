@@ -11,7 +11,9 @@
  * the supplementary zero-weight directions): Gauss-Legendre quadrature on
  * mu in (0, 1], one Fourier term per azimuthal mode, each homogeneous
  * layer built by doubling from a thin layer in single scattering, the
- * layers added onto the surface from the bottom up.
+ * layers added onto the surface from the bottom up. A second case adds the
+ * example atmosphere's aerosol layer (Henyey-Greenstein, g = 0.7) in the
+ * bottom layer, mixed with the molecules by the kernel's blend weight.
  *
  * The reference takes each layer's optical thickness and single-scattering
  * albedo from the kernel's own layer values (molecular_atmosphere_layers),
@@ -382,14 +384,14 @@ static const medium *find_medium(const scene *s) {
  * along -(sin sza, 0, cos sza)); the mdistant looks along -(view) for each
  * view direction (sin v, 0, cos v) with v in VZA (so negative v lies on
  * the sun's side). */
-static scene *eo_scene(double sza, double albedo) {
+static scene *eo_scene(double sza, double albedo, const char *particles) {
   sbuf b = {0};
   double half = (TOP + 100) / 2, t = sza * PI / 180;
   sb_printf(
       &b,
       "{\"type\": \"scene\", \"integrator\": {\"type\": \"piecewise_volpath\", \"max_depth\": -1},"
       " \"atmo\": {\"type\": \"molecular_atmosphere\", \"width\": %.17g,"
-      "   \"thermoprops\": {\"identifier\": \"afgl_1986-us_standard\", \"z\": %s}},"
+      "   \"thermoprops\": {\"identifier\": \"afgl_1986-us_standard\", \"z\": %s}%s},"
       " \"shape_atmosphere\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
       "   \"interior\": {\"type\": \"ref\", \"id\": \"atmo\"},"
       "   \"to_world\": [{\"scale\": [%.17g, %.17g, %.17g]}, {\"translate\": [0, 0, %.17g]}]},"
@@ -397,7 +399,7 @@ static scene *eo_scene(double sza, double albedo) {
       "   \"to_world\": {\"scale\": [%.17g, %.17g, 1]}},"
       " \"sun\": {\"type\": \"directional\", \"direction\": [%.17g, 0, %.17g], \"irradiance\": 1},"
       " \"measure\": {\"type\": \"mdistant\", \"target\": [0, 0, 0], \"directions\": \"",
-      W, LEVELS, W / 2, W / 2, half, TOP - half, albedo, W / 2, W / 2, -sin(t), -cos(t));
+      W, LEVELS, particles, W / 2, W / 2, half, TOP - half, albedo, W / 2, W / 2, -sin(t), -cos(t));
   for (int i = 0; i < NV; i++) {
     double v = -VZA[i] * PI / 180; /* sun side is +x: a negative VZA looks from +x */
     sb_printf(&b, "%s%.17g 0 %.17g", i ? ", " : "", -sin(v), -cos(v));
@@ -426,7 +428,10 @@ static bool layers_of(const scene *s, double wl, double albedo, ad_atmo *at) {
   if (!molecular_atmosphere_layers(find_medium(s), wl, &z, &n, &st, &al, &w, &np) || n > 256) return false;
   memset(at, 0, sizeof *at);
   at->n = (int)n, at->albedo = albedo;
-  for (uint32_t k = 0; k < n; k++) at->tau[k] = st[k] * (z[k + 1] - z[k]), at->omega[k] = al[k];
+  for (uint32_t k = 0; k < n; k++) {
+    at->tau[k] = st[k] * (z[k + 1] - z[k]), at->omega[k] = al[k];
+    at->f_hg[k] = np ? w[k * np] : 0; /* one particle layer: its share of the scattering */
+  }
   return true;
 }
 
@@ -467,7 +472,7 @@ static void test_eo_experiment(void) {
   double worst_ref_err = 0;
   for (int a = 0; a < 2; a++)
     for (int si = 0; si < 3; si++) {
-      scene *s = eo_scene(SZA[si], ALB[a]);
+      scene *s = eo_scene(SZA[si], ALB[a], "");
       REQUIRE(s, "scene");
       for (int wi = 0; wi < 2; wi++) {
         eo_case *c = &cases[nc++];
@@ -558,9 +563,90 @@ static void test_eo_experiment(void) {
   CHECK(fails_hg >= 1, "a reference with an hg phase was never rejected: the test cannot fail");
 }
 
+/* ---- an aerosol layer ------------------------------------------------------ */
+
+static const char *AEROSOL = ", \"particle_layers\": [{\"bottom\": 0, \"top\": 2000, \"tau_ref\": 0.2, "
+                             "\"w_ref\": 550, \"angstrom\": 1.3, \"albedo\": 0.9, "
+                             "\"phase\": {\"type\": \"hg\", \"g\": 0.7}}]";
+
+/* The example atmosphere's aerosol (docs/atmosphere.md): 0-2 km, tau 0.2
+ * at 550 nm, single-scattering albedo 0.9, hg g = 0.7, mixed with the
+ * molecules in the bottom layer (the reference mixes the phase functions
+ * with the kernel's blend weight). 550 nm, surface albedo 0.1, sun at 30
+ * and 60 degrees. The reference keeps Fourier modes 0-31 and 16 Gauss
+ * points; its error is the change with 64 modes, 32 points and the start
+ * layer / 16. Tolerances as test_eo_experiment; the aerosol given
+ * Rayleigh's phase function must be rejected. */
+static void test_eo_aerosol(void) {
+#ifdef __SANITIZE_ADDRESS__
+  const uint32_t spp = 1u << 12;
+#else
+  const uint32_t spp = 1u << 16;
+#endif
+  const ad_opts o = {.nq = 16, .tau0 = 1e-8, .nmodes = 32, .nphi = 128};
+  const ad_opts fine = {.nq = 32, .tau0 = 1e-8 / 16, .nmodes = 64, .nphi = 256};
+  double mu_v[NV], dphi[NV];
+  for (int i = 0; i < NV; i++) mu_v[i] = cos(VZA[i] * PI / 180), dphi[i] = (VZA[i] < 0 ? 0 : PI) - PI;
+  double sum = 0, sum_r = 0, sum_g = 0, var = 0, worst = 0;
+  bool bad_r = false;
+  printf("  | wl nm | albedo | sza | vza | kernel BRF | sigma | reference | (k-r)/sigma | ref aerosol as "
+         "Rayleigh | ref g 0.6 |\n");
+  for (int si = 1; si < 3; si++) {
+    double sza = SZA[si], mus = cos(sza * PI / 180);
+    scene *s = eo_scene(sza, 0.1, AEROSOL);
+    REQUIRE(s, "scene");
+    film_image img;
+    rsw_err err = {0};
+    render_opts ro = {.size = sizeof ro,
+                      .spp = spp,
+                      .seed = 20261200 + (uint64_t)si,
+                      .threads = 2,
+                      .wavelength = 550,
+                      .variance = true};
+    if (render_sensor(s, &ro, &img, NULL, &err)) {
+      char buf[1200];
+      REQUIRE(false, "render: %s", rsw_err_format(&err, buf, sizeof buf));
+    }
+    ad_atmo at;
+    REQUIRE(layers_of(s, 550, 0.1, &at), "the medium's layers");
+    REQUIRE(at.f_hg[0] > 0.5 && at.f_hg[1] == 0, "the aerosol is in the bottom layer only (%g, %g)",
+            at.f_hg[0], at.f_hg[1]);
+    at.g = 0.7;
+    double ref[NV], rf[NV], ray[NV], g6[NV];
+    ad_brf(&at, &o, mus, NV, mu_v, dphi, ref);
+    ad_brf(&at, &fine, mus, NV, mu_v, dphi, rf);
+    ad_atmo bad = at;
+    bad.f_hg[0] = 0;
+    ad_brf(&bad, &OPTS, mus, NV, mu_v, dphi, ray);
+    bad = at, bad.g = 0.6;
+    ad_brf(&bad, &o, mus, NV, mu_v, dphi, g6);
+    for (int i = 0; i < NV; i++) {
+      double k = PI * img.data[i * img.channels] / mus, sem = PI * img.planes[0].data[i * img.channels] / mus;
+      double e = fabs(rf[i] - ref[i]), tol = 4 * sem + e + 2e-5;
+      worst = fmax(worst, e / rf[i]);
+      CHECK(fabs(k - ref[i]) <= tol, "aerosol, sza %g, vza %g: BRF %.6f vs reference %.6f (sigma %.2g)", sza,
+            VZA[i], k, ref[i], sem);
+      bad_r |= fabs(k - ray[i]) > tol;
+      sum += k - ref[i], sum_r += k - ray[i], sum_g += k - g6[i], var += sem * sem + e * e;
+      printf("  | 550 | 0.1 | %g | %g | %.5f | %.5f | %.5f | %+.2f | %.5f | %.5f |\n", sza, VZA[i], k, sem,
+             ref[i], (k - ref[i]) / sem, ray[i], g6[i]);
+    }
+    film_image_free(&img);
+    scene_free(s);
+  }
+  double sd = sqrt(var);
+  printf("  reference discretisation: worst relative change %.2g (modes 32 -> 64, nq 16 -> 32, tau0 / 16)\n",
+         worst);
+  printf("  bias, aerosol: z = %+.2f (reference), %+.2f (aerosol as Rayleigh), %+.2f (g 0.6)\n", sum / sd,
+         sum_r / sd, sum_g / sd);
+  CHECK(fabs(sum) <= 4 * sd, "aerosol: the 10 BRFs are biased: z = %.2f", sum / sd);
+  CHECK(bad_r || fabs(sum_r) > 4 * sd, "the aerosol with a Rayleigh phase function was never rejected");
+}
+
 int main(void) {
   RSW_TEST_RUN(test_solver_single_scattering);
   RSW_TEST_RUN(test_solver_conservation);
   RSW_TEST_RUN(test_eo_experiment);
+  RSW_TEST_RUN(test_eo_aerosol);
   RSW_TEST_END("test_eo_reference");
 }
