@@ -11,8 +11,8 @@ mode prints one line per check, "PASS what", "FAIL what: why" or
   docs_check.py curl-lint FILE...
       Every curl command in the shell blocks of FILE (Markdown) or in FILE
       (a shell script) fails on an HTTP error (see curl_fails).
-  docs_check.py usage PROG README.md
-      Prints PROG's usage entries of the README's usage blocks (plain ```
+  docs_check.py usage PROG FILE.md...
+      Prints PROG's usage entries of the files' usage blocks (plain ```
       blocks whose lines start with "PROG "), one per line, normalised.
   docs_check.py man PROG PAGE.1
       The same for the .SH SYNOPSIS of a man page.
@@ -38,7 +38,8 @@ RULES for fenced blocks in Markdown (the visible rules the brief asks for):
   * Each runnable block runs on its own, in a fresh `bash -e` (so any failing
     command fails the block), from a copy of the repository (W/repo, with
     build/ linked to the built tree), with HOME=W/home, build/bin first on
-    PATH, RAYSWEEP_URL=U, and "localhost:8350" / "127.0.0.1:8350" replaced by
+    PATH (and python3 = RSW_PYTHON, default /usr/bin/python3, before it),
+    RAYSWEEP_URL=U, and "localhost:8350" / "127.0.0.1:8350" replaced by
     the test daemon's address. Files written by one block stay for the next,
     as in a terminal; variables do not.
   * A block whose lines start with "$ " is a transcript: each "$ " command
@@ -217,6 +218,17 @@ def run_blocks(args):
     hostport = re.sub(r"^https?://", "", opts["url"]).rstrip("/")
     repo, home = make_sandbox(root, opts["bin"], opts["work"])
     env = block_env(opts["bin"], home, opts["url"])
+    # python3 in a block is Debian's (python3-xarray, python3-netcdf4 from
+    # `make deps`), not one earlier on PATH that lacks them; RSW_PYTHON
+    # names another, as in test_dataset.sh.
+    py = os.environ.get("RSW_PYTHON", "/usr/bin/python3")
+    if os.path.isfile(py):
+        pybin = os.path.join(opts["work"], "pybin")
+        os.makedirs(pybin, exist_ok=True)
+        link = os.path.join(pybin, "python3")
+        if not os.path.lexists(link):
+            os.symlink(py, link)
+        env["PATH"] = pybin + os.pathsep + env["PATH"]
     if "path-prefix" in opts:
         env["PATH"] = opts["path-prefix"] + os.pathsep + env["PATH"]
     timeout = int(opts.get("timeout", "300"))
@@ -236,7 +248,7 @@ def run_blocks(args):
                 if not os.path.isfile(target):
                     print(f"FAIL {where}: docs-test file {arg} does not exist")
                 elif open(target, encoding="utf-8").read() != text:
-                    print(f"FAIL {where}: the block differs from {arg} (copy the file into the README)")
+                    print(f"FAIL {where}: the block differs from {arg} (copy the file into the page)")
                 else:
                     print(f"PASS {where}: equals {arg}")
                 continue
@@ -286,9 +298,9 @@ def run_transcript(where, text, cwd, env, timeout):
         actual = [norm(l) for l in p.stdout.rstrip("\n").split("\n")] if p.stdout.strip() else []
         if not match_transcript(expected, actual):
             got = " / ".join(actual[:4])
-            print(f"FAIL {where}: `{first}` printed other lines than the README shows (first: {got})")
+            print(f"FAIL {where}: `{first}` printed other lines than the page shows (first: {got})")
         else:
-            print(f"PASS {where}: `{first}` prints what the README shows")
+            print(f"PASS {where}: `{first}` prints what the page shows")
 
 
 def curl_lint(files):
@@ -366,9 +378,13 @@ def main():
         run_blocks(args)
     elif mode == "curl-lint":
         curl_lint(args)
-    elif mode in ("usage", "man"):
+    elif mode == "usage":
+        for path in args[1:]:
+            for e in usage_from_readme(args[0], path):
+                print(e)
+    elif mode == "man":
         prog, path = args
-        for e in (usage_from_readme if mode == "usage" else usage_from_man)(prog, path):
+        for e in usage_from_man(prog, path):
             print(e)
     elif mode == "help-entry":
         prog = args[0]

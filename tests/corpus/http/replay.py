@@ -16,7 +16,7 @@ STATUS is a code (400), a class (4xx) or alternatives (404|405). CHECKS is
 "-" or ';'-separated strings the body must contain ("!text": must not
 contain; {VAR} placeholders are filled in), and two flags for what
 libmicrohttpd answers itself before raysweepd sees the request (documented
-in README.md): "mhd-html" (an HTML body instead of a problem) and
+in docs/daemon.md): "mhd-html" (an HTML body instead of a problem) and
 "close-ok" (the connection closed without an answer, within the timeout). Every 4xx/5xx answer must be
 application/problem+json, valid UTF-8, a JSON object whose "status" is the
 HTTP status; a HEAD answer has no body. An answer must come within 5 s.
