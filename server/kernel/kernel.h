@@ -3,7 +3,7 @@
  * sensor, sampler, integrator, volume, phase function, medium). Every implementation lives in its class's
  * directory, one plugin per file, and is listed once in scene/registry.c.
  *
- * Conventions (Mitsuba 3, kernel-behavior.md §0):
+ * Conventions (Mitsuba 3, docs/kernel-conventions.md#frames-and-directions):
  *  - local shading frame: n = +z; wi points towards where the path came
  *    from (the sensor side), wo the other way; both point away from the
  *    surface;

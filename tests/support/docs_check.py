@@ -8,6 +8,14 @@ mode prints one line per check, "PASS what", "FAIL what: why" or
   docs_check.py run --root R --bin B --work W --url U [--path-prefix D] [FILE.md...]
       Runs every shell block of the Markdown files (default: README.md and
       docs/**/*.md) against the daemon at U; see RULES below.
+  docs_check.py links ROOT FILE.md...
+      Every relative link of the files ([text](path#anchor)) names a file
+      or directory inside ROOT, and an anchor names a heading of the
+      Markdown file it points to.
+  docs_check.py citations ROOT FILE...
+      No file cites a path outside the repository (the reference notes the
+      project was written from, or a machine's own directories), and every
+      "docs/<page>.md" or "docs/<page>.md#anchor" a file mentions exists.
   docs_check.py curl-lint FILE...
       Every curl command in the shell blocks of FILE (Markdown) or in FILE
       (a shell script) fails on an HTTP error (see curl_fails).
@@ -316,6 +324,87 @@ def curl_lint(files):
                 print(f"PASS {where}: every curl fails on HTTP errors")
 
 
+def slugs(path):
+    """The anchors of a Markdown file's headings, as GitHub makes them:
+    lower case, punctuation but - and _ dropped, spaces to -, a repeated
+    heading suffixed -1, -2, ..."""
+    seen, out, fence = {}, set(), False
+    for line in open(path, encoding="utf-8").read().split("\n"):
+        if re.match(r"^\s*```", line):
+            fence = not fence
+            continue
+        m = None if fence else re.match(r"^#{1,6}\s+(.*?)\s*#*\s*$", line)
+        if not m:
+            continue
+        s = re.sub(r"[^\w\- ]", "", m.group(1).replace("`", "").lower()).replace(" ", "-")
+        n = seen.get(s, 0)
+        seen[s] = n + 1
+        out.add(s if n == 0 else f"{s}-{n}")
+    return out
+
+
+def links(root, files):
+    root = os.path.abspath(root)
+    for path in files:
+        path = os.path.abspath(path)
+        rel = os.path.relpath(path, root)
+        fence, bad = False, 0
+        for no, line in enumerate(open(path, encoding="utf-8").read().split("\n"), 1):
+            if re.match(r"^\s*```", line):
+                fence = not fence
+            if fence:
+                continue
+            for m in re.finditer(r"\]\(([^)\s]+)\)", line):
+                target = m.group(1)
+                if re.match(r"^[a-z]+:", target):
+                    continue
+                file, _, anchor = target.partition("#")
+                dest = os.path.normpath(os.path.join(os.path.dirname(path), file)) if file else path
+                if not (dest == root or dest.startswith(root + os.sep)):
+                    print(f"FAIL {rel}:{no}: link {target} leaves the repository")
+                    bad += 1
+                elif not os.path.exists(dest):
+                    print(f"FAIL {rel}:{no}: link {target}: {os.path.relpath(dest, root)} does not exist")
+                    bad += 1
+                elif anchor and dest.endswith(".md") and anchor not in slugs(dest):
+                    print(f"FAIL {rel}:{no}: link {target}: no heading #{anchor} in {os.path.relpath(dest, root)}")
+                    bad += 1
+        if not bad:
+            print(f"PASS {rel}: every link resolves")
+
+
+# Paths outside the repository that files have cited (spelled in pieces so
+# that this file does not match itself).
+OUTSIDE = re.compile("|".join([r"kernel-" + r"behavior", r"(?<![\w.])(?:\.\./)+" + r"shared/",
+                               r"/" + r"work/", r"(?<![\w/.-])" + r"shared/(?:seeds|reference|notes)/"]))
+
+
+def citations(root, files):
+    root = os.path.abspath(root)
+    for path in files:
+        rel = os.path.relpath(path, root)
+        try:
+            text = open(path, encoding="utf-8").read()
+        except (UnicodeDecodeError, IsADirectoryError):
+            continue
+        bad = 0
+        for no, line in enumerate(text.split("\n"), 1):
+            m = OUTSIDE.search(line)
+            if m:
+                print(f"FAIL {rel}:{no}: cites a path outside the repository: {line.strip()[:100]}")
+                bad += 1
+            for m in re.finditer(r"(?<![\w/.-])docs/([\w-]+\.md)(?:#([\w-]+))?", line):
+                page = os.path.join(root, "docs", m.group(1))
+                if not os.path.isfile(page):
+                    print(f"FAIL {rel}:{no}: cites docs/{m.group(1)}, which does not exist")
+                    bad += 1
+                elif m.group(2) and m.group(2) not in slugs(page):
+                    print(f"FAIL {rel}:{no}: cites docs/{m.group(1)}#{m.group(2)}: no such heading")
+                    bad += 1
+        if not bad and ("docs/" in text):
+            print(f"PASS {rel}: its citations exist")
+
+
 def entries(lines, prog):
     """Usage entries: a line starting with "PROG " and the indented lines
     after it; "# comments" dropped, whitespace collapsed."""
@@ -376,6 +465,10 @@ def main():
     mode, args = sys.argv[1], sys.argv[2:]
     if mode == "run":
         run_blocks(args)
+    elif mode == "links":
+        links(args[0], args[1:])
+    elif mode == "citations":
+        citations(args[0], args[1:])
     elif mode == "curl-lint":
         curl_lint(args)
     elif mode == "usage":

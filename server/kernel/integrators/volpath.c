@@ -2,7 +2,7 @@
  * volpath, mitsuba3 src/integrators/volpath.cpp; Eradiate's
  * piecewise_volpath, eradiate/mitsuba3
  * src/eradiate_plugins/integrators/piecewise_volpath.cpp;
- * kernel-behavior.md §4.5). Surfaces behave as in `path` (NEE towards one
+ * docs/kernel-conventions.md#volumetric-path-tracing). Surfaces behave as in `path` (NEE towards one
  * emitter, MIS with BSDF sampling, power heuristic); inside a medium a
  * path also scatters, with NEE and MIS against phase sampling.
  *
