@@ -1,6 +1,7 @@
 # raysweep — one plain GNU Makefile.
 #   make            build build/bin/raysweepd
-#   make test       build and run every test (SAN=1: ASan + UBSan build)
+#   make test       build and run every test (SAN=1: ASan + UBSan build;
+#                   TEST_JOBS=N programs at once, default the number of cores)
 #   make bench      benchmarks, one JSON object per line
 #   make test-cluster  replicas behind HAProxy/nginx, a Slurm job array, the
 #                      container recipes (tests/cluster)
@@ -254,8 +255,14 @@ $(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB),$^) $(KERNEL_LIB) $(COMMON_LIB) $(LIBS) $(TEST_LIBS)
 
-test: deps $(BUILD)/bin/raysweepd $(TEST_BIN) $(BUILD)/tests/raysweepd-failmalloc
-	@RSW_BIN_DIR=$(BUILD)/bin BUILD=$(BUILD) SAN=$(SAN) tests/run.sh $(TEST_BIN) $(TEST_SCRIPTS)
+# The test programs run in parallel, TEST_JOBS at a time (default: the
+# number of cores; tests/run.sh says which run alone). Everything a test's
+# inner `make install` or `make run` needs is built first (the .so and .pc
+# too), so concurrent inner makes find nothing to build.
+TEST_JOBS :=
+test: deps $(BUILD)/bin/raysweepd $(TEST_BIN) $(BUILD)/tests/raysweepd-failmalloc $(CLIENT_SO) $(CLIENT_PC)
+	@RSW_BIN_DIR=$(BUILD)/bin BUILD=$(BUILD) SAN=$(SAN) TEST_JOBS=$(TEST_JOBS) RSW_TEST_TIMES=$(BUILD)/test-times \
+	  tests/run.sh $(TEST_BIN) $(TEST_SCRIPTS)
 
 # The kernel built as a CPU other than x86 builds it (SIMD=generic: the
 # portable vector kernels alone, in build-generic/), and the tests of its
@@ -271,9 +278,11 @@ bench: deps $(BUILD)/bin/raysweepd $(BUILD)/bin/raysweep $(BENCH_BIN)
 
 # make test-cluster: replicas behind real load balancers and schedulers
 # (tests/cluster; the engines come from `make deps`). Also run by .ci/run.
+# One at a time, as before parallel `make test`: each starts balancers or a
+# Slurm cluster and kills replicas mid-sweep on a schedule of its own.
 CLUSTER_SCRIPTS := $(sort $(wildcard tests/cluster/test_*.sh))
 test-cluster: deps $(BUILD)/bin/raysweepd $(BUILD)/bin/raysweep
-	@RSW_BIN_DIR=$(BUILD)/bin BUILD=$(BUILD) SAN=$(SAN) tests/run.sh $(CLUSTER_SCRIPTS)
+	@RSW_BIN_DIR=$(BUILD)/bin BUILD=$(BUILD) SAN=$(SAN) tests/run.sh -j 1 $(CLUSTER_SCRIPTS)
 
 # make run PORT=N: another port. A port that is taken is said plainly, with
 # a free one to try (bash's /dev/tcp: something answers there).
@@ -316,7 +325,7 @@ $(BUILD)/plugins/%.so: tests/plugins/%.c include/raysweep/plugin.h | deps
 	@mkdir -p $(dir $@)
 	$(CC) -shared -fPIC -I include $(PLUGIN_CFLAGS) -o $@ $< -lm
 
-# ---- fuzzing (tests/fuzz, README.md "Fuzzing") -----------------------------
+# ---- fuzzing (tests/fuzz, tests/fuzz/README.md) -----------------------------
 # Replay builds: the harness, the standalone driver, and everything the
 # daemon links but main.c and serve.c.
 FUZZ_HTTP_OBJ := $(filter $(BUILD)/obj/server/http/%,$(DAEMON_OBJ)) $(UI_OBJ)

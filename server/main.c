@@ -3,8 +3,8 @@
  *   raysweepd render | params | serve | routes | version   (see `commands`)
  *
  * Subcommands are a const table (redis' command table); each row holds its
- * usage line and help text, which `raysweepd COMMAND --help`, the README's
- * usage blocks and docs/man/raysweepd.1 must agree with
+ * usage line and help text, which `raysweepd COMMAND --help`, the usage
+ * blocks of the docs/ pages and docs/man/raysweepd.1 must agree with
  * (tests/integration/test_usage.sh compares them). Bad input exits
  * non-zero with a message naming the flag, file or document place. */
 #include <errno.h>

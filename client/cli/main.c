@@ -4,8 +4,8 @@
  * (global options, --help, option syntax, positional counts, the client
  * connection settings) run in main before any handler, so a handler only
  * sees a well-formed command line. The usage strings and summaries below are
- * what `raysweep --help` and `raysweep COMMAND --help` print; the README's
- * usage block and docs/man/raysweep.1 must agree with them
+ * what `raysweep --help` and `raysweep COMMAND --help` print; the usage
+ * block of docs/client.md and docs/man/raysweep.1 must agree with them
  * (tests/integration/test_usage.sh compares them). */
 #include <errno.h>
 #include <stdarg.h>

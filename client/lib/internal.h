@@ -18,7 +18,7 @@
  * allocate without bound. */
 #define CLIENT_MAX_BODY        ((size_t)1 << 31) /* one response body: 2 GiB */
 #define CLIENT_MAX_SSE_EVENT   ((size_t)1 << 20) /* one server-sent event: 1 MiB */
-/* Defaults of the transfer limits (rsw_client_opts; docs/robustness-h-http.md). */
+/* Defaults of the transfer limits (rsw_client_opts; docs/robustness.md). */
 #define CLIENT_STALL_TIMEOUT_S 60.0
 /* A render with a timeout_s of T is given up client-side at
  * T + CLIENT_RENDER_GRACE_S + T / 10: the daemon stops at T and answers. */

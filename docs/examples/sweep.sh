@@ -2,7 +2,7 @@
 # Wavelength sweep of a Lambertian plate with the raysweep CLI.
 set -e
 command -v raysweep >/dev/null || {
-  echo "sweep.sh: raysweep is not on PATH: run 'make install' (see Install in README.md)" \
+  echo "sweep.sh: raysweep is not on PATH: run 'make install' (see docs/building.md)" \
        "or export PATH=\"\$PWD/../../build/bin:\$PATH\" from docs/examples" >&2
   exit 127
 }

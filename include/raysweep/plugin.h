@@ -10,8 +10,7 @@
  * version and type name, and registers the type as an emitter usable in
  * JSON and XML scenes: {"type": "<type_name>", <params>...}.
  *
- * The model follows Ocean's IEnvironmentPlugin (see the README, "Writing an
- * environment plugin"): the plugin adds the environment's spectral radiance
+ * The model follows Ocean's IEnvironmentPlugin (see docs/environment-plugins.md): the plugin adds the environment's spectral radiance
  * for a direction to per-wavelength Stokes vectors (I, Q, U, V), samples a
  * direction and returns its pdf (solid angle), evaluates the pdf of a
  * direction, and is prepared once with the simulation's wavelength range.

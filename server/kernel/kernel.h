@@ -3,7 +3,7 @@
  * sensor, sampler, integrator, volume, phase function, medium). Every implementation lives in its class's
  * directory, one plugin per file, and is listed once in scene/registry.c.
  *
- * Conventions (Mitsuba 3, kernel-behavior.md §0):
+ * Conventions (Mitsuba 3, docs/kernel-conventions.md#frames-and-directions):
  *  - local shading frame: n = +z; wi points towards where the path came
  *    from (the sensor side), wo the other way; both point away from the
  *    surface;
@@ -29,7 +29,7 @@
  * Sun's irradiance is about 1.4e3 W m^-2; photon fluxes about 1e22), and
  * it keeps every product the kernel forms finite: a radiance of 1e30 times
  * BSDF, geometry and 1/pdf factors of up to 1e8 still fits a float32 film
- * (3.4e38), and squares for the variance fit a double. docs/robustness-h-http.md. */
+ * (3.4e38), and squares for the variance fit a double. docs/robustness.md. */
 #define RSW_MAX_MAGNITUDE 1e30
 
 typedef enum obj_class {

@@ -2,7 +2,7 @@
  *
  * Each pixel (ix, iy) takes spp samples; sample s draws, in order, a 2-D
  * film jitter, a 2-D aperture sample, then whatever the integrator needs
- * (Mitsuba's render_sample order, kernel-behavior.md §1.1). The film sample
+ * (Mitsuba's render_sample order, docs/kernel-conventions.md#the-render-pipeline). The film sample
  * is u = ((ix, iy) + jitter) / (W, H). The sample's contribution w L is
  * splatted with the film's reconstruction filter: with the box filter of
  * radius 0.5 it lands in its own pixel with weight 1 (Mitsuba ignores the

@@ -1,7 +1,7 @@
 /* The service layer of raysweepd: resident scenes, blobs, parameter
  * updates, synchronous renders and jobs of kernel contexts. No HTTP types:
  * server/http/ translates requests into these calls and their results and
- * errors into responses (see /work/notes/api-spec.md, proto/openapi.yaml).
+ * errors into responses (see proto/openapi.yaml, docs/daemon.md).
  *
  * Every function is thread-safe unless noted. Errors come back as an
  * rsw_status with an svc_error naming the place (JSON pointer, parameter

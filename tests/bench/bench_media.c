@@ -22,7 +22,7 @@
  *                             `throughput` and `mitsuba`: R + T against
  *                             the incident irradiance, CPU seconds per
  *                             render, variance x time and mean squared
- *                             error x time (docs/robustness-h-dense.md).
+ *                             error x time (docs/media.md#dense-media-the-roulette-and-the-segment-lengths).
  *
  * Medians of REPEATS timings. $RSW_BENCH_ONLY=prefix runs the figures
  * whose name starts with it. */

@@ -11,7 +11,7 @@
 #     bitwise, the attributes equal);
 #   - a job whose coords are not a grid: one "context" dimension;
 #   - a finished job's dataset survives a restart with --state-dir;
-#   - the README's xarray example (docs/examples/dataset.py) runs on it;
+#   - docs/client.md's xarray example (docs/examples/dataset.py) runs on it;
 #   - bad coords are 422 naming the JSON pointer; the dataset of a running
 #     job is 409 unless ?partial=1; a film's fetch cannot be .nc.
 # Ends with "test_dataset: N passed, N failed" (tests/run.sh sums it).
@@ -64,7 +64,7 @@ grid=(--grid wavelength=450:550:100 --grid surface.bsdf.reflectance.value=0.2:0.
 run "sweep --format nc" rs sweep scene.json "${grid[@]}" --format nc -o full
 [ -f full/dataset.nc ] && ok || bad "sweep --format nc wrote no full/dataset.nc"
 ds "grid sweep dataset" grid full/dataset.nc full "$version" 3
-# The README's example (docs/examples/dataset.py) on this sweep.
+# docs/client.md's example (docs/examples/dataset.py) on this sweep.
 ln -s full sweep_nc
 if "$py" "$root/docs/examples/dataset.py" >example.out 2>pyerr; then ok; else bad "docs/examples/dataset.py: $(tail -n 2 pyerr)"; fi
 contains "docs/examples/dataset.py prints the dims" example.out "('wavelength', 'reflectance', 'y', 'x')"

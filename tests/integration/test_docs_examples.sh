@@ -5,7 +5,7 @@
 # skipped and why, are in its header; blocks that copy a file are compared
 # with it byte for byte), and checks that every curl in them and in
 # docs/examples/*.sh fails on an HTTP error instead of saving the error
-# body as a film. Part 2 runs the README's client examples (docs/examples/: C with libraysweep, the
+# body as a film. Part 2 runs the client examples of docs/client.md (docs/examples/: C with libraysweep, the
 # raysweep CLI, curl, Python) against the real daemon on an ephemeral
 # loopback port, so they cannot rot. Each must print the wavelengths 400,
 # 450, ..., 700 nm and, for the plate of docs/examples/plate.json (a
@@ -13,7 +13,7 @@
 # a `distant` sensor), the radiance
 #   L(w) = rho(w) * E * cos(0) / pi,   rho(w) = 0.2 + 0.6 * (w - 400) / 300
 # (the job-level tabulated reflectance, linear between its two points), to
-# 1e-5 relative. The README must hold every example verbatim.
+# 1e-5 relative. docs/client.md must hold every example verbatim.
 # Every docs/examples/*.sh runs (with build/bin on PATH), and sweep.sh says
 # how to get raysweep on PATH when it is not.
 # Environment: RSW_BIN_DIR (default build/bin: raysweepd, raysweep; the
@@ -50,8 +50,8 @@ export RAYSWEEP_URL="http://127.0.0.1:$(cat "$tmp/port")"
 unset RAYSWEEP_TOKEN
 
 # ---- part 1: the shell blocks of README.md and docs/ -----------------------------
-# (Before the client examples: the README's walk-through starts from the
-# daemon's default scene.) Under SAN=1 the library is built with ASan, so
+# (Before the client examples: the walk-through of docs/daemon.md starts
+# from the daemon's default scene.) Under SAN=1 the library is built with ASan, so
 # the blocks' `cc` links with the same flags (a shim first on PATH).
 shim=()
 if [ "${SAN:-}" = 1 ]; then
@@ -193,7 +193,7 @@ else
   ok
   run sweep.c "$tmp/sweep"
 fi
-# The way the README builds it: `make install PREFIX=...` (headers, .a, .so,
+# The way docs/client.md builds it: `make install PREFIX=...` (headers, .a, .so,
 # raysweep.pc), then pkg-config. (The make variables of a `make test` that
 # runs this script are dropped, so the inner make is a plain one.)
 if env -u MAKEFLAGS -u MFLAGS -u MAKELEVEL make -s -C "$root" install PREFIX="$tmp/prefix" SAN="${SAN:-}" \
@@ -240,12 +240,12 @@ for f in "$tmp"/*.out; do
   fi
 done
 
-# ---- the README holds every example verbatim ----------------------------------------
-readme=$(<"$root/README.md")
-for f in plate.json sweep.c sweep.sh sweep_curl.sh sweep.py; do
+# ---- docs/client.md holds every example verbatim ------------------------------------
+readme=$(<"$root/docs/client.md")
+for f in plate.json sweep.c sweep.sh sweep_curl.sh sweep.py dataset.py; do
   if [ ! -f "$examples/$f" ]; then bad "docs/examples/$f is missing"; continue; fi
   text=$(<"$examples/$f")
-  if [[ $readme == *"$text"* ]]; then ok; else bad "README.md does not contain docs/examples/$f verbatim"; fi
+  if [[ $readme == *"$text"* ]]; then ok; else bad "docs/client.md does not contain docs/examples/$f verbatim"; fi
 done
 
 finish

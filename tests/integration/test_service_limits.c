@@ -114,7 +114,7 @@ static void test_directions(void) {
   const cJSON *px = cJSON_GetObjectItem(j, "pixels");
   CHECK(cJSON_GetArraySize(px) == 64 * 32, "%d pixels", cJSON_GetArraySize(px));
   /* Pixel (ix, iy): the uniform hemisphere at ((ix + .5)/W, (iy + .5)/H)
-   * (kernel-behavior.md 1.2); the default hdistant's to_world is the
+   * (docs/kernel-conventions.md#viewing-angles); the default hdistant's to_world is the
    * identity, so the world direction is that vector. */
   const cJSON *p = cJSON_GetArrayItem(px, 5 * 64 + 7);
   vec3 v = warp_square_to_uniform_hemisphere(v2((7 + 0.5) / 64, (5 + 0.5) / 32));

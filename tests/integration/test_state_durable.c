@@ -1,5 +1,5 @@
 /* The state directory acknowledges only what is durable and trusts only
- * what proves itself (issue 22, items 1 and 2; docs/robustness-h-durable.md),
+ * what proves itself (issue 22, items 1 and 2; docs/state.md#robustness-the-state-directory),
  * in process, with a restart being service_free + service_new on the same
  * directory:
  *  - a full disk (the state writer's test hook fails every write with

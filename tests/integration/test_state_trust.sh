@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The state directory and --data-root trust only what proves itself (issue
-# 22 item 2; docs/robustness-h-durable.md), against real daemons:
+# 22 item 2; docs/state.md#robustness-the-state-directory), against real daemons:
 #  - a state directory that others can write is refused at start (stderr,
 #    non-zero exit), as is one under a parent others can write without the
 #    sticky bit; one under a sticky parent (as /tmp) starts;

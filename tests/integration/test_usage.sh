@@ -8,7 +8,8 @@
 #    it (no other RSW_VERSION definition, no version literal in the sources
 #    or the Makefile), and `raysweepd version`, `raysweepd --version`,
 #    `raysweep --version` and GET /v1's "version" all report it;
-#  - every usage entry of the README's usage blocks and of the man pages'
+#  - every usage entry of the usage blocks of README.md and docs/*.md and of
+#    the man pages'
 #    SYNOPSIS (docs/man/raysweepd.1, raysweep.1) equals, whitespace
 #    collapsed, the usage lines of the matching `PROG COMMAND --help`, and
 #    both list exactly the commands `PROG --help` lists;
@@ -88,7 +89,7 @@ else
   bad "daemon: no port file after 10 s: $(tail -n 5 "$tmp/d/log")"
 fi
 
-# ---- README usage blocks and man pages == --help -----------------------------
+# ---- the docs' usage blocks and man pages == --help ---------------------------
 # compare PROG SOURCE ENTRIES_FILE: each entry equals `PROG WORDS --help`'s
 # usage, and the entries name exactly the commands `PROG --help` lists.
 compare() {
@@ -113,9 +114,9 @@ compare() {
   fi
 }
 for prog in raysweepd raysweep; do
-  "${tool[@]}" usage "$prog" README.md >"$tmp/readme.$prog"
-  [ -s "$tmp/readme.$prog" ] && ok || bad "README.md has no usage block for $prog"
-  compare "$prog" README.md "$tmp/readme.$prog"
+  "${tool[@]}" usage "$prog" README.md docs/*.md >"$tmp/readme.$prog"
+  [ -s "$tmp/readme.$prog" ] && ok || bad "README.md and docs/*.md have no usage block for $prog"
+  compare "$prog" "README.md and docs/*.md" "$tmp/readme.$prog"
   page=docs/man/$prog.1
   if [ ! -f "$page" ]; then
     bad "$page is missing"

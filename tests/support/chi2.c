@@ -1,6 +1,6 @@
 /* Pearson chi-square goodness-of-fit test for 2-D sampling routines, after
  * Mitsuba 3's ChiSquareTest (src/python/python/chi2.py) and its pooled
- * statistic chi2() (include/mitsuba/core/math.h); kernel-behavior.md §5.3.
+ * statistic chi2() (include/mitsuba/core/math.h); docs/kernel-conventions.md#chi-square-tests.
  *
  * Hypothesis: the samples drawn by `sample` are distributed with density
  * `pdf`. Both are reduced to a histogram on a grid over a 2-D parameter

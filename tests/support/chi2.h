@@ -1,4 +1,4 @@
-/* Mitsuba 3's chi-square goodness-of-fit test (kernel-behavior.md §5.3;
+/* Mitsuba 3's chi-square goodness-of-fit test (docs/kernel-conventions.md#chi-square-tests;
  * mitsuba3 src/python/python/chi2.py, include/mitsuba/core/math.h), in C.
  *
  * The domain is the sphere, parameterised by (phi, -cos theta) in

@@ -54,7 +54,7 @@ def grid(path, sweep_dir, version, seed):
     check(int(g.get("spp", -1)) == 16, f"spp {g.get('spp')}")
     check(int(g.get("revision", -1)) == 0, f"revision {g.get('revision')}")
     check(len(g.get("scene", "")) == 64, f"scene {g.get('scene')}")
-    # ds.radiance.sel(wavelength=550) works: the README's promise.
+    # ds.radiance.sel(wavelength=550) works: docs/client.md's promise.
     check(ds.radiance.sel(wavelength=550).shape == (3, 3, 4), "sel(wavelength=550)")
     n = 0
     with open(os.path.join(sweep_dir, "index.jsonl")) as f:

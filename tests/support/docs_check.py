@@ -8,11 +8,19 @@ mode prints one line per check, "PASS what", "FAIL what: why" or
   docs_check.py run --root R --bin B --work W --url U [--path-prefix D] [FILE.md...]
       Runs every shell block of the Markdown files (default: README.md and
       docs/**/*.md) against the daemon at U; see RULES below.
+  docs_check.py links ROOT FILE.md...
+      Every relative link of the files ([text](path#anchor)) names a file
+      or directory inside ROOT, and an anchor names a heading of the
+      Markdown file it points to.
+  docs_check.py citations ROOT FILE...
+      No file cites a path outside the repository (the reference notes the
+      project was written from, or a machine's own directories), and every
+      "docs/<page>.md" or "docs/<page>.md#anchor" a file mentions exists.
   docs_check.py curl-lint FILE...
       Every curl command in the shell blocks of FILE (Markdown) or in FILE
       (a shell script) fails on an HTTP error (see curl_fails).
-  docs_check.py usage PROG README.md
-      Prints PROG's usage entries of the README's usage blocks (plain ```
+  docs_check.py usage PROG FILE.md...
+      Prints PROG's usage entries of the files' usage blocks (plain ```
       blocks whose lines start with "PROG "), one per line, normalised.
   docs_check.py man PROG PAGE.1
       The same for the .SH SYNOPSIS of a man page.
@@ -38,7 +46,8 @@ RULES for fenced blocks in Markdown (the visible rules the brief asks for):
   * Each runnable block runs on its own, in a fresh `bash -e` (so any failing
     command fails the block), from a copy of the repository (W/repo, with
     build/ linked to the built tree), with HOME=W/home, build/bin first on
-    PATH, RAYSWEEP_URL=U, and "localhost:8350" / "127.0.0.1:8350" replaced by
+    PATH (and python3 = RSW_PYTHON, default /usr/bin/python3, before it),
+    RAYSWEEP_URL=U, and "localhost:8350" / "127.0.0.1:8350" replaced by
     the test daemon's address. Files written by one block stay for the next,
     as in a terminal; variables do not.
   * A block whose lines start with "$ " is a transcript: each "$ " command
@@ -217,6 +226,17 @@ def run_blocks(args):
     hostport = re.sub(r"^https?://", "", opts["url"]).rstrip("/")
     repo, home = make_sandbox(root, opts["bin"], opts["work"])
     env = block_env(opts["bin"], home, opts["url"])
+    # python3 in a block is Debian's (python3-xarray, python3-netcdf4 from
+    # `make deps`), not one earlier on PATH that lacks them; RSW_PYTHON
+    # names another, as in test_dataset.sh.
+    py = os.environ.get("RSW_PYTHON", "/usr/bin/python3")
+    if os.path.isfile(py):
+        pybin = os.path.join(opts["work"], "pybin")
+        os.makedirs(pybin, exist_ok=True)
+        link = os.path.join(pybin, "python3")
+        if not os.path.lexists(link):
+            os.symlink(py, link)
+        env["PATH"] = pybin + os.pathsep + env["PATH"]
     if "path-prefix" in opts:
         env["PATH"] = opts["path-prefix"] + os.pathsep + env["PATH"]
     timeout = int(opts.get("timeout", "300"))
@@ -236,7 +256,7 @@ def run_blocks(args):
                 if not os.path.isfile(target):
                     print(f"FAIL {where}: docs-test file {arg} does not exist")
                 elif open(target, encoding="utf-8").read() != text:
-                    print(f"FAIL {where}: the block differs from {arg} (copy the file into the README)")
+                    print(f"FAIL {where}: the block differs from {arg} (copy the file into the page)")
                 else:
                     print(f"PASS {where}: equals {arg}")
                 continue
@@ -286,9 +306,9 @@ def run_transcript(where, text, cwd, env, timeout):
         actual = [norm(l) for l in p.stdout.rstrip("\n").split("\n")] if p.stdout.strip() else []
         if not match_transcript(expected, actual):
             got = " / ".join(actual[:4])
-            print(f"FAIL {where}: `{first}` printed other lines than the README shows (first: {got})")
+            print(f"FAIL {where}: `{first}` printed other lines than the page shows (first: {got})")
         else:
-            print(f"PASS {where}: `{first}` prints what the README shows")
+            print(f"PASS {where}: `{first}` prints what the page shows")
 
 
 def curl_lint(files):
@@ -302,6 +322,87 @@ def curl_lint(files):
                 print(f"FAIL {where}: curl without --fail-with-body/-f would save an error body: {seg[:80]}")
             if "curl" in text and not curl_problems(text):
                 print(f"PASS {where}: every curl fails on HTTP errors")
+
+
+def slugs(path):
+    """The anchors of a Markdown file's headings, as GitHub makes them:
+    lower case, punctuation but - and _ dropped, spaces to -, a repeated
+    heading suffixed -1, -2, ..."""
+    seen, out, fence = {}, set(), False
+    for line in open(path, encoding="utf-8").read().split("\n"):
+        if re.match(r"^\s*```", line):
+            fence = not fence
+            continue
+        m = None if fence else re.match(r"^#{1,6}\s+(.*?)\s*#*\s*$", line)
+        if not m:
+            continue
+        s = re.sub(r"[^\w\- ]", "", m.group(1).replace("`", "").lower()).replace(" ", "-")
+        n = seen.get(s, 0)
+        seen[s] = n + 1
+        out.add(s if n == 0 else f"{s}-{n}")
+    return out
+
+
+def links(root, files):
+    root = os.path.abspath(root)
+    for path in files:
+        path = os.path.abspath(path)
+        rel = os.path.relpath(path, root)
+        fence, bad = False, 0
+        for no, line in enumerate(open(path, encoding="utf-8").read().split("\n"), 1):
+            if re.match(r"^\s*```", line):
+                fence = not fence
+            if fence:
+                continue
+            for m in re.finditer(r"\]\(([^)\s]+)\)", line):
+                target = m.group(1)
+                if re.match(r"^[a-z]+:", target):
+                    continue
+                file, _, anchor = target.partition("#")
+                dest = os.path.normpath(os.path.join(os.path.dirname(path), file)) if file else path
+                if not (dest == root or dest.startswith(root + os.sep)):
+                    print(f"FAIL {rel}:{no}: link {target} leaves the repository")
+                    bad += 1
+                elif not os.path.exists(dest):
+                    print(f"FAIL {rel}:{no}: link {target}: {os.path.relpath(dest, root)} does not exist")
+                    bad += 1
+                elif anchor and dest.endswith(".md") and anchor not in slugs(dest):
+                    print(f"FAIL {rel}:{no}: link {target}: no heading #{anchor} in {os.path.relpath(dest, root)}")
+                    bad += 1
+        if not bad:
+            print(f"PASS {rel}: every link resolves")
+
+
+# Paths outside the repository that files have cited (spelled in pieces so
+# that this file does not match itself).
+OUTSIDE = re.compile("|".join([r"kernel-" + r"behavior", r"(?<![\w.])(?:\.\./)+" + r"shared/",
+                               r"/" + r"work/", r"(?<![\w/.-])" + r"shared/(?:seeds|reference|notes)/"]))
+
+
+def citations(root, files):
+    root = os.path.abspath(root)
+    for path in files:
+        rel = os.path.relpath(path, root)
+        try:
+            text = open(path, encoding="utf-8").read()
+        except (UnicodeDecodeError, IsADirectoryError):
+            continue
+        bad = 0
+        for no, line in enumerate(text.split("\n"), 1):
+            m = OUTSIDE.search(line)
+            if m:
+                print(f"FAIL {rel}:{no}: cites a path outside the repository: {line.strip()[:100]}")
+                bad += 1
+            for m in re.finditer(r"(?<![\w/.-])docs/([\w-]+\.md)(?:#([\w-]+))?", line):
+                page = os.path.join(root, "docs", m.group(1))
+                if not os.path.isfile(page):
+                    print(f"FAIL {rel}:{no}: cites docs/{m.group(1)}, which does not exist")
+                    bad += 1
+                elif m.group(2) and m.group(2) not in slugs(page):
+                    print(f"FAIL {rel}:{no}: cites docs/{m.group(1)}#{m.group(2)}: no such heading")
+                    bad += 1
+        if not bad and ("docs/" in text):
+            print(f"PASS {rel}: its citations exist")
 
 
 def entries(lines, prog):
@@ -364,11 +465,19 @@ def main():
     mode, args = sys.argv[1], sys.argv[2:]
     if mode == "run":
         run_blocks(args)
+    elif mode == "links":
+        links(args[0], args[1:])
+    elif mode == "citations":
+        citations(args[0], args[1:])
     elif mode == "curl-lint":
         curl_lint(args)
-    elif mode in ("usage", "man"):
+    elif mode == "usage":
+        for path in args[1:]:
+            for e in usage_from_readme(args[0], path):
+                print(e)
+    elif mode == "man":
         prog, path = args
-        for e in (usage_from_readme if mode == "usage" else usage_from_man)(prog, path):
+        for e in usage_from_man(prog, path):
             print(e)
     elif mode == "help-entry":
         prog = args[0]

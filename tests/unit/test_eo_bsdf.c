@@ -3,7 +3,7 @@
  * tests/support/chi2.h; 200,000 samples, alpha 0.01 with the Sidak
  * correction over the runs of this file), sampling weight = eval / pdf,
  * RPV reciprocity and its closed form against an independent evaluation
- * from angles (kernel-behavior.md §4.1), bilambertian's two sides, and
+ * from angles (docs/kernel-conventions.md#rpv), bilambertian's two sides, and
  * Hapke's energy bound and h = 0 guard. Fixed seeds throughout. */
 #include <math.h>
 #include <stdlib.h>
@@ -115,7 +115,7 @@ static void test_rpv_reciprocity(void) {
   rpv_free(&r);
 }
 
-/* §4.1 written with angles: theta, phi of each direction (phi from atan2,
+/* RPV (docs/kernel-conventions.md#rpv) written with angles: theta, phi of each direction (phi from atan2,
  * which is 0 at the pole as the spec requires), tangents from tan(). */
 static double rpv_ref(double rho_0, double k, double g, double rho_c, double ti, double pi_, double to,
                       double po) {

@@ -1,4 +1,4 @@
-/* Scene parameters (scene/params.h, kernel-behavior.md §3): naming as
+/* Scene parameters (scene/params.h, docs/kernel-conventions.md#parameters-and-updates): naming as
  * Mitsuba's traverse(), entry types/classes/shapes, lookup (exact, alias,
  * glob, class filter, Eradiate's TYPE:ID:PATH search), value JSON, value
  * parsing, atomic updates (a bad entry changes nothing), no-op updates,
@@ -89,8 +89,8 @@ static bool err_mentions(const rsw_err *err, const char *what) {
   return strstr(rsw_err_format(err, buf, sizeof buf), what) != NULL;
 }
 
-/* Eradiate's naming example (kernel-behavior.md §3.1, from
- * ERD:tests/01_unit/kernel/test_render.py): a top-level BSDF declared first
+/* Eradiate's naming example (docs/kernel-conventions.md#parameters-and-updates,
+ * from eradiate tests/01_unit/kernel/test_render.py): a top-level BSDF declared first
  * and shared by three shapes; disk_2 has its own. */
 static const char *ERD_SCENE =
     "{\"type\": \"scene\","

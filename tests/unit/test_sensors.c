@@ -1,6 +1,6 @@
 /* Sensors, hdrfilm and reconstruction filters, built through their
- * plugins' create() from document nodes (kernel-behavior.md §1.2, §1.3,
- * §2.3; mitsuba3 src/sensors/{distant,radiancemeter,perspective}.cpp, src/films/hdrfilm.cpp,
+ * plugins' create() from document nodes (docs/kernel-conventions.md#sensors,
+ * #films-and-samplers; mitsuba3 src/sensors/{distant,radiancemeter,perspective}.cpp, src/films/hdrfilm.cpp,
  * src/rfilters/{box,gaussian}.cpp). */
 #include "../support/test.h"
 RSW_TEST_DEFINE_GLOBALS
@@ -109,7 +109,7 @@ static sensor *build_sensor(harness *h, node *doc, vec3 c, double r) {
 
 /* ---- hdistant ------------------------------------------------------------ */
 
-/* §1.2 test vectors (eradiate/mitsuba3 test_hdistant.py), identity to_world. */
+/* hdistant's test vectors (eradiate/mitsuba3 test_hdistant.py), identity to_world. */
 static const struct {
   double u[2];
   vec3 d;

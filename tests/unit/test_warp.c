@@ -1,5 +1,5 @@
 /* Tests of server/kernel/core/warp.c: Mitsuba's fixed test vectors
- * (kernel-behavior.md §5.1-5.2), inverse round trips on Mitsuba's 10 x 10
+ * (docs/kernel-conventions.md#warps), inverse round trips on Mitsuba's 10 x 10
  * grid, the phi/theta representation about arbitrary axes, and a
  * chi-square goodness-of-fit test (tests/support/chi2.c) of every sampling
  * routine against its own pdf, plus a negative control showing the
@@ -68,7 +68,7 @@ static void test_fixed_vectors(void) {
   check_v3(warp_square_to_uniform_hemisphere(v2(0, 0.5)), -1, 0, 0, t, "hemisphere(0,.5)");
   check_v3(warp_square_to_cosine_hemisphere(v2(0.5, 0.5)), 0, 0, 1, t, "cosine(.5,.5)");
   check_v3(warp_square_to_cosine_hemisphere(v2(0.5, 0)), 0, -1, 0, t, "cosine(.5,0)");
-  /* Values that follow from the formulas of §5.1-5.2. */
+  /* Values that follow from the formulas of docs/kernel-conventions.md#warps. */
   check_v2(warp_square_to_disk_concentric(v2(1, 0.5)), 1, 0, t, "concentric(1,.5)");
   check_v2(warp_square_to_disk_concentric(v2(0.5, 1)), 0, 1, t, "concentric(.5,1)");
   check_v2(warp_disk_to_square_concentric(v2(-SQRT1_2, -SQRT1_2)), 0, 0, t, "concentric^-1");

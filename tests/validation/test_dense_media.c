@@ -1,4 +1,4 @@
-/* Dense media and far-off media (issue 22 item 5; docs/robustness-h-dense.md).
+/* Dense media and far-off media (issue 22 item 5; docs/media.md#dense-media-the-roulette-and-the-segment-lengths).
  *
  *  - A non-absorbing slab of optical thickness 32 over a black ground
  *    under a sun conserves energy at the default settings: the radiosity
@@ -213,7 +213,7 @@ static void test_thin_atmosphere_rules_agree(void) {
    * RPV ground, piecewise_volpath, hdistant 32 x 32) with rr_rule
    * throughput (seeds 1..K) and mitsuba (seeds K+1..2K, independent): the
    * film means agree within 3 standard errors. Measured against the
-   * previous tree's renders at 1,000 spp: docs/robustness-h-dense.md. */
+   * previous tree's renders at 1,000 spp: docs/media.md#dense-media-the-roulette-and-the-segment-lengths. */
   enum {
     K = 8,
     SPP = 64

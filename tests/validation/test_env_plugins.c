@@ -435,7 +435,7 @@ static void test_sunsky_bad_values(void) {
   scene_free(bad);
 }
 
-/* ---- the README holds the example verbatim -------------------------------------------- */
+/* ---- the docs hold the example verbatim ------------------------------------------------- */
 
 static char *slurp(const char *path) {
   FILE *f = fopen(path, "rb");
@@ -473,22 +473,24 @@ static bool repo_root(char *out, size_t len) {
   return snprintf(out, len, "%s", exe) < (int)len;
 }
 
-/* "Writing an environment plugin" shows tests/plugins/two_hemispheres.c in
- * full, so the documented example is the built and tested one. */
+/* docs/environment-plugins.md ("Writing an environment plugin") shows
+ * tests/plugins/two_hemispheres.c in full, so the documented example is the
+ * built and tested one. */
 static void test_readme_holds_example(void) {
   char root[PATH_MAX], path[PATH_MAX + 64];
   REQUIRE(repo_root(root, sizeof root), "repository root");
-  snprintf(path, sizeof path, "%s/README.md", root);
+  snprintf(path, sizeof path, "%s/docs/environment-plugins.md", root);
   char *readme = slurp(path);
   snprintf(path, sizeof path, "%s/tests/plugins/two_hemispheres.c", root);
   char *src = slurp(path);
-  CHECK(readme && src, "read README.md and two_hemispheres.c under %s", root);
+  CHECK(readme && src, "read docs/environment-plugins.md and two_hemispheres.c under %s", root);
   if (readme && src) {
-    CHECK(strstr(readme, src) != NULL, "README.md does not hold tests/plugins/two_hemispheres.c verbatim");
+    CHECK(strstr(readme, src) != NULL,
+          "docs/environment-plugins.md does not hold tests/plugins/two_hemispheres.c verbatim");
     /* (tests/integration/test_docs_examples.sh runs it, from the repository root.) */
     CHECK(strstr(readme, "cc -shared -fPIC -I include -o plugins/test.so tests/plugins/two_hemispheres.c") !=
               NULL,
-          "README.md lacks the one-line build command");
+          "docs/environment-plugins.md lacks the one-line build command");
   }
   free(readme);
   free(src);

@@ -1,4 +1,5 @@
-/* Earth-observation sensors (kernel-behavior.md §1.4-1.5): mdistant,
+/* Earth-observation sensors (docs/kernel-conventions.md#mdistant-and-mradiancemeter,
+ * #distantflux): mdistant,
  * distantflux and mradiancemeter against closed forms, and the per-pixel
  * viewing angles of the distant-family films.
  *

@@ -1,5 +1,5 @@
-/* Earth-observation surfaces in closed-form scenes (kernel-behavior.md
- * §4.1-4.2):
+/* Earth-observation surfaces in closed-form scenes (docs/kernel-conventions.md
+ * #rpv, #bilambertian):
  *  - rpv with k = 1, g = 0, rho_c = 1 is Lambertian: the same film, bit
  *    for bit, as `diffuse` (same scene, same seed);
  *  - a bilambertian sheet (r, t) alone under a constant environment L

@@ -149,7 +149,7 @@ static void test_lambertian_brf_rgb(void) {
 static const double RHO0 = 0.12, K = 0.9, G = -0.25, RHOC = 0.3;
 static const double SUN[3] = {-0.4, 0.3, -0.8660254037844386}; /* travel direction, normalised below */
 
-/* pi f_r of RPV (kernel-behavior.md 4.1) for unit wi, wo above the plate
+/* pi f_r of RPV (docs/kernel-conventions.md#rpv) for unit wi, wo above the plate
  * (normal +z). */
 static double rpv_brf(const double *wi, const double *wo) {
   double ci = wi[2], co = wo[2];

@@ -12,7 +12,7 @@
  * density pdf() reports and the weight is eval/pdf. Before the fix, the
  * Beckmann visible-normal sampler drew exact Beckmann-Smith visible
  * normals while the pdf and weight used the rational G1 fit
- * (kernel-behavior.md §2.3, "Where we differ"): at alpha 1, 80 deg the sky
+ * (docs/kernel-conventions.md#where-raysweep-differs): at alpha 1, 80 deg the sky
  * albedo was 0.880118 +- 2.1e-4 against 0.882550 (-0.28 %, 11.6 sigma),
  * and 6 of the 15 Beckmann visible-normal cases below failed (up to
  * 7.7 sigma, +0.34 % at alpha 0.3, 80 deg).

@@ -1,4 +1,4 @@
-/* Closed-form scenes (kernel-behavior.md §1.2-1.3, §2.4): each renders a
+/* Closed-form scenes (docs/kernel-conventions.md#sensors, #path): each renders a
  * scene whose answer is known exactly or in distribution.
  *
  * Tolerances: zero-variance estimators (Lambertian plate under a
@@ -145,7 +145,7 @@ static void test_distant_and_radiancemeter_exact(void) {
 
 static void test_checkerboard_plate(void) {
   /* Checkerboard 0.5/1.0 plate at normal incidence, shape target: the mean
-   * over the target is 0.5 (0.5 + 1) / pi (kernel-behavior.md §1.2). */
+   * over the target is 0.5 (0.5 + 1) / pi (docs/kernel-conventions.md#hdistant). */
   const char *sc =
       "{\"type\": \"scene\","
       " \"sensor\": {\"type\": \"hdistant\", \"target\": {\"type\": \"rectangle\"},"

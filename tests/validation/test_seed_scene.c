@@ -1,11 +1,11 @@
-/* The hdistant seed scene (shared/seeds/hdistant-sensor.txt, copied
- * unchanged to proto/examples/hdistant_seed.xml) and determinism.
+/* The hdistant seed scene (proto/examples/hdistant_seed.xml, the scene the
+ * project started from, unchanged) and determinism.
  *
  * Three directional emitters (red, green, blue) light a roughconductor
  * rectangle (Beckmann, alpha 0.1: a narrow glossy lobe). Each colour's
  * brightest hdistant pixel must be the one whose exitant direction is that
  * emitter's mirror direction under the documented film mapping
- * (kernel-behavior.md §1.2: omega = to_world H(u), H the concentric uniform
+ * (docs/kernel-conventions.md#hdistant: omega = to_world H(u), H the concentric uniform
  * hemisphere map, u = pixel centre). */
 #include <math.h>
 #include <stdio.h>

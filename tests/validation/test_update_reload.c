@@ -1,4 +1,4 @@
-/* "An update equals a reload, bitwise" (issue 3, kernel-behavior.md §3):
+/* "An update equals a reload, bitwise" (issue 3, docs/kernel-conventions.md#parameters-and-updates):
  * for each case, scene S is loaded and rendered once (so every cache is
  * warm), scene_update() applies a change, and the scene is rendered again
  * with the same sensor, seed, spp, thread count and wavelength; separately

@@ -11,7 +11,7 @@
  *   weight = R / p_R or T / (1 - p_R).
  *
  * Source: eradiate/mitsuba3 src/eradiate_plugins/bsdfs/bilambertian.cpp;
- * kernel-behavior.md §4.2. */
+ * docs/kernel-conventions.md#bilambertian. */
 #include <math.h>
 #include <stdlib.h>
 

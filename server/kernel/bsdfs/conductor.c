@@ -9,7 +9,7 @@
  * Also holds the complex-index plumbing (material presets or eta/k
  * textures) shared with roughconductor.c.
  *
- * Source: mitsuba3 src/bsdfs/conductor.cpp; kernel-behavior.md §2.3. */
+ * Source: mitsuba3 src/bsdfs/conductor.cpp; docs/kernel-conventions.md#conductors-and-fresnel. */
 #include <stdlib.h>
 #include <string.h>
 

@@ -12,7 +12,7 @@
  * for reflection. eval and pdf are 0 (delta lobes).
  *
  * Source: mitsuba3 src/bsdfs/dielectric.cpp, include/mitsuba/render/
- * fresnel.h, ior.h; kernel-behavior.md §2.3. */
+ * fresnel.h, ior.h; docs/kernel-conventions.md#dielectric. */
 #include <stdlib.h>
 #include <string.h>
 

@@ -4,7 +4,7 @@
  *   eval = f_r cos(theta_o);
  *   sample: wo ~ cos(theta_o) / pi (cosine hemisphere), weight = rho.
  *
- * Source: mitsuba3 src/bsdfs/diffuse.cpp; kernel-behavior.md §2.3
+ * Source: mitsuba3 src/bsdfs/diffuse.cpp; docs/kernel-conventions.md#diffuse-and-twosided
  * (reflectance default 0.5). */
 #include <stdlib.h>
 

@@ -3,7 +3,7 @@
  * pointing away from the surface.
  *
  * Sources: mitsuba3 include/mitsuba/render/fresnel.h (fresnel(),
- * fresnel_conductor(), reflect(), refract()); kernel-behavior.md §2.3. */
+ * fresnel_conductor(), reflect(), refract()); docs/kernel-conventions.md#conductors-and-fresnel. */
 #ifndef RSW_BSDFS_FRESNEL_H
 #define RSW_BSDFS_FRESNEL_H
 

@@ -29,7 +29,7 @@
  *
  * Source: eradiate/mitsuba3 src/eradiate_plugins/bsdfs/hapke.cpp;
  * Hapke (2012) "Theory of reflectance and emittance spectroscopy", ch. 12;
- * kernel-behavior.md §4.3. */
+ * docs/kernel-conventions.md#hapke. */
 #include <math.h>
 #include <stdlib.h>
 

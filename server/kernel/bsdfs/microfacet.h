@@ -6,7 +6,7 @@
  * 2007 "Microfacet models for refraction through rough surfaces"; Heitz
  * 2018 "Sampling the GGX distribution of visible normals" (JCGT 7(4));
  * Jakob 2014 "An improved visible normal sampling routine for the
- * Beckmann distribution"; kernel-behavior.md §2.3.
+ * Beckmann distribution"; docs/kernel-conventions.md#rough-conductors.
  *
  * All vectors are in the local shading frame (n = +z). */
 #ifndef RSW_BSDFS_MICROFACET_H
@@ -56,7 +56,7 @@ double mf_smith_g1(const mf_distr *d, vec3 v, vec3 m);
  *   GGX:      mf_smith_g1() (its closed form is exact).
  * Same conventions as mf_smith_g1() at t = 0 and for back-facing m.
  *
- * The model (issue 11 item 4; kernel-behavior.md §2.3 "Where we differ"):
+ * The model (issue 11 item 4; docs/kernel-conventions.md#where-raysweep-differs):
  * eval() keeps Mitsuba's values, i.e. G = mf_smith_g1() products with the
  * Beckmann rational fit (mitsuba3 include/mitsuba/render/microfacet.h,
  * smith_g1()); sampling draws exact Beckmann-Smith visible normals as

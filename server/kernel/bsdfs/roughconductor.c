@@ -24,8 +24,8 @@
  * 0.3 % at grazing incidence (issue 11 item 4).
  *
  * Source: mitsuba3 src/bsdfs/roughconductor.cpp and
- * include/mitsuba/render/microfacet.h; kernel-behavior.md §2.3 (incl.
- * "Where we differ"). */
+ * include/mitsuba/render/microfacet.h; docs/kernel-conventions.md#rough-conductors
+ * and #where-raysweep-differs. */
 #include <ctype.h>
 #include <stdlib.h>
 #include <string.h>

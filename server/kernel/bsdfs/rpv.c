@@ -16,7 +16,7 @@
  * parameter of its own (Eradiate's rpv.cpp does the same).
  *
  * Source: eradiate/mitsuba3 src/eradiate_plugins/bsdfs/rpv.cpp;
- * Rahman, Pinty, Verstraete (1993) JGR 98(D11); kernel-behavior.md §4.1. */
+ * Rahman, Pinty, Verstraete (1993) JGR 98(D11); docs/kernel-conventions.md#rpv. */
 #include <math.h>
 #include <stdlib.h>
 

@@ -8,7 +8,7 @@
  * Nested BSDFs with a transmission lobe are rejected (Mitsuba's default,
  * allow_transmission = false, is the only mode here).
  *
- * Source: mitsuba3 src/bsdfs/twosided.cpp; kernel-behavior.md §2.3. */
+ * Source: mitsuba3 src/bsdfs/twosided.cpp; docs/kernel-conventions.md#diffuse-and-twosided. */
 #include <stdlib.h>
 
 #include "../scene/loader.h"

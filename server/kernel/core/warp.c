@@ -1,6 +1,6 @@
 /* Warps from the unit square to disks, hemispheres, spheres and cones, as
  * sample / pdf / inverse triplets. Formulas follow Mitsuba 3's
- * include/mitsuba/core/warp.h (kernel-behavior.md §5.1-5.2); the pdfs are
+ * include/mitsuba/core/warp.h (docs/kernel-conventions.md#warps); the pdfs are
  * Mitsuba's "checking" variants (TestDomain = true): they return 0 for a
  * point outside the warp's domain, so a chi-square test can detect a
  * sampler that leaves it. */

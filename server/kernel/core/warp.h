@@ -1,7 +1,7 @@
 /* Warps: maps from the unit square to sampling domains, each as a triplet
  * sample / pdf / inverse (pbrt-v4 style), following Mitsuba 3's
- * include/mitsuba/core/warp.h conventions exactly (kernel-behavior.md §5)
- * and CastleSphereSampling's phi/theta representation (seeds/).
+ * include/mitsuba/core/warp.h conventions exactly (docs/kernel-conventions.md#warps)
+ * and CastleSphereSampling's phi/theta representation.
  *
  * Conventions: u in [0,1)^2; directions are unit vectors in a local frame
  * whose +z is the pole; pdfs are with respect to solid angle (sphere,

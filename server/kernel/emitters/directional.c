@@ -1,5 +1,5 @@
 /* `directional`: a distant source of uniform irradiance from one direction
- * (mitsuba3 src/emitters/directional.cpp; kernel-behavior.md §2.3).
+ * (mitsuba3 src/emitters/directional.cpp; docs/kernel-conventions.md#emitters).
  *
  * `direction` is the direction light travels ((0,0,-1): sun at zenith);
  * or `to_world` (exclusive) maps local +z onto it. `irradiance` is per unit

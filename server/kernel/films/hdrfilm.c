@@ -1,5 +1,5 @@
 /* `hdrfilm`: the film description of a sensor (mitsuba3
- * src/films/hdrfilm.cpp, src/render/film.cpp; kernel-behavior.md §2.3).
+ * src/films/hdrfilm.cpp, src/render/film.cpp; docs/kernel-conventions.md#films-and-samplers).
  *
  * Only the description lives here: size, pixel and component format, the
  * reconstruction filter. The renderer owns the pixel buffer and writes

@@ -1,6 +1,6 @@
 /* What the path tracers share (integrators/path.c, volpath.c): the
  * power-heuristic MIS weight and the emitter selection by
- * sampling_weight (Mitsuba 3's, kernel-behavior.md §2.4). */
+ * sampling_weight (Mitsuba 3's, docs/kernel-conventions.md#path). */
 #ifndef RSW_INTEGRATORS_INTEGRATOR_H
 #define RSW_INTEGRATORS_INTEGRATOR_H
 

@@ -1,6 +1,6 @@
 /* `path`: unidirectional path tracer with next-event estimation and
  * multiple importance sampling, following Mitsuba 3's path integrator loop
- * (mitsuba3 src/integrators/path.cpp; kernel-behavior.md §2.4).
+ * (mitsuba3 src/integrators/path.cpp; docs/kernel-conventions.md#path).
  *
  * Estimator: L = sum over path vertices of T * (Le w_bsdf + NEE w_em), with
  * T the product of BSDF sample weights f |cos| / pdf, power-heuristic MIS

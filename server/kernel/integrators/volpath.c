@@ -2,7 +2,7 @@
  * volpath, mitsuba3 src/integrators/volpath.cpp; Eradiate's
  * piecewise_volpath, eradiate/mitsuba3
  * src/eradiate_plugins/integrators/piecewise_volpath.cpp;
- * kernel-behavior.md §4.5). Surfaces behave as in `path` (NEE towards one
+ * docs/kernel-conventions.md#volumetric-path-tracing). Surfaces behave as in `path` (NEE towards one
  * emitter, MIS with BSDF sampling, power heuristic); inside a medium a
  * path also scatters, with NEE and MIS against phase sampling.
  *
@@ -56,7 +56,7 @@
  * surfaces and null collisions are not); max_depth counts as in `path`
  * (2: single scattering). Russian roulette from rr_depth, only while
  * w = max(T) eta^2 < 1, with survival q = min(w, 0.95); from
- * RR_BACKSTOP_DEPTH bounces on at every bounce (docs/robustness-h-dense.md:
+ * RR_BACKSTOP_DEPTH bounces on at every bounce (docs/media.md#dense-media-the-roulette-and-the-segment-lengths:
  * Mitsuba's rule, q = min(w, 0.95) at every bounce, starves dense
  * conservative media, where T stays 1 over the ~tau^2 scatterings a path
  * needs to cross them; rr_rule "mitsuba" keeps it). Emitting media are
@@ -401,7 +401,7 @@ static void wave_trace(const scene *sc, vlane *ln, const int *idx, int n, bool s
  * double from o0 and the face's vertices under to_world: Embree's float32
  * hit distance (or barycentrics) are off by a few float units of the
  * coordinates, 2e-4 at 3 km, which a dense medium far from the origin
- * turns into a transmittance error (docs/robustness-h-dense.md). A
+ * turns into a transmittance error (docs/media.md#dense-media-the-roulette-and-the-segment-lengths). A
  * grazing hit keeps Embree's point. */
 static double seg_end(const scene *sc, const ray3 *r, vec3 o0, surface_interaction *si, bool media) {
   if (sc->periodic.on) return si->t + v3_dot(v3_sub(r->o, o0), r->d);
@@ -662,7 +662,8 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
     l->crossings = 0;
   }
   l->depth++;
-  if (l->depth >= it->rr_depth) { /* roulette: docs/robustness-h-dense.md */
+  if (l->depth >=
+      it->rr_depth) { /* roulette: docs/media.md#dense-media-the-roulette-and-the-segment-lengths */
     double u = sops->next_1d(st); /* drawn whether used or not: later draws keep their places */
     double w = col_max(l->T) * l->eta * l->eta;
     if (w < 1.0 || l->depth >= RR_BACKSTOP_DEPTH || vp->rr_mitsuba) {

@@ -626,7 +626,7 @@ rsw_status spectrum_eval(const spectrum *s, const render_ctx *rc, color *out, rs
   case SPEC_UNIFORM: *out = col1(s->value); return RSW_OK;
   case SPEC_RGB:
     /* Mono: Mitsuba converts an rgb value to its luminance
-     * (kernel-behavior.md §2.2). */
+     * (docs/kernel-conventions.md#spectra-and-textures). */
     if (rc->variant == VARIANT_MONO)
       *out = col1(col_luminance(col(s->rgb[0], s->rgb[1], s->rgb[2])));
     else

@@ -1,5 +1,5 @@
 /* JSON scene dictionaries -> document tree, with Mitsuba 3's load_dict
- * grammar (kernel-behavior.md §2.1; mitsuba3 src/core/python/parser.cpp):
+ * grammar (docs/kernel-conventions.md#scene-dictionaries; mitsuba3 src/core/python/parser.cpp):
  *
  *  - a dict is one object: "type" names the plugin (root: "scene" or absent),
  *    every other key is a property; keys may not contain '.';

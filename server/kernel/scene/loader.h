@@ -5,7 +5,7 @@
  * finiteness and, on error, record the property's location in ld->err.
  *
  * "absent" means the document did not give the property: the default is
- * used (Mitsuba's defaults, kernel-behavior.md §2.3). */
+ * used (Mitsuba's defaults: docs/kernel-conventions.md, by class). */
 #ifndef RSW_SCENE_LOADER_H
 #define RSW_SCENE_LOADER_H
 

@@ -1,9 +1,9 @@
 /* Scene parameters: the table every plugin reports into (Mitsuba's
  * traverse()), lookup by key, glob or Eradiate's (type, id, relative path)
  * search, and atomic updates with update classes
- * (kernel-behavior.md §3).
+ * (docs/kernel-conventions.md#parameters-and-updates).
  *
- * Naming (Mitsuba's rules, §3.1): scene children by id in declaration
+ * Naming (Mitsuba's rules, same section): scene children by id in declaration
  * order; nested objects by the slot name their parent uses (`bsdf`,
  * `reflectance`, `brdf_0`, ...); uniform values end in `.value`; an object
  * shared through `ref` is listed once, under the first path that reaches it,

@@ -1,5 +1,5 @@
 /* `distant`: single-direction distant radiancemeter (mitsuba3
- * src/sensors/distant.cpp; kernel-behavior.md §1.3).
+ * src/sensors/distant.cpp; docs/kernel-conventions.md#distant).
  *
  * Every ray travels along d = to_world (0,0,1) (the direction the sensor
  * looks, into the scene); the one pixel records the radiance leaving the

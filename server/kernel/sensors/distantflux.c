@@ -1,6 +1,6 @@
 /* `distantflux`: hemispherical exitant flux density (Eradiate plugin,
  * eradiate/mitsuba3 src/eradiate_plugins/sensors/distantflux.cpp;
- * kernel-behavior.md §1.5).
+ * docs/kernel-conventions.md#distantflux).
  *
  * Directions, targets and ray_offset exactly as hdistant:
  *   v_local = square_to_uniform_hemisphere(u), omega = to_world v_local,

@@ -1,6 +1,6 @@
 /* `hdistant`: hemispherical distant radiancemeter (Eradiate plugin,
  * eradiate/mitsuba3 src/eradiate_plugins/sensors/hdistant.cpp;
- * kernel-behavior.md §1.2).
+ * docs/kernel-conventions.md#hdistant).
  *
  * Each film sample u maps to one exitant direction of the hemisphere around
  * the sensor axis to_world (0,0,1):
@@ -28,7 +28,7 @@ typedef struct hdistant {
   double radius;
 } hdistant;
 
-/* The film mapping (kernel-behavior.md section 1.2): film sample u in
+/* The film mapping (docs/kernel-conventions.md#hdistant): film sample u in
  * [0,1)^2 sees the radiance leaving along omega = to_world H(u), H the
  * concentric uniform-hemisphere map. Normalised so that a to_world with a
  * scale still gives a unit ray direction (Mitsuba leaves it scaled; the

@@ -1,6 +1,6 @@
 /* `mdistant`: multi-direction distant radiancemeter (Eradiate plugin,
  * eradiate/mitsuba3 src/eradiate_plugins/sensors/mdistant.cpp;
- * kernel-behavior.md §1.4).
+ * docs/kernel-conventions.md#mdistant-and-mradiancemeter).
  *
  * N sub-sensors, one per triple of the `directions` string; each triple is
  * the direction that sub-sensor looks (into the scene; Eradiate passes the

@@ -1,6 +1,6 @@
 /* `mradiancemeter`: N radiancemeters in one sensor (Eradiate plugin,
  * eradiate/mitsuba3 src/eradiate_plugins/sensors/mradiancemeter.cpp;
- * kernel-behavior.md §1.4).
+ * docs/kernel-conventions.md#mdistant-and-mradiancemeter).
  *
  * `origins` and `directions` are strings of 3N numbers each (commas and/or
  * white space); the film is N x 1 and pixel i = floor(u.x N) is the

@@ -1,7 +1,7 @@
 /* Parts shared by the sensor plugins (private to sensors/): what Mitsuba's
  * Sensor base class reads (film, sampler, shutter), the 1x1-film check of
  * the single-pixel sensors, and the ray-target strategy of the distant
- * family (distant, hdistant), kernel-behavior.md §1.2-§1.3. */
+ * family (distant, hdistant), docs/kernel-conventions.md#sensors. */
 #ifndef RSW_SENSORS_SENSOR_COMMON_H
 #define RSW_SENSORS_SENSOR_COMMON_H
 
@@ -94,7 +94,7 @@ void direction_angles(vec3 w, double *zenith, double *azimuth);
 /* pixel_angles of the hemispherical films (hdistant, distantflux): each
  * pixel's angles from the LOCAL vector square_to_uniform_hemisphere at its
  * centre ((ix + 0.5)/W, (iy + 0.5)/H), as Eradiate's post-processing does
- * (eradiate src/eradiate/warp.py; kernel-behavior.md §1.2). */
+ * (eradiate src/eradiate/warp.py; docs/kernel-conventions.md#viewing-angles). */
 void hemisphere_pixel_angles(int W, int H, double *zen_az);
 
 /* ---- the hemispherical sensors' shared parameters (hdistant, distantflux) --

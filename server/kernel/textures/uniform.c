@@ -1,6 +1,6 @@
 /* `uniform` texture: one spectral value everywhere. Every spectrum property
  * of the document (number, rgb, uniform, tabulated) becomes one of these, as
- * in Mitsuba (kernel-behavior.md §2.2); prepare() evaluates it at the
+ * in Mitsuba (docs/kernel-conventions.md#spectra-and-textures); prepare() evaluates it at the
  * render's wavelength (mono) or takes the rgb triple (rgb). */
 #include <stdlib.h>
 #include <string.h>

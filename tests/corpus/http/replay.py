@@ -16,7 +16,7 @@ STATUS is a code (400), a class (4xx) or alternatives (404|405). CHECKS is
 "-" or ';'-separated strings the body must contain ("!text": must not
 contain; {VAR} placeholders are filled in), and two flags for what
 libmicrohttpd answers itself before raysweepd sees the request (documented
-in README.md): "mhd-html" (an HTML body instead of a problem) and
+in docs/daemon.md): "mhd-html" (an HTML body instead of a problem) and
 "close-ok" (the connection closed without an answer, within the timeout);
 and "closes": after its answer the server must close the connection and
 send nothing more (a framing error: what follows cannot be trusted to be
