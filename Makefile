@@ -1,7 +1,7 @@
 # raysweep — one plain GNU Makefile.
 #   make            build build/bin/raysweepd
 #   make test       build and run every test (SAN=1: ASan + UBSan build;
-#                   TEST_JOBS=N programs at once, default the number of cores)
+#                   TEST_JOBS=N programs at once, default twice the cores)
 #   make bench      benchmarks, one JSON object per line
 #   make test-cluster  replicas behind HAProxy/nginx, a Slurm job array, the
 #                      container recipes (tests/cluster)
@@ -255,8 +255,8 @@ $(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB),$^) $(KERNEL_LIB) $(COMMON_LIB) $(LIBS) $(TEST_LIBS)
 
-# The test programs run in parallel, TEST_JOBS at a time (default: the
-# number of cores; tests/run.sh says which run alone). Everything a test's
+# The test programs run in parallel, TEST_JOBS at a time (default: twice
+# the number of cores; tests/run.sh says why, and which run alone). Everything a test's
 # inner `make install` or `make run` needs is built first (the .so and .pc
 # too), so concurrent inner makes find nothing to build.
 TEST_JOBS :=

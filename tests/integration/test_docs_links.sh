@@ -8,7 +8,8 @@
 #    every file outside build directories) cites a path outside it: the
 #    reference notes it was written from, or a machine's own directories;
 #    sources cite papers or docs/ pages instead;
-#  - every "docs/<page>.md#anchor" a source comment cites exists;
+#  - every "docs/<page>.md#anchor" and "README.md#<anchor>" a file cites
+#    exists;
 #  - and the checker catches each kind of mistake (a negative control).
 # Ends with "test_docs_links: N passed, N failed" (tests/run.sh sums it).
 set -u
@@ -44,7 +45,8 @@ count "$tmp/cite.log"
 
 # ---- negative control: each mistake is reported --------------------------
 # ($d: the page names are spelled through it, so that the citation check
-# of this file does not read them as citations of pages that do not exist.)
+# of this file does not read them as citations of pages that do not exist;
+# the README anchor below is split by "" for the same reason.)
 d=docs
 mkdir -p "$tmp/neg/$d"
 printf '# Page\n\n## A heading\n' >"$tmp/neg/$d/page.md"
@@ -52,7 +54,7 @@ cat >"$tmp/neg/README.md" <<MD
 [ok]($d/page.md#a-heading) [missing file]($d/nope.md)
 [missing anchor]($d/page.md#no-heading) [outside](../elsewhere.md)
 MD
-printf '/* see kernel-%s.md 1.2 */\n/* %s/page.md#a-heading, %s/page.md#gone */\n' behavior $d $d >"$tmp/neg/src.c"
+printf '/* see kernel-%s.md 1.2 */\n/* %s/page.md#a-heading, %s/page.md#gone */\n/* README.md#%s */\n' behavior $d $d gone >"$tmp/neg/src.c"
 printf '/* (see ../%s/reference/x.md) */\n' shared >"$tmp/neg/other.c"
 {
   "${tool[@]}" links "$tmp/neg" "$tmp/neg/README.md"
@@ -62,12 +64,13 @@ for want in "README.md:1: link $d/nope.md: $d/nope.md does not exist" \
   "README.md:2: link $d/page.md#no-heading: no heading #no-heading" \
   "README.md:2: link ../elsewhere.md leaves the repository" \
   "src.c:1: cites a path outside the repository" "src.c:2: cites $d/page.md#gone: no such heading" \
+  "src.c:3: cites README.md#""gone: no such heading" \
   "other.c:1: cites a path outside the repository"; do
   if grep '^FAIL' "$tmp/neg.log" | grep -qF "$want"; then ok; else
     bad "docs_check.py did not report '$want': $(tr '\n' ' ' <"$tmp/neg.log" | head -c 600)"
   fi
 done
 n=$(grep -c '^FAIL' "$tmp/neg.log")
-[ "$n" = 6 ] && ok || bad "the negative control has 6 mistakes; docs_check.py reported $n: $(tr '\n' ' ' <"$tmp/neg.log" | head -c 600)"
+[ "$n" = 7 ] && ok || bad "the negative control has 7 mistakes; docs_check.py reported $n: $(tr '\n' ' ' <"$tmp/neg.log" | head -c 600)"
 
 finish

@@ -15,7 +15,8 @@ mode prints one line per check, "PASS what", "FAIL what: why" or
   docs_check.py citations ROOT FILE...
       No file cites a path outside the repository (the reference notes the
       project was written from, or a machine's own directories), and every
-      "docs/<page>.md" or "docs/<page>.md#anchor" a file mentions exists.
+      "docs/<page>.md", "docs/<page>.md#anchor" or "README.md#<anchor>" a
+      file mentions exists.
   docs_check.py curl-lint FILE...
       Every curl command in the shell blocks of FILE (Markdown) or in FILE
       (a shell script) fails on an HTTP error (see curl_fails).
@@ -393,6 +394,10 @@ def citations(root, files):
             if m:
                 print(f"FAIL {rel}:{no}: cites a path outside the repository: {line.strip()[:100]}")
                 bad += 1
+            for m in re.finditer(r"(?<![\w/.-])README\.md#([\w-]+)", line):
+                if m.group(1) not in slugs(os.path.join(root, "README.md")):
+                    print(f"FAIL {rel}:{no}: cites README.md#{m.group(1)}: no such heading")
+                    bad += 1
             for m in re.finditer(r"(?<![\w/.-])docs/([\w-]+\.md)(?:#([\w-]+))?", line):
                 page = os.path.join(root, "docs", m.group(1))
                 if not os.path.isfile(page):
@@ -401,7 +406,7 @@ def citations(root, files):
                 elif m.group(2) and m.group(2) not in slugs(page):
                     print(f"FAIL {rel}:{no}: cites docs/{m.group(1)}#{m.group(2)}: no such heading")
                     bad += 1
-        if not bad and ("docs/" in text):
+        if not bad and ("docs/" in text or "README.md#" in text):
             print(f"PASS {rel}: its citations exist")
 
 
