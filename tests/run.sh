@@ -14,7 +14,8 @@
 # named in `alone` run after the others, one at a time, with nothing beside
 # them: each bounds a latency of its own (a refusal within 0.5 s, a quick
 # render within 1 s while a long one runs, an answer within 1 s under
-# load), which a test program running beside it could push over. No test
+# load; test_state calibrates a job's length to kill the daemon in its
+# middle), which a test program running beside it could push over. No test
 # uses a fixed port or a fixed file name (each has its own mktemp
 # directory and ephemeral ports), and the inner `make install` / `make run`
 # of test_install, test_docs_examples and test_make_run find everything
@@ -28,7 +29,7 @@ export RSW_TEST_DIR="$here"
 export LSAN_OPTIONS="suppressions=$here/lsan.supp:print_suppressions=0${LSAN_OPTIONS:+:$LSAN_OPTIONS}"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
 
-alone=" test_http_limits test_render_views test_service_limits "
+alone=" test_http_limits test_render_views test_service_limits test_state "
 
 jobs=${TEST_JOBS:-}
 case ${1:-} in
