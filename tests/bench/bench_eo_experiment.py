@@ -13,32 +13,28 @@ body under 8 KB, where sending the layers as explicit per-context arrays
 took about 1.3 MB for 16 contexts.
 The explicit job: the same contexts with the direction each context's
 template renders sent as its own `params` (the arithmetic here in Python).
-contexts_per_s: contexts over the job's own `seconds`, best of REPS, the two
+contexts_per_s: contexts over the job's own `seconds`, best of REPS (5), the two
 jobs alternating; ratio = templates / explicit (goal >= 0.95).
 template_us_per_context: (submit time of the template job - submit time of
 the explicit job) / contexts, best of REPS each: what rendering and checking
 the templates costs at submission beyond checking the same explicit values.
 films_equal: every film of the two jobs bitwise the same.
 """
-import http.client
 import json
 import math
 import os
-import subprocess
 import sys
-import tempfile
 import time
 
-root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-bindir = os.environ.get("RSW_BIN_DIR", os.path.join(root, "build", "bin"))
+import rswbench
 SPP = 16
-REPS = 3
+REPS = 5
 SZA = [0, 20, 40, 60]
 WL = [400 + 40 * k for k in range(16)]
 
 
 def scene():
-    doc = json.load(open(os.path.join(root, "proto", "examples", "atmosphere_molecular.json")))
+    doc = json.load(open(os.path.join(rswbench.root, "proto", "examples", "atmosphere_molecular.json")))
     doc["measure"]["film"]["width"] = doc["measure"]["film"]["height"] = 8
     return doc
 
@@ -61,25 +57,9 @@ def bodies():
 
 
 def main():
-    tmp = tempfile.mkdtemp()
-    pf = os.path.join(tmp, "port")
-    d = subprocess.Popen([os.path.join(bindir, "raysweepd"), "serve", "--listen", "127.0.0.1:0", "--port-file", pf,
-                          "--threads", "2"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    d = rswbench.Daemon("bench_eo_experiment")
+    req = d.req
     try:
-        for _ in range(500):
-            if os.path.exists(pf) and open(pf).read().strip():
-                break
-            time.sleep(0.01)
-        conn = http.client.HTTPConnection("127.0.0.1", int(open(pf).read()))
-
-        def req(method, path, body=None):
-            conn.request(method, path, body=body, headers={"Content-Type": "application/json"} if body else {})
-            r = conn.getresponse()
-            data = r.read()
-            if r.status >= 300:
-                sys.exit(f"bench_eo_experiment: {method} {path}: {r.status} {data[:300]!r}")
-            return data
-
         sid = json.loads(req("POST", "/v1/scenes", json.dumps(scene()).encode()))["id"]
         bt, be, ids = bodies()
         best = {"t": (0.0, 1e9), "e": (0.0, 1e9)}
@@ -92,13 +72,7 @@ def main():
                 submit_ms = 1e3 * (time.perf_counter() - t0)
                 warned = warned or bool(answer.get("warnings"))
                 jid = answer["id"]
-                while True:
-                    j = json.loads(req("GET", f"/v1/jobs/{jid}"))
-                    if j["state"] not in ("queued", "running"):
-                        break
-                    time.sleep(0.02)
-                if j["state"] != "succeeded":
-                    sys.exit(f"bench_eo_experiment: job {jid} {j['state']}: {j.get('error')}")
+                j = d.wait_job(jid)
                 best[k] = (max(best[k][0], len(ids) / j["seconds"]), min(best[k][1], submit_ms))
                 jobs[k] = jid
         equal = all(req("GET", f"/v1/jobs/{jobs['t']}/results/{i}/measure") ==
@@ -118,8 +92,7 @@ def main():
         if len(bt) >= 8192:
             sys.exit(f"bench_eo_experiment: the job body is {len(bt)} bytes (goal < 8 KB)")
     finally:
-        d.terminate()
-        d.wait()
+        d.close()
 
 
 if __name__ == "__main__":

@@ -19,17 +19,13 @@ and this script's polling) are reported too: contexts_per_cpu_s_*,
 cpu_ratio. films_equal: every film
 of the two jobs bitwise the same (their JSON texts compared).
 """
-import http.client
 import json
 import math
 import os
-import subprocess
 import sys
-import tempfile
 import time
 
-root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-bindir = os.environ.get("RSW_BIN_DIR", os.path.join(root, "build", "bin"))
+import rswbench
 LAYERS = 2400
 SPP = 32
 REPS = 6
@@ -101,25 +97,9 @@ def cpu_s(pid):
 
 
 def main():
-    tmp = tempfile.mkdtemp()
-    pf = os.path.join(tmp, "port")
-    d = subprocess.Popen([os.path.join(bindir, "raysweepd"), "serve", "--listen", "127.0.0.1:0", "--port-file", pf,
-                          "--threads", "2"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    d = rswbench.Daemon("bench_templates")
+    req = d.req
     try:
-        for _ in range(500):
-            if os.path.exists(pf) and open(pf).read().strip():
-                break
-            time.sleep(0.01)
-        conn = http.client.HTTPConnection("127.0.0.1", int(open(pf).read()))
-
-        def req(method, path, body=None):
-            conn.request(method, path, body=body, headers={"Content-Type": "application/json"} if body else {})
-            r = conn.getresponse()
-            data = r.read()
-            if r.status >= 300:
-                sys.exit(f"bench_templates: {method} {path}: {r.status} {data[:300]!r}")
-            return data
-
         sid = json.loads(req("POST", "/v1/scenes", json.dumps(scene()).encode()))["id"]
         bt, be, ids = bodies()
         best = {"t": (0.0, 1e9, 0.0), "e": (0.0, 1e9, 0.0)}
@@ -129,16 +109,10 @@ def main():
                 t0 = time.perf_counter()
                 jid = json.loads(req("POST", f"/v1/scenes/{sid}/jobs", body))["id"]
                 submit_ms = 1e3 * (time.perf_counter() - t0)
-                c0 = cpu_s(d.pid)
-                while True:
-                    j = json.loads(req("GET", f"/v1/jobs/{jid}"))
-                    if j["state"] not in ("queued", "running"):
-                        break
-                    time.sleep(0.02)
-                if j["state"] != "succeeded":
-                    sys.exit(f"bench_templates: job {jid} {j['state']}: {j.get('error')}")
+                c0 = cpu_s(d.proc.pid)
+                j = d.wait_job(jid)
                 rate = len(ids) / j["seconds"]
-                cpu_rate = len(ids) / max(cpu_s(d.pid) - c0, 1e-9)
+                cpu_rate = len(ids) / max(cpu_s(d.proc.pid) - c0, 1e-9)
                 best[k] = (max(best[k][0], rate), min(best[k][1], submit_ms), max(best[k][2], cpu_rate))
                 jobs[k] = jid
         equal = all(req("GET", f"/v1/jobs/{jobs['t']}/results/{i}/md") == req("GET", f"/v1/jobs/{jobs['e']}/results/{i}/md")
@@ -155,8 +129,7 @@ def main():
         if not equal:
             sys.exit("bench_templates: the templated films differ from the explicit ones")
     finally:
-        d.terminate()
-        d.wait()
+        d.close()
 
 
 if __name__ == "__main__":
