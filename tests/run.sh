@@ -7,8 +7,10 @@
 #
 # Up to N programs run at once (default: $TEST_JOBS, else twice the number
 # of online cores, since most programs spend much of their time waiting on
-# a daemon, a socket or a child: on 2 cores, -j 4 took 141 s where -j 1
-# took 251 s and -j 2 about 70 % of -j 1; -j 1 runs them one after another). Each program's output
+# a daemon, a socket or a child. On a 2-core machine shared with other
+# builds, pairs of runs measured -j 4 at 56 % and 93 % of -j 1's wall time
+# and -j 2 at 66 %, 77 % and 92 %: the load of the rest of the machine
+# decides as much. -j 1 runs them one after another.) Each program's output
 # is kept in a file of its own and printed whole when it is its turn, in
 # the order of the list, so the log reads as a serial run's. The programs
 # named in `alone` run after the others, one at a time, with nothing beside
