@@ -188,11 +188,16 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     n = m;
   }
   size_t got = exchange(req, n, resp, sizeof resp);
+  /* An answer to HEAD has no body: bytes after its headers are the answer
+   * to whatever the connection read next (a pipelined request, or garbage
+   * libmicrohttpd answers itself), not this answer's body. (The request
+   * starts as the input does: no placeholder starts with "HEAD ".) */
+  bool head = size >= 5 && memcmp(data, "HEAD ", 5) == 0;
   free(req);
   if (got > 0) {
     FUZZ_CHECK(got >= 12 && memcmp(resp, "HTTP/1.", 7) == 0, "not an HTTP answer: %.80s", resp);
     char *hdr_end = strstr(resp, "\r\n\r\n");
-    if (hdr_end && !lax) {
+    if (hdr_end && !lax && !head) {
       *hdr_end = '\0';
       bool problem = strcasestr(resp, "\r\ncontent-type: application/problem+json") != NULL;
       bool chunked = strcasestr(resp, "\r\ntransfer-encoding: chunked") != NULL;
