@@ -139,6 +139,11 @@ static char resp[1 << 20];
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
   if (size > FUZZ_MAX_INPUT) return 0;
+  /* An answer to HEAD has no body: bytes after its headers are the answer
+   * to whatever the connection read next (a pipelined request, or garbage
+   * libmicrohttpd answers itself), not this answer's body. (The request
+   * starts as the input does: no placeholder starts with "HEAD ".) */
+  const bool head = size >= 5 && memcmp(data, "HEAD ", 5) == 0;
   /* Placeholders of tests/corpus/http (whose cases are seeds here):
    * {SCENE} the harness scene's id, {AUTH} nothing (no token), {CL} the
    * length of what follows the first blank line. */
@@ -188,11 +193,6 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     n = m;
   }
   size_t got = exchange(req, n, resp, sizeof resp);
-  /* An answer to HEAD has no body: bytes after its headers are the answer
-   * to whatever the connection read next (a pipelined request, or garbage
-   * libmicrohttpd answers itself), not this answer's body. (The request
-   * starts as the input does: no placeholder starts with "HEAD ".) */
-  bool head = size >= 5 && memcmp(data, "HEAD ", 5) == 0;
   free(req);
   if (got > 0) {
     FUZZ_CHECK(got >= 12 && memcmp(resp, "HTTP/1.", 7) == 0, "not an HTTP answer: %.80s", resp);
