@@ -55,7 +55,11 @@ void rsw_err_clear(rsw_err *err) {
 }
 
 const char *rsw_err_format(const rsw_err *err, char *buf, unsigned long len) {
-  if (err->where[0])
+  /* A message that already names its place, quoted ('KEY': a parameter
+   * key), is not prefixed with it again. */
+  char quoted[sizeof err->where + 2];
+  snprintf(quoted, sizeof quoted, "'%s'", err->where);
+  if (err->where[0] && !strstr(err->msg, quoted))
     snprintf(buf, len, "%s: %s", err->where, err->msg);
   else
     snprintf(buf, len, "%s", err->msg);

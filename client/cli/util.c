@@ -108,7 +108,7 @@ int cli_report(const cli_ctx *ctx, rsw_status s, const char *what) {
   fprintf(stderr, "raysweep %s: %s: the server said no (HTTP %d, %s): %s\n", ctx->cmd, what, e->http_status,
           name, msg);
   if (e->pointer && e->pointer[0]) fprintf(stderr, "  at: %s\n", e->pointer);
-  if (e->key && e->key[0]) fprintf(stderr, "  key: %s\n", e->key);
+  if (e->key && e->key[0] && !strstr(msg, e->key)) fprintf(stderr, "  key: %s\n", e->key); /* named once */
   if (e->candidates[0]) {
     fprintf(stderr, "  did you mean: ");
     for (int i = 0; i < 3 && e->candidates[i]; i++) fprintf(stderr, "%s%s", i ? ", " : "", e->candidates[i]);

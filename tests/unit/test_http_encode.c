@@ -449,6 +449,18 @@ static void test_problem(void) {
   CHECK(strcmp(cJSON_GetObjectItem(j, "detail")->valuestring, "scene.xml:12: bad tag") == 0, "detail");
   cJSON_Delete(j);
   free(t);
+  /* A message that names its key already: the detail names it once
+   * (issue 24: errors repeated the key three times). */
+  memset(&e, 0, sizeof e);
+  rsw_fail(&e.err, RSW_ERR_RANGE, "s.bsdf.alpha.value", "'s.bsdf.alpha.value': value -3 must be >= 0.0001");
+  t = http_problem_from_svc(&e, &status);
+  j = t ? cJSON_Parse(t) : NULL;
+  REQUIRE(j, "does not parse");
+  const char *det = cJSON_GetObjectItem(j, "detail")->valuestring;
+  const char *first = strstr(det, "s.bsdf.alpha.value");
+  CHECK(first && !strstr(first + 1, "s.bsdf.alpha.value"), "the key once in the detail: %s", det);
+  cJSON_Delete(j);
+  free(t);
   memset(&e, 0, sizeof e);
   rsw_fail(&e.err, RSW_ERR_INVALID, "ab12", "digest mismatch");
   t = http_problem_from_svc(&e, &status);
