@@ -10,6 +10,8 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "rsw_file.h"
+
 /* matplotlib's viridis and inferno at t = 0, 1/8, ..., 1 (8-bit sRGB). */
 static const unsigned char viridis[9][3] = {{68, 1, 84},    {71, 44, 122},  {59, 81, 139},
                                             {44, 113, 142}, {33, 144, 141}, {39, 173, 129},
@@ -194,19 +196,7 @@ rsw_status png_write_film(const char *path, int width, int height, int n_channel
     if (err) snprintf(err->where, sizeof err->where, "%s", path);
     return st;
   }
-  size_t tl = strlen(path) + 32;
-  char *tmp = malloc(tl);
-  if (!tmp) {
-    free(bytes);
-    return rsw_fail(err, RSW_ERR_NOMEM, path, "out of memory");
-  }
-  snprintf(tmp, tl, "%s.tmp.%ld", path, (long)getpid());
-  FILE *f = fopen(tmp, "wb");
-  bool ok = f && fwrite(bytes, 1, len, f) == len;
-  if (f) ok = fclose(f) == 0 && ok;
-  ok = ok && rename(tmp, path) == 0;
-  if (!ok) unlink(tmp);
-  free(tmp);
+  bool ok = rsw_write_replace(path, bytes, len);
   free(bytes);
   return ok ? RSW_OK : rsw_fail(err, RSW_ERR_IO, path, "cannot write the PNG");
 }

@@ -3,6 +3,7 @@
 
 #include <errno.h>
 #include <fcntl.h>
+#include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -36,4 +37,22 @@ FILE *rsw_fopen_regular(const char *path, const char *mode) {
 
 const char *rsw_open_strerror(int err) {
   return err == EINVAL ? "not a regular file (a FIFO, socket, device or directory)" : strerror(err);
+}
+
+bool rsw_write_replace(const char *path, const void *data, size_t len) {
+  size_t tl = strlen(path) + 32;
+  char *tmp = malloc(tl);
+  if (!tmp) return false;
+  snprintf(tmp, tl, "%s.tmp.%ld", path, (long)getpid());
+  FILE *f = fopen(tmp, "wb");
+  bool ok = f && fwrite(data, 1, len, f) == len;
+  if (f) ok = fclose(f) == 0 && ok;
+  ok = ok && rename(tmp, path) == 0;
+  if (!ok) {
+    int e = errno;
+    unlink(tmp);
+    errno = e;
+  }
+  free(tmp);
+  return ok;
 }

@@ -20,4 +20,9 @@ FILE *rsw_fopen_regular(const char *path, const char *mode);
  * EINVAL, strerror otherwise). */
 const char *rsw_open_strerror(int err);
 
+/* Write len bytes to "<path>.tmp.<pid>" and rename it over path, so that a
+ * reader never sees a partial file and a failure leaves none behind (the
+ * temporary file is removed). false with errno set. */
+bool rsw_write_replace(const char *path, const void *data, size_t len);
+
 #endif

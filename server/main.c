@@ -16,6 +16,7 @@
 #include <string.h>
 #include <strings.h>
 
+#include "http/encode.h"
 #include "image_exr.h"
 #include "image_png.h"
 #include "kernel/core/isa.h"
@@ -25,6 +26,7 @@
 #include "kernel/scene/scene.h"
 #include "raysweep/status.h"
 #include "raysweep/version.h"
+#include "rsw_file.h"
 #include "serve.h"
 
 #define MAX_DEFINES 256
@@ -83,6 +85,46 @@ static const char *add_define(scene_define *defines, size_t *n, const char *def)
   defines[*n].value = eq + 1;
   (*n)++;
   return NULL;
+}
+
+/* What -o writes, from its name's ending (any case). */
+typedef enum {
+  OUT_UNKNOWN,
+  OUT_EXR,
+  OUT_PNG,
+  OUT_NPY,
+  OUT_JSON
+} out_format;
+
+static out_format out_format_of(const char *path) {
+  static const struct {
+    const char *ext;
+    out_format fmt;
+  } exts[] = {{".exr", OUT_EXR}, {".png", OUT_PNG}, {".npy", OUT_NPY}, {".json", OUT_JSON}};
+  size_t n = strlen(path);
+  for (size_t i = 0; i < sizeof exts / sizeof exts[0]; i++) {
+    size_t el = strlen(exts[i].ext);
+    if (n > el && strcasecmp(path + n - el, exts[i].ext) == 0) return exts[i].fmt;
+  }
+  return OUT_UNKNOWN;
+}
+
+/* The film as .npy or JSON, in the encodings of the HTTP API (http/encode.h:
+ * the same bytes a render over the daemon returns, with an empty scene id,
+ * revision 0 and no context, as no resident scene made it). */
+static rsw_status write_film_encoded(out_format fmt, const film_image *img, const char *sensor_name,
+                                     const char *path, rsw_err *err) {
+  svc_film f = {.img = *img}; /* borrowed: never svc_film_free'd */
+  snprintf(f.sensor, sizeof f.sensor, "%s", sensor_name);
+  void *bytes = NULL;
+  size_t len = 0;
+  rsw_status s =
+      fmt == OUT_NPY ? http_film_npy(&f, &bytes, &len, err) : http_film_json(&f, (char **)&bytes, &len, err);
+  if (s) return s;
+  bool ok = rsw_write_replace(path, bytes, len);
+  int e = errno;
+  free(bytes);
+  return ok ? RSW_OK : rsw_fail(err, RSW_ERR_IO, path, "cannot write the film: %s", strerror(e));
 }
 
 static int cmd_render(int argc, char **argv) {
@@ -192,11 +234,17 @@ static int cmd_render(int argc, char **argv) {
     goto out;
   }
   if (!out_path) {
-    rc = usage_error("render", "missing -o OUT.exr%s", "");
+    rc = usage_error("render", "missing -o OUT.exr|OUT.npy|OUT.json|OUT.png%s", "");
     goto out;
   }
-  size_t olen = strlen(out_path);
-  bool is_png = olen > 4 && strcasecmp(out_path + olen - 4, ".png") == 0;
+  out_format fmt = out_format_of(out_path);
+  if (fmt == OUT_UNKNOWN) {
+    rc = usage_error("render",
+                     "-o %s: cannot write that kind of file (the name must end in .exr, .npy, .json or .png)",
+                     out_path);
+    goto out;
+  }
+  bool is_png = fmt == OUT_PNG;
   if (!is_png && (look.exposure != 0 || look.colormap)) {
     rc = usage_error("render", "--exposure and --colormap are for a PNG output (-o OUT.png)%s", "");
     goto out;
@@ -257,9 +305,15 @@ static int cmd_render(int argc, char **argv) {
     fprintf(stderr,
             "raysweepd render: warning: %zu environment plugin failures were replaced by black; first: %s\n",
             pfail, pmsg);
-  if (is_png ? png_write_film(out_path, img.width, img.height, img.channels, img.channel_names, img.data,
-                              &look, &err)
-             : film_image_write_exr(&img, out_path, sc->sensors[sensor_index]->base.id, &err)) {
+  rsw_status ws;
+  if (fmt == OUT_PNG)
+    ws = png_write_film(out_path, img.width, img.height, img.channels, img.channel_names, img.data, &look,
+                        &err);
+  else if (fmt == OUT_EXR)
+    ws = film_image_write_exr(&img, out_path, sc->sensors[sensor_index]->base.id, &err);
+  else
+    ws = write_film_encoded(fmt, &img, sc->sensors[sensor_index]->base.id, out_path, &err);
+  if (ws) {
     fprintf(stderr, "raysweepd render: %s\n", rsw_err_format(&err, msg, sizeof msg));
     goto out;
   }
@@ -446,11 +500,12 @@ static const command commands[] = {
      "[--wavelength NM] [--threads N] [--isa auto|avx512|avx2|sse2|generic] [--variant mono|rgb] "
      "[--plugin-dir DIR] "
      "[--quantities LIST] "
-     "[--variance] [--exposure EV] [--colormap MAP] [--stats] -o OUT.exr|OUT.png",
-     "load a scene, apply parameter updates, render one sensor to OpenEXR or a PNG quick-look",
+     "[--variance] [--exposure EV] [--colormap MAP] [--stats] -o OUT.exr|OUT.npy|OUT.json|OUT.png",
+     "load a scene, apply parameter updates, render one sensor to OpenEXR, NumPy, JSON or a PNG quick-look",
      "  SCENE               a .xml (Mitsuba XML) or .json scene file\n"
-     "  -o, --output OUT    the film; written next to it and renamed once complete; a name ending\n"
-     "                      in .png writes a tone-mapped 8-bit quick-look, anything else OpenEXR\n"
+     "  -o, --output OUT    the film; written next to it and renamed once complete; the name's ending\n"
+     "                      picks the kind: .exr OpenEXR, .npy NumPy and .json JSON (as the HTTP API\n"
+     "                      sends them), .png a tone-mapped 8-bit quick-look; any other is refused\n"
      "  -D name=value       sets an XML $name parameter (not for JSON scenes)\n"
      "  --set KEY=VALUE     a parameter update after loading; VALUE is JSON (all --set form one update)\n"
      "  --sensor ID         a sensor id or index (default: the first sensor)\n"

@@ -377,6 +377,7 @@ int cmd_serve(int argc, char **argv) {
     goto out;
   }
   fprintf(stderr, "raysweepd: listening on http://%s:%d\n", host, http_server_port(srv));
+  fprintf(stderr, "raysweepd: viewer: http://%s:%d/ui/\n", host, http_server_port(srv));
   if (a.port_file && write_port_file(a.port_file, http_server_port(srv))) goto out;
 
   int sig = 0;

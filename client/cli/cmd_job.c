@@ -142,15 +142,26 @@ int cmd_job_watch(cli_ctx *ctx, const cli_args *a) {
   return rc;
 }
 
+enum {
+  CANCEL_WAIT_S = 30
+};
+
 int cmd_job_cancel(cli_ctx *ctx, const cli_args *a) {
   const char *id = a->pos[0];
   rsw_status s = rsw_job_cancel(ctx->client, id);
   if (s) return cli_report(ctx, s, id);
+  /* The cancel is asynchronous: the job stops at its renders' next check.
+   * Wait for that (a bounded wait), so that what is printed is the state
+   * the cancel led to, not the one it found. */
   rsw_job_status st;
+  (void)rsw_job_wait(ctx->client, id, NULL, NULL, CANCEL_WAIT_S, NULL); /* a failure: the GET reports it */
   s = rsw_job_get(ctx->client, id, &st);
   if (s) return cli_report(ctx, s, id);
   if (ctx->json)
     print_status_json(id, &st);
+  else if (st.state == RSW_JOB_QUEUED || st.state == RSW_JOB_RUNNING)
+    printf("%s %s (cancel requested; still %s after %d s)\n", id, cli_job_state_name(st.state),
+           cli_job_state_name(st.state), CANCEL_WAIT_S);
   else
     printf("%s %s\n", id, cli_job_state_name(st.state));
   return CLI_OK;

@@ -256,6 +256,42 @@ int cli_build_param_map(const cli_ctx *ctx, const char *opt, const char *const *
   return 0;
 }
 
+/* The value of key before the update, as compact JSON (owned: free), or
+ * NULL when it cannot be read (the PATCH then reports why). */
+static char *param_value_now(cli_ctx *ctx, const char *id, const char *key) {
+  char *json = NULL;
+  if (rsw_params_get(ctx->client, id, key, NULL, &json, NULL)) return NULL;
+  cJSON *doc = cJSON_Parse(json);
+  rsw_free(json);
+  char *text = NULL;
+  const cJSON *p;
+  cJSON_ArrayForEach(p, cJSON_GetObjectItemCaseSensitive(doc, "params")) {
+    const cJSON *k = cJSON_GetObjectItemCaseSensitive(p, "key");
+    const cJSON *v = cJSON_GetObjectItemCaseSensitive(p, "value");
+    if (cJSON_IsString(k) && strcmp(k->valuestring, key) == 0 && v) {
+      text = cJSON_PrintUnformatted(v);
+      break;
+    }
+  }
+  cJSON_Delete(doc);
+  return text;
+}
+
+/* A value for a line of `set`'s report: long ones (meshes) are cut. */
+static void print_value(const char *text) {
+  enum {
+    MAX = 80
+  };
+  if (!text)
+    fputs("?", stdout);
+  else if (strlen(text) > MAX)
+    printf("%.*s...", MAX, text);
+  else
+    fputs(text, stdout);
+}
+
+/* Prints each key with its value before and after, then the revision
+ * ("revision N"); --json: {"revision": N, "changes": [{key, old, new}]}. */
 int cmd_set(cli_ctx *ctx, const cli_args *a) {
   int64_t if_match = -1;
   const char *im = cli_get(a, "--if-match");
@@ -268,16 +304,55 @@ int cmd_set(cli_ctx *ctx, const cli_args *a) {
   cJSON *map;
   int rc = cli_build_param_map(ctx, "set", a->pos + 1, a->n_pos - 1, &map);
   if (rc) return rc;
-  char *text = cJSON_PrintUnformatted(map);
-  cJSON_Delete(map);
-  if (!text) return cli_fail(ctx, CLI_IO, "out of memory");
+  int n = cJSON_GetArraySize(map);
+  char **old = calloc((size_t)n + 1, sizeof *old);
+  char *text = old ? cJSON_PrintUnformatted(map) : NULL;
+  if (!text) {
+    free(old);
+    cJSON_Delete(map);
+    return cli_fail(ctx, CLI_IO, "out of memory");
+  }
+  int i = 0;
+  const cJSON *e;
+  cJSON_ArrayForEach(e, map) old[i++] = param_value_now(ctx, a->pos[0], e->string);
   uint64_t rev = 0;
   rsw_status s = rsw_params_update(ctx->client, a->pos[0], text, if_match, &rev);
   free(text);
-  if (s) return cli_report(ctx, s, a->pos[0]);
-  if (ctx->json)
-    printf("{\"revision\":%" PRIu64 "}\n", rev);
-  else
-    printf("%" PRIu64 "\n", rev);
-  return CLI_OK;
+  if (s) {
+    rc = cli_report(ctx, s, a->pos[0]);
+  } else if (ctx->json) {
+    printf("{\"revision\":%" PRIu64 ",\"changes\":[", rev);
+    i = 0;
+    cJSON_ArrayForEach(e, map) {
+      char *nv = cJSON_PrintUnformatted(e);
+      cJSON *ks = cJSON_CreateString(e->string);
+      char *k = ks ? cJSON_PrintUnformatted(ks) : NULL; /* quoted, escaped */
+      cJSON_Delete(ks);
+      printf("%s{\"key\":%s,\"old\":%s,\"new\":%s}", i ? "," : "", k ? k : "null", old[i] ? old[i] : "null",
+             nv ? nv : "null");
+      free(nv);
+      free(k);
+      i++;
+    }
+    printf("]}\n");
+    rc = CLI_OK;
+  } else {
+    i = 0;
+    cJSON_ArrayForEach(e, map) {
+      char *nv = cJSON_PrintUnformatted(e);
+      printf("%s: ", e->string);
+      print_value(old[i]);
+      fputs(" -> ", stdout);
+      print_value(nv);
+      putchar('\n');
+      free(nv);
+      i++;
+    }
+    printf("revision %" PRIu64 "\n", rev);
+    rc = CLI_OK;
+  }
+  for (i = 0; i < n; i++) free(old[i]);
+  free(old);
+  cJSON_Delete(map);
+  return rc;
 }

@@ -544,6 +544,7 @@ const http_route http_routes[] = {
     {"PUT", "/v1/blobs/{sha256}", HTTP_BODY_RAW, false, h_blob_put, false},
     {"HEAD", "/v1/blobs/{sha256}", HTTP_BODY_NONE, false, h_blob_head, false},
     {"POST", "/v1/blobs:missing", HTTP_BODY_JSON, false, h_blobs_missing, false},
+    {"GET", "/", HTTP_BODY_NONE, true, http_root_redirect, true},
     {"GET", "/ui", HTTP_BODY_NONE, true, http_ui_redirect, true},
     {"GET", "/ui/", HTTP_BODY_NONE, true, http_ui_index, true},
     {"GET", "/ui/{file}", HTTP_BODY_NONE, true, http_ui_file, true},

@@ -583,17 +583,24 @@ static bool token_equal(const char *a, size_t alen, const char *b, size_t blen) 
   return d == 0;
 }
 
-static bool authorized(const http_server *srv, struct MHD_Connection *c) {
-  if (!srv->token) return true;
+/* NULL when the request may pass; otherwise why not, so that a client
+ * without a token and one with a wrong token are told apart (neither
+ * learns anything about the token itself). */
+static const char *unauthorized(const http_server *srv, struct MHD_Connection *c) {
+  if (!srv->token) return NULL;
   const char *h = MHD_lookup_connection_value(c, MHD_HEADER_KIND, MHD_HTTP_HEADER_AUTHORIZATION);
-  if (!h) return false;
+  if (!h)
+    return "this server requires Authorization: Bearer <token>, and the request has no Authorization header";
   while (*h == ' ') h++;
-  if (strncasecmp(h, "Bearer", 6) != 0 || (h[6] != ' ' && h[6] != '\t')) return false;
+  if (strncasecmp(h, "Bearer", 6) != 0 || (h[6] != ' ' && h[6] != '\t'))
+    return "the Authorization header is not of the form 'Bearer <token>'";
   h += 6;
   while (*h == ' ' || *h == '\t') h++;
   size_t n = strlen(h);
   while (n && (h[n - 1] == ' ' || h[n - 1] == '\t')) n--;
-  return token_equal(h, n, srv->token, srv->token_len);
+  if (!token_equal(h, n, srv->token, srv->token_len))
+    return "the bearer token is wrong (it does not match the daemon's --token-file)";
+  return NULL;
 }
 
 static const char *header(struct MHD_Connection *c, const char *name) {
@@ -746,9 +753,10 @@ static bool first_checks(struct MHD_Connection *c, conn *cn, const char *method,
       http_route_find(method, path, cn->seg_buf, cn->params, &path_known, allow, sizeof allow);
   /* Health stays open to probes; everything else, known path or not, asks
    * for the token first so that unauthenticated clients learn nothing. */
-  if (!(rt && rt->public_route) && !authorized(srv, c)) {
+  const char *why = rt && rt->public_route ? NULL : unauthorized(srv, c);
+  if (why) {
     cn->route = rt;
-    *ret = send_problem(c, cn, 401, NULL, "this server requires Authorization: Bearer <token>", NULL, true);
+    *ret = send_problem(c, cn, 401, NULL, why, NULL, true);
     return false;
   }
   if (!rt) {

@@ -61,6 +61,14 @@ void http_ui_redirect(http_req *r) {
   snprintf(r->resp.location, sizeof r->resp.location, "/ui/");
 }
 
+/* The root: a browser pointed at the daemon lands on the viewer. 302, not
+ * 301: the root may one day answer something else, and browsers cache 301s. */
+void http_root_redirect(http_req *r) {
+  http_resp_clear(&r->resp);
+  r->resp.status = 302;
+  snprintf(r->resp.location, sizeof r->resp.location, "/ui/");
+}
+
 void http_ui_file(http_req *r) {
   const char *name = r->params[0];
   for (size_t i = 0; i < http_ui_n_assets; i++)

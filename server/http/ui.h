@@ -24,6 +24,7 @@ extern const size_t http_ui_n_assets;
  * or 404. Each answer carries its ETag and Cache-Control: no-cache, and a
  * matching If-None-Match gets 304 with no body. */
 void http_ui_redirect(http_req *r);
+void http_root_redirect(http_req *r); /* GET /: 302 to /ui/ */
 void http_ui_index(http_req *r);
 void http_ui_file(http_req *r);
 

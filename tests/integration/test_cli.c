@@ -57,6 +57,47 @@ static void test_render_seed_exr(void) {
   exr_image_free(&img);
 }
 
+static char *slurp(const char *path, size_t *len) {
+  FILE *f = fopen(path, "rb");
+  if (!f) return NULL;
+  char *b = calloc(1, 1 << 20);
+  *len = b ? fread(b, 1, (1 << 20) - 1, f) : 0;
+  fclose(f);
+  return b;
+}
+
+/* -o picks the encoding from the name: .npy and .json as the HTTP API
+ * sends them; a name it cannot write is refused before rendering. */
+static void test_output_formats(void) {
+  char out[128], err[4096];
+  size_t len = 0;
+  snprintf(out, sizeof out, "%s/film.npy", tmpdir);
+  const char *a1[] = {"render", "proto/examples/hdistant_seed.xml", "--spp", "4", "-o", out, NULL};
+  int rc = run(err, sizeof err, a1);
+  REQUIRE(rc == 0, "-o .npy: exit %d: %s", rc, err);
+  char *b = slurp(out, &len);
+  CHECK(b && len == 128 + 32 * 32 * 3 * 4 && memcmp(b, "\x93NUMPY\x01\x00", 8) == 0 &&
+            strstr(b + 10, "'descr': '<f4'") && strstr(b + 10, "'shape': (32, 32, 3)"),
+        "-o film.npy is a (32, 32, 3) float32 .npy: %zu bytes, header %.80s", len, b ? b + 10 : "");
+  free(b);
+  snprintf(out, sizeof out, "%s/film.json", tmpdir);
+  const char *a2[] = {"render", "proto/examples/hdistant_seed.xml", "--spp", "4", "-o", out, NULL};
+  rc = run(err, sizeof err, a2);
+  REQUIRE(rc == 0, "-o .json: exit %d: %s", rc, err);
+  b = slurp(out, &len);
+  CHECK(b && b[0] == '{' && strstr(b, "\"width\":32") && strstr(b, "\"layout\":\"HWC\"") &&
+            strstr(b, "\"sensor\":\"hdistant\""),
+        "-o film.json is the film as JSON: %.200s", b ? b : "");
+  free(b);
+  snprintf(out, sizeof out, "%s/film.tiff", tmpdir);
+  const char *a3[] = {"render", "proto/examples/hdistant_seed.xml", "--spp", "4", "-o", out, NULL};
+  rc = run(err, sizeof err, a3);
+  CHECK(rc == 2, "-o .tiff: exit %d, want 2 (usage)", rc);
+  CHECK(strstr(err, "film.tiff") && strstr(err, ".npy"),
+        "-o .tiff: the error names the file and what can be written: %s", err);
+  CHECK(!exists(out), "-o .tiff: no file written");
+}
+
 static void test_variant_and_wavelength(void) {
   char out[128], err[4096];
   snprintf(out, sizeof out, "%s/mono.exr", tmpdir);
@@ -188,6 +229,7 @@ int main(void) {
   snprintf(tmpdir, sizeof tmpdir, "/tmp/rsw-cli-XXXXXX");
   if (!mkdtemp(tmpdir)) return 1;
   RSW_TEST_RUN(test_render_seed_exr);
+  RSW_TEST_RUN(test_output_formats);
   RSW_TEST_RUN(test_variant_and_wavelength);
   RSW_TEST_RUN(test_defines_and_sensor);
   RSW_TEST_RUN(test_isa);

@@ -74,11 +74,19 @@ expect 0 "params --class geometric" rs params "$plate" --class geometric --json
 py "params --class geometric" 'import json,sys; k=[p["key"] for p in json.load(open(sys.argv[1]))["params"]]; assert "plate.to_world" in k and "plate.bsdf.reflectance.value" not in k, k' out
 expect 2 "params --class bogus" rs params "$plate" --class bogus
 expect 0 "set" rs set "$plate" plate.bsdf.reflectance.value=0.3
-rev=$(cat out)
-py "set prints the new revision" 'import sys; assert int(sys.argv[1]) >= 1' "$rev"
+py "set prints the key, the old and new values and the revision" '
+import sys
+lines = open(sys.argv[1]).read().splitlines()
+assert len(lines) == 2 and lines[0] == "plate.bsdf.reflectance.value: 0.5 -> 0.3", lines
+assert lines[1].startswith("revision ") and int(lines[1].split()[1]) >= 1, lines' out
+rev=$(sed -n 's/^revision //p' out)
 expect 1 "set --if-match stale" rs set "$plate" plate.bsdf.reflectance.value=0.5 --if-match $((rev + 5))
 expect 0 "set --if-match current" rs set "$plate" plate.bsdf.reflectance.value=0.5 --if-match "$rev" --json
-py "set --json" 'import json,sys; assert json.load(open(sys.argv[1]))["revision"] > int(sys.argv[2])' out "$rev"
+py "set --json" '
+import json, sys
+d = json.load(open(sys.argv[1]))
+assert d["revision"] > int(sys.argv[2]), d
+assert d["changes"] == [{"key": "plate.bsdf.reflectance.value", "old": 0.3, "new": 0.5}], d' out "$rev"
 expect 0 "params after set" rs params "$plate" --match 'plate.bsdf.reflectance.value' --json
 py "set took effect" 'import json,sys; assert json.load(open(sys.argv[1]))["params"][0]["value"]==0.5' out
 
@@ -203,6 +211,7 @@ expect 5 "sweep --timeout" rs sweep "$hd" --grid wavelength=400:700:10 --spp 500
 long=$(sed -n 's/^raysweep sweep: job \([^:]*\):.*/\1/p' err | head -n 1)
 [ -n "$long" ] && ok || bad "sweep did not name its job: $(cat err)"
 expect 0 "job cancel" rs job cancel "$long"
+contains "job cancel prints the state the cancel led to" out "$long cancelled"
 expect 4 "job watch cancelled" rs job watch "$long" --timeout 20
 contains "job watch says cancelled" out "cancelled"
 expect 0 "job show cancelled" rs job show "$long" --json

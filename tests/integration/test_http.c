@@ -1782,12 +1782,31 @@ static void test_error_401(void) {
   resp_free(&r);
   r = get(&d, "/v1/scenes");
   CHECK_PROBLEM(r, 401, "GET /v1/scenes without a token");
+  /* A missing token and a wrong one are told apart. */
+  cJSON *p = jparse(&r);
+  CHECK(p && jstr(p, "detail") && strstr(jstr(p, "detail"), "no Authorization header"),
+        "missing token: detail says so: %.300s", r.body);
+  cJSON_Delete(p);
   resp_free(&r);
   snprintf(d.token, sizeof d.token, "wrong-token");
   r = get(&d, "/v1/scenes");
   CHECK_PROBLEM(r, 401, "GET /v1/scenes with a wrong token");
+  p = jparse(&r);
+  CHECK(p && jstr(p, "detail") && strstr(jstr(p, "detail"), "token is wrong") &&
+            !strstr(jstr(p, "detail"), "no Authorization header"),
+        "wrong token: detail says so: %.300s", r.body);
+  cJSON_Delete(p);
   resp_free(&r);
   d.token[0] = '\0';
+  /* The root sends a newcomer's browser to the viewer, token or not. */
+  r = get(&d, "/");
+  CHECK(r.status == 302 && strcmp(hdr(&r, "Location", www, sizeof www), "/ui/") == 0,
+        "GET / redirects to /ui/: %ld, Location '%s'", r.status, www);
+  resp_free(&r);
+  r = do_req(&d, (req){.method = "HEAD", .path = "/"});
+  CHECK(r.status == 302 && strcmp(hdr(&r, "Location", www, sizeof www), "/ui/") == 0,
+        "HEAD / redirects to /ui/: %ld, Location '%s'", r.status, www);
+  resp_free(&r);
   r = get(&d, "/v1/health/live");
   CHECK(r.status == 200, "health/live is open: %ld", r.status);
   resp_free(&r);
@@ -1870,6 +1889,8 @@ static void test_sigterm_main(void) {
   char *log = read_file(main_d.t.log, NULL);
   CHECK(log && strstr(log, "raysweepd: listening on http://127.0.0.1:"),
         "stderr announces the address: %.300s", log ? log : "");
+  CHECK(log && strstr(log, "raysweepd: viewer: http://127.0.0.1:") && strstr(log, "/ui/\n"),
+        "stderr announces the viewer's address: %.300s", log ? log : "");
   free(log);
 }
 

@@ -564,7 +564,7 @@ check("errors_problem_json", c_errors)
 
 
 def c_security():
-    """Bearer everywhere (the document-level requirement) except the health routes and the viewer's files."""
+    """Bearer everywhere (the document-level requirement) except the health routes, the root and the viewer's files."""
     problems = []
     bearer = ((raw.get("components") or {}).get("securitySchemes") or {}).get("bearer") or {}
     if bearer.get("type") != "http" or bearer.get("scheme") != "bearer":
@@ -572,7 +572,7 @@ def c_security():
     if raw.get("security") != [{"bearer": []}]:
         problems.append("the document-level security is not [{bearer: []}]")
     for path, m, op, where in operations(raw):
-        health = path.startswith("/v1/health/") or path == "/ui" or path.startswith("/ui/")
+        health = path.startswith("/v1/health/") or path in ("/", "/ui") or path.startswith("/ui/")
         if health and op.get("security") != []:
             problems.append(f"{where} must have security: []")
         if not health and "security" in op:
