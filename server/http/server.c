@@ -599,7 +599,8 @@ static const char *unauthorized(const http_server *srv, struct MHD_Connection *c
   size_t n = strlen(h);
   while (n && (h[n - 1] == ' ' || h[n - 1] == '\t')) n--;
   if (!token_equal(h, n, srv->token, srv->token_len))
-    return "the bearer token is wrong (it does not match the daemon's --token-file)";
+    return "the bearer token of the Authorization header is wrong (it does not match the daemon's "
+           "--token-file)";
   return NULL;
 }
 

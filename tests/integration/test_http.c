@@ -1792,7 +1792,7 @@ static void test_error_401(void) {
   r = get(&d, "/v1/scenes");
   CHECK_PROBLEM(r, 401, "GET /v1/scenes with a wrong token");
   p = jparse(&r);
-  CHECK(p && jstr(p, "detail") && strstr(jstr(p, "detail"), "token is wrong") &&
+  CHECK(p && jstr(p, "detail") && strstr(jstr(p, "detail"), "Authorization header is wrong") &&
             !strstr(jstr(p, "detail"), "no Authorization header"),
         "wrong token: detail says so: %.300s", r.body);
   cJSON_Delete(p);

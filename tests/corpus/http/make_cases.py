@@ -122,13 +122,14 @@ for m, p, kind in ROUTES:
 
 # ---- 4. paths that match no route, and bad ids ---------------------------------
 for name, p in [
-    ("root", "/"), ("v2", "/v2/scenes"), ("trailing_slash", "/v1/scenes/"), ("double_slash", "/v1//scenes"),
+    ("v2", "/v2/scenes"), ("trailing_slash", "/v1/scenes/"), ("double_slash", "/v1//scenes"),
     ("scene_suffix", S + "/paramsx"), ("scene_extra_segment", S + "/params/x"), ("render_typo", S + ":rendr"),
     ("render_as_path", S + "/render"), ("jobs_trailing", J + "/results/c1"), ("blobs_no_digest", "/v1/blobs/"),
     ("dotdot", "/v1/../v1/scenes"), ("encoded_dotdot", "/v1/%2e%2e/v1/scenes"), ("directions_no_sensor", S + "/sensors//directions"),
     ("metrics_slash", "/metrics/"), ("case", "/V1/SCENES"), ("backslash", "/v1\\scenes"),
 ]:
     add("path_" + name, "404|405|400", "-", req("GET", p))
+add("path_root", "302", "-", req("GET", "/"), "the root redirects to the viewer (/ui/)")
 add("path_encoded_slash_scene", "404|400", "-", req("GET", "/v1/scenes/{SCENE}%2Fparams"),
     "%2F decoded before routing (h-http)")
 add("path_encoded_slash_job", "404|400", "-", req("GET", "/v1/jobs/{JOB}%2Fresults"), "%2F (h-http)")
