@@ -7,6 +7,7 @@
 
 #include "render.h"
 #include "scene/scene.h"
+#include "sensors/sensor_common.h"
 
 /* Every channel a film can have, and each plane's channel names in the
  * same order: "<plane>.<channel>" (EXR's layer.channel convention). */
@@ -151,10 +152,7 @@ bool render_sun_angles(const scene *sc, double *zenith_deg, double *azimuth_deg)
   memset(&ds, 0, sizeof ds);
   (void)sun->ops->sample_direction(sun, &ref, v2(0.5, 0.5), &ds);
   /* ds.d points towards the sun: (sin θ cos φ, sin θ sin φ, cos θ). */
-  double z = ds.d.z < -1 ? -1 : ds.d.z > 1 ? 1 : ds.d.z;
-  double az = atan2(ds.d.y, ds.d.x) * 180 / M_PI;
-  *zenith_deg = acos(z) * 180 / M_PI;
-  *azimuth_deg = (az < 0 ? az + 360 : az) + 0.0; /* + 0.0: atan2(-0, x) is -0, printed "-0" */
+  direction_angles(ds.d, zenith_deg, azimuth_deg);
   return true;
 }
 

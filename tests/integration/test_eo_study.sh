@@ -8,7 +8,7 @@
 #   - the job is accepted without warnings, succeeds, and its dataset has
 #     the sza/band/wavelength dimensions and the band variables;
 #   - the sun's angles in the dataset are the contexts' sza (saa 0 but at
-#     the zenith);
+#     the zenith, never -0: atan2(-0, x) once printed "-0");
 #   - physics that would catch a wrong sun or view mapping: with the sun
 #     overhead the BRF is symmetric about nadir (the two 30° and the two
 #     60° views agree within 4 combined standard errors); at sza 60 the
@@ -62,6 +62,7 @@ assert list(d.sza.values) == [0, 20, 40, 60], d.sza.values
 assert list(d.band.values) == ["B3", "B4"], d.band.values
 assert d.sizes["wavelength"] > 2 and d.sizes["x"] == 5
 assert np.allclose(d.saa.values[1:], 0), d.saa.values
+assert not np.signbit(d.saa.values).any() and not np.signbit(d.vaa.values).any(), (d.saa.values, d.vaa.values)
 vza = d.vza.isel(y=0).values
 assert np.allclose(vza, [60, 30, 0, 30, 60], atol=1e-5), vza
 b, s = d.brf_srf.isel(y=0).values, d.brf_srf_stderr.isel(y=0).values
