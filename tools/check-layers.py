@@ -4,7 +4,8 @@
     tools/check-layers.py [-v] [DIR]   exit 0: no circle; 1: prints each circle
                                        (-v: every step inside each circle)
 
-A module is foo.c with foo.h beside it (either may be missing). Module A
+A module is foo.c with foo.h beside it (either may be missing), and its
+private header foo_internal.h if it has one. Module A
 depends on module B when a file of A
   - #includes a header of B ("..." includes resolved against the file's own
     directory, then against -I server, common, include), or
@@ -170,10 +171,11 @@ def declared_names(code):
                     k = decl.index("(", k + 1)
                 if k > 0 and re.match(r"[A-Za-z_]", decl[k - 1]):
                     out.add(decl[k - 1])
-            elif decl and decl[0] == "extern":
-                nm = [x for x in decl if re.match(r"[A-Za-z_]", x)]
-                if nm:
-                    out.add(nm[-1])
+            elif decl and decl[0] == "extern":  # extern T a, b[N];
+                for k, x in enumerate(decl):
+                    after = decl[k + 1] if k + 1 < len(decl) else ";"
+                    if re.match(r"[A-Za-z_]", x) and after in (",", "[", ";"):
+                        out.add(x)
             decl = []
         elif depth == 0:
             decl.append(t)
@@ -181,7 +183,9 @@ def declared_names(code):
 
 
 def module_of(root, path):
-    return os.path.splitext(os.path.relpath(path, root))[0]
+    """foo.c, foo.h and foo's private header foo_internal.h: module foo."""
+    m = os.path.splitext(os.path.relpath(path, root))[0]
+    return m[: -len("_internal")] if m.endswith("_internal") and path.endswith(".h") else m
 
 
 def build_graph(root):

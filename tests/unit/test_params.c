@@ -16,7 +16,9 @@
 
 #include "../../server/kernel/accel.h"
 #include "../../server/kernel/core/transform.h"
+#include "../../server/kernel/scene/param_table.h"
 #include "../../server/kernel/scene/params.h"
+#include "../../server/kernel/scene/update.h"
 #include "../support/test.h"
 #include "../support/tsup.h"
 
