@@ -70,6 +70,7 @@
 #include <string.h>
 
 #include "../accel.h"
+#include "../hit.h"
 #include "../scene/loader.h"
 #include "../scene/periodic.h"
 #include "../shapes/instance.h"

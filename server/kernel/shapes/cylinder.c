@@ -27,7 +27,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../accel.h"
+#include "../accel_hit.h"
 #include "shape_common.h"
 
 static void cylinder_bounds(const shape *s, vec3 *lo, vec3 *hi) {

@@ -3,7 +3,7 @@
  * in object space (Embree user geometry). */
 #include <stdlib.h>
 
-#include "../accel.h"
+#include "../accel_hit.h"
 #include "shape_common.h"
 
 /* Flat: z in [-0, 0] (accel.c pads it for Embree's box). */

@@ -4,7 +4,7 @@
 #ifndef RSW_SHAPES_MESH_H
 #define RSW_SHAPES_MESH_H
 
-#include "../accel.h"
+#include "../accel_hit.h"
 #include "shape.h"
 
 static inline vec3 mesh_vertex(const mesh *m, uint32_t i) {

@@ -4,7 +4,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../accel.h"
+#include "../accel_hit.h"
 #include "../scene/loader.h"
 #include "../scene/params.h"
 #include "mesh.h"

@@ -4,7 +4,7 @@
  * precision in object space (Embree user geometry). */
 #include <stdlib.h>
 
-#include "../accel.h"
+#include "../accel_hit.h"
 #include "shape_common.h"
 
 static void sphere_bounds(const shape *s, vec3 *lo, vec3 *hi) {
