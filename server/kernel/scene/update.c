@@ -95,12 +95,8 @@ static rsw_status parse_table(const cJSON *o, const char *where, spectrum *out, 
   return RSW_OK;
 }
 
-rsw_status param_value_parse(const char *json, const char *where, param_value *out, rsw_err *err) {
+rsw_status param_value_from_json(const cJSON *j, const char *where, param_value *out, rsw_err *err) {
   memset(out, 0, sizeof *out);
-  if (!json || !*json) return rsw_fail(err, RSW_ERR_PARSE, where, "empty value");
-  const char *end = NULL;
-  cJSON *j = cJSON_ParseWithOpts(json, &end, 1);
-  if (!j) return rsw_fail(err, RSW_ERR_PARSE, where, "value is not valid JSON: '%s'", json);
   rsw_status st = RSW_OK;
   if (cJSON_IsNumber(j)) {
     out->kind = PV_NUMBER;
@@ -173,8 +169,18 @@ rsw_status param_value_parse(const char *json, const char *where, param_value *o
   } else {
     st = rsw_fail(err, RSW_ERR_TYPE, where, "expected a number, a list of numbers or a spectrum object");
   }
-  cJSON_Delete(j);
   if (st) param_value_free(out);
+  return st;
+}
+
+rsw_status param_value_parse(const char *json, const char *where, param_value *out, rsw_err *err) {
+  memset(out, 0, sizeof *out);
+  if (!json || !*json) return rsw_fail(err, RSW_ERR_PARSE, where, "empty value");
+  const char *end = NULL;
+  cJSON *j = cJSON_ParseWithOpts(json, &end, 1);
+  if (!j) return rsw_fail(err, RSW_ERR_PARSE, where, "value is not valid JSON: '%s'", json);
+  rsw_status st = param_value_from_json(j, where, out, err);
+  cJSON_Delete(j);
   return st;
 }
 

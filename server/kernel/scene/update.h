@@ -29,6 +29,10 @@ typedef struct param_value {
 /* Parse a JSON text ("0.3", "[0.1,0.2,0.3]", a 16-number matrix, a
  * tabulated spectrum object). `where` names the input in errors. */
 rsw_status param_value_parse(const char *json, const char *where, param_value *out, rsw_err *err);
+/* The same from a parsed JSON value (a request body's member): no text in
+ * between, so the value is the wire's double exactly. */
+struct cJSON;
+rsw_status param_value_from_json(const struct cJSON *j, const char *where, param_value *out, rsw_err *err);
 void param_value_free(param_value *v);
 
 /* ---- updates -------------------------------------------------------------------- */
