@@ -164,6 +164,8 @@ def declared_names(code):
             depth += 1
         elif t == "}":
             depth -= 1
+            if depth == 0 and "=" not in decl:  # a function body or a struct ended
+                decl = [] if "(" in decl else decl
         elif depth == 0 and t == ";":
             if "(" in decl and "=" not in decl and decl[0] != "typedef":
                 k = decl.index("(")

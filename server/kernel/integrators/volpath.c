@@ -74,7 +74,6 @@
 #include "../scene/loader.h"
 #include "../scene/periodic.h"
 #include "../shapes/instance.h"
-#include "../shapes/mesh.h"
 #include "../shapes/shape.h"
 #include "integrator.h"
 

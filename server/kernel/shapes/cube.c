@@ -3,7 +3,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "shape_common.h"
+#include "shape_internal.h"
 
 /* cube: [-1,1]^3, 24 vertices (4 per face, per-face normals), 12
  * triangles, each face's uv in [0,1]^2 (mitsuba3 src/shapes/cube.cpp). */

@@ -9,7 +9,7 @@
 #include "../accel_hit.h"
 #include "../scene/params.h"
 #include "rsw_file.h"
-#include "shape_common.h"
+#include "shape_internal.h"
 
 /* ---- shapegroup ------------------------------------------------------------ */
 

@@ -3,7 +3,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "shape_common.h"
+#include "shape_internal.h"
 
 /* rectangle: [-1,1]^2 at z = 0, normal +z; vertices (-1,-1,0), (1,-1,0),
  * (-1,1,0), (1,1,0); triangles (1,2,0), (1,3,2) (mitsuba3
