@@ -99,7 +99,7 @@ vec3 accel_origin(const accel *a);
  * depend on a translation of the whole scene. */
 double accel_surface_error(const accel *a, uint32_t index, const xform *X, vec3 p, vec3 n);
 
-/* ---- updates (scene/params.c) ------------------------------------------------
+/* ---- updates (scene/update.c) -------------------------------------------------
  * Each call stages work on one shape; accel_commit() then commits the
  * top-level scene once if anything changed. */
 

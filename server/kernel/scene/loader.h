@@ -102,7 +102,7 @@ rsw_status ld_texture_opt(loader *ld, node *n, const char *name, double lo, text
  * volume holds (any cell, channel, tabulated wavelength) must lie in
  * [lo, hi] (-INFINITY / INFINITY: no bound), checked here and, through
  * the volume's lo/hi, on every update of its parameters
- * (volumes/volume.c). *out is owned by the scene. */
+ * (volumes/constvolume.c). *out is owned by the scene. */
 rsw_status ld_volume(loader *ld, node *n, const char *name, double def, double lo, double hi, volume **out);
 
 /* The nested object (or referenced object) of class cls. With name NULL,

@@ -1,5 +1,5 @@
 /* `cube`: a 24-vertex, 12-triangle mesh (mitsuba3 src/shapes/cube.cpp;
- * mesh.c has its geometry's ops). */
+ * shape.c has its geometry's ops). */
 #include <stdlib.h>
 #include <string.h>
 

@@ -1,4 +1,4 @@
-/* `rectangle`: a two-triangle mesh (Mitsuba 3.7.1's form; mesh.c has
+/* `rectangle`: a two-triangle mesh (Mitsuba 3.7.1's form; shape.c has
  * its geometry's ops). */
 #include <stdlib.h>
 #include <string.h>

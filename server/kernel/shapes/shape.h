@@ -17,8 +17,9 @@ typedef struct position_sample {
 } position_sample;
 
 /* ---- one interface per kind of geometry -------------------------------------
- * Each kind of geometry is one file with one table: mesh.c (triangle
- * meshes: rectangle, cube, obj, ply), sphere.c, disk.c, cylinder.c. accel.c
+ * Each kind of geometry has one table: triangle meshes (rectangle, cube,
+ * obj, ply) in shape.c beside what every shape shares (its inline code
+ * below), sphere.c, disk.c, cylinder.c. accel.c
  * and the shading code go through the table and never ask which kind a
  * shape is; a new kind of geometry is a new file with its table and its
  * plugin (and the plugin's line in scene/registry.c). */
