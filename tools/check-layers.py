@@ -153,35 +153,32 @@ def top_level_definitions(code):
     return defs
 
 
-def declared_names(code):
-    """Names a header declares at top level (prototypes, extern variables):
-    declaring a function is no use of it."""
-    out = set()
-    depth = 0
+def header_uses(code):
+    """Names a header uses: everything but its top-level prototypes and
+    extern declarations (declaring a function is no use of it; an inline
+    function calling it is)."""
+    kept = []
     decl = []
+    depth = 0
     for t in TOKEN_RE.findall(code):
+        if depth > 0:
+            kept.append(t)
+            depth += t == "{"
+            depth -= t == "}"
+            continue
         if t == "{":
-            depth += 1
-        elif t == "}":
-            depth -= 1
-            if depth == 0 and "=" not in decl:  # a function body or a struct ended
-                decl = [] if "(" in decl else decl
-        elif depth == 0 and t == ";":
-            if "(" in decl and "=" not in decl and decl[0] != "typedef":
-                k = decl.index("(")
-                while k > 0 and decl[k - 1] == "__attribute__":
-                    k = decl.index("(", k + 1)
-                if k > 0 and re.match(r"[A-Za-z_]", decl[k - 1]):
-                    out.add(decl[k - 1])
-            elif decl and decl[0] == "extern":  # extern T a, b[N];
-                for k, x in enumerate(decl):
-                    after = decl[k + 1] if k + 1 < len(decl) else ";"
-                    if re.match(r"[A-Za-z_]", x) and after in (",", "[", ";"):
-                        out.add(x)
+            kept.extend(decl)
             decl = []
-        elif depth == 0:
+            depth = 1
+        elif t == ";":
+            prototype = "(" in decl and "=" not in decl and decl[0] != "typedef"
+            if not prototype and decl[:1] != ["extern"]:
+                kept.extend(decl)
+            decl = []
+        else:
             decl.append(t)
-    return out
+    kept.extend(decl)
+    return {t for t in kept if re.match(r"[A-Za-z_]", t)}
 
 
 def module_of(root, path):
@@ -205,7 +202,10 @@ def build_graph(root):
             raw = fh.read()
         includes = [m.group(1) for m in map(INCLUDE_RE.match, raw.split("\n")) if m]
         code, pp = split_preprocessor(strip_comments_and_strings(raw))
-        names = set(re.findall(r"[A-Za-z_][A-Za-z0-9_]*", code + "\n" + pp))
+        if f.endswith(".h"):
+            names = header_uses(code) | set(re.findall(r"[A-Za-z_][A-Za-z0-9_]*", pp))
+        else:
+            names = set(re.findall(r"[A-Za-z_][A-Za-z0-9_]*", code + "\n" + pp))
         # Token pasting (a table of plugin_##name): any name of the file
         # with the pasted prefix or suffix may be named.
         for pre in re.findall(r"([A-Za-z_][A-Za-z0-9_]*)\s*##", pp):
@@ -213,8 +213,6 @@ def build_graph(root):
         for suf in re.findall(r"##\s*([A-Za-z0-9_]+)", pp):
             names |= {w + suf for w in list(names)}
         defs = top_level_definitions(code) if f.endswith(".c") else set()
-        if f.endswith(".h"):
-            names -= declared_names(code)
         own = set(re.findall(r"\bstatic\b[^;{=]*?\b([A-Za-z_][A-Za-z0-9_]*)\s*[\[(=;]", code))
         info[f] = (includes, names, defs, own)
     definer = {}

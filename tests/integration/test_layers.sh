@@ -35,6 +35,20 @@ if [ $? -eq 1 ] && grep -q 'names q (defined in q.c)' <<<"$out" && grep -q 'name
   ok "a circle through a shared header's functions is found"
 else bad "a circle through a shared header's functions is found" "$out"; fi
 
+# A circle through a header's inline function: common.h (no .c of its
+# own) calls g() of g.c inline, and g.c includes common.h; a prototype
+# after the inline function is no use.
+mkdir -p "$tmp/inline"
+printf 'static inline int twice(int x) { return 2 * x; }\nint g(int);\nstatic inline int h(int x) { return g(x); }\nint later(void);\n' > "$tmp/inline/common.h"
+printf '#include "common.h"\nint g(int x) { return twice(x); }\n' > "$tmp/inline/g.c"
+printf 'int later(void) { return 0; }\n' > "$tmp/inline/later.c"
+printf '#include "later.h"\nint user(void) { return 1; }\n' > "$tmp/inline/user.c"
+printf 'int user(void);\n' > "$tmp/inline/later.h"
+out=$(python3 "$check" "$tmp/inline" 2>&1)
+if [ $? -eq 1 ] && grep -q 'common.h names g (defined in g.c)' <<<"$out" && ! grep -q 'names later' <<<"$out"; then
+  ok "a circle through a header's inline function is found; its prototypes are no use"
+else bad "a circle through a header's inline function is found; its prototypes are no use" "$out"; fi
+
 # A table of pasted names (plugin_##name) names what it pastes; a call
 # through a function pointer and a static function of the same name are
 # no dependency.
