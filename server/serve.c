@@ -21,7 +21,7 @@
 #include "default_scene.h"
 #include "http/http.h"
 #include "kernel/core/isa.h"
-#include "kernel/plugins/env_plugin.h"
+#include "kernel/extplugin/env_plugin.h"
 #include "service/service.h"
 
 #define MAX_SCENES 256

@@ -26,20 +26,10 @@
 #ifndef RSW_ACCEL_H
 #define RSW_ACCEL_H
 
+#include "accel_hit.h"
 #include "kernel.h"
 
 typedef struct accel accel;
-
-typedef struct accel_hit {
-  double t;        /* distance along the (unnormalised) ray direction */
-  uint32_t shape;  /* index into scene->shapes */
-  uint32_t member; /* instanced hits: the member of the group (its geomID in the group) */
-  uint32_t sub;    /* instanced hits: the placement within an instancelist (0 for `instance`) */
-  uint32_t prim;   /* triangle index (meshes), 0 for analytic shapes */
-  double u, v;     /* barycentrics for triangles (p = (1-u-v) p0 + u p1 + v p2) */
-  vec3 ng;         /* unnormalised geometric normal in object space, oriented
-                       as (p1 - p0) x (p2 - p0) for triangles */
-} accel_hit;
 
 /* Build for all shapes of s (s->accel is set). Thread count for the
  * Embree build is Embree's default. */
@@ -109,7 +99,7 @@ vec3 accel_origin(const accel *a);
  * depend on a translation of the whole scene. */
 double accel_surface_error(const accel *a, uint32_t index, const xform *X, vec3 p, vec3 n);
 
-/* ---- updates (scene/params.c) ------------------------------------------------
+/* ---- updates (scene/update.c) -------------------------------------------------
  * Each call stages work on one shape; accel_commit() then commits the
  * top-level scene once if anything changed. */
 

@@ -552,7 +552,7 @@ typedef struct shape {
   double *tri_cdf;    /* meshes: cumulative world areas, n_faces entries */
   uint32_t tri_cdf_n; /* entries allocated in tri_cdf */
   /* A cdf computed ahead by a parameter update's validation, installed by
-   * parameters_changed instead of recomputing (scene/params.c). */
+   * parameters_changed instead of recomputing (scene/update.c). */
   double *tri_cdf_next;
   uint32_t tri_cdf_next_n;
   double area_next;

@@ -644,28 +644,6 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
   return RSW_OK;
 }
 
-uint64_t film_image_nonfinite(const film_image *img) {
-  size_t n = (size_t)img->width * (size_t)img->height * (size_t)img->channels;
-  uint64_t bad = 0;
-  for (size_t i = 0; img->data && i < n; i++) bad += !isfinite(img->data[i]);
-  for (int p = 0; p < img->n_planes; p++)
-    for (size_t i = 0; img->planes[p].data && i < n; i++) bad += !isfinite(img->planes[p].data[i]);
-  return bad;
-}
-
-void film_image_free(film_image *img) {
-  if (!img) return;
-  free(img->data);
-  img->data = NULL;
-  free(img->angles);
-  img->angles = NULL;
-  /* The planes' descriptions stay, like the film's size and channels. */
-  for (int p = 0; p < img->n_planes; p++) {
-    free(img->planes[p].data);
-    img->planes[p].data = NULL;
-  }
-}
-
 void render_stats_line(const render_result_stats *st, char *buf, size_t size) {
   const render_stats *r = &st->rays;
   uint64_t cont = r->rays >= r->camera_rays ? r->rays - r->camera_rays : 0;

@@ -154,11 +154,8 @@ rsw_status svc_map_to_updates(const cJSON *j, const scene *sc, const char *where
   size_t i = 0;
   for (const cJSON *k = j->child; k; k = k->next, i++) {
     u[i].key = k->string;
-    char *txt = cJSON_PrintUnformatted(k);
     rsw_err err = {0};
-    rsw_status st = txt ? param_value_parse(txt, k->string, &u[i].value, &err)
-                        : rsw_fail(&err, RSW_ERR_NOMEM, k->string, "out of memory");
-    free(txt);
+    rsw_status st = param_value_from_json(k, k->string, &u[i].value, &err);
     if (st) {
       for (size_t q = 0; q < i; q++) param_value_free(&u[q].value);
       free(u);

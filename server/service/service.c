@@ -14,7 +14,7 @@
 #include <unistd.h>
 
 #include "../kernel/core/isa.h"
-#include "../kernel/plugins/env_plugin.h"
+#include "../kernel/extplugin/env_plugin.h"
 #include "../kernel/scene/loader.h"
 #include "buf.h"
 #include "raysweep/version.h"

@@ -9,8 +9,10 @@
 
 #include <cjson/cJSON.h>
 
+#include "../kernel/scene/param_table.h"
 #include "../kernel/scene/params.h"
 #include "../kernel/scene/scene.h"
+#include "../kernel/scene/update.h"
 #include "bands.h"
 #include "dataset_nc.h"
 #include "service.h"

@@ -6,6 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../kernel/scene/param_table.h"
 #include "../kernel/scene/params.h"
 #include "buf.h"
 #include "rsw_sha256.h"

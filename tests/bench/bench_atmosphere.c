@@ -47,6 +47,7 @@
 #include "../../server/kernel/render.h"
 #include "../../server/kernel/scene/params.h"
 #include "../../server/kernel/scene/scene.h"
+#include "../../server/kernel/scene/update.h"
 #include "../support/daemon.h"
 #include "../support/tsup.h"
 #include "bench.h"

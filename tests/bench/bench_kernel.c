@@ -42,6 +42,7 @@
 #include "../../server/kernel/render.h"
 #include "../../server/kernel/scene/params.h"
 #include "../../server/kernel/scene/scene.h"
+#include "../../server/kernel/scene/update.h"
 #include "bench.h"
 
 /* Each figure is the median of REPEATS runs (render, ceiling and flat

@@ -22,6 +22,7 @@
 #include "../../server/kernel/core/rng.h"
 #include "../../server/kernel/scene/params.h"
 #include "../../server/kernel/scene/scene.h"
+#include "../../server/kernel/scene/update.h"
 #include "../../server/kernel/volumes/volume.h"
 #include "bench.h"
 

@@ -43,6 +43,7 @@
 #include "kernel/render.h"
 #include "kernel/scene/params.h"
 #include "kernel/scene/scene.h"
+#include "kernel/scene/update.h"
 #include "raysweep/client.h"
 #include "service/service.h"
 

@@ -15,6 +15,7 @@
 #include "../support/tsup.h"
 #include "image_exr.h"
 #include "kernel/core/distr2d.h"
+#include "kernel/scene/param_table.h"
 #include "kernel/scene/params.h"
 
 RSW_TEST_DEFINE_GLOBALS

@@ -16,7 +16,9 @@
 
 #include "../../server/kernel/accel.h"
 #include "../../server/kernel/core/transform.h"
+#include "../../server/kernel/scene/param_table.h"
 #include "../../server/kernel/scene/params.h"
+#include "../../server/kernel/scene/update.h"
 #include "../support/test.h"
 #include "../support/tsup.h"
 
@@ -641,6 +643,60 @@ typedef struct bad_case {
   const char *json; /* NULL: NaN number built directly */
 } bad_case;
 
+/* param_value_from_json (what the service calls on a request body's
+ * member, with no print-and-parse in between) gives what parsing the
+ * member's text gives: the same kind, the same doubles bitwise, and on
+ * bad values the same error code and message. */
+static bool values_equal(const param_value *a, const param_value *b) {
+  if (a->kind != b->kind || a->n != b->n || a->rows != b->rows || a->b != b->b) return false;
+  if (memcmp(&a->num, &b->num, sizeof a->num) != 0) return false;
+  if (a->n && memcmp(a->arr, b->arr, a->n * sizeof *a->arr) != 0) return false;
+  if (a->kind == PV_TABLE) {
+    if (a->table.kind != b->table.kind || a->table.n != b->table.n) return false;
+    if (a->table.n && (memcmp(a->table.wl, b->table.wl, a->table.n * sizeof(double)) != 0 ||
+                       memcmp(a->table.val, b->table.val, a->table.n * sizeof(double)) != 0))
+      return false;
+  }
+  return true;
+}
+
+static void test_value_from_json(void) {
+  static const char *const texts[] = {
+      "0.30000000000000004",
+      "-2e-3",
+      "1e308",
+      "true",
+      "[0.1, 0.2, 0.3]",
+      "[[1, 2, 3, 4], [5, 6, 7, 8], [9, 10, 11, 12], [0, 0, 0, 1]]",
+      "{\"wavelengths\": [400, 500, 600], \"values\": [0.1, 0.2, 0.4]}",
+      "{\"type\": \"spectrum\", \"value\": [[400, 0.1], [500, 0.2]]}",
+      "{\"type\": \"rgb\", \"value\": [0.2, 0.5, 0.7]}",
+      "{\"type\": \"uniform\", \"value\": 0.25}",
+      "{\"type\": \"rgb\", \"value\": [1, 2]}",
+      "[[1, 2], [3]]",
+      "\"text\"",
+      "null",
+      "{\"wavelengths\": [500, 400], \"values\": [0.1, 0.2]}",
+  };
+  for (size_t i = 0; i < sizeof texts / sizeof texts[0]; i++) {
+    cJSON *j = cJSON_Parse(texts[i]);
+    REQUIRE(j != NULL, "%s parses", texts[i]);
+    param_value a = {0}, b = {0};
+    rsw_err ea = {0}, eb = {0};
+    rsw_status sa = param_value_parse(texts[i], "k", &a, &ea);
+    rsw_status sb = param_value_from_json(j, "k", &b, &eb);
+    CHECK(sa == sb, "%s: parse %d, from_json %d", texts[i], (int)sa, (int)sb);
+    if (sa == RSW_OK && sb == RSW_OK)
+      CHECK(values_equal(&a, &b), "%s: the values differ", texts[i]);
+    else
+      CHECK(strcmp(ea.msg, eb.msg) == 0 && strcmp(ea.where, eb.where) == 0,
+            "%s: '%s' at '%s' vs '%s' at '%s'", texts[i], ea.msg, ea.where, eb.msg, eb.where);
+    param_value_free(&a);
+    param_value_free(&b);
+    cJSON_Delete(j);
+  }
+}
+
 static void test_atomic_bad_entry(void) {
   scene *s = misc_scene(NULL);
   REQUIRE(s, "load");
@@ -1019,6 +1075,7 @@ int main(void) {
   RSW_TEST_RUN(test_lookup);
   RSW_TEST_RUN(test_value_json);
   RSW_TEST_RUN(test_value_parse);
+  RSW_TEST_RUN(test_value_from_json);
   RSW_TEST_RUN(test_atomic_bad_entry);
   RSW_TEST_RUN(test_equal_values_noop);
   RSW_TEST_RUN(test_update_classes_counters);

@@ -8,7 +8,9 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "../../server/kernel/scene/param_table.h"
 #include "../../server/kernel/scene/params.h"
+#include "../../server/kernel/scene/update.h"
 #include "../support/chi2.h"
 #include "../support/test.h"
 #include "../support/tsup.h"

@@ -1,4 +1,4 @@
-/* Environment plugin loader and adapter (server/kernel/plugins/env_plugin.c).
+/* Environment plugin loader and adapter (server/kernel/extplugin/env_plugin.c).
  *
  * Tiny plugins are written to a temporary directory and compiled at test
  * time with `cc -shared -fPIC -I include` (the compiler is part of the
@@ -12,11 +12,13 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include "kernel/plugins/env_plugin.h"
+#include "kernel/extplugin/env_plugin.h"
 #include "kernel/render.h"
 #include "kernel/scene/loader.h"
+#include "kernel/scene/param_table.h"
 #include "kernel/scene/params.h"
 #include "kernel/scene/scene.h"
+#include "kernel/scene/update.h"
 
 RSW_TEST_DEFINE_GLOBALS
 

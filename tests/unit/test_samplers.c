@@ -39,6 +39,7 @@ static rsw_status build(harness *h, const char *type, int spp, long seed, int ji
   h->ld.err = &h->err;
   h->ld.root = h->doc;
   h->ld.scene = &h->sc;
+  h->ld.hooks = &scene_build_hooks;
   object *o = NULL;
   rsw_status st = registry_find(type)->create(&h->ld, h->doc, &o);
   if (st == RSW_OK) h->s = (sampler *)o;

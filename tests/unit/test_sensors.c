@@ -62,6 +62,7 @@ static void h_init(harness *h, node *doc, rsw_variant v) {
   h->ld.err = &h->err;
   h->ld.root = doc;
   h->ld.scene = &h->sc;
+  h->ld.hooks = &scene_build_hooks;
   h->ld.base_dir = ".";
   h->sc.variant = v;
   h->doc = doc;

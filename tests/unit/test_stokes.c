@@ -10,7 +10,7 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "../../server/kernel/plugins/env_plugin.h"
+#include "../../server/kernel/extplugin/env_plugin.h"
 #include "../support/test.h"
 #include "../support/tsup.h"
 

@@ -27,6 +27,7 @@
 #include "../../server/kernel/accel.h"
 #include "../../server/kernel/core/transform.h"
 #include "../../server/kernel/scene/params.h"
+#include "../../server/kernel/scene/update.h"
 #include "../../server/kernel/shapes/shape.h"
 #include "../support/chi2.h"
 #include "../support/test.h"

@@ -20,8 +20,10 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "../../server/kernel/plugins/env_plugin.h"
+#include "../../server/kernel/extplugin/env_plugin.h"
+#include "../../server/kernel/scene/param_table.h"
 #include "../../server/kernel/scene/params.h"
+#include "../../server/kernel/scene/update.h"
 #include "../support/chi2.h"
 #include "../support/test.h"
 #include "../support/tsup.h"

@@ -26,6 +26,7 @@
 #include "../../server/kernel/core/rng.h"
 #include "../../server/kernel/core/transform.h"
 #include "../../server/kernel/scene/params.h"
+#include "../../server/kernel/scene/update.h"
 #include "../../server/kernel/shapes/instance.h"
 #include "../support/test.h"
 #include "../support/tsup.h"

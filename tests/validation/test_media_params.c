@@ -27,7 +27,9 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../../server/kernel/scene/param_table.h"
 #include "../../server/kernel/scene/params.h"
+#include "../../server/kernel/scene/update.h"
 #include "../support/test.h"
 #include "../support/tsup.h"
 

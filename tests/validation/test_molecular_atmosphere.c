@@ -27,6 +27,7 @@
 #include "../../server/kernel/render.h"
 #include "../../server/kernel/scene/params.h"
 #include "../../server/kernel/scene/scene.h"
+#include "../../server/kernel/scene/update.h"
 #include "../support/test.h"
 #include "../support/tsup.h"
 

@@ -20,6 +20,7 @@
 
 #include "../../server/kernel/core/rng.h"
 #include "../../server/kernel/core/transform.h"
+#include "../../server/kernel/scene/param_table.h"
 #include "../../server/kernel/scene/params.h"
 #include "../support/test.h"
 #include "../support/tsup.h"

@@ -16,6 +16,7 @@
 
 #include "../../server/kernel/core/transform.h"
 #include "../../server/kernel/scene/params.h"
+#include "../../server/kernel/scene/update.h"
 #include "../support/test.h"
 #include "../support/tsup.h"
 

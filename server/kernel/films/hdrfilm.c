@@ -17,8 +17,8 @@
 
 #include <math.h>
 
-#include "../render.h"
 #include "../scene/loader.h"
+#include "film_planes.h"
 
 /* Bounds that keep a hostile document from asking for a huge buffer. */
 #define HDRFILM_MAX_DIM    65536

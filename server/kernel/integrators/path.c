@@ -13,6 +13,7 @@
 #include <time.h>
 
 #include "../accel.h"
+#include "../hit.h"
 #include "../samplers/sampler_batch.h"
 #include "../scene/loader.h"
 #include "../scene/periodic.h"

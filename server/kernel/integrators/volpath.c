@@ -70,10 +70,10 @@
 #include <string.h>
 
 #include "../accel.h"
+#include "../hit.h"
 #include "../scene/loader.h"
 #include "../scene/periodic.h"
 #include "../shapes/instance.h"
-#include "../shapes/mesh.h"
 #include "../shapes/shape.h"
 #include "integrator.h"
 

@@ -3,6 +3,7 @@
 #include <stdlib.h>
 
 #include "../accel.h"
+#include "../hit.h"
 #include "../scene/loader.h"
 #include "../scene/params.h"
 #include "../scene/periodic.h"

@@ -7,8 +7,8 @@
  * be gathered from its sampler_state and scattered back, and measured on
  * the seed scene at AVX-512 vector draws took 8% of a render against 4%
  * for the scalar loop (AVX2 emulates the 64-bit multiply: worse still). */
+#include "pcg_simd.h"
 #include "../core/isa.h"
-#include "sampler_common.h"
 
 #if defined(__x86_64__) || defined(__i386__)
 typedef uint64_t vu_8 __attribute__((vector_size(64)));

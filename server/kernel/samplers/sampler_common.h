@@ -13,6 +13,7 @@
 #define RSW_SAMPLERS_SAMPLER_COMMON_H
 
 #include "../kernel.h"
+#include "pcg_simd.h"
 
 /* Upper bound on sample_count (keeps ceil(sqrt(spp))^2 within 32 bits). */
 #define SAMPLER_MAX_SPP (1LL << 30)
@@ -38,12 +39,6 @@ static inline void sampler_seed_stream(const sampler *s, sampler_state *st, uint
                                        uint32_t sample_index, uint32_t spp) {
   sampler_seed_stream_key(s, st, sampler_pixel_key(seed + s->seed, pixel), sample_index, spp);
 }
-
-/* For n lanes (pcg_simd.c, vectorised at the render's ISA; bitwise the
- * scalar code): the PCG32 state and increment that sampler_seed_stream_key
- * gives pixel key key[k] and sample index[k]. */
-void sampler_pcg_seed_batch(int n, const uint64_t *key, const uint32_t *index, uint64_t *state,
-                            uint64_t *inc);
 
 /* out[k] = the stratified sampler's permute(in[k], l, seed[k]) (Kensler's
  * hash permutation of [0, l), samplers/stratified.c) for k < n, l >= 1;

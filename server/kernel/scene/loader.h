@@ -12,7 +12,27 @@
 #include "../kernel.h"
 #include "node.h"
 
-typedef struct loader {
+typedef struct loader loader;
+
+/* How the getters reach what lies above them: the scene assembly
+ * (scene/build.c) sets these. Building a nested object runs its plugin's
+ * create(), which calls these getters again; through pointers, the
+ * getters stay below every plugin (tools/check-layers.py). */
+typedef struct loader_hooks {
+  /* The plugin of node n (by its type), checking the XML tag agrees with
+   * its class; an unknown type is an error naming it. */
+  rsw_status (*node_plugin)(loader *ld, node *n, const plugin **out);
+  /* Build (or return the already built) object of node n, of class cls
+   * (CLS__COUNT for any class), rejecting properties it left unused. */
+  rsw_status (*build)(loader *ld, node *n, obj_class cls, object **out);
+  /* The plugin registered under name, or NULL. */
+  const plugin *(*find)(const char *name);
+  /* A uniform texture holding s (error locations: where, may be NULL);
+   * NULL when out of memory. */
+  texture *(*uniform_texture)(const spectrum *s, const char *id, const char *where);
+} loader_hooks;
+
+struct loader {
   rsw_variant variant;
   rsw_err *err;
   const char *base_dir; /* directory relative file names resolve against */
@@ -27,7 +47,22 @@ typedef struct loader {
    * power of two), so that 100,000 refs resolve in linear time */
   node **ref_slots;
   size_t ref_cap;
-} loader;
+  const loader_hooks *hooks;
+};
+
+/* The scene assembly's hooks (scene/build.c): what a loader made outside
+ * scene_build (a test building one plugin) points ld->hooks at. */
+extern const loader_hooks scene_build_hooks;
+
+/* Index the document's ids and refs (before building anything). */
+rsw_status ld_index(loader *ld);
+/* The node a ref to id resolves to, or NULL. */
+node *ld_resolve_ref(loader *ld, const char *id);
+/* Class of the object a node/ref property p of owner stands for (without
+ * building it); *target gets its node. */
+rsw_status ld_prop_class(loader *ld, node *owner, prop *p, obj_class *cls, node **target);
+/* The plugin registered under type, or NULL (through ld->hooks). */
+const plugin *ld_find_plugin(loader *ld, const char *type);
 
 /* Report an error about property `name` of n (or about n itself when name
  * is NULL) and return code. */
@@ -67,7 +102,7 @@ rsw_status ld_texture_opt(loader *ld, node *n, const char *name, double lo, text
  * volume holds (any cell, channel, tabulated wavelength) must lie in
  * [lo, hi] (-INFINITY / INFINITY: no bound), checked here and, through
  * the volume's lo/hi, on every update of its parameters
- * (volumes/volume.c). *out is owned by the scene. */
+ * (volumes/constvolume.c). *out is owned by the scene. */
 rsw_status ld_volume(loader *ld, node *n, const char *name, double def, double lo, double hi, volume **out);
 
 /* The nested object (or referenced object) of class cls. With name NULL,
@@ -91,7 +126,10 @@ rsw_status ld_create_default(loader *ld, const char *type, obj_class cls, const 
 rsw_status spectrum_eval(const spectrum *s, const render_ctx *rc, color *out, rsw_err *err,
                          const char *where);
 
-/* Registry lookup (scene/registry.c). NULL if unknown. */
+/* The plugin registered under name: the built-in ones (scene/registry.c),
+ * then the environment plugins (extplugin/env_plugin.h). For the scene
+ * assembly, above the plugins (scene/build.c); plugins call
+ * ld_find_plugin. NULL if unknown. */
 const plugin *registry_find(const char *name);
 /* All registered plugins, NULL-terminated. */
 extern const plugin *const rsw_plugins[];

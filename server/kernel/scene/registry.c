@@ -1,6 +1,5 @@
 /* The one list of plugins. Adding a plugin is one new file defining
  * `const plugin plugin_<name>` and one line here. */
-#include "../plugins/env_plugin.h"
 #include "loader.h"
 
 #include <string.h>
@@ -38,22 +37,3 @@ const plugin *const rsw_plugins[] = {
     PLUGINS(ENTRY_)
 #undef ENTRY_
         NULL};
-
-const plugin *registry_find(const char *name) {
-  size_t n = sizeof rsw_plugins / sizeof rsw_plugins[0] - 1;
-  for (size_t i = 0; i < n; i++)
-    if (strcmp(rsw_plugins[i]->name, name) == 0) return rsw_plugins[i];
-  return plugins_find(name); /* environment plugins loaded with --plugin-dir */
-}
-
-static const char *const class_names[CLS__COUNT] = {
-    [CLS_SCENE] = "scene",     [CLS_SHAPE] = "shape",     [CLS_BSDF] = "bsdf",
-    [CLS_EMITTER] = "emitter", [CLS_SENSOR] = "sensor",   [CLS_FILM] = "film",
-    [CLS_SAMPLER] = "sampler", [CLS_RFILTER] = "rfilter", [CLS_INTEGRATOR] = "integrator",
-    [CLS_TEXTURE] = "texture", [CLS_MEDIUM] = "medium",   [CLS_PHASE] = "phase",
-    [CLS_VOLUME] = "volume",
-};
-
-const char *obj_class_name(obj_class c) {
-  return (unsigned)c < CLS__COUNT ? class_names[c] : "object";
-}

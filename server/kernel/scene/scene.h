@@ -32,6 +32,12 @@ rsw_status scene_load_file(const char *path, const scene_load_opts *opts, scene 
 rsw_status scene_load_memory(const char *text, size_t len, const char *name, bool is_xml,
                              const scene_load_opts *opts, scene **out, rsw_err *err);
 
+/* The scene plugin's create() (scene/scene.c): builds the root's children
+ * through ld->hooks and sorts them into s (ld->scene). */
+struct loader;
+rsw_status scene_create(struct loader *ld, node *n, object **out);
+extern const plugin plugin_scene;
+
 /* Recompute the scene's bounds and what emitters and sensors derive from
  * them (after geometry changed). */
 rsw_status scene_refresh_bounds(scene *s, rsw_err *err);

@@ -1,9 +1,9 @@
 /* `cube`: a 24-vertex, 12-triangle mesh (mitsuba3 src/shapes/cube.cpp;
- * mesh.c has its geometry's ops). */
+ * shape.c has its geometry's ops). */
 #include <stdlib.h>
 #include <string.h>
 
-#include "shape_common.h"
+#include "shape_internal.h"
 
 /* cube: [-1,1]^3, 24 vertices (4 per face, per-face normals), 12
  * triangles, each face's uv in [0,1]^2 (mitsuba3 src/shapes/cube.cpp). */

@@ -27,8 +27,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../accel.h"
-#include "shape_common.h"
+#include "../accel_hit.h"
+#include "shape_internal.h"
 
 static void cylinder_bounds(const shape *s, vec3 *lo, vec3 *hi) {
   *lo = v3(-1, -1, 0), *hi = v3(1, 1, 1); /* the unit tube, 0 <= z <= 1 */

@@ -3,8 +3,8 @@
  * in object space (Embree user geometry). */
 #include <stdlib.h>
 
-#include "../accel.h"
-#include "shape_common.h"
+#include "../accel_hit.h"
+#include "shape_internal.h"
 
 /* Flat: z in [-0, 0] (accel.c pads it for Embree's box). */
 static void disk_bounds(const shape *s, vec3 *lo, vec3 *hi) {

@@ -59,15 +59,3 @@ void instance_bbox(const shape *s, vec3 *lo, vec3 *hi);
 rsw_status instance_list_parse(const char *path, float **xf, uint32_t *n, rsw_err *err);
 
 #endif
-
-/* Hit -> interaction for any top-level shape: plain shapes go to
- * shape_fill_interaction; a hit inside an instanced group is filled from
- * the member's geometry under placement * member.to_world, and si->shape is
- * the member (its BSDF shades the hit). */
-struct accel_hit;
-void hit_fill_interaction(const scene *sc, const ray3 *r, const struct accel_hit *h, surface_interaction *si);
-/* hit_fill_interaction for n hits (lane i: r[i], h[i] -> si[i]), the
- * shading frames and wi vectorised (shape_frames_batch): each si is
- * bitwise what hit_fill_interaction gives. */
-void hit_fill_interaction_batch(const scene *sc, int n, const ray3 *const *r,
-                                const struct accel_hit *const *h, surface_interaction *const *si);

@@ -9,7 +9,7 @@
 #include <stdlib.h>
 
 #include "mesh_io.h"
-#include "shape_common.h"
+#include "shape_internal.h"
 
 static rsw_status meshfile_create(loader *ld, node *n, object **out, bool is_obj) {
   shape *s = shape_new(&shape_ops_mesh);

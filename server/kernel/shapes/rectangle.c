@@ -1,9 +1,9 @@
-/* `rectangle`: a two-triangle mesh (Mitsuba 3.7.1's form; mesh.c has
+/* `rectangle`: a two-triangle mesh (Mitsuba 3.7.1's form; shape.c has
  * its geometry's ops). */
 #include <stdlib.h>
 #include <string.h>
 
-#include "shape_common.h"
+#include "shape_internal.h"
 
 /* rectangle: [-1,1]^2 at z = 0, normal +z; vertices (-1,-1,0), (1,-1,0),
  * (-1,1,0), (1,1,0); triangles (1,2,0), (1,3,2) (mitsuba3

@@ -4,8 +4,8 @@
  * precision in object space (Embree user geometry). */
 #include <stdlib.h>
 
-#include "../accel.h"
-#include "shape_common.h"
+#include "../accel_hit.h"
+#include "shape_internal.h"
 
 static void sphere_bounds(const shape *s, vec3 *lo, vec3 *hi) {
   *lo = v3(-1, -1, -1), *hi = v3(1, 1, 1);

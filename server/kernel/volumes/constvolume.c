@@ -9,6 +9,7 @@
  *
  * Source: mitsuba3 src/volumes/const.cpp. */
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -117,5 +118,68 @@ static rsw_status constvolume_create(loader *ld, node *n, object **out) {
   volume *v = constvolume_make(t, ld->variant, &xf, n->id);
   if (!v) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "constvolume: out of memory");
   *out = &v->base;
+  return RSW_OK;
+}
+
+/* ---- ld_volume (scene/loader.h) ------------------------------------------------ */
+
+/* Mitsuba's props.volume(): a number, an rgb triple or a spectrum (or a
+ * nested uniform texture) becomes a constvolume; a nested or referenced
+ * volume is taken as it is. */
+static const char *range_text(double lo, double hi, char *buf, size_t len) {
+  if (isinf(hi))
+    snprintf(buf, len, ">= %g", lo);
+  else if (isinf(lo))
+    snprintf(buf, len, "<= %g", hi);
+  else
+    snprintf(buf, len, "in [%g, %g]", lo, hi);
+  return buf;
+}
+
+rsw_status ld_volume(loader *ld, node *n, const char *name, double def, double lo, double hi, volume **out) {
+  prop *p = node_find(n, name);
+  volume *v = NULL;
+  bool nested_texture = false;
+  if (p && p->kind == PROP_NODE) {
+    const plugin *pl = ld_find_plugin(ld, p->child->type);
+    nested_texture = pl && pl->cls == CLS_TEXTURE;
+  }
+  if (p && (p->kind == PROP_NODE || p->kind == PROP_REF) && !nested_texture) {
+    object *o;
+    rsw_status st = ld_child(ld, n, name, CLS_VOLUME, &o);
+    if (st) return st;
+    v = (volume *)o;
+  } else {
+    /* A constant: a uniform texture wrapped in a constvolume. ld_texture
+     * checks the lower bound of constants and the type. */
+    texture *t;
+    rsw_status st = ld_texture(ld, n, name, def, isinf(lo) ? -INFINITY : lo, &t);
+    if (st) return st;
+    if (!uniform_texture_spectrum(t))
+      return ld_fail(
+          ld, n, name, RSW_ERR_TYPE,
+          "property '%s' must be a number, a spectrum or a volume (a constvolume holds spectra, not "
+          "the texture plugin '%s')",
+          name, t->base.plugin->name);
+    v = constvolume_new(t, ld->variant, n->id);
+    if (!v) return ld_fail(ld, n, name, RSW_ERR_NOMEM, "out of memory");
+    st = ld_adopt(ld, &v->base);
+    if (st) return st;
+  }
+  double vlo, vhi;
+  v->ops->value_range(v, &vlo, &vhi);
+  char want[96];
+  if (vlo < lo || vhi > hi) {
+    if (vlo == vhi)
+      return ld_fail(ld, n, name, RSW_ERR_RANGE, "property '%s' must be %s (got %g)", name,
+                     range_text(lo, hi, want, sizeof want), vlo);
+    return ld_fail(ld, n, name, RSW_ERR_RANGE, "property '%s': values must be %s (the volume holds %g to %g)",
+                   name, range_text(lo, hi, want, sizeof want), vlo, vhi);
+  }
+  /* A volume shared by several slots must satisfy all of them, now and
+   * on every update. */
+  v->lo = fmax(v->lo, lo);
+  v->hi = fmin(v->hi, hi);
+  *out = v;
   return RSW_OK;
 }

@@ -1,7 +1,6 @@
-/* What every volume shares (box, to_world), and ld_volume(): Mitsuba's
- * props.volume(), which turns a number, an rgb triple or a spectrum (or a
- * nested uniform texture) into a constvolume and takes a nested or
- * referenced volume as it is. */
+/* What every volume shares (box, to_world, lists of numbers). ld_volume()
+ * (Mitsuba's props.volume()), which makes a constvolume of a constant,
+ * lives with the constvolume plugin (volumes/constvolume.c). */
 #include <errno.h>
 #include <math.h>
 #include <stdio.h>
@@ -36,64 +35,6 @@ rsw_status volume_read_to_world(loader *ld, node *n, xform *out) {
 
 void volume_traverse_to_world(volume *v, param_visitor *pv) {
   pv_transform(pv, "to_world", &v->to_world, UPDATE_SPECTRAL, NULL);
-}
-
-static const char *range_text(double lo, double hi, char *buf, size_t len) {
-  if (isinf(hi))
-    snprintf(buf, len, ">= %g", lo);
-  else if (isinf(lo))
-    snprintf(buf, len, "<= %g", hi);
-  else
-    snprintf(buf, len, "in [%g, %g]", lo, hi);
-  return buf;
-}
-
-rsw_status ld_volume(loader *ld, node *n, const char *name, double def, double lo, double hi, volume **out) {
-  prop *p = node_find(n, name);
-  volume *v = NULL;
-  bool nested_texture = false;
-  if (p && p->kind == PROP_NODE) {
-    const plugin *pl = registry_find(p->child->type);
-    nested_texture = pl && pl->cls == CLS_TEXTURE;
-  }
-  if (p && (p->kind == PROP_NODE || p->kind == PROP_REF) && !nested_texture) {
-    object *o;
-    rsw_status st = ld_child(ld, n, name, CLS_VOLUME, &o);
-    if (st) return st;
-    v = (volume *)o;
-  } else {
-    /* A constant: a uniform texture wrapped in a constvolume. ld_texture
-     * checks the lower bound of constants and the type. */
-    texture *t;
-    rsw_status st = ld_texture(ld, n, name, def, isinf(lo) ? -INFINITY : lo, &t);
-    if (st) return st;
-    if (!uniform_texture_spectrum(t))
-      return ld_fail(
-          ld, n, name, RSW_ERR_TYPE,
-          "property '%s' must be a number, a spectrum or a volume (a constvolume holds spectra, not "
-          "the texture plugin '%s')",
-          name, t->base.plugin->name);
-    v = constvolume_new(t, ld->variant, n->id);
-    if (!v) return ld_fail(ld, n, name, RSW_ERR_NOMEM, "out of memory");
-    st = ld_adopt(ld, &v->base);
-    if (st) return st;
-  }
-  double vlo, vhi;
-  v->ops->value_range(v, &vlo, &vhi);
-  char want[96];
-  if (vlo < lo || vhi > hi) {
-    if (vlo == vhi)
-      return ld_fail(ld, n, name, RSW_ERR_RANGE, "property '%s' must be %s (got %g)", name,
-                     range_text(lo, hi, want, sizeof want), vlo);
-    return ld_fail(ld, n, name, RSW_ERR_RANGE, "property '%s': values must be %s (the volume holds %g to %g)",
-                   name, range_text(lo, hi, want, sizeof want), vlo, vhi);
-  }
-  /* A volume shared by several slots must satisfy all of them, now and
-   * on every update. */
-  v->lo = fmax(v->lo, lo);
-  v->hi = fmin(v->hi, hi);
-  *out = v;
-  return RSW_OK;
 }
 
 rsw_status volume_read_numbers(loader *ld, node *n, const char *name, double **out, size_t *count,

@@ -1,13 +1,13 @@
-/* A film's planes beyond radiance (render.h): their names, channel names,
+/* A film's planes beyond radiance (film_planes.h): their names, channel names,
  * interleaving for the one-array formats (EXR channels, .npy), and the
  * horizontal irradiance the BRDF and BRF divide by. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
-#include "render.h"
-#include "scene/scene.h"
-#include "sensors/sensor_common.h"
+#include "../scene/scene.h"
+#include "../sensors/sensor_common.h"
+#include "film_planes.h"
 
 /* Every channel a film can have, and each plane's channel names in the
  * same order: "<plane>.<channel>" (EXR's layer.channel convention). */
@@ -242,4 +242,26 @@ const film_plane *film_image_plane(const film_image *img, const char *name) {
 
 void film_plane_init(const film_image *img, const char *name, film_plane *p) {
   plane_describe(img, plane_index(name), p);
+}
+
+uint64_t film_image_nonfinite(const film_image *img) {
+  size_t n = (size_t)img->width * (size_t)img->height * (size_t)img->channels;
+  uint64_t bad = 0;
+  for (size_t i = 0; img->data && i < n; i++) bad += !isfinite(img->data[i]);
+  for (int p = 0; p < img->n_planes; p++)
+    for (size_t i = 0; img->planes[p].data && i < n; i++) bad += !isfinite(img->planes[p].data[i]);
+  return bad;
+}
+
+void film_image_free(film_image *img) {
+  if (!img) return;
+  free(img->data);
+  img->data = NULL;
+  free(img->angles);
+  img->angles = NULL;
+  /* The planes' descriptions stay, like the film's size and channels. */
+  for (int p = 0; p < img->n_planes; p++) {
+    free(img->planes[p].data);
+    img->planes[p].data = NULL;
+  }
 }

@@ -1,9 +1,8 @@
-/* A rendered film's EXR attributes and file (render.h), through the one
+/* A rendered film's EXR attributes and file (film_exr.h), through the one
  * EXR writer of the project (common/film_io.h). */
 #include <stdlib.h>
 
-#include "film_io.h"
-#include "render.h"
+#include "film_exr.h"
 
 film_exr_info film_image_exr_info(const film_image *img, const char *sensor_id) {
   film_exr_info info = film_exr_info_none();

@@ -1,6 +1,6 @@
 /* Private helpers for shape plugins. */
-#ifndef RSW_SHAPES_SHAPE_COMMON_H
-#define RSW_SHAPES_SHAPE_COMMON_H
+#ifndef RSW_SHAPES_SHAPE_INTERNAL_H
+#define RSW_SHAPES_SHAPE_INTERNAL_H
 
 #include "../scene/loader.h"
 #include "shape.h"

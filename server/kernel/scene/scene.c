@@ -1,0 +1,157 @@
+/* The scene plugin (what the document's root becomes: its children sorted
+ * into shapes, emitters, sensors, the integrator), and what a built scene
+ * answers and how it goes: preparing its objects for a render, finding a
+ * sensor, freeing it. The assembly that builds it is scene/build.c. */
+#include <errno.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../accel.h"
+#include "loader.h"
+#include "params.h"
+#include "periodic.h"
+#include "scene.h"
+
+/* ---- the scene plugin --------------------------------------------------------------- */
+
+static rsw_status push_ptr(void ***arr, size_t *n, void *p) {
+  void **a = realloc(*arr, (*n + 1) * sizeof *a);
+  if (!a) return RSW_ERR_NOMEM;
+  a[(*n)++] = p;
+  *arr = a;
+  return RSW_OK;
+}
+
+static rsw_status add_emitter(loader *ld, scene *s, emitter *e, const char *where) {
+  if (e->flags & EMITTER_INFINITE) {
+    if (s->environment)
+      return rsw_fail(ld->err, RSW_ERR_INVALID, where,
+                      "only one environment emitter per scene ('%s' and '%s')", s->environment->base.id,
+                      e->base.id);
+    s->environment = e;
+  }
+  if (push_ptr((void ***)&s->emitters, &s->n_emitters, e))
+    return rsw_fail(ld->err, RSW_ERR_NOMEM, where, "out of memory");
+  return RSW_OK;
+}
+
+/* The scene's children: shapes (and their area emitters), emitters,
+ * sensors, the integrator, a periodic boundary; other classes are declared
+ * at the top level to be referenced. */
+rsw_status scene_create(loader *ld, node *n, object **out) {
+  scene *s = ld->scene;
+  for (size_t i = 0; i < n->n_props; i++) {
+    prop *p = &n->props[i];
+    if (p->kind != PROP_NODE && p->kind != PROP_REF) continue;
+    if (p->used) continue; /* synthetic defaults */
+    node *t;
+    obj_class c;
+    rsw_status st = ld_prop_class(ld, n, p, &c, &t);
+    if (st) return st;
+    object *o;
+    st = ld->hooks->build(ld, t, c, &o);
+    if (st) return st;
+    p = &n->props[i]; /* building may have grown the root's property array */
+    p->used = true;
+    switch (c) {
+    case CLS_SHAPE: {
+      shape *sh = (shape *)o;
+      if (push_ptr((void ***)&s->shapes, &s->n_shapes, sh))
+        return rsw_fail(ld->err, RSW_ERR_NOMEM, p->loc, "out of memory");
+      if (sh->emitter) {
+        st = add_emitter(ld, s, sh->emitter, p->loc);
+        if (st) return st;
+      }
+      break;
+    }
+    case CLS_EMITTER:
+      if (((emitter *)o)->flags & EMITTER_SURFACE)
+        return rsw_fail(ld->err, RSW_ERR_INVALID, p->loc, "an area emitter must be nested in a shape");
+      st = add_emitter(ld, s, (emitter *)o, p->loc);
+      if (st) return st;
+      break;
+    case CLS_SENSOR:
+      if (push_ptr((void ***)&s->sensors, &s->n_sensors, o))
+        return rsw_fail(ld->err, RSW_ERR_NOMEM, p->loc, "out of memory");
+      break;
+    case CLS_INTEGRATOR:
+      if (s->integrator) return rsw_fail(ld->err, RSW_ERR_DUPLICATE, p->loc, "a scene takes one integrator");
+      s->integrator = (integrator *)o;
+      break;
+    case CLS_BSDF:
+    case CLS_TEXTURE:
+    case CLS_MEDIUM:
+    case CLS_PHASE:
+    case CLS_VOLUME: break; /* declared at the top level to be referenced */
+    case CLS_SCENE:
+      if (o->plugin == &plugin_periodic) {
+        if (s->periodic.on)
+          return rsw_fail(ld->err, RSW_ERR_DUPLICATE, p->loc, "a scene takes one periodic boundary");
+        s->periodic = *periodic_of(o);
+        break;
+      }
+      return rsw_fail(ld->err, RSW_ERR_INVALID, p->loc, "a scene cannot be a child of the scene");
+    default:
+      return rsw_fail(ld->err, RSW_ERR_INVALID, p->loc,
+                      "a %s cannot be a child of the scene (nest it in a sensor)", obj_class_name(c));
+    }
+  }
+  *out = &s->base;
+  return RSW_OK;
+}
+
+const plugin plugin_scene = {.name = "scene", .cls = CLS_SCENE, .create = scene_create};
+
+rsw_status scene_prepare(scene *s, const render_ctx *rc, rsw_err *err) {
+  for (size_t i = 0; i < s->n_objects; i++) {
+    object *o = s->objects[i];
+    if (o->plugin && o->plugin->prepare) {
+      rsw_status st = o->plugin->prepare(o, rc, err);
+      if (st) return st;
+    }
+  }
+  return RSW_OK;
+}
+
+bool scene_wavelength_dependent(const scene *s) {
+  for (size_t i = 0; i < s->n_objects; i++) {
+    const object *o = s->objects[i];
+    if (o->plugin && o->plugin->spectral && o->plugin->spectral(o)) return true;
+  }
+  return false;
+}
+
+sensor *scene_find_sensor(const scene *s, const char *id, size_t *index_out) {
+  for (size_t i = 0; i < s->n_sensors; i++)
+    if (strcmp(s->sensors[i]->base.id, id) == 0) {
+      if (index_out) *index_out = i;
+      return s->sensors[i];
+    }
+  char *end;
+  errno = 0;
+  unsigned long k = strtoul(id, &end, 10);
+  if (id[0] >= '0' && id[0] <= '9' && !*end && !errno && k < s->n_sensors) {
+    if (index_out) *index_out = k;
+    return s->sensors[k];
+  }
+  return NULL;
+}
+
+void scene_free(scene *s) {
+  if (!s) return;
+  accel_free(s->accel);
+  params_free(s->params);
+  for (size_t i = s->n_objects; i-- > 0;) {
+    object *o = s->objects[i];
+    if (o == &s->base) continue;
+    if (o->plugin && o->plugin->destroy) o->plugin->destroy(o);
+  }
+  free(s->objects);
+  free(s->shapes);
+  free(s->emitters);
+  free(s->emitter_cdf);
+  free(s->sensors);
+  free(s->periodic_z);
+  node_free(s->doc);
+  free(s);
+}
