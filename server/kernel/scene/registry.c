@@ -16,6 +16,7 @@
   X(diffuse) X(conductor) X(roughconductor) X(dielectric) X(twosided)        \
   X(rpv) X(bilambertian) X(hapke)                                             \
   X(directional) X(constant) X(area) X(envmap)                                \
+  X(point) X(spot)                                                            \
   X(hdistant) X(distant) X(radiancemeter) X(perspective)                      \
   X(mdistant) X(distantflux) X(mradiancemeter)                                \
   X(hdrfilm) X(box) X(gaussian)                                               \
