@@ -33,9 +33,9 @@ static color point_sample(const emitter *e, const surface_interaction *ref, vec2
 }
 
 static const emitter_ops point_ops = {.sample_direction = point_sample,
-                                      .pdf_direction = point_pdf,
-                                      .eval = point_eval,
-                                      .set_scene = point_set_scene};
+                                      .pdf_direction = delta_position_pdf,
+                                      .eval = delta_position_eval,
+                                      .set_scene = delta_position_set_scene};
 
 static void point_destroy(object *o) {
   free(o);

@@ -50,9 +50,9 @@ static color spot_sample(const emitter *e, const surface_interaction *ref, vec2 
 }
 
 static const emitter_ops spot_ops = {.sample_direction = spot_sample,
-                                     .pdf_direction = spot_pdf,
-                                     .eval = spot_eval,
-                                     .set_scene = spot_set_scene};
+                                     .pdf_direction = delta_position_pdf,
+                                     .eval = delta_position_eval,
+                                     .set_scene = delta_position_set_scene};
 
 static void spot_destroy(object *o) {
   free(o);
