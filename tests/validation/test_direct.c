@@ -121,15 +121,8 @@ static void test_bad_input(void) {
       "{\"type\": \"direct\", \"emitter_samples\": -1}",
       "{\"type\": \"direct\", \"max_depth\": 3}",
   };
-  for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
-    char buf[512];
-    snprintf(buf, sizeof buf, "{\"type\": \"scene\", \"integrator\": %s}", bad[i]);
-    rsw_err err = {0};
-    scene *s = NULL;
-    CHECK(scene_load_memory(buf, strlen(buf), "bad.json", false, NULL, &s, &err) != RSW_OK && !s,
-          "refused: %s", bad[i]);
-    scene_free(s);
-  }
+  for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++)
+    CHECK(tsup_refused("{\"type\": \"scene\", \"integrator\": %s}", bad[i]), "refused: %s", bad[i]);
 }
 
 int main(void) {

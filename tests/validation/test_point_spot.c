@@ -134,15 +134,8 @@ static void test_bad_input(void) {
       "{\"type\": \"point\", \"intensity\": -1}",
       "{\"type\": \"point\", \"intensity\": {\"type\": \"checkerboard\"}}",
   };
-  for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
-    char buf[1024];
-    snprintf(buf, sizeof buf, "{\"type\": \"scene\", \"light\": %s}", bad[i]);
-    rsw_err err = {0};
-    scene *s = NULL;
-    rsw_status st = scene_load_memory(buf, strlen(buf), "bad.json", false, NULL, &s, &err);
-    CHECK(st != RSW_OK && !s, "refused: %s", bad[i]);
-    scene_free(s);
-  }
+  for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++)
+    CHECK(tsup_refused("{\"type\": \"scene\", \"light\": %s}", bad[i]), "refused: %s", bad[i]);
 }
 
 /* Moving the light by its `position` key equals loading it there. */

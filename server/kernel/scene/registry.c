@@ -19,6 +19,7 @@
   X(directional) X(constant) X(area) X(envmap)                                \
   X(point) X(spot)                                                            \
   X(hdistant) X(distant) X(radiancemeter) X(perspective)                      \
+  X(thinlens) X(orthographic)                                                 \
   X(mdistant) X(distantflux) X(mradiancemeter)                                \
   X(hdrfilm) X(box) X(gaussian)                                               \
   X(independent) X(stratified)                                                \
