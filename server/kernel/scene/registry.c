@@ -21,7 +21,7 @@
   X(hdistant) X(distant) X(radiancemeter) X(perspective)                      \
   X(thinlens) X(orthographic)                                                 \
   X(mdistant) X(distantflux) X(mradiancemeter)                                \
-  X(hdrfilm) X(box) X(gaussian)                                               \
+  X(hdrfilm) X(box) X(gaussian) X(tent) X(lanczos)                            \
   X(independent) X(stratified)                                                \
   X(path) X(direct)                                                           \
   X(uniform) X(checkerboard) X(bitmap)                                       \
