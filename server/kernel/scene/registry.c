@@ -15,7 +15,7 @@
   X(rectangle) X(disk) X(sphere) X(cylinder) X(cube) X(obj) X(ply)           \
   X(diffuse) X(conductor) X(roughconductor) X(dielectric) X(twosided)        \
   X(rpv) X(bilambertian) X(hapke)                                             \
-  X(plastic) X(roughplastic) X(blendbsdf)                                     \
+  X(plastic) X(roughplastic) X(blendbsdf) X(mask)                             \
   X(directional) X(constant) X(area) X(envmap)                                \
   X(point) X(spot)                                                            \
   X(hdistant) X(distant) X(radiancemeter) X(perspective)                      \
