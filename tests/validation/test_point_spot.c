@@ -24,7 +24,7 @@ RSW_TEST_DEFINE_GLOBALS
 #define H   2.0
 #define I0  3.0
 
-static double radiance_at(const char *light_json, double x) {
+static double radiance_with(const char *integ, const char *light_json, double x) {
   char buf[4096];
   snprintf(
       buf, sizeof buf,
@@ -32,11 +32,11 @@ static double radiance_at(const char *light_json, double x) {
       " \"sensor\": {\"type\": \"radiancemeter\", \"origin\": [%.17g, 0, 0.5], \"direction\": [0, 0, -1],"
       "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 4},"
       "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},"
-      " \"integrator\": {\"type\": \"path\", \"max_depth\": 2},"
+      " \"integrator\": %s,"
       " \"light\": %s,"
       " \"plate\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [10, 10, 1]}],"
       "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": %g}}}",
-      x, light_json, RHO);
+      x, integ, light_json, RHO);
   scene *s = tsup_load(buf, "mono");
   if (!s) return NAN;
   film_image img;
@@ -47,6 +47,10 @@ static double radiance_at(const char *light_json, double x) {
   }
   scene_free(s);
   return v;
+}
+
+static double radiance_at(const char *light_json, double x) {
+  return radiance_with("{\"type\": \"path\", \"max_depth\": 2}", light_json, x);
 }
 
 static double expected(double x, double falloff) {
@@ -64,6 +68,9 @@ static void test_point_under_light(void) {
   snprintf(light, sizeof light,
            "{\"type\": \"point\", \"to_world\": [{\"translate\": [0, 0, %g]}], \"intensity\": %g}", H, I0);
   CHECK_REL(radiance_at(light, 1.3), expected(1.3, 1.0), 1e-5);
+  /* The volumetric integrators sample them alike (no medium here). */
+  CHECK_REL(radiance_with("{\"type\": \"volpath\", \"max_depth\": 2}", light, 1.3), expected(1.3, 1.0), 1e-5);
+  CHECK_REL(radiance_with("{\"type\": \"direct\"}", light, 1.3), expected(1.3, 1.0), 1e-5);
 }
 
 static void test_point_xml(void) {
