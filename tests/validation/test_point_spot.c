@@ -24,19 +24,19 @@ RSW_TEST_DEFINE_GLOBALS
 #define H   2.0
 #define I0  3.0
 
-static double radiance_with(const char *integ, const char *light_json, double x) {
+static double radiance_xy(const char *integ, const char *light_json, double x, double y) {
   char buf[4096];
   snprintf(
       buf, sizeof buf,
       "{\"type\": \"scene\","
-      " \"sensor\": {\"type\": \"radiancemeter\", \"origin\": [%.17g, 0, 0.5], \"direction\": [0, 0, -1],"
+      " \"sensor\": {\"type\": \"radiancemeter\", \"origin\": [%.17g, %.17g, 0.5], \"direction\": [0, 0, -1],"
       "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 4},"
       "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},"
       " \"integrator\": %s,"
       " \"light\": %s,"
       " \"plate\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [10, 10, 1]}],"
       "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": %g}}}",
-      x, integ, light_json, RHO);
+      x, y, integ, light_json, RHO);
   scene *s = tsup_load(buf, "mono");
   if (!s) return NAN;
   film_image img;
@@ -47,6 +47,14 @@ static double radiance_with(const char *integ, const char *light_json, double x)
   }
   scene_free(s);
   return v;
+}
+
+static double radiance_with(const char *integ, const char *light_json, double x) {
+  return radiance_xy(integ, light_json, x, 0.0);
+}
+
+static double radiance_probe(const char *light_json, double x, double y) {
+  return radiance_xy("{\"type\": \"path\", \"max_depth\": 2}", light_json, x, y);
 }
 
 static double radiance_at(const char *light_json, double x) {
@@ -132,6 +140,25 @@ static void test_spot_falloff(void) {
   CHECK_REL(radiance_at(light, x), expected(x, 0.5), 1e-5);
 }
 
+/* A projected checkerboard (color0 0.8, color1 0.2): the spot, looking
+ * down from (0, 0, h) with up +y, has its local x along world -x, so a
+ * point at (x < 0, y > 0) sees uv > 1/2 in both (color0) and (x < 0, y < 0)
+ * u > 1/2 > v (color1). */
+static void test_spot_texture(void) {
+  char light[512];
+  snprintf(
+      light, sizeof light,
+      "{\"type\": \"spot\", \"intensity\": %g, \"cutoff_angle\": 40, \"beam_width\": 30,"
+      " \"texture\": {\"type\": \"checkerboard\", \"color0\": 0.8, \"color1\": 0.2},"
+      " \"to_world\": [{\"lookat\": {\"origin\": [0, 0, %g], \"target\": [0, 0, 0], \"up\": [0, 1, 0]}}]}",
+      I0, H);
+  const double x = -0.4, y = 0.3;
+  double d2 = x * x + y * y + H * H, want = RHO / RSW_PI * I0 * (H / sqrt(d2)) / d2;
+  CHECK_REL(radiance_probe(light, x, y), 0.8 * want, 1e-5);
+  CHECK_REL(radiance_probe(light, x, -y), 0.2 * want, 1e-5);
+  CHECK_REL(radiance_probe(light, -x, -y), 0.8 * want, 1e-5);
+}
+
 static void test_bad_input(void) {
   const char *bad[] = {
       "{\"type\": \"point\", \"position\": [0, 0, 1], \"to_world\": [{\"translate\": [0, 0, 1]}]}",
@@ -140,6 +167,8 @@ static void test_bad_input(void) {
       "{\"type\": \"spot\", \"position\": [0, 0, 1]}",
       "{\"type\": \"point\", \"intensity\": -1}",
       "{\"type\": \"point\", \"intensity\": {\"type\": \"checkerboard\"}}",
+      "{\"type\": \"spot\", \"texture\": 0.5}",
+      "{\"type\": \"spot\", \"cutoff_angle\": 100, \"texture\": {\"type\": \"checkerboard\"}}",
   };
   for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++)
     CHECK(tsup_refused("{\"type\": \"scene\", \"light\": %s}", bad[i]), "refused: %s", bad[i]);
@@ -182,6 +211,7 @@ int main(void) {
   RSW_TEST_RUN(test_point_under_light);
   RSW_TEST_RUN(test_point_xml);
   RSW_TEST_RUN(test_spot_falloff);
+  RSW_TEST_RUN(test_spot_texture);
   RSW_TEST_RUN(test_bad_input);
   RSW_TEST_RUN(test_position_update_equals_reload);
   RSW_TEST_END("test_point_spot");

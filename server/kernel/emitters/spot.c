@@ -10,8 +10,12 @@
  * (in Mitsuba's branches: cos theta >= cos beam gives 1, cos theta <=
  * cos cutoff gives 0). Next-event estimation as `point`: from x at
  * distance r, pdf 1, value = I f(theta) / r^2, W m^-2 [nm^-1].
- * Mitsuba's projection `texture` is not supported (refused as unused).
- * Keys: `intensity.value`, `to_world` and `sampling_weight`, spectral;
+ * An optional `texture` (spatially varying, as Mitsuba requires) is
+ * projected along the beam: the value is multiplied by it at
+ *   uv = (1/2 + x / (2 z tan(cutoff)), 1/2 + y / (2 z tan(cutoff)))
+ * for the local direction (x, y, z) towards the lit point (Mitsuba's
+ * direction_to_uv), so the cone's cross-section spans [0, 1]^2.
+ * Keys: `intensity.value`, `texture.…`, `to_world` and `sampling_weight`, spectral;
  * the angles are fixed at load, as Mitsuba traverses neither. */
 #include <stdlib.h>
 
@@ -23,6 +27,8 @@
 typedef struct spot_light {
   emitter base;
   texture *intensity;
+  texture *texture; /* projected along the beam, or NULL */
+  double uv_factor; /* tan(cutoff) */
   xform to_world;
   vec3 p;              /* to_world (0, 0, 0) */
   double cutoff, beam; /* radians */
@@ -46,7 +52,14 @@ static color spot_sample(const emitter *e, const surface_interaction *ref, vec2 
     ds->pdf = 0;
     return col1(0);
   }
-  return col_scale(tex_eval(sl->intensity, ref), f * inv_r2);
+  color v = col_scale(tex_eval(sl->intensity, ref), f * inv_r2);
+  if (sl->texture) {
+    surface_interaction at = {.p = sl->p};
+    at.uv[0] = 0.5 + 0.5 * local.x / (local.z * sl->uv_factor);
+    at.uv[1] = 0.5 + 0.5 * local.y / (local.z * sl->uv_factor);
+    v = col_mul(v, tex_eval(sl->texture, &at));
+  }
+  return v;
 }
 
 static const emitter_ops spot_ops = {.sample_direction = spot_sample,
@@ -66,6 +79,7 @@ static void spot_parameters_changed(object *o) {
 static void spot_traverse(object *o, param_visitor *v) {
   spot_light *sl = (spot_light *)o;
   pv_object(v, "intensity", &sl->intensity->base, 0.0, INFINITY);
+  if (sl->texture) pv_object(v, "texture", &sl->texture->base, 0.0, INFINITY);
   pv_transform(v, "to_world", &sl->to_world, UPDATE_SPECTRAL, NULL);
   pv_float(v, "sampling_weight", &sl->base.sampling_weight, UPDATE_SPECTRAL, 0.0, INFINITY);
 }
@@ -85,6 +99,14 @@ static rsw_status spot_create(loader *ld, node *n, object **out) {
   if (!st) st = ld_float(ld, n, "beam_width", cutoff * 3.0 / 4.0, &beam);
   if (!st && !(beam >= 0 && beam <= cutoff))
     st = ld_fail(ld, n, "beam_width", RSW_ERR_RANGE, "beam_width must lie in [0, cutoff_angle] degrees");
+  if (!st) st = ld_texture_opt(ld, n, "texture", 0.0, &sl->texture);
+  color c;
+  if (!st && sl->texture && uniform_texture_value(sl->texture, &c))
+    st = ld_fail(ld, n, "texture", RSW_ERR_INVALID,
+                 "the projected texture must vary spatially (e.g. a bitmap); scale 'intensity' instead");
+  if (!st && sl->texture && !(cutoff < 90))
+    st = ld_fail(ld, n, "cutoff_angle", RSW_ERR_RANGE,
+                 "a projected texture needs a cutoff_angle below 90 degrees");
   if (st) {
     free(sl);
     return st;
@@ -93,6 +115,7 @@ static rsw_status spot_create(loader *ld, node *n, object **out) {
   sl->beam = beam * RSW_PI / 180.0;
   sl->cos_cutoff = cos(sl->cutoff);
   sl->cos_beam = cos(sl->beam);
+  sl->uv_factor = tan(sl->cutoff);
   sl->inv_transition = sl->cutoff > sl->beam ? 1.0 / (sl->cutoff - sl->beam) : 0.0;
   spot_parameters_changed(&sl->base.base);
   *out = &sl->base.base;
