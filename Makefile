@@ -55,7 +55,7 @@ $(BUILD)/obj/client/lib/%.o: CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude -Icommon
 $(BUILD)/obj/client/cli/%.o: CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude
 CFLAGS := -std=c11 $(OPT) -g -fno-math-errno $(WARN) $(SANFLAGS) -fPIC
 LDFLAGS := $(SANFLAGS)
-LIBS := -lembree3 -lOpenEXRCore -lnetcdf -lpng16 -lexpat -lcjson -lpthread -ldl -lm
+LIBS := -lembree3 -lOpenEXRCore -lnetcdf -lpng16 -ljpeg -lexpat -lcjson -lpthread -ldl -lm
 DAEMON_LIBS := -lmicrohttpd -lcrypto
 TEST_LIBS := -lcurl -lcrypto
 

@@ -25,6 +25,8 @@ pkgs=(
   # daemon (tests/cluster/test_slurm.sh)
   haproxy nginx slurm-wlm munge
 )
+# build: libjpeg for bitmap textures from JPEG files (server/kernel/image_ldr.c)
+pkgs+=(libjpeg62-turbo-dev)
 # `tools/deps.sh fuzz` (make fuzz): clang with libFuzzer's runtime as well.
 if [ "${1:-}" = fuzz ]; then
   pkgs+=(clang libclang-rt-14-dev)

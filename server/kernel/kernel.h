@@ -201,6 +201,7 @@ enum emitter_flags {
   EMITTER_DELTA_DIRECTION = 1u << 0, /* directional */
   EMITTER_INFINITE = 1u << 1,        /* environment (constant, envmap) */
   EMITTER_SURFACE = 1u << 2,         /* area */
+  EMITTER_DELTA_POSITION = 1u << 3,  /* point, spot */
 };
 
 typedef struct direction_sample {

@@ -22,6 +22,17 @@ scene *tsup_load(const char *text, const char *variant_name) {
   return s;
 }
 
+bool tsup_refused(const char *fmt, const char *object_json) {
+  char buf[4096];
+  snprintf(buf, sizeof buf, fmt, object_json);
+  rsw_err err = {0};
+  scene *s = NULL;
+  rsw_status st = scene_load_memory(buf, strlen(buf), "bad.json", false, NULL, &s, &err);
+  bool refused = st != RSW_OK && !s && err.code == st;
+  scene_free(s);
+  return refused;
+}
+
 scene *tsup_load_file(const char *path, const char *variant_name) {
   rsw_err err = {0};
   scene *s = NULL;

@@ -8,6 +8,9 @@
 /* Load a JSON (or XML when text starts with '<') scene from memory;
  * prints the error and returns NULL on failure. */
 scene *tsup_load(const char *text, const char *variant_name);
+/* True when the JSON scene fmt with object_json in place of its %s fails
+ * to load, with an error recorded (bad input must be refused). */
+bool tsup_refused(const char *fmt, const char *object_json);
 /* Same from a file under the repository root. */
 scene *tsup_load_file(const char *path, const char *variant_name);
 /* A whole file as a NUL-terminated string (malloc'ed; *len its length),

@@ -17,6 +17,8 @@ extern const plugin plugin_conductor;
 extern const plugin plugin_roughconductor;
 extern const plugin plugin_dielectric;
 extern const plugin plugin_twosided;
+extern const plugin plugin_plastic;
+extern const plugin plugin_roughplastic;
 
 /* ---- diffuse ------------------------------------------------------------ */
 typedef struct diffuse_bsdf {
@@ -131,6 +133,10 @@ struct loader;
 struct node;
 rsw_status bsdf_check_const_range(struct loader *ld, struct node *n, const char *name, const texture *t,
                                   double lo, bool lo_open, double hi, bool hi_open);
+
+/* An index of refraction given as a number > 0 or as a material name
+ * (Mitsuba's lookup_ior(), ior_data.h); absent: the named default `def`. */
+rsw_status bsdf_read_ior(struct loader *ld, struct node *n, const char *name, const char *def, double *out);
 
 /* Helpers shared by the plugin files. */
 static inline color bsdf_factor(const texture *t, const surface_interaction *si) {

@@ -88,7 +88,7 @@ static void dielectric_destroy(object *o) {
 
 /* An index given as a number or as a material name (Mitsuba's
  * lookup_ior()): absent -> the named default. */
-static rsw_status read_ior(loader *ld, node *n, const char *name, const char *def, double *out) {
+rsw_status bsdf_read_ior(loader *ld, node *n, const char *name, const char *def, double *out) {
   const prop *p = node_find(n, name);
   const char *mat = def;
   if (p && p->kind != PROP_STRING) {
@@ -110,9 +110,9 @@ static rsw_status read_ior(loader *ld, node *n, const char *name, const char *de
 
 static rsw_status dielectric_create(loader *ld, node *n, object **out) {
   double int_ior, ext_ior;
-  rsw_status st = read_ior(ld, n, "int_ior", "bk7", &int_ior);
+  rsw_status st = bsdf_read_ior(ld, n, "int_ior", "bk7", &int_ior);
   if (st != RSW_OK) return st;
-  if ((st = read_ior(ld, n, "ext_ior", "air", &ext_ior)) != RSW_OK) return st;
+  if ((st = bsdf_read_ior(ld, n, "ext_ior", "air", &ext_ior)) != RSW_OK) return st;
   texture *sr, *st_;
   if ((st = ld_texture_opt(ld, n, "specular_reflectance", 0.0, &sr)) != RSW_OK) return st;
   if ((st = ld_texture_opt(ld, n, "specular_transmittance", 0.0, &st_)) != RSW_OK) return st;

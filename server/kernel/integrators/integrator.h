@@ -41,4 +41,9 @@ static inline double emitter_prob(const scene *sc, const emitter *e) {
   return sc->emitter_weight_sum > 0 ? e->sampling_weight / sc->emitter_weight_sum : 0.0;
 }
 
+/* The shadow ray from si towards the light sample ds of emitter e
+ * (integrators/path.c says how it is offset at both ends). */
+ray3 spawn_ray_to(const scene *sc, const surface_interaction *si, const emitter *e,
+                  const direction_sample *ds);
+
 #endif

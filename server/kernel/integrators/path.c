@@ -27,8 +27,8 @@
  * the same treatment at the light's end (spawn_ray_between); for other
  * emitters the ray stops short of ds.dist by ShadowEpsilon (relative), as
  * Mitsuba. */
-static ray3 spawn_ray_to(const scene *sc, const surface_interaction *si, const emitter *e,
-                         const direction_sample *ds) {
+ray3 spawn_ray_to(const scene *sc, const surface_interaction *si, const emitter *e,
+                  const direction_sample *ds) {
   if ((e->flags & EMITTER_SURFACE) && e->shape) {
     const shape *ls = e->shape;
     return spawn_ray_between(si, ds->p, ds->n,

@@ -14,12 +14,15 @@
   X(rectangle) X(disk) X(sphere) X(cylinder) X(cube) X(obj) X(ply)           \
   X(diffuse) X(conductor) X(roughconductor) X(dielectric) X(twosided)        \
   X(rpv) X(bilambertian) X(hapke)                                             \
+  X(plastic) X(roughplastic) X(blendbsdf) X(mask)                             \
   X(directional) X(constant) X(area) X(envmap)                                \
+  X(point) X(spot)                                                            \
   X(hdistant) X(distant) X(radiancemeter) X(perspective)                      \
+  X(thinlens) X(orthographic)                                                 \
   X(mdistant) X(distantflux) X(mradiancemeter)                                \
-  X(hdrfilm) X(box) X(gaussian)                                               \
+  X(hdrfilm) X(box) X(gaussian) X(tent) X(lanczos)                            \
   X(independent) X(stratified)                                                \
-  X(path)                                                                     \
+  X(path) X(direct)                                                           \
   X(uniform) X(checkerboard) X(bitmap)                                       \
   X(shapegroup) X(instance) X(instancelist) X(periodic)                      \
   X(isotropic) X(hg) X(blendphase) X(rayleigh) X(tabphase)                    \

@@ -23,6 +23,7 @@
 
 typedef struct perspective {
   sensor base;
+  double x_fov;          /* horizontal field of view, degrees (key `x_fov`) */
   double tan_half_fov_x; /* tan(fov_x / 2) */
   double aspect;         /* film width / height */
   double near_clip, far_clip;
@@ -92,20 +93,28 @@ static rsw_status perspective_check_xf(const object *o, const xform *t, const ch
   return RSW_OK;
 }
 
+#define DEG2RAD (RSW_PI / 180.0)
+
+/* Mitsuba's keys: to_world and x_fov (degrees, in (0, 180)). */
 static void perspective_traverse(object *o, param_visitor *v) {
   pv_transform(v, "to_world", &((sensor *)o)->to_world, UPDATE_SPECTRAL, perspective_check_xf);
+  pv_float(v, "x_fov", &((perspective *)o)->x_fov, UPDATE_SPECTRAL, X_FOV_MIN, X_FOV_MAX);
+}
+
+static void perspective_parameters_changed(object *o) {
+  perspective *p = (perspective *)o;
+  p->tan_half_fov_x = tan(0.5 * p->x_fov * DEG2RAD);
 }
 
 const plugin plugin_perspective = {
     .traverse = perspective_traverse,
+    .parameters_changed = perspective_parameters_changed,
     .name = "perspective",
     .cls = CLS_SENSOR,
     .create = perspective_create,
     .destroy = perspective_destroy,
     .ops = &perspective_ops,
 };
-
-#define DEG2RAD (RSW_PI / 180.0)
 
 /* Focal length of a 35 mm film camera: "50mm", "50" or a number (mm). */
 static rsw_status read_focal_length(loader *ld, node *n, double *mm) {
@@ -141,7 +150,7 @@ static rsw_status read_focal_length(loader *ld, node *n, double *mm) {
  *  - axis y:        fov_x = 2 atan(tan(fov/2) a)
  *    axis diagonal: w = 2 tan(fov/2) / sqrt(1 + 1/a^2), fov_x = 2 atan(w/2);
  *  - the result must lie in (0, 180). */
-static rsw_status parse_fov(loader *ld, node *n, double aspect, double *fov_x) {
+rsw_status perspective_parse_fov(loader *ld, node *n, double aspect, double *fov_x) {
   if (ld_has(n, "fov") && ld_has(n, "focal_length"))
     return ld_fail(ld, n, "fov", RSW_ERR_INVALID,
                    "perspective: give either a focal length ('focal_length') or a "
@@ -197,8 +206,9 @@ static rsw_status perspective_read(loader *ld, node *n, perspective *p) {
   p->aspect = (double)p->base.film->width / (double)p->base.film->height;
 
   double fov_x = 0;
-  st = parse_fov(ld, n, p->aspect, &fov_x);
+  st = perspective_parse_fov(ld, n, p->aspect, &fov_x);
   if (st != RSW_OK) return st;
+  p->x_fov = fov_x;
   p->tan_half_fov_x = tan(0.5 * fov_x * DEG2RAD);
 
   st = ld_transform(ld, n, "to_world", &p->base.to_world, NULL);

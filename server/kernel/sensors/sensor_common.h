@@ -15,6 +15,14 @@
  * Fills s->film and s->sampler (owned by the scene). */
 rsw_status sensor_read_base(loader *ld, node *n, sensor *s);
 
+/* The horizontal field of view in degrees of a projective camera
+ * (perspective, thinlens) from fov / fov_axis / focal_length, Mitsuba's
+ * parse_fov (sensors/perspective.c says how); aspect = film W / H. */
+rsw_status perspective_parse_fov(loader *ld, node *n, double aspect, double *fov_x);
+/* The range of the `x_fov` key (degrees; the open interval (0, 180)). */
+#define X_FOV_MIN 1e-6
+#define X_FOV_MAX (180.0 - 1e-6)
+
 /* Error unless s->film is 1x1 pixels (distant, radiancemeter: Mitsuba's
  * "This sensor only supports films of size 1x1 Pixels!"). */
 rsw_status sensor_require_1x1_film(loader *ld, node *n, const sensor *s);

@@ -1,13 +1,16 @@
-/* `bitmap` (mitsuba3 src/textures/bitmap.cpp): an OpenEXR image looked up
- * at uv' = to_uv (u, v). Parameters: filename, filter_type (bilinear |
- * nearest), wrap_mode (repeat | mirror | clamp), raw (accepted; EXR data is
- * linear already), to_uv. Image row 0 is the top, so v = 0 maps to the
+/* `bitmap` (mitsuba3 src/textures/bitmap.cpp): an OpenEXR, PNG or JPEG
+ * image (told apart by the file's first bytes) looked up at
+ * uv' = to_uv (u, v). Parameters: filename, filter_type (bilinear |
+ * nearest), wrap_mode (repeat | mirror | clamp), raw (PNG and JPEG values
+ * are sRGB-decoded unless raw is true, as Mitsuba does for 8-bit images;
+ * EXR data is linear already and raw has no effect there), to_uv. Image row 0 is the top, so v = 0 maps to the
  * bottom row, as Mitsuba (which flips v on lookup). In mono an RGB image
  * gives its luminance (as Mitsuba's mono conversion); a one-channel (Y)
  * image is used as is. */
 #include <stdlib.h>
 #include <string.h>
 
+#include "../image_ldr.h"
 #include "../scene/loader.h"
 #include "../scene/params.h"
 #include "image_exr.h"
@@ -81,6 +84,34 @@ static rsw_status bm_prepare(object *o, const render_ctx *rc, rsw_err *err) {
   return RSW_OK;
 }
 
+/* A PNG or JPEG: sRGB-decoded unless raw (Mitsuba's bitmap treats 8-bit
+ * images as sRGB-encoded; `raw` keeps the stored values), grey replicated
+ * into the three channels. */
+static rsw_status read_ldr(loader *ld, node *n, const char *path, bool raw, bitmap_tex *b) {
+  ldr_image img;
+  rsw_status st = ldr_read_image(path, &img, ld->err);
+  if (st) return st;
+  b->w = img.width;
+  b->h = img.height;
+  b->rgb = malloc((size_t)b->w * b->h * 3 * sizeof(float));
+  if (!b->rgb) {
+    ldr_image_free(&img);
+    return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+  }
+  double sum[3] = {0, 0, 0};
+  for (size_t i = 0; i < (size_t)b->w * b->h; i++)
+    for (int k = 0; k < 3; k++) {
+      double v = img.data[i * img.n_channels + (img.n_channels == 3 ? k : 0)];
+      if (!raw) v = srgb_to_linear(v);
+      b->rgb[3 * i + k] = (float)v;
+      sum[k] += (float)v;
+    }
+  double inv = 1.0 / ((double)b->w * b->h);
+  b->mean = col(sum[0] * inv, sum[1] * inv, sum[2] * inv);
+  ldr_image_free(&img);
+  return RSW_OK;
+}
+
 static rsw_status bm_create(loader *ld, node *n, object **out) {
   bitmap_tex *b = calloc(1, sizeof *b);
   if (!b) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
@@ -115,11 +146,14 @@ static rsw_status bm_create(loader *ld, node *n, object **out) {
       st = ld_fail(ld, n, "wrap_mode", RSW_ERR_INVALID,
                    "wrap_mode must be \"repeat\", \"mirror\" or \"clamp\" (got \"%s\")", wrap);
   }
-  if (!st) {
+  ldr_format fmt = st ? LDR_NONE : ldr_sniff(path);
+  if (!st && fmt != LDR_NONE) {
+    st = read_ldr(ld, n, path, raw, b);
+  } else if (!st) {
     st = exr_read_image(path, &img, ld->err);
     have_img = !st;
   }
-  if (!st) {
+  if (have_img) {
     int r = exr_image_channel(&img, "R"), g = exr_image_channel(&img, "G"), bl = exr_image_channel(&img, "B");
     int y = exr_image_channel(&img, "Y");
     if (!(r >= 0 && g >= 0 && bl >= 0) && y < 0)

@@ -1,0 +1,96 @@
+/* `mask`: a nested BSDF made partly transparent by an opacity texture
+ * alpha in [0, 1] (mitsuba3 src/bsdfs/mask.cpp; clamped where a texture
+ * strays, as Mitsuba): with probability 1 - alpha light passes the surface
+ * unchanged, else it meets the nested BSDF.
+ *   eval = alpha f_nested,  pdf = alpha pdf_nested (the smooth part);
+ *   sample: u1 > alpha -> the pass-through wo = -wi, a delta transmission
+ *   of pdf 1 - alpha and weight 1; else the nested sample with u1 / alpha,
+ *   its pdf times alpha, its weight unchanged (Mitsuba's).
+ * `opacity` (0.5, texture; the mean of its channels), one nested BSDF.
+ * Shadow rays stop at the surface whatever alpha is (as `path` treats
+ * `null`; Mitsuba's path does the same: only its volumetric integrators
+ * weigh shadow rays by 1 - alpha). Keys: `opacity.…`, `nested_bsdf.…`. */
+#include <stdlib.h>
+
+#include "../scene/loader.h"
+#include "../scene/params.h"
+#include "bsdfs_internal.h"
+
+typedef struct mask_bsdf {
+  bsdf base;
+  texture *opacity;
+  bsdf *nested;
+} mask_bsdf;
+
+static double opacity_at(const mask_bsdf *m, const surface_interaction *si) {
+  double a = col_mean(tex_eval(m->opacity, si));
+  return a < 0 ? 0 : a > 1 ? 1 : a;
+}
+
+static color mask_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2, bsdf_sample *bs) {
+  const mask_bsdf *m = (const mask_bsdf *)b;
+  double a = opacity_at(m, si);
+  if (u1 >= a) {
+    bs->wo = v3_neg(si->wi);
+    bs->pdf = 1.0 - a;
+    bs->eta = 1.0;
+    bs->sampled_type = BSDF_DELTA_TRANSMISSION;
+    return col1(1.0);
+  }
+  color v = m->nested->ops->sample(m->nested, si, u1 / a, u2, bs);
+  bs->pdf *= a;
+  return v;
+}
+
+static color mask_eval(const bsdf *b, const surface_interaction *si, vec3 wo) {
+  const mask_bsdf *m = (const mask_bsdf *)b;
+  return col_scale(m->nested->ops->eval(m->nested, si, wo), opacity_at(m, si));
+}
+
+static double mask_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
+  const mask_bsdf *m = (const mask_bsdf *)b;
+  return opacity_at(m, si) * m->nested->ops->pdf(m->nested, si, wo);
+}
+
+static const bsdf_ops mask_ops = {.sample = mask_sample, .eval = mask_eval, .pdf = mask_pdf};
+
+static void mask_destroy(object *o) {
+  free(o);
+}
+
+extern const plugin plugin_mask;
+
+static rsw_status mask_create(loader *ld, node *n, object **out) {
+  object *nested;
+  rsw_status st = ld_child(ld, n, NULL, CLS_BSDF, &nested);
+  if (st) return st;
+  if (!nested) return ld_fail(ld, n, NULL, RSW_ERR_MISSING, "mask: a nested BSDF is required");
+  texture *op;
+  if ((st = ld_texture(ld, n, "opacity", 0.5, 0.0, &op))) return st;
+  if ((st = bsdf_check_const_range(ld, n, "opacity", op, 0.0, false, 1.0, false))) return st;
+  mask_bsdf *m = calloc(1, sizeof *m);
+  if (!m) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "mask: out of memory");
+  m->base.base.plugin = &plugin_mask;
+  m->base.base.id = n->id;
+  m->base.ops = &mask_ops;
+  m->nested = (bsdf *)nested;
+  m->opacity = op;
+  m->base.flags = m->nested->flags | BSDF_DELTA_TRANSMISSION;
+  *out = &m->base.base;
+  return RSW_OK;
+}
+
+static void mask_traverse(object *o, param_visitor *v) {
+  mask_bsdf *m = (mask_bsdf *)o;
+  pv_object(v, "opacity", &m->opacity->base, 0.0, 1.0);
+  pv_object(v, "nested_bsdf", &m->nested->base, NAN, NAN);
+}
+
+const plugin plugin_mask = {
+    .name = "mask",
+    .cls = CLS_BSDF,
+    .create = mask_create,
+    .destroy = mask_destroy,
+    .ops = &mask_ops,
+    .traverse = mask_traverse,
+};

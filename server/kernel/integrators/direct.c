@@ -1,0 +1,169 @@
+/* `direct`: direct illumination only, as Mitsuba 3's direct integrator
+ * (mitsuba3 src/integrators/direct.cpp). At the camera ray's first hit x:
+ *   L = Le(x) + (1/n_e) sum_{k<n_e} w_e f Le / p_e  +  (1/n_b) sum_{k<n_b} w_b f Le / p_b,
+ * n_e = emitter_samples light samples (pdf p_e: solid angle times the
+ * emitter pick probability) and n_b = bsdf_samples BSDF samples whose ray
+ * reaches an emitter (an area light, or the environment on a miss), with
+ * Mitsuba's power-heuristic weights over the sample fractions
+ *   w_e = w(p_e n_e / n, p_b n_b / n),  w_b = w(p_b n_b / n, p_e n_e / n),
+ * n = n_e + n_b (w(a, b) = a^2 / (a^2 + b^2), integrators/integrator.h).
+ * Delta lights and delta lobes have only one strategy: weight 1 (Mitsuba
+ * gives a delta light weight 1 on each of its n_e samples without the
+ * 1/n_e; here each takes 1/n_e, so the estimate does not grow with n_e).
+ * `shading_samples` sets both counts (exclusive with them, default 1);
+ * their sum must be positive. `hide_emitters` hides the emission seen by
+ * the camera ray. Media are ignored (as Mitsuba's), and Stokes films get
+ * no Q, U, V. */
+#include <stdlib.h>
+
+#include "../accel.h"
+#include "../scene/loader.h"
+#include "../scene/periodic.h"
+#include "../shapes/instance.h"
+#include "../shapes/shape.h"
+#include "integrator.h"
+
+typedef struct direct_integrator {
+  integrator base;
+  long long emitter_samples, bsdf_samples;
+  double frac_e, frac_b; /* n_e / n, n_b / n */
+} direct_integrator;
+
+static trace_result trace(const scene *sc, const ray3 *r, surface_interaction *si, render_stats *stats) {
+  accel_hit h;
+  stats->rays++;
+  ray3 seg = *r;
+  double off;
+  trace_result tr = scene_trace(sc, &seg, &h, &off);
+  if (tr == TRACE_UNRESOLVED) stats->unresolved++;
+  if (tr != TRACE_HIT) return tr;
+  hit_fill_interaction(sc, &seg, &h, si);
+  si->t += off;
+  return TRACE_HIT;
+}
+
+/* Light samples: sum of w_e f Le / p_e over n_e samples, divided by n_e. */
+static color light_samples(const direct_integrator *d, const scene *sc, sampler_state *st,
+                           const surface_interaction *si, render_stats *stats) {
+  const sampler_ops *sops = st->s->ops;
+  const bsdf *b = si->shape->bsdf;
+  color sum = col1(0);
+  for (long long k = 0; k < d->emitter_samples; k++) {
+    double u = sops->next_1d(st);
+    vec2 u2 = sops->next_2d(st);
+    size_t ei = pick_emitter_index(sc, u);
+    const emitter *e = sc->emitters[ei];
+    double pe = pick_probability(sc, ei);
+    direction_sample ds;
+    color value = e->ops->sample_direction(e, si, u2, &ds);
+    if (!(ds.pdf > 0) || !(pe > 0) || col_is_black(value)) continue;
+    if (sc->periodic.on && (e->flags & EMITTER_SURFACE) &&
+        !(ds.p.x >= sc->periodic.min[0] && ds.p.x <= sc->periodic.max[0] && ds.p.y >= sc->periodic.min[1] &&
+          ds.p.y <= sc->periodic.max[1]))
+      continue; /* outside the periodic column: not in the scene (path.c) */
+    vec3 wo = frame_to_local(&si->sh, ds.d);
+    color f = b->ops->eval(b, si, wo);
+    if (col_is_black(f)) continue;
+    ray3 sray = spawn_ray_to(sc, si, e, &ds);
+    stats->shadow_rays++;
+    if (scene_occluded(sc, &sray) != TRACE_MISS) continue;
+    double w = ds.delta ? 1.0 : mis_weight(ds.pdf * pe * d->frac_e, b->ops->pdf(b, si, wo) * d->frac_b);
+    sum = col_add(sum, col_scale(col_mul(f, value), w / pe));
+  }
+  return col_scale(sum, 1.0 / (double)d->emitter_samples);
+}
+
+/* BSDF samples: sum of w_b f Le / p_b over n_b samples, divided by n_b. */
+static color bsdf_samples(const direct_integrator *d, const scene *sc, sampler_state *st,
+                          const surface_interaction *si, render_stats *stats) {
+  const sampler_ops *sops = st->s->ops;
+  const bsdf *b = si->shape->bsdf;
+  color sum = col1(0);
+  for (long long k = 0; k < d->bsdf_samples; k++) {
+    double u1 = sops->next_1d(st);
+    vec2 u2 = sops->next_2d(st);
+    bsdf_sample bs;
+    color weight = b->ops->sample(b, si, u1, u2, &bs);
+    if (!(bs.pdf > 0) || col_is_black(weight)) continue;
+    ray3 r = spawn_ray(si, frame_to_world(&si->sh, bs.wo));
+    surface_interaction hit;
+    trace_result tr = trace(sc, &r, &hit, stats);
+    const emitter *e = NULL;
+    direction_sample ds = {.d = v3_norm(r.d), .dist = INFINITY};
+    color Le = col1(0);
+    if (tr == TRACE_HIT && hit.shape->emitter) {
+      e = hit.shape->emitter;
+      Le = e->ops->eval(e, &hit, r.d);
+      ds.p = hit.p, ds.n = hit.ng, ds.dist = hit.t * v3_len(r.d);
+    } else if (tr == TRACE_MISS && sc->environment) {
+      e = sc->environment;
+      Le = e->ops->eval(e, NULL, r.d);
+    }
+    if (!e || col_is_black(Le)) continue;
+    double pe =
+        (bs.sampled_type & BSDF_DELTA) ? 0.0 : e->ops->pdf_direction(e, si, &ds) * emitter_prob(sc, e);
+    double w = mis_weight(bs.pdf * d->frac_b, pe * d->frac_e);
+    sum = col_add(sum, col_scale(col_mul(weight, Le), w));
+  }
+  return col_scale(sum, 1.0 / (double)d->bsdf_samples);
+}
+
+static color direct_Li(const integrator *it, const scene *sc, sampler_state *st, ray3 ray,
+                       render_stats *stats, double *quv) {
+  (void)quv;
+  const direct_integrator *d = (const direct_integrator *)it;
+  surface_interaction si;
+  trace_result tr = trace(sc, &ray, &si, stats);
+  if (tr != TRACE_HIT) {
+    if (tr == TRACE_MISS && sc->environment && !it->hide_emitters)
+      return sc->environment->ops->eval(sc->environment, NULL, ray.d);
+    return col1(0);
+  }
+  color L = col1(0);
+  const emitter *em = si.shape->emitter;
+  if (em && !it->hide_emitters) L = em->ops->eval(em, &si, ray.d);
+  if (d->emitter_samples > 0 && sc->n_emitters > 0 && (si.shape->bsdf->flags & BSDF_SMOOTH))
+    L = col_add(L, light_samples(d, sc, st, &si, stats));
+  if (d->bsdf_samples > 0) L = col_add(L, bsdf_samples(d, sc, st, &si, stats));
+  return L;
+}
+
+static const integrator_ops direct_ops = {.Li = direct_Li};
+
+static void direct_destroy(object *o) {
+  free(o);
+}
+
+static rsw_status direct_create(loader *ld, node *n, object **out) {
+  if (ld_has(n, "shading_samples") && (ld_has(n, "emitter_samples") || ld_has(n, "bsdf_samples")))
+    return ld_fail(ld, n, "shading_samples", RSW_ERR_INVALID,
+                   "give either 'shading_samples' or 'emitter_samples' / 'bsdf_samples', not both");
+  long long shading, ne, nb;
+  bool hide;
+  rsw_status st = ld_int(ld, n, "shading_samples", 1, 0, 1 << 20, &shading);
+  if (!st) st = ld_int(ld, n, "emitter_samples", shading, 0, 1 << 20, &ne);
+  if (!st) st = ld_int(ld, n, "bsdf_samples", shading, 0, 1 << 20, &nb);
+  if (!st) st = ld_bool(ld, n, "hide_emitters", false, &hide);
+  if (st) return st;
+  if (ne + nb == 0)
+    return ld_fail(ld, n, "emitter_samples", RSW_ERR_INVALID,
+                   "emitter_samples + bsdf_samples must be at least 1");
+  direct_integrator *d = calloc(1, sizeof *d);
+  if (!d) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+  d->base.ops = &direct_ops;
+  d->base.max_depth = 2;
+  d->base.rr_depth = 1 << 30;
+  d->base.hide_emitters = hide;
+  d->emitter_samples = ne;
+  d->bsdf_samples = nb;
+  d->frac_e = (double)ne / (double)(ne + nb);
+  d->frac_b = (double)nb / (double)(ne + nb);
+  *out = &d->base.base;
+  return RSW_OK;
+}
+
+const plugin plugin_direct = {.name = "direct",
+                              .cls = CLS_INTEGRATOR,
+                              .create = direct_create,
+                              .destroy = direct_destroy,
+                              .ops = &direct_ops};
