@@ -342,6 +342,8 @@ class Job:
         """The job's films as one ``xarray.Dataset`` (docs/client.md, "Sweep datasets"), loaded in memory."""
         if self._dataset is not None and not partial:
             return self._dataset
+        if not _data.have_xarray():
+            _data.open_netcdf_bytes(b"")  # raises the ImportError that says what to install
         ds = _data.open_netcdf_bytes(self.dataset_bytes(partial))
         if not partial and self.state in _END_STATES:
             self._dataset = ds

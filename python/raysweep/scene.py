@@ -180,14 +180,46 @@ class Scene:
         :class:`~raysweep.JobFailed`. Without xarray the result is a dict
         ``{(context, sensor): numpy array}``.
         """
-        job = self.submit(grid=grid, contexts=contexts, **options)
+        # A Ctrl-C while the job is being submitted waits for the daemon's
+        # answer, so that the job it may have accepted is known and cancelled.
+        with _deferred_interrupt() as interrupted:
+            job = self.submit(grid=grid, contexts=contexts, **options)
         try:
+            if interrupted:
+                raise KeyboardInterrupt
             return job.result(timeout=timeout, progress=progress)
         except KeyboardInterrupt:
             job.cancel()
             import sys
             print(f"raysweep: interrupted: cancelled job {job.id}", file=sys.stderr)
             raise
+
+
+class _deferred_interrupt:
+    """Holds back SIGINT inside a ``with`` block (main thread only); the value is truthy if one came."""
+
+    def __init__(self):
+        self._hits = []
+        self._old = None
+
+    def __bool__(self):
+        return bool(self._hits)
+
+    def __enter__(self):
+        import signal
+        import threading
+        if threading.current_thread() is threading.main_thread():
+            try:
+                self._old = signal.signal(signal.SIGINT, lambda *_: self._hits.append(1))
+            except ValueError:  # not the main interpreter
+                self._old = None
+        return self
+
+    def __exit__(self, *exc):
+        import signal
+        if self._old is not None:
+            signal.signal(signal.SIGINT, self._old)
+        return False
 
 
 def _encode_values(values):
