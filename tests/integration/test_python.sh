@@ -8,6 +8,7 @@
 #     one started with --token-file: connect, load_file/load_dict with
 #     uploads (the same scene ids as `raysweep scene push`), traverse and
 #     update, render, sweep, futures, Ctrl-C, errors, the numpy-only path;
+#   - docs/python.md's example (docs/examples/sweep_rs.py) prints rho(lambda)/pi;
 #   - the notebook docs/examples/python_quickstart.ipynb runs top to bottom
 #     (jupyter nbconvert --execute, Debian's python3-nbconvert and
 #     python3-ipykernel) in the venv's kernel, its cells' assertions
@@ -65,6 +66,20 @@ else
   bad "test_client.py printed no summary: $(tail -n 20 client.log)"
 fi
 echo "test_python: test_client.py $(secs "$t1") s"
+
+# ---- docs/python.md's example (docs/examples/sweep_rs.py): rho(lambda)/pi ---------------------
+mkdir -p ex && cp "$root/docs/examples/sweep_rs.py" "$root/docs/examples/plate.json" ex/
+if (cd ex && RAYSWEEP_URL=$url "$vpy" sweep_rs.py) >ex/out 2>"$tmp/pyerr"; then ok; else
+  bad "docs/examples/sweep_rs.py: $(tail -n 3 "$tmp/pyerr")"
+fi
+py "sweep_rs.py prints rho(lambda)/pi at 400..700 nm" '
+import math, sys
+rows = [l.split() for l in open(sys.argv[1]) if l.strip()]
+assert [float(w) for w, _ in rows] == list(range(400, 701, 50)), rows
+for w, v in rows:
+    rho = 0.2 + 0.6 * (float(w) - 400) / 300
+    assert abs(float(v) - rho / math.pi) < 1e-5, (w, v)
+' ex/out
 
 # ---- the notebook -----------------------------------------------------------------------
 # The kernel is the venv's python (where raysweep is installed): a kernelspec
