@@ -251,6 +251,19 @@ def _decode_value(entry):
     return v
 
 
+def _short(v):
+    """A value in a few characters, for the table's repr."""
+    if isinstance(v, dict) and "wavelengths" in v and "values" in v:
+        w, x = np.ravel(v["wavelengths"]), np.ravel(v["values"])
+        if w.size:
+            return f"spectrum of {w.size} nodes, {w.min():g}-{w.max():g} nm: {x.min():g}..{x.max():g}"
+    if isinstance(v, (np.ndarray, list, tuple)):
+        a = np.ravel(np.asarray(v, dtype=np.float64))
+        text = " ".join(f"{x:.4g}" for x in a[:6])
+        return f"[{text}{' ...' if a.size > 6 else ''}]" + (f" ({a.size})" if a.size > 6 else "")
+    return repr(v)
+
+
 class _Unfetched:
     """A buffer the table gave as its length only (more than 16 numbers): fetched on first access."""
 
@@ -407,10 +420,7 @@ class SceneParameters:
         width = max((len(k) for k in self._entries), default=0)
         for k, e in self._entries.items():
             mark = "*" if k in self._dirty else " "
-            v = self._values[k]
-            text = repr(v) if not isinstance(v, np.ndarray) else np.array2string(v.ravel()[:6], precision=4)
-            if isinstance(v, np.ndarray) and v.size > 6:
-                text = text[:-1] + " ...]"
+            text = _short(self._values[k])
             rows.append(f" {mark} {k:<{width}}  {e.get('type', ''):<9} {e.get('class', ''):<9} "
                         f"{text[:60]}")
         return "\n".join(rows) + "\n]"

@@ -17,7 +17,6 @@ import io
 import json
 import math
 import os
-import re
 import shutil
 import signal
 import subprocess
@@ -254,6 +253,34 @@ class TestParameters(Base):
         np.testing.assert_allclose(v["values"], [0.2, 0.8])
         film = scene.render(spp=4, wavelength=550, xarray=False)
         self.assertAlmostEqual(float(film[0, 0, 0]), 0.5 / math.pi, delta=1e-5)
+
+    def test_long_buffer(self):
+        # A buffer of more than 16 numbers comes as its length in the table and
+        # is fetched when read (?full=1); a daemon without ?full=1 says so.
+        path = os.path.join(self.tmp, "fan.obj")
+        n = 8
+        with open(path, "w") as f:
+            for k in range(n):
+                a = 2 * math.pi * k / n
+                f.write(f"v {math.cos(a):.6f} {math.sin(a):.6f} 0\n")
+            f.write("v 0 0 0\n")
+            for k in range(n):
+                f.write(f"f {n + 1} {k + 1} {(k + 1) % n + 1}\n")
+        d = plate_dict(0.49)
+        d["plate"] = {"type": "obj", "id": "fan", "filename": "fan.obj",
+                      "bsdf": {"type": "diffuse", "reflectance": 0.5}}
+        p = self.client.load_dict(d, base_dir=self.tmp).traverse()
+        key = next(k for k in p if k.endswith("vertex_positions"))
+        self.assertIn("27", repr(p) + str(p.properties(key)["shape"]))
+        try:
+            v = p[key]
+        except rs.RaysweepError as e:
+            self.assertIn("full=1", str(e))
+        else:
+            rows = np.round(np.reshape(v, (-1, 3)), 5).tolist()
+            self.assertEqual(len(rows), n + 1)
+            self.assertIn([0.0, 0.0, 0.0], rows)
+            self.assertIn([1.0, 0.0, 0.0], rows)
 
     def test_read_only(self):
         p = self.plate(0.47).traverse()
