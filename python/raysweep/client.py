@@ -72,15 +72,14 @@ class Client:
 
         Relative ``filename`` references resolve against the file's directory;
         the files are uploaded when the daemon lacks them. ``variant``
-        (``"mono"`` or ``"rgb"``) overrides the scene's. Unlike Mitsuba's
-        ``load_file``, XML parameters (``$name``) are not substituted from
-        keyword arguments here: give them ``<default>`` values in the file, or
-        set the parameters after loading (``scene.traverse()``).
+        (``"mono"`` or ``"rgb"``) overrides the scene's. Keyword arguments set
+        an XML scene's parameters, as Mitsuba's ``load_file(path, rho=0.3)``:
+        each replaces the value of its ``<default name=... value=...>``, or is
+        declared after ``<scene>`` when the file has no default for it (on the
+        same line, so the daemon's line numbers still match the file).
+        Values are numbers, booleans, strings or sequences of numbers
+        (written ``"1, 2, 3"``). A JSON scene takes none (``TypeError``).
         """
-        if params:
-            raise TypeError("load_file() takes no XML parameters ("
-                            + ", ".join(sorted(params)) + "): use <default name=... value=...> in the file, "
-                            "or set them with scene.traverse() after loading")
         path = os.fspath(path)
         try:
             with open(path, "rb") as f:
@@ -92,7 +91,11 @@ class Client:
         is_xml = lower.endswith(".xml") or (not lower.endswith(".json") and _looks_xml(text))
         label = os.path.basename(path)
         if is_xml:
-            return self._push(_xml_rewrite(text, base, self._upload_missing), "application/xml", variant, label)
+            doc = _xml_rewrite(text, base, self._upload_missing, params)
+            return self._push(doc, "application/xml", variant, label)
+        if params:
+            raise TypeError(f"{label} is a JSON scene: it takes no parameters ({', '.join(sorted(params))}); "
+                            "set them with scene.traverse() after loading")
         return self._push_json_text(text, base, variant, label)
 
     def load_dict(self, d, variant=None, base_dir=None):
@@ -207,41 +210,101 @@ def _looks_xml(text):
     return text.lstrip(b"\xef\xbb\xbf \t\r\n").startswith(b"<")
 
 
-def _xml_rewrite(text, base, upload):
-    """The XML document with every ``<string name="filename" value="P"/>`` value replaced by its digest.
+def _xml_value(v):
+    """A Python value as the text of an XML attribute (escaped)."""
+    if isinstance(v, bool):
+        v = "true" if v else "false"
+    elif isinstance(v, (list, tuple)) or hasattr(v, "tolist"):
+        v = v.tolist() if hasattr(v, "tolist") else list(v)
+        v = ", ".join(repr(float(x)) for x in (v if isinstance(v, list) else [v]))
+    elif isinstance(v, float):
+        v = repr(v)
+    v = str(v)
+    return v.replace("&", "&amp;").replace("<", "&lt;").replace('"', "&quot;").replace("'", "&apos;")
 
-    Edits only those attribute values' bytes (found with expat's byte offsets),
-    so line numbers do not move. A document expat cannot parse goes unchanged:
-    the daemon's answer names the line.
+
+def _xml_rewrite(text, base, upload, params=None):
+    """The XML document with its file references and parameters rewritten.
+
+    Every ``<string name="filename" value="P"/>`` value becomes ``P``'s
+    ``sha256:`` reference (the files are handed to ``upload``), every
+    ``<default name="K" value=...>`` with K in ``params`` takes that value,
+    and the other ``params`` are declared right after the ``<scene>`` start
+    tag. Only those bytes change (found with expat's byte offsets), so line
+    numbers do not move. A document expat cannot parse goes unchanged: the
+    daemon's answer names the line.
     """
-    edits, refs = [], {}
+    params = dict(params or {})
+    edits, refs, pending = [], {}, dict(params)
     parser = xml.parsers.expat.ParserCreate()
+    depth = [0]
+    scene_end = []
 
     def start(name, attrs):
+        depth[0] += 1
+        at = parser.CurrentByteIndex
+        if name == "scene" and depth[0] == 1:
+            end = _tag_end(text, at)
+            if end is not None:
+                scene_end.append(end)
+            return
+        if name == "default" and depth[0] == 2 and attrs.get("name") in params:
+            span = _attr_span(text[at:], b"value")
+            if span is not None:
+                key = attrs["name"]
+                edits.append((at + span[0], at + span[1], _xml_value(params[key])))
+                pending.pop(key, None)
+            return
         if name != "string" or attrs.get("name") != "filename":
             return
         value = attrs.get("value")
         if value is None or value.startswith(_SHA):
             return
-        at = parser.CurrentByteIndex
         span = _attr_span(text[at:], b"value")  # scans to the tag's end, quotes respected
         if span is None:
             raise RaysweepError(f"line {parser.CurrentLineNumber}: cannot locate the value of "
                                 '<string name="filename">')
         edits.append((at + span[0], at + span[1], _hash_ref(value, base, refs)))
 
+    def end(name):
+        depth[0] -= 1
+
     parser.StartElementHandler = start
+    parser.EndElementHandler = end
     try:
         parser.Parse(text, True)
     except xml.parsers.expat.ExpatError:
+        if params:
+            raise RaysweepError("the XML scene does not parse, so its parameters cannot be set: "
+                                + ", ".join(sorted(params))) from None
         return text
+    if pending:
+        if not scene_end:
+            raise RaysweepError("the XML document has no <scene> element to declare parameters in")
+        decl = "".join(f'<default name="{_xml_value(k)}" value="{_xml_value(v)}"/>' for k, v in pending.items())
+        edits.append((scene_end[0], scene_end[0], decl))
     upload(refs)
     out, r = [], 0
-    for a, b, ref in edits:
+    for a, b, ref in sorted(edits, key=lambda e: e[0]):
         out += [text[r:a], ref.encode()]
         r = b
     out.append(text[r:])
     return b"".join(out)
+
+
+def _tag_end(text, at):
+    """The offset just past the ``>`` that ends the start tag at ``at`` (quotes respected), or ``None``."""
+    quote = None
+    for i in range(at, len(text)):
+        c = text[i:i + 1]
+        if quote:
+            if c == quote:
+                quote = None
+        elif c in (b'"', b"'"):
+            quote = c
+        elif c == b">":
+            return i + 1
+    return None
 
 
 def _attr_span(tag, name):

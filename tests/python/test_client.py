@@ -154,11 +154,12 @@ class TestLoad(Base):
                     '    <bsdf type="difuse_typo"/>\n'
                     '  </shape>\n'
                     '</scene>\n')
-        with self.assertRaises(rs.RaysweepError) as cm:
-            self.client.load_file(path)
-        e = cm.exception
-        self.assertEqual(e.status, 422)
-        self.assertRegex(str(e.pointer) + " " + str(e.detail), r":7\b")
+        for params in ({}, {"unused": 1}):  # a declared parameter must not move lines either
+            with self.assertRaises(rs.RaysweepError) as cm:
+                self.client.load_file(path, **params)
+            e = cm.exception
+            self.assertEqual(e.status, 422)
+            self.assertRegex(str(e.pointer) + " " + str(e.detail), r":7\b")
 
     def test_problem_members(self):
         d = plate_dict()
@@ -173,9 +174,36 @@ class TestLoad(Base):
         self.assertTrue(e.pointer.startswith("/plate/bsdf"), e.pointer)
         self.assertIn(e.pointer, str(e))
 
-    def test_xml_params_refused(self):
+    def test_xml_params(self):
+        # Keyword arguments set XML parameters, as Mitsuba's load_file does:
+        # rho replaces its <default>, irr (no default) is declared.
+        path = os.path.join(self.tmp, "plate.xml")
+        with open(path, "w") as f:
+            f.write('<scene version="3.0.0">\n'
+                    '    <default name="rho" value="0.5"/>\n'
+                    '    <sensor type="distant" id="camera">\n'
+                    '        <vector name="direction" x="0" y="0" z="-1"/>\n'
+                    '        <point name="target" x="0" y="0" z="0"/>\n'
+                    '        <sampler type="independent"><integer name="sample_count" value="4"/></sampler>\n'
+                    '        <film type="hdrfilm"><integer name="width" value="1"/>'
+                    '<integer name="height" value="1"/><rfilter type="box"/></film>\n'
+                    '    </sensor>\n'
+                    '    <emitter type="directional" id="sun">\n'
+                    '        <vector name="direction" x="0" y="0" z="-1"/>\n'
+                    '        <float name="irradiance" value="$irr"/>\n'
+                    '    </emitter>\n'
+                    '    <shape type="rectangle" id="plate">\n'
+                    '        <bsdf type="diffuse"><float name="reflectance" value="$rho"/></bsdf>\n'
+                    '    </shape>\n'
+                    '</scene>\n')
+        scene = self.client.load_file(path, variant="mono", rho=0.3, irr=2.0)
+        film = scene.render(spp=4, xarray=False)
+        self.assertAlmostEqual(float(film[0, 0, 0]), 0.3 * 2.0 / math.pi, delta=1e-5)
+        with self.assertRaises(rs.RaysweepError) as cm:
+            self.client.load_file(path, variant="mono", rho=0.3)   # $irr undefined
+        self.assertIn("irr", str(cm.exception))
         with self.assertRaises(TypeError):
-            self.client.load_file(PLATE, spp=4)
+            self.client.load_file(PLATE, rho=0.3)                  # a JSON scene takes none
 
 
 class TestParameters(Base):
