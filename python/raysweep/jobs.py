@@ -63,7 +63,8 @@ def grid_contexts(grid, param_keys=None):
                 raise TypeError(f"grid[{name!r}]: {v!r} is neither a number nor a string "
                                 "(give other values through contexts=[...])")
         is_key = "." in name or ":" in name
-        if is_key and param_keys is not None and name not in param_keys:
+        # An Eradiate search (TYPE:ID:PATH) is resolved by the daemon alone.
+        if is_key and ":" not in name and param_keys is not None and name not in param_keys:
             from .errors import UnknownKeyError, did_you_mean
             cands = did_you_mean(name, param_keys)
             hint = "; did you mean " + ", ".join(repr(c) for c in cands) + "?" if cands else ""
@@ -103,7 +104,7 @@ def submit(scene, grid=None, contexts=None, spp=None, seed=None, sensors=None, w
         raise TypeError("give either grid={NAME: values} or contexts=[{...}, ...]")
     if grid is not None:
         keys = None
-        if any("." in n or ":" in n for n in grid):
+        if any("." in n and ":" not in n for n in grid):
             keys = set(scene._keys())
         contexts = grid_contexts(grid, keys)
     else:

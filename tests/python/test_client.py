@@ -386,6 +386,14 @@ class TestSweep(Base):
         self.assertIn("brf_srf", ds)
         self.assertAlmostEqual(float(ds.brf_srf.squeeze()), 0.5, delta=1e-5)
 
+    def test_grid_search_key(self):
+        # An Eradiate search TYPE:ID:PATH names a parameter too; its coord is the path's last name.
+        d = plate_dict(0.5)
+        d["plate"]["bsdf"]["id"] = "white"
+        ds = self.client.load_dict(d).sweep(grid={"bsdf:white:reflectance.value": [0.1, 0.3]}, spp=4)
+        np.testing.assert_allclose(ds.radiance.isel(y=0, x=0).values, np.array([0.1, 0.3]) / math.pi, atol=1e-5)
+        self.assertIn("reflectance", ds.dims)
+
     def test_grid_typo(self):
         with self.assertRaises(KeyError) as cm:
             self.plate(0.5).sweep(grid={"plate.bsdf.reflectanc.value": [0.1]})
