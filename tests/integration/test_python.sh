@@ -114,4 +114,8 @@ else
   bad "nbconvert and ipykernel are needed for the notebook (make deps installs python3-nbconvert python3-ipykernel)"
 fi
 echo "test_python: notebook $(secs "$t2") s"
+# Under `make test SAN=1` a sanitizer report in a daemon's log is a failure.
+for d in d d2; do
+  if grep -qE 'Sanitizer|runtime error:' "$tmp/$d/log"; then bad "$d: $(grep -m 3 -E 'Sanitizer|runtime error:' "$tmp/$d/log")"; else ok; fi
+done
 finish
