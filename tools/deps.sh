@@ -19,6 +19,8 @@ pkgs=(
   # python3-xarray, python3-netcdf4 and python3-numpy read the sweep datasets
   # back (tests/integration/test_dataset.sh)
   python3-xarray python3-netcdf4 python3-numpy
+  # test: the Python package (venv, offline pip build) and its notebook (tests/integration/test_python.sh)
+  python3-venv python3-setuptools python3-wheel python3-nbconvert python3-ipykernel python3-tqdm
   # make test-cluster: the load balancers in front of replicas (run as the
   # current user with configurations in a temp directory), and a
   # single-node Slurm (slurmctld, slurmd, sbatch) with its authentication
