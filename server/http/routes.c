@@ -100,7 +100,7 @@ static void resp_film(http_req *r, const svc_film *f, http_film_format fmt) {
   rsw_status s;
   if (fmt == HTTP_FILM_PNG) {
     png_look look = {.colormap = r->q_colormap};
-    if (r->q_exposure) look.exposure = strtod(r->q_exposure, NULL); /* checked by negotiate_film */
+    if (r->q_exposure) png_exposure_parse(r->q_exposure, &look); /* checked by negotiate_film */
     s = http_film_png(f, &look, &bytes, &len, &err);
     if (s == RSW_ERR_INVALID) { /* colormap for an rgb film, a film with nothing to show */
       char msg[1200];
@@ -139,14 +139,12 @@ static bool negotiate_film(http_req *r, http_film_format *fmt) {
         "Accept '%s' allows none of application/json, image/x-exr, application/x-npy, image/png", r->accept);
     return false;
   }
-  if (r->q_exposure) {
-    char *end = NULL;
-    double ev = strtod(r->q_exposure, &end);
-    if (end == r->q_exposure || *end || !isfinite(ev) || fabs(ev) > 1000) {
-      http_resp_problem(r, 400, NULL, "query parameter exposure must be a number of stops (got '%s')",
-                        r->q_exposure);
-      return false;
-    }
+  png_look look = {0};
+  if (r->q_exposure && !png_exposure_parse(r->q_exposure, &look)) {
+    http_resp_problem(r, 400, NULL,
+                      "query parameter exposure must be a number of stops, auto, or auto+EV (got '%s')",
+                      r->q_exposure);
+    return false;
   }
   if (r->q_colormap && !png_colormap_known(r->q_colormap)) {
     http_resp_problem(r, 400, NULL, "query parameter colormap must be one of %s (got '%s')",
