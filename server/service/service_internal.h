@@ -152,6 +152,10 @@ typedef struct job {
   /* The job's bands (bands.c), NULL without: each context renders once
    * per node wavelength, items context-major then node then sensor. */
   band_plan *bands;
+  /* The render in progress (an index into items, SIZE_MAX when none) and
+   * its samples, for the job's answers ("render"). */
+  size_t current;
+  render_progress current_samples;
 } job;
 
 struct service {
@@ -316,6 +320,7 @@ typedef struct render_spec {
   double deadline;
   unsigned quantities; /* RENDER_Q_* */
   bool variance;
+  render_progress *samples; /* optional: the render's progress (render_opts.samples) */
 } render_spec;
 /* A request's "quantities" (a list of "radiance", "brdf", "brf") into
  * RENDER_Q_* bits, or its "variance" (a boolean); ptr is the member's JSON
