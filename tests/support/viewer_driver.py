@@ -455,7 +455,7 @@ def run(a, profile, browser):
         if not page.wait("document.querySelectorAll('#results a').length === %d" % n_ctx, 5):
             return "the job's results are not listed"
         page.click("#results a")
-        if not page.wait(f"document.getElementById('film-title').textContent.includes('{jid}')", 10):
+        if not page.wait(f"document.getElementById('film-title').dataset.job === '{jid}'", 10):
             return "clicking a result did not show its film"
     check("follows a running job to the end (event stream) and shows its results", job_follow)
 
@@ -524,7 +524,8 @@ def run(a, profile, browser):
         if not page.wait(f"document.querySelector('{li}')", 10):
             return "the mdistant scene is not listed"
         page.click(li)
-        if not page.wait(f"document.getElementById('scene-title').textContent.startsWith('{sc['id'][:12]}')", 10):
+        if not page.wait(f"(document.querySelector('#scenes li.selected') || {{dataset: {{}}}}).dataset.scene === '{sc['id']}'"
+                         " && document.getElementById('r-sensor').value === 'pp'", 10):
             return "the mdistant scene was not selected"
         page.js("document.getElementById('plot').dataset.kind = ''")
         page.type_into("#r-spp", "64")
