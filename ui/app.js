@@ -387,7 +387,9 @@ function describePixel(k, where) {
   const ix = k % film.width, iy = Math.floor(k / film.width);
   const vals = film.channels.map((name, i) => `${name} ${fmt(film.data[k * c + i])}`).join('  ');
   const ang = m.zenith_deg ? `  θ ${fmt(m.zenith_deg[k])}°  φ ${fmt(m.azimuth_deg[k])}°` : '';
-  $('hover').textContent = `${where} pixel (${ix}, ${iy})  ${vals}${ang}`;
+  const plane = currentPlane();
+  const shown = state.model ? `  ${PLANE_LABELS[plane.name] || plane.name}: ${fmt(state.model.values[k])}` : '';
+  $('hover').textContent = `${where} pixel (${ix}, ${iy})  ${vals}${ang}${shown}`;
 }
 
 function hoverFilm(ev) {

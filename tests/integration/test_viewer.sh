@@ -41,7 +41,7 @@ hdr() { curl -s -o /dev/null -D - "$@" | tr -d '\r'; }
 h=$(hdr "$U/ui")
 echo "$h" | grep -q '^HTTP/1.1 301' && echo "$h" | grep -qi '^Location: /ui/$' && ok || bad "/ui does not redirect to /ui/: $h"
 for f in "/ui/ text/html" "/ui/index.html text/html" "/ui/app.js text/javascript" "/ui/api.js text/javascript" \
-  "/ui/plot.js text/javascript" "/ui/style.css text/css"; do
+  "/ui/plot.js text/javascript" "/ui/sweep.js text/javascript" "/ui/style.css text/css"; do
   set -- $f
   h=$(hdr "$U$1")
   if echo "$h" | grep -q '^HTTP/1.1 200' && echo "$h" | grep -qi "^Content-Type: $2; charset=utf-8$" &&
@@ -82,5 +82,5 @@ fail=$((fail + f))
 if [ "$rc" -ne 0 ] && [ "$f" -eq 0 ]; then
   bad "viewer_driver.py exited $rc: $(echo "$out" | tail -n 5)"
 fi
-[ "$p" -ge 9 ] || bad "viewer_driver.py ran $p checks, want at least 9"
+[ "$p" -ge 17 ] || bad "viewer_driver.py ran $p checks, want at least 17"
 finish
