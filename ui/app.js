@@ -521,6 +521,7 @@ async function showResults(id) {
     const { data } = await api('GET', `/v1/jobs/${encodeURIComponent(id)}/results`);
     const ok = data.results.filter((r) => r.state === 'succeeded');
     setupSweep(id, data.results);
+    box.dataset.job = id;
     box.replaceChildren(el('div', { class: 'muted' }, `${ok.length} film(s) of ${data.results.length}; click one to show it`),
       ...data.results.map((r) => el('div', { dataset: { context: r.context, sensor: r.sensor } },
         r.state === 'succeeded'

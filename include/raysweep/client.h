@@ -115,8 +115,10 @@ void rsw_free(void *p);
  * against the scene file's directory) is hashed; the server is asked which
  * digests it lacks, only those are uploaded, and the references are
  * rewritten to "sha256:<hex>" before the scene is posted. variant may be
- * NULL. id_out: 65 bytes (64 hex + NUL). created_out (may be NULL): 1 when
- * the server loaded it, 0 when it was already resident. */
+ * NULL. The file's name (without its directory) goes along as the scene's
+ * label (?name=, the viewer's name for it). id_out: 65 bytes (64 hex +
+ * NUL). created_out (may be NULL): 1 when the server loaded it, 0 when it
+ * was already resident. */
 rsw_status rsw_scene_push_file(rsw_client *c, const char *path, const char *variant, char id_out[65],
                                int *created_out);
 /* Same from memory; base_dir resolves relative file names (NULL: "."). */

@@ -253,6 +253,12 @@ static const char *const variants[] = {"mono", "rgb"};
 
 static void h_scene_post(http_req *r) {
   if (!query_enum(r, "variant", r->q_variant, variants, 2)) return;
+  if (r->q_name && !service_scene_label_ok(r->q_name)) {
+    http_resp_problem(r, 400, NULL,
+                      "query parameter name must be 1 to %d bytes of text without control characters",
+                      SVC_SCENE_LABEL_MAX);
+    return;
+  }
   bool is_xml = !http_media_type_is(r->content_type, "application/json");
   svc_error e = {0};
   bool created = false;
@@ -260,6 +266,11 @@ static void h_scene_post(http_req *r) {
   rsw_status s =
       service_scene_post(r->svc, r->body, r->body_len, is_xml, r->q_variant, &created, &id, &json, &e);
   if (s == RSW_OK && id) snprintf(r->resp.location, sizeof r->resp.location, "/v1/scenes/%s", id);
+  if (s == RSW_OK && id && r->q_name) { /* the summary again, with the name */
+    free(json);
+    json = NULL;
+    s = service_scene_label(r->svc, id, r->q_name, &json, &e);
+  }
   free(id);
   resp_result(r, s, created ? 201 : 200, json, &e);
 }

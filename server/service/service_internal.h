@@ -33,6 +33,7 @@ typedef struct svc_view {
  * says the base or a view came back. */
 typedef struct resident {
   char id[65];
+  char label[SVC_SCENE_LABEL_MAX + 1]; /* "" or the name it was pushed under (svc->lock) */
   scene *sc;
   uint64_t revision; /* base revision, +1 per PATCH that changed something */
   double load_s;

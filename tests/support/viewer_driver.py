@@ -587,7 +587,7 @@ def run(a, profile, browser):
     check("plots an mdistant principal plane against signed zenith", plane)
 
     # 8. The job form: a grid of a template's coordinate and a parameter key.
-    st2, sw = http("POST", f"{base}/v1/scenes", SWEEP_SCENE)
+    st2, sw = http("POST", f"{base}/v1/scenes?name=sweep-plate.json", SWEEP_SCENE)
     sweep = {}
 
     def job_form():
@@ -597,6 +597,9 @@ def run(a, profile, browser):
         li = f'#scenes li[data-scene="{sw["id"]}"]'
         if not page.wait(f"document.querySelector('{li}')", 10):
             return "the sweep scene is not listed"
+        shown = page.js(f"document.querySelector('{li} .id').textContent")
+        if shown != "sweep-plate.json":
+            return f"the scene pushed as sweep-plate.json is listed as {shown!r}"
         page.click(li)
         if not page.wait("document.getElementById('r-sensor').value === 'hd' && document.getElementById('j-sensors').value === 'hd'", 10):
             return "the sweep scene was not selected"
@@ -675,15 +678,16 @@ def run(a, profile, browser):
     def planes():
         if "job" not in sweep:
             return "no sweep job"
-        page.click('#jobs li[data-state="succeeded"]:not([data-job="%s"])' % sweep["job"])
-        if not page.wait("document.querySelectorAll('#results a').length > 0", 5):
+        rgb_job = page.js('document.querySelector(\'#jobs li[data-state="succeeded"]:not([data-job="%s"])\').dataset.job' % sweep["job"])
+        page.click(f'#jobs li[data-job="{rgb_job}"]')
+        if not page.wait(f"document.getElementById('results').dataset.job === '{rgb_job}'", 5):
             return "the rgb job's results are not listed"
         page.click("#results a")
         if not page.wait("document.getElementById('film').dataset.mode === 'rgb'", 10):
             return "the rgb job's film is not shown as RGB"
         page.js("(() => { const e = document.getElementById('channel'); e.value = '2'; e.dispatchEvent(new Event('change')); })()")
         page.click(f'#jobs li[data-job="{sweep["job"]}"]')
-        if not page.wait("document.querySelectorAll('#results a').length === 9", 5):
+        if not page.wait(f"document.getElementById('results').dataset.job === '{sweep['job']}'", 5):
             return "the sweep job's results are not listed"
         page.js("document.getElementById('film').dataset.ready = ''")
         page.click("#results a")
@@ -708,8 +712,8 @@ def run(a, profile, browser):
         if page.js("document.getElementById('film').dataset.plane") != "brf":
             return "choosing BRF does not show the brf plane"
         # Back to an rgb film: its own default (RGB), not the B chosen before.
-        page.click('#jobs li[data-state="succeeded"]:not([data-job="%s"])' % sweep["job"])
-        page.wait("document.querySelectorAll('#results a').length === 6", 5)
+        page.click(f'#jobs li[data-job="{rgb_job}"]')
+        page.wait(f"document.getElementById('results').dataset.job === '{rgb_job}'", 5)
         page.click("#results a")
         if not page.wait("document.getElementById('film').dataset.mode === 'rgb' && document.getElementById('channel').value === 'rgb'", 10):
             return f"the next rgb film shows channel {page.js('document.getElementById(`channel`).value')}, want RGB"
@@ -721,7 +725,7 @@ def run(a, profile, browser):
         if "job" not in sweep:
             return "no sweep job"
         page.click(f'#jobs li[data-job="{sweep["job"]}"]')
-        page.wait("document.querySelectorAll('#results a').length === 9", 5)
+        page.wait(f"document.getElementById('results').dataset.job === '{sweep['job']}'", 5)
         page.js("document.getElementById('film').dataset.ready = ''")
         page.click("#results a")
         if not page.wait("document.getElementById('film').dataset.ready === '1' && document.getElementById('film').dataset.plane === 'radiance'", 10):
@@ -785,6 +789,9 @@ def run(a, profile, browser):
                 return f"job {jid} is labelled {label!r}"
             if "e-" in meta or not re.search(r"\d (µs|ms|s|min)\b", meta):
                 return f"job {jid}'s duration reads {meta!r}"
+        row = page.js(f"document.querySelector('#jobs li[data-job=\"{sweep['job']}\"] .id').textContent")
+        if not row.endswith(" · sweep-plate.json"):
+            return f"the sweep job's line names its scene as {row!r}, want sweep-plate.json"
         st3, job = http("POST", f"{base}/v1/scenes/{scene}/jobs", {"defaults": {"spp": 200000}, "contexts": [{"id": "long"}]})
         jid = job["id"]
         page.click("#jobs-refresh")
