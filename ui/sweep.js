@@ -5,7 +5,7 @@
 import { filmPlanes, fmt, ticks } from './plot.js';
 
 const SVG = 'http://www.w3.org/2000/svg';
-const COLORS = ['#26828e', '#d62728', '#1f77b4', '#ff7f0e', '#2ca02c', '#9467bd', '#8c564b', '#e377c2', '#7f7f7f', '#bcbd22'];
+const COLORS = ['#1f77b4', '#d62728', '#2ca02c', '#ff7f0e', '#9467bd', '#8c564b', '#e377c2', '#7f7f7f', '#bcbd22', '#17becf']; // matplotlib's tab10, reordered
 
 // The coordinates of a job's results: each result's coords, plus its
 // wavelength (mono) when no coord already carries it. Returns

@@ -513,8 +513,6 @@ def run(a, profile, browser):
     time.sleep(0.3)
     png = page.screenshot()
     open(art("viewer.png"), "wb").write(png)
-    if a.docs_png:
-        shutil.copyfile(art("viewer.png"), a.docs_png)
     if page.errors:
         fail("no script errors", "; ".join(map(str, page.errors[:3])))
     else:
@@ -665,6 +663,18 @@ def run(a, profile, browser):
                 return f"point {p}: want BRF {sum(brf) / n} ± {err} (the film's mean and its standard error)"
         png = page.screenshot(page.rect("#sweep"))
         open(art("sweep.png"), "wb").write(png)
+        # The whole page, one film of the job shown as BRF (docs/viewer.png).
+        page.js("document.getElementById('film').dataset.ready = ''")
+        page.click("#results a")
+        page.wait("document.getElementById('film').dataset.ready === '1'", 10)
+        page.js("(() => { const e = document.getElementById('plane'); e.value = 'brf'; e.dispatchEvent(new Event('change')); })()")
+        page.click("#exposure-auto")
+        page.type_into("#param-search", "plate bsdf")
+        time.sleep(0.3)
+        open(art("viewer-sweep.png"), "wb").write(page.screenshot())
+        page.type_into("#param-search", "")
+        if a.docs_png:
+            shutil.copyfile(art("viewer-sweep.png"), a.docs_png)
         # Against rho_0 instead: sza is then held at one value (3 points).
         page.js("(() => { const e = document.getElementById('sw-x'); e.value = 'rho_0'; e.dispatchEvent(new Event('change')); })()")
         if not page.wait("document.getElementById('sweep').dataset.ready === '1' && document.getElementById('sweep').dataset.points === '3'", 10):
