@@ -498,7 +498,7 @@ static const command commands[] = {
      "[--wavelength NM] [--threads N] [--isa auto|avx512|avx2|sse2|generic] [--variant mono|rgb] "
      "[--plugin-dir DIR] "
      "[--quantities LIST] "
-     "[--variance] [--exposure EV|auto[+-EV]] [--colormap MAP] [--stats] -o OUT.exr|OUT.npy|OUT.json|OUT.png",
+     "[--variance] [--exposure EV|auto] [--colormap MAP] [--stats] -o OUT.exr|OUT.npy|OUT.json|OUT.png",
      "load a scene, apply parameter updates, render one sensor to OpenEXR, NumPy, JSON or a PNG quick-look",
      "  SCENE               a .xml (Mitsuba XML) or .json scene file\n"
      "  -o, --output OUT    the film; written next to it and renamed once complete; the name's ending\n"

@@ -621,7 +621,11 @@ function sweepFixed() {
 async function sweepFilm(r) {
   const films = state.sweep.films;
   if (!films.has(r.href)) {
-    films.set(r.href, api('GET', r.href).then(({ data }) => data));
+    // A failed fetch is forgotten, so that the next draw tries again.
+    films.set(r.href, api('GET', r.href).then(({ data }) => data, (e) => {
+      films.delete(r.href);
+      throw e;
+    }));
   }
   return films.get(r.href);
 }
