@@ -565,8 +565,12 @@ function setupSweep(id, results) {
   }
   panel.hidden = false;
   $('sweep-title').textContent = `job ${jobLabel(id)} · ${ok.length} film(s)`;
+  // A choice the user made on this job's sweep stays when the results are
+  // reloaded (more films done); the defaults are chosen again otherwise,
+  // from the results there are now.
   const keep = (sel, opts, dflt) => {
-    const old = sel.dataset.job === id ? sel.value : null;
+    if (sel.dataset.job !== id) delete sel.dataset.user;
+    const old = sel.dataset.user ? sel.value : null;
     sel.replaceChildren(...opts.map(([v, t]) => option(v, t)));
     sel.value = opts.some(([v]) => v === old) ? old : dflt !== undefined ? dflt : opts.length ? opts[0][0] : '';
     sel.dataset.job = id;
@@ -835,6 +839,11 @@ function wire() {
     redraw();
   });
   $('channel').addEventListener('change', redraw);
+  for (const id of ['sw-sensor', 'sw-quantity', 'sw-channel', 'sw-pixel', 'sw-x', 'sw-series']) {
+    $(id).addEventListener('change', () => {
+      $(id).dataset.user = '1';
+    });
+  }
   for (const id of ['sw-sensor', 'sw-quantity', 'sw-channel', 'sw-pixel']) $(id).addEventListener('change', drawSweepView);
   $('sw-x').addEventListener('change', () => {
     // A line per value of any coordinate but the one plotted against.
