@@ -42,6 +42,49 @@ static unsigned char srgb8(double v) {
   return (unsigned char)lrint(fmin(fmax(s, 0.0), 1.0) * 255.0);
 }
 
+bool png_exposure_parse(const char *text, png_look *look) {
+  if (!text) return false;
+  bool is_auto = strncmp(text, "auto", 4) == 0;
+  const char *num = is_auto ? text + 4 : text;
+  double ev = 0;
+  if (!is_auto || *num) {
+    if (is_auto && *num != '+' && *num != '-') return false;
+    char *end = NULL;
+    ev = strtod(num, &end);
+    if (end == num || *end || !isfinite(ev) || fabs(ev) > 1000) return false;
+  }
+  look->exposure = ev;
+  look->auto_exposure = is_auto;
+  return true;
+}
+
+static int cmp_double(const void *a, const void *b) {
+  double x = *(const double *)a, y = *(const double *)b;
+  return (x > y) - (x < y);
+}
+
+/* The PNG_AUTO_PERCENTILE-th percentile (nearest rank) of the finite
+ * values > 0 of channels ch[0..count) of n pixels; 0 when there are none,
+ * -1 when out of memory. */
+static double auto_white(const float *data, size_t n, int n_channels, const int *ch, int count) {
+  double *v = malloc((n * (size_t)count + 1) * sizeof *v);
+  if (!v) return -1;
+  size_t m = 0;
+  for (size_t i = 0; i < n; i++)
+    for (int k = 0; k < count; k++) {
+      double x = data[i * (size_t)n_channels + (size_t)ch[k]];
+      if (isfinite(x) && x > 0) v[m++] = x;
+    }
+  double white = 0;
+  if (m) {
+    qsort(v, m, sizeof *v, cmp_double);
+    size_t rank = (size_t)ceil(PNG_AUTO_PERCENTILE / 100.0 * (double)m); /* 1-based */
+    white = v[(rank < 1 ? 1 : rank > m ? m : rank) - 1];
+  }
+  free(v);
+  return white;
+}
+
 static double shown(float v, double scale) {
   double x = (double)v * scale;
   return isfinite(x) && x > 0 ? fmin(x, 1.0) : 0.0;
@@ -85,13 +128,12 @@ static rsw_status tonemap(int width, int height, int n_channels, const char *con
     return rsw_fail(err, RSW_ERR_INVALID, where,
                     "colormap '%s' is for one-channel films; this film has R, G, B", look->colormap);
   size_t px = (size_t)width * (size_t)height;
-  double white = 0;
-  for (size_t i = 0; i < px; i++)
-    for (int k = 0; k < (rgb ? 3 : 1); k++) {
-      double v = data[i * (size_t)n_channels + (size_t)(rgb ? idx[k] : one)];
-      if (isfinite(v) && v > white) white = v;
-    }
-  double scale = white > 0 ? exp2(look->exposure) / white : 0;
+  double scale = exp2(look->exposure);
+  if (look->auto_exposure) {
+    double white = auto_white(data, px, n_channels, rgb ? idx : &one, rgb ? 3 : 1);
+    if (white < 0) return rsw_fail(err, RSW_ERR_NOMEM, where, "out of memory for a %dx%d PNG", width, height);
+    if (white > 0) scale /= white;
+  }
   *bpp = rgb || table ? 3 : 1;
   *color_type = *bpp == 3 ? PNG_COLOR_TYPE_RGB : PNG_COLOR_TYPE_GRAY;
   unsigned char *rows = malloc(px * (size_t)*bpp);

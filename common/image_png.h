@@ -2,17 +2,21 @@
  * header mentions none of libpng's types; the one file that includes
  * png.h is image_png.c.
  *
- * The mapping (a look, not a measurement): every value is multiplied by
- * 2^exposure / white, with white the largest finite value of the channels
- * shown (so at exposure 0 the brightest pixel is full white and nothing
- * clips), clamped to [0, 1], then
+ * The mapping (a look, not a measurement) is Mitsuba's conversion of a
+ * linear film to 8-bit sRGB: each value times 2^exposure, clamped to
+ * [0, 1] (at exposure 0 a radiance of 1 is full white), then
  *   - three channels (R, G, B): each sRGB-encoded (IEC 61966-2-1 transfer
  *     curve), an RGB PNG;
  *   - one channel (Y, or S0 of a Stokes film): with colormap "gray", the
  *     sRGB-encoded grey (a grayscale PNG); with "viridis" or "inferno",
  *     the linear value through that perceptually uniform map (matplotlib's,
  *     tabulated at 9 points and interpolated linearly), an RGB PNG.
- * NaN, infinite and negative values show as black. Row 0 is the top. */
+ * With auto_exposure every value is first divided by the film's
+ * PNG_AUTO_PERCENTILE-th percentile of the finite values > 0 of the
+ * channels shown (nearest rank), not by its maximum: a lamp or a glint
+ * clips instead of darkening the whole picture (docs/viewer.md "Tone
+ * mapping"). NaN, infinite and negative values show as black. Row 0 is
+ * the top. */
 #ifndef RSW_IMAGE_PNG_H
 #define RSW_IMAGE_PNG_H
 
@@ -23,8 +27,17 @@
 
 typedef struct png_look {
   double exposure;      /* stops; 0 by default */
+  bool auto_exposure;   /* scale by the PNG_AUTO_PERCENTILE value first */
   const char *colormap; /* NULL or "gray", "viridis", "inferno" */
 } png_look;
+
+/* The percentile auto exposure maps to white (the viewer uses the same). */
+#define PNG_AUTO_PERCENTILE 99.5
+
+/* Parse an exposure as given on a command line or in ?exposure=: a number
+ * of stops (|EV| <= 1000), "auto", or "auto+EV" / "auto-EV" (auto, then
+ * EV stops). false, with look unchanged, for anything else. */
+bool png_exposure_parse(const char *text, png_look *look);
 
 /* True when name is a colormap png_look takes (NULL counts as gray). */
 bool png_colormap_known(const char *name);

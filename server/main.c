@@ -195,10 +195,8 @@ static int cmd_render(int argc, char **argv) {
     } else if (strcmp(a, "--variance") == 0) {
       variance = true;
     } else if (strcmp(a, "--exposure") == 0) {
-      char *end = NULL;
-      look.exposure = val ? strtod(val, &end) : NAN;
-      if (!val || end == val || *end || !isfinite(look.exposure) || fabs(look.exposure) > 1000)
-        USAGE("--exposure needs a number of stops (got '%s')", val ? val : "");
+      if (!png_exposure_parse(val, &look))
+        USAGE("--exposure needs a number of stops, auto, or auto+EV (got '%s')", val ? val : "");
       i++;
     } else if (strcmp(a, "--colormap") == 0) {
       if (!val || !png_colormap_known(val))
@@ -247,7 +245,7 @@ static int cmd_render(int argc, char **argv) {
     goto out;
   }
   bool is_png = fmt == OUT_PNG;
-  if (!is_png && (look.exposure != 0 || look.colormap)) {
+  if (!is_png && (look.exposure != 0 || look.auto_exposure || look.colormap)) {
     rc = usage_error("render", "--exposure and --colormap are for a PNG output (-o OUT.png)%s", "");
     goto out;
   }
@@ -502,7 +500,7 @@ static const command commands[] = {
      "[--wavelength NM] [--threads N] [--isa auto|avx512|avx2|sse2|generic] [--variant mono|rgb] "
      "[--plugin-dir DIR] "
      "[--quantities LIST] "
-     "[--variance] [--exposure EV] [--colormap MAP] [--stats] -o OUT.exr|OUT.npy|OUT.json|OUT.png",
+     "[--variance] [--exposure EV|auto] [--colormap MAP] [--stats] -o OUT.exr|OUT.npy|OUT.json|OUT.png",
      "load a scene, apply parameter updates, render one sensor to OpenEXR, NumPy, JSON or a PNG quick-look",
      "  SCENE               a .xml (Mitsuba XML) or .json scene file\n"
      "  -o, --output OUT    the film; written next to it and renamed once complete; the name's ending\n"
@@ -525,7 +523,9 @@ static const command commands[] = {
      "                      channels (E_h: horizontal irradiance of the directional emitters)\n"
      "  --variance          adds radiance_stderr channels, the standard error of each pixel's mean\n"
      "                      (box rfilter, spp >= 2)\n"
-     "  --exposure EV       PNG only: scale by 2^EV after mapping the brightest value to white (default 0)\n"
+     "  --exposure EV       PNG only, as Mitsuba's 8-bit sRGB: linear radiance times 2^EV, clamped to\n"
+     "                      [0, 1], sRGB curve (default 0); auto: the film's 99.5th percentile maps to\n"
+     "                      white (not its maximum); auto+EV, auto-EV: then EV stops more or less\n"
      "  --colormap MAP      PNG only, one-channel films: gray (default), viridis or inferno\n"
      "  --stats             one summary line on stderr: samples/s, rays by kind, time tracing vs shading\n"
      "Exit status: 0 ok, 1 the scene failed to load or render, 2 command-line mistake.\n",

@@ -25,34 +25,70 @@ function srgb8(v) {
   return Math.round(e * 255);
 }
 
-// The film in display form. mode: 'rgb' (the three channels tone-mapped
-// to sRGB) or a channel index / 'lum' shown in false colour. Returns
-// {values: Float64Array per pixel (the displayed quantity), color(k) →
-// [r,g,b] for pixel k}, given white = the value shown at full scale.
-export function displayModel(film, mode, white) {
-  const n = film.width * film.height, c = film.channels.length, d = film.data;
-  const values = new Float64Array(n);
-  const rgbMode = mode === 'rgb' && c === 3;
-  for (let k = 0; k < n; k++) {
-    if (mode === 'lum' || rgbMode) {
-      values[k] = c === 3 ? 0.212671 * d[3 * k] + 0.71516 * d[3 * k + 1] + 0.072169 * d[3 * k + 2] : d[k * c];
-    } else {
-      values[k] = d[k * c + (mode | 0)];
+// A film's planes: its radiance (the channels without a dot: R, G, B or
+// Y) and each plane the render added (brf.Y, radiance_stderr.R, ...), as
+// [{name, idx: channel indices, names: the channels' short names}], the
+// radiance first. A mono film with BRF and error planes is three planes of
+// one channel each, not an RGB film.
+export function filmPlanes(film) {
+  const out = [{ name: 'radiance', idx: [], names: [] }];
+  const by = new Map([['radiance', out[0]]]);
+  film.channels.forEach((c, i) => {
+    const dot = c.indexOf('.');
+    const name = dot < 0 ? 'radiance' : c.slice(0, dot);
+    if (!by.has(name)) {
+      by.set(name, { name, idx: [], names: [] });
+      out.push(by.get(name));
     }
+    by.get(name).idx.push(i);
+    by.get(name).names.push(dot < 0 ? c : c.slice(dot + 1));
+  });
+  return out;
+}
+
+// The film in display form, for the channels idx of one plane (each times
+// scale[i]; default 1). mode: 'rgb' (three channels as sRGB), 'lum'
+// (their luminance) or a position in idx, shown in false colour. white is
+// the value shown at full scale (2^-EV: at 0 EV a value of 1 is white, as
+// in Mitsuba's 8-bit sRGB conversion). Returns {values: Float64Array per
+// pixel (the displayed quantity), color(k) → [r,g,b] for pixel k, rgb}.
+export function displayModel(film, idx, mode, white, scale) {
+  const n = film.width * film.height, c = film.channels.length, d = film.data, m = idx.length;
+  const sc = scale || idx.map(() => 1);
+  const at = (k, i) => (d[k * c + idx[i]] ?? NaN) * sc[i];
+  const values = new Float64Array(n);
+  const rgbMode = mode === 'rgb' && m === 3;
+  for (let k = 0; k < n; k++) {
+    if (mode === 'lum' || rgbMode) values[k] = m === 3 ? 0.212671 * at(k, 0) + 0.71516 * at(k, 1) + 0.072169 * at(k, 2) : at(k, 0);
+    else values[k] = at(k, Math.min(m - 1, mode | 0));
   }
   const inv = white > 0 ? 1 / white : 0;
   const color = rgbMode
-    ? (k) => [srgb8(d[3 * k] * inv), srgb8(d[3 * k + 1] * inv), srgb8(d[3 * k + 2] * inv)]
+    ? (k) => [srgb8(at(k, 0) * inv), srgb8(at(k, 1) * inv), srgb8(at(k, 2) * inv)]
     : (k) => viridis(values[k] * inv);
   return { values, color, rgb: rgbMode };
 }
 
-// A robust full scale: the 99.5th percentile of the finite values > 0
-// (the maximum for small films), or 1 when there are none.
+// The automatic full scale: the 99.5th percentile (nearest rank) of the
+// finite values > 0, not the maximum (a lamp or a glint clips instead of
+// darkening the rest), or 1 when there are none. The PNG quick-looks'
+// `auto` exposure uses the same rule (common/image_png.h).
 export function autoWhite(values) {
   const v = Array.from(values).filter((x) => Number.isFinite(x) && x > 0).sort((a, b) => a - b);
   if (!v.length) return 1;
-  return v[Math.min(v.length - 1, Math.floor(0.995 * v.length))];
+  const rank = Math.min(v.length, Math.max(1, Math.ceil(0.995 * v.length)));
+  return v[rank - 1];
+}
+
+// Seconds as people read them: 188 µs, 42.1 ms, 3.2 s, 2 min 05 s, 1 h 02 min.
+export function fmtDuration(s) {
+  if (!Number.isFinite(s) || s < 0) return '—';
+  if (s < 1e-3) return `${Math.round(s * 1e6)} µs`;
+  if (s < 1) return `${Number((s * 1e3).toPrecision(3))} ms`;
+  if (s < 60) return `${Number(s.toPrecision(3))} s`;
+  const m = Math.floor(s / 60);
+  if (m < 60) return `${m} min ${String(Math.floor(s - 60 * m)).padStart(2, '0')} s`;
+  return `${Math.floor(m / 60)} h ${String(m % 60).padStart(2, '0')} min`;
 }
 
 export function drawFilm(canvas, film, model, maxCss) {

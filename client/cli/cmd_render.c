@@ -17,13 +17,17 @@ const cli_opt cli_opts_render[] = {
     {"--timeout", "S", false, "seconds the server may spend (exit 5 past it)"},
     {"--quantities", "LIST", false, "comma-separated, of radiance, brdf, brf: adds brdf and brf channels"},
     {"--variance", NULL, false, "adds radiance_stderr channels (standard error of each pixel's mean)"},
-    {"--exposure", "EV", false, "PNG: scale by 2^EV after mapping the brightest value to white (default 0)"},
+    {"--exposure", "EV|auto[+-EV]", false,
+     "PNG: linear radiance times 2^EV, clamped to [0,1], sRGB (default 0); auto: the 99.5th percentile to "
+     "white"},
     {"--colormap", "MAP", false, "PNG of a one-channel film: gray (default), viridis or inferno"},
     {"-o", "FILE", false, "output file: .exr, .npy, .json (the film JSON) or .png (a quick-look)"},
     {NULL},
 };
 const cli_opt cli_opts_fetch[] = {
-    {"--exposure", "EV", false, "PNG: scale by 2^EV after mapping the brightest value to white (default 0)"},
+    {"--exposure", "EV|auto[+-EV]", false,
+     "PNG: linear radiance times 2^EV, clamped to [0,1], sRGB (default 0); auto: the 99.5th percentile to "
+     "white"},
     {"--colormap", "MAP", false, "PNG of a one-channel film: gray (default), viridis or inferno"},
     {"-o", "FILE", false,
      "output file: .exr, .npy, .json (the film JSON) or .png (a quick-look); .nc: the whole job as one "
@@ -36,7 +40,7 @@ const cli_opt cli_opts_fetch[] = {
 /* The PNG quick-look's options (-o OUT.png), or a usage error. */
 typedef struct png_out {
   bool png;
-  double exposure;
+  const char *exposure; /* as given: checked by png_exposure_parse's rules */
   const char *colormap;
 } png_out;
 
@@ -52,8 +56,11 @@ static int output_format(const cli_ctx *ctx, const cli_args *a, const char *out,
   po->png = ends_png(out);
   const char *v;
   if ((v = cli_get(a, "--exposure"))) {
-    if (!cli_parse_double(v, &po->exposure) || fabs(po->exposure) > 1000)
-      return cli_usage(ctx, "--exposure needs a number of stops (got '%s')", v);
+    double ev = 0;
+    const char *num = strncmp(v, "auto", 4) == 0 && (v[4] == '+' || v[4] == '-') ? v + 4 : v;
+    if (strcmp(v, "auto") != 0 && (!cli_parse_double(num, &ev) || fabs(ev) > 1000))
+      return cli_usage(ctx, "--exposure needs a number of stops, auto, or auto+EV (got '%s')", v);
+    po->exposure = v;
   }
   if ((v = cli_get(a, "--colormap"))) {
     if (strcmp(v, "gray") && strcmp(v, "viridis") && strcmp(v, "inferno"))

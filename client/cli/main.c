@@ -38,7 +38,7 @@ static const cli_command commands[] = {
      cli_opts_set, 2, (size_t)-1, true, cmd_set},
     {"render", NULL,
      "ID [--sensor S] [--spp N] [--seed N] [--wavelength NM] [--set KEY=VALUE]... [--timeout S] "
-     "[--quantities LIST] [--variance] [--exposure EV] [--colormap MAP] -o OUT.exr|.npy|.json|.png",
+     "[--quantities LIST] [--variance] [--exposure EV|auto] [--colormap MAP] -o OUT.exr|.npy|.json|.png",
      "render one context synchronously (format by extension; .json is the film JSON, .png a tone-mapped "
      "quick-look; Ctrl-C stops the render)",
      cli_opts_render, 1, 1, true, cmd_render},
@@ -63,7 +63,7 @@ static const cli_command commands[] = {
     {"job", "rm", "ID", "delete a job and its results (cancels it if running)", cli_opts_none, 1, 1, true,
      cmd_job_rm},
     {"fetch", NULL,
-     "JOB [CONTEXT SENSOR] [--exposure EV] [--colormap MAP] -o FILE.exr|.npy|.json|.png|.nc "
+     "JOB [CONTEXT SENSOR] [--exposure EV|auto] [--colormap MAP] -o FILE.exr|.npy|.json|.png|.nc "
      "[--format exr|npy|json|nc] [--partial]",
      "download one film of a job, or (.nc) the whole job as one dataset", cli_opts_fetch, 1, 3, true,
      cmd_fetch},

@@ -240,9 +240,11 @@ rsw_status rsw_film_save_exr(const rsw_film *f, const char *path) {
   return s;
 }
 
-rsw_status rsw_film_save_png(const rsw_film *f, const char *path, double exposure, const char *colormap) {
+rsw_status rsw_film_save_png(const rsw_film *f, const char *path, const char *exposure,
+                             const char *colormap) {
   if (!f || !path) return RSW_ERR_INVALID;
-  png_look look = {.exposure = exposure, .colormap = colormap};
+  png_look look = {.colormap = colormap};
+  if (exposure && !png_exposure_parse(exposure, &look)) return RSW_ERR_INVALID;
   rsw_err err = {0};
   return png_write_film(path, f->width, f->height, f->channels, (const char *const *)f->names, f->data, &look,
                         &err);

@@ -400,7 +400,7 @@ static bool looks_xml(const char *text, size_t len) {
 
 /* is_xml: 1 XML, 0 JSON, -1 from the content. */
 static rsw_status push(rsw_client *c, const char *text, size_t len, const char *base_dir, const char *variant,
-                       int is_xml, char id_out[65], int *created_out) {
+                       const char *name, int is_xml, char id_out[65], int *created_out) {
   if (!c) return RSW_ERR_INVALID;
   client_clear_error(c);
   if (!text || !id_out)
@@ -414,13 +414,23 @@ static rsw_status push(rsw_client *c, const char *text, size_t len, const char *
                         : json_rewrite(c, text, len, base_dir, &refs, &doc, &doc_len);
   if (!s) s = upload_missing(c, &refs);
   refs_free(&refs);
-  char path[256] = "/v1/scenes";
+  char path[1024] = "/v1/scenes";
   if (!s && variant && *variant) {
     char esc[128];
     if (!client_escape(variant, esc, sizeof esc))
       s = client_fail(c, RSW_ERR_INVALID, "variant name too long");
     else
       snprintf(path, sizeof path, "/v1/scenes?variant=%s", esc);
+  }
+  /* The file's name, the scene's label on the daemon (a name it cannot
+   * take, too long or with control characters, is not sent). */
+  char nesc[3 * 128 + 1];
+  bool name_ok = name && *name && strlen(name) <= 128;
+  for (const char *p = name; name_ok && *p; p++)
+    if ((unsigned char)*p < 0x20 || *p == 0x7f) name_ok = false;
+  if (!s && name_ok && client_escape(name, nesc, sizeof nesc)) {
+    size_t at = strlen(path);
+    snprintf(path + at, sizeof path - at, "%cname=%s", strchr(path, '?') ? '&' : '?', nesc);
   }
   http_resp r = {0};
   if (!s)
@@ -450,7 +460,7 @@ static rsw_status push(rsw_client *c, const char *text, size_t len, const char *
 
 rsw_status rsw_scene_push_buffer(rsw_client *c, const char *text, size_t len, const char *base_dir,
                                  const char *variant, char id_out[65], int *created_out) {
-  return push(c, text, len, base_dir, variant, -1, id_out, created_out);
+  return push(c, text, len, base_dir, variant, NULL, -1, id_out, created_out);
 }
 
 rsw_status rsw_scene_push_file(rsw_client *c, const char *path, const char *variant, char id_out[65],
@@ -480,7 +490,8 @@ rsw_status rsw_scene_push_file(rsw_client *c, const char *path, const char *vari
   int is_xml = n >= 4 && strcmp(path + n - 4, ".xml") == 0    ? 1
                : n >= 5 && strcmp(path + n - 5, ".json") == 0 ? 0
                                                               : -1;
-  s = push(c, text, len, dir, variant, is_xml, id_out, created_out);
+  s = push(c, text, len, dir, variant, strrchr(path, '/') ? strrchr(path, '/') + 1 : path, is_xml, id_out,
+           created_out);
   free(dir);
   free(text);
   return s;

@@ -115,8 +115,10 @@ void rsw_free(void *p);
  * against the scene file's directory) is hashed; the server is asked which
  * digests it lacks, only those are uploaded, and the references are
  * rewritten to "sha256:<hex>" before the scene is posted. variant may be
- * NULL. id_out: 65 bytes (64 hex + NUL). created_out (may be NULL): 1 when
- * the server loaded it, 0 when it was already resident. */
+ * NULL. The file's name (without its directory) goes along as the scene's
+ * label (?name=, the viewer's name for it). id_out: 65 bytes (64 hex +
+ * NUL). created_out (may be NULL): 1 when the server loaded it, 0 when it
+ * was already resident. */
 rsw_status rsw_scene_push_file(rsw_client *c, const char *path, const char *variant, char id_out[65],
                                int *created_out);
 /* Same from memory; base_dir resolves relative file names (NULL: "."). */
@@ -170,13 +172,16 @@ rsw_status rsw_film_save_npy(const rsw_film *f, const char *path);
  * savers keep them (EXR channels, the .npy's last axis) and the EXR adds
  * "raysweep:irradiance". */
 /* A tone-mapped 8-bit sRGB PNG quick-look of the film's radiance (R, G, B;
- * else Y; else S0) through a temp file renamed on success: the brightest
- * finite value maps to white, then times 2^exposure (stops), clamped; a
- * one-channel film may use colormap "gray" (NULL: the default), "viridis"
- * or "inferno". RSW_ERR_INVALID for an unknown colormap, a colormap on an
- * RGB film or a non-finite exposure; RSW_ERR_IO when the file cannot be
- * written. Borrows everything. */
-rsw_status rsw_film_save_png(const rsw_film *f, const char *path, double exposure, const char *colormap);
+ * else Y; else S0) through a temp file renamed on success, as Mitsuba
+ * converts a film to 8-bit sRGB: linear values times 2^exposure, clamped
+ * to [0, 1], sRGB-encoded (docs/viewer.md "Tone mapping"). exposure is
+ * NULL (0 stops) or text as in the HTTP ?exposure=: a number of stops,
+ * "auto" (the film's 99.5th percentile maps to white, not its maximum) or
+ * "auto+EV" / "auto-EV". A one-channel film may use colormap "gray" (NULL:
+ * the default), "viridis" or "inferno". RSW_ERR_INVALID for an unknown
+ * colormap, a colormap on an RGB film or a malformed exposure; RSW_ERR_IO
+ * when the file cannot be written. Borrows everything. */
+rsw_status rsw_film_save_png(const rsw_film *f, const char *path, const char *exposure, const char *colormap);
 void rsw_film_free(rsw_film *f);
 
 /* One synchronous render. request_json is a RenderRequest text

@@ -100,7 +100,7 @@ static void resp_film(http_req *r, const svc_film *f, http_film_format fmt) {
   rsw_status s;
   if (fmt == HTTP_FILM_PNG) {
     png_look look = {.colormap = r->q_colormap};
-    if (r->q_exposure) look.exposure = strtod(r->q_exposure, NULL); /* checked by negotiate_film */
+    if (r->q_exposure) png_exposure_parse(r->q_exposure, &look); /* checked by negotiate_film */
     s = http_film_png(f, &look, &bytes, &len, &err);
     if (s == RSW_ERR_INVALID) { /* colormap for an rgb film, a film with nothing to show */
       char msg[1200];
@@ -139,14 +139,12 @@ static bool negotiate_film(http_req *r, http_film_format *fmt) {
         "Accept '%s' allows none of application/json, image/x-exr, application/x-npy, image/png", r->accept);
     return false;
   }
-  if (r->q_exposure) {
-    char *end = NULL;
-    double ev = strtod(r->q_exposure, &end);
-    if (end == r->q_exposure || *end || !isfinite(ev) || fabs(ev) > 1000) {
-      http_resp_problem(r, 400, NULL, "query parameter exposure must be a number of stops (got '%s')",
-                        r->q_exposure);
-      return false;
-    }
+  png_look look = {0};
+  if (r->q_exposure && !png_exposure_parse(r->q_exposure, &look)) {
+    http_resp_problem(r, 400, NULL,
+                      "query parameter exposure must be a number of stops, auto, or auto+EV (got '%s')",
+                      r->q_exposure);
+    return false;
   }
   if (r->q_colormap && !png_colormap_known(r->q_colormap)) {
     http_resp_problem(r, 400, NULL, "query parameter colormap must be one of %s (got '%s')",
@@ -255,6 +253,12 @@ static const char *const variants[] = {"mono", "rgb"};
 
 static void h_scene_post(http_req *r) {
   if (!query_enum(r, "variant", r->q_variant, variants, 2)) return;
+  if (r->q_name && !service_scene_label_ok(r->q_name)) {
+    http_resp_problem(r, 400, NULL,
+                      "query parameter name must be 1 to %d bytes of text without control characters",
+                      SVC_SCENE_LABEL_MAX);
+    return;
+  }
   bool is_xml = !http_media_type_is(r->content_type, "application/json");
   svc_error e = {0};
   bool created = false;
@@ -262,6 +266,11 @@ static void h_scene_post(http_req *r) {
   rsw_status s =
       service_scene_post(r->svc, r->body, r->body_len, is_xml, r->q_variant, &created, &id, &json, &e);
   if (s == RSW_OK && id) snprintf(r->resp.location, sizeof r->resp.location, "/v1/scenes/%s", id);
+  if (s == RSW_OK && id && r->q_name) { /* the summary again, with the name */
+    free(json);
+    json = NULL;
+    s = service_scene_label(r->svc, id, r->q_name, &json, &e);
+  }
   free(id);
   resp_result(r, s, created ? 201 : 200, json, &e);
 }

@@ -303,6 +303,8 @@ static tile_buf *render_tile(job *jb, size_t t, render_stats *rs, uint64_t *samp
           wave_start(jb, wb, n);
           if (!wave_flush(jb, tb, wb, n, rs, invalid)) goto fail;
           *samples += (uint64_t)n;
+          if (jb->opts->samples)
+            atomic_fetch_add_explicit(&jb->opts->samples->done, (uint64_t)n, memory_order_relaxed);
           n = 0;
         }
       }
@@ -312,6 +314,8 @@ static tile_buf *render_tile(job *jb, size_t t, render_stats *rs, uint64_t *samp
     wave_start(jb, wb, n);
     if (!wave_flush(jb, tb, wb, n, rs, invalid)) goto fail;
     *samples += (uint64_t)n;
+    if (jb->opts->samples)
+      atomic_fetch_add_explicit(&jb->opts->samples->done, (uint64_t)n, memory_order_relaxed);
   }
 out:
   free(wb);
@@ -577,6 +581,10 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
   if (nt > 256) nt = 256;
   if ((size_t)nt > jb.n_tiles) nt = (int)jb.n_tiles;
   jb.max_workers = nt;
+  if (opts->samples) {
+    atomic_store_explicit(&opts->samples->done, 0, memory_order_relaxed);
+    atomic_store_explicit(&opts->samples->total, (uint64_t)jb.W * (uint64_t)jb.H * spp, memory_order_relaxed);
+  }
   run_job(&jb);
   pthread_cond_destroy(&jb.idle);
   pthread_mutex_destroy(&jb.lock);

@@ -16,6 +16,13 @@
 #include "films/film_planes.h"
 #include "kernel.h"
 
+/* A render's progress in samples, for another thread to read (relaxed
+ * atomics): total (width x height x spp) is set when tracing starts, done
+ * grows after each wave of samples. */
+typedef struct render_progress {
+  _Atomic uint64_t done, total;
+} render_progress;
+
 typedef struct render_opts {
   size_t size;   /* sizeof(render_opts) */
   size_t sensor; /* index into scene->sensors */
@@ -39,6 +46,9 @@ typedef struct render_opts {
    * mean from its samples' second moment. Needs the box filter (radius
    * 0.5) and spp >= 2 (RSW_ERR_INVALID "variance" otherwise). */
   bool variance;
+  /* Optional: kept up to date while the render runs (a job's progress
+   * within its current render). Does not change the film. */
+  render_progress *samples;
 } render_opts;
 
 typedef struct render_result_stats {

@@ -213,6 +213,15 @@ static cJSON *job_json(const job *j) {
   if (j->started_iso[0] || j->finished_iso[0])
     cJSON_AddNumberToObject(o, "seconds", seconds > 0 ? seconds : 0);
   if (j->error[0]) cJSON_AddStringToObject(o, "error", j->error);
+  if (j->state == JOB_RUNNING && j->current < j->n_items) {
+    /* Progress within the render under way (samples traced so far). */
+    const render_item *it = &j->items[j->current];
+    cJSON *cur = cJSON_AddObjectToObject(o, "render");
+    cJSON_AddStringToObject(cur, "context", it->context);
+    cJSON_AddStringToObject(cur, "sensor", it->sensor);
+    cJSON_AddNumberToObject(cur, "samples_done", (double)atomic_load(&j->current_samples.done));
+    cJSON_AddNumberToObject(cur, "samples_total", (double)atomic_load(&j->current_samples.total));
+  }
   if (j->warnings) svc_json_put(o, "warnings", cJSON_Duplicate(j->warnings, 1));
   char href[128];
   snprintf(href, sizeof href, "/v1/jobs/%s/results", j->id);
@@ -1018,6 +1027,9 @@ void *svc_worker_main(void *arg) {
       render_item *it = &j->items[i];
       if (it->state != JOB_QUEUED) continue; /* done before a restart */
       size_t done = j->items_done + 1;       /* only this worker writes it */
+      j->current = i;
+      atomic_store(&j->current_samples.done, 0);
+      atomic_store(&j->current_samples.total, 0);
       pthread_mutex_unlock(&svc->lock);
       svc_error e = {0};
       render_spec rs = {.sensor_index = it->sensor_index,
@@ -1027,7 +1039,8 @@ void *svc_worker_main(void *arg) {
                         .overrides = it->params,
                         .cancel = &j->cancel,
                         .quantities = it->quantities,
-                        .variance = it->variance};
+                        .variance = it->variance,
+                        .samples = &j->current_samples};
       rsw_status st = svc_render_locked(svc, j->res, &rs, &it->film, &e);
       if (!st) {
         /* With a state directory every film goes to disk first. */
@@ -1077,6 +1090,7 @@ void *svc_worker_main(void *arg) {
         svc->contexts_rendered++;
       }
       j->items_done++;
+      j->current = SIZE_MAX;
       if (--j->context_remaining[it->context_index] == 0) j->contexts_done++;
       push_event_text(svc, j, ev, false);
     }
@@ -1217,6 +1231,16 @@ rsw_status service_job_results(service *svc, const char *id, char **json_out, sv
     if (it->wavelength > 0) cJSON_AddNumberToObject(x, "wavelength", it->wavelength);
     if (it->node) cJSON_AddNumberToObject(x, "node", (double)(it->node - 1));
     cJSON_AddNumberToObject(x, "seed", (double)it->seed);
+    if (j->coords.n) { /* the context's coords, for plots across the job (the viewer's sweep view) */
+      cJSON *co = cJSON_AddObjectToObject(x, "coords");
+      for (size_t k = 0; k < j->coords.n; k++) {
+        const nc_coord *c = &j->coords.c[k];
+        if (c->is_string)
+          cJSON_AddStringToObject(co, c->name, c->str[it->context_index]);
+        else
+          cJSON_AddNumberToObject(co, c->name, c->num[it->context_index]);
+      }
+    }
     if (it->has_film || it->on_disk) {
       cJSON_AddNumberToObject(x, "spp", it->film.img.spp);
       cJSON_AddNumberToObject(x, "width", it->film.img.width);

@@ -333,7 +333,8 @@ rsw_status svc_render_locked(service *svc, resident *r, const render_spec *rs, s
                       .cancel = rs->cancel,
                       .deadline = rs->deadline,
                       .quantities = rs->quantities,
-                      .variance = rs->variance};
+                      .variance = rs->variance,
+                      .samples = rs->samples};
     render_result_stats stats;
     rsw_err rerr = {0};
     st = render_sensor(sc, &ro, &out->img, &stats, &rerr);

@@ -271,6 +271,7 @@ void svc_scene_summary(const resident *r, cJSON *o) {
   for (size_t i = 0; i < r->sc->n_sensors; i++)
     svc_json_push(s, cJSON_CreateString(r->sc->sensors[i]->base.id));
   cJSON_AddNumberToObject(o, "revision", (double)r->revision);
+  if (r->label[0]) cJSON_AddStringToObject(o, "name", r->label);
 }
 
 /* Replace every "prefix/" in s (a string in cap bytes) by repl, cutting
@@ -527,6 +528,12 @@ rsw_status service_scene_load_text(service *svc, const char *text, size_t len, b
   struct post_extra x = {.pinned = true}; /* startup scenes: never evicted */
   rsw_status st = scene_post(svc, text, len, is_xml, NULL, name, &x, &created, &r, e);
   if (st) return st;
+  if (name) { /* a startup scene's label: its file's name */
+    const char *base = strrchr(name, '/') ? strrchr(name, '/') + 1 : name;
+    pthread_mutex_lock(&svc->lock);
+    if (!r->label[0] && service_scene_label_ok(base)) snprintf(r->label, sizeof r->label, "%s", base);
+    pthread_mutex_unlock(&svc->lock);
+  }
   if (id_out) *id_out = strdup(r->id);
   svc_scene_release(svc, r);
   return RSW_OK;
@@ -723,4 +730,31 @@ rsw_status svc_scene_reload(service *svc, const resident *r, scene **out, rsw_er
   }
   if (!st) *out = sc;
   return st;
+}
+
+bool service_scene_label_ok(const char *label) {
+  size_t n = label ? strlen(label) : 0;
+  if (n < 1 || n > SVC_SCENE_LABEL_MAX) return false;
+  for (size_t i = 0; i < n; i++)
+    if ((unsigned char)label[i] < 0x20 || label[i] == 0x7f) return false;
+  return true;
+}
+
+rsw_status service_scene_label(service *svc, const char *id, const char *label, char **json_out,
+                               svc_error *e) {
+  if (!service_scene_label_ok(label))
+    return svc_fail(e, RSW_ERR_BAD_REQUEST, "name", "a scene's name must be 1 to %d bytes of text",
+                    SVC_SCENE_LABEL_MAX);
+  unsigned jm = svc_json_mark();
+  pthread_mutex_lock(&svc->lock);
+  resident *r = svc_find_scene_locked(svc, id);
+  if (!r) {
+    pthread_mutex_unlock(&svc->lock);
+    return svc_fail(e, RSW_ERR_NOT_FOUND, id, "no scene '%s'", id);
+  }
+  if (!r->label[0]) snprintf(r->label, sizeof r->label, "%s", label);
+  cJSON *o = cJSON_CreateObject();
+  svc_scene_summary(r, o);
+  pthread_mutex_unlock(&svc->lock);
+  return svc_json_out(json_out, o, jm, e);
 }

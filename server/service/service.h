@@ -97,6 +97,14 @@ rsw_status service_scene_load_file(service *svc, const char *path, char **id_out
 rsw_status service_scene_load_text(service *svc, const char *text, size_t len, bool is_xml, const char *name,
                                    char **id_out, svc_error *e);
 rsw_status service_scene_list(service *svc, char **json_out, svc_error *e);
+/* A scene's label (the name it was pushed under: SceneSummary "name"),
+ * set by the first push that gives one; *json_out is the SceneSummary.
+ * service_scene_label_ok: 1 to SVC_SCENE_LABEL_MAX bytes, no control
+ * characters. */
+#define SVC_SCENE_LABEL_MAX 128
+bool service_scene_label_ok(const char *label);
+rsw_status service_scene_label(service *svc, const char *id, const char *label, char **json_out,
+                               svc_error *e);
 rsw_status service_scene_get(service *svc, const char *id, char **json_out, svc_error *e);
 rsw_status service_scene_delete(service *svc, const char *id, bool force, svc_error *e);
 

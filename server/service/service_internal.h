@@ -35,6 +35,7 @@ typedef struct svc_view {
  * says the base or a view came back. */
 typedef struct resident {
   char id[65];
+  char label[SVC_SCENE_LABEL_MAX + 1]; /* "" or the name it was pushed under (svc->lock) */
   scene *sc;
   uint64_t revision; /* base revision, +1 per PATCH that changed something */
   double load_s;
@@ -154,6 +155,10 @@ typedef struct job {
   /* The job's bands (bands.c), NULL without: each context renders once
    * per node wavelength, items context-major then node then sensor. */
   band_plan *bands;
+  /* The render in progress (an index into items, SIZE_MAX when none) and
+   * its samples, for the job's answers ("render"). */
+  size_t current;
+  render_progress current_samples;
 } job;
 
 struct service {
@@ -318,6 +323,7 @@ typedef struct render_spec {
   double deadline;
   unsigned quantities; /* RENDER_Q_* */
   bool variance;
+  render_progress *samples; /* optional: the render's progress (render_opts.samples) */
 } render_spec;
 /* A request's "quantities" (a list of "radiance", "brdf", "brf") into
  * RENDER_Q_* bits, or its "variance" (a boolean); ptr is the member's JSON

@@ -99,10 +99,14 @@ for i in range(12 * 9):
 ' r.json
 st=$(post p.png "$id" '{"spp": 16, "seed": 3}' '' -H 'Accept: image/png')
 [ "$st" = 200 ] && ok || bad "render as image/png: $st"
-st=$(post v.png "$id" '{"spp": 16, "seed": 3}' '?exposure=-0.5&colormap=viridis' -H 'Accept: image/png')
+st=$(post v.png "$id" '{"spp": 16, "seed": 3}' '?exposure=auto-0.5&colormap=viridis' -H 'Accept: image/png')
 [ "$st" = 200 ] && ok || bad "render as image/png with exposure and colormap: $st $(head -c 300 v.png)"
 run "raysweep render -o png" rs -q render "$id" --spp 16 --seed 3 -o c.png
 run "raysweep render -o png --colormap" rs -q render "$id" --spp 16 --seed 3 --colormap inferno --exposure 1 -o ci.png
+run "raysweep render -o png --exposure auto" rs -q render "$id" --spp 16 --seed 3 --exposure auto -o ca.png
+run "raysweepd render -o png --exposure auto+1" "$bin/raysweepd" render rpv.json --spp 16 --seed 3 --exposure auto+1 -o da.png
+st=$(post pa.png "$id" '{"spp": 16, "seed": 3}' '?exposure=auto' -H 'Accept: image/png')
+[ "$st" = 200 ] && ok || bad "render as image/png with exposure=auto: $st $(head -c 300 pa.png)"
 run "raysweep render -o json with planes" rs -q render "$id" --spp 16 --seed 3 --quantities brf --variance -o c.json
 run "raysweep render -o npy with planes" rs -q render "$id" --spp 16 --seed 3 --quantities brf --variance -o c.npy
 py "CLI JSON carries the planes, same values as the daemon's" '
@@ -128,7 +132,7 @@ brightest=$(python3 -c '
 import json, sys
 d = json.load(open(sys.argv[1])); v = d["data"][0::4]
 i = max(range(len(v)), key=lambda k: v[k]); print("%d,%d" % (i % 12, i // 12))' r.json)
-for f in d.png p.png v.png c.png ci.png; do
+for f in d.png p.png v.png c.png ci.png ca.png da.png pa.png; do
   if python3 "$pngread" "$f" >png.txt 2>&1 && [ "$(head -n 1 png.txt | cut -d' ' -f1-2)" = "12 9" ] &&
     tail -n 1 png.txt | tr ' ' '\n' | grep -qx "$brightest"; then
     ok
@@ -140,6 +144,25 @@ python3 "$pngread" v.png >png.txt 2>&1
 [ "$(head -n 1 png.txt | cut -d' ' -f3)" = 3 ] && ok || bad "a viridis PNG is RGB: $(head -n 1 png.txt)"
 python3 "$pngread" p.png >png.txt 2>&1
 [ "$(head -n 1 png.txt | cut -d' ' -f3)" = 1 ] && ok || bad "a grey PNG is one channel: $(head -n 1 png.txt)"
+# The default look is Mitsuba's: each pixel the sRGB curve of its linear
+# radiance clamped to [0, 1], not of radiance / the film's maximum (which
+# made the hot spot white and the rest dark); auto maps the film's 99.5th
+# percentile to white (here, of 108 values, the largest).
+py "PNG quick-looks: sRGB of the clamped radiance; auto: the percentile to white" '
+import json, sys
+sys.path.insert(0, sys.argv[4])
+from png_read import read_png
+v = json.load(open(sys.argv[1]))["data"][0::4]
+def srgb8(x):
+    x = min(max(x, 0.0), 1.0)
+    return round(255 * (12.92 * x if x <= 0.0031308 else 1.055 * x ** (1 / 2.4) - 0.055))
+for path, white in ((sys.argv[2], 1.0), (sys.argv[3], sorted(v)[-1])):
+    w, h, ch, rows = read_png(path)
+    got = [b for row in rows for b in row]
+    bad = [(i, got[i], srgb8(v[i] / white)) for i in range(w * h) if abs(got[i] - srgb8(v[i] / white)) > 1]
+    assert not bad, (path, bad[:5])
+assert max(v) < 0.9, "the test wants a film below 1 so that the default look is not white"
+' r.json p.png pa.png "$root/tests/support"
 
 # Refusals, before any work.
 st=$(post e.json "$id" '{"quantities": ["albedo"]}')
@@ -158,6 +181,12 @@ st=$(post e.json "$id" '{"variance": "yes"}')
 expect 1 "raysweep render variance on a gaussian film" rs render "$gauss" --variance -o x.json
 contains "CLI names the field" err "/variance"
 expect 2 "raysweep render --colormap without png" rs render "$id" --colormap gray -o x.json
+st=$(post e.json "$id" '{}' '?exposure=autox' -H 'Accept: image/png')
+[ "$st" = 400 ] && contains "a malformed exposure" e.json 'exposure must be a number of stops, auto' ||
+  bad "exposure=autox: $st"
+expect 2 "raysweep render --exposure auto+" rs render "$id" --exposure auto+ -o x.png
+expect 2 "raysweepd render --exposure bright" "$bin/raysweepd" render rpv.json --exposure bright -o x.png
+contains "raysweepd names the forms" err "a number of stops, auto, or auto+EV"
 
 # ---- jobs: memory, state directory, restart ------------------------------------------------
 job_body='{"contexts": [{"id": "a", "seed": 1}, {"id": "b", "seed": 2, "spp": 32}], "quantities": ["brf"], "variance": true}'

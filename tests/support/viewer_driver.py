@@ -18,6 +18,7 @@ import base64
 import json
 import math
 import os
+import re
 import shutil
 import socket
 import struct
@@ -46,6 +47,38 @@ MDISTANT_SCENE = {
     "sun": {"type": "directional", "direction": [0.5, 0, -0.866], "irradiance": 2.0},
     "plate": {"type": "rectangle", "bsdf": {"type": "roughconductor"}},
 }
+
+# An RPV plate under a sun whose zenith is the coordinate `sza` (a template
+# of the scene), a 4x4 hdistant film: the job form sweeps sza and the
+# plate's rho_0 (a parameter key), the sweep view plots its BRF.
+SWEEP_SCENE = {
+    "type": "scene", "variant": "mono",
+    "hd": {"type": "hdistant", "target": [0, 0, 0],
+           "sampler": {"type": "independent", "sample_count": 16},
+           "film": {"type": "hdrfilm", "width": 4, "height": 4, "rfilter": {"type": "box"}}},
+    "sun": {"type": "directional", "direction": [0, 0, -1], "irradiance": 2.0},
+    "plate": {"type": "rectangle", "to_world": [{"scale": [10, 10, 1]}],
+              "bsdf": {"type": "rpv", "rho_0": 0.12, "k": 0.9, "g": -0.25, "rho_c": 0.3}},
+    "templates": {"sun.direction": {"sun": {"zenith": "sza", "azimuth": 0}}},
+}
+
+# matplotlib's viridis at 9 stops, as ui/plot.js interpolates it.
+VIRIDIS = [(68, 1, 84), (72, 40, 120), (62, 73, 137), (49, 104, 142), (38, 130, 142),
+           (31, 158, 137), (53, 183, 121), (110, 206, 88), (253, 231, 37)]
+
+
+def viridis(t):
+    t = min(1.0, max(0.0, t))
+    x = t * 8
+    i = min(7, int(x))
+    f = x - i
+    return tuple(VIRIDIS[i][k] + (VIRIDIS[i + 1][k] - VIRIDIS[i][k]) * f for k in range(3))
+
+
+def p995(values):
+    """The 99.5th percentile (nearest rank) of the finite values > 0."""
+    v = sorted(x for x in values if x is not None and math.isfinite(x) and x > 0)
+    return v[min(len(v), max(1, math.ceil(0.995 * len(v)))) - 1]
 
 
 def ok(name):
@@ -455,7 +488,7 @@ def run(a, profile, browser):
         if not page.wait("document.querySelectorAll('#results a').length === %d" % n_ctx, 5):
             return "the job's results are not listed"
         page.click("#results a")
-        if not page.wait(f"document.getElementById('film-title').textContent.includes('{jid}')", 10):
+        if not page.wait(f"document.getElementById('film-title').dataset.job === '{jid}'", 10):
             return "clicking a result did not show its film"
     check("follows a running job to the end (event stream) and shows its results", job_follow)
 
@@ -480,8 +513,6 @@ def run(a, profile, browser):
     time.sleep(0.3)
     png = page.screenshot()
     open(art("viewer.png"), "wb").write(png)
-    if a.docs_png:
-        shutil.copyfile(art("viewer.png"), a.docs_png)
     if page.errors:
         fail("no script errors", "; ".join(map(str, page.errors[:3])))
     else:
@@ -524,7 +555,8 @@ def run(a, profile, browser):
         if not page.wait(f"document.querySelector('{li}')", 10):
             return "the mdistant scene is not listed"
         page.click(li)
-        if not page.wait(f"document.getElementById('scene-title').textContent.startsWith('{sc['id'][:12]}')", 10):
+        if not page.wait(f"(document.querySelector('#scenes li.selected') || {{dataset: {{}}}}).dataset.scene === '{sc['id']}'"
+                         " && document.getElementById('r-sensor').value === 'pp'", 10):
             return "the mdistant scene was not selected"
         page.js("document.getElementById('plot').dataset.kind = ''")
         page.type_into("#r-spp", "64")
@@ -551,6 +583,241 @@ def run(a, profile, browser):
             return (f"the highest point of the line is at x {top_x}, the brightest direction (signed θ {signed:.1f}°) "
                     f"is at x {want_x:.0f}")
     check("plots an mdistant principal plane against signed zenith", plane)
+
+    # 8. The job form: a grid of a template's coordinate and a parameter key.
+    st2, sw = http("POST", f"{base}/v1/scenes?name=sweep-plate.json", SWEEP_SCENE)
+    sweep = {}
+
+    def job_form():
+        if st2 not in (200, 201):
+            return f"posting the sweep scene: {st2} {sw}"
+        page.goto(f"{base}/ui/")
+        li = f'#scenes li[data-scene="{sw["id"]}"]'
+        if not page.wait(f"document.querySelector('{li}')", 10):
+            return "the sweep scene is not listed"
+        shown = page.js(f"document.querySelector('{li} .id').textContent")
+        if shown != "sweep-plate.json":
+            return f"the scene pushed as sweep-plate.json is listed as {shown!r}"
+        page.click(li)
+        if not page.wait("document.getElementById('r-sensor').value === 'hd' && document.getElementById('j-sensors').value === 'hd'", 10):
+            return "the sweep scene was not selected"
+        page.js("document.getElementById('job-box').open = true")
+        page.type_into(".grid-row:nth-child(1) .g-name", "sza")
+        page.type_into(".grid-row:nth-child(1) .g-values", "0, 30, 60")
+        page.click("#j-add")
+        page.type_into(".grid-row:nth-child(2) .g-name", "plate.bsdf.rho_0.value")
+        page.type_into(".grid-row:nth-child(2) .g-values", "0.1:0.3:0.1")
+        page.type_into("#j-spp", "32")
+        page.click("#j-brf")
+        page.click("#j-submit")
+        jid = page.wait("document.getElementById('j-status').dataset.job", 10)
+        if not jid:
+            return f"no job submitted; banner: {page.js('document.getElementById(`banner`).textContent')}"
+        sweep["job"] = jid
+        end = time.monotonic() + 60
+        while True:
+            st3, j = http("GET", f"{base}/v1/jobs/{jid}")
+            if j["state"] not in ("queued", "running") or time.monotonic() > end:
+                break
+            time.sleep(0.2)
+        if j["state"] != "succeeded":
+            return f"the job ended {j['state']}: {j.get('error')}"
+        st3, res = http("GET", f"{base}/v1/jobs/{jid}/results")
+        got = sorted((r["coords"]["sza"], round(r["coords"]["rho_0"], 9)) for r in res["results"])
+        want = sorted((z, round(r, 9)) for z in (0, 30, 60) for r in (0.1, 0.2, 0.3))
+        if got != want:
+            return f"the job's contexts have coords {got}, want the grid {want}"
+        if sorted(res["results"][0]["channels"]) != ["Y", "brf.Y", "radiance_stderr.Y"]:
+            return f"the films' channels are {res['results'][0]['channels']}, want Y, brf.Y, radiance_stderr.Y"
+        sweep["results"] = res["results"]
+    check("submits a job from the form (a grid of a template's coordinate and a parameter key)", job_form)
+
+    # 9. The sweep view: BRF against sza, one line per rho_0, with error bars.
+    def sweep_view():
+        if "results" not in sweep:
+            return "no job to plot"
+        jid = sweep["job"]
+        if not page.wait(f"document.getElementById('sweep').dataset.job === '{jid}' && "
+                         "document.getElementById('sweep').dataset.points === '9'", 20):
+            return (f"no sweep plot of 9 points; banner: {page.js('document.getElementById(`banner`).textContent')}; "
+                    f"{page.js('Object.assign({}, document.getElementById(`sweep`).dataset)')}")
+        ctl = page.js("['sw-quantity', 'sw-x', 'sw-series'].map(i => document.getElementById(i).value)")
+        if ctl != ["brf", "sza", "rho_0"]:
+            return f"the sweep's quantity, x and lines are {ctl}, want brf against sza, one line per rho_0"
+        pts = page.js("[...document.querySelectorAll('#sweep circle')].map(c => ({ctx: c.dataset.context, x: +c.dataset.x,"
+                      " y: +c.dataset.y, err: +c.dataset.err, s: c.dataset.series}))")
+        lines = page.js("document.querySelectorAll('#sweep path.series').length")
+        bars = page.js("document.querySelectorAll('#sweep line.err').length")
+        if len(pts) != 9 or lines != 3 or bars != 27:
+            return f"{len(pts)} points, {lines} lines, {bars} error-bar strokes; want 9, 3, 27"
+        by = {r["context"]: r for r in sweep["results"]}
+        for p in pts:
+            r = by[p["ctx"]]
+            st3, film = http("GET", f"{base}{r['href']}")
+            d, n = film["data"], film["width"] * film["height"]
+            brf = [d[3 * k + 1] for k in range(n)]
+            err = math.sqrt(sum((d[3 * k + 2] * d[3 * k + 1] / d[3 * k]) ** 2 for k in range(n))) / n
+            if abs(p["x"] - r["coords"]["sza"]) > 1e-9 or abs(float(p["s"]) - r["coords"]["rho_0"]) > 1e-9:
+                return f"point {p} is not at its context's coords {r['coords']}"
+            if abs(p["y"] - sum(brf) / n) > 1e-6 * abs(p["y"]) or not (err > 0 and abs(p["err"] - err) <= 1e-6 * err):
+                return f"point {p}: want BRF {sum(brf) / n} ± {err} (the film's mean and its standard error)"
+        png = page.screenshot(page.rect("#sweep"))
+        open(art("sweep.png"), "wb").write(png)
+        # The whole page, one film of the job shown as BRF (docs/viewer.png).
+        page.js("document.getElementById('film').dataset.ready = ''")
+        page.click("#results a")
+        page.wait("document.getElementById('film').dataset.ready === '1'", 10)
+        page.js("(() => { const e = document.getElementById('plane'); e.value = 'brf'; e.dispatchEvent(new Event('change')); })()")
+        page.click("#exposure-auto")
+        page.type_into("#param-search", "plate bsdf")
+        time.sleep(0.3)
+        open(art("viewer-sweep.png"), "wb").write(page.screenshot())
+        page.type_into("#param-search", "")
+        if a.docs_png:
+            shutil.copyfile(art("viewer-sweep.png"), a.docs_png)
+        # Against rho_0 instead: sza is then held at one value (3 points).
+        page.js("(() => { const e = document.getElementById('sw-x'); e.value = 'rho_0'; e.dispatchEvent(new Event('change')); })()")
+        if not page.wait("document.getElementById('sweep').dataset.ready === '1' && document.getElementById('sweep').dataset.points === '3'", 10):
+            return f"against rho_0 with sza held: {page.js('Object.assign({}, document.getElementById(`sweep`).dataset)')}"
+        held = page.js("[...document.querySelectorAll('#sw-fixed select')].map(e => e.dataset.coord + '=' + e.value)")
+        if held != ["sza=0"]:
+            return f"the coordinates held are {held}, want sza=0"
+    check("plots the job's BRF against a coordinate, a line per value of another, with error bars", sweep_view)
+
+    # 10. Planes of a mono film, and no channel choice carried over.
+    def planes():
+        if "job" not in sweep:
+            return "no sweep job"
+        rgb_job = page.js('document.querySelector(\'#jobs li[data-state="succeeded"]:not([data-job="%s"])\').dataset.job' % sweep["job"])
+        page.click(f'#jobs li[data-job="{rgb_job}"]')
+        if not page.wait(f"document.getElementById('results').dataset.job === '{rgb_job}'", 5):
+            return "the rgb job's results are not listed"
+        page.click("#results a")
+        if not page.wait("document.getElementById('film').dataset.mode === 'rgb'", 10):
+            return "the rgb job's film is not shown as RGB"
+        page.js("(() => { const e = document.getElementById('channel'); e.value = '2'; e.dispatchEvent(new Event('change')); })()")
+        page.click(f'#jobs li[data-job="{sweep["job"]}"]')
+        if not page.wait(f"document.getElementById('results').dataset.job === '{sweep['job']}'", 5):
+            return "the sweep job's results are not listed"
+        page.js("document.getElementById('film').dataset.ready = ''")
+        page.click("#results a")
+        if not page.wait(f"document.getElementById('film-title').dataset.job === '{sweep['job']}' && "
+                         "document.getElementById('film').dataset.ready === '1'", 10):
+            return "the mono film is not shown"
+        opts = page.js("[...document.getElementById('plane').options].map(o => o.value)")
+        if opts != ["radiance", "brf", "radiance_stderr"]:
+            return f"the quantities offered are {opts}, want radiance, brf, radiance_stderr"
+        f = page.js("Object.assign({}, document.getElementById('film').dataset)")
+        if f["mode"] != "false-colour" or f["plane"] != "radiance" or not page.js("document.getElementById('channel-label').hidden"):
+            return f"a mono film shows as {f} (want radiance in false colour, no channel choice)"
+        png = page.screenshot(page.rect("#film"))
+        open(art("mono-film.png"), "wb").write(png)
+        w, h, rows = png_decode(png)
+        ramp = [viridis(i / 255) for i in range(256)]
+        off = [p for p in {p for row in rows[2:-2] for p in row[2:-2]}
+               if min(max(abs(a - b) for a, b in zip(p, q)) for q in ramp) > 6]
+        if off:
+            return f"{len(off)} pixels of the mono film are not viridis colours (painted as RGB?): {off[:3]}"
+        page.js("(() => { const e = document.getElementById('plane'); e.value = 'brf'; e.dispatchEvent(new Event('change')); })()")
+        if page.js("document.getElementById('film').dataset.plane") != "brf":
+            return "choosing BRF does not show the brf plane"
+        # Back to an rgb film: its own default (RGB), not the B chosen before.
+        page.click(f'#jobs li[data-job="{rgb_job}"]')
+        page.wait(f"document.getElementById('results').dataset.job === '{rgb_job}'", 5)
+        page.click("#results a")
+        if not page.wait("document.getElementById('film').dataset.mode === 'rgb' && document.getElementById('channel').value === 'rgb'", 10):
+            return f"the next rgb film shows channel {page.js('document.getElementById(`channel`).value')}, want RGB"
+    check("offers a mono film's planes (radiance, BRF, stderr) in false colour, no channel carried over", planes)
+
+    # 11. Tone mapping: 0 EV is linear and clamped (a radiance of 1 at full
+    # scale), auto puts the 99.5th percentile there.
+    def tone():
+        if "job" not in sweep:
+            return "no sweep job"
+        page.click(f'#jobs li[data-job="{sweep["job"]}"]')
+        page.wait(f"document.getElementById('results').dataset.job === '{sweep['job']}'", 5)
+        page.js("document.getElementById('film').dataset.ready = ''")
+        page.click("#results a")
+        if not page.wait("document.getElementById('film').dataset.ready === '1' && document.getElementById('film').dataset.plane === 'radiance'", 10):
+            return "the film is not shown"
+        ctx = page.js("document.getElementById('film-title').textContent").split(" · ")[1]
+        r = next(r for r in sweep["results"] if r["context"] == ctx)
+        st3, film = http("GET", f"{base}{r['href']}")
+        L = film["data"][0::3]
+        if float(page.js("document.getElementById('film').dataset.white")) != 1.0:
+            return "at 0 EV full scale is not 1"
+        rr = page.rect("#film")
+        w, h, rows = png_decode(page.screenshot(rr))
+        for k in (0, 5, 10, 15):
+            px = rows[int((k // 4 + 0.5) * h / 4)][int((k % 4 + 0.5) * w / 4)]
+            want = viridis(min(1.0, L[k]))
+            if max(abs(a - b) for a, b in zip(px, want)) > 3:
+                return f"pixel {k} (radiance {L[k]:.4f}) shows {px}, want viridis({L[k]:.4f}) = {want} (0 EV: linear, 1 at full scale)"
+        page.click("#exposure-auto")
+        ev = float(page.js("document.getElementById('exposure').value"))
+        want = -math.log2(p995(L))
+        if abs(ev - want) > 0.01:
+            return f"auto exposure is {ev} EV, want {want:.3f} (the 99.5th percentile at full scale)"
+    check("tone-maps as Mitsuba (0 EV: linear, clamped) with auto at the 99.5th percentile", tone)
+
+    # 12. The BRF toggle of a hemispherical film without a brf plane.
+    def brf_toggle():
+        page.type_into("#r-spp", "16")
+        page.type_into("#r-seed", "1")
+        page.js("document.getElementById('film').dataset.ready = ''")
+        page.click("#render")
+        if not page.wait("document.getElementById('film').dataset.ready === '1' && !document.getElementById('film-title').dataset.job", 15):
+            return "no render shown"
+        opts = page.js("[...document.getElementById('plane').options].map(o => o.value)")
+        if opts != ["radiance", "brf*"]:
+            return f"the quantities offered for an hdistant film are {opts}, want radiance and the computed BRF"
+        page.js("(() => { const e = document.getElementById('plane'); e.value = 'brf*'; e.dispatchEvent(new Event('change')); })()")
+        if page.js("document.getElementById('plot').dataset.kind") != "polar" or page.js("document.getElementById('film').dataset.plane") != "brf*":
+            return "the polar plot of the BRF is not drawn"
+        st3, film = http("POST", f"{base}/v1/scenes/{sw['id']}:render", {"spp": 16, "seed": 1, "quantities": ["brf"]})
+        rr = page.rect("#film")
+        page.hover(rr["x"] + rr["w"] * 0.6, rr["y"] + rr["h"] * 0.35)  # pixel (2, 1)
+        text = page.wait("(() => { const t = document.getElementById('hover').textContent; return t.includes('BRF') && t; })()", 3)
+        if not text:
+            return "hovering the film shows no BRF"
+        shown = float(text.rsplit(":", 1)[1])
+        k = 1 * 4 + 2
+        want = film["data"][2 * k + 1]
+        if abs(shown - want) > 1e-4 * want:
+            return f"the BRF shown at pixel (2, 1) is {shown}, the render's brf plane says {want}: {text}"
+    check("toggles an hdistant film to BRF = pi L / E_h (the render's brf plane agrees)", brf_toggle)
+
+    # 13. Jobs: their distinguishing number, readable durations, progress
+    # within a long render.
+    def labels():
+        got = page.js("[...document.querySelectorAll('#jobs li[data-job]')].map(e => [e.dataset.job, "
+                      "e.querySelector('.label').textContent, e.querySelector('.meta').textContent])")
+        if len(got) < 3:
+            return f"{len(got)} jobs listed"
+        for jid, label, meta in got:
+            if label != "#%d" % int(jid.rsplit("-", 1)[1]):
+                return f"job {jid} is labelled {label!r}"
+            if "e-" in meta or not re.search(r"\d (µs|ms|s|min)\b", meta):
+                return f"job {jid}'s duration reads {meta!r}"
+        row = page.js(f"document.querySelector('#jobs li[data-job=\"{sweep['job']}\"] .id').textContent")
+        if not row.endswith(" · sweep-plate.json"):
+            return f"the sweep job's line names its scene as {row!r}, want sweep-plate.json"
+        st3, job = http("POST", f"{base}/v1/scenes/{scene}/jobs", {"defaults": {"spp": 200000}, "contexts": [{"id": "long"}]})
+        jid = job["id"]
+        page.click("#jobs-refresh")
+        sel = f'#jobs li[data-job="{jid}"]'
+        moved = page.wait(f"(() => {{ const e = document.querySelector('{sel}'); return e && e.dataset.done === '0' && +e.dataset.progress > 0"
+                          f" && e.querySelector('.meta').textContent; }})()", 15)
+        st3, j = http("GET", f"{base}/v1/jobs/{jid}")
+        http("POST", f"{base}/v1/jobs/{jid}:cancel")
+        if not moved:
+            return f"the job's bar did not move during its first render: {page.js(f'Object.assign({{}}, document.querySelector(`{sel}`).dataset)')}"
+        if "samples" not in moved:
+            return f"the job's line does not say how far the render is: {moved!r}"
+        r = j.get("render") or {}
+        if j["state"] == "running" and not (0 < r.get("samples_done", 0) <= r.get("samples_total", 0) == 32 * 32 * 200000):
+            return f"GET job says render {r}, want samples_done > 0 of 32*32*200000"
+    check("labels jobs by number, reads durations, shows progress within a render", labels)
     print(f"# browser part: {time.monotonic() - t0:.1f} s", flush=True)
 
 

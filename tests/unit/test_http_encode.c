@@ -331,8 +331,8 @@ static void test_film_planes(void) {
 }
 
 /* The quick-look decodes (libpng) to the film's size, 8-bit, and its
- * brightest pixel is where the film's brightest value is: at exposure 0
- * only that pixel is white (255). */
+ * brightest pixel is where the film's brightest value is (the only white
+ * one when that value alone reaches 1 after the exposure). */
 static void check_png(const void *bytes, size_t len, int W, int H, int want_channels, int bright_x,
                       int bright_y) {
   png_image im;
@@ -353,6 +353,74 @@ static void check_png(const void *bytes, size_t len, int W, int H, int want_chan
   CHECK(at == bright_y * W + bright_x && n_best == 1, "brightest png pixel %d (x %d) of %d, want (%d, %d)",
         at, n_best, best, bright_x, bright_y);
   free(px);
+}
+
+/* A grey PNG's 8-bit values (n of them); false when it does not decode. */
+static bool gray_pixels(const void *bytes, size_t len, unsigned char *out, int n) {
+  png_image im;
+  memset(&im, 0, sizeof im);
+  im.version = PNG_IMAGE_VERSION;
+  if (!png_image_begin_read_from_memory(&im, bytes, len)) return false;
+  im.format = PNG_FORMAT_GRAY;
+  if ((int)PNG_IMAGE_SIZE(im) != n) {
+    png_image_free(&im);
+    return false;
+  }
+  return png_image_finish_read(&im, NULL, out, 0, NULL) != 0;
+}
+
+/* The sRGB transfer curve (IEC 61966-2-1) of v in [0, 1], to 8 bits. */
+static int srgb8_of(double v) {
+  return (int)lrint(255 * (v <= 0.0031308 ? 12.92 * v : 1.055 * pow(v, 1 / 2.4) - 0.055));
+}
+
+/* "auto" exposure: the 99.5th percentile (nearest rank) of the values > 0
+ * maps to white, not the maximum. 1000 pixels 1..1000 (x 1e-3) and a lamp
+ * of 1e6: the 995th value (0.995) is white and 0.4975 is sRGB 188; with
+ * the maximum as white (the old auto) the whole ramp was black but the
+ * lamp. Then the exposure's text forms. */
+static void test_png_auto_exposure(void) {
+  enum {
+    N = 1001
+  };
+  float v[N];
+  for (int i = 0; i < N - 1; i++) v[i] = 1e-3f * (float)(i + 1);
+  v[N - 1] = 1e6f;
+  svc_film f;
+  memset(&f, 0, sizeof f);
+  f.img.width = N, f.img.height = 1, f.img.channels = 1;
+  f.img.channel_names[0] = "Y";
+  f.img.data = v;
+  f.img.variant = VARIANT_MONO;
+  png_look look = {0};
+  CHECK(png_exposure_parse("auto", &look) && look.auto_exposure && look.exposure == 0, "parse auto");
+  void *bytes = NULL;
+  size_t len = 0;
+  rsw_err err = {0};
+  REQUIRE(http_film_png(&f, &look, &bytes, &len, &err) == RSW_OK, "auto png: %s", err.msg);
+  unsigned char g[N];
+  REQUIRE(gray_pixels(bytes, len, g, N), "grey pixels");
+  free(bytes);
+  /* pixel 994 holds 0.995 (white), pixel 899 0.9 and 496 0.497 (each its
+   * sRGB value over white), the lamp clips. */
+  CHECK(g[994] == 255 && g[899] == srgb8_of(0.9 / 0.995) && g[496] == srgb8_of(0.497 / 0.995) &&
+            g[496] > 150 && g[N - 1] == 255,
+        "auto: 0.995 -> %d (255), 0.9 -> %d (%d), 0.497 -> %d (%d), lamp -> %d", g[994], g[899],
+        srgb8_of(0.9 / 0.995), g[496], srgb8_of(0.497 / 0.995), g[N - 1]);
+  CHECK(png_exposure_parse("auto+1", &look) && look.auto_exposure && look.exposure == 1, "parse auto+1");
+  REQUIRE(http_film_png(&f, &look, &bytes, &len, &err) == RSW_OK, "auto+1 png: %s", err.msg);
+  REQUIRE(gray_pixels(bytes, len, g, N), "grey pixels");
+  free(bytes);
+  CHECK(g[496] == 255 && g[247] == srgb8_of(2 * 0.248 / 0.995), "auto+1: 0.497 -> %d (255), 0.248 -> %d (%d)",
+        g[496], g[247], srgb8_of(2 * 0.248 / 0.995));
+  CHECK(png_exposure_parse("auto-0.5", &look) && look.auto_exposure && look.exposure == -0.5, "auto-0.5");
+  CHECK(png_exposure_parse("-2.5", &look) && !look.auto_exposure && look.exposure == -2.5, "-2.5");
+  const char *bad[] = {"", "autox", "auto+", "auto1", "nan", "inf", "1e9", "1 ", "auto+1e9", NULL};
+  for (int i = 0; bad[i]; i++) {
+    png_look l = {.exposure = 7};
+    CHECK(!png_exposure_parse(bad[i], &l) && l.exposure == 7, "'%s' is refused and changes nothing", bad[i]);
+  }
+  CHECK(!png_exposure_parse(NULL, &look), "NULL refused");
 }
 
 static void test_film_png(void) {
@@ -376,6 +444,22 @@ static void test_film_png(void) {
   REQUIRE(http_film_png(&f, NULL, &bytes, &len, &err) == RSW_OK, "png: %s", err.msg);
   check_png(bytes, len, W, H, 1, 5, 3);
   free(bytes);
+  /* Mitsuba's mapping: linear values clamped to [0, 1], sRGB-encoded; 0.5
+   * is sRGB 188 whatever the brightest value (it was 137, 0.5 / 2.0, when
+   * the maximum mapped to white). */
+  y[0] = 0.5f;
+  REQUIRE(http_film_png(&f, NULL, &bytes, &len, &err) == RSW_OK, "png: %s", err.msg);
+  unsigned char g[W * H];
+  REQUIRE(gray_pixels(bytes, len, g, W * H), "grey pixels");
+  CHECK(g[0] == 188 && g[3 * W + 5] == 255 && g[1] == 0,
+        "0.5 -> %d (want 188), 2.0 -> %d (255), NaN -> %d (0)", g[0], g[3 * W + 5], g[1]);
+  free(bytes);
+  png_look minus1 = {.exposure = -1};
+  REQUIRE(http_film_png(&f, &minus1, &bytes, &len, &err) == RSW_OK, "png: %s", err.msg);
+  REQUIRE(gray_pixels(bytes, len, g, W * H), "grey pixels");
+  CHECK(g[0] == 137 && g[3 * W + 5] == 255, "exposure -1: 0.5 -> %d (want 137 = sRGB of 0.25), 2.0 -> %d",
+        g[0], g[3 * W + 5]);
+  free(bytes);
   png_look look = {.exposure = -1, .colormap = "viridis"};
   REQUIRE(http_film_png(&f, &look, &bytes, &len, &err) == RSW_OK, "viridis png: %s", err.msg);
   check_png(bytes, len, W, H, 3, 5, 3);
@@ -383,8 +467,9 @@ static void test_film_png(void) {
   /* RGB: the brightest pixel of the three channels. */
   float rgb[18];
   svc_film c = make_film(rgb);
-  rgb[3 * 4 + 1] = 9.0f; /* pixel 4 = (1, 1), G */
-  REQUIRE(http_film_png(&c, NULL, &bytes, &len, &err) == RSW_OK, "rgb png: %s", err.msg);
+  rgb[3 * 4 + 1] = 9.0f;                       /* pixel 4 = (1, 1), G */
+  png_look autolook = {.auto_exposure = true}; /* 18 values: the 99.5th percentile is the largest */
+  REQUIRE(http_film_png(&c, &autolook, &bytes, &len, &err) == RSW_OK, "rgb png: %s", err.msg);
   check_png(bytes, len, 3, 2, 3, 1, 1);
   free(bytes);
   err = (rsw_err){0};
@@ -613,6 +698,7 @@ int main(void) {
   RSW_TEST_RUN(test_exr_half_large);
   RSW_TEST_RUN(test_film_planes);
   RSW_TEST_RUN(test_film_png);
+  RSW_TEST_RUN(test_png_auto_exposure);
   RSW_TEST_RUN(test_problem);
   RSW_TEST_RUN(test_problem_utf8);
   RSW_TEST_RUN(test_accept);
