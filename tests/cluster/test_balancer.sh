@@ -16,8 +16,8 @@
 name=test_balancer
 source "$(dirname "$0")/../support/shtest.sh"
 need_bins raysweepd raysweep
-need_cmd haproxy "(make deps installs it): the balancer under test"
-need_cmd nginx "(make deps installs it): the balancer under test"
+need_cmd haproxy "(make deps-cluster installs it): the balancer under test"
+need_cmd nginx "(make deps-cluster installs it): the balancer under test"
 need_cmd python3 "to generate the balancer configurations"
 gen="$root/docker/lb/gen.py"
 scene="$root/proto/examples/hdistant_lambertian.json"
