@@ -259,11 +259,29 @@ static void h_scene_post(http_req *r) {
   svc_error e = {0};
   bool created = false;
   char *id = NULL, *json = NULL;
-  rsw_status s =
-      service_scene_post(r->svc, r->body, r->body_len, is_xml, r->q_variant, &created, &id, &json, &e);
+  /* ?name=: the client's name for the document (raysweep push sends its
+   * file's), which messages about its text use. */
+  rsw_status s = service_scene_post_named(r->svc, r->body, r->body_len, is_xml, r->q_variant, r->q_name,
+                                          &created, &id, &json, &e);
   if (s == RSW_OK && id) snprintf(r->resp.location, sizeof r->resp.location, "/v1/scenes/%s", id);
   free(id);
   resp_result(r, s, created ? 201 : 200, json, &e);
+}
+
+static void h_scene_reset(http_req *r) {
+  svc_error e = {0};
+  char *json = NULL;
+  rsw_status s = service_scene_reset(r->svc, r->params[0], &json, &e);
+  resp_result(r, s, 200, json, &e);
+}
+
+static void h_scene_copy(http_req *r) {
+  svc_error e = {0};
+  char *id = NULL, *json = NULL;
+  rsw_status s = service_scene_copy(r->svc, r->params[0], &id, &json, &e);
+  if (s == RSW_OK && id) snprintf(r->resp.location, sizeof r->resp.location, "/v1/scenes/%s", id);
+  free(id);
+  resp_result(r, s, 201, json, &e);
 }
 
 static void h_scene_list(http_req *r) {
@@ -531,6 +549,8 @@ const http_route http_routes[] = {
     {"GET", "/v1/scenes/{id}/params", HTTP_BODY_NONE, false, h_params_get, false},
     {"PATCH", "/v1/scenes/{id}/params", HTTP_BODY_JSON, false, h_params_patch, false},
     {"POST", "/v1/scenes/{id}:render", HTTP_BODY_JSON, false, h_render, false},
+    {"POST", "/v1/scenes/{id}:reset", HTTP_BODY_NONE, false, h_scene_reset, false},
+    {"POST", "/v1/scenes/{id}:copy", HTTP_BODY_NONE, false, h_scene_copy, false},
     {"GET", "/v1/scenes/{id}/sensors/{sensor}/directions", HTTP_BODY_NONE, false, h_directions, false},
     {"POST", "/v1/scenes/{id}/jobs", HTTP_BODY_JSON, false, h_job_submit, false},
     {"GET", "/v1/jobs", HTTP_BODY_NONE, false, h_job_list, false},

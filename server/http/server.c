@@ -1115,6 +1115,7 @@ static enum MHD_Result dispatch(struct MHD_Connection *c, conn *cn, const char *
       .q_class = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "class"),
       .q_force = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "force"),
       .q_variant = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "variant"),
+      .q_name = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "name"),
       .q_partial = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "partial"),
       .q_exposure = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "exposure"),
       .q_colormap = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "colormap"),
