@@ -11,7 +11,7 @@
 #      (.dockerignore leaves build outputs out): the time it took;
 #   3. the runtime stage kept lean: no compiler (gcc, cc, cpp, clang, make)
 #      and no -dev package installed; its size over the base image's
-#      at most RSW_CONTAINER_MAX_MB (default 200) MB;
+#      at most RSW_CONTAINER_MAX_MB (default 150; 99 MB on 2026-11-27) MB;
 #   4. the image mounted (podman image mount) and, in a mount namespace of
 #      our own with a tmpfs on /tmp, its own binaries run in a chroot as the
 #      image's user (uid 10001): `raysweepd version`, then `raysweepd serve`
@@ -113,7 +113,7 @@ dev=$(chroot "$mnt" dpkg-query -W -f '${Package}\n' | grep -E -- '-dev$|^(gcc|g\
 for t in gcc cc cpp clang make ld; do
   [ ! -e "$mnt/usr/bin/$t" ] || die "the runtime image has /usr/bin/$t"
 done
-max=${RSW_CONTAINER_MAX_MB:-200}
+max=${RSW_CONTAINER_MAX_MB:-150}
 [ "$added_mb" -le "$max" ] || die "the runtime stage adds ${added_mb} MB to the base (at most $max MB)"
 
 # ---- 4. run it in a chroot ---------------------------------------------------------
