@@ -126,7 +126,10 @@ in_image() { chroot --userspec=10001:10001 "$mnt" /usr/bin/env -i HOME=/tmp LANG
 ver=$(in_image raysweepd version 2>&1) || die "raysweepd version in the image: $ver"
 say "raysweepd version: $(head -n 1 <<<"$ver")"
 port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
-in_image raysweepd serve --listen "127.0.0.1:$port" --blob-dir /tmp/blobs >"$store/serve.log" 2>&1 &
+# exec: $! is the daemon itself (chroot and env exec), so the TERM below
+# reaches it; 8>&-: it does not hold this script's lock.
+(exec chroot --userspec=10001:10001 "$mnt" /usr/bin/env -i HOME=/tmp LANG=C.UTF-8 PATH=/usr/local/bin:/usr/bin:/bin \
+  raysweepd serve --listen "127.0.0.1:$port" --blob-dir /tmp/blobs) >"$store/serve.log" 2>&1 8>&- &
 daemon=$!
 for _ in $(seq 1 300); do
   grep -q "listening on http://127.0.0.1:$port" "$store/serve.log" && break
@@ -157,4 +160,6 @@ kill -TERM "$daemon"
 for _ in $(seq 1 100); do kill -0 "$daemon" 2>/dev/null || break; sleep 0.1; done
 ! kill -0 "$daemon" 2>/dev/null || die "the daemon in the image did not stop on SIGTERM"
 daemon=
+grep -q "shutting down" "$store/serve.log" || die "the daemon in the image did not say it was shutting down: $(tail -n 3 "$store/serve.log")"
+pgrep -u 10001 -x raysweepd >/dev/null && die "a raysweepd of the image's user is still running after the TERM" 
 echo "container: PASS ($(($(date +%s) - start)) s; podman build ${t_build} s; image $((bytes / 1000000)) MB, the runtime stage adds ${added_mb} MB to debian:12)"
