@@ -619,6 +619,23 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
   return RSW_OK;
 }
 
+/* The answer to a post or copy: r's id and summary; r's ref released. */
+static rsw_status summary_answer(service *svc, resident *r, char **id_out, char **json_out, svc_error *e) {
+  unsigned jm = svc_json_mark();
+  cJSON *o = cJSON_CreateObject();
+  svc_scene_summary(r, o);
+  *id_out = strdup(r->id);
+  rsw_status st = svc_json_out(json_out, o, jm, e);
+  if (!st && !*id_out) st = svc_fail(e, RSW_ERR_NOMEM, "", "out of memory while building the answer");
+  if (st) {
+    free(*id_out);
+    free(*json_out);
+    *id_out = *json_out = NULL;
+  }
+  svc_scene_release(svc, r);
+  return st;
+}
+
 rsw_status service_scene_post(service *svc, const char *body, size_t len, bool is_xml, const char *variant,
                               bool *created, char **id_out, char **json_out, svc_error *e) {
   return service_scene_post_named(svc, body, len, is_xml, variant, NULL, created, id_out, json_out, e);
@@ -646,19 +663,7 @@ rsw_status service_scene_post_named(service *svc, const char *body, size_t len, 
                                       : "scene.json",
                              NULL, created, &r, e);
   if (st) return st;
-  unsigned jm = svc_json_mark();
-  cJSON *o = cJSON_CreateObject();
-  svc_scene_summary(r, o);
-  *id_out = strdup(r->id);
-  st = svc_json_out(json_out, o, jm, e);
-  if (!st && !*id_out) st = svc_fail(e, RSW_ERR_NOMEM, "", "out of memory while building the answer");
-  if (st) {
-    free(*id_out);
-    free(*json_out);
-    *id_out = *json_out = NULL;
-  }
-  svc_scene_release(svc, r);
-  return st;
+  return summary_answer(svc, r, id_out, json_out, e);
 }
 
 rsw_status service_scene_load_text(service *svc, const char *text, size_t len, bool is_xml, const char *name,
@@ -893,6 +898,13 @@ rsw_status svc_scene_build_at(service *svc, const resident *r, const cJSON *patc
 
 /* ---- reset and copy -------------------------------------------------------------- */
 
+/* A scene marked broken (service_internal.h) is refused: 503. */
+static rsw_status broken_error(svc_error *e, const char *id) {
+  return svc_fail(e, RSW_ERR_UNAVAILABLE, id,
+                  "the scene's base state was lost (restoring it after a render ran out of memory): delete "
+                  "the scene and post it again");
+}
+
 rsw_status service_scene_reset(service *svc, const char *id, char **json_out, svc_error *e) {
   unsigned jm = svc_json_mark();
   resident *r = svc_scene_acquire(svc, id);
@@ -915,9 +927,7 @@ rsw_status service_scene_reset(service *svc, const char *id, char **json_out, sv
   update_report rep = {0};
   cJSON *empty = NULL, *old_patches = NULL; /* keys[].key points into the latter */
   if (r->broken)
-    st = svc_fail(e, RSW_ERR_UNAVAILABLE, r->id,
-                  "the scene's base state was lost (restoring it after a render ran out of memory): delete "
-                  "the scene and post it again");
+    st = broken_error(e, r->id);
   else if (!r->patches || !(empty = cJSON_CreateObject()))
     st = svc_fail(e, RSW_ERR_NOMEM, r->id, "out of memory: the scene's PATCHes were not recorded");
   if (!st) {
@@ -993,9 +1003,7 @@ rsw_status service_scene_copy(service *svc, const char *id, char **id_out, char 
   resident *r = NULL;
   char nid[65];
   if (broken)
-    st = svc_fail(e, RSW_ERR_UNAVAILABLE, src->id,
-                  "the scene's base state was lost (restoring it after a render ran out of memory): delete "
-                  "the scene and post it again");
+    st = broken_error(e, src->id);
   else if (!patches)
     st = svc_fail(e, RSW_ERR_NOMEM, src->id, "out of memory: the scene's PATCHes were not recorded");
   else if (!fresh_id(src->doc, nid))
@@ -1059,17 +1067,5 @@ rsw_status service_scene_copy(service *svc, const char *id, char **id_out, char 
     svc_resident_free(r);
     return st;
   }
-  unsigned jm = svc_json_mark();
-  cJSON *o = cJSON_CreateObject();
-  svc_scene_summary(r, o);
-  *id_out = strdup(r->id);
-  st = svc_json_out(json_out, o, jm, e);
-  if (!st && !*id_out) st = svc_fail(e, RSW_ERR_NOMEM, "", "out of memory while building the answer");
-  if (st) {
-    free(*id_out);
-    free(*json_out);
-    *id_out = *json_out = NULL;
-  }
-  svc_scene_release(svc, r);
-  return st;
+  return summary_answer(svc, r, id_out, json_out, e);
 }
