@@ -401,7 +401,7 @@ static bool looks_xml(const char *text, size_t len) {
 /* is_xml: 1 XML, 0 JSON, -1 from the content. name (may be NULL): the
  * file's name, which the daemon's messages about the text use (?name=). */
 static rsw_status push(rsw_client *c, const char *text, size_t len, const char *base_dir, const char *variant,
-                       const char *name, int is_xml, char id_out[65], int *created_out) {
+                       const char *name, int is_xml, char id_out[65], char doc_out[65], int *created_out) {
   if (!c) return RSW_ERR_INVALID;
   client_clear_error(c);
   if (!text || !id_out)
@@ -448,6 +448,12 @@ static rsw_status push(rsw_client *c, const char *text, size_t len, const char *
   } else {
     memcpy(id_out, id->valuestring, 65);
     if (created_out) *created_out = r.status == 201;
+    /* The document's id: the scene's own for its twin, another for a
+     * scene loaded while the twin had changed (a daemon before "document"
+     * has no such scene). */
+    const cJSON *d = cJSON_GetObjectItemCaseSensitive(a, "document");
+    if (doc_out)
+      memcpy(doc_out, cJSON_IsString(d) && strlen(d->valuestring) == 64 ? d->valuestring : id_out, 65);
   }
   cJSON_Delete(a);
   http_resp_free(&r);
@@ -456,11 +462,16 @@ static rsw_status push(rsw_client *c, const char *text, size_t len, const char *
 
 rsw_status rsw_scene_push_buffer(rsw_client *c, const char *text, size_t len, const char *base_dir,
                                  const char *variant, char id_out[65], int *created_out) {
-  return push(c, text, len, base_dir, variant, NULL, -1, id_out, created_out);
+  return push(c, text, len, base_dir, variant, NULL, -1, id_out, NULL, created_out);
 }
 
 rsw_status rsw_scene_push_file(rsw_client *c, const char *path, const char *variant, char id_out[65],
                                int *created_out) {
+  return client_scene_push_file(c, path, variant, id_out, NULL, created_out);
+}
+
+rsw_status client_scene_push_file(rsw_client *c, const char *path, const char *variant, char id_out[65],
+                                  char doc_out[65], int *created_out) {
   if (!c) return RSW_ERR_INVALID;
   client_clear_error(c);
   if (!path) return client_fail(c, RSW_ERR_INVALID, "scene push: path is NULL");
@@ -487,7 +498,7 @@ rsw_status rsw_scene_push_file(rsw_client *c, const char *path, const char *vari
                : n >= 5 && strcmp(path + n - 5, ".json") == 0 ? 0
                                                               : -1;
   const char *base = strrchr(path, '/');
-  s = push(c, text, len, dir, variant, base ? base + 1 : path, is_xml, id_out, created_out);
+  s = push(c, text, len, dir, variant, base ? base + 1 : path, is_xml, id_out, doc_out, created_out);
   free(dir);
   free(text);
   return s;
