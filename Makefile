@@ -6,7 +6,9 @@
 #   make test-cluster  replicas behind HAProxy/nginx, a Slurm job array, the
 #                      container recipes (tests/cluster)
 #   make run        start the daemon with the embedded default scene (PORT=8350)
-#   make deps       install missing Debian packages (no-op when all present)
+#   make deps       install missing Debian packages for building and running
+#                   (no-op when all present); deps-test adds the tests' tools,
+#                   deps-cluster the balancers and Slurm (tools/deps.sh)
 #   make install    raysweepd, raysweep, man pages, headers, libraysweep
 #                   (PREFIX=/usr/local, DESTDIR= for staging)
 #   make format     clang-format the C sources (tools/check-format.sh --fix)
@@ -127,13 +129,21 @@ client_pc_lines = 'prefix=$(1)' 'includedir=$${prefix}/include' 'libdir=$${prefi
   'Version: $(VERSION)' 'Cflags: -I$${includedir}' \
   'Libs: -L$${libdir} -lraysweep' 'Libs.private: -lcurl -lcjson -lexpat -lcrypto -lOpenEXRCore -lnetcdf -lpng16 -lpthread -lm'
 
-.PHONY: all deps test bench run clean format install test-cluster test-generic
+.PHONY: all deps deps-test deps-cluster test bench run clean format install test-cluster test-generic
 .SECONDARY:
 
 all: deps $(BUILD)/bin/raysweepd $(CLIENT_A) $(CLIENT_SO) $(CLIENT_PC)
 
 deps:
 	@tools/deps.sh
+
+# The tests' and the cluster tests' packages (tools/deps.sh sets), after
+# the build set so two apt-gets never race under -jN.
+deps-test: | deps
+	@tools/deps.sh test
+
+deps-cluster: | deps
+	@tools/deps.sh cluster
 
 $(BUILD)/obj/%.o: %.c | deps
 	@mkdir -p $(dir $@)
@@ -260,7 +270,7 @@ $(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB)
 # inner `make install` or `make run` needs is built first (the .so and .pc
 # too), so concurrent inner makes find nothing to build.
 TEST_JOBS :=
-test: deps $(BUILD)/bin/raysweepd $(TEST_BIN) $(BUILD)/tests/raysweepd-failmalloc $(CLIENT_SO) $(CLIENT_PC)
+test: deps deps-test $(BUILD)/bin/raysweepd $(TEST_BIN) $(BUILD)/tests/raysweepd-failmalloc $(CLIENT_SO) $(CLIENT_PC)
 	@RSW_BIN_DIR=$(BUILD)/bin BUILD=$(BUILD) SAN=$(SAN) TEST_JOBS=$(TEST_JOBS) RSW_TEST_TIMES=$(BUILD)/test-times \
 	  tests/run.sh $(TEST_BIN) $(TEST_SCRIPTS)
 
@@ -277,11 +287,11 @@ bench: deps $(BUILD)/bin/raysweepd $(BUILD)/bin/raysweep $(BENCH_BIN)
 	@for s in $(BENCH_SCRIPTS); do RSW_BIN_DIR=$(BUILD)/bin $$s || exit 1; done
 
 # make test-cluster: replicas behind real load balancers and schedulers
-# (tests/cluster; the engines come from `make deps`). Also run by .ci/run.
+# (tests/cluster; the engines come from `make deps-cluster`). Also run by .ci/run.
 # One at a time, as before parallel `make test`: each starts balancers or a
 # Slurm cluster and kills replicas mid-sweep on a schedule of its own.
 CLUSTER_SCRIPTS := $(sort $(wildcard tests/cluster/test_*.sh))
-test-cluster: deps $(BUILD)/bin/raysweepd $(BUILD)/bin/raysweep
+test-cluster: deps deps-cluster $(BUILD)/bin/raysweepd $(BUILD)/bin/raysweep
 	@RSW_BIN_DIR=$(BUILD)/bin BUILD=$(BUILD) SAN=$(SAN) tests/run.sh -j 1 $(CLUSTER_SCRIPTS)
 
 # make run PORT=N: another port. A port that is taken is said plainly, with
@@ -295,7 +305,7 @@ run: deps $(BUILD)/bin/raysweepd
 	fi
 	$(BUILD)/bin/raysweepd serve --listen 127.0.0.1:$(PORT)
 
-format: deps
+format: deps deps-test
 	tools/check-format.sh --fix
 
 clean:

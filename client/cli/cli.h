@@ -189,6 +189,8 @@ int cmd_scene_push(cli_ctx *ctx, const cli_args *a);
 int cmd_scene_ls(cli_ctx *ctx, const cli_args *a);
 int cmd_scene_show(cli_ctx *ctx, const cli_args *a);
 int cmd_scene_rm(cli_ctx *ctx, const cli_args *a);
+int cmd_scene_reset(cli_ctx *ctx, const cli_args *a);
+int cmd_scene_copy(cli_ctx *ctx, const cli_args *a);
 int cmd_params(cli_ctx *ctx, const cli_args *a);
 int cmd_set(cli_ctx *ctx, const cli_args *a);
 int cmd_render(cli_ctx *ctx, const cli_args *a);

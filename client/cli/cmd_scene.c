@@ -189,6 +189,42 @@ int cmd_scene_rm(cli_ctx *ctx, const cli_args *a) {
   return CLI_OK;
 }
 
+int cmd_scene_reset(cli_ctx *ctx, const cli_args *a) {
+  char *text = NULL;
+  rsw_status s = rsw_scene_reset(ctx->client, a->pos[0], &text);
+  if (s) return cli_report(ctx, s, a->pos[0]);
+  int rc = CLI_OK;
+  cJSON *j;
+  if (ctx->json) {
+    print_raw(text);
+  } else if (!(rc = parse_or_fail(ctx, text, &j))) {
+    char keys[1024];
+    join_strings(cJSON_GetObjectItemCaseSensitive(j, "keys"), ", ", keys, sizeof keys);
+    printf("%s: %s, revision %.0f\n", jstr(j, "id"), keys[0] ? keys : "already in its document's state",
+           jnum(j, "revision"));
+    if (!ctx->quiet && keys[0])
+      fprintf(stderr, "raysweep scene reset: %s is back to its document's state (the keys above)\n",
+              a->pos[0]);
+    cJSON_Delete(j);
+  }
+  rsw_free(text);
+  return rc;
+}
+
+int cmd_scene_copy(cli_ctx *ctx, const cli_args *a) {
+  char id[65];
+  char *text = NULL;
+  rsw_status s = rsw_scene_copy(ctx->client, a->pos[0], id, &text);
+  if (s) return cli_report(ctx, s, a->pos[0]);
+  if (ctx->json)
+    print_raw(text);
+  else
+    printf("%s\n", id);
+  if (!ctx->quiet && !ctx->json) fprintf(stderr, "raysweep scene copy: %s copied to %s\n", a->pos[0], id);
+  rsw_free(text);
+  return CLI_OK;
+}
+
 int cmd_params(cli_ctx *ctx, const cli_args *a) {
   const char *cls = cli_get(a, "--class");
   if (cls && strcmp(cls, "spectral") != 0 && strcmp(cls, "geometric") != 0 && strcmp(cls, "none") != 0)

@@ -119,6 +119,11 @@ bool client_escape(const char *s, char *out, size_t cap);
 bool client_valid_route(const char *key);
 /* GET path and hand back the body as an owned string (rsw_free). */
 rsw_status client_get_text(rsw_client *c, const char *path, char **json_out);
+/* rsw_scene_push_file, also giving the scene's document id (doc_out, may
+ * be NULL): the same on every replica for the same file, where the scene's
+ * id is not once a replica's twin has changed (docs/daemon.md). */
+rsw_status client_scene_push_file(rsw_client *c, const char *path, const char *variant, char id_out[65],
+                                  char doc_out[65], int *created_out);
 /* Monotonic seconds. */
 double client_now_s(void);
 /* Sleep s seconds (interrupted sleeps resume, unless the client's

@@ -398,9 +398,10 @@ static bool looks_xml(const char *text, size_t len) {
   return i < len && text[i] == '<';
 }
 
-/* is_xml: 1 XML, 0 JSON, -1 from the content. */
+/* is_xml: 1 XML, 0 JSON, -1 from the content. name (may be NULL): the
+ * file's name, which the daemon's messages about the text use (?name=). */
 static rsw_status push(rsw_client *c, const char *text, size_t len, const char *base_dir, const char *variant,
-                       const char *name, int is_xml, char id_out[65], int *created_out) {
+                       const char *name, int is_xml, char id_out[65], char doc_out[65], int *created_out) {
   if (!c) return RSW_ERR_INVALID;
   client_clear_error(c);
   if (!text || !id_out)
@@ -414,7 +415,7 @@ static rsw_status push(rsw_client *c, const char *text, size_t len, const char *
                         : json_rewrite(c, text, len, base_dir, &refs, &doc, &doc_len);
   if (!s) s = upload_missing(c, &refs);
   refs_free(&refs);
-  char path[1024] = "/v1/scenes";
+  char path[1200] = "/v1/scenes";
   if (!s && variant && *variant) {
     char esc[128];
     if (!client_escape(variant, esc, sizeof esc))
@@ -422,15 +423,16 @@ static rsw_status push(rsw_client *c, const char *text, size_t len, const char *
     else
       snprintf(path, sizeof path, "/v1/scenes?variant=%s", esc);
   }
-  /* The file's name, the scene's label on the daemon (a name it cannot
-   * take, too long or with control characters, is not sent). */
-  char nesc[3 * 128 + 1];
-  bool name_ok = name && *name && strlen(name) <= 128;
+  /* The file's name, the daemon's name for the document in its messages
+   * and the scene's label (a name it cannot take, too long or with control
+   * characters, is not sent). */
+  char nesc[800];
+  bool name_ok = name && *name && strlen(name) <= 255;
   for (const char *p = name; name_ok && *p; p++)
     if ((unsigned char)*p < 0x20 || *p == 0x7f) name_ok = false;
   if (!s && name_ok && client_escape(name, nesc, sizeof nesc)) {
     size_t at = strlen(path);
-    snprintf(path + at, sizeof path - at, "%cname=%s", strchr(path, '?') ? '&' : '?', nesc);
+    snprintf(path + at, sizeof path - at, "%sname=%s", strchr(path, '?') ? "&" : "?", nesc);
   }
   http_resp r = {0};
   if (!s)
@@ -452,6 +454,12 @@ static rsw_status push(rsw_client *c, const char *text, size_t len, const char *
   } else {
     memcpy(id_out, id->valuestring, 65);
     if (created_out) *created_out = r.status == 201;
+    /* The document's id: the scene's own for its twin, another for a
+     * scene loaded while the twin had changed (a daemon before "document"
+     * has no such scene). */
+    const cJSON *d = cJSON_GetObjectItemCaseSensitive(a, "document");
+    if (doc_out)
+      memcpy(doc_out, cJSON_IsString(d) && strlen(d->valuestring) == 64 ? d->valuestring : id_out, 65);
   }
   cJSON_Delete(a);
   http_resp_free(&r);
@@ -460,11 +468,16 @@ static rsw_status push(rsw_client *c, const char *text, size_t len, const char *
 
 rsw_status rsw_scene_push_buffer(rsw_client *c, const char *text, size_t len, const char *base_dir,
                                  const char *variant, char id_out[65], int *created_out) {
-  return push(c, text, len, base_dir, variant, NULL, -1, id_out, created_out);
+  return push(c, text, len, base_dir, variant, NULL, -1, id_out, NULL, created_out);
 }
 
 rsw_status rsw_scene_push_file(rsw_client *c, const char *path, const char *variant, char id_out[65],
                                int *created_out) {
+  return client_scene_push_file(c, path, variant, id_out, NULL, created_out);
+}
+
+rsw_status client_scene_push_file(rsw_client *c, const char *path, const char *variant, char id_out[65],
+                                  char doc_out[65], int *created_out) {
   if (!c) return RSW_ERR_INVALID;
   client_clear_error(c);
   if (!path) return client_fail(c, RSW_ERR_INVALID, "scene push: path is NULL");
@@ -490,8 +503,8 @@ rsw_status rsw_scene_push_file(rsw_client *c, const char *path, const char *vari
   int is_xml = n >= 4 && strcmp(path + n - 4, ".xml") == 0    ? 1
                : n >= 5 && strcmp(path + n - 5, ".json") == 0 ? 0
                                                               : -1;
-  s = push(c, text, len, dir, variant, strrchr(path, '/') ? strrchr(path, '/') + 1 : path, is_xml, id_out,
-           created_out);
+  const char *base = strrchr(path, '/');
+  s = push(c, text, len, dir, variant, base ? base + 1 : path, is_xml, id_out, doc_out, created_out);
   free(dir);
   free(text);
   return s;
@@ -522,6 +535,53 @@ rsw_status rsw_scene_delete(rsw_client *c, const char *id, int force) {
   http_resp r;
   rsw_status s = http_request(c, &(http_req){.method = "DELETE", .path = path}, &r);
   if (!s) http_resp_free(&r);
+  return s;
+}
+
+/* POST /v1/scenes/{id}:OP with no body; the answer's text (owned) and
+ * its HTTP status. */
+static rsw_status scene_op(rsw_client *c, const char *id, const char *op, char **json_out) {
+  if (!c) return RSW_ERR_INVALID;
+  client_clear_error(c);
+  char esc[256], path[320];
+  if (!id || !client_escape(id, esc, sizeof esc))
+    return client_fail(c, RSW_ERR_INVALID, "scene id missing or too long");
+  snprintf(path, sizeof path, "/v1/scenes/%s:%s", esc, op);
+  http_resp r;
+  rsw_status s = http_request(c, &(http_req){.method = "POST", .path = path}, &r);
+  if (s) return s;
+  *json_out = r.body;
+  r.body = NULL;
+  http_resp_free(&r);
+  return *json_out ? RSW_OK : client_fail(c, RSW_ERR_PARSE, "POST %s: empty answer", path);
+}
+
+rsw_status rsw_scene_reset(rsw_client *c, const char *id, char **json_out) {
+  char *j = NULL;
+  rsw_status s = scene_op(c, id, "reset", &j);
+  if (!s && json_out)
+    *json_out = j;
+  else
+    free(j);
+  return s;
+}
+
+rsw_status rsw_scene_copy(rsw_client *c, const char *id, char id_out[65], char **json_out) {
+  if (c && !id_out) return client_fail(c, RSW_ERR_INVALID, "scene copy: id_out is NULL");
+  char *j = NULL;
+  rsw_status s = scene_op(c, id, "copy", &j);
+  if (s) return s;
+  cJSON *a = cJSON_Parse(j);
+  const cJSON *nid = cJSON_GetObjectItemCaseSensitive(a, "id");
+  if (!cJSON_IsString(nid) || strlen(nid->valuestring) != 64)
+    s = client_fail(c, RSW_ERR_PARSE, "POST :copy: the answer has no 64-character \"id\": %.200s", j);
+  else
+    memcpy(id_out, nid->valuestring, 65);
+  cJSON_Delete(a);
+  if (!s && json_out)
+    *json_out = j;
+  else
+    free(j);
   return s;
 }
 

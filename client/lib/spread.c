@@ -51,6 +51,7 @@ typedef struct shard {
   char base[64]; /* first key; resubmissions append ".r<n>" */
   char key[96];
   char job[40];        /* the job of this attempt, "" before submission */
+  char scene[65];      /* the scene its job runs on, on its replica */
   size_t job_contexts; /* contexts in that job */
   size_t prior;        /* renders delivered by earlier attempts */
   size_t cur_done, cur_total;
@@ -63,6 +64,7 @@ struct spread {
   const rsw_contexts *x;
   char prefix[32];
   char scene_id[65];
+  char doc_id[65]; /* a FILE's document id: every replica's scene of it has it */
   size_t n_ctx;
   const char **sorted_ids; /* ids sorted, for lookups */
   size_t *sorted_idx;      /* index in x of sorted_ids[i] */
@@ -360,20 +362,24 @@ static rsw_status submit(shard *sh, rsw_client *c, size_t *n_out) {
     return RSW_OK;
   }
   rsw_status s = rsw_client_set_route(c, sh->key);
+  snprintf(sh->scene, sizeof sh->scene, "%s", sp->scene_id);
   if (!s && sp->o->scene_file) {
-    char id[65];
-    s = rsw_scene_push_file(c, sp->o->scene_file, sp->o->variant, id, NULL);
-    if (!s && strcmp(id, sp->scene_id) != 0) {
+    /* The replica's scene in the file's state: its id is the document's
+     * unless that replica's twin has been changed (then a scene of its
+     * own); the document must be the same everywhere. */
+    char doc[65];
+    s = client_scene_push_file(c, sp->o->scene_file, sp->o->variant, sh->scene, doc, NULL);
+    if (!s && strcmp(doc, sp->doc_id) != 0) {
       free(pending);
-      set_fatal(sp, RSW_ERR_CONFLICT, "shard %d: %s is scene %s on this replica but %s on another", sh->k,
-                sp->o->scene_file, id, sp->scene_id);
+      set_fatal(sp, RSW_ERR_CONFLICT, "shard %d: %s is document %s on this replica but %s on another", sh->k,
+                sp->o->scene_file, doc, sp->doc_id);
       return RSW_ERR_CONFLICT;
     }
   }
   rsw_contexts *y = NULL;
   if (!s) s = client_contexts_subset(sp->x, pending, np, &y);
   free(pending);
-  if (!s) s = rsw_job_submit(c, sp->scene_id, y, sh->key, sh->job);
+  if (!s) s = rsw_job_submit(c, sh->scene, y, sh->key, sh->job);
   rsw_contexts_free(y);
   if (s) return s;
   sh->job_contexts = np;
@@ -774,7 +780,7 @@ rsw_status rsw_spread_run(const rsw_client_opts *copts, const char *scene_id, co
       what = "pushing the scene";
       shard_key(&sp.shards[0]);
       s = rsw_client_set_route(c, sp.shards[0].base);
-      if (!s) s = rsw_scene_push_file(c, o.scene_file, o.variant, sp.scene_id, NULL);
+      if (!s) s = client_scene_push_file(c, o.scene_file, o.variant, sp.scene_id, sp.doc_id, NULL);
     }
     if (s) {
       const rsw_error_info *e = rsw_client_last_error(c);

@@ -121,6 +121,8 @@ void rsw_free(void *p);
  * was already resident. */
 rsw_status rsw_scene_push_file(rsw_client *c, const char *path, const char *variant, char id_out[65],
                                int *created_out);
+/* (The file's name goes with it, ?name=, so the daemon's messages about
+ * its text name it: `mine.xml:6: ...`.) */
 /* Same from memory; base_dir resolves relative file names (NULL: "."). */
 rsw_status rsw_scene_push_buffer(rsw_client *c, const char *text, size_t len, const char *base_dir,
                                  const char *variant, char id_out[65], int *created_out);
@@ -129,6 +131,15 @@ rsw_status rsw_scene_list(rsw_client *c, char **json_out);
 rsw_status rsw_scene_info(rsw_client *c, const char *id, char **json_out);
 /* DELETE /v1/scenes/{id}; force cancels its jobs. */
 rsw_status rsw_scene_delete(rsw_client *c, const char *id, int force);
+/* POST /v1/scenes/{id}:reset: the scene back to its document's state
+ * (the keys PATCHed since get the document's values; the revision moves
+ * when one changed). json_out (may be NULL; owned: rsw_free): the answer,
+ * the scene's summary with "changed" and "keys". */
+rsw_status rsw_scene_reset(rsw_client *c, const char *id, char **json_out);
+/* POST /v1/scenes/{id}:copy: a new scene in id's current state, a private
+ * one (a push of the document is never handed it). id_out: 65 bytes;
+ * json_out (may be NULL; owned): its summary. */
+rsw_status rsw_scene_copy(rsw_client *c, const char *id, char id_out[65], char **json_out);
 
 /* ---- parameters ---------------------------------------------------------------- */
 

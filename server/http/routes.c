@@ -255,7 +255,7 @@ static void h_scene_post(http_req *r) {
   if (!query_enum(r, "variant", r->q_variant, variants, 2)) return;
   if (r->q_name && !service_scene_label_ok(r->q_name)) {
     http_resp_problem(r, 400, NULL,
-                      "query parameter name must be 1 to %d bytes of text without control characters",
+                      "query parameter name must be a file name (1 to %d bytes, no '/' or control character)",
                       SVC_SCENE_LABEL_MAX);
     return;
   }
@@ -263,8 +263,10 @@ static void h_scene_post(http_req *r) {
   svc_error e = {0};
   bool created = false;
   char *id = NULL, *json = NULL;
-  rsw_status s =
-      service_scene_post(r->svc, r->body, r->body_len, is_xml, r->q_variant, &created, &id, &json, &e);
+  /* ?name=: the client's name for the document (raysweep push sends its
+   * file's), which messages about its text use. */
+  rsw_status s = service_scene_post_named(r->svc, r->body, r->body_len, is_xml, r->q_variant, r->q_name,
+                                          &created, &id, &json, &e);
   if (s == RSW_OK && id) snprintf(r->resp.location, sizeof r->resp.location, "/v1/scenes/%s", id);
   if (s == RSW_OK && id && r->q_name) { /* the summary again, with the name */
     free(json);
@@ -273,6 +275,22 @@ static void h_scene_post(http_req *r) {
   }
   free(id);
   resp_result(r, s, created ? 201 : 200, json, &e);
+}
+
+static void h_scene_reset(http_req *r) {
+  svc_error e = {0};
+  char *json = NULL;
+  rsw_status s = service_scene_reset(r->svc, r->params[0], &json, &e);
+  resp_result(r, s, 200, json, &e);
+}
+
+static void h_scene_copy(http_req *r) {
+  svc_error e = {0};
+  char *id = NULL, *json = NULL;
+  rsw_status s = service_scene_copy(r->svc, r->params[0], &id, &json, &e);
+  if (s == RSW_OK && id) snprintf(r->resp.location, sizeof r->resp.location, "/v1/scenes/%s", id);
+  free(id);
+  resp_result(r, s, 201, json, &e);
 }
 
 static void h_scene_list(http_req *r) {
@@ -540,6 +558,8 @@ const http_route http_routes[] = {
     {"GET", "/v1/scenes/{id}/params", HTTP_BODY_NONE, false, h_params_get, false},
     {"PATCH", "/v1/scenes/{id}/params", HTTP_BODY_JSON, false, h_params_patch, false},
     {"POST", "/v1/scenes/{id}:render", HTTP_BODY_JSON, false, h_render, false},
+    {"POST", "/v1/scenes/{id}:reset", HTTP_BODY_NONE, false, h_scene_reset, false},
+    {"POST", "/v1/scenes/{id}:copy", HTTP_BODY_NONE, false, h_scene_copy, false},
     {"GET", "/v1/scenes/{id}/sensors/{sensor}/directions", HTTP_BODY_NONE, false, h_directions, false},
     {"POST", "/v1/scenes/{id}/jobs", HTTP_BODY_JSON, false, h_job_submit, false},
     {"GET", "/v1/jobs", HTTP_BODY_NONE, false, h_job_list, false},

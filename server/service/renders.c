@@ -115,25 +115,17 @@ cJSON *svc_patch_merged(const cJSON *old, const cJSON *body) {
 /* Build a view of r at the revision whose PATCHes `patches` holds. */
 static rsw_status view_build(service *svc, resident *r, const cJSON *patches, uint64_t revision,
                              svc_view **out, svc_error *e) {
-  rsw_err err = {0};
   scene *sc = NULL;
-  rsw_status st = svc_scene_reload(svc, r, &sc, &err);
-  if (st)
-    return svc_fail(e, RSW_ERR_RENDER, err.where, "cannot build a render view of the scene: %s", err.msg);
-  param_update *u = NULL;
-  size_t n = 0;
-  if (patches && patches->child) {
-    st = svc_map_to_updates(patches, sc, "params", &u, &n, e);
-    if (!st && scene_update(sc, u, n, NULL, &err) != RSW_OK)
-      st = svc_fail(e, RSW_ERR_RENDER, err.where, "cannot replay the scene's updates on a render view: %s",
-                    err.msg);
-    svc_free_updates(u, n);
-  }
-  svc_view *v = st ? NULL : calloc(1, sizeof *v);
-  if (!st && !v) st = svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
+  rsw_status st = svc_scene_build_at(svc, r, patches, &sc, e);
   if (st) {
+    svc_error why = *e;
+    return svc_fail(e, RSW_ERR_RENDER, why.err.where, "cannot build a render view of the scene: %s",
+                    why.err.msg);
+  }
+  svc_view *v = calloc(1, sizeof *v);
+  if (!v) {
     scene_free(sc);
-    return st;
+    return svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
   }
   v->sc = sc;
   v->revision = revision;

@@ -1,11 +1,21 @@
 /* Resident scenes: load from a body or a file (blobs and data-root
  * files resolved, every referenced file's digest in the scene id), the
- * registry, summaries, deletion. */
+ * registry, summaries, deletion, reset and copy.
+ *
+ * A document yields its own state (docs/daemon.md#a-document-yields-its-own-state):
+ * a push is handed the document's resident scene (its twin, id = the
+ * document's digest) only while the twin is in the document's state (no
+ * PATCH recorded since its load or its last reset). Once the twin has
+ * changed, a push gets a fork: a scene of its own, loaded from the
+ * document, with a fresh id and `doc` naming the document, handed to later
+ * pushes in turn while it is unchanged. A copy (POST :copy) is loaded the
+ * same way with its source's PATCHes and is never handed to a pusher. */
 #include <errno.h>
 #include <limits.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/random.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -142,8 +152,12 @@ static resident *scene_reload(service *svc, const char *id) {
   char variant[8];
   cJSON *patched;
   uint64_t revision;
-  if (!svc_state_scene_read(svc, id, &body, &len, &is_xml, variant, &patched, &revision)) return NULL;
-  struct post_extra x = {.expect_id = id, .patched = patched, .revision = revision};
+  char doc[65];
+  bool copy;
+  if (!svc_state_scene_read(svc, id, &body, &len, &is_xml, variant, &patched, &revision, doc, &copy))
+    return NULL;
+  struct post_extra x = {
+      .expect_id = id, .doc = doc[0] ? doc : NULL, .copy = copy, .patched = patched, .revision = revision};
   svc_error e = {0};
   bool created;
   resident *r = NULL;
@@ -266,6 +280,8 @@ void svc_scene_release(service *svc, resident *r) {
 
 void svc_scene_summary(const resident *r, cJSON *o) {
   cJSON_AddStringToObject(o, "id", r->id);
+  cJSON_AddStringToObject(o, "document", r->doc);
+  cJSON_AddBoolToObject(o, "copy", r->copy);
   cJSON_AddStringToObject(o, "variant", r->sc->variant == VARIANT_MONO ? "mono" : "rgb");
   cJSON *s = cJSON_AddArrayToObject(o, "sensors");
   for (size_t i = 0; i < r->sc->n_sensors; i++)
@@ -309,6 +325,89 @@ static void scene_error(svc_error *e, const service *svc, const rsw_err *err) {
   scrub(e->err.msg, sizeof e->err.msg, svc->data_root, "");
 }
 
+/* A new id for a fork or copy of document doc: not its content's digest
+ * (that is doc) but unique: SHA-256 of doc and 32 random bytes. */
+static bool fresh_id(const char *doc, char out[65]) {
+  unsigned char rnd[32], d[32];
+  rsw_sha256_ctx c;
+  if (getrandom(rnd, sizeof rnd, 0) != (ssize_t)sizeof rnd || !rsw_sha256_begin(&c)) return false;
+  rsw_sha256_update(&c, "raysweep-scene-fork-v1\n", 23);
+  rsw_sha256_update(&c, doc, 64);
+  rsw_sha256_update(&c, rnd, sizeof rnd);
+  rsw_sha256_end(&c, d);
+  rsw_hex(d, 32, out);
+  return true;
+}
+
+/* Whether r is in its document's state: no PATCH recorded since its load
+ * or its last reset (r->patches NULL: unknown, so no). */
+static bool in_document_state(resident *r) {
+  pthread_mutex_lock(&r->lock);
+  bool same = r->patches && !r->patches->child && !r->broken;
+  pthread_mutex_unlock(&r->lock);
+  return same;
+}
+
+/* A resident scene of document doc in the document's state that a push
+ * may be handed, with a ref: the twin first, else a fork; never a copy.
+ * NULL when there is none. svc->lock not held (r->lock is taken after it
+ * is released: a PATCH holds r->lock, then svc->lock). */
+static resident *twin_acquire(service *svc, const char *doc) {
+  resident **c = NULL;
+  size_t n = 0, cap = 0;
+  pthread_mutex_lock(&svc->lock);
+  for (size_t i = 0; i < svc->n_scenes; i++) {
+    resident *r = svc->scenes[i];
+    if (r->copy || strcmp(r->doc, doc) != 0) continue;
+    if (!svc_grow((void **)&c, &cap, n + 1, sizeof *c, 0)) break;
+    r->refs++;
+    c[n++] = r;
+  }
+  pthread_mutex_unlock(&svc->lock);
+  resident *found = NULL;
+  for (int twin = 1; twin >= 0 && !found; twin--)
+    for (size_t i = 0; i < n && !found; i++)
+      if ((strcmp(c[i]->id, doc) == 0) == twin && in_document_state(c[i])) found = c[i];
+  for (size_t i = 0; i < n; i++)
+    if (c[i] != found) svc_scene_release(svc, c[i]);
+  free(c);
+  if (found) {
+    pthread_mutex_lock(&svc->lock);
+    found->last_used = ++svc->use_clock;
+    pthread_mutex_unlock(&svc->lock);
+  }
+  return found;
+}
+
+/* A new resident scene holding sc and templates, not registered yet; NULL
+ * when out of memory (sc and templates then stay the caller's). */
+static resident *resident_alloc(scene *sc, cJSON *templates, const char *id, const char *doc, size_t bytes) {
+  resident *r = calloc(1, sizeof *r);
+  if (!r) return NULL;
+  memcpy(r->id, id, 65);
+  memcpy(r->doc, doc, 65);
+  r->sc = sc;
+  r->templates = templates;
+  r->bytes = bytes;
+  r->created = time(NULL);
+  pthread_mutex_init(&r->lock, NULL);
+  pthread_cond_init(&r->cond, NULL);
+  pthread_mutex_init(&r->cache_lock, NULL);
+  return r;
+}
+
+/* Register r (svc->lock held, room made in svc->scenes) with one ref for
+ * the caller; returns the scenes the budget evicts for it
+ * (svc_free_evicted, after the lock). */
+static resident **add_locked(service *svc, resident *r) {
+  r->refs = 1;
+  r->last_used = ++svc->use_clock;
+  svc->scenes[svc->n_scenes++] = r;
+  svc->scene_bytes += r->bytes;
+  svc_forget_evicted_locked(svc, r->id);
+  return svc_evict_locked(svc, r);
+}
+
 /* Load, compute the id, register (or find the existing one). x (may be
  * NULL): a startup scene (pinned, not stored) or a reload from the state
  * directory (the id it must have, the parameters to apply first). */
@@ -331,19 +430,17 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
   }
   bool has_files = memmem(body, len, "filename", 8) != NULL;
   if (!has_files && !x) {
+    char doc[65] = "";
     pthread_mutex_lock(&svc->lock);
-    for (size_t i = 0; i < svc->n_raw; i++)
-      if (memcmp(svc->raw[i].digest, raw, 32) == 0) {
-        resident *r = svc_find_scene_locked(svc, svc->raw[i].id);
-        if (r) {
-          r->refs++;
-          pthread_mutex_unlock(&svc->lock);
-          *created = false;
-          *out = r;
-          return RSW_OK;
-        }
-      }
+    for (size_t i = 0; i < svc->n_raw && !doc[0]; i++)
+      if (memcmp(svc->raw[i].digest, raw, 32) == 0) memcpy(doc, svc->raw[i].id, 65);
     pthread_mutex_unlock(&svc->lock);
+    resident *r = doc[0] ? twin_acquire(svc, doc) : NULL;
+    if (r) {
+      *created = false;
+      *out = r;
+      return RSW_OK;
+    }
   }
   char *canon = canonical_text(body, len, is_xml);
   /* A body that does not even parse is reported by the reader below. */
@@ -409,12 +506,46 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
   free(canon);
   char id[65];
   rsw_hex(d, 32, id);
-  if (x && x->expect_id && strcmp(id, x->expect_id) != 0) {
+  const char *expect_doc = x && x->doc ? x->doc : x ? x->expect_id : NULL;
+  if (expect_doc && strcmp(id, expect_doc) != 0) {
     scene_free(sc);
     cJSON_Delete(templates);
     return svc_fail(e, RSW_ERR_FILE, x->expect_id,
                     "the files scene %s refers to changed since it was stored (it now loads as %s)",
                     x->expect_id, id);
+  }
+  /* The id it is registered under: the document's own, a reload's, or a
+   * fresh one for a fork (a push while the document's twin has changed,
+   * resident or stored). */
+  char reg[65];
+  memcpy(reg, x && x->expect_id ? x->expect_id : id, 65);
+  uint64_t revision = x && x->patched ? x->revision : 0;
+  bool fork = false;
+  if (!x) {
+    resident *t = twin_acquire(svc, id);
+    if (t) {
+      scene_free(sc);
+      cJSON_Delete(templates);
+      *created = false;
+      *out = t;
+      return RSW_OK;
+    }
+    pthread_mutex_lock(&svc->lock);
+    fork = svc_find_scene_locked(svc, id) != NULL;
+    pthread_mutex_unlock(&svc->lock);
+    cJSON *sp = NULL;
+    uint64_t srev = 0;
+    if (!fork && svc_state_scene_params(svc, id, &sp, &srev)) {
+      fork = sp->child != NULL;
+      revision = srev; /* the twin as stored: its revision, no PATCH standing */
+    }
+    cJSON_Delete(sp);
+    if (fork && !fresh_id(id, reg)) {
+      scene_free(sc);
+      cJSON_Delete(templates);
+      return svc_fail(e, RSW_ERR_NOMEM, "scene", "cannot draw a new scene id (getrandom failed)");
+    }
+    if (fork) revision = 0;
   }
   if (x && x->patched) { /* a reload: its base state at its revision */
     param_update *u = NULL;
@@ -433,7 +564,7 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
     }
   }
   if (!x) { /* posted: stored before it is answered */
-    rsw_status sst = svc_state_scene_save(svc, id, is_xml, variant, body, len, e);
+    rsw_status sst = svc_state_scene_save(svc, reg, id, false, is_xml, variant, body, len, e);
     if (sst) {
       scene_free(sc);
       cJSON_Delete(templates);
@@ -442,7 +573,7 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
   }
   size_t bytes = budget_bytes(sc);
   pthread_mutex_lock(&svc->lock);
-  resident *r = svc_find_scene_locked(svc, id);
+  resident *r = svc_find_scene_locked(svc, reg);
   if (r) {
     r->refs++;
     r->last_used = ++svc->use_clock;
@@ -453,27 +584,20 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
     *out = r;
     return RSW_OK;
   }
-  r = calloc(1, sizeof *r);
+  r = resident_alloc(sc, templates, reg, id, bytes);
   bool ok = r && svc_grow((void **)&svc->scenes, &svc->cap_scenes, svc->n_scenes + 1, sizeof *svc->scenes, 0);
   if (!ok) {
     pthread_mutex_unlock(&svc->lock);
-    free(r);
-    scene_free(sc);
-    cJSON_Delete(templates);
+    if (r)
+      svc_resident_free(r);
+    else
+      scene_free(sc), cJSON_Delete(templates);
     return svc_fail(e, RSW_ERR_NOMEM, "scene", "out of memory");
   }
-  memcpy(r->id, id, 65);
-  r->sc = sc;
-  r->templates = templates;
-  r->bytes = bytes;
-  r->last_used = ++svc->use_clock;
+  r->copy = x && x->copy;
   r->pinned = x && x->pinned;
-  if (x && x->patched) r->revision = x->revision;
+  r->revision = revision;
   r->load_s = load_s;
-  r->created = time(NULL);
-  pthread_mutex_init(&r->lock, NULL);
-  pthread_cond_init(&r->cond, NULL);
-  pthread_mutex_init(&r->cache_lock, NULL);
   memcpy(r->src_files, fd, 32);
   /* a reload: its views replay the stored PATCHes too */
   if (!svc_keep_source(svc, r, body, len, is_xml) || (x && x->patched && !svc_keep_patch(r, x->patched)) ||
@@ -482,16 +606,13 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
     svc_resident_free(r);
     return svc_fail(e, RSW_ERR_NOMEM, "scene", "out of memory");
   }
-  r->refs = 1;
-  svc->scenes[svc->n_scenes++] = r;
-  if (!has_files && !x && svc_grow((void **)&svc->raw, &svc->cap_raw, svc->n_raw + 1, sizeof *svc->raw, 0)) {
+  if (!has_files && !x && !fork &&
+      svc_grow((void **)&svc->raw, &svc->cap_raw, svc->n_raw + 1, sizeof *svc->raw, 0)) {
     memcpy(svc->raw[svc->n_raw].digest, raw, 32);
     memcpy(svc->raw[svc->n_raw].id, id, 65);
     svc->n_raw++;
   }
-  svc->scene_bytes += bytes;
-  svc_forget_evicted_locked(svc, id);
-  resident **ev = svc_evict_locked(svc, r);
+  resident **ev = add_locked(svc, r);
   pthread_mutex_unlock(&svc->lock);
   svc_free_evicted(ev);
   *created = true;
@@ -499,18 +620,13 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
   return RSW_OK;
 }
 
-rsw_status service_scene_post(service *svc, const char *body, size_t len, bool is_xml, const char *variant,
-                              bool *created, char **id_out, char **json_out, svc_error *e) {
-  if (!service_ready(svc)) return svc_fail(e, RSW_ERR_UNAVAILABLE, "", "the server is shutting down");
-  resident *r;
-  rsw_status st =
-      scene_post(svc, body, len, is_xml, variant, is_xml ? "scene.xml" : "scene.json", NULL, created, &r, e);
-  if (st) return st;
+/* The answer to a post or copy: r's id and summary; r's ref released. */
+static rsw_status summary_answer(service *svc, resident *r, char **id_out, char **json_out, svc_error *e) {
   unsigned jm = svc_json_mark();
   cJSON *o = cJSON_CreateObject();
   svc_scene_summary(r, o);
   *id_out = strdup(r->id);
-  st = svc_json_out(json_out, o, jm, e);
+  rsw_status st = svc_json_out(json_out, o, jm, e);
   if (!st && !*id_out) st = svc_fail(e, RSW_ERR_NOMEM, "", "out of memory while building the answer");
   if (st) {
     free(*id_out);
@@ -519,6 +635,30 @@ rsw_status service_scene_post(service *svc, const char *body, size_t len, bool i
   }
   svc_scene_release(svc, r);
   return st;
+}
+
+rsw_status service_scene_post(service *svc, const char *body, size_t len, bool is_xml, const char *variant,
+                              bool *created, char **id_out, char **json_out, svc_error *e) {
+  return service_scene_post_named(svc, body, len, is_xml, variant, NULL, created, id_out, json_out, e);
+}
+
+rsw_status service_scene_post_named(service *svc, const char *body, size_t len, bool is_xml,
+                                    const char *variant, const char *name, bool *created, char **id_out,
+                                    char **json_out, svc_error *e) {
+  if (!service_ready(svc)) return svc_fail(e, RSW_ERR_UNAVAILABLE, "", "the server is shutting down");
+  /* What the client calls the document (its file's name): the scene's
+   * label and the name its messages use. */
+  if (name && !service_scene_label_ok(name))
+    return svc_fail(e, RSW_ERR_BAD_REQUEST, "name",
+                    "name must be a file name (1 to %d bytes, no '/' or control character)", SVC_SCENE_LABEL_MAX);
+  resident *r;
+  rsw_status st = scene_post(svc, body, len, is_xml, variant,
+                             name     ? name
+                             : is_xml ? "scene.xml"
+                                      : "scene.json",
+                             NULL, created, &r, e);
+  if (st) return st;
+  return summary_answer(svc, r, id_out, json_out, e);
 }
 
 rsw_status service_scene_load_text(service *svc, const char *text, size_t len, bool is_xml, const char *name,
@@ -655,7 +795,7 @@ rsw_status service_scene_delete(service *svc, const char *id, bool force, svc_er
     char v[8];
     cJSON *pp = NULL;
     uint64_t rev;
-    bool stored = svc_state_scene_read(svc, id, &b, &bl, &xml, v, &pp, &rev);
+    bool stored = svc_state_scene_read(svc, id, &b, &bl, &xml, v, &pp, &rev, NULL, NULL);
     free(b);
     cJSON_Delete(pp);
     if (stored || evicted) { /* not resident: forgetting it is all there is to do */
@@ -736,7 +876,7 @@ bool service_scene_label_ok(const char *label) {
   size_t n = label ? strlen(label) : 0;
   if (n < 1 || n > SVC_SCENE_LABEL_MAX) return false;
   for (size_t i = 0; i < n; i++)
-    if ((unsigned char)label[i] < 0x20 || label[i] == 0x7f) return false;
+    if ((unsigned char)label[i] < 0x20 || label[i] == 0x7f || label[i] == '/') return false;
   return true;
 }
 
@@ -757,4 +897,202 @@ rsw_status service_scene_label(service *svc, const char *id, const char *label, 
   svc_scene_summary(r, o);
   pthread_mutex_unlock(&svc->lock);
   return svc_json_out(json_out, o, jm, e);
+}
+rsw_status svc_scene_build_at(service *svc, const resident *r, const cJSON *patches, scene **out,
+                              svc_error *e) {
+  rsw_err err = {0};
+  scene *sc = NULL;
+  rsw_status st = svc_scene_reload(svc, r, &sc, &err);
+  if (st) {
+    scene_error(e, svc, &err);
+    return e->err.code;
+  }
+  if (patches && patches->child) {
+    param_update *u = NULL;
+    size_t n = 0;
+    st = svc_map_to_updates(patches, sc, "params", &u, &n, e);
+    if (!st && scene_update(sc, u, n, NULL, &err) != RSW_OK)
+      st = svc_fail(e, RSW_ERR_RENDER, err.where, "cannot replay the scene's updates: %s", err.msg);
+    svc_free_updates(u, n);
+  }
+  if (st) {
+    scene_free(sc);
+    return st;
+  }
+  *out = sc;
+  return RSW_OK;
+}
+
+/* ---- reset and copy -------------------------------------------------------------- */
+
+/* A scene marked broken (service_internal.h) is refused: 503. */
+static rsw_status broken_error(svc_error *e, const char *id) {
+  return svc_fail(e, RSW_ERR_UNAVAILABLE, id,
+                  "the scene's base state was lost (restoring it after a render ran out of memory): delete "
+                  "the scene and post it again");
+}
+
+rsw_status service_scene_reset(service *svc, const char *id, char **json_out, svc_error *e) {
+  unsigned jm = svc_json_mark();
+  resident *r = svc_scene_acquire(svc, id);
+  if (!r) return svc_no_scene(e, id);
+  /* The document's values of the keys PATCHed since (from the document
+   * loaded again), set as one update: the same path as a PATCH, so renders
+   * and views follow the revision; then no PATCH stands. */
+  scene *doc = NULL;
+  rsw_err err = {0};
+  rsw_status st = svc_scene_reload(svc, r, &doc, &err);
+  if (st) {
+    scene_error(e, svc, &err);
+    svc_scene_release(svc, r);
+    return e->err.code;
+  }
+  pthread_mutex_lock(&r->lock);
+  while (r->base_busy) pthread_cond_wait(&r->cond, &r->lock);
+  param_update *keys = NULL, *docv = NULL, *before = NULL;
+  size_t n = 0;
+  update_report rep = {0};
+  cJSON *empty = NULL, *old_patches = NULL; /* keys[].key points into the latter */
+  if (r->broken)
+    st = broken_error(e, r->id);
+  else if (!r->patches || !(empty = cJSON_CreateObject()))
+    st = svc_fail(e, RSW_ERR_NOMEM, r->id, "out of memory: the scene's PATCHes were not recorded");
+  if (!st) {
+    for (const cJSON *k = r->patches->child; k; k = k->next) n++;
+    keys = calloc(n ? n : 1, sizeof *keys);
+    if (!keys) st = svc_fail(e, RSW_ERR_NOMEM, r->id, "out of memory");
+    size_t i = 0;
+    for (const cJSON *k = r->patches->child; keys && k; k = k->next) keys[i++].key = k->string;
+  }
+  if (!st && n) {
+    st = svc_param_snapshot(doc, keys, n, &docv, &err);
+    if (!st) st = svc_param_snapshot(r->sc, keys, n, &before, &err);
+    if (!st) st = scene_update(r->sc, docv, n, &rep, &err);
+    if (st) st = svc_update_error(e, r->sc, keys, n, &err);
+  }
+  if (!st && n) {
+    uint64_t old_revision = r->revision;
+    old_patches = r->patches;
+    if (rep.changed) r->revision++;
+    r->patches = empty;
+    empty = NULL;
+    st = svc_scene_patched(svc, r, e);
+    if (st) { /* not stored: back as it was (the same values, so bitwise) */
+      rsw_err uerr = {0};
+      svc_error ignored = {0};
+      empty = r->patches;
+      r->patches = old_patches;
+      old_patches = NULL;
+      r->revision = old_revision;
+      if (scene_update(r->sc, before, n, NULL, &uerr) != RSW_OK) r->broken = true;
+      (void)svc_state_scene_patched(svc, r, &ignored);
+    }
+    (void)svc_refresh_param_cache(r);
+    svc_views_free(r);
+  }
+  cJSON *o = NULL;
+  if (!st) {
+    o = cJSON_CreateObject();
+    svc_scene_summary(r, o);
+    cJSON_AddNumberToObject(o, "changed", (double)rep.changed);
+    cJSON *ks = cJSON_AddArrayToObject(o, "keys");
+    for (size_t i = 0; i < n; i++) svc_json_push(ks, cJSON_CreateString(keys[i].key));
+  }
+  pthread_mutex_unlock(&r->lock);
+  if (!st && n) svc_count_update(svc, &rep);
+  for (size_t i = 0; docv && i < n; i++) param_value_free(&docv[i].value);
+  for (size_t i = 0; before && i < n; i++) param_value_free(&before[i].value);
+  free(docv), free(before), free(keys);
+  cJSON_Delete(empty);
+  cJSON_Delete(old_patches);
+  scene_free(doc);
+  svc_scene_release(svc, r);
+  if (st) {
+    cJSON_Delete(o);
+    return st;
+  }
+  return svc_json_out(json_out, o, jm, e);
+}
+
+rsw_status service_scene_copy(service *svc, const char *id, char **id_out, char **json_out, svc_error *e) {
+  if (!service_ready(svc)) return svc_fail(e, RSW_ERR_UNAVAILABLE, "", "the server is shutting down");
+  resident *src = svc_scene_acquire(svc, id);
+  if (!src) return svc_no_scene(e, id);
+  /* The source's state: its PATCHes at its revision, replayed on the
+   * document loaded again (a view's recipe); its text, variant, root and
+   * templates are fixed at its load. */
+  pthread_mutex_lock(&src->lock);
+  bool broken = src->broken;
+  cJSON *patches = src->patches ? cJSON_Duplicate(src->patches, true) : NULL;
+  pthread_mutex_unlock(&src->lock);
+  rsw_status st = RSW_OK;
+  scene *sc = NULL;
+  resident *r = NULL;
+  char nid[65];
+  if (broken)
+    st = broken_error(e, src->id);
+  else if (!patches)
+    st = svc_fail(e, RSW_ERR_NOMEM, src->id, "out of memory: the scene's PATCHes were not recorded");
+  else if (!fresh_id(src->doc, nid))
+    st = svc_fail(e, RSW_ERR_NOMEM, "scene", "cannot draw a new scene id (getrandom failed)");
+  if (!st) {
+    double t0 = svc_now();
+    st = svc_scene_build_at(svc, src, patches, &sc, e);
+    if (!st) {
+      cJSON *tm = src->templates ? cJSON_Duplicate(src->templates, true) : NULL;
+      r = (!src->templates || tm) ? resident_alloc(sc, tm, nid, src->doc, budget_bytes(sc)) : NULL;
+      if (!r) {
+        scene_free(sc), cJSON_Delete(tm);
+        st = svc_fail(e, RSW_ERR_NOMEM, "scene", "out of memory");
+      } else {
+        r->load_s = svc_now() - t0;
+      }
+    }
+  }
+  if (!st) {
+    r->copy = true;
+    /* A copy of a start-up scene is not stored either (its files resolve
+     * in the start-up file's directory, which a reload does not know) and
+     * never evicted. */
+    r->pinned = src->pinned;
+    memcpy(r->src_files, src->src_files, 32);
+    snprintf(r->src_variant, sizeof r->src_variant, "%s", src->src_variant);
+    r->src_xml = src->src_xml;
+    r->src_len = src->src_len;
+    r->src = malloc(src->src_len + 1);
+    r->src_root = src->src_root ? strdup(src->src_root) : NULL;
+    r->patches = patches;
+    patches = NULL;
+    if (!r->src || (src->src_root && !r->src_root) || !svc_refresh_param_cache(r)) {
+      st = svc_fail(e, RSW_ERR_NOMEM, "scene", "out of memory");
+    } else {
+      memcpy(r->src, src->src, src->src_len + 1);
+    }
+  }
+  /* Stored before it is answered: its PATCHes first, then the document
+   * that makes it a scene (a crash between leaves an unused record). */
+  if (!st && !r->pinned) {
+    st = svc_state_scene_patched(svc, r, e);
+    if (!st)
+      st = svc_state_scene_save(svc, r->id, r->doc, true, r->src_xml, r->src_variant, r->src, r->src_len, e);
+    if (st) svc_state_scene_remove(svc, r->id);
+  }
+  resident **ev = NULL;
+  if (!st) {
+    pthread_mutex_lock(&svc->lock);
+    if (svc_grow((void **)&svc->scenes, &svc->cap_scenes, svc->n_scenes + 1, sizeof *svc->scenes, 0))
+      ev = add_locked(svc, r);
+    else
+      st = svc_fail(e, RSW_ERR_NOMEM, "scene", "out of memory");
+    pthread_mutex_unlock(&svc->lock);
+    svc_free_evicted(ev);
+    if (st) svc_state_scene_remove(svc, r->id);
+  }
+  cJSON_Delete(patches);
+  svc_scene_release(svc, src);
+  if (st) {
+    svc_resident_free(r);
+    return st;
+  }
+  return summary_answer(svc, r, id_out, json_out, e);
 }

@@ -99,14 +99,27 @@ rsw_status service_scene_load_text(service *svc, const char *text, size_t len, b
 rsw_status service_scene_list(service *svc, char **json_out, svc_error *e);
 /* A scene's label (the name it was pushed under: SceneSummary "name"),
  * set by the first push that gives one; *json_out is the SceneSummary.
- * service_scene_label_ok: 1 to SVC_SCENE_LABEL_MAX bytes, no control
- * characters. */
-#define SVC_SCENE_LABEL_MAX 128
+ * service_scene_label_ok: a file name, 1 to SVC_SCENE_LABEL_MAX bytes, no
+ * '/' or control character. */
+#define SVC_SCENE_LABEL_MAX 255
 bool service_scene_label_ok(const char *label);
 rsw_status service_scene_label(service *svc, const char *id, const char *label, char **json_out,
                                svc_error *e);
 rsw_status service_scene_get(service *svc, const char *id, char **json_out, svc_error *e);
 rsw_status service_scene_delete(service *svc, const char *id, bool force, svc_error *e);
+/* service_scene_post with the client's name for the document (its file's
+ * name, NULL: scene.json or scene.xml), which messages about its text use
+ * (`a.xml:6: ...`); not part of the id. */
+rsw_status service_scene_post_named(service *svc, const char *body, size_t len, bool is_xml,
+                                    const char *variant, const char *name, bool *created, char **id_out,
+                                    char **json_out, svc_error *e);
+/* POST :reset: the scene back to its document's state (the values of the
+ * keys PATCHed since, from the document); +1 revision when a value
+ * changed. *json_out: the SceneSummary with "changed" and "keys". */
+rsw_status service_scene_reset(service *svc, const char *id, char **json_out, svc_error *e);
+/* POST :copy: a new scene (a fresh id) in scene id's current state, never
+ * handed to a pusher of the document; *json_out: its SceneSummary. */
+rsw_status service_scene_copy(service *svc, const char *id, char **id_out, char **json_out, svc_error *e);
 
 /* GET params: *revision_out is the base revision (the ETag). */
 rsw_status service_params_get(service *svc, const char *id, const char *match, const char *cls,

@@ -36,6 +36,14 @@ typedef struct svc_view {
 typedef struct resident {
   char id[65];
   char label[SVC_SCENE_LABEL_MAX + 1]; /* "" or the name it was pushed under (svc->lock) */
+  /* The document it was loaded from: the id a push of that text gets.
+   * Equal to id for the document's own scene (its twin); another scene of
+   * the same document has an id of its own: a push while the twin had
+   * changed (a fork) or a POST :copy (`copy`, never handed to a pusher).
+   * A push is handed a twin or fork only in the document's state
+   * (scenes.c, docs/daemon.md#a-document-yields-its-own-state). Fixed. */
+  char doc[65];
+  bool copy;
   scene *sc;
   uint64_t revision; /* base revision, +1 per PATCH that changed something */
   double load_s;
@@ -301,6 +309,11 @@ void svc_resident_free(resident *r);
 bool svc_keep_source(service *svc, resident *r, const char *text, size_t len, bool is_xml);
 /* Load the scene r was loaded from again (scenes.c). */
 rsw_status svc_scene_reload(service *svc, const resident *r, scene **out, rsw_err *err);
+/* r's document loaded again with the PATCHes `patches` (NULL or {}: none)
+ * applied: r's state at the revision they make (scenes.c; renders.c's
+ * views, POST :copy). */
+rsw_status svc_scene_build_at(service *svc, const resident *r, const cJSON *patches, scene **out,
+                              svc_error *e);
 /* Free r's idle views (renders.c; r->lock held or r unreachable). */
 void svc_views_free(resident *r);
 /* A copy of `old` (NULL: none) with the keys of a PATCH body set to its
@@ -359,6 +372,8 @@ rsw_status svc_param_snapshot(const scene *sc, const param_update *u, size_t n, 
 struct post_extra {
   bool pinned;           /* a startup scene: never evicted, not stored */
   const char *expect_id; /* a reload: the id it must get */
+  const char *doc;       /* a reload of a fork or copy: its document's id (NULL: expect_id) */
+  bool copy;             /* a reload of a copy */
   const cJSON *patched;  /* a reload: parameters to apply first */
   uint64_t revision;     /* a reload: the revision they make */
 };
@@ -373,10 +388,17 @@ void svc_job_restore_labels(job *j, const char *body, size_t len);
  * directory. */
 rsw_status svc_state_open(service *svc, rsw_err *err);
 bool svc_state_on(const service *svc);
-rsw_status svc_state_scene_save(service *svc, const char *id, bool is_xml, const char *variant,
-                                const char *body, size_t len, svc_error *e);
+/* A scene's document: id, or for a fork or copy its own id with doc (its
+ * document's id) and copy in the header line. */
+rsw_status svc_state_scene_save(service *svc, const char *id, const char *doc, bool copy, bool is_xml,
+                                const char *variant, const char *body, size_t len, svc_error *e);
+/* doc (may be NULL) receives the document's id ("" when it is id itself),
+ * copy (may be NULL) whether it is a copy. */
 bool svc_state_scene_read(service *svc, const char *id, char **body, size_t *len, bool *is_xml,
-                          char variant[8], cJSON **patched, uint64_t *revision);
+                          char variant[8], cJSON **patched, uint64_t *revision, char doc[65], bool *copy);
+/* Whether scene id has a parameter record: its PATCHed keys (*patched,
+ * the caller deletes it) at *revision. */
+bool svc_state_scene_params(service *svc, const char *id, cJSON **patched, uint64_t *revision);
 /* Store r's PATCHed parameters at its revision, fsync'ed; RSW_ERR_STATE_DIR
  * (507) when they cannot be (the caller undoes the PATCH). r->lock held. */
 rsw_status svc_state_scene_patched(service *svc, resident *r, svc_error *e);

@@ -3,8 +3,10 @@
  *
  *   DIR/lock                   flock'ed while a daemon uses DIR
  *   DIR/blobs/<sha256>         blobs (unless --blob-dir names another place)
- *   DIR/scenes/<id>.scene      one JSON header line {"format", "variant"},
- *                              then the posted scene text as it came
+ *   DIR/scenes/<id>.scene      one JSON header line {"format", "variant",
+ *                              "id"; for a fork or copy "document" (its
+ *                              document's id) and "copy"}, then the posted
+ *                              scene text as it came
  *   DIR/scenes/<id>.params     {"revision": N, "params": {key: value}}: the
  *                              last value of every key PATCHed
  *   DIR/jobs/<id>.req          one JSON header line {"id", "scene",
@@ -498,8 +500,8 @@ static rsw_status write_failed(service *svc, svc_error *e, int err, const char *
 
 /* ---- scenes ------------------------------------------------------------------ */
 
-rsw_status svc_state_scene_save(service *svc, const char *id, bool is_xml, const char *variant,
-                                const char *body, size_t len, svc_error *e) {
+rsw_status svc_state_scene_save(service *svc, const char *id, const char *doc, bool copy, bool is_xml,
+                                const char *variant, const char *body, size_t len, svc_error *e) {
   if (!svc_state_on(svc)) return RSW_OK;
   char p[4200];
   state_path(svc, p, sizeof p, "scenes/%s.scene", id);
@@ -507,10 +509,12 @@ rsw_status svc_state_scene_save(service *svc, const char *id, bool is_xml, const
   char *old = read_record(svc, p, &have); /* stored and whole already: kept */
   free(old);
   if (old) return RSW_OK;
-  char head[200];
-  int nh = snprintf(head, sizeof head, "{\"format\":\"%s\",\"variant\":%s%s%s,\"id\":\"%s\"}\n",
+  char head[300], other[120] = "";
+  if (doc && strcmp(doc, id) != 0)
+    snprintf(other, sizeof other, ",\"document\":\"%.64s\",\"copy\":%s", doc, copy ? "true" : "false");
+  int nh = snprintf(head, sizeof head, "{\"format\":\"%s\",\"variant\":%s%s%s,\"id\":\"%s\"%s}\n",
                     is_xml ? "xml" : "json", variant ? "\"" : "", variant ? variant : "null",
-                    variant ? "\"" : "", id);
+                    variant ? "\"" : "", id, other);
   if (!write_record(svc, p, head, (size_t)nh, body, len)) {
     int err = errno;
     unlink(p); /* a rename whose directory sync failed: not acknowledged, not kept */
@@ -520,7 +524,7 @@ rsw_status svc_state_scene_save(service *svc, const char *id, bool is_xml, const
 }
 
 bool svc_state_scene_read(service *svc, const char *id, char **body, size_t *len, bool *is_xml,
-                          char variant[8], cJSON **patched, uint64_t *revision) {
+                          char variant[8], cJSON **patched, uint64_t *revision, char doc[65], bool *copy) {
   if (!svc_state_on(svc) || !rsw_is_sha256_hex(id)) return false;
   char p[4200];
   state_path(svc, p, sizeof p, "scenes/%s.scene", id);
@@ -531,8 +535,11 @@ bool svc_state_scene_read(service *svc, const char *id, char **body, size_t *len
   cJSON *h = nl ? cJSON_ParseWithLength(text, (size_t)(nl - text)) : NULL;
   const cJSON *f = cJSON_GetObjectItemCaseSensitive(h, "format");
   const cJSON *v = cJSON_GetObjectItemCaseSensitive(h, "variant");
+  const cJSON *dc = cJSON_GetObjectItemCaseSensitive(h, "document");
+  const cJSON *cp = cJSON_GetObjectItemCaseSensitive(h, "copy");
   if (!cJSON_IsString(f) || (strcmp(f->valuestring, "xml") != 0 && strcmp(f->valuestring, "json") != 0) ||
-      !(cJSON_IsNull(v) || (cJSON_IsString(v) && strlen(v->valuestring) < 8))) {
+      !(cJSON_IsNull(v) || (cJSON_IsString(v) && strlen(v->valuestring) < 8)) ||
+      (dc && !(cJSON_IsString(dc) && rsw_is_sha256_hex(dc->valuestring))) || (cp && !cJSON_IsBool(cp))) {
     cJSON_Delete(h);
     free(text);
     quarantine(svc, p, "no valid header line");
@@ -541,13 +548,22 @@ bool svc_state_scene_read(service *svc, const char *id, char **body, size_t *len
   *is_xml = strcmp(f->valuestring, "xml") == 0;
   variant[0] = '\0';
   if (cJSON_IsString(v)) snprintf(variant, 8, "%s", v->valuestring);
+  if (doc) snprintf(doc, 65, "%s", dc ? dc->valuestring : "");
+  if (copy) *copy = cJSON_IsTrue(cp);
   cJSON_Delete(h);
   size_t off = (size_t)(nl + 1 - text);
   memmove(text, text + off, n - off + 1);
   *body = text;
   *len = n - off;
+  svc_state_scene_params(svc, id, patched, revision);
+  return true;
+}
+
+bool svc_state_scene_params(service *svc, const char *id, cJSON **patched, uint64_t *revision) {
   *patched = NULL;
   *revision = 0;
+  if (!svc_state_on(svc) || !rsw_is_sha256_hex(id)) return false;
+  char p[4200];
   state_path(svc, p, sizeof p, "scenes/%s.params", id);
   char *pt = read_record(svc, p, NULL);
   if (pt) {
@@ -566,7 +582,7 @@ bool svc_state_scene_read(service *svc, const char *id, char **body, size_t *len
     cJSON_Delete(j);
     free(pt);
   }
-  return true;
+  return *patched != NULL;
 }
 
 rsw_status svc_state_scene_patched(service *svc, resident *r, svc_error *e) {

@@ -5,7 +5,9 @@
 # into a temp directory. Checks, against the same sweep on one daemon:
 #   - `sweep --spread 3` through HAProxy: index.jsonl and every film
 #     bitwise identical; every replica rendered some contexts (/metrics);
-#   - the same through nginx;
+#   - the same through nginx; again (as .npy) while one replica's scene
+#     of the file has been changed there: that replica's shard runs on a
+#     scene in the file's state, and the films are the same;
 #   - the balancer stopped mid-sweep: the CLI exits 3 naming the state file;
 #     balancer restarted, the same command rerun: it completes, identical,
 #     and the replicas rendered each context once in all (/metrics);
@@ -16,8 +18,8 @@
 name=test_balancer
 source "$(dirname "$0")/../support/shtest.sh"
 need_bins raysweepd raysweep
-need_cmd haproxy "(make deps installs it): the balancer under test"
-need_cmd nginx "(make deps installs it): the balancer under test"
+need_cmd haproxy "(make deps-cluster installs it): the balancer under test"
+need_cmd nginx "(make deps-cluster installs it): the balancer under test"
 need_cmd python3 "to generate the balancer configurations"
 gen="$root/docker/lb/gen.py"
 scene="$root/proto/examples/hdistant_lambertian.json"
@@ -56,6 +58,7 @@ one=$started_port
 [ -n "$one" ] || { bad "the reference daemon did not start: $(cat "$tmp/one/log")"; finish; }
 id=$(rsw "http://127.0.0.1:$one" scene push "$scene" -q)
 expect 0 "one-daemon sweep" rsw "http://127.0.0.1:$one" sweep "$id" "${grid[@]}" --spp $spp -o "$tmp/ref" -q
+expect 0 "one-daemon sweep, npy" rsw "http://127.0.0.1:$one" sweep "$id" "${grid[@]}" --spp $spp --format npy -o "$tmp/refnpy" -q
 kill "${pids[-1]}"
 
 # ---- three replicas ----
@@ -148,6 +151,24 @@ import sys
 b, a = sys.argv[1].split(), sys.argv[2].split()
 d = [int(y) - int(x) for x, y in zip(b, a)]
 assert sum(d) == 60 and min(d) > 0, d' "${before[*]}" "${after[*]}"
+# One replica's scene of the file changed there (raysweep set): a push of
+# the file gets a scene of its own in the file's state on that replica
+# (docs/daemon.md#a-document-yields-its-own-state), with another id than on
+# the others, and each shard runs on its replica's scene, so the films are
+# still the reference's (as .npy: an EXR names its scene's id). Before, the
+# spread stopped ("is scene X on this replica but Y on another").
+tw=$(rsw "http://127.0.0.1:${reps[0]}" scene push "$scene" -q)
+expect 0 "set the twin on one replica" rsw "http://127.0.0.1:${reps[0]}" set "$tw" surface.bsdf.reflectance.value=0.9
+expect 0 "nginx: sweep --spread 3, one replica's twin changed" \
+  rsw "http://127.0.0.1:$lbn" sweep "$scene" "${grid[@]}" --spp $spp --spread 3 --format npy -o "$tmp/tw"
+n=0 differ=0
+while read -r f; do
+  n=$((n + 1))
+  cmp -s "$tmp/refnpy/$f" "$tmp/tw/$f" || differ=$((differ + 1))
+done < <(cd "$tmp/refnpy" && find . -name '*.npy' | sort)
+if [ "$n" -eq 60 ] && [ "$differ" -eq 0 ]; then ok; else bad "twin changed: $differ of $n films differ from the file's state"; fi
+cmp -s "$tmp/refnpy/index.jsonl" "$tmp/tw/index.jsonl" && ok || bad "twin changed: index.jsonl differs"
+expect 0 "reset the twin" rsw "http://127.0.0.1:${reps[0]}" scene reset "$tw"
 kill "$ng_pid"
 wait "$ng_pid" 2>/dev/null
 

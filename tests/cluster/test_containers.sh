@@ -6,7 +6,7 @@
 name=test_containers
 . "$(dirname "$0")/../support/shtest.sh"
 need_bins raysweepd raysweep
-need_cmd python3 "(make deps)"
-need_cmd haproxy "to check the HAProxy configurations (make deps)"
-python3 -c 'import yaml' 2>/dev/null || { bad "python3-yaml is needed (make deps)"; finish; }
+need_cmd python3 "(make deps-cluster)"
+need_cmd haproxy "to check the HAProxy configurations (make deps-cluster)"
+python3 -c 'import yaml' 2>/dev/null || { bad "python3-yaml is needed (make deps-cluster)"; finish; }
 RSW_BIN_DIR=$bin exec python3 "$root/tests/cluster/containers_check.py"

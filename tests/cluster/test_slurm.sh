@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # make test-cluster: the Slurm recipe of docker/slurm/ on a real
-# single-node Slurm (Debian's slurm-wlm and munge, `make deps`) that this
+# single-node Slurm (Debian's slurm-wlm and munge, `make deps-cluster`) that this
 # test starts in a temporary directory: munged on a private socket with a
 # key generated here, slurmctld and slurmd on localhost with a minimal
 # slurm.conf (no cgroups, proctrack/linuxproc, task/none, 2 CPUs), on free
@@ -18,7 +18,7 @@ name=test_slurm
 . "$(dirname "$0")/../support/shtest.sh"
 need_bins raysweepd raysweep
 for c in slurmctld slurmd sbatch scontrol sinfo squeue scancel munged mungekey munge unmunge; do
-  need_cmd "$c" "for the single-node Slurm (packages slurm-wlm and munge: make deps)"
+  need_cmd "$c" "for the single-node Slurm (packages slurm-wlm and munge: make deps-cluster)"
 done
 
 shard_sh=$root/docker/slurm/raysweep-shard.sbatch

@@ -947,8 +947,7 @@ static void test_push_wire(void) {
   REQUIRE(s == RSW_OK && created == 1 && id[0] == 'a', "push: %s %s", rsw_strerror(s), c ? why(c) : "");
   CHECK(fs.n_requests == 3 && strcmp(fs.paths[0], "/v1/blobs:missing") == 0 &&
             strncmp(fs.paths[1], "/v1/blobs/", 10) == 0 &&
-            strcmp(fs.paths[2], "/v1/scenes?variant=mono&name=quad.xml") ==
-                0, /* the file's name: its label */
+            strcmp(fs.paths[2], "/v1/scenes?variant=mono&name=quad.xml") == 0, /* its file's name */
         "requests: %d (%s, %s, %s)", fs.n_requests, fs.paths[0], fs.paths[1], fs.paths[2]);
   const char *hex = fs.paths[1] + 10;
   CHECK(strlen(hex) == 64 && strspn(hex, "0123456789abcdef") == 64, "PUT names a digest: %s", fs.paths[1]);
