@@ -98,7 +98,10 @@ FUZZ_NAMES := $(patsubst tests/fuzz/fuzz_%.c,%,$(FUZZ_SRC))
 FUZZ_REPLAY := $(FUZZ_NAMES:%=$(BUILD)/tests/fuzz_%)
 TEST_BIN += $(FUZZ_REPLAY)
 
-BENCH_SRC := $(wildcard tests/bench/*.c)
+# tests/bench/bench_*.c: one program each; the other .c files there are the
+# benchmarks' shared code (accel_bench.c: the Embree ceilings), linked into each.
+BENCH_SRC := $(wildcard tests/bench/bench_*.c)
+BENCH_SUPPORT_OBJ := $(patsubst %.c,$(BUILD)/obj/%.o,$(filter-out $(BENCH_SRC),$(wildcard tests/bench/*.c)))
 BENCH_BIN := $(patsubst %.c,$(BUILD)/bench/%,$(notdir $(BENCH_SRC)))
 BENCH_SCRIPTS := $(sort $(wildcard tests/bench/bench_*.py))
 
@@ -251,7 +254,7 @@ $(BUILD)/tests/%: $(BUILD)/obj/tests/integration/%.o $(TEST_SUPPORT_OBJ) $(SERVI
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB) $(SERVICE_LIB),$^) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB) $(LIBS) $(TEST_LIBS) -lcrypto
 
-$(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB) $(COMMON_LIB)
+$(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(BENCH_SUPPORT_OBJ) $(TEST_SUPPORT_OBJ) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB),$^) $(KERNEL_LIB) $(COMMON_LIB) $(LIBS) $(TEST_LIBS)
 
