@@ -115,10 +115,13 @@ void cli_format_double(char *buf, size_t n, double v);
 int cli_split_set(const cli_ctx *ctx, const char *opt, const char *kv, char **key_out,
                   const char **value_out);
 
+struct cJSON;
+/* --json output: o on one line of stdout, then freed. */
+void cli_print_json(struct cJSON *o);
+
 /* Build {"key": value, ...} from KEY=VALUE words (VALUE is JSON text;
  * opt names the flag in messages). Returns 0 with *out owned
  * (cJSON_Delete), or an exit code after printing. */
-struct cJSON;
 int cli_build_param_map(const cli_ctx *ctx, const char *opt, const char *const *sets, size_t n,
                         struct cJSON **out);
 

@@ -22,10 +22,7 @@ static void print_status_json(const char *id, const rsw_job_status *st) {
   cJSON_AddNumberToObject(o, "renders_failed", (double)st->renders_failed);
   cJSON_AddNumberToObject(o, "seconds", st->seconds);
   if (st->error[0]) cJSON_AddStringToObject(o, "error", st->error);
-  char *t = cJSON_PrintUnformatted(o);
-  if (t) printf("%s\n", t);
-  free(t);
-  cJSON_Delete(o);
+  cli_print_json(o);
 }
 
 int cmd_job_ls(cli_ctx *ctx, const cli_args *a) {

@@ -105,10 +105,7 @@ static void report_written(const cli_ctx *ctx, const rsw_film *f, const char *pa
     cJSON *meta = cJSON_Parse(rsw_film_meta(f));
     if (meta) cJSON_AddItemToObject(o, "meta", meta);
     cJSON_AddNumberToObject(o, "seconds", seconds);
-    char *t = cJSON_PrintUnformatted(o);
-    if (t) printf("%s\n", t);
-    free(t);
-    cJSON_Delete(o);
+    cli_print_json(o);
   } else if (!ctx->quiet) {
     fprintf(stderr, "raysweep %s: wrote %s (%dx%d, %d channel%s, %.3f s)\n", ctx->cmd, path,
             rsw_film_width(f), rsw_film_height(f), rsw_film_channels(f), rsw_film_channels(f) == 1 ? "" : "s",
@@ -228,10 +225,7 @@ static int fetch_dataset(cli_ctx *ctx, const cli_args *a, const char *out) {
     cJSON *o = cJSON_CreateObject();
     cJSON_AddStringToObject(o, "file", out);
     cJSON_AddStringToObject(o, "job", a->pos[0]);
-    char *t = cJSON_PrintUnformatted(o);
-    if (t) printf("%s\n", t);
-    free(t);
-    cJSON_Delete(o);
+    cli_print_json(o);
   } else if (!ctx->quiet)
     fprintf(stderr, "raysweep fetch: dataset of %s written to %s\n", a->pos[0], out);
   return CLI_OK;
