@@ -46,13 +46,14 @@ endif
 # Each directory sees only the headers it may use: common/ (shared by the
 # daemon and libraysweep) sees the public headers; the daemon sees
 # common/ and server/; libraysweep and the CLI never see server/ (the CLI
-# sees only the public API); tests see everything.
+# sees the public API, and common/ for its command-line tables, cmdline.h);
+# tests see everything.
 BASE_CPPFLAGS := -D_GNU_SOURCE -MMD -MP $(SIMD_CPPFLAGS)
 CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude -Icommon -Iserver
 $(BUILD)/obj/common/%.o: CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude -Icommon
 $(BUILD)/obj/server/%.o: CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude -Icommon -Iserver
 $(BUILD)/obj/client/lib/%.o: CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude -Icommon
-$(BUILD)/obj/client/cli/%.o: CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude
+$(BUILD)/obj/client/cli/%.o: CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude -Icommon
 CFLAGS := -std=c11 $(OPT) -g -fno-math-errno $(WARN) $(SANFLAGS) -fPIC
 LDFLAGS := $(SANFLAGS)
 LIBS := -lembree3 -lOpenEXRCore -lnetcdf -lpng16 -lexpat -lcjson -lpthread -ldl -lm

@@ -10,7 +10,7 @@
 
 #include "sweep.h"
 
-const cli_opt cli_opts_merge[] = {
+const cmdline_opt cli_opts_merge[] = {
     {"-o", "DIR", false,
      "output directory (with DIR/dataset.nc when the shards were swept with --format nc)"},
     {"--partial", NULL, false, "merge even when contexts are missing (they are listed; exit 0)"},
@@ -139,10 +139,10 @@ static size_t merge_missing(const cli_ctx *ctx, const merge_input *in, size_t n_
   return total_missing;
 }
 
-int cmd_merge(cli_ctx *ctx, const cli_args *a) {
-  const char *out = cli_get(a, "-o");
+int cmd_merge(cli_ctx *ctx, const cmdline_args *a) {
+  const char *out = cmdline_get(a, "-o");
   if (!out) return cli_usage(ctx, "missing -o DIR");
-  bool partial = cli_has(a, "--partial");
+  bool partial = cmdline_has(a, "--partial");
   index_entry *e = NULL;
   size_t n = 0, cap = 0, dups = 0, n_sweeps = 0, missing = 0;
   cJSON *missing_ids = NULL;

@@ -21,7 +21,7 @@
 
 #include "sweep.h"
 
-const cli_opt cli_opts_sweep[] = {
+const cmdline_opt cli_opts_sweep[] = {
     {"--contexts", "FILE.jsonl", false, "one Context object per line (id optional)"},
     {"--grid", "NAME=START:STOP:STEP", true,
      "a range, end included; NAME is wavelength or a parameter key; several form a product (each also "
@@ -322,7 +322,7 @@ static int read_contexts(const cli_ctx *ctx, const char *path, size_t shard_i, s
 
 /* Feed the builder. Errors here are about the contexts the user described:
  * usage (2). */
-static int build_contexts(const cli_ctx *ctx, const cli_args *a, const sweep_item *items, size_t n,
+static int build_contexts(const cli_ctx *ctx, const cmdline_args *a, const sweep_item *items, size_t n,
                           const cJSON *job_params, long long spp, long long seed, rsw_contexts **out) {
   rsw_contexts *x = NULL;
   rsw_status s = rsw_contexts_new(&x);
@@ -363,14 +363,14 @@ static int build_contexts(const cli_ctx *ctx, const cli_args *a, const sweep_ite
     }
   }
   size_t n_sensors;
-  const char *const *sensors = cli_get_all(a, "--sensor", &n_sensors);
+  const char *const *sensors = cmdline_get_all(a, "--sensor", &n_sensors);
   for (size_t i = 0; i < n_sensors && !s; i++) {
     snprintf(what, sizeof what, "--sensor '%s'", sensors[i]);
     s = rsw_contexts_add_default_sensor(x, sensors[i]);
   }
   if (!s && spp > 0) snprintf(what, sizeof what, "--spp"), s = rsw_contexts_set_default_spp(x, spp);
   if (!s) snprintf(what, sizeof what, "--seed"), s = rsw_contexts_set_job_seed(x, seed);
-  const char *qv = cli_get(a, "--quantities");
+  const char *qv = cmdline_get(a, "--quantities");
   if (!s && qv) {
     char list[256];
     const char *names[8];
@@ -387,7 +387,7 @@ static int build_contexts(const cli_ctx *ctx, const cli_args *a, const sweep_ite
     if (!nq) s = RSW_ERR_INVALID;
     if (!s) s = rsw_contexts_set_quantities(x, names, nq);
   }
-  if (!s && cli_get(a, "--variance"))
+  if (!s && cmdline_get(a, "--variance"))
     snprintf(what, sizeof what, "--variance"), s = rsw_contexts_set_variance(x, 1);
   if (s) {
     rc = s == RSW_ERR_NOMEM ? cli_fail(ctx, CLI_IO, "out of memory")
@@ -476,27 +476,27 @@ static int fetch_all(cli_ctx *ctx, const char *job, const char *dir, cli_format 
   return 0;
 }
 
-int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
-  const char *scene = a->pos[0], *dir = cli_get(a, "-o"), *contexts_file = cli_get(a, "--contexts");
+int cmd_sweep(cli_ctx *ctx, const cmdline_args *a) {
+  const char *scene = a->pos[0], *dir = cmdline_get(a, "-o"), *contexts_file = cmdline_get(a, "--contexts");
   size_t n_grids;
-  const char *const *grids = cli_get_all(a, "--grid", &n_grids);
+  const char *const *grids = cmdline_get_all(a, "--grid", &n_grids);
   if (!dir) return cli_usage(ctx, "missing -o DIR");
   if (!contexts_file == !n_grids)
     return cli_usage(ctx, "give either --contexts FILE.jsonl or --grid NAME=START:STOP:STEP");
   if (n_grids > MAX_GRIDS) return cli_usage(ctx, "at most %d --grid axes", MAX_GRIDS);
   const char *v;
   cli_format fmt = CLI_FMT_EXR;
-  bool want_nc = (v = cli_get(a, "--format")) && strcmp(v, "nc") == 0;
+  bool want_nc = (v = cmdline_get(a, "--format")) && strcmp(v, "nc") == 0;
   if (want_nc)
     fmt = CLI_FMT_JSON; /* the films the dataset is built from (and merge rebuilds it from) */
   else if (v && (fmt = cli_format_from_name(v)) == CLI_FMT_NONE)
     return cli_usage(ctx, "--format needs exr, npy, json or nc (got '%s')", v);
   unsigned long long spp = 0, seed = 0, shard_i = 0, shard_n = 1;
-  if ((v = cli_get(a, "--spp")) && (!cli_parse_u64(v, 1ull << 31, &spp) || spp == 0))
+  if ((v = cmdline_get(a, "--spp")) && (!cli_parse_u64(v, 1ull << 31, &spp) || spp == 0))
     return cli_usage(ctx, "--spp needs a positive integer (got '%s')", v);
-  if ((v = cli_get(a, "--seed")) && !cli_parse_u64(v, (1ull << 53) - 1, &seed))
+  if ((v = cmdline_get(a, "--seed")) && !cli_parse_u64(v, (1ull << 53) - 1, &seed))
     return cli_usage(ctx, "--seed needs an integer in [0, 2^53) (got '%s')", v);
-  if ((v = cli_get(a, "--shard"))) {
+  if ((v = cmdline_get(a, "--shard"))) {
     const char *slash = strchr(v, '/');
     char ib[32];
     if (!slash || (size_t)(slash - v) >= sizeof ib) return cli_usage(ctx, "--shard needs I/N (got '%s')", v);
@@ -507,13 +507,13 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
       return cli_usage(ctx, "--shard needs I/N with 0 <= I < N (got '%s')", v);
   }
   unsigned long long spread = 0;
-  if ((v = cli_get(a, "--spread")) && (!cli_parse_u64(v, 4096, &spread) || spread == 0))
+  if ((v = cmdline_get(a, "--spread")) && (!cli_parse_u64(v, 4096, &spread) || spread == 0))
     return cli_usage(ctx, "--spread needs a number of shards from 1 to 4096 (got '%s')", v);
   double timeout = 0;
-  if ((v = cli_get(a, "--timeout")) && (!cli_parse_double(v, &timeout) || !(timeout > 0)))
+  if ((v = cmdline_get(a, "--timeout")) && (!cli_parse_double(v, &timeout) || !(timeout > 0)))
     return cli_usage(ctx, "--timeout needs a positive number of seconds (got '%s')", v);
   size_t n_sets;
-  const char *const *sets = cli_get_all(a, "--set", &n_sets);
+  const char *const *sets = cmdline_get_all(a, "--set", &n_sets);
   cJSON *job_params = NULL;
   int rc = cli_build_param_map(ctx, "--set", sets, n_sets, &job_params);
   if (rc) return rc;
@@ -558,8 +558,8 @@ int cmd_sweep(cli_ctx *ctx, const cli_args *a) {
   }
   /* Everything the user described is checked: now the directory. */
   sweep_fingerprint(a, scene, fingerprint);
-  bool resume = spread && !cli_has(a, "--force") && sweep_spread_resumable(dir, fingerprint);
-  if (!resume && (rc = sweep_prepare_output(ctx, dir, cli_has(a, "--force")))) goto out;
+  bool resume = spread && !cmdline_has(a, "--force") && sweep_spread_resumable(dir, fingerprint);
+  if (!resume && (rc = sweep_prepare_output(ctx, dir, cmdline_has(a, "--force")))) goto out;
   if (l.n == 0) {
     /* A shard past the end of a short list: nothing to submit, an empty
      * index keeps `merge` simple. */

@@ -120,7 +120,7 @@ int sweep_write_dataset(const cli_ctx *ctx, const char *dir, const index_entry *
 
 /* ---- sweep_manifest.c --------------------------------------------------- */
 
-void sweep_fingerprint(const cli_args *a, const char *scene, char out[17]);
+void sweep_fingerprint(const cmdline_args *a, const char *scene, char out[17]);
 /* 0, or -1 when DIR has no sweep.json (errno ENOENT), or a CLI exit code
  * after printing. */
 int manifest_read(const cli_ctx *ctx, const char *dir, sweep_manifest *m);
@@ -139,7 +139,7 @@ int sweep_prepare_output(const cli_ctx *ctx, const char *dir, bool force);
 
 /* DIR holds an unfinished --spread run of this sweep (rerun: resume). */
 bool sweep_spread_resumable(const char *dir, const char *fingerprint);
-int sweep_run_spread(cli_ctx *ctx, const cli_args *a, int k_shards, bool resume, cli_format fmt,
+int sweep_run_spread(cli_ctx *ctx, const cmdline_args *a, int k_shards, bool resume, cli_format fmt,
                      double timeout, const sweep_list *l, sweep_item **sorted, const cJSON *job_params,
                      const rsw_contexts *x, const char *fingerprint, size_t shard_i, size_t shard_n);
 

@@ -21,11 +21,11 @@ static uint64_t fnv1a_str(uint64_t h, const char *s) {
   return fnv1a(h, s ? s : "", s ? strlen(s) : 0);
 }
 
-void sweep_fingerprint(const cli_args *a, const char *scene, char out[17]) {
+void sweep_fingerprint(const cmdline_args *a, const char *scene, char out[17]) {
   uint64_t h = 0xcbf29ce484222325ull;
   h = fnv1a_str(h, MANIFEST_FORMAT);
   h = fnv1a_str(h, scene);
-  const char *file = cli_get(a, "--contexts");
+  const char *file = cmdline_get(a, "--contexts");
   if (file) {
     size_t len = 0;
     char *text = cli_read_file(file, &len);
@@ -36,7 +36,7 @@ void sweep_fingerprint(const cli_args *a, const char *scene, char out[17]) {
                                       "--seed", "--format", "--quantities", "--variance"};
   for (size_t k = 0; k < sizeof keyed / sizeof keyed[0]; k++) {
     size_t n;
-    const char *const *v = cli_get_all(a, keyed[k], &n);
+    const char *const *v = cmdline_get_all(a, keyed[k], &n);
     h = fnv1a_str(h, keyed[k]);
     for (size_t i = 0; i < n; i++) h = fnv1a_str(h, v[i]);
   }

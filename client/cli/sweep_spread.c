@@ -107,10 +107,10 @@ static int spread_film(void *user, const char *c, const char *sn, const char *re
   return 0;
 }
 
-int sweep_run_spread(cli_ctx *ctx, const cli_args *a, int k_shards, bool resume, cli_format fmt,
+int sweep_run_spread(cli_ctx *ctx, const cmdline_args *a, int k_shards, bool resume, cli_format fmt,
                      double timeout, const sweep_list *l, sweep_item **sorted, const cJSON *job_params,
                      const rsw_contexts *x, const char *fingerprint, size_t shard_i, size_t shard_n) {
-  const char *scene = a->pos[0], *dir = cli_get(a, "-o");
+  const char *scene = a->pos[0], *dir = cmdline_get(a, "-o");
   struct stat sst;
   bool scene_is_file = stat(scene, &sst) == 0 && S_ISREG(sst.st_mode);
   char *state = sweep_dir_file(dir, SPREAD_STATE);
