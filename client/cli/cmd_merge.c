@@ -139,23 +139,17 @@ static size_t merge_missing(const cli_ctx *ctx, const merge_input *in, size_t n_
   return total_missing;
 }
 
-int cmd_merge(cli_ctx *ctx, const cmdline_args *a) {
-  const char *out = cmdline_get(a, "-o");
-  if (!out) return cli_usage(ctx, "missing -o DIR");
-  bool partial = cmdline_has(a, "--partial");
-  index_entry *e = NULL;
-  size_t n = 0, cap = 0, dups = 0, n_sweeps = 0, missing = 0;
-  cJSON *missing_ids = NULL;
+/* Each input's sweep.json and index.jsonl: the entries of every input
+ * whose sweep finished (an unfinished one contributes nothing: its
+ * contexts are missing), appended to *e. */
+static int merge_read_inputs(const cli_ctx *ctx, const cmdline_args *a, merge_input *in, index_entry **e,
+                             size_t *n) {
+  size_t cap = 0;
   int rc = 0;
-  merge_input *in = calloc(a->n_pos, sizeof *in);
-  if (!in) return cli_fail(ctx, CLI_IO, "out of memory");
   for (size_t i = 0; i < a->n_pos && !rc; i++) {
     in[i].dir = a->pos[i];
     int mrc = manifest_read(ctx, a->pos[i], &in[i].m);
-    if (mrc > 0) {
-      rc = mrc;
-      break;
-    }
+    if (mrc > 0) return mrc;
     in[i].has_manifest = mrc == 0;
     char *index = sweep_dir_file(a->pos[i], "index.jsonl");
     in[i].has_index = index && sweep_is_regular(index);
@@ -173,55 +167,48 @@ int cmd_merge(cli_ctx *ctx, const cmdline_args *a) {
               "raysweep merge: %s has no %s (an older raysweep wrote it): its contexts are merged, "
               "but what is missing from its sweep cannot be told\n",
               a->pos[i], MANIFEST_NAME);
-    rc = sweep_read_index(ctx, a->pos[i], i, &e, &n, &cap);
+    rc = sweep_read_index(ctx, a->pos[i], i, e, n, &cap);
   }
-  if (rc) goto done;
-  if (n) qsort(e, n, sizeof *e, sweep_cmp_entry);
-  /* Duplicates (a shard given twice, overlapping shards): the same film is
-   * kept once; different films for one (context, sensor) are refused. */
+  return rc;
+}
+
+/* Sort the entries and drop duplicates (a shard given twice, overlapping
+ * shards): the same film is kept once (*dups counts the others);
+ * different films for one (context, sensor) are refused. *n: the entries
+ * kept (every other one is freed). */
+static int merge_dedupe(const cli_ctx *ctx, index_entry *e, size_t *n, size_t *dups) {
+  if (*n) qsort(e, *n, sizeof *e, sweep_cmp_entry);
   size_t kept = 0;
-  for (size_t i = 0; i < n; i++) {
+  for (size_t i = 0; i < *n; i++) {
     if (kept && strcmp(e[kept - 1].context, e[i].context) == 0 &&
         strcmp(e[kept - 1].sensor, e[i].sensor) == 0) {
       if (!same_bytes(e[kept - 1].src, e[i].src)) {
-        rc = cli_fail(ctx, CLI_IO, "%s/%s is in two inputs with different films: %s and %s", e[i].context,
-                      e[i].sensor, e[kept - 1].src, e[i].src);
-        for (size_t k = i; k < n; k++) {
-          cJSON_Delete(e[k].line);
-          free(e[k].src);
-        }
-        n = kept;
-        goto done;
+        int rc = cli_fail(ctx, CLI_IO, "%s/%s is in two inputs with different films: %s and %s", e[i].context,
+                          e[i].sensor, e[kept - 1].src, e[i].src);
+        sweep_entries_free_range(e, i, *n);
+        *n = kept;
+        return rc;
       }
-      dups++;
-      cJSON_Delete(e[i].line);
-      free(e[i].src);
+      (*dups)++;
+      sweep_entries_free_range(e, i, i + 1);
       continue;
     }
     e[kept++] = e[i];
   }
-  n = kept;
-  /* Nothing is written before the inputs are known to be complete. */
-  missing = merge_missing(ctx, in, a->n_pos, e, n, partial, &n_sweeps, &missing_ids);
-  if (missing && !partial) {
-    rc = cli_fail(ctx, CLI_IO,
-                  "%zu context%s missing: nothing was written (give the missing shards, or "
-                  "--partial to merge what is there)",
-                  missing, missing == 1 ? " is" : "s are");
-    goto done;
-  }
-  if (cli_mkdirs(out)) {
-    rc = cli_fail(ctx, CLI_IO, "cannot create '%s': %s", out, strerror(errno));
-    goto done;
-  }
+  *n = kept;
+  return 0;
+}
+
+/* Each kept film into out (its path in the index, relative): hard-linked
+ * or copied; already in place when out is one of the inputs. */
+static int merge_copy_films(const cli_ctx *ctx, const char *out, const index_entry *e, size_t n) {
+  if (cli_mkdirs(out)) return cli_fail(ctx, CLI_IO, "cannot create '%s': %s", out, strerror(errno));
+  int rc = 0;
   for (size_t i = 0; i < n && !rc; i++) {
     const char *file = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(e[i].line, "file"));
     size_t dl = strlen(out) + strlen(file) + 2;
     char *dst = malloc(dl);
-    if (!dst) {
-      rc = cli_fail(ctx, CLI_IO, "out of memory");
-      break;
-    }
+    if (!dst) return cli_fail(ctx, CLI_IO, "out of memory");
     snprintf(dst, dl, "%s/%s", out, file);
     char *slash = strrchr(dst, '/');
     *slash = '\0';
@@ -236,51 +223,86 @@ int cmd_merge(cli_ctx *ctx, const cmdline_args *a) {
       rc = cli_fail(ctx, CLI_IO, "cannot copy '%s' to '%s': %s", e[i].src, dst, strerror(errno));
     free(dst);
   }
-  if (!rc) rc = sweep_write_index(ctx, out, e, n);
-  /* Inputs swept with --format nc: the merged dataset, rebuilt from the
-   * films (bitwise the unsharded sweep's data). */
+  return rc;
+}
+
+/* Inputs swept with --format nc: the merged dataset, rebuilt from the
+ * films (bitwise the unsharded sweep's data). */
+static int merge_dataset(const cli_ctx *ctx, const cmdline_args *a, const merge_input *in, const char *out,
+                         const index_entry *e, size_t n) {
   bool all_nc = a->n_pos > 0;
   for (size_t i = 0; i < a->n_pos && all_nc; i++) {
     char *p = sweep_dir_file(a->pos[i], DATASET_NAME);
     all_nc = p && sweep_is_regular(p);
     free(p);
   }
-  if (!rc && all_nc) {
-    const cJSON *seed = NULL;
-    for (size_t i = 0; i < a->n_pos && !seed; i++)
-      if (in[i].has_manifest) seed = cJSON_GetObjectItemCaseSensitive(in[i].m.root, "seed");
-    rc = sweep_write_dataset(ctx, out, e, n, sweep_json_is_int(seed, 0),
+  if (!all_nc) return 0;
+  const cJSON *seed = NULL;
+  for (size_t i = 0; i < a->n_pos && !seed; i++)
+    if (in[i].has_manifest) seed = cJSON_GetObjectItemCaseSensitive(in[i].m.root, "seed");
+  return sweep_write_dataset(ctx, out, e, n, sweep_json_is_int(seed, 0),
                              sweep_json_is_int(seed, 0) ? (long long)seed->valuedouble : 0);
+}
+
+/* out/sweep.json when the inputs are the shards of one sweep: that sweep
+ * unsharded (as complete as the inputs: what is missing is listed as
+ * incomplete). */
+static int merge_manifest(const cli_ctx *ctx, const merge_input *in, size_t n_in, const char *out,
+                          const cJSON *missing_ids) {
+  const sweep_manifest *m0 = NULL;
+  for (size_t i = 0; i < n_in && !m0; i++) m0 = in[i].has_manifest ? &in[i].m : NULL;
+  cJSON *o = cJSON_Duplicate(m0->root, 1);
+  cJSON *sh = cJSON_CreateArray();
+  cJSON_AddItemToArray(sh, cJSON_CreateNumber(0));
+  cJSON_AddItemToArray(sh, cJSON_CreateNumber(1));
+  cJSON_ReplaceItemInObjectCaseSensitive(o, "shard", sh);
+  cJSON_ReplaceItemInObjectCaseSensitive(o, "job", cJSON_CreateNull());
+  cJSON_ReplaceItemInObjectCaseSensitive(o, "finished", cJSON_CreateTrue());
+  cJSON_ReplaceItemInObjectCaseSensitive(o, "incomplete", cJSON_Duplicate(missing_ids, 1));
+  char *text = cJSON_PrintUnformatted(o);
+  char *path = sweep_dir_file(out, MANIFEST_NAME);
+  int rc = 0;
+  if (!text || !path) {
+    rc = cli_fail(ctx, CLI_IO, "out of memory");
+  } else {
+    size_t len = strlen(text);
+    text[len] = '\n';
+    if (cli_write_file_atomic(path, text, len + 1))
+      rc = cli_fail(ctx, CLI_IO, "cannot write '%s': %s", path, strerror(errno));
   }
+  free(text);
+  free(path);
+  cJSON_Delete(o);
+  return rc;
+}
+
+int cmd_merge(cli_ctx *ctx, const cmdline_args *a) {
+  const char *out = cmdline_get(a, "-o");
+  if (!out) return cli_usage(ctx, "missing -o DIR");
+  bool partial = cmdline_has(a, "--partial");
+  index_entry *e = NULL;
+  size_t n = 0, dups = 0, n_sweeps = 0, missing = 0;
+  cJSON *missing_ids = NULL;
+  merge_input *in = calloc(a->n_pos, sizeof *in);
+  if (!in) return cli_fail(ctx, CLI_IO, "out of memory");
+  int rc = merge_read_inputs(ctx, a, in, &e, &n);
+  if (!rc) rc = merge_dedupe(ctx, e, &n, &dups);
+  if (rc) goto done;
+  /* Nothing is written before the inputs are known to be complete. */
+  missing = merge_missing(ctx, in, a->n_pos, e, n, partial, &n_sweeps, &missing_ids);
+  if (missing && !partial) {
+    rc = cli_fail(ctx, CLI_IO,
+                  "%zu context%s missing: nothing was written (give the missing shards, or "
+                  "--partial to merge what is there)",
+                  missing, missing == 1 ? " is" : "s are");
+    goto done;
+  }
+  rc = merge_copy_films(ctx, out, e, n);
+  if (!rc) rc = sweep_write_index(ctx, out, e, n);
+  if (!rc) rc = merge_dataset(ctx, a, in, out, e, n);
   bool legacy = false;
   for (size_t i = 0; i < a->n_pos; i++) legacy = legacy || !in[i].has_manifest;
-  if (!rc && n_sweeps == 1 && !legacy) {
-    /* The merged directory is that sweep unsharded (as complete as the
-     * inputs: what is missing is listed as incomplete). */
-    const sweep_manifest *m0 = NULL;
-    for (size_t i = 0; i < a->n_pos && !m0; i++) m0 = in[i].has_manifest ? &in[i].m : NULL;
-    cJSON *o = cJSON_Duplicate(m0->root, 1);
-    cJSON *sh = cJSON_CreateArray();
-    cJSON_AddItemToArray(sh, cJSON_CreateNumber(0));
-    cJSON_AddItemToArray(sh, cJSON_CreateNumber(1));
-    cJSON_ReplaceItemInObjectCaseSensitive(o, "shard", sh);
-    cJSON_ReplaceItemInObjectCaseSensitive(o, "job", cJSON_CreateNull());
-    cJSON_ReplaceItemInObjectCaseSensitive(o, "finished", cJSON_CreateTrue());
-    cJSON_ReplaceItemInObjectCaseSensitive(o, "incomplete", cJSON_Duplicate(missing_ids, 1));
-    char *text = cJSON_PrintUnformatted(o);
-    char *path = sweep_dir_file(out, MANIFEST_NAME);
-    if (!text || !path) {
-      rc = cli_fail(ctx, CLI_IO, "out of memory");
-    } else {
-      size_t len = strlen(text);
-      text[len] = '\n';
-      if (cli_write_file_atomic(path, text, len + 1))
-        rc = cli_fail(ctx, CLI_IO, "cannot write '%s': %s", path, strerror(errno));
-    }
-    free(text);
-    free(path);
-    cJSON_Delete(o);
-  }
+  if (!rc && n_sweeps == 1 && !legacy) rc = merge_manifest(ctx, in, a->n_pos, out, missing_ids);
   if (!rc) {
     if (ctx->json) {
       cJSON *o = cJSON_CreateObject();

@@ -476,25 +476,35 @@ static int fetch_all(cli_ctx *ctx, const char *job, const char *dir, cli_format 
   return 0;
 }
 
-int cmd_sweep(cli_ctx *ctx, const cmdline_args *a) {
-  const char *scene = a->pos[0], *dir = cmdline_get(a, "-o"), *contexts_file = cmdline_get(a, "--contexts");
+/* The sweep's options, checked (usage errors name the option). */
+typedef struct sweep_opts {
+  const char *dir, *contexts_file;
+  const char *const *grids;
   size_t n_grids;
-  const char *const *grids = cmdline_get_all(a, "--grid", &n_grids);
-  if (!dir) return cli_usage(ctx, "missing -o DIR");
-  if (!contexts_file == !n_grids)
+  cli_format fmt;
+  bool want_nc; /* --format nc: JSON films and DIR/dataset.nc */
+  unsigned long long spp, seed, shard_i, shard_n, spread;
+  double timeout;
+} sweep_opts;
+
+static int read_sweep_options(const cli_ctx *ctx, const cmdline_args *a, sweep_opts *o) {
+  *o = (sweep_opts){.fmt = CLI_FMT_EXR, .shard_n = 1};
+  o->dir = cmdline_get(a, "-o");
+  o->contexts_file = cmdline_get(a, "--contexts");
+  o->grids = cmdline_get_all(a, "--grid", &o->n_grids);
+  if (!o->dir) return cli_usage(ctx, "missing -o DIR");
+  if (!o->contexts_file == !o->n_grids)
     return cli_usage(ctx, "give either --contexts FILE.jsonl or --grid NAME=START:STOP:STEP");
-  if (n_grids > MAX_GRIDS) return cli_usage(ctx, "at most %d --grid axes", MAX_GRIDS);
+  if (o->n_grids > MAX_GRIDS) return cli_usage(ctx, "at most %d --grid axes", MAX_GRIDS);
   const char *v;
-  cli_format fmt = CLI_FMT_EXR;
-  bool want_nc = (v = cmdline_get(a, "--format")) && strcmp(v, "nc") == 0;
-  if (want_nc)
-    fmt = CLI_FMT_JSON; /* the films the dataset is built from (and merge rebuilds it from) */
-  else if (v && (fmt = cli_format_from_name(v)) == CLI_FMT_NONE)
+  o->want_nc = (v = cmdline_get(a, "--format")) && strcmp(v, "nc") == 0;
+  if (o->want_nc)
+    o->fmt = CLI_FMT_JSON; /* the films the dataset is built from (and merge rebuilds it from) */
+  else if (v && (o->fmt = cli_format_from_name(v)) == CLI_FMT_NONE)
     return cli_usage(ctx, "--format needs exr, npy, json or nc (got '%s')", v);
-  unsigned long long spp = 0, seed = 0, shard_i = 0, shard_n = 1;
-  if ((v = cmdline_get(a, "--spp")) && (!cli_parse_u64(v, 1ull << 31, &spp) || spp == 0))
+  if ((v = cmdline_get(a, "--spp")) && (!cli_parse_u64(v, 1ull << 31, &o->spp) || o->spp == 0))
     return cli_usage(ctx, "--spp needs a positive integer (got '%s')", v);
-  if ((v = cmdline_get(a, "--seed")) && !cli_parse_u64(v, (1ull << 53) - 1, &seed))
+  if ((v = cmdline_get(a, "--seed")) && !cli_parse_u64(v, (1ull << 53) - 1, &o->seed))
     return cli_usage(ctx, "--seed needs an integer in [0, 2^53) (got '%s')", v);
   if ((v = cmdline_get(a, "--shard"))) {
     const char *slash = strchr(v, '/');
@@ -502,76 +512,152 @@ int cmd_sweep(cli_ctx *ctx, const cmdline_args *a) {
     if (!slash || (size_t)(slash - v) >= sizeof ib) return cli_usage(ctx, "--shard needs I/N (got '%s')", v);
     memcpy(ib, v, (size_t)(slash - v));
     ib[slash - v] = '\0';
-    if (!cli_parse_u64(ib, MAX_CONTEXTS, &shard_i) || !cli_parse_u64(slash + 1, MAX_CONTEXTS, &shard_n) ||
-        shard_n == 0 || shard_i >= shard_n)
+    if (!cli_parse_u64(ib, MAX_CONTEXTS, &o->shard_i) ||
+        !cli_parse_u64(slash + 1, MAX_CONTEXTS, &o->shard_n) || o->shard_n == 0 || o->shard_i >= o->shard_n)
       return cli_usage(ctx, "--shard needs I/N with 0 <= I < N (got '%s')", v);
   }
-  unsigned long long spread = 0;
-  if ((v = cmdline_get(a, "--spread")) && (!cli_parse_u64(v, 4096, &spread) || spread == 0))
+  if ((v = cmdline_get(a, "--spread")) && (!cli_parse_u64(v, 4096, &o->spread) || o->spread == 0))
     return cli_usage(ctx, "--spread needs a number of shards from 1 to 4096 (got '%s')", v);
-  double timeout = 0;
-  if ((v = cmdline_get(a, "--timeout")) && (!cli_parse_double(v, &timeout) || !(timeout > 0)))
+  if ((v = cmdline_get(a, "--timeout")) && (!cli_parse_double(v, &o->timeout) || !(o->timeout > 0)))
     return cli_usage(ctx, "--timeout needs a positive number of seconds (got '%s')", v);
-  size_t n_sets;
-  const char *const *sets = cmdline_get_all(a, "--set", &n_sets);
-  cJSON *job_params = NULL;
-  int rc = cli_build_param_map(ctx, "--set", sets, n_sets, &job_params);
-  if (rc) return rc;
+  return 0;
+}
 
-  sweep_list l = {.seed = (long long)seed, .dataset = want_nc};
-  grid_axis axes[MAX_GRIDS] = {{0}};
-  sweep_item **sorted = NULL;
-  rsw_contexts *x = NULL;
-  index_entry *entries = NULL;
-  size_t n_entries = 0, failed = 0;
-  char job[40] = "", fingerprint[17] = "", scene_id[65] = "";
-  cJSON *incomplete = NULL;
-  if (contexts_file) {
-    rc = read_contexts(ctx, contexts_file, shard_i, shard_n, &l);
+/* This shard's contexts (*l, from --contexts or the --grid axes), and
+ * *sorted: pointers to them by id, every id usable as a directory name
+ * and given once. */
+static int build_list(const cli_ctx *ctx, const sweep_opts *o, grid_axis *axes, sweep_list *l,
+                      sweep_item ***sorted) {
+  int rc = 0;
+  if (o->contexts_file) {
+    rc = read_contexts(ctx, o->contexts_file, o->shard_i, o->shard_n, l);
   } else {
-    for (size_t i = 0; i < n_grids && !rc; i++) {
-      rc = parse_grid(ctx, grids[i], &axes[i]);
+    for (size_t i = 0; i < o->n_grids && !rc; i++) {
+      rc = parse_grid(ctx, o->grids[i], &axes[i]);
       for (size_t k = 0; k < i && !rc; k++)
         if (strcmp(axes[k].name, axes[i].name) == 0)
           rc = cli_usage(ctx, "--grid %s given twice", axes[i].name);
     }
-    if (!rc) axis_coords(axes, n_grids);
-    if (!rc) rc = build_grid(ctx, axes, n_grids, shard_i, shard_n, &l);
+    if (!rc) axis_coords(axes, o->n_grids);
+    if (!rc) rc = build_grid(ctx, axes, o->n_grids, o->shard_i, o->shard_n, l);
   }
-  if (rc) goto out;
-  sorted = malloc((l.n ? l.n : 1) * sizeof *sorted);
-  if (!sorted) {
-    rc = cli_fail(ctx, CLI_IO, "out of memory");
+  if (rc) return rc;
+  sweep_item **s = *sorted = malloc((l->n ? l->n : 1) * sizeof *s);
+  if (!s) return cli_fail(ctx, CLI_IO, "out of memory");
+  for (size_t i = 0; i < l->n; i++) s[i] = &l->items[i];
+  qsort(s, l->n, sizeof *s, sweep_cmp_item_id);
+  for (size_t i = 0; i < l->n; i++) {
+    if (!cli_safe_component(s[i]->id))
+      return cli_usage(ctx, "context id '%s' cannot name a directory", s[i]->id);
+    if (i && strcmp(s[i]->id, s[i - 1]->id) == 0)
+      return cli_usage(ctx, "context id '%s' appears twice", s[i]->id);
+  }
+  return 0;
+}
+
+/* One job for this shard's contexts x on `scene` (an id): submit, record
+ * it in DIR/sweep.json, wait (Ctrl-C cancels it), fetch every film, write
+ * the index, the dataset and the finished manifest. */
+static int run_job(cli_ctx *ctx, const sweep_opts *o, const sweep_list *l, sweep_item **sorted,
+                   const cJSON *job_params, const rsw_contexts *x, const char *scene,
+                   const char *fingerprint) {
+  const char *dir = o->dir;
+  char job[40] = "";
+  index_entry *entries = NULL;
+  size_t n_entries = 0, failed = 0;
+  cJSON *incomplete = NULL;
+  int rc;
+  cli_catch_interrupt();
+  rsw_status s = rsw_job_submit(ctx->client, scene, x, NULL, job);
+  if (s && cli_interrupted)
+    return cli_fail(ctx, cli_interrupted_code(),
+                    "%s while submitting the job (if the daemon got it, `raysweep job ls` shows it)",
+                    cli_interrupted_word());
+  if (s) return cli_report(ctx, s, scene);
+  if (!ctx->quiet)
+    fprintf(stderr, "raysweep sweep: job %s: %zu contexts%s\n", job, l->n,
+            o->shard_n > 1 ? " (one shard)" : "");
+  cli_print_job_warnings(ctx, "raysweep sweep", job);
+  /* Written before any film, so a sweep that dies half-way leaves a
+   * directory that says so (merge lists its contexts as missing; --force
+   * knows what to clean). */
+  if ((rc = manifest_write(ctx, dir, fingerprint, scene, o->shard_i, o->shard_n, l, job, false, NULL)))
+    return rc;
+  rsw_job_status st;
+  /* Ctrl-C cancels the job (this command submitted it) and writes no films. */
+  rc = cli_wait_job(ctx, job, o->timeout, CLI_INTERRUPT_CANCEL, &st);
+  if (rc != CLI_OK && rc != CLI_JOB) return rc;
+  int job_rc = rc;
+  if (!(incomplete = cJSON_CreateArray())) return cli_fail(ctx, CLI_IO, "out of memory");
+  if ((rc = fetch_all(ctx, job, dir, o->fmt, sorted, l->n, job_params, incomplete, &entries, &n_entries,
+                      &failed))) {
+    if (cli_interrupted)
+      rc = cli_fail(ctx, cli_interrupted_code(),
+                    "%s while fetching films; job %s is over and keeps its results on the daemon "
+                    "(`raysweep fetch %s CONTEXT SENSOR`, or sweep again)",
+                    cli_interrupted_word(), job, job);
     goto out;
   }
-  for (size_t i = 0; i < l.n; i++) sorted[i] = &l.items[i];
-  qsort(sorted, l.n, sizeof *sorted, sweep_cmp_item_id);
-  for (size_t i = 0; i < l.n; i++) {
-    if (!cli_safe_component(sorted[i]->id)) {
-      rc = cli_usage(ctx, "context id '%s' cannot name a directory", sorted[i]->id);
-      goto out;
-    }
-    if (i && strcmp(sorted[i]->id, sorted[i - 1]->id) == 0) {
-      rc = cli_usage(ctx, "context id '%s' appears twice", sorted[i]->id);
-      goto out;
-    }
+  if ((rc = sweep_write_index(ctx, dir, entries, n_entries))) goto out;
+  if (o->want_nc && (rc = sweep_write_dataset(ctx, dir, entries, n_entries, true, l->seed))) goto out;
+  if ((rc = manifest_write(ctx, dir, fingerprint, scene, o->shard_i, o->shard_n, l, job, true, incomplete)))
+    goto out;
+  rc = job_rc;
+  if (ctx->json) {
+    cJSON *j = cJSON_CreateObject();
+    cJSON_AddStringToObject(j, "job", job);
+    cJSON_AddStringToObject(j, "state", cli_job_state_name(st.state));
+    cJSON_AddStringToObject(j, "dir", dir);
+    cJSON_AddNumberToObject(j, "contexts", (double)l->n);
+    cJSON_AddNumberToObject(j, "films", (double)n_entries);
+    cJSON_AddNumberToObject(j, "failed", (double)failed);
+    cli_print_json(j);
+  } else if (!ctx->quiet) {
+    fprintf(stderr, "raysweep sweep: %zu films in %s%s\n", n_entries, dir,
+            failed ? " (some renders failed)" : "");
   }
+out:
+  cJSON_Delete(incomplete);
+  sweep_entries_free(entries, n_entries);
+  return rc;
+}
+
+int cmd_sweep(cli_ctx *ctx, const cmdline_args *a) {
+  const char *scene = a->pos[0];
+  sweep_opts o;
+  int rc = read_sweep_options(ctx, a, &o);
+  if (rc) return rc;
+  const char *dir = o.dir;
+  size_t n_sets;
+  const char *const *sets = cmdline_get_all(a, "--set", &n_sets);
+  cJSON *job_params = NULL;
+  rc = cli_build_param_map(ctx, "--set", sets, n_sets, &job_params);
+  if (rc) return rc;
+
+  sweep_list l = {.seed = (long long)o.seed, .dataset = o.want_nc};
+  grid_axis axes[MAX_GRIDS] = {{0}};
+  sweep_item **sorted = NULL;
+  rsw_contexts *x = NULL;
+  char fingerprint[17] = "", scene_id[65] = "";
+  if ((rc = build_list(ctx, &o, axes, &l, &sorted))) goto out;
   /* Everything the user described is checked: now the directory. */
   sweep_fingerprint(a, scene, fingerprint);
-  bool resume = spread && !cmdline_has(a, "--force") && sweep_spread_resumable(dir, fingerprint);
+  bool resume = o.spread && !cmdline_has(a, "--force") && sweep_spread_resumable(dir, fingerprint);
   if (!resume && (rc = sweep_prepare_output(ctx, dir, cmdline_has(a, "--force")))) goto out;
   if (l.n == 0) {
     /* A shard past the end of a short list: nothing to submit, an empty
      * index keeps `merge` simple. */
-    if (!ctx->quiet) fprintf(stderr, "raysweep sweep: shard %llu/%llu has no contexts\n", shard_i, shard_n);
+    if (!ctx->quiet)
+      fprintf(stderr, "raysweep sweep: shard %llu/%llu has no contexts\n", o.shard_i, o.shard_n);
     rc = sweep_write_index(ctx, dir, NULL, 0);
-    if (!rc) rc = manifest_write(ctx, dir, fingerprint, scene, shard_i, shard_n, &l, NULL, true, NULL);
+    if (!rc) rc = manifest_write(ctx, dir, fingerprint, scene, o.shard_i, o.shard_n, &l, NULL, true, NULL);
     goto out;
   }
   /* The job lists the contexts in the order the user described them. */
-  if ((rc = build_contexts(ctx, a, l.items, l.n, job_params, (long long)spp, (long long)seed, &x))) goto out;
+  if ((rc = build_contexts(ctx, a, l.items, l.n, job_params, (long long)o.spp, (long long)o.seed, &x)))
+    goto out;
   struct stat sst;
-  if (!spread && stat(scene, &sst) == 0 && S_ISREG(sst.st_mode)) {
+  if (!o.spread && stat(scene, &sst) == 0 && S_ISREG(sst.st_mode)) {
     /* A scene FILE: push it (blobs it references too) and sweep its id. */
     int created = 0;
     rsw_status ps = rsw_scene_push_file(ctx->client, scene, NULL, scene_id, &created);
@@ -582,69 +668,12 @@ int cmd_sweep(cli_ctx *ctx, const cmdline_args *a) {
     scene = scene_id;
     sweep_fingerprint(a, scene, fingerprint);
   }
-  if (spread) {
-    rc = sweep_run_spread(ctx, a, (int)spread, resume, fmt, timeout, &l, sorted, job_params, x, fingerprint,
-                          (size_t)shard_i, (size_t)shard_n);
-    goto out;
-  }
-  cli_catch_interrupt();
-  rsw_status s = rsw_job_submit(ctx->client, scene, x, NULL, job);
-  if (s && cli_interrupted) {
-    rc = cli_fail(ctx, cli_interrupted_code(),
-                  "%s while submitting the job (if the daemon got it, `raysweep job ls` shows it)",
-                  cli_interrupted_word());
-    goto out;
-  }
-  if (s) {
-    rc = cli_report(ctx, s, scene);
-    goto out;
-  }
-  if (!ctx->quiet)
-    fprintf(stderr, "raysweep sweep: job %s: %zu contexts%s\n", job, l.n, shard_n > 1 ? " (one shard)" : "");
-  cli_print_job_warnings(ctx, "raysweep sweep", job);
-  /* Written before any film, so a sweep that dies half-way leaves a
-   * directory that says so (merge lists its contexts as missing; --force
-   * knows what to clean). */
-  if ((rc = manifest_write(ctx, dir, fingerprint, scene, shard_i, shard_n, &l, job, false, NULL))) goto out;
-  rsw_job_status st;
-  /* Ctrl-C cancels the job (this command submitted it) and writes no films. */
-  rc = cli_wait_job(ctx, job, timeout, CLI_INTERRUPT_CANCEL, &st);
-  if (rc != CLI_OK && rc != CLI_JOB) goto out;
-  int job_rc = rc;
-  if (!(incomplete = cJSON_CreateArray())) {
-    rc = cli_fail(ctx, CLI_IO, "out of memory");
-    goto out;
-  }
-  if ((rc = fetch_all(ctx, job, dir, fmt, sorted, l.n, job_params, incomplete, &entries, &n_entries,
-                      &failed))) {
-    if (cli_interrupted)
-      rc = cli_fail(ctx, cli_interrupted_code(),
-                    "%s while fetching films; job %s is over and keeps its results on the daemon "
-                    "(`raysweep fetch %s CONTEXT SENSOR`, or sweep again)",
-                    cli_interrupted_word(), job, job);
-    goto out;
-  }
-  if ((rc = sweep_write_index(ctx, dir, entries, n_entries))) goto out;
-  if (want_nc && (rc = sweep_write_dataset(ctx, dir, entries, n_entries, true, l.seed))) goto out;
-  if ((rc = manifest_write(ctx, dir, fingerprint, scene, shard_i, shard_n, &l, job, true, incomplete)))
-    goto out;
-  rc = job_rc;
-  if (ctx->json) {
-    cJSON *o = cJSON_CreateObject();
-    cJSON_AddStringToObject(o, "job", job);
-    cJSON_AddStringToObject(o, "state", cli_job_state_name(st.state));
-    cJSON_AddStringToObject(o, "dir", dir);
-    cJSON_AddNumberToObject(o, "contexts", (double)l.n);
-    cJSON_AddNumberToObject(o, "films", (double)n_entries);
-    cJSON_AddNumberToObject(o, "failed", (double)failed);
-    cli_print_json(o);
-  } else if (!ctx->quiet) {
-    fprintf(stderr, "raysweep sweep: %zu films in %s%s\n", n_entries, dir,
-            failed ? " (some renders failed)" : "");
-  }
+  if (o.spread)
+    rc = sweep_run_spread(ctx, a, (int)o.spread, resume, o.fmt, o.timeout, &l, sorted, job_params, x,
+                          fingerprint, (size_t)o.shard_i, (size_t)o.shard_n);
+  else
+    rc = run_job(ctx, &o, &l, sorted, job_params, x, scene, fingerprint);
 out:
-  cJSON_Delete(incomplete);
-  sweep_entries_free(entries, n_entries);
   rsw_contexts_free(x);
   free(sorted);
   items_free(&l);

@@ -111,6 +111,8 @@ int sweep_write_index(const cli_ctx *ctx, const char *dir, index_entry *e, size_
 int sweep_read_index(const cli_ctx *ctx, const char *dir, size_t input, index_entry **e, size_t *n,
                      size_t *cap);
 void sweep_entries_free(index_entry *e, size_t n);
+/* The lines and sources of entries [from, to) (the array stays). */
+void sweep_entries_free_range(index_entry *e, size_t from, size_t to);
 /* The index line of film rel of result r (sorted: the sweep's items by id). */
 cJSON *sweep_index_line(const cJSON *r, const char *c, const char *sn, const char *rel, sweep_item **sorted,
                         size_t n, const cJSON *job_params);

@@ -112,11 +112,15 @@ int sweep_write_index(const cli_ctx *ctx, const char *dir, index_entry *e, size_
   return rc;
 }
 
-void sweep_entries_free(index_entry *e, size_t n) {
-  for (size_t i = 0; i < n; i++) {
+void sweep_entries_free_range(index_entry *e, size_t from, size_t to) {
+  for (size_t i = from; i < to; i++) {
     cJSON_Delete(e[i].line);
     free(e[i].src);
   }
+}
+
+void sweep_entries_free(index_entry *e, size_t n) {
+  sweep_entries_free_range(e, 0, n);
   free(e);
 }
 
