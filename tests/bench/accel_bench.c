@@ -106,6 +106,37 @@ typedef struct ceiling_sync {
   bool go, abort;
 } ceiling_sync;
 
+/* A worker: ready (its rays made), then wait for go; true when told to
+ * abort (not every worker could start). */
+static bool sync_ready_wait(ceiling_sync *sync) {
+  pthread_mutex_lock(&sync->lock);
+  sync->ready++;
+  pthread_cond_broadcast(&sync->cond);
+  while (!sync->go) pthread_cond_wait(&sync->cond, &sync->lock);
+  bool abort = sync->abort;
+  pthread_mutex_unlock(&sync->lock);
+  return abort;
+}
+
+/* The caller: once the `started` workers are ready, release them at once
+ * (abort: to trace nothing) and return the seconds until the last one
+ * ends; the sync is destroyed. */
+static double sync_release_timed(ceiling_sync *sync, pthread_t *th, int started, bool abort) {
+  pthread_mutex_lock(&sync->lock);
+  while (sync->ready < started) pthread_cond_wait(&sync->cond, &sync->lock);
+  sync->abort = abort;
+  sync->go = true;
+  pthread_cond_broadcast(&sync->cond);
+  pthread_mutex_unlock(&sync->lock);
+  struct timespec t0, t1;
+  clock_gettime(CLOCK_MONOTONIC, &t0);
+  for (int i = 0; i < started; i++) pthread_join(th[i], NULL);
+  clock_gettime(CLOCK_MONOTONIC, &t1);
+  pthread_mutex_destroy(&sync->lock);
+  pthread_cond_destroy(&sync->cond);
+  return (t1.tv_sec - t0.tv_sec) + 1e-9 * (t1.tv_nsec - t0.tv_nsec);
+}
+
 static vec3 uniform_sphere_point(pcg32 *g) {
   double z = 1.0 - 2.0 * pcg32_next_double(g), phi = 2.0 * RSW_PI * pcg32_next_double(g);
   double s = sqrt(fmax(0.0, 1.0 - z * z));
@@ -130,12 +161,7 @@ static void *ceiling_worker(void *arg) {
     q[0] = (float)o.x, q[1] = (float)o.y, q[2] = (float)o.z;
     q[3] = (float)d.x, q[4] = (float)d.y, q[5] = (float)d.z;
   }
-  pthread_mutex_lock(&j->sync->lock);
-  j->sync->ready++;
-  pthread_cond_broadcast(&j->sync->cond);
-  while (!j->sync->go) pthread_cond_wait(&j->sync->cond, &j->sync->lock);
-  if (j->sync->abort) j->ok = false;
-  pthread_mutex_unlock(&j->sync->lock);
+  if (sync_ready_wait(j->sync)) j->ok = false;
   struct RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   uint64_t hits = 0;
@@ -204,22 +230,10 @@ double accel_ceiling_rays_per_s(const scene *s, bool flat, uint64_t n_rays, int 
     if (pthread_create(&th[i], NULL, ceiling_worker, &jobs[i]) != 0) break;
     started++;
   }
-  pthread_mutex_lock(&sync.lock);
-  while (sync.ready < started) pthread_cond_wait(&sync.cond, &sync.lock);
-  sync.abort = started < threads;
-  sync.go = true;
-  pthread_cond_broadcast(&sync.cond);
-  pthread_mutex_unlock(&sync.lock);
-  struct timespec t0, t1;
-  clock_gettime(CLOCK_MONOTONIC, &t0);
-  for (int i = 0; i < started; i++) pthread_join(th[i], NULL);
-  clock_gettime(CLOCK_MONOTONIC, &t1);
-  pthread_mutex_destroy(&sync.lock);
-  pthread_cond_destroy(&sync.cond);
+  double dt = sync_release_timed(&sync, th, started, started < threads);
   bool ok = started == threads;
   for (int i = 0; i < started; i++) ok = ok && jobs[i].ok;
   if (flat) rtcReleaseScene(sc);
-  double dt = (t1.tv_sec - t0.tv_sec) + 1e-9 * (t1.tv_nsec - t0.tv_nsec);
   return ok && dt > 0 ? (double)(n_rays / (uint64_t)threads) * started / dt : 0;
 }
 
@@ -236,11 +250,7 @@ typedef struct replay_job {
 
 static void *replay_worker(void *arg) {
   replay_job *j = arg;
-  pthread_mutex_lock(&j->sync->lock);
-  j->sync->ready++;
-  pthread_cond_broadcast(&j->sync->cond);
-  while (!j->sync->go) pthread_cond_wait(&j->sync->cond, &j->sync->lock);
-  pthread_mutex_unlock(&j->sync->lock);
+  sync_ready_wait(j->sync);
   struct RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   uint64_t hits = 0;
@@ -335,19 +345,8 @@ double accel_replay_rays_per_s(const scene *s, const accel_ray_log *lg, int thre
     if (pthread_create(&th[t], NULL, replay_worker, &jobs[t]) != 0) break;
     started++;
   }
-  pthread_mutex_lock(&sync.lock);
-  while (sync.ready < started) pthread_cond_wait(&sync.cond, &sync.lock);
-  sync.go = true;
-  pthread_cond_broadcast(&sync.cond);
-  pthread_mutex_unlock(&sync.lock);
-  struct timespec t0, t1;
-  clock_gettime(CLOCK_MONOTONIC, &t0);
-  for (int t = 0; t < started; t++) pthread_join(th[t], NULL);
-  clock_gettime(CLOCK_MONOTONIC, &t1);
-  pthread_mutex_destroy(&sync.lock);
-  pthread_cond_destroy(&sync.cond);
+  double dt = sync_release_timed(&sync, th, started, false);
   if (flat) rtcReleaseScene(top);
-  double dt = (t1.tv_sec - t0.tv_sec) + 1e-9 * (t1.tv_nsec - t0.tv_nsec);
   size_t done = started == threads ? n : 0;
   return done && dt > 0 ? (double)done / dt : 0;
 }
