@@ -48,13 +48,14 @@ endif
 # Each directory sees only the headers it may use: common/ (shared by the
 # daemon and libraysweep) sees the public headers; the daemon sees
 # common/ and server/; libraysweep and the CLI never see server/ (the CLI
-# sees only the public API); tests see everything.
+# sees the public API, and common/ for its command-line tables, cmdline.h);
+# tests see everything.
 BASE_CPPFLAGS := -D_GNU_SOURCE -MMD -MP $(SIMD_CPPFLAGS)
 CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude -Icommon -Iserver
 $(BUILD)/obj/common/%.o: CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude -Icommon
 $(BUILD)/obj/server/%.o: CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude -Icommon -Iserver
 $(BUILD)/obj/client/lib/%.o: CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude -Icommon
-$(BUILD)/obj/client/cli/%.o: CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude
+$(BUILD)/obj/client/cli/%.o: CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude -Icommon
 CFLAGS := -std=c11 $(OPT) -g -fno-math-errno $(WARN) $(SANFLAGS) -fPIC
 LDFLAGS := $(SANFLAGS)
 LIBS := -lembree3 -lOpenEXRCore -lnetcdf -lpng16 -ljpeg -lexpat -lcjson -lpthread -ldl -lm
@@ -100,7 +101,10 @@ FUZZ_NAMES := $(patsubst tests/fuzz/fuzz_%.c,%,$(FUZZ_SRC))
 FUZZ_REPLAY := $(FUZZ_NAMES:%=$(BUILD)/tests/fuzz_%)
 TEST_BIN += $(FUZZ_REPLAY)
 
-BENCH_SRC := $(wildcard tests/bench/*.c)
+# tests/bench/bench_*.c: one program each; the other .c files there are the
+# benchmarks' shared code (accel_bench.c: the Embree ceilings), linked into each.
+BENCH_SRC := $(wildcard tests/bench/bench_*.c)
+BENCH_SUPPORT_OBJ := $(patsubst %.c,$(BUILD)/obj/%.o,$(filter-out $(BENCH_SRC),$(wildcard tests/bench/*.c)))
 BENCH_BIN := $(patsubst %.c,$(BUILD)/bench/%,$(notdir $(BENCH_SRC)))
 BENCH_SCRIPTS := $(sort $(wildcard tests/bench/bench_*.py))
 
@@ -261,7 +265,7 @@ $(BUILD)/tests/%: $(BUILD)/obj/tests/integration/%.o $(TEST_SUPPORT_OBJ) $(SERVI
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB) $(SERVICE_LIB),$^) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB) $(LIBS) $(TEST_LIBS) -lcrypto
 
-$(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB) $(COMMON_LIB)
+$(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(BENCH_SUPPORT_OBJ) $(TEST_SUPPORT_OBJ) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB),$^) $(KERNEL_LIB) $(COMMON_LIB) $(LIBS) $(TEST_LIBS)
 

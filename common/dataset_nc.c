@@ -596,13 +596,31 @@ static double canonical_angle(double a) {
   return strtod(buf, NULL);
 }
 
-static rsw_status write_all(writer *w, rsw_err *err) {
+/* ---- writing: define the file (globals, layout, sun, each sensor), then
+ * put its values (layout, then each sensor's films). The calls run in one
+ * fixed order, so a dataset's bytes depend on its content only. */
+
+/* Per sensor: its variables' ids (-1: none). */
+typedef struct sensor_vars {
+  int ch, vza, vaa, seed, spp, unres, irr, irr_srf;
+  int q[N_QUANTITIES];
+} sensor_vars;
+
+/* The variables write_all defines and then fills. */
+typedef struct file_vars {
+  int coord[NC_MAX_COORDS], ctx, wl; /* wl: the contexts' wavelength (-1: none) */
+  int nodes, bands;                  /* jobs with bands (-1: none) */
+  int sun[2];                        /* sza, saa (-1: none) */
+  double *sun_deg;                   /* n_contexts x (zenith, azimuth), NAN where no film says */
+  sensor_vars *sv;                   /* per sensor set */
+} file_vars;
+
+static const char *const sun_names[2] = {"sza", "saa"};
+
+/* The global attributes. */
+static rsw_status write_globals(const writer *w, rsw_err *err) {
   const nc_dataset *d = w->d;
   int ncid = w->ncid;
-  const nc_coords *cs = d->coords && d->coords->n ? d->coords : NULL;
-  bool rgb = d->variant && strcmp(d->variant, "rgb") == 0;
-  char nm[160];
-  /* Global attributes. */
   TRY(put_text_att(ncid, NC_GLOBAL, "Conventions", "CF-1.10", err));
   TRY(put_text_att(ncid, NC_GLOBAL, "title", "raysweep sweep", err));
   TRY(put_text_att(ncid, NC_GLOBAL, "source", "raysweep " RSW_VERSION, err));
@@ -627,22 +645,30 @@ static rsw_status write_all(writer *w, rsw_err *err) {
     unsigned long long v = w->missing;
     NC_TRY(nc_put_att_ulonglong(ncid, NC_GLOBAL, "films_missing", NC_UINT64, 1, &v), "films_missing");
   }
+  return RSW_OK;
+}
 
-  /* The context layout. */
-  int v_coord[NC_MAX_COORDS], v_ctx, v_wl = -1;
+/* The context layout: the coords (grid dimensions or variables over the
+ * context list), the context ids, the contexts' wavelength, and with bands
+ * the node wavelengths and the bands. */
+static rsw_status define_layout(writer *w, file_vars *fv, rsw_err *err) {
+  const nc_dataset *d = w->d;
+  int ncid = w->ncid;
+  const nc_coords *cs = d->coords && d->coords->n ? d->coords : NULL;
+  bool rgb = d->variant && strcmp(d->variant, "rgb") == 0;
   bool wl_coord = false;
   if (w->grid) {
     for (size_t k = 0; k < cs->n; k++) {
       const nc_coord *c = &cs->c[k];
       NC_TRY(nc_def_dim(ncid, c->name, w->ax[k].n, &w->cdim[k]), c->name);
-      NC_TRY(nc_def_var(ncid, c->name, c->is_string ? NC_STRING : NC_DOUBLE, 1, &w->cdim[k], &v_coord[k]),
+      NC_TRY(nc_def_var(ncid, c->name, c->is_string ? NC_STRING : NC_DOUBLE, 1, &w->cdim[k], &fv->coord[k]),
              c->name);
     }
   } else {
     NC_TRY(nc_def_dim(ncid, "context", d->n_contexts, &w->cdim[0]), "context");
     for (size_t k = 0; cs && k < cs->n; k++) {
       const nc_coord *c = &cs->c[k];
-      NC_TRY(nc_def_var(ncid, c->name, c->is_string ? NC_STRING : NC_DOUBLE, 1, &w->cdim[0], &v_coord[k]),
+      NC_TRY(nc_def_var(ncid, c->name, c->is_string ? NC_STRING : NC_DOUBLE, 1, &w->cdim[0], &fv->coord[k]),
              c->name);
       coords_add(w, c->name);
     }
@@ -651,49 +677,63 @@ static rsw_status write_all(writer *w, rsw_err *err) {
     const nc_coord *c = &cs->c[k];
     bool is_wl = strcmp(c->name, "wavelength") == 0;
     wl_coord |= is_wl;
-    TRY(put_text_att(ncid, v_coord[k], "long_name", is_wl ? "wavelength" : c->name, err));
+    TRY(put_text_att(ncid, fv->coord[k], "long_name", is_wl ? "wavelength" : c->name, err));
     if (is_wl && !c->is_string) {
-      TRY(put_text_att(ncid, v_coord[k], "units", "nm", err));
-      TRY(put_text_att(ncid, v_coord[k], "standard_name", "radiation_wavelength", err));
+      TRY(put_text_att(ncid, fv->coord[k], "units", "nm", err));
+      TRY(put_text_att(ncid, fv->coord[k], "standard_name", "radiation_wavelength", err));
     } else if (!c->is_string) {
-      TRY(put_text_att(ncid, v_coord[k], "units", "1", err));
+      TRY(put_text_att(ncid, fv->coord[k], "units", "1", err));
     }
   }
-  TRY(def_ctx_var2(w, "context", NC_STRING, -1, 0, NULL, &v_ctx, err));
-  TRY(put_text_att(ncid, v_ctx, "long_name", "kernel context id", err));
+  TRY(def_ctx_var2(w, "context", NC_STRING, -1, 0, NULL, &fv->ctx, err));
+  TRY(put_text_att(ncid, fv->ctx, "long_name", "kernel context id", err));
   if (w->grid) coords_add(w, "context");
   bool any_wl = false;
   for (size_t i = 0; d->wavelengths && !rgb && i < d->n_contexts; i++) any_wl |= isfinite(d->wavelengths[i]);
   if (any_wl && !wl_coord) {
-    TRY(def_ctx_var2(w, "wavelength", NC_DOUBLE, -1, 0, NULL, &v_wl, err));
+    TRY(def_ctx_var2(w, "wavelength", NC_DOUBLE, -1, 0, NULL, &fv->wl, err));
     double fill = NAN;
-    NC_TRY(nc_def_var_fill(ncid, v_wl, 0, &fill), "wavelength");
-    TRY(put_text_att(ncid, v_wl, "long_name", "wavelength", err));
-    TRY(put_text_att(ncid, v_wl, "standard_name", "radiation_wavelength", err));
-    TRY(put_text_att(ncid, v_wl, "units", "nm", err));
+    NC_TRY(nc_def_var_fill(ncid, fv->wl, 0, &fill), "wavelength");
+    TRY(put_text_att(ncid, fv->wl, "long_name", "wavelength", err));
+    TRY(put_text_att(ncid, fv->wl, "standard_name", "radiation_wavelength", err));
+    TRY(put_text_att(ncid, fv->wl, "units", "nm", err));
     coords_add(w, "wavelength");
   }
   /* Jobs with bands: the node wavelengths and the bands, each a
    * dimension with its coordinate variable. */
-  int v_nodes = -1, v_bands = -1;
   if (d->n_nodes) {
     NC_TRY(nc_def_dim(ncid, "wavelength", d->n_nodes, &w->wl_dim), "wavelength");
-    NC_TRY(nc_def_var(ncid, "wavelength", NC_DOUBLE, 1, &w->wl_dim, &v_nodes), "wavelength");
-    TRY(put_text_att(ncid, v_nodes, "long_name", "wavelength", err));
-    TRY(put_text_att(ncid, v_nodes, "standard_name", "radiation_wavelength", err));
-    TRY(put_text_att(ncid, v_nodes, "units", "nm", err));
-    TRY(put_text_att(ncid, v_nodes, "comment", "the quadrature nodes of the job's bands", err));
+    NC_TRY(nc_def_var(ncid, "wavelength", NC_DOUBLE, 1, &w->wl_dim, &fv->nodes), "wavelength");
+    TRY(put_text_att(ncid, fv->nodes, "long_name", "wavelength", err));
+    TRY(put_text_att(ncid, fv->nodes, "standard_name", "radiation_wavelength", err));
+    TRY(put_text_att(ncid, fv->nodes, "units", "nm", err));
+    TRY(put_text_att(ncid, fv->nodes, "comment", "the quadrature nodes of the job's bands", err));
   }
   if (d->n_bands) {
     NC_TRY(nc_def_dim(ncid, "band", d->n_bands, &w->band_dim), "band");
-    NC_TRY(nc_def_var(ncid, "band", NC_STRING, 1, &w->band_dim, &v_bands), "band");
-    TRY(put_text_att(ncid, v_bands, "long_name", "spectral band (the job's band ids)", err));
+    NC_TRY(nc_def_var(ncid, "band", NC_STRING, 1, &w->band_dim, &fv->bands), "band");
+    TRY(put_text_att(ncid, fv->bands, "long_name", "spectral band (the job's band ids)", err));
   }
-  /* The sun's angles per context, from the films (any sensor, any node):
-   * coordinates, unless a coord of the same name labels the contexts. */
-  int v_sun[2] = {-1, -1};
-  double *sun = calloc(2 * (d->n_contexts ? d->n_contexts : 1), sizeof *sun);
-  if (!sun) return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+  return RSW_OK;
+}
+
+/* Whether a coord named `name` labels the contexts (it wins over a
+ * variable the writer would define under that name). */
+static bool coord_taken(const writer *w, const char *name) {
+  const nc_coords *cs = w->d->coords;
+  for (size_t k = 0; cs && k < cs->n; k++)
+    if (strcmp(cs->c[k].name, name) == 0) return true;
+  return false;
+}
+
+/* The sun's angles per context, from the films (any sensor, any node):
+ * coordinates, unless a coord of the same name labels the contexts. */
+static rsw_status define_sun(writer *w, file_vars *fv, rsw_err *err) {
+  const nc_dataset *d = w->d;
+  int ncid = w->ncid;
+  fv->sun_deg = calloc(2 * (d->n_contexts ? d->n_contexts : 1), sizeof *fv->sun_deg);
+  if (!fv->sun_deg) return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+  double *sun = fv->sun_deg;
   bool any_sun = false;
   for (size_t c = 0; c < 2 * d->n_contexts; c++) sun[c] = NAN;
   for (size_t i = 0; i < d->n_films; i++) {
@@ -703,182 +743,180 @@ static rsw_status write_all(writer *w, rsw_err *err) {
     sun[2 * f->context + 1] = canonical_angle(f->sun_azimuth);
     any_sun = true;
   }
-  static const char *const sun_names[2] = {"sza", "saa"};
   static const char *const sun_std[2] = {"solar_zenith_angle", "solar_azimuth_angle"};
   static const char *const sun_long[2] = {"solar zenith angle", "solar azimuth angle"};
   for (int a = 0; any_sun && a < 2; a++) {
-    bool taken = false;
-    for (size_t k = 0; cs && k < cs->n; k++) taken |= strcmp(cs->c[k].name, sun_names[a]) == 0;
-    if (taken) continue;
-    rsw_status st = def_ctx_var2(w, sun_names[a], NC_DOUBLE, -1, 0, NULL, &v_sun[a], err);
+    if (coord_taken(w, sun_names[a])) continue;
+    TRY(def_ctx_var2(w, sun_names[a], NC_DOUBLE, -1, 0, NULL, &fv->sun[a], err));
     double fill = NAN;
-    int rc = st ? NC_NOERR : nc_def_var_fill(ncid, v_sun[a], 0, &fill);
-    if (!st && rc != NC_NOERR) st = nc_fail(err, rc, sun_names[a]);
-    if (!st) st = put_text_att(ncid, v_sun[a], "long_name", sun_long[a], err);
-    if (!st) st = put_text_att(ncid, v_sun[a], "standard_name", sun_std[a], err);
-    if (!st) st = put_text_att(ncid, v_sun[a], "units", "degree", err);
-    if (!st)
-      st = put_text_att(ncid, v_sun[a], "comment",
-                        a == 0 ? "zenith of the direction towards the directional emitter (from +z)"
-                               : "its azimuth, counter-clockwise from +x (Eradiate's convention)",
-                        err);
-    if (st) {
-      free(sun);
-      return st;
-    }
+    NC_TRY(nc_def_var_fill(ncid, fv->sun[a], 0, &fill), sun_names[a]);
+    TRY(put_text_att(ncid, fv->sun[a], "long_name", sun_long[a], err));
+    TRY(put_text_att(ncid, fv->sun[a], "standard_name", sun_std[a], err));
+    TRY(put_text_att(ncid, fv->sun[a], "units", "degree", err));
+    TRY(put_text_att(ncid, fv->sun[a], "comment",
+                     a == 0 ? "zenith of the direction towards the directional emitter (from +z)"
+                            : "its azimuth, counter-clockwise from +x (Eradiate's convention)",
+                     err));
     coords_add(w, sun_names[a]);
   }
-  size_t base_coords_len = strlen(w->coordinates);
+  return RSW_OK;
+}
 
-  /* Per sensor: dims, coordinates, data variables. */
-  typedef struct sensor_vars {
-    int ch, vza, vaa, seed, spp, unres, irr, irr_srf;
-    int q[N_QUANTITIES];
-  } sensor_vars;
-  sensor_vars *sv = calloc(w->n_s ? w->n_s : 1, sizeof *sv);
-  if (!sv) {
-    free(sun);
-    return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+/* A sensor's viewing angles per pixel: coordinates, one image for the
+ * sensor when every film has the same angles, else one per film. */
+static rsw_status define_view_angles(writer *w, const sensor_set *s, sensor_vars *v, rsw_err *err) {
+  int ncid = w->ncid;
+  char nm[160];
+  int dyx[2] = {s->dim_y, s->dim_x};
+  const char *names[2] = {"vza", "vaa"};
+  const char *std[2] = {"sensor_zenith_angle", "sensor_azimuth_angle"};
+  const char *longn[2] = {"viewing zenith angle", "viewing azimuth angle"};
+  int *ids[2] = {&v->vza, &v->vaa};
+  for (int a = 0; a < 2; a++) {
+    name_cat(nm, sizeof nm, s->prefix, names[a]);
+    if (s->same_angles)
+      NC_TRY(nc_def_var(ncid, nm, NC_DOUBLE, 2, dyx, ids[a]), nm);
+    else
+      TRY(def_ctx_var(w, nm, NC_DOUBLE, 2, dyx, ids[a], err));
+    double fill = NAN;
+    NC_TRY(nc_def_var_fill(ncid, *ids[a], 0, &fill), nm);
+    TRY(put_text_att(ncid, *ids[a], "long_name", longn[a], err));
+    TRY(put_text_att(ncid, *ids[a], "standard_name", std[a], err));
+    TRY(put_text_att(ncid, *ids[a], "units", "degree", err));
+    TRY(put_text_att(ncid, *ids[a], "comment",
+                     a == 0 ? "zenith of the direction the pixel looks from (the reverse of its ray)"
+                            : "azimuth of that direction, Eradiate's convention: counter-clockwise "
+                              "from the +x (east) axis",
+                     err));
+    coords_add(w, nm);
   }
-#define STRY(x)                                                                                              \
-  do {                                                                                                       \
-    rsw_status st_ = (x);                                                                                    \
-    if (st_) {                                                                                               \
-      free(sv), free(sun);                                                                                   \
-      return st_;                                                                                            \
-    }                                                                                                        \
-  } while (0)
-#define SNC(call, what)                                                                                      \
-  do {                                                                                                       \
-    int rc_ = (call);                                                                                        \
-    if (rc_ != NC_NOERR) {                                                                                   \
-      free(sv), free(sun);                                                                                   \
-      return nc_fail(err, rc_, (what));                                                                      \
-    }                                                                                                        \
-  } while (0)
-  for (size_t i = 0; i < w->n_s; i++) {
-    sensor_set *s = &w->s[i];
-    sensor_vars *v = &sv[i];
-    const nc_film *sh = s->shape;
-    w->coordinates[base_coords_len] = '\0';
-    name_cat(nm, sizeof nm, s->prefix, "y");
-    SNC(nc_def_dim(ncid, nm, (size_t)sh->height, &s->dim_y), nm);
-    name_cat(nm, sizeof nm, s->prefix, "x");
-    SNC(nc_def_dim(ncid, nm, (size_t)sh->width, &s->dim_x), nm);
-    s->dim_ch = -1;
-    if (sh->channels > 1) {
-      name_cat(nm, sizeof nm, s->prefix, "channel");
-      SNC(nc_def_dim(ncid, nm, (size_t)sh->channels, &s->dim_ch), nm);
-      SNC(nc_def_var(ncid, nm, NC_STRING, 1, &s->dim_ch, &v->ch), nm);
-      STRY(put_text_att(ncid, v->ch, "long_name", "film channel", err));
-    }
-    if (s->any_angles) {
-      int dyx[2] = {s->dim_y, s->dim_x};
-      const char *names[2] = {"vza", "vaa"};
-      const char *std[2] = {"sensor_zenith_angle", "sensor_azimuth_angle"};
-      const char *longn[2] = {"viewing zenith angle", "viewing azimuth angle"};
-      int *ids[2] = {&v->vza, &v->vaa};
-      for (int a = 0; a < 2; a++) {
-        name_cat(nm, sizeof nm, s->prefix, names[a]);
-        if (s->same_angles)
-          SNC(nc_def_var(ncid, nm, NC_DOUBLE, 2, dyx, ids[a]), nm);
-        else
-          STRY(def_ctx_var(w, nm, NC_DOUBLE, 2, dyx, ids[a], err));
-        double fill = NAN;
-        SNC(nc_def_var_fill(ncid, *ids[a], 0, &fill), nm);
-        STRY(put_text_att(ncid, *ids[a], "long_name", longn[a], err));
-        STRY(put_text_att(ncid, *ids[a], "standard_name", std[a], err));
-        STRY(put_text_att(ncid, *ids[a], "units", "degree", err));
-        STRY(put_text_att(ncid, *ids[a], "comment",
-                          a == 0 ? "zenith of the direction the pixel looks from (the reverse of its ray)"
-                                 : "azimuth of that direction, Eradiate's convention: counter-clockwise "
-                                   "from the +x (east) axis",
-                          err));
-        coords_add(w, nm);
-      }
-    }
-    int extra[3] = {s->dim_y, s->dim_x, s->dim_ch};
-    int n_extra = s->dim_ch >= 0 ? 3 : 2;
-    size_t chunk[NC_MAX_COORDS + 3];
-    size_t nd = 0;
-    for (size_t k = 0; k < w->n_cdims; k++) chunk[nd++] = 1;
-    if (w->wl_dim >= 0 || w->band_dim >= 0) chunk[nd++] = 1;
-    chunk[nd++] = (size_t)sh->height;
-    chunk[nd++] = (size_t)sh->width;
-    if (n_extra == 3) chunk[nd++] = (size_t)sh->channels;
-    for (size_t q = 0; q < s->n_q; q++) {
-      const nc_quantity *qq = nc_quantity_find(s->qnames[q]);
-      name_cat(nm, sizeof nm, s->prefix, qq->name);
-      int id;
-      bool bq = band_quantity(qq->name);
-      STRY(def_ctx_var2(w, nm, NC_FLOAT, bq ? w->band_dim : w->wl_dim, n_extra, extra, &id, err));
-      v->q[q] = id;
-      float fill = NAN;
-      SNC(nc_def_var_fill(ncid, id, 0, &fill), nm);
-      /* Without a band or wavelength dimension chunk[] has one entry less. */
-      size_t ch2[NC_MAX_COORDS + 4], k2 = 0;
-      for (size_t k = 0; k < w->n_cdims; k++) ch2[k2++] = 1;
-      if ((bq ? w->band_dim : w->wl_dim) >= 0) ch2[k2++] = 1;
-      for (size_t k = w->n_cdims + (w->wl_dim >= 0 || w->band_dim >= 0); k < nd; k++) ch2[k2++] = chunk[k];
-      SNC(nc_def_var_chunking(ncid, id, NC_CHUNKED, ch2), nm);
-      STRY(put_text_att(ncid, id, "long_name", qq->long_name, err));
-      STRY(put_text_att(ncid, id, "units", rgb ? qq->units_rgb : qq->units_mono, err));
-      STRY(put_text_att(ncid, id, "sensor", s->id, err));
-      if (w->coordinates[0]) STRY(put_text_att(ncid, id, "coordinates", w->coordinates, err));
-    }
-    name_cat(nm, sizeof nm, s->prefix, "seed");
-    STRY(def_ctx_var(w, nm, NC_UINT64, 0, NULL, &v->seed, err));
-    STRY(put_text_att(ncid, v->seed, "long_name", "render seed", err));
-    STRY(put_text_att(ncid, v->seed, "units", "1", err));
+  return RSW_OK;
+}
+
+/* A sensor's images, one float variable per quantity, chunked one image
+ * per chunk. */
+static rsw_status define_quantities(writer *w, const sensor_set *s, sensor_vars *v, rsw_err *err) {
+  int ncid = w->ncid;
+  const nc_film *sh = s->shape;
+  bool rgb = w->d->variant && strcmp(w->d->variant, "rgb") == 0;
+  char nm[160];
+  int extra[3] = {s->dim_y, s->dim_x, s->dim_ch};
+  int n_extra = s->dim_ch >= 0 ? 3 : 2;
+  size_t chunk[NC_MAX_COORDS + 3];
+  size_t nd = 0;
+  for (size_t k = 0; k < w->n_cdims; k++) chunk[nd++] = 1;
+  if (w->wl_dim >= 0 || w->band_dim >= 0) chunk[nd++] = 1;
+  chunk[nd++] = (size_t)sh->height;
+  chunk[nd++] = (size_t)sh->width;
+  if (n_extra == 3) chunk[nd++] = (size_t)sh->channels;
+  for (size_t q = 0; q < s->n_q; q++) {
+    const nc_quantity *qq = nc_quantity_find(s->qnames[q]);
+    name_cat(nm, sizeof nm, s->prefix, qq->name);
+    int id;
+    bool bq = band_quantity(qq->name);
+    TRY(def_ctx_var2(w, nm, NC_FLOAT, bq ? w->band_dim : w->wl_dim, n_extra, extra, &id, err));
+    v->q[q] = id;
+    float fill = NAN;
+    NC_TRY(nc_def_var_fill(ncid, id, 0, &fill), nm);
+    /* Without a band or wavelength dimension chunk[] has one entry less. */
+    size_t ch2[NC_MAX_COORDS + 4], k2 = 0;
+    for (size_t k = 0; k < w->n_cdims; k++) ch2[k2++] = 1;
+    if ((bq ? w->band_dim : w->wl_dim) >= 0) ch2[k2++] = 1;
+    for (size_t k = w->n_cdims + (w->wl_dim >= 0 || w->band_dim >= 0); k < nd; k++) ch2[k2++] = chunk[k];
+    NC_TRY(nc_def_var_chunking(ncid, id, NC_CHUNKED, ch2), nm);
+    TRY(put_text_att(ncid, id, "long_name", qq->long_name, err));
+    TRY(put_text_att(ncid, id, "units", rgb ? qq->units_rgb : qq->units_mono, err));
+    TRY(put_text_att(ncid, id, "sensor", s->id, err));
+    if (w->coordinates[0]) TRY(put_text_att(ncid, id, "coordinates", w->coordinates, err));
+  }
+  return RSW_OK;
+}
+
+/* A sensor's per-film numbers: seed, spp (when it varies), E_h and the
+ * rays the periodic boundary could not resolve. */
+static rsw_status define_film_numbers(writer *w, const sensor_set *s, sensor_vars *v, rsw_err *err) {
+  int ncid = w->ncid;
+  bool rgb = w->d->variant && strcmp(w->d->variant, "rgb") == 0;
+  char nm[160];
+  name_cat(nm, sizeof nm, s->prefix, "seed");
+  TRY(def_ctx_var(w, nm, NC_UINT64, 0, NULL, &v->seed, err));
+  TRY(put_text_att(ncid, v->seed, "long_name", "render seed", err));
+  TRY(put_text_att(ncid, v->seed, "units", "1", err));
+  if (w->missing) {
+    unsigned long long fill = 0;
+    NC_TRY(nc_def_var_fill(ncid, v->seed, 0, &fill), nm);
+  }
+  v->spp = -1;
+  if (!w->spp_uniform) {
+    name_cat(nm, sizeof nm, s->prefix, "spp");
+    TRY(def_ctx_var(w, nm, NC_UINT, 0, NULL, &v->spp, err));
+    TRY(put_text_att(ncid, v->spp, "long_name", "samples per pixel", err));
+    TRY(put_text_att(ncid, v->spp, "units", "1", err));
     if (w->missing) {
-      unsigned long long fill = 0;
-      SNC(nc_def_var_fill(ncid, v->seed, 0, &fill), nm);
-    }
-    v->spp = -1;
-    if (!w->spp_uniform) {
-      name_cat(nm, sizeof nm, s->prefix, "spp");
-      STRY(def_ctx_var(w, nm, NC_UINT, 0, NULL, &v->spp, err));
-      STRY(put_text_att(ncid, v->spp, "long_name", "samples per pixel", err));
-      STRY(put_text_att(ncid, v->spp, "units", "1", err));
-      if (w->missing) {
-        unsigned fill = 0;
-        SNC(nc_def_var_fill(ncid, v->spp, 0, &fill), nm);
-      }
-    }
-    /* E_h, the irradiance the brdf and brf divide by (Eradiate's
-     * "irradiance": horizontal spectral irradiance), per channel. */
-    v->irr = v->irr_srf = -1;
-    for (int b = 0; b < 2; b++) {
-      if (!(b ? s->any_band_irr : s->any_irr)) continue;
-      int *id = b ? &v->irr_srf : &v->irr;
-      name_cat(nm, sizeof nm, s->prefix, b ? "irradiance_srf" : "irradiance");
-      /* A coord of that name (a sweep over an irradiance) labels the
-       * contexts already: it wins, as for sza and saa. */
-      bool taken = false;
-      for (size_t k = 0; cs && k < cs->n; k++) taken |= strcmp(cs->c[k].name, nm) == 0;
-      if (taken) continue;
-      STRY(def_ctx_var2(w, nm, NC_DOUBLE, b ? w->band_dim : w->wl_dim, s->dim_ch >= 0 ? 1 : 0, &s->dim_ch, id, err));
-      double fill = NAN;
-      SNC(nc_def_var_fill(ncid, *id, 0, &fill), nm);
-      STRY(put_text_att(ncid, *id, "long_name",
-                        b ? "horizontal irradiance of the directional emitters (SRF-weighted)"
-                          : "horizontal irradiance of the directional emitters",
-                        err));
-      STRY(put_text_att(ncid, *id, "units", rgb ? "W m-2" : "W m-2 nm-1", err));
-      STRY(put_text_att(ncid, *id, "sensor", s->id, err));
-    }
-    v->unres = -1;
-    if (s->any_unresolved) {
-      name_cat(nm, sizeof nm, s->prefix, "unresolved_rays");
-      STRY(def_ctx_var(w, nm, NC_UINT64, 0, NULL, &v->unres, err));
-      STRY(put_text_att(ncid, v->unres, "long_name", "rays the periodic boundary could not resolve", err));
-      STRY(put_text_att(ncid, v->unres, "units", "1", err));
+      unsigned fill = 0;
+      NC_TRY(nc_def_var_fill(ncid, v->spp, 0, &fill), nm);
     }
   }
-  SNC(nc_enddef(ncid), "enddef");
+  /* E_h, the irradiance the brdf and brf divide by (Eradiate's
+   * "irradiance": horizontal spectral irradiance), per channel. */
+  v->irr = v->irr_srf = -1;
+  for (int b = 0; b < 2; b++) {
+    if (!(b ? s->any_band_irr : s->any_irr)) continue;
+    int *id = b ? &v->irr_srf : &v->irr;
+    name_cat(nm, sizeof nm, s->prefix, b ? "irradiance_srf" : "irradiance");
+    /* A coord of that name (a sweep over an irradiance) labels the
+     * contexts already: it wins, as for sza and saa. */
+    if (coord_taken(w, nm)) continue;
+    TRY(def_ctx_var2(w, nm, NC_DOUBLE, b ? w->band_dim : w->wl_dim, s->dim_ch >= 0 ? 1 : 0, &s->dim_ch, id, err));
+    double fill = NAN;
+    NC_TRY(nc_def_var_fill(ncid, *id, 0, &fill), nm);
+    TRY(put_text_att(ncid, *id, "long_name",
+                     b ? "horizontal irradiance of the directional emitters (SRF-weighted)"
+                       : "horizontal irradiance of the directional emitters",
+                     err));
+    TRY(put_text_att(ncid, *id, "units", rgb ? "W m-2" : "W m-2 nm-1", err));
+    TRY(put_text_att(ncid, *id, "sensor", s->id, err));
+  }
+  v->unres = -1;
+  if (s->any_unresolved) {
+    name_cat(nm, sizeof nm, s->prefix, "unresolved_rays");
+    TRY(def_ctx_var(w, nm, NC_UINT64, 0, NULL, &v->unres, err));
+    TRY(put_text_att(ncid, v->unres, "long_name", "rays the periodic boundary could not resolve", err));
+    TRY(put_text_att(ncid, v->unres, "units", "1", err));
+  }
+  return RSW_OK;
+}
 
-  /* Values: coords, contexts, wavelengths. */
-  size_t start[NC_MAX_COORDS + 4], count[NC_MAX_COORDS + 4];
+/* One sensor's dimensions (y, x, channel) and variables; coordinates are
+ * the layout's (base_len bytes of w->coordinates) and its own. */
+static rsw_status define_sensor(writer *w, sensor_set *s, sensor_vars *v, size_t base_len, rsw_err *err) {
+  int ncid = w->ncid;
+  const nc_film *sh = s->shape;
+  char nm[160];
+  w->coordinates[base_len] = '\0';
+  name_cat(nm, sizeof nm, s->prefix, "y");
+  NC_TRY(nc_def_dim(ncid, nm, (size_t)sh->height, &s->dim_y), nm);
+  name_cat(nm, sizeof nm, s->prefix, "x");
+  NC_TRY(nc_def_dim(ncid, nm, (size_t)sh->width, &s->dim_x), nm);
+  s->dim_ch = -1;
+  if (sh->channels > 1) {
+    name_cat(nm, sizeof nm, s->prefix, "channel");
+    NC_TRY(nc_def_dim(ncid, nm, (size_t)sh->channels, &s->dim_ch), nm);
+    NC_TRY(nc_def_var(ncid, nm, NC_STRING, 1, &s->dim_ch, &v->ch), nm);
+    TRY(put_text_att(ncid, v->ch, "long_name", "film channel", err));
+  }
+  if (s->any_angles) TRY(define_view_angles(w, s, v, err));
+  TRY(define_quantities(w, s, v, err));
+  return define_film_numbers(w, s, v, err);
+}
+
+/* Values of the layout: coords, context ids, wavelengths, the sun's
+ * angles, node wavelengths and band ids. */
+static rsw_status put_layout(const writer *w, const file_vars *fv, rsw_err *err) {
+  const nc_dataset *d = w->d;
+  int ncid = w->ncid;
+  const nc_coords *cs = d->coords && d->coords->n ? d->coords : NULL;
+  size_t start[NC_MAX_COORDS + 4];
   for (size_t k = 0; cs && k < cs->n; k++) {
     const nc_coord *c = &cs->c[k];
     size_t len = w->grid ? w->ax[k].n : d->n_contexts;
@@ -887,133 +925,146 @@ static rsw_status write_all(writer *w, rsw_err *err) {
       start[0] = r;
       if (c->is_string) {
         const char *p = c->str[ctx];
-        SNC(nc_put_var1_string(ncid, v_coord[k], start, &p), c->name);
+        NC_TRY(nc_put_var1_string(ncid, fv->coord[k], start, &p), c->name);
       } else {
-        SNC(nc_put_var1_double(ncid, v_coord[k], start, &c->num[ctx]), c->name);
+        NC_TRY(nc_put_var1_double(ncid, fv->coord[k], start, &c->num[ctx]), c->name);
       }
     }
   }
   for (size_t ctx = 0; ctx < d->n_contexts; ctx++) {
     cell_start(w, ctx, start);
     const char *p = d->context_ids[ctx];
-    SNC(nc_put_var1_string(ncid, v_ctx, start, &p), "context");
-    if (v_wl >= 0 && isfinite(d->wavelengths[ctx]))
-      SNC(nc_put_var1_double(ncid, v_wl, start, &d->wavelengths[ctx]), "wavelength");
+    NC_TRY(nc_put_var1_string(ncid, fv->ctx, start, &p), "context");
+    if (fv->wl >= 0 && isfinite(d->wavelengths[ctx]))
+      NC_TRY(nc_put_var1_double(ncid, fv->wl, start, &d->wavelengths[ctx]), "wavelength");
   }
   for (int a = 0; a < 2; a++)
-    for (size_t ctx = 0; v_sun[a] >= 0 && ctx < d->n_contexts; ctx++) {
+    for (size_t ctx = 0; fv->sun[a] >= 0 && ctx < d->n_contexts; ctx++) {
       cell_start(w, ctx, start);
-      if (isfinite(sun[2 * ctx + (size_t)a]))
-        SNC(nc_put_var1_double(ncid, v_sun[a], start, &sun[2 * ctx + (size_t)a]), sun_names[a]);
+      if (isfinite(fv->sun_deg[2 * ctx + (size_t)a]))
+        NC_TRY(nc_put_var1_double(ncid, fv->sun[a], start, &fv->sun_deg[2 * ctx + (size_t)a]), sun_names[a]);
     }
-  if (v_nodes >= 0) SNC(nc_put_var_double(ncid, v_nodes, d->nodes), "wavelength");
-  for (size_t b = 0; v_bands >= 0 && b < d->n_bands; b++) {
+  if (fv->nodes >= 0) NC_TRY(nc_put_var_double(ncid, fv->nodes, d->nodes), "wavelength");
+  for (size_t b = 0; fv->bands >= 0 && b < d->n_bands; b++) {
     const char *p = d->band_ids[b];
-    SNC(nc_put_var1_string(ncid, v_bands, &b, &p), "band");
+    NC_TRY(nc_put_var1_string(ncid, fv->bands, &b, &p), "band");
   }
-  /* Films. */
-  float *deriv = NULL;
-  for (size_t i = 0; i < w->n_s; i++) {
-    sensor_set *s = &w->s[i];
-    sensor_vars *v = &sv[i];
-    const nc_film *sh = s->shape;
-    size_t np = (size_t)sh->width * (size_t)sh->height;
-    if (!deriv && !(deriv = malloc(np * (size_t)sh->channels * sizeof *deriv + 1))) {
-      free(sv), free(sun);
-      return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
-    }
-    if (s->any_angles && s->same_angles) {
-      double *za = malloc(np * 2 * sizeof *za);
-      if (!za) {
-        free(sv), free(sun), free(deriv);
-        return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
-      }
-      for (size_t p = 0; p < np; p++)
-        za[p] = canonical_angle(sh->angles[2 * p]), za[np + p] = canonical_angle(sh->angles[2 * p + 1]);
-      int rc = nc_put_var_double(ncid, v->vza, za);
-      if (rc == NC_NOERR) rc = nc_put_var_double(ncid, v->vaa, za + np);
-      free(za);
-      if (rc != NC_NOERR) {
-        free(sv), free(sun), free(deriv);
-        return nc_fail(err, rc, "vza");
-      }
-    }
-    /* Node (or plain) films, then band films. */
-    size_t n_slots = d->n_contexts * w->slots, n_all = n_slots + d->n_contexts * d->n_bands;
-    for (size_t k = 0; k < n_all; k++) {
-      bool is_band = k >= n_slots;
-      const nc_film *f = is_band ? s->by_band[k - n_slots] : s->by_ctx[k];
-      if (!f) continue;
-      size_t ctx = is_band ? (k - n_slots) / d->n_bands : k / w->slots;
-      size_t mid = is_band ? (k - n_slots) % d->n_bands : k % w->slots;
-      bool has_mid = is_band ? w->band_dim >= 0 : w->wl_dim >= 0;
-      cell_start(w, ctx, start);
-      size_t nd = w->n_cdims;
-      if (has_mid) start[nd++] = mid;
-      for (size_t q = 0; q < nd; q++) count[q] = 1;
-      if (!is_band) {
-        unsigned long long seed = f->seed;
-        SNC(nc_put_var1_ulonglong(ncid, v->seed, start, &seed), "seed");
-        if (v->spp >= 0) {
-          unsigned spp = f->spp;
-          SNC(nc_put_var1_uint(ncid, v->spp, start, &spp), "spp");
-        }
-        if (v->unres >= 0) {
-          unsigned long long u = f->unresolved_rays;
-          SNC(nc_put_var1_ulonglong(ncid, v->unres, start, &u), "unresolved_rays");
-        }
-      }
-      int irr = is_band ? v->irr_srf : v->irr;
-      if (irr >= 0 && f->has_irradiance) {
-        start[nd] = 0, count[nd] = (size_t)f->channels;
-        SNC(nc_put_vara_double(ncid, irr, start, count, f->irradiance), "irradiance");
-      }
-      start[nd] = start[nd + 1] = start[nd + 2] = 0;
-      count[nd] = (size_t)f->height, count[nd + 1] = (size_t)f->width, count[nd + 2] = (size_t)f->channels;
-      for (size_t q = 0; q < f->n_vars; q++) {
-        size_t qi = 0;
-        while (strcmp(s->qnames[qi], f->vars[q].name) != 0) qi++;
-        SNC(nc_put_vara_float(ncid, v->q[qi], start, count, f->vars[q].data), f->vars[q].name);
-      }
-      /* Derived standard errors: pi * stderr / E per channel. */
-      for (size_t dq = 0; dq < N_DERIVED && f->has_irradiance; dq++) {
-        const float *from = NULL, *needs = NULL;
-        for (size_t q = 0; q < f->n_vars; q++) {
-          if (strcmp(f->vars[q].name, derived[dq].from) == 0) from = f->vars[q].data;
-          if (strcmp(f->vars[q].name, derived[dq].needs) == 0) needs = f->vars[q].data;
-        }
-        size_t qi = 0;
-        while (qi < s->n_q && strcmp(s->qnames[qi], derived[dq].name) != 0) qi++;
-        if (!from || !needs || qi == s->n_q) continue;
-        size_t C = (size_t)f->channels;
-        for (size_t p = 0; p < np * C; p++) deriv[p] = (float)(M_PI * (double)from[p] / f->irradiance[p % C]);
-        SNC(nc_put_vara_float(ncid, v->q[qi], start, count, deriv), derived[dq].name);
-      }
-      if (!is_band && s->any_angles && !s->same_angles && f->angles) {
-        double *za = malloc(np * 2 * sizeof *za);
-        if (!za) {
-          free(sv), free(sun), free(deriv);
-          return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
-        }
-        for (size_t p = 0; p < np; p++)
-          za[p] = canonical_angle(f->angles[2 * p]), za[np + p] = canonical_angle(f->angles[2 * p + 1]);
-        int rc = nc_put_vara_double(ncid, v->vza, start, count, za);
-        if (rc == NC_NOERR) rc = nc_put_vara_double(ncid, v->vaa, start, count, za + np);
-        free(za);
-        if (rc != NC_NOERR) {
-          free(sv), free(sun), free(deriv);
-          return nc_fail(err, rc, "vza");
-        }
-      }
-    }
-    free(deriv);
-    deriv = NULL;
-  }
-  free(sun);
-  free(sv);
-#undef STRY
-#undef SNC
   return RSW_OK;
+}
+
+/* Viewing angles (np pixels of (zenith, azimuth)) into vza and vaa: the
+ * whole variables (start NULL) or one film's image at start/count. */
+static rsw_status put_view_angles(const writer *w, const sensor_vars *v, const double *angles, size_t np,
+                                  const size_t *start, const size_t *count, rsw_err *err) {
+  double *za = malloc(np * 2 * sizeof *za);
+  if (!za) return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+  for (size_t p = 0; p < np; p++)
+    za[p] = canonical_angle(angles[2 * p]), za[np + p] = canonical_angle(angles[2 * p + 1]);
+  int rc = start ? nc_put_vara_double(w->ncid, v->vza, start, count, za) : nc_put_var_double(w->ncid, v->vza, za);
+  if (rc == NC_NOERR)
+    rc = start ? nc_put_vara_double(w->ncid, v->vaa, start, count, za + np)
+               : nc_put_var_double(w->ncid, v->vaa, za + np);
+  free(za);
+  return rc == NC_NOERR ? RSW_OK : nc_fail(err, rc, "vza");
+}
+
+/* Film f of sensor s (a node or plain film, or a band film: is_band) at
+ * its context's cell and its node or band (mid). deriv: room for one image
+ * of derived standard errors. */
+static rsw_status put_film(const writer *w, const sensor_set *s, const sensor_vars *v, const nc_film *f,
+                           size_t ctx, size_t mid, bool is_band, float *deriv, rsw_err *err) {
+  int ncid = w->ncid;
+  size_t np = (size_t)s->shape->width * (size_t)s->shape->height;
+  size_t start[NC_MAX_COORDS + 4], count[NC_MAX_COORDS + 4];
+  bool has_mid = is_band ? w->band_dim >= 0 : w->wl_dim >= 0;
+  cell_start(w, ctx, start);
+  size_t nd = w->n_cdims;
+  if (has_mid) start[nd++] = mid;
+  for (size_t q = 0; q < nd; q++) count[q] = 1;
+  if (!is_band) {
+    unsigned long long seed = f->seed;
+    NC_TRY(nc_put_var1_ulonglong(ncid, v->seed, start, &seed), "seed");
+    if (v->spp >= 0) {
+      unsigned spp = f->spp;
+      NC_TRY(nc_put_var1_uint(ncid, v->spp, start, &spp), "spp");
+    }
+    if (v->unres >= 0) {
+      unsigned long long u = f->unresolved_rays;
+      NC_TRY(nc_put_var1_ulonglong(ncid, v->unres, start, &u), "unresolved_rays");
+    }
+  }
+  int irr = is_band ? v->irr_srf : v->irr;
+  if (irr >= 0 && f->has_irradiance) {
+    start[nd] = 0, count[nd] = (size_t)f->channels;
+    NC_TRY(nc_put_vara_double(ncid, irr, start, count, f->irradiance), "irradiance");
+  }
+  start[nd] = start[nd + 1] = start[nd + 2] = 0;
+  count[nd] = (size_t)f->height, count[nd + 1] = (size_t)f->width, count[nd + 2] = (size_t)f->channels;
+  for (size_t q = 0; q < f->n_vars; q++) {
+    size_t qi = 0;
+    while (strcmp(s->qnames[qi], f->vars[q].name) != 0) qi++;
+    NC_TRY(nc_put_vara_float(ncid, v->q[qi], start, count, f->vars[q].data), f->vars[q].name);
+  }
+  /* Derived standard errors: pi * stderr / E per channel. */
+  for (size_t dq = 0; dq < N_DERIVED && f->has_irradiance; dq++) {
+    const float *from = NULL, *needs = NULL;
+    for (size_t q = 0; q < f->n_vars; q++) {
+      if (strcmp(f->vars[q].name, derived[dq].from) == 0) from = f->vars[q].data;
+      if (strcmp(f->vars[q].name, derived[dq].needs) == 0) needs = f->vars[q].data;
+    }
+    size_t qi = 0;
+    while (qi < s->n_q && strcmp(s->qnames[qi], derived[dq].name) != 0) qi++;
+    if (!from || !needs || qi == s->n_q) continue;
+    size_t C = (size_t)f->channels;
+    for (size_t p = 0; p < np * C; p++) deriv[p] = (float)(M_PI * (double)from[p] / f->irradiance[p % C]);
+    NC_TRY(nc_put_vara_float(ncid, v->q[qi], start, count, deriv), derived[dq].name);
+  }
+  if (!is_band && s->any_angles && !s->same_angles && f->angles)
+    TRY(put_view_angles(w, v, f->angles, np, start, count, err));
+  return RSW_OK;
+}
+
+/* A sensor's films: its shared viewing angles, then node (or plain)
+ * films, then band films. */
+static rsw_status put_sensor(const writer *w, const sensor_set *s, const sensor_vars *v, rsw_err *err) {
+  const nc_dataset *d = w->d;
+  const nc_film *sh = s->shape;
+  size_t np = (size_t)sh->width * (size_t)sh->height;
+  float *deriv = malloc(np * (size_t)sh->channels * sizeof *deriv + 1);
+  if (!deriv) return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+  rsw_status st = RSW_OK;
+  if (s->any_angles && s->same_angles) st = put_view_angles(w, v, sh->angles, np, NULL, NULL, err);
+  size_t n_slots = d->n_contexts * w->slots, n_all = n_slots + d->n_contexts * d->n_bands;
+  for (size_t k = 0; !st && k < n_all; k++) {
+    bool is_band = k >= n_slots;
+    const nc_film *f = is_band ? s->by_band[k - n_slots] : s->by_ctx[k];
+    if (!f) continue;
+    size_t ctx = is_band ? (k - n_slots) / d->n_bands : k / w->slots;
+    size_t mid = is_band ? (k - n_slots) % d->n_bands : k % w->slots;
+    st = put_film(w, s, v, f, ctx, mid, is_band, deriv, err);
+  }
+  free(deriv);
+  return st;
+}
+
+static rsw_status write_all(writer *w, rsw_err *err) {
+  file_vars fv = {.wl = -1, .nodes = -1, .bands = -1, .sun = {-1, -1}};
+  rsw_status st = write_globals(w, err);
+  if (!st) st = define_layout(w, &fv, err);
+  if (!st) st = define_sun(w, &fv, err);
+  size_t base_len = strlen(w->coordinates);
+  if (!st && !(fv.sv = calloc(w->n_s ? w->n_s : 1, sizeof *fv.sv)))
+    st = rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+  for (size_t i = 0; !st && i < w->n_s; i++) st = define_sensor(w, &w->s[i], &fv.sv[i], base_len, err);
+  if (!st) {
+    int rc = nc_enddef(w->ncid);
+    if (rc != NC_NOERR) st = nc_fail(err, rc, "enddef");
+  }
+  if (!st) st = put_layout(w, &fv, err);
+  for (size_t i = 0; !st && i < w->n_s; i++) st = put_sensor(w, &w->s[i], &fv.sv[i], err);
+  free(fv.sun_deg);
+  free(fv.sv);
+  return st;
 }
 
 /* Plan and write d into the open ncid. */

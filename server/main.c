@@ -16,6 +16,7 @@
 #include <string.h>
 #include <strings.h>
 
+#include "cmdline.h"
 #include "http/encode.h"
 #include "image_exr.h"
 #include "image_png.h"
@@ -75,6 +76,36 @@ static bool parse_pos_double(const char *s, double *out) {
 
 static int apply_sets(const char *cmd, scene *sc, const char *const *sets, size_t n);
 
+/* A command's option values, one at a time, in table order: o is the
+ * option, typed the name as the user wrote it, val its value (NULL: the
+ * command line ended before it). Returns 0, or the exit status after the
+ * message. */
+typedef int (*opt_value_fn)(void *req, const cmdline_opt *o, const char *typed, const char *val);
+
+/* argv[1..] against opts (common/cmdline.h, as the client reads its
+ * command lines): positionals into a->pos, every option value through
+ * value(). Returns 0, or the exit status after the message. */
+static int parse_command(const char *cmd, const cmdline_opt *opts, int argc, char **argv, cmdline_args *a,
+                         opt_value_fn value, void *req) {
+  cmdline_error e;
+  switch (cmdline_parse(opts, argc - 1, argv + 1, a, &e)) {
+  case CMDLINE_OK: break;
+  case CMDLINE_UNKNOWN:
+  case CMDLINE_NO_VALUE: return usage_error(cmd, "unknown option '%s'", e.word);
+  case CMDLINE_NEEDS_VALUE: {
+    int rc = value(req, e.opt, e.word, NULL);
+    return rc ? rc : usage_error(cmd, "%s needs a value", e.word);
+  }
+  case CMDLINE_NOMEM: fprintf(stderr, "raysweepd %s: out of memory\n", cmd); return 1;
+  }
+  for (size_t i = 0; i < a->n_opts; i++)
+    for (size_t k = 0; k < a->n_vals[i]; k++) {
+      int rc = value(req, &opts[i], opts[i].name, a->vals[i][k]);
+      if (rc) return rc;
+    }
+  return 0;
+}
+
 /* -D name=value: append to defines (the name is malloc'ed). Returns NULL,
  * or why it was refused. */
 static const char *add_define(scene_define *defines, size_t *n, const char *def) {
@@ -129,106 +160,161 @@ static rsw_status write_film_encoded(out_format fmt, const film_image *img, cons
   return ok ? RSW_OK : rsw_fail(err, RSW_ERR_IO, path, "cannot write the film: %s", strerror(e));
 }
 
-static int cmd_render(int argc, char **argv) {
-  const char *scene_path = NULL, *out_path = NULL, *sensor_id = NULL, *variant_name = NULL;
-  const char *plugin_dir = NULL;
+/* raysweepd render's options (the help text: `commands` below). */
+enum {
+  R_OUT,
+  R_OUTPUT,
+  R_SENSOR,
+  R_SPP,
+  R_SEED,
+  R_THREADS,
+  R_ISA,
+  R_WAVELENGTH,
+  R_QUANTITIES,
+  R_VARIANCE,
+  R_EXPOSURE,
+  R_COLORMAP,
+  R_VARIANT,
+  R_SET,
+  R_PLUGIN_DIR,
+  R_STATS,
+  R_DEFINE
+};
+static const cmdline_opt render_cmd_opts[] = {
+    [R_OUT] = {"-o", "OUT"},
+    [R_OUTPUT] = {"--output", "OUT", CMDLINE_ALIAS},
+    [R_SENSOR] = {"--sensor", "ID"},
+    [R_SPP] = {"--spp", "N"},
+    [R_SEED] = {"--seed", "S"},
+    [R_THREADS] = {"--threads", "N"},
+    [R_ISA] = {"--isa", "ISA"},
+    [R_WAVELENGTH] = {"--wavelength", "NM"},
+    [R_QUANTITIES] = {"--quantities", "LIST"},
+    [R_VARIANCE] = {"--variance"},
+    [R_EXPOSURE] = {"--exposure", "EV|auto[+-EV]"},
+    [R_COLORMAP] = {"--colormap", "MAP"},
+    [R_VARIANT] = {"--variant", "mono|rgb"},
+    [R_SET] = {"--set", "KEY=VALUE", CMDLINE_REPEAT},
+    [R_PLUGIN_DIR] = {"--plugin-dir", "DIR"},
+    [R_STATS] = {"--stats"},
+    [R_DEFINE] = {"-D", "name=value", CMDLINE_REPEAT | CMDLINE_ATTACHED},
+    {NULL},
+};
+
+/* What raysweepd render was asked. */
+typedef struct render_req {
+  const char *out_path, *sensor_id, *variant_name, *plugin_dir;
   scene_define defines[MAX_DEFINES];
-  size_t n_defines = 0;
+  size_t n_defines;
   const char *sets[MAX_SETS];
-  size_t n_sets = 0;
-  unsigned long long spp = 0, seed = 0, threads = 0;
-  double wavelength = 0;
-  unsigned quantities = 0;
-  bool variance = false;
-  png_look look = {0};
-  bool stats = false;
+  size_t n_sets;
+  unsigned long long spp, seed, threads;
+  double wavelength;
+  unsigned quantities;
+  bool variance, stats;
+  png_look look;
+} render_req;
+
+static int render_value(void *req, const cmdline_opt *o, const char *typed, const char *val) {
+  render_req *r = req;
+  const char *v = val ? val : "";
+  switch ((int)(o - render_cmd_opts)) {
+  case R_OUT:
+    if (!val) return usage_error("render", "%s needs a file name", typed);
+    r->out_path = val;
+    break;
+  case R_SENSOR:
+    if (!val) return usage_error("render", "%s needs a sensor id or index", typed);
+    r->sensor_id = val;
+    break;
+  case R_SPP:
+    if (!parse_u64(val, 1ull << 31, &r->spp) || r->spp == 0)
+      return usage_error("render", "--spp needs a positive integer (got '%s')", v);
+    break;
+  case R_SEED:
+    if (!parse_u64(val, ULLONG_MAX, &r->seed))
+      return usage_error("render", "--seed needs a non-negative integer (got '%s')", v);
+    break;
+  case R_THREADS:
+    if (!parse_u64(val, 256, &r->threads) || r->threads == 0)
+      return usage_error("render", "--threads needs an integer in [1, 256] (got '%s')", v);
+    break;
+  case R_ISA: {
+    rsw_isa isa;
+    rsw_err ierr = {0};
+    if (rsw_isa_parse(val, &isa, &ierr) != RSW_OK)
+      return usage_error("render", "%s: %s", ierr.where, ierr.msg);
+    rsw_isa_set(isa);
+    break;
+  }
+  case R_WAVELENGTH:
+    if (!parse_pos_double(val, &r->wavelength))
+      return usage_error("render", "--wavelength needs a positive number of nm (got '%s')", v);
+    break;
+  case R_QUANTITIES: {
+    if (!val || !*val)
+      return usage_error("render", "--quantities needs a comma-separated list of %s", RENDER_QUANTITY_NAMES);
+    char list[256];
+    snprintf(list, sizeof list, "%s", val);
+    for (char *save = NULL, *q = strtok_r(list, ",", &save); q; q = strtok_r(NULL, ",", &save)) {
+      unsigned bit;
+      if (!render_quantity_bit(q, &bit))
+        return usage_error("render", "--quantities: unknown quantity '%s' (one of %s)", q,
+                           RENDER_QUANTITY_NAMES);
+      r->quantities |= bit;
+    }
+    break;
+  }
+  case R_VARIANCE: r->variance = true; break;
+  case R_EXPOSURE:
+    if (!png_exposure_parse(val, &r->look))
+      return usage_error("render", "--exposure needs a number of stops, auto, or auto+EV (got '%s')", v);
+    break;
+  case R_COLORMAP:
+    if (!val || !png_colormap_known(val))
+      return usage_error("render", "--colormap needs one of %s (got '%s')", png_colormap_list(), v);
+    r->look.colormap = val;
+    break;
+  case R_VARIANT:
+    if (!val) return usage_error("render", "%s needs mono or rgb", typed);
+    r->variant_name = val;
+    break;
+  case R_SET:
+    if (!val || !strchr(val, '=') || val[0] == '=')
+      return usage_error("render", "--set needs KEY=VALUE (got '%s')", v);
+    if (r->n_sets == MAX_SETS) return usage_error("render", "too many --set (at most %d)", MAX_SETS);
+    r->sets[r->n_sets++] = val;
+    break;
+  case R_PLUGIN_DIR:
+    if (!val) return usage_error("render", "%s needs a directory", typed);
+    r->plugin_dir = val;
+    break;
+  case R_STATS: r->stats = true; break;
+  case R_DEFINE: {
+    const char *why = add_define(r->defines, &r->n_defines, val);
+    if (why) return usage_error("render", "%s (got '%s')", why, v);
+    break;
+  }
+  }
+  return 0;
+}
+
+static int cmd_render(int argc, char **argv) {
+  render_req r = {0};
+  cmdline_args args;
   int rc = 1;
   scene *sc = NULL;
   film_image img = {0};
-#define USAGE(...)                                                                                           \
-  do {                                                                                                       \
-    rc = usage_error("render", __VA_ARGS__);                                                                 \
-    goto out;                                                                                                \
-  } while (0)
-  for (int i = 1; i < argc; i++) {
-    const char *a = argv[i];
-    const char *val = i + 1 < argc ? argv[i + 1] : NULL;
-    if (strcmp(a, "-o") == 0 || strcmp(a, "--output") == 0) {
-      if (!val) USAGE("%s needs a file name", a);
-      out_path = val, i++;
-    } else if (strcmp(a, "--sensor") == 0) {
-      if (!val) USAGE("%s needs a sensor id or index", a);
-      sensor_id = val, i++;
-    } else if (strcmp(a, "--spp") == 0) {
-      if (!parse_u64(val, 1ull << 31, &spp) || spp == 0)
-        USAGE("--spp needs a positive integer (got '%s')", val ? val : "");
-      i++;
-    } else if (strcmp(a, "--seed") == 0) {
-      if (!parse_u64(val, ULLONG_MAX, &seed))
-        USAGE("--seed needs a non-negative integer (got '%s')", val ? val : "");
-      i++;
-    } else if (strcmp(a, "--threads") == 0) {
-      if (!parse_u64(val, 256, &threads) || threads == 0)
-        USAGE("--threads needs an integer in [1, 256] (got '%s')", val ? val : "");
-      i++;
-    } else if (strcmp(a, "--isa") == 0) {
-      rsw_isa isa;
-      rsw_err ierr = {0};
-      if (rsw_isa_parse(val, &isa, &ierr) != RSW_OK) USAGE("%s: %s", ierr.where, ierr.msg);
-      rsw_isa_set(isa);
-      i++;
-    } else if (strcmp(a, "--wavelength") == 0) {
-      if (!parse_pos_double(val, &wavelength))
-        USAGE("--wavelength needs a positive number of nm (got '%s')", val ? val : "");
-      i++;
-    } else if (strcmp(a, "--quantities") == 0) {
-      if (!val || !*val) USAGE("--quantities needs a comma-separated list of %s", RENDER_QUANTITY_NAMES);
-      char list[256];
-      snprintf(list, sizeof list, "%s", val);
-      for (char *save = NULL, *q = strtok_r(list, ",", &save); q; q = strtok_r(NULL, ",", &save)) {
-        unsigned bit;
-        if (!render_quantity_bit(q, &bit))
-          USAGE("--quantities: unknown quantity '%s' (one of %s)", q, RENDER_QUANTITY_NAMES);
-        quantities |= bit;
-      }
-      i++;
-    } else if (strcmp(a, "--variance") == 0) {
-      variance = true;
-    } else if (strcmp(a, "--exposure") == 0) {
-      if (!png_exposure_parse(val, &look))
-        USAGE("--exposure needs a number of stops, auto, or auto+EV (got '%s')", val ? val : "");
-      i++;
-    } else if (strcmp(a, "--colormap") == 0) {
-      if (!val || !png_colormap_known(val))
-        USAGE("--colormap needs one of %s (got '%s')", png_colormap_list(), val ? val : "");
-      look.colormap = val, i++;
-    } else if (strcmp(a, "--variant") == 0) {
-      if (!val) USAGE("%s needs mono or rgb", a);
-      variant_name = val, i++;
-    } else if (strcmp(a, "--set") == 0) {
-      if (!val || !strchr(val, '=') || val[0] == '=')
-        USAGE("--set needs KEY=VALUE (got '%s')", val ? val : "");
-      if (n_sets == MAX_SETS) USAGE("too many --set (at most %d)", MAX_SETS);
-      sets[n_sets++] = val, i++;
-    } else if (strcmp(a, "--plugin-dir") == 0) {
-      if (!val) USAGE("%s needs a directory", a);
-      plugin_dir = val, i++;
-    } else if (strcmp(a, "--stats") == 0) {
-      stats = true;
-    } else if (strncmp(a, "-D", 2) == 0) {
-      const char *def = a[2] ? a + 2 : val;
-      if (!a[2]) i++;
-      const char *why = add_define(defines, &n_defines, def);
-      if (why) USAGE("%s (got '%s')", why, def ? def : "");
-    } else if (a[0] == '-' && a[1]) {
-      USAGE("unknown option '%s'", a);
-    } else if (!scene_path) {
-      scene_path = a;
-    } else {
-      USAGE("unexpected argument '%s' (one scene file per render)", a);
-    }
+  const char *scene_path = NULL;
+  if ((rc = parse_command("render", render_cmd_opts, argc, argv, &args, render_value, &r))) goto out;
+  rc = 1;
+  if (args.n_pos > 1) {
+    rc = usage_error("render", "unexpected argument '%s' (one scene file per render)", args.pos[1]);
+    goto out;
   }
-#undef USAGE
+  scene_path = args.n_pos ? args.pos[0] : NULL;
+  const char *out_path = r.out_path, *sensor_id = r.sensor_id;
+  png_look look = r.look;
   if (!scene_path) {
     rc = usage_error("render", "missing the scene file%s", "");
     goto out;
@@ -251,17 +337,17 @@ static int cmd_render(int argc, char **argv) {
   }
   rsw_err err = {0};
   char msg[1200];
-  if (plugin_dir && plugins_load_dir(plugin_dir, &err)) {
+  if (r.plugin_dir && plugins_load_dir(r.plugin_dir, &err)) {
     fprintf(stderr, "raysweepd render: %s\n", rsw_err_format(&err, msg, sizeof msg));
     goto out;
   }
   scene_load_opts lo = {
-      .size = sizeof lo, .variant = variant_name, .defines = defines, .n_defines = n_defines};
+      .size = sizeof lo, .variant = r.variant_name, .defines = r.defines, .n_defines = r.n_defines};
   if (scene_load_file(scene_path, &lo, &sc, &err)) {
     fprintf(stderr, "raysweepd render: %s\n", rsw_err_format(&err, msg, sizeof msg));
     goto out;
   }
-  if (n_sets && apply_sets("render", sc, sets, n_sets)) goto out;
+  if (r.n_sets && apply_sets("render", sc, r.sets, r.n_sets)) goto out;
   size_t sensor_index = 0;
   if (sensor_id) {
     if (!scene_find_sensor(sc, sensor_id, &sensor_index)) {
@@ -274,18 +360,18 @@ static int cmd_render(int argc, char **argv) {
   }
   render_opts ro = {.size = sizeof ro,
                     .sensor = sensor_index,
-                    .spp = (uint32_t)spp,
-                    .seed = seed,
-                    .wavelength = wavelength,
-                    .threads = (int)threads,
-                    .quantities = quantities,
-                    .variance = variance};
+                    .spp = (uint32_t)r.spp,
+                    .seed = r.seed,
+                    .wavelength = r.wavelength,
+                    .threads = (int)r.threads,
+                    .quantities = r.quantities,
+                    .variance = r.variance};
   render_result_stats rs;
   if (render_sensor(sc, &ro, &img, &rs, &err)) {
     fprintf(stderr, "raysweepd render: %s\n", rsw_err_format(&err, msg, sizeof msg));
     goto out;
   }
-  if (stats) {
+  if (r.stats) {
     char line[600];
     render_stats_line(&rs, line, sizeof line);
     fprintf(stderr, "raysweepd render: stats: %s\n", line);
@@ -324,7 +410,8 @@ out:
   film_image_free(&img);
   scene_free(sc);
   plugins_unload(); /* after the scene: its plugin emitters call into them */
-  for (size_t i = 0; i < n_defines; i++) free((char *)defines[i].name);
+  for (size_t i = 0; i < r.n_defines; i++) free((char *)r.defines[i].name);
+  cmdline_free(&args);
   return rc;
 }
 
@@ -381,52 +468,79 @@ static void print_json_string(const char *s) {
   putchar('"');
 }
 
-static int cmd_params(int argc, char **argv) {
-  const char *scene_path = NULL, *match = "*", *variant_name = NULL;
-  unsigned mask = UPDATE_SPECTRAL | UPDATE_GEOMETRIC;
-  bool include_none = true, json = false;
+/* raysweepd params's options. */
+enum {
+  P_MATCH,
+  P_CLASS,
+  P_JSON,
+  P_VARIANT,
+  P_DEFINE
+};
+static const cmdline_opt params_cmd_opts[] = {
+    [P_MATCH] = {"--match", "PATTERN"},
+    [P_CLASS] = {"--class", "CLASS"},
+    [P_JSON] = {"--json"},
+    [P_VARIANT] = {"--variant", "mono|rgb"},
+    [P_DEFINE] = {"-D", "name=value", CMDLINE_REPEAT | CMDLINE_ATTACHED},
+    {NULL},
+};
+
+/* What raysweepd params was asked. */
+typedef struct params_req {
+  const char *match, *variant_name;
+  unsigned mask;
+  bool include_none, json;
   scene_define defines[MAX_DEFINES];
-  size_t n_defines = 0;
+  size_t n_defines;
+} params_req;
+
+static int params_value(void *req, const cmdline_opt *o, const char *typed, const char *val) {
+  params_req *r = req;
+  switch ((int)(o - params_cmd_opts)) {
+  case P_MATCH:
+    if (!val)
+      return usage_error("params", "%s needs a glob (e.g. '*.reflectance.value') or TYPE:ID:PATH", typed);
+    r->match = val;
+    break;
+  case P_CLASS: {
+    update_class c;
+    if (!val || !update_class_parse(val, &c))
+      return usage_error("params", "--class needs spectral, geometric or none (got '%s')", val ? val : "");
+    r->mask = c == UPDATE_NONE ? 0 : (unsigned)c;
+    r->include_none = c == UPDATE_NONE;
+    break;
+  }
+  case P_JSON: r->json = true; break;
+  case P_VARIANT:
+    if (!val) return usage_error("params", "%s needs mono or rgb", typed);
+    r->variant_name = val;
+    break;
+  case P_DEFINE: {
+    const char *why = add_define(r->defines, &r->n_defines, val);
+    if (why) return usage_error("params", "%s (got '%s')", why, val ? val : "");
+    break;
+  }
+  }
+  return 0;
+}
+
+static int cmd_params(int argc, char **argv) {
+  params_req r = {.match = "*", .mask = UPDATE_SPECTRAL | UPDATE_GEOMETRIC, .include_none = true};
+  cmdline_args args;
   int rc = 1;
   scene *sc = NULL;
   size_t *idx = NULL, count = 0;
-#define USAGE(...)                                                                                           \
-  do {                                                                                                       \
-    rc = usage_error("params", __VA_ARGS__);                                                                 \
-    goto out;                                                                                                \
-  } while (0)
-  for (int i = 1; i < argc; i++) {
-    const char *a = argv[i];
-    const char *val = i + 1 < argc ? argv[i + 1] : NULL;
-    if (strcmp(a, "--match") == 0) {
-      if (!val) USAGE("%s needs a glob (e.g. '*.reflectance.value') or TYPE:ID:PATH", a);
-      match = val, i++;
-    } else if (strcmp(a, "--class") == 0) {
-      update_class c;
-      if (!val || !update_class_parse(val, &c))
-        USAGE("--class needs spectral, geometric or none (got '%s')", val ? val : "");
-      mask = c == UPDATE_NONE ? 0 : (unsigned)c;
-      include_none = c == UPDATE_NONE;
-      i++;
-    } else if (strcmp(a, "--json") == 0) {
-      json = true;
-    } else if (strcmp(a, "--variant") == 0) {
-      if (!val) USAGE("%s needs mono or rgb", a);
-      variant_name = val, i++;
-    } else if (strncmp(a, "-D", 2) == 0) {
-      const char *def = a[2] ? a + 2 : val;
-      if (!a[2]) i++;
-      const char *why = add_define(defines, &n_defines, def);
-      if (why) USAGE("%s (got '%s')", why, def ? def : "");
-    } else if (a[0] == '-' && a[1]) {
-      USAGE("unknown option '%s'", a);
-    } else if (!scene_path) {
-      scene_path = a;
-    } else {
-      USAGE("unexpected argument '%s'", a);
-    }
+  const char *scene_path = NULL;
+  if ((rc = parse_command("params", params_cmd_opts, argc, argv, &args, params_value, &r))) goto out;
+  rc = 1;
+  if (args.n_pos > 1) {
+    rc = usage_error("params", "unexpected argument '%s'", args.pos[1]);
+    goto out;
   }
-#undef USAGE
+  scene_path = args.n_pos ? args.pos[0] : NULL;
+  const char *match = r.match;
+  unsigned mask = r.mask;
+  bool include_none = r.include_none, json = r.json;
   if (!scene_path) {
     rc = usage_error("params", "missing the scene file%s", "");
     goto out;
@@ -434,7 +548,7 @@ static int cmd_params(int argc, char **argv) {
   rsw_err err = {0};
   char msg[1200];
   scene_load_opts lo = {
-      .size = sizeof lo, .variant = variant_name, .defines = defines, .n_defines = n_defines};
+      .size = sizeof lo, .variant = r.variant_name, .defines = r.defines, .n_defines = r.n_defines};
   if (scene_load_file(scene_path, &lo, &sc, &err)) {
     fprintf(stderr, "raysweepd params: %s\n", rsw_err_format(&err, msg, sizeof msg));
     goto out;
@@ -484,7 +598,8 @@ static int cmd_params(int argc, char **argv) {
 out:
   free(idx);
   scene_free(sc);
-  for (size_t i = 0; i < n_defines; i++) free((char *)defines[i].name);
+  for (size_t i = 0; i < r.n_defines; i++) free((char *)r.defines[i].name);
+  cmdline_free(&args);
   return rc;
 }
 
@@ -576,35 +691,13 @@ static const command commands[] = {
 };
 #define N_COMMANDS (sizeof commands / sizeof commands[0])
 
-/* Print "PREFIX raysweepd USAGE", wrapped before column 100 at spaces outside
- * brackets and parentheses, continuation lines aligned after "raysweepd CMD ". */
+/* Print "PREFIX raysweepd USAGE" (common/cmdline.h: wrapped as the
+ * client's usage lines are). */
 static void print_usage_line(FILE *f, const char *prefix, const char *usage) {
   const char *sp = strchr(usage, ' ');
-  int name_len = sp ? (int)(sp - usage) : (int)strlen(usage);
-  int indent = (int)strlen(prefix) + (int)strlen("raysweepd ") + name_len + 1;
-  int col = fprintf(f, "%sraysweepd %.*s", prefix, name_len, usage);
-  const char *p = sp;
-  while (p && *p) {
-    while (*p == ' ') p++;
-    const char *q = p; /* the next word: up to a space at depth 0 */
-    int depth = 0;
-    bool joined = false;
-    while (*q && (*q != ' ' || depth > 0)) {
-      if (*q == '[' || *q == '(') depth++;
-      if ((*q == ']' || *q == ')') && depth > 0) depth--;
-      q++;
-      /* A flag and its value stay together ("-o OUT.exr"). */
-      if (*q == ' ' && depth == 0 && *p == '-' && !joined && q[1] && !strchr("-[(", q[1])) q++, joined = true;
-    }
-    if (q == p) break;
-    if (col + 1 + (q - p) > 100)
-      col = fprintf(f, "\n%*s", indent, "") - 1;
-    else
-      col += fprintf(f, " ");
-    col += fprintf(f, "%.*s", (int)(q - p), p);
-    p = q;
-  }
-  fputc('\n', f);
+  char name[32];
+  snprintf(name, sizeof name, "%.*s", sp ? (int)(sp - usage) : (int)strlen(usage), usage);
+  cmdline_print_usage(f, prefix, "raysweepd", name, sp ? sp + 1 : "");
 }
 
 static void usage(FILE *f) {

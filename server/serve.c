@@ -18,6 +18,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "cmdline.h"
 #include "default_scene.h"
 #include "http/http.h"
 #include "kernel/core/isa.h"
@@ -76,7 +77,7 @@ static bool parse_bytes(const char *s, unsigned long long *out) {
   return *out > 0;
 }
 
-/* Options table: each takes one value. */
+/* The options (common/cmdline.h); each takes one value. */
 typedef enum opt_id {
   OPT_LISTEN,
   OPT_THREADS,
@@ -98,112 +99,121 @@ typedef enum opt_id {
   OPT_ISA,
 } opt_id;
 
-static const struct {
-  const char *name;
-  opt_id id;
-} options[] = {
-    {"--listen", OPT_LISTEN},
-    {"--threads", OPT_THREADS},
-    {"--scene", OPT_SCENE},
-    {"--data-root", OPT_DATA_ROOT},
-    {"--blob-dir", OPT_BLOB_DIR},
-    {"--token-file", OPT_TOKEN_FILE},
-    {"--max-body", OPT_MAX_BODY},
-    {"--max-queue", OPT_MAX_QUEUE},
-    {"--result-ttl", OPT_RESULT_TTL},
-    {"--port-file", OPT_PORT_FILE},
-    {"--plugin-dir", OPT_PLUGIN_DIR},
-    {"--state-dir", OPT_STATE_DIR},
-    {"--max-scene-bytes", OPT_MAX_SCENE_BYTES},
-    {"--max-result-bytes", OPT_MAX_RESULT_BYTES},
-    {"--max-connections", OPT_MAX_CONNECTIONS},
-    {"--header-timeout", OPT_HEADER_TIMEOUT},
-    {"--max-film-bytes", OPT_MAX_FILM},
-    {"--isa", OPT_ISA},
+static const cmdline_opt options[] = {
+    [OPT_LISTEN] = {"--listen", "HOST:PORT"},
+    [OPT_THREADS] = {"--threads", "N"},
+    [OPT_SCENE] = {"--scene", "FILE", CMDLINE_REPEAT},
+    [OPT_DATA_ROOT] = {"--data-root", "DIR"},
+    [OPT_BLOB_DIR] = {"--blob-dir", "DIR"},
+    [OPT_TOKEN_FILE] = {"--token-file", "F"},
+    [OPT_MAX_BODY] = {"--max-body", "BYTES"},
+    [OPT_MAX_QUEUE] = {"--max-queue", "N"},
+    [OPT_RESULT_TTL] = {"--result-ttl", "S"},
+    [OPT_PORT_FILE] = {"--port-file", "F"},
+    [OPT_PLUGIN_DIR] = {"--plugin-dir", "DIR"},
+    [OPT_STATE_DIR] = {"--state-dir", "DIR"},
+    [OPT_MAX_SCENE_BYTES] = {"--max-scene-bytes", "BYTES"},
+    [OPT_MAX_RESULT_BYTES] = {"--max-result-bytes", "BYTES"},
+    [OPT_MAX_CONNECTIONS] = {"--max-connections", "N"},
+    [OPT_HEADER_TIMEOUT] = {"--header-timeout", "S"},
+    [OPT_MAX_FILM] = {"--max-film-bytes", "B"},
+    [OPT_ISA] = {"--isa", "ISA"},
+    {NULL},
 };
 
-static int parse_args(int argc, char **argv, serve_args *a) {
-  for (int i = 1; i < argc; i++) {
-    const char *arg = argv[i];
-    if (strcmp(arg, "-h") == 0 || strcmp(arg, "--help") == 0) {
-      printf("usage: raysweepd %s\n", RSW_SERVE_USAGE);
-      return -1;
-    }
-    size_t k = 0;
-    while (k < sizeof options / sizeof options[0] && strcmp(options[k].name, arg) != 0) k++;
-    if (k == sizeof options / sizeof options[0])
-      return fail_usage("unknown option '%s' (usage: raysweepd %s)", arg, RSW_SERVE_USAGE);
-    if (i + 1 >= argc) return fail_usage("%s needs a value", arg);
-    const char *v = argv[++i];
-    switch (options[k].id) {
-    case OPT_LISTEN: a->listen = v; break;
-    case OPT_DATA_ROOT: a->data_root = v; break;
-    case OPT_BLOB_DIR: a->blob_dir = v; break;
-    case OPT_TOKEN_FILE: a->token_file = v; break;
-    case OPT_PORT_FILE: a->port_file = v; break;
-    case OPT_PLUGIN_DIR: a->plugin_dir = v; break;
-    case OPT_STATE_DIR: a->state_dir = v; break;
-    case OPT_MAX_SCENE_BYTES:
-      if (!parse_bytes(v, &a->max_scene_bytes))
-        return fail_usage("--max-scene-bytes needs a positive byte count such as 1073741824 or 1G (got '%s')",
-                          v);
-      break;
-    case OPT_MAX_RESULT_BYTES:
-      if (!parse_bytes(v, &a->max_result_bytes))
-        return fail_usage(
-            "--max-result-bytes needs a positive byte count such as 1073741824 or 1G (got '%s')", v);
-      break;
-    case OPT_SCENE:
-      if (a->n_scenes == MAX_SCENES) return fail_usage("too many --scene (at most %d)", MAX_SCENES);
-      a->scenes[a->n_scenes++] = v;
-      break;
-    case OPT_THREADS:
-      if (!parse_ull(v, 256, &a->threads) || !a->threads)
-        return fail_usage("--threads needs an integer in [1, 256] (got '%s')", v);
-      break;
-    case OPT_ISA: { /* process-wide, set before any thread starts */
-      rsw_isa isa;
-      rsw_err err = {0};
-      if (rsw_isa_parse(v, &isa, &err) != RSW_OK) return fail_usage("%s: %s", err.where, err.msg);
-      rsw_isa_set(isa);
-      break;
-    }
-    case OPT_MAX_QUEUE:
-      if (!parse_ull(v, 1000000, &a->max_queue) || !a->max_queue)
-        return fail_usage("--max-queue needs an integer in [1, 1000000] (got '%s')", v);
-      break;
-    case OPT_MAX_BODY:
-      if (!parse_bytes(v, &a->max_body))
-        return fail_usage("--max-body needs a positive byte count such as 268435456 or 256M (got '%s')", v);
-      break;
-    case OPT_MAX_CONNECTIONS:
-      if (!parse_ull(v, 100000, &a->max_connections) || a->max_connections < 8)
-        return fail_usage("--max-connections needs an integer in [8, 100000] (got '%s')", v);
-      break;
-    case OPT_HEADER_TIMEOUT: {
-      char *end;
-      errno = 0;
-      a->header_timeout = strtod(v, &end);
-      if (errno || end == v || *end || !(a->header_timeout > 0) || !(a->header_timeout <= 3600))
-        return fail_usage("--header-timeout needs a number of seconds in (0, 3600] (got '%s')", v);
-      break;
-    }
-    case OPT_MAX_FILM:
-      if (!parse_bytes(v, &a->max_film))
-        return fail_usage("--max-film-bytes needs a positive byte count such as 1073741824 or 1G (got '%s')",
-                          v);
-      break;
-    case OPT_RESULT_TTL: {
-      char *end;
-      errno = 0;
-      a->result_ttl = strtod(v, &end);
-      if (errno || end == v || *end || !(a->result_ttl > 0) || !isfinite(a->result_ttl))
-        return fail_usage("--result-ttl needs a positive number of seconds (got '%s')", v);
-      break;
-    }
-    }
+/* One option's value into *a. */
+static int serve_value(serve_args *a, opt_id id, const char *v) {
+  switch (id) {
+  case OPT_LISTEN: a->listen = v; break;
+  case OPT_DATA_ROOT: a->data_root = v; break;
+  case OPT_BLOB_DIR: a->blob_dir = v; break;
+  case OPT_TOKEN_FILE: a->token_file = v; break;
+  case OPT_PORT_FILE: a->port_file = v; break;
+  case OPT_PLUGIN_DIR: a->plugin_dir = v; break;
+  case OPT_STATE_DIR: a->state_dir = v; break;
+  case OPT_MAX_SCENE_BYTES:
+    if (!parse_bytes(v, &a->max_scene_bytes))
+      return fail_usage("--max-scene-bytes needs a positive byte count such as 1073741824 or 1G (got '%s')",
+                        v);
+    break;
+  case OPT_MAX_RESULT_BYTES:
+    if (!parse_bytes(v, &a->max_result_bytes))
+      return fail_usage("--max-result-bytes needs a positive byte count such as 1073741824 or 1G (got '%s')",
+                        v);
+    break;
+  case OPT_SCENE:
+    if (a->n_scenes == MAX_SCENES) return fail_usage("too many --scene (at most %d)", MAX_SCENES);
+    a->scenes[a->n_scenes++] = v;
+    break;
+  case OPT_THREADS:
+    if (!parse_ull(v, 256, &a->threads) || !a->threads)
+      return fail_usage("--threads needs an integer in [1, 256] (got '%s')", v);
+    break;
+  case OPT_ISA: { /* process-wide, set before any thread starts */
+    rsw_isa isa;
+    rsw_err err = {0};
+    if (rsw_isa_parse(v, &isa, &err) != RSW_OK) return fail_usage("%s: %s", err.where, err.msg);
+    rsw_isa_set(isa);
+    break;
+  }
+  case OPT_MAX_QUEUE:
+    if (!parse_ull(v, 1000000, &a->max_queue) || !a->max_queue)
+      return fail_usage("--max-queue needs an integer in [1, 1000000] (got '%s')", v);
+    break;
+  case OPT_MAX_BODY:
+    if (!parse_bytes(v, &a->max_body))
+      return fail_usage("--max-body needs a positive byte count such as 268435456 or 256M (got '%s')", v);
+    break;
+  case OPT_MAX_CONNECTIONS:
+    if (!parse_ull(v, 100000, &a->max_connections) || a->max_connections < 8)
+      return fail_usage("--max-connections needs an integer in [8, 100000] (got '%s')", v);
+    break;
+  case OPT_HEADER_TIMEOUT: {
+    char *end;
+    errno = 0;
+    a->header_timeout = strtod(v, &end);
+    if (errno || end == v || *end || !(a->header_timeout > 0) || !(a->header_timeout <= 3600))
+      return fail_usage("--header-timeout needs a number of seconds in (0, 3600] (got '%s')", v);
+    break;
+  }
+  case OPT_MAX_FILM:
+    if (!parse_bytes(v, &a->max_film))
+      return fail_usage("--max-film-bytes needs a positive byte count such as 1073741824 or 1G (got '%s')",
+                        v);
+    break;
+  case OPT_RESULT_TTL: {
+    char *end;
+    errno = 0;
+    a->result_ttl = strtod(v, &end);
+    if (errno || end == v || *end || !(a->result_ttl > 0) || !isfinite(a->result_ttl))
+      return fail_usage("--result-ttl needs a positive number of seconds (got '%s')", v);
+    break;
+  }
   }
   return 0;
+}
+
+/* argv[1..]: every option value through serve_value (in table order);
+ * serve takes no positional argument. */
+static int parse_args(int argc, char **argv, serve_args *a) {
+  cmdline_args args;
+  cmdline_error e;
+  int rc = 0;
+  switch (cmdline_parse(options, argc - 1, argv + 1, &args, &e)) {
+  case CMDLINE_OK: break;
+  case CMDLINE_UNKNOWN:
+  case CMDLINE_NO_VALUE:
+    rc = fail_usage("unknown option '%s' (usage: raysweepd %s)", e.word, RSW_SERVE_USAGE);
+    break;
+  case CMDLINE_NEEDS_VALUE: rc = fail_usage("%s needs a value", e.word); break;
+  case CMDLINE_NOMEM: rc = fail_usage("out of memory"); break;
+  }
+  if (!rc && args.n_pos)
+    rc = fail_usage("unknown option '%s' (usage: raysweepd %s)", args.pos[0], RSW_SERVE_USAGE);
+  for (size_t i = 0; !rc && i < args.n_opts; i++)
+    for (size_t k = 0; !rc && k < args.n_vals[i]; k++) rc = serve_value(a, (opt_id)i, args.vals[i][k]);
+  cmdline_free(&args);
+  return rc;
 }
 
 /* HOST:PORT, :PORT (loopback) or HOST (port 8350). */
@@ -279,7 +289,7 @@ static void report_plugin(void *user, const rsw_err *e) {
 int cmd_serve(int argc, char **argv) {
   serve_args a = {0};
   int rc = parse_args(argc, argv, &a);
-  if (rc) return rc < 0 ? 0 : rc;
+  if (rc) return rc;
   char host[256];
   int port;
   if ((rc = parse_listen(a.listen ? a.listen : "127.0.0.1:8350", host, sizeof host, &port))) return rc;

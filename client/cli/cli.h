@@ -11,6 +11,7 @@
 #include <stddef.h>
 #include <stdio.h>
 
+#include "cmdline.h"
 #include "raysweep/client.h"
 
 /* Exit codes, documented in `raysweep --help`. */
@@ -40,30 +41,6 @@ const char *cli_interrupted_word(void);
 /* CLI_INTERRUPTED, or CLI_TERMINATED after SIGTERM. */
 int cli_interrupted_code(void);
 
-#define CLI_MAX_OPTS 16
-
-/* One option a command accepts. arg: the value's placeholder for help
- * (the option takes a value, `--x V` or `--x=V`), NULL for a flag; repeat:
- * may be given several times (otherwise the last wins). */
-typedef struct cli_opt {
-  const char *name;
-  const char *arg;
-  bool repeat;
-  const char *help; /* one line for per-command help */
-} cli_opt;
-
-/* The parsed command line of one command: positionals, and the values of
- * each option in the order given (index = the option's index in the
- * command's table; a flag's value is ""). */
-typedef struct cli_args {
-  const char **pos;
-  size_t n_pos;
-  const cli_opt *opts;
-  size_t n_opts;
-  const char **vals[CLI_MAX_OPTS];
-  size_t n_vals[CLI_MAX_OPTS];
-} cli_args;
-
 /* What every command handler gets. */
 typedef struct cli_ctx {
   const char *cmd;        /* "scene push", for messages */
@@ -75,25 +52,20 @@ typedef struct cli_ctx {
 } cli_ctx;
 
 struct cli_command;
-typedef int (*cli_run_fn)(cli_ctx *ctx, const cli_args *a);
+typedef int (*cli_run_fn)(cli_ctx *ctx, const cmdline_args *a);
 
 typedef struct cli_command {
   const char *group; /* first word */
   const char *name;  /* second word, or NULL */
   const char *args;  /* positional synopsis and options, for usage lines */
   const char *summary;
-  const cli_opt *opts; /* terminated by a {NULL} entry */
+  const cmdline_opt *opts; /* terminated by a {NULL} entry */
   size_t min_pos, max_pos;
   bool needs_client;
   cli_run_fn run;
 } cli_command;
 
-/* ---- options (main.c) ---- */
-/* Last value of option `name`, or NULL when absent. */
-const char *cli_get(const cli_args *a, const char *name);
-/* All values of option `name` (borrowed), count through *n. */
-const char *const *cli_get_all(const cli_args *a, const char *name, size_t *n);
-bool cli_has(const cli_args *a, const char *name);
+/* Options: cmdline_get, cmdline_get_all, cmdline_has (common/cmdline.h). */
 
 /* ---- util.c ---- */
 int cli_usage(const cli_ctx *ctx, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
@@ -115,10 +87,13 @@ void cli_format_double(char *buf, size_t n, double v);
 int cli_split_set(const cli_ctx *ctx, const char *opt, const char *kv, char **key_out,
                   const char **value_out);
 
+struct cJSON;
+/* --json output: o on one line of stdout, then freed. */
+void cli_print_json(struct cJSON *o);
+
 /* Build {"key": value, ...} from KEY=VALUE words (VALUE is JSON text;
  * opt names the flag in messages). Returns 0 with *out owned
  * (cJSON_Delete), or an exit code after printing. */
-struct cJSON;
 int cli_build_param_map(const cli_ctx *ctx, const char *opt, const char *const *sets, size_t n,
                         struct cJSON **out);
 
@@ -184,35 +159,35 @@ const char *cli_job_state_name(rsw_job_state s);
 void cli_print_job_warnings(cli_ctx *ctx, const char *who, const char *job_id);
 
 /* ---- handlers ---- */
-int cmd_status(cli_ctx *ctx, const cli_args *a);
-int cmd_scene_push(cli_ctx *ctx, const cli_args *a);
-int cmd_scene_ls(cli_ctx *ctx, const cli_args *a);
-int cmd_scene_show(cli_ctx *ctx, const cli_args *a);
-int cmd_scene_rm(cli_ctx *ctx, const cli_args *a);
-int cmd_scene_reset(cli_ctx *ctx, const cli_args *a);
-int cmd_scene_copy(cli_ctx *ctx, const cli_args *a);
-int cmd_params(cli_ctx *ctx, const cli_args *a);
-int cmd_set(cli_ctx *ctx, const cli_args *a);
-int cmd_render(cli_ctx *ctx, const cli_args *a);
-int cmd_fetch(cli_ctx *ctx, const cli_args *a);
-int cmd_sweep(cli_ctx *ctx, const cli_args *a);
-int cmd_merge(cli_ctx *ctx, const cli_args *a);
-int cmd_job_ls(cli_ctx *ctx, const cli_args *a);
-int cmd_job_show(cli_ctx *ctx, const cli_args *a);
-int cmd_job_watch(cli_ctx *ctx, const cli_args *a);
-int cmd_job_cancel(cli_ctx *ctx, const cli_args *a);
-int cmd_job_rm(cli_ctx *ctx, const cli_args *a);
+int cmd_status(cli_ctx *ctx, const cmdline_args *a);
+int cmd_scene_push(cli_ctx *ctx, const cmdline_args *a);
+int cmd_scene_ls(cli_ctx *ctx, const cmdline_args *a);
+int cmd_scene_show(cli_ctx *ctx, const cmdline_args *a);
+int cmd_scene_rm(cli_ctx *ctx, const cmdline_args *a);
+int cmd_scene_reset(cli_ctx *ctx, const cmdline_args *a);
+int cmd_scene_copy(cli_ctx *ctx, const cmdline_args *a);
+int cmd_params(cli_ctx *ctx, const cmdline_args *a);
+int cmd_set(cli_ctx *ctx, const cmdline_args *a);
+int cmd_render(cli_ctx *ctx, const cmdline_args *a);
+int cmd_fetch(cli_ctx *ctx, const cmdline_args *a);
+int cmd_sweep(cli_ctx *ctx, const cmdline_args *a);
+int cmd_merge(cli_ctx *ctx, const cmdline_args *a);
+int cmd_job_ls(cli_ctx *ctx, const cmdline_args *a);
+int cmd_job_show(cli_ctx *ctx, const cmdline_args *a);
+int cmd_job_watch(cli_ctx *ctx, const cmdline_args *a);
+int cmd_job_cancel(cli_ctx *ctx, const cmdline_args *a);
+int cmd_job_rm(cli_ctx *ctx, const cmdline_args *a);
 
 /* Option tables, defined beside their handlers. */
-extern const cli_opt cli_opts_none[];
-extern const cli_opt cli_opts_scene_push[];
-extern const cli_opt cli_opts_scene_rm[];
-extern const cli_opt cli_opts_params[];
-extern const cli_opt cli_opts_set[];
-extern const cli_opt cli_opts_render[];
-extern const cli_opt cli_opts_fetch[];
-extern const cli_opt cli_opts_sweep[];
-extern const cli_opt cli_opts_merge[];
-extern const cli_opt cli_opts_job_watch[];
+extern const cmdline_opt cli_opts_none[];
+extern const cmdline_opt cli_opts_scene_push[];
+extern const cmdline_opt cli_opts_scene_rm[];
+extern const cmdline_opt cli_opts_params[];
+extern const cmdline_opt cli_opts_set[];
+extern const cmdline_opt cli_opts_render[];
+extern const cmdline_opt cli_opts_fetch[];
+extern const cmdline_opt cli_opts_sweep[];
+extern const cmdline_opt cli_opts_merge[];
+extern const cmdline_opt cli_opts_job_watch[];
 
 #endif

@@ -6,7 +6,7 @@
 
 #include "cli.h"
 
-const cli_opt cli_opts_job_watch[] = {
+const cmdline_opt cli_opts_job_watch[] = {
     {"--timeout", "S", false, "stop waiting after S seconds (exit 5; the job keeps running)"},
     {NULL},
 };
@@ -22,13 +22,10 @@ static void print_status_json(const char *id, const rsw_job_status *st) {
   cJSON_AddNumberToObject(o, "renders_failed", (double)st->renders_failed);
   cJSON_AddNumberToObject(o, "seconds", st->seconds);
   if (st->error[0]) cJSON_AddStringToObject(o, "error", st->error);
-  char *t = cJSON_PrintUnformatted(o);
-  if (t) printf("%s\n", t);
-  free(t);
-  cJSON_Delete(o);
+  cli_print_json(o);
 }
 
-int cmd_job_ls(cli_ctx *ctx, const cli_args *a) {
+int cmd_job_ls(cli_ctx *ctx, const cmdline_args *a) {
   (void)a;
   char *text = NULL;
   rsw_status s = rsw_job_list(ctx->client, &text);
@@ -82,7 +79,7 @@ static char *job_json(cli_ctx *ctx, const char *id) {
   return out;
 }
 
-int cmd_job_show(cli_ctx *ctx, const cli_args *a) {
+int cmd_job_show(cli_ctx *ctx, const cmdline_args *a) {
   const char *id = a->pos[0];
   rsw_job_status st;
   rsw_status s = rsw_job_get(ctx->client, id, &st);
@@ -120,10 +117,10 @@ int cmd_job_show(cli_ctx *ctx, const cli_args *a) {
   return CLI_OK;
 }
 
-int cmd_job_watch(cli_ctx *ctx, const cli_args *a) {
+int cmd_job_watch(cli_ctx *ctx, const cmdline_args *a) {
   const char *id = a->pos[0];
   double timeout = 0;
-  const char *v = cli_get(a, "--timeout");
+  const char *v = cmdline_get(a, "--timeout");
   if (v && (!cli_parse_double(v, &timeout) || !(timeout > 0)))
     return cli_usage(ctx, "--timeout needs a positive number of seconds (got '%s')", v);
   rsw_job_status st;
@@ -146,7 +143,7 @@ enum {
   CANCEL_WAIT_S = 30
 };
 
-int cmd_job_cancel(cli_ctx *ctx, const cli_args *a) {
+int cmd_job_cancel(cli_ctx *ctx, const cmdline_args *a) {
   const char *id = a->pos[0];
   rsw_status s = rsw_job_cancel(ctx->client, id);
   if (s) return cli_report(ctx, s, id);
@@ -167,7 +164,7 @@ int cmd_job_cancel(cli_ctx *ctx, const cli_args *a) {
   return CLI_OK;
 }
 
-int cmd_job_rm(cli_ctx *ctx, const cli_args *a) {
+int cmd_job_rm(cli_ctx *ctx, const cmdline_args *a) {
   rsw_status s = rsw_job_delete(ctx->client, a->pos[0]);
   if (s) return cli_report(ctx, s, a->pos[0]);
   if (ctx->json)

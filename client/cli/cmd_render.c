@@ -8,7 +8,7 @@
 
 #include "cli.h"
 
-const cli_opt cli_opts_render[] = {
+const cmdline_opt cli_opts_render[] = {
     {"--sensor", "S", false, "sensor id or index (default: the first)"},
     {"--spp", "N", false, "samples per pixel (default: the scene's sampler)"},
     {"--seed", "N", false, "sampler seed (default 0)"},
@@ -24,7 +24,7 @@ const cli_opt cli_opts_render[] = {
     {"-o", "FILE", false, "output file: .exr, .npy, .json (the film JSON) or .png (a quick-look)"},
     {NULL},
 };
-const cli_opt cli_opts_fetch[] = {
+const cmdline_opt cli_opts_fetch[] = {
     {"--exposure", "EV|auto[+-EV]", false,
      "PNG: linear radiance times 2^EV, clamped to [0,1], sRGB (default 0); auto: the 99.5th percentile to "
      "white"},
@@ -49,25 +49,25 @@ static bool ends_png(const char *path) {
   return n > 4 && strcasecmp(path + n - 4, ".png") == 0;
 }
 
-static int output_format(const cli_ctx *ctx, const cli_args *a, const char *out, cli_format *fmt,
+static int output_format(const cli_ctx *ctx, const cmdline_args *a, const char *out, cli_format *fmt,
                          png_out *po) {
   if (!out) return cli_usage(ctx, "missing -o OUT.exr|.npy|.json|.png");
   memset(po, 0, sizeof *po);
   po->png = ends_png(out);
   const char *v;
-  if ((v = cli_get(a, "--exposure"))) {
+  if ((v = cmdline_get(a, "--exposure"))) {
     double ev = 0;
     const char *num = strncmp(v, "auto", 4) == 0 && (v[4] == '+' || v[4] == '-') ? v + 4 : v;
     if (strcmp(v, "auto") != 0 && (!cli_parse_double(num, &ev) || fabs(ev) > 1000))
       return cli_usage(ctx, "--exposure needs a number of stops, auto, or auto+EV (got '%s')", v);
     po->exposure = v;
   }
-  if ((v = cli_get(a, "--colormap"))) {
+  if ((v = cmdline_get(a, "--colormap"))) {
     if (strcmp(v, "gray") && strcmp(v, "viridis") && strcmp(v, "inferno"))
       return cli_usage(ctx, "--colormap needs gray, viridis or inferno (got '%s')", v);
     po->colormap = v;
   }
-  if (!po->png && (cli_get(a, "--exposure") || cli_get(a, "--colormap")))
+  if (!po->png && (cmdline_get(a, "--exposure") || cmdline_get(a, "--colormap")))
     return cli_usage(ctx, "--exposure and --colormap are for a PNG output (-o OUT.png)");
   if (po->png) {
     *fmt = CLI_FMT_NONE;
@@ -112,10 +112,7 @@ static void report_written(const cli_ctx *ctx, const rsw_film *f, const char *pa
     cJSON *meta = cJSON_Parse(rsw_film_meta(f));
     if (meta) cJSON_AddItemToObject(o, "meta", meta);
     cJSON_AddNumberToObject(o, "seconds", seconds);
-    char *t = cJSON_PrintUnformatted(o);
-    if (t) printf("%s\n", t);
-    free(t);
-    cJSON_Delete(o);
+    cli_print_json(o);
   } else if (!ctx->quiet) {
     fprintf(stderr, "raysweep %s: wrote %s (%dx%d, %d channel%s, %.3f s)\n", ctx->cmd, path,
             rsw_film_width(f), rsw_film_height(f), rsw_film_channels(f), rsw_film_channels(f) == 1 ? "" : "s",
@@ -123,8 +120,8 @@ static void report_written(const cli_ctx *ctx, const rsw_film *f, const char *pa
   }
 }
 
-int cmd_render(cli_ctx *ctx, const cli_args *a) {
-  const char *out = cli_get(a, "-o");
+int cmd_render(cli_ctx *ctx, const cmdline_args *a) {
+  const char *out = cmdline_get(a, "-o");
   cli_format fmt;
   png_out po;
   int rc = output_format(ctx, a, out, &fmt, &po);
@@ -134,21 +131,21 @@ int cmd_render(cli_ctx *ctx, const cli_args *a) {
   const char *v;
   unsigned long long u;
   double d;
-  if ((v = cli_get(a, "--sensor"))) {
+  if ((v = cmdline_get(a, "--sensor"))) {
     if (!*v) {
       rc = cli_usage(ctx, "--sensor needs a sensor id or index");
       goto out;
     }
     cJSON_AddStringToObject(req, "sensor", v);
   }
-  if ((v = cli_get(a, "--spp"))) {
+  if ((v = cmdline_get(a, "--spp"))) {
     if (!cli_parse_u64(v, 1ull << 31, &u) || u == 0) {
       rc = cli_usage(ctx, "--spp needs a positive integer (got '%s')", v);
       goto out;
     }
     cJSON_AddNumberToObject(req, "spp", (double)u);
   }
-  if ((v = cli_get(a, "--seed"))) {
+  if ((v = cmdline_get(a, "--seed"))) {
     /* JSON numbers are doubles on the wire: seeds stay below 2^53. */
     if (!cli_parse_u64(v, (1ull << 53) - 1, &u)) {
       rc = cli_usage(ctx, "--seed needs an integer in [0, 2^53) (got '%s')", v);
@@ -156,21 +153,21 @@ int cmd_render(cli_ctx *ctx, const cli_args *a) {
     }
     cJSON_AddNumberToObject(req, "seed", (double)u);
   }
-  if ((v = cli_get(a, "--wavelength"))) {
+  if ((v = cmdline_get(a, "--wavelength"))) {
     if (!cli_parse_double(v, &d) || !(d > 0)) {
       rc = cli_usage(ctx, "--wavelength needs a positive number of nm (got '%s')", v);
       goto out;
     }
     cJSON_AddNumberToObject(req, "wavelength", d);
   }
-  if ((v = cli_get(a, "--timeout"))) {
+  if ((v = cmdline_get(a, "--timeout"))) {
     if (!cli_parse_double(v, &d) || !(d > 0)) {
       rc = cli_usage(ctx, "--timeout needs a positive number of seconds (got '%s')", v);
       goto out;
     }
     cJSON_AddNumberToObject(req, "timeout_s", d);
   }
-  if ((v = cli_get(a, "--quantities"))) {
+  if ((v = cmdline_get(a, "--quantities"))) {
     cJSON *q = cJSON_AddArrayToObject(req, "quantities");
     char list[256];
     snprintf(list, sizeof list, "%s", v);
@@ -186,9 +183,9 @@ int cmd_render(cli_ctx *ctx, const cli_args *a) {
       goto out;
     }
   }
-  if (cli_get(a, "--variance")) cJSON_AddBoolToObject(req, "variance", true);
+  if (cmdline_get(a, "--variance")) cJSON_AddBoolToObject(req, "variance", true);
   size_t n_sets;
-  const char *const *sets = cli_get_all(a, "--set", &n_sets);
+  const char *const *sets = cmdline_get_all(a, "--set", &n_sets);
   if (n_sets) {
     cJSON *map;
     if ((rc = cli_build_param_map(ctx, "--set", sets, n_sets, &map))) goto out;
@@ -226,26 +223,23 @@ out:
 }
 
 /* fetch JOB -o F.nc: the job's dataset (GET /v1/jobs/{id}/dataset). */
-static int fetch_dataset(cli_ctx *ctx, const cli_args *a, const char *out) {
+static int fetch_dataset(cli_ctx *ctx, const cmdline_args *a, const char *out) {
   if (a->n_pos != 1)
     return cli_usage(ctx, "a dataset (.nc) is the whole job: give JOB alone, without CONTEXT SENSOR");
-  rsw_status s = rsw_job_fetch_dataset(ctx->client, a->pos[0], cli_has(a, "--partial"), out);
+  rsw_status s = rsw_job_fetch_dataset(ctx->client, a->pos[0], cmdline_has(a, "--partial"), out);
   if (s) return cli_report(ctx, s, a->pos[0]);
   if (ctx->json) {
     cJSON *o = cJSON_CreateObject();
     cJSON_AddStringToObject(o, "file", out);
     cJSON_AddStringToObject(o, "job", a->pos[0]);
-    char *t = cJSON_PrintUnformatted(o);
-    if (t) printf("%s\n", t);
-    free(t);
-    cJSON_Delete(o);
+    cli_print_json(o);
   } else if (!ctx->quiet)
     fprintf(stderr, "raysweep fetch: dataset of %s written to %s\n", a->pos[0], out);
   return CLI_OK;
 }
 
-int cmd_fetch(cli_ctx *ctx, const cli_args *a) {
-  const char *out = cli_get(a, "-o"), *v = cli_get(a, "--format");
+int cmd_fetch(cli_ctx *ctx, const cmdline_args *a) {
+  const char *out = cmdline_get(a, "-o"), *v = cmdline_get(a, "--format");
   if (!out) return cli_usage(ctx, "missing -o FILE.exr|.npy|.json|.png|.nc");
   cli_format fmt;
   png_out po;
@@ -255,14 +249,14 @@ int cmd_fetch(cli_ctx *ctx, const cli_args *a) {
     if (strcmp(v, "nc") == 0) return fetch_dataset(ctx, a, out);
     if ((fmt = cli_format_from_name(v)) == CLI_FMT_NONE)
       return cli_usage(ctx, "--format needs exr, npy, json or nc (got '%s')", v);
-    if (cli_get(a, "--exposure") || cli_get(a, "--colormap"))
+    if (cmdline_get(a, "--exposure") || cmdline_get(a, "--colormap"))
       return cli_usage(ctx, "--exposure and --colormap are for a PNG output (-o OUT.png, no --format)");
   } else {
     const char *dot = strrchr(out, '.');
     if (dot && strcmp(dot, ".nc") == 0 && !strchr(dot, '/')) return fetch_dataset(ctx, a, out);
     if ((rc = output_format(ctx, a, out, &fmt, &po))) return rc;
   }
-  if (cli_has(a, "--partial")) return cli_usage(ctx, "--partial applies to a dataset (-o FILE.nc)");
+  if (cmdline_has(a, "--partial")) return cli_usage(ctx, "--partial applies to a dataset (-o FILE.nc)");
   if (a->n_pos != 3)
     return cli_usage(ctx, "one film needs JOB CONTEXT SENSOR (or -o FILE.nc for the dataset)");
   rsw_film *film = NULL;

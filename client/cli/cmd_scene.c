@@ -7,20 +7,20 @@
 
 #include "cli.h"
 
-const cli_opt cli_opts_scene_push[] = {
+const cmdline_opt cli_opts_scene_push[] = {
     {"--variant", "mono|rgb", false, "mono or rgb (overrides the scene's own)"},
     {NULL},
 };
-const cli_opt cli_opts_scene_rm[] = {
+const cmdline_opt cli_opts_scene_rm[] = {
     {"--force", NULL, false, "also cancel the scene's queued and running jobs"},
     {NULL},
 };
-const cli_opt cli_opts_params[] = {
+const cmdline_opt cli_opts_params[] = {
     {"--match", "GLOB", false, "glob over keys (e.g. '*.reflectance.value') or TYPE:ID:PATH"},
     {"--class", "C", false, "spectral, geometric or none"},
     {NULL},
 };
-const cli_opt cli_opts_set[] = {
+const cmdline_opt cli_opts_set[] = {
     {"--if-match", "REV", false, "apply only if the scene is still at revision REV"},
     {NULL},
 };
@@ -62,7 +62,7 @@ static int parse_or_fail(const cli_ctx *ctx, const char *text, cJSON **out) {
   return 0;
 }
 
-int cmd_status(cli_ctx *ctx, const cli_args *a) {
+int cmd_status(cli_ctx *ctx, const cmdline_args *a) {
   (void)a;
   char *info = NULL;
   rsw_status s = rsw_server_info(ctx->client, &info);
@@ -96,8 +96,8 @@ out:
   return rc;
 }
 
-int cmd_scene_push(cli_ctx *ctx, const cli_args *a) {
-  const char *variant = cli_get(a, "--variant");
+int cmd_scene_push(cli_ctx *ctx, const cmdline_args *a) {
+  const char *variant = cmdline_get(a, "--variant");
   if (variant && strcmp(variant, "mono") != 0 && strcmp(variant, "rgb") != 0)
     return cli_usage(ctx, "--variant needs mono or rgb (got '%s')", variant);
   char id[65];
@@ -113,7 +113,7 @@ int cmd_scene_push(cli_ctx *ctx, const cli_args *a) {
   return CLI_OK;
 }
 
-int cmd_scene_ls(cli_ctx *ctx, const cli_args *a) {
+int cmd_scene_ls(cli_ctx *ctx, const cmdline_args *a) {
   (void)a;
   char *text = NULL;
   rsw_status s = rsw_scene_list(ctx->client, &text);
@@ -139,7 +139,7 @@ int cmd_scene_ls(cli_ctx *ctx, const cli_args *a) {
   return rc;
 }
 
-int cmd_scene_show(cli_ctx *ctx, const cli_args *a) {
+int cmd_scene_show(cli_ctx *ctx, const cmdline_args *a) {
   char *text = NULL;
   rsw_status s = rsw_scene_info(ctx->client, a->pos[0], &text);
   if (s) return cli_report(ctx, s, a->pos[0]);
@@ -169,8 +169,8 @@ int cmd_scene_show(cli_ctx *ctx, const cli_args *a) {
   return rc;
 }
 
-int cmd_scene_rm(cli_ctx *ctx, const cli_args *a) {
-  rsw_status s = rsw_scene_delete(ctx->client, a->pos[0], cli_has(a, "--force"));
+int cmd_scene_rm(cli_ctx *ctx, const cmdline_args *a) {
+  rsw_status s = rsw_scene_delete(ctx->client, a->pos[0], cmdline_has(a, "--force"));
   if (s) {
     int rc = cli_report(ctx, s, a->pos[0]);
     const rsw_error_info *e = rsw_client_last_error(ctx->client);
@@ -189,7 +189,7 @@ int cmd_scene_rm(cli_ctx *ctx, const cli_args *a) {
   return CLI_OK;
 }
 
-int cmd_scene_reset(cli_ctx *ctx, const cli_args *a) {
+int cmd_scene_reset(cli_ctx *ctx, const cmdline_args *a) {
   char *text = NULL;
   rsw_status s = rsw_scene_reset(ctx->client, a->pos[0], &text);
   if (s) return cli_report(ctx, s, a->pos[0]);
@@ -211,7 +211,7 @@ int cmd_scene_reset(cli_ctx *ctx, const cli_args *a) {
   return rc;
 }
 
-int cmd_scene_copy(cli_ctx *ctx, const cli_args *a) {
+int cmd_scene_copy(cli_ctx *ctx, const cmdline_args *a) {
   char id[65];
   char *text = NULL;
   rsw_status s = rsw_scene_copy(ctx->client, a->pos[0], id, &text);
@@ -225,13 +225,13 @@ int cmd_scene_copy(cli_ctx *ctx, const cli_args *a) {
   return CLI_OK;
 }
 
-int cmd_params(cli_ctx *ctx, const cli_args *a) {
-  const char *cls = cli_get(a, "--class");
+int cmd_params(cli_ctx *ctx, const cmdline_args *a) {
+  const char *cls = cmdline_get(a, "--class");
   if (cls && strcmp(cls, "spectral") != 0 && strcmp(cls, "geometric") != 0 && strcmp(cls, "none") != 0)
     return cli_usage(ctx, "--class needs spectral, geometric or none (got '%s')", cls);
   char *text = NULL;
   uint64_t rev = 0;
-  rsw_status s = rsw_params_get(ctx->client, a->pos[0], cli_get(a, "--match"), cls, &text, &rev);
+  rsw_status s = rsw_params_get(ctx->client, a->pos[0], cmdline_get(a, "--match"), cls, &text, &rev);
   if (s) return cli_report(ctx, s, a->pos[0]);
   int rc = CLI_OK;
   if (ctx->json) {
@@ -328,9 +328,9 @@ static void print_value(const char *text) {
 
 /* Prints each key with its value before and after, then the revision
  * ("revision N"); --json: {"revision": N, "changes": [{key, old, new}]}. */
-int cmd_set(cli_ctx *ctx, const cli_args *a) {
+int cmd_set(cli_ctx *ctx, const cmdline_args *a) {
   int64_t if_match = -1;
-  const char *im = cli_get(a, "--if-match");
+  const char *im = cmdline_get(a, "--if-match");
   if (im) {
     unsigned long long v;
     if (!cli_parse_u64(im, INT64_MAX, &v))

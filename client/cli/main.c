@@ -19,7 +19,7 @@
 
 #define DEFAULT_URL "http://127.0.0.1:8350"
 
-const cli_opt cli_opts_none[] = {{NULL}};
+const cmdline_opt cli_opts_none[] = {{NULL}};
 
 static const cli_command commands[] = {
     {"status", NULL, "", "server version, variants, limits and readiness", cli_opts_none, 0, 0, true,
@@ -103,33 +103,8 @@ static void command_name(const cli_command *c, char *buf, size_t n) {
   snprintf(buf, n, "%s%s%s", c->group, c->name ? " " : "", c->name ? c->name : "");
 }
 
-/* Print "PREFIX raysweep NAME ARGS", wrapped before column 100 at spaces
- * outside brackets and parentheses (a flag keeps its value: "-o DIR"), with
- * continuation lines aligned after "raysweep NAME ". */
 static void print_usage(FILE *f, const char *prefix, const char *name, const char *args) {
-  int indent = (int)strlen(prefix) + (int)strlen("raysweep ") + (int)strlen(name) + 1;
-  int col = fprintf(f, "%sraysweep %s", prefix, name);
-  const char *p = args;
-  while (*p) {
-    while (*p == ' ') p++;
-    const char *q = p;
-    int depth = 0;
-    bool joined = false;
-    while (*q && (*q != ' ' || depth > 0)) {
-      if (*q == '[' || *q == '(') depth++;
-      if ((*q == ']' || *q == ')') && depth > 0) depth--;
-      q++;
-      if (*q == ' ' && depth == 0 && *p == '-' && !joined && q[1] && !strchr("-[(", q[1])) q++, joined = true;
-    }
-    if (q == p) break;
-    if (col + 1 + (q - p) > 100)
-      col = fprintf(f, "\n%*s", indent, "") - 1;
-    else
-      col += fprintf(f, " ");
-    col += fprintf(f, "%.*s", (int)(q - p), p);
-    p = q;
-  }
-  fputc('\n', f);
+  cmdline_print_usage(f, prefix, "raysweep", name, args);
 }
 
 static void usage_list(FILE *f) {
@@ -151,80 +126,28 @@ static void command_help(const cli_command *c) {
   printf("\n%s\n", c->summary);
   if (c->opts[0].name) {
     printf("\nOptions:\n");
-    for (const cli_opt *o = c->opts; o->name; o++) {
+    for (const cmdline_opt *o = c->opts; o->name; o++) {
       char flag[64];
       snprintf(flag, sizeof flag, "%s%s%s", o->name, o->arg ? " " : "", o->arg ? o->arg : "");
-      printf("  %-28s %s%s\n", flag, o->help ? o->help : "", o->repeat ? " (repeatable)" : "");
+      printf("  %-28s %s%s\n", flag, o->help ? o->help : "",
+             (o->flags & CMDLINE_REPEAT) ? " (repeatable)" : "");
     }
   }
   printf("\n%s", global_help);
 }
 
-/* ---- option access ---- */
-
-static int opt_index(const cli_args *a, const char *name) {
-  for (size_t i = 0; i < a->n_opts; i++)
-    if (strcmp(a->opts[i].name, name) == 0) return (int)i;
-  return -1;
-}
-
-const char *cli_get(const cli_args *a, const char *name) {
-  int i = opt_index(a, name);
-  if (i < 0 || a->n_vals[i] == 0) return NULL;
-  return a->vals[i][a->n_vals[i] - 1];
-}
-
-const char *const *cli_get_all(const cli_args *a, const char *name, size_t *n) {
-  int i = opt_index(a, name);
-  *n = i < 0 ? 0 : a->n_vals[i];
-  return i < 0 ? NULL : a->vals[i];
-}
-
-bool cli_has(const cli_args *a, const char *name) {
-  return cli_get(a, name) != NULL;
-}
-
-/* Parse a command's arguments against its option table. Returns 0, or a
- * usage exit code after printing. Every values array holds at most argc
- * entries, so it is sized once. */
-static int parse_args(cli_ctx *ctx, const cli_command *c, int argc, char **argv, cli_args *a) {
-  memset(a, 0, sizeof *a);
-  a->opts = c->opts;
-  while (c->opts[a->n_opts].name) a->n_opts++;
-  a->pos = calloc((size_t)argc + 1, sizeof *a->pos);
-  for (size_t i = 0; i < a->n_opts; i++) a->vals[i] = calloc((size_t)argc + 1, sizeof(char *));
-  bool only_pos = false;
-  for (int i = 0; i < argc; i++) {
-    const char *arg = argv[i];
-    if (!only_pos && strcmp(arg, "--") == 0) {
-      only_pos = true;
-      continue;
-    }
-    if (only_pos || arg[0] != '-' || arg[1] == '\0') {
-      a->pos[a->n_pos++] = arg;
-      continue;
-    }
-    const char *eq = strchr(arg, '=');
-    size_t len = eq && strncmp(arg, "--", 2) == 0 ? (size_t)(eq - arg) : strlen(arg);
-    int k = -1;
-    for (size_t j = 0; j < a->n_opts; j++)
-      if (strlen(c->opts[j].name) == len && strncmp(c->opts[j].name, arg, len) == 0) k = (int)j;
-    if (k < 0)
-      return cli_usage(ctx, "unknown option '%.*s' (see raysweep %s --help)", (int)len, arg, ctx->cmd);
-    const cli_opt *o = &c->opts[k];
-    const char *val = "";
-    if (o->arg) {
-      if (len < strlen(arg))
-        val = arg + len + 1;
-      else if (i + 1 < argc)
-        val = argv[++i];
-      else
-        return cli_usage(ctx, "%s needs a value", o->name);
-    } else if (len < strlen(arg)) {
-      return cli_usage(ctx, "%s takes no value", o->name);
-    }
-    if (!o->repeat) a->n_vals[k] = 0;
-    a->vals[k][a->n_vals[k]++] = val;
+/* Parse a command's arguments against its option table (common/cmdline.h)
+ * and check the positional count. Returns 0, or a usage exit code after
+ * printing. */
+static int parse_args(cli_ctx *ctx, const cli_command *c, int argc, char **argv, cmdline_args *a) {
+  cmdline_error e;
+  switch (cmdline_parse(c->opts, argc, argv, a, &e)) {
+  case CMDLINE_OK: break;
+  case CMDLINE_UNKNOWN:
+    return cli_usage(ctx, "unknown option '%.*s' (see raysweep %s --help)", e.name_len, e.word, ctx->cmd);
+  case CMDLINE_NEEDS_VALUE: return cli_usage(ctx, "%s needs a value", e.opt->name);
+  case CMDLINE_NO_VALUE: return cli_usage(ctx, "%s takes no value", e.opt->name);
+  case CMDLINE_NOMEM: return cli_fail(ctx, CLI_IO, "out of memory");
   }
   if (a->n_pos < c->min_pos)
     return cli_usage(ctx, "missing arguments (usage: raysweep %s %s)", ctx->cmd, c->args);
@@ -232,11 +155,6 @@ static int parse_args(cli_ctx *ctx, const cli_command *c, int argc, char **argv,
     return cli_usage(ctx, "unexpected argument '%s' (usage: raysweep %s %s)", a->pos[c->max_pos], ctx->cmd,
                      c->args);
   return 0;
-}
-
-static void free_args(cli_args *a) {
-  free(a->pos);
-  for (size_t i = 0; i < a->n_opts; i++) free(a->vals[i]);
 }
 
 /* --connect-timeout / --stall-timeout (or their environment variable):
@@ -385,7 +303,7 @@ int main(int argc, char **argv) {
     return CLI_OK;
   }
   int skip = cmd->name ? 2 : 1;
-  cli_args args;
+  cmdline_args args;
   rc = parse_args(&ctx, cmd, n_rest - skip, rest + skip, &args);
   char *token = NULL;
   if (!rc && cmd->needs_client) {
@@ -414,7 +332,7 @@ int main(int argc, char **argv) {
   if (!rc) rc = cmd->run(&ctx, &args);
   rsw_client_free(ctx.client);
   free(token);
-  free_args(&args);
+  cmdline_free(&args);
   free(rest);
   return rc;
 }

@@ -1,5 +1,6 @@
 /* raysweep CLI: error reporting, number parsing, files, film output and job
  * progress shared by the commands. */
+#include <cjson/cJSON.h>
 #include <errno.h>
 #include <math.h>
 #include <signal.h>
@@ -506,4 +507,11 @@ int cli_wait_job(cli_ctx *ctx, const char *job_id, double timeout_s, cli_on_inte
     fprintf(stderr, "raysweep %s: job %s %s%s%s\n", ctx->cmd, job_id, cli_job_state_name(st.state),
             st.error[0] ? ": " : "", st.error);
   return CLI_JOB;
+}
+
+void cli_print_json(cJSON *o) {
+  char *t = cJSON_PrintUnformatted(o);
+  if (t) printf("%s\n", t);
+  free(t);
+  cJSON_Delete(o);
 }

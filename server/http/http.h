@@ -4,8 +4,9 @@
  * runs on a thread of its own (see server.c for why), and the CPU work is
  * the service's.
  *
- * This header mentions no microhttpd type; server/http/server.c is the one
- * file that includes microhttpd.h. */
+ * This header mentions no microhttpd type; server/http/server.c and its
+ * event streams, server/http/sse.c, are the only files that include
+ * microhttpd.h. */
 #ifndef RSW_HTTP_H
 #define RSW_HTTP_H
 

@@ -1,6 +1,6 @@
 /* Internal to server/http: the routes table and the request/response
  * records its handlers work on. No microhttpd types: server.c (the one
- * file that includes microhttpd.h) fills an http_req from the connection,
+ * file, with sse.c, that includes microhttpd.h) fills an http_req from the connection,
  * runs the route's handler and turns the http_resp into a response. */
 #ifndef RSW_HTTP_ROUTES_H
 #define RSW_HTTP_ROUTES_H

@@ -6,12 +6,12 @@
  * in object space; every other shape is a user geometry whose callbacks
  * call its shape_ops.intersect in double precision in the instance's
  * object space (Embree hands the callback the ray already transformed by
- * the instance), with its shape_ops.bounds as the box. */
-#include "accel.h"
+ * the instance), with its shape_ops.bounds as the box. Measurement code
+ * (make bench) reaches Embree through accel_embree.h. */
+#include "accel_embree.h"
 
 #include <stdatomic.h>
 
-#include <embree3/rtcore.h>
 #include <math.h>
 #include <pthread.h>
 #include <stdio.h>
@@ -166,29 +166,6 @@ static inline bool unit_hit(const shape *s, const double o[3], const double d[3]
                             double *t_out, double n_out[3]) {
   return s->ops->intersect(s, o, d, tnear, tfar, t_out, n_out);
 }
-
-/* Embree's RTCRayN/RTCHitN accessors are C++ only; in C the SOA layout is
- * addressed directly: RTCRayN is 12 arrays of N 32-bit fields (org_x,
- * org_y, org_z, tnear, dir_x, dir_y, dir_z, time, tfar, mask, id, flags),
- * RTCHitN follows it (Ng_x, Ng_y, Ng_z, u, v, primID, geomID, instID[0]). */
-enum {
-  RAY_ORG = 0,
-  RAY_TNEAR = 3,
-  RAY_DIR = 4,
-  RAY_TFAR = 8,
-  RAY_FIELDS = 12
-};
-enum {
-  HIT_NG = 0,
-  HIT_U = 3,
-  HIT_V = 4,
-  HIT_PRIM = 5,
-  HIT_GEOM = 6,
-  HIT_INST = 7
-};
-#define RAYN_F(p, N, f, i) (((float *)(p))[(size_t)(f) * (N) + (i)])
-#define HITN_F(p, N, f, i) (((float *)(p))[(size_t)(f) * (N) + (i)])
-#define HITN_U(p, N, f, i) (((unsigned *)(p))[(size_t)(f) * (N) + (i)])
 
 static void load_ray(const void *ray, unsigned N, unsigned i, double o[3], double d[3]) {
   for (int k = 0; k < 3; k++) {
@@ -526,7 +503,14 @@ static rsw_status embree_fail(accel *a, rsw_err *err, const char *where, const c
   return rsw_fail(err, RSW_ERR_EMBREE, where, "%s%s%s", what, a->error[0] ? ": " : "", a->error);
 }
 
-static RTCGeometry shape_geometry(accel *a, const shape *s) {
+/* Shape s's Embree geometry, committed; NULL when Embree cannot make it
+ * (out of memory). A top-level shape's is in its object space (its
+ * instance applies to_world). A shapegroup member's (in_group) is in group
+ * space: a mesh's vertices are copied through its to_world, an analytic
+ * member's callbacks apply it (the plain ones when it is the identity, so
+ * that a group of one untransformed shape traces exactly as that shape
+ * would). */
+static RTCGeometry shape_geometry(accel *a, const shape *s, bool in_group) {
   RTCGeometry g;
   if (!s->ops->intersect) { /* triangles */
     g = rtcNewGeometry(a->device, RTC_GEOMETRY_TYPE_TRIANGLE);
@@ -542,18 +526,27 @@ static RTCGeometry shape_geometry(accel *a, const shape *s) {
       rtcReleaseGeometry(g);
       return NULL;
     }
-    memcpy(v, s->mesh.pos, 3 * (size_t)s->mesh.n_verts * sizeof(float));
+    if (in_group) {
+      for (uint32_t k = 0; k < s->mesh.n_verts; k++) {
+        const float *q = &s->mesh.pos[3 * (size_t)k];
+        vec3 w = xf_point(&s->to_world, v3(q[0], q[1], q[2]));
+        v[3 * k] = (float)w.x, v[3 * k + 1] = (float)w.y, v[3 * k + 2] = (float)w.z;
+      }
+    } else {
+      memcpy(v, s->mesh.pos, 3 * (size_t)s->mesh.n_verts * sizeof(float));
+    }
     memcpy(ix, s->mesh.faces, 3 * (size_t)s->mesh.n_faces * sizeof(unsigned));
     rtcSetGeometryBuildQuality(g, RTC_BUILD_QUALITY_HIGH);
     a->bytes += 3 * (size_t)s->mesh.n_verts * sizeof(float) + 3 * (size_t)s->mesh.n_faces * sizeof(unsigned);
   } else {
+    bool member = in_group && !xf_is_identity(&s->to_world);
     g = rtcNewGeometry(a->device, RTC_GEOMETRY_TYPE_USER);
     if (!g) return NULL;
     rtcSetGeometryUserPrimitiveCount(g, 1);
     rtcSetGeometryUserData(g, (void *)s);
-    rtcSetGeometryBoundsFunction(g, unit_bounds, NULL);
-    rtcSetGeometryIntersectFunction(g, unit_intersect);
-    rtcSetGeometryOccludedFunction(g, unit_occluded);
+    rtcSetGeometryBoundsFunction(g, member ? member_bounds : unit_bounds, NULL);
+    rtcSetGeometryIntersectFunction(g, member ? member_intersect : unit_intersect);
+    rtcSetGeometryOccludedFunction(g, member ? member_occluded : unit_occluded);
   }
   rtcCommitGeometry(g);
   return g;
@@ -571,11 +564,8 @@ static void set_instance_transform(RTCGeometry inst, const xform *t, vec3 origin
   rtcSetGeometryTransform(inst, 0, RTC_FORMAT_FLOAT3X4_ROW_MAJOR, m);
 }
 
-/* A shapegroup's Embree scene (built on first use): meshes as triangles
- * with the member's to_world baked into a vertex copy, analytic members as
- * user geometry that applies their to_world in the callbacks; a member
- * whose to_world is the identity uses the plain callbacks, so that a group
- * of one untransformed shape traces exactly as that shape would. */
+/* A shapegroup's Embree scene (built on first use): each member's
+ * geometry in group space (shape_geometry). */
 static RTCScene group_scene(accel *a, const shape_group *g) {
   for (size_t i = 0; i < a->n_grp; i++)
     if (a->grp[i] == g) return a->grp_scene[i];
@@ -590,42 +580,8 @@ static RTCScene group_scene(accel *a, const shape_group *g) {
   rtcSetSceneBuildQuality(sc, RTC_BUILD_QUALITY_HIGH);
   size_t i = 0;
   for (; i < g->n_members; i++) {
-    const shape *m = g->members[i];
-    RTCGeometry geo;
-    if (!m->ops->intersect) { /* triangles */
-      geo = rtcNewGeometry(a->device, RTC_GEOMETRY_TYPE_TRIANGLE);
-      if (!geo) break;
-      float *v = rtcSetNewGeometryBuffer(geo, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float),
-                                         m->mesh.n_verts);
-      unsigned *ix = rtcSetNewGeometryBuffer(geo, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
-                                             3 * sizeof(unsigned), m->mesh.n_faces);
-      if (!v || !ix || t_embree_error[0]) {
-        rtcReleaseGeometry(geo);
-        break;
-      }
-      for (uint32_t k = 0; k < m->mesh.n_verts; k++) {
-        const float *q = &m->mesh.pos[3 * (size_t)k];
-        vec3 w = xf_point(&m->to_world, v3(q[0], q[1], q[2]));
-        v[3 * k] = (float)w.x, v[3 * k + 1] = (float)w.y, v[3 * k + 2] = (float)w.z;
-      }
-      memcpy(ix, m->mesh.faces, 3 * (size_t)m->mesh.n_faces * sizeof(unsigned));
-      rtcSetGeometryBuildQuality(geo, RTC_BUILD_QUALITY_HIGH);
-      rtcCommitGeometry(geo);
-      a->bytes +=
-          3 * (size_t)m->mesh.n_verts * sizeof(float) + 3 * (size_t)m->mesh.n_faces * sizeof(unsigned);
-    } else if (xf_is_identity(&m->to_world)) {
-      geo = shape_geometry(a, m);
-      if (!geo) break;
-    } else {
-      geo = rtcNewGeometry(a->device, RTC_GEOMETRY_TYPE_USER);
-      if (!geo) break;
-      rtcSetGeometryUserPrimitiveCount(geo, 1);
-      rtcSetGeometryUserData(geo, (void *)m);
-      rtcSetGeometryBoundsFunction(geo, member_bounds, NULL);
-      rtcSetGeometryIntersectFunction(geo, member_intersect);
-      rtcSetGeometryOccludedFunction(geo, member_occluded);
-      rtcCommitGeometry(geo);
-    }
+    RTCGeometry geo = shape_geometry(a, g->members[i], true);
+    if (!geo) break;
     rtcAttachGeometryByID(sc, geo, (unsigned)i);
     rtcReleaseGeometry(geo); /* the scene holds it */
   }
@@ -765,7 +721,7 @@ rsw_status accel_build(scene *s, rsw_err *err) {
     } else {
       rtcSetSceneBuildQuality(sub, RTC_BUILD_QUALITY_HIGH);
     }
-    RTCGeometry g = shape_geometry(a, sh);
+    RTCGeometry g = shape_geometry(a, sh, false);
     if (!g) return embree_fail(a, err, sh->base.id, "cannot create geometry");
     rtcAttachGeometryByID(sub, g, 0);
     a->geom[i] = g; /* keep our reference for updates */
@@ -863,7 +819,7 @@ rsw_status accel_rebuild_shape(accel *a, const shape *sh, rsw_err *err) {
   unsigned i = sh->index;
   embree_error_reset(a->device);
   a->error[0] = '\0';
-  RTCGeometry g = shape_geometry(a, sh);
+  RTCGeometry g = shape_geometry(a, sh, false);
   if (!g) {
     a->stale = true;
     return embree_fail(a, err, sh->base.id, "cannot create geometry");
@@ -943,70 +899,25 @@ void accel_get_counters(const accel *a, accel_counters *out) {
     memset(out, 0, sizeof *out);
 }
 
-/* ---- ray recording (make bench's replay ceiling) ------------------------------------------ */
+/* ---- the query hook (accel_embree.h) ---------------------------------------------------------- */
 
-/* One recorded query, as Embree saw it (after fill_ray). */
-typedef struct rec_ray {
-  float o[3], d[3], tnear, tfar;
-  uint8_t occluded; /* an occlusion query */
-  uint8_t width;    /* first ray of a query: the lanes of its packet (1: rtcIntersect1/Occluded1) */
-} rec_ray;
+static accel_query_hook *_Atomic g_hook;
 
-struct accel_ray_log {
-  rec_ray *r;
-  size_t cap;
-  _Atomic size_t n;
-};
-
-static accel_ray_log *_Atomic g_rec; /* the log being recorded into, or NULL */
-
-accel_ray_log *accel_record_begin(size_t max_rays) {
-  accel_ray_log *lg = calloc(1, sizeof *lg);
-  if (!lg) return NULL;
-  lg->r = malloc((max_rays ? max_rays : 1) * sizeof *lg->r);
-  if (!lg->r) {
-    free(lg);
-    return NULL;
-  }
-  lg->cap = max_rays;
-  atomic_store(&lg->n, 0);
-  atomic_store(&g_rec, lg);
-  return lg;
+void accel_set_query_hook(accel_query_hook *fn) {
+  atomic_store(&g_hook, fn);
 }
 
-void accel_record_end(void) {
-  atomic_store(&g_rec, NULL);
+RTCDevice accel_embree_device(const accel *a) {
+  return a->device;
 }
 
-size_t accel_ray_log_count(const accel_ray_log *lg) {
-  size_t n = atomic_load(&((accel_ray_log *)lg)->n);
-  return n < lg->cap ? n : lg->cap;
+RTCScene accel_embree_top(const accel *a) {
+  return a->top;
 }
 
-void accel_ray_log_free(accel_ray_log *lg) {
-  if (!lg) return;
-  free(lg->r);
-  free(lg);
-}
-
-/* Record k rays (lanes of one query); the whole query or nothing. */
-static void record_rays(const struct RTCRay *const *rays, unsigned k, unsigned width, bool occluded) {
-  accel_ray_log *lg = atomic_load(&g_rec);
-  if (!lg || k == 0) return;
-  size_t at = atomic_fetch_add(&lg->n, k);
-  if (at + k > lg->cap) {
-    atomic_store(&lg->n, lg->cap); /* full: later queries are not recorded */
-    return;
-  }
-  for (unsigned i = 0; i < k; i++) {
-    const struct RTCRay *ray = rays[i];
-    rec_ray *q = &lg->r[at + i];
-    q->o[0] = ray->org_x, q->o[1] = ray->org_y, q->o[2] = ray->org_z;
-    q->d[0] = ray->dir_x, q->d[1] = ray->dir_y, q->d[2] = ray->dir_z;
-    q->tnear = ray->tnear, q->tfar = ray->tfar;
-    q->occluded = occluded;
-    q->width = i == 0 ? (uint8_t)width : 0;
-  }
+static void query_hook(const struct RTCRay *const *rays, unsigned k, unsigned width, bool occluded) {
+  accel_query_hook *fn = atomic_load_explicit(&g_hook, memory_order_relaxed);
+  if (fn && k) fn(rays, k, width, occluded);
 }
 
 /* ---- queries ------------------------------------------------------------------------------- */
@@ -1100,9 +1011,9 @@ bool accel_intersect_mask(const accel *a, const ray3 *r, accel_hit *h, unsigned 
   struct RTCRayHit rh;
   double t0, ts;
   if (!fill_ray(a, &rh.ray, r, &t0, &ts, mask)) return false;
-  if (atomic_load_explicit(&g_rec, memory_order_relaxed)) {
+  if (atomic_load_explicit(&g_hook, memory_order_relaxed)) {
     const struct RTCRay *rp = &rh.ray;
-    record_rays(&rp, 1, 1, false);
+    query_hook(&rp, 1, 1, false);
   }
   rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
   rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
@@ -1131,9 +1042,9 @@ bool accel_occluded(const accel *a, const ray3 *r) {
   struct RTCRay ray;
   double t0, ts;
   if (!fill_ray(a, &ray, r, &t0, &ts, 0xFFFFFFFFu)) return false;
-  if (atomic_load_explicit(&g_rec, memory_order_relaxed)) {
+  if (atomic_load_explicit(&g_hook, memory_order_relaxed)) {
     const struct RTCRay *rp = &ray;
-    record_rays(&rp, 1, 1, true);
+    query_hook(&rp, 1, 1, true);
   }
   rtcOccluded1(a->top, &ctx, &ray);
   return ray.tfar < 0;
@@ -1174,17 +1085,9 @@ void accel_set_packet_width(int w) {
   g_packet_pin = w == 16 || w == 8 || w == 4 || w == 1 ? w : 0;
 }
 
-/* One SOA packet of up to 16 rays with their hits (RTCRayHit16's layout,
- * addressed through RAYN_F/HITN_*: the same memory serves N = 4, 8, 16). */
-typedef struct packet_buf {
-  _Alignas(64) float f[(RAY_FIELDS + HIT_INST + 1) * 16];
-  _Alignas(64) int valid[16];
-  double t0[16], ts[16];
-} packet_buf;
-
-/* The valid lanes of a filled packet into accel_record_begin's log. */
+/* The valid lanes of a filled packet to the query hook. */
 static void packet_record(const packet_buf *pb, unsigned N, int n, bool occluded) {
-  if (!atomic_load_explicit(&g_rec, memory_order_relaxed)) return;
+  if (!atomic_load_explicit(&g_hook, memory_order_relaxed)) return;
   struct RTCRay rays[16];
   const struct RTCRay *rp[16];
   unsigned k = 0;
@@ -1203,7 +1106,7 @@ static void packet_record(const packet_buf *pb, unsigned N, int n, bool occluded
     rp[k] = ray;
     k++;
   }
-  record_rays(rp, k, N, occluded);
+  query_hook(rp, k, N, occluded);
 }
 
 static unsigned packet_n(int n) {
@@ -1325,279 +1228,6 @@ void accel_occluded_packet(const accel *a, const ray3 *const *r, int n, bool *oc
       rtcOccluded4(pb.valid, a->top, &ctx, (struct RTCRay4 *)pb.f);
   }
   for (int i = 0; i < n; i++) occ[i] = pb.valid[i] && RAYN_F(pb.f, N, RAY_TFAR, i) < 0;
-}
-
-/* ---- measurement ------------------------------------------------------------------------------ */
-
-#include <time.h>
-
-#include "core/rng.h"
-
-typedef struct ceiling_job {
-  RTCScene scene;
-  vec3 c;
-  double r;
-  uint64_t n, seed;
-  unsigned index;
-  uint64_t hits;
-  float *rays; /* n x (org, dir) */
-  struct ceiling_sync *sync;
-  bool ok;
-} ceiling_job;
-
-/* Workers report ready after generating rays and wait for `go`, so the
- * caller's clock covers the queries only. */
-typedef struct ceiling_sync {
-  pthread_mutex_t lock;
-  pthread_cond_t cond;
-  int ready;
-  bool go, abort;
-} ceiling_sync;
-
-static vec3 uniform_sphere_point(pcg32 *g) {
-  double z = 1.0 - 2.0 * pcg32_next_double(g), phi = 2.0 * RSW_PI * pcg32_next_double(g);
-  double s = sqrt(fmax(0.0, 1.0 - z * z));
-  return v3(s * cos(phi), s * sin(phi), z);
-}
-
-/* Generates its rays, waits at the barrier (so that the caller times only
- * the queries), then traces them. */
-static void *ceiling_worker(void *arg) {
-  ceiling_job *j = arg;
-  pcg32 g;
-  pcg32_seed(&g, j->seed, j->index + 1);
-  j->rays = malloc(j->n * 6 * sizeof(float));
-  j->ok = j->rays != NULL;
-  for (uint64_t i = 0; j->ok && i < j->n; i++) {
-    /* Origin uniform in the bounding ball, direction uniform on the
-     * sphere: incoherent rays as secondary bounces produce them. */
-    double rr = j->r * cbrt(pcg32_next_double(&g));
-    vec3 o = v3_fma(j->c, rr, uniform_sphere_point(&g));
-    vec3 d = uniform_sphere_point(&g);
-    float *q = &j->rays[6 * i];
-    q[0] = (float)o.x, q[1] = (float)o.y, q[2] = (float)o.z;
-    q[3] = (float)d.x, q[4] = (float)d.y, q[5] = (float)d.z;
-  }
-  pthread_mutex_lock(&j->sync->lock);
-  j->sync->ready++;
-  pthread_cond_broadcast(&j->sync->cond);
-  while (!j->sync->go) pthread_cond_wait(&j->sync->cond, &j->sync->lock);
-  if (j->sync->abort) j->ok = false;
-  pthread_mutex_unlock(&j->sync->lock);
-  struct RTCIntersectContext ctx;
-  rtcInitIntersectContext(&ctx);
-  uint64_t hits = 0;
-  for (uint64_t i = 0; j->ok && i < j->n; i++) {
-    const float *q = &j->rays[6 * i];
-    struct RTCRayHit rh;
-    rh.ray.org_x = q[0], rh.ray.org_y = q[1], rh.ray.org_z = q[2];
-    rh.ray.dir_x = q[3], rh.ray.dir_y = q[4], rh.ray.dir_z = q[5];
-    rh.ray.tnear = 0, rh.ray.tfar = INFINITY, rh.ray.time = 0, rh.ray.mask = 0xFFFFFFFFu, rh.ray.id = 0,
-    rh.ray.flags = 0;
-    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-    rtcIntersect1(j->scene, &ctx, &rh);
-    hits += rh.hit.geomID != RTC_INVALID_GEOMETRY_ID;
-  }
-  j->hits = hits;
-  free(j->rays);
-  j->rays = NULL;
-  return NULL;
-}
-
-static RTCScene build_flat(const scene *s) {
-  RTCScene fs = rtcNewScene(s->accel->device);
-  rtcSetSceneBuildQuality(fs, RTC_BUILD_QUALITY_HIGH);
-  for (size_t i = 0; i < s->n_shapes; i++) {
-    const shape *sh = s->shapes[i];
-    if (sh->ops->intersect || shape_is_group(sh) || shape_is_instancing(sh)) continue;
-    RTCGeometry g = rtcNewGeometry(s->accel->device, RTC_GEOMETRY_TYPE_TRIANGLE);
-    float *v = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float),
-                                       sh->mesh.n_verts);
-    unsigned *ix = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
-                                           3 * sizeof(unsigned), sh->mesh.n_faces);
-    for (uint32_t k = 0; k < sh->mesh.n_verts; k++) {
-      const float *p = &sh->mesh.pos[3 * (size_t)k];
-      vec3 w = v3_sub(xf_point(&sh->to_world, v3(p[0], p[1], p[2])), s->accel->origin);
-      v[3 * k] = (float)w.x, v[3 * k + 1] = (float)w.y, v[3 * k + 2] = (float)w.z;
-    }
-    memcpy(ix, sh->mesh.faces, 3 * (size_t)sh->mesh.n_faces * sizeof(unsigned));
-    rtcCommitGeometry(g);
-    rtcAttachGeometry(fs, g);
-    rtcReleaseGeometry(g);
-  }
-  rtcCommitScene(fs);
-  return fs;
-}
-
-double accel_ceiling_rays_per_s(const scene *s, bool flat, uint64_t n_rays, int threads, uint64_t seed) {
-  if (!s->accel || threads < 1 || threads > 256) return 0;
-  RTCScene sc = flat ? build_flat(s) : s->accel->top;
-  if (!sc) return 0;
-  ceiling_job jobs[256];
-  pthread_t th[256];
-  ceiling_sync sync = {.ready = 0};
-  pthread_mutex_init(&sync.lock, NULL);
-  pthread_cond_init(&sync.cond, NULL);
-  if (n_rays > ((uint64_t)1 << 26)) n_rays = (uint64_t)1 << 26;
-  int started = 0;
-  for (int i = 0; i < threads; i++) {
-    jobs[i] = (ceiling_job){.scene = sc,
-                            .c = v3_sub(s->bsphere_center, s->accel->origin),
-                            .r = s->bsphere_radius,
-                            .n = n_rays / (uint64_t)threads,
-                            .seed = seed,
-                            .index = (unsigned)i,
-                            .sync = &sync};
-    if (pthread_create(&th[i], NULL, ceiling_worker, &jobs[i]) != 0) break;
-    started++;
-  }
-  pthread_mutex_lock(&sync.lock);
-  while (sync.ready < started) pthread_cond_wait(&sync.cond, &sync.lock);
-  sync.abort = started < threads;
-  sync.go = true;
-  pthread_cond_broadcast(&sync.cond);
-  pthread_mutex_unlock(&sync.lock);
-  struct timespec t0, t1;
-  clock_gettime(CLOCK_MONOTONIC, &t0);
-  for (int i = 0; i < started; i++) pthread_join(th[i], NULL);
-  clock_gettime(CLOCK_MONOTONIC, &t1);
-  pthread_mutex_destroy(&sync.lock);
-  pthread_cond_destroy(&sync.cond);
-  bool ok = started == threads;
-  for (int i = 0; i < started; i++) ok = ok && jobs[i].ok;
-  if (flat) rtcReleaseScene(sc);
-  double dt = (t1.tv_sec - t0.tv_sec) + 1e-9 * (t1.tv_nsec - t0.tv_nsec);
-  return ok && dt > 0 ? (double)(n_rays / (uint64_t)threads) * started / dt : 0;
-}
-
-/* ---- replay ceiling ------------------------------------------------------------------------- */
-
-typedef struct replay_job {
-  RTCScene top;
-  const rec_ray *r;
-  size_t lo, hi; /* queries starting in [lo, hi) */
-  size_t n_end;  /* records in the log */
-  ceiling_sync *sync;
-  uint64_t hits;
-} replay_job;
-
-static void *replay_worker(void *arg) {
-  replay_job *j = arg;
-  pthread_mutex_lock(&j->sync->lock);
-  j->sync->ready++;
-  pthread_cond_broadcast(&j->sync->cond);
-  while (!j->sync->go) pthread_cond_wait(&j->sync->cond, &j->sync->lock);
-  pthread_mutex_unlock(&j->sync->lock);
-  struct RTCIntersectContext ctx;
-  rtcInitIntersectContext(&ctx);
-  uint64_t hits = 0;
-  size_t i = j->lo;
-  while (i < j->hi) {
-    const rec_ray *q = &j->r[i];
-    unsigned w = q->width ? q->width : 1;
-    size_t k = 1;
-    while (i + k < j->n_end && k < w && j->r[i + k].width == 0) k++;
-    if (w == 1) {
-      struct RTCRayHit rh;
-      rh.ray.org_x = q->o[0], rh.ray.org_y = q->o[1], rh.ray.org_z = q->o[2];
-      rh.ray.dir_x = q->d[0], rh.ray.dir_y = q->d[1], rh.ray.dir_z = q->d[2];
-      rh.ray.tnear = q->tnear, rh.ray.tfar = q->tfar, rh.ray.time = 0, rh.ray.mask = 0xFFFFFFFFu;
-      rh.ray.id = 0, rh.ray.flags = 0;
-      if (q->occluded) {
-        rtcOccluded1(j->top, &ctx, &rh.ray);
-        hits += rh.ray.tfar < 0;
-      } else {
-        rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-        rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-        rtcIntersect1(j->top, &ctx, &rh);
-        hits += rh.hit.geomID != RTC_INVALID_GEOMETRY_ID;
-      }
-    } else {
-      packet_buf pb;
-      for (unsigned l = 0; l < w; l++) {
-        if (l >= k) {
-          pb.valid[l] = 0;
-          continue;
-        }
-        const rec_ray *p = &j->r[i + l];
-        float *f = pb.f;
-        RAYN_F(f, w, RAY_ORG, l) = p->o[0], RAYN_F(f, w, RAY_ORG + 1, l) = p->o[1];
-        RAYN_F(f, w, RAY_ORG + 2, l) = p->o[2];
-        RAYN_F(f, w, RAY_DIR, l) = p->d[0], RAYN_F(f, w, RAY_DIR + 1, l) = p->d[1];
-        RAYN_F(f, w, RAY_DIR + 2, l) = p->d[2];
-        RAYN_F(f, w, RAY_TNEAR, l) = p->tnear, RAYN_F(f, w, 7, l) = 0, RAYN_F(f, w, RAY_TFAR, l) = p->tfar;
-        ((unsigned *)f)[9 * w + l] = 0xFFFFFFFFu;
-        ((unsigned *)f)[10 * w + l] = l;
-        ((unsigned *)f)[11 * w + l] = 0;
-        float *hb = f + (size_t)RAY_FIELDS * w;
-        HITN_U(hb, w, HIT_GEOM, l) = RTC_INVALID_GEOMETRY_ID;
-        HITN_U(hb, w, HIT_INST, l) = RTC_INVALID_GEOMETRY_ID;
-        pb.valid[l] = -1;
-      }
-      if (q->occluded) {
-        if (w == 16)
-          rtcOccluded16(pb.valid, j->top, &ctx, (struct RTCRay16 *)pb.f);
-        else if (w == 8)
-          rtcOccluded8(pb.valid, j->top, &ctx, (struct RTCRay8 *)pb.f);
-        else
-          rtcOccluded4(pb.valid, j->top, &ctx, (struct RTCRay4 *)pb.f);
-        for (size_t l = 0; l < k; l++) hits += RAYN_F(pb.f, w, RAY_TFAR, l) < 0;
-      } else {
-        if (w == 16)
-          rtcIntersect16(pb.valid, j->top, &ctx, (struct RTCRayHit16 *)pb.f);
-        else if (w == 8)
-          rtcIntersect8(pb.valid, j->top, &ctx, (struct RTCRayHit8 *)pb.f);
-        else
-          rtcIntersect4(pb.valid, j->top, &ctx, (struct RTCRayHit4 *)pb.f);
-        const float *hb = pb.f + (size_t)RAY_FIELDS * w;
-        for (size_t l = 0; l < k; l++) hits += HITN_U(hb, w, HIT_GEOM, l) != RTC_INVALID_GEOMETRY_ID;
-      }
-    }
-    i += k;
-  }
-  j->hits = hits;
-  return NULL;
-}
-
-double accel_replay_rays_per_s(const scene *s, const accel_ray_log *lg, int threads, bool flat) {
-  size_t n = accel_ray_log_count(lg);
-  const accel *a = s->accel;
-  if (!a || n == 0 || threads < 1 || threads > 256) return 0;
-  RTCScene top = flat ? build_flat(s) : a->top;
-  if (!top) return 0;
-  replay_job jobs[256];
-  pthread_t th[256];
-  ceiling_sync sync = {.ready = 0};
-  pthread_mutex_init(&sync.lock, NULL);
-  pthread_cond_init(&sync.cond, NULL);
-  /* Contiguous shares, cut at query starts. */
-  size_t lo = 0;
-  int started = 0;
-  for (int t = 0; t < threads; t++) {
-    size_t hi = t == threads - 1 ? n : n * (size_t)(t + 1) / (size_t)threads;
-    while (hi < n && lg->r[hi].width == 0) hi++;
-    if (hi < lo) hi = lo;
-    jobs[t] = (replay_job){.top = top, .r = lg->r, .lo = lo, .hi = hi, .n_end = n, .sync = &sync};
-    lo = hi;
-    if (pthread_create(&th[t], NULL, replay_worker, &jobs[t]) != 0) break;
-    started++;
-  }
-  pthread_mutex_lock(&sync.lock);
-  while (sync.ready < started) pthread_cond_wait(&sync.cond, &sync.lock);
-  sync.go = true;
-  pthread_cond_broadcast(&sync.cond);
-  pthread_mutex_unlock(&sync.lock);
-  struct timespec t0, t1;
-  clock_gettime(CLOCK_MONOTONIC, &t0);
-  for (int t = 0; t < started; t++) pthread_join(th[t], NULL);
-  clock_gettime(CLOCK_MONOTONIC, &t1);
-  pthread_mutex_destroy(&sync.lock);
-  pthread_cond_destroy(&sync.cond);
-  if (flat) rtcReleaseScene(top);
-  double dt = (t1.tv_sec - t0.tv_sec) + 1e-9 * (t1.tv_nsec - t0.tv_nsec);
-  size_t done = started == threads ? n : 0;
-  return done && dt > 0 ? (double)done / dt : 0;
 }
 
 bool accel_null_box_candidate(const shape *sh) {

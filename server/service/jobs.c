@@ -447,70 +447,114 @@ static bool get_uint(const cJSON *o, const char *name, double max, uint64_t *out
   return true;
 }
 
-rsw_status service_job_submit(service *svc, const char *scene_id, const char *body, size_t len,
-                              const char *idem_key, char **job_id_out, char **json_out, svc_error *e) {
-  if (!service_ready(svc)) return svc_fail(e, RSW_ERR_UNAVAILABLE, "", "the server is shutting down");
-  unsigned jm = svc_json_mark();
-  unsigned char digest[32];
-  if (!rsw_sha256(body, len, digest)) return svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
-  if (idem_key) {
-    pthread_mutex_lock(&svc->lock);
-    for (size_t i = 0; i < svc->n_jobs; i++) {
-      job *j = svc->jobs[i];
-      if (j->deleted || !j->idem_key || strcmp(j->idem_key, idem_key) != 0 ||
-          strcmp(j->scene_id, scene_id) != 0)
-        continue;
-      if (memcmp(j->body_digest, digest, 32) != 0) {
-        pthread_mutex_unlock(&svc->lock);
-        return svc_fail(e, RSW_ERR_CONFLICT, "Idempotency-Key",
-                        "Idempotency-Key '%s' was used for another request body", idem_key);
-      }
-      rsw_status st = svc_json_out(json_out, job_json(j), jm, e);
-      *job_id_out = st ? NULL : strdup(j->id);
+/* ---- submitting a job ---------------------------------------------------------------------
+ * service_job_submit runs four stages, each of which answers the first
+ * problem it meets (its pointer and message) and leaves nothing behind:
+ *   parse_request     the body's fields (no scene needed);
+ *   validate_request  everything against the scene, context by context
+ *                     (check_context), before anything is accepted;
+ *   plan_job          the job's renders, their seeds and overrides;
+ *   enqueue_job       an id, the state directory, the queue and the answer.
+ * A replayed Idempotency-Key (submit_replay) answers before any of them. */
+
+/* A job request as parsed from its body (stage 1); the cJSON pointers
+ * point into req. */
+typedef struct job_req {
+  cJSON *req;
+  const cJSON *contexts, *defaults, *params, *templates;
+  uint64_t seed;       /* the job's seed ("seed"; 0 when absent) */
+  unsigned quantities; /* RENDER_Q_* */
+  bool variance;
+  band_plan *bands;  /* NULL: no bands (bands.c); the job takes it (plan_job) */
+  size_t n_contexts; /* entries of "contexts" */
+  /* "defaults", read by validate_request (0 / NULL: not given). */
+  uint64_t d_spp;
+  double d_wl;
+  const cJSON *d_sensors;
+} job_req;
+
+/* What validation learned (stage 2) for planning. */
+typedef struct job_check {
+  tmpl_set *ts;       /* the templates (the scene's under the job's), NULL: none */
+  size_t n_nodes;     /* renders per context and sensor: the bands' nodes, or 1 */
+  cJSON **ctx_params; /* with templates: per context and node (context-major), the overrides rendered */
+  size_t n_items;     /* renders */
+  cJSON *warnings;    /* the no-op sweep warnings (NULL: none); the job takes them */
+  nc_coords coords;   /* the contexts' coords; the job takes them */
+} job_check;
+
+static void job_req_free(job_req *q) {
+  cJSON_Delete(q->req);
+  bands_free(q->bands);
+}
+
+static void job_check_free(job_check *k, size_t n_contexts) {
+  for (size_t i = 0; k->ctx_params && i < n_contexts * k->n_nodes; i++) cJSON_Delete(k->ctx_params[i]);
+  free(k->ctx_params);
+  tmpl_free(k->ts);
+  cJSON_Delete(k->warnings);
+  nc_coords_free(&k->coords);
+}
+
+/* A request whose Idempotency-Key this scene's jobs already hold (*found):
+ * the same body answers with that job, another body is a conflict. */
+static rsw_status submit_replay(service *svc, const char *scene_id, const char *idem_key,
+                                const unsigned char digest[32], unsigned jm, char **job_id_out,
+                                char **json_out, bool *found, svc_error *e) {
+  *found = false;
+  pthread_mutex_lock(&svc->lock);
+  for (size_t i = 0; i < svc->n_jobs; i++) {
+    job *j = svc->jobs[i];
+    if (j->deleted || !j->idem_key || strcmp(j->idem_key, idem_key) != 0 ||
+        strcmp(j->scene_id, scene_id) != 0)
+      continue;
+    *found = true;
+    if (memcmp(j->body_digest, digest, 32) != 0) {
       pthread_mutex_unlock(&svc->lock);
-      if (!st && !*job_id_out) {
-        free(*json_out);
-        *json_out = NULL;
-        st = svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
-      }
-      return st;
+      return svc_fail(e, RSW_ERR_CONFLICT, "Idempotency-Key",
+                      "Idempotency-Key '%s' was used for another request body", idem_key);
     }
+    rsw_status st = svc_json_out(json_out, job_json(j), jm, e);
+    *job_id_out = st ? NULL : strdup(j->id);
     pthread_mutex_unlock(&svc->lock);
+    if (!st && !*job_id_out) {
+      free(*json_out);
+      *json_out = NULL;
+      st = svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
+    }
+    return st;
   }
-  resident *r = svc_scene_acquire(svc, scene_id);
-  if (!r) return svc_no_scene(e, scene_id);
-  cJSON *req = cJSON_ParseWithLength(body, len);
+  pthread_mutex_unlock(&svc->lock);
+  return RSW_OK;
+}
+
+/* Stage 1: the body as JSON, its known fields, a non-empty context list
+ * within SVC_MAX_JOB_CONTEXTS (the caps before any context is read: a
+ * request over them costs one pass over the list). */
+static rsw_status parse_request(const char *body, size_t len, job_req *q, svc_error *e) {
+  q->req = cJSON_ParseWithLength(body, len);
+  if (!q->req) return svc_fail(e, RSW_ERR_PARSE, "", "the body is not valid JSON");
+  if (svc_check_body(body, len, e) != RSW_OK) return e->err.code;
+  if (!cJSON_IsObject(q->req)) return svc_fail(e, RSW_ERR_TYPE, "", "the body must be a JSON object");
   rsw_status st = RSW_OK;
-  job *jb = NULL;
-  if (!req)
-    st = svc_fail(e, RSW_ERR_PARSE, "", "the body is not valid JSON");
-  else if (svc_check_body(body, len, e) != RSW_OK)
-    st = e->err.code;
-  else if (!cJSON_IsObject(req))
-    st = svc_fail(e, RSW_ERR_TYPE, "", "the body must be a JSON object");
-  const cJSON *contexts = NULL, *defaults = NULL, *jparams = NULL, *jtemplates = NULL;
-  uint64_t job_seed = 0;
-  unsigned quantities = 0;
-  bool variance = false;
-  band_plan *bands = NULL; /* bands.c */
-  for (const cJSON *k = !st ? req->child : NULL; k && !st; k = k->next) {
+  for (const cJSON *k = q->req->child; k && !st; k = k->next) {
     if (strcmp(k->string, "contexts") == 0)
-      contexts = k;
+      q->contexts = k;
     else if (strcmp(k->string, "defaults") == 0)
-      defaults = k;
+      q->defaults = k;
     else if (strcmp(k->string, "params") == 0)
-      jparams = k;
+      q->params = k;
     else if (strcmp(k->string, "templates") == 0)
-      jtemplates = k;
+      q->templates = k;
     else if (strcmp(k->string, "seed") == 0) {
       bool present;
-      get_uint(req, "seed", 9007199254740991.0, &job_seed, &present, "", e, &st);
+      get_uint(q->req, "seed", 9007199254740991.0, &q->seed, &present, "", e, &st);
     } else if (strcmp(k->string, "quantities") == 0) {
-      st = svc_parse_quantities(k, "/quantities", &quantities, e);
+      st = svc_parse_quantities(k, "/quantities", &q->quantities, e);
     } else if (strcmp(k->string, "variance") == 0) {
-      st = svc_parse_variance(k, "/variance", &variance, e);
+      st = svc_parse_variance(k, "/variance", &q->variance, e);
     } else if (strcmp(k->string, "bands") == 0) {
-      st = bands_parse(k, "/bands", &bands, e);
+      st = bands_parse(k, "/bands", &q->bands, e);
     } else {
       char w[300];
       snprintf(w, sizeof w, "/%s", k->string);
@@ -520,374 +564,457 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
                     k->string);
     }
   }
-  if (!st && (!cJSON_IsArray(contexts) || !contexts->child))
-    st = svc_fail(e, RSW_ERR_MISSING, "/contexts", "a job needs a non-empty \"contexts\" list");
-  /* The caps before any context is read: a request over them costs one
-   * pass over the list. */
-  size_t n_listed = 0;
-  for (const cJSON *c = !st ? contexts->child : NULL; c; c = c->next) n_listed++;
-  if (!st && n_listed > SVC_MAX_JOB_CONTEXTS)
-    st = svc_fail(e, RSW_ERR_LIMIT, "/contexts", "%zu contexts; a job may have at most %d", n_listed,
-                  SVC_MAX_JOB_CONTEXTS);
-  id_set ids = {0};
-  if (!st && !id_set_init(&ids, n_listed)) st = svc_fail(e, RSW_ERR_NOMEM, "/contexts", "out of memory");
-  if (!st && defaults && !cJSON_IsObject(defaults))
-    st = svc_fail(e, RSW_ERR_TYPE, "/defaults", "defaults must be an object");
-  /* Validation reads the parameter table's keys, the sensors' ids and
-   * films: all fixed at load, so no scene lock is needed (a running render
-   * holds it for its whole duration). */
+  if (st) return st;
+  if (!cJSON_IsArray(q->contexts) || !q->contexts->child)
+    return svc_fail(e, RSW_ERR_MISSING, "/contexts", "a job needs a non-empty \"contexts\" list");
+  for (const cJSON *c = q->contexts->child; c; c = c->next) q->n_contexts++;
+  if (q->n_contexts > SVC_MAX_JOB_CONTEXTS)
+    return svc_fail(e, RSW_ERR_LIMIT, "/contexts", "%zu contexts; a job may have at most %d", q->n_contexts,
+                    SVC_MAX_JOB_CONTEXTS);
+  if (q->defaults && !cJSON_IsObject(q->defaults))
+    return svc_fail(e, RSW_ERR_TYPE, "/defaults", "defaults must be an object");
+  return RSW_OK;
+}
+
+/* The "defaults" object's spp, wavelength and sensors. */
+static rsw_status read_defaults(job_req *q, svc_error *e) {
+  const cJSON *defaults = q->defaults;
+  rsw_status st = RSW_OK;
+  if (!defaults) return RSW_OK;
+  bool present;
+  get_uint(defaults, "spp", 4294967295.0, &q->d_spp, &present, "/defaults", e, &st);
+  if (!st && present && q->d_spp == 0)
+    st = svc_fail(e, RSW_ERR_INVALID, "/defaults/spp", "spp must be at least 1");
+  const cJSON *w = cJSON_GetObjectItemCaseSensitive(defaults, "wavelength");
+  if (!st && w) {
+    if (!cJSON_IsNumber(w) || !(w->valuedouble > 0) || !isfinite(w->valuedouble))
+      st =
+          svc_fail(e, RSW_ERR_INVALID, "/defaults/wavelength", "wavelength must be a positive finite number");
+    else
+      q->d_wl = w->valuedouble;
+    if (!st && q->bands)
+      st = svc_fail(e, RSW_ERR_INVALID, "/defaults/wavelength",
+                    "a job with bands renders each band's wavelengths: it takes no wavelength");
+  }
+  q->d_sensors = cJSON_GetObjectItemCaseSensitive(defaults, "sensors");
+  for (const cJSON *k = defaults->child; k && !st; k = k->next)
+    if (strcmp(k->string, "spp") && strcmp(k->string, "wavelength") && strcmp(k->string, "sensors")) {
+      char w2[300];
+      snprintf(w2, sizeof w2, "/defaults/%s", k->string);
+      st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, w2, "unknown field '%s' in defaults", k->string);
+    }
+  return st;
+}
+
+/* What checking the contexts carries from one context to the next. */
+typedef struct ctx_scan {
+  service *svc;
+  const scene *sc;
+  const job_req *q;
+  job_check *k;
+  id_set ids;         /* the context ids met */
+  size_t *seen;       /* per sensor: 1 + the context that last named it (once per context) */
+  bool *film_ok;      /* per sensor: its film passed the film limits (checked once) */
+  spec_range *ranges; /* mono: the base state's tabulated spectra */
+  size_t n_ranges;
+  bool spectral;      /* what the contexts render with depends on the wavelength */
+  bool any_table;     /* some context's overrides hold a table */
+  bool job_params_ok; /* the job-level overrides were checked on their own */
+  tmpl_ctx_sig *sigs; /* per context: the fingerprint for the no-op sweep check */
+} ctx_scan;
+
+/* A context's fields: an object with a fresh id, known keys, a valid
+ * wavelength (*w, NULL when absent) and only on a mono scene. */
+static rsw_status check_context_fields(ctx_scan *cs, const cJSON *c, const char *ptr, const cJSON **w,
+                                       svc_error *e) {
+  if (!cJSON_IsObject(c)) return svc_fail(e, RSW_ERR_TYPE, ptr, "a context must be an object");
+  const cJSON *id = cJSON_GetObjectItemCaseSensitive(c, "id");
+  if (!cJSON_IsString(id) || !svc_valid_id(id->valuestring))
+    return svc_fail(e, RSW_ERR_INVALID, ptr, "context \"id\" must match [A-Za-z0-9._-]{1,64}");
+  if (!id_set_add(&cs->ids, id->valuestring))
+    return svc_fail(e, RSW_ERR_DUPLICATE, ptr, "context id '%s' appears twice", id->valuestring);
+  for (const cJSON *k = c->child; k; k = k->next)
+    if (strcmp(k->string, "id") && strcmp(k->string, "wavelength") && strcmp(k->string, "params") &&
+        strcmp(k->string, "sensors") && strcmp(k->string, "spp") && strcmp(k->string, "seed") &&
+        strcmp(k->string, "coords")) {
+      char p[300];
+      snprintf(p, sizeof p, "%s/%s", ptr, k->string);
+      return svc_fail(e, RSW_ERR_UNUSED_PROPERTY, p, "unknown field '%s' in a context", k->string);
+    }
+  *w = cJSON_GetObjectItemCaseSensitive(c, "wavelength");
+  if (*w && (!cJSON_IsNumber(*w) || !((*w)->valuedouble > 0) || !isfinite((*w)->valuedouble))) {
+    char p2[80];
+    snprintf(p2, sizeof p2, "%s/wavelength", ptr);
+    return svc_fail(e, RSW_ERR_INVALID, p2, "wavelength must be a positive finite number of nm");
+  }
+  if ((*w || cs->q->d_wl > 0) && cs->sc->variant != VARIANT_MONO)
+    return svc_fail(e, RSW_ERR_INVALID, ptr, "wavelength applies to mono scenes; this scene is rgb");
+  return RSW_OK;
+}
+
+/* The wavelengths a mono context renders at (wl, or with bands every
+ * band's support) against the tables it renders with (mine: its
+ * overrides; the job-level ones too without templates). */
+static rsw_status check_context_wavelengths(ctx_scan *cs, const cJSON *c, const cJSON *w, const cJSON *cw,
+                                            double wl, const cJSON *mine, const char *ptr, svc_error *e) {
+  const scene *sc = cs->sc;
+  const cJSON *jp = cs->k->ts ? NULL : cs->q->params;
+  const band_plan *bands = cs->q->bands;
+  if (bands) {
+    /* No wavelength of its own, and the scene's tables must cover
+     * every band's support. */
+    rsw_status st = svc_bands_check_context(bands, c, ptr, e);
+    for (size_t b = 0; !st && b < bands->n; b++) {
+      char p6[80];
+      snprintf(p6, sizeof p6, "/bands/%zu/srf", b);
+      st = check_wavelength(sc, cs->ranges, cs->n_ranges, jp, mine, bands->b[b].lo, p6, e);
+      if (!st) st = check_wavelength(sc, cs->ranges, cs->n_ranges, jp, mine, bands->b[b].hi, p6, e);
+    }
+    return st;
+  }
+  if (sc->variant != VARIANT_MONO) return RSW_OK;
+  char p5[96];
+  snprintf(p5, sizeof p5,
+           w                 ? "%s/wavelength"
+           : cw              ? "%s/coords/wavelength"
+           : cs->q->d_wl > 0 ? "/defaults/wavelength"
+                             : "%s",
+           ptr);
+  return check_wavelength(sc, cs->ranges, cs->n_ranges, jp, mine, wl, p5, e);
+}
+
+/* The values context i renders with must be legal now, not only when it
+ * renders: job-level overrides under its own (checked once for all
+ * contexts that have none of their own), what its templates render, and
+ * its wavelengths against the tables. Records its sweep fingerprint. */
+static rsw_status check_context_values(ctx_scan *cs, const cJSON *c, size_t i, const cJSON *w,
+                                       const char *ptr, svc_error *e) {
+  const scene *sc = cs->sc;
+  const job_req *q = cs->q;
+  job_check *k = cs->k;
+  char pp[80];
+  snprintf(pp, sizeof pp, "%s/params", ptr);
+  const cJSON *cparams = cJSON_GetObjectItemCaseSensitive(c, "params");
+  rsw_status st = check_params(sc, cparams, pp, e);
+  if (st) return st;
+  const cJSON *coords = cJSON_GetObjectItemCaseSensitive(c, "coords");
+  const cJSON *cw = cJSON_IsObject(coords) ? cJSON_GetObjectItemCaseSensitive(coords, "wavelength") : NULL;
+  if (cw && (st = tmpl_check_coord_wavelength(sc, w, cw, ptr, e))) return st;
+  double wl = sc->variant != VARIANT_MONO ? 0
+              : w                         ? w->valuedouble
+              : cw                        ? cw->valuedouble
+              : q->d_wl > 0               ? q->d_wl
+                                          : 550;
+  const cJSON *mine = cparams;
+  if (k->ts) {
+    /* With bands, once per node wavelength: a template may read it. */
+    for (size_t nk = 0; nk < k->n_nodes; nk++) {
+      cJSON *m = merge_params(q->params, cparams);
+      if (!m) return svc_fail(e, RSW_ERR_NOMEM, ptr, "out of memory");
+      k->ctx_params[i * k->n_nodes + nk] = m;
+      st = tmpl_render(k->ts, sc, coords, q->bands ? q->bands->wl[nk] : wl, m, ptr, e);
+      if (!st) st = check_merged(sc, m, cparams, k->ts, ptr, e);
+      if (st) return st;
+    }
+    mine = k->ctx_params[i * k->n_nodes];
+  } else if (cparams || (q->params && !cs->job_params_ok)) {
+    st = check_values(sc, q->params, cparams, ptr, e);
+    if (st) return st;
+    if (!cparams) cs->job_params_ok = true;
+  }
+  st = check_context_wavelengths(cs, c, w, cw, wl, mine, ptr, e);
+  if (st) return st;
+  bool own_table = sc->variant == VARIANT_MONO && has_table(mine);
+  cs->any_table = cs->any_table || own_table;
+  tmpl_ctx_sig *sig = &cs->sigs[i];
+  sig->coords = cJSON_IsObject(coords) ? coords : NULL;
+  sig->wavelength = wl;
+  if (sig->coords) tmpl_ctx_digest(mine, wl, cs->spectral || own_table, c, q->d_sensors, sig->digest);
+  return RSW_OK;
+}
+
+/* A context's spp (at least 1) and seed. */
+static rsw_status check_context_spp_seed(const cJSON *c, const char *ptr, svc_error *e) {
+  rsw_status st = RSW_OK;
+  uint64_t dummy;
+  bool present;
+  get_uint(c, "spp", 4294967295.0, &dummy, &present, ptr, e, &st);
+  if (!st && present && dummy == 0) {
+    char p3[80];
+    snprintf(p3, sizeof p3, "%s/spp", ptr);
+    st = svc_fail(e, RSW_ERR_INVALID, p3, "spp must be at least 1");
+  }
+  if (!st) get_uint(c, "seed", 9007199254740991.0, &dummy, &present, ptr, e, &st);
+  return st;
+}
+
+/* Context i's sensors (its own list, the defaults' or every sensor of the
+ * scene): known, once each, films within the limits; counts its renders
+ * into k->n_items, at most SVC_MAX_JOB_RENDERS in all. */
+static rsw_status check_context_sensors(ctx_scan *cs, const cJSON *c, size_t i, const char *ptr,
+                                        svc_error *e) {
+  const scene *sc = cs->sc;
+  const job_req *q = cs->q;
+  job_check *k = cs->k;
+  rsw_status st = RSW_OK;
+  const cJSON *sens = cJSON_GetObjectItemCaseSensitive(c, "sensors");
+  const char *sens_ptr = ptr;
+  char sp[80];
+  if (sens) {
+    snprintf(sp, sizeof sp, "%s/sensors", ptr);
+    sens_ptr = sp;
+  } else if (q->d_sensors) {
+    sens = q->d_sensors;
+    sens_ptr = "/defaults/sensors";
+  }
+  if (sens) {
+    if (!cJSON_IsArray(sens) || !sens->child)
+      return svc_fail(e, RSW_ERR_TYPE, sens_ptr, "sensors must be a non-empty list of sensor ids");
+    size_t n = 0;
+    for (const cJSON *s = sens->child; s && !st; s = s->next, n++) {
+      size_t si;
+      char ep[120];
+      snprintf(ep, sizeof ep, "%s/%zu", sens_ptr, n);
+      if (!cJSON_IsString(s) || !svc_find_sensor(sc, s->valuestring, &si)) {
+        st = svc_fail(e, RSW_ERR_UNKNOWN_NAME, ep, "no sensor '%s' in the scene",
+                      cJSON_IsString(s) ? s->valuestring : "?");
+        break;
+      }
+      if (cs->seen[si] == i + 1) {
+        st = svc_fail(e, RSW_ERR_DUPLICATE, ep, "sensor '%s' appears twice in one context", s->valuestring);
+        break;
+      }
+      cs->seen[si] = i + 1;
+      if (!cs->film_ok[si]) {
+        st = svc_check_film(cs->svc, sc, si, q->quantities, q->variance, ep, e);
+        cs->film_ok[si] = !st;
+      }
+      k->n_items += k->n_nodes;
+    }
+  } else {
+    if (!sc->n_sensors) st = svc_fail(e, RSW_ERR_INVALID, ptr, "the scene has no sensor");
+    for (size_t si = 0; si < sc->n_sensors && !st; si++)
+      if (!cs->film_ok[si]) {
+        st = svc_check_film(cs->svc, sc, si, q->quantities, q->variance, ptr, e);
+        cs->film_ok[si] = !st;
+      }
+    k->n_items += sc->n_sensors * k->n_nodes;
+  }
+  if (!st && k->n_items > SVC_MAX_JOB_RENDERS)
+    st = svc_fail(e, RSW_ERR_LIMIT, ptr, "the job's renders (contexts times sensors) exceed %d",
+                  SVC_MAX_JOB_RENDERS);
+  return st;
+}
+
+/* Context i (at /contexts/i), in full. */
+static rsw_status check_context(ctx_scan *cs, const cJSON *c, size_t i, svc_error *e) {
+  char ptr[64];
+  snprintf(ptr, sizeof ptr, "/contexts/%zu", i);
+  const cJSON *w = NULL;
+  rsw_status st = check_context_fields(cs, c, ptr, &w, e);
+  if (!st) st = check_context_values(cs, c, i, w, ptr, e);
+  if (!st) st = check_context_spp_seed(c, ptr, e);
+  if (!st) st = check_context_sensors(cs, c, i, ptr, e);
+  return st;
+}
+
+/* The contexts' coords (labels for the dataset): the same names in every
+ * context, one type per name (nc_coords_build). */
+static rsw_status context_coords(const job_req *q, nc_coords *out, svc_error *e) {
+  const void **cj = malloc(q->n_contexts * sizeof *cj);
+  if (!cj) return svc_fail(e, RSW_ERR_NOMEM, "/contexts", "out of memory");
+  size_t i = 0;
+  for (const cJSON *c = q->contexts->child; c; c = c->next, i++)
+    cj[i] = cJSON_GetObjectItemCaseSensitive(c, "coords");
+  rsw_err cerr = {0};
+  rsw_status st = RSW_OK;
+  if (nc_coords_build(cj, q->n_contexts, "/contexts", out, &cerr) != RSW_OK)
+    st = svc_fail(e, cerr.code, cerr.where, "%s", cerr.msg);
+  free(cj);
+  return st;
+}
+
+/* Stage 2: the request against the scene (r), every context before any is
+ * accepted. Validation reads the parameter table's keys, the sensors' ids
+ * and films: all fixed at load, so no scene lock is needed (a running
+ * render holds it for its whole duration). */
+static rsw_status validate_request(service *svc, resident *r, job_req *q, job_check *k, svc_error *e) {
   scene *sc = r->sc;
-  if (!st) st = check_params(sc, jparams, "/params", e);
-  if (!st && bands && sc->variant != VARIANT_MONO)
+  rsw_status st = check_params(sc, q->params, "/params", e);
+  if (!st && q->bands && sc->variant != VARIANT_MONO)
     st = svc_fail(e, RSW_ERR_INVALID, "/bands", "bands apply to mono scenes; this scene is rgb");
-  size_t n_nodes = bands ? bands->n_wl : 1;
+  k->n_nodes = q->bands ? q->bands->n_wl : 1;
   /* Templates (the scene's under the job's), rendered for each context
-   * below into the overrides it renders with. */
-  tmpl_set *ts = NULL;
-  if (!st) st = tmpl_compile(sc, r->templates, "/scene/templates", jtemplates, jparams, &ts, e);
+   * into the overrides it renders with. */
+  if (!st) st = tmpl_compile(sc, r->templates, "/scene/templates", q->templates, q->params, &k->ts, e);
+  if (st) return st;
+  ctx_scan cs = {.svc = svc, .sc = sc, .q = q, .k = k};
   /* Whether what the contexts render with depends on the wavelength: the
    * scene (under r->lock: a PATCH may be changing a table), a template
    * or a job-level table. Contexts' own tables are added as met. */
-  bool spectral = false;
-  if (!st && sc->variant == VARIANT_MONO) {
+  if (sc->variant == VARIANT_MONO) {
     pthread_mutex_lock(&r->lock);
-    spectral = scene_wavelength_dependent(sc);
+    cs.spectral = scene_wavelength_dependent(sc);
     pthread_mutex_unlock(&r->lock);
-    spectral = spectral || tmpl_uses_coord(ts, "wavelength") || has_table(jparams);
+    cs.spectral = cs.spectral || tmpl_uses_coord(k->ts, "wavelength") || has_table(q->params);
   }
-  /* Per context: the overrides rendered from templates (NULL without
-   * templates) and the fingerprint for the no-op sweep check. */
-  cJSON **ctx_params = NULL;
-  tmpl_ctx_sig *sigs = NULL;
-  if (!st && ((ts && !(ctx_params = calloc(n_listed * n_nodes, sizeof *ctx_params))) ||
-              !(sigs = calloc(n_listed, sizeof *sigs))))
+  size_t n_sensors = sc->n_sensors ? sc->n_sensors : 1;
+  if ((k->ts && !(k->ctx_params = calloc(q->n_contexts * k->n_nodes, sizeof *k->ctx_params))) ||
+      !(cs.sigs = calloc(q->n_contexts, sizeof *cs.sigs)) || !id_set_init(&cs.ids, q->n_contexts) ||
+      !(cs.seen = calloc(n_sensors, sizeof *cs.seen)) ||
+      !(cs.film_ok = calloc(n_sensors, sizeof *cs.film_ok)))
     st = svc_fail(e, RSW_ERR_NOMEM, "/contexts", "out of memory");
-  bool any_table = false;
-  /* Defaults. */
-  uint64_t d_spp = 0;
-  double d_wl = 0;
-  const cJSON *d_sensors = NULL;
-  if (!st && defaults) {
-    bool present;
-    get_uint(defaults, "spp", 4294967295.0, &d_spp, &present, "/defaults", e, &st);
-    if (!st && present && d_spp == 0)
-      st = svc_fail(e, RSW_ERR_INVALID, "/defaults/spp", "spp must be at least 1");
-    const cJSON *w = cJSON_GetObjectItemCaseSensitive(defaults, "wavelength");
-    if (!st && w) {
-      if (!cJSON_IsNumber(w) || !(w->valuedouble > 0) || !isfinite(w->valuedouble))
-        st = svc_fail(e, RSW_ERR_INVALID, "/defaults/wavelength",
-                      "wavelength must be a positive finite number");
-      else
-        d_wl = w->valuedouble;
-      if (!st && bands)
-        st = svc_fail(e, RSW_ERR_INVALID, "/defaults/wavelength",
-                      "a job with bands renders each band's wavelengths: it takes no wavelength");
-    }
-    d_sensors = cJSON_GetObjectItemCaseSensitive(defaults, "sensors");
-    for (const cJSON *k = defaults->child; k && !st; k = k->next)
-      if (strcmp(k->string, "spp") && strcmp(k->string, "wavelength") && strcmp(k->string, "sensors")) {
-        char w2[300];
-        snprintf(w2, sizeof w2, "/defaults/%s", k->string);
-        st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, w2, "unknown field '%s' in defaults", k->string);
-      }
-  }
-  /* Count renders and validate every context before accepting. A sensor
-   * may appear once per context (seen[] holds the context number that
-   * last named it), and each sensor's film is checked against the film
-   * memory limit once (film_ok). */
-  size_t n_ctx = 0, n_items = 0;
-  size_t *seen = NULL;
-  bool *film_ok = NULL;
-  if (!st) {
-    seen = calloc(sc->n_sensors ? sc->n_sensors : 1, sizeof *seen);
-    film_ok = calloc(sc->n_sensors ? sc->n_sensors : 1, sizeof *film_ok);
-    if (!seen || !film_ok) st = svc_fail(e, RSW_ERR_NOMEM, "/contexts", "out of memory");
-  }
-  bool job_params_ok = false;
-  size_t n_ranges = 0;
-  spec_range *ranges = !st && sc->variant == VARIANT_MONO ? base_ranges(r, &n_ranges) : NULL;
-  for (const cJSON *c = !st ? contexts->child : NULL; c && !st; c = c->next, n_ctx++) {
-    char ptr[64];
-    snprintf(ptr, sizeof ptr, "/contexts/%zu", n_ctx);
-    if (!cJSON_IsObject(c)) {
-      st = svc_fail(e, RSW_ERR_TYPE, ptr, "a context must be an object");
-      break;
-    }
-    const cJSON *id = cJSON_GetObjectItemCaseSensitive(c, "id");
-    if (!cJSON_IsString(id) || !svc_valid_id(id->valuestring)) {
-      st = svc_fail(e, RSW_ERR_INVALID, ptr, "context \"id\" must match [A-Za-z0-9._-]{1,64}");
-      break;
-    }
-    if (!id_set_add(&ids, id->valuestring)) {
-      st = svc_fail(e, RSW_ERR_DUPLICATE, ptr, "context id '%s' appears twice", id->valuestring);
-      break;
-    }
-    for (const cJSON *k = c->child; k && !st; k = k->next)
-      if (strcmp(k->string, "id") && strcmp(k->string, "wavelength") && strcmp(k->string, "params") &&
-          strcmp(k->string, "sensors") && strcmp(k->string, "spp") && strcmp(k->string, "seed") &&
-          strcmp(k->string, "coords")) {
-        char w[300];
-        snprintf(w, sizeof w, "%s/%s", ptr, k->string);
-        st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, w, "unknown field '%s' in a context", k->string);
-      }
-    if (st) break;
-    const cJSON *w = cJSON_GetObjectItemCaseSensitive(c, "wavelength");
-    if (w && (!cJSON_IsNumber(w) || !(w->valuedouble > 0) || !isfinite(w->valuedouble))) {
-      char p2[80];
-      snprintf(p2, sizeof p2, "%s/wavelength", ptr);
-      st = svc_fail(e, RSW_ERR_INVALID, p2, "wavelength must be a positive finite number of nm");
-      break;
-    }
-    if ((w || d_wl > 0) && sc->variant != VARIANT_MONO) {
-      st = svc_fail(e, RSW_ERR_INVALID, ptr, "wavelength applies to mono scenes; this scene is rgb");
-      break;
-    }
-    char pp[80];
-    snprintf(pp, sizeof pp, "%s/params", ptr);
-    const cJSON *cparams = cJSON_GetObjectItemCaseSensitive(c, "params");
-    st = check_params(sc, cparams, pp, e);
-    if (st) break;
-    const cJSON *coords = cJSON_GetObjectItemCaseSensitive(c, "coords");
-    const cJSON *cw = cJSON_IsObject(coords) ? cJSON_GetObjectItemCaseSensitive(coords, "wavelength") : NULL;
-    if (cw && (st = tmpl_check_coord_wavelength(sc, w, cw, ptr, e))) break;
-    double wl = sc->variant != VARIANT_MONO ? 0
-                : w                         ? w->valuedouble
-                : cw                        ? cw->valuedouble
-                : d_wl > 0                  ? d_wl
-                                            : 550;
-    /* The values this context renders with must be legal now, not only
-     * when it renders: job-level overrides under its own (checked once
-     * for all contexts that have none of their own), and what its
-     * templates render. */
-    const cJSON *mine = cparams;
-    if (ts) {
-      /* With bands, once per node wavelength: a template may read it. */
-      for (size_t nk = 0; nk < n_nodes && !st; nk++) {
-        cJSON *m = merge_params(jparams, cparams);
-        if (!m) {
-          st = svc_fail(e, RSW_ERR_NOMEM, ptr, "out of memory");
-          break;
-        }
-        ctx_params[n_ctx * n_nodes + nk] = m;
-        st = tmpl_render(ts, sc, coords, bands ? bands->wl[nk] : wl, m, ptr, e);
-        if (!st) st = check_merged(sc, m, cparams, ts, ptr, e);
-      }
-      if (st) break;
-      mine = ctx_params[n_ctx * n_nodes];
-    } else if (cparams || (jparams && !job_params_ok)) {
-      st = check_values(sc, jparams, cparams, ptr, e);
-      if (st) break;
-      if (!cparams) job_params_ok = true;
-    }
-    if (bands) {
-      /* No wavelength of its own, and the scene's tables must cover
-       * every band's support. */
-      st = svc_bands_check_context(bands, c, ptr, e);
-      for (size_t b = 0; !st && b < bands->n; b++) {
-        char p6[80];
-        snprintf(p6, sizeof p6, "/bands/%zu/srf", b);
-        st = check_wavelength(sc, ranges, n_ranges, ts ? NULL : jparams, mine, bands->b[b].lo, p6, e);
-        if (!st)
-          st = check_wavelength(sc, ranges, n_ranges, ts ? NULL : jparams, mine, bands->b[b].hi, p6, e);
-      }
-      if (st) break;
-    } else if (sc->variant == VARIANT_MONO) {
-      char p5[96];
-      snprintf(p5, sizeof p5,
-               w          ? "%s/wavelength"
-               : cw       ? "%s/coords/wavelength"
-               : d_wl > 0 ? "/defaults/wavelength"
-                          : "%s",
-               ptr);
-      st = check_wavelength(sc, ranges, n_ranges, ts ? NULL : jparams, mine, wl, p5, e);
-      if (st) break;
-    }
-    bool own_table = sc->variant == VARIANT_MONO && has_table(mine);
-    any_table = any_table || own_table;
-    sigs[n_ctx].coords = cJSON_IsObject(coords) ? coords : NULL;
-    sigs[n_ctx].wavelength = wl;
-    if (sigs[n_ctx].coords)
-      tmpl_ctx_digest(mine, wl, spectral || own_table, c, d_sensors, sigs[n_ctx].digest);
-    uint64_t dummy;
-    bool present;
-    get_uint(c, "spp", 4294967295.0, &dummy, &present, ptr, e, &st);
-    if (!st && present && dummy == 0) {
-      char p3[80];
-      snprintf(p3, sizeof p3, "%s/spp", ptr);
-      st = svc_fail(e, RSW_ERR_INVALID, p3, "spp must be at least 1");
-    }
-    if (!st) get_uint(c, "seed", 9007199254740991.0, &dummy, &present, ptr, e, &st);
-    if (st) break;
-    const cJSON *sens = cJSON_GetObjectItemCaseSensitive(c, "sensors");
-    const char *sens_ptr = ptr;
-    char sp[80];
-    if (sens) {
-      snprintf(sp, sizeof sp, "%s/sensors", ptr);
-      sens_ptr = sp;
-    } else if (d_sensors) {
-      sens = d_sensors;
-      sens_ptr = "/defaults/sensors";
-    }
-    if (sens) {
-      if (!cJSON_IsArray(sens) || !sens->child) {
-        st = svc_fail(e, RSW_ERR_TYPE, sens_ptr, "sensors must be a non-empty list of sensor ids");
-        break;
-      }
-      size_t k = 0;
-      for (const cJSON *s = sens->child; s && !st; s = s->next, k++) {
-        size_t si;
-        char ep[120];
-        snprintf(ep, sizeof ep, "%s/%zu", sens_ptr, k);
-        if (!cJSON_IsString(s) || !svc_find_sensor(sc, s->valuestring, &si)) {
-          st = svc_fail(e, RSW_ERR_UNKNOWN_NAME, ep, "no sensor '%s' in the scene",
-                        cJSON_IsString(s) ? s->valuestring : "?");
-          break;
-        }
-        if (seen[si] == n_ctx + 1) {
-          st = svc_fail(e, RSW_ERR_DUPLICATE, ep, "sensor '%s' appears twice in one context", s->valuestring);
-          break;
-        }
-        seen[si] = n_ctx + 1;
-        if (!film_ok[si]) {
-          st = svc_check_film(svc, sc, si, quantities, variance, ep, e);
-          film_ok[si] = !st;
-        }
-        n_items += n_nodes;
-      }
-    } else {
-      if (!sc->n_sensors) st = svc_fail(e, RSW_ERR_INVALID, ptr, "the scene has no sensor");
-      for (size_t si = 0; si < sc->n_sensors && !st; si++)
-        if (!film_ok[si]) {
-          st = svc_check_film(svc, sc, si, quantities, variance, ptr, e);
-          film_ok[si] = !st;
-        }
-      n_items += sc->n_sensors * n_nodes;
-    }
-    if (!st && n_items > SVC_MAX_JOB_RENDERS)
-      st = svc_fail(e, RSW_ERR_LIMIT, ptr, "the job's renders (contexts times sensors) exceed %d",
-                    SVC_MAX_JOB_RENDERS);
-  }
-  free(ids.slot);
-  free(seen);
-  free(film_ok);
-  free(ranges);
+  if (!st) st = read_defaults(q, e);
+  if (!st && sc->variant == VARIANT_MONO) cs.ranges = base_ranges(r, &cs.n_ranges);
+  size_t i = 0;
+  for (const cJSON *c = !st ? q->contexts->child : NULL; c && !st; c = c->next, i++)
+    st = check_context(&cs, c, i, e);
+  free(cs.ids.slot);
+  free(cs.seen);
+  free(cs.film_ok);
+  free(cs.ranges);
   /* A sweep that changes nothing it renders is flagged (not refused:
    * replicates differing by seed alone are legitimate). */
-  cJSON *warnings = !st && n_ctx > 1 ? tmpl_sweep_warnings(sigs, n_ctx, spectral || any_table) : NULL;
-  free(sigs);
-  /* The contexts' coords (labels for the dataset): the same names in
-   * every context, one type per name (nc_coords_build). */
-  nc_coords coords = {0};
-  if (!st) {
-    const void **cj = malloc(n_ctx * sizeof *cj);
-    if (!cj) st = svc_fail(e, RSW_ERR_NOMEM, "/contexts", "out of memory");
-    size_t i = 0;
-    for (const cJSON *c = cj ? contexts->child : NULL; c; c = c->next, i++)
-      cj[i] = cJSON_GetObjectItemCaseSensitive(c, "coords");
-    rsw_err cerr = {0};
-    if (cj && nc_coords_build(cj, n_ctx, "/contexts", &coords, &cerr) != RSW_OK)
-      st = svc_fail(e, cerr.code, cerr.where, "%s", cerr.msg);
-    free(cj);
-  }
-  /* Build the job. */
-  if (!st) {
-    jb = calloc(1, sizeof *jb);
-    if (jb) {
-      jb->items = calloc(n_items, sizeof *jb->items);
-      jb->context_remaining = calloc(n_ctx, sizeof *jb->context_remaining);
+  if (!st && q->n_contexts > 1)
+    k->warnings = tmpl_sweep_warnings(cs.sigs, q->n_contexts, cs.spectral || cs.any_table);
+  free(cs.sigs);
+  if (!st) st = context_coords(q, &k->coords, e);
+  return st;
+}
+
+/* The renders of context ci (c), from items[*next] on: one per sensor and
+ * band node (node-major), with its seed and overrides. */
+static rsw_status plan_context(service *svc, const scene *sc, const job_req *q, const job_check *k, job *jb,
+                               const cJSON *c, size_t ci, size_t *next, svc_error *e) {
+  const band_plan *bands = jb->bands;
+  size_t n_nodes = k->n_nodes;
+  rsw_status st = RSW_OK;
+  const cJSON *id = cJSON_GetObjectItemCaseSensitive(c, "id");
+  const cJSON *w = cJSON_GetObjectItemCaseSensitive(c, "wavelength");
+  const cJSON *sens = cJSON_GetObjectItemCaseSensitive(c, "sensors");
+  if (!sens) sens = q->d_sensors;
+  uint64_t spp = q->d_spp, seed = 0;
+  bool has_spp, has_seed;
+  get_uint(c, "spp", 4294967295.0, &spp, &has_spp, "", e, &st);
+  if (!has_spp) spp = q->d_spp;
+  get_uint(c, "seed", 9007199254740991.0, &seed, &has_seed, "", e, &st);
+  size_t ns = sens ? (size_t)cJSON_GetArraySize(sens) : sc->n_sensors;
+  jb->context_remaining[ci] = ns * n_nodes;
+  for (size_t s = 0; s < ns * n_nodes && !st; s++, (*next)++) {
+    render_item *it = &jb->items[*next];
+    size_t nk = s / ns; /* node-major within the context */
+    snprintf(it->context, sizeof it->context, "%s", id->valuestring);
+    it->context_index = ci;
+    const char *sname =
+        sens ? cJSON_GetArrayItem(sens, (int)(s % ns))->valuestring : sc->sensors[s % ns]->base.id;
+    svc_find_sensor(sc, sname, &it->sensor_index);
+    snprintf(it->sensor, sizeof it->sensor, "%s", sc->sensors[it->sensor_index]->base.id);
+    const cJSON *cc = cJSON_GetObjectItemCaseSensitive(c, "coords");
+    const cJSON *cw = cJSON_IsObject(cc) ? cJSON_GetObjectItemCaseSensitive(cc, "wavelength") : NULL;
+    it->wavelength = w ? w->valuedouble : cw ? cw->valuedouble : q->d_wl;
+    it->spp = (uint32_t)spp;
+    it->seed = has_seed ? seed : default_seed(q->seed, it->context, it->sensor);
+    if (bands) { /* node renders: independent, each its own seed */
+      it->node = nk + 1;
+      it->wavelength = bands->wl[nk];
+      it->seed = bands_node_seed(it->seed, it->wavelength);
     }
-    if (!jb || !jb->items || !jb->context_remaining) st = svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
-  }
-  size_t k = 0, ci = 0;
-  for (const cJSON *c = !st ? contexts->child : NULL; c && !st; c = c->next, ci++) {
-    const cJSON *id = cJSON_GetObjectItemCaseSensitive(c, "id");
-    const cJSON *w = cJSON_GetObjectItemCaseSensitive(c, "wavelength");
-    const cJSON *sens = cJSON_GetObjectItemCaseSensitive(c, "sensors");
-    if (!sens) sens = d_sensors;
-    uint64_t spp = d_spp, seed = 0;
-    bool has_spp, has_seed;
-    get_uint(c, "spp", 4294967295.0, &spp, &has_spp, "", e, &st);
-    if (!has_spp) spp = d_spp;
-    get_uint(c, "seed", 9007199254740991.0, &seed, &has_seed, "", e, &st);
-    size_t ns = sens ? (size_t)cJSON_GetArraySize(sens) : sc->n_sensors;
-    jb->context_remaining[ci] = ns * n_nodes;
-    for (size_t s = 0; s < ns * n_nodes && !st; s++, k++) {
-      render_item *it = &jb->items[k];
-      size_t nk = s / ns; /* node-major within the context */
-      snprintf(it->context, sizeof it->context, "%s", id->valuestring);
-      it->context_index = ci;
-      const char *sname =
-          sens ? cJSON_GetArrayItem(sens, (int)(s % ns))->valuestring : sc->sensors[s % ns]->base.id;
-      svc_find_sensor(sc, sname, &it->sensor_index);
-      snprintf(it->sensor, sizeof it->sensor, "%s", sc->sensors[it->sensor_index]->base.id);
-      const cJSON *cc = cJSON_GetObjectItemCaseSensitive(c, "coords");
-      const cJSON *cw = cJSON_IsObject(cc) ? cJSON_GetObjectItemCaseSensitive(cc, "wavelength") : NULL;
-      it->wavelength = w ? w->valuedouble : cw ? cw->valuedouble : d_wl;
-      it->spp = (uint32_t)spp;
-      it->seed = has_seed ? seed : default_seed(job_seed, it->context, it->sensor);
-      if (bands) { /* node renders: independent, each its own seed */
-        it->node = nk + 1;
-        it->wavelength = bands->wl[nk];
-        it->seed = bands_node_seed(it->seed, it->wavelength);
-      }
-      it->quantities = quantities;
-      it->variance = variance;
-      /* Refused up front (the message names the sensor and spp) rather
-       * than failing render by render. */
-      if ((quantities || variance) && svc_check_planes(sc, it->sensor_index, it->spp, quantities, variance,
-                                                       "/quantities", "/variance", e))
-        st = e->err.code;
-      it->params = ctx_params ? cJSON_Duplicate(ctx_params[ci * n_nodes + nk], 1)
-                              : merge_params(jparams, cJSON_GetObjectItemCaseSensitive(c, "params"));
-      if (!it->params) {
-        st = svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
-        break;
-      }
-      const sensor *se = sc->sensors[it->sensor_index];
-      uint64_t eff = spp ? spp : se->sampler->sample_count;
-      uint64_t ps = (uint64_t)se->film->width * (uint64_t)se->film->height * eff;
-      if (ps > svc->opts.max_pixel_samples) {
-        char p2[80];
-        snprintf(p2, sizeof p2, "/contexts/%zu", ci);
-        st = svc_fail(e, RSW_ERR_LIMIT, p2, "%llu pixel samples exceed this server's limit of %llu",
-                      (unsigned long long)ps, (unsigned long long)svc->opts.max_pixel_samples);
-      }
+    it->quantities = q->quantities;
+    it->variance = q->variance;
+    /* Refused up front (the message names the sensor and spp) rather
+     * than failing render by render. */
+    if ((q->quantities || q->variance) && svc_check_planes(sc, it->sensor_index, it->spp, q->quantities,
+                                                           q->variance, "/quantities", "/variance", e))
+      st = e->err.code;
+    it->params = k->ctx_params ? cJSON_Duplicate(k->ctx_params[ci * n_nodes + nk], 1)
+                               : merge_params(q->params, cJSON_GetObjectItemCaseSensitive(c, "params"));
+    if (!it->params) {
+      st = svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
+      break;
+    }
+    const sensor *se = sc->sensors[it->sensor_index];
+    uint64_t eff = spp ? spp : se->sampler->sample_count;
+    uint64_t ps = (uint64_t)se->film->width * (uint64_t)se->film->height * eff;
+    if (ps > svc->opts.max_pixel_samples) {
+      char p2[80];
+      snprintf(p2, sizeof p2, "/contexts/%zu", ci);
+      st = svc_fail(e, RSW_ERR_LIMIT, p2, "%llu pixel samples exceed this server's limit of %llu",
+                    (unsigned long long)ps, (unsigned long long)svc->opts.max_pixel_samples);
     }
   }
-  cJSON_Delete(req);
-  for (size_t i = 0; ctx_params && i < n_listed * n_nodes; i++) cJSON_Delete(ctx_params[i]);
-  free(ctx_params);
-  tmpl_free(ts);
-  if (jb) {
-    jb->coords = coords;
-    jb->seed = job_seed;
-    jb->variant = sc->variant;
-    jb->warnings = warnings;
-    jb->bands = bands;
-  } else {
-    nc_coords_free(&coords);
-    cJSON_Delete(warnings);
-    bands_free(bands);
-  }
-  /* The bytes its films will hold, for --max-result-bytes. */
-  uint64_t reserve = 0;
-  uint64_t planes =
-      (uint64_t)((quantities & RENDER_Q_BRDF) != 0) + ((quantities & RENDER_Q_BRF) != 0) + variance;
-  for (size_t i = 0; !st && i < n_items; i++) /* each plane as large as the film (angles overcounted) */
-    reserve += svc_film_bytes(sc, jb->items[i].sensor_index) * (1 + planes);
+  return st;
+}
+
+/* Stage 3: the job (*out) with its renders in context order, taking the
+ * bands, coords and warnings; *reserve: the bytes its films will hold,
+ * for --max-result-bytes. */
+static rsw_status plan_job(service *svc, const scene *sc, job_req *q, job_check *k, job **out,
+                           uint64_t *reserve, svc_error *e) {
+  job *jb = calloc(1, sizeof *jb);
+  if (!jb) return svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
+  jb->coords = k->coords;
+  k->coords = (nc_coords){0};
+  jb->seed = q->seed;
+  jb->variant = sc->variant;
+  jb->warnings = k->warnings;
+  k->warnings = NULL;
+  jb->bands = q->bands;
+  q->bands = NULL;
+  jb->items = calloc(k->n_items, sizeof *jb->items);
+  jb->context_remaining = calloc(q->n_contexts, sizeof *jb->context_remaining);
+  rsw_status st = RSW_OK;
+  if (!jb->items || !jb->context_remaining) st = svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
+  size_t next = 0, ci = 0;
+  for (const cJSON *c = !st ? q->contexts->child : NULL; c && !st; c = c->next, ci++)
+    st = plan_context(svc, sc, q, k, jb, c, ci, &next, e);
+  /* Items exist only if their array was allocated (job_free walks
+   * n_items of them). */
+  jb->n_items = jb->items ? k->n_items : 0;
   if (st) {
-    if (jb) {
-      /* Items exist only if their array was allocated (job_free walks
-       * n_items of them). */
-      jb->n_items = jb->items ? n_items : 0;
-      job_free(jb);
-    }
-    svc_scene_release(svc, r);
+    job_free(jb);
     return st;
   }
-  jb->n_items = n_items;
-  jb->n_contexts = n_ctx;
-  jb->res = r; /* keeps the ref taken above */
+  jb->n_contexts = q->n_contexts;
+  uint64_t planes =
+      (uint64_t)((q->quantities & RENDER_Q_BRDF) != 0) + ((q->quantities & RENDER_Q_BRF) != 0) + q->variance;
+  *reserve = 0;
+  for (size_t i = 0; i < jb->n_items; i++) /* each plane as large as the film (angles overcounted) */
+    *reserve += svc_film_bytes(sc, jb->items[i].sensor_index) * (1 + planes);
+  *out = jb;
+  return RSW_OK;
+}
+
+/* svc->lock held: room for a job whose films take reserve bytes. Without
+ * a state directory films live in memory: a job whose films cannot fit
+ * under --max-result-bytes is refused now, not after rendering (with one,
+ * films beyond the cap go to disk). And the queue must be below its
+ * limit (a job being restored always has room). */
+static rsw_status check_room_locked(service *svc, uint64_t reserve, svc_error *e) {
+  uint64_t cap = svc->opts.max_result_bytes;
+  if (cap && !svc_state_on(svc) &&
+      reserve > cap - (svc->result_committed < cap ? svc->result_committed : cap))
+    return svc_fail(
+        e, RSW_ERR_STORAGE, "/contexts",
+        "the job's films take %llu bytes; %llu of this server's %llu bytes of result storage "
+        "(--max-result-bytes) are held by other jobs: fetch and delete finished jobs, or retry later",
+        (unsigned long long)reserve, (unsigned long long)svc->result_committed, (unsigned long long)cap);
+  if (svc->n_queue >= svc->opts.max_queue && !svc->restore_id) {
+    rsw_status st =
+        svc_fail(e, RSW_ERR_BUSY, "", "%zu jobs are already queued (the limit); retry later", svc->n_queue);
+    e->retry_after_s = 1;
+    return st;
+  }
+  return RSW_OK;
+}
+
+/* Stage 4: accept the job (taking it and the reference on r) or refuse it
+ * and free both: room for it (check_room_locked), its id, its request
+ * stored (with a state directory), then queued; the answer is built
+ * before it is queued. */
+static rsw_status enqueue_job(service *svc, resident *r, job *jb, uint64_t reserve, const char *idem_key,
+                              const unsigned char digest[32], const char *body, size_t len, unsigned jm,
+                              char **job_id_out, char **json_out, svc_error *e) {
+  jb->res = r; /* keeps the ref taken by service_job_submit */
   memcpy(jb->scene_id, r->id, 65);
   memcpy(jb->body_digest, digest, 32);
   if (idem_key && !(jb->idem_key = strdup(idem_key))) {
@@ -900,29 +1027,11 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   svc_iso_time(jb->created, jb->created_iso);
   jb->state = JOB_QUEUED;
   pthread_mutex_lock(&svc->lock);
-  /* Without a state directory films live in memory: a job whose films
-   * cannot fit under --max-result-bytes is refused now, not after
-   * rendering (with one, films beyond the cap go to disk). */
-  uint64_t cap = svc->opts.max_result_bytes;
-  if (cap && !svc_state_on(svc) &&
-      reserve > cap - (svc->result_committed < cap ? svc->result_committed : cap)) {
-    uint64_t used = svc->result_committed;
+  rsw_status st = check_room_locked(svc, reserve, e);
+  if (st) {
     pthread_mutex_unlock(&svc->lock);
     job_free(jb);
     svc_scene_release(svc, r);
-    return svc_fail(
-        e, RSW_ERR_STORAGE, "/contexts",
-        "the job's films take %llu bytes; %llu of this server's %llu bytes of result storage "
-        "(--max-result-bytes) are held by other jobs: fetch and delete finished jobs, or retry later",
-        (unsigned long long)reserve, (unsigned long long)used, (unsigned long long)cap);
-  }
-  if (svc->n_queue >= svc->opts.max_queue && !svc->restore_id) {
-    size_t q = svc->n_queue;
-    pthread_mutex_unlock(&svc->lock);
-    job_free(jb);
-    svc_scene_release(svc, r);
-    st = svc_fail(e, RSW_ERR_BUSY, "", "%zu jobs are already queued (the limit); retry later", q);
-    e->retry_after_s = 1;
     return st;
   }
   if (svc->restore_id) {
@@ -965,6 +1074,35 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   pthread_cond_signal(&svc->work_cond);
   pthread_mutex_unlock(&svc->lock);
   return RSW_OK;
+}
+
+rsw_status service_job_submit(service *svc, const char *scene_id, const char *body, size_t len,
+                              const char *idem_key, char **job_id_out, char **json_out, svc_error *e) {
+  if (!service_ready(svc)) return svc_fail(e, RSW_ERR_UNAVAILABLE, "", "the server is shutting down");
+  unsigned jm = svc_json_mark();
+  unsigned char digest[32];
+  if (!rsw_sha256(body, len, digest)) return svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
+  if (idem_key) {
+    bool found;
+    rsw_status st = submit_replay(svc, scene_id, idem_key, digest, jm, job_id_out, json_out, &found, e);
+    if (found) return st;
+  }
+  resident *r = svc_scene_acquire(svc, scene_id);
+  if (!r) return svc_no_scene(e, scene_id);
+  job_req q = {0};
+  job_check k = {0};
+  job *jb = NULL;
+  uint64_t reserve = 0;
+  rsw_status st = parse_request(body, len, &q, e);
+  if (!st) st = validate_request(svc, r, &q, &k, e);
+  if (!st) st = plan_job(svc, r->sc, &q, &k, &jb, &reserve, e);
+  job_check_free(&k, q.n_contexts);
+  job_req_free(&q);
+  if (st) {
+    svc_scene_release(svc, r);
+    return st;
+  }
+  return enqueue_job(svc, r, jb, reserve, idem_key, digest, body, len, jm, job_id_out, json_out, e);
 }
 
 /* ---- the worker ------------------------------------------------------------------ */

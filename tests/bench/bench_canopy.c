@@ -10,7 +10,7 @@
  *                 memory the canopy costs, shared leaf geometry included
  *   rays_per_s, ceiling_rays_per_s, ratio_to_ceiling, threads
  *   replay_ceiling_rays_per_s, ratio_to_replay_ceiling: the render's own
- *                 queries replayed by Embree alone (accel.h)
+ *                 queries replayed by Embree alone (accel_bench.h)
  * Targets: load <= 2 s, bytes_per_instance <= 1024, ratio_to_replay_ceiling
  * >= 0.6.
  * Threads: $RSW_BENCH_THREADS or all cores; spp: $RSW_BENCH_CANOPY_SPP. */
@@ -26,6 +26,7 @@
 #include "../../server/kernel/core/rng.h"
 #include "../../server/kernel/render.h"
 #include "../../server/kernel/scene/scene.h"
+#include "accel_bench.h"
 #include "bench.h"
 
 #define N_LEAVES 100000
@@ -116,7 +117,7 @@ int main(void) {
   film_image_free(&img);
   double rays = (double)(st.rays.rays + st.rays.shadow_rays), rps = rays / st.wall_s;
   double ceiling = accel_ceiling_rays_per_s(s, false, (uint64_t)fmax(2e6, rays / 2), threads, 7);
-  /* The replay ceiling (accel.h): this render's own queries (about 3 M,
+  /* The replay ceiling (accel_bench.h): this render's own queries (about 3 M,
    * recorded from a one-thread render at a lower spp), traced again by
    * Embree alone; the median of 3. */
   double per_sample = st.samples ? rays / (double)st.samples : 1;

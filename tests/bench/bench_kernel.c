@@ -15,7 +15,7 @@
  * sse2, avx2, avx512, default the best the CPU has); packet_width: Embree's packet lanes (16 with
  * AVX-512). trace_share: the thread time spent in Embree queries. The
  * replay ceiling: the render's own queries, recorded once from a
- * one-thread render and traced again by Embree alone (accel.h), and
+ * one-thread render and traced again by Embree alone (accel_bench.h), and
  * ratio_to_replay_ceiling = rays_per_s over it; flat_replay_rays_per_s: the
  * same rays on a flat single-level copy of the triangles (what a flat BVH
  * would give; analytic shapes and instances left out, so meaningful for
@@ -43,13 +43,14 @@
 #include "../../server/kernel/scene/params.h"
 #include "../../server/kernel/scene/scene.h"
 #include "../../server/kernel/scene/update.h"
+#include "accel_bench.h"
 #include "bench.h"
 
 /* Each figure is the median of REPEATS runs (render, ceiling and flat
  * ceiling interleaved, so a slow spell of the machine hits all three). */
 #define REPEATS 3
 
-/* The replay ceiling (accel.h): the render's own queries, recorded once
+/* The replay ceiling (accel_bench.h): the render's own queries, recorded once
  * from a one-thread render at an spp giving about REPLAY_RAYS queries,
  * traced again by Embree alone on `threads` threads; median of REPEATS. */
 #define REPLAY_RAYS 3000000u

@@ -1,0 +1,148 @@
+/* raysweep sweep and raysweep merge: what their files share. A sweep
+ * directory holds one film per (context, sensor) in DIR/<context>/,
+ * DIR/index.jsonl (one line per film), DIR/sweep.json (the manifest: what
+ * the directory is meant to hold) and, with --format nc, DIR/dataset.nc.
+ *
+ *   cmd_sweep.c       the contexts (--contexts, --grid), the job, its films
+ *   sweep_spread.c    --spread: the shards at once through a balancer, and
+ *                     resuming an interrupted --spread run
+ *   sweep_manifest.c  sweep.json, and --force (what an earlier sweep wrote)
+ *   sweep_dir.c       index.jsonl, dataset.nc, context ids, file helpers
+ *   cmd_merge.c       raysweep merge (join shard directories) */
+#ifndef RSW_CLI_SWEEP_H
+#define RSW_CLI_SWEEP_H
+
+#include <cjson/cJSON.h>
+#include <dirent.h>
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "cli.h"
+
+/* DIR/sweep.json, written before the job is submitted and again when the
+ * sweep ends:
+ *   {"format": "raysweep-sweep/1", "sweep": FINGERPRINT, "scene": ID,
+ *    "shard": [I, N], "contexts_total": T,
+ *    "id_width": W | "ids": [every context id of the unsharded list],
+ *    "job": JOB | null, "finished": BOOL, "incomplete": [context ids]}
+ * FINGERPRINT is FNV-1a 64 over everything that defines the unsharded
+ * sweep (scene, contexts file or grid, --set, --sensor, --spp, --seed,
+ * --format, --quantities, --variance) and not over --shard, so every shard of one sweep carries the
+ * same value. `merge` uses it to know which contexts a set of shard
+ * directories must cover; `sweep --force` to know what an earlier sweep
+ * wrote. "incomplete" lists contexts with a render that did not succeed. */
+#define MANIFEST_NAME   "sweep.json"
+#define DATASET_NAME    "dataset.nc"
+/* The journal of a --spread sweep (rsw_spread_opts.state_path): there
+ * while the sweep is unfinished, removed when it completes. */
+#define SPREAD_STATE    "sweep.spread.jsonl"
+#define MANIFEST_FORMAT "raysweep-sweep/1"
+
+/* One context of the list being swept. */
+typedef struct sweep_item {
+  char id[72];
+  bool has_wl;
+  double wl;
+  cJSON *params;       /* object or NULL, owned */
+  cJSON *sensors;      /* array of strings or NULL, owned */
+  cJSON *coords;       /* object or NULL, owned: the context's coords */
+  long long spp, seed; /* -1: unset */
+} sweep_item;
+
+/* The contexts one shard sweeps. */
+typedef struct sweep_list {
+  sweep_item *items;
+  size_t n, cap;
+  size_t total; /* unsharded count */
+  /* --contexts with ids in the file: the id of every context of the
+   * unsharded list (NULL: numbered), so sweep.json can name the contexts
+   * of the other shards. NULL when every id is numbered. */
+  char **all_ids;
+  int id_width;
+  long long seed; /* --seed (0 by default): the job seed, in sweep.json */
+  bool dataset;   /* --format nc: DIR/dataset.nc besides the (JSON) films */
+} sweep_list;
+
+/* One film of the index: its line (owned) and, for merge, the source. */
+typedef struct index_entry {
+  const char *context, *sensor; /* borrowed from line */
+  cJSON *line;
+  char *src; /* owned, merge only */
+  size_t order;
+  size_t input; /* merge: which input directory */
+} index_entry;
+
+/* DIR/sweep.json as read (manifest_read). */
+typedef struct sweep_manifest {
+  cJSON *root; /* owned */
+  const char *sweep;
+  size_t shard_i, shard_n, total;
+  int id_width;
+  const char **ids;        /* owned array of total ids (borrowed strings), or NULL: numbered */
+  const char **incomplete; /* owned, sorted (strings borrowed from root) */
+  size_t n_incomplete;
+  bool finished;
+} sweep_manifest;
+
+/* ---- sweep_dir.c -------------------------------------------------------- */
+
+/* dir + "/" + name (malloc'd; NULL when out of memory). */
+char *sweep_dir_file(const char *dir, const char *name);
+/* Entries of a directory other than "." and "..": count, and the first. */
+size_t sweep_dir_entries(DIR *d, char *first, size_t cap);
+bool sweep_is_regular(const char *path);
+/* v is a number holding an integer >= lo. */
+bool sweep_json_is_int(const cJSON *v, double lo);
+/* A relative path inside a sweep directory: no leading '/', no "..". */
+bool sweep_safe_relative(const char *p);
+/* Context ids "c00042": the width for a list of total contexts, and id
+ * number index at that width. */
+int sweep_id_width(size_t total);
+void sweep_make_id(char out[72], int width, size_t index);
+/* qsort/bsearch comparators: sweep_item pointers by id, index entries by
+ * context, sensor and order, C strings. */
+int sweep_cmp_item_id(const void *a, const void *b);
+int sweep_cmp_entry(const void *a, const void *b);
+int sweep_cmp_str(const void *a, const void *b);
+/* DIR/index.jsonl: written sorted (e is sorted in place), read appending
+ * to *e (input: which merge input DIR is). */
+int sweep_write_index(const cli_ctx *ctx, const char *dir, index_entry *e, size_t n);
+int sweep_read_index(const cli_ctx *ctx, const char *dir, size_t input, index_entry **e, size_t *n,
+                     size_t *cap);
+void sweep_entries_free(index_entry *e, size_t n);
+/* The lines and sources of entries [from, to) (the array stays). */
+void sweep_entries_free_range(index_entry *e, size_t from, size_t to);
+/* The index line of film rel of result r (sorted: the sweep's items by id). */
+cJSON *sweep_index_line(const cJSON *r, const char *c, const char *sn, const char *rel, sweep_item **sorted,
+                        size_t n, const cJSON *job_params);
+/* DIR/dataset.nc from the films of index entries e (sorted). */
+int sweep_write_dataset(const cli_ctx *ctx, const char *dir, const index_entry *e, size_t n, bool has_seed,
+                        long long seed);
+
+/* ---- sweep_manifest.c --------------------------------------------------- */
+
+void sweep_fingerprint(const cmdline_args *a, const char *scene, char out[17]);
+/* 0, or -1 when DIR has no sweep.json (errno ENOENT), or a CLI exit code
+ * after printing. */
+int manifest_read(const cli_ctx *ctx, const char *dir, sweep_manifest *m);
+int manifest_write(const cli_ctx *ctx, const char *dir, const char *fingerprint, const char *scene,
+                   size_t shard_i, size_t shard_n, const sweep_list *l, const char *job, bool finished,
+                   const cJSON *incomplete);
+void manifest_free(sweep_manifest *m);
+/* The id of context k of the unsharded list; whether it is incomplete. */
+const char *manifest_id(const sweep_manifest *m, size_t k, char buf[72]);
+bool manifest_incomplete(const sweep_manifest *m, const char *id);
+/* Make -o DIR ready (created, empty, or with --force an earlier sweep
+ * removed). */
+int sweep_prepare_output(const cli_ctx *ctx, const char *dir, bool force);
+
+/* ---- sweep_spread.c ----------------------------------------------------- */
+
+/* DIR holds an unfinished --spread run of this sweep (rerun: resume). */
+bool sweep_spread_resumable(const char *dir, const char *fingerprint);
+int sweep_run_spread(cli_ctx *ctx, const cmdline_args *a, int k_shards, bool resume, cli_format fmt,
+                     double timeout, const sweep_list *l, sweep_item **sorted, const cJSON *job_params,
+                     const rsw_contexts *x, const char *fingerprint, size_t shard_i, size_t shard_n);
+
+#endif

@@ -1,0 +1,304 @@
+/* DIR/sweep.json, the manifest of a sweep directory (its format: sweep.h),
+ * and --force: removing exactly what an earlier sweep wrote. */
+#include <cjson/cJSON.h>
+#include <dirent.h>
+#include <errno.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "sweep.h"
+
+static uint64_t fnv1a(uint64_t h, const char *s, size_t n) {
+  for (size_t i = 0; i < n; i++) h = (h ^ (unsigned char)s[i]) * 0x100000001b3ull;
+  return (h ^ 0xff) * 0x100000001b3ull; /* a separator, so "ab","c" != "a","bc" */
+}
+
+static uint64_t fnv1a_str(uint64_t h, const char *s) {
+  return fnv1a(h, s ? s : "", s ? strlen(s) : 0);
+}
+
+void sweep_fingerprint(const cmdline_args *a, const char *scene, char out[17]) {
+  uint64_t h = 0xcbf29ce484222325ull;
+  h = fnv1a_str(h, MANIFEST_FORMAT);
+  h = fnv1a_str(h, scene);
+  const char *file = cmdline_get(a, "--contexts");
+  if (file) {
+    size_t len = 0;
+    char *text = cli_read_file(file, &len);
+    h = fnv1a(h, text ? text : "", text ? len : 0);
+    free(text);
+  }
+  static const char *const keyed[] = {"--grid", "--set",    "--sensor",     "--spp",
+                                      "--seed", "--format", "--quantities", "--variance"};
+  for (size_t k = 0; k < sizeof keyed / sizeof keyed[0]; k++) {
+    size_t n;
+    const char *const *v = cmdline_get_all(a, keyed[k], &n);
+    h = fnv1a_str(h, keyed[k]);
+    for (size_t i = 0; i < n; i++) h = fnv1a_str(h, v[i]);
+  }
+  snprintf(out, 17, "%016llx", (unsigned long long)h);
+}
+
+void manifest_free(sweep_manifest *m) {
+  cJSON_Delete(m->root);
+  free(m->ids);
+  free(m->incomplete);
+  memset(m, 0, sizeof *m);
+}
+
+/* The id of context k of the unsharded list a manifest describes. */
+const char *manifest_id(const sweep_manifest *m, size_t k, char buf[72]) {
+  if (m->ids) return m->ids[k];
+  sweep_make_id(buf, m->id_width, k);
+  return buf;
+}
+
+int sweep_cmp_str(const void *a, const void *b) {
+  return strcmp(*(const char *const *)a, *(const char *const *)b);
+}
+
+bool manifest_incomplete(const sweep_manifest *m, const char *id) {
+  return m->n_incomplete &&
+         bsearch(&id, m->incomplete, m->n_incomplete, sizeof *m->incomplete, sweep_cmp_str);
+}
+
+/* Read and check DIR/sweep.json. 0, or -1 when absent (errno ENOENT), or a
+ * CLI exit code after printing. */
+int manifest_read(const cli_ctx *ctx, const char *dir, sweep_manifest *m) {
+  memset(m, 0, sizeof *m);
+  char *path = sweep_dir_file(dir, MANIFEST_NAME);
+  if (!path) return cli_fail(ctx, CLI_IO, "out of memory");
+  size_t len;
+  char *text = cli_read_file(path, &len);
+  if (!text) {
+    int e = errno;
+    int rc = e == ENOENT ? -1 : cli_fail(ctx, CLI_IO, "cannot read '%s': %s", path, strerror(e));
+    free(path);
+    errno = e;
+    return rc;
+  }
+  m->root = cJSON_ParseWithLength(text, len);
+  free(text);
+  const cJSON *r = m->root;
+  const cJSON *shard = cJSON_GetObjectItemCaseSensitive(r, "shard");
+  const cJSON *total = cJSON_GetObjectItemCaseSensitive(r, "contexts_total");
+  const cJSON *width = cJSON_GetObjectItemCaseSensitive(r, "id_width");
+  m->sweep = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "sweep"));
+  const cJSON *ids = cJSON_GetObjectItemCaseSensitive(r, "ids");
+  const cJSON *inc = cJSON_GetObjectItemCaseSensitive(r, "incomplete");
+  m->finished = cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(r, "finished"));
+  bool ok = m->sweep && cJSON_IsArray(shard) && cJSON_GetArraySize(shard) == 2 &&
+            sweep_json_is_int(total, 0) && (ids ? cJSON_IsArray(ids) : sweep_json_is_int(width, 1)) &&
+            (!inc || cJSON_IsArray(inc));
+  if (ok) {
+    const cJSON *si = cJSON_GetArrayItem(shard, 0), *sn = cJSON_GetArrayItem(shard, 1);
+    ok = sweep_json_is_int(si, 0) && sweep_json_is_int(sn, 1) && si->valuedouble < sn->valuedouble;
+    if (ok) m->shard_i = (size_t)si->valuedouble, m->shard_n = (size_t)sn->valuedouble;
+    m->total = (size_t)total->valuedouble;
+    m->id_width = ids ? 0 : (int)width->valuedouble;
+  }
+  /* Arrays for O(1) ids and O(log n) "incomplete?" (cJSON arrays are lists). */
+  if (ok && ids) {
+    m->ids = malloc((m->total ? m->total : 1) * sizeof *m->ids);
+    size_t k = 0;
+    const cJSON *v;
+    cJSON_ArrayForEach(v, ids) {
+      if (!m->ids || k >= m->total || !cJSON_IsString(v)) break;
+      m->ids[k++] = v->valuestring;
+    }
+    ok = m->ids && k == m->total && !v; /* every element a string, no more and no fewer */
+  }
+  if (ok && inc) {
+    size_t n = (size_t)cJSON_GetArraySize(inc);
+    m->incomplete = malloc((n ? n : 1) * sizeof *m->incomplete);
+    const cJSON *v;
+    cJSON_ArrayForEach(v, inc) {
+      if (!m->incomplete || !cJSON_IsString(v)) break;
+      m->incomplete[m->n_incomplete++] = v->valuestring;
+    }
+    ok = m->incomplete && m->n_incomplete == n;
+    if (ok && n) qsort(m->incomplete, n, sizeof *m->incomplete, sweep_cmp_str);
+  }
+  if (!ok) {
+    int rc = cli_fail(ctx, CLI_IO, "%s: not a sweep manifest (%s)", path, MANIFEST_FORMAT);
+    manifest_free(m);
+    free(path);
+    return rc;
+  }
+  free(path);
+  return 0;
+}
+
+/* Write DIR/sweep.json for this shard. incomplete may be NULL ([]). */
+int manifest_write(const cli_ctx *ctx, const char *dir, const char *fingerprint, const char *scene,
+                   size_t shard_i, size_t shard_n, const sweep_list *l, const char *job, bool finished,
+                   const cJSON *incomplete) {
+  cJSON *o = cJSON_CreateObject();
+  cJSON_AddStringToObject(o, "format", MANIFEST_FORMAT);
+  cJSON_AddStringToObject(o, "sweep", fingerprint);
+  cJSON_AddStringToObject(o, "scene", scene);
+  cJSON *sh = cJSON_AddArrayToObject(o, "shard");
+  cJSON_AddItemToArray(sh, cJSON_CreateNumber((double)shard_i));
+  cJSON_AddItemToArray(sh, cJSON_CreateNumber((double)shard_n));
+  cJSON_AddNumberToObject(o, "contexts_total", (double)l->total);
+  cJSON_AddNumberToObject(o, "seed", (double)l->seed);
+  if (l->all_ids) {
+    cJSON *ids = cJSON_AddArrayToObject(o, "ids");
+    char buf[72];
+    for (size_t k = 0; k < l->total; k++) {
+      if (!l->all_ids[k]) sweep_make_id(buf, l->id_width, k);
+      cJSON_AddItemToArray(ids, cJSON_CreateString(l->all_ids[k] ? l->all_ids[k] : buf));
+    }
+  } else {
+    cJSON_AddNumberToObject(o, "id_width", l->id_width);
+  }
+  if (job && *job)
+    cJSON_AddStringToObject(o, "job", job);
+  else
+    cJSON_AddNullToObject(o, "job");
+  cJSON_AddBoolToObject(o, "finished", finished);
+  cJSON_AddItemToObject(o, "incomplete", incomplete ? cJSON_Duplicate(incomplete, 1) : cJSON_CreateArray());
+  char *text = cJSON_PrintUnformatted(o);
+  cJSON_Delete(o);
+  char *path = sweep_dir_file(dir, MANIFEST_NAME);
+  int rc = CLI_OK;
+  if (!text || !path) {
+    rc = cli_fail(ctx, CLI_IO, "out of memory");
+  } else {
+    size_t n = strlen(text);
+    text[n] = '\n'; /* the NUL goes: write n + 1 bytes of "...}\n" */
+    if (cli_write_file_atomic(path, text, n + 1))
+      rc = cli_fail(ctx, CLI_IO, "cannot write '%s': %s", path, strerror(errno));
+  }
+  free(text);
+  free(path);
+  return rc;
+}
+
+/* What a sweep writes into DIR/<context>/: <sensor>.exr|.npy|.json and
+ * the temp files of an interrupted write (<name>.tmp.<pid>). */
+static bool sweep_file_name(const char *name) {
+  if (strstr(name, ".tmp.")) return true;
+  const char *dot = strrchr(name, '.');
+  return dot && (strcmp(dot, ".exr") == 0 || strcmp(dot, ".npy") == 0 || strcmp(dot, ".json") == 0);
+}
+
+/* Remove DIR/<context>/'s sweep files and the directory when that empties
+ * it. Symbolic links are not followed. Returns the files removed. */
+static size_t remove_context_dir(const char *dir, const char *context) {
+  if (!cli_safe_component(context)) return 0;
+  char *cdir = sweep_dir_file(dir, context);
+  struct stat st;
+  size_t removed = 0;
+  if (cdir && lstat(cdir, &st) == 0 && S_ISDIR(st.st_mode)) {
+    DIR *d = opendir(cdir);
+    struct dirent *e;
+    while (d && (e = readdir(d))) {
+      if (!sweep_file_name(e->d_name)) continue;
+      char *f = sweep_dir_file(cdir, e->d_name);
+      if (f && sweep_is_regular(f) && unlink(f) == 0) removed++;
+      free(f);
+    }
+    if (d) closedir(d);
+    rmdir(cdir); /* fails, as it should, when something else is left */
+  }
+  free(cdir);
+  return removed;
+}
+
+/* Make -o DIR ready: create it when absent; an empty one is fine. A
+ * non-empty one is refused unless --force and it holds an earlier sweep
+ * (sweep.json or index.jsonl): then exactly what that sweep wrote goes
+ * (its films, the temp files of an interrupted write, emptied context
+ * directories, index.jsonl, sweep.json) and anything else stays. A
+ * directory holding no sweep is never emptied: a mistyped -o must not
+ * cost someone their files. */
+int sweep_prepare_output(const cli_ctx *ctx, const char *dir, bool force) {
+  char first[256];
+  DIR *d = opendir(dir);
+  if (!d) {
+    if (errno == ENOENT) {
+      if (cli_mkdirs(dir)) return cli_fail(ctx, CLI_IO, "cannot create '%s': %s", dir, strerror(errno));
+      return 0;
+    }
+    return cli_fail(ctx, CLI_IO, "-o %s: %s", dir, strerror(errno));
+  }
+  size_t n = sweep_dir_entries(d, first, sizeof first);
+  closedir(d);
+  if (n == 0) return 0;
+  if (!force)
+    return cli_usage(ctx,
+                     "-o %s: the directory is not empty (%zu entr%s, e.g. '%s'); give a new or empty "
+                     "directory, or add --force to replace the earlier sweep in it",
+                     dir, n, n == 1 ? "y" : "ies", first);
+  char *index = sweep_dir_file(dir, "index.jsonl"), *manifest = sweep_dir_file(dir, MANIFEST_NAME);
+  if (!index || !manifest) {
+    free(index), free(manifest);
+    return cli_fail(ctx, CLI_IO, "out of memory");
+  }
+  bool has_index = sweep_is_regular(index), has_manifest = sweep_is_regular(manifest);
+  char *state = sweep_dir_file(dir, SPREAD_STATE);
+  if (state && sweep_is_regular(state)) unlink(state); /* the journal of an earlier --spread */
+  free(state);
+  if (!has_index && !has_manifest) {
+    free(index), free(manifest);
+    return cli_usage(ctx,
+                     "-o %s: --force replaces an earlier sweep, but this non-empty directory holds none "
+                     "(no %s or index.jsonl); nothing was deleted: give a new or empty directory",
+                     dir, MANIFEST_NAME);
+  }
+  size_t removed = 0;
+  if (has_index) { /* every context the index names */
+    char *text = cli_read_file(index, NULL);
+    for (char *s = text, *nl; s && *s; s = nl ? nl + 1 : s + strlen(s)) {
+      nl = strchr(s, '\n');
+      if (nl) *nl = '\0';
+      cJSON *o = cJSON_Parse(s);
+      const char *c = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "context"));
+      if (c) removed += remove_context_dir(dir, c);
+      cJSON_Delete(o);
+    }
+    free(text);
+  }
+  sweep_manifest m;
+  int mrc = has_manifest ? manifest_read(ctx, dir, &m) : -1;
+  if (mrc > 0) {
+    free(index), free(manifest);
+    return mrc;
+  }
+  if (mrc == 0) { /* every context of its shard (an interrupted sweep has no index yet) */
+    char buf[72];
+    for (size_t k = m.shard_i; k < m.total; k += m.shard_n)
+      removed += remove_context_dir(dir, manifest_id(&m, k, buf));
+    manifest_free(&m);
+  }
+  char *dataset = sweep_dir_file(dir, DATASET_NAME);
+  if (dataset && sweep_is_regular(dataset)) unlink(dataset);
+  free(dataset);
+  if (has_index && unlink(index) != 0 && errno != ENOENT) {
+    int rc = cli_fail(ctx, CLI_IO, "cannot remove '%s': %s", index, strerror(errno));
+    free(index), free(manifest);
+    return rc;
+  }
+  if (has_manifest && unlink(manifest) != 0 && errno != ENOENT) {
+    int rc = cli_fail(ctx, CLI_IO, "cannot remove '%s': %s", manifest, strerror(errno));
+    free(index), free(manifest);
+    return rc;
+  }
+  free(index), free(manifest);
+  d = opendir(dir);
+  size_t left = d ? sweep_dir_entries(d, first, sizeof first) : 0;
+  if (d) closedir(d);
+  if (!ctx->quiet) {
+    fprintf(stderr, "raysweep %s: --force: removed the earlier sweep in %s (%zu film%s)\n", ctx->cmd, dir,
+            removed, removed == 1 ? "" : "s");
+    if (left)
+      fprintf(stderr, "raysweep %s: kept %zu entr%s no sweep wrote (e.g. '%s')\n", ctx->cmd, left,
+              left == 1 ? "y" : "ies", first);
+  }
+  return 0;
+}
