@@ -7,8 +7,8 @@
  * call its shape_ops.intersect in double precision in the instance's
  * object space (Embree hands the callback the ray already transformed by
  * the instance), with its shape_ops.bounds as the box. Measurement code
- * (make bench) reaches Embree through accel_embree.h. */
-#include "accel_embree.h"
+ * (make bench) reaches Embree through accel_internal.h. */
+#include "accel_internal.h"
 
 #include <stdatomic.h>
 
@@ -899,7 +899,7 @@ void accel_get_counters(const accel *a, accel_counters *out) {
     memset(out, 0, sizeof *out);
 }
 
-/* ---- the query hook (accel_embree.h) ---------------------------------------------------------- */
+/* ---- the query hook (accel_internal.h) ---------------------------------------------------------- */
 
 static accel_query_hook *_Atomic g_hook;
 

@@ -1,6 +1,6 @@
 /* Ray queries on the two-level acceleration structure. accel.c is the only
  * kernel file that includes Embree (measurement code reaches Embree through
- * accel_embree.h).
+ * accel_internal.h).
  *
  * Layout (decided once, relied on by parameter updates): every shape is its
  * own Embree scene holding one geometry in object space, instanced into the
@@ -139,6 +139,6 @@ size_t accel_memory(const accel *a);
 size_t accel_embree_bytes(void);
 
 /* The ceilings make bench measures (Embree alone on the same structure)
- * live with the benchmarks, tests/bench/accel_bench.h, on accel_embree.h. */
+ * live with the benchmarks, tests/bench/accel_bench.h, on accel_internal.h. */
 
 #endif

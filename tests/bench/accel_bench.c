@@ -11,7 +11,7 @@
 #include <string.h>
 #include <time.h>
 
-#include "../../server/kernel/accel_embree.h"
+#include "../../server/kernel/accel_internal.h"
 #include "../../server/kernel/core/rng.h"
 #include "../../server/kernel/shapes/instance.h"
 

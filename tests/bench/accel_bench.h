@@ -1,6 +1,6 @@
 /* The Embree ceilings make bench measures (bench_kernel, bench_canopy):
  * Embree alone, with no shading, on a scene's own acceleration structure
- * (server/kernel/accel_embree.h). Measurement only: nothing in the daemon
+ * (server/kernel/accel_internal.h). Measurement only: nothing in the daemon
  * calls these. */
 #ifndef RSW_BENCH_ACCEL_BENCH_H
 #define RSW_BENCH_ACCEL_BENCH_H

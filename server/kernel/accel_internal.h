@@ -4,8 +4,8 @@
  * and a hook that sees every query as Embree receives it. Only accel.c and
  * measurement code include this header (it includes Embree; accel.h does
  * not). */
-#ifndef RSW_ACCEL_EMBREE_H
-#define RSW_ACCEL_EMBREE_H
+#ifndef RSW_ACCEL_INTERNAL_H
+#define RSW_ACCEL_INTERNAL_H
 
 #include <stdbool.h>
 
