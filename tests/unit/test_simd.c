@@ -14,7 +14,7 @@
  *    in (a batch of 1000 equals 1000 batches of one, bitwise), which is
  *    what keeps 1 and N threads bitwise identical at a given ISA;
  *  - weight = eval / pdf for the batched samples (1e-4 relative: pdf and
- *    weight are single precision, simd/microfacet_lanes.h);
+ *    weight are single precision, bsdfs/microfacet_lanes.h);
  *  - roughconductor's batched eval/pdf (single precision up to Fresnel)
  *    equals eval() and pdf() within 1e-4 relative (+1e-12 absolute) over
  *    random directions, both distributions, visible or not, isotropic

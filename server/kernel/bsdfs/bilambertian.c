@@ -78,7 +78,7 @@ static double bil_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
 }
 
 /* Batched sampling (bsdf_ops.sample_batch): the cosine-hemisphere warp of
- * up to 64 lanes in double lanes (simd/camera_lanes.h, bitwise the scalar
+ * up to 64 lanes in double lanes (simd/warp_lanes.h, bitwise the scalar
  * warp), the rest per lane (bil_finish): bit for bit bil_sample(). */
 static void bil_sample_batch(const bsdf *b, int n, const surface_interaction *const *si, const double *u1,
                              const vec2 *u2, bsdf_sample *bs, color *weight) {

@@ -15,7 +15,6 @@
 
 #include "../scene/loader.h"
 #include "../scene/params.h"
-#include "../simd/simd.h"
 #include "bsdfs_internal.h"
 #include "fresnel.h"
 
@@ -97,7 +96,7 @@ static double conductor_pdf(const bsdf *b, const surface_interaction *si, vec3 w
 /* Batched sampling (bsdf_ops.sample_batch): the mirror direction per lane,
  * the Fresnel terms of up to 64 lanes (three per lane for a coloured
  * index, none for eta = 0, k = 1: F = 1 exactly, as
- * fresnel_conductor_col()) in double lanes (simd/plugin_lanes.h, bitwise
+ * fresnel_conductor_col()) in double lanes (bsdfs/fresnel_lanes.h, bitwise
  * fresnel_conductor()): each lane gives conductor_sample()'s result bit
  * for bit. */
 static void conductor_sample_batch(const bsdf *b, int n, const surface_interaction *const *si,

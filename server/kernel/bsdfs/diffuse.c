@@ -39,7 +39,7 @@ static double diffuse_pdf(const bsdf *b, const surface_interaction *si, vec3 wo)
 }
 
 /* Batched sampling (bsdf_ops.sample_batch): the cosine-hemisphere warp of
- * up to 64 lanes at a time in double lanes (simd/camera_lanes.h), bitwise
+ * up to 64 lanes at a time in double lanes (simd/warp_lanes.h), bitwise
  * the scalar warp, so each lane gives diffuse_sample()'s result exactly;
  * pdf, checks and reflectance per lane. */
 static void diffuse_sample_batch(const bsdf *b, int n, const surface_interaction *const *si, const double *u1,

@@ -32,7 +32,6 @@
 
 #include "../scene/loader.h"
 #include "../scene/params.h"
-#include "../simd/simd.h"
 #include "../textures/texture.h"
 #include "bsdfs_internal.h"
 #include "fresnel.h"
@@ -131,7 +130,7 @@ static inline color rough_fresnel_factor(const roughconductor_bsdf *r, const rou
 
 /* Batched sampling (bsdf_ops.sample_batch): the visible-normal samples of
  * up to 64 lanes at a time, with their pdf and weight (without Fresnel),
- * by the per-ISA single-precision kernels (simd/microfacet_lanes.h: for
+ * by the per-ISA single-precision kernels (bsdfs/microfacet_lanes.h: for
  * Beckmann the Newton inversion runs across the lanes instead of one chain
  * per sample; the tail says why float is safe there); then Fresnel at wi.m
  * and the specular factor per lane in double, and wo renormalised in
@@ -211,7 +210,7 @@ static double rough_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
 
 /* Batched eval and pdf (bsdf_ops.eval_pdf_batch): D, the G1 products, the
  * visible G1 and the pdf of up to 64 lanes at a time in single precision
- * (simd/microfacet_lanes.h mf_eval_lanes says why that is safe), then
+ * (bsdfs/microfacet_lanes.h mf_eval_lanes says why that is safe), then
  * Fresnel and the specular factor per lane in double, as rough_eval(). */
 static void rough_eval_pdf_batch(const bsdf *b, int n, const surface_interaction *const *si, const vec3 *wo,
                                  color *f, double *pdf) {

@@ -25,6 +25,7 @@
 #include "../simd/simd.h"
 #include "../textures/texture.h"
 #include "bsdfs_internal.h"
+#include "rpv_lanes.h"
 
 /* sin(theta), cos(phi), sin(phi) of a local direction; azimuth 0 at the
  * pole. */
@@ -125,8 +126,8 @@ static double rpv_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
 
 /* ---- batched ops --------------------------------------------------------
  * pi f_r of up to RPV_C lanes with M F H in float lanes
- * (simd/plugin_lanes.h rpv_factor_lanes says why single precision is
- * safe there) and rho_0 times it in double. Grey lanes take channel 0's
+ * (bsdfs/rpv_lanes.h rpv_factor_lanes says why single precision is
+ * safe there, and why rpv_value() keeps a double version) and rho_0 times it in double. Grey lanes take channel 0's
  * factor; when a chunk holds a coloured lane, each lane computes three
  * (a grey lane's three are the same numbers), so a lane's value depends on
  * its own inputs only. Equal to rpv_value() within 3e-6 relative (the
@@ -134,6 +135,10 @@ static double rpv_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
 enum {
   RPV_C = 64
 };
+
+static void rpv_factor_batch(rsw_isa isa, int n, const float *const *in, float *out) {
+  SIMD_DISPATCH(isa, rpv_factor, n, in, out);
+}
 
 static void rpv_values_batch(const rpv_bsdf *r, int m, const surface_interaction *const *si, const vec3 *wo,
                              color *out) {

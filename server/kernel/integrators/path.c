@@ -98,7 +98,7 @@ static void add_polarization(double *quv, const emitter *e, vec3 d, double scale
  * Precision: shading stays in double (the plugins' scalar ops, and the
  * batched samplers' pdfs and weights); the batched samplers place a sample
  * in single precision, and roughconductor's batched eval/pdf towards a
- * light sample is single precision up to Fresnel (simd/microfacet_lanes.h
+ * light sample is single precision up to Fresnel (bsdfs/microfacet_lanes.h
  * says why both are safe); the path throughput and L stay double; Embree
  * traces in float32 behind fill_ray (accel.c). Contributions are summed
  * per path in double, in bounce order. */

@@ -12,7 +12,6 @@
 #include <stdlib.h>
 
 #include "../scene/params.h"
-#include "../simd/simd.h"
 #include "sensor_common.h"
 
 typedef struct distant {
@@ -42,7 +41,7 @@ static double distant_sample_ray(const sensor *s, vec2 film_u, vec2 aperture_u, 
 
 /* Batched rays (sensor_ops.sample_ray_batch): without a target or a
  * periodic slab, the origins on the bounding disk in double lanes
- * (simd/plugin_lanes.h disk_origins, the same operations as
+ * (sensors/distant_lanes.h disk_origins, the same operations as
  * ray_target_origin()), so bit for bit distant_sample_ray()'s rays; the
  * direction is the sensor's. Otherwise one by one. */
 static void distant_sample_ray_batch(const sensor *s, int n, const vec2 *film_u, const vec2 *aperture_u,

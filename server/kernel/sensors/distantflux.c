@@ -46,7 +46,7 @@ static double distantflux_sample_ray(const sensor *s, vec2 film_u, vec2 aperture
 }
 
 /* Batched rays (sensor_ops.sample_ray_batch): without a target or a
- * periodic slab, hdistant's double lanes (simd/camera_lanes.h: the same
+ * periodic slab, hdistant's double lanes (sensors/distant_lanes.h: the same
  * directions and origins, bit for bit), omega = -d (exact), and the
  * weight per lane with distantflux_sample_ray()'s operations: bit for bit
  * its rays and weights. Otherwise one by one. */

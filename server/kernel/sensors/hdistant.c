@@ -52,7 +52,7 @@ static double hdistant_sample_ray(const sensor *s, vec2 film_u, vec2 aperture_u,
 }
 
 /* Batched rays (sensor_ops.sample_ray_batch): without a target or a
- * periodic slab, the double-precision lanes of simd/camera_lanes.h, which
+ * periodic slab, the double-precision lanes of sensors/distant_lanes.h, which
  * give hdistant_sample_ray()'s rays bit for bit; otherwise one by one. */
 static void hdistant_sample_ray_batch(const sensor *s, int n, const vec2 *film_u, const vec2 *aperture_u,
                                       ray3 *rays, double *w) {

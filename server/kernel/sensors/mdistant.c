@@ -16,7 +16,6 @@
 #include <stdlib.h>
 
 #include "../scene/params.h"
-#include "../simd/simd.h"
 #include "sensor_common.h"
 
 typedef struct mdistant {
@@ -53,7 +52,7 @@ static double mdistant_sample_ray(const sensor *s, vec2 film_u, vec2 aperture_u,
 /* Batched rays (sensor_ops.sample_ray_batch): without a target or a
  * periodic slab, each lane's sub-sensor picked as mdistant_sample_ray()
  * does, its frame and direction gathered, and the origins on the bounding
- * disk in double lanes (simd/plugin_lanes.h disk_origins): bit for bit the
+ * disk in double lanes (sensors/distant_lanes.h disk_origins): bit for bit the
  * scalar rays. Otherwise one by one. */
 static void mdistant_sample_ray_batch(const sensor *s, int n, const vec2 *film_u, const vec2 *aperture_u,
                                       ray3 *rays, double *w) {
