@@ -141,20 +141,10 @@ static void conductor_sample_batch(const bsdf *b, int n, const surface_interacti
   }
 }
 
-/* A delta lobe: 0 for every lane. */
-static void conductor_eval_pdf_batch(const bsdf *b, int n, const surface_interaction *const *si,
-                                     const vec3 *wo, color *f, double *pdf) {
-  (void)b;
-  (void)si;
-  (void)wo;
-  for (int i = 0; i < n; i++) f[i] = col1(0.0), pdf[i] = 0.0;
-}
-
 static const bsdf_ops conductor_ops = {.sample = conductor_sample,
                                        .eval = conductor_eval,
                                        .pdf = conductor_pdf,
-                                       .sample_batch = conductor_sample_batch,
-                                       .eval_pdf_batch = conductor_eval_pdf_batch};
+                                       .sample_batch = conductor_sample_batch};
 
 static void conductor_destroy(object *o) {
   free(o);

@@ -58,29 +58,8 @@ static double dielectric_pdf(const bsdf *b, const surface_interaction *si, vec3 
   return 0.0;
 }
 
-/* Batched sampling (bsdf_ops.sample_batch): dielectric_sample() lane by
- * lane in one loop (inlined; no vector kernel: the Fresnel term is one
- * square root and two divisions, and the lobe choice branches per lane),
- * so bit for bit the scalar samples. */
-static void dielectric_sample_batch(const bsdf *b, int n, const surface_interaction *const *si,
-                                    const double *u1, const vec2 *u2, bsdf_sample *bs, color *weight) {
-  for (int i = 0; i < n; i++) weight[i] = dielectric_sample(b, si[i], u1[i], u2[i], &bs[i]);
-}
-
-/* Delta lobes: 0 for every lane. */
-static void dielectric_eval_pdf_batch(const bsdf *b, int n, const surface_interaction *const *si,
-                                      const vec3 *wo, color *f, double *pdf) {
-  (void)b;
-  (void)si;
-  (void)wo;
-  for (int i = 0; i < n; i++) f[i] = col1(0.0), pdf[i] = 0.0;
-}
-
-static const bsdf_ops dielectric_ops = {.sample = dielectric_sample,
-                                        .eval = dielectric_eval,
-                                        .pdf = dielectric_pdf,
-                                        .sample_batch = dielectric_sample_batch,
-                                        .eval_pdf_batch = dielectric_eval_pdf_batch};
+static const bsdf_ops dielectric_ops = {
+    .sample = dielectric_sample, .eval = dielectric_eval, .pdf = dielectric_pdf};
 
 static void dielectric_destroy(object *o) {
   free(o);

@@ -75,22 +75,8 @@ static void diffuse_sample_batch(const bsdf *b, int n, const surface_interaction
   }
 }
 
-/* Batched eval and pdf (bsdf_ops.eval_pdf_batch): one loop over the lanes
- * (no vector kernel: the only work is the reflectance texture and a
- * multiplication), each lane diffuse_eval() and diffuse_pdf() bit for bit. */
-static void diffuse_eval_pdf_batch(const bsdf *b, int n, const surface_interaction *const *si, const vec3 *wo,
-                                   color *f, double *pdf) {
-  for (int i = 0; i < n; i++) {
-    f[i] = diffuse_eval(b, si[i], wo[i]);
-    pdf[i] = diffuse_pdf(b, si[i], wo[i]);
-  }
-}
-
-static const bsdf_ops diffuse_ops = {.sample = diffuse_sample,
-                                     .eval = diffuse_eval,
-                                     .pdf = diffuse_pdf,
-                                     .sample_batch = diffuse_sample_batch,
-                                     .eval_pdf_batch = diffuse_eval_pdf_batch};
+static const bsdf_ops diffuse_ops = {
+    .sample = diffuse_sample, .eval = diffuse_eval, .pdf = diffuse_pdf, .sample_batch = diffuse_sample_batch};
 
 static void diffuse_destroy(object *o) {
   free(o);

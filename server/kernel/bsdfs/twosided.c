@@ -61,27 +61,6 @@ enum {
   TS_C = 64
 };
 
-static void side_sample(const bsdf *c, int n, const surface_interaction *const *si, const double *u1,
-                        const vec2 *u2, bsdf_sample *bs, color *w) {
-  if (c->ops->sample_batch) {
-    c->ops->sample_batch(c, n, si, u1, u2, bs, w);
-    return;
-  }
-  for (int i = 0; i < n; i++) w[i] = c->ops->sample(c, si[i], u1[i], u2[i], &bs[i]);
-}
-
-static void side_eval_pdf(const bsdf *c, int n, const surface_interaction *const *si, const vec3 *wo,
-                          color *f, double *pdf) {
-  if (c->ops->eval_pdf_batch) {
-    c->ops->eval_pdf_batch(c, n, si, wo, f, pdf);
-    return;
-  }
-  for (int i = 0; i < n; i++) {
-    f[i] = c->ops->eval(c, si[i], wo[i]);
-    pdf[i] = c->ops->pdf(c, si[i], wo[i]);
-  }
-}
-
 /* Up to TS_C lanes split by side: lane[s][j] the lane index of side s's
  * j-th entry, sp[s] its interactions (the back side's are copies in buf
  * with wi mirrored); cnt[2] the counts. Lanes with wi.z == 0 (or NaN) are
@@ -120,7 +99,7 @@ static void twosided_sample_batch(const bsdf *b, int n, const surface_interactio
       bsdf_sample out[TS_C];
       color w[TS_C];
       for (int j = 0; j < cnt[s]; j++) v1[j] = u1[i0 + lane[s][j]], v2[j] = u2[i0 + lane[s][j]];
-      if (cnt[s] > 0) side_sample(t->brdf[s], cnt[s], sp[s], v1, v2, out, w);
+      if (cnt[s] > 0) bsdf_sample_n(t->brdf[s], cnt[s], sp[s], v1, v2, out, w);
       for (int j = 0; j < cnt[s]; j++) {
         int i = i0 + lane[s][j];
         bs[i] = out[j];
@@ -146,7 +125,7 @@ static void twosided_eval_pdf_batch(const bsdf *b, int n, const surface_interact
       color fo[TS_C];
       double po[TS_C];
       for (int j = 0; j < cnt[s]; j++) o[j] = s == 1 ? flip_z(wo[i0 + lane[s][j]]) : wo[i0 + lane[s][j]];
-      if (cnt[s] > 0) side_eval_pdf(t->brdf[s], cnt[s], sp[s], o, fo, po);
+      if (cnt[s] > 0) bsdf_eval_pdf_n(t->brdf[s], cnt[s], sp[s], o, fo, po);
       for (int j = 0; j < cnt[s]; j++) f[i0 + lane[s][j]] = fo[j], pdf[i0 + lane[s][j]] = po[j];
     }
   }

@@ -52,11 +52,6 @@ static color area_sample(const emitter *e, const surface_interaction *ref, vec2 
   return col_scale(tex_eval(a->radiance, &at), 1.0 / ds->pdf);
 }
 
-static void area_sample_batch(const emitter *e, int n, const surface_interaction *const *ref, const vec2 *u,
-                              direction_sample *ds, color *value) {
-  for (int k = 0; k < n; k++) value[k] = area_sample(e, ref[k], u[k], &ds[k]);
-}
-
 static double area_pdf(const emitter *e, const surface_interaction *ref, const direction_sample *ds) {
   double cos_e = -v3_dot(ds->d, ds->n);
   if (!(cos_e > 0)) return 0.0;
@@ -71,7 +66,6 @@ static color area_eval(const emitter *e, const surface_interaction *hit, vec3 d)
 }
 
 static const emitter_ops area_ops = {.sample_direction = area_sample,
-                                     .sample_direction_batch = area_sample_batch,
                                      .pdf_direction = area_pdf,
                                      .eval = area_eval,
                                      .set_scene = area_set_scene};

@@ -24,11 +24,6 @@ static color const_sample(const emitter *e, const surface_interaction *ref, vec2
   return col_scale(tex_eval(c->radiance, ref), 4.0 * RSW_PI);
 }
 
-static void const_sample_batch(const emitter *e, int n, const surface_interaction *const *ref, const vec2 *u,
-                               direction_sample *ds, color *value) {
-  for (int k = 0; k < n; k++) value[k] = const_sample(e, ref[k], u[k], &ds[k]);
-}
-
 static double const_pdf(const emitter *e, const surface_interaction *ref, const direction_sample *ds) {
   (void)e, (void)ref, (void)ds;
   return RSW_INV_4PI;
@@ -40,10 +35,8 @@ static color const_eval(const emitter *e, const surface_interaction *hit, vec3 d
   return tex_eval(c->radiance, hit);
 }
 
-static const emitter_ops constant_ops = {.sample_direction = const_sample,
-                                         .pdf_direction = const_pdf,
-                                         .eval = const_eval,
-                                         .sample_direction_batch = const_sample_batch};
+static const emitter_ops constant_ops = {
+    .sample_direction = const_sample, .pdf_direction = const_pdf, .eval = const_eval};
 
 static void const_destroy(object *o) {
   free(o);

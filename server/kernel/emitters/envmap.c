@@ -124,11 +124,6 @@ static color env_sample(const emitter *e, const surface_interaction *ref, vec2 u
   return col_scale(lookup(m, uv), 1.0 / ds->pdf);
 }
 
-static void env_sample_batch(const emitter *e, int n, const surface_interaction *const *ref, const vec2 *u,
-                             direction_sample *ds, color *value) {
-  for (int k = 0; k < n; k++) value[k] = env_sample(e, ref[k], u[k], &ds[k]);
-}
-
 static double env_pdf(const emitter *e, const surface_interaction *ref, const direction_sample *ds) {
   const envmap *m = (const envmap *)e;
   (void)ref;
@@ -143,10 +138,8 @@ static double env_pdf(const emitter *e, const surface_interaction *ref, const di
   return distr2d_pdf(&m->distr, v2(x, uv.y)) / (2.0 * RSW_PI * RSW_PI * sin_theta);
 }
 
-static const emitter_ops envmap_ops = {.sample_direction = env_sample,
-                                       .pdf_direction = env_pdf,
-                                       .eval = env_eval,
-                                       .sample_direction_batch = env_sample_batch};
+static const emitter_ops envmap_ops = {
+    .sample_direction = env_sample, .pdf_direction = env_pdf, .eval = env_eval};
 
 static void env_destroy(object *o) {
   envmap *m = (envmap *)o;

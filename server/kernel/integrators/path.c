@@ -371,10 +371,7 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, int
           ref[j] = &ln[g[ord[j0 + j]]].si;
           u[j] = d2[ord[j0 + j]];
         }
-        if (e->ops->sample_direction_batch)
-          e->ops->sample_direction_batch(e, m, ref, u, ds, val);
-        else
-          for (int j = 0; j < m; j++) val[j] = e->ops->sample_direction(e, ref[j], u[j], &ds[j]);
+        emitter_sample_direction_n(e, m, ref, u, ds, val);
         for (int j = 0; j < m; j++) {
           lane *l = &ln[g[ord[j0 + j]]];
           l->pe = pe;
