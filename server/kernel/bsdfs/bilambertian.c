@@ -15,8 +15,7 @@
 #include <math.h>
 #include <stdlib.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "../simd/simd.h"
 #include "../textures/texture.h"
 #include "bsdfs_internal.h"
@@ -132,12 +131,8 @@ static const bsdf_ops bil_ops = {.sample = bil_sample,
                                  .sample_batch = bil_sample_batch,
                                  .eval_pdf_batch = bil_eval_pdf_batch};
 
-static void bil_destroy(object *o) {
-  free(o);
-}
-
 /* R, T >= 0; for constants also R + T <= 1 per channel (energy). */
-static rsw_status bil_create(loader *ld, node *n, object **out) {
+static rsw_status bilambertian_create(loader *ld, node *n, object **out) {
   texture *r, *t;
   rsw_status st;
   if ((st = ld_texture(ld, n, "reflectance", 0.5, 0.0, &r)) != RSW_OK) return st;
@@ -148,11 +143,7 @@ static rsw_status bil_create(loader *ld, node *n, object **out) {
       if (rc.c[i] + tc.c[i] > 1.0 + 1e-12)
         return ld_fail(ld, n, "transmittance", RSW_ERR_INVALID,
                        "reflectance + transmittance = %g exceeds 1 (energy)", rc.c[i] + tc.c[i]);
-  bsdf *b = bilambertian_new(r, t);
-  if (!b) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "bilambertian: out of memory");
-  b->base.id = n->id;
-  *out = &b->base;
-  return RSW_OK;
+  return plugin_created(ld, n, (object *)bilambertian_new(r, t), out);
 }
 
 static void bil_traverse(object *o, param_visitor *v) {
@@ -161,21 +152,12 @@ static void bil_traverse(object *o, param_visitor *v) {
   pv_object(v, "transmittance", &d->transmittance->base, 0.0, 1.0);
 }
 
-const plugin plugin_bilambertian = {
-    .name = "bilambertian",
-    .cls = CLS_BSDF,
-    .create = bil_create,
-    .destroy = bil_destroy,
-    .ops = &bil_ops,
-    .traverse = bil_traverse,
-};
+DEFINE_PLUGIN(bilambertian, CLS_BSDF, .ops = &bil_ops, .traverse = bil_traverse);
 
 bsdf *bilambertian_new(texture *reflectance, texture *transmittance) {
-  bilambertian_bsdf *d = calloc(1, sizeof *d);
+  bilambertian_bsdf *d =
+      BSDF_NEW(bilambertian_bsdf, bilambertian, BSDF_DIFFUSE_REFLECTION | BSDF_DIFFUSE_TRANSMISSION);
   if (!d) return NULL;
-  d->base.base.plugin = &plugin_bilambertian;
-  d->base.ops = &bil_ops;
-  d->base.flags = BSDF_DIFFUSE_REFLECTION | BSDF_DIFFUSE_TRANSMISSION;
   d->reflectance = reflectance;
   d->transmittance = transmittance;
   return &d->base;

@@ -17,6 +17,7 @@ extern const plugin plugin_conductor;
 extern const plugin plugin_roughconductor;
 extern const plugin plugin_dielectric;
 extern const plugin plugin_twosided;
+extern const plugin plugin_null;
 
 /* ---- diffuse ------------------------------------------------------------ */
 typedef struct diffuse_bsdf {

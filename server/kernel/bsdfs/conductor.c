@@ -13,8 +13,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "bsdfs_internal.h"
 #include "fresnel.h"
 
@@ -146,10 +145,6 @@ static const bsdf_ops conductor_ops = {.sample = conductor_sample,
                                        .pdf = conductor_pdf,
                                        .sample_batch = conductor_sample_batch};
 
-static void conductor_destroy(object *o) {
-  free(o);
-}
-
 static rsw_status conductor_prepare(object *o, const render_ctx *rc, rsw_err *err) {
   return conductor_ior_prepare(&((conductor_bsdf *)o)->ior, rc, err, o->id);
 }
@@ -160,16 +155,9 @@ static rsw_status conductor_create(loader *ld, node *n, object **out) {
   rsw_status st = conductor_ior_load(ld, n, &ior);
   if (st != RSW_OK) return st;
   if ((st = ld_texture(ld, n, "specular_reflectance", 1.0, 0.0, &spec)) != RSW_OK) return st;
-  conductor_bsdf *c = calloc(1, sizeof *c);
-  if (!c) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "conductor: out of memory");
-  c->base.base.plugin = &plugin_conductor;
-  c->base.base.id = n->id;
-  c->base.ops = &conductor_ops;
-  c->base.flags = BSDF_DELTA_REFLECTION;
-  c->ior = ior;
-  c->specular_reflectance = spec;
-  *out = &c->base.base;
-  return RSW_OK;
+  conductor_bsdf *c = BSDF_NEW(conductor_bsdf, conductor, BSDF_DELTA_REFLECTION);
+  if (c) c->ior = ior, c->specular_reflectance = spec;
+  return plugin_created(ld, n, (object *)c, out);
 }
 
 /* eta/k are reported only without a material preset (a preset has no
@@ -187,23 +175,13 @@ static void conductor_traverse(object *o, param_visitor *v) {
     pv_object(v, "specular_reflectance", &c->specular_reflectance->base, 0.0, INFINITY);
 }
 
-const plugin plugin_conductor = {
-    .name = "conductor",
-    .cls = CLS_BSDF,
-    .create = conductor_create,
-    .destroy = conductor_destroy,
-    .prepare = conductor_prepare,
-    .ops = &conductor_ops,
-    .traverse = conductor_traverse,
-};
+DEFINE_PLUGIN(conductor, CLS_BSDF, .prepare = conductor_prepare, .ops = &conductor_ops,
+              .traverse = conductor_traverse);
 
 bsdf *conductor_new(texture *eta, texture *k, const ior_conductor *material, texture *specular_reflectance,
                     const render_ctx *rc) {
-  conductor_bsdf *c = calloc(1, sizeof *c);
+  conductor_bsdf *c = BSDF_NEW(conductor_bsdf, conductor, BSDF_DELTA_REFLECTION);
   if (!c) return NULL;
-  c->base.base.plugin = &plugin_conductor;
-  c->base.ops = &conductor_ops;
-  c->base.flags = BSDF_DELTA_REFLECTION;
   c->ior.eta = eta;
   c->ior.k = k;
   c->ior.material = material;

@@ -8,8 +8,7 @@
  * (reflectance default 0.5). */
 #include <stdlib.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "../simd/simd.h"
 #include "bsdfs_internal.h"
 
@@ -78,40 +77,21 @@ static void diffuse_sample_batch(const bsdf *b, int n, const surface_interaction
 static const bsdf_ops diffuse_ops = {
     .sample = diffuse_sample, .eval = diffuse_eval, .pdf = diffuse_pdf, .sample_batch = diffuse_sample_batch};
 
-static void diffuse_destroy(object *o) {
-  free(o);
-}
-
 static rsw_status diffuse_create(loader *ld, node *n, object **out) {
   texture *refl;
   rsw_status st = ld_texture(ld, n, "reflectance", 0.5, 0.0, &refl);
   if (st != RSW_OK) return st;
-  bsdf *b = diffuse_new(refl);
-  if (!b) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "diffuse: out of memory");
-  b->base.id = n->id;
-  *out = &b->base;
-  return RSW_OK;
+  return plugin_created(ld, n, (object *)diffuse_new(refl), out);
 }
 
 static void diffuse_traverse(object *o, param_visitor *v) {
   pv_object(v, "reflectance", &((diffuse_bsdf *)o)->reflectance->base, 0.0, INFINITY);
 }
 
-const plugin plugin_diffuse = {
-    .name = "diffuse",
-    .cls = CLS_BSDF,
-    .create = diffuse_create,
-    .destroy = diffuse_destroy,
-    .ops = &diffuse_ops,
-    .traverse = diffuse_traverse,
-};
+DEFINE_PLUGIN(diffuse, CLS_BSDF, .ops = &diffuse_ops, .traverse = diffuse_traverse);
 
 bsdf *diffuse_new(texture *reflectance) {
-  diffuse_bsdf *d = calloc(1, sizeof *d);
-  if (!d) return NULL;
-  d->base.base.plugin = &plugin_diffuse;
-  d->base.ops = &diffuse_ops;
-  d->base.flags = BSDF_DIFFUSE_REFLECTION;
-  d->reflectance = reflectance;
-  return &d->base;
+  diffuse_bsdf *d = BSDF_NEW(diffuse_bsdf, diffuse, BSDF_DIFFUSE_REFLECTION);
+  if (d) d->reflectance = reflectance;
+  return (bsdf *)d;
 }

@@ -30,8 +30,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "../textures/texture.h"
 #include "bsdfs_internal.h"
 #include "fresnel.h"
@@ -255,10 +254,6 @@ static const bsdf_ops rough_ops = {.sample = rough_sample,
                                    .sample_batch = rough_sample_batch,
                                    .eval_pdf_batch = rough_eval_pdf_batch};
 
-static void rough_destroy(object *o) {
-  free(o);
-}
-
 static rsw_status rough_prepare(object *o, const render_ctx *rc, rsw_err *err) {
   return conductor_ior_prepare(&((roughconductor_bsdf *)o)->ior, rc, err, o->id);
 }
@@ -273,7 +268,7 @@ static bool equal_nocase(const char *a, const char *b) {
  * `distribution` "beckmann" (default) or "ggx" (case-insensitive);
  * either `alpha` (default 0.1) or both `alpha_u` and `alpha_v`;
  * `sample_visible` (default true). */
-static rsw_status rough_create(loader *ld, node *n, object **out) {
+static rsw_status roughconductor_create(loader *ld, node *n, object **out) {
   const char *dist;
   rsw_status st = ld_string(ld, n, "distribution", "beckmann", &dist);
   if (st != RSW_OK) return st;
@@ -319,20 +314,16 @@ static rsw_status rough_create(loader *ld, node *n, object **out) {
   texture *spec;
   if ((st = ld_texture_opt(ld, n, "specular_reflectance", 0.0, &spec)) != RSW_OK) return st;
 
-  roughconductor_bsdf *r = calloc(1, sizeof *r);
-  if (!r) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "roughconductor: out of memory");
-  r->base.base.plugin = &plugin_roughconductor;
-  r->base.base.id = n->id;
-  r->base.ops = &rough_ops;
-  r->base.flags = BSDF_GLOSSY_REFLECTION;
-  r->ior = ior;
-  r->specular_reflectance = spec;
-  r->type = type;
-  r->alpha_u = au;
-  r->alpha_v = av;
-  r->sample_visible = sample_visible;
-  *out = &r->base.base;
-  return RSW_OK;
+  roughconductor_bsdf *r = BSDF_NEW(roughconductor_bsdf, roughconductor, BSDF_GLOSSY_REFLECTION);
+  if (r) {
+    r->ior = ior;
+    r->specular_reflectance = spec;
+    r->type = type;
+    r->alpha_u = au;
+    r->alpha_v = av;
+    r->sample_visible = sample_visible;
+  }
+  return plugin_created(ld, n, (object *)r, out);
 }
 
 static void rough_traverse(object *o, param_visitor *v) {
@@ -349,24 +340,14 @@ static void rough_traverse(object *o, param_visitor *v) {
     pv_object(v, "specular_reflectance", &r->specular_reflectance->base, 0.0, INFINITY);
 }
 
-const plugin plugin_roughconductor = {
-    .name = "roughconductor",
-    .cls = CLS_BSDF,
-    .create = rough_create,
-    .destroy = rough_destroy,
-    .prepare = rough_prepare,
-    .ops = &rough_ops,
-    .traverse = rough_traverse,
-};
+DEFINE_PLUGIN(roughconductor, CLS_BSDF, .prepare = rough_prepare, .ops = &rough_ops,
+              .traverse = rough_traverse);
 
 bsdf *roughconductor_new(mf_type type, texture *alpha_u, texture *alpha_v, bool sample_visible, texture *eta,
                          texture *k, const ior_conductor *material, texture *specular_reflectance,
                          const render_ctx *rc) {
-  roughconductor_bsdf *r = calloc(1, sizeof *r);
+  roughconductor_bsdf *r = BSDF_NEW(roughconductor_bsdf, roughconductor, BSDF_GLOSSY_REFLECTION);
   if (!r) return NULL;
-  r->base.base.plugin = &plugin_roughconductor;
-  r->base.ops = &rough_ops;
-  r->base.flags = BSDF_GLOSSY_REFLECTION;
   r->ior.eta = eta;
   r->ior.k = k;
   r->ior.material = material;

@@ -20,8 +20,7 @@
 #include <math.h>
 #include <stdlib.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "../simd/simd.h"
 #include "../textures/texture.h"
 #include "bsdfs_internal.h"
@@ -240,10 +239,6 @@ static const bsdf_ops rpv_ops = {.sample = rpv_sample,
                                  .sample_batch = rpv_sample_batch,
                                  .eval_pdf_batch = rpv_eval_pdf_batch};
 
-static void rpv_destroy(object *o) {
-  free(o);
-}
-
 rsw_status bsdf_check_const_range(loader *ld, node *n, const char *name, const texture *t, double lo,
                                   bool lo_open, double hi, bool hi_open) {
   color c;
@@ -269,11 +264,7 @@ static rsw_status rpv_create(loader *ld, node *n, object **out) {
   if ((st = ld_texture_opt(ld, n, "rho_c", 0.0, &rho_c)) != RSW_OK) return st;
   if ((st = bsdf_check_const_range(ld, n, "k", k, 0.0, false, INFINITY, true)) != RSW_OK) return st;
   if ((st = bsdf_check_const_range(ld, n, "g", g, -1.0, true, 1.0, true)) != RSW_OK) return st;
-  bsdf *b = rpv_new(rho_0, k, g, rho_c);
-  if (!b) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "rpv: out of memory");
-  b->base.id = n->id;
-  *out = &b->base;
-  return RSW_OK;
+  return plugin_created(ld, n, (object *)rpv_new(rho_0, k, g, rho_c), out);
 }
 
 static void rpv_traverse(object *o, param_visitor *v) {
@@ -284,21 +275,11 @@ static void rpv_traverse(object *o, param_visitor *v) {
   if (r->rho_c != r->rho_0) pv_object(v, "rho_c", &r->rho_c->base, 0.0, INFINITY);
 }
 
-const plugin plugin_rpv = {
-    .name = "rpv",
-    .cls = CLS_BSDF,
-    .create = rpv_create,
-    .destroy = rpv_destroy,
-    .ops = &rpv_ops,
-    .traverse = rpv_traverse,
-};
+DEFINE_PLUGIN(rpv, CLS_BSDF, .ops = &rpv_ops, .traverse = rpv_traverse);
 
 bsdf *rpv_new(texture *rho_0, texture *k, texture *g, texture *rho_c) {
-  rpv_bsdf *r = calloc(1, sizeof *r);
+  rpv_bsdf *r = BSDF_NEW(rpv_bsdf, rpv, BSDF_GLOSSY_REFLECTION);
   if (!r) return NULL;
-  r->base.base.plugin = &plugin_rpv;
-  r->base.ops = &rpv_ops;
-  r->base.flags = BSDF_GLOSSY_REFLECTION;
   r->rho_0 = rho_0;
   r->k = k;
   r->g = g;

@@ -11,8 +11,7 @@
  * Source: mitsuba3 src/bsdfs/twosided.cpp; docs/kernel-conventions.md#diffuse-and-twosided. */
 #include <stdlib.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "bsdfs_internal.h"
 
 #define TRANSMISSION_LOBES (BSDF_DIFFUSE_TRANSMISSION | BSDF_GLOSSY_TRANSMISSION | BSDF_DELTA_TRANSMISSION)
@@ -137,10 +136,6 @@ static const bsdf_ops twosided_ops = {.sample = twosided_sample,
                                       .sample_batch = twosided_sample_batch,
                                       .eval_pdf_batch = twosided_eval_pdf_batch};
 
-static void twosided_destroy(object *o) {
-  free(o);
-}
-
 static rsw_status twosided_create(loader *ld, node *n, object **out) {
   object **kids = NULL;
   size_t count = 0;
@@ -162,11 +157,7 @@ static rsw_status twosided_create(loader *ld, node *n, object **out) {
                      "component; only reflection models can be nested",
                      n->id ? n->id : "", c->base.id ? c->base.id : "?", c->base.plugin->name);
   }
-  bsdf *b = twosided_new(front, back);
-  if (!b) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "twosided: out of memory");
-  b->base.id = n->id;
-  *out = &b->base;
-  return RSW_OK;
+  return plugin_created(ld, n, (object *)twosided_new(front, back), out);
 }
 
 static void twosided_traverse(object *o, param_visitor *v) {
@@ -177,22 +168,13 @@ static void twosided_traverse(object *o, param_visitor *v) {
   pv_object(v, "brdf_1", &t->brdf[1]->base, NAN, NAN);
 }
 
-const plugin plugin_twosided = {
-    .name = "twosided",
-    .cls = CLS_BSDF,
-    .create = twosided_create,
-    .destroy = twosided_destroy,
-    .ops = &twosided_ops,
-    .traverse = twosided_traverse,
-};
+DEFINE_PLUGIN(twosided, CLS_BSDF, .ops = &twosided_ops, .traverse = twosided_traverse);
 
 bsdf *twosided_new(bsdf *front, bsdf *back) {
-  twosided_bsdf *t = calloc(1, sizeof *t);
+  if (!back) back = front;
+  twosided_bsdf *t = BSDF_NEW(twosided_bsdf, twosided, front->flags | back->flags | BSDF_TWO_SIDED);
   if (!t) return NULL;
-  t->base.base.plugin = &plugin_twosided;
-  t->base.ops = &twosided_ops;
   t->brdf[0] = front;
-  t->brdf[1] = back ? back : front;
-  t->base.flags = t->brdf[0]->flags | t->brdf[1]->flags | BSDF_TWO_SIDED;
+  t->brdf[1] = back;
   return &t->base;
 }
