@@ -13,8 +13,7 @@
  * the same code, so the result is the same bit for bit. */
 #include <stdlib.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "../shapes/shape.h"
 #include "../textures/texture.h"
 
@@ -96,9 +95,4 @@ static void area_traverse(object *o, param_visitor *v) {
   pv_float(v, "sampling_weight", &a->base.sampling_weight, UPDATE_SPECTRAL, 0.0, INFINITY);
 }
 
-const plugin plugin_area = {.name = "area",
-                            .cls = CLS_EMITTER,
-                            .create = area_create,
-                            .destroy = area_destroy,
-                            .ops = &area_ops,
-                            .traverse = area_traverse};
+DEFINE_PLUGIN(area, CLS_EMITTER, .destroy = area_destroy, .ops = &area_ops, .traverse = area_traverse);

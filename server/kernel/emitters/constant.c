@@ -4,8 +4,7 @@
  * uniform sphere, pdf 1/(4 pi). */
 #include <stdlib.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "../textures/texture.h"
 
 typedef struct constant_env {
@@ -38,11 +37,7 @@ static color const_eval(const emitter *e, const surface_interaction *hit, vec3 d
 static const emitter_ops constant_ops = {
     .sample_direction = const_sample, .pdf_direction = const_pdf, .eval = const_eval};
 
-static void const_destroy(object *o) {
-  free(o);
-}
-
-static rsw_status const_create(loader *ld, node *n, object **out) {
+static rsw_status constant_create(loader *ld, node *n, object **out) {
   constant_env *c = calloc(1, sizeof *c);
   if (!c) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
   c->base.ops = &constant_ops;
@@ -66,9 +61,4 @@ static void const_traverse(object *o, param_visitor *v) {
   pv_float(v, "sampling_weight", &c->base.sampling_weight, UPDATE_SPECTRAL, 0.0, INFINITY);
 }
 
-const plugin plugin_constant = {.name = "constant",
-                                .cls = CLS_EMITTER,
-                                .create = const_create,
-                                .destroy = const_destroy,
-                                .ops = &constant_ops,
-                                .traverse = const_traverse};
+DEFINE_PLUGIN(constant, CLS_EMITTER, .ops = &constant_ops, .traverse = const_traverse);

@@ -38,8 +38,7 @@
 #include <stdlib.h>
 
 #include "../core/distr2d.h"
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "image_exr.h"
 
 typedef struct envmap {
@@ -225,7 +224,7 @@ static rsw_status build_distribution(loader *ld, node *n, envmap *m) {
   return st;
 }
 
-static rsw_status env_create(loader *ld, node *n, object **out) {
+static rsw_status envmap_create(loader *ld, node *n, object **out) {
   envmap *m = calloc(1, sizeof *m);
   if (!m) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
   m->base.ops = &envmap_ops;
@@ -267,10 +266,5 @@ static void env_traverse(object *o, param_visitor *v) {
   pv_float(v, "sampling_weight", &m->base.sampling_weight, UPDATE_SPECTRAL, 0.0, INFINITY);
 }
 
-const plugin plugin_envmap = {.name = "envmap",
-                              .cls = CLS_EMITTER,
-                              .create = env_create,
-                              .destroy = env_destroy,
-                              .prepare = env_prepare,
-                              .ops = &envmap_ops,
-                              .traverse = env_traverse};
+DEFINE_PLUGIN(envmap, CLS_EMITTER, .destroy = env_destroy, .prepare = env_prepare, .ops = &envmap_ops,
+              .traverse = env_traverse);

@@ -14,8 +14,8 @@
 
 #include "../accel.h"
 #include "../samplers/sampler_batch.h"
-#include "../scene/loader.h"
 #include "../scene/periodic.h"
+#include "../scene/plugin_def.h"
 #include "../shapes/instance.h"
 #include "../shapes/shape.h"
 #include "integrator.h"
@@ -648,10 +648,6 @@ static color path_Li(const integrator *it, const scene *sc, sampler_state *st, r
 
 static const integrator_ops path_ops = {.Li = path_Li, .Li_batch = path_Li_batch};
 
-static void path_destroy(object *o) {
-  free(o);
-}
-
 static rsw_status path_create(loader *ld, node *n, object **out) {
   integrator *it = calloc(1, sizeof *it);
   if (!it) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
@@ -670,5 +666,4 @@ static rsw_status path_create(loader *ld, node *n, object **out) {
   return RSW_OK;
 }
 
-const plugin plugin_path = {
-    .name = "path", .cls = CLS_INTEGRATOR, .create = path_create, .destroy = path_destroy, .ops = &path_ops};
+DEFINE_PLUGIN(path, CLS_INTEGRATOR, .ops = &path_ops);

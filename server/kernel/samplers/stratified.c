@@ -15,7 +15,7 @@
 #include <stdlib.h>
 
 #include "../core/isa.h"
-#include "../scene/loader.h"
+#include "../scene/plugin_def.h"
 #include "permute_lanes.h"
 #include "sampler_common.h"
 
@@ -214,19 +214,7 @@ static const sampler_ops stratified_ops = {
     .next_2d_batch = stratified_next_2d_batch,
 };
 
-static void stratified_destroy(object *o) {
-  free(o);
-}
-
-static rsw_status stratified_create(loader *ld, node *n, object **out);
-
-const plugin plugin_stratified = {
-    .name = "stratified",
-    .cls = CLS_SAMPLER,
-    .create = stratified_create,
-    .destroy = stratified_destroy,
-    .ops = &stratified_ops,
-};
+DEFINE_PLUGIN(stratified, CLS_SAMPLER, .ops = &stratified_ops);
 
 static rsw_status stratified_create(loader *ld, node *n, object **out) {
   long long count = 0, seed = 0;
