@@ -54,6 +54,10 @@ static bool bil_valid(const surface_interaction *si) {
   return !(ci == 0.0 || !isfinite(ci));
 }
 
+/* One body with the batched op (bil_finish); only the warp differs, and
+ * its lanes give the scalar warp's bits (tests/unit/test_simd.c). Kept
+ * scalar rather than a batch of one: volpath and twosided call it per lane
+ * (canopies), where a one-lane vector warp costs more than the scalar. */
 static color bil_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2, bsdf_sample *bs) {
   if (!bil_valid(si)) return bsdf_fail(bs);
   return bil_finish((const bilambertian_bsdf *)b, si, u1, warp_square_to_cosine_hemisphere(u2), bs);

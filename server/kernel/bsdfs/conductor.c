@@ -61,23 +61,6 @@ rsw_status conductor_ior_load(loader *ld, node *n, conductor_ior *out) {
 
 /* ---- the smooth conductor ------------------------------------------------ */
 
-static color conductor_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2,
-                              bsdf_sample *bs) {
-  (void)u1;
-  (void)u2;
-  const conductor_bsdf *c = (const conductor_bsdf *)b;
-  double cos_i = si->wi.z;
-  if (!(cos_i > 0.0)) return bsdf_fail(bs);
-  bs->wo = reflect_local(si->wi);
-  bs->pdf = 1.0;
-  bs->eta = 1.0;
-  bs->sampled_type = BSDF_DELTA_REFLECTION;
-  color eta, k;
-  conductor_ior_eval(&c->ior, si, &eta, &k);
-  color f = fresnel_conductor_col(cos_i, eta, k);
-  return col_mul(f, bsdf_factor(c->specular_reflectance, si));
-}
-
 static color conductor_eval(const bsdf *b, const surface_interaction *si, vec3 wo) {
   (void)b;
   (void)si;
@@ -92,12 +75,11 @@ static double conductor_pdf(const bsdf *b, const surface_interaction *si, vec3 w
   return 0.0;
 }
 
-/* Batched sampling (bsdf_ops.sample_batch): the mirror direction per lane,
- * the Fresnel terms of up to 64 lanes (three per lane for a coloured
- * index, none for eta = 0, k = 1: F = 1 exactly, as
- * fresnel_conductor_col()) in double lanes (bsdfs/fresnel_lanes.h, bitwise
- * fresnel_conductor()): each lane gives conductor_sample()'s result bit
- * for bit. */
+/* Sampling (bsdf_ops.sample_batch): the mirror direction per lane, the
+ * Fresnel terms of up to 64 lanes (three per lane for a coloured index,
+ * none for eta = 0, k = 1: F = 1 exactly, as fresnel_conductor_col()) in
+ * double lanes (bsdfs/fresnel_lanes.h, bitwise fresnel_conductor()),
+ * times specular_reflectance. */
 static void conductor_sample_batch(const bsdf *b, int n, const surface_interaction *const *si,
                                    const double *u1, const vec2 *u2, bsdf_sample *bs, color *weight) {
   (void)u1;
@@ -138,6 +120,15 @@ static void conductor_sample_batch(const bsdf *b, int n, const surface_interacti
       weight[i] = col_mul(F, bsdf_factor(c->specular_reflectance, si[i]));
     }
   }
+}
+
+/* The scalar op is the batch of one (the lanes are bitwise the scalar
+ * Fresnel term: tests/unit/test_simd.c). */
+static color conductor_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2,
+                              bsdf_sample *bs) {
+  color w;
+  conductor_sample_batch(b, 1, &si, &u1, &u2, bs, &w);
+  return w;
 }
 
 static const bsdf_ops conductor_ops = {.sample = conductor_sample,

@@ -12,19 +12,6 @@
 #include "../simd/simd.h"
 #include "bsdfs_internal.h"
 
-static color diffuse_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2,
-                            bsdf_sample *bs) {
-  (void)u1;
-  const diffuse_bsdf *d = (const diffuse_bsdf *)b;
-  if (!(si->wi.z > 0.0)) return bsdf_fail(bs);
-  bs->wo = warp_square_to_cosine_hemisphere(u2);
-  bs->pdf = warp_square_to_cosine_hemisphere_pdf(bs->wo);
-  bs->eta = 1.0;
-  bs->sampled_type = BSDF_DIFFUSE_REFLECTION;
-  if (!(bs->pdf > 0.0) || !(bs->wo.z > 0.0)) return bsdf_fail(bs);
-  return tex_eval(d->reflectance, si);
-}
-
 static color diffuse_eval(const bsdf *b, const surface_interaction *si, vec3 wo) {
   const diffuse_bsdf *d = (const diffuse_bsdf *)b;
   if (!(si->wi.z > 0.0) || !(wo.z > 0.0)) return col1(0.0);
@@ -37,10 +24,9 @@ static double diffuse_pdf(const bsdf *b, const surface_interaction *si, vec3 wo)
   return warp_square_to_cosine_hemisphere_pdf(wo);
 }
 
-/* Batched sampling (bsdf_ops.sample_batch): the cosine-hemisphere warp of
- * up to 64 lanes at a time in double lanes (simd/warp_lanes.h), bitwise
- * the scalar warp, so each lane gives diffuse_sample()'s result exactly;
- * pdf, checks and reflectance per lane. */
+/* Sampling (bsdf_ops.sample_batch): the cosine-hemisphere warp of up to
+ * 64 lanes at a time in double lanes (simd/warp_lanes.h), bitwise the
+ * scalar warp; pdf, checks and reflectance per lane. */
 static void diffuse_sample_batch(const bsdf *b, int n, const surface_interaction *const *si, const double *u1,
                                  const vec2 *u2, bsdf_sample *bs, color *weight) {
   (void)u1;
@@ -72,6 +58,15 @@ static void diffuse_sample_batch(const bsdf *b, int n, const surface_interaction
       weight[i] = !(s->pdf > 0.0) || !(s->wo.z > 0.0) ? bsdf_fail(s) : tex_eval(d->reflectance, si[i]);
     }
   }
+}
+
+/* The scalar op is the batch of one: the lanes give
+ * warp_square_to_cosine_hemisphere()'s bits (tests/unit/test_simd.c). */
+static color diffuse_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2,
+                            bsdf_sample *bs) {
+  color w;
+  diffuse_sample_batch(b, 1, &si, &u1, &u2, bs, &w);
+  return w;
 }
 
 static const bsdf_ops diffuse_ops = {

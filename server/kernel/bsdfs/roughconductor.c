@@ -46,6 +46,10 @@ static mf_distr distr_at(const roughconductor_bsdf *r, const surface_interaction
 static color rough_finish(const roughconductor_bsdf *r, const mf_distr *d, const surface_interaction *si,
                           vec3 m, double pdf_m, double g1vis, bsdf_sample *bs);
 
+/* Not a batch of one: the batched ops place m and evaluate D G in float
+ * lanes (bsdfs/microfacet_lanes.h), this scalar op in double (its
+ * placement in float too, by mf_sample's own code); both keep pdf and
+ * weight consistent, but their bits differ. */
 static color rough_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2, bsdf_sample *bs) {
   (void)u1;
   const roughconductor_bsdf *r = (const roughconductor_bsdf *)b;

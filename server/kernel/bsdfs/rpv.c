@@ -101,6 +101,9 @@ static color rpv_value(const rpv_bsdf *r, const surface_interaction *si, vec3 wo
   return out;
 }
 
+/* Not a batch of one: the batched ops compute M F H in float lanes
+ * (bsdfs/rpv_lanes.h), within 3e-6 of this double version, which stays the
+ * reference (eval, pdf and the per-lane ops of volpath and twosided). */
 static color rpv_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2, bsdf_sample *bs) {
   (void)u1;
   if (!(si->wi.z > 0.0)) return bsdf_fail(bs);

@@ -20,6 +20,9 @@ static vec3 flip_z(vec3 v) {
   return v3(v.x, v.y, -v.z);
 }
 
+/* The scalar ops pick a side and call the nested BSDF's scalar op; the
+ * batched ones split a chunk by side and call the nested batched ops
+ * (bsdf_sample_n), so each lane gets the same value either way. */
 static color twosided_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2,
                              bsdf_sample *bs) {
   const twosided_bsdf *t = (const twosided_bsdf *)b;

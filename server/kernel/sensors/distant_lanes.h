@@ -6,7 +6,9 @@
  * ray_target_origin without a target) in the same order, without FMA
  * contraction, so each lane gives the scalar ray bit for bit
  * (tests/unit/test_simd.c checks it). Double precision on purpose: the
- * origin sits a bounding radius away from the scene. */
+ * origin sits a bounding radius away from the scene. The sensors' scalar
+ * sample_ray ops are not batches of one: they also serve ray targets and
+ * the periodic slab, which the lanes leave to them. */
 #include "../simd/simd.h"
 
 /* hdistant camera rays: m the rows of to_world; fu, ap 2 per lane (x, y);
