@@ -2,12 +2,12 @@
  * repeated, written once (scene/registry.c). docs/adding-a-plugin.md walks
  * through a new BSDF with these:
  *
- *   DEFINE_PLUGIN(tint, CLS_BSDF, .ops = &tint_ops, .traverse = tint_traverse)
- *     defines `const plugin plugin_tint` for the document type "tint"
+ *   DEFINE_PLUGIN(lommel, CLS_BSDF, .ops = &lommel_ops, .traverse = lommel_traverse)
+ *     defines `const plugin plugin_lommel` for the document type "lommel"
  *     (the name comes from the token, as the registry line's does) and
- *     declares tint_create(), which the file defines; destroy defaults to
+ *     declares lommel_create(), which the file defines; destroy defaults to
  *     plugin_free_object (a `.destroy = ...` member replaces it);
- *   PLUGIN_NEW(tint_bsdf, tint) / BSDF_NEW(tint_bsdf, tint, flags)
+ *   PLUGIN_NEW(lommel_bsdf, lommel) / BSDF_NEW(lommel_bsdf, lommel, flags)
  *     a zeroed record whose header names the plugin (and, for a BSDF, its
  *     ops table and lobes), NULL when out of memory;
  *   plugin_created(ld, n, o, out)
