@@ -4,8 +4,9 @@
     tools/check-layers.py [-v] [DIR]   exit 0: no circle; 1: prints each circle
                                        (-v: every step inside each circle)
 
-A module is foo.c with foo.h beside it (either may be missing), and its
-private header foo_internal.h if it has one. Module A
+A module is foo.c with foo.h beside it (either may be missing), its
+private header foo_internal.h and its SIMD lane code foo_lanes.h (a
+plugin's lanes sit beside it: docs/adding-a-plugin.md) if it has them. Module A
 depends on module B when a file of A
   - #includes a header of B ("..." includes resolved against the file's own
     directory, then against -I server, common, include), or
@@ -182,9 +183,14 @@ def header_uses(code):
 
 
 def module_of(root, path):
-    """foo.c, foo.h and foo's private header foo_internal.h: module foo."""
+    """foo.c, foo.h, foo's private header foo_internal.h and its lanes
+    foo_lanes.h: module foo."""
     m = os.path.splitext(os.path.relpath(path, root))[0]
-    return m[: -len("_internal")] if m.endswith("_internal") and path.endswith(".h") else m
+    if path.endswith(".h"):
+        for suffix in ("_internal", "_lanes"):
+            if m.endswith(suffix):
+                return m[: -len(suffix)]
+    return m
 
 
 def build_graph(root):

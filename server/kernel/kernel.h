@@ -196,6 +196,29 @@ struct bsdf {
   unsigned flags; /* union of the lobes' bsdf_flags */
 };
 
+/* The fallback of the optional batched ops, in one place: the plugin's
+ * batched op where it has one, else its scalar op lane by lane. A plugin
+ * whose batched op would only repeat this loop leaves it NULL. */
+static inline void bsdf_sample_n(const bsdf *b, int n, const surface_interaction *const *si, const double *u1,
+                                 const vec2 *u2, bsdf_sample *bs, color *weight) {
+  if (b->ops->sample_batch) {
+    b->ops->sample_batch(b, n, si, u1, u2, bs, weight);
+    return;
+  }
+  for (int i = 0; i < n; i++) weight[i] = b->ops->sample(b, si[i], u1[i], u2[i], &bs[i]);
+}
+static inline void bsdf_eval_pdf_n(const bsdf *b, int n, const surface_interaction *const *si, const vec3 *wo,
+                                   color *f, double *pdf) {
+  if (b->ops->eval_pdf_batch) {
+    b->ops->eval_pdf_batch(b, n, si, wo, f, pdf);
+    return;
+  }
+  for (int i = 0; i < n; i++) {
+    f[i] = b->ops->eval(b, si[i], wo[i]);
+    pdf[i] = b->ops->pdf(b, si[i], wo[i]);
+  }
+}
+
 /* ---- emitters ------------------------------------------------------------ */
 enum emitter_flags {
   EMITTER_DELTA_DIRECTION = 1u << 0, /* directional */
@@ -244,6 +267,17 @@ struct emitter {
   double sampling_weight;    /* Mitsuba's sampling_weight (default 1) */
   const struct shape *shape; /* surface emitters: the shape it sits on */
 };
+
+/* sample_direction_batch where the emitter has it, else sample_direction
+ * lane by lane (as bsdf_sample_n). */
+static inline void emitter_sample_direction_n(const emitter *e, int n, const surface_interaction *const *ref,
+                                              const vec2 *u, direction_sample *ds, color *value) {
+  if (e->ops->sample_direction_batch) {
+    e->ops->sample_direction_batch(e, n, ref, u, ds, value);
+    return;
+  }
+  for (int i = 0; i < n; i++) value[i] = e->ops->sample_direction(e, ref[i], u[i], &ds[i]);
+}
 
 /* ---- films and reconstruction filters ------------------------------------ */
 typedef struct rfilter {

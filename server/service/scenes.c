@@ -650,7 +650,8 @@ rsw_status service_scene_post_named(service *svc, const char *body, size_t len, 
    * label and the name its messages use. */
   if (name && !service_scene_label_ok(name))
     return svc_fail(e, RSW_ERR_BAD_REQUEST, "name",
-                    "name must be a file name (1 to %d bytes, no '/' or control character)", SVC_SCENE_LABEL_MAX);
+                    "name must be a file name (1 to %d bytes, no '/' or control character)",
+                    SVC_SCENE_LABEL_MAX);
   resident *r;
   rsw_status st = scene_post(svc, body, len, is_xml, variant,
                              name     ? name

@@ -192,14 +192,14 @@ static void bench_bsdf_lanes(const char *name, const bsdf *b, bool both_sides) {
             if (op == 0 && mode == 0)
               for (int i = i0; i < i0 + GROUP; i++) w[i] = b->ops->sample(b, sp[i], u1[i], u2[i], &bs[i]);
             else if (op == 0)
-              b->ops->sample_batch(b, GROUP, sp + i0, u1 + i0, u2 + i0, bs + i0, w + i0);
+              bsdf_sample_n(b, GROUP, sp + i0, u1 + i0, u2 + i0, bs + i0, w + i0);
             else if (mode == 0)
               for (int i = i0; i < i0 + GROUP; i++) {
                 f[i] = b->ops->eval(b, sp[i], wo[i]);
                 pdf[i] = b->ops->pdf(b, sp[i], wo[i]);
               }
             else
-              b->ops->eval_pdf_batch(b, GROUP, sp + i0, wo + i0, f + i0, pdf + i0);
+              bsdf_eval_pdf_n(b, GROUP, sp + i0, wo + i0, f + i0, pdf + i0);
           }
         double ns = (bench_thread_cpu_s() - t0) * 1e9 / (8.0 * LANES);
         if (mode == 0)

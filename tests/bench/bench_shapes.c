@@ -16,8 +16,8 @@
 #include <time.h>
 
 #include "../../server/kernel/accel.h"
-#include "../../server/kernel/hit.h"
 #include "../../server/kernel/core/rng.h"
+#include "../../server/kernel/hit.h"
 #include "../../server/kernel/shapes/instance.h"
 #include "../support/tsup.h"
 #include "bench.h"

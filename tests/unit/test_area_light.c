@@ -76,8 +76,8 @@ typedef struct chi2_ctx {
   surface_interaction ref;
 } chi2_ctx;
 
-/* Through the batched op (emitter_ops.sample_direction_batch, what the
- * wave calls; test_wave checks it is bitwise sample_direction lane by
+/* Through the wave's call (kernel.h emitter_sample_direction_n: the batched
+ * op or its fallback; test_wave checks it is bitwise sample_direction lane by
  * lane), one lane at a time. */
 static bool s_area(void *user, const double *u, vec3 *out, double *weight) {
   chi2_ctx *c = user;
@@ -85,7 +85,7 @@ static bool s_area(void *user, const double *u, vec3 *out, double *weight) {
   const surface_interaction *ref = &c->ref;
   vec2 uu = v2(u[0], u[1]);
   color value;
-  c->e->ops->sample_direction_batch(c->e, 1, &ref, &uu, &ds, &value);
+  emitter_sample_direction_n(c->e, 1, &ref, &uu, &ds, &value);
   *weight = ds.pdf > 0 ? 1 : 0;
   if (!(ds.pdf > 0)) return false;
   *out = ds.d;

@@ -126,8 +126,8 @@ typedef struct env_ctx {
   surface_interaction ref;
 } env_ctx;
 
-/* Through the batched op (emitter_ops.sample_direction_batch, what the
- * wave calls), one lane at a time; test_sampling_chi2 checks it against
+/* Through the wave's call (kernel.h emitter_sample_direction_n: the
+ * batched op or its fallback), one lane at a time; test_sampling_chi2 checks it against
  * sample_direction bit for bit. */
 static bool s_env(void *user, const double *u, vec3 *out, double *weight) {
   env_ctx *c = user;
@@ -135,7 +135,7 @@ static bool s_env(void *user, const double *u, vec3 *out, double *weight) {
   const surface_interaction *ref = &c->ref;
   vec2 uu = v2(u[0], u[1]);
   color v;
-  c->e->ops->sample_direction_batch(c->e, 1, &ref, &uu, &ds, &v);
+  emitter_sample_direction_n(c->e, 1, &ref, &uu, &ds, &v);
   if (!(ds.pdf > 0) || col_is_black(v)) return false;
   *out = ds.d;
   *weight = 1.0;
@@ -208,7 +208,7 @@ static void test_sampling_chi2(void) {
     color vs[N];
     for (int i = 0; i < N; i++)
       refs[i] = &c.ref, us[i] = v2(pcg32_next_double(&rng), pcg32_next_double(&rng));
-    c.e->ops->sample_direction_batch(c.e, N, refs, us, dss, vs);
+    emitter_sample_direction_n(c.e, N, refs, us, dss, vs);
     for (int i = 0; i < N; i++) {
       direction_sample ds;
       color v = c.e->ops->sample_direction(c.e, &c.ref, us[i], &ds);

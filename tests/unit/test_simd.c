@@ -10,11 +10,15 @@
  *  - chi-square tests of diffuse's batched cosine-hemisphere sampling at
  *    incidence 0, 60 and 85 degrees (same settings), and its samples equal
  *    diffuse's sample() bit for bit (double lanes, the same operations);
+ *  - the cosine-hemisphere and conductor-Fresnel double lanes equal the
+ *    scalar warp_square_to_cosine_hemisphere() and fresnel_conductor() bit
+ *    for bit (which makes diffuse's and conductor's scalar sample a batch
+ *    of one);
  *  - lane independence: a lane's sample does not depend on the batch it is
  *    in (a batch of 1000 equals 1000 batches of one, bitwise), which is
  *    what keeps 1 and N threads bitwise identical at a given ISA;
  *  - weight = eval / pdf for the batched samples (1e-4 relative: pdf and
- *    weight are single precision, simd/microfacet_lanes.h);
+ *    weight are single precision, bsdfs/microfacet_lanes.h);
  *  - roughconductor's batched eval/pdf (single precision up to Fresnel)
  *    equals eval() and pdf() within 1e-4 relative (+1e-12 absolute) over
  *    random directions, both distributions, visible or not, isotropic
@@ -32,7 +36,8 @@
  *    against pdf() (same settings as above);
  *    batch vs scalar over 3001 random lanes (wi and wo uniform on the
  *    sphere, so every failure path too): sample_batch equals sample() and
- *    eval_pdf_batch equals eval()/pdf() bit for bit for diffuse,
+ *    eval_pdf_batch equals eval()/pdf() (where a plugin has them; else
+ *    the fallback, kernel.h bsdf_sample_n) bit for bit for diffuse,
  *    conductor (mirror, and gold in rgb: three Fresnel channels in double
  *    lanes), dielectric (both sides), bilambertian and twosided of those;
  *    for rpv (grey and coloured) the directions and pdfs bit for bit and
@@ -52,8 +57,10 @@
 #include "../support/test.h"
 #include "../support/tsup.h"
 #include "kernel/bsdfs/bsdfs_internal.h"
+#include "kernel/bsdfs/fresnel.h"
 #include "kernel/core/isa.h"
 #include "kernel/core/rng.h"
+#include "kernel/simd/simd.h"
 #include "kernel/textures/texture.h"
 
 RSW_TEST_DEFINE_GLOBALS
@@ -121,6 +128,47 @@ static void test_roughconductor_batch_chi2(void) {
     }
   }
   rsw_isa_set(rsw_isa_best());
+}
+
+/* The double lanes that make diffuse's and conductor's scalar sample a
+ * batch of one give the scalar functions' bits at every ISA: the
+ * cosine-hemisphere warp (simd/warp_lanes.h) against
+ * warp_square_to_cosine_hemisphere(), the conductor Fresnel term
+ * (bsdfs/fresnel_lanes.h) against fresnel_conductor(), over 4001 random
+ * inputs and the edges (the concentric map's centre and corners; normal,
+ * grazing and back incidence; k = 0 and eta = 0). */
+static void test_lanes_vs_scalar(void) {
+  enum {
+    N = 4001
+  };
+  static double u[2 * N], dir[3 * N], ci[N], eta[N], kk[N], fr[N];
+  pcg32 rng;
+  pcg32_seed(&rng, 92, 93);
+  for (int i = 0; i < N; i++) {
+    u[2 * i] = pcg32_next_double(&rng), u[2 * i + 1] = pcg32_next_double(&rng);
+    ci[i] = 2 * pcg32_next_double(&rng) - 1;
+    eta[i] = 3 * pcg32_next_double(&rng), kk[i] = 5 * pcg32_next_double(&rng);
+  }
+  const double edge_u[][2] = {{0.5, 0.5}, {0.0, 0.0}, {1.0 - 0x1p-53, 0.0}, {0.0, 1.0 - 0x1p-53}, {0.5, 0.0}};
+  for (int e = 0; e < 5; e++) u[2 * e] = edge_u[e][0], u[2 * e + 1] = edge_u[e][1];
+  ci[0] = 1.0, ci[1] = 0.0, ci[2] = -1.0, kk[3] = 0.0, eta[4] = 0.0, eta[5] = 1.0, kk[5] = 0.0;
+  for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
+    if (!rsw_isa_supported((rsw_isa)isa)) continue;
+    cosine_hemisphere_batch((rsw_isa)isa, N, u, dir);
+    fresnel_conductor_batch((rsw_isa)isa, N, ci, eta, kk, fr);
+    int bad_w = 0, bad_f = 0;
+    for (int i = 0; i < N; i++) {
+      vec3 w = warp_square_to_cosine_hemisphere(v2(u[2 * i], u[2 * i + 1]));
+      bad_w += memcmp(&w.x, &dir[3 * i], sizeof w.x) || memcmp(&w.y, &dir[3 * i + 1], sizeof w.y) ||
+               memcmp(&w.z, &dir[3 * i + 2], sizeof w.z);
+      double f = fresnel_conductor(ci[i], eta[i], kk[i]);
+      bad_f += memcmp(&f, &fr[i], sizeof f) != 0;
+    }
+    CHECK(bad_w == 0, "%s: %d of %d cosine-hemisphere lanes differ from the scalar warp",
+          rsw_isa_name((rsw_isa)isa), bad_w, N);
+    CHECK(bad_f == 0, "%s: %d of %d conductor Fresnel lanes differ from fresnel_conductor()",
+          rsw_isa_name((rsw_isa)isa), bad_f, N);
+  }
 }
 
 static void test_diffuse_batch(void) {
@@ -418,7 +466,7 @@ static void check_bsdf_batch(const plug_case *c, int mode) {
     N = 3001
   };
   const bsdf *b = c->b;
-  REQUIRE(b && b->ops->sample_batch && b->ops->eval_pdf_batch, "%s: allocation, batched ops", c->what);
+  REQUIRE(b, "%s: allocation", c->what);
   surface_interaction *si = malloc(N * sizeof *si);
   const surface_interaction **sp = malloc(N * sizeof *sp);
   double *u1 = malloc(N * sizeof *u1), *pdf = malloc(N * sizeof *pdf), *pdf1 = malloc(N * sizeof *pdf1);
@@ -449,13 +497,13 @@ static void check_bsdf_batch(const plug_case *c, int mode) {
   for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
     if (!rsw_isa_set((rsw_isa)isa)) continue;
     const char *in = rsw_isa_name((rsw_isa)isa);
-    b->ops->sample_batch(b, N, sp, u1, u2, bs, w);
-    b->ops->eval_pdf_batch(b, N, sp, wo, f, pdf);
+    bsdf_sample_n(b, N, sp, u1, u2, bs, w);
+    bsdf_eval_pdf_n(b, N, sp, wo, f, pdf);
     int dep = 0, bad_s = 0, bad_e = 0, valid = 0, nonzero = 0;
     double worst = 0;
     for (int i = 0; i < N; i++) {
-      b->ops->sample_batch(b, 1, &sp[i], &u1[i], &u2[i], &bs1[i], &w1[i]);
-      b->ops->eval_pdf_batch(b, 1, &sp[i], &wo[i], &f1[i], &pdf1[i]);
+      bsdf_sample_n(b, 1, &sp[i], &u1[i], &u2[i], &bs1[i], &w1[i]);
+      bsdf_eval_pdf_n(b, 1, &sp[i], &wo[i], &f1[i], &pdf1[i]);
       if (!bs_same(&bs[i], &bs1[i]) || memcmp(&w[i], &w1[i], sizeof w[i]) ||
           memcmp(&f[i], &f1[i], sizeof f[i]) || memcmp(&pdf[i], &pdf1[i], sizeof pdf[i]))
         dep++;
@@ -690,6 +738,7 @@ int main(void) {
   RSW_TEST_RUN(test_roughconductor_eval_pdf);
   RSW_TEST_RUN(test_hdistant_rays);
   RSW_TEST_RUN(test_roughconductor_batch_chi2);
+  RSW_TEST_RUN(test_lanes_vs_scalar);
   RSW_TEST_RUN(test_diffuse_batch);
   RSW_TEST_RUN(test_plugin_batch_vs_scalar);
   RSW_TEST_RUN(test_sensor_batches);

@@ -18,7 +18,8 @@
  *  - the wave's batched ops give each lane bitwise what its per-lane call
  *    gives, at every ISA the CPU has: the samplers' start/next_1d/next_2d
  *    batches (independent, stratified; any subset and order of lanes), the
- *    emitters' sample_direction_batch (directional, constant, area), the
+ *    emitters' sample_direction_batch or its fallback (directional,
+ *    constant, area), the
  *    hits' shading frames (shape_frames_batch, edge cases included); the
  *    batched draws pass a chi-square test of uniformity, the constant
  *    emitter's batched directions one against its pdf_direction (the area
@@ -433,10 +434,9 @@ static void test_emitter_batches(void) {
   int tested = 0;
   for (size_t e_i = 0; e_i < s->n_emitters; e_i++) {
     const emitter *e = s->emitters[e_i];
-    if (!e->ops->sample_direction_batch) continue;
     direction_sample ds[N], one;
     color v[N];
-    e->ops->sample_direction_batch(e, N, ref, u, ds, v);
+    emitter_sample_direction_n(e, N, ref, u, ds, v);
     int bad = 0;
     for (int k = 0; k < N; k++) {
       memset(&one, 0, sizeof one);
@@ -446,7 +446,7 @@ static void test_emitter_batches(void) {
     CHECK(bad == 0, "emitter %s: batched samples differ in %d of %d lanes", e->base.plugin->name, bad, N);
     tested++;
   }
-  CHECK(tested == 3, "directional, constant and area have batched ops (%d tested)", tested);
+  CHECK(tested == 3, "directional, constant and area tested (%d)", tested);
   scene_free(s);
 }
 
@@ -462,7 +462,7 @@ static bool emitter_chi2_sample(void *user, const double *u, vec3 *out, double *
   vec2 uu = v2(u[0], u[1]);
   direction_sample ds;
   color v;
-  c->e->ops->sample_direction_batch(c->e, 1, &ref, &uu, &ds, &v);
+  emitter_sample_direction_n(c->e, 1, &ref, &uu, &ds, &v);
   if (!(ds.pdf > 0)) return false;
   *out = ds.d;
   *weight = 1;
@@ -487,7 +487,7 @@ static void test_emitter_batch_chi2(void) {
     const emitter *e = s->emitters[e_i];
     /* The area light's batched op is tested against its density in
      * tests/unit/test_area_light.c. */
-    if (!e->ops->sample_direction_batch || !(e->flags & EMITTER_INFINITE)) continue;
+    if (!(e->flags & EMITTER_INFINITE)) continue;
     emitter_chi2 c = {.e = e};
     c.ref.p = v3(-0.95, 0.05, 1.85);
     c.ref.ng = c.ref.sh.n = v3(0, 0, 1);

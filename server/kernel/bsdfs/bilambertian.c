@@ -15,8 +15,7 @@
 #include <math.h>
 #include <stdlib.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "../simd/simd.h"
 #include "../textures/texture.h"
 #include "bsdfs_internal.h"
@@ -55,6 +54,10 @@ static bool bil_valid(const surface_interaction *si) {
   return !(ci == 0.0 || !isfinite(ci));
 }
 
+/* One body with the batched op (bil_finish); only the warp differs, and
+ * its lanes give the scalar warp's bits (tests/unit/test_simd.c). Kept
+ * scalar rather than a batch of one: volpath and twosided call it per lane
+ * (canopies), where a one-lane vector warp costs more than the scalar. */
 static color bil_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2, bsdf_sample *bs) {
   if (!bil_valid(si)) return bsdf_fail(bs);
   return bil_finish((const bilambertian_bsdf *)b, si, u1, warp_square_to_cosine_hemisphere(u2), bs);
@@ -78,7 +81,7 @@ static double bil_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
 }
 
 /* Batched sampling (bsdf_ops.sample_batch): the cosine-hemisphere warp of
- * up to 64 lanes in double lanes (simd/camera_lanes.h, bitwise the scalar
+ * up to 64 lanes in double lanes (simd/warp_lanes.h, bitwise the scalar
  * warp), the rest per lane (bil_finish): bit for bit bil_sample(). */
 static void bil_sample_batch(const bsdf *b, int n, const surface_interaction *const *si, const double *u1,
                              const vec2 *u2, bsdf_sample *bs, color *weight) {
@@ -132,12 +135,8 @@ static const bsdf_ops bil_ops = {.sample = bil_sample,
                                  .sample_batch = bil_sample_batch,
                                  .eval_pdf_batch = bil_eval_pdf_batch};
 
-static void bil_destroy(object *o) {
-  free(o);
-}
-
 /* R, T >= 0; for constants also R + T <= 1 per channel (energy). */
-static rsw_status bil_create(loader *ld, node *n, object **out) {
+static rsw_status bilambertian_create(loader *ld, node *n, object **out) {
   texture *r, *t;
   rsw_status st;
   if ((st = ld_texture(ld, n, "reflectance", 0.5, 0.0, &r)) != RSW_OK) return st;
@@ -148,11 +147,7 @@ static rsw_status bil_create(loader *ld, node *n, object **out) {
       if (rc.c[i] + tc.c[i] > 1.0 + 1e-12)
         return ld_fail(ld, n, "transmittance", RSW_ERR_INVALID,
                        "reflectance + transmittance = %g exceeds 1 (energy)", rc.c[i] + tc.c[i]);
-  bsdf *b = bilambertian_new(r, t);
-  if (!b) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "bilambertian: out of memory");
-  b->base.id = n->id;
-  *out = &b->base;
-  return RSW_OK;
+  return plugin_created(ld, n, (object *)bilambertian_new(r, t), out);
 }
 
 static void bil_traverse(object *o, param_visitor *v) {
@@ -161,21 +156,12 @@ static void bil_traverse(object *o, param_visitor *v) {
   pv_object(v, "transmittance", &d->transmittance->base, 0.0, 1.0);
 }
 
-const plugin plugin_bilambertian = {
-    .name = "bilambertian",
-    .cls = CLS_BSDF,
-    .create = bil_create,
-    .destroy = bil_destroy,
-    .ops = &bil_ops,
-    .traverse = bil_traverse,
-};
+DEFINE_PLUGIN(bilambertian, CLS_BSDF, .ops = &bil_ops, .traverse = bil_traverse);
 
 bsdf *bilambertian_new(texture *reflectance, texture *transmittance) {
-  bilambertian_bsdf *d = calloc(1, sizeof *d);
+  bilambertian_bsdf *d =
+      BSDF_NEW(bilambertian_bsdf, bilambertian, BSDF_DIFFUSE_REFLECTION | BSDF_DIFFUSE_TRANSMISSION);
   if (!d) return NULL;
-  d->base.base.plugin = &plugin_bilambertian;
-  d->base.ops = &bil_ops;
-  d->base.flags = BSDF_DIFFUSE_REFLECTION | BSDF_DIFFUSE_TRANSMISSION;
   d->reflectance = reflectance;
   d->transmittance = transmittance;
   return &d->base;

@@ -19,6 +19,7 @@ extern const plugin plugin_dielectric;
 extern const plugin plugin_twosided;
 extern const plugin plugin_plastic;
 extern const plugin plugin_roughplastic;
+extern const plugin plugin_null;
 
 /* ---- diffuse ------------------------------------------------------------ */
 typedef struct diffuse_bsdf {

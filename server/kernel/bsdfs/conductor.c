@@ -13,9 +13,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
-#include "../simd/simd.h"
+#include "../scene/plugin_def.h"
 #include "bsdfs_internal.h"
 #include "fresnel.h"
 
@@ -63,23 +61,6 @@ rsw_status conductor_ior_load(loader *ld, node *n, conductor_ior *out) {
 
 /* ---- the smooth conductor ------------------------------------------------ */
 
-static color conductor_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2,
-                              bsdf_sample *bs) {
-  (void)u1;
-  (void)u2;
-  const conductor_bsdf *c = (const conductor_bsdf *)b;
-  double cos_i = si->wi.z;
-  if (!(cos_i > 0.0)) return bsdf_fail(bs);
-  bs->wo = reflect_local(si->wi);
-  bs->pdf = 1.0;
-  bs->eta = 1.0;
-  bs->sampled_type = BSDF_DELTA_REFLECTION;
-  color eta, k;
-  conductor_ior_eval(&c->ior, si, &eta, &k);
-  color f = fresnel_conductor_col(cos_i, eta, k);
-  return col_mul(f, bsdf_factor(c->specular_reflectance, si));
-}
-
 static color conductor_eval(const bsdf *b, const surface_interaction *si, vec3 wo) {
   (void)b;
   (void)si;
@@ -94,12 +75,11 @@ static double conductor_pdf(const bsdf *b, const surface_interaction *si, vec3 w
   return 0.0;
 }
 
-/* Batched sampling (bsdf_ops.sample_batch): the mirror direction per lane,
- * the Fresnel terms of up to 64 lanes (three per lane for a coloured
- * index, none for eta = 0, k = 1: F = 1 exactly, as
- * fresnel_conductor_col()) in double lanes (simd/plugin_lanes.h, bitwise
- * fresnel_conductor()): each lane gives conductor_sample()'s result bit
- * for bit. */
+/* Sampling (bsdf_ops.sample_batch): the mirror direction per lane, the
+ * Fresnel terms of up to 64 lanes (three per lane for a coloured index,
+ * none for eta = 0, k = 1: F = 1 exactly, as fresnel_conductor_col()) in
+ * double lanes (bsdfs/fresnel_lanes.h, bitwise fresnel_conductor()),
+ * times specular_reflectance. */
 static void conductor_sample_batch(const bsdf *b, int n, const surface_interaction *const *si,
                                    const double *u1, const vec2 *u2, bsdf_sample *bs, color *weight) {
   (void)u1;
@@ -142,24 +122,19 @@ static void conductor_sample_batch(const bsdf *b, int n, const surface_interacti
   }
 }
 
-/* A delta lobe: 0 for every lane. */
-static void conductor_eval_pdf_batch(const bsdf *b, int n, const surface_interaction *const *si,
-                                     const vec3 *wo, color *f, double *pdf) {
-  (void)b;
-  (void)si;
-  (void)wo;
-  for (int i = 0; i < n; i++) f[i] = col1(0.0), pdf[i] = 0.0;
+/* The scalar op is the batch of one (the lanes are bitwise the scalar
+ * Fresnel term: tests/unit/test_simd.c). */
+static color conductor_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2,
+                              bsdf_sample *bs) {
+  color w;
+  conductor_sample_batch(b, 1, &si, &u1, &u2, bs, &w);
+  return w;
 }
 
 static const bsdf_ops conductor_ops = {.sample = conductor_sample,
                                        .eval = conductor_eval,
                                        .pdf = conductor_pdf,
-                                       .sample_batch = conductor_sample_batch,
-                                       .eval_pdf_batch = conductor_eval_pdf_batch};
-
-static void conductor_destroy(object *o) {
-  free(o);
-}
+                                       .sample_batch = conductor_sample_batch};
 
 static rsw_status conductor_prepare(object *o, const render_ctx *rc, rsw_err *err) {
   return conductor_ior_prepare(&((conductor_bsdf *)o)->ior, rc, err, o->id);
@@ -171,16 +146,9 @@ static rsw_status conductor_create(loader *ld, node *n, object **out) {
   rsw_status st = conductor_ior_load(ld, n, &ior);
   if (st != RSW_OK) return st;
   if ((st = ld_texture(ld, n, "specular_reflectance", 1.0, 0.0, &spec)) != RSW_OK) return st;
-  conductor_bsdf *c = calloc(1, sizeof *c);
-  if (!c) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "conductor: out of memory");
-  c->base.base.plugin = &plugin_conductor;
-  c->base.base.id = n->id;
-  c->base.ops = &conductor_ops;
-  c->base.flags = BSDF_DELTA_REFLECTION;
-  c->ior = ior;
-  c->specular_reflectance = spec;
-  *out = &c->base.base;
-  return RSW_OK;
+  conductor_bsdf *c = BSDF_NEW(conductor_bsdf, conductor, BSDF_DELTA_REFLECTION);
+  if (c) c->ior = ior, c->specular_reflectance = spec;
+  return plugin_created(ld, n, (object *)c, out);
 }
 
 /* eta/k are reported only without a material preset (a preset has no
@@ -198,23 +166,13 @@ static void conductor_traverse(object *o, param_visitor *v) {
     pv_object(v, "specular_reflectance", &c->specular_reflectance->base, 0.0, INFINITY);
 }
 
-const plugin plugin_conductor = {
-    .name = "conductor",
-    .cls = CLS_BSDF,
-    .create = conductor_create,
-    .destroy = conductor_destroy,
-    .prepare = conductor_prepare,
-    .ops = &conductor_ops,
-    .traverse = conductor_traverse,
-};
+DEFINE_PLUGIN(conductor, CLS_BSDF, .prepare = conductor_prepare, .ops = &conductor_ops,
+              .traverse = conductor_traverse);
 
 bsdf *conductor_new(texture *eta, texture *k, const ior_conductor *material, texture *specular_reflectance,
                     const render_ctx *rc) {
-  conductor_bsdf *c = calloc(1, sizeof *c);
+  conductor_bsdf *c = BSDF_NEW(conductor_bsdf, conductor, BSDF_DELTA_REFLECTION);
   if (!c) return NULL;
-  c->base.base.plugin = &plugin_conductor;
-  c->base.ops = &conductor_ops;
-  c->base.flags = BSDF_DELTA_REFLECTION;
   c->ior.eta = eta;
   c->ior.k = k;
   c->ior.material = material;

@@ -16,8 +16,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "bsdfs_internal.h"
 #include "fresnel.h"
 
@@ -58,33 +57,8 @@ static double dielectric_pdf(const bsdf *b, const surface_interaction *si, vec3 
   return 0.0;
 }
 
-/* Batched sampling (bsdf_ops.sample_batch): dielectric_sample() lane by
- * lane in one loop (inlined; no vector kernel: the Fresnel term is one
- * square root and two divisions, and the lobe choice branches per lane),
- * so bit for bit the scalar samples. */
-static void dielectric_sample_batch(const bsdf *b, int n, const surface_interaction *const *si,
-                                    const double *u1, const vec2 *u2, bsdf_sample *bs, color *weight) {
-  for (int i = 0; i < n; i++) weight[i] = dielectric_sample(b, si[i], u1[i], u2[i], &bs[i]);
-}
-
-/* Delta lobes: 0 for every lane. */
-static void dielectric_eval_pdf_batch(const bsdf *b, int n, const surface_interaction *const *si,
-                                      const vec3 *wo, color *f, double *pdf) {
-  (void)b;
-  (void)si;
-  (void)wo;
-  for (int i = 0; i < n; i++) f[i] = col1(0.0), pdf[i] = 0.0;
-}
-
-static const bsdf_ops dielectric_ops = {.sample = dielectric_sample,
-                                        .eval = dielectric_eval,
-                                        .pdf = dielectric_pdf,
-                                        .sample_batch = dielectric_sample_batch,
-                                        .eval_pdf_batch = dielectric_eval_pdf_batch};
-
-static void dielectric_destroy(object *o) {
-  free(o);
-}
+static const bsdf_ops dielectric_ops = {
+    .sample = dielectric_sample, .eval = dielectric_eval, .pdf = dielectric_pdf};
 
 /* An index given as a number or as a material name (Mitsuba's
  * lookup_ior()): absent -> the named default. */
@@ -116,11 +90,7 @@ static rsw_status dielectric_create(loader *ld, node *n, object **out) {
   texture *sr, *st_;
   if ((st = ld_texture_opt(ld, n, "specular_reflectance", 0.0, &sr)) != RSW_OK) return st;
   if ((st = ld_texture_opt(ld, n, "specular_transmittance", 0.0, &st_)) != RSW_OK) return st;
-  bsdf *b = dielectric_new(int_ior, ext_ior, sr, st_);
-  if (!b) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "dielectric: out of memory");
-  b->base.id = n->id;
-  *out = &b->base;
-  return RSW_OK;
+  return plugin_created(ld, n, (object *)dielectric_new(int_ior, ext_ior, sr, st_), out);
 }
 
 static void dielectric_traverse(object *o, param_visitor *v) {
@@ -133,23 +103,14 @@ static void dielectric_traverse(object *o, param_visitor *v) {
     pv_object(v, "specular_transmittance", &d->specular_transmittance->base, 0.0, INFINITY);
 }
 
-const plugin plugin_dielectric = {
-    .name = "dielectric",
-    .cls = CLS_BSDF,
-    .create = dielectric_create,
-    .destroy = dielectric_destroy,
-    .ops = &dielectric_ops,
-    .traverse = dielectric_traverse,
-};
+DEFINE_PLUGIN(dielectric, CLS_BSDF, .ops = &dielectric_ops, .traverse = dielectric_traverse);
 
 bsdf *dielectric_new(double int_ior, double ext_ior, texture *specular_reflectance,
                      texture *specular_transmittance) {
-  dielectric_bsdf *d = calloc(1, sizeof *d);
-  if (!d) return NULL;
-  d->base.base.plugin = &plugin_dielectric;
-  d->base.ops = &dielectric_ops;
   /* Reflects and transmits from either side. */
-  d->base.flags = BSDF_DELTA_REFLECTION | BSDF_DELTA_TRANSMISSION | BSDF_TWO_SIDED;
+  dielectric_bsdf *d =
+      BSDF_NEW(dielectric_bsdf, dielectric, BSDF_DELTA_REFLECTION | BSDF_DELTA_TRANSMISSION | BSDF_TWO_SIDED);
+  if (!d) return NULL;
   d->eta = int_ior / ext_ior;
   d->specular_reflectance = specular_reflectance;
   d->specular_transmittance = specular_transmittance;

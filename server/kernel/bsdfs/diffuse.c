@@ -8,23 +8,9 @@
  * (reflectance default 0.5). */
 #include <stdlib.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "../simd/simd.h"
 #include "bsdfs_internal.h"
-
-static color diffuse_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2,
-                            bsdf_sample *bs) {
-  (void)u1;
-  const diffuse_bsdf *d = (const diffuse_bsdf *)b;
-  if (!(si->wi.z > 0.0)) return bsdf_fail(bs);
-  bs->wo = warp_square_to_cosine_hemisphere(u2);
-  bs->pdf = warp_square_to_cosine_hemisphere_pdf(bs->wo);
-  bs->eta = 1.0;
-  bs->sampled_type = BSDF_DIFFUSE_REFLECTION;
-  if (!(bs->pdf > 0.0) || !(bs->wo.z > 0.0)) return bsdf_fail(bs);
-  return tex_eval(d->reflectance, si);
-}
 
 static color diffuse_eval(const bsdf *b, const surface_interaction *si, vec3 wo) {
   const diffuse_bsdf *d = (const diffuse_bsdf *)b;
@@ -38,10 +24,9 @@ static double diffuse_pdf(const bsdf *b, const surface_interaction *si, vec3 wo)
   return warp_square_to_cosine_hemisphere_pdf(wo);
 }
 
-/* Batched sampling (bsdf_ops.sample_batch): the cosine-hemisphere warp of
- * up to 64 lanes at a time in double lanes (simd/camera_lanes.h), bitwise
- * the scalar warp, so each lane gives diffuse_sample()'s result exactly;
- * pdf, checks and reflectance per lane. */
+/* Sampling (bsdf_ops.sample_batch): the cosine-hemisphere warp of up to
+ * 64 lanes at a time in double lanes (simd/warp_lanes.h), bitwise the
+ * scalar warp; pdf, checks and reflectance per lane. */
 static void diffuse_sample_batch(const bsdf *b, int n, const surface_interaction *const *si, const double *u1,
                                  const vec2 *u2, bsdf_sample *bs, color *weight) {
   (void)u1;
@@ -75,57 +60,33 @@ static void diffuse_sample_batch(const bsdf *b, int n, const surface_interaction
   }
 }
 
-/* Batched eval and pdf (bsdf_ops.eval_pdf_batch): one loop over the lanes
- * (no vector kernel: the only work is the reflectance texture and a
- * multiplication), each lane diffuse_eval() and diffuse_pdf() bit for bit. */
-static void diffuse_eval_pdf_batch(const bsdf *b, int n, const surface_interaction *const *si, const vec3 *wo,
-                                   color *f, double *pdf) {
-  for (int i = 0; i < n; i++) {
-    f[i] = diffuse_eval(b, si[i], wo[i]);
-    pdf[i] = diffuse_pdf(b, si[i], wo[i]);
-  }
+/* The scalar op is the batch of one: the lanes give
+ * warp_square_to_cosine_hemisphere()'s bits (tests/unit/test_simd.c). */
+static color diffuse_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2,
+                            bsdf_sample *bs) {
+  color w;
+  diffuse_sample_batch(b, 1, &si, &u1, &u2, bs, &w);
+  return w;
 }
 
-static const bsdf_ops diffuse_ops = {.sample = diffuse_sample,
-                                     .eval = diffuse_eval,
-                                     .pdf = diffuse_pdf,
-                                     .sample_batch = diffuse_sample_batch,
-                                     .eval_pdf_batch = diffuse_eval_pdf_batch};
-
-static void diffuse_destroy(object *o) {
-  free(o);
-}
+static const bsdf_ops diffuse_ops = {
+    .sample = diffuse_sample, .eval = diffuse_eval, .pdf = diffuse_pdf, .sample_batch = diffuse_sample_batch};
 
 static rsw_status diffuse_create(loader *ld, node *n, object **out) {
   texture *refl;
   rsw_status st = ld_texture(ld, n, "reflectance", 0.5, 0.0, &refl);
   if (st != RSW_OK) return st;
-  bsdf *b = diffuse_new(refl);
-  if (!b) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "diffuse: out of memory");
-  b->base.id = n->id;
-  *out = &b->base;
-  return RSW_OK;
+  return plugin_created(ld, n, (object *)diffuse_new(refl), out);
 }
 
 static void diffuse_traverse(object *o, param_visitor *v) {
   pv_object(v, "reflectance", &((diffuse_bsdf *)o)->reflectance->base, 0.0, INFINITY);
 }
 
-const plugin plugin_diffuse = {
-    .name = "diffuse",
-    .cls = CLS_BSDF,
-    .create = diffuse_create,
-    .destroy = diffuse_destroy,
-    .ops = &diffuse_ops,
-    .traverse = diffuse_traverse,
-};
+DEFINE_PLUGIN(diffuse, CLS_BSDF, .ops = &diffuse_ops, .traverse = diffuse_traverse);
 
 bsdf *diffuse_new(texture *reflectance) {
-  diffuse_bsdf *d = calloc(1, sizeof *d);
-  if (!d) return NULL;
-  d->base.base.plugin = &plugin_diffuse;
-  d->base.ops = &diffuse_ops;
-  d->base.flags = BSDF_DIFFUSE_REFLECTION;
-  d->reflectance = reflectance;
-  return &d->base;
+  diffuse_bsdf *d = BSDF_NEW(diffuse_bsdf, diffuse, BSDF_DIFFUSE_REFLECTION);
+  if (d) d->reflectance = reflectance;
+  return (bsdf *)d;
 }

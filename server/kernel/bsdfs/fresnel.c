@@ -1,5 +1,6 @@
 /* Fresnel equations (see fresnel.h for the formulas and their sources). */
 #include "fresnel.h"
+#include "fresnel_lanes.h"
 
 double fresnel_conductor(double cos_i, double eta, double k) {
   double c = fabs(cos_i);
@@ -61,4 +62,9 @@ double fresnel_dielectric(double cos_i, double eta, double *cos_t, double *eta_i
   if (eta_it_out) *eta_it_out = eta_it;
   if (eta_ti_out) *eta_ti_out = eta_ti;
   return r;
+}
+
+void fresnel_conductor_batch(rsw_isa isa, int n, const double *cos_i, const double *eta, const double *k,
+                             double *out) {
+  SIMD_DISPATCH(isa, fresnel_conductor, n, cos_i, eta, k, out);
 }

@@ -7,6 +7,7 @@
 #ifndef RSW_BSDFS_FRESNEL_H
 #define RSW_BSDFS_FRESNEL_H
 
+#include "../core/isa.h"
 #include "../core/vec.h"
 
 /* Unpolarised Fresnel reflectance of a conductor with complex relative
@@ -20,6 +21,10 @@
  * eta = 0, k = 1 gives F = 1 (a perfect mirror); at normal incidence
  * F = ((eta - 1)^2 + k^2) / ((eta + 1)^2 + k^2). */
 double fresnel_conductor(double cos_i, double eta, double k);
+/* fresnel_conductor() for n lanes at `isa` (bsdfs/fresnel_lanes.h, double
+ * lanes, bitwise the scalar values). */
+void fresnel_conductor_batch(rsw_isa isa, int n, const double *cos_i, const double *eta, const double *k,
+                             double *out);
 /* Per channel. */
 color fresnel_conductor_col(double cos_i, color eta, color k);
 

@@ -33,8 +33,7 @@
 #include <math.h>
 #include <stdlib.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "../textures/texture.h"
 #include "bsdfs_internal.h"
 
@@ -150,10 +149,6 @@ static double hapke_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
 
 static const bsdf_ops hapke_ops = {.sample = hapke_sample, .eval = hapke_eval, .pdf = hapke_pdf};
 
-static void hapke_destroy(object *o) {
-  free(o);
-}
-
 /* Ranges (Eradiate / Hapke): w in [0, 1], b in [0, 1), c in [0, 1],
  * theta in [0, 90) degrees, B_0 >= 0, h >= 0. */
 static rsw_status hapke_create(loader *ld, node *n, object **out) {
@@ -172,11 +167,7 @@ static rsw_status hapke_create(loader *ld, node *n, object **out) {
                                      spec[k].hi_open)) != RSW_OK)
       return st;
   }
-  bsdf *b = hapke_new(t[0], t[1], t[2], t[3], t[4], t[5]);
-  if (!b) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "hapke: out of memory");
-  b->base.id = n->id;
-  *out = &b->base;
-  return RSW_OK;
+  return plugin_created(ld, n, (object *)hapke_new(t[0], t[1], t[2], t[3], t[4], t[5]), out);
 }
 
 static void hapke_traverse(object *o, param_visitor *v) {
@@ -189,21 +180,11 @@ static void hapke_traverse(object *o, param_visitor *v) {
   pv_object(v, "h", &hb->h->base, 0.0, INFINITY);
 }
 
-const plugin plugin_hapke = {
-    .name = "hapke",
-    .cls = CLS_BSDF,
-    .create = hapke_create,
-    .destroy = hapke_destroy,
-    .ops = &hapke_ops,
-    .traverse = hapke_traverse,
-};
+DEFINE_PLUGIN(hapke, CLS_BSDF, .ops = &hapke_ops, .traverse = hapke_traverse);
 
 bsdf *hapke_new(texture *w, texture *b, texture *c, texture *theta, texture *B_0, texture *h) {
-  hapke_bsdf *hb = calloc(1, sizeof *hb);
+  hapke_bsdf *hb = BSDF_NEW(hapke_bsdf, hapke, BSDF_GLOSSY_REFLECTION);
   if (!hb) return NULL;
-  hb->base.base.plugin = &plugin_hapke;
-  hb->base.ops = &hapke_ops;
-  hb->base.flags = BSDF_GLOSSY_REFLECTION;
   hb->w = w;
   hb->b = b;
   hb->c = c;

@@ -1,5 +1,6 @@
 /* Microfacet distributions (formulas and sources in microfacet.h). */
 #include "microfacet.h"
+#include "microfacet_lanes.h"
 
 #define INV_SQRT_PI 0.56418958354775628695
 
@@ -300,4 +301,12 @@ vec3 mf_sample_g1(const mf_distr *d, vec3 wi, vec2 u, double *pdf, double *g1vis
 vec3 mf_sample(const mf_distr *d, vec3 wi, vec2 u, double *pdf) {
   double g1vis;
   return mf_sample_g1(d, wi, u, pdf, &g1vis);
+}
+
+void mf_sample_visible_batch(rsw_isa isa, int ggx, int n, const float *const *in, float *const *out) {
+  SIMD_DISPATCH(isa, mf_sample_visible, ggx, n, in, out);
+}
+
+void mf_eval_batch(rsw_isa isa, int ggx, int visible, int n, const float *const *in, float *const *out) {
+  SIMD_DISPATCH(isa, mf_eval, ggx, visible, n, in, out);
 }

@@ -14,6 +14,7 @@
 
 #include <stdbool.h>
 
+#include "../core/isa.h"
 #include "../core/vec.h"
 #include "../core/warp.h"
 
@@ -98,5 +99,11 @@ double mf_erfinv(double x);
  * exp): absolute error below 4e-7 on the whole real line (tested against
  * libm's erf). For sampling only; densities use libm's double erf. */
 float mf_erff(float x);
+
+/* Batched visible-normal samples and eval/pdf, single precision, at
+ * `isa` (supported; rsw_isa_get() for the render's): the float lanes of
+ * bsdfs/microfacet_lanes.h, whose declarations say the in/out layouts. */
+void mf_sample_visible_batch(rsw_isa isa, int ggx, int n, const float *const *in, float *const *out);
+void mf_eval_batch(rsw_isa isa, int ggx, int visible, int n, const float *const *in, float *const *out);
 
 #endif

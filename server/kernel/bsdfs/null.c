@@ -11,7 +11,7 @@
  * rays. Source: mitsuba3 src/bsdfs/null.cpp. */
 #include <stdlib.h>
 
-#include "../scene/loader.h"
+#include "../scene/plugin_def.h"
 #include "bsdfs_internal.h"
 
 static color null_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2, bsdf_sample *bs) {
@@ -35,18 +35,9 @@ static double null_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
 
 static const bsdf_ops null_ops = {.sample = null_sample, .eval = null_eval, .pdf = null_pdf};
 
-static void null_destroy(object *o) {
-  free(o);
-}
-
 static rsw_status null_create(loader *ld, node *n, object **out) {
-  bsdf *b = calloc(1, sizeof *b);
-  if (!b) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "null: out of memory");
-  b->ops = &null_ops;
-  b->flags = BSDF_INDEX_MATCHED | BSDF_DELTA_TRANSMISSION | BSDF_TWO_SIDED;
-  *out = &b->base;
-  return RSW_OK;
+  bsdf *b = BSDF_NEW(bsdf, null, BSDF_INDEX_MATCHED | BSDF_DELTA_TRANSMISSION | BSDF_TWO_SIDED);
+  return plugin_created(ld, n, (object *)b, out);
 }
 
-const plugin plugin_null = {
-    .name = "null", .cls = CLS_BSDF, .create = null_create, .destroy = null_destroy, .ops = &null_ops};
+DEFINE_PLUGIN(null, CLS_BSDF, .ops = &null_ops);

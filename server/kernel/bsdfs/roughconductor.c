@@ -30,9 +30,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
-#include "../simd/simd.h"
+#include "../scene/plugin_def.h"
 #include "../textures/texture.h"
 #include "bsdfs_internal.h"
 #include "fresnel.h"
@@ -48,6 +46,10 @@ static mf_distr distr_at(const roughconductor_bsdf *r, const surface_interaction
 static color rough_finish(const roughconductor_bsdf *r, const mf_distr *d, const surface_interaction *si,
                           vec3 m, double pdf_m, double g1vis, bsdf_sample *bs);
 
+/* Not a batch of one: the batched ops place m and evaluate D G in float
+ * lanes (bsdfs/microfacet_lanes.h), this scalar op in double (its
+ * placement in float too, by mf_sample's own code); both keep pdf and
+ * weight consistent, but their bits differ. */
 static color rough_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2, bsdf_sample *bs) {
   (void)u1;
   const roughconductor_bsdf *r = (const roughconductor_bsdf *)b;
@@ -131,7 +133,7 @@ static inline color rough_fresnel_factor(const roughconductor_bsdf *r, const rou
 
 /* Batched sampling (bsdf_ops.sample_batch): the visible-normal samples of
  * up to 64 lanes at a time, with their pdf and weight (without Fresnel),
- * by the per-ISA single-precision kernels (simd/microfacet_lanes.h: for
+ * by the per-ISA single-precision kernels (bsdfs/microfacet_lanes.h: for
  * Beckmann the Newton inversion runs across the lanes instead of one chain
  * per sample; the tail says why float is safe there); then Fresnel at wi.m
  * and the specular factor per lane in double, and wo renormalised in
@@ -211,7 +213,7 @@ static double rough_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
 
 /* Batched eval and pdf (bsdf_ops.eval_pdf_batch): D, the G1 products, the
  * visible G1 and the pdf of up to 64 lanes at a time in single precision
- * (simd/microfacet_lanes.h mf_eval_lanes says why that is safe), then
+ * (bsdfs/microfacet_lanes.h mf_eval_lanes says why that is safe), then
  * Fresnel and the specular factor per lane in double, as rough_eval(). */
 static void rough_eval_pdf_batch(const bsdf *b, int n, const surface_interaction *const *si, const vec3 *wo,
                                  color *f, double *pdf) {
@@ -256,10 +258,6 @@ static const bsdf_ops rough_ops = {.sample = rough_sample,
                                    .sample_batch = rough_sample_batch,
                                    .eval_pdf_batch = rough_eval_pdf_batch};
 
-static void rough_destroy(object *o) {
-  free(o);
-}
-
 static rsw_status rough_prepare(object *o, const render_ctx *rc, rsw_err *err) {
   return conductor_ior_prepare(&((roughconductor_bsdf *)o)->ior, rc, err, o->id);
 }
@@ -274,7 +272,7 @@ static bool equal_nocase(const char *a, const char *b) {
  * `distribution` "beckmann" (default) or "ggx" (case-insensitive);
  * either `alpha` (default 0.1) or both `alpha_u` and `alpha_v`;
  * `sample_visible` (default true). */
-static rsw_status rough_create(loader *ld, node *n, object **out) {
+static rsw_status roughconductor_create(loader *ld, node *n, object **out) {
   const char *dist;
   rsw_status st = ld_string(ld, n, "distribution", "beckmann", &dist);
   if (st != RSW_OK) return st;
@@ -320,20 +318,16 @@ static rsw_status rough_create(loader *ld, node *n, object **out) {
   texture *spec;
   if ((st = ld_texture_opt(ld, n, "specular_reflectance", 0.0, &spec)) != RSW_OK) return st;
 
-  roughconductor_bsdf *r = calloc(1, sizeof *r);
-  if (!r) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "roughconductor: out of memory");
-  r->base.base.plugin = &plugin_roughconductor;
-  r->base.base.id = n->id;
-  r->base.ops = &rough_ops;
-  r->base.flags = BSDF_GLOSSY_REFLECTION;
-  r->ior = ior;
-  r->specular_reflectance = spec;
-  r->type = type;
-  r->alpha_u = au;
-  r->alpha_v = av;
-  r->sample_visible = sample_visible;
-  *out = &r->base.base;
-  return RSW_OK;
+  roughconductor_bsdf *r = BSDF_NEW(roughconductor_bsdf, roughconductor, BSDF_GLOSSY_REFLECTION);
+  if (r) {
+    r->ior = ior;
+    r->specular_reflectance = spec;
+    r->type = type;
+    r->alpha_u = au;
+    r->alpha_v = av;
+    r->sample_visible = sample_visible;
+  }
+  return plugin_created(ld, n, (object *)r, out);
 }
 
 static void rough_traverse(object *o, param_visitor *v) {
@@ -350,24 +344,14 @@ static void rough_traverse(object *o, param_visitor *v) {
     pv_object(v, "specular_reflectance", &r->specular_reflectance->base, 0.0, INFINITY);
 }
 
-const plugin plugin_roughconductor = {
-    .name = "roughconductor",
-    .cls = CLS_BSDF,
-    .create = rough_create,
-    .destroy = rough_destroy,
-    .prepare = rough_prepare,
-    .ops = &rough_ops,
-    .traverse = rough_traverse,
-};
+DEFINE_PLUGIN(roughconductor, CLS_BSDF, .prepare = rough_prepare, .ops = &rough_ops,
+              .traverse = rough_traverse);
 
 bsdf *roughconductor_new(mf_type type, texture *alpha_u, texture *alpha_v, bool sample_visible, texture *eta,
                          texture *k, const ior_conductor *material, texture *specular_reflectance,
                          const render_ctx *rc) {
-  roughconductor_bsdf *r = calloc(1, sizeof *r);
+  roughconductor_bsdf *r = BSDF_NEW(roughconductor_bsdf, roughconductor, BSDF_GLOSSY_REFLECTION);
   if (!r) return NULL;
-  r->base.base.plugin = &plugin_roughconductor;
-  r->base.ops = &rough_ops;
-  r->base.flags = BSDF_GLOSSY_REFLECTION;
   r->ior.eta = eta;
   r->ior.k = k;
   r->ior.material = material;

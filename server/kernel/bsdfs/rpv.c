@@ -20,11 +20,11 @@
 #include <math.h>
 #include <stdlib.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "../simd/simd.h"
 #include "../textures/texture.h"
 #include "bsdfs_internal.h"
+#include "rpv_lanes.h"
 
 /* sin(theta), cos(phi), sin(phi) of a local direction; azimuth 0 at the
  * pole. */
@@ -101,6 +101,9 @@ static color rpv_value(const rpv_bsdf *r, const surface_interaction *si, vec3 wo
   return out;
 }
 
+/* Not a batch of one: the batched ops compute M F H in float lanes
+ * (bsdfs/rpv_lanes.h), within 3e-6 of this double version, which stays the
+ * reference (eval, pdf and the per-lane ops of volpath and twosided). */
 static color rpv_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2, bsdf_sample *bs) {
   (void)u1;
   if (!(si->wi.z > 0.0)) return bsdf_fail(bs);
@@ -125,8 +128,8 @@ static double rpv_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
 
 /* ---- batched ops --------------------------------------------------------
  * pi f_r of up to RPV_C lanes with M F H in float lanes
- * (simd/plugin_lanes.h rpv_factor_lanes says why single precision is
- * safe there) and rho_0 times it in double. Grey lanes take channel 0's
+ * (bsdfs/rpv_lanes.h rpv_factor_lanes says why single precision is
+ * safe there, and why rpv_value() keeps a double version) and rho_0 times it in double. Grey lanes take channel 0's
  * factor; when a chunk holds a coloured lane, each lane computes three
  * (a grey lane's three are the same numbers), so a lane's value depends on
  * its own inputs only. Equal to rpv_value() within 3e-6 relative (the
@@ -134,6 +137,10 @@ static double rpv_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
 enum {
   RPV_C = 64
 };
+
+static void rpv_factor_batch(rsw_isa isa, int n, const float *const *in, float *out) {
+  SIMD_DISPATCH(isa, rpv_factor, n, in, out);
+}
 
 static void rpv_values_batch(const rpv_bsdf *r, int m, const surface_interaction *const *si, const vec3 *wo,
                              color *out) {
@@ -235,10 +242,6 @@ static const bsdf_ops rpv_ops = {.sample = rpv_sample,
                                  .sample_batch = rpv_sample_batch,
                                  .eval_pdf_batch = rpv_eval_pdf_batch};
 
-static void rpv_destroy(object *o) {
-  free(o);
-}
-
 rsw_status bsdf_check_const_range(loader *ld, node *n, const char *name, const texture *t, double lo,
                                   bool lo_open, double hi, bool hi_open) {
   color c;
@@ -264,11 +267,7 @@ static rsw_status rpv_create(loader *ld, node *n, object **out) {
   if ((st = ld_texture_opt(ld, n, "rho_c", 0.0, &rho_c)) != RSW_OK) return st;
   if ((st = bsdf_check_const_range(ld, n, "k", k, 0.0, false, INFINITY, true)) != RSW_OK) return st;
   if ((st = bsdf_check_const_range(ld, n, "g", g, -1.0, true, 1.0, true)) != RSW_OK) return st;
-  bsdf *b = rpv_new(rho_0, k, g, rho_c);
-  if (!b) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "rpv: out of memory");
-  b->base.id = n->id;
-  *out = &b->base;
-  return RSW_OK;
+  return plugin_created(ld, n, (object *)rpv_new(rho_0, k, g, rho_c), out);
 }
 
 static void rpv_traverse(object *o, param_visitor *v) {
@@ -279,21 +278,11 @@ static void rpv_traverse(object *o, param_visitor *v) {
   if (r->rho_c != r->rho_0) pv_object(v, "rho_c", &r->rho_c->base, 0.0, INFINITY);
 }
 
-const plugin plugin_rpv = {
-    .name = "rpv",
-    .cls = CLS_BSDF,
-    .create = rpv_create,
-    .destroy = rpv_destroy,
-    .ops = &rpv_ops,
-    .traverse = rpv_traverse,
-};
+DEFINE_PLUGIN(rpv, CLS_BSDF, .ops = &rpv_ops, .traverse = rpv_traverse);
 
 bsdf *rpv_new(texture *rho_0, texture *k, texture *g, texture *rho_c) {
-  rpv_bsdf *r = calloc(1, sizeof *r);
+  rpv_bsdf *r = BSDF_NEW(rpv_bsdf, rpv, BSDF_GLOSSY_REFLECTION);
   if (!r) return NULL;
-  r->base.base.plugin = &plugin_rpv;
-  r->base.ops = &rpv_ops;
-  r->base.flags = BSDF_GLOSSY_REFLECTION;
   r->rho_0 = rho_0;
   r->k = k;
   r->g = g;

@@ -11,8 +11,7 @@
  * Source: mitsuba3 src/bsdfs/twosided.cpp; docs/kernel-conventions.md#diffuse-and-twosided. */
 #include <stdlib.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "bsdfs_internal.h"
 
 #define TRANSMISSION_LOBES (BSDF_DIFFUSE_TRANSMISSION | BSDF_GLOSSY_TRANSMISSION | BSDF_DELTA_TRANSMISSION)
@@ -21,6 +20,9 @@ static vec3 flip_z(vec3 v) {
   return v3(v.x, v.y, -v.z);
 }
 
+/* The scalar ops pick a side and call the nested BSDF's scalar op; the
+ * batched ones split a chunk by side and call the nested batched ops
+ * (bsdf_sample_n), so each lane gets the same value either way. */
 static color twosided_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2,
                              bsdf_sample *bs) {
   const twosided_bsdf *t = (const twosided_bsdf *)b;
@@ -61,27 +63,6 @@ enum {
   TS_C = 64
 };
 
-static void side_sample(const bsdf *c, int n, const surface_interaction *const *si, const double *u1,
-                        const vec2 *u2, bsdf_sample *bs, color *w) {
-  if (c->ops->sample_batch) {
-    c->ops->sample_batch(c, n, si, u1, u2, bs, w);
-    return;
-  }
-  for (int i = 0; i < n; i++) w[i] = c->ops->sample(c, si[i], u1[i], u2[i], &bs[i]);
-}
-
-static void side_eval_pdf(const bsdf *c, int n, const surface_interaction *const *si, const vec3 *wo,
-                          color *f, double *pdf) {
-  if (c->ops->eval_pdf_batch) {
-    c->ops->eval_pdf_batch(c, n, si, wo, f, pdf);
-    return;
-  }
-  for (int i = 0; i < n; i++) {
-    f[i] = c->ops->eval(c, si[i], wo[i]);
-    pdf[i] = c->ops->pdf(c, si[i], wo[i]);
-  }
-}
-
 /* Up to TS_C lanes split by side: lane[s][j] the lane index of side s's
  * j-th entry, sp[s] its interactions (the back side's are copies in buf
  * with wi mirrored); cnt[2] the counts. Lanes with wi.z == 0 (or NaN) are
@@ -120,7 +101,7 @@ static void twosided_sample_batch(const bsdf *b, int n, const surface_interactio
       bsdf_sample out[TS_C];
       color w[TS_C];
       for (int j = 0; j < cnt[s]; j++) v1[j] = u1[i0 + lane[s][j]], v2[j] = u2[i0 + lane[s][j]];
-      if (cnt[s] > 0) side_sample(t->brdf[s], cnt[s], sp[s], v1, v2, out, w);
+      if (cnt[s] > 0) bsdf_sample_n(t->brdf[s], cnt[s], sp[s], v1, v2, out, w);
       for (int j = 0; j < cnt[s]; j++) {
         int i = i0 + lane[s][j];
         bs[i] = out[j];
@@ -146,7 +127,7 @@ static void twosided_eval_pdf_batch(const bsdf *b, int n, const surface_interact
       color fo[TS_C];
       double po[TS_C];
       for (int j = 0; j < cnt[s]; j++) o[j] = s == 1 ? flip_z(wo[i0 + lane[s][j]]) : wo[i0 + lane[s][j]];
-      if (cnt[s] > 0) side_eval_pdf(t->brdf[s], cnt[s], sp[s], o, fo, po);
+      if (cnt[s] > 0) bsdf_eval_pdf_n(t->brdf[s], cnt[s], sp[s], o, fo, po);
       for (int j = 0; j < cnt[s]; j++) f[i0 + lane[s][j]] = fo[j], pdf[i0 + lane[s][j]] = po[j];
     }
   }
@@ -157,10 +138,6 @@ static const bsdf_ops twosided_ops = {.sample = twosided_sample,
                                       .pdf = twosided_pdf,
                                       .sample_batch = twosided_sample_batch,
                                       .eval_pdf_batch = twosided_eval_pdf_batch};
-
-static void twosided_destroy(object *o) {
-  free(o);
-}
 
 static rsw_status twosided_create(loader *ld, node *n, object **out) {
   object **kids = NULL;
@@ -183,11 +160,7 @@ static rsw_status twosided_create(loader *ld, node *n, object **out) {
                      "component; only reflection models can be nested",
                      n->id ? n->id : "", c->base.id ? c->base.id : "?", c->base.plugin->name);
   }
-  bsdf *b = twosided_new(front, back);
-  if (!b) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "twosided: out of memory");
-  b->base.id = n->id;
-  *out = &b->base;
-  return RSW_OK;
+  return plugin_created(ld, n, (object *)twosided_new(front, back), out);
 }
 
 static void twosided_traverse(object *o, param_visitor *v) {
@@ -198,22 +171,13 @@ static void twosided_traverse(object *o, param_visitor *v) {
   pv_object(v, "brdf_1", &t->brdf[1]->base, NAN, NAN);
 }
 
-const plugin plugin_twosided = {
-    .name = "twosided",
-    .cls = CLS_BSDF,
-    .create = twosided_create,
-    .destroy = twosided_destroy,
-    .ops = &twosided_ops,
-    .traverse = twosided_traverse,
-};
+DEFINE_PLUGIN(twosided, CLS_BSDF, .ops = &twosided_ops, .traverse = twosided_traverse);
 
 bsdf *twosided_new(bsdf *front, bsdf *back) {
-  twosided_bsdf *t = calloc(1, sizeof *t);
+  if (!back) back = front;
+  twosided_bsdf *t = BSDF_NEW(twosided_bsdf, twosided, front->flags | back->flags | BSDF_TWO_SIDED);
   if (!t) return NULL;
-  t->base.base.plugin = &plugin_twosided;
-  t->base.ops = &twosided_ops;
   t->brdf[0] = front;
-  t->brdf[1] = back ? back : front;
-  t->base.flags = t->brdf[0]->flags | t->brdf[1]->flags | BSDF_TWO_SIDED;
+  t->brdf[1] = back;
   return &t->base;
 }

@@ -13,8 +13,7 @@
  * the same code, so the result is the same bit for bit. */
 #include <stdlib.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "../shapes/shape.h"
 #include "../textures/texture.h"
 
@@ -52,11 +51,6 @@ static color area_sample(const emitter *e, const surface_interaction *ref, vec2 
   return col_scale(tex_eval(a->radiance, &at), 1.0 / ds->pdf);
 }
 
-static void area_sample_batch(const emitter *e, int n, const surface_interaction *const *ref, const vec2 *u,
-                              direction_sample *ds, color *value) {
-  for (int k = 0; k < n; k++) value[k] = area_sample(e, ref[k], u[k], &ds[k]);
-}
-
 static double area_pdf(const emitter *e, const surface_interaction *ref, const direction_sample *ds) {
   double cos_e = -v3_dot(ds->d, ds->n);
   if (!(cos_e > 0)) return 0.0;
@@ -71,7 +65,6 @@ static color area_eval(const emitter *e, const surface_interaction *hit, vec3 d)
 }
 
 static const emitter_ops area_ops = {.sample_direction = area_sample,
-                                     .sample_direction_batch = area_sample_batch,
                                      .pdf_direction = area_pdf,
                                      .eval = area_eval,
                                      .set_scene = area_set_scene};
@@ -102,9 +95,4 @@ static void area_traverse(object *o, param_visitor *v) {
   pv_float(v, "sampling_weight", &a->base.sampling_weight, UPDATE_SPECTRAL, 0.0, INFINITY);
 }
 
-const plugin plugin_area = {.name = "area",
-                            .cls = CLS_EMITTER,
-                            .create = area_create,
-                            .destroy = area_destroy,
-                            .ops = &area_ops,
-                            .traverse = area_traverse};
+DEFINE_PLUGIN(area, CLS_EMITTER, .destroy = area_destroy, .ops = &area_ops, .traverse = area_traverse);

@@ -4,8 +4,7 @@
  * uniform sphere, pdf 1/(4 pi). */
 #include <stdlib.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "../textures/texture.h"
 
 typedef struct constant_env {
@@ -24,11 +23,6 @@ static color const_sample(const emitter *e, const surface_interaction *ref, vec2
   return col_scale(tex_eval(c->radiance, ref), 4.0 * RSW_PI);
 }
 
-static void const_sample_batch(const emitter *e, int n, const surface_interaction *const *ref, const vec2 *u,
-                               direction_sample *ds, color *value) {
-  for (int k = 0; k < n; k++) value[k] = const_sample(e, ref[k], u[k], &ds[k]);
-}
-
 static double const_pdf(const emitter *e, const surface_interaction *ref, const direction_sample *ds) {
   (void)e, (void)ref, (void)ds;
   return RSW_INV_4PI;
@@ -40,16 +34,10 @@ static color const_eval(const emitter *e, const surface_interaction *hit, vec3 d
   return tex_eval(c->radiance, hit);
 }
 
-static const emitter_ops constant_ops = {.sample_direction = const_sample,
-                                         .pdf_direction = const_pdf,
-                                         .eval = const_eval,
-                                         .sample_direction_batch = const_sample_batch};
+static const emitter_ops constant_ops = {
+    .sample_direction = const_sample, .pdf_direction = const_pdf, .eval = const_eval};
 
-static void const_destroy(object *o) {
-  free(o);
-}
-
-static rsw_status const_create(loader *ld, node *n, object **out) {
+static rsw_status constant_create(loader *ld, node *n, object **out) {
   constant_env *c = calloc(1, sizeof *c);
   if (!c) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
   c->base.ops = &constant_ops;
@@ -73,9 +61,4 @@ static void const_traverse(object *o, param_visitor *v) {
   pv_float(v, "sampling_weight", &c->base.sampling_weight, UPDATE_SPECTRAL, 0.0, INFINITY);
 }
 
-const plugin plugin_constant = {.name = "constant",
-                                .cls = CLS_EMITTER,
-                                .create = const_create,
-                                .destroy = const_destroy,
-                                .ops = &constant_ops,
-                                .traverse = const_traverse};
+DEFINE_PLUGIN(constant, CLS_EMITTER, .ops = &constant_ops, .traverse = const_traverse);

@@ -38,8 +38,7 @@
 #include <stdlib.h>
 
 #include "../core/distr2d.h"
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "image_exr.h"
 
 typedef struct envmap {
@@ -124,11 +123,6 @@ static color env_sample(const emitter *e, const surface_interaction *ref, vec2 u
   return col_scale(lookup(m, uv), 1.0 / ds->pdf);
 }
 
-static void env_sample_batch(const emitter *e, int n, const surface_interaction *const *ref, const vec2 *u,
-                             direction_sample *ds, color *value) {
-  for (int k = 0; k < n; k++) value[k] = env_sample(e, ref[k], u[k], &ds[k]);
-}
-
 static double env_pdf(const emitter *e, const surface_interaction *ref, const direction_sample *ds) {
   const envmap *m = (const envmap *)e;
   (void)ref;
@@ -143,10 +137,8 @@ static double env_pdf(const emitter *e, const surface_interaction *ref, const di
   return distr2d_pdf(&m->distr, v2(x, uv.y)) / (2.0 * RSW_PI * RSW_PI * sin_theta);
 }
 
-static const emitter_ops envmap_ops = {.sample_direction = env_sample,
-                                       .pdf_direction = env_pdf,
-                                       .eval = env_eval,
-                                       .sample_direction_batch = env_sample_batch};
+static const emitter_ops envmap_ops = {
+    .sample_direction = env_sample, .pdf_direction = env_pdf, .eval = env_eval};
 
 static void env_destroy(object *o) {
   envmap *m = (envmap *)o;
@@ -232,7 +224,7 @@ static rsw_status build_distribution(loader *ld, node *n, envmap *m) {
   return st;
 }
 
-static rsw_status env_create(loader *ld, node *n, object **out) {
+static rsw_status envmap_create(loader *ld, node *n, object **out) {
   envmap *m = calloc(1, sizeof *m);
   if (!m) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
   m->base.ops = &envmap_ops;
@@ -274,10 +266,5 @@ static void env_traverse(object *o, param_visitor *v) {
   pv_float(v, "sampling_weight", &m->base.sampling_weight, UPDATE_SPECTRAL, 0.0, INFINITY);
 }
 
-const plugin plugin_envmap = {.name = "envmap",
-                              .cls = CLS_EMITTER,
-                              .create = env_create,
-                              .destroy = env_destroy,
-                              .prepare = env_prepare,
-                              .ops = &envmap_ops,
-                              .traverse = env_traverse};
+DEFINE_PLUGIN(envmap, CLS_EMITTER, .destroy = env_destroy, .prepare = env_prepare, .ops = &envmap_ops,
+              .traverse = env_traverse);

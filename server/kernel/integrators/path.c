@@ -15,8 +15,8 @@
 #include "../accel.h"
 #include "../hit.h"
 #include "../samplers/sampler_batch.h"
-#include "../scene/loader.h"
 #include "../scene/periodic.h"
+#include "../scene/plugin_def.h"
 #include "../shapes/instance.h"
 #include "../shapes/shape.h"
 #include "integrator.h"
@@ -99,7 +99,7 @@ static void add_polarization(double *quv, const emitter *e, vec3 d, double scale
  * Precision: shading stays in double (the plugins' scalar ops, and the
  * batched samplers' pdfs and weights); the batched samplers place a sample
  * in single precision, and roughconductor's batched eval/pdf towards a
- * light sample is single precision up to Fresnel (simd/microfacet_lanes.h
+ * light sample is single precision up to Fresnel (bsdfs/microfacet_lanes.h
  * says why both are safe); the path throughput and L stay double; Embree
  * traces in float32 behind fill_ray (accel.c). Contributions are summed
  * per path in double, in bounce order. */
@@ -372,10 +372,7 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, int
           ref[j] = &ln[g[ord[j0 + j]]].si;
           u[j] = d2[ord[j0 + j]];
         }
-        if (e->ops->sample_direction_batch)
-          e->ops->sample_direction_batch(e, m, ref, u, ds, val);
-        else
-          for (int j = 0; j < m; j++) val[j] = e->ops->sample_direction(e, ref[j], u[j], &ds[j]);
+        emitter_sample_direction_n(e, m, ref, u, ds, val);
         for (int j = 0; j < m; j++) {
           lane *l = &ln[g[ord[j0 + j]]];
           l->pe = pe;
@@ -652,10 +649,6 @@ static color path_Li(const integrator *it, const scene *sc, sampler_state *st, r
 
 static const integrator_ops path_ops = {.Li = path_Li, .Li_batch = path_Li_batch};
 
-static void path_destroy(object *o) {
-  free(o);
-}
-
 static rsw_status path_create(loader *ld, node *n, object **out) {
   integrator *it = calloc(1, sizeof *it);
   if (!it) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
@@ -674,5 +667,4 @@ static rsw_status path_create(loader *ld, node *n, object **out) {
   return RSW_OK;
 }
 
-const plugin plugin_path = {
-    .name = "path", .cls = CLS_INTEGRATOR, .create = path_create, .destroy = path_destroy, .ops = &path_ops};
+DEFINE_PLUGIN(path, CLS_INTEGRATOR, .ops = &path_ops);

@@ -71,8 +71,8 @@
 
 #include "../accel.h"
 #include "../hit.h"
-#include "../scene/loader.h"
 #include "../scene/periodic.h"
+#include "../scene/plugin_def.h"
 #include "../shapes/instance.h"
 #include "../shapes/shape.h"
 #include "integrator.h"
@@ -756,10 +756,6 @@ static color volpath_Li(const integrator *it, const scene *sc, sampler_state *st
 
 static const integrator_ops volpath_ops = {.Li = volpath_Li, .Li_batch = volpath_Li_batch};
 
-static void volpath_destroy(object *o) {
-  free(o);
-}
-
 static rsw_status create_common(loader *ld, node *n, object **out, bool analytic) {
   volpath_integrator *vp = calloc(1, sizeof *vp);
   if (!vp) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
@@ -795,14 +791,5 @@ static rsw_status piecewise_volpath_create(loader *ld, node *n, object **out) {
   return create_common(ld, n, out, true);
 }
 
-const plugin plugin_volpath = {.name = "volpath",
-                               .cls = CLS_INTEGRATOR,
-                               .create = volpath_create,
-                               .destroy = volpath_destroy,
-                               .ops = &volpath_ops};
-
-const plugin plugin_piecewise_volpath = {.name = "piecewise_volpath",
-                                         .cls = CLS_INTEGRATOR,
-                                         .create = piecewise_volpath_create,
-                                         .destroy = volpath_destroy,
-                                         .ops = &volpath_ops};
+DEFINE_PLUGIN(volpath, CLS_INTEGRATOR, .ops = &volpath_ops);
+DEFINE_PLUGIN(piecewise_volpath, CLS_INTEGRATOR, .ops = &volpath_ops);

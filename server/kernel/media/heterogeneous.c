@@ -13,8 +13,7 @@
 #include <math.h>
 #include <stdlib.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "media.h"
 
 typedef struct heterogeneous_medium {
@@ -94,11 +93,7 @@ static void het_parameters_changed(object *o) {
   het_refresh((heterogeneous_medium *)o);
 }
 
-static void het_destroy(object *o) {
-  free(o);
-}
-
-static rsw_status het_create(loader *ld, node *n, object **out) {
+static rsw_status heterogeneous_create(loader *ld, node *n, object **out) {
   heterogeneous_medium *h = calloc(1, sizeof *h);
   if (!h) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "heterogeneous: out of memory");
   h->base.ops = &het_ops;
@@ -120,11 +115,5 @@ static void het_traverse(object *o, param_visitor *v) {
   pv_object(v, "albedo", &h->albedo->base, 0.0, 1.0);
 }
 
-const plugin plugin_heterogeneous = {.name = "heterogeneous",
-                                     .cls = CLS_MEDIUM,
-                                     .create = het_create,
-                                     .destroy = het_destroy,
-                                     .prepare = het_prepare,
-                                     .ops = &het_ops,
-                                     .traverse = het_traverse,
-                                     .parameters_changed = het_parameters_changed};
+DEFINE_PLUGIN(heterogeneous, CLS_MEDIUM, .prepare = het_prepare, .ops = &het_ops, .traverse = het_traverse,
+              .parameters_changed = het_parameters_changed);

@@ -13,8 +13,7 @@
 #include <math.h>
 #include <stdlib.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "media.h"
 
 typedef struct homogeneous_medium {
@@ -97,10 +96,6 @@ static void hom_parameters_changed(object *o) {
   hom_refresh((homogeneous_medium *)o);
 }
 
-static void hom_destroy(object *o) {
-  free(o);
-}
-
 static rsw_status constant_only(loader *ld, node *n, const char *name, const volume *v) {
   if (v->res[0] * v->res[1] * v->res[2] != 1)
     return ld_fail(
@@ -111,7 +106,7 @@ static rsw_status constant_only(loader *ld, node *n, const char *name, const vol
   return RSW_OK;
 }
 
-static rsw_status hom_create(loader *ld, node *n, object **out) {
+static rsw_status homogeneous_create(loader *ld, node *n, object **out) {
   homogeneous_medium *h = calloc(1, sizeof *h);
   if (!h) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "homogeneous: out of memory");
   h->base.ops = &hom_ops;
@@ -136,11 +131,5 @@ static void hom_traverse(object *o, param_visitor *v) {
   pv_object(v, "albedo", &h->albedo->base, 0.0, 1.0);
 }
 
-const plugin plugin_homogeneous = {.name = "homogeneous",
-                                   .cls = CLS_MEDIUM,
-                                   .create = hom_create,
-                                   .destroy = hom_destroy,
-                                   .prepare = hom_prepare,
-                                   .ops = &hom_ops,
-                                   .traverse = hom_traverse,
-                                   .parameters_changed = hom_parameters_changed};
+DEFINE_PLUGIN(homogeneous, CLS_MEDIUM, .prepare = hom_prepare, .ops = &hom_ops, .traverse = hom_traverse,
+              .parameters_changed = hom_parameters_changed);

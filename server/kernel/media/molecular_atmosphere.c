@@ -44,8 +44,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "../volumes/volume.h"
 #include "atmo_data.h"
 #include "layered.h"
@@ -640,7 +639,7 @@ static rsw_status read_particle(loader *ld, mol_atmo *m, node *g, ma_particle *p
   return group_done(ld, g, "a particle layer");
 }
 
-static rsw_status ma_create(loader *ld, node *n, object **out) {
+static rsw_status molecular_atmosphere_create(loader *ld, node *n, object **out) {
   if (ld->variant != VARIANT_MONO)
     return ld_fail(ld, n, NULL, RSW_ERR_INVALID,
                    "molecular_atmosphere is spectral: it needs the mono variant");
@@ -777,15 +776,9 @@ static bool ma_spectral(const object *o) {
   return false;
 }
 
-const plugin plugin_molecular_atmosphere = {.name = "molecular_atmosphere",
-                                            .cls = CLS_MEDIUM,
-                                            .create = ma_create,
-                                            .destroy = ma_destroy,
-                                            .prepare = ma_prepare,
-                                            .ops = &layered_medium_ops,
-                                            .traverse = ma_traverse,
-                                            .parameters_changed = ma_parameters_changed,
-                                            .spectral = ma_spectral};
+DEFINE_PLUGIN(molecular_atmosphere, CLS_MEDIUM, .destroy = ma_destroy, .prepare = ma_prepare,
+              .ops = &layered_medium_ops, .traverse = ma_traverse,
+              .parameters_changed = ma_parameters_changed, .spectral = ma_spectral);
 
 /* ---- what tests and benches read --------------------------------------------- */
 

@@ -10,8 +10,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "layered.h"
 #include "media.h"
 
@@ -67,7 +66,7 @@ static bool same_xform(const xform *a, const xform *b) {
   return memcmp(a->m, b->m, sizeof a->m) == 0;
 }
 
-static rsw_status pw_create(loader *ld, node *n, object **out) {
+static rsw_status piecewise_create(loader *ld, node *n, object **out) {
   piecewise_medium *pw = calloc(1, sizeof *pw);
   if (!pw) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "piecewise: out of memory");
   pw->lm.base.ops = &layered_medium_ops;
@@ -112,11 +111,5 @@ static void pw_traverse(object *o, param_visitor *v) {
   pv_object(v, "albedo", &pw->albedo->base, 0.0, 1.0);
 }
 
-const plugin plugin_piecewise = {.name = "piecewise",
-                                 .cls = CLS_MEDIUM,
-                                 .create = pw_create,
-                                 .destroy = pw_destroy,
-                                 .prepare = pw_prepare,
-                                 .ops = &layered_medium_ops,
-                                 .traverse = pw_traverse,
-                                 .parameters_changed = pw_parameters_changed};
+DEFINE_PLUGIN(piecewise, CLS_MEDIUM, .destroy = pw_destroy, .prepare = pw_prepare, .ops = &layered_medium_ops,
+              .traverse = pw_traverse, .parameters_changed = pw_parameters_changed);

@@ -17,6 +17,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../scene/plugin_def.h"
 #include "../volumes/volume.h"
 #include "phase.h"
 
@@ -66,10 +67,6 @@ static double blend_sample(const phase *ph, const medium_interaction *mi, double
 
 static const phase_ops blendphase_ops = {.sample = blend_sample, .eval_pdf = blend_eval_pdf};
 
-static void blendphase_destroy(object *o) {
-  free(o);
-}
-
 static rsw_status blendphase_create(loader *ld, node *n, object **out) {
   object **kids;
   size_t count;
@@ -116,11 +113,4 @@ static void blendphase_traverse(object *o, param_visitor *v) {
   pv_object(v, "phase_1", &b->ph[1]->base, NAN, NAN);
 }
 
-const plugin plugin_blendphase = {
-    .name = "blendphase",
-    .cls = CLS_PHASE,
-    .create = blendphase_create,
-    .destroy = blendphase_destroy,
-    .ops = &blendphase_ops,
-    .traverse = blendphase_traverse,
-};
+DEFINE_PLUGIN(blendphase, CLS_PHASE, .ops = &blendphase_ops, .traverse = blendphase_traverse);

@@ -14,8 +14,7 @@
 #include <math.h>
 #include <stdlib.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "phase.h"
 
 typedef struct hg_phase {
@@ -57,9 +56,12 @@ static const phase_ops hg_ops = {.sample = hg_sample, .eval_pdf = hg_eval_pdf};
 #define HG_G_LO nextafter(-1.0, 0.0)
 #define HG_G_HI nextafter(1.0, 0.0)
 
-static void hg_destroy(object *o) {
-  free(o);
+/* Mitsuba's key `g`; a spectral update (no derived state). */
+static void hg_traverse(object *o, param_visitor *v) {
+  pv_float(v, "g", &((hg_phase *)o)->g, UPDATE_SPECTRAL, HG_G_LO, HG_G_HI);
 }
+
+DEFINE_PLUGIN(hg, CLS_PHASE, .ops = &hg_ops, .traverse = hg_traverse);
 
 static rsw_status hg_create(loader *ld, node *n, object **out) {
   double g;
@@ -68,25 +70,7 @@ static rsw_status hg_create(loader *ld, node *n, object **out) {
   if (!(g > -1.0 && g < 1.0))
     return ld_fail(ld, n, "g", RSW_ERR_RANGE, "property 'g' must lie in the open interval (-1, 1) (got %g)",
                    g);
-  hg_phase *h = calloc(1, sizeof *h);
-  if (!h) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "hg: out of memory");
-  h->base.ops = &hg_ops;
-  h->base.base.id = n->id;
-  h->g = g;
-  *out = &h->base.base;
-  return RSW_OK;
+  hg_phase *h = PLUGIN_NEW(hg_phase, hg);
+  if (h) h->base.ops = &hg_ops, h->g = g;
+  return plugin_created(ld, n, (object *)h, out);
 }
-
-/* Mitsuba's key `g`; a spectral update (no derived state). */
-static void hg_traverse(object *o, param_visitor *v) {
-  pv_float(v, "g", &((hg_phase *)o)->g, UPDATE_SPECTRAL, HG_G_LO, HG_G_HI);
-}
-
-const plugin plugin_hg = {
-    .name = "hg",
-    .cls = CLS_PHASE,
-    .create = hg_create,
-    .destroy = hg_destroy,
-    .ops = &hg_ops,
-    .traverse = hg_traverse,
-};

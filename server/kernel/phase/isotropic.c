@@ -6,7 +6,7 @@
  * Source: mitsuba3 src/phase/isotropic.cpp (no parameters). */
 #include <stdlib.h>
 
-#include "../scene/loader.h"
+#include "../scene/plugin_def.h"
 #include "phase.h"
 
 static double isotropic_sample(const phase *ph, const medium_interaction *mi, double u1, vec2 u2, vec3 *wo,
@@ -25,23 +25,10 @@ static double isotropic_eval_pdf(const phase *ph, const medium_interaction *mi, 
 
 static const phase_ops isotropic_ops = {.sample = isotropic_sample, .eval_pdf = isotropic_eval_pdf};
 
-static void isotropic_destroy(object *o) {
-  free(o);
-}
+DEFINE_PLUGIN(isotropic, CLS_PHASE, .ops = &isotropic_ops);
 
 static rsw_status isotropic_create(loader *ld, node *n, object **out) {
-  phase *p = calloc(1, sizeof *p);
-  if (!p) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "isotropic: out of memory");
-  p->ops = &isotropic_ops;
-  p->base.id = n->id;
-  *out = &p->base;
-  return RSW_OK;
+  phase *p = PLUGIN_NEW(phase, isotropic);
+  if (p) p->ops = &isotropic_ops;
+  return plugin_created(ld, n, (object *)p, out);
 }
-
-const plugin plugin_isotropic = {
-    .name = "isotropic",
-    .cls = CLS_PHASE,
-    .create = isotropic_create,
-    .destroy = isotropic_destroy,
-    .ops = &isotropic_ops,
-};

@@ -13,7 +13,7 @@
 #include <math.h>
 #include <stdlib.h>
 
-#include "../scene/loader.h"
+#include "../scene/plugin_def.h"
 #include "phase.h"
 
 #define RAYLEIGH_NORM (3.0 / (16.0 * RSW_PI))
@@ -38,23 +38,10 @@ static double rayleigh_eval_pdf(const phase *ph, const medium_interaction *mi, v
 
 static const phase_ops rayleigh_ops = {.sample = rayleigh_sample, .eval_pdf = rayleigh_eval_pdf};
 
-static void rayleigh_destroy(object *o) {
-  free(o);
-}
+DEFINE_PLUGIN(rayleigh, CLS_PHASE, .ops = &rayleigh_ops);
 
 static rsw_status rayleigh_create(loader *ld, node *n, object **out) {
-  phase *p = calloc(1, sizeof *p);
-  if (!p) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "rayleigh: out of memory");
-  p->ops = &rayleigh_ops;
-  p->base.id = n->id;
-  *out = &p->base;
-  return RSW_OK;
+  phase *p = PLUGIN_NEW(phase, rayleigh);
+  if (p) p->ops = &rayleigh_ops;
+  return plugin_created(ld, n, (object *)p, out);
 }
-
-const plugin plugin_rayleigh = {
-    .name = "rayleigh",
-    .cls = CLS_PHASE,
-    .create = rayleigh_create,
-    .destroy = rayleigh_destroy,
-    .ops = &rayleigh_ops,
-};

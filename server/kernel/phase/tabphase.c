@@ -22,6 +22,7 @@
 #include <math.h>
 #include <stdlib.h>
 
+#include "../scene/plugin_def.h"
 #include "../volumes/volume.h"
 #include "phase.h"
 
@@ -145,12 +146,5 @@ static void tabphase_parameters_changed(object *o) {
   tab_build((tabphase *)o);
 }
 
-const plugin plugin_tabphase = {
-    .name = "tabphase",
-    .cls = CLS_PHASE,
-    .create = tabphase_create,
-    .destroy = tabphase_destroy,
-    .ops = &tabphase_ops,
-    .traverse = tabphase_traverse,
-    .parameters_changed = tabphase_parameters_changed,
-};
+DEFINE_PLUGIN(tabphase, CLS_PHASE, .destroy = tabphase_destroy, .ops = &tabphase_ops,
+              .traverse = tabphase_traverse, .parameters_changed = tabphase_parameters_changed);

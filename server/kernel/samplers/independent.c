@@ -4,7 +4,7 @@
  * Parameters: sample_count (4), seed (0, added to the render's seed). */
 #include <stdlib.h>
 
-#include "../scene/loader.h"
+#include "../scene/plugin_def.h"
 #include "sampler_common.h"
 
 static void independent_start(const sampler *s, sampler_state *st, uint64_t seed, uint64_t pixel,
@@ -56,19 +56,7 @@ static const sampler_ops independent_ops = {
     .next_2d_batch = independent_next_2d_batch,
 };
 
-static void independent_destroy(object *o) {
-  free(o);
-}
-
-static rsw_status independent_create(loader *ld, node *n, object **out);
-
-const plugin plugin_independent = {
-    .name = "independent",
-    .cls = CLS_SAMPLER,
-    .create = independent_create,
-    .destroy = independent_destroy,
-    .ops = &independent_ops,
-};
+DEFINE_PLUGIN(independent, CLS_SAMPLER, .ops = &independent_ops);
 
 static rsw_status independent_create(loader *ld, node *n, object **out) {
   long long count = 0, seed = 0;

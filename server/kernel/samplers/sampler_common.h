@@ -40,11 +40,6 @@ static inline void sampler_seed_stream(const sampler *s, sampler_state *st, uint
   sampler_seed_stream_key(s, st, sampler_pixel_key(seed + s->seed, pixel), sample_index, spp);
 }
 
-/* out[k] = the stratified sampler's permute(in[k], l, seed[k]) (Kensler's
- * hash permutation of [0, l), samplers/stratified.c) for k < n, l >= 1;
- * vectorised at the render's ISA (permute_simd.c), bitwise the scalar. */
-void stratified_permute_batch(int n, const uint32_t *in, uint32_t l, const uint32_t *seed, uint32_t *out);
-
 /* start_batch of both samplers: the pixel's key once per run of samples
  * of the same pixel (a wave holds consecutive samples of few pixels), the
  * streams seeded together. */

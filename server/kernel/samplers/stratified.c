@@ -14,40 +14,16 @@
 #include <math.h>
 #include <stdlib.h>
 
-#include "../scene/loader.h"
+#include "../core/isa.h"
+#include "../scene/plugin_def.h"
+#include "permute_lanes.h"
 #include "sampler_common.h"
 
-/* Kensler 2013, "Correlated Multi-Jittered Sampling" (Pixar technical memo
- * 13-01), listing 3: a hash-based permutation of [0, l) indexed by the
- * seed p. Each round is invertible on the bits selected by the mask w (the
- * smallest all-ones mask >= l - 1); results >= l are re-hashed (cycle
- * walking), which keeps the map a bijection on [0, l). */
+/* Kensler's permutation of [0, l) (samplers/permute_lanes.h). */
 static uint32_t permute(uint32_t i, uint32_t l, uint32_t p) {
-  uint32_t w = l - 1;
-  w |= w >> 1;
-  w |= w >> 2;
-  w |= w >> 4;
-  w |= w >> 8;
-  w |= w >> 16;
+  uint32_t w = permute_mask(l);
   do {
-    i ^= p;
-    i *= 0xe170893du;
-    i ^= p >> 16;
-    i ^= (i & w) >> 4;
-    i ^= p >> 8;
-    i *= 0x0929eb3fu;
-    i ^= p >> 23;
-    i ^= (i & w) >> 1;
-    i *= 1u | p >> 27;
-    i *= 0x6935fa69u;
-    i ^= (i & w) >> 11;
-    i *= 0x74dcb303u;
-    i ^= (i & w) >> 2;
-    i *= 0x9e501cc3u;
-    i ^= (i & w) >> 2;
-    i *= 0xc860a3dfu;
-    i &= w;
-    i ^= i >> 5;
+    PERMUTE_HASH(i, p, w);
   } while (i >= l);
   return (i + p) % l;
 }
@@ -123,6 +99,56 @@ enum {
   STRAT_C = 64
 };
 
+/* out[k] = permute(in[k], l, seed[k]) for k < n, l >= 1: the lanes of
+ * samplers/permute_lanes.h, 32-bit integer lanes (16 avx512, 8 avx2, 4
+ * sse2 and generic) picked at the render's ISA (core/isa.h); bitwise the
+ * scalar permutation at every ISA. */
+#if defined(__x86_64__) || defined(__i386__)
+typedef uint32_t vp_16 __attribute__((vector_size(64)));
+typedef uint32_t vp_8 __attribute__((vector_size(32)));
+
+#define VW        16
+#define VU32      vp_16
+#define PERM_FN   permute_avx512
+#define PERM_ATTR static __attribute__((target("avx512f,avx512vl,avx512dq")))
+#include "permute_lanes.h"
+#undef VW
+#undef VU32
+#undef PERM_FN
+#undef PERM_ATTR
+
+#define VW        8
+#define VU32      vp_8
+#define PERM_FN   permute_avx2
+#define PERM_ATTR static __attribute__((target("avx2,fma")))
+#include "permute_lanes.h"
+#undef VW
+#undef VU32
+#undef PERM_FN
+#undef PERM_ATTR
+
+#define VW 4
+#else
+#define VW 1
+#endif
+typedef uint32_t vp_p __attribute__((vector_size(4 * VW)));
+#define VU32      vp_p
+#define PERM_FN   permute_plain
+#define PERM_ATTR static
+#include "permute_lanes.h"
+
+static void stratified_permute_batch(int n, const uint32_t *in, uint32_t l, const uint32_t *seed,
+                                     uint32_t *out) {
+#if defined(__x86_64__) || defined(__i386__)
+  switch (rsw_isa_get()) {
+  case RSW_ISA_AVX512: permute_avx512(n, in, l, seed, out); return;
+  case RSW_ISA_AVX2: permute_avx2(n, in, l, seed, out); return;
+  default: break;
+  }
+#endif
+  permute_plain(n, in, l, seed, out);
+}
+
 /* Strata of lanes q[0..m) in the current dimension; false when their spp
  * differ (nothing written). */
 static bool strata_batch(sampler_state *const *q, int m, uint32_t *sq, uint32_t *p) {
@@ -188,19 +214,7 @@ static const sampler_ops stratified_ops = {
     .next_2d_batch = stratified_next_2d_batch,
 };
 
-static void stratified_destroy(object *o) {
-  free(o);
-}
-
-static rsw_status stratified_create(loader *ld, node *n, object **out);
-
-const plugin plugin_stratified = {
-    .name = "stratified",
-    .cls = CLS_SAMPLER,
-    .create = stratified_create,
-    .destroy = stratified_destroy,
-    .ops = &stratified_ops,
-};
+DEFINE_PLUGIN(stratified, CLS_SAMPLER, .ops = &stratified_ops);
 
 static rsw_status stratified_create(loader *ld, node *n, object **out) {
   long long count = 0, seed = 0;

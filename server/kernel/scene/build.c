@@ -20,6 +20,7 @@
 #include "loader.h"
 #include "params.h"
 #include "periodic.h"
+#include "plugin_def.h"
 #include "rsw_file.h"
 #include "scene.h"
 
@@ -118,12 +119,27 @@ static texture *uniform_texture(const spectrum *s, const char *id, const char *w
   return t;
 }
 
-/* The built-in plugins (scene/registry.c), then the environment plugins
- * loaded with --plugin-dir. */
+/* Plugins added at run time (registry_add). */
+enum {
+  ADDED_MAX = 16
+};
+static const plugin *added[ADDED_MAX];
+static size_t n_added;
+
+/* The built-in plugins (scene/registry.c), those added at run time, then
+ * the environment plugins loaded with --plugin-dir. */
 const plugin *registry_find(const char *name) {
   for (size_t i = 0; rsw_plugins[i]; i++)
     if (strcmp(rsw_plugins[i]->name, name) == 0) return rsw_plugins[i];
+  for (size_t i = 0; i < n_added; i++)
+    if (strcmp(added[i]->name, name) == 0) return added[i];
   return plugins_find(name);
+}
+
+bool registry_add(const plugin *p) {
+  if (!p || !p->name || n_added == ADDED_MAX || registry_find(p->name)) return false;
+  added[n_added++] = p;
+  return true;
 }
 
 const loader_hooks scene_build_hooks = {

@@ -1,8 +1,7 @@
 /* The one list of plugins. Adding a plugin is one new file defining
- * `const plugin plugin_<name>` and one line here. */
+ * `const plugin plugin_<name>` (scene/plugin_def.h DEFINE_PLUGIN;
+ * docs/adding-a-plugin.md) and one line here. */
 #include "loader.h"
-
-#include <string.h>
 
 /* Strong references: every plugin object is pulled out of the kernel
  * library by this table, so a missing plugin is a link error (no

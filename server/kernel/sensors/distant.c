@@ -12,7 +12,7 @@
 #include <stdlib.h>
 
 #include "../scene/params.h"
-#include "../simd/simd.h"
+#include "../scene/plugin_def.h"
 #include "sensor_common.h"
 
 typedef struct distant {
@@ -42,7 +42,7 @@ static double distant_sample_ray(const sensor *s, vec2 film_u, vec2 aperture_u, 
 
 /* Batched rays (sensor_ops.sample_ray_batch): without a target or a
  * periodic slab, the origins on the bounding disk in double lanes
- * (simd/plugin_lanes.h disk_origins, the same operations as
+ * (sensors/sensor_common_lanes.h disk_origins, the same operations as
  * ray_target_origin()), so bit for bit distant_sample_ray()'s rays; the
  * direction is the sensor's. Otherwise one by one. */
 static void distant_sample_ray_batch(const sensor *s, int n, const vec2 *film_u, const vec2 *aperture_u,
@@ -109,8 +109,6 @@ static void distant_destroy(object *o) {
   free(o);
 }
 
-static rsw_status distant_create(loader *ld, node *n, object **out);
-
 /* Mitsuba's rule for `direction`: look_at(0, normalize(direction), up)
  * with up the second vector of coordinate_system(direction). */
 static bool distant_frame(vec3 dir, xform *out) {
@@ -144,15 +142,8 @@ static void distant_traverse(object *o, param_visitor *v) {
   pv_vector(v, "direction", distant_get_direction, distant_set_direction, UPDATE_SPECTRAL);
 }
 
-const plugin plugin_distant = {
-    .traverse = distant_traverse,
-    .parameters_changed = distant_parameters_changed,
-    .name = "distant",
-    .cls = CLS_SENSOR,
-    .create = distant_create,
-    .destroy = distant_destroy,
-    .ops = &distant_ops,
-};
+DEFINE_PLUGIN(distant, CLS_SENSOR, .destroy = distant_destroy, .traverse = distant_traverse,
+              .parameters_changed = distant_parameters_changed, .ops = &distant_ops);
 
 static rsw_status distant_read(loader *ld, node *n, distant *ds) {
   rsw_status st = sensor_read_base(ld, n, &ds->base);

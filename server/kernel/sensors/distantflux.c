@@ -16,6 +16,7 @@
 #include <math.h>
 #include <stdlib.h>
 
+#include "../scene/plugin_def.h"
 #include "sensor_common.h"
 
 typedef struct distantflux {
@@ -46,7 +47,7 @@ static double distantflux_sample_ray(const sensor *s, vec2 film_u, vec2 aperture
 }
 
 /* Batched rays (sensor_ops.sample_ray_batch): without a target or a
- * periodic slab, hdistant's double lanes (simd/camera_lanes.h: the same
+ * periodic slab, hdistant's double lanes (sensors/sensor_common_lanes.h: the same
  * directions and origins, bit for bit), omega = -d (exact), and the
  * weight per lane with distantflux_sample_ray()'s operations: bit for bit
  * its rays and weights. Otherwise one by one. */
@@ -96,17 +97,9 @@ static void distantflux_destroy(object *o) {
   free(o);
 }
 
-static rsw_status distantflux_create(loader *ld, node *n, object **out);
-
 /* to_world and the `direction` key: sensor_traverse_axis (sensor_common.h). */
-const plugin plugin_distantflux = {
-    .traverse = sensor_traverse_axis,
-    .name = "distantflux",
-    .cls = CLS_SENSOR,
-    .create = distantflux_create,
-    .destroy = distantflux_destroy,
-    .ops = &distantflux_ops,
-};
+DEFINE_PLUGIN(distantflux, CLS_SENSOR, .destroy = distantflux_destroy, .traverse = sensor_traverse_axis,
+              .ops = &distantflux_ops);
 
 static rsw_status distantflux_create(loader *ld, node *n, object **out) {
   distantflux *f = calloc(1, sizeof *f);

@@ -17,6 +17,7 @@
 #include <math.h>
 #include <stdlib.h>
 
+#include "../scene/plugin_def.h"
 #include "sensor_common.h"
 
 typedef struct hdistant {
@@ -52,7 +53,7 @@ static double hdistant_sample_ray(const sensor *s, vec2 film_u, vec2 aperture_u,
 }
 
 /* Batched rays (sensor_ops.sample_ray_batch): without a target or a
- * periodic slab, the double-precision lanes of simd/camera_lanes.h, which
+ * periodic slab, the double-precision lanes of sensors/sensor_common_lanes.h, which
  * give hdistant_sample_ray()'s rays bit for bit; otherwise one by one. */
 static void hdistant_sample_ray_batch(const sensor *s, int n, const vec2 *film_u, const vec2 *aperture_u,
                                       ray3 *rays, double *w) {
@@ -107,17 +108,9 @@ static void hdistant_destroy(object *o) {
   free(o);
 }
 
-static rsw_status hdistant_create(loader *ld, node *n, object **out);
-
 /* to_world and the `direction` key: sensor_traverse_axis (sensor_common.h). */
-const plugin plugin_hdistant = {
-    .traverse = sensor_traverse_axis,
-    .name = "hdistant",
-    .cls = CLS_SENSOR,
-    .create = hdistant_create,
-    .destroy = hdistant_destroy,
-    .ops = &hdistant_ops,
-};
+DEFINE_PLUGIN(hdistant, CLS_SENSOR, .destroy = hdistant_destroy, .traverse = sensor_traverse_axis,
+              .ops = &hdistant_ops);
 
 static rsw_status hdistant_create(loader *ld, node *n, object **out) {
   hdistant *h = calloc(1, sizeof *h);

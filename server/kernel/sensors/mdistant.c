@@ -16,7 +16,7 @@
 #include <stdlib.h>
 
 #include "../scene/params.h"
-#include "../simd/simd.h"
+#include "../scene/plugin_def.h"
 #include "sensor_common.h"
 
 typedef struct mdistant {
@@ -53,7 +53,7 @@ static double mdistant_sample_ray(const sensor *s, vec2 film_u, vec2 aperture_u,
 /* Batched rays (sensor_ops.sample_ray_batch): without a target or a
  * periodic slab, each lane's sub-sensor picked as mdistant_sample_ray()
  * does, its frame and direction gathered, and the origins on the bounding
- * disk in double lanes (simd/plugin_lanes.h disk_origins): bit for bit the
+ * disk in double lanes (sensors/sensor_common_lanes.h disk_origins): bit for bit the
  * scalar rays. Otherwise one by one. */
 static void mdistant_sample_ray_batch(const sensor *s, int n, const vec2 *film_u, const vec2 *aperture_u,
                                       ray3 *rays, double *w) {
@@ -132,8 +132,6 @@ static void mdistant_destroy(object *o) {
   free(m);
 }
 
-static rsw_status mdistant_create(loader *ld, node *n, object **out);
-
 /* Sub-sensor i's frame from its direction (normalised in place). False
  * when the direction is the zero vector or no frame can be built. */
 static bool mdistant_frame(mdistant *m, size_t i) {
@@ -170,15 +168,8 @@ static void mdistant_parameters_changed(object *o) {
   for (size_t i = 0; i < m->n; i++) (void)mdistant_frame(m, i); /* checked non-zero */
 }
 
-const plugin plugin_mdistant = {
-    .traverse = mdistant_traverse,
-    .parameters_changed = mdistant_parameters_changed,
-    .name = "mdistant",
-    .cls = CLS_SENSOR,
-    .create = mdistant_create,
-    .destroy = mdistant_destroy,
-    .ops = &mdistant_ops,
-};
+DEFINE_PLUGIN(mdistant, CLS_SENSOR, .destroy = mdistant_destroy, .traverse = mdistant_traverse,
+              .parameters_changed = mdistant_parameters_changed, .ops = &mdistant_ops);
 
 static rsw_status mdistant_read(loader *ld, node *n, mdistant *m) {
   if (ld_has(n, "to_world"))

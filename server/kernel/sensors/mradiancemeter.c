@@ -12,6 +12,7 @@
 #include <stdlib.h>
 
 #include "../accel.h"
+#include "../scene/plugin_def.h"
 #include "sensor_common.h"
 
 typedef struct mradiancemeter {
@@ -52,15 +53,7 @@ static void mradiancemeter_destroy(object *o) {
   free(m);
 }
 
-static rsw_status mradiancemeter_create(loader *ld, node *n, object **out);
-
-const plugin plugin_mradiancemeter = {
-    .name = "mradiancemeter",
-    .cls = CLS_SENSOR,
-    .create = mradiancemeter_create,
-    .destroy = mradiancemeter_destroy,
-    .ops = &mradiancemeter_ops,
-};
+DEFINE_PLUGIN(mradiancemeter, CLS_SENSOR, .destroy = mradiancemeter_destroy, .ops = &mradiancemeter_ops);
 
 static rsw_status mradiancemeter_read(loader *ld, node *n, mradiancemeter *m) {
   rsw_status st = sensor_read_base(ld, n, &m->base);

@@ -18,7 +18,7 @@
 #include <strings.h>
 
 #include "../scene/params.h"
-#include "../simd/simd.h"
+#include "perspective_lanes.h"
 #include "sensor_common.h"
 
 typedef struct perspective {
@@ -47,12 +47,18 @@ static double perspective_sample_ray(const sensor *s, vec2 film_u, vec2 aperture
 }
 
 /* Batched rays (sensor_ops.sample_ray_batch): perspective_sample_ray()'s
- * operations in double lanes (simd/plugin_lanes.h perspective_rays,
+ * operations in double lanes (sensors/perspective_lanes.h,
  * written straight into the rays: 8 doubles each), so bit for bit its
  * rays. */
 _Static_assert(sizeof(ray3) == 8 * sizeof(double) && offsetof(ray3, d) == 3 * sizeof(double) &&
                    offsetof(ray3, tmin) == 6 * sizeof(double) && offsetof(ray3, tmax) == 7 * sizeof(double),
                "perspective_rays writes a ray3 as 8 doubles (o, d, tmin, tmax)");
+static void perspective_rays_batch(rsw_isa isa, int n, const double (*m)[4], const double *pp, double t,
+                                   double aspect, double near_clip, double far_clip, const double *fu,
+                                   double *out) {
+  SIMD_DISPATCH(isa, perspective_rays, n, m, pp, t, aspect, near_clip, far_clip, fu, out);
+}
+
 static void perspective_sample_ray_batch(const sensor *s, int n, const vec2 *film_u, const vec2 *aperture_u,
                                          ray3 *rays, double *w) {
   (void)aperture_u;

@@ -14,6 +14,7 @@
 #include <stdlib.h>
 
 #include "../accel.h"
+#include "../scene/plugin_def.h"
 #include "sensor_common.h"
 
 typedef struct radiancemeter {
@@ -56,19 +57,7 @@ static const sensor_ops radiancemeter_ops = {
     .sample_ray_batch = radiancemeter_sample_ray_batch,
 };
 
-static void radiancemeter_destroy(object *o) {
-  free(o);
-}
-
-static rsw_status radiancemeter_create(loader *ld, node *n, object **out);
-
-const plugin plugin_radiancemeter = {
-    .name = "radiancemeter",
-    .cls = CLS_SENSOR,
-    .create = radiancemeter_create,
-    .destroy = radiancemeter_destroy,
-    .ops = &radiancemeter_ops,
-};
+DEFINE_PLUGIN(radiancemeter, CLS_SENSOR, .ops = &radiancemeter_ops);
 
 static rsw_status radiancemeter_read(loader *ld, node *n, radiancemeter *r) {
   rsw_status st = sensor_read_base(ld, n, &r->base);

@@ -10,7 +10,7 @@
 #include "../scene/periodic.h"
 #include "../scene/scene.h"
 #include "../shapes/shape.h"
-#include "../simd/simd.h"
+#include "sensor_common_lanes.h"
 
 /* The nested object of class cls, or a default instance of `def_type`
  * when the document gives none (mitsuba3 src/render/sensor.cpp creates an
@@ -278,6 +278,16 @@ uint64_t sensor_film_bytes(const sensor *se, rsw_variant variant, int *channels)
   uint64_t pixels = (uint64_t)(fm->width > 0 ? fm->width : 0) * (uint64_t)(fm->height > 0 ? fm->height : 0);
   if (pixels && per_pixel > UINT64_MAX / pixels) return UINT64_MAX;
   return pixels * per_pixel;
+}
+
+static void hdistant_rays_batch(rsw_isa isa, int n, const double (*m)[4], const double *fu, const double *ap,
+                                const double *center, double radius, double offset, double *out) {
+  SIMD_DISPATCH(isa, hdistant_rays, n, m, fu, ap, center, radius, offset, out);
+}
+
+void disk_origins_batch(rsw_isa isa, int n, const double *m9, int m_step, const double *d, int d_step,
+                        const double *ap, const double *center, double radius, double offset, double *out) {
+  SIMD_DISPATCH(isa, disk_origins, n, m9, m_step, d, d_step, ap, center, radius, offset, out);
 }
 
 void hemisphere_rays_batch(const sensor *s, vec3 center, double radius, double offset, int n,

@@ -5,6 +5,7 @@
 #ifndef RSW_SENSORS_SENSOR_COMMON_H
 #define RSW_SENSORS_SENSOR_COMMON_H
 
+#include "../core/isa.h"
 #include "../kernel.h"
 #include "../scene/loader.h"
 
@@ -144,10 +145,18 @@ void meter_frame_bind(meter_frame *f, const scene *sc);
 vec3 radiancemeter_ray_origin(vec3 o, vec3 d, const meter_frame *f);
 
 /* hdistant's rays for n film samples without a target (hdistant,
- * distantflux): the double lanes of simd/camera_lanes.h at the render's
+ * distantflux): the double lanes of sensors/sensor_common_lanes.h at the render's
  * ISA, bit for bit hdistant_sample_ray()'s directions and origins on the
  * disk of `radius` around `center`, pushed back by `offset`. */
 void hemisphere_rays_batch(const sensor *s, vec3 center, double radius, double offset, int n,
                            const vec2 *film_u, const vec2 *aperture_u, ray3 *rays);
+
+/* The distant family's ray origins without a target (distant, mdistant;
+ * sensors/sensor_common_lanes.h, double lanes at `isa`, bitwise
+ * ray_target_origin()): frame rows m9 (9 per lane, m_step 9; or shared,
+ * m_step 0), d 3 per lane (d_step 3) or shared (0), ap 2 per lane; out 3
+ * per lane. */
+void disk_origins_batch(rsw_isa isa, int n, const double *m9, int m_step, const double *d, int d_step,
+                        const double *ap, const double *center, double radius, double offset, double *out);
 
 #endif

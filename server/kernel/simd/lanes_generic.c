@@ -1,12 +1,12 @@
-/* Batched kernels for `generic`: the portable build of the lane sources
- * (simd/lanes.h, microfacet_lanes.h, camera_lanes.h, plugin_lanes.h) with
- * GCC/clang vector extensions only: no target attribute, no intrinsic, 4
- * float lanes (2 double ones), which every target with 128-bit vectors
- * maps to its registers (SSE2, NEON, AltiVec...) and any other lowers to
- * scalar code. The square roots are lane by lane __builtin_sqrtf/sqrt,
- * correctly rounded as the packed instructions are (-fno-math-errno makes
- * them single instructions). Always compiled: the only kernels of a
- * non-x86 build, `--isa generic` on x86. Dispatched by simd/simd.c. */
+/* The batched kernels for `generic`: the portable build of the lane
+ * sources (simd/lanes_all.h) with GCC/clang vector extensions only: no
+ * target attribute, no intrinsic, 4 float lanes (2 double ones), which
+ * every target with 128-bit vectors maps to its registers (SSE2, NEON,
+ * AltiVec...) and any other lowers to scalar code. The square roots are
+ * lane by lane __builtin_sqrtf/sqrt, correctly rounded as the packed
+ * instructions are (-fno-math-errno makes them single instructions).
+ * Always compiled: the only kernels of a non-x86 build, `--isa generic` on
+ * x86. */
 #include <math.h>
 
 #include "../core/vec.h"
@@ -26,18 +26,8 @@ static inline __attribute__((always_inline)) vdn vsqrt_generic_d(vdn x) {
 }
 
 #define SIMD_FN static inline __attribute__((always_inline))
-#define MF_LANES_ATTR
-#define VSQRT(x)    vsqrt_generic((x))
-#define MF_LANES_FN mf_sample_visible_generic
-#define MF_EVAL_FN  mf_eval_generic
-#include "lanes.h"
-#include "microfacet_lanes.h"
-
+#define LANES_ATTR
+#define VSQRT(x)   vsqrt_generic((x))
 #define VSQRT_D(x) vsqrt_generic_d((x))
-#define CAM_LANES_ATTR
-#define CAM_LANES_FN    hdistant_rays_generic
-#define COSINE_LANES_FN cosine_hemisphere_generic
-#include "camera_lanes.h"
-
 #define ISA_SUFFIX generic
-#include "plugin_lanes.h"
+#include "lanes_all.h"

@@ -4,8 +4,7 @@
  * color0 where [frac(u') > 0.5] == [frac(v') > 0.5], else color1. */
 #include <stdlib.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 
 typedef struct checkerboard {
   texture base;
@@ -31,11 +30,7 @@ static color cb_mean(const texture *t) {
 
 static const texture_ops checkerboard_ops = {.eval = cb_eval, .mean = cb_mean};
 
-static void cb_destroy(object *o) {
-  free(o);
-}
-
-static rsw_status cb_create(loader *ld, node *n, object **out) {
+static rsw_status checkerboard_create(loader *ld, node *n, object **out) {
   checkerboard *c = calloc(1, sizeof *c);
   if (!c) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
   c->base.ops = &checkerboard_ops;
@@ -57,9 +52,4 @@ static void cb_traverse(object *o, param_visitor *v) {
   pv_transform(v, "to_uv", &c->to_uv, UPDATE_SPECTRAL, NULL);
 }
 
-const plugin plugin_checkerboard = {.name = "checkerboard",
-                                    .cls = CLS_TEXTURE,
-                                    .create = cb_create,
-                                    .destroy = cb_destroy,
-                                    .ops = &checkerboard_ops,
-                                    .traverse = cb_traverse};
+DEFINE_PLUGIN(checkerboard, CLS_TEXTURE, .ops = &checkerboard_ops, .traverse = cb_traverse);

@@ -5,8 +5,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "texture.h"
 
 typedef struct uniform_tex {
@@ -40,8 +39,6 @@ static rsw_status uniform_prepare(object *o, const render_ctx *rc, rsw_err *err)
 }
 
 static bool spectrum_copy(spectrum *dst, const spectrum *src);
-static rsw_status uniform_create(loader *ld, node *n, object **out);
-
 /* A table whose values are not all equal. */
 static bool uniform_spectral(const object *o) {
   const spectrum *s = &((const uniform_tex *)o)->spec;
@@ -55,16 +52,8 @@ static void uniform_traverse(object *o, param_visitor *v) {
   pv_spectrum(v, "value", (texture *)o);
 }
 
-const plugin plugin_uniform = {
-    .name = "uniform",
-    .cls = CLS_TEXTURE,
-    .create = uniform_create,
-    .destroy = uniform_destroy,
-    .prepare = uniform_prepare,
-    .ops = &uniform_ops,
-    .traverse = uniform_traverse,
-    .spectral = uniform_spectral,
-};
+DEFINE_PLUGIN(uniform, CLS_TEXTURE, .destroy = uniform_destroy, .prepare = uniform_prepare,
+              .ops = &uniform_ops, .traverse = uniform_traverse, .spectral = uniform_spectral);
 
 static bool spectrum_copy(spectrum *dst, const spectrum *src) {
   *dst = *src;

@@ -1,10 +1,13 @@
-/* Visible-normal sampling of the Beckmann and GGX distributions across W
- * lanes (the per-ISA body of simd/microfacet_simd.c; include after
- * simd/lanes.h, with MF_LANES_FN naming the entry point).
+/* Visible-normal sampling of the Beckmann and GGX distributions, and
+ * roughconductor's eval and pdf without Fresnel, across W float lanes:
+ * compiled per ISA by simd/lanes_all.h (LANES_FN names the entry points),
+ * dispatched by mf_sample_visible_batch() and mf_eval_batch()
+ * (bsdfs/microfacet.c).
  *
  * The same algorithms as the scalar samplers of bsdfs/microfacet.c
  * (beckmann_sample_visible: Jakob 2014's Newton inversion; ggx: Heitz
- * 2018), in single precision throughout. That is safe here for the reason
+ * 2018), in single precision throughout, so not bitwise the scalar code
+ * (which is why both exist). That is safe here for the reason
  * given in microfacet.c's error budget: these values only place the
  * microfacet normal m; the caller evaluates pdf and weight in double from
  * the m drawn (roughconductor.c rough_sample_batch), so a float error only
@@ -12,6 +15,17 @@
  * with its pdf. The Newton steps of the Beckmann inversion run on all
  * lanes at once; a lane whose residual reached float resolution keeps its
  * x (masked), and the loop ends early only when every lane has. */
+#include "../simd/simd.h"
+
+/* ggx != 0 for GGX, else Beckmann; in[0..6]: wi xyz (unit, local, wi.z >
+ * 0), alpha_u, alpha_v, u.x, u.y (n each); out[0..5]: wo xyz, pdf (0:
+ * failed), weight without Fresnel, wi.m. */
+SIMD_ISA_DECL(void, mf_sample_visible, (int ggx, int n, const float *const *in, float *const *out));
+/* in[0..7] wi xyz, wo xyz, alpha_u, alpha_v (n each; wi.z > 0, wo.z > 0);
+ * out[0..2] value D G / (4 wi.z), pdf, wi.h. */
+SIMD_ISA_DECL(void, mf_eval, (int ggx, int visible, int n, const float *const *in, float *const *out));
+
+#ifdef LANES_FN
 
 /* ---- evaluation: roughconductor's eval() and pdf() without Fresnel ------
  *
@@ -214,7 +228,7 @@ SIMD_FN void mf_sample_tail_lanes(int ggx, const float *in, float *out) {
  * with normal incidence, u = 1/2, alpha = 1; its results are dropped).
  * in[0..6]: wi xyz, alpha_u, alpha_v, u.x, u.y; out[0..5]: wo xyz, pdf,
  * weight without Fresnel, wi.m. */
-MF_LANES_ATTR void MF_LANES_FN(int ggx, int n, const float *const *in, float *const *out) {
+LANES_ATTR void LANES_FN(mf_sample_visible)(int ggx, int n, const float *const *in, float *const *out) {
   for (int k0 = 0; k0 < n; k0 += W) {
     int m = n - k0 < W ? n - k0 : W;
     float a[7 * W], b[6 * W];
@@ -268,7 +282,7 @@ SIMD_FN void mf_eval_lanes(int ggx, int visible, const float *in, float *out) {
 
 /* n lanes; in: 8 arrays of n (wi xyz, wo xyz, alpha_u, alpha_v); out: 3
  * arrays of n (value, pdf, wi.h). Padding: wi = wo = +z, alpha 1. */
-MF_LANES_ATTR void MF_EVAL_FN(int ggx, int visible, int n, const float *const *in, float *const *out) {
+LANES_ATTR void LANES_FN(mf_eval)(int ggx, int visible, int n, const float *const *in, float *const *out) {
   for (int k0 = 0; k0 < n; k0 += W) {
     int m = n - k0 < W ? n - k0 : W;
     float a[8 * W], b[3 * W];
@@ -283,3 +297,4 @@ MF_LANES_ATTR void MF_EVAL_FN(int ggx, int visible, int n, const float *const *i
       for (int k = 0; k < m; k++) out[j][k0 + k] = b[j * W + k];
   }
 }
+#endif

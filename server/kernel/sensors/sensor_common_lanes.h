@@ -1,0 +1,137 @@
+/* The distant family's batched rays (sensors/sensor_common.c
+ * hemisphere_rays_batch for hdistant and distantflux, disk_origins_batch
+ * for distant and mdistant), double lanes compiled per ISA by
+ * simd/lanes_all.h. The operations are those of the scalar path
+ * (warp_square_to_uniform_hemisphere, xf_vector, v3_norm,
+ * ray_target_origin without a target) in the same order, without FMA
+ * contraction, so each lane gives the scalar ray bit for bit
+ * (tests/unit/test_simd.c checks it). Double precision on purpose: the
+ * origin sits a bounding radius away from the scene. The sensors' scalar
+ * sample_ray ops are not batches of one: they also serve ray targets and
+ * the periodic slab, which the lanes leave to them. */
+#include "../simd/simd.h"
+
+/* hdistant camera rays: m the rows of to_world; fu, ap 2 per lane (x, y);
+ * out 6 per lane (origin, direction). */
+SIMD_ISA_DECL(void, hdistant_rays,
+              (int n, const double (*m)[4], const double *fu, const double *ap, const double *center,
+               double radius, double offset, double *out));
+/* Origins on the bounding disk: frame rows m9 (9 per lane, m_step 9; or
+ * shared, m_step 0), d 3 per lane (d_step 3) or shared (0), ap 2 per lane;
+ * out 3 per lane. */
+SIMD_ISA_DECL(void, disk_origins,
+              (int n, const double *m9, int m_step, const double *d, int d_step, const double *ap,
+               const double *center, double radius, double offset, double *out));
+
+#ifdef LANES_FN
+/* n rays: rows m[3][3] of to_world; fu, ap film and aperture samples (x,
+ * y interleaved per lane: fu[2 i], fu[2 i + 1]); out[6 i ..] = o, d. */
+LANES_ATTR void LANES_FN(hdistant_rays)(int n, const double (*m)[4], const double *fu, const double *ap,
+                                        const double *center, double radius, double offset, double *out) {
+  for (int k0 = 0; k0 < n; k0 += WD) {
+    int cnt = n - k0 < WD ? n - k0 : WD;
+    /* Constant-length loops through a padded copy for a partial tail (see
+     * COSINE_LANES_FN below). */
+    const double *fk = fu + 2 * k0, *ak = ap + 2 * k0;
+    double fpad[2 * WD], apad[2 * WD], res[6 * WD];
+    if (cnt < WD) {
+      for (int k = 0; k < 2 * WD; k++)
+        fpad[k] = k < 2 * cnt ? fk[k] : 0.5, apad[k] = k < 2 * cnt ? ak[k] : 0.5;
+      fk = fpad, ak = apad;
+    }
+    vdn ux, uy, ax, ay;
+    for (int k = 0; k < WD; k++)
+      ux[k] = fk[2 * k], uy[k] = fk[2 * k + 1], ax[k] = ak[2 * k], ay[k] = ak[2 * k + 1];
+    /* omega = norm(to_world hemisphere(fu)), d = -omega */
+    vdn px, py;
+    d_concentric(ux, uy, &px, &py);
+    vdn z = 1.0 - (px * px + py * py);
+    vdn z1 = z + 1.0;
+    vdn s = VSQRT_D(dsel(z1 > 0.0, z1, (vdn){0}));
+    vdn vx = px * s, vy = py * s;
+    vdn wx = m[0][0] * vx + m[0][1] * vy + m[0][2] * z;
+    vdn wy = m[1][0] * vx + m[1][1] * vy + m[1][2] * z;
+    vdn wz = m[2][0] * vx + m[2][1] * vy + m[2][2] * z;
+    vdn l = VSQRT_D(wx * wx + wy * wy + wz * wz);
+    vln pos = l > 0.0;
+    vdn il = 1.0 / dsel(pos, l, (vdn){0} + 1.0);
+    wx = dsel(pos, wx * il, wx);
+    wy = dsel(pos, wy * il, wy);
+    wz = dsel(pos, wz * il, wz);
+    vdn dx = -wx, dy = -wy, dz = -wz;
+    /* origin: centre + radius to_world (concentric(ap), 0), back by offset */
+    vdn qx, qy;
+    d_concentric(ax, ay, &qx, &qy);
+    vdn rx = m[0][0] * qx + m[0][1] * qy + m[0][2] * 0.0;
+    vdn ry = m[1][0] * qx + m[1][1] * qy + m[1][2] * 0.0;
+    vdn rz = m[2][0] * qx + m[2][1] * qy + m[2][2] * 0.0;
+    vdn ox = (center[0] + radius * rx) + -offset * dx;
+    vdn oy = (center[1] + radius * ry) + -offset * dy;
+    vdn oz = (center[2] + radius * rz) + -offset * dz;
+    double *ob = cnt < WD ? res : &out[6 * k0];
+    for (int k = 0; k < WD; k++) {
+      double *o = &ob[6 * k];
+      o[0] = ox[k], o[1] = oy[k], o[2] = oz[k];
+      o[3] = dx[k], o[4] = dy[k], o[5] = dz[k];
+    }
+    if (cnt < WD)
+      for (int k = 0; k < 6 * cnt; k++) out[6 * k0 + k] = res[k];
+  }
+}
+
+/* ---- distant family: origins on the bounding disk, double lanes ----------
+ * sensors/sensor_common.c ray_target_origin() without a target:
+ *   q = square_to_disk_concentric(ap), perp = frame (q.x, q.y, 0),
+ *   o = (c + R perp) - offset d.
+ * m9: the frame's 3x3 rows (9 doubles per lane, or one shared frame with
+ * m_step 0); d: 3 per lane (d_step 3) or shared (0); ap 2 per lane; out 3
+ * per lane. */
+LANES_ATTR void LANES_FN(disk_origins)(int n, const double *m9, int m_step, const double *d, int d_step,
+                                       const double *ap, const double *center, double radius, double offset,
+                                       double *out) {
+  for (int k0 = 0; k0 < n; k0 += WD) {
+    int cnt = n - k0 < WD ? n - k0 : WD;
+    /* Loops of constant length over the lanes (a partial tail goes through
+     * a padded copy, or repeats its last lane), so lanes move through
+     * registers: element inserts of a variable count went through memory
+     * and stalled store forwarding (2-3x slower). */
+    vdn ax, ay, mm[9], dx, dy, dz;
+    double res[3 * WD];
+    const double *ak = ap + 2 * k0;
+    double apad[2 * WD];
+    if (cnt < WD) {
+      for (int k = 0; k < 2 * WD; k++) apad[k] = k < 2 * cnt ? ak[k] : 0.5;
+      ak = apad;
+    }
+    for (int k = 0; k < WD; k++) ax[k] = ak[2 * k], ay[k] = ak[2 * k + 1];
+    if (m_step == 0) { /* one frame: broadcast */
+      for (int j = 0; j < 9; j++) mm[j] = (vdn){0} + m9[j];
+    } else {
+      for (int k = 0; k < WD; k++) {
+        const double *mk = m9 + (long)m_step * (k0 + (k < cnt ? k : cnt - 1));
+        for (int j = 0; j < 9; j++) mm[j][k] = mk[j];
+      }
+    }
+    if (d_step == 0) {
+      dx = (vdn){0} + d[0], dy = (vdn){0} + d[1], dz = (vdn){0} + d[2];
+    } else {
+      for (int k = 0; k < WD; k++) {
+        const double *dk = d + (long)d_step * (k0 + (k < cnt ? k : cnt - 1));
+        dx[k] = dk[0], dy[k] = dk[1], dz[k] = dk[2];
+      }
+    }
+    vdn qx, qy;
+    d_concentric(ax, ay, &qx, &qy);
+    vdn rx = mm[0] * qx + mm[1] * qy + mm[2] * 0.0;
+    vdn ry = mm[3] * qx + mm[4] * qy + mm[5] * 0.0;
+    vdn rz = mm[6] * qx + mm[7] * qy + mm[8] * 0.0;
+    vdn ox = (center[0] + radius * rx) + -offset * dx;
+    vdn oy = (center[1] + radius * ry) + -offset * dy;
+    vdn oz = (center[2] + radius * rz) + -offset * dz;
+    double *ob = cnt < WD ? res : &out[3 * k0];
+    for (int k = 0; k < WD; k++) ob[3 * k] = ox[k], ob[3 * k + 1] = oy[k], ob[3 * k + 2] = oz[k];
+    if (cnt < WD)
+      for (int k = 0; k < 3 * cnt; k++) out[3 * k0 + k] = res[k];
+  }
+}
+#endif
