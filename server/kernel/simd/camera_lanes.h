@@ -8,7 +8,7 @@
  * the scalar path (warp_square_to_uniform_hemisphere, xf_vector, v3_norm,
  * ray_target_origin without a target) in the same order, without FMA
  * contraction, so each lane gives the scalar ray bit for bit
- * (tests/unit/test_simd.c checks it). */
+ * (tests/kernel/simd/test_simd.c checks it). */
 
 typedef double vdn __attribute__((vector_size(4 * W)));
 typedef long long vln __attribute__((vector_size(4 * W)));

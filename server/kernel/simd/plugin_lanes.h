@@ -10,7 +10,7 @@
  * a lane's result depends on its own inputs only. The double-lane ones
  * repeat the scalar code's operations in its order (no FMA contraction:
  * -std=c11), so they give the scalar results bit for bit
- * (tests/unit/test_simd.c checks it). */
+ * (tests/kernel/simd/test_simd.c checks it). */
 
 #define PL_CAT2(a, b) a##_##b
 #define PL_CAT(a, b)  PL_CAT2(a, b)
