@@ -15,6 +15,7 @@
 #include <stdlib.h>
 
 #include "../../../server/kernel/scene/params.h"
+#include "../../../server/kernel/scene/update.h"
 #include "../../support/test.h"
 #include "../../support/tsup.h"
 
