@@ -17,6 +17,7 @@
 #include <stdlib.h>
 
 #include "../accel.h"
+#include "../hit.h"
 #include "../scene/loader.h"
 #include "../scene/periodic.h"
 #include "../shapes/instance.h"

@@ -23,6 +23,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 
+#include "../../../server/kernel/scene/param_table.h"
 #include "../../../server/kernel/scene/params.h"
 #include "../../../server/kernel/scene/update.h"
 #include "../../support/test.h"

@@ -29,6 +29,7 @@
 
 #include "../../../server/kernel/accel.h"
 #include "../../../server/kernel/core/rng.h"
+#include "../../../server/kernel/hit.h"
 #include "../../../server/kernel/scene/periodic.h"
 #include "../../../server/kernel/shapes/instance.h"
 #include "../../support/test.h"
