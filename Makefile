@@ -87,8 +87,23 @@ DAEMON_OBJ := $(DAEMON_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/obj/$(BUILD)/gen/defau
 # failmalloc.c replaces malloc: only test_oom and raysweepd-failmalloc link it.
 TEST_SUPPORT_SRC := $(filter-out tests/support/failmalloc.c,$(wildcard tests/support/*.c))
 TEST_SUPPORT_OBJ := $(TEST_SUPPORT_SRC:%.c=$(BUILD)/obj/%.o)
-TEST_SRC := $(sort $(wildcard tests/unit/test_*.c tests/validation/test_*.c tests/integration/test_*.c))
-TEST_BIN := $(patsubst %.c,$(BUILD)/tests/%,$(notdir $(TEST_SRC)))
+# The test programs: every tests/**/test_*.c (tests/README.md: the folders
+# mirror the code, tests/kernel/<class>/ the kernel's). A program is named
+# after its file alone (BUILD/tests/test_NAME, wherever its folder), so two
+# files of one name are an error. Those under tests/service, http, client
+# and integration link the service library; the others the kernel alone.
+TEST_SRC := $(sort $(shell find tests \( -path tests/support -o -path tests/fuzz -o -path tests/bench \
+  -o -path tests/plugins -o -path tests/corpus -o -path tests/data \) -prune -o -name 'test_*.c' -print))
+TEST_SERVICE_DIRS := tests/service tests/http tests/client tests/integration
+TEST_SERVICE_SRC := $(filter $(TEST_SERVICE_DIRS:%=%/%),$(TEST_SRC))
+TEST_KERNEL_SRC := $(filter-out $(TEST_SERVICE_SRC),$(TEST_SRC))
+test_bin = $(patsubst %.c,$(BUILD)/tests/%,$(notdir $(1)))
+TEST_BIN := $(call test_bin,$(TEST_SRC))
+ifneq ($(words $(TEST_BIN)),$(words $(sort $(TEST_BIN))))
+$(error two test programs share a name: $(shell printf '%s\n' $(notdir $(TEST_SRC)) | sort | uniq -d))
+endif
+# The object of test program NAME, wherever its source is.
+test_obj = $(patsubst %.c,$(BUILD)/obj/%.o,$(filter %/$(1).c,$(TEST_SRC)))
 TEST_SCRIPTS := $(sort $(wildcard tests/integration/test_*.sh))
 
 # ---- fuzz harnesses (tests/fuzz): replayed in `make test`, fuzzed by `make fuzz`
@@ -196,7 +211,7 @@ $(CLIENT_PC): include/raysweep/version.h
 	printf '%s\n' $(call client_pc_lines,$(PREFIX)) > $@
 
 # The client test sees only the public header and the static library.
-$(BUILD)/tests/test_client: $(BUILD)/obj/tests/integration/test_client.o $(BUILD)/obj/tests/support/daemon.o $(CLIENT_A)
+$(BUILD)/tests/test_client: $(call test_obj,test_client) $(BUILD)/obj/tests/support/daemon.o $(CLIENT_A)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $< $(BUILD)/obj/tests/support/daemon.o $(CLIENT_A) $(CLIENT_LIBS)
 
@@ -215,7 +230,7 @@ install: $(BUILD)/bin/raysweepd $(BUILD)/bin/raysweep $(CLIENT_A) $(CLIENT_SO)
 	printf '%s\n' $(call client_pc_lines,$(PREFIX)) > $(DESTDIR)$(PREFIX)/lib/pkgconfig/raysweep.pc
 
 # The HTTP encoders are not in the kernel library: link them in.
-$(BUILD)/tests/test_http_encode: $(BUILD)/obj/tests/unit/test_http_encode.o $(BUILD)/obj/server/http/encode.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB) $(COMMON_LIB)
+$(BUILD)/tests/test_http_encode: $(call test_obj,test_http_encode) $(BUILD)/obj/server/http/encode.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB),$^) $(KERNEL_LIB) $(COMMON_LIB) $(LIBS)
 
@@ -234,7 +249,7 @@ FAILMALLOC_LDFLAGS := -Wl,--export-dynamic-symbol=pthread_create -Wl,--export-dy
 HTTP_OBJ := $(patsubst %.c,$(BUILD)/obj/%.o,$(shell find server/http -name '*.c' 2>/dev/null | sort)) $(UI_OBJ)
 # (libraysweep's own objects only: what it shares with the daemon comes
 # from the common library.)
-$(BUILD)/tests/test_oom: $(BUILD)/obj/tests/integration/test_oom.o $(FAILMALLOC_OBJ) $(HTTP_OBJ) $(CLIENT_SRC:%.c=$(BUILD)/obj/%.o) $(TEST_SUPPORT_OBJ) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB)
+$(BUILD)/tests/test_oom: $(call test_obj,test_oom) $(FAILMALLOC_OBJ) $(HTTP_OBJ) $(CLIENT_SRC:%.c=$(BUILD)/obj/%.o) $(TEST_SUPPORT_OBJ) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) $(FAILMALLOC_LDFLAGS) -o $@ $(filter %.o,$^) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB) $(LIBS) $(DAEMON_LIBS) $(TEST_LIBS)
 $(BUILD)/tests/raysweepd-failmalloc: $(DAEMON_OBJ) $(FAILMALLOC_OBJ) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB)
@@ -249,21 +264,22 @@ $(BUILD)/obj/tests/support/imf_read.o: tests/support/imf_read.cpp tests/support/
 	@mkdir -p $(dir $@)
 	$(CXX) $(IMF_CXXFLAGS) -c $< -o $@
 
-$(BUILD)/tests/test_image_exr_stress: $(BUILD)/obj/tests/unit/test_image_exr_stress.o $(BUILD)/obj/tests/support/imf_read.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB) $(COMMON_LIB)
+$(BUILD)/tests/test_image_exr_stress: $(call test_obj,test_image_exr_stress) $(BUILD)/obj/tests/support/imf_read.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
 	$(CXX) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB),$^) $(KERNEL_LIB) $(COMMON_LIB) $(LIBS) $(IMF_LIBS)
 
-$(BUILD)/tests/%: $(BUILD)/obj/tests/unit/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB) $(COMMON_LIB)
-	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB),$^) $(KERNEL_LIB) $(COMMON_LIB) $(LIBS)
+# Every other test program, by its link class: one rule each. (Each
+# program's object is added as a prerequisite of its own.)
+TEST_SPECIAL := test_client test_http_encode test_oom test_image_exr_stress
+$(foreach s,$(TEST_SRC),$(eval $(call test_bin,$(s)): $(patsubst %.c,$(BUILD)/obj/%.o,$(s))))
 
-$(BUILD)/tests/%: $(BUILD)/obj/tests/validation/%.o $(TEST_SUPPORT_OBJ) $(KERNEL_LIB) $(COMMON_LIB)
+$(filter-out $(TEST_SPECIAL:%=$(BUILD)/tests/%),$(call test_bin,$(TEST_KERNEL_SRC))): $(TEST_SUPPORT_OBJ) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB),$^) $(KERNEL_LIB) $(COMMON_LIB) $(LIBS)
+	$(CC) $(LDFLAGS) -o $@ $(filter %.o,$^) $(KERNEL_LIB) $(COMMON_LIB) $(LIBS)
 
-$(BUILD)/tests/%: $(BUILD)/obj/tests/integration/%.o $(TEST_SUPPORT_OBJ) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB)
+$(filter-out $(TEST_SPECIAL:%=$(BUILD)/tests/%),$(call test_bin,$(TEST_SERVICE_SRC))): $(TEST_SUPPORT_OBJ) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $(filter-out $(KERNEL_LIB) $(COMMON_LIB) $(SERVICE_LIB),$^) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB) $(LIBS) $(TEST_LIBS) -lcrypto
+	$(CC) $(LDFLAGS) -o $@ $(filter %.o,$^) $(SERVICE_LIB) $(KERNEL_LIB) $(COMMON_LIB) $(LIBS) $(TEST_LIBS) -lcrypto
 
 $(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(BENCH_SUPPORT_OBJ) $(TEST_SUPPORT_OBJ) $(KERNEL_LIB) $(COMMON_LIB)
 	@mkdir -p $(dir $@)

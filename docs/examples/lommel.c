@@ -7,7 +7,7 @@
  *   eval = f_r cos theta_o; sample: cosine hemisphere, pdf cos / pi.
  *
  * The worked example of docs/adding-a-plugin.md (a test registers it:
- * tests/unit/test_plugin_example.c). */
+ * tests/kernel/scene/test_plugin_example.c). */
 #include "kernel/bsdfs/bsdfs_internal.h"
 #include "kernel/scene/plugin_def.h"
 

@@ -1,5 +1,5 @@
 /* Encoders and request-header helpers of the HTTP layer that need no
- * microhttpd types, so tests/unit/test_http_encode.c can check them alone:
+ * microhttpd types, so tests/http/test_http_encode.c can check them alone:
  * a growable text buffer with a hard cap, JSON string escaping, films as
  * JSON / NPY / EXR, problem+json bodies, Accept negotiation and the JSON
  * nesting-depth scan. Every function is thread-safe (no shared state). */

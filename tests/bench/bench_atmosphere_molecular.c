@@ -11,7 +11,7 @@
  *                         samples_per_cpu_s per second of render-thread time
  *   piecewise_*           the same layers sent as an explicit piecewise +
  *                         blendphase medium (the same film, bit for bit:
- *                         tests/validation/test_molecular_atmosphere.c);
+ *                         tests/kernel/media/test_molecular_atmosphere.c);
  *                         render_ratio = piecewise_samples_per_cpu_s /
  *                         samples_per_cpu_s (goal <= 1.05)
  * Threads: $RSW_BENCH_THREADS or all cores. spp: $RSW_BENCH_ATMO_SPP

@@ -17,7 +17,7 @@
  *                             second, and the ratio to the no-atmosphere
  *                             `path` render.
  *  media_dense_slab_RULE      a non-absorbing slab of optical thickness 32
- *                             under a sun (tests/validation/
+ *                             under a sun (tests/kernel/media/
  *                             test_dense_media.c) with volpath's rr_rule
  *                             `throughput` and `mitsuba`: R + T against
  *                             the incident irradiance, CPU seconds per

@@ -128,7 +128,7 @@ static void test_variant_and_wavelength(void) {
 /* --isa: each ISA the CPU has (generic, the portable kernels, on every
  * CPU) renders and says so in raysweep:isa; auto picks one of them; an unknown name is a usage error (exit 2) naming
  * --isa. (An ISA the CPU lacks is refused the same way: core/isa.c,
- * tests/unit/test_simd.c.) */
+ * tests/kernel/simd/test_simd.c.) */
 static void test_isa(void) {
   char out[128], err[4096];
   snprintf(out, sizeof out, "%s/isa.exr", tmpdir);

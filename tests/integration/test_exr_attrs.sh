@@ -155,7 +155,7 @@ check ref_rgb.exr '{"raysweep:sensor": "hdistant", "raysweep:spp": "4", "rayswee
   "raysweep render -o rgb (rsw_film_save_exr)=cli_rgb.exr=render"
 
 # Unresolved rays under a periodic boundary: a distant sensor looking exactly
-# horizontally between the soil and a sheet (tests/validation/test_periodic_sun.c).
+# horizontally between the soil and a sheet (tests/kernel/scene/test_periodic_sun.c).
 cat >horizontal.json <<'EOF'
 {"type": "scene", "variant": "mono",
  "cam": {"type": "distant", "direction": [0.6, 0.8, 0], "target": [0, 0, 0.5],

@@ -1,6 +1,6 @@
 /* failmalloc: make the Nth heap allocation fail, as curl's and redis's
  * test suites do, to check that every allocation failure in the process
- * ends in a clean error (tests/integration/test_oom.c).
+ * ends in a clean error (tests/http/test_oom.c).
  *
  * How it hooks in: a build-time hook, not LD_PRELOAD. This file defines
  * malloc, calloc, realloc, reallocarray, strdup, strndup, posix_memalign,

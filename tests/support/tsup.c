@@ -132,7 +132,7 @@ void tsup_random_leaves(double (*m)[16], int n, uint64_t seed, uint64_t stream, 
   }
 }
 
-/* The dense slab of tests/validation/test_dense_media.c: z in [0, 1], 200 x 200 wide (the light spreads about one
+/* The dense slab of tests/kernel/media/test_dense_media.c: z in [0, 1], 200 x 200 wide (the light spreads about one
  * thickness sideways) holding medium med, over a black ground at
  * z = -0.5, under a sun of irradiance 1 at zenith angle th0. Sensor 0: a
  * distantflux above the slab, aimed at a 2 x 2 patch of its top; sensor 1:

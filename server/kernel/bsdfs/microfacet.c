@@ -102,7 +102,7 @@ double mf_pdf(const mf_distr *d, vec3 wi, vec3 m) {
  *   erf(x) = 1 - (1 + a1 x + ... + a6 x^6)^-16 for x >= 0, odd in x,
  * polynomial only (no exp). Max absolute error 3e-7 (A&S); with the
  * rounding to float, below 4e-7 over the real line (tested against libm's
- * erf, tests/unit/test_bsdf.c). */
+ * erf, tests/kernel/bsdfs/test_bsdf.c). */
 float mf_erff(float x) {
   float ax = fabsf(x);
   if (!(ax < 6.0f)) return x != x ? x : copysignf(1.0f, x); /* erf = 1 in float; NaN passes */

@@ -133,7 +133,7 @@ static double rpv_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
  * factor; when a chunk holds a coloured lane, each lane computes three
  * (a grey lane's three are the same numbers), so a lane's value depends on
  * its own inputs only. Equal to rpv_value() within 3e-6 relative (the
- * worst of 6e5 random pairs; tests/unit/test_simd.c checks 1e-5). */
+ * worst of 6e5 random pairs; tests/kernel/simd/test_simd.c checks 1e-5). */
 enum {
   RPV_C = 64
 };

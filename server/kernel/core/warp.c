@@ -24,7 +24,7 @@ static double angle_fraction(double y, double x) {
 /* sin and cos of (pi/4) t for t in [-1, 1], in double precision: Taylor
  * polynomials in x^2 up to x^15 (sin) and x^16 (cos), whose first omitted
  * terms at |x| = pi/4 are 5e-17 and 2e-18, below half an ulp of the
- * results (tested against libm to 2 ulp, tests/unit/test_warp.c). Cheaper
+ * results (tested against libm to 2 ulp, tests/kernel/core/test_warp.c). Cheaper
  * than libm's sincos (no range reduction, no call) and as accurate, so the
  * warps keep double precision everywhere: a float angle would move
  * directions near the poles by ~1e-7 rad relative to their tiny radius,

@@ -161,7 +161,7 @@ bool shape_fill_begin(const shape *s, const xform *to_world, const ray3 *r, cons
  * is final); out receives 12, the frame's s, t, n and wi. Vectorised at
  * the render's ISA (core/isa.h) in double precision with the scalar
  * operations in the scalar order (no FMA contraction), so each lane is
- * bitwise the scalar fill whatever the ISA and n (tests/validation/test_wave.c). */
+ * bitwise the scalar fill whatever the ISA and n (tests/kernel/integrators/test_wave.c). */
 #define SHAPE_FRAME_IN 13
 void shape_frames_batch(int n, int stride, const double *in, double *out);
 

@@ -1,0 +1,412 @@
+/* Phase functions (server/kernel/phase/): chi-square of every sampling
+ * routine against its pdf (Mitsuba's test, tests/support/chi2.h; several
+ * g, incident directions, blends), eval == pdf and the weight
+ * value / pdf == 1, normalisation (2 pi int p dmu = 1 by quadrature), hg
+ * with g = 0 equal to isotropic, and loading / update validation of
+ * their parameters (g, blend weight). */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "../../../server/kernel/scene/param_table.h"
+#include "../../../server/kernel/scene/params.h"
+#include "../../../server/kernel/scene/update.h"
+#include "../../support/chi2.h"
+#include "../../support/test.h"
+#include "../../support/tsup.h"
+
+RSW_TEST_DEFINE_GLOBALS
+
+#define CHI2_SAMPLES 200000
+/* chi2_run calls in this file (Sidak correction): isotropic 2, hg 8 x 2,
+ * blendphase 5 x 2 + 2, rayleigh 2, tabphase 5 x 2 + 1. */
+#define CHI2_TESTS   43
+
+/* ---- helpers ------------------------------------------------------------------ */
+
+/* The phase function with this id (objects a plugin makes for its
+ * properties, e.g. a weight's constvolume, carry their holder's id). */
+static object *find_obj(const scene *s, const char *id) {
+  for (size_t i = 0; i < s->n_objects; i++) {
+    object *o = s->objects[i];
+    if (o->id && strcmp(o->id, id) == 0 && o->plugin && o->plugin->cls == CLS_PHASE) return o;
+  }
+  return NULL;
+}
+
+/* A mono scene holding top-level phase functions (and what they need). */
+static scene *load_phases(const char *objects) {
+  char text[4096];
+  snprintf(text, sizeof text, "{\"type\": \"scene\", %s}", objects);
+  return tsup_load(text, "mono");
+}
+
+static rsw_status load_err(const char *objects, rsw_err *err) {
+  char text[4096];
+  snprintf(text, sizeof text, "{\"type\": \"scene\", %s}", objects);
+  scene *s = NULL;
+  scene_load_opts o = {.size = sizeof o, .variant = "mono"};
+  rsw_status st = scene_load_memory(text, strlen(text), "test-scene", false, &o, &s, err);
+  scene_free(s);
+  return st;
+}
+
+static rsw_status upd1(scene *s, const char *key, const char *json, rsw_err *err) {
+  param_update u = {.key = key};
+  rsw_status st = param_value_parse(json, key, &u.value, err);
+  if (st) return st;
+  st = scene_update(s, &u, 1, NULL, err);
+  param_value_free(&u.value);
+  return st;
+}
+
+static medium_interaction mi_at(vec3 wi) {
+  medium_interaction mi = {0};
+  mi.t = 1.0;
+  mi.p = v3(0.2, -0.1, 0.4);
+  mi.wi = v3_norm(wi);
+  return mi;
+}
+
+typedef struct chi2_phase {
+  const phase *ph;
+  medium_interaction mi;
+  int bad; /* samples whose weight differs from eval / pdf */
+} chi2_phase;
+
+static bool phase_sample_cb(void *user, const double *u, vec3 *out, double *weight) {
+  chi2_phase *c = user;
+  double pdf;
+  double w = c->ph->ops->sample(c->ph, &c->mi, u[0], v2(u[1], u[2]), out, &pdf);
+  if (!(pdf > 0.0)) {
+    *weight = 0.0;
+    return false;
+  }
+  double epdf, v = c->ph->ops->eval_pdf(c->ph, &c->mi, *out, &epdf);
+  if (fabs(epdf - pdf) > 1e-9 * pdf || fabs(w - v / pdf) > 1e-9 * w || fabs(v3_len(*out) - 1.0) > 1e-12)
+    c->bad++;
+  *weight = w;
+  return true;
+}
+
+static double phase_pdf_cb(void *user, vec3 wo) {
+  chi2_phase *c = user;
+  double pdf;
+  c->ph->ops->eval_pdf(c->ph, &c->mi, wo, &pdf);
+  return pdf;
+}
+
+static void run_chi2(const phase *ph, vec3 wi, const char *what, int ires) {
+  chi2_phase c = {ph, mi_at(wi), 0};
+  chi2_config cfg = chi2_defaults(CHI2_SPHERE, 3);
+  cfg.sample_count = CHI2_SAMPLES;
+  cfg.test_count = CHI2_TESTS;
+  cfg.ires = ires;
+  chi2_result r = chi2_run(&cfg, phase_sample_cb, phase_pdf_cb, &c);
+  CHECK(r.passed, "chi2 %s, wi = (%.3f, %.3f, %.3f): p = %g, chi2 = %g, dof = %d: %s", what, wi.x, wi.y, wi.z,
+        r.p_value, r.chi2, r.dof, r.reason);
+  CHECK(c.bad == 0, "%s: %d samples with pdf != eval_pdf's or weight != value / pdf", what, c.bad);
+}
+
+/* 2 pi int_{-1}^{1} p(mu) dmu by Simpson's rule on n intervals (p along a
+ * meridian around the forward direction -wi). */
+static double phase_integral(const phase *ph, vec3 wi, int n) {
+  medium_interaction mi = mi_at(wi);
+  frame f = frame_from_normal(v3_neg(mi.wi));
+  double sum = 0.0, h = 2.0 / n;
+  for (int i = 0; i <= n; i++) {
+    double mu = -1.0 + i * h, s = sqrt(fmax(0.0, 1.0 - mu * mu)), pdf;
+    vec3 wo = frame_to_world(&f, v3(s * 0.6, s * 0.8, mu));
+    double v = ph->ops->eval_pdf(ph, &mi, wo, &pdf);
+    sum += v * (i == 0 || i == n ? 1.0 : (i % 2 ? 4.0 : 2.0));
+  }
+  return 2.0 * RSW_PI * sum * h / 3.0;
+}
+
+static const vec3 wis[2] = {{0.0, 0.0, 1.0}, {0.3, -0.5, -0.8}};
+
+/* ---- tests ------------------------------------------------------------------- */
+
+static void test_isotropic(void) {
+  scene *s = load_phases("\"iso\": {\"type\": \"isotropic\"}");
+  REQUIRE(s, "load");
+  const phase *ph = (const phase *)find_obj(s, "iso");
+  REQUIRE(ph && ph->base.plugin->cls == CLS_PHASE, "isotropic object");
+  for (int k = 0; k < 2; k++) run_chi2(ph, wis[k], "isotropic", 4);
+  CHECK_REL(phase_integral(ph, wis[1], 200), 1.0, 1e-12);
+  scene_free(s);
+}
+
+static void test_hg(void) {
+  const double gs[8] = {-0.9, -0.7, -0.3, 0.0, 2e-6, 0.2, 0.5, 0.8};
+  for (int i = 0; i < 8; i++) {
+    char objs[256], what[64];
+    snprintf(objs, sizeof objs, "\"p\": {\"type\": \"hg\", \"g\": %.17g}", gs[i]);
+    snprintf(what, sizeof what, "hg g = %g", gs[i]);
+    scene *s = load_phases(objs);
+    REQUIRE(s, "load %s", what);
+    const phase *ph = (const phase *)find_obj(s, "p");
+    /* Strong forward/backward peaks need the finer pdf integration. */
+    for (int k = 0; k < 2; k++) run_chi2(ph, wis[k], what, fabs(gs[i]) > 0.6 ? 16 : 4);
+    CHECK_REL(phase_integral(ph, wis[1], 20000), 1.0, 1e-6);
+    /* The mean cosine is g: 2 pi int mu p(mu) dmu. */
+    medium_interaction mi = mi_at(wis[0]);
+    double m = 0.0;
+    int n = 200000;
+    for (int j = 0; j < n; j++) {
+      double mu = -1.0 + (j + 0.5) * 2.0 / n, pdf;
+      vec3 wo = v3(sqrt(fmax(0.0, 1.0 - mu * mu)), 0.0, -mu); /* -wi = (0, 0, -1) */
+      m += mu * ph->ops->eval_pdf(ph, &mi, wo, &pdf) * 2.0 / n;
+    }
+    CHECK_ABS(2.0 * RSW_PI * m, gs[i], 1e-6);
+    scene_free(s);
+  }
+}
+
+/* Forward means wo = -wi: hg with g > 0 peaks there. */
+static void test_hg_convention(void) {
+  scene *s = load_phases("\"p\": {\"type\": \"hg\", \"g\": 0.7}");
+  REQUIRE(s, "load");
+  const phase *ph = (const phase *)find_obj(s, "p");
+  medium_interaction mi = mi_at(v3(0, 0, 1));
+  double pdf, fwd = ph->ops->eval_pdf(ph, &mi, v3(0, 0, -1), &pdf);
+  double back = ph->ops->eval_pdf(ph, &mi, v3(0, 0, 1), &pdf);
+  CHECK_REL(fwd, (1 - 0.49) / (4 * RSW_PI * pow(1 - 0.7, 3)), 1e-14);
+  CHECK_REL(back, (1 - 0.49) / (4 * RSW_PI * pow(1 + 0.7, 3)), 1e-14);
+  /* Default g is Mitsuba's 0.8. */
+  scene *d = load_phases("\"p\": {\"type\": \"hg\"}");
+  REQUIRE(d, "load default");
+  const phase *pd = (const phase *)find_obj(d, "p");
+  CHECK_REL(pd->ops->eval_pdf(pd, &mi, v3(0, 0, -1), &pdf), (1 - 0.64) / (4 * RSW_PI * pow(0.2, 3)), 1e-14);
+  scene_free(d);
+  scene_free(s);
+}
+
+static void test_hg_zero_is_isotropic(void) {
+  scene *s = load_phases("\"h\": {\"type\": \"hg\", \"g\": 0}, \"i\": {\"type\": \"isotropic\"}");
+  REQUIRE(s, "load");
+  const phase *h = (const phase *)find_obj(s, "h"), *iso = (const phase *)find_obj(s, "i");
+  medium_interaction mi = mi_at(wis[1]);
+  pcg32 r;
+  pcg32_seed(&r, 7, 1);
+  for (int k = 0; k < 1000; k++) {
+    vec3 wo = warp_square_to_uniform_sphere(v2(pcg32_next_double(&r), pcg32_next_double(&r)));
+    double ph, pi;
+    double vh = h->ops->eval_pdf(h, &mi, wo, &ph), vi = iso->ops->eval_pdf(iso, &mi, wo, &pi);
+    CHECK(vh == vi && ph == pi, "hg(0) %.17g / %.17g vs isotropic %.17g / %.17g", vh, ph, vi, pi);
+    double u1 = pcg32_next_double(&r);
+    vec2 u2 = v2(pcg32_next_double(&r), pcg32_next_double(&r));
+    vec3 a, b;
+    double pa, pb, wa = h->ops->sample(h, &mi, u1, u2, &a, &pa),
+                   wb = iso->ops->sample(iso, &mi, u1, u2, &b, &pb);
+    CHECK(wa == wb && pa == pb, "sample weight/pdf: hg(0) %g/%g, isotropic %g/%g", wa, pa, wb, pb);
+  }
+  scene_free(s);
+}
+
+static void test_blendphase(void) {
+  const char *cases[5][2] = {
+      {"\"weight\": 0.3, \"phase_0\": {\"type\": \"isotropic\"}, \"phase_1\": {\"type\": \"hg\", \"g\": 0.8}",
+       "blend(isotropic, hg 0.8; 0.3)"},
+      {"\"weight\": 0.6, \"phase_0\": {\"type\": \"hg\", \"g\": -0.5}, \"phase_1\": {\"type\": \"hg\", "
+       "\"g\": 0.7}",
+       "blend(hg -0.5, hg 0.7; 0.6)"},
+      /* Nested blend, given in reverse order: names decide the order. */
+      /* The atmosphere's molecules + aerosols. */
+      {"\"weight\": 0.35, \"phase_0\": {\"type\": \"rayleigh\"}, \"phase_1\": {\"type\": \"hg\", \"g\": 0.7}",
+       "blend(rayleigh, hg 0.7; 0.35)"},
+      {"\"weight\": 0.5, \"phase_0\": {\"type\": \"tabphase\", \"values\": \"0, 1, 0.2, 3\"}, "
+       "\"phase_1\": {\"type\": \"rayleigh\"}",
+       "blend(tabphase, rayleigh; 0.5)"},
+      {"\"weight\": 0.5, \"phase_1\": {\"type\": \"blendphase\", \"weight\": 0.25, \"phase_0\": {\"type\": "
+       "\"isotropic\"}, \"phase_1\": {\"type\": \"hg\", \"g\": -0.6}}, \"phase_0\": {\"type\": \"hg\", "
+       "\"g\": 0.4}",
+       "blend(hg 0.4, blend(isotropic, hg -0.6; 0.25); 0.5)"},
+  };
+  for (int c = 0; c < 5; c++) {
+    char objs[1024];
+    snprintf(objs, sizeof objs, "\"b\": {\"type\": \"blendphase\", %s}", cases[c][0]);
+    scene *s = load_phases(objs);
+    REQUIRE(s, "load %s", cases[c][1]);
+    const phase *ph = (const phase *)find_obj(s, "b");
+    for (int k = 0; k < 2; k++) run_chi2(ph, wis[k], cases[c][1], 16);
+    CHECK_REL(phase_integral(ph, wis[0], 20000), 1.0, 1e-6);
+    scene_free(s);
+  }
+  /* The value is the lerp of the two, weight 0.3 on phase_1. */
+  scene *s = load_phases("\"b\": {\"type\": \"blendphase\", \"weight\": 0.3, \"phase_0\": {\"type\": "
+                         "\"isotropic\"}, \"phase_1\": {\"type\": \"hg\", \"g\": 0.8}}");
+  REQUIRE(s, "load");
+  const phase *ph = (const phase *)find_obj(s, "b");
+  medium_interaction mi = mi_at(v3(0, 0, 1));
+  double pdf, v = ph->ops->eval_pdf(ph, &mi, v3(0, 0, -1), &pdf);
+  CHECK_REL(v, 0.7 * RSW_INV_4PI + 0.3 * (1 - 0.64) / (4 * RSW_PI * pow(0.2, 3)), 1e-14);
+  CHECK(v == pdf, "value %g == pdf %g", v, pdf);
+  /* Weight 0 and 1: one component only (its samples, its density). */
+  CHECK(upd1(s, "b.weight.value.value", "1", NULL) == RSW_OK, "weight 1");
+  v = ph->ops->eval_pdf(ph, &mi, v3(0, 0, -1), &pdf);
+  CHECK_REL(v, (1 - 0.64) / (4 * RSW_PI * pow(0.2, 3)), 1e-14);
+  run_chi2(ph, wis[1], "blend weight 1", 16);
+  CHECK(upd1(s, "b.weight.value.value", "0", NULL) == RSW_OK, "weight 0");
+  v = ph->ops->eval_pdf(ph, &mi, v3(0, 0, -1), &pdf);
+  CHECK(v == RSW_INV_4PI, "weight 0: isotropic, got %g", v);
+  run_chi2(ph, wis[1], "blend weight 0", 4);
+  scene_free(s);
+}
+
+static void test_rayleigh(void) {
+  scene *s = load_phases("\"r\": {\"type\": \"rayleigh\"}");
+  REQUIRE(s, "load");
+  const phase *ph = (const phase *)find_obj(s, "r");
+  for (int k = 0; k < 2; k++) run_chi2(ph, wis[k], "rayleigh", 4);
+  /* A quadratic in mu: Simpson's rule is exact. */
+  CHECK_REL(phase_integral(ph, wis[1], 2), 1.0, 1e-14);
+  CHECK_REL(phase_integral(ph, wis[0], 100), 1.0, 1e-14);
+  medium_interaction mi = mi_at(v3(0, 0, 1));
+  double pdf;
+  CHECK_REL(ph->ops->eval_pdf(ph, &mi, v3(0, 0, -1), &pdf), 3.0 / (8.0 * RSW_PI), 1e-15);
+  CHECK_REL(ph->ops->eval_pdf(ph, &mi, v3(1, 0, 0), &pdf), 3.0 / (16.0 * RSW_PI), 1e-15);
+  CHECK_REL(ph->ops->eval_pdf(ph, &mi, v3(0, 0, 1), &pdf), 3.0 / (8.0 * RSW_PI), 1e-15);
+  /* The sampled cosine is the cdf's inverse: F(mu(u)) = u. */
+  for (int i = 0; i <= 100; i++) {
+    double u = i / 100.0, w;
+    vec3 wo;
+    ph->ops->sample(ph, &mi, 0.5, v2(u, 0.3), &wo, &w);
+    double mu = -wo.z;
+    CHECK_ABS(0.375 * (mu + mu * mu * mu / 3.0) + 0.5, u, 1e-14);
+  }
+  scene_free(s);
+}
+
+static void test_tabphase(void) {
+  const char *tables[5][2] = {
+      {"[1, 1]", "tabphase constant"},
+      {"\"0, 1\"", "tabphase linear 0..1"},
+      {"\"0.02 0.03 0.05 0.08 0.12 0.2 0.35 0.6 1.1 2.5 6.0\"", "tabphase forward peak"},
+      {"[0, 1, 0, 2, 0.5, 0]", "tabphase with zeros"},
+      {"[3, 0.5, 0.2, 0.1]", "tabphase backward"},
+  };
+  for (int c = 0; c < 5; c++) {
+    char objs[512];
+    snprintf(objs, sizeof objs, "\"t\": {\"type\": \"tabphase\", \"values\": %s}", tables[c][0]);
+    scene *s = load_phases(objs);
+    REQUIRE(s, "load %s", tables[c][1]);
+    const phase *ph = (const phase *)find_obj(s, "t");
+    for (int k = 0; k < 2; k++) run_chi2(ph, wis[k], tables[c][1], 8);
+    CHECK_REL(phase_integral(ph, wis[1], 30000), 1.0, 1e-6);
+    scene_free(s);
+  }
+  /* [1, 1] is isotropic; a string and a list are the same table. */
+  scene *s = load_phases("\"t\": {\"type\": \"tabphase\", \"values\": \"1,1\"}, \"a\": {\"type\": "
+                         "\"tabphase\", \"values\": \"1, 2,3\"}, \"b\": {\"type\": \"tabphase\", "
+                         "\"values\": [1, 2, 3]}");
+  REQUIRE(s, "load");
+  const phase *t = (const phase *)find_obj(s, "t"), *a = (const phase *)find_obj(s, "a"),
+              *b = (const phase *)find_obj(s, "b");
+  medium_interaction mi = mi_at(wis[1]);
+  double pa, pb;
+  CHECK_REL(t->ops->eval_pdf(t, &mi, v3(0.6, 0.8, 0), &pa), RSW_INV_4PI, 1e-15);
+  for (int k = 0; k < 10; k++) {
+    vec3 wo = v3_norm(v3(sin(k), cos(3 * k), 0.3 * k - 1));
+    CHECK(a->ops->eval_pdf(a, &mi, wo, &pa) == b->ops->eval_pdf(b, &mi, wo, &pb), "string == list");
+  }
+  /* Forward (mu = 1) holds the last value: 3 / (2 pi I), I = 4. */
+  CHECK_REL(a->ops->eval_pdf(a, &mi, v3_neg(mi.wi), &pa), 3.0 / (2 * RSW_PI * 4.0), 1e-14);
+  CHECK_REL(a->ops->eval_pdf(a, &mi, mi.wi, &pa), 1.0 / (2 * RSW_PI * 4.0), 1e-14);
+  /* Updates: same length, non-negative, finite, not all zero. */
+  rsw_err err = {0};
+  CHECK(upd1(s, "a.values", "[3, 2, 1]", &err) == RSW_OK, "update: %s", err.msg);
+  CHECK_REL(a->ops->eval_pdf(a, &mi, v3_neg(mi.wi), &pa), 1.0 / (2 * RSW_PI * 4.0), 1e-14);
+  run_chi2(a, wis[0], "tabphase after an update", 8);
+  const char *bad[][2] = {{"[1, 2]", "takes 3 numbers"},
+                          {"[1, -2, 1]", "must be >= 0"},
+                          {"[0, 0, 0]", "must not all be zero"},
+                          {"0.5", "takes 3 numbers"}};
+  for (int k = 0; k < 4; k++) {
+    memset(&err, 0, sizeof err);
+    CHECK(upd1(s, "a.values", bad[k][0], &err) != RSW_OK, "%s rejected", bad[k][0]);
+    CHECK(strstr(err.msg, bad[k][1]) && strstr(err.msg, "a.values"), "%s: %s", bad[k][0], err.msg);
+  }
+  CHECK_REL(a->ops->eval_pdf(a, &mi, v3_neg(mi.wi), &pa), 1.0 / (2 * RSW_PI * 4.0), 1e-14);
+  scene_free(s);
+}
+
+static void test_parameters(void) {
+  scene *s = load_phases("\"b\": {\"type\": \"blendphase\", \"weight\": 0.3, \"phase_0\": {\"type\": "
+                         "\"isotropic\"}, \"phase_1\": {\"type\": \"hg\", \"g\": 0.8}}");
+  REQUIRE(s, "load");
+  rsw_err err = {0};
+  size_t i;
+  CHECK(params_lookup(s, "b.phase_1.g", &i, &err) == RSW_OK, "b.phase_1.g exists");
+  CHECK(params_lookup(s, "b.weight.value.value", &i, &err) == RSW_OK, "b.weight.value.value exists");
+  param_info info;
+  REQUIRE(params_info(s, i, &info), "info");
+  CHECK(info.cls == UPDATE_SPECTRAL, "weight is spectral");
+  CHECK(upd1(s, "b.phase_1.g", "0.5", &err) == RSW_OK, "g 0.5: %s", err.msg);
+  memset(&err, 0, sizeof err);
+  CHECK(upd1(s, "b.phase_1.g", "1", &err) == RSW_ERR_RANGE, "g = 1 rejected");
+  CHECK(strstr(err.msg, "b.phase_1.g") != NULL, "error names the key: %s", err.msg);
+  /* The open interval's bound is not printed as the excluded 1. */
+  CHECK(strstr(err.msg, "0.99999999999999989") != NULL && strstr(err.msg, "[-1, 1]") == NULL,
+        "the range says g < 1: %s", err.msg);
+  CHECK(upd1(s, "b.phase_1.g", "-1.5", &err) == RSW_ERR_RANGE, "g = -1.5 rejected");
+  memset(&err, 0, sizeof err);
+  CHECK(upd1(s, "b.weight.value.value", "1.2", &err) == RSW_ERR_RANGE, "weight 1.2 rejected");
+  CHECK(strstr(err.msg, "b.weight.value.value") != NULL, "error names the key: %s", err.msg);
+  CHECK(upd1(s, "b.weight.value.value", "-0.1", &err) == RSW_ERR_RANGE, "weight -0.1 rejected");
+  medium_interaction mi = mi_at(v3(0, 0, 1));
+  const phase *ph = (const phase *)find_obj(s, "b");
+  double pdf, v = ph->ops->eval_pdf(ph, &mi, v3(0, 0, -1), &pdf);
+  CHECK_REL(v, 0.7 * RSW_INV_4PI + 0.3 * (1 - 0.25) / (4 * RSW_PI * pow(0.5, 3)), 1e-14);
+  scene_free(s);
+}
+
+static void test_load_errors(void) {
+  static const struct {
+    const char *objs, *want;
+  } bad[] = {
+      {"\"p\": {\"type\": \"hg\", \"g\": 1}", "open interval"},
+      {"\"p\": {\"type\": \"hg\", \"g\": -1.2}", "open interval"},
+      {"\"p\": {\"type\": \"hg\", \"g\": \"x\"}", "must be a number"},
+      {"\"p\": {\"type\": \"hg\", \"k\": 0.1}", "no property 'k'"},
+      {"\"p\": {\"type\": \"isotropic\", \"g\": 0.1}", "no property 'g'"},
+      {"\"p\": {\"type\": \"blendphase\", \"phase_0\": {\"type\": \"isotropic\"}}", "exactly two"},
+      {"\"p\": {\"type\": \"blendphase\", \"weight\": 1.5, \"phase_0\": {\"type\": \"isotropic\"}, "
+       "\"phase_1\": {\"type\": \"isotropic\"}}",
+       "'weight' must be in [0, 1]"},
+      {"\"p\": {\"type\": \"blendphase\", \"weight\": -0.5, \"phase_0\": {\"type\": \"isotropic\"}, "
+       "\"phase_1\": {\"type\": \"isotropic\"}}",
+       "'weight' must be >= 0"},
+      {"\"p\": {\"type\": \"blendphase\", \"weight\": {\"type\": \"hg\"}, \"phase_0\": {\"type\": "
+       "\"isotropic\"}, \"phase_1\": {\"type\": \"isotropic\"}}",
+       "exactly two"},
+      {"\"p\": {\"type\": \"mie\"}", "mie"},
+      {"\"p\": {\"type\": \"rayleigh\", \"g\": 0}", "no property 'g'"},
+      {"\"p\": {\"type\": \"tabphase\"}", "missing property 'values'"},
+      {"\"p\": {\"type\": \"tabphase\", \"values\": \"1\"}", "at least 2"},
+      {"\"p\": {\"type\": \"tabphase\", \"values\": \"1, x, 2\"}", "'x' (value 1) is not a number"},
+      {"\"p\": {\"type\": \"tabphase\", \"values\": \"1, -1, 2\"}", "value 1 (-1) must be >= 0"},
+      {"\"p\": {\"type\": \"tabphase\", \"values\": [0, 0]}", "all zeros"},
+      {"\"p\": {\"type\": \"tabphase\", \"values\": true}", "list of numbers"},
+  };
+  for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
+    rsw_err err = {0};
+    rsw_status st = load_err(bad[k].objs, &err);
+    CHECK(st != RSW_OK, "case %zu loads: %s", k, bad[k].objs);
+    CHECK(strstr(err.msg, bad[k].want) != NULL, "case %zu: '%s' not in '%s'", k, bad[k].want, err.msg);
+    CHECK(strstr(err.where, "/p") != NULL, "case %zu: location '%s' names /p", k, err.where);
+  }
+}
+
+int main(void) {
+  RSW_TEST_RUN(test_isotropic);
+  RSW_TEST_RUN(test_hg);
+  RSW_TEST_RUN(test_hg_convention);
+  RSW_TEST_RUN(test_hg_zero_is_isotropic);
+  RSW_TEST_RUN(test_blendphase);
+  RSW_TEST_RUN(test_rayleigh);
+  RSW_TEST_RUN(test_tabphase);
+  RSW_TEST_RUN(test_parameters);
+  RSW_TEST_RUN(test_load_errors);
+  RSW_TEST_END("test_phase");
+}
