@@ -52,4 +52,54 @@ bsdf *maignan_new(texture *C, texture *ndvi, texture *refr_re, texture *refr_im,
 /* eval(wi, wo) of one channel (Eradiate's value, which is f_r cos(theta_o)). */
 double maignan_value(double C, double ndvi, double refr_re, double refr_im, double ext_ior, vec3 wi, vec3 wo);
 
+/* ---- ocean_legacy: the 6S ocean surface (Eradiate) ------------------------ */
+extern const plugin plugin_ocean_legacy;
+
+enum {
+  OCEAN_T_RES = 64 /* transmittance tables: zenith x azimuth */
+};
+
+typedef struct ocean_bsdf {
+  bsdf base;
+  /* parameters */
+  double wavelength;     /* nm */
+  double wind_speed;     /* m/s at 10 m */
+  double wind_direction; /* degrees, North Left (6SV): where the wind blows from */
+  double chlorinity;     /* g/kg */
+  double pigmentation;   /* mg/m^3 */
+  double coverage;       /* whitecap fraction, derived (read-only) */
+  bool shadowing;
+  int component; /* 0 all, 1 whitecaps, 2 glint, 3 underlight, 4 whitecaps + underlight */
+  /* derived (ocean_update) */
+  double phi_w; /* wind azimuth in the local frame, radians (East Right) */
+  double n_re, n_im, sigma_u, sigma_c, r_omega, whitecap;
+  double t_key[3]; /* n_re, n_im, wind_speed the tables were made for */
+  float t_down[OCEAN_T_RES * OCEAN_T_RES], t_up[OCEAN_T_RES * OCEAN_T_RES];
+} ocean_bsdf;
+
+/* Parameters as Eradiate names them; NULL when out of memory. */
+bsdf *ocean_legacy_new(double wavelength, double wind_speed, double wind_direction, double chlorinity,
+                       double pigmentation, bool shadowing, int component);
+/* Recompute the derived state after a parameter changed (the
+ * transmittance tables are then stale). */
+void ocean_update(ocean_bsdf *o);
+/* Build the transmittance tables if stale (the plugin's prepare() does it
+ * before each render; about a second). Until then underlight is 0 and the
+ * sampling takes t_d = 1: direct users of ocean_legacy_new call it. */
+void ocean_tables(ocean_bsdf *o);
+bool ocean_tables_ready(const ocean_bsdf *o);
+/* The sun-glint term pi D G F / (4 cos_i cos_o) (the BRF of the glint,
+ * before the (1 - coverage) factor), wi and wo in the local frame. */
+double ocean_glint(const ocean_bsdf *o, vec3 wi, vec3 wo);
+/* The transmittance the tables hold (downwelling, or upwelling when up)
+ * at incidence theta with the wind at azimuth phi, by nq x nq
+ * Gauss-Legendre points (the tables use 32; Eradiate 64). */
+double ocean_transmittance(const ocean_bsdf *o, double theta, double phi, bool up, int nq);
+/* Fresnel reflectance as 6S computes it (n_re + i n_im, incidence cosine
+ * and sine). */
+double ocean_fresnel_6s(double n_re, double n_im, double cos_chi, double sin_chi);
+/* The Gram-Charlier factor of Cox and Munk's slope distribution at the
+ * microfacet normal m (local frame). */
+double ocean_gram_charlier(const ocean_bsdf *o, vec3 m);
+
 #endif
