@@ -16,7 +16,7 @@
   X(diffuse) X(conductor) X(roughconductor) X(dielectric) X(twosided)        \
   X(rpv) X(bilambertian) X(hapke)                                             \
   X(rtls) X(maignan) X(ocean_legacy)                                         \
-  X(directional) X(constant) X(area) X(envmap)                                \
+  X(directional) X(constant) X(area) X(envmap) X(astroobject)                \
   X(hdistant) X(distant) X(radiancemeter) X(perspective)                      \
   X(mdistant) X(distantflux) X(mradiancemeter)                                \
   X(hdrfilm) X(box) X(gaussian)                                               \
