@@ -19,6 +19,7 @@
 #include "../scene/loader.h"
 #include "../scene/params.h"
 #include "../textures/texture.h"
+#include "distant_emitter.h"
 
 typedef struct astro {
   emitter base;
@@ -86,16 +87,9 @@ static vec3 astro_get_direction(const object *o) {
   return ((const astro *)o)->f.n;
 }
 
-/* Mitsuba's look_at(0, direction, up), up from coordinate_system. */
-static bool astro_look_at(vec3 d, xform *out) {
-  vec3 dn = v3_norm(d), up, unused;
-  coordinate_system(dn, &up, &unused);
-  return xf_look_at(v3(0, 0, 0), dn, up, out);
-}
-
 static void astro_set_direction(object *o, vec3 d) {
   astro *a = (astro *)o;
-  if (astro_look_at(d, &a->to_world)) astro_derive(a);
+  if (distant_look_at(d, &a->to_world)) astro_derive(a);
 }
 
 static void astro_traverse(object *o, param_visitor *v) {
@@ -117,34 +111,15 @@ static rsw_status astro_create(loader *ld, node *n, object **out) {
   if (!a) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
   a->base.ops = &astro_ops;
   a->base.flags = EMITTER_INFINITE;
-  color tmp;
-  bool has_dir = false, has_xf = false;
-  vec3 d;
-  xform xf;
-  rsw_status st = ld_float_range(ld, n, "sampling_weight", 1.0, 0.0, INFINITY, &a->base.sampling_weight);
-  if (!st) st = ld_texture(ld, n, "irradiance", 1.0, 0.0, &a->irradiance);
-  if (!st && !uniform_texture_value(a->irradiance, &tmp))
-    st = ld_fail(ld, n, "irradiance", RSW_ERR_INVALID,
-                 "irradiance must not vary spatially (give a number, rgb or spectrum, not a texture)");
+  rsw_status st = distant_emitter_read(ld, n, &a->base, &a->irradiance, &a->to_world);
   if (!st) st = ld_float(ld, n, "angular_diameter", 0.5358, &a->angular_diameter);
   if (!st && !(a->angular_diameter > 0.0 && a->angular_diameter < 180.0))
     st = ld_fail(ld, n, "angular_diameter", RSW_ERR_RANGE,
                  "angular_diameter = %g must lie in (0, 180) degrees", a->angular_diameter);
-  if (!st) st = ld_vec3(ld, n, "direction", v3(0, 0, 1), &d, &has_dir);
-  if (!st) st = ld_transform(ld, n, "to_world", &xf, &has_xf);
-  if (!st && has_dir && has_xf)
-    st = ld_fail(ld, n, "direction", RSW_ERR_INVALID, "give either 'direction' or 'to_world', not both");
-  if (!st && has_dir && !(v3_len(d) > 0))
-    st = ld_fail(ld, n, "direction", RSW_ERR_INVALID, "direction must be non-zero");
-  if (!st && !has_xf && !astro_look_at(d, &xf))
-    st = ld_fail(ld, n, "direction", RSW_ERR_INVALID, "cannot build a frame from 'direction'");
-  if (!st && !(v3_len(xf_vector(&xf, v3(0, 0, 1))) > 0))
-    st = ld_fail(ld, n, "to_world", RSW_ERR_INVALID, "to_world maps +z to a zero vector");
   if (st) {
     free(a);
     return st;
   }
-  a->to_world = xf;
   astro_derive(a);
   *out = &a->base.base;
   return RSW_OK;
