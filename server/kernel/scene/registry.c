@@ -18,7 +18,7 @@
   X(rtls) X(maignan) X(ocean_legacy)                                         \
   X(directional) X(constant) X(area) X(envmap) X(astroobject)                \
   X(hdistant) X(distant) X(radiancemeter) X(perspective)                      \
-  X(mdistant) X(distantflux) X(mradiancemeter)                                \
+  X(mdistant) X(distantflux) X(mradiancemeter) X(mpdistant)                  \
   X(hdrfilm) X(box) X(gaussian)                                               \
   X(independent) X(stratified)                                                \
   X(path)                                                                     \
