@@ -52,6 +52,11 @@ bsdf *maignan_new(texture *C, texture *ndvi, texture *refr_re, texture *refr_im,
 /* eval(wi, wo) of one channel (Eradiate's value, which is f_r cos(theta_o)). */
 double maignan_value(double C, double ndvi, double refr_re, double refr_im, double ext_ior, vec3 wi, vec3 wo);
 
+/* ---- mqdiffuse: measured quasi-diffuse reflectance on a grid ------------- */
+extern const plugin plugin_mqdiffuse;
+/* The grid's value (no cosine) at (wi, wo), both above the surface. */
+double mqdiffuse_grid_value(const volume *grid, vec3 wi, vec3 wo);
+
 /* ---- selectbsdf: nested BSDFs picked by an index texture ---------------- */
 extern const plugin plugin_selectbsdf;
 

@@ -15,7 +15,7 @@
   X(rectangle) X(disk) X(sphere) X(cylinder) X(cube) X(obj) X(ply)           \
   X(diffuse) X(conductor) X(roughconductor) X(dielectric) X(twosided)        \
   X(rpv) X(bilambertian) X(hapke)                                             \
-  X(rtls) X(maignan) X(ocean_legacy) X(selectbsdf)                           \
+  X(rtls) X(maignan) X(ocean_legacy) X(selectbsdf) X(mqdiffuse)              \
   X(directional) X(constant) X(area) X(envmap) X(astroobject)                \
   X(hdistant) X(distant) X(radiancemeter) X(perspective)                      \
   X(mdistant) X(distantflux) X(mradiancemeter) X(mpdistant)                  \
