@@ -18,6 +18,8 @@ const cmdline_opt cli_opts_scene_rm[] = {
 const cmdline_opt cli_opts_params[] = {
     {"--match", "GLOB", false, "glob over keys (e.g. '*.reflectance.value') or TYPE:ID:PATH"},
     {"--class", "C", false, "spectral, geometric or none"},
+    {"--full", NULL, false,
+     "every buffer's values (else one longer than 16 numbers shows as {\"length\": N})"},
     {NULL},
 };
 const cmdline_opt cli_opts_set[] = {
@@ -231,7 +233,8 @@ int cmd_params(cli_ctx *ctx, const cmdline_args *a) {
     return cli_usage(ctx, "--class needs spectral, geometric or none (got '%s')", cls);
   char *text = NULL;
   uint64_t rev = 0;
-  rsw_status s = rsw_params_get(ctx->client, a->pos[0], cmdline_get(a, "--match"), cls, &text, &rev);
+  rsw_status s = (cmdline_has(a, "--full") ? rsw_params_get_full : rsw_params_get)(
+      ctx->client, a->pos[0], cmdline_get(a, "--match"), cls, &text, &rev);
   if (s) return cli_report(ctx, s, a->pos[0]);
   int rc = CLI_OK;
   if (ctx->json) {

@@ -587,8 +587,8 @@ rsw_status rsw_scene_copy(rsw_client *c, const char *id, char id_out[65], char *
 
 /* ---- parameters ------------------------------------------------------------------------- */
 
-rsw_status rsw_params_get(rsw_client *c, const char *id, const char *match, const char *class_name,
-                          char **json_out, uint64_t *revision_out) {
+static rsw_status params_get(rsw_client *c, const char *id, const char *match, const char *class_name,
+                             bool full, char **json_out, uint64_t *revision_out) {
   if (!c) return RSW_ERR_INVALID;
   client_clear_error(c);
   char esc[256], m[512], k[128], path[1024];
@@ -602,6 +602,7 @@ rsw_status rsw_params_get(rsw_client *c, const char *id, const char *match, cons
   snprintf(path, sizeof path, "/v1/scenes/%s/params%s%s%s%s%s", esc, match || class_name ? "?" : "",
            match ? "match=" : "", match ? m : "", match && class_name ? "&" : "", class_name ? "class=" : "");
   if (class_name) strncat(path, k, sizeof path - strlen(path) - 1);
+  if (full) strncat(path, match || class_name ? "&full=1" : "?full=1", sizeof path - strlen(path) - 1);
   http_resp r;
   rsw_status s = http_request(c, &(http_req){.method = "GET", .path = path}, &r);
   if (s) return s;
@@ -616,6 +617,16 @@ rsw_status rsw_params_get(rsw_client *c, const char *id, const char *match, cons
   cJSON_Delete(a);
   *json_out = r.body;
   return RSW_OK;
+}
+
+rsw_status rsw_params_get(rsw_client *c, const char *id, const char *match, const char *class_name,
+                          char **json_out, uint64_t *revision_out) {
+  return params_get(c, id, match, class_name, false, json_out, revision_out);
+}
+
+rsw_status rsw_params_get_full(rsw_client *c, const char *id, const char *match, const char *class_name,
+                               char **json_out, uint64_t *revision_out) {
+  return params_get(c, id, match, class_name, true, json_out, revision_out);
 }
 
 rsw_status rsw_params_update(rsw_client *c, const char *id, const char *map_json, int64_t if_match,

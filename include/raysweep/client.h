@@ -148,6 +148,11 @@ rsw_status rsw_scene_copy(rsw_client *c, const char *id, char id_out[65], char *
  * revision. */
 rsw_status rsw_params_get(rsw_client *c, const char *id, const char *match, const char *class_name,
                           char **json_out, uint64_t *revision_out);
+/* As rsw_params_get, with every buffer's values however long (GET
+ * ...?full=1; the table otherwise gives a buffer longer than 16 numbers
+ * as {"length": n}). The daemon waits for a running render of the scene. */
+rsw_status rsw_params_get_full(rsw_client *c, const char *id, const char *match, const char *class_name,
+                               char **json_out, uint64_t *revision_out);
 /* Apply a parameter map atomically. map_json is a JSON object text
  * {"key": value, ...} (borrowed). if_match < 0: unconditional; otherwise
  * RSW_ERR_PRECONDITION when the base revision moved. *revision_out (may be

@@ -321,11 +321,13 @@ static const char *const classes[] = {"spectral", "geometric", "none"};
 
 static void h_params_get(http_req *r) {
   if (!query_enum(r, "class", r->q_class, classes, 3)) return;
+  bool full;
+  if (!query_bool(r, "full", r->q_full, &full)) return;
   svc_error e = {0};
   char *json = NULL;
   uint64_t rev = 0;
-  rsw_status s =
-      service_params_get(r->svc, r->params[0], r->q_match ? r->q_match : "*", r->q_class, &json, &rev, &e);
+  rsw_status s = (full ? service_params_get_full : service_params_get)(
+      r->svc, r->params[0], r->q_match ? r->q_match : "*", r->q_class, &json, &rev, &e);
   if (s == RSW_OK) set_etag(r, rev);
   resp_result(r, s, 200, json, &e);
 }

@@ -71,7 +71,7 @@ struct http_req {
   const char *method, *path;
   const char *params[HTTP_MAX_PATH_PARAMS];
   /* query */
-  const char *q_match, *q_class, *q_force, *q_variant, *q_partial;
+  const char *q_match, *q_class, *q_force, *q_variant, *q_partial, *q_full;
   const char *q_name;                  /* POST /v1/scenes: a label, e.g. the pushed file's name */
   const char *q_exposure, *q_colormap; /* PNG films (image/png) */
   const char *q_band, *q_node;         /* job results of a job with bands */

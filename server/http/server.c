@@ -883,6 +883,7 @@ static enum MHD_Result dispatch(struct MHD_Connection *c, conn *cn, const char *
       .params = {cn->params[0], cn->params[1], cn->params[2]},
       .q_match = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "match"),
       .q_class = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "class"),
+      .q_full = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "full"),
       .q_force = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "force"),
       .q_variant = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "variant"),
       .q_name = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "name"),

@@ -76,8 +76,22 @@ rsw_status svc_key_error(svc_error *e, const scene *sc, const char *key, const r
   return e->err.code;
 }
 
-rsw_status service_params_get(service *svc, const char *id, const char *match, const char *cls,
-                              char **json_out, uint64_t *revision_out, svc_error *e) {
+/* A cached entry whose value is a buffer's {"length": n} stand-in gets
+ * its values, read from the scene (r->lock held, base state). False when
+ * out of memory. */
+static bool params_entry_full(const resident *r, size_t i, cJSON *p) {
+  cJSON *v = cJSON_GetObjectItemCaseSensitive(p, "value");
+  if (!cJSON_IsObject(v) || !cJSON_GetObjectItemCaseSensitive(v, "length")) return true;
+  char *txt = params_value_json(r->sc, i, 0);
+  cJSON *full = txt ? cJSON_Parse(txt) : NULL;
+  free(txt);
+  if (full && cJSON_ReplaceItemInObjectCaseSensitive(p, "value", full)) return true;
+  cJSON_Delete(full);
+  return false;
+}
+
+static rsw_status params_get(service *svc, const char *id, const char *match, const char *cls, bool full,
+                             char **json_out, uint64_t *revision_out, svc_error *e) {
   unsigned jm = svc_json_mark();
   resident *r = svc_scene_acquire(svc, id);
   if (!r) return svc_no_scene(e, id);
@@ -110,6 +124,11 @@ rsw_status service_params_get(service *svc, const char *id, const char *match, c
     return svc_fail(e, RSW_ERR_UNAVAILABLE, "",
                     "the parameter table is being rebuilt (the last rebuild ran out of memory); retry");
   }
+  /* Full values come from the scene in its base state: wait for a
+   * render's overrides to be undone (lock order: r->lock, then
+   * cache_lock, as in svc_refresh_param_cache). */
+  if (full) pthread_mutex_lock(&r->lock);
+  bool oom = false;
   size_t *idx = NULL, n = 0;
   rsw_err err = {0};
   rsw_status st = params_match(r->sc, match && *match ? match : "*", mask, none, &idx, &n, &err);
@@ -122,7 +141,9 @@ rsw_status service_params_get(service *svc, const char *id, const char *match, c
     cJSON *a = cJSON_AddArrayToObject(o, "params");
     for (size_t k = 0; k < n; k++) {
       cJSON *p = cJSON_GetArrayItem(r->base_params, (int)idx[k]);
-      if (p) svc_json_push(a, cJSON_Duplicate(p, 1));
+      cJSON *d = p ? cJSON_Duplicate(p, 1) : NULL;
+      if (d && full && !params_entry_full(r, idx[k], d)) oom = true;
+      if (p) svc_json_push(a, d);
     }
   } else if (st == RSW_ERR_NOT_FOUND && !strchr(match, ':')) {
     /* A glob matching nothing is an empty table, not an error, over HTTP. */
@@ -134,11 +155,26 @@ rsw_status service_params_get(service *svc, const char *id, const char *match, c
     st = svc_key_error(e, r->sc, match, &err);
   }
   pthread_mutex_unlock(&r->cache_lock);
+  if (full) pthread_mutex_unlock(&r->lock);
   *revision_out = rev;
   free(idx);
   svc_scene_release(svc, r);
   if (st) return st;
+  if (oom) {
+    cJSON_Delete(o);
+    return svc_fail(e, RSW_ERR_NOMEM, "", "out of memory writing the full parameter values");
+  }
   return svc_json_out(json_out, o, jm, e);
+}
+
+rsw_status service_params_get(service *svc, const char *id, const char *match, const char *cls,
+                              char **json_out, uint64_t *revision_out, svc_error *e) {
+  return params_get(svc, id, match, cls, false, json_out, revision_out, e);
+}
+
+rsw_status service_params_get_full(service *svc, const char *id, const char *match, const char *cls,
+                                   char **json_out, uint64_t *revision_out, svc_error *e) {
+  return params_get(svc, id, match, cls, true, json_out, revision_out, e);
 }
 
 /* Parse a JSON object {key: value} into updates. Keys borrowed from j. */

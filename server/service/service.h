@@ -124,6 +124,11 @@ rsw_status service_scene_copy(service *svc, const char *id, char **id_out, char 
 /* GET params: *revision_out is the base revision (the ETag). */
 rsw_status service_params_get(service *svc, const char *id, const char *match, const char *cls,
                               char **json_out, uint64_t *revision_out, svc_error *e);
+/* As service_params_get, with every buffer's values however long (the
+ * table above gives a buffer longer than 16 numbers as {"length": n}).
+ * Reading them waits for a running render of the scene. */
+rsw_status service_params_get_full(service *svc, const char *id, const char *match, const char *cls,
+                                   char **json_out, uint64_t *revision_out, svc_error *e);
 /* PATCH params: body is a JSON object {key: value}. if_match < 0: none. */
 rsw_status service_params_patch(service *svc, const char *id, const char *body, size_t len, int64_t if_match,
                                 char **json_out, uint64_t *revision_out, svc_error *e);

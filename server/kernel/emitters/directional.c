@@ -16,6 +16,7 @@
 #include "../scene/loader.h"
 #include "../scene/params.h"
 #include "../textures/texture.h"
+#include "distant_emitter.h"
 
 typedef struct directional {
   emitter base;
@@ -87,14 +88,6 @@ static void dir_destroy(object *o) {
   free(o);
 }
 
-/* Mitsuba: to_world = look_at(0, normalize(direction), up) with up the
- * first vector of coordinate_system(direction). */
-static bool look_at_direction(vec3 d, xform *out) {
-  vec3 dn = v3_norm(d), up, unused;
-  coordinate_system(dn, &up, &unused);
-  return xf_look_at(v3(0, 0, 0), dn, up, out);
-}
-
 /* d always comes from to_world, whichever way it was set, so that an
  * update of `direction` or `to_world` equals a reload with it. */
 static void derive_direction(directional *dl) {
@@ -107,7 +100,7 @@ static vec3 dir_get_direction(const object *o) {
 
 static void dir_set_direction(object *o, vec3 d) {
   directional *dl = (directional *)o;
-  if (look_at_direction(d, &dl->to_world)) derive_direction(dl);
+  if (distant_look_at(d, &dl->to_world)) derive_direction(dl);
 }
 
 static void dir_traverse(object *o, param_visitor *v) {
@@ -129,36 +122,12 @@ static rsw_status dir_create(loader *ld, node *n, object **out) {
   if (!dl) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
   dl->base.ops = &directional_ops;
   dl->base.flags = EMITTER_DELTA_DIRECTION;
-  rsw_status st = ld_float_range(ld, n, "sampling_weight", 1.0, 0.0, INFINITY, &dl->base.sampling_weight);
-  if (!st) st = ld_texture(ld, n, "irradiance", 1.0, 0.0, &dl->irradiance);
-  color tmp;
-  if (!st && !uniform_texture_value(dl->irradiance, &tmp))
-    st = ld_fail(ld, n, "irradiance", RSW_ERR_INVALID,
-                 "irradiance must not vary spatially (give a number, rgb or spectrum, not a texture)");
-  bool has_dir = false, has_xf = false;
-  vec3 d;
-  xform xf;
-  if (!st) st = ld_vec3(ld, n, "direction", v3(0, 0, 1), &d, &has_dir);
-  if (!st) st = ld_transform(ld, n, "to_world", &xf, &has_xf);
-  if (!st && has_dir && has_xf)
-    st = ld_fail(ld, n, "direction", RSW_ERR_INVALID, "give either 'direction' or 'to_world', not both");
-  if (!st && has_dir && !(v3_len(d) > 0))
-    st = ld_fail(ld, n, "direction", RSW_ERR_INVALID, "direction must be non-zero");
+  rsw_status st = distant_emitter_read(ld, n, &dl->base, &dl->irradiance, &dl->to_world);
   if (st) {
     free(dl);
     return st;
   }
-  if (has_xf) {
-    dl->to_world = xf;
-  } else if (!look_at_direction(d, &dl->to_world)) {
-    free(dl);
-    return ld_fail(ld, n, "direction", RSW_ERR_INVALID, "cannot build a frame from 'direction'");
-  }
   derive_direction(dl);
-  if (!(v3_len(dl->d) > 0)) {
-    free(dl);
-    return ld_fail(ld, n, "to_world", RSW_ERR_INVALID, "to_world maps +z to a zero vector");
-  }
   *out = &dl->base.base;
   return RSW_OK;
 }

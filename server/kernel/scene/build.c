@@ -21,26 +21,14 @@
 #include "params.h"
 #include "periodic.h"
 #include "plugin_def.h"
+#include "plugin_names.h"
 #include "rsw_file.h"
 #include "scene.h"
 
 /* ---- plugin lookup and building ------------------------------------------------- */
 
 static rsw_status unknown_plugin(loader *ld, node *n) {
-  const char *best = NULL;
-  size_t best_d = 3;
-  for (size_t i = 0; rsw_plugins[i]; i++) {
-    const plugin *p = rsw_plugins[i];
-    size_t d = rsw_edit_distance(n->type, p->name);
-    if (d < best_d) {
-      best_d = d;
-      best = p->name;
-    }
-  }
-  if (best)
-    return rsw_fail(ld->err, RSW_ERR_UNKNOWN_PLUGIN, n->loc, "unknown plugin type '%s' (did you mean '%s'?)",
-                    n->type, best);
-  return rsw_fail(ld->err, RSW_ERR_UNKNOWN_PLUGIN, n->loc, "unknown plugin type '%s'", n->type);
+  return registry_unknown_type(ld->err, n->loc, n->type, n->tag);
 }
 
 static const char *article(const char *word) {

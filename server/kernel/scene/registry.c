@@ -14,11 +14,12 @@
   X(diffuse) X(conductor) X(roughconductor) X(dielectric) X(twosided)        \
   X(rpv) X(bilambertian) X(hapke)                                             \
   X(plastic) X(roughplastic) X(blendbsdf) X(mask)                             \
-  X(directional) X(constant) X(area) X(envmap)                                \
+  X(rtls) X(maignan) X(ocean_legacy) X(selectbsdf) X(mqdiffuse)               \
+  X(directional) X(constant) X(area) X(envmap) X(astroobject)                 \
   X(point) X(spot)                                                            \
   X(hdistant) X(distant) X(radiancemeter) X(perspective)                      \
   X(thinlens) X(orthographic)                                                 \
-  X(mdistant) X(distantflux) X(mradiancemeter)                                \
+  X(mdistant) X(distantflux) X(mradiancemeter) X(mpdistant)                   \
   X(hdrfilm) X(box) X(gaussian) X(tent) X(lanczos)                            \
   X(independent) X(stratified)                                                \
   X(path) X(direct)                                                           \

@@ -1,0 +1,417 @@
+/* `ocean_legacy`: the ocean surface of the 6S code as Eradiate carries it
+ * (eradiate/mitsuba3 src/eradiate_plugins/bsdfs/ocean_legacy.cpp and
+ * include/mitsuba/eradiate/oceanprops.h), one-sided, unpolarized.
+ *
+ *   eval = [W + (1 - W) U + (1 - c) R_glint] cos(theta_o) / pi
+ *
+ * c: whitecap coverage, Monahan and O'Muircheartaigh (1980):
+ *    c = clamp(2.95e-6 ws^3.52, 0, 1); W = c R_eff(lambda), R_eff from
+ *    Whitlock et al. (1982) x Koepke's 0.4 (ocean_data.c).
+ * R_glint = pi D G F / (4 cos(theta_i) cos(theta_o)): Cox and Munk (1954)
+ *    slopes, sigma_c^2 = 0.003 + 0.00192 ws (crosswind),
+ *    sigma_u^2 = 0.00316 ws (upwind); D is the anisotropic Beckmann
+ *    distribution with alpha = sqrt(2) sigma, rotated to the wind, times
+ *    the Gram-Charlier factor
+ *      1 - c21/2 (xe^2 - 1) xn - c03/6 (xn^2 - 3) xn + c40/24 (xe^4 - 6 xe^2 + 3)
+ *        + c04/24 (xn^4 - 6 xn^2 + 3) + c22/4 (xe^2 - 1)(xn^2 - 1),
+ *    xn, xe the upwind / crosswind slopes over sigma_u, sigma_c,
+ *    c21 = 0.01 - 0.0086 ws, c03 = 0.04 - 0.033 ws, c40 = 0.40,
+ *    c22 = 0.12, c04 = 0.23; G (when `shadowing`) the height-correlated
+ *    Smith term 1 / (1 + Lambda(wi) + Lambda(wo)) with Beckmann's exact
+ *    Lambda; F the 6S Fresnel reflectance (ocean_fresnel_6s) of water,
+ *    n = Hale and Querry (1973) + 0.00017492711 (0.03 + 1.805 chlorinity)
+ *    (Friedman 1969, Sverdrup 1942).
+ * U (400-700 nm only, else 0): underlight,
+ *    U = r_omega t_u t_d / ((n_re^2 + n_im^2)(1 - 0.485 r_omega)),
+ *    r_omega from Morel (1988) by 6S's fixed-point iteration, t_d and t_u
+ *    the downwelling / upwelling transmittances 1 - (glint albedo),
+ *    tabulated on 64 x 64 (zenith, azimuth from the wind) by Gauss-Legendre
+ *    quadrature of the glint (Eradiate's scheme; see ocean_tables for the
+ *    one departure).
+ * Wind direction: degrees, North Left as in 6SV; phi_w = 90 - wd in the
+ * local frame. Sampling (Eradiate's): the diffuse lobe (cosine) with
+ * probability proportional to W + t_d(wi) (1 - W), the glint (Beckmann
+ * visible normals, reflected) proportional to 1 - c; pdf their mixture,
+ * weight eval / pdf.
+ * docs/kernel-conventions.md#ocean_legacy. */
+#include <math.h>
+#include <stdlib.h>
+
+#include "../scene/loader.h"
+#include "../scene/params.h"
+#include "eo_surfaces.h"
+#include "microfacet.h"
+#include "ocean_data.h"
+
+/* Rotation of v into the wind frame (x upwind). */
+static vec3 to_wind(double phi_w, vec3 v) {
+  double c = cos(phi_w), s = sin(phi_w);
+  return v3(c * v.x + s * v.y, -s * v.x + c * v.y, v.z);
+}
+static vec3 from_wind(double phi_w, vec3 v) {
+  double c = cos(phi_w), s = sin(phi_w);
+  return v3(c * v.x - s * v.y, s * v.x + c * v.y, v.z);
+}
+
+static mf_distr ocean_distr(const ocean_bsdf *o) {
+  return mf_make(MF_BECKMANN, sqrt(2.0) * o->sigma_u, sqrt(2.0) * o->sigma_c, true);
+}
+
+double ocean_fresnel_6s(double n_re, double n_im, double cos_chi, double sin_chi) {
+  double nr2 = n_re * n_re, ni2 = n_im * n_im;
+  double s = nr2 - ni2 - sin_chi * sin_chi;
+  double a1 = fabs(s), a2 = sqrt(s * s + 4.0 * nr2 * ni2);
+  double u = sqrt(0.5 * fabs(a1 + a2)), v = sqrt(0.5 * fabs(a2 - a1));
+  double b1 = (nr2 - ni2) * cos_chi, b2 = 2.0 * n_re * n_im * cos_chi;
+  double rr = ((cos_chi - u) * (cos_chi - u) + v * v) / ((cos_chi + u) * (cos_chi + u) + v * v);
+  double rl = ((b1 - u) * (b1 - u) + (b2 + v) * (b2 + v)) / ((b1 + u) * (b1 + u) + (b2 - v) * (b2 - v));
+  return 0.5 * (rr + rl);
+}
+
+/* Gram-Charlier factor for the wind-frame normal mp (normalized). */
+static double gram_charlier(double ws, double sigma_u, double sigma_c, vec3 mp) {
+  const double c40 = 0.40, c22 = 0.12, c04 = 0.23;
+  double c21 = 0.01 - 0.0086 * ws, c03 = 0.04 - 0.033 * ws;
+  double xn = mp.x / (sigma_u * mp.z), xe = mp.y / (sigma_c * mp.z);
+  double xe2 = xe * xe, xn2 = xn * xn;
+  return 1.0 - c21 / 2.0 * (xe2 - 1.0) * xn - c03 / 6.0 * (xn2 - 3.0) * xn +
+         c40 / 24.0 * (xe2 * xe2 - 6.0 * xe2 + 3.0) + c04 / 24.0 * (xn2 * xn2 - 6.0 * xn2 + 3.0) +
+         c22 / 4.0 * (xe2 - 1.0) * (xn2 - 1.0);
+}
+
+double ocean_gram_charlier(const ocean_bsdf *o, vec3 m) {
+  return gram_charlier(o->wind_speed, o->sigma_u, o->sigma_c, v3_norm(to_wind(o->phi_w, m)));
+}
+
+/* Beckmann's exact Lambda for the anisotropic distribution (wind frame). */
+static double beckmann_lambda(double au, double av, vec3 v) {
+  double r = sqrt(au * au * v.x * v.x + av * av * v.y * v.y);
+  if (!(r > 0.0) || !(v.z > 0.0)) return 0.0;
+  double a = v.z / r;
+  return 0.5 * (erf(a) - 1.0) + exp(-a * a) / (2.0 * a * sqrt(RSW_PI));
+}
+
+double ocean_glint(const ocean_bsdf *o, vec3 wi, vec3 wo) {
+  double ci = wi.z, co = wo.z;
+  if (!(ci > 0.0) || !(co > 0.0)) return 0.0;
+  vec3 m = v3_norm(v3_add(wi, wo));
+  vec3 mp = to_wind(o->phi_w, m);
+  mf_distr d = ocean_distr(o);
+  double D = mf_D(&d, mp) * gram_charlier(o->wind_speed, o->sigma_u, o->sigma_c, mp);
+  double r = D / (4.0 * ci * co);
+  if (o->shadowing) {
+    vec3 a = to_wind(o->phi_w, wi), b = to_wind(o->phi_w, wo);
+    r /= 1.0 + beckmann_lambda(d.alpha_u, d.alpha_v, a) + beckmann_lambda(d.alpha_u, d.alpha_v, b);
+  }
+  double cchi = v3_dot(wo, m);
+  cchi = fmin(fmax(cchi, -0.999999999), 0.999999999);
+  double schi = fmin(sqrt(1.0 - cchi * cchi), 0.999999999);
+  return r * ocean_fresnel_6s(o->n_re, o->n_im, cchi, schi) * RSW_PI;
+}
+
+/* Gauss-Legendre nodes and weights on [-1, 1] (Newton on P_n). */
+static void gauss_legendre(int n, double *x, double *w) {
+  for (int i = 0; i < n; i++) {
+    double z = cos(RSW_PI * (i + 0.75) / (n + 0.5)), pp = 1.0;
+    for (int it = 0; it < 100; it++) {
+      double p1 = 1.0, p2 = 0.0;
+      for (int j = 1; j <= n; j++) {
+        double p3 = p2;
+        p2 = p1;
+        p1 = ((2.0 * j - 1.0) * z * p2 - (j - 1.0) * p3) / j;
+      }
+      pp = n * (z * p1 - p2) / (z * z - 1.0);
+      double z1 = z;
+      z = z1 - p1 / pp;
+      if (fabs(z - z1) < 1e-15) break;
+    }
+    x[i] = z;
+    w[i] = 2.0 / ((1.0 - z * z) * pp * pp);
+  }
+}
+
+/* Transmittance 1 - (glint albedo) for incidence theta with the wind at
+ * azimuth phi from the incidence plane (Eradiate's eval_ocean_transmittance:
+ * Cox-Munk-Gram-Charlier D / m_z^4, no shadowing, 6S Fresnel, cosines
+ * clamped to 1e-6, quadrature over the hemisphere). Upwelling: theta
+ * refracted and the index inverted. */
+enum {
+  OCEAN_NQ = 32
+};
+
+static double transmittance(double theta, double phi, double n_re, double n_im, double ws, double sig_u,
+                            double sig_c, bool up, const double *gx, const double *gw, int nq) {
+  if (up) {
+    theta = asin(sin(theta) / n_re);
+    n_re = 1.0 / n_re;
+    n_im = 0.0;
+  }
+  vec3 wi = v3(sin(theta), 0.0, cos(theta));
+  double c = cos(phi), s = sin(phi);
+  double td = 0.0, sum = 0.0;
+  for (int a = 0; a < nq; a++) {
+    double th = (gx[a] + 1.0) * RSW_PI / 4.0, wth = gw[a] * RSW_PI / 4.0;
+    double st = sin(th), ct = cos(th);
+    for (int b = 0; b < nq; b++) {
+      double ph = (gx[b] + 1.0) * RSW_PI, wph = gw[b] * RSW_PI;
+      double gweight = ct * st * wth * wph;
+      vec3 wo = v3(st * cos(ph), st * sin(ph), ct);
+      double ci = wi.z < 1e-6 ? 1e-6 : wi.z, co = wo.z < 1e-6 ? 1e-6 : wo.z;
+      vec3 m = v3_norm(v3_add(wi, wo));
+      vec3 mp = v3_norm(v3(c * m.x + s * m.y, -s * m.x + c * m.y, m.z));
+      double xn = mp.x / (sig_u * mp.z), xe = mp.y / (sig_c * mp.z);
+      double D = gram_charlier(ws, sig_u, sig_c, mp) / (2.0 * RSW_PI * sig_u * sig_c) *
+                 exp(-0.5 * (xe * xe + xn * xn)) / (m.z * m.z * m.z * m.z);
+      double cchi = fmin(fmax(v3_dot(wo, m), -0.999999999), 0.999999999);
+      double schi = fmin(sqrt(1.0 - cchi * cchi), 0.999999999);
+      double g = D * ocean_fresnel_6s(n_re, n_im, cchi, schi) * RSW_PI / (4.0 * ci * co);
+      if (!(wi.z > 0.0 && wo.z > 0.0)) g = 1.0;
+      td += g * gweight;
+      sum += gweight;
+    }
+  }
+  if (td >= sum) td = sum;
+  return 1.0 - td / sum;
+}
+
+double ocean_transmittance(const ocean_bsdf *o, double theta, double phi, bool up, int nq) {
+  double gx[128], gw[128];
+  if (nq < 1 || nq > 128) return NAN;
+  gauss_legendre(nq, gx, gw);
+  return transmittance(theta, phi, o->n_re, o->n_im, o->wind_speed, o->sigma_u, o->sigma_c, up, gx, gw, nq);
+}
+
+/* The tables on Eradiate's grid: zenith linspace(0, pi/2, 64) x azimuth
+ * linspace(0, 2 pi, 64). Departure: OCEAN_NQ = 32 Gauss-Legendre points
+ * per dimension where Eradiate takes 64 (16 times cheaper to build;
+ * tests/kernel/bsdfs/test_ocean_legacy.c bounds the difference). */
+void ocean_tables(ocean_bsdf *o) {
+  if (ocean_tables_ready(o)) return;
+  double gx[OCEAN_NQ], gw[OCEAN_NQ];
+  gauss_legendre(OCEAN_NQ, gx, gw);
+  for (int j = 0; j < OCEAN_T_RES; j++) { /* azimuth */
+    double phi = 2.0 * RSW_PI * j / (OCEAN_T_RES - 1);
+    for (int i = 0; i < OCEAN_T_RES; i++) { /* zenith */
+      double th = 0.5 * RSW_PI * i / (OCEAN_T_RES - 1);
+      o->t_down[j * OCEAN_T_RES + i] = (float)transmittance(th, phi, o->n_re, o->n_im, o->wind_speed,
+                                                            o->sigma_u, o->sigma_c, false, gx, gw, OCEAN_NQ);
+      o->t_up[j * OCEAN_T_RES + i] = (float)transmittance(th, phi, o->n_re, o->n_im, o->wind_speed,
+                                                          o->sigma_u, o->sigma_c, true, gx, gw, OCEAN_NQ);
+    }
+  }
+  o->t_key[0] = o->n_re, o->t_key[1] = o->n_im, o->t_key[2] = o->wind_speed;
+}
+
+/* Bilinear lookup as Dr.Jit's clamped texture does it: texel k centred at
+ * (k + 0.5) / 64 of [0, 1]; u from the zenith, v from the azimuth of
+ * `dir` relative to the wind. */
+static double t_lookup(const ocean_bsdf *o, const float *t, double cos_theta, vec3 dir) {
+  if (!ocean_tables_ready(o)) return 1.0; /* not built: see eo_surfaces.h */
+  double u = acos(fmin(fmax(cos_theta, -1.0), 1.0)) * (2.0 / RSW_PI);
+  double v = (atan2(dir.y, dir.x) - o->phi_w) / (2.0 * RSW_PI);
+  v -= floor(v);
+  double x = u * OCEAN_T_RES - 0.5, y = v * OCEAN_T_RES - 0.5;
+  x = fmin(fmax(x, 0.0), OCEAN_T_RES - 1.0), y = fmin(fmax(y, 0.0), OCEAN_T_RES - 1.0);
+  int i = (int)x, j = (int)y;
+  int i1 = i + 1 < OCEAN_T_RES ? i + 1 : i, j1 = j + 1 < OCEAN_T_RES ? j + 1 : j;
+  double fx = x - i, fy = y - j;
+  double a = t[j * OCEAN_T_RES + i] * (1 - fx) + t[j * OCEAN_T_RES + i1] * fx;
+  double b = t[j1 * OCEAN_T_RES + i] * (1 - fx) + t[j1 * OCEAN_T_RES + i1] * fx;
+  return a * (1 - fy) + b * fy;
+}
+
+/* Morel (1988) / 6S: the ratio of upwelling to downwelling irradiance
+ * below the surface, by fixed-point iteration (relative change < 1e-4;
+ * at most 100 steps). */
+static double r_omega(double wl, double pig) {
+  double plog = log10(pig);
+  double bw = ocean_molecular_scatter_6s(wl);
+  double b = 0.30 * pow(pig, 0.62);
+  double ratio = 0.002 + 0.02 * (0.5 - 0.25 * plog) * (550.0 / wl);
+  double bb = 0.5 * bw + b * ratio;
+  double k = ocean_attn_k(wl) + ocean_attn_chi(wl) * pow(pig, ocean_attn_e(wl));
+  if (bb == 0.0 || k == 0.0) return 0.0;
+  double u = 0.75, r = 0.33 * bb / u / k;
+  for (int it = 0; it < 100; it++) {
+    u = 0.9 * (1.0 - r) / (1.0 + 2.25 * r);
+    double rn = 0.33 * bb / (u * k);
+    if (fabs((rn - r) / rn) < 1e-4) break;
+    r = rn;
+  }
+  return r;
+}
+
+void ocean_update(ocean_bsdf *o) {
+  double wd = 90.0 - o->wind_direction;
+  wd -= 360.0 * floor(wd / 360.0);
+  o->phi_w = wd * RSW_PI / 180.0;
+  o->n_re = ocean_ior_real(o->wavelength) + 0.00017492711 * (0.03 + 1.805 * o->chlorinity);
+  o->n_im = ocean_ior_imag(o->wavelength);
+  o->sigma_c = sqrt(0.003 + 0.00192 * o->wind_speed);
+  o->sigma_u = sqrt(0.00316 * o->wind_speed);
+  o->r_omega = r_omega(o->wavelength, o->pigmentation);
+  o->coverage = fmin(fmax(2.95e-6 * pow(o->wind_speed, 3.52), 0.0), 1.0);
+  o->whitecap = o->coverage * ocean_whitecap_reflectance(o->wavelength);
+}
+
+bool ocean_tables_ready(const ocean_bsdf *o) {
+  return o->t_key[0] == o->n_re && o->t_key[1] == o->n_im && o->t_key[2] == o->wind_speed;
+}
+
+/* The tables are built before a render (single-threaded), not at load or
+ * on each update: a build takes about a second. */
+static rsw_status ocean_prepare(object *ob, const render_ctx *rc, rsw_err *err) {
+  (void)rc, (void)err;
+  ocean_tables((ocean_bsdf *)ob);
+  return RSW_OK;
+}
+
+static double underlight(const ocean_bsdf *o, vec3 light, vec3 view) {
+  if (o->wavelength < 400.0 || o->wavelength > 700.0 || !ocean_tables_ready(o)) return 0.0;
+  double td = t_lookup(o, o->t_down, light.z, light);
+  double tu = t_lookup(o, o->t_up, view.z, light);
+  return o->r_omega * tu * td / ((o->n_re * o->n_re + o->n_im * o->n_im) * (1.0 - 0.485 * o->r_omega));
+}
+
+/* eval() for a radiance path: wi towards the sensor, wo towards the
+ * light (6S's incident direction). */
+static double ocean_value(const ocean_bsdf *o, vec3 wi, vec3 wo) {
+  if (!(wi.z > 0.0) || !(wo.z > 0.0)) return 0.0;
+  double w = o->whitecap, v;
+  switch (o->component) {
+  case 1: v = w; break;
+  case 2: v = (1.0 - o->coverage) * ocean_glint(o, wo, wi); break;
+  case 3: v = (1.0 - w) * underlight(o, wo, wi); break;
+  case 4: v = w + (1.0 - w) * underlight(o, wo, wi); break;
+  default:
+    v = (w + (1.0 - w) * underlight(o, wo, wi) + (1.0 - o->coverage) * ocean_glint(o, wo, wi)) * wo.z *
+        RSW_INV_PI;
+    break;
+  }
+  return isfinite(v) ? v : 0.0;
+}
+
+/* The probability of the glint lobe (Eradiate's). */
+static double p_glint(const ocean_bsdf *o, vec3 wi) {
+  double t_i = t_lookup(o, o->t_down, wi.z, wi);
+  double pd = o->whitecap + t_i * (1.0 - o->whitecap), ps = 1.0 - o->coverage;
+  return ps / (ps + pd);
+}
+
+static double ocean_pdf_dir(const ocean_bsdf *o, vec3 wi, vec3 wo) {
+  if (!(wi.z > 0.0) || !(wo.z > 0.0)) return 0.0;
+  double ps = p_glint(o, wi);
+  double p = (1.0 - ps) * warp_square_to_cosine_hemisphere_pdf(wo);
+  vec3 h = v3_norm(v3_add(wi, wo));
+  double wh = v3_dot(wi, h);
+  if (wh > 0.0) {
+    mf_distr d = ocean_distr(o);
+    p += ps * mf_pdf(&d, to_wind(o->phi_w, wi), to_wind(o->phi_w, h)) / (4.0 * wh);
+  }
+  return p;
+}
+
+static color ocean_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2, bsdf_sample *bs) {
+  const ocean_bsdf *o = (const ocean_bsdf *)b;
+  vec3 wi = si->wi;
+  if (!(wi.z > 0.0)) return bsdf_fail(bs);
+  double ps = p_glint(o, wi);
+  if (u1 >= ps) {
+    bs->wo = warp_square_to_cosine_hemisphere(u2);
+    bs->sampled_type = BSDF_DIFFUSE_REFLECTION;
+  } else {
+    mf_distr d = ocean_distr(o);
+    double mpdf;
+    vec3 m = from_wind(o->phi_w, mf_sample(&d, to_wind(o->phi_w, wi), u2, &mpdf));
+    bs->wo = v3_sub(v3_scale(m, 2.0 * v3_dot(wi, m)), wi);
+    bs->sampled_type = BSDF_GLOSSY_REFLECTION;
+  }
+  bs->eta = 1.0;
+  bs->pdf = ocean_pdf_dir(o, wi, bs->wo);
+  if (!(bs->pdf > 0.0)) return bsdf_fail(bs);
+  return col1(ocean_value(o, wi, bs->wo) / bs->pdf);
+}
+
+static color ocean_eval(const bsdf *b, const surface_interaction *si, vec3 wo) {
+  return col1(ocean_value((const ocean_bsdf *)b, si->wi, wo));
+}
+
+static double ocean_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
+  return ocean_pdf_dir((const ocean_bsdf *)b, si->wi, wo);
+}
+
+static const bsdf_ops ocean_ops = {.sample = ocean_sample, .eval = ocean_eval, .pdf = ocean_pdf};
+
+static void ocean_destroy(object *o) {
+  free(o);
+}
+
+/* Ranges: Eradiate's documented ones (wavelength [200, 4000] nm, the
+ * tables' span; wind speed (0, 37.54] m/s, where the coverage reaches 1;
+ * pigmentation >= 0.3 mg/m^3); chlorinity >= 0; wind direction any. */
+static rsw_status ocean_create(loader *ld, node *n, object **out) {
+  double wl, ws, wd, chl, pig;
+  bool shadowing;
+  long long comp;
+  rsw_status st;
+  if (!ld_has(n, "wavelength"))
+    return ld_fail(ld, n, "wavelength", RSW_ERR_MISSING,
+                   "ocean_legacy needs 'wavelength' (nm, 200 to 4000), as in Eradiate");
+  if ((st = ld_float_range(ld, n, "wavelength", 550.0, 200.0, 4000.0, &wl)) != RSW_OK) return st;
+  if ((st = ld_float_range(ld, n, "wind_speed", 0.1, 0.0, 37.54, &ws)) != RSW_OK) return st;
+  if (!(ws > 0.0)) return ld_fail(ld, n, "wind_speed", RSW_ERR_RANGE, "wind_speed must be > 0 m/s");
+  if ((st = ld_float_range(ld, n, "wind_direction", 0.0, -1e6, 1e6, &wd)) != RSW_OK) return st;
+  if ((st = ld_float_range(ld, n, "chlorinity", 19.0, 0.0, 1e3, &chl)) != RSW_OK) return st;
+  if ((st = ld_float_range(ld, n, "pigmentation", 0.3, 0.3, 1e6, &pig)) != RSW_OK) return st;
+  if ((st = ld_bool(ld, n, "shadowing", true, &shadowing)) != RSW_OK) return st;
+  if ((st = ld_int(ld, n, "component", 0, 0, 4, &comp)) != RSW_OK) return st;
+  if (ld_has(n, "coverage"))
+    return ld_fail(ld, n, "coverage", RSW_ERR_INVALID,
+                   "coverage is derived from wind_speed (Monahan); it cannot be set");
+  bsdf *b = ocean_legacy_new(wl, ws, wd, chl, pig, shadowing, (int)comp);
+  if (!b) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "ocean_legacy: out of memory");
+  b->base.id = n->id;
+  *out = &b->base;
+  return RSW_OK;
+}
+
+static void ocean_traverse(object *ob, param_visitor *v) {
+  ocean_bsdf *o = (ocean_bsdf *)ob;
+  pv_float(v, "wavelength", &o->wavelength, UPDATE_SPECTRAL, 200.0, 4000.0);
+  pv_float(v, "wind_speed", &o->wind_speed, UPDATE_SPECTRAL, nextafter(0.0, 1.0), 37.54);
+  pv_float(v, "wind_direction", &o->wind_direction, UPDATE_SPECTRAL, -1e6, 1e6);
+  pv_float(v, "chlorinity", &o->chlorinity, UPDATE_SPECTRAL, 0.0, 1e3);
+  pv_float(v, "pigmentation", &o->pigmentation, UPDATE_SPECTRAL, 0.3, 1e6);
+  pv_bool_ro(v, "shadowing", o->shadowing);
+  pv_float(v, "coverage", &o->coverage, UPDATE_NONE, 0.0, 1.0);
+}
+
+static void ocean_changed(object *ob) {
+  ocean_update((ocean_bsdf *)ob);
+}
+
+const plugin plugin_ocean_legacy = {
+    .name = "ocean_legacy",
+    .cls = CLS_BSDF,
+    .create = ocean_create,
+    .destroy = ocean_destroy,
+    .ops = &ocean_ops,
+    .traverse = ocean_traverse,
+    .parameters_changed = ocean_changed,
+    .prepare = ocean_prepare,
+};
+
+bsdf *ocean_legacy_new(double wavelength, double wind_speed, double wind_direction, double chlorinity,
+                       double pigmentation, bool shadowing, int component) {
+  ocean_bsdf *o = calloc(1, sizeof *o);
+  if (!o) return NULL;
+  o->base.base.plugin = &plugin_ocean_legacy;
+  o->base.ops = &ocean_ops;
+  o->base.flags = BSDF_DIFFUSE_REFLECTION | BSDF_GLOSSY_REFLECTION;
+  o->wavelength = wavelength, o->wind_speed = wind_speed, o->wind_direction = wind_direction;
+  o->chlorinity = chlorinity, o->pigmentation = pigmentation, o->shadowing = shadowing;
+  o->component = component;
+  o->t_key[0] = NAN;
+  ocean_update(o);
+  return &o->base;
+}
