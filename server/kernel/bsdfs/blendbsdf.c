@@ -15,8 +15,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "bsdfs_internal.h"
 
 typedef struct blend_bsdf {
@@ -66,13 +65,16 @@ static color blend_sample(const bsdf *bb, const surface_interaction *si, double 
 
 static const bsdf_ops blend_ops = {.sample = blend_sample, .eval = blend_eval, .pdf = blend_pdf};
 
-static void blend_destroy(object *o) {
-  free(o);
+static void blend_traverse(object *o, param_visitor *v) {
+  blend_bsdf *b = (blend_bsdf *)o;
+  pv_object(v, "weight", &b->weight->base, 0.0, 1.0);
+  pv_object(v, "bsdf_0", &b->c[0]->base, NAN, NAN);
+  pv_object(v, "bsdf_1", &b->c[1]->base, NAN, NAN);
 }
 
-extern const plugin plugin_blendbsdf;
+DEFINE_PLUGIN(blendbsdf, CLS_BSDF, .ops = &blend_ops, .traverse = blend_traverse);
 
-static rsw_status blend_create(loader *ld, node *n, object **out) {
+static rsw_status blendbsdf_create(loader *ld, node *n, object **out) {
   object **kids;
   size_t count;
   rsw_status st = ld_children(ld, n, CLS_BSDF, &kids, &count);
@@ -96,30 +98,9 @@ static rsw_status blend_create(loader *ld, node *n, object **out) {
   texture *w;
   if ((st = ld_texture(ld, n, "weight", 0.5, 0.0, &w))) return st;
   if ((st = bsdf_check_const_range(ld, n, "weight", w, 0.0, false, 1.0, false))) return st;
-  blend_bsdf *b = calloc(1, sizeof *b);
-  if (!b) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "blendbsdf: out of memory");
-  b->base.base.plugin = &plugin_blendbsdf;
-  b->base.base.id = n->id;
-  b->base.ops = &blend_ops;
-  b->base.flags = c0->flags | c1->flags;
+  blend_bsdf *b = BSDF_NEW(blend_bsdf, blendbsdf, c0->flags | c1->flags);
+  if (!b) return plugin_created(ld, n, NULL, out);
   b->weight = w;
   b->c[0] = c0, b->c[1] = c1;
-  *out = &b->base.base;
-  return RSW_OK;
+  return plugin_created(ld, n, &b->base.base, out);
 }
-
-static void blend_traverse(object *o, param_visitor *v) {
-  blend_bsdf *b = (blend_bsdf *)o;
-  pv_object(v, "weight", &b->weight->base, 0.0, 1.0);
-  pv_object(v, "bsdf_0", &b->c[0]->base, NAN, NAN);
-  pv_object(v, "bsdf_1", &b->c[1]->base, NAN, NAN);
-}
-
-const plugin plugin_blendbsdf = {
-    .name = "blendbsdf",
-    .cls = CLS_BSDF,
-    .create = blend_create,
-    .destroy = blend_destroy,
-    .ops = &blend_ops,
-    .traverse = blend_traverse,
-};

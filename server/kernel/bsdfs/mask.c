@@ -12,8 +12,7 @@
  * weigh shadow rays by 1 - alpha). Keys: `opacity.…`, `nested_bsdf.…`. */
 #include <stdlib.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "bsdfs_internal.h"
 
 typedef struct mask_bsdf {
@@ -54,11 +53,13 @@ static double mask_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
 
 static const bsdf_ops mask_ops = {.sample = mask_sample, .eval = mask_eval, .pdf = mask_pdf};
 
-static void mask_destroy(object *o) {
-  free(o);
+static void mask_traverse(object *o, param_visitor *v) {
+  mask_bsdf *m = (mask_bsdf *)o;
+  pv_object(v, "opacity", &m->opacity->base, 0.0, 1.0);
+  pv_object(v, "nested_bsdf", &m->nested->base, NAN, NAN);
 }
 
-extern const plugin plugin_mask;
+DEFINE_PLUGIN(mask, CLS_BSDF, .ops = &mask_ops, .traverse = mask_traverse);
 
 static rsw_status mask_create(loader *ld, node *n, object **out) {
   object *nested;
@@ -68,29 +69,9 @@ static rsw_status mask_create(loader *ld, node *n, object **out) {
   texture *op;
   if ((st = ld_texture(ld, n, "opacity", 0.5, 0.0, &op))) return st;
   if ((st = bsdf_check_const_range(ld, n, "opacity", op, 0.0, false, 1.0, false))) return st;
-  mask_bsdf *m = calloc(1, sizeof *m);
-  if (!m) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "mask: out of memory");
-  m->base.base.plugin = &plugin_mask;
-  m->base.base.id = n->id;
-  m->base.ops = &mask_ops;
+  mask_bsdf *m = BSDF_NEW(mask_bsdf, mask, ((bsdf *)nested)->flags | BSDF_DELTA_TRANSMISSION);
+  if (!m) return plugin_created(ld, n, NULL, out);
   m->nested = (bsdf *)nested;
   m->opacity = op;
-  m->base.flags = m->nested->flags | BSDF_DELTA_TRANSMISSION;
-  *out = &m->base.base;
-  return RSW_OK;
+  return plugin_created(ld, n, &m->base.base, out);
 }
-
-static void mask_traverse(object *o, param_visitor *v) {
-  mask_bsdf *m = (mask_bsdf *)o;
-  pv_object(v, "opacity", &m->opacity->base, 0.0, 1.0);
-  pv_object(v, "nested_bsdf", &m->nested->base, NAN, NAN);
-}
-
-const plugin plugin_mask = {
-    .name = "mask",
-    .cls = CLS_BSDF,
-    .create = mask_create,
-    .destroy = mask_destroy,
-    .ops = &mask_ops,
-    .traverse = mask_traverse,
-};

@@ -10,8 +10,7 @@
  * else a cosine-weighted direction (pdf (1 - P_s) cos_o / pi). */
 #include <stdlib.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "fresnel.h"
 #include "plastic_layer.h"
 
@@ -71,41 +70,25 @@ static double plastic_pdf(const bsdf *b, const surface_interaction *si, vec3 wo)
 
 static const bsdf_ops plastic_ops = {.sample = plastic_sample, .eval = plastic_eval, .pdf = plastic_pdf};
 
-static void plastic_destroy(object *o) {
-  free(o);
-}
-
 static void plastic_parameters_changed(object *o) {
   plastic_bsdf *p = (plastic_bsdf *)o;
   p->fdr_int = fresnel_diffuse_reflectance(1.0 / p->layer.eta);
-}
-
-static rsw_status plastic_create(loader *ld, node *n, object **out) {
-  plastic_layer layer;
-  rsw_status st = plastic_layer_load(ld, n, &layer);
-  if (st) return st;
-  plastic_bsdf *p = calloc(1, sizeof *p);
-  if (!p) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "plastic: out of memory");
-  p->base.base.plugin = &plugin_plastic;
-  p->base.base.id = n->id;
-  p->base.ops = &plastic_ops;
-  p->base.flags = BSDF_DELTA_REFLECTION | BSDF_DIFFUSE_REFLECTION;
-  p->layer = layer;
-  plastic_parameters_changed(&p->base.base);
-  *out = &p->base.base;
-  return RSW_OK;
 }
 
 static void plastic_traverse(object *o, param_visitor *v) {
   plastic_layer_traverse(&((plastic_bsdf *)o)->layer, v);
 }
 
-const plugin plugin_plastic = {
-    .name = "plastic",
-    .cls = CLS_BSDF,
-    .create = plastic_create,
-    .destroy = plastic_destroy,
-    .ops = &plastic_ops,
-    .traverse = plastic_traverse,
-    .parameters_changed = plastic_parameters_changed,
-};
+DEFINE_PLUGIN(plastic, CLS_BSDF, .ops = &plastic_ops, .traverse = plastic_traverse,
+              .parameters_changed = plastic_parameters_changed);
+
+static rsw_status plastic_create(loader *ld, node *n, object **out) {
+  plastic_layer layer;
+  rsw_status st = plastic_layer_load(ld, n, &layer);
+  if (st) return st;
+  plastic_bsdf *p = BSDF_NEW(plastic_bsdf, plastic, BSDF_DELTA_REFLECTION | BSDF_DIFFUSE_REFLECTION);
+  if (!p) return plugin_created(ld, n, NULL, out);
+  p->layer = layer;
+  plastic_parameters_changed(&p->base.base);
+  return plugin_created(ld, n, &p->base.base, out);
+}

@@ -22,8 +22,7 @@
 #include <stdlib.h>
 #include <strings.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "fresnel.h"
 #include "plastic_layer.h"
 
@@ -139,11 +138,16 @@ static color rp_sample(const bsdf *b, const surface_interaction *si, double u1, 
 
 static const bsdf_ops roughplastic_ops = {.sample = rp_sample, .eval = rp_eval, .pdf = rp_pdf};
 
-static void rp_destroy(object *o) {
-  free(o);
+static void rp_traverse(object *o, param_visitor *v) {
+  roughplastic_bsdf *r = (roughplastic_bsdf *)o;
+  pv_float(v, "alpha", &r->alpha, UPDATE_SPECTRAL, 1e-4, 1e4);
+  plastic_layer_traverse(&r->layer, v);
 }
 
-static rsw_status rp_create(loader *ld, node *n, object **out) {
+DEFINE_PLUGIN(roughplastic, CLS_BSDF, .ops = &roughplastic_ops, .traverse = rp_traverse,
+              .parameters_changed = rp_parameters_changed);
+
+static rsw_status roughplastic_create(loader *ld, node *n, object **out) {
   const char *dist;
   rsw_status st = ld_string(ld, n, "distribution", "beckmann", &dist);
   if (st) return st;
@@ -167,33 +171,13 @@ static rsw_status rp_create(loader *ld, node *n, object **out) {
   if ((st = plastic_layer_load(ld, n, &layer))) return st;
   if (layer.eta == 1.0)
     return ld_fail(ld, n, "int_ior", RSW_ERR_INVALID, "int_ior and ext_ior must differ (as in Mitsuba)");
-  roughplastic_bsdf *r = calloc(1, sizeof *r);
-  if (!r) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "roughplastic: out of memory");
-  r->base.base.plugin = &plugin_roughplastic;
-  r->base.base.id = n->id;
-  r->base.ops = &roughplastic_ops;
-  r->base.flags = BSDF_GLOSSY_REFLECTION | BSDF_DIFFUSE_REFLECTION;
+  roughplastic_bsdf *r =
+      BSDF_NEW(roughplastic_bsdf, roughplastic, BSDF_GLOSSY_REFLECTION | BSDF_DIFFUSE_REFLECTION);
+  if (!r) return plugin_created(ld, n, NULL, out);
   r->layer = layer;
   r->type = type;
   r->alpha = alpha;
   r->sample_visible = visible;
   rp_parameters_changed(&r->base.base);
-  *out = &r->base.base;
-  return RSW_OK;
+  return plugin_created(ld, n, &r->base.base, out);
 }
-
-static void rp_traverse(object *o, param_visitor *v) {
-  roughplastic_bsdf *r = (roughplastic_bsdf *)o;
-  pv_float(v, "alpha", &r->alpha, UPDATE_SPECTRAL, 1e-4, 1e4);
-  plastic_layer_traverse(&r->layer, v);
-}
-
-const plugin plugin_roughplastic = {
-    .name = "roughplastic",
-    .cls = CLS_BSDF,
-    .create = rp_create,
-    .destroy = rp_destroy,
-    .ops = &roughplastic_ops,
-    .traverse = rp_traverse,
-    .parameters_changed = rp_parameters_changed,
-};

@@ -12,8 +12,7 @@
  * `to_world`, each rewriting the other. */
 #include <stdlib.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "../textures/texture.h"
 #include "delta_position.h"
 
@@ -36,10 +35,6 @@ static const emitter_ops point_ops = {.sample_direction = point_sample,
                                       .pdf_direction = delta_position_pdf,
                                       .eval = delta_position_eval,
                                       .set_scene = delta_position_set_scene};
-
-static void point_destroy(object *o) {
-  free(o);
-}
 
 static vec3 point_get_position(const object *o) {
   return ((const point_light *)o)->p;
@@ -64,9 +59,12 @@ static void point_parameters_changed(object *o) {
   pl->p = xf_point(&pl->to_world, v3(0, 0, 0));
 }
 
+DEFINE_PLUGIN(point, CLS_EMITTER, .ops = &point_ops, .traverse = point_traverse,
+              .parameters_changed = point_parameters_changed);
+
 static rsw_status point_create(loader *ld, node *n, object **out) {
-  point_light *pl = calloc(1, sizeof *pl);
-  if (!pl) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+  point_light *pl = PLUGIN_NEW(point_light, point);
+  if (!pl) return plugin_created(ld, n, NULL, out);
   pl->base.ops = &point_ops;
   pl->base.flags = EMITTER_DELTA_POSITION;
   rsw_status st = ld_float_range(ld, n, "sampling_weight", 1.0, 0.0, INFINITY, &pl->base.sampling_weight);
@@ -77,14 +75,5 @@ static rsw_status point_create(loader *ld, node *n, object **out) {
     return st;
   }
   point_parameters_changed(&pl->base.base);
-  *out = &pl->base.base;
-  return RSW_OK;
+  return plugin_created(ld, n, &pl->base.base, out);
 }
-
-const plugin plugin_point = {.name = "point",
-                             .cls = CLS_EMITTER,
-                             .create = point_create,
-                             .destroy = point_destroy,
-                             .ops = &point_ops,
-                             .traverse = point_traverse,
-                             .parameters_changed = point_parameters_changed};

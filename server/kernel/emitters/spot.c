@@ -19,8 +19,7 @@
  * the angles are fixed at load, as Mitsuba traverses neither. */
 #include <stdlib.h>
 
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "../textures/texture.h"
 #include "delta_position.h"
 
@@ -67,10 +66,6 @@ static const emitter_ops spot_ops = {.sample_direction = spot_sample,
                                      .eval = delta_position_eval,
                                      .set_scene = delta_position_set_scene};
 
-static void spot_destroy(object *o) {
-  free(o);
-}
-
 static void spot_parameters_changed(object *o) {
   spot_light *sl = (spot_light *)o;
   sl->p = xf_point(&sl->to_world, v3(0, 0, 0));
@@ -84,9 +79,12 @@ static void spot_traverse(object *o, param_visitor *v) {
   pv_float(v, "sampling_weight", &sl->base.sampling_weight, UPDATE_SPECTRAL, 0.0, INFINITY);
 }
 
+DEFINE_PLUGIN(spot, CLS_EMITTER, .ops = &spot_ops, .traverse = spot_traverse,
+              .parameters_changed = spot_parameters_changed);
+
 static rsw_status spot_create(loader *ld, node *n, object **out) {
-  spot_light *sl = calloc(1, sizeof *sl);
-  if (!sl) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+  spot_light *sl = PLUGIN_NEW(spot_light, spot);
+  if (!sl) return plugin_created(ld, n, NULL, out);
   sl->base.ops = &spot_ops;
   sl->base.flags = EMITTER_DELTA_POSITION;
   double cutoff = 20.0, beam = 15.0;
@@ -118,14 +116,5 @@ static rsw_status spot_create(loader *ld, node *n, object **out) {
   sl->uv_factor = tan(sl->cutoff);
   sl->inv_transition = sl->cutoff > sl->beam ? 1.0 / (sl->cutoff - sl->beam) : 0.0;
   spot_parameters_changed(&sl->base.base);
-  *out = &sl->base.base;
-  return RSW_OK;
+  return plugin_created(ld, n, &sl->base.base, out);
 }
-
-const plugin plugin_spot = {.name = "spot",
-                            .cls = CLS_EMITTER,
-                            .create = spot_create,
-                            .destroy = spot_destroy,
-                            .ops = &spot_ops,
-                            .traverse = spot_traverse,
-                            .parameters_changed = spot_parameters_changed};

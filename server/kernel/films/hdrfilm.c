@@ -17,7 +17,7 @@
 
 #include <math.h>
 
-#include "../scene/loader.h"
+#include "../scene/plugin_def.h"
 #include "film_planes.h"
 
 /* Bounds that keep a hostile document from asking for a huge buffer. */
@@ -29,10 +29,6 @@ typedef struct hdrfilm {
   pixel_format requested; /* what the document asked for (before mono) */
 } hdrfilm;
 
-static void hdrfilm_destroy(object *o) {
-  free(o);
-}
-
 /* The variant is known per render: mono forces one luminance channel. */
 static rsw_status hdrfilm_prepare(object *o, const render_ctx *rc, rsw_err *err) {
   (void)err;
@@ -41,8 +37,6 @@ static rsw_status hdrfilm_prepare(object *o, const render_ctx *rc, rsw_err *err)
       rc->variant == VARIANT_MONO && f->requested != PIXFMT_STOKES ? PIXFMT_LUMINANCE : f->requested;
   return RSW_OK;
 }
-
-static rsw_status hdrfilm_create(loader *ld, node *n, object **out);
 
 /* Develop: normalise by the filter weights; mono films hold one
  * luminance channel Y (Mitsuba forces it), rgb films R, G, B or Y, Stokes
@@ -139,14 +133,7 @@ static rsw_status hdrfilm_develop(const film *fm, const film_sums *s, film_image
 
 static const film_ops hdrfilm_ops = {.develop = hdrfilm_develop};
 
-const plugin plugin_hdrfilm = {
-    .name = "hdrfilm",
-    .cls = CLS_FILM,
-    .create = hdrfilm_create,
-    .destroy = hdrfilm_destroy,
-    .prepare = hdrfilm_prepare,
-    .ops = &hdrfilm_ops,
-};
+DEFINE_PLUGIN(hdrfilm, CLS_FILM, .prepare = hdrfilm_prepare, .ops = &hdrfilm_ops);
 
 typedef struct name_code {
   const char *name;
@@ -271,16 +258,13 @@ static rsw_status hdrfilm_read(loader *ld, node *n, hdrfilm *f) {
 }
 
 static rsw_status hdrfilm_create(loader *ld, node *n, object **out) {
-  hdrfilm *f = calloc(1, sizeof *f);
-  if (!f) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
-  f->base.base.plugin = &plugin_hdrfilm;
+  hdrfilm *f = PLUGIN_NEW(hdrfilm, hdrfilm);
+  if (!f) return plugin_created(ld, n, NULL, out);
   f->base.ops = &hdrfilm_ops;
-  f->base.base.id = n->id;
   rsw_status st = hdrfilm_read(ld, n, f);
   if (st != RSW_OK) {
     free(f);
     return st;
   }
-  *out = &f->base.base;
-  return RSW_OK;
+  return plugin_created(ld, n, &f->base.base, out);
 }

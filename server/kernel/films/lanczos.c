@@ -7,7 +7,7 @@
 #include <math.h>
 #include <stdlib.h>
 
-#include "../scene/loader.h"
+#include "../scene/plugin_def.h"
 
 static double lanczos_eval(const rfilter *f, double x) {
   x = fabs(x);
@@ -18,25 +18,15 @@ static double lanczos_eval(const rfilter *f, double x) {
   return sin(x1) * sin(x2) / (x1 * x2);
 }
 
-static void lanczos_destroy(object *o) {
-  free(o);
-}
-
-extern const plugin plugin_lanczos;
+DEFINE_PLUGIN(lanczos, CLS_RFILTER);
 
 static rsw_status lanczos_create(loader *ld, node *n, object **out) {
   long long lobes;
   rsw_status st = ld_int(ld, n, "lobes", 3, 1, 64, &lobes);
   if (st) return st;
-  rfilter *f = calloc(1, sizeof *f);
-  if (!f) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
-  f->base.plugin = &plugin_lanczos;
-  f->base.id = n->id;
+  rfilter *f = PLUGIN_NEW(rfilter, lanczos);
+  if (!f) return plugin_created(ld, n, NULL, out);
   f->radius = (double)lobes;
   f->eval = lanczos_eval;
-  *out = &f->base;
-  return RSW_OK;
+  return plugin_created(ld, n, &f->base, out);
 }
-
-const plugin plugin_lanczos = {
-    .name = "lanczos", .cls = CLS_RFILTER, .create = lanczos_create, .destroy = lanczos_destroy};

@@ -4,7 +4,7 @@
 #include <math.h>
 #include <stdlib.h>
 
-#include "../scene/loader.h"
+#include "../scene/plugin_def.h"
 
 /* box: radius 0.5 (fixed, no parameters), weight 1 on [-0.5, 0.5). */
 static double box_eval(const rfilter *f, double x) {
@@ -28,36 +28,16 @@ static double gaussian_eval(const rfilter *f, double x) {
   return v > 0.0 ? v : 0.0;
 }
 
-static void rfilter_destroy(object *o) {
-  free(o);
-}
+DEFINE_PLUGIN(box, CLS_RFILTER);
 
-static rsw_status box_create(loader *ld, node *n, object **out);
-static rsw_status gaussian_create(loader *ld, node *n, object **out);
-
-const plugin plugin_box = {
-    .name = "box",
-    .cls = CLS_RFILTER,
-    .create = box_create,
-    .destroy = rfilter_destroy,
-};
-
-const plugin plugin_gaussian = {
-    .name = "gaussian",
-    .cls = CLS_RFILTER,
-    .create = gaussian_create,
-    .destroy = rfilter_destroy,
-};
+DEFINE_PLUGIN(gaussian, CLS_RFILTER);
 
 static rsw_status box_create(loader *ld, node *n, object **out) {
-  rfilter *f = calloc(1, sizeof *f);
-  if (!f) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
-  f->base.plugin = &plugin_box;
-  f->base.id = n->id;
+  rfilter *f = PLUGIN_NEW(rfilter, box);
+  if (!f) return plugin_created(ld, n, NULL, out);
   f->radius = 0.5;
   f->eval = box_eval;
-  *out = &f->base;
-  return RSW_OK;
+  return plugin_created(ld, n, &f->base, out);
 }
 
 static rsw_status gaussian_create(loader *ld, node *n, object **out) {
@@ -65,15 +45,12 @@ static rsw_status gaussian_create(loader *ld, node *n, object **out) {
   /* An upper bound keeps the splat footprint (radius 4 sigma) bounded. */
   rsw_status st = ld_float_range(ld, n, "stddev", 0.5, 1e-6, 64.0, &sigma);
   if (st != RSW_OK) return st;
-  gaussian_filter *g = calloc(1, sizeof *g);
-  if (!g) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
-  g->base.base.plugin = &plugin_gaussian;
-  g->base.base.id = n->id;
+  gaussian_filter *g = PLUGIN_NEW(gaussian_filter, gaussian);
+  if (!g) return plugin_created(ld, n, NULL, out);
   g->stddev = sigma;
   g->base.radius = 4.0 * sigma;
   g->alpha = -1.0 / (2.0 * sigma * sigma);
   g->bias = exp(g->alpha * g->base.radius * g->base.radius);
   g->base.eval = gaussian_eval;
-  *out = &g->base.base;
-  return RSW_OK;
+  return plugin_created(ld, n, &g->base.base, out);
 }

@@ -4,7 +4,7 @@
 #include <math.h>
 #include <stdlib.h>
 
-#include "../scene/loader.h"
+#include "../scene/plugin_def.h"
 
 typedef struct tent_filter {
   rfilter base;
@@ -16,27 +16,17 @@ static double tent_eval(const rfilter *f, double x) {
   return v > 0.0 ? v : 0.0;
 }
 
-static void tent_destroy(object *o) {
-  free(o);
-}
-
-extern const plugin plugin_tent;
+DEFINE_PLUGIN(tent, CLS_RFILTER);
 
 static rsw_status tent_create(loader *ld, node *n, object **out) {
   double r;
   /* The same bound as gaussian's footprint (films/rfilters.c). */
   rsw_status st = ld_float_range(ld, n, "radius", 1.0, 1e-3, 256.0, &r);
   if (st) return st;
-  tent_filter *t = calloc(1, sizeof *t);
-  if (!t) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
-  t->base.base.plugin = &plugin_tent;
-  t->base.base.id = n->id;
+  tent_filter *t = PLUGIN_NEW(tent_filter, tent);
+  if (!t) return plugin_created(ld, n, NULL, out);
   t->base.radius = r;
   t->base.eval = tent_eval;
   t->inv_radius = 1.0 / r;
-  *out = &t->base.base;
-  return RSW_OK;
+  return plugin_created(ld, n, &t->base.base, out);
 }
-
-const plugin plugin_tent = {
-    .name = "tent", .cls = CLS_RFILTER, .create = tent_create, .destroy = tent_destroy};

@@ -18,8 +18,8 @@
 
 #include "../accel.h"
 #include "../hit.h"
-#include "../scene/loader.h"
 #include "../scene/periodic.h"
+#include "../scene/plugin_def.h"
 #include "../shapes/instance.h"
 #include "../shapes/shape.h"
 #include "integrator.h"
@@ -131,9 +131,7 @@ static color direct_Li(const integrator *it, const scene *sc, sampler_state *st,
 
 static const integrator_ops direct_ops = {.Li = direct_Li};
 
-static void direct_destroy(object *o) {
-  free(o);
-}
+DEFINE_PLUGIN(direct, CLS_INTEGRATOR, .ops = &direct_ops);
 
 static rsw_status direct_create(loader *ld, node *n, object **out) {
   if (ld_has(n, "shading_samples") && (ld_has(n, "emitter_samples") || ld_has(n, "bsdf_samples")))
@@ -149,8 +147,8 @@ static rsw_status direct_create(loader *ld, node *n, object **out) {
   if (ne + nb == 0)
     return ld_fail(ld, n, "emitter_samples", RSW_ERR_INVALID,
                    "emitter_samples + bsdf_samples must be at least 1");
-  direct_integrator *d = calloc(1, sizeof *d);
-  if (!d) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+  direct_integrator *d = PLUGIN_NEW(direct_integrator, direct);
+  if (!d) return plugin_created(ld, n, NULL, out);
   d->base.ops = &direct_ops;
   d->base.max_depth = 2;
   d->base.rr_depth = 1 << 30;
@@ -159,12 +157,5 @@ static rsw_status direct_create(loader *ld, node *n, object **out) {
   d->bsdf_samples = nb;
   d->frac_e = (double)ne / (double)(ne + nb);
   d->frac_b = (double)nb / (double)(ne + nb);
-  *out = &d->base.base;
-  return RSW_OK;
+  return plugin_created(ld, n, &d->base.base, out);
 }
-
-const plugin plugin_direct = {.name = "direct",
-                              .cls = CLS_INTEGRATOR,
-                              .create = direct_create,
-                              .destroy = direct_destroy,
-                              .ops = &direct_ops};

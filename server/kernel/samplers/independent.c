@@ -63,14 +63,11 @@ static rsw_status independent_create(loader *ld, node *n, object **out) {
   rsw_status st = ld_int(ld, n, "sample_count", 4, 1, SAMPLER_MAX_SPP, &count);
   if (st == RSW_OK) st = ld_int(ld, n, "seed", 0, 0, UINT32_MAX, &seed);
   if (st != RSW_OK) return st;
-  sampler *s = calloc(1, sizeof *s);
-  if (!s) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
-  s->base.plugin = &plugin_independent;
-  s->base.id = n->id;
+  sampler *s = PLUGIN_NEW(sampler, independent);
+  if (!s) return plugin_created(ld, n, NULL, out);
   s->ops = &independent_ops;
   s->sample_count = (uint32_t)count;
   s->seed = (uint64_t)seed;
   s->jitter = true;
-  *out = &s->base;
-  return RSW_OK;
+  return plugin_created(ld, n, &s->base, out);
 }

@@ -223,14 +223,11 @@ static rsw_status stratified_create(loader *ld, node *n, object **out) {
   if (st == RSW_OK) st = ld_int(ld, n, "seed", 0, 0, UINT32_MAX, &seed);
   if (st == RSW_OK) st = ld_bool(ld, n, "jitter", true, &jit);
   if (st != RSW_OK) return st;
-  sampler *s = calloc(1, sizeof *s);
-  if (!s) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
-  s->base.plugin = &plugin_stratified;
-  s->base.id = n->id;
+  sampler *s = PLUGIN_NEW(sampler, stratified);
+  if (!s) return plugin_created(ld, n, NULL, out);
   s->ops = &stratified_ops;
   s->seed = (uint64_t)seed;
   s->jitter = jit;
   s->sample_count = stratified_adjust_spp(s, (uint32_t)count);
-  *out = &s->base;
-  return RSW_OK;
+  return plugin_created(ld, n, &s->base, out);
 }

@@ -4,11 +4,7 @@
 #include <stdlib.h>
 
 #include "../shapes/instance.h"
-#include "loader.h"
-
-static void periodic_destroy(object *o) {
-  free(o);
-}
+#include "plugin_def.h"
 
 /* The plugin only carries the box; scene_create copies it into
  * scene->periodic. */
@@ -29,9 +25,11 @@ static rsw_status read_xy(loader *ld, node *n, const char *name, double out[2]) 
   return RSW_OK;
 }
 
+DEFINE_PLUGIN(periodic, CLS_SCENE);
+
 static rsw_status periodic_create(loader *ld, node *n, object **out) {
-  periodic_obj *o = calloc(1, sizeof *o);
-  if (!o) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+  periodic_obj *o = PLUGIN_NEW(periodic_obj, periodic);
+  if (!o) return plugin_created(ld, n, NULL, out);
   rsw_status st = read_xy(ld, n, "min", o->b.min);
   if (!st) st = read_xy(ld, n, "max", o->b.max);
   if (!st && !(o->b.max[0] > o->b.min[0] && o->b.max[1] > o->b.min[1] &&
@@ -43,12 +41,8 @@ static rsw_status periodic_create(loader *ld, node *n, object **out) {
     return st;
   }
   o->b.on = true;
-  *out = &o->base;
-  return RSW_OK;
+  return plugin_created(ld, n, &o->base, out);
 }
-
-const plugin plugin_periodic = {
-    .name = "periodic", .cls = CLS_SCENE, .create = periodic_create, .destroy = periodic_destroy};
 
 const periodic_bounds *periodic_of(const object *o) {
   return &((const periodic_obj *)o)->b;

@@ -179,10 +179,8 @@ static rsw_status distant_read(loader *ld, node *n, distant *ds) {
 }
 
 static rsw_status distant_create(loader *ld, node *n, object **out) {
-  distant *ds = calloc(1, sizeof *ds);
-  if (!ds) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
-  ds->base.base.plugin = &plugin_distant;
-  ds->base.base.id = n->id;
+  distant *ds = PLUGIN_NEW(distant, distant);
+  if (!ds) return plugin_created(ld, n, NULL, out);
   ds->base.ops = &distant_ops;
   ds->base.to_world = xf_identity();
   rsw_status st = distant_read(ld, n, ds);
@@ -190,6 +188,5 @@ static rsw_status distant_create(loader *ld, node *n, object **out) {
     free(ds);
     return st;
   }
-  *out = &ds->base.base;
-  return RSW_OK;
+  return plugin_created(ld, n, &ds->base.base, out);
 }

@@ -102,10 +102,8 @@ DEFINE_PLUGIN(distantflux, CLS_SENSOR, .destroy = distantflux_destroy, .traverse
               .ops = &distantflux_ops);
 
 static rsw_status distantflux_create(loader *ld, node *n, object **out) {
-  distantflux *f = calloc(1, sizeof *f);
-  if (!f) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
-  f->base.base.plugin = &plugin_distantflux;
-  f->base.base.id = n->id;
+  distantflux *f = PLUGIN_NEW(distantflux, distantflux);
+  if (!f) return plugin_created(ld, n, NULL, out);
   f->base.ops = &distantflux_ops;
   f->base.to_world = xf_identity();
 
@@ -123,6 +121,5 @@ static rsw_status distantflux_create(loader *ld, node *n, object **out) {
     return st;
   }
   f->ray_offset = f->ray_offset_param;
-  *out = &f->base.base;
-  return RSW_OK;
+  return plugin_created(ld, n, &f->base.base, out);
 }

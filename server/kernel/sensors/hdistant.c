@@ -113,10 +113,8 @@ DEFINE_PLUGIN(hdistant, CLS_SENSOR, .destroy = hdistant_destroy, .traverse = sen
               .ops = &hdistant_ops);
 
 static rsw_status hdistant_create(loader *ld, node *n, object **out) {
-  hdistant *h = calloc(1, sizeof *h);
-  if (!h) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
-  h->base.base.plugin = &plugin_hdistant;
-  h->base.base.id = n->id;
+  hdistant *h = PLUGIN_NEW(hdistant, hdistant);
+  if (!h) return plugin_created(ld, n, NULL, out);
   h->base.ops = &hdistant_ops;
   h->base.to_world = xf_identity();
 
@@ -129,6 +127,5 @@ static rsw_status hdistant_create(loader *ld, node *n, object **out) {
     return st;
   }
   h->ray_offset = h->ray_offset_param;
-  *out = &h->base.base;
-  return RSW_OK;
+  return plugin_created(ld, n, &h->base.base, out);
 }

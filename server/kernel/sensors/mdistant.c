@@ -201,10 +201,8 @@ static rsw_status mdistant_read(loader *ld, node *n, mdistant *m) {
 }
 
 static rsw_status mdistant_create(loader *ld, node *n, object **out) {
-  mdistant *m = calloc(1, sizeof *m);
-  if (!m) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
-  m->base.base.plugin = &plugin_mdistant;
-  m->base.base.id = n->id;
+  mdistant *m = PLUGIN_NEW(mdistant, mdistant);
+  if (!m) return plugin_created(ld, n, NULL, out);
   m->base.ops = &mdistant_ops;
   m->base.to_world = xf_identity();
   rsw_status st = mdistant_read(ld, n, m);
@@ -212,6 +210,5 @@ static rsw_status mdistant_create(loader *ld, node *n, object **out) {
     mdistant_destroy(&m->base.base);
     return st;
   }
-  *out = &m->base.base;
-  return RSW_OK;
+  return plugin_created(ld, n, &m->base.base, out);
 }

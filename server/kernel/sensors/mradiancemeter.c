@@ -80,10 +80,8 @@ static rsw_status mradiancemeter_read(loader *ld, node *n, mradiancemeter *m) {
 }
 
 static rsw_status mradiancemeter_create(loader *ld, node *n, object **out) {
-  mradiancemeter *m = calloc(1, sizeof *m);
-  if (!m) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
-  m->base.base.plugin = &plugin_mradiancemeter;
-  m->base.base.id = n->id;
+  mradiancemeter *m = PLUGIN_NEW(mradiancemeter, mradiancemeter);
+  if (!m) return plugin_created(ld, n, NULL, out);
   m->base.ops = &mradiancemeter_ops;
   m->base.to_world = xf_identity();
   rsw_status st = mradiancemeter_read(ld, n, m);
@@ -91,6 +89,5 @@ static rsw_status mradiancemeter_create(loader *ld, node *n, object **out) {
     mradiancemeter_destroy(&m->base.base);
     return st;
   }
-  *out = &m->base.base;
-  return RSW_OK;
+  return plugin_created(ld, n, &m->base.base, out);
 }

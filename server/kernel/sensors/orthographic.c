@@ -9,7 +9,7 @@
  * transform). */
 #include <stdlib.h>
 
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "projective.h"
 
 typedef struct orthographic {
@@ -35,21 +35,15 @@ static rsw_status ortho_set_scene(sensor *s, const scene *sc, rsw_err *err) {
 
 static const sensor_ops ortho_ops = {.sample_ray = ortho_sample_ray, .set_scene = ortho_set_scene};
 
-static void ortho_destroy(object *o) {
-  free(o);
-}
-
 static void ortho_traverse(object *o, param_visitor *v) {
   pv_transform(v, "to_world", &((sensor *)o)->to_world, UPDATE_SPECTRAL, NULL);
 }
 
-extern const plugin plugin_orthographic;
+DEFINE_PLUGIN(orthographic, CLS_SENSOR, .ops = &ortho_ops, .traverse = ortho_traverse);
 
-static rsw_status ortho_create(loader *ld, node *n, object **out) {
-  orthographic *c = calloc(1, sizeof *c);
-  if (!c) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
-  c->base.base.plugin = &plugin_orthographic;
-  c->base.base.id = n->id;
+static rsw_status orthographic_create(loader *ld, node *n, object **out) {
+  orthographic *c = PLUGIN_NEW(orthographic, orthographic);
+  if (!c) return plugin_created(ld, n, NULL, out);
   c->base.ops = &ortho_ops;
   rsw_status st = sensor_read_base(ld, n, &c->base);
   if (!st) st = projective_read(ld, n, &c->base, &c->proj);
@@ -58,15 +52,5 @@ static rsw_status ortho_create(loader *ld, node *n, object **out) {
     free(c);
     return st;
   }
-  *out = &c->base.base;
-  return RSW_OK;
+  return plugin_created(ld, n, &c->base.base, out);
 }
-
-const plugin plugin_orthographic = {
-    .name = "orthographic",
-    .cls = CLS_SENSOR,
-    .create = ortho_create,
-    .destroy = ortho_destroy,
-    .ops = &ortho_ops,
-    .traverse = ortho_traverse,
-};

@@ -17,7 +17,7 @@
 #include <string.h>
 #include <strings.h>
 
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "perspective_lanes.h"
 #include "sensor_common.h"
 
@@ -83,12 +83,6 @@ static const sensor_ops perspective_ops = {
     .sample_ray_batch = perspective_sample_ray_batch,
 };
 
-static void perspective_destroy(object *o) {
-  free(o);
-}
-
-static rsw_status perspective_create(loader *ld, node *n, object **out);
-
 /* The camera transform must stay a rigid motion (as checked at load). */
 static rsw_status perspective_check_xf(const object *o, const xform *t, const char *key, rsw_err *err) {
   (void)o;
@@ -112,15 +106,8 @@ static void perspective_parameters_changed(object *o) {
   p->tan_half_fov_x = tan(0.5 * p->x_fov * DEG2RAD);
 }
 
-const plugin plugin_perspective = {
-    .traverse = perspective_traverse,
-    .parameters_changed = perspective_parameters_changed,
-    .name = "perspective",
-    .cls = CLS_SENSOR,
-    .create = perspective_create,
-    .destroy = perspective_destroy,
-    .ops = &perspective_ops,
-};
+DEFINE_PLUGIN(perspective, CLS_SENSOR, .traverse = perspective_traverse,
+              .parameters_changed = perspective_parameters_changed, .ops = &perspective_ops);
 
 /* Focal length of a 35 mm film camera: "50mm", "50" or a number (mm). */
 static rsw_status read_focal_length(loader *ld, node *n, double *mm) {
@@ -244,10 +231,8 @@ static rsw_status perspective_read(loader *ld, node *n, perspective *p) {
 }
 
 static rsw_status perspective_create(loader *ld, node *n, object **out) {
-  perspective *p = calloc(1, sizeof *p);
-  if (!p) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
-  p->base.base.plugin = &plugin_perspective;
-  p->base.base.id = n->id;
+  perspective *p = PLUGIN_NEW(perspective, perspective);
+  if (!p) return plugin_created(ld, n, NULL, out);
   p->base.ops = &perspective_ops;
   p->base.to_world = xf_identity();
   rsw_status st = perspective_read(ld, n, p);
@@ -255,6 +240,5 @@ static rsw_status perspective_create(loader *ld, node *n, object **out) {
     free(p);
     return st;
   }
-  *out = &p->base.base;
-  return RSW_OK;
+  return plugin_created(ld, n, &p->base.base, out);
 }

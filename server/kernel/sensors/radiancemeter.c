@@ -99,10 +99,8 @@ static rsw_status radiancemeter_read(loader *ld, node *n, radiancemeter *r) {
 }
 
 static rsw_status radiancemeter_create(loader *ld, node *n, object **out) {
-  radiancemeter *r = calloc(1, sizeof *r);
-  if (!r) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
-  r->base.base.plugin = &plugin_radiancemeter;
-  r->base.base.id = n->id;
+  radiancemeter *r = PLUGIN_NEW(radiancemeter, radiancemeter);
+  if (!r) return plugin_created(ld, n, NULL, out);
   r->base.ops = &radiancemeter_ops;
   r->base.to_world = xf_identity();
   rsw_status st = radiancemeter_read(ld, n, r);
@@ -110,6 +108,5 @@ static rsw_status radiancemeter_create(loader *ld, node *n, object **out) {
     free(r);
     return st;
   }
-  *out = &r->base.base;
-  return RSW_OK;
+  return plugin_created(ld, n, &r->base.base, out);
 }

@@ -18,7 +18,7 @@
  * spectral (Mitsuba lists none but to_world). */
 #include <stdlib.h>
 
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "projective.h"
 
 typedef struct thinlens {
@@ -52,10 +52,6 @@ static rsw_status thinlens_set_scene(sensor *s, const scene *sc, rsw_err *err) {
 
 static const sensor_ops thinlens_ops = {.sample_ray = thinlens_sample_ray, .set_scene = thinlens_set_scene};
 
-static void thinlens_destroy(object *o) {
-  free(o);
-}
-
 static void thinlens_parameters_changed(object *o) {
   thinlens *c = (thinlens *)o;
   c->tan_half_fov_x = tan(0.5 * c->x_fov * DEG2RAD);
@@ -69,13 +65,12 @@ static void thinlens_traverse(object *o, param_visitor *v) {
   pv_float(v, "focus_distance", &c->proj.focus_distance, UPDATE_SPECTRAL, 1e-12, INFINITY);
 }
 
-extern const plugin plugin_thinlens;
+DEFINE_PLUGIN(thinlens, CLS_SENSOR, .ops = &thinlens_ops, .traverse = thinlens_traverse,
+              .parameters_changed = thinlens_parameters_changed);
 
 static rsw_status thinlens_create(loader *ld, node *n, object **out) {
-  thinlens *c = calloc(1, sizeof *c);
-  if (!c) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
-  c->base.base.plugin = &plugin_thinlens;
-  c->base.base.id = n->id;
+  thinlens *c = PLUGIN_NEW(thinlens, thinlens);
+  if (!c) return plugin_created(ld, n, NULL, out);
   c->base.ops = &thinlens_ops;
   rsw_status st = sensor_read_base(ld, n, &c->base);
   if (!st) st = projective_read(ld, n, &c->base, &c->proj);
@@ -94,16 +89,5 @@ static rsw_status thinlens_create(loader *ld, node *n, object **out) {
     return st;
   }
   thinlens_parameters_changed(&c->base.base);
-  *out = &c->base.base;
-  return RSW_OK;
+  return plugin_created(ld, n, &c->base.base, out);
 }
-
-const plugin plugin_thinlens = {
-    .name = "thinlens",
-    .cls = CLS_SENSOR,
-    .create = thinlens_create,
-    .destroy = thinlens_destroy,
-    .ops = &thinlens_ops,
-    .traverse = thinlens_traverse,
-    .parameters_changed = thinlens_parameters_changed,
-};

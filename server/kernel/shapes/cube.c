@@ -3,6 +3,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../scene/plugin_def.h"
 #include "shape_internal.h"
 
 /* cube: [-1,1]^3, 24 vertices (4 per face, per-face normals), 12
@@ -47,9 +48,5 @@ static rsw_status cube_create(loader *ld, node *n, object **out) {
   return shape_finish(ld, n, s, out);
 }
 
-const plugin plugin_cube = {.name = "cube",
-                            .cls = CLS_SHAPE,
-                            .create = cube_create,
-                            .destroy = shape_destroy,
-                            .traverse = shape_traverse,
-                            .parameters_changed = shape_parameters_changed};
+DEFINE_PLUGIN(cube, CLS_SHAPE, .destroy = shape_destroy, .traverse = shape_traverse,
+              .parameters_changed = shape_parameters_changed);

@@ -28,6 +28,7 @@
 #include <string.h>
 
 #include "../accel_hit.h"
+#include "../scene/plugin_def.h"
 #include "shape_internal.h"
 
 static void cylinder_bounds(const shape *s, vec3 *lo, vec3 *hi) {
@@ -177,13 +178,8 @@ static rsw_status cylinder_create(loader *ld, node *n, object **out) {
     free(s);
     return st;
   }
-  *out = &s->base;
-  return RSW_OK;
+  return plugin_created(ld, n, &s->base, out);
 }
 
-const plugin plugin_cylinder = {.name = "cylinder",
-                                .cls = CLS_SHAPE,
-                                .create = cylinder_create,
-                                .destroy = shape_destroy,
-                                .traverse = shape_traverse,
-                                .parameters_changed = shape_parameters_changed};
+DEFINE_PLUGIN(cylinder, CLS_SHAPE, .destroy = shape_destroy, .traverse = shape_traverse,
+              .parameters_changed = shape_parameters_changed);

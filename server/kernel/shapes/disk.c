@@ -4,6 +4,7 @@
 #include <stdlib.h>
 
 #include "../accel_hit.h"
+#include "../scene/plugin_def.h"
 #include "shape_internal.h"
 
 /* Flat: z in [-0, 0] (accel.c pads it for Embree's box). */
@@ -85,9 +86,5 @@ static rsw_status disk_create(loader *ld, node *n, object **out) {
   return shape_finish(ld, n, s, out);
 }
 
-const plugin plugin_disk = {.name = "disk",
-                            .cls = CLS_SHAPE,
-                            .create = disk_create,
-                            .destroy = shape_destroy,
-                            .traverse = shape_traverse,
-                            .parameters_changed = shape_parameters_changed};
+DEFINE_PLUGIN(disk, CLS_SHAPE, .destroy = shape_destroy, .traverse = shape_traverse,
+              .parameters_changed = shape_parameters_changed);

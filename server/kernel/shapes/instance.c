@@ -7,7 +7,7 @@
 #include <string.h>
 
 #include "../accel_hit.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "rsw_file.h"
 #include "shape_internal.h"
 
@@ -24,9 +24,24 @@ static void group_destroy(object *o) {
   free(g);
 }
 
-static rsw_status group_create(loader *ld, node *n, object **out) {
-  shape_group *g = calloc(1, sizeof *g);
-  if (!g) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+/* Members' BSDFs stay reachable as parameters (<group>.<member>.bsdf...);
+ * their to_world is baked into the group's Embree scene, so it is not a
+ * parameter. */
+static void group_traverse(object *o, param_visitor *v) {
+  shape_group *g = (shape_group *)o;
+  for (size_t i = 0; i < g->n_members; i++) {
+    shape *m = g->members[i];
+    char key[256];
+    snprintf(key, sizeof key, "%s.bsdf", m->base.id ? m->base.id : "member");
+    pv_object(v, key, &m->bsdf->base, NAN, NAN);
+  }
+}
+
+DEFINE_PLUGIN(shapegroup, CLS_SHAPE, .destroy = group_destroy, .traverse = group_traverse);
+
+static rsw_status shapegroup_create(loader *ld, node *n, object **out) {
+  shape_group *g = PLUGIN_NEW(shape_group, shapegroup);
+  if (!g) return plugin_created(ld, n, NULL, out);
   g->base.ops = &shape_ops_mesh; /* no geometry of its own */
   g->base.to_world = xf_identity();
   object **arr = NULL;
@@ -60,28 +75,8 @@ static rsw_status group_create(loader *ld, node *n, object **out) {
     group_destroy(&g->base.base);
     return st;
   }
-  *out = &g->base.base;
-  return RSW_OK;
+  return plugin_created(ld, n, &g->base.base, out);
 }
-
-/* Members' BSDFs stay reachable as parameters (<group>.<member>.bsdf...);
- * their to_world is baked into the group's Embree scene, so it is not a
- * parameter. */
-static void group_traverse(object *o, param_visitor *v) {
-  shape_group *g = (shape_group *)o;
-  for (size_t i = 0; i < g->n_members; i++) {
-    shape *m = g->members[i];
-    char key[256];
-    snprintf(key, sizeof key, "%s.bsdf", m->base.id ? m->base.id : "member");
-    pv_object(v, key, &m->bsdf->base, NAN, NAN);
-  }
-}
-
-const plugin plugin_shapegroup = {.name = "shapegroup",
-                                  .cls = CLS_SHAPE,
-                                  .create = group_create,
-                                  .destroy = group_destroy,
-                                  .traverse = group_traverse};
 
 /* ---- instance -------------------------------------------------------------------------- */
 
@@ -107,22 +102,6 @@ static rsw_status read_group(loader *ld, node *n, shape_group **out) {
 
 static rsw_status placement_check(const shape_group *g, const xform *t, const char *what, rsw_err *err,
                                   const char *where);
-
-static rsw_status instance_create(loader *ld, node *n, object **out) {
-  instance_shape *s = calloc(1, sizeof *s);
-  if (!s) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
-  s->base.ops = &shape_ops_mesh; /* no geometry of its own */
-  s->n = 1;
-  rsw_status st = ld_transform(ld, n, "to_world", &s->base.to_world, NULL);
-  if (!st) st = read_group(ld, n, &s->group);
-  if (!st) st = placement_check(s->group, &s->base.to_world, "to_world", ld->err, n->loc);
-  if (st) {
-    free(s);
-    return st;
-  }
-  *out = &s->base.base;
-  return RSW_OK;
-}
 
 /* A placement float32 tracing can represent (core/transform.h): affine,
  * scales and translation within the limits, and the group's box placed
@@ -158,12 +137,23 @@ static void instance_parameters_changed(object *o) {
   (void)o;
 }
 
-const plugin plugin_instance = {.name = "instance",
-                                .cls = CLS_SHAPE,
-                                .create = instance_create,
-                                .destroy = instance_destroy,
-                                .traverse = instance_traverse,
-                                .parameters_changed = instance_parameters_changed};
+DEFINE_PLUGIN(instance, CLS_SHAPE, .destroy = instance_destroy, .traverse = instance_traverse,
+              .parameters_changed = instance_parameters_changed);
+
+static rsw_status instance_create(loader *ld, node *n, object **out) {
+  instance_shape *s = PLUGIN_NEW(instance_shape, instance);
+  if (!s) return plugin_created(ld, n, NULL, out);
+  s->base.ops = &shape_ops_mesh; /* no geometry of its own */
+  s->n = 1;
+  rsw_status st = ld_transform(ld, n, "to_world", &s->base.to_world, NULL);
+  if (!st) st = read_group(ld, n, &s->group);
+  if (!st) st = placement_check(s->group, &s->base.to_world, "to_world", ld->err, n->loc);
+  if (st) {
+    free(s);
+    return st;
+  }
+  return plugin_created(ld, n, &s->base.base, out);
+}
 
 /* ---- instancelist ---------------------------------------------------------------------- */
 
@@ -322,9 +312,11 @@ rsw_status instance_list_parse(const char *path, float **xf_out, uint32_t *n_out
   return st;
 }
 
+DEFINE_PLUGIN(instancelist, CLS_SHAPE, .destroy = instance_destroy);
+
 static rsw_status instancelist_create(loader *ld, node *n, object **out) {
-  instance_shape *s = calloc(1, sizeof *s);
-  if (!s) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+  instance_shape *s = PLUGIN_NEW(instance_shape, instancelist);
+  if (!s) return plugin_created(ld, n, NULL, out);
   s->base.ops = &shape_ops_mesh; /* no geometry of its own */
   s->base.to_world = xf_identity();
   char *path = NULL;
@@ -336,12 +328,8 @@ static rsw_status instancelist_create(loader *ld, node *n, object **out) {
     free(s);
     return st;
   }
-  *out = &s->base.base;
-  return RSW_OK;
+  return plugin_created(ld, n, &s->base.base, out);
 }
-
-const plugin plugin_instancelist = {
-    .name = "instancelist", .cls = CLS_SHAPE, .create = instancelist_create, .destroy = instance_destroy};
 
 /* ---- shared ------------------------------------------------------------------------------ */
 

@@ -8,6 +8,7 @@
  * transform (accel.h), so moving a mesh never touches its BVH. */
 #include <stdlib.h>
 
+#include "../scene/plugin_def.h"
 #include "mesh_io.h"
 #include "shape_internal.h"
 
@@ -43,15 +44,7 @@ static rsw_status ply_create(loader *ld, node *n, object **out) {
   return meshfile_create(ld, n, out, false);
 }
 
-const plugin plugin_obj = {.name = "obj",
-                           .cls = CLS_SHAPE,
-                           .create = obj_create,
-                           .destroy = shape_destroy,
-                           .traverse = shape_traverse,
-                           .parameters_changed = shape_parameters_changed};
-const plugin plugin_ply = {.name = "ply",
-                           .cls = CLS_SHAPE,
-                           .create = ply_create,
-                           .destroy = shape_destroy,
-                           .traverse = shape_traverse,
-                           .parameters_changed = shape_parameters_changed};
+DEFINE_PLUGIN(obj, CLS_SHAPE, .destroy = shape_destroy, .traverse = shape_traverse,
+              .parameters_changed = shape_parameters_changed);
+DEFINE_PLUGIN(ply, CLS_SHAPE, .destroy = shape_destroy, .traverse = shape_traverse,
+              .parameters_changed = shape_parameters_changed);

@@ -3,6 +3,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../scene/plugin_def.h"
 #include "shape_internal.h"
 
 /* rectangle: [-1,1]^2 at z = 0, normal +z; vertices (-1,-1,0), (1,-1,0),
@@ -33,9 +34,5 @@ static rsw_status rectangle_create(loader *ld, node *n, object **out) {
   return shape_finish(ld, n, s, out);
 }
 
-const plugin plugin_rectangle = {.name = "rectangle",
-                                 .cls = CLS_SHAPE,
-                                 .create = rectangle_create,
-                                 .destroy = shape_destroy,
-                                 .traverse = shape_traverse,
-                                 .parameters_changed = shape_parameters_changed};
+DEFINE_PLUGIN(rectangle, CLS_SHAPE, .destroy = shape_destroy, .traverse = shape_traverse,
+              .parameters_changed = shape_parameters_changed);

@@ -5,6 +5,7 @@
 #include <stdlib.h>
 
 #include "../accel_hit.h"
+#include "../scene/plugin_def.h"
 #include "shape_internal.h"
 
 static void sphere_bounds(const shape *s, vec3 *lo, vec3 *hi) {
@@ -106,9 +107,5 @@ static rsw_status sphere_create(loader *ld, node *n, object **out) {
   return shape_finish(ld, n, s, out);
 }
 
-const plugin plugin_sphere = {.name = "sphere",
-                              .cls = CLS_SHAPE,
-                              .create = sphere_create,
-                              .destroy = shape_destroy,
-                              .traverse = shape_traverse,
-                              .parameters_changed = shape_parameters_changed};
+DEFINE_PLUGIN(sphere, CLS_SHAPE, .destroy = shape_destroy, .traverse = shape_traverse,
+              .parameters_changed = shape_parameters_changed);

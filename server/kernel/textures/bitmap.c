@@ -11,8 +11,7 @@
 #include <string.h>
 
 #include "../image_ldr.h"
-#include "../scene/loader.h"
-#include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "image_exr.h"
 
 typedef enum wrap_mode {
@@ -112,9 +111,16 @@ static rsw_status read_ldr(loader *ld, node *n, const char *path, bool raw, bitm
   return RSW_OK;
 }
 
-static rsw_status bm_create(loader *ld, node *n, object **out) {
-  bitmap_tex *b = calloc(1, sizeof *b);
-  if (!b) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+static void bm_traverse(object *o, param_visitor *v) {
+  pv_transform(v, "to_uv", &((bitmap_tex *)o)->to_uv, UPDATE_SPECTRAL, NULL);
+}
+
+DEFINE_PLUGIN(bitmap, CLS_TEXTURE, .destroy = bm_destroy, .prepare = bm_prepare, .ops = &bitmap_ops,
+              .traverse = bm_traverse);
+
+static rsw_status bitmap_create(loader *ld, node *n, object **out) {
+  bitmap_tex *b = PLUGIN_NEW(bitmap_tex, bitmap);
+  if (!b) return plugin_created(ld, n, NULL, out);
   b->base.ops = &bitmap_ops;
   char *path = NULL;
   const char *filter, *wrap;
@@ -193,18 +199,5 @@ static rsw_status bm_create(loader *ld, node *n, object **out) {
     bm_destroy(&b->base.base);
     return st;
   }
-  *out = &b->base.base;
-  return RSW_OK;
+  return plugin_created(ld, n, &b->base.base, out);
 }
-
-static void bm_traverse(object *o, param_visitor *v) {
-  pv_transform(v, "to_uv", &((bitmap_tex *)o)->to_uv, UPDATE_SPECTRAL, NULL);
-}
-
-const plugin plugin_bitmap = {.name = "bitmap",
-                              .cls = CLS_TEXTURE,
-                              .create = bm_create,
-                              .destroy = bm_destroy,
-                              .prepare = bm_prepare,
-                              .ops = &bitmap_ops,
-                              .traverse = bm_traverse};

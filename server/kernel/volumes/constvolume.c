@@ -13,6 +13,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../scene/plugin_def.h"
 #include "../textures/texture.h"
 #include "volume.h"
 
@@ -57,10 +58,6 @@ static rsw_status constvolume_prepare(object *o, const render_ctx *rc, rsw_err *
   return RSW_OK;
 }
 
-static void constvolume_destroy(object *o) {
-  free(o);
-}
-
 static void constvolume_traverse(object *o, param_visitor *v) {
   constvolume *c = (constvolume *)o;
   pv_object(v, "value", &c->value->base, c->base.lo, c->base.hi);
@@ -71,24 +68,13 @@ static void constvolume_parameters_changed(object *o) {
   volume_update_bbox((volume *)o);
 }
 
-static rsw_status constvolume_create(loader *ld, node *n, object **out);
-
-const plugin plugin_constvolume = {
-    .name = "constvolume",
-    .cls = CLS_VOLUME,
-    .create = constvolume_create,
-    .destroy = constvolume_destroy,
-    .prepare = constvolume_prepare,
-    .ops = &constvolume_ops,
-    .traverse = constvolume_traverse,
-    .parameters_changed = constvolume_parameters_changed,
-};
+DEFINE_PLUGIN(constvolume, CLS_VOLUME, .prepare = constvolume_prepare, .ops = &constvolume_ops,
+              .traverse = constvolume_traverse, .parameters_changed = constvolume_parameters_changed);
 
 static volume *constvolume_make(texture *value, rsw_variant variant, const xform *to_world, const char *id) {
-  constvolume *c = calloc(1, sizeof *c);
+  constvolume *c = PLUGIN_NEW(constvolume, constvolume);
   if (!c) return NULL;
   volume_init(&c->base, &constvolume_ops, to_world);
-  c->base.base.plugin = &plugin_constvolume;
   c->base.base.id = id;
   c->value = value;
   c->base.res[0] = c->base.res[1] = c->base.res[2] = 1;
@@ -116,9 +102,7 @@ static rsw_status constvolume_create(loader *ld, node *n, object **out) {
   st = volume_read_to_world(ld, n, &xf);
   if (st) return st;
   volume *v = constvolume_make(t, ld->variant, &xf, n->id);
-  if (!v) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "constvolume: out of memory");
-  *out = &v->base;
-  return RSW_OK;
+  return plugin_created(ld, n, v ? &v->base : NULL, out);
 }
 
 /* ---- ld_volume (scene/loader.h) ------------------------------------------------ */

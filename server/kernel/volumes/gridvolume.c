@@ -40,6 +40,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../scene/plugin_def.h"
 #include "rsw_file.h"
 #include "volume.h"
 
@@ -470,27 +471,17 @@ static rsw_status gridvolume_fill(loader *ld, node *n, gridvolume *g) {
   return RSW_OK;
 }
 
+DEFINE_PLUGIN(gridvolume, CLS_VOLUME, .destroy = gridvolume_destroy, .prepare = gridvolume_prepare,
+              .ops = &gridvolume_ops, .traverse = gridvolume_traverse, .spectral = gridvolume_spectral,
+              .parameters_changed = gridvolume_parameters_changed);
+
 static rsw_status gridvolume_create(loader *ld, node *n, object **out) {
-  gridvolume *g = calloc(1, sizeof *g);
-  if (!g) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "gridvolume: out of memory");
+  gridvolume *g = PLUGIN_NEW(gridvolume, gridvolume);
+  if (!g) return plugin_created(ld, n, NULL, out);
   rsw_status st = gridvolume_fill(ld, n, g);
   if (st) {
     gridvolume_destroy(&g->base.base);
     return st;
   }
-  g->base.base.id = n->id;
-  *out = &g->base.base;
-  return RSW_OK;
+  return plugin_created(ld, n, &g->base.base, out);
 }
-
-const plugin plugin_gridvolume = {
-    .name = "gridvolume",
-    .cls = CLS_VOLUME,
-    .create = gridvolume_create,
-    .destroy = gridvolume_destroy,
-    .prepare = gridvolume_prepare,
-    .ops = &gridvolume_ops,
-    .traverse = gridvolume_traverse,
-    .spectral = gridvolume_spectral,
-    .parameters_changed = gridvolume_parameters_changed,
-};
