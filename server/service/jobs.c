@@ -278,11 +278,8 @@ static rsw_status check_params(const scene *sc, const cJSON *p, const char *ptr,
       for (size_t i = 0; i < n; i++) snprintf(e->candidates[i], sizeof e->candidates[i], "%s", c[i]);
       return e->err.code;
     }
-    char *txt = cJSON_PrintUnformatted(k);
     param_value v;
-    rsw_status st = txt ? param_value_parse(txt, k->string, &v, &err)
-                        : rsw_fail(&err, RSW_ERR_NOMEM, k->string, "out of memory");
-    free(txt);
+    rsw_status st = param_value_from_json(k, k->string, &v, &err);
     if (st) {
       char w[512];
       snprintf(w, sizeof w, "%s/%s", ptr, k->string);

@@ -252,7 +252,7 @@ rsw_status service_params_patch(service *svc, const char *id, const char *body, 
    * before it changes anything. */
   cJSON *patches = NULL;
   if (!st && r->patches) {
-    patches = svc_patch_merged(r->patches, j);
+    patches = svc_patch_merged(r->patches, j, r->sc);
     if (!patches) st = svc_fail(e, RSW_ERR_NOMEM, "body", "out of memory");
   }
   /* With a state directory the PATCH is acknowledged only once stored:

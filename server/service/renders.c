@@ -86,20 +86,41 @@ void svc_views_free(resident *r) {
 
 bool svc_keep_patch(resident *r, const cJSON *body) {
   if (!r->patches) return false;
-  cJSON *m = svc_patch_merged(r->patches, body);
+  cJSON *m = svc_patch_merged(r->patches, body, r->sc);
   if (!m) return false;
   cJSON_Delete(r->patches);
   r->patches = m;
   return true;
 }
 
-cJSON *svc_patch_merged(const cJSON *old, const cJSON *body) {
+/* The canonical path of key in sc (key itself when it does not resolve:
+ * the update that follows refuses it). */
+static const char *canonical_key(const scene *sc, const char *key, size_t *idx) {
+  rsw_err err = {0};
+  param_info info;
+  if (params_lookup(sc, key, idx, &err) != RSW_OK || !params_info(sc, *idx, &info)) {
+    *idx = SIZE_MAX;
+    return key;
+  }
+  return info.key;
+}
+
+cJSON *svc_patch_merged(const cJSON *old, const cJSON *body, const scene *sc) {
   unsigned jm = svc_json_mark();
   cJSON *m = old ? cJSON_Duplicate(old, true) : cJSON_CreateObject();
   for (const cJSON *k = body->child; m && k; k = k->next) {
+    size_t idx;
+    const char *key = canonical_key(sc, k->string, &idx);
+    /* Drop the entry's earlier value under any of its names. */
+    for (cJSON *o = m->child, *next; o; o = next) {
+      next = o->next;
+      size_t oi = SIZE_MAX;
+      if (idx != SIZE_MAX) (void)canonical_key(sc, o->string, &oi);
+      if (strcmp(o->string, k->string) == 0 || (idx != SIZE_MAX && oi == idx))
+        cJSON_Delete(cJSON_DetachItemViaPointer(m, o));
+    }
     cJSON *d = cJSON_Duplicate(k, true);
-    cJSON_DeleteItemFromObjectCaseSensitive(m, k->string);
-    if (!d || !cJSON_AddItemToObject(m, k->string, d)) { /* the key's copy: out of memory */
+    if (!d || !cJSON_AddItemToObject(m, key, d)) { /* the key's copy: out of memory */
       cJSON_Delete(d);
       cJSON_Delete(m);
       m = NULL;

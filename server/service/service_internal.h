@@ -317,9 +317,12 @@ rsw_status svc_scene_build_at(service *svc, const resident *r, const cJSON *patc
 /* Free r's idle views (renders.c; r->lock held or r unreachable). */
 void svc_views_free(resident *r);
 /* A copy of `old` (NULL: none) with the keys of a PATCH body set to its
- * values; NULL when out of memory (built before the update, so that a
- * PATCH that cannot record itself changes nothing). */
-cJSON *svc_patch_merged(const cJSON *old, const cJSON *body);
+ * values, each recorded under its canonical path in sc (a search key or an
+ * alias replaces the entry's earlier value under any name, so that a view's
+ * replay, and a render's override by path, never name one entry twice);
+ * NULL when out of memory (built before the update, so that a PATCH that
+ * cannot record itself changes nothing). */
+cJSON *svc_patch_merged(const cJSON *old, const cJSON *body, const scene *sc);
 /* Merge body's values into r->patches (false, r->patches unchanged, when
  * out of memory or when r has no record). */
 bool svc_keep_patch(resident *r, const cJSON *body);

@@ -114,6 +114,55 @@ static void test_patch_revisions(void) {
   free(id);
 }
 
+/* A PATCH through a search key, then through the path, then the search key
+ * again: the record views replay names the entry once, so a render (or a
+ * job) overriding it by its path renders the override (the film equals a
+ * render of the scene PATCHed to the same value) and views reproduce the
+ * last PATCH. */
+static void test_patch_search_key_then_override_by_path(void) {
+  static const char *doc =
+      "{\"type\": \"scene\", \"variant\": \"mono\","
+      " \"meter\": {\"type\": \"distant\", \"direction\": [0, 0, -1], \"target\": [0, 0, 0],"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"component_format\": \"float32\"}},"
+      " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1], \"irradiance\": 1.0},"
+      " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.6}}}";
+  bool created;
+  char *id = NULL, *json = NULL;
+  svc_error e = {0};
+  REQUIRE(service_scene_post(svc, doc, strlen(doc), false, NULL, &created, &id, &json, &e) == RSW_OK,
+          "post: %s", e.err.msg);
+  free(json);
+  static const char *const patches[] = {"{\"texture:bsdf:value\": 0.4}",
+                                        "{\"plate.bsdf.reflectance.value\": 0.3}",
+                                        "{\"texture:bsdf:value\": 0.35}"};
+  uint64_t rev;
+  for (size_t k = 0; k < 3; k++) {
+    REQUIRE(service_params_patch(svc, id, patches[k], strlen(patches[k]), -1, &json, &rev, &e) == RSW_OK,
+            "patch %s: %s", patches[k], e.err.msg);
+    free(json);
+  }
+  svc_film a, b, c;
+  const char *q1 = "{\"spp\": 4, \"seed\": 1, \"params\": {\"plate.bsdf.reflectance.value\": 0.2}}";
+  const char *q2 = "{\"spp\": 4, \"seed\": 1, \"params\": {\"sun.irradiance.value\": 1.0}}";
+  const char *q3 = "{\"spp\": 4, \"seed\": 1}";
+  REQUIRE(service_render(svc, id, q1, strlen(q1), NULL, &a, &e) == RSW_OK, "render with override by path: %s",
+          e.err.msg);
+  CHECK_REL(a.img.data[0], 0.2 / 3.14159265358979323846, 1e-5);
+  /* A view (any override) replays the last PATCH. */
+  REQUIRE(service_render(svc, id, q2, strlen(q2), NULL, &b, &e) == RSW_OK, "render on a view: %s", e.err.msg);
+  CHECK_REL(b.img.data[0], 0.35 / 3.14159265358979323846, 1e-5);
+  const char *p02 = "{\"plate.bsdf.reflectance.value\": 0.2}";
+  REQUIRE(service_params_patch(svc, id, p02, strlen(p02), -1, &json, &rev, &e) == RSW_OK, "patch 0.2: %s",
+          e.err.msg);
+  free(json);
+  REQUIRE(service_render(svc, id, q3, strlen(q3), NULL, &c, &e) == RSW_OK, "render: %s", e.err.msg);
+  CHECK(memcmp(a.img.data, c.img.data, sizeof(float)) == 0, "override film %.9g != PATCHed film %.9g",
+        a.img.data[0], c.img.data[0]);
+  svc_film_free(&a), svc_film_free(&b), svc_film_free(&c);
+  CHECK(service_scene_delete(svc, id, false, &e) == RSW_OK, "delete");
+  free(id);
+}
+
 static void test_job_spectral_loop(void) {
   char *id = post_plate();
   REQUIRE(id, "scene");
@@ -174,6 +223,7 @@ int main(void) {
   RSW_TEST_RUN(test_render_overrides_restore_base);
   RSW_TEST_RUN(test_patch_revisions);
   RSW_TEST_RUN(test_job_spectral_loop);
+  RSW_TEST_RUN(test_patch_search_key_then_override_by_path);
   service_free(svc);
   RSW_TEST_END("test_service");
 }

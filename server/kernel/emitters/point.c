@@ -49,7 +49,7 @@ static void point_set_position(object *o, vec3 p) {
 static void point_traverse(object *o, param_visitor *v) {
   point_light *pl = (point_light *)o;
   pv_object(v, "intensity", &pl->intensity->base, 0.0, INFINITY);
-  pv_vector(v, "position", point_get_position, point_set_position, UPDATE_SPECTRAL);
+  pv_position(v, "position", point_get_position, point_set_position, UPDATE_SPECTRAL);
   pv_transform(v, "to_world", &pl->to_world, UPDATE_SPECTRAL, NULL);
   pv_float(v, "sampling_weight", &pl->base.sampling_weight, UPDATE_SPECTRAL, 0.0, INFINITY);
 }

@@ -130,11 +130,21 @@ void pv_transform(param_visitor *v, const char *name, xform *ptr, update_class c
   e->check = check;
 }
 
-void pv_vector(param_visitor *v, const char *name, vec_get_fn get, vec_set_fn set, update_class cls) {
+static void add_vector(param_visitor *v, const char *name, vec_get_fn get, vec_set_fn set, update_class cls,
+                       bool position) {
   entry *e = add_entry(v, name, EK_VECTOR, cls);
   if (!e) return;
   e->vget = get;
   e->vset = set;
+  e->position = position;
+}
+
+void pv_vector(param_visitor *v, const char *name, vec_get_fn get, vec_set_fn set, update_class cls) {
+  add_vector(v, name, get, set, cls, false);
+}
+
+void pv_position(param_visitor *v, const char *name, vec_get_fn get, vec_set_fn set, update_class cls) {
+  add_vector(v, name, get, set, cls, true);
 }
 
 void pv_spectrum(param_visitor *v, const char *name, texture *t) {

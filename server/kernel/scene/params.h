@@ -71,7 +71,8 @@ typedef struct param_visitor param_visitor;
  * similarity). Returns an error naming `key`. */
 typedef rsw_status (*xform_check_fn)(const object *owner, const xform *t, const char *key, rsw_err *err);
 /* Getter/setter of a derived 3-vector (e.g. a `direction` that rewrites
- * to_world). set() is called only after validation (non-zero, finite). */
+ * to_world). set() is called only after validation: finite, and for a
+ * direction (pv_vector) non-zero; a position (pv_position) may be zero. */
 typedef vec3 (*vec_get_fn)(const object *owner);
 typedef void (*vec_set_fn)(object *owner, vec3 v);
 
@@ -79,6 +80,7 @@ void pv_float(param_visitor *v, const char *name, double *ptr, update_class cls,
 void pv_bool_ro(param_visitor *v, const char *name, bool value);
 void pv_transform(param_visitor *v, const char *name, xform *ptr, update_class cls, xform_check_fn check);
 void pv_vector(param_visitor *v, const char *name, vec_get_fn get, vec_set_fn set, update_class cls);
+void pv_position(param_visitor *v, const char *name, vec_get_fn get, vec_set_fn set, update_class cls);
 /* A uniform texture's spectral value (type spectrum in mono, rgb in rgb).
  * [lo, hi] comes from the slot that holds the texture (ld_texture's lo). */
 void pv_spectrum(param_visitor *v, const char *name, texture *t);

@@ -37,6 +37,7 @@ typedef struct entry {
   xform_check_fn check;
   vec_get_fn vget;
   vec_set_fn vset;
+  bool position; /* EK_VECTOR: a point (pv_position), may be zero; else a direction */
   texture *tex;
   shape *sh;
   mesh_buf buf;

@@ -305,8 +305,10 @@ static rsw_status validate(const scene *s, staged *sg, const staged *all, size_t
     if (v->kind != PV_ARRAY || v->n != 3 || v->rows)
       return rsw_fail(err, RSW_ERR_TYPE, key, "'%s' takes %s", key, kind_expect(s, e));
     sg->vec = v3(v->arr[0], v->arr[1], v->arr[2]);
-    if (!v3_finite(sg->vec) || !(v3_len(sg->vec) > 0))
-      return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': a direction must be finite and non-zero", key);
+    if (!v3_finite(sg->vec))
+      return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': a vector's components must be finite", key);
+    if (!e->position && !(v3_len(sg->vec) > 0))
+      return rsw_fail(err, RSW_ERR_INVALID, key, "'%s': a direction must be non-zero", key);
     vec3 cur = e->vget(e->owner);
     sg->changed = cur.x != sg->vec.x || cur.y != sg->vec.y || cur.z != sg->vec.z;
     return RSW_OK;

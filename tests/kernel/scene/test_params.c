@@ -957,6 +957,33 @@ static void test_update_by_alias_and_search(void) {
   scene_free(s);
 }
 
+/* A position (a `point` emitter's) may be PATCHed to the origin; a direction
+ * (a directional emitter's, a sensor's) may not, and the error names it. */
+static void test_zero_vector_position_vs_direction(void) {
+  scene *s = tsup_load("{\"type\": \"scene\", \"cam\": {\"type\": \"hdistant\","
+                       "   \"film\": {\"type\": \"hdrfilm\", \"width\": 4, \"height\": 4}},"
+                       " \"lamp\": {\"type\": \"point\", \"position\": [0, 0, 2], \"intensity\": 1},"
+                       " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1], \"irradiance\": 1},"
+                       " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\"}}}",
+                       NULL);
+  REQUIRE(s, "load");
+  update_report rep;
+  if (upd1_ok(s, "lamp.position", "[0, 0, 0]", &rep)) {
+    char *v = value_json(s, "lamp.position");
+    CHECK(v && strcmp(v, "[0, 0, 0]") == 0 && rep.changed == 1,
+          "lamp.position after the update: %s (changed %zu)", v ? v : "(null)", (size_t)rep.changed);
+    free(v);
+  }
+  static const char *const dirs[] = {"sun.direction", "cam.direction"};
+  for (size_t k = 0; k < 2; k++) {
+    rsw_err err = {0};
+    rsw_status st = upd1(s, dirs[k], "[0, 0, 0]", NULL, &err);
+    CHECK(st == RSW_ERR_INVALID && err_mentions(&err, dirs[k]) && strstr(err.msg, "direction"),
+          "%s = [0, 0, 0]: status %d, %s", dirs[k], (int)st, err.msg);
+  }
+  scene_free(s);
+}
+
 /* ---- derived state ---------------------------------------------------------------- */
 
 static void test_bsphere_refresh(void) {
@@ -1080,6 +1107,7 @@ int main(void) {
   RSW_TEST_RUN(test_equal_values_noop);
   RSW_TEST_RUN(test_update_classes_counters);
   RSW_TEST_RUN(test_update_by_alias_and_search);
+  RSW_TEST_RUN(test_zero_vector_position_vs_direction);
   RSW_TEST_RUN(test_bsphere_refresh);
   RSW_TEST_RUN(test_mono_table_range);
   unlink(ply_plain);
