@@ -493,7 +493,11 @@ class TestJobs(Base):
                 f"s = rs.connect({URL!r}).scene({hd.id!r})\n"
                 "s.sweep(grid={'wavelength': list(range(400, 600, 5))}, spp=20000, progress=False)\n")
         before = {j.id for j in self.client.jobs()}
-        proc = subprocess.Popen([sys.executable, "-c", code], stderr=subprocess.PIPE, text=True)
+        # SIGINT back to its default in the script: a shell's background
+        # job (tests/fresh/run.sh's `setsid bash -c ... &`) starts with it
+        # ignored, and Python then never raises KeyboardInterrupt.
+        proc = subprocess.Popen([sys.executable, "-c", code], stderr=subprocess.PIPE, text=True,
+                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
         new = []
         for _ in range(1200):  # up to a minute: a loaded machine imports xarray slowly
             new = [j for j in self.client.jobs() if j.id not in before and j.status["scene"] == hd.id]
