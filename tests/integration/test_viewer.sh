@@ -85,7 +85,7 @@ st=$(curl -s -o "$tmp/out" -w '%{http_code}' -H 'Content-Type: application/json'
 # ---- in Chromium ------------------------------------------------------------------
 docs=()
 [ -n "${RSW_VIEWER_DOCS_PNG:-}" ] && docs=(--docs-png "$RSW_VIEWER_DOCS_PNG")
-out=$(timeout 120 python3 "$root/tests/support/viewer_driver.py" --chromium "$chromium" --base "$U" \
+out=$(timeout 300 python3 "$root/tests/support/viewer_driver.py" --chromium "$chromium" --base "$U" \
   --token-base "$T" --token "$(cat "$tmp/token")" --artefacts "$art" "${docs[@]}" 2>&1)
 rc=$?
 echo "$out" | grep -v '^ok   '

@@ -370,11 +370,11 @@ def run(a, profile, browser):
     # 2. Inline edit: click the value, type, Enter: a PATCH.
     def edit():
         page.click(f'#params tr[data-key="{key}"] td.value')
-        if not page.wait(f'document.querySelector(\'#params tr[data-key="{key}"] td.value input\')', 5):
+        if not page.wait(f'document.querySelector(\'#params tr[data-key="{key}"] td.value input\')', 30):
             return "clicking the value opened no editor"
         page.type_into(f'#params tr[data-key="{key}"] td.value input', "0.25")
         page.key("Enter", 13)
-        if not page.wait("document.getElementById('params').dataset.revision === '1'", 10):
+        if not page.wait("document.getElementById('params').dataset.revision === '1'", 30):
             return f"the table's revision did not become 1; banner: {page.js('document.getElementById(`banner`).textContent')}"
         st2, table = http("GET", f"{base}/v1/scenes/{scene}/params?match={key}")
         v = table["params"][0]["value"]
@@ -416,7 +416,7 @@ def run(a, profile, browser):
         if lit < 0.05 * len(px) or len(set(px)) < 16:
             return f"the film looks blank: {lit} of {len(px)} pixels lit, {len(set(px))} colours"
         page.hover(r["x"] + r["w"] * 0.3, r["y"] + r["h"] * 0.6)
-        text = page.wait("(() => { const t = document.getElementById('hover').textContent; return t.includes('pixel (') && t; })()", 3)
+        text = page.wait("(() => { const t = document.getElementById('hover').textContent; return t.includes('pixel (') && t; })()", 30)
         if not text or "θ" not in text:
             return f"hovering the film shows {text!r}"
     check("shows the film (screenshot pixels) and the value under the pointer", film_pixels)
@@ -459,7 +459,7 @@ def run(a, profile, browser):
         if near(mx, my) <= 24:
             return f"the point opposite (φ + 180°) has the same colour {want}"
         page.hover(r["x"] + ex, r["y"] + ey)
-        text = page.wait("(() => { const t = document.getElementById('hover').textContent; return t.startsWith('plot:') && t; })()", 3)
+        text = page.wait("(() => { const t = document.getElementById('hover').textContent; return t.startsWith('plot:') && t; })()", 30)
         want = f"pixel ({k % film['width']}, {k // film['width']})"
         if not text or want not in text:
             return f"hovering the brightest point shows {text!r}, want {want}"
@@ -476,7 +476,7 @@ def run(a, profile, browser):
         jid = job["id"]
         page.click("#jobs-refresh")
         sel = f'#jobs li[data-job="{jid}"]'
-        if not page.wait(f"document.querySelector('{sel}')", 5):
+        if not page.wait(f"document.querySelector('{sel}')", 30):
             return "the job is not listed"
         end = page.wait(f"(() => {{ const e = document.querySelector('{sel}'); return e && e.dataset.state === 'succeeded'"
                         f" && e.dataset.done === '{n_ctx}' && e.dataset.total === '{n_ctx}' && Object.assign({{}}, e.dataset); }})()", 40)
@@ -485,10 +485,10 @@ def run(a, profile, browser):
         if int(end["events"]) < 1:
             return f"no event came through the event stream: {end}"
         page.click(sel)
-        if not page.wait("document.querySelectorAll('#results a').length === %d" % n_ctx, 5):
+        if not page.wait("document.querySelectorAll('#results a').length === %d" % n_ctx, 30):
             return "the job's results are not listed"
         page.click("#results a")
-        if not page.wait(f"document.getElementById('film-title').dataset.job === '{jid}'", 10):
+        if not page.wait(f"document.getElementById('film-title').dataset.job === '{jid}'", 30):
             return "clicking a result did not show its film"
     check("follows a running job to the end (event stream) and shows its results", job_follow)
 
@@ -498,7 +498,7 @@ def run(a, profile, browser):
         jid = job["id"]
         page.click("#jobs-refresh")
         sel = f'#jobs li[data-job="{jid}"] button'
-        if not page.wait(f"document.querySelector('{sel}')", 5):
+        if not page.wait(f"document.querySelector('{sel}')", 30):
             return "the running job has no cancel button"
         page.click(sel)
         if not page.wait(f"document.querySelector('#jobs li[data-job=\"{jid}\"]').dataset.state === 'cancelled'", 20):
@@ -523,7 +523,7 @@ def run(a, profile, browser):
 
     def token():
         page.goto(f"{tb}/ui/")
-        if not page.wait("document.body.dataset.auth === 'required'", 10):
+        if not page.wait("document.body.dataset.auth === 'required'", 30):
             return "the page did not say that a token is needed"
         text = page.js("document.getElementById('banner').textContent")
         if "requires a bearer token" not in text:
@@ -533,11 +533,11 @@ def run(a, profile, browser):
         open(art("token-refused.png"), "wb").write(page.screenshot())
         page.type_into("#token", "wrong-" + a.token)
         page.click("#token-form button[type=submit]")
-        if not page.wait("document.getElementById('banner').textContent.includes('refused the token')", 10):
+        if not page.wait("document.getElementById('banner').textContent.includes('refused the token')", 30):
             return f"a wrong token: banner {page.js('document.getElementById(`banner`).textContent')!r}"
         page.type_into("#token", a.token)
         page.click("#token-form button[type=submit]")
-        if not page.wait("document.body.dataset.auth === 'ok' && document.querySelectorAll('#scenes li[data-scene]').length > 0", 10):
+        if not page.wait("document.body.dataset.auth === 'ok' && document.querySelectorAll('#scenes li[data-scene]').length > 0", 30):
             return "with the token the scenes are not listed"
         if page.js("sessionStorage.getItem('raysweep.token')") != a.token:
             return "the token is not kept in sessionStorage"
@@ -552,7 +552,7 @@ def run(a, profile, browser):
             return f"posting the mdistant scene: {st2} {sc}"
         page.goto(f"{base}/ui/")
         li = f'#scenes li[data-scene="{sc["id"]}"]'
-        if not page.wait(f"document.querySelector('{li}')", 10):
+        if not page.wait(f"document.querySelector('{li}')", 30):
             return "the mdistant scene is not listed"
         page.click(li)
         if not page.wait(f"(document.querySelector('#scenes li.selected') || {{dataset: {{}}}}).dataset.scene === '{sc['id']}'"
@@ -562,7 +562,7 @@ def run(a, profile, browser):
         page.type_into("#r-spp", "64")
         page.type_into("#r-seed", "0")
         page.click("#render")
-        if not page.wait("document.getElementById('plot').dataset.kind === 'plane'", 15):
+        if not page.wait("document.getElementById('plot').dataset.kind === 'plane'", 30):
             return f"no principal-plane plot; banner: {page.js('document.getElementById(`banner`).textContent')}"
         st2, film = http("POST", f"{base}/v1/scenes/{sc['id']}:render", {"spp": 64, "seed": 0})
         k = max(range(film["width"]), key=lambda i: film["data"][i])
@@ -593,13 +593,13 @@ def run(a, profile, browser):
             return f"posting the sweep scene: {st2} {sw}"
         page.goto(f"{base}/ui/")
         li = f'#scenes li[data-scene="{sw["id"]}"]'
-        if not page.wait(f"document.querySelector('{li}')", 10):
+        if not page.wait(f"document.querySelector('{li}')", 30):
             return "the sweep scene is not listed"
         shown = page.js(f"document.querySelector('{li} .id').textContent")
         if shown != "sweep-plate.json":
             return f"the scene pushed as sweep-plate.json is listed as {shown!r}"
         page.click(li)
-        if not page.wait("document.getElementById('r-sensor').value === 'hd' && document.getElementById('j-sensors').value === 'hd'", 10):
+        if not page.wait("document.getElementById('r-sensor').value === 'hd' && document.getElementById('j-sensors').value === 'hd'", 30):
             return "the sweep scene was not selected"
         page.js("document.getElementById('job-box').open = true")
         page.type_into(".grid-row:nth-child(1) .g-name", "sza")
@@ -610,7 +610,7 @@ def run(a, profile, browser):
         page.type_into("#j-spp", "32")
         page.click("#j-brf")
         page.click("#j-submit")
-        jid = page.wait("document.getElementById('j-status').dataset.job", 10)
+        jid = page.wait("document.getElementById('j-status').dataset.job", 30)
         if not jid:
             return f"no job submitted; banner: {page.js('document.getElementById(`banner`).textContent')}"
         sweep["job"] = jid
@@ -666,7 +666,7 @@ def run(a, profile, browser):
         # The whole page, one film of the job shown as BRF (docs/viewer.png).
         page.js("document.getElementById('film').dataset.ready = ''")
         page.click("#results a")
-        page.wait("document.getElementById('film').dataset.ready === '1'", 10)
+        page.wait("document.getElementById('film').dataset.ready === '1'", 30)
         page.js("(() => { const e = document.getElementById('plane'); e.value = 'brf'; e.dispatchEvent(new Event('change')); })()")
         page.click("#exposure-auto")
         page.type_into("#param-search", "plate bsdf")
@@ -677,7 +677,7 @@ def run(a, profile, browser):
             shutil.copyfile(art("viewer-sweep.png"), a.docs_png)
         # Against rho_0 instead: sza is then held at one value (3 points).
         page.js("(() => { const e = document.getElementById('sw-x'); e.value = 'rho_0'; e.dispatchEvent(new Event('change')); })()")
-        if not page.wait("document.getElementById('sweep').dataset.ready === '1' && document.getElementById('sweep').dataset.points === '3'", 10):
+        if not page.wait("document.getElementById('sweep').dataset.ready === '1' && document.getElementById('sweep').dataset.points === '3'", 30):
             return f"against rho_0 with sza held: {page.js('Object.assign({}, document.getElementById(`sweep`).dataset)')}"
         held = page.js("[...document.querySelectorAll('#sw-fixed select')].map(e => e.dataset.coord + '=' + e.value)")
         if held != ["sza=0"]:
@@ -690,14 +690,14 @@ def run(a, profile, browser):
             return "no sweep job"
         rgb_job = page.js('document.querySelector(\'#jobs li[data-state="succeeded"]:not([data-job="%s"])\').dataset.job' % sweep["job"])
         page.click(f'#jobs li[data-job="{rgb_job}"]')
-        if not page.wait(f"document.getElementById('results').dataset.job === '{rgb_job}'", 5):
+        if not page.wait(f"document.getElementById('results').dataset.job === '{rgb_job}'", 30):
             return "the rgb job's results are not listed"
         page.click("#results a")
-        if not page.wait("document.getElementById('film').dataset.mode === 'rgb'", 10):
+        if not page.wait("document.getElementById('film').dataset.mode === 'rgb'", 30):
             return "the rgb job's film is not shown as RGB"
         page.js("(() => { const e = document.getElementById('channel'); e.value = '2'; e.dispatchEvent(new Event('change')); })()")
         page.click(f'#jobs li[data-job="{sweep["job"]}"]')
-        if not page.wait(f"document.getElementById('results').dataset.job === '{sweep['job']}'", 5):
+        if not page.wait(f"document.getElementById('results').dataset.job === '{sweep['job']}'", 30):
             return "the sweep job's results are not listed"
         page.js("document.getElementById('film').dataset.ready = ''")
         page.click("#results a")
@@ -723,9 +723,9 @@ def run(a, profile, browser):
             return "choosing BRF does not show the brf plane"
         # Back to an rgb film: its own default (RGB), not the B chosen before.
         page.click(f'#jobs li[data-job="{rgb_job}"]')
-        page.wait(f"document.getElementById('results').dataset.job === '{rgb_job}'", 5)
+        page.wait(f"document.getElementById('results').dataset.job === '{rgb_job}'", 30)
         page.click("#results a")
-        if not page.wait("document.getElementById('film').dataset.mode === 'rgb' && document.getElementById('channel').value === 'rgb'", 10):
+        if not page.wait("document.getElementById('film').dataset.mode === 'rgb' && document.getElementById('channel').value === 'rgb'", 30):
             return f"the next rgb film shows channel {page.js('document.getElementById(`channel`).value')}, want RGB"
     check("offers a mono film's planes (radiance, BRF, stderr) in false colour, no channel carried over", planes)
 
@@ -735,10 +735,10 @@ def run(a, profile, browser):
         if "job" not in sweep:
             return "no sweep job"
         page.click(f'#jobs li[data-job="{sweep["job"]}"]')
-        page.wait(f"document.getElementById('results').dataset.job === '{sweep['job']}'", 5)
+        page.wait(f"document.getElementById('results').dataset.job === '{sweep['job']}'", 30)
         page.js("document.getElementById('film').dataset.ready = ''")
         page.click("#results a")
-        if not page.wait("document.getElementById('film').dataset.ready === '1' && document.getElementById('film').dataset.plane === 'radiance'", 10):
+        if not page.wait("document.getElementById('film').dataset.ready === '1' && document.getElementById('film').dataset.plane === 'radiance'", 30):
             return "the film is not shown"
         ctx = page.js("document.getElementById('film-title').textContent").split(" · ")[1]
         r = next(r for r in sweep["results"] if r["context"] == ctx)
@@ -766,7 +766,7 @@ def run(a, profile, browser):
         page.type_into("#r-seed", "1")
         page.js("document.getElementById('film').dataset.ready = ''")
         page.click("#render")
-        if not page.wait("document.getElementById('film').dataset.ready === '1' && !document.getElementById('film-title').dataset.job", 15):
+        if not page.wait("document.getElementById('film').dataset.ready === '1' && !document.getElementById('film-title').dataset.job", 30):
             return "no render shown"
         opts = page.js("[...document.getElementById('plane').options].map(o => o.value)")
         if opts != ["radiance", "brf*"]:
@@ -777,7 +777,7 @@ def run(a, profile, browser):
         st3, film = http("POST", f"{base}/v1/scenes/{sw['id']}:render", {"spp": 16, "seed": 1, "quantities": ["brf"]})
         rr = page.rect("#film")
         page.hover(rr["x"] + rr["w"] * 0.6, rr["y"] + rr["h"] * 0.35)  # pixel (2, 1)
-        text = page.wait("(() => { const t = document.getElementById('hover').textContent; return t.includes('BRF') && t; })()", 3)
+        text = page.wait("(() => { const t = document.getElementById('hover').textContent; return t.includes('BRF') && t; })()", 30)
         if not text:
             return "hovering the film shows no BRF"
         shown = float(text.rsplit(":", 1)[1])
