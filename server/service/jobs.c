@@ -468,6 +468,7 @@ typedef struct job_req {
   uint64_t d_spp;
   double d_wl;
   const cJSON *d_sensors;
+  int bundle; /* "bundle" (1 when absent) */
 } job_req;
 
 /* What validation learned (stage 2) for planning. */
@@ -552,12 +553,21 @@ static rsw_status parse_request(const char *body, size_t len, job_req *q, svc_er
       st = svc_parse_variance(k, "/variance", &q->variance, e);
     } else if (strcmp(k->string, "bands") == 0) {
       st = bands_parse(k, "/bands", &q->bands, e);
+    } else if (strcmp(k->string, "bundle") == 0) {
+      if (!cJSON_IsNumber(k) || k->valuedouble != floor(k->valuedouble) || k->valuedouble < 1 ||
+          k->valuedouble > RENDER_MAX_BUNDLE)
+        st = svc_fail(e, RSW_ERR_INVALID, "/bundle",
+                      "bundle must be an integer from 1 (one wavelength per path) to %d (a path carries one "
+                      "wavelength per colour channel)",
+                      RENDER_MAX_BUNDLE);
+      else
+        q->bundle = (int)k->valuedouble;
     } else {
       char w[300];
       snprintf(w, sizeof w, "/%s", k->string);
       st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, w,
                     "unknown field '%s' (expected contexts, defaults, params, templates, seed, quantities, "
-                    "variance, bands)",
+                    "variance, bands, bundle)",
                     k->string);
     }
   }
@@ -835,12 +845,39 @@ static rsw_status context_coords(const job_req *q, nc_coords *out, svc_error *e)
  * accepted. Validation reads the parameter table's keys, the sensors' ids
  * and films: all fixed at load, so no scene lock is needed (a running
  * render holds it for its whole duration). */
+/* A job's "bundle" > 1: a mono scene whose every object carries one,
+ * and no Stokes film among the sensors (docs/jobs.md#spectral-bundles). */
+static rsw_status check_bundle(resident *r, const job_req *q, svc_error *e) {
+  scene *sc = r->sc;
+  if (sc->variant != VARIANT_MONO)
+    return svc_fail(e, RSW_ERR_INVALID, "/bundle",
+                    "spectral bundles apply to mono scenes; this scene is rgb");
+  pthread_mutex_lock(&r->lock);
+  const object *blk = scene_bundle_blocker(sc);
+  char what[400] = "";
+  if (blk)
+    snprintf(what, sizeof what, "%s '%s' (%s)", obj_class_name(blk->plugin->cls), blk->id ? blk->id : "",
+             blk->plugin->name);
+  pthread_mutex_unlock(&r->lock);
+  if (blk)
+    return svc_fail(e, RSW_ERR_UNSUPPORTED, "/bundle",
+                    "%s evaluates one wavelength at a time: this scene renders with \"bundle\": 1", what);
+  for (size_t i = 0; i < sc->n_sensors; i++)
+    if (sc->sensors[i]->film->pixel_format == PIXFMT_STOKES)
+      return svc_fail(e, RSW_ERR_UNSUPPORTED, "/bundle",
+                      "sensor '%s' has a Stokes film (S0..S3 in its channels): it renders with \"bundle\": 1",
+                      sc->sensors[i]->base.id);
+  (void)q;
+  return RSW_OK;
+}
+
 static rsw_status validate_request(service *svc, resident *r, job_req *q, job_check *k, svc_error *e) {
   scene *sc = r->sc;
   rsw_status st = check_params(sc, q->params, "/params", e);
   if (!st && q->bands && sc->variant != VARIANT_MONO)
     st = svc_fail(e, RSW_ERR_INVALID, "/bands", "bands apply to mono scenes; this scene is rgb");
   k->n_nodes = q->bands ? q->bands->n_wl : 1;
+  if (!st && q->bundle > 1) st = check_bundle(r, q, e);
   /* Templates (the scene's under the job's), rendered for each context
    * into the overrides it renders with. */
   if (!st) st = tmpl_compile(sc, r->templates, "/scene/templates", q->templates, q->params, &k->ts, e);
@@ -957,6 +994,7 @@ static rsw_status plan_job(service *svc, const scene *sc, job_req *q, job_check 
   k->warnings = NULL;
   jb->bands = q->bands;
   q->bands = NULL;
+  jb->bundle = q->bundle > 1 ? q->bundle : 1;
   jb->items = calloc(k->n_items, sizeof *jb->items);
   jb->context_remaining = calloc(q->n_contexts, sizeof *jb->context_remaining);
   rsw_status st = RSW_OK;
@@ -1131,6 +1169,89 @@ static void finish_job(service *svc, job *j) {
   push_event(svc, j, d, true, jm);
 }
 
+/* The items rendered with item i in one spectral bundle (the job's
+ * "bundle" > 1): i, then the next queued items of the same sensor, spp,
+ * planes and overrides at other wavelengths, up to the bundle's size,
+ * looked for among the next BUNDLE_SCAN items (a context's other sensors
+ * and band nodes lie between). Their indices into mates; returns how
+ * many (1: i alone). svc->lock held. */
+#define BUNDLE_SCAN 256
+static int bundle_mates(const job *j, size_t i, size_t *mates) {
+  const render_item *a = &j->items[i];
+  int n = 0;
+  mates[n++] = i;
+  if (j->bundle <= 1 || j->variant != VARIANT_MONO) return n;
+  for (size_t k = i + 1; k < j->n_items && k <= i + BUNDLE_SCAN && n < j->bundle; k++) {
+    const render_item *b = &j->items[k];
+    if (b->state != JOB_QUEUED || b->sensor_index != a->sensor_index || b->spp != a->spp ||
+        b->quantities != a->quantities || b->variance != a->variance)
+      continue;
+    if ((a->params == NULL) != (b->params == NULL) ||
+        (a->params && !cJSON_Compare(a->params, b->params, true)))
+      continue;
+    bool same_wl = false;
+    for (int m = 0; m < n; m++) same_wl = same_wl || j->items[mates[m]].wavelength == b->wavelength;
+    if (!same_wl) mates[n++] = k;
+  }
+  return n;
+}
+
+/* Item k's render ended with st (its film in *film when st is OK; e the
+ * error otherwise): the film stored, counters, and its event. Called
+ * without svc->lock; returns holding it. */
+static void item_done(service *svc, job *j, size_t k, rsw_status st, svc_film *out, svc_error *e) {
+  render_item *it = &j->items[k];
+  size_t done = j->items_done + 1; /* only this worker writes it */
+  if (!st) {
+    it->film = *out;
+    /* With a state directory every film goes to disk first. */
+    snprintf(it->film.context, sizeof it->film.context, "%s", it->context);
+    st = svc_state_film_write(svc, j, k, &it->film, e);
+    if (st) svc_film_free(&it->film);
+    it->on_disk = !st && svc_state_on(svc);
+  }
+  /* The event is built before taking svc->lock (only this worker
+   * writes the job's counters), so a job of tiny renders holds the
+   * lock for moments and requests are not starved of it. */
+  if (st) rsw_err_format(&e->err, it->error, sizeof it->error);
+  unsigned jm = svc_json_mark();
+  cJSON *d = cJSON_CreateObject();
+  cJSON_AddStringToObject(d, "context", it->context);
+  cJSON_AddStringToObject(d, "sensor", it->sensor);
+  if (it->node) cJSON_AddNumberToObject(d, "node", (double)(it->node - 1)); /* jobs with bands */
+  cJSON_AddStringToObject(d, "state", st ? "failed" : "succeeded");
+  if (st) cJSON_AddStringToObject(d, "error", it->error);
+  cJSON_AddNumberToObject(d, "done", (double)done);
+  cJSON_AddNumberToObject(d, "total", (double)j->n_items);
+  char *ev = svc_print_json(d, jm);
+  pthread_mutex_lock(&svc->lock);
+  if (st) {
+    it->state = JOB_FAILED;
+    j->items_failed++;
+    svc->renders_failed++;
+  } else {
+    it->state = JOB_SUCCEEDED;
+    it->has_film = true;
+    uint64_t mem = svc_film_mem(&it->film), cap = svc->opts.max_result_bytes;
+    if (it->on_disk) {
+      svc->result_disk_bytes += mem;
+      svc->results_on_disk++;
+    }
+    if (it->on_disk && cap && svc->result_bytes + mem > cap) {
+      /* Beyond the memory cap: served from disk only. */
+      film_image_free(&it->film.img);
+      it->has_film = false;
+    } else {
+      svc->result_bytes += mem;
+    }
+    svc->contexts_rendered++;
+  }
+  j->items_done++;
+  j->current = SIZE_MAX;
+  if (--j->context_remaining[it->context_index] == 0) j->contexts_done++;
+  push_event_text(svc, j, ev, false);
+}
+
 void *svc_worker_main(void *arg) {
   service *svc = arg;
   pthread_mutex_lock(&svc->lock);
@@ -1161,7 +1282,8 @@ void *svc_worker_main(void *arg) {
       if (atomic_load(&j->cancel) || svc->stopping) break;
       render_item *it = &j->items[i];
       if (it->state != JOB_QUEUED) continue; /* done before a restart */
-      size_t done = j->items_done + 1;       /* only this worker writes it */
+      size_t mates[RENDER_MAX_BUNDLE];
+      int nb = bundle_mates(j, i, mates);
       j->current = i;
       atomic_store(&j->current_samples.done, 0);
       atomic_store(&j->current_samples.total, 0);
@@ -1175,59 +1297,23 @@ void *svc_worker_main(void *arg) {
                         .cancel = &j->cancel,
                         .quantities = it->quantities,
                         .variance = it->variance,
-                        .samples = &j->current_samples};
-      rsw_status st = svc_render_locked(svc, j->res, &rs, &it->film, &e);
-      if (!st) {
-        /* With a state directory every film goes to disk first. */
-        snprintf(it->film.context, sizeof it->film.context, "%s", it->context);
-        st = svc_state_film_write(svc, j, i, &it->film, &e);
-        if (st) svc_film_free(&it->film);
-        it->on_disk = !st && svc_state_on(svc);
+                        .samples = &j->current_samples,
+                        .bundle = nb > 1 ? nb : 0};
+      for (int b = 0; b < nb && nb > 1; b++) {
+        double w = j->items[mates[b]].wavelength;
+        rs.bundle_wl[b] = w > 0 ? w : 550.0;
       }
+      svc_film films[RENDER_MAX_BUNDLE];
+      memset(films, 0, sizeof films);
+      rsw_status st = svc_render_locked(svc, j->res, &rs, films, &e);
       if (st == RSW_ERR_CANCELLED) {
         pthread_mutex_lock(&svc->lock);
         break;
       }
-      /* The event is built before taking svc->lock (only this worker
-       * writes the job's counters), so a job of tiny renders holds the
-       * lock for moments and requests are not starved of it. */
-      if (st) rsw_err_format(&e.err, it->error, sizeof it->error);
-      unsigned jm = svc_json_mark();
-      cJSON *d = cJSON_CreateObject();
-      cJSON_AddStringToObject(d, "context", it->context);
-      cJSON_AddStringToObject(d, "sensor", it->sensor);
-      if (it->node) cJSON_AddNumberToObject(d, "node", (double)(it->node - 1)); /* jobs with bands */
-      cJSON_AddStringToObject(d, "state", st ? "failed" : "succeeded");
-      if (st) cJSON_AddStringToObject(d, "error", it->error);
-      cJSON_AddNumberToObject(d, "done", (double)done);
-      cJSON_AddNumberToObject(d, "total", (double)j->n_items);
-      char *ev = svc_print_json(d, jm);
-      pthread_mutex_lock(&svc->lock);
-      if (st) {
-        it->state = JOB_FAILED;
-        j->items_failed++;
-        svc->renders_failed++;
-      } else {
-        it->state = JOB_SUCCEEDED;
-        it->has_film = true;
-        uint64_t mem = svc_film_mem(&it->film), cap = svc->opts.max_result_bytes;
-        if (it->on_disk) {
-          svc->result_disk_bytes += mem;
-          svc->results_on_disk++;
-        }
-        if (it->on_disk && cap && svc->result_bytes + mem > cap) {
-          /* Beyond the memory cap: served from disk only. */
-          film_image_free(&it->film.img);
-          it->has_film = false;
-        } else {
-          svc->result_bytes += mem;
-        }
-        svc->contexts_rendered++;
+      for (int b = 0; b < nb; b++) {
+        if (b) pthread_mutex_unlock(&svc->lock);
+        item_done(svc, j, mates[b], st, &films[b], &e);
       }
-      j->items_done++;
-      j->current = SIZE_MAX;
-      if (--j->context_remaining[it->context_index] == 0) j->contexts_done++;
-      push_event_text(svc, j, ev, false);
     }
     finish_job(svc, j);
   }
