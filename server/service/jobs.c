@@ -948,6 +948,7 @@ static rsw_status plan_context(service *svc, const scene *sc, const job_req *q, 
     it->wavelength = w ? w->valuedouble : cw ? cw->valuedouble : q->d_wl;
     it->spp = (uint32_t)spp;
     it->seed = has_seed ? seed : default_seed(q->seed, it->context, it->sensor);
+    it->own_seed = has_seed;
     if (bands) { /* node renders: independent, each its own seed */
       it->node = nk + 1;
       it->wavelength = bands->wl[nk];
@@ -1169,29 +1170,40 @@ static void finish_job(service *svc, job *j) {
   push_event(svc, j, d, true, jm);
 }
 
+/* Whether items a and b may share a bundle: the same sensor, spp,
+ * planes and overrides, other wavelengths, no seed of their own. */
+static bool bundle_compatible(const render_item *a, const render_item *b) {
+  if (a->own_seed || b->own_seed || b->sensor_index != a->sensor_index || b->spp != a->spp ||
+      b->quantities != a->quantities || b->variance != a->variance || b->wavelength == a->wavelength)
+    return false;
+  if ((a->params == NULL) != (b->params == NULL)) return false;
+  return !a->params || cJSON_Compare(a->params, b->params, true);
+}
+
 /* The items rendered with item i in one spectral bundle (the job's
- * "bundle" > 1): i, then the next queued items of the same sensor, spp,
- * planes and overrides at other wavelengths, up to the bundle's size,
- * looked for among the next BUNDLE_SCAN items (a context's other sensors
- * and band nodes lie between). Their indices into mates; returns how
+ * "bundle" K > 1). The renders of one sensor, in the job's order, fall
+ * into runs of consecutive compatible renders (a wavelength sweep at one
+ * set of overrides; a context's band nodes), and each run into bundles of
+ * K from its start (the last may be smaller). Item i starts a bundle (the
+ * worker takes items in order); its mates are the next items of its
+ * sensor while they are compatible with all before them, at most K - 1
+ * of them (a context's other sensors lie between). So a job's bundles
+ * depend only on its renders' order, and a shard that holds whole
+ * bundles forms the same ones. Their indices into mates; returns how
  * many (1: i alone). svc->lock held. */
-#define BUNDLE_SCAN 256
 static int bundle_mates(const job *j, size_t i, size_t *mates) {
   const render_item *a = &j->items[i];
   int n = 0;
   mates[n++] = i;
   if (j->bundle <= 1 || j->variant != VARIANT_MONO) return n;
-  for (size_t k = i + 1; k < j->n_items && k <= i + BUNDLE_SCAN && n < j->bundle; k++) {
+  for (size_t k = i + 1; k < j->n_items && n < j->bundle; k++) {
     const render_item *b = &j->items[k];
-    if (b->state != JOB_QUEUED || b->sensor_index != a->sensor_index || b->spp != a->spp ||
-        b->quantities != a->quantities || b->variance != a->variance)
-      continue;
-    if ((a->params == NULL) != (b->params == NULL) ||
-        (a->params && !cJSON_Compare(a->params, b->params, true)))
-      continue;
-    bool same_wl = false;
-    for (int m = 0; m < n; m++) same_wl = same_wl || j->items[mates[m]].wavelength == b->wavelength;
-    if (!same_wl) mates[n++] = k;
+    if (b->sensor_index != a->sensor_index) continue;
+    if (b->state != JOB_QUEUED) break;
+    bool ok = true;
+    for (int m = 0; m < n && ok; m++) ok = bundle_compatible(&j->items[mates[m]], b);
+    if (!ok) break;
+    mates[n++] = k;
   }
   return n;
 }

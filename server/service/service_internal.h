@@ -112,6 +112,7 @@ typedef struct render_item {
   size_t node; /* jobs with bands: 1 + the index of wavelength in job.bands->wl; 0 otherwise */
   uint32_t spp;
   uint64_t seed;
+  bool own_seed;       /* the context gave its "seed" (never bundled: docs/experiments.md#spectral-bundles) */
   unsigned quantities; /* RENDER_Q_*: the job's "quantities" */
   bool variance;       /* the job's "variance" */
   cJSON *params;       /* merged overrides (job-level, then context-level), owned */
