@@ -980,6 +980,71 @@ static rsw_status plan_context(service *svc, const scene *sc, const job_req *q, 
   return st;
 }
 
+/* Whether items a and b may share a bundle: the same sensor, spp,
+ * planes and overrides (their printed JSON ka, kb), other wavelengths, no
+ * seed of their own. */
+static bool bundle_compatible(const render_item *a, const render_item *b, const char *ka, const char *kb) {
+  return !a->own_seed && !b->own_seed && b->sensor_index == a->sensor_index && b->spp == a->spp &&
+         b->quantities == a->quantities && b->variance == a->variance && strcmp(ka, kb) == 0;
+}
+
+typedef struct bundle_key {
+  const render_item *it;
+  const char *params; /* printed overrides ("" when none) */
+  size_t index;
+} bundle_key;
+
+static int bundle_key_cmp(const void *pa, const void *pb) {
+  const bundle_key *a = pa, *b = pb;
+  if (a->it->sensor_index != b->it->sensor_index) return a->it->sensor_index < b->it->sensor_index ? -1 : 1;
+  int c = strcmp(a->params, b->params);
+  if (c) return c;
+  return a->index < b->index ? -1 : a->index > b->index;
+}
+
+/* A job's spectral bundles ("bundle" K > 1, mono): the renders that may
+ * share a bundle (bundle_compatible: a wavelength sweep at one set of
+ * overrides, whatever the axes' order; a context's band nodes) are taken
+ * in the job's order and cut into bundles of K from the first (a
+ * wavelength already in the bundle starts the next one); the last may be
+ * smaller. So a job's bundles depend only on its renders and their order
+ * (docs/experiments.md#spectral-bundles). False: out of memory. */
+static bool plan_bundles(job *jb) {
+  size_t n = jb->n_items;
+  for (size_t i = 0; i < n; i++) jb->items[i].bundle[0] = i, jb->items[i].bundle_n = 1;
+  if (jb->bundle <= 1 || jb->variant != VARIANT_MONO || n < 2) return true;
+  bundle_key *k = calloc(n, sizeof *k);
+  char **printed = calloc(n, sizeof *printed);
+  bool ok = k && printed;
+  for (size_t i = 0; i < n && ok; i++) {
+    printed[i] = jb->items[i].params ? cJSON_PrintUnformatted(jb->items[i].params) : NULL;
+    ok = !jb->items[i].params || printed[i];
+    k[i] = (bundle_key){&jb->items[i], printed[i] ? printed[i] : "", i};
+  }
+  if (ok) qsort(k, n, sizeof *k, bundle_key_cmp);
+  for (size_t g = 0; g < n && ok;) { /* a leader, then its mates among the next keys */
+    render_item *lead = &jb->items[k[g].index];
+    size_t e = g + 1;
+    while (e < n && lead->bundle_n < jb->bundle &&
+           bundle_compatible(lead, k[e].it, k[g].params, k[e].params)) {
+      bool dup = false;
+      for (int m = 0; m < lead->bundle_n; m++)
+        dup = dup || jb->items[lead->bundle[m]].wavelength == k[e].it->wavelength;
+      if (dup) break;
+      render_item *mate = &jb->items[k[e].index];
+      lead->bundle[lead->bundle_n++] = k[e].index;
+      mate->bundle[0] = k[g].index;
+      mate->bundle_n = 0; /* a mate: its leader holds the list */
+      e++;
+    }
+    g = e;
+  }
+  for (size_t i = 0; printed && i < n; i++) cJSON_free(printed[i]);
+  free(printed);
+  free(k);
+  return ok;
+}
+
 /* Stage 3: the job (*out) with its renders in context order, taking the
  * bands, coords and warnings; *reserve: the bytes its films will hold,
  * for --max-result-bytes. */
@@ -1006,6 +1071,7 @@ static rsw_status plan_job(service *svc, const scene *sc, job_req *q, job_check 
   /* Items exist only if their array was allocated (job_free walks
    * n_items of them). */
   jb->n_items = jb->items ? k->n_items : 0;
+  if (!st && !plan_bundles(jb)) st = svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
   if (st) {
     job_free(jb);
     return st;
@@ -1170,44 +1236,6 @@ static void finish_job(service *svc, job *j) {
   push_event(svc, j, d, true, jm);
 }
 
-/* Whether items a and b may share a bundle: the same sensor, spp,
- * planes and overrides, other wavelengths, no seed of their own. */
-static bool bundle_compatible(const render_item *a, const render_item *b) {
-  if (a->own_seed || b->own_seed || b->sensor_index != a->sensor_index || b->spp != a->spp ||
-      b->quantities != a->quantities || b->variance != a->variance || b->wavelength == a->wavelength)
-    return false;
-  if ((a->params == NULL) != (b->params == NULL)) return false;
-  return !a->params || cJSON_Compare(a->params, b->params, true);
-}
-
-/* The items rendered with item i in one spectral bundle (the job's
- * "bundle" K > 1). The renders of one sensor, in the job's order, fall
- * into runs of consecutive compatible renders (a wavelength sweep at one
- * set of overrides; a context's band nodes), and each run into bundles of
- * K from its start (the last may be smaller). Item i starts a bundle (the
- * worker takes items in order); its mates are the next items of its
- * sensor while they are compatible with all before them, at most K - 1
- * of them (a context's other sensors lie between). So a job's bundles
- * depend only on its renders' order, and a shard that holds whole
- * bundles forms the same ones. Their indices into mates; returns how
- * many (1: i alone). svc->lock held. */
-static int bundle_mates(const job *j, size_t i, size_t *mates) {
-  const render_item *a = &j->items[i];
-  int n = 0;
-  mates[n++] = i;
-  if (j->bundle <= 1 || j->variant != VARIANT_MONO) return n;
-  for (size_t k = i + 1; k < j->n_items && n < j->bundle; k++) {
-    const render_item *b = &j->items[k];
-    if (b->sensor_index != a->sensor_index) continue;
-    if (b->state != JOB_QUEUED) break;
-    bool ok = true;
-    for (int m = 0; m < n && ok; m++) ok = bundle_compatible(&j->items[mates[m]], b);
-    if (!ok) break;
-    mates[n++] = k;
-  }
-  return n;
-}
-
 /* Item k's render ended with st (its film in *film when st is OK; e the
  * error otherwise): the film stored, counters, and its event. Called
  * without svc->lock; returns holding it. */
@@ -1294,8 +1322,15 @@ void *svc_worker_main(void *arg) {
       if (atomic_load(&j->cancel) || svc->stopping) break;
       render_item *it = &j->items[i];
       if (it->state != JOB_QUEUED) continue; /* done before a restart */
-      size_t mates[RENDER_MAX_BUNDLE];
-      int nb = bundle_mates(j, i, mates);
+      /* Its bundle (plan_bundles), whose members still queued take their
+       * films from this render (after a restart some may be done: they
+       * are rendered again, the same bits, and not stored twice). */
+      size_t lead = it->bundle_n > 0 ? i : it->bundle[0];
+      const size_t *mates = &i;
+      int nb = 1;
+      if (lead < j->n_items && j->items[lead].bundle_n > 0)
+        mates = j->items[lead].bundle, nb = j->items[lead].bundle_n;
+      it = &j->items[mates[0]];
       j->current = i;
       atomic_store(&j->current_samples.done, 0);
       atomic_store(&j->current_samples.total, 0);
@@ -1322,10 +1357,17 @@ void *svc_worker_main(void *arg) {
         pthread_mutex_lock(&svc->lock);
         break;
       }
+      bool locked = false;
       for (int b = 0; b < nb; b++) {
-        if (b) pthread_mutex_unlock(&svc->lock);
+        if (j->items[mates[b]].state != JOB_QUEUED) {
+          if (!st) svc_film_free(&films[b]);
+          continue;
+        }
+        if (locked) pthread_mutex_unlock(&svc->lock);
         item_done(svc, j, mates[b], st, &films[b], &e);
+        locked = true;
       }
+      if (!locked) pthread_mutex_lock(&svc->lock);
     }
     finish_job(svc, j);
   }

@@ -112,7 +112,12 @@ typedef struct render_item {
   size_t node; /* jobs with bands: 1 + the index of wavelength in job.bands->wl; 0 otherwise */
   uint32_t spp;
   uint64_t seed;
-  bool own_seed;       /* the context gave its "seed" (never bundled: docs/experiments.md#spectral-bundles) */
+  bool own_seed; /* the context gave its "seed" (never bundled: docs/experiments.md#spectral-bundles) */
+  /* Its spectral bundle (job.bundle > 1; plan_bundles): the renders, its
+   * leader first (the bundle's seed), as indices into job.items. A
+   * bundle of one: bundle[0] is the item itself. */
+  size_t bundle[RENDER_MAX_BUNDLE];
+  int bundle_n;
   unsigned quantities; /* RENDER_Q_*: the job's "quantities" */
   bool variance;       /* the job's "variance" */
   cJSON *params;       /* merged overrides (job-level, then context-level), owned */

@@ -11,6 +11,9 @@
 #     noise at 256 spp); fixed seeds;
 #   - a bundled film names its own wavelength and its bundle's seed;
 #   - bitwise the same with 1 and 2 render threads;
+#   - formed whatever the order of a grid's axes (same overrides, other
+#     wavelengths, cut into threes in the job's order), never across
+#     overrides, never over a context's own seed;
 #   - refused with a 422 naming /bundle: bundle 4, an rgb scene, and an
 #     atmosphere with a particle layer (its phase mixture is one set per
 #     layer), naming the medium.
@@ -100,6 +103,34 @@ f = [films(int(p), push(int(p), sys.argv[4]), 3, 11, wls, spp=16) for p in sys.a
 for ctx in f[0]:
     assert f[0][ctx]["data"] == f[1][ctx]["data"], ctx
 ' "$tmp" "$p1" "$p2" "$tmp/atmo.json"
+
+py "bundles form whatever the axes' order (the same overrides, other wavelengths), never across overrides or over a context's own seed" '
+import sys
+sys.path.insert(0, sys.argv[1]); from job import *
+port = int(sys.argv[2]); sid = push(port, sys.argv[3])
+key = "surface.bsdf.reflectance.value"
+ctx = []
+for w in (400.0, 450.0, 500.0, 550.0):        # wavelength slowest, as --grid wavelength=... --grid KEY=...
+    for r in (0.2, 0.4):
+        ctx.append({"id": f"w{int(w)}r{int(r * 10)}", "wavelength": w, "params": {key: r}})
+ctx.append({"id": "own", "wavelength": 600.0, "params": {key: 0.2}, "seed": 5})
+st, j = call(port, "POST", f"/v1/scenes/{sid}/jobs", {"contexts": ctx, "defaults": {"spp": 4}, "bundle": 3})
+assert st in (200, 201, 202), (st, j)
+for _ in range(600):
+    st, j = call(port, "GET", "/v1/jobs/" + j["id"])
+    if j["state"] not in ("queued", "running"): break
+    time.sleep(0.05)
+assert j["state"] == "succeeded", j
+st, idx = call(port, "GET", "/v1/jobs/" + j["id"] + "/results")
+seed = {r["context"]: call(port, "GET", r["href"])[1]["meta"]["seed"] for r in idx["results"]}
+groups = {}
+for c, s in seed.items():
+    groups.setdefault(s, []).append(c)
+got = sorted(sorted(g) for g in groups.values())
+want = sorted([sorted(["w400r2", "w450r2", "w500r2"]), ["w550r2"], sorted(["w400r4", "w450r4", "w500r4"]), ["w550r4"], ["own"]])
+assert got == want, got
+assert seed["own"] == 5, seed["own"]
+' "$tmp" "$p2" "$root/proto/examples/hdistant_lambertian.json"
 
 py "bad bundles are refused, naming /bundle and what blocks it" '
 import sys
