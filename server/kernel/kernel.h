@@ -59,7 +59,7 @@ typedef enum rsw_variant {
 
 /* A spectral bundle (mono): the wavelengths one path carries, one per
  * colour channel, so at most the channels of a `color`
- * (docs/rendering.md#spectral-bundles). */
+ * (docs/experiments.md#spectral-bundles). */
 #define RENDER_MAX_BUNDLE 3
 
 /* What a render is evaluated at; given to every plugin's prepare(). */

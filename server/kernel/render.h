@@ -30,8 +30,8 @@ typedef struct render_opts {
   uint64_t seed;
   double wavelength; /* nm, mono only; 0 means 550 */
   /* Mono: a spectral bundle, `bundle` (2..RENDER_MAX_BUNDLE) wavelengths
-   * carried by every path, one per colour channel (docs/rendering.md
-   * #spectral-bundles); `wavelength` is then ignored and the render gives
+   * carried by every path, one per colour channel
+   * (docs/experiments.md#spectral-bundles); `wavelength` is then ignored and the render gives
    * one film per wavelength (render_sensor_bundle). 0 or 1: none. */
   int bundle;
   double bundle_wl[RENDER_MAX_BUNDLE];

@@ -846,7 +846,7 @@ static rsw_status context_coords(const job_req *q, nc_coords *out, svc_error *e)
  * and films: all fixed at load, so no scene lock is needed (a running
  * render holds it for its whole duration). */
 /* A job's "bundle" > 1: a mono scene whose every object carries one,
- * and no Stokes film among the sensors (docs/jobs.md#spectral-bundles). */
+ * and no Stokes film among the sensors (docs/experiments.md#spectral-bundles). */
 static rsw_status check_bundle(resident *r, const job_req *q, svc_error *e) {
   scene *sc = r->sc;
   if (sc->variant != VARIANT_MONO)

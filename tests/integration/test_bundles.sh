@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Spectral bundles (a job's "bundle": docs/jobs.md#spectral-bundles), on
+# Spectral bundles (a job's "bundle": docs/experiments.md#spectral-bundles), on
 # the molecular atmosphere example without its particle layer (2,400
 # Rayleigh + ozone layers: sigma_t differs by a factor ~2 across the
 # bundle, so the free flights use the chromatic tracking) and 6 contexts
