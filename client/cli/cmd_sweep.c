@@ -37,6 +37,9 @@ const cmdline_opt cli_opts_sweep[] = {
     {"--quantities", "LIST", false,
      "comma-separated, of radiance, brdf, brf: films add brdf and brf channels"},
     {"--variance", NULL, false, "films add radiance_stderr channels (standard error of each pixel's mean)"},
+    {"--bundle", "K", false,
+     "carry K (1-3) wavelengths per path: each render with the next ones that differ only in wavelength "
+     "(docs/experiments.md#spectral-bundles)"},
     {"--format", "exr|npy|json|nc", false,
      "film files: exr (default), npy or json; nc: json films plus DIR/dataset.nc, the sweep as one "
      "NetCDF-4 dataset (xarray.open_dataset)"},
@@ -389,6 +392,15 @@ static int build_contexts(const cli_ctx *ctx, const cmdline_args *a, const sweep
   }
   if (!s && cmdline_get(a, "--variance"))
     snprintf(what, sizeof what, "--variance"), s = rsw_contexts_set_variance(x, 1);
+  const char *bv = cmdline_get(a, "--bundle");
+  if (!s && bv) {
+    unsigned long long k;
+    if (!cli_parse_u64(bv, 3, &k) || k < 1) {
+      rsw_contexts_free(x);
+      return cli_usage(ctx, "--bundle needs 1, 2 or 3 wavelengths per path (got '%s')", bv);
+    }
+    snprintf(what, sizeof what, "--bundle %s", bv), s = rsw_contexts_set_bundle(x, (int)k);
+  }
   if (s) {
     rc = s == RSW_ERR_NOMEM ? cli_fail(ctx, CLI_IO, "out of memory")
                             : cli_usage(ctx, "%s: %s", what, rsw_strerror(s));

@@ -204,6 +204,13 @@ rsw_status rsw_contexts_set_variance(rsw_contexts *x, int on) {
   return RSW_OK;
 }
 
+rsw_status rsw_contexts_set_bundle(rsw_contexts *x, int k) {
+  if (!x || k < 1) return RSW_ERR_INVALID;
+  cJSON_DeleteItemFromObjectCaseSensitive(x->root, "bundle");
+  if (k > 1 && !cJSON_AddNumberToObject(x->root, "bundle", k)) return RSW_ERR_NOMEM;
+  return RSW_OK;
+}
+
 /* ---- submit and status ---------------------------------------------------------------- */
 
 /* "/v1/jobs/<escaped id><suffix>" into path; false when too long. */

@@ -237,6 +237,9 @@ rsw_status rsw_contexts_set_job_seed(rsw_contexts *x, long long seed);
  * radiance_stderr plane). The server checks them at submission. */
 rsw_status rsw_contexts_set_quantities(rsw_contexts *x, const char *const *names, size_t n);
 rsw_status rsw_contexts_set_variance(rsw_contexts *x, int on);
+/* The job's "bundle": wavelengths carried per path (1..3; 1 removes it;
+ * docs/experiments.md#spectral-bundles). The server checks the scene. */
+rsw_status rsw_contexts_set_bundle(rsw_contexts *x, int k);
 size_t rsw_contexts_count(const rsw_contexts *x);
 
 /* Submit a job. idempotency_key may be NULL. job_id_out: 40 bytes. */

@@ -97,7 +97,7 @@ def grid_contexts(grid, param_keys=None):
 
 
 def submit(scene, grid=None, contexts=None, spp=None, seed=None, sensors=None, wavelength=None, params=None,
-           quantities=None, variance=False, bands=None, templates=None, idempotency_key=None):
+           quantities=None, variance=False, bands=None, templates=None, idempotency_key=None, bundle=None):
     """Submit a job on ``scene`` (see :meth:`raysweep.Scene.sweep` for the arguments); a :class:`Job`."""
     from .scene import _encode_values
     if (grid is None) == (contexts is None):
@@ -136,6 +136,8 @@ def submit(scene, grid=None, contexts=None, spp=None, seed=None, sensors=None, w
         body["bands"] = list(bands)
     if templates:
         body["templates"] = dict(templates)
+    if bundle is not None:
+        body["bundle"] = int(bundle)
     headers = {"Idempotency-Key": idempotency_key} if idempotency_key else None
     try:
         status = scene._http.json("POST", f"{scene._path}/jobs", body, headers=headers, timeout=None)

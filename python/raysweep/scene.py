@@ -170,7 +170,8 @@ class Scene:
         ``params`` (job-level overrides; a tabulated spectrum is evaluated at
         each context's wavelength), ``quantities`` (``["brf"]``...),
         ``variance``, ``bands`` (spectral response functions), ``templates``
-        (docs/experiments.md).
+        (docs/experiments.md), ``bundle`` (wavelengths carried per path,
+        1 to 3: docs/experiments.md#spectral-bundles).
 
         ``progress``: ``None`` shows a bar in a notebook (tqdm when
         installed) or on a terminal, ``True`` always, ``False`` never.

@@ -57,11 +57,26 @@ typedef enum rsw_variant {
   VARIANT_MONO
 } rsw_variant;
 
+/* A spectral bundle (mono): the wavelengths one path carries, one per
+ * colour channel, so at most the channels of a `color`
+ * (docs/experiments.md#spectral-bundles). */
+#define RENDER_MAX_BUNDLE 3
+
 /* What a render is evaluated at; given to every plugin's prepare(). */
 typedef struct render_ctx {
   rsw_variant variant;
-  double wavelength; /* nm; mono only (default 550) */
+  double wavelength; /* nm; mono only (default 550); a bundle's first */
+  /* Mono: wavelengths carried per path, 0 or 1 for one (every channel at
+   * `wavelength`), up to RENDER_MAX_BUNDLE; channel c renders at wl[c]
+   * (channels past the bundle repeat its last wavelength). */
+  int bundle;
+  double wl[RENDER_MAX_BUNDLE];
 } render_ctx;
+
+/* The wavelength channel c renders at (mono). */
+static inline double rc_channel_wavelength(const render_ctx *rc, int c) {
+  return rc->bundle > 1 ? rc->wl[c] : rc->wavelength;
+}
 
 struct loader;
 struct node;
@@ -96,6 +111,11 @@ typedef struct plugin {
    * wavelength axis. A plugin whose prepare() reads rc->wavelength sets
    * it; scene_wavelength_dependent asks every object. */
   bool (*spectral)(const object *o);
+  /* Optional: whether the object renders a spectral bundle right (each
+   * colour channel at its own wavelength: render_ctx.bundle). NULL: yes,
+   * for an object whose wavelength dependence goes through spectrum_eval
+   * or that has none. scene_bundle_capable asks every object. */
+  bool (*bundles)(const object *o);
 } plugin;
 
 /* Every object starts with this header. */

@@ -517,8 +517,38 @@ static double now_s(void) {
   return ts.tv_sec + 1e-9 * ts.tv_nsec;
 }
 
+/* A bundle's film b in the layout of a one-wavelength mono film: every
+ * colour sum and the moments from channel b. NULL: out of memory. */
+static double *bundle_channel_sums(const job *jb, int b, int *stride) {
+  int m1 = jb->m_ch ? 1 : 0;
+  int S = jb->m_off + ACC_MOMENT * m1;
+  size_t np = (size_t)jb->W * jb->H;
+  double *d = malloc(np * (size_t)S * sizeof *d);
+  if (!d) return NULL;
+  for (size_t i = 0; i < np; i++) {
+    const double *a = &jb->film_acc[i * (size_t)jb->stride];
+    double *o = &d[i * (size_t)S];
+    o[0] = o[1] = o[2] = a[b];
+    o[3] = a[3];
+    for (int k = 4; k < jb->m_off; k++) o[k] = 0;
+    if (m1)
+      for (int k = 0; k < ACC_MOMENT; k++) o[jb->m_off + k] = a[jb->m_off + ACC_MOMENT * b + k];
+  }
+  *stride = S;
+  return d;
+}
+
 rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, render_result_stats *stats,
                          rsw_err *err) {
+  if (opts->bundle > 1)
+    return rsw_fail(err, RSW_ERR_INVALID, "bundle",
+                    "a spectral bundle renders several films: "
+                    "render_sensor_bundle");
+  return render_sensor_bundle(sc, opts, out, stats, err);
+}
+
+rsw_status render_sensor_bundle(scene *sc, const render_opts *opts, film_image *out,
+                                render_result_stats *stats, rsw_err *err) {
   double t0 = now_s();
   if (opts->sensor >= sc->n_sensors)
     return rsw_fail(err, RSW_ERR_NOT_FOUND, "sensor",
@@ -532,6 +562,30 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
   const sensor *se = sc->sensors[opts->sensor];
   const film *fm = se->film;
   render_ctx rc = {.variant = sc->variant, .wavelength = opts->wavelength > 0 ? opts->wavelength : 550.0};
+  int nb = opts->bundle > 1 ? opts->bundle : 1;
+  if (nb > 1) {
+    if (nb > RENDER_MAX_BUNDLE)
+      return rsw_fail(err, RSW_ERR_RANGE, "bundle",
+                      "a bundle carries at most %d wavelengths (one per colour "
+                      "channel), not %d",
+                      RENDER_MAX_BUNDLE, nb);
+    if (sc->variant != VARIANT_MONO)
+      return rsw_fail(err, RSW_ERR_INVALID, "bundle", "spectral bundles need a mono scene; this one is rgb");
+    if (fm->pixel_format == PIXFMT_STOKES)
+      return rsw_fail(err, RSW_ERR_UNSUPPORTED, "bundle",
+                      "sensor '%s': a Stokes film cannot be bundled (its channels hold S0..S3)", se->base.id);
+    const object *blk = scene_bundle_blocker(sc);
+    if (blk)
+      return rsw_fail(err, RSW_ERR_UNSUPPORTED, "bundle",
+                      "%s '%s' (%s) evaluates one wavelength at a time: this scene renders unbundled",
+                      obj_class_name(blk->plugin->cls), blk->id ? blk->id : "", blk->plugin->name);
+    rc.bundle = nb;
+    for (int c = 0; c < RENDER_MAX_BUNDLE; c++) rc.wl[c] = opts->bundle_wl[c < nb ? c : nb - 1];
+    rc.wavelength = rc.wl[0];
+    for (int c = 0; c < nb; c++)
+      if (!(rc.wl[c] > 0 && rc.wl[c] < 1e6))
+        return rsw_fail(err, RSW_ERR_RANGE, "wavelength", "wavelength must be a positive number of nm");
+  }
   if (!(rc.wavelength > 0 && rc.wavelength < 1e6))
     return rsw_fail(err, RSW_ERR_RANGE, "wavelength", "wavelength must be a positive number of nm");
   rsw_status st = scene_prepare(sc, &rc, err);
@@ -562,7 +616,8 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
   jb.n_tiles = (size_t)jb.tiles_x * jb.tiles_y;
   jb.box = box;
   jb.stokes = fm->pixel_format == PIXFMT_STOKES && sc->variant == VARIANT_MONO;
-  jb.lum = !jb.stokes && (sc->variant == VARIANT_MONO || fm->pixel_format == PIXFMT_LUMINANCE);
+  /* (a bundle sums its wavelengths' channels apart) */
+  jb.lum = !jb.stokes && nb == 1 && (sc->variant == VARIANT_MONO || fm->pixel_format == PIXFMT_LUMINANCE);
   jb.m_ch = !opts->variance ? 0 : jb.stokes ? 4 : jb.lum ? 1 : 3;
   jb.m_off = jb.stokes ? ACC_MAX : 4;
   jb.stride = jb.m_off + ACC_MOMENT * jb.m_ch;
@@ -605,40 +660,49 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
                     now_s() - t0);
   }
 
-  /* Develop: the film's op turns the sums into the image and its planes. */
-  film_sums sums = {.acc = jb.film_acc,
-                    .width = jb.W,
-                    .height = jb.H,
-                    .stride = jb.stride,
-                    .m_off = jb.m_off,
-                    .stokes = jb.stokes,
-                    .lum = jb.lum,
-                    .variant = sc->variant,
-                    .spp = spp,
-                    .seed = opts->seed,
-                    .wavelength = sc->variant == VARIANT_MONO ? rc.wavelength : 0.0,
-                    .quantities = opts->quantities,
-                    .variance = opts->variance,
-                    .e_h = e_h};
-  film_image img;
-  st = fm->ops->develop(fm, &sums, &img, err);
-  if (st) {
-    free(jb.film_acc);
-    return st;
+  /* Develop: the film's op turns the sums into the image and its planes
+   * (a bundle's, film by film from its channel's sums). */
+  for (int b = 0; b < nb; b++) {
+    int stride = jb.stride;
+    double *acc = nb == 1 ? jb.film_acc : bundle_channel_sums(&jb, b, &stride);
+    if (!acc) st = rsw_fail(err, RSW_ERR_NOMEM, "film", "out of memory");
+    film_sums sums = {.acc = acc,
+                      .width = jb.W,
+                      .height = jb.H,
+                      .stride = stride,
+                      .m_off = jb.m_off,
+                      .stokes = jb.stokes,
+                      .lum = nb == 1 ? jb.lum : true,
+                      .variant = sc->variant,
+                      .spp = spp,
+                      .seed = opts->seed,
+                      .wavelength = sc->variant == VARIANT_MONO ? rc_channel_wavelength(&rc, b) : 0.0,
+                      .quantities = opts->quantities,
+                      .variance = opts->variance,
+                      .e_h = nb == 1 ? e_h : col1(e_h.c[b])};
+    if (!st) st = fm->ops->develop(fm, &sums, &out[b], err);
+    if (acc != jb.film_acc) free(acc);
+    if (!st && se->ops->pixel_angles) {
+      out[b].angles = malloc((size_t)jb.W * jb.H * 2 * sizeof(double));
+      if (!out[b].angles) {
+        film_image_free(&out[b]);
+        st = rsw_fail(err, RSW_ERR_NOMEM, "film", "out of memory");
+      } else {
+        se->ops->pixel_angles(se, jb.W, jb.H, out[b].angles);
+      }
+    }
+    if (st) {
+      for (int k = 0; k < b; k++) film_image_free(&out[k]);
+      free(jb.film_acc);
+      return st;
+    }
+    film_image *img = &out[b];
+    img->unresolved_rays = jb.rays.unresolved;
+    img->nonfinite = film_image_nonfinite(img);
+    img->isa = rsw_isa_name(rsw_isa_get());
+    img->has_sun = render_sun_angles(sc, &img->sun_zenith, &img->sun_azimuth);
   }
   free(jb.film_acc);
-  if (se->ops->pixel_angles) {
-    img.angles = malloc((size_t)jb.W * jb.H * 2 * sizeof(double));
-    if (!img.angles) {
-      film_image_free(&img);
-      return rsw_fail(err, RSW_ERR_NOMEM, "film", "out of memory");
-    }
-    se->ops->pixel_angles(se, jb.W, jb.H, img.angles);
-  }
-  img.unresolved_rays = jb.rays.unresolved;
-  img.nonfinite = film_image_nonfinite(&img);
-  img.isa = rsw_isa_name(rsw_isa_get());
-  img.has_sun = render_sun_angles(sc, &img.sun_zenith, &img.sun_azimuth);
   if (stats) {
     stats->rays = jb.rays;
     stats->samples = jb.samples;
@@ -648,7 +712,6 @@ rsw_status render_sensor(scene *sc, const render_opts *opts, film_image *out, re
     stats->packet_width = accel_packet_width();
     stats->wall_s = now_s() - t0;
   }
-  *out = img;
   return RSW_OK;
 }
 

@@ -28,7 +28,13 @@ typedef struct render_opts {
   size_t sensor; /* index into scene->sensors */
   uint32_t spp;  /* 0: the sensor sampler's sample_count */
   uint64_t seed;
-  double wavelength;        /* nm, mono only; 0 means 550 */
+  double wavelength; /* nm, mono only; 0 means 550 */
+  /* Mono: a spectral bundle, `bundle` (2..RENDER_MAX_BUNDLE) wavelengths
+   * carried by every path, one per colour channel
+   * (docs/experiments.md#spectral-bundles); `wavelength` is then ignored and the render gives
+   * one film per wavelength (render_sensor_bundle). 0 or 1: none. */
+  int bundle;
+  double bundle_wl[RENDER_MAX_BUNDLE];
   int threads;              /* 0: all cores */
   const atomic_int *cancel; /* optional: non-zero stops the render
                                (checked before each wave of 256
@@ -70,5 +76,14 @@ void render_stats_line(const render_result_stats *st, char *buf, size_t size);
 
 rsw_status render_sensor(scene *s, const render_opts *opts, film_image *out, render_result_stats *stats,
                          rsw_err *err);
+
+/* A bundle's render: out[b] is the film at opts->bundle_wl[b], for b <
+ * max(opts->bundle, 1) (with no bundle, render_sensor's one film). Each
+ * film is what the film at its wavelength alone would be in distribution;
+ * its noise is correlated with its bundle mates' (the same paths). The
+ * bundle needs a mono scene whose every object can carry one
+ * (scene_bundle_blocker) and a film without Stokes components. */
+rsw_status render_sensor_bundle(scene *s, const render_opts *opts, film_image *out,
+                                render_result_stats *stats, rsw_err *err);
 
 #endif

@@ -468,6 +468,7 @@ typedef struct job_req {
   uint64_t d_spp;
   double d_wl;
   const cJSON *d_sensors;
+  int bundle; /* "bundle" (1 when absent) */
 } job_req;
 
 /* What validation learned (stage 2) for planning. */
@@ -552,12 +553,21 @@ static rsw_status parse_request(const char *body, size_t len, job_req *q, svc_er
       st = svc_parse_variance(k, "/variance", &q->variance, e);
     } else if (strcmp(k->string, "bands") == 0) {
       st = bands_parse(k, "/bands", &q->bands, e);
+    } else if (strcmp(k->string, "bundle") == 0) {
+      if (!cJSON_IsNumber(k) || k->valuedouble != floor(k->valuedouble) || k->valuedouble < 1 ||
+          k->valuedouble > RENDER_MAX_BUNDLE)
+        st = svc_fail(e, RSW_ERR_INVALID, "/bundle",
+                      "bundle must be an integer from 1 (one wavelength per path) to %d (a path carries one "
+                      "wavelength per colour channel)",
+                      RENDER_MAX_BUNDLE);
+      else
+        q->bundle = (int)k->valuedouble;
     } else {
       char w[300];
       snprintf(w, sizeof w, "/%s", k->string);
       st = svc_fail(e, RSW_ERR_UNUSED_PROPERTY, w,
                     "unknown field '%s' (expected contexts, defaults, params, templates, seed, quantities, "
-                    "variance, bands)",
+                    "variance, bands, bundle)",
                     k->string);
     }
   }
@@ -835,12 +845,39 @@ static rsw_status context_coords(const job_req *q, nc_coords *out, svc_error *e)
  * accepted. Validation reads the parameter table's keys, the sensors' ids
  * and films: all fixed at load, so no scene lock is needed (a running
  * render holds it for its whole duration). */
+/* A job's "bundle" > 1: a mono scene whose every object carries one,
+ * and no Stokes film among the sensors (docs/experiments.md#spectral-bundles). */
+static rsw_status check_bundle(resident *r, const job_req *q, svc_error *e) {
+  scene *sc = r->sc;
+  if (sc->variant != VARIANT_MONO)
+    return svc_fail(e, RSW_ERR_INVALID, "/bundle",
+                    "spectral bundles apply to mono scenes; this scene is rgb");
+  pthread_mutex_lock(&r->lock);
+  const object *blk = scene_bundle_blocker(sc);
+  char what[400] = "";
+  if (blk)
+    snprintf(what, sizeof what, "%s '%s' (%s)", obj_class_name(blk->plugin->cls), blk->id ? blk->id : "",
+             blk->plugin->name);
+  pthread_mutex_unlock(&r->lock);
+  if (blk)
+    return svc_fail(e, RSW_ERR_UNSUPPORTED, "/bundle",
+                    "%s evaluates one wavelength at a time: this scene renders with \"bundle\": 1", what);
+  for (size_t i = 0; i < sc->n_sensors; i++)
+    if (sc->sensors[i]->film->pixel_format == PIXFMT_STOKES)
+      return svc_fail(e, RSW_ERR_UNSUPPORTED, "/bundle",
+                      "sensor '%s' has a Stokes film (S0..S3 in its channels): it renders with \"bundle\": 1",
+                      sc->sensors[i]->base.id);
+  (void)q;
+  return RSW_OK;
+}
+
 static rsw_status validate_request(service *svc, resident *r, job_req *q, job_check *k, svc_error *e) {
   scene *sc = r->sc;
   rsw_status st = check_params(sc, q->params, "/params", e);
   if (!st && q->bands && sc->variant != VARIANT_MONO)
     st = svc_fail(e, RSW_ERR_INVALID, "/bands", "bands apply to mono scenes; this scene is rgb");
   k->n_nodes = q->bands ? q->bands->n_wl : 1;
+  if (!st && q->bundle > 1) st = check_bundle(r, q, e);
   /* Templates (the scene's under the job's), rendered for each context
    * into the overrides it renders with. */
   if (!st) st = tmpl_compile(sc, r->templates, "/scene/templates", q->templates, q->params, &k->ts, e);
@@ -911,6 +948,7 @@ static rsw_status plan_context(service *svc, const scene *sc, const job_req *q, 
     it->wavelength = w ? w->valuedouble : cw ? cw->valuedouble : q->d_wl;
     it->spp = (uint32_t)spp;
     it->seed = has_seed ? seed : default_seed(q->seed, it->context, it->sensor);
+    it->own_seed = has_seed;
     if (bands) { /* node renders: independent, each its own seed */
       it->node = nk + 1;
       it->wavelength = bands->wl[nk];
@@ -942,6 +980,71 @@ static rsw_status plan_context(service *svc, const scene *sc, const job_req *q, 
   return st;
 }
 
+/* Whether items a and b may share a bundle: the same sensor, spp,
+ * planes and overrides (their printed JSON ka, kb), other wavelengths, no
+ * seed of their own. */
+static bool bundle_compatible(const render_item *a, const render_item *b, const char *ka, const char *kb) {
+  return !a->own_seed && !b->own_seed && b->sensor_index == a->sensor_index && b->spp == a->spp &&
+         b->quantities == a->quantities && b->variance == a->variance && strcmp(ka, kb) == 0;
+}
+
+typedef struct bundle_key {
+  const render_item *it;
+  const char *params; /* printed overrides ("" when none) */
+  size_t index;
+} bundle_key;
+
+static int bundle_key_cmp(const void *pa, const void *pb) {
+  const bundle_key *a = pa, *b = pb;
+  if (a->it->sensor_index != b->it->sensor_index) return a->it->sensor_index < b->it->sensor_index ? -1 : 1;
+  int c = strcmp(a->params, b->params);
+  if (c) return c;
+  return a->index < b->index ? -1 : a->index > b->index;
+}
+
+/* A job's spectral bundles ("bundle" K > 1, mono): the renders that may
+ * share a bundle (bundle_compatible: a wavelength sweep at one set of
+ * overrides, whatever the axes' order; a context's band nodes) are taken
+ * in the job's order and cut into bundles of K from the first (a
+ * wavelength already in the bundle starts the next one); the last may be
+ * smaller. So a job's bundles depend only on its renders and their order
+ * (docs/experiments.md#spectral-bundles). False: out of memory. */
+static bool plan_bundles(job *jb) {
+  size_t n = jb->n_items;
+  for (size_t i = 0; i < n; i++) jb->items[i].bundle[0] = i, jb->items[i].bundle_n = 1;
+  if (jb->bundle <= 1 || jb->variant != VARIANT_MONO || n < 2) return true;
+  bundle_key *k = calloc(n, sizeof *k);
+  char **printed = calloc(n, sizeof *printed);
+  bool ok = k && printed;
+  for (size_t i = 0; i < n && ok; i++) {
+    printed[i] = jb->items[i].params ? cJSON_PrintUnformatted(jb->items[i].params) : NULL;
+    ok = !jb->items[i].params || printed[i];
+    k[i] = (bundle_key){&jb->items[i], printed[i] ? printed[i] : "", i};
+  }
+  if (ok) qsort(k, n, sizeof *k, bundle_key_cmp);
+  for (size_t g = 0; g < n && ok;) { /* a leader, then its mates among the next keys */
+    render_item *lead = &jb->items[k[g].index];
+    size_t e = g + 1;
+    while (e < n && lead->bundle_n < jb->bundle &&
+           bundle_compatible(lead, k[e].it, k[g].params, k[e].params)) {
+      bool dup = false;
+      for (int m = 0; m < lead->bundle_n; m++)
+        dup = dup || jb->items[lead->bundle[m]].wavelength == k[e].it->wavelength;
+      if (dup) break;
+      render_item *mate = &jb->items[k[e].index];
+      lead->bundle[lead->bundle_n++] = k[e].index;
+      mate->bundle[0] = k[g].index;
+      mate->bundle_n = 0; /* a mate: its leader holds the list */
+      e++;
+    }
+    g = e;
+  }
+  for (size_t i = 0; printed && i < n; i++) cJSON_free(printed[i]);
+  free(printed);
+  free(k);
+  return ok;
+}
+
 /* Stage 3: the job (*out) with its renders in context order, taking the
  * bands, coords and warnings; *reserve: the bytes its films will hold,
  * for --max-result-bytes. */
@@ -957,6 +1060,7 @@ static rsw_status plan_job(service *svc, const scene *sc, job_req *q, job_check 
   k->warnings = NULL;
   jb->bands = q->bands;
   q->bands = NULL;
+  jb->bundle = q->bundle > 1 ? q->bundle : 1;
   jb->items = calloc(k->n_items, sizeof *jb->items);
   jb->context_remaining = calloc(q->n_contexts, sizeof *jb->context_remaining);
   rsw_status st = RSW_OK;
@@ -967,6 +1071,7 @@ static rsw_status plan_job(service *svc, const scene *sc, job_req *q, job_check 
   /* Items exist only if their array was allocated (job_free walks
    * n_items of them). */
   jb->n_items = jb->items ? k->n_items : 0;
+  if (!st && !plan_bundles(jb)) st = svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
   if (st) {
     job_free(jb);
     return st;
@@ -1131,6 +1236,62 @@ static void finish_job(service *svc, job *j) {
   push_event(svc, j, d, true, jm);
 }
 
+/* Item k's render ended with st (its film in *film when st is OK; e the
+ * error otherwise): the film stored, counters, and its event. Called
+ * without svc->lock; returns holding it. */
+static void item_done(service *svc, job *j, size_t k, rsw_status st, svc_film *out, svc_error *e) {
+  render_item *it = &j->items[k];
+  size_t done = j->items_done + 1; /* only this worker writes it */
+  if (!st) {
+    it->film = *out;
+    /* With a state directory every film goes to disk first. */
+    snprintf(it->film.context, sizeof it->film.context, "%s", it->context);
+    st = svc_state_film_write(svc, j, k, &it->film, e);
+    if (st) svc_film_free(&it->film);
+    it->on_disk = !st && svc_state_on(svc);
+  }
+  /* The event is built before taking svc->lock (only this worker
+   * writes the job's counters), so a job of tiny renders holds the
+   * lock for moments and requests are not starved of it. */
+  if (st) rsw_err_format(&e->err, it->error, sizeof it->error);
+  unsigned jm = svc_json_mark();
+  cJSON *d = cJSON_CreateObject();
+  cJSON_AddStringToObject(d, "context", it->context);
+  cJSON_AddStringToObject(d, "sensor", it->sensor);
+  if (it->node) cJSON_AddNumberToObject(d, "node", (double)(it->node - 1)); /* jobs with bands */
+  cJSON_AddStringToObject(d, "state", st ? "failed" : "succeeded");
+  if (st) cJSON_AddStringToObject(d, "error", it->error);
+  cJSON_AddNumberToObject(d, "done", (double)done);
+  cJSON_AddNumberToObject(d, "total", (double)j->n_items);
+  char *ev = svc_print_json(d, jm);
+  pthread_mutex_lock(&svc->lock);
+  if (st) {
+    it->state = JOB_FAILED;
+    j->items_failed++;
+    svc->renders_failed++;
+  } else {
+    it->state = JOB_SUCCEEDED;
+    it->has_film = true;
+    uint64_t mem = svc_film_mem(&it->film), cap = svc->opts.max_result_bytes;
+    if (it->on_disk) {
+      svc->result_disk_bytes += mem;
+      svc->results_on_disk++;
+    }
+    if (it->on_disk && cap && svc->result_bytes + mem > cap) {
+      /* Beyond the memory cap: served from disk only. */
+      film_image_free(&it->film.img);
+      it->has_film = false;
+    } else {
+      svc->result_bytes += mem;
+    }
+    svc->contexts_rendered++;
+  }
+  j->items_done++;
+  j->current = SIZE_MAX;
+  if (--j->context_remaining[it->context_index] == 0) j->contexts_done++;
+  push_event_text(svc, j, ev, false);
+}
+
 void *svc_worker_main(void *arg) {
   service *svc = arg;
   pthread_mutex_lock(&svc->lock);
@@ -1161,7 +1322,15 @@ void *svc_worker_main(void *arg) {
       if (atomic_load(&j->cancel) || svc->stopping) break;
       render_item *it = &j->items[i];
       if (it->state != JOB_QUEUED) continue; /* done before a restart */
-      size_t done = j->items_done + 1;       /* only this worker writes it */
+      /* Its bundle (plan_bundles), whose members still queued take their
+       * films from this render (after a restart some may be done: they
+       * are rendered again, the same bits, and not stored twice). */
+      size_t lead = it->bundle_n > 0 ? i : it->bundle[0];
+      const size_t *mates = &i;
+      int nb = 1;
+      if (lead < j->n_items && j->items[lead].bundle_n > 0)
+        mates = j->items[lead].bundle, nb = j->items[lead].bundle_n;
+      it = &j->items[mates[0]];
       j->current = i;
       atomic_store(&j->current_samples.done, 0);
       atomic_store(&j->current_samples.total, 0);
@@ -1175,59 +1344,30 @@ void *svc_worker_main(void *arg) {
                         .cancel = &j->cancel,
                         .quantities = it->quantities,
                         .variance = it->variance,
-                        .samples = &j->current_samples};
-      rsw_status st = svc_render_locked(svc, j->res, &rs, &it->film, &e);
-      if (!st) {
-        /* With a state directory every film goes to disk first. */
-        snprintf(it->film.context, sizeof it->film.context, "%s", it->context);
-        st = svc_state_film_write(svc, j, i, &it->film, &e);
-        if (st) svc_film_free(&it->film);
-        it->on_disk = !st && svc_state_on(svc);
+                        .samples = &j->current_samples,
+                        .bundle = nb > 1 ? nb : 0};
+      for (int b = 0; b < nb && nb > 1; b++) {
+        double w = j->items[mates[b]].wavelength;
+        rs.bundle_wl[b] = w > 0 ? w : 550.0;
       }
+      svc_film films[RENDER_MAX_BUNDLE];
+      memset(films, 0, sizeof films);
+      rsw_status st = svc_render_locked(svc, j->res, &rs, films, &e);
       if (st == RSW_ERR_CANCELLED) {
         pthread_mutex_lock(&svc->lock);
         break;
       }
-      /* The event is built before taking svc->lock (only this worker
-       * writes the job's counters), so a job of tiny renders holds the
-       * lock for moments and requests are not starved of it. */
-      if (st) rsw_err_format(&e.err, it->error, sizeof it->error);
-      unsigned jm = svc_json_mark();
-      cJSON *d = cJSON_CreateObject();
-      cJSON_AddStringToObject(d, "context", it->context);
-      cJSON_AddStringToObject(d, "sensor", it->sensor);
-      if (it->node) cJSON_AddNumberToObject(d, "node", (double)(it->node - 1)); /* jobs with bands */
-      cJSON_AddStringToObject(d, "state", st ? "failed" : "succeeded");
-      if (st) cJSON_AddStringToObject(d, "error", it->error);
-      cJSON_AddNumberToObject(d, "done", (double)done);
-      cJSON_AddNumberToObject(d, "total", (double)j->n_items);
-      char *ev = svc_print_json(d, jm);
-      pthread_mutex_lock(&svc->lock);
-      if (st) {
-        it->state = JOB_FAILED;
-        j->items_failed++;
-        svc->renders_failed++;
-      } else {
-        it->state = JOB_SUCCEEDED;
-        it->has_film = true;
-        uint64_t mem = svc_film_mem(&it->film), cap = svc->opts.max_result_bytes;
-        if (it->on_disk) {
-          svc->result_disk_bytes += mem;
-          svc->results_on_disk++;
+      bool locked = false;
+      for (int b = 0; b < nb; b++) {
+        if (j->items[mates[b]].state != JOB_QUEUED) {
+          if (!st) svc_film_free(&films[b]);
+          continue;
         }
-        if (it->on_disk && cap && svc->result_bytes + mem > cap) {
-          /* Beyond the memory cap: served from disk only. */
-          film_image_free(&it->film.img);
-          it->has_film = false;
-        } else {
-          svc->result_bytes += mem;
-        }
-        svc->contexts_rendered++;
+        if (locked) pthread_mutex_unlock(&svc->lock);
+        item_done(svc, j, mates[b], st, &films[b], &e);
+        locked = true;
       }
-      j->items_done++;
-      j->current = SIZE_MAX;
-      if (--j->context_remaining[it->context_index] == 0) j->contexts_done++;
-      push_event_text(svc, j, ev, false);
+      if (!locked) pthread_mutex_lock(&svc->lock);
     }
     finish_job(svc, j);
   }

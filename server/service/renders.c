@@ -347,10 +347,14 @@ rsw_status svc_render_locked(service *svc, resident *r, const render_spec *rs, s
                       .deadline = rs->deadline,
                       .quantities = rs->quantities,
                       .variance = rs->variance,
-                      .samples = rs->samples};
+                      .samples = rs->samples,
+                      .bundle = rs->bundle};
+    memcpy(ro.bundle_wl, rs->bundle_wl, sizeof ro.bundle_wl);
+    int nb = rs->bundle > 1 ? rs->bundle : 1;
+    film_image img[RENDER_MAX_BUNDLE];
     render_result_stats stats;
     rsw_err rerr = {0};
-    st = render_sensor(sc, &ro, &out->img, &stats, &rerr);
+    st = render_sensor_bundle(sc, &ro, img, &stats, &rerr);
     if (st) {
       e->err = rerr;
       e->err.code = st = svc_request_code(st);
@@ -358,11 +362,15 @@ rsw_status svc_render_locked(service *svc, resident *r, const render_spec *rs, s
       pthread_mutex_lock(&svc->lock);
       svc->render_seconds += stats.wall_s;
       svc->unresolved_rays += stats.rays.unresolved;
-      if (out->img.nonfinite) svc->films_nonfinite++;
+      for (int b = 0; b < nb; b++)
+        if (img[b].nonfinite) svc->films_nonfinite++;
       pthread_mutex_unlock(&svc->lock);
-      memcpy(out->scene, r->id, 65);
-      out->revision = revision;
-      snprintf(out->sensor, sizeof out->sensor, "%s", kapi_sensor_id(sc, rs->sensor_index));
+      for (int b = 0; b < nb; b++) {
+        out[b].img = img[b];
+        memcpy(out[b].scene, r->id, 65);
+        out[b].revision = revision;
+        snprintf(out[b].sensor, sizeof out[b].sensor, "%s", kapi_sensor_id(sc, rs->sensor_index));
+      }
     }
   }
   if (restore) {

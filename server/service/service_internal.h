@@ -112,6 +112,12 @@ typedef struct render_item {
   size_t node; /* jobs with bands: 1 + the index of wavelength in job.bands->wl; 0 otherwise */
   uint32_t spp;
   uint64_t seed;
+  bool own_seed; /* the context gave its "seed" (never bundled: docs/experiments.md#spectral-bundles) */
+  /* Its spectral bundle (job.bundle > 1; plan_bundles): the renders, its
+   * leader first (the bundle's seed), as indices into job.items. A
+   * bundle of one: bundle[0] is the item itself. */
+  size_t bundle[RENDER_MAX_BUNDLE];
+  int bundle_n;
   unsigned quantities; /* RENDER_Q_*: the job's "quantities" */
   bool variance;       /* the job's "variance" */
   cJSON *params;       /* merged overrides (job-level, then context-level), owned */
@@ -167,6 +173,8 @@ typedef struct job {
    * its samples, for the job's answers ("render"). */
   size_t current;
   render_progress current_samples;
+  /* "bundle": wavelengths per path (render_opts.bundle), 1: none. */
+  int bundle;
 } job;
 
 struct service {
@@ -340,6 +348,10 @@ typedef struct render_spec {
   unsigned quantities; /* RENDER_Q_* */
   bool variance;
   render_progress *samples; /* optional: the render's progress (render_opts.samples) */
+  /* A spectral bundle (render_opts.bundle): 2..RENDER_MAX_BUNDLE films, at
+   * bundle_wl[b], into out[b]; 0 or 1: one film at `wavelength`. */
+  int bundle;
+  double bundle_wl[RENDER_MAX_BUNDLE];
 } render_spec;
 /* A request's "quantities" (a list of "radiance", "brdf", "brf") into
  * RENDER_Q_* bits, or its "variance" (a boolean); ptr is the member's JSON
@@ -350,6 +362,7 @@ rsw_status svc_parse_variance(const cJSON *v, const char *ptr, bool *out, svc_er
  * ("/quantities") and ptr_v ("/variance") name the field at fault. */
 rsw_status svc_check_planes(const scene *sc, size_t si, uint32_t spp, unsigned quantities, bool variance,
                             const char *ptr_q, const char *ptr_v, svc_error *e);
+/* out: max(rs->bundle, 1) films. */
 rsw_status svc_render_locked(service *svc, resident *r, const render_spec *rs, svc_film *out, svc_error *e);
 /* Resolve a sensor given by id or decimal index. */
 bool svc_find_sensor(const scene *sc, const char *name, size_t *index);

@@ -192,7 +192,7 @@ rsw_status ior_conductor_for_ctx(const ior_conductor *c, const render_ctx *rc, c
                                  rsw_err *err, const char *where) {
   double wl[3];
   if (rc->variant == VARIANT_MONO) {
-    wl[0] = wl[1] = wl[2] = rc->wavelength;
+    for (int ch = 0; ch < 3; ch++) wl[ch] = rc_channel_wavelength(rc, ch);
   } else {
     wl[0] = IOR_RGB_WL_R;
     wl[1] = IOR_RGB_WL_G;

@@ -328,6 +328,12 @@ static bool adapter_spectral(const object *o) {
   return true;
 }
 
+/* Its radiance is asked for at one wavelength (and carries Stokes
+ * components a bundle's channels cannot hold). */
+static bool adapter_bundles(const object *o) {
+  return !adapter_spectral(o);
+}
+
 static rsw_status adapter_prepare(object *o, const render_ctx *rc, rsw_err *err) {
   env_adapter *a = (env_adapter *)o;
   atomic_store(&a->failures, 0);
@@ -568,7 +574,8 @@ static rsw_status load_one(const char *path, rsw_err *err) {
                      .ops = &adapter_ops,
                      .traverse = adapter_traverse,
                      .parameters_changed = adapter_parameters_changed,
-                     .spectral = adapter_spectral};
+                     .spectral = adapter_spectral,
+                     .bundles = adapter_bundles};
   loaded_plugin **grown = realloc(g_loaded, (g_n_loaded + 1) * sizeof *grown);
   if (!grown) {
     unload_one(lp);

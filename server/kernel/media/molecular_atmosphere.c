@@ -97,9 +97,12 @@ struct mol_atmo {
   ma_particle *p;
   phase *rayleigh;
   ma_phase mix;
-  double wl; /* wavelength of the layer values; 0: none yet */
+  double wl;     /* wavelength of the layer values (a bundle's first); 0: none yet */
+  double wl3[3]; /* a bundle's: channel c's wavelength */
+  int bundle;    /* the wavelengths the layer values hold (0 or 1: one in every channel) */
   uint64_t sa_revision;
   bool dirty;
+  bool absorbing_only; /* every layer's albedo is 0 (all channels) */
 };
 
 /* ---- cross sections ---------------------------------------------------------- */
@@ -214,7 +217,10 @@ static double spec_at(const ma_spec *s, double wl, bool *ok) {
 
 /* ---- the layers at a wavelength ---------------------------------------------- */
 
-static rsw_status ma_refresh(mol_atmo *m, double wl, rsw_err *err) {
+/* The layer values at wavelength wl into channel ch (ch < 0: every
+ * channel; then also the scalar per-layer values and the phase mixture's
+ * weights, which a bundle, refused with particles, does not vary). */
+static rsw_status ma_refresh_channel(mol_atmo *m, double wl, int ch, rsw_err *err) {
   uint32_t n = m->n;
   const char *id = m->lm.base.base.id ? m->lm.base.base.id : "";
   double sr = m->has_scattering ? atmo_rayleigh_cross_section(wl) : 0.0;
@@ -281,25 +287,49 @@ static rsw_status ma_refresh(mol_atmo *m, double wl, rsw_err *err) {
       s[1 + j] = pssa[j] * e;
       ss += s[1 + j];
     }
-    /* Nested blend weights: component j onto 0..j-1. */
-    double acc = s[0];
-    for (size_t j = 0; j < np; j++) {
-      acc += s[1 + j];
-      m->w[k * np + j] = acc > 0.0 ? s[1 + j] / acc : 0.0;
-    }
     double al = st > 0.0 ? ss / st : 0.0;
     if (al > 1.0) al = 1.0;
-    m->sig_t[k] = st;
-    m->alb[k] = al;
-    for (int c = 0; c < 3; c++) {
+    if (ch <= 0) {
+      /* Nested blend weights: component j onto 0..j-1. */
+      double acc = s[0];
+      for (size_t j = 0; j < np; j++) {
+        acc += s[1 + j];
+        m->w[k * np + j] = acc > 0.0 ? s[1 + j] / acc : 0.0;
+      }
+      m->sig_t[k] = st;
+      m->alb[k] = al;
+    }
+    for (int c = ch < 0 ? 0 : ch; c < (ch < 0 ? 3 : ch + 1); c++) {
       m->lm.L.lay[k].sig[c] = m->lm.base.scale * st;
       m->lm.L.alb[3 * k + c] = al;
     }
     if (al > amax) amax = al;
   }
+  if (ch <= 0)
+    m->absorbing_only = amax == 0.0;
+  else
+    m->absorbing_only = m->absorbing_only && amax == 0.0;
+  return RSW_OK;
+}
+
+/* The layer values at rc's wavelength, or a bundle's channel by channel. */
+static rsw_status ma_refresh(mol_atmo *m, const render_ctx *rc, rsw_err *err) {
+  double wl = rc->wavelength > 0 ? rc->wavelength : 550.0;
+  int bundle = rc->bundle > 1 ? rc->bundle : 0;
+  rsw_status st = RSW_OK;
+  if (!bundle) {
+    st = ma_refresh_channel(m, wl, -1, err);
+  } else {
+    for (int c = 0; c < 3 && !st; c++) st = ma_refresh_channel(m, rc->wl[c], c, err);
+    for (int c = 0; c < 3; c++) m->wl3[c] = rc->wl[c];
+  }
+  if (st) return st;
+  m->lm.L.nc = bundle ? 3 : 1;
+  m->lm.base.has_spectral_extinction = bundle != 0;
   media_layers_finish(&m->lm.L);
-  m->lm.base.absorbing_only = amax == 0.0;
+  m->lm.base.absorbing_only = m->absorbing_only;
   m->wl = wl;
+  m->bundle = bundle;
   m->dirty = false;
   return RSW_OK;
 }
@@ -363,14 +393,21 @@ static const phase_ops ma_phase_ops = {.sample = ma_phase_sample, .eval_pdf = ma
 static rsw_status ma_prepare(object *o, const render_ctx *rc, rsw_err *err) {
   mol_atmo *m = (mol_atmo *)o;
   double wl = rc->wavelength > 0 ? rc->wavelength : 550.0;
-  if (!m->dirty && wl == m->wl && (!m->sigma_a || m->sigma_a->revision == m->sa_revision)) return RSW_OK;
-  return ma_refresh(m, wl, err);
+  int bundle = rc->bundle > 1 ? rc->bundle : 0;
+  bool same = !m->dirty && wl == m->wl && bundle == m->bundle &&
+              (!bundle || memcmp(m->wl3, rc->wl, sizeof m->wl3) == 0);
+  if (same && (!m->sigma_a || m->sigma_a->revision == m->sa_revision)) return RSW_OK;
+  return ma_refresh(m, rc, err);
 }
 
 static void ma_parameters_changed(object *o) {
   mol_atmo *m = (mol_atmo *)o;
   m->dirty = true;
-  if (m->wl > 0) ma_refresh(m, m->wl, NULL); /* (errors come back at the next prepare) */
+  if (m->wl > 0) { /* (errors come back at the next prepare) */
+    render_ctx rc = {.variant = VARIANT_MONO, .wavelength = m->wl, .bundle = m->bundle};
+    memcpy(rc.wl, m->wl3, sizeof rc.wl);
+    ma_refresh(m, &rc, NULL);
+  }
 }
 
 static void ma_destroy(object *o) {
@@ -766,6 +803,12 @@ static void ma_traverse(object *o, param_visitor *v) {
  * scene_wavelength_dependent): Rayleigh and ozone always do; particles do
  * when their extinction follows an Angstrom law or a spectrum, or their
  * albedo is a spectrum. (A user sigma_a volume answers for itself.) */
+/* The phase mixture's weights are one set per layer (a particle layer's
+ * would differ between a bundle's wavelengths). */
+static bool ma_bundles(const object *o) {
+  return ((const mol_atmo *)o)->np == 0;
+}
+
 static bool ma_spectral(const object *o) {
   const mol_atmo *m = (const mol_atmo *)o;
   if (m->has_scattering || m->has_absorption) return true;
@@ -778,7 +821,7 @@ static bool ma_spectral(const object *o) {
 
 DEFINE_PLUGIN(molecular_atmosphere, CLS_MEDIUM, .destroy = ma_destroy, .prepare = ma_prepare,
               .ops = &layered_medium_ops, .traverse = ma_traverse,
-              .parameters_changed = ma_parameters_changed, .spectral = ma_spectral);
+              .parameters_changed = ma_parameters_changed, .spectral = ma_spectral, .bundles = ma_bundles);
 
 /* ---- what tests and benches read --------------------------------------------- */
 
@@ -787,8 +830,10 @@ bool molecular_atmosphere_layers(const medium *md, double wavelength, const doub
                                  size_t *n_particles) {
   if (!md || md->base.plugin != &plugin_molecular_atmosphere) return false;
   mol_atmo *m = (mol_atmo *)md;
-  if (m->dirty || m->wl != wavelength || (m->sigma_a && m->sigma_a->revision != m->sa_revision)) {
-    if (ma_refresh(m, wavelength, NULL)) return false;
+  if (m->dirty || m->wl != wavelength || m->bundle ||
+      (m->sigma_a && m->sigma_a->revision != m->sa_revision)) {
+    render_ctx rc = {.variant = VARIANT_MONO, .wavelength = wavelength};
+    if (ma_refresh(m, &rc, NULL)) return false;
   }
   *z = m->z;
   *n = m->n;

@@ -546,24 +546,29 @@ rsw_status spectrum_eval(const spectrum *s, const render_ctx *rc, color *out, rs
   case SPEC_TABLE: {
     if (rc->variant != VARIANT_MONO)
       return rsw_fail(err, RSW_ERR_UNSUPPORTED, where, "tabulated spectrum in the rgb variant");
-    double w = rc->wavelength;
     /* Deliberate difference from Mitsuba (which collapses a (wl, v) list to
      * a luminance in mono): the table is evaluated at the render's
-     * wavelength by linear interpolation; outside it is an error. */
-    if (!(w >= s->wl[0] && w <= s->wl[s->n - 1]))
-      return rsw_fail(err, RSW_ERR_RANGE, where,
-                      "wavelength %g nm lies outside the spectrum's table [%g, %g] nm", w, s->wl[0],
-                      s->wl[s->n - 1]);
-    size_t lo = 0, hi = s->n - 1;
-    while (hi - lo > 1) {
-      size_t mid = (lo + hi) / 2;
-      if (s->wl[mid] <= w)
-        lo = mid;
-      else
-        hi = mid;
+     * wavelength by linear interpolation; outside it is an error. A
+     * spectral bundle evaluates each channel at its own wavelength. */
+    int nch = rc->bundle > 1 ? 3 : 1;
+    for (int c = 0; c < nch; c++) {
+      double w = rc_channel_wavelength(rc, c);
+      if (!(w >= s->wl[0] && w <= s->wl[s->n - 1]))
+        return rsw_fail(err, RSW_ERR_RANGE, where,
+                        "wavelength %g nm lies outside the spectrum's table [%g, %g] nm", w, s->wl[0],
+                        s->wl[s->n - 1]);
+      size_t lo = 0, hi = s->n - 1;
+      while (hi - lo > 1) {
+        size_t mid = (lo + hi) / 2;
+        if (s->wl[mid] <= w)
+          lo = mid;
+        else
+          hi = mid;
+      }
+      double t = (w - s->wl[lo]) / (s->wl[hi] - s->wl[lo]);
+      out->c[c] = s->val[lo] + t * (s->val[hi] - s->val[lo]);
     }
-    double t = (w - s->wl[lo]) / (s->wl[hi] - s->wl[lo]);
-    *out = col1(s->val[lo] + t * (s->val[hi] - s->val[lo]));
+    if (nch == 1) out->c[1] = out->c[2] = out->c[0];
     return RSW_OK;
   }
   }

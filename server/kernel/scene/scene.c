@@ -121,6 +121,14 @@ bool scene_wavelength_dependent(const scene *s) {
   return false;
 }
 
+const object *scene_bundle_blocker(const scene *s) {
+  for (size_t i = 0; i < s->n_objects; i++) {
+    const object *o = s->objects[i];
+    if (o->plugin && o->plugin->bundles && !o->plugin->bundles(o)) return o;
+  }
+  return NULL;
+}
+
 sensor *scene_find_sensor(const scene *s, const char *id, size_t *index_out) {
   for (size_t i = 0; i < s->n_sensors; i++)
     if (strcmp(s->sensors[i]->base.id, id) == 0) {

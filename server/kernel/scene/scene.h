@@ -49,6 +49,9 @@ rsw_status scene_prepare(scene *s, const render_ctx *rc, rsw_err *err);
  * none does renders the same thing at every wavelength. Reads the scene
  * only (not thread-safe with an update of it). */
 bool scene_wavelength_dependent(const scene *s);
+/* The first object that cannot render a spectral bundle (its plugin's
+ * `bundles` op says no), or NULL when the scene can. */
+const object *scene_bundle_blocker(const scene *s);
 
 /* Sensor by id, or by decimal index when `id` is all digits. NULL if none. */
 sensor *scene_find_sensor(const scene *s, const char *id, size_t *index_out);

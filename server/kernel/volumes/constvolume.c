@@ -53,7 +53,7 @@ static void constvolume_refresh(constvolume *c) {
 static rsw_status constvolume_prepare(object *o, const render_ctx *rc, rsw_err *err) {
   (void)err;
   constvolume *c = (constvolume *)o;
-  c->base.channels = rc->variant == VARIANT_RGB ? 3 : 1;
+  c->base.channels = rc->variant == VARIANT_RGB || rc->bundle > 1 ? 3 : 1;
   constvolume_refresh(c);
   return RSW_OK;
 }

@@ -208,6 +208,12 @@ static bool gridvolume_spectral(const object *o) {
   return ((const gridvolume *)o)->n_wl > 1;
 }
 
+/* A grid is evaluated at one wavelength into one channel: a spectral
+ * bundle would see the first wavelength's values in every channel. */
+static bool gridvolume_bundles(const object *o) {
+  return !gridvolume_spectral(o);
+}
+
 static void gridvolume_traverse(object *o, param_visitor *v) {
   gridvolume *g = (gridvolume *)o;
   double hi = isnan(g->fixed_max) ? g->base.hi : fmin(g->base.hi, g->fixed_max);
@@ -473,7 +479,7 @@ static rsw_status gridvolume_fill(loader *ld, node *n, gridvolume *g) {
 
 DEFINE_PLUGIN(gridvolume, CLS_VOLUME, .destroy = gridvolume_destroy, .prepare = gridvolume_prepare,
               .ops = &gridvolume_ops, .traverse = gridvolume_traverse, .spectral = gridvolume_spectral,
-              .parameters_changed = gridvolume_parameters_changed);
+              .bundles = gridvolume_bundles, .parameters_changed = gridvolume_parameters_changed);
 
 static rsw_status gridvolume_create(loader *ld, node *n, object **out) {
   gridvolume *g = PLUGIN_NEW(gridvolume, gridvolume);

@@ -1,0 +1,151 @@
+#!/usr/bin/env bash
+# Spectral bundles (a job's "bundle": docs/experiments.md#spectral-bundles), on
+# the molecular atmosphere example without its particle layer (2,400
+# Rayleigh + ozone layers: sigma_t differs by a factor ~2 across the
+# bundle, so the free flights use the chromatic tracking) and 6 contexts
+# at 400..650 nm:
+#   - statistically equal to the unbundled films: for each context, the
+#     film means agree within 4 combined standard errors (the stderr
+#     planes), and at most 2% of pixels differ by more than 3 sigma
+#     (Gaussian: 0.27%; the allowance covers the per-pixel stderr's own
+#     noise at 256 spp); fixed seeds;
+#   - a bundled film names its own wavelength and its bundle's seed;
+#   - bitwise the same with 1 and 2 render threads;
+#   - formed whatever the order of a grid's axes (same overrides, other
+#     wavelengths, cut into threes in the job's order), never across
+#     overrides, never over a context's own seed;
+#   - refused with a 422 naming /bundle: bundle 4, an rgb scene, and an
+#     atmosphere with a particle layer (its phase mixture is one set per
+#     layer), naming the medium.
+name=test_bundles
+source "$(dirname "$0")/../support/shtest.sh"
+need_bins raysweepd
+python3 -c 'import json' || { bad "python3 missing"; finish; }
+python3 - "$root/proto/examples/atmosphere_molecular.json" "$tmp/atmo.json" <<'PY'
+import json, sys
+d = json.load(open(sys.argv[1]))
+del d["medium_atmosphere"]["particle_layers"]
+json.dump(d, open(sys.argv[2], "w"))
+PY
+start_daemon "$tmp/d2" --threads 2
+p2=$started_port
+start_daemon "$tmp/d1" --threads 1
+p1=$started_port
+[ -n "$p1" ] && [ -n "$p2" ] || { bad "daemons did not start: $(cat "$tmp/d1/log" "$tmp/d2/log")"; finish; }
+
+cat >"$tmp/job.py" <<'PY'
+import json, math, sys, urllib.request, urllib.error, time
+def call(port, method, path, body=None, ctype="application/json"):
+    req = urllib.request.Request(f"http://127.0.0.1:{port}{path}", method=method,
+                                 data=body if body is None or isinstance(body, bytes) else json.dumps(body).encode(),
+                                 headers={"Content-Type": ctype})
+    try:
+        with urllib.request.urlopen(req, timeout=300) as r:
+            return r.status, json.loads(r.read() or b"null")
+    except urllib.error.HTTPError as e:
+        return e.code, json.loads(e.read() or b"null")
+def push(port, path):
+    st, s = call(port, "POST", "/v1/scenes", open(path, "rb").read())
+    assert st in (200, 201), (st, s)
+    return s["id"]
+def films(port, sid, bundle, seed, wls, spp=256):
+    body = {"contexts": [{"id": f"w{int(w)}", "wavelength": w} for w in wls],
+            "defaults": {"spp": spp}, "variance": True, "seed": seed}
+    if bundle:
+        body["bundle"] = bundle
+    st, j = call(port, "POST", f"/v1/scenes/{sid}/jobs", body)
+    assert st == 202 or st == 201 or st == 200, (st, j)
+    jid = j["id"]
+    for _ in range(3000):
+        st, j = call(port, "GET", f"/v1/jobs/{jid}")
+        if j["state"] not in ("queued", "running"):
+            break
+        time.sleep(0.1)
+    assert j["state"] == "succeeded", j
+    st, idx = call(port, "GET", f"/v1/jobs/{jid}/results")
+    out = {}
+    for r in idx["results"]:
+        st, f = call(port, "GET", r["href"])
+        out[r["context"]] = f
+    return out
+PY
+
+py "bundled films are statistically the unbundled ones, name their wavelength and the bundle's seed" '
+import sys, math
+sys.path.insert(0, sys.argv[1]); from job import *
+port = int(sys.argv[2]); sid = push(port, sys.argv[3])
+wls = [400.0, 450.0, 500.0, 550.0, 600.0, 650.0]
+a = films(port, sid, 0, 7, wls)
+b = films(port, sid, 3, 8, wls)
+seeds = {}
+for ctx in a:
+    fa, fb = a[ctx], b[ctx]
+    assert fb["meta"]["wavelength"] == fa["meta"]["wavelength"] == float(ctx[1:]), (ctx, fb["meta"]["wavelength"])
+    seeds.setdefault(fb["meta"]["seed"], []).append(ctx)
+    nc = len(fa["channels"])
+    A, SA = fa["data"][0::nc], fa["data"][nc - 1::nc]
+    B, SB = fb["data"][0::nc], fb["data"][nc - 1::nc]
+    n = len(A)
+    var = sum(x * x + y * y for x, y in zip(SA, SB))
+    gz = (sum(A) - sum(B)) / math.sqrt(var)
+    far = sum(1 for x, y, s, t in zip(A, B, SA, SB) if abs(x - y) > 3 * math.sqrt(s * s + t * t)) / n
+    assert abs(gz) < 4, (ctx, "film means differ by", gz, "sigma")
+    assert far <= 0.02, (ctx, far, "of pixels beyond 3 sigma")
+# two bundles of three: each shares its first context'"'"'s seed
+assert sorted(len(v) for v in seeds.values()) == [3, 3], seeds
+' "$tmp" "$p2" "$tmp/atmo.json"
+
+py "a bundled job is bitwise the same with 1 and 2 render threads" '
+import sys
+sys.path.insert(0, sys.argv[1]); from job import *
+wls = [400.0, 425.0, 450.0, 475.0]
+f = [films(int(p), push(int(p), sys.argv[4]), 3, 11, wls, spp=16) for p in sys.argv[2:4]]
+for ctx in f[0]:
+    assert f[0][ctx]["data"] == f[1][ctx]["data"], ctx
+' "$tmp" "$p1" "$p2" "$tmp/atmo.json"
+
+py "bundles form whatever the axes' order (the same overrides, other wavelengths), never across overrides or over a context's own seed" '
+import sys
+sys.path.insert(0, sys.argv[1]); from job import *
+port = int(sys.argv[2]); sid = push(port, sys.argv[3])
+key = "surface.bsdf.reflectance.value"
+ctx = []
+for w in (400.0, 450.0, 500.0, 550.0):        # wavelength slowest, as --grid wavelength=... --grid KEY=...
+    for r in (0.2, 0.4):
+        ctx.append({"id": f"w{int(w)}r{int(r * 10)}", "wavelength": w, "params": {key: r}})
+ctx.append({"id": "own", "wavelength": 600.0, "params": {key: 0.2}, "seed": 5})
+st, j = call(port, "POST", f"/v1/scenes/{sid}/jobs", {"contexts": ctx, "defaults": {"spp": 4}, "bundle": 3})
+assert st in (200, 201, 202), (st, j)
+for _ in range(600):
+    st, j = call(port, "GET", "/v1/jobs/" + j["id"])
+    if j["state"] not in ("queued", "running"): break
+    time.sleep(0.05)
+assert j["state"] == "succeeded", j
+st, idx = call(port, "GET", "/v1/jobs/" + j["id"] + "/results")
+seed = {r["context"]: call(port, "GET", r["href"])[1]["meta"]["seed"] for r in idx["results"]}
+groups = {}
+for c, s in seed.items():
+    groups.setdefault(s, []).append(c)
+got = sorted(sorted(g) for g in groups.values())
+want = sorted([sorted(["w400r2", "w450r2", "w500r2"]), ["w550r2"], sorted(["w400r4", "w450r4", "w500r4"]), ["w550r4"], ["own"]])
+assert got == want, got
+assert seed["own"] == 5, seed["own"]
+' "$tmp" "$p2" "$root/proto/examples/hdistant_lambertian.json"
+
+py "bad bundles are refused, naming /bundle and what blocks it" '
+import sys
+sys.path.insert(0, sys.argv[1]); from job import *
+port = int(sys.argv[2])
+def refuse(path, bundle, words):
+    sid = push(port, path)
+    st, p = call(port, "POST", f"/v1/scenes/{sid}/jobs", {"contexts": [{"id": "a"}], "bundle": bundle})
+    assert st == 422, (st, p)
+    assert p.get("pointer") == "/bundle" or "/bundle" in json.dumps(p), p
+    for w in words:
+        assert w in p["detail"], (w, p["detail"])
+refuse(sys.argv[3], 4, ["from 1", "to 3"])
+refuse(sys.argv[3], 0, ["from 1"])
+refuse(sys.argv[4], 3, ["medium_atmosphere", "molecular_atmosphere"])
+refuse(sys.argv[5], 2, ["mono"])
+' "$tmp" "$p2" "$tmp/atmo.json" "$root/proto/examples/atmosphere_molecular.json" "$root/proto/examples/cornell_box.json"
+finish
