@@ -1353,6 +1353,29 @@ void *svc_worker_main(void *arg) {
       svc_film films[RENDER_MAX_BUNDLE];
       memset(films, 0, sizeof films);
       rsw_status st = svc_render_locked(svc, j->res, &rs, films, &e);
+      if (st && st != RSW_ERR_CANCELLED && nb > 1) {
+        /* A bundle that failed: each render alone, so that a failure
+         * (its message naming a wavelength, say) is its own. */
+        bool locked = false;
+        for (int b = 0; b < nb && st != RSW_ERR_CANCELLED; b++) {
+          render_item *m = &j->items[mates[b]];
+          if (m->state != JOB_QUEUED) continue;
+          if (locked) pthread_mutex_unlock(&svc->lock);
+          locked = false;
+          svc_error e1 = {0};
+          render_spec r1 = rs;
+          r1.seed = m->seed, r1.wavelength = m->wavelength, r1.overrides = m->params, r1.bundle = 0;
+          svc_film f1;
+          memset(&f1, 0, sizeof f1);
+          st = svc_render_locked(svc, j->res, &r1, &f1, &e1);
+          if (st == RSW_ERR_CANCELLED) break;
+          item_done(svc, j, mates[b], st, &f1, &e1);
+          locked = true;
+        }
+        if (!locked) pthread_mutex_lock(&svc->lock);
+        if (st == RSW_ERR_CANCELLED) break;
+        continue;
+      }
       if (st == RSW_ERR_CANCELLED) {
         pthread_mutex_lock(&svc->lock);
         break;

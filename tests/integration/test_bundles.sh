@@ -10,6 +10,8 @@
 #     (Gaussian: 0.27%; the allowance covers the per-pixel stderr's own
 #     noise at 256 spp); fixed seeds;
 #   - a bundled film names its own wavelength and its bundle's seed;
+#   - each channel renders at its own wavelength: a Lambertian plate's BRF
+#     in a bundle is its reflectance table at each context's wavelength;
 #   - bitwise the same with 1 and 2 render threads;
 #   - formed whatever the order of a grid's axes (same overrides, other
 #     wavelengths, cut into threes in the job's order), never across
@@ -130,6 +132,30 @@ got = sorted(sorted(g) for g in groups.values())
 want = sorted([sorted(["w400r2", "w450r2", "w500r2"]), ["w550r2"], sorted(["w400r4", "w450r4", "w500r4"]), ["w550r4"], ["own"]])
 assert got == want, got
 assert seed["own"] == 5, seed["own"]
+' "$tmp" "$p2" "$root/proto/examples/hdistant_lambertian.json"
+
+py "each channel of a bundle at its own wavelength: a Lambertian plate's BRF is its reflectance table there (closed form)" '
+import sys
+sys.path.insert(0, sys.argv[1]); from job import *
+port = int(sys.argv[2]); sid = push(port, sys.argv[3])
+body = {"contexts": [{"id": f"w{w}", "wavelength": w} for w in (420, 480, 530, 610)], "defaults": {"spp": 4},
+        "quantities": ["brf"], "bundle": 3}
+st, j = call(port, "POST", f"/v1/scenes/{sid}/jobs", body)
+for _ in range(600):
+    st, j = call(port, "GET", "/v1/jobs/" + j["id"])
+    if j["state"] not in ("queued", "running"): break
+    time.sleep(0.05)
+assert j["state"] == "succeeded", j
+st, idx = call(port, "GET", "/v1/jobs/" + j["id"] + "/results")
+def rho(w):  # the example'"'"'s table: (400, 0.05), (550, 0.1), (700, 0.45)
+    return 0.05 + (w - 400) / 150 * 0.05 if w <= 550 else 0.1 + (w - 550) / 150 * 0.35
+seeds = set()
+for r in idx["results"]:
+    f = call(port, "GET", r["href"])[1]
+    n = len(f["channels"]); w = f["meta"]["wavelength"]; seeds.add(f["meta"]["seed"])
+    brf = f["data"][n - 1::n]
+    assert all(abs(b - rho(w)) < 1e-6 for b in brf), (w, brf[:3], rho(w))
+assert len(seeds) == 2, seeds
 ' "$tmp" "$p2" "$root/proto/examples/hdistant_lambertian.json"
 
 py "bad bundles are refused, naming /bundle and what blocks it" '
