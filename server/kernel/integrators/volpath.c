@@ -71,6 +71,7 @@
 
 #include "../accel.h"
 #include "../hit.h"
+#include "../phase/phase.h"
 #include "../scene/periodic.h"
 #include "../scene/plugin_def.h"
 #include "../shapes/instance.h"
@@ -565,6 +566,7 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
     /* ---- a scattering event in the medium ---- */
     if (!(it->max_depth < 0 || l->depth + 1 < it->max_depth)) return false;
     const phase *ph = m->phase;
+    phase_bind(ph, &mi); /* (NEE and phase sampling look up the point's phase once) */
     surface_interaction ref = {.p = mi.p, .t = mi.t};
     if (m->sample_emitters && sc->n_emitters > 0) {
       double pe;
@@ -683,7 +685,17 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
   int live = 0;
   for (int i = 0; i < n; i++) {
     vlane *l = &ln[i];
-    *l = (vlane){.T = col1(1.0), .L = col1(0.0), .eta = 1.0, .prev_pdf = 1.0, .prev_delta = true};
+    /* Every field but the two surface records (prev, si: 384 bytes that
+     * are written before they are read) and the shadow ray's (start_shadow
+     * sets them). */
+    l->m = NULL;
+    l->T = col1(1.0);
+    l->L = col1(0.0);
+    l->eta = 1.0;
+    l->prev_pdf = 1.0;
+    l->prev_delta = true;
+    l->depth = l->crossings = 0;
+    l->hit = l->sh = false;
     ray3 r = rays[i];
     double len = v3_len(r.d);
     if (!(len > 0) || vp->base.max_depth == 0) continue;

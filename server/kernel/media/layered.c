@@ -38,6 +38,10 @@ void media_layers_finish(media_layers *L) {
       if (s > mx.c[c]) mx.c[c] = s;
     }
   L->maj = mx;
+  media_box_init(&L->box, L->to_world);
+  const double(*inv)[4] = L->to_world->inv;
+  for (int j = 0; j < 4; j++) L->zrow[j] = inv[2][j];
+  L->affine = inv[3][0] == 0.0 && inv[3][1] == 0.0 && inv[3][2] == 0.0 && inv[3][3] == 1.0;
 }
 
 /* C(z), z in layer k. */
@@ -69,8 +73,7 @@ static void fill_layer(const media_layers *L, int k, medium_interaction *mi) {
 }
 
 static void layers_coefficients(const media_layers *L, medium_interaction *mi) {
-  vec3 pl = xf_inv_point(L->to_world, mi->p);
-  fill_layer(L, media_layer_of(L, pl.z), mi);
+  fill_layer(L, media_layer_of(L, media_layers_z(L, mi->p)), mi);
 }
 
 static inline void spread(color *x, int nc) {
@@ -80,14 +83,13 @@ static inline void spread(color *x, int nc) {
 static void layers_sample_real(const media_layers *L, const medium *m, const ray3 *r, double mint,
                                double maxt, double u, int channel, medium_interaction *mi, color *tr,
                                color *pdf) {
-  const xform *tw = L->to_world;
   int nc = L->nc;
   double t0 = mint, t1 = maxt; /* within intersect_aabb's interval (the caller clips) */
   mi->medium = m;
   mi->wi = v3_neg(r->d);
   mi->t = INFINITY;
   mi->mint = t0;
-  double oz = xf_inv_point(tw, r->o).z, dz = xf_inv_vector(tw, r->d).z;
+  double oz = media_layers_z(L, r->o), dz = media_layers_dz(L, r->d);
   double z0 = oz + t0 * dz, z1 = oz + t1 * dz;
   int c = nc == 1 ? 0 : channel;
   double target = -log1p(-u);
@@ -151,8 +153,7 @@ static void layers_sample_real(const media_layers *L, const medium *m, const ray
 }
 
 static color layers_transmittance(const media_layers *L, const ray3 *r, double mint, double maxt) {
-  const xform *tw = L->to_world;
-  double oz = xf_inv_point(tw, r->o).z, dz = xf_inv_vector(tw, r->d).z;
+  double oz = media_layers_z(L, r->o), dz = media_layers_dz(L, r->d);
   double z0 = oz + mint * dz, z1 = oz + maxt * dz;
   color tr;
   int nc = L->nc;
@@ -168,7 +169,7 @@ static inline const media_layers *layers_of(const medium *m) {
 }
 
 static bool lm_intersect_aabb(const medium *m, const ray3 *r, double *mint, double *maxt) {
-  return media_box_clip(layers_of(m)->to_world, r, mint, maxt);
+  return media_box_clip_at(&layers_of(m)->box, r, mint, maxt);
 }
 
 static color lm_majorant(const medium *m, const medium_interaction *mi) {
