@@ -107,22 +107,47 @@ static size_t pick_emitter(const scene *sc, double u, double *prob) {
  * left it (through an atmosphere's top, say) can hit nothing more, so
  * it needs no query. Not under a periodic boundary (copies beyond the
  * column). */
-static bool may_hit(const scene *sc, const ray3 *r) {
-  if (sc->periodic.on) return true;
+typedef struct hit_bounds {
+  int fixed;           /* -1: decide per ray; 0 or 1: every ray's answer */
+  double lo[3], hi[3]; /* the bounds */
+  double pl[3], ph[3]; /* the same, padded */
+} hit_bounds;
+
+/* What may_hit needs of the scene, worked out once per wave. */
+static void hit_bounds_init(const scene *sc, hit_bounds *b) {
+  b->fixed = -1;
+  if (sc->periodic.on) {
+    b->fixed = 1;
+    return;
+  }
   /* With null boxes crossed analytically, the queries leave them out:
    * the bounds of the rest decide. */
   vec3 bl = sc->null_boxes.on ? sc->null_boxes.rest_min : sc->bbox_min;
   vec3 bh = sc->null_boxes.on ? sc->null_boxes.rest_max : sc->bbox_max;
-  if (!(bl.x <= bh.x)) return !sc->null_boxes.on; /* nothing else to hit */
+  if (!(bl.x <= bh.x)) {
+    b->fixed = !sc->null_boxes.on; /* nothing else to hit */
+    return;
+  }
   const double lo[3] = {bl.x, bl.y, bl.z};
   const double hi[3] = {bh.x, bh.y, bh.z};
+  for (int a = 0; a < 3; a++) {
+    double pad = 1e-9 * (fabs(lo[a]) + fabs(hi[a]) + 1.0);
+    b->lo[a] = lo[a], b->hi[a] = hi[a];
+    b->pl[a] = lo[a] - pad, b->ph[a] = hi[a] + pad;
+  }
+}
+
+/* Can ray r meet the scene's bounding box on [tmin, tmax]? A ray that has
+ * left it (through an atmosphere's top, say) can hit nothing more, so
+ * it needs no query. Not under a periodic boundary (copies beyond the
+ * column). b: hit_bounds_init's. */
+static bool may_hit_in(const hit_bounds *b, const ray3 *r) {
+  if (b->fixed >= 0) return b->fixed;
+  const double *lo = b->lo, *hi = b->hi, *pl = b->pl, *ph = b->ph;
   const double o[3] = {r->o.x, r->o.y, r->o.z}, d[3] = {r->d.x, r->d.y, r->d.z};
   if (o[0] >= lo[0] && o[0] <= hi[0] && o[1] >= lo[1] && o[1] <= hi[1] && o[2] >= lo[2] && o[2] <= hi[2])
     return true; /* most rays start inside */
-  double pl[3], ph[3];
   for (int a = 0; a < 3; a++) {
-    double pad = 1e-9 * (fabs(lo[a]) + fabs(hi[a]) + 1.0);
-    pl[a] = lo[a] - pad, ph[a] = hi[a] + pad;
     /* Outside a slab and moving away from it (a ray leaving the ground
      * upwards, say): no division needed. */
     if ((o[a] < pl[a] && !(d[a] > 0)) || (o[a] > ph[a] && !(d[a] < 0))) return false;
@@ -143,6 +168,12 @@ static bool may_hit(const scene *sc, const ray3 *r) {
     if (t0 > t1) return false;
   }
   return true;
+}
+
+static bool may_hit(const scene *sc, const ray3 *r) {
+  hit_bounds b;
+  hit_bounds_init(sc, &b);
+  return may_hit_in(&b, r);
 }
 
 static bool intersect(const scene *sc, const ray3 *r, surface_interaction *si, render_stats *stats) {
@@ -353,8 +384,8 @@ typedef struct vlane {
 
 /* Trace lanes idx[0..n) (rays in ln[i].ray for shadow == false, ln[i].sray
  * else): hits into ln[i].hit / ln[i].si (rays) or h / hit flags. */
-static void wave_trace(const scene *sc, vlane *ln, const int *idx, int n, bool shadow, bool coherent,
-                       bool *hit, surface_interaction *si, render_stats *stats) {
+static void wave_trace(const scene *sc, const hit_bounds *hb, vlane *ln, const int *idx, int n, bool shadow,
+                       bool coherent, bool *hit, surface_interaction *si, render_stats *stats) {
   enum {
     P = 16
   };
@@ -364,7 +395,7 @@ static void wave_trace(const scene *sc, vlane *ln, const int *idx, int n, bool s
       vlane *l = &ln[idx[k]];
       const ray3 *r = shadow ? &l->sray : &l->ray;
       hit[k] = false;
-      if (!may_hit(sc, r)) continue;
+      if (!may_hit_in(hb, r)) continue;
       if (sc->periodic.on) { /* scene_trace walks the walls per ray */
         uint64_t before = stats->rays;
         hit[k] = intersect(sc, r, &si[k], stats); /* counts itself in stats->rays */
@@ -708,8 +739,10 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
     idx[live++] = i;
   }
   bool camera = true;
+  hit_bounds hb;
+  hit_bounds_init(sc, &hb);
   while (live > 0) {
-    wave_trace(sc, ln, idx, live, false, camera, hit, si, stats);
+    wave_trace(sc, &hb, ln, idx, live, false, camera, hit, si, stats);
     camera = false;
     int next = 0, n_sh = 0;
     for (int k = 0; k < live; k++) {
@@ -722,7 +755,7 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
     }
     live = next;
     while (n_sh > 0) {
-      wave_trace(sc, ln, sh, n_sh, true, false, hit, si, stats);
+      wave_trace(sc, &hb, ln, sh, n_sh, true, false, hit, si, stats);
       int more = 0;
       for (int k = 0; k < n_sh; k++) {
         int i = sh[k];

@@ -47,6 +47,14 @@ typedef struct media_layers {
   media_box box;
   double zrow[4];
   bool affine;
+  /* An index over C for the free flights' search, per channel c < nc:
+   * bk[c (n + 1) + j] (j = 0..n) is the smallest i in [1, n] with C_i >
+   * j C_n / n (n if none), so that C* in [j, j + 1) C_n / n has its layer
+   * between two entries; bk_scale[c] = n / C_n (-1: no index). The search
+   * checks the bracket against C before it trusts it, so it finds the
+   * layer the full binary search finds, bit for bit. */
+  uint32_t *bk;
+  double bk_scale[3];
 } media_layers;
 
 /* Allocate n layers (lay, alb) with z_k = k / n; false: out of memory
