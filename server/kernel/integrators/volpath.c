@@ -157,13 +157,9 @@ static bool may_hit_in(const hit_bounds *b, const ray3 *r) {
     double l = pl[a], h = ph[a];
     if (d[a] == 0.0) continue; /* inside that slab (above) */
     double inv = 1.0 / d[a];   /* (the padding covers the rounding) */
-    double ta = (l - o[a]) * inv, tb = (h - o[a]) * inv;
-    if (ta > tb) {
-      double x = ta;
-      ta = tb;
-      tb = x;
-    }
-    t0 = ta > t0 ? ta : t0; /* (no fmin/fmax calls: a NaN never gets here) */
+    double tl = (l - o[a]) * inv, th = (h - o[a]) * inv;
+    double ta = tl > th ? th : tl, tb = tl > th ? tl : th; /* (selects: no branch on the direction) */
+    t0 = ta > t0 ? ta : t0;                                /* (no fmin/fmax calls: a NaN never gets here) */
     t1 = tb < t1 ? tb : t1;
     if (t0 > t1) return false;
   }
@@ -238,12 +234,8 @@ static void box_walk_start(const scene *sc, vec3 o, vec3 d, box_walk *w) {
         continue;
       }
       double inv = 1.0 / dd[a];
-      double t0 = (lo[a] - oo[a]) * inv, t1 = (hi[a] - oo[a]) * inv;
-      if (t0 > t1) {
-        double x = t0;
-        t0 = t1;
-        t1 = x;
-      }
+      double ta = (lo[a] - oo[a]) * inv, tb = (hi[a] - oo[a]) * inv;
+      double t0 = ta > tb ? tb : ta, t1 = ta > tb ? ta : tb; /* (selects: no branch on the direction) */
       tn = t0 > tn ? t0 : tn;
       tf = t1 < tf ? t1 : tf;
     }
@@ -435,21 +427,33 @@ static void wave_trace(const scene *sc, const hit_bounds *hb, vlane *ln, const i
  * coordinates, 2e-4 at 3 km, which a dense medium far from the origin
  * turns into a transmittance error (docs/media.md#dense-media-the-roulette-and-the-segment-lengths). A
  * grazing hit keeps Embree's point. */
-static double seg_end(const scene *sc, const ray3 *r, vec3 o0, surface_interaction *si, bool media) {
+typedef struct face_plane {
+  const shape *sh; /* NULL: empty */
+  uint32_t prim;
+  bool ok; /* a non-degenerate face: a (its first vertex), n (unit normal) */
+  vec3 a, n;
+} face_plane;
+
+static double seg_end(const scene *sc, const ray3 *r, vec3 o0, surface_interaction *si, bool media,
+                      face_plane *fp) {
   if (sc->periodic.on) return si->t + v3_dot(v3_sub(r->o, o0), r->d);
   double t = v3_dot(v3_sub(si->p, o0), r->d);
   const shape *sh = si->shape;
   if (!media || !shape_is_mesh(sh) || sh->index >= sc->n_shapes || sc->shapes[sh->index] != sh ||
       si->prim >= sh->mesh.n_faces)
-    return t; /* (an instance's member: its placement is not at hand) */
-  const uint32_t *ix = &sh->mesh.faces[3 * (size_t)si->prim];
-  vec3 a = xf_point(&sh->to_world, mesh_vertex(&sh->mesh, ix[0]));
-  vec3 b = xf_point(&sh->to_world, mesh_vertex(&sh->mesh, ix[1]));
-  vec3 c = xf_point(&sh->to_world, mesh_vertex(&sh->mesh, ix[2]));
-  vec3 n = v3_cross(v3_sub(b, a), v3_sub(c, a));
-  double len = v3_len(n);
-  if (!(len > 0)) return t;
-  n = v3_scale(n, 1.0 / len);
+    return t;                                 /* (an instance's member: its placement is not at hand) */
+  if (fp->sh != sh || fp->prim != si->prim) { /* (the last face's plane is kept: a ground has few faces) */
+    const uint32_t *ix = &sh->mesh.faces[3 * (size_t)si->prim];
+    vec3 a = xf_point(&sh->to_world, mesh_vertex(&sh->mesh, ix[0]));
+    vec3 b = xf_point(&sh->to_world, mesh_vertex(&sh->mesh, ix[1]));
+    vec3 c = xf_point(&sh->to_world, mesh_vertex(&sh->mesh, ix[2]));
+    vec3 n = v3_cross(v3_sub(b, a), v3_sub(c, a));
+    double len = v3_len(n);
+    *fp = (face_plane){.sh = sh, .prim = si->prim, .ok = len > 0, .a = a};
+    if (fp->ok) fp->n = v3_scale(n, 1.0 / len);
+  }
+  if (!fp->ok) return t;
+  vec3 a = fp->a, n = fp->n;
   double cos_n = v3_dot(r->d, n);
   if (!(fabs(cos_n) > 1e-3)) return t;
   double te = v3_dot(v3_sub(a, o0), n) / cos_n;
@@ -488,11 +492,11 @@ static void start_shadow(const scene *sc, vlane *l, const surface_interaction *s
  * segment's transmittance, then done (false) or a null surface crossed
  * (true: trace again). */
 static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l, bool hit,
-                        surface_interaction *si, sampler_state *st) {
+                        surface_interaction *si, sampler_state *st, face_plane *fp) {
   if (hit && !(l->sm || sc->null_boxes.on) && media_at(NULL, si))
-    seg_end(sc, &l->sray, l->sp0, si, true); /* the next segment's start (si->p) */
+    seg_end(sc, &l->sray, l->sp0, si, true, fp); /* the next segment's start (si->p) */
   if (l->sm || sc->null_boxes.on) {
-    double tend = hit          ? seg_end(sc, &l->sray, l->sp0, si, media_at(l->sm, si))
+    double tend = hit          ? seg_end(sc, &l->sray, l->sp0, si, media_at(l->sm, si), fp)
                   : l->sfinite ? v3_dot(v3_sub(l->send, l->sp0), l->sray.d)
                                : INFINITY;
     ray3 mr = {l->sp0, l->sray.d, 0.0, tend};
@@ -534,7 +538,8 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
 /* Lane l's event after its query: the medium along the segment, then the
  * scattering event or the surface. Sets up the shadow ray (l->sh) and the
  * next ray. False: the path ends (a pending shadow ray still counts). */
-static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *l) {
+static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *l,
+                       face_plane *fp) {
   const integrator *it = &vp->base;
   const sampler_ops *sops = st->s->ops;
   surface_interaction *si = &l->si;
@@ -545,7 +550,7 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
   /* ---- the medium along the segment ---- */
   medium_interaction mi;
   bool scattered = false;
-  double tend = hit ? seg_end(sc, &l->ray, l->seg_o, si, media_at(m, si)) : l->ray.tmax, t0 = 0.0;
+  double tend = hit ? seg_end(sc, &l->ray, l->seg_o, si, media_at(m, si), fp) : l->ray.tmax, t0 = 0.0;
   box_walk bw;
   if (sc->null_boxes.on) box_walk_start(sc, l->seg_o, l->ray.d, &bw);
   for (;;) { /* the segment piece by piece between null boxes' sides */
@@ -741,6 +746,7 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
   bool camera = true;
   hit_bounds hb;
   hit_bounds_init(sc, &hb);
+  face_plane fp = {.sh = NULL};
   while (live > 0) {
     wave_trace(sc, &hb, ln, idx, live, false, camera, hit, si, stats);
     camera = false;
@@ -749,7 +755,7 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
       int i = idx[k];
       ln[i].hit = hit[k];
       if (hit[k]) ln[i].si = si[k];
-      bool alive = lane_event(vp, sc, &st[i], &ln[i]);
+      bool alive = lane_event(vp, sc, &st[i], &ln[i], &fp);
       if (ln[i].sh) sh[n_sh++] = i;
       if (alive) idx[next++] = i;
     }
@@ -759,7 +765,7 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
       int more = 0;
       for (int k = 0; k < n_sh; k++) {
         int i = sh[k];
-        if (shadow_step(vp, sc, &ln[i], hit[k], &si[k], &st[i])) sh[more++] = i;
+        if (shadow_step(vp, sc, &ln[i], hit[k], &si[k], &st[i], &fp)) sh[more++] = i;
       }
       n_sh = more;
     }

@@ -55,14 +55,11 @@ bool media_box_clip_at(const media_box *b, const ray3 *r, double *mint, double *
         continue;
       }
       double inv = 1.0 / d3[a];
-      double t0 = (b0 - o3[a]) * inv, t1 = (b1 - o3[a]) * inv;
-      if (t0 > t1) {
-        double x = t0;
-        t0 = t1;
-        t1 = x;
-      }
-      if (t0 > lo) lo = t0;
-      if (t1 < hi) hi = t1;
+      double ta = (b0 - o3[a]) * inv, tb = (b1 - o3[a]) * inv;
+      /* (selects, not branches: the ray's direction decides them) */
+      double t0 = ta > tb ? tb : ta, t1 = ta > tb ? ta : tb;
+      lo = t0 > lo ? t0 : lo;
+      hi = t1 < hi ? t1 : hi;
     }
   } else {
     vec3 o = xf_inv_point(b->to_world, r->o), d = xf_inv_vector(b->to_world, r->d);
