@@ -475,6 +475,11 @@ typedef struct medium_interaction {
   const struct medium *medium;
   color sigma_t, sigma_s, sigma_n; /* at p (after the medium's scale); sigma_n = majorant - sigma_t */
   color majorant;                  /* Mitsuba's combined_extinction used for the free flight */
+  /* What the phase function `bound` looked up at p once (phase_bind,
+   * phase/phase.h: blendphase's weight), so that its eval_pdf and sample
+   * at this point need not look it up again; NULL: nothing bound. */
+  const struct phase *bound;
+  double bound_w;
 } medium_interaction;
 
 /* Phase functions use Mitsuba's convention: wi (mi->wi) points back
@@ -490,6 +495,9 @@ typedef struct phase_ops {
   /* The value p(wi, wo) [sr^-1] and, in *pdf, the density sample() picks
    * wo with. */
   double (*eval_pdf)(const phase *ph, const medium_interaction *mi, vec3 wo, double *pdf);
+  /* Optional: look up what depends on mi->p alone, once, into
+   * mi->bound_w, and set mi->bound = ph (phase_bind calls it). */
+  void (*bind)(const phase *ph, medium_interaction *mi);
 } phase_ops;
 struct phase {
   object base;

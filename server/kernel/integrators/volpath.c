@@ -71,6 +71,7 @@
 
 #include "../accel.h"
 #include "../hit.h"
+#include "../phase/phase.h"
 #include "../scene/periodic.h"
 #include "../scene/plugin_def.h"
 #include "../shapes/instance.h"
@@ -106,22 +107,47 @@ static size_t pick_emitter(const scene *sc, double u, double *prob) {
  * left it (through an atmosphere's top, say) can hit nothing more, so
  * it needs no query. Not under a periodic boundary (copies beyond the
  * column). */
-static bool may_hit(const scene *sc, const ray3 *r) {
-  if (sc->periodic.on) return true;
+typedef struct hit_bounds {
+  int fixed;           /* -1: decide per ray; 0 or 1: every ray's answer */
+  double lo[3], hi[3]; /* the bounds */
+  double pl[3], ph[3]; /* the same, padded */
+} hit_bounds;
+
+/* What may_hit needs of the scene, worked out once per wave. */
+static void hit_bounds_init(const scene *sc, hit_bounds *b) {
+  b->fixed = -1;
+  if (sc->periodic.on) {
+    b->fixed = 1;
+    return;
+  }
   /* With null boxes crossed analytically, the queries leave them out:
    * the bounds of the rest decide. */
   vec3 bl = sc->null_boxes.on ? sc->null_boxes.rest_min : sc->bbox_min;
   vec3 bh = sc->null_boxes.on ? sc->null_boxes.rest_max : sc->bbox_max;
-  if (!(bl.x <= bh.x)) return !sc->null_boxes.on; /* nothing else to hit */
+  if (!(bl.x <= bh.x)) {
+    b->fixed = !sc->null_boxes.on; /* nothing else to hit */
+    return;
+  }
   const double lo[3] = {bl.x, bl.y, bl.z};
   const double hi[3] = {bh.x, bh.y, bh.z};
+  for (int a = 0; a < 3; a++) {
+    double pad = 1e-9 * (fabs(lo[a]) + fabs(hi[a]) + 1.0);
+    b->lo[a] = lo[a], b->hi[a] = hi[a];
+    b->pl[a] = lo[a] - pad, b->ph[a] = hi[a] + pad;
+  }
+}
+
+/* Can ray r meet the scene's bounding box on [tmin, tmax]? A ray that has
+ * left it (through an atmosphere's top, say) can hit nothing more, so
+ * it needs no query. Not under a periodic boundary (copies beyond the
+ * column). b: hit_bounds_init's. */
+static bool may_hit_in(const hit_bounds *b, const ray3 *r) {
+  if (b->fixed >= 0) return b->fixed;
+  const double *lo = b->lo, *hi = b->hi, *pl = b->pl, *ph = b->ph;
   const double o[3] = {r->o.x, r->o.y, r->o.z}, d[3] = {r->d.x, r->d.y, r->d.z};
   if (o[0] >= lo[0] && o[0] <= hi[0] && o[1] >= lo[1] && o[1] <= hi[1] && o[2] >= lo[2] && o[2] <= hi[2])
     return true; /* most rays start inside */
-  double pl[3], ph[3];
   for (int a = 0; a < 3; a++) {
-    double pad = 1e-9 * (fabs(lo[a]) + fabs(hi[a]) + 1.0);
-    pl[a] = lo[a] - pad, ph[a] = hi[a] + pad;
     /* Outside a slab and moving away from it (a ray leaving the ground
      * upwards, say): no division needed. */
     if ((o[a] < pl[a] && !(d[a] > 0)) || (o[a] > ph[a] && !(d[a] < 0))) return false;
@@ -131,17 +157,19 @@ static bool may_hit(const scene *sc, const ray3 *r) {
     double l = pl[a], h = ph[a];
     if (d[a] == 0.0) continue; /* inside that slab (above) */
     double inv = 1.0 / d[a];   /* (the padding covers the rounding) */
-    double ta = (l - o[a]) * inv, tb = (h - o[a]) * inv;
-    if (ta > tb) {
-      double x = ta;
-      ta = tb;
-      tb = x;
-    }
-    t0 = ta > t0 ? ta : t0; /* (no fmin/fmax calls: a NaN never gets here) */
+    double tl = (l - o[a]) * inv, th = (h - o[a]) * inv;
+    double ta = tl > th ? th : tl, tb = tl > th ? tl : th; /* (selects: no branch on the direction) */
+    t0 = ta > t0 ? ta : t0;                                /* (no fmin/fmax calls: a NaN never gets here) */
     t1 = tb < t1 ? tb : t1;
     if (t0 > t1) return false;
   }
   return true;
+}
+
+static bool may_hit(const scene *sc, const ray3 *r) {
+  hit_bounds b;
+  hit_bounds_init(sc, &b);
+  return may_hit_in(&b, r);
 }
 
 static bool intersect(const scene *sc, const ray3 *r, surface_interaction *si, render_stats *stats) {
@@ -206,12 +234,8 @@ static void box_walk_start(const scene *sc, vec3 o, vec3 d, box_walk *w) {
         continue;
       }
       double inv = 1.0 / dd[a];
-      double t0 = (lo[a] - oo[a]) * inv, t1 = (hi[a] - oo[a]) * inv;
-      if (t0 > t1) {
-        double x = t0;
-        t0 = t1;
-        t1 = x;
-      }
+      double ta = (lo[a] - oo[a]) * inv, tb = (hi[a] - oo[a]) * inv;
+      double t0 = ta > tb ? tb : ta, t1 = ta > tb ? ta : tb; /* (selects: no branch on the direction) */
       tn = t0 > tn ? t0 : tn;
       tf = t1 < tf ? t1 : tf;
     }
@@ -352,8 +376,8 @@ typedef struct vlane {
 
 /* Trace lanes idx[0..n) (rays in ln[i].ray for shadow == false, ln[i].sray
  * else): hits into ln[i].hit / ln[i].si (rays) or h / hit flags. */
-static void wave_trace(const scene *sc, vlane *ln, const int *idx, int n, bool shadow, bool coherent,
-                       bool *hit, surface_interaction *si, render_stats *stats) {
+static void wave_trace(const scene *sc, const hit_bounds *hb, vlane *ln, const int *idx, int n, bool shadow,
+                       bool coherent, bool *hit, surface_interaction *si, render_stats *stats) {
   enum {
     P = 16
   };
@@ -363,7 +387,7 @@ static void wave_trace(const scene *sc, vlane *ln, const int *idx, int n, bool s
       vlane *l = &ln[idx[k]];
       const ray3 *r = shadow ? &l->sray : &l->ray;
       hit[k] = false;
-      if (!may_hit(sc, r)) continue;
+      if (!may_hit_in(hb, r)) continue;
       if (sc->periodic.on) { /* scene_trace walks the walls per ray */
         uint64_t before = stats->rays;
         hit[k] = intersect(sc, r, &si[k], stats); /* counts itself in stats->rays */
@@ -403,21 +427,33 @@ static void wave_trace(const scene *sc, vlane *ln, const int *idx, int n, bool s
  * coordinates, 2e-4 at 3 km, which a dense medium far from the origin
  * turns into a transmittance error (docs/media.md#dense-media-the-roulette-and-the-segment-lengths). A
  * grazing hit keeps Embree's point. */
-static double seg_end(const scene *sc, const ray3 *r, vec3 o0, surface_interaction *si, bool media) {
+typedef struct face_plane {
+  const shape *sh; /* NULL: empty */
+  uint32_t prim;
+  bool ok; /* a non-degenerate face: a (its first vertex), n (unit normal) */
+  vec3 a, n;
+} face_plane;
+
+static double seg_end(const scene *sc, const ray3 *r, vec3 o0, surface_interaction *si, bool media,
+                      face_plane *fp) {
   if (sc->periodic.on) return si->t + v3_dot(v3_sub(r->o, o0), r->d);
   double t = v3_dot(v3_sub(si->p, o0), r->d);
   const shape *sh = si->shape;
   if (!media || !shape_is_mesh(sh) || sh->index >= sc->n_shapes || sc->shapes[sh->index] != sh ||
       si->prim >= sh->mesh.n_faces)
-    return t; /* (an instance's member: its placement is not at hand) */
-  const uint32_t *ix = &sh->mesh.faces[3 * (size_t)si->prim];
-  vec3 a = xf_point(&sh->to_world, mesh_vertex(&sh->mesh, ix[0]));
-  vec3 b = xf_point(&sh->to_world, mesh_vertex(&sh->mesh, ix[1]));
-  vec3 c = xf_point(&sh->to_world, mesh_vertex(&sh->mesh, ix[2]));
-  vec3 n = v3_cross(v3_sub(b, a), v3_sub(c, a));
-  double len = v3_len(n);
-  if (!(len > 0)) return t;
-  n = v3_scale(n, 1.0 / len);
+    return t;                                 /* (an instance's member: its placement is not at hand) */
+  if (fp->sh != sh || fp->prim != si->prim) { /* (the last face's plane is kept: a ground has few faces) */
+    const uint32_t *ix = &sh->mesh.faces[3 * (size_t)si->prim];
+    vec3 a = xf_point(&sh->to_world, mesh_vertex(&sh->mesh, ix[0]));
+    vec3 b = xf_point(&sh->to_world, mesh_vertex(&sh->mesh, ix[1]));
+    vec3 c = xf_point(&sh->to_world, mesh_vertex(&sh->mesh, ix[2]));
+    vec3 n = v3_cross(v3_sub(b, a), v3_sub(c, a));
+    double len = v3_len(n);
+    *fp = (face_plane){.sh = sh, .prim = si->prim, .ok = len > 0, .a = a};
+    if (fp->ok) fp->n = v3_scale(n, 1.0 / len);
+  }
+  if (!fp->ok) return t;
+  vec3 a = fp->a, n = fp->n;
   double cos_n = v3_dot(r->d, n);
   if (!(fabs(cos_n) > 1e-3)) return t;
   double te = v3_dot(v3_sub(a, o0), n) / cos_n;
@@ -456,11 +492,11 @@ static void start_shadow(const scene *sc, vlane *l, const surface_interaction *s
  * segment's transmittance, then done (false) or a null surface crossed
  * (true: trace again). */
 static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l, bool hit,
-                        surface_interaction *si, sampler_state *st) {
+                        surface_interaction *si, sampler_state *st, face_plane *fp) {
   if (hit && !(l->sm || sc->null_boxes.on) && media_at(NULL, si))
-    seg_end(sc, &l->sray, l->sp0, si, true); /* the next segment's start (si->p) */
+    seg_end(sc, &l->sray, l->sp0, si, true, fp); /* the next segment's start (si->p) */
   if (l->sm || sc->null_boxes.on) {
-    double tend = hit          ? seg_end(sc, &l->sray, l->sp0, si, media_at(l->sm, si))
+    double tend = hit          ? seg_end(sc, &l->sray, l->sp0, si, media_at(l->sm, si), fp)
                   : l->sfinite ? v3_dot(v3_sub(l->send, l->sp0), l->sray.d)
                                : INFINITY;
     ray3 mr = {l->sp0, l->sray.d, 0.0, tend};
@@ -502,7 +538,8 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
 /* Lane l's event after its query: the medium along the segment, then the
  * scattering event or the surface. Sets up the shadow ray (l->sh) and the
  * next ray. False: the path ends (a pending shadow ray still counts). */
-static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *l) {
+static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *l,
+                       face_plane *fp) {
   const integrator *it = &vp->base;
   const sampler_ops *sops = st->s->ops;
   surface_interaction *si = &l->si;
@@ -513,7 +550,7 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
   /* ---- the medium along the segment ---- */
   medium_interaction mi;
   bool scattered = false;
-  double tend = hit ? seg_end(sc, &l->ray, l->seg_o, si, media_at(m, si)) : l->ray.tmax, t0 = 0.0;
+  double tend = hit ? seg_end(sc, &l->ray, l->seg_o, si, media_at(m, si), fp) : l->ray.tmax, t0 = 0.0;
   box_walk bw;
   if (sc->null_boxes.on) box_walk_start(sc, l->seg_o, l->ray.d, &bw);
   for (;;) { /* the segment piece by piece between null boxes' sides */
@@ -565,6 +602,7 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
     /* ---- a scattering event in the medium ---- */
     if (!(it->max_depth < 0 || l->depth + 1 < it->max_depth)) return false;
     const phase *ph = m->phase;
+    phase_bind(ph, &mi); /* (NEE and phase sampling look up the point's phase once) */
     surface_interaction ref = {.p = mi.p, .t = mi.t};
     if (m->sample_emitters && sc->n_emitters > 0) {
       double pe;
@@ -683,7 +721,17 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
   int live = 0;
   for (int i = 0; i < n; i++) {
     vlane *l = &ln[i];
-    *l = (vlane){.T = col1(1.0), .L = col1(0.0), .eta = 1.0, .prev_pdf = 1.0, .prev_delta = true};
+    /* Every field but the two surface records (prev, si: 384 bytes that
+     * are written before they are read) and the shadow ray's (start_shadow
+     * sets them). */
+    l->m = NULL;
+    l->T = col1(1.0);
+    l->L = col1(0.0);
+    l->eta = 1.0;
+    l->prev_pdf = 1.0;
+    l->prev_delta = true;
+    l->depth = l->crossings = 0;
+    l->hit = l->sh = false;
     ray3 r = rays[i];
     double len = v3_len(r.d);
     if (!(len > 0) || vp->base.max_depth == 0) continue;
@@ -696,25 +744,28 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
     idx[live++] = i;
   }
   bool camera = true;
+  hit_bounds hb;
+  hit_bounds_init(sc, &hb);
+  face_plane fp = {.sh = NULL};
   while (live > 0) {
-    wave_trace(sc, ln, idx, live, false, camera, hit, si, stats);
+    wave_trace(sc, &hb, ln, idx, live, false, camera, hit, si, stats);
     camera = false;
     int next = 0, n_sh = 0;
     for (int k = 0; k < live; k++) {
       int i = idx[k];
       ln[i].hit = hit[k];
       if (hit[k]) ln[i].si = si[k];
-      bool alive = lane_event(vp, sc, &st[i], &ln[i]);
+      bool alive = lane_event(vp, sc, &st[i], &ln[i], &fp);
       if (ln[i].sh) sh[n_sh++] = i;
       if (alive) idx[next++] = i;
     }
     live = next;
     while (n_sh > 0) {
-      wave_trace(sc, ln, sh, n_sh, true, false, hit, si, stats);
+      wave_trace(sc, &hb, ln, sh, n_sh, true, false, hit, si, stats);
       int more = 0;
       for (int k = 0; k < n_sh; k++) {
         int i = sh[k];
-        if (shadow_step(vp, sc, &ln[i], hit[k], &si[k], &st[i])) sh[more++] = i;
+        if (shadow_step(vp, sc, &ln[i], hit[k], &si[k], &st[i], &fp)) sh[more++] = i;
       }
       n_sh = more;
     }

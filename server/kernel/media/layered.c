@@ -13,7 +13,8 @@ bool media_layers_alloc(media_layers *L, uint32_t n) {
   L->nc = 1;
   L->lay = aligned_alloc(64, ((size_t)n + 1) * sizeof *L->lay);
   L->alb = malloc(3 * (size_t)n * sizeof *L->alb);
-  if (!L->lay || !L->alb) return false;
+  L->bk = malloc(3 * ((size_t)n + 1) * sizeof *L->bk);
+  if (!L->lay || !L->alb || !L->bk) return false;
   memset(L->lay, 0, ((size_t)n + 1) * sizeof *L->lay);
   for (uint32_t k = 0; k <= n; k++) L->lay[k].z = (double)k / n;
   return true;
@@ -22,8 +23,10 @@ bool media_layers_alloc(media_layers *L, uint32_t n) {
 void media_layers_free(media_layers *L) {
   free(L->lay);
   free(L->alb);
+  free(L->bk);
   L->lay = NULL;
   L->alb = NULL;
+  L->bk = NULL;
 }
 
 void media_layers_finish(media_layers *L) {
@@ -38,6 +41,21 @@ void media_layers_finish(media_layers *L) {
       if (s > mx.c[c]) mx.c[c] = s;
     }
   L->maj = mx;
+  for (int c = 0; c < 3; c++) {
+    double top = L->lay[n].cum[c], scale = n / top;
+    L->bk_scale[c] = c < L->nc && top > 0 && isfinite(scale) ? scale : -1.0;
+    if (!(L->bk_scale[c] > 0)) continue;
+    uint32_t *bk = L->bk + (size_t)c * (n + 1), i = 1;
+    for (uint32_t j = 0; j <= n; j++) {
+      double thr = j / scale;
+      while (i < n && !(L->lay[i].cum[c] > thr)) i++;
+      bk[j] = i;
+    }
+  }
+  media_box_init(&L->box, L->to_world);
+  const double(*inv)[4] = L->to_world->inv;
+  for (int j = 0; j < 4; j++) L->zrow[j] = inv[2][j];
+  L->affine = inv[3][0] == 0.0 && inv[3][1] == 0.0 && inv[3][2] == 0.0 && inv[3][3] == 1.0;
 }
 
 /* C(z), z in layer k. */
@@ -69,8 +87,7 @@ static void fill_layer(const media_layers *L, int k, medium_interaction *mi) {
 }
 
 static void layers_coefficients(const media_layers *L, medium_interaction *mi) {
-  vec3 pl = xf_inv_point(L->to_world, mi->p);
-  fill_layer(L, media_layer_of(L, pl.z), mi);
+  fill_layer(L, media_layer_of(L, media_layers_z(L, mi->p)), mi);
 }
 
 static inline void spread(color *x, int nc) {
@@ -80,14 +97,13 @@ static inline void spread(color *x, int nc) {
 static void layers_sample_real(const media_layers *L, const medium *m, const ray3 *r, double mint,
                                double maxt, double u, int channel, medium_interaction *mi, color *tr,
                                color *pdf) {
-  const xform *tw = L->to_world;
   int nc = L->nc;
   double t0 = mint, t1 = maxt; /* within intersect_aabb's interval (the caller clips) */
   mi->medium = m;
   mi->wi = v3_neg(r->d);
   mi->t = INFINITY;
   mi->mint = t0;
-  double oz = xf_inv_point(tw, r->o).z, dz = xf_inv_vector(tw, r->d).z;
+  double oz = media_layers_z(L, r->o), dz = media_layers_dz(L, r->d);
   double z0 = oz + t0 * dz, z1 = oz + t1 * dz;
   int c = nc == 1 ? 0 : channel;
   double target = -log1p(-u);
@@ -109,9 +125,17 @@ static void layers_sample_real(const media_layers *L, const medium *m, const ray
     /* C* on the side the ray moves to; search the layer that holds it. */
     double cs = cum_in(L, c, k0, z0) + target * dz; /* C moves by tau |d_z| in the ray's z direction */
     const pw_layer *lay = L->lay;
+    int n = (int)L->n, a = 1, b = n; /* C*'s bucket in the index: layers a - 1 .. b */
+    double f = cs * L->bk_scale[c];
+    if (f >= 0 && f < L->nd) {
+      const uint32_t *bk = L->bk + (size_t)c * (L->n + 1) + (int)f;
+      a = (int)bk[0], b = (int)bk[1];
+    }
     int lo, hi;
     if (dz > 0) { /* smallest j in [1, n] with C_j > C*: k = j - 1 */
-      lo = 1, hi = (int)L->n;
+      lo = 1, hi = n;
+      /* (j lies in [a, b] when C_{a-1} <= C* < C_b: then search there) */
+      if ((a <= 1 || !(lay[a - 1].cum[c] > cs)) && (b >= n || lay[b].cum[c] > cs)) lo = a, hi = b;
       while (lo < hi) {
         int mid = (lo + hi) / 2;
         if (lay[mid].cum[c] > cs)
@@ -121,7 +145,11 @@ static void layers_sample_real(const media_layers *L, const medium *m, const ray
       }
       k = lo - 1;
     } else { /* largest k in [0, n - 1] with C_k < C* */
-      lo = 0, hi = (int)L->n - 1;
+      lo = 0, hi = n - 1;
+      /* (k lies in [a', b'] when C_a' < C* (or a' = 0) and C_{b'+1} >= C*
+       * (or b' = n - 1)) */
+      int a1 = a > 2 ? a - 2 : 0, b1 = b < n - 1 ? b : n - 1;
+      if ((a1 == 0 || lay[a1].cum[c] < cs) && (b1 >= n - 1 || !(lay[b1 + 1].cum[c] < cs))) lo = a1, hi = b1;
       while (lo < hi) {
         int mid = (lo + hi + 1) / 2;
         if (lay[mid].cum[c] < cs)
@@ -151,8 +179,7 @@ static void layers_sample_real(const media_layers *L, const medium *m, const ray
 }
 
 static color layers_transmittance(const media_layers *L, const ray3 *r, double mint, double maxt) {
-  const xform *tw = L->to_world;
-  double oz = xf_inv_point(tw, r->o).z, dz = xf_inv_vector(tw, r->d).z;
+  double oz = media_layers_z(L, r->o), dz = media_layers_dz(L, r->d);
   double z0 = oz + mint * dz, z1 = oz + maxt * dz;
   color tr;
   int nc = L->nc;
@@ -168,7 +195,7 @@ static inline const media_layers *layers_of(const medium *m) {
 }
 
 static bool lm_intersect_aabb(const medium *m, const ray3 *r, double *mint, double *maxt) {
-  return media_box_clip(layers_of(m)->to_world, r, mint, maxt);
+  return media_box_clip_at(&layers_of(m)->box, r, mint, maxt);
 }
 
 static color lm_majorant(const medium *m, const medium_interaction *mi) {

@@ -23,6 +23,7 @@
 #include <math.h>
 
 #include "../kernel.h"
+#include "media.h"
 
 /* What a lookup in layer k reads, in one 64-byte line: C_k, the scaled
  * sigma_t per channel and z_k, the layer's bottom. n + 1 of them (the
@@ -40,15 +41,41 @@ typedef struct media_layers {
   double *alb;           /* 3 n: albedo per layer and channel */
   double nd;             /* n as a double */
   color maj;             /* the largest layer's sigma_t */
+  /* From to_world (media_layers_finish): the box for clipping, and the
+   * local z row of its inverse (affine: its last row is 0 0 0 1, so that
+   * media_layers_z is xf_inv_point's z, bit for bit). */
+  media_box box;
+  double zrow[4];
+  bool affine;
+  /* An index over C for the free flights' search, per channel c < nc:
+   * bk[c (n + 1) + j] (j = 0..n) is the smallest i in [1, n] with C_i >
+   * j C_n / n (n if none), so that C* in [j, j + 1) C_n / n has its layer
+   * between two entries; bk_scale[c] = n / C_n (-1: no index). The search
+   * checks the bracket against C before it trusts it, so it finds the
+   * layer the full binary search finds, bit for bit. */
+  uint32_t *bk;
+  double bk_scale[3];
 } media_layers;
 
 /* Allocate n layers (lay, alb) with z_k = k / n; false: out of memory
  * (what was allocated stays for media_layers_free). */
 bool media_layers_alloc(media_layers *L, uint32_t n);
 void media_layers_free(media_layers *L);
-/* After the layers' sig (per channel, k < n) and alb changed: C_k and the
- * majorant. */
+/* After the layers' sig (per channel, k < n) and alb, or to_world, changed:
+ * C_k, the majorant and what media_layers keeps of to_world. */
 void media_layers_finish(media_layers *L);
+
+/* The local z of world point p (xf_inv_point(to_world, p).z), and of
+ * world direction d (xf_inv_vector(...).z). */
+static inline double media_layers_z(const media_layers *L, vec3 p) {
+  if (!L->affine) return xf_inv_point(L->to_world, p).z;
+  const double *m = L->zrow;
+  return m[0] * p.x + m[1] * p.y + m[2] * p.z + m[3];
+}
+static inline double media_layers_dz(const media_layers *L, vec3 d) {
+  const double *m = L->zrow;
+  return m[0] * d.x + m[1] * d.y + m[2] * d.z;
+}
 
 static inline int media_layer_of(const media_layers *L, double z) {
   if (L->uniform) {

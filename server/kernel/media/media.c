@@ -29,37 +29,40 @@ void medium_traverse_common(medium *m, param_visitor *v) {
   pv_object(v, "phase_function", &m->phase->base, NAN, NAN);
 }
 
-bool media_box_clip(const xform *to_world, const ray3 *r, double *mint, double *maxt) {
+void media_box_init(media_box *b, const xform *to_world) {
   const double(*m)[4] = to_world->m;
+  b->to_world = to_world;
+  b->aligned = m[0][1] == 0 && m[0][2] == 0 && m[1][0] == 0 && m[1][2] == 0 && m[2][0] == 0 && m[2][1] == 0 &&
+               m[0][0] != 0 && m[1][1] != 0 && m[2][2] != 0;
+  for (int a = 0; a < 3; a++) {
+    double b0 = m[a][3], b1 = m[a][3] + m[a][a];
+    bool swap = b0 > b1;
+    b->lo[a] = swap ? b1 : b0;
+    b->hi[a] = swap ? b0 : b1;
+  }
+}
+
+bool media_box_clip_at(const media_box *b, const ray3 *r, double *mint, double *maxt) {
   double lo = r->tmin, hi = r->tmax;
-  if (m[0][1] == 0 && m[0][2] == 0 && m[1][0] == 0 && m[1][2] == 0 && m[2][0] == 0 && m[2][1] == 0 &&
-      m[0][0] != 0 && m[1][1] != 0 && m[2][2] != 0) {
+  if (b->aligned) {
     /* Axis-aligned box (scale and translation): the slab test in world
      * coordinates, one division per axis. */
     const double o3[3] = {r->o.x, r->o.y, r->o.z}, d3[3] = {r->d.x, r->d.y, r->d.z};
     for (int a = 0; a < 3; a++) {
-      double b0 = m[a][3], b1 = m[a][3] + m[a][a];
-      if (b0 > b1) {
-        double x = b0;
-        b0 = b1;
-        b1 = x;
-      }
+      double b0 = b->lo[a], b1 = b->hi[a];
       if (d3[a] == 0.0) {
         if (o3[a] < b0 || o3[a] > b1) return false;
         continue;
       }
       double inv = 1.0 / d3[a];
-      double t0 = (b0 - o3[a]) * inv, t1 = (b1 - o3[a]) * inv;
-      if (t0 > t1) {
-        double x = t0;
-        t0 = t1;
-        t1 = x;
-      }
-      if (t0 > lo) lo = t0;
-      if (t1 < hi) hi = t1;
+      double ta = (b0 - o3[a]) * inv, tb = (b1 - o3[a]) * inv;
+      /* (selects, not branches: the ray's direction decides them) */
+      double t0 = ta > tb ? tb : ta, t1 = ta > tb ? ta : tb;
+      lo = t0 > lo ? t0 : lo;
+      hi = t1 < hi ? t1 : hi;
     }
   } else {
-    vec3 o = xf_inv_point(to_world, r->o), d = xf_inv_vector(to_world, r->d);
+    vec3 o = xf_inv_point(b->to_world, r->o), d = xf_inv_vector(b->to_world, r->d);
     const double oo[3] = {o.x, o.y, o.z}, dd[3] = {d.x, d.y, d.z};
     for (int a = 0; a < 3; a++) {
       if (dd[a] == 0.0) {
@@ -81,6 +84,12 @@ bool media_box_clip(const xform *to_world, const ray3 *r, double *mint, double *
   *mint = lo;
   *maxt = hi;
   return true;
+}
+
+bool media_box_clip(const xform *to_world, const ray3 *r, double *mint, double *maxt) {
+  media_box b;
+  media_box_init(&b, to_world);
+  return media_box_clip_at(&b, r, mint, maxt);
 }
 
 /* ---- scene-level checks ---------------------------------------------------- */

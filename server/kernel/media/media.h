@@ -27,6 +27,18 @@ void medium_traverse_common(medium *m, struct param_visitor *v);
  * cube under to_world (a volume's box). False when empty. */
 bool media_box_clip(const xform *to_world, const ray3 *r, double *mint, double *maxt);
 
+/* The same with what depends on the box alone worked out once
+ * (media_box_init, again whenever to_world changes): whether it is a scale
+ * and translation (then its world bounds), for media that clip many rays
+ * against one box. Same results as media_box_clip, bit for bit. */
+typedef struct media_box {
+  const xform *to_world;
+  bool aligned;
+  double lo[3], hi[3]; /* world bounds (aligned) */
+} media_box;
+void media_box_init(media_box *b, const xform *to_world);
+bool media_box_clip_at(const media_box *b, const ray3 *r, double *mint, double *maxt);
+
 /* Scene-level checks (scene/build.c calls it once the acceleration
  * structure exists): every medium in the document is bounded by a shape
  * (as its interior or exterior) or holds a sensor, and a sensor with a

@@ -337,7 +337,7 @@ static rsw_status ma_refresh(mol_atmo *m, const render_ctx *rc, rsw_err *err) {
 /* ---- the mixed phase function ------------------------------------------------ */
 
 static int ma_layer_at(const mol_atmo *m, vec3 p) {
-  return media_layer_of(&m->lm.L, xf_inv_point(m->lm.L.to_world, p).z);
+  return media_layer_of(&m->lm.L, media_layers_z(&m->lm.L, p));
 }
 
 static double ma_weight(const mol_atmo *m, int k, size_t j) {
@@ -375,18 +375,29 @@ static double mix_sample(const mol_atmo *m, int k, size_t j, const medium_intera
   return val / *pdf;
 }
 
+/* The layer of mi->p: found once per scattering when bound (phase_bind). */
+static int ma_phase_layer(const phase *ph, const mol_atmo *m, const medium_interaction *mi) {
+  return mi->bound == ph ? (int)mi->bound_w : ma_layer_at(m, mi->p);
+}
+
+static void ma_phase_bind(const phase *ph, medium_interaction *mi) {
+  mi->bound_w = ma_layer_at(((const ma_phase *)ph)->m, mi->p);
+  mi->bound = ph;
+}
+
 static double ma_phase_sample(const phase *ph, const medium_interaction *mi, double u1, vec2 u2, vec3 *wo,
                               double *pdf) {
   const mol_atmo *m = ((const ma_phase *)ph)->m;
-  return mix_sample(m, ma_layer_at(m, mi->p), m->np, mi, u1, u2, wo, pdf);
+  return mix_sample(m, ma_phase_layer(ph, m, mi), m->np, mi, u1, u2, wo, pdf);
 }
 
 static double ma_phase_eval_pdf(const phase *ph, const medium_interaction *mi, vec3 wo, double *pdf) {
   const mol_atmo *m = ((const ma_phase *)ph)->m;
-  return mix_eval(m, ma_layer_at(m, mi->p), m->np, mi, wo, pdf);
+  return mix_eval(m, ma_phase_layer(ph, m, mi), m->np, mi, wo, pdf);
 }
 
-static const phase_ops ma_phase_ops = {.sample = ma_phase_sample, .eval_pdf = ma_phase_eval_pdf};
+static const phase_ops ma_phase_ops = {
+    .sample = ma_phase_sample, .eval_pdf = ma_phase_eval_pdf, .bind = ma_phase_bind};
 
 /* ---- life cycle -------------------------------------------------------------- */
 

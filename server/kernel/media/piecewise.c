@@ -40,10 +40,10 @@ static void pw_refresh(piecewise_medium *pw) {
       L->alb[3 * k + c] = a;
       if (a > amax) amax = a;
     }
-  media_layers_finish(L);
   pw->lm.base.absorbing_only = amax == 0.0;
   pw->lm.base.has_spectral_extinction = pw->sigma_t->channels == 3;
-  L->nc = pw->lm.base.has_spectral_extinction ? 3 : 1;
+  L->nc = pw->lm.base.has_spectral_extinction ? 3 : 1; /* (before finish: the index covers nc channels) */
+  media_layers_finish(L);
 }
 
 static rsw_status pw_prepare(object *o, const render_ctx *rc, rsw_err *err) {

@@ -27,9 +27,20 @@ typedef struct blendphase {
   phase *ph[2];
 } blendphase;
 
-static double blend_weight(const blendphase *b, const medium_interaction *mi) {
-  double w = volume_eval_1(b->weight, mi->p);
+static double blend_lookup(const blendphase *b, vec3 p) {
+  double w = volume_eval_1(b->weight, p);
   return w > 1.0 ? 1.0 : w > 0.0 ? w : 0.0; /* clamped to [0, 1] (NaN: 0), no libm calls */
+}
+
+/* The weight at mi->p: looked up once per scattering when bound (the
+ * volumetric integrators' NEE and phase sampling share it). */
+static double blend_weight(const blendphase *b, const medium_interaction *mi) {
+  return mi->bound == &b->base ? mi->bound_w : blend_lookup(b, mi->p);
+}
+
+static void blend_bind(const phase *ph, medium_interaction *mi) {
+  mi->bound_w = blend_lookup((const blendphase *)ph, mi->p);
+  mi->bound = ph;
 }
 
 /* The mixture at weight w. */
@@ -65,7 +76,8 @@ static double blend_sample(const phase *ph, const medium_interaction *mi, double
   return val / *pdf;
 }
 
-static const phase_ops blendphase_ops = {.sample = blend_sample, .eval_pdf = blend_eval_pdf};
+static const phase_ops blendphase_ops = {
+    .sample = blend_sample, .eval_pdf = blend_eval_pdf, .bind = blend_bind};
 
 static rsw_status blendphase_create(loader *ld, node *n, object **out) {
   object **kids;

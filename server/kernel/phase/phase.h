@@ -28,6 +28,14 @@ static inline vec3 phase_direction(const medium_interaction *mi, double mu, doub
 }
 
 /* A failed sample (kernel.h phase_ops.sample). */
+/* Before the eval_pdf and sample calls of one scattering at mi (mi->p
+ * fixed): let ph look up what it needs at mi->p once. Results are those of
+ * the unbound calls, bit for bit. */
+static inline void phase_bind(const phase *ph, medium_interaction *mi) {
+  mi->bound = NULL;
+  if (ph->ops->bind) ph->ops->bind(ph, mi);
+}
+
 static inline double phase_fail(double *pdf) {
   *pdf = 0.0;
   return 0.0;

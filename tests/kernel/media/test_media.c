@@ -14,6 +14,7 @@
 #include <string.h>
 
 #include "../../../server/kernel/accel.h"
+#include "../../../server/kernel/media/layered.h"
 #include "../../../server/kernel/scene/params.h"
 #include "../../../server/kernel/scene/update.h"
 #include "../../support/test.h"
@@ -471,6 +472,83 @@ static void test_piecewise_exact_ops(void) {
 /* rgb: a chromatic absorbing slab gives exp(-tau_c / mu) per channel
  * (homogeneous, and piecewise with a 3-channel grid); a chromatic
  * scattering slab agrees between volpath and piecewise_volpath. */
+/* The free flights' index over C (media/layered.h) brackets the binary
+ * search only where C says the bracket holds: with it and without it
+ * (bk_scale -1: the full search), every flight lands in the same layer at
+ * the same t, bit for bit. Profiles with runs of empty layers (flat C, so
+ * that buckets hold many equal entries), a dynamic range of 1e8 (an
+ * atmosphere's thin top in one bucket) and three channels (rgb, chromatic:
+ * one index per channel); rays up and down, nearly level and vertical. */
+static void test_layer_index_search(void) {
+  enum {
+    N = 517
+  };
+  for (int prof = 0; prof < 3; prof++) {
+    bool rgb = prof == 2;
+    sbuf b = {0};
+    sb_printf(
+        &b,
+        "{\"type\": \"scene\", \"box\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
+        " \"to_world\": [{\"scale\": [5, 5, 3]}, {\"translate\": [0, 0, 2]}],"
+        " \"interior\": {\"type\": \"piecewise\", \"albedo\": 0.5, \"sigma_t\": {\"type\": \"gridvolume\","
+        " \"shape\": [%d, 1, 1%s], \"data\": [",
+        N, rgb ? ", 3" : "");
+    for (int i = 0; i < N; i++)
+      for (int c = 0; c < (rgb ? 3 : 1); c++) {
+        double v = prof == 0 ? ((i / 9) % 3 == 1 ? 0.0 : 0.3 + 0.2 * sin(0.37 * i))
+                             : 2.0 * exp(-i / (N / 18.0)) * (1 + c);
+        if (prof == 2 && i % 11 == c) v = 0;
+        sb_printf(&b, "%s%.17g", i || c ? ", " : "", v);
+      }
+    sb_printf(&b, "], \"to_world\": [{\"translate\": [-0.5, -0.5, 0]}, {\"scale\": [10, 10, 6]},"
+                  " {\"translate\": [0, 0, -1]}]}}}}");
+    scene *s = tsup_load(b.p, rgb ? "rgb" : "mono");
+    free(b.p);
+    REQUIRE(s, "scene %d", prof);
+    medium *m = s->shapes[0]->interior;
+    render_ctx rc = {.variant = rgb ? VARIANT_RGB : VARIANT_MONO, .wavelength = 550};
+    rsw_err err = {0};
+    REQUIRE(scene_prepare(s, &rc, &err) == RSW_OK, "prepare: %s", err.msg);
+    media_layers *L = &((layered_medium *)m)->L;
+    int nc = rgb ? 3 : 1;
+    for (int c = 0; c < nc; c++) CHECK(L->bk_scale[c] > 0, "profile %d channel %d has its index", prof, c);
+    double keep[3] = {L->bk_scale[0], L->bk_scale[1], L->bk_scale[2]};
+    pcg32 rng;
+    pcg32_seed(&rng, 11, (uint64_t)prof);
+    int differ = 0, coll = 0;
+    for (int k = 0; k < 3000; k++) {
+      vec3 o = v3(2 * pcg32_next_double(&rng) - 1, 2 * pcg32_next_double(&rng) - 1,
+                  -1 + 6 * pcg32_next_double(&rng));
+      double ct = 2 * pcg32_next_double(&rng) - 1, ph = 2 * PI * pcg32_next_double(&rng);
+      if (k % 100 == 0) ct = 1e-7;
+      if (k % 100 == 1) ct = -1;
+      double st = sqrt(1 - ct * ct);
+      ray3 r = {o, v3(st * cos(ph), st * sin(ph), ct), 0, INFINITY};
+      double mint, maxt;
+      if (!m->ops->intersect_aabb(m, &r, &mint, &maxt)) continue;
+      double u = pcg32_next_double(&rng);
+      if (k % 7 == 0) u = 1 - 1e-12;
+      int ch = (int)(pcg32_next_double(&rng) * nc);
+      medium_interaction mi[2];
+      color tr[2], pdf[2];
+      for (int w = 0; w < 2; w++) {
+        for (int c = 0; c < 3; c++) L->bk_scale[c] = w ? -1.0 : keep[c];
+        memset(&mi[w], 0, sizeof mi[w]);
+        m->ops->sample_real(m, &r, mint, maxt, u, ch, &mi[w], &tr[w], &pdf[w]);
+      }
+      coll += isfinite(mi[0].t);
+      if (memcmp(&mi[0].t, &mi[1].t, sizeof mi[0].t) || memcmp(&tr[0], &tr[1], sizeof tr[0]) ||
+          memcmp(&pdf[0], &pdf[1], sizeof pdf[0]) || memcmp(&mi[0].sigma_t, &mi[1].sigma_t, sizeof(color)))
+        differ++;
+    }
+    for (int c = 0; c < 3; c++) L->bk_scale[c] = keep[c];
+    printf("  profile %d: %d collisions of 3000 flights, %d differ\n", prof, coll, differ);
+    CHECK(coll > 500, "profile %d: flights collide (%d)", prof, coll);
+    CHECK(differ == 0, "profile %d: %d flights differ with the index", prof, differ);
+    scene_free(s);
+  }
+}
+
 static void test_rgb_chromatic(void) {
   const char *meds[] = {"{\"type\": \"homogeneous\", \"albedo\": 0, \"sigma_t\": [0.2, 0.5, 1.0]}",
                         "{\"type\": \"piecewise\", \"albedo\": 0, \"sigma_t\": {\"type\": \"gridvolume\","
@@ -935,6 +1013,7 @@ static void test_sensor_in_medium(void) {
 
 int main(void) {
   RSW_TEST_RUN(test_piecewise_exact_ops);
+  RSW_TEST_RUN(test_layer_index_search);
   RSW_TEST_RUN(test_beer_lambert_homogeneous);
   RSW_TEST_RUN(test_beer_lambert_heterogeneous_constant);
   RSW_TEST_RUN(test_beer_lambert_piecewise_one_layer);

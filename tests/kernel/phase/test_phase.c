@@ -8,6 +8,7 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "../../../server/kernel/phase/phase.h"
 #include "../../../server/kernel/scene/param_table.h"
 #include "../../../server/kernel/scene/params.h"
 #include "../../../server/kernel/scene/update.h"
@@ -254,6 +255,61 @@ static void test_blendphase(void) {
   scene_free(s);
 }
 
+/* phase_bind (phase/phase.h): a blendphase with a weight grid looks its
+ * weight up once per point when bound, and its bound eval_pdf and sample
+ * are the unbound ones bit for bit (the nested blend, not bound, looks
+ * its own weight up); a binding made for another phase function is not
+ * taken for its own. */
+static void test_phase_bind(void) {
+  scene *s = load_phases(
+      "\"b\": {\"type\": \"blendphase\", \"weight\": {\"type\": \"gridvolume\", \"shape\": [7, 1, 1],"
+      " \"data\": [0, 0.1, 0.9, 0.4, 1, 0.25, 0.6]},"
+      " \"phase_0\": {\"type\": \"rayleigh\"}, \"phase_1\": {\"type\": \"blendphase\", \"weight\": 0.3,"
+      " \"phase_0\": {\"type\": \"hg\", \"g\": 0.7}, \"phase_1\": {\"type\": \"isotropic\"}}}");
+  REQUIRE(s, "load");
+  const phase *ph = (const phase *)find_obj(s, "b");
+  const phase *inner = NULL, *ray = NULL;
+  for (size_t i = 0; i < s->n_objects; i++) {
+    const object *o = s->objects[i];
+    if (!o->plugin || o->plugin->cls != CLS_PHASE) continue;
+    if (strcmp(o->plugin->name, "blendphase") == 0 && o != &ph->base) inner = (const phase *)o;
+    if (strcmp(o->plugin->name, "rayleigh") == 0) ray = (const phase *)o;
+  }
+  REQUIRE(ph && inner && ray, "the two blends and the rayleigh");
+  pcg32 rng;
+  pcg32_seed(&rng, 5, 3);
+  int differ = 0, bound = 0;
+  for (int k = 0; k < 2000; k++) {
+    medium_interaction mi = mi_at(v3(pcg32_next_double(&rng) - 0.5, pcg32_next_double(&rng) - 0.5, 0.3));
+    mi.p = v3(pcg32_next_double(&rng), pcg32_next_double(&rng), 1.2 * pcg32_next_double(&rng) - 0.1);
+    vec3 wo = v3_norm(v3(pcg32_next_double(&rng) - 0.5, pcg32_next_double(&rng) - 0.5, -0.2));
+    double u1 = pcg32_next_double(&rng);
+    vec2 u2 = v2(pcg32_next_double(&rng), pcg32_next_double(&rng));
+    double v[3], pdf[3], sw[3], spdf[3];
+    vec3 so[3];
+    for (int w = 0; w < 3; w++) {
+      medium_interaction m = mi;
+      if (w == 1) phase_bind(ph, &m), bound += m.bound == ph;
+      if (w == 2) m.bound = ray, m.bound_w = 0.987; /* another phase function's binding */
+      v[w] = ph->ops->eval_pdf(ph, &m, wo, &pdf[w]);
+      sw[w] = ph->ops->sample(ph, &m, u1, u2, &so[w], &spdf[w]);
+    }
+    for (int w = 1; w < 3; w++)
+      if (memcmp(&v[0], &v[w], sizeof v[0]) || memcmp(&pdf[0], &pdf[w], sizeof pdf[0]) ||
+          memcmp(&sw[0], &sw[w], sizeof sw[0]) || memcmp(&spdf[0], &spdf[w], sizeof spdf[0]) ||
+          memcmp(&so[0], &so[w], sizeof so[0]))
+        differ++;
+  }
+  CHECK(bound == 2000, "phase_bind binds the blend (%d of 2000)", bound);
+  CHECK(differ == 0, "%d of 2000 points differ bound / unbound", differ);
+  /* A phase function without a bind op: phase_bind leaves nothing bound. */
+  medium_interaction mi = mi_at(v3(0, 0, 1));
+  mi.bound = ph;
+  phase_bind(ray, &mi);
+  CHECK(mi.bound == NULL, "rayleigh binds nothing");
+  scene_free(s);
+}
+
 static void test_rayleigh(void) {
   scene *s = load_phases("\"r\": {\"type\": \"rayleigh\"}");
   REQUIRE(s, "load");
@@ -404,6 +460,7 @@ int main(void) {
   RSW_TEST_RUN(test_hg_convention);
   RSW_TEST_RUN(test_hg_zero_is_isotropic);
   RSW_TEST_RUN(test_blendphase);
+  RSW_TEST_RUN(test_phase_bind);
   RSW_TEST_RUN(test_rayleigh);
   RSW_TEST_RUN(test_tabphase);
   RSW_TEST_RUN(test_parameters);
