@@ -498,10 +498,18 @@ typedef struct phase_ops {
   /* Optional: look up what depends on mi->p alone, once, into
    * mi->bound_w, and set mi->bound = ph (phase_bind calls it). */
   void (*bind)(const phase *ph, medium_interaction *mi);
+  /* Optional, for a phase whose `chromatic` is set: the value p(wi, wo)
+   * per colour channel (a spectral bundle's wavelengths; sample() and
+   * eval_pdf() give channel 0's value and the density). */
+  color (*eval_channels)(const phase *ph, const medium_interaction *mi, vec3 wo);
 } phase_ops;
 struct phase {
   object base;
   const phase_ops *ops;
+  /* Its value differs between colour channels (set by prepare for a
+   * spectral bundle): the integrator weights each channel with
+   * eval_channels (docs/experiments.md#spectral-bundles). */
+  bool chromatic;
 };
 
 /* A participating medium (Mitsuba's Medium: homogeneous, heterogeneous;

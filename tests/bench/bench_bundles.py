@@ -3,8 +3,8 @@
   {"bench": "bundles", "scenes": [{"scene", "contexts", "spp",
    "contexts_per_s_k1", "contexts_per_s", "k", "speedup"}, ...]}
 A 16-wavelength sweep (one job, 16 contexts 400..550 nm by 10 nm) of
-  - the molecular atmosphere example without its particle layer (2,400
-    layers, Rayleigh and ozone, hdistant 32x32, 64 spp), and
+  - the molecular atmosphere example (2,400 layers, Rayleigh, ozone and an
+    aerosol layer; hdistant 32x32, 64 spp), and
   - the periodic canopy example (hdistant 32x32, 64 spp),
 on one raysweepd (--threads 2), submitted over HTTP with "bundle" 1 and
 then 3 (the largest: one wavelength per colour channel); wall time from
@@ -53,11 +53,10 @@ def run(port, sid, k):
 def main():
     tmp = tempfile.mkdtemp(prefix="rsw-bench-bundles-")
     atmo = json.load(open(os.path.join(root, "proto", "examples", "atmosphere_molecular.json")))
-    del atmo["medium_atmosphere"]["particle_layers"]
     atmo["measure"]["sampler"]["sample_count"] = SPP
     ap = os.path.join(tmp, "atmosphere.json")
     json.dump(atmo, open(ap, "w"))
-    scenes = [("atmosphere_rayleigh_2400", ap),
+    scenes = [("atmosphere_molecular_2400", ap),
               ("canopy_periodic", os.path.join(root, "proto", "examples", "canopy_periodic.json"))]
     pf = os.path.join(tmp, "port")
     d = subprocess.Popen([os.path.join(bindir, "raysweepd"), "serve", "--listen", "127.0.0.1:0", "--port-file", pf,

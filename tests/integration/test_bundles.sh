@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # Spectral bundles (a job's "bundle": docs/experiments.md#spectral-bundles), on
-# the molecular atmosphere example without its particle layer (2,400
-# Rayleigh + ozone layers: sigma_t differs by a factor ~2 across the
-# bundle, so the free flights use the chromatic tracking) and 6 contexts
-# at 400..650 nm:
+# the molecular atmosphere example (2,400 Rayleigh + ozone layers and an
+# aerosol layer whose share of the scattering differs across the bundle:
+# chromatic free flights and a chromatic phase mixture) and 6 contexts at
+# 400..650 nm:
 #   - statistically equal to the unbundled films: for each context, the
 #     film means agree within 4 combined standard errors (the stderr
 #     planes), and at most 2% of pixels differ by more than 3 sigma
@@ -16,17 +16,17 @@
 #   - formed whatever the order of a grid's axes (same overrides, other
 #     wavelengths, cut into threes in the job's order), never across
 #     overrides, never over a context's own seed;
-#   - refused with a 422 naming /bundle: bundle 4, an rgb scene, and an
-#     atmosphere with a particle layer (its phase mixture is one set per
-#     layer), naming the medium.
+#   - refused with a 422 naming /bundle: bundle 0 and 4, an rgb scene, a
+#     Stokes film (naming the sensor).
 name=test_bundles
 source "$(dirname "$0")/../support/shtest.sh"
 need_bins raysweepd
 python3 -c 'import json' || { bad "python3 missing"; finish; }
-python3 - "$root/proto/examples/atmosphere_molecular.json" "$tmp/atmo.json" <<'PY'
+cp "$root/proto/examples/atmosphere_molecular.json" "$tmp/atmo.json"
+python3 - "$root/proto/examples/hdistant_lambertian.json" "$tmp/stokes.json" <<'PY'
 import json, sys
 d = json.load(open(sys.argv[1]))
-del d["medium_atmosphere"]["particle_layers"]
+d["sensor"]["film"]["pixel_format"] = "stokes"
 json.dump(d, open(sys.argv[2], "w"))
 PY
 start_daemon "$tmp/d2" --threads 2
@@ -171,7 +171,7 @@ def refuse(path, bundle, words):
         assert w in p["detail"], (w, p["detail"])
 refuse(sys.argv[3], 4, ["from 1", "to 3"])
 refuse(sys.argv[3], 0, ["from 1"])
-refuse(sys.argv[4], 3, ["medium_atmosphere", "molecular_atmosphere"])
+refuse(sys.argv[4], 3, ["sensor", "Stokes"])
 refuse(sys.argv[5], 2, ["mono"])
-' "$tmp" "$p2" "$tmp/atmo.json" "$root/proto/examples/atmosphere_molecular.json" "$root/proto/examples/cornell_box.json"
+' "$tmp" "$p2" "$tmp/atmo.json" "$tmp/stokes.json" "$root/proto/examples/cornell_box.json"
 finish

@@ -615,7 +615,12 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
         double pval = ph->ops->eval_pdf(ph, &mi, ds.d, &ppdf);
         if (pval > 0) {
           double w = ds.delta ? 1.0 : mis_weight(ds.pdf * pe, ppdf);
-          start_shadow(sc, l, NULL, mi.p, e, &ds, m, col_scale(col_mul(l->T, value), pval * w / pe));
+          /* A chromatic phase (a spectral bundle's aerosol mixture): each
+           * channel's own value. */
+          color c = col_mul(l->T, value);
+          c = ph->chromatic ? col_scale(col_mul(c, ph->ops->eval_channels(ph, &mi, ds.d)), w / pe)
+                            : col_scale(c, pval * w / pe);
+          start_shadow(sc, l, NULL, mi.p, e, &ds, m, c);
         }
       }
     }
@@ -623,7 +628,11 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
     double ppdf;
     double pw = ph->ops->sample(ph, &mi, sops->next_1d(st), sops->next_2d(st), &wo, &ppdf);
     if (!(ppdf > 0) || !(pw > 0)) return false;
-    l->T = col_scale(l->T, pw);
+    /* A chromatic phase: wo drawn with channel 0's mixture, each channel
+     * weighted by its own value over that density (unbiased: every
+     * component covers the sphere). */
+    l->T = ph->chromatic ? col_mul(l->T, col_scale(ph->ops->eval_channels(ph, &mi, wo), 1.0 / ppdf))
+                         : col_scale(l->T, pw);
     l->ray = (ray3){mi.p, wo, 0.0, INFINITY};
     l->seg_o = mi.p;
     l->prev = ref;

@@ -89,6 +89,7 @@ struct mol_atmo {
   double *z;                /* n + 1 levels [m] */
   double *n_air, *n_o3, *t; /* per layer: m^-3, m^-3, K */
   double *sig_t, *alb, *w;  /* per layer (w: np per layer, nested blend weights) */
+  double *wc;               /* a bundle's w per channel: (k np + j) 3 + c */
   double *s_comp;           /* scratch: per component scattering (1 + np) */
   double **frac;            /* per particle layer: its share of tau in each layer */
   volume *sigma_a;          /* NULL: none */
@@ -299,6 +300,13 @@ static rsw_status ma_refresh_channel(mol_atmo *m, double wl, int ch, rsw_err *er
       m->sig_t[k] = st;
       m->alb[k] = al;
     }
+    if (ch >= 0) { /* a bundle: channel ch's blend weights */
+      double acc = s[0];
+      for (size_t j = 0; j < np; j++) {
+        acc += s[1 + j];
+        m->wc[(k * np + j) * 3 + (size_t)ch] = acc > 0.0 ? s[1 + j] / acc : 0.0;
+      }
+    }
     for (int c = ch < 0 ? 0 : ch; c < (ch < 0 ? 3 : ch + 1); c++) {
       m->lm.L.lay[k].sig[c] = m->lm.base.scale * st;
       m->lm.L.alb[3 * k + c] = al;
@@ -326,6 +334,7 @@ static rsw_status ma_refresh(mol_atmo *m, const render_ctx *rc, rsw_err *err) {
   if (st) return st;
   m->lm.L.nc = bundle ? 3 : 1;
   m->lm.base.has_spectral_extinction = bundle != 0;
+  m->mix.base.chromatic = bundle != 0 && m->np > 0;
   media_layers_finish(&m->lm.L);
   m->lm.base.absorbing_only = m->absorbing_only;
   m->wl = wl;
@@ -340,9 +349,12 @@ static int ma_layer_at(const mol_atmo *m, vec3 p) {
   return media_layer_of(&m->lm.L, media_layers_z(&m->lm.L, p));
 }
 
-static double ma_weight(const mol_atmo *m, int k, size_t j) {
-  double w = m->w[(size_t)k * m->np + j];
+static double clamp01(double w) {
   return w > 1.0 ? 1.0 : w > 0.0 ? w : 0.0;
+}
+
+static double ma_weight(const mol_atmo *m, int k, size_t j) {
+  return clamp01(m->w[(size_t)k * m->np + j]);
 }
 
 /* Components 0..j mixed (0: Rayleigh), as nested blendphases. */
@@ -375,6 +387,18 @@ static double mix_sample(const mol_atmo *m, int k, size_t j, const medium_intera
   return val / *pdf;
 }
 
+/* mix_eval's value with channel c's weights (a spectral bundle's). */
+static double mix_eval_channel(const mol_atmo *m, int k, size_t j, const medium_interaction *mi, vec3 wo,
+                               int c) {
+  double pdf;
+  if (j == 0) return m->rayleigh->ops->eval_pdf(m->rayleigh, mi, wo, &pdf);
+  double w = clamp01(m->wc[((size_t)k * m->np + j - 1) * 3 + (size_t)c]), v0 = 0, v1 = 0;
+  const phase *ph = m->p[j - 1].ph;
+  if (w < 1.0) v0 = mix_eval_channel(m, k, j - 1, mi, wo, c);
+  if (w > 0.0) v1 = ph->ops->eval_pdf(ph, mi, wo, &pdf);
+  return (1.0 - w) * v0 + w * v1;
+}
+
 /* The layer of mi->p: found once per scattering when bound (phase_bind). */
 static int ma_phase_layer(const phase *ph, const mol_atmo *m, const medium_interaction *mi) {
   return mi->bound == ph ? (int)mi->bound_w : ma_layer_at(m, mi->p);
@@ -396,8 +420,18 @@ static double ma_phase_eval_pdf(const phase *ph, const medium_interaction *mi, v
   return mix_eval(m, ma_phase_layer(ph, m, mi), m->np, mi, wo, pdf);
 }
 
-static const phase_ops ma_phase_ops = {
-    .sample = ma_phase_sample, .eval_pdf = ma_phase_eval_pdf, .bind = ma_phase_bind};
+static color ma_phase_eval_channels(const phase *ph, const medium_interaction *mi, vec3 wo) {
+  const mol_atmo *m = ((const ma_phase *)ph)->m;
+  int k = ma_phase_layer(ph, m, mi);
+  color v;
+  for (int c = 0; c < 3; c++) v.c[c] = mix_eval_channel(m, k, m->np, mi, wo, c);
+  return v;
+}
+
+static const phase_ops ma_phase_ops = {.sample = ma_phase_sample,
+                                       .eval_pdf = ma_phase_eval_pdf,
+                                       .bind = ma_phase_bind,
+                                       .eval_channels = ma_phase_eval_channels};
 
 /* ---- life cycle -------------------------------------------------------------- */
 
@@ -431,6 +465,7 @@ static void ma_destroy(object *o) {
   free(m->sig_t);
   free(m->alb);
   free(m->w);
+  free(m->wc);
   free(m->s_comp);
   if (m->frac)
     for (size_t j = 0; j < m->np; j++) free(m->frac[j]);
@@ -751,8 +786,9 @@ static rsw_status molecular_atmosphere_create(loader *ld, node *n, object **out)
     m->sig_t = calloc(nl, sizeof(double));
     m->alb = calloc(nl, sizeof(double));
     m->w = calloc((size_t)nl * (m->np ? m->np : 1), sizeof(double));
+    m->wc = calloc(3 * (size_t)nl * (m->np ? m->np : 1), sizeof(double));
     m->s_comp = calloc(1 + 3 * m->np, sizeof(double));
-    if (!m->sig_t || !m->alb || !m->w || !m->s_comp || !media_layers_alloc(&m->lm.L, nl))
+    if (!m->sig_t || !m->alb || !m->w || !m->wc || !m->s_comp || !media_layers_alloc(&m->lm.L, nl))
       st = ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "molecular_atmosphere: out of memory");
   }
   if (!st) {
@@ -814,12 +850,6 @@ static void ma_traverse(object *o, param_visitor *v) {
  * scene_wavelength_dependent): Rayleigh and ozone always do; particles do
  * when their extinction follows an Angstrom law or a spectrum, or their
  * albedo is a spectrum. (A user sigma_a volume answers for itself.) */
-/* The phase mixture's weights are one set per layer (a particle layer's
- * would differ between a bundle's wavelengths). */
-static bool ma_bundles(const object *o) {
-  return ((const mol_atmo *)o)->np == 0;
-}
-
 static bool ma_spectral(const object *o) {
   const mol_atmo *m = (const mol_atmo *)o;
   if (m->has_scattering || m->has_absorption) return true;
@@ -832,7 +862,7 @@ static bool ma_spectral(const object *o) {
 
 DEFINE_PLUGIN(molecular_atmosphere, CLS_MEDIUM, .destroy = ma_destroy, .prepare = ma_prepare,
               .ops = &layered_medium_ops, .traverse = ma_traverse,
-              .parameters_changed = ma_parameters_changed, .spectral = ma_spectral, .bundles = ma_bundles);
+              .parameters_changed = ma_parameters_changed, .spectral = ma_spectral);
 
 /* ---- what tests and benches read --------------------------------------------- */
 
