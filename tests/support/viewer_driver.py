@@ -494,8 +494,7 @@ def run(a, profile, browser):
             return f"the job did not show succeeded {n_ctx}/{n_ctx}: {page.js(f'Object.assign({{}}, document.querySelector(`{sel}`).dataset)')}"
         if int(end["events"]) < 1:
             return f"no event came through the event stream: {end}"
-        page.click(sel)
-        if not page.wait("document.querySelectorAll('#results a').length === %d" % n_ctx, 30):
+        if not page.select_job(jid) or not page.wait("document.querySelectorAll('#results a').length === %d" % n_ctx, 30):
             return "the job's results are not listed"
         page.click("#results a")
         if not page.wait(f"document.getElementById('film-title').dataset.job === '{jid}'", 30):
@@ -510,8 +509,14 @@ def run(a, profile, browser):
         sel = f'#jobs li[data-job="{jid}"] button'
         if not page.wait(f"document.querySelector('{sel}')", 30):
             return "the running job has no cancel button"
-        page.click(sel)
-        if not page.wait(f"document.querySelector('#jobs li[data-job=\"{jid}\"]').dataset.state === 'cancelled'", 20):
+        cancelled = f"document.querySelector('#jobs li[data-job=\"{jid}\"]').dataset.state === 'cancelled'"
+        for _ in range(5):  # (a click during the list's redraw hits nothing: again)
+            if not page.js(f"!!document.querySelector('{sel}')"):
+                break
+            page.click(sel)
+            if page.wait(cancelled, 6):
+                break
+        if not page.wait(cancelled, 20):
             return "the job did not show cancelled"
         st2, j = http("GET", f"{base}/v1/jobs/{jid}")
         if j["state"] != "cancelled":
