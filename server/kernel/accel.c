@@ -495,6 +495,14 @@ double accel_surface_error(const accel *a, uint32_t index, const xform *X, vec3 
   return RSW_F32_UNIT * (n1 * pc + w * (pc + tc) + an1 * a->ext[index]);
 }
 
+void accel_surface_error_terms(const accel *a, uint32_t index, const xform *X, double t[8]) {
+  vec3 c = a->origin;
+  t[0] = c.x, t[1] = c.y, t[2] = c.z;
+  t[3] = v3_max_abs(v3_sub(v3(X->m[0][3], X->m[1][3], X->m[2][3]), c));
+  t[4] = a->ext[index];
+  for (int k = 0; k < 3; k++) t[5 + k] = fabs(X->inv[k][0]) + fabs(X->inv[k][1]) + fabs(X->inv[k][2]);
+}
+
 /* ---- build ------------------------------------------------------------------------------ */
 
 static rsw_status embree_fail(accel *a, rsw_err *err, const char *where, const char *what) {

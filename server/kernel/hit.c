@@ -48,16 +48,109 @@ void hit_fill_interaction(const scene *sc, const ray3 *r, const accel_hit *h, su
   si->wi = frame_to_local(&si->sh, v3_neg(v3_norm(r->d)));
 }
 
+/* A hit that shape_mesh_hits_batch fills: a plain (not instanced) mesh
+ * with a face cache. */
+static inline bool hit_cached_mesh(const shape *s) {
+  return shape_is_mesh(s) && s->face_cache && !shape_is_instancing(s);
+}
+
+/* The hits lane[0..cnt) on one cached mesh s (top-level shape `index`),
+ * their whole si through shape_mesh_hits_batch (bitwise
+ * hit_fill_interaction). */
+static void hit_fill_cached(const scene *sc, const shape *s, uint32_t index, int cnt, const int *lane,
+                            const ray3 *const *r, const accel_hit *const *h, surface_interaction *const *si) {
+  enum {
+    S = 64 /* lanes per call, a multiple of 8 */
+  };
+  const mesh *ms = &s->mesh;
+  const bool nrm = ms->nrm && !s->face_normals, uv = ms->uv != NULL;
+  double k[SHAPE_MH_K];
+  for (int i = 0; i < 4; i++)
+    for (int j = 0; j < 4; j++) k[SHAPE_MH_M + 4 * i + j] = s->to_world.m[i][j];
+  for (int i = 0; i < 3; i++)
+    for (int j = 0; j < 3; j++) k[SHAPE_MH_INV + 3 * i + j] = s->to_world.inv[i][j];
+  double t[8];
+  accel_surface_error_terms(sc->accel, index, &s->to_world, t);
+  for (int i = 0; i < 3; i++) k[SHAPE_MH_C + i] = t[i], k[SHAPE_MH_S + i] = t[5 + i];
+  k[SHAPE_MH_TC] = t[3];
+  k[SHAPE_MH_EXT] = t[4];
+  k[SHAPE_MH_NRM] = nrm;
+  k[SHAPE_MH_UV] = uv;
+  k[SHAPE_MH_FLIP] = s->flip_normals;
+  double a[SHAPE_MH_IN * S], o[SHAPE_MH_OUT * S];
+  for (int j0 = 0; j0 < cnt; j0 += S) {
+    int m = cnt - j0 < S ? cnt - j0 : S;
+    for (int j = 0; j < m; j++) {
+      const accel_hit *hj = h[lane[j0 + j]];
+      const uint32_t *ix = &ms->faces[3 * (size_t)hj->prim];
+      const uint32_t i0 = ix[0], i1 = ix[1], i2 = ix[2];
+      double *q = &a[j];
+      q[0] = hj->u, q[S] = hj->v;
+      const float *p0 = &ms->pos[3 * (size_t)i0], *p1 = &ms->pos[3 * (size_t)i1],
+                  *p2 = &ms->pos[3 * (size_t)i2];
+      q[2 * S] = p0[0], q[3 * S] = p0[1], q[4 * S] = p0[2];
+      q[5 * S] = p1[0], q[6 * S] = p1[1], q[7 * S] = p1[2];
+      q[8 * S] = p2[0], q[9 * S] = p2[1], q[10 * S] = p2[2];
+      if (nrm) {
+        const float *na = &ms->nrm[3 * (size_t)i0], *nb = &ms->nrm[3 * (size_t)i1],
+                    *nc = &ms->nrm[3 * (size_t)i2];
+        double *e = &q[SHAPE_MH_IN_NA * S];
+        e[0] = na[0], e[S] = na[1], e[2 * S] = na[2];
+        e[3 * S] = nb[0], e[4 * S] = nb[1], e[5 * S] = nb[2];
+        e[6 * S] = nc[0], e[7 * S] = nc[1], e[8 * S] = nc[2];
+      }
+      if (uv) {
+        const float *ua = &ms->uv[2 * (size_t)i0], *ub = &ms->uv[2 * (size_t)i1],
+                    *uc = &ms->uv[2 * (size_t)i2];
+        double *e = &q[SHAPE_MH_IN_UVA * S];
+        e[0] = ua[0], e[S] = ua[1], e[2 * S] = ub[0], e[3 * S] = ub[1], e[4 * S] = uc[0], e[5 * S] = uc[1];
+      }
+      /* The face's normal and dp/du: zero where the face's uv
+       * determinant is, as mesh_fill_inline_raw leaves it. */
+      const double *fc = &s->face_cache[SHAPE_FACE_DOUBLES * (size_t)hj->prim];
+      double *e = &q[SHAPE_MH_IN_N * S];
+      e[0] = fc[0], e[S] = fc[1], e[2 * S] = fc[2], e[3 * S] = fc[3], e[4 * S] = fc[4], e[5 * S] = fc[5];
+      vec3 d = r[lane[j0 + j]]->d;
+      e[6 * S] = d.x, e[7 * S] = d.y, e[8 * S] = d.z;
+    }
+    for (int j = m; j < ((m + 7) & ~7); j++) /* the last vector's unused lanes */
+      for (int c = 0; c < SHAPE_MH_IN; c++) a[c * S + j] = 0;
+    shape_mesh_hits_batch(m, S, k, a, o);
+    for (int j = 0; j < m; j++) {
+      const accel_hit *hj = h[lane[j0 + j]];
+      surface_interaction *x = si[lane[j0 + j]];
+      const double *f = &o[j];
+      const double *fc = &s->face_cache[SHAPE_FACE_DOUBLES * (size_t)hj->prim];
+      vec3 n = v3(fc[0], fc[1], fc[2]);
+      x->t = hj->t;
+      x->shape = s;
+      x->prim = hj->prim;
+      x->p = v3(f[0], f[S], f[2 * S]);
+      x->p_error = f[3 * S];
+      x->uv[0] = f[4 * S], x->uv[1] = f[5 * S];
+      x->ng = s->flip_normals ? v3_neg(n) : n;
+      x->sh.s = v3(f[6 * S], f[7 * S], f[8 * S]);
+      x->sh.t = v3(f[9 * S], f[10 * S], f[11 * S]);
+      x->sh.n = v3(f[12 * S], f[13 * S], f[14 * S]);
+      x->wi = v3(f[15 * S], f[16 * S], f[17 * S]);
+    }
+  }
+}
+
 void hit_fill_interaction_batch(const scene *sc, int n, const ray3 *const *r, const accel_hit *const *h,
                                 surface_interaction *const *si) {
   enum {
     C = 64 /* lanes per call, a multiple of 8 */
   };
   double in[SHAPE_FRAME_IN * C], out[12 * C];
-  int lane[C];
+  int lane[C], cached[C];
   for (int k0 = 0; k0 < n; k0 += C) {
-    int cnt = n - k0 < C ? n - k0 : C, m = 0;
+    int cnt = n - k0 < C ? n - k0 : C, m = 0, nc = 0;
     for (int k = 0; k < cnt; k++) {
+      if (hit_cached_mesh(sc->shapes[h[k0 + k]->shape])) {
+        cached[nc++] = k0 + k;
+        continue;
+      }
       vec3 sn, tg, raw = v3(0, 0, 0);
       bool deferred = false;
       if (hit_fill_begin(sc, r[k0 + k], h[k0 + k], si[k0 + k], &sn, &tg, &raw, &deferred)) continue;
@@ -69,6 +162,20 @@ void hit_fill_interaction_batch(const scene *sc, int n, const ray3 *const *r, co
       q[9 * C] = raw.x, q[10 * C] = raw.y, q[11 * C] = raw.z;
       q[12 * C] = deferred ? 1.0 : 0.0;
       lane[m++] = k0 + k;
+    }
+    /* The cached meshes' hits, shape by shape (a hit's values do not
+     * depend on its group). */
+    while (nc > 0) {
+      uint32_t index = h[cached[0]]->shape;
+      int take[C], nt = 0, rest = 0;
+      for (int j = 0; j < nc; j++) {
+        if (h[cached[j]]->shape == index)
+          take[nt++] = cached[j];
+        else
+          cached[rest++] = cached[j];
+      }
+      nc = rest;
+      hit_fill_cached(sc, sc->shapes[index], index, nt, take, r, h, si);
     }
     if (m == 0) continue;
     for (int j = m; j < ((m + 7) & ~7); j++) /* the last vector's unused lanes */

@@ -20,7 +20,9 @@
  *    batches (independent, stratified; any subset and order of lanes), the
  *    emitters' sample_direction_batch or its fallback (directional,
  *    constant, area), the
- *    hits' shading frames (shape_frames_batch, edge cases included); the
+ *    hits' shading frames (shape_frames_batch, edge cases included), the
+ *    batched hit fill against the scalar one (hit_fill_interaction_batch,
+ *    cached meshes and other shapes mixed); the
  *    batched draws pass a chi-square test of uniformity, the constant
  *    emitter's batched directions one against its pdf_direction (the area
  *    emitter's: tests/kernel/emitters/test_area_light.c);
@@ -30,7 +32,9 @@
 
 #include "../../../server/kernel/accel.h"
 #include "../../../server/kernel/core/isa.h"
+#include "../../../server/kernel/hit.h"
 #include "../../../server/kernel/samplers/sampler_batch.h"
+#include "../../../server/kernel/shapes/instance.h"
 #include "../../../server/kernel/shapes/shape.h"
 #include "../../support/chi2.h"
 #include "../../support/test.h"
@@ -557,6 +561,79 @@ static void test_frames_batch(void) {
   rsw_isa_set(rsw_isa_best());
 }
 
+/* hit_fill_interaction_batch against hit_fill_interaction, lane by lane
+ * and bit for bit, at every ISA: cached meshes (shape_mesh_hits_batch:
+ * vertex normals and uv, uv only (an OBJ with face_normals), flip_normals, rotated
+ * and scaled) mixed in one batch with the other shapes' hits (a sphere, a
+ * disk, an instanced rectangle). */
+static void test_hits_batch(void) {
+  static const char *HITS =
+      "{\"type\": \"scene\","
+      " \"cam\": {\"type\": \"perspective\", \"film\": {\"type\": \"hdrfilm\", \"width\": 4, \"height\": 4}},"
+      " \"floor\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [3, 2, 1]}, {\"rotate\": {\"axis\": "
+      "[1, 1, 0],"
+      " \"angle\": 20}}, {\"translate\": [0.1, -0.2, -0.3]}]},"
+      " \"flat\": {\"type\": \"obj\", \"filename\": \"tests/data/quad.obj\", \"face_normals\": true,"
+      " \"to_world\": [{\"scale\": 0.7},"
+      " {\"translate\": [0.5, 0.3, 0.9]}]},"
+      " \"flipped\": {\"type\": \"rectangle\", \"flip_normals\": true, \"to_world\": [{\"rotate\": "
+      "{\"axis\": [0, 1,"
+      " 0], \"angle\": 100}}, {\"translate\": [-1.2, 0, 0.5]}]},"
+      " \"box\": {\"type\": \"cube\", \"to_world\": [{\"scale\": 0.3}, {\"translate\": [1, 0.5, 0.3]}]},"
+      " \"ball\": {\"type\": \"sphere\", \"center\": [-0.3, 0.8, 0.4], \"radius\": 0.3},"
+      " \"lid\": {\"type\": \"disk\", \"to_world\": [{\"translate\": [0.8, -0.9, 0.6]}]},"
+      " \"group\": {\"type\": \"shapegroup\", \"leaf\": {\"type\": \"rectangle\"}},"
+      " \"copy\": {\"type\": \"instance\", \"shapegroup\": {\"type\": \"ref\", \"id\": \"group\"},"
+      " \"to_world\": [{\"scale\": 0.4}, {\"translate\": [-0.5, -0.8, 1.1]}]}}";
+  scene *s = tsup_load(HITS, NULL);
+  REQUIRE(s, "scene");
+  film_image warm;
+  REQUIRE(tsup_render(s, 1, 1, 1, &warm), "prepare");
+  film_image_free(&warm);
+  enum {
+    N = 150
+  };
+  static ray3 rays[N];
+  static accel_hit h[N];
+  static surface_interaction one[N], many[N];
+  const ray3 *rp[N];
+  const accel_hit *hp[N];
+  surface_interaction *sp[N];
+  pcg32 rng;
+  pcg32_seed(&rng, 7, 3);
+  int n = 0, cached = 0, tries = 0;
+  while (n < N && tries++ < 100 * N) {
+    vec3 o =
+        v3(4 * pcg32_next_double(&rng) - 2, 4 * pcg32_next_double(&rng) - 2, 3 * pcg32_next_double(&rng));
+    vec3 t =
+        v3(2 * pcg32_next_double(&rng) - 1, 2 * pcg32_next_double(&rng) - 1, pcg32_next_double(&rng) - 0.2);
+    ray3 r = {o, v3_scale(v3_sub(t, o), 0.5 + pcg32_next_double(&rng)), 0, INFINITY};
+    if (!accel_intersect(s->accel, &r, &h[n])) continue;
+    rays[n] = r;
+    const shape *top = s->shapes[h[n].shape];
+    cached += top->face_cache != NULL && !shape_is_instancing(top);
+    n++;
+  }
+  REQUIRE(n == N, "%d hits", n);
+  CHECK(cached > N / 3 && cached < N - 10, "a mix of cached meshes and other hits (%d cached)", cached);
+  for (int k = 0; k < N; k++) {
+    memset(&one[k], 0, sizeof one[k]);
+    hit_fill_interaction(s, &rays[k], &h[k], &one[k]);
+    rp[k] = &rays[k], hp[k] = &h[k], sp[k] = &many[k];
+  }
+  for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
+    if (!rsw_isa_set((rsw_isa)isa)) continue;
+    memset(many, 0, sizeof many);
+    hit_fill_interaction_batch(s, N, rp, hp, sp);
+    int bad = 0;
+    for (int k = 0; k < N; k++) bad += memcmp(&one[k], &many[k], sizeof one[k]) != 0;
+    CHECK(bad == 0, "%s: hit_fill_interaction_batch differs from hit_fill_interaction in %d of %d hits",
+          rsw_isa_name((rsw_isa)isa), bad, N);
+  }
+  rsw_isa_set(rsw_isa_best());
+  scene_free(s);
+}
+
 int main(void) {
   RSW_TEST_RUN(test_threads_cornell);
   RSW_TEST_RUN(test_threads_periodic);
@@ -569,5 +646,6 @@ int main(void) {
   RSW_TEST_RUN(test_emitter_batches);
   RSW_TEST_RUN(test_emitter_batch_chi2);
   RSW_TEST_RUN(test_frames_batch);
+  RSW_TEST_RUN(test_hits_batch);
   RSW_TEST_END("test_wave");
 }

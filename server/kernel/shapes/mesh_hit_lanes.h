@@ -1,0 +1,109 @@
+/* The body of shape_mesh_hits_batch (shapes/fill_simd.c) for one ISA,
+ * included after FRAME_FN / FRAME_ATTR / VD / VL / FSEL as frame_lanes.h
+ * (MESH_FN names the entry point).
+ *
+ * Each lane runs, operation for operation and in the same order, the
+ * scalar code of a cached mesh's hit (shapes/shape.h mesh_fill_inline_raw
+ * with a face-cache entry, then accel_surface_error for the hit's
+ * position error): the barycentric position under to_world (mat_point,
+ * its projective row included), the texture coordinates, the
+ * interpolated shading normal under the inverse transpose (xf_normal) and
+ * the position error bound; then the shading frame and wi
+ * (FRAME_LANES, frame_lanes.h). IEEE +, -, *, / and fabs round the same in a
+ * vector lane and -std=c11 turns FMA contraction off, so a lane is bitwise
+ * the scalar result. */
+FRAME_ATTR void MESH_FN(int n, int stride, const double *k, const double *in, double *out) {
+  const VD zero = (VD){0}, one = zero + 1.0;
+  const VL abs_mask = (VL){0} + 0x7fffffffffffffffLL;
+  /* k[i] in every lane, bit for bit (zero + k[i] would turn -0 into +0). */
+  VD kb[SHAPE_MH_K];
+  for (int i = 0; i < SHAPE_MH_K; i++) {
+    long long bits;
+    __builtin_memcpy(&bits, &k[i], sizeof bits);
+    kb[i] = (VD)((VL){0} + bits);
+  }
+#define B(i)    kb[i]
+#define VABS(x) ((VD)((VL)(x)&abs_mask))
+  const bool nrm = k[SHAPE_MH_NRM] != 0, uv = k[SHAPE_MH_UV] != 0, flip = k[SHAPE_MH_FLIP] != 0;
+  for (int k0 = 0; k0 < n; k0 += VW) {
+    VD v[SHAPE_MH_IN];
+#define LOAD(lo, hi)                                                                                         \
+  _Pragma("GCC unroll 16") for (int c = (lo); c < (hi); c++)                                                 \
+      __builtin_memcpy(&v[c], &in[(size_t)c * stride + k0], sizeof v[c])
+    LOAD(0, SHAPE_MH_IN_NA);
+    if (nrm)
+      LOAD(SHAPE_MH_IN_NA, SHAPE_MH_IN_UVA);
+    else
+      _Pragma("GCC unroll 16") for (int c = SHAPE_MH_IN_NA; c < SHAPE_MH_IN_UVA; c++) v[c] = zero;
+    if (uv)
+      LOAD(SHAPE_MH_IN_UVA, SHAPE_MH_IN_N);
+    else
+      _Pragma("GCC unroll 16") for (int c = SHAPE_MH_IN_UVA; c < SHAPE_MH_IN_N; c++) v[c] = zero;
+    LOAD(SHAPE_MH_IN_N, SHAPE_MH_IN);
+#undef LOAD
+    VD b1 = v[0], b2 = v[1];
+    VD b0 = one - b1 - b2;
+    /* po = p0 b0 + p1 b1 + p2 b2 (object space), then mat_point. */
+    VD po[3];
+    for (int c = 0; c < 3; c++) po[c] = v[2 + c] * b0 + v[5 + c] * b1 + v[8 + c] * b2;
+    VD p[3];
+    for (int r = 0; r < 3; r++)
+      p[r] = B(SHAPE_MH_M + 4 * r) * po[0] + B(SHAPE_MH_M + 4 * r + 1) * po[1] +
+             B(SHAPE_MH_M + 4 * r + 2) * po[2] + B(SHAPE_MH_M + 4 * r + 3);
+    VD w = B(SHAPE_MH_M + 12) * po[0] + B(SHAPE_MH_M + 13) * po[1] + B(SHAPE_MH_M + 14) * po[2] +
+           B(SHAPE_MH_M + 15);
+    VL proj = w != 1.0;
+    if (FRAME_ANY(proj)) {
+      VD wd = FSEL(proj, w, one);
+      for (int r = 0; r < 3; r++) p[r] = FSEL(proj, p[r] / wd, p[r]);
+    }
+    /* The interpolated vertex normal under the inverse transpose
+     * (xf_normal: component c = inv[0][c] no.x + inv[1][c] no.y +
+     * inv[2][c] no.z), flipped with the shape's normals. */
+    VD raw[3] = {zero, zero, zero};
+    if (nrm) {
+      VD no[3];
+      for (int c = 0; c < 3; c++)
+        no[c] = b0 * v[SHAPE_MH_IN_NA + c] + b1 * v[SHAPE_MH_IN_NA + 3 + c] + b2 * v[SHAPE_MH_IN_NA + 6 + c];
+      for (int c = 0; c < 3; c++) {
+        raw[c] =
+            B(SHAPE_MH_INV + c) * no[0] + B(SHAPE_MH_INV + 3 + c) * no[1] + B(SHAPE_MH_INV + 6 + c) * no[2];
+        if (flip) raw[c] = -raw[c];
+      }
+    }
+    VD u0 = b1, u1 = b2;
+    if (uv) {
+      u0 = b0 * v[SHAPE_MH_IN_UVA] + b1 * v[SHAPE_MH_IN_UVA + 2] + b2 * v[SHAPE_MH_IN_UVA + 4];
+      u1 = b0 * v[SHAPE_MH_IN_UVA + 1] + b1 * v[SHAPE_MH_IN_UVA + 3] + b2 * v[SHAPE_MH_IN_UVA + 5];
+    }
+    /* accel_surface_error(p, n) with the shape's terms (accel.h). */
+    VD nx = v[SHAPE_MH_IN_N], ny = v[SHAPE_MH_IN_N + 1], nz = v[SHAPE_MH_IN_N + 2];
+    VD atn[3];
+    for (int c = 0; c < 3; c++)
+      atn[c] = VABS(B(SHAPE_MH_M + c) * nx + B(SHAPE_MH_M + 4 + c) * ny + B(SHAPE_MH_M + 8 + c) * nz);
+    VD an1 = atn[0] + atn[1] + atn[2];
+    VD wsum = atn[0] * B(SHAPE_MH_S) + atn[1] * B(SHAPE_MH_S + 1) + atn[2] * B(SHAPE_MH_S + 2);
+    VD pc = VABS(p[0] - B(SHAPE_MH_C));
+    VD ay = VABS(p[1] - B(SHAPE_MH_C + 1)), az = VABS(p[2] - B(SHAPE_MH_C + 2));
+    pc = FSEL(ay > pc, ay, pc);
+    pc = FSEL(az > pc, az, pc);
+    VD n1 = VABS(nx) + VABS(ny) + VABS(nz);
+    VD err = RSW_F32_UNIT * (n1 * pc + wsum * (pc + B(SHAPE_MH_TC)) + an1 * B(SHAPE_MH_EXT));
+    /* The shading frame and wi (frame_lanes.h) from sn = n after
+     * flip_normals, the face's dp/du, d and the raw normal. */
+    VD snx[SHAPE_FRAME_IN], res[SHAPE_MH_OUT];
+    snx[0] = flip ? -nx : nx;
+    snx[1] = flip ? -ny : ny;
+    snx[2] = flip ? -nz : nz;
+    snx[3] = v[SHAPE_MH_IN_T], snx[4] = v[SHAPE_MH_IN_T + 1], snx[5] = v[SHAPE_MH_IN_T + 2];
+    snx[6] = v[SHAPE_MH_IN_D], snx[7] = v[SHAPE_MH_IN_D + 1], snx[8] = v[SHAPE_MH_IN_D + 2];
+    snx[9] = raw[0], snx[10] = raw[1], snx[11] = raw[2];
+    snx[12] = nrm ? one : zero;
+    FRAME_LANES(snx, res + 6);
+    res[0] = p[0], res[1] = p[1], res[2] = p[2], res[3] = err, res[4] = u0, res[5] = u1;
+    _Pragma("GCC unroll 16") for (int c = 0; c < SHAPE_MH_OUT; c++)
+        __builtin_memcpy(&out[(size_t)c * stride + k0], &res[c], sizeof res[c]);
+  }
+#undef B
+#undef VABS
+}
