@@ -1156,21 +1156,19 @@ static bool packet_load(const accel *a, packet_buf *pb, unsigned N, const ray3 *
   return any;
 }
 
-void accel_intersect_packet(const accel *a, const ray3 *const *r, int n, accel_hit *h, bool *hit,
-                            bool coherent) {
-  accel_intersect_packet_mask(a, r, n, h, hit, coherent, 0xFFFFFFFFu);
-}
-
-void accel_intersect_packet_mask(const accel *a, const ray3 *const *r, int n, accel_hit *h, bool *hit,
-                                 bool coherent, unsigned mask) {
+/* The packet query of accel_intersect_packet: hit i written to *h[i];
+ * all: every *h[i] written (a miss's with meaningless values: no branch
+ * on an unpredictable outcome), else only the hits'. */
+static void intersect_packet(const accel *a, const ray3 *const *r, int n, accel_hit *const *h, bool *hit,
+                             bool coherent, unsigned mask, bool all) {
   unsigned N = packet_n(n);
   if (n > (int)N && N > 1) { /* more rays than one packet holds */
     for (int k = 0; k < n; k += (int)N)
-      accel_intersect_packet_mask(a, r + k, n - k < (int)N ? n - k : (int)N, h + k, hit + k, coherent, mask);
+      intersect_packet(a, r + k, n - k < (int)N ? n - k : (int)N, h + k, hit + k, coherent, mask, all);
     return;
   }
   if (N == 1 || n == 1) {
-    for (int i = 0; i < n; i++) hit[i] = accel_intersect_mask(a, r[i], &h[i], mask);
+    for (int i = 0; i < n; i++) hit[i] = accel_intersect_mask(a, r[i], h[i], mask);
     return;
   }
   struct RTCIntersectContext ctx;
@@ -1192,10 +1190,12 @@ void accel_intersect_packet_mask(const accel *a, const ray3 *const *r, int n, ac
   for (int i = 0; i < n; i++) {
     unsigned geom = HITN_U(hb, N, HIT_GEOM, i);
     hit[i] = pb.valid[i] && geom != RTC_INVALID_GEOMETRY_ID;
-    if (!hit[i]) continue;
-    accel_hit *o = &h[i];
+  }
+  for (int i = 0; i < n; i++) {
+    if (!all && !hit[i]) continue;
+    accel_hit *o = h[i];
     o->t = pb.t0[i] + RAYN_F(p, N, RAY_TFAR, i) * pb.ts[i];
-    uint32_t id = HITN_U(hb, N, HIT_INST, i);
+    uint32_t id = hit[i] ? HITN_U(hb, N, HIT_INST, i) : 0;
     if (id < a->n_sub) {
       o->shape = id;
       o->sub = 0;
@@ -1203,11 +1203,29 @@ void accel_intersect_packet_mask(const accel *a, const ray3 *const *r, int n, ac
       o->shape = a->list_shape[id - a->n_sub];
       o->sub = a->list_sub[id - a->n_sub];
     }
-    o->member = geom;
+    o->member = HITN_U(hb, N, HIT_GEOM, i);
     o->prim = HITN_U(hb, N, HIT_PRIM, i);
     o->u = HITN_F(hb, N, HIT_U, i);
     o->v = HITN_F(hb, N, HIT_V, i);
     o->ng = v3(HITN_F(hb, N, HIT_NG, i), HITN_F(hb, N, HIT_NG + 1, i), HITN_F(hb, N, HIT_NG + 2, i));
+  }
+}
+
+void accel_intersect_packet(const accel *a, const ray3 *const *r, int n, accel_hit *const *h, bool *hit,
+                            bool coherent) {
+  intersect_packet(a, r, n, h, hit, coherent, 0xFFFFFFFFu, true);
+}
+
+void accel_intersect_packet_mask(const accel *a, const ray3 *const *r, int n, accel_hit *h, bool *hit,
+                                 bool coherent, unsigned mask) {
+  enum {
+    P = 16
+  };
+  for (int k = 0; k < n; k += P) {
+    int m = n - k < P ? n - k : P;
+    accel_hit *hp[P];
+    for (int i = 0; i < m; i++) hp[i] = &h[k + i];
+    intersect_packet(a, r + k, m, hp, hit + k, coherent, mask, false);
   }
 }
 

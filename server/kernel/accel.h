@@ -50,9 +50,10 @@ bool accel_occluded(const accel *a, const ray3 *r);
  * rules, same hit record); Embree's packet kernels may round a hit
  * distance differently from its single-ray kernel, so results agree with
  * the single-ray calls to float precision, not bitwise. hit[i] / occ[i]:
- * ray i hit something (h[i] filled) / is blocked. coherent: the rays share
- * an origin region and nearly a direction (camera rays), an Embree hint. */
-void accel_intersect_packet(const accel *a, const ray3 *const *r, int n, accel_hit *h, bool *hit,
+ * ray i hit something (*h[i] filled, and a miss's *h[i] overwritten; h[i]
+ * in the _mask variant below, a miss's left as it was) / is blocked. coherent: the rays share an origin region and nearly a
+ * direction (camera rays), an Embree hint. */
+void accel_intersect_packet(const accel *a, const ray3 *const *r, int n, accel_hit *const *h, bool *hit,
                             bool coherent);
 void accel_occluded_packet(const accel *a, const ray3 *const *r, int n, bool *occ);
 
