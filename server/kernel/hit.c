@@ -2,6 +2,8 @@
  * members under placement * member.to_world. */
 #include "hit.h"
 
+#include <string.h>
+
 #include "accel.h"
 #include "shapes/instance.h"
 
@@ -54,9 +56,47 @@ static inline bool hit_cached_mesh(const shape *s) {
   return shape_is_mesh(s) && s->face_cache && !shape_is_instancing(s);
 }
 
+/* Face f of mesh s as shape_mesh_hits_batch's in[2 .. SHAPE_MH_IN_D),
+ * written to q[c * step] (step 1: one face's constants; S: a lane of the
+ * per-lane arrays). */
+static inline void mesh_face_in(const shape *s, uint32_t f, bool nrm, bool uv, double *q, int step) {
+  const mesh *ms = &s->mesh;
+  const uint32_t *ix = &ms->faces[3 * (size_t)f];
+  const uint32_t i0 = ix[0], i1 = ix[1], i2 = ix[2];
+  const float *p0 = &ms->pos[3 * (size_t)i0], *p1 = &ms->pos[3 * (size_t)i1], *p2 = &ms->pos[3 * (size_t)i2];
+  q[0] = p0[0], q[step] = p0[1], q[2 * step] = p0[2];
+  q[3 * step] = p1[0], q[4 * step] = p1[1], q[5 * step] = p1[2];
+  q[6 * step] = p2[0], q[7 * step] = p2[1], q[8 * step] = p2[2];
+  if (nrm) {
+    const float *na = &ms->nrm[3 * (size_t)i0], *nb = &ms->nrm[3 * (size_t)i1],
+                *nc = &ms->nrm[3 * (size_t)i2];
+    double *e = &q[(SHAPE_MH_IN_NA - 2) * step];
+    e[0] = na[0], e[step] = na[1], e[2 * step] = na[2];
+    e[3 * step] = nb[0], e[4 * step] = nb[1], e[5 * step] = nb[2];
+    e[6 * step] = nc[0], e[7 * step] = nc[1], e[8 * step] = nc[2];
+  }
+  if (uv) {
+    const float *ua = &ms->uv[2 * (size_t)i0], *ub = &ms->uv[2 * (size_t)i1], *uc = &ms->uv[2 * (size_t)i2];
+    double *e = &q[(SHAPE_MH_IN_UVA - 2) * step];
+    e[0] = ua[0], e[step] = ua[1], e[2 * step] = ub[0], e[3 * step] = ub[1], e[4 * step] = uc[0];
+    e[5 * step] = uc[1];
+  }
+  /* The face's normal and dp/du: zero where the face's uv determinant
+   * is, as mesh_fill_inline_raw leaves it. */
+  const double *fc = &s->face_cache[SHAPE_FACE_DOUBLES * (size_t)f];
+  double *e = &q[(SHAPE_MH_IN_N - 2) * step];
+  e[0] = fc[0], e[step] = fc[1], e[2 * step] = fc[2], e[3 * step] = fc[3], e[4 * step] = fc[4];
+  e[5 * step] = fc[5];
+}
+
+/* Meshes of at most this many faces have their hits filled face by face
+ * (the face's data once for its lanes). */
+#define HIT_FACE_GROUPS 64
+
 /* The hits lane[0..cnt) on one cached mesh s (top-level shape `index`),
  * their whole si through shape_mesh_hits_batch (bitwise
- * hit_fill_interaction). */
+ * hit_fill_interaction): face by face for a small mesh, else lane by
+ * lane. */
 static void hit_fill_cached(const scene *sc, const shape *s, uint32_t index, int cnt, const int *lane,
                             const ray3 *const *r, const accel_hit *const *h, surface_interaction *const *si) {
   enum {
@@ -77,63 +117,60 @@ static void hit_fill_cached(const scene *sc, const shape *s, uint32_t index, int
   k[SHAPE_MH_NRM] = nrm;
   k[SHAPE_MH_UV] = uv;
   k[SHAPE_MH_FLIP] = s->flip_normals;
-  double a[SHAPE_MH_IN * S], o[SHAPE_MH_OUT * S];
-  for (int j0 = 0; j0 < cnt; j0 += S) {
+  /* Lanes in face order for a small mesh (counting sort), else as given. */
+  bool by_face = ms->n_faces <= HIT_FACE_GROUPS;
+  int order[64], start[HIT_FACE_GROUPS + 1];
+  const int *ls = lane;
+  if (by_face) {
+    memset(start, 0, (ms->n_faces + 1) * sizeof *start);
+    for (int j = 0; j < cnt; j++) start[h[lane[j]]->prim + 1]++;
+    for (uint32_t f = 0; f < ms->n_faces; f++) start[f + 1] += start[f];
+    int fill[HIT_FACE_GROUPS];
+    memcpy(fill, start, ms->n_faces * sizeof *fill);
+    for (int j = 0; j < cnt; j++) order[fill[h[lane[j]]->prim]++] = lane[j];
+    ls = order;
+  }
+  double a[SHAPE_MH_IN * S], o[SHAPE_MH_OUT * S], face[SHAPE_MH_IN_D - 2];
+  for (int j0 = 0; j0 < cnt;) {
+    /* The next run: one face's lanes, or up to S lanes. */
     int m = cnt - j0 < S ? cnt - j0 : S;
+    uint32_t f = h[ls[j0]]->prim;
+    if (by_face) {
+      int end = start[f + 1];
+      m = end - j0 < S ? end - j0 : S;
+      mesh_face_in(s, f, nrm, uv, face, 1);
+    }
     for (int j = 0; j < m; j++) {
-      const accel_hit *hj = h[lane[j0 + j]];
-      const uint32_t *ix = &ms->faces[3 * (size_t)hj->prim];
-      const uint32_t i0 = ix[0], i1 = ix[1], i2 = ix[2];
+      const accel_hit *hj = h[ls[j0 + j]];
       double *q = &a[j];
       q[0] = hj->u, q[S] = hj->v;
-      const float *p0 = &ms->pos[3 * (size_t)i0], *p1 = &ms->pos[3 * (size_t)i1],
-                  *p2 = &ms->pos[3 * (size_t)i2];
-      q[2 * S] = p0[0], q[3 * S] = p0[1], q[4 * S] = p0[2];
-      q[5 * S] = p1[0], q[6 * S] = p1[1], q[7 * S] = p1[2];
-      q[8 * S] = p2[0], q[9 * S] = p2[1], q[10 * S] = p2[2];
-      if (nrm) {
-        const float *na = &ms->nrm[3 * (size_t)i0], *nb = &ms->nrm[3 * (size_t)i1],
-                    *nc = &ms->nrm[3 * (size_t)i2];
-        double *e = &q[SHAPE_MH_IN_NA * S];
-        e[0] = na[0], e[S] = na[1], e[2 * S] = na[2];
-        e[3 * S] = nb[0], e[4 * S] = nb[1], e[5 * S] = nb[2];
-        e[6 * S] = nc[0], e[7 * S] = nc[1], e[8 * S] = nc[2];
-      }
-      if (uv) {
-        const float *ua = &ms->uv[2 * (size_t)i0], *ub = &ms->uv[2 * (size_t)i1],
-                    *uc = &ms->uv[2 * (size_t)i2];
-        double *e = &q[SHAPE_MH_IN_UVA * S];
-        e[0] = ua[0], e[S] = ua[1], e[2 * S] = ub[0], e[3 * S] = ub[1], e[4 * S] = uc[0], e[5 * S] = uc[1];
-      }
-      /* The face's normal and dp/du: zero where the face's uv
-       * determinant is, as mesh_fill_inline_raw leaves it. */
-      const double *fc = &s->face_cache[SHAPE_FACE_DOUBLES * (size_t)hj->prim];
-      double *e = &q[SHAPE_MH_IN_N * S];
-      e[0] = fc[0], e[S] = fc[1], e[2 * S] = fc[2], e[3 * S] = fc[3], e[4 * S] = fc[4], e[5 * S] = fc[5];
-      vec3 d = r[lane[j0 + j]]->d;
-      e[6 * S] = d.x, e[7 * S] = d.y, e[8 * S] = d.z;
+      if (!by_face) mesh_face_in(s, hj->prim, nrm, uv, &q[2 * S], S);
+      vec3 d = r[ls[j0 + j]]->d;
+      double *e = &q[SHAPE_MH_IN_D * S];
+      e[0] = d.x, e[S] = d.y, e[2 * S] = d.z;
     }
     for (int j = m; j < ((m + 7) & ~7); j++) /* the last vector's unused lanes */
       for (int c = 0; c < SHAPE_MH_IN; c++) a[c * S + j] = 0;
-    shape_mesh_hits_batch(m, S, k, a, o);
+    shape_mesh_hits_batch(m, S, k, by_face ? face : NULL, a, o);
     for (int j = 0; j < m; j++) {
-      const accel_hit *hj = h[lane[j0 + j]];
-      surface_interaction *x = si[lane[j0 + j]];
-      const double *f = &o[j];
+      const accel_hit *hj = h[ls[j0 + j]];
+      surface_interaction *x = si[ls[j0 + j]];
+      const double *fo = &o[j];
       const double *fc = &s->face_cache[SHAPE_FACE_DOUBLES * (size_t)hj->prim];
       vec3 n = v3(fc[0], fc[1], fc[2]);
       x->t = hj->t;
       x->shape = s;
       x->prim = hj->prim;
-      x->p = v3(f[0], f[S], f[2 * S]);
-      x->p_error = f[3 * S];
-      x->uv[0] = f[4 * S], x->uv[1] = f[5 * S];
+      x->p = v3(fo[0], fo[S], fo[2 * S]);
+      x->p_error = fo[3 * S];
+      x->uv[0] = fo[4 * S], x->uv[1] = fo[5 * S];
       x->ng = s->flip_normals ? v3_neg(n) : n;
-      x->sh.s = v3(f[6 * S], f[7 * S], f[8 * S]);
-      x->sh.t = v3(f[9 * S], f[10 * S], f[11 * S]);
-      x->sh.n = v3(f[12 * S], f[13 * S], f[14 * S]);
-      x->wi = v3(f[15 * S], f[16 * S], f[17 * S]);
+      x->sh.s = v3(fo[6 * S], fo[7 * S], fo[8 * S]);
+      x->sh.t = v3(fo[9 * S], fo[10 * S], fo[11 * S]);
+      x->sh.n = v3(fo[12 * S], fo[13 * S], fo[14 * S]);
+      x->wi = v3(fo[15 * S], fo[16 * S], fo[17 * S]);
     }
+    j0 += m;
   }
 }
 

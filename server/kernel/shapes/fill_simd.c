@@ -103,13 +103,14 @@ void shape_frames_batch(int n, int stride, const double *in, double *out) {
   frames_sse2(n, stride, in, out);
 }
 
-void shape_mesh_hits_batch(int n, int stride, const double *k, const double *in, double *out) {
+void shape_mesh_hits_batch(int n, int stride, const double *k, const double *face, const double *in,
+                           double *out) {
 #if defined(__x86_64__) || defined(__i386__)
   switch (rsw_isa_get()) {
-  case RSW_ISA_AVX512: mesh_hits_avx512(n, stride, k, in, out); return;
-  case RSW_ISA_AVX2: mesh_hits_avx2(n, stride, k, in, out); return;
+  case RSW_ISA_AVX512: mesh_hits_avx512(n, stride, k, face, in, out); return;
+  case RSW_ISA_AVX2: mesh_hits_avx2(n, stride, k, face, in, out); return;
   default: break;
   }
 #endif
-  mesh_hits_sse2(n, stride, k, in, out);
+  mesh_hits_sse2(n, stride, k, face, in, out);
 }

@@ -12,7 +12,8 @@
  * (FRAME_LANES, frame_lanes.h). IEEE +, -, *, / and fabs round the same in a
  * vector lane and -std=c11 turns FMA contraction off, so a lane is bitwise
  * the scalar result. */
-FRAME_ATTR void MESH_FN(int n, int stride, const double *k, const double *in, double *out) {
+FRAME_ATTR void MESH_FN(int n, int stride, const double *k, const double *face, const double *in,
+                        double *out) {
   const VD zero = (VD){0}, one = zero + 1.0;
   const VL abs_mask = (VL){0} + 0x7fffffffffffffffLL;
   /* k[i] in every lane, bit for bit (zero + k[i] would turn -0 into +0). */
@@ -25,8 +26,24 @@ FRAME_ATTR void MESH_FN(int n, int stride, const double *k, const double *in, do
 #define B(i)    kb[i]
 #define VABS(x) ((VD)((VL)(x)&abs_mask))
   const bool nrm = k[SHAPE_MH_NRM] != 0, uv = k[SHAPE_MH_UV] != 0, flip = k[SHAPE_MH_FLIP] != 0;
+  /* One face for every lane: its data in every lane (bit for bit). */
+  VD fv[SHAPE_MH_IN_D];
+  if (face)
+    for (int c = 2; c < SHAPE_MH_IN_D; c++) {
+      long long bits;
+      __builtin_memcpy(&bits, &face[c - 2], sizeof bits);
+      fv[c] = (VD)((VL){0} + bits);
+    }
   for (int k0 = 0; k0 < n; k0 += VW) {
     VD v[SHAPE_MH_IN];
+    if (face) {
+      __builtin_memcpy(&v[0], &in[k0], sizeof v[0]);
+      __builtin_memcpy(&v[1], &in[(size_t)stride + k0], sizeof v[1]);
+      _Pragma("GCC unroll 32") for (int c = 2; c < SHAPE_MH_IN_D; c++) v[c] = fv[c];
+      _Pragma("GCC unroll 4") for (int c = SHAPE_MH_IN_D; c < SHAPE_MH_IN; c++)
+          __builtin_memcpy(&v[c], &in[(size_t)c * stride + k0], sizeof v[c]);
+      goto loaded;
+    }
 #define LOAD(lo, hi)                                                                                         \
   _Pragma("GCC unroll 16") for (int c = (lo); c < (hi); c++)                                                 \
       __builtin_memcpy(&v[c], &in[(size_t)c * stride + k0], sizeof v[c])
@@ -41,6 +58,7 @@ FRAME_ATTR void MESH_FN(int n, int stride, const double *k, const double *in, do
       _Pragma("GCC unroll 16") for (int c = SHAPE_MH_IN_UVA; c < SHAPE_MH_IN_N; c++) v[c] = zero;
     LOAD(SHAPE_MH_IN_N, SHAPE_MH_IN);
 #undef LOAD
+  loaded:;
     VD b1 = v[0], b2 = v[1];
     VD b0 = one - b1 - b2;
     /* po = p0 b0 + p1 b1 + p2 b2 (object space), then mat_point. */

@@ -176,9 +176,11 @@ void shape_frames_batch(int n, int stride, const double *in, double *out);
  * face's vertices p0, p1, p2 xyz; its vertex normals na, nb, nc xyz (read
  * only with normals) and uv ua, ub, uc (read only with uv); the face
  * cache's normal n xyz (before flip_normals) and dp/du xyz; the ray
- * direction d xyz. out: SHAPE_MH_OUT, the world position xyz, its error
- * bound (accel_surface_error), uv, the shading frame s, t, n and wi. Each
- * lane bitwise the scalar code (mesh_hit_lanes.h), at every ISA. */
+ * direction d xyz. face: NULL, or the face data of every lane (hits on
+ * one face), in[2 .. SHAPE_MH_IN_D) as one value each (in then holds only
+ * the barycentrics and d). out: SHAPE_MH_OUT, the world position xyz,
+ * its error bound (accel_surface_error), uv, the shading frame s, t, n and
+ * wi. Each lane bitwise the scalar code (mesh_hit_lanes.h), at every ISA. */
 enum {
   SHAPE_MH_M = 0,
   SHAPE_MH_INV = 16,
@@ -198,7 +200,8 @@ enum {
   SHAPE_MH_IN = 35,
   SHAPE_MH_OUT = 18
 };
-void shape_mesh_hits_batch(int n, int stride, const double *k, const double *in, double *out);
+void shape_mesh_hits_batch(int n, int stride, const double *k, const double *face, const double *in,
+                           double *out);
 
 /* Compute area, triangle cdf; check geometry (degenerate to_world for a
  * disk, non-uniform scale for a sphere, ...). Called by create(). */
