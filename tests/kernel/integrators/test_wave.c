@@ -27,6 +27,7 @@
  *    emitter's batched directions one against its pdf_direction (the area
  *    emitter's: tests/kernel/emitters/test_area_light.c);
  *    a stratified film is bitwise the same for 1, 2 and 3 threads. */
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -564,9 +565,29 @@ static void test_frames_batch(void) {
 /* hit_fill_interaction_batch against hit_fill_interaction, lane by lane
  * and bit for bit, at every ISA: cached meshes (shape_mesh_hits_batch:
  * vertex normals and uv, uv only (an OBJ with face_normals), flip_normals, rotated
- * and scaled) mixed in one batch with the other shapes' hits (a sphere, a
+ * and scaled, filled face by face or, a larger mesh, lane by lane) mixed in one batch with the other shapes' hits (a sphere, a
  * disk, an instanced rectangle). */
 static void test_hits_batch(void) {
+  /* A wavy 10 x 10 grid (162 faces: filled lane by lane), with vertex
+   * normals and uv, as an OBJ file. */
+  char obj[] = "/tmp/rsw_test_hits_XXXXXX.obj";
+  int fd = mkstemps(obj, 4);
+  REQUIRE(fd >= 0, "temporary OBJ");
+  FILE *f = fdopen(fd, "w");
+  REQUIRE(f, "temporary OBJ");
+  for (int j = 0; j < 10; j++)
+    for (int i = 0; i < 10; i++) {
+      double x = i / 4.5 - 1, y = j / 4.5 - 1, z = 0.1 * sin(3 * x) * cos(2 * y);
+      fprintf(f, "v %.6f %.6f %.6f\nvt %.4f %.4f\nvn %.5f %.5f 1\n", x, y, z, i / 9.0, j / 9.0,
+              -0.3 * cos(3 * x) * cos(2 * y), 0.2 * sin(3 * x) * sin(2 * y));
+    }
+  for (int j = 0; j < 9; j++)
+    for (int i = 0; i < 9; i++) {
+      int a = 1 + j * 10 + i, b = a + 1, c = a + 10, d = c + 1;
+      fprintf(f, "f %d/%d/%d %d/%d/%d %d/%d/%d\nf %d/%d/%d %d/%d/%d %d/%d/%d\n", a, a, a, b, b, b, d, d, d, a,
+              a, a, d, d, d, c, c, c);
+    }
+  fclose(f);
   static const char *HITS =
       "{\"type\": \"scene\","
       " \"cam\": {\"type\": \"perspective\", \"film\": {\"type\": \"hdrfilm\", \"width\": 4, \"height\": 4}},"
@@ -580,18 +601,24 @@ static void test_hits_batch(void) {
       "{\"axis\": [0, 1,"
       " 0], \"angle\": 100}}, {\"translate\": [-1.2, 0, 0.5]}]},"
       " \"box\": {\"type\": \"cube\", \"to_world\": [{\"scale\": 0.3}, {\"translate\": [1, 0.5, 0.3]}]},"
+      " \"grid\": {\"type\": \"obj\", \"filename\": \"%s\", \"to_world\": [{\"scale\": [0.8, 0.6, 1]}, "
+      "{\"rotate\":"
+      " {\"axis\": [0, 1, 1], \"angle\": 30}}, {\"translate\": [0.4, 0.4, 1.4]}]},"
       " \"ball\": {\"type\": \"sphere\", \"center\": [-0.3, 0.8, 0.4], \"radius\": 0.3},"
       " \"lid\": {\"type\": \"disk\", \"to_world\": [{\"translate\": [0.8, -0.9, 0.6]}]},"
       " \"group\": {\"type\": \"shapegroup\", \"leaf\": {\"type\": \"rectangle\"}},"
       " \"copy\": {\"type\": \"instance\", \"shapegroup\": {\"type\": \"ref\", \"id\": \"group\"},"
       " \"to_world\": [{\"scale\": 0.4}, {\"translate\": [-0.5, -0.8, 1.1]}]}}";
-  scene *s = tsup_load(HITS, NULL);
+  char text[4096];
+  snprintf(text, sizeof text, HITS, obj);
+  scene *s = tsup_load(text, NULL);
+  remove(obj);
   REQUIRE(s, "scene");
   film_image warm;
   REQUIRE(tsup_render(s, 1, 1, 1, &warm), "prepare");
   film_image_free(&warm);
   enum {
-    N = 150
+    N = 200
   };
   static ray3 rays[N];
   static accel_hit h[N];
@@ -601,7 +628,7 @@ static void test_hits_batch(void) {
   surface_interaction *sp[N];
   pcg32 rng;
   pcg32_seed(&rng, 7, 3);
-  int n = 0, cached = 0, tries = 0;
+  int n = 0, cached = 0, large = 0, tries = 0;
   while (n < N && tries++ < 100 * N) {
     vec3 o =
         v3(4 * pcg32_next_double(&rng) - 2, 4 * pcg32_next_double(&rng) - 2, 3 * pcg32_next_double(&rng));
@@ -612,10 +639,12 @@ static void test_hits_batch(void) {
     rays[n] = r;
     const shape *top = s->shapes[h[n].shape];
     cached += top->face_cache != NULL && !shape_is_instancing(top);
+    large += top->face_cache != NULL && top->mesh.n_faces > 64;
     n++;
   }
   REQUIRE(n == N, "%d hits", n);
-  CHECK(cached > N / 3 && cached < N - 10, "a mix of cached meshes and other hits (%d cached)", cached);
+  CHECK(cached > N / 3 && cached < N - 10 && large > 10,
+        "a mix of cached meshes (small and large) and other hits (%d cached, %d on the grid)", cached, large);
   for (int k = 0; k < N; k++) {
     memset(&one[k], 0, sizeof one[k]);
     hit_fill_interaction(s, &rays[k], &h[k], &one[k]);
