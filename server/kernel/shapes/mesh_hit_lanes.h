@@ -34,6 +34,24 @@ FRAME_ATTR void MESH_FN(int n, int stride, const double *k, const double *face, 
       __builtin_memcpy(&bits, &face[c - 2], sizeof bits);
       fv[c] = (VD)((VL){0} + bits);
     }
+    /* accel_surface_error's terms of the normal n: |(A^T n)_k| summed, and
+   * weighted by S_k, and |n|_1 (once for a face's lanes). */
+#define NORMAL_TERMS(nx, ny, nz, an1, wsum, n1)                                                              \
+  do {                                                                                                       \
+    VD atn0 = VABS(B(SHAPE_MH_M) * (nx) + B(SHAPE_MH_M + 4) * (ny) + B(SHAPE_MH_M + 8) * (nz));              \
+    VD atn1 = VABS(B(SHAPE_MH_M + 1) * (nx) + B(SHAPE_MH_M + 5) * (ny) + B(SHAPE_MH_M + 9) * (nz));          \
+    VD atn2 = VABS(B(SHAPE_MH_M + 2) * (nx) + B(SHAPE_MH_M + 6) * (ny) + B(SHAPE_MH_M + 10) * (nz));         \
+    (an1) = atn0 + atn1 + atn2;                                                                              \
+    (wsum) = atn0 * B(SHAPE_MH_S) + atn1 * B(SHAPE_MH_S + 1) + atn2 * B(SHAPE_MH_S + 2);                     \
+    (n1) = VABS(nx) + VABS(ny) + VABS(nz);                                                                   \
+  } while (0)
+  VD f_an1 = zero, f_wsum = zero, f_n1 = zero;
+  if (face)
+    NORMAL_TERMS(fv[SHAPE_MH_IN_N], fv[SHAPE_MH_IN_N + 1], fv[SHAPE_MH_IN_N + 2], f_an1, f_wsum, f_n1);
+  /* An affine to_world (last row 0 0 0 1) gives w = 1 exactly for the
+   * finite object-space points of a hit: no division (mat_point). */
+  const bool affine = k[SHAPE_MH_M + 12] == 0 && k[SHAPE_MH_M + 13] == 0 && k[SHAPE_MH_M + 14] == 0 &&
+                      k[SHAPE_MH_M + 15] == 1;
   for (int k0 = 0; k0 < n; k0 += VW) {
     VD v[SHAPE_MH_IN];
     if (face) {
@@ -68,10 +86,10 @@ FRAME_ATTR void MESH_FN(int n, int stride, const double *k, const double *face, 
     for (int r = 0; r < 3; r++)
       p[r] = B(SHAPE_MH_M + 4 * r) * po[0] + B(SHAPE_MH_M + 4 * r + 1) * po[1] +
              B(SHAPE_MH_M + 4 * r + 2) * po[2] + B(SHAPE_MH_M + 4 * r + 3);
-    VD w = B(SHAPE_MH_M + 12) * po[0] + B(SHAPE_MH_M + 13) * po[1] + B(SHAPE_MH_M + 14) * po[2] +
-           B(SHAPE_MH_M + 15);
-    VL proj = w != 1.0;
-    if (FRAME_ANY(proj)) {
+    if (!affine) {
+      VD w = B(SHAPE_MH_M + 12) * po[0] + B(SHAPE_MH_M + 13) * po[1] + B(SHAPE_MH_M + 14) * po[2] +
+             B(SHAPE_MH_M + 15);
+      VL proj = w != 1.0;
       VD wd = FSEL(proj, w, one);
       for (int r = 0; r < 3; r++) p[r] = FSEL(proj, p[r] / wd, p[r]);
     }
@@ -96,16 +114,12 @@ FRAME_ATTR void MESH_FN(int n, int stride, const double *k, const double *face, 
     }
     /* accel_surface_error(p, n) with the shape's terms (accel.h). */
     VD nx = v[SHAPE_MH_IN_N], ny = v[SHAPE_MH_IN_N + 1], nz = v[SHAPE_MH_IN_N + 2];
-    VD atn[3];
-    for (int c = 0; c < 3; c++)
-      atn[c] = VABS(B(SHAPE_MH_M + c) * nx + B(SHAPE_MH_M + 4 + c) * ny + B(SHAPE_MH_M + 8 + c) * nz);
-    VD an1 = atn[0] + atn[1] + atn[2];
-    VD wsum = atn[0] * B(SHAPE_MH_S) + atn[1] * B(SHAPE_MH_S + 1) + atn[2] * B(SHAPE_MH_S + 2);
+    VD an1 = f_an1, wsum = f_wsum, n1 = f_n1;
+    if (!face) NORMAL_TERMS(nx, ny, nz, an1, wsum, n1);
     VD pc = VABS(p[0] - B(SHAPE_MH_C));
     VD ay = VABS(p[1] - B(SHAPE_MH_C + 1)), az = VABS(p[2] - B(SHAPE_MH_C + 2));
     pc = FSEL(ay > pc, ay, pc);
     pc = FSEL(az > pc, az, pc);
-    VD n1 = VABS(nx) + VABS(ny) + VABS(nz);
     VD err = RSW_F32_UNIT * (n1 * pc + wsum * (pc + B(SHAPE_MH_TC)) + an1 * B(SHAPE_MH_EXT));
     /* The shading frame and wi (frame_lanes.h) from sn = n after
      * flip_normals, the face's dp/du, d and the raw normal. */
@@ -124,4 +138,5 @@ FRAME_ATTR void MESH_FN(int n, int stride, const double *k, const double *face, 
   }
 #undef B
 #undef VABS
+#undef NORMAL_TERMS
 }
