@@ -27,15 +27,24 @@
  * the same treatment at the light's end (spawn_ray_between); for other
  * emitters the ray stops short of ds.dist by ShadowEpsilon (relative), as
  * Mitsuba. */
-ray3 spawn_ray_to(const scene *sc, const surface_interaction *si, const emitter *e,
-                  const direction_sample *ds) {
+static inline void spawn_ray_to_in(const scene *sc, const surface_interaction *si, const emitter *e,
+                                   const direction_sample *ds, ray3 *r) {
   if ((e->flags & EMITTER_SURFACE) && e->shape) {
     const shape *ls = e->shape;
-    return spawn_ray_between(si, ds->p, ds->n,
-                             accel_surface_error(sc->accel, ls->index, &ls->to_world, ds->p, ds->n));
+    *r = spawn_ray_between(si, ds->p, ds->n,
+                           accel_surface_error(sc->accel, ls->index, &ls->to_world, ds->p, ds->n));
+    return;
   }
-  ray3 r = spawn_ray(si, ds->d);
-  r.tmax = isfinite(ds->dist) ? ds->dist * (1.0 - RSW_SHADOW_EPSILON) : INFINITY;
+  r->o = offset_on_side(si->p, si->ng, si->p_error, ds->d);
+  r->d = ds->d;
+  r->tmin = 0.0;
+  r->tmax = isfinite(ds->dist) ? ds->dist * (1.0 - RSW_SHADOW_EPSILON) : INFINITY;
+}
+
+ray3 spawn_ray_to(const scene *sc, const surface_interaction *si, const emitter *e,
+                  const direction_sample *ds) {
+  ray3 r;
+  spawn_ray_to_in(sc, si, e, ds, &r);
   return r;
 }
 
@@ -411,7 +420,7 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, int
      * walls are reached by BSDF sampling alone (weight 1). */
     if (sc->periodic.on && (e->flags & EMITTER_SURFACE) && !in_column(&sc->periodic, l->ds.p)) l->ds.pdf = 0;
     if (l->ds.pdf > 0 && !col_is_black(l->value)) {
-      l->sray = spawn_ray_to(sc, lane_si(l), e, &l->ds);
+      spawn_ray_to_in(sc, lane_si(l), e, &l->ds, &l->sray);
       l->nee = true;
       g[(*n_sh)++] = g[k];
     }
