@@ -629,20 +629,28 @@ static void test_hits_batch(void) {
   pcg32 rng;
   pcg32_seed(&rng, 7, 3);
   int n = 0, cached = 0, large = 0, tries = 0;
+  /* The first 64 rays from above the floor's far corner (many on one
+   * face of it: that face's hits filled with its data given once), the
+   * rest from anywhere. */
+  int floor_face[2] = {0, 0};
   while (n < N && tries++ < 100 * N) {
     vec3 o =
         v3(4 * pcg32_next_double(&rng) - 2, 4 * pcg32_next_double(&rng) - 2, 3 * pcg32_next_double(&rng));
     vec3 t =
         v3(2 * pcg32_next_double(&rng) - 1, 2 * pcg32_next_double(&rng) - 1, pcg32_next_double(&rng) - 0.2);
+    if (n < 64) o = v3(-2.5, -1.5, 2), t = v3(-2.2 + 0.6 * t.x, -1.5 + 0.5 * t.y, -1);
     ray3 r = {o, v3_scale(v3_sub(t, o), 0.5 + pcg32_next_double(&rng)), 0, INFINITY};
     if (!accel_intersect(s->accel, &r, &h[n])) continue;
     rays[n] = r;
     const shape *top = s->shapes[h[n].shape];
     cached += top->face_cache != NULL && !shape_is_instancing(top);
     large += top->face_cache != NULL && top->mesh.n_faces > 64;
+    if (n < 64 && h[n].shape == s->shapes[0]->index) floor_face[h[n].prim & 1]++;
     n++;
   }
   REQUIRE(n == N, "%d hits", n);
+  CHECK(floor_face[0] >= 8 || floor_face[1] >= 8, "8 hits on one face of the floor (%d, %d)", floor_face[0],
+        floor_face[1]);
   CHECK(cached > N / 3 && cached < N - 10 && large > 10,
         "a mix of cached meshes (small and large) and other hits (%d cached, %d on the grid)", cached, large);
   for (int k = 0; k < N; k++) {
