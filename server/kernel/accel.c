@@ -1195,13 +1195,13 @@ static void intersect_packet(const accel *a, const ray3 *const *r, int n, accel_
     if (!all && !hit[i]) continue;
     accel_hit *o = h[i];
     o->t = pb.t0[i] + RAYN_F(p, N, RAY_TFAR, i) * pb.ts[i];
-    uint32_t id = hit[i] ? HITN_U(hb, N, HIT_INST, i) : 0;
-    if (id < a->n_sub) {
-      o->shape = id;
-      o->sub = 0;
-    } else {
+    uint32_t id = HITN_U(hb, N, HIT_INST, i);
+    if (hit[i] & (id >= a->n_sub)) { /* one predictable branch: false for a miss too */
       o->shape = a->list_shape[id - a->n_sub];
       o->sub = a->list_sub[id - a->n_sub];
+    } else {
+      o->shape = id;
+      o->sub = 0;
     }
     o->member = HITN_U(hb, N, HIT_GEOM, i);
     o->prim = HITN_U(hb, N, HIT_PRIM, i);

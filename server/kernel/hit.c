@@ -89,22 +89,20 @@ static inline void mesh_face_in(const shape *s, uint32_t f, bool nrm, bool uv, d
   e[5 * step] = fc[5];
 }
 
-/* Meshes of at most this many faces have their hits filled face by face
- * (the face's data once for its lanes) where a face has at least
- * HIT_FACE_MIN of them; a cached mesh with fewer than HIT_MESH_MIN hits
- * in a batch takes the scalar fill (the batched call's set-up would cost
- * more). */
+/* A mesh of at most HIT_FACE_GROUPS faces has its hits filled face by
+ * face (the face's data once for its lanes) where a face has at least
+ * HIT_FACE_MIN of a batch's hits, and its other hits by the scalar fill;
+ * a larger mesh lane by lane in vectors; a cached mesh with fewer than
+ * HIT_MESH_MIN hits in a batch by the scalar fill (the batched call's
+ * set-up would cost more: measured on the Cornell box). */
 #define HIT_FACE_GROUPS 64
 #define HIT_FACE_MIN    8
 #define HIT_MESH_MIN    4
-#ifndef HIT_LANE_VECTOR
-#define HIT_LANE_VECTOR 1
-#endif
 
 /* The hits lane[0..cnt) on one cached mesh s (top-level shape `index`),
  * their whole si through shape_mesh_hits_batch (bitwise
- * hit_fill_interaction): face by face where a small mesh's face has
- * enough of them, else lane by lane. */
+ * hit_fill_interaction) as HIT_FACE_GROUPS says; returns how many it
+ * left to the caller's scalar fill, listed in left[]. */
 static int hit_fill_cached(const scene *sc, const shape *s, uint32_t index, int cnt, const int *lane,
                            const ray3 *const *r, const accel_hit *const *h, surface_interaction *const *si,
                            int *left) {
@@ -127,8 +125,9 @@ static int hit_fill_cached(const scene *sc, const shape *s, uint32_t index, int 
   k[SHAPE_MH_UV] = uv;
   k[SHAPE_MH_FLIP] = s->flip_normals;
   /* A small mesh's lanes by face (counting sort): a face with at least
-   * HIT_FACE_MIN of them is filled with its data given once; the others
-   * lane by lane (runs[] lists both kinds: face, or -1 for per-lane). */
+   * HIT_FACE_MIN of them is filled with its data given once, the others
+   * are left to the caller; a large mesh's lanes go lane by lane (runs[]:
+   * a face, or -1 for lane by lane). */
   int order[64], start[HIT_FACE_GROUPS + 1], n_runs = 0, rest = 0;
   int run_face[HIT_FACE_GROUPS + 1], run_len[HIT_FACE_GROUPS + 1];
   const int *ls = lane;
@@ -156,7 +155,7 @@ static int hit_fill_cached(const scene *sc, const shape *s, uint32_t index, int 
     rest = cnt;
   }
   int n_left = 0;
-  if (rest && (ls == order || !HIT_LANE_VECTOR)) { /* a small mesh's scattered hits: the scalar fill */
+  if (rest && ms->n_faces <= HIT_FACE_GROUPS) { /* a small mesh's scattered hits: the scalar fill */
     memcpy(left, ls + (cnt - rest), rest * sizeof *left);
     n_left = rest;
   } else if (rest) {
