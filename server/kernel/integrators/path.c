@@ -364,8 +364,7 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, int
   *n_sh = 0;
   if (n == 0) return;
   const sampler *smp = st[g[0]].s;
-  sampler_next_1d_batch(smp, st, g, n, d1);
-  sampler_next_2d_batch(smp, st, g, n, d2);
+  sampler_next_1d_2d_batch(smp, st, g, n, d1, d2);
   for (int k = 0; k < n; k++) ek[k] = (int)pick_emitter_index(sc, d1[k]);
   /* The lanes grouped by emitter (a counting sort, in lane order within
    * each emitter) for one batched call per emitter and chunk; a lane's
@@ -627,8 +626,7 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
     }
     /* The BSDF samples' numbers, lobe then direction, for every lane. */
     if (live) {
-      sampler_next_1d_batch(smp, st, idx, live, ws->d1);
-      sampler_next_2d_batch(smp, st, idx, live, ws->d2);
+      sampler_next_1d_2d_batch(smp, st, idx, live, ws->d1, ws->d2);
       for (int k = 0; k < live; k++) {
         ln[idx[k]].u1 = ws->d1[k];
         ln[idx[k]].u2 = ws->d2[k];

@@ -17,7 +17,8 @@
  *    within the thread time;
  *  - the wave's batched ops give each lane bitwise what its per-lane call
  *    gives, at every ISA the CPU has: the samplers' start/next_1d/next_2d
- *    batches (independent, stratified; any subset and order of lanes), the
+ *    batches (independent, stratified; any subset and order of lanes; a
+ *    1-D then a 2-D number per lane), the
  *    emitters' sample_direction_batch or its fallback (directional,
  *    constant, area), the
  *    hits' shading frames (shape_frames_batch, edge cases included), the
@@ -327,19 +328,22 @@ static void check_sampler_batches(const sampler *smp, const char *what) {
     }
     const int *use = round % 4 == 0 ? NULL : idx;
     int m = use ? n : N;
-    bool two = round % 2 == 1;
-    if (two)
+    int kind = round % 3; /* 1-D, 2-D, or a 1-D then a 2-D number per lane */
+    if (kind == 1)
       sampler_next_2d_batch(smp, a, use, m, d2);
-    else
+    else if (kind == 0)
       sampler_next_1d_batch(smp, a, use, m, d1);
+    else
+      sampler_next_1d_2d_batch(smp, a, use, m, d1, d2);
     for (int k = 0; k < m; k++) {
       sampler_state *q = &b[use ? use[k] : k];
-      if (two) {
-        vec2 v = smp->ops->next_2d(q);
-        bad += memcmp(&v, &d2[k], sizeof v) != 0;
-      } else {
+      if (kind != 1) {
         double v = smp->ops->next_1d(q);
         bad += memcmp(&v, &d1[k], sizeof v) != 0;
+      }
+      if (kind != 0) {
+        vec2 v = smp->ops->next_2d(q);
+        bad += memcmp(&v, &d2[k], sizeof v) != 0;
       }
     }
   }
