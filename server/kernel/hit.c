@@ -111,19 +111,6 @@ static int hit_fill_cached(const scene *sc, const shape *s, uint32_t index, int 
   };
   const mesh *ms = &s->mesh;
   const bool nrm = ms->nrm && !s->face_normals, uv = ms->uv != NULL;
-  double k[SHAPE_MH_K];
-  for (int i = 0; i < 4; i++)
-    for (int j = 0; j < 4; j++) k[SHAPE_MH_M + 4 * i + j] = s->to_world.m[i][j];
-  for (int i = 0; i < 3; i++)
-    for (int j = 0; j < 3; j++) k[SHAPE_MH_INV + 3 * i + j] = s->to_world.inv[i][j];
-  double t[8];
-  accel_surface_error_terms(sc->accel, index, &s->to_world, t);
-  for (int i = 0; i < 3; i++) k[SHAPE_MH_C + i] = t[i], k[SHAPE_MH_S + i] = t[5 + i];
-  k[SHAPE_MH_TC] = t[3];
-  k[SHAPE_MH_EXT] = t[4];
-  k[SHAPE_MH_NRM] = nrm;
-  k[SHAPE_MH_UV] = uv;
-  k[SHAPE_MH_FLIP] = s->flip_normals;
   /* A small mesh's lanes by face (counting sort): a face with at least
    * HIT_FACE_MIN of them is filled with its data given once, the others
    * are left to the caller; a large mesh's lanes go lane by lane (runs[]:
@@ -131,7 +118,11 @@ static int hit_fill_cached(const scene *sc, const shape *s, uint32_t index, int 
   int order[64], start[HIT_FACE_GROUPS + 1], n_runs = 0, rest = 0;
   int run_face[HIT_FACE_GROUPS + 1], run_len[HIT_FACE_GROUPS + 1];
   const int *ls = lane;
-  if (ms->n_faces <= HIT_FACE_GROUPS && cnt >= HIT_FACE_MIN) {
+  if (ms->n_faces <= HIT_FACE_GROUPS && cnt < HIT_FACE_MIN) { /* all by the scalar fill */
+    memcpy(left, lane, cnt * sizeof *left);
+    return cnt;
+  }
+  if (ms->n_faces <= HIT_FACE_GROUPS) {
     memset(start, 0, (ms->n_faces + 1) * sizeof *start);
     for (int j = 0; j < cnt; j++) start[h[lane[j]]->prim + 1]++;
     /* Faces with enough lanes first (in face order), then the rest. */
@@ -161,6 +152,20 @@ static int hit_fill_cached(const scene *sc, const shape *s, uint32_t index, int 
   } else if (rest) {
     run_face[n_runs] = -1, run_len[n_runs++] = rest;
   }
+  if (n_runs == 0) return n_left; /* nothing for the vector fill */
+  double k[SHAPE_MH_K];
+  for (int i = 0; i < 4; i++)
+    for (int j = 0; j < 4; j++) k[SHAPE_MH_M + 4 * i + j] = s->to_world.m[i][j];
+  for (int i = 0; i < 3; i++)
+    for (int j = 0; j < 3; j++) k[SHAPE_MH_INV + 3 * i + j] = s->to_world.inv[i][j];
+  double t[8];
+  accel_surface_error_terms(sc->accel, index, &s->to_world, t);
+  for (int i = 0; i < 3; i++) k[SHAPE_MH_C + i] = t[i], k[SHAPE_MH_S + i] = t[5 + i];
+  k[SHAPE_MH_TC] = t[3];
+  k[SHAPE_MH_EXT] = t[4];
+  k[SHAPE_MH_NRM] = nrm;
+  k[SHAPE_MH_UV] = uv;
+  k[SHAPE_MH_FLIP] = s->flip_normals;
   double a[SHAPE_MH_IN * S], o[SHAPE_MH_OUT * S], face[SHAPE_MH_IN_D - 2];
   int j0 = 0;
   for (int run = 0; run < n_runs; run++) {
