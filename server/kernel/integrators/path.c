@@ -115,10 +115,7 @@ static void add_polarization(double *quv, const emitter *e, vec3 d, double scale
 
 typedef struct lane {
   ray3 ray;
-  /* The vertex's surface data and the previous vertex's: sis[cur] and
-   * sis[cur ^ 1] (lane_si, lane_prev_si; a bounce flips cur, no copy). */
-  surface_interaction sis[2];
-  int cur;
+  surface_interaction si, prev_si;
   color T, L;
   double eta, prev_pdf;
   bool prev_delta, wrapped;
@@ -143,13 +140,6 @@ typedef struct lane {
   bsdf_sample bs;
   color weight;
 } lane;
-
-static inline surface_interaction *lane_si(lane *l) {
-  return &l->sis[l->cur];
-}
-static inline surface_interaction *lane_prev_si(lane *l) {
-  return &l->sis[l->cur ^ 1];
-}
 
 static double clock_s(void) {
   struct timespec ts;
@@ -201,7 +191,7 @@ static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_
     double t0 = timed ? clock_s() : 0;
     for (int k = 0; k < n; k++) {
       lane *l = &ln[idx[k]];
-      l->hit = intersect(sc, &l->ray, lane_si(l), stats, &l->wrapped);
+      l->hit = intersect(sc, &l->ray, &l->si, stats, &l->wrapped);
       bool h = l->hit == TRACE_HIT;
       hit[nh] = other[no] = idx[k];
       nh += h, no += !h;
@@ -255,7 +245,7 @@ static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_
     int m = nh - k0 < C ? nh - k0 : C;
     for (int j = 0; j < m; j++) {
       lane *l = &ln[hit[k0 + j]];
-      rr[j] = &l->ray, hh[j] = &l->h, ss[j] = lane_si(l);
+      rr[j] = &l->ray, hh[j] = &l->h, ss[j] = &l->si;
     }
     hit_fill_interaction_batch(sc, m, rr, hh, ss);
   }
@@ -316,7 +306,7 @@ static bool shade_emit(const integrator *it, const scene *sc, lane *l, double *q
       double em_pdf = 0.0;
       if (!l->prev_delta) {
         direction_sample ds = {.d = v3_norm(l->ray.d), .dist = INFINITY};
-        em_pdf = env->ops->pdf_direction(env, lane_prev_si(l), &ds) * emitter_prob(sc, env);
+        em_pdf = env->ops->pdf_direction(env, &l->prev_si, &ds) * emitter_prob(sc, env);
       }
       color Le = env->ops->eval(env, NULL, l->ray.d);
       double w = mis_weight(l->prev_pdf, em_pdf);
@@ -325,7 +315,7 @@ static bool shade_emit(const integrator *it, const scene *sc, lane *l, double *q
     }
     return false;
   }
-  const surface_interaction *si = lane_si(l);
+  const surface_interaction *si = &l->si;
   const emitter *em = si->shape->emitter;
   if (em && visible_emitter) {
     color Le = em->ops->eval(em, si, l->ray.d);
@@ -337,7 +327,7 @@ static bool shade_emit(const integrator *it, const scene *sc, lane *l, double *q
       if (!l->prev_delta && !l->wrapped) {
         direction_sample ds = {
             .p = si->p, .n = si->ng, .d = v3_norm(l->ray.d), .dist = si->t * v3_len(l->ray.d)};
-        em_pdf = em->ops->pdf_direction(em, lane_prev_si(l), &ds) * emitter_prob(sc, em);
+        em_pdf = em->ops->pdf_direction(em, &l->prev_si, &ds) * emitter_prob(sc, em);
       }
       l->L = col_add(l->L, col_scale(col_mul(l->T, Le), mis_weight(l->prev_pdf, em_pdf)));
     }
@@ -375,7 +365,7 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, int
       lane *l = &ln[g[k]];
       l->pe = pick_probability(sc, (size_t)ek[k]);
       l->ne = sc->emitters[ek[k]];
-      l->value = l->ne->ops->sample_direction(l->ne, lane_si(l), d2[k], &l->ds);
+      l->value = l->ne->ops->sample_direction(l->ne, &l->si, d2[k], &l->ds);
     }
   } else {
     int start[EMITTER_GROUPS + 1] = {0};
@@ -394,7 +384,7 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, int
         direction_sample ds[C];
         color val[C];
         for (int j = 0; j < m; j++) {
-          ref[j] = lane_si(&ln[g[ord[j0 + j]]]);
+          ref[j] = &ln[g[ord[j0 + j]]].si;
           u[j] = d2[ord[j0 + j]];
         }
         emitter_sample_direction_n(e, m, ref, u, ds, val);
@@ -419,7 +409,7 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, int
      * walls are reached by BSDF sampling alone (weight 1). */
     if (sc->periodic.on && (e->flags & EMITTER_SURFACE) && !in_column(&sc->periodic, l->ds.p)) l->ds.pdf = 0;
     if (l->ds.pdf > 0 && !col_is_black(l->value)) {
-      spawn_ray_to_in(sc, lane_si(l), e, &l->ds, &l->sray);
+      spawn_ray_to_in(sc, &l->si, e, &l->ds, &l->sray);
       l->nee = true;
       g[(*n_sh)++] = g[k];
     }
@@ -429,11 +419,11 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, int
 /* Lanes g[0..*left) wait for a batched BSDF call: move up to `cap` of
  * those whose BSDF is g[0]'s into take[] (in lane order), keep the rest in
  * g (in order), and return how many were taken; *b is their BSDF. */
-static int take_bsdf_group(lane *ln, int *g, int *left, int *take, int cap, const bsdf **b) {
-  *b = lane_si(&ln[g[0]])->shape->bsdf;
+static int take_bsdf_group(const lane *ln, int *g, int *left, int *take, int cap, const bsdf **b) {
+  *b = ln[g[0]].si.shape->bsdf;
   int m = 0, rest = 0;
   for (int k = 0; k < *left; k++) {
-    if (m < cap && lane_si(&ln[g[k]])->shape->bsdf == *b)
+    if (m < cap && ln[g[k]].si.shape->bsdf == *b)
       take[m++] = g[k];
     else
       g[rest++] = g[k];
@@ -454,7 +444,7 @@ static void wave_eval_bsdfs(lane *ln, const int *idx, int n, int *g) {
   for (int k = 0; k < n; k++) {
     lane *l = &ln[idx[k]];
     if (!(l->nee && l->occ == TRACE_MISS)) continue;
-    const surface_interaction *si = lane_si(l);
+    const surface_interaction *si = &l->si;
     const bsdf *b = si->shape->bsdf;
     l->nwo = frame_to_local(&si->sh, l->ds.d);
     if (b->ops->eval_pdf_batch) {
@@ -473,7 +463,7 @@ static void wave_eval_bsdfs(lane *ln, const int *idx, int n, int *g) {
     int take[C];
     int m = take_bsdf_group(ln, g, &left, take, C, &b);
     for (int k = 0; k < m; k++) {
-      si[k] = lane_si(&ln[take[k]]);
+      si[k] = &ln[take[k]].si;
       wo[k] = ln[take[k]].nwo;
     }
     b->ops->eval_pdf_batch(b, m, si, wo, f, pdf);
@@ -514,11 +504,11 @@ static void wave_sample_bsdfs(lane *ln, const int *idx, int n, int *g) {
   int left = 0;
   for (int k = 0; k < n; k++) {
     lane *l = &ln[idx[k]];
-    const bsdf *b = lane_si(l)->shape->bsdf;
+    const bsdf *b = l->si.shape->bsdf;
     if (b->ops->sample_batch)
       g[left++] = idx[k];
     else
-      l->weight = b->ops->sample(b, lane_si(l), l->u1, l->u2, &l->bs);
+      l->weight = b->ops->sample(b, &l->si, l->u1, l->u2, &l->bs);
   }
   while (left > 0) {
     const bsdf *b;
@@ -530,7 +520,7 @@ static void wave_sample_bsdfs(lane *ln, const int *idx, int n, int *g) {
     int take[C];
     int m = take_bsdf_group(ln, g, &left, take, C, &b);
     for (int k = 0; k < m; k++) {
-      si[k] = lane_si(&ln[take[k]]);
+      si[k] = &ln[take[k]].si;
       u1[k] = ln[take[k]].u1;
       u2[k] = ln[take[k]].u2;
     }
@@ -546,7 +536,7 @@ static void wave_sample_bsdfs(lane *ln, const int *idx, int n, int *g) {
  * and the roulette. False: the path ends here. */
 static bool shade_continue(const integrator *it, sampler_state *st, lane *l) {
   const sampler_ops *sops = st->s->ops;
-  const surface_interaction *si = lane_si(l);
+  const surface_interaction *si = &l->si;
   const bsdf_sample *bs = &l->bs;
   color weight = l->weight;
   if (!(bs->pdf > 0) || col_is_black(weight)) return false;
@@ -554,7 +544,7 @@ static bool shade_continue(const integrator *it, sampler_state *st, lane *l) {
   l->ray = spawn_ray(si, wo_world);
   l->T = col_mul(l->T, weight);
   l->eta *= bs->eta;
-  l->cur ^= 1; /* si becomes the previous vertex */
+  l->prev_si = *si;
   l->prev_pdf = bs->pdf;
   l->prev_delta = (bs->sampled_type & BSDF_DELTA) != 0;
   l->depth++;
@@ -592,7 +582,6 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
     l->prev_delta = true;
     l->wrapped = false;
     l->depth = 0;
-    l->cur = 0;
     idx[i] = i;
   }
   int live = it->max_depth == 0 ? 0 : n;
