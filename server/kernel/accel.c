@@ -495,6 +495,14 @@ double accel_surface_error(const accel *a, uint32_t index, const xform *X, vec3 
   return RSW_F32_UNIT * (n1 * pc + w * (pc + tc) + an1 * a->ext[index]);
 }
 
+void accel_surface_error_terms(const accel *a, uint32_t index, const xform *X, double t[8]) {
+  vec3 c = a->origin;
+  t[0] = c.x, t[1] = c.y, t[2] = c.z;
+  t[3] = v3_max_abs(v3_sub(v3(X->m[0][3], X->m[1][3], X->m[2][3]), c));
+  t[4] = a->ext[index];
+  for (int k = 0; k < 3; k++) t[5 + k] = fabs(X->inv[k][0]) + fabs(X->inv[k][1]) + fabs(X->inv[k][2]);
+}
+
 /* ---- build ------------------------------------------------------------------------------ */
 
 static rsw_status embree_fail(accel *a, rsw_err *err, const char *where, const char *what) {
@@ -1148,21 +1156,19 @@ static bool packet_load(const accel *a, packet_buf *pb, unsigned N, const ray3 *
   return any;
 }
 
-void accel_intersect_packet(const accel *a, const ray3 *const *r, int n, accel_hit *h, bool *hit,
-                            bool coherent) {
-  accel_intersect_packet_mask(a, r, n, h, hit, coherent, 0xFFFFFFFFu);
-}
-
-void accel_intersect_packet_mask(const accel *a, const ray3 *const *r, int n, accel_hit *h, bool *hit,
-                                 bool coherent, unsigned mask) {
+/* The packet query of accel_intersect_packet: hit i written to *h[i];
+ * all: every *h[i] written (a miss's with meaningless values: no branch
+ * on an unpredictable outcome), else only the hits'. */
+static void intersect_packet(const accel *a, const ray3 *const *r, int n, accel_hit *const *h, bool *hit,
+                             bool coherent, unsigned mask, bool all) {
   unsigned N = packet_n(n);
   if (n > (int)N && N > 1) { /* more rays than one packet holds */
     for (int k = 0; k < n; k += (int)N)
-      accel_intersect_packet_mask(a, r + k, n - k < (int)N ? n - k : (int)N, h + k, hit + k, coherent, mask);
+      intersect_packet(a, r + k, n - k < (int)N ? n - k : (int)N, h + k, hit + k, coherent, mask, all);
     return;
   }
   if (N == 1 || n == 1) {
-    for (int i = 0; i < n; i++) hit[i] = accel_intersect_mask(a, r[i], &h[i], mask);
+    for (int i = 0; i < n; i++) hit[i] = accel_intersect_mask(a, r[i], h[i], mask);
     return;
   }
   struct RTCIntersectContext ctx;
@@ -1184,22 +1190,42 @@ void accel_intersect_packet_mask(const accel *a, const ray3 *const *r, int n, ac
   for (int i = 0; i < n; i++) {
     unsigned geom = HITN_U(hb, N, HIT_GEOM, i);
     hit[i] = pb.valid[i] && geom != RTC_INVALID_GEOMETRY_ID;
-    if (!hit[i]) continue;
-    accel_hit *o = &h[i];
+  }
+  for (int i = 0; i < n; i++) {
+    if (!all && !hit[i]) continue;
+    accel_hit *o = h[i];
     o->t = pb.t0[i] + RAYN_F(p, N, RAY_TFAR, i) * pb.ts[i];
     uint32_t id = HITN_U(hb, N, HIT_INST, i);
-    if (id < a->n_sub) {
-      o->shape = id;
-      o->sub = 0;
-    } else {
+    if (hit[i] & (id >= a->n_sub)) { /* one predictable branch: false for a miss too */
       o->shape = a->list_shape[id - a->n_sub];
       o->sub = a->list_sub[id - a->n_sub];
+    } else {
+      o->shape = id;
+      o->sub = 0;
     }
-    o->member = geom;
+    o->member = HITN_U(hb, N, HIT_GEOM, i);
     o->prim = HITN_U(hb, N, HIT_PRIM, i);
     o->u = HITN_F(hb, N, HIT_U, i);
     o->v = HITN_F(hb, N, HIT_V, i);
     o->ng = v3(HITN_F(hb, N, HIT_NG, i), HITN_F(hb, N, HIT_NG + 1, i), HITN_F(hb, N, HIT_NG + 2, i));
+  }
+}
+
+void accel_intersect_packet(const accel *a, const ray3 *const *r, int n, accel_hit *const *h, bool *hit,
+                            bool coherent) {
+  intersect_packet(a, r, n, h, hit, coherent, 0xFFFFFFFFu, true);
+}
+
+void accel_intersect_packet_mask(const accel *a, const ray3 *const *r, int n, accel_hit *h, bool *hit,
+                                 bool coherent, unsigned mask) {
+  enum {
+    P = 16
+  };
+  for (int k = 0; k < n; k += P) {
+    int m = n - k < P ? n - k : P;
+    accel_hit *hp[P];
+    for (int i = 0; i < m; i++) hp[i] = &h[k + i];
+    intersect_packet(a, r + k, m, hp, hit + k, coherent, mask, false);
   }
 }
 

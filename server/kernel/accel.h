@@ -50,9 +50,10 @@ bool accel_occluded(const accel *a, const ray3 *r);
  * rules, same hit record); Embree's packet kernels may round a hit
  * distance differently from its single-ray kernel, so results agree with
  * the single-ray calls to float precision, not bitwise. hit[i] / occ[i]:
- * ray i hit something (h[i] filled) / is blocked. coherent: the rays share
- * an origin region and nearly a direction (camera rays), an Embree hint. */
-void accel_intersect_packet(const accel *a, const ray3 *const *r, int n, accel_hit *h, bool *hit,
+ * ray i hit something (*h[i] filled, and a miss's *h[i] overwritten; h[i]
+ * in the _mask variant below, a miss's left as it was) / is blocked. coherent: the rays share an origin region and nearly a
+ * direction (camera rays), an Embree hint. */
+void accel_intersect_packet(const accel *a, const ray3 *const *r, int n, accel_hit *const *h, bool *hit,
                             bool coherent);
 void accel_occluded_packet(const accel *a, const ray3 *const *r, int n, bool *occ);
 
@@ -99,6 +100,12 @@ vec3 accel_origin(const accel *a);
  * instance space, and the intersection arithmetic there. It does not
  * depend on a translation of the whole scene. */
 double accel_surface_error(const accel *a, uint32_t index, const xform *X, vec3 p, vec3 n);
+/* The terms of that bound that depend on the shape and X only, for
+ * batched fills (hit.c): t[0..2] = c, t[3] = |t - c|, t[4] = ext, t[5..7]
+ * = |B_k|_1; the bound is then u [ |n|_1 pc + w (pc + t[3]) + a t[4] ]
+ * with pc = |p - c|, a = sum_k |(A^T n)_k| and w = sum_k |(A^T n)_k|
+ * t[5 + k], each sum taken in k order (accel_surface_error's bits). */
+void accel_surface_error_terms(const accel *a, uint32_t index, const xform *X, double t[8]);
 
 /* ---- updates (scene/update.c) -------------------------------------------------
  * Each call stages work on one shape; accel_commit() then commits the

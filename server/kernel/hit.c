@@ -2,6 +2,8 @@
  * members under placement * member.to_world. */
 #include "hit.h"
 
+#include <string.h>
+
 #include "accel.h"
 #include "shapes/instance.h"
 
@@ -48,27 +50,215 @@ void hit_fill_interaction(const scene *sc, const ray3 *r, const accel_hit *h, su
   si->wi = frame_to_local(&si->sh, v3_neg(v3_norm(r->d)));
 }
 
+/* A hit that shape_mesh_hits_batch fills: a plain (not instanced) mesh
+ * with a face cache. */
+static inline bool hit_cached_mesh(const shape *s) {
+  return shape_is_mesh(s) && s->face_cache && !shape_is_instancing(s);
+}
+
+/* Face f of mesh s as shape_mesh_hits_batch's in[2 .. SHAPE_MH_IN_D),
+ * written to q[c * step] (step 1: one face's constants; S: a lane of the
+ * per-lane arrays). */
+static inline void mesh_face_in(const shape *s, uint32_t f, bool nrm, bool uv, double *q, int step) {
+  const mesh *ms = &s->mesh;
+  const uint32_t *ix = &ms->faces[3 * (size_t)f];
+  const uint32_t i0 = ix[0], i1 = ix[1], i2 = ix[2];
+  const float *p0 = &ms->pos[3 * (size_t)i0], *p1 = &ms->pos[3 * (size_t)i1], *p2 = &ms->pos[3 * (size_t)i2];
+  q[0] = p0[0], q[step] = p0[1], q[2 * step] = p0[2];
+  q[3 * step] = p1[0], q[4 * step] = p1[1], q[5 * step] = p1[2];
+  q[6 * step] = p2[0], q[7 * step] = p2[1], q[8 * step] = p2[2];
+  if (nrm) {
+    const float *na = &ms->nrm[3 * (size_t)i0], *nb = &ms->nrm[3 * (size_t)i1],
+                *nc = &ms->nrm[3 * (size_t)i2];
+    double *e = &q[(SHAPE_MH_IN_NA - 2) * step];
+    e[0] = na[0], e[step] = na[1], e[2 * step] = na[2];
+    e[3 * step] = nb[0], e[4 * step] = nb[1], e[5 * step] = nb[2];
+    e[6 * step] = nc[0], e[7 * step] = nc[1], e[8 * step] = nc[2];
+  }
+  if (uv) {
+    const float *ua = &ms->uv[2 * (size_t)i0], *ub = &ms->uv[2 * (size_t)i1], *uc = &ms->uv[2 * (size_t)i2];
+    double *e = &q[(SHAPE_MH_IN_UVA - 2) * step];
+    e[0] = ua[0], e[step] = ua[1], e[2 * step] = ub[0], e[3 * step] = ub[1], e[4 * step] = uc[0];
+    e[5 * step] = uc[1];
+  }
+  /* The face's normal and dp/du: zero where the face's uv determinant
+   * is, as mesh_fill_inline_raw leaves it. */
+  const double *fc = &s->face_cache[SHAPE_FACE_DOUBLES * (size_t)f];
+  double *e = &q[(SHAPE_MH_IN_N - 2) * step];
+  e[0] = fc[0], e[step] = fc[1], e[2 * step] = fc[2], e[3 * step] = fc[3], e[4 * step] = fc[4];
+  e[5 * step] = fc[5];
+}
+
+/* A mesh of at most HIT_FACE_GROUPS faces has its hits filled face by
+ * face (the face's data once for its lanes) where a face has at least
+ * HIT_FACE_MIN of a batch's hits, and its other hits by the scalar fill;
+ * a larger mesh lane by lane in vectors; a cached mesh with fewer than
+ * HIT_MESH_MIN hits in a batch by the scalar fill (the batched call's
+ * set-up would cost more: measured on the Cornell box). */
+#define HIT_FACE_GROUPS 64
+#define HIT_FACE_MIN    8
+#define HIT_MESH_MIN    4
+
+/* The hits lane[0..cnt) on one cached mesh s (top-level shape `index`),
+ * their whole si through shape_mesh_hits_batch (bitwise
+ * hit_fill_interaction) as HIT_FACE_GROUPS says; returns how many it
+ * left to the caller's scalar fill, listed in left[]. */
+static int hit_fill_cached(const scene *sc, const shape *s, uint32_t index, int cnt, const int *lane,
+                           const ray3 *const *r, const accel_hit *const *h, surface_interaction *const *si,
+                           int *left) {
+  enum {
+    S = 64 /* lanes per call, a multiple of 8 */
+  };
+  const mesh *ms = &s->mesh;
+  const bool nrm = ms->nrm && !s->face_normals, uv = ms->uv != NULL;
+  /* A small mesh's lanes by face (counting sort): a face with at least
+   * HIT_FACE_MIN of them is filled with its data given once, the others
+   * are left to the caller; a large mesh's lanes go lane by lane (runs[]:
+   * a face, or -1 for lane by lane). */
+  int order[64], start[HIT_FACE_GROUPS + 1], n_runs = 0, rest = 0;
+  int run_face[HIT_FACE_GROUPS + 1], run_len[HIT_FACE_GROUPS + 1];
+  const int *ls = lane;
+  if (ms->n_faces <= HIT_FACE_GROUPS && cnt < HIT_FACE_MIN) { /* all by the scalar fill */
+    memcpy(left, lane, cnt * sizeof *left);
+    return cnt;
+  }
+  if (ms->n_faces <= HIT_FACE_GROUPS) {
+    memset(start, 0, (ms->n_faces + 1) * sizeof *start);
+    for (int j = 0; j < cnt; j++) start[h[lane[j]]->prim + 1]++;
+    /* Faces with enough lanes first (in face order), then the rest. */
+    int big = 0;
+    for (uint32_t f = 0; f < ms->n_faces; f++)
+      if (start[f + 1] >= HIT_FACE_MIN) big += start[f + 1];
+    int at_big = 0, at_rest = big;
+    for (uint32_t f = 0; f < ms->n_faces; f++) {
+      int c = start[f + 1];
+      if (c >= HIT_FACE_MIN) {
+        start[f] = at_big, at_big += c;
+        run_face[n_runs] = (int)f, run_len[n_runs++] = c;
+      } else {
+        start[f] = at_rest, at_rest += c;
+      }
+    }
+    rest = cnt - big;
+    for (int j = 0; j < cnt; j++) order[start[h[lane[j]]->prim]++] = lane[j];
+    ls = order;
+  } else {
+    rest = cnt;
+  }
+  int n_left = 0;
+  if (rest && ms->n_faces <= HIT_FACE_GROUPS) { /* a small mesh's scattered hits: the scalar fill */
+    memcpy(left, ls + (cnt - rest), rest * sizeof *left);
+    n_left = rest;
+  } else if (rest) {
+    run_face[n_runs] = -1, run_len[n_runs++] = rest;
+  }
+  if (n_runs == 0) return n_left; /* nothing for the vector fill */
+  double k[SHAPE_MH_K];
+  for (int i = 0; i < 4; i++)
+    for (int j = 0; j < 4; j++) k[SHAPE_MH_M + 4 * i + j] = s->to_world.m[i][j];
+  for (int i = 0; i < 3; i++)
+    for (int j = 0; j < 3; j++) k[SHAPE_MH_INV + 3 * i + j] = s->to_world.inv[i][j];
+  double t[8];
+  accel_surface_error_terms(sc->accel, index, &s->to_world, t);
+  for (int i = 0; i < 3; i++) k[SHAPE_MH_C + i] = t[i], k[SHAPE_MH_S + i] = t[5 + i];
+  k[SHAPE_MH_TC] = t[3];
+  k[SHAPE_MH_EXT] = t[4];
+  k[SHAPE_MH_NRM] = nrm;
+  k[SHAPE_MH_UV] = uv;
+  k[SHAPE_MH_FLIP] = s->flip_normals;
+  double a[SHAPE_MH_IN * S], o[SHAPE_MH_OUT * S], face[SHAPE_MH_IN_D - 2];
+  int j0 = 0;
+  for (int run = 0; run < n_runs; run++) {
+    const bool by_face = run_face[run] >= 0;
+    if (by_face) mesh_face_in(s, (uint32_t)run_face[run], nrm, uv, face, 1);
+    for (int end = j0 + run_len[run]; j0 < end;) {
+      int m = end - j0 < S ? end - j0 : S;
+      for (int j = 0; j < m; j++) {
+        const accel_hit *hj = h[ls[j0 + j]];
+        double *q = &a[j];
+        q[0] = hj->u, q[S] = hj->v;
+        if (!by_face) mesh_face_in(s, hj->prim, nrm, uv, &q[2 * S], S);
+        vec3 d = r[ls[j0 + j]]->d;
+        double *e = &q[SHAPE_MH_IN_D * S];
+        e[0] = d.x, e[S] = d.y, e[2 * S] = d.z;
+      }
+      for (int j = m; j < ((m + 7) & ~7); j++) /* the last vector's unused lanes */
+        for (int c = 0; c < SHAPE_MH_IN; c++) a[c * S + j] = 0;
+      shape_mesh_hits_batch(m, S, k, by_face ? face : NULL, a, o);
+      for (int j = 0; j < m; j++) {
+        const accel_hit *hj = h[ls[j0 + j]];
+        surface_interaction *x = si[ls[j0 + j]];
+        const double *fo = &o[j];
+        const double *fc = &s->face_cache[SHAPE_FACE_DOUBLES * (size_t)hj->prim];
+        vec3 n = v3(fc[0], fc[1], fc[2]);
+        x->t = hj->t;
+        x->shape = s;
+        x->prim = hj->prim;
+        x->p = v3(fo[0], fo[S], fo[2 * S]);
+        x->p_error = fo[3 * S];
+        x->uv[0] = fo[4 * S], x->uv[1] = fo[5 * S];
+        x->ng = s->flip_normals ? v3_neg(n) : n;
+        x->sh.s = v3(fo[6 * S], fo[7 * S], fo[8 * S]);
+        x->sh.t = v3(fo[9 * S], fo[10 * S], fo[11 * S]);
+        x->sh.n = v3(fo[12 * S], fo[13 * S], fo[14 * S]);
+        x->wi = v3(fo[15 * S], fo[16 * S], fo[17 * S]);
+      }
+      j0 += m;
+    }
+  }
+  return n_left;
+}
+
+/* Hit i by the scalar fill, its frame and wi left to the frames batch as
+ * entry *m of in (lane[*m] = i) unless the fill made them. */
+static inline void hit_fill_one(const scene *sc, int i, const ray3 *const *r, const accel_hit *const *h,
+                                surface_interaction *const *si, double *in, int *lane, int *m, int C) {
+  vec3 sn, tg, raw = v3(0, 0, 0);
+  bool deferred = false;
+  if (hit_fill_begin(sc, r[i], h[i], si[i], &sn, &tg, &raw, &deferred)) return;
+  vec3 d = r[i]->d;
+  double *q = &in[*m];
+  q[0 * C] = sn.x, q[1 * C] = sn.y, q[2 * C] = sn.z;
+  q[3 * C] = tg.x, q[4 * C] = tg.y, q[5 * C] = tg.z;
+  q[6 * C] = d.x, q[7 * C] = d.y, q[8 * C] = d.z;
+  q[9 * C] = raw.x, q[10 * C] = raw.y, q[11 * C] = raw.z;
+  q[12 * C] = deferred ? 1.0 : 0.0;
+  lane[(*m)++] = i;
+}
+
 void hit_fill_interaction_batch(const scene *sc, int n, const ray3 *const *r, const accel_hit *const *h,
                                 surface_interaction *const *si) {
   enum {
     C = 64 /* lanes per call, a multiple of 8 */
   };
   double in[SHAPE_FRAME_IN * C], out[12 * C];
-  int lane[C];
+  int lane[C], cached[C];
   for (int k0 = 0; k0 < n; k0 += C) {
-    int cnt = n - k0 < C ? n - k0 : C, m = 0;
+    int cnt = n - k0 < C ? n - k0 : C, m = 0, nc = 0;
     for (int k = 0; k < cnt; k++) {
-      vec3 sn, tg, raw = v3(0, 0, 0);
-      bool deferred = false;
-      if (hit_fill_begin(sc, r[k0 + k], h[k0 + k], si[k0 + k], &sn, &tg, &raw, &deferred)) continue;
-      vec3 d = r[k0 + k]->d;
-      double *q = &in[m];
-      q[0 * C] = sn.x, q[1 * C] = sn.y, q[2 * C] = sn.z;
-      q[3 * C] = tg.x, q[4 * C] = tg.y, q[5 * C] = tg.z;
-      q[6 * C] = d.x, q[7 * C] = d.y, q[8 * C] = d.z;
-      q[9 * C] = raw.x, q[10 * C] = raw.y, q[11 * C] = raw.z;
-      q[12 * C] = deferred ? 1.0 : 0.0;
-      lane[m++] = k0 + k;
+      if (hit_cached_mesh(sc->shapes[h[k0 + k]->shape]))
+        cached[nc++] = k0 + k;
+      else
+        hit_fill_one(sc, k0 + k, r, h, si, in, lane, &m, C);
+    }
+    /* The cached meshes' hits, shape by shape (a hit's values do not
+     * depend on its group); a shape with few of them by the scalar fill. */
+    while (nc > 0) {
+      uint32_t index = h[cached[0]]->shape;
+      int take[C], nt = 0, rest = 0;
+      for (int j = 0; j < nc; j++) {
+        if (h[cached[j]]->shape == index)
+          take[nt++] = cached[j];
+        else
+          cached[rest++] = cached[j];
+      }
+      nc = rest;
+      int left[C], nl = nt;
+      if (nt >= HIT_MESH_MIN)
+        nl = hit_fill_cached(sc, sc->shapes[index], index, nt, take, r, h, si, left);
+      else
+        memcpy(left, take, nt * sizeof *left);
+      for (int j = 0; j < nl; j++) hit_fill_one(sc, left[j], r, h, si, in, lane, &m, C);
     }
     if (m == 0) continue;
     for (int j = m; j < ((m + 7) & ~7); j++) /* the last vector's unused lanes */

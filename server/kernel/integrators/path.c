@@ -27,15 +27,24 @@
  * the same treatment at the light's end (spawn_ray_between); for other
  * emitters the ray stops short of ds.dist by ShadowEpsilon (relative), as
  * Mitsuba. */
-ray3 spawn_ray_to(const scene *sc, const surface_interaction *si, const emitter *e,
-                  const direction_sample *ds) {
+static inline void spawn_ray_to_in(const scene *sc, const surface_interaction *si, const emitter *e,
+                                   const direction_sample *ds, ray3 *r) {
   if ((e->flags & EMITTER_SURFACE) && e->shape) {
     const shape *ls = e->shape;
-    return spawn_ray_between(si, ds->p, ds->n,
-                             accel_surface_error(sc->accel, ls->index, &ls->to_world, ds->p, ds->n));
+    *r = spawn_ray_between(si, ds->p, ds->n,
+                           accel_surface_error(sc->accel, ls->index, &ls->to_world, ds->p, ds->n));
+    return;
   }
-  ray3 r = spawn_ray(si, ds->d);
-  r.tmax = isfinite(ds->dist) ? ds->dist * (1.0 - RSW_SHADOW_EPSILON) : INFINITY;
+  r->o = offset_on_side(si->p, si->ng, si->p_error, ds->d);
+  r->d = ds->d;
+  r->tmin = 0.0;
+  r->tmax = isfinite(ds->dist) ? ds->dist * (1.0 - RSW_SHADOW_EPSILON) : INFINITY;
+}
+
+ray3 spawn_ray_to(const scene *sc, const surface_interaction *si, const emitter *e,
+                  const direction_sample *ds) {
+  ray3 r;
+  spawn_ray_to_in(sc, si, e, ds, &r);
   return r;
 }
 
@@ -161,25 +170,34 @@ static double scene_pad(const scene *sc) {
 static inline bool may_hit(const scene *sc, const ray3 *r, double pad) {
   /* Only the cheap half of a slab test: a ray whose origin lies beyond a
    * face of the padded box and that points away from it (comparisons, no
-   * division); any other ray is traced. */
-  if (r->o.z > sc->bbox_max.z + pad && r->d.z >= 0) return false;
-  if (r->o.z < sc->bbox_min.z - pad && r->d.z <= 0) return false;
-  if (r->o.x > sc->bbox_max.x + pad && r->d.x >= 0) return false;
-  if (r->o.x < sc->bbox_min.x - pad && r->d.x <= 0) return false;
-  if (r->o.y > sc->bbox_max.y + pad && r->d.y >= 0) return false;
-  if (r->o.y < sc->bbox_min.y - pad && r->d.y <= 0) return false;
-  return true;
+   * division); any other ray is traced. Without branches: which face a
+   * camera ray's origin lies beyond varies from ray to ray. */
+  bool away = (r->o.z > sc->bbox_max.z + pad) & (r->d.z >= 0);
+  away |= (r->o.z < sc->bbox_min.z - pad) & (r->d.z <= 0);
+  away |= (r->o.x > sc->bbox_max.x + pad) & (r->d.x >= 0);
+  away |= (r->o.x < sc->bbox_min.x - pad) & (r->d.x <= 0);
+  away |= (r->o.y > sc->bbox_max.y + pad) & (r->d.y >= 0);
+  away |= (r->o.y < sc->bbox_min.y - pad) & (r->d.y <= 0);
+  return !away;
 }
 
+/* Lanes idx[0..n) go to hit[0..*n_hit) (the ones whose ray hit, in the
+ * order of idx) and the others to other[0..*n_other), without a branch
+ * on the outcome (a camera ray's is unpredictable). */
 static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_stats *stats, bool coherent,
-                       bool timed) {
+                       bool timed, int *hit, int *n_hit, int *other, int *n_other) {
+  int nh = 0, no = 0;
   if (sc->periodic.on) { /* the hit fill is counted as tracing here */
     double t0 = timed ? clock_s() : 0;
     for (int k = 0; k < n; k++) {
       lane *l = &ln[idx[k]];
       l->hit = intersect(sc, &l->ray, &l->si, stats, &l->wrapped);
+      bool h = l->hit == TRACE_HIT;
+      hit[nh] = other[no] = idx[k];
+      nh += h, no += !h;
     }
     if (timed) stats->trace_s += clock_s() - t0;
+    *n_hit = nh, *n_other = no;
     return;
   }
   enum {
@@ -191,29 +209,31 @@ static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_
   int q[P], nq = 0;
   for (int k = 0; k <= n; k++) {
     if (k < n) {
-      lane *l = &ln[idx[k]];
-      if (!may_hit(sc, &l->ray, pad)) {
-        l->hit = TRACE_MISS;
-        continue;
-      }
-      q[nq++] = idx[k];
+      int i = idx[k];
+      lane *l = &ln[i];
+      l->hit = TRACE_MISS;
+      l->wrapped = false;
+      bool m = may_hit(sc, &l->ray, pad);
+      q[nq] = other[no] = i;
+      nq += m, no += !m;
       if (nq < P) continue;
     }
     if (!nq) continue;
     const ray3 *rp[P];
-    accel_hit h[P];
-    bool hit[P];
-    for (int j = 0; j < nq; j++) rp[j] = &ln[q[j]].ray;
-    accel_intersect_packet(sc->accel, rp, nq, h, hit, coherent);
+    accel_hit *hp[P];
+    bool h[P];
+    for (int j = 0; j < nq; j++) rp[j] = &ln[q[j]].ray, hp[j] = &ln[q[j]].h;
+    accel_intersect_packet(sc->accel, rp, nq, hp, h, coherent);
     for (int j = 0; j < nq; j++) {
-      lane *l = &ln[q[j]];
-      l->hit = hit[j] ? TRACE_HIT : TRACE_MISS;
-      if (hit[j]) l->h = h[j];
+      ln[q[j]].hit = h[j] ? TRACE_HIT : TRACE_MISS;
+      hit[nh] = other[no] = q[j];
+      nh += h[j], no += !h[j];
     }
     nq = 0;
   }
   if (timed) stats->trace_s += clock_s() - t0;
   stats->rays += (uint64_t)n;
+  *n_hit = nh, *n_other = no;
   /* The hits' surface data together (their frames vectorised). */
   enum {
     C = 64
@@ -221,18 +241,14 @@ static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_
   const ray3 *rr[C];
   const accel_hit *hh[C];
   surface_interaction *ss[C];
-  int m = 0;
-  for (int k = 0; k < n; k++) {
-    lane *l = &ln[idx[k]];
-    l->wrapped = false;
-    if (l->hit != TRACE_HIT) continue;
-    rr[m] = &l->ray, hh[m] = &l->h, ss[m] = &l->si;
-    if (++m == C) {
-      hit_fill_interaction_batch(sc, m, rr, hh, ss);
-      m = 0;
+  for (int k0 = 0; k0 < nh; k0 += C) {
+    int m = nh - k0 < C ? nh - k0 : C;
+    for (int j = 0; j < m; j++) {
+      lane *l = &ln[hit[k0 + j]];
+      rr[j] = &l->ray, hh[j] = &l->h, ss[j] = &l->si;
     }
+    hit_fill_interaction_batch(sc, m, rr, hh, ss);
   }
-  if (m) hit_fill_interaction_batch(sc, m, rr, hh, ss);
 }
 
 /* Trace the shadow rays of lanes idx[0..n) (each has nee set). */
@@ -338,8 +354,7 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, int
   *n_sh = 0;
   if (n == 0) return;
   const sampler *smp = st[g[0]].s;
-  sampler_next_1d_batch(smp, st, g, n, d1);
-  sampler_next_2d_batch(smp, st, g, n, d2);
+  sampler_next_1d_2d_batch(smp, st, g, n, d1, d2);
   for (int k = 0; k < n; k++) ek[k] = (int)pick_emitter_index(sc, d1[k]);
   /* The lanes grouped by emitter (a counting sort, in lane order within
    * each emitter) for one batched call per emitter and chunk; a lane's
@@ -394,7 +409,7 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, int
      * walls are reached by BSDF sampling alone (weight 1). */
     if (sc->periodic.on && (e->flags & EMITTER_SURFACE) && !in_column(&sc->periodic, l->ds.p)) l->ds.pdf = 0;
     if (l->ds.pdf > 0 && !col_is_black(l->value)) {
-      l->sray = spawn_ray_to(sc, &l->si, e, &l->ds);
+      spawn_ray_to_in(sc, &l->si, e, &l->ds, &l->sray);
       l->nee = true;
       g[(*n_sh)++] = g[k];
     }
@@ -574,14 +589,21 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
   bool camera = true;
   const sampler *smp = n > 0 ? st[0].s : NULL;
   while (live > 0) {
-    wave_trace(sc, ln, idx, live, stats, camera, timed);
+    /* The lanes whose ray hit (in order) and the others, in ws->ord and
+     * ws->ek (wave_light_samples' scratch, free until then). */
+    int *hits = ws->ord, *other = ws->ek, n_hit, n_other;
+    wave_trace(sc, ln, idx, live, stats, camera, timed, hits, &n_hit, other, &n_other);
     camera = false;
+    for (int k = 0; k < n_other; k++) { /* the environment's light; these paths end */
+      int i = other[k];
+      shade_emit(it, sc, &ln[i], quv ? &quv[3 * i] : NULL);
+    }
     int next = 0, n_nee = 0, n_sh = 0;
-    for (int k = 0; k < live; k++) {
-      int i = idx[k];
-      if (!shade_emit(it, sc, &ln[i], quv ? &quv[3 * i] : NULL)) continue;
-      idx[next++] = i;
-      if (ln[i].nee) sh[n_nee++] = i;
+    for (int k = 0; k < n_hit; k++) {
+      int i = hits[k];
+      bool keep = shade_emit(it, sc, &ln[i], quv ? &quv[3 * i] : NULL);
+      idx[next] = sh[n_nee] = i;
+      next += keep, n_nee += keep & ln[i].nee;
     }
     live = next;
     wave_light_samples(sc, st, ln, sh, n_nee, &n_sh, ws->d1, ws->d2, ws->ek, ws->ord);
@@ -593,8 +615,7 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
     }
     /* The BSDF samples' numbers, lobe then direction, for every lane. */
     if (live) {
-      sampler_next_1d_batch(smp, st, idx, live, ws->d1);
-      sampler_next_2d_batch(smp, st, idx, live, ws->d2);
+      sampler_next_1d_2d_batch(smp, st, idx, live, ws->d1, ws->d2);
       for (int k = 0; k < live; k++) {
         ln[idx[k]].u1 = ws->d1[k];
         ln[idx[k]].u2 = ws->d2[k];
@@ -602,9 +623,11 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
     }
     wave_sample_bsdfs(ln, idx, live, sh);
     next = 0;
-    for (int k = 0; k < live; k++) {
+    for (int k = 0; k < live; k++) { /* whether a BSDF sample failed is unpredictable: no branch */
       int i = idx[k];
-      if (shade_continue(it, &st[i], &ln[i])) idx[next++] = i;
+      bool keep = shade_continue(it, &st[i], &ln[i]);
+      idx[next] = i;
+      next += keep;
     }
     live = next;
   }

@@ -34,4 +34,16 @@ static inline void sampler_next_2d_batch(const sampler *s, sampler_state *st, co
   for (int k = 0; k < n; k++) out[k] = s->ops->next_2d(&st[idx ? idx[k] : k]);
 }
 
+/* A 1-D then a 2-D number per lane (next_1d_2d_batch, or the two batches
+ * above: the same numbers). */
+static inline void sampler_next_1d_2d_batch(const sampler *s, sampler_state *st, const int *idx, int n,
+                                            double *out1, vec2 *out2) {
+  if (s->ops->next_1d_2d_batch) {
+    s->ops->next_1d_2d_batch(st, idx, n, out1, out2);
+    return;
+  }
+  sampler_next_1d_batch(s, st, idx, n, out1);
+  sampler_next_2d_batch(s, st, idx, n, out2);
+}
+
 #endif

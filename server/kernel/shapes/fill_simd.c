@@ -25,7 +25,12 @@ typedef long long vl_2 __attribute__((vector_size(16)));
 #define FRAME_FN      frames_avx512
 #define FRAME_ATTR    static __attribute__((target("avx512f,avx512vl,avx512dq")))
 #define FRAME_SQRT(x) ((VD)_mm512_sqrt_pd((__m512d)(x)))
+#define MESH_FN       mesh_hits_avx512
+#define FRAME_LANES   frame_lanes_avx512
 #include "frame_lanes.h"
+#include "mesh_hit_lanes.h"
+#undef MESH_FN
+#undef FRAME_LANES
 #undef VW
 #undef VD
 #undef VL
@@ -39,7 +44,12 @@ typedef long long vl_2 __attribute__((vector_size(16)));
 #define FRAME_FN      frames_avx2
 #define FRAME_ATTR    static __attribute__((target("avx2,fma")))
 #define FRAME_SQRT(x) ((VD)_mm256_sqrt_pd((__m256d)(x)))
+#define MESH_FN       mesh_hits_avx2
+#define FRAME_LANES   frame_lanes_avx2
 #include "frame_lanes.h"
+#include "mesh_hit_lanes.h"
+#undef MESH_FN
+#undef FRAME_LANES
 #undef VW
 #undef VD
 #undef VL
@@ -53,7 +63,12 @@ typedef long long vl_2 __attribute__((vector_size(16)));
 #define FRAME_FN      frames_sse2
 #define FRAME_ATTR    static
 #define FRAME_SQRT(x) ((VD)_mm_sqrt_pd((__m128d)(x)))
+#define MESH_FN       mesh_hits_sse2
+#define FRAME_LANES   frame_lanes_sse2
 #include "frame_lanes.h"
+#include "mesh_hit_lanes.h"
+#undef MESH_FN
+#undef FRAME_LANES
 #undef VW
 #undef VD
 #undef VL
@@ -71,7 +86,10 @@ typedef long long vl_1 __attribute__((vector_size(8)));
 #define FRAME_FN      frames_sse2
 #define FRAME_ATTR    static
 #define FRAME_SQRT(x) ((VD){sqrt((x)[0])})
+#define MESH_FN       mesh_hits_sse2
+#define FRAME_LANES   frame_lanes_sse2
 #include "frame_lanes.h"
+#include "mesh_hit_lanes.h"
 #endif
 
 void shape_frames_batch(int n, int stride, const double *in, double *out) {
@@ -83,4 +101,16 @@ void shape_frames_batch(int n, int stride, const double *in, double *out) {
   }
 #endif
   frames_sse2(n, stride, in, out);
+}
+
+void shape_mesh_hits_batch(int n, int stride, const double *k, const double *face, const double *in,
+                           double *out) {
+#if defined(__x86_64__) || defined(__i386__)
+  switch (rsw_isa_get()) {
+  case RSW_ISA_AVX512: mesh_hits_avx512(n, stride, k, face, in, out); return;
+  case RSW_ISA_AVX2: mesh_hits_avx2(n, stride, k, face, in, out); return;
+  default: break;
+  }
+#endif
+  mesh_hits_sse2(n, stride, k, face, in, out);
 }

@@ -165,6 +165,44 @@ bool shape_fill_begin(const shape *s, const xform *to_world, const ray3 *r, cons
 #define SHAPE_FRAME_IN 13
 void shape_frames_batch(int n, int stride, const double *in, double *out);
 
+/* The surface data of n hits on one cached mesh (a face_cache, so the
+ * hits take mesh_fill_inline_raw's interpolating path), as structures of
+ * arrays like shape_frames_batch. k: SHAPE_MH_K constants, the shape's
+ * to_world m (4 x 4, row-major) and inv (its upper 3 x 3, row-major),
+ * the terms of accel_surface_error that do not depend on the hit (c xyz,
+ * tc, ext, S0..S2: accel.h accel_surface_error_terms), then 1 or 0 for
+ * interpolated vertex normals (m->nrm && !face_normals), for uv, and for
+ * flip_normals. in: SHAPE_MH_IN components, the barycentrics u, v; the
+ * face's vertices p0, p1, p2 xyz; its vertex normals na, nb, nc xyz (read
+ * only with normals) and uv ua, ub, uc (read only with uv); the face
+ * cache's normal n xyz (before flip_normals) and dp/du xyz; the ray
+ * direction d xyz. face: NULL, or the face data of every lane (hits on
+ * one face), in[2 .. SHAPE_MH_IN_D) as one value each (in then holds only
+ * the barycentrics and d). out: SHAPE_MH_OUT, the world position xyz,
+ * its error bound (accel_surface_error), uv, the shading frame s, t, n and
+ * wi. Each lane bitwise the scalar code (mesh_hit_lanes.h), at every ISA. */
+enum {
+  SHAPE_MH_M = 0,
+  SHAPE_MH_INV = 16,
+  SHAPE_MH_C = 25,
+  SHAPE_MH_TC = 28,
+  SHAPE_MH_EXT = 29,
+  SHAPE_MH_S = 30,
+  SHAPE_MH_NRM = 33,
+  SHAPE_MH_UV = 34,
+  SHAPE_MH_FLIP = 35,
+  SHAPE_MH_K = 36,
+  SHAPE_MH_IN_NA = 11,
+  SHAPE_MH_IN_UVA = 20,
+  SHAPE_MH_IN_N = 26,
+  SHAPE_MH_IN_T = 29,
+  SHAPE_MH_IN_D = 32,
+  SHAPE_MH_IN = 35,
+  SHAPE_MH_OUT = 18
+};
+void shape_mesh_hits_batch(int n, int stride, const double *k, const double *face, const double *in,
+                           double *out);
+
 /* Compute area, triangle cdf; check geometry (degenerate to_world for a
  * disk, non-uniform scale for a sphere, ...). Called by create(). */
 rsw_status shape_finalize(shape *s, rsw_err *err, const char *where);

@@ -17,20 +17,26 @@
  *    within the thread time;
  *  - the wave's batched ops give each lane bitwise what its per-lane call
  *    gives, at every ISA the CPU has: the samplers' start/next_1d/next_2d
- *    batches (independent, stratified; any subset and order of lanes), the
+ *    batches (independent, stratified; any subset and order of lanes; a
+ *    1-D then a 2-D number per lane), the
  *    emitters' sample_direction_batch or its fallback (directional,
  *    constant, area), the
- *    hits' shading frames (shape_frames_batch, edge cases included); the
+ *    hits' shading frames (shape_frames_batch, edge cases included), the
+ *    batched hit fill against the scalar one (hit_fill_interaction_batch,
+ *    cached meshes and other shapes mixed); the
  *    batched draws pass a chi-square test of uniformity, the constant
  *    emitter's batched directions one against its pdf_direction (the area
  *    emitter's: tests/kernel/emitters/test_area_light.c);
  *    a stratified film is bitwise the same for 1, 2 and 3 threads. */
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "../../../server/kernel/accel.h"
 #include "../../../server/kernel/core/isa.h"
+#include "../../../server/kernel/hit.h"
 #include "../../../server/kernel/samplers/sampler_batch.h"
+#include "../../../server/kernel/shapes/instance.h"
 #include "../../../server/kernel/shapes/shape.h"
 #include "../../support/chi2.h"
 #include "../../support/test.h"
@@ -322,19 +328,22 @@ static void check_sampler_batches(const sampler *smp, const char *what) {
     }
     const int *use = round % 4 == 0 ? NULL : idx;
     int m = use ? n : N;
-    bool two = round % 2 == 1;
-    if (two)
+    int kind = round % 3; /* 1-D, 2-D, or a 1-D then a 2-D number per lane */
+    if (kind == 1)
       sampler_next_2d_batch(smp, a, use, m, d2);
-    else
+    else if (kind == 0)
       sampler_next_1d_batch(smp, a, use, m, d1);
+    else
+      sampler_next_1d_2d_batch(smp, a, use, m, d1, d2);
     for (int k = 0; k < m; k++) {
       sampler_state *q = &b[use ? use[k] : k];
-      if (two) {
-        vec2 v = smp->ops->next_2d(q);
-        bad += memcmp(&v, &d2[k], sizeof v) != 0;
-      } else {
+      if (kind != 1) {
         double v = smp->ops->next_1d(q);
         bad += memcmp(&v, &d1[k], sizeof v) != 0;
+      }
+      if (kind != 0) {
+        vec2 v = smp->ops->next_2d(q);
+        bad += memcmp(&v, &d2[k], sizeof v) != 0;
       }
     }
   }
@@ -557,6 +566,115 @@ static void test_frames_batch(void) {
   rsw_isa_set(rsw_isa_best());
 }
 
+/* hit_fill_interaction_batch against hit_fill_interaction, lane by lane
+ * and bit for bit, at every ISA: cached meshes (shape_mesh_hits_batch:
+ * vertex normals and uv, uv only (an OBJ with face_normals), flip_normals, rotated
+ * and scaled, filled face by face or, a larger mesh, lane by lane) mixed in one batch with the other shapes' hits (a sphere, a
+ * disk, an instanced rectangle). */
+static void test_hits_batch(void) {
+  /* A wavy 10 x 10 grid (162 faces: filled lane by lane), with vertex
+   * normals and uv, as an OBJ file. */
+  char obj[] = "/tmp/rsw_test_hits_XXXXXX.obj";
+  int fd = mkstemps(obj, 4);
+  REQUIRE(fd >= 0, "temporary OBJ");
+  FILE *f = fdopen(fd, "w");
+  REQUIRE(f, "temporary OBJ");
+  for (int j = 0; j < 10; j++)
+    for (int i = 0; i < 10; i++) {
+      double x = i / 4.5 - 1, y = j / 4.5 - 1, z = 0.1 * sin(3 * x) * cos(2 * y);
+      fprintf(f, "v %.6f %.6f %.6f\nvt %.4f %.4f\nvn %.5f %.5f 1\n", x, y, z, i / 9.0, j / 9.0,
+              -0.3 * cos(3 * x) * cos(2 * y), 0.2 * sin(3 * x) * sin(2 * y));
+    }
+  for (int j = 0; j < 9; j++)
+    for (int i = 0; i < 9; i++) {
+      int a = 1 + j * 10 + i, b = a + 1, c = a + 10, d = c + 1;
+      fprintf(f, "f %d/%d/%d %d/%d/%d %d/%d/%d\nf %d/%d/%d %d/%d/%d %d/%d/%d\n", a, a, a, b, b, b, d, d, d, a,
+              a, a, d, d, d, c, c, c);
+    }
+  fclose(f);
+  static const char *HITS =
+      "{\"type\": \"scene\","
+      " \"cam\": {\"type\": \"perspective\", \"film\": {\"type\": \"hdrfilm\", \"width\": 4, \"height\": 4}},"
+      " \"floor\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [3, 2, 1]}, {\"rotate\": {\"axis\": "
+      "[1, 1, 0],"
+      " \"angle\": 20}}, {\"translate\": [0.1, -0.2, -0.3]}]},"
+      " \"flat\": {\"type\": \"obj\", \"filename\": \"tests/data/quad.obj\", \"face_normals\": true,"
+      " \"to_world\": [{\"scale\": 0.7},"
+      " {\"translate\": [0.5, 0.3, 0.9]}]},"
+      " \"flipped\": {\"type\": \"rectangle\", \"flip_normals\": true, \"to_world\": [{\"rotate\": "
+      "{\"axis\": [0, 1,"
+      " 0], \"angle\": 100}}, {\"translate\": [-1.2, 0, 0.5]}]},"
+      " \"box\": {\"type\": \"cube\", \"to_world\": [{\"scale\": 0.3}, {\"translate\": [1, 0.5, 0.3]}]},"
+      " \"grid\": {\"type\": \"obj\", \"filename\": \"%s\", \"to_world\": [{\"scale\": [0.8, 0.6, 1]}, "
+      "{\"rotate\":"
+      " {\"axis\": [0, 1, 1], \"angle\": 30}}, {\"translate\": [0.4, 0.4, 1.4]}]},"
+      " \"ball\": {\"type\": \"sphere\", \"center\": [-0.3, 0.8, 0.4], \"radius\": 0.3},"
+      " \"lid\": {\"type\": \"disk\", \"to_world\": [{\"translate\": [0.8, -0.9, 0.6]}]},"
+      " \"group\": {\"type\": \"shapegroup\", \"leaf\": {\"type\": \"rectangle\"}},"
+      " \"copy\": {\"type\": \"instance\", \"shapegroup\": {\"type\": \"ref\", \"id\": \"group\"},"
+      " \"to_world\": [{\"scale\": 0.4}, {\"translate\": [-0.5, -0.8, 1.1]}]}}";
+  char text[4096];
+  snprintf(text, sizeof text, HITS, obj);
+  scene *s = tsup_load(text, NULL);
+  remove(obj);
+  REQUIRE(s, "scene");
+  film_image warm;
+  REQUIRE(tsup_render(s, 1, 1, 1, &warm), "prepare");
+  film_image_free(&warm);
+  enum {
+    N = 200
+  };
+  static ray3 rays[N];
+  static accel_hit h[N];
+  static surface_interaction one[N], many[N];
+  const ray3 *rp[N];
+  const accel_hit *hp[N];
+  surface_interaction *sp[N];
+  pcg32 rng;
+  pcg32_seed(&rng, 7, 3);
+  int n = 0, cached = 0, large = 0, tries = 0;
+  /* The first 64 rays from above the floor's far corner (many on one
+   * face of it: that face's hits filled with its data given once), the
+   * rest from anywhere. */
+  int floor_face[2] = {0, 0};
+  while (n < N && tries++ < 100 * N) {
+    vec3 o =
+        v3(4 * pcg32_next_double(&rng) - 2, 4 * pcg32_next_double(&rng) - 2, 3 * pcg32_next_double(&rng));
+    vec3 t =
+        v3(2 * pcg32_next_double(&rng) - 1, 2 * pcg32_next_double(&rng) - 1, pcg32_next_double(&rng) - 0.2);
+    if (n < 64) o = v3(-2.5, -1.5, 2), t = v3(-2.2 + 0.6 * t.x, -1.5 + 0.5 * t.y, -1);
+    ray3 r = {o, v3_scale(v3_sub(t, o), 0.5 + pcg32_next_double(&rng)), 0, INFINITY};
+    if (!accel_intersect(s->accel, &r, &h[n])) continue;
+    rays[n] = r;
+    const shape *top = s->shapes[h[n].shape];
+    cached += top->face_cache != NULL && !shape_is_instancing(top);
+    large += top->face_cache != NULL && top->mesh.n_faces > 64;
+    if (n < 64 && h[n].shape == s->shapes[0]->index) floor_face[h[n].prim & 1]++;
+    n++;
+  }
+  REQUIRE(n == N, "%d hits", n);
+  CHECK(floor_face[0] >= 8 || floor_face[1] >= 8, "8 hits on one face of the floor (%d, %d)", floor_face[0],
+        floor_face[1]);
+  CHECK(cached > N / 3 && cached < N - 10 && large > 10,
+        "a mix of cached meshes (small and large) and other hits (%d cached, %d on the grid)", cached, large);
+  for (int k = 0; k < N; k++) {
+    memset(&one[k], 0, sizeof one[k]);
+    hit_fill_interaction(s, &rays[k], &h[k], &one[k]);
+    rp[k] = &rays[k], hp[k] = &h[k], sp[k] = &many[k];
+  }
+  for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
+    if (!rsw_isa_set((rsw_isa)isa)) continue;
+    memset(many, 0, sizeof many);
+    hit_fill_interaction_batch(s, N, rp, hp, sp);
+    int bad = 0;
+    for (int k = 0; k < N; k++) bad += memcmp(&one[k], &many[k], sizeof one[k]) != 0;
+    CHECK(bad == 0, "%s: hit_fill_interaction_batch differs from hit_fill_interaction in %d of %d hits",
+          rsw_isa_name((rsw_isa)isa), bad, N);
+  }
+  rsw_isa_set(rsw_isa_best());
+  scene_free(s);
+}
+
 int main(void) {
   RSW_TEST_RUN(test_threads_cornell);
   RSW_TEST_RUN(test_threads_periodic);
@@ -569,5 +687,6 @@ int main(void) {
   RSW_TEST_RUN(test_emitter_batches);
   RSW_TEST_RUN(test_emitter_batch_chi2);
   RSW_TEST_RUN(test_frames_batch);
+  RSW_TEST_RUN(test_hits_batch);
   RSW_TEST_END("test_wave");
 }
