@@ -701,14 +701,15 @@ static void test_fetch_encoded(void) {
           compared++;
           if (!s && !(want && len == want_len && memcmp(bytes, want, len) == 0)) {
             differ++;
-            fprintf(stdout, "  %s/%s %s: %zu bytes, the client's file %zu\n", ctxs[i], sensors[k], types[t], len,
-                    want_len);
+            fprintf(stdout, "  %s/%s %s: %zu bytes, the client's file %zu\n", ctxs[i], sensors[k], types[t],
+                    len, want_len);
           }
           rsw_free(bytes);
           free(want);
         }
       }
-  CHECK(compared == 24 && differ == 0, "%d of %d encoded films differ from the client's files", differ, compared);
+  CHECK(compared == 24 && differ == 0, "%d of %d encoded films differ from the client's files", differ,
+        compared);
   void *bytes = NULL;
   size_t len = 0;
   s = rsw_job_fetch_encoded(c, job, "a", "hemi", "application/json", &bytes, &len);
@@ -721,8 +722,8 @@ static void test_fetch_encoded(void) {
   rsw_free(bytes);
   bytes = (void *)1;
   s = rsw_job_fetch_encoded(c, job, "a", "hemi", "image/tiff", &bytes, &len);
-  CHECK(s == RSW_ERR_INVALID && !bytes && len == 0 && strstr(why(c), "image/tiff"), "an unknown media type: %s %s",
-        rsw_strerror(s), why(c));
+  CHECK(s == RSW_ERR_INVALID && !bytes && len == 0 && strstr(why(c), "image/tiff"),
+        "an unknown media type: %s %s", rsw_strerror(s), why(c));
   s = rsw_job_fetch_encoded(c, job, "zz", "hemi", "image/x-exr", &bytes, &len);
   CHECK(s == RSW_ERR_NOT_FOUND && !bytes, "an unknown context: %s", rsw_strerror(s));
   rsw_job_delete(c, job);
@@ -1163,7 +1164,8 @@ static int on_spread_encoded(void *user, const char *context, const char *sensor
   int i = atoi(context + 1);
   double wl = 400.0 + 300.0 * i / 11, rho = 0.2 + 0.6 * (wl - 400.0) / 300.0, want = rho / PI;
   if (!write_bytes(path, bytes, len) || exr_read_image(path, &img, &err) != RSW_OK || img.width != 1 ||
-      fabs(img.data[0] - want) > 1e-5 * want || strcmp(sensor, "meter") != 0 || !strstr(result_json, "\"succeeded\""))
+      fabs(img.data[0] - want) > 1e-5 * want || strcmp(sensor, "meter") != 0 ||
+      !strstr(result_json, "\"succeeded\""))
     l->bad++;
   exr_image_free(&img);
   return 0;
@@ -1250,8 +1252,8 @@ static void test_spread(void) {
   spread_log l4 = {0};
   so.film_user = &l4;
   s = rsw_spread_run(&co, id, x, &so, &r);
-  CHECK(s == RSW_OK && l4.resumed == 12 && l4.encoded == 0 && l4.bad == 0, "resumed EXR spread: %s, %d resumed",
-        rsw_strerror(s), l4.resumed);
+  CHECK(s == RSW_OK && l4.resumed == 12 && l4.encoded == 0 && l4.bad == 0,
+        "resumed EXR spread: %s, %d resumed", rsw_strerror(s), l4.resumed);
   so.on_film_encoded = NULL;
   CHECK(rsw_spread_run(&co, id, x, &so, &r) == RSW_ERR_INVALID, "film_media_type without on_film_encoded");
   so.on_film_encoded = on_spread_encoded;

@@ -32,7 +32,9 @@ static double *make_angles(size_t n, double shift) {
   double *a = malloc(2 * n * sizeof *a);
   for (size_t i = 0; i < n; i++) {
     a[2 * i] = 0.123456789123 * (double)(i % 731) + shift;
-    a[2 * i + 1] = (i % 5 == 0) ? -359.99999999 + (double)i : (i % 7 == 0) ? 1e-300 * (double)i : 180.0 - shift;
+    a[2 * i + 1] = (i % 5 == 0)   ? -359.99999999 + (double)i
+                   : (i % 7 == 0) ? 1e-300 * (double)i
+                                  : 180.0 - shift;
   }
   return a;
 }
@@ -65,7 +67,8 @@ static void test_lists_hit_and_miss(void) {
   free(nolen);
   free(want);
   /* Two arrays of one size taking turns: each gets its own text. */
-  for (int r = 0; r < 4; r++) CHECK(list_ok(b, N, r & 1) && list_ok(a, N, r & 1), "turn %d: a and b apart", r);
+  for (int r = 0; r < 4; r++)
+    CHECK(list_ok(b, N, r & 1) && list_ok(a, N, r & 1), "turn %d: a and b apart", r);
   /* The same array but its last value: not served a's text. */
   double last = a[2 * N - 1];
   a[2 * N - 1] = last + 1e-6;
