@@ -313,10 +313,10 @@ static int hand_over(spread *sp, const char *id, const char *sensor, const char 
   return o->on_film(o->film_user, id, sensor, result_json, f ? f->film : NULL, resumed);
 }
 
-/* Hand every result of one context to the caller and journal it. list:
- * the job's results; only those of context `id`. */
-static int deliver_context(shard *sh, rsw_client *c, const cJSON *list, const char *id, size_t cidx,
-                           rsw_status *st_out) {
+/* Hand every result of one context to the caller and journal it: rs, the
+ * job's nr results of context `id`, in the job's order. */
+static int deliver_context(shard *sh, rsw_client *c, const cJSON *const *rs, size_t nr, const char *id,
+                           size_t cidx, rsw_status *st_out) {
   spread *sp = sh->sp;
   cJSON *mine = cJSON_CreateArray();
   fetched *films = NULL;
@@ -325,9 +325,8 @@ static int deliver_context(shard *sh, rsw_client *c, const cJSON *list, const ch
   *st_out = RSW_OK;
   /* Fetch first, then deliver under the lock: a lost replica half-way
    * leaves the context undelivered. */
-  cJSON_ArrayForEach(r, list) {
-    const char *rc = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "context"));
-    if (!rc || strcmp(rc, id) != 0) continue;
+  for (size_t ri = 0; ri < nr; ri++) {
+    r = rs[ri];
     const char *sensor = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "sensor"));
     const char *state = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "state"));
     if (nf == cap) {
@@ -438,6 +437,18 @@ static rsw_status submit(shard *sh, rsw_client *c, size_t *n_out) {
   return RSW_OK;
 }
 
+/* One result of a job and the index in x of its context. */
+typedef struct ctx_result {
+  size_t ci, order;
+  const cJSON *r;
+} ctx_result;
+
+static int cmp_ctx_result(const void *a, const void *b) {
+  const ctx_result *x = a, *y = b;
+  if (x->ci != y->ci) return x->ci < y->ci ? -1 : 1;
+  return x->order < y->order ? -1 : x->order > y->order;
+}
+
 /* Wait for sh's job and deliver its results. RSW_OK: every context of the
  * job delivered; F_LOST-type failures come back as their status with
  * *lost set. */
@@ -487,9 +498,28 @@ static rsw_status follow(shard *sh, rsw_client *c, bool *lost) {
     return RSW_ERR_NOT_FOUND;
   }
   bool cancelled = st.state == RSW_JOB_CANCELLED;
+  /* The results by context (each context's in the job's order), so that
+   * handing them over costs one pass, not one per context. */
+  size_t nres = (size_t)cJSON_GetArraySize(list), k = 0;
+  ctx_result *by = malloc((nres ? nres : 1) * sizeof *by);
+  const cJSON **run = malloc((nres ? nres : 1) * sizeof *run);
+  if (!by || !run) {
+    free(by);
+    free(run);
+    cJSON_Delete(res);
+    set_fatal(sp, RSW_ERR_NOMEM, "out of memory");
+    return RSW_ERR_NOMEM;
+  }
+  cJSON_ArrayForEach(r, list) {
+    by[k] =
+        (ctx_result){lookup(sp, cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "context"))), k, r};
+    k++;
+  }
+  qsort(by, nres, sizeof *by, cmp_ctx_result);
   s = RSW_OK;
-  for (size_t i = 0; i < sh->n && !s; i++) {
-    size_t ci = sh->idx[i];
+  for (size_t a = 0, b; a < nres && !s; a = b) {
+    size_t ci = by[a].ci;
+    for (b = a; b < nres && by[b].ci == ci; b++) run[b - a] = by[b].r;
     pthread_mutex_lock(&sp->lock);
     bool d = sp->done[ci];
     pthread_mutex_unlock(&sp->lock);
@@ -497,17 +527,14 @@ static rsw_status follow(shard *sh, rsw_client *c, bool *lost) {
     const char *id = client_contexts_id(sp->x, ci);
     /* A job cancelled by its replica (shutting down): what did not
      * succeed is rendered again elsewhere. */
-    bool complete = false, all_ok = true;
-    cJSON_ArrayForEach(r, list) {
-      const char *rc = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "context"));
-      if (!rc || strcmp(rc, id) != 0) continue;
-      complete = true;
-      const char *state = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "state"));
+    bool all_ok = true;
+    for (size_t i = 0; i < b - a; i++) {
+      const char *state = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(run[i], "state"));
       if (!state || strcmp(state, "succeeded") != 0) all_ok = false;
     }
-    if (!complete || (cancelled && !all_ok)) continue;
+    if (cancelled && !all_ok) continue;
     rsw_status fs;
-    if (deliver_context(sh, c, list, id, ci, &fs)) {
+    if (deliver_context(sh, c, run, b - a, id, ci, &fs)) {
       set_fatal(sp, RSW_ERR_CANCELLED, "stopped by the film callback");
       s = RSW_ERR_CANCELLED;
       break;
@@ -523,6 +550,8 @@ static rsw_status follow(shard *sh, rsw_client *c, bool *lost) {
       }
     }
   }
+  free(by);
+  free(run);
   cJSON_Delete(res);
   if (!s && cancelled) {
     pthread_mutex_lock(&sp->lock);
