@@ -54,8 +54,10 @@ typedef struct shard {
   char scene[65];      /* the scene its job runs on, on its replica */
   size_t job_contexts; /* contexts in that job */
   size_t prior;        /* renders delivered by earlier attempts */
+  size_t delivered;    /* renders delivered by this attempt */
   size_t cur_done, cur_total;
   rsw_status status;
+  struct early *early; /* while its job runs: the contexts handed over early */
 } shard;
 
 struct spread {
@@ -227,12 +229,16 @@ static rsw_status choose_keys(spread *sp, rsw_client *c) {
 
 /* ---- progress over every shard ---- */
 
+static void early_note(struct early *e);
+static bool early_failed(struct early *e);
+
 static int on_progress(void *user, const char *context, const char *sensor, size_t done, size_t total,
                        int failed) {
   shard *sh = user;
   spread *sp = sh->sp;
-  if (atomic_load(&sp->stop)) return 1;
+  if (atomic_load(&sp->stop) || (sh->early && early_failed(sh->early))) return 1;
   if (!context) return 0; /* the end-of-job call: the results decide */
+  if (sh->early) early_note(sh->early);
   pthread_mutex_lock(&sp->lock);
   if (done > sh->cur_done) sh->cur_done = done;
   if (total) sh->cur_total = total;
@@ -367,7 +373,7 @@ static int deliver_context(shard *sh, rsw_client *c, const cJSON *const *rs, siz
         sp->failed++;
       i++;
     }
-    sh->prior += i;
+    sh->delivered += i;
     sp->done[cidx] = 1;
     cJSON *line = cJSON_CreateObject();
     cJSON_AddStringToObject(line, "context", id);
@@ -423,8 +429,10 @@ static rsw_status submit(shard *sh, rsw_client *c, size_t *n_out) {
   rsw_contexts_free(y);
   if (s) return s;
   sh->job_contexts = np;
-  sh->cur_done = sh->cur_total = 0;
   pthread_mutex_lock(&sp->lock);
+  sh->prior += sh->delivered;
+  sh->delivered = 0;
+  sh->cur_done = sh->cur_total = 0;
   cJSON *line = cJSON_CreateObject();
   cJSON_AddNumberToObject(line, "shard", sh->k);
   cJSON_AddNumberToObject(line, "attempt", sh->attempt);
@@ -449,39 +457,14 @@ static int cmp_ctx_result(const void *a, const void *b) {
   return x->order < y->order ? -1 : x->order > y->order;
 }
 
-/* Wait for sh's job and deliver its results. RSW_OK: every context of the
- * job delivered; F_LOST-type failures come back as their status with
- * *lost set. */
-static rsw_status follow(shard *sh, rsw_client *c, bool *lost) {
+/* Hand over the contexts of one answer of GET results (text, freed here)
+ * that are not delivered yet. early (the job still runs): those whose
+ * every render succeeded; otherwise (the job is over) every context,
+ * but for a job cancelled by its replica only those whose every render
+ * succeeded (the rest is rendered again elsewhere). RSW_OK, or the
+ * failure: *lost set when the replica is lost, else recorded (set_fatal). */
+static rsw_status hand_results(shard *sh, rsw_client *c, char *text, bool early, bool cancelled, bool *lost) {
   spread *sp = sh->sp;
-  *lost = false;
-  double left = 0;
-  if (sp->deadline > 0) {
-    left = sp->deadline - client_now_s();
-    if (left <= 0) {
-      set_fatal(sp, RSW_ERR_TIMEOUT, "the spread sweep did not end within %.3g s", sp->o->timeout_s);
-      return RSW_ERR_TIMEOUT;
-    }
-  }
-  rsw_job_status st;
-  rsw_status s = rsw_job_wait(c, sh->job, on_progress, sh, left, &st);
-  /* A replica that restarted (or another behind the same key) may have a
-   * job of the same id: check it is ours by its size. */
-  if (!s && st.contexts_total != sh->job_contexts) {
-    *lost = true;
-    return RSW_ERR_NOT_FOUND;
-  }
-  char *text = NULL;
-  if (!s) s = rsw_job_results(c, sh->job, &text);
-  if (s) {
-    failure f = classify(sh, c, s);
-    if (f == F_LOST) {
-      *lost = true;
-      return s;
-    }
-    fail_shard(sh, c, s, f, "waiting for its job");
-    return s;
-  }
   cJSON *res = cJSON_Parse(text);
   rsw_free(text);
   const cJSON *list = cJSON_GetObjectItemCaseSensitive(res, "results");
@@ -497,7 +480,6 @@ static rsw_status follow(shard *sh, rsw_client *c, bool *lost) {
     *lost = true;
     return RSW_ERR_NOT_FOUND;
   }
-  bool cancelled = st.state == RSW_JOB_CANCELLED;
   /* The results by context (each context's in the job's order), so that
    * handing them over costs one pass, not one per context. */
   size_t nres = (size_t)cJSON_GetArraySize(list), k = 0;
@@ -516,7 +498,7 @@ static rsw_status follow(shard *sh, rsw_client *c, bool *lost) {
     k++;
   }
   qsort(by, nres, sizeof *by, cmp_ctx_result);
-  s = RSW_OK;
+  rsw_status s = RSW_OK;
   for (size_t a = 0, b; a < nres && !s; a = b) {
     size_t ci = by[a].ci;
     for (b = a; b < nres && by[b].ci == ci; b++) run[b - a] = by[b].r;
@@ -525,14 +507,12 @@ static rsw_status follow(shard *sh, rsw_client *c, bool *lost) {
     pthread_mutex_unlock(&sp->lock);
     if (d) continue;
     const char *id = client_contexts_id(sp->x, ci);
-    /* A job cancelled by its replica (shutting down): what did not
-     * succeed is rendered again elsewhere. */
     bool all_ok = true;
     for (size_t i = 0; i < b - a; i++) {
       const char *state = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(run[i], "state"));
       if (!state || strcmp(state, "succeeded") != 0) all_ok = false;
     }
-    if (cancelled && !all_ok) continue;
+    if ((early || cancelled) && !all_ok) continue;
     rsw_status fs;
     if (deliver_context(sh, c, run, b - a, id, ci, &fs)) {
       set_fatal(sp, RSW_ERR_CANCELLED, "stopped by the film callback");
@@ -541,18 +521,167 @@ static rsw_status follow(shard *sh, rsw_client *c, bool *lost) {
     }
     if (fs) {
       failure f = classify(sh, c, fs);
-      if (f == F_LOST) {
+      if (f == F_LOST)
         *lost = true;
-        s = fs;
-      } else {
+      else
         fail_shard(sh, c, fs, f, "fetching films");
-        s = fs;
-      }
+      s = fs;
     }
   }
   free(by);
   free(run);
   cJSON_Delete(res);
+  return s;
+}
+
+/* ---- handing films over while the job runs ---- */
+
+/* A shard's job streams its events on the shard's connection; a second
+ * connection and thread hand over the finished contexts meanwhile: after
+ * every `batch` renders, GET results and deliver the contexts whose
+ * renders all succeeded. So films are fetched and written while the
+ * daemon renders the next ones (the daemon's core is busy rendering, the
+ * client's fetches and file writes wait on the network and the disk), and
+ * a run that is cut off keeps the films delivered so far (the journal
+ * names them). What is left when the job ends goes in follow()'s last
+ * pass. */
+typedef struct early {
+  shard *sh;
+  rsw_client *c; /* its own connection, on the shard's key */
+  pthread_t th;
+  pthread_mutex_t mu;
+  pthread_cond_t cv;
+  size_t pending, batch; /* renders reported since the last pass; renders per pass */
+  bool finish;           /* the wait is over: stop */
+  rsw_status status;     /* a pass that failed, and whether the replica is lost */
+  bool lost;
+  atomic_int failed;
+} early;
+
+/* Jobs of fewer contexts are handed over at their end only. */
+#define EARLY_MIN_CONTEXTS 8
+
+static void early_note(early *e) {
+  pthread_mutex_lock(&e->mu);
+  if (++e->pending >= e->batch) pthread_cond_signal(&e->cv);
+  pthread_mutex_unlock(&e->mu);
+}
+
+static bool early_failed(early *e) {
+  return atomic_load(&e->failed) != 0;
+}
+
+static void *early_main(void *arg) {
+  early *e = arg;
+  shard *sh = e->sh;
+  for (;;) {
+    pthread_mutex_lock(&e->mu);
+    while (!e->finish && e->pending < e->batch) pthread_cond_wait(&e->cv, &e->mu);
+    bool finish = e->finish;
+    e->pending = 0;
+    pthread_mutex_unlock(&e->mu);
+    if (finish || atomic_load(&sh->sp->stop)) break;
+    char *text = NULL;
+    bool lost = false;
+    rsw_status s = rsw_job_results(e->c, sh->job, &text);
+    if (s) {
+      failure f = classify(sh, e->c, s);
+      if (f == F_LOST)
+        lost = true;
+      else
+        fail_shard(sh, e->c, s, f, "fetching results while its job runs");
+    } else {
+      s = hand_results(sh, e->c, text, true, false, &lost);
+    }
+    if (s) {
+      e->status = s, e->lost = lost;
+      atomic_store(&e->failed, 1);
+      break;
+    }
+  }
+  return NULL;
+}
+
+/* Start handing sh's contexts over early (false: not for this job, or no
+ * connection or thread for it; the last pass then does it all). */
+static bool early_start(shard *sh, early *e) {
+  memset(e, 0, sizeof *e);
+  if (sh->job_contexts < EARLY_MIN_CONTEXTS) return false;
+  e->sh = sh;
+  /* About 16 passes a job: each is one GET results of the whole job. */
+  e->batch = sh->job_contexts / 16 > 4 ? sh->job_contexts / 16 : 4;
+  rsw_client_opts co = *sh->sp->copts;
+  co.size = sizeof co;
+  co.route_key = sh->key;
+  if (rsw_client_new(&co, &e->c)) return false;
+  pthread_mutex_init(&e->mu, NULL);
+  pthread_cond_init(&e->cv, NULL);
+  if (pthread_create(&e->th, NULL, early_main, e) != 0) {
+    pthread_mutex_destroy(&e->mu);
+    pthread_cond_destroy(&e->cv);
+    rsw_client_free(e->c);
+    return false;
+  }
+  sh->early = e;
+  return true;
+}
+
+static void early_stop(shard *sh, early *e) {
+  pthread_mutex_lock(&e->mu);
+  e->finish = true;
+  pthread_cond_signal(&e->cv);
+  pthread_mutex_unlock(&e->mu);
+  pthread_join(e->th, NULL);
+  sh->early = NULL;
+  pthread_mutex_destroy(&e->mu);
+  pthread_cond_destroy(&e->cv);
+  rsw_client_free(e->c);
+}
+
+/* Wait for sh's job and deliver its results. RSW_OK: every context of the
+ * job delivered; F_LOST-type failures come back as their status with
+ * *lost set. */
+static rsw_status follow(shard *sh, rsw_client *c, bool *lost) {
+  spread *sp = sh->sp;
+  *lost = false;
+  double left = 0;
+  if (sp->deadline > 0) {
+    left = sp->deadline - client_now_s();
+    if (left <= 0) {
+      set_fatal(sp, RSW_ERR_TIMEOUT, "the spread sweep did not end within %.3g s", sp->o->timeout_s);
+      return RSW_ERR_TIMEOUT;
+    }
+  }
+  rsw_job_status st;
+  early e;
+  bool piped = early_start(sh, &e);
+  rsw_status s = rsw_job_wait(c, sh->job, on_progress, sh, left, &st);
+  if (piped) {
+    early_stop(sh, &e);
+    if (e.status) { /* a pass failed (and stopped the wait) */
+      *lost = e.lost;
+      return e.status;
+    }
+  }
+  /* A replica that restarted (or another behind the same key) may have a
+   * job of the same id: check it is ours by its size. */
+  if (!s && st.contexts_total != sh->job_contexts) {
+    *lost = true;
+    return RSW_ERR_NOT_FOUND;
+  }
+  char *text = NULL;
+  if (!s) s = rsw_job_results(c, sh->job, &text);
+  if (s) {
+    failure f = classify(sh, c, s);
+    if (f == F_LOST) {
+      *lost = true;
+      return s;
+    }
+    fail_shard(sh, c, s, f, "waiting for its job");
+    return s;
+  }
+  bool cancelled = st.state == RSW_JOB_CANCELLED;
+  s = hand_results(sh, c, text, false, cancelled, lost);
   if (!s && cancelled) {
     pthread_mutex_lock(&sp->lock);
     bool left_over = false;
