@@ -1263,6 +1263,99 @@ static void test_spread(void) {
   rsw_client_free(c);
 }
 
+/* Films are handed over while the job runs: the first film arrives before
+ * the job's last render is reported, every film once, and the progress
+ * never counts past its total. */
+typedef struct early_log {
+  double first_film, last_progress;
+  size_t max_done, last_total;
+  int films, over, bad, resumed;
+  int stop_after; /* > 0: stop the run at this film */
+} early_log;
+
+static int on_early_progress(void *user, const char *context, const char *sensor, size_t done, size_t total,
+                             int failed) {
+  early_log *l = user;
+  (void)sensor;
+  if (!context || !*context) return 0;
+  l->last_progress = now_s();
+  if (done > total || failed) l->over++;
+  if (done > l->max_done) l->max_done = done;
+  l->last_total = total;
+  return 0;
+}
+
+static int on_early_film(void *user, const char *context, const char *sensor, const char *result_json,
+                         const void *bytes, size_t len, int resumed) {
+  early_log *l = user;
+  (void)context, (void)sensor, (void)result_json;
+  if (resumed) {
+    l->resumed++;
+    return 0;
+  }
+  if (!l->films++) l->first_film = now_s();
+  if (!bytes || len < 4 || memcmp(bytes, "\x76\x2f\x31\x01", 4) != 0) l->bad++;
+  return l->stop_after > 0 && l->films == l->stop_after;
+}
+
+static void test_spread_early(void) {
+  rsw_client *c = client_for(main_d.base_url, NULL, 0);
+  REQUIRE(c, "client");
+  char id[65];
+  REQUIRE(plate_scene(c, "0.4", id), "scene");
+  rsw_contexts *x = NULL;
+  REQUIRE(rsw_contexts_new(&x) == RSW_OK, "contexts");
+  enum {
+    N = 48
+  };
+  for (int i = 0; i < N; i++) {
+    char ctx[16];
+    snprintf(ctx, sizeof ctx, "e%02d", i);
+    rsw_contexts_add(x, ctx, 400.0 + 5.0 * i, NULL);
+  }
+  /* About 10 ms a render: the job lasts long enough for passes to run. */
+  rsw_contexts_add_default_sensor(x, "hemi");
+  rsw_contexts_set_default_spp(x, 1500);
+  rsw_client_opts co = {.size = sizeof co, .base_url = main_d.base_url, .retry_backoff_s = 0.01};
+  early_log l = {0};
+  rsw_spread_opts so = {.size = sizeof so,
+                        .shards = 1,
+                        .progress = on_early_progress,
+                        .progress_user = &l,
+                        .film_user = &l,
+                        .film_media_type = "image/x-exr",
+                        .on_film_encoded = on_early_film};
+  rsw_spread_result r;
+  rsw_status s = rsw_spread_run(&co, id, x, &so, &r);
+  CHECK(s == RSW_OK && l.films == N && r.films == N && l.bad == 0, "spread: %s (%s), %d films, %d wrong",
+        rsw_strerror(s), rsw_spread_last_error(), l.films, l.bad);
+  CHECK(l.first_film > 0 && l.first_film < l.last_progress,
+        "the first film came %.3f s after the last render was reported (want before)",
+        l.first_film - l.last_progress);
+  CHECK(l.over == 0 && l.max_done == N && l.last_total == N,
+        "progress: %d calls past the total, last %zu/%zu", l.over, l.max_done, l.last_total);
+  /* Stopped at its 5th film (while the job runs): those 5 are in the
+   * journal, and the same call again hands them back as resumed and
+   * fetches only the rest, from the same job. */
+  char state[200];
+  snprintf(state, sizeof state, "%s/early.state", tmpdir);
+  so.state_path = state;
+  early_log l2 = {.stop_after = 5};
+  so.film_user = so.progress_user = &l2;
+  s = rsw_spread_run(&co, id, x, &so, &r);
+  CHECK(s == RSW_ERR_CANCELLED && l2.films == 5, "stopped by the callback: %s, %d films", rsw_strerror(s),
+        l2.films);
+  early_log l3 = {0};
+  so.film_user = so.progress_user = &l3;
+  s = rsw_spread_run(&co, id, x, &so, &r);
+  CHECK(s == RSW_OK && l3.resumed == 5 && l3.films == N - 5 && l3.bad == 0 && r.resubmitted == 0,
+        "resumed: %s (%s), %d resumed, %d fetched", rsw_strerror(s), rsw_spread_last_error(), l3.resumed,
+        l3.films);
+  rsw_contexts_free(x);
+  rsw_scene_delete(c, id, 1);
+  rsw_client_free(c);
+}
+
 static void test_wait_reconnects(void) {
   fake_server fs;
   REQUIRE(fake_start(&fs, script_drop), "fake server");
@@ -1459,6 +1552,7 @@ int main(void) {
     RSW_TEST_RUN(test_wait_reconnects);
     RSW_TEST_RUN(test_route_header);
     RSW_TEST_RUN(test_spread);
+    RSW_TEST_RUN(test_spread_early);
     RSW_TEST_RUN(test_wait_polls_without_events);
     RSW_TEST_RUN(test_retry_after);
     RSW_TEST_RUN(test_connection_refused);
