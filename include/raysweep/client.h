@@ -359,7 +359,10 @@ const char *rsw_dataset_last_error(const rsw_dataset *d);
  * that were not delivered are rendered. */
 
 /* Called once per (context, sensor) of the list, serialised (never two at
- * once), in no particular order. result_json: the job's result object
+ * once), in no particular order, a context's films together once all its
+ * renders are over: mostly while its job still runs (a second connection
+ * per shard hands finished contexts over as the job goes), the rest when
+ * the job ends. result_json: the job's result object
  * ({context, sensor, state, wavelength?, seed?, error?}). film: the film
  * when state is "succeeded", else NULL; also NULL with resumed = 1 for a
  * film an earlier run with the same state file delivered (the caller kept
