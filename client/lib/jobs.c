@@ -437,10 +437,17 @@ static const struct {
     {"application/json", "{", 1},
 };
 
+#define N_FILM_ENCODINGS (sizeof film_encodings / sizeof film_encodings[0])
+
+/* The index of media_type in film_encodings, or N_FILM_ENCODINGS. */
+static size_t film_encoding(const char *media_type) {
+  size_t e = 0;
+  while (e < N_FILM_ENCODINGS && !(media_type && strcmp(media_type, film_encodings[e].type) == 0)) e++;
+  return e;
+}
+
 bool client_film_media_type_known(const char *media_type) {
-  for (size_t e = 0; media_type && e < sizeof film_encodings / sizeof film_encodings[0]; e++)
-    if (strcmp(media_type, film_encodings[e].type) == 0) return true;
-  return false;
+  return film_encoding(media_type) < N_FILM_ENCODINGS;
 }
 
 rsw_status rsw_job_fetch_encoded(rsw_client *c, const char *job_id, const char *context, const char *sensor,
@@ -449,9 +456,8 @@ rsw_status rsw_job_fetch_encoded(rsw_client *c, const char *job_id, const char *
   client_clear_error(c);
   if (!bytes_out || !len_out) return client_fail(c, RSW_ERR_INVALID, "fetch: bytes_out or len_out is NULL");
   *bytes_out = NULL, *len_out = 0;
-  size_t e = 0, n_enc = sizeof film_encodings / sizeof film_encodings[0];
-  while (e < n_enc && !(media_type && strcmp(media_type, film_encodings[e].type) == 0)) e++;
-  if (e == n_enc)
+  size_t e = film_encoding(media_type);
+  if (e == N_FILM_ENCODINGS)
     return client_fail(c, RSW_ERR_INVALID,
                        "fetch: media type '%s' is none of image/x-exr, application/x-npy, image/png, "
                        "application/json",
