@@ -1313,9 +1313,10 @@ static void test_spread_early(void) {
     snprintf(ctx, sizeof ctx, "e%02d", i);
     rsw_contexts_add(x, ctx, 400.0 + 5.0 * i, NULL);
   }
-  /* About 10 ms a render: the job lasts long enough for passes to run. */
+  /* Some 10-30 ms a render: the job lasts long enough for passes to run,
+   * also on a loaded machine. */
   rsw_contexts_add_default_sensor(x, "hemi");
-  rsw_contexts_set_default_spp(x, 1500);
+  rsw_contexts_set_default_spp(x, 4000);
   rsw_client_opts co = {.size = sizeof co, .base_url = main_d.base_url, .retry_backoff_s = 0.01};
   early_log l = {0};
   rsw_spread_opts so = {.size = sizeof so,
