@@ -19,6 +19,12 @@ not inflate it); `one_daemon_overhead_ms_per_film`, the one-daemon
 command's wall time beyond its job's render time (the job's `seconds`)
 per film: what the client adds end to end (start, scene push, keys,
 submission, fetching and writing), median of the runs.
+`one_daemon_job_s`, `two_daemons_job_s`: the render time of the best
+runs' jobs (for two daemons the slower replica's job), and
+`render_efficiency` = one_daemon_job_s / (2 x two_daemons_job_s): the
+renders' own scaling, so that a shortfall of `efficiency` can be told
+apart as the daemons' share of the cores (other work on the machine) or
+the client's.
 Added latency: GET /v1/health/live on a kept-alive connection, 2000 times
 straight to a daemon and 2000 times through HAProxy (the routing header
 set); the difference of the percentiles.
@@ -154,16 +160,21 @@ def main():
         # alternately, so a shared machine's load falls on both alike.
         sweep(url1, os.path.join(tmp, "o"), ["--spread", "1"])
         sweep(url2, os.path.join(tmp, "t"), ["--spread", "2"])
-        runs1, runs2, cpu1, cpu2, over1 = [], [], [], [], []
+        runs1, runs2, cpu1, cpu2, over1, jobs1, jobs2 = [], [], [], [], [], [], []
         for i in range(3):
             dt, cpu = sweep(url1, os.path.join(tmp, f"o{i}"), ["--spread", "1"])
             runs1.append(dt)
             cpu1.append(cpu)
-            over1.append((dt - last_job_seconds(one)) / N_CONTEXTS * 1e3)
+            jobs1.append(last_job_seconds(one))
+            over1.append((dt - jobs1[-1]) / N_CONTEXTS * 1e3)
             dt, cpu = sweep(url2, os.path.join(tmp, f"t{i}"), ["--spread", "2"])
             runs2.append(dt)
             cpu2.append(cpu)
+            jobs2.append(max(last_job_seconds(a), last_job_seconds(b)))
         t1, t2 = min(runs1), min(runs2)
+        # The renders alone (the jobs' own seconds, the slower replica's for
+        # two): how much of a shortfall is the daemons' share of the cores.
+        j1, j2 = jobs1[runs1.index(t1)], jobs2[runs2.index(t2)]
         th1, th2 = N_CONTEXTS / t1, N_CONTEXTS / t2
         d50, d99, v50, v99 = latencies(a, lb, 2000)
         print(json.dumps({
@@ -180,6 +191,9 @@ def main():
             "efficiency": round(th2 / (2 * th1), 3),
             "client_cpu_ms_per_film": {"one_daemon": round(median(cpu1), 3), "two_daemons": round(median(cpu2), 3)},
             "one_daemon_overhead_ms_per_film": round(median(over1), 3),
+            "one_daemon_job_s": round(j1, 3),
+            "two_daemons_job_s": round(j2, 3),
+            "render_efficiency": round(j1 / (2 * j2), 3),
             "direct_ms_p50": round(d50, 3),
             "direct_ms_p99": round(d99, 3),
             "via_haproxy_ms_p50": round(v50, 3),
