@@ -121,7 +121,7 @@ static uint64_t fnv1a64(const char *s) {
  * are not synced either, so syncing it alone would survive a power loss
  * only to name films that did not. One fsync per context was also the
  * client's largest cost per film (about 2.5 ms on this machine's disk,
- * a fifth of the render of a 32x32 film at 16 spp). */
+ * a quarter of the render of a 32x32 film at 16 spp on one thread). */
 static void journal_line(spread *sp, cJSON *o) {
   if (!sp->journal) {
     cJSON_Delete(o);
