@@ -4,6 +4,7 @@
 
 #include <inttypes.h>
 #include <math.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -30,7 +31,7 @@ film_exr_info film_exr_info_none(void) {
 
 /* "v0,v1,..." of every pixel's angle k (0 zenith, 1 azimuth), row-major,
  * %.9g (enough for a float's worth of angle). NULL when out of memory. */
-static char *angle_list(const double *angles, size_t n, int k) {
+static char *format_angle_list(const double *angles, size_t n, int k, size_t *len_out) {
   size_t cap = n * 18 + 1, len = 0; /* "%.9g" is at most 16 chars, plus ',' */
   char *s = malloc(cap);
   if (!s) return NULL;
@@ -43,6 +44,70 @@ static char *angle_list(const double *angles, size_t n, int k) {
     }
     len += (size_t)w;
   }
+  *len_out = len;
+  return s;
+}
+
+/* The lists of the last angles formatted. A sweep's films share their
+ * sensor's angles (the same sensor at every wavelength), so each film
+ * after the first copies the text instead of formatting 2 x W x H
+ * numbers again: the same bytes, at memcpy speed. Films up to
+ * ANGLE_CACHE_MAX pixels (the larger ones' render time dwarfs the
+ * formatting). */
+#define ANGLE_CACHE_MAX ((size_t)1 << 16)
+static struct {
+  pthread_mutex_t lock;
+  double *angles; /* 2 n, a copy */
+  size_t n;
+  char *list[2];
+  size_t len[2];
+} angle_cache = {.lock = PTHREAD_MUTEX_INITIALIZER};
+
+static char *copy_text(const char *s, size_t len) {
+  char *t = malloc(len + 1);
+  if (t) memcpy(t, s, len + 1);
+  return t;
+}
+
+char *film_angle_list(const double *angles, size_t n, int k, size_t *len_out) {
+  size_t len = 0;
+  char *s = NULL;
+  if (n > ANGLE_CACHE_MAX || k < 0 || k > 1) {
+    s = format_angle_list(angles, n, k, &len);
+    if (s && len_out) *len_out = len;
+    return s;
+  }
+  pthread_mutex_lock(&angle_cache.lock);
+  if (angle_cache.n == n && angle_cache.angles && memcmp(angle_cache.angles, angles, 2 * n * sizeof *angles) == 0)
+    s = copy_text(angle_cache.list[k], len = angle_cache.len[k]);
+  pthread_mutex_unlock(&angle_cache.lock);
+  if (s) {
+    if (len_out) *len_out = len;
+    return s;
+  }
+  /* Not these angles: format both lists and keep them. */
+  size_t l2[2] = {0, 0};
+  char *both[2] = {format_angle_list(angles, n, 0, &l2[0]), format_angle_list(angles, n, 1, &l2[1])};
+  double *copy = malloc(2 * n * sizeof *copy);
+  if (both[0] && both[1] && copy) {
+    memcpy(copy, angles, 2 * n * sizeof *copy);
+    s = copy_text(both[k], len = l2[k]);
+    pthread_mutex_lock(&angle_cache.lock);
+    free(angle_cache.angles);
+    free(angle_cache.list[0]);
+    free(angle_cache.list[1]);
+    angle_cache.angles = copy, angle_cache.n = n;
+    angle_cache.list[0] = both[0], angle_cache.list[1] = both[1];
+    angle_cache.len[0] = l2[0], angle_cache.len[1] = l2[1];
+    pthread_mutex_unlock(&angle_cache.lock);
+    if (s && len_out) *len_out = len;
+    return s;
+  }
+  /* Out of memory for the cache: the list alone, if it was made. */
+  free(copy);
+  s = both[k], len = l2[k];
+  free(both[1 - k]);
+  if (s && len_out) *len_out = len;
   return s;
 }
 
@@ -70,8 +135,8 @@ static rsw_status build_attrs(const film_exr_info *info, int width, int height, 
   if (!rgb && isfinite(info->wavelength_nm)) add(a, "raysweep:wavelength_nm", a->wavelength);
   if (info->angles && width > 0 && height > 0) {
     size_t n = (size_t)width * (size_t)height;
-    a->zenith = angle_list(info->angles, n, 0);
-    a->azimuth = angle_list(info->angles, n, 1);
+    a->zenith = film_angle_list(info->angles, n, 0, NULL);
+    a->azimuth = film_angle_list(info->angles, n, 1, NULL);
     if (!a->zenith || !a->azimuth) {
       free(a->zenith);
       free(a->azimuth);

@@ -59,6 +59,14 @@ typedef struct film_exr_info {
   int n_irradiance;
 } film_exr_info;
 
+/* The text of raysweep:zenith_deg (k 0) or raysweep:azimuth_deg (k 1) for
+ * n pixels' angles (2 per pixel, as film_exr_info.angles): "%.9g" values
+ * joined by ','. The daemon's JSON film meta writes the same lists. The
+ * last angles' lists are kept, so the films of one sensor format them
+ * once. Malloc'ed (*len_out, may be NULL: its length); NULL when out of
+ * memory. Thread-safe. */
+char *film_angle_list(const double *angles, size_t n, int k, size_t *len_out);
+
 /* An info that writes nothing (wavelength NaN); set what is known. */
 film_exr_info film_exr_info_none(void);
 

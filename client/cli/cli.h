@@ -109,6 +109,13 @@ cli_format cli_format_from_name(const char *name);
 const char *cli_format_ext(cli_format f);
 /* Write a film in a format; returns a CLI exit code after printing. */
 int cli_save_film(const cli_ctx *ctx, const rsw_film *f, const char *path, cli_format fmt);
+/* The media type in which the daemon's own encoding of a film is the file
+ * cli_save_film writes (rsw_job_fetch_encoded): EXR and NPY; NULL for
+ * JSON, whose meta the client prints itself. */
+const char *cli_format_media_type(cli_format f);
+/* Write a film's bytes as fetched (through a temp file renamed on
+ * success); returns a CLI exit code after printing. */
+int cli_save_encoded(const cli_ctx *ctx, const void *bytes, size_t len, const char *path);
 
 /* Whole file into memory (NUL-terminated); NULL with errno on failure. */
 char *cli_read_file(const char *path, size_t *len_out);

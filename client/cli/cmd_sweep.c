@@ -462,15 +462,21 @@ static int fetch_all(cli_ctx *ctx, const char *job, const char *dir, cli_format 
     }
     snprintf(rel, sizeof rel, "%s/%s.%s", c, sn, cli_format_ext(fmt));
     snprintf(path, sizeof path, "%s/%s", dir, rel);
+    /* EXR and NPY: the daemon's encoding is the file; JSON: decoded. */
     rsw_film *film = NULL;
-    if ((s = rsw_job_fetch(ctx->client, job, c, sn, &film))) {
+    void *bytes = NULL;
+    size_t len = 0;
+    const char *media = cli_format_media_type(fmt);
+    if ((s = media ? rsw_job_fetch_encoded(ctx->client, job, c, sn, media, &bytes, &len)
+                   : rsw_job_fetch(ctx->client, job, c, sn, &film))) {
       char what[300];
       snprintf(what, sizeof what, "%s %s/%s", job, c, sn);
       rc = cli_report(ctx, s, what);
       break;
     }
-    rc = cli_save_film(ctx, film, path, fmt);
+    rc = film ? cli_save_film(ctx, film, path, fmt) : cli_save_encoded(ctx, bytes, len, path);
     rsw_film_free(film);
+    rsw_free(bytes);
     if (rc) break;
     cJSON *line = sweep_index_line(r, c, sn, rel, sorted, n, job_params);
     e[ne].line = line;

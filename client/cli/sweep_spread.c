@@ -42,11 +42,10 @@ typedef struct spread_sink {
   cli_progress *progress;
 } spread_sink;
 
-/* rsw_spread_film_fn: save the film (or, resumed, find the one an earlier
- * run saved) and keep its index line. */
-static int spread_film(void *user, const char *c, const char *sn, const char *result_json,
-                       const rsw_film *film, int resumed) {
-  spread_sink *k = user;
+/* Save the film (decoded, or the daemon's bytes; or, resumed, find the one
+ * an earlier run saved) and keep its index line. */
+static int spread_save(spread_sink *k, const char *c, const char *sn, const char *result_json,
+                       const rsw_film *film, const void *bytes, size_t len, int resumed) {
   if (k->rc) return 1;
   cJSON *r = cJSON_Parse(result_json);
   const char *state = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "state"));
@@ -68,12 +67,12 @@ static int spread_film(void *user, const char *c, const char *sn, const char *re
   char rel[600], path[4096];
   snprintf(path, sizeof path, "%s/%s", k->dir, c);
   snprintf(rel, sizeof rel, "%s/%s.%s", c, sn, cli_format_ext(k->fmt));
-  if (film) {
+  if (film || bytes) {
     if (cli_mkdirs(path)) {
       k->rc = cli_fail(k->ctx, CLI_IO, "cannot create '%s': %s", path, strerror(errno));
     } else {
       snprintf(path, sizeof path, "%s/%s", k->dir, rel);
-      k->rc = cli_save_film(k->ctx, film, path, k->fmt);
+      k->rc = film ? cli_save_film(k->ctx, film, path, k->fmt) : cli_save_encoded(k->ctx, bytes, len, path);
     }
   } else if (resumed) {
     snprintf(path, sizeof path, "%s/%s", k->dir, rel);
@@ -105,6 +104,18 @@ static int spread_film(void *user, const char *c, const char *sn, const char *re
   e->sensor = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(line, "sensor"));
   e->order = k->ne++;
   return 0;
+}
+
+/* rsw_spread_film_fn (films decoded: JSON) and rsw_spread_encoded_fn
+ * (EXR and NPY, as the daemon encoded them). */
+static int spread_film(void *user, const char *c, const char *sn, const char *result_json,
+                       const rsw_film *film, int resumed) {
+  return spread_save(user, c, sn, result_json, film, NULL, 0, resumed);
+}
+
+static int spread_film_encoded(void *user, const char *c, const char *sn, const char *result_json,
+                               const void *bytes, size_t len, int resumed) {
+  return spread_save(user, c, sn, result_json, NULL, bytes, len, resumed);
 }
 
 int sweep_run_spread(cli_ctx *ctx, const cmdline_args *a, int k_shards, bool resume, cli_format fmt,
@@ -146,7 +157,9 @@ int sweep_run_spread(cli_ctx *ctx, const cmdline_args *a, int k_shards, bool res
                         .progress = ctx->quiet ? NULL : cli_progress_cb,
                         .progress_user = &p,
                         .on_film = spread_film,
-                        .film_user = &sink};
+                        .film_user = &sink,
+                        .film_media_type = cli_format_media_type(fmt),
+                        .on_film_encoded = spread_film_encoded};
   rsw_spread_result res;
   cli_catch_interrupt();
   rsw_status s = rsw_spread_run(&co, scene_is_file ? NULL : scene, x, &so, &res);

@@ -277,6 +277,20 @@ const char *cli_format_ext(cli_format f) {
   }
 }
 
+const char *cli_format_media_type(cli_format f) {
+  switch (f) {
+  case CLI_FMT_EXR: return "image/x-exr";
+  case CLI_FMT_NPY: return "application/x-npy";
+  default: return NULL;
+  }
+}
+
+int cli_save_encoded(const cli_ctx *ctx, const void *bytes, size_t len, const char *path) {
+  if (cli_write_file_atomic(path, bytes, len))
+    return cli_fail(ctx, CLI_IO, "cannot write '%s': %s", path, strerror(errno));
+  return CLI_OK;
+}
+
 static void put_json_string(FILE *f, const char *s) {
   fputc('"', f);
   for (; *s; s++) {

@@ -316,6 +316,7 @@ rsw_status http_request(rsw_client *c, const http_req *q, http_resp *r) {
     r->body = b.p;
     r->len = b.len;
     snprintf(r->etag, sizeof r->etag, "%s", x.hdr.etag);
+    snprintf(r->content_type, sizeof r->content_type, "%s", x.hdr.content_type);
     return RSW_OK;
   }
 }

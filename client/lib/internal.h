@@ -59,6 +59,9 @@ rsw_status client_fail_http(rsw_client *c, long http_status, const char *body, s
 /* Status for an HTTP error status without a usable problem code. */
 rsw_status client_status_for_http(long http_status);
 
+/* A media type rsw_job_fetch_encoded takes (jobs.c). */
+bool client_film_media_type_known(const char *media_type);
+
 /* ---- HTTP (http.c) ---------------------------------------------------------- */
 
 typedef struct http_req {
@@ -84,6 +87,7 @@ typedef struct http_resp {
   char *body; /* NUL-terminated (owned; http_resp_free); may be empty */
   size_t len;
   char etag[80];
+  char content_type[128]; /* the answer's Content-Type, as sent ("" when none) */
 } http_resp;
 
 /* One request with the client's retry policy: retried with exponential

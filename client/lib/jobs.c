@@ -5,6 +5,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 
 #include "internal.h"
 
@@ -398,27 +399,96 @@ rsw_status rsw_job_results(rsw_client *c, const char *job_id, char **json_out) {
   return client_get_text(c, path, json_out);
 }
 
-rsw_status rsw_job_fetch(rsw_client *c, const char *job_id, const char *context, const char *sensor,
-                         rsw_film **film_out) {
-  if (!c) return RSW_ERR_INVALID;
-  client_clear_error(c);
-  char ctx[256], sen[256], suffix[540], path[900];
+/* GET /v1/jobs/{id}/results/{context}/{sensor} as accept: path[900]
+ * names it for messages. */
+static rsw_status fetch_result(rsw_client *c, const char *job_id, const char *context, const char *sensor,
+                               const char *accept, char path[900], http_resp *r) {
+  char ctx[256], sen[256], suffix[540];
+  memset(r, 0, sizeof *r);
   if (!context || !sensor || !client_escape(context, ctx, sizeof ctx) ||
       !client_escape(sensor, sen, sizeof sen))
     return client_fail(c, RSW_ERR_INVALID, "fetch: context and sensor must be given (under 85 characters)");
   snprintf(suffix, sizeof suffix, "/results/%s/%s", ctx, sen);
-  if (!job_path(job_id, suffix, path, sizeof path))
+  if (!job_path(job_id, suffix, path, 900))
     return client_fail(c, RSW_ERR_INVALID, "job id missing or too long");
+  return http_request(c, &(http_req){.method = "GET", .path = path, .accept = accept}, r);
+}
+
+rsw_status rsw_job_fetch(rsw_client *c, const char *job_id, const char *context, const char *sensor,
+                         rsw_film **film_out) {
+  if (!c) return RSW_ERR_INVALID;
+  client_clear_error(c);
   if (!film_out) return client_fail(c, RSW_ERR_INVALID, "fetch: film_out is NULL");
+  char path[900];
   http_resp r;
-  rsw_status s =
-      http_request(c, &(http_req){.method = "GET", .path = path, .accept = "application/json"}, &r);
+  rsw_status s = fetch_result(c, job_id, context, sensor, "application/json", path, &r);
   if (s) return s;
   char what[920];
   snprintf(what, sizeof what, "GET %s", path);
   s = film_from_json(c, r.body, r.len, what, film_out);
   http_resp_free(&r);
   return s;
+}
+
+/* The media types rsw_job_fetch_encoded takes, and how each file starts:
+ * OpenEXR's magic number 20000630 little-endian, NumPy's "\x93NUMPY",
+ * PNG's signature, a JSON object. */
+static const struct {
+  const char *type;
+  const char *magic;
+  size_t magic_len;
+} film_encodings[] = {
+    {"image/x-exr", "\x76\x2f\x31\x01", 4},
+    {"application/x-npy", "\x93NUMPY", 6},
+    {"image/png", "\x89PNG\r\n\x1a\n", 8},
+    {"application/json", "{", 1},
+};
+
+#define N_FILM_ENCODINGS (sizeof film_encodings / sizeof film_encodings[0])
+
+/* The index of media_type in film_encodings, or N_FILM_ENCODINGS. */
+static size_t film_encoding(const char *media_type) {
+  size_t e = 0;
+  while (e < N_FILM_ENCODINGS && !(media_type && strcmp(media_type, film_encodings[e].type) == 0)) e++;
+  return e;
+}
+
+bool client_film_media_type_known(const char *media_type) {
+  return film_encoding(media_type) < N_FILM_ENCODINGS;
+}
+
+rsw_status rsw_job_fetch_encoded(rsw_client *c, const char *job_id, const char *context, const char *sensor,
+                                 const char *media_type, void **bytes_out, size_t *len_out) {
+  if (!c) return RSW_ERR_INVALID;
+  client_clear_error(c);
+  if (!bytes_out || !len_out) return client_fail(c, RSW_ERR_INVALID, "fetch: bytes_out or len_out is NULL");
+  *bytes_out = NULL, *len_out = 0;
+  size_t e = film_encoding(media_type);
+  if (e == N_FILM_ENCODINGS)
+    return client_fail(c, RSW_ERR_INVALID,
+                       "fetch: media type '%s' is none of image/x-exr, application/x-npy, image/png, "
+                       "application/json",
+                       media_type ? media_type : "(null)");
+  char path[900];
+  http_resp r;
+  rsw_status s = fetch_result(c, job_id, context, sensor, media_type, path, &r);
+  if (s) return s;
+  /* The answer must be what was asked for: a server (or a proxy) that
+   * ignored Accept would otherwise leave, say, JSON in a .exr file. */
+  size_t tl = strcspn(r.content_type, "; \t");
+  if (tl != strlen(media_type) || strncasecmp(r.content_type, media_type, tl) != 0 ||
+      r.len < film_encodings[e].magic_len ||
+      memcmp(r.body, film_encodings[e].magic, film_encodings[e].magic_len) != 0) {
+    s = client_fail(c, RSW_ERR_PARSE, "GET %s: asked for %s, the answer is %s%s", path, media_type,
+                    r.content_type[0] ? r.content_type : "of no type",
+                    tl == strlen(media_type) && strncasecmp(r.content_type, media_type, tl) == 0
+                        ? " but does not start as one"
+                        : "");
+    http_resp_free(&r);
+    return s;
+  }
+  *bytes_out = r.body, *len_out = r.len;
+  return RSW_OK;
 }
 
 /* ---- wait ---------------------------------------------------------------------------- */

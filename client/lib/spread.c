@@ -54,8 +54,10 @@ typedef struct shard {
   char scene[65];      /* the scene its job runs on, on its replica */
   size_t job_contexts; /* contexts in that job */
   size_t prior;        /* renders delivered by earlier attempts */
+  size_t delivered;    /* renders delivered by this attempt */
   size_t cur_done, cur_total;
   rsw_status status;
+  struct early *early; /* while its job runs: the contexts handed over early */
 } shard;
 
 struct spread {
@@ -113,7 +115,13 @@ static uint64_t fnv1a64(const char *s) {
   return h;
 }
 
-/* Append one line to the journal (caller holds the lock). */
+/* Append one line to the journal (caller holds the lock). Flushed, not
+ * synced: the line is there for a rerun after the process dies (Ctrl-C,
+ * a crash, a kill), which is what the journal is for; the films it names
+ * are not synced either, so syncing it alone would survive a power loss
+ * only to name films that did not. One fsync per context was also the
+ * client's largest cost per film (about 2.5 ms on this machine's disk,
+ * a quarter of the render of a 32x32 film at 16 spp on one thread). */
 static void journal_line(spread *sp, cJSON *o) {
   if (!sp->journal) {
     cJSON_Delete(o);
@@ -124,7 +132,6 @@ static void journal_line(spread *sp, cJSON *o) {
   if (t) {
     fprintf(sp->journal, "%s\n", t);
     fflush(sp->journal);
-    fsync(fileno(sp->journal));
   }
   free(t);
 }
@@ -222,12 +229,16 @@ static rsw_status choose_keys(spread *sp, rsw_client *c) {
 
 /* ---- progress over every shard ---- */
 
+static void early_note(struct early *e);
+static bool early_failed(struct early *e);
+
 static int on_progress(void *user, const char *context, const char *sensor, size_t done, size_t total,
                        int failed) {
   shard *sh = user;
   spread *sp = sh->sp;
-  if (atomic_load(&sp->stop)) return 1;
+  if (atomic_load(&sp->stop) || (sh->early && early_failed(sh->early))) return 1;
   if (!context) return 0; /* the end-of-job call: the results decide */
+  if (sh->early) early_note(sh->early);
   pthread_mutex_lock(&sp->lock);
   if (done > sh->cur_done) sh->cur_done = done;
   if (total) sh->cur_total = total;
@@ -289,42 +300,62 @@ static void fail_shard(shard *sh, rsw_client *c, rsw_status s, failure f, const 
 
 /* ---- one shard ---- */
 
-/* Hand every result of one context to the caller and journal it. list:
- * the job's results; only those of context `id`. */
-static int deliver_context(shard *sh, rsw_client *c, const cJSON *list, const char *id, size_t cidx,
-                           rsw_status *st_out) {
+/* One result's film, as the caller asked for it (rsw_spread_opts
+ * .film_media_type): decoded, or the daemon's bytes. Neither: the render
+ * did not succeed (or the film was delivered by an earlier run). */
+typedef struct fetched {
+  rsw_film *film;
+  void *bytes;
+  size_t len;
+} fetched;
+
+/* The caller's callback for one result (caller holds the lock). */
+static int hand_over(spread *sp, const char *id, const char *sensor, const char *result_json,
+                     const fetched *f, int resumed) {
+  const rsw_spread_opts *o = sp->o;
+  if (o->film_media_type)
+    return o->on_film_encoded(o->film_user, id, sensor, result_json, f ? f->bytes : NULL, f ? f->len : 0,
+                              resumed);
+  return o->on_film(o->film_user, id, sensor, result_json, f ? f->film : NULL, resumed);
+}
+
+/* Hand every result of one context to the caller and journal it: rs, the
+ * job's nr results of context `id`, in the job's order. */
+static int deliver_context(shard *sh, rsw_client *c, const cJSON *const *rs, size_t nr, const char *id,
+                           size_t cidx, rsw_status *st_out) {
   spread *sp = sh->sp;
   cJSON *mine = cJSON_CreateArray();
-  rsw_film **films = NULL;
+  fetched *films = NULL;
   size_t nf = 0, cap = 0;
   const cJSON *r;
   *st_out = RSW_OK;
   /* Fetch first, then deliver under the lock: a lost replica half-way
    * leaves the context undelivered. */
-  cJSON_ArrayForEach(r, list) {
-    const char *rc = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "context"));
-    if (!rc || strcmp(rc, id) != 0) continue;
+  for (size_t ri = 0; ri < nr; ri++) {
+    r = rs[ri];
     const char *sensor = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "sensor"));
     const char *state = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "state"));
     if (nf == cap) {
       cap = cap ? 2 * cap : 4;
-      rsw_film **nfm = realloc(films, cap * sizeof *nfm);
+      fetched *nfm = realloc(films, cap * sizeof *nfm);
       if (!nfm) {
         *st_out = RSW_ERR_NOMEM;
         break;
       }
       films = nfm;
     }
-    films[nf] = NULL;
+    fetched *f = &films[nf++];
+    memset(f, 0, sizeof *f);
     if (state && sensor && strcmp(state, "succeeded") == 0) {
-      rsw_status s = rsw_job_fetch(c, sh->job, id, sensor, &films[nf]);
+      rsw_status s =
+          sp->o->film_media_type
+              ? rsw_job_fetch_encoded(c, sh->job, id, sensor, sp->o->film_media_type, &f->bytes, &f->len)
+              : rsw_job_fetch(c, sh->job, id, sensor, &f->film);
       if (s) {
-        nf++;
         *st_out = s;
         break;
       }
     }
-    nf++;
     cJSON_AddItemToArray(mine, cJSON_Duplicate(r, 1));
   }
   int stop = 0;
@@ -334,16 +365,15 @@ static int deliver_context(shard *sh, rsw_client *c, const cJSON *list, const ch
     cJSON_ArrayForEach(r, mine) {
       const char *sensor = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "sensor"));
       char *t = cJSON_PrintUnformatted(r);
-      if (!stop && sp->o->on_film(sp->o->film_user, id, sensor ? sensor : "", t ? t : "{}", films[i], 0))
-        stop = 1;
+      if (!stop && hand_over(sp, id, sensor ? sensor : "", t ? t : "{}", &films[i], 0)) stop = 1;
       free(t);
-      if (films[i])
+      if (films[i].film || films[i].bytes)
         sp->films++;
       else
         sp->failed++;
       i++;
     }
-    sh->prior += i;
+    sh->delivered += i;
     sp->done[cidx] = 1;
     cJSON *line = cJSON_CreateObject();
     cJSON_AddStringToObject(line, "context", id);
@@ -352,7 +382,10 @@ static int deliver_context(shard *sh, rsw_client *c, const cJSON *list, const ch
     journal_line(sp, line);
     pthread_mutex_unlock(&sp->lock);
   }
-  for (size_t i = 0; i < nf; i++) rsw_film_free(films[i]);
+  for (size_t i = 0; i < nf; i++) {
+    rsw_film_free(films[i].film);
+    free(films[i].bytes);
+  }
   free(films);
   cJSON_Delete(mine);
   return stop;
@@ -396,8 +429,10 @@ static rsw_status submit(shard *sh, rsw_client *c, size_t *n_out) {
   rsw_contexts_free(y);
   if (s) return s;
   sh->job_contexts = np;
-  sh->cur_done = sh->cur_total = 0;
   pthread_mutex_lock(&sp->lock);
+  sh->prior += sh->delivered;
+  sh->delivered = 0;
+  sh->cur_done = sh->cur_total = 0;
   cJSON *line = cJSON_CreateObject();
   cJSON_AddNumberToObject(line, "shard", sh->k);
   cJSON_AddNumberToObject(line, "attempt", sh->attempt);
@@ -408,6 +443,199 @@ static rsw_status submit(shard *sh, rsw_client *c, size_t *n_out) {
   journal_line(sp, line);
   pthread_mutex_unlock(&sp->lock);
   return RSW_OK;
+}
+
+/* One result of a job and the index in x of its context. */
+typedef struct ctx_result {
+  size_t ci, order;
+  const cJSON *r;
+} ctx_result;
+
+static int cmp_ctx_result(const void *a, const void *b) {
+  const ctx_result *x = a, *y = b;
+  if (x->ci != y->ci) return x->ci < y->ci ? -1 : 1;
+  return x->order < y->order ? -1 : x->order > y->order;
+}
+
+/* Hand over the contexts of one answer of GET results (text, freed here)
+ * that are not delivered yet. early (the job still runs): those whose
+ * every render succeeded; otherwise (the job is over) every context,
+ * but for a job cancelled by its replica only those whose every render
+ * succeeded (the rest is rendered again elsewhere). RSW_OK, or the
+ * failure: *lost set when the replica is lost, else recorded (set_fatal). */
+static rsw_status hand_results(shard *sh, rsw_client *c, char *text, bool early, bool cancelled, bool *lost) {
+  spread *sp = sh->sp;
+  cJSON *res = cJSON_Parse(text);
+  rsw_free(text);
+  const cJSON *list = cJSON_GetObjectItemCaseSensitive(res, "results");
+  /* Ours: every result names a context of this shard that is pending. */
+  const cJSON *r;
+  bool ours = cJSON_IsArray(list);
+  cJSON_ArrayForEach(r, list) {
+    size_t ci = lookup(sp, cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "context")));
+    if (ci == (size_t)-1 || ci % (size_t)sp->n_shards != (size_t)sh->k) ours = false;
+  }
+  if (!ours) {
+    cJSON_Delete(res);
+    *lost = true;
+    return RSW_ERR_NOT_FOUND;
+  }
+  /* The results by context (each context's in the job's order), so that
+   * handing them over costs one pass, not one per context. */
+  size_t nres = (size_t)cJSON_GetArraySize(list), k = 0;
+  ctx_result *by = malloc((nres ? nres : 1) * sizeof *by);
+  const cJSON **run = malloc((nres ? nres : 1) * sizeof *run);
+  if (!by || !run) {
+    free(by);
+    free(run);
+    cJSON_Delete(res);
+    set_fatal(sp, RSW_ERR_NOMEM, "out of memory");
+    return RSW_ERR_NOMEM;
+  }
+  cJSON_ArrayForEach(r, list) {
+    by[k] =
+        (ctx_result){lookup(sp, cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "context"))), k, r};
+    k++;
+  }
+  qsort(by, nres, sizeof *by, cmp_ctx_result);
+  rsw_status s = RSW_OK;
+  for (size_t a = 0, b; a < nres && !s; a = b) {
+    size_t ci = by[a].ci;
+    for (b = a; b < nres && by[b].ci == ci; b++) run[b - a] = by[b].r;
+    pthread_mutex_lock(&sp->lock);
+    bool d = sp->done[ci];
+    pthread_mutex_unlock(&sp->lock);
+    if (d) continue;
+    const char *id = client_contexts_id(sp->x, ci);
+    bool all_ok = true;
+    for (size_t i = 0; i < b - a; i++) {
+      const char *state = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(run[i], "state"));
+      if (!state || strcmp(state, "succeeded") != 0) all_ok = false;
+    }
+    if ((early || cancelled) && !all_ok) continue;
+    rsw_status fs;
+    if (deliver_context(sh, c, run, b - a, id, ci, &fs)) {
+      set_fatal(sp, RSW_ERR_CANCELLED, "stopped by the film callback");
+      s = RSW_ERR_CANCELLED;
+      break;
+    }
+    if (fs) {
+      failure f = classify(sh, c, fs);
+      if (f == F_LOST)
+        *lost = true;
+      else
+        fail_shard(sh, c, fs, f, "fetching films");
+      s = fs;
+    }
+  }
+  free(by);
+  free(run);
+  cJSON_Delete(res);
+  return s;
+}
+
+/* ---- handing films over while the job runs ---- */
+
+/* A shard's job streams its events on the shard's connection; a second
+ * connection and thread hand over the finished contexts meanwhile: after
+ * every `batch` renders, GET results and deliver the contexts whose
+ * renders all succeeded. So films are fetched and written while the
+ * daemon renders the next ones (the daemon's core is busy rendering, the
+ * client's fetches and file writes wait on the network and the disk), and
+ * a run that is cut off keeps the films delivered so far (the journal
+ * names them). What is left when the job ends goes in follow()'s last
+ * pass. */
+typedef struct early {
+  shard *sh;
+  rsw_client *c; /* its own connection, on the shard's key */
+  pthread_t th;
+  pthread_mutex_t mu;
+  pthread_cond_t cv;
+  size_t pending, batch; /* renders reported since the last pass; renders per pass */
+  bool finish;           /* the wait is over: stop */
+  rsw_status status;     /* a pass that failed, and whether the replica is lost */
+  bool lost;
+  atomic_int failed;
+} early;
+
+/* Jobs of fewer contexts are handed over at their end only. */
+#define EARLY_MIN_CONTEXTS 8
+
+static void early_note(early *e) {
+  pthread_mutex_lock(&e->mu);
+  if (++e->pending >= e->batch) pthread_cond_signal(&e->cv);
+  pthread_mutex_unlock(&e->mu);
+}
+
+static bool early_failed(early *e) {
+  return atomic_load(&e->failed) != 0;
+}
+
+static void *early_main(void *arg) {
+  early *e = arg;
+  shard *sh = e->sh;
+  for (;;) {
+    pthread_mutex_lock(&e->mu);
+    while (!e->finish && e->pending < e->batch) pthread_cond_wait(&e->cv, &e->mu);
+    bool finish = e->finish;
+    e->pending = 0;
+    pthread_mutex_unlock(&e->mu);
+    if (finish || atomic_load(&sh->sp->stop)) break;
+    char *text = NULL;
+    bool lost = false;
+    rsw_status s = rsw_job_results(e->c, sh->job, &text);
+    if (s) {
+      failure f = classify(sh, e->c, s);
+      if (f == F_LOST)
+        lost = true;
+      else
+        fail_shard(sh, e->c, s, f, "fetching results while its job runs");
+    } else {
+      s = hand_results(sh, e->c, text, true, false, &lost);
+    }
+    if (s) {
+      e->status = s, e->lost = lost;
+      atomic_store(&e->failed, 1);
+      break;
+    }
+  }
+  return NULL;
+}
+
+/* Start handing sh's contexts over early (false: not for this job, or no
+ * connection or thread for it; the last pass then does it all). */
+static bool early_start(shard *sh, early *e) {
+  memset(e, 0, sizeof *e);
+  if (sh->job_contexts < EARLY_MIN_CONTEXTS) return false;
+  e->sh = sh;
+  /* About 16 passes a job: each is one GET results of the whole job. */
+  e->batch = sh->job_contexts / 16 > 4 ? sh->job_contexts / 16 : 4;
+  rsw_client_opts co = *sh->sp->copts;
+  co.size = sizeof co;
+  co.route_key = sh->key;
+  if (rsw_client_new(&co, &e->c)) return false;
+  pthread_mutex_init(&e->mu, NULL);
+  pthread_cond_init(&e->cv, NULL);
+  if (pthread_create(&e->th, NULL, early_main, e) != 0) {
+    pthread_mutex_destroy(&e->mu);
+    pthread_cond_destroy(&e->cv);
+    rsw_client_free(e->c);
+    return false;
+  }
+  sh->early = e;
+  return true;
+}
+
+static void early_stop(shard *sh, early *e) {
+  pthread_mutex_lock(&e->mu);
+  e->finish = true;
+  pthread_cond_signal(&e->cv);
+  pthread_mutex_unlock(&e->mu);
+  pthread_join(e->th, NULL);
+  sh->early = NULL;
+  pthread_mutex_destroy(&e->mu);
+  pthread_cond_destroy(&e->cv);
+  rsw_client_free(e->c);
 }
 
 /* Wait for sh's job and deliver its results. RSW_OK: every context of the
@@ -425,7 +653,16 @@ static rsw_status follow(shard *sh, rsw_client *c, bool *lost) {
     }
   }
   rsw_job_status st;
+  early e;
+  bool piped = early_start(sh, &e);
   rsw_status s = rsw_job_wait(c, sh->job, on_progress, sh, left, &st);
+  if (piped) {
+    early_stop(sh, &e);
+    if (e.status) { /* a pass failed (and stopped the wait) */
+      *lost = e.lost;
+      return e.status;
+    }
+  }
   /* A replica that restarted (or another behind the same key) may have a
    * job of the same id: check it is ours by its size. */
   if (!s && st.contexts_total != sh->job_contexts) {
@@ -443,59 +680,8 @@ static rsw_status follow(shard *sh, rsw_client *c, bool *lost) {
     fail_shard(sh, c, s, f, "waiting for its job");
     return s;
   }
-  cJSON *res = cJSON_Parse(text);
-  rsw_free(text);
-  const cJSON *list = cJSON_GetObjectItemCaseSensitive(res, "results");
-  /* Ours: every result names a context of this shard that is pending. */
-  const cJSON *r;
-  bool ours = cJSON_IsArray(list);
-  cJSON_ArrayForEach(r, list) {
-    size_t ci = lookup(sp, cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "context")));
-    if (ci == (size_t)-1 || ci % (size_t)sp->n_shards != (size_t)sh->k) ours = false;
-  }
-  if (!ours) {
-    cJSON_Delete(res);
-    *lost = true;
-    return RSW_ERR_NOT_FOUND;
-  }
   bool cancelled = st.state == RSW_JOB_CANCELLED;
-  s = RSW_OK;
-  for (size_t i = 0; i < sh->n && !s; i++) {
-    size_t ci = sh->idx[i];
-    pthread_mutex_lock(&sp->lock);
-    bool d = sp->done[ci];
-    pthread_mutex_unlock(&sp->lock);
-    if (d) continue;
-    const char *id = client_contexts_id(sp->x, ci);
-    /* A job cancelled by its replica (shutting down): what did not
-     * succeed is rendered again elsewhere. */
-    bool complete = false, all_ok = true;
-    cJSON_ArrayForEach(r, list) {
-      const char *rc = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "context"));
-      if (!rc || strcmp(rc, id) != 0) continue;
-      complete = true;
-      const char *state = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "state"));
-      if (!state || strcmp(state, "succeeded") != 0) all_ok = false;
-    }
-    if (!complete || (cancelled && !all_ok)) continue;
-    rsw_status fs;
-    if (deliver_context(sh, c, list, id, ci, &fs)) {
-      set_fatal(sp, RSW_ERR_CANCELLED, "stopped by the film callback");
-      s = RSW_ERR_CANCELLED;
-      break;
-    }
-    if (fs) {
-      failure f = classify(sh, c, fs);
-      if (f == F_LOST) {
-        *lost = true;
-        s = fs;
-      } else {
-        fail_shard(sh, c, fs, f, "fetching films");
-        s = fs;
-      }
-    }
-  }
-  cJSON_Delete(res);
+  s = hand_results(sh, c, text, false, cancelled, lost);
   if (!s && cancelled) {
     pthread_mutex_lock(&sp->lock);
     bool left_over = false;
@@ -650,7 +836,7 @@ static rsw_status journal_open(spread *sp, uint64_t request) {
           cJSON_ArrayForEach(r, res) {
             const char *sensor = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "sensor"));
             char *t = cJSON_PrintUnformatted(r);
-            sp->o->on_film(sp->o->film_user, ctx->valuestring, sensor ? sensor : "", t ? t : "{}", NULL, 1);
+            hand_over(sp, ctx->valuestring, sensor ? sensor : "", t ? t : "{}", NULL, 1);
             free(t);
             sp->resumed++;
           }
@@ -718,10 +904,13 @@ rsw_status rsw_spread_run(const rsw_client_opts *copts, const char *scene_id, co
   }
   co.size = sizeof co;
   if (out) memset(out, 0, sizeof *out);
-  if (!x || !o.on_film || o.shards < 1 || o.shards > 4096 || (!scene_id && !o.scene_file) ||
+  bool has_callback = o.film_media_type ? o.on_film_encoded && client_film_media_type_known(o.film_media_type)
+                                        : o.on_film != NULL;
+  if (!x || !has_callback || o.shards < 1 || o.shards > 4096 || (!scene_id && !o.scene_file) ||
       (o.route_prefix && (!client_valid_route(o.route_prefix) || strlen(o.route_prefix) > 24))) {
     snprintf(spread_err, sizeof spread_err,
-             "rsw_spread_run: needs contexts, on_film, 1 <= shards <= 4096, a scene id or file, and a route "
+             "rsw_spread_run: needs contexts, on_film (or on_film_encoded and a film_media_type of "
+             "rsw_job_fetch_encoded), 1 <= shards <= 4096, a scene id or file, and a route "
              "prefix of [A-Za-z0-9._-]{1,24}");
     return RSW_ERR_INVALID;
   }

@@ -286,6 +286,17 @@ rsw_status rsw_job_results(rsw_client *c, const char *job_id, char **json_out);
 /* One film of a job. *film_out is owned: rsw_film_free. */
 rsw_status rsw_job_fetch(rsw_client *c, const char *job_id, const char *context, const char *sensor,
                          rsw_film **film_out);
+/* The same film as the daemon encodes it, its bytes untouched: media_type
+ * "image/x-exr", "application/x-npy", "image/png" or "application/json".
+ * Nothing is parsed or formatted on the client, so this is the cheap way
+ * to store films: the EXR and the .npy are byte for byte the files
+ * rsw_film_save_exr and rsw_film_save_npy write of rsw_job_fetch's film
+ * (but for non-finite samples, which the JSON detour makes NaN and these
+ * keep as the daemon has them). *bytes_out owned: rsw_free; *len_out its
+ * length. RSW_ERR_PARSE when the answer is of another type or does not
+ * start as one. */
+rsw_status rsw_job_fetch_encoded(rsw_client *c, const char *job_id, const char *context, const char *sensor,
+                                 const char *media_type, void **bytes_out, size_t *len_out);
 
 /* ---- sweep datasets ------------------------------------------------------------------ */
 
@@ -351,13 +362,22 @@ const char *rsw_dataset_last_error(const rsw_dataset *d);
  * that were not delivered are rendered. */
 
 /* Called once per (context, sensor) of the list, serialised (never two at
- * once), in no particular order. result_json: the job's result object
+ * once), in no particular order, a context's films together once all its
+ * renders are over: mostly while its job still runs (a second connection
+ * per shard hands finished contexts over as the job goes), the rest when
+ * the job ends. result_json: the job's result object
  * ({context, sensor, state, wavelength?, seed?, error?}). film: the film
  * when state is "succeeded", else NULL; also NULL with resumed = 1 for a
  * film an earlier run with the same state file delivered (the caller kept
  * it then). Return non-zero to stop the run (RSW_ERR_CANCELLED). */
 typedef int (*rsw_spread_film_fn)(void *user, const char *context, const char *sensor,
                                   const char *result_json, const rsw_film *film, int resumed);
+
+/* The same with the film as the daemon encoded it (rsw_spread_opts
+ * .film_media_type; rsw_job_fetch_encoded): bytes (borrowed for the call)
+ * and len, NULL and 0 when the render did not succeed or resumed is 1. */
+typedef int (*rsw_spread_encoded_fn)(void *user, const char *context, const char *sensor,
+                                     const char *result_json, const void *bytes, size_t len, int resumed);
 
 typedef struct rsw_spread_opts {
   size_t size;              /* sizeof(rsw_spread_opts) */
@@ -373,8 +393,13 @@ typedef struct rsw_spread_opts {
   double timeout_s;         /* whole run; <= 0: none */
   rsw_progress_fn progress; /* may be NULL; done/total over every shard, serialised */
   void *progress_user;
-  rsw_spread_film_fn on_film; /* required */
+  rsw_spread_film_fn on_film; /* required, unless film_media_type and on_film_encoded are given */
   void *film_user;
+  /* NULL: films reach on_film decoded. A media type rsw_job_fetch_encoded
+   * takes ("image/x-exr", "application/x-npy", ...): films are fetched so,
+   * undecoded, and reach on_film_encoded (with film_user) instead. */
+  const char *film_media_type;
+  rsw_spread_encoded_fn on_film_encoded;
 } rsw_spread_opts;
 
 typedef struct rsw_spread_result {

@@ -233,8 +233,13 @@ rsw_status http_film_json(const svc_film *f, char **bytes_out, size_t *len_out, 
     size_t np = (size_t)im->width * (size_t)im->height;
     for (int k = 0; k < 2 && !b.failed; k++) {
       http_buf_puts(&b, k ? "],\"azimuth_deg\":[" : ",\"zenith_deg\":[");
-      for (size_t i = 0; i < np && !b.failed; i++)
-        http_buf_printf(&b, "%s%.9g", i ? "," : "", im->angles[2 * i + (size_t)k]);
+      size_t len = 0;
+      char *list = film_angle_list(im->angles, np, k, &len); /* the EXR's list, "%.9g" joined by ',' */
+      if (list)
+        http_buf_append(&b, list, len);
+      else
+        b.failed = true;
+      free(list);
     }
     http_buf_puts(&b, "]");
   }

@@ -651,6 +651,86 @@ static void test_job_sweep(void) {
   rsw_client_free(c);
 }
 
+/* rsw_job_fetch_encoded: the daemon's EXR and NPY of every film of a job
+ * are byte for byte what rsw_film_save_exr / _npy write of rsw_job_fetch's
+ * film (two sensors, one with per-pixel angles, and brf + variance planes
+ * with their irradiance attribute; wavelengths such as 401.3 nm, whose
+ * %.17g text is longer than their shortest one); JSON and PNG come as
+ * such; an unknown media type is refused before any request. */
+static void test_fetch_encoded(void) {
+  rsw_client *c = client_for(main_d.base_url, NULL, 0);
+  REQUIRE(c, "client");
+  char id[65], job[40];
+  REQUIRE(plate_scene(c, "0.35", id), "scene");
+  rsw_contexts *x = NULL;
+  REQUIRE(rsw_contexts_new(&x) == RSW_OK, "contexts");
+  static const double wl[] = {401.3, 550, 612.7};
+  static const char *ctxs[] = {"a", "b", "c"}, *sensors[] = {"hemi", "meter"};
+  for (int i = 0; i < 3; i++) rsw_contexts_add(x, ctxs[i], wl[i], NULL);
+  const char *q[] = {"radiance", "brf"};
+  rsw_contexts_add_default_sensor(x, "hemi");
+  rsw_contexts_add_default_sensor(x, "meter");
+  rsw_contexts_set_default_spp(x, 4);
+  rsw_contexts_set_quantities(x, q, 2);
+  rsw_contexts_set_variance(x, 1);
+  rsw_status s = rsw_job_submit(c, id, x, NULL, job);
+  rsw_contexts_free(x);
+  REQUIRE(s == RSW_OK, "submit: %s %s", rsw_strerror(s), why(c));
+  REQUIRE(rsw_job_wait(c, job, NULL, NULL, 60, NULL) == RSW_OK, "wait: %s", why(c));
+  int compared = 0, differ = 0;
+  /* Twice over: the second round's angle lists come from the cache. */
+  for (int round = 0; round < 2; round++)
+    for (int i = 0; i < 3; i++)
+      for (int k = 0; k < 2; k++) {
+        rsw_film *f = NULL;
+        s = rsw_job_fetch(c, job, ctxs[i], sensors[k], &f);
+        REQUIRE(s == RSW_OK, "fetch %s/%s: %s", ctxs[i], sensors[k], why(c));
+        char exr[200], npy[200];
+        snprintf(exr, sizeof exr, "%s/enc.exr", tmpdir);
+        snprintf(npy, sizeof npy, "%s/enc.npy", tmpdir);
+        REQUIRE(rsw_film_save_exr(f, exr) == RSW_OK && rsw_film_save_npy(f, npy) == RSW_OK, "save");
+        rsw_film_free(f);
+        static const char *types[] = {"image/x-exr", "application/x-npy"};
+        for (int t = 0; t < 2; t++) {
+          size_t want_len = 0, len = 0;
+          char *want = read_file(t ? npy : exr, &want_len);
+          void *bytes = NULL;
+          s = rsw_job_fetch_encoded(c, job, ctxs[i], sensors[k], types[t], &bytes, &len);
+          CHECK(s == RSW_OK, "fetch_encoded %s/%s %s: %s %s", ctxs[i], sensors[k], types[t], rsw_strerror(s),
+                why(c));
+          compared++;
+          if (!s && !(want && len == want_len && memcmp(bytes, want, len) == 0)) {
+            differ++;
+            fprintf(stdout, "  %s/%s %s: %zu bytes, the client's file %zu\n", ctxs[i], sensors[k], types[t],
+                    len, want_len);
+          }
+          rsw_free(bytes);
+          free(want);
+        }
+      }
+  CHECK(compared == 24 && differ == 0, "%d of %d encoded films differ from the client's files", differ,
+        compared);
+  void *bytes = NULL;
+  size_t len = 0;
+  s = rsw_job_fetch_encoded(c, job, "a", "hemi", "application/json", &bytes, &len);
+  CHECK(s == RSW_OK && len > 2 && ((char *)bytes)[0] == '{' && strstr(bytes, "\"zenith_deg\":["),
+        "JSON as sent: %s", rsw_strerror(s));
+  rsw_free(bytes);
+  bytes = NULL;
+  s = rsw_job_fetch_encoded(c, job, "a", "hemi", "image/png", &bytes, &len);
+  CHECK(s == RSW_OK && len > 8 && memcmp(bytes, "\x89PNG", 4) == 0, "PNG: %s", rsw_strerror(s));
+  rsw_free(bytes);
+  bytes = (void *)1;
+  s = rsw_job_fetch_encoded(c, job, "a", "hemi", "image/tiff", &bytes, &len);
+  CHECK(s == RSW_ERR_INVALID && !bytes && len == 0 && strstr(why(c), "image/tiff"),
+        "an unknown media type: %s %s", rsw_strerror(s), why(c));
+  s = rsw_job_fetch_encoded(c, job, "zz", "hemi", "image/x-exr", &bytes, &len);
+  CHECK(s == RSW_ERR_NOT_FOUND && !bytes, "an unknown context: %s", rsw_strerror(s));
+  rsw_job_delete(c, job);
+  rsw_scene_delete(c, id, 1);
+  rsw_client_free(c);
+}
+
 /* A long job: many contexts of many samples on the 5x5 hdistant. */
 static bool submit_long(rsw_client *c, const char *id, char job[40]) {
   rsw_contexts *x = NULL;
@@ -1022,10 +1102,74 @@ static void test_route_header(void) {
   fake_stop(&fs);
 }
 
+/* A server that ignores Accept (a film as JSON), then one that says EXR
+ * but sends something else. */
+static void script_wrong_type(fake_server *fs, int n, const char *method, const char *path, char *out,
+                              size_t cap) {
+  (void)fs;
+  (void)method;
+  (void)path;
+  if (n == 0)
+    answer(out, cap, "200 OK", "application/json", "", "{\"width\": 1, \"height\": 1}");
+  else
+    answer(out, cap, "200 OK", "image/x-exr; charset=binary", "", "not an EXR");
+}
+
+/* rsw_job_fetch_encoded takes only the type it asked for: a .exr file must
+ * not end up holding JSON. */
+static void test_fetch_encoded_wrong_type(void) {
+  fake_server fs;
+  REQUIRE(fake_start(&fs, script_wrong_type), "fake server");
+  char url[64];
+  snprintf(url, sizeof url, "http://127.0.0.1:%d", fs.port);
+  rsw_client *c = client_for(url, NULL, 0);
+  REQUIRE(c, "client");
+  void *bytes = NULL;
+  size_t len = 0;
+  rsw_status s = rsw_job_fetch_encoded(c, "j1", "c0", "meter", "image/x-exr", &bytes, &len);
+  CHECK(s == RSW_ERR_PARSE && !bytes && strstr(why(c), "application/json"), "JSON for an EXR: %s %s",
+        rsw_strerror(s), why(c));
+  s = rsw_job_fetch_encoded(c, "j1", "c0", "meter", "image/x-exr", &bytes, &len);
+  CHECK(s == RSW_ERR_PARSE && !bytes && strstr(why(c), "does not start as one"), "not EXR bytes: %s %s",
+        rsw_strerror(s), why(c));
+  CHECK(fs.n_requests == 2 && strcmp(fs.paths[0], "/v1/jobs/j1/results/c0/meter") == 0, "%d requests, %s",
+        fs.n_requests, fs.paths[0]);
+  rsw_client_free(c);
+  fake_stop(&fs);
+}
+
 typedef struct spread_log {
-  int films, resumed, failed, bad;
+  int films, resumed, failed, bad, encoded;
   char seen[32][8];
 } spread_log;
+
+/* rsw_spread_encoded_fn: each film an EXR whose one pixel is rho / pi. */
+static int on_spread_encoded(void *user, const char *context, const char *sensor, const char *result_json,
+                             const void *bytes, size_t len, int resumed) {
+  spread_log *l = user;
+  if (resumed) {
+    l->resumed++;
+    if (bytes || len) l->bad++;
+    return 0;
+  }
+  if (!bytes) {
+    l->failed++;
+    return 0;
+  }
+  l->encoded++;
+  char path[200];
+  snprintf(path, sizeof path, "%s/spread-%s.exr", tmpdir, context);
+  exr_image img = {0};
+  rsw_err err = {0};
+  int i = atoi(context + 1);
+  double wl = 400.0 + 300.0 * i / 11, rho = 0.2 + 0.6 * (wl - 400.0) / 300.0, want = rho / PI;
+  if (!write_bytes(path, bytes, len) || exr_read_image(path, &img, &err) != RSW_OK || img.width != 1 ||
+      fabs(img.data[0] - want) > 1e-5 * want || strcmp(sensor, "meter") != 0 ||
+      !strstr(result_json, "\"succeeded\""))
+    l->bad++;
+  exr_image_free(&img);
+  return 0;
+}
 
 static int on_spread_film(void *user, const char *context, const char *sensor, const char *result_json,
                           const rsw_film *film, int resumed) {
@@ -1090,7 +1234,126 @@ static void test_spread(void) {
         "a foreign state file: %s (%s)", rsw_strerror(s), rsw_spread_last_error());
   so.on_film = NULL;
   CHECK(rsw_spread_run(&co, id, x, &so, &r) == RSW_ERR_INVALID, "no on_film: invalid");
+  /* Films as the daemon's EXR: on_film_encoded gets each, on_film none. */
+  unlink(state);
+  spread_log l3 = {0};
+  so = (rsw_spread_opts){.size = sizeof so,
+                         .shards = 3,
+                         .state_path = state,
+                         .on_film = on_spread_film,
+                         .film_user = &l3,
+                         .film_media_type = "image/x-exr",
+                         .on_film_encoded = on_spread_encoded};
+  s = rsw_spread_run(&co, id, x, &so, &r);
+  CHECK(s == RSW_OK && l3.encoded == 12 && l3.films == 0 && l3.bad == 0 && r.films == 12,
+        "spread of EXR films: %s (%s), %d encoded, %d decoded, %d wrong", rsw_strerror(s),
+        rsw_spread_last_error(), l3.encoded, l3.films, l3.bad);
+  /* Resumed from its state file: on_film_encoded again, without bytes. */
+  spread_log l4 = {0};
+  so.film_user = &l4;
+  s = rsw_spread_run(&co, id, x, &so, &r);
+  CHECK(s == RSW_OK && l4.resumed == 12 && l4.encoded == 0 && l4.bad == 0,
+        "resumed EXR spread: %s, %d resumed", rsw_strerror(s), l4.resumed);
+  so.on_film_encoded = NULL;
+  CHECK(rsw_spread_run(&co, id, x, &so, &r) == RSW_ERR_INVALID, "film_media_type without on_film_encoded");
+  so.on_film_encoded = on_spread_encoded;
+  so.film_media_type = "image/gif";
+  CHECK(rsw_spread_run(&co, id, x, &so, &r) == RSW_ERR_INVALID, "an unknown film_media_type");
   rsw_contexts_free(x);
+  rsw_client_free(c);
+}
+
+/* Films are handed over while the job runs: the first film arrives before
+ * the job's last render is reported, every film once, and the progress
+ * never counts past its total. */
+typedef struct early_log {
+  double first_film, last_progress;
+  size_t max_done, last_total;
+  int films, over, bad, resumed;
+  int stop_after; /* > 0: stop the run at this film */
+} early_log;
+
+static int on_early_progress(void *user, const char *context, const char *sensor, size_t done, size_t total,
+                             int failed) {
+  early_log *l = user;
+  (void)sensor;
+  if (!context || !*context) return 0;
+  l->last_progress = now_s();
+  if (done > total || failed) l->over++;
+  if (done > l->max_done) l->max_done = done;
+  l->last_total = total;
+  return 0;
+}
+
+static int on_early_film(void *user, const char *context, const char *sensor, const char *result_json,
+                         const void *bytes, size_t len, int resumed) {
+  early_log *l = user;
+  (void)context, (void)sensor, (void)result_json;
+  if (resumed) {
+    l->resumed++;
+    return 0;
+  }
+  if (!l->films++) l->first_film = now_s();
+  if (!bytes || len < 4 || memcmp(bytes, "\x76\x2f\x31\x01", 4) != 0) l->bad++;
+  return l->stop_after > 0 && l->films == l->stop_after;
+}
+
+static void test_spread_early(void) {
+  rsw_client *c = client_for(main_d.base_url, NULL, 0);
+  REQUIRE(c, "client");
+  char id[65];
+  REQUIRE(plate_scene(c, "0.4", id), "scene");
+  rsw_contexts *x = NULL;
+  REQUIRE(rsw_contexts_new(&x) == RSW_OK, "contexts");
+  enum {
+    N = 48
+  };
+  for (int i = 0; i < N; i++) {
+    char ctx[16];
+    snprintf(ctx, sizeof ctx, "e%02d", i);
+    rsw_contexts_add(x, ctx, 400.0 + 5.0 * i, NULL);
+  }
+  /* Some 10-30 ms a render: the job lasts long enough for passes to run,
+   * also on a loaded machine. */
+  rsw_contexts_add_default_sensor(x, "hemi");
+  rsw_contexts_set_default_spp(x, 4000);
+  rsw_client_opts co = {.size = sizeof co, .base_url = main_d.base_url, .retry_backoff_s = 0.01};
+  early_log l = {0};
+  rsw_spread_opts so = {.size = sizeof so,
+                        .shards = 1,
+                        .progress = on_early_progress,
+                        .progress_user = &l,
+                        .film_user = &l,
+                        .film_media_type = "image/x-exr",
+                        .on_film_encoded = on_early_film};
+  rsw_spread_result r;
+  rsw_status s = rsw_spread_run(&co, id, x, &so, &r);
+  CHECK(s == RSW_OK && l.films == N && r.films == N && l.bad == 0, "spread: %s (%s), %d films, %d wrong",
+        rsw_strerror(s), rsw_spread_last_error(), l.films, l.bad);
+  CHECK(l.first_film > 0 && l.first_film < l.last_progress,
+        "the first film came %.3f s after the last render was reported (want before)",
+        l.first_film - l.last_progress);
+  CHECK(l.over == 0 && l.max_done == N && l.last_total == N,
+        "progress: %d calls past the total, last %zu/%zu", l.over, l.max_done, l.last_total);
+  /* Stopped at its 5th film (while the job runs): those 5 are in the
+   * journal, and the same call again hands them back as resumed and
+   * fetches only the rest, from the same job. */
+  char state[200];
+  snprintf(state, sizeof state, "%s/early.state", tmpdir);
+  so.state_path = state;
+  early_log l2 = {.stop_after = 5};
+  so.film_user = so.progress_user = &l2;
+  s = rsw_spread_run(&co, id, x, &so, &r);
+  CHECK(s == RSW_ERR_CANCELLED && l2.films == 5, "stopped by the callback: %s, %d films", rsw_strerror(s),
+        l2.films);
+  early_log l3 = {0};
+  so.film_user = so.progress_user = &l3;
+  s = rsw_spread_run(&co, id, x, &so, &r);
+  CHECK(s == RSW_OK && l3.resumed == 5 && l3.films == N - 5 && l3.bad == 0 && r.resubmitted == 0,
+        "resumed: %s (%s), %d resumed, %d fetched", rsw_strerror(s), rsw_spread_last_error(), l3.resumed,
+        l3.films);
+  rsw_contexts_free(x);
+  rsw_scene_delete(c, id, 1);
   rsw_client_free(c);
 }
 
@@ -1282,12 +1545,15 @@ int main(void) {
     RSW_TEST_RUN(test_contexts_builder);
     RSW_TEST_RUN(test_dataset_builder);
     RSW_TEST_RUN(test_job_sweep);
+    RSW_TEST_RUN(test_fetch_encoded);
+    RSW_TEST_RUN(test_fetch_encoded_wrong_type);
     RSW_TEST_RUN(test_wait_timeout_stop_cancel);
     RSW_TEST_RUN(test_unknown_ids);
     RSW_TEST_RUN(test_push_wire);
     RSW_TEST_RUN(test_wait_reconnects);
     RSW_TEST_RUN(test_route_header);
     RSW_TEST_RUN(test_spread);
+    RSW_TEST_RUN(test_spread_early);
     RSW_TEST_RUN(test_wait_polls_without_events);
     RSW_TEST_RUN(test_retry_after);
     RSW_TEST_RUN(test_connection_refused);

@@ -65,6 +65,24 @@ run "daemon job result EXR" curl -sf "$url/v1/jobs/$job/results/w550/sensor" -H 
 # The client library through the CLI.
 run "raysweep render -o x.exr" rs -q render "$id" --spp 4 --seed 7 --wavelength 550 -o cli_render.exr
 run "raysweep fetch -o x.exr" rs -q fetch "$job" w550 sensor -o cli_fetch.exr
+# sweep writes the daemon's EXR and .npy as they came (rsw_job_fetch_encoded,
+# no decoding on the client), unsharded and --spread alike: byte for byte
+# the files `raysweep fetch` writes from the decoded JSON film
+# (rsw_film_save_exr / _npy), 401.3 nm (a %.17g longer than its shortest
+# form) as well as 550.
+printf '%s\n' '{"id": "w550", "wavelength": 550, "spp": 4, "seed": 7}' \
+  '{"id": "w401", "wavelength": 401.3, "spp": 4, "seed": 7}' >ctx2.jsonl
+for fmt in exr npy; do
+  run "sweep --format $fmt (2 contexts)" rs --json sweep "$id" --contexts ctx2.jsonl --format $fmt -o "sw2_$fmt"
+  job2=$(python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["job"])' out 2>/dev/null)
+  run "sweep --format $fmt --spread 1" rs -q sweep "$id" --contexts ctx2.jsonl --format $fmt --spread 1 -o "sw2s_$fmt"
+  for c in w550 w401; do
+    run "raysweep fetch -o $c.$fmt" rs -q fetch "$job2" $c sensor -o "cli2_$c.$fmt"
+    if cmp -s "sw2_$fmt/$c/sensor.$fmt" "cli2_$c.$fmt" && cmp -s "sw2s_$fmt/$c/sensor.$fmt" "cli2_$c.$fmt"; then ok; else
+      bad "sweep --format $fmt $c: the film differs from raysweep fetch's (unsharded: $(cmp "sw2_$fmt/$c/sensor.$fmt" "cli2_$c.$fmt" 2>&1 | head -c 200); --spread 1: $(cmp "sw2s_$fmt/$c/sensor.$fmt" "cli2_$c.$fmt" 2>&1 | head -c 200))"
+    fi
+  done
+done
 
 # check REF WANT_JSON SCENE_ID LABEL=FILE=CONTEXT...: REF must hold the
 # attributes WANT_JSON plus the two angle lists; each FILE must hold REF's
