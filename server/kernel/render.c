@@ -517,6 +517,29 @@ static double now_s(void) {
   return ts.tv_sec + 1e-9 * ts.tv_nsec;
 }
 
+rsw_status render_check_bundle(const scene *sc, size_t sensor_index, int bundle, rsw_err *err) {
+  if (bundle <= 1) return RSW_OK;
+  if (bundle > RENDER_MAX_BUNDLE)
+    return rsw_fail(err, RSW_ERR_INVALID, "bundle",
+                    "bundle must be an integer from 1 (one wavelength per path) to %d (a path carries one "
+                    "wavelength per colour channel)",
+                    RENDER_MAX_BUNDLE);
+  if (sc->variant != VARIANT_MONO)
+    return rsw_fail(err, RSW_ERR_INVALID, "bundle",
+                    "spectral bundles apply to mono scenes; this scene is rgb");
+  const sensor *se = sensor_index < sc->n_sensors ? sc->sensors[sensor_index] : NULL;
+  if (se && se->film->pixel_format == PIXFMT_STOKES)
+    return rsw_fail(err, RSW_ERR_UNSUPPORTED, "bundle",
+                    "sensor '%s' has a Stokes film (S0..S3 in its channels): it renders with \"bundle\": 1",
+                    se->base.id);
+  const object *blk = scene_bundle_blocker(sc);
+  if (blk)
+    return rsw_fail(err, RSW_ERR_UNSUPPORTED, "bundle",
+                    "%s '%s' (%s) evaluates one wavelength at a time: this scene renders with \"bundle\": 1",
+                    obj_class_name(blk->plugin->cls), blk->id ? blk->id : "", blk->plugin->name);
+  return RSW_OK;
+}
+
 /* A bundle's film b in the layout of a one-wavelength mono film: every
  * colour sum and the moments from channel b. NULL: out of memory. */
 static double *bundle_channel_sums(const job *jb, int b, int *stride) {
@@ -564,21 +587,8 @@ rsw_status render_sensor_bundle(scene *sc, const render_opts *opts, film_image *
   render_ctx rc = {.variant = sc->variant, .wavelength = opts->wavelength > 0 ? opts->wavelength : 550.0};
   int nb = opts->bundle > 1 ? opts->bundle : 1;
   if (nb > 1) {
-    if (nb > RENDER_MAX_BUNDLE)
-      return rsw_fail(err, RSW_ERR_RANGE, "bundle",
-                      "a bundle carries at most %d wavelengths (one per colour "
-                      "channel), not %d",
-                      RENDER_MAX_BUNDLE, nb);
-    if (sc->variant != VARIANT_MONO)
-      return rsw_fail(err, RSW_ERR_INVALID, "bundle", "spectral bundles need a mono scene; this one is rgb");
-    if (fm->pixel_format == PIXFMT_STOKES)
-      return rsw_fail(err, RSW_ERR_UNSUPPORTED, "bundle",
-                      "sensor '%s': a Stokes film cannot be bundled (its channels hold S0..S3)", se->base.id);
-    const object *blk = scene_bundle_blocker(sc);
-    if (blk)
-      return rsw_fail(err, RSW_ERR_UNSUPPORTED, "bundle",
-                      "%s '%s' (%s) evaluates one wavelength at a time: this scene renders unbundled",
-                      obj_class_name(blk->plugin->cls), blk->id ? blk->id : "", blk->plugin->name);
+    rsw_status bst = render_check_bundle(sc, opts->sensor, nb, err);
+    if (bst) return bst;
     rc.bundle = nb;
     for (int c = 0; c < RENDER_MAX_BUNDLE; c++) rc.wl[c] = opts->bundle_wl[c < nb ? c : nb - 1];
     rc.wavelength = rc.wl[0];

@@ -554,8 +554,9 @@ static rsw_status parse_request(const char *body, size_t len, job_req *q, svc_er
     } else if (strcmp(k->string, "bands") == 0) {
       st = bands_parse(k, "/bands", &q->bands, e);
     } else if (strcmp(k->string, "bundle") == 0) {
+      /* (its range against the scene: render_check_bundle, at planning) */
       if (!cJSON_IsNumber(k) || k->valuedouble != floor(k->valuedouble) || k->valuedouble < 1 ||
-          k->valuedouble > RENDER_MAX_BUNDLE)
+          k->valuedouble > 1e6)
         st = svc_fail(e, RSW_ERR_INVALID, "/bundle",
                       "bundle must be an integer from 1 (one wavelength per path) to %d (a path carries one "
                       "wavelength per colour channel)",
@@ -845,39 +846,12 @@ static rsw_status context_coords(const job_req *q, nc_coords *out, svc_error *e)
  * accepted. Validation reads the parameter table's keys, the sensors' ids
  * and films: all fixed at load, so no scene lock is needed (a running
  * render holds it for its whole duration). */
-/* A job's "bundle" > 1: a mono scene whose every object carries one,
- * and no Stokes film among the sensors (docs/experiments.md#spectral-bundles). */
-static rsw_status check_bundle(resident *r, const job_req *q, svc_error *e) {
-  scene *sc = r->sc;
-  if (sc->variant != VARIANT_MONO)
-    return svc_fail(e, RSW_ERR_INVALID, "/bundle",
-                    "spectral bundles apply to mono scenes; this scene is rgb");
-  pthread_mutex_lock(&r->lock);
-  const object *blk = scene_bundle_blocker(sc);
-  char what[400] = "";
-  if (blk)
-    snprintf(what, sizeof what, "%s '%s' (%s)", obj_class_name(blk->plugin->cls), blk->id ? blk->id : "",
-             blk->plugin->name);
-  pthread_mutex_unlock(&r->lock);
-  if (blk)
-    return svc_fail(e, RSW_ERR_UNSUPPORTED, "/bundle",
-                    "%s evaluates one wavelength at a time: this scene renders with \"bundle\": 1", what);
-  for (size_t i = 0; i < sc->n_sensors; i++)
-    if (sc->sensors[i]->film->pixel_format == PIXFMT_STOKES)
-      return svc_fail(e, RSW_ERR_UNSUPPORTED, "/bundle",
-                      "sensor '%s' has a Stokes film (S0..S3 in its channels): it renders with \"bundle\": 1",
-                      sc->sensors[i]->base.id);
-  (void)q;
-  return RSW_OK;
-}
-
 static rsw_status validate_request(service *svc, resident *r, job_req *q, job_check *k, svc_error *e) {
   scene *sc = r->sc;
   rsw_status st = check_params(sc, q->params, "/params", e);
   if (!st && q->bands && sc->variant != VARIANT_MONO)
     st = svc_fail(e, RSW_ERR_INVALID, "/bands", "bands apply to mono scenes; this scene is rgb");
   k->n_nodes = q->bands ? q->bands->n_wl : 1;
-  if (!st && q->bundle > 1) st = check_bundle(r, q, e);
   /* Templates (the scene's under the job's), rendered for each context
    * into the overrides it renders with. */
   if (!st) st = tmpl_compile(sc, r->templates, "/scene/templates", q->templates, q->params, &k->ts, e);
@@ -980,6 +954,20 @@ static rsw_status plan_context(service *svc, const scene *sc, const job_req *q, 
   return st;
 }
 
+/* A job's "bundle" > 1 against every sensor it renders (render_check_bundle:
+ * a 422 naming /bundle and what stands in the way). */
+static rsw_status check_bundle(const scene *sc, const job *jb, svc_error *e) {
+  if (jb->bundle <= 1) return RSW_OK;
+  for (size_t si = 0; si < sc->n_sensors; si++) {
+    bool used = false;
+    for (size_t i = 0; i < jb->n_items && !used; i++) used = jb->items[i].sensor_index == si;
+    rsw_err err = {0};
+    rsw_status st = used ? render_check_bundle(sc, si, jb->bundle, &err) : RSW_OK;
+    if (st) return svc_fail(e, st, "/bundle", "%s", err.msg);
+  }
+  return RSW_OK;
+}
+
 /* Whether items a and b may share a bundle: the same sensor, spp,
  * planes and overrides (their printed JSON ka, kb), other wavelengths, no
  * seed of their own. */
@@ -1071,6 +1059,7 @@ static rsw_status plan_job(service *svc, const scene *sc, job_req *q, job_check 
   /* Items exist only if their array was allocated (job_free walks
    * n_items of them). */
   jb->n_items = jb->items ? k->n_items : 0;
+  if (!st) st = check_bundle(sc, jb, e);
   if (!st && !plan_bundles(jb)) st = svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
   if (st) {
     job_free(jb);

@@ -17,7 +17,8 @@
 #     wavelengths, cut into threes in the job's order), never across
 #     overrides, never over a context's own seed;
 #   - refused with a 422 naming /bundle: bundle 0 and 4, an rgb scene, a
-#     Stokes film (naming the sensor).
+#     Stokes film the job renders (naming the sensor; a job of the scene's
+#     other sensor is accepted).
 name=test_bundles
 source "$(dirname "$0")/../support/shtest.sh"
 need_bins raysweepd
@@ -26,7 +27,8 @@ cp "$root/proto/examples/atmosphere_molecular.json" "$tmp/atmo.json"
 python3 - "$root/proto/examples/hdistant_lambertian.json" "$tmp/stokes.json" <<'PY'
 import json, sys
 d = json.load(open(sys.argv[1]))
-d["sensor"]["film"]["pixel_format"] = "stokes"
+d["stokes"] = json.loads(json.dumps(d["sensor"]))
+d["stokes"]["film"]["pixel_format"] = "stokes"
 json.dump(d, open(sys.argv[2], "w"))
 PY
 start_daemon "$tmp/d2" --threads 2
@@ -171,7 +173,12 @@ def refuse(path, bundle, words):
         assert w in p["detail"], (w, p["detail"])
 refuse(sys.argv[3], 4, ["from 1", "to 3"])
 refuse(sys.argv[3], 0, ["from 1"])
-refuse(sys.argv[4], 3, ["sensor", "Stokes"])
+refuse(sys.argv[4], 3, ["sensor '"'"'stokes'"'"'", "Stokes"])
+# the job renders only the other sensor: bundled
+sid = push(port, sys.argv[4])
+st, j = call(port, "POST", f"/v1/scenes/{sid}/jobs", {"contexts": [{"id": "a", "wavelength": 500}, {"id": "b", "wavelength": 510}],
+                                                   "defaults": {"sensors": ["sensor"], "spp": 2}, "bundle": 2})
+assert st in (200, 201, 202), (st, j)
 refuse(sys.argv[5], 2, ["mono"])
 ' "$tmp" "$p2" "$tmp/atmo.json" "$tmp/stokes.json" "$root/proto/examples/cornell_box.json"
 finish
