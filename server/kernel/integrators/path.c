@@ -75,10 +75,11 @@ static trace_result intersect(const scene *sc, const ray3 *r, surface_interactio
   return TRACE_HIT;
 }
 
-/* Stokes films: only an environment that reports polarisation carries Q,
- * U, V; they are scaled by the path throughput's intensity (BSDFs are
- * treated as non-polarising and the frame is not rotated along the path —
- * a stated simplification until a polarised integrator exists). */
+/* Stokes films of the unpolarized variants (mono, pixel_format "stokes"):
+ * only an environment that reports polarisation carries Q, U, V; they are
+ * scaled by the path throughput's intensity (BSDFs are treated as
+ * non-polarising and the frame is not rotated along the path). The
+ * polarized variants do it properly (integrators/polarization.h). */
 static void add_polarization(double *quv, const emitter *e, vec3 d, double scale) {
   if (!quv || !e->ops->eval_polarization || scale == 0) return;
   double q[3] = {0, 0, 0};
@@ -313,12 +314,7 @@ static bool shade_emit(const integrator *it, const scene *sc, lane *l, double *q
       double w = mis_weight(l->prev_pdf, em_pdf);
       l->L = col_add(l->L, col_scale(col_mul(l->T, Le), w));
       if (pl) {
-        int nch = pol_channels(sc);
-        double sv[3][4];
-        vec3 d = v3_norm(l->ray.d), bs = pol_env_stokes(env, d, col_mul(l->T, Le), w, nch, sv);
-        for (int c = 0; c < nch; c++)
-          for (int k = 1; k < 4; k++) sv[c][k] *= l->T.c[c];
-        pol_add_stokes(pl, v3_neg(d), bs, sv, nch);
+        pol_add_env(pl, env, l->ray.d, Le, col_scale(col_mul(l->T, Le), w), pol_channels(sc));
       } else {
         add_polarization(quv, env, v3_norm(l->ray.d), l->T.c[0] * w);
       }
@@ -486,34 +482,17 @@ static void wave_eval_bsdfs(lane *ln, const int *idx, int n, int *g) {
   }
 }
 
-/* A light sample's contribution v through the BSDF's
- * polarization factors towards it; an environment's own Q, U, V too. */
+/* A light sample's contribution v through the BSDF's polarization
+ * factors towards it (a polarized environment's own Q, U, V included). */
 static void pol_light(const scene *sc, lane *l, pol_lane *pl, color v) {
   int nch = pol_channels(sc);
   const surface_interaction *si = &l->si;
   mueller P[3];
-  vec3 b_in, b_out, pd = v3_neg(v3_norm(l->ray.d));
+  vec3 b_in, b_out;
+  double out[3][4];
   pol_bsdf(si->shape->bsdf, si, l->nwo, 0, P, &b_in, &b_out);
-  const emitter *e = l->ne;
-  if (!((e->flags & EMITTER_INFINITE) && e->ops->eval_polarization)) {
-    double out[3][4];
-    pol_through(pl, pd, b_out, P, nch, out);
-    pol_collect(pl, out, v, nch);
-    return;
-  }
-  /* Polarized light S (basis b_env): M R(b_out -> x) P R(b_env -> b_in) S,
-   * scaled per channel as the intensity (v / Le). */
-  double s[3][4];
-  color Le = col_scale(l->value, l->ds.pdf);
-  vec3 b_env = pol_env_stokes(e, l->ds.d, Le, 1.0, nch, s);
-  mueller Rin = mu_basis_change(v3_neg(l->ds.d), b_env, b_in);
-  for (int c = 0; c < nch; c++) {
-    double k = Le.c[c] != 0 ? v.c[c] / Le.c[c] : 0.0, r[4], t[4];
-    mu_apply(&Rin, s[c], r);
-    mu_apply(&P[c], r, t);
-    for (int j = 0; j < 4; j++) s[c][j] = t[j] * k;
-  }
-  pol_add_stokes(pl, pd, b_out, s, nch);
+  pol_through_light(pl, l->ne, l->ds.d, v3_neg(v3_norm(l->ray.d)), b_in, b_out, P, nch, out);
+  pol_collect(pl, out, v, nch);
 }
 
 /* The second half of lane l's vertex, first part: the light sample's

@@ -113,17 +113,61 @@ static inline vec3 pol_phase(const phase *ph, const medium_interaction *mi, vec3
 }
 
 /* An environment's light along direction d (towards the environment) as
- * a Stokes vector per channel: I from eval (Le), Q, U, V from
- * eval_polarization in the basis whose x is horizontal (perpendicular to
- * the vertical plane through d; docs/environment-plugins.md), scaled by w. */
-static inline vec3 pol_env_stokes(const emitter *e, vec3 d, color Le, double w, int nch, double s[3][4]) {
+ * a Stokes vector per unit intensity and channel: Q, U, V from
+ * eval_polarization over I = Le, in the basis whose x is horizontal
+ * (perpendicular to the vertical plane through d;
+ * docs/polarization.md#stokes-conventions), returned. */
+static inline vec3 pol_env_unit(const emitter *e, vec3 d, color Le, int nch, double s[3][4]) {
   double q[3] = {0, 0, 0};
-  if (e->ops->eval_polarization) e->ops->eval_polarization(e, d, q);
+  e->ops->eval_polarization(e, d, q);
   for (int c = 0; c < nch; c++) {
-    s[c][0] = Le.c[c] * w;
-    for (int k = 0; k < 3; k++) s[c][k + 1] = q[k] * w;
+    s[c][0] = 1.0;
+    for (int k = 0; k < 3; k++) s[c][k + 1] = Le.c[c] != 0 ? q[k] / Le.c[c] : 0.0;
   }
   return plane_normal(v3(0, 0, 1), v3_neg(d));
+}
+
+static inline bool pol_env_polarized(const emitter *e) {
+  return (e->flags & EMITTER_INFINITE) && e->ops->eval_polarization;
+}
+
+/* An environment's light Le along ray direction d reaching the current
+ * vertex, worth v = T Le w in intensity. */
+static inline void pol_add_env(pol_lane *p, const emitter *e, vec3 d, color Le, color v, int nch) {
+  if (!pol_env_polarized(e)) {
+    pol_add(p, v, nch);
+    return;
+  }
+  double s[3][4];
+  d = v3_norm(d);
+  vec3 b = pol_env_unit(e, d, Le, nch, s);
+  for (int c = 0; c < nch; c++)
+    for (int k = 0; k < 4; k++) s[c][k] *= v.c[c];
+  pol_add_stokes(p, v3_neg(d), b, s, nch);
+}
+
+/* The Stokes vectors per unit of a light sample's intensity contribution
+ * that emitter e's light from direction d (towards e) adds through the
+ * factors P (bases b_in, b_out; pd = -ray.d): M R(b_out -> x) P
+ * R(b_e -> b_in) S / I, S the light's Stokes vector ((1, 0, 0, 0) for
+ * every emitter but a polarized environment). */
+static inline void pol_through_light(const pol_lane *p, const emitter *e, vec3 d, vec3 pd, vec3 b_in,
+                                     vec3 b_out, const mueller P[3], int nch, double out[3][4]) {
+  if (!pol_env_polarized(e)) {
+    pol_through(p, pd, b_out, P, nch, out);
+    return;
+  }
+  double s[3][4];
+  d = v3_norm(d);
+  vec3 be = pol_env_unit(e, d, e->ops->eval(e, NULL, d), nch, s);
+  mueller Rin = mu_basis_change(v3_neg(d), be, b_in), Rout = mu_basis_change(pd, b_out, p->x);
+  for (int c = 0; c < nch; c++) {
+    double r[4], t[4];
+    mu_apply(&Rin, s[c], r);
+    mu_apply(&P[c], r, t);
+    mu_apply(&Rout, t, r);
+    mu_apply(&p->M[c], r, out[c]);
+  }
 }
 
 /* The path's result: I per channel into L, Q, U, V of channel 0 into quv. */

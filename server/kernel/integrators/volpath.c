@@ -46,8 +46,9 @@
  * Transmittance along shadow rays: exact in analytic media, ratio tracking
  * (T *= sigma_n / mu per tentative collision, with Russian roulette once
  * the estimate falls below 0.1) otherwise; null surfaces are crossed, any
- * other surface blocks. Stokes films get Q = U = V = 0 (no polarisation
- * through media).
+ * other surface blocks. Stokes films of the unpolarized variants get Q =
+ * U = V = 0 (no polarisation through media); the polarized variants carry
+ * Mueller factors (integrators/polarization.h).
  *
  * Estimator: L = sum over vertices of T (Le w_bsdf + NEE w_em); at a
  * medium vertex, NEE = p(wi, wo) Le tr / (pdf_em p_pick) with MIS weight
@@ -633,7 +634,7 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
           if (vq) {
             mueller P[3];
             vec3 bp = pol_phase(ph, &mi, ds.d, P);
-            pol_through(&vq->p, mi.wi, bp, P, pol_channels(sc), vq->sv);
+            pol_through_light(&vq->p, e, ds.d, mi.wi, bp, bp, P, pol_channels(sc), vq->sv);
           }
         }
       }
@@ -672,7 +673,7 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
         color Le = env->ops->eval(env, NULL, l->ray.d);
         color v = col_scale(col_mul(l->T, Le), mis_weight(l->prev_pdf, em_pdf));
         l->L = col_add(l->L, v);
-        if (vq) pol_add(&vq->p, v, pol_channels(sc));
+        if (vq) pol_add_env(&vq->p, env, l->ray.d, Le, v, pol_channels(sc));
       }
       return false;
     }
@@ -718,7 +719,7 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
             mueller P[3];
             vec3 b_in, b_out;
             pol_bsdf(b, si, wo, 0, P, &b_in, &b_out);
-            pol_through(&vq->p, v3_neg(l->ray.d), b_out, P, pol_channels(sc), vq->sv);
+            pol_through_light(&vq->p, e, ds.d, v3_neg(l->ray.d), b_in, b_out, P, pol_channels(sc), vq->sv);
           }
         }
       }
