@@ -21,7 +21,7 @@
 typedef struct attrs {
   exr_meta_entry e[FILM_EXR_MAX_ATTRS];
   size_t count;
-  char revision[24], spp[16], seed[24], wavelength[32], unresolved[24], irradiance[4 * 26];
+  char revision[24], spp[16], seed[24], wavelength[32], unresolved[24], irradiance[12 * 26];
   char *zenith, *azimuth;
 } attrs;
 
@@ -147,7 +147,7 @@ static rsw_status build_attrs(const film_exr_info *info, int width, int height, 
   }
   if (info->unresolved_rays) add(a, "raysweep:unresolved_rays", a->unresolved);
   add(a, "raysweep:isa", info->isa);
-  if (info->irradiance && info->n_irradiance > 0 && info->n_irradiance <= 4) {
+  if (info->irradiance && info->n_irradiance > 0 && info->n_irradiance <= 12) {
     size_t len = 0;
     for (int c = 0; c < info->n_irradiance; c++)
       len += (size_t)snprintf(a->irradiance + len, sizeof a->irradiance - len, c ? ",%.17g" : "%.17g",

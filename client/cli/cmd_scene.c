@@ -8,8 +8,8 @@
 #include "cli.h"
 
 const cmdline_opt cli_opts_scene_push[] = {
-    {"--variant", "mono|rgb|mono_polarized", false,
-     "mono, rgb or mono_polarized (overrides the scene's own)"},
+    {"--variant", "mono|rgb|mono_polarized|rgb_polarized", false,
+     "mono, rgb, mono_polarized or rgb_polarized (overrides the scene's own)"},
     {NULL},
 };
 const cmdline_opt cli_opts_scene_rm[] = {

@@ -157,7 +157,8 @@ void http_buf_free(http_buf *b) {
 
 static rsw_status check_film(const svc_film *f, const char *what, rsw_err *err) {
   const film_image *im = f ? &f->img : NULL;
-  if (!im || im->width < 1 || im->height < 1 || im->channels < 1 || im->channels > 4 || !im->data)
+  if (!im || im->width < 1 || im->height < 1 || im->channels < 1 || im->channels > FILM_MAX_CHANNELS ||
+      !im->data)
     return rsw_fail(err, RSW_ERR_INVALID, what, "film has no pixels");
   for (int c = 0; c < im->channels; c++)
     if (!im->channel_names[c]) return rsw_fail(err, RSW_ERR_INVALID, what, "film channel %d has no name", c);
@@ -187,7 +188,7 @@ rsw_status http_film_json(const svc_film *f, char **bytes_out, size_t *len_out, 
   const float *all = film_all(im, &owned);
   size_t n = film_samples(im);
   if (!all) return rsw_fail(err, RSW_ERR_NOMEM, "film JSON", "no memory for %zu samples", n);
-  const char *names[4 * (1 + FILM_MAX_PLANES)];
+  const char *names[FILM_MAX_CHANNELS * (1 + FILM_MAX_PLANES)];
   int nc = film_image_all_channels(im, names);
   http_buf b = {0};
   http_buf_printf(&b, "{\"width\":%d,\"height\":%d,\"channels\":[", im->width, im->height);
@@ -335,7 +336,7 @@ rsw_status http_film_exr(const svc_film *f, void **bytes_out, size_t *len_out, r
   float *owned;
   const float *all = film_all(im, &owned);
   if (!all) return rsw_fail(err, RSW_ERR_NOMEM, "film EXR", "out of memory");
-  const char *names[4 * (1 + FILM_MAX_PLANES)];
+  const char *names[FILM_MAX_CHANNELS * (1 + FILM_MAX_PLANES)];
   int nc = film_image_all_channels(im, names);
   s = film_exr_encode(im->width, im->height, nc, names, all, false, &info, bytes_out, len_out, err);
   free(owned);

@@ -598,15 +598,17 @@ typedef struct render_stats {
 typedef struct integrator integrator;
 typedef struct integrator_ops {
   /* Radiance arriving at ray.o along -ray.d. When quv is not NULL (Stokes
-   * films), the Q, U, V of that radiance are added to quv[0..2]. */
+   * films), the Q, U, V of that radiance are added to quv[0..2] (rgb
+   * polarized: quv[3 c .. 3 c + 2] per colour channel c, scene_quv_stride
+   * doubles in all). */
   color (*Li)(const integrator *it, const struct scene *sc, sampler_state *st, ray3 ray, render_stats *stats,
               double *quv);
   /* Optional: Li for n camera rays at once (a wave: the paths advance
    * bounce by bounce together, their rays traced as packets). Path i uses
    * st[i] alone, in the same order of draws as Li, so its result does not
    * depend on the batch it is in (up to Embree's packet rounding, accel.h).
-   * L[i] (and quv[3 i .. 3 i + 2], zeroed first, when quv is not NULL) are
-   * written. False: out of memory (nothing is valid). */
+   * L[i] (and quv[k i .. k i + k - 1], k = scene_quv_stride, zeroed
+   * first, when quv is not NULL) are written. False: out of memory (nothing is valid). */
   bool (*Li_batch)(const integrator *it, const struct scene *sc, sampler_state *st, const ray3 *rays, int n,
                    render_stats *stats, color *L, double *quv);
 } integrator_ops;
@@ -727,5 +729,12 @@ typedef struct scene {
     vec3 rest_min, rest_max; /* bounds of everything else (empty: min > max) */
   } null_boxes;
 } scene;
+
+/* Doubles per path in an integrator's quv (integrator_ops.Li): Q, U, V of
+ * each colour channel in rgb_polarized, else of one. */
+#define SCENE_QUV_MAX 9
+static inline int scene_quv_stride(const scene *sc) {
+  return sc->polarized && sc->variant == VARIANT_RGB ? 9 : 3;
+}
 
 #endif

@@ -32,12 +32,11 @@
 #define TILE 8
 
 /* Accumulator layout per pixel: sum(f w L) rgb, sum(f), and for Stokes
- * films sum(f w (Q, U, V)); then, for a film with variance, per developed
- * channel k (Y; R, G, B; or S0..S3) the triple (K, sum(x - K),
- * sum((x - K)^2)) of its samples x, K being the pixel's first sample (the
- * shifted-data algorithm: no cancellation, and exactly 0 for a constant
- * pixel). */
-#define ACC_MAX    7
+ * films sum(f w (Q, U, V)) (rgb_polarized: per colour channel, nq = 9);
+ * then, for a film with variance, per developed channel k (Y; R, G, B;
+ * S0..S3; or S0.R..S3.B) the triple (K, sum(x - K), sum((x - K)^2)) of
+ * its samples x, K being the pixel's first sample (the shifted-data
+ * algorithm: no cancellation, and exactly 0 for a constant pixel). */
 #define ACC_MOMENT FILM_ACC_MOMENT
 
 typedef struct tile_buf {
@@ -56,6 +55,7 @@ typedef struct job {
   int margin;       /* pixels a splat can reach beyond its own */
   bool box;         /* box filter of radius 0.5: own pixel only */
   bool stokes;      /* Stokes film: Q, U, V accumulated too */
+  int nq;           /* Stokes films: Q, U, V values per sample (3, or 9 in rgb_polarized) */
   bool lum;         /* one luminance channel (develop's mapping) */
   int m_ch;         /* variance: developed channels with moments (0: none) */
   int m_off;        /* offset of the first moment triple */
@@ -95,11 +95,17 @@ static inline void splat(const job *jb, tile_buf *tb, double px, double py, colo
       /* The sample as develop sees it (Y, R G B or S0..S3), then its
        * shifted first and second moments (Eradiate's `moment` integrator
        * keeps the raw E[x^2]; see ACC_MOMENT). */
-      double x[4] = {v.c[0], v.c[1], v.c[2], 0};
-      if (jb->stokes)
+      double x[FILM_MAX_CHANNELS] = {v.c[0], v.c[1], v.c[2], 0};
+      if (jb->stokes && jb->nq == 3) {
         x[1] = quv[0], x[2] = quv[1], x[3] = quv[2];
-      else if (jb->lum && jb->sc->variant != VARIANT_MONO)
+      } else if (jb->stokes) { /* film order S0.R S0.G S0.B S1.R ... */
+        for (int c = 0; c < 3; c++) {
+          x[c] = v.c[c];
+          for (int k = 0; k < 3; k++) x[3 * (k + 1) + c] = quv[3 * c + k];
+        }
+      } else if (jb->lum && jb->sc->variant != VARIANT_MONO) {
         x[0] = col_luminance(v);
+      }
       bool first = a[3] == 0;
       for (int k = 0; k < jb->m_ch; k++) {
         double *m = &a[jb->m_off + ACC_MOMENT * k];
@@ -109,7 +115,7 @@ static inline void splat(const job *jb, tile_buf *tb, double px, double py, colo
       }
     }
     a[0] += v.c[0], a[1] += v.c[1], a[2] += v.c[2], a[3] += 1.0;
-    if (jb->stokes) a[4] += quv[0], a[5] += quv[1], a[6] += quv[2];
+    for (int k = 0; k < jb->nq; k++) a[4 + k] += quv[k];
     return;
   }
   splat_filter(jb, tb, px, py, v, quv);
@@ -141,7 +147,7 @@ static void splat_filter(const job *jb, tile_buf *tb, double px, double py, colo
       if (wgt == 0) continue;
       double *a = &tb->acc[(size_t)S * ((size_t)(y - tb->y0) * tb->w + (x - tb->x0))];
       a[0] += wgt * v.c[0], a[1] += wgt * v.c[1], a[2] += wgt * v.c[2], a[3] += wgt;
-      if (jb->stokes) a[4] += wgt * quv[0], a[5] += wgt * quv[1], a[6] += wgt * quv[2];
+      for (int k = 0; k < jb->nq; k++) a[4 + k] += wgt * quv[k];
     }
   }
 }
@@ -176,7 +182,7 @@ typedef struct wave_buf {
   sampler_state st[WAVE];
   ray3 ray[WAVE];
   color L[WAVE];
-  double quv[3 * WAVE];
+  double quv[SCENE_QUV_MAX * WAVE];
   int live[WAVE];
   vec2 film_u[WAVE], aperture_u[WAVE];
   double w[WAVE];
@@ -224,16 +230,18 @@ static vec3 film_stokes_x(const sensor *se, vec3 d) {
   return plane_normal(d, v3_norm(xf_vector(&se->to_world, v3(0, 1, 0))));
 }
 
-/* q = (Q, U, V) of a sample whose camera ray is along d, from the
- * integrator's basis (stokes_basis(-d), integrators/polarization.h) into
- * the film's. */
-static void film_stokes_rotate(const sensor *se, vec3 d, double q[3]) {
+/* q = (Q, U, V) per channel (nq / 3 of them) of a sample whose camera
+ * ray is along d, from the integrator's basis (stokes_basis(-d),
+ * integrators/polarization.h) into the film's. */
+static void film_stokes_rotate(const sensor *se, vec3 d, double *q, int nq) {
   d = v3_norm(d);
   vec3 pd = v3_neg(d);
   mueller R = mu_basis_change(pd, stokes_basis(pd), film_stokes_x(se, d));
-  double Q = q[0], U = q[1];
-  q[0] = R.m[1][1] * Q + R.m[1][2] * U;
-  q[1] = R.m[2][1] * Q + R.m[2][2] * U;
+  for (int c = 0; c < nq; c += 3) {
+    double Q = q[c], U = q[c + 1];
+    q[c] = R.m[1][1] * Q + R.m[1][2] * U;
+    q[c + 1] = R.m[2][1] * Q + R.m[2][2] * U;
+  }
 }
 
 /* Trace and splat samples [0, n) of wb: the live ones (w != 0) go through
@@ -262,8 +270,8 @@ static bool wave_flush(job *jb, tile_buf *tb, wave_buf *wb, int n, render_stats 
     if (m && !it->ops->Li_batch(it, jb->sc, wb->st, wb->ray, m, rs, wb->L, quv)) return false;
   } else {
     for (int k = 0; k < m; k++) {
-      double *q = &wb->quv[3 * k];
-      q[0] = q[1] = q[2] = 0;
+      double *q = &wb->quv[SCENE_QUV_MAX * k];
+      for (int j = 0; j < SCENE_QUV_MAX; j++) q[j] = 0;
       wb->L[k] = it->ops->Li(it, jb->sc, &wb->st[k], wb->ray[k], rs, quv ? q : NULL);
     }
   }
@@ -271,18 +279,21 @@ static bool wave_flush(job *jb, tile_buf *tb, wave_buf *wb, int n, render_stats 
   for (int i = 0; i < n; i++) {
     const wave_sample *s = &wb->ws[i];
     color v = col1(0);
-    double q[3] = {0, 0, 0};
+    double q[SCENE_QUV_MAX] = {0};
     if (k < m && wb->live[k] == i) {
       v = col_scale(wb->L[k], s->w);
-      if (jb->stokes)
-        for (int c = 0; c < 3; c++) q[c] = wb->quv[3 * k + c] * s->w;
-      if (jb->sc->polarized) film_stokes_rotate(se, wb->ray[k].d, q);
-      /* All six finite, without a branch each: x * 0 is +-0 for a finite
-       * x and NaN for an infinite or NaN one. */
-      if (!(v.c[0] * 0.0 + v.c[1] * 0.0 + v.c[2] * 0.0 + q[0] * 0.0 + q[1] * 0.0 + q[2] * 0.0 == 0.0)) {
+      /* Li_batch packs nq values per path, Li's slots are SCENE_QUV_MAX apart. */
+      const double *src = &wb->quv[(it->ops->Li_batch ? jb->nq : SCENE_QUV_MAX) * k];
+      for (int c = 0; c < jb->nq; c++) q[c] = src[c] * s->w;
+      if (jb->sc->polarized) film_stokes_rotate(se, wb->ray[k].d, q, jb->nq);
+      /* All finite, without a branch each: x * 0 is +-0 for a finite x and
+       * NaN for an infinite or NaN one. */
+      double z = v.c[0] * 0.0 + v.c[1] * 0.0 + v.c[2] * 0.0;
+      for (int c = 0; c < jb->nq; c++) z += q[c] * 0.0;
+      if (!(z == 0.0)) {
         (*invalid)++;
         v = col1(0);
-        q[0] = q[1] = q[2] = 0;
+        for (int c = 0; c < jb->nq; c++) q[c] = 0;
       }
       k++;
     }
@@ -660,8 +671,9 @@ rsw_status render_sensor_bundle(scene *sc, const render_opts *opts, film_image *
   jb.stokes = sc->polarized || (fm->pixel_format == PIXFMT_STOKES && sc->variant == VARIANT_MONO);
   /* (a bundle sums its wavelengths' channels apart) */
   jb.lum = !jb.stokes && nb == 1 && (sc->variant == VARIANT_MONO || fm->pixel_format == PIXFMT_LUMINANCE);
-  jb.m_ch = !opts->variance ? 0 : jb.stokes ? 4 : jb.lum ? 1 : 3;
-  jb.m_off = jb.stokes ? ACC_MAX : 4;
+  jb.nq = jb.stokes ? scene_quv_stride(sc) : 0;
+  jb.m_ch = !opts->variance ? 0 : jb.stokes ? 4 * jb.nq / 3 : jb.lum ? 1 : 3;
+  jb.m_off = 4 + jb.nq;
   jb.stride = jb.m_off + ACC_MOMENT * jb.m_ch;
   jb.margin = jb.box ? 0 : (int)ceil(fm->filter->radius + 0.5);
   jb.film_acc = calloc((size_t)jb.W * jb.H * (size_t)jb.stride, sizeof(double));

@@ -1533,7 +1533,7 @@ rsw_status service_job_results(service *svc, const char *id, char **json_out, sv
       cJSON_AddNumberToObject(x, "width", it->film.img.width);
       cJSON_AddNumberToObject(x, "height", it->film.img.height);
       cJSON *ch = cJSON_AddArrayToObject(x, "channels");
-      const char *names[4 * (1 + FILM_MAX_PLANES)];
+      const char *names[FILM_MAX_CHANNELS * (1 + FILM_MAX_PLANES)];
       int nc = film_image_all_channels(&it->film.img, names);
       for (int c = 0; c < nc; c++) svc_json_push(ch, cJSON_CreateString(names[c]));
       char href[512];

@@ -293,6 +293,7 @@ char *service_info_json(service *svc) {
   svc_json_push(v, cJSON_CreateString("mono"));
   svc_json_push(v, cJSON_CreateString("rgb"));
   svc_json_push(v, cJSON_CreateString("mono_polarized"));
+  svc_json_push(v, cJSON_CreateString("rgb_polarized"));
   cJSON *pl = cJSON_AddArrayToObject(o, "plugins");
   for (size_t i = 0; rsw_plugins[i]; i++) {
     const plugin *p = rsw_plugins[i];

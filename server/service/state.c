@@ -928,7 +928,7 @@ static bool film_meta(int fd, const film_trailer *t, svc_film *out) {
     out->img.variant = VARIANT_RGB, out->img.polarized = false;
   const cJSON *ch = cJSON_GetObjectItemCaseSensitive(m, "channels");
   int c = 0;
-  for (const cJSON *y = cJSON_IsArray(ch) ? ch->child : NULL; y && c < 4; y = y->next, c++) {
+  for (const cJSON *y = cJSON_IsArray(ch) ? ch->child : NULL; y && c < FILM_MAX_CHANNELS; y = y->next, c++) {
     const char *s = cJSON_IsString(y) ? static_channel(y->valuestring) : NULL;
     if (!s) ok = false;
     out->img.channel_names[c] = s;
@@ -950,7 +950,7 @@ static bool film_meta(int fd, const film_trailer *t, svc_film *out) {
   if (cJSON_IsArray(ir) && cJSON_GetArraySize(ir) == c) {
     out->img.has_irradiance = true;
     int ki = 0;
-    for (const cJSON *y = ir->child; y && ki < 4; y = y->next, ki++)
+    for (const cJSON *y = ir->child; y && ki < FILM_MAX_CHANNELS; y = y->next, ki++)
       out->img.irradiance[ki] = cJSON_IsString(y) ? strtod(y->valuestring, NULL) : NAN;
   }
   const cJSON *sz = cJSON_GetObjectItemCaseSensitive(m, "sun_zenith");
@@ -1375,7 +1375,7 @@ static bool restore_finished(service *svc, const req_header *h, cJSON *done, con
       im->unresolved_rays = unres;
       y = cJSON_GetObjectItemCaseSensitive(it, "ch");
       int c = 0;
-      for (const cJSON *z = cJSON_IsArray(y) ? y->child : NULL; z && c < 4; z = z->next)
+      for (const cJSON *z = cJSON_IsArray(y) ? y->child : NULL; z && c < FILM_MAX_CHANNELS; z = z->next)
         if (cJSON_IsString(z) && static_channel(z->valuestring))
           im->channel_names[c++] = static_channel(z->valuestring);
       im->channels = c;

@@ -17,6 +17,8 @@
 #     direction: clockwise as its viewer sees it) turns the AoLP by +30
 #     degrees (counter-clockwise as the viewer sees it: the scene turned the
 #     other way in the image);
+#   - rgb_polarized: one render whose ground is black in R and of albedo
+#     0.25 in G, each channel against its own table, as above;
 #   - variants named wrongly are refused naming the variant.
 name=test_polarization
 source "$(dirname "$0")/../support/shtest.sh"
@@ -34,6 +36,10 @@ import json, math, sys
 table, case, out, variant, spp = sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4], int(sys.argv[5])
 d = json.load(open(table))
 c = d["cases"][case]
+# rgb_polarized: the ground's reflectance per colour channel (argv[6], JSON)
+albedo = json.loads(sys.argv[6]) if len(sys.argv) > 6 else c["albedo"]
+if isinstance(albedo, list):
+    albedo = {"type": "rgb", "value": albedo}
 MU = [0.2, 0.52, 0.84]
 t0 = math.acos(c["mu0"])
 sun = [math.sin(t0), 0.0, math.cos(t0)]  # towards the sun; the light travels towards azimuth 180
@@ -49,7 +55,7 @@ sc = {"type": "scene", "variant": variant,
       "slab": {"type": "cube", "to_world": [{"scale": [W, W, 0.5]}, {"translate": [0, 0, 0.5]}],
                "bsdf": {"type": "null"}, "interior": {"type": "ref", "id": "air"}},
       "ground": {"type": "rectangle", "to_world": [{"scale": [W, W, 1]}],
-                 "bsdf": {"type": "diffuse", "reflectance": c["albedo"]}},
+                 "bsdf": {"type": "diffuse", "reflectance": albedo}},
       "sun": {"type": "directional", "direction": [-s for s in sun], "irradiance": math.pi},
       "toa": {"type": "mdistant", "directions": " ".join("%.12g" % x for x in dirs),
               "target": {"type": "rectangle", "to_world": [{"translate": [0, 0, 1]}]},
@@ -63,19 +69,22 @@ cat >"$tmp/check.py" <<'PY'
 import json, sys
 import numpy as np
 table, case, pol, mono = sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4]
+# rgb_polarized films: colour channel ch of nc (S0.R S0.G S0.B S1.R ...)
+ch, nc = (int(sys.argv[5]), 3) if len(sys.argv) > 5 else (0, 1)
 d = json.load(open(table))
 c = d["cases"][case]
 rows = [d["mu"].index(m) for m in (0.2, 0.52, 0.84)]
 I, Q, U = (np.array(c[k])[rows] for k in "IQU")
-a = np.load(pol)[0]  # 21 pixels: S0..S3, then their standard errors
-S, E = a[:, 0:4].reshape(3, 7, 4), a[:, 4:8].reshape(3, 7, 4)
+a = np.load(pol)[0]  # 21 pixels: S0..S3 (per colour), then their standard errors
+S = a[:, [k * nc + ch for k in range(4)]].reshape(3, 7, 4)
+E = a[:, [4 * nc + k * nc + ch for k in range(4)]].reshape(3, 7, 4)
 err = np.abs(S[..., 0] - I) / I
 dolp = np.hypot(S[..., 1], S[..., 2]) / S[..., 0]
 ddolp = np.abs(dolp - np.hypot(Q, U) / I)
 zi, zq, zu = (S[..., 0] - I) / E[..., 0], (S[..., 1] - Q) / E[..., 1], (S[..., 2] - U) / E[..., 2]
-m = np.load(mono)[0][:, 0].reshape(3, 7)
+m = np.load(mono)[0][:, ch].reshape(3, 7)
 merr = np.mean(np.abs(m - I) / I)
-name = "tau %g albedo %g mu0 %g" % (c["tau"], c["albedo"], c["mu0"])
+name = "tau %g albedo %g mu0 %g%s" % (c["tau"], c["albedo"], c["mu0"], " (rgb_polarized, %s)" % "RGB"[ch] if nc == 3 else "")
 print("%s: I max err %.4f (mean %.4f, stderr %.4f), DoLP max diff %.4f, max |z| I %.2f Q %.2f U %.2f; "
       "unpolarized I mean err %.4f" % (name, err.max(), err.mean(), np.mean(E[..., 0] / I), ddolp.max(),
                                        np.abs(zi).max(), np.abs(zq).max(), np.abs(zu).max(), merr))
@@ -89,10 +98,10 @@ print("; ".join(bad) if bad else "ok")
 PY
 data="$root/tests/data/natraj2009/up.json"
 # Cases: index 4 t + 2 a + m into up.json (tau 0.02 0.1 0.25 0.5 1, albedo
-# 0 0.25, mu0 0.2 0.6): tau 0.25 mu0 0.2, tau 0.5 mu0 0.6 and tau 1 mu0 0.2
-# over black, tau 0.5 mu0 0.6 over albedo 0.25 (thinner ones are too close
-# to unpolarized for the control).
-for cs in "8 200000" "13 120000" "16 100000" "15 120000"; do
+# 0 0.25, mu0 0.2 0.6): tau 0.25 mu0 0.2 and tau 1 mu0 0.2 over black here,
+# tau 0.5 mu0 0.6 over black and over albedo 0.25 in rgb_polarized below
+# (thinner ones are too close to unpolarized for the control).
+for cs in "8 200000" "16 100000"; do
   set -- $cs
   "$pyx" "$tmp/natraj.py" "$data" "$1" "$tmp/n$1.json" mono_polarized "$2"
   "$pyx" "$tmp/natraj.py" "$data" "$1" "$tmp/m$1.json" mono "$2"
@@ -101,6 +110,20 @@ for cs in "8 200000" "13 120000" "16 100000" "15 120000"; do
   out=$("$pyx" "$tmp/check.py" "$data" "$1" "$tmp/n$1.npy" "$tmp/m$1.npy" 2>&1)
   echo "  natraj: $out" | head -1
   [ "$(echo "$out" | tail -1)" = ok ] && ok || bad "natraj case $1: $out"
+done
+
+# rgb_polarized: one render, the ground black in R and of albedo 0.25 in G
+# (B black too): R against case 13's table, G against case 15's; the
+# control is the rgb render of the same scene.
+"$pyx" "$tmp/natraj.py" "$data" 13 "$tmp/rgbp.json" rgb_polarized 120000 "[0, 0.25, 0]"
+"$pyx" "$tmp/natraj.py" "$data" 13 "$tmp/rgb.json" rgb 120000 "[0, 0.25, 0]"
+"$rsd" render "$tmp/rgbp.json" --variance -o "$tmp/rgbp.npy" >/dev/null 2>"$tmp/err" || bad "render: $(cat "$tmp/err")"
+"$rsd" render "$tmp/rgb.json" -o "$tmp/rgb.npy" >/dev/null 2>"$tmp/err" || bad "render: $(cat "$tmp/err")"
+for cc in "13 0" "15 1"; do
+  set -- $cc
+  out=$("$pyx" "$tmp/check.py" "$data" "$1" "$tmp/rgbp.npy" "$tmp/rgb.npy" "$2" 2>&1)
+  echo "  natraj: $out" | head -1
+  [ "$(echo "$out" | tail -1)" = ok ] && ok || bad "natraj rgb_polarized channel $2: $out"
 done
 
 # ---- nothing polarizes: S0 is the mono film ---------------------------------
@@ -168,7 +191,7 @@ echo "  rotation: $(echo "$out" | head -1)"
 "$rsd" render "$tmp/plate.json" --variant mono_polarised -o "$tmp/x.npy" >/dev/null 2>"$tmp/err" &&
   bad "an unknown variant was accepted"
 contains "unknown variant" "$tmp/err" "mono_polarized"
-"$rsd" render "$tmp/plate.json" --variant rgb_polarized -o "$tmp/x.npy" >/dev/null 2>"$tmp/err" &&
-  bad "rgb_polarized was accepted"
-contains "rgb_polarized refused" "$tmp/err" "rgb_polarized"
+"$rsd" render "$tmp/plate.json" --variant polarized -o "$tmp/x.npy" >/dev/null 2>"$tmp/err" &&
+  bad "variant polarized was accepted"
+contains "unknown variant" "$tmp/err" "rgb_polarized"
 finish

@@ -28,7 +28,7 @@ rsw_status film_image_write_exr(const film_image *img, const char *path, const c
   if (!img->n_planes)
     return film_exr_write(path, img->width, img->height, img->channels, img->channel_names, img->data,
                           img->half, &info, err);
-  const char *names[4 * (1 + FILM_MAX_PLANES)];
+  const char *names[FILM_MAX_CHANNELS * (1 + FILM_MAX_PLANES)];
   int n = film_image_all_channels(img, names);
   float *all = film_image_interleaved(img);
   if (!all) return rsw_fail(err, RSW_ERR_NOMEM, path, "out of memory for the film's planes");

@@ -12,19 +12,33 @@
 /* Every channel a film can have, and each plane's channel names in the
  * same order: "<plane>.<channel>" (EXR's layer.channel convention). */
 enum {
-  N_BASE = 12
+  N_BASE = 24
 };
-static const char *const base_channels[N_BASE] = {"R",  "G",  "B",    "Y",    "S0",   "S1",
-                                                  "S2", "S3", "S0.Y", "S1.Y", "S2.Y", "S3.Y"};
+static const char *const base_channels[N_BASE] = {
+    "R",    "G",    "B",    "Y",    "S0",   "S1",   "S2",   "S3",   "S0.Y", "S1.Y", "S2.Y", "S3.Y",
+    "S0.R", "S0.G", "S0.B", "S1.R", "S1.G", "S1.B", "S2.R", "S2.G", "S2.B", "S3.R", "S3.G", "S3.B",
+};
 static const char *const plane_names[FILM_MAX_PLANES] = {"brdf", "brf", "radiance_stderr"};
 static const char *const plane_channels[FILM_MAX_PLANES][N_BASE] = {
-    {"brdf.R", "brdf.G", "brdf.B", "brdf.Y", "brdf.S0", "brdf.S1", "brdf.S2", "brdf.S3", "brdf.S0.Y",
-     "brdf.S1.Y", "brdf.S2.Y", "brdf.S3.Y"},
-    {"brf.R", "brf.G", "brf.B", "brf.Y", "brf.S0", "brf.S1", "brf.S2", "brf.S3", "brf.S0.Y", "brf.S1.Y",
-     "brf.S2.Y", "brf.S3.Y"},
-    {"radiance_stderr.R", "radiance_stderr.G", "radiance_stderr.B", "radiance_stderr.Y", "radiance_stderr.S0",
-     "radiance_stderr.S1", "radiance_stderr.S2", "radiance_stderr.S3", "radiance_stderr.S0.Y",
-     "radiance_stderr.S1.Y", "radiance_stderr.S2.Y", "radiance_stderr.S3.Y"},
+    {
+        "brdf.R",    "brdf.G",    "brdf.B",    "brdf.Y",    "brdf.S0",   "brdf.S1",
+        "brdf.S2",   "brdf.S3",   "brdf.S0.Y", "brdf.S1.Y", "brdf.S2.Y", "brdf.S3.Y",
+        "brdf.S0.R", "brdf.S0.G", "brdf.S0.B", "brdf.S1.R", "brdf.S1.G", "brdf.S1.B",
+        "brdf.S2.R", "brdf.S2.G", "brdf.S2.B", "brdf.S3.R", "brdf.S3.G", "brdf.S3.B",
+    },
+    {
+        "brf.R",    "brf.G",    "brf.B",    "brf.Y",    "brf.S0",   "brf.S1",   "brf.S2",   "brf.S3",
+        "brf.S0.Y", "brf.S1.Y", "brf.S2.Y", "brf.S3.Y", "brf.S0.R", "brf.S0.G", "brf.S0.B", "brf.S1.R",
+        "brf.S1.G", "brf.S1.B", "brf.S2.R", "brf.S2.G", "brf.S2.B", "brf.S3.R", "brf.S3.G", "brf.S3.B",
+    },
+    {
+        "radiance_stderr.R",    "radiance_stderr.G",    "radiance_stderr.B",    "radiance_stderr.Y",
+        "radiance_stderr.S0",   "radiance_stderr.S1",   "radiance_stderr.S2",   "radiance_stderr.S3",
+        "radiance_stderr.S0.Y", "radiance_stderr.S1.Y", "radiance_stderr.S2.Y", "radiance_stderr.S3.Y",
+        "radiance_stderr.S0.R", "radiance_stderr.S0.G", "radiance_stderr.S0.B", "radiance_stderr.S1.R",
+        "radiance_stderr.S1.G", "radiance_stderr.S1.B", "radiance_stderr.S2.R", "radiance_stderr.S2.G",
+        "radiance_stderr.S2.B", "radiance_stderr.S3.R", "radiance_stderr.S3.G", "radiance_stderr.S3.B",
+    },
 };
 
 const char *film_channel_static(const char *name) {
@@ -51,7 +65,7 @@ static void plane_describe(const film_image *img, int which, film_plane *p) {
              : which == 1                   ? "1"
              : img->variant == VARIANT_MONO ? "W m-2 sr-1 nm-1"
                                             : "W m-2 sr-1";
-  for (int c = 0; c < img->channels && c < 4; c++) {
+  for (int c = 0; c < img->channels && c < FILM_MAX_CHANNELS; c++) {
     p->channel_names[c] = NULL;
     for (int k = 0; k < N_BASE; k++)
       if (img->channel_names[c] && strcmp(img->channel_names[c], base_channels[k]) == 0)

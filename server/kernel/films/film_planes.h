@@ -24,27 +24,29 @@ bool render_quantity_bit(const char *name, unsigned *bit);
  * width, height and channels (HWC float32, row 0 on top). Names are
  * static: "brdf", "brf", "radiance_stderr" (the NetCDF variable names,
  * which other formats use as the prefix of a channel: "brf.Y"). */
-#define FILM_MAX_PLANES 3
+#define FILM_MAX_PLANES   3
+/* The most channels a film has: rgb_polarized's S0..S3 per colour. */
+#define FILM_MAX_CHANNELS 12
 typedef struct film_plane {
   const char *name;
-  const char *units;            /* CF/UDUNITS text: "sr-1", "1", radiance's units */
-  const char *long_name;        /* CF long_name */
-  const char *channel_names[4]; /* "<name>.<film channel>", static */
-  float *data;                  /* owned */
+  const char *units;                            /* CF/UDUNITS text: "sr-1", "1", radiance's units */
+  const char *long_name;                        /* CF long_name */
+  const char *channel_names[FILM_MAX_CHANNELS]; /* "<name>.<film channel>", static */
+  float *data;                                  /* owned */
 } film_plane;
 
 /* A developed film: HWC float32, row 0 = first (top) row. */
 typedef struct film_image {
   int width, height, channels;
-  const char *channel_names[4]; /* static strings: "R","G","B" or "Y" */
-  float *data;                  /* owned */
-  bool half;                    /* the film asked for float16 storage */
+  const char *channel_names[FILM_MAX_CHANNELS]; /* static: "R","G","B", "Y", "S0".."S3", "S0.Y".., "S0.R".. */
+  float *data;                                  /* owned */
+  bool half;                                    /* the film asked for float16 storage */
   /* What was rendered (for metadata). */
   uint32_t spp;
   uint64_t seed;
   double wavelength;
   rsw_variant variant;
-  bool polarized; /* a polarized variant's film (channels S0.Y..S3.Y) */
+  bool polarized; /* a polarized variant's film (channels S0.Y..S3.Y, or S0.R..S3.B) */
   /* Viewing zenith, azimuth (degrees) of each pixel, 2 per pixel,
    * row-major (owned); NULL when the sensor has no pixel_angles op. */
   double *angles;
@@ -68,7 +70,7 @@ typedef struct film_image {
   /* brdf / brf films: the horizontal irradiance E_h the radiance was
    * divided by, per film channel (W m^-2 [nm^-1]). */
   bool has_irradiance;
-  double irradiance[4];
+  double irradiance[FILM_MAX_CHANNELS];
   /* Scenes with one directional emitter: the sun's zenith and azimuth
    * (degrees, Eradiate's convention: zenith from +z, azimuth from +x
    * counter-clockwise; the light travels along -(sin θ cos φ, sin θ sin φ,
@@ -107,7 +109,7 @@ rsw_status render_check_planes(const scene *sc, size_t sensor, uint32_t spp, uns
 uint64_t render_planes_bytes(const sensor *se, rsw_variant variant, unsigned quantities, bool variance);
 
 /* A film's channels, radiance then every plane's: names (static) into
- * names[] (room for 4 * (1 + FILM_MAX_PLANES)) and the count. */
+ * names[] (room for FILM_MAX_CHANNELS * (1 + FILM_MAX_PLANES)) and the count. */
 int film_image_all_channels(const film_image *img, const char **names);
 /* The film's radiance and planes interleaved per pixel in the order of
  * film_image_all_channels (HWC; malloc'ed, free()), or NULL when out of

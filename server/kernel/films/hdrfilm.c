@@ -52,11 +52,17 @@ static rsw_status hdrfilm_develop(const film *fm, const film_sums *s, film_image
   memset(&img, 0, sizeof img);
   img.width = s->width;
   img.height = s->height;
+  /* Stokes films: nc colour channels per component, in the order S0.R
+   * S0.G S0.B S1.R ... (rgb_polarized) or S0..S3 / S0.Y..S3.Y. */
+  int nc = s->stokes && s->polarized && s->variant == VARIANT_RGB ? 3 : 1;
   if (s->stokes) {
     static const char *const plain[4] = {"S0", "S1", "S2", "S3"}, *const pol[4] = {"S0.Y", "S1.Y", "S2.Y",
                                                                                    "S3.Y"};
-    img.channels = 4;
-    for (int k = 0; k < 4; k++) img.channel_names[k] = s->polarized ? pol[k] : plain[k];
+    static const char *const rgb[12] = {"S0.R", "S0.G", "S0.B", "S1.R", "S1.G", "S1.B",
+                                        "S2.R", "S2.G", "S2.B", "S3.R", "S3.G", "S3.B"};
+    img.channels = 4 * nc;
+    for (int k = 0; k < img.channels; k++)
+      img.channel_names[k] = nc == 3 ? rgb[k] : s->polarized ? pol[k] : plain[k];
   } else if (lum) {
     img.channels = 1;
     img.channel_names[0] = "Y";
@@ -80,8 +86,11 @@ static rsw_status hdrfilm_develop(const film *fm, const film_sums *s, film_image
     double inv = a[3] != 0 ? 1.0 / a[3] : 0.0;
     color c = col(a[0] * inv, a[1] * inv, a[2] * inv);
     if (s->stokes) {
-      img.data[4 * i] = (float)c.c[0];
-      for (int k = 0; k < 3; k++) img.data[4 * i + 1 + (size_t)k] = (float)(a[4 + k] * inv);
+      float *o = &img.data[(size_t)img.channels * i];
+      for (int ch = 0; ch < nc; ch++) {
+        o[ch] = (float)c.c[ch];
+        for (int k = 0; k < 3; k++) o[nc * (k + 1) + ch] = (float)(a[4 + 3 * ch + k] * inv);
+      }
     } else if (lum) {
       img.data[i] = (float)(s->variant == VARIANT_MONO ? c.c[0] : col_luminance(c));
     } else {
@@ -90,9 +99,12 @@ static rsw_status hdrfilm_develop(const film *fm, const film_sums *s, film_image
       img.data[3 * i + 2] = (float)c.c[2];
     }
   }
-  double eh[4] = {0, 0, 0, 0}; /* per developed channel, as the radiance maps colours */
+  double eh[FILM_MAX_CHANNELS] = {0}; /* per developed channel, as the radiance maps colours */
   for (int c = 0; c < img.channels; c++)
-    eh[c] = s->stokes || s->variant == VARIANT_MONO ? s->e_h.c[0] : lum ? col_luminance(s->e_h) : s->e_h.c[c];
+    eh[c] = s->stokes                    ? s->e_h.c[nc == 3 ? c % 3 : 0]
+            : s->variant == VARIANT_MONO ? s->e_h.c[0]
+            : lum                        ? col_luminance(s->e_h)
+                                         : s->e_h.c[c];
   const char *want[FILM_MAX_PLANES];
   int n_want = 0;
   if (s->quantities & RENDER_Q_BRDF) want[n_want++] = "brdf";
@@ -126,7 +138,7 @@ static rsw_status hdrfilm_develop(const film *fm, const film_sums *s, film_image
   }
   if (n_want && (s->quantities & (RENDER_Q_BRDF | RENDER_Q_BRF))) {
     img.has_irradiance = true;
-    for (int c = 0; c < 4; c++) img.irradiance[c] = eh[c];
+    for (int c = 0; c < FILM_MAX_CHANNELS; c++) img.irradiance[c] = eh[c];
   }
   *out = img;
   return RSW_OK;
@@ -228,7 +240,7 @@ static rsw_status hdrfilm_read(loader *ld, node *n, hdrfilm *f) {
       return ld_fail(ld, n, "pixel_format", RSW_ERR_INVALID, "hdrfilm: unknown pixel_format '%s'", s);
     /* "stokes": channels S0..S3 (I, Q, U, V) — kept in mono. */
     code = strcmp(s, "stokes") == 0 ? PIXFMT_STOKES : PIXFMT_LUMINANCE;
-  } else if (strcmp(s, "stokes") == 0) {
+  } else if (strcmp(s, "stokes") == 0 && !ld->polarized) {
     return ld_fail(
         ld, n, "pixel_format", RSW_ERR_UNSUPPORTED,
         "hdrfilm: pixel_format 'stokes' needs the mono variant (Stokes vectors are per wavelength)");

@@ -12,8 +12,9 @@
  * 1/n_e; here each takes 1/n_e, so the estimate does not grow with n_e).
  * `shading_samples` sets both counts (exclusive with them, default 1);
  * their sum must be positive. `hide_emitters` hides the emission seen by
- * the camera ray. Media are ignored (as Mitsuba's), and Stokes films get
- * no Q, U, V. */
+ * the camera ray. Media are ignored (as Mitsuba's); Stokes films of the
+ * unpolarized variants get no Q, U, V, the polarized variants carry the
+ * BSDF's Mueller factors (integrators/polarization.h). */
 #include <stdlib.h>
 
 #include "../accel.h"
@@ -23,6 +24,7 @@
 #include "../shapes/instance.h"
 #include "../shapes/shape.h"
 #include "integrator.h"
+#include "polarization.h"
 
 typedef struct direct_integrator {
   integrator base;
@@ -45,7 +47,7 @@ static trace_result trace(const scene *sc, const ray3 *r, surface_interaction *s
 
 /* Light samples: sum of w_e f Le / p_e over n_e samples, divided by n_e. */
 static color light_samples(const direct_integrator *d, const scene *sc, sampler_state *st,
-                           const surface_interaction *si, render_stats *stats) {
+                           const surface_interaction *si, render_stats *stats, pol_lane *pl, vec3 pd) {
   const sampler_ops *sops = st->s->ops;
   const bsdf *b = si->shape->bsdf;
   color sum = col1(0);
@@ -69,14 +71,24 @@ static color light_samples(const direct_integrator *d, const scene *sc, sampler_
     stats->shadow_rays++;
     if (scene_occluded(sc, &sray) != TRACE_MISS) continue;
     double w = ds.delta ? 1.0 : mis_weight(ds.pdf * pe * d->frac_e, b->ops->pdf(b, si, wo) * d->frac_b);
-    sum = col_add(sum, col_scale(col_mul(f, value), w / pe));
+    color v = col_scale(col_mul(f, value), w / pe);
+    sum = col_add(sum, v);
+    if (pl) {
+      int nch = pol_channels(sc);
+      mueller P[3];
+      vec3 b_in, b_out;
+      double out[3][4];
+      pol_bsdf(b, si, wo, 0, P, &b_in, &b_out);
+      pol_through_light(pl, e, ds.d, pd, b_in, b_out, P, nch, out);
+      pol_collect(pl, out, col_scale(v, 1.0 / (double)d->emitter_samples), nch);
+    }
   }
   return col_scale(sum, 1.0 / (double)d->emitter_samples);
 }
 
 /* BSDF samples: sum of w_b f Le / p_b over n_b samples, divided by n_b. */
 static color bsdf_samples(const direct_integrator *d, const scene *sc, sampler_state *st,
-                          const surface_interaction *si, render_stats *stats) {
+                          const surface_interaction *si, render_stats *stats, pol_lane *pl, vec3 pd) {
   const sampler_ops *sops = st->s->ops;
   const bsdf *b = si->shape->bsdf;
   color sum = col1(0);
@@ -104,29 +116,61 @@ static color bsdf_samples(const direct_integrator *d, const scene *sc, sampler_s
     double pe =
         (bs.sampled_type & BSDF_DELTA) ? 0.0 : e->ops->pdf_direction(e, si, &ds) * emitter_prob(sc, e);
     double w = mis_weight(bs.pdf * d->frac_b, pe * d->frac_e);
-    sum = col_add(sum, col_scale(col_mul(weight, Le), w));
+    color v = col_scale(col_mul(weight, Le), w);
+    sum = col_add(sum, v);
+    if (pl) {
+      int nch = pol_channels(sc);
+      mueller P[3];
+      vec3 b_in, b_out;
+      double out[3][4];
+      pol_bsdf(b, si, bs.wo, bs.sampled_type, P, &b_in, &b_out);
+      pol_through_light(pl, e, ds.d, pd, b_in, b_out, P, nch, out);
+      pol_collect(pl, out, col_scale(v, 1.0 / (double)d->bsdf_samples), nch);
+    }
   }
   return col_scale(sum, 1.0 / (double)d->bsdf_samples);
 }
 
-static color direct_Li(const integrator *it, const scene *sc, sampler_state *st, ray3 ray,
-                       render_stats *stats, double *quv) {
-  (void)quv;
-  const direct_integrator *d = (const direct_integrator *)it;
+/* The unpolarized estimate (pl NULL), or also the Stokes vectors into
+ * *pl (the polarized variants). */
+static color direct_L(const direct_integrator *d, const scene *sc, sampler_state *st, ray3 ray,
+                      render_stats *stats, pol_lane *pl) {
+  const integrator *it = &d->base;
   surface_interaction si;
   trace_result tr = trace(sc, &ray, &si, stats);
   if (tr != TRACE_HIT) {
-    if (tr == TRACE_MISS && sc->environment && !it->hide_emitters)
-      return sc->environment->ops->eval(sc->environment, NULL, ray.d);
+    if (tr == TRACE_MISS && sc->environment && !it->hide_emitters) {
+      color Le = sc->environment->ops->eval(sc->environment, NULL, ray.d);
+      if (pl) pol_add_env(pl, sc->environment, ray.d, Le, Le, pol_channels(sc));
+      return Le;
+    }
     return col1(0);
   }
   color L = col1(0);
   const emitter *em = si.shape->emitter;
   if (em && !it->hide_emitters) L = em->ops->eval(em, &si, ray.d);
+  if (pl) pol_add(pl, L, pol_channels(sc));
+  vec3 pd = v3_neg(v3_norm(ray.d));
   if (d->emitter_samples > 0 && sc->n_emitters > 0 && (si.shape->bsdf->flags & BSDF_SMOOTH))
-    L = col_add(L, light_samples(d, sc, st, &si, stats));
-  if (d->bsdf_samples > 0) L = col_add(L, bsdf_samples(d, sc, st, &si, stats));
+    L = col_add(L, light_samples(d, sc, st, &si, stats, pl, pd));
+  if (d->bsdf_samples > 0) L = col_add(L, bsdf_samples(d, sc, st, &si, stats, pl, pd));
   return L;
+}
+
+static color direct_Li(const integrator *it, const scene *sc, sampler_state *st, ray3 ray,
+                       render_stats *stats, double *quv) {
+  const direct_integrator *d = (const direct_integrator *)it;
+  if (!sc->polarized) return direct_L(d, sc, st, ray, stats, NULL);
+  pol_lane pl;
+  int nch = pol_channels(sc);
+  pol_start(&pl, ray.d, nch);
+  (void)direct_L(d, sc, st, ray, stats, &pl);
+  color S0;
+  double q[SCENE_QUV_MAX];
+  pol_result(&pl, nch, &S0, q);
+  if (quv)
+    for (int k = 0; k < scene_quv_stride(sc); k++) quv[k] += q[k];
+  return S0;
 }
 
 static const integrator_ops direct_ops = {.Li = direct_Li};

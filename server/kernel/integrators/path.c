@@ -602,8 +602,9 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
   lane *ln = ws->ln;
   pol_lane *pol = ws->pol;
   int *idx = ws->idx, *sh = ws->sh;
+  const int qs = scene_quv_stride(sc);
   if (quv)
-    for (int i = 0; i < 3 * n; i++) quv[i] = 0;
+    for (int i = 0; i < qs * n; i++) quv[i] = 0;
   if (pol)
     for (int i = 0; i < n; i++) pol_start(&pol[i], rays[i].d, pol_channels(sc));
   for (int i = 0; i < n; i++) {
@@ -630,12 +631,12 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
     camera = false;
     for (int k = 0; k < n_other; k++) { /* the environment's light; these paths end */
       int i = other[k];
-      shade_emit(it, sc, &ln[i], quv ? &quv[3 * i] : NULL, pol ? &pol[i] : NULL);
+      shade_emit(it, sc, &ln[i], quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL);
     }
     int next = 0, n_nee = 0, n_sh = 0;
     for (int k = 0; k < n_hit; k++) {
       int i = hits[k];
-      bool keep = shade_emit(it, sc, &ln[i], quv ? &quv[3 * i] : NULL, pol ? &pol[i] : NULL);
+      bool keep = shade_emit(it, sc, &ln[i], quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL);
       idx[next] = sh[n_nee] = i;
       next += keep, n_nee += keep & ln[i].nee;
     }
@@ -645,7 +646,7 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
     wave_eval_bsdfs(ln, idx, live, sh);
     for (int k = 0; k < live; k++) {
       int i = idx[k];
-      shade_light(sc, &ln[i], quv ? &quv[3 * i] : NULL, pol ? &pol[i] : NULL);
+      shade_light(sc, &ln[i], quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL);
     }
     /* The BSDF samples' numbers, lobe then direction, for every lane. */
     if (live) {
@@ -667,7 +668,7 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
   }
   for (int i = 0; i < n; i++) L[i] = ln[i].L;
   if (pol)
-    for (int i = 0; i < n; i++) pol_result(&pol[i], pol_channels(sc), &L[i], quv ? &quv[3 * i] : NULL);
+    for (int i = 0; i < n; i++) pol_result(&pol[i], pol_channels(sc), &L[i], quv ? &quv[qs * i] : NULL);
 }
 
 static bool path_Li_batch(const integrator *it, const scene *sc, sampler_state *st, const ray3 *rays, int n,
@@ -709,10 +710,10 @@ static color path_Li(const integrator *it, const scene *sc, sampler_state *st, r
                      .d2 = d2,
                      .pol = sc->polarized ? &pl : NULL};
   color L;
-  double q[3];
+  double q[SCENE_QUV_MAX];
   wave_run(it, sc, st, &ray, 1, stats, &L, quv ? q : NULL, &ws);
   if (quv)
-    for (int k = 0; k < 3; k++) quv[k] += q[k];
+    for (int k = 0; k < scene_quv_stride(sc); k++) quv[k] += q[k];
   return L;
 }
 

@@ -170,11 +170,13 @@ static inline void pol_through_light(const pol_lane *p, const emitter *e, vec3 d
   }
 }
 
-/* The path's result: I per channel into L, Q, U, V of channel 0 into quv. */
+/* The path's result: I per channel into L, Q, U, V of channel c into
+ * quv[3 c .. 3 c + 2] (nch channels: kernel.h scene_quv_stride). */
 static inline void pol_result(const pol_lane *p, int nch, color *L, double *quv) {
   for (int c = 0; c < 3; c++) L->c[c] = p->S[c < nch ? c : 0][0];
   if (quv)
-    for (int k = 0; k < 3; k++) quv[k] = p->S[0][k + 1];
+    for (int c = 0; c < nch; c++)
+      for (int k = 0; k < 3; k++) quv[3 * c + k] = p->S[c][k + 1];
 }
 
 #endif

@@ -818,10 +818,11 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
     }
   }
   for (int i = 0; i < n; i++) L[i] = ln[i].L;
+  const int qs = scene_quv_stride(sc);
   if (quv)
-    for (int i = 0; i < 3 * n; i++) quv[i] = 0; /* unpolarized variants: no polarisation through media */
+    for (int i = 0; i < qs * n; i++) quv[i] = 0; /* unpolarized variants: no polarisation through media */
   if (vq)
-    for (int i = 0; i < n; i++) pol_result(&vq[i].p, pol_channels(sc), &L[i], quv ? &quv[3 * i] : NULL);
+    for (int i = 0; i < n; i++) pol_result(&vq[i].p, pol_channels(sc), &L[i], quv ? &quv[qs * i] : NULL);
 }
 
 static bool volpath_Li_batch(const integrator *it, const scene *sc, sampler_state *st, const ray3 *rays,
@@ -851,11 +852,11 @@ static color volpath_Li(const integrator *it, const scene *sc, sampler_state *st
   bool hit;
   surface_interaction si;
   color L;
-  double q[3];
+  double q[SCENE_QUV_MAX];
   wave_run((const volpath_integrator *)it, sc, st, &ray, 1, stats, &L, quv ? q : NULL, &ln,
            sc->polarized ? &vq : NULL, idx, idx + 1, &hit, &si);
   if (quv)
-    for (int k = 0; k < 3; k++) quv[k] += q[k];
+    for (int k = 0; k < scene_quv_stride(sc); k++) quv[k] += q[k];
   return L;
 }
 

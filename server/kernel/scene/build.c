@@ -222,14 +222,6 @@ rsw_status scene_build(node *root, const char *doc_variant, const scene_load_opt
     node_free(root);
     return st;
   }
-  if (polarized && var == VARIANT_RGB) {
-    rsw_status st = rsw_fail(err, RSW_ERR_UNSUPPORTED, opts && opts->variant ? "--variant" : root->loc,
-                             "variant '%s' is not supported yet: use mono_polarized (one wavelength per "
-                             "render; docs/polarization.md)",
-                             vname);
-    node_free(root);
-    return st;
-  }
   scene *s = calloc(1, sizeof *s);
   if (!s) {
     node_free(root);

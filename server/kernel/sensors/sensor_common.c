@@ -267,14 +267,16 @@ vec3 radiancemeter_ray_origin(vec3 o, vec3 d, const meter_frame *f) {
 
 uint64_t sensor_film_bytes(const sensor *se, rsw_variant variant, int *channels) {
   const film *fm = se->film;
-  bool stokes = fm->pixel_format == PIXFMT_STOKES && variant == VARIANT_MONO;
+  /* A Stokes film: the mono variant's or a polarized variant's (rgb:
+   * S0..S3 per colour). */
+  bool stokes = fm->pixel_format == PIXFMT_STOKES;
   bool lum = !stokes && (variant == VARIANT_MONO || fm->pixel_format == PIXFMT_LUMINANCE);
-  int c = stokes ? 4 : lum ? 1 : 3;
+  int c = stokes ? (variant == VARIANT_MONO ? 4 : 12) : lum ? 1 : 3;
   if (channels) *channels = c;
   /* Mirrors render.c's allocations (accumulator, film, angles) and the
    * encoders' copy of the film and its angles. */
-  uint64_t per_pixel =
-      (stokes ? 7u : 4u) * 8u + 2u * 4u * (uint64_t)c + (se->ops->pixel_angles ? 2u * 16u : 0u);
+  uint64_t per_pixel = (stokes ? (variant == VARIANT_MONO ? 7u : 13u) : 4u) * 8u + 2u * 4u * (uint64_t)c +
+                       (se->ops->pixel_angles ? 2u * 16u : 0u);
   uint64_t pixels = (uint64_t)(fm->width > 0 ? fm->width : 0) * (uint64_t)(fm->height > 0 ? fm->height : 0);
   if (pixels && per_pixel > UINT64_MAX / pixels) return UINT64_MAX;
   return pixels * per_pixel;
