@@ -279,23 +279,26 @@ static bool wave_flush(job *jb, tile_buf *tb, wave_buf *wb, int n, render_stats 
   for (int i = 0; i < n; i++) {
     const wave_sample *s = &wb->ws[i];
     color v = col1(0);
-    double q[SCENE_QUV_MAX] = {0};
+    double q[SCENE_QUV_MAX];
     if (k < m && wb->live[k] == i) {
       v = col_scale(wb->L[k], s->w);
-      /* Li_batch packs nq values per path, Li's slots are SCENE_QUV_MAX apart. */
-      const double *src = &wb->quv[(it->ops->Li_batch ? jb->nq : SCENE_QUV_MAX) * k];
-      for (int c = 0; c < jb->nq; c++) q[c] = src[c] * s->w;
-      if (jb->sc->polarized) film_stokes_rotate(se, wb->ray[k].d, q, jb->nq);
       /* All finite, without a branch each: x * 0 is +-0 for a finite x and
        * NaN for an infinite or NaN one. */
       double z = v.c[0] * 0.0 + v.c[1] * 0.0 + v.c[2] * 0.0;
-      for (int c = 0; c < jb->nq; c++) z += q[c] * 0.0;
+      if (jb->nq) { /* Li_batch packs nq values per path, Li's slots are SCENE_QUV_MAX apart */
+        const double *src = &wb->quv[(it->ops->Li_batch ? jb->nq : SCENE_QUV_MAX) * k];
+        for (int c = 0; c < jb->nq; c++) q[c] = src[c] * s->w;
+        if (jb->sc->polarized) film_stokes_rotate(se, wb->ray[k].d, q, jb->nq);
+        for (int c = 0; c < jb->nq; c++) z += q[c] * 0.0;
+      }
       if (!(z == 0.0)) {
         (*invalid)++;
         v = col1(0);
         for (int c = 0; c < jb->nq; c++) q[c] = 0;
       }
       k++;
+    } else {
+      for (int c = 0; c < jb->nq; c++) q[c] = 0;
     }
     splat(jb, tb, s->px, s->py, v, q);
   }
