@@ -45,7 +45,7 @@ echo "test_python: install $(secs "$t0") s"
 
 # ---- the package's tests ----------------------------------------------------------------
 # With the SDK examples (tests/plugins), for the Stokes films' tests.
-start_daemon "$tmp/d" --plugin-dir "$root/build/plugins"
+start_daemon "$tmp/d" --plugin-dir "$bin/../plugins"
 [ -n "$started_port" ] || {
   bad "daemon did not start: $(tail -n 5 "$tmp/d/log")"
   finish

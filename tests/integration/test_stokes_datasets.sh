@@ -25,9 +25,9 @@ py=${RSW_PYTHON:-/usr/bin/python3}
   bad "$py cannot import xarray and netCDF4 (make deps installs python3-xarray python3-netcdf4)"
   finish
 }
-plugins=$root/build/plugins
+plugins=$bin/../plugins
 [ -f "$plugins/polarized_sky.so" ] || {
-  bad "build/plugins/polarized_sky.so is missing (make builds it)"
+  bad "$plugins/polarized_sky.so is missing (make builds it)"
   finish
 }
 cd "$tmp" || exit 1
