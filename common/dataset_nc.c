@@ -85,12 +85,12 @@ static const struct polar *polar_find(const char *name) {
 
 /* The AoLP convention, the aolp variables' comment (docs/polarization.md). */
 #define AOLP_COMMENT                                                                                          \
-  "0.5 atan2(S2, S1) in degrees, in (-90, 90], 0 where S1 = S2 = 0; counter-clockwise from the x axis of the " \
-  "Stokes frame as seen by the viewer (light coming towards the viewer): for cameras x is the film's "       \
-  "horizontal axis (image right), for distant sensors the meridian plane of the view direction"
+  "0.5 atan2(S2, S1) in degrees, in (-90, 90], 0 where S1 = S2 = 0; from x towards y of the film's Stokes "    \
+  "basis (counter-clockwise as seen looking into the beam): for cameras x is the image's right, for distant " \
+  "sensors x is horizontal, perpendicular to the meridian plane (docs/polarization.md)"
 #define STOKES_COMMENT                                                                                        \
-  "S0..S3 = I, Q, U, V; Q = I_x - I_y, U = I_+45 - I_-45, V circular; x is the film's horizontal axis for "  \
-  "cameras, the meridian plane of the view direction for distant sensors (docs/polarization.md)"
+  "S0..S3 = I, Q, U, V; Q = I_x - I_y, U = I_+45 - I_-45, V circular; for cameras x is the image's right, "  \
+  "for distant sensors x is horizontal, perpendicular to the meridian plane (docs/polarization.md)"
 
 const nc_quantity *nc_quantity_find(const char *name) {
   for (size_t i = 0; i < N_QUANTITIES; i++)

@@ -10,11 +10,12 @@
  * component-major: film channel k is Stokes component k / n_color of
  * colour k % n_color. Planes prefix them ("brf.S0.Y").
  *
- * Conventions (Mitsuba's `stokes` integrator): S0..S3 = I, Q, U, V;
+ * Conventions (Mitsuba's `stokes` integrator; the film's basis x, y:
+ * docs/polarization.md#stokes-conventions): S0..S3 = I, Q, U, V;
  * Q = I_x - I_y, U = I_{+45} - I_{-45}.
  *   DoLP = sqrt(S1^2 + S2^2) / S0, 0 where S0 = 0;
  *   AoLP = 0.5 atan2(S2, S1) in degrees, in (-90, 90], 0 where S1 = S2 = 0,
- *          counter-clockwise from x as seen by the viewer. */
+ *          from x towards y. */
 #ifndef RSW_COMMON_STOKES_H
 #define RSW_COMMON_STOKES_H
 

@@ -193,7 +193,7 @@ static const cmdline_opt render_cmd_opts[] = {
     [R_VARIANCE] = {"--variance"},
     [R_EXPOSURE] = {"--exposure", "EV|auto[+-EV]"},
     [R_COLORMAP] = {"--colormap", "MAP"},
-    [R_VARIANT] = {"--variant", "mono|rgb"},
+    [R_VARIANT] = {"--variant", "mono|rgb|mono_polarized"},
     [R_SET] = {"--set", "KEY=VALUE", CMDLINE_REPEAT},
     [R_PLUGIN_DIR] = {"--plugin-dir", "DIR"},
     [R_STATS] = {"--stats"},
@@ -480,7 +480,7 @@ static const cmdline_opt params_cmd_opts[] = {
     [P_MATCH] = {"--match", "PATTERN"},
     [P_CLASS] = {"--class", "CLASS"},
     [P_JSON] = {"--json"},
-    [P_VARIANT] = {"--variant", "mono|rgb"},
+    [P_VARIANT] = {"--variant", "mono|rgb|mono_polarized"},
     [P_DEFINE] = {"-D", "name=value", CMDLINE_REPEAT | CMDLINE_ATTACHED},
     {NULL},
 };
@@ -612,7 +612,8 @@ static int cmd_version(int argc, char **argv) {
 static const command commands[] = {
     {"render",
      "render SCENE [-D name=value]... [--set KEY=VALUE]... [--sensor ID] [--spp N] [--seed S] "
-     "[--wavelength NM] [--threads N] [--isa auto|avx512|avx2|sse2|generic] [--variant mono|rgb] "
+     "[--wavelength NM] [--threads N] [--isa auto|avx512|avx2|sse2|generic] [--variant "
+     "mono|rgb|mono_polarized] "
      "[--plugin-dir DIR] "
      "[--quantities LIST] "
      "[--variance] [--exposure EV|auto] [--colormap MAP] [--stats] -o OUT.exr|OUT.npy|OUT.json|OUT.png",
@@ -632,7 +633,8 @@ static const command commands[] = {
      "(portable,\n"
      "                      every CPU): the instruction set of the vectorised shading; films agree across\n"
      "                      ISAs statistically, not bitwise; refused when the CPU lacks it\n"
-     "  --variant mono|rgb  overrides the document's variant (default rgb)\n"
+     "  --variant V         mono, rgb or mono_polarized (Stokes films S0..S3): overrides the document's\n"
+     "                      variant (default rgb)\n"
      "  --plugin-dir DIR    load every *.so in DIR as an environment plugin first\n"
      "  --quantities LIST   comma-separated, of radiance, brdf, brf: adds brdf = L/E_h and brf = pi L/E_h\n"
      "                      channels (E_h: horizontal irradiance of the directional emitters)\n"
@@ -647,13 +649,14 @@ static const command commands[] = {
      cmd_render},
     {"params",
      "params SCENE [-D name=value]... [--match GLOB|TYPE:ID:PATH] [--class spectral|geometric|none] "
-     "[--variant mono|rgb] [--json]",
+     "[--variant mono|rgb|mono_polarized] [--json]",
      "print a scene's parameter table (key, type, class, shape, value, aliases)",
      "  SCENE               a .xml (Mitsuba XML) or .json scene file\n"
      "  -D name=value       sets an XML $name parameter (not for JSON scenes)\n"
      "  --match PATTERN     a glob over keys ('*' also matches dots) or an Eradiate search TYPE:ID:PATH\n"
      "  --class CLASS       only keys of this update class: spectral, geometric or none\n"
-     "  --variant mono|rgb  overrides the document's variant (default rgb)\n"
+     "  --variant V         mono, rgb or mono_polarized (Stokes films S0..S3): overrides the document's\n"
+     "                      variant (default rgb)\n"
      "  --json              a JSON array instead of the table\n",
      cmd_params},
     {"serve", RSW_SERVE_USAGE, "the HTTP/JSON daemon (contract: proto/openapi.yaml)",

@@ -8,7 +8,8 @@
 #include "cli.h"
 
 const cmdline_opt cli_opts_scene_push[] = {
-    {"--variant", "mono|rgb", false, "mono or rgb (overrides the scene's own)"},
+    {"--variant", "mono|rgb|mono_polarized", false,
+     "mono, rgb or mono_polarized (overrides the scene's own)"},
     {NULL},
 };
 const cmdline_opt cli_opts_scene_rm[] = {
@@ -100,8 +101,11 @@ out:
 
 int cmd_scene_push(cli_ctx *ctx, const cmdline_args *a) {
   const char *variant = cmdline_get(a, "--variant");
-  if (variant && strcmp(variant, "mono") != 0 && strcmp(variant, "rgb") != 0)
-    return cli_usage(ctx, "--variant needs mono or rgb (got '%s')", variant);
+  static const char *const known[] = {"mono", "rgb", "mono_polarized", "rgb_polarized"};
+  bool ok = !variant;
+  for (size_t i = 0; variant && i < sizeof known / sizeof known[0]; i++) ok |= strcmp(variant, known[i]) == 0;
+  if (!ok)
+    return cli_usage(ctx, "--variant needs mono, rgb, mono_polarized or rgb_polarized (got '%s')", variant);
   char id[65];
   int created = 0;
   rsw_status s = rsw_scene_push_file(ctx->client, a->pos[0], variant, id, &created);

@@ -24,7 +24,7 @@ const cmdline_opt cli_opts_none[] = {{NULL}};
 static const cli_command commands[] = {
     {"status", NULL, "", "server version, variants, limits and readiness", cli_opts_none, 0, 0, true,
      cmd_status},
-    {"scene", "push", "FILE [--variant mono|rgb]",
+    {"scene", "push", "FILE [--variant mono|rgb|mono_polarized]",
      "upload a scene (JSON or Mitsuba XML) and the files it references; prints the scene id",
      cli_opts_scene_push, 1, 1, true, cmd_scene_push},
     {"scene", "ls", "", "list resident scenes", cli_opts_none, 0, 0, true, cmd_scene_ls},

@@ -109,8 +109,8 @@ def film_dataarray(film):
 
 
 STOKES = ("S0", "S1", "S2", "S3")
-AOLP_CONVENTION = ("0.5 atan2(S2, S1) in degrees, in (-90, 90], 0 where S1 = S2 = 0; counter-clockwise from "
-                   "the x axis of the Stokes frame as seen by the viewer (docs/polarization.md)")
+AOLP_CONVENTION = ("0.5 atan2(S2, S1) in degrees, in (-90, 90], 0 where S1 = S2 = 0; from x towards y of the "
+                   "film's Stokes basis (docs/polarization.md#stokes-conventions)")
 
 
 def _components(x, axis):

@@ -179,10 +179,6 @@ static const float *film_all(const film_image *im, float **owned) {
   return *owned;
 }
 
-static const char *variant_name(rsw_variant v) {
-  return v == VARIANT_MONO ? "mono" : "rgb";
-}
-
 rsw_status http_film_json(const svc_film *f, char **bytes_out, size_t *len_out, rsw_err *err) {
   rsw_status s = check_film(f, "film JSON", err);
   if (s) return s;
@@ -221,7 +217,7 @@ rsw_status http_film_json(const svc_film *f, char **bytes_out, size_t *len_out, 
     http_buf_puts(&b, "null");
   http_buf_puts(&b, ",\"sensor\":");
   http_buf_json_string(&b, f->sensor);
-  http_buf_printf(&b, ",\"variant\":\"%s\",\"wavelength\":", variant_name(im->variant));
+  http_buf_printf(&b, ",\"variant\":\"%s\",\"wavelength\":", variant_name(im->variant, im->polarized));
   if (im->variant == VARIANT_MONO && isfinite(im->wavelength))
     http_buf_printf(&b, "%.17g", im->wavelength);
   else

@@ -249,10 +249,10 @@ static void h_metrics(http_req *r) {
   r->resp.len = strlen(text);
 }
 
-static const char *const variants[] = {"mono", "rgb"};
+static const char *const variants[] = {"mono", "rgb", "mono_polarized", "rgb_polarized"};
 
 static void h_scene_post(http_req *r) {
-  if (!query_enum(r, "variant", r->q_variant, variants, 2)) return;
+  if (!query_enum(r, "variant", r->q_variant, variants, 4)) return;
   if (r->q_name && !service_scene_label_ok(r->q_name)) {
     http_resp_problem(r, 400, NULL,
                       "query parameter name must be a file name (1 to %d bytes, no '/' or control character)",

@@ -17,6 +17,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "core/mueller.h"
 #include "core/rng.h"
 #include "core/transform.h"
 #include "core/vec.h"
@@ -57,6 +58,13 @@ typedef enum rsw_variant {
   VARIANT_MONO
 } rsw_variant;
 
+/* A variant's name: "mono", "rgb", "mono_polarized", "rgb_polarized"
+ * (the polarized ones carry Stokes vectors, docs/polarization.md). */
+const char *variant_name(rsw_variant v, bool polarized);
+/* Parse a variant name (also Mitsuba's scalar_mono, scalar_mono_double,
+ * scalar_rgb and their _polarized forms). False: not a variant. */
+bool variant_parse(const char *name, rsw_variant *v, bool *polarized);
+
 /* A spectral bundle (mono): the wavelengths one path carries, one per
  * colour channel, so at most the channels of a `color`
  * (docs/experiments.md#spectral-bundles). */
@@ -65,6 +73,7 @@ typedef enum rsw_variant {
 /* What a render is evaluated at; given to every plugin's prepare(). */
 typedef struct render_ctx {
   rsw_variant variant;
+  bool polarized;    /* mono_polarized, rgb_polarized */
   double wavelength; /* nm; mono only (default 550); a bundle's first */
   /* Mono: wavelengths carried per path, 0 or 1 for one (every channel at
    * `wavelength`), up to RENDER_MAX_BUNDLE; channel c renders at wl[c]
@@ -209,6 +218,16 @@ typedef struct bsdf_ops {
    * eval() and pdf() per lane. */
   void (*eval_pdf_batch)(const bsdf *b, int n, const surface_interaction *const *si, const vec3 *wo, color *f,
                          double *pdf);
+  /* Optional (polarized variants, docs/polarization.md#the-payload): the
+   * polarization factors P[c] = F / F00 per colour channel, F the Mueller
+   * matrix of light arriving along -wo and leaving along si->wi (local
+   * directions), where `lobe` is 0 for eval()'s smooth lobes (a light
+   * sample) and bs->sampled_type after sample() (a delta lobe: that lobe's
+   * matrix). The bases: *s_in perpendicular to wo (the incident light),
+   * *s_out perpendicular to si->wi, local unit vectors. NULL: the BSDF
+   * depolarizes (P = diag(1, 0, 0, 0)). */
+  void (*polarization)(const bsdf *b, const surface_interaction *si, vec3 wo, unsigned lobe, mueller P[3],
+                       vec3 *s_in, vec3 *s_out);
 } bsdf_ops;
 struct bsdf {
   object base;
@@ -327,8 +346,9 @@ typedef enum component_format {
 typedef struct film_sums {
   const double *acc; /* width*height*stride */
   int width, height, stride, m_off;
-  bool stokes; /* S0..S3 */
-  bool lum;    /* one luminance channel Y */
+  bool stokes;    /* S0..S3 */
+  bool polarized; /* a polarized variant: channels S0.Y..S3.Y */
+  bool lum;       /* one luminance channel Y */
   rsw_variant variant;
   uint32_t spp;
   uint64_t seed;
@@ -426,6 +446,10 @@ struct sensor {
   sampler *sampler;
   xform to_world;
   struct medium *medium; /* the medium the sensor sits in (Mitsuba's `medium`), or NULL */
+  /* Distant family (pixel_angles): the vertical its films' Stokes bases
+   * refer to is to_world's +z (a hemisphere's pole: hdistant, distantflux)
+   * rather than world +z (docs/polarization.md#stokes-conventions). */
+  bool stokes_pole;
 };
 
 /* ---- volumes ------------------------------------------------------------- */
@@ -505,6 +529,10 @@ typedef struct phase_ops {
    * per colour channel (a spectral bundle's wavelengths; sample() and
    * eval_pdf() give channel 0's value and the density). */
   color (*eval_channels)(const phase *ph, const medium_interaction *mi, vec3 wo);
+  /* Optional (polarized variants): the polarization factors P[c] = F / F11
+   * per colour channel of the scattering from mi->wi into wo, in the bases
+   * whose x is the scattering plane's normal. NULL: a depolarizer. */
+  void (*polarization)(const phase *ph, const medium_interaction *mi, vec3 wo, mueller P[3]);
 } phase_ops;
 struct phase {
   object base;
@@ -662,6 +690,7 @@ enum {
 typedef struct scene {
   object base;
   rsw_variant variant;
+  bool polarized;   /* mono_polarized, rgb_polarized: paths carry Mueller matrices */
   object **objects; /* every object, for prepare/destroy (owned) */
   size_t n_objects, cap_objects;
   shape **shapes;

@@ -207,6 +207,35 @@ static void wave_start(job *jb, wave_buf *wb, int n) {
       wb->ws[i].w = se->ops->sample_ray(se, wb->film_u[i], wb->aperture_u[i], &wb->ray[i]);
 }
 
+/* The film's Stokes basis (docs/polarization.md#stokes-conventions) for
+ * light arriving along -d: cameras x = d x up, up the sensor's to_world
+ * +y (Mitsuba's: the image's right, y its up); the distant family x in
+ * the meridian plane (the vertical plane through d: Q = I_l - I_r, as
+ * Coulson, Dave & Sekera 1960), the vertical being world +z or, for a
+ * hemisphere sensor, its pole. */
+static vec3 film_stokes_x(const sensor *se, vec3 d) {
+  vec3 pd = v3_neg(d);
+  if (se->ops->pixel_angles) {
+    vec3 z = se->stokes_pole ? v3_norm(xf_vector(&se->to_world, v3(0, 0, 1))) : v3(0, 0, 1);
+    vec3 h = v3_cross(z, pd);
+    if (!(v3_len(h) > 1e-9)) h = v3_cross(v3_norm(xf_vector(&se->to_world, v3(0, 1, 0))), pd);
+    return v3_norm(h);
+  }
+  return plane_normal(d, v3_norm(xf_vector(&se->to_world, v3(0, 1, 0))));
+}
+
+/* q = (Q, U, V) of a sample whose camera ray is along d, from the
+ * integrator's basis (stokes_basis(-d), integrators/polarization.h) into
+ * the film's. */
+static void film_stokes_rotate(const sensor *se, vec3 d, double q[3]) {
+  d = v3_norm(d);
+  vec3 pd = v3_neg(d);
+  mueller R = mu_basis_change(pd, stokes_basis(pd), film_stokes_x(se, d));
+  double Q = q[0], U = q[1];
+  q[0] = R.m[1][1] * Q + R.m[1][2] * U;
+  q[1] = R.m[2][1] * Q + R.m[2][2] * U;
+}
+
 /* Trace and splat samples [0, n) of wb: the live ones (w != 0) go through
  * the integrator together; every sample is splatted in order, so the tile's
  * sums are those of the one-sample loop. False: out of memory. */
@@ -247,6 +276,7 @@ static bool wave_flush(job *jb, tile_buf *tb, wave_buf *wb, int n, render_stats 
       v = col_scale(wb->L[k], s->w);
       if (jb->stokes)
         for (int c = 0; c < 3; c++) q[c] = wb->quv[3 * k + c] * s->w;
+      if (jb->sc->polarized) film_stokes_rotate(se, wb->ray[k].d, q);
       /* All six finite, without a branch each: x * 0 is +-0 for a finite
        * x and NaN for an infinite or NaN one. */
       if (!(v.c[0] * 0.0 + v.c[1] * 0.0 + v.c[2] * 0.0 + q[0] * 0.0 + q[1] * 0.0 + q[2] * 0.0 == 0.0)) {
@@ -584,7 +614,9 @@ rsw_status render_sensor_bundle(scene *sc, const render_opts *opts, film_image *
                     "reload the scene");
   const sensor *se = sc->sensors[opts->sensor];
   const film *fm = se->film;
-  render_ctx rc = {.variant = sc->variant, .wavelength = opts->wavelength > 0 ? opts->wavelength : 550.0};
+  render_ctx rc = {.variant = sc->variant,
+                   .polarized = sc->polarized,
+                   .wavelength = opts->wavelength > 0 ? opts->wavelength : 550.0};
   int nb = opts->bundle > 1 ? opts->bundle : 1;
   if (nb > 1) {
     rsw_status bst = render_check_bundle(sc, opts->sensor, nb, err);
@@ -625,7 +657,7 @@ rsw_status render_sensor_bundle(scene *sc, const render_opts *opts, film_image *
   jb.tiles_y = (jb.H + TILE - 1) / TILE;
   jb.n_tiles = (size_t)jb.tiles_x * jb.tiles_y;
   jb.box = box;
-  jb.stokes = fm->pixel_format == PIXFMT_STOKES && sc->variant == VARIANT_MONO;
+  jb.stokes = sc->polarized || (fm->pixel_format == PIXFMT_STOKES && sc->variant == VARIANT_MONO);
   /* (a bundle sums its wavelengths' channels apart) */
   jb.lum = !jb.stokes && nb == 1 && (sc->variant == VARIANT_MONO || fm->pixel_format == PIXFMT_LUMINANCE);
   jb.m_ch = !opts->variance ? 0 : jb.stokes ? 4 : jb.lum ? 1 : 3;
@@ -682,6 +714,7 @@ rsw_status render_sensor_bundle(scene *sc, const render_opts *opts, film_image *
                       .stride = stride,
                       .m_off = jb.m_off,
                       .stokes = jb.stokes,
+                      .polarized = sc->polarized,
                       .lum = nb == 1 ? jb.lum : true,
                       .variant = sc->variant,
                       .spp = spp,

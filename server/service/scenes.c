@@ -149,7 +149,7 @@ static resident *scene_reload(service *svc, const char *id) {
   char *body;
   size_t len;
   bool is_xml;
-  char variant[8];
+  char variant[32];
   cJSON *patched;
   uint64_t revision;
   char doc[65];
@@ -282,7 +282,7 @@ void svc_scene_summary(const resident *r, cJSON *o) {
   cJSON_AddStringToObject(o, "id", r->id);
   cJSON_AddStringToObject(o, "document", r->doc);
   cJSON_AddBoolToObject(o, "copy", r->copy);
-  cJSON_AddStringToObject(o, "variant", r->sc->variant == VARIANT_MONO ? "mono" : "rgb");
+  cJSON_AddStringToObject(o, "variant", variant_name(r->sc->variant, r->sc->polarized));
   cJSON *s = cJSON_AddArrayToObject(o, "sensors");
   for (size_t i = 0; i < r->sc->n_sensors; i++)
     svc_json_push(s, cJSON_CreateString(r->sc->sensors[i]->base.id));
@@ -414,8 +414,12 @@ static resident **add_locked(service *svc, resident *r) {
 static rsw_status scene_post(service *svc, const char *body, size_t len, bool is_xml, const char *variant,
                              const char *name, const struct post_extra *x, bool *created, resident **out,
                              svc_error *e) {
-  if (variant && strcmp(variant, "mono") != 0 && strcmp(variant, "rgb") != 0)
-    return svc_fail(e, RSW_ERR_BAD_REQUEST, "variant", "variant must be mono or rgb (got '%s')", variant);
+  rsw_variant v_parsed;
+  bool v_pol;
+  if (variant &&
+      (strlen(variant) >= sizeof((resident *)0)->src_variant || !variant_parse(variant, &v_parsed, &v_pol)))
+    return svc_fail(e, RSW_ERR_BAD_REQUEST, "variant",
+                    "variant must be mono, rgb, mono_polarized or rgb_polarized (got '%s')", variant);
   /* Same text and variant as an earlier post: the same scene (cheap path;
    * files it references are content-addressed or re-hashed on a load). */
   unsigned char raw[32];
@@ -494,7 +498,7 @@ static rsw_status scene_post(service *svc, const char *body, size_t len, bool is
     cJSON_Delete(templates);
     return svc_fail(e, RSW_ERR_NOMEM, "scene", "out of memory");
   }
-  const char *vname = sc->variant == VARIANT_MONO ? "mono" : "rgb";
+  const char *vname = variant_name(sc->variant, sc->polarized);
   rsw_sha256_update(&c, "raysweep-scene-v1\n", 18);
   rsw_sha256_update(&c, is_xml ? "xml\n" : "json\n", is_xml ? 4 : 5);
   rsw_sha256_update(&c, vname, strlen(vname));
@@ -793,7 +797,7 @@ rsw_status service_scene_delete(service *svc, const char *id, bool force, svc_er
     char *b = NULL;
     size_t bl;
     bool xml;
-    char v[8];
+    char v[32];
     cJSON *pp = NULL;
     uint64_t rev;
     bool stored = svc_state_scene_read(svc, id, &b, &bl, &xml, v, &pp, &rev, NULL, NULL);
@@ -847,7 +851,7 @@ bool svc_keep_source(service *svc, resident *r, const char *text, size_t len, bo
   r->src[len] = '\0';
   r->src_len = len;
   r->src_xml = is_xml;
-  snprintf(r->src_variant, sizeof r->src_variant, "%s", r->sc->variant == VARIANT_MONO ? "mono" : "rgb");
+  snprintf(r->src_variant, sizeof r->src_variant, "%s", variant_name(r->sc->variant, r->sc->polarized));
   return true;
 }
 

@@ -292,6 +292,7 @@ char *service_info_json(service *svc) {
   cJSON *v = cJSON_AddArrayToObject(o, "variants");
   svc_json_push(v, cJSON_CreateString("mono"));
   svc_json_push(v, cJSON_CreateString("rgb"));
+  svc_json_push(v, cJSON_CreateString("mono_polarized"));
   cJSON *pl = cJSON_AddArrayToObject(o, "plugins");
   for (size_t i = 0; rsw_plugins[i]; i++) {
     const plugin *p = rsw_plugins[i];

@@ -64,7 +64,7 @@ typedef struct resident {
   char *src;
   size_t src_len;
   bool src_xml;
-  char src_variant[8];
+  char src_variant[32];
   char *src_root;              /* NULL: the daemon's data root */
   unsigned char src_files[32]; /* digest of the referenced files' digests */
   cJSON *patches;
@@ -411,7 +411,7 @@ rsw_status svc_state_scene_save(service *svc, const char *id, const char *doc, b
 /* doc (may be NULL) receives the document's id ("" when it is id itself),
  * copy (may be NULL) whether it is a copy. */
 bool svc_state_scene_read(service *svc, const char *id, char **body, size_t *len, bool *is_xml,
-                          char variant[8], cJSON **patched, uint64_t *revision, char doc[65], bool *copy);
+                          char variant[32], cJSON **patched, uint64_t *revision, char doc[65], bool *copy);
 /* Whether scene id has a parameter record: its PATCHed keys (*patched,
  * the caller deletes it) at *revision. */
 bool svc_state_scene_params(service *svc, const char *id, cJSON **patched, uint64_t *revision);

@@ -524,7 +524,7 @@ rsw_status svc_state_scene_save(service *svc, const char *id, const char *doc, b
 }
 
 bool svc_state_scene_read(service *svc, const char *id, char **body, size_t *len, bool *is_xml,
-                          char variant[8], cJSON **patched, uint64_t *revision, char doc[65], bool *copy) {
+                          char variant[32], cJSON **patched, uint64_t *revision, char doc[65], bool *copy) {
   if (!svc_state_on(svc) || !rsw_is_sha256_hex(id)) return false;
   char p[4200];
   state_path(svc, p, sizeof p, "scenes/%s.scene", id);
@@ -547,7 +547,7 @@ bool svc_state_scene_read(service *svc, const char *id, char **body, size_t *len
   }
   *is_xml = strcmp(f->valuestring, "xml") == 0;
   variant[0] = '\0';
-  if (cJSON_IsString(v)) snprintf(variant, 8, "%s", v->valuestring);
+  if (cJSON_IsString(v)) snprintf(variant, 32, "%s", v->valuestring);
   if (doc) snprintf(doc, 65, "%s", dc ? dc->valuestring : "");
   if (copy) *copy = cJSON_IsTrue(cp);
   cJSON_Delete(h);
@@ -617,19 +617,16 @@ void svc_state_scene_remove(service *svc, const char *id) {
 uint64_t svc_film_bytes(const scene *sc, size_t sensor_index) {
   const sensor *se = sc->sensors[sensor_index];
   const film *fm = se->film;
-  int ch = fm->pixel_format == PIXFMT_STOKES && sc->variant == VARIANT_MONO      ? 4
-           : sc->variant == VARIANT_MONO || fm->pixel_format == PIXFMT_LUMINANCE ? 1
-                                                                                 : 3;
+  int ch = sc->polarized || (fm->pixel_format == PIXFMT_STOKES && sc->variant == VARIANT_MONO) ? 4
+           : sc->variant == VARIANT_MONO || fm->pixel_format == PIXFMT_LUMINANCE               ? 1
+                                                                                               : 3;
   uint64_t px = (uint64_t)fm->width * (uint64_t)fm->height;
   return px * (uint64_t)ch * 4 + (se->ops->pixel_angles ? px * 16 : 0);
 }
 
 /* The channel names are static strings in a film_image. */
 static const char *static_channel(const char *name) {
-  static const char *const names[] = {"R", "G", "B", "Y", "S0", "S1", "S2", "S3"};
-  for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
-    if (strcmp(names[i], name) == 0) return names[i];
-  return NULL;
+  return film_channel_static(name);
 }
 
 /* The .npy header of http_film_npy: magic, version 1.0, header length,
@@ -810,7 +807,7 @@ rsw_status svc_state_film_write(service *svc, const job *j, size_t k, const svc_
   cJSON_AddStringToObject(m, "seed", num);
   snprintf(num, sizeof num, "%.17g", im->wavelength);
   cJSON_AddStringToObject(m, "wavelength", num);
-  cJSON_AddStringToObject(m, "variant", im->variant == VARIANT_MONO ? "mono" : "rgb");
+  cJSON_AddStringToObject(m, "variant", variant_name(im->variant, im->polarized));
   snprintf(num, sizeof num, "%" PRIu64, im->unresolved_rays);
   cJSON_AddStringToObject(m, "unresolved_rays", num);
   if (im->n_planes) { /* their channels follow the radiance ones in the .npy */
@@ -926,7 +923,9 @@ static bool film_meta(int fd, const film_trailer *t, svc_film *out) {
   out->img.spp = cJSON_IsNumber(x) ? (uint32_t)x->valuedouble : 0;
   out->img.half = cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(m, "half"));
   x = cJSON_GetObjectItemCaseSensitive(m, "variant");
-  out->img.variant = cJSON_IsString(x) && strcmp(x->valuestring, "mono") == 0 ? VARIANT_MONO : VARIANT_RGB;
+  out->img.variant = VARIANT_RGB;
+  if (!cJSON_IsString(x) || !variant_parse(x->valuestring, &out->img.variant, &out->img.polarized))
+    out->img.variant = VARIANT_RGB, out->img.polarized = false;
   const cJSON *ch = cJSON_GetObjectItemCaseSensitive(m, "channels");
   int c = 0;
   for (const cJSON *y = cJSON_IsArray(ch) ? ch->child : NULL; y && c < 4; y = y->next, c++) {

@@ -10,7 +10,7 @@ film_exr_info film_image_exr_info(const film_image *img, const char *sensor_id) 
   info.has_spp = info.has_seed = true;
   info.spp = img->spp;
   info.seed = img->seed;
-  info.variant = img->variant == VARIANT_MONO ? "mono" : "rgb";
+  info.variant = variant_name(img->variant, img->polarized);
   if (img->variant == VARIANT_MONO) info.wavelength_nm = img->wavelength;
   info.angles = img->angles;
   info.unresolved_rays = img->unresolved_rays;

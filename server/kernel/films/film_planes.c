@@ -11,14 +11,27 @@
 
 /* Every channel a film can have, and each plane's channel names in the
  * same order: "<plane>.<channel>" (EXR's layer.channel convention). */
-static const char *const base_channels[8] = {"R", "G", "B", "Y", "S0", "S1", "S2", "S3"};
-static const char *const plane_names[FILM_MAX_PLANES] = {"brdf", "brf", "radiance_stderr"};
-static const char *const plane_channels[FILM_MAX_PLANES][8] = {
-    {"brdf.R", "brdf.G", "brdf.B", "brdf.Y", "brdf.S0", "brdf.S1", "brdf.S2", "brdf.S3"},
-    {"brf.R", "brf.G", "brf.B", "brf.Y", "brf.S0", "brf.S1", "brf.S2", "brf.S3"},
-    {"radiance_stderr.R", "radiance_stderr.G", "radiance_stderr.B", "radiance_stderr.Y", "radiance_stderr.S0",
-     "radiance_stderr.S1", "radiance_stderr.S2", "radiance_stderr.S3"},
+enum {
+  N_BASE = 12
 };
+static const char *const base_channels[N_BASE] = {"R",  "G",  "B",    "Y",    "S0",   "S1",
+                                                  "S2", "S3", "S0.Y", "S1.Y", "S2.Y", "S3.Y"};
+static const char *const plane_names[FILM_MAX_PLANES] = {"brdf", "brf", "radiance_stderr"};
+static const char *const plane_channels[FILM_MAX_PLANES][N_BASE] = {
+    {"brdf.R", "brdf.G", "brdf.B", "brdf.Y", "brdf.S0", "brdf.S1", "brdf.S2", "brdf.S3", "brdf.S0.Y",
+     "brdf.S1.Y", "brdf.S2.Y", "brdf.S3.Y"},
+    {"brf.R", "brf.G", "brf.B", "brf.Y", "brf.S0", "brf.S1", "brf.S2", "brf.S3", "brf.S0.Y", "brf.S1.Y",
+     "brf.S2.Y", "brf.S3.Y"},
+    {"radiance_stderr.R", "radiance_stderr.G", "radiance_stderr.B", "radiance_stderr.Y", "radiance_stderr.S0",
+     "radiance_stderr.S1", "radiance_stderr.S2", "radiance_stderr.S3", "radiance_stderr.S0.Y",
+     "radiance_stderr.S1.Y", "radiance_stderr.S2.Y", "radiance_stderr.S3.Y"},
+};
+
+const char *film_channel_static(const char *name) {
+  for (int k = 0; k < N_BASE; k++)
+    if (strcmp(base_channels[k], name) == 0) return base_channels[k];
+  return NULL;
+}
 
 static int plane_index(const char *name) {
   for (int i = 0; i < FILM_MAX_PLANES; i++)
@@ -40,7 +53,7 @@ static void plane_describe(const film_image *img, int which, film_plane *p) {
                                             : "W m-2 sr-1";
   for (int c = 0; c < img->channels && c < 4; c++) {
     p->channel_names[c] = NULL;
-    for (int k = 0; k < 8; k++)
+    for (int k = 0; k < N_BASE; k++)
       if (img->channel_names[c] && strcmp(img->channel_names[c], base_channels[k]) == 0)
         p->channel_names[c] = plane_channels[which][k];
   }

@@ -44,6 +44,7 @@ typedef struct film_image {
   uint64_t seed;
   double wavelength;
   rsw_variant variant;
+  bool polarized; /* a polarized variant's film (channels S0.Y..S3.Y) */
   /* Viewing zenith, azimuth (degrees) of each pixel, 2 per pixel,
    * row-major (owned); NULL when the sensor has no pixel_angles op. */
   double *angles;
@@ -126,6 +127,9 @@ void film_plane_init(const film_image *img, const char *name, film_plane *p);
 bool film_image_copy(const film_image *src, film_image *dst);
 /* True when name is a plane ("brdf", "brf", "radiance_stderr"). */
 bool film_plane_known(const char *name);
+/* The static string of a film channel name ("R", "Y", "S0", "S0.Y", ...;
+ * film_image.channel_names holds these), or NULL for an unknown one. */
+const char *film_channel_static(const char *name);
 /* The plane called name, or NULL. */
 const film_plane *film_image_plane(const film_image *img, const char *name);
 

@@ -33,8 +33,9 @@ typedef struct hdrfilm {
 static rsw_status hdrfilm_prepare(object *o, const render_ctx *rc, rsw_err *err) {
   (void)err;
   hdrfilm *f = (hdrfilm *)o;
-  f->base.pixel_format =
-      rc->variant == VARIANT_MONO && f->requested != PIXFMT_STOKES ? PIXFMT_LUMINANCE : f->requested;
+  f->base.pixel_format = rc->polarized                                                  ? PIXFMT_STOKES
+                         : rc->variant == VARIANT_MONO && f->requested != PIXFMT_STOKES ? PIXFMT_LUMINANCE
+                                                                                        : f->requested;
   return RSW_OK;
 }
 
@@ -52,11 +53,10 @@ static rsw_status hdrfilm_develop(const film *fm, const film_sums *s, film_image
   img.width = s->width;
   img.height = s->height;
   if (s->stokes) {
+    static const char *const plain[4] = {"S0", "S1", "S2", "S3"}, *const pol[4] = {"S0.Y", "S1.Y", "S2.Y",
+                                                                                   "S3.Y"};
     img.channels = 4;
-    img.channel_names[0] = "S0";
-    img.channel_names[1] = "S1";
-    img.channel_names[2] = "S2";
-    img.channel_names[3] = "S3";
+    for (int k = 0; k < 4; k++) img.channel_names[k] = s->polarized ? pol[k] : plain[k];
   } else if (lum) {
     img.channels = 1;
     img.channel_names[0] = "Y";
@@ -71,6 +71,7 @@ static rsw_status hdrfilm_develop(const film *fm, const film_sums *s, film_image
   img.seed = s->seed;
   img.wavelength = s->wavelength;
   img.variant = s->variant;
+  img.polarized = s->polarized;
   size_t np = (size_t)s->width * s->height;
   img.data = malloc(np * img.channels * sizeof(float));
   if (!img.data) return rsw_fail(err, RSW_ERR_NOMEM, "film", "out of memory");
@@ -236,8 +237,11 @@ static rsw_status hdrfilm_read(loader *ld, node *n, hdrfilm *f) {
     if (st != RSW_OK) return st;
   }
   f->requested = (pixel_format)code;
-  f->base.pixel_format =
-      ld->variant == VARIANT_MONO && f->requested != PIXFMT_STOKES ? PIXFMT_LUMINANCE : f->requested;
+  /* The polarized variants' films are Stokes films whatever was asked
+   * (Mitsuba's `stokes` integrator gives them S0..S3 channels). */
+  f->base.pixel_format = ld->polarized                                                  ? PIXFMT_STOKES
+                         : ld->variant == VARIANT_MONO && f->requested != PIXFMT_STOKES ? PIXFMT_LUMINANCE
+                                                                                        : f->requested;
 
   st = ld_string(ld, n, "component_format", "float16", &s);
   if (st == RSW_OK)

@@ -20,6 +20,7 @@
 #include "../shapes/instance.h"
 #include "../shapes/shape.h"
 #include "integrator.h"
+#include "polarization.h"
 
 /* Shadow ray from si towards the emitter sample ds. Spawned rays are
  * offset by the hit point's float error, not by Mitsuba's (1 + max|p|)
@@ -296,7 +297,7 @@ static void wave_occluded(const scene *sc, lane *ln, const int *idx, int n, rend
 /* Emission seen by lane l's ray; l->nee: the vertex takes a light sample
  * (its random numbers and the sample itself come from wave_light_samples,
  * for the lanes together). False: the path ends here. */
-static bool shade_emit(const integrator *it, const scene *sc, lane *l, double *quv) {
+static bool shade_emit(const integrator *it, const scene *sc, lane *l, double *quv, pol_lane *pl) {
   l->nee = false;
   /* Emission seen by this ray (area light or the environment). */
   bool visible_emitter = !(it->hide_emitters && l->depth == 0);
@@ -311,7 +312,16 @@ static bool shade_emit(const integrator *it, const scene *sc, lane *l, double *q
       color Le = env->ops->eval(env, NULL, l->ray.d);
       double w = mis_weight(l->prev_pdf, em_pdf);
       l->L = col_add(l->L, col_scale(col_mul(l->T, Le), w));
-      add_polarization(quv, env, v3_norm(l->ray.d), l->T.c[0] * w);
+      if (pl) {
+        int nch = pol_channels(sc);
+        double sv[3][4];
+        vec3 d = v3_norm(l->ray.d), bs = pol_env_stokes(env, d, col_mul(l->T, Le), w, nch, sv);
+        for (int c = 0; c < nch; c++)
+          for (int k = 1; k < 4; k++) sv[c][k] *= l->T.c[c];
+        pol_add_stokes(pl, v3_neg(d), bs, sv, nch);
+      } else {
+        add_polarization(quv, env, v3_norm(l->ray.d), l->T.c[0] * w);
+      }
     }
     return false;
   }
@@ -329,7 +339,9 @@ static bool shade_emit(const integrator *it, const scene *sc, lane *l, double *q
             .p = si->p, .n = si->ng, .d = v3_norm(l->ray.d), .dist = si->t * v3_len(l->ray.d)};
         em_pdf = em->ops->pdf_direction(em, &l->prev_si, &ds) * emitter_prob(sc, em);
       }
-      l->L = col_add(l->L, col_scale(col_mul(l->T, Le), mis_weight(l->prev_pdf, em_pdf)));
+      color v = col_scale(col_mul(l->T, Le), mis_weight(l->prev_pdf, em_pdf));
+      l->L = col_add(l->L, v);
+      if (pl) pol_add(pl, v, pol_channels(sc));
     }
   }
   if (!(it->max_depth < 0 || l->depth + 1 < it->max_depth)) return false;
@@ -474,20 +486,53 @@ static void wave_eval_bsdfs(lane *ln, const int *idx, int n, int *g) {
   }
 }
 
+/* A light sample's contribution v through the BSDF's
+ * polarization factors towards it; an environment's own Q, U, V too. */
+static void pol_light(const scene *sc, lane *l, pol_lane *pl, color v) {
+  int nch = pol_channels(sc);
+  const surface_interaction *si = &l->si;
+  mueller P[3];
+  vec3 b_in, b_out, pd = v3_neg(v3_norm(l->ray.d));
+  pol_bsdf(si->shape->bsdf, si, l->nwo, 0, P, &b_in, &b_out);
+  const emitter *e = l->ne;
+  if (!((e->flags & EMITTER_INFINITE) && e->ops->eval_polarization)) {
+    double out[3][4];
+    pol_through(pl, pd, b_out, P, nch, out);
+    pol_collect(pl, out, v, nch);
+    return;
+  }
+  /* Polarized light S (basis b_env): M R(b_out -> x) P R(b_env -> b_in) S,
+   * scaled per channel as the intensity (v / Le). */
+  double s[3][4];
+  color Le = col_scale(l->value, l->ds.pdf);
+  vec3 b_env = pol_env_stokes(e, l->ds.d, Le, 1.0, nch, s);
+  mueller Rin = mu_basis_change(v3_neg(l->ds.d), b_env, b_in);
+  for (int c = 0; c < nch; c++) {
+    double k = Le.c[c] != 0 ? v.c[c] / Le.c[c] : 0.0, r[4], t[4];
+    mu_apply(&Rin, s[c], r);
+    mu_apply(&P[c], r, t);
+    for (int j = 0; j < 4; j++) s[c][j] = t[j] * k;
+  }
+  pol_add_stokes(pl, pd, b_out, s, nch);
+}
+
 /* The second half of lane l's vertex, first part: the light sample's
  * contribution if its shadow ray was clear (its BSDF value and pdf from
  * wave_eval_bsdfs). The BSDF sample's random numbers are drawn next, for
  * the lanes together (wave_run), in the one-path order; the sample itself
  * is taken by wave_sample_bsdfs. */
-static void shade_light(lane *l, double *quv) {
+static void shade_light(const scene *sc, lane *l, double *quv, pol_lane *pl) {
   if (l->nee && l->occ == TRACE_MISS) {
     const direction_sample *ds = &l->ds;
     const emitter *e = l->ne;
     color f = l->nf;
     if (!col_is_black(f)) {
       double w = ds->delta ? 1.0 : mis_weight(ds->pdf * l->pe, l->npdf);
-      l->L = col_add(l->L, col_scale(col_mul(l->T, col_mul(f, l->value)), w / l->pe));
-      if (quv && (e->flags & EMITTER_INFINITE))
+      color v = col_scale(col_mul(l->T, col_mul(f, l->value)), w / l->pe);
+      l->L = col_add(l->L, v);
+      if (pl)
+        pol_light(sc, l, pl, v);
+      else if (quv && (e->flags & EMITTER_INFINITE))
         add_polarization(quv, e, ds->d, l->T.c[0] * f.c[0] * w / (l->pe * ds->pdf));
     }
   }
@@ -534,13 +579,19 @@ static void wave_sample_bsdfs(lane *ln, const int *idx, int n, int *g) {
 
 /* The end of lane l's vertex: the continuation ray from its BSDF sample
  * and the roulette. False: the path ends here. */
-static bool shade_continue(const integrator *it, sampler_state *st, lane *l) {
+static bool shade_continue(const integrator *it, const scene *sc, sampler_state *st, lane *l, pol_lane *pl) {
   const sampler_ops *sops = st->s->ops;
   const surface_interaction *si = &l->si;
   const bsdf_sample *bs = &l->bs;
   color weight = l->weight;
   if (!(bs->pdf > 0) || col_is_black(weight)) return false;
   vec3 wo_world = frame_to_world(&si->sh, bs->wo);
+  if (pl) {
+    mueller P[3];
+    vec3 b_in, b_out;
+    pol_bsdf(si->shape->bsdf, si, bs->wo, bs->sampled_type, P, &b_in, &b_out);
+    pol_scatter(pl, v3_neg(v3_norm(l->ray.d)), b_out, P, b_in, pol_channels(sc));
+  }
   l->ray = spawn_ray(si, wo_world);
   l->T = col_mul(l->T, weight);
   l->eta *= bs->eta;
@@ -560,6 +611,7 @@ static bool shade_continue(const integrator *it, sampler_state *st, lane *l) {
  * batched draws. */
 typedef struct wave_scratch {
   lane *ln;
+  pol_lane *pol; /* the polarized variants' payload, per lane (else NULL) */
   int *idx, *sh, *ek, *ord;
   double *d1;
   vec2 *d2;
@@ -569,9 +621,12 @@ typedef struct wave_scratch {
 static void wave_run(const integrator *it, const scene *sc, sampler_state *st, const ray3 *rays, int n,
                      render_stats *stats, color *L, double *quv, const wave_scratch *ws) {
   lane *ln = ws->ln;
+  pol_lane *pol = ws->pol;
   int *idx = ws->idx, *sh = ws->sh;
   if (quv)
     for (int i = 0; i < 3 * n; i++) quv[i] = 0;
+  if (pol)
+    for (int i = 0; i < n; i++) pol_start(&pol[i], rays[i].d, pol_channels(sc));
   for (int i = 0; i < n; i++) {
     lane *l = &ln[i];
     l->ray = rays[i];
@@ -596,12 +651,12 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
     camera = false;
     for (int k = 0; k < n_other; k++) { /* the environment's light; these paths end */
       int i = other[k];
-      shade_emit(it, sc, &ln[i], quv ? &quv[3 * i] : NULL);
+      shade_emit(it, sc, &ln[i], quv ? &quv[3 * i] : NULL, pol ? &pol[i] : NULL);
     }
     int next = 0, n_nee = 0, n_sh = 0;
     for (int k = 0; k < n_hit; k++) {
       int i = hits[k];
-      bool keep = shade_emit(it, sc, &ln[i], quv ? &quv[3 * i] : NULL);
+      bool keep = shade_emit(it, sc, &ln[i], quv ? &quv[3 * i] : NULL, pol ? &pol[i] : NULL);
       idx[next] = sh[n_nee] = i;
       next += keep, n_nee += keep & ln[i].nee;
     }
@@ -611,7 +666,7 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
     wave_eval_bsdfs(ln, idx, live, sh);
     for (int k = 0; k < live; k++) {
       int i = idx[k];
-      shade_light(&ln[i], quv ? &quv[3 * i] : NULL);
+      shade_light(sc, &ln[i], quv ? &quv[3 * i] : NULL, pol ? &pol[i] : NULL);
     }
     /* The BSDF samples' numbers, lobe then direction, for every lane. */
     if (live) {
@@ -625,13 +680,15 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
     next = 0;
     for (int k = 0; k < live; k++) { /* whether a BSDF sample failed is unpredictable: no branch */
       int i = idx[k];
-      bool keep = shade_continue(it, &st[i], &ln[i]);
+      bool keep = shade_continue(it, sc, &st[i], &ln[i], pol ? &pol[i] : NULL);
       idx[next] = i;
       next += keep;
     }
     live = next;
   }
   for (int i = 0; i < n; i++) L[i] = ln[i].L;
+  if (pol)
+    for (int i = 0; i < n; i++) pol_result(&pol[i], pol_channels(sc), &L[i], quv ? &quv[3 * i] : NULL);
 }
 
 static bool path_Li_batch(const integrator *it, const scene *sc, sampler_state *st, const ray3 *rays, int n,
@@ -640,8 +697,9 @@ static bool path_Li_batch(const integrator *it, const scene *sc, sampler_state *
   wave_scratch ws = {.ln = malloc((size_t)n * sizeof *ws.ln),
                      .idx = malloc(4 * (size_t)n * sizeof *ws.idx),
                      .d1 = malloc((size_t)n * sizeof *ws.d1),
-                     .d2 = malloc((size_t)n * sizeof *ws.d2)};
-  bool ok = ws.ln && ws.idx && ws.d1 && ws.d2;
+                     .d2 = malloc((size_t)n * sizeof *ws.d2),
+                     .pol = sc->polarized ? malloc((size_t)n * sizeof *ws.pol) : NULL};
+  bool ok = ws.ln && ws.idx && ws.d1 && ws.d2 && (ws.pol || !sc->polarized);
   if (ok) {
     ws.sh = ws.idx + n;
     ws.ek = ws.idx + 2 * (size_t)n;
@@ -652,6 +710,7 @@ static bool path_Li_batch(const integrator *it, const scene *sc, sampler_state *
   free(ws.idx);
   free(ws.d1);
   free(ws.d2);
+  free(ws.pol);
   return ok;
 }
 
@@ -661,7 +720,15 @@ static color path_Li(const integrator *it, const scene *sc, sampler_state *st, r
   int idx[4];
   double d1[1];
   vec2 d2[1];
-  wave_scratch ws = {.ln = &ln, .idx = idx, .sh = idx + 1, .ek = idx + 2, .ord = idx + 3, .d1 = d1, .d2 = d2};
+  pol_lane pl;
+  wave_scratch ws = {.ln = &ln,
+                     .idx = idx,
+                     .sh = idx + 1,
+                     .ek = idx + 2,
+                     .ord = idx + 3,
+                     .d1 = d1,
+                     .d2 = d2,
+                     .pol = sc->polarized ? &pl : NULL};
   color L;
   double q[3];
   wave_run(it, sc, st, &ray, 1, stats, &L, quv ? q : NULL, &ws);

@@ -77,6 +77,7 @@
 #include "../shapes/instance.h"
 #include "../shapes/shape.h"
 #include "integrator.h"
+#include "polarization.h"
 
 typedef struct volpath_integrator {
   integrator base;
@@ -374,6 +375,13 @@ typedef struct vlane {
   int scross;
 } vlane;
 
+/* The polarized variants' payload of a lane (integrators/polarization.h)
+ * and its pending shadow ray's Stokes vectors per unit of sval. */
+typedef struct vpol {
+  pol_lane p;
+  double sv[3][4];
+} vpol;
+
 /* Trace lanes idx[0..n) (rays in ln[i].ray for shadow == false, ln[i].sray
  * else): hits into ln[i].hit / ln[i].si (rays) or h / hit flags. */
 static void wave_trace(const scene *sc, const hit_bounds *hb, vlane *ln, const int *idx, int n, bool shadow,
@@ -491,7 +499,7 @@ static void start_shadow(const scene *sc, vlane *l, const surface_interaction *s
 /* One round of lane l's shadow ray after its query (hit at si): the
  * segment's transmittance, then done (false) or a null surface crossed
  * (true: trace again). */
-static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l, bool hit,
+static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l, vpol *vq, bool hit,
                         surface_interaction *si, sampler_state *st, face_plane *fp) {
   if (hit && !(l->sm || sc->null_boxes.on) && media_at(NULL, si))
     seg_end(sc, &l->sray, l->sp0, si, true, fp); /* the next segment's start (si->p) */
@@ -531,6 +539,7 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
     }
   }
   l->L = col_add(l->L, col_mul(l->sval, l->str));
+  if (vq) pol_collect(&vq->p, vq->sv, col_mul(l->sval, l->str), pol_channels(sc));
   l->sh = false;
   return false;
 }
@@ -538,7 +547,7 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
 /* Lane l's event after its query: the medium along the segment, then the
  * scattering event or the surface. Sets up the shadow ray (l->sh) and the
  * next ray. False: the path ends (a pending shadow ray still counts). */
-static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *l,
+static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *l, vpol *vq,
                        face_plane *fp) {
   const integrator *it = &vp->base;
   const sampler_ops *sops = st->s->ops;
@@ -621,6 +630,11 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
           c = ph->chromatic ? col_scale(col_mul(c, ph->ops->eval_channels(ph, &mi, ds.d)), w / pe)
                             : col_scale(c, pval * w / pe);
           start_shadow(sc, l, NULL, mi.p, e, &ds, m, c);
+          if (vq) {
+            mueller P[3];
+            vec3 bp = pol_phase(ph, &mi, ds.d, P);
+            pol_through(&vq->p, mi.wi, bp, P, pol_channels(sc), vq->sv);
+          }
         }
       }
     }
@@ -633,6 +647,11 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
      * component covers the sphere). */
     l->T = ph->chromatic ? col_mul(l->T, col_scale(ph->ops->eval_channels(ph, &mi, wo), 1.0 / ppdf))
                          : col_scale(l->T, pw);
+    if (vq) {
+      mueller P[3];
+      vec3 bp = pol_phase(ph, &mi, wo, P);
+      pol_scatter(&vq->p, mi.wi, bp, P, bp, pol_channels(sc));
+    }
     l->ray = (ray3){mi.p, wo, 0.0, INFINITY};
     l->seg_o = mi.p;
     l->prev = ref;
@@ -651,7 +670,9 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
           em_pdf = env->ops->pdf_direction(env, &l->prev, &ds) * emitter_prob(sc, env);
         }
         color Le = env->ops->eval(env, NULL, l->ray.d);
-        l->L = col_add(l->L, col_scale(col_mul(l->T, Le), mis_weight(l->prev_pdf, em_pdf)));
+        color v = col_scale(col_mul(l->T, Le), mis_weight(l->prev_pdf, em_pdf));
+        l->L = col_add(l->L, v);
+        if (vq) pol_add(&vq->p, v, pol_channels(sc));
       }
       return false;
     }
@@ -665,7 +686,9 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
               .p = si->p, .n = si->ng, .d = l->ray.d, .dist = v3_len(v3_sub(si->p, l->prev.p))};
           em_pdf = em->ops->pdf_direction(em, &l->prev, &ds) * emitter_prob(sc, em);
         }
-        l->L = col_add(l->L, col_scale(col_mul(l->T, Le), mis_weight(l->prev_pdf, em_pdf)));
+        color v = col_scale(col_mul(l->T, Le), mis_weight(l->prev_pdf, em_pdf));
+        l->L = col_add(l->L, v);
+        if (vq) pol_add(&vq->p, v, pol_channels(sc));
       }
     }
     const bsdf *b = si->shape->bsdf;
@@ -691,6 +714,12 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
           double w = ds.delta ? 1.0 : mis_weight(ds.pdf * pe, bpdf);
           start_shadow(sc, l, si, si->p, e, &ds, medium_after(si, ds.d, m),
                        col_scale(col_mul(l->T, col_mul(f, value)), w / pe));
+          if (vq) {
+            mueller P[3];
+            vec3 b_in, b_out;
+            pol_bsdf(b, si, wo, 0, P, &b_in, &b_out);
+            pol_through(&vq->p, v3_neg(l->ray.d), b_out, P, pol_channels(sc), vq->sv);
+          }
         }
       }
     }
@@ -698,6 +727,12 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
     color weight = b->ops->sample(b, si, sops->next_1d(st), sops->next_2d(st), &bs);
     if (!(bs.pdf > 0) || col_is_black(weight)) return false;
     vec3 wo = frame_to_world(&si->sh, bs.wo);
+    if (vq) {
+      mueller P[3];
+      vec3 b_in, b_out;
+      pol_bsdf(b, si, bs.wo, bs.sampled_type, P, &b_in, &b_out);
+      pol_scatter(&vq->p, v3_neg(l->ray.d), b_out, P, b_in, pol_channels(sc));
+    }
     l->T = col_mul(l->T, weight);
     l->eta *= bs.eta;
     l->m = medium_after(si, wo, m);
@@ -725,9 +760,11 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
 /* Run the wave over n lanes; scratch: ln (n lanes), idx and sh (n ints
  * each), hit (n), si (n). */
 static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_state *st, const ray3 *rays,
-                     int n, render_stats *stats, color *L, vlane *ln, int *idx, int *sh, bool *hit,
-                     surface_interaction *si) {
+                     int n, render_stats *stats, color *L, double *quv, vlane *ln, vpol *vq, int *idx,
+                     int *sh, bool *hit, surface_interaction *si) {
   int live = 0;
+  if (vq)
+    for (int i = 0; i < n; i++) pol_start(&vq[i].p, rays[i].d, pol_channels(sc));
   for (int i = 0; i < n; i++) {
     vlane *l = &ln[i];
     /* Every field but the two surface records (prev, si: 384 bytes that
@@ -764,7 +801,7 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
       int i = idx[k];
       ln[i].hit = hit[k];
       if (hit[k]) ln[i].si = si[k];
-      bool alive = lane_event(vp, sc, &st[i], &ln[i], &fp);
+      bool alive = lane_event(vp, sc, &st[i], &ln[i], vq ? &vq[i] : NULL, &fp);
       if (ln[i].sh) sh[n_sh++] = i;
       if (alive) idx[next++] = i;
     }
@@ -774,12 +811,16 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
       int more = 0;
       for (int k = 0; k < n_sh; k++) {
         int i = sh[k];
-        if (shadow_step(vp, sc, &ln[i], hit[k], &si[k], &st[i], &fp)) sh[more++] = i;
+        if (shadow_step(vp, sc, &ln[i], vq ? &vq[i] : NULL, hit[k], &si[k], &st[i], &fp)) sh[more++] = i;
       }
       n_sh = more;
     }
   }
   for (int i = 0; i < n; i++) L[i] = ln[i].L;
+  if (quv)
+    for (int i = 0; i < 3 * n; i++) quv[i] = 0; /* unpolarized variants: no polarisation through media */
+  if (vq)
+    for (int i = 0; i < n; i++) pol_result(&vq[i].p, pol_channels(sc), &L[i], quv ? &quv[3 * i] : NULL);
 }
 
 static bool volpath_Li_batch(const integrator *it, const scene *sc, sampler_state *st, const ray3 *rays,
@@ -789,12 +830,11 @@ static bool volpath_Li_batch(const integrator *it, const scene *sc, sampler_stat
   int *idx = malloc(2 * (size_t)n * sizeof *idx);
   bool *hit = malloc((size_t)n * sizeof *hit);
   surface_interaction *si = malloc((size_t)n * sizeof *si);
-  bool ok = ln && idx && hit && si;
-  if (ok) {
-    wave_run((const volpath_integrator *)it, sc, st, rays, n, stats, L, ln, idx, idx + n, hit, si);
-    if (quv)
-      for (int i = 0; i < 3 * n; i++) quv[i] = 0; /* no polarisation through media */
-  }
+  vpol *vq = sc->polarized ? malloc((size_t)n * sizeof *vq) : NULL;
+  bool ok = ln && idx && hit && si && (vq || !sc->polarized);
+  if (ok)
+    wave_run((const volpath_integrator *)it, sc, st, rays, n, stats, L, quv, ln, vq, idx, idx + n, hit, si);
+  free(vq);
   free(ln);
   free(idx);
   free(hit);
@@ -804,13 +844,17 @@ static bool volpath_Li_batch(const integrator *it, const scene *sc, sampler_stat
 
 static color volpath_Li(const integrator *it, const scene *sc, sampler_state *st, ray3 ray,
                         render_stats *stats, double *quv) {
-  (void)quv;
   vlane ln;
+  vpol vq;
   int idx[2];
   bool hit;
   surface_interaction si;
   color L;
-  wave_run((const volpath_integrator *)it, sc, st, &ray, 1, stats, &L, &ln, idx, idx + 1, &hit, &si);
+  double q[3];
+  wave_run((const volpath_integrator *)it, sc, st, &ray, 1, stats, &L, quv ? q : NULL, &ln,
+           sc->polarized ? &vq : NULL, idx, idx + 1, &hit, &si);
+  if (quv)
+    for (int k = 0; k < 3; k++) quv[k] += q[k];
   return L;
 }
 

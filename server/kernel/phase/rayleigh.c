@@ -36,7 +36,15 @@ static double rayleigh_eval_pdf(const phase *ph, const medium_interaction *mi, v
   return *pdf;
 }
 
-static const phase_ops rayleigh_ops = {.sample = rayleigh_sample, .eval_pdf = rayleigh_eval_pdf};
+/* Polarized variants: the Rayleigh phase matrix (core/mueller.h
+ * mu_rayleigh, no depolarization) over its F11. */
+static void rayleigh_polarization(const phase *ph, const medium_interaction *mi, vec3 wo, mueller P[3]) {
+  (void)ph;
+  P[0] = P[1] = P[2] = mu_normalized(mu_rayleigh(phase_mu(mi, wo), 0.0));
+}
+
+static const phase_ops rayleigh_ops = {
+    .sample = rayleigh_sample, .eval_pdf = rayleigh_eval_pdf, .polarization = rayleigh_polarization};
 
 DEFINE_PLUGIN(rayleigh, CLS_PHASE, .ops = &rayleigh_ops);
 

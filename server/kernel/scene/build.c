@@ -210,24 +210,23 @@ static rsw_status scene_finalize(loader *ld, scene *s) {
   return params_build(s, ld->err);
 }
 
-static rsw_variant parse_variant(const char *name, bool *ok) {
-  const char *v = name;
-  *ok = true;
-  if (!v || strcmp(v, "rgb") == 0 || strcmp(v, "scalar_rgb") == 0) return VARIANT_RGB;
-  if (strcmp(v, "mono") == 0 || strcmp(v, "scalar_mono") == 0 || strcmp(v, "scalar_mono_double") == 0)
-    return VARIANT_MONO;
-  *ok = false;
-  return VARIANT_RGB;
-}
-
 rsw_status scene_build(node *root, const char *doc_variant, const scene_load_opts *opts, scene **out,
                        rsw_err *err) {
   const char *vname = opts && opts->variant ? opts->variant : doc_variant;
-  bool ok;
-  rsw_variant var = parse_variant(vname, &ok);
-  if (!ok) {
-    rsw_status st = rsw_fail(err, RSW_ERR_INVALID, opts && opts->variant ? "--variant" : root->loc,
-                             "unknown variant '%s' (expected \"mono\" or \"rgb\")", vname);
+  rsw_variant var = VARIANT_RGB;
+  bool polarized = false;
+  if (vname && !variant_parse(vname, &var, &polarized)) {
+    rsw_status st = rsw_fail(
+        err, RSW_ERR_INVALID, opts && opts->variant ? "--variant" : root->loc,
+        "unknown variant '%s' (expected \"mono\", \"rgb\", \"mono_polarized\" or \"rgb_polarized\")", vname);
+    node_free(root);
+    return st;
+  }
+  if (polarized && var == VARIANT_RGB) {
+    rsw_status st = rsw_fail(err, RSW_ERR_UNSUPPORTED, opts && opts->variant ? "--variant" : root->loc,
+                             "variant '%s' is not supported yet: use mono_polarized (one wavelength per "
+                             "render; docs/polarization.md)",
+                             vname);
     node_free(root);
     return st;
   }
@@ -238,8 +237,10 @@ rsw_status scene_build(node *root, const char *doc_variant, const scene_load_opt
   }
   s->base.plugin = &plugin_scene;
   s->variant = var;
+  s->polarized = polarized;
   s->doc = root;
   loader ld = {.variant = var,
+               .polarized = polarized,
                .err = err,
                .base_dir = opts && opts->base_dir ? opts->base_dir : ".",
                .root = root,

@@ -589,6 +589,37 @@ static const char *const class_names[CLS__COUNT] = {
     [CLS_VOLUME] = "volume",
 };
 
+const char *variant_name(rsw_variant v, bool polarized) {
+  if (v == VARIANT_MONO) return polarized ? "mono_polarized" : "mono";
+  return polarized ? "rgb_polarized" : "rgb";
+}
+
+bool variant_parse(const char *name, rsw_variant *v, bool *polarized) {
+  static const struct {
+    const char *name;
+    rsw_variant v;
+    bool pol;
+  } names[] = {
+      {"rgb", VARIANT_RGB, false},
+      {"scalar_rgb", VARIANT_RGB, false},
+      {"mono", VARIANT_MONO, false},
+      {"scalar_mono", VARIANT_MONO, false},
+      {"scalar_mono_double", VARIANT_MONO, false},
+      {"mono_polarized", VARIANT_MONO, true},
+      {"scalar_mono_polarized", VARIANT_MONO, true},
+      {"scalar_mono_polarized_double", VARIANT_MONO, true},
+      {"rgb_polarized", VARIANT_RGB, true},
+      {"scalar_rgb_polarized", VARIANT_RGB, true},
+  };
+  for (size_t i = 0; name && i < sizeof names / sizeof names[0]; i++)
+    if (strcmp(name, names[i].name) == 0) {
+      *v = names[i].v;
+      *polarized = names[i].pol;
+      return true;
+    }
+  return false;
+}
+
 const char *obj_class_name(obj_class c) {
   return (unsigned)c < CLS__COUNT ? class_names[c] : "object";
 }

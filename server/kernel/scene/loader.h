@@ -34,6 +34,7 @@ typedef struct loader_hooks {
 
 struct loader {
   rsw_variant variant;
+  bool polarized; /* mono_polarized, rgb_polarized */
   rsw_err *err;
   const char *base_dir; /* directory relative file names resolve against */
   rsw_status (*resolve)(void *user, const char *name, char **path_out, rsw_err *err);

@@ -540,8 +540,13 @@ static rsw_status start_scene(xml_ctx *c, xml_frame *parent, xml_frame *self) {
                  v);
   const char *variant = attr(c, "variant");
   if (variant) {
-    if (strcmp(variant, "mono") != 0 && strcmp(variant, "rgb") != 0)
-      return xfail(c, RSW_ERR_INVALID, "variant \"%s\" is not \"mono\" or \"rgb\"", variant);
+    static const char *const known[] = {"mono", "rgb", "mono_polarized", "rgb_polarized"};
+    bool ok = false;
+    for (size_t i = 0; i < sizeof known / sizeof known[0]; i++) ok |= strcmp(variant, known[i]) == 0;
+    if (!ok)
+      return xfail(c, RSW_ERR_INVALID,
+                   "variant \"%s\" is not \"mono\", \"rgb\", \"mono_polarized\" or \"rgb_polarized\"",
+                   variant);
     if (!(c->variant = rsw_strdup(variant))) return xfail(c, RSW_ERR_NOMEM, "out of memory");
   }
   if (!(c->root = node_new("scene", "scene", c->loc))) return xfail(c, RSW_ERR_NOMEM, "out of memory");

@@ -106,6 +106,7 @@ static rsw_status distantflux_create(loader *ld, node *n, object **out) {
   if (!f) return plugin_created(ld, n, NULL, out);
   f->base.ops = &distantflux_ops;
   f->base.to_world = xf_identity();
+  f->base.stokes_pole = true;
 
   rsw_status st = sensor_read_base(ld, n, &f->base);
   if (st == RSW_OK) st = ld_transform(ld, n, "to_world", &f->base.to_world, NULL);

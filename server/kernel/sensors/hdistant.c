@@ -117,6 +117,7 @@ static rsw_status hdistant_create(loader *ld, node *n, object **out) {
   if (!h) return plugin_created(ld, n, NULL, out);
   h->base.ops = &hdistant_ops;
   h->base.to_world = xf_identity();
+  h->base.stokes_pole = true;
 
   rsw_status st = sensor_read_base(ld, n, &h->base);
   if (st == RSW_OK) st = ld_transform(ld, n, "to_world", &h->base.to_world, NULL);
