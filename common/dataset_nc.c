@@ -1120,7 +1120,10 @@ static rsw_status put_film(const writer *w, const sensor_set *s, const sensor_va
  * film's colours) and Stokes labels S0..S3. */
 static rsw_status put_labels(const writer *w, const sensor_set *s, const sensor_vars *v, rsw_err *err) {
   static const char *const st_names[4] = {"S0", "S1", "S2", "S3"};
-  for (size_t k = 0; v->st >= 0 && k < 4; k++) NC_TRY(nc_put_var1_string(w->ncid, v->st, &k, &st_names[k]), "stokes");
+  for (size_t k = 0; v->st >= 0 && k < 4; k++) {
+    const char *p = st_names[k];
+    NC_TRY(nc_put_var1_string(w->ncid, v->st, &k, &p), "stokes");
+  }
   for (size_t k = 0; v->ch >= 0 && k < (size_t)s->n_col; k++) {
     const char *p = s->stokes ? s->sl.color[k] : s->shape->channel_names[k];
     NC_TRY(nc_put_var1_string(w->ncid, v->ch, &k, &p), "channel");
