@@ -13,7 +13,10 @@
 #   - the daemon's dataset of the same job (`raysweep fetch JOB -o F.nc`) is
 #     the client's, bitwise;
 #   - the JSON films (and the job's result list) keep S0..S3, brf.S0..S3 and
-#     radiance_stderr.S0..S3.
+#     radiance_stderr.S0..S3;
+#   - the same scene in the variant mono_polarized (films S0.Y..S3.Y): the
+#     same layout, variant "mono_polarized", dolp and aolp those of the
+#     dataset's radiance, and the daemon's dataset is the client's.
 # Ends with "test_stokes_datasets: N passed, N failed" (tests/run.sh sums it).
 set -u
 name=test_stokes_datasets
@@ -112,4 +115,39 @@ r = json.load(open(sys.argv[1]))
 items = r["results"] if isinstance(r, dict) else r
 assert items and all(x["channels"][:4] == ["S0", "S1", "S2", "S3"] for x in items), str(items)[:400]
 ' results.json
+
+# The variant mono_polarized: channels S0.Y..S3.Y (planes brf.S0.Y ...), the
+# same layout; the sky's Stokes vector reaches each pixel turned into the
+# camera's basis, so DoLP and AoLP are checked against the dataset's own
+# radiance (and DoLP <= p: averaging turned vectors never polarizes more).
+sed 's/"variant": "mono"/"variant": "mono_polarized"/; s/"pixel_format": "stokes",//' scene.json >mp.json
+run "sweep a mono_polarized film --format nc" rs sweep mp.json --grid sky.polarization_angle=-45:90:45 \
+  --quantities brf --variance --seed 5 --format nc -o mp
+pycheck "mono_polarized: S0.Y films, the same dataset layout" '
+import json, os, sys
+import numpy as np, xarray as xr
+d = sys.argv[1]
+ds = xr.open_dataset(os.path.join(d, "dataset.nc"))
+assert ds.attrs["variant"] == "mono_polarized", ds.attrs["variant"]
+assert ds.radiance.dims == ("polarization_angle", "y", "x", "stokes"), ds.radiance.dims
+assert ds.brf.dims == ds.radiance.dims and ds.dolp.dims == ("polarization_angle", "y", "x")
+r = ds.radiance.values.astype(np.float64)
+dolp = np.hypot(r[..., 1], r[..., 2]) / r[..., 0]
+assert np.allclose(ds.dolp.values, dolp, atol=1e-6), (ds.dolp.values, dolp)
+assert (ds.dolp.values <= 0.6 + 1e-6).all() and (ds.dolp.values > 0).all(), ds.dolp.values
+a = 0.5 * np.degrees(np.arctan2(r[..., 2], r[..., 1]))
+diff = (ds.aolp.values - a + 90) % 180 - 90
+assert np.abs(diff).max() < 1e-3, diff
+assert np.allclose(r[..., 0], 1.0, atol=1e-6)
+line = json.loads(open(os.path.join(d, "index.jsonl")).readline())
+ch = json.load(open(os.path.join(d, line["file"])))["channels"]
+assert ch[:5] == ["S0.Y", "S1.Y", "S2.Y", "S3.Y", "brf.S0.Y"], ch
+' mp
+mjob=$("$py" -c 'import json; print(json.load(open("mp/sweep.json"))["job"])')
+run "fetch the daemon's mono_polarized dataset" rs fetch "$mjob" -o mp_daemon.nc
+if "$py" "$root/tests/support/dataset_check.py" same mp_daemon.nc mp/dataset.nc --ignore-attr job 2>"$tmp/pyerr"; then
+  ok
+else
+  bad "mono_polarized: the daemon's dataset != the client's: $(tail -n 3 "$tmp/pyerr")"
+fi
 finish

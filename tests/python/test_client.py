@@ -384,6 +384,18 @@ class TestStokes(Base):
         np.testing.assert_allclose(rs.aolp(film), -75.0, atol=1e-4)
         np.testing.assert_allclose(rs.dolp(film), 0.6, atol=1e-6)
 
+    def test_render_mono_polarized(self):
+        d = stokes_dict(0.6, 30.0)
+        d["variant"] = "mono_polarized"
+        del d["camera"]["film"]["pixel_format"]
+        da = self.client.load_dict(d).render(spp=4, variance=True)
+        self.assertEqual(da.dims, ("y", "x", "stokes", "channel"))
+        self.assertEqual(list(da.channel.values), ["Y", "radiance_stderr.Y"])
+        s = da.sel(channel="Y").values.astype(np.float64)
+        np.testing.assert_allclose(rs.dolp(da).sel(channel="Y").values, np.hypot(s[..., 1], s[..., 2]) / s[..., 0],
+                                   atol=1e-6)
+        self.assertTrue((rs.dolp(da).sel(channel="Y").values <= 0.6 + 1e-6).all())
+
     def test_sweep_dataset(self):
         ds = self.client.load_dict(stokes_dict(0.4)).sweep(
             grid={"sky.polarization_angle": [-60, 0, 90]}, spp=4, progress=False)
