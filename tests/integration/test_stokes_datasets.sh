@@ -150,4 +150,6 @@ if "$py" "$root/tests/support/dataset_check.py" same mp_daemon.nc mp/dataset.nc 
 else
   bad "mono_polarized: the daemon's dataset != the client's: $(tail -n 3 "$tmp/pyerr")"
 fi
+# Under `make test SAN=1` a sanitizer report in the daemon's log is a failure.
+if grep -qE 'Sanitizer|runtime error:' "$tmp/d/log"; then bad "$(grep -m 3 -E 'Sanitizer|runtime error:' "$tmp/d/log")"; else ok; fi
 finish
