@@ -25,6 +25,7 @@
 #include "../../server/kernel/extplugin/env_plugin.h"
 #include "../../server/service/service.h"
 #include "../support/test.h"
+#include "../support/tsup.h"
 
 RSW_TEST_DEFINE_GLOBALS
 
@@ -81,23 +82,6 @@ static const char *SCENE =
 static char dir[64];
 static service *svc;
 static char *g_scene;
-
-static bool build_plugin(void) {
-  snprintf(dir, sizeof dir, "/tmp/rsw-stokesres-XXXXXX");
-  if (!mkdtemp(dir)) return false;
-  char src[128], cmd[1024];
-  snprintf(src, sizeof src, "%s/polvar.c", dir);
-  FILE *f = fopen(src, "w");
-  if (!f) return false;
-  fputs(PLUGIN, f);
-  fclose(f);
-  const char *td = getenv("RSW_TEST_DIR");
-  char inc[512];
-  snprintf(inc, sizeof inc, "%s/../include", td && *td ? td : "tests");
-  snprintf(cmd, sizeof cmd, "cc -std=c11 -Wall -Wextra -Werror -shared -fPIC -I '%s' -o '%s/polvar.so' '%s'",
-           inc, dir, src);
-  return system(cmd) == 0;
-}
 
 /* Submit and wait for the end; the job id (free), or NULL. */
 static char *run_job(const char *body) {
@@ -262,10 +246,7 @@ static void test_band_integrates_stokes(void) {
 }
 
 int main(void) {
-  if (!build_plugin()) {
-    printf("could not build the test plugin\n");
-    return 1;
-  }
+  if (!tsup_build_plugin(PLUGIN, "polvar", dir)) return 1;
   rsw_err err = {0};
   if (plugins_load_dir(dir, &err)) {
     printf("load: %s\n", err.msg);
@@ -293,8 +274,6 @@ int main(void) {
   free(g_scene);
   service_free(svc);
   plugins_unload();
-  char cmd[128];
-  snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
-  if (system(cmd)) fprintf(stderr, "could not remove %s\n", dir);
+  tsup_remove_dir(dir);
   RSW_TEST_END("test_stokes_results");
 }
