@@ -16,7 +16,8 @@
 #     radiance_stderr.S0..S3;
 #   - the same scene in the variant mono_polarized (films S0.Y..S3.Y): the
 #     same layout, variant "mono_polarized", dolp and aolp those of the
-#     dataset's radiance, and the daemon's dataset is the client's.
+#     dataset's radiance, and the daemon's dataset is the client's; its PNG
+#     quick-look is S0.
 # Ends with "test_stokes_datasets: N passed, N failed" (tests/run.sh sums it).
 set -u
 name=test_stokes_datasets
@@ -150,6 +151,17 @@ if "$py" "$root/tests/support/dataset_check.py" same mp_daemon.nc mp/dataset.nc 
 else
   bad "mono_polarized: the daemon's dataset != the client's: $(tail -n 3 "$tmp/pyerr")"
 fi
+# The PNG quick-look of a Stokes film is its S0 (here 1: white at 0 EV).
+mscene=$(rs -q scene push mp.json)
+run "render a mono_polarized film to PNG" rs render "$mscene" --spp 4 -o mp.png
+pycheck "the PNG shows S0" '
+import sys
+sys.path.insert(0, sys.argv[2])
+import png_read
+w, h, ch, rows = png_read.decode_png(open(sys.argv[1], "rb").read(), (0,))
+assert (w, h, ch) == (3, 2, 1), (w, h, ch)
+assert all(v == 255 for r in rows for v in r), rows
+' mp.png "$root/tests/support"
 # Under `make test SAN=1` a sanitizer report in the daemon's log is a failure.
 if grep -qE 'Sanitizer|runtime error:' "$tmp/d/log"; then bad "$(grep -m 3 -E 'Sanitizer|runtime error:' "$tmp/d/log")"; else ok; fi
 finish
