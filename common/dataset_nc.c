@@ -21,6 +21,7 @@
 #include <unistd.h>
 
 #include "raysweep/version.h"
+#include "stokes.h"
 
 /* The quantities a dataset variable may hold. Radiance: W m^-2 sr^-1
  * nm^-1 in mono (spectral, at the context's wavelength), W m^-2 sr^-1 in
@@ -41,6 +42,14 @@ static const nc_quantity quantities[] = {
     {"brdf_srf", "bidirectional reflectance distribution function (SRF-weighted)", "sr-1", "sr-1"},
     {"brf_srf", "bidirectional reflectance factor (SRF-weighted)", "1", "1"},
     {"brf_srf_stderr", "standard error of brf_srf", "1", "1"},
+    /* Stokes films (stokes.h): derived from the Stokes vector of the
+     * radiance (of radiance_srf: the band's SRF-weighted vector, never a
+     * mean of DoLPs). brf and brdf divide every component by the same
+     * E_h, so theirs are the same and not repeated. */
+    {"dolp", "degree of linear polarization", "1", "1"},
+    {"aolp", "angle of linear polarization", "degree", "degree"},
+    {"dolp_srf", "degree of linear polarization of the SRF-weighted Stokes vector", "1", "1"},
+    {"aolp_srf", "angle of linear polarization of the SRF-weighted Stokes vector", "degree", "degree"},
 };
 #define N_QUANTITIES (sizeof quantities / sizeof quantities[0])
 
@@ -57,6 +66,32 @@ static const struct derived {
 } derived[] = {{"brf_stderr", "radiance_stderr", "brf"}, {"brf_srf_stderr", "radiance_srf_stderr", "brf_srf"}};
 #define N_DERIVED 2
 
+/* The polarization quantities of Stokes films, from the Stokes vector of
+ * `from`: over the film's dimensions less stokes. */
+static const struct polar {
+  const char *name, *from;
+  bool aolp;
+} polar[] = {{"dolp", "radiance", false},
+             {"aolp", "radiance", true},
+             {"dolp_srf", "radiance_srf", false},
+             {"aolp_srf", "radiance_srf", true}};
+#define N_POLAR 4
+
+static const struct polar *polar_find(const char *name) {
+  for (size_t k = 0; k < N_POLAR; k++)
+    if (strcmp(polar[k].name, name) == 0) return &polar[k];
+  return NULL;
+}
+
+/* The AoLP convention, the aolp variables' comment (docs/polarization.md). */
+#define AOLP_COMMENT                                                                                          \
+  "0.5 atan2(S2, S1) in degrees, in (-90, 90], 0 where S1 = S2 = 0; from x towards y of the film's Stokes "    \
+  "basis (counter-clockwise as seen looking into the beam): for cameras x is the image's right, for distant " \
+  "sensors x is horizontal, perpendicular to the meridian plane (docs/polarization.md)"
+#define STOKES_COMMENT                                                                                        \
+  "S0..S3 = I, Q, U, V; Q = I_x - I_y, U = I_+45 - I_-45, V circular; for cameras x is the image's right, "  \
+  "for distant sensors x is horizontal, perpendicular to the meridian plane (docs/polarization.md)"
+
 const nc_quantity *nc_quantity_find(const char *name) {
   for (size_t i = 0; i < N_QUANTITIES; i++)
     if (strcmp(quantities[i].name, name) == 0) return &quantities[i];
@@ -66,7 +101,7 @@ const nc_quantity *nc_quantity_find(const char *name) {
 /* Names the writer uses itself (besides the quantities): a coord may not
  * take them. "wavelength" is allowed: a coord of that name replaces the
  * wavelength variable. */
-static const char *const reserved[] = {"x", "y", "channel", "context", "seed", "spp", "vza", "vaa",
+static const char *const reserved[] = {"x", "y", "channel", "stokes", "context", "seed", "spp", "vza", "vaa",
                                        "unresolved_rays"};
 
 static bool valid_coord_name(const char *s) {
@@ -303,7 +338,12 @@ typedef struct sensor_set {
   bool any_angles, same_angles, spp_varies, any_unresolved, any_irr, any_band_irr;
   char **qnames; /* quantities, table order */
   size_t n_q;
-  int dim_y, dim_x, dim_ch;
+  /* Stokes films (stokes.h): the stokes dimension, and channel over the
+   * colours; n_col: the channel dimension's length (1: none). */
+  bool stokes;
+  stokes_layout sl;
+  int n_col;
+  int dim_y, dim_x, dim_ch, dim_st;
 } sensor_set;
 
 typedef struct writer {
@@ -442,6 +482,8 @@ static rsw_status plan_sensors(writer *w, rsw_err *err) {
       s->id = x->sensor;
       s->shape = x;
       s->same_angles = true;
+      s->stokes = x->channel_names && stokes_layout_of(x->channel_names, x->channels, &s->sl);
+      s->n_col = s->stokes ? s->sl.n_color : x->channels;
       if (ns > 1) sanitize(x->sensor, s->prefix, sizeof s->prefix);
       s->by_ctx = calloc(d->n_contexts * w->slots + 1, sizeof *s->by_ctx);
       s->by_band = calloc(d->n_contexts * d->n_bands + 1, sizeof *s->by_band);
@@ -506,6 +548,7 @@ static rsw_status plan_sensors(writer *w, rsw_err *err) {
     for (size_t v = 0; v < x->n_vars && !st; v++) {
       const nc_quantity *q = x->vars[v].name ? nc_quantity_find(x->vars[v].name) : NULL;
       if (q && band_quantity(q->name) != (x->band != 0)) q = NULL;
+      if (q && polar_find(q->name)) q = NULL; /* derived here, never handed in */
       if (!q || !x->vars[v].data) {
         st = rsw_fail(err, RSW_ERR_INVALID, where, "no quantity '%s' (dataset_nc.c's table)",
                       x->vars[v].name ? x->vars[v].name : "(null)");
@@ -525,6 +568,11 @@ static rsw_status plan_sensors(writer *w, rsw_err *err) {
       size_t qn = (size_t)(nc_quantity_find(derived[k].needs) - quantities);
       bool irr = k == 0 ? s->any_irr : s->any_band_irr;
       if (s->qnames[qf] && s->qnames[qn] && irr) s->qnames[qd] = (char *)quantities[qd].name;
+    }
+    for (size_t k = 0; k < N_POLAR && s->stokes; k++) {
+      size_t qd = (size_t)(nc_quantity_find(polar[k].name) - quantities);
+      size_t qf = (size_t)(nc_quantity_find(polar[k].from) - quantities);
+      if (s->qnames[qf]) s->qnames[qd] = (char *)quantities[qd].name;
     }
     for (size_t q = 0; q < N_QUANTITIES; q++)
       if (s->qnames[q]) s->qnames[s->n_q++] = s->qnames[q];
@@ -551,6 +599,11 @@ static void name_cat(char *out, size_t cap, const char *prefix, const char *name
   snprintf(out, cap, "%s%s", prefix, name);
 }
 
+/* rgb and rgb_polarized: radiance per colour, not per nm. */
+static bool is_rgb(const nc_dataset *d) {
+  return d->variant && strncmp(d->variant, "rgb", 3) == 0;
+}
+
 /* Append a name to the coordinates attribute list. */
 static void coords_add(writer *w, const char *name) {
   size_t l = strlen(w->coordinates);
@@ -561,7 +614,7 @@ static void coords_add(writer *w, const char *name) {
  * wavelength or band dimension; -1: none), then `extra` more. */
 static rsw_status def_ctx_var2(writer *w, const char *name, nc_type type, int mid, int n_extra, const int *extra,
                                int *varid, rsw_err *err) {
-  int dims[NC_MAX_COORDS + 4];
+  int dims[NC_MAX_COORDS + 5];
   int nd = 0;
   for (size_t k = 0; k < w->n_cdims; k++) dims[nd++] = w->cdim[k];
   if (mid >= 0) dims[nd++] = mid;
@@ -602,7 +655,7 @@ static double canonical_angle(double a) {
 
 /* Per sensor: its variables' ids (-1: none). */
 typedef struct sensor_vars {
-  int ch, vza, vaa, seed, spp, unres, irr, irr_srf;
+  int ch, st, vza, vaa, seed, spp, unres, irr, irr_srf;
   int q[N_QUANTITIES];
 } sensor_vars;
 
@@ -655,7 +708,7 @@ static rsw_status define_layout(writer *w, file_vars *fv, rsw_err *err) {
   const nc_dataset *d = w->d;
   int ncid = w->ncid;
   const nc_coords *cs = d->coords && d->coords->n ? d->coords : NULL;
-  bool rgb = d->variant && strcmp(d->variant, "rgb") == 0;
+  bool rgb = is_rgb(d);
   bool wl_coord = false;
   if (w->grid) {
     for (size_t k = 0; k < cs->n; k++) {
@@ -798,35 +851,38 @@ static rsw_status define_view_angles(writer *w, const sensor_set *s, sensor_vars
 static rsw_status define_quantities(writer *w, const sensor_set *s, sensor_vars *v, rsw_err *err) {
   int ncid = w->ncid;
   const nc_film *sh = s->shape;
-  bool rgb = w->d->variant && strcmp(w->d->variant, "rgb") == 0;
+  bool rgb = is_rgb(w->d);
   char nm[160];
-  int extra[3] = {s->dim_y, s->dim_x, s->dim_ch};
-  int n_extra = s->dim_ch >= 0 ? 3 : 2;
-  size_t chunk[NC_MAX_COORDS + 3];
-  size_t nd = 0;
-  for (size_t k = 0; k < w->n_cdims; k++) chunk[nd++] = 1;
-  if (w->wl_dim >= 0 || w->band_dim >= 0) chunk[nd++] = 1;
-  chunk[nd++] = (size_t)sh->height;
-  chunk[nd++] = (size_t)sh->width;
-  if (n_extra == 3) chunk[nd++] = (size_t)sh->channels;
   for (size_t q = 0; q < s->n_q; q++) {
     const nc_quantity *qq = nc_quantity_find(s->qnames[q]);
+    const struct polar *pq = polar_find(qq->name);
     name_cat(nm, sizeof nm, s->prefix, qq->name);
+    /* y, x, then stokes (not for DoLP and AoLP) and channel where the
+     * sensor has them; each chunk one whole image. */
+    int extra[4];
+    size_t ext[4];
+    int n_extra = 0;
+    extra[n_extra] = s->dim_y, ext[n_extra++] = (size_t)sh->height;
+    extra[n_extra] = s->dim_x, ext[n_extra++] = (size_t)sh->width;
+    if (s->stokes && !pq) extra[n_extra] = s->dim_st, ext[n_extra++] = 4;
+    if (s->dim_ch >= 0) extra[n_extra] = s->dim_ch, ext[n_extra++] = (size_t)s->n_col;
     int id;
-    bool bq = band_quantity(qq->name);
-    TRY(def_ctx_var2(w, nm, NC_FLOAT, bq ? w->band_dim : w->wl_dim, n_extra, extra, &id, err));
+    int mid = band_quantity(qq->name) ? w->band_dim : w->wl_dim;
+    TRY(def_ctx_var2(w, nm, NC_FLOAT, mid, n_extra, extra, &id, err));
     v->q[q] = id;
     float fill = NAN;
     NC_TRY(nc_def_var_fill(ncid, id, 0, &fill), nm);
-    /* Without a band or wavelength dimension chunk[] has one entry less. */
-    size_t ch2[NC_MAX_COORDS + 4], k2 = 0;
-    for (size_t k = 0; k < w->n_cdims; k++) ch2[k2++] = 1;
-    if ((bq ? w->band_dim : w->wl_dim) >= 0) ch2[k2++] = 1;
-    for (size_t k = w->n_cdims + (w->wl_dim >= 0 || w->band_dim >= 0); k < nd; k++) ch2[k2++] = chunk[k];
-    NC_TRY(nc_def_var_chunking(ncid, id, NC_CHUNKED, ch2), nm);
+    size_t chunk[NC_MAX_COORDS + 5], nd = 0;
+    for (size_t k = 0; k < w->n_cdims; k++) chunk[nd++] = 1;
+    if (mid >= 0) chunk[nd++] = 1;
+    for (int k = 0; k < n_extra; k++) chunk[nd++] = ext[k];
+    NC_TRY(nc_def_var_chunking(ncid, id, NC_CHUNKED, chunk), nm);
     TRY(put_text_att(ncid, id, "long_name", qq->long_name, err));
     TRY(put_text_att(ncid, id, "units", rgb ? qq->units_rgb : qq->units_mono, err));
     TRY(put_text_att(ncid, id, "sensor", s->id, err));
+    if (pq && pq->aolp) TRY(put_text_att(ncid, id, "comment", AOLP_COMMENT, err));
+    if (pq && !pq->aolp)
+      TRY(put_text_att(ncid, id, "comment", "sqrt(S1^2 + S2^2) / S0, 0 where S0 = 0", err));
     if (w->coordinates[0]) TRY(put_text_att(ncid, id, "coordinates", w->coordinates, err));
   }
   return RSW_OK;
@@ -836,7 +892,7 @@ static rsw_status define_quantities(writer *w, const sensor_set *s, sensor_vars 
  * rays the periodic boundary could not resolve. */
 static rsw_status define_film_numbers(writer *w, const sensor_set *s, sensor_vars *v, rsw_err *err) {
   int ncid = w->ncid;
-  bool rgb = w->d->variant && strcmp(w->d->variant, "rgb") == 0;
+  bool rgb = is_rgb(w->d);
   char nm[160];
   name_cat(nm, sizeof nm, s->prefix, "seed");
   TRY(def_ctx_var(w, nm, NC_UINT64, 0, NULL, &v->seed, err));
@@ -898,10 +954,18 @@ static rsw_status define_sensor(writer *w, sensor_set *s, sensor_vars *v, size_t
   NC_TRY(nc_def_dim(ncid, nm, (size_t)sh->height, &s->dim_y), nm);
   name_cat(nm, sizeof nm, s->prefix, "x");
   NC_TRY(nc_def_dim(ncid, nm, (size_t)sh->width, &s->dim_x), nm);
-  s->dim_ch = -1;
-  if (sh->channels > 1) {
+  s->dim_ch = s->dim_st = -1;
+  v->ch = v->st = -1;
+  if (s->stokes) {
+    name_cat(nm, sizeof nm, s->prefix, "stokes");
+    NC_TRY(nc_def_dim(ncid, nm, 4, &s->dim_st), nm);
+    NC_TRY(nc_def_var(ncid, nm, NC_STRING, 1, &s->dim_st, &v->st), nm);
+    TRY(put_text_att(ncid, v->st, "long_name", "Stokes parameter", err));
+    TRY(put_text_att(ncid, v->st, "comment", STOKES_COMMENT, err));
+  }
+  if (s->n_col > 1) {
     name_cat(nm, sizeof nm, s->prefix, "channel");
-    NC_TRY(nc_def_dim(ncid, nm, (size_t)sh->channels, &s->dim_ch), nm);
+    NC_TRY(nc_def_dim(ncid, nm, (size_t)s->n_col, &s->dim_ch), nm);
     NC_TRY(nc_def_var(ncid, nm, NC_STRING, 1, &s->dim_ch, &v->ch), nm);
     TRY(put_text_att(ncid, v->ch, "long_name", "film channel", err));
   }
@@ -975,7 +1039,7 @@ static rsw_status put_film(const writer *w, const sensor_set *s, const sensor_va
                            size_t ctx, size_t mid, bool is_band, float *deriv, rsw_err *err) {
   int ncid = w->ncid;
   size_t np = (size_t)s->shape->width * (size_t)s->shape->height;
-  size_t start[NC_MAX_COORDS + 4], count[NC_MAX_COORDS + 4];
+  size_t start[NC_MAX_COORDS + 5], count[NC_MAX_COORDS + 5];
   bool has_mid = is_band ? w->band_dim >= 0 : w->wl_dim >= 0;
   cell_start(w, ctx, start);
   size_t nd = w->n_cdims;
@@ -995,11 +1059,17 @@ static rsw_status put_film(const writer *w, const sensor_set *s, const sensor_va
   }
   int irr = is_band ? v->irr_srf : v->irr;
   if (irr >= 0 && f->has_irradiance) {
-    start[nd] = 0, count[nd] = (size_t)f->channels;
+    /* Per colour: a Stokes film's E_h is its colours' (the first n_col
+     * values), the same for every component. */
+    start[nd] = 0, count[nd] = (size_t)s->n_col;
     NC_TRY(nc_put_vara_double(ncid, irr, start, count, f->irradiance), "irradiance");
   }
-  start[nd] = start[nd + 1] = start[nd + 2] = 0;
-  count[nd] = (size_t)f->height, count[nd + 1] = (size_t)f->width, count[nd + 2] = (size_t)f->channels;
+  /* y, x, then the film's channels: [stokes, ][channel]. */
+  size_t ncd = 2;
+  start[nd] = start[nd + 1] = start[nd + 2] = start[nd + 3] = 0;
+  count[nd] = (size_t)f->height, count[nd + 1] = (size_t)f->width;
+  if (s->stokes) count[nd + ncd++] = 4;
+  if (s->dim_ch >= 0) count[nd + ncd++] = (size_t)s->n_col;
   for (size_t q = 0; q < f->n_vars; q++) {
     size_t qi = 0;
     while (strcmp(s->qnames[qi], f->vars[q].name) != 0) qi++;
@@ -1015,12 +1085,49 @@ static rsw_status put_film(const writer *w, const sensor_set *s, const sensor_va
     size_t qi = 0;
     while (qi < s->n_q && strcmp(s->qnames[qi], derived[dq].name) != 0) qi++;
     if (!from || !needs || qi == s->n_q) continue;
-    size_t C = (size_t)f->channels;
-    for (size_t p = 0; p < np * C; p++) deriv[p] = (float)(M_PI * (double)from[p] / f->irradiance[p % C]);
+    size_t C = (size_t)f->channels, K = (size_t)s->n_col;
+    for (size_t p = 0; p < np * C; p++)
+      deriv[p] = (float)(M_PI * (double)from[p] / f->irradiance[p % C % K]);
     NC_TRY(nc_put_vara_float(ncid, v->q[qi], start, count, deriv), derived[dq].name);
+  }
+  /* DoLP and AoLP per pixel and colour, from the film's Stokes vector
+   * (component-major channels: S_k of colour c is channel k K + c). */
+  for (size_t pk = 0; pk < N_POLAR && s->stokes; pk++) {
+    const float *from = NULL;
+    for (size_t q = 0; q < f->n_vars; q++)
+      if (strcmp(f->vars[q].name, polar[pk].from) == 0) from = f->vars[q].data;
+    size_t qi = 0;
+    while (qi < s->n_q && strcmp(s->qnames[qi], polar[pk].name) != 0) qi++;
+    if (!from || qi == s->n_q) continue;
+    size_t C = (size_t)f->channels, K = (size_t)s->n_col;
+    for (size_t p = 0; p < np; p++)
+      for (size_t c = 0; c < K; c++) {
+        const float *st = from + p * C + c;
+        deriv[p * K + c] = (float)(polar[pk].aolp ? stokes_aolp_deg(st[K], st[2 * K])
+                                                  : stokes_dolp(st[0], st[K], st[2 * K]));
+      }
+    size_t pcount[NC_MAX_COORDS + 5];
+    memcpy(pcount, count, sizeof pcount);
+    pcount[nd + 2] = K; /* y, x[, channel]: beyond the dims when K = 1 */
+    NC_TRY(nc_put_vara_float(ncid, v->q[qi], start, pcount, deriv), polar[pk].name);
   }
   if (!is_band && s->any_angles && !s->same_angles && f->angles)
     TRY(put_view_angles(w, v, f->angles, np, start, count, err));
+  return RSW_OK;
+}
+
+/* A sensor's channel labels (the film's channel names, or a Stokes
+ * film's colours) and Stokes labels S0..S3. */
+static rsw_status put_labels(const writer *w, const sensor_set *s, const sensor_vars *v, rsw_err *err) {
+  static const char *const st_names[4] = {"S0", "S1", "S2", "S3"};
+  for (size_t k = 0; v->st >= 0 && k < 4; k++) {
+    const char *p = st_names[k];
+    NC_TRY(nc_put_var1_string(w->ncid, v->st, &k, &p), "stokes");
+  }
+  for (size_t k = 0; v->ch >= 0 && k < (size_t)s->n_col; k++) {
+    const char *p = s->stokes ? s->sl.color[k] : s->shape->channel_names[k];
+    NC_TRY(nc_put_var1_string(w->ncid, v->ch, &k, &p), "channel");
+  }
   return RSW_OK;
 }
 
@@ -1032,8 +1139,8 @@ static rsw_status put_sensor(const writer *w, const sensor_set *s, const sensor_
   size_t np = (size_t)sh->width * (size_t)sh->height;
   float *deriv = malloc(np * (size_t)sh->channels * sizeof *deriv + 1);
   if (!deriv) return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
-  rsw_status st = RSW_OK;
-  if (s->any_angles && s->same_angles) st = put_view_angles(w, v, sh->angles, np, NULL, NULL, err);
+  rsw_status st = put_labels(w, s, v, err);
+  if (!st && s->any_angles && s->same_angles) st = put_view_angles(w, v, sh->angles, np, NULL, NULL, err);
   size_t n_slots = d->n_contexts * w->slots, n_all = n_slots + d->n_contexts * d->n_bands;
   for (size_t k = 0; !st && k < n_all; k++) {
     bool is_band = k >= n_slots;

@@ -44,6 +44,13 @@
  *                brf_srf, brf_srf_stderr over (contexts..., band, y, x
  *                [, channel]) with irradiance_srf over (contexts...,
  *                band [, channel]);
+ *                Stokes films (stokes.h: channels S0..S3, S0.Y..S3.Y,
+ *                S0.R..S3.B): a dimension and coordinate "stokes" (S0..S3)
+ *                after x on every quantity, channel then over the colours
+ *                (none for one), and dolp (1) and aolp (degrees) over the
+ *                quantity's dimensions less stokes, derived from the
+ *                radiance's Stokes vector (dolp_srf, aolp_srf from
+ *                radiance_srf); irradiance per colour;
  *                seed (uint64) per film over the contexts' dimensions;
  *                spp as a global attribute when every film has the same,
  *                else a uint32 variable; unresolved_rays when any is not 0.
@@ -102,8 +109,8 @@ typedef struct nc_coords {
  * must name the same coords (or none does), each a number or a string of
  * one type across contexts, at most NC_MAX_COORDS names of
  * [A-Za-z][A-Za-z0-9_]{0,63} that are not names the dataset uses itself
- * (x, y, channel, context, seed, spp, vza, vaa, unresolved_rays, a
- * quantity). A coord named sza, saa, irradiance or irradiance_srf
+ * (x, y, channel, stokes, context, seed, spp, vza, vaa, unresolved_rays,
+ * a quantity). A coord named sza, saa, irradiance or irradiance_srf
  * replaces the dataset's variable of that name. Errors name the JSON pointer "<prefix>/<i>/coords[/<name>]":
  * RSW_ERR_TYPE (not an object; not a number or string; types mixed
  * across contexts), RSW_ERR_INVALID (a name; a string too long or with a

@@ -111,19 +111,24 @@ static rsw_status tonemap(int width, int height, int n_channels, const char *con
   if (!known)
     return rsw_fail(err, RSW_ERR_INVALID, where, "unknown colormap '%s' (one of %s)", look->colormap,
                     png_colormap_list());
-  int idx[3] = {-1, -1, -1}, y = -1, s0 = -1;
+  /* A Stokes film shows its S0 (stokes.h): S0, S0.Y, or S0.R S0.G S0.B. */
+  int idx[3] = {-1, -1, -1}, sidx[3] = {-1, -1, -1}, y = -1, s0 = -1;
   for (int c = 0; c < n_channels; c++) {
     const char *n = names[c] ? names[c] : "";
     if (strcmp(n, "R") == 0) idx[0] = c;
     if (strcmp(n, "G") == 0) idx[1] = c;
     if (strcmp(n, "B") == 0) idx[2] = c;
     if (strcmp(n, "Y") == 0) y = c;
-    if (strcmp(n, "S0") == 0) s0 = c;
+    if (strcmp(n, "S0") == 0 || strcmp(n, "S0.Y") == 0) s0 = c;
+    if (strcmp(n, "S0.R") == 0) sidx[0] = c;
+    if (strcmp(n, "S0.G") == 0) sidx[1] = c;
+    if (strcmp(n, "S0.B") == 0) sidx[2] = c;
   }
+  if (idx[0] < 0 && sidx[0] >= 0) memcpy(idx, sidx, sizeof idx);
   bool rgb = idx[0] >= 0 && idx[1] >= 0 && idx[2] >= 0;
   int one = y >= 0 ? y : s0;
   if (!rgb && one < 0)
-    return rsw_fail(err, RSW_ERR_INVALID, where, "the film has no R, G, B, Y or S0 channel to show");
+    return rsw_fail(err, RSW_ERR_INVALID, where, "the film has no R, G, B, Y or S0 (S0.Y) channel to show");
   if (rgb && look->colormap && table)
     return rsw_fail(err, RSW_ERR_INVALID, where,
                     "colormap '%s' is for one-channel films; this film has R, G, B", look->colormap);

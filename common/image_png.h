@@ -7,7 +7,7 @@
  * [0, 1] (at exposure 0 a radiance of 1 is full white), then
  *   - three channels (R, G, B): each sRGB-encoded (IEC 61966-2-1 transfer
  *     curve), an RGB PNG;
- *   - one channel (Y, or S0 of a Stokes film): with colormap "gray", the
+ *   - one channel (Y, or S0 / S0.Y of a Stokes film): with colormap "gray", the
  *     sRGB-encoded grey (a grayscale PNG); with "viridis" or "inferno",
  *     the linear value through that perceptually uniform map (matplotlib's,
  *     tabulated at 9 points and interpolated linearly), an RGB PNG.
@@ -46,8 +46,9 @@ const char *png_colormap_list(void);
 
 /* Encode / write the quick-look of a film (width x height x n_channels
  * float32 HWC, channel_names as the film's). The channels shown are the
- * film's radiance: R, G, B when it has them, else Y, else S0; other
- * channels (planes such as brf.Y) are ignored. look may be NULL
+ * film's radiance: R, G, B when it has them, else Y, else S0 (a Stokes
+ * film's intensity: S0, S0.Y, or S0.R S0.G S0.B as R, G, B); other
+ * channels (planes such as brf.Y, S1..S3) are ignored. look may be NULL
  * (defaults). png_write_film writes "<path>.tmp.<pid>" and renames it over
  * path once complete. Errors: RSW_ERR_INVALID (no R/G/B, Y or S0 channel;
  * unknown colormap; exposure not finite), RSW_ERR_NOMEM, RSW_ERR_IO

@@ -1,7 +1,9 @@
 // raysweep viewer: scenes and their parameters, renders, jobs and films,
 // over the public API only (api.js).
 import { api, ApiError, followEvents, getToken, setToken } from './api.js';
-import { autoWhite, displayModel, drawColorbar, drawFilm, filmPlanes, fmt, fmtDuration, PlanePlot, PolarPlot } from './plot.js';
+import {
+  autoWhite, displayModel, drawColorbar, drawFilm, filmPlanes, fmt, fmtDuration, PlanePlot, PolarPlot, stokesViews,
+} from './plot.js';
 import { drawSweep, filmValue, resultCoords } from './sweep.js';
 
 const $ = (id) => document.getElementById(id);
@@ -261,6 +263,8 @@ async function sensorType(film) {
 const PLANE_LABELS = {
   radiance: 'radiance', brf: 'BRF', brdf: 'BRDF (sr⁻¹)', radiance_stderr: 'radiance stderr', 'brf*': 'BRF = π L / E_h',
 };
+// Stokes films' derived views (docs/polarization.md).
+const VIEW_LABELS = { dolp: 'DoLP', aolp: 'AoLP (°)' };
 const DISTANT = new Set(['hdistant', 'mdistant', 'distant', 'distantflux', 'multi_distant']);
 
 async function showFilm(film, title) {
@@ -278,7 +282,7 @@ async function showFilm(film, title) {
   // film shown before, whose planes and channels may differ.
   state.planes = filmPlanes(film);
   const eh = DISTANT.has(state.filmType) && !state.planes.some((p) => p.name === 'brf') ? horizontalIrradiance(film) : null;
-  if (eh) state.planes.push({ name: 'brf*', idx: state.planes[0].idx, names: state.planes[0].names, scale: eh.map((e) => Math.PI / e) });
+  if (eh) state.planes.push({ name: 'brf*', idx: state.planes[0].idx, names: state.planes[0].names, stokes: state.planes[0].stokes, scale: eh.map((e) => Math.PI / e) });
   $('plane').replaceChildren(...state.planes.map((p) => el('option', { value: p.name }, PLANE_LABELS[p.name] || p.name)));
   $('plane').value = 'radiance';
   $('plane-label').hidden = state.planes.length < 2;
@@ -296,7 +300,7 @@ function currentPlane() {
 
 function fillChannels() {
   const p = currentPlane();
-  const opts = p.idx.length === 3
+  const opts = p.stokes ? stokesViews(p) : p.idx.length === 3
     ? [['rgb', 'RGB'], ['lum', 'luminance'], ['0', p.names[0]], ['1', p.names[1]], ['2', p.names[2]]]
     : p.names.map((c, i) => [String(i), c]);
   $('channel').replaceChildren(...opts.map(([v, t]) => el('option', { value: v }, t)));
@@ -344,16 +348,16 @@ function redraw() {
   const ev = Number($('exposure').value);
   $('exposure-out').textContent = `${ev > 0 ? '+' : ''}${Number(ev.toFixed(2))} EV`;
   const white = Math.pow(2, -ev);
-  const model = displayModel(film, plane.idx, mode, white, plane.scale);
+  const model = displayModel(film, plane.idx, mode, white, plane.scale, plane);
   state.model = model;
   drawFilm($('film'), film, model, 320);
   const f = $('film');
   f.dataset.ready = '1';
   f.dataset.plane = plane.name;
-  f.dataset.mode = model.rgb ? 'rgb' : 'false-colour';
+  f.dataset.mode = model.kind; /* rgb, false-colour; Stokes: signed, dolp, aolp */
   f.dataset.white = white;
-  const unit = PLANE_LABELS[plane.name] || plane.name;
-  drawColorbar($('colorbar'), white, model.rgb, unit);
+  const unit = VIEW_LABELS[model.kind] || PLANE_LABELS[plane.name] || plane.name;
+  drawColorbar($('colorbar'), model, unit);
   $('colorbar-unit').textContent = model.rgb ? `${unit} (sRGB, clipped)` : unit;
   const fig = $('plot-fig');
   state.plot = null;
@@ -388,7 +392,8 @@ function describePixel(k, where) {
   const vals = film.channels.map((name, i) => `${name} ${fmt(film.data[k * c + i])}`).join('  ');
   const ang = m.zenith_deg ? `  θ ${fmt(m.zenith_deg[k])}°  φ ${fmt(m.azimuth_deg[k])}°` : '';
   const plane = currentPlane();
-  const shown = state.model ? `  ${PLANE_LABELS[plane.name] || plane.name}: ${fmt(state.model.values[k])}` : '';
+  const label = VIEW_LABELS[state.model && state.model.kind] || PLANE_LABELS[plane.name] || plane.name;
+  const shown = state.model ? `  ${label}: ${fmt(state.model.values[k])}` : '';
   $('hover').textContent = `${where} pixel (${ix}, ${iy})  ${vals}${ang}${shown}`;
 }
 
@@ -826,7 +831,8 @@ function wire() {
   $('exposure-auto').addEventListener('click', () => {
     if (!state.model) return;
     // EV such that the 99.5th percentile of what is shown is full scale.
-    const white = autoWhite(displayModel(state.film, currentPlane().idx, $('channel').value, 1, currentPlane().scale).values);
+    const p = currentPlane();
+    const white = autoWhite(displayModel(state.film, p.idx, $('channel').value, 1, p.scale, p).values.map(Math.abs));
     $('exposure').value = -Math.log2(white);
     redraw();
   });

@@ -25,16 +25,37 @@ function srgb8(v) {
   return Math.round(e * 255);
 }
 
+// The Stokes component a channel's short name starts with: 0..3 for S0..S3
+// and S0.Y, S2.R, ... (docs/polarization.md), else -1.
+function stokesComponent(c) {
+  return /^S[0-3](\.|$)/.test(c) ? Number(c[1]) : -1;
+}
+
+// A plane's Stokes layout: {nColor, colors} when its short names are
+// S0..S3, S0.Y..S3.Y or S0.R S0.G S0.B S1.R .. S3.B (component-major),
+// else null.
+export function stokesLayout(names) {
+  const n = names.length, nc = n / 4;
+  if (n < 4 || n % 4 || nc > 4) return null;
+  const colors = names.slice(0, nc).map((c) => (c.length > 3 ? c.slice(3) : ''));
+  for (let k = 0; k < n; k++) {
+    const want = `S${Math.floor(k / nc)}${colors[k % nc] ? '.' + colors[k % nc] : ''}`;
+    if (names[k] !== want) return null;
+  }
+  return { nColor: nc, colors };
+}
+
 // A film's planes: its radiance (the channels without a dot: R, G, B or
-// Y) and each plane the render added (brf.Y, radiance_stderr.R, ...), as
-// [{name, idx: channel indices, names: the channels' short names}], the
+// Y; S0..S3, S0.Y.., S0.R.. for Stokes films) and each plane the render
+// added (brf.Y, radiance_stderr.R, brf.S0.Y, ...), as [{name, idx: channel
+// indices, names: the channels' short names, stokes: stokesLayout}], the
 // radiance first. A mono film with BRF and error planes is three planes of
 // one channel each, not an RGB film.
 export function filmPlanes(film) {
   const out = [{ name: 'radiance', idx: [], names: [] }];
   const by = new Map([['radiance', out[0]]]);
   film.channels.forEach((c, i) => {
-    const dot = c.indexOf('.');
+    const dot = stokesComponent(c) >= 0 ? -1 : c.indexOf('.');
     const name = dot < 0 ? 'radiance' : c.slice(0, dot);
     if (!by.has(name)) {
       by.set(name, { name, idx: [], names: [] });
@@ -43,7 +64,72 @@ export function filmPlanes(film) {
     by.get(name).idx.push(i);
     by.get(name).names.push(dot < 0 ? c : c.slice(dot + 1));
   });
+  for (const p of out) p.stokes = stokesLayout(p.names);
   return out;
+}
+
+// DoLP = sqrt(S1² + S2²) / S0 (0 where S0 = 0) and AoLP = ½ atan2(S2, S1)
+// in degrees, in (-90, 90] (0 where S1 = S2 = 0): docs/polarization.md.
+export function dolp(s0, s1, s2) {
+  return s0 === 0 ? 0 : Math.hypot(s1, s2) / s0;
+}
+export function aolp(s1, s2) {
+  if (s1 === 0 && s2 === 0) return 0;
+  const a = (0.5 * Math.atan2(s2, s1) * 180) / Math.PI;
+  return a <= -90 ? a + 180 : a;
+}
+
+// Cyclic hue for an AoLP in [-90, 90] (-90 and 90 are one axis, one
+// colour): hue (aolp + 90) / 180 of the circle, full saturation and value.
+export function hue(a) {
+  const h = ((((a + 90) / 180) % 1) + 1) % 1 * 6, i = Math.floor(h) % 6, f = h - Math.floor(h);
+  const q = Math.round(255 * (1 - f)), t = Math.round(255 * f);
+  return [[255, t, 0], [q, 255, 0], [0, 255, t], [0, q, 255], [t, 0, 255], [255, 0, q]][i];
+}
+
+// Diverging blue-white-red for signed values (S1..S3), t in [0, 1], 0.5 white.
+function diverging(t) {
+  t = Math.min(1, Math.max(0, t));
+  const lo = [59, 76, 192], mid = [240, 240, 240], hi = [180, 4, 38];
+  const [a, b, f] = t < 0.5 ? [lo, mid, 2 * t] : [mid, hi, 2 * t - 1];
+  return [a[0] + (b[0] - a[0]) * f, a[1] + (b[1] - a[1]) * f, a[2] + (b[2] - a[2]) * f];
+}
+
+// A Stokes plane's views: 'rgb' (S0 in colour, rgb films), S0..S3 (the
+// colours' luminance for rgb films), DoLP, AoLP; as [value, label].
+export function stokesViews(plane) {
+  const v = plane.stokes.nColor === 3 ? [['rgb', 'S0 (RGB)']] : [];
+  return v.concat([['s0', 'S0'], ['s1', 'S1'], ['s2', 'S2'], ['s3', 'S3'], ['dolp', 'DoLP'], ['aolp', 'AoLP']]);
+}
+
+// A Stokes plane in display form (view: stokesViews's value): S0 as any
+// one-channel film, S1..S3 signed over [-white, white] (diverging), DoLP
+// greyscale over [0, 1] (linear 8-bit grey: 0.5 is 128), AoLP as a cyclic
+// hue over [-90, 90] degrees. An rgb film's Stokes vector is its colours'
+// luminance-weighted sum (linear, so DoLP and AoLP are those of that sum).
+function stokesModel(film, plane, view, white, scale) {
+  const n = film.width * film.height, c = film.channels.length, d = film.data, nc = plane.stokes.nColor;
+  const sc = scale || plane.idx.map(() => 1);
+  const lum = nc === 3 ? [0.212671, 0.71516, 0.072169] : [1];
+  const comp = (k, s) => {
+    let v = 0;
+    for (let j = 0; j < nc; j++) v += lum[j] * (d[k * c + plane.idx[s * nc + j]] ?? NaN) * sc[s * nc + j];
+    return v;
+  };
+  const values = new Float64Array(n);
+  const inv = white > 0 ? 1 / white : 0;
+  if (view === 'dolp' || view === 'aolp') {
+    for (let k = 0; k < n; k++) values[k] = view === 'dolp' ? dolp(comp(k, 0), comp(k, 1), comp(k, 2)) : aolp(comp(k, 1), comp(k, 2));
+    if (view === 'dolp') {
+      const g = (k) => Math.round(255 * Math.min(1, Math.max(0, values[k])));
+      return { values, color: (k) => [g(k), g(k), g(k)], rgb: false, kind: 'dolp', lo: 0, hi: 1, ramp: (t) => [255 * t, 255 * t, 255 * t] };
+    }
+    return { values, color: (k) => (Number.isFinite(values[k]) ? hue(values[k]) : [0, 0, 0]), rgb: false, kind: 'aolp', lo: -90, hi: 90, ramp: (t) => hue(180 * t - 90) };
+  }
+  const s = Number(view.slice(1));
+  for (let k = 0; k < n; k++) values[k] = comp(k, s);
+  if (s === 0) return { values, color: (k) => viridis(values[k] * inv), rgb: false, kind: 'false-colour', lo: 0, hi: white, ramp: viridis };
+  return { values, color: (k) => diverging(0.5 + 0.5 * values[k] * inv), rgb: false, kind: 'signed', lo: -white, hi: white, ramp: diverging };
 }
 
 // The film in display form, for the channels idx of one plane (each times
@@ -52,7 +138,13 @@ export function filmPlanes(film) {
 // the value shown at full scale (2^-EV: at 0 EV a value of 1 is white, as
 // in Mitsuba's 8-bit sRGB conversion). Returns {values: Float64Array per
 // pixel (the displayed quantity), color(k) → [r,g,b] for pixel k, rgb}.
-export function displayModel(film, idx, mode, white, scale) {
+export function displayModel(film, idx, mode, white, scale, plane) {
+  if (plane && plane.stokes && mode !== 'rgb') return stokesModel(film, plane, mode, white, scale);
+  if (plane && plane.stokes) {
+    // S0 of an rgb Stokes film in colour.
+    idx = idx.slice(0, 3);
+    scale = scale && scale.slice(0, 3);
+  }
   const n = film.width * film.height, c = film.channels.length, d = film.data, m = idx.length;
   const sc = scale || idx.map(() => 1);
   const at = (k, i) => (d[k * c + idx[i]] ?? NaN) * sc[i];
@@ -66,7 +158,8 @@ export function displayModel(film, idx, mode, white, scale) {
   const color = rgbMode
     ? (k) => [srgb8(at(k, 0) * inv), srgb8(at(k, 1) * inv), srgb8(at(k, 2) * inv)]
     : (k) => viridis(values[k] * inv);
-  return { values, color, rgb: rgbMode };
+  const ramp = rgbMode ? (t) => [srgb8(t), srgb8(t), srgb8(t)] : viridis;
+  return { values, color, rgb: rgbMode, kind: rgbMode ? 'rgb' : 'false-colour', lo: 0, hi: white, ramp };
 }
 
 // The automatic full scale: the 99.5th percentile (nearest rank) of the
@@ -139,14 +232,15 @@ function hiDpi(canvas, w, h) {
   return ctx;
 }
 
-// The colour bar from 0 to white: the ramp the film uses, with ticks.
-export function drawColorbar(canvas, white, rgb, unit) {
+// The colour bar of a display model: its ramp from lo to hi, with ticks.
+export function drawColorbar(canvas, model, unit) {
+  const { lo, hi } = model;
   const W = 78, H = 260, x0 = 6, bw = 16, y0 = 8, y1 = H - 8;
   const ctx = hiDpi(canvas, W, H);
   ctx.clearRect(0, 0, W, H);
   for (let y = y0; y <= y1; y++) {
     const t = (y1 - y) / (y1 - y0);
-    const c = rgb ? [srgb8(t), srgb8(t), srgb8(t)] : viridis(t);
+    const c = model.ramp(t);
     ctx.fillStyle = `rgb(${c[0]},${c[1]},${c[2]})`;
     ctx.fillRect(x0, y, bw, 1.5);
   }
@@ -155,12 +249,12 @@ export function drawColorbar(canvas, white, rgb, unit) {
   ctx.fillStyle = '#1d232b';
   ctx.font = '11px system-ui, sans-serif';
   ctx.textBaseline = 'middle';
-  for (const v of ticks(0, white, 5)) {
-    const y = y1 - (v / white) * (y1 - y0);
+  for (const v of ticks(lo, hi, 5)) {
+    const y = y1 - ((v - lo) / (hi - lo)) * (y1 - y0);
     ctx.fillRect(x0 + bw, y, 4, 1);
     ctx.fillText(fmt(v), x0 + bw + 7, y);
   }
-  canvas.title = `0 … ${fmt(white)} ${unit} (values above are clipped)`;
+  canvas.title = `${fmt(lo)} … ${fmt(hi)} ${unit}${model.kind === 'aolp' ? ' (cyclic)' : ' (values beyond are clipped)'}`;
 }
 
 // ---- polar plot of a hemisphere --------------------------------------------

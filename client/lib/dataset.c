@@ -13,6 +13,13 @@
 
 #include "dataset_nc.h"
 #include "internal.h"
+#include "stokes.h"
+
+/* A plane's channel ("brf.Y", "brf.S0.Y"): a dot after a name that is no
+ * Stokes component (a mono_polarized film's radiance is "S0.Y"). */
+static bool plane_channel(const char *name) {
+  return strchr(name, '.') && stokes_component(name) < 0;
+}
 
 rsw_status rsw_job_fetch_dataset(rsw_client *c, const char *job_id, int partial, const char *path) {
   if (!c) return RSW_ERR_INVALID;
@@ -241,7 +248,7 @@ rsw_status rsw_dataset_add_film(rsw_dataset *d, const char *context, const char 
    * "<plane>.<channel>", the planes one after another, each with as many
    * channels as the radiance. */
   int base = 0;
-  while (base < all && !strchr(rsw_film_channel_name(film, base), '.')) base++;
+  while (base < all && !plane_channel(rsw_film_channel_name(film, base))) base++;
   f.channels = base;
   size_t np = (size_t)f.width * (size_t)f.height, ns = np * (size_t)f.channels;
   cJSON *meta = cJSON_Parse(rsw_film_meta(film));
@@ -297,11 +304,19 @@ rsw_status rsw_dataset_add_film(rsw_dataset *d, const char *context, const char 
     const cJSON *wl = cJSON_GetObjectItemCaseSensitive(meta, "wavelength");
     if (!s && cJSON_IsNumber(wl) && !isfinite(d->wl[ci])) d->wl[ci] = wl->valuedouble;
     const cJSON *ir = cJSON_GetObjectItemCaseSensitive(meta, "irradiance");
-    if (!s && cJSON_IsArray(ir) && cJSON_GetArraySize(ir) == f.channels && f.channels <= 4) {
+    /* E_h per channel, or a Stokes film's per colour (the writer takes the
+     * first of each colour's). */
+    stokes_layout sl;
+    int n_ir = cJSON_GetArraySize(ir), n_col = f.channels;
+    if (stokes_layout_of((const char *const *)f.names, f.channels, &sl)) n_col = sl.n_color;
+    if (!s && cJSON_IsArray(ir) && (n_ir == f.channels || n_ir == n_col) && n_ir >= n_col && n_col <= 4) {
       int k = 0;
       const cJSON *x;
       f.has_irradiance = true;
-      cJSON_ArrayForEach(x, ir) f.irradiance[k++] = cJSON_IsNumber(x) ? x->valuedouble : NAN;
+      cJSON_ArrayForEach(x, ir) {
+        if (k == n_col) break;
+        f.irradiance[k++] = cJSON_IsNumber(x) ? x->valuedouble : NAN;
+      }
     }
     const cJSON *sz = cJSON_GetObjectItemCaseSensitive(meta, "sun_zenith_deg");
     const cJSON *sa = cJSON_GetObjectItemCaseSensitive(meta, "sun_azimuth_deg");

@@ -14,6 +14,7 @@
 The manual is docs/python.md; the HTTP API docs/daemon.md.
 """
 
+from ._data import aolp, dolp
 from .client import Client, connect
 from .errors import ConnectionFailed, JobFailed, RaysweepError, UnknownKeyError
 from .jobs import Job, as_completed, grid_contexts
@@ -30,8 +31,10 @@ __all__ = [
     "Scene",
     "SceneParameters",
     "UnknownKeyError",
+    "aolp",
     "as_completed",
     "connect",
+    "dolp",
     "grid_contexts",
     "render",
     "traverse",

@@ -32,8 +32,39 @@ def film_array(film):
     return data.astype(np.float32).reshape(h, w, len(ch))
 
 
+def stokes_channels(names):
+    """A Stokes film's channels (docs/polarization.md) as ``(labels, index)``, else None.
+
+    Stokes films name their channels ``S0 .. S3`` (mono ``pixel_format:
+    "stokes"``), ``S0.Y .. S3.Y`` (mono_polarized) or ``S0.R S0.G S0.B S1.R
+    ... S3.B`` (rgb_polarized), and their planes ``brf.S0.Y`` (``brf.S0``).
+    ``labels`` are the channel dimension's labels with the Stokes component
+    taken out (``Y``, ``R G B``, ``brf.Y``, ...; the bare ``S0`` is ``Y``),
+    ``index[k][c]`` the film channel of component k of label c.
+    """
+    where = {}
+    labels = []
+    for i, name in enumerate(names):
+        parts = name.split(".")
+        ks = [j for j, t in enumerate(parts) if len(t) == 2 and t[0] == "S" and t[1] in "0123"]
+        if len(ks) != 1:
+            return None
+        j = ks[0]
+        colour = ".".join(parts[j + 1:]) or "Y"
+        label = ".".join(parts[:j] + [colour])
+        if label not in labels:
+            labels.append(label)
+        key = (int(parts[j][1]), label)
+        if key in where:
+            return None
+        where[key] = i
+    if len(where) != 4 * len(labels):
+        return None
+    return labels, [[where[(k, lab)] for lab in labels] for k in range(4)]
+
+
 def film_dataarray(film):
-    """A JSON film as an ``xarray.DataArray`` over (y, x, channel).
+    """A JSON film as an ``xarray.DataArray`` over (y, x, channel), or (y, x, stokes, channel).
 
     Coordinates: ``channel`` (its names: ``Y`` or ``R G B``, then ``brf.Y``,
     ``radiance_stderr.Y``, ... for the planes asked for), ``wavelength`` (nm,
@@ -41,6 +72,9 @@ def film_dataarray(film):
     viewing zenith and azimuth in degrees, Eradiate's convention) and, for a
     scene with one directional emitter, ``sza`` and ``saa``. The film's
     ``meta`` (scene, revision, sensor, spp, seed, variant, ...) is in ``attrs``.
+    A Stokes film (:func:`stokes_channels`) has a ``stokes`` dimension too,
+    labelled ``S0 .. S3``: :func:`raysweep.dolp` and :func:`raysweep.aolp`
+    take it.
     """
     import xarray as xr
 
@@ -62,8 +96,77 @@ def film_dataarray(film):
     attrs["long_name"] = "radiance"
     if meta.get("planes"):
         attrs["planes"] = ", ".join(f"{p['name']} [{p['units']}]" for p in meta["planes"])
-    return xr.DataArray(film_array(film), dims=("y", "x", "channel"), coords=coords, attrs=attrs,
-                        name="radiance")
+    data = film_array(film)
+    st = stokes_channels(film["channels"])
+    if st is not None:
+        labels, index = st
+        coords["channel"] = labels
+        coords["stokes"] = list(STOKES)
+        data = np.stack([data[:, :, idx] for idx in index], axis=2)
+        return xr.DataArray(data, dims=("y", "x", "stokes", "channel"), coords=coords, attrs=attrs,
+                            name="radiance")
+    return xr.DataArray(data, dims=("y", "x", "channel"), coords=coords, attrs=attrs, name="radiance")
+
+
+STOKES = ("S0", "S1", "S2", "S3")
+AOLP_CONVENTION = ("0.5 atan2(S2, S1) in degrees, in (-90, 90], 0 where S1 = S2 = 0; from x towards y of the "
+                   "film's Stokes basis (docs/polarization.md#stokes-conventions)")
+
+
+def _components(x, axis):
+    """S0, S1, S2 of x: a DataArray or Dataset with a ``stokes`` dimension, or an array along ``axis``."""
+    if hasattr(x, "data_vars"):  # a Dataset: its radiance (radiance_srf for bands)
+        name = "radiance" if "radiance" in x.data_vars else "radiance_srf"
+        if name not in x.data_vars:
+            raise RaysweepError("dolp/aolp: the dataset has no radiance or radiance_srf variable")
+        x = x[name]
+    if hasattr(x, "dims"):
+        if "stokes" not in x.dims:
+            raise RaysweepError(f"dolp/aolp: no 'stokes' dimension in {tuple(x.dims)} (not a Stokes film)")
+        return [x.sel(stokes=k) for k in STOKES[:3]], True
+    a = np.asarray(x)
+    if a.shape[axis] != 4:
+        raise RaysweepError(f"dolp/aolp: axis {axis} has {a.shape[axis]} values, wanted S0..S3")
+    return [np.take(a, k, axis=axis) for k in range(3)], False
+
+
+def dolp(x, axis=-1):
+    """The degree of linear polarization sqrt(S1^2 + S2^2) / S0 (0 where S0 = 0).
+
+    ``x``: a film or dataset variable with a ``stokes`` dimension (``render``
+    of a Stokes film, ``ds.radiance``, ``ds.radiance_srf``), a whole dataset
+    (its radiance), or a numpy array whose ``axis`` holds S0..S3. Datasets
+    carry it already as ``dolp`` (``dolp_srf`` for bands).
+    """
+    (s0, s1, s2), is_xr = _components(x, axis)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.sqrt(s1 * s1 + s2 * s2) / s0
+    r = r.where(s0 != 0, 0.0) if is_xr else np.where(s0 == 0, 0.0, r)
+    if is_xr:
+        r.name = "dolp"
+        r.attrs = {"long_name": "degree of linear polarization", "units": "1"}
+    return r
+
+
+def aolp(x, axis=-1):
+    """The angle of linear polarization 0.5 atan2(S2, S1) in degrees, in (-90, 90].
+
+    Takes what :func:`dolp` takes; 0 where S1 = S2 = 0. Datasets carry it
+    already as ``aolp`` (``aolp_srf``), with the convention in its attrs.
+    """
+    (_, s1, s2), is_xr = _components(x, axis)
+    if is_xr:
+        import xarray as xr
+        r = 0.5 * np.degrees(xr.apply_ufunc(np.arctan2, s2, s1))
+    else:
+        r = 0.5 * np.degrees(np.arctan2(s2, s1))
+    r = r.where(r > -90, r + 180) if is_xr else np.where(r <= -90, r + 180, r)
+    zero = (s1 == 0) & (s2 == 0)
+    r = r.where(~zero, 0.0) if is_xr else np.where(zero, 0.0, r)
+    if is_xr:
+        r.name = "aolp"
+        r.attrs = {"long_name": "angle of linear polarization", "units": "degree", "comment": AOLP_CONVENTION}
+    return r
 
 
 def _attr(v):

@@ -35,6 +35,7 @@
 #include <string.h>
 
 #include "service_internal.h"
+#include "stokes.h"
 
 /* ---- Gauss-Legendre on [-1, 1] ---------------------------------------------------- */
 
@@ -511,14 +512,24 @@ rsw_status bands_combine(const band *b, const film_image *const *nodes, film_ima
   o.n_planes = 0;
   o.wavelength = NAN;
   double W = b->integral;
+  /* Every Stokes component (stokes.h) integrates on its own, as any
+   * channel: the band's Stokes vector is Σ w_i S_i / Σ w_i, and its DoLP
+   * and AoLP are the dataset's, derived from that vector (never a mean of
+   * the nodes' DoLPs). E_h is per colour: a Stokes film's channel k
+   * divides by its colour's, E[k % n_color]. */
+  size_t n_ir = C;
+  stokes_layout sl;
+  if ((size_t)f0->channels <= sizeof f0->channel_names / sizeof f0->channel_names[0] &&
+      stokes_layout_of(f0->channel_names, f0->channels, &sl))
+    n_ir = (size_t)sl.n_color;
   double e_srf[4] = {0, 0, 0, 0};
   if (f0->has_irradiance)
-    for (size_t c = 0; c < C && c < 4; c++) {
+    for (size_t c = 0; c < n_ir && c < 4; c++) {
       double s = 0;
       for (size_t i = 0; i < b->n_nodes; i++) s += b->w[i] * nodes[i]->irradiance[c];
       e_srf[c] = s / W;
-      o.irradiance[c] = e_srf[c];
     }
+  for (size_t c = 0; f0->has_irradiance && c < C && c < 4; c++) o.irradiance[c] = e_srf[c % n_ir];
   bool ok = (o.data = malloc(n * sizeof *o.data)) != NULL;
   if (ok && f0->angles) {
     size_t na = (size_t)f0->width * (size_t)f0->height * 2;
@@ -551,7 +562,7 @@ rsw_status bands_combine(const band *b, const film_image *const *nodes, film_ima
         }
         v = sqrt(var) / W;
       } else {
-        v = (strcmp(name, "brf") == 0 ? M_PI : 1.0) * l / e_srf[c < 4 ? c : 0];
+        v = (strcmp(name, "brf") == 0 ? M_PI : 1.0) * l / e_srf[c % n_ir < 4 ? c % n_ir : 0];
       }
       o.planes[p].data[q] = (float)v;
     }

@@ -130,6 +130,7 @@ rsw_status service_job_dataset(service *svc, const char *id, bool partial, void 
   uint64_t revision = j->revision, seed = j->seed;
   char *warnings = warnings_text(j->warnings);
   rsw_variant variant = j->variant;
+  bool polarized = false; /* the films': a job's record keeps the variant only */
   rsw_status st = RSW_OK;
   /* A job with bands: its bands (copied: the job may go) and node
    * wavelengths. */
@@ -214,7 +215,7 @@ rsw_status service_job_dataset(service *svc, const char *id, bool partial, void 
     if (!d->present) continue;
     const film_image *im = &d->film.img;
     if (!isfinite(wl[d->context]) && im->wavelength > 0 && !d->node) wl[d->context] = im->wavelength;
-    if (n_films == 0) variant = im->variant; /* a restored job's record has none */
+    if (n_films == 0) variant = im->variant, polarized = im->polarized; /* a restored job's record has none */
     size_t nv = film_vars(im, d->vars);
     films[n_films++] = (nc_film){.context = d->context,
                                  .sensor = d->sensor,
@@ -286,7 +287,7 @@ rsw_status service_job_dataset(service *svc, const char *id, bool partial, void 
   if (!st) {
     nc_dataset ds = {.size = sizeof ds,
                      .scene = scene_id,
-                     .variant = variant == VARIANT_MONO ? "mono" : "rgb",
+                     .variant = variant_name(variant, polarized),
                      .job = jid,
                      .has_revision = true,
                      .revision = revision,

@@ -13,6 +13,7 @@
 
 #include "../support/test.h"
 #include "dataset_nc.h"
+#include "stokes.h"
 
 RSW_TEST_DEFINE_GLOBALS
 
@@ -258,10 +259,178 @@ static void test_bad_films(void) {
         "the quantity table");
 }
 
+/* Stokes films (common/stokes.h): a stokes dimension S0..S3 (channel over
+ * the colours where there are several), and dolp / aolp from the Stokes
+ * vector, for the three channel namings. One context, 2x1 pixels; pixel 0
+ * of colour c is (1, 0.5, -0.25, 0.125) scaled by c + 1, pixel 1 is
+ * unpolarized (2, 0, 0, 0) but for colour 1 with S0 = 0 (dolp 0 by
+ * definition). Closed forms: dolp = sqrt(0.5^2 + 0.25^2) = 0.559017,
+ * aolp = 0.5 atan2(-0.25, 0.5) = -13.2825 degrees. */
+static void stokes_case(const char *variant, const char *const *names, int nch, int n_col) {
+  float data[2 * 12], brf[2 * 12];
+  const float pol[4] = {1.0f, 0.5f, -0.25f, 0.125f};
+  for (int c = 0; c < n_col; c++)
+    for (int k = 0; k < 4; k++) {
+      data[k * n_col + c] = pol[k] * (float)(c + 1);
+      data[nch + k * n_col + c] = k == 0 && c != 1 ? 2.0f : 0.0f;
+    }
+  for (int i = 0; i < 2 * nch; i++) brf[i] = data[i] * 0.5f;
+  nc_var vars[2] = {{"radiance", data}, {"brf", brf}};
+  const char *ids[1] = {"k0"};
+  nc_film film = {.context = 0,
+                  .sensor = "cam",
+                  .width = 2,
+                  .height = 1,
+                  .channels = nch,
+                  .channel_names = names,
+                  .spp = 4,
+                  .vars = vars,
+                  .n_vars = 2,
+                  .has_irradiance = true,
+                  .irradiance = {2, 2, 2, 2}};
+  nc_dataset d = {.size = sizeof d,
+                  .variant = variant,
+                  .n_contexts = 1,
+                  .context_ids = ids,
+                  .films = &film,
+                  .n_films = 1};
+  void *bytes = NULL;
+  rsw_err err = {0};
+  int ncid = encode_open(&d, &bytes, &err);
+  REQUIRE(ncid >= 0, "%s: encode: %s", names[0], err.msg);
+  int dim, var, nd = 0, dims[8];
+  size_t len = 0;
+  CHECK(nc_inq_dimid(ncid, "stokes", &dim) == NC_NOERR && nc_inq_dimlen(ncid, dim, &len) == NC_NOERR &&
+            len == 4,
+        "%s: a stokes dimension of 4", names[0]);
+  char *lab[4] = {0};
+  CHECK(nc_inq_varid(ncid, "stokes", &var) == NC_NOERR && nc_get_var_string(ncid, var, lab) == NC_NOERR &&
+            lab[0] && strcmp(lab[0], "S0") == 0 && strcmp(lab[3], "S3") == 0,
+        "%s: stokes labels S0..S3", names[0]);
+  nc_free_string(4, lab);
+  bool has_ch = nc_inq_dimid(ncid, "channel", &dim) == NC_NOERR;
+  CHECK(has_ch == (n_col > 1), "%s: a channel dimension only for several colours", names[0]);
+  if (has_ch) {
+    char *cl[3] = {0};
+    CHECK(nc_inq_dimlen(ncid, dim, &len) == NC_NOERR && len == (size_t)n_col, "channel of n_col");
+    CHECK(nc_inq_varid(ncid, "channel", &var) == NC_NOERR && nc_get_var_string(ncid, var, cl) == NC_NOERR &&
+              cl[0] && strcmp(cl[0], "R") == 0 && strcmp(cl[2], "B") == 0,
+          "channel labels R G B");
+    nc_free_string(3, cl);
+  }
+  /* radiance over (context, y, x, stokes[, channel]), the film's values. */
+  float r[24];
+  REQUIRE(nc_inq_varid(ncid, "radiance", &var) == NC_NOERR && nc_inq_varndims(ncid, var, &nd) == NC_NOERR &&
+              nd == (has_ch ? 5 : 4) && nc_get_var_float(ncid, var, r) == NC_NOERR,
+          "%s: radiance over %d dims", names[0], nd);
+  CHECK(memcmp(r, data, sizeof(float) * 2 * (size_t)nch) == 0, "%s: radiance holds the film's values",
+        names[0]);
+  nc_inq_vardimid(ncid, var, dims);
+  char dn[NC_MAX_NAME + 1];
+  nc_inq_dimname(ncid, dims[3], dn);
+  CHECK(strcmp(dn, "stokes") == 0, "%s: radiance's 4th dimension is stokes (%s)", names[0], dn);
+  float dolp[6], aolp[6];
+  REQUIRE(nc_inq_varid(ncid, "dolp", &var) == NC_NOERR && nc_inq_varndims(ncid, var, &nd) == NC_NOERR &&
+              nd == (has_ch ? 4 : 3) && nc_get_var_float(ncid, var, dolp) == NC_NOERR,
+          "%s: dolp over (context, y, x[, channel])", names[0]);
+  char units[32] = {0};
+  CHECK(nc_get_att_text(ncid, var, "units", units) == NC_NOERR && strcmp(units, "1") == 0, "dolp units");
+  REQUIRE(nc_inq_varid(ncid, "aolp", &var) == NC_NOERR && nc_get_var_float(ncid, var, aolp) == NC_NOERR,
+          "%s: aolp", names[0]);
+  memset(units, 0, sizeof units);
+  CHECK(nc_get_att_text(ncid, var, "units", units) == NC_NOERR && strcmp(units, "degree") == 0, "aolp units");
+  size_t clen = 0;
+  CHECK(nc_inq_attlen(ncid, var, "comment", &clen) == NC_NOERR && clen > 20, "aolp states its convention");
+  for (int c = 0; c < n_col; c++) {
+    CHECK(fabsf(dolp[c] - 0.559017f) < 1e-5f, "%s: dolp %g, wanted 0.559017", names[0], dolp[c]);
+    CHECK(fabsf(aolp[c] - -13.28252f) < 1e-4f, "%s: aolp %g, wanted -13.28252", names[0], aolp[c]);
+    CHECK(dolp[n_col + c] == 0.0f && aolp[n_col + c] == 0.0f, "%s: unpolarized and S0 = 0: dolp 0, aolp 0",
+          names[0]);
+  }
+  CHECK(nc_inq_varid(ncid, "brf_dolp", &var) != NC_NOERR, "no second dolp for brf");
+  /* irradiance per colour, not per Stokes component. */
+  CHECK(nc_inq_varid(ncid, "irradiance", &var) == NC_NOERR && nc_inq_varndims(ncid, var, &nd) == NC_NOERR &&
+            nd == (has_ch ? 2 : 1),
+        "%s: irradiance over (context[, channel])", names[0]);
+  nc_close(ncid);
+  free(bytes);
+}
+
+static void test_stokes_films(void) {
+  static const char *const bare[4] = {"S0", "S1", "S2", "S3"};
+  static const char *const mono[4] = {"S0.Y", "S1.Y", "S2.Y", "S3.Y"};
+  static const char *const rgb[12] = {"S0.R", "S0.G", "S0.B", "S1.R", "S1.G", "S1.B",
+                                      "S2.R", "S2.G", "S2.B", "S3.R", "S3.G", "S3.B"};
+  stokes_case("mono", bare, 4, 1);
+  stokes_case("mono_polarized", mono, 4, 1);
+  stokes_case("rgb_polarized", rgb, 12, 3);
+  /* Not Stokes: a plain rgb film keeps its channel dimension, labelled. */
+  static const char *const plain[3] = {"R", "G", "B"};
+  float data[6] = {1, 2, 3, 4, 5, 6};
+  nc_var var = {"radiance", data};
+  const char *ids[1] = {"k0"};
+  nc_film film = {.sensor = "cam",
+                  .width = 2,
+                  .height = 1,
+                  .channels = 3,
+                  .channel_names = plain,
+                  .vars = &var,
+                  .n_vars = 1};
+  nc_dataset d = {
+      .size = sizeof d, .variant = "rgb", .n_contexts = 1, .context_ids = ids, .films = &film, .n_films = 1};
+  void *bytes = NULL;
+  rsw_err err = {0};
+  int ncid = encode_open(&d, &bytes, &err);
+  REQUIRE(ncid >= 0, "rgb encode: %s", err.msg);
+  int dim, v;
+  char *cl[3] = {0};
+  CHECK(nc_inq_dimid(ncid, "stokes", &dim) != NC_NOERR && nc_inq_varid(ncid, "dolp", &v) != NC_NOERR,
+        "an rgb film has no stokes dimension and no dolp");
+  CHECK(nc_inq_varid(ncid, "channel", &v) == NC_NOERR && nc_get_var_string(ncid, v, cl) == NC_NOERR &&
+            cl[1] && strcmp(cl[1], "G") == 0,
+        "the channel coordinate holds the channel names");
+  nc_free_string(3, cl);
+  nc_close(ncid);
+  free(bytes);
+  /* dolp is derived, never handed in. */
+  var.name = "dolp";
+  size_t len;
+  CHECK(nc_dataset_encode(&d, &bytes, &len, &err) == RSW_ERR_INVALID, "a film's own dolp is refused");
+}
+
+/* stokes.h's closed forms and layouts. */
+static void test_stokes_helpers(void) {
+  CHECK(stokes_dolp(0, 0, 0) == 0 && stokes_dolp(0, 1, 1) == 0, "dolp 0 where S0 = 0");
+  CHECK(fabs(stokes_dolp(2, 1, -1) - sqrt(2) / 2) < 1e-15, "dolp sqrt(S1^2 + S2^2) / S0");
+  CHECK(isnan(stokes_dolp(NAN, 0, 0)), "dolp NaN in, NaN out");
+  CHECK(stokes_aolp_deg(1, 0) == 0 && fabs(stokes_aolp_deg(0, 1) - 45) < 1e-12 &&
+            fabs(stokes_aolp_deg(0, -1) + 45) < 1e-12,
+        "aolp 0, 45, -45");
+  CHECK(stokes_aolp_deg(-1, 0) == 90 && stokes_aolp_deg(-1, -0.0) == 90,
+        "aolp 90 (not -90) for S1 < 0, S2 = -0");
+  CHECK(stokes_aolp_deg(0, 0) == 0 && stokes_aolp_deg(-0.0, -0.0) == 0, "aolp 0 where S1 = S2 = 0");
+  stokes_layout l;
+  const char *ok3[12] = {"S0.R", "S0.G", "S0.B", "S1.R", "S1.G", "S1.B",
+                         "S2.R", "S2.G", "S2.B", "S3.R", "S3.G", "S3.B"};
+  CHECK(stokes_layout_of(ok3, 12, &l) && l.n_color == 3 && strcmp(l.color[2], "B") == 0, "rgb layout");
+  const char *bad1[4] = {"S0", "S1", "S3", "S2"};
+  const char *bad2[4] = {"S0.Y", "S1.Y", "S2.X", "S3.Y"};
+  const char *bad3[4] = {"Y", "brf.Y", "brdf.Y", "radiance_stderr.Y"};
+  const char *bad4[8] = {"S0", "S0", "S1", "S1", "S2", "S2", "S3", "S3"};
+  CHECK(!stokes_layout_of(bad1, 4, &l) && !stokes_layout_of(bad2, 4, &l) && !stokes_layout_of(bad3, 4, &l) &&
+            !stokes_layout_of(bad4, 8, &l) && !stokes_layout_of(ok3, 3, &l),
+        "not Stokes layouts");
+  CHECK(stokes_component("S2.Y") == 2 && stokes_component("S2") == 2 && stokes_component("S4") == -1 &&
+            stokes_component("S0Y") == -1 && stokes_component("brf.S0.Y") == -1,
+        "stokes_component");
+}
+
 int main(void) {
   RSW_TEST_RUN(test_coords_errors);
   RSW_TEST_RUN(test_grid_any_order);
   RSW_TEST_RUN(test_not_a_grid);
   RSW_TEST_RUN(test_bad_films);
+  RSW_TEST_RUN(test_stokes_helpers);
+  RSW_TEST_RUN(test_stokes_films);
   RSW_TEST_END("test_dataset_nc");
 }

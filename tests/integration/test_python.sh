@@ -44,7 +44,8 @@ if "$vpy" -c 'import raysweep, sys; assert raysweep.__file__.startswith(sys.pref
 echo "test_python: install $(secs "$t0") s"
 
 # ---- the package's tests ----------------------------------------------------------------
-start_daemon "$tmp/d"
+# With the SDK examples (tests/plugins), for the Stokes films' tests.
+start_daemon "$tmp/d" --plugin-dir "$bin/../plugins"
 [ -n "$started_port" ] || {
   bad "daemon did not start: $(tail -n 5 "$tmp/d/log")"
   finish
@@ -55,7 +56,7 @@ start_daemon "$tmp/d2" --token-file "$tmp/token"
 url2=http://127.0.0.1:$started_port
 
 t1=$(date +%s.%N)
-RAYSWEEP_URL=$url RSW_TOKEN_URL=$url2 RSW_TOKEN=$(cat "$tmp/token") RSW_ROOT=$root RSW_BIN=$bin \
+RSW_STOKES=1 RAYSWEEP_URL=$url RSW_TOKEN_URL=$url2 RSW_TOKEN=$(cat "$tmp/token") RSW_ROOT=$root RSW_BIN=$bin \
   "$vpy" "$root/tests/python/test_client.py" >client.log 2>&1
 summary=$(grep -E '^test_client: [0-9]+ passed, [0-9]+ failed$' client.log)
 if [ -n "$summary" ]; then

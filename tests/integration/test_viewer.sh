@@ -9,7 +9,8 @@
 #    (screenshot pixels), draws the polar plot of the hdistant film where
 #    the film's angles put it, follows a job to the end over the event
 #    stream and cancels another; with a token configured it refuses
-#    without it. Screenshots stay in $BUILD/test-artefacts/viewer.
+#    without it; shows a Stokes film (tests/plugins/polarized_sky.c) as
+#    S0..S3, DoLP (grey) and AoLP (cyclic hue), pixels checked. Screenshots stay in $BUILD/test-artefacts/viewer.
 # Chromium (Debian's `chromium`, in tools/deps.sh) is required: without it
 # the test fails, it does not skip. RSW_VIEWER_DOCS_PNG=FILE also writes
 # the page's screenshot there (docs/viewer.png is made so).
@@ -28,7 +29,8 @@ fi
 art="$root/${BUILD:-build}/test-artefacts/viewer"
 rm -rf "$art" && mkdir -p "$art"
 
-start_daemon "$tmp/d1" --threads 2
+# With the SDK examples (tests/plugins): a Stokes film's views.
+start_daemon "$tmp/d1" --threads 2 --plugin-dir "$bin/../plugins"
 U=http://127.0.0.1:$started_port
 [ -n "$started_port" ] || { bad "daemon did not start: $(cat "$tmp/d1/log")"; finish; }
 echo "secret-$$-token" >"$tmp/token"

@@ -353,6 +353,68 @@ class TestRender(Base):
         self.assertEqual(cm.exception.pointer, "/sensor")
 
 
+def stokes_dict(p=0.6, chi=30.0):
+    """A 3x2 mono Stokes camera under tests/plugins/polarized_sky.c (DoLP p, AoLP chi) and a sun of E_h = 2."""
+    return {"type": "scene", "variant": "mono",
+            "camera": {"type": "perspective", "fov": 20,
+                       "to_world": [{"lookat": {"origin": [0, 0, 5], "target": [0, 0, 0], "up": [0, 1, 0]}}],
+                       "sampler": {"type": "independent", "sample_count": 4},
+                       "film": {"type": "hdrfilm", "width": 3, "height": 2, "pixel_format": "stokes",
+                                "component_format": "float32", "rfilter": {"type": "box"}}},
+            "sun": {"type": "directional", "direction": [0, 0, -1], "irradiance": 2.0},
+            "sky": {"type": "polarized_sky", "polarization": p, "polarization_angle": chi}}
+
+
+@unittest.skipUnless(os.environ.get("RSW_STOKES"), "needs a daemon with tests/plugins (RSW_STOKES=1)")
+class TestStokes(Base):
+    """Stokes films (docs/polarization.md): every escaped ray sees DoLP p and AoLP chi exactly."""
+
+    def test_render_stokes_dimension(self):
+        da = self.client.load_dict(stokes_dict(0.6, 30.0)).render(spp=4, quantities=["brf"])
+        self.assertEqual(da.dims, ("y", "x", "stokes", "channel"))
+        self.assertEqual(list(da.stokes.values), ["S0", "S1", "S2", "S3"])
+        self.assertEqual(list(da.channel.values), ["Y", "brf.Y"])
+        want = [1.0, 0.6 * math.cos(math.radians(60)), 0.6 * math.sin(math.radians(60)), 0.0]
+        np.testing.assert_allclose(da.sel(channel="Y").isel(y=0, x=0).values, want, atol=1e-6)
+        np.testing.assert_allclose(rs.dolp(da).sel(channel="Y").values, 0.6, atol=1e-6)
+        np.testing.assert_allclose(rs.aolp(da).values, 30.0, atol=1e-4)  # brf's too: the same vector / E_h
+        self.assertEqual(rs.aolp(da).attrs["units"], "degree")
+        film = self.client.load_dict(stokes_dict(0.6, -75.0)).render(spp=4, xarray=False)
+        self.assertEqual(film.shape, (2, 3, 4))
+        np.testing.assert_allclose(rs.aolp(film), -75.0, atol=1e-4)
+        np.testing.assert_allclose(rs.dolp(film), 0.6, atol=1e-6)
+
+    def test_render_mono_polarized(self):
+        d = stokes_dict(0.6, 30.0)
+        d["variant"] = "mono_polarized"
+        del d["camera"]["film"]["pixel_format"]
+        da = self.client.load_dict(d).render(spp=4, variance=True)
+        self.assertEqual(da.dims, ("y", "x", "stokes", "channel"))
+        self.assertEqual(list(da.channel.values), ["Y", "radiance_stderr.Y"])
+        s = da.sel(channel="Y").values.astype(np.float64)
+        np.testing.assert_allclose(rs.dolp(da).sel(channel="Y").values, np.hypot(s[..., 1], s[..., 2]) / s[..., 0],
+                                   atol=1e-6)
+        self.assertTrue((rs.dolp(da).sel(channel="Y").values <= 0.6 + 1e-6).all())
+
+    def test_sweep_dataset(self):
+        ds = self.client.load_dict(stokes_dict(0.4)).sweep(
+            grid={"sky.polarization_angle": [-60, 0, 90]}, spp=4, progress=False)
+        self.assertEqual(ds.radiance.dims, ("polarization_angle", "y", "x", "stokes"))
+        self.assertEqual(ds.dolp.dims, ("polarization_angle", "y", "x"))
+        np.testing.assert_allclose(ds.dolp.values, 0.4, atol=1e-6)
+        np.testing.assert_allclose(ds.aolp.isel(y=0, x=0).values, [-60, 0, 90], atol=1e-4)
+        # The helpers agree with the dataset's own variables.
+        np.testing.assert_allclose(rs.aolp(ds).values, ds.aolp.values, atol=1e-4)
+        np.testing.assert_allclose(rs.dolp(ds.radiance).values, ds.dolp.values, atol=1e-6)
+
+    def test_helpers_refuse_non_stokes(self):
+        with self.assertRaises(rs.RaysweepError):
+            rs.dolp(np.zeros((2, 3, 1)))
+        da = self.plate(0.5).render(spp=4)
+        with self.assertRaises(rs.RaysweepError):
+            rs.aolp(da)
+
+
 class TestSweep(Base):
     def test_grid_dataset(self):
         scene = self.plate(0.5)

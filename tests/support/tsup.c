@@ -160,3 +160,35 @@ char *tsup_dense_slab(const char *integ, const char *med, double th0) {
       integ, med, sin(th0), -cos(th0));
   return b.p;
 }
+
+bool tsup_build_plugin(const char *src, const char *name, char *dir) {
+  snprintf(dir, 64, "/tmp/rsw-plugin-XXXXXX");
+  if (!mkdtemp(dir)) {
+    printf("  mkdtemp: cannot make a directory for plugin %s\n", name);
+    return false;
+  }
+  char path[160], cmd[1024], inc[512];
+  snprintf(path, sizeof path, "%s/%s.c", dir, name);
+  FILE *f = fopen(path, "w");
+  if (!f || fputs(src, f) < 0) {
+    if (f) fclose(f);
+    printf("  cannot write %s\n", path);
+    return false;
+  }
+  fclose(f);
+  const char *td = getenv("RSW_TEST_DIR");
+  snprintf(inc, sizeof inc, "%s/../include", td && *td ? td : "tests");
+  snprintf(cmd, sizeof cmd, "cc -std=c11 -Wall -Wextra -Werror -shared -fPIC -I '%s' -o '%s/%s.so' '%s'", inc,
+           dir, name, path);
+  if (system(cmd) != 0) {
+    printf("  could not build plugin %s: %s\n", name, cmd);
+    return false;
+  }
+  return true;
+}
+
+void tsup_remove_dir(const char *dir) {
+  char cmd[128];
+  snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
+  if (system(cmd)) fprintf(stderr, "could not remove %s\n", dir);
+}

@@ -48,6 +48,18 @@ MDISTANT_SCENE = {
     "plate": {"type": "rectangle", "bsdf": {"type": "roughconductor"}},
 }
 
+# A 4x4 Stokes camera under tests/plugins/polarized_sky.c (the daemon runs
+# with --plugin-dir build/plugins): every pixel sees DoLP 0.6 and AoLP 30°.
+STOKES_SCENE = {
+    "type": "scene", "variant": "mono",
+    "cam": {"type": "perspective", "fov": 20,
+            "to_world": [{"lookat": {"origin": [0, 0, 5], "target": [0, 0, 0], "up": [0, 1, 0]}}],
+            "sampler": {"type": "independent", "sample_count": 4},
+            "film": {"type": "hdrfilm", "width": 4, "height": 4, "pixel_format": "stokes",
+                     "rfilter": {"type": "box"}}},
+    "sky": {"type": "polarized_sky", "polarization": 0.6, "polarization_angle": 30},
+}
+
 # An RPV plate under a sun whose zenith is the coordinate `sza` (a template
 # of the scene), a 4x4 hdistant film: the job form sweeps sza and the
 # plate's rho_0 (a parameter key), the sweep view plots its BRF.
@@ -831,6 +843,50 @@ def run(a, profile, browser):
         if j["state"] == "running" and not (0 < r.get("samples_done", 0) <= r.get("samples_total", 0) == 32 * 32 * 200000):
             return f"GET job says render {r}, want samples_done > 0 of 32*32*200000"
     check("labels jobs by number, reads durations, shows progress within a render", labels)
+
+    # 14. A Stokes film: S0..S3, DoLP (grey, 0..1) and AoLP (cyclic hue) views.
+    def stokes():
+        st2, sc = http("POST", f"{base}/v1/scenes", STOKES_SCENE)
+        if st2 not in (200, 201):
+            return f"posting the Stokes scene: {st2} {sc}"
+        page.goto(f"{base}/ui/")
+        li = f'#scenes li[data-scene="{sc["id"]}"]'
+        if not page.wait(f"document.querySelector('{li}')", 30):
+            return "the Stokes scene is not listed"
+        page.click(li)
+        if not page.wait(f"(document.querySelector('#scenes li.selected') || {{dataset: {{}}}}).dataset.scene === '{sc['id']}'"
+                         " && document.getElementById('r-sensor').value === 'cam'", 30):
+            return "the Stokes scene was not selected"
+        page.type_into("#r-spp", "4")
+        page.js("document.getElementById('film').dataset.ready = ''")
+        page.click("#render")
+        if not page.wait("document.getElementById('film').dataset.ready === '1'", 30):
+            return f"no Stokes film shown; banner: {page.js('document.getElementById(`banner`).textContent')}"
+        opts = page.js("[...document.getElementById('channel').options].map(o => o.textContent)")
+        if opts != ["S0", "S1", "S2", "S3", "DoLP", "AoLP"]:
+            return f"the views offered are {opts}, want S0, S1, S2, S3, DoLP, AoLP"
+        # DoLP 0.6: linear grey 153; AoLP 30°: hue (30 + 90) / 180 of the circle, blue.
+        for view, want in (("dolp", (153, 153, 153)), ("aolp", (0, 0, 255))):
+            page.js(f"(() => {{ const e = document.getElementById('channel'); e.value = '{view}'; e.dispatchEvent(new Event('change')); }})()")
+            if not page.wait(f"document.getElementById('film').dataset.mode === '{view}'", 30):
+                return f"choosing {view} does not show it: {page.js('Object.assign({}, document.getElementById(`film`).dataset)')}"
+            rr = page.rect("#film")
+            png = page.screenshot(rr)
+            open(art(f"stokes-{view}.png"), "wb").write(png)
+            w, h, rows = png_decode(png)
+            px = {rows[int((j + 0.5) * h / 4)][int((i + 0.5) * w / 4)] for j in range(4) for i in range(4)}
+            off = [p for p in px if max(abs(a - b) for a, b in zip(p, want)) > 3]
+            if off:
+                return f"the {view} view shows {sorted(px)}, want {want} everywhere"
+            page.hover(rr["x"] + rr["w"] * 0.4, rr["y"] + rr["h"] * 0.4)
+            label = "DoLP" if view == "dolp" else "AoLP (°)"
+            text = page.wait(f"(() => {{ const t = document.getElementById('hover').textContent; return t.includes('{label}:') && t; }})()", 30)
+            if not text:
+                return f"hovering the {view} view does not show it"
+            v = float(text.rsplit(":", 1)[1])
+            if abs(v - (0.6 if view == "dolp" else 30.0)) > 1e-3:
+                return f"the hover says {text!r}"
+    check("shows a Stokes film's S0..S3, DoLP (grey) and AoLP (cyclic hue)", stokes)
     print(f"# browser part: {time.monotonic() - t0:.1f} s", flush=True)
 
 

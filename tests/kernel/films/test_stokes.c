@@ -40,23 +40,6 @@ static const char *PLUGIN =
 
 static char dir[64];
 
-static bool build(void) {
-  snprintf(dir, sizeof dir, "/tmp/rsw-stokes-XXXXXX");
-  if (!mkdtemp(dir)) return false;
-  char src[128], cmd[1024];
-  snprintf(src, sizeof src, "%s/polsky.c", dir);
-  FILE *f = fopen(src, "w");
-  if (!f) return false;
-  fputs(PLUGIN, f);
-  fclose(f);
-  const char *td = getenv("RSW_TEST_DIR");
-  char inc[512];
-  snprintf(inc, sizeof inc, "%s/../include", td && *td ? td : "tests");
-  snprintf(cmd, sizeof cmd, "cc -std=c11 -Wall -Wextra -Werror -shared -fPIC -I '%s' -o '%s/polsky.so' '%s'",
-           inc, dir, src);
-  return system(cmd) == 0;
-}
-
 static const char *SCENE =
     "{\"type\": \"scene\", \"variant\": \"mono\","
     " \"cam\": {\"type\": \"perspective\", \"fov\": 30,"
@@ -95,12 +78,12 @@ static void test_reflected_light_keeps_the_ratios(void) {
   REQUIRE(tsup_render(s, 0, 2, 2, &img), "render");
   int lit = 0;
   for (int i = 0; i < img.width * img.height; i++) {
-    double I = img.data[4 * i];
-    if (I <= 0) continue;
+    double s0 = img.data[4 * i];
+    if (s0 <= 0) continue;
     lit++;
-    CHECK_REL(img.data[4 * i + 1], 0.5 * I, 1e-5);
-    CHECK_REL(img.data[4 * i + 2], -0.25 * I, 1e-5);
-    CHECK_REL(img.data[4 * i + 3], 0.125 * I, 1e-5);
+    CHECK_REL(img.data[4 * i + 1], 0.5 * s0, 1e-5);
+    CHECK_REL(img.data[4 * i + 2], -0.25 * s0, 1e-5);
+    CHECK_REL(img.data[4 * i + 3], 0.125 * s0, 1e-5);
   }
   CHECK(lit == img.width * img.height, "every pixel sees light (%d)", lit);
   film_image_free(&img);
@@ -117,10 +100,7 @@ static void test_rgb_refuses_stokes(void) {
 }
 
 int main(void) {
-  if (!build()) {
-    printf("could not build the test plugin\n");
-    return 1;
-  }
+  if (!tsup_build_plugin(PLUGIN, "polsky", dir)) return 1;
   rsw_err err = {0};
   if (plugins_load_dir(dir, &err)) {
     printf("load: %s\n", err.msg);
@@ -130,8 +110,6 @@ int main(void) {
   RSW_TEST_RUN(test_reflected_light_keeps_the_ratios);
   RSW_TEST_RUN(test_rgb_refuses_stokes);
   plugins_unload();
-  char cmd[128];
-  snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
-  if (system(cmd)) fprintf(stderr, "could not remove %s\n", dir);
+  tsup_remove_dir(dir);
   RSW_TEST_END("test_stokes");
 }
