@@ -194,7 +194,7 @@ rsw_status rsw_film_save_exr(const rsw_film *f, const char *path) {
   if (!f || !path) return RSW_ERR_INVALID;
   cJSON *meta = cJSON_Parse(f->meta);
   film_exr_info info = film_exr_info_none();
-  double *angles = NULL, irradiance[4];
+  double *angles = NULL, irradiance[12];
   rsw_status s = RSW_OK;
   if (cJSON_IsObject(meta)) {
     uint64_t spp = 0;
@@ -218,7 +218,7 @@ rsw_status rsw_film_save_exr(const rsw_film *f, const char *path) {
     const cJSON *ir = cJSON_GetObjectItemCaseSensitive(meta, "irradiance");
     if (ok && ir && !cJSON_IsNull(ir)) {
       int n = cJSON_GetArraySize(ir), k = 0;
-      ok = cJSON_IsArray(ir) && n >= 1 && n <= 4;
+      ok = cJSON_IsArray(ir) && n >= 1 && n <= 12; /* a Stokes film: up to S0.R..S3.B */
       for (const cJSON *x = ok ? ir->child : NULL; x; x = x->next, k++) {
         if (!cJSON_IsNumber(x)) ok = false;
         irradiance[k] = cJSON_IsNumber(x) ? x->valuedouble : 0;

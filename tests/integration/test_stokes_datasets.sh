@@ -17,7 +17,9 @@
 #   - the same scene in the variant mono_polarized (films S0.Y..S3.Y): the
 #     same layout, variant "mono_polarized", dolp and aolp those of the
 #     dataset's radiance, and the daemon's dataset is the client's; its PNG
-#     quick-look is S0.
+#     quick-look is S0;
+#   - the same in rgb_polarized (S0.R..S3.B): a channel dimension after
+#     stokes, each colour's dolp; the daemon's dataset is the client's.
 # Ends with "test_stokes_datasets: N passed, N failed" (tests/run.sh sums it).
 set -u
 name=test_stokes_datasets
@@ -162,6 +164,54 @@ w, h, ch, rows = png_read.decode_png(open(sys.argv[1], "rb").read(), (0,))
 assert (w, h, ch) == (3, 2, 1), (w, h, ch)
 assert all(v == 255 for r in rows for v in r), rows
 ' mp.png "$root/tests/support"
+# The variant rgb_polarized (environment plugins serve mono only, so a
+# Rayleigh medium: a camera looking horizontally through it under a sun at
+# the zenith sees single scattering at 90 degrees, DoLP 1 and AoLP 0 in
+# every colour): channels S0.R S0.G S0.B S1.R ... S3.B; the dataset gains
+# the channel dimension after stokes, dolp per colour; the daemon's dataset
+# is the client's; the film's JSON lists the 12 channels and their planes.
+cat >rp.json <<'JSON'
+{"type": "scene", "variant": "rgb_polarized",
+ "air": {"type": "homogeneous", "sigma_t": 0.05, "albedo": {"type": "rgb", "value": [0.9, 0.6, 0.3]},
+         "phase": {"type": "rayleigh"}},
+ "box": {"type": "cube", "to_world": [{"scale": [50, 50, 50]}], "bsdf": {"type": "null"},
+         "interior": {"type": "ref", "id": "air"}},
+ "sun": {"type": "directional", "direction": [0, 0, -1], "irradiance": 1.0},
+ "cam": {"type": "perspective", "fov": 0.1, "medium": {"type": "ref", "id": "air"},
+         "to_world": [{"lookat": {"origin": [0, 0, 0], "target": [1, 0, 0], "up": [0, 0, 1]}}],
+         "sampler": {"type": "independent", "sample_count": 64},
+         "film": {"type": "hdrfilm", "width": 3, "height": 2, "component_format": "float32",
+                  "rfilter": {"type": "box"}}},
+ "integrator": {"type": "volpath", "max_depth": 2}}
+JSON
+run "sweep an rgb_polarized film --format nc" rs sweep rp.json --grid sun.irradiance.value=1:2:1 \
+  --quantities brf --variance --seed 5 --format nc -o rp
+pycheck "rgb_polarized: S0.R..S3.B films, stokes x channel" '
+import json, os, sys
+import numpy as np, xarray as xr
+d = sys.argv[1]
+ds = xr.open_dataset(os.path.join(d, "dataset.nc"))
+assert ds.attrs["variant"] == "rgb_polarized", ds.attrs["variant"]
+assert ds.radiance.dims[-4:] == ("y", "x", "stokes", "channel"), ds.radiance.dims
+assert list(ds.channel.values) == ["R", "G", "B"], ds.channel.values
+assert ds.dolp.dims == ds.radiance.dims[:-2] + ("channel",), ds.dolp.dims
+r = ds.radiance.values.astype(np.float64)
+s0 = r[..., 0, :]
+assert (s0 > 0).all() and (np.diff(s0, axis=-1) < 0).all(), s0  # albedo 0.9 > 0.6 > 0.3
+assert np.allclose(ds.dolp.values, 1.0, atol=1e-5), ds.dolp.values
+assert np.allclose(ds.aolp.values, 0.0, atol=1e-3), ds.aolp.values
+line = json.loads(open(os.path.join(d, "index.jsonl")).readline())
+ch = json.load(open(os.path.join(d, line["file"])))["channels"]
+assert ch[:13] == ["S0.R", "S0.G", "S0.B", "S1.R", "S1.G", "S1.B", "S2.R", "S2.G", "S2.B",
+                   "S3.R", "S3.G", "S3.B", "brf.S0.R"], ch
+' rp
+rjob=$("$py" -c 'import json; print(json.load(open("rp/sweep.json"))["job"])')
+run "fetch the daemon's rgb_polarized dataset" rs fetch "$rjob" -o rp_daemon.nc
+if "$py" "$root/tests/support/dataset_check.py" same rp_daemon.nc rp/dataset.nc --ignore-attr job 2>"$tmp/pyerr"; then
+  ok
+else
+  bad "rgb_polarized: the daemon's dataset != the client's: $(tail -n 3 "$tmp/pyerr")"
+fi
 # Under `make test SAN=1` a sanitizer report in the daemon's log is a failure.
 if grep -qE 'Sanitizer|runtime error:' "$tmp/d/log"; then bad "$(grep -m 3 -E 'Sanitizer|runtime error:' "$tmp/d/log")"; else ok; fi
 finish
