@@ -1,0 +1,281 @@
+/* The BSDFs' polarization factors (bsdf_ops.polarization, bsdfs/fresnel_pol.h;
+ * docs/polarization.md#surfaces), against the Fresnel equations computed
+ * here in real arithmetic (Born & Wolf, Principles of Optics, sect. 1.5.2,
+ * 1.5.4 and 14.2), independently of core/mueller.h's complex amplitudes:
+ *  - dielectric reflection at Brewster's angle: unpolarized light comes
+ *    out fully s-polarized (Q/I = +1, x = s);
+ *  - conductor (gold at 550 nm, the ior table) reflection:
+ *    Q/I = (Rs - Rp) / (Rs + Rp) at several angles;
+ *  - dielectric transmission, from either side: Q/I = (Ts - Tp) / (Ts + Tp)
+ *    with Ts = 1 - Rs, Tp = 1 - Rp;
+ *  - total internal reflection: linear light stays fully polarized and
+ *    its U turns into V by the s-p phase difference delta,
+ *    tan(delta / 2) = cos t sqrt(sin^2 t - n^2) / sin^2 t;
+ *  - every BSDF's factors are those of a passive surface (diattenuation
+ *    and polarizance <= 1, a fully polarized input gives at most a fully
+ *    polarized output), in bases perpendicular to the beams;
+ *  - rough and layered surfaces: a microfacet's Fresnel matrix at the half
+ *    vector, the diffuse share depolarizing, the wrappers forwarding.
+ * Deterministic (fixed directions and a fixed pcg32 stream); tolerances
+ * are rounding-level (1e-12) unless stated. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+
+#include "../../support/bsdf_test.h"
+#include "../../support/test.h"
+#include "../../support/tsup.h"
+#include "kernel/bsdfs/fresnel.h"
+#include "kernel/bsdfs/ior_data.h"
+#include "kernel/core/rng.h"
+
+RSW_TEST_DEFINE_GLOBALS
+
+static scene *bsdf_scene(const char *bsdf_json) {
+  char buf[4096];
+  snprintf(buf, sizeof buf, "{\"type\": \"scene\", \"s\": {\"type\": \"rectangle\", \"bsdf\": %s}}",
+           bsdf_json);
+  return tsup_load(buf, "mono");
+}
+
+/* The factors of b for light arriving along -wo and leaving along wi. */
+static void factors(const bsdf *b, vec3 wi, vec3 wo, unsigned lobe, mueller P[3], vec3 *s_in, vec3 *s_out) {
+  surface_interaction si = tb_si_with(wi);
+  b->ops->polarization(b, &si, wo, lobe, P, s_in, s_out);
+}
+
+/* Real-arithmetic Fresnel reflectances of a dielectric (relative index n,
+ * no total reflection) at incidence cosine c. */
+static void dielectric_rs_rp(double c, double n, double *Rs, double *Rp) {
+  double ct = sqrt(1.0 - (1.0 - c * c) / (n * n));
+  double rs = (c - n * ct) / (c + n * ct), rp = (n * c - ct) / (n * c + ct);
+  *Rs = rs * rs, *Rp = rp * rp;
+}
+
+/* Conductor reflectances (Born & Wolf 14.2; the real form of
+ * bsdfs/fresnel.h's comment), index eta + i k, incidence cosine c. */
+static void conductor_rs_rp(double c, double eta, double k, double *Rs, double *Rp) {
+  double s2 = 1.0 - c * c, t1 = eta * eta - k * k - s2;
+  double A = sqrt(t1 * t1 + 4.0 * eta * eta * k * k), a = sqrt(0.5 * (A + t1));
+  *Rs = (A + c * c - 2.0 * c * a) / (A + c * c + 2.0 * c * a);
+  *Rp = *Rs * (A * c * c + s2 * s2 - 2.0 * c * a * s2) / (A * c * c + s2 * s2 + 2.0 * c * a * s2);
+}
+
+static void check_bases(vec3 wi, vec3 wo, vec3 s_in, vec3 s_out, const char *what) {
+  CHECK(fabs(v3_len(s_in) - 1.0) < 1e-12 && fabs(v3_len(s_out) - 1.0) < 1e-12, "%s: unit bases", what);
+  CHECK(fabs(v3_dot(s_in, wo)) < 1e-12, "%s: s_in . wo = %g", what, v3_dot(s_in, wo));
+  CHECK(fabs(v3_dot(s_out, wi)) < 1e-12, "%s: s_out . wi = %g", what, v3_dot(s_out, wi));
+}
+
+static void test_brewster_reflection_is_s_polarized(void) {
+  scene *s = bsdf_scene("{\"type\": \"dielectric\", \"int_ior\": 1.5, \"ext_ior\": 1.0}");
+  REQUIRE(s, "scene");
+  const bsdf *b = s->shapes[0]->bsdf;
+  double tb = atan(1.5);
+  for (int k = 0; k < 2; k++) {
+    double phi = k ? 1.1 : 0.0;
+    vec3 wo = v3(sin(tb) * cos(phi), sin(tb) * sin(phi), cos(tb)), wi = reflect_local(wo);
+    mueller P[3];
+    vec3 si_, so_;
+    factors(b, wi, wo, BSDF_DELTA_REFLECTION, P, &si_, &so_);
+    check_bases(wi, wo, si_, so_, "brewster");
+    /* s is perpendicular to the plane of incidence (z, wo). */
+    CHECK(fabs(v3_dot(si_, v3(0, 0, 1))) < 1e-12 && fabs(v3_dot(so_, v3(0, 0, 1))) < 1e-12, "s horizontal");
+    const mueller *m = &P[0];
+    CHECK_ABS(m->m[0][0], 1.0, 0.0);
+    CHECK_ABS(m->m[1][0], 1.0, 1e-12); /* Q/I of unpolarized light: +1 (x = s) */
+    CHECK_ABS(m->m[2][0], 0.0, 1e-12);
+    CHECK_ABS(m->m[3][0], 0.0, 1e-12);
+    double dolp = sqrt(m->m[1][0] * m->m[1][0] + m->m[2][0] * m->m[2][0]);
+    CHECK_ABS(dolp, 1.0, 1e-12);
+  }
+  /* Lobe 0 (the light sample) and the sampled lobe agree on the geometry. */
+  vec3 wo = tb_dir_deg(tb * 180.0 / RSW_PI, 0.0), wi = reflect_local(wo), a, c;
+  mueller P0[3], P1[3];
+  factors(b, wi, wo, 0, P0, &a, &c);
+  factors(b, wi, wo, BSDF_DELTA_REFLECTION, P1, &a, &c);
+  CHECK(memcmp(&P0[0], &P1[0], sizeof P0[0]) == 0, "lobe 0 = the reflection lobe for reflection geometry");
+  /* Normal incidence: no diattenuation, U and V flip (r_p = -r_s). */
+  factors(b, v3(0, 0, 1), v3(0, 0, 1), BSDF_DELTA_REFLECTION, P0, &a, &c);
+  CHECK_ABS(P0[0].m[1][0], 0.0, 1e-12);
+  CHECK_ABS(P0[0].m[1][1], 1.0, 1e-12);
+  CHECK_ABS(P0[0].m[2][2], -1.0, 1e-12);
+  CHECK_ABS(P0[0].m[3][3], -1.0, 1e-12);
+  scene_free(s);
+}
+
+static void test_conductor_gold_against_fresnel(void) {
+  scene *s = bsdf_scene("{\"type\": \"conductor\", \"material\": \"Au\"}");
+  REQUIRE(s, "scene");
+  const bsdf *b = s->shapes[0]->bsdf;
+  double eta, k;
+  REQUIRE(ior_conductor_eval(ior_conductor_lookup("Au"), 550.0, &eta, &k), "gold at 550 nm");
+  const double th[] = {0.0, 20.0, 45.0, 60.0, 75.0, 85.0, 89.0};
+  for (size_t i = 0; i < sizeof th / sizeof th[0]; i++) {
+    vec3 wo = tb_dir_deg(th[i], 35.0), wi = reflect_local(wo), a, c;
+    mueller P[3];
+    factors(b, wi, wo, BSDF_DELTA_REFLECTION, P, &a, &c);
+    check_bases(wi, wo, a, c, "gold");
+    double Rs, Rp;
+    conductor_rs_rp(wo.z, eta, k, &Rs, &Rp);
+    CHECK_ABS(P[0].m[1][0], (Rs - Rp) / (Rs + Rp), 1e-12);
+    CHECK_ABS(P[0].m[0][1], (Rs - Rp) / (Rs + Rp), 1e-12);
+    /* c^2 + d^2 = Rs Rp: the non-depolarizing block. */
+    double cc = P[0].m[2][2], dd = P[0].m[2][3], norm = 0.5 * (Rs + Rp);
+    CHECK_ABS((cc * cc + dd * dd) * norm * norm, Rs * Rp, 1e-12);
+    CHECK_ABS(P[0].m[3][3], cc, 1e-15);
+    CHECK_ABS(P[0].m[3][2], -dd, 1e-15);
+    CHECK(P[0].m[2][2] < 0.0 || th[i] > 60.0, "theta %g: reflection flips U at small angles", th[i]);
+    /* The scalar Fresnel term the BSDF samples with is this matrix's M00. */
+    CHECK_REL(norm, fresnel_conductor(wo.z, eta, k), 1e-12);
+  }
+  scene_free(s);
+}
+
+static void test_dielectric_transmission(void) {
+  scene *s = bsdf_scene("{\"type\": \"dielectric\", \"int_ior\": 1.5, \"ext_ior\": 1.0}");
+  REQUIRE(s, "scene");
+  const bsdf *b = s->shapes[0]->bsdf;
+  const double th[] = {0.0, 30.0, 56.309932474020215, 70.0, 85.0};
+  for (int side = 0; side < 2; side++)
+    for (size_t i = 0; i < sizeof th / sizeof th[0]; i++) {
+      double n = side ? 1.0 / 1.5 : 1.5, t = th[i] * RSW_PI / 180.0;
+      if (side && sin(t) >= n) continue;
+      vec3 wo = tb_dir_deg(th[i], 20.0);
+      if (side) wo.z = -wo.z; /* the light comes from inside */
+      double cos_t, eta_it, eta_ti;
+      /* The radiance direction wi leaving along the refracted light. */
+      fresnel_dielectric(wo.z, 1.5, &cos_t, &eta_it, &eta_ti);
+      vec3 wi = refract_local(wo, cos_t, eta_ti), a, c;
+      mueller P[3];
+      factors(b, wi, wo, BSDF_DELTA_TRANSMISSION, P, &a, &c);
+      check_bases(wi, wo, a, c, "transmission");
+      double Rs, Rp;
+      dielectric_rs_rp(fabs(wo.z), n, &Rs, &Rp);
+      double Ts = 1.0 - Rs, Tp = 1.0 - Rp;
+      CHECK_ABS(P[0].m[1][0], (Ts - Tp) / (Ts + Tp), 1e-12);
+      CHECK_ABS(P[0].m[2][2], 2.0 * sqrt(Ts * Tp) / (Ts + Tp), 1e-12);
+      CHECK_ABS(P[0].m[3][2], 0.0, 1e-15);
+    }
+  /* Brewster's angle from outside: Tp = 1, DoLP = Rs / (2 - Rs). */
+  double tb = atan(1.5), Rs, Rp, cos_t, eta_it, eta_ti;
+  vec3 wo = v3(sin(tb), 0, cos(tb));
+  fresnel_dielectric(wo.z, 1.5, &cos_t, &eta_it, &eta_ti);
+  vec3 wi = refract_local(wo, cos_t, eta_ti), a, c;
+  mueller P[3];
+  factors(b, wi, wo, BSDF_DELTA_TRANSMISSION, P, &a, &c);
+  dielectric_rs_rp(wo.z, 1.5, &Rs, &Rp);
+  CHECK_ABS(Rp, 0.0, 1e-15);
+  CHECK_ABS(fabs(P[0].m[1][0]), Rs / (2.0 - Rs), 1e-12);
+  CHECK(P[0].m[1][0] < 0, "transmitted light is p-rich (Q < 0 with x = s)");
+  scene_free(s);
+}
+
+static void test_total_internal_reflection_retards(void) {
+  scene *s = bsdf_scene("{\"type\": \"dielectric\", \"int_ior\": 1.5, \"ext_ior\": 1.0}");
+  REQUIRE(s, "scene");
+  const bsdf *b = s->shapes[0]->bsdf;
+  const double th[] = {45.0, 50.0, 60.0, 75.0};
+  double n = 1.0 / 1.5;
+  for (size_t i = 0; i < sizeof th / sizeof th[0]; i++) {
+    vec3 wo = tb_dir_deg(th[i], 70.0);
+    wo.z = -wo.z;
+    vec3 wi = reflect_local(wo), a, c;
+    mueller P[3];
+    factors(b, wi, wo, BSDF_DELTA_REFLECTION, P, &a, &c);
+    check_bases(wi, wo, a, c, "tir");
+    double t = th[i] * RSW_PI / 180.0, st2 = sin(t) * sin(t);
+    double delta = 2.0 * atan(cos(t) * sqrt(st2 - n * n) / st2); /* Born & Wolf 1.5 (60) */
+    /* Linear light at +45 degrees to s: (1, 0, 1, 0). */
+    double in[4] = {1, 0, 1, 0}, out[4];
+    mu_apply(&P[0], in, out);
+    CHECK_ABS(out[0], 1.0, 1e-12); /* no diattenuation */
+    CHECK_ABS(out[1], 0.0, 1e-12);
+    CHECK_ABS(sqrt(out[1] * out[1] + out[2] * out[2] + out[3] * out[3]), 1.0, 1e-12);
+    CHECK_ABS(fabs(out[2]), fabs(cos(delta)), 1e-12);
+    CHECK_ABS(fabs(out[3]), fabs(sin(delta)), 1e-12);
+    CHECK(fabs(out[3]) > 0.3, "theta %g: part of the light turns circular (V = %g)", th[i], out[3]);
+    /* Linear light along s or p stays linear (DoLP 1, no V). */
+    double in2[4] = {1, 1, 0, 0};
+    mu_apply(&P[0], in2, out);
+    CHECK_ABS(out[1], 1.0, 1e-12);
+    CHECK_ABS(out[3], 0.0, 1e-12);
+  }
+  scene_free(s);
+}
+
+/* A passive surface's matrix: for every fully polarized input the output
+ * has I >= 0 and DoP <= 1; so, too, diattenuation and polarizance <= 1. */
+static void check_passive(const mueller *m, const char *what, int *bad) {
+  double D = sqrt(m->m[0][1] * m->m[0][1] + m->m[0][2] * m->m[0][2] + m->m[0][3] * m->m[0][3]);
+  double Pz = sqrt(m->m[1][0] * m->m[1][0] + m->m[2][0] * m->m[2][0] + m->m[3][0] * m->m[3][0]);
+  bool ok = m->m[0][0] == 1.0 && D <= 1.0 + 1e-12 && Pz <= 1.0 + 1e-12;
+  for (int k = 0; k < 24 && ok; k++) {
+    double th = RSW_PI * (k % 6) / 5.0, ph = 2.0 * RSW_PI * (k / 6) / 4.0 + 0.3;
+    double in[4] = {1, sin(th) * cos(ph), sin(th) * sin(ph), cos(th)}, out[4];
+    mu_apply(m, in, out);
+    double p = sqrt(out[1] * out[1] + out[2] * out[2] + out[3] * out[3]);
+    ok = out[0] >= -1e-12 && p <= out[0] + 1e-12;
+  }
+  if (!ok && (*bad)++ < 3) {
+    printf("  %s: not passive:\n", what);
+    for (int i = 0; i < 4; i++)
+      printf("    %.6g %.6g %.6g %.6g\n", m->m[i][0], m->m[i][1], m->m[i][2], m->m[i][3]);
+  }
+}
+
+static const char *const PASSIVE[] = {
+    "{\"type\": \"conductor\", \"material\": \"Au\"}",
+    "{\"type\": \"conductor\"}",
+    "{\"type\": \"dielectric\", \"int_ior\": 1.33}",
+    "{\"type\": \"roughconductor\", \"material\": \"Cu\", \"alpha\": 0.3}",
+    "{\"type\": \"roughconductor\", \"material\": \"Al\", \"distribution\": \"ggx\", \"alpha_u\": 0.1, "
+    "\"alpha_v\": 0.4}",
+    "{\"type\": \"plastic\", \"diffuse_reflectance\": 0.3}",
+    "{\"type\": \"roughplastic\", \"diffuse_reflectance\": 0.3, \"alpha\": 0.2}",
+    "{\"type\": \"maignan\", \"C\": 5, \"ndvi\": 0.5, \"refr_re\": 1.5, \"refr_im\": 0.1}",
+    "{\"type\": \"ocean_legacy\", \"wavelength\": 550, \"wind_speed\": 5}",
+    "{\"type\": \"twosided\", \"bsdf\": {\"type\": \"roughconductor\", \"material\": \"Au\"}}",
+    "{\"type\": \"blendbsdf\", \"weight\": 0.3, \"bsdf_0\": {\"type\": \"roughplastic\"},"
+    " \"bsdf_1\": {\"type\": \"roughconductor\", \"material\": \"Ag\", \"alpha\": 0.2}}",
+    "{\"type\": \"mask\", \"opacity\": 0.4, \"bsdf\": {\"type\": \"conductor\", \"material\": \"Au\"}}",
+    "{\"type\": \"selectbsdf\", \"indices\": 1, \"a\": {\"type\": \"diffuse\"},"
+    " \"b\": {\"type\": \"roughconductor\", \"material\": \"Au\"}}",
+};
+
+static void test_every_matrix_is_passive(void) {
+  pcg32 r;
+  pcg32_seed(&r, 2024, 27);
+  for (size_t i = 0; i < sizeof PASSIVE / sizeof PASSIVE[0]; i++) {
+    scene *s = bsdf_scene(PASSIVE[i]);
+    REQUIRE(s, "%s", PASSIVE[i]);
+    const bsdf *b = s->shapes[0]->bsdf;
+    REQUIRE(b->ops->polarization, "%s has a polarization op", PASSIVE[i]);
+    int bad = 0;
+    for (int k = 0; k < 400; k++) {
+      vec3 wi = warp_square_to_uniform_sphere(v2(pcg32_next_double(&r), pcg32_next_double(&r)));
+      vec3 wo = warp_square_to_uniform_sphere(v2(pcg32_next_double(&r), pcg32_next_double(&r)));
+      if (k % 2 == 0) wo.z = fabs(wo.z), wi.z = fabs(wi.z);
+      const unsigned lobes[] = {0, BSDF_DELTA_REFLECTION, BSDF_GLOSSY_REFLECTION, BSDF_DIFFUSE_REFLECTION,
+                                BSDF_DELTA_TRANSMISSION};
+      for (int l = 0; l < 5; l++) {
+        mueller P[3];
+        vec3 a, c;
+        factors(b, wi, wo, lobes[l], P, &a, &c);
+        check_bases(wi, wo, a, c, PASSIVE[i]);
+        for (int ch = 0; ch < 3; ch++) check_passive(&P[ch], PASSIVE[i], &bad);
+      }
+    }
+    CHECK(bad == 0, "%s: %d matrices not passive", PASSIVE[i], bad);
+    scene_free(s);
+  }
+}
+
+int main(void) {
+  RSW_TEST_RUN(test_brewster_reflection_is_s_polarized);
+  RSW_TEST_RUN(test_conductor_gold_against_fresnel);
+  RSW_TEST_RUN(test_dielectric_transmission);
+  RSW_TEST_RUN(test_total_internal_reflection_retards);
+  RSW_TEST_RUN(test_every_matrix_is_passive);
+  RSW_TEST_END("test_fresnel_pol");
+}
