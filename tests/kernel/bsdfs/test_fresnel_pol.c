@@ -21,6 +21,7 @@
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "../../support/bsdf_test.h"
 #include "../../support/test.h"
@@ -271,11 +272,122 @@ static void test_every_matrix_is_passive(void) {
   }
 }
 
+/* ---- renders (variant mono_polarized, path) -------------------------------
+ * The distant sensor looks along d at the origin; its film's Stokes basis
+ * has x = z x (-d) normalized, horizontal (render.c film_stokes_x): for a
+ * plane of incidence through the vertical, x is the s direction. */
+static scene *plane_scene(const char *variant, const char *bsdf_json, double view_deg, uint32_t spp) {
+  double t = view_deg * RSW_PI / 180.0;
+  char buf[4096];
+  snprintf(
+      buf, sizeof buf,
+      "{\"type\": \"scene\", \"integrator\": {\"type\": \"path\"},"
+      " \"sensor\": {\"type\": \"distant\", \"direction\": [%.17g, 0, %.17g], \"target\": [0, 0, 0],"
+      "   \"sampler\": {\"type\": \"independent\", \"sample_count\": %u},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},"
+      " \"sky\": {\"type\": \"constant\", \"radiance\": 1.0},"
+      " \"plane\": {\"type\": \"rectangle\", \"bsdf\": %s},"
+      " \"floor\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [20, 20, 1]}, "
+      "   {\"translate\": [0, 0, -1]}], \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.0}}}",
+      -sin(t), -cos(t), spp, bsdf_json);
+  return tsup_load(buf, variant);
+}
+
+/* Glass at Brewster's angle over a black floor (the transmitted light is
+ * absorbed), under a uniform unpolarized sky: every sample that reflects
+ * brings (1, 1, 0, 0) in the s basis, so the pixel's DoLP is 1 and its
+ * AoLP 0 (x = s), and S0 = R(theta_B) = Rs / 2 within 4 standard errors
+ * (65,536 samples; Bernoulli variance R (1 - R) / N). */
+static void test_render_brewster_glass(void) {
+  double tb = atan(1.5) * 180.0 / RSW_PI;
+  const uint32_t N = 65536;
+  scene *s =
+      plane_scene("mono_polarized", "{\"type\": \"dielectric\", \"int_ior\": 1.5, \"ext_ior\": 1.0}", tb, N);
+  REQUIRE(s, "scene");
+  film_image img;
+  REQUIRE(tsup_render(s, 0, 7, 2, &img), "render");
+  REQUIRE(img.channels == 4 && strcmp(img.channel_names[0], "S0.Y") == 0 &&
+              strcmp(img.channel_names[1], "S1.Y") == 0,
+          "Stokes channels (%d)", img.channels);
+  double S0 = img.data[0], Q = img.data[1], U = img.data[2], V = img.data[3];
+  double Rs, Rp;
+  dielectric_rs_rp(cos(atan(1.5)), 1.5, &Rs, &Rp);
+  double R = 0.5 * (Rs + Rp), se = sqrt(R * (1.0 - R) / N);
+  CHECK(fabs(S0 - R) <= 4.0 * se, "S0 = %.6g vs R = %.6g (4 se = %.2g)", S0, R, 4.0 * se);
+  REQUIRE(S0 > 0, "light reflected");
+  CHECK_ABS(sqrt(Q * Q + U * U) / S0, 1.0, 1e-6);
+  CHECK_ABS(Q / S0, 1.0, 1e-6); /* AoLP 0: along x, the s direction */
+  CHECK_ABS(V / S0, 0.0, 1e-6);
+  film_image_free(&img);
+  scene_free(s);
+}
+
+/* A gold plane seen at 60 degrees under the uniform sky: every sample
+ * reflects with the same Fresnel matrix, so S0 = F and
+ * Q / S0 = (Rs - Rp) / (Rs + Rp) (float film: 1e-6), U = V = 0. */
+static void test_render_gold_plane(void) {
+  scene *s = plane_scene("mono_polarized", "{\"type\": \"conductor\", \"material\": \"Au\"}", 60.0, 16);
+  REQUIRE(s, "scene");
+  film_image img;
+  REQUIRE(tsup_render(s, 0, 3, 1, &img), "render");
+  REQUIRE(img.channels == 4, "Stokes channels");
+  double eta, k, Rs, Rp;
+  REQUIRE(ior_conductor_eval(ior_conductor_lookup("Au"), 550.0, &eta, &k), "gold");
+  conductor_rs_rp(0.5, eta, k, &Rs, &Rp);
+  double S0 = img.data[0];
+  CHECK_REL(S0, 0.5 * (Rs + Rp), 1e-6);
+  CHECK_ABS(img.data[1] / S0, (Rs - Rp) / (Rs + Rp), 1e-6);
+  CHECK_ABS(img.data[2] / S0, 0.0, 1e-6);
+  CHECK_ABS(img.data[3] / S0, 0.0, 1e-6);
+  film_image_free(&img);
+  scene_free(s);
+}
+
+/* Where nothing polarizes (a diffuse plate, a sun and a uniform sky), the
+ * polarized render's S0 is the mono render, bitwise, and Q = U = V = 0. */
+static void test_render_depolarizing_scene_is_mono(void) {
+  const char *fmt =
+      "{\"type\": \"scene\", \"integrator\": {\"type\": \"path\"},"
+      " \"cam\": {\"type\": \"perspective\", \"fov\": 40,"
+      "   \"to_world\": [{\"lookat\": {\"origin\": [1, -2, 3], \"target\": [0, 0, 0], \"up\": [0, 0, 1]}}],"
+      "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 8},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 12, \"height\": 10, \"rfilter\": {\"type\": "
+      "\"box\"}}},"
+      " \"sun\": {\"type\": \"directional\", \"direction\": [0.3, 0.2, -1], \"irradiance\": 2},"
+      " \"sky\": {\"type\": \"constant\", \"radiance\": 0.5},"
+      " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.4}},"
+      " \"ball\": {\"type\": \"sphere\", \"center\": [0.3, 0.2, 0.4], \"radius\": 0.4,"
+      "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.7}}}";
+  scene *a = tsup_load(fmt, "mono"), *b = tsup_load(fmt, "mono_polarized");
+  REQUIRE(a && b, "scenes");
+  film_image ia, ib;
+  REQUIRE(tsup_render(a, 0, 11, 2, &ia), "mono render");
+  REQUIRE(tsup_render(b, 0, 11, 2, &ib), "polarized render");
+  REQUIRE(ib.channels == 4 && ia.width == ib.width && ia.height == ib.height, "films");
+  int diff = 0, pol = 0, lit = 0;
+  for (int i = 0; i < ia.width * ia.height; i++) {
+    float m = ia.data[i * ia.channels], p = ib.data[4 * i];
+    if (memcmp(&m, &p, sizeof m) != 0) diff++;
+    if (ib.data[4 * i + 1] != 0 || ib.data[4 * i + 2] != 0 || ib.data[4 * i + 3] != 0) pol++;
+    lit += m > 0;
+  }
+  CHECK(diff == 0, "%d pixels: S0 differs from the mono render", diff);
+  CHECK(pol == 0, "%d pixels carry polarization", pol);
+  CHECK(lit == ia.width * ia.height, "every pixel lit (%d)", lit);
+  film_image_free(&ia);
+  film_image_free(&ib);
+  scene_free(a);
+  scene_free(b);
+}
+
 int main(void) {
   RSW_TEST_RUN(test_brewster_reflection_is_s_polarized);
   RSW_TEST_RUN(test_conductor_gold_against_fresnel);
   RSW_TEST_RUN(test_dielectric_transmission);
   RSW_TEST_RUN(test_total_internal_reflection_retards);
   RSW_TEST_RUN(test_every_matrix_is_passive);
+  RSW_TEST_RUN(test_render_brewster_glass);
+  RSW_TEST_RUN(test_render_gold_plane);
+  RSW_TEST_RUN(test_render_depolarizing_scene_is_mono);
   RSW_TEST_END("test_fresnel_pol");
 }
