@@ -26,6 +26,7 @@
 #include "../../support/bsdf_test.h"
 #include "../../support/test.h"
 #include "../../support/tsup.h"
+#include "kernel/bsdfs/eo_surfaces.h"
 #include "kernel/bsdfs/fresnel.h"
 #include "kernel/bsdfs/ior_data.h"
 #include "kernel/core/rng.h"
@@ -272,6 +273,156 @@ static void test_every_matrix_is_passive(void) {
   }
 }
 
+/* Q/I of unpolarized light after P (channel 0). */
+static double q_of(const mueller *P) {
+  return P[0].m[1][0];
+}
+
+/* The microfacet models: the Fresnel matrix at the half vector h, in the
+ * bases of the plane holding wo, wi and h (not the macro surface's), and
+ * the layered ones' diffuse share depolarizing. */
+static void test_rough_and_layered(void) {
+  vec3 wi = tb_dir_deg(35.0, 10.0), wo = tb_dir_deg(50.0, 150.0), a, c;
+  vec3 h = v3_norm(v3_add(wi, wo)), n_inc = v3_norm(v3_cross(wo, wi));
+  double ch = v3_dot(wo, h), eta, k, Rs, Rp;
+  mueller P[3];
+  REQUIRE(ior_conductor_eval(ior_conductor_lookup("Cu"), 550.0, &eta, &k), "copper");
+  scene *s = bsdf_scene("{\"type\": \"roughconductor\", \"material\": \"Cu\", \"alpha\": 0.3}");
+  REQUIRE(s, "roughconductor");
+  factors(s->shapes[0]->bsdf, wi, wo, 0, P, &a, &c);
+  conductor_rs_rp(ch, eta, k, &Rs, &Rp);
+  CHECK_ABS(q_of(P), (Rs - Rp) / (Rs + Rp), 1e-12);
+  CHECK_ABS(fabs(v3_dot(a, n_inc)), 1.0, 1e-12);
+  CHECK_ABS(fabs(v3_dot(c, n_inc)), 1.0, 1e-12);
+  mueller P2[3];
+  factors(s->shapes[0]->bsdf, wi, wo, BSDF_GLOSSY_REFLECTION, P2, &a, &c);
+  CHECK(memcmp(P, P2, sizeof P) == 0, "one lobe: the sample's matrix is eval's");
+  scene_free(s);
+
+  /* roughplastic: the specular lobe alone (a black base) is the coating's
+   * Fresnel matrix at h; with a base, Q/I scales by f_s / (f_s + f_d). */
+  dielectric_rs_rp(ch, 1.49, &Rs, &Rp);
+  scene *sp = bsdf_scene("{\"type\": \"roughplastic\", \"int_ior\": 1.49, \"ext_ior\": 1, \"alpha\": 0.3, "
+                         "\"diffuse_reflectance\": 0.0}");
+  scene *sd = bsdf_scene("{\"type\": \"roughplastic\", \"int_ior\": 1.49, \"ext_ior\": 1, \"alpha\": 0.3, "
+                         "\"diffuse_reflectance\": 0.6}");
+  REQUIRE(sp && sd, "roughplastic");
+  surface_interaction si = tb_si_with(wi);
+  const bsdf *bp = sp->shapes[0]->bsdf, *bd = sd->shapes[0]->bsdf;
+  double fs = bp->ops->eval(bp, &si, wo).c[0], f = bd->ops->eval(bd, &si, wo).c[0];
+  REQUIRE(fs > 0 && f > fs, "both lobes (fs %g, f %g)", fs, f);
+  factors(bp, wi, wo, 0, P, &a, &c);
+  CHECK_ABS(q_of(P), (Rs - Rp) / (Rs + Rp), 1e-12);
+  factors(bd, wi, wo, BSDF_DIFFUSE_REFLECTION, P, &a, &c);
+  CHECK_ABS(q_of(P), fs / f * (Rs - Rp) / (Rs + Rp), 1e-12);
+  CHECK_ABS(P[0].m[1][1], fs / f * 0.5 * (Rs + Rp) / (0.5 * (Rs + Rp)), 1e-12);
+  scene_free(sp);
+  scene_free(sd);
+
+  /* plastic: the delta lobe is the coating's reflection, the diffuse lobe
+   * (eval's, lobe 0) depolarizes. */
+  scene *pl = bsdf_scene("{\"type\": \"plastic\", \"int_ior\": 1.5, \"ext_ior\": 1}");
+  REQUIRE(pl, "plastic");
+  vec3 r = reflect_local(wo);
+  factors(pl->shapes[0]->bsdf, r, wo, BSDF_DELTA_REFLECTION, P, &a, &c);
+  dielectric_rs_rp(wo.z, 1.5, &Rs, &Rp);
+  CHECK_ABS(q_of(P), (Rs - Rp) / (Rs + Rp), 1e-12);
+  factors(pl->shapes[0]->bsdf, wi, wo, 0, P, &a, &c);
+  CHECK(memcmp(&P[0], &(mueller){{{1}}}, sizeof P[0]) == 0, "diffuse lobe depolarizes");
+  scene_free(pl);
+}
+
+/* maignan: the facet's Fresnel matrix at alpha (cos alpha = sqrt((1 +
+ * wi.wo) / 2)) of the complex index (refr_re + i refr_im) / ext_ior;
+ * ocean_legacy's glint (component 2): water's at the half vector. */
+static void test_eo_surfaces(void) {
+  vec3 wi = tb_dir_deg(30.0, 0.0), wo = tb_dir_deg(45.0, 120.0), a, c;
+  mueller P[3];
+  double Rs, Rp;
+  scene *s = bsdf_scene("{\"type\": \"maignan\", \"C\": 5, \"refr_re\": 1.6, \"refr_im\": 0.2, "
+                        "\"ext_ior\": 1.0}");
+  REQUIRE(s, "maignan");
+  factors(s->shapes[0]->bsdf, wi, wo, 0, P, &a, &c);
+  conductor_rs_rp(sqrt(0.5 * (1.0 + v3_dot(wi, wo))), 1.6, 0.2, &Rs, &Rp);
+  CHECK_ABS(q_of(P), (Rs - Rp) / (Rs + Rp), 1e-12);
+  CHECK(q_of(P) > 0.05, "maignan polarizes (Q/I %g)", q_of(P));
+  scene_free(s);
+  s = bsdf_scene("{\"type\": \"ocean_legacy\", \"wavelength\": 550, \"wind_speed\": 5, \"component\": 2}");
+  REQUIRE(s, "ocean");
+  const ocean_bsdf *o = (const ocean_bsdf *)s->shapes[0]->bsdf;
+  factors(&o->base, wi, wo, BSDF_GLOSSY_REFLECTION, P, &a, &c);
+  conductor_rs_rp(v3_dot(wo, v3_norm(v3_add(wi, wo))), o->n_re, o->n_im, &Rs, &Rp);
+  CHECK_ABS(q_of(P), (Rs - Rp) / (Rs + Rp), 1e-12);
+  scene_free(s);
+  /* Whitecaps alone (component 1) depolarize; the whole model lies
+   * between. */
+  s = bsdf_scene("{\"type\": \"ocean_legacy\", \"wavelength\": 550, \"wind_speed\": 5, \"component\": 1}");
+  REQUIRE(s, "ocean whitecaps");
+  factors(s->shapes[0]->bsdf, wi, wo, 0, P, &a, &c);
+  CHECK(q_of(P) == 0.0 && P[0].m[1][1] == 0.0, "whitecaps depolarize");
+  scene_free(s);
+  s = bsdf_scene("{\"type\": \"ocean_legacy\", \"wavelength\": 550, \"wind_speed\": 5}");
+  REQUIRE(s, "ocean");
+  factors(s->shapes[0]->bsdf, wi, wo, 0, P, &a, &c);
+  CHECK(q_of(P) > 0.0 && q_of(P) < (Rs - Rp) / (Rs + Rp), "glint share: Q/I %g", q_of(P));
+  scene_free(s);
+}
+
+/* Wrappers: twosided's back side is the nested BSDF's mirror image,
+ * blendbsdf mixes by the components' values, mask's pass-through is the
+ * identity, selectbsdf forwards. */
+static void test_wrappers(void) {
+  vec3 wi = tb_dir_deg(35.0, 10.0), wo = tb_dir_deg(50.0, 150.0), a, c, a2, c2;
+  mueller P[3], Q[3];
+  scene *s = bsdf_scene("{\"type\": \"twosided\", \"bsdf\": {\"type\": \"roughconductor\", \"material\": "
+                        "\"Au\"}}");
+  REQUIRE(s, "twosided");
+  factors(s->shapes[0]->bsdf, wi, wo, 0, P, &a, &c);
+  vec3 wib = v3(wi.x, wi.y, -wi.z), wob = v3(wo.x, wo.y, -wo.z);
+  factors(s->shapes[0]->bsdf, wib, wob, 0, Q, &a2, &c2);
+  check_bases(wib, wob, a2, c2, "twosided back");
+  CHECK_ABS(q_of(Q), q_of(P), 1e-12);
+  CHECK_ABS(Q[0].m[2][2], P[0].m[2][2], 1e-12);
+  /* D P D: the circular coupling keeps its sign, U-Q couplings flip. */
+  CHECK_ABS(Q[0].m[2][3], P[0].m[2][3], 1e-12);
+  scene_free(s);
+
+  const char *blend =
+      "{\"type\": \"blendbsdf\", \"weight\": 0.25, \"bsdf_0\": {\"type\": \"diffuse\", "
+      "\"reflectance\": 0.5}, \"bsdf_1\": {\"type\": \"roughconductor\", \"material\": \"Au\", "
+      "\"alpha\": 0.3}}";
+  s = bsdf_scene(blend);
+  scene *rc = bsdf_scene("{\"type\": \"roughconductor\", \"material\": \"Au\", \"alpha\": 0.3}");
+  REQUIRE(s && rc, "blend");
+  surface_interaction si = tb_si_with(wi);
+  const bsdf *bb = s->shapes[0]->bsdf, *br = rc->shapes[0]->bsdf;
+  double f = bb->ops->eval(bb, &si, wo).c[0], f1 = 0.25 * br->ops->eval(br, &si, wo).c[0];
+  factors(br, wi, wo, 0, Q, &a2, &c2);
+  factors(bb, wi, wo, BSDF_GLOSSY_REFLECTION, P, &a, &c);
+  CHECK_ABS(q_of(P), f1 / f * q_of(Q), 1e-12);
+  CHECK(q_of(P) != 0.0, "the conductor's share polarizes");
+  scene_free(s);
+  scene_free(rc);
+
+  s = bsdf_scene("{\"type\": \"mask\", \"opacity\": 0.3, \"bsdf\": {\"type\": \"conductor\"}}");
+  REQUIRE(s, "mask");
+  factors(s->shapes[0]->bsdf, wi, v3_neg(wi), BSDF_DELTA_TRANSMISSION, P, &a, &c);
+  CHECK(memcmp(&P[0], &(mueller){{{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}, {0, 0, 0, 1}}}, sizeof P[0]) == 0,
+        "pass-through: the identity");
+  factors(s->shapes[0]->bsdf, reflect_local(wo), wo, BSDF_DELTA_REFLECTION, P, &a, &c);
+  CHECK(P[0].m[2][2] != 1.0 && P[0].m[2][3] != 0.0, "the nested mirror retards");
+  scene_free(s);
+
+  s = bsdf_scene("{\"type\": \"selectbsdf\", \"indices\": 1, \"a\": {\"type\": \"diffuse\"},"
+                 " \"b\": {\"type\": \"dielectric\", \"int_ior\": 1.5, \"ext_ior\": 1}}");
+  REQUIRE(s, "selectbsdf");
+  double tb = atan(1.5);
+  wo = v3(sin(tb), 0, cos(tb));
+  factors(s->shapes[0]->bsdf, reflect_local(wo), wo, BSDF_DELTA_REFLECTION, P, &a, &c);
+  CHECK_ABS(q_of(P), 1.0, 1e-12);
+  scene_free(s);
+}
+
 /* ---- renders (variant mono_polarized, path) -------------------------------
  * The distant sensor looks along d at the origin; its film's Stokes basis
  * has x = z x (-d) normalized, horizontal (render.c film_stokes_x): for a
@@ -386,6 +537,9 @@ int main(void) {
   RSW_TEST_RUN(test_dielectric_transmission);
   RSW_TEST_RUN(test_total_internal_reflection_retards);
   RSW_TEST_RUN(test_every_matrix_is_passive);
+  RSW_TEST_RUN(test_rough_and_layered);
+  RSW_TEST_RUN(test_eo_surfaces);
+  RSW_TEST_RUN(test_wrappers);
   RSW_TEST_RUN(test_render_brewster_glass);
   RSW_TEST_RUN(test_render_gold_plane);
   RSW_TEST_RUN(test_render_depolarizing_scene_is_mono);
