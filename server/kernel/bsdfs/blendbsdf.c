@@ -64,7 +64,7 @@ static color blend_sample(const bsdf *bb, const surface_interaction *si, double 
   return col_scale(blend_eval(bb, si, bs->wo), 1.0 / bs->pdf);
 }
 
-/* Polarization (docs/polarization.md#surfaces). Smooth lobes (eval, and
+/* Polarization (docs/plugins.md#polarization-surfaces). Smooth lobes (eval, and
  * a smooth sample, whose weight is the mixture's eval over its pdf): the
  * components' matrices weighted by their shares of f, per channel,
  * P = ((1 - w) f_0 P_0 + w f_1 P_1) / f, in common bases (the s axis of

@@ -132,7 +132,7 @@ static color conductor_sample(const bsdf *b, const surface_interaction *si, doub
   return w;
 }
 
-/* Polarization (docs/polarization.md#surfaces): the Fresnel matrix of
+/* Polarization (docs/plugins.md#polarization-surfaces): the Fresnel matrix of
  * the complex index eta + i k per channel at the light's incidence
  * cosine, s-axis bases (mitsuba3 src/bsdfs/conductor.cpp; the default
  * eta 0, k 1 is a mirror that keeps the intensity but retards p against

@@ -58,7 +58,7 @@ static double dielectric_pdf(const bsdf *b, const surface_interaction *si, vec3 
   return 0.0;
 }
 
-/* Polarization (docs/polarization.md#surfaces): the Fresnel reflection
+/* Polarization (docs/plugins.md#polarization-surfaces): the Fresnel reflection
  * or transmission matrix (by the side wo lies on) at the light's
  * incidence cosine, with the index seen from the light's side, s-axis
  * bases (mitsuba3 src/bsdfs/dielectric.cpp). Total internal reflection:

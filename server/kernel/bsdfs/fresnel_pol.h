@@ -1,5 +1,5 @@
 /* The BSDFs' polarization factors (bsdf_ops.polarization, the polarized
- * variants: docs/polarization.md#surfaces): Fresnel matrices of
+ * variants: docs/plugins.md#polarization-surfaces): Fresnel matrices of
  * interfaces, in the bases whose x is the s direction (the normal of the
  * plane of incidence), and the mixing of lobes.
  *

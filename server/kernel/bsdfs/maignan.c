@@ -71,7 +71,7 @@ static double maignan_pdf(const bsdf *b, const surface_interaction *si, vec3 wo)
   return eo_cosine_pdf(si, wo);
 }
 
-/* Polarization (docs/polarization.md#surfaces): Maignan et al.'s model is
+/* Polarization (docs/plugins.md#polarization-surfaces): Maignan et al.'s model is
  * the Fresnel matrix of the facet reflecting -wo into wi (eq. 21, the
  * interface from ext_ior to refr_re + i refr_im at the facet angle alpha),
  * as eradiate/mitsuba3 maignan.cpp (its fresnel_sunglint_polarized: that

@@ -52,7 +52,7 @@ static double mask_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
   return opacity_at(m, si) * m->nested->ops->pdf(m->nested, si, wo);
 }
 
-/* Polarization (docs/polarization.md#surfaces): the pass-through
+/* Polarization (docs/plugins.md#polarization-surfaces): the pass-through
  * (wo = -wi, a delta transmission) leaves the light as it is (the
  * identity); everything else is the nested BSDF's (eval = alpha f_nested
  * has its matrix). A nested delta transmission straight through (a

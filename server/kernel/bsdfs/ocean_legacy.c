@@ -341,7 +341,7 @@ static double ocean_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
   return ocean_pdf_dir((const ocean_bsdf *)b, si->wi, wo);
 }
 
-/* Polarization (docs/polarization.md#surfaces), as Eradiate's polarized
+/* Polarization (docs/plugins.md#polarization-surfaces), as Eradiate's polarized
  * variant (eradiate/mitsuba3 ocean_legacy.cpp): the glint is the Fresnel
  * matrix of water (n_re + i n_im, from air) at the facet reflecting -wo
  * into wi (Mishchenko & Travis 1997 there: the facet's matrix rotated to

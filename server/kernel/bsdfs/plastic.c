@@ -69,7 +69,7 @@ static double plastic_pdf(const bsdf *b, const surface_interaction *si, vec3 wo)
   return (1.0 - prob_specular(p, f_i)) * warp_square_to_cosine_hemisphere_pdf(wo);
 }
 
-/* Polarization (docs/polarization.md#surfaces): the specular lobe is the
+/* Polarization (docs/plugins.md#polarization-surfaces): the specular lobe is the
  * coating's Fresnel reflection matrix at the light's incidence cosine
  * (s-axis bases, as `dielectric`); the diffuse base depolarizes, and it
  * is eval's only lobe (lobe 0). Mitsuba 3's plastic depolarizes both

@@ -253,7 +253,7 @@ static void rough_eval_pdf_batch(const bsdf *b, int n, const surface_interaction
   }
 }
 
-/* Polarization (docs/polarization.md#surfaces): the Fresnel matrix of
+/* Polarization (docs/plugins.md#polarization-surfaces): the Fresnel matrix of
  * the microfacet that reflects -wo into wi, at wo . h (h the half
  * vector), in the bases of its plane of incidence, which holds wo, wi and
  * h (mitsuba3 src/bsdfs/roughconductor.cpp). One lobe: eval's and a

@@ -112,7 +112,7 @@ static color rp_eval(const bsdf *b, const surface_interaction *si, vec3 wo) {
   return col_add(fs, fd);
 }
 
-/* Polarization (docs/polarization.md#surfaces): the coating's microfacet
+/* Polarization (docs/plugins.md#polarization-surfaces): the coating's microfacet
  * Fresnel matrix at wo . h for the specular lobe (s-axis bases, as
  * `roughconductor`), the diffuse base depolarizing; mixed by the lobes'
  * values, per channel, P = (f_s F / F00 + f_d D) / (f_s + f_d). A

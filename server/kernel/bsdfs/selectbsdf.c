@@ -50,7 +50,7 @@ static double sel_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
   return k ? k->ops->pdf(k, si, wo) : 0.0;
 }
 
-/* Polarization (docs/polarization.md#surfaces): the chosen BSDF's; none
+/* Polarization (docs/plugins.md#polarization-surfaces): the chosen BSDF's; none
  * chosen (black) depolarizes. */
 static void sel_polarization(const bsdf *b, const surface_interaction *si, vec3 wo, unsigned lobe,
                              mueller P[3], vec3 *s_in, vec3 *s_out) {

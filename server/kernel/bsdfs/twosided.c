@@ -134,7 +134,7 @@ static void twosided_eval_pdf_batch(const bsdf *b, int n, const surface_interact
   }
 }
 
-/* Polarization (docs/polarization.md#surfaces): the side's BSDF, with the
+/* Polarization (docs/plugins.md#polarization-surfaces): the side's BSDF, with the
  * back side's geometry mirrored as for its values. A mirror reverses the
  * handedness of a Stokes basis (y = d x x), so U and V change sign on
  * both sides of the back BSDF's matrix: P = D P_back D, D = diag(1, 1, -1, -1). */

@@ -413,6 +413,14 @@ static void test_wrappers(void) {
   CHECK(P[0].m[2][2] != 1.0 && P[0].m[2][3] != 0.0, "the nested mirror retards");
   scene_free(s);
 
+  s = bsdf_scene("{\"type\": \"null\"}");
+  REQUIRE(s, "null");
+  factors(s->shapes[0]->bsdf, wi, v3_neg(wi), BSDF_DELTA_TRANSMISSION, P, &a, &c);
+  CHECK(memcmp(&P[0], &(mueller){{{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}, {0, 0, 0, 1}}}, sizeof P[0]) == 0,
+        "null: the identity");
+  check_bases(wi, v3_neg(wi), a, c, "null");
+  scene_free(s);
+
   s = bsdf_scene("{\"type\": \"selectbsdf\", \"indices\": 1, \"a\": {\"type\": \"diffuse\"},"
                  " \"b\": {\"type\": \"dielectric\", \"int_ior\": 1.5, \"ext_ior\": 1}}");
   REQUIRE(s, "selectbsdf");
