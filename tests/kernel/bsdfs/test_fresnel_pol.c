@@ -502,6 +502,48 @@ static void test_render_gold_plane(void) {
   scene_free(s);
 }
 
+/* A rough gold plane under a sun, no sky, seen off the sun's plane: every
+ * sample is the sun's light through eval's matrix (lobe 0), the Fresnel
+ * matrix at the half vector h, so the pixel is linearly polarized along
+ * the facet's s axis e = wo x wi (wo towards the sun, wi towards the
+ * sensor) with DoLP |Rs - Rp| / (Rs + Rp) at wo . h. In the film's basis
+ * (x = z x wi horizontal, y = wi x x) its AoLP is atan2(e.y, e.x): this
+ * checks the rotations from the facet's bases to the film's. */
+static void test_render_rough_gold_off_plane(void) {
+  double ts = 40.0 * RSW_PI / 180.0, tv = 30.0 * RSW_PI / 180.0, pv = 120.0 * RSW_PI / 180.0;
+  vec3 wo = v3(sin(ts), 0, cos(ts)), wi = v3(sin(tv) * cos(pv), sin(tv) * sin(pv), cos(tv));
+  char buf[4096];
+  snprintf(
+      buf, sizeof buf,
+      "{\"type\": \"scene\", \"integrator\": {\"type\": \"path\"},"
+      " \"sensor\": {\"type\": \"distant\", \"direction\": [%.17g, %.17g, %.17g], \"target\": [0, 0, 0],"
+      "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 16},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},"
+      " \"sun\": {\"type\": \"directional\", \"direction\": [%.17g, 0, %.17g], \"irradiance\": 1},"
+      " \"plane\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"roughconductor\", \"material\": \"Au\","
+      "   \"alpha\": 0.2}}}",
+      -wi.x, -wi.y, -wi.z, -wo.x, -wo.z);
+  scene *s = tsup_load(buf, "mono_polarized");
+  REQUIRE(s, "scene");
+  film_image img;
+  REQUIRE(tsup_render(s, 0, 5, 1, &img), "render");
+  REQUIRE(img.channels == 4 && img.data[0] > 0, "a lit Stokes pixel");
+  double eta, k, Rs, Rp;
+  REQUIRE(ior_conductor_eval(ior_conductor_lookup("Au"), 550.0, &eta, &k), "gold");
+  vec3 h = v3_norm(v3_add(wo, wi));
+  conductor_rs_rp(v3_dot(wo, h), eta, k, &Rs, &Rp);
+  double dolp = fabs(Rs - Rp) / (Rs + Rp);
+  vec3 x = v3_norm(v3_cross(v3(0, 0, 1), wi)), y = v3_cross(wi, x), e = v3_norm(v3_cross(wo, wi));
+  double chi = atan2(v3_dot(e, y), v3_dot(e, x)), sgn = Rs > Rp ? 1.0 : -1.0;
+  double S0 = img.data[0];
+  CHECK_ABS(img.data[1] / S0, sgn * dolp * cos(2.0 * chi), 2e-6);
+  CHECK_ABS(img.data[2] / S0, sgn * dolp * sin(2.0 * chi), 2e-6);
+  CHECK_ABS(img.data[3] / S0, 0.0, 1e-6);
+  CHECK(fabs(sin(2.0 * chi)) > 0.2, "the geometry turns the basis (chi %g deg)", chi * 180 / RSW_PI);
+  film_image_free(&img);
+  scene_free(s);
+}
+
 /* Where nothing polarizes (a diffuse plate, a sun and a uniform sky), the
  * polarized render's S0 is the mono render, bitwise, and Q = U = V = 0. */
 static void test_render_depolarizing_scene_is_mono(void) {
@@ -550,6 +592,7 @@ int main(void) {
   RSW_TEST_RUN(test_wrappers);
   RSW_TEST_RUN(test_render_brewster_glass);
   RSW_TEST_RUN(test_render_gold_plane);
+  RSW_TEST_RUN(test_render_rough_gold_off_plane);
   RSW_TEST_RUN(test_render_depolarizing_scene_is_mono);
   RSW_TEST_END("test_fresnel_pol");
 }
