@@ -1,5 +1,5 @@
 /* The BSDFs' polarization factors (bsdf_ops.polarization, bsdfs/fresnel_pol.h;
- * docs/polarization.md#surfaces), against the Fresnel equations computed
+ * docs/plugins.md#polarization-surfaces), against the Fresnel equations computed
  * here in real arithmetic (Born & Wolf, Principles of Optics, sect. 1.5.2,
  * 1.5.4 and 14.2), independently of core/mueller.h's complex amplitudes:
  *  - dielectric reflection at Brewster's angle: unpolarized light comes
