@@ -17,6 +17,7 @@
 
 #include "../scene/plugin_def.h"
 #include "bsdfs_internal.h"
+#include "fresnel_pol.h"
 
 typedef struct blend_bsdf {
   bsdf base;
@@ -63,7 +64,44 @@ static color blend_sample(const bsdf *bb, const surface_interaction *si, double 
   return col_scale(blend_eval(bb, si, bs->wo), 1.0 / bs->pdf);
 }
 
-static const bsdf_ops blend_ops = {.sample = blend_sample, .eval = blend_eval, .pdf = blend_pdf};
+/* Polarization (docs/plugins.md#polarization-surfaces). Smooth lobes (eval, and
+ * a smooth sample, whose weight is the mixture's eval over its pdf): the
+ * components' matrices weighted by their shares of f, per channel,
+ * P = ((1 - w) f_0 P_0 + w f_1 P_1) / f, in common bases (the s axis of
+ * wo and wi). A delta lobe: the matrix of the component that has it; when
+ * both have it (which one was drawn is not known here) their mixture by
+ * the pick probabilities 1 - w and w, an approximation. */
+static void blend_polarization(const bsdf *bb, const surface_interaction *si, vec3 wo, unsigned lobe,
+                               mueller P[3], vec3 *s_in, vec3 *s_out) {
+  const blend_bsdf *b = (const blend_bsdf *)bb;
+  double w = weight_at(b, si);
+  color f[2];
+  unsigned delta = lobe & BSDF_DELTA;
+  if (delta) {
+    bool has0 = w < 1 && (b->c[0]->flags & delta), has1 = w > 0 && (b->c[1]->flags & delta);
+    if (has0 != has1) {
+      fpol_forward(b->c[has1 ? 1 : 0], si, wo, lobe, P, s_in, s_out);
+      return;
+    }
+    f[0] = col1(1 - w), f[1] = col1(w);
+  } else {
+    f[0] = col_scale(w < 1 ? b->c[0]->ops->eval(b->c[0], si, wo) : col1(0), 1 - w);
+    f[1] = col_scale(w > 0 ? b->c[1]->ops->eval(b->c[1], si, wo) : col1(0), w);
+  }
+  *s_in = *s_out = fpol_s_axis(wo, si->wi);
+  mueller acc[3] = {mu_zero(), mu_zero(), mu_zero()}, Pk[3];
+  double sum[3] = {0, 0, 0};
+  for (int k = 0; k < 2; k++) {
+    if (col_is_black(f[k])) continue;
+    fpol_child(b->c[k], si, wo, lobe, Pk, *s_in, *s_out);
+    fpol_mix_add(acc, sum, f[k], Pk);
+  }
+  fpol_mix_end(acc, sum);
+  for (int c = 0; c < 3; c++) P[c] = acc[c];
+}
+
+static const bsdf_ops blend_ops = {
+    .sample = blend_sample, .eval = blend_eval, .pdf = blend_pdf, .polarization = blend_polarization};
 
 static void blend_traverse(object *o, param_visitor *v) {
   blend_bsdf *b = (blend_bsdf *)o;

@@ -16,6 +16,7 @@
 #include "../scene/plugin_def.h"
 #include "bsdfs_internal.h"
 #include "fresnel.h"
+#include "fresnel_pol.h"
 
 /* ---- complex index of refraction ---------------------------------------- */
 
@@ -131,10 +132,26 @@ static color conductor_sample(const bsdf *b, const surface_interaction *si, doub
   return w;
 }
 
+/* Polarization (docs/plugins.md#polarization-surfaces): the Fresnel matrix of
+ * the complex index eta + i k per channel at the light's incidence
+ * cosine, s-axis bases (mitsuba3 src/bsdfs/conductor.cpp; the default
+ * eta 0, k 1 is a mirror that keeps the intensity but retards p against
+ * s, as there). specular_reflectance scales F00 alone. */
+static void conductor_polarization(const bsdf *b, const surface_interaction *si, vec3 wo, unsigned lobe,
+                                   mueller P[3], vec3 *s_in, vec3 *s_out) {
+  (void)lobe;
+  const conductor_bsdf *c = (const conductor_bsdf *)b;
+  color eta, k;
+  conductor_ior_eval(&c->ior, si, &eta, &k);
+  fpol_reflection(P, wo.z, eta, k);
+  *s_in = *s_out = fpol_s_axis(wo, si->wi);
+}
+
 static const bsdf_ops conductor_ops = {.sample = conductor_sample,
                                        .eval = conductor_eval,
                                        .pdf = conductor_pdf,
-                                       .sample_batch = conductor_sample_batch};
+                                       .sample_batch = conductor_sample_batch,
+                                       .polarization = conductor_polarization};
 
 static rsw_status conductor_prepare(object *o, const render_ctx *rc, rsw_err *err) {
   return conductor_ior_prepare(&((conductor_bsdf *)o)->ior, rc, err, o->id);

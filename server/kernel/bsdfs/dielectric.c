@@ -19,6 +19,7 @@
 #include "../scene/plugin_def.h"
 #include "bsdfs_internal.h"
 #include "fresnel.h"
+#include "fresnel_pol.h"
 
 static color dielectric_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2,
                                bsdf_sample *bs) {
@@ -57,8 +58,22 @@ static double dielectric_pdf(const bsdf *b, const surface_interaction *si, vec3 
   return 0.0;
 }
 
-static const bsdf_ops dielectric_ops = {
-    .sample = dielectric_sample, .eval = dielectric_eval, .pdf = dielectric_pdf};
+/* Polarization (docs/plugins.md#polarization-surfaces): the Fresnel reflection
+ * or transmission matrix (by the side wo lies on) at the light's
+ * incidence cosine, with the index seen from the light's side, s-axis
+ * bases (mitsuba3 src/bsdfs/dielectric.cpp). Total internal reflection:
+ * |r_s| = |r_p| = 1 with their phases, a retarder. */
+static void dielectric_polarization(const bsdf *b, const surface_interaction *si, vec3 wo, unsigned lobe,
+                                    mueller P[3], vec3 *s_in, vec3 *s_out) {
+  (void)lobe;
+  P[0] = P[1] = P[2] = fpol_dielectric(((const dielectric_bsdf *)b)->eta, wo, si->wi);
+  *s_in = *s_out = fpol_s_axis(wo, si->wi);
+}
+
+static const bsdf_ops dielectric_ops = {.sample = dielectric_sample,
+                                        .eval = dielectric_eval,
+                                        .pdf = dielectric_pdf,
+                                        .polarization = dielectric_polarization};
 
 /* An index given as a number or as a material name (Mitsuba's
  * lookup_ior()): absent -> the named default. */

@@ -31,6 +31,7 @@
 #include "../textures/texture.h"
 #include "eo_surfaces.h"
 #include "fresnel.h"
+#include "fresnel_pol.h"
 
 double maignan_value(double C, double ndvi, double refr_re, double refr_im, double ext_ior, vec3 wi,
                      vec3 wo) {
@@ -70,7 +71,25 @@ static double maignan_pdf(const bsdf *b, const surface_interaction *si, vec3 wo)
   return eo_cosine_pdf(si, wo);
 }
 
-static const bsdf_ops maignan_ops = {.sample = maignan_sample, .eval = maignan_eval, .pdf = maignan_pdf};
+/* Polarization (docs/plugins.md#polarization-surfaces): Maignan et al.'s model is
+ * the Fresnel matrix of the facet reflecting -wo into wi (eq. 21, the
+ * interface from ext_ior to refr_re + i refr_im at the facet angle alpha),
+ * as eradiate/mitsuba3 maignan.cpp (its fresnel_sunglint_polarized: that
+ * matrix rotated to the meridian planes; here in the facet's s-axis
+ * bases), per channel. */
+static void maignan_polarization(const bsdf *b, const surface_interaction *si, vec3 wo, unsigned lobe,
+                                 mueller P[3], vec3 *s_in, vec3 *s_out) {
+  (void)lobe;
+  const maignan_bsdf *m = (const maignan_bsdf *)b;
+  color re = tex_eval(m->refr_re, si), im = tex_eval(m->refr_im, si), ext = tex_eval(m->ext_ior, si);
+  double cos_big = fmin(1.0, fmax(-1.0, v3_dot(si->wi, wo)));
+  for (int c = 0; c < 3; c++) re.c[c] /= ext.c[c], im.c[c] /= ext.c[c];
+  fpol_reflection(P, sqrt(0.5 * (1.0 + cos_big)), re, im);
+  *s_in = *s_out = fpol_s_axis(wo, si->wi);
+}
+
+static const bsdf_ops maignan_ops = {
+    .sample = maignan_sample, .eval = maignan_eval, .pdf = maignan_pdf, .polarization = maignan_polarization};
 
 static void maignan_destroy(object *o) {
   free(o);

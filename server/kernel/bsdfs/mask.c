@@ -14,6 +14,7 @@
 
 #include "../scene/plugin_def.h"
 #include "bsdfs_internal.h"
+#include "fresnel_pol.h"
 
 typedef struct mask_bsdf {
   bsdf base;
@@ -51,7 +52,26 @@ static double mask_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
   return opacity_at(m, si) * m->nested->ops->pdf(m->nested, si, wo);
 }
 
-static const bsdf_ops mask_ops = {.sample = mask_sample, .eval = mask_eval, .pdf = mask_pdf};
+/* Polarization (docs/plugins.md#polarization-surfaces): the pass-through
+ * (wo = -wi, a delta transmission) leaves the light as it is (the
+ * identity); everything else is the nested BSDF's (eval = alpha f_nested
+ * has its matrix). A nested delta transmission straight through (a
+ * dielectric at normal incidence) is the identity too, so the two need
+ * not be told apart. */
+static void mask_polarization(const bsdf *b, const surface_interaction *si, vec3 wo, unsigned lobe,
+                              mueller P[3], vec3 *s_in, vec3 *s_out) {
+  const mask_bsdf *m = (const mask_bsdf *)b;
+  vec3 wi = si->wi;
+  if ((lobe & BSDF_DELTA_TRANSMISSION) && wo.x == -wi.x && wo.y == -wi.y && wo.z == -wi.z) {
+    P[0] = P[1] = P[2] = mu_identity();
+    *s_in = *s_out = stokes_basis(wo);
+    return;
+  }
+  fpol_forward(m->nested, si, wo, lobe, P, s_in, s_out);
+}
+
+static const bsdf_ops mask_ops = {
+    .sample = mask_sample, .eval = mask_eval, .pdf = mask_pdf, .polarization = mask_polarization};
 
 static void mask_traverse(object *o, param_visitor *v) {
   mask_bsdf *m = (mask_bsdf *)o;

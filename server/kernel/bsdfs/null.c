@@ -13,6 +13,7 @@
 
 #include "../scene/plugin_def.h"
 #include "bsdfs_internal.h"
+#include "fresnel_pol.h"
 
 static color null_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2, bsdf_sample *bs) {
   (void)b, (void)u1, (void)u2;
@@ -33,7 +34,17 @@ static double null_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
   return 0.0;
 }
 
-static const bsdf_ops null_ops = {.sample = null_sample, .eval = null_eval, .pdf = null_pdf};
+/* Polarization (docs/plugins.md#polarization-surfaces): the light crosses
+ * unchanged, the identity (with `path`, which scatters at it). */
+static void null_polarization(const bsdf *b, const surface_interaction *si, vec3 wo, unsigned lobe,
+                              mueller P[3], vec3 *s_in, vec3 *s_out) {
+  (void)b, (void)lobe;
+  P[0] = P[1] = P[2] = mu_identity();
+  *s_in = *s_out = fpol_s_axis(wo, si->wi);
+}
+
+static const bsdf_ops null_ops = {
+    .sample = null_sample, .eval = null_eval, .pdf = null_pdf, .polarization = null_polarization};
 
 static rsw_status null_create(loader *ld, node *n, object **out) {
   bsdf *b = BSDF_NEW(bsdf, null, BSDF_INDEX_MATCHED | BSDF_DELTA_TRANSMISSION | BSDF_TWO_SIDED);

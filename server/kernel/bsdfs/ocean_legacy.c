@@ -40,6 +40,7 @@
 #include "../scene/loader.h"
 #include "../scene/params.h"
 #include "eo_surfaces.h"
+#include "fresnel_pol.h"
 #include "microfacet.h"
 #include "ocean_data.h"
 
@@ -340,7 +341,32 @@ static double ocean_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
   return ocean_pdf_dir((const ocean_bsdf *)b, si->wi, wo);
 }
 
-static const bsdf_ops ocean_ops = {.sample = ocean_sample, .eval = ocean_eval, .pdf = ocean_pdf};
+/* Polarization (docs/plugins.md#polarization-surfaces), as Eradiate's polarized
+ * variant (eradiate/mitsuba3 ocean_legacy.cpp): the glint is the Fresnel
+ * matrix of water (n_re + i n_im, from air) at the facet reflecting -wo
+ * into wi (Mishchenko & Travis 1997 there: the facet's matrix rotated to
+ * the meridian planes; here in the facet's s-axis bases, the same
+ * matrix), whitecaps and underlight depolarize; mixed by their values,
+ * P = (g F / F00 + d D) / (g + d), for every lobe (a sample's weight is
+ * the whole eval over the mixture pdf). `component` keeps its terms. */
+static void ocean_polarization(const bsdf *b, const surface_interaction *si, vec3 wo, unsigned lobe,
+                               mueller P[3], vec3 *s_in, vec3 *s_out) {
+  (void)lobe;
+  const ocean_bsdf *o = (const ocean_bsdf *)b;
+  vec3 wi = si->wi;
+  fpol_depolarize(P, wo, wi, s_in, s_out);
+  if (!(wi.z > 0.0) || !(wo.z > 0.0) || o->component == 1 || o->component >= 3) return;
+  double w = o->whitecap, g = (1.0 - o->coverage) * ocean_glint(o, wo, wi);
+  double d = o->component == 2 ? 0.0 : w + (1.0 - w) * underlight(o, wo, wi);
+  if (!(g > 0.0) || !isfinite(g)) return;
+  vec3 h = v3_norm(v3_add(wi, wo));
+  mueller F[3];
+  F[0] = F[1] = F[2] = mu_normalized(mu_fresnel_reflection(v3_dot(wo, h), CMPLX(o->n_re, o->n_im)));
+  fpol_with_diffuse(P, F, col1(g), col1(d));
+}
+
+static const bsdf_ops ocean_ops = {
+    .sample = ocean_sample, .eval = ocean_eval, .pdf = ocean_pdf, .polarization = ocean_polarization};
 
 static void ocean_destroy(object *o) {
   free(o);

@@ -12,6 +12,7 @@
 
 #include "../scene/plugin_def.h"
 #include "fresnel.h"
+#include "fresnel_pol.h"
 #include "plastic_layer.h"
 
 typedef struct plastic_bsdf {
@@ -68,7 +69,21 @@ static double plastic_pdf(const bsdf *b, const surface_interaction *si, vec3 wo)
   return (1.0 - prob_specular(p, f_i)) * warp_square_to_cosine_hemisphere_pdf(wo);
 }
 
-static const bsdf_ops plastic_ops = {.sample = plastic_sample, .eval = plastic_eval, .pdf = plastic_pdf};
+/* Polarization (docs/plugins.md#polarization-surfaces): the specular lobe is the
+ * coating's Fresnel reflection matrix at the light's incidence cosine
+ * (s-axis bases, as `dielectric`); the diffuse base depolarizes, and it
+ * is eval's only lobe (lobe 0). Mitsuba 3's plastic depolarizes both
+ * lobes; its pplastic and our `dielectric` polarize a smooth coating's
+ * reflection as here. */
+static void plastic_polarization(const bsdf *b, const surface_interaction *si, vec3 wo, unsigned lobe,
+                                 mueller P[3], vec3 *s_in, vec3 *s_out) {
+  fpol_depolarize(P, wo, si->wi, s_in, s_out);
+  if (lobe & BSDF_DELTA_REFLECTION)
+    P[0] = P[1] = P[2] = mu_normalized(mu_fresnel_reflection(wo.z, ((const plastic_bsdf *)b)->layer.eta));
+}
+
+static const bsdf_ops plastic_ops = {
+    .sample = plastic_sample, .eval = plastic_eval, .pdf = plastic_pdf, .polarization = plastic_polarization};
 
 static void plastic_parameters_changed(object *o) {
   plastic_bsdf *p = (plastic_bsdf *)o;

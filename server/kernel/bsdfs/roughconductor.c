@@ -34,6 +34,7 @@
 #include "../textures/texture.h"
 #include "bsdfs_internal.h"
 #include "fresnel.h"
+#include "fresnel_pol.h"
 
 /* Scalar roughness from a texture: luminance, which is the value itself
  * for a uniform (mono or grey) input, as Mitsuba's eval_1(). */
@@ -252,11 +253,29 @@ static void rough_eval_pdf_batch(const bsdf *b, int n, const surface_interaction
   }
 }
 
+/* Polarization (docs/plugins.md#polarization-surfaces): the Fresnel matrix of
+ * the microfacet that reflects -wo into wi, at wo . h (h the half
+ * vector), in the bases of its plane of incidence, which holds wo, wi and
+ * h (mitsuba3 src/bsdfs/roughconductor.cpp). One lobe: eval's and a
+ * sample's matrix are the same. */
+static void rough_polarization(const bsdf *b, const surface_interaction *si, vec3 wo, unsigned lobe,
+                               mueller P[3], vec3 *s_in, vec3 *s_out) {
+  (void)lobe;
+  const roughconductor_bsdf *r = (const roughconductor_bsdf *)b;
+  color eta, k;
+  conductor_ior_eval(&r->ior, si, &eta, &k);
+  vec3 h = v3_add(si->wi, wo);
+  double l = v3_len(h);
+  fpol_reflection(P, l > 0.0 ? v3_dot(wo, h) / l : 1.0, eta, k);
+  *s_in = *s_out = fpol_s_axis(wo, si->wi);
+}
+
 static const bsdf_ops rough_ops = {.sample = rough_sample,
                                    .eval = rough_eval,
                                    .pdf = rough_pdf,
                                    .sample_batch = rough_sample_batch,
-                                   .eval_pdf_batch = rough_eval_pdf_batch};
+                                   .eval_pdf_batch = rough_eval_pdf_batch,
+                                   .polarization = rough_polarization};
 
 static rsw_status rough_prepare(object *o, const render_ctx *rc, rsw_err *err) {
   return conductor_ior_prepare(&((roughconductor_bsdf *)o)->ior, rc, err, o->id);

@@ -24,6 +24,7 @@
 
 #include "../scene/plugin_def.h"
 #include "fresnel.h"
+#include "fresnel_pol.h"
 #include "plastic_layer.h"
 
 enum {
@@ -83,20 +84,52 @@ static double prob_specular(const roughplastic_bsdf *r, double t_i) {
   return ps + pd > 0 ? ps / (ps + pd) : 0.0;
 }
 
-static color rp_eval(const bsdf *b, const surface_interaction *si, vec3 wo) {
-  const roughplastic_bsdf *r = (const roughplastic_bsdf *)b;
+/* eval's two lobes: *fs the specular, *fd the diffuse (both cosine
+ * weighted); false (both 0) outside the upper hemisphere. */
+static bool rp_lobes(const roughplastic_bsdf *r, const surface_interaction *si, vec3 wo, color *fs,
+                     color *fd) {
   vec3 wi = si->wi;
-  if (!(wi.z > 0.0) || !(wo.z > 0.0)) return col1(0.0);
+  if (!(wi.z > 0.0) || !(wo.z > 0.0)) {
+    *fs = *fd = col1(0.0);
+    return false;
+  }
   mf_distr d = mf_make(r->type, r->alpha, r->alpha, r->sample_visible);
   vec3 h = v3_norm(v3_add(wi, wo));
   double spec = 0.0, D = mf_D(&d, h);
   if (D > 0.0)
     spec = fresnel_dielectric(v3_dot(wi, h), r->layer.eta, NULL, NULL, NULL) * D * mf_G(&d, wi, wo, h) /
            (4.0 * wi.z);
-  color f = col_scale(bsdf_factor(r->layer.specular, si), spec);
+  *fs = col_scale(bsdf_factor(r->layer.specular, si), spec);
   double t =
       transmittance(r, wi.z) * transmittance(r, wo.z) * wo.z * RSW_INV_PI / (r->layer.eta * r->layer.eta);
-  return col_add(f, col_scale(plastic_diffuse(&r->layer, si, r->int_reflectance), t));
+  *fd = col_scale(plastic_diffuse(&r->layer, si, r->int_reflectance), t);
+  return true;
+}
+
+static color rp_eval(const bsdf *b, const surface_interaction *si, vec3 wo) {
+  color fs, fd;
+  if (!rp_lobes((const roughplastic_bsdf *)b, si, wo, &fs, &fd)) return col1(0.0);
+  return col_add(fs, fd);
+}
+
+/* Polarization (docs/plugins.md#polarization-surfaces): the coating's microfacet
+ * Fresnel matrix at wo . h for the specular lobe (s-axis bases, as
+ * `roughconductor`), the diffuse base depolarizing; mixed by the lobes'
+ * values, per channel, P = (f_s F / F00 + f_d D) / (f_s + f_d). A
+ * sample's weight is eval / pdf of both lobes whichever was drawn, so
+ * every lobe gets this mixture. (Mitsuba 3's roughplastic depolarizes
+ * both lobes.) */
+static void rp_polarization(const bsdf *b, const surface_interaction *si, vec3 wo, unsigned lobe,
+                            mueller P[3], vec3 *s_in, vec3 *s_out) {
+  (void)lobe;
+  const roughplastic_bsdf *r = (const roughplastic_bsdf *)b;
+  color fs, fd;
+  fpol_depolarize(P, wo, si->wi, s_in, s_out);
+  if (!rp_lobes(r, si, wo, &fs, &fd)) return;
+  vec3 h = v3_norm(v3_add(si->wi, wo));
+  mueller F[3];
+  F[0] = F[1] = F[2] = mu_normalized(mu_fresnel_reflection(v3_dot(wo, h), r->layer.eta));
+  fpol_with_diffuse(P, F, fs, fd);
 }
 
 static double rp_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
@@ -136,7 +169,8 @@ static color rp_sample(const bsdf *b, const surface_interaction *si, double u1, 
   return col_scale(rp_eval(b, si, bs->wo), 1.0 / bs->pdf);
 }
 
-static const bsdf_ops roughplastic_ops = {.sample = rp_sample, .eval = rp_eval, .pdf = rp_pdf};
+static const bsdf_ops roughplastic_ops = {
+    .sample = rp_sample, .eval = rp_eval, .pdf = rp_pdf, .polarization = rp_polarization};
 
 static void rp_traverse(object *o, param_visitor *v) {
   roughplastic_bsdf *r = (roughplastic_bsdf *)o;

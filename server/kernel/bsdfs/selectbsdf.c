@@ -18,6 +18,7 @@
 #include "../scene/params.h"
 #include "../textures/texture.h"
 #include "eo_surfaces.h"
+#include "fresnel_pol.h"
 
 typedef struct selectbsdf {
   bsdf base;
@@ -49,7 +50,19 @@ static double sel_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
   return k ? k->ops->pdf(k, si, wo) : 0.0;
 }
 
-static const bsdf_ops sel_ops = {.sample = sel_sample, .eval = sel_eval, .pdf = sel_pdf};
+/* Polarization (docs/plugins.md#polarization-surfaces): the chosen BSDF's; none
+ * chosen (black) depolarizes. */
+static void sel_polarization(const bsdf *b, const surface_interaction *si, vec3 wo, unsigned lobe,
+                             mueller P[3], vec3 *s_in, vec3 *s_out) {
+  const bsdf *k = pick((const selectbsdf *)b, si);
+  if (k)
+    fpol_forward(k, si, wo, lobe, P, s_in, s_out);
+  else
+    fpol_depolarize(P, wo, si->wi, s_in, s_out);
+}
+
+static const bsdf_ops sel_ops = {
+    .sample = sel_sample, .eval = sel_eval, .pdf = sel_pdf, .polarization = sel_polarization};
 
 static void sel_destroy(object *o) {
   if (o) free(((selectbsdf *)o)->kids);

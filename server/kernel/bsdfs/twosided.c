@@ -13,6 +13,7 @@
 
 #include "../scene/plugin_def.h"
 #include "bsdfs_internal.h"
+#include "fresnel_pol.h"
 
 #define TRANSMISSION_LOBES (BSDF_DIFFUSE_TRANSMISSION | BSDF_GLOSSY_TRANSMISSION | BSDF_DELTA_TRANSMISSION)
 
@@ -133,7 +134,34 @@ static void twosided_eval_pdf_batch(const bsdf *b, int n, const surface_interact
   }
 }
 
-static const bsdf_ops twosided_ops = {.sample = twosided_sample,
+/* Polarization (docs/plugins.md#polarization-surfaces): the side's BSDF, with the
+ * back side's geometry mirrored as for its values. A mirror reverses the
+ * handedness of a Stokes basis (y = d x x), so U and V change sign on
+ * both sides of the back BSDF's matrix: P = D P_back D, D = diag(1, 1, -1, -1). */
+static void twosided_polarization(const bsdf *b, const surface_interaction *si, vec3 wo, unsigned lobe,
+                                  mueller P[3], vec3 *s_in, vec3 *s_out) {
+  const twosided_bsdf *t = (const twosided_bsdf *)b;
+  if (si->wi.z > 0.0) {
+    fpol_forward(t->brdf[0], si, wo, lobe, P, s_in, s_out);
+    return;
+  }
+  if (!(si->wi.z < 0.0)) {
+    fpol_depolarize(P, wo, si->wi, s_in, s_out);
+    return;
+  }
+  surface_interaction s = *si;
+  s.wi = flip_z(si->wi);
+  fpol_forward(t->brdf[1], &s, flip_z(wo), lobe, P, s_in, s_out);
+  *s_in = flip_z(*s_in);
+  *s_out = flip_z(*s_out);
+  for (int c = 0; c < 3; c++)
+    for (int i = 0; i < 4; i++)
+      for (int j = 0; j < 4; j++)
+        if ((i >= 2) != (j >= 2)) P[c].m[i][j] = -P[c].m[i][j];
+}
+
+static const bsdf_ops twosided_ops = {.polarization = twosided_polarization,
+                                      .sample = twosided_sample,
                                       .eval = twosided_eval,
                                       .pdf = twosided_pdf,
                                       .sample_batch = twosided_sample_batch,
