@@ -769,22 +769,16 @@ int cmd_sweep(cli_ctx *ctx, const cmdline_args *a) {
   sweep_fingerprint(a, scene, fingerprint);
   bool resume = o.spread && !cmdline_has(a, "--force") && sweep_spread_resumable(dir, fingerprint);
   if (!resume && (rc = sweep_prepare_output(ctx, dir, cmdline_has(a, "--force")))) goto out;
-  if (l.n == 0) {
-    /* A shard past the end of a short list: nothing to submit, an empty
-     * index keeps `merge` simple. */
-    if (!ctx->quiet)
-      fprintf(stderr, "raysweep sweep: shard %llu/%llu has no contexts\n", o.shard_i, o.shard_n);
-    rc = sweep_write_index(ctx, dir, NULL, 0);
-    if (!rc) rc = manifest_write(ctx, dir, fingerprint, scene, o.shard_i, o.shard_n, &l, NULL, true, NULL);
-    goto out;
-  }
-  /* The job lists the contexts in the order the user described them. */
+  /* The job lists the contexts in the order the user described them (an empty
+   * shard's too: its options are checked before the scene is pushed). */
   if ((rc = build_contexts(ctx, a, l.items, l.n, job_params, (long long)o.spp, (long long)o.seed, o.bundle,
                            &x)))
     goto out;
   struct stat sst;
   if (!o.spread && stat(scene, &sst) == 0 && S_ISREG(sst.st_mode)) {
-    /* A scene FILE: push it (blobs it references too) and sweep its id. */
+    /* A scene FILE: push it (blobs it references too) and sweep its id
+     * (an empty shard too: its sweep.json must name the sweep its other
+     * shards name, for merge). */
     int created = 0;
     rsw_status ps = rsw_scene_push_file(ctx->client, scene, NULL, scene_id, &created);
     if (ps) {
@@ -793,6 +787,15 @@ int cmd_sweep(cli_ctx *ctx, const cmdline_args *a) {
     }
     scene = scene_id;
     sweep_fingerprint(a, scene, fingerprint);
+  }
+  if (l.n == 0) {
+    /* A shard past the end of a short list: nothing to submit, an empty
+     * index keeps `merge` simple. */
+    if (!ctx->quiet)
+      fprintf(stderr, "raysweep sweep: shard %llu/%llu has no contexts\n", o.shard_i, o.shard_n);
+    rc = sweep_write_index(ctx, dir, NULL, 0);
+    if (!rc) rc = manifest_write(ctx, dir, fingerprint, scene, o.shard_i, o.shard_n, &l, NULL, true, NULL);
+    goto out;
   }
   if (o.spread)
     rc = sweep_run_spread(ctx, a, (int)o.spread, resume, o.fmt, o.timeout, &l, sorted, job_params, x,
