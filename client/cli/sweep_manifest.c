@@ -176,7 +176,8 @@ int manifest_write(const cli_ctx *ctx, const char *dir, const char *fingerprint,
   for (size_t k = 0; l->leads && k < l->total && !grouped; k++) grouped = l->leads[k] != k;
   if (grouped) {
     cJSON *leads = cJSON_AddArrayToObject(o, "bundle_leads");
-    for (size_t k = 0; k < l->total; k++) cJSON_AddItemToArray(leads, cJSON_CreateNumber((double)l->leads[k]));
+    for (size_t k = 0; k < l->total; k++)
+      cJSON_AddItemToArray(leads, cJSON_CreateNumber((double)l->leads[k]));
   }
   if (job && *job)
     cJSON_AddStringToObject(o, "job", job);

@@ -209,7 +209,8 @@ rsw_status rsw_contexts_set_variance(rsw_contexts *x, int on) {
 rsw_status rsw_contexts_set_bundle(rsw_contexts *x, int k) {
   if (!x || (k < 1 && k != RSW_BUNDLE_AUTO)) return RSW_ERR_INVALID;
   cJSON_DeleteItemFromObjectCaseSensitive(x->root, "bundle");
-  if (k == RSW_BUNDLE_AUTO) return cJSON_AddStringToObject(x->root, "bundle", "auto") ? RSW_OK : RSW_ERR_NOMEM;
+  if (k == RSW_BUNDLE_AUTO)
+    return cJSON_AddStringToObject(x->root, "bundle", "auto") ? RSW_OK : RSW_ERR_NOMEM;
   if (k > 1 && !cJSON_AddNumberToObject(x->root, "bundle", k)) return RSW_ERR_NOMEM;
   return RSW_OK;
 }
@@ -863,7 +864,8 @@ rsw_status client_contexts_bundle_leads(const rsw_contexts *x, size_t *lead) {
     /* The others: their texts numbered, cut into runs (common/bundle_plan.h). */
     size_t m = 0;
     for (size_t i = 0; i < n; i++)
-      if (text[i] && !cJSON_GetObjectItemCaseSensitive(x->items[i], "bundle_group")) g[m++] = (text_key){text[i], i};
+      if (text[i] && !cJSON_GetObjectItemCaseSensitive(x->items[i], "bundle_group"))
+        g[m++] = (text_key){text[i], i};
     qsort(g, m, sizeof *g, cmp_text_key);
     for (size_t a = 0, id = 0; a < m; a++) {
       if (a && strcmp(g[a].text, g[a - 1].text) != 0) id++;

@@ -243,7 +243,7 @@ rsw_status rsw_contexts_set_variance(rsw_contexts *x, int on);
  * docs/experiments.md#spectral-bundles). The server checks the scene. */
 #define RSW_BUNDLE_AUTO (-1)
 /* The most wavelengths per path the API allows ("bundle" 1..RSW_BUNDLE_MAX). */
-#define RSW_BUNDLE_MAX 3
+#define RSW_BUNDLE_MAX  3
 rsw_status rsw_contexts_set_bundle(rsw_contexts *x, int k);
 /* Context index's "bundle_group" (group < 0 removes it): renders of
  * contexts in different groups never share a bundle. What keeps a sweep's

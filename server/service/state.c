@@ -1323,7 +1323,8 @@ static bool restore_finished(service *svc, const req_header *h, cJSON *done, con
   if (cJSON_IsNumber(x) && x->valuedouble >= 1 && x->valuedouble <= RENDER_MAX_BUNDLE)
     j->bundle = (int)x->valuedouble, j->bundle_asked = true;
   x = cJSON_GetObjectItemCaseSensitive(done, "bundle_why");
-  if (j->bundle_asked && cJSON_IsString(x)) snprintf(j->bundle_why, sizeof j->bundle_why, "%s", x->valuestring);
+  if (j->bundle_asked && cJSON_IsString(x))
+    snprintf(j->bundle_why, sizeof j->bundle_why, "%s", x->valuestring);
   x = cJSON_GetObjectItemCaseSensitive(done, "seconds");
   double secs = cJSON_IsNumber(x) && x->valuedouble >= 0 && x->valuedouble < 1e9 ? x->valuedouble : 0;
   x = cJSON_GetObjectItemCaseSensitive(done, "finished");
