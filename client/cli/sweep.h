@@ -29,7 +29,7 @@
  *    "bundle_leads": [per context, its bundle group's first] (with --bundle)}
  * FINGERPRINT is FNV-1a 64 over everything that defines the unsharded
  * sweep (scene, contexts file or grid, --set, --sensor, --spp, --seed,
- * --format, --quantities, --variance, --bundle) and not over --shard, so every shard of one sweep carries the
+ * --format, --quantities, --variance, --bundle but 1) and not over --shard, so every shard of one sweep carries the
  * same value. `merge` uses it to know which contexts a set of shard
  * directories must cover; `sweep --force` to know what an earlier sweep
  * wrote. "incomplete" lists contexts with a render that did not succeed. */

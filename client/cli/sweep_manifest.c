@@ -40,9 +40,10 @@ void sweep_fingerprint(const cmdline_args *a, const char *scene, char out[17]) {
     h = fnv1a_str(h, keyed[k]);
     for (size_t i = 0; i < n; i++) h = fnv1a_str(h, v[i]);
   }
-  /* (only when given: the sweeps of before --bundle keep their value) */
+  /* (only when it bundles: sweeps without it, or with --bundle 1, keep
+   * the value they had before --bundle existed) */
   const char *bundle = cmdline_get(a, "--bundle");
-  if (bundle) h = fnv1a_str(fnv1a_str(h, "--bundle"), bundle);
+  if (bundle && strcmp(bundle, "1") != 0) h = fnv1a_str(fnv1a_str(h, "--bundle"), bundle);
   snprintf(out, 17, "%016llx", (unsigned long long)h);
 }
 
