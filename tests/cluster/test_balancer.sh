@@ -188,56 +188,44 @@ done
 kill "$ng_pid"
 wait "$ng_pid" 2>/dev/null
 
+# kill_mid_sweep LABEL OUT REF SPARED [sweep options]: a --spread 3 sweep
+# into OUT through HAProxy, the first replica other than SPARED's index
+# (none: "") to render 2 contexts SIGKILLed (its index in $victim); the
+# sweep completes, is REF bit for bit, and counts a resubmission.
+kill_mid_sweep() {
+  local label=$1 out=$2 ref=$3 spared=$4
+  shift 4
+  local before now i rc sweep_pid
+  before=($(counts))
+  rsw "http://127.0.0.1:$lb" sweep "$scene" "${grid[@]}" --spp $spp --spread 3 "$@" -o "$out" >"$out.out" 2>"$out.err" &
+  sweep_pid=$!
+  victim=""
+  for _ in $(seq 300); do
+    now=($(counts))
+    for i in 0 1 2; do
+      if [ "$i" != "$spared" ] && [ $(( ${now[$i]} - ${before[$i]} )) -ge 2 ]; then victim=$i; break 2; fi
+    done
+    sleep 0.01
+  done
+  if [ -n "$victim" ]; then
+    kill -KILL "${rep_pids[$((victim + 1))]}"
+    wait "${rep_pids[$((victim + 1))]}" 2>/dev/null
+    ok
+  else
+    bad "$label: no replica started rendering"
+  fi
+  wait "$sweep_pid"
+  rc=$?
+  if [ "$rc" -eq 0 ]; then ok; else bad "$label: sweep exit $rc: $(tail -c 800 "$out.err")"; fi
+  same_sweep "$label" "$out" "$ref"
+  if grep -Eq '[1-9][0-9]* resubmissions? of [1-9]' "$out.err"; then ok; else bad "$label: the summary counts no resubmission: $(tail -n 2 "$out.err")"; fi
+}
+
 # ---- one replica SIGKILLed mid-sweep (HAProxy) ----
 start_haproxy "$lb"
-before=($(counts))
-rsw "http://127.0.0.1:$lb" sweep "$scene" "${grid[@]}" --spp $spp --spread 3 -o "$tmp/k" >"$tmp/k.out" 2>"$tmp/k.err" &
-sweep_pid=$!
-victim=""
-for _ in $(seq 300); do
-  now=($(counts))
-  for i in 0 1 2; do
-    if [ $(( ${now[$i]} - ${before[$i]} )) -ge 2 ]; then victim=$i; break 2; fi
-  done
-  sleep 0.01
-done
-if [ -n "$victim" ]; then
-  kill -KILL "${rep_pids[$((victim + 1))]}"
-  wait "${rep_pids[$((victim + 1))]}" 2>/dev/null
-  ok
-else
-  bad "kill: no replica started rendering"
-fi
-wait "$sweep_pid"
-rc=$?
-if [ "$rc" -eq 0 ]; then ok; else bad "replica killed: sweep exit $rc: $(tail -c 800 "$tmp/k.err")"; fi
-same_sweep "replica killed" "$tmp/k"
-if grep -Eq '[1-9][0-9]* resubmissions? of [1-9]' "$tmp/k.err"; then ok; else bad "replica killed: the summary counts no resubmission: $(tail -n 2 "$tmp/k.err")"; fi
-
-# ---- --bundle 3, another replica SIGKILLed mid-sweep (HAProxy) ----
-before=($(counts))
-rsw "http://127.0.0.1:$lb" sweep "$scene" "${grid[@]}" --spp $spp --bundle 3 --spread 3 -o "$tmp/kb" >"$tmp/kb.out" 2>"$tmp/kb.err" &
-sweep_pid=$!
-victim2=""
-for _ in $(seq 300); do
-  now=($(counts))
-  for i in 0 1 2; do
-    if [ "$i" != "$victim" ] && [ $(( ${now[$i]:-0} - ${before[$i]:-0} )) -ge 2 ]; then victim2=$i; break 2; fi
-  done
-  sleep 0.01
-done
-if [ -n "$victim2" ]; then
-  kill -KILL "${rep_pids[$((victim2 + 1))]}"
-  wait "${rep_pids[$((victim2 + 1))]}" 2>/dev/null
-  ok
-else
-  bad "bundle 3, kill: no other replica started rendering"
-fi
-wait "$sweep_pid"
-rc=$?
-if [ "$rc" -eq 0 ]; then ok; else bad "bundle 3, replica killed: sweep exit $rc: $(tail -c 800 "$tmp/kb.err")"; fi
-same_sweep "bundle 3, replica killed" "$tmp/kb" "$tmp/refb"
-if grep -Eq '[1-9][0-9]* resubmissions? of [1-9]' "$tmp/kb.err"; then ok; else bad "bundle 3, replica killed: the summary counts no resubmission: $(tail -n 2 "$tmp/kb.err")"; fi
+kill_mid_sweep "replica killed" "$tmp/k" "$tmp/ref" ""
+# ---- --bundle 3, another replica SIGKILLed mid-sweep ----
+kill_mid_sweep "bundle 3, replica killed" "$tmp/kb" "$tmp/refb" "$victim" --bundle 3
 
 # ---- the shipped configurations are the generator's ----
 three=(--replica raysweep-1:8350 --replica raysweep-2:8350 --replica raysweep-3:8350)
