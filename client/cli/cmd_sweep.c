@@ -19,6 +19,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "bundle_plan.h"
 #include "sweep.h"
 
 const cmdline_opt cli_opts_sweep[] = {
@@ -30,16 +31,19 @@ const cmdline_opt cli_opts_sweep[] = {
     {"--sensor", "S", true, "sensor to render (default: every sensor)"},
     {"--spp", "N", false, "samples per pixel"},
     {"--seed", "N", false, "job seed (default 0)"},
-    {"--shard", "I/N", false, "keep contexts I, I+N, I+2N, ... (ids unchanged)"},
+    {"--shard", "I/N", false,
+     "keep contexts I, I+N, I+2N, ... (ids unchanged; with --bundle, whole bundle groups: those whose first "
+     "context is one of them)"},
     {"--spread", "K", false,
      "run K shards at once through one load balancer (--server), each routed to its own replica by "
      "X-Raysweep-Shard; a scene FILE is pushed to every replica; a balancer that went away: rerun to resume"},
     {"--quantities", "LIST", false,
      "comma-separated, of radiance, brdf, brf: films add brdf and brf channels"},
     {"--variance", NULL, false, "films add radiance_stderr channels (standard error of each pixel's mean)"},
-    {"--bundle", "K", false,
-     "carry K (1-3) wavelengths per path: each render with the next ones that differ only in wavelength "
-     "(docs/experiments.md#spectral-bundles)"},
+    {"--bundle", "K|auto", false,
+     "carry K (1-3) wavelengths per path: each render with the next ones that differ only in wavelength; "
+     "auto (recommended for spectral sweeps): the most the daemon allows for the scene, 1 where it allows "
+     "none (docs/experiments.md#spectral-bundles)"},
     {"--format", "exr|npy|json|nc", false,
      "film files: exr (default), npy or json; nc: json films plus DIR/dataset.nc, the sweep as one "
      "NetCDF-4 dataset (xarray.open_dataset)"},
@@ -74,6 +78,7 @@ static void items_free(sweep_list *l) {
   if (l->all_ids)
     for (size_t i = 0; i < l->total; i++) free(l->all_ids[i]);
   free(l->all_ids);
+  free(l->leads);
 }
 
 static sweep_item *items_push(sweep_list *l) {
@@ -85,7 +90,7 @@ static sweep_item *items_push(sweep_list *l) {
   }
   sweep_item *it = &l->items[l->n++];
   memset(it, 0, sizeof *it);
-  it->spp = it->seed = -1;
+  it->spp = it->seed = it->group = -1;
   return it;
 }
 
@@ -155,10 +160,37 @@ static void axis_coords(grid_axis *g, size_t n) {
   }
 }
 
+/* A grid's bundle groups (bundle > 1 and a wavelength axis; otherwise
+ * l->leads stays NULL): the daemon's rule (common/bundle_plan.h) over the
+ * contexts, whose key is their index with the wavelength axis's digit
+ * taken out (the contexts that differ only in the wavelength). */
+static int grid_leads(const cli_ctx *ctx, const grid_axis *g, size_t n_axes, int bundle, sweep_list *l) {
+  size_t wa = n_axes, stride = 1;
+  for (size_t a = 0; a < n_axes; a++)
+    if (g[a].is_wavelength) wa = a;
+  if (bundle <= 1 || wa == n_axes) return 0;
+  for (size_t a = wa + 1; a < n_axes; a++) stride *= g[a].n;
+  size_t n = l->total, nw = g[wa].n;
+  uint64_t *key = malloc(n * sizeof *key);
+  double *wl = malloc(n * sizeof *wl);
+  l->leads = malloc(n * sizeof *l->leads);
+  int rc = key && wl && l->leads ? 0 : -1;
+  for (size_t i = 0; i < n && !rc; i++) {
+    size_t lo = i % stride, kw = i / stride % nw, hi = i / stride / nw;
+    key[i] = (uint64_t)(hi * stride + lo);
+    wl[i] = g[wa].start + (double)kw * g[wa].step;
+  }
+  if (!rc) rc = rsw_bundle_runs(n, key, wl, bundle, l->leads);
+  free(key);
+  free(wl);
+  return rc ? cli_fail(ctx, CLI_IO, "out of memory") : 0;
+}
+
 /* The Cartesian product of the axes, first axis slowest; only the indices
- * this shard keeps are materialised. */
+ * this shard keeps are materialised (sweep_shard_of: with bundles, whole
+ * bundle groups). */
 static int build_grid(const cli_ctx *ctx, const grid_axis *g, size_t n_axes, size_t shard_i, size_t shard_n,
-                      sweep_list *l) {
+                      int bundle, sweep_list *l) {
   unsigned long long total = 1;
   for (size_t a = 0; a < n_axes; a++) {
     total *= g[a].n;
@@ -167,10 +199,14 @@ static int build_grid(const cli_ctx *ctx, const grid_axis *g, size_t n_axes, siz
   }
   l->total = (size_t)total;
   int w = l->id_width = sweep_id_width(l->total);
-  for (size_t i = shard_i; i < l->total; i += shard_n) {
+  int rc = grid_leads(ctx, g, n_axes, bundle, l);
+  if (rc) return rc;
+  for (size_t i = l->leads ? 0 : shard_i; i < l->total; i += l->leads ? 1 : shard_n) {
+    if (l->leads && sweep_shard_of(l->leads, i, shard_n) != shard_i) continue;
     sweep_item *it = items_push(l);
     if (!it) return cli_fail(ctx, CLI_IO, "out of memory");
     sweep_make_id(it->id, w, i);
+    if (bundle > 1) it->group = (long long)(l->leads ? l->leads[i] : i);
     size_t rest = i, ks[MAX_GRIDS];
     for (size_t a = n_axes; a-- > 0;) {
       ks[a] = rest % g[a].n;
@@ -195,9 +231,66 @@ static int build_grid(const cli_ctx *ctx, const grid_axis *g, size_t n_axes, siz
   return 0;
 }
 
+typedef struct text_key {
+  char *text;
+  size_t index;
+} text_key;
+
+static int cmp_text_key(const void *a, const void *b) {
+  const text_key *x = a, *y = b;
+  int c = strcmp(x->text, y->text);
+  return c ? c : (x->index > y->index) - (x->index < y->index);
+}
+
+/* A contexts file's bundle groups (bundle > 1): the daemon's rule
+ * (common/bundle_plan.h) over every line, keyed by
+ * rsw_bundle_context_text (a line that is not an object, or has a seed or
+ * no wavelength, is a group of its own). text: the file, its lines
+ * NUL-free; total lines that are not blank. */
+static int file_leads(const cli_ctx *ctx, const char *text, size_t total, int bundle, sweep_list *l) {
+  if (bundle <= 1 || !total) return 0;
+  uint64_t *key = malloc(total * sizeof *key);
+  double *wl = calloc(total, sizeof *wl);
+  text_key *tk = calloc(total, sizeof *tk);
+  l->leads = malloc(total * sizeof *l->leads);
+  int rc = key && wl && tk && l->leads ? 0 : -1;
+  size_t i = 0, nt = 0;
+  for (const char *s = text; *s && !rc && i < total;) {
+    const char *nl = strchr(s, '\n');
+    size_t n = nl ? (size_t)(nl - s) : strlen(s);
+    cJSON *o = cJSON_ParseWithLength(s, n);
+    bool blank = true;
+    for (size_t k = 0; k < n; k++) blank = blank && (s[k] == ' ' || s[k] == '\t' || s[k] == '\r');
+    if (!blank) {
+      const cJSON *w = cJSON_GetObjectItemCaseSensitive(o, "wavelength");
+      wl[i] = cJSON_IsNumber(w) ? w->valuedouble : 0;
+      key[i] = RSW_BUNDLE_ALONE;
+      char *t = rsw_bundle_context_text(o);
+      if (t) tk[nt++] = (text_key){t, i};
+      i++;
+    }
+    cJSON_Delete(o);
+    s += n + (nl ? 1 : 0);
+  }
+  if (!rc) {
+    qsort(tk, nt, sizeof *tk, cmp_text_key);
+    for (size_t a = 0, id = 0; a < nt; a++) {
+      if (a && strcmp(tk[a].text, tk[a - 1].text) != 0) id++;
+      key[tk[a].index] = id;
+    }
+    rc = rsw_bundle_runs(total, key, wl, bundle, l->leads);
+  }
+  for (size_t a = 0; tk && a < nt; a++) free(tk[a].text);
+  free(tk);
+  free(key);
+  free(wl);
+  return rc ? cli_fail(ctx, CLI_IO, "out of memory") : 0;
+}
+
 /* One Context per non-blank line: {id?, wavelength?, params?, sensors?,
- * spp?, seed?}; a missing id is numbered like a grid's. */
-static int read_contexts(const cli_ctx *ctx, const char *path, size_t shard_i, size_t shard_n,
+ * spp?, seed?}; a missing id is numbered like a grid's. This shard keeps
+ * the lines sweep_shard_of gives it (with bundles, whole bundle groups). */
+static int read_contexts(const cli_ctx *ctx, const char *path, size_t shard_i, size_t shard_n, int bundle,
                          sweep_list *l) {
   size_t len;
   char *text = cli_read_file(path, &len);
@@ -221,6 +314,11 @@ static int read_contexts(const cli_ctx *ctx, const char *path, size_t shard_i, s
     free(text);
     return cli_fail(ctx, CLI_IO, "out of memory");
   }
+  int lrc = file_leads(ctx, text, total, bundle, l);
+  if (lrc) {
+    free(text);
+    return lrc;
+  }
   size_t line = 0, index = 0;
   for (char *s = text; *s && !rc;) {
     char *nl = strchr(s, '\n');
@@ -235,7 +333,7 @@ static int read_contexts(const cli_ctx *ctx, const char *path, size_t shard_i, s
       continue;
     }
     size_t my = index++;
-    if (my % shard_n != shard_i) {
+    if (sweep_shard_of(l->leads, my, shard_n) != shard_i) {
       if (l->all_ids) { /* another shard's line: only its id (that shard checks the rest) */
         cJSON *o = cJSON_Parse(s);
         const char *id = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "id"));
@@ -258,6 +356,7 @@ static int read_contexts(const cli_ctx *ctx, const char *path, size_t shard_i, s
       break;
     }
     sweep_make_id(it->id, w, my);
+    if (bundle > 1) it->group = (long long)(l->leads ? l->leads[my] : my);
     cJSON *f;
     cJSON_ArrayForEach(f, o) {
       const char *k = f->string;
@@ -326,7 +425,8 @@ static int read_contexts(const cli_ctx *ctx, const char *path, size_t shard_i, s
 /* Feed the builder. Errors here are about the contexts the user described:
  * usage (2). */
 static int build_contexts(const cli_ctx *ctx, const cmdline_args *a, const sweep_item *items, size_t n,
-                          const cJSON *job_params, long long spp, long long seed, rsw_contexts **out) {
+                          const cJSON *job_params, long long spp, long long seed, int bundle,
+                          rsw_contexts **out) {
   rsw_contexts *x = NULL;
   rsw_status s = rsw_contexts_new(&x);
   if (s) return cli_fail(ctx, CLI_IO, "cannot start a context list: %s", rsw_strerror(s));
@@ -354,6 +454,7 @@ static int build_contexts(const cli_ctx *ctx, const cmdline_args *a, const sweep
     cJSON_ArrayForEach(p, it->sensors) if (!s) s = rsw_contexts_add_sensor(x, idx, p->valuestring);
     if (!s && it->spp >= 0) s = rsw_contexts_set_spp(x, idx, it->spp);
     if (!s && it->seed >= 0) s = rsw_contexts_set_seed(x, idx, it->seed);
+    if (!s && it->group >= 0) s = rsw_contexts_set_bundle_group(x, idx, it->group);
   }
   if (!s) {
     snprintf(what, sizeof what, "--set");
@@ -392,15 +493,9 @@ static int build_contexts(const cli_ctx *ctx, const cmdline_args *a, const sweep
   }
   if (!s && cmdline_get(a, "--variance"))
     snprintf(what, sizeof what, "--variance"), s = rsw_contexts_set_variance(x, 1);
-  const char *bv = cmdline_get(a, "--bundle");
-  if (!s && bv) {
-    unsigned long long k;
-    if (!cli_parse_u64(bv, 3, &k) || k < 1) {
-      rsw_contexts_free(x);
-      return cli_usage(ctx, "--bundle needs 1, 2 or 3 wavelengths per path (got '%s')", bv);
-    }
-    snprintf(what, sizeof what, "--bundle %s", bv), s = rsw_contexts_set_bundle(x, (int)k);
-  }
+  if (!s && cmdline_get(a, "--bundle"))
+    snprintf(what, sizeof what, "--bundle %s", cmdline_get(a, "--bundle")),
+        s = rsw_contexts_set_bundle(x, bundle);
   if (s) {
     rc = s == RSW_ERR_NOMEM ? cli_fail(ctx, CLI_IO, "out of memory")
                             : cli_usage(ctx, "%s: %s", what, rsw_strerror(s));
@@ -503,6 +598,8 @@ typedef struct sweep_opts {
   bool want_nc; /* --format nc: JSON films and DIR/dataset.nc */
   unsigned long long spp, seed, shard_i, shard_n, spread;
   double timeout;
+  int bundle;      /* --bundle: 1..RSW_BUNDLE_MAX or RSW_BUNDLE_AUTO (1 when absent) */
+  int bundle_plan; /* the K its groups are planned with: RSW_BUNDLE_MAX for auto */
 } sweep_opts;
 
 static int read_sweep_options(const cli_ctx *ctx, const cmdline_args *a, sweep_opts *o) {
@@ -536,6 +633,16 @@ static int read_sweep_options(const cli_ctx *ctx, const cmdline_args *a, sweep_o
   }
   if ((v = cmdline_get(a, "--spread")) && (!cli_parse_u64(v, 4096, &o->spread) || o->spread == 0))
     return cli_usage(ctx, "--spread needs a number of shards from 1 to 4096 (got '%s')", v);
+  o->bundle = o->bundle_plan = 1;
+  if ((v = cmdline_get(a, "--bundle"))) {
+    unsigned long long k;
+    if (strcmp(v, "auto") == 0)
+      o->bundle = RSW_BUNDLE_AUTO, o->bundle_plan = RSW_BUNDLE_MAX;
+    else if (cli_parse_u64(v, RSW_BUNDLE_MAX, &k) && k >= 1)
+      o->bundle = o->bundle_plan = (int)k;
+    else
+      return cli_usage(ctx, "--bundle needs 1, 2, 3 or auto (wavelengths per path; got '%s')", v);
+  }
   if ((v = cmdline_get(a, "--timeout")) && (!cli_parse_double(v, &o->timeout) || !(o->timeout > 0)))
     return cli_usage(ctx, "--timeout needs a positive number of seconds (got '%s')", v);
   return 0;
@@ -548,7 +655,7 @@ static int build_list(const cli_ctx *ctx, const sweep_opts *o, grid_axis *axes, 
                       sweep_item ***sorted) {
   int rc = 0;
   if (o->contexts_file) {
-    rc = read_contexts(ctx, o->contexts_file, o->shard_i, o->shard_n, l);
+    rc = read_contexts(ctx, o->contexts_file, o->shard_i, o->shard_n, o->bundle_plan, l);
   } else {
     for (size_t i = 0; i < o->n_grids && !rc; i++) {
       rc = parse_grid(ctx, o->grids[i], &axes[i]);
@@ -557,7 +664,7 @@ static int build_list(const cli_ctx *ctx, const sweep_opts *o, grid_axis *axes, 
           rc = cli_usage(ctx, "--grid %s given twice", axes[i].name);
     }
     if (!rc) axis_coords(axes, o->n_grids);
-    if (!rc) rc = build_grid(ctx, axes, o->n_grids, o->shard_i, o->shard_n, l);
+    if (!rc) rc = build_grid(ctx, axes, o->n_grids, o->shard_i, o->shard_n, o->bundle_plan, l);
   }
   if (rc) return rc;
   sweep_item **s = *sorted = malloc((l->n ? l->n : 1) * sizeof *s);
@@ -662,21 +769,16 @@ int cmd_sweep(cli_ctx *ctx, const cmdline_args *a) {
   sweep_fingerprint(a, scene, fingerprint);
   bool resume = o.spread && !cmdline_has(a, "--force") && sweep_spread_resumable(dir, fingerprint);
   if (!resume && (rc = sweep_prepare_output(ctx, dir, cmdline_has(a, "--force")))) goto out;
-  if (l.n == 0) {
-    /* A shard past the end of a short list: nothing to submit, an empty
-     * index keeps `merge` simple. */
-    if (!ctx->quiet)
-      fprintf(stderr, "raysweep sweep: shard %llu/%llu has no contexts\n", o.shard_i, o.shard_n);
-    rc = sweep_write_index(ctx, dir, NULL, 0);
-    if (!rc) rc = manifest_write(ctx, dir, fingerprint, scene, o.shard_i, o.shard_n, &l, NULL, true, NULL);
-    goto out;
-  }
-  /* The job lists the contexts in the order the user described them. */
-  if ((rc = build_contexts(ctx, a, l.items, l.n, job_params, (long long)o.spp, (long long)o.seed, &x)))
+  /* The job lists the contexts in the order the user described them (an empty
+   * shard's too: its options are checked before the scene is pushed). */
+  if ((rc = build_contexts(ctx, a, l.items, l.n, job_params, (long long)o.spp, (long long)o.seed, o.bundle,
+                           &x)))
     goto out;
   struct stat sst;
   if (!o.spread && stat(scene, &sst) == 0 && S_ISREG(sst.st_mode)) {
-    /* A scene FILE: push it (blobs it references too) and sweep its id. */
+    /* A scene FILE: push it (blobs it references too) and sweep its id
+     * (an empty shard too: its sweep.json must name the sweep its other
+     * shards name, for merge). */
     int created = 0;
     rsw_status ps = rsw_scene_push_file(ctx->client, scene, NULL, scene_id, &created);
     if (ps) {
@@ -685,6 +787,15 @@ int cmd_sweep(cli_ctx *ctx, const cmdline_args *a) {
     }
     scene = scene_id;
     sweep_fingerprint(a, scene, fingerprint);
+  }
+  if (l.n == 0) {
+    /* A shard past the end of a short list: nothing to submit, an empty
+     * index keeps `merge` simple. */
+    if (!ctx->quiet)
+      fprintf(stderr, "raysweep sweep: shard %llu/%llu has no contexts\n", o.shard_i, o.shard_n);
+    rc = sweep_write_index(ctx, dir, NULL, 0);
+    if (!rc) rc = manifest_write(ctx, dir, fingerprint, scene, o.shard_i, o.shard_n, &l, NULL, true, NULL);
+    goto out;
   }
   if (o.spread)
     rc = sweep_run_spread(ctx, a, (int)o.spread, resume, o.fmt, o.timeout, &l, sorted, job_params, x,

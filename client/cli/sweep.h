@@ -25,10 +25,11 @@
  *   {"format": "raysweep-sweep/1", "sweep": FINGERPRINT, "scene": ID,
  *    "shard": [I, N], "contexts_total": T,
  *    "id_width": W | "ids": [every context id of the unsharded list],
- *    "job": JOB | null, "finished": BOOL, "incomplete": [context ids]}
+ *    "job": JOB | null, "finished": BOOL, "incomplete": [context ids],
+ *    "bundle_leads": [per context, its bundle group's first] (with --bundle)}
  * FINGERPRINT is FNV-1a 64 over everything that defines the unsharded
  * sweep (scene, contexts file or grid, --set, --sensor, --spp, --seed,
- * --format, --quantities, --variance) and not over --shard, so every shard of one sweep carries the
+ * --format, --quantities, --variance, --bundle but 1) and not over --shard, so every shard of one sweep carries the
  * same value. `merge` uses it to know which contexts a set of shard
  * directories must cover; `sweep --force` to know what an earlier sweep
  * wrote. "incomplete" lists contexts with a render that did not succeed. */
@@ -48,6 +49,7 @@ typedef struct sweep_item {
   cJSON *sensors;      /* array of strings or NULL, owned */
   cJSON *coords;       /* object or NULL, owned: the context's coords */
   long long spp, seed; /* -1: unset */
+  long long group;     /* its "bundle_group" (the index of its group's first context), -1: none */
 } sweep_item;
 
 /* The contexts one shard sweeps. */
@@ -60,6 +62,9 @@ typedef struct sweep_list {
    * of the other shards. NULL when every id is numbered. */
   char **all_ids;
   int id_width;
+  /* With --bundle: per context of the unsharded list, the index of its
+   * bundle group's first context (sweep_shard_of); NULL without. */
+  size_t *leads;
   long long seed; /* --seed (0 by default): the job seed, in sweep.json */
   bool dataset;   /* --format nc: DIR/dataset.nc besides the (JSON) films */
 } sweep_list;
@@ -79,6 +84,7 @@ typedef struct sweep_manifest {
   const char *sweep;
   size_t shard_i, shard_n, total;
   int id_width;
+  size_t *leads;           /* owned: "bundle_leads", or NULL (every context its own) */
   const char **ids;        /* owned array of total ids (borrowed strings), or NULL: numbered */
   const char **incomplete; /* owned, sorted (strings borrowed from root) */
   size_t n_incomplete;
@@ -130,6 +136,12 @@ int manifest_write(const cli_ctx *ctx, const char *dir, const char *fingerprint,
                    size_t shard_i, size_t shard_n, const sweep_list *l, const char *job, bool finished,
                    const cJSON *incomplete);
 void manifest_free(sweep_manifest *m);
+/* The shard of the unsharded list's context k: lead k (its bundle group's
+ * first context, leads[k]; k itself without bundles) mod n, so that a
+ * bundle group stays whole (docs/cluster.md#shards-and-spectral-bundles). */
+static inline size_t sweep_shard_of(const size_t *leads, size_t k, size_t n) {
+  return (leads ? leads[k] : k) % n;
+}
 /* The id of context k of the unsharded list; whether it is incomplete. */
 const char *manifest_id(const sweep_manifest *m, size_t k, char buf[72]);
 bool manifest_incomplete(const sweep_manifest *m, const char *id);

@@ -40,12 +40,17 @@ void sweep_fingerprint(const cmdline_args *a, const char *scene, char out[17]) {
     h = fnv1a_str(h, keyed[k]);
     for (size_t i = 0; i < n; i++) h = fnv1a_str(h, v[i]);
   }
+  /* (only when it bundles: sweeps without it, or with --bundle 1, keep
+   * the value they had before --bundle existed) */
+  const char *bundle = cmdline_get(a, "--bundle");
+  if (bundle && strcmp(bundle, "1") != 0) h = fnv1a_str(fnv1a_str(h, "--bundle"), bundle);
   snprintf(out, 17, "%016llx", (unsigned long long)h);
 }
 
 void manifest_free(sweep_manifest *m) {
   cJSON_Delete(m->root);
   free(m->ids);
+  free(m->leads);
   free(m->incomplete);
   memset(m, 0, sizeof *m);
 }
@@ -90,10 +95,11 @@ int manifest_read(const cli_ctx *ctx, const char *dir, sweep_manifest *m) {
   m->sweep = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "sweep"));
   const cJSON *ids = cJSON_GetObjectItemCaseSensitive(r, "ids");
   const cJSON *inc = cJSON_GetObjectItemCaseSensitive(r, "incomplete");
+  const cJSON *leads = cJSON_GetObjectItemCaseSensitive(r, "bundle_leads");
   m->finished = cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(r, "finished"));
   bool ok = m->sweep && cJSON_IsArray(shard) && cJSON_GetArraySize(shard) == 2 &&
             sweep_json_is_int(total, 0) && (ids ? cJSON_IsArray(ids) : sweep_json_is_int(width, 1)) &&
-            (!inc || cJSON_IsArray(inc));
+            (!inc || cJSON_IsArray(inc)) && (!leads || cJSON_IsArray(leads));
   if (ok) {
     const cJSON *si = cJSON_GetArrayItem(shard, 0), *sn = cJSON_GetArrayItem(shard, 1);
     ok = sweep_json_is_int(si, 0) && sweep_json_is_int(sn, 1) && si->valuedouble < sn->valuedouble;
@@ -111,6 +117,17 @@ int manifest_read(const cli_ctx *ctx, const char *dir, sweep_manifest *m) {
       m->ids[k++] = v->valuestring;
     }
     ok = m->ids && k == m->total && !v; /* every element a string, no more and no fewer */
+  }
+  if (ok && leads) { /* total of them, each at most its own index */
+    m->leads = malloc((m->total ? m->total : 1) * sizeof *m->leads);
+    size_t k = 0;
+    const cJSON *v;
+    cJSON_ArrayForEach(v, leads) {
+      if (!m->leads || k >= m->total || !sweep_json_is_int(v, 0) || v->valuedouble > (double)k) break;
+      m->leads[k] = (size_t)v->valuedouble;
+      k++;
+    }
+    ok = m->leads && k == m->total && !v;
   }
   if (ok && inc) {
     size_t n = (size_t)cJSON_GetArraySize(inc);
@@ -155,6 +172,13 @@ int manifest_write(const cli_ctx *ctx, const char *dir, const char *fingerprint,
     }
   } else {
     cJSON_AddNumberToObject(o, "id_width", l->id_width);
+  }
+  bool grouped = false;
+  for (size_t k = 0; l->leads && k < l->total && !grouped; k++) grouped = l->leads[k] != k;
+  if (grouped) {
+    cJSON *leads = cJSON_AddArrayToObject(o, "bundle_leads");
+    for (size_t k = 0; k < l->total; k++)
+      cJSON_AddItemToArray(leads, cJSON_CreateNumber((double)l->leads[k]));
   }
   if (job && *job)
     cJSON_AddStringToObject(o, "job", job);
@@ -272,8 +296,9 @@ int sweep_prepare_output(const cli_ctx *ctx, const char *dir, bool force) {
   }
   if (mrc == 0) { /* every context of its shard (an interrupted sweep has no index yet) */
     char buf[72];
-    for (size_t k = m.shard_i; k < m.total; k += m.shard_n)
-      removed += remove_context_dir(dir, manifest_id(&m, k, buf));
+    for (size_t k = 0; k < m.total; k++)
+      if (sweep_shard_of(m.leads, k, m.shard_n) == m.shard_i)
+        removed += remove_context_dir(dir, manifest_id(&m, k, buf));
     manifest_free(&m);
   }
   char *dataset = sweep_dir_file(dir, DATASET_NAME);

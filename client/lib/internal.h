@@ -142,10 +142,22 @@ rsw_status client_fail_interrupted(rsw_client *c, const char *what);
 
 /* The id of context i (borrowed), or NULL. */
 const char *client_contexts_id(const rsw_contexts *x, size_t i);
+/* Context i's object (borrowed), or NULL. */
+struct cJSON *client_contexts_item(const rsw_contexts *x, size_t i);
 /* The whole JobRequest as JSON text (owned: free). */
 char *client_contexts_print(const rsw_contexts *x);
 /* A new list with the job settings of x and its contexts idx[0..n). */
 rsw_status client_contexts_subset(const rsw_contexts *x, const size_t *idx, size_t n, rsw_contexts **out);
+/* The job's "bundle" as the client plans with it: K, RSW_BUNDLE_MAX for
+ * "auto", 1 when absent. */
+int client_contexts_bundle(const rsw_contexts *x);
+/* lead[i] (n = the contexts of x): the index of the first context of
+ * context i's bundle group, so that shards keep groups whole
+ * (docs/cluster.md#shards-and-spectral-bundles): contexts with the same
+ * "bundle_group" form one; the others are cut by the daemon's rule
+ * (common/bundle_plan.h) over their JSON less id, wavelength and coords.
+ * lead[i] == i for every i when the bundle is 1. */
+rsw_status client_contexts_bundle_leads(const rsw_contexts *x, size_t *lead);
 
 /* ---- films (film.c) -------------------------------------------------------- */
 

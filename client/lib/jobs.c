@@ -7,6 +7,7 @@
 #include <string.h>
 #include <strings.h>
 
+#include "bundle_plan.h"
 #include "internal.h"
 
 /* ---- the context builder ------------------------------------------------------------ */
@@ -206,10 +207,17 @@ rsw_status rsw_contexts_set_variance(rsw_contexts *x, int on) {
 }
 
 rsw_status rsw_contexts_set_bundle(rsw_contexts *x, int k) {
-  if (!x || k < 1) return RSW_ERR_INVALID;
+  if (!x || (k < 1 && k != RSW_BUNDLE_AUTO)) return RSW_ERR_INVALID;
   cJSON_DeleteItemFromObjectCaseSensitive(x->root, "bundle");
+  if (k == RSW_BUNDLE_AUTO)
+    return cJSON_AddStringToObject(x->root, "bundle", "auto") ? RSW_OK : RSW_ERR_NOMEM;
   if (k > 1 && !cJSON_AddNumberToObject(x->root, "bundle", k)) return RSW_ERR_NOMEM;
   return RSW_OK;
+}
+
+rsw_status rsw_contexts_set_bundle_group(rsw_contexts *x, size_t index, long long group) {
+  if (!x || index >= x->n) return RSW_ERR_INVALID;
+  return set_int(x->items[index], "bundle_group", group);
 }
 
 /* ---- submit and status ---------------------------------------------------------------- */
@@ -758,6 +766,10 @@ const char *client_contexts_id(const rsw_contexts *x, size_t i) {
   return x && i < x->n ? cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(x->items[i], "id")) : NULL;
 }
 
+cJSON *client_contexts_item(const rsw_contexts *x, size_t i) {
+  return x && i < x->n ? x->items[i] : NULL;
+}
+
 char *client_contexts_print(const rsw_contexts *x) {
   return x ? cJSON_PrintUnformatted(x->root) : NULL;
 }
@@ -796,4 +808,78 @@ rsw_status client_contexts_subset(const rsw_contexts *x, const size_t *idx, size
   }
   *out = y;
   return RSW_OK;
+}
+
+typedef struct text_key {
+  const char *text;
+  size_t index;
+} text_key;
+
+static int cmp_text_key(const void *a, const void *b) {
+  return strcmp(((const text_key *)a)->text, ((const text_key *)b)->text);
+}
+
+int client_contexts_bundle(const rsw_contexts *x) {
+  const cJSON *b = x ? cJSON_GetObjectItemCaseSensitive(x->root, "bundle") : NULL;
+  if (cJSON_IsString(b)) return RSW_BUNDLE_MAX; /* "auto": the most any daemon takes */
+  return cJSON_IsNumber(b) && b->valuedouble > 1 ? (int)b->valuedouble : 1;
+}
+
+rsw_status client_contexts_bundle_leads(const rsw_contexts *x, size_t *lead) {
+  size_t n = x->n;
+  for (size_t i = 0; i < n; i++) lead[i] = i;
+  int k = client_contexts_bundle(x);
+  if (k <= 1) return RSW_OK;
+  /* Contexts with a "bundle_group": the first of theirs leads. */
+  text_key *g = malloc((n ? n : 1) * sizeof *g);
+  char **text = calloc(n ? n : 1, sizeof *text);
+  uint64_t *key = malloc((n ? n : 1) * sizeof *key);
+  double *wl = malloc((n ? n : 1) * sizeof *wl);
+  size_t *run = malloc((n ? n : 1) * sizeof *run);
+  size_t ng = 0;
+  bool ok = g && text && key && wl && run;
+  for (size_t i = 0; i < n && ok; i++) {
+    const cJSON *bg = cJSON_GetObjectItemCaseSensitive(x->items[i], "bundle_group");
+    const cJSON *w = cJSON_GetObjectItemCaseSensitive(x->items[i], "wavelength");
+    wl[i] = cJSON_IsNumber(w) ? w->valuedouble : 0;
+    key[i] = RSW_BUNDLE_ALONE;
+    if (bg) {
+      char *t = cJSON_PrintUnformatted(bg);
+      text[i] = t ? strdup(t) : NULL;
+      cJSON_free(t);
+      ok = text[i] != NULL;
+      g[ng++] = (text_key){text[i], i};
+    } else {
+      text[i] = rsw_bundle_context_text(x->items[i]);
+    }
+  }
+  if (ok) { /* groups: in order of index within equal texts (a stable sort by hand) */
+    qsort(g, ng, sizeof *g, cmp_text_key);
+    for (size_t a = 0, b; a < ng; a = b) {
+      size_t first = g[a].index;
+      for (b = a; b < ng && strcmp(g[b].text, g[a].text) == 0; b++)
+        if (g[b].index < first) first = g[b].index;
+      for (size_t c = a; c < b; c++) lead[g[c].index] = first;
+    }
+    /* The others: their texts numbered, cut into runs (common/bundle_plan.h). */
+    size_t m = 0;
+    for (size_t i = 0; i < n; i++)
+      if (text[i] && !cJSON_GetObjectItemCaseSensitive(x->items[i], "bundle_group"))
+        g[m++] = (text_key){text[i], i};
+    qsort(g, m, sizeof *g, cmp_text_key);
+    for (size_t a = 0, id = 0; a < m; a++) {
+      if (a && strcmp(g[a].text, g[a - 1].text) != 0) id++;
+      key[g[a].index] = id;
+    }
+    ok = rsw_bundle_runs(n, key, wl, k, run) == 0;
+    for (size_t i = 0; i < n && ok; i++)
+      if (!cJSON_GetObjectItemCaseSensitive(x->items[i], "bundle_group")) lead[i] = run[i];
+  }
+  for (size_t i = 0; text && i < n; i++) free(text[i]);
+  free(text);
+  free(g);
+  free(key);
+  free(wl);
+  free(run);
+  return ok ? RSW_OK : RSW_ERR_NOMEM;
 }

@@ -5,7 +5,10 @@
  * follow-up requests (events, results, films) need to find their job.
  *
  * Shard k holds contexts k, k+K, k+2K, ... (as `raysweep sweep --shard
- * k/K`). Its n-th (re)submission is routed by "<prefix>-<k>.r<n>" (n = 0:
+ * k/K`); with spectral bundles, the contexts whose bundle group's first
+ * context is one of those, so that every shard forms the bundles the
+ * whole job would (client_contexts_bundle_leads;
+ * docs/cluster.md#shards-and-spectral-bundles). Its n-th (re)submission is routed by "<prefix>-<k>.r<n>" (n = 0:
  * "<prefix>-<k>"), so a resubmission after a lost replica hashes to a
  * fresh point of the ring and usually lands on another replica, while
  * the balancer's own health checks take the lost one out.
@@ -71,6 +74,8 @@ struct spread {
   const char **sorted_ids; /* ids sorted, for lookups */
   size_t *sorted_idx;      /* index in x of sorted_ids[i] */
   unsigned char *done;     /* per context index of x: delivered */
+  size_t *lead;            /* per context index of x: its bundle group's first (itself without bundles) */
+  bool grouped;            /* some lead differs from its context: resubmit groups whole, name them */
   double deadline;
   FILE *journal;
   pthread_mutex_t lock; /* journal, callbacks, counters, done[] */
@@ -100,6 +105,17 @@ static int cmp_id(const void *a, const void *b) {
   const spread *sp = NULL;
   (void)sp;
   return strcmp(*(const char *const *)a, *(const char *const *)b);
+}
+
+/* A context and its bundle group's first, sorted by group, then index. */
+typedef struct led {
+  size_t lead, index;
+} led;
+
+static int cmp_led(const void *pa, const void *pb) {
+  const led *a = pa, *b = pb;
+  if (a->lead != b->lead) return a->lead < b->lead ? -1 : 1;
+  return a->index < b->index ? -1 : a->index > b->index;
 }
 
 /* Index in x of context id, or (size_t)-1. */
@@ -398,8 +414,16 @@ static rsw_status submit(shard *sh, rsw_client *c, size_t *n_out) {
   size_t *pending = malloc((sh->n ? sh->n : 1) * sizeof *pending), np = 0;
   if (!pending) return RSW_ERR_NOMEM;
   pthread_mutex_lock(&sp->lock);
-  for (size_t i = 0; i < sh->n; i++)
-    if (!sp->done[sh->idx[i]]) pending[np++] = sh->idx[i];
+  /* A bundle group goes whole, delivered mates too (hand_results skips
+   * them), so that its bundles are the whole job's: idx lists a group's
+   * contexts from its first, in order. */
+  for (size_t a = 0, b; a < sh->n; a = b) {
+    bool left = false;
+    for (b = a; b < sh->n && sp->lead[sh->idx[b]] == sp->lead[sh->idx[a]]; b++)
+      left = left || !sp->done[sh->idx[b]];
+    for (size_t i = a; i < b; i++)
+      if (left && (sp->grouped || !sp->done[sh->idx[i]])) pending[np++] = sh->idx[i];
+  }
   pthread_mutex_unlock(&sp->lock);
   *n_out = np;
   sh->job[0] = '\0';
@@ -424,6 +448,9 @@ static rsw_status submit(shard *sh, rsw_client *c, size_t *n_out) {
   }
   rsw_contexts *y = NULL;
   if (!s) s = client_contexts_subset(sp->x, pending, np, &y);
+  for (size_t i = 0; !s && sp->grouped && i < np; i++) /* the groups, for the daemon to keep */
+    if (!cJSON_GetObjectItemCaseSensitive(client_contexts_item(y, i), "bundle_group"))
+      s = rsw_contexts_set_bundle_group(y, i, (long long)sp->lead[pending[i]]);
   free(pending);
   if (!s) s = rsw_job_submit(c, sh->scene, y, sh->key, sh->job);
   rsw_contexts_free(y);
@@ -473,7 +500,7 @@ static rsw_status hand_results(shard *sh, rsw_client *c, char *text, bool early,
   bool ours = cJSON_IsArray(list);
   cJSON_ArrayForEach(r, list) {
     size_t ci = lookup(sp, cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "context")));
-    if (ci == (size_t)-1 || ci % (size_t)sp->n_shards != (size_t)sh->k) ours = false;
+    if (ci == (size_t)-1 || sp->lead[ci] % (size_t)sp->n_shards != (size_t)sh->k) ours = false;
   }
   if (!ours) {
     cJSON_Delete(res);
@@ -946,16 +973,46 @@ rsw_status rsw_spread_run(const rsw_client_opts *copts, const char *scene_id, co
     const char **hit = bsearch(&id, sp.sorted_ids, sp.n_ctx, sizeof *sp.sorted_ids, cmp_id);
     sp.sorted_idx[hit - sp.sorted_ids] = i;
   }
+  /* Shard k: the contexts whose bundle group's first context is k mod
+   * shards (every context its own group without bundles), by group. */
+  sp.lead = malloc(sp.n_ctx * sizeof *sp.lead);
+  if (!sp.lead || (s = client_contexts_bundle_leads(x, sp.lead))) {
+    s = RSW_ERR_NOMEM;
+    snprintf(sp.err, sizeof sp.err, "out of memory");
+    goto done;
+  }
+  for (size_t i = 0; i < sp.n_ctx; i++) sp.grouped = sp.grouped || sp.lead[i] != i;
+  for (size_t i = 0; i < sp.n_ctx; i++) sp.shards[sp.lead[i] % (size_t)o.shards].n++;
   for (int k = 0; k < o.shards; k++) {
     shard *sh = &sp.shards[k];
     sh->sp = &sp, sh->k = k;
-    sh->idx = malloc(((sp.n_ctx + (size_t)o.shards - 1) / (size_t)o.shards + 1) * sizeof *sh->idx);
+    sh->idx = malloc((sh->n ? sh->n : 1) * sizeof *sh->idx);
+    sh->n = 0;
     if (!sh->idx) {
       s = RSW_ERR_NOMEM;
       snprintf(sp.err, sizeof sp.err, "out of memory");
       goto done;
     }
-    for (size_t i = (size_t)k; i < sp.n_ctx; i += (size_t)o.shards) sh->idx[sh->n++] = i;
+  }
+  if (sp.grouped) { /* by group, then index */
+    led *order = malloc(sp.n_ctx * sizeof *order);
+    if (!order) {
+      s = RSW_ERR_NOMEM;
+      snprintf(sp.err, sizeof sp.err, "out of memory");
+      goto done;
+    }
+    for (size_t i = 0; i < sp.n_ctx; i++) order[i] = (led){sp.lead[i], i};
+    qsort(order, sp.n_ctx, sizeof *order, cmp_led);
+    for (size_t i = 0; i < sp.n_ctx; i++) {
+      shard *sh = &sp.shards[order[i].lead % (size_t)o.shards];
+      sh->idx[sh->n++] = order[i].index;
+    }
+    free(order);
+  } else {
+    for (size_t i = 0; i < sp.n_ctx; i++) {
+      shard *sh = &sp.shards[i % (size_t)o.shards];
+      sh->idx[sh->n++] = i;
+    }
   }
   if (o.route_prefix)
     snprintf(sp.prefix, sizeof sp.prefix, "%s", o.route_prefix);
@@ -1031,6 +1088,7 @@ done:
   free(sp.sorted_ids);
   free(sp.sorted_idx);
   free(sp.done);
+  free(sp.lead);
   snprintf(spread_err, sizeof spread_err, "%s", sp.err);
   pthread_mutex_destroy(&sp.lock);
   return s;

@@ -137,7 +137,7 @@ def submit(scene, grid=None, contexts=None, spp=None, seed=None, sensors=None, w
     if templates:
         body["templates"] = dict(templates)
     if bundle is not None:
-        body["bundle"] = int(bundle)
+        body["bundle"] = "auto" if bundle == "auto" else int(bundle)
     headers = {"Idempotency-Key": idempotency_key} if idempotency_key else None
     try:
         status = scene._http.json("POST", f"{scene._path}/jobs", body, headers=headers, timeout=None)

@@ -171,7 +171,9 @@ class Scene:
         each context's wavelength), ``quantities`` (``["brf"]``...),
         ``variance``, ``bands`` (spectral response functions), ``templates``
         (docs/experiments.md), ``bundle`` (wavelengths carried per path,
-        1 to 3: docs/experiments.md#spectral-bundles).
+        1 to 3, or ``"auto"``, the most the scene allows and the
+        recommended setting for spectral sweeps:
+        docs/experiments.md#spectral-bundles).
 
         ``progress``: ``None`` shows a bar in a notebook (tqdm when
         installed) or on a terminal, ``True`` always, ``False`` never.

@@ -18,6 +18,7 @@
 #include <unistd.h>
 
 #include "buf.h"
+#include "bundle_plan.h"
 #include "rsw_sha256.h"
 #include "service_internal.h"
 #include "templates.h"
@@ -223,6 +224,10 @@ static cJSON *job_json(const job *j) {
     cJSON_AddNumberToObject(cur, "samples_total", (double)atomic_load(&j->current_samples.total));
   }
   if (j->warnings) svc_json_put(o, "warnings", cJSON_Duplicate(j->warnings, 1));
+  if (j->bundle_asked) { /* what "bundle" came to ("auto": and why 1) */
+    cJSON_AddNumberToObject(o, "bundle", j->bundle);
+    if (j->bundle_why[0]) cJSON_AddStringToObject(o, "bundle_why", j->bundle_why);
+  }
   char href[128];
   snprintf(href, sizeof href, "/v1/jobs/%s/results", j->id);
   cJSON_AddStringToObject(o, "href_results", href);
@@ -468,8 +473,11 @@ typedef struct job_req {
   uint64_t d_spp;
   double d_wl;
   const cJSON *d_sensors;
-  int bundle; /* "bundle" (1 when absent) */
+  int bundle; /* "bundle" (0 when absent, JOB_BUNDLE_AUTO for "auto") */
 } job_req;
+
+/* "bundle": "auto": the most the job's sensors allow (plan_job). */
+#define JOB_BUNDLE_AUTO (-1)
 
 /* What validation learned (stage 2) for planning. */
 typedef struct job_check {
@@ -555,11 +563,13 @@ static rsw_status parse_request(const char *body, size_t len, job_req *q, svc_er
       st = bands_parse(k, "/bands", &q->bands, e);
     } else if (strcmp(k->string, "bundle") == 0) {
       /* (its range against the scene: render_check_bundle, at planning) */
-      if (!cJSON_IsNumber(k) || k->valuedouble != floor(k->valuedouble) || k->valuedouble < 1 ||
-          k->valuedouble > 1e6)
+      if (cJSON_IsString(k) && strcmp(k->valuestring, "auto") == 0)
+        q->bundle = JOB_BUNDLE_AUTO;
+      else if (!cJSON_IsNumber(k) || k->valuedouble != floor(k->valuedouble) || k->valuedouble < 1 ||
+               k->valuedouble > 1e6)
         st = svc_fail(e, RSW_ERR_INVALID, "/bundle",
-                      "bundle must be an integer from 1 (one wavelength per path) to %d (a path carries one "
-                      "wavelength per colour channel)",
+                      "bundle must be \"auto\" (the most the scene allows) or an integer from 1 (one "
+                      "wavelength per path) to %d (a path carries one wavelength per colour channel)",
                       RENDER_MAX_BUNDLE);
       else
         q->bundle = (int)k->valuedouble;
@@ -644,7 +654,7 @@ static rsw_status check_context_fields(ctx_scan *cs, const cJSON *c, const char 
   for (const cJSON *k = c->child; k; k = k->next)
     if (strcmp(k->string, "id") && strcmp(k->string, "wavelength") && strcmp(k->string, "params") &&
         strcmp(k->string, "sensors") && strcmp(k->string, "spp") && strcmp(k->string, "seed") &&
-        strcmp(k->string, "coords")) {
+        strcmp(k->string, "coords") && strcmp(k->string, "bundle_group")) {
       char p[300];
       snprintf(p, sizeof p, "%s/%s", ptr, k->string);
       return svc_fail(e, RSW_ERR_UNUSED_PROPERTY, p, "unknown field '%s' in a context", k->string);
@@ -753,6 +763,7 @@ static rsw_status check_context_spp_seed(const cJSON *c, const char *ptr, svc_er
     st = svc_fail(e, RSW_ERR_INVALID, p3, "spp must be at least 1");
   }
   if (!st) get_uint(c, "seed", 9007199254740991.0, &dummy, &present, ptr, e, &st);
+  if (!st) get_uint(c, "bundle_group", 9007199254740991.0, &dummy, &present, ptr, e, &st);
   return st;
 }
 
@@ -906,6 +917,9 @@ static rsw_status plan_context(service *svc, const scene *sc, const job_req *q, 
   get_uint(c, "spp", 4294967295.0, &spp, &has_spp, "", e, &st);
   if (!has_spp) spp = q->d_spp;
   get_uint(c, "seed", 9007199254740991.0, &seed, &has_seed, "", e, &st);
+  uint64_t group = 0;
+  bool has_group;
+  get_uint(c, "bundle_group", 9007199254740991.0, &group, &has_group, "", e, &st);
   size_t ns = sens ? (size_t)cJSON_GetArraySize(sens) : sc->n_sensors;
   jb->context_remaining[ci] = ns * n_nodes;
   for (size_t s = 0; s < ns * n_nodes && !st; s++, (*next)++) {
@@ -923,6 +937,7 @@ static rsw_status plan_context(service *svc, const scene *sc, const job_req *q, 
     it->spp = (uint32_t)spp;
     it->seed = has_seed ? seed : default_seed(q->seed, it->context, it->sensor);
     it->own_seed = has_seed;
+    it->bundle_group = has_group ? group + 1 : 0;
     if (bands) { /* node renders: independent, each its own seed */
       it->node = nk + 1;
       it->wavelength = bands->wl[nk];
@@ -954,82 +969,94 @@ static rsw_status plan_context(service *svc, const scene *sc, const job_req *q, 
   return st;
 }
 
-/* A job's "bundle" > 1 against every sensor it renders (render_check_bundle:
- * a 422 naming /bundle and what stands in the way). */
-static rsw_status check_bundle(const scene *sc, const job *jb, svc_error *e) {
+/* A job's "bundle" against every sensor it renders (render_check_bundle):
+ * K > 1 that a sensor cannot take is a 422 naming /bundle and what stands
+ * in the way; "auto" takes RENDER_MAX_BUNDLE where every one can and 1
+ * otherwise, the first reason in jb->bundle_why (never refused). */
+static rsw_status check_bundle(const scene *sc, job *jb, svc_error *e) {
+  bool autok = jb->bundle == JOB_BUNDLE_AUTO;
+  if (autok) jb->bundle = RENDER_MAX_BUNDLE;
   if (jb->bundle <= 1) return RSW_OK;
   for (size_t si = 0; si < sc->n_sensors; si++) {
     bool used = false;
     for (size_t i = 0; i < jb->n_items && !used; i++) used = jb->items[i].sensor_index == si;
     rsw_err err = {0};
     rsw_status st = used ? render_check_bundle(sc, si, jb->bundle, &err) : RSW_OK;
+    if (st && autok) {
+      jb->bundle = 1;
+      snprintf(jb->bundle_why, sizeof jb->bundle_why, "%s", err.msg);
+      return RSW_OK;
+    }
     if (st) return svc_fail(e, st, "/bundle", "%s", err.msg);
   }
   return RSW_OK;
 }
 
-/* Whether items a and b may share a bundle: the same sensor, spp,
- * planes and overrides (their printed JSON ka, kb), other wavelengths, no
- * seed of their own. */
-static bool bundle_compatible(const render_item *a, const render_item *b, const char *ka, const char *kb) {
-  return !a->own_seed && !b->own_seed && b->sensor_index == a->sensor_index && b->spp == a->spp &&
-         b->quantities == a->quantities && b->variance == a->variance && strcmp(ka, kb) == 0;
-}
-
+/* A render's bundle key (plan_bundles): what must be the same for two
+ * renders to share a bundle; params is its printed overrides ("" when
+ * none). */
 typedef struct bundle_key {
   const render_item *it;
-  const char *params; /* printed overrides ("" when none) */
+  const char *params;
   size_t index;
 } bundle_key;
 
 static int bundle_key_cmp(const void *pa, const void *pb) {
-  const bundle_key *a = pa, *b = pb;
-  if (a->it->sensor_index != b->it->sensor_index) return a->it->sensor_index < b->it->sensor_index ? -1 : 1;
-  int c = strcmp(a->params, b->params);
-  if (c) return c;
-  return a->index < b->index ? -1 : a->index > b->index;
+  const render_item *a = ((const bundle_key *)pa)->it, *b = ((const bundle_key *)pb)->it;
+  if (a->sensor_index != b->sensor_index) return a->sensor_index < b->sensor_index ? -1 : 1;
+  if (a->spp != b->spp) return a->spp < b->spp ? -1 : 1;
+  if (a->quantities != b->quantities) return a->quantities < b->quantities ? -1 : 1;
+  if (a->variance != b->variance) return a->variance < b->variance ? -1 : 1;
+  if (a->bundle_group != b->bundle_group) return a->bundle_group < b->bundle_group ? -1 : 1;
+  return strcmp(((const bundle_key *)pa)->params, ((const bundle_key *)pb)->params);
 }
 
 /* A job's spectral bundles ("bundle" K > 1, mono): the renders that may
- * share a bundle (bundle_compatible: a wavelength sweep at one set of
- * overrides, whatever the axes' order; a context's band nodes) are taken
- * in the job's order and cut into bundles of K from the first (a
- * wavelength already in the bundle starts the next one); the last may be
- * smaller. So a job's bundles depend only on its renders and their order
- * (docs/experiments.md#spectral-bundles). False: out of memory. */
+ * share a bundle (the same sensor, spp, planes, "bundle_group" and
+ * overrides, no seed of their own: a wavelength sweep at one set of
+ * overrides, whatever the axes' order; a context's band nodes) are cut by
+ * rsw_bundle_runs, the rule the client's shards follow too
+ * (common/bundle_plan.h): in the job's order, into bundles of K from the
+ * first (a wavelength already in the bundle starts the next one); the
+ * last may be smaller. So a job's bundles depend only on its renders and
+ * their order (docs/experiments.md#spectral-bundles). False: out of
+ * memory. */
 static bool plan_bundles(job *jb) {
   size_t n = jb->n_items;
   for (size_t i = 0; i < n; i++) jb->items[i].bundle[0] = i, jb->items[i].bundle_n = 1;
   if (jb->bundle <= 1 || jb->variant != VARIANT_MONO || n < 2) return true;
   bundle_key *k = calloc(n, sizeof *k);
   char **printed = calloc(n, sizeof *printed);
-  bool ok = k && printed;
+  uint64_t *key = calloc(n, sizeof *key);
+  double *wl = calloc(n, sizeof *wl);
+  size_t *lead = calloc(n, sizeof *lead);
+  bool ok = k && printed && key && wl && lead;
   for (size_t i = 0; i < n && ok; i++) {
     printed[i] = jb->items[i].params ? cJSON_PrintUnformatted(jb->items[i].params) : NULL;
     ok = !jb->items[i].params || printed[i];
     k[i] = (bundle_key){&jb->items[i], printed[i] ? printed[i] : "", i};
+    wl[i] = jb->items[i].wavelength;
   }
+  /* Equal keys, numbered in sorted order; a render with its own seed alone. */
   if (ok) qsort(k, n, sizeof *k, bundle_key_cmp);
-  for (size_t g = 0; g < n && ok;) { /* a leader, then its mates among the next keys */
-    render_item *lead = &jb->items[k[g].index];
-    size_t e = g + 1;
-    while (e < n && lead->bundle_n < jb->bundle &&
-           bundle_compatible(lead, k[e].it, k[g].params, k[e].params)) {
-      bool dup = false;
-      for (int m = 0; m < lead->bundle_n; m++)
-        dup = dup || jb->items[lead->bundle[m]].wavelength == k[e].it->wavelength;
-      if (dup) break;
-      render_item *mate = &jb->items[k[e].index];
-      lead->bundle[lead->bundle_n++] = k[e].index;
-      mate->bundle[0] = k[g].index;
-      mate->bundle_n = 0; /* a mate: its leader holds the list */
-      e++;
-    }
-    g = e;
+  for (size_t i = 0, id = 0; i < n && ok; i++) {
+    if (i && bundle_key_cmp(&k[i - 1], &k[i]) != 0) id++;
+    key[k[i].index] = k[i].it->own_seed ? RSW_BUNDLE_ALONE : id;
+  }
+  ok = ok && rsw_bundle_runs(n, key, wl, jb->bundle, lead) == 0;
+  for (size_t i = 0; i < n && ok; i++) { /* a leader holds the list, in order; a mate points to it */
+    if (lead[i] == i) continue;
+    render_item *l = &jb->items[lead[i]];
+    l->bundle[l->bundle_n++] = i;
+    jb->items[i].bundle[0] = lead[i];
+    jb->items[i].bundle_n = 0;
   }
   for (size_t i = 0; printed && i < n; i++) cJSON_free(printed[i]);
   free(printed);
   free(k);
+  free(key);
+  free(wl);
+  free(lead);
   return ok;
 }
 
@@ -1048,7 +1075,8 @@ static rsw_status plan_job(service *svc, const scene *sc, job_req *q, job_check 
   k->warnings = NULL;
   jb->bands = q->bands;
   q->bands = NULL;
-  jb->bundle = q->bundle > 1 ? q->bundle : 1;
+  jb->bundle = q->bundle == JOB_BUNDLE_AUTO ? JOB_BUNDLE_AUTO : q->bundle > 1 ? q->bundle : 1;
+  jb->bundle_asked = q->bundle != 0;
   jb->items = calloc(k->n_items, sizeof *jb->items);
   jb->context_remaining = calloc(q->n_contexts, sizeof *jb->context_remaining);
   rsw_status st = RSW_OK;

@@ -118,6 +118,9 @@ typedef struct render_item {
    * bundle of one: bundle[0] is the item itself. */
   size_t bundle[RENDER_MAX_BUNDLE];
   int bundle_n;
+  /* The context's "bundle_group" + 1 (0: none): renders of other groups
+   * never share a bundle (docs/cluster.md#shards-and-spectral-bundles). */
+  uint64_t bundle_group;
   unsigned quantities; /* RENDER_Q_*: the job's "quantities" */
   bool variance;       /* the job's "variance" */
   cJSON *params;       /* merged overrides (job-level, then context-level), owned */
@@ -173,8 +176,12 @@ typedef struct job {
    * its samples, for the job's answers ("render"). */
   size_t current;
   render_progress current_samples;
-  /* "bundle": wavelengths per path (render_opts.bundle), 1: none. */
+  /* "bundle": wavelengths per path (render_opts.bundle), 1: none;
+   * bundle_asked: the request named it (the answers say what it came
+   * to); bundle_why: why "auto" came to 1 ("" otherwise). */
   int bundle;
+  bool bundle_asked;
+  char bundle_why[768];
 } job;
 
 struct service {

@@ -1103,6 +1103,10 @@ void svc_state_job_finished(service *svc, const job *j) {
       o, "seconds", j->started_iso[0] && j->t_finished > j->t_started ? j->t_finished - j->t_started : 0);
   cJSON_AddNumberToObject(o, "contexts_total", (double)j->n_contexts);
   cJSON_AddNumberToObject(o, "contexts_done", (double)j->contexts_done);
+  if (j->bundle_asked) { /* what "bundle" came to, for its answers after a restart */
+    cJSON_AddNumberToObject(o, "bundle", j->bundle);
+    if (j->bundle_why[0]) cJSON_AddStringToObject(o, "bundle_why", j->bundle_why);
+  }
   cJSON *a = cJSON_AddArrayToObject(o, "items");
   for (size_t i = 0; i < j->n_items; i++) {
     const render_item *it = &j->items[i];
@@ -1314,6 +1318,12 @@ static bool restore_finished(service *svc, const req_header *h, cJSON *done, con
   if (cJSON_IsString(x)) snprintf(j->started_iso, sizeof j->started_iso, "%s", x->valuestring);
   x = cJSON_GetObjectItemCaseSensitive(done, "finished_iso");
   if (cJSON_IsString(x)) snprintf(j->finished_iso, sizeof j->finished_iso, "%s", x->valuestring);
+  x = cJSON_GetObjectItemCaseSensitive(done, "bundle");
+  if (cJSON_IsNumber(x) && x->valuedouble >= 1 && x->valuedouble <= RENDER_MAX_BUNDLE)
+    j->bundle = (int)x->valuedouble, j->bundle_asked = true;
+  x = cJSON_GetObjectItemCaseSensitive(done, "bundle_why");
+  if (j->bundle_asked && cJSON_IsString(x))
+    snprintf(j->bundle_why, sizeof j->bundle_why, "%s", x->valuestring);
   x = cJSON_GetObjectItemCaseSensitive(done, "seconds");
   double secs = cJSON_IsNumber(x) && x->valuedouble >= 0 && x->valuedouble < 1e9 ? x->valuedouble : 0;
   x = cJSON_GetObjectItemCaseSensitive(done, "finished");

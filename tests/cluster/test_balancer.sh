@@ -13,6 +13,9 @@
 #     and the replicas rendered each context once in all (/metrics);
 #   - one replica SIGKILLed mid-sweep: the sweep completes, identical, and
 #     the summary counts the resubmission;
+#   - the same with --bundle 3 (a second replica killed): the shards keep
+#     the whole sweep's bundle groups, and a lost shard resubmits its
+#     groups whole, so the films are the one-daemon --bundle 3 sweep's;
 #   - the shipped docker/haproxy and docker/nginx configurations are the
 #     generator's current output and pass `haproxy -c` / `nginx -t`.
 name=test_balancer
@@ -28,24 +31,25 @@ free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",
 # rendered PORT: the replica's raysweep_contexts_rendered_total.
 rendered() { curl -s "http://127.0.0.1:$1/metrics" | awk '$1 == "raysweep_contexts_rendered_total" { print $2 }'; }
 # same_sweep LABEL DIR: DIR holds the reference's films and index, bit for bit.
+# same_sweep LABEL DIR [REF]: against REF (default $tmp/ref).
 same_sweep() {
-  local label=$1 d=$2
-  if cmp -s "$tmp/ref/index.jsonl" "$d/index.jsonl"; then ok; else bad "$label: index.jsonl differs from the one-daemon sweep"; fi
+  local label=$1 d=$2 ref=${3:-$tmp/ref}
+  if cmp -s "$ref/index.jsonl" "$d/index.jsonl"; then ok; else bad "$label: index.jsonl differs from the one-daemon sweep"; fi
   local want got
-  want=$(cd "$tmp/ref" && find . -type f ! -name sweep.json | sort)
+  want=$(cd "$ref" && find . -type f ! -name sweep.json | sort)
   got=$(cd "$d" && find . -type f ! -name sweep.json | sort)
   if [ "$want" = "$got" ]; then ok; else bad "$label: files differ: $(diff <(echo "$want") <(echo "$got") | head -5 | tr '\n' ' ')"; fi
   local f n=0 differ=0
   while read -r f; do
     n=$((n + 1))
-    cmp -s "$tmp/ref/$f" "$d/$f" || differ=$((differ + 1))
-  done < <(cd "$tmp/ref" && find . -name '*.exr' | sort)
+    cmp -s "$ref/$f" "$d/$f" || differ=$((differ + 1))
+  done < <(cd "$ref" && find . -name '*.exr' | sort)
   if [ "$n" -eq 60 ] && [ "$differ" -eq 0 ]; then ok; else bad "$label: $differ of $n films differ (want 60, all identical)"; fi
   py "$label: sweep.json is the unsharded one's but for the job" '
 import json, sys
 a, b = (json.load(open(p)) for p in sys.argv[1:3])
 a.pop("job"); b.pop("job")
-assert a == b, (a, b)' "$tmp/ref/sweep.json" "$d/sweep.json"
+assert a == b, (a, b)' "$ref/sweep.json" "$d/sweep.json"
 }
 
 # 60 mono contexts; SPP makes the sweep last long enough to interrupt.
@@ -59,6 +63,7 @@ one=$started_port
 id=$(rsw "http://127.0.0.1:$one" scene push "$scene" -q)
 expect 0 "one-daemon sweep" rsw "http://127.0.0.1:$one" sweep "$id" "${grid[@]}" --spp $spp -o "$tmp/ref" -q
 expect 0 "one-daemon sweep, npy" rsw "http://127.0.0.1:$one" sweep "$id" "${grid[@]}" --spp $spp --format npy -o "$tmp/refnpy" -q
+expect 0 "one-daemon sweep, bundle 3" rsw "http://127.0.0.1:$one" sweep "$scene" "${grid[@]}" --spp $spp --bundle 3 -o "$tmp/refb" -q
 kill "${pids[-1]}"
 
 # ---- three replicas ----
@@ -71,7 +76,8 @@ for i in 1 2 3; do
   rep_pids[$i]=${pids[-1]}
   rep_args+=(--replica "127.0.0.1:$started_port")
 done
-counts() { local p; for p in "${reps[@]}"; do printf '%s ' "$(rendered "$p")"; done; }
+# (a replica that is gone counts 0, so the columns stay the replicas')
+counts() { local p x; for p in "${reps[@]}"; do x=$(rendered "$p"); printf '%s ' "${x:-0}"; done; }
 
 # start_haproxy PORT: HAProxy on 127.0.0.1:PORT in front of the replicas.
 start_haproxy() {
@@ -182,31 +188,44 @@ done
 kill "$ng_pid"
 wait "$ng_pid" 2>/dev/null
 
+# kill_mid_sweep LABEL OUT REF SPARED [sweep options]: a --spread 3 sweep
+# into OUT through HAProxy, the first replica other than SPARED's index
+# (none: "") to render 2 contexts SIGKILLed (its index in $victim); the
+# sweep completes, is REF bit for bit, and counts a resubmission.
+kill_mid_sweep() {
+  local label=$1 out=$2 ref=$3 spared=$4
+  shift 4
+  local before now i rc sweep_pid
+  before=($(counts))
+  rsw "http://127.0.0.1:$lb" sweep "$scene" "${grid[@]}" --spp $spp --spread 3 "$@" -o "$out" >"$out.out" 2>"$out.err" &
+  sweep_pid=$!
+  victim=""
+  for _ in $(seq 300); do
+    now=($(counts))
+    for i in 0 1 2; do
+      if [ "$i" != "$spared" ] && [ $(( ${now[$i]} - ${before[$i]} )) -ge 2 ]; then victim=$i; break 2; fi
+    done
+    sleep 0.01
+  done
+  if [ -n "$victim" ]; then
+    kill -KILL "${rep_pids[$((victim + 1))]}"
+    wait "${rep_pids[$((victim + 1))]}" 2>/dev/null
+    ok
+  else
+    bad "$label: no replica started rendering"
+  fi
+  wait "$sweep_pid"
+  rc=$?
+  if [ "$rc" -eq 0 ]; then ok; else bad "$label: sweep exit $rc: $(tail -c 800 "$out.err")"; fi
+  same_sweep "$label" "$out" "$ref"
+  if grep -Eq '[1-9][0-9]* resubmissions? of [1-9]' "$out.err"; then ok; else bad "$label: the summary counts no resubmission: $(tail -n 2 "$out.err")"; fi
+}
+
 # ---- one replica SIGKILLed mid-sweep (HAProxy) ----
 start_haproxy "$lb"
-before=($(counts))
-rsw "http://127.0.0.1:$lb" sweep "$scene" "${grid[@]}" --spp $spp --spread 3 -o "$tmp/k" >"$tmp/k.out" 2>"$tmp/k.err" &
-sweep_pid=$!
-victim=""
-for _ in $(seq 300); do
-  now=($(counts))
-  for i in 0 1 2; do
-    if [ $(( ${now[$i]} - ${before[$i]} )) -ge 2 ]; then victim=$i; break 2; fi
-  done
-  sleep 0.01
-done
-if [ -n "$victim" ]; then
-  kill -KILL "${rep_pids[$((victim + 1))]}"
-  wait "${rep_pids[$((victim + 1))]}" 2>/dev/null
-  ok
-else
-  bad "kill: no replica started rendering"
-fi
-wait "$sweep_pid"
-rc=$?
-if [ "$rc" -eq 0 ]; then ok; else bad "replica killed: sweep exit $rc: $(tail -c 800 "$tmp/k.err")"; fi
-same_sweep "replica killed" "$tmp/k"
-if grep -Eq '[1-9][0-9]* resubmissions? of [1-9]' "$tmp/k.err"; then ok; else bad "replica killed: the summary counts no resubmission: $(tail -n 2 "$tmp/k.err")"; fi
+kill_mid_sweep "replica killed" "$tmp/k" "$tmp/ref" ""
+# ---- --bundle 3, another replica SIGKILLed mid-sweep ----
+kill_mid_sweep "bundle 3, replica killed" "$tmp/kb" "$tmp/refb" "$victim" --bundle 3
 
 # ---- the shipped configurations are the generator's ----
 three=(--replica raysweep-1:8350 --replica raysweep-2:8350 --replica raysweep-3:8350)

@@ -1,0 +1,253 @@
+#!/usr/bin/env bash
+# Spectral bundles and shards (docs/cluster.md#shards-and-spectral-bundles),
+# on the Lambertian plate (mono) with a 2 x 7 grid, wavelength fastest, at
+# --bundle 3 (bundle groups {0,1,2} {3,4,5} {6} {7,8,9} {10,11,12} {13}):
+#   - the sweep run whole, as --shard 0/2 + 1/2 merged, and with --spread 2
+#     over two daemons behind a balancer give cmp-identical films and the
+#     same index; each shard holds whole bundle groups (its sweep.json's
+#     bundle_leads); --shard with --bundle auto likewise;
+#   - the same from a --contexts file (wavelength fastest, ids given);
+#   - without --bundle the shards are still k mod n and sweep.json has no
+#     bundle_leads (sweeps of before keep their contexts and files);
+#   - a job's "bundle": "auto" comes to 3 on a mono scene (its films those
+#     of "bundle": 3) and to 1, accepted, with the reason, on an rgb scene,
+#     a Stokes film and an environment plugin scene; "bundle" 0, 4, "x", -1
+#     and a context's bundle_group "a" are 4xx naming the pointer;
+#     `sweep --bundle 5` and `--bundle x` are usage errors.
+name=test_bundle_shards
+source "$(dirname "$0")/../support/shtest.sh"
+need_bins raysweepd raysweep
+need_cmd python3 "for the balancer and the HTTP checks"
+scene="$root/proto/examples/hdistant_lambertian.json"
+start_daemon "$tmp/a" --threads 1
+pa=$started_port
+start_daemon "$tmp/b" --threads 1
+pb=$started_port
+[ -n "$pa" ] && [ -n "$pb" ] || { bad "daemons did not start: $(cat "$tmp/a/log" "$tmp/b/log")"; finish; }
+
+# A balancer for --spread: each request goes to the replica that its
+# X-Raysweep-Shard header hashes to (crc32 mod 2), answers streamed back.
+cat >"$tmp/lb.py" <<'PY'
+import http.client, http.server, socketserver, sys, zlib
+ports = [int(p) for p in sys.argv[2:]]
+class H(http.server.BaseHTTPRequestHandler):
+    protocol_version = "HTTP/1.1"
+    def log_message(self, *a): pass
+    def relay(self):
+        key = self.headers.get("X-Raysweep-Shard", "")
+        port = ports[zlib.crc32(key.encode()) % len(ports)]
+        n = int(self.headers.get("Content-Length") or 0)
+        body = self.rfile.read(n) if n else None
+        hop = {"connection", "keep-alive", "transfer-encoding", "host"}
+        hdr = {k: v for k, v in self.headers.items() if k.lower() not in hop}
+        c = http.client.HTTPConnection("127.0.0.1", port, timeout=600)
+        c.request(self.command, self.path, body=body, headers=hdr)
+        r = c.getresponse()
+        self.send_response(r.status)
+        chunked = r.getheader("Content-Length") is None
+        for k, v in r.getheaders():
+            if k.lower() not in hop:
+                self.send_header(k, v)
+        if chunked:
+            self.send_header("Transfer-Encoding", "chunked")
+        self.end_headers()
+        while True:
+            b = r.read1(65536) if chunked else r.read()
+            if not b:
+                break
+            if chunked:
+                self.wfile.write(b"%x\r\n%s\r\n" % (len(b), b))
+                self.wfile.flush()
+            else:
+                self.wfile.write(b)
+                break
+        if chunked:
+            self.wfile.write(b"0\r\n\r\n")
+        c.close()
+    do_GET = do_POST = do_PUT = do_PATCH = do_DELETE = do_HEAD = relay
+class S(socketserver.ThreadingMixIn, http.server.HTTPServer):
+    daemon_threads = True
+s = S(("127.0.0.1", 0), H)
+open(sys.argv[1], "w").write(str(s.server_address[1]))
+s.serve_forever()
+PY
+python3 "$tmp/lb.py" "$tmp/lb.port" "$pa" "$pb" &
+pids+=($!)
+for _ in $(seq 100); do [ -s "$tmp/lb.port" ] && break; sleep 0.05; done
+plb=$(cat "$tmp/lb.port" 2>/dev/null)
+[ -n "$plb" ] || { bad "the balancer did not start"; finish; }
+
+rs() { "$bin/raysweep" -q --server "http://127.0.0.1:$1" "${@:2}"; }
+# same LABEL REF DIR: DIR holds REF's films, bit for bit, and its index.
+same() {
+  local f n=0 differ=""
+  for f in $(cd "$2" && find . -name '*.exr' | sort); do
+    n=$((n + 1))
+    cmp -s "$2/$f" "$3/$f" || differ="$differ $f"
+  done
+  if [ "$n" -gt 0 ] && [ -z "$differ" ]; then ok; else bad "$1: $n films, differing:${differ:- (none found)}"; fi
+  if cmp -s "$2/index.jsonl" "$3/index.jsonl"; then ok; else bad "$1: index.jsonl differs"; fi
+}
+# leads LABEL DIR WANT: DIR/sweep.json's bundle_leads (JSON, or "none").
+leads() {
+  local got
+  got=$(python3 -c 'import json,sys; print(json.dumps(json.load(open(sys.argv[1])).get("bundle_leads", "none")))' "$2/sweep.json")
+  if [ "$got" = "$3" ]; then ok; else bad "$1: bundle_leads $got, wanted $3"; fi
+}
+
+grid=(--grid surface.bsdf.reflectance.value=0.2:0.3:0.1 --grid wavelength=400:460:10 --spp 64 --seed 7)
+w3='[0, 0, 0, 3, 3, 3, 6, 7, 7, 7, 10, 10, 10, 13]'
+cd "$tmp" || finish
+rs "$pa" sweep "$scene" "${grid[@]}" --bundle 3 -o whole >/dev/null 2>"$tmp/err" || bad "whole sweep: $(cat "$tmp/err")"
+rs "$pa" sweep "$scene" "${grid[@]}" --bundle 3 --shard 0/2 -o s0 >/dev/null 2>"$tmp/err" || bad "shard 0/2: $(cat "$tmp/err")"
+rs "$pb" sweep "$scene" "${grid[@]}" --bundle 3 --shard 1/2 -o s1 >/dev/null 2>"$tmp/err" || bad "shard 1/2: $(cat "$tmp/err")"
+rs "$pa" merge s0 s1 -o merged >/dev/null 2>"$tmp/err" || bad "merge: $(cat "$tmp/err")"
+same "--shard 0/2 + 1/2 merged" whole merged
+leads "shard 0/2's manifest" s0 "$w3"
+got=$(ls s0 | grep '^c' | tr '\n' ' ')
+if [ "$got" = "c00000 c00001 c00002 c00006 c00010 c00011 c00012 " ]; then ok; else bad "shard 0/2 holds $got"; fi
+rs "$plb" sweep "$scene" "${grid[@]}" --bundle 3 --spread 2 -o spread >/dev/null 2>"$tmp/err" || bad "--spread 2: $(cat "$tmp/err")"
+same "--spread 2 over two daemons" whole spread
+for p in "$pa" "$pb"; do # each replica rendered a shard
+  n=$(curl -s "http://127.0.0.1:$p/metrics" | awk '$1 == "raysweep_contexts_rendered_total" { print $2 }')
+  if [ "${n:-0}" != 0 ]; then ok; else bad "replica $p rendered nothing of the spread sweep"; fi
+done
+# --bundle auto: groups of 3 too, and the daemon takes 3 here.
+rs "$pa" sweep "$scene" "${grid[@]}" --bundle auto -o auto >/dev/null 2>"$tmp/err" || bad "auto: $(cat "$tmp/err")"
+rs "$pa" sweep "$scene" "${grid[@]}" --bundle auto --shard 0/3 -o a0 >/dev/null 2>"$tmp/err" &&
+  rs "$pa" sweep "$scene" "${grid[@]}" --bundle auto --shard 1/3 -o a1 >/dev/null 2>"$tmp/err" &&
+  rs "$pa" sweep "$scene" "${grid[@]}" --bundle auto --shard 2/3 -o a2 >/dev/null 2>"$tmp/err" &&
+  rs "$pa" merge a0 a1 a2 -o amerged >/dev/null 2>"$tmp/err" || bad "auto shards: $(cat "$tmp/err")"
+same "--bundle auto, --shard I/3 merged" auto amerged
+n=0
+for f in $(cd whole && find . -name '*.exr'); do cmp -s "whole/$f" "auto/$f" || n=$((n + 1)); done
+if [ "$n" = 0 ]; then ok; else bad "--bundle auto's films differ from --bundle 3's ($n)"; fi
+# A bundled sweep is not the unbundled one (so the checks above can fail).
+rs "$pa" sweep "$scene" "${grid[@]}" -o plain >/dev/null 2>"$tmp/err" || bad "plain: $(cat "$tmp/err")"
+n=0
+for f in $(cd whole && find . -name '*.exr'); do cmp -s "whole/$f" "plain/$f" || n=$((n + 1)); done
+if [ "$n" -gt 0 ]; then ok; else bad "bundle 3 gave the films of bundle 1"; fi
+# Without --bundle: k mod n, no bundle_leads.
+rs "$pa" sweep "$scene" "${grid[@]}" --shard 1/2 -o p1 >/dev/null 2>"$tmp/err" || bad "plain shard: $(cat "$tmp/err")"
+leads "an unbundled shard's manifest" p1 '"none"'
+got=$(ls p1 | grep '^c' | tr '\n' ' ')
+if [ "$got" = "c00001 c00003 c00005 c00007 c00009 c00011 c00013 " ]; then ok; else bad "unbundled shard 1/2 holds $got"; fi
+
+# A --contexts file: wavelength fastest under two reflectances, ids given.
+python3 - >ctx.jsonl <<'PY'
+import json
+for r in (0.2, 0.3):
+    for w in range(400, 470, 10):
+        print(json.dumps({"id": f"r{int(r*10)}w{w}", "wavelength": w, "params": {"surface.bsdf.reflectance.value": r}}))
+PY
+rs "$pa" sweep "$scene" --contexts ctx.jsonl --spp 64 --bundle 3 -o cwhole >/dev/null 2>"$tmp/err" || bad "contexts whole: $(cat "$tmp/err")"
+rs "$pb" sweep "$scene" --contexts ctx.jsonl --spp 64 --bundle 3 --shard 0/2 -o c0 >/dev/null 2>"$tmp/err" &&
+  rs "$pa" sweep "$scene" --contexts ctx.jsonl --spp 64 --bundle 3 --shard 1/2 -o c1 >/dev/null 2>"$tmp/err" &&
+  rs "$pa" merge c0 c1 -o cmerged >/dev/null 2>"$tmp/err" || bad "contexts shards: $(cat "$tmp/err")"
+same "--contexts, --shard 0/2 + 1/2 merged" cwhole cmerged
+leads "a --contexts shard's manifest" c0 "$w3"
+rs "$plb" sweep "$scene" --contexts ctx.jsonl --spp 64 --bundle 3 --spread 2 -o cspread >/dev/null 2>"$tmp/err" || bad "contexts --spread: $(cat "$tmp/err")"
+same "--contexts, --spread 2" cwhole cspread
+
+# Usage errors.
+expect 2 "sweep --bundle 5" rs "$pa" sweep "$scene" "${grid[@]}" --bundle 5 -o u5
+contains "sweep --bundle 5" "$tmp/err" "--bundle"
+expect 2 "sweep --bundle x" rs "$pa" sweep "$scene" "${grid[@]}" --bundle x -o ux
+
+# "bundle": "auto" and bad values over HTTP.
+python3 - "$root/proto/examples/hdistant_lambertian.json" "$tmp/stokes.json" <<'PY'
+import json, sys
+d = json.load(open(sys.argv[1]))
+d["sensor"]["film"]["pixel_format"] = "stokes"
+json.dump(d, open(sys.argv[2], "w"))
+PY
+cat >"$tmp/plugin.json" <<'JSON'
+{"type": "scene", "variant": "mono",
+ "meter": {"type": "radiancemeter", "origin": [0, 0, 0], "direction": [1, 0, 0],
+   "film": {"type": "hdrfilm", "width": 1, "height": 1, "component_format": "float32"}},
+ "sky": {"type": "test"}}
+JSON
+start_daemon "$tmp/p" --threads 1 --plugin-dir "$bin/../plugins"
+pp=$started_port
+[ -n "$pp" ] || bad "the plugin daemon did not start: $(cat "$tmp/p/log")"
+cat >"$tmp/rsw_http.py" <<'PY'
+import json, sys, time, urllib.request, urllib.error
+def call(port, method, path, body=None):
+    data = body if body is None or isinstance(body, bytes) else json.dumps(body).encode()
+    req = urllib.request.Request(f"http://127.0.0.1:{port}{path}", method=method, data=data,
+                                 headers={"Content-Type": "application/json"})
+    try:
+        with urllib.request.urlopen(req, timeout=300) as r:
+            return r.status, r.read()
+    except urllib.error.HTTPError as e:
+        return e.code, e.read()
+def push(port, path):
+    st, b = call(port, "POST", "/v1/scenes", open(path, "rb").read())
+    assert st in (200, 201), (st, b)
+    return json.loads(b)["id"]
+def job(port, sid, extra, ctxs=None):
+    body = {"contexts": ctxs or [{"id": f"w{w}", "wavelength": w} for w in (400, 410, 420, 430)],
+            "defaults": {"spp": 16}, "seed": 3}
+    body.update(extra)
+    st, b = call(port, "POST", f"/v1/scenes/{sid}/jobs", body)
+    return st, json.loads(b)
+def films(port, j):
+    for _ in range(3000):
+        st, b = call(port, "GET", f"/v1/jobs/{j['id']}")
+        s = json.loads(b)
+        if s["state"] not in ("queued", "running"):
+            break
+        time.sleep(0.05)
+    assert s["state"] == "succeeded", s
+    st, b = call(port, "GET", f"/v1/jobs/{j['id']}/results")
+    return {r["context"]: call(port, "GET", r["href"])[1] for r in json.loads(b)["results"]}
+PY
+py '"bundle": "auto" on a mono scene: 3, the films of "bundle": 3, not those of 1' '
+import sys; sys.path.insert(0, sys.argv[1]); import importlib.util as u
+spec = u.spec_from_file_location("h", sys.argv[1] + "/rsw_http.py"); h = u.module_from_spec(spec); spec.loader.exec_module(h)
+port = int(sys.argv[2]); sid = h.push(port, sys.argv[3])
+st, a = h.job(port, sid, {"bundle": "auto"}); assert st == 202, (st, a); assert a["bundle"] == 3 and "bundle_why" not in a, a
+st, t = h.job(port, sid, {"bundle": 3}); assert st == 202, (st, t); assert t["bundle"] == 3, t
+st, o = h.job(port, sid, {}); assert st == 202 and "bundle" not in o, o
+fa, ft, fo = h.films(port, a), h.films(port, t), h.films(port, o)
+assert fa == ft, "auto differs from 3"
+assert fa != fo, "auto gave the unbundled films"
+' "$tmp" "$pa" "$scene"
+for s in "$root/proto/examples/cornell_box.json:rgb" "$tmp/stokes.json:Stokes" "$tmp/plugin.json:evaluates one wavelength"; do
+  py "\"bundle\": \"auto\" on ${s##*:}: 1 with the reason" '
+import sys, importlib.util as u
+spec = u.spec_from_file_location("h", sys.argv[1] + "/rsw_http.py"); h = u.module_from_spec(spec); spec.loader.exec_module(h)
+port = int(sys.argv[2]); sid = h.push(port, sys.argv[3])
+rgb = "rgb" in sys.argv[4]
+ctxs = [{"id": "a"}, {"id": "b"}] if rgb else None
+st, a = h.job(port, sid, {"bundle": "auto"}, ctxs); assert st == 202, (st, a)
+assert a["bundle"] == 1 and sys.argv[4] in a["bundle_why"], a
+h.films(port, a)
+st, e = h.job(port, sid, {"bundle": 3}, ctxs); assert st == 422 and e["pointer"] == "/bundle", (st, e)
+' "$tmp" "$([ "${s##*:}" = "evaluates one wavelength" ] && echo "$pp" || echo "$pa")" "${s%%:*}" "${s##*:}"
+done
+py 'bad "bundle" values and bundle_group: 4xx naming the pointer' '
+import sys, importlib.util as u
+spec = u.spec_from_file_location("h", sys.argv[1] + "/rsw_http.py"); h = u.module_from_spec(spec); spec.loader.exec_module(h)
+port = int(sys.argv[2]); sid = h.push(port, sys.argv[3])
+for v in (0, 4, "x", -1, 2.5, "AUTO", None, [3]):
+    st, e = h.job(port, sid, {"bundle": v})
+    assert 400 <= st < 500 and e["pointer"] == "/bundle", (v, st, e)
+for v in ("a", -1, 1.5):
+    st, e = h.job(port, sid, {"bundle": 3}, [{"id": "a", "wavelength": 400, "bundle_group": v}])
+    assert 400 <= st < 500 and e["pointer"] == "/contexts/0/bundle_group", (v, st, e)
+' "$tmp" "$pa" "$scene"
+py 'bundle_group: renders of other groups never share a bundle' '
+import sys, importlib.util as u
+spec = u.spec_from_file_location("h", sys.argv[1] + "/rsw_http.py"); h = u.module_from_spec(spec); spec.loader.exec_module(h)
+port = int(sys.argv[2]); sid = h.push(port, sys.argv[3])
+one = lambda w: [{"id": f"w{w}", "wavelength": w}]
+grouped = [{"id": f"w{w}", "wavelength": w, "bundle_group": g} for w, g in ((400, 0), (410, 0), (420, 2), (430, 2))]
+st, a = h.job(port, sid, {"bundle": 3}, grouped); assert st == 202, (st, a)
+st, b = h.job(port, sid, {"bundle": 3}, grouped[2:]); assert st == 202, (st, b)
+st, c = h.job(port, sid, {"bundle": 3}, [dict(x, bundle_group=0) for x in grouped]); assert st == 202, (st, c)
+fa, fb, fc = h.films(port, a), h.films(port, b), h.films(port, c)
+assert fa["w420"] == fb["w420"] and fa["w430"] == fb["w430"], "a group alone differs from the group in the job"
+assert fa["w420"] != fc["w420"], "bundle_group changed nothing"
+' "$tmp" "$pa" "$scene"
+finish
