@@ -529,7 +529,8 @@ rsw_status bands_combine(const band *b, const film_image *const *nodes, film_ima
       for (size_t i = 0; i < b->n_nodes; i++) s += b->w[i] * nodes[i]->irradiance[c];
       e_srf[c] = s / W;
     }
-  for (size_t c = 0; f0->has_irradiance && c < C && c < FILM_MAX_CHANNELS; c++) o.irradiance[c] = e_srf[c % n_ir];
+  for (size_t c = 0; f0->has_irradiance && c < C && c < FILM_MAX_CHANNELS; c++)
+    o.irradiance[c] = e_srf[c % n_ir];
   bool ok = (o.data = malloc(n * sizeof *o.data)) != NULL;
   if (ok && f0->angles) {
     size_t na = (size_t)f0->width * (size_t)f0->height * 2;

@@ -19,6 +19,8 @@
 #     other way in the image);
 #   - rgb_polarized: one render whose ground is black in R and of albedo
 #     0.25 in G, each channel against its own table, as above;
+#   - Mitsuba's `stokes` integrator wrapper renders its nested integrator's
+#     film bit for bit, and is refused in an unpolarized variant;
 #   - variants named wrongly are refused naming the variant.
 name=test_polarization
 source "$(dirname "$0")/../support/shtest.sh"
@@ -186,6 +188,21 @@ PY
 )
 echo "  rotation: $(echo "$out" | head -1)"
 [ "$(echo "$out" | tail -1)" = ok ] && ok || bad "rotation: $out"
+
+# ---- Mitsuba's `stokes` wrapper: the nested integrator's films, bit for bit;
+# refused in an unpolarized variant --------------------------------------------
+"$pyx" - "$tmp/cam0.json" "$tmp/camw.json" "$tmp/camw_mono.json" <<'PY'
+import json, sys
+d = json.load(open(sys.argv[1]))
+d["integrator"] = {"type": "stokes", "inner": d["integrator"]}
+json.dump(d, open(sys.argv[2], "w"))
+d["variant"] = "mono"
+json.dump(d, open(sys.argv[3], "w"))
+PY
+"$rsd" render "$tmp/camw.json" -o "$tmp/camw.npy" >/dev/null 2>"$tmp/err" || bad "stokes wrapper: $(cat "$tmp/err")"
+cmp -s "$tmp/camw.npy" "$tmp/cam0.npy" && ok || bad "the stokes wrapper's film differs from its nested integrator's"
+"$rsd" render "$tmp/camw_mono.json" -o "$tmp/x.npy" >/dev/null 2>"$tmp/err" && bad "stokes in mono was accepted"
+contains "stokes in mono" "$tmp/err" "needs a polarized variant"
 
 # ---- bad variants -------------------------------------------------------------
 "$rsd" render "$tmp/plate.json" --variant mono_polarised -o "$tmp/x.npy" >/dev/null 2>"$tmp/err" &&

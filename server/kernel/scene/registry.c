@@ -22,7 +22,7 @@
   X(mdistant) X(distantflux) X(mradiancemeter) X(mpdistant)                   \
   X(hdrfilm) X(box) X(gaussian) X(tent) X(lanczos)                            \
   X(independent) X(stratified)                                                \
-  X(path) X(direct)                                                           \
+  X(path) X(direct) X(stokes)                                                 \
   X(uniform) X(checkerboard) X(bitmap)                                       \
   X(shapegroup) X(instance) X(instancelist) X(periodic)                      \
   X(isotropic) X(hg) X(blendphase) X(rayleigh) X(tabphase)                    \
