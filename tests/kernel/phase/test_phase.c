@@ -20,8 +20,8 @@ RSW_TEST_DEFINE_GLOBALS
 
 #define CHI2_SAMPLES 200000
 /* chi2_run calls in this file (Sidak correction): isotropic 2, hg 8 x 2,
- * blendphase 5 x 2 + 2, rayleigh 2, tabphase 5 x 2 + 1. */
-#define CHI2_TESTS   43
+ * blendphase 5 x 2 + 2, rayleigh 3 x 2, tabphase 5 x 2 + 1. */
+#define CHI2_TESTS   47
 
 /* ---- helpers ------------------------------------------------------------------ */
 
@@ -334,6 +334,90 @@ static void test_rayleigh(void) {
   scene_free(s);
 }
 
+/* rayleigh with depolarization rho: p(mu) = 3 / (8 pi (2 + rho)) ((1 + rho)
+ * + (1 - rho) mu^2) (Hansen & Travis 1974 eq. 2.15's F11 over 4 pi),
+ * sampled by the exact inverse of its cdf; rho = 0 bit for bit the
+ * unpolarized formulas; the update of `depolarization`. */
+static void test_rayleigh_depolarization(void) {
+  scene *s = load_phases("\"r0\": {\"type\": \"rayleigh\", \"depolarization\": 0}, \"a\": {\"type\": "
+                         "\"rayleigh\", \"depolarization\": 0.03}, \"b\": {\"type\": \"rayleigh_polarized\", "
+                         "\"depolarization\": 0.3}");
+  REQUIRE(s, "load");
+  const phase *r0 = (const phase *)find_obj(s, "r0");
+  medium_interaction mi = mi_at(wis[1]);
+  /* rho = 0: the formulas before depolarization existed, bit for bit. */
+  int diff = 0;
+  for (int i = 0; i <= 1000; i++) {
+    double u = i / 1000.0, pdf, epdf;
+    vec3 wo;
+    r0->ops->sample(r0, &mi, 0.5, v2(u, 0.7), &wo, &pdf);
+    double z = 2.0 * (2.0 * u - 1.0), a = cbrt(z + sqrt(z * z + 1.0));
+    double mu = fmin(1.0, fmax(-1.0, a - 1.0 / a));
+    vec3 want = phase_direction(&mi, mu, 0.7);
+    double v = r0->ops->eval_pdf(r0, &mi, want, &epdf);
+    diff += memcmp(&wo, &want, sizeof wo) != 0 || pdf != 3.0 / (16.0 * RSW_PI) * (1.0 + mu * mu) ||
+            v != 3.0 / (16.0 * RSW_PI) * (1.0 + phase_mu(&mi, want) * phase_mu(&mi, want));
+  }
+  CHECK(diff == 0, "rho = 0: %d of 1001 samples differ from the unpolarized formulas", diff);
+  const double rhos[2] = {0.03, 0.3};
+  const char *ids[2] = {"a", "b"};
+  for (int r = 0; r < 2; r++) {
+    const phase *ph = (const phase *)find_obj(s, ids[r]);
+    REQUIRE(ph, "phase %s", ids[r]);
+    double rho = rhos[r], A = 1.0 + rho, B = 1.0 - rho;
+    char what[64];
+    snprintf(what, sizeof what, "rayleigh depolarization %g", rho);
+    for (int k = 0; k < 2; k++) run_chi2(ph, wis[k], what, 4);
+    CHECK_REL(phase_integral(ph, wis[1], 2), 1.0, 1e-14);
+    medium_interaction m0 = mi_at(v3(0, 0, 1));
+    double pdf;
+    CHECK_REL(ph->ops->eval_pdf(ph, &m0, v3(0, 0, -1), &pdf), 3.0 / (8.0 * RSW_PI * (2 + rho)) * 2.0, 1e-15);
+    CHECK_REL(ph->ops->eval_pdf(ph, &m0, v3(1, 0, 0), &pdf), 3.0 / (8.0 * RSW_PI * (2 + rho)) * A, 1e-15);
+    /* F(mu(u)) = u, F the cdf of mu. */
+    for (int i = 0; i <= 100; i++) {
+      double u = i / 100.0, w;
+      vec3 wo;
+      ph->ops->sample(ph, &m0, 0.5, v2(u, 0.3), &wo, &w);
+      double mu = -wo.z;
+      double F = (A * (mu + 1.0) + B * (mu * mu * mu + 1.0) / 3.0) / (2.0 * A + 2.0 * B / 3.0);
+      CHECK_ABS(F, u, 1e-14);
+    }
+    /* The polarization factors: Hansen & Travis's F / F11. */
+    mueller P[3];
+    vec3 wo = v3_norm(v3(0.3, 0.4, 0.5));
+    double mu = phase_mu(&m0, wo), D = (1 - rho) / (1 + rho / 2);
+    ph->ops->polarization(ph, &m0, wo, P);
+    double f11 = 0.75 * D * (1 + mu * mu) + 1 - D;
+    CHECK_REL(P[0].m[0][1], 0.75 * D * (1 - mu * mu) / f11, 1e-14);
+    CHECK_REL(P[0].m[3][3], 1.5 * D * (1 - 2 * rho) / (1 - rho) * mu / f11, 1e-14);
+    /* 4 pi p(mu) is that F11. */
+    CHECK_REL(4.0 * RSW_PI * ph->ops->eval_pdf(ph, &m0, wo, &pdf), f11, 1e-14);
+  }
+  /* The parameter: spectral, in [0, 1); derived constants follow it. */
+  rsw_err err = {0};
+  size_t i;
+  CHECK(params_lookup(s, "r0.depolarization", &i, &err) == RSW_OK, "r0.depolarization exists");
+  param_info info;
+  REQUIRE(params_info(s, i, &info), "info");
+  CHECK(info.cls == UPDATE_SPECTRAL, "depolarization is spectral");
+  CHECK(upd1(s, "r0.depolarization", "0.3", &err) == RSW_OK, "update: %s", err.msg);
+  const phase *b = (const phase *)find_obj(s, "b");
+  for (int k = 0; k < 10; k++) {
+    double u = (k + 0.5) / 10.0, p0, p1;
+    vec3 w0, w1;
+    double v0 = r0->ops->sample(r0, &mi, 0.5, v2(u, 0.2), &w0, &p0);
+    double v1 = b->ops->sample(b, &mi, 0.5, v2(u, 0.2), &w1, &p1);
+    CHECK(v0 == v1 && p0 == p1 && memcmp(&w0, &w1, sizeof w0) == 0, "updated to 0.3 == loaded with 0.3");
+  }
+  const char *bad[] = {"1", "-0.01", "1.5"};
+  for (int k = 0; k < 3; k++) {
+    memset(&err, 0, sizeof err);
+    CHECK(upd1(s, "r0.depolarization", bad[k], &err) == RSW_ERR_RANGE, "%s rejected", bad[k]);
+    CHECK(strstr(err.msg, "r0.depolarization") != NULL, "error names the key: %s", err.msg);
+  }
+  scene_free(s);
+}
+
 static void test_tabphase(void) {
   const char *tables[5][2] = {
       {"[1, 1]", "tabphase constant"},
@@ -438,6 +522,8 @@ static void test_load_errors(void) {
        "exactly two"},
       {"\"p\": {\"type\": \"mie\"}", "mie"},
       {"\"p\": {\"type\": \"rayleigh\", \"g\": 0}", "no property 'g'"},
+      {"\"p\": {\"type\": \"rayleigh\", \"depolarization\": 1}", "'depolarization' must lie in [0, 1)"},
+      {"\"p\": {\"type\": \"rayleigh_polarized\", \"depolarization\": -0.1}", "must lie in [0, 1)"},
       {"\"p\": {\"type\": \"tabphase\"}", "missing property 'values'"},
       {"\"p\": {\"type\": \"tabphase\", \"values\": \"1\"}", "at least 2"},
       {"\"p\": {\"type\": \"tabphase\", \"values\": \"1, x, 2\"}", "'x' (value 1) is not a number"},
@@ -462,6 +548,7 @@ int main(void) {
   RSW_TEST_RUN(test_blendphase);
   RSW_TEST_RUN(test_phase_bind);
   RSW_TEST_RUN(test_rayleigh);
+  RSW_TEST_RUN(test_rayleigh_depolarization);
   RSW_TEST_RUN(test_tabphase);
   RSW_TEST_RUN(test_parameters);
   RSW_TEST_RUN(test_load_errors);
