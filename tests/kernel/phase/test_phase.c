@@ -20,8 +20,9 @@ RSW_TEST_DEFINE_GLOBALS
 
 #define CHI2_SAMPLES 200000
 /* chi2_run calls in this file (Sidak correction): isotropic 2, hg 8 x 2,
- * blendphase 5 x 2 + 2, rayleigh 3 x 2, tabphase 5 x 2 + 1. */
-#define CHI2_TESTS   47
+ * blendphase 5 x 2 + 2, rayleigh 3 x 2, tabphase 5 x 2 + 1, tabphase_polarized
+ * 2 x 2 + 1. */
+#define CHI2_TESTS   52
 
 /* ---- helpers ------------------------------------------------------------------ */
 
@@ -471,6 +472,82 @@ static void test_tabphase(void) {
   scene_free(s);
 }
 
+/* tabphase_polarized: sampling (regular and irregular nodes), its
+ * intensity equal to tabphase's on the same regular table, the phase
+ * matrix's factors (the signs of m12 and m34 in the kernel's bases; the
+ * Rayleigh matrix: test_phase_polarized.c), the parameters. */
+static void test_tabphase_polarized(void) {
+  scene *s = load_phases(
+      "\"t\": {\"type\": \"tabphase\", \"values\": \"0.02 0.03 0.05 0.08 0.12 0.2 0.35 0.6 1.1 2.5 6.0\"},"
+      " \"p\": {\"type\": \"tabphase_polarized\", \"m11\": \"0.02 0.03 0.05 0.08 0.12 0.2 0.35 0.6 1.1 2.5 "
+      "6.0\", \"m12\": -0.01, \"m34\": \"0 0 0 0 0 0.1 0 0 0 0 0\"},"
+      " \"q\": {\"type\": \"tabphase_polarized\", \"nodes\": [-1, -0.2, 0, 0.3, 0.9, 0.99, 1],"
+      " \"m11\": [1, 0.5, 0.4, 0.8, 3, 20, 40], \"m33\": [1, 0.5, 0.4, 0.8, 3, 20, 40]},"
+      " \"z\": {\"type\": \"tabphase_polarized\", \"nodes\": \"-1, 0.5, 0.6, 1\", \"m11\": \"1, 0, 0, 2\"}");
+  REQUIRE(s, "load");
+  const phase *t = (const phase *)find_obj(s, "t"), *p = (const phase *)find_obj(s, "p"),
+              *q = (const phase *)find_obj(s, "q"), *z = (const phase *)find_obj(s, "z");
+  REQUIRE(t && p && q && z, "the four phases");
+  medium_interaction mi = mi_at(wis[1]);
+  int diff = 0;
+  for (int i = 0; i <= 200; i++) {
+    double pt, pp, vt, vp;
+    vec3 wt, wp;
+    vt = t->ops->sample(t, &mi, 0.5, v2(i / 200.0, 0.1), &wt, &pt);
+    vp = p->ops->sample(p, &mi, 0.5, v2(i / 200.0, 0.1), &wp, &pp);
+    diff += vt != vp || pt != pp || memcmp(&wt, &wp, sizeof wt) != 0;
+  }
+  CHECK(diff == 0, "regular tabphase_polarized == tabphase (%d of 201 samples differ)", diff);
+  run_chi2(q, wis[0], "tabphase_polarized irregular", 16);
+  run_chi2(q, wis[1], "tabphase_polarized irregular", 16);
+  run_chi2(z, wis[0], "tabphase_polarized irregular, empty intervals", 8);
+  run_chi2(z, wis[1], "tabphase_polarized irregular, empty intervals", 8);
+  CHECK_REL(phase_integral(q, wis[1], 40000), 1.0, 1e-6);
+  /* int m11 = (1 + 0.5) 0.8 / 2 + ... ; at mu = 0.3 the node value 0.8. */
+  double tot = 0.5 * (1.5 * 0.8 + 0.9 * 0.2 + 1.2 * 0.3 + 3.8 * 0.6 + 23 * 0.09 + 60 * 0.01), pdf;
+  vec3 w03 = phase_direction(&mi, 0.3, 0.25);
+  CHECK_REL(q->ops->eval_pdf(q, &mi, w03, &pdf), 0.8 / (2 * RSW_PI * tot), 1e-12);
+  /* Factors: m12 and m34 change sign in the kernel's bases; absent
+   * elements are 0; one number stands for every node. */
+  mueller P[3];
+  vec3 w = phase_direction(&mi, 0.0, 0.6); /* mu = 0: node 5 */
+  p->ops->polarization(p, &mi, w, P);
+  CHECK_REL(P[0].m[0][1], 0.01 / 0.2, 1e-12);
+  CHECK_REL(P[0].m[1][0], 0.01 / 0.2, 1e-12);
+  CHECK_REL(P[0].m[2][3], -0.1 / 0.2, 1e-12);
+  CHECK_REL(P[0].m[3][2], 0.1 / 0.2, 1e-12);
+  CHECK(P[0].m[0][0] == 1.0 && P[0].m[1][1] == 0.0 && P[0].m[2][2] == 0.0 && P[0].m[3][3] == 0.0,
+        "absent elements are 0");
+  q->ops->polarization(q, &mi, w03, P);
+  CHECK_REL(P[0].m[2][2], 1.0, 1e-14);
+  CHECK(P[0].m[0][1] == 0.0 && P[0].m[1][1] == 0.0, "q: only m11 and m33");
+  /* Updates: m11 (>= 0, not all zero), m34 (any sign), nodes (-1 .. 1,
+   * increasing); a phase without nodes has no `nodes` key. */
+  rsw_err err = {0};
+  size_t idx;
+  CHECK(params_lookup(s, "p.nodes", &idx, &err) != RSW_OK, "p has no nodes key");
+  CHECK(upd1(s, "q.nodes", "[-1, -0.5, 0, 0.3, 0.9, 0.99, 1]", &err) == RSW_OK, "nodes update: %s", err.msg);
+  CHECK(upd1(s, "p.m34", "[0, 0, 0, 0, 0, -0.1, 0, 0, 0, 0, 0]", &err) == RSW_OK, "m34 update: %s", err.msg);
+  p->ops->polarization(p, &mi, w, P);
+  CHECK_REL(P[0].m[2][3], 0.1 / 0.2, 1e-12);
+  CHECK(upd1(s, "q.m11", "[1, 1, 1, 1, 1, 1, 1]", &err) == RSW_OK, "m11 update: %s", err.msg);
+  CHECK_REL(q->ops->eval_pdf(q, &mi, w03, &pdf), RSW_INV_4PI, 1e-14);
+  run_chi2(q, wis[1], "tabphase_polarized after updates", 4);
+  const char *bad[][3] = {{"q.nodes", "[-1, -0.5, 0.3, 0, 0.9, 0.99, 1]", "strictly increasing"},
+                          {"q.nodes", "[-0.9, -0.5, 0, 0.3, 0.9, 0.99, 1]", "must start at -1"},
+                          {"q.nodes", "[-1, -0.5, 0, 0.3, 0.9, 0.99, 0.999]", "must end at 1"},
+                          {"q.m11", "[0, 0, 0, 0, 0, 0, 0]", "must not all be zero"},
+                          {"q.m11", "[1, 1, -1, 1, 1, 1, 1]", ">= 0"},
+                          {"q.m12", "[1, 1]", "takes 7 numbers"}};
+  for (int k = 0; k < 6; k++) {
+    memset(&err, 0, sizeof err);
+    CHECK(upd1(s, bad[k][0], bad[k][1], &err) != RSW_OK, "%s = %s rejected", bad[k][0], bad[k][1]);
+    CHECK(strstr(err.msg, bad[k][2]) && strstr(err.msg, bad[k][0]), "%s: %s", bad[k][1], err.msg);
+  }
+  CHECK_REL(q->ops->eval_pdf(q, &mi, w03, &pdf), RSW_INV_4PI, 1e-14);
+  scene_free(s);
+}
+
 static void test_parameters(void) {
   scene *s = load_phases("\"b\": {\"type\": \"blendphase\", \"weight\": 0.3, \"phase_0\": {\"type\": "
                          "\"isotropic\"}, \"phase_1\": {\"type\": \"hg\", \"g\": 0.8}}");
@@ -530,6 +607,16 @@ static void test_load_errors(void) {
       {"\"p\": {\"type\": \"tabphase\", \"values\": \"1, -1, 2\"}", "value 1 (-1) must be >= 0"},
       {"\"p\": {\"type\": \"tabphase\", \"values\": [0, 0]}", "all zeros"},
       {"\"p\": {\"type\": \"tabphase\", \"values\": true}", "list of numbers"},
+      {"\"p\": {\"type\": \"tabphase_polarized\", \"nodes\": [-1, 1]}", "missing property 'm11'"},
+      {"\"p\": {\"type\": \"tabphase_polarized\", \"m11\": [1, 2, 3], \"nodes\": [-1, 1]}", "must match"},
+      {"\"p\": {\"type\": \"tabphase_polarized\", \"m11\": [1, 2, 3], \"nodes\": [-1, 0.5, 0.2]}",
+       "'nodes' must end at 1"},
+      {"\"p\": {\"type\": \"tabphase_polarized\", \"m11\": [1, 2, 3], \"nodes\": [-1, 1, 1]}",
+       "strictly increasing"},
+      {"\"p\": {\"type\": \"tabphase_polarized\", \"m11\": [1, 2, 3], \"m12\": [1, 2]}",
+       "'m12' has 2 values, 'm11' 3"},
+      {"\"p\": {\"type\": \"tabphase_polarized\", \"m11\": [1, -2, 3]}", "must be >= 0"},
+      {"\"p\": {\"type\": \"tabphase_polarized\", \"m11\": [1, 2], \"m44\": \"1, x\"}", "not a number"},
   };
   for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
     rsw_err err = {0};
@@ -550,6 +637,7 @@ int main(void) {
   RSW_TEST_RUN(test_rayleigh);
   RSW_TEST_RUN(test_rayleigh_depolarization);
   RSW_TEST_RUN(test_tabphase);
+  RSW_TEST_RUN(test_tabphase_polarized);
   RSW_TEST_RUN(test_parameters);
   RSW_TEST_RUN(test_load_errors);
   RSW_TEST_END("test_phase");

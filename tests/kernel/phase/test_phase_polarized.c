@@ -26,6 +26,7 @@
 #include <string.h>
 
 #include "../../../server/kernel/films/film_planes.h"
+#include "../../../server/kernel/phase/phase.h"
 #include "../../support/test.h"
 #include "../../support/tsup.h"
 
@@ -99,7 +100,7 @@ static bool render_var(scene *sc, film_image *img) {
 
 /* The layer with Rayleigh phase `phase_json` of depolarization rho: DoLP
  * and S0 of every view against the closed forms above. */
-static void check_rayleigh_layer(const char *phase_json, double rho) {
+static void check_rayleigh_layer(const char *phase_json, double rho, film_image *keep) {
   scene *sc = layer_scene(phase_json);
   REQUIRE(sc, "load %s", phase_json);
   film_image img = {0};
@@ -137,18 +138,113 @@ static void check_rayleigh_layer(const char *phase_json, double rho) {
     CHECK(fabs(z) < 4.0, "rho %g view %zu: S0 %.6g, single scattering %.6g, z = %.2f", rho, i, s0, L, z);
     zmax = fmax(zmax, fabs(z));
   }
-  printf("  %s: max |DoLP - closed form| = %.2g, max |z| of S0 = %.2f\n", phase_json, worst, zmax);
-  film_image_free(&img);
+  printf("  %.48s: max |DoLP - closed form| = %.2g, max |z| of S0 = %.2f\n", phase_json, worst, zmax);
+  if (keep)
+    *keep = img;
+  else
+    film_image_free(&img);
   scene_free(sc);
 }
 
+/* The phase function with this id. */
+static const phase *find_phase(const scene *s, const char *id) {
+  for (size_t i = 0; i < s->n_objects; i++) {
+    object *o = s->objects[i];
+    if (o->id && strcmp(o->id, id) == 0 && o->plugin && o->plugin->cls == CLS_PHASE) return (const phase *)o;
+  }
+  return NULL;
+}
+
+/* The Rayleigh phase matrix in Eradiate's bases (Q = I_l - I_r: m12 < 0),
+ * tabulated at n nodes (irregular when `irregular`: denser near mu = 0),
+ * as a tabphase_polarized object's JSON. malloc'ed. */
+static char *rayleigh_table(int n, bool irregular) {
+  sbuf b = {0};
+  const char *keys[7] = {"nodes", "m11", "m12", "m22", "m33", "m34", "m44"};
+  sb_printf(&b, "{\"type\": \"tabphase_polarized\"");
+  for (int k = irregular ? 0 : 1; k < 7; k++) {
+    sb_printf(&b, ", \"%s\": [", keys[k]);
+    for (int i = 0; i < n; i++) {
+      double x = -1.0 + 2.0 * i / (n - 1), mu = irregular ? sin(x * RSW_PI / 2) : x;
+      if (i == 0) mu = -1.0;
+      if (i == n - 1) mu = 1.0;
+      double v[7] = {
+          mu, 0.75 * (1 + mu * mu), -0.75 * (1 - mu * mu), 0.75 * (1 + mu * mu), 1.5 * mu, 0.0, 1.5 * mu};
+      sb_printf(&b, "%s%.17g", i ? ", " : "", v[k]);
+    }
+    sb_printf(&b, "]");
+  }
+  sb_printf(&b, "}");
+  return b.p;
+}
+
+/* tabphase_polarized holding Rayleigh's matrix (in Eradiate's bases): its
+ * factors are mu_rayleigh's (the kernel's bases) to the interpolation's
+ * accuracy, and it renders the layer as `rayleigh` does (the closed
+ * forms, and rayleigh's film within 4 combined standard errors). */
+static void test_tabphase_polarized_rayleigh(void) {
+  medium_interaction mi = {0};
+  mi.wi = v3_norm(v3(0.3, -0.5, -0.8));
+  mueller P[3];
+  double pdf;
+  /* Rayleigh's matrix tabulated in Eradiate's bases gives mu_rayleigh's
+   * factors (the kernel's bases) to the interpolation's accuracy:
+   * |error| <= h^2 / 8 max |F''| / F11 ~ 1e-6 for 2001 nodes. */
+  for (int irr = 0; irr < 2; irr++) {
+    char *tab = rayleigh_table(2001, irr);
+    sbuf b = {0};
+    sb_printf(&b, "{\"type\": \"scene\", \"r\": %s}", tab);
+    scene *sr = tsup_load(b.p, "mono");
+    free(b.p), free(tab);
+    REQUIRE(sr, "load the Rayleigh table");
+    const phase *r = find_phase(sr, "r");
+    REQUIRE(r, "phase r");
+    double worst = 0.0;
+    for (int i = 0; i < 400; i++) {
+      double mu = -1.0 + 2.0 * (i + 0.37) / 400.0; /* between nodes */
+      vec3 wo = phase_direction(&mi, mu, 0.3);
+      mueller want = mu_normalized(mu_rayleigh(phase_mu(&mi, wo), 0.0));
+      r->ops->polarization(r, &mi, wo, P);
+      for (int a = 0; a < 4; a++)
+        for (int c = 0; c < 4; c++) worst = fmax(worst, fabs(P[0].m[a][c] - want.m[a][c]));
+      CHECK_REL(r->ops->eval_pdf(r, &mi, wo, &pdf), 3.0 / (16 * RSW_PI) * (1 + mu * mu), 1e-5);
+    }
+    CHECK(worst < 2e-6, "%s Rayleigh table: max |P - mu_rayleigh's| = %g", irr ? "irregular" : "regular",
+          worst);
+    printf("  Rayleigh table (2001 %s nodes): max |P - mu_rayleigh's| = %.2g\n",
+           irr ? "irregular" : "regular", worst);
+    scene_free(sr);
+  }
+  film_image ray = {0};
+  check_rayleigh_layer("{\"type\": \"rayleigh\"}", 0.0, &ray);
+  for (int irr = 0; irr < 2; irr++) {
+    char *tab = rayleigh_table(2001, irr);
+    film_image img = {0};
+    check_rayleigh_layer(tab, 0.0, &img);
+    const film_plane *e0 = film_image_plane(&ray, "radiance_stderr"),
+                     *e1 = film_image_plane(&img, "radiance_stderr");
+    double zmax = 0.0;
+    for (size_t i = 0; i < 4 * NV && e0 && e1 && img.data; i++) {
+      double sd = hypot(e0->data[i], e1->data[i]);
+      if (sd > 0.0) zmax = fmax(zmax, fabs(img.data[i] - ray.data[i]) / sd);
+    }
+    CHECK(e0 && e1 && zmax < 4.0, "%s table vs rayleigh: max |z| over S0..S3 = %.2f",
+          irr ? "irregular" : "regular", zmax);
+    printf("  table (%s nodes) vs rayleigh films: max |z| = %.2f\n", irr ? "irregular" : "regular", zmax);
+    film_image_free(&img);
+    free(tab);
+  }
+  film_image_free(&ray);
+}
+
 static void test_rayleigh_single_scattering(void) {
-  check_rayleigh_layer("{\"type\": \"rayleigh\"}", 0.0);
-  check_rayleigh_layer("{\"type\": \"rayleigh\", \"depolarization\": 0.0279}", 0.0279);
-  check_rayleigh_layer("{\"type\": \"rayleigh_polarized\", \"depolarization\": 0.3}", 0.3);
+  check_rayleigh_layer("{\"type\": \"rayleigh\"}", 0.0, NULL);
+  check_rayleigh_layer("{\"type\": \"rayleigh\", \"depolarization\": 0.0279}", 0.0279, NULL);
+  check_rayleigh_layer("{\"type\": \"rayleigh_polarized\", \"depolarization\": 0.3}", 0.3, NULL);
 }
 
 int main(void) {
   RSW_TEST_RUN(test_rayleigh_single_scattering);
+  RSW_TEST_RUN(test_tabphase_polarized_rayleigh);
   RSW_TEST_END("test_phase_polarized");
 }
