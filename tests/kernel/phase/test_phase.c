@@ -548,6 +548,55 @@ static void test_tabphase_polarized(void) {
   scene_free(s);
 }
 
+/* blendphase in the polarized variants: P = sum w_i p_i P_i / sum w_i p_i,
+ * a component without a phase matrix counting as a depolarizer; nested
+ * blends; a blend of depolarizers is one. */
+static void test_blendphase_polarization(void) {
+  scene *s = load_phases(
+      "\"b\": {\"type\": \"blendphase\", \"weight\": 0.35, \"phase_0\": {\"type\": \"rayleigh\", "
+      "\"depolarization\": 0.1}, \"phase_1\": {\"type\": \"hg\", \"g\": 0.7}},"
+      " \"n\": {\"type\": \"blendphase\", \"weight\": 0.6, \"phase_0\": {\"type\": \"isotropic\"},"
+      " \"phase_1\": {\"type\": \"blendphase\", \"weight\": 0.25, \"phase_0\": {\"type\": \"rayleigh\"},"
+      " \"phase_1\": {\"type\": \"tabphase_polarized\", \"m11\": [1, 2], \"m12\": [0.5, -0.5], \"m34\": "
+      "0.3}}},"
+      " \"d\": {\"type\": \"blendphase\", \"phase_0\": {\"type\": \"isotropic\"}, \"phase_1\": {\"type\": "
+      "\"hg\", \"g\": 0.2}}");
+  REQUIRE(s, "load");
+  const phase *b = (const phase *)find_obj(s, "b"), *nb = (const phase *)find_obj(s, "n"),
+              *d = (const phase *)find_obj(s, "d");
+  REQUIRE(b && nb && d, "the blends");
+  medium_interaction mi = mi_at(wis[1]);
+  for (int k = 0; k < 5; k++) {
+    double mu = -0.9 + 0.45 * k, pdf;
+    vec3 wo = phase_direction(&mi, mu, 0.3 + 0.1 * k);
+    mu = phase_mu(&mi, wo);
+    mueller P[3];
+    /* b: (0.65 p_r F_r / F11_r + 0.35 p_hg diag(1, 0, 0, 0)) / p. */
+    double D = 0.9 / 1.05, f11 = 0.75 * D * (1 + mu * mu) + 1 - D, pr = f11 / (4 * RSW_PI);
+    double phg = (1 - 0.49) / (4 * RSW_PI * pow(1 + 0.49 - 1.4 * mu, 1.5)), p = 0.65 * pr + 0.35 * phg;
+    b->ops->polarization(b, &mi, wo, P);
+    CHECK_REL(b->ops->eval_pdf(b, &mi, wo, &pdf), p, 1e-13);
+    CHECK(P[0].m[0][0] == 1.0, "normalised");
+    CHECK_REL(P[0].m[0][1], 0.65 * pr * 0.75 * D * (1 - mu * mu) / f11 / p, 1e-12);
+    CHECK_REL(P[0].m[2][2], 0.65 * pr * 1.5 * D * mu / f11 / p, 1e-12);
+    CHECK(memcmp(&P[0], &P[2], sizeof P[0]) == 0, "every channel");
+    /* n: 0.4 iso + 0.6 (0.75 rayleigh + 0.25 table); table m11 = 1.5 + mu / 2
+     * over I = 3, m12 (kernel) = -(-0.5 mu), m34 (kernel) = -0.3. */
+    double ray = 3 / (16 * RSW_PI) * (1 + mu * mu), m11 = 1.5 + 0.5 * mu, tab = m11 / (2 * RSW_PI * 3);
+    double a_iso = 0.4 * RSW_INV_4PI, a_r = 0.6 * 0.75 * ray, a_t = 0.6 * 0.25 * tab, sum = a_iso + a_r + a_t;
+    nb->ops->polarization(nb, &mi, wo, P);
+    CHECK_REL(nb->ops->eval_pdf(nb, &mi, wo, &pdf), sum, 1e-13);
+    CHECK_REL(P[0].m[0][1], (a_r * (1 - mu * mu) / (1 + mu * mu) + a_t * 0.5 * mu / m11) / sum, 1e-11);
+    CHECK_REL(P[0].m[2][3], a_t * -0.3 / m11 / sum, 1e-11);
+    CHECK_REL(P[0].m[3][2], a_t * 0.3 / m11 / sum, 1e-11);
+    CHECK_REL(P[0].m[3][3], a_r * 2 * mu / (1 + mu * mu) / sum, 1e-11);
+    d->ops->polarization(d, &mi, wo, P);
+    mueller dep = mu_depolarizer();
+    CHECK(memcmp(&P[0], &dep, sizeof dep) == 0, "a blend of depolarizers depolarizes");
+  }
+  scene_free(s);
+}
+
 static void test_parameters(void) {
   scene *s = load_phases("\"b\": {\"type\": \"blendphase\", \"weight\": 0.3, \"phase_0\": {\"type\": "
                          "\"isotropic\"}, \"phase_1\": {\"type\": \"hg\", \"g\": 0.8}}");
@@ -638,6 +687,7 @@ int main(void) {
   RSW_TEST_RUN(test_rayleigh_depolarization);
   RSW_TEST_RUN(test_tabphase);
   RSW_TEST_RUN(test_tabphase_polarized);
+  RSW_TEST_RUN(test_blendphase_polarization);
   RSW_TEST_RUN(test_parameters);
   RSW_TEST_RUN(test_load_errors);
   RSW_TEST_END("test_phase");
