@@ -33,17 +33,11 @@ typedef struct tabphase {
 static double tab_sample(const phase *ph, const medium_interaction *mi, double u1, vec2 u2, vec3 *wo,
                          double *pdf) {
   (void)u1;
-  const tabphase *t = (const tabphase *)ph;
-  double mu = tab_mu_sample(&t->d, u2.x);
-  *wo = phase_direction(mi, mu, u2.y);
-  *pdf = tab_mu_pdf(&t->d, mu) * (0.5 / RSW_PI);
-  if (!(*pdf > 0.0)) return phase_fail(pdf);
-  return 1.0;
+  return tab_phase_sample(&((const tabphase *)ph)->d, mi, u2, wo, pdf);
 }
 
 static double tab_eval_pdf(const phase *ph, const medium_interaction *mi, vec3 wo, double *pdf) {
-  *pdf = tab_mu_pdf(&((const tabphase *)ph)->d, phase_mu(mi, wo)) * (0.5 / RSW_PI);
-  return *pdf;
+  return tab_phase_eval_pdf(&((const tabphase *)ph)->d, mi, wo, pdf);
 }
 
 static const phase_ops tabphase_ops = {.sample = tab_sample, .eval_pdf = tab_eval_pdf};

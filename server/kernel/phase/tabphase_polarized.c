@@ -59,17 +59,11 @@ typedef struct tabphase_polarized {
 static double tpp_sample(const phase *ph, const medium_interaction *mi, double u1, vec2 u2, vec3 *wo,
                          double *pdf) {
   (void)u1;
-  const tabphase_polarized *t = (const tabphase_polarized *)ph;
-  double mu = tab_mu_sample(&t->d, u2.x);
-  *wo = phase_direction(mi, mu, u2.y);
-  *pdf = tab_mu_pdf(&t->d, mu) * (0.5 / RSW_PI);
-  if (!(*pdf > 0.0)) return phase_fail(pdf);
-  return 1.0;
+  return tab_phase_sample(&((const tabphase_polarized *)ph)->d, mi, u2, wo, pdf);
 }
 
 static double tpp_eval_pdf(const phase *ph, const medium_interaction *mi, vec3 wo, double *pdf) {
-  *pdf = tab_mu_pdf(&((const tabphase_polarized *)ph)->d, phase_mu(mi, wo)) * (0.5 / RSW_PI);
-  return *pdf;
+  return tab_phase_eval_pdf(&((const tabphase_polarized *)ph)->d, mi, wo, pdf);
 }
 
 /* F / F11 at the scattering cosine of wo, in the kernel's bases (the

@@ -20,6 +20,19 @@ void tab_mu_build(tab_mu *t) {
     t->cdf[i + 1] = t->cdf[i] + 0.5 * tab_width(t, i) * (t->values[i] + t->values[i + 1]);
 }
 
+/* The last i in [0, n - 2] with a[i] <= x (a non-decreasing, n >= 2). */
+static size_t tab_search(const double *a, size_t n, double x) {
+  size_t lo = 0, hi = n - 1;
+  while (hi - lo > 1) {
+    size_t mid = (lo + hi) / 2;
+    if (a[mid] <= x)
+      lo = mid;
+    else
+      hi = mid;
+  }
+  return lo;
+}
+
 bool tab_mu_locate(const tab_mu *t, double mu, size_t *i, double *f) {
   if (!(mu >= -1.0 && mu <= 1.0)) return false;
   if (!t->nodes) {
@@ -30,15 +43,7 @@ bool tab_mu_locate(const tab_mu *t, double mu, size_t *i, double *f) {
     *f = x - (double)k;
     return true;
   }
-  /* The last node at or below mu, at most n - 2. */
-  size_t lo = 0, hi = t->n - 1;
-  while (hi - lo > 1) {
-    size_t mid = (lo + hi) / 2;
-    if (t->nodes[mid] <= mu)
-      lo = mid;
-    else
-      hi = mid;
-  }
+  size_t lo = tab_search(t->nodes, t->n, mu);
   *i = lo;
   *f = (mu - t->nodes[lo]) / (t->nodes[lo + 1] - t->nodes[lo]);
   return true;
@@ -51,18 +56,24 @@ double tab_mu_pdf(const tab_mu *t, double mu) {
   return tab_mu_lerp(t->values, i, f) / t->cdf[t->n - 1];
 }
 
+double tab_phase_sample(const tab_mu *t, const medium_interaction *mi, vec2 u2, vec3 *wo, double *pdf) {
+  double mu = tab_mu_sample(t, u2.x);
+  *wo = phase_direction(mi, mu, u2.y);
+  *pdf = tab_mu_pdf(t, mu) * (0.5 / RSW_PI);
+  if (!(*pdf > 0.0)) return phase_fail(pdf);
+  return 1.0;
+}
+
+double tab_phase_eval_pdf(const tab_mu *t, const medium_interaction *mi, vec3 wo, double *pdf) {
+  *pdf = tab_mu_pdf(t, phase_mu(mi, wo)) * (0.5 / RSW_PI);
+  return *pdf;
+}
+
 double tab_mu_sample(const tab_mu *t, double u) {
   double total = t->cdf[t->n - 1], target = u * total;
   /* The interval i with cdf[i] <= target < cdf[i + 1]: first cdf above
    * target, so that empty intervals are never picked. */
-  size_t lo = 0, hi = t->n - 1;
-  while (hi - lo > 1) {
-    size_t mid = (lo + hi) / 2;
-    if (t->cdf[mid] <= target)
-      lo = mid;
-    else
-      hi = mid;
-  }
+  size_t lo = tab_search(t->cdf, t->n, target);
   double a = t->values[lo], b = t->values[lo + 1], area = target - t->cdf[lo], w = tab_width(t, lo);
   double disc = a * a + 2.0 * (b - a) * area / w;
   double den = a + sqrt(fmax(0.0, disc));

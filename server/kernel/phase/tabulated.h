@@ -25,6 +25,7 @@
 #include "../scene/loader.h"
 #include "../scene/node.h"
 #include "../scene/params.h"
+#include "phase.h"
 
 typedef struct tab_mu {
   double *values; /* n, >= 0, not all zero (owned) */
@@ -45,6 +46,11 @@ static inline double tab_mu_lerp(const double *v, size_t i, double f) {
 double tab_mu_pdf(const tab_mu *t, double mu);
 /* The cosine at which the cdf reaches u * I (u in [0, 1]). */
 double tab_mu_sample(const tab_mu *t, double u);
+/* phase_ops.sample and eval_pdf of the phase function p(mu) = the
+ * density above / (2 pi): mu by tab_mu_sample (u2.x), the azimuth uniform
+ * (u2.y); pdf = p(mu), weight 1. */
+double tab_phase_sample(const tab_mu *t, const medium_interaction *mi, vec2 u2, vec3 *wo, double *pdf);
+double tab_phase_eval_pdf(const tab_mu *t, const medium_interaction *mi, vec3 wo, double *pdf);
 /* Recompute the cdf (after values or nodes changed). */
 void tab_mu_build(tab_mu *t);
 
