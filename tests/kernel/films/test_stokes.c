@@ -95,12 +95,12 @@ static void test_reflected_light_keeps_the_ratios(void) {
   REQUIRE(tsup_render(s, 0, 2, 2, &img), "render");
   int lit = 0;
   for (int i = 0; i < img.width * img.height; i++) {
-    double I = img.data[4 * i];
-    if (I <= 0) continue;
+    double s0 = img.data[4 * i];
+    if (s0 <= 0) continue;
     lit++;
-    CHECK_REL(img.data[4 * i + 1], 0.5 * I, 1e-5);
-    CHECK_REL(img.data[4 * i + 2], -0.25 * I, 1e-5);
-    CHECK_REL(img.data[4 * i + 3], 0.125 * I, 1e-5);
+    CHECK_REL(img.data[4 * i + 1], 0.5 * s0, 1e-5);
+    CHECK_REL(img.data[4 * i + 2], -0.25 * s0, 1e-5);
+    CHECK_REL(img.data[4 * i + 3], 0.125 * s0, 1e-5);
   }
   CHECK(lit == img.width * img.height, "every pixel sees light (%d)", lit);
   film_image_free(&img);
