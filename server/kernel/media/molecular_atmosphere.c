@@ -34,7 +34,9 @@
  *    `blendphase` (component j mixed onto components 0..j-1 with weight
  *    s_j / (s_0 + ... + s_j); 0 is Rayleigh), arithmetic for arithmetic,
  *    so that the same layers given to `piecewise` + `blendphase` render
- *    the same film bit for bit.
+ *    the same film bit for bit; in the polarized variants its phase
+ *    matrix too (blendphase's: the components' matrices weighted by their
+ *    shares).
  *
  * The layers live in the box [-width/2, width/2]^2 x [0, z_N] (metres;
  * tracked exactly by layered.c, as piecewise); a wavelength change costs
@@ -44,6 +46,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../phase/phase.h"
 #include "../scene/plugin_def.h"
 #include "../volumes/volume.h"
 #include "atmo_data.h"
@@ -399,6 +402,23 @@ static double mix_eval_channel(const mol_atmo *m, int k, size_t j, const medium_
   return (1.0 - w) * v0 + w * v1;
 }
 
+/* Polarized variants: components 0..j's factors, each weighted by its
+ * share of mix_eval's value times `scale` (phase.h phase_mix_add), into
+ * acc; the order and arithmetic of blendphase's, so that the same layers
+ * as piecewise + blendphase give the same matrices. */
+static void mix_polarization(const mol_atmo *m, int k, size_t j, const medium_interaction *mi, vec3 wo,
+                             double scale, mueller acc[3]) {
+  double pdf;
+  if (j == 0) {
+    phase_mix_add(m->rayleigh, mi, wo, scale * m->rayleigh->ops->eval_pdf(m->rayleigh, mi, wo, &pdf), acc);
+    return;
+  }
+  double w = ma_weight(m, k, j - 1);
+  const phase *ph = m->p[j - 1].ph;
+  if (w < 1.0) mix_polarization(m, k, j - 1, mi, wo, scale * (1.0 - w), acc);
+  if (w > 0.0) phase_mix_add(ph, mi, wo, scale * w * ph->ops->eval_pdf(ph, mi, wo, &pdf), acc);
+}
+
 /* The layer of mi->p: found once per scattering when bound (phase_bind). */
 static int ma_phase_layer(const phase *ph, const mol_atmo *m, const medium_interaction *mi) {
   return mi->bound == ph ? (int)mi->bound_w : ma_layer_at(m, mi->p);
@@ -428,10 +448,20 @@ static color ma_phase_eval_channels(const phase *ph, const medium_interaction *m
   return v;
 }
 
+/* The mixture's factors (polarized variants carry no spectral bundle:
+ * the weights are the layer's, m->w). */
+static void ma_phase_polarization(const phase *ph, const medium_interaction *mi, vec3 wo, mueller P[3]) {
+  const mol_atmo *m = ((const ma_phase *)ph)->m;
+  mueller acc[3] = {mu_zero(), mu_zero(), mu_zero()};
+  mix_polarization(m, ma_phase_layer(ph, m, mi), m->np, mi, wo, 1.0, acc);
+  for (int c = 0; c < 3; c++) P[c] = mu_normalized(acc[c]);
+}
+
 static const phase_ops ma_phase_ops = {.sample = ma_phase_sample,
                                        .eval_pdf = ma_phase_eval_pdf,
                                        .bind = ma_phase_bind,
-                                       .eval_channels = ma_phase_eval_channels};
+                                       .eval_channels = ma_phase_eval_channels,
+                                       .polarization = ma_phase_polarization};
 
 /* ---- life cycle -------------------------------------------------------------- */
 

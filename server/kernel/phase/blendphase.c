@@ -10,7 +10,10 @@
  * weight instead; we return the mixture's (what eval_pdf reports too), so
  * that MIS and the chi-square test see one density. Components are
  * ordered by their property names (Mitsuba: alphanumeric order, the
- * usual `phase_0`, `phase_1`); `weight` defaults to 0.5.
+ * usual `phase_0`, `phase_1`); `weight` defaults to 0.5. Polarized
+ * variants: the mixture's phase matrix, F = (1 - w) F_0 + w F_1, i.e. the
+ * components' factors weighted by their shares of p (a component without
+ * a phase matrix counts as a depolarizer).
  *
  * Source: mitsuba3 src/phase/blendphase.cpp. */
 #include <math.h>
@@ -76,8 +79,22 @@ static double blend_sample(const phase *ph, const medium_interaction *mi, double
   return val / *pdf;
 }
 
-static const phase_ops blendphase_ops = {
-    .sample = blend_sample, .eval_pdf = blend_eval_pdf, .bind = blend_bind};
+/* Polarized variants: the components' factors weighted by (1 - w) p_0 and
+ * w p_1 (phase.h phase_mix_add). */
+static void blend_polarization(const phase *ph, const medium_interaction *mi, vec3 wo, mueller P[3]) {
+  const blendphase *b = (const blendphase *)ph;
+  double w = blend_weight(b, mi), pdf;
+  mueller acc[3] = {mu_zero(), mu_zero(), mu_zero()};
+  if (w < 1.0)
+    phase_mix_add(b->ph[0], mi, wo, (1.0 - w) * b->ph[0]->ops->eval_pdf(b->ph[0], mi, wo, &pdf), acc);
+  if (w > 0.0) phase_mix_add(b->ph[1], mi, wo, w * b->ph[1]->ops->eval_pdf(b->ph[1], mi, wo, &pdf), acc);
+  for (int c = 0; c < 3; c++) P[c] = mu_normalized(acc[c]);
+}
+
+static const phase_ops blendphase_ops = {.sample = blend_sample,
+                                         .eval_pdf = blend_eval_pdf,
+                                         .bind = blend_bind,
+                                         .polarization = blend_polarization};
 
 static rsw_status blendphase_create(loader *ld, node *n, object **out) {
   object **kids;

@@ -41,4 +41,22 @@ static inline double phase_fail(double *pdf) {
   return 0.0;
 }
 
+/* Polarized variants, mixtures (blendphase, molecular_atmosphere): the
+ * factors of sum_i a_i p_i are P = sum_i a_i p_i P_i / sum_i a_i p_i, P_i
+ * component i's factors (phase_ops.polarization; without it a
+ * depolarizer), p_i its value at wo. phase_mix_add adds component ph of
+ * weight a_i p_i = ap into acc[] (start from mu_zero()); then
+ * P[c] = mu_normalized(acc[c]) (the sum's M00 is sum a_i p_i). */
+static inline void phase_mix_add(const phase *ph, const medium_interaction *mi, vec3 wo, double ap,
+                                 mueller acc[3]) {
+  mueller P[3];
+  if (ph->ops->polarization)
+    ph->ops->polarization(ph, mi, wo, P);
+  else
+    P[0] = P[1] = P[2] = mu_depolarizer();
+  for (int c = 0; c < 3; c++)
+    for (int i = 0; i < 4; i++)
+      for (int j = 0; j < 4; j++) acc[c].m[i][j] += ap * P[c].m[i][j];
+}
+
 #endif

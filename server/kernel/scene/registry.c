@@ -25,7 +25,8 @@
   X(path) X(direct) X(stokes)                                                 \
   X(uniform) X(checkerboard) X(bitmap)                                       \
   X(shapegroup) X(instance) X(instancelist) X(periodic)                      \
-  X(isotropic) X(hg) X(blendphase) X(rayleigh) X(tabphase)                    \
+  X(isotropic) X(hg) X(blendphase) X(rayleigh) X(rayleigh_polarized)        \
+  X(tabphase) X(tabphase_polarized)                                          \
   X(constvolume) X(gridvolume)                                                \
   X(null) X(homogeneous) X(heterogeneous) X(piecewise) X(molecular_atmosphere) \
   X(volpath) X(piecewise_volpath)

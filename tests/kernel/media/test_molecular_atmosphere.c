@@ -11,7 +11,8 @@
  *    2e-6), and the medium's transmittance op along slant rays with
  *    scattering on (1e-12);
  *  - a wavelength sweep of molecular_atmosphere equals the same layers
- *    given to piecewise + blendphase, bitwise (same seed, 2 threads);
+ *    given to piecewise + blendphase, bitwise (same seed, 2 threads), in
+ *    mono and in mono_polarized (S0..S3: the two phase matrices);
  *  - particle layers: tau at w_ref = tau_ref (1e-12) for every
  *    distribution, the Angstrom law at another wavelength, an extinction
  *    spectrum's ratio;
@@ -36,6 +37,10 @@ RSW_TEST_DEFINE_GLOBALS
 #define TOP 120e3
 #define W   1e6
 
+/* The variant atmo_scene loads in (test_sweep_equals_piecewise sets
+ * mono_polarized too). */
+static const char *atmo_variant = "mono";
+
 static void levels(sbuf *b, int n) {
   sb_printf(b, "[");
   for (int k = 0; k <= n; k++) sb_printf(b, "%s%.17g", k ? ", " : "", TOP * k / n);
@@ -57,7 +62,7 @@ static scene *atmo_scene(const char *med, const char *light, const char *sens, c
             med, W / 2, W / 2, half, TOP - half, light, sens);
   if (ground) sb_printf(&b, ", \"surface\": %s", ground);
   sb_printf(&b, "}");
-  scene *s = tsup_load(b.p, "mono");
+  scene *s = tsup_load(b.p, atmo_variant);
   free(b.p);
   return s;
 }
@@ -231,7 +236,7 @@ static void test_direct_transmittance(void) {
 
 /* ---- the same layers through piecewise, bitwise ----------------------------- */
 
-static void test_sweep_equals_piecewise(void) {
+static void sweep_equals_piecewise(void) {
   const int n = 60;
   char *mol = us_standard(n, "\"width\": 1000000, \"particle_layers\": [{\"bottom\": 0, \"top\": 4000, "
                              "\"tau_ref\": 0.2, \"angstrom\": 1.3, \"albedo\": 0.9, "
@@ -278,14 +283,28 @@ static void test_sweep_equals_piecewise(void) {
     CHECK(fa.width == fb.width && memcmp(fa.data, fb.data, bytes) == 0,
           "%g nm: molecular_atmosphere and the same layers as piecewise differ (pixel 0: %.9g vs %.9g)",
           wls[i], fa.data[0], fb.data[0]);
-    double mean = 0;
-    for (int p = 0; p < fa.width * fa.height; p++) mean += fa.data[p];
+    double mean = 0, q = 0;
+    for (int p = 0; p < fa.width * fa.height; p++) {
+      mean += fa.data[p * fa.channels];
+      if (fa.channels == 4) q += fabs(fa.data[p * 4 + 1]);
+    }
     CHECK(mean > 0, "%g nm: black film", wls[i]);
+    CHECK(fa.channels != 4 || q > 1e-3 * mean, "%g nm: no polarization (sum |S1| %g, S0 %g)", wls[i], q,
+          mean);
     film_image_free(&fa);
     film_image_free(&fb);
     scene_free(pb);
   }
   scene_free(a);
+}
+
+/* In mono, and in mono_polarized (the phase matrices: molecular_atmosphere's
+ * mixture against blendphase's, S0..S3 bit for bit). */
+static void test_sweep_equals_piecewise(void) {
+  sweep_equals_piecewise();
+  atmo_variant = "mono_polarized";
+  sweep_equals_piecewise();
+  atmo_variant = "mono";
 }
 
 /* ---- particle layers ---------------------------------------------------------- */

@@ -20,8 +20,9 @@ RSW_TEST_DEFINE_GLOBALS
 
 #define CHI2_SAMPLES 200000
 /* chi2_run calls in this file (Sidak correction): isotropic 2, hg 8 x 2,
- * blendphase 5 x 2 + 2, rayleigh 2, tabphase 5 x 2 + 1. */
-#define CHI2_TESTS   43
+ * blendphase 5 x 2 + 2, rayleigh 3 x 2, tabphase 5 x 2 + 1, tabphase_polarized
+ * 2 x 2 + 1. */
+#define CHI2_TESTS   52
 
 /* ---- helpers ------------------------------------------------------------------ */
 
@@ -334,6 +335,90 @@ static void test_rayleigh(void) {
   scene_free(s);
 }
 
+/* rayleigh with depolarization rho: p(mu) = 3 / (8 pi (2 + rho)) ((1 + rho)
+ * + (1 - rho) mu^2) (Hansen & Travis 1974 eq. 2.15's F11 over 4 pi),
+ * sampled by the exact inverse of its cdf; rho = 0 bit for bit the
+ * unpolarized formulas; the update of `depolarization`. */
+static void test_rayleigh_depolarization(void) {
+  scene *s = load_phases("\"r0\": {\"type\": \"rayleigh\", \"depolarization\": 0}, \"a\": {\"type\": "
+                         "\"rayleigh\", \"depolarization\": 0.03}, \"b\": {\"type\": \"rayleigh_polarized\", "
+                         "\"depolarization\": 0.3}");
+  REQUIRE(s, "load");
+  const phase *r0 = (const phase *)find_obj(s, "r0");
+  medium_interaction mi = mi_at(wis[1]);
+  /* rho = 0: the formulas before depolarization existed, bit for bit. */
+  int diff = 0;
+  for (int i = 0; i <= 1000; i++) {
+    double u = i / 1000.0, pdf, epdf;
+    vec3 wo;
+    r0->ops->sample(r0, &mi, 0.5, v2(u, 0.7), &wo, &pdf);
+    double z = 2.0 * (2.0 * u - 1.0), a = cbrt(z + sqrt(z * z + 1.0));
+    double mu = fmin(1.0, fmax(-1.0, a - 1.0 / a));
+    vec3 want = phase_direction(&mi, mu, 0.7);
+    double v = r0->ops->eval_pdf(r0, &mi, want, &epdf);
+    diff += memcmp(&wo, &want, sizeof wo) != 0 || pdf != 3.0 / (16.0 * RSW_PI) * (1.0 + mu * mu) ||
+            v != 3.0 / (16.0 * RSW_PI) * (1.0 + phase_mu(&mi, want) * phase_mu(&mi, want));
+  }
+  CHECK(diff == 0, "rho = 0: %d of 1001 samples differ from the unpolarized formulas", diff);
+  const double rhos[2] = {0.03, 0.3};
+  const char *ids[2] = {"a", "b"};
+  for (int r = 0; r < 2; r++) {
+    const phase *ph = (const phase *)find_obj(s, ids[r]);
+    REQUIRE(ph, "phase %s", ids[r]);
+    double rho = rhos[r], A = 1.0 + rho, B = 1.0 - rho;
+    char what[64];
+    snprintf(what, sizeof what, "rayleigh depolarization %g", rho);
+    for (int k = 0; k < 2; k++) run_chi2(ph, wis[k], what, 4);
+    CHECK_REL(phase_integral(ph, wis[1], 2), 1.0, 1e-14);
+    medium_interaction m0 = mi_at(v3(0, 0, 1));
+    double pdf;
+    CHECK_REL(ph->ops->eval_pdf(ph, &m0, v3(0, 0, -1), &pdf), 3.0 / (8.0 * RSW_PI * (2 + rho)) * 2.0, 1e-15);
+    CHECK_REL(ph->ops->eval_pdf(ph, &m0, v3(1, 0, 0), &pdf), 3.0 / (8.0 * RSW_PI * (2 + rho)) * A, 1e-15);
+    /* F(mu(u)) = u, F the cdf of mu. */
+    for (int i = 0; i <= 100; i++) {
+      double u = i / 100.0, w;
+      vec3 wo;
+      ph->ops->sample(ph, &m0, 0.5, v2(u, 0.3), &wo, &w);
+      double mu = -wo.z;
+      double F = (A * (mu + 1.0) + B * (mu * mu * mu + 1.0) / 3.0) / (2.0 * A + 2.0 * B / 3.0);
+      CHECK_ABS(F, u, 1e-14);
+    }
+    /* The polarization factors: Hansen & Travis's F / F11. */
+    mueller P[3];
+    vec3 wo = v3_norm(v3(0.3, 0.4, 0.5));
+    double mu = phase_mu(&m0, wo), D = (1 - rho) / (1 + rho / 2);
+    ph->ops->polarization(ph, &m0, wo, P);
+    double f11 = 0.75 * D * (1 + mu * mu) + 1 - D;
+    CHECK_REL(P[0].m[0][1], 0.75 * D * (1 - mu * mu) / f11, 1e-14);
+    CHECK_REL(P[0].m[3][3], 1.5 * D * (1 - 2 * rho) / (1 - rho) * mu / f11, 1e-14);
+    /* 4 pi p(mu) is that F11. */
+    CHECK_REL(4.0 * RSW_PI * ph->ops->eval_pdf(ph, &m0, wo, &pdf), f11, 1e-14);
+  }
+  /* The parameter: spectral, in [0, 1); derived constants follow it. */
+  rsw_err err = {0};
+  size_t i;
+  CHECK(params_lookup(s, "r0.depolarization", &i, &err) == RSW_OK, "r0.depolarization exists");
+  param_info info;
+  REQUIRE(params_info(s, i, &info), "info");
+  CHECK(info.cls == UPDATE_SPECTRAL, "depolarization is spectral");
+  CHECK(upd1(s, "r0.depolarization", "0.3", &err) == RSW_OK, "update: %s", err.msg);
+  const phase *b = (const phase *)find_obj(s, "b");
+  for (int k = 0; k < 10; k++) {
+    double u = (k + 0.5) / 10.0, p0, p1;
+    vec3 w0, w1;
+    double v0 = r0->ops->sample(r0, &mi, 0.5, v2(u, 0.2), &w0, &p0);
+    double v1 = b->ops->sample(b, &mi, 0.5, v2(u, 0.2), &w1, &p1);
+    CHECK(v0 == v1 && p0 == p1 && memcmp(&w0, &w1, sizeof w0) == 0, "updated to 0.3 == loaded with 0.3");
+  }
+  const char *bad[] = {"1", "-0.01", "1.5"};
+  for (int k = 0; k < 3; k++) {
+    memset(&err, 0, sizeof err);
+    CHECK(upd1(s, "r0.depolarization", bad[k], &err) == RSW_ERR_RANGE, "%s rejected", bad[k]);
+    CHECK(strstr(err.msg, "r0.depolarization") != NULL, "error names the key: %s", err.msg);
+  }
+  scene_free(s);
+}
+
 static void test_tabphase(void) {
   const char *tables[5][2] = {
       {"[1, 1]", "tabphase constant"},
@@ -384,6 +469,131 @@ static void test_tabphase(void) {
     CHECK(strstr(err.msg, bad[k][1]) && strstr(err.msg, "a.values"), "%s: %s", bad[k][0], err.msg);
   }
   CHECK_REL(a->ops->eval_pdf(a, &mi, v3_neg(mi.wi), &pa), 1.0 / (2 * RSW_PI * 4.0), 1e-14);
+  scene_free(s);
+}
+
+/* tabphase_polarized: sampling (regular and irregular nodes), its
+ * intensity equal to tabphase's on the same regular table, the phase
+ * matrix's factors (the signs of m12 and m34 in the kernel's bases; the
+ * Rayleigh matrix: test_phase_polarized.c), the parameters. */
+static void test_tabphase_polarized(void) {
+  scene *s = load_phases(
+      "\"t\": {\"type\": \"tabphase\", \"values\": \"0.02 0.03 0.05 0.08 0.12 0.2 0.35 0.6 1.1 2.5 6.0\"},"
+      " \"p\": {\"type\": \"tabphase_polarized\", \"m11\": \"0.02 0.03 0.05 0.08 0.12 0.2 0.35 0.6 1.1 2.5 "
+      "6.0\", \"m12\": -0.01, \"m34\": \"0 0 0 0 0 0.1 0 0 0 0 0\"},"
+      " \"q\": {\"type\": \"tabphase_polarized\", \"nodes\": [-1, -0.2, 0, 0.3, 0.9, 0.99, 1],"
+      " \"m11\": [1, 0.5, 0.4, 0.8, 3, 20, 40], \"m33\": [1, 0.5, 0.4, 0.8, 3, 20, 40]},"
+      " \"z\": {\"type\": \"tabphase_polarized\", \"nodes\": \"-1, 0.5, 0.6, 1\", \"m11\": \"1, 0, 0, 2\"}");
+  REQUIRE(s, "load");
+  const phase *t = (const phase *)find_obj(s, "t"), *p = (const phase *)find_obj(s, "p"),
+              *q = (const phase *)find_obj(s, "q"), *z = (const phase *)find_obj(s, "z");
+  REQUIRE(t && p && q && z, "the four phases");
+  medium_interaction mi = mi_at(wis[1]);
+  int diff = 0;
+  for (int i = 0; i <= 200; i++) {
+    double pt, pp, vt, vp;
+    vec3 wt, wp;
+    vt = t->ops->sample(t, &mi, 0.5, v2(i / 200.0, 0.1), &wt, &pt);
+    vp = p->ops->sample(p, &mi, 0.5, v2(i / 200.0, 0.1), &wp, &pp);
+    diff += vt != vp || pt != pp || memcmp(&wt, &wp, sizeof wt) != 0;
+  }
+  CHECK(diff == 0, "regular tabphase_polarized == tabphase (%d of 201 samples differ)", diff);
+  run_chi2(q, wis[0], "tabphase_polarized irregular", 16);
+  run_chi2(q, wis[1], "tabphase_polarized irregular", 16);
+  run_chi2(z, wis[0], "tabphase_polarized irregular, empty intervals", 8);
+  run_chi2(z, wis[1], "tabphase_polarized irregular, empty intervals", 8);
+  CHECK_REL(phase_integral(q, wis[1], 40000), 1.0, 1e-6);
+  /* int m11 = (1 + 0.5) 0.8 / 2 + ... ; at mu = 0.3 the node value 0.8. */
+  double tot = 0.5 * (1.5 * 0.8 + 0.9 * 0.2 + 1.2 * 0.3 + 3.8 * 0.6 + 23 * 0.09 + 60 * 0.01), pdf;
+  vec3 w03 = phase_direction(&mi, 0.3, 0.25);
+  CHECK_REL(q->ops->eval_pdf(q, &mi, w03, &pdf), 0.8 / (2 * RSW_PI * tot), 1e-12);
+  /* Factors: m12 and m34 change sign in the kernel's bases; absent
+   * elements are 0; one number stands for every node. */
+  mueller P[3];
+  vec3 w = phase_direction(&mi, 0.0, 0.6); /* mu = 0: node 5 */
+  p->ops->polarization(p, &mi, w, P);
+  CHECK_REL(P[0].m[0][1], 0.01 / 0.2, 1e-12);
+  CHECK_REL(P[0].m[1][0], 0.01 / 0.2, 1e-12);
+  CHECK_REL(P[0].m[2][3], -0.1 / 0.2, 1e-12);
+  CHECK_REL(P[0].m[3][2], 0.1 / 0.2, 1e-12);
+  CHECK(P[0].m[0][0] == 1.0 && P[0].m[1][1] == 0.0 && P[0].m[2][2] == 0.0 && P[0].m[3][3] == 0.0,
+        "absent elements are 0");
+  q->ops->polarization(q, &mi, w03, P);
+  CHECK_REL(P[0].m[2][2], 1.0, 1e-14);
+  CHECK(P[0].m[0][1] == 0.0 && P[0].m[1][1] == 0.0, "q: only m11 and m33");
+  /* Updates: m11 (>= 0, not all zero), m34 (any sign), nodes (-1 .. 1,
+   * increasing); a phase without nodes has no `nodes` key. */
+  rsw_err err = {0};
+  size_t idx;
+  CHECK(params_lookup(s, "p.nodes", &idx, &err) != RSW_OK, "p has no nodes key");
+  CHECK(upd1(s, "q.nodes", "[-1, -0.5, 0, 0.3, 0.9, 0.99, 1]", &err) == RSW_OK, "nodes update: %s", err.msg);
+  CHECK(upd1(s, "p.m34", "[0, 0, 0, 0, 0, -0.1, 0, 0, 0, 0, 0]", &err) == RSW_OK, "m34 update: %s", err.msg);
+  p->ops->polarization(p, &mi, w, P);
+  CHECK_REL(P[0].m[2][3], 0.1 / 0.2, 1e-12);
+  CHECK(upd1(s, "q.m11", "[1, 1, 1, 1, 1, 1, 1]", &err) == RSW_OK, "m11 update: %s", err.msg);
+  CHECK_REL(q->ops->eval_pdf(q, &mi, w03, &pdf), RSW_INV_4PI, 1e-14);
+  run_chi2(q, wis[1], "tabphase_polarized after updates", 4);
+  const char *bad[][3] = {{"q.nodes", "[-1, -0.5, 0.3, 0, 0.9, 0.99, 1]", "strictly increasing"},
+                          {"q.nodes", "[-0.9, -0.5, 0, 0.3, 0.9, 0.99, 1]", "must start at -1"},
+                          {"q.nodes", "[-1, -0.5, 0, 0.3, 0.9, 0.99, 0.999]", "must end at 1"},
+                          {"q.m11", "[0, 0, 0, 0, 0, 0, 0]", "must not all be zero"},
+                          {"q.m11", "[1, 1, -1, 1, 1, 1, 1]", ">= 0"},
+                          {"q.m12", "[1, 1]", "takes 7 numbers"}};
+  for (int k = 0; k < 6; k++) {
+    memset(&err, 0, sizeof err);
+    CHECK(upd1(s, bad[k][0], bad[k][1], &err) != RSW_OK, "%s = %s rejected", bad[k][0], bad[k][1]);
+    CHECK(strstr(err.msg, bad[k][2]) && strstr(err.msg, bad[k][0]), "%s: %s", bad[k][1], err.msg);
+  }
+  CHECK_REL(q->ops->eval_pdf(q, &mi, w03, &pdf), RSW_INV_4PI, 1e-14);
+  scene_free(s);
+}
+
+/* blendphase in the polarized variants: P = sum w_i p_i P_i / sum w_i p_i,
+ * a component without a phase matrix counting as a depolarizer; nested
+ * blends; a blend of depolarizers is one. */
+static void test_blendphase_polarization(void) {
+  scene *s = load_phases(
+      "\"b\": {\"type\": \"blendphase\", \"weight\": 0.35, \"phase_0\": {\"type\": \"rayleigh\", "
+      "\"depolarization\": 0.1}, \"phase_1\": {\"type\": \"hg\", \"g\": 0.7}},"
+      " \"n\": {\"type\": \"blendphase\", \"weight\": 0.6, \"phase_0\": {\"type\": \"isotropic\"},"
+      " \"phase_1\": {\"type\": \"blendphase\", \"weight\": 0.25, \"phase_0\": {\"type\": \"rayleigh\"},"
+      " \"phase_1\": {\"type\": \"tabphase_polarized\", \"m11\": [1, 2], \"m12\": [0.5, -0.5], \"m34\": "
+      "0.3}}},"
+      " \"d\": {\"type\": \"blendphase\", \"phase_0\": {\"type\": \"isotropic\"}, \"phase_1\": {\"type\": "
+      "\"hg\", \"g\": 0.2}}");
+  REQUIRE(s, "load");
+  const phase *b = (const phase *)find_obj(s, "b"), *nb = (const phase *)find_obj(s, "n"),
+              *d = (const phase *)find_obj(s, "d");
+  REQUIRE(b && nb && d, "the blends");
+  medium_interaction mi = mi_at(wis[1]);
+  for (int k = 0; k < 5; k++) {
+    double mu = -0.9 + 0.45 * k, pdf;
+    vec3 wo = phase_direction(&mi, mu, 0.3 + 0.1 * k);
+    mu = phase_mu(&mi, wo);
+    mueller P[3];
+    /* b: (0.65 p_r F_r / F11_r + 0.35 p_hg diag(1, 0, 0, 0)) / p. */
+    double D = 0.9 / 1.05, f11 = 0.75 * D * (1 + mu * mu) + 1 - D, pr = f11 / (4 * RSW_PI);
+    double phg = (1 - 0.49) / (4 * RSW_PI * pow(1 + 0.49 - 1.4 * mu, 1.5)), p = 0.65 * pr + 0.35 * phg;
+    b->ops->polarization(b, &mi, wo, P);
+    CHECK_REL(b->ops->eval_pdf(b, &mi, wo, &pdf), p, 1e-13);
+    CHECK(P[0].m[0][0] == 1.0, "normalised");
+    CHECK_REL(P[0].m[0][1], 0.65 * pr * 0.75 * D * (1 - mu * mu) / f11 / p, 1e-12);
+    CHECK_REL(P[0].m[2][2], 0.65 * pr * 1.5 * D * mu / f11 / p, 1e-12);
+    CHECK(memcmp(&P[0], &P[2], sizeof P[0]) == 0, "every channel");
+    /* n: 0.4 iso + 0.6 (0.75 rayleigh + 0.25 table); table m11 = 1.5 + mu / 2
+     * over I = 3, m12 (kernel) = -(-0.5 mu), m34 (kernel) = -0.3. */
+    double ray = 3 / (16 * RSW_PI) * (1 + mu * mu), m11 = 1.5 + 0.5 * mu, tab = m11 / (2 * RSW_PI * 3);
+    double a_iso = 0.4 * RSW_INV_4PI, a_r = 0.6 * 0.75 * ray, a_t = 0.6 * 0.25 * tab, sum = a_iso + a_r + a_t;
+    nb->ops->polarization(nb, &mi, wo, P);
+    CHECK_REL(nb->ops->eval_pdf(nb, &mi, wo, &pdf), sum, 1e-13);
+    CHECK_REL(P[0].m[0][1], (a_r * (1 - mu * mu) / (1 + mu * mu) + a_t * 0.5 * mu / m11) / sum, 1e-11);
+    CHECK_REL(P[0].m[2][3], a_t * -0.3 / m11 / sum, 1e-11);
+    CHECK_REL(P[0].m[3][2], a_t * 0.3 / m11 / sum, 1e-11);
+    CHECK_REL(P[0].m[3][3], a_r * 2 * mu / (1 + mu * mu) / sum, 1e-11);
+    d->ops->polarization(d, &mi, wo, P);
+    mueller dep = mu_depolarizer();
+    CHECK(memcmp(&P[0], &dep, sizeof dep) == 0, "a blend of depolarizers depolarizes");
+  }
   scene_free(s);
 }
 
@@ -438,12 +648,24 @@ static void test_load_errors(void) {
        "exactly two"},
       {"\"p\": {\"type\": \"mie\"}", "mie"},
       {"\"p\": {\"type\": \"rayleigh\", \"g\": 0}", "no property 'g'"},
+      {"\"p\": {\"type\": \"rayleigh\", \"depolarization\": 1}", "'depolarization' must lie in [0, 1)"},
+      {"\"p\": {\"type\": \"rayleigh_polarized\", \"depolarization\": -0.1}", "must lie in [0, 1)"},
       {"\"p\": {\"type\": \"tabphase\"}", "missing property 'values'"},
       {"\"p\": {\"type\": \"tabphase\", \"values\": \"1\"}", "at least 2"},
       {"\"p\": {\"type\": \"tabphase\", \"values\": \"1, x, 2\"}", "'x' (value 1) is not a number"},
       {"\"p\": {\"type\": \"tabphase\", \"values\": \"1, -1, 2\"}", "value 1 (-1) must be >= 0"},
       {"\"p\": {\"type\": \"tabphase\", \"values\": [0, 0]}", "all zeros"},
       {"\"p\": {\"type\": \"tabphase\", \"values\": true}", "list of numbers"},
+      {"\"p\": {\"type\": \"tabphase_polarized\", \"nodes\": [-1, 1]}", "missing property 'm11'"},
+      {"\"p\": {\"type\": \"tabphase_polarized\", \"m11\": [1, 2, 3], \"nodes\": [-1, 1]}", "must match"},
+      {"\"p\": {\"type\": \"tabphase_polarized\", \"m11\": [1, 2, 3], \"nodes\": [-1, 0.5, 0.2]}",
+       "'nodes' must end at 1"},
+      {"\"p\": {\"type\": \"tabphase_polarized\", \"m11\": [1, 2, 3], \"nodes\": [-1, 1, 1]}",
+       "strictly increasing"},
+      {"\"p\": {\"type\": \"tabphase_polarized\", \"m11\": [1, 2, 3], \"m12\": [1, 2]}",
+       "'m12' has 2 values, 'm11' 3"},
+      {"\"p\": {\"type\": \"tabphase_polarized\", \"m11\": [1, -2, 3]}", "must be >= 0"},
+      {"\"p\": {\"type\": \"tabphase_polarized\", \"m11\": [1, 2], \"m44\": \"1, x\"}", "not a number"},
   };
   for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
     rsw_err err = {0};
@@ -462,7 +684,10 @@ int main(void) {
   RSW_TEST_RUN(test_blendphase);
   RSW_TEST_RUN(test_phase_bind);
   RSW_TEST_RUN(test_rayleigh);
+  RSW_TEST_RUN(test_rayleigh_depolarization);
   RSW_TEST_RUN(test_tabphase);
+  RSW_TEST_RUN(test_tabphase_polarized);
+  RSW_TEST_RUN(test_blendphase_polarization);
   RSW_TEST_RUN(test_parameters);
   RSW_TEST_RUN(test_load_errors);
   RSW_TEST_END("test_phase");
