@@ -76,10 +76,10 @@ static color light_samples(const direct_integrator *d, const scene *sc, sampler_
     if (pl) {
       int nch = pol_channels(sc);
       mueller P[3];
-      vec3 b_in, b_out;
+      vec3 b_in = {0}, b_out = {0};
       double out[3][4];
-      pol_bsdf(b, si, wo, 0, P, &b_in, &b_out);
-      pol_through_light(pl, e, ds.d, pd, b_in, b_out, P, nch, out);
+      const mueller *pp = pol_bsdf(b, si, wo, 0, P, &b_in, &b_out);
+      pol_through_light(pl, e, ds.d, pd, b_in, b_out, pp, nch, out);
       pol_collect(pl, out, col_scale(v, 1.0 / (double)d->emitter_samples), nch);
     }
   }
@@ -121,10 +121,10 @@ static color bsdf_samples(const direct_integrator *d, const scene *sc, sampler_s
     if (pl) {
       int nch = pol_channels(sc);
       mueller P[3];
-      vec3 b_in, b_out;
+      vec3 b_in = {0}, b_out = {0};
       double out[3][4];
-      pol_bsdf(b, si, bs.wo, bs.sampled_type, P, &b_in, &b_out);
-      pol_through_light(pl, e, ds.d, pd, b_in, b_out, P, nch, out);
+      const mueller *pp = pol_bsdf(b, si, bs.wo, bs.sampled_type, P, &b_in, &b_out);
+      pol_through_light(pl, e, ds.d, pd, b_in, b_out, pp, nch, out);
       pol_collect(pl, out, col_scale(v, 1.0 / (double)d->bsdf_samples), nch);
     }
   }
@@ -161,7 +161,8 @@ static color direct_Li(const integrator *it, const scene *sc, sampler_state *st,
                        render_stats *stats, double *quv) {
   const direct_integrator *d = (const direct_integrator *)it;
   if (!sc->polarized) return direct_L(d, sc, st, ray, stats, NULL);
-  pol_lane pl;
+  mueller pm[3];
+  pol_lane pl = {.M = pm};
   int nch = pol_channels(sc);
   pol_start(&pl, ray.d, nch);
   (void)direct_L(d, sc, st, ray, stats, &pl);

@@ -488,10 +488,10 @@ static void pol_light(const scene *sc, lane *l, pol_lane *pl, color v) {
   int nch = pol_channels(sc);
   const surface_interaction *si = &l->si;
   mueller P[3];
-  vec3 b_in, b_out;
+  vec3 b_in = {0}, b_out = {0};
   double out[3][4];
-  pol_bsdf(si->shape->bsdf, si, l->nwo, 0, P, &b_in, &b_out);
-  pol_through_light(pl, l->ne, l->ds.d, v3_neg(v3_norm(l->ray.d)), b_in, b_out, P, nch, out);
+  const mueller *pp = pol_bsdf(si->shape->bsdf, si, l->nwo, 0, P, &b_in, &b_out);
+  pol_through_light(pl, l->ne, l->ds.d, v3_neg(v3_norm(l->ray.d)), b_in, b_out, pp, nch, out);
   pol_collect(pl, out, v, nch);
 }
 
@@ -567,9 +567,9 @@ static bool shade_continue(const integrator *it, const scene *sc, sampler_state 
   vec3 wo_world = frame_to_world(&si->sh, bs->wo);
   if (pl) {
     mueller P[3];
-    vec3 b_in, b_out;
-    pol_bsdf(si->shape->bsdf, si, bs->wo, bs->sampled_type, P, &b_in, &b_out);
-    pol_scatter(pl, v3_neg(v3_norm(l->ray.d)), b_out, P, b_in, pol_channels(sc));
+    vec3 b_in = {0}, b_out = {0};
+    const mueller *pp = pol_bsdf(si->shape->bsdf, si, bs->wo, bs->sampled_type, P, &b_in, &b_out);
+    pol_scatter(pl, v3_neg(v3_norm(l->ray.d)), b_out, pp, b_in, pol_channels(sc));
   }
   l->ray = spawn_ray(si, wo_world);
   l->T = col_mul(l->T, weight);
@@ -678,7 +678,7 @@ static bool path_Li_batch(const integrator *it, const scene *sc, sampler_state *
                      .idx = malloc(4 * (size_t)n * sizeof *ws.idx),
                      .d1 = malloc((size_t)n * sizeof *ws.d1),
                      .d2 = malloc((size_t)n * sizeof *ws.d2),
-                     .pol = sc->polarized ? malloc((size_t)n * sizeof *ws.pol) : NULL};
+                     .pol = sc->polarized ? pol_alloc(n, pol_channels(sc)) : NULL};
   bool ok = ws.ln && ws.idx && ws.d1 && ws.d2 && (ws.pol || !sc->polarized);
   if (ok) {
     ws.sh = ws.idx + n;
@@ -690,7 +690,7 @@ static bool path_Li_batch(const integrator *it, const scene *sc, sampler_state *
   free(ws.idx);
   free(ws.d1);
   free(ws.d2);
-  free(ws.pol);
+  pol_free(ws.pol);
   return ok;
 }
 
@@ -700,7 +700,8 @@ static color path_Li(const integrator *it, const scene *sc, sampler_state *st, r
   int idx[4];
   double d1[1];
   vec2 d2[1];
-  pol_lane pl;
+  mueller pm[3];
+  pol_lane pl = {.M = pm};
   wave_scratch ws = {.ln = &ln,
                      .idx = idx,
                      .sh = idx + 1,

@@ -13,16 +13,27 @@
  * the light arriving along -wo and b_out for the light leaving along
  * -ray.d, makes M <- M R(b_out -> x) P and x <- b_in. Unpolarized light
  * (S = (L, 0, 0, 0)) is turned by no rotation, so it adds T L M[., 0]
- * before a scattering and T L M R P[., 0] through one. */
+ * before a scattering and T L M R P[., 0] through one.
+ *
+ * A depolarizing scattering (P = diag(1, 0, 0, 0), passed as P = NULL)
+ * leaves M with its first column only (M R D = [M e0, 0, 0, 0]: every
+ * rotator's first row is e0); from then on (col0) M R P = M[., 0] P[0, .]
+ * and M R P e0 = M[., 0], so such paths skip the bases and the 4x4
+ * products (the seed scene's RPV, a Lambertian ground). */
 #ifndef RSW_INTEGRATORS_POLARIZATION_H
 #define RSW_INTEGRATORS_POLARIZATION_H
+
+#include <stdlib.h>
 
 #include "../kernel.h"
 
 typedef struct pol_lane {
-  mueller M[3];
+  mueller *M;     /* pol_channels of them, storage the caller's (pol_alloc) */
   vec3 x;         /* world, perpendicular to the current ray */
   double S[3][4]; /* collected, per channel */
+  bool col0;      /* M's columns 1..3 are zero (x does not matter) */
+  /* volpath: its pending shadow ray's Stokes vectors per unit intensity */
+  double pend[3][4];
 } pol_lane;
 
 /* Channels a polarized render carries: one in mono (a Stokes film has no
@@ -31,11 +42,33 @@ static inline int pol_channels(const scene *sc) {
   return sc->variant == VARIANT_MONO ? 1 : 3;
 }
 
+/* n lanes and their nch matrices each (pol_free them; NULL: out of
+ * memory), as two blocks of at most a wave's 256 x 3 x 128 bytes: a
+ * wave's scratch past the allocator's thresholds was mapped, or trimmed,
+ * and faulted in again at every wave (780,000 page faults in a render of
+ * the seed scene). */
+static inline pol_lane *pol_alloc(int n, int nch) {
+  pol_lane *p = malloc((size_t)n * sizeof *p);
+  mueller *m = malloc((size_t)n * (size_t)nch * sizeof *m);
+  if (!p || !m) {
+    free(p);
+    free(m);
+    return NULL;
+  }
+  for (int i = 0; i < n; i++) p[i].M = m + (size_t)i * nch;
+  return p;
+}
+static inline void pol_free(pol_lane *p) {
+  if (p) free(p[0].M);
+  free(p);
+}
+
 /* A path starting along camera direction d (any length). */
 static inline void pol_start(pol_lane *p, vec3 d, int nch) {
   for (int c = 0; c < nch; c++) p->M[c] = mu_identity();
   p->x = stokes_basis(v3_neg(v3_norm(d)));
   memset(p->S, 0, sizeof p->S);
+  p->col0 = false;
 }
 
 /* Unpolarized light of intensity v (per channel, T and MIS weights
@@ -48,6 +81,11 @@ static inline void pol_add(pol_lane *p, color v, int nch) {
 /* Light of Stokes vector s[c] per channel (weights included) in basis
  * bs, travelling along pd = -ray.d, arriving at the current vertex. */
 static inline void pol_add_stokes(pol_lane *p, vec3 pd, vec3 bs, const double s[3][4], int nch) {
+  if (p->col0) {
+    for (int c = 0; c < nch; c++)
+      for (int k = 0; k < 4; k++) p->S[c][k] += p->M[c].m[k][0] * s[c][0];
+    return;
+  }
   mueller R = mu_basis_change(pd, bs, p->x);
   for (int c = 0; c < nch; c++) {
     double r[4], o[4];
@@ -59,9 +97,15 @@ static inline void pol_add_stokes(pol_lane *p, vec3 pd, vec3 bs, const double s[
 
 /* The Stokes vectors, per unit intensity and channel, that unpolarized
  * light scattered by P (bases: b_out for the light leaving along pd,
- * the current ray's reverse) adds at the camera: M R(b_out -> x) P[., 0]. */
-static inline void pol_through(const pol_lane *p, vec3 pd, vec3 b_out, const mueller P[3], int nch,
+ * the current ray's reverse) adds at the camera: M R(b_out -> x) P[., 0]
+ * (M[., 0] when P depolarizes or M has its first column only). */
+static inline void pol_through(const pol_lane *p, vec3 pd, vec3 b_out, const mueller *P, int nch,
                                double out[3][4]) {
+  if (!P || p->col0) {
+    for (int c = 0; c < nch; c++)
+      for (int k = 0; k < 4; k++) out[c][k] = p->M[c].m[k][0];
+    return;
+  }
   mueller R = mu_basis_change(pd, b_out, p->x);
   for (int c = 0; c < nch; c++) {
     double col[4] = {P[c].m[0][0], P[c].m[1][0], P[c].m[2][0], P[c].m[3][0]}, r[4];
@@ -76,8 +120,24 @@ static inline void pol_collect(pol_lane *p, const double out[3][4], color v, int
     for (int k = 0; k < 4; k++) p->S[c][k] += v.c[c] * out[c][k];
 }
 
-/* A scattering: M <- M R(b_out -> x) P, x <- b_in. */
-static inline void pol_scatter(pol_lane *p, vec3 pd, vec3 b_out, const mueller P[3], vec3 b_in, int nch) {
+/* A scattering: M <- M R(b_out -> x) P, x <- b_in (P NULL: depolarizes). */
+static inline void pol_scatter(pol_lane *p, vec3 pd, vec3 b_out, const mueller *P, vec3 b_in, int nch) {
+  if (!P) {
+    for (int c = 0; c < nch; c++)
+      for (int k = 0; k < 4; k++) p->M[c].m[k][1] = p->M[c].m[k][2] = p->M[c].m[k][3] = 0.0;
+    p->col0 = true;
+    return;
+  }
+  if (p->col0) { /* M[., 0] P[0, .] */
+    for (int c = 0; c < nch; c++) {
+      double m[4] = {p->M[c].m[0][0], p->M[c].m[1][0], p->M[c].m[2][0], p->M[c].m[3][0]};
+      for (int i = 0; i < 4; i++)
+        for (int j = 0; j < 4; j++) p->M[c].m[i][j] = m[i] * P[c].m[0][j];
+    }
+    p->col0 = false;
+    p->x = b_in;
+    return;
+  }
   mueller R = mu_basis_change(pd, b_out, p->x);
   for (int c = 0; c < nch; c++) {
     mueller MR = mu_mul(&p->M[c], &R);
@@ -87,29 +147,26 @@ static inline void pol_scatter(pol_lane *p, vec3 pd, vec3 b_out, const mueller P
 }
 
 /* A BSDF's factors towards local direction wo (lobe: bsdf_ops.polarization)
- * and their bases in world space. */
-static inline void pol_bsdf(const bsdf *b, const surface_interaction *si, vec3 wo, unsigned lobe,
-                            mueller P[3], vec3 *b_in, vec3 *b_out) {
+ * into P and their bases in world space; returns P, or NULL (nothing
+ * written) for a BSDF that depolarizes. */
+static inline const mueller *pol_bsdf(const bsdf *b, const surface_interaction *si, vec3 wo, unsigned lobe,
+                                      mueller P[3], vec3 *b_in, vec3 *b_out) {
+  if (!b->ops->polarization) return NULL;
   vec3 s_in, s_out;
-  if (b->ops->polarization) {
-    b->ops->polarization(b, si, wo, lobe, P, &s_in, &s_out);
-  } else {
-    P[0] = P[1] = P[2] = mu_depolarizer();
-    s_in = stokes_basis(wo);
-    s_out = stokes_basis(si->wi);
-  }
+  b->ops->polarization(b, si, wo, lobe, P, &s_in, &s_out);
   *b_in = v3_norm(frame_to_world(&si->sh, s_in));
   *b_out = v3_norm(frame_to_world(&si->sh, s_out));
+  return P;
 }
 
 /* A phase function's factors for the scattering from mi->wi into wo, and
  * their basis (both sides): the scattering plane's normal. */
-static inline vec3 pol_phase(const phase *ph, const medium_interaction *mi, vec3 wo, mueller P[3]) {
-  if (ph->ops->polarization)
-    ph->ops->polarization(ph, mi, wo, P);
-  else
-    P[0] = P[1] = P[2] = mu_depolarizer();
-  return plane_normal(wo, mi->wi);
+static inline const mueller *pol_phase(const phase *ph, const medium_interaction *mi, vec3 wo, mueller P[3],
+                                       vec3 *basis) {
+  if (!ph->ops->polarization) return NULL;
+  ph->ops->polarization(ph, mi, wo, P);
+  *basis = plane_normal(wo, mi->wi);
+  return P;
 }
 
 /* An environment's light along direction d (towards the environment) as
@@ -152,8 +209,8 @@ static inline void pol_add_env(pol_lane *p, const emitter *e, vec3 d, color Le, 
  * R(b_e -> b_in) S / I, S the light's Stokes vector ((1, 0, 0, 0) for
  * every emitter but a polarized environment). */
 static inline void pol_through_light(const pol_lane *p, const emitter *e, vec3 d, vec3 pd, vec3 b_in,
-                                     vec3 b_out, const mueller P[3], int nch, double out[3][4]) {
-  if (!pol_env_polarized(e)) {
+                                     vec3 b_out, const mueller *P, int nch, double out[3][4]) {
+  if (!pol_env_polarized(e) || !P) {
     pol_through(p, pd, b_out, P, nch, out);
     return;
   }
@@ -165,6 +222,10 @@ static inline void pol_through_light(const pol_lane *p, const emitter *e, vec3 d
     double r[4], t[4];
     mu_apply(&Rin, s[c], r);
     mu_apply(&P[c], r, t);
+    if (p->col0) { /* M[., 0] times the intensity of P R_in S */
+      for (int k = 0; k < 4; k++) out[c][k] = p->M[c].m[k][0] * t[0];
+      continue;
+    }
     mu_apply(&Rout, t, r);
     mu_apply(&p->M[c], r, out[c]);
   }

@@ -376,13 +376,6 @@ typedef struct vlane {
   int scross;
 } vlane;
 
-/* The polarized variants' payload of a lane (integrators/polarization.h)
- * and its pending shadow ray's Stokes vectors per unit of sval. */
-typedef struct vpol {
-  pol_lane p;
-  double sv[3][4];
-} vpol;
-
 /* Trace lanes idx[0..n) (rays in ln[i].ray for shadow == false, ln[i].sray
  * else): hits into ln[i].hit / ln[i].si (rays) or h / hit flags. */
 static void wave_trace(const scene *sc, const hit_bounds *hb, vlane *ln, const int *idx, int n, bool shadow,
@@ -500,7 +493,7 @@ static void start_shadow(const scene *sc, vlane *l, const surface_interaction *s
 /* One round of lane l's shadow ray after its query (hit at si): the
  * segment's transmittance, then done (false) or a null surface crossed
  * (true: trace again). */
-static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l, vpol *vq, bool hit,
+static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l, pol_lane *vq, bool hit,
                         surface_interaction *si, sampler_state *st, face_plane *fp) {
   if (hit && !(l->sm || sc->null_boxes.on) && media_at(NULL, si))
     seg_end(sc, &l->sray, l->sp0, si, true, fp); /* the next segment's start (si->p) */
@@ -540,7 +533,7 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
     }
   }
   l->L = col_add(l->L, col_mul(l->sval, l->str));
-  if (vq) pol_collect(&vq->p, vq->sv, col_mul(l->sval, l->str), pol_channels(sc));
+  if (vq) pol_collect(vq, vq->pend, col_mul(l->sval, l->str), pol_channels(sc));
   l->sh = false;
   return false;
 }
@@ -548,8 +541,8 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
 /* Lane l's event after its query: the medium along the segment, then the
  * scattering event or the surface. Sets up the shadow ray (l->sh) and the
  * next ray. False: the path ends (a pending shadow ray still counts). */
-static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *l, vpol *vq,
-                       face_plane *fp) {
+static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *l,
+                       pol_lane *vq, face_plane *fp) {
   const integrator *it = &vp->base;
   const sampler_ops *sops = st->s->ops;
   surface_interaction *si = &l->si;
@@ -633,8 +626,9 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
           start_shadow(sc, l, NULL, mi.p, e, &ds, m, c);
           if (vq) {
             mueller P[3];
-            vec3 bp = pol_phase(ph, &mi, ds.d, P);
-            pol_through_light(&vq->p, e, ds.d, mi.wi, bp, bp, P, pol_channels(sc), vq->sv);
+            vec3 bp = {0};
+            const mueller *pp = pol_phase(ph, &mi, ds.d, P, &bp);
+            pol_through_light(vq, e, ds.d, mi.wi, bp, bp, pp, pol_channels(sc), vq->pend);
           }
         }
       }
@@ -650,8 +644,9 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
                          : col_scale(l->T, pw);
     if (vq) {
       mueller P[3];
-      vec3 bp = pol_phase(ph, &mi, wo, P);
-      pol_scatter(&vq->p, mi.wi, bp, P, bp, pol_channels(sc));
+      vec3 bp = {0};
+      const mueller *pp = pol_phase(ph, &mi, wo, P, &bp);
+      pol_scatter(vq, mi.wi, bp, pp, bp, pol_channels(sc));
     }
     l->ray = (ray3){mi.p, wo, 0.0, INFINITY};
     l->seg_o = mi.p;
@@ -673,7 +668,7 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
         color Le = env->ops->eval(env, NULL, l->ray.d);
         color v = col_scale(col_mul(l->T, Le), mis_weight(l->prev_pdf, em_pdf));
         l->L = col_add(l->L, v);
-        if (vq) pol_add_env(&vq->p, env, l->ray.d, Le, v, pol_channels(sc));
+        if (vq) pol_add_env(vq, env, l->ray.d, Le, v, pol_channels(sc));
       }
       return false;
     }
@@ -689,7 +684,7 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
         }
         color v = col_scale(col_mul(l->T, Le), mis_weight(l->prev_pdf, em_pdf));
         l->L = col_add(l->L, v);
-        if (vq) pol_add(&vq->p, v, pol_channels(sc));
+        if (vq) pol_add(vq, v, pol_channels(sc));
       }
     }
     const bsdf *b = si->shape->bsdf;
@@ -717,9 +712,9 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
                        col_scale(col_mul(l->T, col_mul(f, value)), w / pe));
           if (vq) {
             mueller P[3];
-            vec3 b_in, b_out;
-            pol_bsdf(b, si, wo, 0, P, &b_in, &b_out);
-            pol_through_light(&vq->p, e, ds.d, v3_neg(l->ray.d), b_in, b_out, P, pol_channels(sc), vq->sv);
+            vec3 b_in = {0}, b_out = {0};
+            const mueller *pp = pol_bsdf(b, si, wo, 0, P, &b_in, &b_out);
+            pol_through_light(vq, e, ds.d, v3_neg(l->ray.d), b_in, b_out, pp, pol_channels(sc), vq->pend);
           }
         }
       }
@@ -730,9 +725,9 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
     vec3 wo = frame_to_world(&si->sh, bs.wo);
     if (vq) {
       mueller P[3];
-      vec3 b_in, b_out;
-      pol_bsdf(b, si, bs.wo, bs.sampled_type, P, &b_in, &b_out);
-      pol_scatter(&vq->p, v3_neg(l->ray.d), b_out, P, b_in, pol_channels(sc));
+      vec3 b_in = {0}, b_out = {0};
+      const mueller *pp = pol_bsdf(b, si, bs.wo, bs.sampled_type, P, &b_in, &b_out);
+      pol_scatter(vq, v3_neg(l->ray.d), b_out, pp, b_in, pol_channels(sc));
     }
     l->T = col_mul(l->T, weight);
     l->eta *= bs.eta;
@@ -761,11 +756,11 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
 /* Run the wave over n lanes; scratch: ln (n lanes), idx and sh (n ints
  * each), hit (n), si (n). */
 static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_state *st, const ray3 *rays,
-                     int n, render_stats *stats, color *L, double *quv, vlane *ln, vpol *vq, int *idx,
+                     int n, render_stats *stats, color *L, double *quv, vlane *ln, pol_lane *vq, int *idx,
                      int *sh, bool *hit, surface_interaction *si) {
   int live = 0;
   if (vq)
-    for (int i = 0; i < n; i++) pol_start(&vq[i].p, rays[i].d, pol_channels(sc));
+    for (int i = 0; i < n; i++) pol_start(&vq[i], rays[i].d, pol_channels(sc));
   for (int i = 0; i < n; i++) {
     vlane *l = &ln[i];
     /* Every field but the two surface records (prev, si: 384 bytes that
@@ -822,7 +817,7 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
   if (quv)
     for (int i = 0; i < qs * n; i++) quv[i] = 0; /* unpolarized variants: no polarisation through media */
   if (vq)
-    for (int i = 0; i < n; i++) pol_result(&vq[i].p, pol_channels(sc), &L[i], quv ? &quv[qs * i] : NULL);
+    for (int i = 0; i < n; i++) pol_result(&vq[i], pol_channels(sc), &L[i], quv ? &quv[qs * i] : NULL);
 }
 
 static bool volpath_Li_batch(const integrator *it, const scene *sc, sampler_state *st, const ray3 *rays,
@@ -832,11 +827,11 @@ static bool volpath_Li_batch(const integrator *it, const scene *sc, sampler_stat
   int *idx = malloc(2 * (size_t)n * sizeof *idx);
   bool *hit = malloc((size_t)n * sizeof *hit);
   surface_interaction *si = malloc((size_t)n * sizeof *si);
-  vpol *vq = sc->polarized ? malloc((size_t)n * sizeof *vq) : NULL;
+  pol_lane *vq = sc->polarized ? pol_alloc(n, pol_channels(sc)) : NULL;
   bool ok = ln && idx && hit && si && (vq || !sc->polarized);
   if (ok)
     wave_run((const volpath_integrator *)it, sc, st, rays, n, stats, L, quv, ln, vq, idx, idx + n, hit, si);
-  free(vq);
+  pol_free(vq);
   free(ln);
   free(idx);
   free(hit);
@@ -847,7 +842,8 @@ static bool volpath_Li_batch(const integrator *it, const scene *sc, sampler_stat
 static color volpath_Li(const integrator *it, const scene *sc, sampler_state *st, ray3 ray,
                         render_stats *stats, double *quv) {
   vlane ln;
-  vpol vq;
+  mueller pm[3];
+  pol_lane vq = {.M = pm};
   int idx[2];
   bool hit;
   surface_interaction si;
