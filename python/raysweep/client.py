@@ -72,7 +72,8 @@ class Client:
 
         Relative ``filename`` references resolve against the file's directory;
         the files are uploaded when the daemon lacks them. ``variant``
-        (``"mono"`` or ``"rgb"``) overrides the scene's. Keyword arguments set
+        (``"mono"``, ``"rgb"``, ``"mono_polarized"`` or ``"rgb_polarized"``)
+        overrides the scene's. Keyword arguments set
         an XML scene's parameters, as Mitsuba's ``load_file(path, rho=0.3)``:
         each replaces the value of its ``<default name=... value=...>``, or is
         declared after ``<scene>`` when the file has no default for it (on the

@@ -18,8 +18,8 @@ class Scene:
     """A scene resident in the daemon (made by ``client.load_file`` / ``load_dict``).
 
     Attributes: ``id`` (the SHA-256 of the document, its variant and its
-    files), ``variant`` (``mono`` or ``rgb``), ``sensors`` (sensor ids in scene
-    order), ``revision`` (the base revision when last seen), ``label`` (the
+    files), ``variant`` (``mono``, ``rgb``, ``mono_polarized`` or
+    ``rgb_polarized``), ``sensors`` (sensor ids in scene order), ``revision`` (the base revision when last seen), ``label`` (the
     file's name for ``load_file``).
     """
 

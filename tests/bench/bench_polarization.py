@@ -9,8 +9,9 @@ states the figure). Scenes:
   - rayleigh_slab: a Rayleigh layer of optical thickness 0.5 over a black
     ground under the sun (the Natraj et al. 2009 geometry of
     tests/integration/test_polarization.sh), 112 view directions, 20,000 spp;
-  - seed_hdistant: the hdistant seed scene (RPV under the sun; nothing
-    polarizes, so it measures the payload alone), 800 spp.
+  - seed_hdistant: the hdistant seed scene (RPV and a roughconductor,
+    Mitsuba's default perfect mirror, under three suns: a Mueller matrix at
+    every mirror bounce that does not polarize sunlight), 800 spp.
 The unpolarized variants do not carry the payload: their figures are the
 kernel lines' (bench_kernel)."""
 import json

@@ -204,6 +204,25 @@ cmp -s "$tmp/camw.npy" "$tmp/cam0.npy" && ok || bad "the stokes wrapper's film d
 "$rsd" render "$tmp/camw_mono.json" -o "$tmp/x.npy" >/dev/null 2>"$tmp/err" && bad "stokes in mono was accepted"
 contains "stokes in mono" "$tmp/err" "needs a polarized variant"
 
+# Mitsuba XML as Mitsuba writes it for a polarized variant: the scene's
+# variant scalar_mono_polarized and the stokes wrapper (the seed scene, its
+# roughconductor made of gold: it polarizes, so S1 is not 0 everywhere; the
+# default material, a perfect mirror, only retards p against s).
+sed 's/<scene version="2.1.0">/<scene version="2.1.0" variant="scalar_mono_polarized">/;
+     s|<integrator type="path"/>|<integrator type="stokes"><integrator type="path"/></integrator>|;
+     s|<bsdf type="roughconductor"/>|<bsdf type="roughconductor"><string name="material" value="Au"/></bsdf>|' \
+  "$root/proto/examples/hdistant_seed.xml" >"$tmp/seed_pol.xml"
+"$rsd" render "$tmp/seed_pol.xml" --spp 16 -o "$tmp/seed_pol.npy" >/dev/null 2>"$tmp/err" || bad "XML: $(cat "$tmp/err")"
+out=$("$pyx" - "$tmp/seed_pol.npy" <<'PY'
+import sys
+import numpy as np
+a = np.load(sys.argv[1])
+print("ok" if a.shape[-1] == 4 and np.abs(a[..., 1]).max() > 0 and a[..., 0].max() > 0 else
+      "shape %s, max |S1| %g" % (a.shape, np.abs(a[..., 1]).max()))
+PY
+)
+[ "$out" = ok ] && ok || bad "XML scalar_mono_polarized + stokes: $out"
+
 # ---- bad variants -------------------------------------------------------------
 "$rsd" render "$tmp/plate.json" --variant mono_polarised -o "$tmp/x.npy" >/dev/null 2>"$tmp/err" &&
   bad "an unknown variant was accepted"

@@ -540,7 +540,17 @@ static rsw_status start_scene(xml_ctx *c, xml_frame *parent, xml_frame *self) {
                  v);
   const char *variant = attr(c, "variant");
   if (variant) {
-    static const char *const known[] = {"mono", "rgb", "mono_polarized", "rgb_polarized"};
+    /* As scene/loader.c variant_parse (this reader stays below the kernel). */
+    static const char *const known[] = {"mono",
+                                        "rgb",
+                                        "scalar_mono",
+                                        "scalar_mono_double",
+                                        "scalar_rgb",
+                                        "mono_polarized",
+                                        "rgb_polarized",
+                                        "scalar_mono_polarized",
+                                        "scalar_mono_polarized_double",
+                                        "scalar_rgb_polarized"};
     bool ok = false;
     for (size_t i = 0; i < sizeof known / sizeof known[0]; i++) ok |= strcmp(variant, known[i]) == 0;
     if (!ok)
