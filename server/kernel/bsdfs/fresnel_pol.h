@@ -45,7 +45,7 @@ static inline void fpol_reflection(mueller P[3], double cos_i, color eta, color 
       P[c] = P[c - 1];
       continue;
     }
-    P[c] = mu_normalized(mu_fresnel_reflection(fabs(cos_i), CMPLX(eta.c[c], k.c[c])));
+    P[c] = mu_normalized(mu_fresnel_reflection(fabs(cos_i), mu_cmplx(eta.c[c], k.c[c])));
   }
 }
 

@@ -361,7 +361,7 @@ static void ocean_polarization(const bsdf *b, const surface_interaction *si, vec
   if (!(g > 0.0) || !isfinite(g)) return;
   vec3 h = v3_norm(v3_add(wi, wo));
   mueller F[3];
-  F[0] = F[1] = F[2] = mu_normalized(mu_fresnel_reflection(v3_dot(wo, h), CMPLX(o->n_re, o->n_im)));
+  F[0] = F[1] = F[2] = mu_normalized(mu_fresnel_reflection(v3_dot(wo, h), mu_cmplx(o->n_re, o->n_im)));
   fpol_with_diffuse(P, F, col1(g), col1(d));
 }
 

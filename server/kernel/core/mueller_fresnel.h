@@ -9,6 +9,17 @@
 
 #include "mueller.h"
 
+/* re + i im, as C11's CMPLX (which glibc's header leaves undefined for
+ * clang, the fuzzers' compiler): a complex has the representation of an
+ * array of two doubles (C11 6.2.5p13). */
+static inline double complex mu_cmplx(double re, double im) {
+  union {
+    double complex z;
+    double d[2];
+  } u = {.d = {re, im}};
+  return u.z;
+}
+
 /* ---- Fresnel (Born & Wolf, Principles of Optics, sect. 1.5.2 and 14.2;
  * the Mueller form as in Collett, Field Guide to Polarization, and
  * Mitsuba 3's mueller.h specular_reflection / specular_transmission) ---- */
