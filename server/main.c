@@ -605,7 +605,7 @@ out:
 
 static int cmd_version(int argc, char **argv) {
   if (argc > 1) return usage_error("version", "takes no arguments (got '%s')", argv[1]);
-  printf("raysweepd %s (variants: mono, rgb)\n", RSW_VERSION);
+  printf("raysweepd %s (variants: mono, rgb, mono_polarized, rgb_polarized)\n", RSW_VERSION);
   return 0;
 }
 

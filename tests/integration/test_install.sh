@@ -61,7 +61,7 @@ grep -qx "Version: $version" "$pc" && ok || bad "raysweep.pc: $(grep Version "$p
 # ---- the installed programs, from PATH ---------------------------------------
 export PATH="$prefix/bin:$PATH"
 [ "$(command -v raysweepd)" = "$prefix/bin/raysweepd" ] && ok || bad "raysweepd on PATH is $(command -v raysweepd)"
-out=$(cd "$tmp" && raysweepd version 2>&1) && [ "$out" = "raysweepd $version (variants: mono, rgb)" ] && ok ||
+out=$(cd "$tmp" && raysweepd version 2>&1) && [ "$out" = "raysweepd $version (variants: mono, rgb, mono_polarized, rgb_polarized)" ] && ok ||
   bad "installed raysweepd version: $out"
 out=$(cd "$tmp" && raysweep --version 2>&1) && [ "$out" = "raysweep $version" ] && ok ||
   bad "installed raysweep --version: $out"

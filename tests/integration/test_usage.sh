@@ -70,11 +70,11 @@ defs=$(grep -rn --include='*.[ch]' '#define RSW_VERSION\b' server client include
 lits=$(grep -rnE '"[0-9]+\.[0-9]+\.[0-9]+"|libraysweep/[0-9]|Version: [0-9]' server client Makefile)
 [ -z "$lits" ] && ok || bad "a version is written out instead of taken from include/raysweep/version.h: $lits"
 if helps "raysweepd version" "$bin/raysweepd" version; then
-  [ "$(cat "$tmp/out")" = "raysweepd $version (variants: mono, rgb)" ] && ok ||
+  [ "$(cat "$tmp/out")" = "raysweepd $version (variants: mono, rgb, mono_polarized, rgb_polarized)" ] && ok ||
     bad "raysweepd version: '$(cat "$tmp/out")', want raysweepd $version"
 fi
 if helps "raysweepd --version" "$bin/raysweepd" --version; then
-  [ "$(cat "$tmp/out")" = "raysweepd $version (variants: mono, rgb)" ] && ok ||
+  [ "$(cat "$tmp/out")" = "raysweepd $version (variants: mono, rgb, mono_polarized, rgb_polarized)" ] && ok ||
     bad "raysweepd --version: '$(cat "$tmp/out")', want raysweepd $version"
 fi
 if helps "raysweep --version" "$bin/raysweep" --version; then
