@@ -617,9 +617,8 @@ void svc_state_scene_remove(service *svc, const char *id) {
 uint64_t svc_film_bytes(const scene *sc, size_t sensor_index) {
   const sensor *se = sc->sensors[sensor_index];
   const film *fm = se->film;
-  int ch = sc->polarized || (fm->pixel_format == PIXFMT_STOKES && sc->variant == VARIANT_MONO) ? 4
-           : sc->variant == VARIANT_MONO || fm->pixel_format == PIXFMT_LUMINANCE               ? 1
-                                                                                               : 3;
+  int ch; /* the film's channels, as the kernel counts them (12 for rgb_polarized) */
+  (void)sensor_film_bytes(se, sc->variant, &ch);
   uint64_t px = (uint64_t)fm->width * (uint64_t)fm->height;
   return px * (uint64_t)ch * 4 + (se->ops->pixel_angles ? px * 16 : 0);
 }

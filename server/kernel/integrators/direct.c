@@ -73,15 +73,9 @@ static color light_samples(const direct_integrator *d, const scene *sc, sampler_
     double w = ds.delta ? 1.0 : mis_weight(ds.pdf * pe * d->frac_e, b->ops->pdf(b, si, wo) * d->frac_b);
     color v = col_scale(col_mul(f, value), w / pe);
     sum = col_add(sum, v);
-    if (pl) {
-      int nch = pol_channels(sc);
-      mueller P[3];
-      vec3 b_in = {0}, b_out = {0};
-      double out[3][4];
-      const mueller *pp = pol_bsdf(b, si, wo, 0, P, &b_in, &b_out);
-      pol_through_light(pl, e, ds.d, pd, b_in, b_out, pp, nch, out);
-      pol_collect(pl, out, col_scale(v, 1.0 / (double)d->emitter_samples), nch);
-    }
+    if (pl)
+      pol_collect_light(pl, si, wo, 0, e, ds.d, pd, col_scale(v, 1.0 / (double)d->emitter_samples),
+                        pol_channels(sc));
   }
   return col_scale(sum, 1.0 / (double)d->emitter_samples);
 }
@@ -118,15 +112,9 @@ static color bsdf_samples(const direct_integrator *d, const scene *sc, sampler_s
     double w = mis_weight(bs.pdf * d->frac_b, pe * d->frac_e);
     color v = col_scale(col_mul(weight, Le), w);
     sum = col_add(sum, v);
-    if (pl) {
-      int nch = pol_channels(sc);
-      mueller P[3];
-      vec3 b_in = {0}, b_out = {0};
-      double out[3][4];
-      const mueller *pp = pol_bsdf(b, si, bs.wo, bs.sampled_type, P, &b_in, &b_out);
-      pol_through_light(pl, e, ds.d, pd, b_in, b_out, pp, nch, out);
-      pol_collect(pl, out, col_scale(v, 1.0 / (double)d->bsdf_samples), nch);
-    }
+    if (pl)
+      pol_collect_light(pl, si, bs.wo, bs.sampled_type, e, ds.d, pd,
+                        col_scale(v, 1.0 / (double)d->bsdf_samples), pol_channels(sc));
   }
   return col_scale(sum, 1.0 / (double)d->bsdf_samples);
 }

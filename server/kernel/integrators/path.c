@@ -482,19 +482,6 @@ static void wave_eval_bsdfs(lane *ln, const int *idx, int n, int *g) {
   }
 }
 
-/* A light sample's contribution v through the BSDF's polarization
- * factors towards it (a polarized environment's own Q, U, V included). */
-static void pol_light(const scene *sc, lane *l, pol_lane *pl, color v) {
-  int nch = pol_channels(sc);
-  const surface_interaction *si = &l->si;
-  mueller P[3];
-  vec3 b_in = {0}, b_out = {0};
-  double out[3][4];
-  const mueller *pp = pol_bsdf(si->shape->bsdf, si, l->nwo, 0, P, &b_in, &b_out);
-  pol_through_light(pl, l->ne, l->ds.d, v3_neg(v3_norm(l->ray.d)), b_in, b_out, pp, nch, out);
-  pol_collect(pl, out, v, nch);
-}
-
 /* The second half of lane l's vertex, first part: the light sample's
  * contribution if its shadow ray was clear (its BSDF value and pdf from
  * wave_eval_bsdfs). The BSDF sample's random numbers are drawn next, for
@@ -510,7 +497,7 @@ static void shade_light(const scene *sc, lane *l, double *quv, pol_lane *pl) {
       color v = col_scale(col_mul(l->T, col_mul(f, l->value)), w / l->pe);
       l->L = col_add(l->L, v);
       if (pl)
-        pol_light(sc, l, pl, v);
+        pol_collect_light(pl, &l->si, l->nwo, 0, e, ds->d, v3_neg(v3_norm(l->ray.d)), v, pol_channels(sc));
       else if (quv && (e->flags & EMITTER_INFINITE))
         add_polarization(quv, e, ds->d, l->T.c[0] * f.c[0] * w / (l->pe * ds->pdf));
     }

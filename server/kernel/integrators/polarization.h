@@ -231,6 +231,19 @@ static inline void pol_through_light(const pol_lane *p, const emitter *e, vec3 d
   }
 }
 
+/* A light sample of emitter e from direction d (world, towards e) through
+ * the BSDF at si (local wo, lobe as bsdf_ops.polarization), worth v in
+ * intensity: its Stokes vectors collected (pd = -ray.d). */
+static inline void pol_collect_light(pol_lane *p, const surface_interaction *si, vec3 wo, unsigned lobe,
+                                     const emitter *e, vec3 d, vec3 pd, color v, int nch) {
+  mueller P[3];
+  vec3 b_in = {0}, b_out = {0};
+  double out[3][4];
+  const mueller *pp = pol_bsdf(si->shape->bsdf, si, wo, lobe, P, &b_in, &b_out);
+  pol_through_light(p, e, d, pd, b_in, b_out, pp, nch, out);
+  pol_collect(p, out, v, nch);
+}
+
 /* The path's result: I per channel into L, Q, U, V of channel c into
  * quv[3 c .. 3 c + 2] (nch channels: kernel.h scene_quv_stride). */
 static inline void pol_result(const pol_lane *p, int nch, color *L, double *quv) {
