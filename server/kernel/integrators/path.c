@@ -20,6 +20,7 @@
 #include "../shapes/instance.h"
 #include "../shapes/shape.h"
 #include "integrator.h"
+#include "pages.h"
 #include "polarization.h"
 
 /* Shadow ray from si towards the emitter sample ds. Spawned rays are
@@ -488,34 +489,14 @@ static int take_bsdf_group(const lane *ln, int *g, int *left, int *take, int cap
 
 /* The light samples of lanes idx[0..n) whose shadow ray was clear: the
  * BSDF's value and pdf towards each (l->nf, l->npdf), grouped by BSDF
- * through bsdf_ops.eval_pdf_batch where a BSDF has it, else per lane. A
- * lane's values depend on its own state only. g: n ints of scratch. */
+ * through bsdf_ops.eval_pdf_batch where a BSDF has it, else per lane (a
+ * bundle of pages: lane by lane, every page's value and the pages' mean
+ * pdf). A lane's values depend on its own state only. g: n ints of
+ * scratch. */
 static void wave_eval_bsdfs(const scene *sc, lane *ln, page_lane *pgs, const int *idx, int n, int *g) {
   enum {
     C = 64
   };
-  if (pgs) { /* every page's value, and the pages' mean pdf (one-sample MIS), lane by lane */
-    for (int k = 0; k < n; k++) {
-      lane *l = &ln[idx[k]];
-      if (!(l->nee && l->occ == TRACE_MISS)) continue;
-      const surface_interaction *si = &l->si;
-      const bsdf *b = si->shape->bsdf;
-      l->nwo = frame_to_local(&si->sh, l->ds.d);
-      double pdf = 0.0;
-      for (int p = 0; p < sc->pages; p++) {
-        rsw_page = p;
-        color f = b->ops->eval(b, si, l->nwo);
-        if (p)
-          pgs[idx[k]].nf[p - 1] = f;
-        else
-          l->nf = f;
-        if (!l->ds.delta) pdf += b->ops->pdf(b, si, l->nwo);
-      }
-      rsw_page = 0;
-      l->npdf = pdf / sc->pages;
-    }
-    return;
-  }
   int left = 0;
   for (int k = 0; k < n; k++) {
     lane *l = &ln[idx[k]];
@@ -523,7 +504,12 @@ static void wave_eval_bsdfs(const scene *sc, lane *ln, page_lane *pgs, const int
     const surface_interaction *si = &l->si;
     const bsdf *b = si->shape->bsdf;
     l->nwo = frame_to_local(&si->sh, l->ds.d);
-    if (b->ops->eval_pdf_batch) {
+    if (pgs) { /* every page's value, and the pages' mean pdf (one-sample MIS), lane by lane */
+      color f[RENDER_MAX_PAGES];
+      l->npdf = bsdf_eval_pages(b, si, sc->pages, l->nwo, !l->ds.delta, f);
+      l->nf = f[0];
+      for (int p = 1; p < sc->pages; p++) pgs[idx[k]].nf[p - 1] = f[p];
+    } else if (b->ops->eval_pdf_batch) {
       g[left++] = idx[k];
     } else {
       l->nf = b->ops->eval(b, si, l->nwo);
@@ -579,55 +565,21 @@ static void shade_light(const scene *sc, lane *l, double *quv, pol_lane *pl, pag
 /* BSDF samples of the lanes idx[0..n): lanes whose BSDF has a batched
  * sample op are grouped by BSDF (one call per BSDF, vectorised at the
  * render's ISA); the others sample one by one. The grouping does not
- * change a lane's value (bsdf_ops.sample_batch). g: n ints of scratch. */
-/* Lane l's BSDF sample for a bundle of pages: the direction from page j
- * (picked by the lobe number, which then picks the lobe within it), each
- * page's weight its value over the pages' mean pdf; a delta lobe (only
- * the index-matched `null` carries pages) takes each page's own weight
- * for the same lobe and direction. */
-static void sample_pages(const scene *sc, lane *l, page_lane *pg) {
-  const surface_interaction *si = &l->si;
-  const bsdf *b = si->shape->bsdf;
-  int P = sc->pages;
-  double u = l->u1 * P;
-  int j = (int)u < P - 1 ? (int)u : P - 1;
-  double u1 = fmin(u - j, 1.0 - 0x1p-53);
-  rsw_page = j;
-  color wj = b->ops->sample(b, si, u1, l->u2, &l->bs);
-  color w[RENDER_MAX_PAGES] = {{{0}}};
-  bsdf_sample *bs = &l->bs;
-  if (!(bs->pdf > 0)) {
-    /* a failed sample: every page's weight 0 */
-  } else if (bs->sampled_type & BSDF_DELTA) {
-    for (int p = 0; p < P; p++) {
-      bsdf_sample t;
-      rsw_page = p;
-      w[p] = p == j ? wj : b->ops->sample(b, si, u1, l->u2, &t);
-      if (p != j && (t.sampled_type != bs->sampled_type || t.wo.x != bs->wo.x || t.wo.y != bs->wo.y ||
-                     t.wo.z != bs->wo.z))
-        w[p] = col1(0);
-    }
-  } else {
-    double pdf = 0.0;
-    for (int p = 0; p < P; p++) {
-      rsw_page = p;
-      w[p] = b->ops->eval(b, si, bs->wo);
-      pdf += b->ops->pdf(b, si, bs->wo);
-    }
-    bs->pdf = pdf / P;
-    for (int p = 0; p < P; p++) w[p] = bs->pdf > 0 ? col_scale(w[p], 1.0 / bs->pdf) : col1(0);
-  }
-  rsw_page = 0;
-  l->weight = w[0];
-  for (int p = 1; p < P; p++) pg->weight[p - 1] = w[p];
-}
-
+ * change a lane's value (bsdf_ops.sample_batch). A bundle of pages
+ * samples lane by lane for every page (integrators/pages.h). g: n ints of
+ * scratch. */
 static void wave_sample_bsdfs(const scene *sc, lane *ln, page_lane *pgs, const int *idx, int n, int *g) {
   enum {
     C = 64
   };
   if (pgs) {
-    for (int k = 0; k < n; k++) sample_pages(sc, &ln[idx[k]], &pgs[idx[k]]);
+    for (int k = 0; k < n; k++) {
+      lane *l = &ln[idx[k]];
+      color w[RENDER_MAX_PAGES];
+      bsdf_sample_pages(l->si.shape->bsdf, &l->si, sc->pages, l->u1, l->u2, &l->bs, w);
+      l->weight = w[0];
+      for (int p = 1; p < sc->pages; p++) pgs[idx[k]].weight[p - 1] = w[p];
+    }
     return;
   }
   int left = 0;
