@@ -13,9 +13,9 @@ typedef struct uniform_tex {
   spectrum spec; /* owned copy */
   color value;   /* current value (after prepare) */
   /* A bundle of pages (render_ctx.bundle > 3): the value at pages 1.. of
-   * the last prepare (page 0's is `value`), what eval answers while
-   * rsw_page names one. */
-  color page[RENDER_MAX_PAGES - 1];
+   * the last such prepare (page 0's is `value`), what eval answers while
+   * rsw_page names one; allocated by the first (owned). */
+  color *page;
   char *where; /* document location of the property it came from (owned) */
 } uniform_tex;
 
@@ -39,6 +39,7 @@ static void uniform_destroy(object *o) {
   uniform_tex *u = (uniform_tex *)o;
   spectrum_free(&u->spec);
   free(u->where);
+  free(u->page);
   free(u);
 }
 
@@ -47,6 +48,8 @@ static rsw_status uniform_prepare(object *o, const render_ctx *rc, rsw_err *err)
   const char *where = u->where ? u->where : o->id;
   render_ctx pc = rc_page(rc, 0);
   rsw_status st = spectrum_eval(&u->spec, &pc, &u->value, err, where);
+  if (!st && rc_pages(rc) > 1 && !u->page && !(u->page = malloc((RENDER_MAX_PAGES - 1) * sizeof *u->page)))
+    return rsw_fail(err, RSW_ERR_NOMEM, where, "out of memory");
   for (int p = 1; p < rc_pages(rc) && !st; p++) {
     pc = rc_page(rc, p);
     st = spectrum_eval(&u->spec, &pc, &u->page[p - 1], err, where);
