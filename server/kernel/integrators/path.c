@@ -311,11 +311,8 @@ static void wave_occluded(const scene *sc, lane *ln, const int *idx, int n, rend
   if (timed) stats->trace_s += clock_s() - t0;
 }
 
-/* Emission seen by lane l's ray; l->nee: the vertex takes a light sample
- * (its random numbers and the sample itself come from wave_light_samples,
- * for the lanes together). False: the path ends here. */
-/* Emitted radiance Le (page 0's, already evaluated) and pages 1.. of it,
- * weighted by w, into the lane's pages (pg NULL: none). */
+/* Emitted radiance at pages 1.. (page 0's is the caller's), weighted by
+ * w, into the lane's pages (pg NULL: none). */
 static void pages_add_emission(const scene *sc, page_lane *pg, const emitter *e,
                                const surface_interaction *si, vec3 d, double w) {
   if (!pg) return;
@@ -327,6 +324,9 @@ static void pages_add_emission(const scene *sc, page_lane *pg, const emitter *e,
   rsw_page = 0;
 }
 
+/* Emission seen by lane l's ray; l->nee: the vertex takes a light sample
+ * (its random numbers and the sample itself come from wave_light_samples,
+ * for the lanes together). False: the path ends here. */
 static bool shade_emit(const integrator *it, const scene *sc, lane *l, double *quv, pol_lane *pl,
                        page_lane *pg) {
   l->nee = false;
@@ -439,8 +439,10 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, pag
       }
     }
   }
-  /* Pages 1..: the same sample's value at each (the emitter's sampling
-   * does not depend on the wavelength: scene_page_blocker). */
+  /* Pages 1..: the same sample's value at each (the same numbers give the
+   * same direction: an emitter that could carry pages samples positions
+   * and directions without its spectrum; the ones that do not, envmap,
+   * prepare per wavelength and are refused by scene_page_blocker). */
   for (int k = 0; pgs && k < n; k++) {
     lane *l = &ln[g[k]];
     for (int p = 1; p < sc->pages; p++) {
