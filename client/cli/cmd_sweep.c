@@ -41,7 +41,7 @@ const cmdline_opt cli_opts_sweep[] = {
      "comma-separated, of radiance, brdf, brf: films add brdf and brf channels"},
     {"--variance", NULL, false, "films add radiance_stderr channels (standard error of each pixel's mean)"},
     {"--bundle", "K|auto", false,
-     "carry K (1-3) wavelengths per path: each render with the next ones that differ only in wavelength; "
+     "carry K (1-16) wavelengths per path: each render with the next ones that differ only in wavelength; "
      "auto (recommended for spectral sweeps): the most the daemon allows for the scene, 1 where it allows "
      "none (docs/experiments.md#spectral-bundles)"},
     {"--format", "exr|npy|json|nc", false,

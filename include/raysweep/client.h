@@ -237,13 +237,13 @@ rsw_status rsw_contexts_set_job_seed(rsw_contexts *x, long long seed);
  * radiance_stderr plane). The server checks them at submission. */
 rsw_status rsw_contexts_set_quantities(rsw_contexts *x, const char *const *names, size_t n);
 rsw_status rsw_contexts_set_variance(rsw_contexts *x, int on);
-/* The job's "bundle": wavelengths carried per path (1..3; 1 removes it;
+/* The job's "bundle": wavelengths carried per path (1..RSW_BUNDLE_MAX; 1 removes it;
  * RSW_BUNDLE_AUTO: "auto", the most the daemon allows for the scene, the
  * recommended setting for spectral sweeps;
  * docs/experiments.md#spectral-bundles). The server checks the scene. */
 #define RSW_BUNDLE_AUTO (-1)
 /* The most wavelengths per path the API allows ("bundle" 1..RSW_BUNDLE_MAX). */
-#define RSW_BUNDLE_MAX  3
+#define RSW_BUNDLE_MAX  16
 rsw_status rsw_contexts_set_bundle(rsw_contexts *x, int k);
 /* Context index's "bundle_group" (group < 0 removes it): renders of
  * contexts in different groups never share a bundle. What keeps a sweep's

@@ -171,7 +171,7 @@ class Scene:
         each context's wavelength), ``quantities`` (``["brf"]``...),
         ``variance``, ``bands`` (spectral response functions), ``templates``
         (docs/experiments.md), ``bundle`` (wavelengths carried per path,
-        1 to 3, or ``"auto"``, the most the scene allows and the
+        1 to 16, or ``"auto"``, the most the scene allows and the
         recommended setting for spectral sweeps:
         docs/experiments.md#spectral-bundles).
 

@@ -65,10 +65,14 @@ const char *variant_name(rsw_variant v, bool polarized);
  * scalar_rgb and their _polarized forms). False: not a variant. */
 bool variant_parse(const char *name, rsw_variant *v, bool *polarized);
 
-/* A spectral bundle (mono): the wavelengths one path carries, one per
- * colour channel, so at most the channels of a `color`
- * (docs/experiments.md#spectral-bundles). */
-#define RENDER_MAX_BUNDLE 3
+/* A spectral bundle (mono): the wavelengths one path carries
+ * (docs/experiments.md#spectral-bundles). Up to three ride in the colour
+ * channels; more ride in "pages" of three: page p holds wavelengths
+ * 3p .. 3p + 2 in its channels, and an object evaluates at the page the
+ * integrator names in rsw_page (a uniform texture keeps a value per page;
+ * objects that cannot, scene_page_blocker). */
+#define RENDER_MAX_BUNDLE 16
+#define RENDER_MAX_PAGES  ((RENDER_MAX_BUNDLE + 2) / 3)
 
 /* What a render is evaluated at; given to every plugin's prepare(). */
 typedef struct render_ctx {
@@ -76,16 +80,41 @@ typedef struct render_ctx {
   bool polarized;    /* mono_polarized, rgb_polarized */
   double wavelength; /* nm; mono only (default 550); a bundle's first */
   /* Mono: wavelengths carried per path, 0 or 1 for one (every channel at
-   * `wavelength`), up to RENDER_MAX_BUNDLE; channel c renders at wl[c]
-   * (channels past the bundle repeat its last wavelength). */
+   * `wavelength`), up to RENDER_MAX_BUNDLE; channel c of page p renders at
+   * wl[3 p + c] (those past the bundle repeat its last wavelength). */
   int bundle;
   double wl[RENDER_MAX_BUNDLE];
 } render_ctx;
 
-/* The wavelength channel c renders at (mono). */
+/* The wavelength channel c renders at (mono; page 0). */
 static inline double rc_channel_wavelength(const render_ctx *rc, int c) {
   return rc->bundle > 1 ? rc->wl[c] : rc->wavelength;
 }
+
+/* Pages of three wavelengths a bundle of rc->bundle needs: 1 up to three
+ * wavelengths (the colour's channels), else ceil(bundle / 3). */
+static inline int rc_pages(const render_ctx *rc) {
+  return rc->bundle > 3 ? (rc->bundle + 2) / 3 : 1;
+}
+
+/* The context of page p of rc: a bundle of three (or fewer) whose
+ * channel c is rc's wavelength 3 p + c, for prepare() to evaluate a page
+ * as it evaluates a bundle of three. */
+static inline render_ctx rc_page(const render_ctx *rc, int p) {
+  render_ctx q = *rc;
+  if (rc->bundle <= 3) return q;
+  int last = rc->bundle - 1;
+  for (int c = 0; c < 3; c++) q.wl[c] = rc->wl[3 * p + c < last ? 3 * p + c : last];
+  for (int c = 3; c < RENDER_MAX_BUNDLE; c++) q.wl[c] = q.wl[2];
+  q.bundle = 3;
+  q.wavelength = q.wl[0];
+  return q;
+}
+
+/* The page of a bundle the calling thread evaluates at: 0 but while an
+ * integrator that carries pages (integrator.pages) asks an object for its
+ * value at another page (render.c defines it). */
+extern _Thread_local int rsw_page;
 
 struct loader;
 struct node;
@@ -125,6 +154,13 @@ typedef struct plugin {
    * for an object whose wavelength dependence goes through spectrum_eval
    * or that has none. scene_bundle_capable asks every object. */
   bool (*bundles)(const object *o);
+  /* Optional, for a plugin with prepare(): whether the object renders a
+   * bundle of more than three wavelengths (render_ctx.bundle > 3: its
+   * prepare() keeps a value per page and its ops answer for rsw_page).
+   * NULL: no, for a plugin with prepare() (what it prepares holds one
+   * page); plugins without prepare() read their spectra through textures
+   * and can. scene_page_blocker asks every object. */
+  bool (*pages)(const object *o);
 } plugin;
 
 /* Every object starts with this header. */
@@ -618,6 +654,10 @@ struct integrator {
   int max_depth; /* -1 = infinite */
   int rr_depth;
   bool hide_emitters;
+  /* Carries a bundle of more than three wavelengths, page by page
+   * (render_ctx.bundle > 3; path): Li_batch then writes pages 1.. of each
+   * path's radiance after page 0's, as quv (scene_extra_stride). */
+  bool pages;
 };
 
 /* ---- shapes -------------------------------------------------------------- */
@@ -693,6 +733,7 @@ typedef struct scene {
   object base;
   rsw_variant variant;
   bool polarized;   /* mono_polarized, rgb_polarized: paths carry Mueller matrices */
+  int pages;        /* pages of the bundle the last scene_prepare was for (rc_pages; 0 or 1: one) */
   object **objects; /* every object, for prepare/destroy (owned) */
   size_t n_objects, cap_objects;
   shape **shapes;
@@ -735,6 +776,14 @@ typedef struct scene {
 #define SCENE_QUV_MAX 9
 static inline int scene_quv_stride(const scene *sc) {
   return sc->polarized && sc->variant == VARIANT_RGB ? 9 : 3;
+}
+
+/* Doubles per path that an integrator's Li_batch writes to quv: the Stokes
+ * Q, U, V (scene_quv_stride) or, for a bundle of pages, the colours of
+ * pages 1.. (3 per page). */
+#define SCENE_EXTRA_MAX (3 * (RENDER_MAX_PAGES - 1))
+static inline int scene_extra_stride(const scene *sc) {
+  return sc->pages > 1 ? 3 * (sc->pages - 1) : scene_quv_stride(sc);
 }
 
 #endif

@@ -31,6 +31,8 @@
 
 #define TILE 8
 
+_Thread_local int rsw_page;
+
 /* Accumulator layout per pixel: sum(f w L) rgb, sum(f), and for Stokes
  * films sum(f w (Q, U, V)) (rgb_polarized: per colour channel, nq = 9);
  * then, for a film with variance, per developed channel k (Y; R, G, B;
@@ -55,7 +57,8 @@ typedef struct job {
   int margin;       /* pixels a splat can reach beyond its own */
   bool box;         /* box filter of radius 0.5: own pixel only */
   bool stokes;      /* Stokes film: Q, U, V accumulated too */
-  int nq;           /* Stokes films: Q, U, V values per sample (3, or 9 in rgb_polarized) */
+  int nq;           /* Stokes films: Q, U, V values per sample (3, or 9 in rgb_polarized);
+                       a bundle of pages: the colours of pages 1.. (scene_extra_stride) */
   bool lum;         /* one luminance channel (develop's mapping) */
   int m_ch;         /* variance: developed channels with moments (0: none) */
   int m_off;        /* offset of the first moment triple */
@@ -83,6 +86,10 @@ typedef struct job {
 
 static void splat_filter(const job *jb, tile_buf *tb, double px, double py, color v, const double *quv);
 
+/* Channels of a sample as develop sees them: a film's, or a bundle's
+ * wavelengths (three of page 0, then the other pages'). */
+#define SPLAT_X_MAX (FILM_MAX_CHANNELS > 3 + SCENE_EXTRA_MAX ? FILM_MAX_CHANNELS : 3 + SCENE_EXTRA_MAX)
+
 /* The box filter inline (every sample of most renders), others out of line. */
 static inline void splat(const job *jb, tile_buf *tb, double px, double py, color v, const double *quv) {
   int S = jb->stride;
@@ -95,8 +102,10 @@ static inline void splat(const job *jb, tile_buf *tb, double px, double py, colo
       /* The sample as develop sees it (Y, R G B or S0..S3), then its
        * shifted first and second moments (Eradiate's `moment` integrator
        * keeps the raw E[x^2]; see ACC_MOMENT). */
-      double x[FILM_MAX_CHANNELS] = {v.c[0], v.c[1], v.c[2], 0};
-      if (jb->stokes && jb->nq == 3) {
+      double x[SPLAT_X_MAX] = {v.c[0], v.c[1], v.c[2], 0};
+      if (!jb->stokes) { /* a bundle's pages 1..: its channels 3.. */
+        for (int k = 0; k < jb->nq; k++) x[3 + k] = quv[k];
+      } else if (jb->nq == 3) {
         x[1] = quv[0], x[2] = quv[1], x[3] = quv[2];
       } else if (jb->stokes) { /* film order S0.R S0.G S0.B S1.R ... */
         for (int c = 0; c < 3; c++) {
@@ -182,7 +191,7 @@ typedef struct wave_buf {
   sampler_state st[WAVE];
   ray3 ray[WAVE];
   color L[WAVE];
-  double quv[SCENE_QUV_MAX * WAVE];
+  double quv[(SCENE_QUV_MAX > SCENE_EXTRA_MAX ? SCENE_QUV_MAX : SCENE_EXTRA_MAX) * WAVE];
   int live[WAVE];
   vec2 film_u[WAVE], aperture_u[WAVE];
   double w[WAVE];
@@ -265,7 +274,7 @@ static bool wave_flush(job *jb, tile_buf *tb, wave_buf *wb, int n, render_stats 
       m++;
     }
   rs->camera_rays += (uint64_t)m;
-  double *quv = jb->stokes ? wb->quv : NULL;
+  double *quv = jb->nq ? wb->quv : NULL;
   if (it->ops->Li_batch) {
     if (m && !it->ops->Li_batch(it, jb->sc, wb->st, wb->ray, m, rs, wb->L, quv)) return false;
   } else {
@@ -279,7 +288,7 @@ static bool wave_flush(job *jb, tile_buf *tb, wave_buf *wb, int n, render_stats 
   for (int i = 0; i < n; i++) {
     const wave_sample *s = &wb->ws[i];
     color v = col1(0);
-    double q[SCENE_QUV_MAX];
+    double q[SCENE_QUV_MAX > SCENE_EXTRA_MAX ? SCENE_QUV_MAX : SCENE_EXTRA_MAX];
     if (k < m && wb->live[k] == i) {
       v = col_scale(wb->L[k], s->w);
       /* All finite, without a branch each: x * 0 is +-0 for a finite x and
@@ -565,8 +574,8 @@ rsw_status render_check_bundle(const scene *sc, size_t sensor_index, int bundle,
   if (bundle <= 1) return RSW_OK;
   if (bundle > RENDER_MAX_BUNDLE)
     return rsw_fail(err, RSW_ERR_INVALID, "bundle",
-                    "bundle must be an integer from 1 (one wavelength per path) to %d (a path carries one "
-                    "wavelength per colour channel)",
+                    "bundle must be an integer from 1 (one wavelength per path) to %d (the wavelengths a "
+                    "path carries)",
                     RENDER_MAX_BUNDLE);
   if (sc->variant != VARIANT_MONO)
     return rsw_fail(err, RSW_ERR_INVALID, "bundle",
@@ -581,6 +590,14 @@ rsw_status render_check_bundle(const scene *sc, size_t sensor_index, int bundle,
     return rsw_fail(err, RSW_ERR_UNSUPPORTED, "bundle",
                     "%s '%s' (%s) evaluates one wavelength at a time: this scene renders with \"bundle\": 1",
                     obj_class_name(blk->plugin->cls), blk->id ? blk->id : "", blk->plugin->name);
+  if (bundle > 3) {
+    const char *why = "";
+    blk = scene_page_blocker(sc, &why);
+    if (blk)
+      return rsw_fail(err, RSW_ERR_UNSUPPORTED, "bundle",
+                      "%s '%s' (%s) %s: this scene renders bundles of at most 3 wavelengths",
+                      obj_class_name(blk->plugin->cls), blk->id ? blk->id : "", blk->plugin->name, why);
+  }
   return RSW_OK;
 }
 
@@ -595,7 +612,7 @@ static double *bundle_channel_sums(const job *jb, int b, int *stride) {
   for (size_t i = 0; i < np; i++) {
     const double *a = &jb->film_acc[i * (size_t)jb->stride];
     double *o = &d[i * (size_t)S];
-    o[0] = o[1] = o[2] = a[b];
+    o[0] = o[1] = o[2] = a[b < 3 ? b : 4 + (b - 3)]; /* pages 1.. follow the filter weight */
     o[3] = a[3];
     for (int k = 4; k < jb->m_off; k++) o[k] = 0;
     if (m1)
@@ -652,9 +669,15 @@ rsw_status render_sensor_bundle(scene *sc, const render_opts *opts, film_image *
   bool box = fm->filter->radius <= 0.5 + 1e-12;
   st = render_check_planes(sc, opts->sensor, spp, opts->quantities, opts->variance, err);
   if (st) return st;
-  color e_h = col1(0);
+  color e_h = col1(0), e_hp[RENDER_MAX_PAGES] = {{{0}}}; /* a bundle of pages: each page's */
   if (opts->quantities & (RENDER_Q_BRDF | RENDER_Q_BRF)) {
     st = render_horizontal_irradiance(sc, &e_h, err);
+    e_hp[0] = e_h;
+    for (int p = 1; p < sc->pages && !st; p++) {
+      rsw_page = p;
+      st = render_horizontal_irradiance(sc, &e_hp[p], err);
+      rsw_page = 0;
+    }
     if (st) return st;
   }
 
@@ -674,8 +697,8 @@ rsw_status render_sensor_bundle(scene *sc, const render_opts *opts, film_image *
   jb.stokes = sc->polarized || (fm->pixel_format == PIXFMT_STOKES && sc->variant == VARIANT_MONO);
   /* (a bundle sums its wavelengths' channels apart) */
   jb.lum = !jb.stokes && nb == 1 && (sc->variant == VARIANT_MONO || fm->pixel_format == PIXFMT_LUMINANCE);
-  jb.nq = jb.stokes ? scene_quv_stride(sc) : 0;
-  jb.m_ch = !opts->variance ? 0 : jb.stokes ? 4 * jb.nq / 3 : jb.lum ? 1 : 3;
+  jb.nq = jb.stokes || sc->pages > 1 ? scene_extra_stride(sc) : 0;
+  jb.m_ch = !opts->variance ? 0 : jb.stokes ? 4 * jb.nq / 3 : jb.lum ? 1 : nb > 3 ? nb : 3;
   jb.m_off = 4 + jb.nq;
   jb.stride = jb.m_off + ACC_MOMENT * jb.m_ch;
   jb.margin = jb.box ? 0 : (int)ceil(fm->filter->radius + 0.5);
@@ -737,7 +760,9 @@ rsw_status render_sensor_bundle(scene *sc, const render_opts *opts, film_image *
                       .wavelength = sc->variant == VARIANT_MONO ? rc_channel_wavelength(&rc, b) : 0.0,
                       .quantities = opts->quantities,
                       .variance = opts->variance,
-                      .e_h = nb == 1 ? e_h : col1(e_h.c[b])};
+                      .e_h = nb == 1   ? e_h
+                             : nb <= 3 ? col1(e_h.c[b])
+                                       : col1(e_hp[b / 3].c[b % 3])};
     if (!st) st = fm->ops->develop(fm, &sums, &out[b], err);
     if (acc != jb.film_acc) free(acc);
     if (!st && se->ops->pixel_angles) {

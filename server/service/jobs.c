@@ -569,7 +569,7 @@ static rsw_status parse_request(const char *body, size_t len, job_req *q, svc_er
                k->valuedouble > 1e6)
         st = svc_fail(e, RSW_ERR_INVALID, "/bundle",
                       "bundle must be \"auto\" (the most the scene allows) or an integer from 1 (one "
-                      "wavelength per path) to %d (a path carries one wavelength per colour channel)",
+                      "wavelength per path) to %d (the wavelengths a path carries)",
                       RENDER_MAX_BUNDLE);
       else
         q->bundle = (int)k->valuedouble;
@@ -969,25 +969,40 @@ static rsw_status plan_context(service *svc, const scene *sc, const job_req *q, 
   return st;
 }
 
-/* A job's "bundle" against every sensor it renders (render_check_bundle):
- * K > 1 that a sensor cannot take is a 422 naming /bundle and what stands
- * in the way; "auto" takes RENDER_MAX_BUNDLE where every one can and 1
- * otherwise, the first reason in jb->bundle_why (never refused). */
-static rsw_status check_bundle(const scene *sc, job *jb, svc_error *e) {
-  bool autok = jb->bundle == JOB_BUNDLE_AUTO;
-  if (autok) jb->bundle = RENDER_MAX_BUNDLE;
-  if (jb->bundle <= 1) return RSW_OK;
+/* Whether every sensor the job renders takes a bundle of k
+ * (render_check_bundle); the first refusal in *err. */
+static rsw_status sensors_take_bundle(const scene *sc, const job *jb, int k, rsw_err *err) {
   for (size_t si = 0; si < sc->n_sensors; si++) {
     bool used = false;
     for (size_t i = 0; i < jb->n_items && !used; i++) used = jb->items[i].sensor_index == si;
+    rsw_status st = used ? render_check_bundle(sc, si, k, err) : RSW_OK;
+    if (st) return st;
+  }
+  return RSW_OK;
+}
+
+/* A job's "bundle" against every sensor it renders: K > 1 that a sensor
+ * cannot take is a 422 naming /bundle and what stands in the way; "auto"
+ * takes RENDER_MAX_BUNDLE where every one can (pages: surfaces and the
+ * path integrator), else 3 (the colour's channels), else 1, the reason it
+ * stopped short in jb->bundle_why (never refused). */
+static rsw_status check_bundle(const scene *sc, job *jb, svc_error *e) {
+  bool autok = jb->bundle == JOB_BUNDLE_AUTO;
+  jb->bundle_unit = autok ? RENDER_MAX_BUNDLE : jb->bundle;
+  if (!autok) {
     rsw_err err = {0};
-    rsw_status st = used ? render_check_bundle(sc, si, jb->bundle, &err) : RSW_OK;
-    if (st && autok) {
-      jb->bundle = 1;
-      snprintf(jb->bundle_why, sizeof jb->bundle_why, "%s", err.msg);
-      return RSW_OK;
+    rsw_status st = jb->bundle > 1 ? sensors_take_bundle(sc, jb, jb->bundle, &err) : RSW_OK;
+    return st ? svc_fail(e, st, "/bundle", "%s", err.msg) : RSW_OK;
+  }
+  static const int tries[] = {RENDER_MAX_BUNDLE, 3};
+  jb->bundle = 1;
+  for (size_t t = 0; t < sizeof tries / sizeof tries[0]; t++) {
+    rsw_err err = {0};
+    if (sensors_take_bundle(sc, jb, tries[t], &err) == RSW_OK) {
+      jb->bundle = tries[t];
+      break;
     }
-    if (st) return svc_fail(e, st, "/bundle", "%s", err.msg);
+    if (!jb->bundle_why[0]) snprintf(jb->bundle_why, sizeof jb->bundle_why, "%s", err.msg);
   }
   return RSW_OK;
 }
@@ -1043,7 +1058,22 @@ static bool plan_bundles(job *jb) {
     if (i && bundle_key_cmp(&k[i - 1], &k[i]) != 0) id++;
     key[k[i].index] = k[i].it->own_seed ? RSW_BUNDLE_ALONE : id;
   }
-  ok = ok && rsw_bundle_runs(n, key, wl, jb->bundle, lead) == 0;
+  ok = ok &&
+       rsw_bundle_runs(n, key, wl, jb->bundle_unit > jb->bundle ? jb->bundle_unit : jb->bundle, lead) == 0;
+  /* "auto" that came to fewer than its unit: each group, in order, cut
+   * into bundles of jb->bundle (so a shard's groups still render as the
+   * whole sweep's do). */
+  size_t *count = ok && jb->bundle_unit > jb->bundle ? calloc(n, sizeof *count) : NULL;
+  size_t *cur = count ? calloc(n, sizeof *cur) : NULL;
+  if (count && !cur) ok = false;
+  for (size_t i = 0; cur && i < n; i++) {
+    size_t g = lead[i]; /* g <= i: its group's first, already numbered */
+    if (count[g] % (size_t)jb->bundle == 0) cur[g] = i;
+    count[g]++;
+    lead[i] = cur[g];
+  }
+  free(count);
+  free(cur);
   for (size_t i = 0; i < n && ok; i++) { /* a leader holds the list, in order; a mate points to it */
     if (lead[i] == i) continue;
     render_item *l = &jb->items[lead[i]];

@@ -178,8 +178,11 @@ typedef struct job {
   render_progress current_samples;
   /* "bundle": wavelengths per path (render_opts.bundle), 1: none;
    * bundle_asked: the request named it (the answers say what it came
-   * to); bundle_why: why "auto" came to 1 ("" otherwise). */
+   * to); bundle_why: why "auto" came to less than RENDER_MAX_BUNDLE ("" otherwise);
+   * bundle_unit: the groups the bundles are cut from (plan_bundles), K, or
+   * RENDER_MAX_BUNDLE for "auto", as the client's shards plan them. */
   int bundle;
+  int bundle_unit;
   bool bundle_asked;
   char bundle_why[768];
 } job;

@@ -5,15 +5,18 @@
 #   - the sweep run whole, as --shard 0/2 + 1/2 merged, and with --spread 2
 #     over two daemons behind a balancer give cmp-identical films and the
 #     same index; each shard holds whole bundle groups (its sweep.json's
-#     bundle_leads); --shard with --bundle auto likewise;
+#     bundle_leads); --shard with --bundle auto likewise (the client plans
+#     auto in groups of 16: where the daemon comes to 16, its films are
+#     --bundle 16's; where it comes to 3, it cuts each group of 16 into
+#     threes, so shards still give the whole sweep's films);
 #   - the same from a --contexts file (wavelength fastest, ids given);
 #   - without --bundle the shards are still k mod n and sweep.json has no
 #     bundle_leads (sweeps of before keep their contexts and files);
-#   - a job's "bundle": "auto" comes to 3 on a mono scene (its films those
-#     of "bundle": 3) and to 1, accepted, with the reason, on an rgb scene,
-#     a Stokes film and an environment plugin scene; "bundle" 0, 4, "x", -1
-#     and a context's bundle_group "a" are 4xx naming the pointer;
-#     `sweep --bundle 5` and `--bundle x` are usage errors.
+#   - a job's "bundle": "auto" comes to 16 on a mono surface scene (its
+#     films those of "bundle": 16) and to 1, accepted, with the reason, on
+#     an rgb scene, a Stokes film and an environment plugin scene; "bundle"
+#     0, 17, "x", -1 and a context's bundle_group "a" are 4xx naming the
+#     pointer; `sweep --bundle 17` and `--bundle x` are usage errors.
 name=test_bundle_shards
 source "$(dirname "$0")/../support/shtest.sh"
 need_bins raysweepd raysweep
@@ -112,16 +115,39 @@ for p in "$pa" "$pb"; do # each replica rendered a shard
   n=$(curl -s "http://127.0.0.1:$p/metrics" | awk '$1 == "raysweep_contexts_rendered_total" { print $2 }')
   if [ "${n:-0}" != 0 ]; then ok; else bad "replica $p rendered nothing of the spread sweep"; fi
 done
-# --bundle auto: groups of 3 too, and the daemon takes 3 here.
+# --bundle auto: groups of 16, and the daemon takes 16 here.
 rs "$pa" sweep "$scene" "${grid[@]}" --bundle auto -o auto >/dev/null 2>"$tmp/err" || bad "auto: $(cat "$tmp/err")"
 rs "$pa" sweep "$scene" "${grid[@]}" --bundle auto --shard 0/3 -o a0 >/dev/null 2>"$tmp/err" &&
   rs "$pa" sweep "$scene" "${grid[@]}" --bundle auto --shard 1/3 -o a1 >/dev/null 2>"$tmp/err" &&
   rs "$pa" sweep "$scene" "${grid[@]}" --bundle auto --shard 2/3 -o a2 >/dev/null 2>"$tmp/err" &&
   rs "$pa" merge a0 a1 a2 -o amerged >/dev/null 2>"$tmp/err" || bad "auto shards: $(cat "$tmp/err")"
 same "--bundle auto, --shard I/3 merged" auto amerged
-n=0
-for f in $(cd whole && find . -name '*.exr'); do cmp -s "whole/$f" "auto/$f" || n=$((n + 1)); done
-if [ "$n" = 0 ]; then ok; else bad "--bundle auto's films differ from --bundle 3's ($n)"; fi
+rs "$pa" sweep "$scene" "${grid[@]}" --bundle 16 -o whole16 >/dev/null 2>"$tmp/err" || bad "bundle 16: $(cat "$tmp/err")"
+same "--bundle auto, --bundle 16" whole16 auto
+# --bundle auto where the daemon comes to 3 (a canopy on a roughconductor
+# soil, whose index tables hold three wavelengths; leaves with tabulated
+# reflectance and transmittance, so that the bundle changes the paths'
+# choices): 20 wavelengths per reflectance, groups of 16 (leads 0, 16, 20,
+# 36: shards 0, 1, 2, 0 of 3) each cut into threes, so the shards' bundles
+# are the whole sweep's (runs cut into threes across a group's end,
+# {15, 16, 17}, would not be).
+cp "$root/proto/examples/canopy_leaves.txt" .
+python3 - "$root/proto/examples/canopy_periodic.json" canopy3.json <<'PY'
+import json, sys
+d = json.load(open(sys.argv[1]))
+d["soil"]["bsdf"] = {"type": "roughconductor", "material": "Au", "alpha": 0.3}
+d["leaf"]["disc"]["bsdf"] = {"type": "bilambertian",
+                             "reflectance": {"type": "spectrum", "wavelengths": [400, 800], "values": [0.05, 0.5]},
+                             "transmittance": {"type": "spectrum", "wavelengths": [400, 800], "values": [0.3, 0.45]}}
+json.dump(d, open(sys.argv[2], "w"))
+PY
+g20=(--grid wavelength=400:590:10 --grid soil.bsdf.alpha.value=0.2:0.3:0.1 --spp 4 --seed 7)
+rs "$pa" sweep canopy3.json "${g20[@]}" --bundle auto -o dauto >/dev/null 2>"$tmp/err" &&
+  rs "$pa" sweep canopy3.json "${g20[@]}" --bundle auto --shard 0/3 -o d0 >/dev/null 2>"$tmp/err" &&
+  rs "$pb" sweep canopy3.json "${g20[@]}" --bundle auto --shard 1/3 -o d1 >/dev/null 2>"$tmp/err" &&
+  rs "$pa" sweep canopy3.json "${g20[@]}" --bundle auto --shard 2/3 -o d2 >/dev/null 2>"$tmp/err" &&
+  rs "$pa" merge d0 d1 d2 -o dmerged >/dev/null 2>"$tmp/err" || bad "auto at 3, shards: $(cat "$tmp/err")"
+same "--bundle auto at 3, --shard I/3 merged" dauto dmerged
 # A bundled sweep is not the unbundled one (so the checks above can fail).
 rs "$pa" sweep "$scene" "${grid[@]}" -o plain >/dev/null 2>"$tmp/err" || bad "plain: $(cat "$tmp/err")"
 n=0
@@ -150,8 +176,8 @@ rs "$plb" sweep "$scene" --contexts ctx.jsonl --spp 64 --bundle 3 --spread 2 -o 
 same "--contexts, --spread 2" cwhole cspread
 
 # Usage errors.
-expect 2 "sweep --bundle 5" rs "$pa" sweep "$scene" "${grid[@]}" --bundle 5 -o u5
-contains "sweep --bundle 5" "$tmp/err" "--bundle"
+expect 2 "sweep --bundle 17" rs "$pa" sweep "$scene" "${grid[@]}" --bundle 17 -o u17
+contains "sweep --bundle 17" "$tmp/err" "--bundle"
 expect 2 "sweep --bundle x" rs "$pa" sweep "$scene" "${grid[@]}" --bundle x -o ux
 
 # "bundle": "auto" and bad values over HTTP.
@@ -202,15 +228,15 @@ def films(port, j):
     st, b = call(port, "GET", f"/v1/jobs/{j['id']}/results")
     return {r["context"]: call(port, "GET", r["href"])[1] for r in json.loads(b)["results"]}
 PY
-py '"bundle": "auto" on a mono scene: 3, the films of "bundle": 3, not those of 1' '
+py '"bundle": "auto" on a mono surface scene: 16, the films of "bundle": 16, not those of 1' '
 import sys; sys.path.insert(0, sys.argv[1]); import importlib.util as u
 spec = u.spec_from_file_location("h", sys.argv[1] + "/rsw_http.py"); h = u.module_from_spec(spec); spec.loader.exec_module(h)
 port = int(sys.argv[2]); sid = h.push(port, sys.argv[3])
-st, a = h.job(port, sid, {"bundle": "auto"}); assert st == 202, (st, a); assert a["bundle"] == 3 and "bundle_why" not in a, a
-st, t = h.job(port, sid, {"bundle": 3}); assert st == 202, (st, t); assert t["bundle"] == 3, t
+st, a = h.job(port, sid, {"bundle": "auto"}); assert st == 202, (st, a); assert a["bundle"] == 16 and "bundle_why" not in a, a
+st, t = h.job(port, sid, {"bundle": 16}); assert st == 202, (st, t); assert t["bundle"] == 16, t
 st, o = h.job(port, sid, {}); assert st == 202 and "bundle" not in o, o
 fa, ft, fo = h.films(port, a), h.films(port, t), h.films(port, o)
-assert fa == ft, "auto differs from 3"
+assert fa == ft, "auto differs from 16"
 assert fa != fo, "auto gave the unbundled films"
 ' "$tmp" "$pa" "$scene"
 for s in "$root/proto/examples/cornell_box.json:rgb" "$tmp/stokes.json:Stokes" "$tmp/plugin.json:evaluates one wavelength"; do
@@ -230,7 +256,7 @@ py 'bad "bundle" values and bundle_group: 4xx naming the pointer' '
 import sys, importlib.util as u
 spec = u.spec_from_file_location("h", sys.argv[1] + "/rsw_http.py"); h = u.module_from_spec(spec); spec.loader.exec_module(h)
 port = int(sys.argv[2]); sid = h.push(port, sys.argv[3])
-for v in (0, 4, "x", -1, 2.5, "AUTO", None, [3]):
+for v in (0, 17, "x", -1, 2.5, "AUTO", None, [3]):
     st, e = h.job(port, sid, {"bundle": v})
     assert 400 <= st < 500 and e["pointer"] == "/bundle", (v, st, e)
 for v in ("a", -1, 1.5):

@@ -16,7 +16,7 @@
 #   - formed whatever the order of a grid's axes (same overrides, other
 #     wavelengths, cut into threes in the job's order), never across
 #     overrides, never over a context's own seed;
-#   - refused with a 422 naming /bundle: bundle 0 and 4, an rgb scene, a
+#   - refused with a 422 naming /bundle: bundle 0 and 17, an rgb scene, a
 #     Stokes film the job renders (naming the sensor; a job of the scene's
 #     other sensor is accepted).
 name=test_bundles
@@ -171,7 +171,7 @@ def refuse(path, bundle, words):
     assert p.get("pointer") == "/bundle" or "/bundle" in json.dumps(p), p
     for w in words:
         assert w in p["detail"], (w, p["detail"])
-refuse(sys.argv[3], 4, ["from 1", "to 3"])
+refuse(sys.argv[3], 17, ["from 1", "to 16"])
 refuse(sys.argv[3], 0, ["from 1"])
 refuse(sys.argv[4], 3, ["sensor '"'"'stokes'"'"'", "Stokes"])
 # the job renders only the other sensor: bundled

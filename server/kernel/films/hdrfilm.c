@@ -146,7 +146,7 @@ static rsw_status hdrfilm_develop(const film *fm, const film_sums *s, film_image
 
 static const film_ops hdrfilm_ops = {.develop = hdrfilm_develop};
 
-DEFINE_PLUGIN(hdrfilm, CLS_FILM, .prepare = hdrfilm_prepare, .ops = &hdrfilm_ops);
+DEFINE_PLUGIN(hdrfilm, CLS_FILM, .prepare = hdrfilm_prepare, .pages = plugin_pages_any, .ops = &hdrfilm_ops);
 
 typedef struct name_code {
   const char *name;

@@ -20,6 +20,7 @@
 #include "../shapes/instance.h"
 #include "../shapes/shape.h"
 #include "integrator.h"
+#include "pages.h"
 #include "polarization.h"
 
 /* Shadow ray from si towards the emitter sample ds. Spawned rays are
@@ -142,6 +143,21 @@ typedef struct lane {
   bsdf_sample bs;
   color weight;
 } lane;
+
+/* A bundle of pages (render_ctx.bundle > 3, docs/experiments.md#spectral-bundles):
+ * a lane's throughput and radiance at pages 1.. (page 0's are the lane's
+ * T and L) and what its vertex computes for them. The path is sampled
+ * once for all pages: the BSDF direction from one page picked by the lobe
+ * number (one-sample spectral MIS, Wilkie et al. 2014: every page's value
+ * over the pages' mean pdf, so a direction any page can sample is
+ * counted), the light sample and the roulette shared; an object answers
+ * for page p while rsw_page = p. */
+typedef struct page_lane {
+  color T[RENDER_MAX_PAGES - 1], L[RENDER_MAX_PAGES - 1];
+  color value[RENDER_MAX_PAGES - 1];  /* the light sample's emitted value */
+  color nf[RENDER_MAX_PAGES - 1];     /* the BSDF towards the light sample */
+  color weight[RENDER_MAX_PAGES - 1]; /* the BSDF sample's weight */
+} page_lane;
 
 static double clock_s(void) {
   struct timespec ts;
@@ -295,10 +311,24 @@ static void wave_occluded(const scene *sc, lane *ln, const int *idx, int n, rend
   if (timed) stats->trace_s += clock_s() - t0;
 }
 
+/* Emitted radiance at pages 1.. (page 0's is the caller's), weighted by
+ * w, into the lane's pages (pg NULL: none). */
+static void pages_add_emission(const scene *sc, page_lane *pg, const emitter *e,
+                               const surface_interaction *si, vec3 d, double w) {
+  if (!pg) return;
+  for (int p = 1; p < sc->pages; p++) {
+    rsw_page = p;
+    color Le = e->ops->eval(e, si, d);
+    pg->L[p - 1] = col_add(pg->L[p - 1], col_scale(col_mul(pg->T[p - 1], Le), w));
+  }
+  rsw_page = 0;
+}
+
 /* Emission seen by lane l's ray; l->nee: the vertex takes a light sample
  * (its random numbers and the sample itself come from wave_light_samples,
  * for the lanes together). False: the path ends here. */
-static bool shade_emit(const integrator *it, const scene *sc, lane *l, double *quv, pol_lane *pl) {
+static bool shade_emit(const integrator *it, const scene *sc, lane *l, double *quv, pol_lane *pl,
+                       page_lane *pg) {
   l->nee = false;
   /* Emission seen by this ray (area light or the environment). */
   bool visible_emitter = !(it->hide_emitters && l->depth == 0);
@@ -313,6 +343,7 @@ static bool shade_emit(const integrator *it, const scene *sc, lane *l, double *q
       color Le = env->ops->eval(env, NULL, l->ray.d);
       double w = mis_weight(l->prev_pdf, em_pdf);
       l->L = col_add(l->L, col_scale(col_mul(l->T, Le), w));
+      pages_add_emission(sc, pg, env, NULL, l->ray.d, w);
       if (pl) {
         pol_add_env(pl, env, l->ray.d, Le, col_scale(col_mul(l->T, Le), w), pol_channels(sc));
       } else {
@@ -325,7 +356,7 @@ static bool shade_emit(const integrator *it, const scene *sc, lane *l, double *q
   const emitter *em = si->shape->emitter;
   if (em && visible_emitter) {
     color Le = em->ops->eval(em, si, l->ray.d);
-    if (!col_is_black(Le)) {
+    if (!col_is_black(Le) || pg) {
       double em_pdf = 0.0;
       /* Next-event estimation samples the emitter in the column only,
        * along a segment that never wraps: a copy reached through the
@@ -335,9 +366,11 @@ static bool shade_emit(const integrator *it, const scene *sc, lane *l, double *q
             .p = si->p, .n = si->ng, .d = v3_norm(l->ray.d), .dist = si->t * v3_len(l->ray.d)};
         em_pdf = em->ops->pdf_direction(em, &l->prev_si, &ds) * emitter_prob(sc, em);
       }
-      color v = col_scale(col_mul(l->T, Le), mis_weight(l->prev_pdf, em_pdf));
+      double w = mis_weight(l->prev_pdf, em_pdf);
+      color v = col_scale(col_mul(l->T, Le), w);
       l->L = col_add(l->L, v);
       if (pl) pol_add(pl, v, pol_channels(sc));
+      pages_add_emission(sc, pg, em, si, l->ray.d, w);
     }
   }
   if (!(it->max_depth < 0 || l->depth + 1 < it->max_depth)) return false;
@@ -354,8 +387,8 @@ static bool shade_emit(const integrator *it, const scene *sc, lane *l, double *q
  * that keep it are left in g[0..*n_sh), in order. d1, d2, ek, ord: n
  * entries of scratch each. */
 #define EMITTER_GROUPS 64
-static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, int *g, int n, int *n_sh,
-                               double *d1, vec2 *d2, int *ek, int *ord) {
+static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, page_lane *pgs, int *g, int n,
+                               int *n_sh, double *d1, vec2 *d2, int *ek, int *ord) {
   enum {
     C = 64
   };
@@ -406,6 +439,20 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, int
       }
     }
   }
+  /* Pages 1..: the same sample's value at each (the same numbers give the
+   * same direction: an emitter that could carry pages samples positions
+   * and directions without its spectrum; the ones that do not, envmap,
+   * prepare per wavelength and are refused by scene_page_blocker). */
+  for (int k = 0; pgs && k < n; k++) {
+    lane *l = &ln[g[k]];
+    for (int p = 1; p < sc->pages; p++) {
+      direction_sample ds;
+      rsw_page = p;
+      color v = l->ne->ops->sample_direction(l->ne, &l->si, d2[k], &ds);
+      pgs[g[k]].value[p - 1] = v;
+    }
+    rsw_page = 0;
+  }
   for (int k = 0; k < n; k++) {
     lane *l = &ln[g[k]];
     const emitter *e = l->ne;
@@ -416,7 +463,9 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, int
      * pdf_direction gives an unwrapped emitter hit; its copies beyond the
      * walls are reached by BSDF sampling alone (weight 1). */
     if (sc->periodic.on && (e->flags & EMITTER_SURFACE) && !in_column(&sc->periodic, l->ds.p)) l->ds.pdf = 0;
-    if (l->ds.pdf > 0 && !col_is_black(l->value)) {
+    bool lit = !col_is_black(l->value);
+    for (int p = 1; pgs && p < sc->pages; p++) lit |= !col_is_black(pgs[g[k]].value[p - 1]);
+    if (l->ds.pdf > 0 && lit) {
       spawn_ray_to_in(sc, &l->si, e, &l->ds, &l->sray);
       l->nee = true;
       g[(*n_sh)++] = g[k];
@@ -442,9 +491,11 @@ static int take_bsdf_group(const lane *ln, int *g, int *left, int *take, int cap
 
 /* The light samples of lanes idx[0..n) whose shadow ray was clear: the
  * BSDF's value and pdf towards each (l->nf, l->npdf), grouped by BSDF
- * through bsdf_ops.eval_pdf_batch where a BSDF has it, else per lane. A
- * lane's values depend on its own state only. g: n ints of scratch. */
-static void wave_eval_bsdfs(lane *ln, const int *idx, int n, int *g) {
+ * through bsdf_ops.eval_pdf_batch where a BSDF has it, else per lane (a
+ * bundle of pages: lane by lane, every page's value and the pages' mean
+ * pdf). A lane's values depend on its own state only. g: n ints of
+ * scratch. */
+static void wave_eval_bsdfs(const scene *sc, lane *ln, page_lane *pgs, const int *idx, int n, int *g) {
   enum {
     C = 64
   };
@@ -455,7 +506,12 @@ static void wave_eval_bsdfs(lane *ln, const int *idx, int n, int *g) {
     const surface_interaction *si = &l->si;
     const bsdf *b = si->shape->bsdf;
     l->nwo = frame_to_local(&si->sh, l->ds.d);
-    if (b->ops->eval_pdf_batch) {
+    if (pgs) { /* every page's value, and the pages' mean pdf (one-sample MIS), lane by lane */
+      color f[RENDER_MAX_PAGES];
+      l->npdf = bsdf_eval_pages(b, si, sc->pages, l->nwo, !l->ds.delta, f);
+      l->nf = f[0];
+      for (int p = 1; p < sc->pages; p++) pgs[idx[k]].nf[p - 1] = f[p];
+    } else if (b->ops->eval_pdf_batch) {
       g[left++] = idx[k];
     } else {
       l->nf = b->ops->eval(b, si, l->nwo);
@@ -487,13 +543,17 @@ static void wave_eval_bsdfs(lane *ln, const int *idx, int n, int *g) {
  * wave_eval_bsdfs). The BSDF sample's random numbers are drawn next, for
  * the lanes together (wave_run), in the one-path order; the sample itself
  * is taken by wave_sample_bsdfs. */
-static void shade_light(const scene *sc, lane *l, double *quv, pol_lane *pl) {
+static void shade_light(const scene *sc, lane *l, double *quv, pol_lane *pl, page_lane *pg) {
   if (l->nee && l->occ == TRACE_MISS) {
     const direction_sample *ds = &l->ds;
     const emitter *e = l->ne;
     color f = l->nf;
+    double w = ds->delta ? 1.0 : mis_weight(ds->pdf * l->pe, l->npdf);
+    for (int p = 1; pg && p < sc->pages; p++) {
+      color v = col_mul(pg->T[p - 1], col_mul(pg->nf[p - 1], pg->value[p - 1]));
+      pg->L[p - 1] = col_add(pg->L[p - 1], col_scale(v, w / l->pe));
+    }
     if (!col_is_black(f)) {
-      double w = ds->delta ? 1.0 : mis_weight(ds->pdf * l->pe, l->npdf);
       color v = col_scale(col_mul(l->T, col_mul(f, l->value)), w / l->pe);
       l->L = col_add(l->L, v);
       if (pl)
@@ -507,11 +567,23 @@ static void shade_light(const scene *sc, lane *l, double *quv, pol_lane *pl) {
 /* BSDF samples of the lanes idx[0..n): lanes whose BSDF has a batched
  * sample op are grouped by BSDF (one call per BSDF, vectorised at the
  * render's ISA); the others sample one by one. The grouping does not
- * change a lane's value (bsdf_ops.sample_batch). g: n ints of scratch. */
-static void wave_sample_bsdfs(lane *ln, const int *idx, int n, int *g) {
+ * change a lane's value (bsdf_ops.sample_batch). A bundle of pages
+ * samples lane by lane for every page (integrators/pages.h). g: n ints of
+ * scratch. */
+static void wave_sample_bsdfs(const scene *sc, lane *ln, page_lane *pgs, const int *idx, int n, int *g) {
   enum {
     C = 64
   };
+  if (pgs) {
+    for (int k = 0; k < n; k++) {
+      lane *l = &ln[idx[k]];
+      color w[RENDER_MAX_PAGES];
+      bsdf_sample_pages(l->si.shape->bsdf, &l->si, sc->pages, l->u1, l->u2, &l->bs, w);
+      l->weight = w[0];
+      for (int p = 1; p < sc->pages; p++) pgs[idx[k]].weight[p - 1] = w[p];
+    }
+    return;
+  }
   int left = 0;
   for (int k = 0; k < n; k++) {
     lane *l = &ln[idx[k]];
@@ -545,12 +617,15 @@ static void wave_sample_bsdfs(lane *ln, const int *idx, int n, int *g) {
 
 /* The end of lane l's vertex: the continuation ray from its BSDF sample
  * and the roulette. False: the path ends here. */
-static bool shade_continue(const integrator *it, const scene *sc, sampler_state *st, lane *l, pol_lane *pl) {
+static bool shade_continue(const integrator *it, const scene *sc, sampler_state *st, lane *l, pol_lane *pl,
+                           page_lane *pg) {
   const sampler_ops *sops = st->s->ops;
   const surface_interaction *si = &l->si;
   const bsdf_sample *bs = &l->bs;
   color weight = l->weight;
-  if (!(bs->pdf > 0) || col_is_black(weight)) return false;
+  bool lit = !col_is_black(weight);
+  for (int p = 1; pg && p < sc->pages; p++) lit |= !col_is_black(pg->weight[p - 1]);
+  if (!(bs->pdf > 0) || !lit) return false;
   vec3 wo_world = frame_to_world(&si->sh, bs->wo);
   if (pl) {
     mueller P[3];
@@ -560,17 +635,25 @@ static bool shade_continue(const integrator *it, const scene *sc, sampler_state 
   }
   l->ray = spawn_ray(si, wo_world);
   l->T = col_mul(l->T, weight);
+  /* A bundle of pages: the roulette on the largest throughput of any page. */
+  double tmax = col_max(l->T);
+  for (int p = 1; pg && p < sc->pages; p++) {
+    pg->T[p - 1] = col_mul(pg->T[p - 1], pg->weight[p - 1]);
+    tmax = fmax(tmax, col_max(pg->T[p - 1]));
+  }
   l->eta *= bs->eta;
   l->prev_si = *si;
   l->prev_pdf = bs->pdf;
   l->prev_delta = (bs->sampled_type & BSDF_DELTA) != 0;
   l->depth++;
   if (l->depth >= it->rr_depth) {
-    double q = fmin(col_max(l->T) * l->eta * l->eta, 0.95);
+    double q = fmin(tmax * l->eta * l->eta, 0.95);
     if (!(sops->next_1d(st) < q)) return false;
     l->T = col_scale(l->T, 1.0 / q);
+    for (int p = 1; pg && p < sc->pages; p++) pg->T[p - 1] = col_scale(pg->T[p - 1], 1.0 / q);
+    tmax /= q;
   }
-  return col_max(l->T) > 0;
+  return tmax > 0;
 }
 
 /* Scratch for a wave of n lanes: the lanes, two index lists and the
@@ -578,6 +661,7 @@ static bool shade_continue(const integrator *it, const scene *sc, sampler_state 
 typedef struct wave_scratch {
   lane *ln;
   pol_lane *pol; /* the polarized variants' payload, per lane (else NULL) */
+  page_lane *pg; /* a bundle of pages: pages 1.., per lane (else NULL) */
   int *idx, *sh, *ek, *ord;
   double *d1;
   vec2 *d2;
@@ -588,10 +672,18 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
                      render_stats *stats, color *L, double *quv, const wave_scratch *ws) {
   lane *ln = ws->ln;
   pol_lane *pol = ws->pol;
+  page_lane *pgs = ws->pg;
   int *idx = ws->idx, *sh = ws->sh;
-  const int qs = scene_quv_stride(sc);
+  const int qs = scene_extra_stride(sc);
   if (quv)
     for (int i = 0; i < qs * n; i++) quv[i] = 0;
+  double *pages_out = pgs ? quv : NULL; /* a bundle's pages 1.. go there, not Stokes values */
+  if (pgs) quv = NULL;
+  for (int i = 0; pgs && i < n; i++)
+    for (int p = 1; p < sc->pages; p++) {
+      pgs[i].T[p - 1] = col1(1);
+      pgs[i].L[p - 1] = col1(0);
+    }
   if (pol)
     for (int i = 0; i < n; i++) pol_start(&pol[i], rays[i].d, pol_channels(sc));
   for (int i = 0; i < n; i++) {
@@ -618,22 +710,23 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
     camera = false;
     for (int k = 0; k < n_other; k++) { /* the environment's light; these paths end */
       int i = other[k];
-      shade_emit(it, sc, &ln[i], quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL);
+      shade_emit(it, sc, &ln[i], quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, pgs ? &pgs[i] : NULL);
     }
     int next = 0, n_nee = 0, n_sh = 0;
     for (int k = 0; k < n_hit; k++) {
       int i = hits[k];
-      bool keep = shade_emit(it, sc, &ln[i], quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL);
+      bool keep =
+          shade_emit(it, sc, &ln[i], quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, pgs ? &pgs[i] : NULL);
       idx[next] = sh[n_nee] = i;
       next += keep, n_nee += keep & ln[i].nee;
     }
     live = next;
-    wave_light_samples(sc, st, ln, sh, n_nee, &n_sh, ws->d1, ws->d2, ws->ek, ws->ord);
+    wave_light_samples(sc, st, ln, pgs, sh, n_nee, &n_sh, ws->d1, ws->d2, ws->ek, ws->ord);
     if (n_sh) wave_occluded(sc, ln, sh, n_sh, stats, timed);
-    wave_eval_bsdfs(ln, idx, live, sh);
+    wave_eval_bsdfs(sc, ln, pgs, idx, live, sh);
     for (int k = 0; k < live; k++) {
       int i = idx[k];
-      shade_light(sc, &ln[i], quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL);
+      shade_light(sc, &ln[i], quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, pgs ? &pgs[i] : NULL);
     }
     /* The BSDF samples' numbers, lobe then direction, for every lane. */
     if (live) {
@@ -643,17 +736,20 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
         ln[idx[k]].u2 = ws->d2[k];
       }
     }
-    wave_sample_bsdfs(ln, idx, live, sh);
+    wave_sample_bsdfs(sc, ln, pgs, idx, live, sh);
     next = 0;
     for (int k = 0; k < live; k++) { /* whether a BSDF sample failed is unpredictable: no branch */
       int i = idx[k];
-      bool keep = shade_continue(it, sc, &st[i], &ln[i], pol ? &pol[i] : NULL);
+      bool keep = shade_continue(it, sc, &st[i], &ln[i], pol ? &pol[i] : NULL, pgs ? &pgs[i] : NULL);
       idx[next] = i;
       next += keep;
     }
     live = next;
   }
   for (int i = 0; i < n; i++) L[i] = ln[i].L;
+  for (int i = 0; pages_out && i < n; i++)
+    for (int p = 1; p < sc->pages; p++)
+      for (int c = 0; c < 3; c++) pages_out[qs * i + 3 * (p - 1) + c] = pgs[i].L[p - 1].c[c];
   if (pol)
     for (int i = 0; i < n; i++) pol_result(&pol[i], pol_channels(sc), &L[i], quv ? &quv[qs * i] : NULL);
 }
@@ -665,8 +761,9 @@ static bool path_Li_batch(const integrator *it, const scene *sc, sampler_state *
                      .idx = malloc(4 * (size_t)n * sizeof *ws.idx),
                      .d1 = malloc((size_t)n * sizeof *ws.d1),
                      .d2 = malloc((size_t)n * sizeof *ws.d2),
-                     .pol = sc->polarized ? pol_alloc(n, pol_channels(sc)) : NULL};
-  bool ok = ws.ln && ws.idx && ws.d1 && ws.d2 && (ws.pol || !sc->polarized);
+                     .pol = sc->polarized ? pol_alloc(n, pol_channels(sc)) : NULL,
+                     .pg = sc->pages > 1 ? malloc((size_t)n * sizeof *ws.pg) : NULL};
+  bool ok = ws.ln && ws.idx && ws.d1 && ws.d2 && (ws.pol || !sc->polarized) && (ws.pg || sc->pages <= 1);
   if (ok) {
     ws.sh = ws.idx + n;
     ws.ek = ws.idx + 2 * (size_t)n;
@@ -677,6 +774,7 @@ static bool path_Li_batch(const integrator *it, const scene *sc, sampler_state *
   free(ws.idx);
   free(ws.d1);
   free(ws.d2);
+  free(ws.pg);
   pol_free(ws.pol);
   return ok;
 }
@@ -689,6 +787,7 @@ static color path_Li(const integrator *it, const scene *sc, sampler_state *st, r
   vec2 d2[1];
   mueller pm[3];
   pol_lane pl = {.M = pm};
+  page_lane pg;
   wave_scratch ws = {.ln = &ln,
                      .idx = idx,
                      .sh = idx + 1,
@@ -696,12 +795,13 @@ static color path_Li(const integrator *it, const scene *sc, sampler_state *st, r
                      .ord = idx + 3,
                      .d1 = d1,
                      .d2 = d2,
-                     .pol = sc->polarized ? &pl : NULL};
+                     .pol = sc->polarized ? &pl : NULL,
+                     .pg = sc->pages > 1 ? &pg : NULL};
   color L;
-  double q[SCENE_QUV_MAX];
+  double q[SCENE_QUV_MAX > SCENE_EXTRA_MAX ? SCENE_QUV_MAX : SCENE_EXTRA_MAX];
   wave_run(it, sc, st, &ray, 1, stats, &L, quv ? q : NULL, &ws);
-  if (quv)
-    for (int k = 0; k < scene_quv_stride(sc); k++) quv[k] += q[k];
+  if (quv) /* (a bundle's pages: Li_batch alone gives them) */
+    for (int k = 0; k < scene_quv_stride(sc) && sc->pages <= 1; k++) quv[k] += q[k];
   return L;
 }
 
@@ -721,6 +821,7 @@ static rsw_status path_create(loader *ld, node *n, object **out) {
   }
   it->max_depth = (int)md;
   it->rr_depth = (int)rr;
+  it->pages = true;
   *out = &it->base;
   return RSW_OK;
 }

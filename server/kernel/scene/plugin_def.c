@@ -8,6 +8,11 @@ void plugin_free_object(object *o) {
   free(o);
 }
 
+bool plugin_pages_any(const object *o) {
+  (void)o;
+  return true;
+}
+
 void *plugin_object_new(size_t size, const plugin *p) {
   object *o = calloc(1, size);
   if (o) o->plugin = p;

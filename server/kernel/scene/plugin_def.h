@@ -27,6 +27,11 @@
 /* The destroy of a plugin whose object owns nothing beyond its record. */
 void plugin_free_object(object *o);
 
+/* plugin.pages saying yes: for a plugin whose prepare() keeps a value per
+ * page (uniform) or holds nothing spectral (a film's pixel format, a
+ * bitmap's variant). */
+bool plugin_pages_any(const object *o);
+
 /* A zeroed record of `size` bytes (a plugin struct whose first member is
  * the class's struct, itself starting with the object header), its
  * header naming plugin p; NULL when out of memory. */

@@ -103,6 +103,7 @@ rsw_status scene_create(loader *ld, node *n, object **out) {
 const plugin plugin_scene = {.name = "scene", .cls = CLS_SCENE, .create = scene_create};
 
 rsw_status scene_prepare(scene *s, const render_ctx *rc, rsw_err *err) {
+  s->pages = rc_pages(rc);
   for (size_t i = 0; i < s->n_objects; i++) {
     object *o = s->objects[i];
     if (o->plugin && o->plugin->prepare) {
@@ -125,6 +126,37 @@ const object *scene_bundle_blocker(const scene *s) {
   for (size_t i = 0; i < s->n_objects; i++) {
     const object *o = s->objects[i];
     if (o->plugin && o->plugin->bundles && !o->plugin->bundles(o)) return o;
+  }
+  return NULL;
+}
+
+const object *scene_page_blocker(const scene *s, const char **why) {
+  if (s->integrator && !s->integrator->pages) {
+    *why = "carries at most three wavelengths per path (the `path` integrator carries more)";
+    return &s->integrator->base;
+  }
+  for (size_t i = 0; i < s->n_objects; i++) {
+    const object *o = s->objects[i];
+    const plugin *pl = o->plugin;
+    if (!pl) continue;
+    if (pl->cls == CLS_MEDIUM) {
+      *why = "is a participating medium: media carry at most three wavelengths per path";
+      return o;
+    }
+    if (pl->prepare && !(pl->pages && pl->pages(o))) {
+      *why = "prepares its values at one set of three wavelengths";
+      return o;
+    }
+    /* A delta lobe's weight comes from sample() alone, at one page: only
+     * the index-matched `null` (weight 1 at every wavelength) can carry
+     * pages. */
+    if (pl->cls == CLS_BSDF) {
+      const bsdf *b = (const bsdf *)o;
+      if ((b->flags & BSDF_DELTA) && !(b->flags & BSDF_INDEX_MATCHED)) {
+        *why = "has a delta lobe: its sampling differs between a bundle's pages";
+        return o;
+      }
+    }
   }
   return NULL;
 }

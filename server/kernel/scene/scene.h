@@ -52,6 +52,10 @@ bool scene_wavelength_dependent(const scene *s);
 /* The first object that cannot render a spectral bundle (its plugin's
  * `bundles` op says no), or NULL when the scene can. */
 const object *scene_bundle_blocker(const scene *s);
+/* The first object that cannot render a bundle of more than three
+ * wavelengths (pages, render_ctx.bundle > 3), with *why its reason (a
+ * phrase to follow the object's name), or NULL when the scene can. */
+const object *scene_page_blocker(const scene *s, const char **why);
 
 /* Sensor by id, or by decimal index when `id` is all digits. NULL if none. */
 sensor *scene_find_sensor(const scene *s, const char *id, size_t *index_out);

@@ -115,8 +115,8 @@ static void bm_traverse(object *o, param_visitor *v) {
   pv_transform(v, "to_uv", &((bitmap_tex *)o)->to_uv, UPDATE_SPECTRAL, NULL);
 }
 
-DEFINE_PLUGIN(bitmap, CLS_TEXTURE, .destroy = bm_destroy, .prepare = bm_prepare, .ops = &bitmap_ops,
-              .traverse = bm_traverse);
+DEFINE_PLUGIN(bitmap, CLS_TEXTURE, .destroy = bm_destroy, .prepare = bm_prepare, .pages = plugin_pages_any,
+              .ops = &bitmap_ops, .traverse = bm_traverse);
 
 static rsw_status bitmap_create(loader *ld, node *n, object **out) {
   bitmap_tex *b = PLUGIN_NEW(bitmap_tex, bitmap);

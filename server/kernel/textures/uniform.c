@@ -12,16 +12,25 @@ typedef struct uniform_tex {
   texture base;
   spectrum spec; /* owned copy */
   color value;   /* current value (after prepare) */
-  char *where;   /* document location of the property it came from (owned) */
+  /* A bundle of pages (render_ctx.bundle > 3): the value at pages 1.. of
+   * the last such prepare (page 0's is `value`), what eval answers while
+   * rsw_page names one; allocated by the first (owned). */
+  color *page;
+  char *where; /* document location of the property it came from (owned) */
 } uniform_tex;
+
+static inline color uniform_at_page(const uniform_tex *u) {
+  int p = rsw_page;
+  return p ? u->page[p - 1] : u->value;
+}
 
 static color uniform_eval(const texture *t, const surface_interaction *si) {
   (void)si;
-  return ((const uniform_tex *)t)->value;
+  return uniform_at_page((const uniform_tex *)t);
 }
 
 static color uniform_mean(const texture *t) {
-  return ((const uniform_tex *)t)->value;
+  return uniform_at_page((const uniform_tex *)t);
 }
 
 static const texture_ops uniform_ops = {.eval = uniform_eval, .mean = uniform_mean};
@@ -30,12 +39,22 @@ static void uniform_destroy(object *o) {
   uniform_tex *u = (uniform_tex *)o;
   spectrum_free(&u->spec);
   free(u->where);
+  free(u->page);
   free(u);
 }
 
 static rsw_status uniform_prepare(object *o, const render_ctx *rc, rsw_err *err) {
   uniform_tex *u = (uniform_tex *)o;
-  return spectrum_eval(&u->spec, rc, &u->value, err, u->where ? u->where : o->id);
+  const char *where = u->where ? u->where : o->id;
+  render_ctx pc = rc_page(rc, 0);
+  rsw_status st = spectrum_eval(&u->spec, &pc, &u->value, err, where);
+  if (!st && rc_pages(rc) > 1 && !u->page && !(u->page = malloc((RENDER_MAX_PAGES - 1) * sizeof *u->page)))
+    return rsw_fail(err, RSW_ERR_NOMEM, where, "out of memory");
+  for (int p = 1; p < rc_pages(rc) && !st; p++) {
+    pc = rc_page(rc, p);
+    st = spectrum_eval(&u->spec, &pc, &u->page[p - 1], err, where);
+  }
+  return st;
 }
 
 static bool spectrum_copy(spectrum *dst, const spectrum *src);
@@ -53,7 +72,8 @@ static void uniform_traverse(object *o, param_visitor *v) {
 }
 
 DEFINE_PLUGIN(uniform, CLS_TEXTURE, .destroy = uniform_destroy, .prepare = uniform_prepare,
-              .ops = &uniform_ops, .traverse = uniform_traverse, .spectral = uniform_spectral);
+              .ops = &uniform_ops, .traverse = uniform_traverse, .spectral = uniform_spectral,
+              .pages = plugin_pages_any);
 
 static bool spectrum_copy(spectrum *dst, const spectrum *src) {
   *dst = *src;
