@@ -323,6 +323,7 @@ char *service_info_json(service *svc) {
   cJSON_AddNumberToObject(lim, "max_job_contexts", SVC_MAX_JOB_CONTEXTS);
   cJSON_AddNumberToObject(lim, "max_job_renders", SVC_MAX_JOB_RENDERS);
   cJSON_AddNumberToObject(lim, "max_direction_pixels", SVC_MAX_DIRECTION_PIXELS);
+  cJSON_AddNumberToObject(lim, "max_bundle", RENDER_MAX_BUNDLE); /* a job's "bundle" K */
   cJSON_AddNumberToObject(lim, "result_ttl_s", svc->opts.result_ttl_s);
   /* 0: no budget / no cap. */
   cJSON_AddNumberToObject(lim, "max_scene_bytes", (double)svc->opts.max_scene_bytes);

@@ -148,6 +148,7 @@ py "auto takes 16 on the canopy and 3 on the atmosphere, saying why; refusals na
 import sys
 sys.path.insert(0, sys.argv[1]); from job import *
 port = int(sys.argv[2])
+assert call(port, "GET", "/v1")[1]["limits"]["max_bundle"] == 16
 ctx = [{"id": f"w{w}", "wavelength": w} for w in (500, 510, 520, 530)]
 j = submit(port, push(port, sys.argv[3]), {"contexts": ctx, "defaults": {"spp": 2}, "bundle": "auto"})
 assert j["bundle"] == 16 and "bundle_why" not in j, j
