@@ -144,6 +144,7 @@ static void job_free(job *j) {
   if (!j) return;
   for (size_t i = 0; i < j->n_items; i++) {
     cJSON_Delete(j->items[i].params);
+    free(j->items[i].result_json);
     if (j->items[i].has_film) svc_film_free(&j->items[i].film);
   }
   for (size_t i = 0; i < j->n_events; i++) free(j->events[i].json);
@@ -1525,6 +1526,72 @@ rsw_status service_job_delete(service *svc, const char *id, svc_error *e) {
   return RSW_OK;
 }
 
+/* One result of GET results: its object, printed. */
+static char *result_text(const job *j, const render_item *it, unsigned jm) {
+  cJSON *x = cJSON_CreateObject();
+  cJSON_AddStringToObject(x, "context", it->context);
+  cJSON_AddStringToObject(x, "sensor", it->sensor);
+  cJSON_AddStringToObject(x, "state", state_names[it->state]);
+  if (it->wavelength > 0) cJSON_AddNumberToObject(x, "wavelength", it->wavelength);
+  if (it->node) cJSON_AddNumberToObject(x, "node", (double)(it->node - 1));
+  cJSON_AddNumberToObject(x, "seed", (double)it->seed);
+  if (j->coords.n) { /* the context's coords, for plots across the job (the viewer's sweep view) */
+    cJSON *co = cJSON_AddObjectToObject(x, "coords");
+    for (size_t k = 0; k < j->coords.n; k++) {
+      const nc_coord *c = &j->coords.c[k];
+      if (c->is_string)
+        cJSON_AddStringToObject(co, c->name, c->str[it->context_index]);
+      else
+        cJSON_AddNumberToObject(co, c->name, c->num[it->context_index]);
+    }
+  }
+  if (it->has_film || it->on_disk) {
+    cJSON_AddNumberToObject(x, "spp", it->film.img.spp);
+    cJSON_AddNumberToObject(x, "width", it->film.img.width);
+    cJSON_AddNumberToObject(x, "height", it->film.img.height);
+    cJSON *ch = cJSON_AddArrayToObject(x, "channels");
+    const char *names[FILM_MAX_CHANNELS * (1 + FILM_MAX_PLANES)];
+    int nc = film_image_all_channels(&it->film.img, names);
+    for (int c = 0; c < nc; c++) svc_json_push(ch, cJSON_CreateString(names[c]));
+    char href[512];
+    if (it->node)
+      snprintf(href, sizeof href, "/v1/jobs/%s/results/%s/%s?node=%zu", j->id, it->context, it->sensor,
+               it->node - 1);
+    else
+      snprintf(href, sizeof href, "/v1/jobs/%s/results/%s/%s", j->id, it->context, it->sensor);
+    cJSON_AddStringToObject(x, "href", href);
+    if (it->film.img.unresolved_rays)
+      cJSON_AddNumberToObject(x, "unresolved_rays", (double)it->film.img.unresolved_rays);
+  }
+  if (it->error[0]) cJSON_AddStringToObject(x, "error", it->error);
+  return svc_print_json(x, jm);
+}
+
+/* The text of item it's result. An ended render's (succeeded or failed)
+ * is printed once and kept, since its fields no longer change (the key
+ * checks the two that could: the state, and whether a film is there), so
+ * that a client that polls GET results while a job runs (`raysweep sweep
+ * --spread` does, about 16 times a job) costs a copy per result, not a
+ * cJSON object built and printed each time, nor svc->lock held meanwhile
+ * against the render thread's item_done. svc->lock held; NULL when out
+ * of memory. */
+static const char *result_text_kept(const job *j, render_item *it, unsigned jm, char **tmp) {
+  unsigned key = (unsigned)it->state << 1 | (it->has_film || it->on_disk);
+  if (it->result_json && it->result_key == key) return it->result_json;
+  char *t = result_text(j, it, jm);
+  if (t && (it->state == JOB_SUCCEEDED || it->state == JOB_FAILED)) {
+    free(it->result_json);
+    it->result_json = t;
+    it->result_key = key;
+    return t;
+  }
+  *tmp = t;
+  return t;
+}
+
+/* GET results: {"job", "state", "results": [...], and with bands "bands"
+ * and "band_results"}, the same text cJSON would print for the whole
+ * object, put together from the results' texts. */
 rsw_status service_job_results(service *svc, const char *id, char **json_out, svc_error *e) {
   unsigned jm = svc_json_mark();
   pthread_mutex_lock(&svc->lock);
@@ -1536,50 +1603,37 @@ rsw_status service_job_results(service *svc, const char *id, char **json_out, sv
   cJSON *o = cJSON_CreateObject();
   cJSON_AddStringToObject(o, "job", j->id);
   cJSON_AddStringToObject(o, "state", state_names[j->state]);
-  cJSON *a = cJSON_AddArrayToObject(o, "results");
-  for (size_t i = 0; i < j->n_items; i++) {
-    const render_item *it = &j->items[i];
-    cJSON *x = cJSON_CreateObject();
-    cJSON_AddStringToObject(x, "context", it->context);
-    cJSON_AddStringToObject(x, "sensor", it->sensor);
-    cJSON_AddStringToObject(x, "state", state_names[it->state]);
-    if (it->wavelength > 0) cJSON_AddNumberToObject(x, "wavelength", it->wavelength);
-    if (it->node) cJSON_AddNumberToObject(x, "node", (double)(it->node - 1));
-    cJSON_AddNumberToObject(x, "seed", (double)it->seed);
-    if (j->coords.n) { /* the context's coords, for plots across the job (the viewer's sweep view) */
-      cJSON *co = cJSON_AddObjectToObject(x, "coords");
-      for (size_t k = 0; k < j->coords.n; k++) {
-        const nc_coord *c = &j->coords.c[k];
-        if (c->is_string)
-          cJSON_AddStringToObject(co, c->name, c->str[it->context_index]);
-        else
-          cJSON_AddNumberToObject(co, c->name, c->num[it->context_index]);
-      }
-    }
-    if (it->has_film || it->on_disk) {
-      cJSON_AddNumberToObject(x, "spp", it->film.img.spp);
-      cJSON_AddNumberToObject(x, "width", it->film.img.width);
-      cJSON_AddNumberToObject(x, "height", it->film.img.height);
-      cJSON *ch = cJSON_AddArrayToObject(x, "channels");
-      const char *names[FILM_MAX_CHANNELS * (1 + FILM_MAX_PLANES)];
-      int nc = film_image_all_channels(&it->film.img, names);
-      for (int c = 0; c < nc; c++) svc_json_push(ch, cJSON_CreateString(names[c]));
-      char href[512];
-      if (it->node)
-        snprintf(href, sizeof href, "/v1/jobs/%s/results/%s/%s?node=%zu", j->id, it->context, it->sensor,
-                 it->node - 1);
-      else
-        snprintf(href, sizeof href, "/v1/jobs/%s/results/%s/%s", j->id, it->context, it->sensor);
-      cJSON_AddStringToObject(x, "href", href);
-      if (it->film.img.unresolved_rays)
-        cJSON_AddNumberToObject(x, "unresolved_rays", (double)it->film.img.unresolved_rays);
-    }
-    if (it->error[0]) cJSON_AddStringToObject(x, "error", it->error);
-    svc_json_push(a, x);
+  char *head = svc_print_json(o, jm), *tail = NULL;
+  if (j->bands) {
+    cJSON *b = cJSON_CreateObject();
+    svc_bands_results_json(j, b);
+    tail = svc_print_json(b, jm);
   }
-  if (j->bands) svc_bands_results_json(j, o);
+  svc_buf out = svc_buf_make(0);
+  if (!head || (j->bands && !tail)) out.failed = true;
+  if (head) svc_buf_append(&out, head, strlen(head) - 1); /* without its '}' */
+  svc_buf_append(&out, ",\"results\":[", 12);
+  for (size_t i = 0; i < j->n_items && !out.failed; i++) {
+    char *tmp = NULL;
+    const char *t = result_text_kept(j, &j->items[i], jm, &tmp);
+    if (!t) out.failed = true;
+    if (i) svc_buf_append(&out, ",", 1);
+    if (t) svc_buf_append(&out, t, strlen(t));
+    free(tmp);
+  }
+  svc_buf_append(&out, "]", 1);
+  if (tail) { /* ,"bands":[...],"band_results":[...]} */
+    svc_buf_append(&out, ",", 1);
+    svc_buf_append(&out, tail + 1, strlen(tail + 1));
+  } else {
+    svc_buf_append(&out, "}", 1);
+  }
   pthread_mutex_unlock(&svc->lock);
-  return svc_json_out(json_out, o, jm, e);
+  free(head);
+  free(tail);
+  *json_out = svc_buf_take(&out);
+  if (*json_out) return RSW_OK;
+  return svc_fail(e, RSW_ERR_NOMEM, "", "out of memory while building the answer");
 }
 
 rsw_status service_job_result(service *svc, const char *id, const char *context, const char *sensor_id,
