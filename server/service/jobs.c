@@ -150,6 +150,7 @@ static void job_free(job *j) {
   for (size_t i = 0; i < j->n_events; i++) free(j->events[i].json);
   free(j->events);
   free(j->items);
+  free(j->by_name);
   free(j->context_remaining);
   free(j->idem_key);
   nc_coords_free(&j->coords);
@@ -1636,6 +1637,47 @@ rsw_status service_job_results(service *svc, const char *id, char **json_out, sv
   return svc_fail(e, RSW_ERR_NOMEM, "", "out of memory while building the answer");
 }
 
+/* Item order for find_item_locked: by context, sensor, then job order. */
+static int item_name_cmp(const void *pa, const void *pb, void *arg) {
+  const render_item *items = arg;
+  size_t a = *(const size_t *)pa, b = *(const size_t *)pb;
+  int c = strcmp(items[a].context, items[b].context);
+  if (!c) c = strcmp(items[a].sensor, items[b].sensor);
+  return c ? c : (a > b) - (a < b);
+}
+
+/* The index in j->items of the first render (in the job's order) of
+ * context and sensor, or SIZE_MAX. A sorted index of the items is built at
+ * the first lookup (items never change their names after planning), so
+ * fetching every film of a job of n renders costs n log n string
+ * compares, not n^2 / 2. Without memory for it, a linear scan. svc->lock
+ * held. */
+static size_t find_item_locked(job *j, const char *context, const char *sensor_id) {
+  if (!j->by_name && j->n_items > 8 && (j->by_name = malloc(j->n_items * sizeof *j->by_name))) {
+    for (size_t i = 0; i < j->n_items; i++) j->by_name[i] = i;
+    qsort_r(j->by_name, j->n_items, sizeof *j->by_name, item_name_cmp, j->items);
+  }
+  if (!j->by_name) {
+    for (size_t i = 0; i < j->n_items; i++)
+      if (strcmp(j->items[i].context, context) == 0 && strcmp(j->items[i].sensor, sensor_id) == 0) return i;
+    return SIZE_MAX;
+  }
+  size_t lo = 0, hi = j->n_items; /* first entry not below (context, sensor) */
+  while (lo < hi) {
+    size_t mid = lo + (hi - lo) / 2;
+    const render_item *it = &j->items[j->by_name[mid]];
+    int c = strcmp(it->context, context);
+    if (!c) c = strcmp(it->sensor, sensor_id);
+    if (c < 0)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  if (lo == j->n_items) return SIZE_MAX;
+  const render_item *it = &j->items[j->by_name[lo]];
+  return strcmp(it->context, context) == 0 && strcmp(it->sensor, sensor_id) == 0 ? j->by_name[lo] : SIZE_MAX;
+}
+
 rsw_status service_job_result(service *svc, const char *id, const char *context, const char *sensor_id,
                               svc_film *out, svc_error *e) {
   const char *sensor_name = sensor_id;
@@ -1653,9 +1695,9 @@ rsw_status service_job_result(service *svc, const char *id, const char *context,
                     "list both",
                     id);
   }
-  for (size_t i = 0; i < j->n_items; i++) {
+  size_t i = find_item_locked(j, context, sensor_name);
+  if (i != SIZE_MAX) {
     const render_item *it = &j->items[i];
-    if (strcmp(it->context, context) != 0 || strcmp(it->sensor, sensor_name) != 0) continue;
     if (!it->has_film && it->on_disk) {
       /* Beyond the memory cap or restored: read from the state directory. */
       svc_film_ref ref;
@@ -1730,12 +1772,9 @@ rsw_status service_job_result_npy_fd(service *svc, const char *id, const char *c
   }
   svc_film_ref ref;
   size_t k = SIZE_MAX;
-  for (size_t i = 0; i < j->n_items && !j->bands; i++) { /* bands: service_job_band_result */
-    const render_item *it = &j->items[i];
-    if (strcmp(it->context, context) != 0 || strcmp(it->sensor, sensor_id) != 0) continue;
-    if (it->on_disk) k = i;
-    break;
-  }
+  size_t i =
+      j->bands ? SIZE_MAX : find_item_locked(j, context, sensor_id); /* bands: service_job_band_result */
+  if (i != SIZE_MAX && j->items[i].on_disk) k = i;
   if (k != SIZE_MAX) svc_film_ref_set(&ref, j, k);
   pthread_mutex_unlock(&svc->lock);
   /* Deleted meanwhile: -1, and the in-memory path answers. */

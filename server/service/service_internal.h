@@ -151,6 +151,7 @@ typedef struct job {
   char created_iso[32], started_iso[32], finished_iso[32];
   render_item *items;
   size_t n_items, items_done, items_failed;
+  size_t *by_name; /* items sorted by context and sensor, built at the first lookup (jobs.c) */
   size_t n_contexts;
   size_t *context_remaining; /* renders left per context */
   size_t contexts_done;
