@@ -37,7 +37,8 @@ typedef enum http_body_kind {
  * header values are copied into the fixed fields. */
 typedef struct http_resp {
   int status;
-  const char *content_type; /* static string; NULL with no body */
+  const char *content_type;  /* static string, or content_type_buf; NULL with no body */
+  char content_type_buf[96]; /* one with parameters (multipart/mixed; boundary=...) */
   void *body;
   size_t len;
   char location[512];
