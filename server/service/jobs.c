@@ -1568,25 +1568,21 @@ static char *result_text(const job *j, const render_item *it, unsigned jm) {
   return svc_print_json(x, jm);
 }
 
-/* The text of item it's result. An ended render's (succeeded or failed)
- * is printed once and kept, since its fields no longer change (the key
- * checks the two that could: the state, and whether a film is there), so
- * that a client that polls GET results while a job runs (`raysweep sweep
- * --spread` does, about 16 times a job) costs a copy per result, not a
- * cJSON object built and printed each time, nor svc->lock held meanwhile
- * against the render thread's item_done. svc->lock held; NULL when out
- * of memory. */
-static const char *result_text_kept(const job *j, render_item *it, unsigned jm, char **tmp) {
+/* The text of item it's result, printed once and kept until it changes:
+ * only its state and whether a film is there can change what it says (the
+ * key), so a client that polls GET results while a job runs (`raysweep
+ * sweep --spread` does, about 16 times a job) costs a copy per result, not
+ * a cJSON object built and printed each time, nor svc->lock held that
+ * long against the render thread's item_done. svc->lock held; NULL when
+ * out of memory. */
+static const char *result_text_kept(const job *j, render_item *it, unsigned jm) {
   unsigned key = (unsigned)it->state << 1 | (it->has_film || it->on_disk);
   if (it->result_json && it->result_key == key) return it->result_json;
   char *t = result_text(j, it, jm);
-  if (t && (it->state == JOB_SUCCEEDED || it->state == JOB_FAILED)) {
-    free(it->result_json);
-    it->result_json = t;
-    it->result_key = key;
-    return t;
-  }
-  *tmp = t;
+  if (!t) return NULL;
+  free(it->result_json);
+  it->result_json = t;
+  it->result_key = key;
   return t;
 }
 
@@ -1615,12 +1611,10 @@ rsw_status service_job_results(service *svc, const char *id, char **json_out, sv
   if (head) svc_buf_append(&out, head, strlen(head) - 1); /* without its '}' */
   svc_buf_append(&out, ",\"results\":[", 12);
   for (size_t i = 0; i < j->n_items && !out.failed; i++) {
-    char *tmp = NULL;
-    const char *t = result_text_kept(j, &j->items[i], jm, &tmp);
+    const char *t = result_text_kept(j, &j->items[i], jm);
     if (!t) out.failed = true;
     if (i) svc_buf_append(&out, ",", 1);
     if (t) svc_buf_append(&out, t, strlen(t));
-    free(tmp);
   }
   svc_buf_append(&out, "]", 1);
   if (tail) { /* ,"bands":[...],"band_results":[...]} */

@@ -130,7 +130,7 @@ typedef struct render_item {
   bool on_disk; /* the film's files are in the state directory; when
                       !has_film, film.img holds its header (no data) */
   char error[600];
-  char *result_json;   /* its result's text in GET results, once the render ended (jobs.c) */
+  char *result_json;   /* its result's text in GET results, kept (jobs.c result_text_kept) */
   unsigned result_key; /* what that text was printed from: state, film there */
 } render_item;
 
