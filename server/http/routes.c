@@ -31,6 +31,7 @@ void http_resp_clear(http_resp *resp) {
   resp->has_fd = false;
   resp->len = 0;
   resp->content_type = NULL;
+  resp->content_type_full[0] = '\0';
 }
 
 /* A problem body could not even be allocated: answer the status bare. */
@@ -633,9 +634,9 @@ static void h_job_results_fetch(http_req *r) {
   }
   http_resp_clear(&r->resp);
   r->resp.status = 200;
-  snprintf(r->resp.content_type_buf, sizeof r->resp.content_type_buf, "multipart/mixed; boundary=%s",
+  snprintf(r->resp.content_type_full, sizeof r->resp.content_type_full, "multipart/mixed; boundary=%s",
            boundary);
-  r->resp.content_type = r->resp.content_type_buf;
+  r->resp.content_type = "multipart/mixed";
   r->resp.body = body;
   r->resp.len = len;
 }

@@ -37,8 +37,11 @@ typedef enum http_body_kind {
  * header values are copied into the fixed fields. */
 typedef struct http_resp {
   int status;
-  const char *content_type;  /* static string, or content_type_buf; NULL with no body */
-  char content_type_buf[96]; /* one with parameters (multipart/mixed; boundary=...) */
+  const char *content_type; /* static string; NULL with no body */
+  /* When not empty, the Content-Type sent instead: a value with
+   * parameters (multipart/mixed; boundary=...), kept here since the
+   * response is copied between threads. http_resp_clear empties it. */
+  char content_type_full[96];
   void *body;
   size_t len;
   char location[512];
