@@ -66,7 +66,8 @@ bool client_film_media_type_known(const char *media_type);
  * (contexts[i], sensors[i]), each what rsw_job_fetch_encoded returns;
  * media_type image/x-exr or application/x-npy; 1 <= n <= CLIENT_FETCH_MAX.
  * All or nothing (on failure every bytes_out[i] is NULL). jobs.c. */
-#define CLIENT_FETCH_MAX 32
+#define CLIENT_FETCH_MAX   32
+#define CLIENT_FETCH_BYTES (16.0 * 1024 * 1024) /* a batch's films, about (the daemon takes 64 MiB) */
 rsw_status client_job_fetch_encoded_many(rsw_client *c, const char *job_id, size_t n,
                                          const char *const *contexts, const char *const *sensors,
                                          const char *media_type, void **bytes_out, size_t *len_out);

@@ -504,10 +504,11 @@ static bool to_deliver(const spread *sp, const ctx_result *by, size_t a, size_t 
 
 /* Fetch in one request (POST .../results:fetch) the films of the contexts
  * handed over next, from by[a] on: as many whole contexts as hold at most
- * CLIENT_FETCH_MAX films. pre[i] gets result by[i]'s film; returns the end
- * of the results looked at (by index), a when nothing was fetched (not
- * EXR or NPY, a daemon without the route, any failure: deliver_context
- * then fetches them one by one, and says what failed). */
+ * CLIENT_FETCH_MAX films and about CLIENT_FETCH_BYTES. pre[i] gets result
+ * by[i]'s film; returns the end of the results looked at (by index), a
+ * when nothing was fetched (not EXR or NPY, a daemon without the route,
+ * any failure: deliver_context then fetches them one by one, and says
+ * what failed). */
 static size_t fetch_ahead(shard *sh, rsw_client *c, const ctx_result *by, size_t nres, size_t a, bool early,
                           bool cancelled, fetched *pre) {
   spread *sp = sh->sp;
@@ -515,21 +516,29 @@ static size_t fetch_ahead(shard *sh, rsw_client *c, const ctx_result *by, size_t
   if (!mt || (strcmp(mt, "image/x-exr") != 0 && strcmp(mt, "application/x-npy") != 0)) return a;
   const char *ctx[CLIENT_FETCH_MAX], *sen[CLIENT_FETCH_MAX];
   size_t at[CLIENT_FETCH_MAX], n = 0, end = a;
+  double est = 0; /* the answer's size, about: 4 bytes a sample, 24 a pixel's angles */
   pthread_mutex_lock(&sp->lock);
   for (size_t lo = a, hi; lo < nres; lo = hi) {
     for (hi = lo; hi < nres && by[hi].ci == by[lo].ci; hi++) {}
     size_t m = n;
+    double est_m = est;
+    bool fits = true;
     if (to_deliver(sp, by, lo, hi, early, cancelled))
-      for (size_t i = lo; i < hi; i++) {
-        const char *sensor = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(by[i].r, "sensor"));
-        const char *state = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(by[i].r, "state"));
+      for (size_t i = lo; i < hi && fits; i++) {
+        const cJSON *r = by[i].r;
+        const char *sensor = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "sensor"));
+        const char *state = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "state"));
         if (!sensor || !state || strcmp(state, "succeeded") != 0) continue;
-        if (m == CLIENT_FETCH_MAX) break;
+        est_m += cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(r, "width")) *
+                 cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(r, "height")) *
+                 (4.0 * cJSON_GetArraySize(cJSON_GetObjectItemCaseSensitive(r, "channels")) + 24.0);
+        fits = m < CLIENT_FETCH_MAX && est_m <= CLIENT_FETCH_BYTES; /* (a size not given: NaN, no) */
+        if (!fits) break;
         ctx[m] = client_contexts_id(sp->x, by[i].ci), sen[m] = sensor, at[m] = i;
         m++;
       }
-    if (m == CLIENT_FETCH_MAX && hi - lo > m - n) break; /* this context's films do not fit */
-    n = m, end = hi;
+    if (!fits) break; /* this context's films do not fit: the next batch */
+    n = m, end = hi, est = est_m;
     if (n == CLIENT_FETCH_MAX) break;
   }
   pthread_mutex_unlock(&sp->lock);

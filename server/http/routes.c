@@ -588,7 +588,7 @@ static void h_job_results_fetch(http_req *r) {
   int bl = snprintf(boundary, sizeof boundary, "raysweep-");
   for (int i = 0; i < 16; i++) bl += snprintf(boundary + bl, sizeof boundary - (size_t)bl, "%02x", rnd[i]);
   http_buf out = {.max = FETCH_MAX_BYTES};
-  for (size_t i = 0; i < n; i++) {
+  for (size_t i = 0; i < n && !out.failed; i++) { /* past the cap: stop encoding */
     svc_error e = {0};
     svc_film f;
     memset(&f, 0, sizeof f);
