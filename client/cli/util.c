@@ -218,6 +218,10 @@ int cli_write_file_atomic(const char *path, const char *data, size_t len) {
 }
 
 int cli_mkdirs(const char *path) {
+  /* Most calls make one directory in one that exists (a sweep's context
+   * directory, once per film): one mkdir then, not one per component. */
+  if (mkdir(path, 0777) == 0) return 0;
+  if (errno != ENOENT && errno != EEXIST) return -1;
   char *p = strdup(path);
   if (!p) return -1;
   for (char *s = p + 1;; s++) {

@@ -499,6 +499,121 @@ rsw_status rsw_job_fetch_encoded(rsw_client *c, const char *job_id, const char *
   return RSW_OK;
 }
 
+/* One part of a multipart/mixed answer at *p (end): its headers' Content-Location and
+ * Content-Length, its bytes; *p moves past it. false when malformed. */
+static bool next_part(const char **p, const char *end, const char *dash_boundary, size_t bl, char loc[600],
+                      const char **bytes, size_t *len) {
+  const char *q = *p;
+  if ((size_t)(end - q) < bl + 2 || memcmp(q, dash_boundary, bl) != 0 || memcmp(q + bl, "\r\n", 2) != 0)
+    return false;
+  q += bl + 2;
+  loc[0] = '\0';
+  bool has_len = false;
+  for (;;) { /* header lines up to the empty one */
+    const char *eol = memmem(q, (size_t)(end - q), "\r\n", 2);
+    if (!eol) return false;
+    size_t n = (size_t)(eol - q);
+    if (n == 0) {
+      q = eol + 2;
+      break;
+    }
+    if (n > 16 && strncasecmp(q, "Content-Length: ", 16) == 0) {
+      char num[24];
+      if (n - 16 >= sizeof num) return false;
+      memcpy(num, q + 16, n - 16);
+      num[n - 16] = '\0';
+      char *e;
+      unsigned long long v = strtoull(num, &e, 10);
+      if (*e || e == num) return false;
+      *len = (size_t)v, has_len = true;
+    } else if (n > 18 && strncasecmp(q, "Content-Location: ", 18) == 0 && n - 18 < 600) {
+      memcpy(loc, q + 18, n - 18);
+      loc[n - 18] = '\0';
+    }
+    q = eol + 2;
+  }
+  if (!has_len || (size_t)(end - q) < *len + 2 || memcmp(q + *len, "\r\n", 2) != 0) return false;
+  *bytes = q;
+  *p = q + *len + 2;
+  return true;
+}
+
+rsw_status client_job_fetch_encoded_many(rsw_client *c, const char *job_id, size_t n,
+                                         const char *const *contexts, const char *const *sensors,
+                                         const char *media_type, void **bytes_out, size_t *len_out) {
+  size_t e = film_encoding(media_type);
+  if (e == N_FILM_ENCODINGS || n == 0 || n > CLIENT_FETCH_MAX)
+    return client_fail(c, RSW_ERR_INVALID, "fetch: bad batch");
+  for (size_t i = 0; i < n; i++) bytes_out[i] = NULL, len_out[i] = 0;
+  char path[900];
+  if (!job_path(job_id, "/results:fetch", path, sizeof path))
+    return client_fail(c, RSW_ERR_INVALID, "job id missing or too long");
+  cJSON *req = cJSON_CreateObject();
+  cJSON *a = cJSON_AddArrayToObject(req, "results");
+  for (size_t i = 0; i < n; i++) {
+    cJSON *x = cJSON_CreateObject();
+    cJSON_AddStringToObject(x, "context", contexts[i]);
+    cJSON_AddStringToObject(x, "sensor", sensors[i]);
+    cJSON_AddItemToArray(a, x);
+  }
+  char *body = cJSON_PrintUnformatted(req);
+  cJSON_Delete(req);
+  if (!body) return client_fail(c, RSW_ERR_NOMEM, "out of memory");
+  http_resp r;
+  memset(&r, 0, sizeof r);
+  rsw_status s = http_request(c,
+                              &(http_req){.method = "POST",
+                                          .path = path,
+                                          .content_type = "application/json",
+                                          .body = body,
+                                          .body_len = strlen(body),
+                                          .accept = media_type},
+                              &r);
+  free(body);
+  if (s) return s;
+  /* multipart/mixed; boundary=B: the parts in the order asked for, each
+   * what GET .../results/{context}/{sensor} answers. */
+  const char *bp = strstr(r.content_type, "boundary=");
+  char dash[96];
+  size_t bl = 0;
+  if (strncasecmp(r.content_type, "multipart/mixed", 15) == 0 && bp) {
+    bp += 9;
+    size_t n_b = strcspn(bp, "; \t");
+    if (n_b > 0 && n_b < 70) bl = (size_t)snprintf(dash, sizeof dash, "--%.*s", (int)n_b, bp);
+  }
+  const char *p = r.body, *end = r.body + r.len;
+  for (size_t i = 0; i < n && !s; i++) {
+    char loc[600], want[600], ce[256], se[256];
+    const char *bytes;
+    size_t len = 0;
+    if (!bl || !next_part(&p, end, dash, bl, loc, &bytes, &len)) {
+      s = client_fail(c, RSW_ERR_PARSE, "POST %s: the answer is not the multipart/mixed asked for", path);
+      break;
+    }
+    snprintf(want, sizeof want, "/results/%s/%s", client_escape(contexts[i], ce, sizeof ce) ? ce : "?",
+             client_escape(sensors[i], se, sizeof se) ? se : "?");
+    size_t wl = strlen(want), ll = strlen(loc);
+    if (ll < wl || strcmp(loc + ll - wl, want) != 0 || len < film_encodings[e].magic_len ||
+        memcmp(bytes, film_encodings[e].magic, film_encodings[e].magic_len) != 0) {
+      s = client_fail(c, RSW_ERR_PARSE, "POST %s: part %zu is not the %s of %s/%s", path, i, media_type,
+                      contexts[i], sensors[i]);
+      break;
+    }
+    if (!(bytes_out[i] = malloc(len ? len : 1))) {
+      s = client_fail(c, RSW_ERR_NOMEM, "out of memory");
+      break;
+    }
+    memcpy(bytes_out[i], bytes, len);
+    len_out[i] = len;
+  }
+  if (!s && ((size_t)(end - p) < bl + 2 || memcmp(p, dash, bl) != 0 || memcmp(p + bl, "--", 2) != 0))
+    s = client_fail(c, RSW_ERR_PARSE, "POST %s: the multipart answer does not end as it should", path);
+  if (s)
+    for (size_t i = 0; i < n; i++) free(bytes_out[i]), bytes_out[i] = NULL, len_out[i] = 0;
+  http_resp_free(&r);
+  return s;
+}
+
 /* ---- wait ---------------------------------------------------------------------------- */
 
 /* One server-sent event being assembled (text/event-stream, WHATWG HTML

@@ -336,9 +336,10 @@ static int hand_over(spread *sp, const char *id, const char *sensor, const char 
 }
 
 /* Hand every result of one context to the caller and journal it: rs, the
- * job's nr results of context `id`, in the job's order. */
+ * job's nr results of context `id`, in the job's order; pre (or NULL: each
+ * fetched here) their films fetched already, taken over. */
 static int deliver_context(shard *sh, rsw_client *c, const cJSON *const *rs, size_t nr, const char *id,
-                           size_t cidx, rsw_status *st_out) {
+                           size_t cidx, fetched *pre, rsw_status *st_out) {
   spread *sp = sh->sp;
   cJSON *mine = cJSON_CreateArray();
   fetched *films = NULL;
@@ -362,7 +363,10 @@ static int deliver_context(shard *sh, rsw_client *c, const cJSON *const *rs, siz
     }
     fetched *f = &films[nf++];
     memset(f, 0, sizeof *f);
-    if (state && sensor && strcmp(state, "succeeded") == 0) {
+    if (pre && pre[ri].bytes && state && sensor && strcmp(state, "succeeded") == 0) {
+      *f = pre[ri]; /* fetched with others (fetch_batch): ours now */
+      memset(&pre[ri], 0, sizeof pre[ri]);
+    } else if (state && sensor && strcmp(state, "succeeded") == 0) {
       rsw_status s =
           sp->o->film_media_type
               ? rsw_job_fetch_encoded(c, sh->job, id, sensor, sp->o->film_media_type, &f->bytes, &f->len)
@@ -484,6 +488,68 @@ static int cmp_ctx_result(const void *a, const void *b) {
   return x->order < y->order ? -1 : x->order > y->order;
 }
 
+/* Does the context of results by[a..b) get handed over in this pass: not
+ * delivered yet and, early or cancelled, every render of it succeeded?
+ * (caller holds sp->lock) */
+static bool to_deliver(const spread *sp, const ctx_result *by, size_t a, size_t b, bool early,
+                       bool cancelled) {
+  if (sp->done[by[a].ci]) return false;
+  if (!early && !cancelled) return true;
+  for (size_t i = a; i < b; i++) {
+    const char *state = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(by[i].r, "state"));
+    if (!state || strcmp(state, "succeeded") != 0) return false;
+  }
+  return true;
+}
+
+/* Fetch in one request (POST .../results:fetch) the films of the contexts
+ * handed over next, from by[a] on: as many whole contexts as hold at most
+ * CLIENT_FETCH_MAX films and about CLIENT_FETCH_BYTES. pre[i] gets result
+ * by[i]'s film; returns the end of the results looked at (by index), a
+ * when nothing was fetched (not EXR or NPY, a daemon without the route,
+ * any failure: deliver_context then fetches them one by one, and says
+ * what failed). */
+static size_t fetch_ahead(shard *sh, rsw_client *c, const ctx_result *by, size_t nres, size_t a, bool early,
+                          bool cancelled, fetched *pre) {
+  spread *sp = sh->sp;
+  const char *mt = sp->o->film_media_type;
+  if (!mt || (strcmp(mt, "image/x-exr") != 0 && strcmp(mt, "application/x-npy") != 0)) return a;
+  const char *ctx[CLIENT_FETCH_MAX], *sen[CLIENT_FETCH_MAX];
+  size_t at[CLIENT_FETCH_MAX], n = 0, end = a;
+  double est = 0; /* the answer's size, about: 4 bytes a sample, 24 a pixel's angles */
+  pthread_mutex_lock(&sp->lock);
+  for (size_t lo = a, hi; lo < nres; lo = hi) {
+    for (hi = lo; hi < nres && by[hi].ci == by[lo].ci; hi++) {}
+    size_t m = n;
+    double est_m = est;
+    bool fits = true;
+    if (to_deliver(sp, by, lo, hi, early, cancelled))
+      for (size_t i = lo; i < hi && fits; i++) {
+        const cJSON *r = by[i].r;
+        const char *sensor = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "sensor"));
+        const char *state = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "state"));
+        if (!sensor || !state || strcmp(state, "succeeded") != 0) continue;
+        est_m += cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(r, "width")) *
+                 cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(r, "height")) *
+                 (4.0 * cJSON_GetArraySize(cJSON_GetObjectItemCaseSensitive(r, "channels")) + 24.0);
+        fits = m < CLIENT_FETCH_MAX && est_m <= CLIENT_FETCH_BYTES; /* (a size not given: NaN, no) */
+        if (!fits) break;
+        ctx[m] = client_contexts_id(sp->x, by[i].ci), sen[m] = sensor, at[m] = i;
+        m++;
+      }
+    if (!fits) break; /* this context's films do not fit: the next batch */
+    n = m, end = hi, est = est_m;
+    if (n == CLIENT_FETCH_MAX) break;
+  }
+  pthread_mutex_unlock(&sp->lock);
+  if (n < 2) return a; /* one film: its GET is as cheap */
+  void *bytes[CLIENT_FETCH_MAX];
+  size_t len[CLIENT_FETCH_MAX];
+  if (client_job_fetch_encoded_many(c, sh->job, n, ctx, sen, mt, bytes, len)) return a;
+  for (size_t k = 0; k < n; k++) pre[at[k]].bytes = bytes[k], pre[at[k]].len = len[k];
+  return end;
+}
+
 /* Hand over the contexts of one answer of GET results (text, freed here)
  * that are not delivered yet. early (the job still runs): those whose
  * every render succeeded; otherwise (the job is over) every context,
@@ -525,23 +591,26 @@ static rsw_status hand_results(shard *sh, rsw_client *c, char *text, bool early,
     k++;
   }
   qsort(by, nres, sizeof *by, cmp_ctx_result);
+  /* Films fetched ahead, several contexts' in one request (fetch_ahead),
+   * by index in by; pre_end: the results looked at so far. */
+  fetched *pre = calloc(nres ? nres : 1, sizeof *pre);
+  size_t pre_end = 0;
+  bool batches = pre != NULL;
   rsw_status s = RSW_OK;
   for (size_t a = 0, b; a < nres && !s; a = b) {
     size_t ci = by[a].ci;
     for (b = a; b < nres && by[b].ci == ci; b++) run[b - a] = by[b].r;
     pthread_mutex_lock(&sp->lock);
-    bool d = sp->done[ci];
+    bool go = to_deliver(sp, by, a, b, early, cancelled);
     pthread_mutex_unlock(&sp->lock);
-    if (d) continue;
+    if (!go) continue;
     const char *id = client_contexts_id(sp->x, ci);
-    bool all_ok = true;
-    for (size_t i = 0; i < b - a; i++) {
-      const char *state = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(run[i], "state"));
-      if (!state || strcmp(state, "succeeded") != 0) all_ok = false;
+    if (batches && a >= pre_end) {
+      pre_end = fetch_ahead(sh, c, by, nres, a, early, cancelled, pre);
+      batches = pre_end > a; /* a failure: one by one from here on */
     }
-    if ((early || cancelled) && !all_ok) continue;
     rsw_status fs;
-    if (deliver_context(sh, c, run, b - a, id, ci, &fs)) {
+    if (deliver_context(sh, c, run, b - a, id, ci, a < pre_end ? &pre[a] : NULL, &fs)) {
       set_fatal(sp, RSW_ERR_CANCELLED, "stopped by the film callback");
       s = RSW_ERR_CANCELLED;
       break;
@@ -555,6 +624,8 @@ static rsw_status hand_results(shard *sh, rsw_client *c, char *text, bool early,
       s = fs;
     }
   }
+  for (size_t i = 0; pre && i < nres; i++) free(pre[i].bytes);
+  free(pre);
   free(by);
   free(run);
   cJSON_Delete(res);

@@ -12,7 +12,11 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/random.h>
+#include <time.h>
 #include <unistd.h>
+
+#include <cjson/cJSON.h>
 
 #include "encode.h"
 #include "http.h"
@@ -27,6 +31,7 @@ void http_resp_clear(http_resp *resp) {
   resp->has_fd = false;
   resp->len = 0;
   resp->content_type = NULL;
+  resp->content_type_full[0] = '\0';
 }
 
 /* A problem body could not even be allocated: answer the status bare. */
@@ -498,6 +503,144 @@ static void h_job_result(http_req *r) {
   svc_film_free(&f);
 }
 
+/* POST /v1/jobs/{id}/results:fetch {"results": [{"context", "sensor"}, ...]}:
+ * several films of a job in one answer, multipart/mixed (RFC 2046), each
+ * part the bytes GET .../results/{context}/{sensor} answers with the same
+ * Accept (EXR or NPY), with its Content-Location and Content-Length. A
+ * sweep that fetched its films one request each paid each request's own
+ * cost (the balancer's, the daemon's, the client's) once per film. All or
+ * nothing: a film that is not there answers as its GET would. */
+#define FETCH_MAX_FILMS 256
+#define FETCH_MAX_BYTES ((size_t)64 << 20)
+
+/* s percent-encoded as one path segment (RFC 3986 unreserved kept). */
+static void buf_segment(http_buf *b, const char *s) {
+  for (; *s; s++) {
+    unsigned char ch = (unsigned char)*s;
+    if ((ch >= 'A' && ch <= 'Z') || (ch >= 'a' && ch <= 'z') || (ch >= '0' && ch <= '9') ||
+        strchr("-._~", ch))
+      http_buf_append(b, s, 1);
+    else
+      http_buf_printf(b, "%%%02X", ch);
+  }
+}
+static bool fetch_bad(http_req *r, rsw_status code, const char *ptr, const char *msg) {
+  svc_error e = {0};
+  rsw_fail(&e.err, code, ptr, "%s", msg);
+  http_resp_svc_error(r, &e);
+  return false;
+}
+
+/* The body's (context, sensor) pairs, borrowed from *doc; false when
+ * answered. */
+static bool fetch_list(http_req *r, cJSON **doc, const cJSON *pairs[][2], size_t *n) {
+  *doc = cJSON_ParseWithLength(r->body, r->body_len);
+  if (!cJSON_IsObject(*doc)) return fetch_bad(r, RSW_ERR_PARSE, "", "the body must be a JSON object");
+  for (const cJSON *k = (*doc)->child; k; k = k->next)
+    if (strcmp(k->string, "results") != 0) {
+      char msg[400];
+      snprintf(msg, sizeof msg, "unknown field '%.300s' (expected results)", k->string);
+      char ptr[310];
+      snprintf(ptr, sizeof ptr, "/%.300s", k->string);
+      return fetch_bad(r, RSW_ERR_UNUSED_PROPERTY, ptr, msg);
+    }
+  const cJSON *a = cJSON_GetObjectItemCaseSensitive(*doc, "results");
+  int na = cJSON_GetArraySize(a);
+  if (!cJSON_IsArray(a) || na < 1 || na > FETCH_MAX_FILMS)
+    return fetch_bad(r, RSW_ERR_INVALID, "/results",
+                     "results must be an array of 1 to 256 {\"context\", \"sensor\"} objects");
+  *n = 0;
+  for (const cJSON *x = a->child; x; x = x->next, (*n)++) {
+    char ptr[40];
+    snprintf(ptr, sizeof ptr, "/results/%zu", *n);
+    const cJSON *c = cJSON_GetObjectItemCaseSensitive(x, "context");
+    const cJSON *sn = cJSON_GetObjectItemCaseSensitive(x, "sensor");
+    if (!cJSON_IsObject(x) || cJSON_GetArraySize(x) != 2 || !cJSON_IsString(c) || !cJSON_IsString(sn))
+      return fetch_bad(r, RSW_ERR_INVALID, ptr,
+                       "each result is {\"context\": ID, \"sensor\": ID}, nothing else");
+    pairs[*n][0] = c, pairs[*n][1] = sn;
+  }
+  return true;
+}
+
+static void h_job_results_fetch(http_req *r) {
+  http_film_format fmt = http_accept_film(r->accept);
+  if (fmt != HTTP_FILM_EXR && fmt != HTTP_FILM_NPY) {
+    http_resp_problem(r, 406, NULL, "Accept '%s' allows neither image/x-exr nor application/x-npy",
+                      r->accept);
+    return;
+  }
+  cJSON *doc = NULL;
+  const cJSON *pairs[FETCH_MAX_FILMS][2];
+  size_t n = 0;
+  if (!fetch_list(r, &doc, pairs, &n)) {
+    cJSON_Delete(doc);
+    return;
+  }
+  /* The boundary: random, so that no film's bytes hold it (2^-128). */
+  char boundary[48];
+  unsigned char rnd[16] = {0};
+  if (getrandom(rnd, sizeof rnd, 0) != (ssize_t)sizeof rnd) {
+    struct timespec ts;
+    clock_gettime(CLOCK_REALTIME, &ts);
+    memcpy(rnd, &ts, sizeof ts < sizeof rnd ? sizeof ts : sizeof rnd);
+  }
+  int bl = snprintf(boundary, sizeof boundary, "raysweep-");
+  for (int i = 0; i < 16; i++) bl += snprintf(boundary + bl, sizeof boundary - (size_t)bl, "%02x", rnd[i]);
+  http_buf out = {.max = FETCH_MAX_BYTES};
+  for (size_t i = 0; i < n && !out.failed; i++) { /* past the cap: stop encoding */
+    svc_error e = {0};
+    svc_film f;
+    memset(&f, 0, sizeof f);
+    const char *ctx = pairs[i][0]->valuestring, *sen = pairs[i][1]->valuestring;
+    if (service_job_result(r->svc, r->params[0], ctx, sen, &f, &e) != RSW_OK) {
+      http_buf_free(&out);
+      cJSON_Delete(doc);
+      http_resp_svc_error(r, &e);
+      return;
+    }
+    rsw_err err = {0};
+    void *bytes = NULL;
+    size_t len = 0;
+    rsw_status s =
+        fmt == HTTP_FILM_EXR ? http_film_exr(&f, &bytes, &len, &err) : http_film_npy(&f, &bytes, &len, &err);
+    svc_film_free(&f);
+    if (s != RSW_OK) {
+      char msg[1200];
+      http_buf_free(&out);
+      cJSON_Delete(doc);
+      http_resp_problem(r, 500, rsw_status_name(s), "cannot encode the film: %s",
+                        rsw_err_format(&err, msg, sizeof msg));
+      return;
+    }
+    http_buf_printf(&out, "--%s\r\nContent-Type: %s\r\nContent-Location: /v1/jobs/%s/results/", boundary,
+                    http_film_content_type(fmt), r->params[0]);
+    buf_segment(&out, ctx);
+    http_buf_puts(&out, "/");
+    buf_segment(&out, sen);
+    http_buf_printf(&out, "\r\nContent-Length: %zu\r\n\r\n", len);
+    http_buf_append(&out, bytes, len);
+    http_buf_puts(&out, "\r\n");
+    free(bytes);
+  }
+  cJSON_Delete(doc);
+  http_buf_printf(&out, "--%s--\r\n", boundary);
+  size_t len = 0;
+  char *body = http_buf_take(&out, &len);
+  if (!body) {
+    http_resp_problem(r, 413, "RSW_ERR_LIMIT",
+                      "the films asked for do not fit in one answer (64 MiB): ask for fewer");
+    return;
+  }
+  http_resp_clear(&r->resp);
+  r->resp.status = 200;
+  snprintf(r->resp.content_type_full, sizeof r->resp.content_type_full, "multipart/mixed; boundary=%s",
+           boundary);
+  r->resp.content_type = "multipart/mixed";
+  r->resp.body = body;
+  r->resp.len = len;
+}
+
 /* The job as one NetCDF-4 dataset (application/x-netcdf): 409 while it
  * runs unless ?partial=1. */
 static void h_job_dataset(http_req *r) {
@@ -571,6 +714,7 @@ const http_route http_routes[] = {
     {"GET", "/v1/jobs/{id}/events", HTTP_BODY_NONE, false, h_job_events, false},
     {"GET", "/v1/jobs/{id}/results", HTTP_BODY_NONE, false, h_job_results, false},
     {"GET", "/v1/jobs/{id}/results/{context}/{sensor}", HTTP_BODY_NONE, false, h_job_result, false},
+    {"POST", "/v1/jobs/{id}/results:fetch", HTTP_BODY_JSON, false, h_job_results_fetch, false},
     {"GET", "/v1/jobs/{id}/dataset", HTTP_BODY_NONE, false, h_job_dataset, false},
     {"PUT", "/v1/blobs/{sha256}", HTTP_BODY_RAW, false, h_blob_put, false},
     {"HEAD", "/v1/blobs/{sha256}", HTTP_BODY_NONE, false, h_blob_head, false},

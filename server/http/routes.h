@@ -38,6 +38,10 @@ typedef enum http_body_kind {
 typedef struct http_resp {
   int status;
   const char *content_type; /* static string; NULL with no body */
+  /* When not empty, the Content-Type sent instead: a value with
+   * parameters (multipart/mixed; boundary=...), kept here since the
+   * response is copied between threads. http_resp_clear empties it. */
+  char content_type_full[96];
   void *body;
   size_t len;
   char location[512];

@@ -179,7 +179,9 @@ static void count(http_server *srv, const http_route *rt, int status) {
 }
 
 static void add_headers(struct MHD_Response *mr, const http_resp *resp) {
-  if (resp->content_type) MHD_add_response_header(mr, MHD_HTTP_HEADER_CONTENT_TYPE, resp->content_type);
+  if (resp->content_type)
+    MHD_add_response_header(mr, MHD_HTTP_HEADER_CONTENT_TYPE,
+                            resp->content_type_full[0] ? resp->content_type_full : resp->content_type);
   if (resp->location[0]) MHD_add_response_header(mr, MHD_HTTP_HEADER_LOCATION, resp->location);
   if (resp->etag[0]) MHD_add_response_header(mr, MHD_HTTP_HEADER_ETAG, resp->etag);
   if (resp->allow[0]) MHD_add_response_header(mr, MHD_HTTP_HEADER_ALLOW, resp->allow);

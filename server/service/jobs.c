@@ -144,11 +144,13 @@ static void job_free(job *j) {
   if (!j) return;
   for (size_t i = 0; i < j->n_items; i++) {
     cJSON_Delete(j->items[i].params);
+    free(j->items[i].result_json);
     if (j->items[i].has_film) svc_film_free(&j->items[i].film);
   }
   for (size_t i = 0; i < j->n_events; i++) free(j->events[i].json);
   free(j->events);
   free(j->items);
+  free(j->by_name);
   free(j->context_remaining);
   free(j->idem_key);
   nc_coords_free(&j->coords);
@@ -1555,6 +1557,68 @@ rsw_status service_job_delete(service *svc, const char *id, svc_error *e) {
   return RSW_OK;
 }
 
+/* One result of GET results: its object, printed. */
+static char *result_text(const job *j, const render_item *it, unsigned jm) {
+  cJSON *x = cJSON_CreateObject();
+  cJSON_AddStringToObject(x, "context", it->context);
+  cJSON_AddStringToObject(x, "sensor", it->sensor);
+  cJSON_AddStringToObject(x, "state", state_names[it->state]);
+  if (it->wavelength > 0) cJSON_AddNumberToObject(x, "wavelength", it->wavelength);
+  if (it->node) cJSON_AddNumberToObject(x, "node", (double)(it->node - 1));
+  cJSON_AddNumberToObject(x, "seed", (double)it->seed);
+  if (j->coords.n) { /* the context's coords, for plots across the job (the viewer's sweep view) */
+    cJSON *co = cJSON_AddObjectToObject(x, "coords");
+    for (size_t k = 0; k < j->coords.n; k++) {
+      const nc_coord *c = &j->coords.c[k];
+      if (c->is_string)
+        cJSON_AddStringToObject(co, c->name, c->str[it->context_index]);
+      else
+        cJSON_AddNumberToObject(co, c->name, c->num[it->context_index]);
+    }
+  }
+  if (it->has_film || it->on_disk) {
+    cJSON_AddNumberToObject(x, "spp", it->film.img.spp);
+    cJSON_AddNumberToObject(x, "width", it->film.img.width);
+    cJSON_AddNumberToObject(x, "height", it->film.img.height);
+    cJSON *ch = cJSON_AddArrayToObject(x, "channels");
+    const char *names[FILM_MAX_CHANNELS * (1 + FILM_MAX_PLANES)];
+    int nc = film_image_all_channels(&it->film.img, names);
+    for (int c = 0; c < nc; c++) svc_json_push(ch, cJSON_CreateString(names[c]));
+    char href[512];
+    if (it->node)
+      snprintf(href, sizeof href, "/v1/jobs/%s/results/%s/%s?node=%zu", j->id, it->context, it->sensor,
+               it->node - 1);
+    else
+      snprintf(href, sizeof href, "/v1/jobs/%s/results/%s/%s", j->id, it->context, it->sensor);
+    cJSON_AddStringToObject(x, "href", href);
+    if (it->film.img.unresolved_rays)
+      cJSON_AddNumberToObject(x, "unresolved_rays", (double)it->film.img.unresolved_rays);
+  }
+  if (it->error[0]) cJSON_AddStringToObject(x, "error", it->error);
+  return svc_print_json(x, jm);
+}
+
+/* The text of item it's result, printed once and kept until it changes:
+ * only its state and whether a film is there can change what it says (the
+ * key), so a client that polls GET results while a job runs (`raysweep
+ * sweep --spread` does, about 16 times a job) costs a copy per result, not
+ * a cJSON object built and printed each time, nor svc->lock held that
+ * long against the render thread's item_done. svc->lock held; NULL when
+ * out of memory. */
+static const char *result_text_kept(const job *j, render_item *it, unsigned jm) {
+  unsigned key = (unsigned)it->state << 1 | (it->has_film || it->on_disk);
+  if (it->result_json && it->result_key == key) return it->result_json;
+  char *t = result_text(j, it, jm);
+  if (!t) return NULL;
+  free(it->result_json);
+  it->result_json = t;
+  it->result_key = key;
+  return t;
+}
+
+/* GET results: {"job", "state", "results": [...], and with bands "bands"
+ * and "band_results"}, the same text cJSON would print for the whole
+ * object, put together from the results' texts. */
 rsw_status service_job_results(service *svc, const char *id, char **json_out, svc_error *e) {
   unsigned jm = svc_json_mark();
   pthread_mutex_lock(&svc->lock);
@@ -1566,50 +1630,76 @@ rsw_status service_job_results(service *svc, const char *id, char **json_out, sv
   cJSON *o = cJSON_CreateObject();
   cJSON_AddStringToObject(o, "job", j->id);
   cJSON_AddStringToObject(o, "state", state_names[j->state]);
-  cJSON *a = cJSON_AddArrayToObject(o, "results");
-  for (size_t i = 0; i < j->n_items; i++) {
-    const render_item *it = &j->items[i];
-    cJSON *x = cJSON_CreateObject();
-    cJSON_AddStringToObject(x, "context", it->context);
-    cJSON_AddStringToObject(x, "sensor", it->sensor);
-    cJSON_AddStringToObject(x, "state", state_names[it->state]);
-    if (it->wavelength > 0) cJSON_AddNumberToObject(x, "wavelength", it->wavelength);
-    if (it->node) cJSON_AddNumberToObject(x, "node", (double)(it->node - 1));
-    cJSON_AddNumberToObject(x, "seed", (double)it->seed);
-    if (j->coords.n) { /* the context's coords, for plots across the job (the viewer's sweep view) */
-      cJSON *co = cJSON_AddObjectToObject(x, "coords");
-      for (size_t k = 0; k < j->coords.n; k++) {
-        const nc_coord *c = &j->coords.c[k];
-        if (c->is_string)
-          cJSON_AddStringToObject(co, c->name, c->str[it->context_index]);
-        else
-          cJSON_AddNumberToObject(co, c->name, c->num[it->context_index]);
-      }
-    }
-    if (it->has_film || it->on_disk) {
-      cJSON_AddNumberToObject(x, "spp", it->film.img.spp);
-      cJSON_AddNumberToObject(x, "width", it->film.img.width);
-      cJSON_AddNumberToObject(x, "height", it->film.img.height);
-      cJSON *ch = cJSON_AddArrayToObject(x, "channels");
-      const char *names[FILM_MAX_CHANNELS * (1 + FILM_MAX_PLANES)];
-      int nc = film_image_all_channels(&it->film.img, names);
-      for (int c = 0; c < nc; c++) svc_json_push(ch, cJSON_CreateString(names[c]));
-      char href[512];
-      if (it->node)
-        snprintf(href, sizeof href, "/v1/jobs/%s/results/%s/%s?node=%zu", j->id, it->context, it->sensor,
-                 it->node - 1);
-      else
-        snprintf(href, sizeof href, "/v1/jobs/%s/results/%s/%s", j->id, it->context, it->sensor);
-      cJSON_AddStringToObject(x, "href", href);
-      if (it->film.img.unresolved_rays)
-        cJSON_AddNumberToObject(x, "unresolved_rays", (double)it->film.img.unresolved_rays);
-    }
-    if (it->error[0]) cJSON_AddStringToObject(x, "error", it->error);
-    svc_json_push(a, x);
+  char *head = svc_print_json(o, jm), *tail = NULL;
+  if (j->bands) {
+    cJSON *b = cJSON_CreateObject();
+    svc_bands_results_json(j, b);
+    tail = svc_print_json(b, jm);
   }
-  if (j->bands) svc_bands_results_json(j, o);
+  svc_buf out = svc_buf_make(0);
+  if (!head || (j->bands && !tail)) out.failed = true;
+  if (head) svc_buf_append(&out, head, strlen(head) - 1); /* without its '}' */
+  svc_buf_append(&out, ",\"results\":[", 12);
+  for (size_t i = 0; i < j->n_items && !out.failed; i++) {
+    const char *t = result_text_kept(j, &j->items[i], jm);
+    if (!t) out.failed = true;
+    if (i) svc_buf_append(&out, ",", 1);
+    if (t) svc_buf_append(&out, t, strlen(t));
+  }
+  svc_buf_append(&out, "]", 1);
+  if (tail) { /* ,"bands":[...],"band_results":[...]} */
+    svc_buf_append(&out, ",", 1);
+    svc_buf_append(&out, tail + 1, strlen(tail + 1));
+  } else {
+    svc_buf_append(&out, "}", 1);
+  }
   pthread_mutex_unlock(&svc->lock);
-  return svc_json_out(json_out, o, jm, e);
+  free(head);
+  free(tail);
+  *json_out = svc_buf_take(&out);
+  if (*json_out) return RSW_OK;
+  return svc_fail(e, RSW_ERR_NOMEM, "", "out of memory while building the answer");
+}
+
+/* Item order for find_item_locked: by context, sensor, then job order. */
+static int item_name_cmp(const void *pa, const void *pb, void *arg) {
+  const render_item *items = arg;
+  size_t a = *(const size_t *)pa, b = *(const size_t *)pb;
+  int c = strcmp(items[a].context, items[b].context);
+  if (!c) c = strcmp(items[a].sensor, items[b].sensor);
+  return c ? c : (a > b) - (a < b);
+}
+
+/* The index in j->items of the first render (in the job's order) of
+ * context and sensor, or SIZE_MAX. A sorted index of the items is built at
+ * the first lookup (items never change their names after planning), so
+ * fetching every film of a job of n renders costs n log n string
+ * compares, not n^2 / 2. Without memory for it, a linear scan. svc->lock
+ * held. */
+static size_t find_item_locked(job *j, const char *context, const char *sensor_id) {
+  if (!j->by_name && j->n_items > 8 && (j->by_name = malloc(j->n_items * sizeof *j->by_name))) {
+    for (size_t i = 0; i < j->n_items; i++) j->by_name[i] = i;
+    qsort_r(j->by_name, j->n_items, sizeof *j->by_name, item_name_cmp, j->items);
+  }
+  if (!j->by_name) {
+    for (size_t i = 0; i < j->n_items; i++)
+      if (strcmp(j->items[i].context, context) == 0 && strcmp(j->items[i].sensor, sensor_id) == 0) return i;
+    return SIZE_MAX;
+  }
+  size_t lo = 0, hi = j->n_items; /* first entry not below (context, sensor) */
+  while (lo < hi) {
+    size_t mid = lo + (hi - lo) / 2;
+    const render_item *it = &j->items[j->by_name[mid]];
+    int c = strcmp(it->context, context);
+    if (!c) c = strcmp(it->sensor, sensor_id);
+    if (c < 0)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  if (lo == j->n_items) return SIZE_MAX;
+  const render_item *it = &j->items[j->by_name[lo]];
+  return strcmp(it->context, context) == 0 && strcmp(it->sensor, sensor_id) == 0 ? j->by_name[lo] : SIZE_MAX;
 }
 
 rsw_status service_job_result(service *svc, const char *id, const char *context, const char *sensor_id,
@@ -1629,9 +1719,9 @@ rsw_status service_job_result(service *svc, const char *id, const char *context,
                     "list both",
                     id);
   }
-  for (size_t i = 0; i < j->n_items; i++) {
+  size_t i = find_item_locked(j, context, sensor_name);
+  if (i != SIZE_MAX) {
     const render_item *it = &j->items[i];
-    if (strcmp(it->context, context) != 0 || strcmp(it->sensor, sensor_name) != 0) continue;
     if (!it->has_film && it->on_disk) {
       /* Beyond the memory cap or restored: read from the state directory. */
       svc_film_ref ref;
@@ -1706,12 +1796,9 @@ rsw_status service_job_result_npy_fd(service *svc, const char *id, const char *c
   }
   svc_film_ref ref;
   size_t k = SIZE_MAX;
-  for (size_t i = 0; i < j->n_items && !j->bands; i++) { /* bands: service_job_band_result */
-    const render_item *it = &j->items[i];
-    if (strcmp(it->context, context) != 0 || strcmp(it->sensor, sensor_id) != 0) continue;
-    if (it->on_disk) k = i;
-    break;
-  }
+  size_t i =
+      j->bands ? SIZE_MAX : find_item_locked(j, context, sensor_id); /* bands: service_job_band_result */
+  if (i != SIZE_MAX && j->items[i].on_disk) k = i;
   if (k != SIZE_MAX) svc_film_ref_set(&ref, j, k);
   pthread_mutex_unlock(&svc->lock);
   /* Deleted meanwhile: -1, and the in-memory path answers. */

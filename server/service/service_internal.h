@@ -130,6 +130,8 @@ typedef struct render_item {
   bool on_disk; /* the film's files are in the state directory; when
                       !has_film, film.img holds its header (no data) */
   char error[600];
+  char *result_json;   /* its result's text in GET results, kept (jobs.c result_text_kept) */
+  unsigned result_key; /* what that text was printed from: state, film there */
 } render_item;
 
 typedef struct job_event {
@@ -149,6 +151,7 @@ typedef struct job {
   char created_iso[32], started_iso[32], finished_iso[32];
   render_item *items;
   size_t n_items, items_done, items_failed;
+  size_t *by_name; /* items sorted by context and sensor, built at the first lookup (jobs.c) */
   size_t n_contexts;
   size_t *context_remaining; /* renders left per context */
   size_t contexts_done;

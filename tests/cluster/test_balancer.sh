@@ -5,6 +5,9 @@
 # into a temp directory. Checks, against the same sweep on one daemon:
 #   - `sweep --spread 3` through HAProxy: index.jsonl and every film
 #     bitwise identical; every replica rendered some contexts (/metrics);
+#     films came in batches (POST .../results:fetch); through a HAProxy
+#     that answers those 404 (as replicas without it would), the sweep
+#     fetches film by film and is identical;
 #   - the same through nginx; again (as .npy) while one replica's scene
 #     of the file has been changed there: that replica's shard runs on a
 #     scene in the file's state, and the films are the same;
@@ -110,6 +113,33 @@ b, a = sys.argv[1].split(), sys.argv[2].split()
 d = [int(y) - int(x) for x, y in zip(b, a)]
 assert sum(d) == 60 and min(d) > 0, d' "${before[*]}" "${after[*]}"
 [ -e "$tmp/h/sweep.spread.jsonl" ] && bad "haproxy: the state file is left after a complete sweep" || ok
+
+# ---- films in batches (POST .../results:fetch), and film by film through a
+# balancer that answers it 404, as replicas older than it would ----
+fetches() {
+  local p x n=0
+  for p in "${reps[@]}"; do
+    x=$(curl -s "http://127.0.0.1:$p/metrics" | awk 'index($1, "results:fetch\",status=\"200\"") { print $2 }')
+    n=$((n + ${x:-0}))
+  done
+  echo "$n"
+}
+f0=$(fetches)
+[ "$f0" -gt 0 ] && ok || bad "haproxy: sweep --spread 3 fetched no films in batches (results:fetch 200s: $f0)"
+lb2=$(free_port)
+python3 "$gen" haproxy --listen "127.0.0.1:$lb2" "${rep_args[@]}" --check-interval-ms 200 -o "$tmp/nofetch.cfg"
+sed -i "s|^\(    bind 127.0.0.1:$lb2\)\$|\1\n    http-request deny deny_status 404 if { path_end :fetch }|" "$tmp/nofetch.cfg"
+grep -q "deny_status 404" "$tmp/nofetch.cfg" || bad "could not add the results:fetch refusal to $tmp/nofetch.cfg"
+haproxy -f "$tmp/nofetch.cfg" -db >"$tmp/nofetch.log" 2>&1 &
+nf_pid=$!
+pids+=($nf_pid)
+wait_ready "$lb2" nofetch
+expect 0 "no results:fetch: sweep --spread 3" rsw "http://127.0.0.1:$lb2" sweep "$scene" "${grid[@]}" --spp $spp --spread 3 -o "$tmp/nf"
+same_sweep "no results:fetch (film by film)" "$tmp/nf"
+f1=$(fetches)
+[ "$f1" -eq "$f0" ] && ok || bad "no results:fetch: the replicas still answered $((f1 - f0)) of them"
+kill "$nf_pid"
+wait "$nf_pid" 2>/dev/null
 
 # ---- the balancer stops mid-sweep; restart it and rerun the command ----
 before=($(counts))

@@ -513,6 +513,89 @@ static resp result(const daemon_proc *d, const char *job, const char *ctx, const
   return do_req(d, (req){.path = path, .accept = accept});
 }
 
+/* POST .../results:fetch: several films in one multipart/mixed answer,
+ * each part byte for byte its GET's answer, in the order asked, with its
+ * Content-Location; the refusals. (A job of 2 contexts a, b.2 x 2 sensors
+ * hemi and another, finished.) */
+static void test_results_fetch(const char *job) {
+  static const char *const accepts[] = {"image/x-exr", "application/x-npy"};
+  char path[256];
+  snprintf(path, sizeof path, "/v1/jobs/%s/results:fetch", job);
+  const char *body =
+      "{\"results\": [{\"context\": \"b.2\", \"sensor\": \"hemi\"}, "
+      "{\"context\": \"a\", \"sensor\": \"hemi\"}, {\"context\": \"b.2\", \"sensor\": \"hemi\"}]}";
+  static const char *const order[] = {"b.2", "a", "b.2"};
+  for (int k = 0; k < 2; k++) {
+    resp r = do_req(&main_d, (req){.method = "POST", .path = path, .accept = accepts[k], .body = body});
+    char ct[256];
+    hdr(&r, "Content-Type", ct, sizeof ct);
+    const char *bp = strstr(ct, "boundary=");
+    CHECK(r.status == 200 && starts_with(ct, "multipart/mixed") && bp, "results:fetch %s: %ld %s", accepts[k],
+          r.status, ct);
+    if (r.status != 200 || !bp) {
+      resp_free(&r);
+      continue;
+    }
+    char dash[128];
+    int bl = snprintf(dash, sizeof dash, "--%s", bp + 9);
+    const char *p = r.body, *end = r.body + r.len;
+    for (int i = 0; i < 3; i++) {
+      resp one = result(&main_d, job, order[i], "hemi", accepts[k]);
+      char want[256], head[600];
+      snprintf(want, sizeof want, "Content-Location: /v1/jobs/%s/results/%s/hemi\r\n", job, order[i]);
+      const char *hend = (size_t)(end - p) > (size_t)bl ? strstr(p, "\r\n\r\n") : NULL;
+      size_t hl = hend ? (size_t)(hend - p) : 0;
+      snprintf(head, sizeof head, "%.*s\r\n", (int)(hl < 500 ? hl : 500), p);
+      long n = -1;
+      const char *cl = strstr(head, "Content-Length: ");
+      if (cl) n = strtol(cl + 16, NULL, 10);
+      bool same = hend && strncmp(p, dash, (size_t)bl) == 0 && strstr(head, want) && n == (long)one.len &&
+                  (size_t)(end - hend - 4) >= one.len + 2 && memcmp(hend + 4, one.body, one.len) == 0 &&
+                  memcmp(hend + 4 + one.len, "\r\n", 2) == 0;
+      CHECK(same, "results:fetch %s part %d is GET %s/hemi's %zu bytes: %.300s", accepts[k], i, order[i],
+            one.len, head);
+      resp_free(&one);
+      if (!same) break;
+      p = hend + 4 + n + 2;
+    }
+    CHECK((size_t)(end - p) == (size_t)bl + 4 && strncmp(p, dash, (size_t)bl) == 0 &&
+              strcmp(p + bl, "--\r\n") == 0,
+          "results:fetch %s ends with the closing boundary", accepts[k]);
+    resp_free(&r);
+  }
+  /* Refusals: JSON or PNG asked for, a bad list, a film not there, no such job. */
+  resp r = do_req(&main_d, (req){.method = "POST", .path = path, .accept = "application/json", .body = body});
+  CHECK_PROBLEM(r, 406, "results:fetch as JSON");
+  resp_free(&r);
+  static const char *const bad[][2] = {
+      {"{\"results\": []}", "/results"},
+      {"{\"results\": [{\"context\": \"a\"}]}", "/results/0"},
+      {"{\"results\": [{\"context\": \"a\", \"sensor\": \"hemi\", \"x\": 1}]}", "/results/0"},
+      {"{\"films\": []}", "/films"},
+  };
+  for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+    r = do_req(&main_d, (req){.method = "POST", .path = path, .accept = "image/x-exr", .body = bad[i][0]});
+    cJSON *j = jparse(&r);
+    CHECK(r.status == 422 && jstr_is(j, "pointer", bad[i][1]), "results:fetch %s: %ld %.300s", bad[i][0],
+          r.status, r.body);
+    cJSON_Delete(j);
+    resp_free(&r);
+  }
+  r = do_req(&main_d, (req){.method = "POST",
+                            .path = path,
+                            .accept = "image/x-exr",
+                            .body = "{\"results\": [{\"context\": \"a\", \"sensor\": \"hemi\"}, "
+                                    "{\"context\": \"nosuch\", \"sensor\": \"hemi\"}]}"});
+  CHECK_PROBLEM(r, 404, "results:fetch with a context not in the job");
+  resp_free(&r);
+  r = do_req(&main_d, (req){.method = "POST",
+                            .path = "/v1/jobs/no-such-job/results:fetch",
+                            .accept = "image/x-exr",
+                            .body = "{\"results\": [{\"context\": \"a\", \"sensor\": \"hemi\"}]}"});
+  CHECK_PROBLEM(r, 404, "results:fetch of an unknown job");
+  resp_free(&r);
+}
+
 /* ---- tests: metadata, health, metrics ------------------------------------------- */
 
 static void test_server_info(void) {
@@ -1068,6 +1151,7 @@ static void test_jobs_routes(void) {
   r = result(&main_d, job, "nosuch", "hemi", NULL);
   CHECK_PROBLEM(r, 404, "result of an unknown context");
   resp_free(&r);
+  test_results_fetch(job);
   /* Cancel a finished job: unchanged. */
   snprintf(path, sizeof path, "/v1/jobs/%s:cancel", job);
   r = post_json(&main_d, path, NULL);
