@@ -72,6 +72,7 @@
 
 #include "../accel.h"
 #include "../hit.h"
+#include "../media/layered.h"
 #include "../phase/phase.h"
 #include "../scene/periodic.h"
 #include "../scene/plugin_def.h"
@@ -208,6 +209,7 @@ static const medium *medium_after(const surface_interaction *si, vec3 d, const m
  * outside one, as the hit's normal would say (a box with one medium on
  * both sides changes nothing). */
 typedef struct box_walk {
+  double inv[3];                      /* 1 / d per world axis (where d != 0): media_clip shares it */
   double t[2 * SCENE_NULL_BOXES_MAX]; /* per box: entry, exit (or +inf: missed) */
   double tc;                          /* the last crossing taken */
   int ic;
@@ -216,6 +218,8 @@ typedef struct box_walk {
 static void box_walk_start(const scene *sc, vec3 o, vec3 d, box_walk *w) {
   w->tc = 0.0;
   w->ic = -1;
+  const double dw[3] = {d.x, d.y, d.z};
+  for (int a = 0; a < 3; a++) w->inv[a] = dw[a] != 0.0 ? 1.0 / dw[a] : 0.0;
   for (unsigned i = 0; i < sc->null_boxes.n; i++) {
     const struct scene_null_box *b = &sc->null_boxes.box[i];
     double oo[3], dd[3];
@@ -235,7 +239,7 @@ static void box_walk_start(const scene *sc, vec3 o, vec3 d, box_walk *w) {
         if (oo[a] < lo[a] || oo[a] > hi[a]) tn = INFINITY;
         continue;
       }
-      double inv = 1.0 / dd[a];
+      double inv = b->aligned ? w->inv[a] : 1.0 / dd[a]; /* (the same quotient) */
       double ta = (lo[a] - oo[a]) * inv, tb = (hi[a] - oo[a]) * inv;
       double t0 = ta > tb ? tb : ta, t1 = ta > tb ? ta : tb; /* (selects: no branch on the direction) */
       tn = t0 > tn ? t0 : tn;
@@ -263,6 +267,15 @@ static bool box_walk_next(const scene *sc, box_walk *w, double tend, const mediu
   return true;
 }
 
+/* m's part of segment r: intersect_aabb, or for a layered medium its box
+ * clipped with inv (box_walk's, for r's direction; NULL: none), the same
+ * bit for bit. */
+static bool media_clip(const medium *m, const ray3 *r, const double *inv, double *mint, double *maxt) {
+  if (inv && m->ops == &layered_medium_ops)
+    return media_box_clip_inv(&((const layered_medium *)m)->L.box, r, inv, mint, maxt);
+  return m->ops->intersect_aabb(m, r, mint, maxt);
+}
+
 static int pick_channel(const medium *m, sampler_state *st) {
   if (!m->has_spectral_extinction) return 0;
   int c = (int)(st->s->ops->next_1d(st) * 3.0);
@@ -277,12 +290,12 @@ static bool analytic_in(const volpath_integrator *vp, const medium *m) {
 /* Transmittance of m along r over [tstart, tend] (a shadow ray's segment):
  * exact where analytic, else ratio tracking. */
 static color segment_tr(const volpath_integrator *vp, const medium *m, const ray3 *r, double tstart,
-                        double tend, sampler_state *st) {
+                        double tend, const double *inv, sampler_state *st) {
   ray3 seg = *r;
   seg.tmin = tstart;
   seg.tmax = tend;
   double mint, maxt;
-  if (!m->ops->intersect_aabb(m, &seg, &mint, &maxt)) return col1(1.0);
+  if (!media_clip(m, &seg, inv, &mint, &maxt)) return col1(1.0);
   if (m->ops->transmittance && (analytic_in(vp, m) || m->is_homogeneous))
     return m->ops->transmittance(m, &seg, mint, maxt);
   const sampler_ops *sops = st->s->ops;
@@ -509,7 +522,8 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
       const medium *next = l->sm;
       bool cross = sc->null_boxes.on && box_walk_next(sc, &bw, tend, &next);
       double t1 = cross ? bw.tc : tend;
-      if (l->sm && t1 > t0) l->str = col_mul(l->str, segment_tr(vp, l->sm, &mr, t0, t1, st));
+      if (l->sm && t1 > t0)
+        l->str = col_mul(l->str, segment_tr(vp, l->sm, &mr, t0, t1, sc->null_boxes.on ? bw.inv : NULL, st));
       if (!cross || col_is_black(l->str)) break;
       l->sm = next;
       t0 = t1;
@@ -561,9 +575,10 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
     bool cross = sc->null_boxes.on && box_walk_next(sc, &bw, tend, &next);
     ray3 seg = {l->seg_o, l->ray.d, t0, cross ? bw.tc : tend};
     double mint, maxt;
-    if (m && seg.tmax > seg.tmin && m->ops->intersect_aabb(m, &seg, &mint, &maxt)) {
+    const double *inv = sc->null_boxes.on ? bw.inv : NULL;
+    if (m && seg.tmax > seg.tmin && media_clip(m, &seg, inv, &mint, &maxt)) {
       if (m->absorbing_only) {
-        l->T = col_mul(l->T, segment_tr(vp, m, &seg, seg.tmin, seg.tmax, st));
+        l->T = col_mul(l->T, segment_tr(vp, m, &seg, seg.tmin, seg.tmax, inv, st));
       } else if (analytic_in(vp, m)) {
         int c = pick_channel(m, st);
         color tr, pdf;

@@ -38,6 +38,10 @@ typedef struct media_box {
 } media_box;
 void media_box_init(media_box *b, const xform *to_world);
 bool media_box_clip_at(const media_box *b, const ray3 *r, double *mint, double *maxt);
+/* The same with inv[a] = 1 / r->d[a] (world) wherever r->d[a] != 0,
+ * worked out by the caller once per direction (volpath shares it with its
+ * null boxes' slab test): the same results, bit for bit. */
+bool media_box_clip_inv(const media_box *b, const ray3 *r, const double inv[3], double *mint, double *maxt);
 
 /* Scene-level checks (scene/build.c calls it once the acceleration
  * structure exists): every medium in the document is bounded by a shape
