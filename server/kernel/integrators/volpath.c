@@ -215,7 +215,8 @@ typedef struct box_walk {
   int ic;
 } box_walk;
 
-static void box_walk_start(const scene *sc, vec3 o, vec3 d, box_walk *w) {
+static inline __attribute__((always_inline)) void box_walk_start(const scene *sc, vec3 o, vec3 d,
+                                                                 box_walk *w) {
   w->tc = 0.0;
   w->ic = -1;
   const double dw[3] = {d.x, d.y, d.z};
@@ -251,7 +252,7 @@ static void box_walk_start(const scene *sc, vec3 o, vec3 d, box_walk *w) {
   }
 }
 
-static bool box_walk_next(const scene *sc, box_walk *w, double tend, const medium **m) {
+static inline bool box_walk_next(const scene *sc, box_walk *w, double tend, const medium **m) {
   double best = INFINITY;
   int bi = -1;
   for (int id = 0; id < 2 * (int)sc->null_boxes.n; id++) {
@@ -270,9 +271,11 @@ static bool box_walk_next(const scene *sc, box_walk *w, double tend, const mediu
 /* m's part of segment r: intersect_aabb, or for a layered medium its box
  * clipped with inv (box_walk's, for r's direction; NULL: none), the same
  * bit for bit. */
-static bool media_clip(const medium *m, const ray3 *r, const double *inv, double *mint, double *maxt) {
-  if (inv && m->ops == &layered_medium_ops)
-    return media_box_clip_inv(&((const layered_medium *)m)->L.box, r, inv, mint, maxt);
+static inline bool media_clip(const medium *m, const ray3 *r, const double *inv, double *mint, double *maxt) {
+  if (inv && m->ops == &layered_medium_ops) {
+    const media_box *b = &((const layered_medium *)m)->L.box;
+    if (b->aligned) return media_box_clip_aligned(b, r->o, r->d, r->tmin, r->tmax, inv, mint, maxt);
+  }
   return m->ops->intersect_aabb(m, r, mint, maxt);
 }
 
@@ -296,6 +299,8 @@ static color segment_tr(const volpath_integrator *vp, const medium *m, const ray
   seg.tmax = tend;
   double mint, maxt;
   if (!media_clip(m, &seg, inv, &mint, &maxt)) return col1(1.0);
+  if (m->ops == &layered_medium_ops && vp->analytic) /* (inline: the same code as its op) */
+    return media_layers_transmittance(&((const layered_medium *)m)->L, &seg, mint, maxt);
   if (m->ops->transmittance && (analytic_in(vp, m) || m->is_homogeneous))
     return m->ops->transmittance(m, &seg, mint, maxt);
   const sampler_ops *sops = st->s->ops;
@@ -376,8 +381,7 @@ typedef struct vlane {
   bool prev_delta;
   surface_interaction prev; /* the last scattering vertex (its p), for MIS */
   int depth, crossings;
-  bool hit;
-  surface_interaction si;
+  bool hit; /* (its hit record stays in wave_run's array) */
   /* The shadow ray of this event, while it is being traced. */
   bool sh;
   ray3 sray;
@@ -390,7 +394,7 @@ typedef struct vlane {
 } vlane;
 
 /* Trace lanes idx[0..n) (rays in ln[i].ray for shadow == false, ln[i].sray
- * else): hits into ln[i].hit / ln[i].si (rays) or h / hit flags. */
+ * else): hit flags into hit[k], hits into si[k]. */
 static void wave_trace(const scene *sc, const hit_bounds *hb, vlane *ln, const int *idx, int n, bool shadow,
                        bool coherent, bool *hit, surface_interaction *si, render_stats *stats) {
   enum {
@@ -556,10 +560,9 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
  * scattering event or the surface. Sets up the shadow ray (l->sh) and the
  * next ray. False: the path ends (a pending shadow ray still counts). */
 static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *l,
-                       pol_lane *vq, face_plane *fp) {
+                       surface_interaction *si, pol_lane *vq, face_plane *fp) {
   const integrator *it = &vp->base;
   const sampler_ops *sops = st->s->ops;
-  surface_interaction *si = &l->si;
   bool hit = l->hit;
   const medium *m = l->m;
   l->sh = false;
@@ -582,7 +585,12 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
       } else if (analytic_in(vp, m)) {
         int c = pick_channel(m, st);
         color tr, pdf;
-        m->ops->sample_real(m, &seg, mint, maxt, sops->next_1d(st), c, &mi, &tr, &pdf);
+        double u = sops->next_1d(st);
+        if (m->ops == &layered_medium_ops) /* (inline: the same code as its op) */
+          media_layers_sample_real(&((const layered_medium *)m)->L, m, &seg, mint, maxt, u, c, &mi, &tr,
+                                   &pdf);
+        else
+          m->ops->sample_real(m, &seg, mint, maxt, u, c, &mi, &tr, &pdf);
         double pc = col_mean(pdf);
         scattered = isfinite(mi.t);
         color f = scattered ? col_mul(tr, mi.sigma_s) : tr;
@@ -621,13 +629,17 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
     if (!(it->max_depth < 0 || l->depth + 1 < it->max_depth)) return false;
     const phase *ph = m->phase;
     phase_bind(ph, &mi); /* (NEE and phase sampling look up the point's phase once) */
-    surface_interaction ref = {.p = mi.p, .t = mi.t};
+    /* The vertex MIS weighs later hits against: written in place (the
+     * last one is not needed past this point), and the light sample's
+     * reference. */
+    l->prev = (surface_interaction){.p = mi.p, .t = mi.t};
+    const surface_interaction *ref = &l->prev;
     if (m->sample_emitters && sc->n_emitters > 0) {
       double pe;
       size_t k = pick_emitter(sc, sops->next_1d(st), &pe);
       const emitter *e = sc->emitters[k];
       direction_sample ds;
-      color value = e->ops->sample_direction(e, &ref, sops->next_2d(st), &ds);
+      color value = e->ops->sample_direction(e, ref, sops->next_2d(st), &ds);
       if (ds.pdf > 0 && !col_is_black(value)) {
         double ppdf;
         double pval = ph->ops->eval_pdf(ph, &mi, ds.d, &ppdf);
@@ -665,7 +677,6 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
     }
     l->ray = (ray3){mi.p, wo, 0.0, INFINITY};
     l->seg_o = mi.p;
-    l->prev = ref;
     l->prev_pdf = ppdf;
     l->prev_delta = !m->sample_emitters; /* no light sample taken here: phase sampling's hits count fully */
     l->crossings = 0;
@@ -778,9 +789,8 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
     for (int i = 0; i < n; i++) pol_start(&vq[i], rays[i].d, pol_channels(sc));
   for (int i = 0; i < n; i++) {
     vlane *l = &ln[i];
-    /* Every field but the two surface records (prev, si: 384 bytes that
-     * are written before they are read) and the shadow ray's (start_shadow
-     * sets them). */
+    /* Every field but the surface record prev (192 bytes that are written
+     * before they are read) and the shadow ray's (start_shadow sets them). */
     l->m = NULL;
     l->T = col1(1.0);
     l->L = col1(0.0);
@@ -811,8 +821,8 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
     for (int k = 0; k < live; k++) {
       int i = idx[k];
       ln[i].hit = hit[k];
-      if (hit[k]) ln[i].si = si[k];
-      bool alive = lane_event(vp, sc, &st[i], &ln[i], vq ? &vq[i] : NULL, &fp);
+      bool alive =
+          lane_event(vp, sc, &st[i], &ln[i], &si[k], vq ? &vq[i] : NULL, &fp); /* (si[k]: in place) */
       if (ln[i].sh) sh[n_sh++] = i;
       if (alive) idx[next++] = i;
     }

@@ -42,29 +42,6 @@ void media_box_init(media_box *b, const xform *to_world) {
   }
 }
 
-/* The aligned box's slab test, with inv[a] = 1 / d[a] wherever d[a] != 0. */
-static inline bool clip_aligned(const media_box *b, const ray3 *r, const double inv[3], double *mint,
-                                double *maxt) {
-  double lo = r->tmin, hi = r->tmax;
-  const double o3[3] = {r->o.x, r->o.y, r->o.z}, d3[3] = {r->d.x, r->d.y, r->d.z};
-  for (int a = 0; a < 3; a++) {
-    double b0 = b->lo[a], b1 = b->hi[a];
-    if (d3[a] == 0.0) {
-      if (o3[a] < b0 || o3[a] > b1) return false;
-      continue;
-    }
-    double ta = (b0 - o3[a]) * inv[a], tb = (b1 - o3[a]) * inv[a];
-    /* (selects, not branches: the ray's direction decides them) */
-    double t0 = ta > tb ? tb : ta, t1 = ta > tb ? ta : tb;
-    lo = t0 > lo ? t0 : lo;
-    hi = t1 < hi ? t1 : hi;
-  }
-  if (!(lo < hi)) return false;
-  *mint = lo;
-  *maxt = hi;
-  return true;
-}
-
 bool media_box_clip_at(const media_box *b, const ray3 *r, double *mint, double *maxt) {
   if (b->aligned) {
     /* Axis-aligned box (scale and translation): the slab test in world
@@ -73,7 +50,7 @@ bool media_box_clip_at(const media_box *b, const ray3 *r, double *mint, double *
     if (r->d.x != 0.0) inv[0] = 1.0 / r->d.x;
     if (r->d.y != 0.0) inv[1] = 1.0 / r->d.y;
     if (r->d.z != 0.0) inv[2] = 1.0 / r->d.z;
-    return clip_aligned(b, r, inv, mint, maxt);
+    return media_box_clip_aligned(b, r->o, r->d, r->tmin, r->tmax, inv, mint, maxt);
   }
   double lo = r->tmin, hi = r->tmax;
   vec3 o = xf_inv_point(b->to_world, r->o), d = xf_inv_vector(b->to_world, r->d);
@@ -97,10 +74,6 @@ bool media_box_clip_at(const media_box *b, const ray3 *r, double *mint, double *
   *mint = lo;
   *maxt = hi;
   return true;
-}
-
-bool media_box_clip_inv(const media_box *b, const ray3 *r, const double inv[3], double *mint, double *maxt) {
-  return b->aligned ? clip_aligned(b, r, inv, mint, maxt) : media_box_clip_at(b, r, mint, maxt);
 }
 
 bool media_box_clip(const xform *to_world, const ray3 *r, double *mint, double *maxt) {
