@@ -526,8 +526,18 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
       const medium *next = l->sm;
       bool cross = sc->null_boxes.on && box_walk_next(sc, &bw, tend, &next);
       double t1 = cross ? bw.tc : tend;
-      if (l->sm && t1 > t0)
-        l->str = col_mul(l->str, segment_tr(vp, l->sm, &mr, t0, t1, sc->null_boxes.on ? bw.inv : NULL, st));
+      const double *inv = sc->null_boxes.on ? bw.inv : NULL;
+      if (l->sm && t1 > t0 && vp->analytic && l->sm->ops == &layered_medium_ops) {
+        /* segment_tr's exact case, inline */
+        ray3 seg = {mr.o, mr.d, t0, t1};
+        double mint, maxt;
+        color tr = media_clip(l->sm, &seg, inv, &mint, &maxt)
+                       ? media_layers_transmittance(&((const layered_medium *)l->sm)->L, &seg, mint, maxt)
+                       : col1(1.0);
+        l->str = col_mul(l->str, tr);
+      } else if (l->sm && t1 > t0) {
+        l->str = col_mul(l->str, segment_tr(vp, l->sm, &mr, t0, t1, inv, st));
+      }
       if (!cross || col_is_black(l->str)) break;
       l->sm = next;
       t0 = t1;
