@@ -229,7 +229,7 @@ static inline color media_layers_transmittance(const media_layers *L, const ray3
                                                double maxt) {
   double oz = media_layers_z(L, r->o), dz = media_layers_dz(L, r->d);
   double z0 = oz + mint * dz, z1 = oz + maxt * dz;
-  color tr;
+  color tr = col1(1.0); /* (every channel is set: nc is 1 or 3) */
   int nc = L->nc;
   for (int j = 0; j < nc; j++) tr.c[j] = exp(-media_layers_tau_between(L, j, z0, z1, dz, maxt - mint));
   media_layers_spread(&tr, nc);
