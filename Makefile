@@ -58,6 +58,12 @@ $(BUILD)/obj/client/lib/%.o: CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude -Icommon
 $(BUILD)/obj/client/cli/%.o: CPPFLAGS := $(BASE_CPPFLAGS) -Iinclude -Icommon
 CFLAGS := -std=c11 $(OPT) -g -fno-math-errno $(WARN) $(SANFLAGS) -fPIC
 LDFLAGS := $(SANFLAGS)
+# The volumetric path tracer's per-lane steps at -O3 (they inline into the
+# wave's loop: the atmosphere bench renders ~4% faster). ISO C mode keeps
+# every operation IEEE (no contraction, no reassociation): films are
+# bitwise those of -O2.
+VOLPATH_O3 := $(addprefix $(BUILD)/obj/server/kernel/,integrators/volpath.o media/layered.o media/media.o)
+$(VOLPATH_O3): CFLAGS += -O3
 LIBS := -lembree3 -lOpenEXRCore -lnetcdf -lpng16 -ljpeg -lexpat -lcjson -lpthread -ldl -lm
 DAEMON_LIBS := -lmicrohttpd -lcrypto
 TEST_LIBS := -lcurl -lcrypto

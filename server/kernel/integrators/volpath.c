@@ -72,6 +72,7 @@
 
 #include "../accel.h"
 #include "../hit.h"
+#include "../media/layered.h"
 #include "../phase/phase.h"
 #include "../scene/periodic.h"
 #include "../scene/plugin_def.h"
@@ -208,14 +209,18 @@ static const medium *medium_after(const surface_interaction *si, vec3 d, const m
  * outside one, as the hit's normal would say (a box with one medium on
  * both sides changes nothing). */
 typedef struct box_walk {
+  double inv[3];                      /* 1 / d per world axis (where d != 0): media_clip shares it */
   double t[2 * SCENE_NULL_BOXES_MAX]; /* per box: entry, exit (or +inf: missed) */
   double tc;                          /* the last crossing taken */
   int ic;
 } box_walk;
 
-static void box_walk_start(const scene *sc, vec3 o, vec3 d, box_walk *w) {
+static inline __attribute__((always_inline)) void box_walk_start(const scene *sc, vec3 o, vec3 d,
+                                                                 box_walk *w) {
   w->tc = 0.0;
   w->ic = -1;
+  const double dw[3] = {d.x, d.y, d.z};
+  for (int a = 0; a < 3; a++) w->inv[a] = dw[a] != 0.0 ? 1.0 / dw[a] : 0.0;
   for (unsigned i = 0; i < sc->null_boxes.n; i++) {
     const struct scene_null_box *b = &sc->null_boxes.box[i];
     double oo[3], dd[3];
@@ -235,7 +240,7 @@ static void box_walk_start(const scene *sc, vec3 o, vec3 d, box_walk *w) {
         if (oo[a] < lo[a] || oo[a] > hi[a]) tn = INFINITY;
         continue;
       }
-      double inv = 1.0 / dd[a];
+      double inv = b->aligned ? w->inv[a] : 1.0 / dd[a]; /* (the same quotient) */
       double ta = (lo[a] - oo[a]) * inv, tb = (hi[a] - oo[a]) * inv;
       double t0 = ta > tb ? tb : ta, t1 = ta > tb ? ta : tb; /* (selects: no branch on the direction) */
       tn = t0 > tn ? t0 : tn;
@@ -247,7 +252,7 @@ static void box_walk_start(const scene *sc, vec3 o, vec3 d, box_walk *w) {
   }
 }
 
-static bool box_walk_next(const scene *sc, box_walk *w, double tend, const medium **m) {
+static inline bool box_walk_next(const scene *sc, box_walk *w, double tend, const medium **m) {
   double best = INFINITY;
   int bi = -1;
   for (int id = 0; id < 2 * (int)sc->null_boxes.n; id++) {
@@ -261,6 +266,17 @@ static bool box_walk_next(const scene *sc, box_walk *w, double tend, const mediu
   w->tc = best;
   w->ic = bi;
   return true;
+}
+
+/* m's part of segment r: intersect_aabb, or for a layered medium its box
+ * clipped with inv (box_walk's, for r's direction; NULL: none), the same
+ * bit for bit. */
+static inline bool media_clip(const medium *m, const ray3 *r, const double *inv, double *mint, double *maxt) {
+  if (inv && m->ops == &layered_medium_ops) {
+    const media_box *b = &((const layered_medium *)m)->L.box;
+    if (b->aligned) return media_box_clip_aligned(b, r->o, r->d, r->tmin, r->tmax, inv, mint, maxt);
+  }
+  return m->ops->intersect_aabb(m, r, mint, maxt);
 }
 
 static int pick_channel(const medium *m, sampler_state *st) {
@@ -277,12 +293,14 @@ static bool analytic_in(const volpath_integrator *vp, const medium *m) {
 /* Transmittance of m along r over [tstart, tend] (a shadow ray's segment):
  * exact where analytic, else ratio tracking. */
 static color segment_tr(const volpath_integrator *vp, const medium *m, const ray3 *r, double tstart,
-                        double tend, sampler_state *st) {
+                        double tend, const double *inv, sampler_state *st) {
   ray3 seg = *r;
   seg.tmin = tstart;
   seg.tmax = tend;
   double mint, maxt;
-  if (!m->ops->intersect_aabb(m, &seg, &mint, &maxt)) return col1(1.0);
+  if (!media_clip(m, &seg, inv, &mint, &maxt)) return col1(1.0);
+  if (m->ops == &layered_medium_ops && vp->analytic) /* (inline: the same code as its op) */
+    return media_layers_transmittance(&((const layered_medium *)m)->L, &seg, mint, maxt);
   if (m->ops->transmittance && (analytic_in(vp, m) || m->is_homogeneous))
     return m->ops->transmittance(m, &seg, mint, maxt);
   const sampler_ops *sops = st->s->ops;
@@ -363,8 +381,7 @@ typedef struct vlane {
   bool prev_delta;
   surface_interaction prev; /* the last scattering vertex (its p), for MIS */
   int depth, crossings;
-  bool hit;
-  surface_interaction si;
+  bool hit; /* (its hit record stays in wave_run's array) */
   /* The shadow ray of this event, while it is being traced. */
   bool sh;
   ray3 sray;
@@ -377,7 +394,7 @@ typedef struct vlane {
 } vlane;
 
 /* Trace lanes idx[0..n) (rays in ln[i].ray for shadow == false, ln[i].sray
- * else): hits into ln[i].hit / ln[i].si (rays) or h / hit flags. */
+ * else): hit flags into hit[k], hits into si[k]. */
 static void wave_trace(const scene *sc, const hit_bounds *hb, vlane *ln, const int *idx, int n, bool shadow,
                        bool coherent, bool *hit, surface_interaction *si, render_stats *stats) {
   enum {
@@ -509,7 +526,18 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
       const medium *next = l->sm;
       bool cross = sc->null_boxes.on && box_walk_next(sc, &bw, tend, &next);
       double t1 = cross ? bw.tc : tend;
-      if (l->sm && t1 > t0) l->str = col_mul(l->str, segment_tr(vp, l->sm, &mr, t0, t1, st));
+      const double *inv = sc->null_boxes.on ? bw.inv : NULL;
+      if (l->sm && t1 > t0 && vp->analytic && l->sm->ops == &layered_medium_ops) {
+        /* segment_tr's exact case, inline */
+        ray3 seg = {mr.o, mr.d, t0, t1};
+        double mint, maxt;
+        color tr = media_clip(l->sm, &seg, inv, &mint, &maxt)
+                       ? media_layers_transmittance(&((const layered_medium *)l->sm)->L, &seg, mint, maxt)
+                       : col1(1.0);
+        l->str = col_mul(l->str, tr);
+      } else if (l->sm && t1 > t0) {
+        l->str = col_mul(l->str, segment_tr(vp, l->sm, &mr, t0, t1, inv, st));
+      }
       if (!cross || col_is_black(l->str)) break;
       l->sm = next;
       t0 = t1;
@@ -542,10 +570,9 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
  * scattering event or the surface. Sets up the shadow ray (l->sh) and the
  * next ray. False: the path ends (a pending shadow ray still counts). */
 static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *l,
-                       pol_lane *vq, face_plane *fp) {
+                       surface_interaction *si, pol_lane *vq, face_plane *fp) {
   const integrator *it = &vp->base;
   const sampler_ops *sops = st->s->ops;
-  surface_interaction *si = &l->si;
   bool hit = l->hit;
   const medium *m = l->m;
   l->sh = false;
@@ -561,13 +588,19 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
     bool cross = sc->null_boxes.on && box_walk_next(sc, &bw, tend, &next);
     ray3 seg = {l->seg_o, l->ray.d, t0, cross ? bw.tc : tend};
     double mint, maxt;
-    if (m && seg.tmax > seg.tmin && m->ops->intersect_aabb(m, &seg, &mint, &maxt)) {
+    const double *inv = sc->null_boxes.on ? bw.inv : NULL;
+    if (m && seg.tmax > seg.tmin && media_clip(m, &seg, inv, &mint, &maxt)) {
       if (m->absorbing_only) {
-        l->T = col_mul(l->T, segment_tr(vp, m, &seg, seg.tmin, seg.tmax, st));
+        l->T = col_mul(l->T, segment_tr(vp, m, &seg, seg.tmin, seg.tmax, inv, st));
       } else if (analytic_in(vp, m)) {
         int c = pick_channel(m, st);
         color tr, pdf;
-        m->ops->sample_real(m, &seg, mint, maxt, sops->next_1d(st), c, &mi, &tr, &pdf);
+        double u = sops->next_1d(st);
+        if (m->ops == &layered_medium_ops) /* (inline: the same code as its op) */
+          media_layers_sample_real(&((const layered_medium *)m)->L, m, &seg, mint, maxt, u, c, &mi, &tr,
+                                   &pdf);
+        else
+          m->ops->sample_real(m, &seg, mint, maxt, u, c, &mi, &tr, &pdf);
         double pc = col_mean(pdf);
         scattered = isfinite(mi.t);
         color f = scattered ? col_mul(tr, mi.sigma_s) : tr;
@@ -606,13 +639,17 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
     if (!(it->max_depth < 0 || l->depth + 1 < it->max_depth)) return false;
     const phase *ph = m->phase;
     phase_bind(ph, &mi); /* (NEE and phase sampling look up the point's phase once) */
-    surface_interaction ref = {.p = mi.p, .t = mi.t};
+    /* The vertex MIS weighs later hits against: written in place (the
+     * last one is not needed past this point), and the light sample's
+     * reference. */
+    l->prev = (surface_interaction){.p = mi.p, .t = mi.t};
+    const surface_interaction *ref = &l->prev;
     if (m->sample_emitters && sc->n_emitters > 0) {
       double pe;
       size_t k = pick_emitter(sc, sops->next_1d(st), &pe);
       const emitter *e = sc->emitters[k];
       direction_sample ds;
-      color value = e->ops->sample_direction(e, &ref, sops->next_2d(st), &ds);
+      color value = e->ops->sample_direction(e, ref, sops->next_2d(st), &ds);
       if (ds.pdf > 0 && !col_is_black(value)) {
         double ppdf;
         double pval = ph->ops->eval_pdf(ph, &mi, ds.d, &ppdf);
@@ -650,7 +687,6 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
     }
     l->ray = (ray3){mi.p, wo, 0.0, INFINITY};
     l->seg_o = mi.p;
-    l->prev = ref;
     l->prev_pdf = ppdf;
     l->prev_delta = !m->sample_emitters; /* no light sample taken here: phase sampling's hits count fully */
     l->crossings = 0;
@@ -763,9 +799,8 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
     for (int i = 0; i < n; i++) pol_start(&vq[i], rays[i].d, pol_channels(sc));
   for (int i = 0; i < n; i++) {
     vlane *l = &ln[i];
-    /* Every field but the two surface records (prev, si: 384 bytes that
-     * are written before they are read) and the shadow ray's (start_shadow
-     * sets them). */
+    /* Every field but the surface record prev (192 bytes that are written
+     * before they are read) and the shadow ray's (start_shadow sets them). */
     l->m = NULL;
     l->T = col1(1.0);
     l->L = col1(0.0);
@@ -796,8 +831,8 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
     for (int k = 0; k < live; k++) {
       int i = idx[k];
       ln[i].hit = hit[k];
-      if (hit[k]) ln[i].si = si[k];
-      bool alive = lane_event(vp, sc, &st[i], &ln[i], vq ? &vq[i] : NULL, &fp);
+      bool alive =
+          lane_event(vp, sc, &st[i], &ln[i], &si[k], vq ? &vq[i] : NULL, &fp); /* (si[k]: in place) */
       if (ln[i].sh) sh[n_sh++] = i;
       if (alive) idx[next++] = i;
     }

@@ -97,6 +97,145 @@ static inline int media_layer_of(const media_layers *L, double z) {
   return lo;
 }
 
+/* The tracking over the layers (layered_medium_ops' sample_real,
+ * transmittance and coefficients), inline so that volpath calls them with
+ * the segment's numbers in registers (an out-of-line call reads them back
+ * from the caller's stores, and its results are read back the same way). */
+
+/* C(z), z in layer k. */
+static inline double media_layers_cum_in(const media_layers *L, int c, int k, double z) {
+  double zc = z < 0.0 ? 0.0 : z > 1.0 ? 1.0 : z;
+  const pw_layer *y = &L->lay[k];
+  return y->cum[c] + y->sig[c] * (zc - y->z);
+}
+
+/* tau over [t0, t1] in channel c; z0, z1 the local z at both ends, k0, k1
+ * their layers. */
+static inline double media_layers_tau(const media_layers *L, int c, double z0, double z1, int k0, int k1,
+                                      double dz, double len) {
+  if (k0 == k1) return L->lay[k0].sig[c] * len;
+  return fabs(media_layers_cum_in(L, c, k1, z1) - media_layers_cum_in(L, c, k0, z0)) / fabs(dz);
+}
+
+static inline double media_layers_tau_between(const media_layers *L, int c, double z0, double z1, double dz,
+                                              double len) {
+  return media_layers_tau(L, c, z0, z1, media_layer_of(L, z0), media_layer_of(L, z1), dz, len);
+}
+
+static inline void media_layers_fill(const media_layers *L, int k, medium_interaction *mi) {
+  for (int c = 0; c < 3; c++) {
+    double s = L->lay[k].sig[c];
+    mi->sigma_t.c[c] = s;
+    mi->sigma_s.c[c] = s * L->alb[3 * k + c];
+    mi->sigma_n.c[c] = fmax(mi->majorant.c[c] - s, 0.0);
+  }
+}
+
+static inline void media_layers_coefficients(const media_layers *L, medium_interaction *mi) {
+  media_layers_fill(L, media_layer_of(L, media_layers_z(L, mi->p)), mi);
+}
+
+static inline void media_layers_spread(color *x, int nc) {
+  if (nc == 1) x->c[1] = x->c[2] = x->c[0];
+}
+
+static inline void media_layers_sample_real(const media_layers *L, const medium *m, const ray3 *r,
+                                            double mint, double maxt, double u, int channel,
+                                            medium_interaction *mi, color *tr, color *pdf) {
+  int nc = L->nc;
+  double t0 = mint, t1 = maxt; /* within intersect_aabb's interval (the caller clips) */
+  mi->medium = m;
+  mi->wi = v3_neg(r->d);
+  mi->t = INFINITY;
+  mi->mint = t0;
+  double oz = media_layers_z(L, r->o), dz = media_layers_dz(L, r->d);
+  double z0 = oz + t0 * dz, z1 = oz + t1 * dz;
+  int c = nc == 1 ? 0 : channel;
+  double target = -log1p(-u);
+  int k0 = media_layer_of(L, z0), k1 = media_layer_of(L, z1);
+  double total = media_layers_tau(L, c, z0, z1, k0, k1, dz, t1 - t0);
+  if (!(target < total)) { /* the flight passes the box */
+    for (int j = 0; j < nc; j++)
+      tr->c[j] = j == c ? exp(-total) : exp(-media_layers_tau(L, j, z0, z1, k0, k1, dz, t1 - t0));
+    media_layers_spread(tr, nc);
+    *pdf = *tr;
+    return;
+  }
+  double t;
+  int k;
+  if (k0 == k1) {
+    k = k0;
+    t = t0 + target / L->lay[k].sig[c];
+  } else {
+    /* C* on the side the ray moves to; search the layer that holds it. */
+    double cs =
+        media_layers_cum_in(L, c, k0, z0) + target * dz; /* C moves by tau |d_z| in the ray's z direction */
+    const pw_layer *lay = L->lay;
+    int n = (int)L->n, a = 1, b = n; /* C*'s bucket in the index: layers a - 1 .. b */
+    double f = cs * L->bk_scale[c];
+    if (f >= 0 && f < L->nd) {
+      const uint32_t *bk = L->bk + (size_t)c * (L->n + 1) + (int)f;
+      a = (int)bk[0], b = (int)bk[1];
+    }
+    int lo, hi;
+    if (dz > 0) { /* smallest j in [1, n] with C_j > C*: k = j - 1 */
+      lo = 1, hi = n;
+      /* (j lies in [a, b] when C_{a-1} <= C* < C_b: then search there) */
+      if ((a <= 1 || !(lay[a - 1].cum[c] > cs)) && (b >= n || lay[b].cum[c] > cs)) lo = a, hi = b;
+      while (lo < hi) {
+        int mid = (lo + hi) / 2;
+        if (lay[mid].cum[c] > cs)
+          hi = mid;
+        else
+          lo = mid + 1;
+      }
+      k = lo - 1;
+    } else { /* largest k in [0, n - 1] with C_k < C* */
+      lo = 0, hi = n - 1;
+      /* (k lies in [a', b'] when C_a' < C* (or a' = 0) and C_{b'+1} >= C*
+       * (or b' = n - 1)) */
+      int a1 = a > 2 ? a - 2 : 0, b1 = b < n - 1 ? b : n - 1;
+      if ((a1 == 0 || lay[a1].cum[c] < cs) && (b1 >= n - 1 || !(lay[b1 + 1].cum[c] < cs))) lo = a1, hi = b1;
+      while (lo < hi) {
+        int mid = (lo + hi + 1) / 2;
+        if (lay[mid].cum[c] < cs)
+          lo = mid;
+        else
+          hi = mid - 1;
+      }
+      k = lo;
+    }
+    double s = lay[k].sig[c];
+    double z = lay[k].z + (s > 0 ? (cs - lay[k].cum[c]) / s : 0.0);
+    t = t0 + (z - z0) / dz;
+  }
+  t = fmin(fmax(t, t0), t1);
+  double zt = oz + t * dz;
+  k = media_layer_of(L, zt);
+  mi->t = t;
+  mi->p = v3_fma(r->o, t, r->d);
+  mi->majorant = col(L->lay[k].sig[0], L->lay[k].sig[1], L->lay[k].sig[2]);
+  media_layers_fill(L, k, mi);
+  for (int j = 0; j < nc; j++) {
+    tr->c[j] =
+        j == c ? 1.0 - u : exp(-media_layers_tau_between(L, j, z0, zt, dz, t - t0)); /* exp(-tau*) = 1 - u */
+    pdf->c[j] = tr->c[j] * L->lay[k].sig[j];
+  }
+  media_layers_spread(tr, nc);
+  media_layers_spread(pdf, nc);
+}
+
+static inline color media_layers_transmittance(const media_layers *L, const ray3 *r, double mint,
+                                               double maxt) {
+  double oz = media_layers_z(L, r->o), dz = media_layers_dz(L, r->d);
+  double z0 = oz + mint * dz, z1 = oz + maxt * dz;
+  color tr = col1(1.0); /* (every channel is set: nc is 1 or 3) */
+  int nc = L->nc;
+  for (int j = 0; j < nc; j++) tr.c[j] = exp(-media_layers_tau_between(L, j, z0, z1, dz, maxt - mint));
+  media_layers_spread(&tr, nc);
+  return tr;
+}
+
 /* A layered medium: the plugins' structs start with one of these, and
  * their medium_ops are layered_medium_ops (box clip, majorant,
  * coefficients, exact free flights and transmittance over the layers). */

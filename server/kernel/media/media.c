@@ -43,42 +43,32 @@ void media_box_init(media_box *b, const xform *to_world) {
 }
 
 bool media_box_clip_at(const media_box *b, const ray3 *r, double *mint, double *maxt) {
-  double lo = r->tmin, hi = r->tmax;
   if (b->aligned) {
     /* Axis-aligned box (scale and translation): the slab test in world
      * coordinates, one division per axis. */
-    const double o3[3] = {r->o.x, r->o.y, r->o.z}, d3[3] = {r->d.x, r->d.y, r->d.z};
-    for (int a = 0; a < 3; a++) {
-      double b0 = b->lo[a], b1 = b->hi[a];
-      if (d3[a] == 0.0) {
-        if (o3[a] < b0 || o3[a] > b1) return false;
-        continue;
-      }
-      double inv = 1.0 / d3[a];
-      double ta = (b0 - o3[a]) * inv, tb = (b1 - o3[a]) * inv;
-      /* (selects, not branches: the ray's direction decides them) */
-      double t0 = ta > tb ? tb : ta, t1 = ta > tb ? ta : tb;
-      lo = t0 > lo ? t0 : lo;
-      hi = t1 < hi ? t1 : hi;
+    double inv[3] = {0.0, 0.0, 0.0};
+    if (r->d.x != 0.0) inv[0] = 1.0 / r->d.x;
+    if (r->d.y != 0.0) inv[1] = 1.0 / r->d.y;
+    if (r->d.z != 0.0) inv[2] = 1.0 / r->d.z;
+    return media_box_clip_aligned(b, r->o, r->d, r->tmin, r->tmax, inv, mint, maxt);
+  }
+  double lo = r->tmin, hi = r->tmax;
+  vec3 o = xf_inv_point(b->to_world, r->o), d = xf_inv_vector(b->to_world, r->d);
+  const double oo[3] = {o.x, o.y, o.z}, dd[3] = {d.x, d.y, d.z};
+  for (int a = 0; a < 3; a++) {
+    if (dd[a] == 0.0) {
+      if (oo[a] < 0.0 || oo[a] > 1.0) return false;
+      continue;
     }
-  } else {
-    vec3 o = xf_inv_point(b->to_world, r->o), d = xf_inv_vector(b->to_world, r->d);
-    const double oo[3] = {o.x, o.y, o.z}, dd[3] = {d.x, d.y, d.z};
-    for (int a = 0; a < 3; a++) {
-      if (dd[a] == 0.0) {
-        if (oo[a] < 0.0 || oo[a] > 1.0) return false;
-        continue;
-      }
-      double inv = 1.0 / dd[a];
-      double t0 = (0.0 - oo[a]) * inv, t1 = (1.0 - oo[a]) * inv;
-      if (t0 > t1) {
-        double tmp = t0;
-        t0 = t1;
-        t1 = tmp;
-      }
-      if (t0 > lo) lo = t0;
-      if (t1 < hi) hi = t1;
+    double inv = 1.0 / dd[a];
+    double t0 = (0.0 - oo[a]) * inv, t1 = (1.0 - oo[a]) * inv;
+    if (t0 > t1) {
+      double tmp = t0;
+      t0 = t1;
+      t1 = tmp;
     }
+    if (t0 > lo) lo = t0;
+    if (t1 < hi) hi = t1;
   }
   if (!(lo < hi)) return false;
   *mint = lo;

@@ -38,6 +38,33 @@ typedef struct media_box {
 } media_box;
 void media_box_init(media_box *b, const xform *to_world);
 bool media_box_clip_at(const media_box *b, const ray3 *r, double *mint, double *maxt);
+/* An aligned box's clip of o + t d over [tmin, tmax], with inv[a] = 1 /
+ * d[a] (world) wherever d[a] != 0, worked out by the caller once per
+ * direction (volpath shares it with its null boxes' slab test): what
+ * media_box_clip_at finds, bit for bit (it calls this). Inline, with the
+ * ray's numbers as values: a call that reads them back from memory stalls
+ * on the caller's stores. */
+static inline bool media_box_clip_aligned(const media_box *b, vec3 o, vec3 d, double tmin, double tmax,
+                                          const double inv[3], double *mint, double *maxt) {
+  double lo = tmin, hi = tmax;
+  const double o3[3] = {o.x, o.y, o.z}, d3[3] = {d.x, d.y, d.z};
+  for (int a = 0; a < 3; a++) {
+    double b0 = b->lo[a], b1 = b->hi[a];
+    if (d3[a] == 0.0) {
+      if (o3[a] < b0 || o3[a] > b1) return false;
+      continue;
+    }
+    double ta = (b0 - o3[a]) * inv[a], tb = (b1 - o3[a]) * inv[a];
+    /* (selects, not branches: the ray's direction decides them) */
+    double t0 = ta > tb ? tb : ta, t1 = ta > tb ? ta : tb;
+    lo = t0 > lo ? t0 : lo;
+    hi = t1 < hi ? t1 : hi;
+  }
+  if (!(lo < hi)) return false;
+  *mint = lo;
+  *maxt = hi;
+  return true;
+}
 
 /* Scene-level checks (scene/build.c calls it once the acceleration
  * structure exists): every medium in the document is bounded by a shape

@@ -99,8 +99,29 @@ static double fold(double x, int n, grid_wrap w) {
   return fmod(x, 2.0 * n);
 }
 
+/* A nearest-filtered [1, 1, N] profile (Eradiate's layers, blendphase's
+ * weight) under an affine to_world: its x and y indices are 0 whatever
+ * the point (one cell: every wrap mode gives 0), and xf_inv_point's z is
+ * the inverse's third row applied to p (its w is exactly 1 for a finite
+ * p), so only z is computed; the cell is gridvolume_eval's, bit for bit.
+ * False: not such a grid or point. */
+static bool layer_cell(const gridvolume *g, vec3 p, color *out) {
+  const volume *v = &g->base;
+  const double(*m)[4] = v->to_world.inv;
+  if (g->filter != FILTER_NEAREST || v->res[0] != 1 || v->res[1] != 1 || m[3][0] != 0.0 || m[3][1] != 0.0 ||
+      m[3][2] != 0.0 || m[3][3] != 1.0 || !isfinite(p.x) || !isfinite(p.y) || !isfinite(p.z))
+    return false;
+  int n = (int)v->res[2];
+  double z = m[2][0] * p.x + m[2][1] * p.y + m[2][2] * p.z + m[2][3];
+  double c = fold(z * n, n, g->wrap);
+  *out = cell(v, 0, 0, wrap_index((int)floor(isfinite(c) ? c : 0.0), n, g->wrap));
+  return true;
+}
+
 static color gridvolume_eval(const volume *v, vec3 p) {
   const gridvolume *g = (const gridvolume *)v;
+  color lc;
+  if (layer_cell(g, p, &lc)) return lc;
   vec3 q = xf_inv_point(&v->to_world, p);
   double x[3] = {q.x, q.y, q.z};
   int n[3] = {(int)v->res[0], (int)v->res[1], (int)v->res[2]};

@@ -549,6 +549,70 @@ static void test_layer_index_search(void) {
   }
 }
 
+/* media_box_clip_aligned with the caller's 1 / d (volpath shares its null
+ * boxes') against the slab test as media_box_clip_at did it before (one
+ * division per axis inside the loop, written out here): bit for bit, for
+ * 40,000 random rays from inside, outside and on the box, directions with
+ * zero components among them, over random [tmin, tmax]. */
+static bool ref_clip(const media_box *b, const ray3 *r, double *mint, double *maxt) {
+  double lo = r->tmin, hi = r->tmax;
+  const double o3[3] = {r->o.x, r->o.y, r->o.z}, d3[3] = {r->d.x, r->d.y, r->d.z};
+  for (int a = 0; a < 3; a++) {
+    double b0 = b->lo[a], b1 = b->hi[a];
+    if (d3[a] == 0.0) {
+      if (o3[a] < b0 || o3[a] > b1) return false;
+      continue;
+    }
+    double inv = 1.0 / d3[a];
+    double ta = (b0 - o3[a]) * inv, tb = (b1 - o3[a]) * inv;
+    double t0 = ta > tb ? tb : ta, t1 = ta > tb ? ta : tb;
+    lo = t0 > lo ? t0 : lo;
+    hi = t1 < hi ? t1 : hi;
+  }
+  if (!(lo < hi)) return false;
+  *mint = lo;
+  *maxt = hi;
+  return true;
+}
+
+static void test_box_clip_shared_inverse(void) {
+  xform xf;
+  const double mat[4][4] = {{1e6, 0, 0, -5e5}, {0, 3.5, 0, 2}, {0, 0, 120e3, 0}, {0, 0, 0, 1}};
+  REQUIRE(xf_from_matrix(mat, &xf), "to_world");
+  media_box b;
+  media_box_init(&b, &xf);
+  REQUIRE(b.aligned, "a scale and translation is aligned");
+  pcg32 rng;
+  pcg32_seed(&rng, 5, 26);
+  int differ = 0, met = 0;
+  for (int k = 0; k < 40000; k++) {
+    vec3 o = v3(b.lo[0] + (b.hi[0] - b.lo[0]) * (2 * pcg32_next_double(&rng) - 0.5),
+                b.lo[1] + (b.hi[1] - b.lo[1]) * (2 * pcg32_next_double(&rng) - 0.5),
+                b.lo[2] + (b.hi[2] - b.lo[2]) * (2 * pcg32_next_double(&rng) - 0.5));
+    if (k % 17 == 0) o.z = b.hi[2]; /* on the top */
+    double ct = 2 * pcg32_next_double(&rng) - 1, ph = 2 * PI * pcg32_next_double(&rng),
+           st = sqrt(1 - ct * ct);
+    vec3 d = v3(st * cos(ph), st * sin(ph), ct);
+    if (k % 5 == 0) d.x = 0;
+    if (k % 7 == 0) d.y = 0;
+    if (k % 11 == 0) d = v3(0, 0, k % 2 ? 1 : -1); /* hdistant's nadir rays */
+    ray3 r = {o, d, k % 3 ? 0.0 : 1e4 * pcg32_next_double(&rng),
+              k % 4 ? INFINITY : 1e6 * pcg32_next_double(&rng)};
+    double inv[3] = {d.x != 0 ? 1.0 / d.x : 0.0, d.y != 0 ? 1.0 / d.y : 0.0, d.z != 0 ? 1.0 / d.z : 0.0};
+    double m0 = 0, M0 = 0, m1 = 0, M1 = 0, m2 = 0, M2 = 0;
+    bool a = ref_clip(&b, &r, &m0, &M0);
+    bool c = media_box_clip_aligned(&b, r.o, r.d, r.tmin, r.tmax, inv, &m1, &M1);
+    bool e = media_box_clip_at(&b, &r, &m2, &M2);
+    met += a;
+    if (a != c || a != e || memcmp(&m0, &m1, sizeof m0) || memcmp(&M0, &M1, sizeof M0) ||
+        memcmp(&m0, &m2, sizeof m0) || memcmp(&M0, &M2, sizeof M0))
+      differ++;
+  }
+  printf("  %d of 40000 rays meet the box, %d differ\n", met, differ);
+  CHECK(met > 2000 && met < 38000, "rays both meet and miss the box (%d)", met);
+  CHECK(differ == 0, "%d clips differ from the slab test", differ);
+}
+
 static void test_rgb_chromatic(void) {
   const char *meds[] = {"{\"type\": \"homogeneous\", \"albedo\": 0, \"sigma_t\": [0.2, 0.5, 1.0]}",
                         "{\"type\": \"piecewise\", \"albedo\": 0, \"sigma_t\": {\"type\": \"gridvolume\","
@@ -1014,6 +1078,7 @@ static void test_sensor_in_medium(void) {
 int main(void) {
   RSW_TEST_RUN(test_piecewise_exact_ops);
   RSW_TEST_RUN(test_layer_index_search);
+  RSW_TEST_RUN(test_box_clip_shared_inverse);
   RSW_TEST_RUN(test_beer_lambert_homogeneous);
   RSW_TEST_RUN(test_beer_lambert_heterogeneous_constant);
   RSW_TEST_RUN(test_beer_lambert_piecewise_one_layer);

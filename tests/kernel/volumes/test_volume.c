@@ -10,6 +10,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "../../../server/kernel/core/rng.h"
 #include "../../../server/kernel/scene/param_table.h"
 #include "../../../server/kernel/scene/params.h"
 #include "../../../server/kernel/scene/update.h"
@@ -280,6 +281,86 @@ static void test_grid_wrap_and_box(void) {
             volume_eval_1(z, v3(0, 0, 119)) == 7,
         "layer values by height");
   CHECK(z->bbox_min.z == 0 && z->bbox_max.z == 120 && z->bbox_min.x == -5 && z->bbox_max.y == 5, "box");
+  scene_free(s);
+}
+
+/* A nearest [1, 1, N] profile looks up z alone (gridvolume.c layer_cell):
+ * bit for bit the cell of the general lookup, written out here (the whole
+ * inverse transform, every axis folded and wrapped), for 20,000 random
+ * points inside, around and far outside a rotated, scaled, shifted box,
+ * half of them on a layer's boundary (the world point of local z = j / N,
+ * which lands on either side), in each wrap mode, and for a [2, 1, N] grid (not a profile: the general
+ * path) as a control. */
+static int ref_wrap(int i, int n, int w) {
+  if (w == 0) return i < 0 ? 0 : i >= n ? n - 1 : i;
+  if (w == 1) {
+    i %= n;
+    return i < 0 ? i + n : i;
+  }
+  i %= 2 * n;
+  if (i < 0) i += 2 * n;
+  return i >= n ? 2 * n - 1 - i : i;
+}
+static double ref_fold(double x, int n, int w) {
+  if (fabs(x) < 1e9) return x;
+  if (w == 0) return x < 0 ? -1.0 : (double)n;
+  return fmod(x, 2.0 * n);
+}
+static double ref_nearest(const volume *v, int w, vec3 p) {
+  vec3 q = xf_inv_point(&v->to_world, p);
+  double x[3] = {q.x, q.y, q.z};
+  int i[3];
+  for (int a = 0; a < 3; a++) {
+    int n = (int)v->res[a];
+    double c = ref_fold(x[a] * n, n, w);
+    i[a] = ref_wrap((int)floor(isfinite(c) ? c : 0.0), n, w);
+  }
+  return v->data[((size_t)i[2] * v->res[1] + i[1]) * v->res[0] + i[0]];
+}
+static void test_grid_profile_lookup(void) {
+  enum {
+    N = 37
+  };
+  static const char *wraps[3] = {"clamp", "repeat", "mirror"};
+  sbuf b = {0};
+  sb_printf(&b, "{\"type\": \"scene\"");
+  for (int g = 0; g < 4; g++) {
+    bool two = g == 3; /* [2, 1, N]: the control */
+    sb_printf(&b,
+              ", \"g%d\": {\"type\": \"gridvolume\", \"filter_type\": \"nearest\", \"wrap_mode\": \"%s\", "
+              "\"shape\": [%d, 1, %d], \"data\": [",
+              g, wraps[g % 3], N, two ? 2 : 1);
+    for (int i = 0; i < N * (two ? 2 : 1); i++) sb_printf(&b, "%s%d", i ? ", " : "", i);
+    sb_printf(
+        &b,
+        "], \"to_world\": [{\"scale\": [3, 2, 1200]}, {\"rotate\": {\"axis\": [1, 2, 3], \"angle\": 17}}, "
+        "{\"translate\": [-1.5, 4, 7]}]}");
+  }
+  sb_printf(&b, "}");
+  scene *s = tsup_load(b.p, "mono");
+  free(b.p);
+  REQUIRE(s, "load");
+  pcg32 rng;
+  pcg32_seed(&rng, 7, 26);
+  int differ = 0;
+  for (int g = 0; g < 4; g++) {
+    char id[8];
+    snprintf(id, sizeof id, "g%d", g);
+    volume *v = find_vol(s, id);
+    REQUIRE(v, "%s", id);
+    for (int k = 0; k < 5000; k++) {
+      double r = k % 10 == 0 ? 1e13 : k % 10 == 1 ? 5e3 : 1500.0;
+      vec3 p = v3(r * (2 * pcg32_next_double(&rng) - 1), r * (2 * pcg32_next_double(&rng) - 1),
+                  r * (2 * pcg32_next_double(&rng) - 1));
+      if (k % 2) { /* on a layer's boundary, where a rounding of z moves the point across */
+        double zl = (double)(int)(pcg32_next_double(&rng) * (N + 1)) / N;
+        p = xf_point(&v->to_world, v3(pcg32_next_double(&rng), pcg32_next_double(&rng), zl));
+      }
+      double got = volume_eval_1(v, p), want = ref_nearest(v, g % 3, p);
+      if (memcmp(&got, &want, sizeof got)) differ++;
+    }
+  }
+  CHECK(differ == 0, "%d lookups differ from the general nearest lookup", differ);
   scene_free(s);
 }
 
@@ -638,6 +719,7 @@ int main(void) {
   RSW_TEST_RUN(test_ld_volume_errors);
   RSW_TEST_RUN(test_grid_layout);
   RSW_TEST_RUN(test_grid_wrap_and_box);
+  RSW_TEST_RUN(test_grid_profile_lookup);
   RSW_TEST_RUN(test_grid_channels);
   RSW_TEST_RUN(test_grid_spectral_cells);
   RSW_TEST_RUN(test_grid_vol_file);
