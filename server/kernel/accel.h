@@ -57,6 +57,18 @@ void accel_intersect_packet(const accel *a, const ray3 *const *r, int n, accel_h
                             bool coherent);
 void accel_occluded_packet(const accel *a, const ray3 *const *r, int n, bool *occ);
 
+/* True when ray r (any tmin, tmax) passes the scene's bounding box
+ * (scene.h bbox_min/max) by a clear margin, 2^-14 clip_r (clip_r being
+ * 64 times the bounds' half diagonal): far beyond where Embree's float32
+ * copy of the ray (its origin within clip_r of accel_origin, rounded to
+ * 2^-24 relative, its direction likewise: a lateral error below
+ * 2^-24 * 130 clip_r / 64) or of the geometry can stray, so no query of
+ * r can hit anything: a caller may count it a miss without one. A slab
+ * test in double; false for a ray starting inside the padded box, one
+ * with a NaN, or a NULL structure. Not for periodic scenes (the box is
+ * one cell's). */
+bool accel_misses_bounds(const accel *a, const ray3 *r);
+
 /* ---- ray masks: null boxes the volumetric integrators cross analytically --
  * A top-level shape that may be a box with the `null` BSDF
  * (accel_null_box_candidate: index-matched BSDF, no emitter, a triangle

@@ -180,7 +180,10 @@ static inline bool may_hit(const scene *sc, const ray3 *r, double pad) {
   away |= (r->o.x < sc->bbox_min.x - pad) & (r->d.x <= 0);
   away |= (r->o.y > sc->bbox_max.y + pad) & (r->d.y >= 0);
   away |= (r->o.y < sc->bbox_min.y - pad) & (r->d.y <= 0);
-  return !away;
+  /* Then a full slab test against the box with a clear margin
+   * (accel_misses_bounds): a camera ray that passes the scene by (a third
+   * of the seed scene's) needs no query either. */
+  return !away && !accel_misses_bounds(sc->accel, r);
 }
 
 /* Whether the continuation of a path at si cannot meet anything, for
