@@ -1058,30 +1058,18 @@ bool accel_occluded(const accel *a, const ray3 *r) {
   return ray.tfar < 0;
 }
 
-bool accel_misses_bounds(const accel *a, const ray3 *r) {
+bool accel_cull_box(const accel *a, accel_box *b) {
   if (!a || !a->scene) return false;
   const scene *sc = a->scene;
   const double m = 0x1p-14 * a->clip_r;
-  const double o[3] = {r->o.x, r->o.y, r->o.z}, d[3] = {r->d.x, r->d.y, r->d.z};
-  const double lo[3] = {sc->bbox_min.x - m, sc->bbox_min.y - m, sc->bbox_min.z - m};
-  const double hi[3] = {sc->bbox_max.x + m, sc->bbox_max.y + m, sc->bbox_max.z + m};
-  /* The parameter interval [t0, t1] of the line inside the padded box,
-   * from t = 0 on; divisions only where the direction has a component
-   * (elsewhere the origin must lie in the slab). A NaN anywhere leaves a
-   * comparison false: not culled. */
-  double t0 = 0.0, t1 = INFINITY;
-  bool out = false;
-  for (int k = 0; k < 3; k++) {
-    if (d[k] == 0.0) {
-      out |= o[k] < lo[k] || o[k] > hi[k];
-      continue;
-    }
-    double ta = (lo[k] - o[k]) / d[k], tb = (hi[k] - o[k]) / d[k];
-    double tn = d[k] > 0 ? ta : tb, tf = d[k] > 0 ? tb : ta;
-    t0 = tn > t0 ? tn : t0;
-    t1 = tf < t1 ? tf : t1;
-  }
-  return out || t0 > t1;
+  b->lo[0] = sc->bbox_min.x - m, b->lo[1] = sc->bbox_min.y - m, b->lo[2] = sc->bbox_min.z - m;
+  b->hi[0] = sc->bbox_max.x + m, b->hi[1] = sc->bbox_max.y + m, b->hi[2] = sc->bbox_max.z + m;
+  return true;
+}
+
+bool accel_misses_bounds(const accel *a, const ray3 *r) {
+  accel_box b;
+  return accel_cull_box(a, &b) && accel_box_misses(&b, r);
 }
 
 /* ---- packet queries ---------------------------------------------------------------------------- */

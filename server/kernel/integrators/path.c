@@ -180,10 +180,7 @@ static inline bool may_hit(const scene *sc, const ray3 *r, double pad) {
   away |= (r->o.x < sc->bbox_min.x - pad) & (r->d.x <= 0);
   away |= (r->o.y > sc->bbox_max.y + pad) & (r->d.y >= 0);
   away |= (r->o.y < sc->bbox_min.y - pad) & (r->d.y <= 0);
-  /* Then a full slab test against the box with a clear margin
-   * (accel_misses_bounds): a camera ray that passes the scene by (a third
-   * of the seed scene's) needs no query either. */
-  return !away && !accel_misses_bounds(sc->accel, r);
+  return !away;
 }
 
 /* Whether the continuation of a path at si cannot meet anything, for
@@ -243,6 +240,8 @@ static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_
   /* All packets first (timed as one), then every hit's surface data. */
   double t0 = timed ? clock_s() : 0;
   const double pad = scene_pad(sc);
+  accel_box box;
+  const bool cull = coherent && accel_cull_box(sc->accel, &box);
   int q[P], nq = 0;
   for (int k = 0; k <= n; k++) {
     if (k < n) {
@@ -250,7 +249,10 @@ static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_
       lane *l = &ln[i];
       l->hit = TRACE_MISS;
       l->wrapped = false;
-      bool m = may_hit(sc, &l->ray, pad);
+      /* Camera rays also by a full slab test with a clear margin
+       * (accel_misses_bounds): those that pass the scene by (a third of
+       * the seed scene's) need no query either. */
+      bool m = may_hit(sc, &l->ray, pad) && !(cull && accel_box_misses(&box, &l->ray));
       q[nq] = other[no] = i;
       nq += m, no += !m;
       if (nq < P) continue;
