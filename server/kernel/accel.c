@@ -1058,6 +1058,20 @@ bool accel_occluded(const accel *a, const ray3 *r) {
   return ray.tfar < 0;
 }
 
+bool accel_cull_box(const accel *a, accel_box *b) {
+  if (!a || !a->scene) return false;
+  const scene *sc = a->scene;
+  const double m = 0x1p-14 * a->clip_r;
+  b->lo[0] = sc->bbox_min.x - m, b->lo[1] = sc->bbox_min.y - m, b->lo[2] = sc->bbox_min.z - m;
+  b->hi[0] = sc->bbox_max.x + m, b->hi[1] = sc->bbox_max.y + m, b->hi[2] = sc->bbox_max.z + m;
+  return true;
+}
+
+bool accel_misses_bounds(const accel *a, const ray3 *r) {
+  accel_box b;
+  return accel_cull_box(a, &b) && accel_box_misses(&b, r);
+}
+
 /* ---- packet queries ---------------------------------------------------------------------------- */
 
 /* Widest packet the device traces natively: 16 (AVX-512), 8 (AVX/AVX2),

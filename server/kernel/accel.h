@@ -28,6 +28,8 @@
 #define RSW_ACCEL_H
 
 #include "accel_hit.h"
+#include <math.h>
+
 #include "kernel.h"
 
 typedef struct accel accel;
@@ -56,6 +58,56 @@ bool accel_occluded(const accel *a, const ray3 *r);
 void accel_intersect_packet(const accel *a, const ray3 *const *r, int n, accel_hit *const *h, bool *hit,
                             bool coherent);
 void accel_occluded_packet(const accel *a, const ray3 *const *r, int n, bool *occ);
+
+/* True when ray r (any tmin, tmax) passes the scene's bounding box
+ * (scene.h bbox_min/max) by a clear margin, 2^-14 clip_r (clip_r being
+ * 64 times the bounds' half diagonal): far beyond where Embree's float32
+ * copy of the ray (its origin within clip_r of accel_origin, rounded to
+ * 2^-24 relative, its direction likewise: a lateral error below
+ * 2^-24 * 130 clip_r / 64) or of the geometry can stray, so no query of
+ * r can hit anything: a caller may count it a miss without one. A slab
+ * test in double; false for a ray starting inside the padded box, one
+ * with a NaN, or a NULL structure. Not for periodic scenes (the box is
+ * one cell's). */
+bool accel_misses_bounds(const accel *a, const ray3 *r);
+
+/* The same test inline, for many rays: the padded box once
+ * (accel_cull_box; false for a NULL structure, where nothing may be
+ * culled), then accel_box_misses per ray. */
+typedef struct accel_box {
+  double lo[3], hi[3];
+} accel_box;
+bool accel_cull_box(const accel *a, accel_box *b);
+
+/* The line from t = 0 on meets slab k over [tn_k, tf_k] = [A_k, B_k] /
+ * |d_k| (A_k, B_k: the signed distances to the slab's near and far planes
+ * along d_k's sign); it misses the box when some tf_k < 0 or some tn_i >
+ * tf_j, i.e. A_i |d_j| > B_j |d_i|: products, no division (their rounding
+ * is nothing next to the margin). A slab the direction lies in (d_k = 0)
+ * culls when the origin is outside it, else takes no part (A = -1, B = 1
+ * make its comparisons false). A NaN makes a comparison false: less
+ * culled, never more. Without branches. */
+static inline bool accel_box_misses(const accel_box *b, const ray3 *r) {
+  const double o[3] = {r->o.x, r->o.y, r->o.z}, d[3] = {r->d.x, r->d.y, r->d.z};
+  double A[3], B[3], ad[3];
+  bool out = false;
+  for (int k = 0; k < 3; k++) {
+    bool zero = d[k] == 0.0, pos = d[k] > 0.0;
+    out |= zero & ((o[k] < b->lo[k]) | (o[k] > b->hi[k]));
+    double near = pos ? b->lo[k] - o[k] : o[k] - b->hi[k], far = pos ? b->hi[k] - o[k] : o[k] - b->lo[k];
+    A[k] = zero ? -1.0 : near;
+    B[k] = zero ? 1.0 : far;
+    ad[k] = fabs(d[k]);
+    out |= B[k] < 0.0;
+  }
+  out |= A[0] * ad[1] > B[1] * ad[0];
+  out |= A[0] * ad[2] > B[2] * ad[0];
+  out |= A[1] * ad[0] > B[0] * ad[1];
+  out |= A[1] * ad[2] > B[2] * ad[1];
+  out |= A[2] * ad[0] > B[0] * ad[2];
+  out |= A[2] * ad[1] > B[1] * ad[2];
+  return out;
+}
 
 /* ---- ray masks: null boxes the volumetric integrators cross analytically --
  * A top-level shape that may be a box with the `null` BSDF

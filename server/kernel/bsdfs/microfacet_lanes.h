@@ -132,8 +132,10 @@ SIMD_FN void mf_beckmann_lanes(const float *wx, const float *wy, const float *wz
     xx = vsel(active, xx - value / deriv, xx);
   }
   /* Lanes that did not converge: keep x inside erfinv's domain. */
-  vf xc = vclamp(xx, -1.0f + 6e-8f, 1.0f - 6e-8f);
-  slope = vsel(active, verfinv(xc), slope);
+  if (vany(active)) {
+    vf xc = vclamp(xx, -1.0f + 6e-8f, 1.0f - 6e-8f);
+    slope = vsel(active, verfinv(xc), slope);
+  }
   vf sy = verfinv(2.0f * uy0 - 1.0f);
 
   /* Rotate back to wi's azimuth, unstretch. */

@@ -199,6 +199,38 @@ static inline bool may_hit(const scene *sc, const ray3 *r, double pad) {
   return !away;
 }
 
+/* Whether the continuation of a path at si cannot meet anything, for
+ * any direction its BSDF samples: then, without an environment to see,
+ * the next bounce would only find a miss that adds nothing, and the path
+ * ends after its light sample (wave_run). It holds for a one-sided
+ * reflecting BSDF, whose valid samples have wo.z >= 0 in the shading
+ * frame (tests/kernel/integrators/test_wave.c checks every such plugin),
+ * at a point whose geometric and shading normals point along one axis
+ * (the other two vectors of the shading frame without a component along
+ * it), outwards from a face of the padded box that the spawned origin
+ * lies beyond: every direction then has a component >= 0 along the
+ * normal, spawn_ray offsets the origin along it, and may_hit's test for
+ * that face culls the ray, in the same arithmetic as below. The seed
+ * scene's every hit (a flat surface under directional suns). */
+static bool continuation_escapes(const scene *sc, const surface_interaction *si, double pad) {
+  const unsigned reflect = BSDF_DIFFUSE_REFLECTION | BSDF_GLOSSY_REFLECTION | BSDF_DELTA_REFLECTION;
+  if (si->shape->bsdf->flags & ~reflect) return false;
+  const double ng[3] = {si->ng.x, si->ng.y, si->ng.z}, n[3] = {si->sh.n.x, si->sh.n.y, si->sh.n.z};
+  const double s[3] = {si->sh.s.x, si->sh.s.y, si->sh.s.z}, t[3] = {si->sh.t.x, si->sh.t.y, si->sh.t.z};
+  const double p[3] = {si->p.x, si->p.y, si->p.z};
+  const double lo[3] = {sc->bbox_min.x, sc->bbox_min.y, sc->bbox_min.z};
+  const double hi[3] = {sc->bbox_max.x, sc->bbox_max.y, sc->bbox_max.z};
+  const double mag = RSW_SPAWN_ERRORS * si->p_error; /* offset_on_side, ng . d >= 0 */
+  for (int a = 0; a < 3; a++) {
+    int b = (a + 1) % 3, c = (a + 2) % 3;
+    if (ng[b] != 0 || ng[c] != 0 || s[a] != 0 || t[a] != 0) continue;
+    double o = p[a] + mag * ng[a];
+    if (ng[a] > 0 && n[a] > 0 && o > hi[a] + pad) return true;
+    if (ng[a] < 0 && n[a] < 0 && o < lo[a] - pad) return true;
+  }
+  return false;
+}
+
 /* Lanes idx[0..n) go to hit[0..*n_hit) (the ones whose ray hit, in the
  * order of idx) and the others to other[0..*n_other), without a branch
  * on the outcome (a camera ray's is unpredictable). */
@@ -224,6 +256,8 @@ static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_
   /* All packets first (timed as one), then every hit's surface data. */
   double t0 = timed ? clock_s() : 0;
   const double pad = scene_pad(sc);
+  accel_box box;
+  const bool cull = coherent && accel_cull_box(sc->accel, &box);
   int q[P], nq = 0;
   for (int k = 0; k <= n; k++) {
     if (k < n) {
@@ -231,7 +265,10 @@ static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_
       lane *l = &ln[i];
       l->hit = TRACE_MISS;
       l->wrapped = false;
-      bool m = may_hit(sc, &l->ray, pad);
+      /* Camera rays also by a full slab test with a clear margin
+       * (accel_misses_bounds): those that pass the scene by (a third of
+       * the seed scene's) need no query either. */
+      bool m = may_hit(sc, &l->ray, pad) && !(cull && accel_box_misses(&box, &l->ray));
       q[nq] = other[no] = i;
       nq += m, no += !m;
       if (nq < P) continue;
@@ -702,6 +739,8 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
   bool timed = n > 1; /* Li's one-path waves are not timed (two clock reads per query) */
   bool camera = true;
   const sampler *smp = n > 0 ? st[0].s : NULL;
+  const bool escape_test = !sc->periodic.on && !sc->environment && !pol;
+  const double pad = scene_pad(sc);
   while (live > 0) {
     /* The lanes whose ray hit (in order) and the others, in ws->ord and
      * ws->ek (wave_light_samples' scratch, free until then). */
@@ -727,6 +766,19 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
     for (int k = 0; k < live; k++) {
       int i = idx[k];
       shade_light(sc, &ln[i], quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, pgs ? &pgs[i] : NULL);
+    }
+    /* Paths whose continuation cannot meet anything end here
+     * (continuation_escapes): no BSDF sample, no roulette, nothing else
+     * drawn from their streams. Not under a periodic boundary, with an
+     * environment, or in the polarized variants (their payload). */
+    if (escape_test) {
+      next = 0;
+      for (int k = 0; k < live; k++) {
+        int i = idx[k];
+        idx[next] = i;
+        next += !continuation_escapes(sc, &ln[i].si, pad);
+      }
+      live = next;
     }
     /* The BSDF samples' numbers, lobe then direction, for every lane. */
     if (live) {
