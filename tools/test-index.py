@@ -34,7 +34,8 @@ def plugins():
 
 
 def plugin_file(name):
-    pat = re.compile(r"\bconst plugin plugin_%s\b" % re.escape(name))
+    pat = re.compile(r"\bconst plugin plugin_%s\b|^DEFINE_PLUGIN\(%s\b" % (re.escape(name), re.escape(name)),
+                     re.M)
     for d, _, files in sorted(os.walk(os.path.join(ROOT, "server/kernel"))):
         for f in sorted(files):
             p = os.path.join(d, f)

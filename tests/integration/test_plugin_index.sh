@@ -2,7 +2,7 @@
 # Each plugin's tests are findable by its name (tests/README.md):
 #  - every plugin registered in server/kernel/scene/registry.c is named by
 #    at least one test, and tests/README.md's plugin index is current
-#    (tools/test-index.py --check);
+#    (tools/test-index.py --check), each plugin with its source file;
 #  - every test program sits in the folder tools/test-layout.sh gives it,
 #    and none is left in the old tests/unit/;
 #  - and the check catches a plugin no test names, and a stale index (a
@@ -14,6 +14,8 @@ source "$(dirname "$0")/../support/shtest.sh"
 cd "$root" || exit 1
 
 if out=$(python3 tools/test-index.py --check 2>&1); then ok; else bad "tools/test-index.py --check: $out"; fi
+# every plugin's source file is found (DEFINE_PLUGIN(name, ...) or const plugin plugin_name)
+if grep -q '\[?\](\.\./?)' tests/README.md; then bad "plugins without their source in the index: $(grep -c '\[?\]' tests/README.md)"; else ok; fi
 
 moves=$(tools/test-layout.sh -n 2>&1)
 if [ -z "$moves" ]; then ok; else bad "test programs out of place (run tools/test-layout.sh): $moves"; fi
