@@ -242,7 +242,18 @@ static inline color media_layers_transmittance(const media_layers *L, const ray3
 typedef struct layered_medium {
   medium base;
   media_layers L;
+  /* A bundle of pages (render_ctx.bundle > 3, a plugin whose prepare()
+   * fills them): the layers at pages 1.. (their box and levels L's), read
+   * while rsw_page names one; NULL: none. */
+  media_layers *Lp;
 } layered_medium;
 extern const medium_ops layered_medium_ops;
+
+/* The layers m answers with at the calling thread's page (rsw_page). */
+static inline const media_layers *layered_layers(const medium *m) {
+  const layered_medium *lm = (const layered_medium *)m;
+  int p = rsw_page;
+  return p ? &lm->Lp[p - 1] : &lm->L;
+}
 
 #endif
