@@ -435,19 +435,6 @@ static double mix_sample(const mol_atmo *m, int k, size_t j, const medium_intera
   return val / *pdf;
 }
 
-/* mix_eval's value with channel c's weights (a spectral bundle's). */
-static double mix_eval_channel(const mol_atmo *m, int k, size_t j, const medium_interaction *mi, vec3 wo,
-                               int c) {
-  double pdf;
-  if (j == 0) return m->rayleigh->ops->eval_pdf(m->rayleigh, mi, wo, &pdf);
-  /* (the weights of the calling thread's page) */
-  const double *wc = rsw_page ? m->wcp + (size_t)(rsw_page - 1) * 3 * m->n * (m->np ? m->np : 1) : m->wc;
-  double w = clamp01(wc[((size_t)k * m->np + j - 1) * 3 + (size_t)c]), v0 = 0, v1 = 0;
-  const phase *ph = m->p[j - 1].ph;
-  if (w < 1.0) v0 = mix_eval_channel(m, k, j - 1, mi, wo, c);
-  if (w > 0.0) v1 = ph->ops->eval_pdf(ph, mi, wo, &pdf);
-  return (1.0 - w) * v0 + w * v1;
-}
 
 /* Polarized variants: components 0..j's factors, each weighted by its
  * share of mix_eval's value times `scale` (phase.h phase_mix_add), into
@@ -487,11 +474,24 @@ static double ma_phase_eval_pdf(const phase *ph, const medium_interaction *mi, v
   return mix_eval(m, ma_phase_layer(ph, m, mi), m->np, mi, wo, pdf);
 }
 
+/* mix_eval's value with each channel's weights (a spectral bundle's, at
+ * the calling thread's page): the components evaluated once, then mixed
+ * per channel in mix_eval's order, component j onto 0..j-1. */
 static color ma_phase_eval_channels(const phase *ph, const medium_interaction *mi, vec3 wo) {
   const mol_atmo *m = ((const ma_phase *)ph)->m;
   int k = ma_phase_layer(ph, m, mi);
-  color v;
-  for (int c = 0; c < 3; c++) v.c[c] = mix_eval_channel(m, k, m->np, mi, wo, c);
+  size_t np = m->np;
+  const double *wc = rsw_page ? m->wcp + (size_t)(rsw_page - 1) * 3 * m->n * (np ? np : 1) : m->wc;
+  double pdf;
+  color v = col1(m->rayleigh->ops->eval_pdf(m->rayleigh, mi, wo, &pdf));
+  for (size_t j = 1; j <= np; j++) {
+    const phase *pj = m->p[j - 1].ph;
+    double vj = pj->ops->eval_pdf(pj, mi, wo, &pdf);
+    for (int c = 0; c < 3; c++) {
+      double w = clamp01(wc[((size_t)k * np + j - 1) * 3 + (size_t)c]);
+      v.c[c] = (1.0 - w) * v.c[c] + w * vj;
+    }
+  }
   return v;
 }
 
