@@ -563,11 +563,15 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
       } else if (l->sm && t1 > t0) {
         l->str = col_mul(l->str, segment_tr(vp, l->sm, &mr, t0, t1, inv, st));
       }
-      for (int p = 1; pg && l->sm && t1 > t0 && p < NP; p++) { /* (analytic media: no draws) */
-        rsw_page = p;
-        pg->str[p - 1] = col_mul(pg->str[p - 1], segment_tr(vp, l->sm, &mr, t0, t1, inv, st));
+      if (pg && l->sm && t1 > t0) { /* pages 1.. (media that carry pages are layered, analytic) */
+        ray3 seg = {mr.o, mr.d, t0, t1};
+        double mint, maxt;
+        color tr[RENDER_MAX_PAGES];
+        if (media_clip(l->sm, &seg, inv, &mint, &maxt)) {
+          layered_transmittance_pages((const layered_medium *)l->sm, &seg, mint, maxt, 1, NP, tr);
+          for (int p = 1; p < NP; p++) pg->str[p - 1] = col_mul(pg->str[p - 1], tr[p]);
+        }
       }
-      rsw_page = 0;
       if (!cross || !(pages_max(l->str, pg, pg ? pg->str : NULL, NP) > 0)) break;
       l->sm = next;
       t0 = t1;
@@ -622,21 +626,24 @@ static bool flight_pages(const scene *sc, const medium *m, const ray3 *seg, doub
   ss[h] = mi->sigma_s;
   bool scattered = isfinite(mi->t);
   double tend = scattered ? mi->t : maxt, pc = 0.0;
+  rsw_page = 0;
+  color trh = tr[h];
+  const layered_medium *lm = (const layered_medium *)m; /* (media that carry pages are layered) */
+  layered_transmittance_pages(lm, seg, mint, tend, 0, NP, tr);
+  tr[h] = trh;
+  int k = scattered ? media_layer_of(&lm->L, media_layers_z(&lm->L, mi->p)) : 0;
   for (int p = 0; p < NP; p++) {
     if (p != h) {
-      rsw_page = p;
-      tr[p] = m->ops->transmittance(m, seg, mint, tend);
       pdf[p] = tr[p];
       if (scattered) {
         medium_interaction mp = *mi;
-        m->ops->coefficients(m, &mp);
+        media_layers_fill(p ? &lm->Lp[p - 1] : &lm->L, k, &mp);
         ss[p] = mp.sigma_s;
         pdf[p] = col_mul(mp.sigma_t, tr[p]);
       }
     }
     pc += col_mean(pdf[p]);
   }
-  rsw_page = 0;
   pc = m->has_spectral_extinction ? pc / NP : pdf[0].c[0];
   for (int p = 0; p < NP; p++) {
     color f = scattered ? col_mul(tr[p], ss[p]) : tr[p];
@@ -673,11 +680,11 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
     if (m && seg.tmax > seg.tmin && media_clip(m, &seg, inv, &mint, &maxt)) {
       if (m->absorbing_only) {
         l->T = col_mul(l->T, segment_tr(vp, m, &seg, seg.tmin, seg.tmax, inv, st));
-        for (int p = 1; pg && p < NP; p++) { /* (analytic media: no draws) */
-          rsw_page = p;
-          pg->T[p - 1] = col_mul(pg->T[p - 1], segment_tr(vp, m, &seg, seg.tmin, seg.tmax, inv, st));
+        if (pg) { /* pages 1.. (media that carry pages are layered, analytic) */
+          color tr[RENDER_MAX_PAGES];
+          layered_transmittance_pages((const layered_medium *)m, &seg, mint, maxt, 1, NP, tr);
+          for (int p = 1; p < NP; p++) pg->T[p - 1] = col_mul(pg->T[p - 1], tr[p]);
         }
-        rsw_page = 0;
       } else if (pg) {
         scattered = flight_pages(sc, m, &seg, mint, maxt, st, l, pg, &mi);
       } else if (analytic_in(vp, m)) {

@@ -435,7 +435,6 @@ static double mix_sample(const mol_atmo *m, int k, size_t j, const medium_intera
   return val / *pdf;
 }
 
-
 /* Polarized variants: components 0..j's factors, each weighted by its
  * share of mix_eval's value times `scale` (phase.h phase_mix_add), into
  * acc; the order and arithmetic of blendphase's, so that the same layers
