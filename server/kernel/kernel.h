@@ -655,7 +655,7 @@ struct integrator {
   int rr_depth;
   bool hide_emitters;
   /* Carries a bundle of more than three wavelengths, page by page
-   * (render_ctx.bundle > 3; path): Li_batch then writes pages 1.. of each
+   * (render_ctx.bundle > 3; path, piecewise_volpath): Li_batch then writes pages 1.. of each
    * path's radiance after page 0's, as quv (scene_extra_stride). */
   bool pages;
 };

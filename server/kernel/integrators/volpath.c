@@ -79,6 +79,7 @@
 #include "../shapes/instance.h"
 #include "../shapes/shape.h"
 #include "integrator.h"
+#include "pages.h"
 #include "polarization.h"
 
 typedef struct volpath_integrator {
@@ -300,7 +301,7 @@ static color segment_tr(const volpath_integrator *vp, const medium *m, const ray
   double mint, maxt;
   if (!media_clip(m, &seg, inv, &mint, &maxt)) return col1(1.0);
   if (m->ops == &layered_medium_ops && vp->analytic) /* (inline: the same code as its op) */
-    return media_layers_transmittance(&((const layered_medium *)m)->L, &seg, mint, maxt);
+    return media_layers_transmittance(layered_layers(m), &seg, mint, maxt);
   if (m->ops->transmittance && (analytic_in(vp, m) || m->is_homogeneous))
     return m->ops->transmittance(m, &seg, mint, maxt);
   const sampler_ops *sops = st->s->ops;
@@ -392,6 +393,29 @@ typedef struct vlane {
   color str;  /* transmittance so far */
   int scross;
 } vlane;
+
+/* A bundle of pages (render_ctx.bundle > 3, piecewise_volpath;
+ * docs/experiments.md#pages-more-than-three-wavelengths-per-path): a lane's
+ * throughput, radiance, shadow contribution and shadow transmittance at
+ * pages 1.. (page 0's are the lane's). The path is sampled once for all
+ * pages: a free flight inverts one channel of the 3 P the bundle carries,
+ * picked at random, and every page is weighted by its own transmittance
+ * (and scattering coefficient) over the mean of the 3 P channels'
+ * densities, as a bundle of three does with its three; the phase
+ * direction is drawn with page 0's mixture and each page weighted by its
+ * own value over that density; surfaces as `path` (integrators/pages.h);
+ * the roulette on the largest throughput of any page. */
+typedef struct vpage {
+  color T[RENDER_MAX_PAGES - 1], L[RENDER_MAX_PAGES - 1];
+  color sval[RENDER_MAX_PAGES - 1], str[RENDER_MAX_PAGES - 1];
+} vpage;
+
+/* The largest value of x (page 0's) and of pages 1.. of a (pg NULL: x's). */
+static inline double pages_max(color x, const vpage *pg, const color *a, int pages) {
+  double m = col_max(x);
+  for (int p = 1; pg && p < pages; p++) m = fmax(m, col_max(a[p - 1]));
+  return m;
+}
 
 /* Trace lanes idx[0..n) (rays in ln[i].ray for shadow == false, ln[i].sray
  * else): hit flags into hit[k], hits into si[k]. */
@@ -510,8 +534,9 @@ static void start_shadow(const scene *sc, vlane *l, const surface_interaction *s
 /* One round of lane l's shadow ray after its query (hit at si): the
  * segment's transmittance, then done (false) or a null surface crossed
  * (true: trace again). */
-static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l, pol_lane *vq, bool hit,
-                        surface_interaction *si, sampler_state *st, face_plane *fp) {
+static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l, pol_lane *vq, vpage *pg,
+                        bool hit, surface_interaction *si, sampler_state *st, face_plane *fp) {
+  const int NP = sc->pages;
   if (hit && !(l->sm || sc->null_boxes.on) && media_at(NULL, si))
     seg_end(sc, &l->sray, l->sp0, si, true, fp); /* the next segment's start (si->p) */
   if (l->sm || sc->null_boxes.on) {
@@ -532,26 +557,37 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
         ray3 seg = {mr.o, mr.d, t0, t1};
         double mint, maxt;
         color tr = media_clip(l->sm, &seg, inv, &mint, &maxt)
-                       ? media_layers_transmittance(&((const layered_medium *)l->sm)->L, &seg, mint, maxt)
+                       ? media_layers_transmittance(layered_layers(l->sm), &seg, mint, maxt)
                        : col1(1.0);
         l->str = col_mul(l->str, tr);
       } else if (l->sm && t1 > t0) {
         l->str = col_mul(l->str, segment_tr(vp, l->sm, &mr, t0, t1, inv, st));
       }
-      if (!cross || col_is_black(l->str)) break;
+      if (pg && l->sm && t1 > t0) { /* pages 1.. (media that carry pages are layered, analytic) */
+        ray3 seg = {mr.o, mr.d, t0, t1};
+        double mint, maxt;
+        color tr[RENDER_MAX_PAGES];
+        if (media_clip(l->sm, &seg, inv, &mint, &maxt)) {
+          layered_transmittance_pages((const layered_medium *)l->sm, &seg, mint, maxt, 1, NP, tr);
+          for (int p = 1; p < NP; p++) pg->str[p - 1] = col_mul(pg->str[p - 1], tr[p]);
+        }
+      }
+      if (!cross || !(pages_max(l->str, pg, pg ? pg->str : NULL, NP) > 0)) break;
       l->sm = next;
       t0 = t1;
     }
   }
-  bool more = hit && !col_is_black(l->str);
-  if (more && !(si->shape->bsdf->flags & BSDF_INDEX_MATCHED)) { /* blocked */
-    l->str = col1(0.0);
-    more = false;
-  }
-  if (more) { /* a null surface crossed: on to the next segment */
+  bool more = hit && pages_max(l->str, pg, pg ? pg->str : NULL, NP) > 0;
+  bool block = more && !(si->shape->bsdf->flags & BSDF_INDEX_MATCHED);
+  if (more) { /* a null surface crossed: on to the next segment (or blocked) */
     double left = l->sray.tmax - si->t;
-    if (++l->scross >= MAX_CROSSINGS) l->str = col1(0.0);
-    more = left > 0 && l->scross < MAX_CROSSINGS;
+    block |= ++l->scross >= MAX_CROSSINGS;
+    more = !block;
+    if (block) {
+      l->str = col1(0.0);
+      for (int p = 1; pg && p < NP; p++) pg->str[p - 1] = col1(0.0);
+    }
+    more = more && left > 0;
     if (more) {
       l->sm = medium_after(si, l->sray.d, l->sm);
       l->sray = spawn_ray(si, l->sray.d);
@@ -561,16 +597,68 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
     }
   }
   l->L = col_add(l->L, col_mul(l->sval, l->str));
+  for (int p = 1; pg && p < NP; p++)
+    pg->L[p - 1] = col_add(pg->L[p - 1], col_mul(pg->sval[p - 1], pg->str[p - 1]));
   if (vq) pol_collect(vq, vq->pend, col_mul(l->sval, l->str), pol_channels(sc));
   l->sh = false;
   return false;
+}
+
+/* A free flight over [mint, maxt] of seg in analytic medium m for a
+ * bundle of pages (vpage): the collision (or the pass) drawn by inverting
+ * one of the 3 P channels, each page weighted by its own transmittance (and
+ * sigma_s at a collision) over the mean of the channels' densities. True:
+ * a collision, at mi. */
+static bool flight_pages(const scene *sc, const medium *m, const ray3 *seg, double mint, double maxt,
+                         sampler_state *st, vlane *l, vpage *pg, medium_interaction *mi) {
+  const sampler_ops *sops = st->s->ops;
+  const int NP = sc->pages, nch = 3 * NP;
+  int c = 0;
+  if (m->has_spectral_extinction) {
+    c = (int)(sops->next_1d(st) * nch);
+    c = c < nch - 1 ? c : nch - 1;
+  }
+  double u = sops->next_1d(st);
+  int h = c / 3;
+  color tr[RENDER_MAX_PAGES], pdf[RENDER_MAX_PAGES], ss[RENDER_MAX_PAGES];
+  rsw_page = h;
+  m->ops->sample_real(m, seg, mint, maxt, u, c % 3, mi, &tr[h], &pdf[h]);
+  ss[h] = mi->sigma_s;
+  bool scattered = isfinite(mi->t);
+  double tend = scattered ? mi->t : maxt, pc = 0.0;
+  rsw_page = 0;
+  color trh = tr[h];
+  const layered_medium *lm = (const layered_medium *)m; /* (media that carry pages are layered) */
+  layered_transmittance_pages(lm, seg, mint, tend, 0, NP, tr);
+  tr[h] = trh;
+  int k = scattered ? media_layer_of(&lm->L, media_layers_z(&lm->L, mi->p)) : 0;
+  for (int p = 0; p < NP; p++) {
+    if (p != h) {
+      pdf[p] = tr[p];
+      if (scattered) {
+        medium_interaction mp = *mi;
+        media_layers_fill(p ? &lm->Lp[p - 1] : &lm->L, k, &mp);
+        ss[p] = mp.sigma_s;
+        pdf[p] = col_mul(mp.sigma_t, tr[p]);
+      }
+    }
+    pc += col_mean(pdf[p]);
+  }
+  pc = m->has_spectral_extinction ? pc / NP : pdf[0].c[0];
+  for (int p = 0; p < NP; p++) {
+    color f = scattered ? col_mul(tr[p], ss[p]) : tr[p];
+    color *T = p ? &pg->T[p - 1] : &l->T;
+    *T = pc > 0 ? col_scale(col_mul(*T, f), 1.0 / pc) : col1(0.0);
+  }
+  return scattered;
 }
 
 /* Lane l's event after its query: the medium along the segment, then the
  * scattering event or the surface. Sets up the shadow ray (l->sh) and the
  * next ray. False: the path ends (a pending shadow ray still counts). */
 static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *l,
-                       surface_interaction *si, pol_lane *vq, face_plane *fp) {
+                       surface_interaction *si, pol_lane *vq, vpage *pg, face_plane *fp) {
+  const int NP = sc->pages;
   const integrator *it = &vp->base;
   const sampler_ops *sops = st->s->ops;
   bool hit = l->hit;
@@ -592,13 +680,19 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
     if (m && seg.tmax > seg.tmin && media_clip(m, &seg, inv, &mint, &maxt)) {
       if (m->absorbing_only) {
         l->T = col_mul(l->T, segment_tr(vp, m, &seg, seg.tmin, seg.tmax, inv, st));
+        if (pg) { /* pages 1.. (media that carry pages are layered, analytic) */
+          color tr[RENDER_MAX_PAGES];
+          layered_transmittance_pages((const layered_medium *)m, &seg, mint, maxt, 1, NP, tr);
+          for (int p = 1; p < NP; p++) pg->T[p - 1] = col_mul(pg->T[p - 1], tr[p]);
+        }
+      } else if (pg) {
+        scattered = flight_pages(sc, m, &seg, mint, maxt, st, l, pg, &mi);
       } else if (analytic_in(vp, m)) {
         int c = pick_channel(m, st);
         color tr, pdf;
         double u = sops->next_1d(st);
         if (m->ops == &layered_medium_ops) /* (inline: the same code as its op) */
-          media_layers_sample_real(&((const layered_medium *)m)->L, m, &seg, mint, maxt, u, c, &mi, &tr,
-                                   &pdf);
+          media_layers_sample_real(layered_layers(m), m, &seg, mint, maxt, u, c, &mi, &tr, &pdf);
         else
           m->ops->sample_real(m, &seg, mint, maxt, u, c, &mi, &tr, &pdf);
         double pc = col_mean(pdf);
@@ -628,11 +722,11 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
         }
       }
     }
-    if (scattered || !cross || !(col_max(l->T) > 0)) break;
+    if (scattered || !cross || !(pages_max(l->T, pg, pg ? pg->T : NULL, NP) > 0)) break;
     m = l->m = next; /* a null box's side crossed without a query */
     t0 = bw.tc;
   }
-  if (!(col_max(l->T) > 0)) return false;
+  if (!(pages_max(l->T, pg, pg ? pg->T : NULL, NP) > 0)) return false;
 
   if (scattered) {
     /* ---- a scattering event in the medium ---- */
@@ -649,8 +743,9 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
       size_t k = pick_emitter(sc, sops->next_1d(st), &pe);
       const emitter *e = sc->emitters[k];
       direction_sample ds;
-      color value = e->ops->sample_direction(e, ref, sops->next_2d(st), &ds);
-      if (ds.pdf > 0 && !col_is_black(value)) {
+      vec2 u2 = sops->next_2d(st);
+      color value = e->ops->sample_direction(e, ref, u2, &ds);
+      if (ds.pdf > 0 && (!col_is_black(value) || pg)) {
         double ppdf;
         double pval = ph->ops->eval_pdf(ph, &mi, ds.d, &ppdf);
         if (pval > 0) {
@@ -661,6 +756,15 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
           c = ph->chromatic ? col_scale(col_mul(c, ph->ops->eval_channels(ph, &mi, ds.d)), w / pe)
                             : col_scale(c, pval * w / pe);
           start_shadow(sc, l, NULL, mi.p, e, &ds, m, c);
+          for (int p = 1; pg && p < NP; p++) { /* each page's light and phase value */
+            direction_sample dp;
+            rsw_page = p;
+            color v = col_mul(pg->T[p - 1], e->ops->sample_direction(e, ref, u2, &dp));
+            v = ph->chromatic ? col_mul(v, ph->ops->eval_channels(ph, &mi, ds.d)) : col_scale(v, pval);
+            pg->sval[p - 1] = col_scale(v, w / pe);
+            pg->str[p - 1] = col1(1.0);
+          }
+          rsw_page = 0;
           if (vq) {
             mueller P[3];
             vec3 bp = {0};
@@ -679,6 +783,13 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
      * component covers the sphere). */
     l->T = ph->chromatic ? col_mul(l->T, col_scale(ph->ops->eval_channels(ph, &mi, wo), 1.0 / ppdf))
                          : col_scale(l->T, pw);
+    for (int p = 1; pg && p < NP; p++) {
+      rsw_page = p;
+      pg->T[p - 1] = ph->chromatic
+                         ? col_mul(pg->T[p - 1], col_scale(ph->ops->eval_channels(ph, &mi, wo), 1.0 / ppdf))
+                         : col_scale(pg->T[p - 1], pw);
+    }
+    rsw_page = 0;
     if (vq) {
       mueller P[3];
       vec3 bp = {0};
@@ -702,8 +813,15 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
           em_pdf = env->ops->pdf_direction(env, &l->prev, &ds) * emitter_prob(sc, env);
         }
         color Le = env->ops->eval(env, NULL, l->ray.d);
-        color v = col_scale(col_mul(l->T, Le), mis_weight(l->prev_pdf, em_pdf));
+        double w = mis_weight(l->prev_pdf, em_pdf);
+        color v = col_scale(col_mul(l->T, Le), w);
         l->L = col_add(l->L, v);
+        for (int p = 1; pg && p < NP; p++) {
+          rsw_page = p;
+          pg->L[p - 1] =
+              col_add(pg->L[p - 1], col_scale(col_mul(pg->T[p - 1], env->ops->eval(env, NULL, l->ray.d)), w));
+        }
+        rsw_page = 0;
         if (vq) pol_add_env(vq, env, l->ray.d, Le, v, pol_channels(sc));
       }
       return false;
@@ -711,15 +829,22 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
     const emitter *em = si->shape->emitter;
     if (em && visible) {
       color Le = em->ops->eval(em, si, l->ray.d);
-      if (!col_is_black(Le)) {
+      if (!col_is_black(Le) || pg) {
         double em_pdf = 0.0;
         if (!l->prev_delta) {
           direction_sample ds = {
               .p = si->p, .n = si->ng, .d = l->ray.d, .dist = v3_len(v3_sub(si->p, l->prev.p))};
           em_pdf = em->ops->pdf_direction(em, &l->prev, &ds) * emitter_prob(sc, em);
         }
-        color v = col_scale(col_mul(l->T, Le), mis_weight(l->prev_pdf, em_pdf));
+        double w = mis_weight(l->prev_pdf, em_pdf);
+        color v = col_scale(col_mul(l->T, Le), w);
         l->L = col_add(l->L, v);
+        for (int p = 1; pg && p < NP; p++) {
+          rsw_page = p;
+          pg->L[p - 1] =
+              col_add(pg->L[p - 1], col_scale(col_mul(pg->T[p - 1], em->ops->eval(em, si, l->ray.d)), w));
+        }
+        rsw_page = 0;
         if (vq) pol_add(vq, v, pol_channels(sc));
       }
     }
@@ -737,8 +862,24 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
       size_t k = pick_emitter(sc, sops->next_1d(st), &pe);
       const emitter *e = sc->emitters[k];
       direction_sample ds;
-      color value = e->ops->sample_direction(e, si, sops->next_2d(st), &ds);
-      if (ds.pdf > 0 && !col_is_black(value)) {
+      vec2 u2 = sops->next_2d(st);
+      color value = e->ops->sample_direction(e, si, u2, &ds);
+      if (pg && ds.pdf > 0) { /* every page's BSDF and light value, the pages' mean pdf */
+        vec3 wo = frame_to_local(&si->sh, ds.d);
+        color f[RENDER_MAX_PAGES];
+        double bpdf = bsdf_eval_pages(b, si, NP, wo, !ds.delta, f);
+        double w = ds.delta ? 1.0 : mis_weight(ds.pdf * pe, bpdf);
+        start_shadow(sc, l, si, si->p, e, &ds, medium_after(si, ds.d, m),
+                     col_scale(col_mul(l->T, col_mul(f[0], value)), w / pe));
+        for (int p = 1; p < NP; p++) {
+          direction_sample dp;
+          rsw_page = p;
+          color v = e->ops->sample_direction(e, si, u2, &dp);
+          pg->sval[p - 1] = col_scale(col_mul(pg->T[p - 1], col_mul(f[p], v)), w / pe);
+          pg->str[p - 1] = col1(1.0);
+        }
+        rsw_page = 0;
+      } else if (ds.pdf > 0 && !col_is_black(value)) {
         vec3 wo = frame_to_local(&si->sh, ds.d);
         color f = b->ops->eval(b, si, wo);
         if (!col_is_black(f)) {
@@ -756,8 +897,19 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
       }
     }
     bsdf_sample bs;
-    color weight = b->ops->sample(b, si, sops->next_1d(st), sops->next_2d(st), &bs);
-    if (!(bs.pdf > 0) || col_is_black(weight)) return false;
+    color weight;
+    if (pg) { /* one direction for every page (integrators/pages.h) */
+      double u1 = sops->next_1d(st);
+      vec2 u2 = sops->next_2d(st);
+      color w[RENDER_MAX_PAGES] = {{{0}}};
+      bsdf_sample_pages(b, si, NP, u1, u2, &bs, w);
+      weight = w[0];
+      for (int p = 1; p < NP; p++) pg->T[p - 1] = col_mul(pg->T[p - 1], w[p]);
+      if (!(bs.pdf > 0) || !(pages_max(weight, pg, pg->T, NP) > 0)) return false;
+    } else {
+      weight = b->ops->sample(b, si, sops->next_1d(st), sops->next_2d(st), &bs);
+    }
+    if (!(bs.pdf > 0) || (col_is_black(weight) && !pg)) return false;
     vec3 wo = frame_to_world(&si->sh, bs.wo);
     if (vq) {
       mueller P[3];
@@ -779,22 +931,28 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
   if (l->depth >=
       it->rr_depth) { /* roulette: docs/media.md#dense-media-the-roulette-and-the-segment-lengths */
     double u = sops->next_1d(st); /* drawn whether used or not: later draws keep their places */
-    double w = col_max(l->T) * l->eta * l->eta;
+    double w = pages_max(l->T, pg, pg ? pg->T : NULL, NP) * l->eta * l->eta;
     if (w < 1.0 || l->depth >= RR_BACKSTOP_DEPTH || vp->rr_mitsuba) {
       double q = fmin(w, 0.95);
       if (!(u < q)) return false;
       l->T = col_scale(l->T, 1.0 / q);
+      for (int p = 1; pg && p < NP; p++) pg->T[p - 1] = col_scale(pg->T[p - 1], 1.0 / q);
     }
   }
-  return col_max(l->T) > 0;
+  return pages_max(l->T, pg, pg ? pg->T : NULL, NP) > 0;
 }
 
 /* Run the wave over n lanes; scratch: ln (n lanes), idx and sh (n ints
  * each), hit (n), si (n). */
 static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_state *st, const ray3 *rays,
-                     int n, render_stats *stats, color *L, double *quv, vlane *ln, pol_lane *vq, int *idx,
-                     int *sh, bool *hit, surface_interaction *si) {
+                     int n, render_stats *stats, color *L, double *quv, vlane *ln, pol_lane *vq, vpage *pgs,
+                     int *idx, int *sh, bool *hit, surface_interaction *si) {
   int live = 0;
+  for (int i = 0; pgs && i < n; i++)
+    for (int p = 1; p < sc->pages; p++) {
+      pgs[i].T[p - 1] = col1(1.0);
+      pgs[i].L[p - 1] = col1(0.0);
+    }
   if (vq)
     for (int i = 0; i < n; i++) pol_start(&vq[i], rays[i].d, pol_channels(sc));
   for (int i = 0; i < n; i++) {
@@ -831,8 +989,8 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
     for (int k = 0; k < live; k++) {
       int i = idx[k];
       ln[i].hit = hit[k];
-      bool alive =
-          lane_event(vp, sc, &st[i], &ln[i], &si[k], vq ? &vq[i] : NULL, &fp); /* (si[k]: in place) */
+      bool alive = lane_event(vp, sc, &st[i], &ln[i], &si[k], vq ? &vq[i] : NULL, pgs ? &pgs[i] : NULL,
+                              &fp); /* (si[k]: in place) */
       if (ln[i].sh) sh[n_sh++] = i;
       if (alive) idx[next++] = i;
     }
@@ -842,15 +1000,20 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
       int more = 0;
       for (int k = 0; k < n_sh; k++) {
         int i = sh[k];
-        if (shadow_step(vp, sc, &ln[i], vq ? &vq[i] : NULL, hit[k], &si[k], &st[i], &fp)) sh[more++] = i;
+        if (shadow_step(vp, sc, &ln[i], vq ? &vq[i] : NULL, pgs ? &pgs[i] : NULL, hit[k], &si[k], &st[i],
+                        &fp))
+          sh[more++] = i;
       }
       n_sh = more;
     }
   }
   for (int i = 0; i < n; i++) L[i] = ln[i].L;
-  const int qs = scene_quv_stride(sc);
+  const int qs = scene_extra_stride(sc);
   if (quv)
     for (int i = 0; i < qs * n; i++) quv[i] = 0; /* unpolarized variants: no polarisation through media */
+  for (int i = 0; pgs && quv && i < n; i++)      /* a bundle's pages 1.. */
+    for (int p = 1; p < sc->pages; p++)
+      for (int c = 0; c < 3; c++) quv[qs * i + 3 * (p - 1) + c] = pgs[i].L[p - 1].c[c];
   if (vq)
     for (int i = 0; i < n; i++) pol_result(&vq[i], pol_channels(sc), &L[i], quv ? &quv[qs * i] : NULL);
 }
@@ -863,10 +1026,13 @@ static bool volpath_Li_batch(const integrator *it, const scene *sc, sampler_stat
   bool *hit = malloc((size_t)n * sizeof *hit);
   surface_interaction *si = malloc((size_t)n * sizeof *si);
   pol_lane *vq = sc->polarized ? pol_alloc(n, pol_channels(sc)) : NULL;
-  bool ok = ln && idx && hit && si && (vq || !sc->polarized);
+  vpage *pg = sc->pages > 1 ? malloc((size_t)n * sizeof *pg) : NULL;
+  bool ok = ln && idx && hit && si && (vq || !sc->polarized) && (pg || sc->pages <= 1);
   if (ok)
-    wave_run((const volpath_integrator *)it, sc, st, rays, n, stats, L, quv, ln, vq, idx, idx + n, hit, si);
+    wave_run((const volpath_integrator *)it, sc, st, rays, n, stats, L, quv, ln, vq, pg, idx, idx + n, hit,
+             si);
   pol_free(vq);
+  free(pg);
   free(ln);
   free(idx);
   free(hit);
@@ -883,11 +1049,12 @@ static color volpath_Li(const integrator *it, const scene *sc, sampler_state *st
   bool hit;
   surface_interaction si;
   color L;
-  double q[SCENE_QUV_MAX];
+  vpage pg;
+  double q[SCENE_QUV_MAX > SCENE_EXTRA_MAX ? SCENE_QUV_MAX : SCENE_EXTRA_MAX];
   wave_run((const volpath_integrator *)it, sc, st, &ray, 1, stats, &L, quv ? q : NULL, &ln,
-           sc->polarized ? &vq : NULL, idx, idx + 1, &hit, &si);
-  if (quv)
-    for (int k = 0; k < scene_quv_stride(sc); k++) quv[k] += q[k];
+           sc->polarized ? &vq : NULL, sc->pages > 1 ? &pg : NULL, idx, idx + 1, &hit, &si);
+  if (quv) /* (a bundle's pages: Li_batch alone gives them) */
+    for (int k = 0; k < scene_quv_stride(sc) && sc->pages <= 1; k++) quv[k] += q[k];
   return L;
 }
 
@@ -916,6 +1083,7 @@ static rsw_status create_common(loader *ld, node *n, object **out, bool analytic
   }
   vp->base.max_depth = (int)md;
   vp->base.rr_depth = (int)rr;
+  vp->base.pages = analytic; /* (its media analytic: a page's free flight needs no draws of its own) */
   *out = &vp->base.base;
   return RSW_OK;
 }

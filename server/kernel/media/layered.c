@@ -61,7 +61,7 @@ void media_layers_finish(media_layers *L) {
 /* ---- the medium_ops ------------------------------------------------------------ */
 
 static inline const media_layers *layers_of(const medium *m) {
-  return &((const layered_medium *)m)->L;
+  return layered_layers(m);
 }
 
 static bool lm_intersect_aabb(const medium *m, const ray3 *r, double *mint, double *maxt) {

@@ -242,7 +242,33 @@ static inline color media_layers_transmittance(const media_layers *L, const ray3
 typedef struct layered_medium {
   medium base;
   media_layers L;
+  /* A bundle of pages (render_ctx.bundle > 3, a plugin whose prepare()
+   * fills them): the layers at pages 1.. (their box and levels L's), read
+   * while rsw_page names one; NULL: none. */
+  media_layers *Lp;
 } layered_medium;
 extern const medium_ops layered_medium_ops;
+
+/* The layers m answers with at the calling thread's page (rsw_page). */
+static inline const media_layers *layered_layers(const medium *m) {
+  const layered_medium *lm = (const layered_medium *)m;
+  int p = rsw_page;
+  return p ? &lm->Lp[p - 1] : &lm->L;
+}
+
+/* A bundle of pages: the transmittance over [mint, maxt] of r at pages
+ * p0..pages-1 into tr[p], the levels (and so the layers crossed) worked
+ * out once: each page's media_layers_transmittance, bit for bit. */
+static inline void layered_transmittance_pages(const layered_medium *lm, const ray3 *r, double mint,
+                                               double maxt, int p0, int pages, color *tr) {
+  const media_layers *L = &lm->L;
+  double oz = media_layers_z(L, r->o), dz = media_layers_dz(L, r->d);
+  double z0 = oz + mint * dz, z1 = oz + maxt * dz;
+  int k0 = media_layer_of(L, z0), k1 = media_layer_of(L, z1);
+  for (int p = p0; p < pages; p++) {
+    const media_layers *Lp = p ? &lm->Lp[p - 1] : L;
+    for (int c = 0; c < 3; c++) tr[p].c[c] = exp(-media_layers_tau(Lp, c, z0, z1, k0, k1, dz, maxt - mint));
+  }
+}
 
 #endif

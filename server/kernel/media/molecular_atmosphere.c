@@ -101,9 +101,14 @@ struct mol_atmo {
   ma_particle *p;
   phase *rayleigh;
   ma_phase mix;
-  double wl;     /* wavelength of the layer values (a bundle's first); 0: none yet */
-  double wl3[3]; /* a bundle's: channel c's wavelength */
-  int bundle;    /* the wavelengths the layer values hold (0 or 1: one in every channel) */
+  double wl;                     /* wavelength of the layer values (a bundle's first); 0: none yet */
+  double wl3[RENDER_MAX_BUNDLE]; /* a bundle's: wavelength b (render_ctx.wl) */
+  /* A bundle of pages (render_ctx.bundle > 3): pages 1.. keep their
+   * layers in lm.Lp and their blend weights per channel in wcp (page p at
+   * wcp + (p - 1) 3 n np), allocated by the first such prepare. */
+  double *wcp;
+  int pages_alloc; /* pages 1.. allocated (lm.Lp, wcp) */
+  int bundle;      /* the wavelengths the layer values hold (0 or 1: one in every channel) */
   uint64_t sa_revision;
   bool dirty;
   bool absorbing_only; /* every layer's albedo is 0 (all channels) */
@@ -224,7 +229,8 @@ static double spec_at(const ma_spec *s, double wl, bool *ok) {
 /* The layer values at wavelength wl into channel ch (ch < 0: every
  * channel; then also the scalar per-layer values and the phase mixture's
  * weights, which a bundle, refused with particles, does not vary). */
-static rsw_status ma_refresh_channel(mol_atmo *m, double wl, int ch, rsw_err *err) {
+static rsw_status ma_refresh_channel(mol_atmo *m, double wl, int ch, media_layers *L, double *wc, bool first,
+                                     rsw_err *err) {
   uint32_t n = m->n;
   const char *id = m->lm.base.base.id ? m->lm.base.base.id : "";
   double sr = m->has_scattering ? atmo_rayleigh_cross_section(wl) : 0.0;
@@ -293,7 +299,7 @@ static rsw_status ma_refresh_channel(mol_atmo *m, double wl, int ch, rsw_err *er
     }
     double al = st > 0.0 ? ss / st : 0.0;
     if (al > 1.0) al = 1.0;
-    if (ch <= 0) {
+    if (ch <= 0 && first) {
       /* Nested blend weights: component j onto 0..j-1. */
       double acc = s[0];
       for (size_t j = 0; j < np; j++) {
@@ -307,32 +313,71 @@ static rsw_status ma_refresh_channel(mol_atmo *m, double wl, int ch, rsw_err *er
       double acc = s[0];
       for (size_t j = 0; j < np; j++) {
         acc += s[1 + j];
-        m->wc[(k * np + j) * 3 + (size_t)ch] = acc > 0.0 ? s[1 + j] / acc : 0.0;
+        wc[(k * np + j) * 3 + (size_t)ch] = acc > 0.0 ? s[1 + j] / acc : 0.0;
       }
     }
     for (int c = ch < 0 ? 0 : ch; c < (ch < 0 ? 3 : ch + 1); c++) {
-      m->lm.L.lay[k].sig[c] = m->lm.base.scale * st;
-      m->lm.L.alb[3 * k + c] = al;
+      L->lay[k].sig[c] = m->lm.base.scale * st;
+      L->alb[3 * k + c] = al;
     }
     if (al > amax) amax = al;
   }
-  if (ch <= 0)
+  if (ch <= 0 && first)
     m->absorbing_only = amax == 0.0;
   else
     m->absorbing_only = m->absorbing_only && amax == 0.0;
   return RSW_OK;
 }
 
-/* The layer values at rc's wavelength, or a bundle's channel by channel. */
+/* Pages 1..pages-1 of a bundle allocated (their levels those of lm.L).
+ * False: out of memory. */
+static bool ma_pages_alloc(mol_atmo *m, int pages) {
+  if (m->pages_alloc >= pages - 1) return true;
+  size_t per = 3 * (size_t)m->n * (m->np ? m->np : 1);
+  media_layers *lp = calloc(RENDER_MAX_PAGES - 1, sizeof *lp);
+  double *wcp = calloc((RENDER_MAX_PAGES - 1) * per, sizeof *wcp);
+  bool ok = lp && wcp;
+  for (int p = 0; ok && p < RENDER_MAX_PAGES - 1; p++) {
+    ok = media_layers_alloc(&lp[p], m->n);
+    if (!ok) break;
+    lp[p].to_world = m->lm.L.to_world;
+    lp[p].uniform = m->lm.L.uniform;
+    for (uint32_t k = 0; k <= m->n; k++) lp[p].lay[k].z = m->lm.L.lay[k].z;
+  }
+  if (!ok) {
+    for (int p = 0; lp && p < RENDER_MAX_PAGES - 1; p++) media_layers_free(&lp[p]);
+    free(lp);
+    free(wcp);
+    return false;
+  }
+  m->lm.Lp = lp;
+  m->wcp = wcp;
+  m->pages_alloc = RENDER_MAX_PAGES - 1;
+  return true;
+}
+
+/* The layer values at rc's wavelength, or a bundle's channel by channel
+ * (page by page: lm.L and wc, then lm.Lp and wcp). */
 static rsw_status ma_refresh(mol_atmo *m, const render_ctx *rc, rsw_err *err) {
   double wl = rc->wavelength > 0 ? rc->wavelength : 550.0;
   int bundle = rc->bundle > 1 ? rc->bundle : 0;
+  int pages = rc_pages(rc);
   rsw_status st = RSW_OK;
+  if (pages > 1 && !ma_pages_alloc(m, pages))
+    return rsw_fail(err, RSW_ERR_NOMEM, "", "molecular_atmosphere: out of memory");
   if (!bundle) {
-    st = ma_refresh_channel(m, wl, -1, err);
+    st = ma_refresh_channel(m, wl, -1, &m->lm.L, m->wc, true, err);
   } else {
-    for (int c = 0; c < 3 && !st; c++) st = ma_refresh_channel(m, rc->wl[c], c, err);
-    for (int c = 0; c < 3; c++) m->wl3[c] = rc->wl[c];
+    size_t per = 3 * (size_t)m->n * (m->np ? m->np : 1);
+    for (int p = 0; p < pages && !st; p++) {
+      render_ctx pc = rc_page(rc, p);
+      media_layers *L = p ? &m->lm.Lp[p - 1] : &m->lm.L;
+      double *wc = p ? m->wcp + (size_t)(p - 1) * per : m->wc;
+      for (int c = 0; c < 3 && !st; c++) st = ma_refresh_channel(m, pc.wl[c], c, L, wc, p == 0, err);
+      L->nc = 3;
+      if (p) media_layers_finish(L);
+    }
+    memcpy(m->wl3, rc->wl, sizeof m->wl3);
   }
   if (st) return st;
   m->lm.L.nc = bundle ? 3 : 1;
@@ -390,18 +435,6 @@ static double mix_sample(const mol_atmo *m, int k, size_t j, const medium_intera
   return val / *pdf;
 }
 
-/* mix_eval's value with channel c's weights (a spectral bundle's). */
-static double mix_eval_channel(const mol_atmo *m, int k, size_t j, const medium_interaction *mi, vec3 wo,
-                               int c) {
-  double pdf;
-  if (j == 0) return m->rayleigh->ops->eval_pdf(m->rayleigh, mi, wo, &pdf);
-  double w = clamp01(m->wc[((size_t)k * m->np + j - 1) * 3 + (size_t)c]), v0 = 0, v1 = 0;
-  const phase *ph = m->p[j - 1].ph;
-  if (w < 1.0) v0 = mix_eval_channel(m, k, j - 1, mi, wo, c);
-  if (w > 0.0) v1 = ph->ops->eval_pdf(ph, mi, wo, &pdf);
-  return (1.0 - w) * v0 + w * v1;
-}
-
 /* Polarized variants: components 0..j's factors, each weighted by its
  * share of mix_eval's value times `scale` (phase.h phase_mix_add), into
  * acc; the order and arithmetic of blendphase's, so that the same layers
@@ -440,11 +473,24 @@ static double ma_phase_eval_pdf(const phase *ph, const medium_interaction *mi, v
   return mix_eval(m, ma_phase_layer(ph, m, mi), m->np, mi, wo, pdf);
 }
 
+/* mix_eval's value with each channel's weights (a spectral bundle's, at
+ * the calling thread's page): the components evaluated once, then mixed
+ * per channel in mix_eval's order, component j onto 0..j-1. */
 static color ma_phase_eval_channels(const phase *ph, const medium_interaction *mi, vec3 wo) {
   const mol_atmo *m = ((const ma_phase *)ph)->m;
   int k = ma_phase_layer(ph, m, mi);
-  color v;
-  for (int c = 0; c < 3; c++) v.c[c] = mix_eval_channel(m, k, m->np, mi, wo, c);
+  size_t np = m->np;
+  const double *wc = rsw_page ? m->wcp + (size_t)(rsw_page - 1) * 3 * m->n * (np ? np : 1) : m->wc;
+  double pdf;
+  color v = col1(m->rayleigh->ops->eval_pdf(m->rayleigh, mi, wo, &pdf));
+  for (size_t j = 1; j <= np; j++) {
+    const phase *pj = m->p[j - 1].ph;
+    double vj = pj->ops->eval_pdf(pj, mi, wo, &pdf);
+    for (int c = 0; c < 3; c++) {
+      double w = clamp01(wc[((size_t)k * np + j - 1) * 3 + (size_t)c]);
+      v.c[c] = (1.0 - w) * v.c[c] + w * vj;
+    }
+  }
   return v;
 }
 
@@ -471,6 +517,7 @@ static rsw_status ma_prepare(object *o, const render_ctx *rc, rsw_err *err) {
   int bundle = rc->bundle > 1 ? rc->bundle : 0;
   bool same = !m->dirty && wl == m->wl && bundle == m->bundle &&
               (!bundle || memcmp(m->wl3, rc->wl, sizeof m->wl3) == 0);
+  /* (a bundle's pages: every wavelength compared, wl3 holds them all) */
   if (same && (!m->sigma_a || m->sigma_a->revision == m->sa_revision)) return RSW_OK;
   return ma_refresh(m, rc, err);
 }
@@ -488,6 +535,9 @@ static void ma_parameters_changed(object *o) {
 static void ma_destroy(object *o) {
   mol_atmo *m = (mol_atmo *)o;
   media_layers_free(&m->lm.L);
+  for (int p = 0; m->lm.Lp && p < m->pages_alloc; p++) media_layers_free(&m->lm.Lp[p]);
+  free(m->lm.Lp);
+  free(m->wcp);
   free(m->z);
   free(m->n_air);
   free(m->n_o3);
@@ -892,7 +942,8 @@ static bool ma_spectral(const object *o) {
 
 DEFINE_PLUGIN(molecular_atmosphere, CLS_MEDIUM, .destroy = ma_destroy, .prepare = ma_prepare,
               .ops = &layered_medium_ops, .traverse = ma_traverse,
-              .parameters_changed = ma_parameters_changed, .spectral = ma_spectral);
+              .parameters_changed = ma_parameters_changed, .spectral = ma_spectral,
+              .pages = plugin_pages_any); /* (ma_refresh: a page's layers and weights each) */
 
 /* ---- what tests and benches read --------------------------------------------- */
 

@@ -132,17 +132,13 @@ const object *scene_bundle_blocker(const scene *s) {
 
 const object *scene_page_blocker(const scene *s, const char **why) {
   if (s->integrator && !s->integrator->pages) {
-    *why = "carries at most three wavelengths per path (the `path` integrator carries more)";
+    *why = "carries at most three wavelengths per path (`path` and `piecewise_volpath` carry more)";
     return &s->integrator->base;
   }
   for (size_t i = 0; i < s->n_objects; i++) {
     const object *o = s->objects[i];
     const plugin *pl = o->plugin;
     if (!pl) continue;
-    if (pl->cls == CLS_MEDIUM) {
-      *why = "is a participating medium: media carry at most three wavelengths per path";
-      return o;
-    }
     if (pl->prepare && !(pl->pages && pl->pages(o))) {
       *why = "prepares its values at one set of three wavelengths";
       return o;
