@@ -98,32 +98,42 @@ def films(port, sid, bundle, seed, wls, spp=64, quantities=None):
     st, idx = call(port, "GET", "/v1/jobs/" + j["id"] + "/results")
     return {r["context"]: call(port, "GET", r["href"])[1] for r in idx["results"]}, j
 WLS = [400.0 + 20 * i for i in range(16)]
+def agree(a, b, label):
+    """Each bundled film b[ctx] is statistically the unbundled a[ctx] (the
+    criteria above); returns the films' z-scores."""
+    import math
+    zs = []
+    for ctx in a:
+        fa, fb = a[ctx], b[ctx]
+        nc = len(fa["channels"])
+        A, SA = fa["data"][0::nc], fa["data"][nc - 1::nc]
+        B, SB = fb["data"][0::nc], fb["data"][nc - 1::nc]
+        zs.append((sum(A) - sum(B)) / math.sqrt(sum(x * x + y * y for x, y in zip(SA, SB))))
+        far = sum(1 for x, y, s, t in zip(A, B, SA, SB) if abs(x - y) > 3 * math.sqrt(s * s + t * t)) / len(A)
+        assert abs(zs[-1]) < 4, (label, ctx, "film means differ by", zs[-1], "sigma")
+        assert far <= 0.02, (label, ctx, far, "of pixels beyond 3 sigma")
+    rms = math.sqrt(sum(z * z for z in zs) / len(zs))
+    assert rms < 1.4, (label, "rms of the films z-scores", rms)
+    return zs
+def same_across_threads(ports, path, wls, spp):
+    f = [films(p, push(p, path), 16, 11, wls, spp=spp)[0] for p in ports]
+    for ctx in f[0]:
+        assert f[0][ctx]["data"] == f[1][ctx]["data"], ctx
 PY
 
 py "bundles of 16 and of 7 are statistically the unbundled films (one-sample MIS over the pages)" '
-import sys, math
+import sys
 sys.path.insert(0, sys.argv[1]); from job import *
 port = int(sys.argv[2]); sid = push(port, sys.argv[3])
 a, _ = films(port, sid, 0, 7, WLS)
 for k, seed in ((16, 8), (7, 9)):
     b, j = films(port, sid, k, seed, WLS)
     assert j["bundle"] == k, j
-    seeds, zs = {}, []
-    for ctx in a:
-        fa, fb = a[ctx], b[ctx]
+    agree(a, b, k)
+    seeds = {}
+    for ctx, fb in b.items():
         assert fb["meta"]["wavelength"] == float(ctx[1:]), (ctx, fb["meta"])
         seeds.setdefault(fb["meta"]["seed"], []).append(ctx)
-        nc = len(fa["channels"])
-        A, SA = fa["data"][0::nc], fa["data"][nc - 1::nc]
-        B, SB = fb["data"][0::nc], fb["data"][nc - 1::nc]
-        var = sum(x * x + y * y for x, y in zip(SA, SB))
-        gz = (sum(A) - sum(B)) / math.sqrt(var)
-        far = sum(1 for x, y, s, t in zip(A, B, SA, SB) if abs(x - y) > 3 * math.sqrt(s * s + t * t)) / len(A)
-        assert abs(gz) < 4, (k, ctx, "film means differ by", gz, "sigma")
-        zs.append(gz)
-        assert far <= 0.02, (k, ctx, far, "of pixels beyond 3 sigma")
-    rms = math.sqrt(sum(z * z for z in zs) / len(zs))
-    assert rms < 1.4, (k, "rms of the films z-scores", rms)
     want = [16] if k == 16 else [2, 7, 7]
     assert sorted(len(v) for v in seeds.values()) == want, (k, seeds)
 ' "$tmp" "$p2" "$tmp/canopy.json"
@@ -131,9 +141,7 @@ for k, seed in ((16, 8), (7, 9)):
 py "a bundle of 16 is bitwise the same with 1 and 2 render threads" '
 import sys
 sys.path.insert(0, sys.argv[1]); from job import *
-f = [films(int(p), push(int(p), sys.argv[4]), 16, 11, WLS, spp=8)[0] for p in sys.argv[2:4]]
-for ctx in f[0]:
-    assert f[0][ctx]["data"] == f[1][ctx]["data"], ctx
+same_across_threads([int(p) for p in sys.argv[2:4]], sys.argv[4], WLS, 8)
 ' "$tmp" "$p1" "$p2" "$tmp/canopy.json"
 
 py "each page at its own wavelengths: a Lambertian plate's BRF in a bundle of 16 is its reflectance table (closed form)" '
@@ -153,30 +161,18 @@ assert len(seeds) == 1 and len(f) == 16, seeds
 ' "$tmp" "$p2" "$root/proto/examples/hdistant_lambertian.json"
 
 py "through the molecular atmosphere (piecewise_volpath, aerosols): a bundle of 16 is statistically the unbundled films, and bitwise across threads" '
-import sys, math
+import sys
 sys.path.insert(0, sys.argv[1]); from job import *
 port = int(sys.argv[2]); sid = push(port, sys.argv[4])
 wls = [400.0 + 10 * i for i in range(16)]
 a, _ = films(port, sid, 0, 7, wls, spp=128)
 b, j = films(port, sid, 16, 8, wls, spp=128)
 assert j["bundle"] == 16, j
-zs = []
-for ctx in a:
-    fa, fb = a[ctx], b[ctx]
-    nc = len(fa["channels"])
-    A, SA = fa["data"][0::nc], fa["data"][nc - 1::nc]
-    B, SB = fb["data"][0::nc], fb["data"][nc - 1::nc]
-    zs.append((sum(A) - sum(B)) / math.sqrt(sum(x * x + y * y for x, y in zip(SA, SB))))
-    far = sum(1 for x, y, s, t in zip(A, B, SA, SB) if abs(x - y) > 3 * math.sqrt(s * s + t * t)) / len(A)
-    assert abs(zs[-1]) < 4 and far <= 0.02, (ctx, zs[-1], far)
-rms = math.sqrt(sum(z * z for z in zs) / len(zs))
-assert rms < 1.4, ("rms of the films z-scores", rms)
-f = [films(int(p), push(int(p), sys.argv[4]), 16, 11, wls, spp=4)[0] for p in sys.argv[2:4]]
-for ctx in f[0]:
-    assert f[0][ctx]["data"] == f[1][ctx]["data"], ctx
+agree(a, b, "atmosphere")
+same_across_threads([int(p) for p in sys.argv[2:4]], sys.argv[4], wls, 4)
 ' "$tmp" "$p2" "$p1" "$root/proto/examples/atmosphere_molecular.json"
 
-py "auto takes 16 on the canopy and 3 on the atmosphere, saying why; refusals name what stands in the way" '
+py "auto takes 16 on the canopy and the atmosphere, 3 under volpath saying why; refusals name what stands in the way" '
 import sys
 sys.path.insert(0, sys.argv[1]); from job import *
 port = int(sys.argv[2])
