@@ -159,7 +159,9 @@ typedef struct plugin {
    * prepare() keeps a value per page and its ops answer for rsw_page).
    * NULL: no, for a plugin with prepare() (what it prepares holds one
    * page); plugins without prepare() read their spectra through textures
-   * and can. scene_page_blocker asks every object. */
+   * and can. A medium that says yes must be a layered_medium keeping its
+   * pages' layers in Lp (media/layered.h: volpath's free flights and
+   * shadow rays read them). scene_page_blocker asks every object. */
   bool (*pages)(const object *o);
 } plugin;
 

@@ -7,7 +7,6 @@
 #include <string.h>
 
 #include "../accel.h"
-#include "../media/layered.h"
 #include "loader.h"
 #include "params.h"
 #include "periodic.h"
@@ -142,12 +141,6 @@ const object *scene_page_blocker(const scene *s, const char **why) {
     if (!pl) continue;
     if (pl->prepare && !(pl->pages && pl->pages(o))) {
       *why = "prepares its values at one set of three wavelengths";
-      return o;
-    }
-    /* A page's free flights and shadow rays read a layered medium's page
-     * layers (volpath.c flight_pages, layered_layers). */
-    if (pl->cls == CLS_MEDIUM && ((const medium *)o)->ops != &layered_medium_ops) {
-      *why = "is a medium without layers per page";
       return o;
     }
     /* A delta lobe's weight comes from sample() alone, at one page: only
