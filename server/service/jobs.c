@@ -933,6 +933,8 @@ static rsw_status plan_context(service *svc, const scene *sc, const job_req *q, 
         sens ? cJSON_GetArrayItem(sens, (int)(s % ns))->valuestring : sc->sensors[s % ns]->base.id;
     svc_find_sensor(sc, sname, &it->sensor_index);
     snprintf(it->sensor, sizeof it->sensor, "%s", sc->sensors[it->sensor_index]->base.id);
+    it->film_w = sc->sensors[it->sensor_index]->film->width;
+    it->film_h = sc->sensors[it->sensor_index]->film->height;
     const cJSON *cc = cJSON_GetObjectItemCaseSensitive(c, "coords");
     const cJSON *cw = cJSON_IsObject(cc) ? cJSON_GetObjectItemCaseSensitive(cc, "wavelength") : NULL;
     it->wavelength = w ? w->valuedouble : cw ? cw->valuedouble : q->d_wl;

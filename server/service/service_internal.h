@@ -108,6 +108,9 @@ typedef struct render_item {
   size_t context_index;
   char sensor[256];
   size_t sensor_index;
+  /* The size of its sensor's film (plan_context; a restored job's record):
+   * a stored film of another size is not this render's (film_open_ref). */
+  int film_w, film_h;
   double wavelength;
   size_t node; /* jobs with bands: 1 + the index of wavelength in job.bands->wl; 0 otherwise */
   uint32_t spp;
@@ -448,6 +451,7 @@ typedef struct svc_film_ref {
   char scene[65];
   char context[72];
   char sensor[256];
+  int width, height; /* the render's film size; 0: not known */
 } svc_film_ref;
 void svc_film_ref_set(svc_film_ref *ref, const job *j, size_t k); /* svc->lock held */
 rsw_status svc_state_film_read(service *svc, const svc_film_ref *ref, svc_film *out, svc_error *e);

@@ -764,6 +764,8 @@ void svc_film_ref_set(svc_film_ref *ref, const job *j, size_t k) {
   memcpy(ref->scene, j->scene_id, sizeof ref->scene);
   snprintf(ref->context, sizeof ref->context, "%s", j->items[k].context);
   snprintf(ref->sensor, sizeof ref->sensor, "%s", j->items[k].sensor);
+  ref->width = j->items[k].film_w;
+  ref->height = j->items[k].film_h;
 }
 
 static bool read_at(int fd, void *buf, size_t n, off_t off) {
@@ -978,11 +980,17 @@ static int film_open_ref(service *svc, const svc_film_ref *ref, film_trailer *t,
   int fd = film_open_path(svc, p, t, true, NULL);
   if (fd < 0) return -1;
   const char *bad = NULL;
+  char size_why[128];
   if (!film_meta(fd, t, out))
     bad = "its metadata does not describe it";
   else if (strcmp(out->scene, ref->scene) != 0 || strcmp(out->context, ref->context) != 0 ||
            strcmp(out->sensor, ref->sensor) != 0)
     bad = "it is another render's film (its scene, context or sensor differ from its place's)";
+  else if (ref->width && (out->img.width != ref->width || out->img.height != ref->height)) {
+    snprintf(size_why, sizeof size_why, "its size (%dx%d) is not its sensor's film size (%dx%d)",
+             out->img.width, out->img.height, ref->width, ref->height);
+    bad = size_why;
+  }
   if (bad) {
     close(fd);
     char why[200];
@@ -1381,6 +1389,8 @@ static bool restore_finished(service *svc, const req_header *h, cJSON *done, con
       im->spp = (uint32_t)spp;
       im->width = (int)w;
       im->height = (int)hh;
+      ri->film_w = (int)w;
+      ri->film_h = (int)hh;
       im->unresolved_rays = unres;
       y = cJSON_GetObjectItemCaseSensitive(it, "ch");
       int c = 0;
