@@ -22,8 +22,10 @@
 #     wavelengths 400..550 nm at 128 spp: a bundle of 16 against the
 #     unbundled films (the same criteria: measured max |z| 1.57, rms 0.69,
 #     <= 0.6% of pixels beyond 3 sigma), and bitwise across threads;
-#   - "auto" takes 16 on the canopy and the atmosphere, 3 where the
-#     atmosphere is rendered by `volpath` (with the reason in bundle_why),
+#   - "auto" takes 16 on the canopy (also on a gold roughconductor soil:
+#     its index preset per page) and the atmosphere, 3 on a plastic soil
+#     (a delta lobe) and where the atmosphere is rendered by `volpath`
+#     (with the reason in bundle_why),
 #     and refusals name what stands in the way: 17 (the range), an
 #     integrator that carries three (`volpath`, `direct`), a delta BSDF.
 name=test_bundle_pages
@@ -183,6 +185,15 @@ assert j["bundle"] == 16 and "bundle_why" not in j, j
 atmo = push(port, sys.argv[4])
 j = submit(port, atmo, {"contexts": ctx, "defaults": {"spp": 1}, "bundle": "auto"})
 assert j["bundle"] == 16 and "bundle_why" not in j, j
+import json
+canopy = json.load(open(sys.argv[3]))
+for soil, k, words in (({"type": "roughconductor", "material": "Au", "alpha": 0.3}, 16, []),
+                       ({"type": "plastic", "diffuse_reflectance": 0.3}, 3, ["(plastic)", "delta lobe"])):
+    canopy["soil"]["bsdf"] = soil
+    path = sys.argv[1] + "/canopy_" + soil["type"] + ".json"
+    json.dump(canopy, open(path, "w"))
+    j = submit(port, push(port, path), {"contexts": ctx, "defaults": {"spp": 1}, "bundle": "auto"})
+    assert j["bundle"] == k and all(w in j.get("bundle_why", "") for w in words), (soil, j)
 vol = push(port, sys.argv[7])
 j = submit(port, vol, {"contexts": ctx, "defaults": {"spp": 1}, "bundle": "auto"})
 assert j["bundle"] == 3 and "(volpath)" in j["bundle_why"] and "at most 3" in j["bundle_why"], j

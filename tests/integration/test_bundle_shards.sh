@@ -124,8 +124,8 @@ rs "$pa" sweep "$scene" "${grid[@]}" --bundle auto --shard 0/3 -o a0 >/dev/null 
 same "--bundle auto, --shard I/3 merged" auto amerged
 rs "$pa" sweep "$scene" "${grid[@]}" --bundle 16 -o whole16 >/dev/null 2>"$tmp/err" || bad "bundle 16: $(cat "$tmp/err")"
 same "--bundle auto, --bundle 16" whole16 auto
-# --bundle auto where the daemon comes to 3 (a canopy on a roughconductor
-# soil, whose index tables hold three wavelengths; leaves with tabulated
+# --bundle auto where the daemon comes to 3 (a canopy on a plastic soil,
+# whose delta specular lobe keeps pages out; leaves with tabulated
 # reflectance and transmittance, so that the bundle changes the paths'
 # choices): 20 wavelengths per reflectance, groups of 16 (leads 0, 16, 20,
 # 36: shards 0, 1, 2, 0 of 3) each cut into threes, so the shards' bundles
@@ -135,13 +135,13 @@ cp "$root/proto/examples/canopy_leaves.txt" .
 python3 - "$root/proto/examples/canopy_periodic.json" canopy3.json <<'PY'
 import json, sys
 d = json.load(open(sys.argv[1]))
-d["soil"]["bsdf"] = {"type": "roughconductor", "material": "Au", "alpha": 0.3}
+d["soil"]["bsdf"] = {"type": "plastic", "diffuse_reflectance": 0.3}
 d["leaf"]["disc"]["bsdf"] = {"type": "bilambertian",
                              "reflectance": {"type": "spectrum", "wavelengths": [400, 800], "values": [0.05, 0.5]},
                              "transmittance": {"type": "spectrum", "wavelengths": [400, 800], "values": [0.3, 0.45]}}
 json.dump(d, open(sys.argv[2], "w"))
 PY
-g20=(--grid wavelength=400:590:10 --grid soil.bsdf.alpha.value=0.2:0.3:0.1 --spp 4 --seed 7)
+g20=(--grid wavelength=400:590:10 --grid soil.bsdf.diffuse_reflectance.value=0.2:0.3:0.1 --spp 4 --seed 7)
 rs "$pa" sweep canopy3.json "${g20[@]}" --bundle auto -o dauto >/dev/null 2>"$tmp/err" &&
   rs "$pa" sweep canopy3.json "${g20[@]}" --bundle auto --shard 0/3 -o d0 >/dev/null 2>"$tmp/err" &&
   rs "$pb" sweep canopy3.json "${g20[@]}" --bundle auto --shard 1/3 -o d1 >/dev/null 2>"$tmp/err" &&

@@ -36,6 +36,10 @@ typedef struct conductor_ior {
   color mat_eta, mat_k;          /* the preset at the render's wavelength
                                      (set at creation for 550 nm / rgb,
                                      refreshed by prepare()) */
+  /* A bundle of pages (render_ctx.bundle > 3): the preset at pages 1..
+   * (page 0's is mat_eta, mat_k), what eval answers while rsw_page names
+   * one. */
+  color page_eta[RENDER_MAX_PAGES - 1], page_k[RENDER_MAX_PAGES - 1];
 } conductor_ior;
 
 /* eta and k at si. */

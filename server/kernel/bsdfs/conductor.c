@@ -22,8 +22,9 @@
 
 void conductor_ior_eval(const conductor_ior *c, const surface_interaction *si, color *eta, color *k) {
   if (c->material) {
-    *eta = c->mat_eta;
-    *k = c->mat_k;
+    int p = rsw_page;
+    *eta = p ? c->page_eta[p - 1] : c->mat_eta;
+    *k = p ? c->page_k[p - 1] : c->mat_k;
   } else {
     *eta = tex_eval(c->eta, si);
     *k = tex_eval(c->k, si);
@@ -32,7 +33,13 @@ void conductor_ior_eval(const conductor_ior *c, const surface_interaction *si, c
 
 rsw_status conductor_ior_prepare(conductor_ior *c, const render_ctx *rc, rsw_err *err, const char *where) {
   if (!c->material) return RSW_OK;
-  return ior_conductor_for_ctx(c->material, rc, &c->mat_eta, &c->mat_k, err, where);
+  render_ctx pc = rc_page(rc, 0);
+  rsw_status st = ior_conductor_for_ctx(c->material, &pc, &c->mat_eta, &c->mat_k, err, where);
+  for (int p = 1; p < rc_pages(rc) && !st; p++) {
+    pc = rc_page(rc, p);
+    st = ior_conductor_for_ctx(c->material, &pc, &c->page_eta[p - 1], &c->page_k[p - 1], err, where);
+  }
+  return st;
 }
 
 rsw_status conductor_ior_load(loader *ld, node *n, conductor_ior *out) {
@@ -184,7 +191,7 @@ static void conductor_traverse(object *o, param_visitor *v) {
 }
 
 DEFINE_PLUGIN(conductor, CLS_BSDF, .prepare = conductor_prepare, .ops = &conductor_ops,
-              .traverse = conductor_traverse);
+              .traverse = conductor_traverse, .pages = plugin_pages_any);
 
 bsdf *conductor_new(texture *eta, texture *k, const ior_conductor *material, texture *specular_reflectance,
                     const render_ctx *rc) {

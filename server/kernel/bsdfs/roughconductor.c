@@ -364,7 +364,7 @@ static void rough_traverse(object *o, param_visitor *v) {
 }
 
 DEFINE_PLUGIN(roughconductor, CLS_BSDF, .prepare = rough_prepare, .ops = &rough_ops,
-              .traverse = rough_traverse);
+              .traverse = rough_traverse, .pages = plugin_pages_any);
 
 bsdf *roughconductor_new(mf_type type, texture *alpha_u, texture *alpha_v, bool sample_visible, texture *eta,
                          texture *k, const ior_conductor *material, texture *specular_reflectance,

@@ -28,7 +28,7 @@
 void plugin_free_object(object *o);
 
 /* plugin.pages saying yes: for a plugin whose prepare() keeps a value per
- * page (uniform) or holds nothing spectral (a film's pixel format, a
+ * page (uniform, the conductors' index presets) or holds nothing spectral (a film's pixel format, a
  * bitmap's variant). */
 bool plugin_pages_any(const object *o);
 

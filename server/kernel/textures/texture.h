@@ -28,7 +28,8 @@ bool uniform_spectrum_copy(spectrum *out, const spectrum *s);
  * it without a failure. Returns false (nothing changed) if t is not a
  * uniform texture. */
 bool uniform_texture_swap_spectrum(texture *t, spectrum *s);
-/* The uniform texture's current value (for parameter tables/tests). */
+/* The uniform texture's current value, at the page rsw_page names (for
+ * parameter tables, tests and the batched BSDF ops). */
 bool uniform_texture_value(const texture *t, color *out);
 
 #endif

@@ -153,7 +153,7 @@ bool uniform_texture_set_where(texture *t, const char *where) {
 
 bool uniform_texture_value(const texture *t, color *out) {
   if (t->base.plugin != &plugin_uniform) return false;
-  *out = ((const uniform_tex *)t)->value;
+  *out = uniform_at_page((const uniform_tex *)t);
   return true;
 }
 

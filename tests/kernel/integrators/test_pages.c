@@ -4,12 +4,13 @@
  *  - chi-square of bsdf_sample_pages against the mean pdf
  *    (bsdf_eval_pages), at 3 incidences, for a bilambertian leaf whose
  *    transmittance is 0 at the first page's wavelengths (so a page's own
- *    sampling misses a lobe another page has) and for an rpv soil with a
- *    spectral rho_0, with bundles of 16 (6 pages) and 7 (3 pages);
+ *    sampling misses a lobe another page has), for an rpv soil with a
+ *    spectral rho_0 and for a gold roughconductor (its index preset per
+ *    page), with bundles of 16 (6 pages) and 7 (3 pages);
  *  - each page's weight times the mean pdf is that page's value (1e-12),
  *    and each page's value is the BSDF's at its own wavelengths: the leaf
- *    evaluated at page p equals the same leaf prepared at the page's three
- *    wavelengths alone, bit for bit;
+ *    (and the gold roughconductor) evaluated at page p equals the same BSDF
+ *    prepared at the page's three wavelengths alone, bit for bit;
  *  - the uniform texture answers for rsw_page and leaves it at 0;
  *  - `null` (the one delta lobe pages carry) gives weight 1 at every page.
  * Chi-square: 200,000 samples per run, significance 0.01 with the Sidak
@@ -25,7 +26,7 @@
 
 RSW_TEST_DEFINE_GLOBALS
 
-#define CHI2_TESTS 12
+#define CHI2_TESTS 18
 
 static const char *LEAF =
     "{\"type\": \"bilambertian\","
@@ -36,6 +37,8 @@ static const char *LEAF =
 static const char *SOIL =
     "{\"type\": \"rpv\", \"rho_0\": {\"type\": \"spectrum\", \"wavelengths\": [400, 700], "
     "\"values\": [0.02, 0.3]}, \"k\": 0.7, \"g\": -0.2}";
+
+static const char *METAL = "{\"type\": \"roughconductor\", \"material\": \"Au\", \"alpha\": 0.25}";
 
 static scene *bsdf_scene(const char *bsdf_json) {
   char buf[2048];
@@ -75,11 +78,11 @@ static double pdf_pages(void *user, vec3 wo) {
 }
 
 static void test_chi2(void) {
-  const char *bsdfs[2] = {LEAF, SOIL};
+  const char *bsdfs[3] = {LEAF, SOIL, METAL};
   const int ks[2] = {16, 7};
   const double th[3] = {10, 50, 80};
   int runs = 0;
-  for (int i = 0; i < 2; i++)
+  for (int i = 0; i < 3; i++)
     for (int j = 0; j < 2; j++) {
       scene *s = bsdf_scene(bsdfs[i]);
       REQUIRE(s && prepare_bundle(s, ks[j]), "scene %d", i);
@@ -98,6 +101,29 @@ static void test_chi2(void) {
       scene_free(s);
     }
   CHECK(runs == CHI2_TESTS, "runs %d", runs);
+}
+
+/* Page p of b (prepared for a bundle of 16) evaluates bit for bit as the
+ * BSDF json prepared at the page's three wavelengths alone. */
+static void page_alone(const bsdf *b, int pages, const char *json, const surface_interaction *si) {
+  color f[RENDER_MAX_PAGES];
+  for (int p = 0; p < pages; p++) {
+    scene *one = bsdf_scene(json);
+    render_ctx rc = {.variant = VARIANT_MONO, .bundle = 3};
+    for (int c = 0; c < RENDER_MAX_BUNDLE; c++)
+      rc.wl[c] = 400.0 + 20.0 * (3 * p + (c < 3 ? c : 2) < 15 ? 3 * p + (c < 3 ? c : 2) : 15);
+    rc.wavelength = rc.wl[0];
+    rsw_err err = {0};
+    REQUIRE(one && scene_prepare(one, &rc, &err) == RSW_OK, "page %d alone: %s", p, err.msg);
+    const bsdf *b1 = one->shapes[0]->bsdf;
+    for (int k = 0; k < 5; k++) {
+      vec3 wo = tb_dir_deg(20 + 35 * k, 40 * k);
+      color g = b1->ops->eval(b1, si, wo);
+      bsdf_eval_pages(b, si, pages, wo, false, f);
+      CHECK(g.c[0] == f[p].c[0] && g.c[1] == f[p].c[1] && g.c[2] == f[p].c[2], "page %d at %d", p, k);
+    }
+    scene_free(one);
+  }
 }
 
 /* Weights are values over the mean pdf; a page's value is the BSDF's at
@@ -133,24 +159,7 @@ static void test_weights(void) {
   vec3 down = tb_dir_deg(160, 10);
   bsdf_eval_pages(b, &si, s->pages, down, false, f);
   CHECK(col_is_black(f[0]) && f[2].c[0] > 0, "page 0 transmits nothing, page 2 does");
-  /* Page p's values are those of the leaf prepared at its wavelengths alone. */
-  for (int p = 0; p < s->pages; p++) {
-    scene *one = bsdf_scene(LEAF);
-    render_ctx rc = {.variant = VARIANT_MONO, .bundle = 3};
-    for (int c = 0; c < RENDER_MAX_BUNDLE; c++)
-      rc.wl[c] = 400.0 + 20.0 * (3 * p + (c < 3 ? c : 2) < 15 ? 3 * p + (c < 3 ? c : 2) : 15);
-    rc.wavelength = rc.wl[0];
-    rsw_err err = {0};
-    REQUIRE(one && scene_prepare(one, &rc, &err) == RSW_OK, "page %d alone: %s", p, err.msg);
-    const bsdf *b1 = one->shapes[0]->bsdf;
-    for (int k = 0; k < 5; k++) {
-      vec3 wo = tb_dir_deg(20 + 35 * k, 40 * k);
-      color g = b1->ops->eval(b1, &si, wo);
-      bsdf_eval_pages(b, &si, s->pages, wo, false, f);
-      CHECK(g.c[0] == f[p].c[0] && g.c[1] == f[p].c[1] && g.c[2] == f[p].c[2], "page %d at %d", p, k);
-    }
-    scene_free(one);
-  }
+  page_alone(b, s->pages, LEAF, &si);
   scene_free(s);
 }
 
@@ -167,9 +176,25 @@ static void test_null(void) {
   scene_free(s);
 }
 
+/* The gold roughconductor: each page's Fresnel from its own wavelengths'
+ * index (gold's reflectance rises steeply from 450 to 600 nm). */
+static void test_metal(void) {
+  scene *s = bsdf_scene(METAL);
+  REQUIRE(s && prepare_bundle(s, 16), "metal");
+  const bsdf *b = s->shapes[0]->bsdf;
+  surface_interaction si = tb_si_with(tb_dir_deg(30, 0));
+  page_alone(b, s->pages, METAL, &si);
+  color f[RENDER_MAX_PAGES];
+  bsdf_eval_pages(b, &si, s->pages, tb_dir_deg(30, 180), false, f);
+  CHECK(f[5].c[0] > 1.5 * f[0].c[0], "gold reflects more at 700 nm than at 400 nm (%g, %g)", f[5].c[0],
+        f[0].c[0]);
+  scene_free(s);
+}
+
 int main(void) {
   RSW_TEST_RUN(test_chi2);
   RSW_TEST_RUN(test_weights);
+  RSW_TEST_RUN(test_metal);
   RSW_TEST_RUN(test_null);
   RSW_TEST_END("test_pages");
 }
