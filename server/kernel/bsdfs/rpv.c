@@ -65,7 +65,7 @@ static rpv_geom rpv_geometry(vec3 wi, vec3 wo) {
 
 /* pi f_r = rho_0 M F H (the BRF) for one channel. */
 static double rpv_brf_geom(double rho_0, double k, double g, double rho_c, const rpv_geom *t) {
-  /* x^1.5 as x sqrt(x): within 2 ulp of pow, a third of its time. */
+  /* x^1.5 as x sqrt(x): within 2 ulp of pow, about a sixth of its time. */
   double fb = 1.0 + g * g + 2.0 * g * t->cos_big;
   double f = (1.0 - g * g) / (fb * sqrt(fb));
   double h = 1.0 + (1.0 - rho_c) / (1.0 + t->gg);

@@ -28,8 +28,8 @@
 void plugin_free_object(object *o);
 
 /* plugin.pages saying yes: for a plugin whose prepare() keeps a value per
- * page (uniform, the conductors' index presets) or holds nothing spectral (a film's pixel format, a
- * bitmap's variant). */
+ * page (uniform, the conductors' index presets) or holds nothing spectral
+ * (a film's pixel format, a bitmap's variant). */
 bool plugin_pages_any(const object *o);
 
 /* A zeroed record of `size` bytes (a plugin struct whose first member is
