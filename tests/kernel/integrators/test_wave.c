@@ -35,6 +35,7 @@
 #include "../../../server/kernel/accel.h"
 #include "../../../server/kernel/core/isa.h"
 #include "../../../server/kernel/hit.h"
+#include "../../../server/kernel/integrators/integrator.h"
 #include "../../../server/kernel/samplers/sampler_batch.h"
 #include "../../../server/kernel/shapes/instance.h"
 #include "../../../server/kernel/shapes/shape.h"
@@ -675,7 +676,64 @@ static void test_hits_batch(void) {
   scene_free(s);
 }
 
+/* pick_emitter_index against the binary search it replaces for a few
+ * emitters (the first k < n - 1 with cdf[k] > t, else n - 1): every
+ * count of emitters on both sides of PICK_COUNT_MAX, weights with zeros
+ * (equal cdf entries), an infinite one, and u at 0, at every cdf entry,
+ * one ulp either side, and a NaN. */
+static size_t pick_by_search(const scene *sc, double u) {
+  double t = u * sc->emitter_weight_sum;
+  size_t lo = 0, hi = sc->n_emitters - 1;
+  while (lo < hi) {
+    size_t mid = (lo + hi) / 2;
+    if (sc->emitter_cdf[mid] <= t)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  return lo;
+}
+
+static void test_pick_emitter(void) {
+  enum {
+    NMAX = PICK_COUNT_MAX + 4
+  };
+  const double weight_sets[][NMAX] = {{1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1},
+                                      {0.3, 0, 0, 2, 0.1, 0, 5, 1e-9, 0, 0.7, 0, 3},
+                                      {0, 0, 1, 0, 0, 1, 0, 0, 0, 1, 0, 0},
+                                      {2, INFINITY, 1, 0, 1, 1, 1, 1, 1, 1, 1, 1},
+                                      {1e-300, 1, 1e300, 1, 0, 0, 0, 0, 0, 2, 0, 0}};
+  int bad = 0, tried = 0, counted = 0;
+  for (size_t w = 0; w < sizeof weight_sets / sizeof weight_sets[0]; w++) {
+    for (size_t n = 1; n <= NMAX; n++) {
+      double cdf[NMAX], sum = 0;
+      for (size_t i = 0; i < n; i++) sum += weight_sets[w][i], cdf[i] = sum;
+      scene sc = {.n_emitters = n, .emitter_cdf = cdf, .emitter_weight_sum = sum};
+      double us[4 * NMAX + 8];
+      int nu = 0;
+      us[nu++] = 0.0, us[nu++] = 0.5, us[nu++] = nextafter(1.0, 0.0), us[nu++] = NAN;
+      for (size_t i = 0; i < n; i++) {
+        double u = sum > 0 && isfinite(sum) ? cdf[i] / sum : 0.5;
+        us[nu++] = u, us[nu++] = nextafter(u, 0.0), us[nu++] = nextafter(u, 1.0);
+      }
+      for (int j = 0; j < nu; j++) {
+        size_t a = pick_emitter_index(&sc, us[j]), b = pick_by_search(&sc, us[j]);
+        if (a != b) {
+          if (bad < 5)
+            fprintf(stderr, "weights %zu, n %zu, u %.17g: picked %zu, search %zu\n", w, n, us[j], a, b);
+          bad++;
+        }
+        tried++;
+        counted += n <= PICK_COUNT_MAX;
+      }
+    }
+  }
+  CHECK(bad == 0, "pick_emitter_index differs from the binary search in %d of %d picks", bad, tried);
+  CHECK(counted > 100 && counted < tried, "both forms tried (%d counted of %d)", counted, tried);
+}
+
 int main(void) {
+  RSW_TEST_RUN(test_pick_emitter);
   RSW_TEST_RUN(test_threads_cornell);
   RSW_TEST_RUN(test_threads_periodic);
   RSW_TEST_RUN(test_threads_batched_plugins);
