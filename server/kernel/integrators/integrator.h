@@ -16,11 +16,22 @@ static inline double mis_weight(double a, double b) {
   return isfinite(w) ? w : 0.0;
 }
 
-/* The emitter that u in [0, 1) picks, proportionally to sampling_weight.
- * The search is written for conditional moves (which way a random number
- * goes is unpredictable). */
+/* The emitter that u in [0, 1) picks, proportionally to sampling_weight:
+ * the first k < n - 1 with cdf[k] > t = u * sum, else n - 1. The cdf
+ * never decreases (weights >= 0), so the cdf[k] <= t form a prefix and
+ * the pick is their count over k < n - 1 (a NaN t counts none, as the
+ * search goes left): a few emitters are counted in a loop of fixed
+ * length, more are searched, written for conditional moves (which way a
+ * random number goes is unpredictable; the search's length varies with
+ * it, the count's does not). */
+#define PICK_COUNT_MAX 8
 static inline size_t pick_emitter_index(const scene *sc, double u) {
   double t = u * sc->emitter_weight_sum;
+  if (sc->n_emitters <= PICK_COUNT_MAX) {
+    size_t k = 0;
+    for (size_t i = 0; i + 1 < sc->n_emitters; i++) k += sc->emitter_cdf[i] <= t;
+    return k;
+  }
   size_t lo = 0, hi = sc->n_emitters - 1;
   while (lo < hi) {
     size_t mid = (lo + hi) / 2;

@@ -19,6 +19,8 @@
 #include "../scene/plugin_def.h"
 #include "../shapes/instance.h"
 #include "../shapes/shape.h"
+#include "cull.h"
+#include "cull_lanes.h"
 #include "integrator.h"
 #include "pages.h"
 #include "polarization.h"
@@ -185,18 +187,9 @@ static double scene_pad(const scene *sc) {
   return 4.0 * RSW_F32_UNIT * (m + e);
 }
 
-static inline bool may_hit(const scene *sc, const ray3 *r, double pad) {
-  /* Only the cheap half of a slab test: a ray whose origin lies beyond a
-   * face of the padded box and that points away from it (comparisons, no
-   * division); any other ray is traced. Without branches: which face a
-   * camera ray's origin lies beyond varies from ray to ray. */
-  bool away = (r->o.z > sc->bbox_max.z + pad) & (r->d.z >= 0);
-  away |= (r->o.z < sc->bbox_min.z - pad) & (r->d.z <= 0);
-  away |= (r->o.x > sc->bbox_max.x + pad) & (r->d.x >= 0);
-  away |= (r->o.x < sc->bbox_min.x - pad) & (r->d.x <= 0);
-  away |= (r->o.y > sc->bbox_max.y + pad) & (r->d.y >= 0);
-  away |= (r->o.y < sc->bbox_min.y - pad) & (r->d.y <= 0);
-  return !away;
+void rays_traced_batch(rsw_isa isa, int n, const double *const *o, const double *const *d, const pad_box *pb,
+                       const accel_box *box, unsigned char *out) {
+  SIMD_DISPATCH(isa, rays_traced, n, o, d, pb->lo, pb->hi, box ? box->lo : NULL, box ? box->hi : NULL, out);
 }
 
 /* Whether the continuation of a path at si cannot meet anything, for
@@ -209,7 +202,7 @@ static inline bool may_hit(const scene *sc, const ray3 *r, double pad) {
  * (the other two vectors of the shading frame without a component along
  * it), outwards from a face of the padded box that the spawned origin
  * lies beyond: every direction then has a component >= 0 along the
- * normal, spawn_ray offsets the origin along it, and may_hit's test for
+ * normal, spawn_ray offsets the origin along it, and ray_may_hit's test for
  * that face culls the ray, in the same arithmetic as below. The seed
  * scene's every hit (a flat surface under directional suns). */
 static bool continuation_escapes(const scene *sc, const surface_interaction *si, double pad) {
@@ -255,20 +248,36 @@ static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_
   };
   /* All packets first (timed as one), then every hit's surface data. */
   double t0 = timed ? clock_s() : 0;
-  const double pad = scene_pad(sc);
+  const pad_box pb = pad_box_of(sc, scene_pad(sc));
   accel_box box;
   const bool cull = coherent && accel_cull_box(sc->accel, &box);
+  /* Which rays to trace, V at a time (rays_traced_batch, vectorised):
+   * ray_may_hit, and camera rays also by a full slab test with a clear
+   * margin (accel_misses_bounds): those that pass the scene by (a third
+   * of the seed scene's) need no query either. */
+  enum {
+    V = 64
+  };
+  unsigned char go[V];
   int q[P], nq = 0;
   for (int k = 0; k <= n; k++) {
     if (k < n) {
+      if (k % V == 0) {
+        int m = n - k < V ? n - k : V;
+        double c[6][V];
+        for (int j = 0; j < m; j++) {
+          const ray3 *r = &ln[idx[k + j]].ray;
+          c[0][j] = r->o.x, c[1][j] = r->o.y, c[2][j] = r->o.z;
+          c[3][j] = r->d.x, c[4][j] = r->d.y, c[5][j] = r->d.z;
+        }
+        const double *o[3] = {c[0], c[1], c[2]}, *d[3] = {c[3], c[4], c[5]};
+        rays_traced_batch(rsw_isa_get(), m, o, d, &pb, cull ? &box : NULL, go);
+      }
       int i = idx[k];
       lane *l = &ln[i];
       l->hit = TRACE_MISS;
       l->wrapped = false;
-      /* Camera rays also by a full slab test with a clear margin
-       * (accel_misses_bounds): those that pass the scene by (a third of
-       * the seed scene's) need no query either. */
-      bool m = may_hit(sc, &l->ray, pad) && !(cull && accel_box_misses(&box, &l->ray));
+      bool m = go[k % V];
       q[nq] = other[no] = i;
       nq += m, no += !m;
       if (nq < P) continue;
@@ -325,12 +334,12 @@ static void wave_occluded(const scene *sc, lane *ln, const int *idx, int n, rend
   enum {
     P = 16
   };
-  const double pad = scene_pad(sc);
+  const pad_box pb = pad_box_of(sc, scene_pad(sc));
   int q[P], nq = 0;
   for (int k = 0; k <= n; k++) {
     if (k < n) {
       lane *l = &ln[idx[k]];
-      if (!may_hit(sc, &l->sray, pad)) {
+      if (!ray_may_hit(&pb, &l->sray)) {
         l->occ = TRACE_MISS;
         continue;
       }

@@ -18,5 +18,6 @@
 #include "../bsdfs/fresnel_lanes.h"
 #include "../bsdfs/microfacet_lanes.h"
 #include "../bsdfs/rpv_lanes.h"
+#include "../integrators/cull_lanes.h"
 #include "../sensors/perspective_lanes.h"
 #include "../sensors/sensor_common_lanes.h"

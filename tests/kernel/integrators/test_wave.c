@@ -27,7 +27,10 @@
  *    batched draws pass a chi-square test of uniformity, the constant
  *    emitter's batched directions one against its pdf_direction (the area
  *    emitter's: tests/kernel/emitters/test_area_light.c);
- *    a stratified film is bitwise the same for 1, 2 and 3 threads. */
+ *    a stratified film is bitwise the same for 1, 2 and 3 threads;
+ *  - the wave's shortcuts give what they replace: the emitter pick by a
+ *    count (a few emitters) the binary search's pick, the batched ray
+ *    culls (rays_traced_batch) the scalar verdicts at every ISA. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -35,6 +38,8 @@
 #include "../../../server/kernel/accel.h"
 #include "../../../server/kernel/core/isa.h"
 #include "../../../server/kernel/hit.h"
+#include "../../../server/kernel/integrators/cull.h"
+#include "../../../server/kernel/integrators/integrator.h"
 #include "../../../server/kernel/samplers/sampler_batch.h"
 #include "../../../server/kernel/shapes/instance.h"
 #include "../../../server/kernel/shapes/shape.h"
@@ -675,7 +680,121 @@ static void test_hits_batch(void) {
   scene_free(s);
 }
 
+/* pick_emitter_index against the binary search it replaces for a few
+ * emitters (the first k < n - 1 with cdf[k] > t, else n - 1): every
+ * count of emitters on both sides of PICK_COUNT_MAX, weights with zeros
+ * (equal cdf entries), an infinite one, and u at 0, at every cdf entry,
+ * one ulp either side, and a NaN. */
+static size_t pick_by_search(const scene *sc, double u) {
+  double t = u * sc->emitter_weight_sum;
+  size_t lo = 0, hi = sc->n_emitters - 1;
+  while (lo < hi) {
+    size_t mid = (lo + hi) / 2;
+    if (sc->emitter_cdf[mid] <= t)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  return lo;
+}
+
+static void test_pick_emitter(void) {
+  enum {
+    NMAX = PICK_COUNT_MAX + 4
+  };
+  const double weight_sets[][NMAX] = {{1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1},
+                                      {0.3, 0, 0, 2, 0.1, 0, 5, 1e-9, 0, 0.7, 0, 3},
+                                      {0, 0, 1, 0, 0, 1, 0, 0, 0, 1, 0, 0},
+                                      {2, INFINITY, 1, 0, 1, 1, 1, 1, 1, 1, 1, 1},
+                                      {1e-300, 1, 1e300, 1, 0, 0, 0, 0, 0, 2, 0, 0}};
+  int bad = 0, tried = 0, counted = 0;
+  for (size_t w = 0; w < sizeof weight_sets / sizeof weight_sets[0]; w++) {
+    for (size_t n = 1; n <= NMAX; n++) {
+      double cdf[NMAX], sum = 0;
+      for (size_t i = 0; i < n; i++) sum += weight_sets[w][i], cdf[i] = sum;
+      scene sc = {.n_emitters = n, .emitter_cdf = cdf, .emitter_weight_sum = sum};
+      double us[4 * NMAX + 8];
+      int nu = 0;
+      us[nu++] = 0.0, us[nu++] = 0.5, us[nu++] = nextafter(1.0, 0.0), us[nu++] = NAN;
+      for (size_t i = 0; i < n; i++) {
+        double u = sum > 0 && isfinite(sum) ? cdf[i] / sum : 0.5;
+        us[nu++] = u, us[nu++] = nextafter(u, 0.0), us[nu++] = nextafter(u, 1.0);
+      }
+      for (int j = 0; j < nu; j++) {
+        size_t a = pick_emitter_index(&sc, us[j]), b = pick_by_search(&sc, us[j]);
+        if (a != b) {
+          if (bad < 5)
+            fprintf(stderr, "weights %zu, n %zu, u %.17g: picked %zu, search %zu\n", w, n, us[j], a, b);
+          bad++;
+        }
+        tried++;
+        counted += n <= PICK_COUNT_MAX;
+      }
+    }
+  }
+  CHECK(bad == 0, "pick_emitter_index differs from the binary search in %d of %d picks", bad, tried);
+  CHECK(counted > 100 && counted < tried, "both forms tried (%d counted of %d)", counted, tried);
+}
+
+/* rays_traced_batch against ray_may_hit and accel_box_misses, ray by ray
+ * at every ISA, with and without the full slab test: random rays around
+ * and through a box, and the edge cases (direction components of zero
+ * and -0, origins on the padded and the full box's faces, infinities,
+ * NaNs, a zero direction), over counts that leave a partial last vector. */
+static void test_rays_traced_batch(void) {
+  enum {
+    N = 203
+  };
+  const pad_box pb = {{-1.0, -2.0, -0.001}, {1.0, 2.0, 0.001}};
+  const accel_box box = {{-1.25, -2.25, -0.25}, {1.25, 2.25, 0.25}};
+  static double c[6][N];
+  ray3 r[N];
+  pcg32 rng;
+  pcg32_seed(&rng, 31, 7);
+  const double special[] = {0.0, -0.0, 1.0, -1.0, 0.001, -0.001, 1.25, -2.25, 0.25, INFINITY, -INFINITY, NAN};
+  const int ns = (int)(sizeof special / sizeof special[0]);
+  for (int k = 0; k < N; k++) {
+    double v[6];
+    for (int j = 0; j < 3; j++) v[j] = 6 * pcg32_next_double(&rng) - 3;
+    for (int j = 3; j < 6; j++) v[j] = 2 * pcg32_next_double(&rng) - 1;
+    if (k % 3 == 1) /* a component from the edge cases */
+      v[pcg32_next(&rng) % 6] = special[pcg32_next(&rng) % (uint32_t)ns];
+    if (k % 5 == 2) v[3 + pcg32_next(&rng) % 3] = 0.0;
+    if (k == 7) v[3] = v[4] = v[5] = 0.0;
+    r[k] = (ray3){v3(v[0], v[1], v[2]), v3(v[3], v[4], v[5]), 0.0, INFINITY};
+    for (int j = 0; j < 6; j++) c[j][k] = v[j];
+  }
+  const double *o[3] = {c[0], c[1], c[2]}, *d[3] = {c[3], c[4], c[5]};
+  int traced[2] = {0, 0}, first = -1;
+  for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
+    if (!rsw_isa_supported((rsw_isa)isa)) continue;
+    if (first < 0) first = isa;
+    for (int full = 0; full < 2; full++) {
+      const int counts[] = {N, 1, 2, 3, 5, 8, 13};
+      for (size_t ci = 0; ci < sizeof counts / sizeof counts[0]; ci++) {
+        int n = counts[ci], bad = 0;
+        unsigned char out[N + 1];
+        out[n] = 0xAA;
+        rays_traced_batch((rsw_isa)isa, n, o, d, &pb, full ? &box : NULL, out);
+        for (int k = 0; k < n; k++) {
+          bool want = ray_may_hit(&pb, &r[k]) && !(full && accel_box_misses(&box, &r[k]));
+          bad += out[k] != (want ? 1 : 0);
+          if (n == N && isa == first) traced[full] += want;
+        }
+        CHECK(bad == 0 && out[n] == 0xAA, "%s, %s, %d rays: %d verdicts differ from the scalar tests%s",
+              rsw_isa_name((rsw_isa)isa), full ? "full slab test" : "half", n, bad,
+              out[n] == 0xAA ? "" : " (and it wrote past the last)");
+      }
+    }
+  }
+  /* Both outcomes occur, and the full test culls more. */
+  CHECK(traced[1] > 10 && traced[0] < N - 10 && traced[1] < traced[0], "traced: %d half, %d full of %d",
+        traced[0], traced[1], N);
+}
+
 int main(void) {
+  RSW_TEST_RUN(test_pick_emitter);
+  RSW_TEST_RUN(test_rays_traced_batch);
   RSW_TEST_RUN(test_threads_cornell);
   RSW_TEST_RUN(test_threads_periodic);
   RSW_TEST_RUN(test_threads_batched_plugins);
