@@ -32,8 +32,8 @@ const cmdline_opt cli_opts_sweep[] = {
     {"--spp", "N", false, "samples per pixel"},
     {"--seed", "N", false, "job seed (default 0)"},
     {"--shard", "I/N", false,
-     "keep contexts I, I+N, I+2N, ... (ids unchanged; with --bundle, whole bundle groups: those whose first "
-     "context is one of them)"},
+     "keep contexts I, I+N, I+2N, ... (ids unchanged; unless --bundle 1, whole bundle groups: those whose "
+     "first context is one of them)"},
     {"--spread", "K", false,
      "run K shards at once through one load balancer (--server), each routed to its own replica by "
      "X-Raysweep-Shard; a scene FILE is pushed to every replica; a balancer that went away: rerun to resume"},
@@ -42,8 +42,8 @@ const cmdline_opt cli_opts_sweep[] = {
     {"--variance", NULL, false, "films add radiance_stderr channels (standard error of each pixel's mean)"},
     {"--bundle", "K|auto", false,
      "carry K (1-16) wavelengths per path: each render with the next ones that differ only in wavelength; "
-     "auto (recommended for spectral sweeps): the most the daemon allows for the scene, 1 where it allows "
-     "none (docs/experiments.md#spectral-bundles)"},
+     "auto (the default): the most the daemon allows for the scene, 1 where it allows none; 1: one "
+     "wavelength per path (docs/experiments.md#spectral-bundles)"},
     {"--format", "exr|npy|json|nc", false,
      "film files: exr (default), npy or json; nc: json films plus DIR/dataset.nc, the sweep as one "
      "NetCDF-4 dataset (xarray.open_dataset)"},
@@ -598,7 +598,7 @@ typedef struct sweep_opts {
   bool want_nc; /* --format nc: JSON films and DIR/dataset.nc */
   unsigned long long spp, seed, shard_i, shard_n, spread;
   double timeout;
-  int bundle;      /* --bundle: 1..RSW_BUNDLE_MAX or RSW_BUNDLE_AUTO (1 when absent) */
+  int bundle;      /* --bundle: 1..RSW_BUNDLE_MAX or RSW_BUNDLE_AUTO (auto when absent) */
   int bundle_plan; /* the K its groups are planned with: RSW_BUNDLE_MAX for auto */
 } sweep_opts;
 
@@ -633,7 +633,7 @@ static int read_sweep_options(const cli_ctx *ctx, const cmdline_args *a, sweep_o
   }
   if ((v = cmdline_get(a, "--spread")) && (!cli_parse_u64(v, 4096, &o->spread) || o->spread == 0))
     return cli_usage(ctx, "--spread needs a number of shards from 1 to 4096 (got '%s')", v);
-  o->bundle = o->bundle_plan = 1;
+  o->bundle = RSW_BUNDLE_AUTO, o->bundle_plan = RSW_BUNDLE_MAX; /* the daemon's default */
   if ((v = cmdline_get(a, "--bundle"))) {
     unsigned long long k;
     if (strcmp(v, "auto") == 0)

@@ -40,10 +40,12 @@ void sweep_fingerprint(const cmdline_args *a, const char *scene, char out[17]) {
     h = fnv1a_str(h, keyed[k]);
     for (size_t i = 0; i < n; i++) h = fnv1a_str(h, v[i]);
   }
-  /* (only when it bundles: sweeps without it, or with --bundle 1, keep
-   * the value they had before --bundle existed) */
+  /* (only when it bundles: --bundle 1 keeps the value sweeps had before
+   * --bundle existed; none is auto, the daemon's default, so that a sweep
+   * begun when none meant 1 is not resumed with bundles) */
   const char *bundle = cmdline_get(a, "--bundle");
-  if (bundle && strcmp(bundle, "1") != 0) h = fnv1a_str(fnv1a_str(h, "--bundle"), bundle);
+  if (!bundle) bundle = "auto";
+  if (strcmp(bundle, "1") != 0) h = fnv1a_str(fnv1a_str(h, "--bundle"), bundle);
   snprintf(out, 17, "%016llx", (unsigned long long)h);
 }
 

@@ -211,8 +211,7 @@ rsw_status rsw_contexts_set_bundle(rsw_contexts *x, int k) {
   cJSON_DeleteItemFromObjectCaseSensitive(x->root, "bundle");
   if (k == RSW_BUNDLE_AUTO)
     return cJSON_AddStringToObject(x->root, "bundle", "auto") ? RSW_OK : RSW_ERR_NOMEM;
-  if (k > 1 && !cJSON_AddNumberToObject(x->root, "bundle", k)) return RSW_ERR_NOMEM;
-  return RSW_OK;
+  return cJSON_AddNumberToObject(x->root, "bundle", k) ? RSW_OK : RSW_ERR_NOMEM;
 }
 
 rsw_status rsw_contexts_set_bundle_group(rsw_contexts *x, size_t index, long long group) {
@@ -936,7 +935,8 @@ static int cmp_text_key(const void *a, const void *b) {
 
 int client_contexts_bundle(const rsw_contexts *x) {
   const cJSON *b = x ? cJSON_GetObjectItemCaseSensitive(x->root, "bundle") : NULL;
-  if (cJSON_IsString(b)) return RSW_BUNDLE_MAX; /* "auto": the most any daemon takes */
+  /* "auto", or none (the daemon's default, auto): the most any daemon takes */
+  if (!b || cJSON_IsString(b)) return RSW_BUNDLE_MAX;
   return cJSON_IsNumber(b) && b->valuedouble > 1 ? (int)b->valuedouble : 1;
 }
 

@@ -237,9 +237,9 @@ rsw_status rsw_contexts_set_job_seed(rsw_contexts *x, long long seed);
  * radiance_stderr plane). The server checks them at submission. */
 rsw_status rsw_contexts_set_quantities(rsw_contexts *x, const char *const *names, size_t n);
 rsw_status rsw_contexts_set_variance(rsw_contexts *x, int on);
-/* The job's "bundle": wavelengths carried per path (1..RSW_BUNDLE_MAX; 1 removes it;
- * RSW_BUNDLE_AUTO: "auto", the most the daemon allows for the scene, the
- * recommended setting for spectral sweeps;
+/* The job's "bundle": wavelengths carried per path (1..RSW_BUNDLE_MAX; 1:
+ * one per path, as before bundles; RSW_BUNDLE_AUTO: "auto", the most the
+ * daemon allows for the scene, what a job that names no bundle gets;
  * docs/experiments.md#spectral-bundles). The server checks the scene. */
 #define RSW_BUNDLE_AUTO (-1)
 /* The most wavelengths per path the API allows ("bundle" 1..RSW_BUNDLE_MAX). */

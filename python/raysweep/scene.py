@@ -171,8 +171,9 @@ class Scene:
         each context's wavelength), ``quantities`` (``["brf"]``...),
         ``variance``, ``bands`` (spectral response functions), ``templates``
         (docs/experiments.md), ``bundle`` (wavelengths carried per path,
-        1 to 16, or ``"auto"``, the most the scene allows and the
-        recommended setting for spectral sweeps:
+        1 to 16, or ``"auto"``, the most the scene allows; ``None``, the
+        default, leaves it to the daemon, which takes ``"auto"``; 1 renders
+        one wavelength per path, as before bundles:
         docs/experiments.md#spectral-bundles).
 
         ``progress``: ``None`` shows a bar in a notebook (tqdm when

@@ -546,6 +546,20 @@ rsw_status bands_combine(const band *b, const film_image *const *nodes, film_ima
     film_image_free(&o);
     return rsw_fail(err, RSW_ERR_NOMEM, b->id, "out of memory for band '%s'", b->id);
   }
+  /* The node films' errors: independent between renders of their own
+   * seeds, but node films rendered in one spectral bundle share its seed
+   * and its paths, so their errors are correlated and only bounded:
+   * sd(Σ_{i∈B} w_i X_i) ≤ Σ_{i∈B} |w_i| s_i (Cauchy–Schwarz). So the
+   * band's variance is Σ over bundles of (Σ_{i∈B} |w_i| s_i)²: exact for
+   * nodes rendered alone, an upper bound for bundled ones
+   * (docs/experiments.md#standard-errors). group[i]: node i's bundle, by
+   * seed. */
+  size_t group[BAND_MAX_NODES], n_groups = 0;
+  for (size_t i = 0; i < b->n_nodes && i < BAND_MAX_NODES; i++) {
+    size_t g = 0;
+    while (g < i && nodes[g]->seed != nodes[i]->seed) g++;
+    group[i] = g < i ? group[g] : n_groups++;
+  }
   for (size_t q = 0; q < n; q++) {
     double s = 0;
     for (size_t i = 0; i < b->n_nodes; i++) s += b->w[i] * (double)nodes[i]->data[q];
@@ -556,11 +570,10 @@ rsw_status bands_combine(const band *b, const film_image *const *nodes, film_ima
       const char *name = o.planes[p].name;
       double v;
       if (strcmp(name, "radiance_stderr") == 0) {
-        double var = 0;
-        for (size_t i = 0; i < b->n_nodes; i++) {
-          double sd = nodes[i]->planes[p].data[q];
-          var += b->w[i] * b->w[i] * sd * sd;
-        }
+        double sum[BAND_MAX_NODES], var = 0;
+        for (size_t g = 0; g < n_groups; g++) sum[g] = 0;
+        for (size_t i = 0; i < b->n_nodes; i++) sum[group[i]] += fabs(b->w[i]) * nodes[i]->planes[p].data[q];
+        for (size_t g = 0; g < n_groups; g++) var += sum[g] * sum[g];
         v = sqrt(var) / W;
       } else {
         v = (strcmp(name, "brf") == 0 ? M_PI : 1.0) * l / e_srf[c % n_ir < 4 ? c % n_ir : 0];

@@ -475,7 +475,7 @@ typedef struct job_req {
   uint64_t d_spp;
   double d_wl;
   const cJSON *d_sensors;
-  int bundle; /* "bundle" (0 when absent, JOB_BUNDLE_AUTO for "auto") */
+  int bundle; /* "bundle" (0 when absent: auto, plan_job; JOB_BUNDLE_AUTO for "auto") */
 } job_req;
 
 /* "bundle": "auto": the most the job's sensors allow (plan_job). */
@@ -1109,8 +1109,12 @@ static rsw_status plan_job(service *svc, const scene *sc, job_req *q, job_check 
   k->warnings = NULL;
   jb->bands = q->bands;
   q->bands = NULL;
+  /* No "bundle": "auto", the daemon's choice (docs/experiments.md#spectral-bundles);
+   * 1 for a job restored from a record older than that default. */
+  bool old_default = svc->restore_id && svc->restore_bundle_default;
+  jb->bundle_asked = q->bundle != 0 || !old_default;
+  if (q->bundle == 0) q->bundle = old_default ? 1 : JOB_BUNDLE_AUTO;
   jb->bundle = q->bundle == JOB_BUNDLE_AUTO ? JOB_BUNDLE_AUTO : q->bundle > 1 ? q->bundle : 1;
-  jb->bundle_asked = q->bundle != 0;
   jb->items = calloc(k->n_items, sizeof *jb->items);
   jb->context_remaining = calloc(q->n_contexts, sizeof *jb->context_remaining);
   rsw_status st = RSW_OK;
@@ -1295,6 +1299,9 @@ static void item_done(service *svc, job *j, size_t k, rsw_status st, svc_film *o
   size_t done = j->items_done + 1; /* only this worker writes it */
   if (!st) {
     it->film = *out;
+    /* The seed the film was rendered with: its bundle's (its leader's),
+     * which GET .../results, the job's record and its dataset name. */
+    it->seed = out->img.seed;
     /* With a state directory every film goes to disk first. */
     snprintf(it->film.context, sizeof it->film.context, "%s", it->context);
     st = svc_state_film_write(svc, j, k, &it->film, e);

@@ -183,8 +183,8 @@ typedef struct job {
   size_t current;
   render_progress current_samples;
   /* "bundle": wavelengths per path (render_opts.bundle), 1: none;
-   * bundle_asked: the request named it (the answers say what it came
-   * to); bundle_why: why "auto" came to less than RENDER_MAX_BUNDLE ("" otherwise);
+   * bundle_asked: the answers say what it came to (every job but one
+   * restored from a record older than the "auto" default); bundle_why: why "auto" came to less than RENDER_MAX_BUNDLE ("" otherwise);
    * bundle_unit: the groups the bundles are cut from (plan_bundles), K, or
    * RENDER_MAX_BUNDLE for "auto", as the client's shards plan them. */
   int bundle;
@@ -246,6 +246,7 @@ struct service {
   uint64_t result_committed;                   /* estimates reserved by live jobs, no state dir */
   uint64_t result_disk_bytes, results_on_disk; /* films written to disk */
   const char *restore_id;                      /* while restoring: the id a submission takes */
+  int restore_bundle_default; /* while restoring: what no "bundle" means (1: a record from before "auto"; 0: auto) */
   uint64_t jobs_resumed, jobs_failed_on_restore;
   double restore_s;
   /* Trust and durability of the state directory (state.c). */

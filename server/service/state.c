@@ -1082,6 +1082,10 @@ rsw_status svc_state_job_saved(service *svc, const job *j, const char *body, siz
   rsw_hex(j->body_digest, 32, dh);
   cJSON_AddStringToObject(h, "body_sha256", dh);
   if (j->warnings) cJSON_AddItemToObject(h, "warnings", cJSON_Duplicate(j->warnings, 1));
+  /* What a request without "bundle" means: "auto" since bundles became
+   * the default. A record without it is older, and resumes with 1, the
+   * default its films so far were rendered with. */
+  cJSON_AddStringToObject(h, "bundle_default", "auto");
   char *hs = svc_print_json(h, svc_json_mark());
   if (!hs) return svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
   char p[4200];
@@ -1186,6 +1190,7 @@ typedef struct req_header {
   time_t created;
   char idem[256];
   bool has_idem;
+  bool bundle_auto; /* "bundle_default": "auto" (a request without "bundle" means auto) */
   unsigned char digest[32];
   cJSON *warnings; /* the job's warnings (templates.h), owned; NULL when none */
 } req_header;
@@ -1199,6 +1204,7 @@ static bool parse_req(const char *text, size_t n, req_header *h, size_t *body_of
   const cJSON *cr = cJSON_GetObjectItemCaseSensitive(o, "created");
   const cJSON *ik = cJSON_GetObjectItemCaseSensitive(o, "idem_key");
   const cJSON *dg = cJSON_GetObjectItemCaseSensitive(o, "body_sha256");
+  const cJSON *bd = cJSON_GetObjectItemCaseSensitive(o, "bundle_default");
   bool ok = cJSON_IsString(id) && strlen(id->valuestring) < sizeof h->id && id->valuestring[0] &&
             strspn(id->valuestring, "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-") ==
                 strlen(id->valuestring) &&
@@ -1215,6 +1221,7 @@ static bool parse_req(const char *text, size_t n, req_header *h, size_t *body_of
       snprintf(h->idem, sizeof h->idem, "%s", ik->valuestring);
       h->has_idem = true;
     }
+    h->bundle_auto = cJSON_IsString(bd) && strcmp(bd->valuestring, "auto") == 0;
     if (cJSON_IsString(dg) && rsw_is_sha256_hex(dg->valuestring))
       for (int i = 0; i < 32; i++) {
         unsigned v;
@@ -1475,8 +1482,10 @@ static void restore_resume(service *svc, const req_header *h, const char *body, 
   svc_error e = {0};
   char *jid = NULL, *json = NULL;
   svc->restore_id = h->id;
+  svc->restore_bundle_default = h->bundle_auto ? 0 : 1;
   rsw_status st = service_job_submit(svc, h->scene, body, len, h->has_idem ? h->idem : NULL, &jid, &json, &e);
   svc->restore_id = NULL;
+  svc->restore_bundle_default = 0;
   free(json);
   free(jid);
   if (st) {
@@ -1505,6 +1514,7 @@ void svc_state_resume_items(service *svc, job *j) {
     svc_film_ref_set(&ref, j, k);
     if (!svc_state_film_header(svc, &ref, &f)) continue;
     it->film = f;
+    it->seed = f.img.seed; /* its bundle's, as item_done records it */
     it->on_disk = true;
     it->state = JOB_SUCCEEDED;
     j->items_done++;

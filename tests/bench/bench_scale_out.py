@@ -83,9 +83,11 @@ def wait_ready(port):
 
 
 def sweep(url, out, extra):
-    # 200 contexts: wavelengths 400, 401.5, ..., 698.5 nm
+    # 200 contexts: wavelengths 400, 401.5, ..., 698.5 nm, one per path
+    # (--bundle 1: each context its own render, so that the sweep's film
+    # count and each film's cost are those this bench measures)
     cmd = [os.path.join(bindir, "raysweep"), "--server", url, "-q", "sweep", scene, "--grid",
-           "wavelength=400:698.5:1.5", "--spp", str(SPP), "-o", out] + extra
+           "wavelength=400:698.5:1.5", "--spp", str(SPP), "--bundle", "1", "-o", out] + extra
     ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.monotonic()
     r = subprocess.run(cmd, capture_output=True, text=True)

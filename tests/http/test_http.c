@@ -1178,7 +1178,8 @@ static void test_jobs_routes(void) {
  * rho(w) = 0.2 + 0.6 (w - 400) / 300 (linear between the two nodes). */
 static char spectral_job_body[4096];
 
-static const char *spectral_body(int from, int to, int seed) {
+/* bundle: the job's "bundle" (0: none, the daemon's default, auto). */
+static const char *spectral_body_k(int from, int to, int seed, int bundle) {
   char ctx[2048] = "";
   size_t off = 0;
   for (int i = from; i < to; i++)
@@ -1187,8 +1188,12 @@ static const char *spectral_body(int from, int to, int seed) {
   return jq(spectral_job_body, sizeof spectral_job_body,
             "{'contexts': [%s], 'defaults': {'spp': 2},"
             " 'params': {'plate.bsdf.reflectance.value': {'wavelengths': [400, 700], 'values': [0.2, 0.8]}},"
-            " 'seed': %d}",
-            ctx, seed);
+            " 'seed': %d%s}",
+            ctx, seed, bundle == 1 ? ", 'bundle': 1" : "");
+}
+
+static const char *spectral_body(int from, int to, int seed) {
+  return spectral_body_k(from, to, seed, 0);
 }
 
 static void test_spectral_job(void) {
@@ -1237,10 +1242,13 @@ static void test_spectral_job(void) {
 static void test_split_job_bitwise(void) {
   char id[65], whole[128], lo[128], hi[128], other[128];
   REQUIRE(plate_scene(&main_d, "0.5", id), "scene");
-  REQUIRE(submit_job(&main_d, id, spectral_body(0, 20, 11), NULL, whole) == 202, "submit whole");
-  REQUIRE(submit_job(&main_d, id, spectral_body(0, 10, 11), NULL, lo) == 202, "submit 0-9");
-  REQUIRE(submit_job(&main_d, id, spectral_body(10, 20, 11), NULL, hi) == 202, "submit 10-19");
-  REQUIRE(submit_job(&main_d, id, spectral_body(0, 20, 12), NULL, other) == 202, "submit another seed");
+  /* One wavelength per path ("bundle": 1): each context's film is its
+   * own, whatever the job's other contexts (bundles split along their
+   * groups: test_bundle_shards.sh). */
+  REQUIRE(submit_job(&main_d, id, spectral_body_k(0, 20, 11, 1), NULL, whole) == 202, "submit whole");
+  REQUIRE(submit_job(&main_d, id, spectral_body_k(0, 10, 11, 1), NULL, lo) == 202, "submit 0-9");
+  REQUIRE(submit_job(&main_d, id, spectral_body_k(10, 20, 11, 1), NULL, hi) == 202, "submit 10-19");
+  REQUIRE(submit_job(&main_d, id, spectral_body_k(0, 20, 12, 1), NULL, other) == 202, "submit another seed");
   const char *jobs[] = {whole, lo, hi, other};
   for (int k = 0; k < 4; k++) {
     cJSON *j = wait_job(&main_d, jobs[k], 15);

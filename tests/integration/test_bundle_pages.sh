@@ -12,6 +12,9 @@
 #     those z-scores below 1.4 (measured 0.50 and 0.73; drawing every
 #     direction from the first page alone, which never samples the leaves'
 #     transmission, gives 1.91 and 1.61); fixed seeds, 64 spp;
+#   - a job that names no bundle renders with "auto", the daemon's default
+#     (16 here): its films bitwise those of "bundle": "auto" with the same
+#     seed, and not those of "bundle": 1 (one seed for its 8 films, not 8);
 #   - bitwise the same with 1 and 2 render threads;
 #   - each page at its own wavelengths: a Lambertian plate's BRF in a
 #     bundle of 16 is its reflectance table at each context's wavelength
@@ -92,7 +95,7 @@ def submit(port, sid, body):
 def films(port, sid, bundle, seed, wls, spp=64, quantities=None):
     body = {"contexts": [{"id": f"w{int(w)}", "wavelength": w} for w in wls],
             "defaults": {"spp": spp}, "variance": True, "seed": seed}
-    if bundle:
+    if bundle is not None:
         body["bundle"] = bundle
     if quantities:
         body["quantities"] = quantities
@@ -127,7 +130,7 @@ py "bundles of 16 and of 7 are statistically the unbundled films (one-sample MIS
 import sys
 sys.path.insert(0, sys.argv[1]); from job import *
 port = int(sys.argv[2]); sid = push(port, sys.argv[3])
-a, _ = films(port, sid, 0, 7, WLS)
+a, _ = films(port, sid, 1, 7, WLS)
 for k, seed in ((16, 8), (7, 9)):
     b, j = films(port, sid, k, seed, WLS)
     assert j["bundle"] == k, j
@@ -138,6 +141,19 @@ for k, seed in ((16, 8), (7, 9)):
         seeds.setdefault(fb["meta"]["seed"], []).append(ctx)
     want = [16] if k == 16 else [2, 7, 7]
     assert sorted(len(v) for v in seeds.values()) == want, (k, seeds)
+' "$tmp" "$p2" "$tmp/canopy.json"
+
+py "a job that names no bundle renders with auto, the default: 16 here, its films bitwise those of auto, not those of bundle 1" '
+import sys
+sys.path.insert(0, sys.argv[1]); from job import *
+port = int(sys.argv[2]); sid = push(port, sys.argv[3])
+d, jd = films(port, sid, None, 5, WLS[:8], spp=8)
+a, ja = films(port, sid, "auto", 5, WLS[:8], spp=8)
+o, jo = films(port, sid, 1, 5, WLS[:8], spp=8)
+assert jd["bundle"] == ja["bundle"] == 16 and jo["bundle"] == 1, (jd.get("bundle"), ja.get("bundle"), jo.get("bundle"))
+assert all(d[c]["data"] == a[c]["data"] for c in a), "default and auto differ"
+assert sum(d[c]["data"] != o[c]["data"] for c in o) >= 7, "the default renders as bundle 1 does"
+assert len({d[c]["meta"]["seed"] for c in d}) == 1 and len({o[c]["meta"]["seed"] for c in o}) == 8
 ' "$tmp" "$p2" "$tmp/canopy.json"
 
 py "a bundle of 16 is bitwise the same with 1 and 2 render threads" '
@@ -167,7 +183,7 @@ import sys
 sys.path.insert(0, sys.argv[1]); from job import *
 port = int(sys.argv[2]); sid = push(port, sys.argv[4])
 wls = [400.0 + 10 * i for i in range(16)]
-a, _ = films(port, sid, 0, 7, wls, spp=128)
+a, _ = films(port, sid, 1, 7, wls, spp=128)
 b, j = films(port, sid, 16, 8, wls, spp=128)
 assert j["bundle"] == 16, j
 agree(a, b, "atmosphere")

@@ -10,10 +10,11 @@
 #     --bundle 16's; where it comes to 3, it cuts each group of 16 into
 #     threes, so shards still give the whole sweep's films);
 #   - the same from a --contexts file (wavelength fastest, ids given);
-#   - without --bundle the shards are still k mod n and sweep.json has no
-#     bundle_leads (sweeps of before keep their contexts and files);
+#   - without --bundle the sweep is --bundle auto's (the daemon's
+#     default), whole and as shards merged; with --bundle 1 the shards are
+#     k mod n and sweep.json has no bundle_leads (as before bundles);
 #   - a job's "bundle": "auto" comes to 16 on a mono surface scene (its
-#     films those of "bundle": 16) and to 1, accepted, with the reason, on
+#     films those of "bundle": 16, not those of "bundle": 1) and to 1, accepted, with the reason, on
 #     an rgb scene, a Stokes film and an environment plugin scene; "bundle"
 #     0, 17, "x", -1 and a context's bundle_group "a" are 4xx naming the
 #     pointer; `sweep --bundle 17` and `--bundle x` are usage errors.
@@ -124,6 +125,13 @@ rs "$pa" sweep "$scene" "${grid[@]}" --bundle auto --shard 0/3 -o a0 >/dev/null 
 same "--bundle auto, --shard I/3 merged" auto amerged
 rs "$pa" sweep "$scene" "${grid[@]}" --bundle 16 -o whole16 >/dev/null 2>"$tmp/err" || bad "bundle 16: $(cat "$tmp/err")"
 same "--bundle auto, --bundle 16" whole16 auto
+# No --bundle: auto, the daemon's default, whole and in shards.
+rs "$pa" sweep "$scene" "${grid[@]}" -o dflt >/dev/null 2>"$tmp/err" &&
+  rs "$pa" sweep "$scene" "${grid[@]}" --shard 0/2 -o n0 >/dev/null 2>"$tmp/err" &&
+  rs "$pb" sweep "$scene" "${grid[@]}" --shard 1/2 -o n1 >/dev/null 2>"$tmp/err" &&
+  rs "$pa" merge n0 n1 -o nmerged >/dev/null 2>"$tmp/err" || bad "no --bundle: $(cat "$tmp/err")"
+same "no --bundle, --bundle auto" auto dflt
+same "no --bundle, --shard 0/2 + 1/2 merged" auto nmerged
 # --bundle auto where the daemon comes to 3 (a canopy on a plastic soil,
 # whose delta specular lobe keeps pages out; leaves with tabulated
 # reflectance and transmittance, so that the bundle changes the paths'
@@ -149,12 +157,12 @@ rs "$pa" sweep canopy3.json "${g20[@]}" --bundle auto -o dauto >/dev/null 2>"$tm
   rs "$pa" merge d0 d1 d2 -o dmerged >/dev/null 2>"$tmp/err" || bad "auto at 3, shards: $(cat "$tmp/err")"
 same "--bundle auto at 3, --shard I/3 merged" dauto dmerged
 # A bundled sweep is not the unbundled one (so the checks above can fail).
-rs "$pa" sweep "$scene" "${grid[@]}" -o plain >/dev/null 2>"$tmp/err" || bad "plain: $(cat "$tmp/err")"
+rs "$pa" sweep "$scene" "${grid[@]}" --bundle 1 -o plain >/dev/null 2>"$tmp/err" || bad "plain: $(cat "$tmp/err")"
 n=0
 for f in $(cd whole && find . -name '*.exr'); do cmp -s "whole/$f" "plain/$f" || n=$((n + 1)); done
 if [ "$n" -gt 0 ]; then ok; else bad "bundle 3 gave the films of bundle 1"; fi
-# Without --bundle: k mod n, no bundle_leads.
-rs "$pa" sweep "$scene" "${grid[@]}" --shard 1/2 -o p1 >/dev/null 2>"$tmp/err" || bad "plain shard: $(cat "$tmp/err")"
+# With --bundle 1: k mod n, no bundle_leads.
+rs "$pa" sweep "$scene" "${grid[@]}" --bundle 1 --shard 1/2 -o p1 >/dev/null 2>"$tmp/err" || bad "plain shard: $(cat "$tmp/err")"
 leads "an unbundled shard's manifest" p1 '"none"'
 got=$(ls p1 | grep '^c' | tr '\n' ' ')
 if [ "$got" = "c00001 c00003 c00005 c00007 c00009 c00011 c00013 " ]; then ok; else bad "unbundled shard 1/2 holds $got"; fi
@@ -234,7 +242,7 @@ spec = u.spec_from_file_location("h", sys.argv[1] + "/rsw_http.py"); h = u.modul
 port = int(sys.argv[2]); sid = h.push(port, sys.argv[3])
 st, a = h.job(port, sid, {"bundle": "auto"}); assert st == 202, (st, a); assert a["bundle"] == 16 and "bundle_why" not in a, a
 st, t = h.job(port, sid, {"bundle": 16}); assert st == 202, (st, t); assert t["bundle"] == 16, t
-st, o = h.job(port, sid, {}); assert st == 202 and "bundle" not in o, o
+st, o = h.job(port, sid, {"bundle": 1}); assert st == 202 and o["bundle"] == 1, o
 fa, ft, fo = h.films(port, a), h.films(port, t), h.films(port, o)
 assert fa == ft, "auto differs from 16"
 assert fa != fo, "auto gave the unbundled films"

@@ -9,7 +9,8 @@
 #     planes), and at most 2% of pixels differ by more than 3 sigma
 #     (Gaussian: 0.27%; the allowance covers the per-pixel stderr's own
 #     noise at 256 spp); fixed seeds;
-#   - a bundled film names its own wavelength and its bundle's seed;
+#   - a bundled film names its own wavelength and its bundle's seed, and
+#     GET .../results names that seed too (it named the context's own);
 #   - each channel renders at its own wavelength: a Lambertian plate's BRF
 #     in a bundle is its reflectance table at each context's wavelength;
 #   - bitwise the same with 1 and 2 render threads;
@@ -55,7 +56,7 @@ def push(port, path):
 def films(port, sid, bundle, seed, wls, spp=256):
     body = {"contexts": [{"id": f"w{int(w)}", "wavelength": w} for w in wls],
             "defaults": {"spp": spp}, "variance": True, "seed": seed}
-    if bundle:
+    if bundle is not None:
         body["bundle"] = bundle
     st, j = call(port, "POST", f"/v1/scenes/{sid}/jobs", body)
     assert st == 202 or st == 201 or st == 200, (st, j)
@@ -70,6 +71,8 @@ def films(port, sid, bundle, seed, wls, spp=256):
     out = {}
     for r in idx["results"]:
         st, f = call(port, "GET", r["href"])
+        # the listing names the seed the film was rendered with (its bundle'"'"'s)
+        assert r["seed"] == f["meta"]["seed"], (r, f["meta"]["seed"])
         out[r["context"]] = f
     return out
 PY
@@ -79,7 +82,7 @@ import sys, math
 sys.path.insert(0, sys.argv[1]); from job import *
 port = int(sys.argv[2]); sid = push(port, sys.argv[3])
 wls = [400.0, 450.0, 500.0, 550.0, 600.0, 650.0]
-a = films(port, sid, 0, 7, wls)
+a = films(port, sid, 1, 7, wls)
 b = films(port, sid, 3, 8, wls)
 seeds = {}
 for ctx in a:

@@ -117,7 +117,7 @@ assert m["finished"] is True and m["contexts_total"] == 2 and m["shard"] == [0, 
 '
 
 # ---- merge: an incomplete set of shards fails and lists what is missing ----
-grid=(--grid wavelength=400:750:50 --format json)
+grid=(--grid wavelength=400:750:50 --format json --bundle 1) # (one per path: shards are k mod 3)
 expect 0 "shard 0/3" rs -q sweep "$plate" "${grid[@]}" --shard 0/3 -o s0
 expect 0 "shard 1/3" rs -q sweep "$plate" "${grid[@]}" --shard 1/3 -o s1
 expect 6 "merge without shard 2/3" rs merge s0 s1 -o m
@@ -142,7 +142,7 @@ expect 0 "a partial merge plus the missing shard" rs merge mp s2 -o mall2
 cmp -s mall/index.jsonl mall2/index.jsonl && ok || bad "partial + missing shard differs from the full merge"
 # --contexts with ids of its own: the missing ones are named by id.
 printf '%s\n' '{"id":"red","wavelength":650}' '{"id":"green","wavelength":550}' '{"id":"blue","wavelength":450}' >rgb.jsonl
-expect 0 "contexts shard 0/2" rs -q sweep "$plate" --contexts rgb.jsonl --shard 0/2 -o r0
+expect 0 "contexts shard 0/2" rs -q sweep "$plate" --contexts rgb.jsonl --bundle 1 --shard 0/2 -o r0
 expect 6 "merge without contexts shard 1/2" rs merge r0 -o rm
 contains "merge names a given id" err "green"
 

@@ -7,9 +7,10 @@
 #    and renders bitwise what it rendered before;
 #  - --max-result-bytes: with --state-dir films beyond the cap are served
 #    from disk (NPY streamed from the file, JSON read back), bitwise equal to
-#    synchronous renders; without it a job whose films cannot fit is
+#    synchronous renders ("bundle": 1: each context alone); without it a job whose films cannot fit is
 #    refused up front with 507 RSW_ERR_STORAGE;
-#  - SIGKILL mid-job with --state-dir, restart: the films finished before
+#  - SIGKILL mid-job (16 renders of one per path) with --state-dir,
+#    restart: the films finished before
 #    the kill are fetchable bitwise, the job resumes to completion with the
 #    films of an uninterrupted run, a job whose scene vanished ends failed
 #    with the reason; scenes and blobs survive;
@@ -134,7 +135,7 @@ py "the reloaded scene keeps its revision and PATCHed value" \
 [ "$(metric raysweep_scenes_reloaded_total)" -ge 1 ] 2>/dev/null && ok || bad "raysweep_scenes_reloaded_total"
 # Four 1280-byte films against a 2000-byte cap: one in memory, the rest on disk.
 curl -s -o "$tmp/out" -XPOST "$U/v1/scenes/$B/jobs" -H 'Content-Type: application/json' \
-  -d '{"contexts":[{"id":"w500","wavelength":500},{"id":"w550","wavelength":550},{"id":"w600","wavelength":600},{"id":"w650","wavelength":650}],"defaults":{"spp":3}}'
+  -d '{"contexts":[{"id":"w500","wavelength":500},{"id":"w550","wavelength":550},{"id":"w600","wavelength":600},{"id":"w650","wavelength":650}],"defaults":{"spp":3},"bundle":1}'
 jb=$(field "$tmp/out" id)
 [ "$(wait_job "$jb" 30)" = succeeded ] && ok || bad "the job over the result cap"
 rb=$(metric raysweep_result_bytes)
@@ -167,7 +168,7 @@ t0=$(date +%s%N)
 render_npy "$K" '{"spp":2048,"wavelength":550}' "$tmp/cal.npy" >/dev/null
 t1=$(date +%s%N)
 spp=$(python3 -c 'import sys; dt=max(1e-4,(int(sys.argv[2])-int(sys.argv[1]))/1e9); print(max(64,min(1000000,int(2048*0.3/dt))))' "$t0" "$t1")
-body=$(python3 -c 'import json,sys; print(json.dumps({"contexts":[{"id":"c%d"%i,"wavelength":400+20*i} for i in range(16)],"defaults":{"spp":int(sys.argv[1])}}))' "$spp")
+body=$(python3 -c 'import json,sys; print(json.dumps({"contexts":[{"id":"c%d"%i,"wavelength":400+20*i} for i in range(16)],"defaults":{"spp":int(sys.argv[1])},"bundle":1}))' "$spp")
 curl -s -o "$tmp/out" -XPOST "$U/v1/scenes/$K/jobs" -H 'Content-Type: application/json' -d "$body"
 jk=$(field "$tmp/out" id)
 curl -s -o "$tmp/out" -XPOST "$U/v1/scenes/$A/jobs" -H 'Content-Type: application/json' -d '{"contexts":[{"id":"q","wavelength":500}]}'

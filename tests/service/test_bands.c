@@ -9,7 +9,8 @@
  *     quadrature of the same SRF (relative 2e-5);
  *   - radiance_srf_stderr against the scatter of 48 replicates (fixed
  *     seeds): the ratio of the replicates' variance to the mean predicted
- *     variance within [0.75, 1.33];
+ *     variance within [0.75, 1.33] for nodes rendered alone ("bundle": 1),
+ *     within [0.6, 1.33] for nodes in one bundle (a bound: never below);
  *   - the dataset (read back with libnetcdf): band and wavelength
  *     dimensions, radiance_srf, brf_srf and their _stderr, irradiance,
  *     irradiance_srf, brf_stderr, and sza, saa, vza, vaa as coordinates;
@@ -343,9 +344,12 @@ static void test_gaussian_fine(void) {
 }
 
 /* radiance_srf_stderr predicts the scatter of the band value. */
-static void test_stderr_replicates(void) {
+/* The replicates' variance over the mean predicted one, the band's 4
+ * nodes rendered with `bundle` ("1": alone, each its own seed; "\"auto\"":
+ * in one bundle, on the same paths). */
+static double replicates_ratio(const char *bundle) {
   char *sky = post(SKY);
-  REQUIRE(sky, "sky scene");
+  if (!sky) return NAN;
   enum {
     R = 48,
     P = 16
@@ -353,23 +357,32 @@ static void test_stderr_replicates(void) {
   char body[8192];
   size_t n =
       (size_t)snprintf(body, sizeof body,
-                       "{\"seed\": 7, \"variance\": true, \"bands\": [{\"id\": \"u\", \"srf\": {\"type\": "
-                       "\"uniform\", \"wmin\": 500, \"wmax\": 600}, \"nodes\": 4}], \"contexts\": [");
+                       "{\"seed\": 7, \"bundle\": %s, \"variance\": true, \"bands\": [{\"id\": \"u\", "
+                       "\"srf\": {\"type\": \"uniform\", \"wmin\": 500, \"wmax\": 600}, \"nodes\": 4}], "
+                       "\"contexts\": [",
+                       bundle);
   for (int r = 0; r < R; r++)
     n += (size_t)snprintf(body + n, sizeof body - n, "%s{\"id\": \"r%d\"}", r ? "," : "", r);
   snprintf(body + n, sizeof body - n, "]}");
   char *jid = run_job(sky, body);
-  REQUIRE(jid, "job");
+  if (!jid) {
+    free(sky);
+    return NAN;
+  }
   static double L[R][P], S2[R][P];
   for (int r = 0; r < R; r++) {
     char ctx[16];
     snprintf(ctx, sizeof ctx, "r%d", r);
     svc_film f;
     svc_error e = {0};
-    REQUIRE(service_job_band_result(svc, jid, ctx, "meter", "u", NULL, &f, &e) == RSW_OK, "%s: %s", ctx,
-            e.err.msg);
-    const film_plane *sd = film_image_plane(&f.img, "radiance_stderr");
-    REQUIRE(sd, "stderr plane");
+    const film_plane *sd = NULL;
+    if (service_job_band_result(svc, jid, ctx, "meter", "u", NULL, &f, &e) != RSW_OK ||
+        !(sd = film_image_plane(&f.img, "radiance_stderr"))) {
+      printf("  %s: %s\n", ctx, sd ? e.err.msg : "no stderr plane");
+      free(jid);
+      free(sky);
+      return NAN;
+    }
     for (int p = 0; p < P; p++) L[r][p] = f.img.data[p], S2[r][p] = (double)sd->data[p] * sd->data[p];
     svc_film_free(&f);
   }
@@ -381,10 +394,21 @@ static void test_stderr_replicates(void) {
     for (int r = 0; r < R; r++) scatter += (L[r][p] - m) * (L[r][p] - m) / (R - 1), predicted += S2[r][p] / R;
   }
   double ratio = scatter / predicted;
-  printf("  replicates: scatter / predicted variance = %.3f\n", ratio);
-  CHECK(ratio > 0.75 && ratio < 1.33, "stderr predicts the scatter: ratio %.3f", ratio);
+  printf("  replicates, bundle %s: scatter / predicted variance = %.3f\n", bundle, ratio);
   free(jid);
   free(sky);
+  return ratio;
+}
+
+/* Nodes rendered alone are independent: the stderr predicts the scatter.
+ * Nodes of one bundle are correlated: the stderr bounds it (Cauchy-Schwarz
+ * within a bundle), never below it, and close (neighbouring wavelengths
+ * on the same paths are nearly fully correlated). The formula for
+ * independent nodes gave 3.6 there: its stderr too small by 1.9x. */
+static void test_stderr_replicates(void) {
+  double alone = replicates_ratio("1"), bundled = replicates_ratio("\"auto\"");
+  CHECK(alone > 0.75 && alone < 1.33, "alone: stderr predicts the scatter: ratio %.3f", alone);
+  CHECK(bundled > 0.6 && bundled < 1.33, "bundled: stderr bounds the scatter closely: ratio %.3f", bundled);
 }
 
 /* ---- refusals ---------------------------------------------------------------------- */

@@ -20,7 +20,9 @@
  *  - a FIFO or a link out of the root under --data-root, and a FIFO in the
  *    blob directory, are refused (RSW_ERR_FILE, 422) without blocking;
  *  - records of the previous version (no checksum) are upgraded once, in a
- *    directory without DIR/format; in an upgraded one they are quarantined.
+ *    directory without DIR/format; in an upgraded one they are quarantined;
+ *  - a job without "bundle" renders with auto, and one recorded before that
+ *    default resumes with 1.
  * Every test runs under alarm(): a hang is a failure, not a stuck run. */
 #include <errno.h>
 #include <fcntl.h>
@@ -773,6 +775,74 @@ static void test_legacy(void) {
   alarm(0);
 }
 
+/* ---- 9. a job recorded before "bundle": "auto" became the default --------------- */
+
+/* The job's answer's "bundle": what it came to, 0 when absent, -1 when
+ * the job is not there. */
+static int bundle_of(service *svc, const char *jid) {
+  char *json = NULL;
+  svc_error e = {0};
+  if (service_job_get(svc, jid, &json, &e) != RSW_OK) return -1;
+  cJSON *j = cJSON_Parse(json);
+  free(json);
+  const cJSON *b = cJSON_GetObjectItemCaseSensitive(j, "bundle");
+  int k = cJSON_IsNumber(b) ? (int)b->valuedouble : 0;
+  cJSON_Delete(j);
+  return k;
+}
+
+/* A request recorded without "bundle" renders with "auto" and says so in
+ * its header; one whose record predates that (no "bundle_default") resumes
+ * with 1, the setting its films so far were rendered with. */
+static void test_bundle_default(void) {
+  alarm(60);
+  char dir[64], rel[200], p[400];
+  mkstate(dir, sizeof dir);
+  service *svc;
+  char *sid;
+  char *jid = finished_job(dir, &svc, &sid); /* JOB2 names no bundle */
+  REQUIRE(jid, "a finished job");
+  CHECK(bundle_of(svc, jid) == 16, "a job without bundle came to auto's 16: %d", bundle_of(svc, jid));
+  service_free(svc);
+  snprintf(rel, sizeof rel, "jobs/%s.req", jid);
+  char *c = record_content(dir, rel);
+  const char *mark = ",\"bundle_default\":\"auto\"";
+  char *at = c ? strstr(c, mark) : NULL;
+  CHECK(at && at < strchr(c, '\n'), "the request's header says what no bundle means: %.300s", c ? c : "");
+  /* The previous version's directory: no DIR/format, records without
+   * checksum or "bundle_default", the job interrupted before it finished. */
+  if (at) memmove(at, at + strlen(mark), strlen(at + strlen(mark)) + 1);
+  snprintf(p, sizeof p, "%s/%s", dir, rel);
+  FILE *f = c ? fopen(p, "w") : NULL;
+  CHECK(f && fputs(c, f) >= 0 && fclose(f) == 0, "rewrite %s", rel);
+  free(c);
+  snprintf(p, sizeof p, "%s/jobs/%s.done", dir, jid);
+  CHECK(unlink(p) == 0, "remove the job's outcome");
+  snprintf(p, sizeof p, "%s/results/%s", dir, jid);
+  rmtree(p);
+  snprintf(p, sizeof p, "%s/format", dir);
+  CHECK(unlink(p) == 0, "remove DIR/format");
+  svc = open_svc(dir, NULL);
+  REQUIRE(svc, "restart");
+  char *s = wait_job(svc, jid);
+  CHECK(s && strcmp(s, "succeeded") == 0, "the old job resumed and finished: %s", s ? s : "(gone)");
+  free(s);
+  CHECK(bundle_of(svc, jid) == 0, "it rendered with 1, as recorded: its answer has no bundle (%d)",
+        bundle_of(svc, jid));
+  svc_error e = {0};
+  char *j2 = submit(svc, sid, &e);
+  s = j2 ? wait_job(svc, j2) : NULL;
+  CHECK(s && strcmp(s, "succeeded") == 0 && bundle_of(svc, j2) == 16,
+        "a new job without bundle, after the restart: auto (%d)", j2 ? bundle_of(svc, j2) : -1);
+  free(s);
+  free(j2);
+  service_free(svc);
+  free(jid);
+  free(sid);
+  rmtree(dir);
+  alarm(0);
+}
+
 int main(void) {
   signal(SIGPIPE, SIG_IGN);
   RSW_TEST_RUN(test_full_disk);
@@ -783,5 +853,6 @@ int main(void) {
   RSW_TEST_RUN(test_record_bounds);
   RSW_TEST_RUN(test_data_root);
   RSW_TEST_RUN(test_legacy);
+  RSW_TEST_RUN(test_bundle_default);
   RSW_TEST_END("test_state_durable");
 }
