@@ -57,3 +57,16 @@ char *rsw_bundle_context_text(const cJSON *c) {
   cJSON_free(t);
   return out;
 }
+
+void rsw_bundle_shard_keys(size_t n, const size_t *lead, size_t *key) {
+  /* key[i] = #{j < lead[i] : lead[j] == j}: leads counted in one pass
+   * (lead[i] <= i, so the count up to lead[i] is known when i comes). */
+  size_t below = 0; /* leads among 0..i-1 */
+  for (size_t i = 0; i < n; i++) {
+    size_t l = lead[i] <= i ? lead[i] : i;
+    /* the count below l: l == i gives `below`; l < i was a lead whose
+     * key is that count */
+    key[i] = l == i ? below : key[l];
+    if (lead[i] == i) below++;
+  }
+}

@@ -21,6 +21,13 @@
  * k = 1). */
 int rsw_bundle_runs(size_t n, const uint64_t *key, const double *wl, int k, size_t *lead);
 
+/* Which shard of n holds unit i: key[i] mod n, key[i] the rank of unit
+ * i's run among the runs in the order of their first units (the number of
+ * leads below lead[i]; i itself without runs). So a run stays whole and
+ * the runs are dealt out in turn: by lead[i] mod n, runs of 16 would all
+ * fall on shard 0 whenever n divides 16. */
+void rsw_bundle_shard_keys(size_t n, const size_t *lead, size_t *key);
+
 struct cJSON;
 /* The client's key for a context (a JobRequest Context object): its JSON
  * less what may differ within a bundle (id, wavelength, coords,

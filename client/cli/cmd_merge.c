@@ -93,7 +93,7 @@ static size_t merge_missing(const cli_ctx *ctx, const merge_input *in, size_t n_
       for (size_t j = g; j < n_in && !covered; j++) {
         const sweep_manifest *m = &in[j].m;
         if (!in[j].has_manifest || strcmp(m->sweep, m0->sweep) != 0) continue;
-        covered = in[j].has_index && m->finished && sweep_shard_of(m->leads, k, m->shard_n) == m->shard_i &&
+        covered = in[j].has_index && m->finished && sweep_shard_of(m->keys, k, m->shard_n) == m->shard_i &&
                   !manifest_incomplete(m, id);
       }
       if (!covered) covered = legacy_has(e, n, in, id);

@@ -79,6 +79,7 @@ static void items_free(sweep_list *l) {
     for (size_t i = 0; i < l->total; i++) free(l->all_ids[i]);
   free(l->all_ids);
   free(l->leads);
+  free(l->keys);
 }
 
 static sweep_item *items_push(sweep_list *l) {
@@ -181,6 +182,8 @@ static int grid_leads(const cli_ctx *ctx, const grid_axis *g, size_t n_axes, int
     wl[i] = g[wa].start + (double)kw * g[wa].step;
   }
   if (!rc) rc = rsw_bundle_runs(n, key, wl, bundle, l->leads);
+  if (!rc) rc = (l->keys = malloc(n * sizeof *l->keys)) ? 0 : -1;
+  if (!rc) rsw_bundle_shard_keys(n, l->leads, l->keys);
   free(key);
   free(wl);
   return rc ? cli_fail(ctx, CLI_IO, "out of memory") : 0;
@@ -202,7 +205,7 @@ static int build_grid(const cli_ctx *ctx, const grid_axis *g, size_t n_axes, siz
   int rc = grid_leads(ctx, g, n_axes, bundle, l);
   if (rc) return rc;
   for (size_t i = l->leads ? 0 : shard_i; i < l->total; i += l->leads ? 1 : shard_n) {
-    if (l->leads && sweep_shard_of(l->leads, i, shard_n) != shard_i) continue;
+    if (l->leads && sweep_shard_of(l->keys, i, shard_n) != shard_i) continue;
     sweep_item *it = items_push(l);
     if (!it) return cli_fail(ctx, CLI_IO, "out of memory");
     sweep_make_id(it->id, w, i);
@@ -279,6 +282,8 @@ static int file_leads(const cli_ctx *ctx, const char *text, size_t total, int bu
       key[tk[a].index] = id;
     }
     rc = rsw_bundle_runs(total, key, wl, bundle, l->leads);
+    if (!rc) rc = (l->keys = malloc(total * sizeof *l->keys)) ? 0 : -1;
+    if (!rc) rsw_bundle_shard_keys(total, l->leads, l->keys);
   }
   for (size_t a = 0; tk && a < nt; a++) free(tk[a].text);
   free(tk);
@@ -333,7 +338,7 @@ static int read_contexts(const cli_ctx *ctx, const char *path, size_t shard_i, s
       continue;
     }
     size_t my = index++;
-    if (sweep_shard_of(l->leads, my, shard_n) != shard_i) {
+    if (sweep_shard_of(l->keys, my, shard_n) != shard_i) {
       if (l->all_ids) { /* another shard's line: only its id (that shard checks the rest) */
         cJSON *o = cJSON_Parse(s);
         const char *id = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "id"));

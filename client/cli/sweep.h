@@ -62,9 +62,10 @@ typedef struct sweep_list {
    * of the other shards. NULL when every id is numbered. */
   char **all_ids;
   int id_width;
-  /* With --bundle: per context of the unsharded list, the index of its
-   * bundle group's first context (sweep_shard_of); NULL without. */
-  size_t *leads;
+  /* With bundles: per context of the unsharded list, the index of its
+   * bundle group's first context, and its shard key (sweep_shard_of:
+   * rsw_bundle_shard_keys); NULL without. */
+  size_t *leads, *keys;
   long long seed; /* --seed (0 by default): the job seed, in sweep.json */
   bool dataset;   /* --format nc: DIR/dataset.nc besides the (JSON) films */
 } sweep_list;
@@ -85,6 +86,7 @@ typedef struct sweep_manifest {
   size_t shard_i, shard_n, total;
   int id_width;
   size_t *leads;           /* owned: "bundle_leads", or NULL (every context its own) */
+  size_t *keys;            /* owned: their shard keys (rsw_bundle_shard_keys), or NULL */
   const char **ids;        /* owned array of total ids (borrowed strings), or NULL: numbered */
   const char **incomplete; /* owned, sorted (strings borrowed from root) */
   size_t n_incomplete;
@@ -136,11 +138,12 @@ int manifest_write(const cli_ctx *ctx, const char *dir, const char *fingerprint,
                    size_t shard_i, size_t shard_n, const sweep_list *l, const char *job, bool finished,
                    const cJSON *incomplete);
 void manifest_free(sweep_manifest *m);
-/* The shard of the unsharded list's context k: lead k (its bundle group's
- * first context, leads[k]; k itself without bundles) mod n, so that a
- * bundle group stays whole (docs/cluster.md#shards-and-spectral-bundles). */
-static inline size_t sweep_shard_of(const size_t *leads, size_t k, size_t n) {
-  return (leads ? leads[k] : k) % n;
+/* The shard of the unsharded list's context k: its bundle group's rank
+ * (keys[k], rsw_bundle_shard_keys; k itself without bundles) mod n, so
+ * that a bundle group stays whole and the groups are dealt out in turn
+ * (docs/cluster.md#shards-and-spectral-bundles). */
+static inline size_t sweep_shard_of(const size_t *keys, size_t k, size_t n) {
+  return (keys ? keys[k] : k) % n;
 }
 /* The id of context k of the unsharded list; whether it is incomplete. */
 const char *manifest_id(const sweep_manifest *m, size_t k, char buf[72]);

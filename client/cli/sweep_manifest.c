@@ -10,6 +10,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "bundle_plan.h"
 #include "sweep.h"
 
 static uint64_t fnv1a(uint64_t h, const char *s, size_t n) {
@@ -53,6 +54,7 @@ void manifest_free(sweep_manifest *m) {
   cJSON_Delete(m->root);
   free(m->ids);
   free(m->leads);
+  free(m->keys);
   free(m->incomplete);
   memset(m, 0, sizeof *m);
 }
@@ -130,6 +132,8 @@ int manifest_read(const cli_ctx *ctx, const char *dir, sweep_manifest *m) {
       k++;
     }
     ok = m->leads && k == m->total && !v;
+    if (ok) ok = (m->keys = malloc((m->total ? m->total : 1) * sizeof *m->keys)) != NULL;
+    if (ok) rsw_bundle_shard_keys(m->total, m->leads, m->keys);
   }
   if (ok && inc) {
     size_t n = (size_t)cJSON_GetArraySize(inc);
@@ -299,7 +303,7 @@ int sweep_prepare_output(const cli_ctx *ctx, const char *dir, bool force) {
   if (mrc == 0) { /* every context of its shard (an interrupted sweep has no index yet) */
     char buf[72];
     for (size_t k = 0; k < m.total; k++)
-      if (sweep_shard_of(m.leads, k, m.shard_n) == m.shard_i)
+      if (sweep_shard_of(m.keys, k, m.shard_n) == m.shard_i)
         removed += remove_context_dir(dir, manifest_id(&m, k, buf));
     manifest_free(&m);
   }

@@ -5,8 +5,9 @@
  * follow-up requests (events, results, films) need to find their job.
  *
  * Shard k holds contexts k, k+K, k+2K, ... (as `raysweep sweep --shard
- * k/K`); with spectral bundles, the contexts whose bundle group's first
- * context is one of those, so that every shard forms the bundles the
+ * k/K`); with spectral bundles, the bundle groups dealt out in turn
+ * (the g-th group, in the order of their first contexts, to shard g mod
+ * K: rsw_bundle_shard_keys), so that every shard forms the bundles the
  * whole job would (client_contexts_bundle_leads;
  * docs/cluster.md#shards-and-spectral-bundles). Its n-th (re)submission is routed by "<prefix>-<k>.r<n>" (n = 0:
  * "<prefix>-<k>"), so a resubmission after a lost replica hashes to a
@@ -32,6 +33,8 @@
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
+
+#include "bundle_plan.h"
 
 #include "internal.h"
 
@@ -75,6 +78,7 @@ struct spread {
   size_t *sorted_idx;      /* index in x of sorted_ids[i] */
   unsigned char *done;     /* per context index of x: delivered */
   size_t *lead;            /* per context index of x: its bundle group's first (itself without bundles) */
+  size_t *key;             /* and its shard key: the group's rank, dealt mod shards (rsw_bundle_shard_keys) */
   bool grouped;            /* some lead differs from its context: resubmit groups whole, name them */
   double deadline;
   FILE *journal;
@@ -566,7 +570,7 @@ static rsw_status hand_results(shard *sh, rsw_client *c, char *text, bool early,
   bool ours = cJSON_IsArray(list);
   cJSON_ArrayForEach(r, list) {
     size_t ci = lookup(sp, cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "context")));
-    if (ci == (size_t)-1 || sp->lead[ci] % (size_t)sp->n_shards != (size_t)sh->k) ours = false;
+    if (ci == (size_t)-1 || sp->key[ci] % (size_t)sp->n_shards != (size_t)sh->k) ours = false;
   }
   if (!ours) {
     cJSON_Delete(res);
@@ -1047,13 +1051,15 @@ rsw_status rsw_spread_run(const rsw_client_opts *copts, const char *scene_id, co
   /* Shard k: the contexts whose bundle group's first context is k mod
    * shards (every context its own group without bundles), by group. */
   sp.lead = malloc(sp.n_ctx * sizeof *sp.lead);
-  if (!sp.lead || (s = client_contexts_bundle_leads(x, sp.lead))) {
+  sp.key = malloc((sp.n_ctx ? sp.n_ctx : 1) * sizeof *sp.key);
+  if (!sp.lead || !sp.key || (s = client_contexts_bundle_leads(x, sp.lead))) {
     s = RSW_ERR_NOMEM;
     snprintf(sp.err, sizeof sp.err, "out of memory");
     goto done;
   }
   for (size_t i = 0; i < sp.n_ctx; i++) sp.grouped = sp.grouped || sp.lead[i] != i;
-  for (size_t i = 0; i < sp.n_ctx; i++) sp.shards[sp.lead[i] % (size_t)o.shards].n++;
+  rsw_bundle_shard_keys(sp.n_ctx, sp.lead, sp.key);
+  for (size_t i = 0; i < sp.n_ctx; i++) sp.shards[sp.key[i] % (size_t)o.shards].n++;
   for (int k = 0; k < o.shards; k++) {
     shard *sh = &sp.shards[k];
     sh->sp = &sp, sh->k = k;
@@ -1075,7 +1081,7 @@ rsw_status rsw_spread_run(const rsw_client_opts *copts, const char *scene_id, co
     for (size_t i = 0; i < sp.n_ctx; i++) order[i] = (led){sp.lead[i], i};
     qsort(order, sp.n_ctx, sizeof *order, cmp_led);
     for (size_t i = 0; i < sp.n_ctx; i++) {
-      shard *sh = &sp.shards[order[i].lead % (size_t)o.shards];
+      shard *sh = &sp.shards[sp.key[order[i].index] % (size_t)o.shards];
       sh->idx[sh->n++] = order[i].index;
     }
     free(order);
@@ -1160,6 +1166,7 @@ done:
   free(sp.sorted_idx);
   free(sp.done);
   free(sp.lead);
+  free(sp.key);
   snprintf(spread_err, sizeof spread_err, "%s", sp.err);
   pthread_mutex_destroy(&sp.lock);
   return s;

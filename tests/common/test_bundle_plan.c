@@ -1,8 +1,10 @@
 /* Spectral bundles' one rule (common/bundle_plan.c), which the daemon's job
  * planning and the client's shards share: runs of equal keys in order, at
  * most k long, a repeated wavelength starting the next run, lone units;
+ * the shard keys that deal the runs out in turn (rsw_bundle_shard_keys);
  * and the client's context key (rsw_bundle_context_text). */
 #include <cjson/cJSON.h>
+#include <stdbool.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -43,6 +45,39 @@ static void test_runs(void) {
   CHECK(rsw_bundle_runs(0, NULL, NULL, 3, NULL) == 0, "no units");
 }
 
+/* Shards deal the runs out in turn: a 40-wavelength sweep in runs of 16
+ * (leads 0, 16, 32) over 4 shards puts one run on each of shards 0, 1, 2
+ * (by lead mod 4 all three fell on shard 0); runs of interleaved groups
+ * are ranked by their first units; without runs, unit i is its own. */
+static void test_shard_keys(void) {
+  enum {
+    N = 40
+  };
+  uint64_t key[N];
+  double wl[N];
+  size_t lead[N], sk[N];
+  for (size_t i = 0; i < N; i++) key[i] = 0, wl[i] = 400.0 + (double)i;
+  REQUIRE(rsw_bundle_runs(N, key, wl, 16, lead) == 0, "runs");
+  rsw_bundle_shard_keys(N, lead, sk);
+  size_t per[4] = {0};
+  for (size_t i = 0; i < N; i++) per[sk[i] % 4]++;
+  CHECK(sk[0] == 0 && sk[15] == 0 && sk[16] == 1 && sk[31] == 1 && sk[32] == 2 && sk[39] == 2,
+        "runs ranked 0, 1, 2: %zu %zu %zu", sk[0], sk[16], sk[32]);
+  CHECK(per[0] == 16 && per[1] == 16 && per[2] == 8 && per[3] == 0, "shards of 4 hold %zu %zu %zu %zu",
+        per[0], per[1], per[2], per[3]);
+  /* Two interleaved groups (keys 0 1 0 1 ...) in runs of 3: leads 0 1 0 1 0 1 6 7 6 7 ... */
+  for (size_t i = 0; i < N; i++) key[i] = i % 2, wl[i] = 400.0 + (double)(i / 2);
+  REQUIRE(rsw_bundle_runs(N, key, wl, 3, lead) == 0, "interleaved runs");
+  rsw_bundle_shard_keys(N, lead, sk);
+  CHECK(lead[7] == 7 && sk[6] == 2 && sk[7] == 3 && sk[9] == 3 && sk[8] == 2,
+        "interleaved runs ranked by their first units: lead[7] %zu, keys %zu %zu", lead[7], sk[6], sk[7]);
+  for (size_t i = 0; i < N; i++) lead[i] = i;
+  rsw_bundle_shard_keys(N, lead, sk);
+  bool own = true;
+  for (size_t i = 0; i < N; i++) own = own && sk[i] == i;
+  CHECK(own, "without runs every unit is its own key");
+}
+
 static void test_context_text(void) {
   const char *base =
       "{\"id\":\"a\",\"wavelength\":400,\"coords\":{\"r\":1},\"params\":{\"k\":0.2},\"spp\":8}";
@@ -70,6 +105,7 @@ static void test_context_text(void) {
 
 int main(void) {
   RSW_TEST_RUN(test_runs);
+  RSW_TEST_RUN(test_shard_keys);
   RSW_TEST_RUN(test_context_text);
   RSW_TEST_END("test_bundle_plan");
 }

@@ -11,7 +11,8 @@
 #     threes, so shards still give the whole sweep's films);
 #   - the same from a --contexts file (wavelength fastest, ids given);
 #   - without --bundle the sweep is --bundle auto's (the daemon's
-#     default), whole and as shards merged; with --bundle 1 the shards are
+#     default), whole and as shards merged; groups are dealt to the shards
+#     in turn (40 wavelengths in groups of 16: shard 1/4 holds the second); with --bundle 1 the shards are
 #     k mod n and sweep.json has no bundle_leads (as before bundles);
 #   - a job's "bundle": "auto" comes to 16 on a mono surface scene (its
 #     films those of "bundle": 16, not those of "bundle": 1) and to 1, accepted, with the reason, on
@@ -132,6 +133,14 @@ rs "$pa" sweep "$scene" "${grid[@]}" -o dflt >/dev/null 2>"$tmp/err" &&
   rs "$pa" merge n0 n1 -o nmerged >/dev/null 2>"$tmp/err" || bad "no --bundle: $(cat "$tmp/err")"
 same "no --bundle, --bundle auto" auto dflt
 same "no --bundle, --shard 0/2 + 1/2 merged" auto nmerged
+# Groups are dealt out in turn: 40 wavelengths in groups of 16 over 4
+# shards put one group on each of shards 0, 1, 2 (by the first context's
+# index mod 4 all three fell on shard 0).
+rs "$pa" sweep "$scene" --grid wavelength=400:439:1 --spp 1 --shard 1/4 -o g1 >/dev/null 2>"$tmp/err" ||
+  bad "40 wavelengths, shard 1/4: $(cat "$tmp/err")"
+got=$(ls g1 | grep '^c' | tr '\n' ' ')
+want=$(seq -f 'c%05g' 16 31 | tr '\n' ' ')
+if [ "$got" = "$want" ]; then ok; else bad "shard 1/4 of 40 wavelengths in groups of 16 holds '$got'"; fi
 # --bundle auto where the daemon comes to 3 (a canopy on a plastic soil,
 # whose delta specular lobe keeps pages out; leaves with tabulated
 # reflectance and transmittance, so that the bundle changes the paths'
