@@ -680,6 +680,69 @@ static void test_hits_batch(void) {
   scene_free(s);
 }
 
+/* shape_mesh_hits_batch with one face's data given once, where the face's
+ * frame is reused while a vector's lanes repeat the normal and tangent
+ * it was made from (frame_lanes.h), against the same lanes with the
+ * face's data in every lane (every frame computed; test_hits_batch checks
+ * that against the scalar fill), bit for bit at every ISA: a flat face
+ * (equal vertex normals: the frame reused, but where an interpolated
+ * normal comes out an ulp off), a bent one (the normal differs from lane
+ * to lane: a frame reused wrongly shows), a face without dp/du, each with
+ * and without vertex normals, flipped or not, n not a multiple of any
+ * vector width. */
+static void test_hits_frame_reuse(void) {
+  enum {
+    S = 64,
+    N = 61
+  };
+  static const double faces[3][SHAPE_MH_IN_D - 2] = {
+      /* p0, p1, p2; na, nb, nc; uv a, b, c; n; dp/du */
+      {-1, -1, 0, 1, -1, 0, 1, 1, 0, 0, 0, 1, 0, 0, 1, 0, 0, 1, 0, 0, 1, 0, 1, 1, 0, 0, 1, 2, 0, 0},
+      {0,   0,   0.5, 1, 0, 0.3, 0, 1, 0.2, 0.1,  -0.2, 1,    -0.3, 0.1, 0.9,
+       0.2, 0.3, 1.1, 0, 0, 1,   0, 0, 1,   -0.3, -0.2, 0.93, 1,    0,   0.2},
+      {0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 1, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 1, 0, 0, 0},
+  };
+  double k[SHAPE_MH_K] = {0};
+  for (int i = 0; i < 4; i++) k[SHAPE_MH_M + 5 * i] = 1;
+  for (int i = 0; i < 3; i++) k[SHAPE_MH_INV + 4 * i] = 1;
+  k[SHAPE_MH_M + 3] = 0.25, k[SHAPE_MH_C] = 0.1, k[SHAPE_MH_TC] = 0.5, k[SHAPE_MH_EXT] = 2;
+  for (int i = 0; i < 3; i++) k[SHAPE_MH_S + i] = 0.5 + i;
+  static double in[SHAPE_MH_IN * S], a[SHAPE_MH_OUT * S], b[SHAPE_MH_OUT * S];
+  pcg32 rng;
+  pcg32_seed(&rng, 11, 5);
+  int cases = 0;
+  for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
+    if (!rsw_isa_set((rsw_isa)isa)) continue;
+    for (int f = 0; f < 3; f++)
+      for (int nrm = 0; nrm < 2; nrm++)
+        for (int flip = 0; flip < 2; flip++) {
+          k[SHAPE_MH_NRM] = nrm, k[SHAPE_MH_UV] = 1, k[SHAPE_MH_FLIP] = flip;
+          memset(in, 0, sizeof in);
+          for (int j = 0; j < N; j++) {
+            /* Barycentrics summing to 1 exactly in most lanes (the
+             * interpolated normal then the vertices'), random in some. */
+            double u = (j % 5 == 4) ? pcg32_next_double(&rng) * 0.5 : 0.125 * (j % 4);
+            double v = (j % 5 == 4) ? pcg32_next_double(&rng) * 0.5 : 0.25 * (j % 3);
+            in[j] = u, in[S + j] = v;
+            for (int c = 2; c < SHAPE_MH_IN_D; c++) in[c * S + j] = faces[f][c - 2];
+            for (int c = 0; c < 3; c++) in[(SHAPE_MH_IN_D + c) * S + j] = pcg32_next_double(&rng) - 0.5;
+          }
+          memset(a, 0, sizeof a);
+          memset(b, 0, sizeof b);
+          shape_mesh_hits_batch(N, S, k, NULL, in, a);
+          shape_mesh_hits_batch(N, S, k, faces[f], in, b);
+          int bad = 0;
+          for (int c = 0; c < SHAPE_MH_OUT; c++)
+            for (int j = 0; j < N; j++) bad += memcmp(&a[c * S + j], &b[c * S + j], sizeof a[0]) != 0;
+          CHECK(bad == 0, "%s, face %d, normals %d, flip %d: %d values differ", rsw_isa_name((rsw_isa)isa), f,
+                nrm, flip, bad);
+          cases++;
+        }
+  }
+  rsw_isa_set(rsw_isa_best());
+  CHECK(cases >= 12, "%d cases", cases);
+}
+
 /* pick_emitter_index against the binary search it replaces for a few
  * emitters (the first k < n - 1 with cdf[k] > t, else n - 1): every
  * count of emitters on both sides of PICK_COUNT_MAX, weights with zeros
@@ -807,5 +870,6 @@ int main(void) {
   RSW_TEST_RUN(test_emitter_batch_chi2);
   RSW_TEST_RUN(test_frames_batch);
   RSW_TEST_RUN(test_hits_batch);
+  RSW_TEST_RUN(test_hits_frame_reuse);
   RSW_TEST_END("test_wave");
 }
