@@ -325,7 +325,7 @@ static void check_sampler_batches(const sampler *smp, const char *what) {
   int idx[N];
   double d1[N];
   vec2 d2[N];
-  for (int round = 0; round < 12; round++) {
+  for (int round = 0; round < 16; round++) {
     int n = 0; /* a subset, in a scrambled order */
     for (int k = 0; k < N; k++) {
       int i = (k * 31 + round * 7) % N;
@@ -333,8 +333,12 @@ static void check_sampler_batches(const sampler *smp, const char *what) {
     }
     const int *use = round % 4 == 0 ? NULL : idx;
     int m = use ? n : N;
-    int kind = round % 3; /* 1-D, 2-D, or a 1-D then a 2-D number per lane */
-    if (kind == 1)
+    /* 1-D, 2-D, a 1-D then a 2-D number per lane, or two 2-D numbers */
+    int kind = round % 5 == 4 ? 3 : round % 3; /* (round 4: every lane in order) */
+    vec2 e2[N];
+    if (kind == 3)
+      sampler_next_2d_2d_batch(smp, a, use, m, d2, e2);
+    else if (kind == 1)
       sampler_next_2d_batch(smp, a, use, m, d2);
     else if (kind == 0)
       sampler_next_1d_batch(smp, a, use, m, d1);
@@ -342,13 +346,17 @@ static void check_sampler_batches(const sampler *smp, const char *what) {
       sampler_next_1d_2d_batch(smp, a, use, m, d1, d2);
     for (int k = 0; k < m; k++) {
       sampler_state *q = &b[use ? use[k] : k];
-      if (kind != 1) {
+      if (kind == 0 || kind == 2) {
         double v = smp->ops->next_1d(q);
         bad += memcmp(&v, &d1[k], sizeof v) != 0;
       }
       if (kind != 0) {
         vec2 v = smp->ops->next_2d(q);
         bad += memcmp(&v, &d2[k], sizeof v) != 0;
+      }
+      if (kind == 3) {
+        vec2 v = smp->ops->next_2d(q);
+        bad += memcmp(&v, &e2[k], sizeof v) != 0;
       }
     }
   }
@@ -364,6 +372,7 @@ static void test_sampler_batches(void) {
     const sampler *smp = s->sensors[0]->sampler;
     CHECK(smp->ops->start_batch && smp->ops->next_1d_batch && smp->ops->next_2d_batch, "%s has batch ops",
           types[t]);
+    CHECK(t == 1 || smp->ops->next_2d_2d_batch, "%s has next_2d_2d_batch", types[t]);
     for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
       if (!rsw_isa_set((rsw_isa)isa)) continue;
       char what[64];
