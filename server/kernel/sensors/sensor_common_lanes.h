@@ -108,11 +108,13 @@ LANES_ATTR void LANES_FN(disk_origins)(int n, const double *m9, int m_step, cons
     for (int k = 0; k < WD; k++) ax[k] = ak[2 * k], ay[k] = ak[2 * k + 1];
     if (m_step == 0) { /* one frame: broadcast */
       for (int j = 0; j < 9; j++) mm[j] = (vdn){0} + m9[j];
-    } else {
+    } else { /* through a copy: whole vectors set (no lane of them left unset) */
+      double t[9][WD];
       for (int k = 0; k < WD; k++) {
         const double *mk = m9 + (long)m_step * (k0 + (k < cnt ? k : cnt - 1));
-        for (int j = 0; j < 9; j++) mm[j][k] = mk[j];
+        for (int j = 0; j < 9; j++) t[j][k] = mk[j];
       }
+      for (int j = 0; j < 9; j++) __builtin_memcpy(&mm[j], t[j], sizeof mm[j]);
     }
     if (d_step == 0) {
       dx = (vdn){0} + d[0], dy = (vdn){0} + d[1], dz = (vdn){0} + d[2];
