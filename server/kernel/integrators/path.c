@@ -122,10 +122,6 @@ typedef struct lane {
   ray3 ray;
   surface_interaction si, prev_si;
   color T, L;
-  /* The lane's ray: the wave's camera ray until the first bounce, then
-   * ray (a camera ray is not copied into its lane; r sits with the
-   * fields a lane's start writes). */
-  const ray3 *r;
   double eta, prev_pdf;
   bool prev_delta, wrapped;
   int depth;
@@ -238,7 +234,7 @@ static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_
     double t0 = timed ? clock_s() : 0;
     for (int k = 0; k < n; k++) {
       lane *l = &ln[idx[k]];
-      l->hit = intersect(sc, l->r, &l->si, stats, &l->wrapped);
+      l->hit = intersect(sc, &l->ray, &l->si, stats, &l->wrapped);
       bool h = l->hit == TRACE_HIT;
       hit[nh] = other[no] = idx[k];
       nh += h, no += !h;
@@ -270,7 +266,7 @@ static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_
         int m = n - k < V ? n - k : V;
         double c[6][V];
         for (int j = 0; j < m; j++) {
-          const ray3 *r = ln[idx[k + j]].r;
+          const ray3 *r = &ln[idx[k + j]].ray;
           c[0][j] = r->o.x, c[1][j] = r->o.y, c[2][j] = r->o.z;
           c[3][j] = r->d.x, c[4][j] = r->d.y, c[5][j] = r->d.z;
         }
@@ -290,7 +286,7 @@ static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_
     const ray3 *rp[P];
     accel_hit *hp[P];
     bool h[P];
-    for (int j = 0; j < nq; j++) rp[j] = ln[q[j]].r, hp[j] = &ln[q[j]].h;
+    for (int j = 0; j < nq; j++) rp[j] = &ln[q[j]].ray, hp[j] = &ln[q[j]].h;
     accel_intersect_packet(sc->accel, rp, nq, hp, h, coherent);
     for (int j = 0; j < nq; j++) {
       ln[q[j]].hit = h[j] ? TRACE_HIT : TRACE_MISS;
@@ -313,7 +309,7 @@ static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_
     int m = nh - k0 < C ? nh - k0 : C;
     for (int j = 0; j < m; j++) {
       lane *l = &ln[hit[k0 + j]];
-      rr[j] = l->r, hh[j] = &l->h, ss[j] = &l->si;
+      rr[j] = &l->ray, hh[j] = &l->h, ss[j] = &l->si;
     }
     hit_fill_interaction_batch(sc, m, rr, hh, ss);
   }
@@ -387,17 +383,17 @@ static bool shade_emit(const integrator *it, const scene *sc, lane *l, double *q
     if (env && visible_emitter && l->hit == TRACE_MISS) {
       double em_pdf = 0.0;
       if (!l->prev_delta) {
-        direction_sample ds = {.d = v3_norm(l->r->d), .dist = INFINITY};
+        direction_sample ds = {.d = v3_norm(l->ray.d), .dist = INFINITY};
         em_pdf = env->ops->pdf_direction(env, &l->prev_si, &ds) * emitter_prob(sc, env);
       }
-      color Le = env->ops->eval(env, NULL, l->r->d);
+      color Le = env->ops->eval(env, NULL, l->ray.d);
       double w = mis_weight(l->prev_pdf, em_pdf);
       l->L = col_add(l->L, col_scale(col_mul(l->T, Le), w));
-      pages_add_emission(sc, pg, env, NULL, l->r->d, w);
+      pages_add_emission(sc, pg, env, NULL, l->ray.d, w);
       if (pl) {
-        pol_add_env(pl, env, l->r->d, Le, col_scale(col_mul(l->T, Le), w), pol_channels(sc));
+        pol_add_env(pl, env, l->ray.d, Le, col_scale(col_mul(l->T, Le), w), pol_channels(sc));
       } else {
-        add_polarization(quv, env, v3_norm(l->r->d), l->T.c[0] * w);
+        add_polarization(quv, env, v3_norm(l->ray.d), l->T.c[0] * w);
       }
     }
     return false;
@@ -405,7 +401,7 @@ static bool shade_emit(const integrator *it, const scene *sc, lane *l, double *q
   const surface_interaction *si = &l->si;
   const emitter *em = si->shape->emitter;
   if (em && visible_emitter) {
-    color Le = em->ops->eval(em, si, l->r->d);
+    color Le = em->ops->eval(em, si, l->ray.d);
     if (!col_is_black(Le) || pg) {
       double em_pdf = 0.0;
       /* Next-event estimation samples the emitter in the column only,
@@ -413,14 +409,14 @@ static bool shade_emit(const integrator *it, const scene *sc, lane *l, double *q
        * periodic boundary is BSDF sampling's alone (weight 1). */
       if (!l->prev_delta && !l->wrapped) {
         direction_sample ds = {
-            .p = si->p, .n = si->ng, .d = v3_norm(l->r->d), .dist = si->t * v3_len(l->r->d)};
+            .p = si->p, .n = si->ng, .d = v3_norm(l->ray.d), .dist = si->t * v3_len(l->ray.d)};
         em_pdf = em->ops->pdf_direction(em, &l->prev_si, &ds) * emitter_prob(sc, em);
       }
       double w = mis_weight(l->prev_pdf, em_pdf);
       color v = col_scale(col_mul(l->T, Le), w);
       l->L = col_add(l->L, v);
       if (pl) pol_add(pl, v, pol_channels(sc));
-      pages_add_emission(sc, pg, em, si, l->r->d, w);
+      pages_add_emission(sc, pg, em, si, l->ray.d, w);
     }
   }
   if (!(it->max_depth < 0 || l->depth + 1 < it->max_depth)) return false;
@@ -607,7 +603,7 @@ static void shade_light(const scene *sc, lane *l, double *quv, pol_lane *pl, pag
       color v = col_scale(col_mul(l->T, col_mul(f, l->value)), w / l->pe);
       l->L = col_add(l->L, v);
       if (pl)
-        pol_collect_light(pl, &l->si, l->nwo, 0, e, ds->d, v3_neg(v3_norm(l->r->d)), v, pol_channels(sc));
+        pol_collect_light(pl, &l->si, l->nwo, 0, e, ds->d, v3_neg(v3_norm(l->ray.d)), v, pol_channels(sc));
       else if (quv && (e->flags & EMITTER_INFINITE))
         add_polarization(quv, e, ds->d, l->T.c[0] * f.c[0] * w / (l->pe * ds->pdf));
     }
@@ -681,10 +677,9 @@ static bool shade_continue(const integrator *it, const scene *sc, sampler_state 
     mueller P[3];
     vec3 b_in = {0}, b_out = {0};
     const mueller *pp = pol_bsdf(si->shape->bsdf, si, bs->wo, bs->sampled_type, P, &b_in, &b_out);
-    pol_scatter(pl, v3_neg(v3_norm(l->r->d)), b_out, pp, b_in, pol_channels(sc));
+    pol_scatter(pl, v3_neg(v3_norm(l->ray.d)), b_out, pp, b_in, pol_channels(sc));
   }
   l->ray = spawn_ray(si, wo_world);
-  l->r = &l->ray;
   l->T = col_mul(l->T, weight);
   /* A bundle of pages: the roulette on the largest throughput of any page. */
   double tmax = col_max(l->T);
@@ -739,7 +734,7 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
     for (int i = 0; i < n; i++) pol_start(&pol[i], rays[i].d, pol_channels(sc));
   for (int i = 0; i < n; i++) {
     lane *l = &ln[i];
-    l->r = &rays[i];
+    l->ray = rays[i];
     l->T = col1(1);
     l->L = col1(0);
     l->eta = 1.0;
