@@ -64,6 +64,13 @@ LDFLAGS := $(SANFLAGS)
 # bitwise those of -O2.
 VOLPATH_O3 := $(addprefix $(BUILD)/obj/server/kernel/,integrators/volpath.o media/layered.o media/media.o)
 $(VOLPATH_O3): CFLAGS += -O3
+# The surface path tracer's wave and its batched kernels at -O3 as well
+# (the seed scene: 2-4% less CPU time; the same bitwise argument).
+SEED_O3 := $(addprefix $(BUILD)/obj/server/kernel/,integrators/path.o hit.o render.o accel.o shapes/fill_simd.o \
+             sensors/sensor_common.o samplers/independent.o samplers/pcg_simd.o simd/lanes_avx2.o \
+             simd/lanes_avx512.o simd/lanes_sse2.o simd/lanes_generic.o bsdfs/roughconductor.o bsdfs/microfacet.o \
+             emitters/directional.o)
+$(SEED_O3): CFLAGS += -O3
 LIBS := -lembree3 -lOpenEXRCore -lnetcdf -lpng16 -ljpeg -lexpat -lcjson -lpthread -ldl -lm
 DAEMON_LIBS := -lmicrohttpd -lcrypto
 TEST_LIBS := -lcurl -lcrypto

@@ -445,6 +445,9 @@ typedef struct sampler_ops {
   /* next_1d() then next_2d() per lane, in one pass (a light pick and its
    * sample, a BSDF lobe and its direction): out1[k], out2[k]. */
   void (*next_1d_2d_batch)(sampler_state *st, const int *idx, int n, double *out1, vec2 *out2);
+  /* next_2d() twice per lane, in one pass (a camera sample's film and
+   * aperture numbers): out1[k], out2[k]. */
+  void (*next_2d_2d_batch)(sampler_state *st, const int *idx, int n, vec2 *out1, vec2 *out2);
 } sampler_ops;
 struct sampler {
   object base;

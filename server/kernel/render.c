@@ -209,8 +209,7 @@ static void wave_start(job *jb, wave_buf *wb, int n) {
   const sampler *smp = jb->se->sampler;
   const sensor *se = jb->se;
   sampler_start_batch(smp, wb->st, n, jb->opts->seed, wb->pixel, wb->index, jb->spp);
-  sampler_next_2d_batch(smp, wb->st, NULL, n, wb->film_u);
-  sampler_next_2d_batch(smp, wb->st, NULL, n, wb->aperture_u);
+  sampler_next_2d_2d_batch(smp, wb->st, NULL, n, wb->film_u, wb->aperture_u);
   for (int i = 0; i < n; i++) {
     double px = wb->ix[i] + wb->film_u[i].x, py = wb->iy[i] + wb->film_u[i].y;
     wb->ws[i].px = px;

@@ -30,12 +30,17 @@ LANES_ATTR void LANES_FN(rays_traced)(int n, const double *const *o, const doubl
         __builtin_memcpy(&ov[c], &o[c][k0], sizeof ov[c]);
         __builtin_memcpy(&dv[c], &d[c][k0], sizeof dv[c]);
       }
-    } else {
+    } else { /* through a padded copy: whole vectors set (no lane of them left unset) */
+      double t[6][WD];
       for (int c = 0; c < 3; c++)
         for (int k = 0; k < WD; k++) {
           int j = k0 + (k < cnt ? k : cnt - 1);
-          ov[c][k] = o[c][j], dv[c][k] = d[c][j];
+          t[c][k] = o[c][j], t[3 + c][k] = d[c][j];
         }
+      for (int c = 0; c < 3; c++) {
+        __builtin_memcpy(&ov[c], t[c], sizeof ov[c]);
+        __builtin_memcpy(&dv[c], t[3 + c], sizeof dv[c]);
+      }
     }
     /* ray_may_hit: an origin beyond a face of the padded box, pointing away. */
     vln away = (vln){0};

@@ -55,6 +55,20 @@ static void independent_next_1d_2d_batch(sampler_state *st, const int *idx, int 
     }
 }
 
+static void independent_next_2d_2d_batch(sampler_state *st, const int *idx, int n, vec2 *out1, vec2 *out2) {
+  if (idx)
+    for (int k = 0; k < n; k++) {
+      sampler_state *q = &st[idx[k]];
+      out1[k] = independent_next_2d(q);
+      out2[k] = independent_next_2d(q);
+    }
+  else
+    for (int k = 0; k < n; k++) {
+      out1[k] = independent_next_2d(&st[k]);
+      out2[k] = independent_next_2d(&st[k]);
+    }
+}
+
 /* Any count works; 0 means "the scene's sample_count". */
 static uint32_t independent_adjust_spp(const sampler *s, uint32_t spp) {
   return spp ? spp : s->sample_count;
@@ -69,6 +83,7 @@ static const sampler_ops independent_ops = {
     .next_1d_batch = independent_next_1d_batch,
     .next_2d_batch = independent_next_2d_batch,
     .next_1d_2d_batch = independent_next_1d_2d_batch,
+    .next_2d_2d_batch = independent_next_2d_2d_batch,
 };
 
 DEFINE_PLUGIN(independent, CLS_SAMPLER, .ops = &independent_ops);

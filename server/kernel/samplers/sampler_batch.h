@@ -46,4 +46,16 @@ static inline void sampler_next_1d_2d_batch(const sampler *s, sampler_state *st,
   sampler_next_2d_batch(s, st, idx, n, out2);
 }
 
+/* Two 2-D numbers per lane (next_2d_2d_batch, or next_2d_batch twice:
+ * the same numbers). */
+static inline void sampler_next_2d_2d_batch(const sampler *s, sampler_state *st, const int *idx, int n,
+                                            vec2 *out1, vec2 *out2) {
+  if (s->ops->next_2d_2d_batch) {
+    s->ops->next_2d_2d_batch(st, idx, n, out1, out2);
+    return;
+  }
+  sampler_next_2d_batch(s, st, idx, n, out1);
+  sampler_next_2d_batch(s, st, idx, n, out2);
+}
+
 #endif

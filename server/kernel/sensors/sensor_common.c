@@ -4,6 +4,7 @@
 
 #include <ctype.h>
 #include <math.h>
+#include <stddef.h>
 #include <stdlib.h>
 
 #include "../accel.h"
@@ -294,25 +295,13 @@ void disk_origins_batch(rsw_isa isa, int n, const double *m9, int m_step, const 
 
 void hemisphere_rays_batch(const sensor *s, vec3 center, double radius, double offset, int n,
                            const vec2 *film_u, const vec2 *aperture_u, ray3 *rays) {
-  enum {
-    C = 64
-  };
-  double out[6 * C], fu[2 * C], ap[2 * C], c[3] = {center.x, center.y, center.z};
-  rsw_isa isa = rsw_isa_get();
-  for (int i0 = 0; i0 < n; i0 += C) {
-    int m = n - i0 < C ? n - i0 : C;
-    for (int k = 0; k < m; k++) {
-      fu[2 * k] = film_u[i0 + k].x, fu[2 * k + 1] = film_u[i0 + k].y;
-      ap[2 * k] = aperture_u[i0 + k].x, ap[2 * k + 1] = aperture_u[i0 + k].y;
-    }
-    hdistant_rays_batch(isa, m, (const double(*)[4])s->to_world.m, fu, ap, c, radius, offset, out);
-    for (int k = 0; k < m; k++) {
-      const double *o = &out[6 * k];
-      ray3 *r = &rays[i0 + k];
-      r->o = v3(o[0], o[1], o[2]);
-      r->d = v3(o[3], o[4], o[5]);
-      r->tmin = 0.0;
-      r->tmax = INFINITY;
-    }
-  }
+  /* A vec2 array is the lanes' interleaved (x, y) and a ray3 array their
+   * output layout: no copies on either side. */
+  _Static_assert(sizeof(vec2) == 2 * sizeof(double) && sizeof(ray3) == 8 * sizeof(double) &&
+                     offsetof(ray3, d) == 3 * sizeof(double) && offsetof(ray3, tmin) == 6 * sizeof(double),
+                 "vec2 and ray3 as the hdistant lanes lay them out");
+  if (n <= 0) return;
+  double c[3] = {center.x, center.y, center.z};
+  hdistant_rays_batch(rsw_isa_get(), n, (const double(*)[4])s->to_world.m, &film_u[0].x, &aperture_u[0].x, c,
+                      radius, offset, &rays[0].o.x);
 }

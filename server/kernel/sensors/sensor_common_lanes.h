@@ -12,7 +12,7 @@
 #include "../simd/simd.h"
 
 /* hdistant camera rays: m the rows of to_world; fu, ap 2 per lane (x, y);
- * out 6 per lane (origin, direction). */
+ * out 8 per lane (origin, direction, tmin 0, tmax infinity: a ray3). */
 SIMD_ISA_DECL(void, hdistant_rays,
               (int n, const double (*m)[4], const double *fu, const double *ap, const double *center,
                double radius, double offset, double *out));
@@ -25,7 +25,8 @@ SIMD_ISA_DECL(void, disk_origins,
 
 #ifdef LANES_FN
 /* n rays: rows m[3][3] of to_world; fu, ap film and aperture samples (x,
- * y interleaved per lane: fu[2 i], fu[2 i + 1]); out[6 i ..] = o, d. */
+ * y interleaved per lane: fu[2 i], fu[2 i + 1]); out[8 i ..] = o, d, 0,
+ * infinity (the layout of a ray3, which the caller's rays are). */
 LANES_ATTR void LANES_FN(hdistant_rays)(int n, const double (*m)[4], const double *fu, const double *ap,
                                         const double *center, double radius, double offset, double *out) {
   for (int k0 = 0; k0 < n; k0 += WD) {
@@ -33,7 +34,7 @@ LANES_ATTR void LANES_FN(hdistant_rays)(int n, const double (*m)[4], const doubl
     /* Constant-length loops through a padded copy for a partial tail (see
      * COSINE_LANES_FN below). */
     const double *fk = fu + 2 * k0, *ak = ap + 2 * k0;
-    double fpad[2 * WD], apad[2 * WD], res[6 * WD];
+    double fpad[2 * WD], apad[2 * WD], res[8 * WD];
     if (cnt < WD) {
       for (int k = 0; k < 2 * WD; k++)
         fpad[k] = k < 2 * cnt ? fk[k] : 0.5, apad[k] = k < 2 * cnt ? ak[k] : 0.5;
@@ -68,14 +69,15 @@ LANES_ATTR void LANES_FN(hdistant_rays)(int n, const double (*m)[4], const doubl
     vdn ox = (center[0] + radius * rx) + -offset * dx;
     vdn oy = (center[1] + radius * ry) + -offset * dy;
     vdn oz = (center[2] + radius * rz) + -offset * dz;
-    double *ob = cnt < WD ? res : &out[6 * k0];
+    double *ob = cnt < WD ? res : &out[8 * k0];
     for (int k = 0; k < WD; k++) {
-      double *o = &ob[6 * k];
+      double *o = &ob[8 * k];
       o[0] = ox[k], o[1] = oy[k], o[2] = oz[k];
       o[3] = dx[k], o[4] = dy[k], o[5] = dz[k];
+      o[6] = 0.0, o[7] = INFINITY;
     }
     if (cnt < WD)
-      for (int k = 0; k < 6 * cnt; k++) out[6 * k0 + k] = res[k];
+      for (int k = 0; k < 8 * cnt; k++) out[8 * k0 + k] = res[k];
   }
 }
 
@@ -106,11 +108,13 @@ LANES_ATTR void LANES_FN(disk_origins)(int n, const double *m9, int m_step, cons
     for (int k = 0; k < WD; k++) ax[k] = ak[2 * k], ay[k] = ak[2 * k + 1];
     if (m_step == 0) { /* one frame: broadcast */
       for (int j = 0; j < 9; j++) mm[j] = (vdn){0} + m9[j];
-    } else {
+    } else { /* through a copy: whole vectors set (no lane of them left unset) */
+      double t[9][WD];
       for (int k = 0; k < WD; k++) {
         const double *mk = m9 + (long)m_step * (k0 + (k < cnt ? k : cnt - 1));
-        for (int j = 0; j < 9; j++) mm[j][k] = mk[j];
+        for (int j = 0; j < 9; j++) t[j][k] = mk[j];
       }
+      for (int j = 0; j < 9; j++) __builtin_memcpy(&mm[j], t[j], sizeof mm[j]);
     }
     if (d_step == 0) {
       dx = (vdn){0} + d[0], dy = (vdn){0} + d[1], dz = (vdn){0} + d[2];

@@ -21,7 +21,31 @@
     a_ != 0;                                                                                                 \
   })
 #endif
-FRAME_ATTR inline __attribute__((always_inline)) void FRAME_LANES(const VD *v, VD *res) {
+#ifndef FRAME_ALL
+/* Every lane of mask m is set. */
+#define FRAME_ALL(m)                                                                                         \
+  ({                                                                                                         \
+    VL m_ = (m);                                                                                             \
+    long long a_ = -1;                                                                                       \
+    for (int i_ = 0; i_ < VW; i_++) a_ &= m_[i_];                                                            \
+    a_ != 0;                                                                                                 \
+  })
+/* Lane 0 of x in every lane, bit for bit (zero + x[0] would turn -0 into +0). */
+#define FRAME_LANE0(x) ((VD)((VL){0} + ((VL)(x))[0]))
+#endif
+/* memo (NULL: none): FRAME_MEMO vectors, the normal and tangent of a
+ * previous call's lane 0 (each in every lane) and the frame they gave,
+ * s and t (valid where memo_ok). A lane's frame is a function of its own
+ * normal and tangent only, so where every lane has the memo's normal and
+ * tangent bit for bit (a flat face's hits, filled face by face), the
+ * memo's frame is theirs: bitwise what the arithmetic below would give,
+ * without its square roots and divisions. Otherwise the frame is computed
+ * and lane 0's becomes the memo. */
+#ifndef FRAME_MEMO
+#define FRAME_MEMO 12
+#endif
+FRAME_ATTR inline __attribute__((always_inline)) void FRAME_LANES(const VD *v, VD *res, VD *memo,
+                                                                  bool *memo_ok) {
   {
     VD nx = v[0], ny = v[1], nz = v[2], tx = v[3], ty = v[4], tz = v[5], dx = v[6], dy = v[7], dz = v[8];
     const VD zero = (VD){0}, one = zero + 1.0;
@@ -36,10 +60,16 @@ FRAME_ATTR inline __attribute__((always_inline)) void FRAME_LANES(const VD *v, V
       VL take = (v[12] != 0.0) & (rx * rx + ry * ry + rz * rz > 0.5);
       nx = FSEL(take, rx, nx), ny = FSEL(take, ry, ny), nz = FSEL(take, rz, nz);
     }
+    VD sx = zero, sy = zero, sz = zero, cx = zero, cy = zero, cz = zero;
+    if (memo && *memo_ok &&
+        FRAME_ALL(((VL)nx == (VL)memo[0]) & ((VL)ny == (VL)memo[1]) & ((VL)nz == (VL)memo[2]) &
+                  ((VL)tx == (VL)memo[3]) & ((VL)ty == (VL)memo[4]) & ((VL)tz == (VL)memo[5]))) {
+      sx = memo[6], sy = memo[7], sz = memo[8], cx = memo[9], cy = memo[10], cz = memo[11];
+      goto framed;
+    }
     /* The tangent made orthogonal to sn. */
     VL none = (tx == 0.0) & (ty == 0.0) & (tz == 0.0);
     VL use = none & ~none;
-    VD sx = zero, sy = zero, sz = zero, cx = zero, cy = zero, cz = zero;
     if (FRAME_ANY(~none)) { /* square roots and divisions only where a lane needs them */
       VD dot = nx * tx + ny * ty + nz * tz;
       VD ux = tx - nx * dot, uy = ty - ny * dot, uz = tz - nz * dot;
@@ -60,6 +90,12 @@ FRAME_ATTR inline __attribute__((always_inline)) void FRAME_LANES(const VD *v, V
       sx = FSEL(use, sx, s2x), sy = FSEL(use, sy, s2y), sz = FSEL(use, sz, s2z);
       cx = FSEL(use, cx, t2x), cy = FSEL(use, cy, t2y), cz = FSEL(use, cz, t2z);
     }
+    if (memo) {
+      const VD key[FRAME_MEMO] = {nx, ny, nz, tx, ty, tz, sx, sy, sz, cx, cy, cz};
+      for (int i = 0; i < FRAME_MEMO; i++) memo[i] = FRAME_LANE0(key[i]);
+      *memo_ok = true;
+    }
+  framed:;
     /* wi = local(-v3_norm(d)); v3_norm leaves a zero-length d as it is. */
     VD dl = FRAME_SQRT(dx * dx + dy * dy + dz * dz);
     VL pos = dl > 0.0;
@@ -78,7 +114,7 @@ FRAME_ATTR void FRAME_FN(int n, int stride, const double *in, double *out) {
     VD v[SHAPE_FRAME_IN], res[12];
     for (int c = 0; c < SHAPE_FRAME_IN; c++)
       __builtin_memcpy(&v[c], &in[(size_t)c * stride + k0], sizeof v[c]);
-    FRAME_LANES(v, res);
+    FRAME_LANES(v, res, NULL, NULL);
     for (int c = 0; c < 12; c++) __builtin_memcpy(&out[(size_t)c * stride + k0], &res[c], sizeof res[c]);
   }
 }

@@ -52,6 +52,11 @@ FRAME_ATTR void MESH_FN(int n, int stride, const double *k, const double *face, 
    * finite object-space points of a hit: no division (mat_point). */
   const bool affine = k[SHAPE_MH_M + 12] == 0 && k[SHAPE_MH_M + 13] == 0 && k[SHAPE_MH_M + 14] == 0 &&
                       k[SHAPE_MH_M + 15] == 1;
+  /* A face's lanes share their tangent, and often their shading normal
+   * (a flat face's vertex normals): its frame is reused while they do
+   * (frame_lanes.h). */
+  VD memo[FRAME_MEMO];
+  bool memo_ok = false;
   for (int k0 = 0; k0 < n; k0 += VW) {
     VD v[SHAPE_MH_IN];
     if (face) {
@@ -131,7 +136,7 @@ FRAME_ATTR void MESH_FN(int n, int stride, const double *k, const double *face, 
     snx[6] = v[SHAPE_MH_IN_D], snx[7] = v[SHAPE_MH_IN_D + 1], snx[8] = v[SHAPE_MH_IN_D + 2];
     snx[9] = raw[0], snx[10] = raw[1], snx[11] = raw[2];
     snx[12] = nrm ? one : zero;
-    FRAME_LANES(snx, res + 6);
+    FRAME_LANES(snx, res + 6, face ? memo : NULL, &memo_ok);
     res[0] = p[0], res[1] = p[1], res[2] = p[2], res[3] = err, res[4] = u0, res[5] = u1;
     _Pragma("GCC unroll 16") for (int c = 0; c < SHAPE_MH_OUT; c++)
         __builtin_memcpy(&out[(size_t)c * stride + k0], &res[c], sizeof res[c]);

@@ -325,7 +325,7 @@ static void check_sampler_batches(const sampler *smp, const char *what) {
   int idx[N];
   double d1[N];
   vec2 d2[N];
-  for (int round = 0; round < 12; round++) {
+  for (int round = 0; round < 16; round++) {
     int n = 0; /* a subset, in a scrambled order */
     for (int k = 0; k < N; k++) {
       int i = (k * 31 + round * 7) % N;
@@ -333,8 +333,12 @@ static void check_sampler_batches(const sampler *smp, const char *what) {
     }
     const int *use = round % 4 == 0 ? NULL : idx;
     int m = use ? n : N;
-    int kind = round % 3; /* 1-D, 2-D, or a 1-D then a 2-D number per lane */
-    if (kind == 1)
+    /* 1-D, 2-D, a 1-D then a 2-D number per lane, or two 2-D numbers */
+    int kind = round % 5 == 4 ? 3 : round % 3; /* (round 4: every lane in order) */
+    vec2 e2[N];
+    if (kind == 3)
+      sampler_next_2d_2d_batch(smp, a, use, m, d2, e2);
+    else if (kind == 1)
       sampler_next_2d_batch(smp, a, use, m, d2);
     else if (kind == 0)
       sampler_next_1d_batch(smp, a, use, m, d1);
@@ -342,13 +346,17 @@ static void check_sampler_batches(const sampler *smp, const char *what) {
       sampler_next_1d_2d_batch(smp, a, use, m, d1, d2);
     for (int k = 0; k < m; k++) {
       sampler_state *q = &b[use ? use[k] : k];
-      if (kind != 1) {
+      if (kind == 0 || kind == 2) {
         double v = smp->ops->next_1d(q);
         bad += memcmp(&v, &d1[k], sizeof v) != 0;
       }
       if (kind != 0) {
         vec2 v = smp->ops->next_2d(q);
         bad += memcmp(&v, &d2[k], sizeof v) != 0;
+      }
+      if (kind == 3) {
+        vec2 v = smp->ops->next_2d(q);
+        bad += memcmp(&v, &e2[k], sizeof v) != 0;
       }
     }
   }
@@ -364,6 +372,7 @@ static void test_sampler_batches(void) {
     const sampler *smp = s->sensors[0]->sampler;
     CHECK(smp->ops->start_batch && smp->ops->next_1d_batch && smp->ops->next_2d_batch, "%s has batch ops",
           types[t]);
+    CHECK(t == 1 || smp->ops->next_2d_2d_batch, "%s has next_2d_2d_batch", types[t]);
     for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
       if (!rsw_isa_set((rsw_isa)isa)) continue;
       char what[64];
@@ -680,6 +689,69 @@ static void test_hits_batch(void) {
   scene_free(s);
 }
 
+/* shape_mesh_hits_batch with one face's data given once, where the face's
+ * frame is reused while a vector's lanes repeat the normal and tangent
+ * it was made from (frame_lanes.h), against the same lanes with the
+ * face's data in every lane (every frame computed; test_hits_batch checks
+ * that against the scalar fill), bit for bit at every ISA: a flat face
+ * (equal vertex normals: the frame reused, but where an interpolated
+ * normal comes out an ulp off), a bent one (the normal differs from lane
+ * to lane: a frame reused wrongly shows), a face without dp/du, each with
+ * and without vertex normals, flipped or not, n not a multiple of any
+ * vector width. */
+static void test_hits_frame_reuse(void) {
+  enum {
+    S = 64,
+    N = 61
+  };
+  static const double faces[3][SHAPE_MH_IN_D - 2] = {
+      /* p0, p1, p2; na, nb, nc; uv a, b, c; n; dp/du */
+      {-1, -1, 0, 1, -1, 0, 1, 1, 0, 0, 0, 1, 0, 0, 1, 0, 0, 1, 0, 0, 1, 0, 1, 1, 0, 0, 1, 2, 0, 0},
+      {0,   0,   0.5, 1, 0, 0.3, 0, 1, 0.2, 0.1,  -0.2, 1,    -0.3, 0.1, 0.9,
+       0.2, 0.3, 1.1, 0, 0, 1,   0, 0, 1,   -0.3, -0.2, 0.93, 1,    0,   0.2},
+      {0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 1, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 1, 0, 0, 0},
+  };
+  double k[SHAPE_MH_K] = {0};
+  for (int i = 0; i < 4; i++) k[SHAPE_MH_M + 5 * i] = 1;
+  for (int i = 0; i < 3; i++) k[SHAPE_MH_INV + 4 * i] = 1;
+  k[SHAPE_MH_M + 3] = 0.25, k[SHAPE_MH_C] = 0.1, k[SHAPE_MH_TC] = 0.5, k[SHAPE_MH_EXT] = 2;
+  for (int i = 0; i < 3; i++) k[SHAPE_MH_S + i] = 0.5 + i;
+  static double in[SHAPE_MH_IN * S], a[SHAPE_MH_OUT * S], b[SHAPE_MH_OUT * S];
+  pcg32 rng;
+  pcg32_seed(&rng, 11, 5);
+  int cases = 0;
+  for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
+    if (!rsw_isa_set((rsw_isa)isa)) continue;
+    for (int f = 0; f < 3; f++)
+      for (int nrm = 0; nrm < 2; nrm++)
+        for (int flip = 0; flip < 2; flip++) {
+          k[SHAPE_MH_NRM] = nrm, k[SHAPE_MH_UV] = 1, k[SHAPE_MH_FLIP] = flip;
+          memset(in, 0, sizeof in);
+          for (int j = 0; j < N; j++) {
+            /* Barycentrics summing to 1 exactly in most lanes (the
+             * interpolated normal then the vertices'), random in some. */
+            double u = (j % 5 == 4) ? pcg32_next_double(&rng) * 0.5 : 0.125 * (j % 4);
+            double v = (j % 5 == 4) ? pcg32_next_double(&rng) * 0.5 : 0.25 * (j % 3);
+            in[j] = u, in[S + j] = v;
+            for (int c = 2; c < SHAPE_MH_IN_D; c++) in[c * S + j] = faces[f][c - 2];
+            for (int c = 0; c < 3; c++) in[(SHAPE_MH_IN_D + c) * S + j] = pcg32_next_double(&rng) - 0.5;
+          }
+          memset(a, 0, sizeof a);
+          memset(b, 0, sizeof b);
+          shape_mesh_hits_batch(N, S, k, NULL, in, a);
+          shape_mesh_hits_batch(N, S, k, faces[f], in, b);
+          int bad = 0;
+          for (int c = 0; c < SHAPE_MH_OUT; c++)
+            for (int j = 0; j < N; j++) bad += memcmp(&a[c * S + j], &b[c * S + j], sizeof a[0]) != 0;
+          CHECK(bad == 0, "%s, face %d, normals %d, flip %d: %d values differ", rsw_isa_name((rsw_isa)isa), f,
+                nrm, flip, bad);
+          cases++;
+        }
+  }
+  rsw_isa_set(rsw_isa_best());
+  CHECK(cases >= 12, "%d cases", cases);
+}
+
 /* pick_emitter_index against the binary search it replaces for a few
  * emitters (the first k < n - 1 with cdf[k] > t, else n - 1): every
  * count of emitters on both sides of PICK_COUNT_MAX, weights with zeros
@@ -807,5 +879,6 @@ int main(void) {
   RSW_TEST_RUN(test_emitter_batch_chi2);
   RSW_TEST_RUN(test_frames_batch);
   RSW_TEST_RUN(test_hits_batch);
+  RSW_TEST_RUN(test_hits_frame_reuse);
   RSW_TEST_END("test_wave");
 }
