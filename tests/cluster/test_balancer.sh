@@ -66,6 +66,7 @@ one=$started_port
 id=$(rsw "http://127.0.0.1:$one" scene push "$scene" -q)
 expect 0 "one-daemon sweep" rsw "http://127.0.0.1:$one" sweep "$id" "${grid[@]}" --spp $spp -o "$tmp/ref" -q
 expect 0 "one-daemon sweep, npy" rsw "http://127.0.0.1:$one" sweep "$id" "${grid[@]}" --spp $spp --format npy -o "$tmp/refnpy" -q
+expect 0 "one-daemon sweep, bundle 1" rsw "http://127.0.0.1:$one" sweep "$scene" "${grid[@]}" --spp $spp --bundle 1 -o "$tmp/ref1" -q
 expect 0 "one-daemon sweep, bundle 3" rsw "http://127.0.0.1:$one" sweep "$scene" "${grid[@]}" --spp $spp --bundle 3 -o "$tmp/refb" -q
 kill "${pids[-1]}"
 
@@ -253,7 +254,7 @@ kill_mid_sweep() {
 
 # ---- one replica SIGKILLed mid-sweep (HAProxy) ----
 start_haproxy "$lb"
-kill_mid_sweep "replica killed" "$tmp/k" "$tmp/ref" ""
+kill_mid_sweep "replica killed" "$tmp/k" "$tmp/ref1" "" --bundle 1 # (one per path: 60 renders, time to kill)
 # ---- --bundle 3, another replica SIGKILLed mid-sweep ----
 kill_mid_sweep "bundle 3, replica killed" "$tmp/kb" "$tmp/refb" "$victim" --bundle 3
 
