@@ -14,6 +14,8 @@
 #     with --layout dirs (exit 2 naming --layout), and the same command with
 #     --layout flat resumes it (films of the earlier run kept, not fetched
 #     again) to the whole sweep's films;
+#   - --force over a stopped flat run (sweep.json but no index.jsonl)
+#     removes its films, keeps a file no sweep wrote;
 #   - odd context ids (a.b next to a, ..., .hid, -x_): '.' written %2E, no
 #     two films share a name, none is hidden, each equals the default
 #     layout's; --force removes them all and keeps a file no sweep wrote;
@@ -125,9 +127,21 @@ if [ "$rc" -eq 143 ] && [ "$saved" -ge 2 ] && [ "$saved" -lt 20 ]; then ok; else
 fi
 [ -s cut/sweep.spread.jsonl ] && ok || bad "stopped run: no cut/sweep.spread.jsonl"
 # a film the journal says was saved (it must not be fetched again)
-first=$(python3 -c 'import json,sys; print(json.loads(open(sys.argv[1]).readline())["context"] + ".sensor.exr")' \
-  cut/sweep.spread.jsonl)
+first=$(python3 -c '
+import json, sys
+done = [json.loads(l)["context"] for l in open(sys.argv[1]) if "\"context\"" in l]
+print(done[0] + ".sensor.exr" if done else "")' cut/sweep.spread.jsonl)
+[ -n "$first" ] && [ -f "cut/$first" ] && ok || bad "stopped run: the journal names no saved film ('$first')"
 inode=$(stat -c %i "cut/$first")
+# --force over the stopped run (no index.jsonl yet: sweep.json's layout and
+# contexts say which films are its own)
+cp -a cut cut_force
+touch cut_force/c00001.notes.txt
+expect 0 "--force over a stopped flat run" rs "$pa" sweep "$scene" --grid wavelength=500:500:1 --spp 4 \
+  --layout flat --force -o cut_force
+got=$(cd cut_force && ls -A | LC_ALL=C sort | tr '\n' ' ')
+want='c00000.sensor.exr c00001.notes.txt index.jsonl sweep.json '
+[ "$got" = "$want" ] && ok || bad "--force over a stopped run: left '$got', wanted '$want'"
 expect 2 "resume with another layout" rs "$plb" sweep "$scene" "${slow[@]}" --spread 2 -o cut
 contains "resume with another layout: the error names --layout" "$tmp/err" "--layout dirs: -o cut holds an unfinished --spread run of this sweep with --layout flat"
 [ -s cut/sweep.spread.jsonl ] && ok || bad "the refused rerun removed the journal"
