@@ -1,7 +1,8 @@
 /* raysweep sweep and raysweep merge: what their files share. A sweep
  * directory holds one film per (context, sensor), in DIR/<context>/ or,
- * with --layout flat, in DIR itself (sweep_film_file), DIR/index.jsonl (one line per film), DIR/sweep.json (the manifest: what
- * the directory is meant to hold) and, with --format nc, DIR/dataset.nc.
+ * with --layout flat, in DIR itself (sweep_film_file), DIR/index.jsonl
+ * (one line per film), DIR/sweep.json (the manifest: what the directory
+ * is meant to hold) and, with --format nc, DIR/dataset.nc.
  *
  *   cmd_sweep.c       the contexts (--contexts, --grid), the job, its films
  *   sweep_spread.c    --spread: the shards at once through a balancer, and

@@ -117,12 +117,12 @@ bool sweep_flat_context(const char *name, char *out) {
   }
   out[k] = '\0';
   /* the rest: SENSOR.EXT, or its temp file SENSOR.EXT.tmp.PID */
-  const char *rest = dot + 1, *tmp = strstr(rest, ".tmp.");
+  const char *rest = dot + 1, *tmp = NULL;
+  for (const char *t = strstr(rest, ".tmp."); t; t = strstr(t + 1, ".tmp.")) tmp = t; /* the last */
+  if (tmp && !tmp[5]) tmp = NULL;
+  for (const char *p = tmp ? tmp + 5 : ""; *p; p++)
+    if (*p < '0' || *p > '9') tmp = NULL;
   size_t len = tmp ? (size_t)(tmp - rest) : strlen(rest);
-  if (tmp) {
-    for (const char *p = tmp + 5; *p; p++)
-      if (*p < '0' || *p > '9') return false;
-  }
   static const char *const exts[] = {".exr", ".npy", ".json"};
   for (size_t i = 0; i < 3; i++) {
     size_t el = strlen(exts[i]);
