@@ -47,6 +47,10 @@ const cmdline_opt cli_opts_sweep[] = {
     {"--format", "exr|npy|json|nc", false,
      "film files: exr (default), npy or json; nc: json films plus DIR/dataset.nc, the sweep as one "
      "NetCDF-4 dataset (xarray.open_dataset)"},
+    {"--layout", "dirs|flat", false,
+     "where the films go: dirs (default): DIR/CONTEXT/SENSOR.EXT; flat: DIR/CONTEXT.SENSOR.EXT, no directory "
+     "per context (faster to write; '%' and '.' in CONTEXT written %25 and %2E); index.jsonl names each "
+     "file"},
     {"--timeout", "S", false, "stop waiting after S seconds (exit 5; the job keeps running)"},
     {"-o", "DIR", false, "output directory: new or empty (see --force)"},
     {"--force", NULL, false,
@@ -511,11 +515,11 @@ static int build_contexts(const cli_ctx *ctx, const cmdline_args *a, const sweep
   return 0;
 }
 
-/* Films of a finished job into dir/<context>/<sensor>.<ext>, one index
- * entry each. Failed renders are reported and counted. */
-static int fetch_all(cli_ctx *ctx, const char *job, const char *dir, cli_format fmt, sweep_item **sorted,
-                     size_t n, const cJSON *job_params, cJSON *incomplete, index_entry **entries_out,
-                     size_t *n_out, size_t *failed_out) {
+/* Films of a finished job into dir (sweep_film_file), one index entry
+ * each. Failed renders are reported and counted. */
+static int fetch_all(cli_ctx *ctx, const char *job, const char *dir, sweep_layout layout, cli_format fmt,
+                     sweep_item **sorted, size_t n, const cJSON *job_params, cJSON *incomplete,
+                     index_entry **entries_out, size_t *n_out, size_t *failed_out) {
   char *text = NULL;
   rsw_status s = rsw_job_results(ctx->client, job, &text);
   if (s) return cli_report(ctx, s, job);
@@ -549,19 +553,8 @@ static int fetch_all(cli_ctx *ctx, const char *job, const char *dir, cli_format 
       if (!last || strcmp(last, c) != 0) cJSON_AddItemToArray(incomplete, cJSON_CreateString(c));
       continue;
     }
-    if (!cli_safe_component(c) || !cli_safe_component(sn)) {
-      rc = cli_fail(ctx, CLI_IO, "%s/%s: not usable as a file name", c, sn);
-      break;
-    }
-    char rel[600], path[4096];
-    snprintf(rel, sizeof rel, "%s", c);
-    snprintf(path, sizeof path, "%s/%s", dir, rel);
-    if (cli_mkdirs(path)) {
-      rc = cli_fail(ctx, CLI_IO, "cannot create '%s': %s", path, strerror(errno));
-      break;
-    }
-    snprintf(rel, sizeof rel, "%s/%s.%s", c, sn, cli_format_ext(fmt));
-    snprintf(path, sizeof path, "%s/%s", dir, rel);
+    char rel[1100], path[4096];
+    if ((rc = sweep_film_file(ctx, dir, layout, c, sn, fmt, true, rel, sizeof rel, path, sizeof path))) break;
     /* EXR and NPY: the daemon's encoding is the file; JSON: decoded. */
     rsw_film *film = NULL;
     void *bytes = NULL;
@@ -601,6 +594,7 @@ typedef struct sweep_opts {
   size_t n_grids;
   cli_format fmt;
   bool want_nc; /* --format nc: JSON films and DIR/dataset.nc */
+  sweep_layout layout;
   unsigned long long spp, seed, shard_i, shard_n, spread;
   double timeout;
   int bundle;      /* --bundle: 1..RSW_BUNDLE_MAX or RSW_BUNDLE_AUTO (auto when absent) */
@@ -648,14 +642,17 @@ static int read_sweep_options(const cli_ctx *ctx, const cmdline_args *a, sweep_o
     else
       return cli_usage(ctx, "--bundle needs 1, 2, 3 or auto (wavelengths per path; got '%s')", v);
   }
+  if ((v = cmdline_get(a, "--layout")) && !sweep_layout_from_name(v, &o->layout))
+    return cli_usage(ctx, "--layout needs dirs or flat (got '%s')", v);
   if ((v = cmdline_get(a, "--timeout")) && (!cli_parse_double(v, &o->timeout) || !(o->timeout > 0)))
     return cli_usage(ctx, "--timeout needs a positive number of seconds (got '%s')", v);
   return 0;
 }
 
 /* This shard's contexts (*l, from --contexts or the --grid axes), and
- * *sorted: pointers to them by id, every id usable as a directory name
- * and given once. */
+ * *sorted: pointers to them by id, every id usable as a file name (not
+ * "." or "..": the daemon's URLs could not name them either) and given
+ * once. */
 static int build_list(const cli_ctx *ctx, const sweep_opts *o, grid_axis *axes, sweep_list *l,
                       sweep_item ***sorted) {
   int rc = 0;
@@ -677,8 +674,7 @@ static int build_list(const cli_ctx *ctx, const sweep_opts *o, grid_axis *axes, 
   for (size_t i = 0; i < l->n; i++) s[i] = &l->items[i];
   qsort(s, l->n, sizeof *s, sweep_cmp_item_id);
   for (size_t i = 0; i < l->n; i++) {
-    if (!cli_safe_component(s[i]->id))
-      return cli_usage(ctx, "context id '%s' cannot name a directory", s[i]->id);
+    if (!cli_safe_component(s[i]->id)) return cli_usage(ctx, "context id '%s' cannot name a file", s[i]->id);
     if (i && strcmp(s[i]->id, s[i - 1]->id) == 0)
       return cli_usage(ctx, "context id '%s' appears twice", s[i]->id);
   }
@@ -719,8 +715,8 @@ static int run_job(cli_ctx *ctx, const sweep_opts *o, const sweep_list *l, sweep
   if (rc != CLI_OK && rc != CLI_JOB) return rc;
   int job_rc = rc;
   if (!(incomplete = cJSON_CreateArray())) return cli_fail(ctx, CLI_IO, "out of memory");
-  if ((rc = fetch_all(ctx, job, dir, o->fmt, sorted, l->n, job_params, incomplete, &entries, &n_entries,
-                      &failed))) {
+  if ((rc = fetch_all(ctx, job, dir, l->layout, o->fmt, sorted, l->n, job_params, incomplete, &entries,
+                      &n_entries, &failed))) {
     if (cli_interrupted)
       rc = cli_fail(ctx, cli_interrupted_code(),
                     "%s while fetching films; job %s is over and keeps its results on the daemon "
@@ -764,7 +760,7 @@ int cmd_sweep(cli_ctx *ctx, const cmdline_args *a) {
   rc = cli_build_param_map(ctx, "--set", sets, n_sets, &job_params);
   if (rc) return rc;
 
-  sweep_list l = {.seed = (long long)o.seed, .dataset = o.want_nc};
+  sweep_list l = {.seed = (long long)o.seed, .dataset = o.want_nc, .layout = o.layout};
   grid_axis axes[MAX_GRIDS] = {{0}};
   sweep_item **sorted = NULL;
   rsw_contexts *x = NULL;
@@ -772,7 +768,15 @@ int cmd_sweep(cli_ctx *ctx, const cmdline_args *a) {
   if ((rc = build_list(ctx, &o, axes, &l, &sorted))) goto out;
   /* Everything the user described is checked: now the directory. */
   sweep_fingerprint(a, scene, fingerprint);
-  bool resume = o.spread && !cmdline_has(a, "--force") && sweep_spread_resumable(dir, fingerprint);
+  sweep_layout was = SWEEP_LAYOUT_DIRS;
+  bool resume = o.spread && !cmdline_has(a, "--force") && sweep_spread_resumable(dir, fingerprint, &was);
+  if (resume && was != o.layout) {
+    rc = cli_usage(ctx,
+                   "--layout %s: -o %s holds an unfinished --spread run of this sweep with --layout %s; "
+                   "rerun with --layout %s to resume it, or add --force to start over",
+                   sweep_layout_name(o.layout), dir, sweep_layout_name(was), sweep_layout_name(was));
+    goto out;
+  }
   if (!resume && (rc = sweep_prepare_output(ctx, dir, cmdline_has(a, "--force")))) goto out;
   /* The job lists the contexts in the order the user described them (an empty
    * shard's too: its options are checked before the scene is pushed). */

@@ -1,7 +1,8 @@
 /* raysweep sweep and raysweep merge: what their files share. A sweep
- * directory holds one film per (context, sensor) in DIR/<context>/,
- * DIR/index.jsonl (one line per film), DIR/sweep.json (the manifest: what
- * the directory is meant to hold) and, with --format nc, DIR/dataset.nc.
+ * directory holds one film per (context, sensor), in DIR/<context>/ or,
+ * with --layout flat, in DIR itself (sweep_film_file), DIR/index.jsonl
+ * (one line per film), DIR/sweep.json (the manifest: what the directory
+ * is meant to hold) and, with --format nc, DIR/dataset.nc.
  *
  *   cmd_sweep.c       the contexts (--contexts, --grid), the job, its films
  *   sweep_spread.c    --spread: the shards at once through a balancer, and
@@ -26,19 +27,28 @@
  *    "shard": [I, N], "contexts_total": T,
  *    "id_width": W | "ids": [every context id of the unsharded list],
  *    "job": JOB | null, "finished": BOOL, "incomplete": [context ids],
- *    "bundle_leads": [per context, its bundle group's first] (with --bundle)}
+ *    "bundle_leads": [per context, its bundle group's first] (with --bundle),
+ *    "layout": "flat" (with --layout flat; absent: one directory per context)}
  * FINGERPRINT is FNV-1a 64 over everything that defines the unsharded
  * sweep (scene, contexts file or grid, --set, --sensor, --spp, --seed,
  * --format, --quantities, --variance, --bundle but 1) and not over --shard, so every shard of one sweep carries the
  * same value. `merge` uses it to know which contexts a set of shard
  * directories must cover; `sweep --force` to know what an earlier sweep
- * wrote. "incomplete" lists contexts with a render that did not succeed. */
+ * wrote. "incomplete" lists contexts with a render that did not succeed.
+ * The layout is not in the fingerprint: the films are the same either way,
+ * so shards of one sweep may differ in it and still merge. */
 #define MANIFEST_NAME   "sweep.json"
 #define DATASET_NAME    "dataset.nc"
 /* The journal of a --spread sweep (rsw_spread_opts.state_path): there
  * while the sweep is unfinished, removed when it completes. */
 #define SPREAD_STATE    "sweep.spread.jsonl"
 #define MANIFEST_FORMAT "raysweep-sweep/1"
+
+/* Where a sweep puts its films (--layout). */
+typedef enum sweep_layout {
+  SWEEP_LAYOUT_DIRS, /* DIR/<context>/<sensor>.<ext> (the default) */
+  SWEEP_LAYOUT_FLAT  /* DIR/<context escaped>.<sensor>.<ext> */
+} sweep_layout;
 
 /* One context of the list being swept. */
 typedef struct sweep_item {
@@ -68,6 +78,7 @@ typedef struct sweep_list {
   size_t *leads, *keys;
   long long seed; /* --seed (0 by default): the job seed, in sweep.json */
   bool dataset;   /* --format nc: DIR/dataset.nc besides the (JSON) films */
+  sweep_layout layout;
 } sweep_list;
 
 /* One film of the index: its line (owned) and, for merge, the source. */
@@ -91,6 +102,7 @@ typedef struct sweep_manifest {
   const char **incomplete; /* owned, sorted (strings borrowed from root) */
   size_t n_incomplete;
   bool finished;
+  sweep_layout layout; /* "layout" (absent: dirs) */
 } sweep_manifest;
 
 /* ---- sweep_dir.c -------------------------------------------------------- */
@@ -128,6 +140,23 @@ cJSON *sweep_index_line(const cJSON *r, const char *c, const char *sn, const cha
 int sweep_write_dataset(const cli_ctx *ctx, const char *dir, const index_entry *e, size_t n, bool has_seed,
                         long long seed);
 
+/* --layout's value: dirs or flat; false for anything else. */
+bool sweep_layout_from_name(const char *name, sweep_layout *out);
+const char *sweep_layout_name(sweep_layout l);
+/* The file of film (c, sn) in format fmt: rel (inside dir, as index.jsonl
+ * names it) and path (dir/rel). dirs: c/sn.ext; flat: c with every '%' and
+ * '.' written %25 and %2E, then '.', sn, '.', ext, so the first '.' ends
+ * the context and no two (context, sensor) pairs share a name, nor does a
+ * film share one with the directory's own files (index.jsonl, sweep.json,
+ * dataset.nc, sweep.spread.jsonl: one dot, or not a film extension).
+ * mkdir: create DIR/<c> (dirs). 0, or a CLI exit code after printing (a
+ * name no file can have, a directory that cannot be made). */
+int sweep_film_file(const cli_ctx *ctx, const char *dir, sweep_layout layout, const char *c, const char *sn,
+                    cli_format fmt, bool mkdir, char *rel, size_t rel_cap, char *path, size_t path_cap);
+/* The context whose flat film (or its temp file) name is: false when name
+ * is no flat film's name. out: at least strlen(name) + 1 bytes. */
+bool sweep_flat_context(const char *name, char *out);
+
 /* ---- sweep_manifest.c --------------------------------------------------- */
 
 void sweep_fingerprint(const cmdline_args *a, const char *scene, char out[17]);
@@ -154,8 +183,9 @@ int sweep_prepare_output(const cli_ctx *ctx, const char *dir, bool force);
 
 /* ---- sweep_spread.c ----------------------------------------------------- */
 
-/* DIR holds an unfinished --spread run of this sweep (rerun: resume). */
-bool sweep_spread_resumable(const char *dir, const char *fingerprint);
+/* DIR holds an unfinished --spread run of this sweep (rerun: resume);
+ * *layout: the layout that run writes. */
+bool sweep_spread_resumable(const char *dir, const char *fingerprint, sweep_layout *layout);
 int sweep_run_spread(cli_ctx *ctx, const cmdline_args *a, int k_shards, bool resume, cli_format fmt,
                      double timeout, const sweep_list *l, sweep_item **sorted, const cJSON *job_params,
                      const rsw_contexts *x, const char *fingerprint, size_t shard_i, size_t shard_n);

@@ -53,6 +53,84 @@ bool sweep_safe_relative(const char *p) {
   return true;
 }
 
+bool sweep_layout_from_name(const char *name, sweep_layout *out) {
+  if (name && strcmp(name, "dirs") == 0) return *out = SWEEP_LAYOUT_DIRS, true;
+  if (name && strcmp(name, "flat") == 0) return *out = SWEEP_LAYOUT_FLAT, true;
+  return false;
+}
+
+const char *sweep_layout_name(sweep_layout l) {
+  return l == SWEEP_LAYOUT_FLAT ? "flat" : "dirs";
+}
+
+int sweep_film_file(const cli_ctx *ctx, const char *dir, sweep_layout layout, const char *c, const char *sn,
+                    cli_format fmt, bool mkdir, char *rel, size_t rel_cap, char *path, size_t path_cap) {
+  if (!cli_safe_component(c) || !cli_safe_component(sn))
+    return cli_fail(ctx, CLI_IO, "%s/%s: not usable as a file name", c, sn);
+  const char *ext = cli_format_ext(fmt);
+  int n;
+  if (layout == SWEEP_LAYOUT_FLAT) {
+    char esc[3 * 256 + 1];
+    size_t k = 0;
+    const char *p = c;
+    for (; *p && k + 4 <= sizeof esc; p++) {
+      if (*p == '%' || *p == '.') {
+        memcpy(esc + k, *p == '%' ? "%25" : "%2E", 3);
+        k += 3;
+      } else {
+        esc[k++] = *p;
+      }
+    }
+    esc[k] = '\0';
+    n = snprintf(rel, rel_cap, "%s.%s.%s", esc, sn, ext);
+    /* one name in DIR: at most 255 bytes (NAME_MAX) */
+    if (*p || n < 0 || (size_t)n >= rel_cap || !cli_safe_component(rel))
+      return cli_fail(ctx, CLI_IO, "%s/%s: too long for one file name with --layout flat (at most 255 bytes)",
+                      c, sn);
+  } else {
+    n = snprintf(path, path_cap, "%s/%s", dir, c);
+    if (n < 0 || (size_t)n >= path_cap) return cli_fail(ctx, CLI_IO, "%s/%s: path too long", dir, c);
+    if (mkdir && cli_mkdirs(path))
+      return cli_fail(ctx, CLI_IO, "cannot create '%s': %s", path, strerror(errno));
+    n = snprintf(rel, rel_cap, "%s/%s.%s", c, sn, ext);
+    if (n < 0 || (size_t)n >= rel_cap)
+      return cli_fail(ctx, CLI_IO, "%s/%s: not usable as a file name", c, sn);
+  }
+  n = snprintf(path, path_cap, "%s/%s", dir, rel);
+  if (n < 0 || (size_t)n >= path_cap) return cli_fail(ctx, CLI_IO, "%s/%s: path too long", dir, rel);
+  return 0;
+}
+
+bool sweep_flat_context(const char *name, char *out) {
+  const char *dot = strchr(name, '.');
+  if (!dot || dot == name) return false;
+  size_t k = 0;
+  for (const char *p = name; p < dot; p++) {
+    if (*p != '%') {
+      out[k++] = *p;
+    } else if (p + 2 < dot && p[1] == '2' && (p[2] == '5' || p[2] == 'E')) {
+      out[k++] = p[2] == '5' ? '%' : '.';
+      p += 2;
+    } else {
+      return false;
+    }
+  }
+  out[k] = '\0';
+  /* the rest: SENSOR.EXT, or its temp file SENSOR.EXT.tmp.PID */
+  const char *rest = dot + 1, *tmp = NULL;
+  for (const char *t = strstr(rest, ".tmp."); t; t = strstr(t + 1, ".tmp.")) tmp = t; /* the last */
+  if (tmp && !tmp[5]) tmp = NULL;
+  for (const char *p = tmp ? tmp + 5 : ""; *p; p++)
+    if (*p < '0' || *p > '9') tmp = NULL;
+  size_t len = tmp ? (size_t)(tmp - rest) : strlen(rest);
+  static const char *const exts[] = {".exr", ".npy", ".json"};
+  for (size_t i = 0; i < 3; i++) {
+    size_t el = strlen(exts[i]);
+    if (len > el && strncmp(rest + len - el, exts[i], el) == 0) return true;
+  }
+  return false;
+}
+
 /* "c" + index zero-padded to at least 5 digits; the width is that of the
  * largest index, so every id of one sweep has the same width and ids sort
  * in list order. */

@@ -101,9 +101,11 @@ int manifest_read(const cli_ctx *ctx, const char *dir, sweep_manifest *m) {
   const cJSON *inc = cJSON_GetObjectItemCaseSensitive(r, "incomplete");
   const cJSON *leads = cJSON_GetObjectItemCaseSensitive(r, "bundle_leads");
   m->finished = cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(r, "finished"));
-  bool ok = m->sweep && cJSON_IsArray(shard) && cJSON_GetArraySize(shard) == 2 &&
-            sweep_json_is_int(total, 0) && (ids ? cJSON_IsArray(ids) : sweep_json_is_int(width, 1)) &&
-            (!inc || cJSON_IsArray(inc)) && (!leads || cJSON_IsArray(leads));
+  const cJSON *layout = cJSON_GetObjectItemCaseSensitive(r, "layout");
+  bool ok = (!layout || sweep_layout_from_name(cJSON_GetStringValue(layout), &m->layout)) && m->sweep &&
+            cJSON_IsArray(shard) && cJSON_GetArraySize(shard) == 2 && sweep_json_is_int(total, 0) &&
+            (ids ? cJSON_IsArray(ids) : sweep_json_is_int(width, 1)) && (!inc || cJSON_IsArray(inc)) &&
+            (!leads || cJSON_IsArray(leads));
   if (ok) {
     const cJSON *si = cJSON_GetArrayItem(shard, 0), *sn = cJSON_GetArrayItem(shard, 1);
     ok = sweep_json_is_int(si, 0) && sweep_json_is_int(sn, 1) && si->valuedouble < sn->valuedouble;
@@ -186,6 +188,8 @@ int manifest_write(const cli_ctx *ctx, const char *dir, const char *fingerprint,
     for (size_t k = 0; k < l->total; k++)
       cJSON_AddItemToArray(leads, cJSON_CreateNumber((double)l->leads[k]));
   }
+  if (l->layout != SWEEP_LAYOUT_DIRS) /* absent for the default: manifests as before --layout */
+    cJSON_AddStringToObject(o, "layout", sweep_layout_name(l->layout));
   if (job && *job)
     cJSON_AddStringToObject(o, "job", job);
   else
@@ -240,6 +244,44 @@ static size_t remove_context_dir(const char *dir, const char *context) {
   return removed;
 }
 
+/* The contexts an earlier sweep in DIR wrote, for its flat films. */
+typedef struct context_set {
+  char **ids;
+  size_t n, cap;
+  bool flat; /* films in DIR itself: the manifest says so, or index.jsonl names one */
+} context_set;
+
+static void context_set_add(context_set *s, const char *id) {
+  if (s->n == s->cap) {
+    size_t cap = s->cap ? 2 * s->cap : 64;
+    char **ni = realloc(s->ids, cap * sizeof *ni);
+    if (!ni) return; /* out of memory: those films stay, and are named as kept */
+    s->ids = ni, s->cap = cap;
+  }
+  if ((s->ids[s->n] = strdup(id))) s->n++;
+}
+
+/* Remove DIR's flat films (and their temp files) of the contexts in s.
+ * Returns the files removed. */
+static size_t remove_flat_films(const char *dir, context_set *s) {
+  if (!s->flat || !s->n) return 0;
+  qsort(s->ids, s->n, sizeof *s->ids, sweep_cmp_str);
+  DIR *d = opendir(dir);
+  struct dirent *e;
+  size_t removed = 0;
+  while (d && (e = readdir(d))) {
+    char id[256];
+    const char *key = id;
+    if (!sweep_flat_context(e->d_name, id) || !bsearch(&key, s->ids, s->n, sizeof *s->ids, sweep_cmp_str))
+      continue;
+    char *f = sweep_dir_file(dir, e->d_name);
+    if (f && sweep_is_regular(f) && unlink(f) == 0) removed++;
+    free(f);
+  }
+  if (d) closedir(d);
+  return removed;
+}
+
 /* Make -o DIR ready: create it when absent; an empty one is fine. A
  * non-empty one is refused unless --force and it holds an earlier sweep
  * (sweep.json or index.jsonl): then exactly what that sweep wrote goes
@@ -282,6 +324,7 @@ int sweep_prepare_output(const cli_ctx *ctx, const char *dir, bool force) {
                      dir, MANIFEST_NAME);
   }
   size_t removed = 0;
+  context_set flat = {0};
   if (has_index) { /* every context the index names */
     char *text = cli_read_file(index, NULL);
     for (char *s = text, *nl; s && *s; s = nl ? nl + 1 : s + strlen(s)) {
@@ -289,7 +332,10 @@ int sweep_prepare_output(const cli_ctx *ctx, const char *dir, bool force) {
       if (nl) *nl = '\0';
       cJSON *o = cJSON_Parse(s);
       const char *c = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "context"));
+      const char *file = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "file"));
       if (c) removed += remove_context_dir(dir, c);
+      if (c) context_set_add(&flat, c);
+      if (file && !strchr(file, '/')) flat.flat = true;
       cJSON_Delete(o);
     }
     free(text);
@@ -297,16 +343,24 @@ int sweep_prepare_output(const cli_ctx *ctx, const char *dir, bool force) {
   sweep_manifest m;
   int mrc = has_manifest ? manifest_read(ctx, dir, &m) : -1;
   if (mrc > 0) {
+    for (size_t i = 0; i < flat.n; i++) free(flat.ids[i]);
+    free(flat.ids);
     free(index), free(manifest);
     return mrc;
   }
   if (mrc == 0) { /* every context of its shard (an interrupted sweep has no index yet) */
     char buf[72];
+    flat.flat = flat.flat || m.layout == SWEEP_LAYOUT_FLAT;
     for (size_t k = 0; k < m.total; k++)
-      if (sweep_shard_of(m.keys, k, m.shard_n) == m.shard_i)
+      if (sweep_shard_of(m.keys, k, m.shard_n) == m.shard_i) {
         removed += remove_context_dir(dir, manifest_id(&m, k, buf));
+        if (flat.flat) context_set_add(&flat, manifest_id(&m, k, buf));
+      }
     manifest_free(&m);
   }
+  removed += remove_flat_films(dir, &flat);
+  for (size_t i = 0; i < flat.n; i++) free(flat.ids[i]);
+  free(flat.ids);
   char *dataset = sweep_dir_file(dir, DATASET_NAME);
   if (dataset && sweep_is_regular(dataset)) unlink(dataset);
   free(dataset);

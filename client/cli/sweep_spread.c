@@ -3,7 +3,6 @@
  * journal (SPREAD_STATE) names the films saved, so a rerun fetches only
  * the rest. */
 #include <cjson/cJSON.h>
-#include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -14,7 +13,7 @@
 
 /* DIR holds an unfinished --spread run of this very sweep: rerunning the
  * command resumes it instead of refusing a non-empty directory. */
-bool sweep_spread_resumable(const char *dir, const char *fingerprint) {
+bool sweep_spread_resumable(const char *dir, const char *fingerprint, sweep_layout *layout) {
   char *state = sweep_dir_file(dir, SPREAD_STATE);
   bool has = state && sweep_is_regular(state);
   free(state);
@@ -23,6 +22,7 @@ bool sweep_spread_resumable(const char *dir, const char *fingerprint) {
   cli_ctx quiet = {.cmd = "sweep", .quiet = true};
   if (manifest_read(&quiet, dir, &m) != 0) return false;
   bool same = strcmp(m.sweep, fingerprint) == 0 && !m.finished;
+  *layout = m.layout;
   manifest_free(&m);
   return same;
 }
@@ -30,6 +30,7 @@ bool sweep_spread_resumable(const char *dir, const char *fingerprint) {
 typedef struct spread_sink {
   cli_ctx *ctx;
   const char *dir;
+  sweep_layout layout;
   cli_format fmt;
   sweep_item **sorted;
   size_t n;
@@ -59,28 +60,15 @@ static int spread_save(spread_sink *k, const char *c, const char *sn, const char
     cJSON_Delete(r);
     return 0;
   }
-  if (!cli_safe_component(c) || !cli_safe_component(sn)) {
-    k->rc = cli_fail(k->ctx, CLI_IO, "%s/%s: not usable as a file name", c, sn);
-    cJSON_Delete(r);
-    return 1;
-  }
-  char rel[600], path[4096];
-  snprintf(path, sizeof path, "%s/%s", k->dir, c);
-  snprintf(rel, sizeof rel, "%s/%s.%s", c, sn, cli_format_ext(k->fmt));
-  if (film || bytes) {
-    if (cli_mkdirs(path)) {
-      k->rc = cli_fail(k->ctx, CLI_IO, "cannot create '%s': %s", path, strerror(errno));
-    } else {
-      snprintf(path, sizeof path, "%s/%s", k->dir, rel);
-      k->rc = film ? cli_save_film(k->ctx, film, path, k->fmt) : cli_save_encoded(k->ctx, bytes, len, path);
-    }
-  } else if (resumed) {
-    snprintf(path, sizeof path, "%s/%s", k->dir, rel);
-    if (!sweep_is_regular(path))
-      k->rc = cli_fail(k->ctx, CLI_IO,
-                       "%s: %s says an earlier run saved it, but it is not there (start over with --force)",
-                       path, SPREAD_STATE);
-  }
+  char rel[1100], path[4096];
+  k->rc = sweep_film_file(k->ctx, k->dir, k->layout, c, sn, k->fmt, film || bytes, rel, sizeof rel, path,
+                          sizeof path);
+  if (!k->rc && (film || bytes))
+    k->rc = film ? cli_save_film(k->ctx, film, path, k->fmt) : cli_save_encoded(k->ctx, bytes, len, path);
+  else if (!k->rc && resumed && !sweep_is_regular(path))
+    k->rc = cli_fail(k->ctx, CLI_IO,
+                     "%s: %s says an earlier run saved it, but it is not there (start over with --force)",
+                     path, SPREAD_STATE);
   if (k->rc) {
     cJSON_Delete(r);
     return 1;
@@ -129,6 +117,7 @@ int sweep_run_spread(cli_ctx *ctx, const cmdline_args *a, int k_shards, bool res
   cli_progress_init(&p, ctx);
   spread_sink sink = {.ctx = ctx,
                       .dir = dir,
+                      .layout = l->layout,
                       .fmt = fmt,
                       .sorted = sorted,
                       .n = l->n,

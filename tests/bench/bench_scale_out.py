@@ -9,7 +9,10 @@ hdistant film, 16 spp) against one raysweepd (--threads 1), then
 two raysweepd (--threads 1 each); wall time of the whole command (scene
 push, submission, progress, every film fetched and written), best of 3,
 the two set-ups alternating. The client (film fetches, EXR writes) and
-HAProxy share the machine's cores with the daemons.
+HAProxy share the machine's cores with the daemons. The films are written
+with `--layout flat` (one file each in the output directory, no directory
+per context: the cheaper layout for the file system, docs/client.md);
+RSW_SCALE_OUT_LAYOUT=dirs measures the default layout instead.
 efficiency = throughput(2) / (2 x throughput(1)); the target is >= 0.9
 on two free cores.
 The client's own cost per film: `client_cpu_ms_per_film`, the CPU time
@@ -45,6 +48,7 @@ bindir = os.environ.get("RSW_BIN_DIR", os.path.join(root, "build", "bin"))
 scene = os.path.join(root, "proto", "examples", "hdistant_lambertian.json")
 N_CONTEXTS = 200
 SPP = 16
+LAYOUT = os.environ.get("RSW_SCALE_OUT_LAYOUT", "flat")
 
 
 def free_port():
@@ -87,7 +91,7 @@ def sweep(url, out, extra):
     # (--bundle 1: each context its own render, so that the sweep's film
     # count and each film's cost are those this bench measures)
     cmd = [os.path.join(bindir, "raysweep"), "--server", url, "-q", "sweep", scene, "--grid",
-           "wavelength=400:698.5:1.5", "--spp", str(SPP), "--bundle", "1", "-o", out] + extra
+           "wavelength=400:698.5:1.5", "--spp", str(SPP), "--bundle", "1", "--layout", LAYOUT, "-o", out] + extra
     ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.monotonic()
     r = subprocess.run(cmd, capture_output=True, text=True)
@@ -184,6 +188,7 @@ def main():
             "contexts": N_CONTEXTS,
             "spp": SPP,
             "threads_per_daemon": 1,
+            "layout": LAYOUT,
             "one_daemon_s": round(t1, 3),
             "two_daemons_s": round(t2, 3),
             "one_daemon_runs_s": [round(t, 3) for t in runs1],

@@ -24,63 +24,7 @@ source "$(dirname "$0")/../support/shtest.sh"
 need_bins raysweepd raysweep
 need_cmd python3 "for the balancer and the HTTP checks"
 scene="$root/proto/examples/hdistant_lambertian.json"
-start_daemon "$tmp/a" --threads 1
-pa=$started_port
-start_daemon "$tmp/b" --threads 1
-pb=$started_port
-[ -n "$pa" ] && [ -n "$pb" ] || { bad "daemons did not start: $(cat "$tmp/a/log" "$tmp/b/log")"; finish; }
-
-# A balancer for --spread: each request goes to the replica that its
-# X-Raysweep-Shard header hashes to (crc32 mod 2), answers streamed back.
-cat >"$tmp/lb.py" <<'PY'
-import http.client, http.server, socketserver, sys, zlib
-ports = [int(p) for p in sys.argv[2:]]
-class H(http.server.BaseHTTPRequestHandler):
-    protocol_version = "HTTP/1.1"
-    def log_message(self, *a): pass
-    def relay(self):
-        key = self.headers.get("X-Raysweep-Shard", "")
-        port = ports[zlib.crc32(key.encode()) % len(ports)]
-        n = int(self.headers.get("Content-Length") or 0)
-        body = self.rfile.read(n) if n else None
-        hop = {"connection", "keep-alive", "transfer-encoding", "host"}
-        hdr = {k: v for k, v in self.headers.items() if k.lower() not in hop}
-        c = http.client.HTTPConnection("127.0.0.1", port, timeout=600)
-        c.request(self.command, self.path, body=body, headers=hdr)
-        r = c.getresponse()
-        self.send_response(r.status)
-        chunked = r.getheader("Content-Length") is None
-        for k, v in r.getheaders():
-            if k.lower() not in hop:
-                self.send_header(k, v)
-        if chunked:
-            self.send_header("Transfer-Encoding", "chunked")
-        self.end_headers()
-        while True:
-            b = r.read1(65536) if chunked else r.read()
-            if not b:
-                break
-            if chunked:
-                self.wfile.write(b"%x\r\n%s\r\n" % (len(b), b))
-                self.wfile.flush()
-            else:
-                self.wfile.write(b)
-                break
-        if chunked:
-            self.wfile.write(b"0\r\n\r\n")
-        c.close()
-    do_GET = do_POST = do_PUT = do_PATCH = do_DELETE = do_HEAD = relay
-class S(socketserver.ThreadingMixIn, http.server.HTTPServer):
-    daemon_threads = True
-s = S(("127.0.0.1", 0), H)
-open(sys.argv[1], "w").write(str(s.server_address[1]))
-s.serve_forever()
-PY
-python3 "$tmp/lb.py" "$tmp/lb.port" "$pa" "$pb" &
-pids+=($!)
-for _ in $(seq 100); do [ -s "$tmp/lb.port" ] && break; sleep 0.05; done
-plb=$(cat "$tmp/lb.port" 2>/dev/null)
-[ -n "$plb" ] || { bad "the balancer did not start"; finish; }
+start_spread_pair # $pa, $pb and the balancer $plb
 
 rs() { "$bin/raysweep" -q --server "http://127.0.0.1:$1" "${@:2}"; }
 # same LABEL REF DIR: DIR holds REF's films, bit for bit, and its index.

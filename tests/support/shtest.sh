@@ -63,6 +63,33 @@ start_daemon() {
   started_port=$(cat "$d/port" 2>/dev/null)
 }
 
+# start_spread_pair: two daemons (--threads 1, in $tmp/a and $tmp/b) on
+# ports $pa and $pb, and tests/support/shard_lb.py in front of them on $plb
+# (a balancer for `sweep --spread`; its log $tmp/lb/lb.log); fails and
+# finishes when one does not start.
+start_spread_pair() {
+  start_daemon "$tmp/a" --threads 1
+  pa=$started_port
+  start_daemon "$tmp/b" --threads 1
+  pb=$started_port
+  [ -n "$pa" ] && [ -n "$pb" ] || {
+    bad "daemons did not start: $(cat "$tmp/a/log" "$tmp/b/log")"
+    finish
+  }
+  mkdir -p "$tmp/lb"
+  python3 "$root/tests/support/shard_lb.py" "$tmp/lb/lb.port" "$pa" "$pb" 2>"$tmp/lb/lb.log" &
+  pids+=($!)
+  for _ in $(seq 100); do
+    [ -s "$tmp/lb/lb.port" ] && break
+    sleep 0.05
+  done
+  plb=$(cat "$tmp/lb/lb.port" 2>/dev/null)
+  [ -n "$plb" ] || {
+    bad "the balancer did not start"
+    finish
+  }
+}
+
 # expect RC LABEL CMD...: run CMD (stdout to $tmp/out, stderr to $tmp/err)
 # and check its exit status.
 expect() {
