@@ -516,6 +516,13 @@ static bool media_at(const medium *m, const surface_interaction *si) {
   return m || si->shape->interior || si->shape->exterior;
 }
 
+/* Layered medium m's layers at page 0: layered_layers(m) wherever rsw_page
+ * is 0, as it is outside the loops over a bundle's pages (each sets it back
+ * to 0), without reading the thread-local page. */
+static inline const media_layers *layers_page0(const medium *m) {
+  return &((const layered_medium *)m)->L;
+}
+
 /* Start lane l's shadow ray towards ds from a surface vertex si (or the
  * medium point p when si is NULL) in medium sm, worth val if clear. */
 static void start_shadow(const scene *sc, vlane *l, const surface_interaction *si, vec3 p, const emitter *e,
@@ -557,7 +564,7 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
         ray3 seg = {mr.o, mr.d, t0, t1};
         double mint, maxt;
         color tr = media_clip(l->sm, &seg, inv, &mint, &maxt)
-                       ? media_layers_transmittance(layered_layers(l->sm), &seg, mint, maxt)
+                       ? media_layers_transmittance(layers_page0(l->sm), &seg, mint, maxt)
                        : col1(1.0);
         l->str = col_mul(l->str, tr);
       } else if (l->sm && t1 > t0) {
@@ -692,7 +699,7 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
         color tr, pdf;
         double u = sops->next_1d(st);
         if (m->ops == &layered_medium_ops) /* (inline: the same code as its op) */
-          media_layers_sample_real(layered_layers(m), m, &seg, mint, maxt, u, c, &mi, &tr, &pdf);
+          media_layers_sample_real(layers_page0(m), m, &seg, mint, maxt, u, c, &mi, &tr, &pdf);
         else
           m->ops->sample_real(m, &seg, mint, maxt, u, c, &mi, &tr, &pdf);
         double pc = col_mean(pdf);

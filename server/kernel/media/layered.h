@@ -22,6 +22,7 @@
 
 #include <math.h>
 
+#include "../core/fastmath.h"
 #include "../kernel.h"
 #include "media.h"
 
@@ -127,7 +128,7 @@ static inline void media_layers_fill(const media_layers *L, int k, medium_intera
     double s = L->lay[k].sig[c];
     mi->sigma_t.c[c] = s;
     mi->sigma_s.c[c] = s * L->alb[3 * k + c];
-    mi->sigma_n.c[c] = fmax(mi->majorant.c[c] - s, 0.0);
+    mi->sigma_n.c[c] = rsw_fmax(mi->majorant.c[c] - s, 0.0);
   }
 }
 
@@ -151,7 +152,7 @@ static inline void media_layers_sample_real(const media_layers *L, const medium 
   double oz = media_layers_z(L, r->o), dz = media_layers_dz(L, r->d);
   double z0 = oz + t0 * dz, z1 = oz + t1 * dz;
   int c = nc == 1 ? 0 : channel;
-  double target = -log1p(-u);
+  double target = rsw_neg_log1m(u); /* (-log1p(-u) within 2 ulp: core/fastmath.h) */
   int k0 = media_layer_of(L, z0), k1 = media_layer_of(L, z1);
   double total = media_layers_tau(L, c, z0, z1, k0, k1, dz, t1 - t0);
   if (!(target < total)) { /* the flight passes the box */
@@ -209,7 +210,7 @@ static inline void media_layers_sample_real(const media_layers *L, const medium 
     double z = lay[k].z + (s > 0 ? (cs - lay[k].cum[c]) / s : 0.0);
     t = t0 + (z - z0) / dz;
   }
-  t = fmin(fmax(t, t0), t1);
+  t = rsw_fmin(rsw_fmax(t, t0), t1);
   double zt = oz + t * dz;
   k = media_layer_of(L, zt);
   mi->t = t;
