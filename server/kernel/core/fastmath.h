@@ -13,7 +13,7 @@
  * log(1 - u) = log(v + e) = log(v) + e / v - (e / v)^2 / 2 + ..., where
  * |e / v| <= 2^-53 / (1 - u) makes the third term far below an ulp of the
  * result. So the error is log's (glibc: < 1 ulp) plus the sum's rounding:
- * at most 2 ulp of log1p(-u), which tests/kernel/test_fastmath.c checks
+ * at most 2 ulp of log1p(-u), which tests/kernel/core/test_fastmath.c checks
  * against libm's log1p over [0, 1) (every binade down to the subnormals and
  * up to the last double below 1). */
 #ifndef RSW_CORE_FASTMATH_H
