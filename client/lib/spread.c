@@ -1048,8 +1048,9 @@ rsw_status rsw_spread_run(const rsw_client_opts *copts, const char *scene_id, co
     const char **hit = bsearch(&id, sp.sorted_ids, sp.n_ctx, sizeof *sp.sorted_ids, cmp_id);
     sp.sorted_idx[hit - sp.sorted_ids] = i;
   }
-  /* Shard k: the contexts whose bundle group's first context is k mod
-   * shards (every context its own group without bundles), by group. */
+  /* Shard k: the contexts whose bundle group's rank is k mod shards
+   * (rsw_bundle_shard_keys; every context its own group without
+   * bundles), by group. */
   sp.lead = malloc(sp.n_ctx * sizeof *sp.lead);
   sp.key = malloc((sp.n_ctx ? sp.n_ctx : 1) * sizeof *sp.key);
   if (!sp.lead || !sp.key || (s = client_contexts_bundle_leads(x, sp.lead))) {

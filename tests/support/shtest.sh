@@ -56,11 +56,17 @@ start_daemon() {
   mkdir -p "$d/data"
   "$bin/raysweepd" serve --listen 127.0.0.1:0 --port-file "$d/port" --data-root "$d/data" "$@" >"$d/log" 2>&1 &
   pids+=($!)
-  for _ in $(seq 200); do
-    [ -s "$d/port" ] && break
+  started_port=$(port_of "$d/port" 200)
+}
+
+# port_of FILE TRIES: the port a process writes to FILE once it listens,
+# waiting up to TRIES x 50 ms ("" when it never does).
+port_of() {
+  for _ in $(seq "$2"); do
+    [ -s "$1" ] && break
     sleep 0.05
   done
-  started_port=$(cat "$d/port" 2>/dev/null)
+  cat "$1" 2>/dev/null
 }
 
 # start_spread_pair: two daemons (--threads 1, in $tmp/a and $tmp/b) on
@@ -79,11 +85,7 @@ start_spread_pair() {
   mkdir -p "$tmp/lb"
   python3 "$root/tests/support/shard_lb.py" "$tmp/lb/lb.port" "$pa" "$pb" 2>"$tmp/lb/lb.log" &
   pids+=($!)
-  for _ in $(seq 100); do
-    [ -s "$tmp/lb/lb.port" ] && break
-    sleep 0.05
-  done
-  plb=$(cat "$tmp/lb/lb.port" 2>/dev/null)
+  plb=$(port_of "$tmp/lb/lb.port" 100)
   [ -n "$plb" ] || {
     bad "the balancer did not start"
     finish
