@@ -28,6 +28,9 @@
  *    "id_width": W | "ids": [every context id of the unsharded list],
  *    "job": JOB | null, "finished": BOOL, "incomplete": [context ids],
  *    "bundle_leads": [per context, its bundle group's first] (with --bundle),
+ *    "bundle_shards": "rank" (with bundle_leads: group g, in the order of
+ *      the groups' first contexts, is shard g mod N; absent, as written
+ *      before this rule, a group is shard (its first context) mod N),
  *    "layout": "flat" (with --layout flat; absent: one directory per context)}
  * FINGERPRINT is FNV-1a 64 over everything that defines the unsharded
  * sweep (scene, contexts file or grid, --set, --sensor, --spp, --seed,

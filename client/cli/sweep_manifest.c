@@ -135,7 +135,23 @@ int manifest_read(const cli_ctx *ctx, const char *dir, sweep_manifest *m) {
     }
     ok = m->leads && k == m->total && !v;
     if (ok) ok = (m->keys = malloc((m->total ? m->total : 1) * sizeof *m->keys)) != NULL;
-    if (ok) rsw_bundle_shard_keys(m->total, m->leads, m->keys);
+    /* How its groups were dealt: "rank" (group g to shard g mod N), or,
+     * absent, by the group's first context mod N, as clients before the
+     * rank rule did, so that their shards still merge and --force still
+     * finds their films. */
+    const cJSON *rule = cJSON_GetObjectItemCaseSensitive(r, "bundle_shards");
+    const char *rs = cJSON_GetStringValue(rule);
+    if (ok && rule && !(rs && strcmp(rs, "rank") == 0)) {
+      int rc =
+          cli_fail(ctx, CLI_IO, "%s: \"bundle_shards\" is not \"rank\" (written by a newer raysweep?)", path);
+      manifest_free(m);
+      free(path);
+      return rc;
+    }
+    if (ok && rule)
+      rsw_bundle_shard_keys(m->total, m->leads, m->keys);
+    else if (ok)
+      memcpy(m->keys, m->leads, m->total * sizeof *m->keys);
   }
   if (ok && inc) {
     size_t n = (size_t)cJSON_GetArraySize(inc);
@@ -187,6 +203,7 @@ int manifest_write(const cli_ctx *ctx, const char *dir, const char *fingerprint,
     cJSON *leads = cJSON_AddArrayToObject(o, "bundle_leads");
     for (size_t k = 0; k < l->total; k++)
       cJSON_AddItemToArray(leads, cJSON_CreateNumber((double)l->leads[k]));
+    cJSON_AddStringToObject(o, "bundle_shards", "rank"); /* how the groups are dealt (manifest_read) */
   }
   if (l->layout != SWEEP_LAYOUT_DIRS) /* absent for the default: manifests as before --layout */
     cJSON_AddStringToObject(o, "layout", sweep_layout_name(l->layout));

@@ -12,7 +12,12 @@
 #   - the same from a --contexts file (wavelength fastest, ids given);
 #   - without --bundle the sweep is --bundle auto's (the daemon's
 #     default), whole and as shards merged; groups are dealt to the shards
-#     in turn (40 wavelengths in groups of 16: shard 1/4 holds the second); with --bundle 1 the shards are
+#     in turn (40 wavelengths in groups of 16: shard 1/4 holds the second;
+#     sweep.json says "bundle_shards": "rank"); shards dealt by a group's
+#     first context, as clients before that rule left them (no
+#     "bundle_shards"), merge whole, and merged alone with --partial list
+#     what they lack; an unknown "bundle_shards" is refused naming it;
+#     with --bundle 1 the shards are
 #     k mod n and sweep.json has no bundle_leads (as before bundles);
 #   - a job's "bundle": "auto" comes to 16 on a mono surface scene (its
 #     films those of "bundle": 16, not those of "bundle": 1) and to 1, accepted, with the reason, on
@@ -85,6 +90,38 @@ rs "$pa" sweep "$scene" --grid wavelength=400:439:1 --spp 1 --shard 1/4 -o g1 >/
 got=$(ls g1 | grep '^c' | tr '\n' ' ')
 want=$(seq -f 'c%05g' 16 31 | tr '\n' ' ')
 if [ "$got" = "$want" ]; then ok; else bad "shard 1/4 of 40 wavelengths in groups of 16 holds '$got'"; fi
+rule=$(python3 -c 'import json,sys; print(json.load(open(sys.argv[1])).get("bundle_shards"))' g1/sweep.json)
+if [ "$rule" = rank ]; then ok; else bad "shard 1/4's manifest: bundle_shards $rule, wanted rank"; fi
+# Shards written by a client before the rank rule (no "bundle_shards";
+# a group on shard (its first context) mod N) still merge: 40 wavelengths
+# over 2 shards put all three groups (first contexts 0, 16, 32) on shard
+# 0. Built from the whole sweep by hand, as that client left them.
+rs "$pa" sweep "$scene" --grid wavelength=400:439:1 --spp 1 -o g40 >/dev/null 2>"$tmp/err" ||
+  bad "40 wavelengths: $(cat "$tmp/err")"
+cp -a g40 old0 && mkdir old1 && : >old1/index.jsonl
+python3 - <<'PY2'
+import json
+m = json.load(open("g40/sweep.json"))
+m.pop("bundle_shards", None)
+for i, d in enumerate(("old0", "old1")):
+    m["shard"] = [i, 2]
+    json.dump(m, open(d + "/sweep.json", "w"))
+PY2
+if rs "$pa" merge old0 old1 -o oldmerged >/dev/null 2>"$tmp/err"; then
+  same "shards dealt by first context (a client before the rank rule), merged" g40 oldmerged
+else
+  bad "merge of shards dealt by first context: $(cat "$tmp/err")"
+fi
+# Shard 1/2 alone (it holds nothing): every context is missing, and
+# listed as incomplete (by the rank rule it would claim the second group).
+rs "$pa" merge old1 --partial -o oldpartial >/dev/null 2>"$tmp/err" || bad "merge --partial of old shard 1/2: $(cat "$tmp/err")"
+py "merge --partial of an old empty shard lists every context as incomplete" '
+import json, sys
+m = json.load(open(sys.argv[1]))
+assert len(m["incomplete"]) == 40, len(m["incomplete"])' oldpartial/sweep.json
+python3 -c 'import json; m = json.load(open("old1/sweep.json")); m["bundle_shards"] = "pairs"; json.dump(m, open("old1/sweep.json", "w"))'
+expect 6 "merge, a manifest with an unknown bundle_shards" rs "$pa" merge old0 old1 -o oldbad
+contains "merge, a manifest with an unknown bundle_shards" "$tmp/err" "bundle_shards"
 # --bundle auto where the daemon comes to 3 (a canopy on a plastic soil,
 # whose delta specular lobe keeps pages out; leaves with tabulated
 # reflectance and transmittance, so that the bundle changes the paths'
