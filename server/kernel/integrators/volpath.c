@@ -269,13 +269,42 @@ static inline bool box_walk_next(const scene *sc, box_walk *w, double tend, cons
   return true;
 }
 
+/* The null box whose world bounds are, bit for bit, those of layered
+ * medium m's box, both aligned (an atmosphere's cube); -1: none. */
+static inline int media_null_box(const scene *sc, const medium *m) {
+  const media_box *mb = &((const layered_medium *)m)->L.box;
+  if (!mb->aligned) return -1;
+  for (unsigned i = 0; i < sc->null_boxes.n; i++) {
+    const struct scene_null_box *b = &sc->null_boxes.box[i];
+    if (b->aligned && memcmp(b->wlo, mb->lo, sizeof mb->lo) == 0 &&
+        memcmp(b->whi, mb->hi, sizeof mb->hi) == 0)
+      return (int)i;
+  }
+  return -1;
+}
+
 /* m's part of segment r: intersect_aabb, or for a layered medium its box
- * clipped with inv (box_walk's, for r's direction; NULL: none), the same
- * bit for bit. */
-static inline bool media_clip(const medium *m, const ray3 *r, const double *inv, double *mint, double *maxt) {
-  if (inv && m->ops == &layered_medium_ops) {
+ * clipped with w's 1 / d (box_walk's, for r's direction and origin; NULL:
+ * none), the same bit for bit. Where that box is one of the null boxes
+ * the walk has met already (media_null_box), its slab interval is
+ * [tn, tf] = [max over the axes of the entries, min of the exits] (both
+ * +inf when missed), and the clip is [max(tmin, tn), min(tmax, tf)]:
+ * the same maximum and minimum of the same numbers as the slab test
+ * below (ties keep the earlier operand, tmin or tmax, in both). */
+static inline bool media_clip(const scene *sc, const medium *m, const ray3 *r, const box_walk *w,
+                              double *mint, double *maxt) {
+  if (w && m->ops == &layered_medium_ops) {
+    int i = media_null_box(sc, m);
+    if (i >= 0) {
+      double tn = w->t[2 * i], tf = w->t[2 * i + 1];
+      double lo = tn > r->tmin ? tn : r->tmin, hi = tf < r->tmax ? tf : r->tmax;
+      if (!(lo < hi)) return false;
+      *mint = lo;
+      *maxt = hi;
+      return true;
+    }
     const media_box *b = &((const layered_medium *)m)->L.box;
-    if (b->aligned) return media_box_clip_aligned(b, r->o, r->d, r->tmin, r->tmax, inv, mint, maxt);
+    if (b->aligned) return media_box_clip_aligned(b, r->o, r->d, r->tmin, r->tmax, w->inv, mint, maxt);
   }
   return m->ops->intersect_aabb(m, r, mint, maxt);
 }
@@ -293,13 +322,13 @@ static bool analytic_in(const volpath_integrator *vp, const medium *m) {
 
 /* Transmittance of m along r over [tstart, tend] (a shadow ray's segment):
  * exact where analytic, else ratio tracking. */
-static color segment_tr(const volpath_integrator *vp, const medium *m, const ray3 *r, double tstart,
-                        double tend, const double *inv, sampler_state *st) {
+static color segment_tr(const volpath_integrator *vp, const scene *sc, const medium *m, const ray3 *r,
+                        double tstart, double tend, const box_walk *w, sampler_state *st) {
   ray3 seg = *r;
   seg.tmin = tstart;
   seg.tmax = tend;
   double mint, maxt;
-  if (!media_clip(m, &seg, inv, &mint, &maxt)) return col1(1.0);
+  if (!media_clip(sc, m, &seg, w, &mint, &maxt)) return col1(1.0);
   if (m->ops == &layered_medium_ops && vp->analytic) /* (inline: the same code as its op) */
     return media_layers_transmittance(layered_layers(m), &seg, mint, maxt);
   if (m->ops->transmittance && (analytic_in(vp, m) || m->is_homogeneous))
@@ -558,23 +587,23 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
       const medium *next = l->sm;
       bool cross = sc->null_boxes.on && box_walk_next(sc, &bw, tend, &next);
       double t1 = cross ? bw.tc : tend;
-      const double *inv = sc->null_boxes.on ? bw.inv : NULL;
+      const box_walk *w = sc->null_boxes.on ? &bw : NULL;
       if (l->sm && t1 > t0 && vp->analytic && l->sm->ops == &layered_medium_ops) {
         /* segment_tr's exact case, inline */
         ray3 seg = {mr.o, mr.d, t0, t1};
         double mint, maxt;
-        color tr = media_clip(l->sm, &seg, inv, &mint, &maxt)
+        color tr = media_clip(sc, l->sm, &seg, w, &mint, &maxt)
                        ? media_layers_transmittance(layers_page0(l->sm), &seg, mint, maxt)
                        : col1(1.0);
         l->str = col_mul(l->str, tr);
       } else if (l->sm && t1 > t0) {
-        l->str = col_mul(l->str, segment_tr(vp, l->sm, &mr, t0, t1, inv, st));
+        l->str = col_mul(l->str, segment_tr(vp, sc, l->sm, &mr, t0, t1, w, st));
       }
       if (pg && l->sm && t1 > t0) { /* pages 1.. (media that carry pages are layered, analytic) */
         ray3 seg = {mr.o, mr.d, t0, t1};
         double mint, maxt;
         color tr[RENDER_MAX_PAGES];
-        if (media_clip(l->sm, &seg, inv, &mint, &maxt)) {
+        if (media_clip(sc, l->sm, &seg, w, &mint, &maxt)) {
           layered_transmittance_pages((const layered_medium *)l->sm, &seg, mint, maxt, 1, NP, tr);
           for (int p = 1; p < NP; p++) pg->str[p - 1] = col_mul(pg->str[p - 1], tr[p]);
         }
@@ -683,10 +712,10 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
     bool cross = sc->null_boxes.on && box_walk_next(sc, &bw, tend, &next);
     ray3 seg = {l->seg_o, l->ray.d, t0, cross ? bw.tc : tend};
     double mint, maxt;
-    const double *inv = sc->null_boxes.on ? bw.inv : NULL;
-    if (m && seg.tmax > seg.tmin && media_clip(m, &seg, inv, &mint, &maxt)) {
+    const box_walk *w = sc->null_boxes.on ? &bw : NULL;
+    if (m && seg.tmax > seg.tmin && media_clip(sc, m, &seg, w, &mint, &maxt)) {
       if (m->absorbing_only) {
-        l->T = col_mul(l->T, segment_tr(vp, m, &seg, seg.tmin, seg.tmax, inv, st));
+        l->T = col_mul(l->T, segment_tr(vp, sc, m, &seg, seg.tmin, seg.tmax, w, st));
         if (pg) { /* pages 1.. (media that carry pages are layered, analytic) */
           color tr[RENDER_MAX_PAGES];
           layered_transmittance_pages((const layered_medium *)m, &seg, mint, maxt, 1, NP, tr);

@@ -140,6 +140,10 @@ static inline void media_layers_spread(color *x, int nc) {
   if (nc == 1) x->c[1] = x->c[2] = x->c[0];
 }
 
+/* 1 + 2^-40: media_layers_sample_real's margin for a flight that passes
+ * without its log. */
+#define MEDIA_LAYERS_PASS_MARGIN (1.0 + 0x1p-40)
+
 static inline void media_layers_sample_real(const media_layers *L, const medium *m, const ray3 *r,
                                             double mint, double maxt, double u, int channel,
                                             medium_interaction *mi, color *tr, color *pdf) {
@@ -152,10 +156,22 @@ static inline void media_layers_sample_real(const media_layers *L, const medium 
   double oz = media_layers_z(L, r->o), dz = media_layers_dz(L, r->d);
   double z0 = oz + t0 * dz, z1 = oz + t1 * dz;
   int c = nc == 1 ? 0 : channel;
-  double target = rsw_neg_log1m(u); /* (-log1p(-u) within 2 ulp: core/fastmath.h) */
   int k0 = media_layer_of(L, z0), k1 = media_layer_of(L, z1);
   double total = media_layers_tau(L, c, z0, z1, k0, k1, dz, t1 - t0);
-  if (!(target < total)) { /* the flight passes the box */
+  /* The flight passes the box when tau* >= total. tau* = -ln(1 - u) >= u,
+   * and tau* is computed within 3 ulp of it (core/fastmath.h), so u >=
+   * total (1 + 2^-40) (the product rounded down by at most an ulp) makes the
+   * computed tau* >= total (1 + 2^-40) (1 - 2^-52)^4 > total: the flight
+   * passes, as the log would say, without the log (most flights through a
+   * thin atmosphere). A NaN or infinite total fails the test and takes the
+   * log as before. */
+  double target = 0.0;
+  bool pass = u >= total * MEDIA_LAYERS_PASS_MARGIN;
+  if (!pass) {
+    target = rsw_neg_log1m(u); /* (-log1p(-u) within 2 ulp: core/fastmath.h) */
+    pass = !(target < total);
+  }
+  if (pass) { /* the flight passes the box */
     for (int j = 0; j < nc; j++)
       tr->c[j] = j == c ? exp(-total) : exp(-media_layers_tau(L, j, z0, z1, k0, k1, dz, t1 - t0));
     media_layers_spread(tr, nc);

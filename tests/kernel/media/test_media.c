@@ -549,6 +549,87 @@ static void test_layer_index_search(void) {
   }
 }
 
+/* A flight decides that it passes the box without the log when u >= total
+ * (1 + 2^-40) (media_layers_sample_real): the decision must be the log's,
+ * !(-log1p(-u) < total) as rsw_neg_log1m computes it, for every u. Flights
+ * through thin (totals down to 1e-12, where tau* is u to an ulp or two)
+ * and thick layers, u at the margin and up to 64 ulp either side of it and
+ * of total itself, and at random. */
+static void test_flight_pass_margin(void) {
+  enum {
+    N = 240
+  };
+  sbuf b = {0};
+  sb_printf(
+      &b,
+      "{\"type\": \"scene\", \"box\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
+      " \"interior\": {\"type\": \"piecewise\", \"albedo\": 0.5, \"sigma_t\": {\"type\": \"gridvolume\","
+      " \"shape\": [%d, 1, 1], \"data\": [",
+      N);
+  for (int i = 0; i < N; i++) sb_printf(&b, "%s%.17g", i ? ", " : "", 3.0 * exp(-i / 8.0));
+  sb_printf(&b, "], \"to_world\": [{\"translate\": [-0.5, -0.5, 0]}, {\"scale\": [2, 2, 2]},"
+                " {\"translate\": [0, 0, -1]}]}}}}");
+  scene *s = tsup_load(b.p, "mono");
+  free(b.p);
+  REQUIRE(s, "scene");
+  medium *m = s->shapes[0]->interior;
+  render_ctx rc = {.variant = VARIANT_MONO, .wavelength = 550};
+  rsw_err err = {0};
+  REQUIRE(scene_prepare(s, &rc, &err) == RSW_OK, "prepare: %s", err.msg);
+  const media_layers *L = &((layered_medium *)m)->L;
+  pcg32 rng;
+  pcg32_seed(&rng, 5, 3);
+  long flights = 0, fast = 0, near = 0, differ = 0;
+  double tmin_seen = INFINITY;
+  for (int k = 0; k < 4000; k++) {
+    /* From inside the box, mostly upwards into the thin top. */
+    vec3 o =
+        v3(0.5 * pcg32_next_double(&rng), 0.5 * pcg32_next_double(&rng), -1 + 2 * pcg32_next_double(&rng));
+    double ct = 2 * pcg32_next_double(&rng) - 1, ph = 2 * PI * pcg32_next_double(&rng);
+    if (k % 2) ct = 0.2 + 0.8 * pcg32_next_double(&rng);
+    double st = sqrt(1 - ct * ct);
+    ray3 r = {o, v3(st * cos(ph), st * sin(ph), ct), 0, INFINITY};
+    double mint, maxt;
+    if (!m->ops->intersect_aabb(m, &r, &mint, &maxt)) continue;
+    if (k % 3 == 0) mint = maxt - (maxt - mint) * pow(10, -12 * pcg32_next_double(&rng)); /* short ones */
+    double oz = media_layers_z(L, r.o), dz = media_layers_dz(L, r.d);
+    double z0 = oz + mint * dz, z1 = oz + maxt * dz;
+    double total =
+        media_layers_tau(L, 0, z0, z1, media_layer_of(L, z0), media_layer_of(L, z1), dz, maxt - mint);
+    if (!(total > 0) || !(total < 1)) continue;
+    tmin_seen = fmin(tmin_seen, total);
+    double edge = total * MEDIA_LAYERS_PASS_MARGIN;
+    for (int j = -66; j <= 66; j++) {
+      double base = j < -33 ? total : j > 33 ? edge : 0, u;
+      int step = j < -33 ? j + 50 : j > 33 ? j - 50 : 0;
+      if (base > 0) {
+        u = base;
+        for (int q = 0; q < (step < 0 ? -step : step); q++) u = nextafter(u, step < 0 ? 0.0 : 1.0);
+      } else {
+        u = pcg32_next_double(&rng);
+      }
+      if (!(u >= 0 && u < 1)) continue;
+      medium_interaction mi;
+      color tr, pdf;
+      memset(&mi, 0, sizeof mi);
+      media_layers_sample_real(L, m, &r, mint, maxt, u, 0, &mi, &tr, &pdf);
+      bool passed = !isfinite(mi.t);
+      bool want = !(rsw_neg_log1m(u) < total);
+      flights++;
+      fast += u >= edge;
+      near += base > 0;
+      differ += passed != want;
+    }
+  }
+  printf("  %ld flights (%ld near the margin or total, %ld decided without the log), smallest total %.3g, "
+         "%ld differ\n",
+         flights, near, fast, tmin_seen, differ);
+  CHECK(flights > 100000 && fast > 20000, "enough flights (%ld, %ld without the log)", flights, fast);
+  CHECK(tmin_seen < 1e-10, "thin flights (smallest total %g)", tmin_seen);
+  CHECK(differ == 0, "%ld flights decided otherwise than the log", differ);
+  scene_free(s);
+}
+
 /* media_box_clip_aligned with the caller's 1 / d (volpath shares its null
  * boxes') against the slab test as media_box_clip_at did it before (one
  * division per axis inside the loop, written out here): bit for bit, for
@@ -1078,6 +1159,7 @@ static void test_sensor_in_medium(void) {
 int main(void) {
   RSW_TEST_RUN(test_piecewise_exact_ops);
   RSW_TEST_RUN(test_layer_index_search);
+  RSW_TEST_RUN(test_flight_pass_margin);
   RSW_TEST_RUN(test_box_clip_shared_inverse);
   RSW_TEST_RUN(test_beer_lambert_homogeneous);
   RSW_TEST_RUN(test_beer_lambert_heterogeneous_constant);
