@@ -36,9 +36,11 @@
  * docs/kernel-conventions.md#ocean_legacy. */
 #include <math.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "../scene/loader.h"
 #include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "eo_surfaces.h"
 #include "fresnel_pol.h"
 #include "microfacet.h"
@@ -92,7 +94,13 @@ static double beckmann_lambda(double au, double av, vec3 v) {
   return 0.5 * (erf(a) - 1.0) + exp(-a * a) / (2.0 * a * sqrt(RSW_PI));
 }
 
-double ocean_glint(const ocean_bsdf *o, vec3 wi, vec3 wo) {
+static ocean_wl fixed_wl(const ocean_bsdf *o) {
+  bool t = ocean_tables_ready(o);
+  return (ocean_wl){o->wavelength,        o->n_re,           o->n_im, o->r_omega, o->whitecap,
+                    t ? o->t_down : NULL, t ? o->t_up : NULL};
+}
+
+static double glint(const ocean_bsdf *o, const ocean_wl *w, vec3 wi, vec3 wo) {
   double ci = wi.z, co = wo.z;
   if (!(ci > 0.0) || !(co > 0.0)) return 0.0;
   vec3 m = v3_norm(v3_add(wi, wo));
@@ -107,7 +115,12 @@ double ocean_glint(const ocean_bsdf *o, vec3 wi, vec3 wo) {
   double cchi = v3_dot(wo, m);
   cchi = fmin(fmax(cchi, -0.999999999), 0.999999999);
   double schi = fmin(sqrt(1.0 - cchi * cchi), 0.999999999);
-  return r * ocean_fresnel_6s(o->n_re, o->n_im, cchi, schi) * RSW_PI;
+  return r * ocean_fresnel_6s(w->n_re, w->n_im, cchi, schi) * RSW_PI;
+}
+
+double ocean_glint(const ocean_bsdf *o, vec3 wi, vec3 wo) {
+  ocean_wl w = fixed_wl(o);
+  return glint(o, &w, wi, wo);
 }
 
 /* Gauss-Legendre nodes and weights on [-1, 1] (Newton on P_n). */
@@ -186,20 +199,24 @@ double ocean_transmittance(const ocean_bsdf *o, double theta, double phi, bool u
  * linspace(0, 2 pi, 64). Departure: OCEAN_NQ = 32 Gauss-Legendre points
  * per dimension where Eradiate takes 64 (16 times cheaper to build;
  * tests/kernel/bsdfs/test_ocean_legacy.c bounds the difference). */
-void ocean_tables(ocean_bsdf *o) {
-  if (ocean_tables_ready(o)) return;
+static void build_tables(const ocean_bsdf *o, double n_re, double n_im, float *t_down, float *t_up) {
   double gx[OCEAN_NQ], gw[OCEAN_NQ];
   gauss_legendre(OCEAN_NQ, gx, gw);
   for (int j = 0; j < OCEAN_T_RES; j++) { /* azimuth */
     double phi = 2.0 * RSW_PI * j / (OCEAN_T_RES - 1);
     for (int i = 0; i < OCEAN_T_RES; i++) { /* zenith */
       double th = 0.5 * RSW_PI * i / (OCEAN_T_RES - 1);
-      o->t_down[j * OCEAN_T_RES + i] = (float)transmittance(th, phi, o->n_re, o->n_im, o->wind_speed,
-                                                            o->sigma_u, o->sigma_c, false, gx, gw, OCEAN_NQ);
-      o->t_up[j * OCEAN_T_RES + i] = (float)transmittance(th, phi, o->n_re, o->n_im, o->wind_speed,
-                                                          o->sigma_u, o->sigma_c, true, gx, gw, OCEAN_NQ);
+      t_down[j * OCEAN_T_RES + i] = (float)transmittance(th, phi, n_re, n_im, o->wind_speed, o->sigma_u,
+                                                         o->sigma_c, false, gx, gw, OCEAN_NQ);
+      t_up[j * OCEAN_T_RES + i] = (float)transmittance(th, phi, n_re, n_im, o->wind_speed, o->sigma_u,
+                                                       o->sigma_c, true, gx, gw, OCEAN_NQ);
     }
   }
+}
+
+void ocean_tables(ocean_bsdf *o) {
+  if (ocean_tables_ready(o)) return;
+  build_tables(o, o->n_re, o->n_im, o->t_down, o->t_up);
   o->t_key[0] = o->n_re, o->t_key[1] = o->n_im, o->t_key[2] = o->wind_speed;
 }
 
@@ -207,7 +224,7 @@ void ocean_tables(ocean_bsdf *o) {
  * (k + 0.5) / 64 of [0, 1]; u from the zenith, v from the azimuth of
  * `dir` relative to the wind. */
 static double t_lookup(const ocean_bsdf *o, const float *t, double cos_theta, vec3 dir) {
-  if (!ocean_tables_ready(o)) return 1.0; /* not built: see eo_surfaces.h */
+  if (!t) return 1.0; /* not built: see eo_surfaces.h */
   double u = acos(fmin(fmax(cos_theta, -1.0), 1.0)) * (2.0 / RSW_PI);
   double v = (atan2(dir.y, dir.x) - o->phi_w) / (2.0 * RSW_PI);
   v -= floor(v);
@@ -242,17 +259,26 @@ static double r_omega(double wl, double pig) {
   return r;
 }
 
+/* The water at wavelength wl (nm), tables not built (o's wind and
+ * coverage already derived). */
+static ocean_wl wl_state(const ocean_bsdf *o, double wl) {
+  ocean_wl w = {.wavelength = wl};
+  w.n_re = ocean_ior_real(wl) + 0.00017492711 * (0.03 + 1.805 * o->chlorinity);
+  w.n_im = ocean_ior_imag(wl);
+  w.r_omega = r_omega(wl, o->pigmentation);
+  w.whitecap = o->coverage * ocean_whitecap_reflectance(wl);
+  return w;
+}
+
 void ocean_update(ocean_bsdf *o) {
   double wd = 90.0 - o->wind_direction;
   wd -= 360.0 * floor(wd / 360.0);
   o->phi_w = wd * RSW_PI / 180.0;
-  o->n_re = ocean_ior_real(o->wavelength) + 0.00017492711 * (0.03 + 1.805 * o->chlorinity);
-  o->n_im = ocean_ior_imag(o->wavelength);
   o->sigma_c = sqrt(0.003 + 0.00192 * o->wind_speed);
   o->sigma_u = sqrt(0.00316 * o->wind_speed);
-  o->r_omega = r_omega(o->wavelength, o->pigmentation);
   o->coverage = fmin(fmax(2.95e-6 * pow(o->wind_speed, 3.52), 0.0), 1.0);
-  o->whitecap = o->coverage * ocean_whitecap_reflectance(o->wavelength);
+  ocean_wl w = wl_state(o, o->wavelength);
+  o->n_re = w.n_re, o->n_im = w.n_im, o->r_omega = w.r_omega, o->whitecap = w.whitecap;
 }
 
 bool ocean_tables_ready(const ocean_bsdf *o) {
@@ -261,47 +287,127 @@ bool ocean_tables_ready(const ocean_bsdf *o) {
 
 /* The tables are built before a render (single-threaded), not at load or
  * on each update: a build takes about a second. */
+/* An ocean that follows the render: the tables for w from the cache, built
+ * there if missing (replacing, in turn, an entry this prepare() has not
+ * used). False: out of memory. */
+static bool cached_tables(ocean_bsdf *o, ocean_wl *w) {
+  if (!o->cache && !(o->cache = calloc(OCEAN_CACHE, sizeof *o->cache))) return false;
+  ocean_table *t = NULL;
+  for (int i = 0; i < OCEAN_CACHE && !t; i++) {
+    ocean_table *c = &o->cache[i];
+    if (c->stamp && c->key[0] == w->n_re && c->key[1] == w->n_im && c->key[2] == o->wind_speed) t = c;
+  }
+  while (!t) { /* (a render uses at most RENDER_MAX_BUNDLE < OCEAN_CACHE entries) */
+    ocean_table *c = &o->cache[o->next];
+    o->next = (o->next + 1) % OCEAN_CACHE;
+    if (c->stamp == o->stamp) continue;
+    build_tables(o, w->n_re, w->n_im, c->t_down, c->t_up);
+    c->key[0] = w->n_re, c->key[1] = w->n_im, c->key[2] = o->wind_speed;
+    t = c;
+  }
+  t->stamp = o->stamp;
+  w->t_down = t->t_down, w->t_up = t->t_up;
+  return true;
+}
+
+/* The tables are built before a render (single-threaded), not at load or
+ * on each update: a build takes about a second. An ocean that follows the
+ * render prepares each channel of each page at its wavelength
+ * (rc_page: docs/experiments.md#pages-more-than-three-wavelengths-per-path),
+ * its tables from a cache keyed by the water's index and the wind. */
 static rsw_status ocean_prepare(object *ob, const render_ctx *rc, rsw_err *err) {
-  (void)rc, (void)err;
-  ocean_tables((ocean_bsdf *)ob);
+  ocean_bsdf *o = (ocean_bsdf *)ob;
+  if (!o->follow) {
+    ocean_tables(o);
+    return RSW_OK;
+  }
+  if (++o->stamp == 0) o->stamp = 1; /* (0 marks an empty entry) */
+  for (int p = 0; p < RENDER_MAX_PAGES; p++) {
+    render_ctx pc = rc_page(rc, p < rc_pages(rc) ? p : 0);
+    for (int c = 0; c < 3; c++) {
+      double wl = rc_channel_wavelength(&pc, c);
+      if (!(wl >= 200.0 && wl <= 4000.0))
+        return rsw_fail(err, RSW_ERR_RANGE, ob->id ? ob->id : "ocean_legacy",
+                        "ocean_legacy follows the render's wavelength, %g nm, outside its 200 to 4000 nm",
+                        wl);
+      bool same = c > 0 && wl == o->pg[p][c - 1].wavelength;
+      if (same)
+        o->pg[p][c] = o->pg[p][c - 1];
+      else if (p > 0 && p >= rc_pages(rc))
+        o->pg[p][c] = o->pg[0][c];
+      else if (o->pg[p][c] = wl_state(o, wl), !cached_tables(o, &o->pg[p][c]))
+        return rsw_fail(err, RSW_ERR_NOMEM, ob->id ? ob->id : "ocean_legacy",
+                        "ocean_legacy: out of memory for its transmittance tables");
+    }
+    o->chromatic[p] =
+        o->pg[p][1].wavelength != o->pg[p][0].wavelength || o->pg[p][2].wavelength != o->pg[p][0].wavelength;
+  }
   return RSW_OK;
 }
 
-static double underlight(const ocean_bsdf *o, vec3 light, vec3 view) {
-  if (o->wavelength < 400.0 || o->wavelength > 700.0 || !ocean_tables_ready(o)) return 0.0;
-  double td = t_lookup(o, o->t_down, light.z, light);
-  double tu = t_lookup(o, o->t_up, view.z, light);
-  return o->r_omega * tu * td / ((o->n_re * o->n_re + o->n_im * o->n_im) * (1.0 - 0.485 * o->r_omega));
+/* The water each colour channel renders with at the page the caller
+ * evaluates at (rsw_page): n = 1 where the channels are alike (w[0]), else
+ * 3. */
+static int page_water(const ocean_bsdf *o, ocean_wl *fixed, const ocean_wl **w) {
+  if (!o->follow) {
+    *fixed = fixed_wl(o);
+    w[0] = w[1] = w[2] = fixed;
+    return 1;
+  }
+  const ocean_wl *pg = o->pg[rsw_page];
+  w[0] = &pg[0], w[1] = &pg[1], w[2] = &pg[2];
+  return o->chromatic[rsw_page] ? 3 : 1;
+}
+
+static double underlight(const ocean_bsdf *o, const ocean_wl *w, vec3 light, vec3 view) {
+  if (w->wavelength < 400.0 || w->wavelength > 700.0 || !w->t_down) return 0.0;
+  double td = t_lookup(o, w->t_down, light.z, light);
+  double tu = t_lookup(o, w->t_up, view.z, light);
+  return w->r_omega * tu * td / ((w->n_re * w->n_re + w->n_im * w->n_im) * (1.0 - 0.485 * w->r_omega));
 }
 
 /* eval() for a radiance path: wi towards the sensor, wo towards the
  * light (6S's incident direction). */
-static double ocean_value(const ocean_bsdf *o, vec3 wi, vec3 wo) {
+static double ocean_value(const ocean_bsdf *o, const ocean_wl *wl, vec3 wi, vec3 wo) {
   if (!(wi.z > 0.0) || !(wo.z > 0.0)) return 0.0;
-  double w = o->whitecap, v;
+  double w = wl->whitecap, v;
   switch (o->component) {
   case 1: v = w; break;
-  case 2: v = (1.0 - o->coverage) * ocean_glint(o, wo, wi); break;
-  case 3: v = (1.0 - w) * underlight(o, wo, wi); break;
-  case 4: v = w + (1.0 - w) * underlight(o, wo, wi); break;
+  case 2: v = (1.0 - o->coverage) * glint(o, wl, wo, wi); break;
+  case 3: v = (1.0 - w) * underlight(o, wl, wo, wi); break;
+  case 4: v = w + (1.0 - w) * underlight(o, wl, wo, wi); break;
   default:
-    v = (w + (1.0 - w) * underlight(o, wo, wi) + (1.0 - o->coverage) * ocean_glint(o, wo, wi)) * wo.z *
+    v = (w + (1.0 - w) * underlight(o, wl, wo, wi) + (1.0 - o->coverage) * glint(o, wl, wo, wi)) * wo.z *
         RSW_INV_PI;
     break;
   }
   return isfinite(v) ? v : 0.0;
 }
 
-/* The probability of the glint lobe (Eradiate's). */
-static double p_glint(const ocean_bsdf *o, vec3 wi) {
-  double t_i = t_lookup(o, o->t_down, wi.z, wi);
-  double pd = o->whitecap + t_i * (1.0 - o->whitecap), ps = 1.0 - o->coverage;
+/* The value of each channel (n from page_water). */
+static color ocean_values(const ocean_bsdf *o, int n, const ocean_wl *const *w, vec3 wi, vec3 wo) {
+  if (n == 1) return col1(ocean_value(o, w[0], wi, wo));
+  return col(ocean_value(o, w[0], wi, wo), ocean_value(o, w[1], wi, wo), ocean_value(o, w[2], wi, wo));
+}
+
+/* The probability of the glint lobe (Eradiate's); where the channels
+ * differ, the mean of theirs (the channel-mean density, as media do:
+ * docs/experiments.md#spectral-bundles), so that every channel's value
+ * over it is unbiased. */
+static double p_glint1(const ocean_bsdf *o, const ocean_wl *w, vec3 wi) {
+  double t_i = t_lookup(o, w->t_down, wi.z, wi);
+  double pd = w->whitecap + t_i * (1.0 - w->whitecap), ps = 1.0 - o->coverage;
   return ps / (ps + pd);
 }
 
-static double ocean_pdf_dir(const ocean_bsdf *o, vec3 wi, vec3 wo) {
+static double p_glint(const ocean_bsdf *o, int n, const ocean_wl *const *w, vec3 wi) {
+  if (n == 1) return p_glint1(o, w[0], wi);
+  return (p_glint1(o, w[0], wi) + p_glint1(o, w[1], wi) + p_glint1(o, w[2], wi)) / 3.0;
+}
+
+static double ocean_pdf_dir(const ocean_bsdf *o, int n, const ocean_wl *const *w, vec3 wi, vec3 wo) {
   if (!(wi.z > 0.0) || !(wo.z > 0.0)) return 0.0;
-  double ps = p_glint(o, wi);
+  double ps = p_glint(o, n, w, wi);
   double p = (1.0 - ps) * warp_square_to_cosine_hemisphere_pdf(wo);
   vec3 h = v3_norm(v3_add(wi, wo));
   double wh = v3_dot(wi, h);
@@ -316,7 +422,10 @@ static color ocean_sample(const bsdf *b, const surface_interaction *si, double u
   const ocean_bsdf *o = (const ocean_bsdf *)b;
   vec3 wi = si->wi;
   if (!(wi.z > 0.0)) return bsdf_fail(bs);
-  double ps = p_glint(o, wi);
+  ocean_wl fx;
+  const ocean_wl *w[3];
+  int n = page_water(o, &fx, w);
+  double ps = p_glint(o, n, w, wi);
   if (u1 >= ps) {
     bs->wo = warp_square_to_cosine_hemisphere(u2);
     bs->sampled_type = BSDF_DIFFUSE_REFLECTION;
@@ -328,17 +437,26 @@ static color ocean_sample(const bsdf *b, const surface_interaction *si, double u
     bs->sampled_type = BSDF_GLOSSY_REFLECTION;
   }
   bs->eta = 1.0;
-  bs->pdf = ocean_pdf_dir(o, wi, bs->wo);
+  bs->pdf = ocean_pdf_dir(o, n, w, wi, bs->wo);
   if (!(bs->pdf > 0.0)) return bsdf_fail(bs);
-  return col1(ocean_value(o, wi, bs->wo) / bs->pdf);
+  if (n == 1) return col1(ocean_value(o, w[0], wi, bs->wo) / bs->pdf);
+  return col_scale(ocean_values(o, n, w, wi, bs->wo), 1.0 / bs->pdf);
 }
 
 static color ocean_eval(const bsdf *b, const surface_interaction *si, vec3 wo) {
-  return col1(ocean_value((const ocean_bsdf *)b, si->wi, wo));
+  const ocean_bsdf *o = (const ocean_bsdf *)b;
+  ocean_wl fx;
+  const ocean_wl *w[3];
+  int n = page_water(o, &fx, w);
+  return ocean_values(o, n, w, si->wi, wo);
 }
 
 static double ocean_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
-  return ocean_pdf_dir((const ocean_bsdf *)b, si->wi, wo);
+  const ocean_bsdf *o = (const ocean_bsdf *)b;
+  ocean_wl fx;
+  const ocean_wl *w[3];
+  int n = page_water(o, &fx, w);
+  return ocean_pdf_dir(o, n, w, si->wi, wo);
 }
 
 /* Polarization (docs/plugins.md#polarization-surfaces), as Eradiate's polarized
@@ -356,12 +474,16 @@ static void ocean_polarization(const bsdf *b, const surface_interaction *si, vec
   vec3 wi = si->wi;
   fpol_depolarize(P, wo, wi, s_in, s_out);
   if (!(wi.z > 0.0) || !(wo.z > 0.0) || o->component == 1 || o->component >= 3) return;
-  double w = o->whitecap, g = (1.0 - o->coverage) * ocean_glint(o, wo, wi);
-  double d = o->component == 2 ? 0.0 : w + (1.0 - w) * underlight(o, wo, wi);
+  ocean_wl fx;
+  const ocean_wl *wl[3];
+  page_water(o, &fx, wl); /* (Stokes films render one wavelength: the channels are alike) */
+  double w = wl[0]->whitecap, g = (1.0 - o->coverage) * glint(o, wl[0], wo, wi);
+  double d = o->component == 2 ? 0.0 : w + (1.0 - w) * underlight(o, wl[0], wo, wi);
   if (!(g > 0.0) || !isfinite(g)) return;
   vec3 h = v3_norm(v3_add(wi, wo));
   mueller F[3];
-  F[0] = F[1] = F[2] = mu_normalized(mu_fresnel_reflection(v3_dot(wo, h), mu_cmplx(o->n_re, o->n_im)));
+  F[0] = F[1] = F[2] =
+      mu_normalized(mu_fresnel_reflection(v3_dot(wo, h), mu_cmplx(wl[0]->n_re, wl[0]->n_im)));
   fpol_with_diffuse(P, F, col1(g), col1(d));
 }
 
@@ -369,6 +491,7 @@ static const bsdf_ops ocean_ops = {
     .sample = ocean_sample, .eval = ocean_eval, .pdf = ocean_pdf, .polarization = ocean_polarization};
 
 static void ocean_destroy(object *o) {
+  free(((ocean_bsdf *)o)->cache);
   free(o);
 }
 
@@ -382,8 +505,22 @@ static rsw_status ocean_create(loader *ld, node *n, object **out) {
   rsw_status st;
   if (!ld_has(n, "wavelength"))
     return ld_fail(ld, n, "wavelength", RSW_ERR_MISSING,
-                   "ocean_legacy needs 'wavelength' (nm, 200 to 4000), as in Eradiate");
-  if ((st = ld_float_range(ld, n, "wavelength", 550.0, 200.0, 4000.0, &wl)) != RSW_OK) return st;
+                   "ocean_legacy needs 'wavelength' (nm, 200 to 4000, as in Eradiate, or \"render\": each "
+                   "render's own)");
+  const prop *wp = node_find(n, "wavelength");
+  bool follow = wp->kind == PROP_STRING;
+  if (follow) {
+    const char *s;
+    if ((st = ld_string(ld, n, "wavelength", NULL, &s)) != RSW_OK) return st;
+    if (strcmp(s, "render") != 0)
+      return ld_fail(ld, n, "wavelength", RSW_ERR_INVALID,
+                     "ocean_legacy's wavelength is a number (nm, 200 to 4000) or \"render\" (each render's "
+                     "own), not '%s'",
+                     s);
+    wl = 550.0;
+  } else if ((st = ld_float_range(ld, n, "wavelength", 550.0, 200.0, 4000.0, &wl)) != RSW_OK) {
+    return st;
+  }
   if ((st = ld_float_range(ld, n, "wind_speed", 0.1, 0.0, 37.54, &ws)) != RSW_OK) return st;
   if (!(ws > 0.0)) return ld_fail(ld, n, "wind_speed", RSW_ERR_RANGE, "wind_speed must be > 0 m/s");
   if ((st = ld_float_range(ld, n, "wind_direction", 0.0, -1e6, 1e6, &wd)) != RSW_OK) return st;
@@ -397,13 +534,15 @@ static rsw_status ocean_create(loader *ld, node *n, object **out) {
   bsdf *b = ocean_legacy_new(wl, ws, wd, chl, pig, shadowing, (int)comp);
   if (!b) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "ocean_legacy: out of memory");
   b->base.id = n->id;
+  ((ocean_bsdf *)b)->follow = follow;
   *out = &b->base;
   return RSW_OK;
 }
 
 static void ocean_traverse(object *ob, param_visitor *v) {
   ocean_bsdf *o = (ocean_bsdf *)ob;
-  pv_float(v, "wavelength", &o->wavelength, UPDATE_SPECTRAL, 200.0, 4000.0);
+  if (!o->follow) /* (one that follows the render has no wavelength of its own) */
+    pv_float(v, "wavelength", &o->wavelength, UPDATE_SPECTRAL, 200.0, 4000.0);
   pv_float(v, "wind_speed", &o->wind_speed, UPDATE_SPECTRAL, nextafter(0.0, 1.0), 37.54);
   pv_float(v, "wind_direction", &o->wind_direction, UPDATE_SPECTRAL, -1e6, 1e6);
   pv_float(v, "chlorinity", &o->chlorinity, UPDATE_SPECTRAL, 0.0, 1e3);
@@ -416,6 +555,11 @@ static void ocean_changed(object *ob) {
   ocean_update((ocean_bsdf *)ob);
 }
 
+/* Whether a wavelength sweep changes it (scene_wavelength_dependent). */
+static bool ocean_spectral(const object *ob) {
+  return ((const ocean_bsdf *)ob)->follow;
+}
+
 const plugin plugin_ocean_legacy = {
     .name = "ocean_legacy",
     .cls = CLS_BSDF,
@@ -425,6 +569,8 @@ const plugin plugin_ocean_legacy = {
     .traverse = ocean_traverse,
     .parameters_changed = ocean_changed,
     .prepare = ocean_prepare,
+    .spectral = ocean_spectral,
+    .pages = plugin_pages_any, /* (one that follows the render prepares each page: ocean_prepare) */
 };
 
 bsdf *ocean_legacy_new(double wavelength, double wind_speed, double wind_direction, double chlorinity,
