@@ -153,70 +153,119 @@ enum {
   OCEAN_NQ = 32
 };
 
-static double transmittance(double theta, double phi, double n_re, double n_im, double ws, double sig_u,
-                            double sig_c, bool up, const double *gx, const double *gw, int nq) {
-  if (up) {
-    theta = asin(sin(theta) / n_re);
-    n_re = 1.0 / n_re;
-    n_im = 0.0;
-  }
-  vec3 wi = v3(sin(theta), 0.0, cos(theta));
-  double c = cos(phi), s = sin(phi);
-  double td = 0.0, sum = 0.0;
+/* The quadrature over the hemisphere: nq x nq Gauss-Legendre points,
+ * zenith in [0, pi/2], azimuth in [0, 2 pi], their directions, weights
+ * and the weights' sum (made once per table build; the sums in the order
+ * transmittance() takes them); wo and w hold nq^2 each. */
+typedef struct hemi_quad {
+  int n;
+  vec3 *wo;
+  double *w, sum;
+} hemi_quad;
+
+static void hemi_quad_make(int nq, hemi_quad *q) {
+  double gx[128], gw[128];
+  gauss_legendre(nq, gx, gw);
+  q->n = nq * nq;
+  q->sum = 0.0;
   for (int a = 0; a < nq; a++) {
     double th = (gx[a] + 1.0) * RSW_PI / 4.0, wth = gw[a] * RSW_PI / 4.0;
     double st = sin(th), ct = cos(th);
     for (int b = 0; b < nq; b++) {
       double ph = (gx[b] + 1.0) * RSW_PI, wph = gw[b] * RSW_PI;
-      double gweight = ct * st * wth * wph;
-      vec3 wo = v3(st * cos(ph), st * sin(ph), ct);
-      double ci = wi.z < 1e-6 ? 1e-6 : wi.z, co = wo.z < 1e-6 ? 1e-6 : wo.z;
-      vec3 m = v3_norm(v3_add(wi, wo));
-      vec3 mp = v3_norm(v3(c * m.x + s * m.y, -s * m.x + c * m.y, m.z));
-      double xn = mp.x / (sig_u * mp.z), xe = mp.y / (sig_c * mp.z);
-      double D = gram_charlier(ws, sig_u, sig_c, mp) / (2.0 * RSW_PI * sig_u * sig_c) *
-                 exp(-0.5 * (xe * xe + xn * xn)) / (m.z * m.z * m.z * m.z);
-      double cchi = fmin(fmax(v3_dot(wo, m), -0.999999999), 0.999999999);
-      double schi = fmin(sqrt(1.0 - cchi * cchi), 0.999999999);
-      double g = D * ocean_fresnel_6s(n_re, n_im, cchi, schi) * RSW_PI / (4.0 * ci * co);
-      if (!(wi.z > 0.0 && wo.z > 0.0)) g = 1.0;
-      td += g * gweight;
-      sum += gweight;
+      int k = a * nq + b;
+      q->w[k] = ct * st * wth * wph;
+      q->wo[k] = v3(st * cos(ph), st * sin(ph), ct);
+      q->sum += q->w[k];
     }
   }
-  if (td >= sum) td = sum;
-  return 1.0 - td / sum;
+}
+
+/* 1 - (glint albedo) for nw indices n_re[w] + i n_im[w] at once into
+ * t[w] (downwelling: the slopes' geometry is the same for every index;
+ * upwelling takes one index, nw 1, its refraction of theta its own). */
+enum {
+  OCEAN_MAX_NW = 3 * RENDER_MAX_PAGES
+};
+
+static void transmittance(double theta, double phi, int nw, const double *n_re, const double *n_im, double ws,
+                          double sig_u, double sig_c, bool up, const hemi_quad *q, double *t) {
+  double nr[OCEAN_MAX_NW], ni[OCEAN_MAX_NW], td[OCEAN_MAX_NW];
+  for (int w = 0; w < nw; w++) nr[w] = n_re[w], ni[w] = n_im[w], td[w] = 0.0;
+  if (up) {
+    theta = asin(sin(theta) / nr[0]);
+    nr[0] = 1.0 / nr[0];
+    ni[0] = 0.0;
+  }
+  vec3 wi = v3(sin(theta), 0.0, cos(theta));
+  double c = cos(phi), s = sin(phi);
+  for (int k = 0; k < q->n; k++) {
+    double gweight = q->w[k];
+    vec3 wo = q->wo[k];
+    double ci = wi.z < 1e-6 ? 1e-6 : wi.z, co = wo.z < 1e-6 ? 1e-6 : wo.z;
+    vec3 m = v3_norm(v3_add(wi, wo));
+    vec3 mp = v3_norm(v3(c * m.x + s * m.y, -s * m.x + c * m.y, m.z));
+    double xn = mp.x / (sig_u * mp.z), xe = mp.y / (sig_c * mp.z);
+    double D = gram_charlier(ws, sig_u, sig_c, mp) / (2.0 * RSW_PI * sig_u * sig_c) *
+               exp(-0.5 * (xe * xe + xn * xn)) / (m.z * m.z * m.z * m.z);
+    double cchi = fmin(fmax(v3_dot(wo, m), -0.999999999), 0.999999999);
+    double schi = fmin(sqrt(1.0 - cchi * cchi), 0.999999999);
+    bool lit = wi.z > 0.0 && wo.z > 0.0;
+    for (int w = 0; w < nw; w++) {
+      double g = D * ocean_fresnel_6s(nr[w], ni[w], cchi, schi) * RSW_PI / (4.0 * ci * co);
+      if (!lit) g = 1.0;
+      td[w] += g * gweight;
+    }
+  }
+  for (int w = 0; w < nw; w++) {
+    if (td[w] >= q->sum) td[w] = q->sum;
+    t[w] = 1.0 - td[w] / q->sum;
+  }
 }
 
 double ocean_transmittance(const ocean_bsdf *o, double theta, double phi, bool up, int nq) {
-  double gx[128], gw[128];
+  hemi_quad q = {0};
   if (nq < 1 || nq > 128) return NAN;
-  gauss_legendre(nq, gx, gw);
-  return transmittance(theta, phi, o->n_re, o->n_im, o->wind_speed, o->sigma_u, o->sigma_c, up, gx, gw, nq);
+  q.wo = malloc((size_t)nq * nq * sizeof *q.wo);
+  q.w = malloc((size_t)nq * nq * sizeof *q.w);
+  if (!q.wo || !q.w) return free(q.wo), free(q.w), NAN;
+  hemi_quad_make(nq, &q);
+  double t;
+  transmittance(theta, phi, 1, &o->n_re, &o->n_im, o->wind_speed, o->sigma_u, o->sigma_c, up, &q, &t);
+  free(q.wo), free(q.w);
+  return t;
 }
 
 /* The tables on Eradiate's grid: zenith linspace(0, pi/2, 64) x azimuth
- * linspace(0, 2 pi, 64). Departure: OCEAN_NQ = 32 Gauss-Legendre points
- * per dimension where Eradiate takes 64 (16 times cheaper to build;
- * tests/kernel/bsdfs/test_ocean_legacy.c bounds the difference). */
-static void build_tables(const ocean_bsdf *o, double n_re, double n_im, float *t_down, float *t_up) {
-  double gx[OCEAN_NQ], gw[OCEAN_NQ];
-  gauss_legendre(OCEAN_NQ, gx, gw);
+ * linspace(0, 2 pi, 64), for nw indices at once (t_down[w], t_up[w]; the
+ * downwelling ones share the slopes). Departure: OCEAN_NQ = 32
+ * Gauss-Legendre points per dimension where Eradiate takes 64 (16 times
+ * cheaper to build; tests/kernel/bsdfs/test_ocean_legacy.c bounds the
+ * difference). */
+static void build_tables(const ocean_bsdf *o, int nw, const double *n_re, const double *n_im, float **t_down,
+                         float **t_up) {
+  vec3 qwo[OCEAN_NQ * OCEAN_NQ];
+  double qw[OCEAN_NQ * OCEAN_NQ];
+  hemi_quad q = {.wo = qwo, .w = qw};
+  hemi_quad_make(OCEAN_NQ, &q);
   for (int j = 0; j < OCEAN_T_RES; j++) { /* azimuth */
     double phi = 2.0 * RSW_PI * j / (OCEAN_T_RES - 1);
     for (int i = 0; i < OCEAN_T_RES; i++) { /* zenith */
-      double th = 0.5 * RSW_PI * i / (OCEAN_T_RES - 1);
-      t_down[j * OCEAN_T_RES + i] = (float)transmittance(th, phi, n_re, n_im, o->wind_speed, o->sigma_u,
-                                                         o->sigma_c, false, gx, gw, OCEAN_NQ);
-      t_up[j * OCEAN_T_RES + i] = (float)transmittance(th, phi, n_re, n_im, o->wind_speed, o->sigma_u,
-                                                       o->sigma_c, true, gx, gw, OCEAN_NQ);
+      double th = 0.5 * RSW_PI * i / (OCEAN_T_RES - 1), t[OCEAN_MAX_NW];
+      transmittance(th, phi, nw, n_re, n_im, o->wind_speed, o->sigma_u, o->sigma_c, false, &q, t);
+      for (int w = 0; w < nw; w++) t_down[w][j * OCEAN_T_RES + i] = (float)t[w];
+      for (int w = 0; w < nw; w++) {
+        transmittance(th, phi, 1, &n_re[w], &n_im[w], o->wind_speed, o->sigma_u, o->sigma_c, true, &q, t);
+        t_up[w][j * OCEAN_T_RES + i] = (float)t[0];
+      }
     }
   }
 }
 
 void ocean_tables(ocean_bsdf *o) {
+  float *down = o->t_down, *up = o->t_up;
   if (ocean_tables_ready(o)) return;
-  build_tables(o, o->n_re, o->n_im, o->t_down, o->t_up);
+  build_tables(o, 1, &o->n_re, &o->n_im, &down, &up);
   o->t_key[0] = o->n_re, o->t_key[1] = o->n_im, o->t_key[2] = o->wind_speed;
 }
 
@@ -287,26 +336,33 @@ bool ocean_tables_ready(const ocean_bsdf *o) {
 
 /* The tables are built before a render (single-threaded), not at load or
  * on each update: a build takes about a second. */
-/* An ocean that follows the render: the tables for w from the cache, built
- * there if missing (replacing, in turn, an entry this prepare() has not
- * used). False: out of memory. */
-static bool cached_tables(ocean_bsdf *o, ocean_wl *w) {
+/* An ocean that follows the render: the tables of each of the n waters
+ * w[k] from the cache, those missing built there at once (each in an
+ * entry this prepare() has not used, taken in turn). False: out of
+ * memory. */
+static bool cached_tables(ocean_bsdf *o, int n, ocean_wl **w) {
   if (!o->cache && !(o->cache = calloc(OCEAN_CACHE, sizeof *o->cache))) return false;
-  ocean_table *t = NULL;
-  for (int i = 0; i < OCEAN_CACHE && !t; i++) {
-    ocean_table *c = &o->cache[i];
-    if (c->stamp && c->key[0] == w->n_re && c->key[1] == w->n_im && c->key[2] == o->wind_speed) t = c;
+  double nr[OCEAN_MAX_NW], ni[OCEAN_MAX_NW];
+  float *down[OCEAN_MAX_NW], *up[OCEAN_MAX_NW];
+  int nb = 0;
+  for (int k = 0; k < n; k++) {
+    ocean_table *t = NULL;
+    for (int i = 0; i < OCEAN_CACHE && !t; i++) {
+      ocean_table *c = &o->cache[i];
+      if (c->stamp && c->key[0] == w[k]->n_re && c->key[1] == w[k]->n_im && c->key[2] == o->wind_speed) t = c;
+    }
+    while (!t) { /* (a render uses at most RENDER_MAX_BUNDLE < OCEAN_CACHE entries) */
+      ocean_table *c = &o->cache[o->next];
+      o->next = (o->next + 1) % OCEAN_CACHE;
+      if (c->stamp == o->stamp) continue;
+      c->key[0] = w[k]->n_re, c->key[1] = w[k]->n_im, c->key[2] = o->wind_speed;
+      nr[nb] = w[k]->n_re, ni[nb] = w[k]->n_im, down[nb] = c->t_down, up[nb] = c->t_up, nb++;
+      t = c;
+    }
+    t->stamp = o->stamp;
+    w[k]->t_down = t->t_down, w[k]->t_up = t->t_up;
   }
-  while (!t) { /* (a render uses at most RENDER_MAX_BUNDLE < OCEAN_CACHE entries) */
-    ocean_table *c = &o->cache[o->next];
-    o->next = (o->next + 1) % OCEAN_CACHE;
-    if (c->stamp == o->stamp) continue;
-    build_tables(o, w->n_re, w->n_im, c->t_down, c->t_up);
-    c->key[0] = w->n_re, c->key[1] = w->n_im, c->key[2] = o->wind_speed;
-    t = c;
-  }
-  t->stamp = o->stamp;
-  w->t_down = t->t_down, w->t_up = t->t_up;
+  if (nb) build_tables(o, nb, nr, ni, down, up);
   return true;
 }
 
@@ -314,7 +370,8 @@ static bool cached_tables(ocean_bsdf *o, ocean_wl *w) {
  * on each update: a build takes about a second. An ocean that follows the
  * render prepares each channel of each page at its wavelength
  * (rc_page: docs/experiments.md#pages-more-than-three-wavelengths-per-path),
- * its tables from a cache keyed by the water's index and the wind. */
+ * its tables from a cache keyed by the water's index and the wind, those
+ * missing built together (the downwelling ones share their slopes). */
 static rsw_status ocean_prepare(object *ob, const render_ctx *rc, rsw_err *err) {
   ocean_bsdf *o = (ocean_bsdf *)ob;
   if (!o->follow) {
@@ -322,23 +379,31 @@ static rsw_status ocean_prepare(object *ob, const render_ctx *rc, rsw_err *err) 
     return RSW_OK;
   }
   if (++o->stamp == 0) o->stamp = 1; /* (0 marks an empty entry) */
-  for (int p = 0; p < RENDER_MAX_PAGES; p++) {
-    render_ctx pc = rc_page(rc, p < rc_pages(rc) ? p : 0);
+  ocean_wl *own[OCEAN_MAX_NW];       /* the distinct waters, in page and channel order */
+  int n = 0, pages = rc_pages(rc);
+  for (int p = 0; p < pages; p++) {
+    render_ctx pc = rc_page(rc, p);
     for (int c = 0; c < 3; c++) {
       double wl = rc_channel_wavelength(&pc, c);
       if (!(wl >= 200.0 && wl <= 4000.0))
         return rsw_fail(err, RSW_ERR_RANGE, ob->id ? ob->id : "ocean_legacy",
                         "ocean_legacy follows the render's wavelength, %g nm, outside its 200 to 4000 nm",
                         wl);
-      bool same = c > 0 && wl == o->pg[p][c - 1].wavelength;
-      if (same)
-        o->pg[p][c] = o->pg[p][c - 1];
-      else if (p > 0 && p >= rc_pages(rc))
-        o->pg[p][c] = o->pg[0][c];
-      else if (o->pg[p][c] = wl_state(o, wl), !cached_tables(o, &o->pg[p][c]))
-        return rsw_fail(err, RSW_ERR_NOMEM, ob->id ? ob->id : "ocean_legacy",
-                        "ocean_legacy: out of memory for its transmittance tables");
+      if (c > 0 && wl == rc_channel_wavelength(&pc, c - 1)) continue; /* (a copy: below) */
+      o->pg[p][c] = wl_state(o, wl);
+      own[n++] = &o->pg[p][c];
     }
+  }
+  if (!cached_tables(o, n, own))
+    return rsw_fail(err, RSW_ERR_NOMEM, ob->id ? ob->id : "ocean_legacy",
+                    "ocean_legacy: out of memory for its transmittance tables");
+  for (int p = 0; p < RENDER_MAX_PAGES; p++) {
+    render_ctx pc = rc_page(rc, p < pages ? p : 0);
+    for (int c = 0; c < 3; c++)
+      if (p >= pages)
+        o->pg[p][c] = o->pg[0][c];
+      else if (c > 0 && rc_channel_wavelength(&pc, c) == rc_channel_wavelength(&pc, c - 1))
+        o->pg[p][c] = o->pg[p][c - 1];
     o->chromatic[p] =
         o->pg[p][1].wavelength != o->pg[p][0].wavelength || o->pg[p][2].wavelength != o->pg[p][0].wavelength;
   }
