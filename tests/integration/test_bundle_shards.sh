@@ -85,8 +85,9 @@ rs "$pa" sweep "$scene" --grid wavelength=400:439:1 --spp 1 --shard 1/4 -o g1 >/
 got=$(ls g1 | grep '^c' | tr '\n' ' ')
 want=$(seq -f 'c%05g' 16 31 | tr '\n' ' ')
 if [ "$got" = "$want" ]; then ok; else bad "shard 1/4 of 40 wavelengths in groups of 16 holds '$got'"; fi
-# --bundle auto where the daemon comes to 3 (a canopy on a plastic soil,
-# whose delta specular lobe keeps pages out; leaves with tabulated
+# --bundle auto where the daemon comes to 3 (a canopy on a two-sided
+# plastic soil, whose delta specular lobe inside `twosided` keeps pages
+# out; leaves with tabulated
 # reflectance and transmittance, so that the bundle changes the paths'
 # choices): 20 wavelengths per reflectance, groups of 16 (leads 0, 16, 20,
 # 36: shards 0, 1, 2, 0 of 3) each cut into threes, so the shards' bundles
@@ -96,7 +97,7 @@ cp "$root/proto/examples/canopy_leaves.txt" .
 python3 - "$root/proto/examples/canopy_periodic.json" canopy3.json <<'PY'
 import json, sys
 d = json.load(open(sys.argv[1]))
-d["soil"]["bsdf"] = {"type": "plastic", "diffuse_reflectance": 0.3}
+d["soil"]["bsdf"] = {"type": "twosided", "bsdf": {"type": "plastic", "diffuse_reflectance": 0.3}}
 d["leaf"]["disc"]["bsdf"] = {"type": "bilambertian",
                              "reflectance": {"type": "spectrum", "wavelengths": [400, 800], "values": [0.05, 0.5]},
                              "transmittance": {"type": "spectrum", "wavelengths": [400, 800], "values": [0.3, 0.45]}}

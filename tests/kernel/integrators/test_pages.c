@@ -8,7 +8,17 @@
  *    spectral rho_0 and for a gold roughconductor (its index preset per
  *    page) and for water following the render's wavelength (`ocean_legacy`
  *    "render": each channel its own index, whitecaps, underlight and lobe
- *    choice), with bundles of 16 (6 pages) and 7 (3 pages);
+ *    choice), for a plastic and a roughplastic whose spectral diffuse
+ *    reflectance makes the lobe choice differ between the pages (their
+ *    smooth lobes; the delta lobe is left out of the histogram), with
+ *    bundles of 16 (6 pages) and 7 (3 pages);
+ *  - delta lobes that say their value (bsdf_ops.delta_value): plastic's
+ *    specular lobe, drawn with a probability that differs between the
+ *    pages, and glass's reflection and transmission (one index, a
+ *    spectral transmittance): drawn with the pages' mean probability
+ *    (200,000 samples, within 4 binomial standard errors), each page
+ *    weighted by its value over it (1e-12), each page's value and
+ *    probability bit for bit the BSDF's at its wavelengths alone;
  *  - each page's weight times the mean pdf is that page's value (1e-12),
  *    and each page's value is the BSDF's at its own wavelengths: the leaf
  *    (and the gold roughconductor) evaluated at page p equals the same BSDF
@@ -29,7 +39,7 @@
 
 RSW_TEST_DEFINE_GLOBALS
 
-#define CHI2_TESTS 24
+#define CHI2_TESTS 36
 
 static const char *LEAF =
     "{\"type\": \"bilambertian\","
@@ -64,6 +74,20 @@ static bool prepare_bundle(scene *s, int k) {
   return scene_prepare(s, &rc, &err) == RSW_OK;
 }
 
+/* A plastic whose diffuse reflectance rises 20-fold over the bundle: its
+ * specular lobe's choice probability differs between the pages; a
+ * roughplastic alike; glass with a spectral specular_transmittance (one
+ * index: every page draws its lobes alike). */
+static const char *PLASTIC =
+    "{\"type\": \"plastic\", \"diffuse_reflectance\": {\"type\": \"spectrum\", \"wavelengths\": [400, 700], "
+    "\"values\": [0.03, 0.6]}}";
+static const char *ROUGHPLASTIC =
+    "{\"type\": \"roughplastic\", \"alpha\": 0.2, \"diffuse_reflectance\": {\"type\": \"spectrum\", "
+    "\"wavelengths\": [400, 700], \"values\": [0.03, 0.6]}}";
+static const char *GLASS =
+    "{\"type\": \"dielectric\", \"int_ior\": 1.5, \"specular_transmittance\": {\"type\": \"spectrum\", "
+    "\"wavelengths\": [400, 700], \"values\": [0.9, 0.2]}}";
+
 /* One ocean scene for the file: prepared again for each bundle, it keeps
  * the transmittance tables it built (about half a second a wavelength). */
 static scene *g_ocean;
@@ -83,9 +107,10 @@ static bool sample_pages(void *user, const double *u, vec3 *out, double *weight)
   bsdf_sample bs;
   color w[RENDER_MAX_PAGES];
   bsdf_sample_pages(c->b, &c->si, c->pages, u[0], v2(u[1], u[2]), &bs, w);
-  *weight = bs.pdf > 0 ? 1.0 : 0.0;
+  bool smooth = bs.pdf > 0 && !(bs.sampled_type & BSDF_DELTA); /* (a delta lobe is not in the pdf) */
+  *weight = smooth ? 1.0 : 0.0;
   *out = bs.wo;
-  return bs.pdf > 0;
+  return smooth;
 }
 
 static double pdf_pages(void *user, vec3 wo) {
@@ -95,11 +120,11 @@ static double pdf_pages(void *user, vec3 wo) {
 }
 
 static void test_chi2(void) {
-  const char *bsdfs[4] = {LEAF, SOIL, METAL, OCEAN};
+  const char *bsdfs[6] = {LEAF, SOIL, METAL, OCEAN, PLASTIC, ROUGHPLASTIC};
   const int ks[2] = {16, 7};
   const double th[3] = {10, 50, 80};
   int runs = 0;
-  for (int i = 0; i < 4; i++) {
+  for (int i = 0; i < 6; i++) {
     scene *s = i == 3 ? ocean_scene() : bsdf_scene(bsdfs[i]);
     for (int j = 0; j < 2; j++) {
       REQUIRE(s && prepare_bundle(s, ks[j]), "scene %d", i);
@@ -256,11 +281,82 @@ static void test_ocean(void) {
   g_ocean = NULL;
 }
 
+/* A delta lobe's probability at each page (bsdf_ops.delta_value). */
+static double delta_prob(const bsdf *b, const surface_interaction *si, int p, unsigned lobe, color *v) {
+  double pr;
+  rsw_page = p;
+  *v = b->ops->delta_value(b, si, lobe, &pr);
+  rsw_page = 0;
+  return pr;
+}
+
+/* Delta lobes whose choice differs between the pages (plastic) or does
+ * not (glass): over 200,000 samples the delta lobe is drawn with the
+ * pages' mean probability (within 4 binomial standard errors), each
+ * page's weight times that mean is the page's own value (1e-12), and
+ * each page's value and probability are the BSDF's at the page's
+ * wavelengths alone, bit for bit. */
+static void delta_case(const char *json, unsigned lobe, int pk) {
+  scene *s = bsdf_scene(json);
+  REQUIRE(s && prepare_bundle(s, 16), "%s", json);
+  const bsdf *b = s->shapes[0]->bsdf;
+  surface_interaction si = tb_si_with(tb_dir_deg(40, 0));
+  double pm = 0, pr[RENDER_MAX_PAGES];
+  color v[RENDER_MAX_PAGES];
+  for (int p = 0; p < s->pages; p++) pm += pr[p] = delta_prob(b, &si, p, lobe, &v[p]);
+  pm /= s->pages;
+  CHECK(pk ? pr[0] > 2 * pr[5] : pr[0] == pr[5], "page 0's probability %g, page 5's %g", pr[0], pr[5]);
+  uint64_t state = 5;
+  int n = 200000, hits = 0;
+  for (int k = 0; k < n; k++) {
+    double u[3];
+    for (int i = 0; i < 3; i++) {
+      state = state * 6364136223846793005ULL + 1442695040888963407ULL;
+      u[i] = (double)(state >> 11) * 0x1p-53;
+    }
+    bsdf_sample bs;
+    color w[RENDER_MAX_PAGES];
+    bsdf_sample_pages(b, &si, s->pages, u[0], v2(u[1], u[2]), &bs, w);
+    if (bs.sampled_type != lobe || !(bs.pdf > 0)) continue;
+    hits++;
+    if (hits > 100) continue;
+    CHECK_REL(bs.pdf, pm, 1e-14);
+    for (int p = 0; p < s->pages; p++)
+      for (int c = 0; c < 3; c++) CHECK_REL(w[p].c[c] * pm, v[p].c[c], 1e-12);
+  }
+  double se = sqrt(pm * (1 - pm) / n);
+  CHECK(fabs((double)hits / n - pm) < 4 * se, "drawn %g of the time, the mean probability %g (se %g)",
+        (double)hits / n, pm, se);
+  for (int p = 0; p < s->pages; p += 5) {
+    scene *one = bsdf_scene(json);
+    render_ctx rc = {.variant = VARIANT_MONO, .bundle = 3};
+    for (int c = 0; c < RENDER_MAX_BUNDLE; c++)
+      rc.wl[c] = 400.0 + 20.0 * (p == 5 ? 15 : 3 * p + (c < 3 ? c : 2));
+    rc.wavelength = rc.wl[0];
+    rsw_err err = {0};
+    REQUIRE(one && scene_prepare(one, &rc, &err) == RSW_OK, "page %d alone", p);
+    color v1;
+    double p1 = delta_prob(one->shapes[0]->bsdf, &si, 0, lobe, &v1);
+    CHECK(p1 == pr[p] && v1.c[0] == v[p].c[0] && v1.c[1] == v[p].c[1] && v1.c[2] == v[p].c[2],
+          "page %d alone", p);
+    scene_free(one);
+  }
+  CHECK(rsw_page == 0, "rsw_page left at 0");
+  scene_free(s);
+}
+
+static void test_delta(void) {
+  delta_case(PLASTIC, BSDF_DELTA_REFLECTION, 1);
+  delta_case(GLASS, BSDF_DELTA_TRANSMISSION, 0);
+  delta_case(GLASS, BSDF_DELTA_REFLECTION, 0);
+}
+
 int main(void) {
   RSW_TEST_RUN(test_chi2);
   RSW_TEST_RUN(test_weights);
   RSW_TEST_RUN(test_metal);
   RSW_TEST_RUN(test_ocean);
   RSW_TEST_RUN(test_null);
+  RSW_TEST_RUN(test_delta);
   RSW_TEST_END("test_pages");
 }
