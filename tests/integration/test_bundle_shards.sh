@@ -103,7 +103,7 @@ d["leaf"]["disc"]["bsdf"] = {"type": "bilambertian",
                              "transmittance": {"type": "spectrum", "wavelengths": [400, 800], "values": [0.3, 0.45]}}
 json.dump(d, open(sys.argv[2], "w"))
 PY
-g20=(--grid wavelength=400:590:10 --grid soil.bsdf.diffuse_reflectance.value=0.2:0.3:0.1 --spp 4 --seed 7)
+g20=(--grid wavelength=400:590:10 --grid soil.bsdf.brdf_0.diffuse_reflectance.value=0.2:0.3:0.1 --spp 4 --seed 7)
 rs "$pa" sweep canopy3.json "${g20[@]}" --bundle auto -o dauto >/dev/null 2>"$tmp/err" &&
   rs "$pa" sweep canopy3.json "${g20[@]}" --bundle auto --shard 0/3 -o d0 >/dev/null 2>"$tmp/err" &&
   rs "$pb" sweep canopy3.json "${g20[@]}" --bundle auto --shard 1/3 -o d1 >/dev/null 2>"$tmp/err" &&
