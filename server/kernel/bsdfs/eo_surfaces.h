@@ -97,6 +97,7 @@ typedef struct ocean_bsdf {
   bool chromatic[RENDER_MAX_PAGES]; /* page p's channels differ */
   ocean_table *cache;               /* follow: OCEAN_CACHE entries, allocated by the first prepare() */
   unsigned stamp, next;
+  unsigned long gen; /* a number no other state of any ocean had (ocean_update): keys eval's reuse */
   /* parameters */
   double wavelength;     /* nm */
   double wind_speed;     /* m/s at 10 m */

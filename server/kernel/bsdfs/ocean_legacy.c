@@ -100,29 +100,6 @@ static ocean_wl fixed_wl(const ocean_bsdf *o) {
                     t ? o->t_down : NULL, t ? o->t_up : NULL};
 }
 
-static double glint(const ocean_bsdf *o, const ocean_wl *w, vec3 wi, vec3 wo) {
-  double ci = wi.z, co = wo.z;
-  if (!(ci > 0.0) || !(co > 0.0)) return 0.0;
-  vec3 m = v3_norm(v3_add(wi, wo));
-  vec3 mp = to_wind(o->phi_w, m);
-  mf_distr d = ocean_distr(o);
-  double D = mf_D(&d, mp) * gram_charlier(o->wind_speed, o->sigma_u, o->sigma_c, mp);
-  double r = D / (4.0 * ci * co);
-  if (o->shadowing) {
-    vec3 a = to_wind(o->phi_w, wi), b = to_wind(o->phi_w, wo);
-    r /= 1.0 + beckmann_lambda(d.alpha_u, d.alpha_v, a) + beckmann_lambda(d.alpha_u, d.alpha_v, b);
-  }
-  double cchi = v3_dot(wo, m);
-  cchi = fmin(fmax(cchi, -0.999999999), 0.999999999);
-  double schi = fmin(sqrt(1.0 - cchi * cchi), 0.999999999);
-  return r * ocean_fresnel_6s(w->n_re, w->n_im, cchi, schi) * RSW_PI;
-}
-
-double ocean_glint(const ocean_bsdf *o, vec3 wi, vec3 wo) {
-  ocean_wl w = fixed_wl(o);
-  return glint(o, &w, wi, wo);
-}
-
 /* Gauss-Legendre nodes and weights on [-1, 1] (Newton on P_n). */
 static void gauss_legendre(int n, double *x, double *w) {
   for (int i = 0; i < n; i++) {
@@ -272,8 +249,13 @@ void ocean_tables(ocean_bsdf *o) {
 /* Bilinear lookup as Dr.Jit's clamped texture does it: texel k centred at
  * (k + 0.5) / 64 of [0, 1]; u from the zenith, v from the azimuth of
  * `dir` relative to the wind. */
-static double t_lookup(const ocean_bsdf *o, const float *t, double cos_theta, vec3 dir) {
-  if (!t) return 1.0; /* not built: see eo_surfaces.h */
+/* A lookup's texels and weights, the same for every wavelength's table. */
+typedef struct lut_at {
+  int k00, k01, k10, k11;
+  double fx, fy;
+} lut_at;
+
+static lut_at lut_coords(const ocean_bsdf *o, double cos_theta, vec3 dir) {
   double u = acos(fmin(fmax(cos_theta, -1.0), 1.0)) * (2.0 / RSW_PI);
   double v = (atan2(dir.y, dir.x) - o->phi_w) / (2.0 * RSW_PI);
   v -= floor(v);
@@ -281,10 +263,15 @@ static double t_lookup(const ocean_bsdf *o, const float *t, double cos_theta, ve
   x = fmin(fmax(x, 0.0), OCEAN_T_RES - 1.0), y = fmin(fmax(y, 0.0), OCEAN_T_RES - 1.0);
   int i = (int)x, j = (int)y;
   int i1 = i + 1 < OCEAN_T_RES ? i + 1 : i, j1 = j + 1 < OCEAN_T_RES ? j + 1 : j;
-  double fx = x - i, fy = y - j;
-  double a = t[j * OCEAN_T_RES + i] * (1 - fx) + t[j * OCEAN_T_RES + i1] * fx;
-  double b = t[j1 * OCEAN_T_RES + i] * (1 - fx) + t[j1 * OCEAN_T_RES + i1] * fx;
-  return a * (1 - fy) + b * fy;
+  return (lut_at){
+      j * OCEAN_T_RES + i, j * OCEAN_T_RES + i1, j1 * OCEAN_T_RES + i, j1 * OCEAN_T_RES + i1, x - i, y - j};
+}
+
+static double lut_read(const float *t, const lut_at *c) {
+  if (!t) return 1.0; /* not built: see eo_surfaces.h */
+  double a = t[c->k00] * (1 - c->fx) + t[c->k01] * c->fx;
+  double b = t[c->k10] * (1 - c->fx) + t[c->k11] * c->fx;
+  return a * (1 - c->fy) + b * c->fy;
 }
 
 /* Morel (1988) / 6S: the ratio of upwelling to downwelling irradiance
@@ -320,6 +307,8 @@ static ocean_wl wl_state(const ocean_bsdf *o, double wl) {
 }
 
 void ocean_update(ocean_bsdf *o) {
+  static _Atomic unsigned long gens;
+  o->gen = ++gens;
   double wd = 90.0 - o->wind_direction;
   wd -= 360.0 * floor(wd / 360.0);
   o->phi_w = wd * RSW_PI / 180.0;
@@ -424,62 +413,126 @@ static int page_water(const ocean_bsdf *o, ocean_wl *fixed, const ocean_wl **w) 
   return o->chromatic[rsw_page] ? 3 : 1;
 }
 
-static double underlight(const ocean_bsdf *o, const ocean_wl *w, vec3 light, vec3 view) {
+/* What eval and pdf compute at (wi, wo) whatever the wavelength (wi
+ * towards the sensor, wo towards the light, 6S's incident direction): the
+ * glint before its Fresnel term, the tables' lookups, the lobes'
+ * densities. Each channel and page then adds its own water's terms. */
+typedef struct ocean_geom {
+  bool lit;                     /* wi.z > 0 and wo.z > 0 */
+  double r, cchi, schi;         /* the glint: r F(cchi) pi */
+  lut_at down, up;              /* underlight: t_d at the light, t_u at the view */
+  lut_at at_wi;                 /* the glint lobe's probability: t_d at wi */
+  double cos_pdf, mf_p, mf_den; /* the pdf: (1 - ps) cos_pdf + ps mf_p / mf_den (mf_den 0: no glint) */
+} ocean_geom;
+
+static void geom_make(const ocean_bsdf *o, vec3 wi, vec3 wo, ocean_geom *g) {
+  g->lit = wi.z > 0.0 && wo.z > 0.0;
+  if (!g->lit) return;
+  /* The glint of light from wo seen from wi (Cox-Munk D, Smith G, 6S's F). */
+  double ci = wo.z, co = wi.z;
+  vec3 m = v3_norm(v3_add(wo, wi));
+  vec3 mp = to_wind(o->phi_w, m);
+  mf_distr d = ocean_distr(o);
+  double D = mf_D(&d, mp) * gram_charlier(o->wind_speed, o->sigma_u, o->sigma_c, mp);
+  g->r = D / (4.0 * ci * co);
+  if (o->shadowing) {
+    vec3 a = to_wind(o->phi_w, wo), b = to_wind(o->phi_w, wi);
+    g->r /= 1.0 + beckmann_lambda(d.alpha_u, d.alpha_v, a) + beckmann_lambda(d.alpha_u, d.alpha_v, b);
+  }
+  double cchi = v3_dot(wi, m);
+  g->cchi = fmin(fmax(cchi, -0.999999999), 0.999999999);
+  g->schi = fmin(sqrt(1.0 - g->cchi * g->cchi), 0.999999999);
+  g->down = lut_coords(o, wo.z, wo);
+  g->up = lut_coords(o, wi.z, wo);
+  g->at_wi = lut_coords(o, wi.z, wi);
+  g->cos_pdf = warp_square_to_cosine_hemisphere_pdf(wo);
+  vec3 h = v3_norm(v3_add(wi, wo));
+  double wh = v3_dot(wi, h);
+  g->mf_den = 0.0;
+  if (wh > 0.0) {
+    g->mf_p = mf_pdf(&d, to_wind(o->phi_w, wi), to_wind(o->phi_w, h));
+    g->mf_den = 4.0 * wh;
+  }
+}
+
+/* The geometry at (wi, wo), made again only when the ocean, its state or
+ * the directions (bit for bit) changed since this thread's last: a bundle
+ * asks every page at the same directions, and pdf() follows eval(). */
+static const ocean_geom *geom(const ocean_bsdf *o, vec3 wi, vec3 wo) {
+  static _Thread_local struct {
+    const ocean_bsdf *o;
+    unsigned long gen;
+    vec3 wi, wo;
+    ocean_geom g;
+  } tl;
+  if (tl.o != o || tl.gen != o->gen || memcmp(&tl.wi, &wi, sizeof wi) || memcmp(&tl.wo, &wo, sizeof wo)) {
+    geom_make(o, wi, wo, &tl.g);
+    tl.o = o, tl.gen = o->gen, tl.wi = wi, tl.wo = wo;
+  }
+  return &tl.g;
+}
+
+static double glint_g(const ocean_wl *w, const ocean_geom *g) {
+  return g->r * ocean_fresnel_6s(w->n_re, w->n_im, g->cchi, g->schi) * RSW_PI;
+}
+
+static double underlight_g(const ocean_wl *w, const ocean_geom *g) {
   if (w->wavelength < 400.0 || w->wavelength > 700.0 || !w->t_down) return 0.0;
-  double td = t_lookup(o, w->t_down, light.z, light);
-  double tu = t_lookup(o, w->t_up, view.z, light);
+  double td = lut_read(w->t_down, &g->down);
+  double tu = lut_read(w->t_up, &g->up);
   return w->r_omega * tu * td / ((w->n_re * w->n_re + w->n_im * w->n_im) * (1.0 - 0.485 * w->r_omega));
 }
 
-/* eval() for a radiance path: wi towards the sensor, wo towards the
- * light (6S's incident direction). */
-static double ocean_value(const ocean_bsdf *o, const ocean_wl *wl, vec3 wi, vec3 wo) {
-  if (!(wi.z > 0.0) || !(wo.z > 0.0)) return 0.0;
+double ocean_glint(const ocean_bsdf *o, vec3 wi, vec3 wo) {
+  ocean_wl w = fixed_wl(o);
+  ocean_geom g;
+  geom_make(o, wo, wi, &g); /* (wi here is the light's, geom_make's wo) */
+  return g.lit ? glint_g(&w, &g) : 0.0;
+}
+
+/* eval() for a radiance path (cos_o: wo.z). */
+static double ocean_value(const ocean_bsdf *o, const ocean_wl *wl, const ocean_geom *g, double cos_o) {
+  if (!g->lit) return 0.0;
   double w = wl->whitecap, v;
   switch (o->component) {
   case 1: v = w; break;
-  case 2: v = (1.0 - o->coverage) * glint(o, wl, wo, wi); break;
-  case 3: v = (1.0 - w) * underlight(o, wl, wo, wi); break;
-  case 4: v = w + (1.0 - w) * underlight(o, wl, wo, wi); break;
+  case 2: v = (1.0 - o->coverage) * glint_g(wl, g); break;
+  case 3: v = (1.0 - w) * underlight_g(wl, g); break;
+  case 4: v = w + (1.0 - w) * underlight_g(wl, g); break;
   default:
-    v = (w + (1.0 - w) * underlight(o, wl, wo, wi) + (1.0 - o->coverage) * glint(o, wl, wo, wi)) * wo.z *
-        RSW_INV_PI;
+    v = (w + (1.0 - w) * underlight_g(wl, g) + (1.0 - o->coverage) * glint_g(wl, g)) * cos_o * RSW_INV_PI;
     break;
   }
   return isfinite(v) ? v : 0.0;
 }
 
 /* The value of each channel (n from page_water). */
-static color ocean_values(const ocean_bsdf *o, int n, const ocean_wl *const *w, vec3 wi, vec3 wo) {
-  if (n == 1) return col1(ocean_value(o, w[0], wi, wo));
-  return col(ocean_value(o, w[0], wi, wo), ocean_value(o, w[1], wi, wo), ocean_value(o, w[2], wi, wo));
+static color ocean_values(const ocean_bsdf *o, int n, const ocean_wl *const *w, const ocean_geom *g,
+                          double cos_o) {
+  if (n == 1) return col1(ocean_value(o, w[0], g, cos_o));
+  return col(ocean_value(o, w[0], g, cos_o), ocean_value(o, w[1], g, cos_o), ocean_value(o, w[2], g, cos_o));
 }
 
-/* The probability of the glint lobe (Eradiate's); where the channels
- * differ, the mean of theirs (the channel-mean density, as media do:
- * docs/experiments.md#spectral-bundles), so that every channel's value
- * over it is unbiased. */
-static double p_glint1(const ocean_bsdf *o, const ocean_wl *w, vec3 wi) {
-  double t_i = t_lookup(o, w->t_down, wi.z, wi);
+/* The probability of the glint lobe (Eradiate's) with t_d looked up at
+ * `at`; where the channels differ, the mean of theirs (the channel-mean
+ * density, as media do: docs/experiments.md#spectral-bundles), so that
+ * every channel's value over it is unbiased. */
+static double p_glint1(const ocean_bsdf *o, const ocean_wl *w, const lut_at *at) {
+  double t_i = lut_read(w->t_down, at);
   double pd = w->whitecap + t_i * (1.0 - w->whitecap), ps = 1.0 - o->coverage;
   return ps / (ps + pd);
 }
 
-static double p_glint(const ocean_bsdf *o, int n, const ocean_wl *const *w, vec3 wi) {
-  if (n == 1) return p_glint1(o, w[0], wi);
-  return (p_glint1(o, w[0], wi) + p_glint1(o, w[1], wi) + p_glint1(o, w[2], wi)) / 3.0;
+static double p_glint(const ocean_bsdf *o, int n, const ocean_wl *const *w, const lut_at *at) {
+  if (n == 1) return p_glint1(o, w[0], at);
+  return (p_glint1(o, w[0], at) + p_glint1(o, w[1], at) + p_glint1(o, w[2], at)) / 3.0;
 }
 
-static double ocean_pdf_dir(const ocean_bsdf *o, int n, const ocean_wl *const *w, vec3 wi, vec3 wo) {
-  if (!(wi.z > 0.0) || !(wo.z > 0.0)) return 0.0;
-  double ps = p_glint(o, n, w, wi);
-  double p = (1.0 - ps) * warp_square_to_cosine_hemisphere_pdf(wo);
-  vec3 h = v3_norm(v3_add(wi, wo));
-  double wh = v3_dot(wi, h);
-  if (wh > 0.0) {
-    mf_distr d = ocean_distr(o);
-    p += ps * mf_pdf(&d, to_wind(o->phi_w, wi), to_wind(o->phi_w, h)) / (4.0 * wh);
-  }
+static double ocean_pdf_dir(const ocean_bsdf *o, int n, const ocean_wl *const *w, const ocean_geom *g) {
+  if (!g->lit) return 0.0;
+  double ps = p_glint(o, n, w, &g->at_wi);
+  double p = (1.0 - ps) * g->cos_pdf;
+  if (g->mf_den > 0.0) p += ps * g->mf_p / g->mf_den;
   return p;
 }
 
@@ -490,7 +543,8 @@ static color ocean_sample(const bsdf *b, const surface_interaction *si, double u
   ocean_wl fx;
   const ocean_wl *w[3];
   int n = page_water(o, &fx, w);
-  double ps = p_glint(o, n, w, wi);
+  lut_at at = lut_coords(o, wi.z, wi);
+  double ps = p_glint(o, n, w, &at);
   if (u1 >= ps) {
     bs->wo = warp_square_to_cosine_hemisphere(u2);
     bs->sampled_type = BSDF_DIFFUSE_REFLECTION;
@@ -502,10 +556,11 @@ static color ocean_sample(const bsdf *b, const surface_interaction *si, double u
     bs->sampled_type = BSDF_GLOSSY_REFLECTION;
   }
   bs->eta = 1.0;
-  bs->pdf = ocean_pdf_dir(o, n, w, wi, bs->wo);
+  const ocean_geom *g = geom(o, wi, bs->wo);
+  bs->pdf = ocean_pdf_dir(o, n, w, g);
   if (!(bs->pdf > 0.0)) return bsdf_fail(bs);
-  if (n == 1) return col1(ocean_value(o, w[0], wi, bs->wo) / bs->pdf);
-  return col_scale(ocean_values(o, n, w, wi, bs->wo), 1.0 / bs->pdf);
+  if (n == 1) return col1(ocean_value(o, w[0], g, bs->wo.z) / bs->pdf);
+  return col_scale(ocean_values(o, n, w, g, bs->wo.z), 1.0 / bs->pdf);
 }
 
 static color ocean_eval(const bsdf *b, const surface_interaction *si, vec3 wo) {
@@ -513,7 +568,7 @@ static color ocean_eval(const bsdf *b, const surface_interaction *si, vec3 wo) {
   ocean_wl fx;
   const ocean_wl *w[3];
   int n = page_water(o, &fx, w);
-  return ocean_values(o, n, w, si->wi, wo);
+  return ocean_values(o, n, w, geom(o, si->wi, wo), wo.z);
 }
 
 static double ocean_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
@@ -521,7 +576,7 @@ static double ocean_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
   ocean_wl fx;
   const ocean_wl *w[3];
   int n = page_water(o, &fx, w);
-  return ocean_pdf_dir(o, n, w, si->wi, wo);
+  return ocean_pdf_dir(o, n, w, geom(o, si->wi, wo));
 }
 
 /* Polarization (docs/plugins.md#polarization-surfaces), as Eradiate's polarized
@@ -542,8 +597,9 @@ static void ocean_polarization(const bsdf *b, const surface_interaction *si, vec
   ocean_wl fx;
   const ocean_wl *wl[3];
   page_water(o, &fx, wl); /* (Stokes films render one wavelength: the channels are alike) */
-  double w = wl[0]->whitecap, g = (1.0 - o->coverage) * glint(o, wl[0], wo, wi);
-  double d = o->component == 2 ? 0.0 : w + (1.0 - w) * underlight(o, wl[0], wo, wi);
+  const ocean_geom *ge = geom(o, wi, wo);
+  double w = wl[0]->whitecap, g = (1.0 - o->coverage) * glint_g(wl[0], ge);
+  double d = o->component == 2 ? 0.0 : w + (1.0 - w) * underlight_g(wl[0], ge);
   if (!(g > 0.0) || !isfinite(g)) return;
   vec3 h = v3_norm(v3_add(wi, wo));
   mueller F[3];
