@@ -25,11 +25,15 @@
  *    prepared at the page's three wavelengths alone, bit for bit (the
  *    ocean: pages 0, 3 and 5, value and pdf);
  *  - the uniform texture answers for rsw_page and leaves it at 0;
- *  - `null` (the one delta lobe pages carry) gives weight 1 at every page.
+ *  - `null` (a delta lobe every page draws alike) gives weight 1 at every page;
+ *  - what carries pages: plastic, roughplastic, dielectric, the ocean and
+ *    compositions without a delta lobe; twosided, blendbsdf and mask over
+ *    a plastic or glass are refused, named, "delta lobe" in the reason.
  * Chi-square: 200,000 samples per run, significance 0.01 with the Sidak
  * correction over the runs of this file; fixed seeds. */
 #include <math.h>
 #include <stdio.h>
+#include <string.h>
 
 #include "../../../server/kernel/integrators/pages.h"
 #include "../../support/bsdf_test.h"
@@ -351,6 +355,41 @@ static void test_delta(void) {
   delta_case(GLASS, BSDF_DELTA_REFLECTION, 0);
 }
 
+/* What carries pages (scene_page_blocker): plastic, roughplastic,
+ * dielectric, the ocean that follows the render and compositions without
+ * a delta lobe do; compositions holding a delta lobe (twosided, blendbsdf,
+ * mask over a plastic or glass) are refused, naming the composition. */
+static void test_blockers(void) {
+  const char *yes[6] = {PLASTIC,
+                        ROUGHPLASTIC,
+                        GLASS,
+                        OCEAN,
+                        "{\"type\": \"twosided\", \"bsdf\": {\"type\": \"roughplastic\"}}",
+                        "{\"type\": \"blendbsdf\", \"weight\": 0.3, \"bsdf_0\": {\"type\": \"diffuse\"}, "
+                        "\"bsdf_1\": {\"type\": \"roughplastic\"}}"};
+  const char *no[3][2] = {
+      {"{\"type\": \"twosided\", \"bsdf\": {\"type\": \"plastic\"}}", "twosided"},
+      {"{\"type\": \"blendbsdf\", \"weight\": 0.3, \"bsdf_0\": {\"type\": \"diffuse\"}, "
+       "\"bsdf_1\": {\"type\": \"plastic\"}}",
+       "blendbsdf"},
+      {"{\"type\": \"mask\", \"opacity\": 0.5, \"bsdf\": {\"type\": \"dielectric\"}}", "mask"}};
+  for (int i = 0; i < 6; i++) {
+    scene *s = bsdf_scene(yes[i]);
+    const char *why = "";
+    const object *blk = s ? scene_page_blocker(s, &why) : NULL;
+    CHECK(s && !blk, "%s carries pages (%s: %s)", yes[i], blk ? blk->plugin->name : "", why);
+    scene_free(s);
+  }
+  for (int i = 0; i < 3; i++) {
+    scene *s = bsdf_scene(no[i][0]);
+    const char *why = "";
+    const object *blk = s ? scene_page_blocker(s, &why) : NULL;
+    CHECK(blk && strcmp(blk->plugin->name, no[i][1]) == 0 && strstr(why, "delta lobe"), "%s refused: %s %s",
+          no[i][0], blk ? blk->plugin->name : "none", why);
+    scene_free(s);
+  }
+}
+
 int main(void) {
   RSW_TEST_RUN(test_chi2);
   RSW_TEST_RUN(test_weights);
@@ -358,5 +397,6 @@ int main(void) {
   RSW_TEST_RUN(test_ocean);
   RSW_TEST_RUN(test_null);
   RSW_TEST_RUN(test_delta);
+  RSW_TEST_RUN(test_blockers);
   RSW_TEST_END("test_pages");
 }
