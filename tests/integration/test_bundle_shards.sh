@@ -122,8 +122,9 @@ assert len(m["incomplete"]) == 40, len(m["incomplete"])' oldpartial/sweep.json
 python3 -c 'import json; m = json.load(open("old1/sweep.json")); m["bundle_shards"] = "pairs"; json.dump(m, open("old1/sweep.json", "w"))'
 expect 6 "merge, a manifest with an unknown bundle_shards" rs "$pa" merge old0 old1 -o oldbad
 contains "merge, a manifest with an unknown bundle_shards" "$tmp/err" "bundle_shards"
-# --bundle auto where the daemon comes to 3 (a canopy on a plastic soil,
-# whose delta specular lobe keeps pages out; leaves with tabulated
+# --bundle auto where the daemon comes to 3 (a canopy on a two-sided
+# plastic soil, whose delta specular lobe inside `twosided` keeps pages
+# out; leaves with tabulated
 # reflectance and transmittance, so that the bundle changes the paths'
 # choices): 20 wavelengths per reflectance, groups of 16 (leads 0, 16, 20,
 # 36: shards 0, 1, 2, 0 of 3) each cut into threes, so the shards' bundles
@@ -133,13 +134,13 @@ cp "$root/proto/examples/canopy_leaves.txt" .
 python3 - "$root/proto/examples/canopy_periodic.json" canopy3.json <<'PY'
 import json, sys
 d = json.load(open(sys.argv[1]))
-d["soil"]["bsdf"] = {"type": "plastic", "diffuse_reflectance": 0.3}
+d["soil"]["bsdf"] = {"type": "twosided", "bsdf": {"type": "plastic", "diffuse_reflectance": 0.3}}
 d["leaf"]["disc"]["bsdf"] = {"type": "bilambertian",
                              "reflectance": {"type": "spectrum", "wavelengths": [400, 800], "values": [0.05, 0.5]},
                              "transmittance": {"type": "spectrum", "wavelengths": [400, 800], "values": [0.3, 0.45]}}
 json.dump(d, open(sys.argv[2], "w"))
 PY
-g20=(--grid wavelength=400:590:10 --grid soil.bsdf.diffuse_reflectance.value=0.2:0.3:0.1 --spp 4 --seed 7)
+g20=(--grid wavelength=400:590:10 --grid soil.bsdf.brdf_0.diffuse_reflectance.value=0.2:0.3:0.1 --spp 4 --seed 7)
 rs "$pa" sweep canopy3.json "${g20[@]}" --bundle auto -o dauto >/dev/null 2>"$tmp/err" &&
   rs "$pa" sweep canopy3.json "${g20[@]}" --bundle auto --shard 0/3 -o d0 >/dev/null 2>"$tmp/err" &&
   rs "$pb" sweep canopy3.json "${g20[@]}" --bundle auto --shard 1/3 -o d1 >/dev/null 2>"$tmp/err" &&

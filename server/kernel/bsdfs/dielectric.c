@@ -44,6 +44,22 @@ static color dielectric_sample(const bsdf *b, const surface_interaction *si, dou
   return col_scale(bsdf_factor(d->specular_transmittance, si), eta_ti * eta_ti);
 }
 
+/* A lobe's value and its probability (R for the reflection, 1 - R for the
+ * transmission) at the page rsw_page names (bsdf_ops.delta_value; the
+ * index is one number, so the direction is every page's). */
+static color dielectric_delta_value(const bsdf *b, const surface_interaction *si, unsigned lobe,
+                                    double *prob) {
+  const dielectric_bsdf *d = (const dielectric_bsdf *)b;
+  double cos_t, eta_it, eta_ti;
+  double r = fresnel_dielectric(si->wi.z, d->eta, &cos_t, &eta_it, &eta_ti);
+  if (lobe == BSDF_DELTA_REFLECTION) {
+    *prob = r;
+    return col_scale(bsdf_factor(d->specular_reflectance, si), r);
+  }
+  *prob = lobe == BSDF_DELTA_TRANSMISSION ? 1.0 - r : 0.0;
+  return col_scale(bsdf_factor(d->specular_transmittance, si), *prob * eta_ti * eta_ti);
+}
+
 static color dielectric_eval(const bsdf *b, const surface_interaction *si, vec3 wo) {
   (void)b;
   (void)si;
@@ -73,7 +89,8 @@ static void dielectric_polarization(const bsdf *b, const surface_interaction *si
 static const bsdf_ops dielectric_ops = {.sample = dielectric_sample,
                                         .eval = dielectric_eval,
                                         .pdf = dielectric_pdf,
-                                        .polarization = dielectric_polarization};
+                                        .polarization = dielectric_polarization,
+                                        .delta_value = dielectric_delta_value};
 
 /* An index given as a number or as a material name (Mitsuba's
  * lookup_ior()): absent -> the named default. */

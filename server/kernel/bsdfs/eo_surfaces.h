@@ -67,8 +67,37 @@ enum {
   OCEAN_T_RES = 64 /* transmittance tables: zenith x azimuth */
 };
 
+/* What one wavelength makes of the water (ocean_update's derived
+ * values at that wavelength, and its transmittance tables; NULL: not
+ * built, underlight 0 and t_d = 1). */
+typedef struct ocean_wl {
+  double wavelength, n_re, n_im, r_omega, whitecap;
+  const float *t_down, *t_up;
+} ocean_wl;
+
+/* Transmittance tables for one (n_re, n_im, wind_speed): a cache entry of
+ * an ocean that follows the render's wavelength. */
+typedef struct ocean_table {
+  double key[3];
+  unsigned stamp; /* the prepare() that last used it */
+  float t_down[OCEAN_T_RES * OCEAN_T_RES], t_up[OCEAN_T_RES * OCEAN_T_RES];
+} ocean_table;
+
+enum {
+  OCEAN_CACHE = 48 /* tables an ocean that follows the render keeps (32 KiB each) */
+};
+
 typedef struct ocean_bsdf {
   bsdf base;
+  /* "wavelength": "render": each colour channel of each page at its own
+   * render wavelength (prepare() fills pg and chromatic); else the fixed
+   * `wavelength` below for every channel */
+  bool follow;
+  ocean_wl pg[RENDER_MAX_PAGES][3];
+  bool chromatic[RENDER_MAX_PAGES]; /* page p's channels differ */
+  ocean_table *cache;               /* follow: OCEAN_CACHE entries, allocated by the first prepare() */
+  unsigned stamp, next;
+  unsigned long gen; /* a number no other state of any ocean had (ocean_update): keys eval's reuse */
   /* parameters */
   double wavelength;     /* nm */
   double wind_speed;     /* m/s at 10 m */

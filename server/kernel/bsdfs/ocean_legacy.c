@@ -36,9 +36,11 @@
  * docs/kernel-conventions.md#ocean_legacy. */
 #include <math.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "../scene/loader.h"
 #include "../scene/params.h"
+#include "../scene/plugin_def.h"
 #include "eo_surfaces.h"
 #include "fresnel_pol.h"
 #include "microfacet.h"
@@ -92,22 +94,10 @@ static double beckmann_lambda(double au, double av, vec3 v) {
   return 0.5 * (erf(a) - 1.0) + exp(-a * a) / (2.0 * a * sqrt(RSW_PI));
 }
 
-double ocean_glint(const ocean_bsdf *o, vec3 wi, vec3 wo) {
-  double ci = wi.z, co = wo.z;
-  if (!(ci > 0.0) || !(co > 0.0)) return 0.0;
-  vec3 m = v3_norm(v3_add(wi, wo));
-  vec3 mp = to_wind(o->phi_w, m);
-  mf_distr d = ocean_distr(o);
-  double D = mf_D(&d, mp) * gram_charlier(o->wind_speed, o->sigma_u, o->sigma_c, mp);
-  double r = D / (4.0 * ci * co);
-  if (o->shadowing) {
-    vec3 a = to_wind(o->phi_w, wi), b = to_wind(o->phi_w, wo);
-    r /= 1.0 + beckmann_lambda(d.alpha_u, d.alpha_v, a) + beckmann_lambda(d.alpha_u, d.alpha_v, b);
-  }
-  double cchi = v3_dot(wo, m);
-  cchi = fmin(fmax(cchi, -0.999999999), 0.999999999);
-  double schi = fmin(sqrt(1.0 - cchi * cchi), 0.999999999);
-  return r * ocean_fresnel_6s(o->n_re, o->n_im, cchi, schi) * RSW_PI;
+static ocean_wl fixed_wl(const ocean_bsdf *o) {
+  bool t = ocean_tables_ready(o);
+  return (ocean_wl){o->wavelength,        o->n_re,           o->n_im, o->r_omega, o->whitecap,
+                    t ? o->t_down : NULL, t ? o->t_up : NULL};
 }
 
 /* Gauss-Legendre nodes and weights on [-1, 1] (Newton on P_n). */
@@ -140,74 +130,132 @@ enum {
   OCEAN_NQ = 32
 };
 
-static double transmittance(double theta, double phi, double n_re, double n_im, double ws, double sig_u,
-                            double sig_c, bool up, const double *gx, const double *gw, int nq) {
-  if (up) {
-    theta = asin(sin(theta) / n_re);
-    n_re = 1.0 / n_re;
-    n_im = 0.0;
-  }
-  vec3 wi = v3(sin(theta), 0.0, cos(theta));
-  double c = cos(phi), s = sin(phi);
-  double td = 0.0, sum = 0.0;
+/* The quadrature over the hemisphere: nq x nq Gauss-Legendre points,
+ * zenith in [0, pi/2], azimuth in [0, 2 pi], their directions, weights
+ * and the weights' sum (made once per table build; the sums in the order
+ * transmittance() takes them); wo and w hold nq^2 each. */
+typedef struct hemi_quad {
+  int n;
+  vec3 *wo;
+  double *w, sum;
+} hemi_quad;
+
+static void hemi_quad_make(int nq, hemi_quad *q) {
+  double gx[128], gw[128];
+  gauss_legendre(nq, gx, gw);
+  q->n = nq * nq;
+  q->sum = 0.0;
   for (int a = 0; a < nq; a++) {
     double th = (gx[a] + 1.0) * RSW_PI / 4.0, wth = gw[a] * RSW_PI / 4.0;
     double st = sin(th), ct = cos(th);
     for (int b = 0; b < nq; b++) {
       double ph = (gx[b] + 1.0) * RSW_PI, wph = gw[b] * RSW_PI;
-      double gweight = ct * st * wth * wph;
-      vec3 wo = v3(st * cos(ph), st * sin(ph), ct);
-      double ci = wi.z < 1e-6 ? 1e-6 : wi.z, co = wo.z < 1e-6 ? 1e-6 : wo.z;
-      vec3 m = v3_norm(v3_add(wi, wo));
-      vec3 mp = v3_norm(v3(c * m.x + s * m.y, -s * m.x + c * m.y, m.z));
-      double xn = mp.x / (sig_u * mp.z), xe = mp.y / (sig_c * mp.z);
-      double D = gram_charlier(ws, sig_u, sig_c, mp) / (2.0 * RSW_PI * sig_u * sig_c) *
-                 exp(-0.5 * (xe * xe + xn * xn)) / (m.z * m.z * m.z * m.z);
-      double cchi = fmin(fmax(v3_dot(wo, m), -0.999999999), 0.999999999);
-      double schi = fmin(sqrt(1.0 - cchi * cchi), 0.999999999);
-      double g = D * ocean_fresnel_6s(n_re, n_im, cchi, schi) * RSW_PI / (4.0 * ci * co);
-      if (!(wi.z > 0.0 && wo.z > 0.0)) g = 1.0;
-      td += g * gweight;
-      sum += gweight;
+      int k = a * nq + b;
+      q->w[k] = ct * st * wth * wph;
+      q->wo[k] = v3(st * cos(ph), st * sin(ph), ct);
+      q->sum += q->w[k];
     }
   }
-  if (td >= sum) td = sum;
-  return 1.0 - td / sum;
+}
+
+/* 1 - (glint albedo) for nw indices n_re[w] + i n_im[w] at once into
+ * t[w] (downwelling: the slopes' geometry is the same for every index;
+ * upwelling takes one index, nw 1, its refraction of theta its own). */
+enum {
+  OCEAN_MAX_NW = 3 * RENDER_MAX_PAGES
+};
+
+static void transmittance(double theta, double phi, int nw, const double *n_re, const double *n_im, double ws,
+                          double sig_u, double sig_c, bool up, const hemi_quad *q, double *t) {
+  double nr[OCEAN_MAX_NW], ni[OCEAN_MAX_NW], td[OCEAN_MAX_NW];
+  for (int w = 0; w < nw; w++) nr[w] = n_re[w], ni[w] = n_im[w], td[w] = 0.0;
+  if (up) {
+    theta = asin(sin(theta) / nr[0]);
+    nr[0] = 1.0 / nr[0];
+    ni[0] = 0.0;
+  }
+  vec3 wi = v3(sin(theta), 0.0, cos(theta));
+  double c = cos(phi), s = sin(phi);
+  for (int k = 0; k < q->n; k++) {
+    double gweight = q->w[k];
+    vec3 wo = q->wo[k];
+    double ci = wi.z < 1e-6 ? 1e-6 : wi.z, co = wo.z < 1e-6 ? 1e-6 : wo.z;
+    vec3 m = v3_norm(v3_add(wi, wo));
+    vec3 mp = v3_norm(v3(c * m.x + s * m.y, -s * m.x + c * m.y, m.z));
+    double xn = mp.x / (sig_u * mp.z), xe = mp.y / (sig_c * mp.z);
+    double D = gram_charlier(ws, sig_u, sig_c, mp) / (2.0 * RSW_PI * sig_u * sig_c) *
+               exp(-0.5 * (xe * xe + xn * xn)) / (m.z * m.z * m.z * m.z);
+    double cchi = fmin(fmax(v3_dot(wo, m), -0.999999999), 0.999999999);
+    double schi = fmin(sqrt(1.0 - cchi * cchi), 0.999999999);
+    bool lit = wi.z > 0.0 && wo.z > 0.0;
+    for (int w = 0; w < nw; w++) {
+      double g = D * ocean_fresnel_6s(nr[w], ni[w], cchi, schi) * RSW_PI / (4.0 * ci * co);
+      if (!lit) g = 1.0;
+      td[w] += g * gweight;
+    }
+  }
+  for (int w = 0; w < nw; w++) {
+    if (td[w] >= q->sum) td[w] = q->sum;
+    t[w] = 1.0 - td[w] / q->sum;
+  }
 }
 
 double ocean_transmittance(const ocean_bsdf *o, double theta, double phi, bool up, int nq) {
-  double gx[128], gw[128];
+  hemi_quad q = {0};
   if (nq < 1 || nq > 128) return NAN;
-  gauss_legendre(nq, gx, gw);
-  return transmittance(theta, phi, o->n_re, o->n_im, o->wind_speed, o->sigma_u, o->sigma_c, up, gx, gw, nq);
+  q.wo = malloc((size_t)nq * nq * sizeof *q.wo);
+  q.w = malloc((size_t)nq * nq * sizeof *q.w);
+  if (!q.wo || !q.w) return free(q.wo), free(q.w), NAN;
+  hemi_quad_make(nq, &q);
+  double t;
+  transmittance(theta, phi, 1, &o->n_re, &o->n_im, o->wind_speed, o->sigma_u, o->sigma_c, up, &q, &t);
+  free(q.wo), free(q.w);
+  return t;
 }
 
 /* The tables on Eradiate's grid: zenith linspace(0, pi/2, 64) x azimuth
- * linspace(0, 2 pi, 64). Departure: OCEAN_NQ = 32 Gauss-Legendre points
- * per dimension where Eradiate takes 64 (16 times cheaper to build;
- * tests/kernel/bsdfs/test_ocean_legacy.c bounds the difference). */
-void ocean_tables(ocean_bsdf *o) {
-  if (ocean_tables_ready(o)) return;
-  double gx[OCEAN_NQ], gw[OCEAN_NQ];
-  gauss_legendre(OCEAN_NQ, gx, gw);
+ * linspace(0, 2 pi, 64), for nw indices at once (t_down[w], t_up[w]; the
+ * downwelling ones share the slopes). Departure: OCEAN_NQ = 32
+ * Gauss-Legendre points per dimension where Eradiate takes 64 (16 times
+ * cheaper to build; tests/kernel/bsdfs/test_ocean_legacy.c bounds the
+ * difference). */
+static void build_tables(const ocean_bsdf *o, int nw, const double *n_re, const double *n_im, float **t_down,
+                         float **t_up) {
+  vec3 qwo[OCEAN_NQ * OCEAN_NQ];
+  double qw[OCEAN_NQ * OCEAN_NQ];
+  hemi_quad q = {.wo = qwo, .w = qw};
+  hemi_quad_make(OCEAN_NQ, &q);
   for (int j = 0; j < OCEAN_T_RES; j++) { /* azimuth */
     double phi = 2.0 * RSW_PI * j / (OCEAN_T_RES - 1);
     for (int i = 0; i < OCEAN_T_RES; i++) { /* zenith */
-      double th = 0.5 * RSW_PI * i / (OCEAN_T_RES - 1);
-      o->t_down[j * OCEAN_T_RES + i] = (float)transmittance(th, phi, o->n_re, o->n_im, o->wind_speed,
-                                                            o->sigma_u, o->sigma_c, false, gx, gw, OCEAN_NQ);
-      o->t_up[j * OCEAN_T_RES + i] = (float)transmittance(th, phi, o->n_re, o->n_im, o->wind_speed,
-                                                          o->sigma_u, o->sigma_c, true, gx, gw, OCEAN_NQ);
+      double th = 0.5 * RSW_PI * i / (OCEAN_T_RES - 1), t[OCEAN_MAX_NW];
+      transmittance(th, phi, nw, n_re, n_im, o->wind_speed, o->sigma_u, o->sigma_c, false, &q, t);
+      for (int w = 0; w < nw; w++) t_down[w][j * OCEAN_T_RES + i] = (float)t[w];
+      for (int w = 0; w < nw; w++) {
+        transmittance(th, phi, 1, &n_re[w], &n_im[w], o->wind_speed, o->sigma_u, o->sigma_c, true, &q, t);
+        t_up[w][j * OCEAN_T_RES + i] = (float)t[0];
+      }
     }
   }
+}
+
+void ocean_tables(ocean_bsdf *o) {
+  float *down = o->t_down, *up = o->t_up;
+  if (ocean_tables_ready(o)) return;
+  build_tables(o, 1, &o->n_re, &o->n_im, &down, &up);
   o->t_key[0] = o->n_re, o->t_key[1] = o->n_im, o->t_key[2] = o->wind_speed;
 }
 
 /* Bilinear lookup as Dr.Jit's clamped texture does it: texel k centred at
  * (k + 0.5) / 64 of [0, 1]; u from the zenith, v from the azimuth of
  * `dir` relative to the wind. */
-static double t_lookup(const ocean_bsdf *o, const float *t, double cos_theta, vec3 dir) {
-  if (!ocean_tables_ready(o)) return 1.0; /* not built: see eo_surfaces.h */
+/* A lookup's texels and weights, the same for every wavelength's table. */
+typedef struct lut_at {
+  int k00, k01, k10, k11;
+  double fx, fy;
+} lut_at;
+
+static lut_at lut_coords(const ocean_bsdf *o, double cos_theta, vec3 dir) {
   double u = acos(fmin(fmax(cos_theta, -1.0), 1.0)) * (2.0 / RSW_PI);
   double v = (atan2(dir.y, dir.x) - o->phi_w) / (2.0 * RSW_PI);
   v -= floor(v);
@@ -215,10 +263,15 @@ static double t_lookup(const ocean_bsdf *o, const float *t, double cos_theta, ve
   x = fmin(fmax(x, 0.0), OCEAN_T_RES - 1.0), y = fmin(fmax(y, 0.0), OCEAN_T_RES - 1.0);
   int i = (int)x, j = (int)y;
   int i1 = i + 1 < OCEAN_T_RES ? i + 1 : i, j1 = j + 1 < OCEAN_T_RES ? j + 1 : j;
-  double fx = x - i, fy = y - j;
-  double a = t[j * OCEAN_T_RES + i] * (1 - fx) + t[j * OCEAN_T_RES + i1] * fx;
-  double b = t[j1 * OCEAN_T_RES + i] * (1 - fx) + t[j1 * OCEAN_T_RES + i1] * fx;
-  return a * (1 - fy) + b * fy;
+  return (lut_at){
+      j * OCEAN_T_RES + i, j * OCEAN_T_RES + i1, j1 * OCEAN_T_RES + i, j1 * OCEAN_T_RES + i1, x - i, y - j};
+}
+
+static double lut_read(const float *t, const lut_at *c) {
+  if (!t) return 1.0; /* not built: see eo_surfaces.h */
+  double a = t[c->k00] * (1 - c->fx) + t[c->k01] * c->fx;
+  double b = t[c->k10] * (1 - c->fx) + t[c->k11] * c->fx;
+  return a * (1 - c->fy) + b * c->fy;
 }
 
 /* Morel (1988) / 6S: the ratio of upwelling to downwelling irradiance
@@ -242,17 +295,28 @@ static double r_omega(double wl, double pig) {
   return r;
 }
 
+/* The water at wavelength wl (nm), tables not built (o's wind and
+ * coverage already derived). */
+static ocean_wl wl_state(const ocean_bsdf *o, double wl) {
+  ocean_wl w = {.wavelength = wl};
+  w.n_re = ocean_ior_real(wl) + 0.00017492711 * (0.03 + 1.805 * o->chlorinity);
+  w.n_im = ocean_ior_imag(wl);
+  w.r_omega = r_omega(wl, o->pigmentation);
+  w.whitecap = o->coverage * ocean_whitecap_reflectance(wl);
+  return w;
+}
+
 void ocean_update(ocean_bsdf *o) {
+  static _Atomic unsigned long gens;
+  o->gen = ++gens;
   double wd = 90.0 - o->wind_direction;
   wd -= 360.0 * floor(wd / 360.0);
   o->phi_w = wd * RSW_PI / 180.0;
-  o->n_re = ocean_ior_real(o->wavelength) + 0.00017492711 * (0.03 + 1.805 * o->chlorinity);
-  o->n_im = ocean_ior_imag(o->wavelength);
   o->sigma_c = sqrt(0.003 + 0.00192 * o->wind_speed);
   o->sigma_u = sqrt(0.00316 * o->wind_speed);
-  o->r_omega = r_omega(o->wavelength, o->pigmentation);
   o->coverage = fmin(fmax(2.95e-6 * pow(o->wind_speed, 3.52), 0.0), 1.0);
-  o->whitecap = o->coverage * ocean_whitecap_reflectance(o->wavelength);
+  ocean_wl w = wl_state(o, o->wavelength);
+  o->n_re = w.n_re, o->n_im = w.n_im, o->r_omega = w.r_omega, o->whitecap = w.whitecap;
 }
 
 bool ocean_tables_ready(const ocean_bsdf *o) {
@@ -261,54 +325,214 @@ bool ocean_tables_ready(const ocean_bsdf *o) {
 
 /* The tables are built before a render (single-threaded), not at load or
  * on each update: a build takes about a second. */
+/* An ocean that follows the render: the tables of each of the n waters
+ * w[k] from the cache, those missing built there at once (each in an
+ * entry this prepare() has not used, taken in turn). False: out of
+ * memory. */
+static bool cached_tables(ocean_bsdf *o, int n, ocean_wl **w) {
+  if (!o->cache && !(o->cache = calloc(OCEAN_CACHE, sizeof *o->cache))) return false;
+  double nr[OCEAN_MAX_NW], ni[OCEAN_MAX_NW];
+  float *down[OCEAN_MAX_NW], *up[OCEAN_MAX_NW];
+  int nb = 0;
+  for (int k = 0; k < n; k++) {
+    ocean_table *t = NULL;
+    for (int i = 0; i < OCEAN_CACHE && !t; i++) {
+      ocean_table *c = &o->cache[i];
+      if (c->stamp && c->key[0] == w[k]->n_re && c->key[1] == w[k]->n_im && c->key[2] == o->wind_speed) t = c;
+    }
+    while (!t) { /* (a render uses at most RENDER_MAX_BUNDLE < OCEAN_CACHE entries) */
+      ocean_table *c = &o->cache[o->next];
+      o->next = (o->next + 1) % OCEAN_CACHE;
+      if (c->stamp == o->stamp) continue;
+      c->key[0] = w[k]->n_re, c->key[1] = w[k]->n_im, c->key[2] = o->wind_speed;
+      nr[nb] = w[k]->n_re, ni[nb] = w[k]->n_im, down[nb] = c->t_down, up[nb] = c->t_up, nb++;
+      t = c;
+    }
+    t->stamp = o->stamp;
+    w[k]->t_down = t->t_down, w[k]->t_up = t->t_up;
+  }
+  if (nb) build_tables(o, nb, nr, ni, down, up);
+  return true;
+}
+
+/* The tables are built before a render (single-threaded), not at load or
+ * on each update: a build takes about a second. An ocean that follows the
+ * render prepares each channel of each page at its wavelength
+ * (rc_page: docs/experiments.md#pages-more-than-three-wavelengths-per-path),
+ * its tables from a cache keyed by the water's index and the wind, those
+ * missing built together (the downwelling ones share their slopes). */
 static rsw_status ocean_prepare(object *ob, const render_ctx *rc, rsw_err *err) {
-  (void)rc, (void)err;
-  ocean_tables((ocean_bsdf *)ob);
+  ocean_bsdf *o = (ocean_bsdf *)ob;
+  if (!o->follow) {
+    ocean_tables(o);
+    return RSW_OK;
+  }
+  if (++o->stamp == 0) o->stamp = 1; /* (0 marks an empty entry) */
+  ocean_wl *own[OCEAN_MAX_NW];       /* the distinct waters, in page and channel order */
+  int n = 0, pages = rc_pages(rc);
+  for (int p = 0; p < pages; p++) {
+    render_ctx pc = rc_page(rc, p);
+    for (int c = 0; c < 3; c++) {
+      double wl = rc_channel_wavelength(&pc, c);
+      if (!(wl >= 200.0 && wl <= 4000.0))
+        return rsw_fail(err, RSW_ERR_RANGE, ob->id ? ob->id : "ocean_legacy",
+                        "ocean_legacy follows the render's wavelength, %g nm, outside its 200 to 4000 nm",
+                        wl);
+      if (c > 0 && wl == rc_channel_wavelength(&pc, c - 1)) continue; /* (a copy: below) */
+      o->pg[p][c] = wl_state(o, wl);
+      own[n++] = &o->pg[p][c];
+    }
+  }
+  if (!cached_tables(o, n, own))
+    return rsw_fail(err, RSW_ERR_NOMEM, ob->id ? ob->id : "ocean_legacy",
+                    "ocean_legacy: out of memory for its transmittance tables");
+  for (int p = 0; p < RENDER_MAX_PAGES; p++) {
+    render_ctx pc = rc_page(rc, p < pages ? p : 0);
+    for (int c = 0; c < 3; c++)
+      if (p >= pages)
+        o->pg[p][c] = o->pg[0][c];
+      else if (c > 0 && rc_channel_wavelength(&pc, c) == rc_channel_wavelength(&pc, c - 1))
+        o->pg[p][c] = o->pg[p][c - 1];
+    o->chromatic[p] =
+        o->pg[p][1].wavelength != o->pg[p][0].wavelength || o->pg[p][2].wavelength != o->pg[p][0].wavelength;
+  }
   return RSW_OK;
 }
 
-static double underlight(const ocean_bsdf *o, vec3 light, vec3 view) {
-  if (o->wavelength < 400.0 || o->wavelength > 700.0 || !ocean_tables_ready(o)) return 0.0;
-  double td = t_lookup(o, o->t_down, light.z, light);
-  double tu = t_lookup(o, o->t_up, view.z, light);
-  return o->r_omega * tu * td / ((o->n_re * o->n_re + o->n_im * o->n_im) * (1.0 - 0.485 * o->r_omega));
+/* The water each colour channel renders with at the page the caller
+ * evaluates at (rsw_page): n = 1 where the channels are alike (w[0]), else
+ * 3. */
+static int page_water(const ocean_bsdf *o, ocean_wl *fixed, const ocean_wl **w) {
+  if (!o->follow) {
+    *fixed = fixed_wl(o);
+    w[0] = w[1] = w[2] = fixed;
+    return 1;
+  }
+  const ocean_wl *pg = o->pg[rsw_page];
+  w[0] = &pg[0], w[1] = &pg[1], w[2] = &pg[2];
+  return o->chromatic[rsw_page] ? 3 : 1;
 }
 
-/* eval() for a radiance path: wi towards the sensor, wo towards the
- * light (6S's incident direction). */
-static double ocean_value(const ocean_bsdf *o, vec3 wi, vec3 wo) {
-  if (!(wi.z > 0.0) || !(wo.z > 0.0)) return 0.0;
-  double w = o->whitecap, v;
+/* What eval and pdf compute at (wi, wo) whatever the wavelength (wi
+ * towards the sensor, wo towards the light, 6S's incident direction): the
+ * glint before its Fresnel term, the tables' lookups, the lobes'
+ * densities. Each channel and page then adds its own water's terms. */
+typedef struct ocean_geom {
+  bool lit;                     /* wi.z > 0 and wo.z > 0 */
+  double r, cchi, schi;         /* the glint: r F(cchi) pi */
+  lut_at down, up;              /* underlight: t_d at the light, t_u at the view */
+  lut_at at_wi;                 /* the glint lobe's probability: t_d at wi */
+  double cos_pdf, mf_p, mf_den; /* the pdf: (1 - ps) cos_pdf + ps mf_p / mf_den (mf_den 0: no glint) */
+} ocean_geom;
+
+static void geom_make(const ocean_bsdf *o, vec3 wi, vec3 wo, ocean_geom *g) {
+  g->lit = wi.z > 0.0 && wo.z > 0.0;
+  if (!g->lit) return;
+  /* The glint of light from wo seen from wi (Cox-Munk D, Smith G, 6S's F). */
+  double ci = wo.z, co = wi.z;
+  vec3 m = v3_norm(v3_add(wo, wi));
+  vec3 mp = to_wind(o->phi_w, m);
+  mf_distr d = ocean_distr(o);
+  double D = mf_D(&d, mp) * gram_charlier(o->wind_speed, o->sigma_u, o->sigma_c, mp);
+  g->r = D / (4.0 * ci * co);
+  if (o->shadowing) {
+    vec3 a = to_wind(o->phi_w, wo), b = to_wind(o->phi_w, wi);
+    g->r /= 1.0 + beckmann_lambda(d.alpha_u, d.alpha_v, a) + beckmann_lambda(d.alpha_u, d.alpha_v, b);
+  }
+  double cchi = v3_dot(wi, m);
+  g->cchi = fmin(fmax(cchi, -0.999999999), 0.999999999);
+  g->schi = fmin(sqrt(1.0 - g->cchi * g->cchi), 0.999999999);
+  g->down = lut_coords(o, wo.z, wo);
+  g->up = lut_coords(o, wi.z, wo);
+  g->at_wi = lut_coords(o, wi.z, wi);
+  g->cos_pdf = warp_square_to_cosine_hemisphere_pdf(wo);
+  vec3 h = v3_norm(v3_add(wi, wo));
+  double wh = v3_dot(wi, h);
+  g->mf_den = 0.0;
+  if (wh > 0.0) {
+    g->mf_p = mf_pdf(&d, to_wind(o->phi_w, wi), to_wind(o->phi_w, h));
+    g->mf_den = 4.0 * wh;
+  }
+}
+
+/* The geometry at (wi, wo), made again only when the ocean, its state or
+ * the directions (bit for bit) changed since this thread's last: a bundle
+ * asks every page at the same directions, and pdf() follows eval(). */
+static const ocean_geom *geom(const ocean_bsdf *o, vec3 wi, vec3 wo) {
+  static _Thread_local struct {
+    const ocean_bsdf *o;
+    unsigned long gen;
+    vec3 wi, wo;
+    ocean_geom g;
+  } tl;
+  if (tl.o != o || tl.gen != o->gen || memcmp(&tl.wi, &wi, sizeof wi) || memcmp(&tl.wo, &wo, sizeof wo)) {
+    geom_make(o, wi, wo, &tl.g);
+    tl.o = o, tl.gen = o->gen, tl.wi = wi, tl.wo = wo;
+  }
+  return &tl.g;
+}
+
+static double glint_g(const ocean_wl *w, const ocean_geom *g) {
+  return g->r * ocean_fresnel_6s(w->n_re, w->n_im, g->cchi, g->schi) * RSW_PI;
+}
+
+static double underlight_g(const ocean_wl *w, const ocean_geom *g) {
+  if (w->wavelength < 400.0 || w->wavelength > 700.0 || !w->t_down) return 0.0;
+  double td = lut_read(w->t_down, &g->down);
+  double tu = lut_read(w->t_up, &g->up);
+  return w->r_omega * tu * td / ((w->n_re * w->n_re + w->n_im * w->n_im) * (1.0 - 0.485 * w->r_omega));
+}
+
+double ocean_glint(const ocean_bsdf *o, vec3 wi, vec3 wo) {
+  ocean_wl w = fixed_wl(o);
+  ocean_geom g;
+  geom_make(o, wo, wi, &g); /* (wi here is the light's, geom_make's wo) */
+  return g.lit ? glint_g(&w, &g) : 0.0;
+}
+
+/* eval() for a radiance path (cos_o: wo.z). */
+static double ocean_value(const ocean_bsdf *o, const ocean_wl *wl, const ocean_geom *g, double cos_o) {
+  if (!g->lit) return 0.0;
+  double w = wl->whitecap, v;
   switch (o->component) {
   case 1: v = w; break;
-  case 2: v = (1.0 - o->coverage) * ocean_glint(o, wo, wi); break;
-  case 3: v = (1.0 - w) * underlight(o, wo, wi); break;
-  case 4: v = w + (1.0 - w) * underlight(o, wo, wi); break;
+  case 2: v = (1.0 - o->coverage) * glint_g(wl, g); break;
+  case 3: v = (1.0 - w) * underlight_g(wl, g); break;
+  case 4: v = w + (1.0 - w) * underlight_g(wl, g); break;
   default:
-    v = (w + (1.0 - w) * underlight(o, wo, wi) + (1.0 - o->coverage) * ocean_glint(o, wo, wi)) * wo.z *
-        RSW_INV_PI;
+    v = (w + (1.0 - w) * underlight_g(wl, g) + (1.0 - o->coverage) * glint_g(wl, g)) * cos_o * RSW_INV_PI;
     break;
   }
   return isfinite(v) ? v : 0.0;
 }
 
-/* The probability of the glint lobe (Eradiate's). */
-static double p_glint(const ocean_bsdf *o, vec3 wi) {
-  double t_i = t_lookup(o, o->t_down, wi.z, wi);
-  double pd = o->whitecap + t_i * (1.0 - o->whitecap), ps = 1.0 - o->coverage;
+/* The value of each channel (n from page_water). */
+static color ocean_values(const ocean_bsdf *o, int n, const ocean_wl *const *w, const ocean_geom *g,
+                          double cos_o) {
+  if (n == 1) return col1(ocean_value(o, w[0], g, cos_o));
+  return col(ocean_value(o, w[0], g, cos_o), ocean_value(o, w[1], g, cos_o), ocean_value(o, w[2], g, cos_o));
+}
+
+/* The probability of the glint lobe (Eradiate's) with t_d looked up at
+ * `at`; where the channels differ, the mean of theirs (the channel-mean
+ * density, as media do: docs/experiments.md#spectral-bundles), so that
+ * every channel's value over it is unbiased. */
+static double p_glint1(const ocean_bsdf *o, const ocean_wl *w, const lut_at *at) {
+  double t_i = lut_read(w->t_down, at);
+  double pd = w->whitecap + t_i * (1.0 - w->whitecap), ps = 1.0 - o->coverage;
   return ps / (ps + pd);
 }
 
-static double ocean_pdf_dir(const ocean_bsdf *o, vec3 wi, vec3 wo) {
-  if (!(wi.z > 0.0) || !(wo.z > 0.0)) return 0.0;
-  double ps = p_glint(o, wi);
-  double p = (1.0 - ps) * warp_square_to_cosine_hemisphere_pdf(wo);
-  vec3 h = v3_norm(v3_add(wi, wo));
-  double wh = v3_dot(wi, h);
-  if (wh > 0.0) {
-    mf_distr d = ocean_distr(o);
-    p += ps * mf_pdf(&d, to_wind(o->phi_w, wi), to_wind(o->phi_w, h)) / (4.0 * wh);
-  }
+static double p_glint(const ocean_bsdf *o, int n, const ocean_wl *const *w, const lut_at *at) {
+  if (n == 1) return p_glint1(o, w[0], at);
+  return (p_glint1(o, w[0], at) + p_glint1(o, w[1], at) + p_glint1(o, w[2], at)) / 3.0;
+}
+
+static double ocean_pdf_dir(const ocean_bsdf *o, int n, const ocean_wl *const *w, const ocean_geom *g) {
+  if (!g->lit) return 0.0;
+  double ps = p_glint(o, n, w, &g->at_wi);
+  double p = (1.0 - ps) * g->cos_pdf;
+  if (g->mf_den > 0.0) p += ps * g->mf_p / g->mf_den;
   return p;
 }
 
@@ -316,7 +540,11 @@ static color ocean_sample(const bsdf *b, const surface_interaction *si, double u
   const ocean_bsdf *o = (const ocean_bsdf *)b;
   vec3 wi = si->wi;
   if (!(wi.z > 0.0)) return bsdf_fail(bs);
-  double ps = p_glint(o, wi);
+  ocean_wl fx;
+  const ocean_wl *w[3];
+  int n = page_water(o, &fx, w);
+  lut_at at = lut_coords(o, wi.z, wi);
+  double ps = p_glint(o, n, w, &at);
   if (u1 >= ps) {
     bs->wo = warp_square_to_cosine_hemisphere(u2);
     bs->sampled_type = BSDF_DIFFUSE_REFLECTION;
@@ -328,17 +556,27 @@ static color ocean_sample(const bsdf *b, const surface_interaction *si, double u
     bs->sampled_type = BSDF_GLOSSY_REFLECTION;
   }
   bs->eta = 1.0;
-  bs->pdf = ocean_pdf_dir(o, wi, bs->wo);
+  const ocean_geom *g = geom(o, wi, bs->wo);
+  bs->pdf = ocean_pdf_dir(o, n, w, g);
   if (!(bs->pdf > 0.0)) return bsdf_fail(bs);
-  return col1(ocean_value(o, wi, bs->wo) / bs->pdf);
+  if (n == 1) return col1(ocean_value(o, w[0], g, bs->wo.z) / bs->pdf);
+  return col_scale(ocean_values(o, n, w, g, bs->wo.z), 1.0 / bs->pdf);
 }
 
 static color ocean_eval(const bsdf *b, const surface_interaction *si, vec3 wo) {
-  return col1(ocean_value((const ocean_bsdf *)b, si->wi, wo));
+  const ocean_bsdf *o = (const ocean_bsdf *)b;
+  ocean_wl fx;
+  const ocean_wl *w[3];
+  int n = page_water(o, &fx, w);
+  return ocean_values(o, n, w, geom(o, si->wi, wo), wo.z);
 }
 
 static double ocean_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
-  return ocean_pdf_dir((const ocean_bsdf *)b, si->wi, wo);
+  const ocean_bsdf *o = (const ocean_bsdf *)b;
+  ocean_wl fx;
+  const ocean_wl *w[3];
+  int n = page_water(o, &fx, w);
+  return ocean_pdf_dir(o, n, w, geom(o, si->wi, wo));
 }
 
 /* Polarization (docs/plugins.md#polarization-surfaces), as Eradiate's polarized
@@ -356,12 +594,17 @@ static void ocean_polarization(const bsdf *b, const surface_interaction *si, vec
   vec3 wi = si->wi;
   fpol_depolarize(P, wo, wi, s_in, s_out);
   if (!(wi.z > 0.0) || !(wo.z > 0.0) || o->component == 1 || o->component >= 3) return;
-  double w = o->whitecap, g = (1.0 - o->coverage) * ocean_glint(o, wo, wi);
-  double d = o->component == 2 ? 0.0 : w + (1.0 - w) * underlight(o, wo, wi);
+  ocean_wl fx;
+  const ocean_wl *wl[3];
+  page_water(o, &fx, wl); /* (Stokes films render one wavelength: the channels are alike) */
+  const ocean_geom *ge = geom(o, wi, wo);
+  double w = wl[0]->whitecap, g = (1.0 - o->coverage) * glint_g(wl[0], ge);
+  double d = o->component == 2 ? 0.0 : w + (1.0 - w) * underlight_g(wl[0], ge);
   if (!(g > 0.0) || !isfinite(g)) return;
   vec3 h = v3_norm(v3_add(wi, wo));
   mueller F[3];
-  F[0] = F[1] = F[2] = mu_normalized(mu_fresnel_reflection(v3_dot(wo, h), mu_cmplx(o->n_re, o->n_im)));
+  F[0] = F[1] = F[2] =
+      mu_normalized(mu_fresnel_reflection(v3_dot(wo, h), mu_cmplx(wl[0]->n_re, wl[0]->n_im)));
   fpol_with_diffuse(P, F, col1(g), col1(d));
 }
 
@@ -369,6 +612,7 @@ static const bsdf_ops ocean_ops = {
     .sample = ocean_sample, .eval = ocean_eval, .pdf = ocean_pdf, .polarization = ocean_polarization};
 
 static void ocean_destroy(object *o) {
+  free(((ocean_bsdf *)o)->cache);
   free(o);
 }
 
@@ -382,8 +626,22 @@ static rsw_status ocean_create(loader *ld, node *n, object **out) {
   rsw_status st;
   if (!ld_has(n, "wavelength"))
     return ld_fail(ld, n, "wavelength", RSW_ERR_MISSING,
-                   "ocean_legacy needs 'wavelength' (nm, 200 to 4000), as in Eradiate");
-  if ((st = ld_float_range(ld, n, "wavelength", 550.0, 200.0, 4000.0, &wl)) != RSW_OK) return st;
+                   "ocean_legacy needs 'wavelength' (nm, 200 to 4000, as in Eradiate, or \"render\": each "
+                   "render's own)");
+  const prop *wp = node_find(n, "wavelength");
+  bool follow = wp->kind == PROP_STRING;
+  if (follow) {
+    const char *s;
+    if ((st = ld_string(ld, n, "wavelength", NULL, &s)) != RSW_OK) return st;
+    if (strcmp(s, "render") != 0)
+      return ld_fail(ld, n, "wavelength", RSW_ERR_INVALID,
+                     "ocean_legacy's wavelength is a number (nm, 200 to 4000) or \"render\" (each render's "
+                     "own), not '%s'",
+                     s);
+    wl = 550.0;
+  } else if ((st = ld_float_range(ld, n, "wavelength", 550.0, 200.0, 4000.0, &wl)) != RSW_OK) {
+    return st;
+  }
   if ((st = ld_float_range(ld, n, "wind_speed", 0.1, 0.0, 37.54, &ws)) != RSW_OK) return st;
   if (!(ws > 0.0)) return ld_fail(ld, n, "wind_speed", RSW_ERR_RANGE, "wind_speed must be > 0 m/s");
   if ((st = ld_float_range(ld, n, "wind_direction", 0.0, -1e6, 1e6, &wd)) != RSW_OK) return st;
@@ -397,13 +655,15 @@ static rsw_status ocean_create(loader *ld, node *n, object **out) {
   bsdf *b = ocean_legacy_new(wl, ws, wd, chl, pig, shadowing, (int)comp);
   if (!b) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "ocean_legacy: out of memory");
   b->base.id = n->id;
+  ((ocean_bsdf *)b)->follow = follow;
   *out = &b->base;
   return RSW_OK;
 }
 
 static void ocean_traverse(object *ob, param_visitor *v) {
   ocean_bsdf *o = (ocean_bsdf *)ob;
-  pv_float(v, "wavelength", &o->wavelength, UPDATE_SPECTRAL, 200.0, 4000.0);
+  if (!o->follow) /* (one that follows the render has no wavelength of its own) */
+    pv_float(v, "wavelength", &o->wavelength, UPDATE_SPECTRAL, 200.0, 4000.0);
   pv_float(v, "wind_speed", &o->wind_speed, UPDATE_SPECTRAL, nextafter(0.0, 1.0), 37.54);
   pv_float(v, "wind_direction", &o->wind_direction, UPDATE_SPECTRAL, -1e6, 1e6);
   pv_float(v, "chlorinity", &o->chlorinity, UPDATE_SPECTRAL, 0.0, 1e3);
@@ -416,6 +676,11 @@ static void ocean_changed(object *ob) {
   ocean_update((ocean_bsdf *)ob);
 }
 
+/* Whether a wavelength sweep changes it (scene_wavelength_dependent). */
+static bool ocean_spectral(const object *ob) {
+  return ((const ocean_bsdf *)ob)->follow;
+}
+
 const plugin plugin_ocean_legacy = {
     .name = "ocean_legacy",
     .cls = CLS_BSDF,
@@ -425,6 +690,8 @@ const plugin plugin_ocean_legacy = {
     .traverse = ocean_traverse,
     .parameters_changed = ocean_changed,
     .prepare = ocean_prepare,
+    .spectral = ocean_spectral,
+    .pages = plugin_pages_any, /* (one that follows the render prepares each page: ocean_prepare) */
 };
 
 bsdf *ocean_legacy_new(double wavelength, double wind_speed, double wind_direction, double chlorinity,

@@ -55,6 +55,18 @@ static color plastic_sample(const bsdf *b, const surface_interaction *si, double
   return col_scale(diffuse_value(p, si, f_i, bs->wo.z), 1.0 / pd);
 }
 
+/* The specular lobe's value F(cos_i) s and its probability P_s at the
+ * page rsw_page names (bsdf_ops.delta_value). */
+static color plastic_delta_value(const bsdf *b, const surface_interaction *si, unsigned lobe, double *prob) {
+  const plastic_bsdf *p = (const plastic_bsdf *)b;
+  double cos_i = si->wi.z;
+  *prob = 0.0;
+  if (!(cos_i > 0.0) || lobe != BSDF_DELTA_REFLECTION) return col1(0.0);
+  double f_i = fresnel_dielectric(cos_i, p->layer.eta, NULL, NULL, NULL);
+  *prob = prob_specular(p, f_i);
+  return col_scale(bsdf_factor(p->layer.specular, si), f_i);
+}
+
 static color plastic_eval(const bsdf *b, const surface_interaction *si, vec3 wo) {
   const plastic_bsdf *p = (const plastic_bsdf *)b;
   if (!(si->wi.z > 0.0) || !(wo.z > 0.0)) return col1(0.0);
@@ -82,8 +94,11 @@ static void plastic_polarization(const bsdf *b, const surface_interaction *si, v
     P[0] = P[1] = P[2] = mu_normalized(mu_fresnel_reflection(wo.z, ((const plastic_bsdf *)b)->layer.eta));
 }
 
-static const bsdf_ops plastic_ops = {
-    .sample = plastic_sample, .eval = plastic_eval, .pdf = plastic_pdf, .polarization = plastic_polarization};
+static const bsdf_ops plastic_ops = {.sample = plastic_sample,
+                                     .eval = plastic_eval,
+                                     .pdf = plastic_pdf,
+                                     .polarization = plastic_polarization,
+                                     .delta_value = plastic_delta_value};
 
 static void plastic_parameters_changed(object *o) {
   plastic_bsdf *p = (plastic_bsdf *)o;

@@ -27,8 +27,13 @@ static inline double bsdf_eval_pages(const bsdf *b, const surface_interaction *s
 
 /* The sample for every page: u1 picks the page j the direction is drawn
  * from (then, rescaled, the lobe within it), u2 the direction; bs->pdf is
- * the pages' mean density of bs->wo and w[p] each page's value over it. A
- * delta lobe (of the index-matched `null` alone: scene_page_blocker) takes
+ * the pages' mean density of bs->wo and w[p] each page's value over it.
+ * A delta lobe of a BSDF that says its value (bsdf_ops.delta_value:
+ * `plastic`, `dielectric`): each page's value over the mean of the pages'
+ * probabilities of drawing it (bs->pdf), so that a lobe the pages choose
+ * with different probabilities (a spectral diffuse_reflectance weights
+ * plastic's choice) stays unbiased at every page. Other delta lobes (the
+ * index-matched `null`, `conductor`'s one mirror: scene_page_blocker) take
  * each page's own weight for the same lobe and direction. A failed
  * sample: bs->pdf 0 and every weight 0. */
 static inline void bsdf_sample_pages(const bsdf *b, const surface_interaction *si, int pages, double u1,
@@ -41,6 +46,15 @@ static inline void bsdf_sample_pages(const bsdf *b, const surface_interaction *s
   for (int p = 0; p < pages; p++) w[p] = col1(0);
   if (!(bs->pdf > 0)) {
     bs->pdf = 0;
+  } else if ((bs->sampled_type & BSDF_DELTA) && b->ops->delta_value) {
+    double pm = 0.0, pr;
+    for (int p = 0; p < pages; p++) {
+      rsw_page = p;
+      w[p] = b->ops->delta_value(b, si, bs->sampled_type, &pr);
+      pm += pr;
+    }
+    bs->pdf = pm / pages;
+    for (int p = 0; p < pages; p++) w[p] = col_scale(w[p], 1.0 / bs->pdf);
   } else if (bs->sampled_type & BSDF_DELTA) {
     for (int p = 0; p < pages; p++) {
       bsdf_sample t;

@@ -143,20 +143,23 @@ const object *scene_page_blocker(const scene *s, const char **why) {
       *why = "prepares its values at one set of three wavelengths";
       return o;
     }
-    /* A delta lobe's weight comes from sample() alone, at one page:
-     * bsdf_sample_pages samples every page again with the same numbers
-     * and keeps its weight where it drew the same lobe and direction. So
-     * a delta lobe carries pages where every page draws it alike: the
-     * index-matched `null` (weight 1 at every wavelength), and a BSDF
-     * whose only lobe is one delta reflection (`conductor`: the mirror
-     * direction, drawn with probability 1 at every page). Where a delta
-     * lobe shares the choice with other lobes (`dielectric`, `plastic`),
-     * the choice's probability differs between the pages. */
+    /* A delta lobe carries pages where its BSDF says its value at each
+     * page and the probability of drawing it (bsdf_ops.delta_value:
+     * `plastic`, `dielectric`; bsdf_sample_pages weights each page by its
+     * value over the pages' mean probability), or where every page draws
+     * it alike (bsdf_sample_pages samples every page again with the same
+     * numbers and keeps its weight where it drew the same lobe and
+     * direction): the index-matched `null` (weight 1 at every wavelength),
+     * and a BSDF whose only lobe is one delta reflection (`conductor`: the
+     * mirror direction, drawn with probability 1 at every page). Others
+     * (a composition that holds a delta lobe: twosided, blendbsdf, ...)
+     * would need their parts' probabilities at every page. */
     if (pl->cls == CLS_BSDF) {
       const bsdf *b = (const bsdf *)o;
       const unsigned lobes = BSDF_SMOOTH | BSDF_DELTA;
       bool one_mirror = (b->flags & lobes) == BSDF_DELTA_REFLECTION;
-      if ((b->flags & BSDF_DELTA) && !(b->flags & BSDF_INDEX_MATCHED) && !one_mirror) {
+      if ((b->flags & BSDF_DELTA) && !(b->flags & BSDF_INDEX_MATCHED) && !one_mirror &&
+          !b->ops->delta_value) {
         *why = "has a delta lobe: its sampling differs between a bundle's pages";
         return o;
       }

@@ -22,7 +22,11 @@
  *  - chi-square of sample() against pdf() (200,000 samples, alpha 0.01
  *    Sidak-corrected over 4 runs), weight = eval / pdf;
  *  - JSON and XML scenes load; a PATCH of wind_speed updates the derived
- *    coverage; a missing wavelength and wind_speed 40 are refused.
+ *    coverage; a missing wavelength, wind_speed 40 and a wavelength
+ *    string other than "render" are refused;
+ *  - "wavelength": "render": the ocean at 450 and 650 nm is bit for bit
+ *    the ocean given those wavelengths (value and pdf), has no wavelength
+ *    parameter, is spectral, and refuses a render at 5000 nm.
  * Fixed seeds throughout. */
 #include <math.h>
 #include <stdio.h>
@@ -324,14 +328,58 @@ static void test_scene(void) {
     param_value_free(&c.value);
     scene_free(s);
   }
-  const char *bad[2] = {"{\"type\": \"scene\", \"a\": {\"type\": \"ocean_legacy\"}}",
-                        "{\"type\": \"scene\", \"a\": {\"type\": \"ocean_legacy\", \"wavelength\": 550, "
-                        "\"wind_speed\": 40}}"};
-  for (int k = 0; k < 2; k++) {
+  const char *bad[3] = {
+      "{\"type\": \"scene\", \"a\": {\"type\": \"ocean_legacy\"}}",
+      "{\"type\": \"scene\", \"a\": {\"type\": \"ocean_legacy\", \"wavelength\": 550, "
+      "\"wind_speed\": 40}}",
+      "{\"type\": \"scene\", \"a\": {\"type\": \"ocean_legacy\", \"wavelength\": \"sensor\"}}"};
+  for (int k = 0; k < 3; k++) {
     scene *s = tsup_load(bad[k], "mono");
     CHECK(s == NULL, "refused: %s", bad[k]);
     if (s) scene_free(s);
   }
+}
+
+/* "wavelength": "render": the ocean at each render's wavelength, bit for
+ * bit the ocean given that wavelength (its index, whitecaps, underlight
+ * and tables); no `wavelength` parameter of its own; spectral (a
+ * wavelength sweep changes it); a render outside 200-4000 nm refused. */
+static void test_follow(void) {
+  scene *s = tsup_load("{\"type\": \"scene\", \"a\": {\"type\": \"ocean_legacy\", \"id\": \"o\", "
+                       "\"wavelength\": \"render\", \"wind_speed\": 7, \"component\": 4}}",
+                       "mono");
+  REQUIRE(s, "an ocean that follows the render loads");
+  CHECK(scene_wavelength_dependent(s), "a wavelength sweep changes it");
+  const bsdf *b = NULL;
+  for (size_t i = 0; i < s->n_objects && !b; i++)
+    if (s->objects[i]->plugin == &plugin_ocean_legacy) b = (const bsdf *)s->objects[i];
+  REQUIRE(b, "the ocean");
+  rsw_err err = {0};
+  size_t idx;
+  CHECK(params_lookup(s, "ocean_legacy:o:wavelength", &idx, &err) != RSW_OK, "no wavelength parameter");
+  err = (rsw_err){0};
+  surface_interaction si = tb_si_with(tb_dir_deg(30, 10));
+  vec3 wo = tb_dir_deg(40, 200);
+  double prev = -1;
+  for (int k = 0; k < 2; k++) {
+    double wl = k ? 650.0 : 450.0;
+    render_ctx rc = {.variant = VARIANT_MONO, .wavelength = wl};
+    REQUIRE(scene_prepare(s, &rc, &err) == RSW_OK, "prepare at %g: %s", wl, err.msg);
+    bsdf *f = ocean_legacy_new(wl, 7, 0, 19, 0.3, true, 4);
+    REQUIRE(f, "fixed");
+    ocean_tables((ocean_bsdf *)f);
+    color a = b->ops->eval(b, &si, wo), e = f->ops->eval(f, &si, wo);
+    CHECK(a.c[0] == e.c[0] && a.c[1] == e.c[0] && a.c[2] == e.c[0], "at %g nm: %g, fixed %g", wl, a.c[0],
+          e.c[0]);
+    CHECK(b->ops->pdf(b, &si, wo) == f->ops->pdf(f, &si, wo), "pdf at %g nm", wl);
+    CHECK(a.c[0] != prev, "450 and 650 nm differ");
+    prev = a.c[0];
+    free(f);
+  }
+  render_ctx far = {.variant = VARIANT_MONO, .wavelength = 5000};
+  err = (rsw_err){0};
+  CHECK(scene_prepare(s, &far, &err) != RSW_OK && strstr(err.msg, "5000"), "5000 nm refused: %s", err.msg);
+  scene_free(s);
 }
 
 int main(void) {
@@ -342,5 +390,6 @@ int main(void) {
   RSW_TEST_RUN(test_quadrature);
   RSW_TEST_RUN(test_sampling);
   RSW_TEST_RUN(test_scene);
+  RSW_TEST_RUN(test_follow);
   RSW_TEST_END("test_ocean_legacy");
 }

@@ -6,17 +6,34 @@
  *    transmittance is 0 at the first page's wavelengths (so a page's own
  *    sampling misses a lobe another page has), for an rpv soil with a
  *    spectral rho_0 and for a gold roughconductor (its index preset per
- *    page), with bundles of 16 (6 pages) and 7 (3 pages);
+ *    page) and for water following the render's wavelength (`ocean_legacy`
+ *    "render": each channel its own index, whitecaps, underlight and lobe
+ *    choice), for a plastic and a roughplastic whose spectral diffuse
+ *    reflectance makes the lobe choice differ between the pages (their
+ *    smooth lobes; the delta lobe is left out of the histogram), with
+ *    bundles of 16 (6 pages) and 7 (3 pages);
+ *  - delta lobes that say their value (bsdf_ops.delta_value): plastic's
+ *    specular lobe, drawn with a probability that differs between the
+ *    pages, and glass's reflection and transmission (one index, a
+ *    spectral transmittance): drawn with the pages' mean probability
+ *    (200,000 samples, within 4 binomial standard errors), each page
+ *    weighted by its value over it (1e-12), each page's value and
+ *    probability bit for bit the BSDF's at its wavelengths alone;
  *  - each page's weight times the mean pdf is that page's value (1e-12),
  *    and each page's value is the BSDF's at its own wavelengths: the leaf
  *    (and the gold roughconductor) evaluated at page p equals the same BSDF
- *    prepared at the page's three wavelengths alone, bit for bit;
+ *    prepared at the page's three wavelengths alone, bit for bit (the
+ *    ocean: pages 0, 3 and 5, value and pdf);
  *  - the uniform texture answers for rsw_page and leaves it at 0;
- *  - `null` (the one delta lobe pages carry) gives weight 1 at every page.
+ *  - `null` (a delta lobe every page draws alike) gives weight 1 at every page;
+ *  - what carries pages: plastic, roughplastic, dielectric, the ocean and
+ *    compositions without a delta lobe; twosided, blendbsdf and mask over
+ *    a plastic or glass are refused, named, "delta lobe" in the reason.
  * Chi-square: 200,000 samples per run, significance 0.01 with the Sidak
  * correction over the runs of this file; fixed seeds. */
 #include <math.h>
 #include <stdio.h>
+#include <string.h>
 
 #include "../../../server/kernel/integrators/pages.h"
 #include "../../support/bsdf_test.h"
@@ -26,7 +43,7 @@
 
 RSW_TEST_DEFINE_GLOBALS
 
-#define CHI2_TESTS 18
+#define CHI2_TESTS 36
 
 static const char *LEAF =
     "{\"type\": \"bilambertian\","
@@ -39,6 +56,12 @@ static const char *SOIL =
     "\"values\": [0.02, 0.3]}, \"k\": 0.7, \"g\": -0.2}";
 
 static const char *METAL = "{\"type\": \"roughconductor\", \"material\": \"Au\", \"alpha\": 0.25}";
+
+/* Water that follows the render's wavelength: its index, whitecaps,
+ * underlight (none past 700 nm) and the tables that weight its lobe
+ * choice differ between the channels of a page and between the pages. */
+static const char *OCEAN = "{\"type\": \"ocean_legacy\", \"wavelength\": \"render\", \"wind_speed\": 5, "
+                           "\"wind_direction\": 30, \"pigmentation\": 1}";
 
 static scene *bsdf_scene(const char *bsdf_json) {
   char buf[2048];
@@ -55,6 +78,28 @@ static bool prepare_bundle(scene *s, int k) {
   return scene_prepare(s, &rc, &err) == RSW_OK;
 }
 
+/* A plastic whose diffuse reflectance rises 20-fold over the bundle: its
+ * specular lobe's choice probability differs between the pages; a
+ * roughplastic alike; glass with a spectral specular_transmittance (one
+ * index: every page draws its lobes alike). */
+static const char *PLASTIC =
+    "{\"type\": \"plastic\", \"diffuse_reflectance\": {\"type\": \"spectrum\", \"wavelengths\": [400, 700], "
+    "\"values\": [0.03, 0.6]}}";
+static const char *ROUGHPLASTIC =
+    "{\"type\": \"roughplastic\", \"alpha\": 0.2, \"diffuse_reflectance\": {\"type\": \"spectrum\", "
+    "\"wavelengths\": [400, 700], \"values\": [0.03, 0.6]}}";
+static const char *GLASS =
+    "{\"type\": \"dielectric\", \"int_ior\": 1.5, \"specular_transmittance\": {\"type\": \"spectrum\", "
+    "\"wavelengths\": [400, 700], \"values\": [0.9, 0.2]}}";
+
+/* One ocean scene for the file: prepared again for each bundle, it keeps
+ * the transmittance tables it built (about half a second a wavelength). */
+static scene *g_ocean;
+static scene *ocean_scene(void) {
+  if (!g_ocean) g_ocean = bsdf_scene(OCEAN);
+  return g_ocean;
+}
+
 typedef struct pages_case {
   const bsdf *b;
   surface_interaction si;
@@ -66,9 +111,10 @@ static bool sample_pages(void *user, const double *u, vec3 *out, double *weight)
   bsdf_sample bs;
   color w[RENDER_MAX_PAGES];
   bsdf_sample_pages(c->b, &c->si, c->pages, u[0], v2(u[1], u[2]), &bs, w);
-  *weight = bs.pdf > 0 ? 1.0 : 0.0;
+  bool smooth = bs.pdf > 0 && !(bs.sampled_type & BSDF_DELTA); /* (a delta lobe is not in the pdf) */
+  *weight = smooth ? 1.0 : 0.0;
   *out = bs.wo;
-  return bs.pdf > 0;
+  return smooth;
 }
 
 static double pdf_pages(void *user, vec3 wo) {
@@ -78,13 +124,13 @@ static double pdf_pages(void *user, vec3 wo) {
 }
 
 static void test_chi2(void) {
-  const char *bsdfs[3] = {LEAF, SOIL, METAL};
+  const char *bsdfs[6] = {LEAF, SOIL, METAL, OCEAN, PLASTIC, ROUGHPLASTIC};
   const int ks[2] = {16, 7};
   const double th[3] = {10, 50, 80};
   int runs = 0;
-  for (int i = 0; i < 3; i++)
+  for (int i = 0; i < 6; i++) {
+    scene *s = i == 3 ? ocean_scene() : bsdf_scene(bsdfs[i]);
     for (int j = 0; j < 2; j++) {
-      scene *s = bsdf_scene(bsdfs[i]);
       REQUIRE(s && prepare_bundle(s, ks[j]), "scene %d", i);
       REQUIRE(s->pages == (ks[j] + 2) / 3, "pages %d", s->pages);
       for (int t = 0; t < 3; t++) {
@@ -98,16 +144,19 @@ static void test_chi2(void) {
         runs++;
       }
       CHECK(rsw_page == 0, "rsw_page left at 0");
-      scene_free(s);
     }
+    if (i != 3) scene_free(s);
+  }
   CHECK(runs == CHI2_TESTS, "runs %d", runs);
 }
 
 /* Page p of b (prepared for a bundle of 16) evaluates bit for bit as the
- * BSDF json prepared at the page's three wavelengths alone. */
-static void page_alone(const bsdf *b, int pages, const char *json, const surface_interaction *si) {
+ * BSDF json prepared at the page's three wavelengths alone (its pdf too),
+ * for every page, or every third one and the last when `some`. */
+static void page_alone(const bsdf *b, int pages, const char *json, const surface_interaction *si, bool some) {
   color f[RENDER_MAX_PAGES];
   for (int p = 0; p < pages; p++) {
+    if (some && p % 3 && p != pages - 1) continue;
     scene *one = bsdf_scene(json);
     render_ctx rc = {.variant = VARIANT_MONO, .bundle = 3};
     for (int c = 0; c < RENDER_MAX_BUNDLE; c++)
@@ -121,6 +170,10 @@ static void page_alone(const bsdf *b, int pages, const char *json, const surface
       color g = b1->ops->eval(b1, si, wo);
       bsdf_eval_pages(b, si, pages, wo, false, f);
       CHECK(g.c[0] == f[p].c[0] && g.c[1] == f[p].c[1] && g.c[2] == f[p].c[2], "page %d at %d", p, k);
+      rsw_page = p;
+      double pdf = b->ops->pdf(b, si, wo);
+      rsw_page = 0;
+      CHECK(pdf == b1->ops->pdf(b1, si, wo), "page %d's pdf at %d", p, k);
     }
     scene_free(one);
   }
@@ -159,7 +212,7 @@ static void test_weights(void) {
   vec3 down = tb_dir_deg(160, 10);
   bsdf_eval_pages(b, &si, s->pages, down, false, f);
   CHECK(col_is_black(f[0]) && f[2].c[0] > 0, "page 0 transmits nothing, page 2 does");
-  page_alone(b, s->pages, LEAF, &si);
+  page_alone(b, s->pages, LEAF, &si, false);
   scene_free(s);
 }
 
@@ -183,7 +236,7 @@ static void test_metal(void) {
   REQUIRE(s && prepare_bundle(s, 16), "metal");
   const bsdf *b = s->shapes[0]->bsdf;
   surface_interaction si = tb_si_with(tb_dir_deg(30, 0));
-  page_alone(b, s->pages, METAL, &si);
+  page_alone(b, s->pages, METAL, &si, false);
   color f[RENDER_MAX_PAGES];
   bsdf_eval_pages(b, &si, s->pages, tb_dir_deg(30, 180), false, f);
   CHECK(f[5].c[0] > 1.5 * f[0].c[0], "gold reflects more at 700 nm than at 400 nm (%g, %g)", f[5].c[0],
@@ -191,10 +244,159 @@ static void test_metal(void) {
   scene_free(s);
 }
 
+/* The ocean that follows the render: each page's weight times the mean
+ * pdf is its value; its pages and its channels differ (the index and the
+ * underlight, none at 700 nm); each page is the ocean prepared at its
+ * wavelengths alone, bit for bit. */
+static void test_ocean(void) {
+  scene *s = ocean_scene();
+  REQUIRE(s && prepare_bundle(s, 16), "ocean");
+  const bsdf *b = s->shapes[0]->bsdf;
+  surface_interaction si = tb_si_with(tb_dir_deg(35, 0));
+  uint64_t state = 11;
+  int checked = 0, glints = 0;
+  for (int n = 0; n < 2000; n++) {
+    double u[3];
+    for (int k = 0; k < 3; k++) {
+      state = state * 6364136223846793005ULL + 1442695040888963407ULL;
+      u[k] = (double)(state >> 11) * 0x1p-53;
+    }
+    bsdf_sample bs;
+    color w[RENDER_MAX_PAGES], f[RENDER_MAX_PAGES];
+    bsdf_sample_pages(b, &si, s->pages, u[0], v2(u[1], u[2]), &bs, w);
+    if (!(bs.pdf > 0)) continue;
+    double pdf = bsdf_eval_pages(b, &si, s->pages, bs.wo, true, f);
+    CHECK_REL(pdf, bs.pdf, 1e-14);
+    glints += bs.sampled_type == BSDF_GLOSSY_REFLECTION;
+    for (int p = 0; p < s->pages; p++)
+      for (int c = 0; c < 3; c++) CHECK_REL(w[p].c[c] * pdf, f[p].c[c], 1e-12);
+    checked++;
+  }
+  CHECK(checked > 1900 && glints > 100, "samples %d, glints %d", checked, glints);
+  /* Off the glint, the diffuse terms (underlight: none at 700 nm, the
+   * last page's three channels) differ between channels and pages. */
+  color f[RENDER_MAX_PAGES];
+  bsdf_eval_pages(b, &si, s->pages, tb_dir_deg(60, 90), false, f);
+  CHECK(f[0].c[0] != f[0].c[1] && f[0].c[1] != f[0].c[2], "page 0's channels differ");
+  CHECK(f[2].c[0] > 3 * f[5].c[0] && f[5].c[0] == f[5].c[2], "underlight at 520 nm, not at 700 (%g, %g)",
+        f[2].c[0], f[5].c[0]);
+  page_alone(b, s->pages, OCEAN, &si, true);
+  scene_free(s);
+  g_ocean = NULL;
+}
+
+/* A delta lobe's probability at each page (bsdf_ops.delta_value). */
+static double delta_prob(const bsdf *b, const surface_interaction *si, int p, unsigned lobe, color *v) {
+  double pr;
+  rsw_page = p;
+  *v = b->ops->delta_value(b, si, lobe, &pr);
+  rsw_page = 0;
+  return pr;
+}
+
+/* Delta lobes whose choice differs between the pages (plastic) or does
+ * not (glass): over 200,000 samples the delta lobe is drawn with the
+ * pages' mean probability (within 4 binomial standard errors), each
+ * page's weight times that mean is the page's own value (1e-12), and
+ * each page's value and probability are the BSDF's at the page's
+ * wavelengths alone, bit for bit. */
+static void delta_case(const char *json, unsigned lobe, int pk) {
+  scene *s = bsdf_scene(json);
+  REQUIRE(s && prepare_bundle(s, 16), "%s", json);
+  const bsdf *b = s->shapes[0]->bsdf;
+  surface_interaction si = tb_si_with(tb_dir_deg(40, 0));
+  double pm = 0, pr[RENDER_MAX_PAGES];
+  color v[RENDER_MAX_PAGES];
+  for (int p = 0; p < s->pages; p++) pm += pr[p] = delta_prob(b, &si, p, lobe, &v[p]);
+  pm /= s->pages;
+  CHECK(pk ? pr[0] > 2 * pr[5] : pr[0] == pr[5], "page 0's probability %g, page 5's %g", pr[0], pr[5]);
+  uint64_t state = 5;
+  int n = 200000, hits = 0;
+  for (int k = 0; k < n; k++) {
+    double u[3];
+    for (int i = 0; i < 3; i++) {
+      state = state * 6364136223846793005ULL + 1442695040888963407ULL;
+      u[i] = (double)(state >> 11) * 0x1p-53;
+    }
+    bsdf_sample bs;
+    color w[RENDER_MAX_PAGES];
+    bsdf_sample_pages(b, &si, s->pages, u[0], v2(u[1], u[2]), &bs, w);
+    if (bs.sampled_type != lobe || !(bs.pdf > 0)) continue;
+    hits++;
+    if (hits > 100) continue;
+    CHECK_REL(bs.pdf, pm, 1e-14);
+    for (int p = 0; p < s->pages; p++)
+      for (int c = 0; c < 3; c++) CHECK_REL(w[p].c[c] * pm, v[p].c[c], 1e-12);
+  }
+  double se = sqrt(pm * (1 - pm) / n);
+  CHECK(fabs((double)hits / n - pm) < 4 * se, "drawn %g of the time, the mean probability %g (se %g)",
+        (double)hits / n, pm, se);
+  for (int p = 0; p < s->pages; p += 5) {
+    scene *one = bsdf_scene(json);
+    render_ctx rc = {.variant = VARIANT_MONO, .bundle = 3};
+    for (int c = 0; c < RENDER_MAX_BUNDLE; c++)
+      rc.wl[c] = 400.0 + 20.0 * (p == 5 ? 15 : 3 * p + (c < 3 ? c : 2));
+    rc.wavelength = rc.wl[0];
+    rsw_err err = {0};
+    REQUIRE(one && scene_prepare(one, &rc, &err) == RSW_OK, "page %d alone", p);
+    color v1;
+    double p1 = delta_prob(one->shapes[0]->bsdf, &si, 0, lobe, &v1);
+    CHECK(p1 == pr[p] && v1.c[0] == v[p].c[0] && v1.c[1] == v[p].c[1] && v1.c[2] == v[p].c[2],
+          "page %d alone", p);
+    scene_free(one);
+  }
+  CHECK(rsw_page == 0, "rsw_page left at 0");
+  scene_free(s);
+}
+
+static void test_delta(void) {
+  delta_case(PLASTIC, BSDF_DELTA_REFLECTION, 1);
+  delta_case(GLASS, BSDF_DELTA_TRANSMISSION, 0);
+  delta_case(GLASS, BSDF_DELTA_REFLECTION, 0);
+}
+
+/* What carries pages (scene_page_blocker): plastic, roughplastic,
+ * dielectric, the ocean that follows the render and compositions without
+ * a delta lobe do; compositions holding a delta lobe (twosided, blendbsdf,
+ * mask over a plastic or glass) are refused, naming the composition. */
+static void test_blockers(void) {
+  const char *yes[6] = {PLASTIC,
+                        ROUGHPLASTIC,
+                        GLASS,
+                        OCEAN,
+                        "{\"type\": \"twosided\", \"bsdf\": {\"type\": \"roughplastic\"}}",
+                        "{\"type\": \"blendbsdf\", \"weight\": 0.3, \"bsdf_0\": {\"type\": \"diffuse\"}, "
+                        "\"bsdf_1\": {\"type\": \"roughplastic\"}}"};
+  const char *no[3][2] = {
+      {"{\"type\": \"twosided\", \"bsdf\": {\"type\": \"plastic\"}}", "twosided"},
+      {"{\"type\": \"blendbsdf\", \"weight\": 0.3, \"bsdf_0\": {\"type\": \"diffuse\"}, "
+       "\"bsdf_1\": {\"type\": \"plastic\"}}",
+       "blendbsdf"},
+      {"{\"type\": \"mask\", \"opacity\": 0.5, \"bsdf\": {\"type\": \"dielectric\"}}", "mask"}};
+  for (int i = 0; i < 6; i++) {
+    scene *s = bsdf_scene(yes[i]);
+    const char *why = "";
+    const object *blk = s ? scene_page_blocker(s, &why) : NULL;
+    CHECK(s && !blk, "%s carries pages (%s: %s)", yes[i], blk ? blk->plugin->name : "", why);
+    scene_free(s);
+  }
+  for (int i = 0; i < 3; i++) {
+    scene *s = bsdf_scene(no[i][0]);
+    const char *why = "";
+    const object *blk = s ? scene_page_blocker(s, &why) : NULL;
+    CHECK(blk && strcmp(blk->plugin->name, no[i][1]) == 0 && strstr(why, "delta lobe"), "%s refused: %s %s",
+          no[i][0], blk ? blk->plugin->name : "none", why);
+    scene_free(s);
+  }
+}
+
 int main(void) {
   RSW_TEST_RUN(test_chi2);
   RSW_TEST_RUN(test_weights);
   RSW_TEST_RUN(test_metal);
+  RSW_TEST_RUN(test_ocean);
   RSW_TEST_RUN(test_null);
+  RSW_TEST_RUN(test_delta);
+  RSW_TEST_RUN(test_blockers);
   RSW_TEST_END("test_pages");
 }
