@@ -74,12 +74,7 @@ LANES_ATTR void LANES_FN(hdistant_rays)(int n, const double (*m)[4], const doubl
       vdn wx = m[0][0] * vx + m[0][1] * vy + m[0][2] * z;
       vdn wy = m[1][0] * vx + m[1][1] * vy + m[1][2] * z;
       vdn wz = m[2][0] * vx + m[2][1] * vy + m[2][2] * z;
-      vdn l = VSQRT_D(wx * wx + wy * wy + wz * wz);
-      vln pos = l > 0.0;
-      vdn il = 1.0 / dsel(pos, l, (vdn){0} + 1.0);
-      wx = dsel(pos, wx * il, wx);
-      wy = dsel(pos, wy * il, wy);
-      wz = dsel(pos, wz * il, wz);
+      d_norm3(&wx, &wy, &wz);
       vdn dx = -wx, dy = -wy, dz = -wz;
       /* origin: centre + radius to_world (concentric(ap), 0), back by offset */
       vdn rx = m[0][0] * qx[v] + m[0][1] * qy[v] + m[0][2] * 0.0;
