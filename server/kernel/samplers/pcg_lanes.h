@@ -7,37 +7,50 @@
 /* core/rng.h pcg32_seed(tea64(fold32(key), index, 4), mix64(key + index)),
  * fold32(key) = (uint32_t)(key ^ (key >> 32)). */
 PCG_ATTR void PCG_SEED_FN(int n, const uint64_t *key, const uint32_t *index, uint64_t *state, uint64_t *inc) {
-  for (int k0 = 0; k0 < n; k0 += VW) {
-    int cnt = n - k0 < VW ? n - k0 : VW;
+  /* PCG_IL vectors of lanes per step, their TEA rounds interleaved: one
+   * vector's rounds are a chain of dependent operations, several give the
+   * core independent work to overlap. */
+  for (int k0 = 0; k0 < n; k0 += PCG_IL * VW) {
+    int cnt = n - k0 < PCG_IL * VW ? n - k0 : PCG_IL * VW;
     /* Every lane set, a tail's from its last lane (a variable count of
      * element stores then a vector load would stall on store forwarding). */
-    VU kk, ix;
-    if (cnt == VW) {
-      __builtin_memcpy(&kk, &key[k0], sizeof kk);
-      VU32 i32;
-      __builtin_memcpy(&i32, &index[k0], sizeof i32);
-      ix = __builtin_convertvector(i32, VU);
-    } else {
-      for (int k = 0; k < VW; k++) {
-        int q = k0 + (k < cnt ? k : cnt - 1);
-        kk[k] = key[q], ix[k] = index[q];
+    VU kk[PCG_IL] = {{0}}, ix[PCG_IL] = {{0}};
+    for (int h = 0; h < PCG_IL; h++) {
+      if (cnt == PCG_IL * VW) {
+        __builtin_memcpy(&kk[h], &key[k0 + h * VW], sizeof kk[h]);
+        VU32 i32;
+        __builtin_memcpy(&i32, &index[k0 + h * VW], sizeof i32);
+        ix[h] = __builtin_convertvector(i32, VU);
+      } else {
+        for (int k = 0; k < VW; k++) {
+          int j = h * VW + k, q = k0 + (j < cnt ? j : cnt - 1);
+          kk[h][k] = key[q], ix[h][k] = index[q];
+        }
       }
     }
-    VU32 v0 = __builtin_convertvector(kk ^ (kk >> 32), VU32), v1 = __builtin_convertvector(ix, VU32);
+    VU32 v0[PCG_IL], v1[PCG_IL];
+    for (int h = 0; h < PCG_IL; h++)
+      v0[h] = __builtin_convertvector(kk[h] ^ (kk[h] >> 32), VU32),
+      v1[h] = __builtin_convertvector(ix[h], VU32);
     uint32_t sum = 0;
     for (int i = 0; i < 4; i++) {
       sum += 0x9e3779b9u;
-      v0 += ((v1 << 4) + 0xa341316cu) ^ (v1 + sum) ^ ((v1 >> 5) + 0xc8013ea4u);
-      v1 += ((v0 << 4) + 0xad90777du) ^ (v0 + sum) ^ ((v0 >> 5) + 0x7e95761eu);
+      for (int h = 0; h < PCG_IL; h++)
+        v0[h] += ((v1[h] << 4) + 0xa341316cu) ^ (v1[h] + sum) ^ ((v1[h] >> 5) + 0xc8013ea4u);
+      for (int h = 0; h < PCG_IL; h++)
+        v1[h] += ((v0[h] << 4) + 0xad90777du) ^ (v0[h] + sum) ^ ((v0[h] >> 5) + 0x7e95761eu);
     }
-    VU initstate = (__builtin_convertvector(v1, VU) << 32) | __builtin_convertvector(v0, VU);
     /* The 64-bit products lane by lane: a scalar multiply is one
      * instruction, a vector one below AVX-512 several (the seed scene's
      * seeding took 2.6% of a render with them in the lanes). */
-    for (int k = 0; k < cnt; k++) {
-      uint64_t z = mix64(kk[k] + ix[k]), in = (z << 1) | 1u;
-      state[k0 + k] = (in + initstate[k]) * PCG32_MULT + in; /* 0 * MULT + inc, then + initstate */
-      inc[k0 + k] = in;
+    for (int h = 0; h < PCG_IL; h++) {
+      VU initstate = (__builtin_convertvector(v1[h], VU) << 32) | __builtin_convertvector(v0[h], VU);
+      for (int k = 0; k < VW && h * VW + k < cnt; k++) {
+        int j = k0 + h * VW + k;
+        uint64_t z = mix64(kk[h][k] + ix[h][k]), in = (z << 1) | 1u;
+        state[j] = (in + initstate[k]) * PCG32_MULT + in; /* 0 * MULT + inc, then + initstate */
+        inc[j] = in;
+      }
     }
   }
 }

@@ -35,12 +35,7 @@ LANES_ATTR void LANES_FN(perspective_rays)(int n, const double (*m)[4], const do
     for (int k = 0; k < WD; k++) ux[k] = fk[2 * k], uy[k] = fk[2 * k + 1];
     vdn sx = ux + pp[0], sy = uy + pp[1];
     vdn vx = (1.0 - 2.0 * sx) * t, vy = (1.0 - 2.0 * sy) * t / aspect, vz = (vdn){0} + 1.0;
-    vdn l = VSQRT_D(vx * vx + vy * vy + vz * vz);
-    vln pos = l > 0.0;
-    vdn il = 1.0 / dsel(pos, l, (vdn){0} + 1.0);
-    vx = dsel(pos, vx * il, vx);
-    vy = dsel(pos, vy * il, vy);
-    vz = dsel(pos, vz * il, vz);
+    d_norm3(&vx, &vy, &vz);
     vdn wx = m[0][0] * vx + m[0][1] * vy + m[0][2] * vz;
     vdn wy = m[1][0] * vx + m[1][1] * vy + m[1][2] * vz;
     vdn wz = m[2][0] * vx + m[2][1] * vy + m[2][2] * vz;

@@ -26,60 +26,75 @@ SIMD_ISA_DECL(void, disk_origins,
 #ifdef LANES_FN
 /* n rays: rows m[3][3] of to_world; fu, ap film and aperture samples (x,
  * y interleaved per lane: fu[2 i], fu[2 i + 1]); out[8 i ..] = o, d, 0,
- * infinity (the layout of a ray3, which the caller's rays are). */
+ * infinity (the layout of a ray3, which the caller's rays are).
+ *
+ * HD_CHUNK lanes at a time, in three passes over their vectors (the film
+ * samples' disk points, the aperture samples', then the rest): a vector's
+ * whole chain of dependent operations (two concentric maps' divisions and
+ * polynomials, two square roots and a division) is longer than the core
+ * looks ahead, while a pass's vectors are independent and short enough to
+ * overlap. The same operations per lane in the same order: the rays of a
+ * single pass bit for bit. */
+#define HD_CHUNK 32
 LANES_ATTR void LANES_FN(hdistant_rays)(int n, const double (*m)[4], const double *fu, const double *ap,
                                         const double *center, double radius, double offset, double *out) {
-  for (int k0 = 0; k0 < n; k0 += WD) {
-    int cnt = n - k0 < WD ? n - k0 : WD;
-    /* Constant-length loops through a padded copy for a partial tail (see
-     * COSINE_LANES_FN below). */
-    const double *fk = fu + 2 * k0, *ak = ap + 2 * k0;
-    double fpad[2 * WD], apad[2 * WD], res[8 * WD];
-    if (cnt < WD) {
-      for (int k = 0; k < 2 * WD; k++)
+  enum {
+    HV = HD_CHUNK / WD /* vectors per chunk */
+  };
+  for (int c0 = 0; c0 < n; c0 += HD_CHUNK) {
+    int cnt = n - c0 < HD_CHUNK ? n - c0 : HD_CHUNK;
+    int nv = (cnt + WD - 1) / WD;
+    /* A partial chunk goes through padded copies (every lane of its
+     * vectors set, as cosine_hemisphere in simd/warp_lanes.h). */
+    const double *fk = fu + 2 * c0, *ak = ap + 2 * c0;
+    double fpad[2 * HD_CHUNK], apad[2 * HD_CHUNK], res[8 * HD_CHUNK];
+    if (cnt < HD_CHUNK) {
+      for (int k = 0; k < 2 * HD_CHUNK; k++)
         fpad[k] = k < 2 * cnt ? fk[k] : 0.5, apad[k] = k < 2 * cnt ? ak[k] : 0.5;
       fk = fpad, ak = apad;
     }
-    vdn ux, uy, ax, ay;
-    for (int k = 0; k < WD; k++)
-      ux[k] = fk[2 * k], uy[k] = fk[2 * k + 1], ax[k] = ak[2 * k], ay[k] = ak[2 * k + 1];
-    /* omega = norm(to_world hemisphere(fu)), d = -omega */
-    vdn px, py;
-    d_concentric(ux, uy, &px, &py);
-    vdn z = 1.0 - (px * px + py * py);
-    vdn z1 = z + 1.0;
-    vdn s = VSQRT_D(dsel(z1 > 0.0, z1, (vdn){0}));
-    vdn vx = px * s, vy = py * s;
-    vdn wx = m[0][0] * vx + m[0][1] * vy + m[0][2] * z;
-    vdn wy = m[1][0] * vx + m[1][1] * vy + m[1][2] * z;
-    vdn wz = m[2][0] * vx + m[2][1] * vy + m[2][2] * z;
-    vdn l = VSQRT_D(wx * wx + wy * wy + wz * wz);
-    vln pos = l > 0.0;
-    vdn il = 1.0 / dsel(pos, l, (vdn){0} + 1.0);
-    wx = dsel(pos, wx * il, wx);
-    wy = dsel(pos, wy * il, wy);
-    wz = dsel(pos, wz * il, wz);
-    vdn dx = -wx, dy = -wy, dz = -wz;
-    /* origin: centre + radius to_world (concentric(ap), 0), back by offset */
-    vdn qx, qy;
-    d_concentric(ax, ay, &qx, &qy);
-    vdn rx = m[0][0] * qx + m[0][1] * qy + m[0][2] * 0.0;
-    vdn ry = m[1][0] * qx + m[1][1] * qy + m[1][2] * 0.0;
-    vdn rz = m[2][0] * qx + m[2][1] * qy + m[2][2] * 0.0;
-    vdn ox = (center[0] + radius * rx) + -offset * dx;
-    vdn oy = (center[1] + radius * ry) + -offset * dy;
-    vdn oz = (center[2] + radius * rz) + -offset * dz;
-    double *ob = cnt < WD ? res : &out[8 * k0];
-    for (int k = 0; k < WD; k++) {
-      double *o = &ob[8 * k];
-      o[0] = ox[k], o[1] = oy[k], o[2] = oz[k];
-      o[3] = dx[k], o[4] = dy[k], o[5] = dz[k];
-      o[6] = 0.0, o[7] = INFINITY;
+    vdn px[HV], py[HV], qx[HV], qy[HV];
+    for (int v = 0; v < nv; v++) { /* the film samples' disk points */
+      vdn ux, uy;
+      for (int k = 0; k < WD; k++) ux[k] = fk[2 * (WD * v + k)], uy[k] = fk[2 * (WD * v + k) + 1];
+      d_concentric(ux, uy, &px[v], &py[v]);
     }
-    if (cnt < WD)
-      for (int k = 0; k < 8 * cnt; k++) out[8 * k0 + k] = res[k];
+    for (int v = 0; v < nv; v++) { /* the aperture samples' */
+      vdn ax, ay;
+      for (int k = 0; k < WD; k++) ax[k] = ak[2 * (WD * v + k)], ay[k] = ak[2 * (WD * v + k) + 1];
+      d_concentric(ax, ay, &qx[v], &qy[v]);
+    }
+    double *ob = cnt < HD_CHUNK ? res : &out[8 * c0];
+    for (int v = 0; v < nv; v++) {
+      /* omega = norm(to_world hemisphere(fu)), d = -omega */
+      vdn z = 1.0 - (px[v] * px[v] + py[v] * py[v]);
+      vdn z1 = z + 1.0;
+      vdn s = VSQRT_D(dsel(z1 > 0.0, z1, (vdn){0}));
+      vdn vx = px[v] * s, vy = py[v] * s;
+      vdn wx = m[0][0] * vx + m[0][1] * vy + m[0][2] * z;
+      vdn wy = m[1][0] * vx + m[1][1] * vy + m[1][2] * z;
+      vdn wz = m[2][0] * vx + m[2][1] * vy + m[2][2] * z;
+      d_norm3(&wx, &wy, &wz);
+      vdn dx = -wx, dy = -wy, dz = -wz;
+      /* origin: centre + radius to_world (concentric(ap), 0), back by offset */
+      vdn rx = m[0][0] * qx[v] + m[0][1] * qy[v] + m[0][2] * 0.0;
+      vdn ry = m[1][0] * qx[v] + m[1][1] * qy[v] + m[1][2] * 0.0;
+      vdn rz = m[2][0] * qx[v] + m[2][1] * qy[v] + m[2][2] * 0.0;
+      vdn ox = (center[0] + radius * rx) + -offset * dx;
+      vdn oy = (center[1] + radius * ry) + -offset * dy;
+      vdn oz = (center[2] + radius * rz) + -offset * dz;
+      for (int k = 0; k < WD; k++) {
+        double *o = &ob[8 * (WD * v + k)];
+        o[0] = ox[k], o[1] = oy[k], o[2] = oz[k];
+        o[3] = dx[k], o[4] = dy[k], o[5] = dz[k];
+        o[6] = 0.0, o[7] = INFINITY;
+      }
+    }
+    if (cnt < HD_CHUNK)
+      for (int k = 0; k < 8 * cnt; k++) out[8 * c0 + k] = res[k];
   }
 }
+#undef HD_CHUNK
 
 /* ---- distant family: origins on the bounding disk, double lanes ----------
  * sensors/sensor_common.c ray_target_origin() without a target:

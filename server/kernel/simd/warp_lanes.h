@@ -21,6 +21,17 @@ SIMD_FN vdn dabs(vdn a) {
   return (vdn)((vln)a & 0x7fffffffffffffffLL);
 }
 
+/* core/vec.h v3_norm: (x, y, z) over its length where that is > 0, else
+ * unchanged, through the reciprocal as v3_norm does it. */
+SIMD_FN void d_norm3(vdn *x, vdn *y, vdn *z) {
+  vdn l = VSQRT_D(*x * *x + *y * *y + *z * *z);
+  vln pos = l > 0.0;
+  vdn il = 1.0 / dsel(pos, l, (vdn){0} + 1.0);
+  *x = dsel(pos, *x * il, *x);
+  *y = dsel(pos, *y * il, *y);
+  *z = dsel(pos, *z * il, *z);
+}
+
 /* core/warp.c sincos_quarter: sin and cos of (pi/4) t, |t| <= 1. */
 SIMD_FN void d_sincos_quarter(vdn t, vdn *s, vdn *c) {
   vdn x = 0.78539816339744830962 * t, x2 = x * x;

@@ -8,6 +8,9 @@ RSW_TEST_DEFINE_GLOBALS
 #include <stdlib.h>
 #include <string.h>
 
+#include "kernel/core/isa.h"
+#include "kernel/core/rng.h"
+#include "kernel/samplers/pcg_simd.h"
 #include "kernel/scene/loader.h"
 #include "kernel/shapes/shape.h"
 
@@ -246,6 +249,39 @@ static void test_sampler_bad_input(void) {
   h_free(&h);
 }
 
+/* sampler_pcg_seed_batch (samplers/pcg_simd.h) seeds every lane as
+ * core/rng.h's pcg32_seed(tea64(fold32(key), index, 4), mix64(key +
+ * index)) does, at every ISA and every count from 1 to 70 (whole steps of
+ * the lanes and every kind of tail), keys changing every few lanes. */
+static void test_pcg_seed_batch(void) {
+  enum {
+    N = 70
+  };
+  uint64_t key[N], state[N], inc[N];
+  uint32_t index[N];
+  for (int i = 0; i < N; i++) key[i] = mix64(1000 + (uint64_t)(i / 5)), index[i] = (uint32_t)(i * 37 % 101);
+  int bad = 0, runs = 0;
+  for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
+    if (!rsw_isa_set((rsw_isa)isa)) continue;
+    for (int n = 1; n <= N; n++) {
+      for (int i = 0; i < N; i++) state[i] = inc[i] = 0x5555;
+      sampler_pcg_seed_batch(n, key, index, state, inc);
+      for (int i = 0; i < N; i++) {
+        pcg32 r = {0x5555, 0x5555};
+        if (i < n) {
+          uint32_t fold = (uint32_t)(key[i] ^ (key[i] >> 32));
+          pcg32_seed(&r, tea64(fold, index[i], 4), mix64(key[i] + index[i]));
+        }
+        bad += r.state != state[i] || r.inc != inc[i]; /* lanes past n untouched */
+      }
+      runs++;
+    }
+  }
+  rsw_isa_set(rsw_isa_best());
+  CHECK(runs >= N, "ran at some ISA (%d runs)", runs);
+  CHECK(bad == 0, "%d seeded lanes differ from pcg32_seed's (or lanes past n written)", bad);
+}
+
 int main(void) {
   RSW_TEST_RUN(test_independent_determinism);
   RSW_TEST_RUN(test_independent_uniform);
@@ -253,5 +289,6 @@ int main(void) {
   RSW_TEST_RUN(test_stratified_strata);
   RSW_TEST_RUN(test_stratified_no_jitter);
   RSW_TEST_RUN(test_sampler_bad_input);
+  RSW_TEST_RUN(test_pcg_seed_batch);
   RSW_TEST_END("test_samplers");
 }

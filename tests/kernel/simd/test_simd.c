@@ -365,7 +365,11 @@ static void check_rays(const sensor *se, const char *what) {
   REQUIRE(se->ops->sample_ray_batch, "%s: batched op", what);
   for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
     if (!rsw_isa_set((rsw_isa)isa)) continue;
+    /* One batch of N, then batches of every size up to 70 from a few
+     * offsets (partial vectors and partial chunks of the lanes' passes). */
     se->ops->sample_ray_batch(se, N, fu, ap, r, w);
+    for (int m = 1, at = 0; m <= 70 && at + m <= N; at += m, m++)
+      se->ops->sample_ray_batch(se, m, fu + at, ap + at, r + at, w + at);
     int differ = 0;
     for (int i = 0; i < N; i++) {
       ray3 q;
