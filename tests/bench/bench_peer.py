@@ -41,7 +41,7 @@ import tempfile
 import time
 
 root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-bindir = os.environ.get("RSW_BIN_DIR", os.path.join(root, "build", "bin"))
+bindir = os.path.abspath(os.environ.get("RSW_BIN_DIR", os.path.join(root, "build", "bin")))
 ex = os.path.join(root, "proto", "examples")
 
 SCENES = [
