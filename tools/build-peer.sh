@@ -24,10 +24,14 @@ fi
 ext="$dir/src/ext/CMakeLists.txt"
 sed -i -E 's/(EMBREE_ISA_SSE42|EMBREE_ISA_AVX)( +)ON CACHE/\1\2OFF CACHE/' "$ext"
 sed -i -E 's/(EMBREE_GEOMETRY_CURVE|EMBREE_BACKFACE_CULLING_CURVES)( +)ON  CACHE/\1\2OFF CACHE/' "$ext"
+# Without the autodiff variants Mitsuba does not link drjit-extra, which
+# llvm_rgb's loops call (ad_loop): link it whenever the JIT is on.
+sed -i 's/^if (MI_ENABLE_AUTODIFF)$/if (MI_ENABLE_JIT OR MI_ENABLE_AUTODIFF)/' "$dir/src/src/core/CMakeLists.txt"
 mkdir -p "$dir/build"
 cd "$dir/build"
+# (Mitsuba's headers include nanobind's intrusive counter even without Python.)
 cmake -G Ninja -DCMAKE_BUILD_TYPE=Release -DMI_ENABLE_PYTHON=OFF -DDRJIT_ENABLE_PYTHON=OFF \
-  -DMI_ENABLE_EMBREE=ON ../src >/dev/null
+  -DMI_ENABLE_EMBREE=ON -DCMAKE_CXX_FLAGS="-I$dir/src/ext/nanobind/include" ../src >/dev/null
 # The variants (the first configure wrote mitsuba.conf with its defaults).
 sed -i -E '/"enabled": \[/{n;s/.*/        "scalar_mono", "scalar_rgb", "llvm_rgb"/}' mitsuba.conf
 cmake . >/dev/null
