@@ -179,15 +179,14 @@ static void page_alone(const bsdf *b, int pages, const char *json, const surface
   }
 }
 
-/* Weights are values over the mean pdf; a page's value is the BSDF's at
- * that page's wavelengths alone. */
-static void test_weights(void) {
-  scene *s = bsdf_scene(LEAF);
-  REQUIRE(s && prepare_bundle(s, 16), "leaf");
-  const bsdf *b = s->shapes[0]->bsdf;
-  surface_interaction si = tb_si_with(tb_dir_deg(35, 0));
-  uint64_t state = 7;
-  int checked = 0, transmitted = 0;
+/* 2000 samples of every page at seed `state` (an LCG): each page's weight
+ * times the mean pdf is its value, and eval's pdf is the sample's.
+ * Returns how many samples succeeded; *below counts those transmitted
+ * (wo.z < 0), *glossy those of a glossy reflection. */
+static int check_weights(const bsdf *b, const surface_interaction *si, int pages, uint64_t state, int *below,
+                         int *glossy) {
+  int checked = 0;
+  *below = *glossy = 0;
   for (int n = 0; n < 2000; n++) {
     double u[3];
     for (int k = 0; k < 3; k++) {
@@ -196,15 +195,28 @@ static void test_weights(void) {
     }
     bsdf_sample bs;
     color w[RENDER_MAX_PAGES], f[RENDER_MAX_PAGES];
-    bsdf_sample_pages(b, &si, s->pages, u[0], v2(u[1], u[2]), &bs, w);
+    bsdf_sample_pages(b, si, pages, u[0], v2(u[1], u[2]), &bs, w);
     if (!(bs.pdf > 0)) continue;
-    double pdf = bsdf_eval_pages(b, &si, s->pages, bs.wo, true, f);
+    double pdf = bsdf_eval_pages(b, si, pages, bs.wo, true, f);
     CHECK_REL(pdf, bs.pdf, 1e-14);
-    transmitted += bs.wo.z < 0;
-    for (int p = 0; p < s->pages; p++)
+    *below += bs.wo.z < 0;
+    *glossy += bs.sampled_type == BSDF_GLOSSY_REFLECTION;
+    for (int p = 0; p < pages; p++)
       for (int c = 0; c < 3; c++) CHECK_REL(w[p].c[c] * pdf, f[p].c[c], 1e-12);
     checked++;
   }
+  return checked;
+}
+
+/* Weights are values over the mean pdf; a page's value is the BSDF's at
+ * that page's wavelengths alone. */
+static void test_weights(void) {
+  scene *s = bsdf_scene(LEAF);
+  REQUIRE(s && prepare_bundle(s, 16), "leaf");
+  const bsdf *b = s->shapes[0]->bsdf;
+  surface_interaction si = tb_si_with(tb_dir_deg(35, 0));
+  int transmitted, glossy;
+  int checked = check_weights(b, &si, s->pages, 7, &transmitted, &glossy);
   CHECK(checked == 2000, "every sample succeeds (%d)", checked);
   CHECK(transmitted > 300, "transmission is sampled (%d of 2000)", transmitted);
   /* Page 0 (400, 420, 440 nm) transmits nothing; page 2 (520..560 nm) does. */
@@ -253,25 +265,8 @@ static void test_ocean(void) {
   REQUIRE(s && prepare_bundle(s, 16), "ocean");
   const bsdf *b = s->shapes[0]->bsdf;
   surface_interaction si = tb_si_with(tb_dir_deg(35, 0));
-  uint64_t state = 11;
-  int checked = 0, glints = 0;
-  for (int n = 0; n < 2000; n++) {
-    double u[3];
-    for (int k = 0; k < 3; k++) {
-      state = state * 6364136223846793005ULL + 1442695040888963407ULL;
-      u[k] = (double)(state >> 11) * 0x1p-53;
-    }
-    bsdf_sample bs;
-    color w[RENDER_MAX_PAGES], f[RENDER_MAX_PAGES];
-    bsdf_sample_pages(b, &si, s->pages, u[0], v2(u[1], u[2]), &bs, w);
-    if (!(bs.pdf > 0)) continue;
-    double pdf = bsdf_eval_pages(b, &si, s->pages, bs.wo, true, f);
-    CHECK_REL(pdf, bs.pdf, 1e-14);
-    glints += bs.sampled_type == BSDF_GLOSSY_REFLECTION;
-    for (int p = 0; p < s->pages; p++)
-      for (int c = 0; c < 3; c++) CHECK_REL(w[p].c[c] * pdf, f[p].c[c], 1e-12);
-    checked++;
-  }
+  int below, glints;
+  int checked = check_weights(b, &si, s->pages, 11, &below, &glints);
   CHECK(checked > 1900 && glints > 100, "samples %d, glints %d", checked, glints);
   /* Off the glint, the diffuse terms (underlight: none at 700 nm, the
    * last page's three channels) differ between channels and pages. */
