@@ -480,13 +480,7 @@ vec3 accel_origin(const accel *a) {
  * about u |B_k|_1 (|o - c| + |t - c|), which moves the point along n by
  * (A^T n)_k times that; the instance-space intersection itself is off by
  * about u ext per coordinate, (A^T n)_k times that along n. */
-double accel_surface_error(const accel *a, uint32_t index, const xform *X, vec3 p, vec3 n) {
-  double t[8];
-  accel_surface_error_terms(a, index, X, t);
-  return accel_surface_error_at(t, X, p, n);
-}
-
-void accel_surface_error_terms(const accel *a, uint32_t index, const xform *X, double t[8]) {
+static inline void surface_error_terms(const accel *a, uint32_t index, const xform *X, double t[8]) {
   vec3 c = a->origin;
   t[0] = c.x, t[1] = c.y, t[2] = c.z;
   t[3] = v3_max_abs(v3_sub(v3(X->m[0][3], X->m[1][3], X->m[2][3]), c));
@@ -494,7 +488,7 @@ void accel_surface_error_terms(const accel *a, uint32_t index, const xform *X, d
   for (int k = 0; k < 3; k++) t[5 + k] = fabs(X->inv[k][0]) + fabs(X->inv[k][1]) + fabs(X->inv[k][2]);
 }
 
-double accel_surface_error_at(const double t[8], const xform *X, vec3 p, vec3 n) {
+static inline double surface_error_at(const double t[8], const xform *X, vec3 p, vec3 n) {
   const double nn[3] = {n.x, n.y, n.z};
   double w = 0, an1 = 0;
   for (int k = 0; k < 3; k++) {
@@ -505,6 +499,22 @@ double accel_surface_error_at(const double t[8], const xform *X, vec3 p, vec3 n)
   double pc = v3_max_abs(v3_sub(p, v3(t[0], t[1], t[2])));
   double n1 = fabs(n.x) + fabs(n.y) + fabs(n.z);
   return RSW_F32_UNIT * (n1 * pc + w * (pc + t[3]) + an1 * t[4]);
+}
+
+/* The exported three through the inline two (an exported function is not
+ * inlined into another under -fPIC). */
+double accel_surface_error(const accel *a, uint32_t index, const xform *X, vec3 p, vec3 n) {
+  double t[8];
+  surface_error_terms(a, index, X, t);
+  return surface_error_at(t, X, p, n);
+}
+
+void accel_surface_error_terms(const accel *a, uint32_t index, const xform *X, double t[8]) {
+  surface_error_terms(a, index, X, t);
+}
+
+double accel_surface_error_at(const double t[8], const xform *X, vec3 p, vec3 n) {
+  return surface_error_at(t, X, p, n);
 }
 
 /* ---- build ------------------------------------------------------------------------------ */
@@ -1147,16 +1157,15 @@ static bool packet_load(const accel *a, packet_buf *pb, unsigned N, const ray3 *
                         unsigned mask) {
   float *p = pb->f;
   float *hit = p + (size_t)RAY_FIELDS * N;
-  /* Field by field (each a contiguous row of the SOA layout: vector
-   * stores, where lane by lane the six fields were scalar stores). */
-  _Static_assert(RTC_INVALID_GEOMETRY_ID == 0xFFFFFFFFu, "memset's 0xFF bytes");
-  memset(&RAYN_F(p, N, 7, 0), 0, N * sizeof(float)); /* time */
-  for (unsigned i = 0; i < N; i++) ((unsigned *)p)[9 * N + i] = mask;
-  for (unsigned i = 0; i < N; i++) ((unsigned *)p)[10 * N + i] = i; /* id */
-  memset(&((unsigned *)p)[11 * N], 0, N * sizeof(unsigned));        /* flags */
-  memset(&HITN_U(hit, N, HIT_GEOM, 0), 0xFF, N * sizeof(unsigned));
-  memset(&HITN_U(hit, N, HIT_INST, 0), 0xFF, N * sizeof(unsigned));
-  memset(pb->valid, 0, N * sizeof *pb->valid);
+  for (unsigned i = 0; i < N; i++) {
+    RAYN_F(p, N, 7, i) = 0;            /* time */
+    ((unsigned *)p)[9 * N + i] = mask; /* mask */
+    ((unsigned *)p)[10 * N + i] = i;   /* id */
+    ((unsigned *)p)[11 * N + i] = 0;   /* flags */
+    HITN_U(hit, N, HIT_GEOM, i) = RTC_INVALID_GEOMETRY_ID;
+    HITN_U(hit, N, HIT_INST, i) = RTC_INVALID_GEOMETRY_ID;
+    pb->valid[i] = 0;
+  }
   bool any = false;
   for (int i = 0; i < n; i++) {
     float f[8];
