@@ -131,6 +131,10 @@ static int hit_fill_cached(const shape *s, const double t[8], int cnt, const int
     int big = 0;
     for (uint32_t f = 0; f < ms->n_faces; f++)
       if (start[f + 1] >= HIT_FACE_MIN) big += start[f + 1];
+    if (big == 0) { /* no face has enough: all by the scalar fill, unsorted */
+      memcpy(left, lane, cnt * sizeof *left);
+      return cnt;
+    }
     int at_big = 0, at_rest = big;
     for (uint32_t f = 0; f < ms->n_faces; f++) {
       int c = start[f + 1];
