@@ -480,27 +480,41 @@ vec3 accel_origin(const accel *a) {
  * about u |B_k|_1 (|o - c| + |t - c|), which moves the point along n by
  * (A^T n)_k times that; the instance-space intersection itself is off by
  * about u ext per coordinate, (A^T n)_k times that along n. */
-double accel_surface_error(const accel *a, uint32_t index, const xform *X, vec3 p, vec3 n) {
-  vec3 c = a->origin;
-  const double nn[3] = {n.x, n.y, n.z};
-  double w = 0, an1 = 0;
-  for (int k = 0; k < 3; k++) {
-    double atn = fabs(X->m[0][k] * nn[0] + X->m[1][k] * nn[1] + X->m[2][k] * nn[2]); /* |(A^T n)_k| */
-    an1 += atn;
-    w += atn * (fabs(X->inv[k][0]) + fabs(X->inv[k][1]) + fabs(X->inv[k][2]));
-  }
-  vec3 t = v3(X->m[0][3], X->m[1][3], X->m[2][3]);
-  double pc = v3_max_abs(v3_sub(p, c)), tc = v3_max_abs(v3_sub(t, c));
-  double n1 = fabs(n.x) + fabs(n.y) + fabs(n.z);
-  return RSW_F32_UNIT * (n1 * pc + w * (pc + tc) + an1 * a->ext[index]);
-}
-
-void accel_surface_error_terms(const accel *a, uint32_t index, const xform *X, double t[8]) {
+static inline void surface_error_terms(const accel *a, uint32_t index, const xform *X, double t[8]) {
   vec3 c = a->origin;
   t[0] = c.x, t[1] = c.y, t[2] = c.z;
   t[3] = v3_max_abs(v3_sub(v3(X->m[0][3], X->m[1][3], X->m[2][3]), c));
   t[4] = a->ext[index];
   for (int k = 0; k < 3; k++) t[5 + k] = fabs(X->inv[k][0]) + fabs(X->inv[k][1]) + fabs(X->inv[k][2]);
+}
+
+static inline double surface_error_at(const double t[8], const xform *X, vec3 p, vec3 n) {
+  const double nn[3] = {n.x, n.y, n.z};
+  double w = 0, an1 = 0;
+  for (int k = 0; k < 3; k++) {
+    double atn = fabs(X->m[0][k] * nn[0] + X->m[1][k] * nn[1] + X->m[2][k] * nn[2]); /* |(A^T n)_k| */
+    an1 += atn;
+    w += atn * t[5 + k];
+  }
+  double pc = v3_max_abs(v3_sub(p, v3(t[0], t[1], t[2])));
+  double n1 = fabs(n.x) + fabs(n.y) + fabs(n.z);
+  return RSW_F32_UNIT * (n1 * pc + w * (pc + t[3]) + an1 * t[4]);
+}
+
+/* The exported three through the inline two (an exported function is not
+ * inlined into another under -fPIC). */
+double accel_surface_error(const accel *a, uint32_t index, const xform *X, vec3 p, vec3 n) {
+  double t[8];
+  surface_error_terms(a, index, X, t);
+  return surface_error_at(t, X, p, n);
+}
+
+void accel_surface_error_terms(const accel *a, uint32_t index, const xform *X, double t[8]) {
+  surface_error_terms(a, index, X, t);
+}
+
+double accel_surface_error_at(const double t[8], const xform *X, vec3 p, vec3 n) {
+  return surface_error_at(t, X, p, n);
 }
 
 /* ---- build ------------------------------------------------------------------------------ */

@@ -158,6 +158,9 @@ double accel_surface_error(const accel *a, uint32_t index, const xform *X, vec3 
  * with pc = |p - c|, a = sum_k |(A^T n)_k| and w = sum_k |(A^T n)_k|
  * t[5 + k], each sum taken in k order (accel_surface_error's bits). */
 void accel_surface_error_terms(const accel *a, uint32_t index, const xform *X, double t[8]);
+/* accel_surface_error from those terms (bit for bit): a shape's many hits
+ * take the terms once. */
+double accel_surface_error_at(const double t[8], const xform *X, vec3 p, vec3 n);
 
 /* ---- updates (scene/update.c) -------------------------------------------------
  * Each call stages work on one shape; accel_commit() then commits the

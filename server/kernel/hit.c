@@ -8,13 +8,16 @@
 #include "shapes/instance.h"
 
 /* hit_fill_interaction but for si's shading frame and wi, which
- * shape_fill_begin leaves to *sn and *tangent unless it returns true. */
+ * shape_fill_begin leaves to *sn and *tangent unless it returns true.
+ * terms: NULL, or a plain shape's accel_surface_error_terms under its
+ * to_world (taken once for its hits). */
 static bool hit_fill_begin(const scene *sc, const ray3 *r, const accel_hit *h, surface_interaction *si,
-                           vec3 *sn, vec3 *tangent, vec3 *sn_raw, bool *sn_raw_set) {
+                           vec3 *sn, vec3 *tangent, vec3 *sn_raw, bool *sn_raw_set, const double *terms) {
   const shape *top = sc->shapes[h->shape];
   if (!shape_is_instancing(top)) {
     bool done = shape_fill_begin(top, &top->to_world, r, h, si, sn, tangent, sn_raw, sn_raw_set);
-    si->p_error += accel_surface_error(sc->accel, h->shape, &top->to_world, si->p, si->ng);
+    si->p_error += terms ? accel_surface_error_at(terms, &top->to_world, si->p, si->ng)
+                         : accel_surface_error(sc->accel, h->shape, &top->to_world, si->p, si->ng);
     return done;
   }
   const instance_shape *is = (const instance_shape *)top;
@@ -45,7 +48,7 @@ static bool hit_fill_begin(const scene *sc, const ray3 *r, const accel_hit *h, s
 
 void hit_fill_interaction(const scene *sc, const ray3 *r, const accel_hit *h, surface_interaction *si) {
   vec3 sn, tangent;
-  if (hit_fill_begin(sc, r, h, si, &sn, &tangent, NULL, NULL)) return;
+  if (hit_fill_begin(sc, r, h, si, &sn, &tangent, NULL, NULL, NULL)) return;
   si->sh = shape_frame_from_tangent(sn, tangent);
   si->wi = frame_to_local(&si->sh, v3_neg(v3_norm(r->d)));
 }
@@ -99,13 +102,12 @@ static inline void mesh_face_in(const shape *s, uint32_t f, bool nrm, bool uv, d
 #define HIT_FACE_MIN    8
 #define HIT_MESH_MIN    4
 
-/* The hits lane[0..cnt) on one cached mesh s (top-level shape `index`),
- * their whole si through shape_mesh_hits_batch (bitwise
+/* The hits lane[0..cnt) on one cached mesh s (top-level shape `index`,
+ * t its accel_surface_error_terms), their whole si through shape_mesh_hits_batch (bitwise
  * hit_fill_interaction) as HIT_FACE_GROUPS says; returns how many it
  * left to the caller's scalar fill, listed in left[]. */
-static int hit_fill_cached(const scene *sc, const shape *s, uint32_t index, int cnt, const int *lane,
-                           const ray3 *const *r, const accel_hit *const *h, surface_interaction *const *si,
-                           int *left) {
+static int hit_fill_cached(const shape *s, const double t[8], int cnt, const int *lane, const ray3 *const *r,
+                           const accel_hit *const *h, surface_interaction *const *si, int *left) {
   enum {
     S = 64 /* lanes per call, a multiple of 8 */
   };
@@ -129,6 +131,10 @@ static int hit_fill_cached(const scene *sc, const shape *s, uint32_t index, int 
     int big = 0;
     for (uint32_t f = 0; f < ms->n_faces; f++)
       if (start[f + 1] >= HIT_FACE_MIN) big += start[f + 1];
+    if (big == 0) { /* no face has enough: all by the scalar fill, unsorted */
+      memcpy(left, lane, cnt * sizeof *left);
+      return cnt;
+    }
     int at_big = 0, at_rest = big;
     for (uint32_t f = 0; f < ms->n_faces; f++) {
       int c = start[f + 1];
@@ -158,8 +164,6 @@ static int hit_fill_cached(const scene *sc, const shape *s, uint32_t index, int 
     for (int j = 0; j < 4; j++) k[SHAPE_MH_M + 4 * i + j] = s->to_world.m[i][j];
   for (int i = 0; i < 3; i++)
     for (int j = 0; j < 3; j++) k[SHAPE_MH_INV + 3 * i + j] = s->to_world.inv[i][j];
-  double t[8];
-  accel_surface_error_terms(sc->accel, index, &s->to_world, t);
   for (int i = 0; i < 3; i++) k[SHAPE_MH_C + i] = t[i], k[SHAPE_MH_S + i] = t[5 + i];
   k[SHAPE_MH_TC] = t[3];
   k[SHAPE_MH_EXT] = t[4];
@@ -209,13 +213,15 @@ static int hit_fill_cached(const scene *sc, const shape *s, uint32_t index, int 
   return n_left;
 }
 
-/* Hit i by the scalar fill, its frame and wi left to the frames batch as
- * entry *m of in (lane[*m] = i) unless the fill made them. */
+/* Hit i by the scalar fill (terms as hit_fill_begin's), its frame and wi
+ * left to the frames batch as entry *m of in (lane[*m] = i) unless the
+ * fill made them. */
 static inline void hit_fill_one(const scene *sc, int i, const ray3 *const *r, const accel_hit *const *h,
-                                surface_interaction *const *si, double *in, int *lane, int *m, int C) {
+                                surface_interaction *const *si, const double *terms, double *in, int *lane,
+                                int *m, int C) {
   vec3 sn, tg, raw = v3(0, 0, 0);
   bool deferred = false;
-  if (hit_fill_begin(sc, r[i], h[i], si[i], &sn, &tg, &raw, &deferred)) return;
+  if (hit_fill_begin(sc, r[i], h[i], si[i], &sn, &tg, &raw, &deferred, terms)) return;
   vec3 d = r[i]->d;
   double *q = &in[*m];
   q[0 * C] = sn.x, q[1 * C] = sn.y, q[2 * C] = sn.z;
@@ -239,26 +245,31 @@ void hit_fill_interaction_batch(const scene *sc, int n, const ray3 *const *r, co
       if (hit_cached_mesh(sc->shapes[h[k0 + k]->shape]))
         cached[nc++] = k0 + k;
       else
-        hit_fill_one(sc, k0 + k, r, h, si, in, lane, &m, C);
+        hit_fill_one(sc, k0 + k, r, h, si, NULL, in, lane, &m, C);
     }
     /* The cached meshes' hits, shape by shape (a hit's values do not
      * depend on its group); a shape with few of them by the scalar fill. */
     while (nc > 0) {
       uint32_t index = h[cached[0]]->shape;
       int take[C], nt = 0, rest = 0;
+      /* Without a branch: which shape a hit is on is unpredictable (the
+       * branch's mispredictions cost a third of this function on the
+       * Cornell box). Both lists are written; the counts say which holds. */
       for (int j = 0; j < nc; j++) {
-        if (h[cached[j]]->shape == index)
-          take[nt++] = cached[j];
-        else
-          cached[rest++] = cached[j];
+        int c = cached[j], on = h[c]->shape == index;
+        take[nt] = c, cached[rest] = c;
+        nt += on, rest += 1 - on;
       }
       nc = rest;
+      const shape *s = sc->shapes[index];
+      double terms[8];
+      accel_surface_error_terms(sc->accel, index, &s->to_world, terms);
       int left[C], nl = nt;
       if (nt >= HIT_MESH_MIN)
-        nl = hit_fill_cached(sc, sc->shapes[index], index, nt, take, r, h, si, left);
+        nl = hit_fill_cached(s, terms, nt, take, r, h, si, left);
       else
         memcpy(left, take, nt * sizeof *left);
-      for (int j = 0; j < nl; j++) hit_fill_one(sc, left[j], r, h, si, in, lane, &m, C);
+      for (int j = 0; j < nl; j++) hit_fill_one(sc, left[j], r, h, si, terms, in, lane, &m, C);
     }
     if (m == 0) continue;
     for (int j = m; j < ((m + 7) & ~7); j++) /* the last vector's unused lanes */

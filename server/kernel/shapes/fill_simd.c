@@ -25,8 +25,11 @@ typedef long long vl_2 __attribute__((vector_size(16)));
 #define FRAME_FN      frames_avx512
 #define FRAME_ATTR    static __attribute__((target("avx512f,avx512vl,avx512dq")))
 #define FRAME_SQRT(x) ((VD)_mm512_sqrt_pd((__m512d)(x)))
+#define MESH_FN       mesh_hits_avx512
 #define FRAME_LANES   frame_lanes_avx512
 #include "frame_lanes.h"
+#include "mesh_hit_lanes.h"
+#undef MESH_FN
 #undef FRAME_LANES
 #undef VW
 #undef VD
@@ -104,10 +107,7 @@ void shape_mesh_hits_batch(int n, int stride, const double *k, const double *fac
                            double *out) {
 #if defined(__x86_64__) || defined(__i386__)
   switch (rsw_isa_get()) {
-  /* AVX-512 takes the AVX2 build: bitwise the same as every other ISA's
-   * (test_hits_batch), and the AVX-512 build of these lanes has not yet
-   * run on AVX-512 hardware. */
-  case RSW_ISA_AVX512:
+  case RSW_ISA_AVX512: mesh_hits_avx512(n, stride, k, face, in, out); return;
   case RSW_ISA_AVX2: mesh_hits_avx2(n, stride, k, face, in, out); return;
   default: break;
   }
