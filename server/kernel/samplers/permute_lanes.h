@@ -49,10 +49,30 @@ static inline uint32_t permute_mask(uint32_t l) {
 /* The permutation of VW lanes at once in 32-bit integer lanes (VU32),
  * instantiated per ISA by stratified.c after it defined PERM_FN and
  * PERM_ATTR: each lane runs the scalar rounds; cycle walking continues,
- * masked, until every lane has landed in [0, l). */
+ * masked, until every lane has landed in [0, l). When l is a power of two
+ * (l = w + 1, every square sample count 4^k) the first round lands every
+ * lane (it ends masked to w, and i ^ i >> 5 keeps those bits) and
+ * (i + p) mod l is (i + p) & w: one round, no walking, no division. */
 #ifdef PERM_FN
 PERM_ATTR void PERM_FN(int n, const uint32_t *in, uint32_t l, const uint32_t *seed, uint32_t *out) {
   uint32_t w = permute_mask(l);
+  if (w == l - 1) {
+    int k0 = 0;
+    for (; k0 + VW <= n; k0 += VW) {
+      VU32 i, p;
+      __builtin_memcpy(&i, &in[k0], sizeof i);
+      __builtin_memcpy(&p, &seed[k0], sizeof p);
+      PERMUTE_HASH(i, p, w);
+      i = (i + p) & w;
+      __builtin_memcpy(&out[k0], &i, sizeof i);
+    }
+    for (; k0 < n; k0++) {
+      uint32_t i = in[k0], p = seed[k0];
+      PERMUTE_HASH(i, p, w);
+      out[k0] = (i + p) & w;
+    }
+    return;
+  }
   for (int k0 = 0; k0 < n; k0 += VW) {
     int cnt = n - k0 < VW ? n - k0 : VW;
     VU32 i, p;

@@ -156,9 +156,19 @@ static bool strata_batch(sampler_state *const *q, int m, uint32_t *sq, uint32_t 
   for (int k = 1; k < m; k++)
     if (q[k]->spp != spp) return false;
   uint32_t n = ceil_sqrt(spp ? spp : 1), n2 = n * n;
+  /* A wave holds runs of samples of one pixel at one dimension: their
+   * seed is hashed once per run; an index below n^2 (every sample of a
+   * render) needs no division. */
+  uint64_t key = 0;
+  uint32_t dim = 0, h = 0;
   for (int k = 0; k < m; k++) {
-    in[k] = q[k]->sample_index % n2;
-    seed[k] = dim_seed(q[k]);
+    uint32_t si = q[k]->sample_index;
+    in[k] = si < n2 ? si : si % n2;
+    if (k == 0 || q[k]->pixel_key != key || q[k]->dim != dim) {
+      key = q[k]->pixel_key, dim = q[k]->dim;
+      h = dim_seed(q[k]);
+    }
+    seed[k] = h;
   }
   stratified_permute_batch(m, in, n2, seed, p);
   *sq = n;
@@ -175,12 +185,14 @@ static void stratified_next_1d_batch(sampler_state *st, const int *idx, int n, d
       for (int k = 0; k < m; k++) out[k0 + k] = stratified_next_1d(q[k]);
       continue;
     }
-    uint32_t n2 = sq * sq;
+    double n2 = (double)(sq * sq), j[STRAT_C];
     for (int k = 0; k < m; k++) {
-      double j = jitter(q[k]);
+      j[k] = jitter(q[k]);
       q[k]->dim++;
-      out[k0 + k] = ((double)p[k] + j) / (double)n2;
     }
+    /* Apart from the streams: the divisions in vector lanes (IEEE
+     * division, the scalar's bits). */
+    for (int k = 0; k < m; k++) out[k0 + k] = ((double)p[k] + j[k]) / n2;
   }
 }
 
@@ -194,13 +206,23 @@ static void stratified_next_2d_batch(sampler_state *st, const int *idx, int n, v
       for (int k = 0; k < m; k++) out[k0 + k] = stratified_next_2d(q[k]);
       continue;
     }
+    double jx[STRAT_C], jy[STRAT_C], fx[STRAT_C], fy[STRAT_C], side = (double)sq;
     for (int k = 0; k < m; k++) {
-      uint32_t y = p[k] / sq, x = p[k] - y * sq;
-      double jx = jitter(q[k]);
-      double jy = jitter(q[k]);
+      jx[k] = jitter(q[k]);
+      jy[k] = jitter(q[k]);
       q[k]->dim++;
-      out[k0 + k] = v2(((double)x + jx) / (double)sq, ((double)y + jy) / (double)sq);
     }
+    /* The cell: a shift and mask for a power-of-two side (spp 4^k). */
+    if ((sq & (sq - 1)) == 0) {
+      int sh = __builtin_ctz(sq);
+      for (int k = 0; k < m; k++) fx[k] = (double)(p[k] & (sq - 1)), fy[k] = (double)(p[k] >> sh);
+    } else {
+      for (int k = 0; k < m; k++) {
+        uint32_t y = p[k] / sq;
+        fx[k] = (double)(p[k] - y * sq), fy[k] = (double)y;
+      }
+    }
+    for (int k = 0; k < m; k++) out[k0 + k] = v2((fx[k] + jx[k]) / side, (fy[k] + jy[k]) / side);
   }
 }
 

@@ -308,17 +308,19 @@ static bool same_state(const sampler_state *a, const sampler_state *b) {
 }
 
 /* start_batch, then batched draws over changing subsets of lanes in
- * changing orders, against the per-lane ops. */
-static void check_sampler_batches(const sampler *smp, const char *what) {
+ * changing orders, against the per-lane ops, at spp samples per pixel
+ * (49: the stratified permutation walks cycles; 64: a power of two, its
+ * one-round path). */
+static void check_sampler_batches(const sampler *smp, const char *what, uint32_t spp) {
   enum {
     N = 77
   };
   sampler_state a[N], b[N];
   uint64_t pixel[N];
   uint32_t index[N];
-  for (int k = 0; k < N; k++) pixel[k] = 1000 + (uint64_t)(k / 9), index[k] = (uint32_t)(k * 5 % 49);
-  sampler_start_batch(smp, a, N, 3, pixel, index, 49);
-  for (int k = 0; k < N; k++) smp->ops->start(smp, &b[k], 3, pixel[k], index[k], 49);
+  for (int k = 0; k < N; k++) pixel[k] = 1000 + (uint64_t)(k / 9), index[k] = (uint32_t)(k * 5 % spp);
+  sampler_start_batch(smp, a, N, 3, pixel, index, spp);
+  for (int k = 0; k < N; k++) smp->ops->start(smp, &b[k], 3, pixel[k], index[k], spp);
   int bad = 0;
   for (int k = 0; k < N; k++) bad += !same_state(&a[k], &b[k]);
   CHECK(bad == 0, "%s: start_batch differs in %d of %d lanes", what, bad, N);
@@ -376,8 +378,10 @@ static void test_sampler_batches(void) {
     for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
       if (!rsw_isa_set((rsw_isa)isa)) continue;
       char what[64];
-      snprintf(what, sizeof what, "%s at %s", types[t], rsw_isa_name((rsw_isa)isa));
-      check_sampler_batches(smp, what);
+      snprintf(what, sizeof what, "%s at %s, spp 49", types[t], rsw_isa_name((rsw_isa)isa));
+      check_sampler_batches(smp, what, 49);
+      snprintf(what, sizeof what, "%s at %s, spp 64", types[t], rsw_isa_name((rsw_isa)isa));
+      check_sampler_batches(smp, what, 64);
     }
     rsw_isa_set(rsw_isa_best());
     if (t == 1) check_threads(s, 49, "stratified sampler");
