@@ -11,8 +11,10 @@
  * both, scene_refresh_bounds), not per sample; without them (a mesh above
  * SHAPE_TRIS_MAX faces, or no memory) each sample makes its triangle with
  * the same code, so the result is the same bit for bit. */
+#include <math.h>
 #include <stdlib.h>
 
+#include "../core/isa.h"
 #include "../scene/plugin_def.h"
 #include "../shapes/shape.h"
 #include "../textures/texture.h"
@@ -51,6 +53,125 @@ static color area_sample(const emitter *e, const surface_interaction *ref, vec2 
   return col_scale(tex_eval(a->radiance, &at), 1.0 / ds->pdf);
 }
 
+/* ---- the wave's batch (emitter_ops.sample_direction_batch) -------------------- */
+
+/* area_sample for up to AREA_C lanes, its geometry in structure-of-arrays
+ * form: the positions (and normals) are drawn lane by lane, then the
+ * direction, distance, cosine and pdf of every lane in one loop that the
+ * compiler vectorises (compiled per ISA below, picked by rsw_isa_get), then
+ * the results written out. Each lane makes the operations of area_sample in
+ * its order (the kernel is built without floating-point contraction: no
+ * fused multiply-adds), so every ISA gives its bits. */
+enum {
+  AREA_C = 64
+};
+typedef struct area_lanes {
+  double px[AREA_C], py[AREA_C], pz[AREA_C]; /* sampled point */
+  double nx[AREA_C], ny[AREA_C], nz[AREA_C]; /* its unit normal (after flip_normals) */
+  double rx[AREA_C], ry[AREA_C], rz[AREA_C]; /* reference point */
+  double dx[AREA_C], dy[AREA_C], dz[AREA_C]; /* out: unit direction */
+  double dist[AREA_C], pdf[AREA_C], ipdf[AREA_C];
+  double dist_ok[AREA_C], cos_ok[AREA_C]; /* out: 1 where dist > 0, cos_e > 0 */
+} area_lanes;
+
+/* pdf_a: the position density 1 / area, as shape_sample_position_tris. */
+static inline __attribute__((always_inline)) void area_geom_body(area_lanes *L, int n, double pdf_a) {
+  for (int i = 0; i < n; i++) {
+    double ddx = L->px[i] - L->rx[i], ddy = L->py[i] - L->ry[i], ddz = L->pz[i] - L->rz[i];
+    double dist2 = ddx * ddx + ddy * ddy + ddz * ddz;
+    double dist = sqrt(dist2);
+    double inv = 1.0 / dist;
+    double ux = ddx * inv, uy = ddy * inv, uz = ddz * inv;
+    double cos_e = -(ux * L->nx[i] + uy * L->ny[i] + uz * L->nz[i]);
+    double pdf = pdf_a * dist2 / cos_e;
+    L->dx[i] = ux, L->dy[i] = uy, L->dz[i] = uz;
+    L->dist[i] = dist;
+    L->pdf[i] = pdf;
+    L->ipdf[i] = 1.0 / pdf;
+    L->dist_ok[i] = dist > 0 ? 1.0 : 0.0;
+    L->cos_ok[i] = cos_e > 0 ? 1.0 : 0.0;
+  }
+}
+
+#if defined(__x86_64__) || defined(__i386__)
+static __attribute__((target("avx512f,avx512vl,avx512dq"))) void area_geom_avx512(area_lanes *L, int n,
+                                                                                  double pdf_a) {
+  area_geom_body(L, n, pdf_a);
+}
+static __attribute__((target("avx2,fma"))) void area_geom_avx2(area_lanes *L, int n, double pdf_a) {
+  area_geom_body(L, n, pdf_a);
+}
+#endif
+/* sse2 (the x86-64 baseline) and generic. */
+static void area_geom_base(area_lanes *L, int n, double pdf_a) {
+  area_geom_body(L, n, pdf_a);
+}
+
+static void area_geom(area_lanes *L, int n, double pdf_a) {
+#if defined(__x86_64__) || defined(__i386__)
+  switch (rsw_isa_get()) {
+  case RSW_ISA_AVX512: area_geom_avx512(L, n, pdf_a); return;
+  case RSW_ISA_AVX2: area_geom_avx2(L, n, pdf_a); return;
+  default: break;
+  }
+#endif
+  area_geom_base(L, n, pdf_a);
+}
+
+static void area_sample_chunk(const area_light *a, int n, const surface_interaction *const *ref,
+                              const vec2 *u, direction_sample *ds, color *value, area_lanes *L) {
+  const emitter *e = &a->base;
+  const shape *s = e->shape;
+  const double *tris = shape_world_tris_for(s, a->tris, a->tris_n);
+  bool is_mesh = shape_is_mesh(s), flip = s->flip_normals;
+  double uv[AREA_C][2];
+  for (int i = 0; i < n; i++) {
+    /* shape_sample_position_tris without its pdf (the same for every
+     * lane: pdf_a below) */
+    position_sample ps;
+    if (is_mesh) {
+      mesh_sample_inline(s, u[i], tris, &ps);
+      if (flip) ps.n = v3_neg(ps.n);
+    } else {
+      ps = shape_sample_position_tris(s, u[i], tris);
+    }
+    L->px[i] = ps.p.x, L->py[i] = ps.p.y, L->pz[i] = ps.p.z;
+    L->nx[i] = ps.n.x, L->ny[i] = ps.n.y, L->nz[i] = ps.n.z;
+    L->rx[i] = ref[i]->p.x, L->ry[i] = ref[i]->p.y, L->rz[i] = ref[i]->p.z;
+    uv[i][0] = ps.uv[0], uv[i][1] = ps.uv[1];
+  }
+  area_geom(L, n, 1.0 / s->area);
+  /* A uniform radiance (the common case) is read once, not per lane. */
+  color rad;
+  bool uniform = uniform_texture_value(a->radiance, &rad);
+  for (int i = 0; i < n; i++) {
+    direction_sample *d = &ds[i];
+    d->p = v3(L->px[i], L->py[i], L->pz[i]);
+    d->n = v3(L->nx[i], L->ny[i], L->nz[i]);
+    d->delta = false;
+    d->pdf = 0;
+    value[i] = col1(0);
+    if (L->dist_ok[i] == 0) continue;
+    d->d = v3(L->dx[i], L->dy[i], L->dz[i]);
+    d->dist = L->dist[i];
+    if (L->cos_ok[i] == 0) continue;
+    d->pdf = L->pdf[i];
+    if (!uniform) {
+      surface_interaction at = {.p = d->p, .uv = {uv[i][0], uv[i][1]}, .shape = s};
+      rad = tex_eval(a->radiance, &at);
+    }
+    value[i] = col_scale(rad, L->ipdf[i]);
+  }
+}
+
+static void area_sample_batch(const emitter *e, int n, const surface_interaction *const *ref, const vec2 *u,
+                              direction_sample *ds, color *value) {
+  area_lanes L;
+  for (int i = 0; i < n; i += AREA_C)
+    area_sample_chunk((const area_light *)e, n - i < AREA_C ? n - i : AREA_C, ref + i, u + i, ds + i,
+                      value + i, &L);
+}
+
 static double area_pdf(const emitter *e, const surface_interaction *ref, const direction_sample *ds) {
   double cos_e = -v3_dot(ds->d, ds->n);
   if (!(cos_e > 0)) return 0.0;
@@ -67,7 +188,8 @@ static color area_eval(const emitter *e, const surface_interaction *hit, vec3 d)
 static const emitter_ops area_ops = {.sample_direction = area_sample,
                                      .pdf_direction = area_pdf,
                                      .eval = area_eval,
-                                     .set_scene = area_set_scene};
+                                     .set_scene = area_set_scene,
+                                     .sample_direction_batch = area_sample_batch};
 
 static void area_destroy(object *o) {
   if (o) free(((area_light *)o)->tris);

@@ -4,11 +4,14 @@
  * for a two-triangle rectangle and a 12-triangle cube light, and the
  * direction, distance and pdf follow from that point; and a chi-square test
  * of sample_direction against a density written independently of the
- * kernel (ray-triangle intersection over the light's world triangles). (That the triangles
+ * kernel (ray-triangle intersection over the light's world triangles); and
+ * the batched op (sample_direction_batch, structure-of-arrays lanes per
+ * ISA) bitwise sample_direction lane by lane at every ISA. (That the triangles
  * follow to_world and vertex updates is checked as update = reload in
  * tests/kernel/scene/test_update_reload.c.) */
 #include <string.h>
 
+#include "../../../server/kernel/core/isa.h"
 #include "../../../server/kernel/core/rng.h"
 #include "../../../server/kernel/shapes/shape.h"
 #include "../../support/chi2.h"
@@ -66,6 +69,88 @@ static void test_rectangle_light(void) {
 
 static void test_cube_light(void) {
   check_light("cube");
+}
+
+/* ---- the batched op against sample_direction --------------------------------------- */
+
+/* Every field sample_direction writes, bit for bit (d and dist are left
+ * as they were when the distance is zero; both sides start from the same
+ * bytes). */
+static bool same_sample(const direction_sample *a, const direction_sample *b) {
+  return !memcmp(&a->p, &b->p, sizeof a->p) && !memcmp(&a->n, &b->n, sizeof a->n) &&
+         !memcmp(&a->d, &b->d, sizeof a->d) && !memcmp(&a->dist, &b->dist, sizeof a->dist) &&
+         !memcmp(&a->pdf, &b->pdf, sizeof a->pdf) && a->delta == b->delta;
+}
+
+/* n lanes (over two chunks of the op's 64) with reference points in front
+ * of the light, behind it (cos_e <= 0) and one on a sampled point (zero
+ * distance), at each ISA this CPU runs: each lane equals sample_direction,
+ * and the entries past n stay as they were. */
+static void check_batch(const char *shape_type, const char *radiance) {
+  char text[2048], fmt[2048];
+  /* the scene with another radiance */
+  snprintf(fmt, sizeof fmt, "%s", scene_fmt);
+  char *r = strstr(fmt, "\"radiance\": 2");
+  REQUIRE(r, "radiance in the scene text");
+  char tail[512];
+  snprintf(tail, sizeof tail, "%s", r + strlen("\"radiance\": 2"));
+  snprintf(r, sizeof fmt - (size_t)(r - fmt), "\"radiance\": %s%s", radiance, tail);
+  snprintf(text, sizeof text, fmt, shape_type);
+  scene *s = tsup_load(text, "rgb");
+  REQUIRE(s, "load a %s light (radiance %s)", shape_type, radiance);
+  const emitter *e = NULL;
+  for (size_t i = 0; i < s->n_emitters; i++)
+    if (s->emitters[i]->flags & EMITTER_SURFACE) e = s->emitters[i];
+  REQUIRE(e && e->ops->sample_direction_batch, "%s: the area emitter and its batch op", shape_type);
+  enum {
+    N = 100,
+    PAD = 3
+  };
+  static surface_interaction si[N];
+  const surface_interaction *ref[N];
+  vec2 u[N];
+  pcg32 rng;
+  pcg32_seed(&rng, 23, 4);
+  memset(si, 0, sizeof si);
+  for (int k = 0; k < N; k++) {
+    /* below the light (it faces down, mostly) or above it */
+    double z = k % 3 == 2 ? 3.0 : -0.5 + pcg32_next_double(&rng);
+    si[k].p = v3(2 * pcg32_next_double(&rng) - 1, 2 * pcg32_next_double(&rng) - 1, z);
+    ref[k] = &si[k];
+    u[k] = v2(pcg32_next_double(&rng), pcg32_next_double(&rng));
+  }
+  si[7].p = shape_sample_position(e->shape, u[7]).p; /* zero distance */
+  int isas = 0;
+  rsw_isa was = rsw_isa_get();
+  for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
+    if (!rsw_isa_set((rsw_isa)isa)) continue;
+    isas++;
+    direction_sample ds[N + PAD], one[N + PAD];
+    color v[N + PAD], w[N + PAD];
+    memset(ds, 0xa5, sizeof ds), memset(one, 0xa5, sizeof one);
+    memset(v, 0x5a, sizeof v), memset(w, 0x5a, sizeof w);
+    e->ops->sample_direction_batch(e, N, ref, u, ds, v);
+    int bad = 0, lit = 0, back = 0;
+    for (int k = 0; k < N; k++) {
+      w[k] = e->ops->sample_direction(e, ref[k], u[k], &one[k]);
+      bad += memcmp(&w[k], &v[k], sizeof w[k]) != 0 || !same_sample(&one[k], &ds[k]);
+      lit += one[k].pdf > 0, back += !(one[k].pdf > 0);
+    }
+    CHECK(bad == 0, "%s (%s) at %s: %d of %d lanes differ from sample_direction", shape_type, radiance,
+          rsw_isa_name((rsw_isa)isa), bad, N);
+    CHECK(!memcmp(&ds[N], &one[N], PAD * sizeof ds[0]) && !memcmp(&v[N], &w[N], PAD * sizeof v[0]),
+          "%s at %s: entries past n written", shape_type, rsw_isa_name((rsw_isa)isa));
+    CHECK(lit > N / 3 && back > N / 4, "%s: lit %d, unlit %d of %d lanes", shape_type, lit, back, N);
+  }
+  CHECK(isas >= 2, "at least two ISAs (%d)", isas);
+  rsw_isa_set(was);
+  scene_free(s);
+}
+
+static void test_batch_matches_scalar(void) {
+  check_batch("rectangle", "2");
+  check_batch("cube", "2");
+  check_batch("rectangle", "{\"type\": \"checkerboard\"}");
 }
 
 /* ---- direction sampling chi-square ------------------------------------------------- */
@@ -160,6 +245,7 @@ static void test_direction_sampling_chi2(void) {
 int main(void) {
   RSW_TEST_RUN(test_rectangle_light);
   RSW_TEST_RUN(test_cube_light);
+  RSW_TEST_RUN(test_batch_matches_scalar);
   RSW_TEST_RUN(test_direction_sampling_chi2);
   RSW_TEST_END("test_area_light");
 }
