@@ -8,7 +8,8 @@
 #   make run        start the daemon with the embedded default scene (PORT=8350)
 #   make deps       install missing Debian packages for building and running
 #                   (no-op when all present); deps-test adds the tests' tools,
-#                   deps-cluster the balancers and Slurm (tools/deps.sh)
+#                   deps-cluster the balancers and Slurm, deps-bench haproxy
+#                   for make bench (tools/deps.sh)
 #   make install    raysweepd, raysweep, man pages, headers, libraysweep
 #                   (PREFIX=/usr/local, DESTDIR= for staging)
 #   make format     clang-format the C sources (tools/check-format.sh --fix)
@@ -161,7 +162,7 @@ client_pc_lines = 'prefix=$(1)' 'includedir=$${prefix}/include' 'libdir=$${prefi
   'Version: $(VERSION)' 'Cflags: -I$${includedir}' \
   'Libs: -L$${libdir} -lraysweep' 'Libs.private: -lcurl -lcjson -lexpat -lcrypto -lOpenEXRCore -lnetcdf -lpng16 -lpthread -lm'
 
-.PHONY: all deps deps-test deps-cluster test bench run clean format install test-cluster test-generic
+.PHONY: all deps deps-test deps-cluster deps-bench test bench run clean format install test-cluster test-generic
 .SECONDARY:
 
 all: deps $(BUILD)/bin/raysweepd $(CLIENT_A) $(CLIENT_SO) $(CLIENT_PC)
@@ -176,6 +177,9 @@ deps-test: | deps
 
 deps-cluster: | deps
 	@tools/deps.sh cluster
+
+deps-bench: | deps
+	@tools/deps.sh bench
 
 $(BUILD)/obj/%.o: %.c | deps
 	@mkdir -p $(dir $@)
@@ -315,7 +319,7 @@ test-generic: deps
 	$(MAKE) SIMD=generic $(addprefix build-generic/tests/,$(GENERIC_TESTS))
 	@BUILD=build-generic tests/run.sh $(addprefix build-generic/tests/,$(GENERIC_TESTS))
 
-bench: deps $(BUILD)/bin/raysweepd $(BUILD)/bin/raysweep $(BENCH_BIN)
+bench: deps deps-bench $(BUILD)/bin/raysweepd $(BUILD)/bin/raysweep $(BENCH_BIN)
 	@for b in $(BENCH_BIN); do $$b || exit 1; done
 	@for s in $(BENCH_SCRIPTS); do RSW_BIN_DIR=$(BUILD)/bin $$s || exit 1; done
 

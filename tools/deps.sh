@@ -6,12 +6,14 @@
 #   test     `make test`: the test scripts' tools, the headless browser
 #   cluster  `make test-cluster`: the balancers and a single-node Slurm
 #   container  tests/container/run.sh (.ci/run): podman
+#   bench    `make bench`: haproxy for the scale_out line
 #   fuzz     `make fuzz`: clang with libFuzzer's runtime
 #
 # `tools/deps.sh --list [SET...]` prints the packages, one a line, and
 # installs nothing (tests/integration/test_deps.sh checks the sets).
 # The Makefile runs it before compiling (`make deps`: build), before the
-# tests (`make deps-test`), before the cluster tests (`make deps-cluster`).
+# tests (`make deps-test`), before the cluster tests (`make deps-cluster`),
+# before the benchmarks (`make deps-bench`).
 # Costs one dpkg-query and no network when everything is there. Otherwise
 # it runs `apt-get update` and `apt-get install` (as root, or through sudo),
 # waiting up to RSW_DEPS_LOCK_WAIT seconds (default 600) for the dpkg and
@@ -47,6 +49,11 @@ cluster=(
   # (test_containers.sh)
   haproxy nginx slurm-wlm munge curl python3 python3-yaml
 )
+bench=(
+  # make bench: haproxy in front of the scale_out line's replicas
+  # (tests/bench/bench_scale_out.py); python3 runs the bench scripts
+  haproxy python3
+)
 container=(
   # podman builds docker/Dockerfile (tests/container/run.sh)
   podman curl python3
@@ -68,9 +75,10 @@ for set in "$@"; do
   test) pkgs+=("${test[@]}") ;;
   cluster) pkgs+=("${cluster[@]}") ;;
   container) pkgs+=("${container[@]}") ;;
+  bench) pkgs+=("${bench[@]}") ;;
   fuzz) pkgs+=("${fuzz[@]}") ;;
   *)
-    echo "deps: unknown package set '$set' (one of build, test, cluster, container, fuzz)" >&2
+    echo "deps: unknown package set '$set' (one of build, test, cluster, container, fuzz, bench)" >&2
     exit 2
     ;;
   esac

@@ -145,7 +145,7 @@ def latencies(direct, via, n):
 
 def main():
     if not shutil.which("haproxy"):
-        sys.exit("bench_scale_out: haproxy is needed (make deps)")
+        sys.exit("bench_scale_out: haproxy is needed (make deps-bench)")
     tmp = tempfile.mkdtemp()
     procs = []
     load0 = os.getloadavg()[0]

@@ -35,8 +35,18 @@ for p in slurm-wlm munge nginx haproxy; do
 done
 has "$cluster_set" chromium && bad "the cluster set installs chromium: $cluster_set" || ok
 has "$(set_of container)" podman && ok || bad "the container set lacks podman"
+# make bench's scale_out line puts haproxy in front of replicas: the bench
+# set has it (a fresh machine's `make bench` stopped there), and no Slurm
+# or browser.
+bench_set=$(set_of bench)
+for p in haproxy python3; do
+  has "$bench_set" "$p" && ok || bad "the bench set lacks $p: $bench_set"
+done
+for p in slurm-wlm munge chromium; do
+  has "$bench_set" "$p" && bad "the bench set installs $p: $bench_set" || ok
+done
 # Each package once, whatever the sets asked for.
-dups=$("$deps" --list test cluster container | sort | uniq -d)
+dups=$("$deps" --list test cluster container bench | sort | uniq -d)
 [ -z "$dups" ] && ok || bad "packages listed twice: $dups"
 "$deps" --list bogus >/dev/null 2>"$tmp/err" && bad "an unknown set was accepted" ||
   { grep -q "unknown package set 'bogus'" "$tmp/err" && ok || bad "unknown set: $(cat "$tmp/err")"; }
@@ -51,6 +61,9 @@ out=$(mk deps-cluster)
 grep -qx 'tools/deps.sh cluster' <<<"$out" && ok || bad "make deps-cluster does not run tools/deps.sh cluster: $out"
 grep -qE '^test: .*deps-test' "$root/Makefile" && ok || bad "make test does not depend on deps-test"
 grep -qE '^test-cluster: .*deps-cluster' "$root/Makefile" && ok || bad "make test-cluster does not depend on deps-cluster"
+out=$(mk deps-bench)
+grep -qx 'tools/deps.sh bench' <<<"$out" && ok || bad "make deps-bench does not run tools/deps.sh bench: $out"
+grep -qE '^bench: .*deps-bench' "$root/Makefile" && ok || bad "make bench does not depend on deps-bench"
 grep -qE '^run: .*deps-(test|cluster)' "$root/Makefile" && bad "make run installs the test or cluster tools" || ok
 grep -qE 'deps\.sh (test|cluster)' "$root/make" && bad "./make installs the test or cluster set itself" || ok
 
