@@ -16,6 +16,15 @@
 # shortens the build and changes nothing the scenes use.
 set -eu
 dir=${1:?usage: tools/build-peer.sh DIR}
+# What the build and llvm_rgb need, checked before the clone (an hour in,
+# a missing libLLVM would only show when llvm_rgb first runs).
+for t in git cmake ninja g++; do
+  command -v "$t" >/dev/null || { echo "build-peer: $t not found (Debian 12: apt install git cmake ninja-build g++)" >&2; exit 1; }
+done
+if [ -z "${DRJIT_LIBLLVM_PATH:-}" ] && ! ldconfig -p 2>/dev/null | grep -q 'libLLVM'; then
+  echo "build-peer: libLLVM not found, which llvm_rgb loads at run time (Debian 12: apt install libllvm14, or set DRJIT_LIBLLVM_PATH)" >&2
+  exit 1
+fi
 mkdir -p "$dir"
 dir=$(cd "$dir" && pwd)
 if [ ! -d "$dir/src/.git" ]; then
