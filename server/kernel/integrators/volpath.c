@@ -446,14 +446,32 @@ static inline double pages_max(color x, const vpage *pg, const color *a, int pag
   return m;
 }
 
+/* Fill the pending hits' interactions (hit_fill_interaction_batch:
+ * bitwise hit_fill_interaction's, the frames vectorised). */
+static void fill_hits(const scene *sc, int n, const ray3 *const *r, const accel_hit *h,
+                      surface_interaction *si, const int *k) {
+  enum {
+    C = 64
+  };
+  const accel_hit *hp[C];
+  surface_interaction *sp[C];
+  for (int j = 0; j < n; j++) hp[j] = &h[j], sp[j] = &si[k[j]];
+  hit_fill_interaction_batch(sc, n, r, hp, sp);
+}
+
 /* Trace lanes idx[0..n) (rays in ln[i].ray for shadow == false, ln[i].sray
- * else): hit flags into hit[k], hits into si[k]. */
+ * else): hit flags into hit[k], hits into si[k]. The packets' hits wait in
+ * a buffer of C and are filled together (fill_hits). */
 static void wave_trace(const scene *sc, const hit_bounds *hb, vlane *ln, const int *idx, int n, bool shadow,
                        bool coherent, bool *hit, surface_interaction *si, render_stats *stats) {
   enum {
-    P = 16
+    P = 16,
+    C = 64 /* (a multiple of P) */
   };
   int q[P], nq = 0;
+  const ray3 *fr[C];
+  accel_hit fh[C];
+  int fk[C], nf = 0;
   for (int k = 0; k <= n; k++) {
     if (k < n) {
       vlane *l = &ln[idx[k]];
@@ -480,12 +498,18 @@ static void wave_trace(const scene *sc, const hit_bounds *hb, vlane *ln, const i
     accel_intersect_packet_mask(sc->accel, rp, nq, h, ok, coherent,
                                 sc->null_boxes.on ? ACCEL_RAYS_NO_NULL_BOX : 0xFFFFFFFFu);
     *(shadow ? &stats->shadow_rays : &stats->rays) += (uint64_t)nq;
+    if (nf + nq > C) {
+      fill_hits(sc, nf, fr, fh, si, fk);
+      nf = 0;
+    }
     for (int j = 0; j < nq; j++) {
       hit[q[j]] = ok[j];
-      if (ok[j]) hit_fill_interaction(sc, rp[j], &h[j], &si[q[j]]);
+      fr[nf] = rp[j], fh[nf] = h[j], fk[nf] = q[j];
+      nf += ok[j];
     }
     nq = 0;
   }
+  if (nf > 0) fill_hits(sc, nf, fr, fh, si, fk);
 }
 
 /* The length from the exact start o0 of ray r's segment (unit direction)
