@@ -479,17 +479,18 @@ static void wave_trace(const scene *sc, const hit_bounds *hb, vlane *ln, const i
       vlane *l = &ln[idx[k]];
       const ray3 *r = shadow ? &l->sray : &l->ray;
       hit[k] = false;
-      if (!may_hit_in(hb, r)) continue;
-      if (sc->periodic.on) { /* scene_trace walks the walls per ray */
+      bool go = may_hit_in(hb, r);
+      if (sc->periodic.on) { /* scene_trace walks the walls per ray (go: always) */
         uint64_t before = stats->rays;
-        hit[k] = intersect(sc, r, &si[k], stats); /* counts itself in stats->rays */
+        hit[k] = go && intersect(sc, r, &si[k], stats); /* counts itself in stats->rays */
         if (shadow) {
           stats->shadow_rays += stats->rays - before;
           stats->rays = before;
         }
         continue;
       }
-      q[nq++] = k;
+      q[nq] = k; /* (no branch on go) */
+      nq += go;
       if (nq < P) continue;
     }
     if (nq == 0) continue;
@@ -1381,10 +1382,11 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
     int next = 0, n_sh = 0;
     if (staged) {
       wave_events(vp, sc, st, ln, idx, live, hit, si, &fp, vs); /* (si[k]: in place) */
-      for (int k = 0; k < live; k++) {
+      for (int k = 0; k < live; k++) {                          /* (no branch on the outcomes) */
         int i = idx[k];
-        if (ln[i].sh) sh[n_sh++] = i;
-        if (vs->ev[k] != EV_END) idx[next++] = i;
+        sh[n_sh] = idx[next] = i;
+        n_sh += ln[i].sh;
+        next += vs->ev[k] != EV_END;
       }
     } else {
       for (int k = 0; k < live; k++) {
