@@ -65,7 +65,14 @@
  *
  * The sensor's medium: Li does not receive the sensor, so the path's first
  * medium is that of the sensor whose sampler drives it (st->s); sensors
- * sharing a sampler must share a medium (scene_check_media says so). */
+ * sharing a sampler must share a medium (scene_check_media says so).
+ *
+ * The paths run as a wave (below): in stages over its lanes where the
+ * scene has neither pages nor polarization (wave_events), so that each
+ * stage can call the batched ops for all its lanes (the samplers' draws,
+ * the emitters' light samples; per lane still: free flights, phase
+ * functions and BSDFs), else lane by lane (lane_event); the same film bit
+ * for bit either way (tests/kernel/integrators/test_volpath_stages.c). */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -393,16 +400,21 @@ static const medium *start_medium(const scene *sc, const sampler_state *st) {
  * Paths advance together, event by event (as `path`'s wave): the rays of
  * the live lanes are traced as Embree packets (one by one under a
  * periodic boundary; a ray that has left the scene's bounds is not traced
- * at all), then each lane handles its segment: the free flight through
- * its medium, then the scattering event, the surface, the null surface
- * crossed or the escape, which sets up its shadow ray (next-event
- * estimation) and its next ray. The shadow rays are then traced together,
- * round after round while some cross null surfaces, each lane
- * accumulating its transmittance. A lane draws from its own sampler state
- * only, always in the same order (free flight, light sample, phase or
- * BSDF sample, roulette, then the shadow ray's ratio tracking), so its
- * value does not depend on its batch (up to Embree's packet rounding,
- * accel.h); Li is the wave of one path. */
+ * at all) and their hits filled together (hit_fill_interaction_batch),
+ * then the lanes handle their segments: the free flight through the
+ * medium, then the scattering event, the surface, the null surface
+ * crossed or the escape, which sets up the shadow ray (next-event
+ * estimation) and the next ray. Without pages or polarization this goes
+ * in stages over the lanes (wave_events: the flights, the surfaces, the
+ * scatterings, the roulette, each stage drawing its numbers for all its
+ * lanes at once), else lane by lane (lane_event); both are made of the
+ * same pieces and give the same film bit for bit. The shadow rays are
+ * then traced together, round after round while some cross null
+ * surfaces, each lane accumulating its transmittance. A lane draws from
+ * its own sampler state only, always in the same order (free flight,
+ * light sample, phase or BSDF sample, roulette, then the shadow ray's
+ * ratio tracking), so its value does not depend on its batch (up to
+ * Embree's packet rounding, accel.h); Li is the wave of one path. */
 
 typedef struct vlane {
   ray3 ray;   /* the ray to trace (its origin offset off the surface it leaves) */
