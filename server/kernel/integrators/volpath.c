@@ -1158,16 +1158,20 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
  *
  * Without pages or polarization (the common case), a wave's events go in
  * stages over its lanes rather than lane by lane (wave_events): every
- * lane's free flight; then the lanes that reached a surface (emission,
- * light samples, BSDF samples); then the lanes that scattered in the
- * medium (light samples, phase samples); then the roulette. Each stage
- * draws its numbers for all its lanes at once (samplers/sampler_batch.h)
- * and groups the light samples by emitter (integrators/wave.h); every lane
- * still draws from its own state in lane_event's order and computes the
- * same values, so the staged and the lane-by-lane events give bitwise the
- * same film (tests/kernel/integrators/test_volpath_stages.c). The BSDFs
- * and phase functions are called per lane: the BSDFs' batched ops compute
- * in single precision (bsdfs/rpv.c), which would move the films. */
+ * lane's free flight and what needs no draw after it (the emission its
+ * ray sees, a null surface crossed); then the lanes that bounce off a
+ * surface (light samples, BSDF samples); then the lanes that scatter in
+ * the medium (light samples, phase samples); each of the last two ending
+ * with the roulette. Each stage draws its numbers for all its lanes at
+ * once (samplers/sampler_batch.h) and groups the light samples by emitter
+ * (integrators/wave.h); every lane still draws from its own state in
+ * lane_event's order and computes the same values, so the staged and the
+ * lane-by-lane events give bitwise the same film
+ * (tests/kernel/integrators/test_volpath_stages.c). The free flights,
+ * phase functions and BSDFs are still called per lane: a batched flight
+ * or phase op would replace those calls in stage_segments and
+ * stage_scatters; the BSDFs' batched ops compute in single precision
+ * (bsdfs/rpv.c), which would move the films (docs/performance.md). */
 
 /* Whether wave_run goes by stages where it can (volpath_set_stages). */
 static _Atomic bool g_stages = true;
