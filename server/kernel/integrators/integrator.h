@@ -57,4 +57,9 @@ static inline double emitter_prob(const scene *sc, const emitter *e) {
 ray3 spawn_ray_to(const scene *sc, const surface_interaction *si, const emitter *e,
                   const direction_sample *ds);
 
+/* volpath's and piecewise_volpath's waves: by stages over the lanes (on,
+ * the default) or lane by lane (off), for the whole process; the films
+ * are bitwise the same either way (for the tests that check it). */
+void volpath_set_stages(bool on);
+
 #endif

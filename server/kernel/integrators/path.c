@@ -24,6 +24,7 @@
 #include "integrator.h"
 #include "pages.h"
 #include "polarization.h"
+#include "wave.h"
 
 /* Shadow ray from si towards the emitter sample ds. Spawned rays are
  * offset by the hit point's float error, not by Mitsuba's (1 + max|p|)
@@ -432,7 +433,7 @@ static bool shade_emit(const integrator *it, const scene *sc, lane *l, double *q
  * shadow rays. A lane whose sample counts zero drops its nee; the lanes
  * that keep it are left in g[0..*n_sh), in order. d1, d2, ek, ord: n
  * entries of scratch each. */
-#define EMITTER_GROUPS 64
+#define EMITTER_GROUPS WAVE_EMITTER_GROUPS
 static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, page_lane *pgs, int *g, int n,
                                int *n_sh, double *d1, vec2 *d2, int *ek, int *ord) {
   enum {
@@ -455,12 +456,8 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, pag
       l->value = l->ne->ops->sample_direction(l->ne, &l->si, d2[k], &l->ds);
     }
   } else {
-    int start[EMITTER_GROUPS + 1] = {0};
-    for (int k = 0; k < n; k++) start[ek[k] + 1]++;
-    for (size_t e_i = 0; e_i < sc->n_emitters; e_i++) start[e_i + 1] += start[e_i];
-    int fill[EMITTER_GROUPS];
-    for (size_t e_i = 0; e_i < sc->n_emitters; e_i++) fill[e_i] = start[e_i];
-    for (int k = 0; k < n; k++) ord[fill[ek[k]]++] = k;
+    int start[EMITTER_GROUPS + 1];
+    wave_group_by_emitter(sc, ek, n, start, ord);
     for (size_t e_i = 0; e_i < sc->n_emitters; e_i++) {
       const emitter *e = sc->emitters[e_i];
       double pe = pick_probability(sc, e_i); /* every lane's own quotient */
