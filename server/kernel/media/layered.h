@@ -118,11 +118,6 @@ static inline double media_layers_tau(const media_layers *L, int c, double z0, d
   return fabs(media_layers_cum_in(L, c, k1, z1) - media_layers_cum_in(L, c, k0, z0)) / fabs(dz);
 }
 
-static inline double media_layers_tau_between(const media_layers *L, int c, double z0, double z1, double dz,
-                                              double len) {
-  return media_layers_tau(L, c, z0, z1, media_layer_of(L, z0), media_layer_of(L, z1), dz, len);
-}
-
 static inline void media_layers_fill(const media_layers *L, int k, medium_interaction *mi) {
   for (int c = 0; c < 3; c++) {
     double s = L->lay[k].sig[c];
@@ -134,10 +129,6 @@ static inline void media_layers_fill(const media_layers *L, int k, medium_intera
 
 static inline void media_layers_coefficients(const media_layers *L, medium_interaction *mi) {
   media_layers_fill(L, media_layer_of(L, media_layers_z(L, mi->p)), mi);
-}
-
-static inline void media_layers_spread(color *x, int nc) {
-  if (nc == 1) x->c[1] = x->c[2] = x->c[0];
 }
 
 /* 1 + 2^-40: media_layers_sample_real's margin for a flight that passes
@@ -172,10 +163,11 @@ static inline void media_layers_sample_real(const media_layers *L, const medium 
     pass = !(target < total);
   }
   if (pass) { /* the flight passes the box */
+    double e = exp(-total);
+    color x = col1(e); /* (one channel: the others copied) */
     for (int j = 0; j < nc; j++)
-      tr->c[j] = j == c ? exp(-total) : exp(-media_layers_tau(L, j, z0, z1, k0, k1, dz, t1 - t0));
-    media_layers_spread(tr, nc);
-    *pdf = *tr;
+      if (j != c) x.c[j] = exp(-media_layers_tau(L, j, z0, z1, k0, k1, dz, t1 - t0));
+    *tr = *pdf = x;
     return;
   }
   double t;
@@ -229,27 +221,32 @@ static inline void media_layers_sample_real(const media_layers *L, const medium 
   t = rsw_fmin(rsw_fmax(t, t0), t1);
   double zt = oz + t * dz;
   k = media_layer_of(L, zt);
+  const pw_layer *y = &L->lay[k];
   mi->t = t;
   mi->p = v3_fma(r->o, t, r->d);
-  mi->majorant = col(L->lay[k].sig[0], L->lay[k].sig[1], L->lay[k].sig[2]);
+  mi->majorant = col(y->sig[0], y->sig[1], y->sig[2]);
   media_layers_fill(L, k, mi);
-  for (int j = 0; j < nc; j++) {
-    tr->c[j] =
-        j == c ? 1.0 - u : exp(-media_layers_tau_between(L, j, z0, zt, dz, t - t0)); /* exp(-tau*) = 1 - u */
-    pdf->c[j] = tr->c[j] * L->lay[k].sig[j];
+  /* exp(-tau*) = 1 - u in channel c; the others over [z0, zt] (k0, k: its
+   * layers). One channel: the rest copied. */
+  color x = col1(1.0 - u), q;
+  for (int j = 0; j < nc; j++)
+    if (j != c) x.c[j] = exp(-media_layers_tau(L, j, z0, zt, k0, k, dz, t - t0));
+  if (nc == 1) {
+    q = col1(x.c[0] * y->sig[0]);
+  } else {
+    for (int j = 0; j < 3; j++) q.c[j] = x.c[j] * y->sig[j];
   }
-  media_layers_spread(tr, nc);
-  media_layers_spread(pdf, nc);
+  *tr = x;
+  *pdf = q;
 }
 
-static inline color media_layers_transmittance(const media_layers *L, const ray3 *r, double mint,
+static inline __attribute__((always_inline)) color media_layers_transmittance(const media_layers *L, const ray3 *r, double mint,
                                                double maxt) {
   double oz = media_layers_z(L, r->o), dz = media_layers_dz(L, r->d);
   double z0 = oz + mint * dz, z1 = oz + maxt * dz;
-  color tr = col1(1.0); /* (every channel is set: nc is 1 or 3) */
-  int nc = L->nc;
-  for (int j = 0; j < nc; j++) tr.c[j] = exp(-media_layers_tau_between(L, j, z0, z1, dz, maxt - mint));
-  media_layers_spread(&tr, nc);
+  int k0 = media_layer_of(L, z0), k1 = media_layer_of(L, z1);
+  color tr = col1(exp(-media_layers_tau(L, 0, z0, z1, k0, k1, dz, maxt - mint))); /* (nc 1: copied) */
+  for (int j = 1; j < L->nc; j++) tr.c[j] = exp(-media_layers_tau(L, j, z0, z1, k0, k1, dz, maxt - mint));
   return tr;
 }
 

@@ -37,7 +37,7 @@ static double hg_sample(const phase *ph, const medium_interaction *mi, double u1
     double s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u2.x);
     mu = (1.0 + g * g - s * s) / (2.0 * g);
   }
-  mu = fmin(1.0, fmax(-1.0, mu));
+  mu = rsw_fmin(rsw_fmax(mu, -1.0), 1.0); /* (fmin(1, fmax(-1, mu)) bit for bit, no libm calls) */
   *wo = phase_direction(mi, mu, u2.y);
   *pdf = hg_eval(g, mu);
   if (!(*pdf > 0.0)) return phase_fail(pdf);

@@ -12,6 +12,7 @@
 
 #include <math.h>
 
+#include "../core/fastmath.h"
 #include "../kernel.h"
 
 /* mu = cos(theta) of the scattering from mi->wi into wo. */
@@ -23,7 +24,7 @@ static inline double phase_mu(const medium_interaction *mi, vec3 wo) {
  * phi = 2 pi u around the forward direction -wi. */
 static inline vec3 phase_direction(const medium_interaction *mi, double mu, double u) {
   frame f = frame_from_normal(v3_neg(mi->wi));
-  double s = sqrt(fmax(0.0, 1.0 - mu * mu)), phi = 2.0 * RSW_PI * u;
+  double s = sqrt(rsw_fmax(1.0 - mu * mu, 0.0)), phi = 2.0 * RSW_PI * u; /* (fmax(0, .) bit for bit) */
   return frame_to_world(&f, v3(s * cos(phi), s * sin(phi), mu));
 }
 

@@ -58,7 +58,7 @@ static double rayleigh_sample(const phase *ph, const medium_interaction *mi, dou
   const rayleigh_phase *r = (const rayleigh_phase *)ph;
   double z = r->c * (2.0 * u2.x - 1.0);
   double a = cbrt(z + sqrt(z * z + r->k3));
-  double mu = fmin(1.0, fmax(-1.0, a - r->k / a));
+  double mu = rsw_fmin(rsw_fmax(a - r->k / a, -1.0), 1.0); /* (fmin(1, fmax(-1, .)) bit for bit) */
   *wo = phase_direction(mi, mu, u2.y);
   *pdf = rayleigh_value(r, mu);
   return 1.0;
