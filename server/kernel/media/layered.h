@@ -23,6 +23,7 @@
 #include <math.h>
 
 #include "../core/fastmath.h"
+#include "../core/isa.h"
 #include "../kernel.h"
 #include "media.h"
 
@@ -298,6 +299,28 @@ static inline void media_layers_sample_real(const media_layers *L, const medium 
   media_layers_collision(L, m, r, mint, t, k, mi);
   media_flight_weights(L, &f, u, t, k, tr, pdf);
 }
+
+/* n free flights at once, structure of arrays (media_layers_sample_real
+ * for each: lane i's numbers are its call's, bit for bit). In: the rays
+ * o[3], d[3] (world; n each), their clipped intervals [mint, maxt], the
+ * random numbers u and the drawn channels (NULL: all 0). Out (n each): t,
+ * the collision's distance (INFINITY: the flight passed), layer, its layer
+ * (-1: passed), and the transmittance tr and pdf per channel. A collision's
+ * medium interaction is media_layers_collision(L, m, ray, mint, t, layer). */
+typedef struct media_flight_batch {
+  int n;
+  const double *o[3], *d[3];
+  const double *mint, *maxt, *u;
+  const int *channel;
+  double *t;
+  int *layer;
+  double *tr[3], *pdf[3];
+} media_flight_batch;
+
+/* The flights of b at ISA isa (the setup in its lanes where the layers
+ * are equal and to_world affine; the logs, exps and searches per flight,
+ * passes and collisions apart). Reads L; thread-safe. */
+void media_layers_sample_real_batch(rsw_isa isa, const media_layers *L, const media_flight_batch *b);
 
 static inline __attribute__((always_inline)) color
 media_layers_transmittance(const media_layers *L, const ray3 *r, double mint, double maxt) {
