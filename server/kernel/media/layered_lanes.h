@@ -12,7 +12,8 @@
  * 8 doubles each (cum[3], sig[3], z, pad); o[3], d[3]: the rays; t0, t1,
  * u; c: the drawn channel (0 when nc = 1). out[0..4]: oz, dz, z0, z1,
  * total; k0, k1: the ends' layers; fast: 1 where the flight passes
- * without its log (media_flight_passes_fast). */
+ * without its log (media_flight_passes_fast). u and fast NULL: the setup
+ * alone (a transmittance's). */
 SIMD_ISA_DECL(void, flight_setup,
               (int n, const double *geo, const double *lay, const double *const *o, const double *const *d,
                const double *t0, const double *t1, const double *u, const int *c, double *const *out, int *k0,
@@ -58,7 +59,7 @@ LANES_ATTR void LANES_FN(flight_setup)(int n, const double *geo, const double *l
     /* Whole vectors loaded as such; a partial tail through a copy of
      * constant length that repeats its last flight (lane by lane inserts
      * of a variable count went through memory). */
-    const double *src[9] = {o[0], o[1], o[2], d[0], d[1], d[2], t0, t1, u};
+    const double *src[9] = {o[0], o[1], o[2], d[0], d[1], d[2], t0, t1, u ? u : t0};
     vdn v[9];
     vin ch;
     if (cnt == WD) {
@@ -94,7 +95,7 @@ LANES_ATTR void LANES_FN(flight_setup)(int n, const double *geo, const double *l
       int j = i0 + k;
       out[0][j] = oz[k], out[1][j] = dz[k], out[2][j] = z0[k], out[3][j] = z1[k], out[4][j] = total[k];
       k0[j] = (int)ka[k], k1[j] = (int)kb[k];
-      fast[j] = quick[k] != 0;
+      if (fast) fast[j] = quick[k] != 0;
     }
   }
 }

@@ -1,5 +1,6 @@
-/* media/layered.c media_layers_sample_real_batch against
- * media_layers_sample_real, bit for bit, at every ISA this CPU runs
+/* media/layered.c media_layers_sample_real_batch and
+ * media_layers_transmittance_batch against media_layers_sample_real and
+ * media_layers_transmittance, bit for bit, at every ISA this CPU runs
  * (media/layered_lanes.h: the setup's lanes): equal layers under an affine
  * to_world (the lanes), unequal layers and a projective to_world (the
  * scalar setup), one channel and three, over random rays from inside and
@@ -128,6 +129,16 @@ static int compare(const media_layers *L, const flights *F, rsw_isa isa, long *h
     }
     differ += bad;
   }
+  /* The transmittances over the same intervals. */
+  const double *o[3] = {F->o[0], F->o[1], F->o[2]}, *d[3] = {F->d[0], F->d[1], F->d[2]};
+  double *const trp[3] = {tr[0], tr[1], tr[2]};
+  media_layers_transmittance_batch(isa, L, F->n, o, d, F->mint, F->maxt, trp);
+  for (int i = 0; i < F->n; i++) {
+    color ct = media_layers_transmittance(L, &F->r[i], F->mint[i], F->maxt[i]);
+    bool bad = false;
+    for (int c = 0; c < 3; c++) bad |= !same(&ct.c[c], &tr[c][i], 8);
+    differ += bad;
+  }
   return differ;
 }
 
@@ -147,7 +158,9 @@ static void run_case(const char *name, const xform *xf, uint32_t n, int nc, bool
     for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
       if (!rsw_isa_supported((rsw_isa)isa)) continue;
       int d = compare(&L, &F, (rsw_isa)isa, &hits, &passes);
-      if (d) printf("  %s at %s: %d of %d flights differ\n", name, rsw_isa_name((rsw_isa)isa), d, F.n);
+      if (d)
+        printf("  %s at %s: %d of %d flights or transmittances differ\n", name, rsw_isa_name((rsw_isa)isa), d,
+               F.n);
       differ += d;
       isas += rep == 0;
     }
@@ -156,7 +169,7 @@ static void run_case(const char *name, const xform *xf, uint32_t n, int nc, bool
   CHECK(isas >= 1, "%s: no ISA", name);
   CHECK(hits > 1000 && passes > 1000, "%s: both kinds of flight (%ld collisions, %ld passes)", name, hits,
         passes);
-  CHECK(differ == 0, "%s: %d flights differ from media_layers_sample_real", name, differ);
+  CHECK(differ == 0, "%s: %d flights or transmittances differ from the scalar ones", name, differ);
   media_layers_free(&L);
 }
 
