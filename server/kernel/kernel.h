@@ -582,6 +582,15 @@ typedef struct phase_ops {
    * per colour channel of the scattering from mi->wi into wo, in the bases
    * whose x is the scattering plane's normal. NULL: a depolarizer. */
   void (*polarization)(const phase *ph, const medium_interaction *mi, vec3 wo, mueller P[3]);
+  /* Optional: n samples at once, lane i that of sample(ph, &mi[i], u1[i],
+   * u2[i], &wo[i], &pdf[i]) returning weight[i], bit for bit
+   * (phase/phase.h phase_sample_batch makes those calls without it). */
+  void (*sample_batch)(const phase *ph, int n, const medium_interaction *mi, const double *u1, const vec2 *u2,
+                       vec3 *wo, double *pdf, double *weight);
+  /* Optional: n evaluations at once, lane i that of eval_pdf(ph, &mi[i],
+   * wo[i], &pdf[i]) returning val[i], bit for bit (phase_eval_pdf_batch). */
+  void (*eval_pdf_batch)(const phase *ph, int n, const medium_interaction *mi, const vec3 *wo, double *val,
+                         double *pdf);
 } phase_ops;
 struct phase {
   object base;

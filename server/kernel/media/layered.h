@@ -23,6 +23,7 @@
 #include <math.h>
 
 #include "../core/fastmath.h"
+#include "../core/isa.h"
 #include "../kernel.h"
 #include "media.h"
 
@@ -118,11 +119,6 @@ static inline double media_layers_tau(const media_layers *L, int c, double z0, d
   return fabs(media_layers_cum_in(L, c, k1, z1) - media_layers_cum_in(L, c, k0, z0)) / fabs(dz);
 }
 
-static inline double media_layers_tau_between(const media_layers *L, int c, double z0, double z1, double dz,
-                                              double len) {
-  return media_layers_tau(L, c, z0, z1, media_layer_of(L, z0), media_layer_of(L, z1), dz, len);
-}
-
 static inline void media_layers_fill(const media_layers *L, int k, medium_interaction *mi) {
   for (int c = 0; c < 3; c++) {
     double s = L->lay[k].sig[c];
@@ -136,62 +132,71 @@ static inline void media_layers_coefficients(const media_layers *L, medium_inter
   media_layers_fill(L, media_layer_of(L, media_layers_z(L, mi->p)), mi);
 }
 
-static inline void media_layers_spread(color *x, int nc) {
-  if (nc == 1) x->c[1] = x->c[2] = x->c[0];
-}
-
 /* 1 + 2^-40: media_layers_sample_real's margin for a flight that passes
  * without its log. */
 #define MEDIA_LAYERS_PASS_MARGIN (1.0 + 0x1p-40)
 
-static inline void media_layers_sample_real(const media_layers *L, const medium *m, const ray3 *r,
-                                            double mint, double maxt, double u, int channel,
-                                            medium_interaction *mi, color *tr, color *pdf) {
-  int nc = L->nc;
-  double t0 = mint, t1 = maxt; /* within intersect_aabb's interval (the caller clips) */
-  mi->medium = m;
-  mi->wi = v3_neg(r->d);
-  mi->t = INFINITY;
-  mi->mint = t0;
-  double oz = media_layers_z(L, r->o), dz = media_layers_dz(L, r->d);
-  double z0 = oz + t0 * dz, z1 = oz + t1 * dz;
-  int c = nc == 1 ? 0 : channel;
-  int k0 = media_layer_of(L, z0), k1 = media_layer_of(L, z1);
-  double total = media_layers_tau(L, c, z0, z1, k0, k1, dz, t1 - t0);
-  /* The flight passes the box when tau* >= total. tau* = -ln(1 - u) >= u,
-   * and tau* is computed within 3 ulp of it (core/fastmath.h), so u >=
-   * total (1 + 2^-40) (the product rounded down by at most an ulp) makes the
-   * computed tau* >= total (1 + 2^-40) (1 - 2^-52)^4 > total: the flight
-   * passes, as the log would say, without the log (most flights through a
-   * thin atmosphere). A NaN or infinite total fails the test and takes the
-   * log as before. */
-  double target = 0.0;
-  bool pass = u >= total * MEDIA_LAYERS_PASS_MARGIN;
-  if (!pass) {
-    target = rsw_neg_log1m(u); /* (-log1p(-u) within 2 ulp: core/fastmath.h) */
-    pass = !(target < total);
-  }
-  if (pass) { /* the flight passes the box */
-    for (int j = 0; j < nc; j++)
-      tr->c[j] = j == c ? exp(-total) : exp(-media_layers_tau(L, j, z0, z1, k0, k1, dz, t1 - t0));
-    media_layers_spread(tr, nc);
-    *pdf = *tr;
-    return;
-  }
-  double t;
+/* A free flight over [t0, t1] of a ray in the drawn channel c (0 when
+ * nc = 1): the pieces media_layers_sample_real and its batch
+ * (media_layers_sample_real_batch) share, so that both give the same bits.
+ * oz, dz: the ray's local z origin and direction; z0, z1 (k0, k1): the
+ * ends' local z (layers); total: tau over [t0, t1] in channel c. */
+typedef struct media_flight {
+  double t0, t1, oz, dz, z0, z1, total;
+  int c, k0, k1;
+} media_flight;
+
+static inline void media_flight_setup(const media_layers *L, const ray3 *r, double t0, double t1, int channel,
+                                      media_flight *f) {
+  f->t0 = t0, f->t1 = t1;
+  f->c = L->nc == 1 ? 0 : channel;
+  f->oz = media_layers_z(L, r->o), f->dz = media_layers_dz(L, r->d);
+  f->z0 = f->oz + t0 * f->dz, f->z1 = f->oz + t1 * f->dz;
+  f->k0 = media_layer_of(L, f->z0), f->k1 = media_layer_of(L, f->z1);
+  f->total = media_layers_tau(L, f->c, f->z0, f->z1, f->k0, f->k1, f->dz, t1 - t0);
+}
+
+/* The flight passes the box when tau* >= total. tau* = -ln(1 - u) >= u,
+ * and tau* is computed within 3 ulp of it (core/fastmath.h), so u >= total
+ * (1 + 2^-40) (the product rounded down by at most an ulp) makes the
+ * computed tau* >= total (1 + 2^-40) (1 - 2^-52)^4 > total: the flight
+ * passes, as the log would say, without the log (most flights through a
+ * thin atmosphere). A NaN or infinite total fails the test and takes the
+ * log. */
+static inline bool media_flight_passes_fast(double u, double total) {
+  return u >= total * MEDIA_LAYERS_PASS_MARGIN;
+}
+
+/* A passed flight's transmittance (= its pdf): exp(-total) in channel c,
+ * the others' over the same ends (one channel: copied). */
+static inline color media_flight_passed(const media_layers *L, const media_flight *f) {
+  color x = col1(exp(-f->total));
+  for (int j = 0; j < L->nc; j++)
+    if (j != f->c) x.c[j] = exp(-media_layers_tau(L, j, f->z0, f->z1, f->k0, f->k1, f->dz, f->t1 - f->t0));
+  return x;
+}
+
+/* A collision at optical thickness target (< total) in channel c: its
+ * distance *t in [t0, t1] and layer *k. Within a layer z = z_k + (C* -
+ * C_k) / sigma_k; across layers the index (bk) brackets C*, then a binary
+ * search over C. */
+static inline void media_flight_collide(const media_layers *L, const media_flight *f, double target,
+                                        double *tp, int *kp) {
+  int c = f->c, k0 = f->k0;
+  double t0 = f->t0, dz = f->dz, t;
   int k;
-  if (k0 == k1) {
+  if (k0 == f->k1) {
     k = k0;
     t = t0 + target / L->lay[k].sig[c];
   } else {
     /* C* on the side the ray moves to; search the layer that holds it. */
-    double cs =
-        media_layers_cum_in(L, c, k0, z0) + target * dz; /* C moves by tau |d_z| in the ray's z direction */
+    double cs = media_layers_cum_in(L, c, k0, f->z0) +
+                target * dz; /* C moves by tau |d_z| in the ray's z direction */
     const pw_layer *lay = L->lay;
     int n = (int)L->n, a = 1, b = n; /* C*'s bucket in the index: layers a - 1 .. b */
-    double f = cs * L->bk_scale[c];
-    if (f >= 0 && f < L->nd) {
-      const uint32_t *bk = L->bk + (size_t)c * (L->n + 1) + (int)f;
+    double fb = cs * L->bk_scale[c];
+    if (fb >= 0 && fb < L->nd) {
+      const uint32_t *bk = L->bk + (size_t)c * (L->n + 1) + (int)fb;
       a = (int)bk[0], b = (int)bk[1];
     }
     int lo, hi;
@@ -224,32 +229,117 @@ static inline void media_layers_sample_real(const media_layers *L, const medium 
     }
     double s = lay[k].sig[c];
     double z = lay[k].z + (s > 0 ? (cs - lay[k].cum[c]) / s : 0.0);
-    t = t0 + (z - z0) / dz;
+    t = t0 + (z - f->z0) / dz;
   }
-  t = rsw_fmin(rsw_fmax(t, t0), t1);
-  double zt = oz + t * dz;
-  k = media_layer_of(L, zt);
-  mi->t = t;
-  mi->p = v3_fma(r->o, t, r->d);
-  mi->majorant = col(L->lay[k].sig[0], L->lay[k].sig[1], L->lay[k].sig[2]);
-  media_layers_fill(L, k, mi);
-  for (int j = 0; j < nc; j++) {
-    tr->c[j] =
-        j == c ? 1.0 - u : exp(-media_layers_tau_between(L, j, z0, zt, dz, t - t0)); /* exp(-tau*) = 1 - u */
-    pdf->c[j] = tr->c[j] * L->lay[k].sig[j];
-  }
-  media_layers_spread(tr, nc);
-  media_layers_spread(pdf, nc);
+  t = rsw_fmin(rsw_fmax(t, t0), f->t1);
+  *tp = t;
+  *kp = media_layer_of(L, f->oz + t * dz);
 }
 
-static inline color media_layers_transmittance(const media_layers *L, const ray3 *r, double mint,
-                                               double maxt) {
+/* A collision at t in layer k: the transmittance to it, exp(-tau*) = 1 - u
+ * in channel c and the others' over [z0, z(t)] (one channel: copied), and
+ * the pdf, tr sigma_t. */
+static inline void media_flight_weights(const media_layers *L, const media_flight *f, double u, double t,
+                                        int k, color *tr, color *pdf) {
+  const pw_layer *y = &L->lay[k];
+  color x = col1(1.0 - u), q;
+  for (int j = 0; j < L->nc; j++)
+    if (j != f->c)
+      x.c[j] = exp(-media_layers_tau(L, j, f->z0, f->oz + t * f->dz, f->k0, k, f->dz, t - f->t0));
+  if (L->nc == 1) {
+    q = col1(x.c[0] * y->sig[0]);
+  } else {
+    for (int j = 0; j < 3; j++) q.c[j] = x.c[j] * y->sig[j];
+  }
+  *tr = x;
+  *pdf = q;
+}
+
+/* The medium interaction of a collision at t in layer k of ray r in medium
+ * m (whose flight began at mint): what media_layers_sample_real writes. */
+static inline void media_layers_collision(const media_layers *L, const medium *m, const ray3 *r, double mint,
+                                          double t, int k, medium_interaction *mi) {
+  const pw_layer *y = &L->lay[k];
+  mi->medium = m;
+  mi->wi = v3_neg(r->d);
+  mi->mint = mint;
+  mi->t = t;
+  mi->p = v3_fma(r->o, t, r->d);
+  mi->majorant = col(y->sig[0], y->sig[1], y->sig[2]);
+  media_layers_fill(L, k, mi);
+}
+
+/* A free flight over [mint, maxt] (within intersect_aabb's interval: the
+ * caller clips) with the random number u in channel `channel`: a collision
+ * (mi->t finite, mi filled) or a pass (mi->t infinite; mi's medium, wi and
+ * mint set); tr the transmittance to it, pdf its density (layered.h's
+ * head gives the inversion). */
+static inline void media_layers_sample_real(const media_layers *L, const medium *m, const ray3 *r,
+                                            double mint, double maxt, double u, int channel,
+                                            medium_interaction *mi, color *tr, color *pdf) {
+  media_flight f;
+  media_flight_setup(L, r, mint, maxt, channel, &f);
+  double target = 0.0;
+  bool pass = media_flight_passes_fast(u, f.total);
+  if (!pass) {
+    target = rsw_neg_log1m(u); /* (-log1p(-u) within 2 ulp: core/fastmath.h) */
+    pass = !(target < f.total);
+  }
+  if (pass) {
+    mi->medium = m;
+    mi->wi = v3_neg(r->d);
+    mi->t = INFINITY;
+    mi->mint = mint;
+    *tr = *pdf = media_flight_passed(L, &f);
+    return;
+  }
+  double t;
+  int k;
+  media_flight_collide(L, &f, target, &t, &k);
+  media_layers_collision(L, m, r, mint, t, k, mi);
+  media_flight_weights(L, &f, u, t, k, tr, pdf);
+}
+
+/* n free flights at once, structure of arrays (media_layers_sample_real
+ * for each: lane i's numbers are its call's, bit for bit). In: the rays
+ * o[3], d[3] (world; n each), their clipped intervals [mint, maxt], the
+ * random numbers u and the drawn channels (NULL: all 0). Out (n each): t,
+ * the collision's distance (INFINITY: the flight passed), layer, its layer
+ * (-1: passed), and the transmittance tr and pdf per channel. A collision's
+ * medium interaction is media_layers_collision(L, m, ray, mint, t, layer). */
+typedef struct media_flight_batch {
+  int n;
+  const double *o[3], *d[3];
+  const double *mint, *maxt, *u;
+  const int *channel;
+  double *t;
+  int *layer;
+  double *tr[3], *pdf[3];
+} media_flight_batch;
+
+/* The flights of b at ISA isa (the setup in its lanes where the layers
+ * are equal and to_world affine; the logs, exps and searches per flight,
+ * passes and collisions apart). Reads L; thread-safe. */
+void media_layers_sample_real_batch(rsw_isa isa, const media_layers *L, const media_flight_batch *b);
+
+/* n transmittances at once (media_layers_transmittance for each, bit for
+ * bit): rays o[3], d[3] over [mint, maxt] (n each); tr[c][i] channel c of
+ * ray i's. ISA, lanes and thread safety as media_layers_sample_real_batch. */
+void media_layers_transmittance_batch(rsw_isa isa, const media_layers *L, int n, const double *const *o,
+                                      const double *const *d, const double *mint, const double *maxt,
+                                      double *const *tr);
+
+/* The transmittance over [mint, maxt] of r: exp(-tau) per channel
+ * (media_flight_setup's and media_flight_passed's numbers in channel 0,
+ * written out: through the struct the atmosphere bench renders ~0.8%
+ * slower). */
+static inline __attribute__((always_inline)) color
+media_layers_transmittance(const media_layers *L, const ray3 *r, double mint, double maxt) {
   double oz = media_layers_z(L, r->o), dz = media_layers_dz(L, r->d);
   double z0 = oz + mint * dz, z1 = oz + maxt * dz;
-  color tr = col1(1.0); /* (every channel is set: nc is 1 or 3) */
-  int nc = L->nc;
-  for (int j = 0; j < nc; j++) tr.c[j] = exp(-media_layers_tau_between(L, j, z0, z1, dz, maxt - mint));
-  media_layers_spread(&tr, nc);
+  int k0 = media_layer_of(L, z0), k1 = media_layer_of(L, z1);
+  color tr = col1(exp(-media_layers_tau(L, 0, z0, z1, k0, k1, dz, maxt - mint))); /* (nc 1: copied) */
+  for (int j = 1; j < L->nc; j++) tr.c[j] = exp(-media_layers_tau(L, j, z0, z1, k0, k1, dz, maxt - mint));
   return tr;
 }
 

@@ -46,13 +46,19 @@ static void blend_bind(const phase *ph, medium_interaction *mi) {
   mi->bound = ph;
 }
 
+/* The mixture at weight w from its components' values and pdfs at wo
+ * (those of a component whose share is 0 taken as 0, not evaluated). */
+static double blend_sum(double w, double v0, double p0, double v1, double p1, double *pdf) {
+  *pdf = (1.0 - w) * p0 + w * p1;
+  return (1.0 - w) * v0 + w * v1;
+}
+
 /* The mixture at weight w. */
 static double blend_mix(const blendphase *b, double w, const medium_interaction *mi, vec3 wo, double *pdf) {
   double p0 = 0, p1 = 0, v0 = 0, v1 = 0;
   if (w < 1.0) v0 = b->ph[0]->ops->eval_pdf(b->ph[0], mi, wo, &p0);
   if (w > 0.0) v1 = b->ph[1]->ops->eval_pdf(b->ph[1], mi, wo, &p1);
-  *pdf = (1.0 - w) * p0 + w * p1;
-  return (1.0 - w) * v0 + w * v1;
+  return blend_sum(w, v0, p0, v1, p1, pdf);
 }
 
 static double blend_eval_pdf(const phase *ph, const medium_interaction *mi, vec3 wo, double *pdf) {
@@ -60,23 +66,90 @@ static double blend_eval_pdf(const phase *ph, const medium_interaction *mi, vec3
   return blend_mix(b, blend_weight(b, mi), mi, wo, pdf);
 }
 
+/* The component a sample at weight w draws from with u1 (phase_1 when
+ * u1 <= w), and *u1 rescaled for it (at most 1). */
+static int blend_pick(double w, double *u1) {
+  int k;
+  double u = *u1;
+  if (w >= 1.0 || (w > 0.0 && u <= w)) {
+    k = 1;
+    u = w >= 1.0 ? u : u / w;
+  } else {
+    k = 0;
+    u = w <= 0.0 ? u : (u - w) / (1.0 - w);
+  }
+  *u1 = u < 1.0 ? u : 1.0;
+  return k;
+}
+
+/* The weight value / pdf of a sample whose mixture at wo is val, *pdf. */
+static double blend_weigh(double val, double *pdf) {
+  if (!(*pdf > 0.0)) return phase_fail(pdf);
+  return val / *pdf;
+}
+
 static double blend_sample(const phase *ph, const medium_interaction *mi, double u1, vec2 u2, vec3 *wo,
                            double *pdf) {
   const blendphase *b = (const blendphase *)ph;
   double w = blend_weight(b, mi), cpdf;
-  int k;
-  if (w >= 1.0 || (w > 0.0 && u1 <= w)) {
-    k = 1;
-    u1 = w >= 1.0 ? u1 : u1 / w;
-  } else {
-    k = 0;
-    u1 = w <= 0.0 ? u1 : (u1 - w) / (1.0 - w);
-  }
-  double cw = b->ph[k]->ops->sample(b->ph[k], mi, u1 < 1.0 ? u1 : 1.0, u2, wo, &cpdf);
+  int k = blend_pick(w, &u1);
+  double cw = b->ph[k]->ops->sample(b->ph[k], mi, u1, u2, wo, &cpdf);
   if (!(cpdf > 0.0) || !(cw > 0.0)) return phase_fail(pdf);
   double val = blend_mix(b, w, mi, *wo, pdf); /* (the weight looked up once) */
-  if (!(*pdf > 0.0)) return phase_fail(pdf);
-  return val / *pdf;
+  return blend_weigh(val, pdf);
+}
+
+/* ---- batches: lane i is blend_eval_pdf's / blend_sample's, bit for bit:
+ * the weights looked up (or bound) per lane, the components evaluated by
+ * their own batches over the lanes, a component's values taken as 0 where
+ * its share is. */
+
+#define BLEND_CHUNK 64
+
+/* n <= BLEND_CHUNK lanes at weights w. */
+static void blend_mix_lanes(const blendphase *b, int n, const medium_interaction *mi, const vec3 *wo,
+                            const double *w, double *val, double *pdf) {
+  double v0[BLEND_CHUNK], p0[BLEND_CHUNK], v1[BLEND_CHUNK], p1[BLEND_CHUNK];
+  phase_eval_pdf_batch(b->ph[0], n, mi, wo, v0, p0);
+  phase_eval_pdf_batch(b->ph[1], n, mi, wo, v1, p1);
+  for (int i = 0; i < n; i++) {
+    bool a0 = w[i]<1.0, a1 = w[i]> 0.0;
+    val[i] = blend_sum(w[i], a0 ? v0[i] : 0.0, a0 ? p0[i] : 0.0, a1 ? v1[i] : 0.0, a1 ? p1[i] : 0.0, &pdf[i]);
+  }
+}
+
+static void blend_eval_pdf_batch(const phase *ph, int n, const medium_interaction *mi, const vec3 *wo,
+                                 double *val, double *pdf) {
+  const blendphase *b = (const blendphase *)ph;
+  for (int i0 = 0; i0 < n; i0 += BLEND_CHUNK) {
+    int cnt = n - i0 < BLEND_CHUNK ? n - i0 : BLEND_CHUNK;
+    double w[BLEND_CHUNK];
+    for (int i = 0; i < cnt; i++) w[i] = blend_weight(b, &mi[i0 + i]);
+    blend_mix_lanes(b, cnt, mi + i0, wo + i0, w, val + i0, pdf + i0);
+  }
+}
+
+static void blend_sample_batch(const phase *ph, int n, const medium_interaction *mi, const double *u1,
+                               const vec2 *u2, vec3 *wo, double *pdf, double *weight) {
+  const blendphase *b = (const blendphase *)ph;
+  for (int i0 = 0; i0 < n; i0 += BLEND_CHUNK) {
+    int cnt = n - i0 < BLEND_CHUNK ? n - i0 : BLEND_CHUNK;
+    double w[BLEND_CHUNK], val[BLEND_CHUNK];
+    bool ok[BLEND_CHUNK];
+    vec3 at[BLEND_CHUNK]; /* where the mixture is evaluated (failed lanes: any unit direction) */
+    for (int i = 0; i < cnt; i++) {
+      int j = i0 + i;
+      w[i] = blend_weight(b, &mi[j]);
+      double u = u1[j], cpdf;
+      int k = blend_pick(w[i], &u);
+      double cw = b->ph[k]->ops->sample(b->ph[k], &mi[j], u, u2[j], &wo[j], &cpdf);
+      ok[i] = cpdf > 0.0 && cw > 0.0;
+      at[i] = ok[i] ? wo[j] : v3_neg(mi[j].wi);
+    }
+    blend_mix_lanes(b, cnt, mi + i0, at, w, val, pdf + i0);
+    for (int i = 0; i < cnt; i++)
+      weight[i0 + i] = ok[i] ? blend_weigh(val[i], &pdf[i0 + i]) : phase_fail(&pdf[i0 + i]);
+  }
 }
 
 /* Polarized variants: the components' factors weighted by (1 - w) p_0 and
@@ -94,7 +167,9 @@ static void blend_polarization(const phase *ph, const medium_interaction *mi, ve
 static const phase_ops blendphase_ops = {.sample = blend_sample,
                                          .eval_pdf = blend_eval_pdf,
                                          .bind = blend_bind,
-                                         .polarization = blend_polarization};
+                                         .polarization = blend_polarization,
+                                         .sample_batch = blend_sample_batch,
+                                         .eval_pdf_batch = blend_eval_pdf_batch};
 
 static rsw_status blendphase_create(loader *ld, node *n, object **out) {
   object **kids;

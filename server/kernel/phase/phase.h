@@ -12,6 +12,7 @@
 
 #include <math.h>
 
+#include "../core/fastmath.h"
 #include "../kernel.h"
 
 /* mu = cos(theta) of the scattering from mi->wi into wo. */
@@ -23,11 +24,10 @@ static inline double phase_mu(const medium_interaction *mi, vec3 wo) {
  * phi = 2 pi u around the forward direction -wi. */
 static inline vec3 phase_direction(const medium_interaction *mi, double mu, double u) {
   frame f = frame_from_normal(v3_neg(mi->wi));
-  double s = sqrt(fmax(0.0, 1.0 - mu * mu)), phi = 2.0 * RSW_PI * u;
+  double s = sqrt(rsw_fmax(1.0 - mu * mu, 0.0)), phi = 2.0 * RSW_PI * u; /* (fmax(0, .) bit for bit) */
   return frame_to_world(&f, v3(s * cos(phi), s * sin(phi), mu));
 }
 
-/* A failed sample (kernel.h phase_ops.sample). */
 /* Before the eval_pdf and sample calls of one scattering at mi (mi->p
  * fixed): let ph look up what it needs at mi->p once. Results are those of
  * the unbound calls, bit for bit. */
@@ -36,9 +36,34 @@ static inline void phase_bind(const phase *ph, medium_interaction *mi) {
   if (ph->ops->bind) ph->ops->bind(ph, mi);
 }
 
+/* A failed sample (kernel.h phase_ops.sample). */
 static inline double phase_fail(double *pdf) {
   *pdf = 0.0;
   return 0.0;
+}
+
+/* n scatterings at once (kernel.h phase_ops.sample_batch; without it, one
+ * sample call a lane): lane i is sample(ph, &mi[i], u1[i], u2[i], &wo[i],
+ * &pdf[i]), its return value in weight[i], bit for bit. */
+static inline void phase_sample_batch(const phase *ph, int n, const medium_interaction *mi, const double *u1,
+                                      const vec2 *u2, vec3 *wo, double *pdf, double *weight) {
+  if (ph->ops->sample_batch) {
+    ph->ops->sample_batch(ph, n, mi, u1, u2, wo, pdf, weight);
+    return;
+  }
+  for (int i = 0; i < n; i++) weight[i] = ph->ops->sample(ph, &mi[i], u1[i], u2[i], &wo[i], &pdf[i]);
+}
+
+/* n evaluations at once (phase_ops.eval_pdf_batch; without it, one
+ * eval_pdf call a lane): lane i is eval_pdf(ph, &mi[i], wo[i], &pdf[i]),
+ * its return value in val[i], bit for bit. */
+static inline void phase_eval_pdf_batch(const phase *ph, int n, const medium_interaction *mi, const vec3 *wo,
+                                        double *val, double *pdf) {
+  if (ph->ops->eval_pdf_batch) {
+    ph->ops->eval_pdf_batch(ph, n, mi, wo, val, pdf);
+    return;
+  }
+  for (int i = 0; i < n; i++) val[i] = ph->ops->eval_pdf(ph, &mi[i], wo[i], &pdf[i]);
 }
 
 /* Polarized variants, mixtures (blendphase, molecular_atmosphere): the

@@ -19,5 +19,6 @@
 #include "../bsdfs/microfacet_lanes.h"
 #include "../bsdfs/rpv_lanes.h"
 #include "../integrators/cull_lanes.h"
+#include "../media/layered_lanes.h"
 #include "../sensors/perspective_lanes.h"
 #include "../sensors/sensor_common_lanes.h"

@@ -21,8 +21,8 @@ RSW_TEST_DEFINE_GLOBALS
 #define CHI2_SAMPLES 200000
 /* chi2_run calls in this file (Sidak correction): isotropic 2, hg 8 x 2,
  * blendphase 5 x 2 + 2, rayleigh 3 x 2, tabphase 5 x 2 + 1, tabphase_polarized
- * 2 x 2 + 1. */
-#define CHI2_TESTS   52
+ * 2 x 2 + 1, batches 3. */
+#define CHI2_TESTS   55
 
 /* ---- helpers ------------------------------------------------------------------ */
 
@@ -73,18 +73,26 @@ static medium_interaction mi_at(vec3 wi) {
 typedef struct chi2_phase {
   const phase *ph;
   medium_interaction mi;
-  int bad; /* samples whose weight differs from eval / pdf */
+  int bad;    /* samples whose weight differs from eval / pdf */
+  bool batch; /* through phase_sample_batch and phase_eval_pdf_batch (a lane each) */
 } chi2_phase;
 
 static bool phase_sample_cb(void *user, const double *u, vec3 *out, double *weight) {
   chi2_phase *c = user;
-  double pdf;
-  double w = c->ph->ops->sample(c->ph, &c->mi, u[0], v2(u[1], u[2]), out, &pdf);
+  double pdf, w, epdf, v;
+  vec2 u2 = v2(u[1], u[2]);
+  if (c->batch)
+    phase_sample_batch(c->ph, 1, &c->mi, &u[0], &u2, out, &pdf, &w);
+  else
+    w = c->ph->ops->sample(c->ph, &c->mi, u[0], u2, out, &pdf);
   if (!(pdf > 0.0)) {
     *weight = 0.0;
     return false;
   }
-  double epdf, v = c->ph->ops->eval_pdf(c->ph, &c->mi, *out, &epdf);
+  if (c->batch)
+    phase_eval_pdf_batch(c->ph, 1, &c->mi, out, &v, &epdf);
+  else
+    v = c->ph->ops->eval_pdf(c->ph, &c->mi, *out, &epdf);
   if (fabs(epdf - pdf) > 1e-9 * pdf || fabs(w - v / pdf) > 1e-9 * w || fabs(v3_len(*out) - 1.0) > 1e-12)
     c->bad++;
   *weight = w;
@@ -93,13 +101,16 @@ static bool phase_sample_cb(void *user, const double *u, vec3 *out, double *weig
 
 static double phase_pdf_cb(void *user, vec3 wo) {
   chi2_phase *c = user;
-  double pdf;
-  c->ph->ops->eval_pdf(c->ph, &c->mi, wo, &pdf);
+  double pdf, v;
+  if (c->batch)
+    phase_eval_pdf_batch(c->ph, 1, &c->mi, &wo, &v, &pdf);
+  else
+    c->ph->ops->eval_pdf(c->ph, &c->mi, wo, &pdf);
   return pdf;
 }
 
-static void run_chi2(const phase *ph, vec3 wi, const char *what, int ires) {
-  chi2_phase c = {ph, mi_at(wi), 0};
+static void run_chi2_as(const phase *ph, vec3 wi, const char *what, int ires, bool batch) {
+  chi2_phase c = {ph, mi_at(wi), 0, batch};
   chi2_config cfg = chi2_defaults(CHI2_SPHERE, 3);
   cfg.sample_count = CHI2_SAMPLES;
   cfg.test_count = CHI2_TESTS;
@@ -108,6 +119,10 @@ static void run_chi2(const phase *ph, vec3 wi, const char *what, int ires) {
   CHECK(r.passed, "chi2 %s, wi = (%.3f, %.3f, %.3f): p = %g, chi2 = %g, dof = %d: %s", what, wi.x, wi.y, wi.z,
         r.p_value, r.chi2, r.dof, r.reason);
   CHECK(c.bad == 0, "%s: %d samples with pdf != eval_pdf's or weight != value / pdf", what, c.bad);
+}
+
+static void run_chi2(const phase *ph, vec3 wi, const char *what, int ires) {
+  run_chi2_as(ph, wi, what, ires, false);
 }
 
 /* 2 pi int_{-1}^{1} p(mu) dmu by Simpson's rule on n intervals (p along a
@@ -676,6 +691,81 @@ static void test_load_errors(void) {
   }
 }
 
+/* The batches (phase_ops.sample_batch, eval_pdf_batch through
+ * phase_sample_batch and phase_eval_pdf_batch): each lane the scalar
+ * call's bits (directions, pdfs, values, weights), for rayleigh (rho 0 and
+ * 0.2), hg (forward, backward, |g| < 1e-5), isotropic (no batch op: the
+ * calls a lane at a time) and blends of them (a weight grid with 0 and 1
+ * in it, a nested blend, half the points bound), batches of 1 to 200
+ * lanes; and the chi-square of the batched sampling of rayleigh, hg and
+ * the atmosphere's blend. */
+static void test_phase_batches(void) {
+  scene *s = load_phases(
+      "\"r0\": {\"type\": \"rayleigh\"}, \"r2\": {\"type\": \"rayleigh\", \"depolarization\": 0.2},"
+      " \"h7\": {\"type\": \"hg\", \"g\": 0.7}, \"hm\": {\"type\": \"hg\", \"g\": -0.4},"
+      " \"h0\": {\"type\": \"hg\", \"g\": 1e-6}, \"iso\": {\"type\": \"isotropic\"},"
+      " \"atm\": {\"type\": \"blendphase\", \"weight\": {\"type\": \"gridvolume\", \"shape\": [7, 1, 1],"
+      "  \"data\": [0, 0.1, 0.9, 0.4, 1, 0.25, 0.6]},"
+      "  \"phase_0\": {\"type\": \"rayleigh\"}, \"phase_1\": {\"type\": \"hg\", \"g\": 0.7}},"
+      " \"nest\": {\"type\": \"blendphase\", \"weight\": 0.45, \"phase_0\": {\"type\": \"isotropic\"},"
+      "  \"phase_1\": {\"type\": \"blendphase\", \"weight\": 0.3, \"phase_0\": {\"type\": \"hg\", \"g\": "
+      "-0.6},"
+      "  \"phase_1\": {\"type\": \"rayleigh\"}}}");
+  REQUIRE(s, "load");
+  const char *ids[] = {"r0", "r2", "h7", "hm", "h0", "iso", "atm", "nest"};
+  enum {
+    N = 200
+  };
+  static medium_interaction mi[N];
+  static vec3 wo[N], so[N];
+  static double u1[N], v[N], pdf[N], sw[N], spdf[N];
+  static vec2 u2[N];
+  pcg32 rng;
+  pcg32_seed(&rng, 19, 4);
+  for (size_t p = 0; p < sizeof ids / sizeof ids[0]; p++) {
+    const phase *ph = (const phase *)find_obj(s, ids[p]);
+    REQUIRE(ph, "%s", ids[p]);
+    long lanes = 0, failed = 0;
+    int differ = 0;
+    for (int n = 1; n <= N; n += n < 20 ? 1 : 60) {
+      for (int i = 0; i < n; i++) {
+        mi[i] = mi_at(
+            v3(pcg32_next_double(&rng) - 0.5, pcg32_next_double(&rng) - 0.5, pcg32_next_double(&rng) - 0.5));
+        mi[i].p = v3(pcg32_next_double(&rng), pcg32_next_double(&rng), 1.2 * pcg32_next_double(&rng) - 0.1);
+        if (i % 2) phase_bind(ph, &mi[i]);
+        wo[i] = v3_norm(
+            v3(pcg32_next_double(&rng) - 0.5, pcg32_next_double(&rng) - 0.5, pcg32_next_double(&rng) - 0.5));
+        u1[i] = i % 13 == 0 ? 1.0 : pcg32_next_double(&rng);
+        u2[i] = v2(i % 17 == 0 ? 0.0 : pcg32_next_double(&rng), pcg32_next_double(&rng));
+      }
+      phase_eval_pdf_batch(ph, n, mi, wo, v, pdf);
+      phase_sample_batch(ph, n, mi, u1, u2, so, spdf, sw);
+      for (int i = 0; i < n; i++) {
+        double ev, epdf, sp, w;
+        vec3 d;
+        ev = ph->ops->eval_pdf(ph, &mi[i], wo[i], &epdf);
+        w = ph->ops->sample(ph, &mi[i], u1[i], u2[i], &d, &sp);
+        bool bad = memcmp(&ev, &v[i], sizeof ev) || memcmp(&epdf, &pdf[i], sizeof epdf) ||
+                   memcmp(&w, &sw[i], sizeof w) || memcmp(&sp, &spdf[i], sizeof sp) ||
+                   memcmp(&d, &so[i], sizeof d);
+        differ += bad;
+        failed += !(sp > 0);
+        lanes++;
+      }
+    }
+    printf("  %s: %ld lanes (%ld failed samples), %d differ\n", ids[p], lanes, failed, differ);
+    CHECK(differ == 0, "%s: %d of %ld lanes differ from the scalar calls", ids[p], differ, lanes);
+  }
+  run_chi2_as((const phase *)find_obj(s, "r0"), wis[1], "rayleigh, batched", 4, true);
+  run_chi2_as((const phase *)find_obj(s, "h7"), wis[1], "hg 0.7, batched", 16, true);
+  scene *a = load_phases("\"b\": {\"type\": \"blendphase\", \"weight\": 0.35, \"phase_0\": {\"type\": "
+                         "\"rayleigh\"}, \"phase_1\": {\"type\": \"hg\", \"g\": 0.7}}");
+  REQUIRE(a, "load the blend");
+  run_chi2_as((const phase *)find_obj(a, "b"), wis[1], "blend(rayleigh, hg 0.7; 0.35), batched", 16, true);
+  scene_free(a);
+  scene_free(s);
+}
+
 int main(void) {
   RSW_TEST_RUN(test_isotropic);
   RSW_TEST_RUN(test_hg);
@@ -690,5 +780,6 @@ int main(void) {
   RSW_TEST_RUN(test_blendphase_polarization);
   RSW_TEST_RUN(test_parameters);
   RSW_TEST_RUN(test_load_errors);
+  RSW_TEST_RUN(test_phase_batches);
   RSW_TEST_END("test_phase");
 }
