@@ -1391,7 +1391,9 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
   hit_bounds hb;
   hit_bounds_init(sc, &hb);
   face_plane fp = {.sh = NULL};
-  const bool staged = !vq && !pgs && g_stages; /* (the pieces' pages and polarization: lane by lane) */
+  /* (the pieces' pages and polarization: lane by lane; vs has no scratch
+   * where the caller saw the stages switched off) */
+  const bool staged = !vq && !pgs && vs->mi;
   while (live > 0) {
     wave_trace(sc, &hb, ln, idx, live, false, camera, hit, si, stats);
     camera = false;
@@ -1469,7 +1471,11 @@ static void vstage_free(vstage *vs) {
 static bool volpath_Li_batch(const integrator *it, const scene *sc, sampler_state *st, const ray3 *rays,
                              int n, render_stats *stats, color *L, double *quv) {
   if (n <= 0) return true;
-  vstage vs;
+  /* The stages' scratch only where they run: allocated for nothing, it
+   * cost the polarized slab 12 % (glibc returned it to the kernel at each
+   * free, and the next wave faulted it in again). */
+  vstage vs = {0};
+  bool staged = !sc->polarized && sc->pages <= 1 && g_stages;
   vlane *ln = malloc((size_t)n * sizeof *ln);
   int *idx = malloc(2 * (size_t)n * sizeof *idx);
   bool *hit = malloc((size_t)n * sizeof *hit);
@@ -1477,7 +1483,7 @@ static bool volpath_Li_batch(const integrator *it, const scene *sc, sampler_stat
   pol_lane *vq = sc->polarized ? pol_alloc(n, pol_channels(sc)) : NULL;
   vpage *pg = sc->pages > 1 ? malloc((size_t)n * sizeof *pg) : NULL;
   bool ok =
-      vstage_alloc(&vs, n) && ln && idx && hit && si && (vq || !sc->polarized) && (pg || sc->pages <= 1);
+      (!staged || vstage_alloc(&vs, n)) && ln && idx && hit && si && (vq || !sc->polarized) && (pg || sc->pages <= 1);
   if (ok)
     wave_run((const volpath_integrator *)it, sc, st, rays, n, stats, L, quv, ln, vq, pg, idx, idx + n, hit,
              si, &vs);
@@ -1509,7 +1515,7 @@ static color volpath_Li(const integrator *it, const scene *sc, sampler_state *st
   vec2 d2;
   direction_sample ds;
   color val;
-  const vstage vs = {.mi = &mi,
+  const vstage vs = {.mi = g_stages ? &mi : NULL, /* (NULL: lane by lane, wave_run) */
                      .ev = &ev,
                      .ks = ks,
                      .sub = ks + 1,
