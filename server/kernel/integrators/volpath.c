@@ -1482,8 +1482,8 @@ static bool volpath_Li_batch(const integrator *it, const scene *sc, sampler_stat
   surface_interaction *si = malloc((size_t)n * sizeof *si);
   pol_lane *vq = sc->polarized ? pol_alloc(n, pol_channels(sc)) : NULL;
   vpage *pg = sc->pages > 1 ? malloc((size_t)n * sizeof *pg) : NULL;
-  bool ok =
-      (!staged || vstage_alloc(&vs, n)) && ln && idx && hit && si && (vq || !sc->polarized) && (pg || sc->pages <= 1);
+  bool ok = (!staged || vstage_alloc(&vs, n)) && ln && idx && hit && si && (vq || !sc->polarized) &&
+            (pg || sc->pages <= 1);
   if (ok)
     wave_run((const volpath_integrator *)it, sc, st, rays, n, stats, L, quv, ln, vq, pg, idx, idx + n, hit,
              si, &vs);
