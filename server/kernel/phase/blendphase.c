@@ -113,7 +113,8 @@ static void blend_mix_lanes(const blendphase *b, int n, const medium_interaction
   phase_eval_pdf_batch(b->ph[0], n, mi, wo, v0, p0);
   phase_eval_pdf_batch(b->ph[1], n, mi, wo, v1, p1);
   for (int i = 0; i < n; i++) {
-    bool a0 = w[i]<1.0, a1 = w[i]> 0.0;
+    bool a0 = w[i] < 1.0;
+    bool a1 = w[i] > 0.0;
     val[i] = blend_sum(w[i], a0 ? v0[i] : 0.0, a0 ? p0[i] : 0.0, a1 ? v1[i] : 0.0, a1 ? p1[i] : 0.0, &pdf[i]);
   }
 }

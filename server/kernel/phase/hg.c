@@ -50,23 +50,7 @@ static double hg_eval_pdf(const phase *ph, const medium_interaction *mi, vec3 wo
   return v;
 }
 
-/* The batches: hg_sample and hg_eval_pdf a lane at a time, called
- * directly (phase_ops.sample_batch, eval_pdf_batch). */
-static void hg_sample_batch(const phase *ph, int n, const medium_interaction *mi, const double *u1,
-                            const vec2 *u2, vec3 *wo, double *pdf, double *weight) {
-  for (int i = 0; i < n; i++) weight[i] = hg_sample(ph, &mi[i], u1[i], u2[i], &wo[i], &pdf[i]);
-}
-
-static void hg_eval_pdf_batch(const phase *ph, int n, const medium_interaction *mi, const vec3 *wo,
-                              double *val, double *pdf) {
-  double g = ((const hg_phase *)ph)->g;
-  for (int i = 0; i < n; i++) val[i] = pdf[i] = hg_eval(g, phase_mu(&mi[i], wo[i]));
-}
-
-static const phase_ops hg_ops = {.sample = hg_sample,
-                                 .eval_pdf = hg_eval_pdf,
-                                 .sample_batch = hg_sample_batch,
-                                 .eval_pdf_batch = hg_eval_pdf_batch};
+static const phase_ops hg_ops = {.sample = hg_sample, .eval_pdf = hg_eval_pdf};
 
 /* g lies in the open interval (-1, 1): the largest closed one inside it. */
 #define HG_G_LO nextafter(-1.0, 0.0)

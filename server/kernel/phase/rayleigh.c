@@ -75,24 +75,8 @@ static void rayleigh_polarization(const phase *ph, const medium_interaction *mi,
   P[0] = P[1] = P[2] = mu_normalized(mu_rayleigh(phase_mu(mi, wo), ((const rayleigh_phase *)ph)->rho));
 }
 
-/* The batches: rayleigh_sample and rayleigh_eval_pdf a lane at a time,
- * called directly (phase_ops.sample_batch, eval_pdf_batch). */
-static void rayleigh_sample_batch(const phase *ph, int n, const medium_interaction *mi, const double *u1,
-                                  const vec2 *u2, vec3 *wo, double *pdf, double *weight) {
-  for (int i = 0; i < n; i++) weight[i] = rayleigh_sample(ph, &mi[i], u1[i], u2[i], &wo[i], &pdf[i]);
-}
-
-static void rayleigh_eval_pdf_batch(const phase *ph, int n, const medium_interaction *mi, const vec3 *wo,
-                                    double *val, double *pdf) {
-  const rayleigh_phase *r = (const rayleigh_phase *)ph;
-  for (int i = 0; i < n; i++) val[i] = pdf[i] = rayleigh_value(r, phase_mu(&mi[i], wo[i]));
-}
-
-static const phase_ops rayleigh_ops = {.sample = rayleigh_sample,
-                                       .eval_pdf = rayleigh_eval_pdf,
-                                       .polarization = rayleigh_polarization,
-                                       .sample_batch = rayleigh_sample_batch,
-                                       .eval_pdf_batch = rayleigh_eval_pdf_batch};
+static const phase_ops rayleigh_ops = {
+    .sample = rayleigh_sample, .eval_pdf = rayleigh_eval_pdf, .polarization = rayleigh_polarization};
 
 /* rho lies in [0, 1): the largest closed interval inside it. */
 #define RAYLEIGH_RHO_HI nextafter(1.0, 0.0)

@@ -694,8 +694,8 @@ static void test_load_errors(void) {
 /* The batches (phase_ops.sample_batch, eval_pdf_batch through
  * phase_sample_batch and phase_eval_pdf_batch): each lane the scalar
  * call's bits (directions, pdfs, values, weights), for rayleigh (rho 0 and
- * 0.2), hg (forward, backward, |g| < 1e-5), isotropic (no batch op: the
- * calls a lane at a time) and blends of them (a weight grid with 0 and 1
+ * 0.2), hg (forward, backward, |g| < 1e-5), isotropic (these three have no
+ * batch op: the calls a lane at a time) and blends of them (a weight grid with 0 and 1
  * in it, a nested blend, half the points bound), batches of 1 to 200
  * lanes; and the chi-square of the batched sampling of rayleigh, hg and
  * the atmosphere's blend. */
