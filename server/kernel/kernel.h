@@ -159,9 +159,11 @@ typedef struct plugin {
    * prepare() keeps a value per page and its ops answer for rsw_page).
    * NULL: no, for a plugin with prepare() (what it prepares holds one
    * page); plugins without prepare() read their spectra through textures
-   * and can. A medium that says yes must be a layered_medium keeping its
-   * pages' layers in Lp (media/layered.h: volpath's free flights and
-   * shadow rays read them). scene_page_blocker asks every object. */
+   * and can. A medium that says yes has exact free flights and
+   * transmittances (medium_ops.sample_real, transmittance) answering at
+   * rsw_page (a layered_medium keeps its pages' layers in Lp,
+   * media/layered.h, which volpath reads directly). scene_page_blocker
+   * asks every object. */
   bool (*pages)(const object *o);
 } plugin;
 
@@ -677,9 +679,13 @@ struct integrator {
   int rr_depth;
   bool hide_emitters;
   /* Carries a bundle of more than three wavelengths, page by page
-   * (render_ctx.bundle > 3; path, piecewise_volpath): Li_batch then writes pages 1.. of each
+   * (render_ctx.bundle > 3; path, volpath, piecewise_volpath): Li_batch then writes pages 1.. of each
    * path's radiance after page 0's, as quv (scene_extra_stride). */
   bool pages;
+  /* Samples free flights by delta tracking in every medium that is not
+   * homogeneous (volpath): those cannot carry pages (a page's tentative
+   * collisions would need every page's coefficients; scene_page_blocker). */
+  bool tracks_media;
 };
 
 /* ---- shapes -------------------------------------------------------------- */

@@ -606,6 +606,22 @@ static void start_shadow(const scene *sc, vlane *l, const surface_interaction *s
   l->sh = true;
 }
 
+/* A bundle of pages: medium m's transmittance along r over [mint, maxt]
+ * at pages p0..pages-1 into tr[p]. A layered medium works out the levels
+ * (and so the layers crossed) once for every page; another answers its
+ * transmittance op at each page (rsw_page). */
+static void tr_pages(const medium *m, const ray3 *r, double mint, double maxt, int p0, int pages, color *tr) {
+  if (m->ops == &layered_medium_ops) {
+    layered_transmittance_pages((const layered_medium *)m, r, mint, maxt, p0, pages, tr);
+    return;
+  }
+  for (int p = p0; p < pages; p++) {
+    rsw_page = p;
+    tr[p] = m->ops->transmittance(m, r, mint, maxt);
+  }
+  rsw_page = 0;
+}
+
 /* One round of lane l's shadow ray after its query (hit at si): the
  * segment's transmittance, then done (false) or a null surface crossed
  * (true: trace again). */
@@ -638,12 +654,12 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
       } else if (l->sm && t1 > t0) {
         l->str = col_mul(l->str, segment_tr(vp, sc, l->sm, &mr, t0, t1, w, st));
       }
-      if (pg && l->sm && t1 > t0) { /* pages 1.. (media that carry pages are layered, analytic) */
+      if (pg && l->sm && t1 > t0) { /* pages 1.. (media that carry pages are analytic) */
         ray3 seg = {mr.o, mr.d, t0, t1};
         double mint, maxt;
         color tr[RENDER_MAX_PAGES];
         if (media_clip(sc, l->sm, &seg, w, &mint, &maxt)) {
-          layered_transmittance_pages((const layered_medium *)l->sm, &seg, mint, maxt, 1, NP, tr);
+          tr_pages(l->sm, &seg, mint, maxt, 1, NP, tr);
           for (int p = 1; p < NP; p++) pg->str[p - 1] = col_mul(pg->str[p - 1], tr[p]);
         }
       }
@@ -703,16 +719,22 @@ static bool flight_pages(const scene *sc, const medium *m, const ray3 *seg, doub
   double tend = scattered ? mi->t : maxt, pc = 0.0;
   rsw_page = 0;
   color trh = tr[h];
-  const layered_medium *lm = (const layered_medium *)m; /* (media that carry pages are layered) */
-  layered_transmittance_pages(lm, seg, mint, tend, 0, NP, tr);
+  tr_pages(m, seg, mint, tend, 0, NP, tr);
   tr[h] = trh;
-  int k = scattered ? media_layer_of(&lm->L, media_layers_z(&lm->L, mi->p)) : 0;
+  const layered_medium *lm = m->ops == &layered_medium_ops ? (const layered_medium *)m : NULL;
+  int k = scattered && lm ? media_layer_of(&lm->L, media_layers_z(&lm->L, mi->p)) : 0;
   for (int p = 0; p < NP; p++) {
     if (p != h) {
       pdf[p] = tr[p];
       if (scattered) {
         medium_interaction mp = *mi;
-        media_layers_fill(p ? &lm->Lp[p - 1] : &lm->L, k, &mp);
+        if (lm) {
+          media_layers_fill(p ? &lm->Lp[p - 1] : &lm->L, k, &mp);
+        } else {
+          rsw_page = p;
+          m->ops->coefficients(m, &mp);
+          rsw_page = 0;
+        }
         ss[p] = mp.sigma_s;
         pdf[p] = col_mul(mp.sigma_t, tr[p]);
       }
@@ -775,9 +797,9 @@ PIECE enum lane_outcome lane_flight(const volpath_integrator *vp, const scene *s
     if (m && seg.tmax > seg.tmin && media_clip(sc, m, &seg, w, &mint, &maxt)) {
       if (m->absorbing_only) {
         l->T = col_mul(l->T, segment_tr(vp, sc, m, &seg, seg.tmin, seg.tmax, w, st));
-        if (pg) { /* pages 1.. (media that carry pages are layered, analytic) */
+        if (pg) { /* pages 1.. (media that carry pages are analytic) */
           color tr[RENDER_MAX_PAGES];
-          layered_transmittance_pages((const layered_medium *)m, &seg, mint, maxt, 1, NP, tr);
+          tr_pages(m, &seg, mint, maxt, 1, NP, tr);
           for (int p = 1; p < NP; p++) pg->T[p - 1] = col_mul(pg->T[p - 1], tr[p]);
         }
       } else if (pg) {
@@ -1560,7 +1582,10 @@ static rsw_status create_common(loader *ld, node *n, object **out, bool analytic
   }
   vp->base.max_depth = (int)md;
   vp->base.rr_depth = (int)rr;
-  vp->base.pages = analytic; /* (its media analytic: a page's free flight needs no draws of its own) */
+  /* Pages ride on exact free flights (a page's needs no draws of its own):
+   * volpath's through homogeneous media only (scene_page_blocker). */
+  vp->base.pages = true;
+  vp->base.tracks_media = !analytic;
   *out = &vp->base.base;
   return RSW_OK;
 }

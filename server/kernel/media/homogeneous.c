@@ -8,7 +8,9 @@
  *   transmittance over a length l: exp(-sigma_t l).
  *
  * sigma_t and albedo are constant volumes (a number, an rgb or a spectrum,
- * or a constvolume), read at the render's wavelength by prepare().
+ * or a constvolume), read at the render's wavelength by prepare(); for a
+ * bundle of pages (render_ctx.bundle > 3) at each page's wavelengths, and
+ * the ops answer at the page rsw_page names (docs/experiments.md#pages-more-than-three-wavelengths-per-path).
  * Source: mitsuba3 src/media/homogeneous.cpp. */
 #include <math.h>
 #include <stdlib.h>
@@ -19,7 +21,10 @@
 typedef struct homogeneous_medium {
   medium base;
   volume *sigma_t, *albedo;
-  color sig, alb; /* sigma_t (scaled) and albedo at the render's wavelength */
+  /* sigma_t (scaled) and albedo at the render's wavelength, or at page p's
+   * of a bundle of pages (pages of them, set by prepare) */
+  color sig[RENDER_MAX_PAGES], alb[RENDER_MAX_PAGES];
+  int pages;
 } homogeneous_medium;
 
 static bool hom_intersect_aabb(const medium *m, const ray3 *r, double *mint, double *maxt) {
@@ -31,13 +36,14 @@ static bool hom_intersect_aabb(const medium *m, const ray3 *r, double *mint, dou
 
 static color hom_majorant(const medium *m, const medium_interaction *mi) {
   (void)mi;
-  return ((const homogeneous_medium *)m)->sig;
+  return ((const homogeneous_medium *)m)->sig[rsw_page];
 }
 
 static void hom_coefficients(const medium *m, medium_interaction *mi) {
   const homogeneous_medium *h = (const homogeneous_medium *)m;
-  mi->sigma_t = h->sig;
-  mi->sigma_s = col_mul(h->sig, h->alb);
+  int p = rsw_page;
+  mi->sigma_t = h->sig[p];
+  mi->sigma_s = col_mul(h->sig[p], h->alb[p]);
   mi->sigma_n = col1(0.0);
 }
 
@@ -48,7 +54,8 @@ static color tr_over(color sig, double len) {
 static void hom_sample_real(const medium *m, const ray3 *r, double mint, double maxt, double u, int channel,
                             medium_interaction *mi, color *tr, color *pdf) {
   const homogeneous_medium *h = (const homogeneous_medium *)m;
-  double s = h->sig.c[channel];
+  color sig = h->sig[rsw_page];
+  double s = sig.c[channel];
   double t = s > 0 ? mint - log1p(-u) / s : INFINITY;
   mi->medium = m;
   mi->mint = mint;
@@ -56,20 +63,20 @@ static void hom_sample_real(const medium *m, const ray3 *r, double mint, double 
   if (t < maxt) {
     mi->t = t;
     mi->p = v3_fma(r->o, t, r->d);
-    mi->majorant = h->sig;
+    mi->majorant = sig;
     hom_coefficients(m, mi);
-    *tr = tr_over(h->sig, t - mint);
-    *pdf = col_mul(*tr, h->sig);
+    *tr = tr_over(sig, t - mint);
+    *pdf = col_mul(*tr, sig);
   } else {
     mi->t = INFINITY;
-    *tr = tr_over(h->sig, maxt - mint);
+    *tr = tr_over(sig, maxt - mint);
     *pdf = *tr;
   }
 }
 
 static color hom_transmittance(const medium *m, const ray3 *r, double mint, double maxt) {
   (void)r;
-  return tr_over(((const homogeneous_medium *)m)->sig, maxt - mint);
+  return tr_over(((const homogeneous_medium *)m)->sig[rsw_page], maxt - mint);
 }
 
 static const medium_ops hom_ops = {.intersect_aabb = hom_intersect_aabb,
@@ -78,17 +85,31 @@ static const medium_ops hom_ops = {.intersect_aabb = hom_intersect_aabb,
                                    .sample_real = hom_sample_real,
                                    .transmittance = hom_transmittance};
 
+/* The coefficients at each of h->pages pages (the volumes' textures
+ * answer at the page rsw_page names). has_spectral_extinction: sigma_t
+ * differs between any two of the pages' channels (a bundle's free flight
+ * then picks one of them, volpath); absorbing_only: no albedo at any. */
 static void hom_refresh(homogeneous_medium *h) {
   vec3 o = v3(0, 0, 0);
-  h->sig = col_scale(h->sigma_t->ops->eval(h->sigma_t, o), h->base.scale);
-  h->alb = h->albedo->ops->eval(h->albedo, o);
-  h->base.has_spectral_extinction = h->sig.c[0] != h->sig.c[1] || h->sig.c[0] != h->sig.c[2];
-  h->base.absorbing_only = col_max(h->alb) == 0.0;
+  bool spectral = false;
+  double alb_max = 0.0;
+  for (int p = 0; p < h->pages; p++) {
+    rsw_page = p;
+    h->sig[p] = col_scale(h->sigma_t->ops->eval(h->sigma_t, o), h->base.scale);
+    h->alb[p] = h->albedo->ops->eval(h->albedo, o);
+    rsw_page = 0;
+    for (int c = 0; c < 3; c++) spectral |= h->sig[p].c[c] != h->sig[0].c[0];
+    alb_max = fmax(alb_max, col_max(h->alb[p]));
+  }
+  h->base.has_spectral_extinction = spectral;
+  h->base.absorbing_only = alb_max == 0.0;
 }
 
 static rsw_status hom_prepare(object *o, const render_ctx *rc, rsw_err *err) {
-  (void)rc, (void)err;
-  hom_refresh((homogeneous_medium *)o);
+  (void)err;
+  homogeneous_medium *h = (homogeneous_medium *)o;
+  h->pages = rc_pages(rc);
+  hom_refresh(h);
   return RSW_OK;
 }
 
@@ -111,6 +132,7 @@ static rsw_status homogeneous_create(loader *ld, node *n, object **out) {
   if (!h) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "homogeneous: out of memory");
   h->base.ops = &hom_ops;
   h->base.is_homogeneous = true;
+  h->pages = 1;
   rsw_status st = medium_read_common(ld, n, &h->base);
   if (!st) st = ld_volume(ld, n, "sigma_t", 1.0, 0.0, INFINITY, &h->sigma_t);
   if (!st) st = ld_volume(ld, n, "albedo", 0.75, 0.0, 1.0, &h->albedo);
@@ -132,4 +154,4 @@ static void hom_traverse(object *o, param_visitor *v) {
 }
 
 DEFINE_PLUGIN(homogeneous, CLS_MEDIUM, .prepare = hom_prepare, .ops = &hom_ops, .traverse = hom_traverse,
-              .parameters_changed = hom_parameters_changed);
+              .parameters_changed = hom_parameters_changed, .pages = plugin_pages_any);

@@ -132,7 +132,8 @@ const object *scene_bundle_blocker(const scene *s) {
 
 const object *scene_page_blocker(const scene *s, const char **why) {
   if (s->integrator && !s->integrator->pages) {
-    *why = "carries at most three wavelengths per path (`path` and `piecewise_volpath` carry more)";
+    *why =
+        "carries at most three wavelengths per path (`path`, `volpath` and `piecewise_volpath` carry more)";
     return &s->integrator->base;
   }
   for (size_t i = 0; i < s->n_objects; i++) {
@@ -142,6 +143,20 @@ const object *scene_page_blocker(const scene *s, const char **why) {
     if (pl->prepare && !(pl->pages && pl->pages(o))) {
       *why = "prepares its values at one set of three wavelengths";
       return o;
+    }
+    /* A medium's pages ride on exact free flights: one page's flight
+     * weights every page by its own transmittance (volpath's
+     * flight_pages). */
+    if (pl->cls == CLS_MEDIUM) {
+      const medium *m = (const medium *)o;
+      if (!m->ops->sample_real || !m->ops->transmittance) {
+        *why = "has no exact free flights to carry more than three wavelengths";
+        return o;
+      }
+      if (s->integrator && s->integrator->tracks_media && !m->is_homogeneous) {
+        *why = "is delta tracked by `volpath` (`piecewise_volpath` samples it exactly, and carries more)";
+        return o;
+      }
     }
     /* A delta lobe carries pages where its BSDF says its value at each
      * page and the probability of drawing it (bsdf_ops.delta_value:

@@ -68,8 +68,12 @@ static void constvolume_parameters_changed(object *o) {
   volume_update_bbox((volume *)o);
 }
 
+/* A bundle of pages: eval answers at the page rsw_page names (its uniform
+ * texture keeps a value per page); the grid view (cell, max) is page 0's,
+ * and the media that read it (heterogeneous, piecewise) do not carry pages. */
 DEFINE_PLUGIN(constvolume, CLS_VOLUME, .prepare = constvolume_prepare, .ops = &constvolume_ops,
-              .traverse = constvolume_traverse, .parameters_changed = constvolume_parameters_changed);
+              .traverse = constvolume_traverse, .parameters_changed = constvolume_parameters_changed,
+              .pages = plugin_pages_any);
 
 static volume *constvolume_make(texture *value, rsw_variant variant, const xform *to_world, const char *id) {
   constvolume *c = PLUGIN_NEW(constvolume, constvolume);
