@@ -61,14 +61,18 @@
 #     with no albedo, each page's BRF seen by a distant sensor is
 #     rho(w) exp(-tau(w) (1/mu_s + 1/mu_v)) (closed form, 1e-6: every path
 #     is weighted by the exact transmittances);
+#   - a two-sided plastic plate seen from its back (twosided's back side:
+#     the nested plastic's delta lobe with wi mirrored): `auto` takes 16,
+#     a bundle of 16 is statistically the unbundled films at 256 spp (the
+#     criteria above) and bitwise across threads;
 #   - "auto" takes 16 on the canopy (also on a gold roughconductor soil:
-#     its index preset per page; on a plastic and a roughplastic soil) and
-#     the atmosphere, 3 on a two-sided plastic soil (a delta lobe inside
-#     `twosided`) and where the molecular atmosphere is rendered by
-#     `volpath` (delta tracked; the medium named in bundle_why),
-#     and refusals name what stands in the way: 17 (the range), an
-#     integrator that carries three (`direct`), a two-sided
-#     plastic, the molecular atmosphere under volpath.
+#     its index preset per page; on a plastic, a roughplastic and a
+#     two-sided plastic soil) and the atmosphere, 3 on a blendbsdf soil
+#     over a plastic (a delta lobe inside `blendbsdf`) and where the
+#     molecular atmosphere is rendered by `volpath` (delta tracked; the
+#     medium named in bundle_why), and refusals name what stands in the
+#     way: 17 (the range), an integrator that carries three (`direct`), a
+#     blendbsdf over a plastic, the molecular atmosphere under volpath.
 name=test_bundle_pages
 source "$(dirname "$0")/../support/shtest.sh"
 need_bins raysweepd raysweep
@@ -91,14 +95,18 @@ p = json.load(open(f"{ex}/hdistant_lambertian.json"))
 p["integrator"] = {"type": "direct"}
 json.dump(p, open(f"{tmp}/direct.json", "w"))
 p = json.load(open(f"{ex}/hdistant_lambertian.json"))
-p["surface"]["bsdf"] = {"type": "twosided", "bsdf": {"type": "plastic"}}
-json.dump(p, open(f"{tmp}/twosided.json", "w"))
-p = json.load(open(f"{ex}/hdistant_lambertian.json"))
 p["sensor"]["film"]["width"] = p["sensor"]["film"]["height"] = 16
 p["sky"] = {"type": "constant", "radiance": 0.2}
 p["surface"]["bsdf"] = {"type": "plastic", "diffuse_reflectance": {"type": "spectrum", "wavelengths": [400, 550, 700],
                                                                   "values": [0.02, 0.1, 0.7]}}
 json.dump(p, open(f"{tmp}/plastic.json", "w"))
+q = json.loads(json.dumps(p))
+q["surface"]["bsdf"] = {"type": "twosided", "bsdf": p["surface"]["bsdf"]}
+q["surface"]["to_world"] = [{"scale": [10, 10, 1]}, {"rotate": {"axis": [1, 0, 0], "angle": 180}}]
+json.dump(q, open(f"{tmp}/twosided_back.json", "w"))
+q["surface"]["bsdf"] = {"type": "blendbsdf", "weight": 0.5, "bsdf_0": {"type": "diffuse"},
+                        "bsdf_1": {"type": "plastic"}}
+json.dump(q, open(f"{tmp}/blend.json", "w"))
 del p["sun"]
 p["sky"] = {"type": "constant", "radiance": {"type": "spectrum", "wavelengths": [400, 700], "values": [1.0, 0.3]}}
 p["surface"]["bsdf"] = {"type": "dielectric", "int_ior": 1.5,
@@ -309,6 +317,17 @@ agree(a, b, "plastic")
 same_across_threads([int(p) for p in sys.argv[2:4]], sys.argv[4], WLS, 8)
 ' "$tmp" "$p2" "$p1" "$tmp/plastic.json"
 
+py "a two-sided plastic seen from its back (twosided: the back side's delta lobe, wi mirrored): auto takes 16, a bundle of 16 is statistically the unbundled films, and bitwise across threads" '
+import sys
+sys.path.insert(0, sys.argv[1]); from job import *
+port = int(sys.argv[2]); sid = push(port, sys.argv[4])
+a, _ = films(port, sid, 1, 17, WLS, spp=256)
+b, j = films(port, sid, "auto", 18, WLS, spp=256)
+assert j["bundle"] == 16 and "bundle_why" not in j, j
+agree(a, b, "twosided")
+same_across_threads([int(p) for p in sys.argv[2:4]], sys.argv[4], WLS, 8)
+' "$tmp" "$p2" "$p1" "$tmp/twosided_back.json"
+
 py "a glass pane (dielectric, one index, a spectral specular_reflectance) under a spectral sky: in a bundle of 16 every film is the same reflections, each page weighted by its own reflectance" '
 import sys, math
 sys.path.insert(0, sys.argv[1]); from job import *
@@ -391,7 +410,9 @@ canopy = json.load(open(sys.argv[3]))
 for soil, k, words in (({"type": "roughconductor", "material": "Au", "alpha": 0.3}, 16, []),
                        ({"type": "plastic", "diffuse_reflectance": 0.3}, 16, []),
                        ({"type": "roughplastic", "diffuse_reflectance": 0.3}, 16, []),
-                       ({"type": "twosided", "bsdf": {"type": "plastic"}}, 3, ["(twosided)", "delta lobe"])):
+                       ({"type": "twosided", "bsdf": {"type": "plastic"}}, 16, []),
+                       ({"type": "blendbsdf", "weight": 0.5, "bsdf_0": {"type": "diffuse"},
+                         "bsdf_1": {"type": "plastic"}}, 3, ["(blendbsdf)", "delta lobe"])):
     canopy["soil"]["bsdf"] = soil
     path = sys.argv[1] + "/canopy_" + soil["type"] + ".json"
     json.dump(canopy, open(path, "w"))
@@ -409,6 +430,6 @@ def refuse(sid, bundle, words):
 refuse(atmo, 17, ["from 1", "to 16"])
 refuse(vol, 4, ["(molecular_atmosphere)", "delta tracked by `volpath`", "at most 3 wavelengths"])
 refuse(push(port, sys.argv[5]), 6, ["integrator", "(direct)", "at most three"])
-refuse(push(port, sys.argv[6]), 16, ["(twosided)", "delta lobe"])
-' "$tmp" "$p2" "$tmp/canopy.json" "$root/proto/examples/atmosphere_molecular.json" "$tmp/direct.json" "$tmp/twosided.json" "$tmp/volpath.json"
+refuse(push(port, sys.argv[6]), 16, ["(blendbsdf)", "delta lobe"])
+' "$tmp" "$p2" "$tmp/canopy.json" "$root/proto/examples/atmosphere_molecular.json" "$tmp/direct.json" "$tmp/blend.json" "$tmp/volpath.json"
 finish

@@ -139,6 +139,21 @@ static color conductor_sample(const bsdf *b, const surface_interaction *si, doub
   return w;
 }
 
+/* A bundle of pages (bsdf_ops.delta_value): the mirror lobe at the page
+ * rsw_page names, drawn with probability 1 (0 below the surface): its
+ * value is sample()'s weight, bit for bit. What a composition over a
+ * conductor (twosided) asks for. */
+static color conductor_delta_value(const bsdf *b, const surface_interaction *si, unsigned lobe,
+                                   double *prob) {
+  bsdf_sample bs;
+  double u1 = 0.0;
+  vec2 u2 = v2(0.0, 0.0);
+  color w;
+  conductor_sample_batch(b, 1, &si, &u1, &u2, &bs, &w);
+  *prob = bs.pdf > 0.0 && lobe == BSDF_DELTA_REFLECTION ? 1.0 : 0.0;
+  return *prob > 0.0 ? w : col1(0.0);
+}
+
 /* Polarization (docs/plugins.md#polarization-surfaces): the Fresnel matrix of
  * the complex index eta + i k per channel at the light's incidence
  * cosine, s-axis bases (mitsuba3 src/bsdfs/conductor.cpp; the default
@@ -158,7 +173,8 @@ static const bsdf_ops conductor_ops = {.sample = conductor_sample,
                                        .eval = conductor_eval,
                                        .pdf = conductor_pdf,
                                        .sample_batch = conductor_sample_batch,
-                                       .polarization = conductor_polarization};
+                                       .polarization = conductor_polarization,
+                                       .delta_value = conductor_delta_value};
 
 static rsw_status conductor_prepare(object *o, const render_ctx *rc, rsw_err *err) {
   return conductor_ior_prepare(&((conductor_bsdf *)o)->ior, rc, err, o->id);

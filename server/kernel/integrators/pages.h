@@ -29,11 +29,11 @@ static inline double bsdf_eval_pages(const bsdf *b, const surface_interaction *s
  * from (then, rescaled, the lobe within it), u2 the direction; bs->pdf is
  * the pages' mean density of bs->wo and w[p] each page's value over it.
  * A delta lobe of a BSDF that says its value (bsdf_ops.delta_value:
- * `plastic`, `dielectric`): each page's value over the mean of the pages'
+ * `plastic`, `dielectric`, `conductor`, `twosided` over them): each page's value over the mean of the pages'
  * probabilities of drawing it (bs->pdf), so that a lobe the pages choose
  * with different probabilities (a spectral diffuse_reflectance weights
  * plastic's choice) stays unbiased at every page. Other delta lobes (the
- * index-matched `null`, `conductor`'s one mirror: scene_page_blocker) take
+ * index-matched `null`: scene_page_blocker) take
  * each page's own weight for the same lobe and direction. A failed
  * sample: bs->pdf 0 and every weight 0. */
 static inline void bsdf_sample_pages(const bsdf *b, const surface_interaction *si, int pages, double u1,
@@ -54,7 +54,7 @@ static inline void bsdf_sample_pages(const bsdf *b, const surface_interaction *s
       pm += pr;
     }
     bs->pdf = pm / pages;
-    for (int p = 0; p < pages; p++) w[p] = col_scale(w[p], 1.0 / bs->pdf);
+    for (int p = 0; p < pages; p++) w[p] = bs->pdf > 0 ? col_scale(w[p], 1.0 / bs->pdf) : col1(0);
   } else if (bs->sampled_type & BSDF_DELTA) {
     for (int p = 0; p < pages; p++) {
       bsdf_sample t;

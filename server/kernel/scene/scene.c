@@ -160,14 +160,15 @@ const object *scene_page_blocker(const scene *s, const char **why) {
     }
     /* A delta lobe carries pages where its BSDF says its value at each
      * page and the probability of drawing it (bsdf_ops.delta_value:
-     * `plastic`, `dielectric`; bsdf_sample_pages weights each page by its
-     * value over the pages' mean probability), or where every page draws
-     * it alike (bsdf_sample_pages samples every page again with the same
-     * numbers and keeps its weight where it drew the same lobe and
-     * direction): the index-matched `null` (weight 1 at every wavelength),
-     * and a BSDF whose only lobe is one delta reflection (`conductor`: the
-     * mirror direction, drawn with probability 1 at every page). Others
-     * (a composition that holds a delta lobe: twosided, blendbsdf, ...)
+     * `plastic`, `dielectric`, `conductor`, `twosided` over them;
+     * bsdf_sample_pages weights each page by its value over the pages'
+     * mean probability), or where every page draws it alike
+     * (bsdf_sample_pages samples every page again with the same numbers
+     * and keeps its weight where it drew the same lobe and direction): the
+     * index-matched `null` (weight 1 at every wavelength), and a BSDF
+     * whose only lobe is one delta reflection (a blend of mirrors: the
+     * mirror direction, drawn with probability 1 at every page). Other
+     * compositions that hold a delta lobe (blendbsdf, selectbsdf, mask)
      * would need their parts' probabilities at every page. */
     if (pl->cls == CLS_BSDF) {
       const bsdf *b = (const bsdf *)o;

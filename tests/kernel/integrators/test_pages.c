@@ -26,9 +26,14 @@
  *    ocean: pages 0, 3 and 5, value and pdf);
  *  - the uniform texture answers for rsw_page and leaves it at 0;
  *  - `null` (a delta lobe every page draws alike) gives weight 1 at every page;
- *  - what carries pages: plastic, roughplastic, dielectric, the ocean and
- *    compositions without a delta lobe; twosided, blendbsdf and mask over
- *    a plastic or glass are refused, named, "delta lobe" in the reason;
+ *  - twosided over a plastic (and over a gold conductor) says its nested
+ *    delta lobe's value at each page: the front side's is the nested
+ *    BSDF's, the back side's the nested BSDF's with wi mirrored, bit for
+ *    bit, and it is drawn with the pages' mean probability (as above);
+ *  - what carries pages: plastic, roughplastic, dielectric, the ocean,
+ *    twosided over a plastic and compositions without a delta lobe;
+ *    blendbsdf and mask over a plastic or glass are refused, named,
+ *    "delta lobe" in the reason;
  *  - a `homogeneous` medium carries pages under volpath and
  *    piecewise_volpath, a `heterogeneous` one is refused (named); at page
  *    p the homogeneous medium's coefficients, free flight and
@@ -355,32 +360,69 @@ static void test_delta(void) {
   delta_case(GLASS, BSDF_DELTA_REFLECTION, 0);
 }
 
+/* twosided over a plastic and over a gold conductor: its delta_value is
+ * the nested BSDF's at each page, the back side's with wi mirrored, bit
+ * for bit; the plastic's drawn with the pages' mean probability
+ * (delta_case); a wi in the surface's plane has none. */
+static void test_twosided(void) {
+  char two[512];
+  snprintf(two, sizeof two, "{\"type\": \"twosided\", \"bsdf\": %s}", PLASTIC);
+  delta_case(two, BSDF_DELTA_REFLECTION, 1);
+  const char *nested[2] = {PLASTIC, "{\"type\": \"conductor\", \"material\": \"Au\"}"};
+  for (int i = 0; i < 2; i++) {
+    snprintf(two, sizeof two, "{\"type\": \"twosided\", \"bsdf\": %s}", nested[i]);
+    scene *s = bsdf_scene(two), *one = bsdf_scene(nested[i]);
+    REQUIRE(s && one && prepare_bundle(s, 16) && prepare_bundle(one, 16), "%s", two);
+    const bsdf *b = s->shapes[0]->bsdf, *n = one->shapes[0]->bsdf;
+    CHECK(b->ops->delta_value && n->ops->delta_value, "%s says its delta lobes' values", two);
+    surface_interaction front = tb_si_with(tb_dir_deg(40, 0)), back = front;
+    back.wi.z = -front.wi.z;
+    for (int p = 0; p < s->pages; p++) {
+      color vf, vb, vn;
+      double pf = delta_prob(b, &front, p, BSDF_DELTA_REFLECTION, &vf);
+      double pb = delta_prob(b, &back, p, BSDF_DELTA_REFLECTION, &vb);
+      double pn = delta_prob(n, &front, p, BSDF_DELTA_REFLECTION, &vn);
+      CHECK(pn > 0 && pf == pn && pb == pn && memcmp(&vf, &vn, sizeof vn) == 0 &&
+                memcmp(&vb, &vn, sizeof vn) == 0,
+            "%s page %d: front %g, back %g, nested %g", two, p, pf, pb, pn);
+    }
+    surface_interaction flat = front;
+    flat.wi.z = 0.0;
+    color v;
+    CHECK(delta_prob(b, &flat, 0, BSDF_DELTA_REFLECTION, &v) == 0.0 && col_max(v) == 0.0, "%s: wi.z = 0",
+          two);
+    scene_free(s);
+    scene_free(one);
+  }
+}
+
 /* What carries pages (scene_page_blocker): plastic, roughplastic,
- * dielectric, the ocean that follows the render and compositions without
- * a delta lobe do; compositions holding a delta lobe (twosided, blendbsdf,
- * mask over a plastic or glass) are refused, naming the composition. */
+ * dielectric, the ocean that follows the render, twosided over a plastic
+ * and compositions without a delta lobe do; other compositions holding a
+ * delta lobe (blendbsdf, mask over a plastic or glass) are refused, naming
+ * the composition. */
 static void test_blockers(void) {
-  const char *yes[6] = {PLASTIC,
+  const char *yes[7] = {PLASTIC,
                         ROUGHPLASTIC,
                         GLASS,
                         OCEAN,
                         "{\"type\": \"twosided\", \"bsdf\": {\"type\": \"roughplastic\"}}",
+                        "{\"type\": \"twosided\", \"bsdf\": {\"type\": \"plastic\"}}",
                         "{\"type\": \"blendbsdf\", \"weight\": 0.3, \"bsdf_0\": {\"type\": \"diffuse\"}, "
                         "\"bsdf_1\": {\"type\": \"roughplastic\"}}"};
-  const char *no[3][2] = {
-      {"{\"type\": \"twosided\", \"bsdf\": {\"type\": \"plastic\"}}", "twosided"},
+  const char *no[2][2] = {
       {"{\"type\": \"blendbsdf\", \"weight\": 0.3, \"bsdf_0\": {\"type\": \"diffuse\"}, "
        "\"bsdf_1\": {\"type\": \"plastic\"}}",
        "blendbsdf"},
       {"{\"type\": \"mask\", \"opacity\": 0.5, \"bsdf\": {\"type\": \"dielectric\"}}", "mask"}};
-  for (int i = 0; i < 6; i++) {
+  for (int i = 0; i < 7; i++) {
     scene *s = bsdf_scene(yes[i]);
     const char *why = "";
     const object *blk = s ? scene_page_blocker(s, &why) : NULL;
     CHECK(s && !blk, "%s carries pages (%s: %s)", yes[i], blk ? blk->plugin->name : "", why);
     scene_free(s);
   }
-  for (int i = 0; i < 3; i++) {
+  for (int i = 0; i < 2; i++) {
     scene *s = bsdf_scene(no[i][0]);
     const char *why = "";
     const object *blk = s ? scene_page_blocker(s, &why) : NULL;
@@ -471,6 +513,7 @@ int main(void) {
   RSW_TEST_RUN(test_ocean);
   RSW_TEST_RUN(test_null);
   RSW_TEST_RUN(test_delta);
+  RSW_TEST_RUN(test_twosided);
   RSW_TEST_RUN(test_blockers);
   RSW_TEST_RUN(test_media);
   RSW_TEST_END("test_pages");
