@@ -520,6 +520,11 @@ typedef struct volume_ops {
    * (for tabulated spectra per cell: over every sample of the tables),
    * whatever the wavelength: ld_volume checks it against its slot's range. */
   void (*value_range)(const volume *v, double *lo, double *hi);
+  /* Optional (a bundle of pages, render_ctx.bundle > 3): the values at
+   * page p of the bundle prepare() was given (laid out as data; eval
+   * answers at the page rsw_page names). NULL, or data for p = 0: the
+   * volume's values are data at every page. volume_page_data. */
+  const double *(*page_data)(const volume *v, int p);
 } volume_ops;
 struct volume {
   object base;

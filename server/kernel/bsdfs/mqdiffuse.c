@@ -96,6 +96,13 @@ static void mq_traverse(object *o, param_visitor *v) {
   pv_object(v, "grid", &((mqdiffuse *)o)->grid->base, NAN, NAN);
 }
 
+/* The grid is read in one channel (volume_eval_1): a grid with a
+ * wavelength axis would give a spectral bundle its first wavelength's
+ * values in every channel. */
+static bool mq_bundles(const object *o) {
+  return !volume_spectral(((const mqdiffuse *)o)->grid);
+}
+
 const plugin plugin_mqdiffuse = {
     .name = "mqdiffuse",
     .cls = CLS_BSDF,
@@ -103,4 +110,5 @@ const plugin plugin_mqdiffuse = {
     .destroy = mq_destroy,
     .ops = &mq_ops,
     .traverse = mq_traverse,
+    .bundles = mq_bundles,
 };

@@ -229,8 +229,8 @@ static double spec_at(const ma_spec *s, double wl, bool *ok) {
 /* The layer values at wavelength wl into channel ch (ch < 0: every
  * channel; then also the scalar per-layer values and the phase mixture's
  * weights, which a bundle, refused with particles, does not vary). */
-static rsw_status ma_refresh_channel(mol_atmo *m, double wl, int ch, media_layers *L, double *wc, bool first,
-                                     rsw_err *err) {
+static rsw_status ma_refresh_channel(mol_atmo *m, double wl, int ch, int page, media_layers *L, double *wc,
+                                     bool first, rsw_err *err) {
   uint32_t n = m->n;
   const char *id = m->lm.base.base.id ? m->lm.base.base.id : "";
   double sr = m->has_scattering ? atmo_rayleigh_cross_section(wl) : 0.0;
@@ -273,11 +273,16 @@ static rsw_status ma_refresh_channel(mol_atmo *m, double wl, int ch, media_layer
       m->frac[j][k] =
           dist_cdf(p, (m->z[k + 1] - p->bottom) / span) - dist_cdf(p, (m->z[k] - p->bottom) / span);
   }
+  /* sigma_a at this channel's wavelength: a bundle's volume holds its
+   * channels (page by page: volume_page_data) */
   const double *sa = NULL;
   bool sa_grid = false;
+  uint32_t sa_ch = 0, sa_off = 0;
   if (m->sigma_a) {
-    sa = m->sigma_a->data;
+    sa = volume_page_data(m->sigma_a, page);
     sa_grid = m->sigma_a->res[2] > 1;
+    sa_ch = m->sigma_a->channels;
+    sa_off = sa_ch == 3 && ch > 0 ? (uint32_t)ch : 0;
     m->sa_revision = m->sigma_a->revision;
   }
   double amax = 0.0;
@@ -286,7 +291,7 @@ static rsw_status ma_refresh_channel(mol_atmo *m, double wl, int ch, media_layer
     double ss = m->n_air[k] * sr, sabs = 0.0;
     if (m->has_absorption) {
       if (o3) sabs += m->n_o3[k] * o3_cross_section(c3, m->t[k]);
-      if (sa) sabs += sa[(sa_grid ? k : 0) * m->sigma_a->channels];
+      if (sa) sabs += sa[(sa_grid ? k : 0) * sa_ch + sa_off];
     }
     double st = ss + sabs;
     double *s = m->s_comp;
@@ -366,14 +371,14 @@ static rsw_status ma_refresh(mol_atmo *m, const render_ctx *rc, rsw_err *err) {
   if (pages > 1 && !ma_pages_alloc(m, pages))
     return rsw_fail(err, RSW_ERR_NOMEM, "", "molecular_atmosphere: out of memory");
   if (!bundle) {
-    st = ma_refresh_channel(m, wl, -1, &m->lm.L, m->wc, true, err);
+    st = ma_refresh_channel(m, wl, -1, 0, &m->lm.L, m->wc, true, err);
   } else {
     size_t per = 3 * (size_t)m->n * (m->np ? m->np : 1);
     for (int p = 0; p < pages && !st; p++) {
       render_ctx pc = rc_page(rc, p);
       media_layers *L = p ? &m->lm.Lp[p - 1] : &m->lm.L;
       double *wc = p ? m->wcp + (size_t)(p - 1) * per : m->wc;
-      for (int c = 0; c < 3 && !st; c++) st = ma_refresh_channel(m, pc.wl[c], c, L, wc, p == 0, err);
+      for (int c = 0; c < 3 && !st; c++) st = ma_refresh_channel(m, pc.wl[c], c, p, L, wc, p == 0, err);
       L->nc = 3;
       if (p) media_layers_finish(L);
     }

@@ -218,4 +218,12 @@ static void blendphase_traverse(object *o, param_visitor *v) {
   pv_object(v, "phase_1", &b->ph[1]->base, NAN, NAN);
 }
 
-DEFINE_PLUGIN(blendphase, CLS_PHASE, .ops = &blendphase_ops, .traverse = blendphase_traverse);
+/* The weight is a scalar field (volume_eval_1): one that depends on the
+ * wavelength would give a spectral bundle its first wavelength's weight
+ * in every channel. */
+static bool blendphase_bundles(const object *o) {
+  return !volume_spectral(((const blendphase *)o)->weight);
+}
+
+DEFINE_PLUGIN(blendphase, CLS_PHASE, .ops = &blendphase_ops, .traverse = blendphase_traverse,
+              .bundles = blendphase_bundles);

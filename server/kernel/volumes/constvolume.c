@@ -21,6 +21,9 @@ typedef struct constvolume {
   volume base;
   texture *value; /* a uniform texture */
   double cell[3];
+  /* A bundle of pages: pages 1.. (prepare; volume_ops.page_data) */
+  double cellp[RENDER_MAX_PAGES - 1][3];
+  int pages;
 } constvolume;
 
 static color constvolume_eval(const volume *v, vec3 p) {
@@ -38,7 +41,13 @@ static void constvolume_value_range(const volume *v, double *lo, double *hi) {
   for (size_t i = 0; i < n; i++) *lo = fmin(*lo, x[i]), *hi = fmax(*hi, x[i]);
 }
 
-static const volume_ops constvolume_ops = {.eval = constvolume_eval, .value_range = constvolume_value_range};
+static const double *constvolume_page_data(const volume *v, int p) {
+  const constvolume *c = (const constvolume *)v;
+  return p > 0 && p < c->pages ? c->cellp[p - 1] : c->cell;
+}
+
+static const volume_ops constvolume_ops = {
+    .eval = constvolume_eval, .value_range = constvolume_value_range, .page_data = constvolume_page_data};
 
 /* The cell and max from the texture's current value (prepared before the
  * volume: a texture is created, and so prepared, before its holder). */
@@ -55,7 +64,21 @@ static rsw_status constvolume_prepare(object *o, const render_ctx *rc, rsw_err *
   constvolume *c = (constvolume *)o;
   c->base.channels = rc->variant == VARIANT_RGB || rc->bundle > 1 ? 3 : 1;
   constvolume_refresh(c);
+  c->pages = rc_pages(rc);
+  for (int p = 1; p < c->pages; p++) { /* (the texture answers at rsw_page) */
+    rsw_page = p;
+    color x = tex_eval(c->value, NULL);
+    rsw_page = 0;
+    for (int k = 0; k < 3; k++) c->cellp[p - 1][k] = x.c[k];
+    c->base.max = fmax(c->base.max, c->base.channels == 3 ? col_max(x) : x.c[0]);
+  }
   return RSW_OK;
+}
+
+/* Its value depends on the wavelength where its spectrum does. */
+static bool constvolume_spectral(const object *o) {
+  const texture *t = ((const constvolume *)o)->value;
+  return t->base.plugin && t->base.plugin->spectral && t->base.plugin->spectral(&t->base);
 }
 
 static void constvolume_traverse(object *o, param_visitor *v) {
@@ -69,11 +92,11 @@ static void constvolume_parameters_changed(object *o) {
 }
 
 /* A bundle of pages: eval answers at the page rsw_page names (its uniform
- * texture keeps a value per page); the grid view (cell, max) is page 0's,
- * and the media that read it (heterogeneous, piecewise) do not carry pages. */
+ * texture keeps a value per page), page_data gives each page's cell, and
+ * max is the largest over the pages. */
 DEFINE_PLUGIN(constvolume, CLS_VOLUME, .prepare = constvolume_prepare, .ops = &constvolume_ops,
               .traverse = constvolume_traverse, .parameters_changed = constvolume_parameters_changed,
-              .pages = plugin_pages_any);
+              .spectral = constvolume_spectral, .pages = plugin_pages_any);
 
 static volume *constvolume_make(texture *value, rsw_variant variant, const xform *to_world, const char *id) {
   constvolume *c = PLUGIN_NEW(constvolume, constvolume);
@@ -84,6 +107,7 @@ static volume *constvolume_make(texture *value, rsw_variant variant, const xform
   c->base.res[0] = c->base.res[1] = c->base.res[2] = 1;
   c->base.channels = variant == VARIANT_RGB ? 3 : 1;
   c->base.data = c->cell;
+  c->pages = 1;
   const spectrum *s = uniform_texture_spectrum(value);
   if (s && s->kind != SPEC_TABLE) constvolume_refresh(c); /* a table waits for prepare() */
   return &c->base;

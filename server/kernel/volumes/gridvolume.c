@@ -13,8 +13,12 @@
  * every cell a tabulated spectrum: data then holds Z Y X K values, K =
  * len(wavelengths), the spectral axis last (shape [Z, Y, X] or
  * [Z, Y, X, K]); prepare() interpolates each cell at the render's
- * wavelength (outside the table is an error, as for every spectrum). A
- * 3-channel grid in mono is seen as its luminance, as rgb spectra are.
+ * wavelength (outside the table is an error, as for every spectrum): for
+ * a spectral bundle (render_ctx.bundle > 1) into 3 channels, channel c at
+ * the bundle's c-th wavelength, and for a bundle of pages one such grid
+ * per page (volume_ops.page_data; eval answers at the page rsw_page
+ * names). A 3-channel grid in mono is seen as its luminance, as rgb
+ * spectra are.
  *
  * Evaluation: `filter_type` "trilinear" (default; cell centres at
  * (i + 1/2) / res) or "nearest"; `wrap_mode` "clamp" (default), "repeat"
@@ -61,12 +65,17 @@ typedef struct gridvolume {
   uint32_t src_ch; /* channels, or K with wavelengths */
   double *wl;      /* K wavelengths (owned), or NULL */
   size_t n_wl;
-  double *grid; /* evaluated grid (tables, luminance), or NULL: data is src */
+  /* The evaluated grid (tables, luminance), or NULL: data is src. Tables:
+   * `pages` grids of cells x channels, page p's channel c at
+   * prepared_wl[3 p + c] (channels 1: prepared_wl[0]). */
+  double *grid;
+  size_t grid_cap; /* doubles allocated for grid */
   grid_filter filter;
   grid_wrap wrap;
-  double prepared_wl; /* wavelength grid was evaluated at (NAN: never) */
-  double fixed_max;   /* max_value, or NAN */
-  char *where;        /* the document location of the values (owned) */
+  double prepared_wl[3 * RENDER_MAX_PAGES]; /* (NAN: never evaluated) */
+  int pages;
+  double fixed_max; /* max_value, or NAN */
+  char *where;      /* the document location of the values (owned) */
 } gridvolume;
 
 static size_t cells_of(const volume *v) {
@@ -85,8 +94,17 @@ static int wrap_index(int i, int n, grid_wrap w) {
   return 0;
 }
 
+/* The values at page p (volume_ops.page_data): a table's grid of that
+ * page; other grids hold the same values at every wavelength. */
+static const double *gridvolume_page_data(const volume *v, int p) {
+  const gridvolume *g = (const gridvolume *)v;
+  if (!g->wl || p <= 0 || p >= g->pages) return v->data;
+  return g->grid + (size_t)p * cells_of(v) * v->channels;
+}
+
 static color cell(const volume *v, int ix, int iy, int iz) {
-  const double *d = v->data + (((size_t)iz * v->res[1] + iy) * v->res[0] + ix) * v->channels;
+  const double *d = rsw_page ? gridvolume_page_data(v, rsw_page) : v->data;
+  d += (((size_t)iz * v->res[1] + iy) * v->res[0] + ix) * v->channels;
   return v->channels == 3 ? col(d[0], d[1], d[2]) : col1(d[0]);
 }
 
@@ -164,36 +182,52 @@ static void gridvolume_value_range(const volume *v, double *lo, double *hi) {
   for (size_t i = 0; i < g->n_src; i++) *lo = fmin(*lo, g->src[i]), *hi = fmax(*hi, g->src[i]);
 }
 
-static const volume_ops gridvolume_ops = {.eval = gridvolume_eval, .value_range = gridvolume_value_range};
+static const volume_ops gridvolume_ops = {
+    .eval = gridvolume_eval, .value_range = gridvolume_value_range, .page_data = gridvolume_page_data};
 
-/* The evaluated grid at wavelength wl (tables) or the luminance (3
- * channels in mono), then max. wl must lie in the table. */
-static void evaluate(gridvolume *g, double wl) {
+/* The tables at wavelength wl into channel c of the cells x ch values at
+ * out. wl must lie in the table. */
+static void evaluate_at(const gridvolume *g, double wl, double *out, size_t ch, size_t c) {
   size_t cells = cells_of(&g->base);
+  size_t lo = 0, hi = g->n_wl - 1;
+  while (hi - lo > 1) {
+    size_t mid = (lo + hi) / 2;
+    if (g->wl[mid] <= wl)
+      lo = mid;
+    else
+      hi = mid;
+  }
+  double t = (wl - g->wl[lo]) / (g->wl[hi] - g->wl[lo]);
+  for (size_t i = 0; i < cells; i++) {
+    const double *s = g->src + i * g->src_ch;
+    out[i * ch + c] = s[lo] + t * (s[hi] - s[lo]);
+  }
+}
+
+/* The evaluated grid: the tables at prepared_wl (each page's grid, each
+ * channel's wavelength; never prepared: nothing to do) or the luminance
+ * (3 channels in mono), then max over every page. */
+static void evaluate(gridvolume *g) {
+  size_t cells = cells_of(&g->base);
+  size_t n = cells * g->base.channels;
   if (g->wl) {
-    size_t lo = 0, hi = g->n_wl - 1;
-    while (hi - lo > 1) {
-      size_t mid = (lo + hi) / 2;
-      if (g->wl[mid] <= wl)
-        lo = mid;
-      else
-        hi = mid;
+    if (isnan(g->prepared_wl[0])) {
+      g->base.revision++;
+      return;
     }
-    double t = (wl - g->wl[lo]) / (g->wl[hi] - g->wl[lo]);
-    for (size_t i = 0; i < cells; i++) {
-      const double *s = g->src + i * g->src_ch;
-      g->grid[i] = s[lo] + t * (s[hi] - s[lo]);
-    }
-    g->prepared_wl = wl;
+    for (int p = 0; p < g->pages; p++)
+      for (uint32_t c = 0; c < g->base.channels; c++)
+        evaluate_at(g, g->prepared_wl[3 * p + c], g->grid + (size_t)p * n, g->base.channels, c);
+    n *= (size_t)g->pages;
   } else if (g->grid) {
     for (size_t i = 0; i < cells; i++) {
       const double *s = g->src + 3 * i;
       g->grid[i] = col_luminance(col(s[0], s[1], s[2]));
     }
   }
-  size_t n = cells * g->base.channels;
+  const double *d = g->grid ? g->grid : g->base.data;
   double m = -INFINITY;
-  for (size_t i = 0; i < n; i++) m = fmax(m, g->base.data[i]);
+  for (size_t i = 0; i < n; i++) m = fmax(m, d[i]);
   g->base.max = isnan(g->fixed_max) ? m : g->fixed_max;
   g->base.revision++;
 }
@@ -201,12 +235,35 @@ static void evaluate(gridvolume *g, double wl) {
 static rsw_status gridvolume_prepare(object *o, const render_ctx *rc, rsw_err *err) {
   gridvolume *g = (gridvolume *)o;
   if (!g->wl) return RSW_OK; /* luminance and plain grids follow the values (parameters_changed) */
-  double w = rc->wavelength;
-  if (!(w >= g->wl[0] && w <= g->wl[g->n_wl - 1]))
-    return rsw_fail(err, RSW_ERR_RANGE, g->where,
-                    "wavelength %g nm lies outside the grid's spectral table [%g, %g] nm", w, g->wl[0],
-                    g->wl[g->n_wl - 1]);
-  if (w != g->prepared_wl) evaluate(g, w);
+  /* One channel at the render's wavelength, or a bundle's 3 channels per
+   * page (render_ctx: channel c of page p at rc_page(rc, p).wl[c]). */
+  int pages = rc_pages(rc);
+  uint32_t ch = rc->bundle > 1 ? 3 : 1;
+  double wl[3 * RENDER_MAX_PAGES];
+  for (int p = 0; p < pages; p++) {
+    render_ctx pc = rc_page(rc, p);
+    for (uint32_t c = 0; c < 3; c++) {
+      double w = wl[3 * p + c] = ch == 3 ? rc_channel_wavelength(&pc, (int)c) : rc->wavelength;
+      if (!(w >= g->wl[0] && w <= g->wl[g->n_wl - 1]))
+        return rsw_fail(err, RSW_ERR_RANGE, g->where,
+                        "wavelength %g nm lies outside the grid's spectral table [%g, %g] nm", w, g->wl[0],
+                        g->wl[g->n_wl - 1]);
+    }
+  }
+  if (ch == g->base.channels && pages == g->pages && memcmp(wl, g->prepared_wl, 3 * pages * sizeof *wl) == 0)
+    return RSW_OK;
+  size_t need = cells_of(&g->base) * ch * (size_t)pages;
+  if (need > g->grid_cap) {
+    double *grid = realloc(g->grid, need * sizeof *grid);
+    if (!grid) return rsw_fail(err, RSW_ERR_NOMEM, g->where, "out of memory for the grid at its wavelengths");
+    g->grid = grid;
+    g->grid_cap = need;
+    g->base.data = grid;
+  }
+  g->base.channels = ch;
+  g->pages = pages;
+  memcpy(g->prepared_wl, wl, 3 * pages * sizeof *wl);
+  evaluate(g);
   return RSW_OK;
 }
 
@@ -214,12 +271,9 @@ static void gridvolume_parameters_changed(object *o) {
   gridvolume *g = (gridvolume *)o;
   volume_update_bbox(&g->base);
   /* The data changed (or only to_world: then this recomputes the same
-   * grid). Tables are re-evaluated at the wavelength of the last
+   * grid). Tables are re-evaluated at the wavelengths of the last
    * prepare(), or wait for the next one. */
-  if (!g->wl || !isnan(g->prepared_wl))
-    evaluate(g, g->prepared_wl);
-  else
-    g->base.revision++;
+  evaluate(g);
 }
 
 /* The slot's range (lo, hi of the volume) travels with the key. */
@@ -227,12 +281,6 @@ static void gridvolume_parameters_changed(object *o) {
  * axis is there to be read). */
 static bool gridvolume_spectral(const object *o) {
   return ((const gridvolume *)o)->n_wl > 1;
-}
-
-/* A grid is evaluated at one wavelength into one channel: a spectral
- * bundle would see the first wavelength's values in every channel. */
-static bool gridvolume_bundles(const object *o) {
-  return !gridvolume_spectral(o);
 }
 
 static void gridvolume_traverse(object *o, param_visitor *v) {
@@ -490,17 +538,19 @@ static rsw_status gridvolume_fill(loader *ld, node *n, gridvolume *g) {
   if (derived) {
     g->grid = calloc(cells, sizeof(double));
     if (!g->grid) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "out of memory");
+    g->grid_cap = cells;
   }
   g->base.channels = derived ? 1 : g->src_ch;
   g->base.data = derived ? g->grid : g->src;
-  g->prepared_wl = NAN;
-  if (!g->wl) evaluate(g, NAN); /* tables wait for prepare() */
+  g->prepared_wl[0] = NAN;
+  g->pages = 1;
+  if (!g->wl) evaluate(g); /* tables wait for prepare() */
   return RSW_OK;
 }
 
 DEFINE_PLUGIN(gridvolume, CLS_VOLUME, .destroy = gridvolume_destroy, .prepare = gridvolume_prepare,
               .ops = &gridvolume_ops, .traverse = gridvolume_traverse, .spectral = gridvolume_spectral,
-              .bundles = gridvolume_bundles, .parameters_changed = gridvolume_parameters_changed);
+              .parameters_changed = gridvolume_parameters_changed, .pages = plugin_pages_any);
 
 static rsw_status gridvolume_create(loader *ld, node *n, object **out) {
   gridvolume *g = PLUGIN_NEW(gridvolume, gridvolume);

@@ -18,6 +18,19 @@ static inline double volume_eval_1(const volume *v, vec3 p) {
   return v->ops->eval(v, p).c[0];
 }
 
+/* The values at page p of a bundle of pages (volume_ops.page_data), laid
+ * out as v->data. */
+static inline const double *volume_page_data(const volume *v, int p) {
+  return p > 0 && v->ops->page_data ? v->ops->page_data(v, p) : v->data;
+}
+
+/* Whether v's values depend on the render's wavelength (a grid with a
+ * wavelength axis, a constvolume holding a tabulated spectrum). */
+static inline bool volume_spectral(const volume *v) {
+  const plugin *pl = v->base.plugin;
+  return pl && pl->spectral && pl->spectral(&v->base);
+}
+
 /* Set up the common part: ops, to_world (the unit cube -> world), the box,
  * an unconstrained range. */
 void volume_init(volume *v, const volume_ops *ops, const xform *to_world);

@@ -38,7 +38,14 @@
  *    piecewise_volpath, a `heterogeneous` one is refused (named); at page
  *    p the homogeneous medium's coefficients, free flight and
  *    transmittance are bit for bit the medium's prepared at the page's
- *    three wavelengths alone, and rsw_page is left at 0.
+ *    three wavelengths alone, and rsw_page is left at 0;
+ *  - grids with a wavelength axis: a `piecewise` medium whose sigma_t is
+ *    a gridvolume of 4 layers tabulated at 400, 550 and 700 nm (and whose
+ *    albedo is a spectrum) carries pages; each page's layers (sigma_t,
+ *    albedo, cumulative thickness) are bit for bit the medium's prepared
+ *    at the page's wavelengths alone, and the grid's eval at page p is
+ *    its value there; a blendphase whose weight is such a grid, and an
+ *    mqdiffuse's grid, refuse any bundle (they read one channel).
  * Chi-square: 200,000 samples per run, significance 0.01 with the Sidak
  * correction over the runs of this file; fixed seeds. */
 #include <math.h>
@@ -46,6 +53,7 @@
 #include <string.h>
 
 #include "../../../server/kernel/integrators/pages.h"
+#include "../../../server/kernel/media/layered.h"
 #include "../../support/bsdf_test.h"
 #include "../../support/chi2.h"
 #include "../../support/test.h"
@@ -506,6 +514,83 @@ static void test_media(void) {
   scene_free(s);
 }
 
+/* The first object of scene s made by the plugin named. */
+static const object *find_object(const scene *s, const char *name) {
+  for (size_t i = 0; i < s->n_objects; i++)
+    if (s->objects[i]->plugin && strcmp(s->objects[i]->plugin->name, name) == 0) return s->objects[i];
+  return NULL;
+}
+
+static const char *LAYERS =
+    "{\"type\": \"piecewise\", \"sigma_t\": {\"type\": \"gridvolume\", \"shape\": [4, 1, 1, 3], "
+    "\"wavelengths\": [400, 550, 700], \"filter_type\": \"nearest\", \"data\": [0.9, 0.4, 0.1, 0.5, 0.3, "
+    "0.2, 0.05, 0.05, 0.05, 2.0, 0.1, 0.0]}, \"albedo\": {\"type\": \"spectrum\", \"wavelengths\": [400, "
+    "700], \"values\": [0.95, 0.5]}}";
+
+static void test_grids(void) {
+  scene *s = medium_scene("piecewise_volpath", LAYERS);
+  const char *why = "";
+  const object *blk = s ? scene_page_blocker(s, &why) : NULL;
+  CHECK(s && !blk, "a piecewise medium over a spectral grid carries pages (%s: %s)",
+        blk ? blk->plugin->name : "", why);
+  CHECK(s && !scene_bundle_blocker(s), "and bundles");
+  REQUIRE(s && prepare_bundle(s, 16) && s->pages == 6, "prepared for a bundle of 16");
+  const layered_medium *lm = (const layered_medium *)s->shapes[0]->interior;
+  REQUIRE(lm && lm->Lp, "the box's medium has its pages' layers");
+  const medium *m = &lm->base;
+  CHECK(m->has_spectral_extinction && !m->absorbing_only, "spectral extinction");
+  for (int p = 0; p < s->pages; p++) {
+    scene *one = medium_scene("piecewise_volpath", LAYERS);
+    render_ctx rc = {.variant = VARIANT_MONO, .bundle = 3};
+    for (int c = 0; c < RENDER_MAX_BUNDLE; c++)
+      rc.wl[c] = 400.0 + 20.0 * (3 * p + (c < 3 ? c : 2) < 15 ? 3 * p + (c < 3 ? c : 2) : 15);
+    rc.wavelength = rc.wl[0];
+    rsw_err err = {0};
+    REQUIRE(one && scene_prepare(one, &rc, &err) == RSW_OK, "page %d alone: %s", p, err.msg);
+    const media_layers *a = p ? &lm->Lp[p - 1] : &lm->L;
+    const media_layers *b = &((const layered_medium *)one->shapes[0]->interior)->L;
+    CHECK(a->n == 4 && b->n == 4 && memcmp(a->lay, b->lay, 5 * sizeof *a->lay) == 0 &&
+              memcmp(a->alb, b->alb, 12 * sizeof *a->alb) == 0,
+          "page %d: layers (sigma_t %g %g %g) as the medium's alone (%g %g %g)", p, a->lay[0].sig[0],
+          a->lay[0].sig[1], a->lay[0].sig[2], b->lay[0].sig[0], b->lay[0].sig[1], b->lay[0].sig[2]);
+    /* the grid's eval at page p: its value at the page's wavelengths */
+    const volume *g = (const volume *)find_object(s, "gridvolume"),
+                 *g1 = (const volume *)find_object(one, "gridvolume");
+    REQUIRE(g && g1, "the grids");
+    vec3 at = v3(0.1, 0.2, 0.3);
+    rsw_page = p;
+    color ga = g->ops->eval(g, at);
+    rsw_page = 0;
+    color gb = g1->ops->eval(g1, at);
+    CHECK(memcmp(&ga, &gb, sizeof ga) == 0, "page %d: the grid's value %g %g %g, alone %g %g %g", p, ga.c[0],
+          ga.c[1], ga.c[2], gb.c[0], gb.c[1], gb.c[2]);
+    scene_free(one);
+  }
+  CHECK(lm->L.lay[0].sig[0] > 3 * lm->Lp[4].lay[0].sig[2], "400 nm thicker than 700 nm: %g, %g",
+        lm->L.lay[0].sig[0], lm->Lp[4].lay[0].sig[2]);
+  CHECK(rsw_page == 0, "rsw_page left at 0");
+  scene_free(s);
+  const char *one_channel[2][2] = {
+      {"{\"type\": \"homogeneous\", \"phase\": {\"type\": \"blendphase\", \"weight\": {\"type\": "
+       "\"gridvolume\", \"shape\": [1, 1, 1, 2], \"wavelengths\": [400, 700], \"data\": [0.2, 0.8]}, "
+       "\"phase_0\": {\"type\": \"isotropic\"}, \"phase_1\": {\"type\": \"rayleigh\"}}}",
+       "blendphase"},
+      {"{\"type\": \"scene\", \"s\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"mqdiffuse\", "
+       "\"grid\": {\"type\": \"gridvolume\", \"shape\": [2, 2, 2, 2], \"wavelengths\": [400, 700], "
+       "\"data\": [0.1, 0.2, 0.1, 0.2, 0.1, 0.2, 0.1, 0.2, 0.1, 0.2, 0.1, 0.2, 0.1, 0.2, 0.1, 0.2]}}}}",
+       "mqdiffuse"}};
+  for (int i = 0; i < 2; i++) {
+    scene *t = i == 0 ? medium_scene("volpath", one_channel[i][0]) : tsup_load(one_channel[i][0], "mono");
+    blk = t ? scene_bundle_blocker(t) : NULL;
+    CHECK(blk && strcmp(blk->plugin->name, one_channel[i][1]) == 0, "%s refuses bundles: %s",
+          one_channel[i][1],
+          blk ? blk->plugin->name
+          : t ? "none"
+              : "load failed");
+    scene_free(t);
+  }
+}
+
 int main(void) {
   RSW_TEST_RUN(test_chi2);
   RSW_TEST_RUN(test_weights);
@@ -516,5 +601,6 @@ int main(void) {
   RSW_TEST_RUN(test_twosided);
   RSW_TEST_RUN(test_blockers);
   RSW_TEST_RUN(test_media);
+  RSW_TEST_RUN(test_grids);
   RSW_TEST_END("test_pages");
 }
