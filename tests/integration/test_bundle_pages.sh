@@ -70,6 +70,10 @@
 #     and 0.72) and bitwise across threads; with no
 #     albedo, each page's BRF through the layers is
 #     rho(w) exp(-tau(w) (1/mu_s + 1/mu_v)) (closed form, 1e-6);
+#   - the molecular atmosphere with a constant sigma_a spectrum (a
+#     constvolume): bundles of 3 and of 16 are statistically the
+#     unbundled films (before, a bundle read the first wavelength's
+#     sigma_a in every channel and page: max |z| far beyond 4);
 #   - a two-sided plastic plate seen from its back (twosided's back side:
 #     the nested plastic's delta lobe with wi mirrored): `auto` takes 16,
 #     a bundle of 16 is statistically the unbundled films at 256 spp (the
@@ -167,6 +171,8 @@ a = json.load(open(f"{ex}/atmosphere_molecular.json"))
 a["medium_atmosphere"]["sigma_a"] = {"type": "gridvolume", "shape": [1, 1, 1, 3], "wavelengths": [380, 480, 580],
                                      "data": [2e-6, 8e-6, 1e-6]}
 json.dump(a, open(f"{tmp}/atmo_sigma_a.json", "w"))
+a["medium_atmosphere"]["sigma_a"] = {"type": "spectrum", "wavelengths": [380, 480, 580], "values": [2e-6, 8e-6, 1e-6]}
+json.dump(a, open(f"{tmp}/atmo_sigma_a_spectrum.json", "w"))
 PY
 start_daemon "$tmp/d2" --threads 2
 p2=$started_port
@@ -432,6 +438,18 @@ for path, spp in ((sys.argv[4], 128), (sys.argv[5], 64)):
     agree(a, b, path)
     same_across_threads([int(p) for p in sys.argv[2:4]], path, wls, 4)
 ' "$tmp" "$p1" "$p2" "$tmp/layers.json" "$tmp/atmo_sigma_a.json"
+
+py "the molecular atmosphere with a constant sigma_a spectrum: a bundle of 3 and of 16 is statistically the unbundled films (each channel its own absorption; a bundle once gave every channel the first wavelength's)" '
+import sys
+sys.path.insert(0, sys.argv[1]); from job import *
+port = int(sys.argv[2]); sid = push(port, sys.argv[3])
+wls = [400.0 + 10 * i for i in range(16)]
+a, _ = films(port, sid, 1, 41, wls, spp=64)
+for k in (3, 16):
+    b, j = films(port, sid, k, 42, wls, spp=64)
+    assert j["bundle"] == k, j
+    agree(a, b, f"sigma_a spectrum, bundle {k}")
+' "$tmp" "$p2" "$tmp/atmo_sigma_a_spectrum.json"
 
 py "an absorbing piecewise medium over a spectral grid in a bundle of 16: each page's BRF is rho(w) exp(-tau(w) (1/mu_s + 1/mu_v)), tau(w) the layers' mean sigma_t(w) (closed form)" '
 import sys, math
