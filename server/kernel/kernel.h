@@ -684,8 +684,8 @@ struct integrator {
   int rr_depth;
   bool hide_emitters;
   /* Carries a bundle of more than three wavelengths, page by page
-   * (render_ctx.bundle > 3; path, volpath, piecewise_volpath): Li_batch then writes pages 1.. of each
-   * path's radiance after page 0's, as quv (scene_extra_stride). */
+   * (render_ctx.bundle > 3; path, direct, volpath, piecewise_volpath): Li_batch (or Li) then writes
+   * pages 1.. of each path's radiance after page 0's, as quv (scene_extra_stride). */
   bool pages;
   /* Samples free flights by delta tracking in every medium that is not
    * homogeneous (volpath): those cannot carry pages (a page's tentative

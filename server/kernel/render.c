@@ -178,7 +178,10 @@ static bool job_should_stop(job *jb) {
  * bounce fills Embree packets and the shading stages stay hot in the
  * instruction cache, few enough that the lanes' state stays in L2. */
 #ifndef WAVE
-#define WAVE 256
+#define WAVE     256
+/* The extra values of a path (Stokes Q, U, V or a bundle's pages 1..):
+ * Li's slots per path in wave_buf.quv (Li_batch packs nq per path). */
+#define LI_SLOTS (SCENE_QUV_MAX > SCENE_EXTRA_MAX ? SCENE_QUV_MAX : SCENE_EXTRA_MAX)
 #endif
 
 /* One sample of a wave: where it lands and its camera ray. */
@@ -191,7 +194,7 @@ typedef struct wave_buf {
   sampler_state st[WAVE];
   ray3 ray[WAVE];
   color L[WAVE];
-  double quv[(SCENE_QUV_MAX > SCENE_EXTRA_MAX ? SCENE_QUV_MAX : SCENE_EXTRA_MAX) * WAVE];
+  double quv[LI_SLOTS * WAVE];
   int live[WAVE];
   vec2 film_u[WAVE], aperture_u[WAVE];
   double w[WAVE];
@@ -277,9 +280,9 @@ static bool wave_flush(job *jb, tile_buf *tb, wave_buf *wb, int n, render_stats 
   if (it->ops->Li_batch) {
     if (m && !it->ops->Li_batch(it, jb->sc, wb->st, wb->ray, m, rs, wb->L, quv)) return false;
   } else {
-    for (int k = 0; k < m; k++) {
-      double *q = &wb->quv[SCENE_QUV_MAX * k];
-      for (int j = 0; j < SCENE_QUV_MAX; j++) q[j] = 0;
+    for (int k = 0; k < m; k++) { /* Li's slots: LI_SLOTS apart */
+      double *q = &wb->quv[LI_SLOTS * k];
+      for (int j = 0; j < LI_SLOTS; j++) q[j] = 0;
       wb->L[k] = it->ops->Li(it, jb->sc, &wb->st[k], wb->ray[k], rs, quv ? q : NULL);
     }
   }
@@ -293,8 +296,8 @@ static bool wave_flush(job *jb, tile_buf *tb, wave_buf *wb, int n, render_stats 
       /* All finite, without a branch each: x * 0 is +-0 for a finite x and
        * NaN for an infinite or NaN one. */
       double z = v.c[0] * 0.0 + v.c[1] * 0.0 + v.c[2] * 0.0;
-      if (jb->nq) { /* Li_batch packs nq values per path, Li's slots are SCENE_QUV_MAX apart */
-        const double *src = &wb->quv[(it->ops->Li_batch ? jb->nq : SCENE_QUV_MAX) * k];
+      if (jb->nq) { /* Li_batch packs nq values per path, Li's slots are LI_SLOTS apart */
+        const double *src = &wb->quv[(it->ops->Li_batch ? jb->nq : LI_SLOTS) * k];
         for (int c = 0; c < jb->nq; c++) q[c] = src[c] * s->w;
         if (jb->sc->polarized) film_stokes_rotate(se, wb->ray[k].d, q, jb->nq);
         for (int c = 0; c < jb->nq; c++) z += q[c] * 0.0;

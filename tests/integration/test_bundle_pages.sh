@@ -74,6 +74,11 @@
 #     constvolume): bundles of 3 and of 16 are statistically the
 #     unbundled films (before, a bundle read the first wavelength's
 #     sigma_a in every channel and page: max |z| far beyond 4);
+#   - `direct` (light and BSDF samples with MIS) on the plastic plate
+#     under its sun and sky: `auto` takes 16, a bundle of 16 is
+#     statistically the unbundled films at 256 spp and bitwise across
+#     threads; a Lambertian plate's BRF in a bundle of 16 under `direct`
+#     is its reflectance table (closed form, 1e-6);
 #   - a two-sided plastic plate seen from its back (twosided's back side:
 #     the nested plastic's delta lobe with wi mirrored): `auto` takes 16,
 #     a bundle of 16 is statistically the unbundled films at 256 spp (the
@@ -84,7 +89,7 @@
 #     over a plastic (a delta lobe inside `blendbsdf`) and where the
 #     molecular atmosphere is rendered by `volpath` (delta tracked; the
 #     medium named in bundle_why), and refusals name what stands in the
-#     way: 17 (the range), an integrator that carries three (`direct`), a
+#     way: 17 (the range), a
 #     blendbsdf over a plastic, the molecular atmosphere under volpath.
 name=test_bundle_pages
 source "$(dirname "$0")/../support/shtest.sh"
@@ -113,6 +118,7 @@ p["sky"] = {"type": "constant", "radiance": 0.2}
 p["surface"]["bsdf"] = {"type": "plastic", "diffuse_reflectance": {"type": "spectrum", "wavelengths": [400, 550, 700],
                                                                   "values": [0.02, 0.1, 0.7]}}
 json.dump(p, open(f"{tmp}/plastic.json", "w"))
+json.dump(dict(p, integrator={"type": "direct"}), open(f"{tmp}/direct_plastic.json", "w"))
 q = json.loads(json.dumps(p))
 q["surface"]["bsdf"] = {"type": "twosided", "bsdf": p["surface"]["bsdf"]}
 q["surface"]["to_world"] = [{"scale": [10, 10, 1]}, {"rotate": {"axis": [1, 0, 0], "angle": 180}}]
@@ -349,6 +355,25 @@ agree(a, b, "plastic")
 same_across_threads([int(p) for p in sys.argv[2:4]], sys.argv[4], WLS, 8)
 ' "$tmp" "$p2" "$p1" "$tmp/plastic.json"
 
+py "direct: a plastic under a sun and a sky (light and BSDF samples, MIS, a delta lobe): auto takes 16, a bundle of 16 is statistically the unbundled films, and bitwise across threads; a Lambertian plate's BRF in a bundle of 16 is its reflectance table (closed form)" '
+import sys
+sys.path.insert(0, sys.argv[1]); from job import *
+port = int(sys.argv[2]); sid = push(port, sys.argv[4])
+a, _ = films(port, sid, 1, 41, WLS, spp=256)
+b, j = films(port, sid, "auto", 42, WLS, spp=256)
+assert j["bundle"] == 16 and "bundle_why" not in j, j
+agree(a, b, "direct")
+same_across_threads([int(p) for p in sys.argv[2:4]], sys.argv[4], WLS, 8)
+wls = [400.0 + 19 * i for i in range(16)]
+f, j = films(port, push(port, sys.argv[5]), 16, 3, wls, spp=4, quantities=["brf"])
+def rho(w):  # hdistant_lambertian.json: (400, 0.05), (550, 0.1), (700, 0.45)
+    return 0.05 + (w - 400) / 150 * 0.05 if w <= 550 else 0.1 + (w - 550) / 150 * 0.35
+for ctx, x in f.items():
+    n = len(x["channels"]); w = x["meta"]["wavelength"]
+    brf = x["data"][x["channels"].index("brf.Y")::n]
+    assert all(abs(v - rho(w)) < 1e-6 for v in brf), (w, brf[:3], rho(w))
+' "$tmp" "$p2" "$p1" "$tmp/direct_plastic.json" "$tmp/direct.json"
+
 py "a two-sided plastic seen from its back (twosided: the back side's delta lobe, wi mirrored): auto takes 16, a bundle of 16 is statistically the unbundled films, and bitwise across threads" '
 import sys
 sys.path.insert(0, sys.argv[1]); from job import *
@@ -506,7 +531,6 @@ def refuse(sid, bundle, words):
         assert w in p["detail"], (w, p["detail"])
 refuse(atmo, 17, ["from 1", "to 16"])
 refuse(vol, 4, ["(molecular_atmosphere)", "delta tracked by `volpath`", "at most 3 wavelengths"])
-refuse(push(port, sys.argv[5]), 6, ["integrator", "(direct)", "at most three"])
 refuse(push(port, sys.argv[6]), 16, ["(blendbsdf)", "delta lobe"])
 ' "$tmp" "$p2" "$tmp/canopy.json" "$root/proto/examples/atmosphere_molecular.json" "$tmp/direct.json" "$tmp/blend.json" "$tmp/volpath.json"
 finish

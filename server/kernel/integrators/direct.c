@@ -24,6 +24,7 @@
 #include "../shapes/instance.h"
 #include "../shapes/shape.h"
 #include "integrator.h"
+#include "pages.h"
 #include "polarization.h"
 
 typedef struct direct_integrator {
@@ -145,9 +146,119 @@ static color direct_L(const direct_integrator *d, const scene *sc, sampler_state
   return L;
 }
 
+/* Each page's value of emitter e (seen along d at si, or sampled with u2
+ * at the shading point si: sample) into v[1..pages), page 0's given. */
+static void emitter_pages(const scene *sc, const emitter *e, const surface_interaction *si, vec3 d,
+                          bool sample, vec2 u2, color *v) {
+  for (int p = 1; p < sc->pages; p++) {
+    rsw_page = p;
+    direction_sample ds;
+    v[p] = sample ? e->ops->sample_direction(e, si, u2, &ds) : e->ops->eval(e, si, d);
+  }
+  rsw_page = 0;
+}
+
+/* A bundle of pages (render_ctx.bundle > 3, docs/experiments.md#spectral-bundles):
+ * the estimate at every page into Lp[0..pages), one path for all. The
+ * light samples' picks and directions are drawn once and each page takes
+ * its emitter's and BSDF's values there; the BSDF samples are drawn from
+ * one page and every page weighted by its own value over the pages' mean
+ * pdf (integrators/pages.h); both strategies' MIS weights use that mean
+ * pdf, the same at every page, so that they sum to 1 for any direction.
+ * The numbers are drawn in the order of direct_L. */
+static void direct_pages(const direct_integrator *d, const scene *sc, sampler_state *st, ray3 ray,
+                         render_stats *stats, color *Lp) {
+  const int NP = sc->pages;
+  const integrator *it = &d->base;
+  const sampler_ops *sops = st->s->ops;
+  color v[RENDER_MAX_PAGES], f[RENDER_MAX_PAGES], sum[RENDER_MAX_PAGES];
+  for (int p = 0; p < NP; p++) Lp[p] = col1(0);
+  surface_interaction si;
+  trace_result tr = trace(sc, &ray, &si, stats);
+  if (tr != TRACE_HIT) {
+    if (tr == TRACE_MISS && sc->environment && !it->hide_emitters) {
+      Lp[0] = sc->environment->ops->eval(sc->environment, NULL, ray.d);
+      emitter_pages(sc, sc->environment, NULL, ray.d, false, v2(0, 0), Lp);
+    }
+    return;
+  }
+  const emitter *em = si.shape->emitter;
+  if (em && !it->hide_emitters) {
+    Lp[0] = em->ops->eval(em, &si, ray.d);
+    emitter_pages(sc, em, &si, ray.d, false, v2(0, 0), Lp);
+  }
+  const bsdf *b = si.shape->bsdf;
+  if (d->emitter_samples > 0 && sc->n_emitters > 0 && (b->flags & BSDF_SMOOTH)) {
+    for (int p = 0; p < NP; p++) sum[p] = col1(0);
+    for (long long k = 0; k < d->emitter_samples; k++) {
+      double u = sops->next_1d(st);
+      vec2 u2 = sops->next_2d(st);
+      size_t ei = pick_emitter_index(sc, u);
+      const emitter *e = sc->emitters[ei];
+      double pe = pick_probability(sc, ei);
+      direction_sample ds;
+      v[0] = e->ops->sample_direction(e, &si, u2, &ds);
+      if (!(ds.pdf > 0) || !(pe > 0)) continue;
+      if (sc->periodic.on && (e->flags & EMITTER_SURFACE) &&
+          !(ds.p.x >= sc->periodic.min[0] && ds.p.x <= sc->periodic.max[0] && ds.p.y >= sc->periodic.min[1] &&
+            ds.p.y <= sc->periodic.max[1]))
+        continue; /* outside the periodic column: not in the scene (path.c) */
+      emitter_pages(sc, e, &si, ds.d, true, u2, v);
+      vec3 wo = frame_to_local(&si.sh, ds.d);
+      double pdf = bsdf_eval_pages(b, &si, NP, wo, !ds.delta, f);
+      bool lit = false;
+      for (int p = 0; p < NP; p++) lit |= !col_is_black(col_mul(f[p], v[p]));
+      if (!lit) continue;
+      ray3 sray = spawn_ray_to(sc, &si, e, &ds);
+      stats->shadow_rays++;
+      if (scene_occluded(sc, &sray) != TRACE_MISS) continue;
+      double w = ds.delta ? 1.0 : mis_weight(ds.pdf * pe * d->frac_e, pdf * d->frac_b);
+      for (int p = 0; p < NP; p++) sum[p] = col_add(sum[p], col_scale(col_mul(f[p], v[p]), w / pe));
+    }
+    for (int p = 0; p < NP; p++) Lp[p] = col_add(Lp[p], col_scale(sum[p], 1.0 / (double)d->emitter_samples));
+  }
+  if (d->bsdf_samples > 0) {
+    for (int p = 0; p < NP; p++) sum[p] = col1(0);
+    for (long long k = 0; k < d->bsdf_samples; k++) {
+      double u1 = sops->next_1d(st);
+      vec2 u2 = sops->next_2d(st);
+      bsdf_sample bs;
+      bsdf_sample_pages(b, &si, NP, u1, u2, &bs, f);
+      if (!(bs.pdf > 0)) continue;
+      ray3 r = spawn_ray(&si, frame_to_world(&si.sh, bs.wo));
+      surface_interaction hit;
+      trace_result th = trace(sc, &r, &hit, stats);
+      const emitter *e = NULL;
+      direction_sample ds = {.d = v3_norm(r.d), .dist = INFINITY};
+      if (th == TRACE_HIT && hit.shape->emitter) {
+        e = hit.shape->emitter;
+        v[0] = e->ops->eval(e, &hit, r.d);
+        ds.p = hit.p, ds.n = hit.ng, ds.dist = hit.t * v3_len(r.d);
+      } else if (th == TRACE_MISS && sc->environment) {
+        e = sc->environment;
+        v[0] = e->ops->eval(e, NULL, r.d);
+      }
+      if (!e) continue;
+      emitter_pages(sc, e, th == TRACE_HIT ? &hit : NULL, r.d, false, v2(0, 0), v);
+      double pe =
+          (bs.sampled_type & BSDF_DELTA) ? 0.0 : e->ops->pdf_direction(e, &si, &ds) * emitter_prob(sc, e);
+      double w = mis_weight(bs.pdf * d->frac_b, pe * d->frac_e);
+      for (int p = 0; p < NP; p++) sum[p] = col_add(sum[p], col_scale(col_mul(f[p], v[p]), w));
+    }
+    for (int p = 0; p < NP; p++) Lp[p] = col_add(Lp[p], col_scale(sum[p], 1.0 / (double)d->bsdf_samples));
+  }
+}
+
 static color direct_Li(const integrator *it, const scene *sc, sampler_state *st, ray3 ray,
                        render_stats *stats, double *quv) {
   const direct_integrator *d = (const direct_integrator *)it;
+  if (sc->pages > 1 && !sc->polarized) { /* pages 1.. into quv (scene_extra_stride) */
+    color Lp[RENDER_MAX_PAGES];
+    direct_pages(d, sc, st, ray, stats, Lp);
+    for (int p = 1; quv && p < sc->pages; p++)
+      for (int c = 0; c < 3; c++) quv[3 * (p - 1) + c] += Lp[p].c[c];
+    return Lp[0];
+  }
   if (!sc->polarized) return direct_L(d, sc, st, ray, stats, NULL);
   mueller pm[3];
   pol_lane pl = {.M = pm};
@@ -186,6 +297,7 @@ static rsw_status direct_create(loader *ld, node *n, object **out) {
   d->base.max_depth = 2;
   d->base.rr_depth = 1 << 30;
   d->base.hide_emitters = hide;
+  d->base.pages = true; /* (direct_pages) */
   d->emitter_samples = ne;
   d->bsdf_samples = nb;
   d->frac_e = (double)ne / (double)(ne + nb);

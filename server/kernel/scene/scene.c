@@ -132,8 +132,9 @@ const object *scene_bundle_blocker(const scene *s) {
 
 const object *scene_page_blocker(const scene *s, const char **why) {
   if (s->integrator && !s->integrator->pages) {
-    *why =
-        "carries at most three wavelengths per path (`path`, `volpath` and `piecewise_volpath` carry more)";
+    *why = "carries at most three wavelengths per path (`path`, `direct`, `volpath` and `piecewise_volpath` "
+           "carry "
+           "more)";
     return &s->integrator->base;
   }
   for (size_t i = 0; i < s->n_objects; i++) {
