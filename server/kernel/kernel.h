@@ -159,11 +159,12 @@ typedef struct plugin {
    * prepare() keeps a value per page and its ops answer for rsw_page).
    * NULL: no, for a plugin with prepare() (what it prepares holds one
    * page); plugins without prepare() read their spectra through textures
-   * and can. A medium that says yes has exact free flights and
-   * transmittances (medium_ops.sample_real, transmittance) answering at
-   * rsw_page (a layered_medium keeps its pages' layers in Lp,
-   * media/layered.h, which volpath reads directly). scene_page_blocker
-   * asks every object. */
+   * and can. A medium that says yes answers its ops at rsw_page, its
+   * majorant included (volpath samples an exact medium's flight at one
+   * page and weights every page by its own transmittance, and tracks the
+   * others against the largest page's majorant; a layered_medium keeps
+   * its pages' layers in Lp, media/layered.h, which volpath reads
+   * directly). scene_page_blocker asks every object. */
   bool (*pages)(const object *o);
 } plugin;
 
@@ -687,10 +688,6 @@ struct integrator {
    * (render_ctx.bundle > 3; path, direct, volpath, piecewise_volpath): Li_batch (or Li) then writes
    * pages 1.. of each path's radiance after page 0's, as quv (scene_extra_stride). */
   bool pages;
-  /* Samples free flights by delta tracking in every medium that is not
-   * homogeneous (volpath): those cannot carry pages (a page's tentative
-   * collisions would need every page's coefficients; scene_page_blocker). */
-  bool tracks_media;
 };
 
 /* ---- shapes -------------------------------------------------------------- */

@@ -368,6 +368,85 @@ static color segment_tr(const volpath_integrator *vp, const scene *sc, const med
   return tr;
 }
 
+/* Whether segment_tr is exact in m (else it tracks). */
+static bool exact_in(const volpath_integrator *vp, const medium *m) {
+  return (m->ops == &layered_medium_ops && vp->analytic) ||
+         (m->ops->transmittance && (analytic_in(vp, m) || m->is_homogeneous));
+}
+
+/* A bundle of pages: the majorant over every page's channels at mi (a
+ * tracked medium's free flights and ratio tracks serve all pages at once). */
+static double majorant_pages(const medium *m, const medium_interaction *mi, int pages) {
+  double mu = 0.0;
+  for (int p = 0; p < pages; p++) {
+    rsw_page = p;
+    mu = fmax(mu, col_max(m->ops->majorant(m, mi)));
+  }
+  rsw_page = 0;
+  return mu;
+}
+
+/* A bundle of pages: the coefficients of m at mi (t, p set) at every page
+ * against the shared majorant mu (sigma_n = mu - sigma_t per channel); mi
+ * keeps page 0's. Returns the mean of the 3 pages channels' sigma_t. */
+static double coefficients_pages(const medium *m, medium_interaction *mi, double mu, int pages, color *ss,
+                                 color *sn) {
+  double mean = 0.0;
+  medium_interaction q = *mi;
+  for (int p = pages - 1; p >= 0; p--) {
+    rsw_page = p;
+    q.majorant = col1(mu);
+    m->ops->coefficients(m, &q);
+    ss[p] = q.sigma_s;
+    for (int c = 0; c < 3; c++) sn[p].c[c] = fmax(mu - q.sigma_t.c[c], 0.0);
+    mean += col_mean(q.sigma_t);
+  }
+  rsw_page = 0;
+  *mi = q; /* (page 0's, the last) */
+  mi->sigma_n = sn[0];
+  return mean / pages;
+}
+
+/* A bundle of pages: the transmittance of a tracked medium m along r over
+ * [tstart, tend] at every page into tr[0..pages), by one ratio track for
+ * all (each page's sigma_n over the majorant of every page's channels, so
+ * that each page's estimate is unbiased), with segment_tr's roulette on
+ * the largest page. */
+static void segment_tr_pages(const scene *sc, const medium *m, const ray3 *r, double tstart, double tend,
+                             const box_walk *w, sampler_state *st, int pages, color *tr) {
+  for (int p = 0; p < pages; p++) tr[p] = col1(1.0);
+  ray3 seg = *r;
+  seg.tmin = tstart;
+  seg.tmax = tend;
+  double mint, maxt;
+  if (!media_clip(sc, m, &seg, w, &mint, &maxt)) return;
+  const sampler_ops *sops = st->s->ops;
+  medium_interaction mi = {.medium = m, .wi = v3_neg(r->d)};
+  mi.p = v3_fma(r->o, mint, r->d);
+  double mu = majorant_pages(m, &mi, pages);
+  if (!(mu > 0)) return;
+  color ss[RENDER_MAX_PAGES], sn[RENDER_MAX_PAGES];
+  double t = mint;
+  for (;;) {
+    t -= log1p(-sops->next_1d(st)) / mu;
+    if (!(t < maxt)) break;
+    mi.t = t;
+    mi.p = v3_fma(r->o, t, r->d);
+    coefficients_pages(m, &mi, mu, pages, ss, sn);
+    double q = 0.0;
+    for (int p = 0; p < pages; p++) {
+      tr[p] = col_mul(tr[p], col_scale(sn[p], 1.0 / mu));
+      q = fmax(q, col_max(tr[p]));
+    }
+    if (q <= 0) break;
+    if (q < 0.1) { /* (segment_tr's roulette, on the largest page) */
+      bool live = sops->next_1d(st) < q;
+      for (int p = 0; p < pages; p++) tr[p] = live ? col_scale(tr[p], 1.0 / q) : col1(0.0);
+      if (!live) break;
+    }
+  }
+}
+
 /* The shadow ray from a surface vertex si (or a medium point p when si is
  * NULL) towards emitter sample ds (unit direction ds->d). */
 static ray3 shadow_ray(const scene *sc, const surface_interaction *si, vec3 p, const emitter *e,
@@ -643,7 +722,12 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
       bool cross = sc->null_boxes.on && box_walk_next(sc, &bw, tend, &next);
       double t1 = cross ? bw.tc : tend;
       const box_walk *w = sc->null_boxes.on ? &bw : NULL;
-      if (l->sm && t1 > t0 && vp->analytic && l->sm->ops == &layered_medium_ops) {
+      if (pg && l->sm && t1 > t0 && !exact_in(vp, l->sm)) { /* every page tracked at once */
+        color tr[RENDER_MAX_PAGES];
+        segment_tr_pages(sc, l->sm, &mr, t0, t1, w, st, NP, tr);
+        l->str = col_mul(l->str, tr[0]);
+        for (int p = 1; p < NP; p++) pg->str[p - 1] = col_mul(pg->str[p - 1], tr[p]);
+      } else if (l->sm && t1 > t0 && vp->analytic && l->sm->ops == &layered_medium_ops) {
         /* segment_tr's exact case, inline */
         ray3 seg = {mr.o, mr.d, t0, t1};
         double mint, maxt;
@@ -654,7 +738,7 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
       } else if (l->sm && t1 > t0) {
         l->str = col_mul(l->str, segment_tr(vp, sc, l->sm, &mr, t0, t1, w, st));
       }
-      if (pg && l->sm && t1 > t0) { /* pages 1.. (media that carry pages are analytic) */
+      if (pg && l->sm && t1 > t0 && exact_in(vp, l->sm)) { /* pages 1.. (exact) */
         ray3 seg = {mr.o, mr.d, t0, t1};
         double mint, maxt;
         color tr[RENDER_MAX_PAGES];
@@ -750,6 +834,44 @@ static bool flight_pages(const scene *sc, const medium *m, const ray3 *seg, doub
   return scattered;
 }
 
+/* A free flight over [mint, maxt] of seg in tracked medium m for a bundle
+ * of pages: delta tracking against the majorant of every page's channels,
+ * a tentative collision real with the probability of the mean of the 3 P
+ * channels' sigma_t over it (the channel-mean tracking volpath uses for
+ * rgb, over every page), and each page weighted by its own sigma_s (real)
+ * or sigma_n (null) over that probability's density, so that each page's
+ * estimate is unbiased (Kutz et al. 2017, "Spectral and decomposition
+ * tracking for rendering heterogeneous volumes"). 1: a collision, at mi;
+ * 0: the flight passed maxt; -1: every page's throughput is 0. */
+static int track_pages(const scene *sc, const medium *m, const ray3 *seg, double mint, double maxt,
+                       sampler_state *st, vlane *l, vpage *pg, medium_interaction *mi) {
+  const sampler_ops *sops = st->s->ops;
+  const int NP = sc->pages;
+  *mi = (medium_interaction){.medium = m, .wi = v3_neg(seg->d), .mint = mint};
+  mi->p = v3_fma(seg->o, mint, seg->d);
+  double mu = majorant_pages(m, mi, NP);
+  color ss[RENDER_MAX_PAGES], sn[RENDER_MAX_PAGES];
+  double t = mint;
+  while (mu > 0) {
+    t -= log1p(-sops->next_1d(st)) / mu;
+    if (!(t < maxt)) break;
+    mi->t = t;
+    mi->p = v3_fma(seg->o, t, seg->d);
+    double p_real = coefficients_pages(m, mi, mu, NP, ss, sn) / mu;
+    mi->majorant = col1(mu);
+    bool real = sops->next_1d(st) < p_real;
+    double k = 1.0 / (mu * (real ? p_real : 1.0 - p_real));
+    for (int p = 0; p < NP; p++) {
+      color *T = p ? &pg->T[p - 1] : &l->T;
+      *T = col_scale(col_mul(*T, real ? ss[p] : sn[p]), k);
+    }
+    if (real) return 1;
+    if (!(pages_max(l->T, pg, pg->T, NP) > 0)) return -1;
+  }
+  mi->t = INFINITY;
+  return 0;
+}
+
 /* ---- a lane's event, in pieces --------------------------------------------
  *
  * Lane l's event after its query: the medium along the segment
@@ -795,15 +917,24 @@ PIECE enum lane_outcome lane_flight(const volpath_integrator *vp, const scene *s
     double mint, maxt;
     const box_walk *w = sc->null_boxes.on ? &bw : NULL;
     if (m && seg.tmax > seg.tmin && media_clip(sc, m, &seg, w, &mint, &maxt)) {
-      if (m->absorbing_only) {
+      if (m->absorbing_only && pg && !exact_in(vp, m)) { /* every page tracked at once */
+        color tr[RENDER_MAX_PAGES];
+        segment_tr_pages(sc, m, &seg, seg.tmin, seg.tmax, w, st, NP, tr);
+        l->T = col_mul(l->T, tr[0]);
+        for (int p = 1; p < NP; p++) pg->T[p - 1] = col_mul(pg->T[p - 1], tr[p]);
+      } else if (m->absorbing_only) {
         l->T = col_mul(l->T, segment_tr(vp, sc, m, &seg, seg.tmin, seg.tmax, w, st));
-        if (pg) { /* pages 1.. (media that carry pages are analytic) */
+        if (pg) { /* pages 1.. (exact) */
           color tr[RENDER_MAX_PAGES];
           tr_pages(m, &seg, mint, maxt, 1, NP, tr);
           for (int p = 1; p < NP; p++) pg->T[p - 1] = col_mul(pg->T[p - 1], tr[p]);
         }
-      } else if (pg) {
+      } else if (pg && analytic_in(vp, m)) {
         scattered = flight_pages(sc, m, &seg, mint, maxt, st, l, pg, mi);
+      } else if (pg) {
+        int ev = track_pages(sc, m, &seg, mint, maxt, st, l, pg, mi);
+        if (ev < 0) return EV_END;
+        scattered = ev > 0;
       } else if (analytic_in(vp, m)) {
         int c = pick_channel(m, st);
         color tr, pdf;
@@ -1582,10 +1713,10 @@ static rsw_status create_common(loader *ld, node *n, object **out, bool analytic
   }
   vp->base.max_depth = (int)md;
   vp->base.rr_depth = (int)rr;
-  /* Pages ride on exact free flights (a page's needs no draws of its own):
-   * volpath's through homogeneous media only (scene_page_blocker). */
+  /* Pages: exact free flights weight every page by its own transmittance
+   * (flight_pages), tracked ones track every page at once (track_pages,
+   * segment_tr_pages). */
   vp->base.pages = true;
-  vp->base.tracks_media = !analytic;
   *out = &vp->base.base;
   return RSW_OK;
 }

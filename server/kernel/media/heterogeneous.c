@@ -9,17 +9,23 @@
  * (integrators/volpath.c). A grid whose sigma_t and albedo are uniform is
  * a homogeneous box: it is flagged is_homogeneous and its transmittance
  * is exact (exp(-sigma_t l) over the length l inside the box).
+ * A bundle of pages (render_ctx.bundle > 3): the volumes answer at the
+ * page rsw_page names and their max covers every page, so the majorant
+ * serves them all (volpath's track_pages). Uniform means uniform at every
+ * page and channel.
  * Source: mitsuba3 src/media/heterogeneous.cpp. */
 #include <math.h>
 #include <stdlib.h>
 
 #include "../scene/plugin_def.h"
+#include "../volumes/volume.h"
 #include "media.h"
 
 typedef struct heterogeneous_medium {
   medium base;
   volume *sigma_t, *albedo;
-  color maj; /* scale * max sigma_t */
+  color maj; /* scale * max sigma_t (over every page) */
+  int pages; /* of the bundle the last prepare() was for (1: none) */
 } heterogeneous_medium;
 
 static bool het_intersect_aabb(const medium *m, const ray3 *r, double *mint, double *maxt) {
@@ -61,13 +67,16 @@ static const medium_ops het_ops = {.intersect_aabb = het_intersect_aabb,
                                    .coefficients = het_coefficients,
                                    .transmittance = het_transmittance};
 
-/* Smallest and largest value of a volume's grid. */
-static void grid_range(const volume *v, double *lo, double *hi) {
+/* Smallest and largest value of a volume's grid over pages 0..pages-1. */
+static void grid_range(const volume *v, int pages, double *lo, double *hi) {
   size_t n = (size_t)v->res[0] * v->res[1] * v->res[2] * v->channels;
   double a = INFINITY, b = -INFINITY;
-  for (size_t i = 0; i < n; i++) {
-    a = fmin(a, v->data[i]);
-    b = fmax(b, v->data[i]);
+  for (int p = 0; p < pages; p++) {
+    const double *d = volume_page_data(v, p);
+    for (size_t i = 0; i < n; i++) {
+      a = fmin(a, d[i]);
+      b = fmax(b, d[i]);
+    }
   }
   *lo = a;
   *hi = b;
@@ -75,8 +84,8 @@ static void grid_range(const volume *v, double *lo, double *hi) {
 
 static void het_refresh(heterogeneous_medium *h) {
   double slo, shi, alo, ahi;
-  grid_range(h->sigma_t, &slo, &shi);
-  grid_range(h->albedo, &alo, &ahi);
+  grid_range(h->sigma_t, h->pages, &slo, &shi);
+  grid_range(h->albedo, h->pages, &alo, &ahi);
   h->maj = col1(h->base.scale * h->sigma_t->max);
   h->base.is_homogeneous = slo == shi && alo == ahi;
   h->base.has_spectral_extinction = h->sigma_t->channels == 3;
@@ -84,8 +93,10 @@ static void het_refresh(heterogeneous_medium *h) {
 }
 
 static rsw_status het_prepare(object *o, const render_ctx *rc, rsw_err *err) {
-  (void)rc, (void)err;
-  het_refresh((heterogeneous_medium *)o);
+  (void)err;
+  heterogeneous_medium *h = (heterogeneous_medium *)o;
+  h->pages = rc_pages(rc);
+  het_refresh(h);
   return RSW_OK;
 }
 
@@ -97,6 +108,7 @@ static rsw_status heterogeneous_create(loader *ld, node *n, object **out) {
   heterogeneous_medium *h = calloc(1, sizeof *h);
   if (!h) return ld_fail(ld, n, NULL, RSW_ERR_NOMEM, "heterogeneous: out of memory");
   h->base.ops = &het_ops;
+  h->pages = 1;
   rsw_status st = medium_read_common(ld, n, &h->base);
   if (!st) st = ld_volume(ld, n, "sigma_t", 1.0, 0.0, INFINITY, &h->sigma_t);
   if (!st) st = ld_volume(ld, n, "albedo", 0.75, 0.0, 1.0, &h->albedo);
@@ -116,4 +128,4 @@ static void het_traverse(object *o, param_visitor *v) {
 }
 
 DEFINE_PLUGIN(heterogeneous, CLS_MEDIUM, .prepare = het_prepare, .ops = &het_ops, .traverse = het_traverse,
-              .parameters_changed = het_parameters_changed);
+              .parameters_changed = het_parameters_changed, .pages = plugin_pages_any);

@@ -145,20 +145,6 @@ const object *scene_page_blocker(const scene *s, const char **why) {
       *why = "prepares its values at one set of three wavelengths";
       return o;
     }
-    /* A medium's pages ride on exact free flights: one page's flight
-     * weights every page by its own transmittance (volpath's
-     * flight_pages). */
-    if (pl->cls == CLS_MEDIUM) {
-      const medium *m = (const medium *)o;
-      if (!m->ops->sample_real || !m->ops->transmittance) {
-        *why = "has no exact free flights to carry more than three wavelengths";
-        return o;
-      }
-      if (s->integrator && s->integrator->tracks_media && !m->is_homogeneous) {
-        *why = "is delta tracked by `volpath` (`piecewise_volpath` samples it exactly, and carries more)";
-        return o;
-      }
-    }
     /* A delta lobe carries pages where its BSDF says its value at each
      * page and the probability of drawing it (bsdf_ops.delta_value:
      * `plastic`, `dielectric`, `conductor`, `twosided` over them;
