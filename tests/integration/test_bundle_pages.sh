@@ -79,6 +79,9 @@
 #     statistically the unbundled films at 256 spp and bitwise across
 #     threads; a Lambertian plate's BRF in a bundle of 16 under `direct`
 #     is its reflectance table (closed form, 1e-6);
+#   - a blend of a diffuse and a plastic (the plastic's delta lobe inside
+#     `blendbsdf`): `auto` takes 16, a bundle of 16 is statistically the
+#     unbundled films at 256 spp and bitwise across threads;
 #   - a two-sided plastic plate seen from its back (twosided's back side:
 #     the nested plastic's delta lobe with wi mirrored): `auto` takes 16,
 #     a bundle of 16 is statistically the unbundled films at 256 spp (the
@@ -94,10 +97,11 @@
 #     errors of the closed form above (measured |z| <= 0.4);
 #   - "auto" takes 16 on the canopy (also on a gold roughconductor soil:
 #     its index preset per page; on a plastic, a roughplastic and a
-#     two-sided plastic soil) and the atmosphere, also under volpath, 3 on
-#     a blendbsdf soil over a plastic (a delta lobe inside `blendbsdf`),
-#     and refusals name what stands in the way: 17 (the range), a
-#     blendbsdf over a plastic.
+#     two-sided plastic soil, a blend of a diffuse and a plastic) and the
+#     atmosphere, also under volpath, 3 on a soil masking a dielectric (a
+#     mask cannot tell its pass-through from the glass's transmission),
+#     and refusals name what stands in the way: 17 (the range), a mask
+#     over a dielectric.
 name=test_bundle_pages
 source "$(dirname "$0")/../support/shtest.sh"
 need_bins raysweepd raysweep
@@ -131,8 +135,11 @@ q["surface"]["bsdf"] = {"type": "twosided", "bsdf": p["surface"]["bsdf"]}
 q["surface"]["to_world"] = [{"scale": [10, 10, 1]}, {"rotate": {"axis": [1, 0, 0], "angle": 180}}]
 json.dump(q, open(f"{tmp}/twosided_back.json", "w"))
 q["surface"]["bsdf"] = {"type": "blendbsdf", "weight": 0.5, "bsdf_0": {"type": "diffuse"},
-                        "bsdf_1": {"type": "plastic"}}
+                        "bsdf_1": p["surface"]["bsdf"]}
+q["surface"]["to_world"] = p["surface"]["to_world"]
 json.dump(q, open(f"{tmp}/blend.json", "w"))
+q["surface"]["bsdf"] = {"type": "mask", "opacity": 0.5, "bsdf": {"type": "dielectric"}}
+json.dump(q, open(f"{tmp}/mask_glass.json", "w"))
 del p["sun"]
 p["sky"] = {"type": "constant", "radiance": {"type": "spectrum", "wavelengths": [400, 700], "values": [1.0, 0.3]}}
 p["surface"]["bsdf"] = {"type": "dielectric", "int_ior": 1.5,
@@ -394,6 +401,17 @@ for ctx, x in f.items():
     assert all(abs(v - rho(w)) < 1e-6 for v in brf), (w, brf[:3], rho(w))
 ' "$tmp" "$p2" "$p1" "$tmp/direct_plastic.json" "$tmp/direct.json"
 
+py "a blend of a diffuse and a plastic (a composition over a delta lobe): auto takes 16, a bundle of 16 is statistically the unbundled films, and bitwise across threads" '
+import sys
+sys.path.insert(0, sys.argv[1]); from job import *
+port = int(sys.argv[2]); sid = push(port, sys.argv[4])
+a, _ = films(port, sid, 1, 41, WLS, spp=256)
+b, j = films(port, sid, "auto", 42, WLS, spp=256)
+assert j["bundle"] == 16 and "bundle_why" not in j, j
+agree(a, b, "blendbsdf")
+same_across_threads([int(p) for p in sys.argv[2:4]], sys.argv[4], WLS, 8)
+' "$tmp" "$p2" "$p1" "$tmp/blend.json"
+
 py "a two-sided plastic seen from its back (twosided: the back side's delta lobe, wi mirrored): auto takes 16, a bundle of 16 is statistically the unbundled films, and bitwise across threads" '
 import sys
 sys.path.insert(0, sys.argv[1]); from job import *
@@ -566,7 +584,9 @@ for soil, k, words in (({"type": "roughconductor", "material": "Au", "alpha": 0.
                        ({"type": "roughplastic", "diffuse_reflectance": 0.3}, 16, []),
                        ({"type": "twosided", "bsdf": {"type": "plastic"}}, 16, []),
                        ({"type": "blendbsdf", "weight": 0.5, "bsdf_0": {"type": "diffuse"},
-                         "bsdf_1": {"type": "plastic"}}, 3, ["(blendbsdf)", "delta lobe"])):
+                         "bsdf_1": {"type": "plastic"}}, 16, []),
+                       ({"type": "mask", "opacity": 0.5, "bsdf": {"type": "dielectric"}}, 3,
+                        ["(mask)", "delta lobe"])):
     canopy["soil"]["bsdf"] = soil
     path = sys.argv[1] + "/canopy_" + soil["type"] + ".json"
     json.dump(canopy, open(path, "w"))
@@ -581,6 +601,6 @@ def refuse(sid, bundle, words):
     for w in words:
         assert w in p["detail"], (w, p["detail"])
 refuse(atmo, 17, ["from 1", "to 16"])
-refuse(push(port, sys.argv[6]), 16, ["(blendbsdf)", "delta lobe"])
-' "$tmp" "$p2" "$tmp/canopy.json" "$root/proto/examples/atmosphere_molecular.json" "$tmp/direct.json" "$tmp/blend.json" "$tmp/volpath.json"
+refuse(push(port, sys.argv[6]), 16, ["(mask)", "delta lobe"])
+' "$tmp" "$p2" "$tmp/canopy.json" "$root/proto/examples/atmosphere_molecular.json" "$tmp/direct.json" "$tmp/mask_glass.json" "$tmp/volpath.json"
 finish

@@ -100,8 +100,44 @@ static void blend_polarization(const bsdf *bb, const surface_interaction *si, ve
   for (int c = 0; c < 3; c++) P[c] = acc[c];
 }
 
-static const bsdf_ops blend_ops = {
-    .sample = blend_sample, .eval = blend_eval, .pdf = blend_pdf, .polarization = blend_polarization};
+/* A bundle of pages (bsdf_ops.delta_value): lobe `lobe` at the page
+ * rsw_page names, the components' values and probabilities mixed by
+ * their pick probabilities 1 - w and w (a delta reflection is the mirror
+ * direction in either; blend_pages refuses two delta transmissions). */
+static color blend_delta_value(const bsdf *bb, const surface_interaction *si, unsigned lobe, double *prob) {
+  const blend_bsdf *b = (const blend_bsdf *)bb;
+  double w = weight_at(b, si), pk[2] = {1.0 - w, w};
+  color v = col1(0.0);
+  *prob = 0.0;
+  for (int k = 0; k < 2; k++) {
+    const bsdf *c = b->c[k];
+    double p = 0.0;
+    if (!(pk[k] > 0) || !c->ops->delta_value) continue;
+    v = col_add(v, col_scale(c->ops->delta_value(c, si, lobe, &p), pk[k]));
+    *prob += pk[k] * p;
+  }
+  return v;
+}
+
+static const bsdf_ops blend_ops = {.sample = blend_sample,
+                                   .eval = blend_eval,
+                                   .pdf = blend_pdf,
+                                   .polarization = blend_polarization,
+                                   .delta_value = blend_delta_value};
+
+/* Whether a bundle of pages can weigh its delta lobes (scene_page_blocker):
+ * each component's delta lobes say their values, and at most one of them
+ * has a delta transmission (two could refract in different directions). */
+static bool blend_pages(const object *o) {
+  const blend_bsdf *b = (const blend_bsdf *)o;
+  int dt = 0;
+  for (int k = 0; k < 2; k++) {
+    const bsdf *c = b->c[k];
+    if ((c->flags & BSDF_DELTA) && !c->ops->delta_value) return false;
+    dt += (c->flags & BSDF_DELTA_TRANSMISSION) != 0;
+  }
+  return dt < 2;
+}
 
 static void blend_traverse(object *o, param_visitor *v) {
   blend_bsdf *b = (blend_bsdf *)o;
@@ -110,7 +146,7 @@ static void blend_traverse(object *o, param_visitor *v) {
   pv_object(v, "bsdf_1", &b->c[1]->base, NAN, NAN);
 }
 
-DEFINE_PLUGIN(blendbsdf, CLS_BSDF, .ops = &blend_ops, .traverse = blend_traverse);
+DEFINE_PLUGIN(blendbsdf, CLS_BSDF, .ops = &blend_ops, .traverse = blend_traverse, .pages = blend_pages);
 
 static rsw_status blendbsdf_create(loader *ld, node *n, object **out) {
   object **kids;

@@ -43,8 +43,19 @@ static void null_polarization(const bsdf *b, const surface_interaction *si, vec3
   *s_in = *s_out = fpol_s_axis(wo, si->wi);
 }
 
-static const bsdf_ops null_ops = {
-    .sample = null_sample, .eval = null_eval, .pdf = null_pdf, .polarization = null_polarization};
+/* A bundle of pages (bsdf_ops.delta_value): the crossing, weight 1 with
+ * probability 1 at every page (what a composition over a `null` asks). */
+static color null_delta_value(const bsdf *b, const surface_interaction *si, unsigned lobe, double *prob) {
+  (void)b, (void)si;
+  *prob = lobe == BSDF_DELTA_TRANSMISSION ? 1.0 : 0.0;
+  return col1(*prob);
+}
+
+static const bsdf_ops null_ops = {.sample = null_sample,
+                                  .eval = null_eval,
+                                  .pdf = null_pdf,
+                                  .polarization = null_polarization,
+                                  .delta_value = null_delta_value};
 
 static rsw_status null_create(loader *ld, node *n, object **out) {
   bsdf *b = BSDF_NEW(bsdf, null, BSDF_INDEX_MATCHED | BSDF_DELTA_TRANSMISSION | BSDF_TWO_SIDED);

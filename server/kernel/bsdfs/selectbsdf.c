@@ -61,8 +61,19 @@ static void sel_polarization(const bsdf *b, const surface_interaction *si, vec3 
     fpol_depolarize(P, wo, si->wi, s_in, s_out);
 }
 
-static const bsdf_ops sel_ops = {
-    .sample = sel_sample, .eval = sel_eval, .pdf = sel_pdf, .polarization = sel_polarization};
+/* A bundle of pages (bsdf_ops.delta_value): the picked BSDF's (sel_pages:
+ * every component's delta lobes say their values). */
+static color sel_delta_value(const bsdf *b, const surface_interaction *si, unsigned lobe, double *prob) {
+  const bsdf *k = pick((const selectbsdf *)b, si);
+  *prob = 0.0;
+  return k && k->ops->delta_value ? k->ops->delta_value(k, si, lobe, prob) : col1(0.0);
+}
+
+static const bsdf_ops sel_ops = {.sample = sel_sample,
+                                 .eval = sel_eval,
+                                 .pdf = sel_pdf,
+                                 .polarization = sel_polarization,
+                                 .delta_value = sel_delta_value};
 
 static void sel_destroy(object *o) {
   if (o) free(((selectbsdf *)o)->kids);
@@ -117,11 +128,21 @@ static void sel_traverse(object *o, param_visitor *v) {
   }
 }
 
+/* Whether a bundle of pages can weigh its delta lobes (scene_page_blocker):
+ * every component's delta lobes say their values. */
+static bool sel_pages(const object *o) {
+  const selectbsdf *s = (const selectbsdf *)o;
+  for (size_t i = 0; i < s->n; i++)
+    if ((s->kids[i]->flags & BSDF_DELTA) && !s->kids[i]->ops->delta_value) return false;
+  return true;
+}
+
 const plugin plugin_selectbsdf = {
     .name = "selectbsdf",
     .cls = CLS_BSDF,
     .create = sel_create,
     .destroy = sel_destroy,
+    .pages = sel_pages,
     .ops = &sel_ops,
     .traverse = sel_traverse,
 };

@@ -29,11 +29,11 @@ static inline double bsdf_eval_pages(const bsdf *b, const surface_interaction *s
  * from (then, rescaled, the lobe within it), u2 the direction; bs->pdf is
  * the pages' mean density of bs->wo and w[p] each page's value over it.
  * A delta lobe of a BSDF that says its value (bsdf_ops.delta_value:
- * `plastic`, `dielectric`, `conductor`, `twosided` over them): each page's value over the mean of the pages'
+ * `plastic`, `dielectric`, `conductor`, `null` and the compositions over them): each page's value over the mean of the pages'
  * probabilities of drawing it (bs->pdf), so that a lobe the pages choose
  * with different probabilities (a spectral diffuse_reflectance weights
- * plastic's choice) stays unbiased at every page. Other delta lobes (the
- * index-matched `null`: scene_page_blocker) take
+ * plastic's choice) stays unbiased at every page. Other delta lobes (a
+ * BSDF without delta_value whose only lobe is a mirror: scene_page_blocker) take
  * each page's own weight for the same lobe and direction. A failed
  * sample: bs->pdf 0 and every weight 0. */
 static inline void bsdf_sample_pages(const bsdf *b, const surface_interaction *si, int pages, double u1,

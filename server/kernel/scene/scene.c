@@ -153,10 +153,15 @@ const object *scene_page_blocker(const scene *s, const char **why) {
      * (bsdf_sample_pages samples every page again with the same numbers
      * and keeps its weight where it drew the same lobe and direction): the
      * index-matched `null` (weight 1 at every wavelength), and a BSDF
-     * whose only lobe is one delta reflection (a blend of mirrors: the
-     * mirror direction, drawn with probability 1 at every page). Other
-     * compositions that hold a delta lobe (blendbsdf, selectbsdf, mask)
-     * would need their parts' probabilities at every page. */
+     * whose only lobe is one delta reflection (the mirror direction,
+     * drawn with probability 1 at every page). Compositions (blendbsdf,
+     * selectbsdf, mask, twosided) say their parts' values and
+     * probabilities; their `pages` hook refuses what they cannot tell
+     * apart (two delta transmissions, a part that does not say its). */
+    if (pl->cls == CLS_BSDF && pl->pages && !pl->pages(o)) { /* a composition (blendbsdf, mask, ...) */
+      *why = "has a delta lobe: its sampling differs between a bundle's pages";
+      return o;
+    }
     if (pl->cls == CLS_BSDF) {
       const bsdf *b = (const bsdf *)o;
       const unsigned lobes = BSDF_SMOOTH | BSDF_DELTA;

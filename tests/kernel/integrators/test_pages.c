@@ -30,10 +30,14 @@
  *    delta lobe's value at each page: the front side's is the nested
  *    BSDF's, the back side's the nested BSDF's with wi mirrored, bit for
  *    bit, and it is drawn with the pages' mean probability (as above);
+ *  - compositions over delta lobes say their values: a blendbsdf over a
+ *    plastic and a mask over a plastic (its pass-through too), drawn with
+ *    the pages' mean probability (as above);
  *  - what carries pages: plastic, roughplastic, dielectric, the ocean,
- *    twosided over a plastic and compositions without a delta lobe;
- *    blendbsdf and mask over a plastic or glass are refused, named,
- *    "delta lobe" in the reason;
+ *    twosided, blendbsdf, mask and selectbsdf over them; a blend of two
+ *    dielectrics and a mask over a dielectric (two delta transmissions
+ *    it cannot tell apart) are refused, named, "delta lobe" in the
+ *    reason;
  *  - `homogeneous` and `heterogeneous` media carry pages under volpath
  *    and piecewise_volpath (a heterogeneous one's majorant covers every
  *    page: volpath tracks them at once); at page
@@ -369,6 +373,22 @@ static void test_delta(void) {
   delta_case(GLASS, BSDF_DELTA_REFLECTION, 0);
 }
 
+/* Compositions over delta lobes: a blend of a diffuse and a plastic (the
+ * specular lobe's probability halved, still differing between the
+ * pages), a mask over a plastic (its pass-through, 1 - opacity at every
+ * page, and the plastic's lobe times the opacity): drawn with the pages'
+ * mean probability, weighted by each page's value (delta_case). */
+static void test_compositions(void) {
+  char json[512];
+  snprintf(json, sizeof json,
+           "{\"type\": \"blendbsdf\", \"weight\": 0.5, \"bsdf_0\": {\"type\": \"diffuse\"}, \"bsdf_1\": %s}",
+           PLASTIC);
+  delta_case(json, BSDF_DELTA_REFLECTION, 1);
+  snprintf(json, sizeof json, "{\"type\": \"mask\", \"opacity\": 0.6, \"bsdf\": %s}", PLASTIC);
+  delta_case(json, BSDF_DELTA_REFLECTION, 1);
+  delta_case(json, BSDF_DELTA_TRANSMISSION, 0);
+}
+
 /* twosided over a plastic and over a gold conductor: its delta_value is
  * the nested BSDF's at each page, the back side's with wi mirrored, bit
  * for bit; the plastic's drawn with the pages' mean probability
@@ -406,25 +426,30 @@ static void test_twosided(void) {
 }
 
 /* What carries pages (scene_page_blocker): plastic, roughplastic,
- * dielectric, the ocean that follows the render, twosided over a plastic
- * and compositions without a delta lobe do; other compositions holding a
- * delta lobe (blendbsdf, mask over a plastic or glass) are refused, naming
- * the composition. */
+ * dielectric, the ocean that follows the render, and twosided, blendbsdf,
+ * mask and selectbsdf over them do; a blend of two dielectrics and a mask
+ * over a dielectric (two delta transmissions) are refused, naming the
+ * composition. */
 static void test_blockers(void) {
-  const char *yes[7] = {PLASTIC,
-                        ROUGHPLASTIC,
-                        GLASS,
-                        OCEAN,
-                        "{\"type\": \"twosided\", \"bsdf\": {\"type\": \"roughplastic\"}}",
-                        "{\"type\": \"twosided\", \"bsdf\": {\"type\": \"plastic\"}}",
-                        "{\"type\": \"blendbsdf\", \"weight\": 0.3, \"bsdf_0\": {\"type\": \"diffuse\"}, "
-                        "\"bsdf_1\": {\"type\": \"roughplastic\"}}"};
+  const char *yes[10] = {PLASTIC,
+                         ROUGHPLASTIC,
+                         GLASS,
+                         OCEAN,
+                         "{\"type\": \"twosided\", \"bsdf\": {\"type\": \"roughplastic\"}}",
+                         "{\"type\": \"twosided\", \"bsdf\": {\"type\": \"plastic\"}}",
+                         "{\"type\": \"blendbsdf\", \"weight\": 0.3, \"bsdf_0\": {\"type\": \"dielectric\"}, "
+                         "\"bsdf_1\": {\"type\": \"plastic\"}}",
+                         "{\"type\": \"mask\", \"opacity\": 0.5, \"bsdf\": {\"type\": \"plastic\"}}",
+                         "{\"type\": \"selectbsdf\", \"indices\": 1, \"bsdf_0\": {\"type\": \"diffuse\"}, "
+                         "\"bsdf_1\": {\"type\": \"dielectric\"}}",
+                         "{\"type\": \"blendbsdf\", \"weight\": 0.3, \"bsdf_0\": {\"type\": \"diffuse\"}, "
+                         "\"bsdf_1\": {\"type\": \"roughplastic\"}}"};
   const char *no[2][2] = {
-      {"{\"type\": \"blendbsdf\", \"weight\": 0.3, \"bsdf_0\": {\"type\": \"diffuse\"}, "
-       "\"bsdf_1\": {\"type\": \"plastic\"}}",
+      {"{\"type\": \"blendbsdf\", \"weight\": 0.3, \"bsdf_0\": {\"type\": \"dielectric\"}, "
+       "\"bsdf_1\": {\"type\": \"dielectric\", \"int_ior\": 1.33}}",
        "blendbsdf"},
       {"{\"type\": \"mask\", \"opacity\": 0.5, \"bsdf\": {\"type\": \"dielectric\"}}", "mask"}};
-  for (int i = 0; i < 7; i++) {
+  for (int i = 0; i < 10; i++) {
     scene *s = bsdf_scene(yes[i]);
     const char *why = "";
     const object *blk = s ? scene_page_blocker(s, &why) : NULL;
@@ -607,6 +632,7 @@ int main(void) {
   RSW_TEST_RUN(test_null);
   RSW_TEST_RUN(test_delta);
   RSW_TEST_RUN(test_twosided);
+  RSW_TEST_RUN(test_compositions);
   RSW_TEST_RUN(test_blockers);
   RSW_TEST_RUN(test_media);
   RSW_TEST_RUN(test_grids);
