@@ -11,9 +11,11 @@
 #   - the same through nginx; again (as .npy) while one replica's scene
 #     of the file has been changed there: that replica's shard runs on a
 #     scene in the file's state, and the films are the same;
-#   - the balancer stopped mid-sweep: the CLI exits 3 naming the state file;
-#     balancer restarted, the same command rerun: it completes, identical,
-#     and the replicas rendered each context once in all (/metrics);
+#   - the balancer stopped mid-sweep (a sweep of one wavelength per path,
+#     time to stop it): the CLI exits 3 naming the state file; balancer
+#     restarted, the same command rerun: it completes, identical to the
+#     one-daemon --bundle 1 sweep, and the replicas rendered each context
+#     once in all (/metrics);
 #   - one replica SIGKILLed mid-sweep: the sweep completes, identical, and
 #     the summary counts the resubmission;
 #   - the same with --bundle 3 (a second replica killed): the shards keep
@@ -144,7 +146,10 @@ wait "$nf_pid" 2>/dev/null
 
 # ---- the balancer stops mid-sweep; restart it and rerun the command ----
 before=($(counts))
-rsw "http://127.0.0.1:$lb" sweep "$scene" "${grid[@]}" --spp $spp --spread 3 -o "$tmp/b" -q 2>"$tmp/b.err" &
+# (--bundle 1: one render per context, 60 renders, time to stop the
+# balancer; bundles of 16 left a quiet machine too little, and the sweep
+# finished first)
+rsw "http://127.0.0.1:$lb" sweep "$scene" "${grid[@]}" --spp $spp --bundle 1 --spread 3 -o "$tmp/b" -q 2>"$tmp/b.err" &
 sweep_pid=$!
 for _ in $(seq 200); do
   now=($(counts))
@@ -160,9 +165,9 @@ contains "balancer gone: the error says how to resume" "$tmp/b.err" "rerun the s
 [ -s "$tmp/b/sweep.spread.jsonl" ] && ok || bad "balancer gone: no state file in the output directory"
 mid=($(counts))
 start_haproxy "$lb"
-expect 0 "balancer back: the same command resumes" rsw "http://127.0.0.1:$lb" sweep "$scene" "${grid[@]}" --spp $spp --spread 3 -o "$tmp/b"
+expect 0 "balancer back: the same command resumes" rsw "http://127.0.0.1:$lb" sweep "$scene" "${grid[@]}" --spp $spp --bundle 1 --spread 3 -o "$tmp/b"
 contains "balancer back: the summary counts earlier films" "$tmp/err" "from an earlier run"
-same_sweep "balancer stopped and back" "$tmp/b"
+same_sweep "balancer stopped and back" "$tmp/b" "$tmp/ref1"
 after=($(counts))
 py "balancer stopped and back: 60 renders in all, none twice (before $(echo ${before[*]}), when stopped $(echo ${mid[*]}), after $(echo ${after[*]}))" '
 import sys
