@@ -49,8 +49,10 @@
  *    albedo is a spectrum) carries pages; each page's layers (sigma_t,
  *    albedo, cumulative thickness) are bit for bit the medium's prepared
  *    at the page's wavelengths alone, and the grid's eval at page p is
- *    its value there; a blendphase whose weight is such a grid, and an
- *    mqdiffuse's grid, refuse any bundle (they read one channel).
+ *    its value there; a blendphase whose weight is such a grid or a
+ *    spectrum (once read at a bundle's first wavelength in every
+ *    channel), and an mqdiffuse's grid, refuse any bundle (they read one
+ *    channel).
  * Chi-square: 200,000 samples per run, significance 0.01 with the Sidak
  * correction over the runs of this file; fixed seeds. */
 #include <math.h>
@@ -603,7 +605,7 @@ static void test_grids(void) {
         lm->L.lay[0].sig[0], lm->Lp[4].lay[0].sig[2]);
   CHECK(rsw_page == 0, "rsw_page left at 0");
   scene_free(s);
-  const char *one_channel[2][2] = {
+  const char *one_channel[3][2] = {
       {"{\"type\": \"homogeneous\", \"phase\": {\"type\": \"blendphase\", \"weight\": {\"type\": "
        "\"gridvolume\", \"shape\": [1, 1, 1, 2], \"wavelengths\": [400, 700], \"data\": [0.2, 0.8]}, "
        "\"phase_0\": {\"type\": \"isotropic\"}, \"phase_1\": {\"type\": \"rayleigh\"}}}",
@@ -611,9 +613,13 @@ static void test_grids(void) {
       {"{\"type\": \"scene\", \"s\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"mqdiffuse\", "
        "\"grid\": {\"type\": \"gridvolume\", \"shape\": [2, 2, 2, 2], \"wavelengths\": [400, 700], "
        "\"data\": [0.1, 0.2, 0.1, 0.2, 0.1, 0.2, 0.1, 0.2, 0.1, 0.2, 0.1, 0.2, 0.1, 0.2, 0.1, 0.2]}}}}",
-       "mqdiffuse"}};
-  for (int i = 0; i < 2; i++) {
-    scene *t = i == 0 ? medium_scene("volpath", one_channel[i][0]) : tsup_load(one_channel[i][0], "mono");
+       "mqdiffuse"},
+      {"{\"type\": \"homogeneous\", \"phase\": {\"type\": \"blendphase\", \"weight\": {\"type\": "
+       "\"spectrum\", \"wavelengths\": [400, 700], \"values\": [0.2, 0.8]}, \"phase_0\": {\"type\": "
+       "\"isotropic\"}, \"phase_1\": {\"type\": \"rayleigh\"}}}",
+       "blendphase"}};
+  for (int i = 0; i < 3; i++) {
+    scene *t = i != 1 ? medium_scene("volpath", one_channel[i][0]) : tsup_load(one_channel[i][0], "mono");
     blk = t ? scene_bundle_blocker(t) : NULL;
     CHECK(blk && strcmp(blk->plugin->name, one_channel[i][1]) == 0, "%s refuses bundles: %s",
           one_channel[i][1],
