@@ -165,12 +165,31 @@ static void blend_polarization(const phase *ph, const medium_interaction *mi, ve
   for (int c = 0; c < 3; c++) P[c] = mu_normalized(acc[c]);
 }
 
+/* A spectral bundle whose weight depends on the wavelength (phase.chromatic,
+ * set by prepare): each channel's mixture at its own weight, the weight
+ * volume read per channel (and at the page rsw_page names); sample() and
+ * eval_pdf() stay channel 0's. */
+static color blend_eval_channels(const phase *ph, const medium_interaction *mi, vec3 wo) {
+  const blendphase *b = (const blendphase *)ph;
+  color w = volume_eval(b->weight, mi->p);
+  double p0, p1;
+  double v0 = b->ph[0]->ops->eval_pdf(b->ph[0], mi, wo, &p0);
+  double v1 = b->ph[1]->ops->eval_pdf(b->ph[1], mi, wo, &p1);
+  color r;
+  for (int c = 0; c < 3; c++) {
+    double wc = w.c[c] > 1.0 ? 1.0 : w.c[c] > 0.0 ? w.c[c] : 0.0;
+    r.c[c] = (1.0 - wc) * v0 + wc * v1;
+  }
+  return r;
+}
+
 static const phase_ops blendphase_ops = {.sample = blend_sample,
                                          .eval_pdf = blend_eval_pdf,
                                          .bind = blend_bind,
                                          .polarization = blend_polarization,
                                          .sample_batch = blend_sample_batch,
-                                         .eval_pdf_batch = blend_eval_pdf_batch};
+                                         .eval_pdf_batch = blend_eval_pdf_batch,
+                                         .eval_channels = blend_eval_channels};
 
 static rsw_status blendphase_create(loader *ld, node *n, object **out) {
   object **kids;
@@ -218,12 +237,30 @@ static void blendphase_traverse(object *o, param_visitor *v) {
   pv_object(v, "phase_1", &b->ph[1]->base, NAN, NAN);
 }
 
-/* The weight is a scalar field (volume_eval_1): one that depends on the
- * wavelength would give a spectral bundle its first wavelength's weight
- * in every channel. */
+/* Whether ph's value depends on the wavelength through a blendphase's
+ * weight (its own or a component's). */
+static bool blend_spectral(const phase *ph) {
+  if (ph->ops != &blendphase_ops) return false;
+  const blendphase *b = (const blendphase *)ph;
+  return volume_spectral(b->weight) || blend_spectral(b->ph[0]) || blend_spectral(b->ph[1]);
+}
+
+/* A spectral bundle with a weight that depends on the wavelength renders
+ * chromatic (blend_eval_channels), each page at its own weights. */
+static rsw_status blendphase_prepare(object *o, const render_ctx *rc, rsw_err *err) {
+  (void)err;
+  blendphase *b = (blendphase *)o;
+  b->base.chromatic = rc->bundle > 1 && volume_spectral(b->weight);
+  return RSW_OK;
+}
+
+/* A chromatic mixture reads its components at channel 0: a component whose
+ * own value depends on the wavelength (a nested blendphase with a spectral
+ * weight) would give every channel the first wavelength's. */
 static bool blendphase_bundles(const object *o) {
-  return !volume_spectral(((const blendphase *)o)->weight);
+  const blendphase *b = (const blendphase *)o;
+  return !volume_spectral(b->weight) || !(blend_spectral(b->ph[0]) || blend_spectral(b->ph[1]));
 }
 
 DEFINE_PLUGIN(blendphase, CLS_PHASE, .ops = &blendphase_ops, .traverse = blendphase_traverse,
-              .bundles = blendphase_bundles);
+              .prepare = blendphase_prepare, .bundles = blendphase_bundles, .pages = plugin_pages_any);
