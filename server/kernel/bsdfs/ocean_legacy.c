@@ -35,6 +35,8 @@
  * weight eval / pdf.
  * docs/kernel-conventions.md#ocean_legacy. */
 #include <math.h>
+#include <pthread.h>
+#include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -219,30 +221,65 @@ double ocean_transmittance(const ocean_bsdf *o, double theta, double phi, bool u
  * Gauss-Legendre points per dimension where Eradiate takes 64 (16 times
  * cheaper to build; tests/kernel/bsdfs/test_ocean_legacy.c bounds the
  * difference). */
+typedef struct table_build {
+  const ocean_bsdf *o;
+  int nw;
+  const double *n_re, *n_im;
+  float **t_down, **t_up;
+  const hemi_quad *q;
+  atomic_int next; /* the next azimuth row to claim */
+} table_build;
+
+/* Row j (one azimuth, every zenith) of every table: each cell whole. */
+static void build_row(const table_build *b, int j) {
+  const ocean_bsdf *o = b->o;
+  double phi = 2.0 * RSW_PI * j / (OCEAN_T_RES - 1);
+  for (int i = 0; i < OCEAN_T_RES; i++) { /* zenith */
+    double th = 0.5 * RSW_PI * i / (OCEAN_T_RES - 1), t[OCEAN_MAX_NW];
+    transmittance(th, phi, b->nw, b->n_re, b->n_im, o->wind_speed, o->sigma_u, o->sigma_c, false, b->q, t);
+    for (int w = 0; w < b->nw; w++) b->t_down[w][j * OCEAN_T_RES + i] = (float)t[w];
+    for (int w = 0; w < b->nw; w++) {
+      transmittance(th, phi, 1, &b->n_re[w], &b->n_im[w], o->wind_speed, o->sigma_u, o->sigma_c, true, b->q,
+                    t);
+      b->t_up[w][j * OCEAN_T_RES + i] = (float)t[0];
+    }
+  }
+}
+
+static void *build_rows(void *arg) {
+  table_build *b = arg;
+  for (int j; (j = atomic_fetch_add(&b->next, 1)) < OCEAN_T_RES;) build_row(b, j);
+  return NULL;
+}
+
+/* The tables on Eradiate's grid: zenith linspace(0, pi/2, 64) x azimuth
+ * linspace(0, 2 pi, 64), for nw indices at once (t_down[w], t_up[w]; the
+ * downwelling ones share the slopes), on `threads` threads (the caller's
+ * and threads - 1 started for the build): they claim azimuth rows in turn
+ * and each computes its cells whole, so the tables are the same bits
+ * whatever the threads. Departure: OCEAN_NQ = 32 Gauss-Legendre points
+ * per dimension where Eradiate takes 64 (16 times cheaper to build;
+ * tests/kernel/bsdfs/test_ocean_legacy.c bounds the difference). */
 static void build_tables(const ocean_bsdf *o, int nw, const double *n_re, const double *n_im, float **t_down,
-                         float **t_up) {
+                         float **t_up, int threads) {
   vec3 qwo[OCEAN_NQ * OCEAN_NQ];
   double qw[OCEAN_NQ * OCEAN_NQ];
   hemi_quad q = {.wo = qwo, .w = qw};
   hemi_quad_make(OCEAN_NQ, &q);
-  for (int j = 0; j < OCEAN_T_RES; j++) { /* azimuth */
-    double phi = 2.0 * RSW_PI * j / (OCEAN_T_RES - 1);
-    for (int i = 0; i < OCEAN_T_RES; i++) { /* zenith */
-      double th = 0.5 * RSW_PI * i / (OCEAN_T_RES - 1), t[OCEAN_MAX_NW];
-      transmittance(th, phi, nw, n_re, n_im, o->wind_speed, o->sigma_u, o->sigma_c, false, &q, t);
-      for (int w = 0; w < nw; w++) t_down[w][j * OCEAN_T_RES + i] = (float)t[w];
-      for (int w = 0; w < nw; w++) {
-        transmittance(th, phi, 1, &n_re[w], &n_im[w], o->wind_speed, o->sigma_u, o->sigma_c, true, &q, t);
-        t_up[w][j * OCEAN_T_RES + i] = (float)t[0];
-      }
-    }
-  }
+  table_build b = {.o = o, .nw = nw, .n_re = n_re, .n_im = n_im, .t_down = t_down, .t_up = t_up, .q = &q};
+  atomic_init(&b.next, 0);
+  pthread_t th[OCEAN_T_RES];
+  int started = 0;
+  if (threads > OCEAN_T_RES) threads = OCEAN_T_RES;
+  while (started < threads - 1 && pthread_create(&th[started], NULL, build_rows, &b) == 0) started++;
+  build_rows(&b); /* (rows no thread could be started for: the caller's) */
+  for (int k = 0; k < started; k++) pthread_join(th[k], NULL);
 }
 
 void ocean_tables(ocean_bsdf *o) {
   float *down = o->t_down, *up = o->t_up;
   if (ocean_tables_ready(o)) return;
-  build_tables(o, 1, &o->n_re, &o->n_im, &down, &up);
+  build_tables(o, 1, &o->n_re, &o->n_im, &down, &up, o->threads);
   o->t_key[0] = o->n_re, o->t_key[1] = o->n_im, o->t_key[2] = o->wind_speed;
 }
 
@@ -323,8 +360,8 @@ bool ocean_tables_ready(const ocean_bsdf *o) {
   return o->t_key[0] == o->n_re && o->t_key[1] == o->n_im && o->t_key[2] == o->wind_speed;
 }
 
-/* The tables are built before a render (single-threaded), not at load or
- * on each update: a build takes about a second. */
+/* The tables are built before a render on its threads (rc->threads), not
+ * at load or on each update: a build takes about a second of CPU. */
 /* An ocean that follows the render: the tables of each of the n waters
  * w[k] from the cache, those missing built there at once (each in an
  * entry this prepare() has not used, taken in turn). False: out of
@@ -351,18 +388,19 @@ static bool cached_tables(ocean_bsdf *o, int n, ocean_wl **w) {
     t->stamp = o->stamp;
     w[k]->t_down = t->t_down, w[k]->t_up = t->t_up;
   }
-  if (nb) build_tables(o, nb, nr, ni, down, up);
+  if (nb) build_tables(o, nb, nr, ni, down, up, o->threads);
   return true;
 }
 
-/* The tables are built before a render (single-threaded), not at load or
- * on each update: a build takes about a second. An ocean that follows the
+/* The tables are built before a render on its threads (rc->threads), not
+ * at load or on each update: a build takes about a second of CPU. An ocean that follows the
  * render prepares each channel of each page at its wavelength
  * (rc_page: docs/experiments.md#pages-more-than-three-wavelengths-per-path),
  * its tables from a cache keyed by the water's index and the wind, those
  * missing built together (the downwelling ones share their slopes). */
 static rsw_status ocean_prepare(object *ob, const render_ctx *rc, rsw_err *err) {
   ocean_bsdf *o = (ocean_bsdf *)ob;
+  o->threads = rc->threads;
   if (!o->follow) {
     ocean_tables(o);
     return RSW_OK;
