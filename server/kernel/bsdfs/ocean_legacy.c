@@ -40,13 +40,18 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../core/isa.h"
 #include "../scene/loader.h"
 #include "../scene/params.h"
 #include "../scene/plugin_def.h"
+#include "../simd/simd.h"
 #include "eo_surfaces.h"
 #include "fresnel_pol.h"
 #include "microfacet.h"
 #include "ocean_data.h"
+#if RSW_SIMD_X86
+#include <immintrin.h>
+#endif
 
 /* Rotation of v into the wind frame (x upwind). */
 static vec3 to_wind(double phi_w, vec3 v) {
@@ -133,13 +138,12 @@ enum {
 };
 
 /* The quadrature over the hemisphere: nq x nq Gauss-Legendre points,
- * zenith in [0, pi/2], azimuth in [0, 2 pi], their directions, weights
- * and the weights' sum (made once per table build; the sums in the order
- * transmittance() takes them); wo and w hold nq^2 each. */
+ * zenith in [0, pi/2], azimuth in [0, 2 pi], their directions (x, y, z),
+ * weights w and the weights' sum (made once per table build; the sums in
+ * the order transmittance() takes them); x, y, z and w hold nq^2 each. */
 typedef struct hemi_quad {
   int n;
-  vec3 *wo;
-  double *w, sum;
+  double *x, *y, *z, *w, sum;
 } hemi_quad;
 
 static void hemi_quad_make(int nq, hemi_quad *q) {
@@ -154,7 +158,7 @@ static void hemi_quad_make(int nq, hemi_quad *q) {
       double ph = (gx[b] + 1.0) * RSW_PI, wph = gw[b] * RSW_PI;
       int k = a * nq + b;
       q->w[k] = ct * st * wth * wph;
-      q->wo[k] = v3(st * cos(ph), st * sin(ph), ct);
+      q->x[k] = st * cos(ph), q->y[k] = st * sin(ph), q->z[k] = ct;
       q->sum += q->w[k];
     }
   }
@@ -167,6 +171,99 @@ enum {
   OCEAN_MAX_NW = 3 * RENDER_MAX_PAGES
 };
 
+/* One cell's incidence wi (clamped cosine ci), its wind rotation (c, s),
+ * the slopes and the nw indices nr + i ni. */
+typedef struct glint_cell {
+  vec3 wi;
+  double c, s, ci, ws, sig_u, sig_c;
+  int nw;
+  const double *nr, *ni;
+} glint_cell;
+
+/* The glint at quadrature points k0 .. k1 - 1, times their weights, added
+ * to td[w] point by point (the scalar path; ocean_lanes.h the same on
+ * lanes). */
+static void glint_sums(const hemi_quad *q, const glint_cell *gc, int k0, int k1, double *td) {
+  vec3 wi = gc->wi;
+  double c = gc->c, s = gc->s, sig_u = gc->sig_u, sig_c = gc->sig_c, ci = gc->ci;
+  for (int k = k0; k < k1; k++) {
+    double gweight = q->w[k];
+    vec3 wo = v3(q->x[k], q->y[k], q->z[k]);
+    double co = wo.z < 1e-6 ? 1e-6 : wo.z;
+    vec3 m = v3_norm(v3_add(wi, wo));
+    vec3 mp = v3_norm(v3(c * m.x + s * m.y, -s * m.x + c * m.y, m.z));
+    double xn = mp.x / (sig_u * mp.z), xe = mp.y / (sig_c * mp.z);
+    double D = gram_charlier(gc->ws, sig_u, sig_c, mp) / (2.0 * RSW_PI * sig_u * sig_c) *
+               exp(-0.5 * (xe * xe + xn * xn)) / (m.z * m.z * m.z * m.z);
+    double cchi = fmin(fmax(v3_dot(wo, m), -0.999999999), 0.999999999);
+    double schi = fmin(sqrt(1.0 - cchi * cchi), 0.999999999);
+    bool lit = wi.z > 0.0 && wo.z > 0.0;
+    for (int w = 0; w < gc->nw; w++) {
+      double g = D * ocean_fresnel_6s(gc->nr[w], gc->ni[w], cchi, schi) * RSW_PI / (4.0 * ci * co);
+      if (!lit) g = 1.0;
+      td[w] += g * gweight;
+    }
+  }
+}
+
+#if RSW_SIMD_X86
+#define OL_NAME(f)     OL_NAME2(f, OL_SUFFIX)
+#define OL_NAME2(f, s) OL_NAME3(f, s)
+#define OL_NAME3(f, s) f##_##s
+
+#define W          2
+#define OL_FN      static inline __attribute__((always_inline, target("sse2")))
+#define OL_ATTR    static __attribute__((target("sse2")))
+#define OL_SQRT(x) ((vd)_mm_sqrt_pd((x)))
+#define OL_SUFFIX  sse2
+#include "ocean_lanes.h"
+#undef W
+#undef OL_FN
+#undef OL_ATTR
+#undef OL_SQRT
+#undef OL_SUFFIX
+
+#define W          4
+#define OL_FN      static inline __attribute__((always_inline, target("avx2")))
+#define OL_ATTR    static __attribute__((target("avx2")))
+#define OL_SQRT(x) ((vd)_mm256_sqrt_pd((x)))
+#define OL_SUFFIX  avx2
+#include "ocean_lanes.h"
+#undef W
+#undef OL_FN
+#undef OL_ATTR
+#undef OL_SQRT
+#undef OL_SUFFIX
+
+#define W          8
+#define OL_FN      static inline __attribute__((always_inline, target("avx512f")))
+#define OL_ATTR    static __attribute__((target("avx512f")))
+#define OL_SQRT(x) ((vd)_mm512_sqrt_pd((x)))
+#define OL_SUFFIX  avx512
+#include "ocean_lanes.h"
+#undef W
+#undef OL_FN
+#undef OL_ATTR
+#undef OL_SQRT
+#undef OL_SUFFIX
+#endif
+
+/* Every point's glint into td on the ISA renders use (rsw_isa_get(); the
+ * generic one and the points past the last whole vector: the scalar
+ * path), the same bits on each. */
+static void glint_sums_isa(const hemi_quad *q, const glint_cell *gc, double *td) {
+  int k = 0;
+#if RSW_SIMD_X86
+  switch (rsw_isa_get()) {
+  case RSW_ISA_AVX512: glint_sums_avx512(q, gc, 0, k = q->n / 8 * 8, td); break;
+  case RSW_ISA_AVX2: glint_sums_avx2(q, gc, 0, k = q->n / 4 * 4, td); break;
+  case RSW_ISA_SSE2: glint_sums_sse2(q, gc, 0, k = q->n / 2 * 2, td); break;
+  default: break;
+  }
+#endif
+  glint_sums(q, gc, k, q->n, td);
+}
+
 static void transmittance(double theta, double phi, int nw, const double *n_re, const double *n_im, double ws,
                           double sig_u, double sig_c, bool up, const hemi_quad *q, double *t) {
   double nr[OCEAN_MAX_NW], ni[OCEAN_MAX_NW], td[OCEAN_MAX_NW];
@@ -177,25 +274,17 @@ static void transmittance(double theta, double phi, int nw, const double *n_re, 
     ni[0] = 0.0;
   }
   vec3 wi = v3(sin(theta), 0.0, cos(theta));
-  double c = cos(phi), s = sin(phi);
-  for (int k = 0; k < q->n; k++) {
-    double gweight = q->w[k];
-    vec3 wo = q->wo[k];
-    double ci = wi.z < 1e-6 ? 1e-6 : wi.z, co = wo.z < 1e-6 ? 1e-6 : wo.z;
-    vec3 m = v3_norm(v3_add(wi, wo));
-    vec3 mp = v3_norm(v3(c * m.x + s * m.y, -s * m.x + c * m.y, m.z));
-    double xn = mp.x / (sig_u * mp.z), xe = mp.y / (sig_c * mp.z);
-    double D = gram_charlier(ws, sig_u, sig_c, mp) / (2.0 * RSW_PI * sig_u * sig_c) *
-               exp(-0.5 * (xe * xe + xn * xn)) / (m.z * m.z * m.z * m.z);
-    double cchi = fmin(fmax(v3_dot(wo, m), -0.999999999), 0.999999999);
-    double schi = fmin(sqrt(1.0 - cchi * cchi), 0.999999999);
-    bool lit = wi.z > 0.0 && wo.z > 0.0;
-    for (int w = 0; w < nw; w++) {
-      double g = D * ocean_fresnel_6s(nr[w], ni[w], cchi, schi) * RSW_PI / (4.0 * ci * co);
-      if (!lit) g = 1.0;
-      td[w] += g * gweight;
-    }
-  }
+  glint_cell gc = {.wi = wi,
+                   .c = cos(phi),
+                   .s = sin(phi),
+                   .ci = wi.z < 1e-6 ? 1e-6 : wi.z,
+                   .ws = ws,
+                   .sig_u = sig_u,
+                   .sig_c = sig_c,
+                   .nw = nw,
+                   .nr = nr,
+                   .ni = ni};
+  glint_sums_isa(q, &gc, td);
   for (int w = 0; w < nw; w++) {
     if (td[w] >= q->sum) td[w] = q->sum;
     t[w] = 1.0 - td[w] / q->sum;
@@ -205,13 +294,13 @@ static void transmittance(double theta, double phi, int nw, const double *n_re, 
 double ocean_transmittance(const ocean_bsdf *o, double theta, double phi, bool up, int nq) {
   hemi_quad q = {0};
   if (nq < 1 || nq > 128) return NAN;
-  q.wo = malloc((size_t)nq * nq * sizeof *q.wo);
-  q.w = malloc((size_t)nq * nq * sizeof *q.w);
-  if (!q.wo || !q.w) return free(q.wo), free(q.w), NAN;
+  double *mem = malloc(4 * (size_t)nq * nq * sizeof *mem);
+  if (!mem) return NAN;
+  q.x = mem, q.y = mem + nq * nq, q.z = mem + 2 * nq * nq, q.w = mem + 3 * nq * nq;
   hemi_quad_make(nq, &q);
   double t;
   transmittance(theta, phi, 1, &o->n_re, &o->n_im, o->wind_speed, o->sigma_u, o->sigma_c, up, &q, &t);
-  free(q.wo), free(q.w);
+  free(mem);
   return t;
 }
 
@@ -262,9 +351,8 @@ static void *build_rows(void *arg) {
  * tests/kernel/bsdfs/test_ocean_legacy.c bounds the difference). */
 static void build_tables(const ocean_bsdf *o, int nw, const double *n_re, const double *n_im, float **t_down,
                          float **t_up, int threads) {
-  vec3 qwo[OCEAN_NQ * OCEAN_NQ];
-  double qw[OCEAN_NQ * OCEAN_NQ];
-  hemi_quad q = {.wo = qwo, .w = qw};
+  double qx[OCEAN_NQ * OCEAN_NQ], qy[OCEAN_NQ * OCEAN_NQ], qz[OCEAN_NQ * OCEAN_NQ], qw[OCEAN_NQ * OCEAN_NQ];
+  hemi_quad q = {.x = qx, .y = qy, .z = qz, .w = qw};
   hemi_quad_make(OCEAN_NQ, &q);
   table_build b = {.o = o, .nw = nw, .n_re = n_re, .n_im = n_im, .t_down = t_down, .t_up = t_up, .q = &q};
   atomic_init(&b.next, 0);
