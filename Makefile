@@ -313,8 +313,9 @@ test: deps deps-test $(BUILD)/bin/raysweepd $(TEST_BIN) $(BUILD)/tests/raysweepd
 
 # The kernel built as a CPU other than x86 builds it (SIMD=generic: the
 # portable vector kernels alone, in build-generic/), and the tests of its
-# batched kernels, ISA choice and wave determinism run on it.
-GENERIC_TESTS := test_simd test_isa test_wave test_eo_surfaces
+# batched kernels, ISA choice and wave determinism, and ocean_legacy's tables
+# (its quadrature's scalar path alone there), run on it.
+GENERIC_TESTS := test_simd test_isa test_wave test_eo_surfaces test_ocean_legacy
 test-generic: deps
 	$(MAKE) SIMD=generic $(addprefix build-generic/tests/,$(GENERIC_TESTS))
 	@BUILD=build-generic tests/run.sh $(addprefix build-generic/tests/,$(GENERIC_TESTS))

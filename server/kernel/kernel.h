@@ -84,6 +84,10 @@ typedef struct render_ctx {
    * wl[3 p + c] (those past the bundle repeat its last wavelength). */
   int bundle;
   double wl[RENDER_MAX_BUNDLE];
+  /* Threads the render uses (its `threads`; 0: one): prepare() may use as
+   * many for work of its own (ocean_legacy's tables), its results the
+   * same bits whatever their number. */
+  int threads;
 } render_ctx;
 
 /* The wavelength channel c renders at (mono; page 0). */

@@ -649,7 +649,8 @@ rsw_status render_sensor_bundle(scene *sc, const render_opts *opts, film_image *
   const film *fm = se->film;
   render_ctx rc = {.variant = sc->variant,
                    .polarized = sc->polarized,
-                   .wavelength = opts->wavelength > 0 ? opts->wavelength : 550.0};
+                   .wavelength = opts->wavelength > 0 ? opts->wavelength : 550.0,
+                   .threads = opts->threads > 0 ? opts->threads : (int)sysconf(_SC_NPROCESSORS_ONLN)};
   int nb = opts->bundle > 1 ? opts->bundle : 1;
   if (nb > 1) {
     rsw_status bst = render_check_bundle(sc, opts->sensor, nb, err);

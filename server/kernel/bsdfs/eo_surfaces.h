@@ -98,6 +98,7 @@ typedef struct ocean_bsdf {
   ocean_table *cache;               /* follow: OCEAN_CACHE entries, allocated by the first prepare() */
   unsigned stamp, next;
   unsigned long gen; /* a number no other state of any ocean had (ocean_update): keys eval's reuse */
+  int threads;       /* threads a table build may use (prepare(): the render's; 0 or 1: the caller's alone) */
   /* parameters */
   double wavelength;     /* nm */
   double wind_speed;     /* m/s at 10 m */
@@ -121,7 +122,7 @@ bsdf *ocean_legacy_new(double wavelength, double wind_speed, double wind_directi
  * transmittance tables are then stale). */
 void ocean_update(ocean_bsdf *o);
 /* Build the transmittance tables if stale (the plugin's prepare() does it
- * before each render; about a second). Until then underlight is 0 and the
+ * before each render; about 0.15 s of CPU a pair, on o->threads threads). Until then underlight is 0 and the
  * sampling takes t_d = 1: direct users of ocean_legacy_new call it. */
 void ocean_tables(ocean_bsdf *o);
 bool ocean_tables_ready(const ocean_bsdf *o);

@@ -35,16 +35,23 @@
  * weight eval / pdf.
  * docs/kernel-conventions.md#ocean_legacy. */
 #include <math.h>
+#include <pthread.h>
+#include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "../core/isa.h"
 #include "../scene/loader.h"
 #include "../scene/params.h"
 #include "../scene/plugin_def.h"
+#include "../simd/simd.h"
 #include "eo_surfaces.h"
 #include "fresnel_pol.h"
 #include "microfacet.h"
 #include "ocean_data.h"
+#if RSW_SIMD_X86
+#include <immintrin.h>
+#endif
 
 /* Rotation of v into the wind frame (x upwind). */
 static vec3 to_wind(double phi_w, vec3 v) {
@@ -131,13 +138,12 @@ enum {
 };
 
 /* The quadrature over the hemisphere: nq x nq Gauss-Legendre points,
- * zenith in [0, pi/2], azimuth in [0, 2 pi], their directions, weights
- * and the weights' sum (made once per table build; the sums in the order
- * transmittance() takes them); wo and w hold nq^2 each. */
+ * zenith in [0, pi/2], azimuth in [0, 2 pi], their directions (x, y, z),
+ * weights w and the weights' sum (made once per table build; the sums in
+ * the order transmittance() takes them); x, y, z and w hold nq^2 each. */
 typedef struct hemi_quad {
   int n;
-  vec3 *wo;
-  double *w, sum;
+  double *x, *y, *z, *w, sum;
 } hemi_quad;
 
 static void hemi_quad_make(int nq, hemi_quad *q) {
@@ -152,7 +158,7 @@ static void hemi_quad_make(int nq, hemi_quad *q) {
       double ph = (gx[b] + 1.0) * RSW_PI, wph = gw[b] * RSW_PI;
       int k = a * nq + b;
       q->w[k] = ct * st * wth * wph;
-      q->wo[k] = v3(st * cos(ph), st * sin(ph), ct);
+      q->x[k] = st * cos(ph), q->y[k] = st * sin(ph), q->z[k] = ct;
       q->sum += q->w[k];
     }
   }
@@ -165,6 +171,99 @@ enum {
   OCEAN_MAX_NW = 3 * RENDER_MAX_PAGES
 };
 
+/* One cell's incidence wi (clamped cosine ci), its wind rotation (c, s),
+ * the slopes and the nw indices nr + i ni. */
+typedef struct glint_cell {
+  vec3 wi;
+  double c, s, ci, ws, sig_u, sig_c;
+  int nw;
+  const double *nr, *ni;
+} glint_cell;
+
+/* The glint at quadrature points k0 .. k1 - 1, times their weights, added
+ * to td[w] point by point (the scalar path; ocean_lanes.h the same on
+ * lanes). */
+static void glint_sums(const hemi_quad *q, const glint_cell *gc, int k0, int k1, double *td) {
+  vec3 wi = gc->wi;
+  double c = gc->c, s = gc->s, sig_u = gc->sig_u, sig_c = gc->sig_c, ci = gc->ci;
+  for (int k = k0; k < k1; k++) {
+    double gweight = q->w[k];
+    vec3 wo = v3(q->x[k], q->y[k], q->z[k]);
+    double co = wo.z < 1e-6 ? 1e-6 : wo.z;
+    vec3 m = v3_norm(v3_add(wi, wo));
+    vec3 mp = v3_norm(v3(c * m.x + s * m.y, -s * m.x + c * m.y, m.z));
+    double xn = mp.x / (sig_u * mp.z), xe = mp.y / (sig_c * mp.z);
+    double D = gram_charlier(gc->ws, sig_u, sig_c, mp) / (2.0 * RSW_PI * sig_u * sig_c) *
+               exp(-0.5 * (xe * xe + xn * xn)) / (m.z * m.z * m.z * m.z);
+    double cchi = fmin(fmax(v3_dot(wo, m), -0.999999999), 0.999999999);
+    double schi = fmin(sqrt(1.0 - cchi * cchi), 0.999999999);
+    bool lit = wi.z > 0.0 && wo.z > 0.0;
+    for (int w = 0; w < gc->nw; w++) {
+      double g = D * ocean_fresnel_6s(gc->nr[w], gc->ni[w], cchi, schi) * RSW_PI / (4.0 * ci * co);
+      if (!lit) g = 1.0;
+      td[w] += g * gweight;
+    }
+  }
+}
+
+#if RSW_SIMD_X86
+#define OL_NAME(f)     OL_NAME2(f, OL_SUFFIX)
+#define OL_NAME2(f, s) OL_NAME3(f, s)
+#define OL_NAME3(f, s) f##_##s
+
+#define W          2
+#define OL_FN      static inline __attribute__((always_inline, target("sse2")))
+#define OL_ATTR    static __attribute__((target("sse2")))
+#define OL_SQRT(x) ((vd)_mm_sqrt_pd((x)))
+#define OL_SUFFIX  sse2
+#include "ocean_lanes.h"
+#undef W
+#undef OL_FN
+#undef OL_ATTR
+#undef OL_SQRT
+#undef OL_SUFFIX
+
+#define W          4
+#define OL_FN      static inline __attribute__((always_inline, target("avx2")))
+#define OL_ATTR    static __attribute__((target("avx2")))
+#define OL_SQRT(x) ((vd)_mm256_sqrt_pd((x)))
+#define OL_SUFFIX  avx2
+#include "ocean_lanes.h"
+#undef W
+#undef OL_FN
+#undef OL_ATTR
+#undef OL_SQRT
+#undef OL_SUFFIX
+
+#define W          8
+#define OL_FN      static inline __attribute__((always_inline, target("avx512f")))
+#define OL_ATTR    static __attribute__((target("avx512f")))
+#define OL_SQRT(x) ((vd)_mm512_sqrt_pd((x)))
+#define OL_SUFFIX  avx512
+#include "ocean_lanes.h"
+#undef W
+#undef OL_FN
+#undef OL_ATTR
+#undef OL_SQRT
+#undef OL_SUFFIX
+#endif
+
+/* Every point's glint into td on the ISA renders use (rsw_isa_get(); the
+ * generic one and the points past the last whole vector: the scalar
+ * path), the same bits on each. */
+static void glint_sums_isa(const hemi_quad *q, const glint_cell *gc, double *td) {
+  int k = 0;
+#if RSW_SIMD_X86
+  switch (rsw_isa_get()) {
+  case RSW_ISA_AVX512: glint_sums_avx512(q, gc, 0, k = q->n / 8 * 8, td); break;
+  case RSW_ISA_AVX2: glint_sums_avx2(q, gc, 0, k = q->n / 4 * 4, td); break;
+  case RSW_ISA_SSE2: glint_sums_sse2(q, gc, 0, k = q->n / 2 * 2, td); break;
+  default: break;
+  }
+#endif
+  glint_sums(q, gc, k, q->n, td);
+}
+
 static void transmittance(double theta, double phi, int nw, const double *n_re, const double *n_im, double ws,
                           double sig_u, double sig_c, bool up, const hemi_quad *q, double *t) {
   double nr[OCEAN_MAX_NW], ni[OCEAN_MAX_NW], td[OCEAN_MAX_NW];
@@ -175,25 +274,17 @@ static void transmittance(double theta, double phi, int nw, const double *n_re, 
     ni[0] = 0.0;
   }
   vec3 wi = v3(sin(theta), 0.0, cos(theta));
-  double c = cos(phi), s = sin(phi);
-  for (int k = 0; k < q->n; k++) {
-    double gweight = q->w[k];
-    vec3 wo = q->wo[k];
-    double ci = wi.z < 1e-6 ? 1e-6 : wi.z, co = wo.z < 1e-6 ? 1e-6 : wo.z;
-    vec3 m = v3_norm(v3_add(wi, wo));
-    vec3 mp = v3_norm(v3(c * m.x + s * m.y, -s * m.x + c * m.y, m.z));
-    double xn = mp.x / (sig_u * mp.z), xe = mp.y / (sig_c * mp.z);
-    double D = gram_charlier(ws, sig_u, sig_c, mp) / (2.0 * RSW_PI * sig_u * sig_c) *
-               exp(-0.5 * (xe * xe + xn * xn)) / (m.z * m.z * m.z * m.z);
-    double cchi = fmin(fmax(v3_dot(wo, m), -0.999999999), 0.999999999);
-    double schi = fmin(sqrt(1.0 - cchi * cchi), 0.999999999);
-    bool lit = wi.z > 0.0 && wo.z > 0.0;
-    for (int w = 0; w < nw; w++) {
-      double g = D * ocean_fresnel_6s(nr[w], ni[w], cchi, schi) * RSW_PI / (4.0 * ci * co);
-      if (!lit) g = 1.0;
-      td[w] += g * gweight;
-    }
-  }
+  glint_cell gc = {.wi = wi,
+                   .c = cos(phi),
+                   .s = sin(phi),
+                   .ci = wi.z < 1e-6 ? 1e-6 : wi.z,
+                   .ws = ws,
+                   .sig_u = sig_u,
+                   .sig_c = sig_c,
+                   .nw = nw,
+                   .nr = nr,
+                   .ni = ni};
+  glint_sums_isa(q, &gc, td);
   for (int w = 0; w < nw; w++) {
     if (td[w] >= q->sum) td[w] = q->sum;
     t[w] = 1.0 - td[w] / q->sum;
@@ -203,13 +294,13 @@ static void transmittance(double theta, double phi, int nw, const double *n_re, 
 double ocean_transmittance(const ocean_bsdf *o, double theta, double phi, bool up, int nq) {
   hemi_quad q = {0};
   if (nq < 1 || nq > 128) return NAN;
-  q.wo = malloc((size_t)nq * nq * sizeof *q.wo);
-  q.w = malloc((size_t)nq * nq * sizeof *q.w);
-  if (!q.wo || !q.w) return free(q.wo), free(q.w), NAN;
+  double *mem = malloc(4 * (size_t)nq * nq * sizeof *mem);
+  if (!mem) return NAN;
+  q.x = mem, q.y = mem + nq * nq, q.z = mem + 2 * nq * nq, q.w = mem + 3 * nq * nq;
   hemi_quad_make(nq, &q);
   double t;
   transmittance(theta, phi, 1, &o->n_re, &o->n_im, o->wind_speed, o->sigma_u, o->sigma_c, up, &q, &t);
-  free(q.wo), free(q.w);
+  free(mem);
   return t;
 }
 
@@ -219,30 +310,64 @@ double ocean_transmittance(const ocean_bsdf *o, double theta, double phi, bool u
  * Gauss-Legendre points per dimension where Eradiate takes 64 (16 times
  * cheaper to build; tests/kernel/bsdfs/test_ocean_legacy.c bounds the
  * difference). */
-static void build_tables(const ocean_bsdf *o, int nw, const double *n_re, const double *n_im, float **t_down,
-                         float **t_up) {
-  vec3 qwo[OCEAN_NQ * OCEAN_NQ];
-  double qw[OCEAN_NQ * OCEAN_NQ];
-  hemi_quad q = {.wo = qwo, .w = qw};
-  hemi_quad_make(OCEAN_NQ, &q);
-  for (int j = 0; j < OCEAN_T_RES; j++) { /* azimuth */
-    double phi = 2.0 * RSW_PI * j / (OCEAN_T_RES - 1);
-    for (int i = 0; i < OCEAN_T_RES; i++) { /* zenith */
-      double th = 0.5 * RSW_PI * i / (OCEAN_T_RES - 1), t[OCEAN_MAX_NW];
-      transmittance(th, phi, nw, n_re, n_im, o->wind_speed, o->sigma_u, o->sigma_c, false, &q, t);
-      for (int w = 0; w < nw; w++) t_down[w][j * OCEAN_T_RES + i] = (float)t[w];
-      for (int w = 0; w < nw; w++) {
-        transmittance(th, phi, 1, &n_re[w], &n_im[w], o->wind_speed, o->sigma_u, o->sigma_c, true, &q, t);
-        t_up[w][j * OCEAN_T_RES + i] = (float)t[0];
-      }
+typedef struct table_build {
+  const ocean_bsdf *o;
+  int nw;
+  const double *n_re, *n_im;
+  float **t_down, **t_up;
+  const hemi_quad *q;
+  atomic_int next; /* the next azimuth row to claim */
+} table_build;
+
+/* Row j (one azimuth, every zenith) of every table: each cell whole. */
+static void build_row(const table_build *b, int j) {
+  const ocean_bsdf *o = b->o;
+  double phi = 2.0 * RSW_PI * j / (OCEAN_T_RES - 1);
+  for (int i = 0; i < OCEAN_T_RES; i++) { /* zenith */
+    double th = 0.5 * RSW_PI * i / (OCEAN_T_RES - 1), t[OCEAN_MAX_NW];
+    transmittance(th, phi, b->nw, b->n_re, b->n_im, o->wind_speed, o->sigma_u, o->sigma_c, false, b->q, t);
+    for (int w = 0; w < b->nw; w++) b->t_down[w][j * OCEAN_T_RES + i] = (float)t[w];
+    for (int w = 0; w < b->nw; w++) {
+      transmittance(th, phi, 1, &b->n_re[w], &b->n_im[w], o->wind_speed, o->sigma_u, o->sigma_c, true, b->q,
+                    t);
+      b->t_up[w][j * OCEAN_T_RES + i] = (float)t[0];
     }
   }
+}
+
+static void *build_rows(void *arg) {
+  table_build *b = arg;
+  for (int j; (j = atomic_fetch_add(&b->next, 1)) < OCEAN_T_RES;) build_row(b, j);
+  return NULL;
+}
+
+/* The tables on Eradiate's grid: zenith linspace(0, pi/2, 64) x azimuth
+ * linspace(0, 2 pi, 64), for nw indices at once (t_down[w], t_up[w]; the
+ * downwelling ones share the slopes), on `threads` threads (the caller's
+ * and threads - 1 started for the build): they claim azimuth rows in turn
+ * and each computes its cells whole, so the tables are the same bits
+ * whatever the threads. Departure: OCEAN_NQ = 32 Gauss-Legendre points
+ * per dimension where Eradiate takes 64 (16 times cheaper to build;
+ * tests/kernel/bsdfs/test_ocean_legacy.c bounds the difference). */
+static void build_tables(const ocean_bsdf *o, int nw, const double *n_re, const double *n_im, float **t_down,
+                         float **t_up, int threads) {
+  double qx[OCEAN_NQ * OCEAN_NQ], qy[OCEAN_NQ * OCEAN_NQ], qz[OCEAN_NQ * OCEAN_NQ], qw[OCEAN_NQ * OCEAN_NQ];
+  hemi_quad q = {.x = qx, .y = qy, .z = qz, .w = qw};
+  hemi_quad_make(OCEAN_NQ, &q);
+  table_build b = {.o = o, .nw = nw, .n_re = n_re, .n_im = n_im, .t_down = t_down, .t_up = t_up, .q = &q};
+  atomic_init(&b.next, 0);
+  pthread_t th[OCEAN_T_RES];
+  int started = 0;
+  if (threads > OCEAN_T_RES) threads = OCEAN_T_RES;
+  while (started < threads - 1 && pthread_create(&th[started], NULL, build_rows, &b) == 0) started++;
+  build_rows(&b); /* (rows no thread could be started for: the caller's) */
+  for (int k = 0; k < started; k++) pthread_join(th[k], NULL);
 }
 
 void ocean_tables(ocean_bsdf *o) {
   float *down = o->t_down, *up = o->t_up;
   if (ocean_tables_ready(o)) return;
-  build_tables(o, 1, &o->n_re, &o->n_im, &down, &up);
+  build_tables(o, 1, &o->n_re, &o->n_im, &down, &up, o->threads);
   o->t_key[0] = o->n_re, o->t_key[1] = o->n_im, o->t_key[2] = o->wind_speed;
 }
 
@@ -323,8 +448,8 @@ bool ocean_tables_ready(const ocean_bsdf *o) {
   return o->t_key[0] == o->n_re && o->t_key[1] == o->n_im && o->t_key[2] == o->wind_speed;
 }
 
-/* The tables are built before a render (single-threaded), not at load or
- * on each update: a build takes about a second. */
+/* The tables are built before a render on its threads (rc->threads), not
+ * at load or on each update: a build takes about a second of CPU. */
 /* An ocean that follows the render: the tables of each of the n waters
  * w[k] from the cache, those missing built there at once (each in an
  * entry this prepare() has not used, taken in turn). False: out of
@@ -351,18 +476,19 @@ static bool cached_tables(ocean_bsdf *o, int n, ocean_wl **w) {
     t->stamp = o->stamp;
     w[k]->t_down = t->t_down, w[k]->t_up = t->t_up;
   }
-  if (nb) build_tables(o, nb, nr, ni, down, up);
+  if (nb) build_tables(o, nb, nr, ni, down, up, o->threads);
   return true;
 }
 
-/* The tables are built before a render (single-threaded), not at load or
- * on each update: a build takes about a second. An ocean that follows the
+/* The tables are built before a render on its threads (rc->threads), not
+ * at load or on each update: a build takes about a second of CPU. An ocean that follows the
  * render prepares each channel of each page at its wavelength
  * (rc_page: docs/experiments.md#pages-more-than-three-wavelengths-per-path),
  * its tables from a cache keyed by the water's index and the wind, those
  * missing built together (the downwelling ones share their slopes). */
 static rsw_status ocean_prepare(object *ob, const render_ctx *rc, rsw_err *err) {
   ocean_bsdf *o = (ocean_bsdf *)ob;
+  o->threads = rc->threads;
   if (!o->follow) {
     ocean_tables(o);
     return RSW_OK;

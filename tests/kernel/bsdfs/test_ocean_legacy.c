@@ -26,7 +26,9 @@
  *    string other than "render" are refused;
  *  - "wavelength": "render": the ocean at 450 and 650 nm is bit for bit
  *    the ocean given those wavelengths (value and pdf), has no wavelength
- *    parameter, is spectral, and refuses a render at 5000 nm.
+ *    parameter, is spectral, and refuses a render at 5000 nm;
+ *  - the tables (one index's, a bundle of 5's) are the same bits on 1 and
+ *    5 threads and at every ISA (the lanes against the scalar path).
  * Fixed seeds throughout. */
 #include <math.h>
 #include <stdio.h>
@@ -38,6 +40,7 @@
 #include "../../support/test.h"
 #include "../../support/tsup.h"
 #include "kernel/bsdfs/eo_surfaces.h"
+#include "kernel/core/isa.h"
 #include "kernel/core/rng.h"
 #include "kernel/scene/param_table.h"
 #include "kernel/scene/params.h"
@@ -382,6 +385,91 @@ static void test_follow(void) {
   scene_free(s);
 }
 
+/* One build of the tables on `isa` with `threads` into out: a fixed
+ * ocean's pair (2 tables), or (follow) the 6 pairs of the channels of a
+ * bundle of 5 wavelengths (its downwelling tables 5 indices at once; the
+ * last channel a copy). */
+enum {
+  TBL = OCEAN_T_RES * OCEAN_T_RES
+};
+static void build_tables_at(rsw_isa isa, int threads, bool follow, float *out) {
+  REQUIRE(rsw_isa_set(isa), "the ISA %s", rsw_isa_name(isa));
+  bsdf *b = ocean_legacy_new(550, 7, 30, 19, 0.3, true, 0);
+  REQUIRE(b, "ocean");
+  ocean_bsdf *o = (ocean_bsdf *)b;
+  o->follow = follow;
+  render_ctx rc = {.variant = VARIANT_MONO, .wavelength = 550, .threads = threads};
+  if (follow) {
+    rc.bundle = 5;
+    for (int c = 0; c < RENDER_MAX_BUNDLE; c++) rc.wl[c] = 400.0 + 50.0 * (c < 5 ? c : 4);
+    rc.wavelength = rc.wl[0];
+  }
+  rsw_err err = {0};
+  REQUIRE(plugin_ocean_legacy.prepare(&b->base, &rc, &err) == RSW_OK, "prepare: %s", err.msg);
+  if (!follow) {
+    memcpy(out, o->t_down, sizeof o->t_down);
+    memcpy(out + TBL, o->t_up, sizeof o->t_up);
+  }
+  for (int k = 0; follow && k < 6; k++) {
+    const ocean_wl *w = &o->pg[k / 3][k % 3];
+    REQUIRE(w->t_down && w->t_up, "channel %d's tables", k);
+    memcpy(out + 2 * k * TBL, w->t_down, TBL * sizeof *out);
+    memcpy(out + (2 * k + 1) * TBL, w->t_up, TBL * sizeof *out);
+  }
+  plugin_ocean_legacy.destroy(&b->base);
+  rsw_isa_set(rsw_isa_best());
+}
+
+/* The tables are the same bits whatever the threads that build them
+ * (render_ctx.threads: 1 and 5) and the ISA (ocean_lanes.h's lanes on
+ * sse2, avx2 and avx512 against the scalar path, the generic ISA's), for
+ * one index and for a bundle's; they vary over the cells and between
+ * wavelengths (the comparison compares something). */
+static void test_tables_threads_isa(void) {
+  float *ref = malloc(12 * TBL * sizeof *ref), *got = malloc(12 * TBL * sizeof *got);
+  REQUIRE(ref && got, "memory");
+  for (int follow = 0; follow < 2; follow++) {
+    size_t n = (follow ? 12 : 2) * (size_t)TBL;
+    build_tables_at(RSW_ISA_GENERIC, 1, follow, ref);
+    CHECK(ref[0] != ref[TBL - 1] && ref[5 * OCEAN_T_RES + 40] != ref[40 * OCEAN_T_RES + 5],
+          "the tables vary over the cells");
+    if (follow) CHECK(memcmp(ref, ref + 2 * TBL, TBL * sizeof *ref) != 0, "400 and 450 nm differ");
+    if (follow)
+      CHECK(memcmp(ref + 8 * TBL, ref + 10 * TBL, 2 * TBL * sizeof *ref) == 0, "the copied channel");
+    for (int isa = 0; isa < RSW_ISA__COUNT; isa++)
+      for (int threads = 1; threads <= 5; threads += 4) {
+        if (isa == RSW_ISA_GENERIC && threads == 1) continue;
+        if (!rsw_isa_supported((rsw_isa)isa)) continue;
+        build_tables_at((rsw_isa)isa, threads, follow, got);
+        size_t diff = 0;
+        for (size_t i = 0; i < n; i++) diff += memcmp(&ref[i], &got[i], sizeof *ref) != 0;
+        CHECK(diff == 0, "%s, %d threads, %s: %zu of %zu entries differ from the generic ISA's on 1 thread",
+              rsw_isa_name((rsw_isa)isa), threads, follow ? "a bundle of 5" : "one index", diff, n);
+      }
+  }
+  free(ref), free(got);
+  /* The sums before the tables' rounding to float: ocean_transmittance,
+   * down and up, 32 and 7 points (49: the lanes and the scalar tail). */
+  bsdf *b = ocean_legacy_new(550, 7, 30, 19, 0.3, true, 0);
+  REQUIRE(b, "ocean");
+  const ocean_bsdf *o = (const ocean_bsdf *)b;
+  for (int k = 0; k < 40; k++) {
+    double th = 1.55 * k / 39.0, ph = 0.7 + 0.37 * k;
+    bool up = k % 2;
+    int nq = k % 4 < 2 ? 32 : 7;
+    REQUIRE(rsw_isa_set(RSW_ISA_GENERIC), "generic");
+    double t0 = ocean_transmittance(o, th, ph, up, nq);
+    for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
+      if (!rsw_isa_set((rsw_isa)isa)) continue;
+      double t = ocean_transmittance(o, th, ph, up, nq);
+      CHECK(memcmp(&t, &t0, sizeof t) == 0, "%s at theta %g, phi %g, %s, %d points: %.17g, scalar %.17g",
+            rsw_isa_name((rsw_isa)isa), th, ph, up ? "up" : "down", nq, t, t0);
+    }
+  }
+  rsw_isa_set(rsw_isa_best());
+  free(b);
+}
+
 int main(void) {
   RSW_TEST_RUN(test_data);
   RSW_TEST_RUN(test_glint_closed_form);
@@ -391,5 +479,6 @@ int main(void) {
   RSW_TEST_RUN(test_sampling);
   RSW_TEST_RUN(test_scene);
   RSW_TEST_RUN(test_follow);
+  RSW_TEST_RUN(test_tables_threads_isa);
   RSW_TEST_END("test_ocean_legacy");
 }
