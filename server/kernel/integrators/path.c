@@ -880,6 +880,11 @@ static rsw_status path_create(loader *ld, node *n, object **out) {
   it->max_depth = (int)md;
   it->rr_depth = (int)rr;
   it->pages = true;
+  /* Waves of 512 samples (render.c): on the AVX-512 machine of
+   * docs/performance.md the seed scene took 0.96x and the Cornell box
+   * 0.98x the CPU time of waves of 256 (the per-wave work, grouping by
+   * emitter and BSDF, the packets' tails, over more lanes). */
+  it->wave = 512;
   *out = &it->base;
   return RSW_OK;
 }
