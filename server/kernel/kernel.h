@@ -692,6 +692,9 @@ struct integrator {
    * (render_ctx.bundle > 3; path, direct, volpath, piecewise_volpath): Li_batch (or Li) then writes
    * pages 1.. of each path's radiance after page 0's, as quv (scene_extra_stride). */
   bool pages;
+  /* Samples per Li_batch call it prefers (render.c's wave; 0: the default
+   * there; at most render.c's RENDER_WAVE_MAX). */
+  int wave;
 };
 
 /* ---- shapes -------------------------------------------------------------- */

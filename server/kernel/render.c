@@ -176,12 +176,18 @@ static bool job_should_stop(job *jb) {
 
 /* Samples per wave (integrator_ops.Li_batch): enough paths that each
  * bounce fills Embree packets and the shading stages stay hot in the
- * instruction cache, few enough that the lanes' state stays in L2. */
+ * instruction cache, few enough that the lanes' state stays in L2. An
+ * integrator may ask for a larger wave (integrator.wave, up to
+ * RENDER_WAVE_MAX; `path`: its per-wave work is spread over more lanes). */
 #ifndef WAVE
 #define WAVE     256
 /* The extra values of a path (Stokes Q, U, V or a bundle's pages 1..):
  * Li's slots per path in wave_buf.quv (Li_batch packs nq per path). */
 #define LI_SLOTS (SCENE_QUV_MAX > SCENE_EXTRA_MAX ? SCENE_QUV_MAX : SCENE_EXTRA_MAX)
+#endif
+#define RENDER_WAVE_MAX 512
+#if WAVE > RENDER_WAVE_MAX
+#error "WAVE exceeds RENDER_WAVE_MAX"
 #endif
 
 /* One sample of a wave: where it lands and its camera ray. */
@@ -190,18 +196,18 @@ typedef struct wave_sample {
 } wave_sample;
 
 typedef struct wave_buf {
-  wave_sample ws[WAVE];
-  sampler_state st[WAVE];
-  ray3 ray[WAVE];
-  color L[WAVE];
-  double quv[LI_SLOTS * WAVE];
-  int live[WAVE];
-  vec2 film_u[WAVE], aperture_u[WAVE];
-  double w[WAVE];
+  wave_sample ws[RENDER_WAVE_MAX];
+  sampler_state st[RENDER_WAVE_MAX];
+  ray3 ray[RENDER_WAVE_MAX];
+  color L[RENDER_WAVE_MAX];
+  double quv[LI_SLOTS * RENDER_WAVE_MAX];
+  int live[RENDER_WAVE_MAX];
+  vec2 film_u[RENDER_WAVE_MAX], aperture_u[RENDER_WAVE_MAX];
+  double w[RENDER_WAVE_MAX];
   /* Which sample each slot takes (render_tile), for wave_start. */
-  uint64_t pixel[WAVE];
-  uint32_t index[WAVE];
-  int ix[WAVE], iy[WAVE];
+  uint64_t pixel[RENDER_WAVE_MAX];
+  uint32_t index[RENDER_WAVE_MAX];
+  int ix[RENDER_WAVE_MAX], iy[RENDER_WAVE_MAX];
 } wave_buf;
 
 /* Samples [0, n) of wb begin: their sampler streams, film jitter and
@@ -340,7 +346,9 @@ static tile_buf *render_tile(job *jb, size_t t, render_stats *rs, uint64_t *samp
     free(wb);
     return NULL;
   }
-  /* Samples are taken pixel by pixel, sample by sample, WAVE at a time
+  const int iw = jb->sc->integrator->wave;
+  const int wave = iw > 0 && iw <= RENDER_WAVE_MAX ? iw : WAVE;
+  /* Samples are taken pixel by pixel, sample by sample, `wave` at a time
    * (a wave may span pixels). Cancellation and deadlines are honoured
    * before each wave, so a film of a few pixels with a huge spp stops
    * too; the partial tile is discarded with the render. */
@@ -354,7 +362,7 @@ static tile_buf *render_tile(job *jb, size_t t, render_stats *rs, uint64_t *samp
         wb->index[n] = s;
         wb->ix[n] = ix;
         wb->iy[n] = iy;
-        if (++n == WAVE) {
+        if (++n == wave) {
           wave_start(jb, wb, n);
           if (!wave_flush(jb, tb, wb, n, rs, invalid)) goto fail;
           *samples += (uint64_t)n;
