@@ -180,12 +180,12 @@ static bool job_should_stop(job *jb) {
  * integrator may ask for a larger wave (integrator.wave, up to
  * RENDER_WAVE_MAX; `path`: its per-wave work is spread over more lanes). */
 #ifndef WAVE
-#define WAVE     256
-/* The extra values of a path (Stokes Q, U, V or a bundle's pages 1..):
- * Li's slots per path in wave_buf.quv (Li_batch packs nq per path). */
-#define LI_SLOTS (SCENE_QUV_MAX > SCENE_EXTRA_MAX ? SCENE_QUV_MAX : SCENE_EXTRA_MAX)
+#define WAVE 256
 #endif
 #define RENDER_WAVE_MAX 512
+/* The extra values of a path (Stokes Q, U, V or a bundle's pages 1..):
+ * Li's slots per path in wave_buf.quv (Li_batch packs nq per path). */
+#define LI_SLOTS        (SCENE_QUV_MAX > SCENE_EXTRA_MAX ? SCENE_QUV_MAX : SCENE_EXTRA_MAX)
 #if WAVE > RENDER_WAVE_MAX
 #error "WAVE exceeds RENDER_WAVE_MAX"
 #endif
