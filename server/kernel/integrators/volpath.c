@@ -412,8 +412,9 @@ static double coefficients_pages(const medium *m, medium_interaction *mi, double
  * all (each page's sigma_n over the majorant of every page's channels, so
  * that each page's estimate is unbiased), with segment_tr's roulette on
  * the largest page. */
-static void segment_tr_pages(const scene *sc, const medium *m, const ray3 *r, double tstart, double tend,
-                             const box_walk *w, sampler_state *st, int pages, color *tr) {
+static __attribute__((noinline)) void segment_tr_pages(const scene *sc, const medium *m, const ray3 *r,
+                                                       double tstart, double tend, const box_walk *w,
+                                                       sampler_state *st, int pages, color *tr) {
   for (int p = 0; p < pages; p++) tr[p] = col1(1.0);
   ray3 seg = *r;
   seg.tmin = tstart;
@@ -689,7 +690,8 @@ static void start_shadow(const scene *sc, vlane *l, const surface_interaction *s
  * at pages p0..pages-1 into tr[p]. A layered medium works out the levels
  * (and so the layers crossed) once for every page; another answers its
  * transmittance op at each page (rsw_page). */
-static void tr_pages(const medium *m, const ray3 *r, double mint, double maxt, int p0, int pages, color *tr) {
+static __attribute__((noinline)) void tr_pages(const medium *m, const ray3 *r, double mint, double maxt,
+                                               int p0, int pages, color *tr) {
   if (m->ops == &layered_medium_ops) {
     layered_transmittance_pages((const layered_medium *)m, r, mint, maxt, p0, pages, tr);
     return;
@@ -784,8 +786,9 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
  * one of the 3 P channels, each page weighted by its own transmittance (and
  * sigma_s at a collision) over the mean of the channels' densities. True:
  * a collision, at mi. */
-static bool flight_pages(const scene *sc, const medium *m, const ray3 *seg, double mint, double maxt,
-                         sampler_state *st, vlane *l, vpage *pg, medium_interaction *mi) {
+static __attribute__((noinline)) bool flight_pages(const scene *sc, const medium *m, const ray3 *seg,
+                                                   double mint, double maxt, sampler_state *st, vlane *l,
+                                                   vpage *pg, medium_interaction *mi) {
   const sampler_ops *sops = st->s->ops;
   const int NP = sc->pages, nch = 3 * NP;
   int c = 0;
@@ -843,8 +846,9 @@ static bool flight_pages(const scene *sc, const medium *m, const ray3 *seg, doub
  * estimate is unbiased (Kutz et al. 2017, "Spectral and decomposition
  * tracking for rendering heterogeneous volumes"). 1: a collision, at mi;
  * 0: the flight passed maxt; -1: every page's throughput is 0. */
-static int track_pages(const scene *sc, const medium *m, const ray3 *seg, double mint, double maxt,
-                       sampler_state *st, vlane *l, vpage *pg, medium_interaction *mi) {
+static __attribute__((noinline)) int track_pages(const scene *sc, const medium *m, const ray3 *seg,
+                                                 double mint, double maxt, sampler_state *st, vlane *l,
+                                                 vpage *pg, medium_interaction *mi) {
   const sampler_ops *sops = st->s->ops;
   const int NP = sc->pages;
   *mi = (medium_interaction){.medium = m, .wi = v3_neg(seg->d), .mint = mint};
