@@ -281,6 +281,30 @@ def same_across_threads(ports, path, wls, spp):
     f = [films(p, push(p, path), 16, 11, wls, spp=spp)[0] for p in ports]
     for ctx in f[0]:
         assert f[0][ctx]["data"] == f[1][ctx]["data"], ctx
+def lerp(w, x, y):
+    """y at w, linear between the nodes x (the scenes' spectra)."""
+    for i in range(len(x) - 1):
+        if w <= x[i + 1]:
+            return y[i] + (y[i + 1] - y[i]) * (w - x[i]) / (x[i + 1] - x[i])
+    return y[-1]
+def plate_brf(w, tau):
+    """hdistant_lambertian.json's plate (its reflectance table) seen at 30
+    degrees under its sun at 30 degrees through optical thickness tau(w)."""
+    import math
+    return lerp(w, [400, 550, 700], [0.05, 0.1, 0.45]) * math.exp(-tau * 2 / 0.8660254037844386)
+def layers_tau(w):
+    """The 3 layers' optical thickness (their sigma_t tables, mean: 1/3 each)."""
+    return sum(lerp(w, [400, 550, 700], v) for v in ([1.2, 0.5, 0.1], [0.6, 0.3, 0.15], [0.9, 0.25, 0.05])) / 3
+def auto_agrees(ports, path, wls, spp, seeds, threads_spp):
+    """On ports[0]: "auto" takes 16 for the scene at path, and a bundle of 16
+    (seeds[1]) is statistically the unbundled films (seeds[0]); bitwise the
+    same on both ports (their render threads) at threads_spp."""
+    port = ports[0]; sid = push(port, path)
+    a, _ = films(port, sid, 1, seeds[0], wls, spp=spp)
+    b, j = films(port, sid, "auto", seeds[1], wls, spp=spp)
+    assert j["bundle"] == 16 and "bundle_why" not in j, (path, j)
+    agree(a, b, path)
+    same_across_threads(ports, path, wls, threads_spp)
 PY
 
 py "bundles of 16 and of 7 are statistically the unbundled films (one-sample MIS over the pages)" '
@@ -383,23 +407,14 @@ same_across_threads([int(p) for p in sys.argv[2:4]], sys.argv[4], WLS[:8], 8)
 py "plastic (a delta lobe whose choice differs between the pages): auto takes 16, a bundle of 16 is statistically the unbundled films, and bitwise across threads" '
 import sys
 sys.path.insert(0, sys.argv[1]); from job import *
-port = int(sys.argv[2]); sid = push(port, sys.argv[4])
-a, _ = films(port, sid, 1, 7, WLS, spp=256)
-b, j = films(port, sid, "auto", 8, WLS, spp=256)
-assert j["bundle"] == 16 and "bundle_why" not in j, j
-agree(a, b, "plastic")
-same_across_threads([int(p) for p in sys.argv[2:4]], sys.argv[4], WLS, 8)
+auto_agrees([int(p) for p in sys.argv[2:4]], sys.argv[4], WLS, 256, (7, 8), 8)
 ' "$tmp" "$p2" "$p1" "$tmp/plastic.json"
 
 py "direct: a plastic under a sun and a sky (light and BSDF samples, MIS, a delta lobe): auto takes 16, a bundle of 16 is statistically the unbundled films, and bitwise across threads; a Lambertian plate's BRF in a bundle of 16 is its reflectance table (closed form)" '
 import sys
 sys.path.insert(0, sys.argv[1]); from job import *
-port = int(sys.argv[2]); sid = push(port, sys.argv[4])
-a, _ = films(port, sid, 1, 41, WLS, spp=256)
-b, j = films(port, sid, "auto", 42, WLS, spp=256)
-assert j["bundle"] == 16 and "bundle_why" not in j, j
-agree(a, b, "direct")
-same_across_threads([int(p) for p in sys.argv[2:4]], sys.argv[4], WLS, 8)
+auto_agrees([int(p) for p in sys.argv[2:4]], sys.argv[4], WLS, 256, (41, 42), 8)
+port = int(sys.argv[2])
 wls = [400.0 + 19 * i for i in range(16)]
 f, j = films(port, push(port, sys.argv[5]), 16, 3, wls, spp=4, quantities=["brf"])
 def rho(w):  # hdistant_lambertian.json: (400, 0.05), (550, 0.1), (700, 0.45)
@@ -413,27 +428,17 @@ for ctx, x in f.items():
 py "a blend of a diffuse and a plastic (a composition over a delta lobe): auto takes 16, a bundle of 16 is statistically the unbundled films, and bitwise across threads" '
 import sys
 sys.path.insert(0, sys.argv[1]); from job import *
-port = int(sys.argv[2]); sid = push(port, sys.argv[4])
-a, _ = films(port, sid, 1, 41, WLS, spp=256)
-b, j = films(port, sid, "auto", 42, WLS, spp=256)
-assert j["bundle"] == 16 and "bundle_why" not in j, j
-agree(a, b, "blendbsdf")
-same_across_threads([int(p) for p in sys.argv[2:4]], sys.argv[4], WLS, 8)
+auto_agrees([int(p) for p in sys.argv[2:4]], sys.argv[4], WLS, 256, (41, 42), 8)
 ' "$tmp" "$p2" "$p1" "$tmp/blend.json"
 
 py "a two-sided plastic seen from its back (twosided: the back side's delta lobe, wi mirrored): auto takes 16, a bundle of 16 is statistically the unbundled films, and bitwise across threads" '
 import sys
 sys.path.insert(0, sys.argv[1]); from job import *
-port = int(sys.argv[2]); sid = push(port, sys.argv[4])
-a, _ = films(port, sid, 1, 17, WLS, spp=256)
-b, j = films(port, sid, "auto", 18, WLS, spp=256)
-assert j["bundle"] == 16 and "bundle_why" not in j, j
-agree(a, b, "twosided")
-same_across_threads([int(p) for p in sys.argv[2:4]], sys.argv[4], WLS, 8)
+auto_agrees([int(p) for p in sys.argv[2:4]], sys.argv[4], WLS, 256, (17, 18), 8)
 ' "$tmp" "$p2" "$p1" "$tmp/twosided_back.json"
 
 py "a glass pane (dielectric, one index, a spectral specular_reflectance) under a spectral sky: in a bundle of 16 every film is the same reflections, each page weighted by its own reflectance" '
-import sys, math
+import sys
 sys.path.insert(0, sys.argv[1]); from job import *
 port = int(sys.argv[2]); sid = push(port, sys.argv[4])
 b, j = films(port, sid, "auto", 8, WLS, spp=64)
@@ -469,22 +474,12 @@ py "through a homogeneous slab (spectral sigma_t and albedo, Rayleigh), under vo
 import sys
 sys.path.insert(0, sys.argv[1]); from job import *
 for path in sys.argv[4:6]:
-    port = int(sys.argv[3]); sid = push(port, path)
-    a, _ = films(port, sid, 1, 21, WLS, spp=128)
-    b, j = films(port, sid, "auto", 22, WLS, spp=128)
-    assert j["bundle"] == 16 and "bundle_why" not in j, j
-    agree(a, b, path)
-    same_across_threads([int(p) for p in sys.argv[2:4]], path, WLS, 16)
-' "$tmp" "$p1" "$p2" "$tmp/slab_volpath.json" "$tmp/slab_piecewise.json"
+    auto_agrees([int(p) for p in sys.argv[2:4]], path, WLS, 128, (21, 22), 16)
+' "$tmp" "$p2" "$p1" "$tmp/slab_volpath.json" "$tmp/slab_piecewise.json"
 
 py "an absorbing homogeneous slab in a bundle of 16: each page's BRF is rho(w) exp(-tau(w) (1/mu_s + 1/mu_v)) (closed form), under volpath and piecewise_volpath" '
-import sys, math
+import sys
 sys.path.insert(0, sys.argv[1]); from job import *
-def lerp(w, x, y):
-    for i in range(len(x) - 1):
-        if w <= x[i + 1]:
-            return y[i] + (y[i + 1] - y[i]) * (w - x[i]) / (x[i + 1] - x[i])
-    return y[-1]
 wls = [400.0 + 19 * i for i in range(16)]
 port = int(sys.argv[2])
 for path in sys.argv[3:5]:
@@ -493,8 +488,7 @@ for path in sys.argv[3:5]:
     for ctx, x in f.items():
         n = len(x["channels"]); w = x["meta"]["wavelength"]
         brf = x["data"][x["channels"].index("brf.Y")::n]
-        tau = lerp(w, [400, 550, 700], [0.6, 0.35, 0.2])
-        want = lerp(w, [400, 550, 700], [0.05, 0.1, 0.45]) * math.exp(-tau * 2 / 0.8660254037844386)
+        want = plate_brf(w, lerp(w, [400, 550, 700], [0.6, 0.35, 0.2]))
         assert all(abs(b - want) < 1e-6 for b in brf), (path, w, brf, want)
 ' "$tmp" "$p2" "$tmp/absorb_volpath.json" "$tmp/absorb_piecewise.json"
 
@@ -503,13 +497,8 @@ import sys
 sys.path.insert(0, sys.argv[1]); from job import *
 wls = [400.0 + 10 * i for i in range(16)]
 for path, spp in ((sys.argv[4], 128), (sys.argv[5], 64), (sys.argv[6], 128)):
-    port = int(sys.argv[3]); sid = push(port, path)
-    a, _ = films(port, sid, 1, 41, wls, spp=spp)
-    b, j = films(port, sid, "auto", 42, wls, spp=spp)
-    assert j["bundle"] == 16 and "bundle_why" not in j, (path, j)
-    agree(a, b, path)
-    same_across_threads([int(p) for p in sys.argv[2:4]], path, wls, 4)
-' "$tmp" "$p1" "$p2" "$tmp/layers.json" "$tmp/atmo_sigma_a.json" "$tmp/layers_blend.json"
+    auto_agrees([int(p) for p in sys.argv[2:4]], path, wls, spp, (41, 42), 4)
+' "$tmp" "$p2" "$p1" "$tmp/layers.json" "$tmp/atmo_sigma_a.json" "$tmp/layers_blend.json"
 
 py "the molecular atmosphere with a constant sigma_a spectrum: a bundle of 3 and of 16 is statistically the unbundled films (each channel its own absorption; a bundle once gave every channel the first wavelength's)" '
 import sys
@@ -527,42 +516,26 @@ py "tracked media (volpath): a heterogeneous medium over a spectral 3-D grid, an
 import sys
 sys.path.insert(0, sys.argv[1]); from job import *
 for path, spp, wls in ((sys.argv[4], 128, WLS), (sys.argv[5], 64, [400.0 + 10 * i for i in range(16)])):
-    port = int(sys.argv[3]); sid = push(port, path)
-    a, _ = films(port, sid, 1, 41, wls, spp=spp)
-    b, j = films(port, sid, "auto", 42, wls, spp=spp)
-    assert j["bundle"] == 16 and "bundle_why" not in j, (path, j)
-    agree(a, b, path)
-    same_across_threads([int(p) for p in sys.argv[2:4]], path, wls, 4)
-' "$tmp" "$p1" "$p2" "$tmp/het.json" "$tmp/volpath.json"
+    auto_agrees([int(p) for p in sys.argv[2:4]], path, wls, spp, (41, 42), 4)
+' "$tmp" "$p2" "$p1" "$tmp/het.json" "$tmp/volpath.json"
 
 py "ratio tracking for every page at once: an absorbing heterogeneous medium of 3 layers over a spectral grid (volpath), a bundle of 16: each page's BRF is within 4 standard errors of rho(w) exp(-tau(w) (1/mu_s + 1/mu_v))" '
-import sys, math
+import sys
 sys.path.insert(0, sys.argv[1]); from job import *
-def lerp(w, x, y):
-    for i in range(len(x) - 1):
-        if w <= x[i + 1]:
-            return y[i] + (y[i + 1] - y[i]) * (w - x[i]) / (x[i + 1] - x[i])
-    return y[-1]
 wls = [400.0 + 19 * i for i in range(16)]
 port = int(sys.argv[2])
 f, j = films(port, push(port, sys.argv[3]), 16, 6, wls, spp=16384, quantities=["brf"])
 assert j["bundle"] == 16 and len(f) == 16, j
 for ctx, x in f.items():
     d = dict(zip(x["channels"], x["data"])); w = x["meta"]["wavelength"]
-    tau = sum(lerp(w, [400, 550, 700], v) for v in ([1.2, 0.5, 0.1], [0.6, 0.3, 0.15], [0.9, 0.25, 0.05])) / 3
-    want = lerp(w, [400, 550, 700], [0.05, 0.1, 0.45]) * math.exp(-tau * 2 / 0.8660254037844386)
+    want = plate_brf(w, layers_tau(w))
     se = d["radiance_stderr.Y"] * d["brf.Y"] / d["Y"]
     assert 0 < se < 0.05 * want and abs(d["brf.Y"] - want) < 4 * se, (w, d, want)
 ' "$tmp" "$p2" "$tmp/het_absorb.json"
 
 py "an absorbing piecewise medium over a spectral grid in a bundle of 16: each page's BRF is rho(w) exp(-tau(w) (1/mu_s + 1/mu_v)), tau(w) the layers' mean sigma_t(w) (closed form)" '
-import sys, math
+import sys
 sys.path.insert(0, sys.argv[1]); from job import *
-def lerp(w, x, y):
-    for i in range(len(x) - 1):
-        if w <= x[i + 1]:
-            return y[i] + (y[i + 1] - y[i]) * (w - x[i]) / (x[i + 1] - x[i])
-    return y[-1]
 wls = [400.0 + 19 * i for i in range(16)]
 port = int(sys.argv[2])
 f, j = films(port, push(port, sys.argv[3]), 16, 4, wls, spp=16, quantities=["brf"])
@@ -570,8 +543,7 @@ assert j["bundle"] == 16 and len(f) == 16, j
 for ctx, x in f.items():
     n = len(x["channels"]); w = x["meta"]["wavelength"]
     brf = x["data"][x["channels"].index("brf.Y")::n]
-    tau = sum(lerp(w, [400, 550, 700], v) for v in ([1.2, 0.5, 0.1], [0.6, 0.3, 0.15], [0.9, 0.25, 0.05])) / 3
-    want = lerp(w, [400, 550, 700], [0.05, 0.1, 0.45]) * math.exp(-tau * 2 / 0.8660254037844386)
+    want = plate_brf(w, layers_tau(w))
     assert all(abs(b - want) < 1e-6 for b in brf), (w, brf, want)
 ' "$tmp" "$p2" "$tmp/layers_absorb.json"
 

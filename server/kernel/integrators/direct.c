@@ -46,25 +46,40 @@ static trace_result trace(const scene *sc, const ray3 *r, surface_interaction *s
   return TRACE_HIT;
 }
 
+/* One light sample at si: its numbers drawn (the pick, then u2), the
+ * emitter *e picked with probability *pe, its direction sample *ds and its
+ * value. *pe is 0 where the sample counts for nothing: a zero pdf, or a
+ * surface emitter's point outside the periodic column (not in the scene,
+ * as path.c). */
+static color light_sample(const scene *sc, sampler_state *st, const surface_interaction *si,
+                          const emitter **e, double *pe, vec2 *u2, direction_sample *ds) {
+  const sampler_ops *sops = st->s->ops;
+  double u = sops->next_1d(st);
+  *u2 = sops->next_2d(st);
+  size_t ei = pick_emitter_index(sc, u);
+  *e = sc->emitters[ei];
+  *pe = pick_probability(sc, ei);
+  color value = (*e)->ops->sample_direction(*e, si, *u2, ds);
+  const periodic_bounds *pb = &sc->periodic;
+  if (!(ds->pdf > 0) ||
+      (pb->on && ((*e)->flags & EMITTER_SURFACE) &&
+       !(ds->p.x >= pb->min[0] && ds->p.x <= pb->max[0] && ds->p.y >= pb->min[1] && ds->p.y <= pb->max[1])))
+    *pe = 0.0;
+  return value;
+}
+
 /* Light samples: sum of w_e f Le / p_e over n_e samples, divided by n_e. */
 static color light_samples(const direct_integrator *d, const scene *sc, sampler_state *st,
                            const surface_interaction *si, render_stats *stats, pol_lane *pl, vec3 pd) {
-  const sampler_ops *sops = st->s->ops;
   const bsdf *b = si->shape->bsdf;
   color sum = col1(0);
   for (long long k = 0; k < d->emitter_samples; k++) {
-    double u = sops->next_1d(st);
-    vec2 u2 = sops->next_2d(st);
-    size_t ei = pick_emitter_index(sc, u);
-    const emitter *e = sc->emitters[ei];
-    double pe = pick_probability(sc, ei);
+    const emitter *e;
+    double pe;
+    vec2 u2;
     direction_sample ds;
-    color value = e->ops->sample_direction(e, si, u2, &ds);
-    if (!(ds.pdf > 0) || !(pe > 0) || col_is_black(value)) continue;
-    if (sc->periodic.on && (e->flags & EMITTER_SURFACE) &&
-        !(ds.p.x >= sc->periodic.min[0] && ds.p.x <= sc->periodic.max[0] && ds.p.y >= sc->periodic.min[1] &&
-          ds.p.y <= sc->periodic.max[1]))
-      continue; /* outside the periodic column: not in the scene (path.c) */
+    color value = light_sample(sc, st, si, &e, &pe, &u2, &ds);
+    if (!(pe > 0) || col_is_black(value)) continue;
     vec3 wo = frame_to_local(&si->sh, ds.d);
     color f = b->ops->eval(b, si, wo);
     if (col_is_black(f)) continue;
@@ -191,18 +206,12 @@ static void direct_pages(const direct_integrator *d, const scene *sc, sampler_st
   if (d->emitter_samples > 0 && sc->n_emitters > 0 && (b->flags & BSDF_SMOOTH)) {
     for (int p = 0; p < NP; p++) sum[p] = col1(0);
     for (long long k = 0; k < d->emitter_samples; k++) {
-      double u = sops->next_1d(st);
-      vec2 u2 = sops->next_2d(st);
-      size_t ei = pick_emitter_index(sc, u);
-      const emitter *e = sc->emitters[ei];
-      double pe = pick_probability(sc, ei);
+      const emitter *e;
+      double pe;
+      vec2 u2;
       direction_sample ds;
-      v[0] = e->ops->sample_direction(e, &si, u2, &ds);
-      if (!(ds.pdf > 0) || !(pe > 0)) continue;
-      if (sc->periodic.on && (e->flags & EMITTER_SURFACE) &&
-          !(ds.p.x >= sc->periodic.min[0] && ds.p.x <= sc->periodic.max[0] && ds.p.y >= sc->periodic.min[1] &&
-            ds.p.y <= sc->periodic.max[1]))
-        continue; /* outside the periodic column: not in the scene (path.c) */
+      v[0] = light_sample(sc, st, &si, &e, &pe, &u2, &ds);
+      if (!(pe > 0)) continue;
       emitter_pages(sc, e, &si, ds.d, true, u2, v);
       vec3 wo = frame_to_local(&si.sh, ds.d);
       double pdf = bsdf_eval_pages(b, &si, NP, wo, !ds.delta, f);

@@ -329,45 +329,6 @@ static bool analytic_in(const volpath_integrator *vp, const medium *m) {
   return m->ops->sample_real && m->ops->transmittance && (vp->analytic || m->is_homogeneous);
 }
 
-/* Transmittance of m along r over [tstart, tend] (a shadow ray's segment):
- * exact where analytic, else ratio tracking. */
-static color segment_tr(const volpath_integrator *vp, const scene *sc, const medium *m, const ray3 *r,
-                        double tstart, double tend, const box_walk *w, sampler_state *st) {
-  ray3 seg = *r;
-  seg.tmin = tstart;
-  seg.tmax = tend;
-  double mint, maxt;
-  if (!media_clip(sc, m, &seg, w, &mint, &maxt)) return col1(1.0);
-  if (m->ops == &layered_medium_ops && vp->analytic) /* (inline: the same code as its op) */
-    return media_layers_transmittance(layered_layers(m), &seg, mint, maxt);
-  if (m->ops->transmittance && (analytic_in(vp, m) || m->is_homogeneous))
-    return m->ops->transmittance(m, &seg, mint, maxt);
-  const sampler_ops *sops = st->s->ops;
-  color tr = col1(1.0);
-  medium_interaction mi = {.medium = m, .wi = v3_neg(r->d)};
-  mi.p = v3_fma(r->o, mint, r->d);
-  double mu = col_max(m->ops->majorant(m, &mi));
-  if (!(mu > 0)) return tr;
-  double t = mint;
-  for (;;) {
-    t -= log1p(-sops->next_1d(st)) / mu;
-    if (!(t < maxt)) break;
-    mi.t = t;
-    mi.p = v3_fma(r->o, t, r->d);
-    mi.majorant = col1(mu);
-    m->ops->coefficients(m, &mi);
-    tr = col_mul(tr, col_scale(mi.sigma_n, 1.0 / mu));
-    if (col_max(tr) <= 0) return col1(0.0);
-    /* Roulette on low weights keeps long tracks bounded (unbiased). */
-    if (col_max(tr) < 0.1) {
-      double q = col_max(tr);
-      if (!(sops->next_1d(st) < q)) return col1(0.0);
-      tr = col_scale(tr, 1.0 / q);
-    }
-  }
-  return tr;
-}
-
 /* Whether segment_tr is exact in m (else it tracks). */
 static bool exact_in(const volpath_integrator *vp, const medium *m) {
   return (m->ops == &layered_medium_ops && vp->analytic) ||
@@ -407,11 +368,11 @@ static double coefficients_pages(const medium *m, medium_interaction *mi, double
   return mean / pages;
 }
 
-/* A bundle of pages: the transmittance of a tracked medium m along r over
- * [tstart, tend] at every page into tr[0..pages), by one ratio track for
- * all (each page's sigma_n over the majorant of every page's channels, so
- * that each page's estimate is unbiased), with segment_tr's roulette on
- * the largest page. */
+/* The transmittance of a tracked medium m along r over [tstart, tend] at
+ * pages 0..pages-1 into tr[p] (one page: segment_tr's), by one ratio track
+ * for all: each page's sigma_n over the majorant of every page's channels,
+ * so that each page's estimate is unbiased, and a roulette on the largest
+ * page's weight below 0.1 that keeps long tracks bounded (unbiased). */
 static __attribute__((noinline)) void segment_tr_pages(const scene *sc, const medium *m, const ray3 *r,
                                                        double tstart, double tend, const box_walk *w,
                                                        sampler_state *st, int pages, color *tr) {
@@ -446,6 +407,24 @@ static __attribute__((noinline)) void segment_tr_pages(const scene *sc, const me
       if (!live) break;
     }
   }
+}
+
+/* Transmittance of m along r over [tstart, tend] (a shadow ray's segment):
+ * exact where analytic, else ratio tracking (segment_tr_pages' one page). */
+static color segment_tr(const volpath_integrator *vp, const scene *sc, const medium *m, const ray3 *r,
+                        double tstart, double tend, const box_walk *w, sampler_state *st) {
+  ray3 seg = *r;
+  seg.tmin = tstart;
+  seg.tmax = tend;
+  double mint, maxt;
+  if (!media_clip(sc, m, &seg, w, &mint, &maxt)) return col1(1.0);
+  if (m->ops == &layered_medium_ops && vp->analytic) /* (inline: the same code as its op) */
+    return media_layers_transmittance(layered_layers(m), &seg, mint, maxt);
+  if (m->ops->transmittance && (analytic_in(vp, m) || m->is_homogeneous))
+    return m->ops->transmittance(m, &seg, mint, maxt);
+  color tr;
+  segment_tr_pages(sc, m, r, tstart, tend, w, st, 1, &tr);
+  return tr;
 }
 
 /* The shadow ray from a surface vertex si (or a medium point p when si is

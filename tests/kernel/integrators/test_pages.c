@@ -99,6 +99,16 @@ static scene *bsdf_scene(const char *bsdf_json) {
   return tsup_load(buf, "mono");
 }
 
+/* Prepared at page p's three wavelengths alone, of a bundle of 16
+ * wavelengths 400, 420, ... nm (prepare_bundle's). */
+static bool prepare_page_alone(scene *s, int p, rsw_err *err) {
+  render_ctx rc = {.variant = VARIANT_MONO, .bundle = 3};
+  for (int c = 0; c < RENDER_MAX_BUNDLE; c++)
+    rc.wl[c] = 400.0 + 20.0 * (3 * p + (c < 3 ? c : 2) < 15 ? 3 * p + (c < 3 ? c : 2) : 15);
+  rc.wavelength = rc.wl[0];
+  return scene_prepare(s, &rc, err) == RSW_OK;
+}
+
 /* Prepared for a bundle of k wavelengths 400, 420, ... nm. */
 static bool prepare_bundle(scene *s, int k) {
   render_ctx rc = {.variant = VARIANT_MONO, .wavelength = 400.0, .bundle = k};
@@ -187,12 +197,8 @@ static void page_alone(const bsdf *b, int pages, const char *json, const surface
   for (int p = 0; p < pages; p++) {
     if (some && p % 3 && p != pages - 1) continue;
     scene *one = bsdf_scene(json);
-    render_ctx rc = {.variant = VARIANT_MONO, .bundle = 3};
-    for (int c = 0; c < RENDER_MAX_BUNDLE; c++)
-      rc.wl[c] = 400.0 + 20.0 * (3 * p + (c < 3 ? c : 2) < 15 ? 3 * p + (c < 3 ? c : 2) : 15);
-    rc.wavelength = rc.wl[0];
     rsw_err err = {0};
-    REQUIRE(one && scene_prepare(one, &rc, &err) == RSW_OK, "page %d alone: %s", p, err.msg);
+    REQUIRE(one && prepare_page_alone(one, p, &err), "page %d alone: %s", p, err.msg);
     const bsdf *b1 = one->shapes[0]->bsdf;
     for (int k = 0; k < 5; k++) {
       vec3 wo = tb_dir_deg(20 + 35 * k, 40 * k);
@@ -517,12 +523,8 @@ static void test_media(void) {
   ray3 r = {.o = v3(0.1, -0.2, -2), .d = v3_norm(v3(0.1, 0.2, 1)), .tmin = 0, .tmax = INFINITY};
   for (int p = 0; p < s->pages; p++) {
     scene *one = medium_scene("volpath", HOMOGENEOUS);
-    render_ctx rc = {.variant = VARIANT_MONO, .bundle = 3};
-    for (int c = 0; c < RENDER_MAX_BUNDLE; c++)
-      rc.wl[c] = 400.0 + 20.0 * (3 * p + (c < 3 ? c : 2) < 15 ? 3 * p + (c < 3 ? c : 2) : 15);
-    rc.wavelength = rc.wl[0];
     rsw_err err = {0};
-    REQUIRE(one && scene_prepare(one, &rc, &err) == RSW_OK, "page %d alone: %s", p, err.msg);
+    REQUIRE(one && prepare_page_alone(one, p, &err), "page %d alone: %s", p, err.msg);
     const medium *m1 = one->shapes[0]->interior;
     medium_interaction a = {.p = r.o}, b = {.p = r.o};
     rsw_page = p;
@@ -589,12 +591,8 @@ static void test_chromatic_blend(void) {
   vec3 wo = v3_norm(v3(0.3, 0.2, 0.9));
   for (int p = 0; p < s->pages; p++) {
     scene *one = medium_scene("volpath", med);
-    render_ctx rc = {.variant = VARIANT_MONO, .bundle = 3};
-    for (int c = 0; c < RENDER_MAX_BUNDLE; c++)
-      rc.wl[c] = 400.0 + 20.0 * (3 * p + (c < 3 ? c : 2) < 15 ? 3 * p + (c < 3 ? c : 2) : 15);
-    rc.wavelength = rc.wl[0];
     rsw_err err = {0};
-    REQUIRE(one && scene_prepare(one, &rc, &err) == RSW_OK, "page %d alone: %s", p, err.msg);
+    REQUIRE(one && prepare_page_alone(one, p, &err), "page %d alone: %s", p, err.msg);
     const phase *p1 = one->shapes[0]->interior->phase;
     rsw_page = p;
     color a = ph->ops->eval_channels(ph, &mi, wo);
@@ -629,12 +627,8 @@ static void test_grids(void) {
   CHECK(m->has_spectral_extinction && !m->absorbing_only, "spectral extinction");
   for (int p = 0; p < s->pages; p++) {
     scene *one = medium_scene("piecewise_volpath", LAYERS);
-    render_ctx rc = {.variant = VARIANT_MONO, .bundle = 3};
-    for (int c = 0; c < RENDER_MAX_BUNDLE; c++)
-      rc.wl[c] = 400.0 + 20.0 * (3 * p + (c < 3 ? c : 2) < 15 ? 3 * p + (c < 3 ? c : 2) : 15);
-    rc.wavelength = rc.wl[0];
     rsw_err err = {0};
-    REQUIRE(one && scene_prepare(one, &rc, &err) == RSW_OK, "page %d alone: %s", p, err.msg);
+    REQUIRE(one && prepare_page_alone(one, p, &err), "page %d alone: %s", p, err.msg);
     const media_layers *a = p ? &lm->Lp[p - 1] : &lm->L;
     const media_layers *b = &((const layered_medium *)one->shapes[0]->interior)->L;
     CHECK(a->n == 4 && b->n == 4 && memcmp(a->lay, b->lay, 5 * sizeof *a->lay) == 0 &&
