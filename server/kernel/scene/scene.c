@@ -132,9 +132,8 @@ const object *scene_bundle_blocker(const scene *s) {
 
 const object *scene_page_blocker(const scene *s, const char **why) {
   if (s->integrator && !s->integrator->pages) {
-    *why = "carries at most three wavelengths per path (`path`, `direct`, `volpath` and `piecewise_volpath` "
-           "carry "
-           "more)";
+    *why = "carries at most three wavelengths per path (`path`, `direct`, `volpath` and "
+           "`piecewise_volpath` carry more)";
     return &s->integrator->base;
   }
   for (size_t i = 0; i < s->n_objects; i++) {
@@ -151,15 +150,16 @@ const object *scene_page_blocker(const scene *s, const char **why) {
      * bsdf_sample_pages weights each page by its value over the pages'
      * mean probability), or where every page draws it alike
      * (bsdf_sample_pages samples every page again with the same numbers
-     * and keeps its weight where it drew the same lobe and direction): the
-     * index-matched `null` (weight 1 at every wavelength), and a BSDF
-     * whose only lobe is one delta reflection (the mirror direction,
-     * drawn with probability 1 at every page). Compositions (blendbsdf,
+     * and keeps its weight where it drew the same lobe and direction): a
+     * BSDF without delta_value whose only lobe is one delta reflection
+     * (the mirror direction, drawn with probability 1 at every page), or
+     * index-matched (weight 1 at every wavelength). Compositions (blendbsdf,
      * selectbsdf, mask, twosided) say their parts' values and
      * probabilities; their `pages` hook refuses what they cannot tell
      * apart (two delta transmissions, a part that does not say its). */
     if (pl->cls == CLS_BSDF && pl->pages && !pl->pages(o)) { /* a composition (blendbsdf, mask, ...) */
-      *why = "has a delta lobe: its sampling differs between a bundle's pages";
+      *why = "has delta lobes it cannot tell apart at every page (two delta transmissions, or a part's "
+             "delta lobe without its value per page)";
       return o;
     }
     if (pl->cls == CLS_BSDF) {
