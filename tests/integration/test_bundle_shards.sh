@@ -20,8 +20,9 @@
 #     with --bundle 1 the shards are
 #     k mod n and sweep.json has no bundle_leads (as before bundles);
 #   - a job's "bundle": "auto" comes to 16 on a mono surface scene (its
-#     films those of "bundle": 16, not those of "bundle": 1) and to 1, accepted, with the reason, on
-#     an rgb scene, a Stokes film and an environment plugin scene; "bundle"
+#     films those of "bundle": 16, not those of "bundle": 1) and to 1,
+#     accepted, with the reason, on an rgb scene and a Stokes film
+#     (environment plugins: test_bundle_env.sh); "bundle"
 #     0, 17, "x", -1 and a context's bundle_group "a" are 4xx naming the
 #     pointer; `sweep --bundle 17` and `--bundle x` are usage errors.
 name=test_bundle_shards
@@ -186,15 +187,6 @@ d = json.load(open(sys.argv[1]))
 d["sensor"]["film"]["pixel_format"] = "stokes"
 json.dump(d, open(sys.argv[2], "w"))
 PY
-cat >"$tmp/plugin.json" <<'JSON'
-{"type": "scene", "variant": "mono",
- "meter": {"type": "radiancemeter", "origin": [0, 0, 0], "direction": [1, 0, 0],
-   "film": {"type": "hdrfilm", "width": 1, "height": 1, "component_format": "float32"}},
- "sky": {"type": "test"}}
-JSON
-start_daemon "$tmp/p" --threads 1 --plugin-dir "$bin/../plugins"
-pp=$started_port
-[ -n "$pp" ] || bad "the plugin daemon did not start: $(cat "$tmp/p/log")"
 cat >"$tmp/rsw_http.py" <<'PY'
 import json, sys, time, urllib.request, urllib.error
 def call(port, method, path, body=None):
@@ -238,7 +230,7 @@ fa, ft, fo = h.films(port, a), h.films(port, t), h.films(port, o)
 assert fa == ft, "auto differs from 16"
 assert fa != fo, "auto gave the unbundled films"
 ' "$tmp" "$pa" "$scene"
-for s in "$root/proto/examples/cornell_box.json:rgb" "$tmp/stokes.json:Stokes" "$tmp/plugin.json:evaluates one wavelength"; do
+for s in "$root/proto/examples/cornell_box.json:rgb" "$tmp/stokes.json:Stokes"; do
   py "\"bundle\": \"auto\" on ${s##*:}: 1 with the reason" '
 import sys, importlib.util as u
 spec = u.spec_from_file_location("h", sys.argv[1] + "/rsw_http.py"); h = u.module_from_spec(spec); spec.loader.exec_module(h)
@@ -249,7 +241,7 @@ st, a = h.job(port, sid, {"bundle": "auto"}, ctxs); assert st == 202, (st, a)
 assert a["bundle"] == 1 and sys.argv[4] in a["bundle_why"], a
 h.films(port, a)
 st, e = h.job(port, sid, {"bundle": 3}, ctxs); assert st == 422 and e["pointer"] == "/bundle", (st, e)
-' "$tmp" "$([ "${s##*:}" = "evaluates one wavelength" ] && echo "$pp" || echo "$pa")" "${s%%:*}" "${s##*:}"
+' "$tmp" "$pa" "${s%%:*}" "${s##*:}"
 done
 py 'bad "bundle" values and bundle_group: 4xx naming the pointer' '
 import sys, importlib.util as u

@@ -147,6 +147,8 @@ static void env_destroy(object *o) {
   free(m);
 }
 
+/* In mono the map's radiance is its luminance at every wavelength: each
+ * page of a bundle takes the same value. */
 static rsw_status env_prepare(object *o, const render_ctx *rc, rsw_err *err) {
   (void)err;
   ((envmap *)o)->mono = rc->variant == VARIANT_MONO;
@@ -267,4 +269,4 @@ static void env_traverse(object *o, param_visitor *v) {
 }
 
 DEFINE_PLUGIN(envmap, CLS_EMITTER, .destroy = env_destroy, .prepare = env_prepare, .ops = &envmap_ops,
-              .traverse = env_traverse);
+              .traverse = env_traverse, .pages = plugin_pages_any);

@@ -124,7 +124,12 @@ typedef struct env_adapter {
   const loaded_plugin *lp;
   void *inst;
   double *values;    /* 3 per parameter: the table's view of them */
-  double wavelength; /* nm, from prepare */
+  double wavelength; /* nm, from prepare: the render's (a bundle's first) */
+  /* A spectral bundle (render_ctx.bundle > 1): the wavelengths of page p's
+   * channels at wl[3 p .. 3 p + 2], asked for together; 0 pages: one
+   * wavelength, `wavelength`, in every channel. */
+  int pages;
+  double wl[3 * RENDER_MAX_PAGES];
   atomic_ullong failures;
   atomic_int msg_state; /* 0 empty, 1 being written, 2 ready */
   char msg[512];
@@ -152,24 +157,38 @@ static void record_failure(const env_adapter *ca, const char *fmt, ...) {
   atomic_store_explicit(&a->msg_state, 2, memory_order_release);
 }
 
-/* I of the plugin's radiance towards unit direction d at the prepared
- * wavelength; 0 (recorded) if it is not finite or negative. Q, U, V reach
- * Stokes films through adapter_eval_polarization. */
-static double radiance_I(const env_adapter *a, vec3 d) {
-  double s[4] = {0, 0, 0, 0}, dir[3];
+/* I of the plugin's radiance towards unit direction d at the n
+ * wavelengths wl into I[0..n); each that is not finite or negative is 0
+ * (recorded). Q, U, V reach Stokes films through
+ * adapter_eval_polarization. */
+static void radiance_at(const env_adapter *a, vec3 d, const double *wl, size_t n, double *I) {
+  double q[3] = {0}, u[3] = {0}, v[3] = {0}, dir[3];
+  for (size_t i = 0; i < n; i++) I[i] = 0;
   out3(d, dir);
-  rsw_stokes_context ctx = {
-      .wavelengths = &a->wavelength, .count = 1, .stokes = {&s[0], &s[1], &s[2], &s[3]}};
+  rsw_stokes_context ctx = {.wavelengths = wl, .count = n, .stokes = {I, q, u, v}};
   a->lp->api->add_radiance(a->inst, &ctx, dir);
-  if (!isfinite(s[0]) || s[0] < 0) {
-    record_failure(
-        a,
-        "add_radiance returned I = %g at %g nm for direction (%g, %g, %g) (must be finite and >= 0); "
-        "used 0",
-        s[0], a->wavelength, d.x, d.y, d.z);
-    return 0.0;
+  for (size_t i = 0; i < n; i++)
+    if (!isfinite(I[i]) || I[i] < 0) {
+      record_failure(
+          a,
+          "add_radiance returned I = %g at %g nm for direction (%g, %g, %g) (must be finite and >= 0); "
+          "used 0",
+          I[i], wl[i], d.x, d.y, d.z);
+      I[i] = 0.0;
+    }
+}
+
+/* The plugin's radiance towards unit direction d in the colour's
+ * channels: at the prepared wavelength in all three, or at the three
+ * wavelengths of the bundle's page rsw_page. */
+static color radiance(const env_adapter *a, vec3 d) {
+  double I[3];
+  if (!a->pages) {
+    radiance_at(a, d, &a->wavelength, 1, I);
+    return col1(I[0]);
   }
-  return s[0];
+  radiance_at(a, d, &a->wl[3 * (rsw_page < a->pages ? rsw_page : 0)], 3, I);
+  return col(I[0], I[1], I[2]);
 }
 
 static color adapter_sample(const emitter *e, const surface_interaction *ref, vec2 u, direction_sample *ds) {
@@ -197,7 +216,9 @@ static color adapter_sample(const emitter *e, const surface_interaction *ref, ve
   ds->d = ds->p = dir;
   ds->n = v3_neg(dir);
   ds->pdf = pdf;
-  return col1(radiance_I(a, dir) / pdf);
+  color L = radiance(a, dir);
+  for (int c = 0; c < 3; c++) L.c[c] /= pdf;
+  return L;
 }
 
 static double adapter_pdf(const emitter *e, const surface_interaction *ref, const direction_sample *ds) {
@@ -218,7 +239,7 @@ static color adapter_eval(const emitter *e, const surface_interaction *hit, vec3
   (void)hit;
   double len = v3_len(d);
   if (!(len > 0) || !isfinite(len)) return col1(0);
-  return col1(radiance_I((const env_adapter *)e, v3_scale(d, 1.0 / len)));
+  return radiance((const env_adapter *)e, v3_scale(d, 1.0 / len));
 }
 
 /* Q, U, V of the plugin's radiance along ray direction d (Stokes films). */
@@ -328,10 +349,12 @@ static bool adapter_spectral(const object *o) {
   return true;
 }
 
-/* Its radiance is asked for at one wavelength (and carries Stokes
- * components a bundle's channels cannot hold). */
-static bool adapter_bundles(const object *o) {
-  return !adapter_spectral(o);
+/* A bundle asks for each page's three wavelengths in one add_radiance
+ * (prepared with the bundle's range); sample and pdf do not depend on
+ * the wavelength, so every page draws the same direction. */
+static bool adapter_pages(const object *o) {
+  (void)o;
+  return true;
 }
 
 static rsw_status adapter_prepare(object *o, const render_ctx *rc, rsw_err *err) {
@@ -345,12 +368,26 @@ static rsw_status adapter_prepare(object *o, const render_ctx *rc, rsw_err *err)
   a->wavelength = rc->wavelength > 0 ? rc->wavelength : 550.0;
   rsw_prepare_context pc = {
       .wavelength_min = a->wavelength, .wavelength_max = a->wavelength, .variant = "mono"};
+  a->pages = rc->bundle > 1 ? rc_pages(rc) : 0;
+  for (int p = 0; p < a->pages; p++) {
+    render_ctx q = rc_page(rc, p);
+    for (int c = 0; c < 3; c++) {
+      double w = rc_channel_wavelength(&q, c);
+      a->wl[3 * p + c] = w;
+      pc.wavelength_min = fmin(pc.wavelength_min, w);
+      pc.wavelength_max = fmax(pc.wavelength_max, w);
+    }
+  }
   char eb[512] = "";
   if (a->lp->api->prepare && a->lp->api->prepare(a->inst, &pc, eb, sizeof eb)) {
     eb[sizeof eb - 1] = 0;
-    return rsw_fail(err, RSW_ERR_INVALID, "",
-                    "emitter '%s' (plugin type '%s', %s): prepare failed at %g nm: %s", o->id ? o->id : "?",
-                    a->lp->rec.name, a->lp->file, a->wavelength, eb[0] ? eb : "(no message)");
+    char at[64];
+    if (pc.wavelength_min < pc.wavelength_max)
+      snprintf(at, sizeof at, "for %g..%g nm", pc.wavelength_min, pc.wavelength_max);
+    else
+      snprintf(at, sizeof at, "at %g nm", pc.wavelength_min);
+    return rsw_fail(err, RSW_ERR_INVALID, "", "emitter '%s' (plugin type '%s', %s): prepare failed %s: %s",
+                    o->id ? o->id : "?", a->lp->rec.name, a->lp->file, at, eb[0] ? eb : "(no message)");
   }
   return RSW_OK;
 }
@@ -575,7 +612,7 @@ static rsw_status load_one(const char *path, rsw_err *err) {
                      .traverse = adapter_traverse,
                      .parameters_changed = adapter_parameters_changed,
                      .spectral = adapter_spectral,
-                     .bundles = adapter_bundles};
+                     .pages = adapter_pages};
   loaded_plugin **grown = realloc(g_loaded, (g_n_loaded + 1) * sizeof *grown);
   if (!grown) {
     unload_one(lp);

@@ -483,9 +483,9 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, pag
     }
   }
   /* Pages 1..: the same sample's value at each (the same numbers give the
-   * same direction: an emitter that could carry pages samples positions
-   * and directions without its spectrum; the ones that do not, envmap,
-   * prepare per wavelength and are refused by scene_page_blocker). */
+   * same direction: every emitter samples positions and directions
+   * without its spectrum, environment plugins included, whose sample()
+   * takes no wavelength). */
   for (int k = 0; pgs && k < n; k++) {
     lane *l = &ln[g[k]];
     for (int p = 1; p < sc->pages; p++) {
