@@ -12,16 +12,16 @@
 #include "image_exr.h"
 
 /* Most attributes an info gives: scene, revision, context, sensor, spp,
- * seed, variant, wavelength, zenith, azimuth, unresolved rays,
- * irradiance. */
-#define FILM_EXR_MAX_ATTRS 14
+ * seed, variant, wavelength, zenith, azimuth, unresolved rays, plugin
+ * failures and their message, isa, irradiance. */
+#define FILM_EXR_MAX_ATTRS 16
 
 /* The attribute list of one info: entries point into info, the number
  * buffers here and the two angle lists (owned). */
 typedef struct attrs {
   exr_meta_entry e[FILM_EXR_MAX_ATTRS];
   size_t count;
-  char revision[24], spp[16], seed[24], wavelength[32], unresolved[24], irradiance[12 * 26];
+  char revision[24], spp[16], seed[24], wavelength[32], unresolved[24], plugin_failures[24], irradiance[12 * 26];
   char *zenith, *azimuth;
 } attrs;
 
@@ -146,6 +146,11 @@ static rsw_status build_attrs(const film_exr_info *info, int width, int height, 
     add(a, "raysweep:azimuth_deg", a->azimuth);
   }
   if (info->unresolved_rays) add(a, "raysweep:unresolved_rays", a->unresolved);
+  if (info->plugin_failures) {
+    snprintf(a->plugin_failures, sizeof a->plugin_failures, "%" PRIu64, info->plugin_failures);
+    add(a, "raysweep:plugin_failures", a->plugin_failures);
+    add(a, "raysweep:plugin_failure", info->plugin_failure);
+  }
   add(a, "raysweep:isa", info->isa);
   if (info->irradiance && info->n_irradiance > 0 && info->n_irradiance <= 12) {
     size_t len = 0;

@@ -22,6 +22,10 @@
  *   raysweep:unresolved_rays
  *                           only when non-zero: rays the periodic boundary
  *                           could not resolve (render.h), decimal
+ *   raysweep:plugin_failures, raysweep:plugin_failure
+ *                           only when non-zero: environment plugin answers
+ *                           the render replaced by black (decimal), and the
+ *                           first one's message
  *   raysweep:isa            the instruction set the batched shading ran
  *                           ("avx512", "avx2", "sse2", "generic"), when known
  *   raysweep:irradiance     films with brdf/brf channels: the horizontal
@@ -48,6 +52,8 @@ typedef struct film_exr_info {
   bool has_revision, has_spp, has_seed;
   uint64_t revision, seed;
   uint64_t unresolved_rays; /* written when non-zero */
+  uint64_t plugin_failures; /* written when non-zero, with plugin_failure */
+  const char *plugin_failure;
   uint32_t spp;
   const char *isa; /* NULL or "": not written */
   double wavelength_nm; /* written when finite and variant is not "rgb" */

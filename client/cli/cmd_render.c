@@ -100,6 +100,12 @@ static void report_written(const cli_ctx *ctx, const rsw_film *f, const char *pa
             "slab for 65,536 cell walls and were counted as blocked (unresolved); the film depends on that "
             "policy\n",
             ctx->cmd, u->valuedouble, path);
+  const cJSON *pf = cJSON_GetObjectItemCaseSensitive(m, "plugin_failures");
+  const cJSON *pm = cJSON_GetObjectItemCaseSensitive(m, "plugin_failure");
+  if (cJSON_IsNumber(pf) && pf->valuedouble > 0)
+    fprintf(stderr,
+            "raysweep %s: warning: %.0f environment plugin answers in %s were replaced by black; first: %s\n",
+            ctx->cmd, pf->valuedouble, path, cJSON_IsString(pm) ? pm->valuestring : "(no message)");
   cJSON_Delete(m);
   if (ctx->json) {
     cJSON *o = cJSON_CreateObject();

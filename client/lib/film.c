@@ -209,6 +209,9 @@ rsw_status rsw_film_save_exr(const rsw_film *f, const char *path) {
     bool has_unresolved; /* absent or null: 0, which writes no attribute */
     ok = ok &&
          meta_uint(meta, "unresolved_rays", 18446744073709549568.0, &has_unresolved, &info.unresolved_rays);
+    bool has_pf; /* absent: none, which writes no attribute */
+    ok = ok && meta_uint(meta, "plugin_failures", 18446744073709549568.0, &has_pf, &info.plugin_failures) &&
+         meta_string(meta, "plugin_failure", &info.plugin_failure);
     info.spp = (uint32_t)spp;
     if (ok && cJSON_IsNumber(wl)) info.wavelength_nm = wl->valuedouble;
     if (ok && !meta_angles(meta, (size_t)f->width * (size_t)f->height, &angles)) ok = false;

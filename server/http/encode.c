@@ -243,6 +243,13 @@ rsw_status http_film_json(const svc_film *f, char **bytes_out, size_t *len_out, 
   /* Only when non-zero: rays the periodic boundary could not resolve. */
   if (im->unresolved_rays)
     http_buf_printf(&b, ",\"unresolved_rays\":%llu", (unsigned long long)im->unresolved_rays);
+  /* Only when non-zero: environment plugin answers replaced by black, and
+   * the first one's message. */
+  if (im->plugin_failures) {
+    http_buf_printf(&b,
+                    ",\"plugin_failures\":%llu,\"plugin_failure\":", (unsigned long long)im->plugin_failures);
+    http_buf_json_string(&b, im->plugin_failure);
+  }
   /* Only when non-zero: values that are inf or NaN (null in "data"). */
   if (nonfinite) http_buf_printf(&b, ",\"nonfinite\":%llu", (unsigned long long)nonfinite);
   /* The instruction set the batched shading ran (core/isa.h), when known. */

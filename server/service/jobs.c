@@ -1602,6 +1602,10 @@ static char *result_text(const job *j, const render_item *it, unsigned jm) {
     cJSON_AddStringToObject(x, "href", href);
     if (it->film.img.unresolved_rays)
       cJSON_AddNumberToObject(x, "unresolved_rays", (double)it->film.img.unresolved_rays);
+    if (it->film.img.plugin_failures) {
+      cJSON_AddNumberToObject(x, "plugin_failures", (double)it->film.img.plugin_failures);
+      cJSON_AddStringToObject(x, "plugin_failure", it->film.img.plugin_failure);
+    }
   }
   if (it->error[0]) cJSON_AddStringToObject(x, "error", it->error);
   return svc_print_json(x, jm);

@@ -811,6 +811,11 @@ rsw_status svc_state_film_write(service *svc, const job *j, size_t k, const svc_
   cJSON_AddStringToObject(m, "variant", variant_name(im->variant, im->polarized));
   snprintf(num, sizeof num, "%" PRIu64, im->unresolved_rays);
   cJSON_AddStringToObject(m, "unresolved_rays", num);
+  if (im->plugin_failures) { /* (absent: none; records before them had none) */
+    snprintf(num, sizeof num, "%" PRIu64, im->plugin_failures);
+    cJSON_AddStringToObject(m, "plugin_failures", num);
+    cJSON_AddStringToObject(m, "plugin_failure", im->plugin_failure);
+  }
   if (im->n_planes) { /* their channels follow the radiance ones in the .npy */
     cJSON *pl = cJSON_AddArrayToObject(m, "planes");
     for (int q = 0; q < im->n_planes; q++) cJSON_AddItemToArray(pl, cJSON_CreateString(im->planes[q].name));
@@ -914,6 +919,16 @@ static bool film_meta(int fd, const film_trailer *t, svc_film *out) {
   NUMSTR("unresolved_rays")
   out->img.unresolved_rays = strtoull(num, NULL, 10);
 #undef NUMSTR
+  x = cJSON_GetObjectItemCaseSensitive(m, "plugin_failures");
+  if (x) {
+    const cJSON *msg = cJSON_GetObjectItemCaseSensitive(m, "plugin_failure");
+    if (cJSON_IsString(x) && cJSON_IsString(msg)) {
+      out->img.plugin_failures = strtoull(x->valuestring, NULL, 10);
+      snprintf(out->img.plugin_failure, sizeof out->img.plugin_failure, "%s", msg->valuestring);
+    } else {
+      ok = false;
+    }
+  }
   x = cJSON_GetObjectItemCaseSensitive(m, "revision");
   out->revision = cJSON_IsNumber(x) ? (uint64_t)x->valuedouble : 0;
   x = cJSON_GetObjectItemCaseSensitive(m, "width");
@@ -1147,6 +1162,10 @@ void svc_state_job_finished(service *svc, const job *j) {
           cJSON_AddItemToArray(pl, cJSON_CreateString(im->planes[q].name));
       }
       if (im->unresolved_rays) cJSON_AddNumberToObject(x, "unres", (double)im->unresolved_rays);
+      if (im->plugin_failures) {
+        cJSON_AddNumberToObject(x, "pf", (double)im->plugin_failures);
+        cJSON_AddStringToObject(x, "pfm", im->plugin_failure);
+      }
       cJSON_AddBoolToObject(x, "disk", it->on_disk);
     }
     cJSON_AddItemToArray(a, x);
@@ -1399,6 +1418,14 @@ static bool restore_finished(service *svc, const req_header *h, cJSON *done, con
       ri->film_w = (int)w;
       ri->film_h = (int)hh;
       im->unresolved_rays = unres;
+      uint64_t pf = 0;
+      if (cJSON_GetObjectItemCaseSensitive(it, "pf") &&
+          (!get_count(it, "pf", 0, 1.8e19, &pf) ||
+           !get_str(it, "pfm", im->plugin_failure, sizeof im->plugin_failure))) {
+        snprintf(why, wn, "render %zu: pf must be a whole number and pfm a string", k);
+        break;
+      }
+      im->plugin_failures = pf;
       y = cJSON_GetObjectItemCaseSensitive(it, "ch");
       int c = 0;
       for (const cJSON *z = cJSON_IsArray(y) ? y->child : NULL; z && c < FILM_MAX_CHANNELS; z = z->next)

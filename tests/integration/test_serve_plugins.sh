@@ -3,7 +3,9 @@
 # bad ones are refused with a message naming the file, the good ones load,
 # the daemon serves (GET /v1 lists them) and a scene using one renders; a
 # render through a plugin that returns NaN radiance completes with a
-# finite film. Prints "test_serve_plugins: N passed, N failed".
+# finite film whose meta says how many answers were replaced by black and
+# the first one's message (a render and a job's results, not silently).
+# Prints "test_serve_plugins: N passed, N failed".
 set -u
 here=$(cd "$(dirname "$0")/../.." && pwd)
 cd "$here"
@@ -16,6 +18,7 @@ tmp=$(mktemp -d /tmp/rsw-serve-plugins-XXXXXX)
 pid=""
 cleanup() { [ -n "$pid" ] && kill -TERM "$pid" 2>/dev/null; wait "$pid" 2>/dev/null; rm -rf "$tmp"; }
 trap cleanup EXIT
+
 mkdir -p "$tmp/plugins"
 cp "$build"/plugins/*.so "$tmp/plugins/" 2>/dev/null
 # A plugin with the wrong ABI version and one with no entry point.
@@ -24,10 +27,30 @@ cat > "$tmp/bad_abi.c" <<'C'
 static const rsw_env_plugin T = {.abi_version = 999, .type_name = "badabi"};
 RSW_PLUGIN_EXPORT const rsw_env_plugin *rsw_env_plugin_entry(const rsw_plugin_host *h) { (void)h; return &T; }
 C
+# A plugin whose radiance is NaN towards +x (the host replaces it by black).
+cat > "$tmp/nan_sky.c" <<'C'
+#include <math.h>
+#include <raysweep/plugin.h>
+static const rsw_plugin_host *host;
+static int state;
+static int create(const double *const *v, void **inst, char *eb, size_t n) { (void)v, (void)eb, (void)n; *inst = &state; return 0; }
+static void destroy(void *inst) { (void)inst; }
+static void add_radiance(const void *inst, rsw_stokes_context *ctx, const double d[3]) {
+  (void)inst;
+  for (size_t i = 0; i < ctx->count; i++) ctx->stokes[0][i] += d[0] > 0 ? NAN : 1.0;
+}
+static double sample(const void *inst, const double u[2], double d[3]) { (void)inst; host->square_to_uniform_sphere(u, d); return host->uniform_sphere_pdf(); }
+static double pdf(const void *inst, const double d[3]) { (void)inst, (void)d; return host->uniform_sphere_pdf(); }
+static const rsw_env_plugin T = {.abi_version = RSW_PLUGIN_ABI_VERSION, .type_name = "nan_sky", .pretty_name = "NaN towards +x",
+  .create = create, .destroy = destroy, .add_radiance = add_radiance, .sample = sample, .pdf = pdf};
+RSW_PLUGIN_EXPORT const rsw_env_plugin *rsw_env_plugin_entry(const rsw_plugin_host *h) { host = h; return &T; }
+C
+cc -shared -fPIC -I include -o "$tmp/plugins/nan_sky.so" "$tmp/nan_sky.c" || { echo "test_serve_plugins: 0 passed, 1 failed"; exit 1; }
 echo 'int not_a_plugin = 1;' > "$tmp/no_entry.c"
 cc -shared -fPIC -I include -o "$tmp/plugins/bad_abi.so" "$tmp/bad_abi.c" && \
 cc -shared -fPIC -o "$tmp/plugins/no_entry.so" "$tmp/no_entry.c" || { echo "test_serve_plugins: 0 passed, 1 failed"; exit 1; }
-"$bin/raysweepd" serve --listen 127.0.0.1:0 --port-file "$tmp/port" --plugin-dir "$tmp/plugins" 2> "$tmp/log" &
+mkdir -p "$tmp/data"
+"$bin/raysweepd" serve --listen 127.0.0.1:0 --port-file "$tmp/port" --plugin-dir "$tmp/plugins" --state-dir "$tmp/data" 2> "$tmp/log" &
 pid=$!
 for _ in $(seq 100); do [ -s "$tmp/port" ] && break; sleep 0.05; done
 port=$(cat "$tmp/port" 2>/dev/null)
@@ -51,6 +74,59 @@ v600=$(curl -s -X POST "http://127.0.0.1:$port/v1/scenes/$id:render" -H 'Content
 echo "$v600" | grep -q '"data":\[5.10' && ok render_600 || ko render_600 "$v600"
 v450=$(curl -s -X POST "http://127.0.0.1:$port/v1/scenes/$id:render" -H 'Content-Type: application/json' -d '{"spp": 4, "wavelength": 450}')
 echo "$v450" | grep -q '"data":\[0\]' && ok render_450 || ko render_450 "$v450"
+# The NaN sky: a meter looking at +x sees black, and the film says so.
+nscene='{"type": "scene", "variant": "mono",
+ "meter": {"type": "radiancemeter", "origin": [0, 0, 0], "direction": [1, 0, 0],
+   "film": {"type": "hdrfilm", "width": 1, "height": 1, "component_format": "float32"}},
+ "sky": {"type": "nan_sky", "id": "bad_sky"}}'
+nid=$(curl -s -X POST "http://127.0.0.1:$port/v1/scenes" -H 'Content-Type: application/json' -d "$nscene" | sed 's/.*"id":"\([0-9a-f]*\)".*/\1/')
+vn=$(curl -s -X POST "http://127.0.0.1:$port/v1/scenes/$nid:render" -H 'Content-Type: application/json' -d '{"spp": 4, "wavelength": 600}')
+echo "$vn" | grep -q '"data":\[0\]' && echo "$vn" | grep -q '"plugin_failures":4,' &&
+  echo "$vn" | grep -q "\"plugin_failure\":\"emitter 'bad_sky' (plugin type 'nan_sky'): add_radiance returned I = nan at 600 nm" &&
+  ok nan_render_says_so || ko nan_render_says_so "$vn"
+# raysweepd render says so on stderr and in the EXR's attributes.
+echo "$nscene" > "$tmp/nan.json"
+mkdir -p "$tmp/nan_only" && cp "$tmp/plugins/nan_sky.so" "$tmp/nan_only/"
+"$bin/raysweepd" render "$tmp/nan.json" --spp 4 --wavelength 600 --plugin-dir "$tmp/nan_only" -o "$tmp/nan.exr" 2> "$tmp/render.err"
+grep -q "warning: 4 environment plugin failures were replaced by black; first: emitter 'bad_sky'" "$tmp/render.err" &&
+  grep -aq "raysweep:plugin_failures" "$tmp/nan.exr" && grep -aq "add_radiance returned I = nan at 600 nm" "$tmp/nan.exr" &&
+  ok nan_render_cli_says_so || ko nan_render_cli_says_so "$(cat "$tmp/render.err")"
+# A job of two wavelengths (one bundle): each result says so too, and
+# again after a restart (the job's record and its films keep it).
+cat > "$tmp/nanjob.py" <<'PY'
+import json, sys, time, urllib.request
+port, what = sys.argv[1], sys.argv[2]
+def call(path, body=None):
+    req = urllib.request.Request(f"http://127.0.0.1:{port}{path}", data=body and json.dumps(body).encode(),
+                                 headers={"Content-Type": "application/json"})
+    return json.loads(urllib.request.urlopen(req, timeout=60).read())
+if what == "submit":
+    j = call(f"/v1/scenes/{sys.argv[3]}/jobs", {"contexts": [{"id": "a", "wavelength": 500},
+                                                             {"id": "b", "wavelength": 600}], "defaults": {"spp": 2}})
+    jid = j["id"]
+    for _ in range(400):
+        if call(f"/v1/jobs/{jid}")["state"] not in ("queued", "running"):
+            break
+        time.sleep(0.05)
+else:
+    jid = what
+res = call(f"/v1/jobs/{jid}/results")["results"]
+assert len(res) == 2, res
+for r in res:
+    assert r.get("plugin_failures", 0) > 0 and "add_radiance returned I = nan" in r["plugin_failure"], r
+    f = call(r["href"])
+    assert f["data"] == [0] and f["meta"]["plugin_failures"] == r["plugin_failures"], f
+    assert f["meta"]["plugin_failure"] == r["plugin_failure"], f
+print(jid)
+PY
+njob=$(python3 "$tmp/nanjob.py" "$port" submit "$nid" 2>"$tmp/pyerr") && ok nan_job_says_so || ko nan_job_says_so "$(tail -n 3 "$tmp/pyerr")"
+kill -TERM "$pid"; wait "$pid" 2>/dev/null
+rm -f "$tmp/port"
+"$bin/raysweepd" serve --listen 127.0.0.1:0 --port-file "$tmp/port" --plugin-dir "$tmp/plugins" --state-dir "$tmp/data" 2>> "$tmp/log" &
+pid=$!
+for _ in $(seq 100); do [ -s "$tmp/port" ] && break; sleep 0.05; done
+port=$(cat "$tmp/port" 2>/dev/null)
+python3 "$tmp/nanjob.py" "$port" "$njob" >/dev/null 2>"$tmp/pyerr" && ok nan_job_after_restart || ko nan_job_after_restart "$(tail -n 3 "$tmp/pyerr")"
 curl -sf "http://127.0.0.1:$port/v1/health/ready" > /dev/null && ok still_ready || ko still_ready "not ready"
 echo "test_serve_plugins: $pass passed, $fail failed"
 [ "$fail" -eq 0 ]

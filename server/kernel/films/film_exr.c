@@ -14,6 +14,8 @@ film_exr_info film_image_exr_info(const film_image *img, const char *sensor_id) 
   if (img->variant == VARIANT_MONO) info.wavelength_nm = img->wavelength;
   info.angles = img->angles;
   info.unresolved_rays = img->unresolved_rays;
+  info.plugin_failures = img->plugin_failures;
+  info.plugin_failure = img->plugin_failure;
   info.isa = img->isa;
   if (img->has_irradiance) {
     info.irradiance = img->irradiance;

@@ -55,6 +55,12 @@ typedef struct film_image {
    * walls), each counted as blocked / ending its path. Non-zero means the
    * film depends on that policy; written to the film's metadata. */
   uint64_t unresolved_rays;
+  /* Calls to environment plugins whose answer the render replaced by black
+   * or a dropped sample (a NaN or negative radiance, a bad pdf or
+   * direction: env_plugin.c) during the render that made this film, and
+   * the first one's message; written to the film's metadata. */
+  uint64_t plugin_failures;
+  char plugin_failure[256];
   /* Values of the image and its planes that are not finite (inf, NaN): 0
    * for any film of a scene within the parameter bounds (RSW_MAX_MAGNITUDE),
    * but counted rather than assumed (film_image_nonfinite). */
