@@ -386,7 +386,7 @@ static int cmd_render(int argc, char **argv) {
             "policy\n",
             (unsigned long long)rs.rays.unresolved);
   char pmsg[600];
-  size_t pfail = plugin_emitter_failures(sc, pmsg, sizeof pmsg);
+  size_t pfail = emitter_failures(sc, pmsg, sizeof pmsg);
   if (pfail)
     fprintf(stderr,
             "raysweepd render: warning: %zu environment plugin failures were replaced by black; first: %s\n",

@@ -26,7 +26,6 @@
 
 #include "accel.h"
 #include "core/isa.h"
-#include "extplugin/env_plugin.h"
 #include "samplers/sampler_batch.h"
 #include "scene/scene.h"
 
@@ -793,7 +792,7 @@ rsw_status render_sensor_bundle(scene *sc, const render_opts *opts, film_image *
     }
     film_image *img = &out[b];
     img->unresolved_rays = jb.rays.unresolved;
-    img->plugin_failures = plugin_emitter_failures(sc, img->plugin_failure, sizeof img->plugin_failure);
+    img->plugin_failures = emitter_failures(sc, img->plugin_failure, sizeof img->plugin_failure);
     img->nonfinite = film_image_nonfinite(img);
     img->isa = rsw_isa_name(rsw_isa_get());
     img->has_sun = render_sun_angles(sc, &img->sun_zenith, &img->sun_azimuth);

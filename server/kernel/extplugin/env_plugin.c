@@ -260,10 +260,19 @@ static void adapter_eval_polarization(const emitter *e, vec3 d, double quv[3]) {
   quv[0] = s[1], quv[1] = s[2], quv[2] = s[3];
 }
 
+static size_t adapter_failures(const emitter *e, char *msg, size_t len) {
+  env_adapter *a = (env_adapter *)e;
+  size_t n = (size_t)atomic_load(&a->failures);
+  if (n && msg && len && atomic_load_explicit(&a->msg_state, memory_order_acquire) == 2)
+    snprintf(msg, len, "%s", a->msg);
+  return n;
+}
+
 static const emitter_ops adapter_ops = {.sample_direction = adapter_sample,
                                         .pdf_direction = adapter_pdf,
                                         .eval = adapter_eval,
-                                        .eval_polarization = adapter_eval_polarization};
+                                        .eval_polarization = adapter_eval_polarization,
+                                        .failures = adapter_failures};
 
 static const loaded_plugin *find_loaded(const char *name) {
   for (size_t i = 0; name && i < g_n_loaded; i++)
@@ -458,21 +467,6 @@ static void adapter_traverse(object *o, param_visitor *v) {
       pv_vector(v, p->name, vec_getters[k], vec_setters[k], cls);
     }
   }
-}
-
-size_t plugin_emitter_failures(const scene *s, char *msg, size_t len) {
-  size_t total = 0;
-  if (msg && len) msg[0] = 0;
-  for (size_t i = 0; s && i < s->n_emitters; i++) {
-    const emitter *e = s->emitters[i];
-    if (e->ops != &adapter_ops) continue;
-    env_adapter *a = (env_adapter *)e;
-    size_t n = (size_t)atomic_load(&a->failures);
-    if (n && msg && len && !msg[0] && atomic_load_explicit(&a->msg_state, memory_order_acquire) == 2)
-      snprintf(msg, len, "%s", a->msg);
-    total += n;
-  }
-  return total;
 }
 
 /* ---- loading ------------------------------------------------------------------ */

@@ -40,11 +40,5 @@ const plugin *plugins_find(const char *name);
 size_t plugins_count(void);
 const plugin *plugins_at(size_t i, const char **pretty_name, const char **file);
 
-/* Failures of plugin emitters in a scene since their last prepare (i.e.
- * during the last render): NaN/negative radiance, bad pdfs or directions,
- * failed set_param. Returns the count and copies the first failure's
- * message into msg (may be NULL). Those contributions were replaced by
- * black. */
-size_t plugin_emitter_failures(const struct scene *s, char *msg, size_t len);
 
 #endif

@@ -130,6 +130,17 @@ const object *scene_bundle_blocker(const scene *s) {
   return NULL;
 }
 
+size_t emitter_failures(const scene *s, char *msg, size_t len) {
+  size_t total = 0;
+  if (msg && len) msg[0] = 0;
+  for (size_t i = 0; s && i < s->n_emitters; i++) {
+    const emitter *e = s->emitters[i];
+    if (!e->ops->failures) continue;
+    total += e->ops->failures(e, msg && len && !msg[0] ? msg : NULL, len);
+  }
+  return total;
+}
+
 const object *scene_page_blocker(const scene *s, const char **why) {
   if (s->integrator && !s->integrator->pages) {
     *why = "carries at most three wavelengths per path (`path`, `direct`, `volpath` and "

@@ -52,6 +52,11 @@ bool scene_wavelength_dependent(const scene *s);
 /* The first object that cannot render a spectral bundle (its plugin's
  * `bundles` op says no), or NULL when the scene can. */
 const object *scene_bundle_blocker(const scene *s);
+/* Answers the scene's emitters replaced by black during the last render
+ * (emitter_ops.failures: environment plugins' NaN or negative radiance,
+ * bad pdfs or directions, failed set_param), summed; the first one's
+ * message into msg (len bytes; "" when none). */
+size_t emitter_failures(const scene *s, char *msg, size_t len);
 /* The first object that cannot render a bundle of more than three
  * wavelengths (pages, render_ctx.bundle > 3), with *why its reason (a
  * phrase to follow the object's name), or NULL when the scene can. */
