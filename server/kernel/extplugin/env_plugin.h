@@ -40,5 +40,4 @@ const plugin *plugins_find(const char *name);
 size_t plugins_count(void);
 const plugin *plugins_at(size_t i, const char **pretty_name, const char **file);
 
-
 #endif
