@@ -658,7 +658,28 @@ struct medium {
    * volumetric integrators then weight a flight by its transmittance
    * instead of sampling collisions (exact for analytic media). */
   bool absorbing_only;
+  /* A bundle of pages where has_spectral_extinction (set by prepare,
+   * medium_extremes): the channels (3 p + c) of largest and smallest
+   * extinction over every page (a layered medium's whole column, a
+   * homogeneous one's sigma_t) and the ratio of the two (volpath's
+   * flight_pages draws its channel from a mixture that favours both when
+   * it is large). */
+  int thick_channel, thin_channel;
+  double extinction_spread;
 };
+
+/* Set m's thick_channel, thin_channel and extinction_spread from ext[k],
+ * the extinction of channel k < n (infinite spread when the thinnest is
+ * 0 and the thickest not). */
+static inline void medium_extremes(medium *m, const double *ext, int n) {
+  int thick = 0, thin = 0;
+  for (int k = 1; k < n; k++) {
+    if (ext[k] > ext[thick]) thick = k;
+    if (ext[k] < ext[thin]) thin = k;
+  }
+  m->thick_channel = thick, m->thin_channel = thin;
+  m->extinction_spread = ext[thin] > 0 ? ext[thick] / ext[thin] : ext[thick] > 0 ? INFINITY : 1.0;
+}
 
 /* ---- integrators --------------------------------------------------------- */
 typedef struct render_stats {

@@ -1,18 +1,27 @@
 #!/usr/bin/env python3
 """make bench: spectral bundles, one JSON line:
   {"bench": "bundles", "scenes": [{"scene", "contexts", "spp",
-   "contexts_per_s_k1", "contexts_per_s", "k", "speedup"}, ...]}
+   "contexts_per_s_k1", "contexts_per_s", "k", "speedup",
+   "stderr_ratio_median", "stderr_ratio_max", "speedup_equal_noise"}, ...]}
 A 16-wavelength sweep (one job, 16 contexts 400..550 nm by 10 nm) of
   - the molecular atmosphere example (2,400 layers, Rayleigh, ozone and an
     aerosol layer; hdistant 32x32, 64 spp), and
   - the periodic canopy example (hdistant 32x32, 64 spp),
 on one raysweepd (--threads 2), submitted over HTTP with "bundle" 1 and
-then "auto" (what the daemon chooses: 16, pages of three wavelengths per
-path, on the canopy; 3, the colour's channels, in the atmosphere, whose
-volumetric integrator carries three), `k` being what it came to; wall time
-from submission to the job's end, films not fetched; best of 3,
-alternating. speedup = contexts_per_s at K / at K = 1. The goals: >= 5 for
-the atmosphere, >= 8 for the canopy.
+then "auto" (what the daemon chooses: 16 on both, pages of three
+wavelengths per path), `k` being what it came to; wall time from
+submission to the job's end, films not fetched; best of 3, alternating.
+speedup = contexts_per_s at K / at K = 1. The goals: >= 5 for the
+atmosphere, >= 8 for the canopy.
+A bundle's films are unbiased but may be noisier than unbundled ones at
+the same spp (a path sampled for all the bundle's wavelengths fits some
+worse: docs/experiments.md#spectral-bundles). So one more pair of jobs
+(untimed, with the stderr planes, "variance": true) gives each
+wavelength's noise: its film's rms standard error bundled over unbundled,
+their median and largest over the 16 wavelengths (stderr_ratio_median,
+stderr_ratio_max), and the speedup at equal noise at every wavelength,
+speedup_equal_noise = speedup / stderr_ratio_max^2 (spp, and time, grow
+with the variance to reach a given standard error).
 """
 import json
 import os
@@ -52,6 +61,27 @@ def run(port, sid, k):
     return dt, j.get("bundle", 1)
 
 
+def rms_stderr(port, sid, k):
+    """Each context's film's rms standard error (its stderr plane), a job
+    with "variance": true at bundle k."""
+    body = {"contexts": [{"id": f"w{int(w)}", "wavelength": w} for w in WLS], "defaults": {"spp": SPP},
+            "seed": 2, "bundle": k, "variance": True}
+    j = call(port, "POST", f"/v1/scenes/{sid}/jobs", body)
+    while j["state"] in ("queued", "running"):
+        time.sleep(0.01)
+        j = call(port, "GET", f"/v1/jobs/{j['id']}")
+    if j["state"] != "succeeded":
+        sys.exit(f"bench_bundles: job {j['state']}: {j}")
+    out = {}
+    for r in call(port, "GET", f"/v1/jobs/{j['id']}/results")["results"]:
+        f = call(port, "GET", r["href"])
+        nc = len(f["channels"])
+        se = f["data"][nc - 1::nc]  # radiance_stderr.Y, the last channel
+        out[r["context"]] = (sum(x * x for x in se) / len(se)) ** 0.5
+    call(port, "DELETE", f"/v1/jobs/{j['id']}")
+    return out
+
+
 def main():
     tmp = tempfile.mkdtemp(prefix="rsw-bench-bundles-")
     atmo = json.load(open(os.path.join(root, "proto", "examples", "atmosphere_molecular.json")))
@@ -79,8 +109,13 @@ def main():
                 dt, k = run(port, sid, K)
                 tk.append(dt)
             c1, ck = len(WLS) / min(t1), len(WLS) / min(tk)
+            s1, sk = rms_stderr(port, sid, 1), rms_stderr(port, sid, K)
+            ratios = sorted(sk[c] / s1[c] for c in s1 if s1[c] > 0)
+            med, worst = ratios[len(ratios) // 2], ratios[-1]
             out.append({"scene": name, "contexts": len(WLS), "spp": SPP, "contexts_per_s_k1": round(c1, 2),
-                        "contexts_per_s": round(ck, 2), "k": k, "speedup": round(ck / c1, 2)})
+                        "contexts_per_s": round(ck, 2), "k": k, "speedup": round(ck / c1, 2),
+                        "stderr_ratio_median": round(med, 3), "stderr_ratio_max": round(worst, 3),
+                        "speedup_equal_noise": round(ck / c1 / worst ** 2, 2)})
         print(json.dumps({"bench": "bundles", "scenes": out}))
     finally:
         d.terminate()

@@ -38,6 +38,14 @@ def films(port, sid, bundle, seed, wls, spp=64, quantities=None):
     st, idx = call(port, "GET", "/v1/jobs/" + j["id"] + "/results")
     return {r["context"]: call(port, "GET", r["href"])[1] for r in idx["results"]}, j
 WLS = [400.0 + 20 * i for i in range(16)]
+def film_z(fa, fb):
+    """The difference of two films' means over their combined standard
+    error (the stderr planes, their last channel)."""
+    import math
+    nc = len(fa["channels"])
+    A, SA = fa["data"][0::nc], fa["data"][nc - 1::nc]
+    B, SB = fb["data"][0::nc], fb["data"][nc - 1::nc]
+    return (sum(A) - sum(B)) / math.sqrt(sum(x * x + y * y for x, y in zip(SA, SB)))
 def agree(a, b, label):
     """Each bundled film b[ctx] is statistically the unbundled a[ctx]: its
     mean within 4 combined standard errors (the stderr planes), at most 2%
@@ -50,7 +58,7 @@ def agree(a, b, label):
         nc = len(fa["channels"])
         A, SA = fa["data"][0::nc], fa["data"][nc - 1::nc]
         B, SB = fb["data"][0::nc], fb["data"][nc - 1::nc]
-        zs.append((sum(A) - sum(B)) / math.sqrt(sum(x * x + y * y for x, y in zip(SA, SB))))
+        zs.append(film_z(fa, fb))
         far = sum(1 for x, y, s, t in zip(A, B, SA, SB) if abs(x - y) > 3 * math.sqrt(s * s + t * t)) / len(A)
         assert abs(zs[-1]) < 4, (label, ctx, "film means differ by", zs[-1], "sigma")
         assert far <= 0.02, (label, ctx, far, "of pixels beyond 3 sigma")
@@ -85,3 +93,8 @@ def auto_agrees(ports, path, wls, spp, seeds, threads_spp):
     assert j["bundle"] == 16 and "bundle_why" not in j, (path, j)
     agree(a, b, path)
     same_across_threads(ports, path, wls, threads_spp)
+def rms_stderr(f):
+    """The rms over pixels of film f's standard error plane (its last channel)."""
+    nc = len(f["channels"])
+    se = f["data"][nc - 1::nc]
+    return (sum(x * x for x in se) / len(se)) ** 0.5

@@ -103,6 +103,9 @@ static void hom_refresh(homogeneous_medium *h) {
   }
   h->base.has_spectral_extinction = spectral;
   h->base.absorbing_only = alb_max == 0.0;
+  double ext[3 * RENDER_MAX_PAGES] = {0};
+  for (int k = 0; k < 3 * h->pages; k++) ext[k] = h->sig[k / 3].c[k % 3];
+  medium_extremes(&h->base, ext, 3 * h->pages);
 }
 
 static rsw_status hom_prepare(object *o, const render_ctx *rc, rsw_err *err) {

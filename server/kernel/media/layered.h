@@ -356,6 +356,17 @@ typedef struct layered_medium {
 } layered_medium;
 extern const medium_ops layered_medium_ops;
 
+/* m's medium_extremes over its pages' columns (each page's optical
+ * thickness top to bottom per channel), after the layers are filled. */
+static inline void layered_extremes(layered_medium *m, int pages) {
+  double ext[3 * RENDER_MAX_PAGES] = {0};
+  for (int p = 0; p < pages; p++) {
+    const media_layers *L = p ? &m->Lp[p - 1] : &m->L;
+    for (int c = 0; c < 3; c++) ext[3 * p + c] = L->lay[L->n].cum[c < L->nc ? c : 0];
+  }
+  medium_extremes(&m->base, ext, 3 * pages);
+}
+
 /* The layers m answers with at the calling thread's page (rsw_page). */
 static inline const media_layers *layered_layers(const medium *m) {
   const layered_medium *lm = (const layered_medium *)m;

@@ -389,6 +389,7 @@ static rsw_status ma_refresh(mol_atmo *m, const render_ctx *rc, rsw_err *err) {
   m->lm.base.has_spectral_extinction = bundle != 0;
   m->mix.base.chromatic = bundle != 0 && m->np > 0;
   media_layers_finish(&m->lm.L);
+  layered_extremes(&m->lm, pages);
   m->lm.base.absorbing_only = m->absorbing_only;
   m->wl = wl;
   m->bundle = bundle;

@@ -59,6 +59,7 @@ static void pw_refresh(piecewise_medium *pw) {
   for (int p = 0; p < pw->pages; p++) amax = fmax(amax, pw_fill(pw, p));
   pw->lm.base.absorbing_only = amax == 0.0;
   pw->lm.base.has_spectral_extinction = pw->sigma_t->channels == 3;
+  layered_extremes(&pw->lm, pw->pages);
 }
 
 /* Pages 1..pages-1 of a bundle allocated (their levels those of lm.L).

@@ -56,7 +56,11 @@
  *  - a blendphase whose weight depends on the wavelength (once read at a
  *    bundle's first wavelength in every channel) renders a bundle
  *    chromatic: each channel's mixture at its own weight, each page bit
- *    for bit the phase prepared at the page's wavelengths alone.
+ *    for bit the phase prepared at the page's wavelengths alone;
+ *  - each medium names its thickest and thinnest channels over a
+ *    bundle's pages and their ratio (a homogeneous one by sigma_t, 9; a
+ *    piecewise one by its column, 3.45 / 0.35; 1.43 over 400..460 nm):
+ *    what volpath's free flights favour when the ratio passes 4.
  * Chi-square: 200,000 samples per run, significance 0.01 with the Sidak
  * correction over the runs of this file; fixed seeds. */
 #include <math.h>
@@ -568,6 +572,30 @@ static const char *LAYERS =
     "0.2, 0.05, 0.05, 0.05, 2.0, 0.1, 0.0]}, \"albedo\": {\"type\": \"spectrum\", \"wavelengths\": [400, "
     "700], \"values\": [0.95, 0.5]}}";
 
+/* Each medium names its thickest and thinnest channels over a bundle's
+ * pages and their ratio (volpath's flight_pages favours both above a
+ * ratio of 4): a homogeneous medium by sigma_t (0.9 at 400 nm over 0.1 at
+ * 700), a piecewise one by its column (3.45 over 0.35, the layers' sums
+ * at 400 and 700 nm); a bundle 400..460 nm of the layers spans 1.43. */
+static void test_extremes(void) {
+  scene *s = medium_scene("piecewise_volpath", HOMOGENEOUS);
+  REQUIRE(s && prepare_bundle(s, 16), "homogeneous prepared for a bundle of 16");
+  const medium *m = s->shapes[0]->interior;
+  CHECK(m->thick_channel == 0 && m->thin_channel == 15 && fabs(m->extinction_spread - 9.0) < 1e-12,
+        "homogeneous: thick %d, thin %d, spread %.17g", m->thick_channel, m->thin_channel, m->extinction_spread);
+  scene_free(s);
+  s = medium_scene("piecewise_volpath", LAYERS);
+  REQUIRE(s && prepare_bundle(s, 16), "piecewise prepared for a bundle of 16");
+  m = s->shapes[0]->interior;
+  CHECK(m->thick_channel == 0 && m->thin_channel == 15 && fabs(m->extinction_spread - 3.45 / 0.35) < 1e-9,
+        "piecewise: thick %d, thin %d, spread %.17g", m->thick_channel, m->thin_channel, m->extinction_spread);
+  REQUIRE(prepare_bundle(s, 4), "piecewise prepared for a bundle of 4");
+  CHECK(m->thick_channel == 0 && m->thin_channel == 3 && fabs(m->extinction_spread - 3.45 / 2.41) < 1e-9,
+        "piecewise, 400..460 nm: thick %d, thin %d, spread %.17g", m->thick_channel, m->thin_channel,
+        m->extinction_spread);
+  scene_free(s);
+}
+
 /* A blendphase whose weight is a grid with a wavelength axis. */
 #define BLEND_SPECTRAL                                                                                       \
   "{\"type\": \"blendphase\", \"weight\": {\"type\": \"gridvolume\", \"shape\": [1, 1, 1, 3], "              \
@@ -686,5 +714,6 @@ int main(void) {
   RSW_TEST_RUN(test_media);
   RSW_TEST_RUN(test_grids);
   RSW_TEST_RUN(test_chromatic_blend);
+  RSW_TEST_RUN(test_extremes);
   RSW_TEST_END("test_pages");
 }
