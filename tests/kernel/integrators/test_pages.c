@@ -582,13 +582,15 @@ static void test_extremes(void) {
   REQUIRE(s && prepare_bundle(s, 16), "homogeneous prepared for a bundle of 16");
   const medium *m = s->shapes[0]->interior;
   CHECK(m->thick_channel == 0 && m->thin_channel == 15 && fabs(m->extinction_spread - 9.0) < 1e-12,
-        "homogeneous: thick %d, thin %d, spread %.17g", m->thick_channel, m->thin_channel, m->extinction_spread);
+        "homogeneous: thick %d, thin %d, spread %.17g", m->thick_channel, m->thin_channel,
+        m->extinction_spread);
   scene_free(s);
   s = medium_scene("piecewise_volpath", LAYERS);
   REQUIRE(s && prepare_bundle(s, 16), "piecewise prepared for a bundle of 16");
   m = s->shapes[0]->interior;
   CHECK(m->thick_channel == 0 && m->thin_channel == 15 && fabs(m->extinction_spread - 3.45 / 0.35) < 1e-9,
-        "piecewise: thick %d, thin %d, spread %.17g", m->thick_channel, m->thin_channel, m->extinction_spread);
+        "piecewise: thick %d, thin %d, spread %.17g", m->thick_channel, m->thin_channel,
+        m->extinction_spread);
   REQUIRE(prepare_bundle(s, 4), "piecewise prepared for a bundle of 4");
   CHECK(m->thick_channel == 0 && m->thin_channel == 3 && fabs(m->extinction_spread - 3.45 / 2.41) < 1e-9,
         "piecewise, 400..460 nm: thick %d, thin %d, spread %.17g", m->thick_channel, m->thin_channel,
