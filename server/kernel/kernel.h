@@ -153,11 +153,6 @@ typedef struct plugin {
    * wavelength axis. A plugin whose prepare() reads rc->wavelength sets
    * it; scene_wavelength_dependent asks every object. */
   bool (*spectral)(const object *o);
-  /* Optional: whether the object renders a spectral bundle right (each
-   * colour channel at its own wavelength: render_ctx.bundle). NULL: yes,
-   * for an object whose wavelength dependence goes through spectrum_eval
-   * or that has none. scene_bundle_capable asks every object. */
-  bool (*bundles)(const object *o);
   /* Optional, for a plugin with prepare(): whether the object renders a
    * bundle of more than three wavelengths (render_ctx.bundle > 3: its
    * prepare() keeps a value per page and its ops answer for rsw_page).

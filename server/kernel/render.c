@@ -595,14 +595,9 @@ rsw_status render_check_bundle(const scene *sc, size_t sensor_index, int bundle,
     return rsw_fail(err, RSW_ERR_UNSUPPORTED, "bundle",
                     "sensor '%s' has a Stokes film (S0..S3 in its channels): it renders with \"bundle\": 1",
                     se->base.id);
-  const object *blk = scene_bundle_blocker(sc);
-  if (blk)
-    return rsw_fail(err, RSW_ERR_UNSUPPORTED, "bundle",
-                    "%s '%s' (%s) evaluates one wavelength at a time: this scene renders with \"bundle\": 1",
-                    obj_class_name(blk->plugin->cls), blk->id ? blk->id : "", blk->plugin->name);
   if (bundle > 3) {
     const char *why = "";
-    blk = scene_page_blocker(sc, &why);
+    const object *blk = scene_page_blocker(sc, &why);
     if (blk)
       return rsw_fail(err, RSW_ERR_UNSUPPORTED, "bundle",
                       "%s '%s' (%s) %s: this scene renders bundles of at most 3 wavelengths",

@@ -78,17 +78,17 @@ rsw_status render_sensor(scene *s, const render_opts *opts, film_image *out, ren
                          rsw_err *err);
 
 /* Whether sensor sensor_index of sc can render a bundle of `bundle`
- * wavelengths (1 always can): 2..RENDER_MAX_BUNDLE, a mono scene whose
- * every object can carry one (scene_bundle_blocker), a film without
- * Stokes components. The message names what stands in the way. */
+ * wavelengths (1 always can): 2..RENDER_MAX_BUNDLE, a mono scene, a film
+ * without Stokes components, and for more than three, a scene that can
+ * carry pages (scene_page_blocker). The message names what stands in the
+ * way. */
 rsw_status render_check_bundle(const scene *sc, size_t sensor_index, int bundle, rsw_err *err);
 
 /* A bundle's render: out[b] is the film at opts->bundle_wl[b], for b <
  * max(opts->bundle, 1) (with no bundle, render_sensor's one film). Each
  * film is what the film at its wavelength alone would be in distribution;
  * its noise is correlated with its bundle mates' (the same paths). The
- * bundle needs a mono scene whose every object can carry one
- * (scene_bundle_blocker) and a film without Stokes components. */
+ * bundle needs what render_check_bundle says. */
 rsw_status render_sensor_bundle(scene *s, const render_opts *opts, film_image *out,
                                 render_result_stats *stats, rsw_err *err);
 

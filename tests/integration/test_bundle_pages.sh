@@ -77,10 +77,15 @@
 #     films (the criteria above; measured max |z| 1.67 and 1.54, rms 0.79
 #     and 0.72) and bitwise across threads; the same for the layers with
 #     a blendphase (rayleigh, hg) whose weight grid has a wavelength axis
-#     (chromatic: each channel its own mixture; max |z| 1.27, rms 0.72);
+#     (chromatic: each channel its own mixture; max |z| 1.27, rms 0.72),
+#     and for a blend of that blend and an HG whose own weight is a
+#     spectrum (each channel its components' own values);
 #     with no
 #     albedo, each page's BRF through the layers is
 #     rho(w) exp(-tau(w) (1/mu_s + 1/mu_v)) (closed form, 1e-6);
+#   - an `mqdiffuse` plate whose grid has a wavelength axis (each channel
+#     at its own wavelength): `auto` takes 16, a bundle of 16 is
+#     statistically the unbundled films at 64 spp, bitwise across threads;
 #   - the molecular atmosphere with a constant sigma_a spectrum (a
 #     constvolume): bundles of 3 and of 16 are statistically the
 #     unbundled films (before, a bundle read the first wavelength's
@@ -203,6 +208,15 @@ w["layers"]["phase"] = {"type": "blendphase", "phase_0": {"type": "rayleigh"}, "
                                    "filter_type": "nearest", "data": [0.8, 0.5, 0.1, 0.4, 0.2, 0.1, 0.0, 0.0, 0.0],
                                    "to_world": w["layers"]["sigma_t"]["to_world"]}}
 json.dump(w, open(f"{tmp}/layers_blend.json", "w"))
+w["layers"]["phase"] = {"type": "blendphase", "phase_0": w["layers"]["phase"], "phase_1": {"type": "hg", "g": -0.4},
+                        "weight": {"type": "spectrum", "wavelengths": [400, 700], "values": [0.1, 0.6]}}
+json.dump(w, open(f"{tmp}/layers_nested_blend.json", "w"))
+q = json.load(open(f"{ex}/hdistant_lambertian.json"))
+q["sensor"]["film"]["width"] = q["sensor"]["film"]["height"] = 16
+q["surface"]["bsdf"] = {"type": "mqdiffuse", "grid": {"type": "gridvolume", "shape": [2, 3, 2, 2], "wavelengths": [400, 700],
+                        "data": [0.05, 0.4, 0.1, 0.5, 0.08, 0.3, 0.2, 0.6, 0.1, 0.45, 0.05, 0.35,
+                                 0.07, 0.5, 0.12, 0.3, 0.06, 0.4, 0.15, 0.55, 0.09, 0.3, 0.1, 0.4]}}
+json.dump(q, open(f"{tmp}/mqdiffuse.json", "w"))
 w["layers"]["phase"] = {"type": "rayleigh"}
 w["layers"]["albedo"] = 0.0
 w["sensor"] = t["sensor"]
@@ -440,9 +454,15 @@ py "grids with a wavelength axis: a piecewise medium over a spectral sigma_t gri
 import sys
 sys.path.insert(0, sys.argv[1]); from job import *
 wls = [400.0 + 10 * i for i in range(16)]
-for path, spp in ((sys.argv[4], 128), (sys.argv[5], 64), (sys.argv[6], 128)):
+for path, spp in ((sys.argv[4], 128), (sys.argv[5], 64), (sys.argv[6], 128), (sys.argv[7], 128)):
     auto_agrees([int(p) for p in sys.argv[2:4]], path, wls, spp, (41, 42), 4)
-' "$tmp" "$p2" "$p1" "$tmp/layers.json" "$tmp/atmo_sigma_a.json" "$tmp/layers_blend.json"
+' "$tmp" "$p2" "$p1" "$tmp/layers.json" "$tmp/atmo_sigma_a.json" "$tmp/layers_blend.json" "$tmp/layers_nested_blend.json"
+
+py "an mqdiffuse plate whose grid has a wavelength axis: auto takes 16, a bundle of 16 is statistically the unbundled films, and bitwise across threads" '
+import sys
+sys.path.insert(0, sys.argv[1]); from job import *
+auto_agrees([int(p) for p in sys.argv[2:4]], sys.argv[4], WLS, 64, (43, 44), 4)
+' "$tmp" "$p2" "$p1" "$tmp/mqdiffuse.json"
 
 py "the molecular atmosphere with a constant sigma_a spectrum: a bundle of 3 and of 16 is statistically the unbundled films (each channel its own absorption; a bundle once gave every channel the first wavelength's)" '
 import sys

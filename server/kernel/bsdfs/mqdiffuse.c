@@ -13,7 +13,9 @@
  * mapping onto Dr.Jit's clamped trilinear texture, whose texel k sits at
  * (k + 1/2) / res; a gridvolume's trilinear filter is the same). The
  * volume's own to_world carries p into its box, so any to_world keeps the
- * mapping. The first channel is used (the material is grey). Sampling:
+ * mapping. The first channel is used (the material is grey), or, for a
+ * grid with a wavelength axis (`wavelengths`), each channel its own (a
+ * spectral bundle's wavelengths; mono: the render's in all three). Sampling:
  * cosine hemisphere, weight eval / pdf (Eradiate's sample() wraps phi_d
  * without the + 2 pi of its eval(): negative differences read the phi = 0
  * edge there; here both use eval's rule). Values are not checked (as in
@@ -29,9 +31,11 @@
 typedef struct mqdiffuse {
   bsdf base;
   volume *grid;
+  bool spectral; /* the grid has a wavelength axis */
 } mqdiffuse;
 
-double mqdiffuse_grid_value(const volume *g, vec3 wi, vec3 wo) {
+/* The grid's point for (wi, wo) (see the top), in world space. */
+static vec3 grid_point(const volume *g, vec3 wi, vec3 wo) {
   double phi = atan2(wo.y, wo.x) - atan2(wi.y, wi.x);
   phi = fmod(phi, 2.0 * RSW_PI);
   if (phi < 0.0) phi += 2.0 * RSW_PI;
@@ -40,24 +44,39 @@ double mqdiffuse_grid_value(const volume *g, vec3 wi, vec3 wo) {
     double px = 1.0 / g->res[k];
     p[k] = c[k] * (1.0 - px) + 0.5 * px;
   }
-  return volume_eval_1(g, xf_point(&g->to_world, v3(p[0], p[1], p[2])));
+  return xf_point(&g->to_world, v3(p[0], p[1], p[2]));
 }
 
-static double mq_value(const mqdiffuse *m, vec3 wi, vec3 wo) {
-  if (!(wi.z > 0.0) || !(wo.z > 0.0)) return 0.0;
-  double v = mqdiffuse_grid_value(m->grid, wi, wo) * wo.z;
-  return isfinite(v) ? v : 0.0;
+double mqdiffuse_grid_value(const volume *g, vec3 wi, vec3 wo) {
+  return volume_eval_1(g, grid_point(g, wi, wo));
+}
+
+/* The value per channel: the grid's first channel in all three (the
+ * material is grey), or, for a grid with a wavelength axis, each channel
+ * its own (a spectral bundle's channel c at its c-th wavelength, at the
+ * page rsw_page names; in mono every channel holds the render's). */
+static color mq_value(const mqdiffuse *m, vec3 wi, vec3 wo) {
+  if (!(wi.z > 0.0) || !(wo.z > 0.0)) return col1(0.0);
+  color g = m->spectral ? volume_eval(m->grid, grid_point(m->grid, wi, wo))
+                        : col1(mqdiffuse_grid_value(m->grid, wi, wo));
+  for (int c = 0; c < 3; c++) {
+    double v = g.c[c] * wo.z;
+    g.c[c] = isfinite(v) ? v : 0.0;
+  }
+  return g;
 }
 
 static color mq_sample(const bsdf *b, const surface_interaction *si, double u1, vec2 u2, bsdf_sample *bs) {
   (void)u1;
   if (!eo_cosine_sample(si, u2, bs)) return col1(0.0);
   bs->sampled_type = BSDF_DIFFUSE_REFLECTION;
-  return col1(mq_value((const mqdiffuse *)b, si->wi, bs->wo) / bs->pdf);
+  color v = mq_value((const mqdiffuse *)b, si->wi, bs->wo);
+  for (int c = 0; c < 3; c++) v.c[c] /= bs->pdf;
+  return v;
 }
 
 static color mq_eval(const bsdf *b, const surface_interaction *si, vec3 wo) {
-  return col1(mq_value((const mqdiffuse *)b, si->wi, wo));
+  return mq_value((const mqdiffuse *)b, si->wi, wo);
 }
 
 static double mq_pdf(const bsdf *b, const surface_interaction *si, vec3 wo) {
@@ -88,19 +107,13 @@ static rsw_status mq_create(loader *ld, node *n, object **out) {
   m->base.ops = &mq_ops;
   m->base.flags = BSDF_DIFFUSE_REFLECTION;
   m->grid = g;
+  m->spectral = volume_spectral(g);
   *out = &m->base.base;
   return RSW_OK;
 }
 
 static void mq_traverse(object *o, param_visitor *v) {
   pv_object(v, "grid", &((mqdiffuse *)o)->grid->base, NAN, NAN);
-}
-
-/* The grid is read in one channel (volume_eval_1): a grid with a
- * wavelength axis would give a spectral bundle its first wavelength's
- * values in every channel. */
-static bool mq_bundles(const object *o) {
-  return !volume_spectral(((const mqdiffuse *)o)->grid);
 }
 
 const plugin plugin_mqdiffuse = {
@@ -110,5 +123,4 @@ const plugin plugin_mqdiffuse = {
     .destroy = mq_destroy,
     .ops = &mq_ops,
     .traverse = mq_traverse,
-    .bundles = mq_bundles,
 };

@@ -165,20 +165,28 @@ static void blend_polarization(const phase *ph, const medium_interaction *mi, ve
   for (int c = 0; c < 3; c++) P[c] = mu_normalized(acc[c]);
 }
 
-/* A spectral bundle whose weight depends on the wavelength (phase.chromatic,
- * set by prepare): each channel's mixture at its own weight, the weight
- * volume read per channel (and at the page rsw_page names); sample() and
- * eval_pdf() stay channel 0's. */
+/* A component's value per channel: its own channels where it is
+ * chromatic (a nested blendphase whose weight depends on the
+ * wavelength), else its one value in all three. */
+static color component_channels(const phase *ph, const medium_interaction *mi, vec3 wo) {
+  if (ph->chromatic && ph->ops->eval_channels) return ph->ops->eval_channels(ph, mi, wo);
+  double pdf;
+  return col1(ph->ops->eval_pdf(ph, mi, wo, &pdf));
+}
+
+/* A spectral bundle whose weight, or a component's, depends on the
+ * wavelength (phase.chromatic, set by prepare): each channel's mixture at
+ * its own weight of its components' own values, the weight volume read
+ * per channel (and at the page rsw_page names); sample() and eval_pdf()
+ * stay channel 0's. */
 static color blend_eval_channels(const phase *ph, const medium_interaction *mi, vec3 wo) {
   const blendphase *b = (const blendphase *)ph;
   color w = volume_eval(b->weight, mi->p);
-  double p0, p1;
-  double v0 = b->ph[0]->ops->eval_pdf(b->ph[0], mi, wo, &p0);
-  double v1 = b->ph[1]->ops->eval_pdf(b->ph[1], mi, wo, &p1);
+  color v0 = component_channels(b->ph[0], mi, wo), v1 = component_channels(b->ph[1], mi, wo);
   color r;
   for (int c = 0; c < 3; c++) {
     double wc = w.c[c] > 1.0 ? 1.0 : w.c[c] > 0.0 ? w.c[c] : 0.0;
-    r.c[c] = (1.0 - wc) * v0 + wc * v1;
+    r.c[c] = (1.0 - wc) * v0.c[c] + wc * v1.c[c];
   }
   return r;
 }
@@ -245,22 +253,15 @@ static bool blend_spectral(const phase *ph) {
   return volume_spectral(b->weight) || blend_spectral(b->ph[0]) || blend_spectral(b->ph[1]);
 }
 
-/* A spectral bundle with a weight that depends on the wavelength renders
- * chromatic (blend_eval_channels), each page at its own weights. */
+/* A spectral bundle with a weight that depends on the wavelength (its own
+ * or a nested blendphase's) renders chromatic (blend_eval_channels), each
+ * page at its own weights. */
 static rsw_status blendphase_prepare(object *o, const render_ctx *rc, rsw_err *err) {
   (void)err;
   blendphase *b = (blendphase *)o;
-  b->base.chromatic = rc->bundle > 1 && volume_spectral(b->weight);
+  b->base.chromatic = rc->bundle > 1 && blend_spectral(&b->base);
   return RSW_OK;
 }
 
-/* A chromatic mixture reads its components at channel 0: a component whose
- * own value depends on the wavelength (a nested blendphase with a spectral
- * weight) would give every channel the first wavelength's. */
-static bool blendphase_bundles(const object *o) {
-  const blendphase *b = (const blendphase *)o;
-  return !volume_spectral(b->weight) || !(blend_spectral(b->ph[0]) || blend_spectral(b->ph[1]));
-}
-
 DEFINE_PLUGIN(blendphase, CLS_PHASE, .ops = &blendphase_ops, .traverse = blendphase_traverse,
-              .prepare = blendphase_prepare, .bundles = blendphase_bundles, .pages = plugin_pages_any);
+              .prepare = blendphase_prepare, .pages = plugin_pages_any);

@@ -122,14 +122,6 @@ bool scene_wavelength_dependent(const scene *s) {
   return false;
 }
 
-const object *scene_bundle_blocker(const scene *s) {
-  for (size_t i = 0; i < s->n_objects; i++) {
-    const object *o = s->objects[i];
-    if (o->plugin && o->plugin->bundles && !o->plugin->bundles(o)) return o;
-  }
-  return NULL;
-}
-
 size_t emitter_failures(const scene *s, char *msg, size_t len) {
   size_t total = 0;
   if (msg && len) msg[0] = 0;

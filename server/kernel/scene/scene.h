@@ -49,9 +49,6 @@ rsw_status scene_prepare(scene *s, const render_ctx *rc, rsw_err *err);
  * none does renders the same thing at every wavelength. Reads the scene
  * only (not thread-safe with an update of it). */
 bool scene_wavelength_dependent(const scene *s);
-/* The first object that cannot render a spectral bundle (its plugin's
- * `bundles` op says no), or NULL when the scene can. */
-const object *scene_bundle_blocker(const scene *s);
 /* Answers the scene's emitters replaced by black during the last render
  * (emitter_ops.failures: environment plugins' NaN or negative radiance,
  * bad pdfs or directions, failed set_param), summed; the first one's

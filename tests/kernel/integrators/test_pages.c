@@ -604,43 +604,63 @@ static void test_extremes(void) {
   "\"wavelengths\": [400, 550, 700], \"data\": [0.1, 0.5, 0.9]}, \"phase_0\": {\"type\": \"rayleigh\"}, "    \
   "\"phase_1\": {\"type\": \"hg\", \"g\": 0.7}}"
 
-/* A blendphase whose weight depends on the wavelength renders a bundle
- * chromatic: its value per channel at the channel's own weight, at each
- * page bit for bit the phase prepared at the page's wavelengths alone
- * (eval_channels); sample and eval_pdf stay channel 0's. */
+/* A blendphase over a spectral blendphase, its own weight a spectrum. */
+#define BLEND_NESTED                                                                                         \
+  "{\"type\": \"blendphase\", \"weight\": {\"type\": \"spectrum\", \"wavelengths\": [400, 700], "            \
+  "\"values\": [0.2, 0.8]}, \"phase_0\": " BLEND_SPECTRAL ", \"phase_1\": {\"type\": \"hg\", \"g\": -0.3}}"
+
+/* A blendphase whose weight depends on the wavelength (its own, or a
+ * nested blendphase's) renders a bundle chromatic: its value per channel
+ * at the channel's own weights, at each page bit for bit the phase
+ * prepared at the page's wavelengths alone (eval_channels), and each
+ * channel the phase prepared at the channel's wavelength alone (one
+ * wavelength: eval_pdf; 1e-12); sample and eval_pdf stay channel 0's. */
 static void test_chromatic_blend(void) {
-  const char *med = "{\"type\": \"homogeneous\", \"phase\": " BLEND_SPECTRAL "}";
-  scene *s = medium_scene("volpath", med);
-  const char *why = "";
-  REQUIRE(s && !scene_bundle_blocker(s) && !scene_page_blocker(s, &why), "a spectral blendphase bundles: %s",
-          why);
-  REQUIRE(prepare_bundle(s, 16), "prepared for a bundle of 16");
-  const phase *ph = s->shapes[0]->interior->phase;
-  CHECK(ph->chromatic && ph->ops->eval_channels, "chromatic in a bundle");
-  medium_interaction mi = {.p = v3(0, 0, 0), .wi = v3(0, 0, 1)};
-  vec3 wo = v3_norm(v3(0.3, 0.2, 0.9));
-  for (int p = 0; p < s->pages; p++) {
-    scene *one = medium_scene("volpath", med);
+  const char *meds[2] = {"{\"type\": \"homogeneous\", \"phase\": " BLEND_SPECTRAL "}",
+                         "{\"type\": \"homogeneous\", \"phase\": " BLEND_NESTED "}"};
+  for (int i = 0; i < 2; i++) {
+    const char *med = meds[i];
+    scene *s = medium_scene("volpath", med);
+    const char *why = "";
+    REQUIRE(s && !scene_page_blocker(s, &why), "blend %d carries pages: %s", i, why);
+    REQUIRE(prepare_bundle(s, 16), "prepared for a bundle of 16");
+    const phase *ph = s->shapes[0]->interior->phase;
+    CHECK(ph->chromatic && ph->ops->eval_channels, "blend %d: chromatic in a bundle", i);
+    medium_interaction mi = {.p = v3(0, 0, 0), .wi = v3(0, 0, 1)};
+    vec3 wo = v3_norm(v3(0.3, 0.2, 0.9));
+    for (int p = 0; p < s->pages; p++) {
+      scene *one = medium_scene("volpath", med);
+      rsw_err err = {0};
+      REQUIRE(one && prepare_page_alone(one, p, &err), "page %d alone: %s", p, err.msg);
+      const phase *p1 = one->shapes[0]->interior->phase;
+      rsw_page = p;
+      color a = ph->ops->eval_channels(ph, &mi, wo);
+      rsw_page = 0;
+      color b = p1->ops->eval_channels(p1, &mi, wo);
+      CHECK(memcmp(&a, &b, sizeof a) == 0, "blend %d, page %d: %g %g %g, alone %g %g %g", i, p, a.c[0],
+            a.c[1], a.c[2], b.c[0], b.c[1], b.c[2]);
+      scene_free(one);
+      for (int c = 0; c < 3 && 3 * p + c < 16; c++) {
+        scene *w1 = medium_scene("volpath", med);
+        render_ctx rc = {.variant = VARIANT_MONO, .wavelength = 400.0 + 20.0 * (3 * p + c)};
+        REQUIRE(w1 && scene_prepare(w1, &rc, &err) == RSW_OK, "%s", err.msg);
+        const phase *pw = w1->shapes[0]->interior->phase;
+        double pdf, v = pw->ops->eval_pdf(pw, &mi, wo, &pdf);
+        CHECK(fabs(a.c[c] - v) <= 1e-12 * v, "blend %d at %g nm: %.17g in the bundle, %.17g alone", i,
+              rc.wavelength, a.c[c], v);
+        scene_free(w1);
+      }
+    }
+    color c0 = ph->ops->eval_channels(ph, &mi, wo);
+    CHECK(c0.c[0] != c0.c[2], "the channels differ: %g %g", c0.c[0], c0.c[2]);
+    scene_free(s);
+    s = medium_scene("volpath", med);
+    render_ctx mono = {.variant = VARIANT_MONO, .wavelength = 500.0};
     rsw_err err = {0};
-    REQUIRE(one && prepare_page_alone(one, p, &err), "page %d alone: %s", p, err.msg);
-    const phase *p1 = one->shapes[0]->interior->phase;
-    rsw_page = p;
-    color a = ph->ops->eval_channels(ph, &mi, wo);
-    rsw_page = 0;
-    color b = p1->ops->eval_channels(p1, &mi, wo);
-    CHECK(memcmp(&a, &b, sizeof a) == 0, "page %d: %g %g %g, alone %g %g %g", p, a.c[0], a.c[1], a.c[2],
-          b.c[0], b.c[1], b.c[2]);
-    scene_free(one);
+    REQUIRE(s && scene_prepare(s, &mono, &err) == RSW_OK, "%s", err.msg);
+    CHECK(!s->shapes[0]->interior->phase->chromatic, "one wavelength: not chromatic");
+    scene_free(s);
   }
-  color c0 = ph->ops->eval_channels(ph, &mi, wo);
-  CHECK(c0.c[0] != c0.c[2], "the channels differ: %g %g", c0.c[0], c0.c[2]);
-  scene_free(s);
-  s = medium_scene("volpath", med);
-  render_ctx mono = {.variant = VARIANT_MONO, .wavelength = 500.0};
-  rsw_err err = {0};
-  REQUIRE(s && scene_prepare(s, &mono, &err) == RSW_OK, "%s", err.msg);
-  CHECK(!s->shapes[0]->interior->phase->chromatic, "one wavelength: not chromatic");
-  scene_free(s);
 }
 
 static void test_grids(void) {
@@ -649,7 +669,6 @@ static void test_grids(void) {
   const object *blk = s ? scene_page_blocker(s, &why) : NULL;
   CHECK(s && !blk, "a piecewise medium over a spectral grid carries pages (%s: %s)",
         blk ? blk->plugin->name : "", why);
-  CHECK(s && !scene_bundle_blocker(s), "and bundles");
   REQUIRE(s && prepare_bundle(s, 16) && s->pages == 6, "prepared for a bundle of 16");
   const layered_medium *lm = (const layered_medium *)s->shapes[0]->interior;
   REQUIRE(lm && lm->Lp, "the box's medium has its pages' layers");
@@ -682,25 +701,42 @@ static void test_grids(void) {
         lm->L.lay[0].sig[0], lm->Lp[4].lay[0].sig[2]);
   CHECK(rsw_page == 0, "rsw_page left at 0");
   scene_free(s);
-  const char *one_channel[2][2] = {
-      {"{\"type\": \"homogeneous\", \"phase\": {\"type\": \"blendphase\", \"weight\": {\"type\": "
-       "\"spectrum\", \"wavelengths\": [400, 700], \"values\": [0.2, 0.8]}, \"phase_0\": " BLEND_SPECTRAL
-       ", \"phase_1\": {\"type\": \"rayleigh\"}}}",
-       "blendphase"},
-      {"{\"type\": \"scene\", \"s\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"mqdiffuse\", "
-       "\"grid\": {\"type\": \"gridvolume\", \"shape\": [2, 2, 2, 2], \"wavelengths\": [400, 700], "
-       "\"data\": [0.1, 0.2, 0.1, 0.2, 0.1, 0.2, 0.1, 0.2, 0.1, 0.2, 0.1, 0.2, 0.1, 0.2, 0.1, 0.2]}}}}",
-       "mqdiffuse"}};
-  for (int i = 0; i < 2; i++) {
-    scene *t = i == 0 ? medium_scene("volpath", one_channel[i][0]) : tsup_load(one_channel[i][0], "mono");
-    blk = t ? scene_bundle_blocker(t) : NULL;
-    CHECK(blk && strcmp(blk->plugin->name, one_channel[i][1]) == 0, "%s refuses bundles: %s",
-          one_channel[i][1],
-          blk ? blk->plugin->name
-          : t ? "none"
-              : "load failed");
-    scene_free(t);
+}
+
+/* An mqdiffuse whose grid has a wavelength axis (0.1 at 400 nm, 0.2 at
+ * 700, at every node) carries pages: its value in channel c of page p is
+ * the BSDF's prepared at that wavelength alone (1e-12). */
+static void test_mqdiffuse(void) {
+  const char *mq =
+      "{\"type\": \"mqdiffuse\", \"grid\": {\"type\": \"gridvolume\", \"shape\": [2, 2, 2, 2], "
+      "\"wavelengths\": [400, 700], \"data\": [0.1, 0.2, 0.1, 0.2, 0.1, 0.2, 0.1, 0.2, 0.1, 0.2, 0.1, "
+      "0.2, 0.1, 0.2, 0.1, 0.2]}}";
+  scene *s = bsdf_scene(mq);
+  const char *why = "";
+  const object *blk = s ? scene_page_blocker(s, &why) : NULL;
+  CHECK(s && !blk, "mqdiffuse over a spectral grid carries pages (%s: %s)", blk ? blk->plugin->name : "",
+        why);
+  REQUIRE(s && prepare_bundle(s, 16), "prepared for a bundle of 16");
+  const bsdf *b = s->shapes[0]->bsdf;
+  surface_interaction si = tb_si_with(v3_norm(v3(0.3, 0.1, 0.8)));
+  vec3 wo = v3_norm(v3(-0.2, 0.4, 0.7));
+  for (int p = 0; p < s->pages; p++) {
+    rsw_page = p;
+    color a = b->ops->eval(b, &si, wo);
+    rsw_page = 0;
+    for (int c = 0; c < 3 && 3 * p + c < 16; c++) {
+      scene *one = bsdf_scene(mq);
+      render_ctx rc = {.variant = VARIANT_MONO, .wavelength = 400.0 + 20.0 * (3 * p + c)};
+      rsw_err err = {0};
+      REQUIRE(one && scene_prepare(one, &rc, &err) == RSW_OK, "%s", err.msg);
+      const bsdf *b1 = one->shapes[0]->bsdf;
+      color v = b1->ops->eval(b1, &si, wo);
+      CHECK(fabs(a.c[c] - v.c[0]) <= 1e-12 * v.c[0] && v.c[0] > 0,
+            "at %g nm: %.17g in the bundle, %.17g alone", rc.wavelength, a.c[c], v.c[0]);
+      scene_free(one);
+    }
   }
+  scene_free(s);
 }
 
 int main(void) {
@@ -717,5 +753,6 @@ int main(void) {
   RSW_TEST_RUN(test_grids);
   RSW_TEST_RUN(test_chromatic_blend);
   RSW_TEST_RUN(test_extremes);
+  RSW_TEST_RUN(test_mqdiffuse);
   RSW_TEST_END("test_pages");
 }
