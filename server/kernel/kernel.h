@@ -268,14 +268,16 @@ typedef struct bsdf_ops {
    * depolarizes (P = diag(1, 0, 0, 0)). */
   void (*polarization)(const bsdf *b, const surface_interaction *si, vec3 wo, unsigned lobe, mueller P[3],
                        vec3 *s_in, vec3 *s_out);
-  /* Optional (a bundle of pages, integrators/pages.h): the delta lobe
-   * `lobe` (a sample()'s sampled_type) at the page rsw_page names: its
-   * value, sample()'s weight for it times the probability sample() draws
-   * it with, which goes to *prob. Its direction must not depend on the
-   * page (an index that does not vary with the wavelength). NULL: a BSDF
-   * with delta lobes carries pages only where every page draws them
-   * alike (scene_page_blocker). */
-  color (*delta_value)(const bsdf *b, const surface_interaction *si, unsigned lobe, double *prob);
+  /* Optional (a bundle of pages, integrators/pages.h): the delta lobes of
+   * kind `lobe` (a sample()'s sampled_type) that send si->wi to wo (a
+   * sample()'s direction), at the page rsw_page names: their value,
+   * sample()'s weight times the probability sample() draws them with,
+   * which goes to *prob (0 and 0 where none leads to wo: a composition's
+   * other part refracting elsewhere). A lobe's direction must not depend
+   * on the page (an index that does not vary with the wavelength). NULL:
+   * a BSDF with delta lobes carries pages only where every page draws
+   * them alike (scene_page_blocker). */
+  color (*delta_value)(const bsdf *b, const surface_interaction *si, unsigned lobe, vec3 wo, double *prob);
 } bsdf_ops;
 struct bsdf {
   object base;

@@ -100,11 +100,12 @@ static void blend_polarization(const bsdf *bb, const surface_interaction *si, ve
   for (int c = 0; c < 3; c++) P[c] = acc[c];
 }
 
-/* A bundle of pages (bsdf_ops.delta_value): lobe `lobe` at the page
- * rsw_page names, the components' values and probabilities mixed by
- * their pick probabilities 1 - w and w (a delta reflection is the mirror
- * direction in either; blend_pages refuses two delta transmissions). */
-static color blend_delta_value(const bsdf *bb, const surface_interaction *si, unsigned lobe, double *prob) {
+/* A bundle of pages (bsdf_ops.delta_value): lobe `lobe` towards wo at
+ * the page rsw_page names, the components' values and probabilities mixed
+ * by their pick probabilities 1 - w and w (each counts only where its own
+ * lobe leads to wo: two delta transmissions may refract apart). */
+static color blend_delta_value(const bsdf *bb, const surface_interaction *si, unsigned lobe, vec3 wo,
+                               double *prob) {
   const blend_bsdf *b = (const blend_bsdf *)bb;
   double w = weight_at(b, si), pk[2] = {1.0 - w, w};
   color v = col1(0.0);
@@ -113,7 +114,7 @@ static color blend_delta_value(const bsdf *bb, const surface_interaction *si, un
     const bsdf *c = b->c[k];
     double p = 0.0;
     if (!(pk[k] > 0) || !c->ops->delta_value) continue;
-    v = col_add(v, col_scale(c->ops->delta_value(c, si, lobe, &p), pk[k]));
+    v = col_add(v, col_scale(c->ops->delta_value(c, si, lobe, wo, &p), pk[k]));
     *prob += pk[k] * p;
   }
   return v;
@@ -126,17 +127,14 @@ static const bsdf_ops blend_ops = {.sample = blend_sample,
                                    .delta_value = blend_delta_value};
 
 /* Whether a bundle of pages can weigh its delta lobes (scene_page_blocker):
- * each component's delta lobes say their values, and at most one of them
- * has a delta transmission (two could refract in different directions). */
+ * each component's delta lobes say their values. */
 static bool blend_pages(const object *o) {
   const blend_bsdf *b = (const blend_bsdf *)o;
-  int dt = 0;
   for (int k = 0; k < 2; k++) {
     const bsdf *c = b->c[k];
     if ((c->flags & BSDF_DELTA) && !c->ops->delta_value) return false;
-    dt += (c->flags & BSDF_DELTA_TRANSMISSION) != 0;
   }
-  return dt < 2;
+  return true;
 }
 
 static void blend_traverse(object *o, param_visitor *v) {

@@ -155,4 +155,12 @@ static inline color bsdf_fail(bsdf_sample *bs) {
   return col1(0.0);
 }
 
+/* Whether delta lobes' directions a and b (unit) are one: the same
+ * computation gives the same bits; 1e-12 allows another order of the
+ * same operations (a composition's pass-through against an index-matched
+ * refraction). */
+static inline bool delta_same_direction(vec3 a, vec3 b) {
+  return fabs(a.x - b.x) <= 1e-12 && fabs(a.y - b.y) <= 1e-12 && fabs(a.z - b.z) <= 1e-12;
+}
+
 #endif

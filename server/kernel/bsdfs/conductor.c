@@ -140,17 +140,18 @@ static color conductor_sample(const bsdf *b, const surface_interaction *si, doub
 }
 
 /* A bundle of pages (bsdf_ops.delta_value): the mirror lobe at the page
- * rsw_page names, drawn with probability 1 (0 below the surface): its
+ * rsw_page names, drawn with probability 1 (0 below the surface, or for
+ * a wo that is not the mirror direction): its
  * value is sample()'s weight, bit for bit. What a composition over a
  * conductor (twosided) asks for. */
-static color conductor_delta_value(const bsdf *b, const surface_interaction *si, unsigned lobe,
+static color conductor_delta_value(const bsdf *b, const surface_interaction *si, unsigned lobe, vec3 wo,
                                    double *prob) {
   bsdf_sample bs;
   double u1 = 0.0;
   vec2 u2 = v2(0.0, 0.0);
   color w;
   conductor_sample_batch(b, 1, &si, &u1, &u2, &bs, &w);
-  *prob = bs.pdf > 0.0 && lobe == BSDF_DELTA_REFLECTION ? 1.0 : 0.0;
+  *prob = bs.pdf > 0.0 && lobe == BSDF_DELTA_REFLECTION && delta_same_direction(wo, bs.wo) ? 1.0 : 0.0;
   return *prob > 0.0 ? w : col1(0.0);
 }
 

@@ -45,18 +45,23 @@ static color dielectric_sample(const bsdf *b, const surface_interaction *si, dou
 }
 
 /* A lobe's value and its probability (R for the reflection, 1 - R for the
- * transmission) at the page rsw_page names (bsdf_ops.delta_value; the
- * index is one number, so the direction is every page's). */
-static color dielectric_delta_value(const bsdf *b, const surface_interaction *si, unsigned lobe,
+ * transmission) at the page rsw_page names, where the lobe sends wi to wo
+ * (bsdf_ops.delta_value; the index is one number, so the direction is
+ * every page's). */
+static color dielectric_delta_value(const bsdf *b, const surface_interaction *si, unsigned lobe, vec3 wo,
                                     double *prob) {
   const dielectric_bsdf *d = (const dielectric_bsdf *)b;
   double cos_t, eta_it, eta_ti;
   double r = fresnel_dielectric(si->wi.z, d->eta, &cos_t, &eta_it, &eta_ti);
+  *prob = 0.0;
   if (lobe == BSDF_DELTA_REFLECTION) {
+    if (!delta_same_direction(wo, reflect_local(si->wi))) return col1(0.0);
     *prob = r;
     return col_scale(bsdf_factor(d->specular_reflectance, si), r);
   }
-  *prob = lobe == BSDF_DELTA_TRANSMISSION ? 1.0 - r : 0.0;
+  if (lobe != BSDF_DELTA_TRANSMISSION || !delta_same_direction(wo, refract_local(si->wi, cos_t, eta_ti)))
+    return col1(0.0);
+  *prob = 1.0 - r;
   return col_scale(bsdf_factor(d->specular_transmittance, si), *prob * eta_ti * eta_ti);
 }
 

@@ -70,16 +70,18 @@ static void mask_polarization(const bsdf *b, const surface_interaction *si, vec3
   fpol_forward(m->nested, si, wo, lobe, P, s_in, s_out);
 }
 
-/* A bundle of pages (bsdf_ops.delta_value): lobe `lobe` at the page
- * rsw_page names, the pass-through's (1 - alpha, weight 1) plus alpha
- * times the nested BSDF's. mask_pages keeps the two apart: a nested delta
- * transmission (refracted elsewhere) is refused. */
-static color mask_delta_value(const bsdf *b, const surface_interaction *si, unsigned lobe, double *prob) {
+/* A bundle of pages (bsdf_ops.delta_value): lobe `lobe` towards wo at the
+ * page rsw_page names, the pass-through's (1 - alpha, weight 1, where wo
+ * = -wi) plus alpha times the nested BSDF's (where its lobe leads to wo:
+ * a nested delta transmission refracts elsewhere). */
+static color mask_delta_value(const bsdf *b, const surface_interaction *si, unsigned lobe, vec3 wo,
+                              double *prob) {
   const mask_bsdf *m = (const mask_bsdf *)b;
   double a = opacity_at(m, si), pn = 0.0;
   color v = col1(0.0);
-  if (m->nested->ops->delta_value) v = col_scale(m->nested->ops->delta_value(m->nested, si, lobe, &pn), a);
-  double pass = lobe == BSDF_DELTA_TRANSMISSION ? 1.0 - a : 0.0;
+  if (m->nested->ops->delta_value)
+    v = col_scale(m->nested->ops->delta_value(m->nested, si, lobe, wo, &pn), a);
+  double pass = lobe == BSDF_DELTA_TRANSMISSION && delta_same_direction(wo, v3_neg(si->wi)) ? 1.0 - a : 0.0;
   *prob = pass + a * pn;
   return col_add(v, col1(pass));
 }
@@ -91,11 +93,10 @@ static const bsdf_ops mask_ops = {.sample = mask_sample,
                                   .delta_value = mask_delta_value};
 
 /* Whether a bundle of pages can weigh its delta lobes (scene_page_blocker):
- * the nested BSDF's delta lobes say their values, and none of them is a
- * transmission (the pass-through's lobe, in another direction). */
+ * the nested BSDF's delta lobes say their values. */
 static bool mask_pages(const object *o) {
   const bsdf *n = ((const mask_bsdf *)o)->nested;
-  return !(n->flags & BSDF_DELTA) || (n->ops->delta_value && !(n->flags & BSDF_DELTA_TRANSMISSION));
+  return !(n->flags & BSDF_DELTA) || n->ops->delta_value;
 }
 
 static void mask_traverse(object *o, param_visitor *v) {

@@ -43,11 +43,13 @@ static void null_polarization(const bsdf *b, const surface_interaction *si, vec3
   *s_in = *s_out = fpol_s_axis(wo, si->wi);
 }
 
-/* A bundle of pages (bsdf_ops.delta_value): the crossing, weight 1 with
- * probability 1 at every page (what a composition over a `null` asks). */
-static color null_delta_value(const bsdf *b, const surface_interaction *si, unsigned lobe, double *prob) {
-  (void)b, (void)si;
-  *prob = lobe == BSDF_DELTA_TRANSMISSION ? 1.0 : 0.0;
+/* A bundle of pages (bsdf_ops.delta_value): the crossing (wo = -wi),
+ * weight 1 with probability 1 at every page (what a composition over a
+ * `null` asks). */
+static color null_delta_value(const bsdf *b, const surface_interaction *si, unsigned lobe, vec3 wo,
+                              double *prob) {
+  (void)b;
+  *prob = lobe == BSDF_DELTA_TRANSMISSION && delta_same_direction(wo, v3_neg(si->wi)) ? 1.0 : 0.0;
   return col1(*prob);
 }
 

@@ -56,12 +56,14 @@ static color plastic_sample(const bsdf *b, const surface_interaction *si, double
 }
 
 /* The specular lobe's value F(cos_i) s and its probability P_s at the
- * page rsw_page names (bsdf_ops.delta_value). */
-static color plastic_delta_value(const bsdf *b, const surface_interaction *si, unsigned lobe, double *prob) {
+ * page rsw_page names, wo being its mirror direction (bsdf_ops.delta_value). */
+static color plastic_delta_value(const bsdf *b, const surface_interaction *si, unsigned lobe, vec3 wo,
+                                 double *prob) {
   const plastic_bsdf *p = (const plastic_bsdf *)b;
   double cos_i = si->wi.z;
   *prob = 0.0;
-  if (!(cos_i > 0.0) || lobe != BSDF_DELTA_REFLECTION) return col1(0.0);
+  if (!(cos_i > 0.0) || lobe != BSDF_DELTA_REFLECTION || !delta_same_direction(wo, reflect_local(si->wi)))
+    return col1(0.0);
   double f_i = fresnel_dielectric(cos_i, p->layer.eta, NULL, NULL, NULL);
   *prob = prob_specular(p, f_i);
   return col_scale(bsdf_factor(p->layer.specular, si), f_i);

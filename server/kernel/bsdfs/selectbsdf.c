@@ -63,10 +63,11 @@ static void sel_polarization(const bsdf *b, const surface_interaction *si, vec3 
 
 /* A bundle of pages (bsdf_ops.delta_value): the picked BSDF's (sel_pages:
  * every component's delta lobes say their values). */
-static color sel_delta_value(const bsdf *b, const surface_interaction *si, unsigned lobe, double *prob) {
+static color sel_delta_value(const bsdf *b, const surface_interaction *si, unsigned lobe, vec3 wo,
+                             double *prob) {
   const bsdf *k = pick((const selectbsdf *)b, si);
   *prob = 0.0;
-  return k && k->ops->delta_value ? k->ops->delta_value(k, si, lobe, prob) : col1(0.0);
+  return k && k->ops->delta_value ? k->ops->delta_value(k, si, lobe, wo, prob) : col1(0.0);
 }
 
 static const bsdf_ops sel_ops = {.sample = sel_sample,

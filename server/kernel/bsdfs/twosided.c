@@ -161,23 +161,24 @@ static void twosided_polarization(const bsdf *b, const surface_interaction *si, 
 }
 
 /* A bundle of pages (bsdf_ops.delta_value): the side's BSDF's delta lobe
- * at the page rsw_page names, the back side's wi mirrored as for its
+ * at the page rsw_page names, the back side's wi and wo mirrored as for its
  * values (a mirrored direction has the same cosines, so the lobe's value
  * and probability are the back BSDF's). A side whose BSDF has no
  * delta_value has no delta lobe it could have drawn: nested delta lobes
  * say their value (conductor, plastic; scene_page_blocker refuses the
  * others, and twosided refuses transmission). */
-static color twosided_delta_value(const bsdf *b, const surface_interaction *si, unsigned lobe, double *prob) {
+static color twosided_delta_value(const bsdf *b, const surface_interaction *si, unsigned lobe, vec3 wo,
+                                  double *prob) {
   const twosided_bsdf *t = (const twosided_bsdf *)b;
   *prob = 0.0;
   if (!(si->wi.z != 0.0)) return col1(0.0);
   int side = si->wi.z < 0.0;
   const bsdf *n = t->brdf[side];
   if (!n->ops->delta_value) return col1(0.0);
-  if (!side) return n->ops->delta_value(n, si, lobe, prob);
+  if (!side) return n->ops->delta_value(n, si, lobe, wo, prob);
   surface_interaction s = *si;
   s.wi = flip_z(si->wi);
-  return n->ops->delta_value(n, &s, lobe, prob);
+  return n->ops->delta_value(n, &s, lobe, flip_z(wo), prob);
 }
 
 static const bsdf_ops twosided_ops = {.polarization = twosided_polarization,

@@ -29,10 +29,12 @@ static inline double bsdf_eval_pages(const bsdf *b, const surface_interaction *s
  * from (then, rescaled, the lobe within it), u2 the direction; bs->pdf is
  * the pages' mean density of bs->wo and w[p] each page's value over it.
  * A delta lobe of a BSDF that says its value (bsdf_ops.delta_value:
- * `plastic`, `dielectric`, `conductor`, `null` and the compositions over them): each page's value over the mean of the pages'
+ * `plastic`, `dielectric`, `conductor`, `null` and the compositions over
+ * them): each page's value towards bs->wo over the mean of the pages'
  * probabilities of drawing it (bs->pdf), so that a lobe the pages choose
  * with different probabilities (a spectral diffuse_reflectance weights
- * plastic's choice) stays unbiased at every page. Other delta lobes (a
+ * plastic's choice) stays unbiased at every page, and a composition's
+ * lobes that lead elsewhere (another glass's refraction) do not count. Other delta lobes (a
  * BSDF without delta_value whose only lobe is a mirror: scene_page_blocker) take
  * each page's own weight for the same lobe and direction. A failed
  * sample: bs->pdf 0 and every weight 0. */
@@ -50,7 +52,7 @@ static inline void bsdf_sample_pages(const bsdf *b, const surface_interaction *s
     double pm = 0.0, pr;
     for (int p = 0; p < pages; p++) {
       rsw_page = p;
-      w[p] = b->ops->delta_value(b, si, bs->sampled_type, &pr);
+      w[p] = b->ops->delta_value(b, si, bs->sampled_type, bs->wo, &pr);
       pm += pr;
     }
     bs->pdf = pm / pages;

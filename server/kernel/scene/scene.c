@@ -158,11 +158,11 @@ const object *scene_page_blocker(const scene *s, const char **why) {
      * (the mirror direction, drawn with probability 1 at every page), or
      * index-matched (weight 1 at every wavelength). Compositions (blendbsdf,
      * selectbsdf, mask, twosided) say their parts' values and
-     * probabilities; their `pages` hook refuses what they cannot tell
-     * apart (two delta transmissions, a part that does not say its). */
+     * probabilities towards the sampled direction (two delta
+     * transmissions that refract apart count each towards its own); their
+     * `pages` hook refuses a part whose delta lobe does not say its. */
     if (pl->cls == CLS_BSDF && pl->pages && !pl->pages(o)) { /* a composition (blendbsdf, mask, ...) */
-      *why = "has delta lobes it cannot tell apart at every page (two delta transmissions, or a part's "
-             "delta lobe without its value per page)";
+      *why = "has a part whose delta lobe does not say its value per page";
       return o;
     }
     if (pl->cls == CLS_BSDF) {

@@ -34,10 +34,10 @@
  *    plastic and a mask over a plastic (its pass-through too), drawn with
  *    the pages' mean probability (as above);
  *  - what carries pages: plastic, roughplastic, dielectric, the ocean,
- *    twosided, blendbsdf, mask and selectbsdf over them; a blend of two
- *    dielectrics and a mask over a dielectric (two delta transmissions
- *    it cannot tell apart) are refused, named, "delta lobe" in the
- *    reason;
+ *    twosided, blendbsdf, mask and selectbsdf over them, a blend of two
+ *    dielectrics and a mask over a dielectric among them (two delta
+ *    transmissions, told apart by their directions); the `stokes`
+ *    integrator is refused, named;
  *  - `homogeneous` and `heterogeneous` media carry pages under volpath
  *    and piecewise_volpath (a heterogeneous one's majorant covers every
  *    page: volpath tracks them at once); at page
@@ -319,33 +319,39 @@ static void test_ocean(void) {
   g_ocean = NULL;
 }
 
-/* A delta lobe's probability at each page (bsdf_ops.delta_value). */
-static double delta_prob(const bsdf *b, const surface_interaction *si, int p, unsigned lobe, color *v) {
+/* A delta lobe's probability towards wo at page p (bsdf_ops.delta_value). */
+static double delta_prob(const bsdf *b, const surface_interaction *si, int p, unsigned lobe, vec3 wo,
+                         color *v) {
   double pr;
   rsw_page = p;
-  *v = b->ops->delta_value(b, si, lobe, &pr);
+  *v = b->ops->delta_value(b, si, lobe, wo, &pr);
   rsw_page = 0;
   return pr;
 }
 
 /* Delta lobes whose choice differs between the pages (plastic) or does
- * not (glass): over 200,000 samples the delta lobe is drawn with the
- * pages' mean probability (within 4 binomial standard errors), each
- * page's weight times that mean is the page's own value (1e-12), and
- * each page's value and probability are the BSDF's at the page's
- * wavelengths alone, bit for bit. */
-static void delta_case(const char *json, unsigned lobe, int pk) {
+ * not (glass), and compositions whose parts' lobes of one kind lead to
+ * different directions (two glasses, a mask's pass-through and its
+ * glass): over 200,000 samples each direction the lobe is drawn towards
+ * is drawn with the pages' mean probability for it (within 4 binomial
+ * standard errors), each page's weight times that mean is the page's own
+ * value towards it (1e-12), and each page's value and probability are
+ * the BSDF's at the page's wavelengths alone, bit for bit. ndir: the
+ * distinct directions expected. */
+static void delta_case(const char *json, unsigned lobe, int pk, int ndir) {
   scene *s = bsdf_scene(json);
   REQUIRE(s && prepare_bundle(s, 16), "%s", json);
   const bsdf *b = s->shapes[0]->bsdf;
   surface_interaction si = tb_si_with(tb_dir_deg(40, 0));
-  double pm = 0, pr[RENDER_MAX_PAGES];
-  color v[RENDER_MAX_PAGES];
-  for (int p = 0; p < s->pages; p++) pm += pr[p] = delta_prob(b, &si, p, lobe, &v[p]);
-  pm /= s->pages;
-  CHECK(pk ? pr[0] > 2 * pr[5] : pr[0] == pr[5], "page 0's probability %g, page 5's %g", pr[0], pr[5]);
+  enum {
+    D = 4
+  };
+  vec3 dir[D];
+  int nd = 0, hits[D] = {0}, checked[D] = {0};
+  double pm[D] = {0}, pr[D][RENDER_MAX_PAGES];
+  color v[D][RENDER_MAX_PAGES];
   uint64_t state = 5;
-  int n = 200000, hits = 0;
+  int n = 200000;
   for (int k = 0; k < n; k++) {
     double u[3];
     for (int i = 0; i < 3; i++) {
@@ -356,53 +362,82 @@ static void delta_case(const char *json, unsigned lobe, int pk) {
     color w[RENDER_MAX_PAGES];
     bsdf_sample_pages(b, &si, s->pages, u[0], v2(u[1], u[2]), &bs, w);
     if (bs.sampled_type != lobe || !(bs.pdf > 0)) continue;
-    hits++;
-    if (hits > 100) continue;
-    CHECK_REL(bs.pdf, pm, 1e-14);
+    int d = 0;
+    while (d < nd && !(dir[d].x == bs.wo.x && dir[d].y == bs.wo.y && dir[d].z == bs.wo.z)) d++;
+    if (d == nd) {
+      REQUIRE(nd < D, "more than %d directions", D);
+      dir[nd++] = bs.wo;
+      for (int p = 0; p < s->pages; p++) pm[d] += pr[d][p] = delta_prob(b, &si, p, lobe, bs.wo, &v[d][p]);
+      pm[d] /= s->pages;
+    }
+    hits[d]++;
+    if (checked[d]++ >= 100) continue;
+    CHECK_REL(bs.pdf, pm[d], 1e-14);
     for (int p = 0; p < s->pages; p++)
-      for (int c = 0; c < 3; c++) CHECK_REL(w[p].c[c] * pm, v[p].c[c], 1e-12);
+      for (int c = 0; c < 3; c++) CHECK_REL(w[p].c[c] * pm[d], v[d][p].c[c], 1e-12);
   }
-  double se = sqrt(pm * (1 - pm) / n);
-  CHECK(fabs((double)hits / n - pm) < 4 * se, "drawn %g of the time, the mean probability %g (se %g)",
-        (double)hits / n, pm, se);
-  for (int p = 0; p < s->pages; p += 5) {
-    scene *one = bsdf_scene(json);
-    render_ctx rc = {.variant = VARIANT_MONO, .bundle = 3};
-    for (int c = 0; c < RENDER_MAX_BUNDLE; c++)
-      rc.wl[c] = 400.0 + 20.0 * (p == 5 ? 15 : 3 * p + (c < 3 ? c : 2));
-    rc.wavelength = rc.wl[0];
-    rsw_err err = {0};
-    REQUIRE(one && scene_prepare(one, &rc, &err) == RSW_OK, "page %d alone", p);
-    color v1;
-    double p1 = delta_prob(one->shapes[0]->bsdf, &si, 0, lobe, &v1);
-    CHECK(p1 == pr[p] && v1.c[0] == v[p].c[0] && v1.c[1] == v[p].c[1] && v1.c[2] == v[p].c[2],
-          "page %d alone", p);
-    scene_free(one);
+  CHECK(nd == ndir, "%d directions drawn, %d expected", nd, ndir);
+  for (int d = 0; d < nd; d++) {
+    CHECK(pk ? pr[d][0] > 2 * pr[d][5] : pr[d][0] == pr[d][5],
+          "direction %d: page 0's probability %g, page 5's %g", d, pr[d][0], pr[d][5]);
+    double se = sqrt(pm[d] * (1 - pm[d]) / n);
+    CHECK(fabs((double)hits[d] / n - pm[d]) < 4 * se,
+          "direction %d drawn %g of the time, the mean probability %g (se %g)", d, (double)hits[d] / n, pm[d],
+          se);
+    for (int p = 0; p < s->pages; p += 5) {
+      scene *one = bsdf_scene(json);
+      render_ctx rc = {.variant = VARIANT_MONO, .bundle = 3};
+      for (int c = 0; c < RENDER_MAX_BUNDLE; c++)
+        rc.wl[c] = 400.0 + 20.0 * (p == 5 ? 15 : 3 * p + (c < 3 ? c : 2));
+      rc.wavelength = rc.wl[0];
+      rsw_err err = {0};
+      REQUIRE(one && scene_prepare(one, &rc, &err) == RSW_OK, "page %d alone", p);
+      color v1;
+      double p1 = delta_prob(one->shapes[0]->bsdf, &si, 0, lobe, dir[d], &v1);
+      CHECK(p1 == pr[d][p] && v1.c[0] == v[d][p].c[0] && v1.c[1] == v[d][p].c[1] && v1.c[2] == v[d][p].c[2],
+            "direction %d, page %d alone", d, p);
+      scene_free(one);
+    }
   }
   CHECK(rsw_page == 0, "rsw_page left at 0");
   scene_free(s);
 }
 
 static void test_delta(void) {
-  delta_case(PLASTIC, BSDF_DELTA_REFLECTION, 1);
-  delta_case(GLASS, BSDF_DELTA_TRANSMISSION, 0);
-  delta_case(GLASS, BSDF_DELTA_REFLECTION, 0);
+  delta_case(PLASTIC, BSDF_DELTA_REFLECTION, 1, 1);
+  delta_case(GLASS, BSDF_DELTA_TRANSMISSION, 0, 1);
+  delta_case(GLASS, BSDF_DELTA_REFLECTION, 0, 1);
 }
 
 /* Compositions over delta lobes: a blend of a diffuse and a plastic (the
  * specular lobe's probability halved, still differing between the
  * pages), a mask over a plastic (its pass-through, 1 - opacity at every
- * page, and the plastic's lobe times the opacity): drawn with the pages'
- * mean probability, weighted by each page's value (delta_case). */
+ * page, and the plastic's lobe times the opacity), a blend of two glasses
+ * (index 1.5 and 1.33: two transmitted directions, each its glass's
+ * lobe; one reflected, both glasses' lobes) and a mask over a glass (the
+ * pass-through and the glass's refraction, two directions): drawn with
+ * the pages' mean probability, weighted by each page's value
+ * (delta_case). */
 static void test_compositions(void) {
   char json[512];
   snprintf(json, sizeof json,
            "{\"type\": \"blendbsdf\", \"weight\": 0.5, \"bsdf_0\": {\"type\": \"diffuse\"}, \"bsdf_1\": %s}",
            PLASTIC);
-  delta_case(json, BSDF_DELTA_REFLECTION, 1);
+  delta_case(json, BSDF_DELTA_REFLECTION, 1, 1);
   snprintf(json, sizeof json, "{\"type\": \"mask\", \"opacity\": 0.6, \"bsdf\": %s}", PLASTIC);
-  delta_case(json, BSDF_DELTA_REFLECTION, 1);
-  delta_case(json, BSDF_DELTA_TRANSMISSION, 0);
+  delta_case(json, BSDF_DELTA_REFLECTION, 1, 1);
+  delta_case(json, BSDF_DELTA_TRANSMISSION, 0, 1);
+  const char *glasses =
+      "{\"type\": \"blendbsdf\", \"weight\": 0.3, \"bsdf_0\": {\"type\": \"dielectric\", "
+      "\"int_ior\": 1.5, \"ext_ior\": 1.0}, \"bsdf_1\": {\"type\": \"dielectric\", \"int_ior\": "
+      "1.33, \"ext_ior\": 1.0}}";
+  delta_case(glasses, BSDF_DELTA_TRANSMISSION, 0, 2);
+  delta_case(glasses, BSDF_DELTA_REFLECTION, 0, 1);
+  const char *masked =
+      "{\"type\": \"mask\", \"opacity\": 0.6, \"bsdf\": {\"type\": \"dielectric\", \"int_ior\": "
+      "1.5, \"ext_ior\": 1.0}}";
+  delta_case(masked, BSDF_DELTA_TRANSMISSION, 0, 2);
+  delta_case(masked, BSDF_DELTA_REFLECTION, 0, 1);
 }
 
 /* twosided over a plastic and over a gold conductor: its delta_value is
@@ -412,7 +447,7 @@ static void test_compositions(void) {
 static void test_twosided(void) {
   char two[512];
   snprintf(two, sizeof two, "{\"type\": \"twosided\", \"bsdf\": %s}", PLASTIC);
-  delta_case(two, BSDF_DELTA_REFLECTION, 1);
+  delta_case(two, BSDF_DELTA_REFLECTION, 1, 1);
   const char *nested[2] = {PLASTIC, "{\"type\": \"conductor\", \"material\": \"Au\"}"};
   for (int i = 0; i < 2; i++) {
     snprintf(two, sizeof two, "{\"type\": \"twosided\", \"bsdf\": %s}", nested[i]);
@@ -422,11 +457,12 @@ static void test_twosided(void) {
     CHECK(b->ops->delta_value && n->ops->delta_value, "%s says its delta lobes' values", two);
     surface_interaction front = tb_si_with(tb_dir_deg(40, 0)), back = front;
     back.wi.z = -front.wi.z;
+    vec3 wf = v3(-front.wi.x, -front.wi.y, front.wi.z), wb = v3(-back.wi.x, -back.wi.y, back.wi.z);
     for (int p = 0; p < s->pages; p++) {
       color vf, vb, vn;
-      double pf = delta_prob(b, &front, p, BSDF_DELTA_REFLECTION, &vf);
-      double pb = delta_prob(b, &back, p, BSDF_DELTA_REFLECTION, &vb);
-      double pn = delta_prob(n, &front, p, BSDF_DELTA_REFLECTION, &vn);
+      double pf = delta_prob(b, &front, p, BSDF_DELTA_REFLECTION, wf, &vf);
+      double pb = delta_prob(b, &back, p, BSDF_DELTA_REFLECTION, wb, &vb);
+      double pn = delta_prob(n, &front, p, BSDF_DELTA_REFLECTION, wf, &vn);
       CHECK(pn > 0 && pf == pn && pb == pn && memcmp(&vf, &vn, sizeof vn) == 0 &&
                 memcmp(&vb, &vn, sizeof vn) == 0,
             "%s page %d: front %g, back %g, nested %g", two, p, pf, pb, pn);
@@ -434,8 +470,11 @@ static void test_twosided(void) {
     surface_interaction flat = front;
     flat.wi.z = 0.0;
     color v;
-    CHECK(delta_prob(b, &flat, 0, BSDF_DELTA_REFLECTION, &v) == 0.0 && col_max(v) == 0.0, "%s: wi.z = 0",
+    CHECK(delta_prob(b, &flat, 0, BSDF_DELTA_REFLECTION, wf, &v) == 0.0 && col_max(v) == 0.0, "%s: wi.z = 0",
           two);
+    color vx;
+    CHECK(delta_prob(b, &front, 0, BSDF_DELTA_REFLECTION, v3(0, 0, 1), &vx) == 0.0 && col_max(vx) == 0.0,
+          "%s: not the mirror direction", two);
     scene_free(s);
     scene_free(one);
   }
@@ -443,11 +482,11 @@ static void test_twosided(void) {
 
 /* What carries pages (scene_page_blocker): plastic, roughplastic,
  * dielectric, the ocean that follows the render, and twosided, blendbsdf,
- * mask and selectbsdf over them do; a blend of two dielectrics and a mask
- * over a dielectric (two delta transmissions) are refused, naming the
- * composition. */
+ * mask and selectbsdf over them, a blend of two dielectrics and a mask
+ * over a dielectric among them (each part's lobe counts only towards its
+ * own direction); the `stokes` integrator is refused, named. */
 static void test_blockers(void) {
-  const char *yes[10] = {PLASTIC,
+  const char *yes[12] = {PLASTIC,
                          ROUGHPLASTIC,
                          GLASS,
                          OCEAN,
@@ -458,28 +497,27 @@ static void test_blockers(void) {
                          "{\"type\": \"mask\", \"opacity\": 0.5, \"bsdf\": {\"type\": \"plastic\"}}",
                          "{\"type\": \"selectbsdf\", \"indices\": 1, \"bsdf_0\": {\"type\": \"diffuse\"}, "
                          "\"bsdf_1\": {\"type\": \"dielectric\"}}",
+                         "{\"type\": \"blendbsdf\", \"weight\": 0.3, \"bsdf_0\": {\"type\": \"dielectric\"}, "
+                         "\"bsdf_1\": {\"type\": \"dielectric\", \"int_ior\": 1.33}}",
+                         "{\"type\": \"mask\", \"opacity\": 0.5, \"bsdf\": {\"type\": \"dielectric\"}}",
                          "{\"type\": \"blendbsdf\", \"weight\": 0.3, \"bsdf_0\": {\"type\": \"diffuse\"}, "
                          "\"bsdf_1\": {\"type\": \"roughplastic\"}}"};
-  const char *no[2][2] = {
-      {"{\"type\": \"blendbsdf\", \"weight\": 0.3, \"bsdf_0\": {\"type\": \"dielectric\"}, "
-       "\"bsdf_1\": {\"type\": \"dielectric\", \"int_ior\": 1.33}}",
-       "blendbsdf"},
-      {"{\"type\": \"mask\", \"opacity\": 0.5, \"bsdf\": {\"type\": \"dielectric\"}}", "mask"}};
-  for (int i = 0; i < 10; i++) {
+  for (int i = 0; i < 12; i++) {
     scene *s = bsdf_scene(yes[i]);
     const char *why = "";
     const object *blk = s ? scene_page_blocker(s, &why) : NULL;
     CHECK(s && !blk, "%s carries pages (%s: %s)", yes[i], blk ? blk->plugin->name : "", why);
     scene_free(s);
   }
-  for (int i = 0; i < 2; i++) {
-    scene *s = bsdf_scene(no[i][0]);
-    const char *why = "";
-    const object *blk = s ? scene_page_blocker(s, &why) : NULL;
-    CHECK(blk && strcmp(blk->plugin->name, no[i][1]) == 0 && strstr(why, "delta lobe"), "%s refused: %s %s",
-          no[i][0], blk ? blk->plugin->name : "none", why);
-    scene_free(s);
-  }
+  scene *s =
+      tsup_load("{\"type\": \"scene\", \"integrator\": {\"type\": \"stokes\", \"integrator\": {\"type\": "
+                "\"path\"}}, \"s\": {\"type\": \"rectangle\"}}",
+                "mono_polarized");
+  const char *why = "";
+  const object *blk = s ? scene_page_blocker(s, &why) : NULL;
+  CHECK(blk && strcmp(blk->plugin->name, "stokes") == 0 && strstr(why, "at most three"),
+        "stokes refused: %s %s", blk ? blk->plugin->name : "none", why);
+  scene_free(s);
 }
 
 /* A medium (spectral sigma_t and albedo) inside a cube, rendered by the
