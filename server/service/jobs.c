@@ -1294,6 +1294,30 @@ static void finish_job(service *svc, job *j) {
 /* Item k's render ended with st (its film in *film when st is OK; e the
  * error otherwise): the film stored, counters, and its event. Called
  * without svc->lock; returns holding it. */
+/* The first film of job j whose render replaced environment plugin
+ * answers by black (film_image.plugin_failures) adds a warning to the
+ * job (`raysweep sweep` prints the job's warnings, its dataset keeps
+ * them); every such film says so in its own meta and result. svc->lock
+ * held. */
+static void note_plugin_failures(job *j, const render_item *it) {
+  for (const cJSON *w = j->warnings ? j->warnings->child : NULL; w; w = w->next) {
+    const cJSON *c = cJSON_GetObjectItemCaseSensitive(w, "code");
+    if (cJSON_IsString(c) && strcmp(c->valuestring, "plugin_failures") == 0) return;
+  }
+  if (!j->warnings && !(j->warnings = cJSON_CreateArray())) return;
+  char detail[1024];
+  snprintf(detail, sizeof detail,
+           "context '%s' (sensor '%s'): %llu environment plugin answers were replaced by black (first: %s); "
+           "each film with such answers says how many in its plugin_failures",
+           it->context, it->sensor, (unsigned long long)it->film.img.plugin_failures, it->film.img.plugin_failure);
+  cJSON *w = cJSON_CreateObject();
+  if (!w) return;
+  cJSON_AddStringToObject(w, "code", "plugin_failures");
+  cJSON_AddStringToObject(w, "coordinate", "");
+  cJSON_AddStringToObject(w, "detail", detail);
+  cJSON_AddItemToArray(j->warnings, w);
+}
+
 static void item_done(service *svc, job *j, size_t k, rsw_status st, svc_film *out, svc_error *e) {
   render_item *it = &j->items[k];
   size_t done = j->items_done + 1; /* only this worker writes it */
@@ -1343,6 +1367,7 @@ static void item_done(service *svc, job *j, size_t k, rsw_status st, svc_film *o
       svc->result_bytes += mem;
     }
     svc->contexts_rendered++;
+    if (it->film.img.plugin_failures) note_plugin_failures(j, it);
   }
   j->items_done++;
   j->current = SIZE_MAX;

@@ -1133,6 +1133,9 @@ void svc_state_job_finished(service *svc, const job *j) {
     cJSON_AddNumberToObject(o, "bundle", j->bundle);
     if (j->bundle_why[0]) cJSON_AddStringToObject(o, "bundle_why", j->bundle_why);
   }
+  /* The warnings as they stand at the end (a render may have added one:
+   * plugin_failures); the request's header holds those of submission. */
+  if (j->warnings) cJSON_AddItemToObject(o, "warnings", cJSON_Duplicate(j->warnings, 1));
   cJSON *a = cJSON_AddArrayToObject(o, "items");
   for (size_t i = 0; i < j->n_items; i++) {
     const render_item *it = &j->items[i];
@@ -1357,6 +1360,11 @@ static bool restore_finished(service *svc, const req_header *h, cJSON *done, con
   x = cJSON_GetObjectItemCaseSensitive(done, "bundle_why");
   if (j->bundle_asked && cJSON_IsString(x))
     snprintf(j->bundle_why, sizeof j->bundle_why, "%s", x->valuestring);
+  x = cJSON_GetObjectItemCaseSensitive(done, "warnings");
+  if (cJSON_IsArray(x)) {
+    cJSON *w = cJSON_Duplicate(x, 1);
+    if (w) cJSON_Delete(j->warnings), j->warnings = w;
+  }
   x = cJSON_GetObjectItemCaseSensitive(done, "seconds");
   double secs = cJSON_IsNumber(x) && x->valuedouble >= 0 && x->valuedouble < 1e9 ? x->valuedouble : 0;
   x = cJSON_GetObjectItemCaseSensitive(done, "finished");

@@ -117,9 +117,16 @@ for r in res:
     f = call(r["href"])
     assert f["data"] == [0] and f["meta"]["plugin_failures"] == r["plugin_failures"], f
     assert f["meta"]["plugin_failure"] == r["plugin_failure"], f
+w = [x for x in call(f"/v1/jobs/{jid}").get("warnings", []) if x["code"] == "plugin_failures"]
+assert len(w) == 1 and "replaced by black" in w[0]["detail"] and "nan_sky" in w[0]["detail"], w
 print(jid)
 PY
 njob=$(python3 "$tmp/nanjob.py" "$port" submit "$nid" 2>"$tmp/pyerr") && ok nan_job_says_so || ko nan_job_says_so "$(tail -n 3 "$tmp/pyerr")"
+# raysweep sweep prints the job's warning.
+"$bin/raysweep" --server "http://127.0.0.1:$port" sweep "$nid" --grid wavelength=500:600:100 --spp 2 \
+  -o "$tmp/nansweep" > /dev/null 2> "$tmp/sweep.err"
+grep -q "warning: job .*environment plugin answers were replaced by black" "$tmp/sweep.err" &&
+  ok nan_sweep_says_so || ko nan_sweep_says_so "$(cat "$tmp/sweep.err")"
 kill -TERM "$pid"; wait "$pid" 2>/dev/null
 rm -f "$tmp/port"
 "$bin/raysweepd" serve --listen 127.0.0.1:0 --port-file "$tmp/port" --plugin-dir "$tmp/plugins" --state-dir "$tmp/data" 2>> "$tmp/log" &
