@@ -1309,7 +1309,8 @@ static void note_plugin_failures(job *j, const render_item *it) {
   snprintf(detail, sizeof detail,
            "context '%s' (sensor '%s'): %llu environment plugin answers were replaced by black (first: %s); "
            "each film with such answers says how many in its plugin_failures",
-           it->context, it->sensor, (unsigned long long)it->film.img.plugin_failures, it->film.img.plugin_failure);
+           it->context, it->sensor, (unsigned long long)it->film.img.plugin_failures,
+           it->film.img.plugin_failure);
   cJSON *w = cJSON_CreateObject();
   if (!w) return;
   cJSON_AddStringToObject(w, "code", "plugin_failures");
