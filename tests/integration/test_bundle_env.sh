@@ -96,9 +96,7 @@ import sys
 sys.path.insert(0, sys.argv[1]); from job import *
 port = int(sys.argv[2]); sid = push(port, sys.argv[3])
 wls = [435.0 + 10 * i for i in range(16)]
-a, _ = films(port, sid, 1, 41, wls, spp=32)
-b, j = films(port, sid, 16, 42, wls, spp=32)
-assert j["bundle"] == 16, j
+a, b = bundled_pair(port, sid, wls, 32, (41, 42), 16)
 agree(a, b, "two_hemispheres")
 def sides(f):
     nc = len(f["channels"]); w = f["width"]; X = f["data"][0::nc]
@@ -114,9 +112,7 @@ py "an envmap: auto takes 16; the films of the bundle are bit for bit one anothe
 import sys
 sys.path.insert(0, sys.argv[1]); from job import *
 port = int(sys.argv[2]); sid = push(port, sys.argv[3])
-a, _ = films(port, sid, 1, 51, WLS)
-b, j = films(port, sid, "auto", 52, WLS)
-assert j["bundle"] == 16 and "bundle_why" not in j, j
+a, b = bundled_pair(port, sid, WLS, 64, (51, 52))
 agree(a, b, "envmap")
 first = b["w400"]["data"]
 for ctx, f in b.items():

@@ -341,9 +341,7 @@ py "water that follows the render (ocean_legacy \"render\"): auto takes 16 (also
 import sys
 sys.path.insert(0, sys.argv[1]); from job import *
 port = int(sys.argv[2]); sid = push(port, sys.argv[4])
-a, _ = films(port, sid, 1, 7, WLS)
-b, j = films(port, sid, "auto", 8, WLS)
-assert j["bundle"] == 16 and "bundle_why" not in j, j
+a, b = bundled_pair(port, sid, WLS, 64, (7, 8))
 zs = agree(a, b, "ocean")
 assert len({b[c]["meta"]["seed"] for c in b}) == 1
 lev = {c: sum(a[c]["data"][0::len(a[c]["channels"])]) for c in a}
@@ -415,9 +413,7 @@ import sys
 sys.path.insert(0, sys.argv[1]); from job import *
 port = int(sys.argv[2]); sid = push(port, sys.argv[4])
 wls = [400.0 + 10 * i for i in range(16)]
-a, _ = films(port, sid, 1, 7, wls, spp=128)
-b, j = films(port, sid, 16, 8, wls, spp=128)
-assert j["bundle"] == 16, j
+a, b = bundled_pair(port, sid, wls, 128, (7, 8), 16)
 agree(a, b, "atmosphere")
 same_across_threads([int(p) for p in sys.argv[2:4]], sys.argv[4], wls, 4)
 ' "$tmp" "$p2" "$p1" "$root/proto/examples/atmosphere_molecular.json"
@@ -435,9 +431,7 @@ sys.path.insert(0, sys.argv[1]); from job import *
 port = int(sys.argv[2])
 for path in sys.argv[3:5]:
     sid = push(port, path)
-    a, _ = films(port, sid, 1, 31, WLS, spp=256)
-    b, j = films(port, sid, "auto", 32, WLS, spp=256)
-    assert j["bundle"] == 16 and "bundle_why" not in j, (path, j)
+    a, b = bundled_pair(port, sid, WLS, 256, (31, 32))
     zs = [film_z(a[c], b[c]) for c in a]  # (heavy tails: pixel stderrs too low for the 3 sigma count)
     assert max(abs(z) for z in zs) < 4 and (sum(z * z for z in zs) / len(zs)) ** 0.5 < 1.4, (path, zs)
     worst = max(rms_stderr(b[c]) / rms_stderr(a[c]) for c in a)

@@ -38,17 +38,11 @@ start_daemon "$tmp/d1" --threads 1
 p1=$started_port
 [ -n "$p1" ] && [ -n "$p2" ] || { bad "daemons did not start: $(cat "$tmp/d1/log" "$tmp/d2/log")"; finish; }
 
+export RSW_JOB_BIN="$bin"
+cp "$root/tests/support/bundle_job.py" "$tmp/bundle_job.py"
 cat >"$tmp/job.py" <<'PY'
-import json, math, sys, urllib.request, urllib.error, time
-def call(port, method, path, body=None, ctype="application/json"):
-    req = urllib.request.Request(f"http://127.0.0.1:{port}{path}", method=method,
-                                 data=body if body is None or isinstance(body, bytes) else json.dumps(body).encode(),
-                                 headers={"Content-Type": ctype})
-    try:
-        with urllib.request.urlopen(req, timeout=300) as r:
-            return r.status, json.loads(r.read() or b"null")
-    except urllib.error.HTTPError as e:
-        return e.code, json.loads(e.read() or b"null")
+import json, math, sys, time
+from bundle_job import call
 def push(port, path):
     st, s = call(port, "POST", "/v1/scenes", open(path, "rb").read())
     assert st in (200, 201), (st, s)

@@ -83,14 +83,19 @@ def plate_brf(w, tau):
 def layers_tau(w):
     """The 3 layers' optical thickness (their sigma_t tables, mean: 1/3 each)."""
     return sum(lerp(w, [400, 550, 700], v) for v in ([1.2, 0.5, 0.1], [0.6, 0.3, 0.15], [0.9, 0.25, 0.05])) / 3
+def bundled_pair(port, sid, wls, spp, seeds, k="auto"):
+    """The unbundled films (seeds[0]) and those of bundle k (seeds[1]) of
+    scene sid; k "auto" must come to 16 without a reason."""
+    a, _ = films(port, sid, 1, seeds[0], wls, spp=spp)
+    b, j = films(port, sid, k, seeds[1], wls, spp=spp)
+    assert j["bundle"] == (16 if k == "auto" else k) and "bundle_why" not in j, (sid, j)
+    return a, b
 def auto_agrees(ports, path, wls, spp, seeds, threads_spp):
     """On ports[0]: "auto" takes 16 for the scene at path, and a bundle of 16
     (seeds[1]) is statistically the unbundled films (seeds[0]); bitwise the
     same on both ports (their render threads) at threads_spp."""
     port = ports[0]; sid = push(port, path)
-    a, _ = films(port, sid, 1, seeds[0], wls, spp=spp)
-    b, j = films(port, sid, "auto", seeds[1], wls, spp=spp)
-    assert j["bundle"] == 16 and "bundle_why" not in j, (path, j)
+    a, b = bundled_pair(port, sid, wls, spp, seeds)
     agree(a, b, path)
     same_across_threads(ports, path, wls, threads_spp)
 def rms_stderr(f):
