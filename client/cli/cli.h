@@ -161,9 +161,12 @@ int cli_wait_job(cli_ctx *ctx, const char *job_id, double timeout_s, cli_on_inte
 void cli_format_duration(char *buf, size_t n, double s);
 const char *cli_job_state_name(rsw_job_state s);
 /* The job's warnings (a sweep that changes nothing along a coordinate or
- * the wavelength) on stderr, "<who>: warning: job ID: ..." a line, even
- * with --quiet; nothing when there are none or they cannot be read. */
-void cli_print_job_warnings(cli_ctx *ctx, const char *who, const char *job_id);
+ * the wavelength, renders that replaced environment plugin answers by
+ * black) on stderr, "<who>: warning: job ID: ..." a line, even with
+ * --quiet; nothing when there are none or they cannot be read. seen (or
+ * NULL): the lines printed before, skipped, and replaced by the job's
+ * whole text now (the caller frees it with free). */
+void cli_print_job_warnings(cli_ctx *ctx, const char *who, const char *job_id, char **seen);
 
 /* ---- handlers ---- */
 int cmd_status(cli_ctx *ctx, const cmdline_args *a);

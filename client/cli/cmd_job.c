@@ -93,7 +93,7 @@ int cmd_job_show(cli_ctx *ctx, const cmdline_args *a) {
     free(t);
     return CLI_OK;
   }
-  cli_print_job_warnings(ctx, "raysweep job", id);
+  cli_print_job_warnings(ctx, "raysweep job", id, NULL);
   printf("id:        %s\n", id);
   printf("state:     %s\n", cli_job_state_name(st.state));
   printf("contexts:  %zu/%zu\n", st.contexts_done, st.contexts_total);

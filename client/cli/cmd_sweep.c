@@ -692,6 +692,7 @@ static int run_job(cli_ctx *ctx, const sweep_opts *o, const sweep_list *l, sweep
   index_entry *entries = NULL;
   size_t n_entries = 0, failed = 0;
   cJSON *incomplete = NULL;
+  char *warned = NULL; /* the job's warnings printed at submission */
   int rc;
   cli_catch_interrupt();
   rsw_status s = rsw_job_submit(ctx->client, scene, x, NULL, job);
@@ -703,17 +704,26 @@ static int run_job(cli_ctx *ctx, const sweep_opts *o, const sweep_list *l, sweep
   if (!ctx->quiet)
     fprintf(stderr, "raysweep sweep: job %s: %zu contexts%s\n", job, l->n,
             o->shard_n > 1 ? " (one shard)" : "");
-  cli_print_job_warnings(ctx, "raysweep sweep", job);
+  cli_print_job_warnings(ctx, "raysweep sweep", job, &warned);
   /* Written before any film, so a sweep that dies half-way leaves a
    * directory that says so (merge lists its contexts as missing; --force
    * knows what to clean). */
-  if ((rc = manifest_write(ctx, dir, fingerprint, scene, o->shard_i, o->shard_n, l, job, false, NULL)))
+  if ((rc = manifest_write(ctx, dir, fingerprint, scene, o->shard_i, o->shard_n, l, job, false, NULL))) {
+    free(warned);
     return rc;
+  }
   rsw_job_status st;
   /* Ctrl-C cancels the job (this command submitted it) and writes no films. */
   rc = cli_wait_job(ctx, job, o->timeout, CLI_INTERRUPT_CANCEL, &st);
-  if (rc != CLI_OK && rc != CLI_JOB) return rc;
+  if (rc != CLI_OK && rc != CLI_JOB) {
+    free(warned);
+    return rc;
+  }
   int job_rc = rc;
+  /* What the renders added (plugin_failures). */
+  cli_print_job_warnings(ctx, "raysweep sweep", job, &warned);
+  free(warned);
+  warned = NULL;
   if (!(incomplete = cJSON_CreateArray())) return cli_fail(ctx, CLI_IO, "out of memory");
   if ((rc = fetch_all(ctx, job, dir, l->layout, o->fmt, sorted, l->n, job_params, incomplete, &entries,
                       &n_entries, &failed))) {

@@ -440,15 +440,29 @@ void cli_progress_finish(cli_progress *p) {
   if (!p->ctx->quiet && (p->drawn || p->total)) progress_draw(p, true);
 }
 
-void cli_print_job_warnings(cli_ctx *ctx, const char *who, const char *job_id) {
+/* Whether text holds line as a whole line. */
+static bool has_line(const char *text, const char *line) {
+  size_t n = strlen(line);
+  for (const char *p = text; p && (p = strstr(p, line)); p++)
+    if ((p == text || p[-1] == '\n') && (p[n] == '\n' || p[n] == '\0')) return true;
+  return false;
+}
+
+void cli_print_job_warnings(cli_ctx *ctx, const char *who, const char *job_id, char **seen) {
   char *text = NULL;
   if (rsw_job_warnings(ctx->client, job_id, &text) != RSW_OK || !text) return;
+  char *all = seen ? strdup(text) : NULL;
   for (char *line = text, *next; line && *line; line = next) {
     next = strchr(line, '\n');
     if (next) *next++ = '\0';
+    if (seen && *seen && has_line(*seen, line)) continue;
     fprintf(stderr, "%s: warning: job %s: %s\n", who, job_id, line);
   }
   rsw_free(text);
+  if (seen && all) {
+    free(*seen);
+    *seen = all;
+  }
 }
 
 const char *cli_job_state_name(rsw_job_state s) {
