@@ -17,7 +17,8 @@ bool media_layers_alloc(media_layers *L, uint32_t n) {
   L->lay = aligned_alloc(64, ((size_t)n + 1) * sizeof *L->lay);
   L->alb = malloc(3 * (size_t)n * sizeof *L->alb);
   L->bk = malloc(3 * ((size_t)n + 1) * sizeof *L->bk);
-  if (!L->lay || !L->alb || !L->bk) return false;
+  L->cum = aligned_alloc(64, (3 * ((size_t)n + 1) * sizeof *L->cum + 63) / 64 * 64);
+  if (!L->lay || !L->alb || !L->bk || !L->cum) return false;
   memset(L->lay, 0, ((size_t)n + 1) * sizeof *L->lay);
   for (uint32_t k = 0; k <= n; k++) L->lay[k].z = (double)k / n;
   return true;
@@ -27,9 +28,11 @@ void media_layers_free(media_layers *L) {
   free(L->lay);
   free(L->alb);
   free(L->bk);
+  free(L->cum);
   L->lay = NULL;
   L->alb = NULL;
   L->bk = NULL;
+  L->cum = NULL;
 }
 
 void media_layers_finish(media_layers *L) {
@@ -44,6 +47,15 @@ void media_layers_finish(media_layers *L) {
       if (s > mx.c[c]) mx.c[c] = s;
     }
   L->maj = mx;
+  for (int c = 0; c < 3; c++)
+    for (uint32_t k = 0; k <= n; k++) L->cum[(size_t)c * (n + 1) + k] = L->lay[k].cum[c];
+  L->gray_alb = true;
+  for (uint32_t k = 0; k < n; k++) {
+    const double *a = &L->alb[3 * (size_t)k];
+    L->lay[k].alb0 = a[0];
+    L->gray_alb &= a[1] == a[0] && a[2] == a[0];
+  }
+  L->lay[n].alb0 = 0.0;
   for (int c = 0; c < 3; c++) {
     double top = L->lay[n].cum[c], scale = n / top;
     L->bk_scale[c] = c < L->nc && top > 0 && isfinite(scale) ? scale : -1.0;
@@ -66,7 +78,7 @@ void media_layers_finish(media_layers *L) {
 /* The lanes read media_layers.lay as 8 doubles a layer. */
 _Static_assert(sizeof(pw_layer) == 8 * sizeof(double) && offsetof(pw_layer, sig) == 3 * sizeof(double) &&
                    offsetof(pw_layer, z) == 6 * sizeof(double),
-               "pw_layer: cum[3], sig[3], z, pad");
+               "pw_layer: cum[3], sig[3], z, alb0");
 
 static void flight_setup_batch(rsw_isa isa, int n, const double *geo, const double *lay,
                                const double *const *o, const double *const *d, const double *t0,

@@ -28,10 +28,11 @@
 #include "media.h"
 
 /* What a lookup in layer k reads, in one 64-byte line: C_k, the scaled
- * sigma_t per channel and z_k, the layer's bottom. n + 1 of them (the
- * last: C_n, the top; sigma_t 0). */
+ * sigma_t per channel, z_k, the layer's bottom, and alb[3 k] (channel 0's
+ * albedo: a collision's every channel where the albedo is gray). n + 1 of
+ * them (the last: C_n, the top; sigma_t 0). */
 typedef struct pw_layer {
-  double cum[3], sig[3], z, pad;
+  double cum[3], sig[3], z, alb0;
 } pw_layer;
 
 typedef struct media_layers {
@@ -41,6 +42,7 @@ typedef struct media_layers {
   int nc;                /* channels to compute: 1 (the rest copied) or 3 */
   pw_layer *lay;         /* n + 1, 64-byte aligned */
   double *alb;           /* 3 n: albedo per layer and channel */
+  bool gray_alb;         /* every layer's 3 albedos equal (lay[k].alb0 serves) */
   double nd;             /* n as a double */
   color maj;             /* the largest layer's sigma_t */
   /* From to_world (media_layers_finish): the box for clipping, and the
@@ -57,6 +59,10 @@ typedef struct media_layers {
    * layer the full binary search finds, bit for bit. */
   uint32_t *bk;
   double bk_scale[3];
+  /* cum[c (n + 1) + k] = lay[k].cum[c] (c < nc): the search's C_k packed,
+   * 8 to a cache line where lay holds one (the probes of a collision's
+   * search stay in a few lines instead of one line each). */
+  double *cum;
 } media_layers;
 
 /* Allocate n layers (lay, alb) with z_k = k / n; false: out of memory
@@ -120,10 +126,11 @@ static inline double media_layers_tau(const media_layers *L, int c, double z0, d
 }
 
 static inline void media_layers_fill(const media_layers *L, int k, medium_interaction *mi) {
+  const pw_layer *y = &L->lay[k];
   for (int c = 0; c < 3; c++) {
-    double s = L->lay[k].sig[c];
+    double s = y->sig[c];
     mi->sigma_t.c[c] = s;
-    mi->sigma_s.c[c] = s * L->alb[3 * k + c];
+    mi->sigma_s.c[c] = s * (L->gray_alb ? y->alb0 : L->alb[3 * k + c]); /* (the line already read) */
     mi->sigma_n.c[c] = rsw_fmax(mi->majorant.c[c] - s, 0.0);
   }
 }
@@ -192,7 +199,7 @@ static inline void media_flight_collide(const media_layers *L, const media_fligh
     /* C* on the side the ray moves to; search the layer that holds it. */
     double cs = media_layers_cum_in(L, c, k0, f->z0) +
                 target * dz; /* C moves by tau |d_z| in the ray's z direction */
-    const pw_layer *lay = L->lay;
+    const double *cum = L->cum + (size_t)c * (L->n + 1);
     int n = (int)L->n, a = 1, b = n; /* C*'s bucket in the index: layers a - 1 .. b */
     double fb = cs * L->bk_scale[c];
     if (fb >= 0 && fb < L->nd) {
@@ -203,10 +210,10 @@ static inline void media_flight_collide(const media_layers *L, const media_fligh
     if (dz > 0) { /* smallest j in [1, n] with C_j > C*: k = j - 1 */
       lo = 1, hi = n;
       /* (j lies in [a, b] when C_{a-1} <= C* < C_b: then search there) */
-      if ((a <= 1 || !(lay[a - 1].cum[c] > cs)) && (b >= n || lay[b].cum[c] > cs)) lo = a, hi = b;
+      if ((a <= 1 || !(cum[a - 1] > cs)) && (b >= n || cum[b] > cs)) lo = a, hi = b;
       while (lo < hi) {
         int mid = (lo + hi) / 2;
-        if (lay[mid].cum[c] > cs)
+        if (cum[mid] > cs)
           hi = mid;
         else
           lo = mid + 1;
@@ -217,18 +224,19 @@ static inline void media_flight_collide(const media_layers *L, const media_fligh
       /* (k lies in [a', b'] when C_a' < C* (or a' = 0) and C_{b'+1} >= C*
        * (or b' = n - 1)) */
       int a1 = a > 2 ? a - 2 : 0, b1 = b < n - 1 ? b : n - 1;
-      if ((a1 == 0 || lay[a1].cum[c] < cs) && (b1 >= n - 1 || !(lay[b1 + 1].cum[c] < cs))) lo = a1, hi = b1;
+      if ((a1 == 0 || cum[a1] < cs) && (b1 >= n - 1 || !(cum[b1 + 1] < cs))) lo = a1, hi = b1;
       while (lo < hi) {
         int mid = (lo + hi + 1) / 2;
-        if (lay[mid].cum[c] < cs)
+        if (cum[mid] < cs)
           lo = mid;
         else
           hi = mid - 1;
       }
       k = lo;
     }
-    double s = lay[k].sig[c];
-    double z = lay[k].z + (s > 0 ? (cs - lay[k].cum[c]) / s : 0.0);
+    const pw_layer *y = &L->lay[k];
+    double s = y->sig[c];
+    double z = y->z + (s > 0 ? (cs - y->cum[c]) / s : 0.0);
     t = t0 + (z - f->z0) / dz;
   }
   t = rsw_fmin(rsw_fmax(t, t0), f->t1);

@@ -9,7 +9,7 @@
 
 /* n flights. geo: the local z row of to_world's inverse (4), the layer
  * count N as a double and N - 1; lay: the layers as media_layers.lay's
- * 8 doubles each (cum[3], sig[3], z, pad); o[3], d[3]: the rays; t0, t1,
+ * 8 doubles each (cum[3], sig[3], z, alb0); o[3], d[3]: the rays; t0, t1,
  * u; c: the drawn channel (0 when nc = 1). out[0..4]: oz, dz, z0, z1,
  * total; k0, k1: the ends' layers; fast: 1 where the flight passes
  * without its log (media_flight_passes_fast). u and fast NULL: the setup

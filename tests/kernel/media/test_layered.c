@@ -1,4 +1,5 @@
-/* media/layered.c media_layers_sample_real_batch and
+/* media/layered.c media_layers_finish's packed copies (test_packed_copies);
+ * media_layers_sample_real_batch and
  * media_layers_transmittance_batch against media_layers_sample_real and
  * media_layers_transmittance, bit for bit, at every ISA this CPU runs
  * (media/layered_lanes.h: the setup's lanes): equal layers under an affine
@@ -197,8 +198,41 @@ static void test_flight_batch_scalar_setup(void) {
   run_case("projective, 200 equal layers", &proj, 200, 1, true, false);
 }
 
+/* What media_layers_finish packs for the flights (cum: the search's C_k
+ * per channel; lay[k].alb0 and gray_alb: a collision's albedo from the
+ * layer's own line) agrees with the layers, and a collision's
+ * coefficients are sigma_t alb per channel whether the albedo is gray or
+ * not, before and after one layer's albedo turns chromatic (finish again,
+ * as a parameter update does). */
+static void test_packed_copies(void) {
+  xform xf = slab_xform();
+  pcg32 rng;
+  pcg32_seed(&rng, 7, 3);
+  media_layers L;
+  REQUIRE(layers_make(&L, &xf, 240, 3, true, &rng), "layers");
+  for (int round = 0; round < 3; round++) {
+    for (uint32_t k = 0; k < L.n; k++)
+      for (int c = 0; c < 3; c++) L.alb[3 * k + c] = round == 0 ? 0.2 + 0.5 * c : 0.6;
+    if (round == 2) L.alb[3 * 17 + 2] = 0.25;
+    media_layers_finish(&L);
+    CHECK(L.gray_alb == (round == 1), "round %d: gray_alb %d", round, L.gray_alb);
+    int bad = 0;
+    for (int c = 0; c < 3; c++)
+      for (uint32_t k = 0; k <= L.n; k++) bad += L.cum[(size_t)c * (L.n + 1) + k] != L.lay[k].cum[c];
+    for (uint32_t k = 0; k < L.n; k++) {
+      bad += L.lay[k].alb0 != L.alb[3 * k];
+      medium_interaction mi = {0};
+      media_layers_fill(&L, (int)k, &mi);
+      for (int c = 0; c < 3; c++) bad += mi.sigma_s.c[c] != L.lay[k].sig[c] * L.alb[3 * k + c];
+    }
+    CHECK(bad == 0, "round %d: %d packed values or coefficients differ from the layers'", round, bad);
+  }
+  media_layers_free(&L);
+}
+
 int main(void) {
   RSW_TEST_RUN(test_flight_batch_equal_layers);
   RSW_TEST_RUN(test_flight_batch_scalar_setup);
+  RSW_TEST_RUN(test_packed_copies);
   RSW_TEST_END("test_layered");
 }
