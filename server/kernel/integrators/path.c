@@ -32,6 +32,13 @@
  * the same treatment at the light's end (spawn_ray_between); for other
  * emitters the ray stops short of ds.dist by ShadowEpsilon (relative), as
  * Mitsuba. */
+static inline void spawn_ray_to_far(const surface_interaction *si, const direction_sample *ds, ray3 *r) {
+  r->o = offset_on_side(si->p, si->ng, si->p_error, ds->d);
+  r->d = ds->d;
+  r->tmin = 0.0;
+  r->tmax = isfinite(ds->dist) ? ds->dist * (1.0 - RSW_SHADOW_EPSILON) : INFINITY;
+}
+
 static inline void spawn_ray_to_in(const scene *sc, const surface_interaction *si, const emitter *e,
                                    const direction_sample *ds, ray3 *r) {
   if ((e->flags & EMITTER_SURFACE) && e->shape) {
@@ -40,10 +47,7 @@ static inline void spawn_ray_to_in(const scene *sc, const surface_interaction *s
                            accel_surface_error(sc->accel, ls->index, &ls->to_world, ds->p, ds->n));
     return;
   }
-  r->o = offset_on_side(si->p, si->ng, si->p_error, ds->d);
-  r->d = ds->d;
-  r->tmin = 0.0;
-  r->tmax = isfinite(ds->dist) ? ds->dist * (1.0 - RSW_SHADOW_EPSILON) : INFINITY;
+  spawn_ray_to_far(si, ds, r);
 }
 
 ray3 spawn_ray_to(const scene *sc, const surface_interaction *si, const emitter *e,
@@ -496,6 +500,11 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, pag
     }
     rsw_page = 0;
   }
+  /* The light's end of a shadow ray towards a surface emitter is offset
+   * by accel_surface_error; its shape's terms are taken once per run of
+   * lanes of one emitter (accel_surface_error_at: the same bits). */
+  const emitter *te = NULL;
+  double terms[8];
   for (int k = 0; k < n; k++) {
     lane *l = &ln[g[k]];
     const emitter *e = l->ne;
@@ -509,7 +518,14 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, pag
     bool lit = !col_is_black(l->value);
     for (int p = 1; pgs && p < sc->pages; p++) lit |= !col_is_black(pgs[g[k]].value[p - 1]);
     if (l->ds.pdf > 0 && lit) {
-      spawn_ray_to_in(sc, &l->si, e, &l->ds, &l->sray);
+      if ((e->flags & EMITTER_SURFACE) && e->shape) {
+        const shape *ls = e->shape;
+        if (e != te) accel_surface_error_terms(sc->accel, ls->index, &ls->to_world, terms), te = e;
+        l->sray = spawn_ray_between(&l->si, l->ds.p, l->ds.n,
+                                    accel_surface_error_at(terms, &ls->to_world, l->ds.p, l->ds.n));
+      } else {
+        spawn_ray_to_far(&l->si, &l->ds, &l->sray);
+      }
       l->nee = true;
       g[(*n_sh)++] = g[k];
     }
