@@ -430,6 +430,98 @@ static bool shade_emit(const integrator *it, const scene *sc, lane *l, double *q
   return true;
 }
 
+/* The shadow rays of spawn_ray_between for up to SPAWN_C lanes, in
+ * structure-of-arrays lanes: the lane's surface point p (normal ng, error
+ * err) and the point q on the light (normal nq, error qerr) in, the ray's
+ * origin o, unit direction d and tmax out. The loop is compiled per ISA
+ * (core/isa.h) and vectorised, each lane making spawn_ray_between's
+ * operations in its order (no contraction in ISO C mode): the same bits.
+ * A lane's square root and division no longer wait on the lane before. */
+enum {
+  SPAWN_C = 64
+};
+typedef struct spawn_lanes {
+  double p[3][SPAWN_C], ng[3][SPAWN_C], err[SPAWN_C];
+  double q[3][SPAWN_C], nq[3][SPAWN_C], qerr[SPAWN_C];
+  double o[3][SPAWN_C], d[3][SPAWN_C], tmax[SPAWN_C];
+} spawn_lanes;
+
+static inline __attribute__((always_inline)) void spawn_between_body(spawn_lanes *S, int n) {
+  const double shorten = 1.0 - RSW_SPAWN_ERRORS * RSW_F32_UNIT;
+  for (int i = 0; i < n; i++) {
+    const double px = S->p[0][i], py = S->p[1][i], pz = S->p[2][i];
+    const double qx = S->q[0][i], qy = S->q[1][i], qz = S->q[2][i];
+    const double gx = S->ng[0][i], gy = S->ng[1][i], gz = S->ng[2][i];
+    const double nx = S->nq[0][i], ny = S->nq[1][i], nz = S->nq[2][i];
+    /* offset_on_side(p, ng, err, q - p) */
+    double vx = qx - px, vy = qy - py, vz = qz - pz;
+    double mo = RSW_SPAWN_ERRORS * S->err[i];
+    double so = gx * vx + gy * vy + gz * vz >= 0 ? mo : -mo;
+    double ox = px + so * gx, oy = py + so * gy, oz = pz + so * gz;
+    /* offset_on_side(q, nq, qerr, p - q) */
+    double wx = px - qx, wy = py - qy, wz = pz - qz;
+    double me = RSW_SPAWN_ERRORS * S->qerr[i];
+    double se = nx * wx + ny * wy + nz * wz >= 0 ? me : -me;
+    double ex = qx + se * nx, ey = qy + se * ny, ez = qz + se * nz;
+    double dx = ex - ox, dy = ey - oy, dz = ez - oz;
+    double len = sqrt(dx * dx + dy * dy + dz * dz);
+    double inv = 1.0 / len;
+    S->o[0][i] = ox, S->o[1][i] = oy, S->o[2][i] = oz;
+    S->d[0][i] = len > 0 ? dx * inv : dx;
+    S->d[1][i] = len > 0 ? dy * inv : dy;
+    S->d[2][i] = len > 0 ? dz * inv : dz;
+    S->tmax[i] = len * shorten;
+  }
+}
+
+#if defined(__x86_64__) || defined(__i386__)
+static __attribute__((target("avx512f,avx512vl,avx512dq"))) void spawn_between_avx512(spawn_lanes *S, int n) {
+  spawn_between_body(S, n);
+}
+static __attribute__((target("avx2,fma"))) void spawn_between_avx2(spawn_lanes *S, int n) {
+  spawn_between_body(S, n);
+}
+#endif
+static void spawn_between_base(spawn_lanes *S, int n) {
+  spawn_between_body(S, n);
+}
+
+/* Lanes ln[sl[0..n)]'s shadow rays from S's inputs 0..n), towards the
+ * surface of shape ls: the light's end's error bounds from the shape's
+ * accel_surface_error_terms t (accel_surface_error_at_n), then the rays. */
+static void spawn_between_lanes(const shape *ls, const double t[8], lane *ln, spawn_lanes *S, const int *sl,
+                                int n) {
+  if (n == 0) return;
+  const double *q[3] = {S->q[0], S->q[1], S->q[2]}, *nq[3] = {S->nq[0], S->nq[1], S->nq[2]};
+  accel_surface_error_at_n(t, &ls->to_world, n, q, nq, S->qerr);
+#if defined(__x86_64__) || defined(__i386__)
+  switch (rsw_isa_get()) {
+  case RSW_ISA_AVX512: spawn_between_avx512(S, n); break;
+  case RSW_ISA_AVX2: spawn_between_avx2(S, n); break;
+  default: spawn_between_base(S, n); break;
+  }
+#else
+  spawn_between_base(S, n);
+#endif
+  for (int j = 0; j < n; j++) {
+    ray3 *r = &ln[sl[j]].sray;
+    r->o = v3(S->o[0][j], S->o[1][j], S->o[2][j]);
+    r->d = v3(S->d[0][j], S->d[1][j], S->d[2][j]);
+    r->tmin = 0.0;
+    r->tmax = S->tmax[j];
+  }
+}
+
+/* Lane j of S: from si towards the emitter sample ds on a surface. */
+static inline void spawn_lane_in(spawn_lanes *S, int j, const surface_interaction *si,
+                                 const direction_sample *ds) {
+  S->p[0][j] = si->p.x, S->p[1][j] = si->p.y, S->p[2][j] = si->p.z;
+  S->ng[0][j] = si->ng.x, S->ng[1][j] = si->ng.y, S->ng[2][j] = si->ng.z;
+  S->err[j] = si->p_error;
+  S->q[0][j] = ds->p.x, S->q[1][j] = ds->p.y, S->q[2][j] = ds->p.z;
+  S->nq[0][j] = ds->n.x, S->nq[1][j] = ds->n.y, S->nq[2][j] = ds->n.z;
+}
+
 /* Next-event estimation for lanes g[0..n) (each has nee set): the light
  * pick and light sample numbers of every lane (in the one-path order:
  * pick, then sample), then the samples grouped by emitter
@@ -505,6 +597,8 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, pag
    * lanes of one emitter (accel_surface_error_at: the same bits). */
   const emitter *te = NULL;
   double terms[8];
+  spawn_lanes S;
+  int sl[SPAWN_C], ns = 0;
   for (int k = 0; k < n; k++) {
     lane *l = &ln[g[k]];
     const emitter *e = l->ne;
@@ -520,9 +614,14 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, pag
     if (l->ds.pdf > 0 && lit) {
       if ((e->flags & EMITTER_SURFACE) && e->shape) {
         const shape *ls = e->shape;
-        if (e != te) accel_surface_error_terms(sc->accel, ls->index, &ls->to_world, terms), te = e;
-        l->sray = spawn_ray_between(&l->si, l->ds.p, l->ds.n,
-                                    accel_surface_error_at(terms, &ls->to_world, l->ds.p, l->ds.n));
+        if (e != te) {
+          if (te) spawn_between_lanes(te->shape, terms, ln, &S, sl, ns), ns = 0;
+          accel_surface_error_terms(sc->accel, ls->index, &ls->to_world, terms);
+          te = e;
+        }
+        spawn_lane_in(&S, ns, &l->si, &l->ds);
+        sl[ns++] = g[k];
+        if (ns == SPAWN_C) spawn_between_lanes(ls, terms, ln, &S, sl, ns), ns = 0;
       } else {
         spawn_ray_to_far(&l->si, &l->ds, &l->sray);
       }
@@ -530,6 +629,7 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, pag
       g[(*n_sh)++] = g[k];
     }
   }
+  if (te) spawn_between_lanes(te->shape, terms, ln, &S, sl, ns);
 }
 
 /* Lanes g[0..*left) wait for a batched BSDF call: move up to `cap` of
