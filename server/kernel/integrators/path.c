@@ -486,6 +486,34 @@ static void spawn_between_base(spawn_lanes *S, int n) {
   spawn_between_body(S, n);
 }
 
+static void spawn_between_run(rsw_isa isa, spawn_lanes *S, int n) {
+#if defined(__x86_64__) || defined(__i386__)
+  switch (isa) {
+  case RSW_ISA_AVX512: spawn_between_avx512(S, n); return;
+  case RSW_ISA_AVX2: spawn_between_avx2(S, n); return;
+  default: break;
+  }
+#else
+  (void)isa;
+#endif
+  spawn_between_base(S, n);
+}
+
+/* Ray j of S's outputs. */
+static inline ray3 spawn_lane_out(const spawn_lanes *S, int j) {
+  ray3 r = {v3(S->o[0][j], S->o[1][j], S->o[2][j]), v3(S->d[0][j], S->d[1][j], S->d[2][j]), 0.0, S->tmax[j]};
+  return r;
+}
+
+/* Lane j of S: from si towards the point q (normal nq) on a surface. */
+static inline void spawn_lane_in(spawn_lanes *S, int j, const surface_interaction *si, vec3 q, vec3 nq) {
+  S->p[0][j] = si->p.x, S->p[1][j] = si->p.y, S->p[2][j] = si->p.z;
+  S->ng[0][j] = si->ng.x, S->ng[1][j] = si->ng.y, S->ng[2][j] = si->ng.z;
+  S->err[j] = si->p_error;
+  S->q[0][j] = q.x, S->q[1][j] = q.y, S->q[2][j] = q.z;
+  S->nq[0][j] = nq.x, S->nq[1][j] = nq.y, S->nq[2][j] = nq.z;
+}
+
 /* Lanes ln[sl[0..n)]'s shadow rays from S's inputs 0..n), towards the
  * surface of shape ls: the light's end's error bounds from the shape's
  * accel_surface_error_terms t (accel_surface_error_at_n), then the rays. */
@@ -494,32 +522,22 @@ static void spawn_between_lanes(const shape *ls, const double t[8], lane *ln, sp
   if (n == 0) return;
   const double *q[3] = {S->q[0], S->q[1], S->q[2]}, *nq[3] = {S->nq[0], S->nq[1], S->nq[2]};
   accel_surface_error_at_n(t, &ls->to_world, n, q, nq, S->qerr);
-#if defined(__x86_64__) || defined(__i386__)
-  switch (rsw_isa_get()) {
-  case RSW_ISA_AVX512: spawn_between_avx512(S, n); break;
-  case RSW_ISA_AVX2: spawn_between_avx2(S, n); break;
-  default: spawn_between_base(S, n); break;
-  }
-#else
-  spawn_between_base(S, n);
-#endif
-  for (int j = 0; j < n; j++) {
-    ray3 *r = &ln[sl[j]].sray;
-    r->o = v3(S->o[0][j], S->o[1][j], S->o[2][j]);
-    r->d = v3(S->d[0][j], S->d[1][j], S->d[2][j]);
-    r->tmin = 0.0;
-    r->tmax = S->tmax[j];
-  }
+  spawn_between_run(rsw_isa_get(), S, n);
+  for (int j = 0; j < n; j++) ln[sl[j]].sray = spawn_lane_out(S, j);
 }
 
-/* Lane j of S: from si towards the emitter sample ds on a surface. */
-static inline void spawn_lane_in(spawn_lanes *S, int j, const surface_interaction *si,
-                                 const direction_sample *ds) {
-  S->p[0][j] = si->p.x, S->p[1][j] = si->p.y, S->p[2][j] = si->p.z;
-  S->ng[0][j] = si->ng.x, S->ng[1][j] = si->ng.y, S->ng[2][j] = si->ng.z;
-  S->err[j] = si->p_error;
-  S->q[0][j] = ds->p.x, S->q[1][j] = ds->p.y, S->q[2][j] = ds->p.z;
-  S->nq[0][j] = ds->n.x, S->nq[1][j] = ds->n.y, S->nq[2][j] = ds->n.z;
+void spawn_rays_between_batch(rsw_isa isa, int n, const surface_interaction *const *si, const vec3 *q,
+                              const vec3 *nq, const double *qerr, ray3 *r) {
+  spawn_lanes S;
+  for (int k0 = 0; k0 < n; k0 += SPAWN_C) {
+    int m = n - k0 < SPAWN_C ? n - k0 : SPAWN_C;
+    for (int j = 0; j < m; j++) {
+      spawn_lane_in(&S, j, si[k0 + j], q[k0 + j], nq[k0 + j]);
+      S.qerr[j] = qerr[k0 + j];
+    }
+    spawn_between_run(isa, &S, m);
+    for (int j = 0; j < m; j++) r[k0 + j] = spawn_lane_out(&S, j);
+  }
 }
 
 /* Next-event estimation for lanes g[0..n) (each has nee set): the light
@@ -619,7 +637,7 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, pag
           accel_surface_error_terms(sc->accel, ls->index, &ls->to_world, terms);
           te = e;
         }
-        spawn_lane_in(&S, ns, &l->si, &l->ds);
+        spawn_lane_in(&S, ns, &l->si, l->ds.p, l->ds.n);
         sl[ns++] = g[k];
         if (ns == SPAWN_C) spawn_between_lanes(ls, terms, ln, &S, sl, ns), ns = 0;
       } else {
