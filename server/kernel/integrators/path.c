@@ -303,9 +303,10 @@ static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_
   if (timed) stats->trace_s += clock_s() - t0;
   stats->rays += (uint64_t)n;
   *n_hit = nh, *n_other = no;
-  /* The hits' surface data together (their frames vectorised). */
+  /* The hits' surface data together (their frames vectorised), 256 at
+   * a time (hit.c HIT_BATCH). */
   enum {
-    C = 64
+    C = 256
   };
   const ray3 *rr[C];
   const accel_hit *hh[C];
