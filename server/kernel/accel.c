@@ -517,6 +517,12 @@ double accel_surface_error_at(const double t[8], const xform *X, vec3 p, vec3 n)
   return surface_error_at(t, X, p, n);
 }
 
+void accel_surface_error_at_n(const double t[8], const xform *X, int m, const double *const p[3],
+                              const double *const n[3], double *out) {
+  for (int j = 0; j < m; j++)
+    out[j] = surface_error_at(t, X, v3(p[0][j], p[1][j], p[2][j]), v3(n[0][j], n[1][j], n[2][j]));
+}
+
 /* ---- build ------------------------------------------------------------------------------ */
 
 static rsw_status embree_fail(accel *a, rsw_err *err, const char *where, const char *what) {

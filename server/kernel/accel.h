@@ -161,6 +161,10 @@ void accel_surface_error_terms(const accel *a, uint32_t index, const xform *X, d
 /* accel_surface_error from those terms (bit for bit): a shape's many hits
  * take the terms once. */
 double accel_surface_error_at(const double t[8], const xform *X, vec3 p, vec3 n);
+/* The same for m points (p[0][j], p[1][j], p[2][j]) with unit normals
+ * n[.][j], into out[j], j < m: one call for a batch. */
+void accel_surface_error_at_n(const double t[8], const xform *X, int m, const double *const p[3],
+                              const double *const n[3], double *out);
 
 /* ---- updates (scene/update.c) -------------------------------------------------
  * Each call stages work on one shape; accel_commit() then commits the

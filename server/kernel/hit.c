@@ -101,6 +101,11 @@ static inline void mesh_face_in(const shape *s, uint32_t f, bool nrm, bool uv, d
 #define HIT_FACE_GROUPS 64
 #define HIT_FACE_MIN    8
 #define HIT_MESH_MIN    4
+/* Hits per chunk of hit_fill_interaction_batch (a multiple of 8): the
+ * more hits a chunk holds, the more of a small mesh's faces have
+ * HIT_FACE_MIN of them (the Cornell box: 256 took 0.97-0.98x the CPU
+ * time of 64, 512 no less than 256). */
+#define HIT_BATCH       256
 
 /* The hits lane[0..cnt) on one cached mesh s (top-level shape `index`,
  * t its accel_surface_error_terms), their whole si through shape_mesh_hits_batch (bitwise
@@ -117,7 +122,7 @@ static int hit_fill_cached(const shape *s, const double t[8], int cnt, const int
    * HIT_FACE_MIN of them is filled with its data given once, the others
    * are left to the caller; a large mesh's lanes go lane by lane (runs[]:
    * a face, or -1 for lane by lane). */
-  int order[64], start[HIT_FACE_GROUPS + 1], n_runs = 0, rest = 0;
+  int order[HIT_BATCH], start[HIT_FACE_GROUPS + 1], n_runs = 0, rest = 0;
   int run_face[HIT_FACE_GROUPS + 1], run_len[HIT_FACE_GROUPS + 1];
   const int *ls = lane;
   if (ms->n_faces <= HIT_FACE_GROUPS && cnt < HIT_FACE_MIN) { /* all by the scalar fill */
@@ -235,7 +240,7 @@ static inline void hit_fill_one(const scene *sc, int i, const ray3 *const *r, co
 void hit_fill_interaction_batch(const scene *sc, int n, const ray3 *const *r, const accel_hit *const *h,
                                 surface_interaction *const *si) {
   enum {
-    C = 64 /* lanes per call, a multiple of 8 */
+    C = HIT_BATCH
   };
   double in[SHAPE_FRAME_IN * C], out[12 * C];
   int lane[C], cached[C];

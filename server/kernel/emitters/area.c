@@ -72,7 +72,33 @@ typedef struct area_lanes {
   double dx[AREA_C], dy[AREA_C], dz[AREA_C]; /* out: unit direction */
   double dist[AREA_C], pdf[AREA_C], ipdf[AREA_C];
   double dist_ok[AREA_C], cos_ok[AREA_C]; /* out: 1 where dist > 0, cos_e > 0 */
+  /* A mesh's position samples (area_pos_body): the face picked, the
+   * area target u.x * area, the face's cdf step [prev, prev + w), u.y. */
+  uint32_t f[AREA_C];
+  double tg[AREA_C], prev[AREA_C], w[AREA_C], uy[AREA_C];
 } area_lanes;
+
+/* mesh_sample_inline's position and normal for lanes whose face, target
+ * and cdf step are in L (its operations in its order: the same bits), from
+ * the world triangles tris; flip: the normal negated (flip_normals). */
+static inline __attribute__((always_inline)) void area_pos_body(area_lanes *L, int n, const double *tris,
+                                                                bool flip) {
+  for (int i = 0; i < n; i++) {
+    double w = L->w[i];
+    double ux = w > 0 ? (L->tg[i] - L->prev[i]) / w : 0.5;
+    ux = ux < 0 ? 0 : ux;
+    ux = ux >= 1 ? 0x1.fffffffffffffp-1 : ux;
+    double t = sqrt(1.0 - ux);
+    double b1 = 1.0 - t, b2 = t * L->uy[i];
+    const double *T = &tris[SHAPE_TRI_DOUBLES * (size_t)L->f[i]];
+    L->px[i] = (T[0] + T[3] * b1) + T[6] * b2;
+    L->py[i] = (T[1] + T[4] * b1) + T[7] * b2;
+    L->pz[i] = (T[2] + T[5] * b1) + T[8] * b2;
+    L->nx[i] = flip ? -T[9] : T[9];
+    L->ny[i] = flip ? -T[10] : T[10];
+    L->nz[i] = flip ? -T[11] : T[11];
+  }
+}
 
 /* pdf_a: the position density 1 / area, as shape_sample_position_tris. */
 static inline __attribute__((always_inline)) void area_geom_body(area_lanes *L, int n, double pdf_a) {
@@ -93,29 +119,38 @@ static inline __attribute__((always_inline)) void area_geom_body(area_lanes *L, 
   }
 }
 
-#if defined(__x86_64__) || defined(__i386__)
-static __attribute__((target("avx512f,avx512vl,avx512dq"))) void area_geom_avx512(area_lanes *L, int n,
-                                                                                  double pdf_a) {
-  area_geom_body(L, n, pdf_a);
-}
-static __attribute__((target("avx2,fma"))) void area_geom_avx2(area_lanes *L, int n, double pdf_a) {
-  area_geom_body(L, n, pdf_a);
-}
-#endif
-/* sse2 (the x86-64 baseline) and generic. */
-static void area_geom_base(area_lanes *L, int n, double pdf_a) {
+/* tris: NULL when L holds the positions already, else area_pos_body's
+ * first. */
+static inline __attribute__((always_inline)) void area_lanes_body(area_lanes *L, int n, double pdf_a,
+                                                                  const double *tris, bool flip) {
+  if (tris) area_pos_body(L, n, tris, flip);
   area_geom_body(L, n, pdf_a);
 }
 
-static void area_geom(area_lanes *L, int n, double pdf_a) {
+#if defined(__x86_64__) || defined(__i386__)
+static __attribute__((target("avx512f,avx512vl,avx512dq"))) void
+area_geom_avx512(area_lanes *L, int n, double pdf_a, const double *tris, bool flip) {
+  area_lanes_body(L, n, pdf_a, tris, flip);
+}
+static __attribute__((target("avx2,fma"))) void area_geom_avx2(area_lanes *L, int n, double pdf_a,
+                                                               const double *tris, bool flip) {
+  area_lanes_body(L, n, pdf_a, tris, flip);
+}
+#endif
+/* sse2 (the x86-64 baseline) and generic. */
+static void area_geom_base(area_lanes *L, int n, double pdf_a, const double *tris, bool flip) {
+  area_lanes_body(L, n, pdf_a, tris, flip);
+}
+
+static void area_geom(area_lanes *L, int n, double pdf_a, const double *tris, bool flip) {
 #if defined(__x86_64__) || defined(__i386__)
   switch (rsw_isa_get()) {
-  case RSW_ISA_AVX512: area_geom_avx512(L, n, pdf_a); return;
-  case RSW_ISA_AVX2: area_geom_avx2(L, n, pdf_a); return;
+  case RSW_ISA_AVX512: area_geom_avx512(L, n, pdf_a, tris, flip); return;
+  case RSW_ISA_AVX2: area_geom_avx2(L, n, pdf_a, tris, flip); return;
   default: break;
   }
 #endif
-  area_geom_base(L, n, pdf_a);
+  area_geom_base(L, n, pdf_a, tris, flip);
 }
 
 static void area_sample_chunk(const area_light *a, int n, const surface_interaction *const *ref,
@@ -124,8 +159,34 @@ static void area_sample_chunk(const area_light *a, int n, const surface_interact
   const shape *s = e->shape;
   const double *tris = shape_world_tris_for(s, a->tris, a->tris_n);
   bool is_mesh = shape_is_mesh(s), flip = s->flip_normals;
+  /* A uniform radiance (the common case) is read once, not per lane. */
+  color rad;
+  bool uniform = uniform_texture_value(a->radiance, &rad);
   double uv[AREA_C][2];
-  for (int i = 0; i < n; i++) {
+  if (is_mesh && uniform && tris) {
+    /* Without texture coordinates to give, the positions in the lanes
+     * too: the face's pick here (mesh_sample_inline's search), the rest
+     * in area_pos_body. */
+    const double *cdf = s->tri_cdf;
+    for (int i = 0; i < n; i++) {
+      double target = u[i].x * s->area;
+      uint32_t lo = 0, hi = s->mesh.n_faces - 1;
+      while (lo < hi) {
+        uint32_t mid = lo + (hi - lo) / 2;
+        bool right = cdf[mid] <= target;
+        lo = right ? mid + 1 : lo;
+        hi = right ? hi : mid;
+      }
+      double prev = lo ? cdf[lo - 1] : 0.0;
+      L->f[i] = lo;
+      L->tg[i] = target;
+      L->prev[i] = prev;
+      L->w[i] = cdf[lo] - prev;
+      L->uy[i] = u[i].y;
+      L->rx[i] = ref[i]->p.x, L->ry[i] = ref[i]->p.y, L->rz[i] = ref[i]->p.z;
+    }
+  }
+  for (int i = 0; i < n && !(is_mesh && uniform && tris); i++) {
     /* shape_sample_position_tris without its pdf (the same for every
      * lane: pdf_a below) */
     position_sample ps;
@@ -140,10 +201,7 @@ static void area_sample_chunk(const area_light *a, int n, const surface_interact
     L->rx[i] = ref[i]->p.x, L->ry[i] = ref[i]->p.y, L->rz[i] = ref[i]->p.z;
     uv[i][0] = ps.uv[0], uv[i][1] = ps.uv[1];
   }
-  area_geom(L, n, 1.0 / s->area);
-  /* A uniform radiance (the common case) is read once, not per lane. */
-  color rad;
-  bool uniform = uniform_texture_value(a->radiance, &rad);
+  area_geom(L, n, 1.0 / s->area, is_mesh && uniform && tris ? tris : NULL, flip);
   for (int i = 0; i < n; i++) {
     direction_sample *d = &ds[i];
     d->p = v3(L->px[i], L->py[i], L->pz[i]);

@@ -6,6 +6,7 @@
 
 #include <math.h>
 
+#include "../core/isa.h"
 #include "../kernel.h"
 
 /* Power heuristic w(a, b) = a^2 / (a^2 + b^2); 0 where it is not finite. */
@@ -56,6 +57,11 @@ static inline double emitter_prob(const scene *sc, const emitter *e) {
  * (integrators/path.c says how it is offset at both ends). */
 ray3 spawn_ray_to(const scene *sc, const surface_interaction *si, const emitter *e,
                   const direction_sample *ds);
+/* spawn_ray_between(si[j], q[j], nq[j], qerr[j]) into r[j] for j < n, in
+ * structure-of-arrays lanes at ISA isa: path's shadow rays towards surface
+ * emitters, bitwise the scalar function at every ISA (test_wave). */
+void spawn_rays_between_batch(rsw_isa isa, int n, const surface_interaction *const *si, const vec3 *q,
+                              const vec3 *nq, const double *qerr, ray3 *r);
 
 /* volpath's and piecewise_volpath's waves: by stages over the lanes (on,
  * the default) or lane by lane (off), for the whole process; the films

@@ -32,6 +32,13 @@
  * the same treatment at the light's end (spawn_ray_between); for other
  * emitters the ray stops short of ds.dist by ShadowEpsilon (relative), as
  * Mitsuba. */
+static inline void spawn_ray_to_far(const surface_interaction *si, const direction_sample *ds, ray3 *r) {
+  r->o = offset_on_side(si->p, si->ng, si->p_error, ds->d);
+  r->d = ds->d;
+  r->tmin = 0.0;
+  r->tmax = isfinite(ds->dist) ? ds->dist * (1.0 - RSW_SHADOW_EPSILON) : INFINITY;
+}
+
 static inline void spawn_ray_to_in(const scene *sc, const surface_interaction *si, const emitter *e,
                                    const direction_sample *ds, ray3 *r) {
   if ((e->flags & EMITTER_SURFACE) && e->shape) {
@@ -40,10 +47,7 @@ static inline void spawn_ray_to_in(const scene *sc, const surface_interaction *s
                            accel_surface_error(sc->accel, ls->index, &ls->to_world, ds->p, ds->n));
     return;
   }
-  r->o = offset_on_side(si->p, si->ng, si->p_error, ds->d);
-  r->d = ds->d;
-  r->tmin = 0.0;
-  r->tmax = isfinite(ds->dist) ? ds->dist * (1.0 - RSW_SHADOW_EPSILON) : INFINITY;
+  spawn_ray_to_far(si, ds, r);
 }
 
 ray3 spawn_ray_to(const scene *sc, const surface_interaction *si, const emitter *e,
@@ -299,9 +303,10 @@ static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_
   if (timed) stats->trace_s += clock_s() - t0;
   stats->rays += (uint64_t)n;
   *n_hit = nh, *n_other = no;
-  /* The hits' surface data together (their frames vectorised). */
+  /* The hits' surface data together (their frames vectorised), 256 at
+   * a time (hit.c HIT_BATCH). */
   enum {
-    C = 64
+    C = 256
   };
   const ray3 *rr[C];
   const accel_hit *hh[C];
@@ -426,6 +431,116 @@ static bool shade_emit(const integrator *it, const scene *sc, lane *l, double *q
   return true;
 }
 
+/* The shadow rays of spawn_ray_between for up to SPAWN_C lanes, in
+ * structure-of-arrays lanes: the lane's surface point p (normal ng, error
+ * err) and the point q on the light (normal nq, error qerr) in, the ray's
+ * origin o, unit direction d and tmax out. The loop is compiled per ISA
+ * (core/isa.h) and vectorised, each lane making spawn_ray_between's
+ * operations in its order (no contraction in ISO C mode): the same bits.
+ * A lane's square root and division no longer wait on the lane before. */
+enum {
+  SPAWN_C = 64
+};
+typedef struct spawn_lanes {
+  double p[3][SPAWN_C], ng[3][SPAWN_C], err[SPAWN_C];
+  double q[3][SPAWN_C], nq[3][SPAWN_C], qerr[SPAWN_C];
+  double o[3][SPAWN_C], d[3][SPAWN_C], tmax[SPAWN_C];
+} spawn_lanes;
+
+static inline __attribute__((always_inline)) void spawn_between_body(spawn_lanes *S, int n) {
+  const double shorten = 1.0 - RSW_SPAWN_ERRORS * RSW_F32_UNIT;
+  for (int i = 0; i < n; i++) {
+    const double px = S->p[0][i], py = S->p[1][i], pz = S->p[2][i];
+    const double qx = S->q[0][i], qy = S->q[1][i], qz = S->q[2][i];
+    const double gx = S->ng[0][i], gy = S->ng[1][i], gz = S->ng[2][i];
+    const double nx = S->nq[0][i], ny = S->nq[1][i], nz = S->nq[2][i];
+    /* offset_on_side(p, ng, err, q - p) */
+    double vx = qx - px, vy = qy - py, vz = qz - pz;
+    double mo = RSW_SPAWN_ERRORS * S->err[i];
+    double so = gx * vx + gy * vy + gz * vz >= 0 ? mo : -mo;
+    double ox = px + so * gx, oy = py + so * gy, oz = pz + so * gz;
+    /* offset_on_side(q, nq, qerr, p - q) */
+    double wx = px - qx, wy = py - qy, wz = pz - qz;
+    double me = RSW_SPAWN_ERRORS * S->qerr[i];
+    double se = nx * wx + ny * wy + nz * wz >= 0 ? me : -me;
+    double ex = qx + se * nx, ey = qy + se * ny, ez = qz + se * nz;
+    double dx = ex - ox, dy = ey - oy, dz = ez - oz;
+    double len = sqrt(dx * dx + dy * dy + dz * dz);
+    double inv = 1.0 / len;
+    S->o[0][i] = ox, S->o[1][i] = oy, S->o[2][i] = oz;
+    S->d[0][i] = len > 0 ? dx * inv : dx;
+    S->d[1][i] = len > 0 ? dy * inv : dy;
+    S->d[2][i] = len > 0 ? dz * inv : dz;
+    S->tmax[i] = len * shorten;
+  }
+}
+
+#if defined(__x86_64__) || defined(__i386__)
+static __attribute__((target("avx512f,avx512vl,avx512dq"))) void spawn_between_avx512(spawn_lanes *S, int n) {
+  spawn_between_body(S, n);
+}
+static __attribute__((target("avx2,fma"))) void spawn_between_avx2(spawn_lanes *S, int n) {
+  spawn_between_body(S, n);
+}
+#endif
+static void spawn_between_base(spawn_lanes *S, int n) {
+  spawn_between_body(S, n);
+}
+
+static void spawn_between_run(rsw_isa isa, spawn_lanes *S, int n) {
+#if defined(__x86_64__) || defined(__i386__)
+  switch (isa) {
+  case RSW_ISA_AVX512: spawn_between_avx512(S, n); return;
+  case RSW_ISA_AVX2: spawn_between_avx2(S, n); return;
+  default: break;
+  }
+#else
+  (void)isa;
+#endif
+  spawn_between_base(S, n);
+}
+
+/* Ray j of S's outputs. */
+static inline ray3 spawn_lane_out(const spawn_lanes *S, int j) {
+  ray3 r = {v3(S->o[0][j], S->o[1][j], S->o[2][j]), v3(S->d[0][j], S->d[1][j], S->d[2][j]), 0.0, S->tmax[j]};
+  return r;
+}
+
+/* Lane j of S: from si towards the point q (normal nq) on a surface. */
+static inline void spawn_lane_in(spawn_lanes *S, int j, const surface_interaction *si, vec3 q, vec3 nq) {
+  S->p[0][j] = si->p.x, S->p[1][j] = si->p.y, S->p[2][j] = si->p.z;
+  S->ng[0][j] = si->ng.x, S->ng[1][j] = si->ng.y, S->ng[2][j] = si->ng.z;
+  S->err[j] = si->p_error;
+  S->q[0][j] = q.x, S->q[1][j] = q.y, S->q[2][j] = q.z;
+  S->nq[0][j] = nq.x, S->nq[1][j] = nq.y, S->nq[2][j] = nq.z;
+}
+
+/* Lanes ln[sl[0..n)]'s shadow rays from S's inputs 0..n), towards the
+ * surface of shape ls: the light's end's error bounds from the shape's
+ * accel_surface_error_terms t (accel_surface_error_at_n), then the rays. */
+static void spawn_between_lanes(const shape *ls, const double t[8], lane *ln, spawn_lanes *S, const int *sl,
+                                int n) {
+  if (n == 0) return;
+  const double *q[3] = {S->q[0], S->q[1], S->q[2]}, *nq[3] = {S->nq[0], S->nq[1], S->nq[2]};
+  accel_surface_error_at_n(t, &ls->to_world, n, q, nq, S->qerr);
+  spawn_between_run(rsw_isa_get(), S, n);
+  for (int j = 0; j < n; j++) ln[sl[j]].sray = spawn_lane_out(S, j);
+}
+
+void spawn_rays_between_batch(rsw_isa isa, int n, const surface_interaction *const *si, const vec3 *q,
+                              const vec3 *nq, const double *qerr, ray3 *r) {
+  spawn_lanes S;
+  for (int k0 = 0; k0 < n; k0 += SPAWN_C) {
+    int m = n - k0 < SPAWN_C ? n - k0 : SPAWN_C;
+    for (int j = 0; j < m; j++) {
+      spawn_lane_in(&S, j, si[k0 + j], q[k0 + j], nq[k0 + j]);
+      S.qerr[j] = qerr[k0 + j];
+    }
+    spawn_between_run(isa, &S, m);
+    for (int j = 0; j < m; j++) r[k0 + j] = spawn_lane_out(&S, j);
+  }
+}
+
 /* Next-event estimation for lanes g[0..n) (each has nee set): the light
  * pick and light sample numbers of every lane (in the one-path order:
  * pick, then sample), then the samples grouped by emitter
@@ -496,6 +611,13 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, pag
     }
     rsw_page = 0;
   }
+  /* The light's end of a shadow ray towards a surface emitter is offset
+   * by accel_surface_error; its shape's terms are taken once per run of
+   * lanes of one emitter (accel_surface_error_at: the same bits). */
+  const emitter *te = NULL;
+  double terms[8];
+  spawn_lanes S;
+  int sl[SPAWN_C], ns = 0;
   for (int k = 0; k < n; k++) {
     lane *l = &ln[g[k]];
     const emitter *e = l->ne;
@@ -509,11 +631,24 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, pag
     bool lit = !col_is_black(l->value);
     for (int p = 1; pgs && p < sc->pages; p++) lit |= !col_is_black(pgs[g[k]].value[p - 1]);
     if (l->ds.pdf > 0 && lit) {
-      spawn_ray_to_in(sc, &l->si, e, &l->ds, &l->sray);
+      if ((e->flags & EMITTER_SURFACE) && e->shape) {
+        const shape *ls = e->shape;
+        if (e != te) {
+          if (te) spawn_between_lanes(te->shape, terms, ln, &S, sl, ns), ns = 0;
+          accel_surface_error_terms(sc->accel, ls->index, &ls->to_world, terms);
+          te = e;
+        }
+        spawn_lane_in(&S, ns, &l->si, l->ds.p, l->ds.n);
+        sl[ns++] = g[k];
+        if (ns == SPAWN_C) spawn_between_lanes(ls, terms, ln, &S, sl, ns), ns = 0;
+      } else {
+        spawn_ray_to_far(&l->si, &l->ds, &l->sray);
+      }
       l->nee = true;
       g[(*n_sh)++] = g[k];
     }
   }
+  if (te) spawn_between_lanes(te->shape, terms, ln, &S, sl, ns);
 }
 
 /* Lanes g[0..*left) wait for a batched BSDF call: move up to `cap` of

@@ -15,6 +15,11 @@
  * ord[start[e]..start[e + 1]), in lane order. */
 static inline void wave_group_by_emitter(const scene *sc, const int *ek, int n,
                                          int start[WAVE_EMITTER_GROUPS + 1], int *ord) {
+  if (sc->n_emitters == 1) { /* every ek[j] is 0: the count's chain through memory is skipped */
+    start[0] = 0, start[1] = n;
+    for (int j = 0; j < n; j++) ord[j] = j;
+    return;
+  }
   int fill[WAVE_EMITTER_GROUPS];
   for (size_t e = 0; e <= sc->n_emitters; e++) start[e] = 0;
   for (int j = 0; j < n; j++) start[ek[j] + 1]++;

@@ -191,8 +191,14 @@ static void stratified_next_1d_batch(sampler_state *st, const int *idx, int n, d
       q[k]->dim++;
     }
     /* Apart from the streams: the divisions in vector lanes (IEEE
-     * division, the scalar's bits). */
-    for (int k = 0; k < m; k++) out[k0 + k] = ((double)p[k] + j[k]) / n2;
+     * division, the scalar's bits); by a power of two (spp 4^k) a product
+     * with its reciprocal, which is exact: the same bits. */
+    if ((sq & (sq - 1)) == 0) {
+      const double inv = 1.0 / n2;
+      for (int k = 0; k < m; k++) out[k0 + k] = ((double)p[k] + j[k]) * inv;
+    } else {
+      for (int k = 0; k < m; k++) out[k0 + k] = ((double)p[k] + j[k]) / n2;
+    }
   }
 }
 
@@ -212,10 +218,14 @@ static void stratified_next_2d_batch(sampler_state *st, const int *idx, int n, v
       jy[k] = jitter(q[k]);
       q[k]->dim++;
     }
-    /* The cell: a shift and mask for a power-of-two side (spp 4^k). */
+    /* The cell: a shift and mask for a power-of-two side (spp 4^k), and
+     * the division by the side a product with its reciprocal (exact). */
     if ((sq & (sq - 1)) == 0) {
       int sh = __builtin_ctz(sq);
+      const double inv = 1.0 / side;
       for (int k = 0; k < m; k++) fx[k] = (double)(p[k] & (sq - 1)), fy[k] = (double)(p[k] >> sh);
+      for (int k = 0; k < m; k++) out[k0 + k] = v2((fx[k] + jx[k]) * inv, (fy[k] + jy[k]) * inv);
+      continue;
     } else {
       for (int k = 0; k < m; k++) {
         uint32_t y = p[k] / sq;

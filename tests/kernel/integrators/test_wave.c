@@ -30,7 +30,9 @@
  *    a stratified film is bitwise the same for 1, 2 and 3 threads;
  *  - the wave's shortcuts give what they replace: the emitter pick by a
  *    count (a few emitters) the binary search's pick, the batched ray
- *    culls (rays_traced_batch) the scalar verdicts at every ISA. */
+ *    culls (rays_traced_batch) the scalar verdicts at every ISA, the
+ *    shadow rays towards surface emitters in lanes
+ *    (spawn_rays_between_batch) spawn_ray_between's at every ISA. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -817,6 +819,60 @@ static void test_pick_emitter(void) {
  * and through a box, and the edge cases (direction components of zero
  * and -0, origins on the padded and the full box's faces, infinities,
  * NaNs, a zero direction), over counts that leave a partial last vector. */
+/* spawn_rays_between_batch (path's shadow rays towards surface emitters,
+ * structure-of-arrays lanes per ISA) against spawn_ray_between bit for
+ * bit, at every ISA this CPU runs and several batch sizes: points on both
+ * sides of each other's normals, a point on the light that is the
+ * surface point itself with no error (zero length), and nothing written
+ * past n. */
+static void test_spawn_between_batch(void) {
+  enum {
+    N = 150
+  };
+  static surface_interaction si[N];
+  const surface_interaction *sp[N];
+  vec3 q[N], nq[N];
+  double qerr[N];
+  pcg32 rng;
+  pcg32_seed(&rng, 57, 3);
+  memset(si, 0, sizeof si);
+  for (int k = 0; k < N; k++) {
+    double v[12];
+    for (int j = 0; j < 12; j++) v[j] = 4 * pcg32_next_double(&rng) - 2;
+    si[k].p = v3(v[0], v[1], v[2]);
+    si[k].ng = v3_norm(v3(v[3], v[4], v[5]));
+    si[k].p_error = 1e-6 * (1 + pcg32_next_double(&rng));
+    q[k] = v3(v[6], v[7], v[8]);
+    nq[k] = v3_norm(v3(v[9], v[10], v[11]));
+    qerr[k] = 1e-6 * pcg32_next_double(&rng);
+    sp[k] = &si[k];
+  }
+  si[5].p_error = 0, q[5] = si[5].p, qerr[5] = 0; /* zero length */
+  int isas = 0, zero = 0;
+  for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
+    if (!rsw_isa_supported((rsw_isa)isa)) continue;
+    isas++;
+    const int counts[] = {N, 1, 7, 64, 65};
+    for (size_t ci = 0; ci < sizeof counts / sizeof counts[0]; ci++) {
+      int n = counts[ci], bad = 0;
+      ray3 r[N + 1];
+      memset(r, 0xa5, sizeof r);
+      ray3 guard = r[n];
+      spawn_rays_between_batch((rsw_isa)isa, n, sp, q, nq, qerr, r);
+      for (int k = 0; k < n; k++) {
+        ray3 w = spawn_ray_between(&si[k], q[k], nq[k], qerr[k]);
+        bad += memcmp(&w.o, &r[k].o, sizeof w.o) || memcmp(&w.d, &r[k].d, sizeof w.d) ||
+               memcmp(&w.tmin, &r[k].tmin, sizeof w.tmin) || memcmp(&w.tmax, &r[k].tmax, sizeof w.tmax);
+        zero += n == N && w.tmax == 0;
+      }
+      CHECK(bad == 0 && !memcmp(&r[n], &guard, sizeof guard),
+            "%s, %d rays: %d differ from spawn_ray_between%s", rsw_isa_name((rsw_isa)isa), n, bad,
+            memcmp(&r[n], &guard, sizeof guard) ? " (and it wrote past n)" : "");
+    }
+  }
+  CHECK(isas >= 2 && zero == isas, "%d ISAs, %d zero-length rays", isas, zero);
+}
+
 static void test_rays_traced_batch(void) {
   enum {
     N = 203
@@ -871,6 +927,7 @@ static void test_rays_traced_batch(void) {
 int main(void) {
   RSW_TEST_RUN(test_pick_emitter);
   RSW_TEST_RUN(test_rays_traced_batch);
+  RSW_TEST_RUN(test_spawn_between_batch);
   RSW_TEST_RUN(test_threads_cornell);
   RSW_TEST_RUN(test_threads_periodic);
   RSW_TEST_RUN(test_threads_batched_plugins);
