@@ -870,7 +870,8 @@ static void test_spawn_between_batch(void) {
             memcmp(&r[n], &guard, sizeof guard) ? " (and it wrote past n)" : "");
     }
   }
-  CHECK(isas >= 2 && zero == isas, "%d ISAs, %d zero-length rays", isas, zero);
+  /* (every ISA this build has: the portable build, make test-generic, has one) */
+  CHECK(isas >= 1 && zero == isas, "%d ISAs, %d zero-length rays", isas, zero);
 }
 
 static void test_rays_traced_batch(void) {
