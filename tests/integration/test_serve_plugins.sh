@@ -127,6 +127,13 @@ njob=$(python3 "$tmp/nanjob.py" "$port" submit "$nid" 2>"$tmp/pyerr") && ok nan_
   -o "$tmp/nansweep" > /dev/null 2> "$tmp/sweep.err"
 grep -q "warning: job .*environment plugin answers were replaced by black" "$tmp/sweep.err" &&
   ok nan_sweep_says_so || ko nan_sweep_says_so "$(cat "$tmp/sweep.err")"
+# raysweep render warns, and the EXR the client library writes from the
+# film's meta carries the attributes.
+"$bin/raysweep" --server "http://127.0.0.1:$port" render "$nid" --wavelength 600 --spp 4 -o "$tmp/client.exr" \
+  > /dev/null 2> "$tmp/crender.err"
+grep -q "warning: 4 environment plugin answers in .* were replaced by black; first: emitter 'bad_sky'" "$tmp/crender.err" &&
+  grep -aq "raysweep:plugin_failures" "$tmp/client.exr" && ok nan_client_render_says_so ||
+  ko nan_client_render_says_so "$(cat "$tmp/crender.err")"
 kill -TERM "$pid"; wait "$pid" 2>/dev/null
 rm -f "$tmp/port"
 "$bin/raysweepd" serve --listen 127.0.0.1:0 --port-file "$tmp/port" --plugin-dir "$tmp/plugins" --state-dir "$tmp/data" 2>> "$tmp/log" &
