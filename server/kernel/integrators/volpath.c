@@ -510,6 +510,11 @@ typedef struct vlane {
 typedef struct vpage {
   color T[RENDER_MAX_PAGES - 1], L[RENDER_MAX_PAGES - 1];
   color sval[RENDER_MAX_PAGES - 1], str[RENDER_MAX_PAGES - 1];
+  /* The path's hero channel for its exact free flights (-1: none drawn
+   * yet) and the mixture weights of the 3 P channels given the flights so
+   * far (flight_pages: path-level spectral MIS). */
+  int hero;
+  double post[3 * RENDER_MAX_PAGES];
 } vpage;
 
 /* The largest value of x (page 0's) and of pages 1.. of a (pg NULL: x's). */
@@ -760,60 +765,60 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
   return false;
 }
 
-/* The mixture a bundle's free flight draws its channel from
- * (flight_pages). One-sample MIS with the balance heuristic over any
- * mixture of the channels' densities is unbiased (each wavelength
- * weighted by its own density over the mixture's; Veach 1997, sec.
- * 9.2.4): the choice only moves noise between the wavelengths. All 3 P
- * alike (what a bundle of three uses) starves the extremes when the
- * bundle's extinction spans a wide range: a wavelength far from the mean
- * seldom gets a flight drawn near its own density, and the mismatch
- * compounds over the bounces. So where the largest extinction of the
- * bundle's channels is more than FLIGHT_SPREAD times the smallest (a
- * layered medium's whole column, a homogeneous one's sigma_t), the
- * mixture puts FLIGHT_W_THICK on the thickest channel, FLIGHT_W_THIN on
- * the thinnest and spreads the rest alike. Measured (the films' stderr at
- * equal spp, bundled over unbundled, at the worst of 16 wavelengths;
- * docs/experiments.md#spectral-bundles): a slab of optical thickness 0.9
- * at 400 nm to 0.1 at 700 (a spread of 9), 8.5 alike, 3.7 with the
- * extremes; the molecular atmosphere 400..550 nm (a spread of 3.6), 1.92
- * alike, 1.70 with the extremes but 1.10x the CPU (more collisions): not
- * worth it below the threshold. */
+/* A bundle's free flights: path-level spectral MIS (the hero wavelength
+ * of Wilkie et al. 2014, "Hero Wavelength Spectral Sampling", over the
+ * bundle's 3 P channels). A path draws its hero channel j once, with
+ * prior probability w_j, at its first flight through a medium whose
+ * extinction depends on the wavelength, and every later such flight
+ * inverts the hero's optical thickness. The path's density is then the
+ * mixture sum_j w_j prod_e p_j(e) over its flights e (p_j: the flight's
+ * outcome's density had channel j drawn it: the transmittance to a pass,
+ * transmittance times sigma_t at a collision), and channel c's estimate
+ * is its own prod_e f_c(e) over that sum (the balance heuristic, Veach
+ * 1997, sec. 9.2.4: unbiased for any prior). Flight by flight: with
+ * post_j = w_j prod p_j / sum_k w_k prod p_k (the channels' weights given
+ * the flights so far; w before the first), a flight divides every
+ * channel's throughput by pc = sum_j post_j p_j(e) and then post_j *=
+ * p_j(e) / pc. Drawing a new channel at every flight instead (the mixture
+ * per flight, what bundles did before) lets a wavelength's mismatch
+ * compound over the bounces: through a slab of optical thickness 4 at 400
+ * nm to 1 at 700 the 400 nm film was 14.5 times noisier than unbundled at
+ * equal spp, 1.6 with the hero (docs/experiments.md#spectral-bundles).
+ * The prior puts FLIGHT_W_THICK on the bundle's thickest channel,
+ * FLIGHT_W_THIN on its thinnest (a layered medium's whole column, a
+ * homogeneous one's sigma_t: medium_extremes) and spreads the rest alike:
+ * a wavelength at either end of the range then gets paths drawn near its
+ * own density. */
 #define FLIGHT_W_THICK 0.4
 #define FLIGHT_W_THIN  0.4
-#define FLIGHT_SPREAD  4.0
 
 /* A free flight over [mint, maxt] of seg in analytic medium m for a
  * bundle of pages (vpage): the collision (or the pass) drawn by inverting
- * one of the 3 P channels, picked from the mixture above, each page
- * weighted by its own transmittance (and sigma_s at a collision) over the
- * mixture of the channels' densities. True: a collision, at mi. */
+ * the path's hero channel (drawn here at its first chromatic flight),
+ * each page weighted by its own transmittance (and sigma_s at a
+ * collision) over the path-level mixture above. True: a collision, at
+ * mi. */
 static __attribute__((noinline)) bool flight_pages(const scene *sc, const medium *m, const ray3 *seg,
                                                    double mint, double maxt, sampler_state *st, vlane *l,
                                                    vpage *pg, medium_interaction *mi) {
   const sampler_ops *sops = st->s->ops;
   const int NP = sc->pages, nch = 3 * NP;
   const bool chromatic = m->has_spectral_extinction;
-  int c = 0;
-  bool wide = false;
-  double w[3 * RENDER_MAX_PAGES] = {0};
-  if (chromatic) {
+  double *post = pg->post;
+  if (chromatic && pg->hero < 0) { /* the path's first chromatic flight: its hero, from the prior */
     int thick = m->thick_channel, thin = m->thin_channel;
-    wide = m->extinction_spread > FLIGHT_SPREAD && thick < nch && thin < nch;
-    double u0 = sops->next_1d(st);
-    if (wide) {
-      for (int k = 0; k < nch; k++) w[k] = (1.0 - FLIGHT_W_THICK - FLIGHT_W_THIN) / nch;
-      w[thick] += FLIGHT_W_THICK, w[thin] += FLIGHT_W_THIN;
-      double cdf = 0.0;
-      for (c = 0; c < nch - 1; c++) {
-        cdf += w[c];
-        if (u0 < cdf) break;
-      }
-    } else {
-      c = (int)(u0 * nch);
-      c = c < nch - 1 ? c : nch - 1;
+    bool ends = m->extinction_spread > 1.0 && thick != thin && thick < nch && thin < nch;
+    for (int k = 0; k < nch; k++) post[k] = (ends ? 1.0 - FLIGHT_W_THICK - FLIGHT_W_THIN : 1.0) / nch;
+    if (ends) post[thick] += FLIGHT_W_THICK, post[thin] += FLIGHT_W_THIN;
+    double u0 = sops->next_1d(st), cdf = 0.0;
+    int k = 0;
+    for (; k < nch - 1; k++) {
+      cdf += post[k];
+      if (u0 < cdf) break;
     }
+    pg->hero = k;
   }
+  int c = chromatic ? pg->hero : 0;
   double u = sops->next_1d(st);
   int h = c / 3;
   color tr[RENDER_MAX_PAGES], pdf[RENDER_MAX_PAGES], ss[RENDER_MAX_PAGES];
@@ -844,12 +849,13 @@ static __attribute__((noinline)) bool flight_pages(const scene *sc, const medium
         pdf[p] = col_mul(mp.sigma_t, tr[p]);
       }
     }
-    if (wide)
-      for (int j = 0; j < 3; j++) pc += w[3 * p + j] * pdf[p].c[j];
-    else
-      pc += col_mean(pdf[p]);
+    for (int j = 0; chromatic && j < 3; j++) pc += post[3 * p + j] * pdf[p].c[j];
   }
-  pc = !chromatic ? pdf[0].c[0] : wide ? pc : pc / NP;
+  if (!chromatic) pc = pdf[0].c[0];
+  if (chromatic && pc > 0) {
+    for (int p = 0; p < NP; p++)
+      for (int j = 0; j < 3; j++) post[3 * p + j] *= pdf[p].c[j] / pc;
+  }
   for (int p = 0; p < NP; p++) {
     color f = scattered ? col_mul(tr[p], ss[p]) : tr[p];
     color *T = p ? &pg->T[p - 1] : &l->T;
@@ -1535,11 +1541,13 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
                      int n, render_stats *stats, color *L, double *quv, vlane *ln, pol_lane *vq, vpage *pgs,
                      int *idx, int *sh, bool *hit, surface_interaction *si, const vstage *vs) {
   int live = 0;
-  for (int i = 0; pgs && i < n; i++)
+  for (int i = 0; pgs && i < n; i++) {
+    pgs[i].hero = -1;
     for (int p = 1; p < sc->pages; p++) {
       pgs[i].T[p - 1] = col1(1.0);
       pgs[i].L[p - 1] = col1(0.0);
     }
+  }
   if (vq)
     for (int i = 0; i < n; i++) pol_start(&vq[i], rays[i].d, pol_channels(sc));
   for (int i = 0; i < n; i++) {
