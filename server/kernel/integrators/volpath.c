@@ -792,6 +792,24 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
 #define FLIGHT_W_THICK 0.4
 #define FLIGHT_W_THIN  0.4
 
+/* Lane pg's hero among the nch channels, drawn with number u0 from the
+ * prior above (m: the medium of the path's first chromatic flight), and
+ * its channels' weights set to that prior. */
+static void draw_hero(const medium *m, int nch, double u0, vpage *pg) {
+  double *post = pg->post;
+  int thick = m->thick_channel, thin = m->thin_channel;
+  bool ends = m->extinction_spread > 1.0 && thick != thin && thick < nch && thin < nch;
+  for (int k = 0; k < nch; k++) post[k] = (ends ? 1.0 - FLIGHT_W_THICK - FLIGHT_W_THIN : 1.0) / nch;
+  if (ends) post[thick] += FLIGHT_W_THICK, post[thin] += FLIGHT_W_THIN;
+  double cdf = 0.0;
+  int k = 0;
+  for (; k < nch - 1; k++) {
+    cdf += post[k];
+    if (u0 < cdf) break;
+  }
+  pg->hero = k;
+}
+
 /* A free flight over [mint, maxt] of seg in analytic medium m for a
  * bundle of pages (vpage): the collision (or the pass) drawn by inverting
  * the path's hero channel (drawn here at its first chromatic flight),
@@ -805,19 +823,7 @@ static __attribute__((noinline)) bool flight_pages(const scene *sc, const medium
   const int NP = sc->pages, nch = 3 * NP;
   const bool chromatic = m->has_spectral_extinction;
   double *post = pg->post;
-  if (chromatic && pg->hero < 0) { /* the path's first chromatic flight: its hero, from the prior */
-    int thick = m->thick_channel, thin = m->thin_channel;
-    bool ends = m->extinction_spread > 1.0 && thick != thin && thick < nch && thin < nch;
-    for (int k = 0; k < nch; k++) post[k] = (ends ? 1.0 - FLIGHT_W_THICK - FLIGHT_W_THIN : 1.0) / nch;
-    if (ends) post[thick] += FLIGHT_W_THICK, post[thin] += FLIGHT_W_THIN;
-    double u0 = sops->next_1d(st), cdf = 0.0;
-    int k = 0;
-    for (; k < nch - 1; k++) {
-      cdf += post[k];
-      if (u0 < cdf) break;
-    }
-    pg->hero = k;
-  }
+  if (chromatic && pg->hero < 0) draw_hero(m, nch, sops->next_1d(st), pg);
   int c = chromatic ? pg->hero : 0;
   double u = sops->next_1d(st);
   int h = c / 3;
@@ -866,18 +872,25 @@ static __attribute__((noinline)) bool flight_pages(const scene *sc, const medium
 
 /* A free flight over [mint, maxt] of seg in tracked medium m for a bundle
  * of pages: delta tracking against the majorant of every page's channels,
- * a tentative collision real with the probability of the mean of the 3 P
- * channels' sigma_t over it (the channel-mean tracking volpath uses for
- * rgb, over every page), and each page weighted by its own sigma_s (real)
- * or sigma_n (null) over that probability's density, so that each page's
- * estimate is unbiased (Kutz et al. 2017, "Spectral and decomposition
- * tracking for rendering heterogeneous volumes"). 1: a collision, at mi;
- * 0: the flight passed maxt; -1: every page's throughput is 0. */
+ * each page weighted by its own sigma_s (real) or sigma_n (null) over the
+ * probability of the outcome, so that each page's estimate is unbiased
+ * (Kutz et al. 2017, "Spectral and decomposition tracking for rendering
+ * heterogeneous volumes"). Where the extinction depends on the wavelength,
+ * a tentative collision is real with the path's hero channel's
+ * probability sigma_t / mu and weighted over the path-level mixture
+ * (draw_hero, flight_pages: the tentative collisions' distances do not
+ * depend on the channel, the real-or-null choices do); else with the
+ * mean of the 3 P channels' (the channel-mean tracking volpath uses for
+ * rgb). 1: a collision, at mi; 0: the flight passed maxt; -1: every
+ * page's throughput is 0. */
 static __attribute__((noinline)) int track_pages(const scene *sc, const medium *m, const ray3 *seg,
                                                  double mint, double maxt, sampler_state *st, vlane *l,
                                                  vpage *pg, medium_interaction *mi) {
   const sampler_ops *sops = st->s->ops;
-  const int NP = sc->pages;
+  const int NP = sc->pages, nch = 3 * NP;
+  const bool chromatic = m->has_spectral_extinction;
+  double *post = pg->post;
+  if (chromatic && pg->hero < 0) draw_hero(m, nch, sops->next_1d(st), pg);
   *mi = (medium_interaction){.medium = m, .wi = v3_neg(seg->d), .mint = mint};
   mi->p = v3_fma(seg->o, mint, seg->d);
   double mu = majorant_pages(m, mi, NP);
@@ -889,9 +902,22 @@ static __attribute__((noinline)) int track_pages(const scene *sc, const medium *
     mi->t = t;
     mi->p = v3_fma(seg->o, t, seg->d);
     double p_real = coefficients_pages(m, mi, mu, NP, ss, sn) / mu;
+    if (chromatic) p_real = 1.0 - sn[pg->hero / 3].c[pg->hero % 3] / mu;
     mi->majorant = col1(mu);
     bool real = sops->next_1d(st) < p_real;
-    double k = 1.0 / (mu * (real ? p_real : 1.0 - p_real));
+    double pc = real ? p_real : 1.0 - p_real;
+    if (chromatic) { /* the mixture's probability of the outcome; the weights given it */
+      pc = 0.0;
+      for (int j = 0; j < nch; j++) {
+        double q = sn[j / 3].c[j % 3] / mu;
+        pc += post[j] * (real ? 1.0 - q : q);
+      }
+      for (int j = 0; j < nch && pc > 0; j++) {
+        double q = sn[j / 3].c[j % 3] / mu;
+        post[j] *= (real ? 1.0 - q : q) / pc;
+      }
+    }
+    double k = pc > 0 ? 1.0 / (mu * pc) : 0.0;
     for (int p = 0; p < NP; p++) {
       color *T = p ? &pg->T[p - 1] : &l->T;
       *T = col_scale(col_mul(*T, real ? ss[p] : sn[p]), k);
