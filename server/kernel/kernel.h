@@ -591,6 +591,12 @@ typedef struct phase_ops {
    * per colour channel (a spectral bundle's wavelengths; sample() and
    * eval_pdf() give channel 0's value and the density). */
   color (*eval_channels)(const phase *ph, const medium_interaction *mi, vec3 wo);
+  /* Optional, beside eval_channels: out[p] = eval_channels at page p (as
+   * rsw_page = p would give it, bit for bit) for p0 <= p < pages, what
+   * does not depend on the wavelength worked out once
+   * (integrators/pages.h phase_pages makes the per-page calls without
+   * it). */
+  void (*eval_pages)(const phase *ph, const medium_interaction *mi, vec3 wo, int p0, int pages, color *out);
   /* Optional (polarized variants): the polarization factors P[c] = F / F11
    * per colour channel of the scattering from mi->wi into wo, in the bases
    * whose x is the scattering plane's normal. NULL: a depolarizer. */

@@ -11,6 +11,22 @@
 
 #include "../kernel.h"
 
+/* A chromatic phase's value per channel at pages p0..pages-1 into
+ * out[p] (phase_ops.eval_pages where the phase has it, else
+ * eval_channels page by page). */
+static inline void phase_pages(const phase *ph, const medium_interaction *mi, vec3 wo, int p0, int pages,
+                               color *out) {
+  if (ph->ops->eval_pages) {
+    ph->ops->eval_pages(ph, mi, wo, p0, pages, out);
+    return;
+  }
+  for (int p = p0; p < pages; p++) {
+    rsw_page = p;
+    out[p] = ph->ops->eval_channels(ph, mi, wo);
+  }
+  rsw_page = 0;
+}
+
 /* Each page's value f[p] towards wo (local) into f[0..pages), and the mean
  * of the pages' pdfs (0 when with_pdf is false: a delta light sample). */
 static inline double bsdf_eval_pages(const bsdf *b, const surface_interaction *si, int pages, vec3 wo,

@@ -1072,11 +1072,13 @@ PIECE void scatter_light(const scene *sc, vlane *l, const medium_interaction *mi
   c = ph->chromatic ? col_scale(col_mul(c, ph->ops->eval_channels(ph, mi, ds->d)), w / pe)
                     : col_scale(c, pval * w / pe);
   start_shadow(sc, l, NULL, mi->p, e, ds, m, c);
+  color pv[RENDER_MAX_PAGES];
+  if (pg && ph->chromatic) phase_pages(ph, mi, ds->d, 1, NP, pv);
   for (int p = 1; pg && p < NP; p++) { /* each page's light and phase value */
     direction_sample dp;
     rsw_page = p;
     color v = col_mul(pg->T[p - 1], e->ops->sample_direction(e, &l->prev, u2, &dp));
-    v = ph->chromatic ? col_mul(v, ph->ops->eval_channels(ph, mi, ds->d)) : col_scale(v, pval);
+    v = ph->chromatic ? col_mul(v, pv[p]) : col_scale(v, pval);
     pg->sval[p - 1] = col_scale(v, w / pe);
     pg->str[p - 1] = col1(1.0);
   }
@@ -1105,13 +1107,10 @@ PIECE bool scatter_phase(const scene *sc, vlane *l, const medium_interaction *mi
    * component covers the sphere). */
   l->T = ph->chromatic ? col_mul(l->T, col_scale(ph->ops->eval_channels(ph, mi, wo), 1.0 / ppdf))
                        : col_scale(l->T, pw);
-  for (int p = 1; pg && p < NP; p++) {
-    rsw_page = p;
-    pg->T[p - 1] = ph->chromatic
-                       ? col_mul(pg->T[p - 1], col_scale(ph->ops->eval_channels(ph, mi, wo), 1.0 / ppdf))
-                       : col_scale(pg->T[p - 1], pw);
-  }
-  rsw_page = 0;
+  color pv[RENDER_MAX_PAGES];
+  if (pg && ph->chromatic) phase_pages(ph, mi, wo, 1, NP, pv);
+  for (int p = 1; pg && p < NP; p++)
+    pg->T[p - 1] = ph->chromatic ? col_mul(pg->T[p - 1], col_scale(pv[p], 1.0 / ppdf)) : col_scale(pg->T[p - 1], pw);
   if (vq) {
     mueller P[3];
     vec3 bp = {0};

@@ -500,6 +500,28 @@ static color ma_phase_eval_channels(const phase *ph, const medium_interaction *m
   return v;
 }
 
+/* ma_phase_eval_channels at pages p0..pages-1: the components' values
+ * once, each page's weights mixed in the same order. */
+static void ma_phase_eval_pages(const phase *ph, const medium_interaction *mi, vec3 wo, int p0, int pages,
+                                color *out) {
+  const mol_atmo *m = ((const ma_phase *)ph)->m;
+  int k = ma_phase_layer(ph, m, mi);
+  size_t np = m->np, stride = 3 * m->n * (np ? np : 1);
+  double pdf, v0 = m->rayleigh->ops->eval_pdf(m->rayleigh, mi, wo, &pdf);
+  for (int p = p0; p < pages; p++) out[p] = col1(v0);
+  for (size_t j = 1; j <= np; j++) {
+    const phase *pj = m->p[j - 1].ph;
+    double vj = pj->ops->eval_pdf(pj, mi, wo, &pdf);
+    for (int p = p0; p < pages; p++) {
+      const double *wc = p ? m->wcp + (size_t)(p - 1) * stride : m->wc;
+      for (int c = 0; c < 3; c++) {
+        double w = clamp01(wc[((size_t)k * np + j - 1) * 3 + (size_t)c]);
+        out[p].c[c] = (1.0 - w) * out[p].c[c] + w * vj;
+      }
+    }
+  }
+}
+
 /* The mixture's factors (polarized variants carry no spectral bundle:
  * the weights are the layer's, m->w). */
 static void ma_phase_polarization(const phase *ph, const medium_interaction *mi, vec3 wo, mueller P[3]) {
@@ -513,6 +535,7 @@ static const phase_ops ma_phase_ops = {.sample = ma_phase_sample,
                                        .eval_pdf = ma_phase_eval_pdf,
                                        .bind = ma_phase_bind,
                                        .eval_channels = ma_phase_eval_channels,
+                                       .eval_pages = ma_phase_eval_pages,
                                        .polarization = ma_phase_polarization};
 
 /* ---- life cycle -------------------------------------------------------------- */

@@ -611,8 +611,8 @@ static const char *LAYERS =
     "700], \"values\": [0.95, 0.5]}}";
 
 /* Each medium names its thickest and thinnest channels over a bundle's
- * pages and their ratio (volpath's flight_pages favours both above a
- * ratio of 4): a homogeneous medium by sigma_t (0.9 at 400 nm over 0.1 at
+ * pages and their ratio (the prior of a path's hero channel favours both,
+ * volpath's draw_hero): a homogeneous medium by sigma_t (0.9 at 400 nm over 0.1 at
  * 700), a piecewise one by its column (3.45 over 0.35, the layers' sums
  * at 400 and 700 nm); a bundle 400..460 nm of the layers spans 1.43. */
 static void test_extremes(void) {
@@ -633,6 +633,44 @@ static void test_extremes(void) {
   CHECK(m->thick_channel == 0 && m->thin_channel == 3 && fabs(m->extinction_spread - 3.45 / 2.41) < 1e-9,
         "piecewise, 400..460 nm: thick %d, thin %d, spread %.17g", m->thick_channel, m->thin_channel,
         m->extinction_spread);
+  scene_free(s);
+}
+
+/* The molecular atmosphere's phase (Rayleigh and an aerosol layer's hg,
+ * weights per page) answers a bundle's pages in one call (eval_pages)
+ * with each page's eval_channels bits, over 200 directions at 3 heights
+ * (in the aerosol layer, at its top, above it). */
+static void test_phase_pages(void) {
+  scene *s = medium_scene(
+      "piecewise_volpath",
+      "{\"type\": \"molecular_atmosphere\", \"thermoprops\": {\"identifier\": \"afgl_1986-us_standard\", "
+      "\"toa_altitude\": 120000, \"n_layers\": 240}, \"width\": 1000000, \"particle_layers\": [{\"bottom\": 0, "
+      "\"top\": 2000, \"distribution\": \"uniform\", \"tau_ref\": 0.2, \"w_ref\": 550, \"angstrom\": 1.3, "
+      "\"albedo\": 0.9, \"phase\": {\"type\": \"hg\", \"g\": 0.7}}]}");
+  REQUIRE(s && prepare_bundle(s, 16) && s->pages == 6, "molecular_atmosphere prepared for a bundle of 16");
+  const medium *m = find_object(s, "molecular_atmosphere") ? (const medium *)find_object(s, "molecular_atmosphere")
+                                                            : NULL;
+  REQUIRE(m && m->phase && m->phase->chromatic && m->phase->ops->eval_pages, "a chromatic phase with eval_pages");
+  const phase *ph = m->phase;
+  pcg32 rng;
+  pcg32_seed(&rng, 5, 6);
+  int bad = 0, n = 0;
+  const double zs[3] = {500.0, 2000.0, 30000.0};
+  for (int h = 0; h < 3; h++)
+    for (int i = 0; i < 200; i++) {
+      medium_interaction mi = {.medium = m, .p = v3(0, 0, zs[h])};
+      mi.wi = warp_square_to_uniform_sphere(v2(pcg32_next_double(&rng), pcg32_next_double(&rng)));
+      vec3 wo = warp_square_to_uniform_sphere(v2(pcg32_next_double(&rng), pcg32_next_double(&rng)));
+      color all[RENDER_MAX_PAGES];
+      ph->ops->eval_pages(ph, &mi, wo, 0, s->pages, all);
+      for (int p = 0; p < s->pages; p++, n++) {
+        rsw_page = p;
+        color one = ph->ops->eval_channels(ph, &mi, wo);
+        rsw_page = 0;
+        bad += memcmp(&one, &all[p], sizeof one) != 0;
+      }
+    }
+  CHECK(bad == 0, "%d of %d pages' eval_pages differ from their eval_channels", bad, n);
   scene_free(s);
 }
 
@@ -791,6 +829,7 @@ int main(void) {
   RSW_TEST_RUN(test_grids);
   RSW_TEST_RUN(test_chromatic_blend);
   RSW_TEST_RUN(test_extremes);
+  RSW_TEST_RUN(test_phase_pages);
   RSW_TEST_RUN(test_mqdiffuse);
   RSW_TEST_END("test_pages");
 }
