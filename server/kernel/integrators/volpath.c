@@ -1110,7 +1110,8 @@ PIECE bool scatter_phase(const scene *sc, vlane *l, const medium_interaction *mi
   color pv[RENDER_MAX_PAGES];
   if (pg && ph->chromatic) phase_pages(ph, mi, wo, 1, NP, pv);
   for (int p = 1; pg && p < NP; p++)
-    pg->T[p - 1] = ph->chromatic ? col_mul(pg->T[p - 1], col_scale(pv[p], 1.0 / ppdf)) : col_scale(pg->T[p - 1], pw);
+    pg->T[p - 1] =
+        ph->chromatic ? col_mul(pg->T[p - 1], col_scale(pv[p], 1.0 / ppdf)) : col_scale(pg->T[p - 1], pw);
   if (vq) {
     mueller P[3];
     vec3 bp = {0};

@@ -644,13 +644,15 @@ static void test_phase_pages(void) {
   scene *s = medium_scene(
       "piecewise_volpath",
       "{\"type\": \"molecular_atmosphere\", \"thermoprops\": {\"identifier\": \"afgl_1986-us_standard\", "
-      "\"toa_altitude\": 120000, \"n_layers\": 240}, \"width\": 1000000, \"particle_layers\": [{\"bottom\": 0, "
+      "\"toa_altitude\": 120000, \"n_layers\": 240}, \"width\": 1000000, \"particle_layers\": [{\"bottom\": "
+      "0, "
       "\"top\": 2000, \"distribution\": \"uniform\", \"tau_ref\": 0.2, \"w_ref\": 550, \"angstrom\": 1.3, "
       "\"albedo\": 0.9, \"phase\": {\"type\": \"hg\", \"g\": 0.7}}]}");
   REQUIRE(s && prepare_bundle(s, 16) && s->pages == 6, "molecular_atmosphere prepared for a bundle of 16");
-  const medium *m = find_object(s, "molecular_atmosphere") ? (const medium *)find_object(s, "molecular_atmosphere")
-                                                            : NULL;
-  REQUIRE(m && m->phase && m->phase->chromatic && m->phase->ops->eval_pages, "a chromatic phase with eval_pages");
+  const medium *m =
+      find_object(s, "molecular_atmosphere") ? (const medium *)find_object(s, "molecular_atmosphere") : NULL;
+  REQUIRE(m && m->phase && m->phase->chromatic && m->phase->ops->eval_pages,
+          "a chromatic phase with eval_pages");
   const phase *ph = m->phase;
   pcg32 rng;
   pcg32_seed(&rng, 5, 6);
