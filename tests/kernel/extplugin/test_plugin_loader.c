@@ -265,7 +265,7 @@ static void test_plugin_matches_constant_and_updates(void) {
   for (size_t i = 0; i < n; i++) sum += a.data[i];
   CHECK(sum / (double)n > 0.1, "plugin film is dark: mean %g", sum / (double)n);
   CHECK(maxrel < 1e-5, "plugin vs constant: max relative difference %g", maxrel);
-  CHECK(emitter_failures(sp, NULL, 0) == 0, "good plugin reported failures");
+  CHECK(emitter_failures(sp, 0, NULL, 0) == 0, "good plugin reported failures");
 
   /* The plugin's parameters are in the table (spectral) and updatable:
    * radiance 1.5 -> 3 doubles the film. */
@@ -330,7 +330,7 @@ static void check_contained(spec s, const char *want, const char *what) {
     for (size_t i = 0; i < n; i++) bad += !isfinite(img.data[i]);
     CHECK(bad == 0, "%s: %zu non-finite pixels", what, bad);
     char fm[600];
-    size_t k = emitter_failures(sc, fm, sizeof fm);
+    size_t k = emitter_failures(sc, 0, fm, sizeof fm);
     CHECK(k > 0, "%s: no failure reported", what);
     CHECK(strstr(fm, want) && strstr(fm, "pmis") && strstr(fm, "'env'"), "%s: message: %s", what, fm);
   }
