@@ -175,8 +175,9 @@ static void record_failure(const env_adapter *ca, int c0, int c1, const char *fm
 static void record_failure(const env_adapter *ca, int c0, int c1, const char *fmt, ...) {
   env_adapter *a = (env_adapter *)ca;
   char text[sizeof a->fail[0].msg];
-  int k = snprintf(text, sizeof text, "emitter '%s' (plugin type '%s'): ",
-                   a->base.base.id ? a->base.base.id : "?", a->lp->rec.name);
+  int k =
+      snprintf(text, sizeof text,
+               "emitter '%s' (plugin type '%s'): ", a->base.base.id ? a->base.base.id : "?", a->lp->rec.name);
   if (k < 0 || (size_t)k >= sizeof text) k = 0;
   va_list ap;
   va_start(ap, fmt);
@@ -226,10 +227,11 @@ static color page_color(const env_adapter *a, const double *I, vec3 d) {
   for (int c = c0; c < c1; c++) {
     double v = I[c];
     if (!isfinite(v) || v < 0) {
-      record_failure(a, c, c + 1,
-                     "add_radiance returned I = %g at %g nm for direction (%g, %g, %g) (must be finite and >= "
-                     "0); used 0",
-                     v, a->pages ? a->wl[c] : a->wavelength, d.x, d.y, d.z);
+      record_failure(
+          a, c, c + 1,
+          "add_radiance returned I = %g at %g nm for direction (%g, %g, %g) (must be finite and >= "
+          "0); used 0",
+          v, a->pages ? a->wl[c] : a->wavelength, d.x, d.y, d.z);
       v = 0.0;
     }
     L.c[c - c0] = v;
@@ -263,7 +265,10 @@ static color page_color(const env_adapter *a, const double *I, vec3 d) {
  * when each page asked the plugin. */
 #define MEMO_SLOTS 512 /* >= RENDER_WAVE_MAX: path.c's wave of light samples */
 
-enum memo_kind { MEMO_EVAL, MEMO_SAMPLE };
+enum memo_kind {
+  MEMO_EVAL,
+  MEMO_SAMPLE
+};
 
 typedef struct memo_entry {
   const env_adapter *a;
@@ -371,8 +376,8 @@ static color adapter_sample(const emitter *e, const surface_interaction *ref, ve
   vec3 dir = in3(d);
   double len = v3_len(dir);
   if (!isfinite(len) || fabs(len - 1.0) > 1e-3) {
-    record_failure(a, c0, c1, "sample returned direction (%g, %g, %g), not a unit vector; sample dropped", d[0],
-                   d[1], d[2]);
+    record_failure(a, c0, c1, "sample returned direction (%g, %g, %g), not a unit vector; sample dropped",
+                   d[0], d[1], d[2]);
     return col1(0);
   }
   dir = v3_scale(dir, 1.0 / len);
