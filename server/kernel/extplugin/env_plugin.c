@@ -201,8 +201,8 @@ static void record_failure(const env_adapter *ca, int c0, int c1, const char *fm
  * in place, not by a memset whose masked stores the plugin's first
  * reads of them could not forward from (a stall that cost an unbundled
  * render 7%). */
-static inline __attribute__((always_inline)) void plugin_radiance(const env_adapter *a, vec3 d, const double *wl,
-                                                                  size_t n, size_t z, double *I) {
+static inline __attribute__((always_inline)) void
+plugin_radiance(const env_adapter *a, vec3 d, const double *wl, size_t n, size_t z, double *I) {
   static const double zeros[MAX_CHANNELS];
   double q[MAX_CHANNELS], u[MAX_CHANNELS], v[MAX_CHANNELS], dir[3];
   memcpy(I, zeros, z * sizeof *I), memcpy(q, zeros, z * sizeof *q);
@@ -230,10 +230,11 @@ static void all_channels(const env_adapter *a, vec3 d, double *I) {
  * it is not finite or negative. */
 static inline double checked(const env_adapter *a, int c, double v, vec3 d) {
   if (__builtin_expect(isfinite(v) && v >= 0, 1)) return v;
-  record_failure(a, c, c + 1,
-                 "add_radiance returned I = %g at %g nm for direction (%g, %g, %g) (must be finite and >= 0); "
-                 "used 0",
-                 v, a->pages ? a->wl[c] : a->wavelength, d.x, d.y, d.z);
+  record_failure(
+      a, c, c + 1,
+      "add_radiance returned I = %g at %g nm for direction (%g, %g, %g) (must be finite and >= 0); "
+      "used 0",
+      v, a->pages ? a->wl[c] : a->wavelength, d.x, d.y, d.z);
   return 0.0;
 }
 
