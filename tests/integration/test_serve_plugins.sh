@@ -29,27 +29,11 @@ cat > "$tmp/bad_abi.c" <<'C'
 static const rsw_env_plugin T = {.abi_version = 999, .type_name = "badabi"};
 RSW_PLUGIN_EXPORT const rsw_env_plugin *rsw_env_plugin_entry(const rsw_plugin_host *h) { (void)h; return &T; }
 C
-# A plugin whose radiance is NaN towards +x (the host replaces it by black).
-cat > "$tmp/nan_sky.c" <<'C'
-#include <math.h>
-#include <raysweep/plugin.h>
-static const rsw_plugin_host *host;
-static int state;
-static int create(const double *const *v, void **inst, char *eb, size_t n) { (void)v, (void)eb, (void)n; *inst = &state; return 0; }
-static void destroy(void *inst) { (void)inst; }
-static void add_radiance(const void *inst, rsw_stokes_context *ctx, const double d[3]) {
-  (void)inst;
-  for (size_t i = 0; i < ctx->count; i++) ctx->stokes[0][i] += d[0] > 0 ? NAN : 1.0;
-}
-static double sample(const void *inst, const double u[2], double d[3]) { (void)inst; host->square_to_uniform_sphere(u, d); return host->uniform_sphere_pdf(); }
-static double pdf(const void *inst, const double d[3]) { (void)inst, (void)d; return host->uniform_sphere_pdf(); }
-static const rsw_env_plugin T = {.abi_version = RSW_PLUGIN_ABI_VERSION, .type_name = "nan_sky", .pretty_name = "NaN towards +x",
-  .create = create, .destroy = destroy, .add_radiance = add_radiance, .sample = sample, .pdf = pdf};
-RSW_PLUGIN_EXPORT const rsw_env_plugin *rsw_env_plugin_entry(const rsw_plugin_host *h) { host = h; return &T; }
-C
-cc -shared -fPIC -I include -o "$tmp/plugins/nan_sky.so" "$tmp/nan_sky.c" || { echo "test_serve_plugins: 0 passed, 1 failed"; exit 1; }
-# A sky of 1 whose radiance is NaN above 475 nm (every direction).
-cat > "$tmp/nan_above.c" <<'C'
+# nan_plugin TYPE PRETTY WHEN: a uniform sky of 1 whose radiance is NaN
+# where the C expression WHEN holds (d: the direction, w: the wavelength);
+# the host replaces it by black.
+nan_plugin() {
+  cat > "$tmp/$1.c" <<C
 #include <math.h>
 #include <raysweep/plugin.h>
 static const rsw_plugin_host *host;
@@ -58,15 +42,21 @@ static int create(const double *const *v, void **inst, char *eb, size_t n) { (vo
 static void destroy(void *inst) { (void)inst; }
 static void add_radiance(const void *inst, rsw_stokes_context *ctx, const double d[3]) {
   (void)inst, (void)d;
-  for (size_t i = 0; i < ctx->count; i++) ctx->stokes[0][i] += ctx->wavelengths[i] > 475 ? NAN : 1.0;
+  for (size_t i = 0; i < ctx->count; i++) {
+    double w = ctx->wavelengths[i];
+    ctx->stokes[0][i] += ($3) ? NAN : 1.0;
+  }
 }
 static double sample(const void *inst, const double u[2], double d[3]) { (void)inst; host->square_to_uniform_sphere(u, d); return host->uniform_sphere_pdf(); }
 static double pdf(const void *inst, const double d[3]) { (void)inst, (void)d; return host->uniform_sphere_pdf(); }
-static const rsw_env_plugin T = {.abi_version = RSW_PLUGIN_ABI_VERSION, .type_name = "nan_above", .pretty_name = "NaN above 475 nm",
+static const rsw_env_plugin T = {.abi_version = RSW_PLUGIN_ABI_VERSION, .type_name = "$1", .pretty_name = "$2",
   .create = create, .destroy = destroy, .add_radiance = add_radiance, .sample = sample, .pdf = pdf};
 RSW_PLUGIN_EXPORT const rsw_env_plugin *rsw_env_plugin_entry(const rsw_plugin_host *h) { host = h; return &T; }
 C
-cc -shared -fPIC -I include -o "$tmp/plugins/nan_above.so" "$tmp/nan_above.c" || { echo "test_serve_plugins: 0 passed, 1 failed"; exit 1; }
+  cc -shared -fPIC -I include -o "$tmp/plugins/$1.so" "$tmp/$1.c"
+}
+nan_plugin nan_sky "NaN towards +x" "d[0] > 0" &&
+  nan_plugin nan_above "NaN above 475 nm" "w > 475" || { echo "test_serve_plugins: 0 passed, 1 failed"; exit 1; }
 echo 'int not_a_plugin = 1;' > "$tmp/no_entry.c"
 cc -shared -fPIC -I include -o "$tmp/plugins/bad_abi.so" "$tmp/bad_abi.c" && \
 cc -shared -fPIC -o "$tmp/plugins/no_entry.so" "$tmp/no_entry.c" || { echo "test_serve_plugins: 0 passed, 1 failed"; exit 1; }
