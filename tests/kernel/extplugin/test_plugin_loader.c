@@ -564,6 +564,44 @@ static void test_failures_per_film(void) {
   plugins_unload();
 }
 
+/* The memo never answers for another render: a bundle of 16 rendered
+ * again with the same seed (the same directions, on threads that keep
+ * their memo) after env.radiance 1.5 -> 3 is exactly twice the first, at
+ * every wavelength (a scale by 2 is exact). */
+static void test_bundle_memo_follows_updates(void) {
+  spec s = good("pupd");
+  const char *files[] = {"pupd"};
+  char msg[1200] = "";
+  REQUIRE(load_specs(&s, files, 1, msg, sizeof msg, NULL, 0) == RSW_OK, "load: %s", msg);
+  scene *sc = NULL;
+  rsw_err err = {0};
+  film_image a[16], b[16];
+  memset(a, 0, sizeof a), memset(b, 0, sizeof b);
+  render_opts ro = {.size = sizeof ro, .seed = 7, .threads = 2, .bundle = 16};
+  for (int i = 0; i < 16; i++) ro.bundle_wl[i] = 400.0 + 10.0 * i;
+  param_update up = {.key = "env.radiance", .value = {.kind = PV_NUMBER, .num = 3.0}};
+  if (load_scene("{\"type\": \"pupd\", \"radiance\": 1.5}", "mono", &sc, &err)) {
+    CHECK(0, "scene: %s", err.msg);
+  } else if (render_sensor_bundle(sc, &ro, a, NULL, &err) || scene_update(sc, &up, 1, NULL, &err) ||
+             render_sensor_bundle(sc, &ro, b, NULL, &err)) {
+    CHECK(0, "render or update: %s", err.msg);
+  } else {
+    for (int k = 0; k < 16; k++) {
+      size_t n = (size_t)a[k].width * a[k].height * a[k].channels, off = 0;
+      double sum = 0;
+      for (size_t i = 0; i < n; i++) {
+        off += b[k].data[i] != 2.0 * a[k].data[i];
+        sum += a[k].data[i];
+      }
+      CHECK(off == 0 && sum > 0, "film %d (%g nm): %zu of %zu values not twice the first render's (mean %g)",
+            k, 400.0 + 10.0 * k, off, n, sum / (double)n);
+    }
+  }
+  for (int k = 0; k < 16; k++) film_image_free(&a[k]), film_image_free(&b[k]);
+  scene_free(sc);
+  plugins_unload();
+}
+
 int main(void) {
   find_include_dir();
   RSW_TEST_RUN(test_builtin_registry);
@@ -574,5 +612,6 @@ int main(void) {
   RSW_TEST_RUN(test_bad_values_contained);
   RSW_TEST_RUN(test_bundle_asks_once);
   RSW_TEST_RUN(test_failures_per_film);
+  RSW_TEST_RUN(test_bundle_memo_follows_updates);
   RSW_TEST_END("test_plugin_loader");
 }
