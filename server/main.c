@@ -385,12 +385,10 @@ static int cmd_render(int argc, char **argv) {
             "slab for 65,536 cell walls and were counted as blocked (unresolved); the film depends on that "
             "policy\n",
             (unsigned long long)rs.rays.unresolved);
-  char pmsg[600];
-  size_t pfail = emitter_failures(sc, pmsg, sizeof pmsg);
-  if (pfail)
+  if (img.plugin_failures)
     fprintf(stderr,
-            "raysweepd render: warning: %zu environment plugin failures were replaced by black; first: %s\n",
-            pfail, pmsg);
+            "raysweepd render: warning: %llu environment plugin failures were replaced by black; first: %s\n",
+            (unsigned long long)img.plugin_failures, img.plugin_failure);
   rsw_status ws;
   if (fmt == OUT_PNG)
     ws = png_write_film(out_path, img.width, img.height, img.channels, img.channel_names, img.data, &look,

@@ -39,8 +39,10 @@
  *   non-finite/non-positive pdf from sample, a non-finite or non-unit
  *   sampled direction, or a non-finite/negative pdf: the host counts the
  *   failure, keeps the first message, contributes black (zero) instead,
- *   and reports the count with the render. A plugin that crashes cannot
- *   be contained in process.
+ *   and reports the count with the render (a spectral bundle: with each
+ *   wavelength's film, a radiance answered at one wavelength counting
+ *   for that film alone). A plugin that crashes cannot be contained in
+ *   process.
  *
  * This header is C11 and C++ clean and uses no kernel type. */
 #ifndef RAYSWEEP_PLUGIN_H
@@ -206,7 +208,13 @@ typedef struct rsw_env_plugin {
   int (*prepare)(void *instance, const rsw_prepare_context *ctx, char *errbuf, size_t errlen);
 
   /* Add the radiance arriving from `direction` (i.e. seen by a ray that
-   * escapes along it) to ctx->stokes. Concurrent, read-only. */
+   * escapes along it) to ctx->stokes. Concurrent, read-only. ctx->count
+   * is any number from 1 (a render of one wavelength) up: a spectral
+   * bundle asks for all its wavelengths (up to 16) in one call. The
+   * answer at each wavelength must depend only on the instance as
+   * prepared, the direction and that wavelength (not on the others asked
+   * with it, nor on the call): the host may keep an answer and use it
+   * again for the same direction. The same holds for sample and pdf. */
   void (*add_radiance)(const void *instance, rsw_stokes_context *ctx, const double direction[3]);
   /* Sample a direction from u in [0,1)^2, write it (unit) and return its
    * solid-angle pdf (> 0). Concurrent, read-only. */

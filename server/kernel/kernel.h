@@ -349,9 +349,11 @@ typedef struct emitter_ops {
   void (*sample_direction_batch)(const emitter *e, int n, const surface_interaction *const *ref,
                                  const vec2 *u, direction_sample *ds, color *value);
   /* Optional (environment plugins, extplugin/env_plugin.c): answers the
-   * emitter replaced by black since its last prepare(), and the first
-   * one's message into msg (len bytes; may be left empty). */
-  size_t (*failures)(const emitter *e, char *msg, size_t len);
+   * emitter replaced by black since its last prepare() at the render's
+   * channel `channel` (the film: a bundle's wavelength index, 0 for one
+   * wavelength), and the first one's message into msg (len bytes; may be
+   * left empty). */
+  size_t (*failures)(const emitter *e, int channel, char *msg, size_t len);
 } emitter_ops;
 struct emitter {
   object base;

@@ -787,7 +787,7 @@ rsw_status render_sensor_bundle(scene *sc, const render_opts *opts, film_image *
     }
     film_image *img = &out[b];
     img->unresolved_rays = jb.rays.unresolved;
-    img->plugin_failures = emitter_failures(sc, img->plugin_failure, sizeof img->plugin_failure);
+    img->plugin_failures = emitter_failures(sc, b, img->plugin_failure, sizeof img->plugin_failure);
     img->nonfinite = film_image_nonfinite(img);
     img->isa = rsw_isa_name(rsw_isa_get());
     img->has_sun = render_sun_angles(sc, &img->sun_zenith, &img->sun_azimuth);

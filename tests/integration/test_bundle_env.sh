@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Spectral bundles under environment emitters that prepare per render
 # (docs/experiments.md#spectral-bundles): environment plugins (asked for
-# each page's three wavelengths in one add_radiance, prepared with the
-# bundle's whole range) and `envmap` (its luminance at every wavelength in
+# all the bundle's wavelengths in one add_radiance per evaluation, prepared
+# with its whole range) and `envmap` (its luminance at every wavelength in
 # mono). 16 wavelengths per job, fixed seeds:
 #   - tests/plugins/rayleigh_sky.c (a sky of sky (550 / w)^4 over the upper
 #     hemisphere, tabulated in prepare over the range it is given; asked

@@ -4,7 +4,9 @@
 # the daemon serves (GET /v1 lists them) and a scene using one renders; a
 # render through a plugin that returns NaN radiance completes with a
 # finite film whose meta says how many answers were replaced by black and
-# the first one's message (a render and a job's results, not silently).
+# the first one's message (a render and a job's results, not silently);
+# in a bundle of 16 wavelengths, through a plugin that answers NaN above
+# 475 nm, each film carries its own wavelength's count (none below).
 # Prints "test_serve_plugins: N passed, N failed".
 set -u
 here=$(cd "$(dirname "$0")/../.." && pwd)
@@ -27,8 +29,11 @@ cat > "$tmp/bad_abi.c" <<'C'
 static const rsw_env_plugin T = {.abi_version = 999, .type_name = "badabi"};
 RSW_PLUGIN_EXPORT const rsw_env_plugin *rsw_env_plugin_entry(const rsw_plugin_host *h) { (void)h; return &T; }
 C
-# A plugin whose radiance is NaN towards +x (the host replaces it by black).
-cat > "$tmp/nan_sky.c" <<'C'
+# nan_plugin TYPE PRETTY WHEN: a uniform sky of 1 whose radiance is NaN
+# where the C expression WHEN holds (d: the direction, w: the wavelength);
+# the host replaces it by black.
+nan_plugin() {
+  cat > "$tmp/$1.c" <<C
 #include <math.h>
 #include <raysweep/plugin.h>
 static const rsw_plugin_host *host;
@@ -36,16 +41,22 @@ static int state;
 static int create(const double *const *v, void **inst, char *eb, size_t n) { (void)v, (void)eb, (void)n; *inst = &state; return 0; }
 static void destroy(void *inst) { (void)inst; }
 static void add_radiance(const void *inst, rsw_stokes_context *ctx, const double d[3]) {
-  (void)inst;
-  for (size_t i = 0; i < ctx->count; i++) ctx->stokes[0][i] += d[0] > 0 ? NAN : 1.0;
+  (void)inst, (void)d;
+  for (size_t i = 0; i < ctx->count; i++) {
+    double w = ctx->wavelengths[i];
+    ctx->stokes[0][i] += ($3) ? NAN : 1.0;
+  }
 }
 static double sample(const void *inst, const double u[2], double d[3]) { (void)inst; host->square_to_uniform_sphere(u, d); return host->uniform_sphere_pdf(); }
 static double pdf(const void *inst, const double d[3]) { (void)inst, (void)d; return host->uniform_sphere_pdf(); }
-static const rsw_env_plugin T = {.abi_version = RSW_PLUGIN_ABI_VERSION, .type_name = "nan_sky", .pretty_name = "NaN towards +x",
+static const rsw_env_plugin T = {.abi_version = RSW_PLUGIN_ABI_VERSION, .type_name = "$1", .pretty_name = "$2",
   .create = create, .destroy = destroy, .add_radiance = add_radiance, .sample = sample, .pdf = pdf};
 RSW_PLUGIN_EXPORT const rsw_env_plugin *rsw_env_plugin_entry(const rsw_plugin_host *h) { host = h; return &T; }
 C
-cc -shared -fPIC -I include -o "$tmp/plugins/nan_sky.so" "$tmp/nan_sky.c" || { echo "test_serve_plugins: 0 passed, 1 failed"; exit 1; }
+  cc -shared -fPIC -I include -o "$tmp/plugins/$1.so" "$tmp/$1.c"
+}
+nan_plugin nan_sky "NaN towards +x" "d[0] > 0" &&
+  nan_plugin nan_above "NaN above 475 nm" "w > 475" || { echo "test_serve_plugins: 0 passed, 1 failed"; exit 1; }
 echo 'int not_a_plugin = 1;' > "$tmp/no_entry.c"
 cc -shared -fPIC -I include -o "$tmp/plugins/bad_abi.so" "$tmp/bad_abi.c" && \
 cc -shared -fPIC -o "$tmp/plugins/no_entry.so" "$tmp/no_entry.c" || { echo "test_serve_plugins: 0 passed, 1 failed"; exit 1; }
@@ -122,6 +133,48 @@ assert len(w) == 1 and "replaced by black" in w[0]["detail"] and "nan_sky" in w[
 print(jid)
 PY
 njob=$(python3 "$tmp/nanjob.py" "$port" submit "$nid" 2>"$tmp/pyerr") && ok nan_job_says_so || ko nan_job_says_so "$(tail -n 3 "$tmp/pyerr")"
+# A bundle of 16 (400..550 nm) under nan_above, a grey plate seen by
+# hdistant: the films at 400..470 nm carry no failure, those at 480..550
+# nm some, each with a message at its own wavelength; the job warns once.
+cat > "$tmp/bundlejob.py" <<'PY'
+import json, sys, time, urllib.request
+port = sys.argv[1]
+def call(path, body=None):
+    req = urllib.request.Request(f"http://127.0.0.1:{port}{path}", data=body and json.dumps(body).encode(),
+                                 headers={"Content-Type": "application/json"})
+    return json.loads(urllib.request.urlopen(req, timeout=60).read())
+scene = {"type": "scene", "variant": "mono",
+         "sensor": {"type": "hdistant", "target": [0, 0, 0], "sampler": {"type": "independent", "sample_count": 4},
+                    "to_world": [{"lookat": {"origin": [0, 0, 0], "target": [0, 0, 1], "up": [0, 1, 0]}}],
+                    "film": {"type": "hdrfilm", "width": 4, "height": 4, "rfilter": {"type": "box"}}},
+         "plate": {"type": "rectangle", "to_world": [{"scale": [10, 10, 1]}],
+                   "bsdf": {"type": "diffuse", "reflectance": 0.5}},
+         "sky": {"type": "nan_above", "id": "sky"}}
+sid = call("/v1/scenes", scene)["id"]
+wls = [400.0 + 10 * i for i in range(16)]
+j = call(f"/v1/scenes/{sid}/jobs", {"contexts": [{"id": f"w{int(w)}", "wavelength": w} for w in wls], "bundle": 16})
+for _ in range(400):
+    j = call(f"/v1/jobs/{j['id']}")
+    if j["state"] not in ("queued", "running"):
+        break
+    time.sleep(0.05)
+assert j["state"] == "succeeded" and j["bundle"] == 16, j
+res = {r["context"]: r for r in call(f"/v1/jobs/{j['id']}/results")["results"]}
+assert len(res) == 16, res
+for w in wls:
+    r = res[f"w{int(w)}"]
+    f = call(r["href"])
+    assert all(v == v for v in f["data"]), (w, f["data"])
+    if w < 475:
+        assert "plugin_failures" not in r and "plugin_failures" not in f["meta"], (w, r, f["meta"])
+    else:
+        assert r.get("plugin_failures", 0) > 0 and f"I = nan at {w:g} nm" in r["plugin_failure"], (w, r)
+        assert f["meta"]["plugin_failures"] == r["plugin_failures"], (w, f["meta"], r)
+        assert f["meta"]["plugin_failure"] == r["plugin_failure"], (w, f["meta"], r)
+w = [x for x in j.get("warnings", []) if x["code"] == "plugin_failures"]
+assert len(w) == 1 and "nan_above" in w[0]["detail"], j
+PY
+python3 "$tmp/bundlejob.py" "$port" 2>"$tmp/pyerr" && ok nan_bundle_per_film || ko nan_bundle_per_film "$(tail -n 3 "$tmp/pyerr")"
 # raysweep sweep prints the job's warning.
 "$bin/raysweep" --server "http://127.0.0.1:$port" sweep "$nid" --grid wavelength=500:600:100 --spp 2 \
   -o "$tmp/nansweep" > /dev/null 2> "$tmp/sweep.err"

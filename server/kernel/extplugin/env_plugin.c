@@ -119,6 +119,17 @@ static const rsw_plugin_host host_services = {
 
 /* ---- the adapter emitter --------------------------------------------------- */
 
+/* The channels of a render: a bundle's wavelengths (3 per page), or one. */
+#define MAX_CHANNELS (3 * RENDER_MAX_PAGES)
+
+/* Answers replaced by black at one channel of the render (one film: a
+ * bundle's wavelength), and the first one's message. */
+typedef struct failure_slot {
+  atomic_ullong count;
+  atomic_int msg_state; /* 0 empty, 1 being written, 2 ready */
+  char msg[512];
+} failure_slot;
+
 typedef struct env_adapter {
   emitter base;
   const loaded_plugin *lp;
@@ -126,101 +137,274 @@ typedef struct env_adapter {
   double *values;    /* 3 per parameter: the table's view of them */
   double wavelength; /* nm, from prepare: the render's (a bundle's first) */
   /* A spectral bundle (render_ctx.bundle > 1): the wavelengths of page p's
-   * channels at wl[3 p .. 3 p + 2], asked for together; 0 pages: one
-   * wavelength, `wavelength`, in every channel. */
-  int pages;
-  double wl[3 * RENDER_MAX_PAGES];
-  atomic_ullong failures;
-  atomic_int msg_state; /* 0 empty, 1 being written, 2 ready */
-  char msg[512];
+   * channels at wl[3 p .. 3 p + 2] (those past the bundle repeat its
+   * last), the bundle's n_wl first; 0 pages: one wavelength, `wavelength`,
+   * in every channel. */
+  int pages, n_wl;
+  double wl[MAX_CHANNELS];
+  /* The instance's state as of its last prepare() or parameter change,
+   * unique in the process (g_generation): no answer kept from another
+   * render or another instance passes for one of this one's. */
+  unsigned long long gen;
+  failure_slot fail[MAX_CHANNELS]; /* per channel; [0] alone without pages */
 } env_adapter;
+
+static atomic_ullong g_generation;
 
 static const emitter_ops adapter_ops;
 
-static void record_failure(const env_adapter *ca, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-/* Counts a failure and keeps the first message. Takes a const adapter
- * because the ops receive one; the counters are the only state the render
- * writes (atomics, so concurrent writers are safe). */
-static void record_failure(const env_adapter *ca, const char *fmt, ...) {
+/* The channels of the render: 3 per page, or the one. */
+static int n_channels(const env_adapter *a) {
+  return a->pages ? 3 * a->pages : 1;
+}
+
+/* The channels [*c0, *c1) of the page the calling thread asks at
+ * (rsw_page): that page's three, or the one. */
+static void page_channels(const env_adapter *a, int *c0, int *c1) {
+  int p = rsw_page < a->pages ? rsw_page : 0;
+  *c0 = a->pages ? 3 * p : 0;
+  *c1 = a->pages ? *c0 + 3 : 1;
+}
+
+static void record_failure(const env_adapter *ca, int c0, int c1, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5), cold, noinline));
+/* Counts a failure at channels [c0, c1) (the films it reaches) and keeps
+ * the first message of each. Takes a const adapter because the ops
+ * receive one; the slots are the only state the render writes (atomics,
+ * so concurrent writers are safe). */
+static void record_failure(const env_adapter *ca, int c0, int c1, const char *fmt, ...) {
   env_adapter *a = (env_adapter *)ca;
-  atomic_fetch_add_explicit(&a->failures, 1, memory_order_relaxed);
-  int expected = 0;
-  if (!atomic_compare_exchange_strong(&a->msg_state, &expected, 1)) return;
+  char text[sizeof a->fail[0].msg];
   int k =
-      snprintf(a->msg, sizeof a->msg,
+      snprintf(text, sizeof text,
                "emitter '%s' (plugin type '%s'): ", a->base.base.id ? a->base.base.id : "?", a->lp->rec.name);
-  if (k < 0 || (size_t)k >= sizeof a->msg) k = 0;
+  if (k < 0 || (size_t)k >= sizeof text) k = 0;
   va_list ap;
   va_start(ap, fmt);
-  vsnprintf(a->msg + k, sizeof a->msg - (size_t)k, fmt, ap);
+  vsnprintf(text + k, sizeof text - (size_t)k, fmt, ap);
   va_end(ap);
-  atomic_store_explicit(&a->msg_state, 2, memory_order_release);
+  for (int c = c0; c < c1; c++) {
+    failure_slot *f = &a->fail[c];
+    atomic_fetch_add_explicit(&f->count, 1, memory_order_relaxed);
+    int expected = 0;
+    if (!atomic_compare_exchange_strong(&f->msg_state, &expected, 1)) continue;
+    memcpy(f->msg, text, sizeof text);
+    atomic_store_explicit(&f->msg_state, 2, memory_order_release);
+  }
 }
 
 /* I of the plugin's radiance towards unit direction d at the n
- * wavelengths wl into I[0..n); each that is not finite or negative is 0
- * (recorded). Q, U, V reach Stokes films through
- * adapter_eval_polarization. */
-static void radiance_at(const env_adapter *a, vec3 d, const double *wl, size_t n, double *I) {
-  double q[3] = {0}, u[3] = {0}, v[3] = {0}, dir[3];
-  for (size_t i = 0; i < n; i++) I[i] = 0;
+ * wavelengths wl into I[0..n), as the plugin answered it (page_color
+ * checks it). Q, U, V reach Stokes films through
+ * adapter_eval_polarization. The first z (>= n) of each Stokes component
+ * are zeroed: z a constant at every call, so that the zeros are written
+ * in place, not by a memset whose masked stores the plugin's first
+ * reads of them could not forward from (a stall that cost an unbundled
+ * render 7%). */
+static inline __attribute__((always_inline)) void
+plugin_radiance(const env_adapter *a, vec3 d, const double *wl, size_t n, size_t z, double *I) {
+  static const double zeros[MAX_CHANNELS];
+  double q[MAX_CHANNELS], u[MAX_CHANNELS], v[MAX_CHANNELS], dir[3];
+  memcpy(I, zeros, z * sizeof *I), memcpy(q, zeros, z * sizeof *q);
+  memcpy(u, zeros, z * sizeof *u), memcpy(v, zeros, z * sizeof *v);
   out3(d, dir);
   rsw_stokes_context ctx = {.wavelengths = wl, .count = n, .stokes = {I, q, u, v}};
   a->lp->api->add_radiance(a->inst, &ctx, dir);
-  for (size_t i = 0; i < n; i++)
-    if (!isfinite(I[i]) || I[i] < 0) {
-      record_failure(
-          a,
-          "add_radiance returned I = %g at %g nm for direction (%g, %g, %g) (must be finite and >= 0); "
-          "used 0",
-          I[i], wl[i], d.x, d.y, d.z);
-      I[i] = 0.0;
-    }
 }
 
-/* The plugin's radiance towards unit direction d in the colour's
- * channels: at the prepared wavelength in all three, or at the three
- * wavelengths of the bundle's page rsw_page. */
-static color radiance(const env_adapter *a, vec3 d) {
-  double I[3];
+/* The plugin's radiance towards unit direction d at every channel into
+ * I[0..n_channels) in one call: the one wavelength, a page's three, or a
+ * bundle's n_wl (the channels past them repeat the last's answer). */
+static void all_channels(const env_adapter *a, vec3 d, double *I) {
   if (!a->pages) {
-    radiance_at(a, d, &a->wavelength, 1, I);
-    return col1(I[0]);
+    plugin_radiance(a, d, &a->wavelength, 1, 1, I);
+  } else if (a->pages == 1) {
+    plugin_radiance(a, d, a->wl, 3, 3, I);
+  } else {
+    plugin_radiance(a, d, a->wl, (size_t)a->n_wl, MAX_CHANNELS, I);
+    for (int c = a->n_wl; c < 3 * a->pages; c++) I[c] = I[a->n_wl - 1];
   }
-  radiance_at(a, d, &a->wl[3 * (rsw_page < a->pages ? rsw_page : 0)], 3, I);
-  return col(I[0], I[1], I[2]);
+}
+
+/* Channel c's answer v towards d, 0 (counted for channel c alone) where
+ * it is not finite or negative. */
+static inline double checked(const env_adapter *a, int c, double v, vec3 d) {
+  if (__builtin_expect(isfinite(v) && v >= 0, 1)) return v;
+  record_failure(
+      a, c, c + 1,
+      "add_radiance returned I = %g at %g nm for direction (%g, %g, %g) (must be finite and >= 0); "
+      "used 0",
+      v, a->pages ? a->wl[c] : a->wavelength, d.x, d.y, d.z);
+  return 0.0;
+}
+
+/* The colour of the calling thread's page from every channel's answer
+ * I towards d (checked). */
+static color page_color(const env_adapter *a, const double *I, vec3 d) {
+  if (!a->pages) return col1(checked(a, 0, I[0], d));
+  int c0 = 3 * (rsw_page < a->pages ? rsw_page : 0);
+  return col(checked(a, c0, I[c0], d), checked(a, c0 + 1, I[c0 + 1], d), checked(a, c0 + 2, I[c0 + 2], d));
+}
+
+/* ---- every page of a bundle from one call ------------------------------------
+ *
+ * A bundle's integrator asks an emitter once per page (the page in
+ * rsw_page), page 0 first, every page with the same direction (an
+ * escape) or the same sample numbers (a light sample: sample() takes no
+ * wavelength, so every page gets the same direction). The plugin is
+ * asked once, at page 0, for all the bundle's wavelengths; the other
+ * pages read its answers from a per-thread memo. The integrators ask the
+ * pages of one evaluation in one of two orders, and the memo finds the
+ * entry with a few comparisons in both:
+ *  - right after page 0 (an escape in path, volpath and direct; volpath's
+ *    and direct's light samples): the newest entry;
+ *  - after page 0 of a whole wave's light samples, lane after lane in the
+ *    order their page 0 was asked (path.c's wave_light_samples, up to
+ *    RENDER_WAVE_MAX lanes): the entry after the one read last, or for
+ *    the first lane the first of the last run of page-0 asks.
+ * An entry holds the plugin's raw answers, keyed by the instance, its
+ * generation and the direction or the sample numbers, bit for bit: what
+ * it holds is what the plugin would answer again (add_radiance, sample
+ * and pdf are functions of the prepared instance and their arguments,
+ * plugin.h), so the films are bit for bit those of one call per page.
+ * Anything else (another order, more lanes than slots) asks the plugin
+ * again. Each page's ask checks and counts its own channels' failures, as
+ * when each page asked the plugin. */
+#define MEMO_SLOTS 512 /* >= RENDER_WAVE_MAX: path.c's wave of light samples */
+
+enum memo_kind {
+  MEMO_EVAL,
+  MEMO_SAMPLE
+};
+
+typedef struct memo_entry {
+  const env_adapter *a;
+  unsigned long long gen;
+  int kind;
+  double key[3];          /* MEMO_EVAL: the ray's direction; MEMO_SAMPLE: u */
+  double pdf, dir[3];     /* MEMO_SAMPLE: sample()'s answer */
+  double I[MAX_CHANNELS]; /* add_radiance's at every channel (a sample: if good) */
+} memo_entry;
+
+/* The ring: the page-0 asks of a bundle's evaluations, entry i (counted
+ * from the thread's first) in e[i % MEMO_SLOTS]. spare: the last page > 0
+ * that found none, asked for every page for the pages after it. */
+static _Thread_local struct {
+  memo_entry e[MEMO_SLOTS];
+  memo_entry spare;
+  unsigned long long head; /* entries written */
+  unsigned long long rd;   /* the entry a page > 0 read last */
+  unsigned long long run;  /* the first of the last run of page-0 asks */
+  bool writing;            /* the last ask was at page 0 */
+} t_memo;
+
+static bool memo_is(const memo_entry *m, const env_adapter *a, int kind, const double *key, size_t n) {
+  if (m->a != a || m->gen != a->gen || m->kind != kind) return false;
+  for (size_t i = 0; i < n; i++) { /* bit for bit (-0 is not 0; a NaN is itself) */
+    uint64_t x, y;
+    memcpy(&x, &m->key[i], sizeof x);
+    memcpy(&y, &key[i], sizeof y);
+    if (x != y) return false;
+  }
+  return true;
+}
+
+/* The entry a page > 0 asks for (a, kind, key) in the orders above, or
+ * NULL. */
+static const memo_entry *memo_find(const env_adapter *a, int kind, const double *key, size_t n) {
+  unsigned long long h = t_memo.head, lo = h > MEMO_SLOTS ? h - MEMO_SLOTS : 0;
+  t_memo.writing = false;
+  const unsigned long long at[3] = {h - 1, t_memo.rd, t_memo.rd + 1};
+  for (int i = 0; i < 3; i++)
+    if (h && at[i] >= lo && at[i] < h && memo_is(&t_memo.e[at[i] % MEMO_SLOTS], a, kind, key, n)) {
+      t_memo.rd = at[i];
+      return &t_memo.e[at[i] % MEMO_SLOTS];
+    }
+  if (memo_is(&t_memo.spare, a, kind, key, n)) return &t_memo.spare;
+  /* The first lane of a wave's light samples: the run's first entry or
+   * one of the next few (page-0 asks just before the wave's). */
+  for (unsigned long long i = t_memo.run < lo ? lo : t_memo.run; i < h && i < t_memo.run + 8; i++)
+    if (memo_is(&t_memo.e[i % MEMO_SLOTS], a, kind, key, n)) {
+      t_memo.rd = i;
+      return &t_memo.e[i % MEMO_SLOTS];
+    }
+  return NULL;
+}
+
+/* The entry for a new evaluation (a, kind, key) at the calling thread's
+ * page, for the caller to fill: the ring's newest at page 0, else the
+ * spare. */
+static memo_entry *memo_add(const env_adapter *a, int kind, const double *key, size_t n) {
+  memo_entry *m = &t_memo.spare;
+  if (rsw_page == 0) {
+    if (!t_memo.writing) t_memo.run = t_memo.head;
+    t_memo.writing = true;
+    m = &t_memo.e[t_memo.head++ % MEMO_SLOTS];
+  }
+  m->a = a, m->gen = a->gen, m->kind = kind;
+  memset(m->key, 0, sizeof m->key);
+  memcpy(m->key, key, n * sizeof *key);
+  return m;
+}
+
+/* The plugin's sample for u into m (its pdf and direction, and where they
+ * are good every channel's radiance towards the direction). */
+static void plugin_sample(const env_adapter *a, const double u[2], memo_entry *m) {
+  m->dir[0] = m->dir[1] = m->dir[2] = NAN;
+  m->pdf = a->lp->api->sample(a->inst, u, m->dir);
+  vec3 dir = in3(m->dir);
+  double len = v3_len(dir);
+  if (isfinite(m->pdf) && m->pdf > 0 && isfinite(len) && fabs(len - 1.0) <= 1e-3)
+    all_channels(a, v3_scale(dir, 1.0 / len), m->I);
 }
 
 static color adapter_sample(const emitter *e, const surface_interaction *ref, vec2 u, direction_sample *ds) {
   const env_adapter *a = (const env_adapter *)e;
   (void)ref;
-  double uu[2] = {u.x, u.y}, d[3] = {NAN, NAN, NAN};
-  double pdf = a->lp->api->sample(a->inst, uu, d);
+  double uu[2] = {u.x, u.y};
+  memo_entry own;
+  const memo_entry *m = &own;
+  if (a->pages > 1) {
+    m = rsw_page > 0 ? memo_find(a, MEMO_SAMPLE, uu, 2) : NULL;
+    if (!m) {
+      memo_entry *w = memo_add(a, MEMO_SAMPLE, uu, 2);
+      plugin_sample(a, uu, w);
+      m = w;
+    }
+  } else {
+    plugin_sample(a, uu, &own);
+  }
+  double pdf = m->pdf;
+  const double *d = m->dir;
   ds->dist = INFINITY;
   ds->delta = false;
   ds->pdf = 0.0;
   ds->d = ds->p = v3(0, 0, 1);
   ds->n = v3(0, 0, -1);
+  int c0, c1;
+  page_channels(a, &c0, &c1);
   if (!isfinite(pdf) || !(pdf > 0)) {
-    record_failure(a, "sample returned pdf %g (must be finite and > 0); sample dropped", pdf);
+    record_failure(a, c0, c1, "sample returned pdf %g (must be finite and > 0); sample dropped", pdf);
     return col1(0);
   }
   vec3 dir = in3(d);
   double len = v3_len(dir);
   if (!isfinite(len) || fabs(len - 1.0) > 1e-3) {
-    record_failure(a, "sample returned direction (%g, %g, %g), not a unit vector; sample dropped", d[0], d[1],
-                   d[2]);
+    record_failure(a, c0, c1, "sample returned direction (%g, %g, %g), not a unit vector; sample dropped",
+                   d[0], d[1], d[2]);
     return col1(0);
   }
   dir = v3_scale(dir, 1.0 / len);
   ds->d = ds->p = dir;
   ds->n = v3_neg(dir);
   ds->pdf = pdf;
-  color L = radiance(a, dir);
+  color L = page_color(a, m->I, dir);
   for (int c = 0; c < 3; c++) L.c[c] /= pdf;
   return L;
 }
 
+/* The pdf is asked once for every page (integrators ask it at page 0
+ * only): a failure counts for every channel. */
 static double adapter_pdf(const emitter *e, const surface_interaction *ref, const direction_sample *ds) {
   const env_adapter *a = (const env_adapter *)e;
   (void)ref;
@@ -228,18 +412,34 @@ static double adapter_pdf(const emitter *e, const surface_interaction *ref, cons
   out3(ds->d, d);
   double pdf = a->lp->api->pdf(a->inst, d);
   if (!isfinite(pdf) || pdf < 0) {
-    record_failure(a, "pdf returned %g for direction (%g, %g, %g) (must be finite and >= 0); used 0", pdf,
-                   d[0], d[1], d[2]);
+    record_failure(a, 0, n_channels(a),
+                   "pdf returned %g for direction (%g, %g, %g) (must be finite and >= 0); used 0", pdf, d[0],
+                   d[1], d[2]);
     return 0.0;
   }
   return pdf;
 }
 
 static color adapter_eval(const emitter *e, const surface_interaction *hit, vec3 d) {
+  const env_adapter *a = (const env_adapter *)e;
   (void)hit;
   double len = v3_len(d);
   if (!(len > 0) || !isfinite(len)) return col1(0);
-  return radiance((const env_adapter *)e, v3_scale(d, 1.0 / len));
+  vec3 u = v3_scale(d, 1.0 / len);
+  double I[MAX_CHANNELS];
+  if (a->pages <= 1) {
+    all_channels(a, u, I);
+    return page_color(a, I, u);
+  }
+  double key[3];
+  out3(d, key);
+  const memo_entry *m = rsw_page > 0 ? memo_find(a, MEMO_EVAL, key, 3) : NULL;
+  if (!m) {
+    memo_entry *w = memo_add(a, MEMO_EVAL, key, 3);
+    all_channels(a, u, w->I);
+    m = w;
+  }
+  return page_color(a, m->I, u);
 }
 
 /* Q, U, V of the plugin's radiance along ray direction d (Stokes films). */
@@ -254,17 +454,21 @@ static void adapter_eval_polarization(const emitter *e, vec3 d, double quv[3]) {
       .wavelengths = &a->wavelength, .count = 1, .stokes = {&s[0], &s[1], &s[2], &s[3]}};
   a->lp->api->add_radiance(a->inst, &ctx, dir);
   if (!isfinite(s[1]) || !isfinite(s[2]) || !isfinite(s[3])) {
-    record_failure(a, "add_radiance returned a non-finite Q, U or V at %g nm; used 0", a->wavelength);
+    int c0, c1;
+    page_channels(a, &c0, &c1);
+    record_failure(a, c0, c1, "add_radiance returned a non-finite Q, U or V at %g nm; used 0", a->wavelength);
     return;
   }
   quv[0] = s[1], quv[1] = s[2], quv[2] = s[3];
 }
 
-static size_t adapter_failures(const emitter *e, char *msg, size_t len) {
+static size_t adapter_failures(const emitter *e, int channel, char *msg, size_t len) {
   env_adapter *a = (env_adapter *)e;
-  size_t n = (size_t)atomic_load(&a->failures);
-  if (n && msg && len && atomic_load_explicit(&a->msg_state, memory_order_acquire) == 2)
-    snprintf(msg, len, "%s", a->msg);
+  if (channel < 0 || channel >= MAX_CHANNELS) return 0;
+  failure_slot *f = &a->fail[channel];
+  size_t n = (size_t)atomic_load(&f->count);
+  if (n && msg && len && atomic_load_explicit(&f->msg_state, memory_order_acquire) == 2)
+    snprintf(msg, len, "%s", f->msg);
   return n;
 }
 
@@ -314,6 +518,7 @@ static rsw_status adapter_create(loader *ld, node *n, object **out) {
   a->lp = lp;
   a->values = values;
   a->wavelength = 550.0;
+  a->gen = atomic_fetch_add(&g_generation, 1) + 1;
   rsw_status st = ld_float_range(ld, n, "sampling_weight", 1.0, 0.0, INFINITY, &a->base.sampling_weight);
   for (size_t i = 0; !st && i < api->n_params; i++) {
     const rsw_plugin_param *p = &api->params[i];
@@ -358,9 +563,10 @@ static bool adapter_spectral(const object *o) {
   return true;
 }
 
-/* A bundle asks for each page's three wavelengths in one add_radiance
- * (prepared with the bundle's range); sample and pdf do not depend on
- * the wavelength, so every page draws the same direction. */
+/* A bundle asks for all its wavelengths in one add_radiance (prepared
+ * with the bundle's range) and serves its pages from the answer (the memo
+ * above); sample and pdf do not depend on the wavelength, so every page
+ * draws the same direction. */
 static bool adapter_pages(const object *o) {
   (void)o;
   return true;
@@ -368,8 +574,11 @@ static bool adapter_pages(const object *o) {
 
 static rsw_status adapter_prepare(object *o, const render_ctx *rc, rsw_err *err) {
   env_adapter *a = (env_adapter *)o;
-  atomic_store(&a->failures, 0);
-  atomic_store(&a->msg_state, 0);
+  for (int c = 0; c < MAX_CHANNELS; c++) {
+    atomic_store(&a->fail[c].count, 0);
+    atomic_store(&a->fail[c].msg_state, 0);
+  }
+  a->gen = atomic_fetch_add(&g_generation, 1) + 1;
   if (rc->variant != VARIANT_MONO)
     return rsw_fail(err, RSW_ERR_UNSUPPORTED, "",
                     "emitter '%s' (plugin type '%s') serves only the mono variant", o->id ? o->id : "?",
@@ -378,6 +587,7 @@ static rsw_status adapter_prepare(object *o, const render_ctx *rc, rsw_err *err)
   rsw_prepare_context pc = {
       .wavelength_min = a->wavelength, .wavelength_max = a->wavelength, .variant = "mono"};
   a->pages = rc->bundle > 1 ? rc_pages(rc) : 0;
+  a->n_wl = a->pages > 1 ? rc->bundle : 3;
   for (int p = 0; p < a->pages; p++) {
     render_ctx q = rc_page(rc, p);
     for (int c = 0; c < 3; c++) {
@@ -418,9 +628,11 @@ static void adapter_parameters_changed(object *o) {
     char eb[512] = "";
     if (api->set_param(a->inst, api->params[i].name, &a->values[3 * i], eb, sizeof eb)) {
       eb[sizeof eb - 1] = 0;
-      record_failure(a, "set_param('%s') failed: %s", api->params[i].name, eb[0] ? eb : "(no message)");
+      record_failure(a, 0, MAX_CHANNELS, "set_param('%s') failed: %s", api->params[i].name,
+                     eb[0] ? eb : "(no message)");
     }
   }
+  a->gen = atomic_fetch_add(&g_generation, 1) + 1;
 }
 
 /* pv_vector trampolines: slot k is the k-th vector parameter. */

@@ -122,13 +122,13 @@ bool scene_wavelength_dependent(const scene *s) {
   return false;
 }
 
-size_t emitter_failures(const scene *s, char *msg, size_t len) {
+size_t emitter_failures(const scene *s, int channel, char *msg, size_t len) {
   size_t total = 0;
   if (msg && len) msg[0] = 0;
   for (size_t i = 0; s && i < s->n_emitters; i++) {
     const emitter *e = s->emitters[i];
     if (!e->ops->failures) continue;
-    total += e->ops->failures(e, msg && len && !msg[0] ? msg : NULL, len);
+    total += e->ops->failures(e, channel, msg && len && !msg[0] ? msg : NULL, len);
   }
   return total;
 }

@@ -50,10 +50,12 @@ rsw_status scene_prepare(scene *s, const render_ctx *rc, rsw_err *err);
  * only (not thread-safe with an update of it). */
 bool scene_wavelength_dependent(const scene *s);
 /* Answers the scene's emitters replaced by black during the last render
- * (emitter_ops.failures: environment plugins' NaN or negative radiance,
- * bad pdfs or directions, failed set_param), summed; the first one's
- * message into msg (len bytes; "" when none). */
-size_t emitter_failures(const scene *s, char *msg, size_t len);
+ * at its channel `channel` (the film: a bundle's wavelength index, 0 for
+ * a render of one wavelength; emitter_ops.failures: environment plugins'
+ * NaN or negative radiance at that wavelength, bad pdfs or directions,
+ * failed set_param), summed; the first one's message into msg (len
+ * bytes; "" when none). */
+size_t emitter_failures(const scene *s, int channel, char *msg, size_t len);
 /* The first object that cannot render a bundle of more than three
  * wavelengths (pages, render_ctx.bundle > 3), with *why its reason (a
  * phrase to follow the object's name), or NULL when the scene can. */

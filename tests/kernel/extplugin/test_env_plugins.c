@@ -49,7 +49,7 @@ static bool render_at(scene *s, uint32_t spp, uint64_t seed, double wavelength, 
 /* No plugin failure (NaN, bad pdf) may have been caught during a render. */
 static void check_no_failures(const scene *s, const char *what) {
   char msg[600];
-  size_t n = emitter_failures(s, msg, sizeof msg);
+  size_t n = emitter_failures(s, 0, msg, sizeof msg);
   CHECK(n == 0, "%s: %zu plugin failures, first: %s", what, n, msg);
 }
 

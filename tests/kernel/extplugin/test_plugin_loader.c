@@ -7,6 +7,8 @@
  * invalid type names, NaN radiance, negative or zero sampled pdf. */
 #include "../../support/test.h"
 
+#include <dlfcn.h>
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
@@ -206,8 +208,10 @@ static void test_bad_plugins_refused(void) {
         "missing directory: %s", err.msg);
 }
 
-/* A grey diffuse sphere seen from +y under environment ENV (JSON). */
-static rsw_status load_scene(const char *env_json, const char *variant, scene **out, rsw_err *err) {
+/* A grey diffuse sphere seen from +y under environment ENV (JSON),
+ * rendered by INTEGRATOR (JSON). */
+static rsw_status load_scene_with(const char *env_json, const char *integrator_json, const char *variant,
+                                  scene **out, rsw_err *err) {
   char doc[2048];
   snprintf(
       doc, sizeof doc,
@@ -216,12 +220,17 @@ static rsw_status load_scene(const char *env_json, const char *variant, scene **
       "  \"to_world\": [{\"lookat\": {\"origin\": [0, 5, 0], \"target\": [0, 0, 0], \"up\": [0, 0, 1]}}],"
       "  \"film\": {\"type\": \"hdrfilm\", \"width\": 8, \"height\": 8},"
       "  \"sampler\": {\"type\": \"independent\", \"sample_count\": 4}},"
-      " \"integrator\": {\"type\": \"path\", \"max_depth\": 3},"
+      " \"integrator\": %s,"
       " \"ball\": {\"type\": \"sphere\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}},"
       " \"env\": %s}",
-      env_json);
+      integrator_json, env_json);
   scene_load_opts lo = {.size = sizeof lo, .variant = variant};
   return scene_load_memory(doc, strlen(doc), "plugin_test.json", false, &lo, out, err);
+}
+
+/* The sphere under ENV through `path` (max_depth 3). */
+static rsw_status load_scene(const char *env_json, const char *variant, scene **out, rsw_err *err) {
+  return load_scene_with(env_json, "{\"type\": \"path\", \"max_depth\": 3}", variant, out, err);
 }
 
 static bool render(scene *s, film_image *img) {
@@ -265,7 +274,7 @@ static void test_plugin_matches_constant_and_updates(void) {
   for (size_t i = 0; i < n; i++) sum += a.data[i];
   CHECK(sum / (double)n > 0.1, "plugin film is dark: mean %g", sum / (double)n);
   CHECK(maxrel < 1e-5, "plugin vs constant: max relative difference %g", maxrel);
-  CHECK(emitter_failures(sp, NULL, 0) == 0, "good plugin reported failures");
+  CHECK(emitter_failures(sp, 0, NULL, 0) == 0, "good plugin reported failures");
 
   /* The plugin's parameters are in the table (spectral) and updatable:
    * radiance 1.5 -> 3 doubles the film. */
@@ -298,11 +307,19 @@ out:
   plugins_unload();
 }
 
-static void test_rgb_scene_refused(void) {
-  spec s = good("prgb");
-  const char *files[] = {"prgb"};
+/* Load the good plugin of type `type` (file type.so); false (said) if it
+ * did not build or load. */
+static bool load_good(const char *type) {
+  spec s = good(type);
+  const char *files[] = {type};
   char msg[1200] = "";
-  REQUIRE(load_specs(&s, files, 1, msg, sizeof msg, NULL, 0) == RSW_OK, "load: %s", msg);
+  if (load_specs(&s, files, 1, msg, sizeof msg, NULL, 0) == RSW_OK) return true;
+  printf("  load %s: %s\n", type, msg);
+  return false;
+}
+
+static void test_rgb_scene_refused(void) {
+  REQUIRE(load_good("prgb"), "the plugin did not load");
   scene *sc = NULL;
   rsw_err err = {0};
   rsw_status st = load_scene("{\"type\": \"prgb\"}", "rgb", &sc, &err);
@@ -330,7 +347,7 @@ static void check_contained(spec s, const char *want, const char *what) {
     for (size_t i = 0; i < n; i++) bad += !isfinite(img.data[i]);
     CHECK(bad == 0, "%s: %zu non-finite pixels", what, bad);
     char fm[600];
-    size_t k = emitter_failures(sc, fm, sizeof fm);
+    size_t k = emitter_failures(sc, 0, fm, sizeof fm);
     CHECK(k > 0, "%s: no failure reported", what);
     CHECK(strstr(fm, want) && strstr(fm, "pmis") && strstr(fm, "'env'"), "%s: message: %s", what, fm);
   }
@@ -357,6 +374,239 @@ static void test_bad_values_contained(void) {
   check_contained(s, "pdf returned", "NaN pdf");
 }
 
+/* ---- spectral bundles: one add_radiance per evaluation, failures per film ---- */
+
+/* "pcount": a sky of (d.z > 0 ? 1 : 0.5) 500 / w, NaN above `nan_above`
+ * nm; it counts its add_radiance calls and the wavelengths they ask for
+ * in exported globals (atomics: render threads call concurrently). */
+static const char *const COUNTING =
+    "#include <raysweep/plugin.h>\n"
+    "#include <math.h>\n"
+    "#include <stdio.h>\n"
+    "static const rsw_plugin_host *H;\n"
+    "unsigned long long pcount_calls, pcount_wavelengths;\n"
+    "static const rsw_plugin_param P[] = {{\"nan_above\", RSW_PARAM_FLOAT, {1e9, 0, 0}, RSW_UPDATE_SPECTRAL, "
+    "0, "
+    "1e9}};\n"
+    "static double above;\n"
+    "static int cr(const double *const *v, void **o, char *e, size_t n) {\n"
+    "  (void)e, (void)n; above = v[0][0]; *o = &above; return 0; }\n"
+    "static void de(void *i) { (void)i; }\n"
+    "static int sp(void *p, const char *name, const double *v, char *e, size_t n) {\n"
+    "  (void)p, (void)name, (void)v; snprintf(e, n, \"read-only\"); return 1; }\n"
+    "static void ar(const void *p, rsw_stokes_context *c, const double d[3]) {\n"
+    "  const double *a = p;\n"
+    "  __atomic_fetch_add(&pcount_calls, 1, __ATOMIC_RELAXED);\n"
+    "  __atomic_fetch_add(&pcount_wavelengths, c->count, __ATOMIC_RELAXED);\n"
+    "  for (size_t k = 0; k < c->count; k++)\n"
+    "    c->stokes[0][k] += c->wavelengths[k] > *a ? NAN : (d[2] > 0 ? 1.0 : 0.5) * 500.0 / "
+    "c->wavelengths[k]; }\n"
+    "static double sa(const void *p, const double u[2], double d[3]) {\n"
+    "  (void)p; H->square_to_uniform_sphere(u, d); return H->uniform_sphere_pdf(); }\n"
+    "static double pd(const void *p, const double d[3]) { (void)p, (void)d; return H->uniform_sphere_pdf(); "
+    "}\n"
+    "static const rsw_env_plugin T = {RSW_PLUGIN_ABI_VERSION, \"pcount\", \"Counting sky\", P, 1, cr, de, "
+    "NULL, "
+    "sp, NULL, NULL, ar, sa, pd};\n"
+    "const rsw_env_plugin *rsw_env_plugin_entry(const rsw_plugin_host *h) { H = h; return &T; }\n";
+
+typedef struct counters {
+  unsigned long long *calls, *wavelengths;
+} counters;
+
+/* Build and load pcount; its counters through the loaded object's
+ * symbols (the directory is removed once it is loaded). */
+static bool load_counting(counters *k) {
+  char dir[256], src[300], so[300], cmd[2048];
+  if (!make_dir(dir, sizeof dir)) return false;
+  snprintf(src, sizeof src, "%s/pcount.c", dir);
+  snprintf(so, sizeof so, "%s/pcount.so", dir);
+  FILE *f = fopen(src, "w");
+  bool ok = f != NULL;
+  if (f) {
+    fputs(COUNTING, f);
+    fclose(f);
+  }
+  snprintf(cmd, sizeof cmd, "cc -std=c11 -Wall -Wextra -Werror -shared -fPIC -I '%s' -o '%s' '%s'",
+           include_dir, so, src);
+  ok = ok && system(cmd) == 0;
+  rsw_err err = {0};
+  ok = ok && plugins_load_dir(dir, &err) == RSW_OK;
+  void *h = ok ? dlopen(so, RTLD_NOW | RTLD_NOLOAD) : NULL;
+  k->calls = h ? dlsym(h, "pcount_calls") : NULL;
+  k->wavelengths = h ? dlsym(h, "pcount_wavelengths") : NULL;
+  if (h) dlclose(h); /* (a reference of its own: the adapter's keeps it loaded) */
+  rm_dir(dir);
+  return k->calls && k->wavelengths;
+}
+
+/* 16 wavelengths 400..550 nm (k: 1 unbundled at 400 nm); the calls and
+ * wavelengths asked of the plugin by a render of sc through a bundle of
+ * k of them into out[0..k). */
+static bool render_counted(scene *sc, int k, const counters *c, film_image *out, unsigned long long *calls,
+                           unsigned long long *wls) {
+  render_opts ro = {.size = sizeof ro, .seed = 7, .wavelength = 400, .threads = 2, .bundle = k};
+  for (int i = 0; i < 16; i++) ro.bundle_wl[i] = 400.0 + 10.0 * i;
+  *c->calls = *c->wavelengths = 0;
+  rsw_err err = {0};
+  rsw_status st = render_sensor_bundle(sc, &ro, out, NULL, &err);
+  if (st) printf("  render (bundle %d) failed: %s\n", k, err.msg);
+  *calls = *c->calls, *wls = *c->wavelengths;
+  return st == RSW_OK;
+}
+
+/* A bundle of 16 (six pages) asks add_radiance once per evaluation, for
+ * every wavelength of the bundle: as many calls as a bundle of 3 (one
+ * page, one call per evaluation; before, six per evaluation: one per
+ * page). The sphere under the sky: every sample that hits it takes a
+ * light sample (path.c asks page 0 of a whole wave's light samples first)
+ * and its bounce escapes (the sphere is convex); the others escape. The
+ * camera looking away from the sphere: one call per sample. */
+static void test_bundle_asks_once(void) {
+  counters c;
+  REQUIRE(load_counting(&c), "the counting plugin did not build or load");
+  static const char *const integrators[] = {"{\"type\": \"path\", \"max_depth\": 3}",
+                                            "{\"type\": \"volpath\", \"max_depth\": 3}",
+                                            "{\"type\": \"direct\"}"};
+  film_image f16[16], f3[3];
+  memset(f16, 0, sizeof f16), memset(f3, 0, sizeof f3);
+  for (int i = 0; i < 3; i++) {
+    scene *sc = NULL;
+    rsw_err err = {0};
+    if (load_scene_with("{\"type\": \"pcount\"}", integrators[i], "mono", &sc, &err)) {
+      CHECK(0, "%s: scene: %s", integrators[i], err.msg);
+      continue;
+    }
+    unsigned long long n3, w3, n16, w16;
+    if (render_counted(sc, 3, &c, f3, &n3, &w3) && render_counted(sc, 16, &c, f16, &n16, &w16)) {
+      CHECK(n3 > 256 && w3 == 3 * n3, "%s: bundle of 3: %llu calls for %llu wavelengths", integrators[i], n3,
+            w3);
+      CHECK(n16 == n3, "%s: bundle of 16: %llu add_radiance calls, %.3g per evaluation (%llu evaluations)",
+            integrators[i], n16, (double)n16 / (double)n3, n3);
+      CHECK(w16 == 16 * n16, "%s: bundle of 16: %llu wavelengths in %llu calls", integrators[i], w16, n16);
+      for (int b = 0; b < 16; b++)
+        CHECK(f16[b].plugin_failures == 0, "%s: film %d: %llu failures", integrators[i], b,
+              (unsigned long long)f16[b].plugin_failures);
+    }
+    for (int b = 0; b < 16; b++) film_image_free(&f16[b]);
+    for (int b = 0; b < 3; b++) film_image_free(&f3[b]);
+    scene_free(sc);
+  }
+  scene *away = NULL;
+  rsw_err err = {0};
+  const char *doc =
+      "{\"type\": \"scene\","
+      " \"sensor\": {\"type\": \"perspective\", \"fov\": 40,"
+      "  \"to_world\": [{\"lookat\": {\"origin\": [0, 5, 0], \"target\": [0, 10, 0], \"up\": [0, 0, 1]}}],"
+      "  \"film\": {\"type\": \"hdrfilm\", \"width\": 8, \"height\": 8},"
+      "  \"sampler\": {\"type\": \"independent\", \"sample_count\": 4}},"
+      " \"ball\": {\"type\": \"sphere\", \"bsdf\": {\"type\": \"diffuse\"}},"
+      " \"env\": {\"type\": \"pcount\"}}";
+  scene_load_opts lo = {.size = sizeof lo, .variant = "mono"};
+  if (scene_load_memory(doc, strlen(doc), "away.json", false, &lo, &away, &err)) {
+    CHECK(0, "scene away: %s", err.msg);
+  } else {
+    unsigned long long n, w;
+    if (render_counted(away, 16, &c, f16, &n, &w))
+      CHECK(n == 8 * 8 * 4 && w == 16 * n,
+            "sky alone, bundle of 16: %llu calls (%llu wavelengths) for %d escapes", n, w, 8 * 8 * 4);
+    for (int b = 0; b < 16; b++) film_image_free(&f16[b]);
+  }
+  scene_free(away);
+  plugins_unload();
+}
+
+/* A plugin that answers NaN above 475 nm, in a bundle of 16 (400..550
+ * nm): each film counts its own wavelength's failures, the films at 400
+ * ..470 nm none, those at 480..550 nm some, with a message naming their
+ * wavelength; unbundled, the same at 470 and 480 nm. */
+static void test_failures_per_film(void) {
+  counters c;
+  REQUIRE(load_counting(&c), "the counting plugin did not build or load");
+  scene *sc = NULL;
+  rsw_err err = {0};
+  film_image f16[16];
+  memset(f16, 0, sizeof f16);
+  if (load_scene("{\"type\": \"pcount\", \"nan_above\": 475}", "mono", &sc, &err)) {
+    CHECK(0, "scene: %s", err.msg);
+    plugins_unload();
+    return;
+  }
+  unsigned long long n, w;
+  if (render_counted(sc, 16, &c, f16, &n, &w)) {
+    for (int b = 0; b < 16; b++) {
+      double wl = 400.0 + 10.0 * b;
+      char want[64];
+      snprintf(want, sizeof want, "at %g nm", wl);
+      if (wl < 475)
+        CHECK(f16[b].plugin_failures == 0 && !f16[b].plugin_failure[0], "film at %g nm: %llu failures (%s)",
+              wl, (unsigned long long)f16[b].plugin_failures, f16[b].plugin_failure);
+      else
+        CHECK(f16[b].plugin_failures > 0 && strstr(f16[b].plugin_failure, want) &&
+                  strstr(f16[b].plugin_failure, "add_radiance returned I = nan"),
+              "film at %g nm: %llu failures (%s)", wl, (unsigned long long)f16[b].plugin_failures,
+              f16[b].plugin_failure);
+      size_t bad = 0;
+      for (size_t i = 0; i < (size_t)f16[b].width * f16[b].height * f16[b].channels; i++)
+        bad += !isfinite(f16[b].data[i]);
+      CHECK(bad == 0, "film at %g nm: %zu non-finite values", wl, bad);
+    }
+    /* Every film above counts each of its evaluations once. */
+    CHECK(f16[15].plugin_failures == f16[8].plugin_failures,
+          "films at 480 and 550 nm: %llu and %llu failures", (unsigned long long)f16[8].plugin_failures,
+          (unsigned long long)f16[15].plugin_failures);
+  }
+  for (int b = 0; b < 16; b++) film_image_free(&f16[b]);
+  film_image one = {0};
+  render_opts ro = {.size = sizeof ro, .seed = 7, .wavelength = 470, .threads = 2};
+  if (render_sensor(sc, &ro, &one, NULL, &err) == RSW_OK)
+    CHECK(one.plugin_failures == 0, "unbundled at 470 nm: %llu failures",
+          (unsigned long long)one.plugin_failures);
+  film_image_free(&one);
+  ro.wavelength = 480;
+  if (render_sensor(sc, &ro, &one, NULL, &err) == RSW_OK)
+    CHECK(one.plugin_failures > 0 && strstr(one.plugin_failure, "at 480 nm"),
+          "unbundled at 480 nm: %llu (%s)", (unsigned long long)one.plugin_failures, one.plugin_failure);
+  film_image_free(&one);
+  scene_free(sc);
+  plugins_unload();
+}
+
+/* The memo never answers for another render: a bundle of 16 rendered
+ * again with the same seed (the same directions, on threads that keep
+ * their memo) after env.radiance 1.5 -> 3 is exactly twice the first, at
+ * every wavelength (a scale by 2 is exact). */
+static void test_bundle_memo_follows_updates(void) {
+  REQUIRE(load_good("pupd"), "the plugin did not load");
+  scene *sc = NULL;
+  rsw_err err = {0};
+  film_image a[16], b[16];
+  memset(a, 0, sizeof a), memset(b, 0, sizeof b);
+  render_opts ro = {.size = sizeof ro, .seed = 7, .threads = 2, .bundle = 16};
+  for (int i = 0; i < 16; i++) ro.bundle_wl[i] = 400.0 + 10.0 * i;
+  param_update up = {.key = "env.radiance", .value = {.kind = PV_NUMBER, .num = 3.0}};
+  if (load_scene("{\"type\": \"pupd\", \"radiance\": 1.5}", "mono", &sc, &err)) {
+    CHECK(0, "scene: %s", err.msg);
+  } else if (render_sensor_bundle(sc, &ro, a, NULL, &err) || scene_update(sc, &up, 1, NULL, &err) ||
+             render_sensor_bundle(sc, &ro, b, NULL, &err)) {
+    CHECK(0, "render or update: %s", err.msg);
+  } else {
+    for (int k = 0; k < 16; k++) {
+      size_t n = (size_t)a[k].width * a[k].height * a[k].channels, off = 0;
+      double sum = 0;
+      for (size_t i = 0; i < n; i++) {
+        off += b[k].data[i] != 2.0 * a[k].data[i];
+        sum += a[k].data[i];
+      }
+      CHECK(off == 0 && sum > 0, "film %d (%g nm): %zu of %zu values not twice the first render's (mean %g)",
+            k, 400.0 + 10.0 * k, off, n, sum / (double)n);
+    }
+  }
+  for (int k = 0; k < 16; k++) film_image_free(&a[k]), film_image_free(&b[k]);
+  scene_free(sc);
+  plugins_unload();
+}
+
 int main(void) {
   find_include_dir();
   RSW_TEST_RUN(test_builtin_registry);
@@ -365,5 +615,8 @@ int main(void) {
   RSW_TEST_RUN(test_plugin_matches_constant_and_updates);
   RSW_TEST_RUN(test_rgb_scene_refused);
   RSW_TEST_RUN(test_bad_values_contained);
+  RSW_TEST_RUN(test_bundle_asks_once);
+  RSW_TEST_RUN(test_failures_per_film);
+  RSW_TEST_RUN(test_bundle_memo_follows_updates);
   RSW_TEST_END("test_plugin_loader");
 }
