@@ -101,8 +101,8 @@ const nc_quantity *nc_quantity_find(const char *name) {
 /* Names the writer uses itself (besides the quantities): a coord may not
  * take them. "wavelength" is allowed: a coord of that name replaces the
  * wavelength variable. */
-static const char *const reserved[] = {"x", "y", "channel", "stokes", "context", "seed", "spp", "vza", "vaa",
-                                       "unresolved_rays"};
+static const char *const reserved[] = {"x",   "y",   "channel",         "stokes",          "context",       "seed",
+                                       "spp", "vza", "vaa", "unresolved_rays", "plugin_failures", "plugin_failure"};
 
 static bool valid_coord_name(const char *s) {
   size_t n = strlen(s);
@@ -655,7 +655,7 @@ static double canonical_angle(double a) {
 
 /* Per sensor: its variables' ids (-1: none). */
 typedef struct sensor_vars {
-  int ch, st, vza, vaa, seed, spp, unres, irr, irr_srf;
+  int ch, st, vza, vaa, seed, spp, unres, pf, pf_msg, irr, irr_srf;
   int q[N_QUANTITIES];
 } sensor_vars;
 
@@ -888,8 +888,9 @@ static rsw_status define_quantities(writer *w, const sensor_set *s, sensor_vars 
   return RSW_OK;
 }
 
-/* A sensor's per-film numbers: seed, spp (when it varies), E_h and the
- * rays the periodic boundary could not resolve. */
+/* A sensor's per-film numbers: seed, spp (when it varies), E_h, the
+ * rays the periodic boundary could not resolve and the environment plugin
+ * answers replaced by black. */
 static rsw_status define_film_numbers(writer *w, const sensor_set *s, sensor_vars *v, rsw_err *err) {
   int ncid = w->ncid;
   bool rgb = is_rgb(w->d);
@@ -940,6 +941,31 @@ static rsw_status define_film_numbers(writer *w, const sensor_set *s, sensor_var
     TRY(put_text_att(ncid, v->unres, "long_name", "rays the periodic boundary could not resolve", err));
     TRY(put_text_att(ncid, v->unres, "units", "1", err));
   }
+  /* Plugin failures: always there, 0 and "" for a clean film, so that
+   * code reading a dataset finds the same variables whether or not a
+   * plugin misbehaved (unlike unresolved_rays, which predates the rule).
+   * A missing film's count is unknown: _FillValue (netCDF's default for
+   * uint64, which xarray then reads as NaN) rather than a 0 it never
+   * earned. */
+  name_cat(nm, sizeof nm, s->prefix, "plugin_failures");
+  TRY(def_ctx_var(w, nm, NC_UINT64, 0, NULL, &v->pf, err));
+  TRY(put_text_att(ncid, v->pf, "long_name", "environment plugin answers replaced by black", err));
+  TRY(put_text_att(ncid, v->pf, "units", "1", err));
+  TRY(put_text_att(ncid, v->pf, "comment",
+                   "per film: how many times an environment plugin answered a non-finite or negative "
+                   "radiance that the renderer replaced by black (0: none; docs/environment-plugins.md)",
+                   err));
+  if (w->missing) {
+    unsigned long long fill = NC_FILL_UINT64;
+    NC_TRY(nc_def_var_fill(ncid, v->pf, 0, &fill), nm);
+  }
+  name_cat(nm, sizeof nm, s->prefix, "plugin_failure");
+  TRY(def_ctx_var(w, nm, NC_STRING, 0, NULL, &v->pf_msg, err));
+  TRY(put_text_att(ncid, v->pf_msg, "long_name", "first environment plugin answer replaced by black", err));
+  TRY(put_text_att(ncid, v->pf_msg, "comment",
+                   "per film: the first such answer's message, naming the emitter and the plugin type "
+                   "(empty: none)",
+                   err));
   return RSW_OK;
 }
 
@@ -1056,6 +1082,10 @@ static rsw_status put_film(const writer *w, const sensor_set *s, const sensor_va
       unsigned long long u = f->unresolved_rays;
       NC_TRY(nc_put_var1_ulonglong(ncid, v->unres, start, &u), "unresolved_rays");
     }
+    unsigned long long pf = f->plugin_failures;
+    NC_TRY(nc_put_var1_ulonglong(ncid, v->pf, start, &pf), "plugin_failures");
+    const char *msg = f->plugin_failures && f->plugin_failure ? f->plugin_failure : "";
+    NC_TRY(nc_put_var1_string(ncid, v->pf_msg, start, &msg), "plugin_failure");
   }
   int irr = is_band ? v->irr_srf : v->irr;
   if (irr >= 0 && f->has_irradiance) {
