@@ -20,22 +20,9 @@ name=test_dataset
 source "$(dirname "$0")/../support/shtest.sh"
 need_bins raysweep raysweepd
 need_cmd curl "to ask the daemon for datasets"
-# Debian's python3 (python3-xarray, python3-netcdf4 from `make deps`), not
-# one earlier on PATH that lacks them.
-py=${RSW_PYTHON:-/usr/bin/python3}
-"$py" -c 'import xarray, netCDF4' 2>/dev/null || {
-  bad "$py cannot import xarray and netCDF4 (make deps installs python3-xarray python3-netcdf4)"
-  finish
-}
-check="$root/tests/support/dataset_check.py"
+need_xarray
 cd "$tmp" || exit 1
 
-# ds LABEL ARGS...: a dataset_check.py check must pass.
-ds() {
-  local label=$1
-  shift
-  if "$py" "$check" "$@" 2>"$tmp/pyerr"; then ok; else bad "$label: $(tail -n 3 "$tmp/pyerr")"; fi
-}
 run() {
   local label=$1
   shift
