@@ -8,7 +8,8 @@
 #     > 0 with the plugin's message for the failing sky, 0 and "" for the
 #     constant one (the variables are there either way);
 #   - the daemon's dataset and the client's are the same, bitwise (but
-#     for the daemon's job and warnings attributes);
+#     for the daemon's job and warnings attributes), and so is the one
+#     `raysweep merge` makes of two shards;
 #   - after a restart with --state-dir (films read back from disk) the
 #     daemon's dataset still carries them.
 # Ends with "test_dataset_plugins: N passed, N failed" (tests/run.sh sums it).
@@ -55,6 +56,13 @@ for sky in bad good; do
   ds "$sky: the daemon's dataset = the client's" same ${sky}_daemon.nc $sky/dataset.nc --ignore-attr job \
     --ignore-attr warnings
 done
+
+# Shards merged (`raysweep merge`, from the films' JSON): the same dataset.
+for k in 0 1; do
+  expect 0 "bad: shard $k/2" rs sweep bad.json --grid wavelength=500:600:100 --spp 2 --format nc --shard $k/2 -o s$k
+done
+expect 0 "bad: merge" rs merge s0 s1 -o merged
+ds "bad: merged shards = unsharded" same merged/dataset.nc bad/dataset.nc
 
 kill "${pids[-1]}" && wait "${pids[-1]}" 2>/dev/null
 start_daemon "$tmp/d2" --plugin-dir "$tmp/plugins" --state-dir "$tmp/st" --max-result-bytes 100
