@@ -132,6 +132,9 @@ r = ds.radiance
 assert r.dims[0] == "context" and list(ds.context.values) == ["quick", "slow"], ds
 assert not np.isnan(r.values[0]).any() and np.isnan(r.values[1]).all(), r.values
 assert int(ds.attrs["films_missing"]) == 1
+# A missing film has no plugin failure count (the fill: NaN), a clean one 0.
+n = ds.plugin_failures.values
+assert n[0] == 0 and np.isnan(n[1]), n
 ' partial.nc 2>pyerr && ok || bad "partial dataset: $(tail -n 2 pyerr)"
 expect 0 "fetch --partial" rs fetch "$slow" -o partial2.nc --partial
 expect 1 "fetch of a running job's dataset" rs fetch "$slow" -o running.nc

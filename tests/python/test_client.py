@@ -490,6 +490,9 @@ class TestSweep(Base):
             bands=[{"id": "B4", "srf": {"type": "gaussian", "mean": 665, "fwhm": 30}}])
         self.assertIn("brf_srf", ds)
         self.assertAlmostEqual(float(ds.brf_srf.squeeze()), 0.5, delta=1e-5)
+        # Plugin failures are the node films': over the node wavelengths.
+        self.assertEqual(ds.plugin_failures.dims, ("context", "wavelength"))
+        self.assertTrue((ds.plugin_failures.values == 0).all())
 
     def test_grid_search_key(self):
         # An Eradiate search TYPE:ID:PATH names a parameter too; its coord is the path's last name.
