@@ -268,11 +268,13 @@ static void test_bad_films(void) {
 
 /* Plugin failures (nc_film.plugin_failures, plugin_failure): a uint64
  * and a string variable per film, always there (0 and "" for clean
- * films); a missing film's count is the variable's _FillValue, not 0. */
+ * films); a missing film's count is the variable's _FillValue, not 0.
+ * The contexts are out of grid order: c0 (a=2), c1 (a=3), c2 (a=1) sit in
+ * cells 1, 2, 0; c1 has failures, c2 is missing in the second round. */
 static void test_plugin_failures(void) {
   nc_coords c;
   rsw_err err;
-  REQUIRE(coords_of("[{\"a\": 1}, {\"a\": 2}, {\"a\": 3}]", &c, &err) == RSW_OK, "%s", err.msg);
+  REQUIRE(coords_of("[{\"a\": 2}, {\"a\": 3}, {\"a\": 1}]", &c, &err) == RSW_OK, "%s", err.msg);
   const char *ids[3] = {"c0", "c1", "c2"};
   for (int with_missing = 0; with_missing < 2; with_missing++) {
     fixture fx;
@@ -287,8 +289,8 @@ static void test_plugin_failures(void) {
     int var, msg_var;
     unsigned long long n[3] = {1, 1, 1}, fill = 0;
     CHECK(nc_inq_varid(ncid, "plugin_failures", &var) == NC_NOERR &&
-              nc_get_var_ulonglong(ncid, var, n) == NC_NOERR && n[0] == 0 && n[1] == 7,
-          "missing=%d: counts %llu %llu", with_missing, n[0], n[1]);
+              nc_get_var_ulonglong(ncid, var, n) == NC_NOERR && n[1] == 0 && n[2] == 7,
+          "missing=%d: counts %llu %llu", with_missing, n[1], n[2]);
     nc_type type = NC_NAT;
     CHECK(nc_inq_vartype(ncid, var, &type) == NC_NOERR && type == NC_UINT64, "plugin_failures is uint64");
     char text[200] = "";
@@ -296,14 +298,14 @@ static void test_plugin_failures(void) {
           "plugin_failures has a comment naming what it counts");
     bool has_fill = nc_get_att_ulonglong(ncid, var, "_FillValue", &fill) == NC_NOERR;
     if (with_missing)
-      CHECK(has_fill && fill == NC_FILL_UINT64 && n[2] == fill, "a missing film's count is the fill: %llu",
-            n[2]);
+      CHECK(has_fill && fill == NC_FILL_UINT64 && n[0] == fill, "a missing film's count is the fill: %llu",
+            n[0]);
     else
-      CHECK(!has_fill && n[2] == 0, "no fill when every film is there; the clean film reads 0");
+      CHECK(!has_fill && n[0] == 0, "no fill when every film is there; the clean film reads 0");
     char *msg[3] = {0};
     CHECK(nc_inq_varid(ncid, "plugin_failure", &msg_var) == NC_NOERR &&
               nc_get_var_string(ncid, msg_var, msg) == NC_NOERR && msg[0] && strcmp(msg[0], "") == 0 &&
-              msg[1] && strstr(msg[1], "add_radiance returned I = nan") && msg[2] && strcmp(msg[2], "") == 0,
+              msg[1] && strcmp(msg[1], "") == 0 && msg[2] && strstr(msg[2], "add_radiance returned I = nan"),
           "messages: '%s' '%s' '%s'", msg[0] ? msg[0] : "(null)", msg[1] ? msg[1] : "(null)",
           msg[2] ? msg[2] : "(null)");
     nc_free_string(3, msg);
