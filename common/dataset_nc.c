@@ -101,8 +101,10 @@ const nc_quantity *nc_quantity_find(const char *name) {
 /* Names the writer uses itself (besides the quantities): a coord may not
  * take them. "wavelength" is allowed: a coord of that name replaces the
  * wavelength variable. */
-static const char *const reserved[] = {"x",   "y",   "channel",         "stokes",          "context",       "seed",
-                                       "spp", "vza", "vaa", "unresolved_rays", "plugin_failures", "plugin_failure"};
+static const char *const reserved[] = {
+    "x", "y", "channel", "stokes", "context", "seed", "spp", "vza", "vaa", "unresolved_rays",
+    "plugin_failures", "plugin_failure",
+};
 
 static bool valid_coord_name(const char *s) {
   size_t n = strlen(s);
@@ -953,7 +955,8 @@ static rsw_status define_film_numbers(writer *w, const sensor_set *s, sensor_var
   TRY(put_text_att(ncid, v->pf, "units", "1", err));
   TRY(put_text_att(ncid, v->pf, "comment",
                    "per film: how many times an environment plugin answered a non-finite or negative "
-                   "radiance that the renderer replaced by black (0: none; docs/environment-plugins.md)",
+                   "radiance (or a bad pdf or direction) that the renderer replaced by black "
+                   "(0: none; docs/environment-plugins.md)",
                    err));
   if (w->missing) {
     unsigned long long fill = NC_FILL_UINT64;

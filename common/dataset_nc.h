@@ -114,8 +114,8 @@ typedef struct nc_coords {
  * one type across contexts, at most NC_MAX_COORDS names of
  * [A-Za-z][A-Za-z0-9_]{0,63} that are not names the dataset uses itself
  * (x, y, channel, stokes, context, seed, spp, vza, vaa, unresolved_rays,
- * plugin_failures, plugin_failure, a quantity). A coord named sza, saa, irradiance or irradiance_srf
- * replaces the dataset's variable of that name. Errors name the JSON pointer "<prefix>/<i>/coords[/<name>]":
+ * plugin_failures, plugin_failure, a quantity). A coord named sza, saa,
+ * irradiance or irradiance_srf replaces the dataset's variable of that name. Errors name the JSON pointer "<prefix>/<i>/coords[/<name>]":
  * RSW_ERR_TYPE (not an object; not a number or string; types mixed
  * across contexts), RSW_ERR_INVALID (a name; a string too long or with a
  * control character; a non-finite number), RSW_ERR_MISSING (a context
@@ -155,8 +155,8 @@ typedef struct nc_film {
    * convention), the context's sza and saa. */
   bool has_sun;
   double sun_zenith, sun_azimuth;
-  /* Environment plugin answers (non-finite or negative radiance) the
-   * renderer replaced by black while making this film, and the first
+  /* Environment plugin answers (a non-finite or negative radiance, a bad
+   * pdf or direction) the renderer replaced by black while making this film, and the first
    * one's message (NULL or "": none): the variables plugin_failures and
    * plugin_failure. */
   uint64_t plugin_failures;
