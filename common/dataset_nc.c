@@ -101,8 +101,10 @@ const nc_quantity *nc_quantity_find(const char *name) {
 /* Names the writer uses itself (besides the quantities): a coord may not
  * take them. "wavelength" is allowed: a coord of that name replaces the
  * wavelength variable. */
-static const char *const reserved[] = {"x", "y", "channel", "stokes", "context", "seed", "spp", "vza", "vaa",
-                                       "unresolved_rays"};
+static const char *const reserved[] = {
+    "x", "y", "channel", "stokes", "context", "seed", "spp", "vza", "vaa", "unresolved_rays",
+    "plugin_failures", "plugin_failure",
+};
 
 static bool valid_coord_name(const char *s) {
   size_t n = strlen(s);
@@ -655,7 +657,7 @@ static double canonical_angle(double a) {
 
 /* Per sensor: its variables' ids (-1: none). */
 typedef struct sensor_vars {
-  int ch, st, vza, vaa, seed, spp, unres, irr, irr_srf;
+  int ch, st, vza, vaa, seed, spp, unres, pf, pf_msg, irr, irr_srf;
   int q[N_QUANTITIES];
 } sensor_vars;
 
@@ -888,8 +890,9 @@ static rsw_status define_quantities(writer *w, const sensor_set *s, sensor_vars 
   return RSW_OK;
 }
 
-/* A sensor's per-film numbers: seed, spp (when it varies), E_h and the
- * rays the periodic boundary could not resolve. */
+/* A sensor's per-film numbers: seed, spp (when it varies), E_h, the
+ * rays the periodic boundary could not resolve and the environment plugin
+ * answers replaced by black. */
 static rsw_status define_film_numbers(writer *w, const sensor_set *s, sensor_vars *v, rsw_err *err) {
   int ncid = w->ncid;
   bool rgb = is_rgb(w->d);
@@ -940,6 +943,32 @@ static rsw_status define_film_numbers(writer *w, const sensor_set *s, sensor_var
     TRY(put_text_att(ncid, v->unres, "long_name", "rays the periodic boundary could not resolve", err));
     TRY(put_text_att(ncid, v->unres, "units", "1", err));
   }
+  /* Plugin failures: always there, 0 and "" for a clean film, so that
+   * code reading a dataset finds the same variables whether or not a
+   * plugin misbehaved (unlike unresolved_rays, which predates the rule).
+   * A missing film's count is unknown: _FillValue (netCDF's default for
+   * uint64, which xarray then reads as NaN) rather than a 0 it never
+   * earned. */
+  name_cat(nm, sizeof nm, s->prefix, "plugin_failures");
+  TRY(def_ctx_var(w, nm, NC_UINT64, 0, NULL, &v->pf, err));
+  TRY(put_text_att(ncid, v->pf, "long_name", "environment plugin answers replaced by black", err));
+  TRY(put_text_att(ncid, v->pf, "units", "1", err));
+  TRY(put_text_att(ncid, v->pf, "comment",
+                   "per film: how many times an environment plugin answered a non-finite or negative "
+                   "radiance (or a bad pdf or direction) that the renderer replaced by black "
+                   "(0: none; docs/environment-plugins.md)",
+                   err));
+  if (w->missing) {
+    unsigned long long fill = NC_FILL_UINT64;
+    NC_TRY(nc_def_var_fill(ncid, v->pf, 0, &fill), nm);
+  }
+  name_cat(nm, sizeof nm, s->prefix, "plugin_failure");
+  TRY(def_ctx_var(w, nm, NC_STRING, 0, NULL, &v->pf_msg, err));
+  TRY(put_text_att(ncid, v->pf_msg, "long_name", "first environment plugin answer replaced by black", err));
+  TRY(put_text_att(ncid, v->pf_msg, "comment",
+                   "per film: the first such answer's message, naming the emitter and the plugin type "
+                   "(empty: none)",
+                   err));
   return RSW_OK;
 }
 
@@ -1131,6 +1160,29 @@ static rsw_status put_labels(const writer *w, const sensor_set *s, const sensor_
   return RSW_OK;
 }
 
+/* A sensor's plugin failures, each variable in one call (a call per film
+ * doubled the time to encode 200 small films): counts and messages in the
+ * variables' C order, the layout's cell (w->cell) then the node. */
+static rsw_status put_plugin_failures(const writer *w, const sensor_set *s, const sensor_vars *v, rsw_err *err) {
+  size_t n = w->n_cells * w->slots;
+  unsigned long long *count = malloc((n ? n : 1) * sizeof *count);
+  const char **msg = malloc((n ? n : 1) * sizeof *msg);
+  rsw_status st = RSW_OK;
+  if (!count || !msg) st = rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+  for (size_t k = 0; !st && k < n; k++) {
+    const nc_film *f = s->by_ctx[k];
+    size_t at = w->cell[k / w->slots] * w->slots + k % w->slots;
+    count[at] = f ? f->plugin_failures : NC_FILL_UINT64;
+    msg[at] = f && f->plugin_failures && f->plugin_failure ? f->plugin_failure : "";
+  }
+  int rc = st ? NC_NOERR : nc_put_var_ulonglong(w->ncid, v->pf, count);
+  if (rc == NC_NOERR && !st) rc = nc_put_var_string(w->ncid, v->pf_msg, msg);
+  if (!st && rc != NC_NOERR) st = nc_fail(err, rc, "plugin_failures");
+  free(count);
+  free(msg);
+  return st;
+}
+
 /* A sensor's films: its shared viewing angles, then node (or plain)
  * films, then band films. */
 static rsw_status put_sensor(const writer *w, const sensor_set *s, const sensor_vars *v, rsw_err *err) {
@@ -1151,7 +1203,7 @@ static rsw_status put_sensor(const writer *w, const sensor_set *s, const sensor_
     st = put_film(w, s, v, f, ctx, mid, is_band, deriv, err);
   }
   free(deriv);
-  return st;
+  return st ? st : put_plugin_failures(w, s, v, err);
 }
 
 static rsw_status write_all(writer *w, rsw_err *err) {

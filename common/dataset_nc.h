@@ -53,7 +53,11 @@
  *                radiance_srf); irradiance per colour;
  *                seed (uint64) per film over the contexts' dimensions;
  *                spp as a global attribute when every film has the same,
- *                else a uint32 variable; unresolved_rays when any is not 0.
+ *                else a uint32 variable; unresolved_rays when any is not 0;
+ *                plugin_failures (uint64) and plugin_failure (string) per
+ *                film, always (0 and "" for a film without failures; a
+ *                stable schema), _FillValue on plugin_failures where a
+ *                film is missing;
  *   attributes   Conventions, title, source, raysweep_version, scene,
  *                revision, variant, seed (the job seed), spp, job,
  *                films_missing when some film is missing, and warnings
@@ -110,8 +114,8 @@ typedef struct nc_coords {
  * one type across contexts, at most NC_MAX_COORDS names of
  * [A-Za-z][A-Za-z0-9_]{0,63} that are not names the dataset uses itself
  * (x, y, channel, stokes, context, seed, spp, vza, vaa, unresolved_rays,
- * a quantity). A coord named sza, saa, irradiance or irradiance_srf
- * replaces the dataset's variable of that name. Errors name the JSON pointer "<prefix>/<i>/coords[/<name>]":
+ * plugin_failures, plugin_failure, a quantity). A coord named sza, saa,
+ * irradiance or irradiance_srf replaces the dataset's variable of that name. Errors name the JSON pointer "<prefix>/<i>/coords[/<name>]":
  * RSW_ERR_TYPE (not an object; not a number or string; types mixed
  * across contexts), RSW_ERR_INVALID (a name; a string too long or with a
  * control character; a non-finite number), RSW_ERR_MISSING (a context
@@ -151,6 +155,12 @@ typedef struct nc_film {
    * convention), the context's sza and saa. */
   bool has_sun;
   double sun_zenith, sun_azimuth;
+  /* Environment plugin answers (a non-finite or negative radiance, a bad
+   * pdf or direction) the renderer replaced by black while making this film, and the first
+   * one's message (NULL or "": none): the variables plugin_failures and
+   * plugin_failure. */
+  uint64_t plugin_failures;
+  const char *plugin_failure;
   /* Jobs with bands: 1 + the index of the film's wavelength in
    * nc_dataset.nodes (a node film), or 1 + its band's index in
    * nc_dataset.band_ids (a band film, whose quantities are the *_srf

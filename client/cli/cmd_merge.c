@@ -227,16 +227,22 @@ static int merge_copy_films(const cli_ctx *ctx, const char *out, const index_ent
 }
 
 /* Inputs swept with --format nc: the merged dataset, rebuilt from the
- * films (bitwise the unsharded sweep's data). */
+ * films (bitwise the unsharded sweep's data). An input without films (a
+ * shard whose contexts all went to others, as spectral bundles send them)
+ * has no dataset and does not say how it was swept. */
 static int merge_dataset(const cli_ctx *ctx, const cmdline_args *a, const merge_input *in, const char *out,
                          const index_entry *e, size_t n) {
-  bool all_nc = a->n_pos > 0;
+  bool any = false, all_nc = true;
   for (size_t i = 0; i < a->n_pos && all_nc; i++) {
+    bool films = false;
+    for (size_t k = 0; k < n && !films; k++) films = e[k].input == i;
+    if (!films) continue;
     char *p = sweep_dir_file(a->pos[i], DATASET_NAME);
+    any = true;
     all_nc = p && sweep_is_regular(p);
     free(p);
   }
-  if (!all_nc) return 0;
+  if (!any || !all_nc) return 0;
   const cJSON *seed = NULL;
   for (size_t i = 0; i < a->n_pos && !seed; i++)
     if (in[i].has_manifest) seed = cJSON_GetObjectItemCaseSensitive(in[i].m.root, "seed");

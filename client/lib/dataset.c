@@ -76,6 +76,8 @@ typedef struct ds_film {
   /* From the film's meta, as the daemon's dataset takes them. */
   bool has_irradiance, has_sun;
   double irradiance[4], sun_zenith, sun_azimuth;
+  uint64_t plugin_failures; /* meta's plugin_failures (absent: 0) */
+  char *plugin_failure;     /* and plugin_failure; NULL with none */
 } ds_film;
 
 struct rsw_dataset {
@@ -116,6 +118,7 @@ static void film_clear(ds_film *f) {
   free(f->names);
   free(f->data);
   free(f->angles);
+  free(f->plugin_failure);
   for (int k = 0; k < f->n_planes; k++) {
     free(f->plane_names[k]);
     free(f->plane_data[k]);
@@ -292,6 +295,10 @@ rsw_status rsw_dataset_add_film(rsw_dataset *d, const char *context, const char 
     meta_u64(meta, "spp", &spp);
     meta_u64(meta, "seed", &f.seed);
     meta_u64(meta, "unresolved_rays", &f.unresolved);
+    const char *pfm = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(meta, "plugin_failure"));
+    if (meta_u64(meta, "plugin_failures", &f.plugin_failures) && f.plugin_failures && pfm &&
+        !(f.plugin_failure = strdup(pfm)))
+      s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");
     f.spp = spp > 0xffffffffu ? 0xffffffffu : (uint32_t)spp;
     if (meta_u64(meta, "revision", &rev)) {
       if (d->has_revision && rev != d->revision)
@@ -427,7 +434,9 @@ rsw_status rsw_dataset_write(rsw_dataset *d, const char *path) {
                   .irradiance = {f->irradiance[0], f->irradiance[1], f->irradiance[2], f->irradiance[3]},
                   .has_sun = f->has_sun,
                   .sun_zenith = f->sun_zenith,
-                  .sun_azimuth = f->sun_azimuth};
+                  .sun_azimuth = f->sun_azimuth,
+                  .plugin_failures = f->plugin_failures,
+                  .plugin_failure = f->plugin_failure};
   }
   if (!s) {
     nc_dataset ds = {.size = sizeof ds,

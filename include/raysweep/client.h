@@ -336,7 +336,8 @@ rsw_status rsw_dataset_add_context(rsw_dataset *d, const char *id, double wavele
 rsw_status rsw_dataset_set_seed(rsw_dataset *d, long long seed);
 /* Add the film of (context, sensor), copied: its pixels are the radiance;
  * its meta gives scene, revision and variant (the same for every film:
- * RSW_ERR_INVALID otherwise), spp, seed and the pixel angles. Borrows. */
+ * RSW_ERR_INVALID otherwise), spp, seed, the pixel angles and the plugin
+ * failures (plugin_failures, plugin_failure; absent: 0). Borrows. */
 rsw_status rsw_dataset_add_film(rsw_dataset *d, const char *context, const char *sensor,
                                 const rsw_film *film);
 /* The same from a film saved as JSON (`raysweep fetch -o F.json`,

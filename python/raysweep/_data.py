@@ -71,7 +71,10 @@ def film_dataarray(film):
     mono), and for distant-family sensors ``vza`` and ``vaa`` (each pixel's
     viewing zenith and azimuth in degrees, Eradiate's convention) and, for a
     scene with one directional emitter, ``sza`` and ``saa``. The film's
-    ``meta`` (scene, revision, sensor, spp, seed, variant, ...) is in ``attrs``.
+    ``meta`` (scene, revision, sensor, spp, seed, variant, ...) is in ``attrs``,
+    always with ``plugin_failures`` (environment plugin answers replaced by
+    black while making the film; 0: none) and ``plugin_failure`` (the first
+    one's message; "": none), as the datasets' variables of those names.
     A Stokes film (:func:`stokes_channels`) has a ``stokes`` dimension too,
     labelled ``S0 .. S3``: :func:`raysweep.dolp` and :func:`raysweep.aolp`
     take it.
@@ -92,6 +95,9 @@ def film_dataarray(film):
     if "sun_azimuth_deg" in meta:
         coords["saa"] = float(meta.pop("sun_azimuth_deg"))
     attrs = {k: _attr(v) for k, v in meta.items() if k not in ("wavelength", "planes") and v is not None}
+    # The meta names plugin failures only when there were some; attrs always do.
+    attrs["plugin_failures"] = int(meta.get("plugin_failures") or 0)
+    attrs["plugin_failure"] = str(meta.get("plugin_failure") or "") if attrs["plugin_failures"] else ""
     attrs["units"] = _UNITS.get(meta.get("variant"), "W m-2 sr-1")
     attrs["long_name"] = "radiance"
     if meta.get("planes"):

@@ -39,8 +39,12 @@ static size_t band_vars(const film_image *im, nc_var *out) {
   return n;
 }
 
-/* The labels of a film the writer takes besides its quantities. */
+/* The labels of a film the writer takes besides its quantities (the
+ * plugin failures of a band film are its nodes', which the writer keeps
+ * with the node films). */
 static void film_labels(const film_image *im, nc_film *f) {
+  f->plugin_failures = im->plugin_failures;
+  f->plugin_failure = im->plugin_failure;
   f->has_irradiance = im->has_irradiance;
   memcpy(f->irradiance, im->irradiance, sizeof f->irradiance);
   f->has_sun = im->has_sun;

@@ -126,6 +126,21 @@ static int encode_open(const nc_dataset *d, void **bytes, rsw_err *err) {
   return ncid;
 }
 
+/* A mono dataset of scene "s" over n contexts (ids, coords c) holding
+ * nf films of fx, encoded and opened as encode_open does. */
+static int encode_fixture(const fixture *fx, size_t nf, size_t n, const char *const *ids, const nc_coords *c,
+                          void **bytes, rsw_err *err) {
+  nc_dataset d = {.size = sizeof d,
+                  .scene = "s",
+                  .variant = "mono",
+                  .n_contexts = n,
+                  .context_ids = ids,
+                  .coords = c,
+                  .films = fx->films,
+                  .n_films = nf};
+  return encode_open(&d, bytes, err);
+}
+
 static void test_grid_any_order(void) {
   /* 2 x 3 over (a, b), listed out of order: b descending, a mixed. */
   const char *json = "[{\"a\": 2, \"b\": \"z\"}, {\"a\": 1, \"b\": \"z\"}, {\"a\": 2, \"b\": \"x\"},"
@@ -137,16 +152,8 @@ static void test_grid_any_order(void) {
   const char *ids[6] = {"c0", "c1", "c2", "c3", "c4", "c5"};
   size_t nf;
   make_films(&fx, 6, NULL, 0, &nf);
-  nc_dataset d = {.size = sizeof d,
-                  .scene = "s",
-                  .variant = "mono",
-                  .n_contexts = 6,
-                  .context_ids = ids,
-                  .coords = &c,
-                  .films = fx.films,
-                  .n_films = nf};
   void *bytes = NULL;
-  int ncid = encode_open(&d, &bytes, &err);
+  int ncid = encode_fixture(&fx, nf, 6, ids, &c, &bytes, &err);
   REQUIRE(ncid >= 0, "encode: %s", err.msg);
   int dim_a, dim_b, dim_ctx, var;
   size_t na = 0, nb = 0;
@@ -257,6 +264,59 @@ static void test_bad_films(void) {
   free(bytes);
   CHECK(nc_quantity_find("radiance_stderr") && nc_quantity_find("brdf") && !nc_quantity_find("x"),
         "the quantity table");
+}
+
+/* Plugin failures (nc_film.plugin_failures, plugin_failure): a uint64
+ * and a string variable per film, always there (0 and "" for clean
+ * films); a missing film's count is the variable's _FillValue, not 0.
+ * The contexts are out of grid order: c0 (a=2), c1 (a=3), c2 (a=1) sit in
+ * cells 1, 2, 0; c1 has failures, c2 is missing in the second round. */
+static void test_plugin_failures(void) {
+  nc_coords c;
+  rsw_err err;
+  REQUIRE(coords_of("[{\"a\": 2}, {\"a\": 3}, {\"a\": 1}]", &c, &err) == RSW_OK, "%s", err.msg);
+  const char *ids[3] = {"c0", "c1", "c2"};
+  for (int with_missing = 0; with_missing < 2; with_missing++) {
+    fixture fx;
+    size_t skip[1] = {2}, nf;
+    make_films(&fx, 3, skip, with_missing ? 1 : 0, &nf);
+    fx.films[1].plugin_failures = 7;
+    fx.films[1].plugin_failure = "emitter 'sky' (plugin type 'nan_sky'): add_radiance returned I = nan";
+    fx.films[0].plugin_failure = "ignored: no failures"; /* a message without a count is not written */
+    void *bytes = NULL;
+    int ncid = encode_fixture(&fx, nf, 3, ids, &c, &bytes, &err);
+    REQUIRE(ncid >= 0, "encode: %s", err.msg);
+    int var, msg_var;
+    unsigned long long n[3] = {1, 1, 1}, fill = 0;
+    CHECK(nc_inq_varid(ncid, "plugin_failures", &var) == NC_NOERR &&
+              nc_get_var_ulonglong(ncid, var, n) == NC_NOERR && n[1] == 0 && n[2] == 7,
+          "missing=%d: counts %llu %llu", with_missing, n[1], n[2]);
+    nc_type type = NC_NAT;
+    CHECK(nc_inq_vartype(ncid, var, &type) == NC_NOERR && type == NC_UINT64, "plugin_failures is uint64");
+    char text[200] = "";
+    CHECK(nc_get_att_text(ncid, var, "comment", text) == NC_NOERR && strstr(text, "replaced by black"),
+          "plugin_failures has a comment naming what it counts");
+    bool has_fill = nc_get_att_ulonglong(ncid, var, "_FillValue", &fill) == NC_NOERR;
+    if (with_missing)
+      CHECK(has_fill && fill == NC_FILL_UINT64 && n[0] == fill, "a missing film's count is the fill: %llu",
+            n[0]);
+    else
+      CHECK(!has_fill && n[0] == 0, "no fill when every film is there; the clean film reads 0");
+    char *msg[3] = {0};
+    CHECK(nc_inq_varid(ncid, "plugin_failure", &msg_var) == NC_NOERR &&
+              nc_get_var_string(ncid, msg_var, msg) == NC_NOERR && msg[0] && strcmp(msg[0], "") == 0 &&
+              msg[1] && strcmp(msg[1], "") == 0 && msg[2] && strstr(msg[2], "add_radiance returned I = nan"),
+          "messages: '%s' '%s' '%s'", msg[0] ? msg[0] : "(null)", msg[1] ? msg[1] : "(null)",
+          msg[2] ? msg[2] : "(null)");
+    nc_free_string(3, msg);
+    nc_close(ncid);
+    free(bytes);
+  }
+  nc_coords_free(&c);
+  /* A coord may not take the names. */
+  nc_coords r = {0};
+  CHECK(coords_of("[{\"plugin_failures\": 1}]", &r, &err) == RSW_ERR_INVALID, "plugin_failures is reserved");
+  nc_coords_free(&r);
 }
 
 /* Stokes films (common/stokes.h): a stokes dimension S0..S3 (channel over
@@ -430,6 +490,7 @@ int main(void) {
   RSW_TEST_RUN(test_grid_any_order);
   RSW_TEST_RUN(test_not_a_grid);
   RSW_TEST_RUN(test_bad_films);
+  RSW_TEST_RUN(test_plugin_failures);
   RSW_TEST_RUN(test_stokes_helpers);
   RSW_TEST_RUN(test_stokes_films);
   RSW_TEST_END("test_dataset_nc");

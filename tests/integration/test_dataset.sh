@@ -20,22 +20,9 @@ name=test_dataset
 source "$(dirname "$0")/../support/shtest.sh"
 need_bins raysweep raysweepd
 need_cmd curl "to ask the daemon for datasets"
-# Debian's python3 (python3-xarray, python3-netcdf4 from `make deps`), not
-# one earlier on PATH that lacks them.
-py=${RSW_PYTHON:-/usr/bin/python3}
-"$py" -c 'import xarray, netCDF4' 2>/dev/null || {
-  bad "$py cannot import xarray and netCDF4 (make deps installs python3-xarray python3-netcdf4)"
-  finish
-}
-check="$root/tests/support/dataset_check.py"
+need_xarray
 cd "$tmp" || exit 1
 
-# ds LABEL ARGS...: a dataset_check.py check must pass.
-ds() {
-  local label=$1
-  shift
-  if "$py" "$check" "$@" 2>"$tmp/pyerr"; then ok; else bad "$label: $(tail -n 3 "$tmp/pyerr")"; fi
-}
 run() {
   local label=$1
   shift
@@ -145,6 +132,9 @@ r = ds.radiance
 assert r.dims[0] == "context" and list(ds.context.values) == ["quick", "slow"], ds
 assert not np.isnan(r.values[0]).any() and np.isnan(r.values[1]).all(), r.values
 assert int(ds.attrs["films_missing"]) == 1
+# A missing film has no plugin failure count (the fill: NaN), a clean one 0.
+n = ds.plugin_failures.values
+assert n[0] == 0 and np.isnan(n[1]), n
 ' partial.nc 2>pyerr && ok || bad "partial dataset: $(tail -n 2 pyerr)"
 expect 0 "fetch --partial" rs fetch "$slow" -o partial2.nc --partial
 expect 1 "fetch of a running job's dataset" rs fetch "$slow" -o running.nc

@@ -7,7 +7,8 @@
 #   - tests/python/test_client.py (unittest) against a daemon, and a second
 #     one started with --token-file: connect, load_file/load_dict with
 #     uploads (the same scene ids as `raysweep scene push`), traverse and
-#     update, render, sweep, futures, Ctrl-C, errors, the numpy-only path;
+#     update, render, sweep, futures, Ctrl-C, errors, the numpy-only path,
+#     plugin failures in films' attrs and datasets;
 #   - docs/python.md's example (docs/examples/sweep_rs.py) prints rho(lambda)/pi;
 #   - the notebook docs/examples/python_quickstart.ipynb runs top to bottom
 #     (jupyter nbconvert --execute, Debian's python3-nbconvert and
@@ -44,8 +45,15 @@ if "$vpy" -c 'import raysweep, sys; assert raysweep.__file__.startswith(sys.pref
 echo "test_python: install $(secs "$t0") s"
 
 # ---- the package's tests ----------------------------------------------------------------
-# With the SDK examples (tests/plugins), for the Stokes films' tests.
-start_daemon "$tmp/d" --plugin-dir "$bin/../plugins"
+# With the SDK examples (tests/plugins), for the Stokes films' tests, and
+# tests/support/plugins/failing_sky.c for the plugin failures'.
+mkdir -p plugins && cp "$bin"/../plugins/*.so plugins/
+need_cmd cc "to build the failing plugin"
+cc -shared -fPIC -I "$root/include" -o plugins/failing_sky.so "$root/tests/support/plugins/failing_sky.c" || {
+  bad "cannot build tests/support/plugins/failing_sky.c"
+  finish
+}
+start_daemon "$tmp/d" --plugin-dir "$tmp/plugins"
 [ -n "$started_port" ] || {
   bad "daemon did not start: $(tail -n 5 "$tmp/d/log")"
   finish
@@ -56,7 +64,7 @@ start_daemon "$tmp/d2" --token-file "$tmp/token"
 url2=http://127.0.0.1:$started_port
 
 t1=$(date +%s.%N)
-RSW_STOKES=1 RAYSWEEP_URL=$url RSW_TOKEN_URL=$url2 RSW_TOKEN=$(cat "$tmp/token") RSW_ROOT=$root RSW_BIN=$bin \
+RSW_STOKES=1 RSW_FAILING_SKY=1 RAYSWEEP_URL=$url RSW_TOKEN_URL=$url2 RSW_TOKEN=$(cat "$tmp/token") RSW_ROOT=$root RSW_BIN=$bin \
   "$vpy" "$root/tests/python/test_client.py" >client.log 2>&1
 summary=$(grep -E '^test_client: [0-9]+ passed, [0-9]+ failed$' client.log)
 if [ -n "$summary" ]; then

@@ -338,6 +338,8 @@ class TestRender(Base):
         self.assertEqual(float(da.wavelength), 600.0)
         self.assertEqual(da.attrs["spp"], 4)
         self.assertEqual(da.attrs["units"], "W m-2 sr-1 nm-1")
+        # No environment plugin failed: the attrs say 0 all the same.
+        self.assertEqual((da.attrs["plugin_failures"], da.attrs["plugin_failure"]), (0, ""))
 
     def test_angles(self):
         scene = self.client.load_file(HDISTANT)
@@ -415,6 +417,42 @@ class TestStokes(Base):
             rs.aolp(da)
 
 
+@unittest.skipUnless(os.environ.get("RSW_FAILING_SKY"),
+                     "needs a daemon with tests/support/plugins/failing_sky.c (RSW_FAILING_SKY=1)")
+class TestPluginFailures(Base):
+    """A meter under a sky whose every answer is NaN or negative (replaced by black): films and datasets count them."""
+
+    def scene(self):
+        return self.client.load_dict({
+            "type": "scene", "variant": "mono",
+            "meter": {"type": "radiancemeter", "origin": [0, 0, 0], "direction": [1, 0, 0],
+                      "film": {"type": "hdrfilm", "width": 1, "height": 1, "component_format": "float32"}},
+            "sky": {"type": "failing_sky", "id": "bad_sky"}})
+
+    def assert_failed(self, n, msg):
+        self.assertGreater(n, 0)
+        self.assertIn("emitter 'bad_sky' (plugin type 'failing_sky'): add_radiance returned I =", msg)
+
+    def test_render_attrs(self):
+        da = self.scene().render(spp=4, wavelength=600)
+        self.assertEqual(float(da[0, 0, 0]), 0.0)
+        self.assertIsInstance(da.attrs["plugin_failures"], int)
+        self.assert_failed(da.attrs["plugin_failures"], da.attrs["plugin_failure"])
+
+    def test_dataset_and_films(self):
+        job = self.scene().submit(grid={"wavelength": [500, 600]}, spp=2)
+        ds = job.result()
+        self.assertEqual(ds.plugin_failures.dims, ("wavelength",))
+        self.assertEqual(ds.plugin_failures.attrs["units"], "1")
+        films = job.films(xarray=True)
+        for w in (500, 600):
+            n, msg = int(ds.plugin_failures.sel(wavelength=w)), str(ds.plugin_failure.sel(wavelength=w).item())
+            self.assert_failed(n, msg)
+            ctx = str(ds.context.sel(wavelength=w).item())
+            da = films[(ctx, "meter")]
+            self.assertEqual((da.attrs["plugin_failures"], da.attrs["plugin_failure"]), (n, msg))
+
+
 class TestSweep(Base):
     def test_grid_dataset(self):
         scene = self.plate(0.5)
@@ -426,6 +464,11 @@ class TestSweep(Base):
         want = np.broadcast_to(np.array([0.2, 0.4]) / math.pi, (3, 2))
         np.testing.assert_allclose(got, want, atol=1e-5)
         self.assertEqual(ds.attrs["scene"], scene.id)
+        # Plugin failures per film: there, and 0 ("") for a scene without plugins.
+        self.assertEqual(ds.plugin_failures.dims, ("wavelength", "reflectance"))
+        self.assertEqual(ds.plugin_failures.dtype, np.uint64)
+        self.assertTrue((ds.plugin_failures.values == 0).all())
+        self.assertTrue((ds.plugin_failure.values == "").all())
 
     def test_grid_coordinate_with_templates(self):
         # sza is a plain coordinate: a template turns it into the sun's direction.
@@ -447,6 +490,9 @@ class TestSweep(Base):
             bands=[{"id": "B4", "srf": {"type": "gaussian", "mean": 665, "fwhm": 30}}])
         self.assertIn("brf_srf", ds)
         self.assertAlmostEqual(float(ds.brf_srf.squeeze()), 0.5, delta=1e-5)
+        # Plugin failures are the node films': over the node wavelengths.
+        self.assertEqual(ds.plugin_failures.dims, ("context", "wavelength"))
+        self.assertTrue((ds.plugin_failures.values == 0).all())
 
     def test_grid_search_key(self):
         # An Eradiate search TYPE:ID:PATH names a parameter too; its coord is the path's last name.

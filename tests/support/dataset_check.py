@@ -11,6 +11,12 @@
     dataset_check.py context DATASET N
         a job whose coords do not form a grid: one "context" dimension of N,
         the coords a and b as coordinates along it.
+    dataset_check.py failures DATASET SWEEPDIR some|none
+        each film's plugin_failures (uint64 over the contexts' dimensions,
+        with long_name and comment) and plugin_failure (its first message)
+        equal the JSON film meta's (absent: 0 and ""); "some": every film
+        has failures, named by the failing_sky plugin; "none": every count
+        is 0.
 
 Exit status 0 when every check passes; otherwise the first failure on stderr.
 """
@@ -142,6 +148,35 @@ def planes(path, sweep_dir):
     check(n == 6, f"{n} films in index.jsonl, wanted 6")
 
 
+def failures(path, sweep_dir, want):
+    ds = xr.open_dataset(path)
+    for v in ("plugin_failures", "plugin_failure"):
+        check(v in ds.data_vars, f"no {v} variable: {sorted(ds.data_vars)}")
+    n, m = ds.plugin_failures, ds.plugin_failure
+    ctx_dims = ds.radiance.dims[:-2]
+    check(n.dims == ctx_dims and m.dims == ctx_dims, f"dims {n.dims}, {m.dims}, wanted {ctx_dims}")
+    check(n.dtype == np.uint64, f"plugin_failures dtype {n.dtype}")
+    check(n.attrs.get("units") == "1" and "replaced by black" in n.attrs.get("long_name", "") and
+          "non-finite or negative" in n.attrs.get("comment", ""), f"plugin_failures attrs {n.attrs}")
+    check("comment" in m.attrs, f"plugin_failure attrs {m.attrs}")
+    films = 0
+    for line in open(os.path.join(sweep_dir, "index.jsonl")):
+        e = json.loads(line)
+        meta = json.load(open(os.path.join(sweep_dir, e["file"])))["meta"]
+        cell = ds.sel(e.get("coords", {}))
+        got, msg = int(cell.plugin_failures.item()), cell.plugin_failure.item()
+        check(got == meta.get("plugin_failures", 0) and msg == meta.get("plugin_failure", ""),
+              f"{e['file']}: dataset says {got} '{msg}', the film {meta.get('plugin_failures')} "
+              f"'{meta.get('plugin_failure')}'")
+        if want == "some":
+            check(got > 0 and "add_radiance returned I =" in msg and "failing_sky" in msg,
+                  f"{e['file']}: {got} '{msg}', wanted failures of failing_sky")
+        else:
+            check(got == 0 and msg == "", f"{e['file']}: {got} '{msg}', wanted none")
+        films += 1
+    check(films == n.size and films > 0, f"{films} films in index.jsonl, the dataset has {n.size}")
+
+
 def main():
     cmd = sys.argv[1]
     if cmd == "grid":
@@ -151,6 +186,8 @@ def main():
         same(sys.argv[2], sys.argv[3], ignore)
     elif cmd == "planes":
         planes(sys.argv[2], sys.argv[3])
+    elif cmd == "failures":
+        failures(sys.argv[2], sys.argv[3], sys.argv[4])
     elif cmd == "context":
         context(sys.argv[2], int(sys.argv[3]))
     else:

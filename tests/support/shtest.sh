@@ -92,6 +92,26 @@ start_spread_pair() {
   }
 }
 
+# need_xarray: $py, Debian's python3 (python3-xarray, python3-netcdf4 from
+# `make deps`; not one earlier on PATH that lacks them), must import both,
+# else fail and finish.
+need_xarray() {
+  py=${RSW_PYTHON:-/usr/bin/python3}
+  "$py" -c 'import xarray, netCDF4' 2>/dev/null || {
+    bad "$py cannot import xarray and netCDF4 (make deps installs python3-xarray python3-netcdf4)"
+    finish
+  }
+}
+# ds LABEL CHECK ARGS...: a tests/support/dataset_check.py check must pass
+# (need_xarray first).
+ds() {
+  local label=$1
+  shift
+  if "$py" "$root/tests/support/dataset_check.py" "$@" 2>"$tmp/pyerr"; then ok; else
+    bad "$label: $(tail -n 3 "$tmp/pyerr")"
+  fi
+}
+
 # expect RC LABEL CMD...: run CMD (stdout to $tmp/out, stderr to $tmp/err)
 # and check its exit status.
 expect() {
