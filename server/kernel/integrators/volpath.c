@@ -510,9 +510,9 @@ typedef struct vlane {
 typedef struct vpage {
   color T[RENDER_MAX_PAGES - 1], L[RENDER_MAX_PAGES - 1];
   color sval[RENDER_MAX_PAGES - 1], str[RENDER_MAX_PAGES - 1];
-  /* The path's hero channel for its exact free flights (-1: none drawn
-   * yet) and the mixture weights of the 3 P channels given the flights so
-   * far (flight_pages: path-level spectral MIS). */
+  /* The path's hero channel for its free flights (-1: none drawn yet)
+   * and the weights of the 3 P channels given the flights so far
+   * (draw_hero, flight_pages, track_pages: path-level spectral MIS). */
   int hero;
   double post[3 * RENDER_MAX_PAGES];
 } vpage;
