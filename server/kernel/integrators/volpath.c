@@ -1162,17 +1162,17 @@ static bool surface_nee(const scene *sc, const surface_interaction *si) {
   return (si->shape->bsdf->flags & BSDF_SMOOTH) && sc->n_emitters > 0;
 }
 
-/* The light sample at lane l's surface si (no pages: lane_surface does
- * theirs): emitter e (picked with probability pe) sampled into ds, worth
- * value; its shadow ray is started where the BSDF and the sample count. */
-PIECE void surface_light(const scene *sc, vlane *l, const surface_interaction *si, const emitter *e,
-                         double pe, const direction_sample *ds, color value, pol_lane *vq) {
-  if (!(ds->pdf > 0) || col_is_black(value)) return;
+/* Does the light sample ds of value `value` need the BSDF's value? */
+static inline bool surface_light_lit(const direction_sample *ds, color value) {
+  return ds->pdf > 0 && !col_is_black(value);
+}
+
+/* surface_light past the BSDF: its value f (not black) and pdf bpdf (0
+ * for a delta light) towards the light sample (local wo). */
+PIECE void surface_light_at(const scene *sc, vlane *l, const surface_interaction *si, const emitter *e,
+                            double pe, const direction_sample *ds, color value, vec3 wo, color f, double bpdf,
+                            pol_lane *vq) {
   const bsdf *b = si->shape->bsdf;
-  vec3 wo = frame_to_local(&si->sh, ds->d);
-  color f = b->ops->eval(b, si, wo);
-  if (col_is_black(f)) return;
-  double bpdf = ds->delta ? 0.0 : b->ops->pdf(b, si, wo);
   double w = ds->delta ? 1.0 : mis_weight(ds->pdf * pe, bpdf);
   start_shadow(sc, l, si, si->p, e, ds, medium_after(si, ds->d, l->m),
                col_scale(col_mul(l->T, col_mul(f, value)), w / pe));
@@ -1182,6 +1182,19 @@ PIECE void surface_light(const scene *sc, vlane *l, const surface_interaction *s
     const mueller *pp = pol_bsdf(b, si, wo, 0, P, &b_in, &b_out);
     pol_through_light(vq, e, ds->d, v3_neg(l->ray.d), b_in, b_out, pp, pol_channels(sc), vq->pend);
   }
+}
+
+/* The light sample at lane l's surface si (no pages: lane_surface does
+ * theirs): emitter e (picked with probability pe) sampled into ds, worth
+ * value; its shadow ray is started where the BSDF and the sample count. */
+PIECE void surface_light(const scene *sc, vlane *l, const surface_interaction *si, const emitter *e,
+                         double pe, const direction_sample *ds, color value, pol_lane *vq) {
+  if (!surface_light_lit(ds, value)) return;
+  const bsdf *b = si->shape->bsdf;
+  vec3 wo = frame_to_local(&si->sh, ds->d);
+  color f = b->ops->eval(b, si, wo);
+  if (col_is_black(f)) return;
+  surface_light_at(sc, l, si, e, pe, ds, value, wo, f, ds->delta ? 0.0 : b->ops->pdf(b, si, wo), vq);
 }
 
 /* Lane l's BSDF sample bs at si, of weight `weight` (page 0's; a bundle's
@@ -1437,11 +1450,118 @@ static void stage_light_samples(const scene *sc, sampler_state *st, const int *i
   wave_sample_emitters(sc, n, vs->ref, vs->d1, vs->d2, vs->ek, vs->ord, vs->ds, vs->val);
 }
 
+/* The BSDF calls of stage (b) go in chunks of BSDF_C lanes, their results
+ * on the stack (the stages' scratch is allocated per wave, and more of it
+ * costs page faults: see vstage_alloc's caller). */
+enum {
+  BSDF_C = 64
+};
+
+/* The lanes g[0..*left) (positions into vs->ref) wait for a BSDF's exact
+ * batch: move those whose BSDF is g[0]'s into take[] (in order), keep the
+ * rest in g (in order); returns how many were taken, *b their BSDF. */
+static int take_exact_group(const vstage *vs, int *g, int *left, int *take, const bsdf **b) {
+  *b = vs->ref[g[0]]->shape->bsdf;
+  int m = 0, rest = 0;
+  for (int k = 0; k < *left; k++) {
+    if (vs->ref[g[k]]->shape->bsdf == *b)
+      take[m++] = g[k];
+    else
+      g[rest++] = g[k];
+  }
+  *left = rest;
+  return m;
+}
+
+/* Do the surfaces vs->ref[j0..j0 + c) all have BSDF b? */
+static bool same_bsdf(const vstage *vs, int j0, int c, const bsdf *b) {
+  bool same = true;
+  for (int j = j0; j < j0 + c; j++) same &= vs->ref[j]->shape->bsdf == b;
+  return same;
+}
+
+/* The BSDFs' values and pdfs towards the light samples of the surfaces
+ * vs->ref[j0..j0 + c) (c <= BSDF_C) that need them (surface_light_lit)
+ * into f[j - j0], pdf[j - j0], their local directions into wo[j - j0]:
+ * grouped by BSDF through its eval_pdf_batch_exact where it has one (bit
+ * for bit eval() and pdf(); where every lane has that BSDF, all of them
+ * in one call, the values of lanes that do not need them unused), else
+ * eval() and pdf() per lane as surface_light calls them. */
+static void stage_bsdf_evals(int j0, int c, const vstage *vs, vec3 *wo, color *f, double *pdf) {
+  const bsdf *b0 = vs->ref[j0]->shape->bsdf;
+  if (b0->ops->eval_pdf_batch_exact && same_bsdf(vs, j0, c, b0)) { /* one call, no gathering */
+    for (int i = 0; i < c; i++) wo[i] = frame_to_local(&vs->ref[j0 + i]->sh, vs->ds[j0 + i].d);
+    b0->ops->eval_pdf_batch_exact(b0, c, vs->ref + j0, wo, f, pdf);
+    return;
+  }
+  int g[BSDF_C], left = 0;
+  for (int j = j0; j < j0 + c; j++) {
+    const surface_interaction *si = vs->ref[j];
+    if (!surface_light_lit(&vs->ds[j], vs->val[j])) continue;
+    const bsdf *b = si->shape->bsdf;
+    int i = j - j0;
+    wo[i] = frame_to_local(&si->sh, vs->ds[j].d);
+    if (b->ops->eval_pdf_batch_exact) {
+      g[left++] = j;
+      continue;
+    }
+    f[i] = b->ops->eval(b, si, wo[i]);
+    pdf[i] = col_is_black(f[i]) || vs->ds[j].delta ? 0.0 : b->ops->pdf(b, si, wo[i]);
+  }
+  while (left > 0) {
+    const bsdf *b;
+    const surface_interaction *si[BSDF_C];
+    vec3 two[BSDF_C];
+    color tf[BSDF_C];
+    double tpdf[BSDF_C];
+    int take[BSDF_C];
+    int m = take_exact_group(vs, g, &left, take, &b);
+    for (int k = 0; k < m; k++) si[k] = vs->ref[take[k]], two[k] = wo[take[k] - j0];
+    b->ops->eval_pdf_batch_exact(b, m, si, two, tf, tpdf);
+    for (int k = 0; k < m; k++) f[take[k] - j0] = tf[k], pdf[take[k] - j0] = tpdf[k];
+  }
+}
+
+/* The BSDF samples of the surfaces vs->ref[j0..j0 + c) (c <= BSDF_C) with
+ * numbers vs->d1, vs->d2 into bs[j - j0], their weights into w[j - j0]:
+ * grouped by BSDF through its sample_batch_exact where it has one (bit
+ * for bit sample()), else sample() per lane. */
+static void stage_bsdf_samples(int j0, int c, const vstage *vs, bsdf_sample *bs, color *w) {
+  const bsdf *b0 = vs->ref[j0]->shape->bsdf;
+  if (b0->ops->sample_batch_exact && same_bsdf(vs, j0, c, b0)) { /* one call, no gathering */
+    b0->ops->sample_batch_exact(b0, c, vs->ref + j0, vs->d1 + j0, vs->d2 + j0, bs, w);
+    return;
+  }
+  int g[BSDF_C], left = 0;
+  for (int j = j0; j < j0 + c; j++) {
+    const surface_interaction *si = vs->ref[j];
+    const bsdf *b = si->shape->bsdf;
+    if (b->ops->sample_batch_exact)
+      g[left++] = j;
+    else
+      w[j - j0] = b->ops->sample(b, si, vs->d1[j], vs->d2[j], &bs[j - j0]);
+  }
+  while (left > 0) {
+    const bsdf *b;
+    const surface_interaction *si[BSDF_C];
+    double u1[BSDF_C];
+    vec2 u2[BSDF_C];
+    bsdf_sample tbs[BSDF_C];
+    color tw[BSDF_C];
+    int take[BSDF_C];
+    int m = take_exact_group(vs, g, &left, take, &b);
+    for (int k = 0; k < m; k++) si[k] = vs->ref[take[k]], u1[k] = vs->d1[take[k]], u2[k] = vs->d2[take[k]];
+    b->ops->sample_batch_exact(b, m, si, u1, u2, tbs, tw);
+    for (int k = 0; k < m; k++) bs[take[k] - j0] = tbs[k], w[take[k] - j0] = tw[k];
+  }
+}
+
 /* Stage (b): the lanes ks[0..n) that bounce off a surface: the light
  * samples of those whose BSDF takes one and the BSDF's value towards
- * them (surface_light), then the BSDF samples' numbers (together), the
- * samples and the continuation rays (surface_continue), then the
- * roulette. ev[k]: EV_BOUNCE (goes on) or EV_END. ks is reordered. */
+ * them (stage_bsdf_evals, surface_light_at), then the BSDF samples'
+ * numbers (together), the samples (stage_bsdf_samples) and the
+ * continuation rays (surface_continue), then the roulette. ev[k]:
+ * EV_BOUNCE (goes on) or EV_END. ks is reordered. */
 static void stage_surfaces(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *ln,
                            const int *idx, int *ks, int n, surface_interaction *si, const vstage *vs) {
   if (n == 0) return;
@@ -1451,24 +1571,36 @@ static void stage_surfaces(const volpath_integrator *vp, const scene *sc, sample
     vs->ref[ng] = &si[ks[j]];
     ng += surface_nee(sc, &si[ks[j]]);
   }
-  if (ng > 0) {
-    stage_light_samples(sc, st, idx, g, ng, vs);
-    for (int j = 0; j < ng; j++)
-      surface_light(sc, &ln[idx[g[j]]], &si[g[j]], sc->emitters[vs->ek[j]], pick_probability(sc, vs->ek[j]),
-                    &vs->ds[j], vs->val[j], NULL);
+  if (ng > 0) stage_light_samples(sc, st, idx, g, ng, vs);
+  for (int j0 = 0; j0 < ng; j0 += BSDF_C) {
+    int c = ng - j0 < BSDF_C ? ng - j0 : BSDF_C;
+    vec3 wo[BSDF_C];
+    color f[BSDF_C];
+    double pdf[BSDF_C];
+    stage_bsdf_evals(j0, c, vs, wo, f, pdf);
+    for (int i = 0; i < c; i++) {
+      int j = j0 + i;
+      if (surface_light_lit(&vs->ds[j], vs->val[j]) && !col_is_black(f[i]))
+        surface_light_at(sc, &ln[idx[g[j]]], &si[g[j]], sc->emitters[vs->ek[j]], pick_probability(sc, vs->ek[j]),
+                         &vs->ds[j], vs->val[j], wo[i], f[i], vs->ds[j].delta ? 0.0 : pdf[i], NULL);
+    }
   }
   stage_lanes(idx, ks, n, vs->lid);
   stage_sample_numbers(st[vs->lid[0]].s, st, vs->lid, n, vs);
+  for (int j = 0; j < n; j++) vs->ref[j] = &si[ks[j]];
   int m = 0;
-  for (int j = 0; j < n; j++) {
-    int k = ks[j];
-    const bsdf *b = si[k].shape->bsdf;
-    bsdf_sample bs;
-    color weight = b->ops->sample(b, &si[k], vs->d1[j], vs->d2[j], &bs);
-    bool on = surface_continue(sc, &ln[idx[k]], &si[k], &bs, weight, NULL, NULL);
-    vs->ev[k] = (unsigned char)(on ? EV_BOUNCE : EV_END);
-    ks[m] = k;
-    m += on;
+  for (int j0 = 0; j0 < n; j0 += BSDF_C) {
+    int c = n - j0 < BSDF_C ? n - j0 : BSDF_C;
+    bsdf_sample bs[BSDF_C];
+    color w[BSDF_C];
+    stage_bsdf_samples(j0, c, vs, bs, w);
+    for (int i = 0; i < c; i++) {
+      int k = ks[j0 + i];
+      bool on = surface_continue(sc, &ln[idx[k]], &si[k], &bs[i], w[i], NULL, NULL);
+      vs->ev[k] = (unsigned char)(on ? EV_BOUNCE : EV_END);
+      ks[m] = k;
+      m += on;
+    }
   }
   stage_roulette(vp, sc, st, ln, idx, ks, m, vs);
 }
