@@ -1581,8 +1581,9 @@ static void stage_surfaces(const volpath_integrator *vp, const scene *sc, sample
     for (int i = 0; i < c; i++) {
       int j = j0 + i;
       if (surface_light_lit(&vs->ds[j], vs->val[j]) && !col_is_black(f[i]))
-        surface_light_at(sc, &ln[idx[g[j]]], &si[g[j]], sc->emitters[vs->ek[j]], pick_probability(sc, vs->ek[j]),
-                         &vs->ds[j], vs->val[j], wo[i], f[i], vs->ds[j].delta ? 0.0 : pdf[i], NULL);
+        surface_light_at(sc, &ln[idx[g[j]]], &si[g[j]], sc->emitters[vs->ek[j]],
+                         pick_probability(sc, vs->ek[j]), &vs->ds[j], vs->val[j], wo[i], f[i],
+                         vs->ds[j].delta ? 0.0 : pdf[i], NULL);
     }
   }
   stage_lanes(idx, ks, n, vs->lid);

@@ -698,7 +698,7 @@ static void check_bsdf_exact(const plug_case *c) {
   si[0].wi = v3(0, 0, 1); /* the pole: azimuth 0 */
   si[1].wi = v3(1, 0, 0); /* grazing: wi.z = 0 fails everywhere */
   wo[3] = v3(0, 0, 1);
-  wo[4] = si[4].wi; /* the hot spot: G = 0 */
+  wo[4] = si[4].wi;     /* the hot spot: G = 0 */
   u2[2] = v2(0.5, 0.5); /* the concentric map's centre: wo at the pole */
   for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
     if (!rsw_isa_set((rsw_isa)isa)) continue;
