@@ -1024,32 +1024,14 @@ static bool scatter_nee(const scene *sc, const medium *m) {
 /* The light sample at lane l's collision mi: emitter e (picked with
  * probability pe) sampled with u2 into ds, worth value; its shadow ray
  * is started where the phase function and the sample count. */
-PIECE void scatter_light_at(const scene *sc, vlane *l, const medium_interaction *mi, const emitter *e,
-                            double pe, vec2 u2, const direction_sample *ds, color value, double pval,
-                            double ppdf, pol_lane *vq, vpage *pg);
-
-/* Does the light sample ds of value `value` need the phase's value? */
-static inline bool scatter_light_lit(const direction_sample *ds, color value, const vpage *pg) {
-  return ds->pdf > 0 && (!col_is_black(value) || pg);
-}
-
 PIECE void scatter_light(const scene *sc, vlane *l, const medium_interaction *mi, const emitter *e, double pe,
                          vec2 u2, const direction_sample *ds, color value, pol_lane *vq, vpage *pg) {
-  if (!scatter_light_lit(ds, value, pg)) return;
-  const phase *ph = l->m->phase;
-  double ppdf;
-  double pval = ph->ops->eval_pdf(ph, mi, ds->d, &ppdf);
-  scatter_light_at(sc, l, mi, e, pe, u2, ds, value, pval, ppdf, vq, pg);
-}
-
-/* scatter_light past the phase function: its value pval and pdf ppdf
- * towards the light sample. */
-PIECE void scatter_light_at(const scene *sc, vlane *l, const medium_interaction *mi, const emitter *e,
-                            double pe, vec2 u2, const direction_sample *ds, color value, double pval,
-                            double ppdf, pol_lane *vq, vpage *pg) {
   const int NP = sc->pages;
   const medium *m = l->m;
   const phase *ph = m->phase;
+  if (!(ds->pdf > 0) || (col_is_black(value) && !pg)) return;
+  double ppdf;
+  double pval = ph->ops->eval_pdf(ph, mi, ds->d, &ppdf);
   if (!(pval > 0)) return;
   double w = ds->delta ? 1.0 : mis_weight(ds->pdf * pe, ppdf);
   /* A chromatic phase (a spectral bundle's aerosol mixture): each
@@ -1077,25 +1059,14 @@ PIECE void scatter_light_at(const scene *sc, vlane *l, const medium_interaction 
 
 /* The phase sample at lane l's collision mi (numbers u1, u2) and the
  * continuation ray. False: the sample failed and the path ends. */
-PIECE bool scatter_phase_at(const scene *sc, vlane *l, const medium_interaction *mi, vec3 wo, double ppdf,
-                            double pw, pol_lane *vq, vpage *pg);
-
 PIECE bool scatter_phase(const scene *sc, vlane *l, const medium_interaction *mi, double u1, vec2 u2,
                          pol_lane *vq, vpage *pg) {
-  const phase *ph = l->m->phase;
-  vec3 wo;
-  double ppdf;
-  double pw = ph->ops->sample(ph, mi, u1, u2, &wo, &ppdf);
-  return scatter_phase_at(sc, l, mi, wo, ppdf, pw, vq, pg);
-}
-
-/* scatter_phase past the phase function's sample: direction wo, pdf
- * ppdf, weight pw. */
-PIECE bool scatter_phase_at(const scene *sc, vlane *l, const medium_interaction *mi, vec3 wo, double ppdf,
-                            double pw, pol_lane *vq, vpage *pg) {
   const int NP = sc->pages;
   const medium *m = l->m;
   const phase *ph = m->phase;
+  vec3 wo;
+  double ppdf;
+  double pw = ph->ops->sample(ph, mi, u1, u2, &wo, &ppdf);
   if (!(ppdf > 0) || !(pw > 0)) return false;
   /* A chromatic phase: wo drawn with channel 0's mixture, each channel
    * weighted by its own value over that density (unbiased: every
@@ -1432,26 +1403,20 @@ static void stage_sample_numbers(const sampler *smp, sampler_state *st, const in
  * free flight: the flight (lane_flight), then at a collision
  * scatter_begin, at a surface or an escape surface_emit. ev[k]:
  * EV_SCATTER (on to stage (c)), EV_BOUNCE (on to stage (b)), EV_CROSS (a
- * null surface crossed: goes on as it is) or EV_END. The collisions go to
- * vs->mi in the order of their lanes, one after the other (vs->mi[j]: the
- * j-th lane with EV_SCATTER), so that stage (c) hands them to the phase
- * functions' batches as they lie. */
+ * null surface crossed: goes on as it is) or EV_END. */
 static void stage_segments(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *ln,
                            const int *idx, int live, const bool *hit, surface_interaction *si, face_plane *fp,
                            const vstage *vs) {
-  int nsc = 0;
   for (int k = 0; k < live; k++) {
     vlane *l = &ln[idx[k]];
     l->hit = hit[k];
     l->sh = false;
-    medium_interaction *mi = &vs->mi[nsc];
-    enum lane_outcome ev = lane_flight(vp, sc, &st[idx[k]], l, &si[k], NULL, fp, mi);
+    enum lane_outcome ev = lane_flight(vp, sc, &st[idx[k]], l, &si[k], NULL, fp, &vs->mi[k]);
     if (ev == EV_SCATTER)
-      ev = scatter_begin(vp, l, mi) ? EV_SCATTER : EV_END;
+      ev = scatter_begin(vp, l, &vs->mi[k]) ? EV_SCATTER : EV_END;
     else if (ev == EV_SURFACE)
       ev = surface_emit(vp, sc, l, &si[k], NULL, NULL);
     vs->ev[k] = (unsigned char)ev;
-    nsc += ev == EV_SCATTER;
   }
 }
 
@@ -1641,29 +1606,14 @@ static void stage_surfaces(const volpath_integrator *vp, const scene *sc, sample
   stage_roulette(vp, sc, st, ln, idx, ks, m, vs);
 }
 
-/* The phase calls of stage (c) go in chunks of BSDF_C lanes, one batched
- * call (phase/phase.h phase_eval_pdf_batch, phase_sample_batch: bit for
- * bit the scalar calls) where a chunk's lanes share a phase function,
- * else a call a lane. */
-
-/* Do lanes ks[j0..j0 + c) all scatter with phase function ph? */
-static bool same_phase(const vlane *ln, const int *idx, const int *ks, int j0, int c, const phase *ph) {
-  bool same = true;
-  for (int j = j0; j < j0 + c; j++) same &= ln[idx[ks[j]]].m->phase == ph;
-  return same;
-}
-
 /* Stage (c): the lanes ks[0..n) that scatter in their medium: the light
  * samples of those whose medium takes one and the phase function's value
- * towards them (scatter_light_at), then the phase samples' numbers
- * (together), the samples and the continuation rays (scatter_phase_at),
- * then the roulette. ks ascends, so vs->mi[j] is lane idx[ks[j]]'s
- * collision (stage_segments). ev[k]: EV_SCATTER (goes on) or EV_END. ks
- * is reordered. */
+ * towards them (scatter_light), then the phase samples' numbers
+ * (together), the samples and the continuation rays (scatter_phase), then
+ * the roulette. ev[k]: EV_SCATTER (goes on) or EV_END. ks is reordered. */
 static void stage_scatters(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *ln,
                            const int *idx, int *ks, int n, const vstage *vs) {
   if (n == 0) return;
-  medium_interaction *mi = vs->mi;
   int *g = vs->sub, ng = 0;
   for (int j = 0; j < n; j++) {
     g[ng] = ks[j];
@@ -1672,59 +1622,19 @@ static void stage_scatters(const volpath_integrator *vp, const scene *sc, sample
   }
   if (ng > 0) {
     stage_light_samples(sc, st, idx, g, ng, vs);
-    /* ng == n: light sample j is collision j's; else the collisions of
-     * the lanes g[] are taken in turn (their list positions ascend). */
-    for (int j0 = 0, p = 0; j0 < ng; j0 += BSDF_C) {
-      int c = ng - j0 < BSDF_C ? ng - j0 : BSDF_C;
-      const medium_interaction *cm[BSDF_C];
-      vec3 wo[BSDF_C];
-      double pv[BSDF_C], pp[BSDF_C];
-      for (int i = 0; i < c; i++) {
-        while (ks[p] != g[j0 + i]) p++;
-        cm[i] = &mi[p];
-        wo[i] = vs->ds[j0 + i].d;
-      }
-      const phase *ph = ln[idx[g[j0]]].m->phase;
-      if (ng == n && same_phase(ln, idx, g, j0, c, ph)) {
-        phase_eval_pdf_batch(ph, c, mi + j0, wo, pv, pp);
-      } else {
-        for (int i = 0; i < c; i++) {
-          const phase *q = ln[idx[g[j0 + i]]].m->phase;
-          pv[i] = q->ops->eval_pdf(q, cm[i], wo[i], &pp[i]);
-        }
-      }
-      for (int i = 0; i < c; i++) {
-        int j = j0 + i;
-        if (scatter_light_lit(&vs->ds[j], vs->val[j], NULL))
-          scatter_light_at(sc, &ln[idx[g[j]]], cm[i], sc->emitters[vs->ek[j]],
-                           pick_probability(sc, vs->ek[j]), vs->d2[j], &vs->ds[j], vs->val[j], pv[i], pp[i],
-                           NULL, NULL);
-      }
-    }
+    for (int j = 0; j < ng; j++)
+      scatter_light(sc, &ln[idx[g[j]]], &vs->mi[g[j]], sc->emitters[vs->ek[j]],
+                    pick_probability(sc, vs->ek[j]), vs->d2[j], &vs->ds[j], vs->val[j], NULL, NULL);
   }
   stage_lanes(idx, ks, n, vs->lid);
   stage_sample_numbers(st[vs->lid[0]].s, st, vs->lid, n, vs);
   int m = 0;
-  for (int j0 = 0; j0 < n; j0 += BSDF_C) {
-    int c = n - j0 < BSDF_C ? n - j0 : BSDF_C;
-    vec3 wo[BSDF_C];
-    double pp[BSDF_C], pw[BSDF_C];
-    const phase *ph = ln[idx[ks[j0]]].m->phase;
-    if (same_phase(ln, idx, ks, j0, c, ph)) {
-      phase_sample_batch(ph, c, mi + j0, vs->d1 + j0, vs->d2 + j0, wo, pp, pw);
-    } else {
-      for (int i = 0; i < c; i++) {
-        const phase *q = ln[idx[ks[j0 + i]]].m->phase;
-        pw[i] = q->ops->sample(q, &mi[j0 + i], vs->d1[j0 + i], vs->d2[j0 + i], &wo[i], &pp[i]);
-      }
-    }
-    for (int i = 0; i < c; i++) {
-      int k = ks[j0 + i];
-      bool on = scatter_phase_at(sc, &ln[idx[k]], &mi[j0 + i], wo[i], pp[i], pw[i], NULL, NULL);
-      vs->ev[k] = (unsigned char)(on ? EV_SCATTER : EV_END);
-      ks[m] = k;
-      m += on;
-    }
+  for (int j = 0; j < n; j++) {
+    int k = ks[j];
+    bool on = scatter_phase(sc, &ln[idx[k]], &vs->mi[k], vs->d1[j], vs->d2[j], NULL, NULL);
+    vs->ev[k] = (unsigned char)(on ? EV_SCATTER : EV_END);
+    ks[m] = k;
+    m += on;
   }
   stage_roulette(vp, sc, st, ln, idx, ks, m, vs);
 }

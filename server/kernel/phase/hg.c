@@ -50,16 +50,7 @@ static double hg_eval_pdf(const phase *ph, const medium_interaction *mi, vec3 wo
   return v;
 }
 
-/* n lanes (phase_ops.eval_pdf_batch, bit for bit hg_eval_pdf): the value
- * inlined in one loop, no call a lane. */
-static void hg_eval_pdf_batch(const phase *ph, int n, const medium_interaction *mi, const vec3 *wo,
-                              double *val, double *pdf) {
-  double g = ((const hg_phase *)ph)->g;
-  for (int i = 0; i < n; i++) val[i] = pdf[i] = hg_eval(g, phase_mu(&mi[i], wo[i]));
-}
-
-static const phase_ops hg_ops = {
-    .sample = hg_sample, .eval_pdf = hg_eval_pdf, .eval_pdf_batch = hg_eval_pdf_batch};
+static const phase_ops hg_ops = {.sample = hg_sample, .eval_pdf = hg_eval_pdf};
 
 /* g lies in the open interval (-1, 1): the largest closed one inside it. */
 #define HG_G_LO nextafter(-1.0, 0.0)

@@ -69,25 +69,14 @@ static double rayleigh_eval_pdf(const phase *ph, const medium_interaction *mi, v
   return *pdf;
 }
 
-/* n lanes (phase_ops.eval_pdf_batch, bit for bit rayleigh_eval_pdf): the
- * value inlined in one loop, no call a lane (blendphase's batch and the
- * volumetric wave evaluate through it). */
-static void rayleigh_eval_pdf_batch(const phase *ph, int n, const medium_interaction *mi, const vec3 *wo,
-                                    double *val, double *pdf) {
-  const rayleigh_phase *r = (const rayleigh_phase *)ph;
-  for (int i = 0; i < n; i++) val[i] = pdf[i] = rayleigh_value(r, phase_mu(&mi[i], wo[i]));
-}
-
 /* Polarized variants: the Rayleigh phase matrix (core/mueller.h
  * mu_rayleigh) over its F11. */
 static void rayleigh_polarization(const phase *ph, const medium_interaction *mi, vec3 wo, mueller P[3]) {
   P[0] = P[1] = P[2] = mu_normalized(mu_rayleigh(phase_mu(mi, wo), ((const rayleigh_phase *)ph)->rho));
 }
 
-static const phase_ops rayleigh_ops = {.sample = rayleigh_sample,
-                                       .eval_pdf = rayleigh_eval_pdf,
-                                       .polarization = rayleigh_polarization,
-                                       .eval_pdf_batch = rayleigh_eval_pdf_batch};
+static const phase_ops rayleigh_ops = {
+    .sample = rayleigh_sample, .eval_pdf = rayleigh_eval_pdf, .polarization = rayleigh_polarization};
 
 /* rho lies in [0, 1): the largest closed interval inside it. */
 #define RAYLEIGH_RHO_HI nextafter(1.0, 0.0)
