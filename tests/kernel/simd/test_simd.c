@@ -24,7 +24,8 @@
  *    random directions, both distributions, visible or not, isotropic
  *    and anisotropic, and is lane-independent (bitwise);
  *  - hdistant's batched camera rays (double lanes) equal sample_ray()'s
- *    bit for bit, at every ISA (the seed scene's sensor, and one with a
+ *    bit for bit, at every ISA (the seed scene's sensor, with a target;
+ *    the periodic canopy's, a target and the slab; and one with a
  *    rotated, scaled to_world), including the concentric map's centre and
  *    edges;
  *  - --isa parsing: auto, names, an unknown name, an ISA the CPU lacks;
@@ -396,6 +397,10 @@ static void test_hdistant_rays(void) {
   scene *s = tsup_load_file("proto/examples/hdistant_seed.xml", NULL);
   REQUIRE(s && s->n_sensors, "hdistant_seed.xml");
   check_rays(s->sensors[0], "seed scene hdistant");
+  scene_free(s);
+  s = tsup_load_file("proto/examples/canopy_periodic.json", NULL);
+  REQUIRE(s && s->n_sensors, "canopy_periodic.json");
+  check_rays(s->sensors[0], "periodic canopy hdistant (a target, the slab)");
   scene_free(s);
   s = tsup_load("{\"type\": \"scene\","
                 " \"cam\": {\"type\": \"hdistant\", \"to_world\": [{\"scale\": [1, 2, 0.5]},"
