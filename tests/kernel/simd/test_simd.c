@@ -24,10 +24,10 @@
  *    random directions, both distributions, visible or not, isotropic
  *    and anisotropic, and is lane-independent (bitwise);
  *  - hdistant's batched camera rays (double lanes) equal sample_ray()'s
- *    bit for bit, at every ISA (the seed scene's sensor, with a target;
- *    the periodic canopy's, a target and the slab; and one with a
- *    rotated, scaled to_world), including the concentric map's centre and
- *    edges;
+ *    bit for bit, at every ISA (the seed scene's sensor; the periodic
+ *    canopy's, a target and the slab; a tilted rectangle target, as the
+ *    atmosphere's; and one with a rotated, scaled to_world), including
+ *    the concentric map's centre and edges;
  *  - --isa parsing: auto, names, an unknown name, an ISA the CPU lacks;
  *  - the batched ops of the other hot plugins (issue 12 point 3), at every
  *    ISA, generic included (simd/lanes_generic.c):
@@ -401,6 +401,17 @@ static void test_hdistant_rays(void) {
   s = tsup_load_file("proto/examples/canopy_periodic.json", NULL);
   REQUIRE(s && s->n_sensors, "canopy_periodic.json");
   check_rays(s->sensors[0], "periodic canopy hdistant (a target, the slab)");
+  scene_free(s);
+  s = tsup_load(
+      "{\"type\": \"scene\","
+      " \"cam\": {\"type\": \"hdistant\", \"to_world\": [{\"rotate\": {\"axis\": [0, 1, 0], \"angle\": 20}}],"
+      "   \"target\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [3, 2, 1]},"
+      "     {\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 10}}, {\"translate\": [0.5, 0, 0.25]}]},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 4, \"height\": 4}},"
+      " \"ball\": {\"type\": \"sphere\", \"center\": [1, 2, 3], \"radius\": 2}}",
+      NULL);
+  REQUIRE(s && s->n_sensors, "hdistant with a rectangle target");
+  check_rays(s->sensors[0], "hdistant, a rectangle target (the atmosphere's sensor)");
   scene_free(s);
   s = tsup_load("{\"type\": \"scene\","
                 " \"cam\": {\"type\": \"hdistant\", \"to_world\": [{\"scale\": [1, 2, 0.5]},"
