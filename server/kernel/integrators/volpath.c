@@ -1358,11 +1358,14 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
  * (integrators/wave.h); every lane still draws from its own state in
  * lane_event's order and computes the same values, so the staged and the
  * lane-by-lane events give bitwise the same film
- * (tests/kernel/integrators/test_volpath_stages.c). The free flights,
- * phase functions and BSDFs are still called per lane: a batched flight
- * or phase op would replace those calls in stage_segments and
- * stage_scatters; the BSDFs' batched ops compute in single precision
- * (bsdfs/rpv.c), which would move the films (docs/performance.md). */
+ * (tests/kernel/integrators/test_volpath_stages.c). The BSDFs with exact
+ * batches (bsdf_ops.sample_batch_exact, eval_pdf_batch_exact: rpv's
+ * double lanes, the scalar ops' bits) are called for a chunk of lanes at
+ * once in stage (b); their other batched ops compute in single precision
+ * (bsdfs/rpv.c), which would move the films. The free flights and the
+ * phase functions are still called per lane (their batches, wired into
+ * stage_segments and stage_scatters, measured slower:
+ * docs/performance.md). */
 
 /* Whether wave_run goes by stages where it can (volpath_set_stages). */
 static _Atomic bool g_stages = true;
