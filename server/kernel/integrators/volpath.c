@@ -1455,107 +1455,58 @@ static void stage_light_samples(const scene *sc, sampler_state *st, const int *i
 
 /* The BSDF calls of stage (b) go in chunks of BSDF_C lanes, their results
  * on the stack (the stages' scratch is allocated per wave, and more of it
- * costs page faults: see vstage_alloc's caller). */
+ * costs page faults: see vstage_alloc's caller). A chunk whose lanes share
+ * a BSDF with exact batches (bsdf_ops.sample_batch_exact,
+ * eval_pdf_batch_exact: the scalar ops' bits) takes one call; any other
+ * chunk the scalar ops lane by lane, the same numbers. */
 enum {
   BSDF_C = 64
 };
 
-/* The lanes g[0..*left) (positions into vs->ref) wait for a BSDF's exact
- * batch: move those whose BSDF is g[0]'s into take[] (in order), keep the
- * rest in g (in order); returns how many were taken, *b their BSDF. */
-static int take_exact_group(const vstage *vs, int *g, int *left, int *take, const bsdf **b) {
-  *b = vs->ref[g[0]]->shape->bsdf;
-  int m = 0, rest = 0;
-  for (int k = 0; k < *left; k++) {
-    if (vs->ref[g[k]]->shape->bsdf == *b)
-      take[m++] = g[k];
-    else
-      g[rest++] = g[k];
-  }
-  *left = rest;
-  return m;
-}
-
-/* Do the surfaces vs->ref[j0..j0 + c) all have BSDF b? */
-static bool same_bsdf(const vstage *vs, int j0, int c, const bsdf *b) {
+/* The BSDF of the surfaces vs->ref[j0..j0 + c) where they all have the
+ * same, else NULL. */
+static const bsdf *chunk_bsdf(const vstage *vs, int j0, int c) {
+  const bsdf *b = vs->ref[j0]->shape->bsdf;
   bool same = true;
   for (int j = j0; j < j0 + c; j++) same &= vs->ref[j]->shape->bsdf == b;
-  return same;
+  return same ? b : NULL;
 }
 
 /* The BSDFs' values and pdfs towards the light samples of the surfaces
- * vs->ref[j0..j0 + c) (c <= BSDF_C) that need them (surface_light_lit)
- * into f[j - j0], pdf[j - j0], their local directions into wo[j - j0]:
- * grouped by BSDF through its eval_pdf_batch_exact where it has one (bit
- * for bit eval() and pdf(); where every lane has that BSDF, all of them
- * in one call, the values of lanes that do not need them unused), else
- * eval() and pdf() per lane as surface_light calls them. */
+ * vs->ref[j0..j0 + c) (c <= BSDF_C) into f[j - j0], pdf[j - j0], their
+ * local directions into wo[j - j0], where a lane needs them
+ * (surface_light_lit; an exact batch computes every lane's, the others
+ * unused), as surface_light computes them. */
 static void stage_bsdf_evals(int j0, int c, const vstage *vs, vec3 *wo, color *f, double *pdf) {
-  const bsdf *b0 = vs->ref[j0]->shape->bsdf;
-  if (b0->ops->eval_pdf_batch_exact && same_bsdf(vs, j0, c, b0)) { /* one call, no gathering */
+  const bsdf *b = chunk_bsdf(vs, j0, c);
+  if (b && b->ops->eval_pdf_batch_exact) {
     for (int i = 0; i < c; i++) wo[i] = frame_to_local(&vs->ref[j0 + i]->sh, vs->ds[j0 + i].d);
-    b0->ops->eval_pdf_batch_exact(b0, c, vs->ref + j0, wo, f, pdf);
+    b->ops->eval_pdf_batch_exact(b, c, vs->ref + j0, wo, f, pdf);
     return;
   }
-  int g[BSDF_C], left = 0;
-  for (int j = j0; j < j0 + c; j++) {
-    const surface_interaction *si = vs->ref[j];
-    if (!surface_light_lit(&vs->ds[j], vs->val[j])) continue;
-    const bsdf *b = si->shape->bsdf;
-    int i = j - j0;
-    wo[i] = frame_to_local(&si->sh, vs->ds[j].d);
-    if (b->ops->eval_pdf_batch_exact) {
-      g[left++] = j;
-      continue;
-    }
-    f[i] = b->ops->eval(b, si, wo[i]);
-    pdf[i] = col_is_black(f[i]) || vs->ds[j].delta ? 0.0 : b->ops->pdf(b, si, wo[i]);
-  }
-  while (left > 0) {
-    const bsdf *b;
-    const surface_interaction *si[BSDF_C];
-    vec3 two[BSDF_C];
-    color tf[BSDF_C];
-    double tpdf[BSDF_C];
-    int take[BSDF_C];
-    int m = take_exact_group(vs, g, &left, take, &b);
-    for (int k = 0; k < m; k++) si[k] = vs->ref[take[k]], two[k] = wo[take[k] - j0];
-    b->ops->eval_pdf_batch_exact(b, m, si, two, tf, tpdf);
-    for (int k = 0; k < m; k++) f[take[k] - j0] = tf[k], pdf[take[k] - j0] = tpdf[k];
+  for (int i = 0; i < c; i++) {
+    const surface_interaction *si = vs->ref[j0 + i];
+    const direction_sample *ds = &vs->ds[j0 + i];
+    if (!surface_light_lit(ds, vs->val[j0 + i])) continue;
+    const bsdf *bi = si->shape->bsdf;
+    wo[i] = frame_to_local(&si->sh, ds->d);
+    f[i] = bi->ops->eval(bi, si, wo[i]);
+    pdf[i] = col_is_black(f[i]) || ds->delta ? 0.0 : bi->ops->pdf(bi, si, wo[i]);
   }
 }
 
 /* The BSDF samples of the surfaces vs->ref[j0..j0 + c) (c <= BSDF_C) with
- * numbers vs->d1, vs->d2 into bs[j - j0], their weights into w[j - j0]:
- * grouped by BSDF through its sample_batch_exact where it has one (bit
- * for bit sample()), else sample() per lane. */
+ * numbers vs->d1, vs->d2 into bs[j - j0], their weights into w[j - j0]. */
 static void stage_bsdf_samples(int j0, int c, const vstage *vs, bsdf_sample *bs, color *w) {
-  const bsdf *b0 = vs->ref[j0]->shape->bsdf;
-  if (b0->ops->sample_batch_exact && same_bsdf(vs, j0, c, b0)) { /* one call, no gathering */
-    b0->ops->sample_batch_exact(b0, c, vs->ref + j0, vs->d1 + j0, vs->d2 + j0, bs, w);
+  const bsdf *b = chunk_bsdf(vs, j0, c);
+  if (b && b->ops->sample_batch_exact) {
+    b->ops->sample_batch_exact(b, c, vs->ref + j0, vs->d1 + j0, vs->d2 + j0, bs, w);
     return;
   }
-  int g[BSDF_C], left = 0;
-  for (int j = j0; j < j0 + c; j++) {
-    const surface_interaction *si = vs->ref[j];
-    const bsdf *b = si->shape->bsdf;
-    if (b->ops->sample_batch_exact)
-      g[left++] = j;
-    else
-      w[j - j0] = b->ops->sample(b, si, vs->d1[j], vs->d2[j], &bs[j - j0]);
-  }
-  while (left > 0) {
-    const bsdf *b;
-    const surface_interaction *si[BSDF_C];
-    double u1[BSDF_C];
-    vec2 u2[BSDF_C];
-    bsdf_sample tbs[BSDF_C];
-    color tw[BSDF_C];
-    int take[BSDF_C];
-    int m = take_exact_group(vs, g, &left, take, &b);
-    for (int k = 0; k < m; k++) si[k] = vs->ref[take[k]], u1[k] = vs->d1[take[k]], u2[k] = vs->d2[take[k]];
-    b->ops->sample_batch_exact(b, m, si, u1, u2, tbs, tw);
-    for (int k = 0; k < m; k++) bs[take[k] - j0] = tbs[k], w[take[k] - j0] = tw[k];
+  for (int i = 0; i < c; i++) {
+    const surface_interaction *si = vs->ref[j0 + i];
+    const bsdf *bi = si->shape->bsdf;
+    w[i] = bi->ops->sample(bi, si, vs->d1[j0 + i], vs->d2[j0 + i], &bs[i]);
   }
 }
 

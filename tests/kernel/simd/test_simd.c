@@ -393,6 +393,21 @@ static void check_rays(const sensor *se, const char *what) {
   free(w);
 }
 
+/* An hdistant sensor (its properties cam besides its 4x4 film) over a
+ * ball: check_rays. */
+static void check_hdistant(const char *cam, const char *what) {
+  char doc[1024];
+  snprintf(doc, sizeof doc,
+           "{\"type\": \"scene\", \"cam\": {\"type\": \"hdistant\", %s,"
+           " \"film\": {\"type\": \"hdrfilm\", \"width\": 4, \"height\": 4}},"
+           " \"ball\": {\"type\": \"sphere\", \"center\": [1, 2, 3], \"radius\": 2}}",
+           cam);
+  scene *s = tsup_load(doc, NULL);
+  REQUIRE(s && s->n_sensors, "%s: the scene", what);
+  check_rays(s->sensors[0], what);
+  scene_free(s);
+}
+
 static void test_hdistant_rays(void) {
   scene *s = tsup_load_file("proto/examples/hdistant_seed.xml", NULL);
   REQUIRE(s && s->n_sensors, "hdistant_seed.xml");
@@ -402,26 +417,13 @@ static void test_hdistant_rays(void) {
   REQUIRE(s && s->n_sensors, "canopy_periodic.json");
   check_rays(s->sensors[0], "periodic canopy hdistant (a target, the slab)");
   scene_free(s);
-  s = tsup_load(
-      "{\"type\": \"scene\","
-      " \"cam\": {\"type\": \"hdistant\", \"to_world\": [{\"rotate\": {\"axis\": [0, 1, 0], \"angle\": 20}}],"
-      "   \"target\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [3, 2, 1]},"
-      "     {\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 10}}, {\"translate\": [0.5, 0, 0.25]}]},"
-      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 4, \"height\": 4}},"
-      " \"ball\": {\"type\": \"sphere\", \"center\": [1, 2, 3], \"radius\": 2}}",
-      NULL);
-  REQUIRE(s && s->n_sensors, "hdistant with a rectangle target");
-  check_rays(s->sensors[0], "hdistant, a rectangle target (the atmosphere's sensor)");
-  scene_free(s);
-  s = tsup_load("{\"type\": \"scene\","
-                " \"cam\": {\"type\": \"hdistant\", \"to_world\": [{\"scale\": [1, 2, 0.5]},"
-                "   {\"rotate\": {\"axis\": [1, 1, 0], \"angle\": 33}}],"
-                "   \"film\": {\"type\": \"hdrfilm\", \"width\": 4, \"height\": 4}},"
-                " \"ball\": {\"type\": \"sphere\", \"center\": [1, 2, 3], \"radius\": 2}}",
-                NULL);
-  REQUIRE(s && s->n_sensors, "rotated hdistant scene");
-  check_rays(s->sensors[0], "rotated, scaled hdistant");
-  scene_free(s);
+  check_hdistant("\"to_world\": [{\"rotate\": {\"axis\": [0, 1, 0], \"angle\": 20}}],"
+                 " \"target\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [3, 2, 1]},"
+                 "   {\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 10}}, {\"translate\": [0.5, 0, 0.25]}]}",
+                 "hdistant, a rectangle target (the atmosphere's sensor)");
+  check_hdistant(
+      "\"to_world\": [{\"scale\": [1, 2, 0.5]}, {\"rotate\": {\"axis\": [1, 1, 0], \"angle\": 33}}]",
+      "rotated, scaled hdistant");
 }
 
 static void test_isa_parse(void) {
@@ -484,6 +486,32 @@ static bool bs_same(const bsdf_sample *a, const bsdf_sample *b) {
          !memcmp(&a->eta, &b->eta, sizeof a->eta) && a->sampled_type == b->sampled_type;
 }
 
+/* n random lanes for the BSDF batches (seeded s0, s1): wi (si[i]) and
+ * wo uniform on the sphere, so every failure path too, u1, u2 uniform;
+ * lane 0 at the pole, lane 1 grazing (wi.z = 0 fails everywhere), lane 2
+ * at the concentric map's centre. */
+static void bsdf_lanes(int n, uint64_t s0, uint64_t s1, surface_interaction *si,
+                       const surface_interaction **sp, vec3 *wo, double *u1, vec2 *u2) {
+  pcg32 rng;
+  pcg32_seed(&rng, s0, s1);
+  for (int i = 0; i < n; i++) {
+    vec3 d[2];
+    for (int k = 0; k < 2; k++) {
+      double z = 2 * pcg32_next_double(&rng) - 1, ph = 2 * RSW_PI * pcg32_next_double(&rng);
+      double r = sqrt(fmax(0.0, 1 - z * z));
+      d[k] = v3(r * cos(ph), r * sin(ph), z);
+    }
+    si[i] = tb_si_with(d[0]);
+    sp[i] = &si[i];
+    wo[i] = d[1];
+    u1[i] = pcg32_next_double(&rng);
+    u2[i] = v2(pcg32_next_double(&rng), pcg32_next_double(&rng));
+  }
+  si[0].wi = v3(0, 0, 1);
+  si[1].wi = v3(1, 0, 0);
+  u2[2] = v2(0.5, 0.5);
+}
+
 /* Batch vs scalar and lane independence over N random lanes. */
 static void check_bsdf_batch(const plug_case *c, int mode) {
   enum {
@@ -500,24 +528,7 @@ static void check_bsdf_batch(const plug_case *c, int mode) {
   color *w = malloc(N * sizeof *w), *w1 = malloc(N * sizeof *w1), *f = malloc(N * sizeof *f),
         *f1 = malloc(N * sizeof *f1);
   REQUIRE(si && sp && u1 && pdf && pdf1 && u2 && wo && bs && bs1 && w && w1 && f && f1, "allocation");
-  pcg32 rng;
-  pcg32_seed(&rng, 314, 159);
-  for (int i = 0; i < N; i++) {
-    vec3 d[2];
-    for (int k = 0; k < 2; k++) {
-      double z = 2 * pcg32_next_double(&rng) - 1, ph = 2 * RSW_PI * pcg32_next_double(&rng);
-      double r = sqrt(fmax(0.0, 1 - z * z));
-      d[k] = v3(r * cos(ph), r * sin(ph), z);
-    }
-    si[i] = tb_si_with(d[0]);
-    sp[i] = &si[i];
-    wo[i] = d[1];
-    u1[i] = pcg32_next_double(&rng);
-    u2[i] = v2(pcg32_next_double(&rng), pcg32_next_double(&rng));
-  }
-  si[0].wi = v3(0, 0, 1);
-  si[1].wi = v3(1, 0, 0); /* grazing: wi.z = 0 fails everywhere */
-  u2[2] = v2(0.5, 0.5);   /* the concentric map's centre */
+  bsdf_lanes(N, 314, 159, si, sp, wo, u1, u2);
   for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
     if (!rsw_isa_set((rsw_isa)isa)) continue;
     const char *in = rsw_isa_name((rsw_isa)isa);
@@ -696,26 +707,9 @@ static void check_bsdf_exact(const plug_case *c) {
   bsdf_sample *bs = malloc(N * sizeof *bs);
   color *w = malloc(N * sizeof *w), *f = malloc(N * sizeof *f);
   REQUIRE(si && sp && u1 && pdf && u2 && wo && bs && w && f, "allocation");
-  pcg32 rng;
-  pcg32_seed(&rng, 2718, 28);
-  for (int i = 0; i < N; i++) {
-    vec3 d[2];
-    for (int k = 0; k < 2; k++) {
-      double z = 2 * pcg32_next_double(&rng) - 1, ph = 2 * RSW_PI * pcg32_next_double(&rng);
-      double r = sqrt(fmax(0.0, 1 - z * z));
-      d[k] = v3(r * cos(ph), r * sin(ph), z);
-    }
-    si[i] = tb_si_with(d[0]);
-    sp[i] = &si[i];
-    wo[i] = d[1];
-    u1[i] = pcg32_next_double(&rng);
-    u2[i] = v2(pcg32_next_double(&rng), pcg32_next_double(&rng));
-  }
-  si[0].wi = v3(0, 0, 1); /* the pole: azimuth 0 */
-  si[1].wi = v3(1, 0, 0); /* grazing: wi.z = 0 fails everywhere */
+  bsdf_lanes(N, 2718, 28, si, sp, wo, u1, u2);
   wo[3] = v3(0, 0, 1);
-  wo[4] = si[4].wi;     /* the hot spot: G = 0 */
-  u2[2] = v2(0.5, 0.5); /* the concentric map's centre: wo at the pole */
+  wo[4] = si[4].wi; /* the hot spot: G = 0 */
   for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
     if (!rsw_isa_set((rsw_isa)isa)) continue;
     const char *in = rsw_isa_name((rsw_isa)isa);
