@@ -258,6 +258,14 @@ typedef struct bsdf_ops {
    * eval() and pdf() per lane. */
   void (*eval_pdf_batch)(const bsdf *b, int n, const surface_interaction *const *si, const vec3 *wo, color *f,
                          double *pdf);
+  /* Optional: sample_batch and eval_pdf_batch that give sample(), and
+   * eval() and pdf(), bit for bit in every lane (double lanes; what the
+   * volumetric wave calls, whose films do not move with a batch). NULL:
+   * the integrator calls the scalar ops per lane. */
+  void (*sample_batch_exact)(const bsdf *b, int n, const surface_interaction *const *si, const double *u1,
+                             const vec2 *u2, bsdf_sample *bs, color *weight);
+  void (*eval_pdf_batch_exact)(const bsdf *b, int n, const surface_interaction *const *si, const vec3 *wo,
+                               color *f, double *pdf);
   /* Optional (polarized variants, docs/polarization.md#the-payload): the
    * polarization factors P[c] = F / F00 per colour channel, F the Mueller
    * matrix of light arriving along -wo and leaving along si->wi (local

@@ -174,11 +174,68 @@ static void rpv_values_batch(const rpv_bsdf *r, int m, const surface_interaction
     }
 }
 
-/* sample_batch: the cosine-hemisphere warp in double lanes (bitwise the
- * scalar directions and pdfs), the value as above. */
-static void rpv_sample_batch(const bsdf *b, int n, const surface_interaction *const *si, const double *u1,
+/* ---- the exact batch (sample_batch_exact, eval_pdf_batch_exact) ----------
+ * Bit for bit rpv_value() per lane: with uniform grey parameters (read
+ * once, tex_eval's value) the direction terms, F and H in double lanes
+ * (bsdfs/rpv_lanes.h rpv_terms_exact, rpv_geometry()'s and
+ * rpv_brf_geom()'s operations in their order), M through libm's pow per
+ * lane, and the product in rpv_brf_geom()'s order; other parameters take
+ * rpv_value() itself, lane by lane. */
+static void rpv_terms_exact_batch(rsw_isa isa, int n, const double *const *in, double *const *out) {
+  SIMD_DISPATCH(isa, rpv_terms_exact, n, in, out);
+}
+
+/* The uniform grey parameters rho_0, k, g, rho_c into p[0..3]; false:
+ * a parameter varies or is coloured. */
+static bool rpv_uniform_grey(const rpv_bsdf *r, double *p) {
+  const texture *t[4] = {r->rho_0, r->k, r->g, r->rho_c};
+  for (int i = 0; i < 4; i++) {
+    color c;
+    if (!uniform_texture_value(t[i], &c) || !grey(c)) return false;
+    p[i] = c.c[0];
+  }
+  return true;
+}
+
+static void rpv_values_exact(const rpv_bsdf *r, int m, const surface_interaction *const *si, const vec3 *wo,
+                             color *out) {
+  double p[4];
+  if (!rpv_uniform_grey(r, p)) {
+    for (int j = 0; j < m; j++) out[j] = rpv_value(r, si[j], wo[j]);
+    return;
+  }
+  double in[8][RPV_C], t[3][RPV_C];
+  for (int j = 0; j < m; j++) {
+    vec3 wi = si[j]->wi, o = wo[j];
+    in[0][j] = wi.x, in[1][j] = wi.y, in[2][j] = wi.z;
+    in[3][j] = o.x, in[4][j] = o.y, in[5][j] = o.z;
+    in[6][j] = p[2], in[7][j] = p[3];
+  }
+  const double *ip[8] = {in[0], in[1], in[2], in[3], in[4], in[5], in[6], in[7]};
+  double *op[3] = {t[0], t[1], t[2]};
+  rpv_terms_exact_batch(rsw_isa_get(), m, ip, op);
+  double e = p[1] - 1.0;
+  for (int j = 0; j < m; j++) {
+    double x = p[0] * pow(t[0][j], e) * t[1][j] * t[2][j];
+    out[j] = col1(isfinite(x) ? x : 0.0);
+  }
+}
+
+/* The values of lanes vs[0..m) towards vwo (exact: rpv_values_exact, else
+ * the float lanes' rpv_values_batch). */
+static void rpv_values(const rpv_bsdf *r, bool exact, int m, const surface_interaction *const *vs,
+                       const vec3 *vwo, color *out) {
+  if (exact)
+    rpv_values_exact(r, m, vs, vwo, out);
+  else
+    rpv_values_batch(r, m, vs, vwo, out);
+}
+
+/* sample_batch (exact false) and sample_batch_exact: the cosine-hemisphere
+ * warp in double lanes (bitwise the scalar directions and pdfs), the
+ * value as above. */
+static void rpv_sample_lanes(const bsdf *b, bool exact, int n, const surface_interaction *const *si,
                              const vec2 *u2, bsdf_sample *bs, color *weight) {
-  (void)u1;
   const rpv_bsdf *r = (const rpv_bsdf *)b;
   rsw_isa isa = rsw_isa_get();
   for (int i0 = 0; i0 < n; i0 += RPV_C) {
@@ -211,13 +268,26 @@ static void rpv_sample_batch(const bsdf *b, int n, const surface_interaction *co
       vs[v] = si[i], vwo[v] = s->wo, vlane[v++] = i;
     }
     color val[RPV_C];
-    if (v > 0) rpv_values_batch(r, v, vs, vwo, val);
+    if (v > 0) rpv_values(r, exact, v, vs, vwo, val);
     for (int j = 0; j < v; j++) weight[vlane[j]] = val[j];
   }
 }
 
-static void rpv_eval_pdf_batch(const bsdf *b, int n, const surface_interaction *const *si, const vec3 *wo,
-                               color *f, double *pdf) {
+static void rpv_sample_batch(const bsdf *b, int n, const surface_interaction *const *si, const double *u1,
+                             const vec2 *u2, bsdf_sample *bs, color *weight) {
+  (void)u1;
+  rpv_sample_lanes(b, false, n, si, u2, bs, weight);
+}
+
+static void rpv_sample_batch_exact(const bsdf *b, int n, const surface_interaction *const *si,
+                                   const double *u1, const vec2 *u2, bsdf_sample *bs, color *weight) {
+  (void)u1;
+  rpv_sample_lanes(b, true, n, si, u2, bs, weight);
+}
+
+/* eval_pdf_batch (exact false) and eval_pdf_batch_exact. */
+static void rpv_eval_pdf_lanes(const bsdf *b, bool exact, int n, const surface_interaction *const *si,
+                               const vec3 *wo, color *f, double *pdf) {
   const rpv_bsdf *r = (const rpv_bsdf *)b;
   for (int i0 = 0; i0 < n; i0 += RPV_C) {
     int m = n - i0 < RPV_C ? n - i0 : RPV_C;
@@ -233,16 +303,28 @@ static void rpv_eval_pdf_batch(const bsdf *b, int n, const surface_interaction *
       vs[v] = si[i], vwo[v] = wo[i], vlane[v++] = i;
     }
     color val[RPV_C];
-    if (v > 0) rpv_values_batch(r, v, vs, vwo, val);
+    if (v > 0) rpv_values(r, exact, v, vs, vwo, val);
     for (int j = 0; j < v; j++) f[vlane[j]] = col_scale(val[j], RSW_INV_PI * vwo[j].z);
   }
+}
+
+static void rpv_eval_pdf_batch(const bsdf *b, int n, const surface_interaction *const *si, const vec3 *wo,
+                               color *f, double *pdf) {
+  rpv_eval_pdf_lanes(b, false, n, si, wo, f, pdf);
+}
+
+static void rpv_eval_pdf_batch_exact(const bsdf *b, int n, const surface_interaction *const *si,
+                                     const vec3 *wo, color *f, double *pdf) {
+  rpv_eval_pdf_lanes(b, true, n, si, wo, f, pdf);
 }
 
 static const bsdf_ops rpv_ops = {.sample = rpv_sample,
                                  .eval = rpv_eval,
                                  .pdf = rpv_pdf,
                                  .sample_batch = rpv_sample_batch,
-                                 .eval_pdf_batch = rpv_eval_pdf_batch};
+                                 .eval_pdf_batch = rpv_eval_pdf_batch,
+                                 .sample_batch_exact = rpv_sample_batch_exact,
+                                 .eval_pdf_batch_exact = rpv_eval_pdf_batch_exact};
 
 rsw_status bsdf_check_const_range(loader *ld, node *n, const char *name, const texture *t, double lo,
                                   bool lo_open, double hi, bool hi_open) {

@@ -73,3 +73,61 @@ LANES_ATTR void LANES_FN(rpv_factor)(int n, const float *const *in, float *out) 
   }
 }
 #endif
+
+/* rpv's exact batch (bsdfs/rpv.c rpv_sample_batch_exact,
+ * rpv_eval_pdf_batch_exact): the direction terms and F, H of
+ * rpv_geometry() and rpv_brf_geom() in double lanes, the same operations
+ * in the same order without FMA contraction, so each lane is the scalar
+ * code's bits (M's pow stays in libm, per lane, in rpv.c). in[0..7]: wi
+ * xyz, wo xyz (local, z > 0), g, rho_c (n each); out[0..2]: mbase, F, H. */
+SIMD_ISA_DECL(void, rpv_terms_exact, (int n, const double *const *in, double *const *out));
+
+#ifdef LANES_FN
+/* dir_angles() of rpv.c: sin(theta), and the azimuth's cosine and sine
+ * as x / s, y / s (1 and 0 at the pole). */
+SIMD_FN void rpv_dir_angles_d(vdn x, vdn y, vdn *s, vdn *cp, vdn *sp) {
+  vdn r = VSQRT_D(x * x + y * y);
+  vln pos = r > 0.0;
+  vdn q = dsel(pos, r, (vdn){0} + 1.0);
+  *s = r;
+  *cp = dsel(pos, x / q, (vdn){0} + 1.0);
+  *sp = dsel(pos, y / q, (vdn){0});
+}
+
+LANES_ATTR void LANES_FN(rpv_terms_exact)(int n, const double *const *in, double *const *out) {
+  for (int k0 = 0; k0 < n; k0 += WD) {
+    int m = n - k0 < WD ? n - k0 : WD;
+    vdn v[8];
+    if (m == WD) {
+      for (int j = 0; j < 8; j++) __builtin_memcpy(&v[j], in[j] + k0, sizeof v[j]);
+    } else { /* a partial tail: its last lane repeated */
+      double a[8][WD];
+      for (int j = 0; j < 8; j++)
+        for (int k = 0; k < WD; k++) a[j][k] = in[j][k0 + (k < m ? k : m - 1)];
+      for (int j = 0; j < 8; j++) __builtin_memcpy(&v[j], a[j], sizeof v[j]);
+    }
+    vdn ci = v[2], co = v[5], g = v[6], rho_c = v[7];
+    vdn si, cpi, spi, so, cpo, spo;
+    rpv_dir_angles_d(v[0], v[1], &si, &cpi, &spi);
+    rpv_dir_angles_d(v[3], v[4], &so, &cpo, &spo);
+    vdn cos_dphi = cpi * cpo + spi * spo;
+    vdn cos_big = ci * co + si * so * cos_dphi;
+    vdn ti = si / ci, to = so / co;
+    vdn g2 = ti * ti + to * to - 2.0 * ti * to * cos_dphi;
+    /* sqrt(fmax(g2, 0)): NaN and g2 <= 0 give a zero (of either sign,
+     * which only ever meets 1 + G) */
+    vdn gg = VSQRT_D(dsel(g2 > 0.0, g2, (vdn){0}));
+    vdn mbase = ci * co * (ci + co);
+    vdn fb = 1.0 + g * g + 2.0 * g * cos_big;
+    vdn f = (1.0 - g * g) / (fb * VSQRT_D(fb));
+    vdn h = 1.0 + (1.0 - rho_c) / (1.0 + gg);
+    vdn r[3] = {mbase, f, h};
+    for (int j = 0; j < 3; j++) {
+      if (m == WD)
+        __builtin_memcpy(out[j] + k0, &r[j], sizeof r[j]);
+      else
+        for (int k = 0; k < m; k++) out[j][k0 + k] = r[j][k];
+    }
+  }
+}
+#endif

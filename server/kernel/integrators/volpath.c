@@ -1194,17 +1194,17 @@ static bool surface_nee(const scene *sc, const surface_interaction *si) {
   return (si->shape->bsdf->flags & BSDF_SMOOTH) && sc->n_emitters > 0;
 }
 
-/* The light sample at lane l's surface si (no pages: lane_surface does
- * theirs): emitter e (picked with probability pe) sampled into ds, worth
- * value; its shadow ray is started where the BSDF and the sample count. */
-PIECE void surface_light(const scene *sc, vlane *l, const surface_interaction *si, const emitter *e,
-                         double pe, const direction_sample *ds, color value, pol_lane *vq) {
-  if (!(ds->pdf > 0) || col_is_black(value)) return;
+/* Does the light sample ds of value `value` need the BSDF's value? */
+static inline bool surface_light_lit(const direction_sample *ds, color value) {
+  return ds->pdf > 0 && !col_is_black(value);
+}
+
+/* surface_light past the BSDF: its value f (not black) and pdf bpdf (0
+ * for a delta light) towards the light sample (local wo). */
+PIECE void surface_light_at(const scene *sc, vlane *l, const surface_interaction *si, const emitter *e,
+                            double pe, const direction_sample *ds, color value, vec3 wo, color f, double bpdf,
+                            pol_lane *vq) {
   const bsdf *b = si->shape->bsdf;
-  vec3 wo = frame_to_local(&si->sh, ds->d);
-  color f = b->ops->eval(b, si, wo);
-  if (col_is_black(f)) return;
-  double bpdf = ds->delta ? 0.0 : b->ops->pdf(b, si, wo);
   double w = ds->delta ? 1.0 : mis_weight(ds->pdf * pe, bpdf);
   start_shadow(sc, l, si, si->p, e, ds, medium_after(si, ds->d, l->m),
                col_scale(col_mul(l->T, col_mul(f, value)), w / pe));
@@ -1214,6 +1214,19 @@ PIECE void surface_light(const scene *sc, vlane *l, const surface_interaction *s
     const mueller *pp = pol_bsdf(b, si, wo, 0, P, &b_in, &b_out);
     pol_through_light(vq, e, ds->d, v3_neg(l->ray.d), b_in, b_out, pp, pol_channels(sc), vq->pend);
   }
+}
+
+/* The light sample at lane l's surface si (no pages: lane_surface does
+ * theirs): emitter e (picked with probability pe) sampled into ds, worth
+ * value; its shadow ray is started where the BSDF and the sample count. */
+PIECE void surface_light(const scene *sc, vlane *l, const surface_interaction *si, const emitter *e,
+                         double pe, const direction_sample *ds, color value, pol_lane *vq) {
+  if (!surface_light_lit(ds, value)) return;
+  const bsdf *b = si->shape->bsdf;
+  vec3 wo = frame_to_local(&si->sh, ds->d);
+  color f = b->ops->eval(b, si, wo);
+  if (col_is_black(f)) return;
+  surface_light_at(sc, l, si, e, pe, ds, value, wo, f, ds->delta ? 0.0 : b->ops->pdf(b, si, wo), vq);
 }
 
 /* Lane l's BSDF sample bs at si, of weight `weight` (page 0's; a bundle's
@@ -1377,11 +1390,14 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
  * (integrators/wave.h); every lane still draws from its own state in
  * lane_event's order and computes the same values, so the staged and the
  * lane-by-lane events give bitwise the same film
- * (tests/kernel/integrators/test_volpath_stages.c). The free flights,
- * phase functions and BSDFs are still called per lane: a batched flight
- * or phase op would replace those calls in stage_segments and
- * stage_scatters; the BSDFs' batched ops compute in single precision
- * (bsdfs/rpv.c), which would move the films (docs/performance.md). */
+ * (tests/kernel/integrators/test_volpath_stages.c). The BSDFs with exact
+ * batches (bsdf_ops.sample_batch_exact, eval_pdf_batch_exact: rpv's
+ * double lanes, the scalar ops' bits) are called for a chunk of lanes at
+ * once in stage (b); their other batched ops compute in single precision
+ * (bsdfs/rpv.c), which would move the films. The free flights and the
+ * phase functions are still called per lane (their batches, wired into
+ * stage_segments and stage_scatters, measured slower:
+ * docs/performance.md). */
 
 /* Whether wave_run goes by stages where it can (volpath_set_stages). */
 static _Atomic bool g_stages = true;
@@ -1469,11 +1485,69 @@ static void stage_light_samples(const scene *sc, sampler_state *st, const int *i
   wave_sample_emitters(sc, n, vs->ref, vs->d1, vs->d2, vs->ek, vs->ord, vs->ds, vs->val);
 }
 
+/* The BSDF calls of stage (b) go in chunks of BSDF_C lanes, their results
+ * on the stack (the stages' scratch is allocated per wave, and more of it
+ * costs page faults: see vstage_alloc's caller). A chunk whose lanes share
+ * a BSDF with exact batches (bsdf_ops.sample_batch_exact,
+ * eval_pdf_batch_exact: the scalar ops' bits) takes one call; any other
+ * chunk the scalar ops lane by lane, the same numbers. */
+enum {
+  BSDF_C = 64
+};
+
+/* The BSDF of the surfaces vs->ref[j0..j0 + c) where they all have the
+ * same, else NULL. */
+static const bsdf *chunk_bsdf(const vstage *vs, int j0, int c) {
+  const bsdf *b = vs->ref[j0]->shape->bsdf;
+  bool same = true;
+  for (int j = j0; j < j0 + c; j++) same &= vs->ref[j]->shape->bsdf == b;
+  return same ? b : NULL;
+}
+
+/* The BSDFs' values and pdfs towards the light samples of the surfaces
+ * vs->ref[j0..j0 + c) (c <= BSDF_C) into f[j - j0], pdf[j - j0], their
+ * local directions into wo[j - j0], where a lane needs them
+ * (surface_light_lit; an exact batch computes every lane's, the others
+ * unused), as surface_light computes them. */
+static void stage_bsdf_evals(int j0, int c, const vstage *vs, vec3 *wo, color *f, double *pdf) {
+  const bsdf *b = chunk_bsdf(vs, j0, c);
+  if (b && b->ops->eval_pdf_batch_exact) {
+    for (int i = 0; i < c; i++) wo[i] = frame_to_local(&vs->ref[j0 + i]->sh, vs->ds[j0 + i].d);
+    b->ops->eval_pdf_batch_exact(b, c, vs->ref + j0, wo, f, pdf);
+    return;
+  }
+  for (int i = 0; i < c; i++) {
+    const surface_interaction *si = vs->ref[j0 + i];
+    const direction_sample *ds = &vs->ds[j0 + i];
+    if (!surface_light_lit(ds, vs->val[j0 + i])) continue;
+    const bsdf *bi = si->shape->bsdf;
+    wo[i] = frame_to_local(&si->sh, ds->d);
+    f[i] = bi->ops->eval(bi, si, wo[i]);
+    pdf[i] = col_is_black(f[i]) || ds->delta ? 0.0 : bi->ops->pdf(bi, si, wo[i]);
+  }
+}
+
+/* The BSDF samples of the surfaces vs->ref[j0..j0 + c) (c <= BSDF_C) with
+ * numbers vs->d1, vs->d2 into bs[j - j0], their weights into w[j - j0]. */
+static void stage_bsdf_samples(int j0, int c, const vstage *vs, bsdf_sample *bs, color *w) {
+  const bsdf *b = chunk_bsdf(vs, j0, c);
+  if (b && b->ops->sample_batch_exact) {
+    b->ops->sample_batch_exact(b, c, vs->ref + j0, vs->d1 + j0, vs->d2 + j0, bs, w);
+    return;
+  }
+  for (int i = 0; i < c; i++) {
+    const surface_interaction *si = vs->ref[j0 + i];
+    const bsdf *bi = si->shape->bsdf;
+    w[i] = bi->ops->sample(bi, si, vs->d1[j0 + i], vs->d2[j0 + i], &bs[i]);
+  }
+}
+
 /* Stage (b): the lanes ks[0..n) that bounce off a surface: the light
  * samples of those whose BSDF takes one and the BSDF's value towards
- * them (surface_light), then the BSDF samples' numbers (together), the
- * samples and the continuation rays (surface_continue), then the
- * roulette. ev[k]: EV_BOUNCE (goes on) or EV_END. ks is reordered. */
+ * them (stage_bsdf_evals, surface_light_at), then the BSDF samples'
+ * numbers (together), the samples (stage_bsdf_samples) and the
+ * continuation rays (surface_continue), then the roulette. ev[k]:
+ * EV_BOUNCE (goes on) or EV_END. ks is reordered. */
 static void stage_surfaces(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *ln,
                            const int *idx, int *ks, int n, surface_interaction *si, const vstage *vs) {
   if (n == 0) return;
@@ -1483,24 +1557,37 @@ static void stage_surfaces(const volpath_integrator *vp, const scene *sc, sample
     vs->ref[ng] = &si[ks[j]];
     ng += surface_nee(sc, &si[ks[j]]);
   }
-  if (ng > 0) {
-    stage_light_samples(sc, st, idx, g, ng, vs);
-    for (int j = 0; j < ng; j++)
-      surface_light(sc, &ln[idx[g[j]]], &si[g[j]], sc->emitters[vs->ek[j]], pick_probability(sc, vs->ek[j]),
-                    &vs->ds[j], vs->val[j], NULL);
+  if (ng > 0) stage_light_samples(sc, st, idx, g, ng, vs);
+  for (int j0 = 0; j0 < ng; j0 += BSDF_C) {
+    int c = ng - j0 < BSDF_C ? ng - j0 : BSDF_C;
+    vec3 wo[BSDF_C];
+    color f[BSDF_C];
+    double pdf[BSDF_C];
+    stage_bsdf_evals(j0, c, vs, wo, f, pdf);
+    for (int i = 0; i < c; i++) {
+      int j = j0 + i;
+      if (surface_light_lit(&vs->ds[j], vs->val[j]) && !col_is_black(f[i]))
+        surface_light_at(sc, &ln[idx[g[j]]], &si[g[j]], sc->emitters[vs->ek[j]],
+                         pick_probability(sc, vs->ek[j]), &vs->ds[j], vs->val[j], wo[i], f[i],
+                         vs->ds[j].delta ? 0.0 : pdf[i], NULL);
+    }
   }
   stage_lanes(idx, ks, n, vs->lid);
   stage_sample_numbers(st[vs->lid[0]].s, st, vs->lid, n, vs);
+  for (int j = 0; j < n; j++) vs->ref[j] = &si[ks[j]];
   int m = 0;
-  for (int j = 0; j < n; j++) {
-    int k = ks[j];
-    const bsdf *b = si[k].shape->bsdf;
-    bsdf_sample bs;
-    color weight = b->ops->sample(b, &si[k], vs->d1[j], vs->d2[j], &bs);
-    bool on = surface_continue(sc, &ln[idx[k]], &si[k], &bs, weight, NULL, NULL);
-    vs->ev[k] = (unsigned char)(on ? EV_BOUNCE : EV_END);
-    ks[m] = k;
-    m += on;
+  for (int j0 = 0; j0 < n; j0 += BSDF_C) {
+    int c = n - j0 < BSDF_C ? n - j0 : BSDF_C;
+    bsdf_sample bs[BSDF_C];
+    color w[BSDF_C];
+    stage_bsdf_samples(j0, c, vs, bs, w);
+    for (int i = 0; i < c; i++) {
+      int k = ks[j0 + i];
+      bool on = surface_continue(sc, &ln[idx[k]], &si[k], &bs[i], w[i], NULL, NULL);
+      vs->ev[k] = (unsigned char)(on ? EV_BOUNCE : EV_END);
+      ks[m] = k;
+      m += on;
+    }
   }
   stage_roulette(vp, sc, st, ln, idx, ks, m, vs);
 }

@@ -52,17 +52,20 @@ static double hdistant_sample_ray(const sensor *s, vec2 film_u, vec2 aperture_u,
   return w;
 }
 
-/* Batched rays (sensor_ops.sample_ray_batch): without a target or a
- * periodic slab, the double-precision lanes of sensors/sensor_common_lanes.h, which
- * give hdistant_sample_ray()'s rays bit for bit; otherwise one by one. */
+/* Batched rays (sensor_ops.sample_ray_batch): the double-precision lanes
+ * of sensors/sensor_common_lanes.h, which give hdistant_sample_ray()'s
+ * rays bit for bit without a target or a periodic slab; with one, their
+ * directions (hdistant_omega's, negated: the same bits) and the origins
+ * and weights of ray_target_origin() (ray_target_origins), as sample_ray
+ * takes them. */
 static void hdistant_sample_ray_batch(const sensor *s, int n, const vec2 *film_u, const vec2 *aperture_u,
                                       ray3 *rays, double *w) {
   const hdistant *h = (const hdistant *)s;
+  hemisphere_rays_batch(s, h->center, h->radius, h->ray_offset, n, film_u, aperture_u, rays);
   if (h->target.kind != RAY_TARGET_NONE || h->target.slab.on) {
-    for (int i = 0; i < n; i++) w[i] = hdistant_sample_ray(s, film_u[i], aperture_u[i], &rays[i]);
+    ray_target_origins(&h->target, &s->to_world, h->center, h->radius, h->ray_offset, n, aperture_u, rays, w);
     return;
   }
-  hemisphere_rays_batch(s, h->center, h->radius, h->ray_offset, n, film_u, aperture_u, rays);
   for (int i = 0; i < n; i++) w[i] = 1.0;
 }
 

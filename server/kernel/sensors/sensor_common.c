@@ -148,6 +148,27 @@ double ray_target_origin(const ray_target *t, const xform *to_world, vec3 center
   }
 }
 
+void ray_target_origins(const ray_target *t, const xform *to_world, vec3 center, double radius, double offset,
+                        int n, const vec2 *u, ray3 *rays, double *w) {
+  const shape *s = t->shape;
+  const double *tris = t->kind == RAY_TARGET_SHAPE ? shape_world_tris_for(s, t->tris, t->tris_n) : NULL;
+  if (!(tris && shape_is_mesh(s) && !t->slab.on)) {
+    for (int i = 0; i < n; i++)
+      w[i] = ray_target_origin(t, to_world, center, radius, offset, rays[i].d, u[i], &rays[i].o);
+    return;
+  }
+  /* A mesh target: its position samples in one loop, the weight (the same
+   * for every lane: pdf = 1 / area) once. */
+  double denom = (1.0 / s->area) * s->area;
+  double wt = denom > 0.0 ? 1.0 / denom : 0.0;
+  for (int i = 0; i < n; i++) {
+    position_sample ps;
+    mesh_sample_inline(s, u[i], tris, &ps);
+    rays[i].o = v3_fma(ps.p, -offset, rays[i].d);
+    w[i] = wt;
+  }
+}
+
 rsw_status sensor_read_vec3_list(loader *ld, node *n, const char *name, vec3 **out, size_t *count) {
   const char *text = NULL;
   rsw_status st = ld_string(ld, n, name, NULL, &text);

@@ -89,6 +89,12 @@ void ray_target_release(ray_target *t);
 double ray_target_origin(const ray_target *t, const xform *to_world, vec3 center, double radius,
                          double offset, vec3 d, vec2 u, vec3 *o);
 
+/* ray_target_origin for n rays of unit directions rays[i].d and aperture
+ * samples u[i], into rays[i].o and w[i], bit for bit: a mesh target
+ * without the periodic slab in one loop, else one call a ray. */
+void ray_target_origins(const ray_target *t, const xform *to_world, vec3 center, double radius, double offset,
+                        int n, const vec2 *u, ray3 *rays, double *w);
+
 /* Read a string property of 3N numbers separated by commas and/or white
  * space (Eradiate's mdistant `directions`, mradiancemeter `origins`) into
  * *out (malloc'ed, N entries, caller frees). Error when it is absent,

@@ -24,9 +24,10 @@
  *    random directions, both distributions, visible or not, isotropic
  *    and anisotropic, and is lane-independent (bitwise);
  *  - hdistant's batched camera rays (double lanes) equal sample_ray()'s
- *    bit for bit, at every ISA (the seed scene's sensor, and one with a
- *    rotated, scaled to_world), including the concentric map's centre and
- *    edges;
+ *    bit for bit, at every ISA (the seed scene's sensor; the periodic
+ *    canopy's, a target and the slab; a tilted rectangle target, as the
+ *    atmosphere's; and one with a rotated, scaled to_world), including
+ *    the concentric map's centre and edges;
  *  - --isa parsing: auto, names, an unknown name, an ISA the CPU lacks;
  *  - the batched ops of the other hot plugins (issue 12 point 3), at every
  *    ISA, generic included (simd/lanes_generic.c):
@@ -45,6 +46,10 @@
  *    6e5 random pairs: 3e-6); for a twosided with a rough back, weight =
  *    eval/pdf within 1e-4; every op lane-independent
  *    (a batch of 3001 equals 3001 batches of one, bitwise);
+ *    rpv's exact batches (sample_batch_exact, eval_pdf_batch_exact: the
+ *    volumetric wave's) bit for bit sample(), eval() and pdf() at every
+ *    ISA (grey, the atmosphere's ground, coloured, as Lambertian; the
+ *    pole, the hot spot, grazing), lane-independent;
  *    the batched rays of distant, mdistant, distantflux, perspective (with
  *    a principal point offset) and radiancemeter equal sample_ray()'s bit
  *    for bit, with and without a target. */
@@ -388,20 +393,37 @@ static void check_rays(const sensor *se, const char *what) {
   free(w);
 }
 
+/* An hdistant sensor (its properties cam besides its 4x4 film) over a
+ * ball: check_rays. */
+static void check_hdistant(const char *cam, const char *what) {
+  char doc[1024];
+  snprintf(doc, sizeof doc,
+           "{\"type\": \"scene\", \"cam\": {\"type\": \"hdistant\", %s,"
+           " \"film\": {\"type\": \"hdrfilm\", \"width\": 4, \"height\": 4}},"
+           " \"ball\": {\"type\": \"sphere\", \"center\": [1, 2, 3], \"radius\": 2}}",
+           cam);
+  scene *s = tsup_load(doc, NULL);
+  REQUIRE(s && s->n_sensors, "%s: the scene", what);
+  check_rays(s->sensors[0], what);
+  scene_free(s);
+}
+
 static void test_hdistant_rays(void) {
   scene *s = tsup_load_file("proto/examples/hdistant_seed.xml", NULL);
   REQUIRE(s && s->n_sensors, "hdistant_seed.xml");
   check_rays(s->sensors[0], "seed scene hdistant");
   scene_free(s);
-  s = tsup_load("{\"type\": \"scene\","
-                " \"cam\": {\"type\": \"hdistant\", \"to_world\": [{\"scale\": [1, 2, 0.5]},"
-                "   {\"rotate\": {\"axis\": [1, 1, 0], \"angle\": 33}}],"
-                "   \"film\": {\"type\": \"hdrfilm\", \"width\": 4, \"height\": 4}},"
-                " \"ball\": {\"type\": \"sphere\", \"center\": [1, 2, 3], \"radius\": 2}}",
-                NULL);
-  REQUIRE(s && s->n_sensors, "rotated hdistant scene");
-  check_rays(s->sensors[0], "rotated, scaled hdistant");
+  s = tsup_load_file("proto/examples/canopy_periodic.json", NULL);
+  REQUIRE(s && s->n_sensors, "canopy_periodic.json");
+  check_rays(s->sensors[0], "periodic canopy hdistant (a target, the slab)");
   scene_free(s);
+  check_hdistant("\"to_world\": [{\"rotate\": {\"axis\": [0, 1, 0], \"angle\": 20}}],"
+                 " \"target\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [3, 2, 1]},"
+                 "   {\"rotate\": {\"axis\": [1, 0, 0], \"angle\": 10}}, {\"translate\": [0.5, 0, 0.25]}]}",
+                 "hdistant, a rectangle target (the atmosphere's sensor)");
+  check_hdistant(
+      "\"to_world\": [{\"scale\": [1, 2, 0.5]}, {\"rotate\": {\"axis\": [1, 1, 0], \"angle\": 33}}]",
+      "rotated, scaled hdistant");
 }
 
 static void test_isa_parse(void) {
@@ -464,6 +486,32 @@ static bool bs_same(const bsdf_sample *a, const bsdf_sample *b) {
          !memcmp(&a->eta, &b->eta, sizeof a->eta) && a->sampled_type == b->sampled_type;
 }
 
+/* n random lanes for the BSDF batches (seeded s0, s1): wi (si[i]) and
+ * wo uniform on the sphere, so every failure path too, u1, u2 uniform;
+ * lane 0 at the pole, lane 1 grazing (wi.z = 0 fails everywhere), lane 2
+ * at the concentric map's centre. */
+static void bsdf_lanes(int n, uint64_t s0, uint64_t s1, surface_interaction *si,
+                       const surface_interaction **sp, vec3 *wo, double *u1, vec2 *u2) {
+  pcg32 rng;
+  pcg32_seed(&rng, s0, s1);
+  for (int i = 0; i < n; i++) {
+    vec3 d[2];
+    for (int k = 0; k < 2; k++) {
+      double z = 2 * pcg32_next_double(&rng) - 1, ph = 2 * RSW_PI * pcg32_next_double(&rng);
+      double r = sqrt(fmax(0.0, 1 - z * z));
+      d[k] = v3(r * cos(ph), r * sin(ph), z);
+    }
+    si[i] = tb_si_with(d[0]);
+    sp[i] = &si[i];
+    wo[i] = d[1];
+    u1[i] = pcg32_next_double(&rng);
+    u2[i] = v2(pcg32_next_double(&rng), pcg32_next_double(&rng));
+  }
+  si[0].wi = v3(0, 0, 1);
+  si[1].wi = v3(1, 0, 0);
+  u2[2] = v2(0.5, 0.5);
+}
+
 /* Batch vs scalar and lane independence over N random lanes. */
 static void check_bsdf_batch(const plug_case *c, int mode) {
   enum {
@@ -480,24 +528,7 @@ static void check_bsdf_batch(const plug_case *c, int mode) {
   color *w = malloc(N * sizeof *w), *w1 = malloc(N * sizeof *w1), *f = malloc(N * sizeof *f),
         *f1 = malloc(N * sizeof *f1);
   REQUIRE(si && sp && u1 && pdf && pdf1 && u2 && wo && bs && bs1 && w && w1 && f && f1, "allocation");
-  pcg32 rng;
-  pcg32_seed(&rng, 314, 159);
-  for (int i = 0; i < N; i++) {
-    vec3 d[2];
-    for (int k = 0; k < 2; k++) {
-      double z = 2 * pcg32_next_double(&rng) - 1, ph = 2 * RSW_PI * pcg32_next_double(&rng);
-      double r = sqrt(fmax(0.0, 1 - z * z));
-      d[k] = v3(r * cos(ph), r * sin(ph), z);
-    }
-    si[i] = tb_si_with(d[0]);
-    sp[i] = &si[i];
-    wo[i] = d[1];
-    u1[i] = pcg32_next_double(&rng);
-    u2[i] = v2(pcg32_next_double(&rng), pcg32_next_double(&rng));
-  }
-  si[0].wi = v3(0, 0, 1);
-  si[1].wi = v3(1, 0, 0); /* grazing: wi.z = 0 fails everywhere */
-  u2[2] = v2(0.5, 0.5);   /* the concentric map's centre */
+  bsdf_lanes(N, 314, 159, si, sp, wo, u1, u2);
   for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
     if (!rsw_isa_set((rsw_isa)isa)) continue;
     const char *in = rsw_isa_name((rsw_isa)isa);
@@ -657,6 +688,92 @@ static void test_plugin_batch_vs_scalar(void) {
   }
 }
 
+/* The exact batches (bsdf_ops.sample_batch_exact, eval_pdf_batch_exact):
+ * bit for bit sample(), eval() and pdf() in every lane at every ISA, over
+ * N random lanes (every failure path too), and a batch of N the same as
+ * N batches of one. */
+static void check_bsdf_exact(const plug_case *c) {
+  enum {
+    N = 3001
+  };
+  const bsdf *b = c->b;
+  REQUIRE(b && b->ops->sample_batch_exact && b->ops->eval_pdf_batch_exact, "%s: allocation, exact ops",
+          c->what);
+  surface_interaction *si = malloc(N * sizeof *si);
+  const surface_interaction **sp = malloc(N * sizeof *sp);
+  double *u1 = malloc(N * sizeof *u1), *pdf = malloc(N * sizeof *pdf);
+  vec2 *u2 = malloc(N * sizeof *u2);
+  vec3 *wo = malloc(N * sizeof *wo);
+  bsdf_sample *bs = malloc(N * sizeof *bs);
+  color *w = malloc(N * sizeof *w), *f = malloc(N * sizeof *f);
+  REQUIRE(si && sp && u1 && pdf && u2 && wo && bs && w && f, "allocation");
+  bsdf_lanes(N, 2718, 28, si, sp, wo, u1, u2);
+  wo[3] = v3(0, 0, 1);
+  wo[4] = si[4].wi; /* the hot spot: G = 0 */
+  for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
+    if (!rsw_isa_set((rsw_isa)isa)) continue;
+    const char *in = rsw_isa_name((rsw_isa)isa);
+    b->ops->sample_batch_exact(b, N, sp, u1, u2, bs, w);
+    b->ops->eval_pdf_batch_exact(b, N, sp, wo, f, pdf);
+    int bad_s = 0, bad_e = 0, dep = 0, valid = 0, nonzero = 0;
+    for (int i = 0; i < N; i++) {
+      bsdf_sample q, q1;
+      color wq = b->ops->sample(b, &si[i], u1[i], u2[i], &q), w1, f1;
+      color fe = b->ops->eval(b, &si[i], wo[i]);
+      double pe = b->ops->pdf(b, &si[i], wo[i]), p1;
+      if (memcmp(&q.wo, &bs[i].wo, sizeof q.wo) || q.pdf != bs[i].pdf || memcmp(&wq, &w[i], sizeof wq) ||
+          (q.pdf > 0 && (q.eta != bs[i].eta || q.sampled_type != bs[i].sampled_type)))
+        bad_s++;
+      if (memcmp(&fe, &f[i], sizeof fe) || memcmp(&pe, &pdf[i], sizeof pe)) bad_e++;
+      b->ops->sample_batch_exact(b, 1, &sp[i], &u1[i], &u2[i], &q1, &w1);
+      b->ops->eval_pdf_batch_exact(b, 1, &sp[i], &wo[i], &f1, &p1);
+      if (!bs_same(&q1, &bs[i]) || memcmp(&w1, &w[i], sizeof w1) || memcmp(&f1, &f[i], sizeof f1) ||
+          memcmp(&p1, &pdf[i], sizeof p1))
+        dep++;
+      valid += bs[i].pdf > 0;
+      nonzero += fe.c[0] > 0;
+    }
+    CHECK(bad_s == 0, "%s at %s: %d exact batched samples differ from sample()'s", c->what, in, bad_s);
+    CHECK(bad_e == 0, "%s at %s: %d exact batched eval/pdf differ from eval()/pdf()", c->what, in, bad_e);
+    CHECK(dep == 0, "%s at %s: %d of %d lanes differ between a batch of %d and batches of 1", c->what, in,
+          dep, N, N);
+    CHECK(valid > N / 5 && nonzero > N / 10, "%s at %s: only %d samples valid, %d evals non-zero", c->what,
+          in, valid, nonzero);
+  }
+  rsw_isa_set(rsw_isa_best());
+  free(si);
+  free(sp);
+  free(u1);
+  free(pdf);
+  free(u2);
+  free(wo);
+  free(bs);
+  free(w);
+  free(f);
+}
+
+static void test_rpv_exact(void) {
+  plug_case c = {.what = "rpv grey (exact)"};
+  c.b = rpv_new(ctex(&c, 0.12), ctex(&c, 0.7), ctex(&c, -0.2), ctex(&c, 0.4));
+  check_bsdf_exact(&c);
+  case_free(&c);
+
+  c = (plug_case){.what = "rpv the atmosphere's ground, rho_c = rho_0 (exact)"};
+  c.b = rpv_new(ctex(&c, 0.183), ctex(&c, 0.78), ctex(&c, -0.1), NULL);
+  check_bsdf_exact(&c);
+  case_free(&c);
+
+  c = (plug_case){.what = "rpv coloured (exact)"};
+  c.b = rpv_new(ctex3(&c, 0.05, 0.1, 0.3), ctex3(&c, 0.6, 0.8, 1.3), ctex3(&c, -0.3, 0.1, 0.25), NULL);
+  check_bsdf_exact(&c);
+  case_free(&c);
+
+  c = (plug_case){.what = "rpv as Lambertian (exact)"};
+  c.b = rpv_new(ctex(&c, 0.3), ctex(&c, 1.0), ctex(&c, 0.0), ctex(&c, 1.0));
+  check_bsdf_exact(&c);
+  case_free(&c);
+}
+
 static void test_plugin_batch_chi2(void) {
   for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
     if (!rsw_isa_set((rsw_isa)isa)) continue;
@@ -745,6 +862,7 @@ int main(void) {
   RSW_TEST_RUN(test_lanes_vs_scalar);
   RSW_TEST_RUN(test_diffuse_batch);
   RSW_TEST_RUN(test_plugin_batch_vs_scalar);
+  RSW_TEST_RUN(test_rpv_exact);
   RSW_TEST_RUN(test_sensor_batches);
   RSW_TEST_RUN(test_plugin_batch_chi2);
   RSW_TEST_END("test_simd");
