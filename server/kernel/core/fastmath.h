@@ -21,6 +21,43 @@
 
 #include <math.h>
 
+/* x < y ? x : y and x > y ? x : y, bit for bit (equal operands or a NaN:
+ * y), as one minsd / maxsd each on x86-64: written as selects, GCC turns
+ * the pair of them on one comparison (a slab's near and far distance,
+ * ta > tb ? tb : ta and ta > tb ? ta : tb) into a branch and two moves,
+ * and a ray's direction decides that branch, so that it mispredicts about
+ * every other ray. (Inline assembly, not _mm_min_sd: GCC folds that one on
+ * constants with other NaN rules than the instruction's.) */
+static inline double rsw_sel_min(double x, double y) {
+#if defined(__GNUC__) && defined(__x86_64__)
+#ifdef __AVX__
+  double r;
+  __asm__("vminsd %2, %1, %0" : "=x"(r) : "x"(x), "xm"(y));
+  return r;
+#else
+  __asm__("minsd %1, %0" : "+x"(x) : "xm"(y));
+  return x;
+#endif
+#else
+  return x < y ? x : y;
+#endif
+}
+
+static inline double rsw_sel_max(double x, double y) {
+#if defined(__GNUC__) && defined(__x86_64__)
+#ifdef __AVX__
+  double r;
+  __asm__("vmaxsd %2, %1, %0" : "=x"(r) : "x"(x), "xm"(y));
+  return r;
+#else
+  __asm__("maxsd %1, %0" : "+x"(x) : "xm"(y));
+  return x;
+#endif
+#else
+  return x > y ? x : y;
+#endif
+}
+
 static inline double rsw_fmax(double x, double y) {
   return x > y || y != y ? x : y;
 }
