@@ -44,11 +44,20 @@ static uint64_t next_u64(void) { /* xorshift64* */
   return rng_state * 0x2545F4914F6CDD1Dull;
 }
 
+/* 64 values into v: signed zeros, infinities, NaN, subnormals, then
+ * random bits (NaNs included). */
+static int test_values(double v[64]) {
+  const double fixed[12] = {0.0, -0.0, 1.0,       -1.0,       INFINITY,  -INFINITY,
+                            NAN, -NAN, 0x1p-1074, -0x1p-1074, 0x1p-1022, 1e300};
+  int n = 0;
+  for (; n < 12; n++) v[n] = fixed[n];
+  for (; n < 64; n++) v[n] = from_bits(next_u64()) * (n % 2 ? 1.0 : 1e-300);
+  return n;
+}
+
 static void test_fmax_fmin_bits(void) {
-  double v[64] = {0.0, -0.0, 1.0,       -1.0,       INFINITY,  -INFINITY,
-                  NAN, -NAN, 0x1p-1074, -0x1p-1074, 0x1p-1022, 1e300};
-  int n = 12;
-  for (; n < 64; n++) v[n] = from_bits(next_u64()) * (n % 2 ? 1.0 : 1e-300); /* (any bits, NaNs included) */
+  double v[64];
+  int n = test_values(v);
   int bad = 0;
   for (int i = 0; i < n; i++)
     for (int j = 0; j < n; j++) {
@@ -75,10 +84,8 @@ static __attribute__((noinline)) double sel_max_ref(double x, double y) {
 }
 
 static void test_sel_bits(void) {
-  double v[64] = {0.0, -0.0, 1.0,       -1.0,       INFINITY,  -INFINITY,
-                  NAN, -NAN, 0x1p-1074, -0x1p-1074, 0x1p-1022, 1e300};
-  int n = 12;
-  for (; n < 64; n++) v[n] = from_bits(next_u64()) * (n % 2 ? 1.0 : 1e-300); /* (any bits, NaNs included) */
+  double v[64];
+  int n = test_values(v);
   int bad = 0;
   for (int i = 0; i < n; i++)
     for (int j = 0; j < n; j++) { /* (every bit, a NaN's too: both return y's) */
