@@ -267,10 +267,8 @@ static inline bool box_walk_next(const scene *sc, box_walk *w, double tend, cons
   int bi = -1;
   for (int id = 0; id < 2 * (int)sc->null_boxes.n; id++) {
     double t = w->t[id];
-    /* (no branch: which side a ray meets first is its direction's) */
-    bool take = (t > w->tc || (t == w->tc && id > w->ic)) & (t < tend) & (t < best);
-    best = take ? t : best;
-    bi = take ? id : bi;
+    bool after = t > w->tc || (t == w->tc && id > w->ic);
+    if (after && t < tend && t < best) best = t, bi = id;
   }
   if (bi < 0) return false;
   const struct scene_null_box *b = &sc->null_boxes.box[bi / 2];
