@@ -28,35 +28,25 @@
  * and a ray's direction decides that branch, so that it mispredicts about
  * every other ray. (Inline assembly, not _mm_min_sd: GCC folds that one on
  * constants with other NaN rules than the instruction's.) */
+#if defined(__GNUC__) && defined(__x86_64__) && defined(__AVX__)
+#define RSW_SEL_BODY(op, cmp)                                                                                \
+  double r;                                                                                                  \
+  __asm__("v" op "sd %2, %1, %0" : "=x"(r) : "x"(x), "xm"(y));                                               \
+  return r;
+#elif defined(__GNUC__) && defined(__x86_64__)
+#define RSW_SEL_BODY(op, cmp)                                                                                \
+  __asm__(op "sd %1, %0" : "+x"(x) : "xm"(y));                                                               \
+  return x;
+#else
+#define RSW_SEL_BODY(op, cmp) return x cmp y ? x : y;
+#endif
 static inline double rsw_sel_min(double x, double y) {
-#if defined(__GNUC__) && defined(__x86_64__)
-#ifdef __AVX__
-  double r;
-  __asm__("vminsd %2, %1, %0" : "=x"(r) : "x"(x), "xm"(y));
-  return r;
-#else
-  __asm__("minsd %1, %0" : "+x"(x) : "xm"(y));
-  return x;
-#endif
-#else
-  return x < y ? x : y;
-#endif
+  RSW_SEL_BODY("min", <)
 }
-
 static inline double rsw_sel_max(double x, double y) {
-#if defined(__GNUC__) && defined(__x86_64__)
-#ifdef __AVX__
-  double r;
-  __asm__("vmaxsd %2, %1, %0" : "=x"(r) : "x"(x), "xm"(y));
-  return r;
-#else
-  __asm__("maxsd %1, %0" : "+x"(x) : "xm"(y));
-  return x;
-#endif
-#else
-  return x > y ? x : y;
-#endif
+  RSW_SEL_BODY("max", >)
 }
+#undef RSW_SEL_BODY
 
 static inline double rsw_fmax(double x, double y) {
   return x > y || y != y ? x : y;
