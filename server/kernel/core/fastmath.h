@@ -21,6 +21,33 @@
 
 #include <math.h>
 
+/* x < y ? x : y and x > y ? x : y, bit for bit (equal operands or a NaN:
+ * y), as one minsd / maxsd each on x86-64: written as selects, GCC turns
+ * the pair of them on one comparison (a slab's near and far distance,
+ * ta > tb ? tb : ta and ta > tb ? ta : tb) into a branch and two moves,
+ * and a ray's direction decides that branch, so that it mispredicts about
+ * every other ray. (Inline assembly, not _mm_min_sd: GCC folds that one on
+ * constants with other NaN rules than the instruction's.) */
+#if defined(__GNUC__) && defined(__x86_64__) && defined(__AVX__)
+#define RSW_SEL_BODY(op, cmp)                                                                                \
+  double r;                                                                                                  \
+  __asm__("v" op "sd %2, %1, %0" : "=x"(r) : "x"(x), "xm"(y));                                               \
+  return r;
+#elif defined(__GNUC__) && defined(__x86_64__)
+#define RSW_SEL_BODY(op, cmp)                                                                                \
+  __asm__(op "sd %1, %0" : "+x"(x) : "xm"(y));                                                               \
+  return x;
+#else
+#define RSW_SEL_BODY(op, cmp) return x cmp y ? x : y;
+#endif
+static inline double rsw_sel_min(double x, double y) {
+  RSW_SEL_BODY("min", <)
+}
+static inline double rsw_sel_max(double x, double y) {
+  RSW_SEL_BODY("max", >)
+}
+#undef RSW_SEL_BODY
+
 static inline double rsw_fmax(double x, double y) {
   return x > y || y != y ? x : y;
 }

@@ -171,8 +171,8 @@ static bool may_hit_in(const hit_bounds *b, const ray3 *r) {
     if (d[a] == 0.0) continue; /* inside that slab (above) */
     double inv = 1.0 / d[a];   /* (the padding covers the rounding) */
     double tl = (l - o[a]) * inv, th = (h - o[a]) * inv;
-    double ta = tl > th ? th : tl, tb = tl > th ? tl : th; /* (selects: no branch on the direction) */
-    t0 = ta > t0 ? ta : t0;                                /* (no fmin/fmax calls: a NaN never gets here) */
+    double ta = rsw_sel_min(th, tl), tb = rsw_sel_max(tl, th); /* (tl > th ? th : tl, tl > th ? tl : th) */
+    t0 = ta > t0 ? ta : t0; /* (no fmin/fmax calls: a NaN never gets here) */
     t1 = tb < t1 ? tb : t1;
     if (t0 > t1) return false;
   }
@@ -252,7 +252,7 @@ static inline __attribute__((always_inline)) void box_walk_start(const scene *sc
       }
       double inv = b->aligned ? w->inv[a] : 1.0 / dd[a]; /* (the same quotient) */
       double ta = (lo[a] - oo[a]) * inv, tb = (hi[a] - oo[a]) * inv;
-      double t0 = ta > tb ? tb : ta, t1 = ta > tb ? ta : tb; /* (selects: no branch on the direction) */
+      double t0 = rsw_sel_min(tb, ta), t1 = rsw_sel_max(ta, tb); /* (ta > tb ? tb : ta, ta > tb ? ta : tb) */
       tn = t0 > tn ? t0 : tn;
       tf = t1 < tf ? t1 : tf;
     }

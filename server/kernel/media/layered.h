@@ -87,10 +87,11 @@ static inline double media_layers_dz(const media_layers *L, vec3 d) {
 
 static inline int media_layer_of(const media_layers *L, double z) {
   if (L->uniform) {
+    /* !(f > 0): 0; f >= n: n - 1; else (int) f; as a clamp to [0, n - 1]
+     * (minsd and maxsd, no branch: a ray's ends decide it, at the ground
+     * or the top as often as not): (int) f is n - 1 on [n - 1, n) too. */
     double f = z * L->nd;
-    if (!(f > 0)) return 0;
-    if (f >= L->nd) return (int)L->n - 1;
-    return (int)f;
+    return (int)rsw_sel_min(rsw_sel_max(f, 0.0), L->nd - 1.0);
   }
   if (!(z > 0)) return 0;
   if (z >= 1.0) return (int)L->n - 1;
@@ -112,7 +113,7 @@ static inline int media_layer_of(const media_layers *L, double z) {
 
 /* C(z), z in layer k. */
 static inline double media_layers_cum_in(const media_layers *L, int c, int k, double z) {
-  double zc = z < 0.0 ? 0.0 : z > 1.0 ? 1.0 : z;
+  double zc = rsw_sel_max(0.0, rsw_sel_min(1.0, z)); /* (z < 0 ? 0 : z > 1 ? 1 : z, -0 and NaN kept) */
   const pw_layer *y = &L->lay[k];
   return y->cum[c] + y->sig[c] * (zc - y->z);
 }

@@ -8,6 +8,7 @@
 #ifndef RSW_MEDIA_MEDIA_H
 #define RSW_MEDIA_MEDIA_H
 
+#include "../core/fastmath.h"
 #include "../kernel.h"
 
 struct loader;
@@ -56,7 +57,7 @@ static inline bool media_box_clip_aligned(const media_box *b, vec3 o, vec3 d, do
     }
     double ta = (b0 - o3[a]) * inv[a], tb = (b1 - o3[a]) * inv[a];
     /* (selects, not branches: the ray's direction decides them) */
-    double t0 = ta > tb ? tb : ta, t1 = ta > tb ? ta : tb;
+    double t0 = rsw_sel_min(tb, ta), t1 = rsw_sel_max(ta, tb); /* (ta > tb ? tb : ta, ta > tb ? ta : tb) */
     lo = t0 > lo ? t0 : lo;
     hi = t1 < hi ? t1 : hi;
   }

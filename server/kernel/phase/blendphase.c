@@ -20,6 +20,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../core/fastmath.h"
 #include "../scene/plugin_def.h"
 #include "../volumes/volume.h"
 #include "phase.h"
@@ -32,7 +33,9 @@ typedef struct blendphase {
 
 static double blend_lookup(const blendphase *b, vec3 p) {
   double w = volume_eval_1(b->weight, p);
-  return w > 1.0 ? 1.0 : w > 0.0 ? w : 0.0; /* clamped to [0, 1] (NaN: 0), no libm calls */
+  /* clamped to [0, 1] (NaN: 0), no libm calls and no branch (the layers
+   * with aerosols and without alternate): w > 1 ? 1 : w > 0 ? w : 0 */
+  return rsw_sel_min(1.0, rsw_sel_max(w, 0.0));
 }
 
 /* The weight at mi->p: looked up once per scattering when bound (the

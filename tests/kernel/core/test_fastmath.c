@@ -2,6 +2,8 @@
  *  - rsw_fmax, rsw_fmin give fmax's and fmin's bits for every pair of a
  *    set of values with signed zeros, infinities, NaN, subnormals and
  *    random doubles;
+ *  - rsw_sel_min, rsw_sel_max give the bits of the selects x < y ? x : y
+ *    and x > y ? x : y for every pair of those values;
  *  - rsw_neg_log1m(u) is -log1p(-u) within 2 ulp (of log1p's value) over
  *    the whole domain [0, 1]: 0 and 1, 2,000 random mantissas in every
  *    binade from the smallest subnormal (2^-1074) to [0.5, 1), the 4,096
@@ -42,12 +44,32 @@ static uint64_t next_u64(void) { /* xorshift64* */
   return rng_state * 0x2545F4914F6CDD1Dull;
 }
 
-static void test_fmax_fmin_bits(void) {
-  double v[64] = {0.0, -0.0, 1.0,       -1.0,       INFINITY,  -INFINITY,
-                  NAN, -NAN, 0x1p-1074, -0x1p-1074, 0x1p-1022, 1e300};
-  int n = 12;
-  for (; n < 64; n++) v[n] = from_bits(next_u64()) * (n % 2 ? 1.0 : 1e-300); /* (any bits, NaNs included) */
-  int bad = 0;
+/* 64 values into v: signed zeros, infinities, NaN, subnormals, then
+ * random bits (NaNs included). */
+static int test_values(double v[64]) {
+  const double fixed[12] = {0.0, -0.0, 1.0,       -1.0,       INFINITY,  -INFINITY,
+                            NAN, -NAN, 0x1p-1074, -0x1p-1074, 0x1p-1022, 1e300};
+  int n = 0;
+  for (; n < 12; n++) v[n] = fixed[n];
+  for (; n < 64; n++) v[n] = from_bits(next_u64()) * (n % 2 ? 1.0 : 1e-300);
+  return n;
+}
+
+/* The selects rsw_sel_min and rsw_sel_max stand for, as branches (noinline:
+ * the reference is the C expression, whatever code GCC picks for it). */
+static __attribute__((noinline)) double sel_min_ref(double x, double y) {
+  if (x < y) return x;
+  return y;
+}
+static __attribute__((noinline)) double sel_max_ref(double x, double y) {
+  if (x > y) return x;
+  return y;
+}
+
+static void test_minmax_bits(void) {
+  double v[64];
+  int n = test_values(v);
+  int bad = 0, bad_sel = 0;
   for (int i = 0; i < n; i++)
     for (int j = 0; j < n; j++) {
       double x = v[i], y = v[j];
@@ -55,10 +77,17 @@ static void test_fmax_fmin_bits(void) {
       /* (NaN results: any NaN; else the same bits) */
       if (nan_max ? !isnan(rsw_fmax(x, y)) : bits(rsw_fmax(x, y)) != bits(fmax(x, y))) bad++;
       if (nan_min ? !isnan(rsw_fmin(x, y)) : bits(rsw_fmin(x, y)) != bits(fmin(x, y))) bad++;
+      /* (the selects: every bit, a NaN's too, both returning y's) */
+      bad_sel += bits(rsw_sel_min(x, y)) != bits(sel_min_ref(x, y));
+      bad_sel += bits(rsw_sel_max(x, y)) != bits(sel_max_ref(x, y));
     }
   CHECK(bad == 0, "%d of %d pairs differ from libm's fmax/fmin", bad, 2 * n * n);
   CHECK(bits(rsw_fmax(-0.0, 0.0)) == bits(0.0) && bits(rsw_fmax(0.0, -0.0)) == bits(-0.0),
         "signed zeros: fmax returns its second argument");
+  CHECK(bad_sel == 0, "%d of %d pairs differ from the selects", bad_sel, 2 * n * n);
+  CHECK(bits(rsw_sel_min(-0.0, 0.0)) == bits(0.0) && bits(rsw_sel_max(0.0, -0.0)) == bits(-0.0) &&
+            isnan(rsw_sel_min(1.0, NAN)) && rsw_sel_min(NAN, 1.0) == 1.0,
+        "rsw_sel_*: equal operands and a NaN give the second operand");
 }
 
 /* |a - b| in ulp of b (b finite, > 0 here: -log1p(-u) for u in (0, 1)). */
@@ -103,7 +132,7 @@ static void test_neg_log1m_ulp(void) {
 }
 
 int main(void) {
-  RSW_TEST_RUN(test_fmax_fmin_bits);
+  RSW_TEST_RUN(test_minmax_bits);
   RSW_TEST_RUN(test_neg_log1m_ulp);
   RSW_TEST_END("test_fastmath");
 }

@@ -1,4 +1,6 @@
 /* media/layered.c media_layers_finish's packed copies (test_packed_copies);
+ * media_layer_of's and media_layers_cum_in's clamps against their
+ * branches (test_layer_of_clamps);
  * media_layers_sample_real_batch and
  * media_layers_transmittance_batch against media_layers_sample_real and
  * media_layers_transmittance, bit for bit, at every ISA this CPU runs
@@ -230,9 +232,54 @@ static void test_packed_copies(void) {
   media_layers_free(&L);
 }
 
+/* media_layer_of's equal layers (a clamp of z n to [0, n - 1] in
+ * minsd and maxsd) and media_layers_cum_in's clamp of z to [0, 1] against
+ * the branches they replace, at the edges (signed zeros, NaN, infinities,
+ * the layers' boundaries and the doubles beside them) and at random z,
+ * for n = 1, 2, 7, 2,400. */
+static int layer_of_ref(uint32_t n, double z) {
+  double f = z * n;
+  if (!(f > 0)) return 0;
+  if (f >= n) return (int)n - 1;
+  return (int)f;
+}
+
+static void test_layer_of_clamps(void) {
+  const uint32_t ns[] = {1, 2, 7, 2400};
+  pcg32 rng;
+  pcg32_seed(&rng, 0x1a7e5, 11);
+  int bad = 0, badc = 0, checked = 0;
+  for (int in = 0; in < 4; in++) {
+    uint32_t n = ns[in];
+    media_layers L = {.n = n, .nd = n, .uniform = true};
+    pw_layer lay[2] = {{.cum = {0.25}, .sig = {3.0}, .z = 0.125}};
+    L.lay = lay;
+    double zs[16 + 4 * 2401 + 4096];
+    int nz = 0;
+    const double edge[] = {0.0,      -0.0,      1.0,       -1.0,       NAN, -NAN,
+                           INFINITY, -INFINITY, 0x1p-1074, -0x1p-1074, 2.0, 0.5};
+    for (int i = 0; i < 12; i++) zs[nz++] = edge[i];
+    for (uint32_t k = 0; k <= n; k++) {
+      double z = (double)k / n;
+      zs[nz++] = z, zs[nz++] = nextafter(z, -1.0), zs[nz++] = nextafter(z, 2.0);
+    }
+    for (int i = 0; i < 4096; i++) zs[nz++] = 1.2 * pcg32_next_double(&rng) - 0.1;
+    for (int i = 0; i < nz; i++) {
+      double z = zs[i];
+      bad += media_layer_of(&L, z) != layer_of_ref(n, z);
+      double zc = z < 0.0 ? 0.0 : z > 1.0 ? 1.0 : z, ref = lay[0].cum[0] + lay[0].sig[0] * (zc - lay[0].z);
+      double got = media_layers_cum_in(&L, 0, 0, z);
+      badc += memcmp(&got, &ref, sizeof got) != 0;
+      checked++;
+    }
+  }
+  CHECK(bad == 0 && badc == 0, "%d layers and %d C(z) of %d differ from the branches", bad, badc, checked);
+}
+
 int main(void) {
   RSW_TEST_RUN(test_flight_batch_equal_layers);
   RSW_TEST_RUN(test_flight_batch_scalar_setup);
   RSW_TEST_RUN(test_packed_copies);
+  RSW_TEST_RUN(test_layer_of_clamps);
   RSW_TEST_END("test_layered");
 }
