@@ -546,15 +546,17 @@ void spawn_rays_between_batch(rsw_isa isa, int n, const surface_interaction *con
  * pick, then sample), then the samples grouped by emitter
  * (emitter_ops.sample_direction_batch where the emitter has it), then the
  * shadow rays. A lane whose sample counts zero drops its nee; the lanes
- * that keep it are left in g[0..*n_sh), in order. d1, d2, ek, ord: n
- * entries of scratch each. */
+ * that keep it and whose shadow ray needs a query are left in
+ * g[0..*n_sh), in order; *n_clear counts those whose ray ray_may_hit
+ * culled (occ TRACE_MISS already, no sray). d1, d2, ek, ord: n entries of
+ * scratch each. */
 #define EMITTER_GROUPS WAVE_EMITTER_GROUPS
 static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, page_lane *pgs, int *g, int n,
-                               int *n_sh, double *d1, vec2 *d2, int *ek, int *ord) {
+                               int *n_sh, int *n_clear, double *d1, vec2 *d2, int *ek, int *ord) {
   enum {
     C = 64
   };
-  *n_sh = 0;
+  *n_sh = *n_clear = 0;
   if (n == 0) return;
   const sampler *smp = st[g[0]].s;
   sampler_next_1d_2d_batch(smp, st, g, n, d1, d2);
@@ -616,6 +618,8 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, pag
    * lanes of one emitter (accel_surface_error_at: the same bits). */
   const emitter *te = NULL;
   double terms[8];
+  const bool cull = !sc->periodic.on;
+  const pad_box pb = pad_box_of(sc, scene_pad(sc));
   spawn_lanes S;
   int sl[SPAWN_C], ns = 0;
   for (int k = 0; k < n; k++) {
@@ -642,7 +646,18 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, pag
         sl[ns++] = g[k];
         if (ns == SPAWN_C) spawn_between_lanes(ls, terms, ln, &S, sl, ns), ns = 0;
       } else {
-        spawn_ray_to_far(&l->si, &l->ds, &l->sray);
+        /* wave_occluded's first test here, while the lane is in cache: a
+         * ray that cannot meet the scene (a sun's, leaving an
+         * Earth-observation scene) is clear without being stored. */
+        ray3 r;
+        spawn_ray_to_far(&l->si, &l->ds, &r);
+        if (cull && !ray_may_hit(&pb, &r)) {
+          l->nee = true;
+          l->occ = TRACE_MISS;
+          (*n_clear)++;
+          continue;
+        }
+        l->sray = r;
       }
       l->nee = true;
       g[(*n_sh)++] = g[k];
@@ -667,58 +682,9 @@ static int take_bsdf_group(const lane *ln, int *g, int *left, int *take, int cap
   return m;
 }
 
-/* The light samples of lanes idx[0..n) whose shadow ray was clear: the
- * BSDF's value and pdf towards each (l->nf, l->npdf), grouped by BSDF
- * through bsdf_ops.eval_pdf_batch where a BSDF has it, else per lane (a
- * bundle of pages: lane by lane, every page's value and the pages' mean
- * pdf). A lane's values depend on its own state only. g: n ints of
- * scratch. */
-static void wave_eval_bsdfs(const scene *sc, lane *ln, page_lane *pgs, const int *idx, int n, int *g) {
-  enum {
-    C = 64
-  };
-  int left = 0;
-  for (int k = 0; k < n; k++) {
-    lane *l = &ln[idx[k]];
-    if (!(l->nee && l->occ == TRACE_MISS)) continue;
-    const surface_interaction *si = &l->si;
-    const bsdf *b = si->shape->bsdf;
-    l->nwo = frame_to_local(&si->sh, l->ds.d);
-    if (pgs) { /* every page's value, and the pages' mean pdf (one-sample MIS), lane by lane */
-      color f[RENDER_MAX_PAGES];
-      l->npdf = bsdf_eval_pages(b, si, sc->pages, l->nwo, !l->ds.delta, f);
-      l->nf = f[0];
-      for (int p = 1; p < sc->pages; p++) pgs[idx[k]].nf[p - 1] = f[p];
-    } else if (b->ops->eval_pdf_batch) {
-      g[left++] = idx[k];
-    } else {
-      l->nf = b->ops->eval(b, si, l->nwo);
-      l->npdf = col_is_black(l->nf) || l->ds.delta ? 0.0 : b->ops->pdf(b, si, l->nwo);
-    }
-  }
-  while (left > 0) {
-    const bsdf *b;
-    const surface_interaction *si[C];
-    vec3 wo[C];
-    color f[C];
-    double pdf[C];
-    int take[C];
-    int m = take_bsdf_group(ln, g, &left, take, C, &b);
-    for (int k = 0; k < m; k++) {
-      si[k] = &ln[take[k]].si;
-      wo[k] = ln[take[k]].nwo;
-    }
-    b->ops->eval_pdf_batch(b, m, si, wo, f, pdf);
-    for (int k = 0; k < m; k++) {
-      ln[take[k]].nf = f[k];
-      ln[take[k]].npdf = pdf[k];
-    }
-  }
-}
-
 /* The second half of lane l's vertex, first part: the light sample's
  * contribution if its shadow ray was clear (its BSDF value and pdf from
- * wave_eval_bsdfs). The BSDF sample's random numbers are drawn next, for
+ * wave_eval_bsdfs, which calls it). The BSDF sample's random numbers are drawn next, for
  * the lanes together (wave_run), in the one-path order; the sample itself
  * is taken by wave_sample_bsdfs. */
 static void shade_light(const scene *sc, lane *l, double *quv, pol_lane *pl, page_lane *pg) {
@@ -738,6 +704,63 @@ static void shade_light(const scene *sc, lane *l, double *quv, pol_lane *pl, pag
         pol_collect_light(pl, &l->si, l->nwo, 0, e, ds->d, v3_neg(v3_norm(l->ray.d)), v, pol_channels(sc));
       else if (quv && (e->flags & EMITTER_INFINITE))
         add_polarization(quv, e, ds->d, l->T.c[0] * f.c[0] * w / (l->pe * ds->pdf));
+    }
+  }
+}
+
+/* The light samples of lanes idx[0..n) whose shadow ray was clear: the
+ * BSDF's value and pdf towards each (l->nf, l->npdf), grouped by BSDF
+ * through bsdf_ops.eval_pdf_batch where a BSDF has it, else per lane (a
+ * bundle of pages: lane by lane, every page's value and the pages' mean
+ * pdf), and at once the sample's contribution (shade_light), while the
+ * lane is in cache. A lane's values depend on its own state only, so
+ * the order its group puts it in changes nothing. quv (qs values a lane),
+ * pol: as wave_run's. g: n ints of scratch. */
+static void wave_eval_bsdfs(const scene *sc, lane *ln, page_lane *pgs, const int *idx, int n, int *g,
+                            double *quv, int qs, pol_lane *pol) {
+  enum {
+    C = 64
+  };
+  int left = 0;
+  for (int k = 0; k < n; k++) {
+    lane *l = &ln[idx[k]];
+    if (!(l->nee && l->occ == TRACE_MISS)) continue;
+    const surface_interaction *si = &l->si;
+    const bsdf *b = si->shape->bsdf;
+    l->nwo = frame_to_local(&si->sh, l->ds.d);
+    if (pgs) { /* every page's value, and the pages' mean pdf (one-sample MIS), lane by lane */
+      color f[RENDER_MAX_PAGES];
+      l->npdf = bsdf_eval_pages(b, si, sc->pages, l->nwo, !l->ds.delta, f);
+      l->nf = f[0];
+      for (int p = 1; p < sc->pages; p++) pgs[idx[k]].nf[p - 1] = f[p];
+    } else if (b->ops->eval_pdf_batch) {
+      g[left++] = idx[k];
+      continue;
+    } else {
+      l->nf = b->ops->eval(b, si, l->nwo);
+      l->npdf = col_is_black(l->nf) || l->ds.delta ? 0.0 : b->ops->pdf(b, si, l->nwo);
+    }
+    int i = idx[k];
+    shade_light(sc, l, quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, pgs ? &pgs[i] : NULL);
+  }
+  while (left > 0) {
+    const bsdf *b;
+    const surface_interaction *si[C];
+    vec3 wo[C];
+    color f[C];
+    double pdf[C];
+    int take[C];
+    int m = take_bsdf_group(ln, g, &left, take, C, &b);
+    for (int k = 0; k < m; k++) {
+      si[k] = &ln[take[k]].si;
+      wo[k] = ln[take[k]].nwo;
+    }
+    b->ops->eval_pdf_batch(b, m, si, wo, f, pdf);
+    for (int k = 0; k < m; k++) {
+      int i = take[k];
+      ln[i].nf = f[k];
+      ln[i].npdf = pdf[k];
+      shade_light(sc, &ln[i], quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, NULL);
     }
   }
 }
@@ -840,7 +863,7 @@ typedef struct wave_scratch {
   lane *ln;
   pol_lane *pol; /* the polarized variants' payload, per lane (else NULL) */
   page_lane *pg; /* a bundle of pages: pages 1.., per lane (else NULL) */
-  int *idx, *sh, *ek, *ord;
+  int *idx, *sh, *ek, *ord, *cont;
   double *d1;
   vec2 *d2;
 } wave_scratch;
@@ -851,7 +874,7 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
   lane *ln = ws->ln;
   pol_lane *pol = ws->pol;
   page_lane *pgs = ws->pg;
-  int *idx = ws->idx, *sh = ws->sh;
+  int *idx = ws->idx, *sh = ws->sh, *cont = ws->cont;
   const int qs = scene_extra_stride(sc);
   if (quv)
     for (int i = 0; i < qs * n; i++) quv[i] = 0;
@@ -892,32 +915,29 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
       int i = other[k];
       shade_emit(it, sc, &ln[i], quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, pgs ? &pgs[i] : NULL);
     }
-    int next = 0, n_nee = 0, n_sh = 0;
+    /* The hits' emission, and (in the same pass, while the lane is in
+     * cache) whether the path ends after its light sample: paths whose
+     * continuation cannot meet anything (continuation_escapes) take no
+     * BSDF sample, no roulette, nothing else drawn from their streams
+     * (cont: the others, in order). Not under a periodic boundary, with
+     * an environment, or in the polarized variants (their payload). */
+    int next = 0, n_nee = 0, n_sh = 0, n_clear = 0, n_cont = 0;
     for (int k = 0; k < n_hit; k++) {
       int i = hits[k];
       bool keep =
           shade_emit(it, sc, &ln[i], quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, pgs ? &pgs[i] : NULL);
-      idx[next] = sh[n_nee] = i;
+      idx[next] = sh[n_nee] = cont[n_cont] = i;
       next += keep, n_nee += keep & ln[i].nee;
+      n_cont += keep && !(escape_test && continuation_escapes(sc, &ln[i].si, pad));
     }
     live = next;
-    wave_light_samples(sc, st, ln, pgs, sh, n_nee, &n_sh, ws->d1, ws->d2, ws->ek, ws->ord);
+    wave_light_samples(sc, st, ln, pgs, sh, n_nee, &n_sh, &n_clear, ws->d1, ws->d2, ws->ek, ws->ord);
+    stats->shadow_rays += (uint64_t)n_clear;
     if (n_sh) wave_occluded(sc, ln, sh, n_sh, stats, timed);
-    wave_eval_bsdfs(sc, ln, pgs, idx, live, sh);
-    /* Each lane's light sample, then (in the same pass, while the lane is
-     * in cache) whether its path ends here: paths whose continuation
-     * cannot meet anything (continuation_escapes) take no BSDF sample, no
-     * roulette, nothing else drawn from their streams. Not under a
-     * periodic boundary, with an environment, or in the polarized variants
-     * (their payload). */
-    next = 0;
-    for (int k = 0; k < live; k++) {
-      int i = idx[k];
-      shade_light(sc, &ln[i], quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, pgs ? &pgs[i] : NULL);
-      idx[next] = i;
-      next += !(escape_test && continuation_escapes(sc, &ln[i].si, pad));
-    }
-    live = next;
+    /* Each lane's light sample. */
+    wave_eval_bsdfs(sc, ln, pgs, idx, live, sh, quv, qs, pol);
+    for (int k = 0; k < n_cont; k++) idx[k] = cont[k];
+    live = n_cont;
     /* The BSDF samples' numbers, lobe then direction, for every lane. */
     if (live) {
       sampler_next_1d_2d_batch(smp, st, idx, live, ws->d1, ws->d2);
@@ -948,7 +968,7 @@ static bool path_Li_batch(const integrator *it, const scene *sc, sampler_state *
                           render_stats *stats, color *L, double *quv) {
   if (n <= 0) return true;
   wave_scratch ws = {.ln = malloc((size_t)n * sizeof *ws.ln),
-                     .idx = malloc(4 * (size_t)n * sizeof *ws.idx),
+                     .idx = malloc(5 * (size_t)n * sizeof *ws.idx),
                      .d1 = malloc((size_t)n * sizeof *ws.d1),
                      .d2 = malloc((size_t)n * sizeof *ws.d2),
                      .pol = sc->polarized ? pol_alloc(n, pol_channels(sc)) : NULL,
@@ -958,6 +978,7 @@ static bool path_Li_batch(const integrator *it, const scene *sc, sampler_state *
     ws.sh = ws.idx + n;
     ws.ek = ws.idx + 2 * (size_t)n;
     ws.ord = ws.idx + 3 * (size_t)n;
+    ws.cont = ws.idx + 4 * (size_t)n;
     wave_run(it, sc, st, rays, n, stats, L, quv, &ws);
   }
   free(ws.ln);
@@ -972,7 +993,7 @@ static bool path_Li_batch(const integrator *it, const scene *sc, sampler_state *
 static color path_Li(const integrator *it, const scene *sc, sampler_state *st, ray3 ray, render_stats *stats,
                      double *quv) {
   lane ln;
-  int idx[4];
+  int idx[5];
   double d1[1];
   vec2 d2[1];
   mueller pm[3];
@@ -983,6 +1004,7 @@ static color path_Li(const integrator *it, const scene *sc, sampler_state *st, r
                      .sh = idx + 1,
                      .ek = idx + 2,
                      .ord = idx + 3,
+                     .cont = idx + 4,
                      .d1 = d1,
                      .d2 = d2,
                      .pol = sc->polarized ? &pl : NULL,
