@@ -124,31 +124,36 @@ static void add_polarization(double *quv, const emitter *e, vec3 d, double scale
  * per path in double, in bounce order. */
 
 typedef struct lane {
+  /* What every bounce reads and writes first (wave_run's start and end
+   * touch these alone): together, so a lane's pass over them touches few
+   * cache lines; the BSDF sample and the previous vertex, which the seed
+   * scene's paths rarely reach, last. */
   ray3 ray;
-  surface_interaction si, prev_si;
   color T, L;
   double eta, prev_pdf;
   bool prev_delta, wrapped;
   int depth;
   trace_result hit;
-  accel_hit h; /* the hit, between the packet queries and the surface data */
   /* Next-event estimation between the shading and the shading's end. */
   bool nee;
   trace_result occ;
+  surface_interaction si;
+  accel_hit h; /* the hit, between the packet queries and the surface data */
   const emitter *ne;
-  direction_sample ds;
-  color value;
   double pe;
-  ray3 sray;
+  color value;
+  direction_sample ds;
   /* The light sample's BSDF value and pdf (wave_eval_bsdfs). */
   vec3 nwo;
   color nf;
   double npdf;
+  ray3 sray;
   /* The BSDF sample: its random numbers, then its result. */
   double u1;
   vec2 u2;
   bsdf_sample bs;
   color weight;
+  surface_interaction prev_si;
 } lane;
 
 /* A bundle of pages (render_ctx.bundle > 3, docs/experiments.md#spectral-bundles):
@@ -551,6 +556,31 @@ void spawn_rays_between_batch(rsw_isa isa, int n, const surface_interaction *con
  * culled (occ TRACE_MISS already, no sray). d1, d2, ek, ord: n entries of
  * scratch each. */
 #define EMITTER_GROUPS WAVE_EMITTER_GROUPS
+
+/* What a lane's light sample asks of the shadow rays (light_far). */
+enum {
+  LIGHT_NONE,    /* the sample counts zero: no shadow ray */
+  LIGHT_CLEAR,   /* its ray cannot meet the scene: clear, not traced */
+  LIGHT_QUERY,   /* its ray l->sray is traced (wave_occluded) */
+  LIGHT_SURFACE, /* towards a surface emitter: left to the spawn pass */
+};
+
+/* Lane l's light sample ds (value v) from an emitter that is not a
+ * surface, outside a periodic boundary: nee, and the shadow ray's
+ * verdict as wave_light_samples' spawn pass and wave_occluded's culling
+ * would give them (the same ray, the same test). */
+static inline int light_far(lane *l, const direction_sample *ds, color v, const pad_box *pb) {
+  l->nee = ds->pdf > 0 && !col_is_black(v);
+  if (!l->nee) return LIGHT_NONE;
+  ray3 r;
+  spawn_ray_to_far(&l->si, ds, &r);
+  if (!ray_may_hit(pb, &r)) {
+    l->occ = TRACE_MISS;
+    return LIGHT_CLEAR;
+  }
+  l->sray = r;
+  return LIGHT_QUERY;
+}
 static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, page_lane *pgs, int *g, int n,
                                int *n_sh, int *n_clear, double *d1, vec2 *d2, int *ek, int *ord) {
   enum {
@@ -561,6 +591,13 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, pag
   const sampler *smp = st[g[0]].s;
   sampler_next_1d_2d_batch(smp, st, g, n, d1, d2);
   for (int k = 0; k < n; k++) ek[k] = (int)pick_emitter_index(sc, d1[k]);
+  /* Without pages or a periodic boundary, a lane of an emitter that is not
+   * a surface takes its shadow ray's verdict (light_far) as its sample is
+   * stored, while the lane is in cache; the others, below. verdict[k]:
+   * lane g[k]'s, in ek (free once the lanes are grouped). */
+  const bool cull = !sc->periodic.on, fast = !pgs && cull && sc->n_emitters <= EMITTER_GROUPS;
+  const pad_box pb = pad_box_of(sc, scene_pad(sc));
+  int *verdict = ek;
   /* The lanes grouped by emitter (a counting sort, in lane order within
    * each emitter) for one batched call per emitter and chunk; a lane's
    * sample does not depend on its group. Scenes with many emitters sample
@@ -575,8 +612,10 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, pag
   } else {
     int start[EMITTER_GROUPS + 1];
     wave_group_by_emitter(sc, ek, n, start, ord);
+    for (int k = 0; fast && k < n; k++) verdict[k] = LIGHT_SURFACE;
     for (size_t e_i = 0; e_i < sc->n_emitters; e_i++) {
       const emitter *e = sc->emitters[e_i];
+      const bool far = fast && !((e->flags & EMITTER_SURFACE) && e->shape);
       double pe = pick_probability(sc, e_i); /* every lane's own quotient */
       for (int j0 = start[e_i]; j0 < start[e_i + 1]; j0 += C) {
         int m = start[e_i + 1] - j0 < C ? start[e_i + 1] - j0 : C;
@@ -595,6 +634,7 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, pag
           l->ne = e;
           l->ds = ds[j];
           l->value = val[j];
+          if (far) verdict[ord[j0 + j]] = light_far(l, &ds[j], val[j], &pb);
         }
       }
     }
@@ -618,11 +658,15 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, pag
    * lanes of one emitter (accel_surface_error_at: the same bits). */
   const emitter *te = NULL;
   double terms[8];
-  const bool cull = !sc->periodic.on;
-  const pad_box pb = pad_box_of(sc, scene_pad(sc));
   spawn_lanes S;
   int sl[SPAWN_C], ns = 0;
   for (int k = 0; k < n; k++) {
+    if (fast && verdict[k] != LIGHT_SURFACE) { /* its verdict taken already (light_far) */
+      g[*n_sh] = g[k];
+      *n_sh += verdict[k] == LIGHT_QUERY;
+      *n_clear += verdict[k] == LIGHT_CLEAR;
+      continue;
+    }
     lane *l = &ln[g[k]];
     const emitter *e = l->ne;
     l->nee = false;
