@@ -54,3 +54,41 @@ PCG_ATTR void PCG_SEED_FN(int n, const uint64_t *key, const uint32_t *index, uin
     }
   }
 }
+
+/* core/rng.h pcg32_next_double `draws` times per stream, VW streams a
+ * step (VI, VD: the lanes as int64 and double): out[d * n + j] is stream
+ * j's d-th number, and state[j] is left past them. The step's 64-bit
+ * product and the output permutation wrap and shift as the scalar code
+ * does (the 32-bit rotation in 64-bit lanes, masked), and a 32-bit value
+ * converts to double exactly, times 2^-32 exactly: every lane is bitwise
+ * the scalar stream. */
+PCG_ATTR void PCG_DRAW_FN(int n, uint64_t *state, const uint64_t *inc, int draws, double *out) {
+  for (int k0 = 0; k0 < n; k0 += VW) {
+    int cnt = n - k0 < VW ? n - k0 : VW;
+    VU s = {0}, in = {0};
+    if (cnt == VW) {
+      __builtin_memcpy(&s, &state[k0], sizeof s);
+      __builtin_memcpy(&in, &inc[k0], sizeof in);
+    } else { /* a tail: its last lane repeated */
+      for (int k = 0; k < VW; k++) {
+        int q = k0 + (k < cnt ? k : cnt - 1);
+        s[k] = state[q], in[k] = inc[q];
+      }
+    }
+    for (int d = 0; d < draws; d++) {
+      VU old = s;
+      s = old * PCG32_MULT + in;
+      VU xs = (((old >> 18) ^ old) >> 27) & 0xffffffffu, rot = old >> 59;
+      VU r = ((xs >> rot) | (xs << ((32 - rot) & 31))) & 0xffffffffu;
+      VD x = __builtin_convertvector((VI)r, VD) * (1.0 / 4294967296.0);
+      if (cnt == VW)
+        __builtin_memcpy(&out[(size_t)d * n + k0], &x, sizeof x);
+      else
+        for (int k = 0; k < cnt; k++) out[(size_t)d * n + k0 + k] = x[k];
+    }
+    if (cnt == VW)
+      __builtin_memcpy(&state[k0], &s, sizeof s);
+    else
+      for (int k = 0; k < cnt; k++) state[k0 + k] = s[k];
+  }
+}
