@@ -186,7 +186,7 @@ static bool job_should_stop(job *jb) {
 #ifndef WAVE
 #define WAVE 256
 #endif
-#define RENDER_WAVE_MAX 512
+#define RENDER_WAVE_MAX 1024
 /* The extra values of a path (Stokes Q, U, V or a bundle's pages 1..):
  * Li's slots per path in wave_buf.quv (Li_batch packs nq per path). */
 #define LI_SLOTS        (SCENE_QUV_MAX > SCENE_EXTRA_MAX ? SCENE_QUV_MAX : SCENE_EXTRA_MAX)

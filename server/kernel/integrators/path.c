@@ -659,12 +659,12 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, pag
   const emitter *te = NULL;
   double terms[8];
   spawn_lanes S;
-  int sl[SPAWN_C], ns = 0;
+  int sl[SPAWN_C], ns = 0, nq = 0, nc = 0; /* the counts in registers, not behind the pointers */
   for (int k = 0; k < n; k++) {
     if (fast && verdict[k] != LIGHT_SURFACE) { /* its verdict taken already (light_far) */
-      g[*n_sh] = g[k];
-      *n_sh += verdict[k] == LIGHT_QUERY;
-      *n_clear += verdict[k] == LIGHT_CLEAR;
+      g[nq] = g[k];
+      nq += verdict[k] == LIGHT_QUERY;
+      nc += verdict[k] == LIGHT_CLEAR;
       continue;
     }
     lane *l = &ln[g[k]];
@@ -698,16 +698,17 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, pag
         if (cull && !ray_may_hit(&pb, &r)) {
           l->nee = true;
           l->occ = TRACE_MISS;
-          (*n_clear)++;
+          nc++;
           continue;
         }
         l->sray = r;
       }
       l->nee = true;
-      g[(*n_sh)++] = g[k];
+      g[nq++] = g[k];
     }
   }
   if (te) spawn_between_lanes(te->shape, terms, ln, &S, sl, ns);
+  *n_sh = nq, *n_clear = nc;
 }
 
 /* Lanes g[0..*left) wait for a batched BSDF call: move up to `cap` of
@@ -1078,11 +1079,13 @@ static rsw_status path_create(loader *ld, node *n, object **out) {
   it->max_depth = (int)md;
   it->rr_depth = (int)rr;
   it->pages = true;
-  /* Waves of 512 samples (render.c): on the AVX-512 machine of
-   * docs/performance.md the seed scene took 0.96x and the Cornell box
-   * 0.98x the CPU time of waves of 256 (the per-wave work, grouping by
-   * emitter and BSDF, the packets' tails, over more lanes). */
-  it->wave = 512;
+  /* Waves of 1024 samples (render.c): on the AVX-512 machine of
+   * docs/performance.md 512 took 0.96x (the seed scene) and 0.98x (the
+   * Cornell box) the CPU time of 256 (the per-wave work, grouping by
+   * emitter and BSDF, the packets' tails, over more lanes), and 1024
+   * 0.98x and 0.99x that of 512; 2048 took 1.03x (the seed scene: the
+   * lanes no longer stay in the core's cache). */
+  it->wave = 1024;
   *out = &it->base;
   return RSW_OK;
 }
