@@ -85,25 +85,26 @@ typedef int64_t vi_p __attribute__((vector_size(8 * VW)));
 #define PCG_ATTR    static
 #include "pcg_lanes.h"
 
+/* fn's instance for the render's ISA (fn_avx512, fn_avx2, fn_plain),
+ * called with the arguments. */
+#if defined(__x86_64__) || defined(__i386__)
+#define PCG_CALL(fn, ...)                                                                                    \
+  do {                                                                                                       \
+    switch (rsw_isa_get()) {                                                                                 \
+    case RSW_ISA_AVX512: fn##_avx512(__VA_ARGS__); return;                                                   \
+    case RSW_ISA_AVX2: fn##_avx2(__VA_ARGS__); return;                                                       \
+    default: fn##_plain(__VA_ARGS__); return;                                                                \
+    }                                                                                                        \
+  } while (0)
+#else
+#define PCG_CALL(fn, ...) fn##_plain(__VA_ARGS__)
+#endif
+
 void sampler_pcg_seed_batch(int n, const uint64_t *key, const uint32_t *index, uint64_t *state,
                             uint64_t *inc) {
-#if defined(__x86_64__) || defined(__i386__)
-  switch (rsw_isa_get()) {
-  case RSW_ISA_AVX512: pcg_seed_avx512(n, key, index, state, inc); return;
-  case RSW_ISA_AVX2: pcg_seed_avx2(n, key, index, state, inc); return;
-  default: break;
-  }
-#endif
-  pcg_seed_plain(n, key, index, state, inc);
+  PCG_CALL(pcg_seed, n, key, index, state, inc);
 }
 
 void sampler_pcg_draw_batch(int n, uint64_t *state, const uint64_t *inc, int draws, double *out) {
-#if defined(__x86_64__) || defined(__i386__)
-  switch (rsw_isa_get()) {
-  case RSW_ISA_AVX512: pcg_draw_avx512(n, state, inc, draws, out); return;
-  case RSW_ISA_AVX2: pcg_draw_avx2(n, state, inc, draws, out); return;
-  default: break;
-  }
-#endif
-  pcg_draw_plain(n, state, inc, draws, out);
+  PCG_CALL(pcg_draw, n, state, inc, draws, out);
 }
