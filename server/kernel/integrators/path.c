@@ -711,17 +711,20 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, pag
   *n_sh = nq, *n_clear = nc;
 }
 
-/* Lanes g[0..*left) wait for a batched BSDF call: move up to `cap` of
- * those whose BSDF is g[0]'s into take[] (in lane order), keep the rest in
- * g (in order), and return how many were taken; *b is their BSDF. */
-static int take_bsdf_group(const lane *ln, int *g, int *left, int *take, int cap, const bsdf **b) {
-  *b = ln[g[0]].si.shape->bsdf;
+/* Lanes g[0..*left), of BSDFs gb[], wait for batched BSDF calls: move
+ * all of those whose BSDF is gb[0] into take[] (in lane order), keep the
+ * rest in g and gb (in order), and return how many were taken; *b is
+ * their BSDF. The BSDFs from gb, not the lanes: a wave's every group is
+ * one pass over a dense array (a scan of the lanes per call of 64 read
+ * each lane's line again and again). Without a branch on the BSDF. */
+static int take_bsdf_group(int *g, const bsdf **gb, int *left, int *take, const bsdf **b) {
+  *b = gb[0];
   int m = 0, rest = 0;
   for (int k = 0; k < *left; k++) {
-    if (m < cap && ln[g[k]].si.shape->bsdf == *b)
-      take[m++] = g[k];
-    else
-      g[rest++] = g[k];
+    bool on = gb[k] == *b;
+    take[m] = g[rest] = g[k];
+    gb[rest] = gb[k];
+    m += on, rest += !on;
   }
   *left = rest;
   return m;
@@ -762,7 +765,7 @@ static void shade_light(const scene *sc, lane *l, double *quv, pol_lane *pl, pag
  * the order its group puts it in changes nothing. quv (qs values a lane),
  * pol: as wave_run's. g: n ints of scratch. */
 static void wave_eval_bsdfs(const scene *sc, lane *ln, page_lane *pgs, const int *idx, int n, int *g,
-                            double *quv, int qs, pol_lane *pol) {
+                            const bsdf **gb, int *take, double *quv, int qs, pol_lane *pol) {
   enum {
     C = 64
   };
@@ -779,6 +782,7 @@ static void wave_eval_bsdfs(const scene *sc, lane *ln, page_lane *pgs, const int
       l->nf = f[0];
       for (int p = 1; p < sc->pages; p++) pgs[idx[k]].nf[p - 1] = f[p];
     } else if (b->ops->eval_pdf_batch) {
+      gb[left] = b;
       g[left++] = idx[k];
       continue;
     } else {
@@ -790,22 +794,24 @@ static void wave_eval_bsdfs(const scene *sc, lane *ln, page_lane *pgs, const int
   }
   while (left > 0) {
     const bsdf *b;
-    const surface_interaction *si[C];
-    vec3 wo[C];
-    color f[C];
-    double pdf[C];
-    int take[C];
-    int m = take_bsdf_group(ln, g, &left, take, C, &b);
-    for (int k = 0; k < m; k++) {
-      si[k] = &ln[take[k]].si;
-      wo[k] = ln[take[k]].nwo;
-    }
-    b->ops->eval_pdf_batch(b, m, si, wo, f, pdf);
-    for (int k = 0; k < m; k++) {
-      int i = take[k];
-      ln[i].nf = f[k];
-      ln[i].npdf = pdf[k];
-      shade_light(sc, &ln[i], quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, NULL);
+    int mb = take_bsdf_group(g, gb, &left, take, &b);
+    for (int j0 = 0; j0 < mb; j0 += C) {
+      const int m = mb - j0 < C ? mb - j0 : C, *t = take + j0;
+      const surface_interaction *si[C];
+      vec3 wo[C];
+      color f[C];
+      double pdf[C];
+      for (int k = 0; k < m; k++) {
+        si[k] = &ln[t[k]].si;
+        wo[k] = ln[t[k]].nwo;
+      }
+      b->ops->eval_pdf_batch(b, m, si, wo, f, pdf);
+      for (int k = 0; k < m; k++) {
+        int i = t[k];
+        ln[i].nf = f[k];
+        ln[i].npdf = pdf[k];
+        shade_light(sc, &ln[i], quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, NULL);
+      }
     }
   }
 }
@@ -816,7 +822,8 @@ static void wave_eval_bsdfs(const scene *sc, lane *ln, page_lane *pgs, const int
  * change a lane's value (bsdf_ops.sample_batch). A bundle of pages
  * samples lane by lane for every page (integrators/pages.h). g: n ints of
  * scratch. */
-static void wave_sample_bsdfs(const scene *sc, lane *ln, page_lane *pgs, const int *idx, int n, int *g) {
+static void wave_sample_bsdfs(const scene *sc, lane *ln, page_lane *pgs, const int *idx, int n, int *g,
+                              const bsdf **gb, int *take) {
   enum {
     C = 64
   };
@@ -835,28 +842,30 @@ static void wave_sample_bsdfs(const scene *sc, lane *ln, page_lane *pgs, const i
     lane *l = &ln[idx[k]];
     const bsdf *b = l->si.shape->bsdf;
     if (b->ops->sample_batch)
-      g[left++] = idx[k];
+      gb[left] = b, g[left++] = idx[k];
     else
       l->weight = b->ops->sample(b, &l->si, l->u1, l->u2, &l->bs);
   }
   while (left > 0) {
     const bsdf *b;
-    const surface_interaction *si[C];
-    double u1[C];
-    vec2 u2[C];
-    bsdf_sample bs[C];
-    color w[C];
-    int take[C];
-    int m = take_bsdf_group(ln, g, &left, take, C, &b);
-    for (int k = 0; k < m; k++) {
-      si[k] = &ln[take[k]].si;
-      u1[k] = ln[take[k]].u1;
-      u2[k] = ln[take[k]].u2;
-    }
-    b->ops->sample_batch(b, m, si, u1, u2, bs, w);
-    for (int k = 0; k < m; k++) {
-      ln[take[k]].bs = bs[k];
-      ln[take[k]].weight = w[k];
+    int mb = take_bsdf_group(g, gb, &left, take, &b);
+    for (int j0 = 0; j0 < mb; j0 += C) {
+      const int m = mb - j0 < C ? mb - j0 : C, *t = take + j0;
+      const surface_interaction *si[C];
+      double u1[C];
+      vec2 u2[C];
+      bsdf_sample bs[C];
+      color w[C];
+      for (int k = 0; k < m; k++) {
+        si[k] = &ln[t[k]].si;
+        u1[k] = ln[t[k]].u1;
+        u2[k] = ln[t[k]].u2;
+      }
+      b->ops->sample_batch(b, m, si, u1, u2, bs, w);
+      for (int k = 0; k < m; k++) {
+        ln[t[k]].bs = bs[k];
+        ln[t[k]].weight = w[k];
+      }
     }
   }
 }
@@ -908,7 +917,8 @@ typedef struct wave_scratch {
   lane *ln;
   pol_lane *pol; /* the polarized variants' payload, per lane (else NULL) */
   page_lane *pg; /* a bundle of pages: pages 1.., per lane (else NULL) */
-  int *idx, *sh, *ek, *ord, *cont;
+  int *idx, *sh, *ek, *ord, *cont, *take;
+  const bsdf **gb; /* the BSDFs of lanes waiting for a batch (take_bsdf_group) */
   double *d1;
   vec2 *d2;
 } wave_scratch;
@@ -980,7 +990,7 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
     stats->shadow_rays += (uint64_t)n_clear;
     if (n_sh) wave_occluded(sc, ln, sh, n_sh, stats, timed);
     /* Each lane's light sample. */
-    wave_eval_bsdfs(sc, ln, pgs, idx, live, sh, quv, qs, pol);
+    wave_eval_bsdfs(sc, ln, pgs, idx, live, sh, ws->gb, ws->take, quv, qs, pol);
     for (int k = 0; k < n_cont; k++) idx[k] = cont[k];
     live = n_cont;
     /* The BSDF samples' numbers, lobe then direction, for every lane. */
@@ -991,7 +1001,7 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
         ln[idx[k]].u2 = ws->d2[k];
       }
     }
-    wave_sample_bsdfs(sc, ln, pgs, idx, live, sh);
+    wave_sample_bsdfs(sc, ln, pgs, idx, live, sh, ws->gb, ws->take);
     next = 0;
     for (int k = 0; k < live; k++) { /* whether a BSDF sample failed is unpredictable: no branch */
       int i = idx[k];
@@ -1013,21 +1023,24 @@ static bool path_Li_batch(const integrator *it, const scene *sc, sampler_state *
                           render_stats *stats, color *L, double *quv) {
   if (n <= 0) return true;
   wave_scratch ws = {.ln = malloc((size_t)n * sizeof *ws.ln),
-                     .idx = malloc(5 * (size_t)n * sizeof *ws.idx),
+                     .idx = malloc(6 * (size_t)n * sizeof *ws.idx),
+                     .gb = malloc((size_t)n * sizeof *ws.gb),
                      .d1 = malloc((size_t)n * sizeof *ws.d1),
                      .d2 = malloc((size_t)n * sizeof *ws.d2),
                      .pol = sc->polarized ? pol_alloc(n, pol_channels(sc)) : NULL,
                      .pg = sc->pages > 1 ? malloc((size_t)n * sizeof *ws.pg) : NULL};
-  bool ok = ws.ln && ws.idx && ws.d1 && ws.d2 && (ws.pol || !sc->polarized) && (ws.pg || sc->pages <= 1);
+  bool ok = ws.ln && ws.idx && ws.gb && ws.d1 && ws.d2 && (ws.pol || !sc->polarized) && (ws.pg || sc->pages <= 1);
   if (ok) {
     ws.sh = ws.idx + n;
     ws.ek = ws.idx + 2 * (size_t)n;
     ws.ord = ws.idx + 3 * (size_t)n;
     ws.cont = ws.idx + 4 * (size_t)n;
+    ws.take = ws.idx + 5 * (size_t)n;
     wave_run(it, sc, st, rays, n, stats, L, quv, &ws);
   }
   free(ws.ln);
   free(ws.idx);
+  free(ws.gb);
   free(ws.d1);
   free(ws.d2);
   free(ws.pg);
@@ -1038,7 +1051,8 @@ static bool path_Li_batch(const integrator *it, const scene *sc, sampler_state *
 static color path_Li(const integrator *it, const scene *sc, sampler_state *st, ray3 ray, render_stats *stats,
                      double *quv) {
   lane ln;
-  int idx[5];
+  int idx[6];
+  const bsdf *gb[1];
   double d1[1];
   vec2 d2[1];
   mueller pm[3];
@@ -1050,6 +1064,8 @@ static color path_Li(const integrator *it, const scene *sc, sampler_state *st, r
                      .ek = idx + 2,
                      .ord = idx + 3,
                      .cont = idx + 4,
+                     .take = idx + 5,
+                     .gb = gb,
                      .d1 = d1,
                      .d2 = d2,
                      .pol = sc->polarized ? &pl : NULL,
