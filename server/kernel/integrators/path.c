@@ -730,6 +730,28 @@ static int take_bsdf_group(int *g, const bsdf **gb, int *left, int *take, const 
   return m;
 }
 
+/* The batched BSDF calls of the lanes waiting in g, gb (take_bsdf_group;
+ * take: as many ints of scratch): each call's BSDF *b and lanes t[0..*m),
+ * at most BSDF_BATCH of them. False: none left. */
+enum {
+  BSDF_BATCH = 64
+};
+typedef struct bsdf_batches {
+  int *g, left, *take, taken, done;
+  const bsdf **gb, *b;
+} bsdf_batches;
+
+static bool next_bsdf_batch(bsdf_batches *q, const bsdf **b, const int **t, int *m) {
+  if (q->done == q->taken) {
+    if (q->left == 0) return false;
+    q->taken = take_bsdf_group(q->g, q->gb, &q->left, q->take, &q->b), q->done = 0;
+  }
+  *b = q->b, *t = q->take + q->done;
+  *m = q->taken - q->done < BSDF_BATCH ? q->taken - q->done : BSDF_BATCH;
+  q->done += *m;
+  return true;
+}
+
 /* The second half of lane l's vertex, first part: the light sample's
  * contribution if its shadow ray was clear (its BSDF value and pdf from
  * wave_eval_bsdfs, which calls it). The BSDF sample's random numbers are drawn next, for
@@ -767,7 +789,7 @@ static void shade_light(const scene *sc, lane *l, double *quv, pol_lane *pl, pag
 static void wave_eval_bsdfs(const scene *sc, lane *ln, page_lane *pgs, const int *idx, int n, int *g,
                             const bsdf **gb, int *take, double *quv, int qs, pol_lane *pol) {
   enum {
-    C = 64
+    C = BSDF_BATCH
   };
   int left = 0;
   for (int k = 0; k < n; k++) {
@@ -792,26 +814,22 @@ static void wave_eval_bsdfs(const scene *sc, lane *ln, page_lane *pgs, const int
     int i = idx[k];
     shade_light(sc, l, quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, pgs ? &pgs[i] : NULL);
   }
-  while (left > 0) {
-    const bsdf *b;
-    int mb = take_bsdf_group(g, gb, &left, take, &b);
-    for (int j0 = 0; j0 < mb; j0 += C) {
-      const int m = mb - j0 < C ? mb - j0 : C, *t = take + j0;
-      const surface_interaction *si[C];
-      vec3 wo[C];
-      color f[C];
-      double pdf[C];
-      for (int k = 0; k < m; k++) {
-        si[k] = &ln[t[k]].si;
-        wo[k] = ln[t[k]].nwo;
-      }
-      b->ops->eval_pdf_batch(b, m, si, wo, f, pdf);
-      for (int k = 0; k < m; k++) {
-        int i = t[k];
-        ln[i].nf = f[k];
-        ln[i].npdf = pdf[k];
-        shade_light(sc, &ln[i], quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, NULL);
-      }
+  bsdf_batches q = {.g = g, .gb = gb, .left = left, .take = take};
+  const bsdf *b;
+  const int *t;
+  int m;
+  while (next_bsdf_batch(&q, &b, &t, &m)) {
+    const surface_interaction *si[C];
+    vec3 wo[C];
+    color f[C];
+    double pdf[C];
+    for (int k = 0; k < m; k++) si[k] = &ln[t[k]].si, wo[k] = ln[t[k]].nwo;
+    b->ops->eval_pdf_batch(b, m, si, wo, f, pdf);
+    for (int k = 0; k < m; k++) {
+      int i = t[k];
+      ln[i].nf = f[k];
+      ln[i].npdf = pdf[k];
+      shade_light(sc, &ln[i], quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, NULL);
     }
   }
 }
@@ -825,7 +843,7 @@ static void wave_eval_bsdfs(const scene *sc, lane *ln, page_lane *pgs, const int
 static void wave_sample_bsdfs(const scene *sc, lane *ln, page_lane *pgs, const int *idx, int n, int *g,
                               const bsdf **gb, int *take) {
   enum {
-    C = 64
+    C = BSDF_BATCH
   };
   if (pgs) {
     for (int k = 0; k < n; k++) {
@@ -846,27 +864,19 @@ static void wave_sample_bsdfs(const scene *sc, lane *ln, page_lane *pgs, const i
     else
       l->weight = b->ops->sample(b, &l->si, l->u1, l->u2, &l->bs);
   }
-  while (left > 0) {
-    const bsdf *b;
-    int mb = take_bsdf_group(g, gb, &left, take, &b);
-    for (int j0 = 0; j0 < mb; j0 += C) {
-      const int m = mb - j0 < C ? mb - j0 : C, *t = take + j0;
-      const surface_interaction *si[C];
-      double u1[C];
-      vec2 u2[C];
-      bsdf_sample bs[C];
-      color w[C];
-      for (int k = 0; k < m; k++) {
-        si[k] = &ln[t[k]].si;
-        u1[k] = ln[t[k]].u1;
-        u2[k] = ln[t[k]].u2;
-      }
-      b->ops->sample_batch(b, m, si, u1, u2, bs, w);
-      for (int k = 0; k < m; k++) {
-        ln[t[k]].bs = bs[k];
-        ln[t[k]].weight = w[k];
-      }
-    }
+  bsdf_batches q = {.g = g, .gb = gb, .left = left, .take = take};
+  const bsdf *b;
+  const int *t;
+  int m;
+  while (next_bsdf_batch(&q, &b, &t, &m)) {
+    const surface_interaction *si[C];
+    double u1[C];
+    vec2 u2[C];
+    bsdf_sample bs[C];
+    color w[C];
+    for (int k = 0; k < m; k++) si[k] = &ln[t[k]].si, u1[k] = ln[t[k]].u1, u2[k] = ln[t[k]].u2;
+    b->ops->sample_batch(b, m, si, u1, u2, bs, w);
+    for (int k = 0; k < m; k++) ln[t[k]].bs = bs[k], ln[t[k]].weight = w[k];
   }
 }
 
@@ -1029,7 +1039,8 @@ static bool path_Li_batch(const integrator *it, const scene *sc, sampler_state *
                      .d2 = malloc((size_t)n * sizeof *ws.d2),
                      .pol = sc->polarized ? pol_alloc(n, pol_channels(sc)) : NULL,
                      .pg = sc->pages > 1 ? malloc((size_t)n * sizeof *ws.pg) : NULL};
-  bool ok = ws.ln && ws.idx && ws.gb && ws.d1 && ws.d2 && (ws.pol || !sc->polarized) && (ws.pg || sc->pages <= 1);
+  bool ok =
+      ws.ln && ws.idx && ws.gb && ws.d1 && ws.d2 && (ws.pol || !sc->polarized) && (ws.pg || sc->pages <= 1);
   if (ok) {
     ws.sh = ws.idx + n;
     ws.ek = ws.idx + 2 * (size_t)n;
