@@ -40,11 +40,22 @@ PCG_ATTR void PCG_SEED_FN(int n, const uint64_t *key, const uint32_t *index, uin
       for (int h = 0; h < PCG_IL; h++)
         v1[h] += ((v0[h] << 4) + 0xad90777du) ^ (v0[h] + sum) ^ ((v0[h] >> 5) + 0x7e95761eu);
     }
-    /* The 64-bit products lane by lane: a scalar multiply is one
-     * instruction, a vector one below AVX-512 several (the seed scene's
-     * seeding took 2.6% of a render with them in the lanes). */
+    /* The 64-bit products lane by lane below AVX-512 (PCG_VMUL 0): a
+     * scalar multiply is one instruction, a vector one there several (the
+     * seed scene's seeding took 2.6% of a render with them in the lanes);
+     * at AVX-512 (one instruction) in the lanes, whole vectors stored. */
     for (int h = 0; h < PCG_IL; h++) {
       VU initstate = (__builtin_convertvector(v1[h], VU) << 32) | __builtin_convertvector(v0[h], VU);
+      if (PCG_VMUL && cnt == PCG_IL * VW) {
+        VU z = kk[h] + ix[h] + 0x9e3779b97f4a7c15ULL; /* mix64 */
+        z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+        z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+        z ^= z >> 31;
+        VU in = (z << 1) | 1u, st = (in + initstate) * PCG32_MULT + in;
+        __builtin_memcpy(&state[k0 + h * VW], &st, sizeof st);
+        __builtin_memcpy(&inc[k0 + h * VW], &in, sizeof in);
+        continue;
+      }
       for (int k = 0; k < VW && h * VW + k < cnt; k++) {
         int j = k0 + h * VW + k;
         uint64_t z = mix64(kk[h][k] + ix[h][k]), in = (z << 1) | 1u;

@@ -36,6 +36,7 @@ typedef uint32_t vu32_2 __attribute__((vector_size(8)));
 #define VI          vi_8
 #define PCG_SEED_FN pcg_seed_avx512
 #define PCG_DRAW_FN pcg_draw_avx512
+#define PCG_VMUL    1
 #define PCG_ATTR    static __attribute__((target("avx512f,avx512vl,avx512dq")))
 #include "pcg_lanes.h"
 #undef VW
@@ -45,6 +46,7 @@ typedef uint32_t vu32_2 __attribute__((vector_size(8)));
 #undef VI
 #undef PCG_SEED_FN
 #undef PCG_DRAW_FN
+#undef PCG_VMUL
 #undef PCG_ATTR
 
 #define VW          4
@@ -54,6 +56,7 @@ typedef uint32_t vu32_2 __attribute__((vector_size(8)));
 #define VI          vi_4
 #define PCG_SEED_FN pcg_seed_avx2
 #define PCG_DRAW_FN pcg_draw_avx2
+#define PCG_VMUL    0
 #define PCG_ATTR    static __attribute__((target("avx2,fma")))
 #include "pcg_lanes.h"
 #undef VW
@@ -63,6 +66,7 @@ typedef uint32_t vu32_2 __attribute__((vector_size(8)));
 #undef VI
 #undef PCG_SEED_FN
 #undef PCG_DRAW_FN
+#undef PCG_VMUL
 #undef PCG_ATTR
 #endif
 
@@ -82,6 +86,7 @@ typedef int64_t vi_p __attribute__((vector_size(8 * VW)));
 #define VI          vi_p
 #define PCG_SEED_FN pcg_seed_plain
 #define PCG_DRAW_FN pcg_draw_plain
+#define PCG_VMUL    0
 #define PCG_ATTR    static
 #include "pcg_lanes.h"
 
