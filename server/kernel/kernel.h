@@ -474,6 +474,10 @@ typedef struct sampler_ops {
   /* next_2d() twice per lane, in one pass (a camera sample's film and
    * aperture numbers): out1[k], out2[k]. */
   void (*next_2d_2d_batch)(sampler_state *st, const int *idx, int n, vec2 *out1, vec2 *out2);
+  /* start_batch() then next_2d_2d_batch() of st[0..n) (idx NULL), in one
+   * pass (a wave's camera samples). */
+  void (*start_2d_2d_batch)(const sampler *s, sampler_state *st, int n, uint64_t seed, const uint64_t *pixel,
+                            const uint32_t *sample_index, uint32_t spp, vec2 *out1, vec2 *out2);
 } sampler_ops;
 struct sampler {
   object base;

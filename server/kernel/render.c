@@ -90,14 +90,18 @@ static void splat_filter(const job *jb, tile_buf *tb, double px, double py, colo
  * wavelengths (three of page 0, then the other pages'). */
 #define SPLAT_X_MAX (FILM_MAX_CHANNELS > 3 + SCENE_EXTRA_MAX ? FILM_MAX_CHANNELS : 3 + SCENE_EXTRA_MAX)
 
+/* The box filter's pixel for a sample at (px, py): its accumulator. */
+static inline double *box_pixel(const job *jb, tile_buf *tb, double px, double py) {
+  int ix = (int)px, iy = (int)py;
+  if (ix >= jb->W) ix = jb->W - 1;
+  if (iy >= jb->H) iy = jb->H - 1;
+  return &tb->acc[(size_t)jb->stride * ((size_t)(iy - tb->y0) * tb->w + (ix - tb->x0))];
+}
+
 /* The box filter inline (every sample of most renders), others out of line. */
 static inline void splat(const job *jb, tile_buf *tb, double px, double py, color v, const double *quv) {
-  int S = jb->stride;
   if (jb->box) {
-    int ix = (int)px, iy = (int)py;
-    if (ix >= jb->W) ix = jb->W - 1;
-    if (iy >= jb->H) iy = jb->H - 1;
-    double *a = &tb->acc[(size_t)S * ((size_t)(iy - tb->y0) * tb->w + (ix - tb->x0))];
+    double *a = box_pixel(jb, tb, px, py);
     if (jb->m_ch) {
       /* The sample as develop sees it (Y, R G B or S0..S3), then its
        * shifted first and second moments (Eradiate's `moment` integrator
@@ -182,7 +186,7 @@ static bool job_should_stop(job *jb) {
 #ifndef WAVE
 #define WAVE 256
 #endif
-#define RENDER_WAVE_MAX 512
+#define RENDER_WAVE_MAX 1024
 /* The extra values of a path (Stokes Q, U, V or a bundle's pages 1..):
  * Li's slots per path in wave_buf.quv (Li_batch packs nq per path). */
 #define LI_SLOTS        (SCENE_QUV_MAX > SCENE_EXTRA_MAX ? SCENE_QUV_MAX : SCENE_EXTRA_MAX)
@@ -190,9 +194,9 @@ static bool job_should_stop(job *jb) {
 #error "WAVE exceeds RENDER_WAVE_MAX"
 #endif
 
-/* One sample of a wave: where it lands and its camera ray. */
+/* One sample of a wave: where it lands (its weight: wave_buf.w). */
 typedef struct wave_sample {
-  double px, py, w;
+  double px, py;
 } wave_sample;
 
 typedef struct wave_buf {
@@ -203,7 +207,7 @@ typedef struct wave_buf {
   double quv[LI_SLOTS * RENDER_WAVE_MAX];
   int live[RENDER_WAVE_MAX];
   vec2 film_u[RENDER_WAVE_MAX], aperture_u[RENDER_WAVE_MAX];
-  double w[RENDER_WAVE_MAX];
+  double w[RENDER_WAVE_MAX]; /* the camera rays' weights */
   /* Which sample each slot takes (render_tile), for wave_start. */
   uint64_t pixel[RENDER_WAVE_MAX];
   uint32_t index[RENDER_WAVE_MAX];
@@ -217,8 +221,8 @@ typedef struct wave_buf {
 static void wave_start(job *jb, wave_buf *wb, int n) {
   const sampler *smp = jb->se->sampler;
   const sensor *se = jb->se;
-  sampler_start_batch(smp, wb->st, n, jb->opts->seed, wb->pixel, wb->index, jb->spp);
-  sampler_next_2d_2d_batch(smp, wb->st, NULL, n, wb->film_u, wb->aperture_u);
+  sampler_start_2d_2d_batch(smp, wb->st, n, jb->opts->seed, wb->pixel, wb->index, jb->spp, wb->film_u,
+                            wb->aperture_u);
   for (int i = 0; i < n; i++) {
     double px = wb->ix[i] + wb->film_u[i].x, py = wb->iy[i] + wb->film_u[i].y;
     wb->ws[i].px = px;
@@ -227,7 +231,7 @@ static void wave_start(job *jb, wave_buf *wb, int n) {
   }
   if (!se->ops->sample_ray_batch)
     for (int i = 0; i < n; i++)
-      wb->ws[i].w = se->ops->sample_ray(se, wb->film_u[i], wb->aperture_u[i], &wb->ray[i]);
+      wb->w[i] = se->ops->sample_ray(se, wb->film_u[i], wb->aperture_u[i], &wb->ray[i]);
 }
 
 /* The film's Stokes basis (docs/polarization.md#stokes-conventions) for
@@ -267,13 +271,11 @@ static void film_stokes_rotate(const sensor *se, vec3 d, double *q, int nq) {
 static bool wave_flush(job *jb, tile_buf *tb, wave_buf *wb, int n, render_stats *rs, uint64_t *invalid) {
   const integrator *it = jb->sc->integrator;
   const sensor *se = jb->se;
-  if (se->ops->sample_ray_batch) { /* the wave's camera rays together (vectorised, core/isa.h) */
+  if (se->ops->sample_ray_batch) /* the wave's camera rays together (vectorised, core/isa.h) */
     se->ops->sample_ray_batch(se, n, wb->film_u, wb->aperture_u, wb->ray, wb->w);
-    for (int i = 0; i < n; i++) wb->ws[i].w = wb->w[i];
-  }
   int m = 0;
   for (int i = 0; i < n; i++) /* compacted in place: live sample k's state and ray move to slot k */
-    if (wb->ws[i].w != 0) {
+    if (wb->w[i] != 0) {
       wb->live[m] = i;
       if (m != i) {
         wb->st[m] = wb->st[i];
@@ -292,19 +294,25 @@ static bool wave_flush(job *jb, tile_buf *tb, wave_buf *wb, int n, render_stats 
       wb->L[k] = it->ops->Li(it, jb->sc, &wb->st[k], wb->ray[k], rs, quv ? q : NULL);
     }
   }
+  /* The box filter without moments or extra values (most renders): a run
+   * of samples of one pixel adds into registers, stored when the pixel
+   * changes; splat()'s additions in its order, so the same sums. */
+  const bool run = jb->box && !jb->m_ch && !jb->nq;
+  double *ra = NULL, r0 = 0, r1 = 0, r2 = 0, r3 = 0;
   int k = 0;
   for (int i = 0; i < n; i++) {
     const wave_sample *s = &wb->ws[i];
+    const double w = wb->w[i];
     color v = col1(0);
     double q[SCENE_QUV_MAX > SCENE_EXTRA_MAX ? SCENE_QUV_MAX : SCENE_EXTRA_MAX];
     if (k < m && wb->live[k] == i) {
-      v = col_scale(wb->L[k], s->w);
+      v = col_scale(wb->L[k], w);
       /* All finite, without a branch each: x * 0 is +-0 for a finite x and
        * NaN for an infinite or NaN one. */
       double z = v.c[0] * 0.0 + v.c[1] * 0.0 + v.c[2] * 0.0;
       if (jb->nq) { /* Li_batch packs nq values per path, Li's slots are LI_SLOTS apart */
         const double *src = &wb->quv[(it->ops->Li_batch ? jb->nq : LI_SLOTS) * k];
-        for (int c = 0; c < jb->nq; c++) q[c] = src[c] * s->w;
+        for (int c = 0; c < jb->nq; c++) q[c] = src[c] * w;
         if (jb->sc->polarized) film_stokes_rotate(se, wb->ray[k].d, q, jb->nq);
         for (int c = 0; c < jb->nq; c++) z += q[c] * 0.0;
       }
@@ -317,8 +325,18 @@ static bool wave_flush(job *jb, tile_buf *tb, wave_buf *wb, int n, render_stats 
     } else {
       for (int c = 0; c < jb->nq; c++) q[c] = 0;
     }
+    if (run) {
+      double *a = box_pixel(jb, tb, s->px, s->py);
+      if (a != ra) {
+        if (ra) ra[0] = r0, ra[1] = r1, ra[2] = r2, ra[3] = r3;
+        ra = a, r0 = a[0], r1 = a[1], r2 = a[2], r3 = a[3];
+      }
+      r0 += v.c[0], r1 += v.c[1], r2 += v.c[2], r3 += 1.0;
+      continue;
+    }
     splat(jb, tb, s->px, s->py, v, q);
   }
+  if (ra) ra[0] = r0, ra[1] = r1, ra[2] = r2, ra[3] = r3;
   return true;
 }
 

@@ -270,7 +270,7 @@ static color page_color(const env_adapter *a, const double *I, vec3 d) {
  * Anything else (another order, more lanes than slots) asks the plugin
  * again. Each page's ask checks and counts its own channels' failures, as
  * when each page asked the plugin. */
-#define MEMO_SLOTS 512 /* >= RENDER_WAVE_MAX: path.c's wave of light samples */
+#define MEMO_SLOTS 1024 /* >= RENDER_WAVE_MAX: path.c's wave of light samples */
 
 enum memo_kind {
   MEMO_EVAL,

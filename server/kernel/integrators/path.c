@@ -124,31 +124,36 @@ static void add_polarization(double *quv, const emitter *e, vec3 d, double scale
  * per path in double, in bounce order. */
 
 typedef struct lane {
+  /* What every bounce reads and writes first (wave_run's start and end
+   * touch these alone): together, so a lane's pass over them touches few
+   * cache lines; the BSDF sample and the previous vertex, which the seed
+   * scene's paths rarely reach, last. */
   ray3 ray;
-  surface_interaction si, prev_si;
   color T, L;
   double eta, prev_pdf;
   bool prev_delta, wrapped;
   int depth;
   trace_result hit;
-  accel_hit h; /* the hit, between the packet queries and the surface data */
   /* Next-event estimation between the shading and the shading's end. */
   bool nee;
   trace_result occ;
+  surface_interaction si;
+  accel_hit h; /* the hit, between the packet queries and the surface data */
   const emitter *ne;
-  direction_sample ds;
-  color value;
   double pe;
-  ray3 sray;
+  color value;
+  direction_sample ds;
   /* The light sample's BSDF value and pdf (wave_eval_bsdfs). */
   vec3 nwo;
   color nf;
   double npdf;
+  ray3 sray;
   /* The BSDF sample: its random numbers, then its result. */
   double u1;
   vec2 u2;
   bsdf_sample bs;
   color weight;
+  surface_interaction prev_si;
 } lane;
 
 /* A bundle of pages (render_ctx.bundle > 3, docs/experiments.md#spectral-bundles):
@@ -546,19 +551,53 @@ void spawn_rays_between_batch(rsw_isa isa, int n, const surface_interaction *con
  * pick, then sample), then the samples grouped by emitter
  * (emitter_ops.sample_direction_batch where the emitter has it), then the
  * shadow rays. A lane whose sample counts zero drops its nee; the lanes
- * that keep it are left in g[0..*n_sh), in order. d1, d2, ek, ord: n
- * entries of scratch each. */
+ * that keep it and whose shadow ray needs a query are left in
+ * g[0..*n_sh), in order; *n_clear counts those whose ray ray_may_hit
+ * culled (occ TRACE_MISS already, no sray). d1, d2, ek, ord: n entries of
+ * scratch each. */
 #define EMITTER_GROUPS WAVE_EMITTER_GROUPS
+
+/* What a lane's light sample asks of the shadow rays (light_far). */
+enum {
+  LIGHT_NONE,    /* the sample counts zero: no shadow ray */
+  LIGHT_CLEAR,   /* its ray cannot meet the scene: clear, not traced */
+  LIGHT_QUERY,   /* its ray l->sray is traced (wave_occluded) */
+  LIGHT_SURFACE, /* towards a surface emitter: left to the spawn pass */
+};
+
+/* Lane l's light sample ds (value v) from an emitter that is not a
+ * surface, outside a periodic boundary: nee, and the shadow ray's
+ * verdict as wave_light_samples' spawn pass and wave_occluded's culling
+ * would give them (the same ray, the same test). */
+static inline int light_far(lane *l, const direction_sample *ds, color v, const pad_box *pb) {
+  l->nee = ds->pdf > 0 && !col_is_black(v);
+  if (!l->nee) return LIGHT_NONE;
+  ray3 r;
+  spawn_ray_to_far(&l->si, ds, &r);
+  if (!ray_may_hit(pb, &r)) {
+    l->occ = TRACE_MISS;
+    return LIGHT_CLEAR;
+  }
+  l->sray = r;
+  return LIGHT_QUERY;
+}
 static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, page_lane *pgs, int *g, int n,
-                               int *n_sh, double *d1, vec2 *d2, int *ek, int *ord) {
+                               int *n_sh, int *n_clear, double *d1, vec2 *d2, int *ek, int *ord) {
   enum {
     C = 64
   };
-  *n_sh = 0;
+  *n_sh = *n_clear = 0;
   if (n == 0) return;
   const sampler *smp = st[g[0]].s;
   sampler_next_1d_2d_batch(smp, st, g, n, d1, d2);
   for (int k = 0; k < n; k++) ek[k] = (int)pick_emitter_index(sc, d1[k]);
+  /* Without pages or a periodic boundary, a lane of an emitter that is not
+   * a surface takes its shadow ray's verdict (light_far) as its sample is
+   * stored, while the lane is in cache; the others, below. verdict[k]:
+   * lane g[k]'s, in ek (free once the lanes are grouped). */
+  const bool cull = !sc->periodic.on, fast = !pgs && cull && sc->n_emitters <= EMITTER_GROUPS;
+  const pad_box pb = pad_box_of(sc, scene_pad(sc));
+  int *verdict = ek;
   /* The lanes grouped by emitter (a counting sort, in lane order within
    * each emitter) for one batched call per emitter and chunk; a lane's
    * sample does not depend on its group. Scenes with many emitters sample
@@ -573,8 +612,10 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, pag
   } else {
     int start[EMITTER_GROUPS + 1];
     wave_group_by_emitter(sc, ek, n, start, ord);
+    for (int k = 0; fast && k < n; k++) verdict[k] = LIGHT_SURFACE;
     for (size_t e_i = 0; e_i < sc->n_emitters; e_i++) {
       const emitter *e = sc->emitters[e_i];
+      const bool far = fast && !((e->flags & EMITTER_SURFACE) && e->shape);
       double pe = pick_probability(sc, e_i); /* every lane's own quotient */
       for (int j0 = start[e_i]; j0 < start[e_i + 1]; j0 += C) {
         int m = start[e_i + 1] - j0 < C ? start[e_i + 1] - j0 : C;
@@ -593,6 +634,7 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, pag
           l->ne = e;
           l->ds = ds[j];
           l->value = val[j];
+          if (far) verdict[ord[j0 + j]] = light_far(l, &ds[j], val[j], &pb);
         }
       }
     }
@@ -617,8 +659,14 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, pag
   const emitter *te = NULL;
   double terms[8];
   spawn_lanes S;
-  int sl[SPAWN_C], ns = 0;
+  int sl[SPAWN_C], ns = 0, nq = 0, nc = 0; /* the counts in registers, not behind the pointers */
   for (int k = 0; k < n; k++) {
+    if (fast && verdict[k] != LIGHT_SURFACE) { /* its verdict taken already (light_far) */
+      g[nq] = g[k];
+      nq += verdict[k] == LIGHT_QUERY;
+      nc += verdict[k] == LIGHT_CLEAR;
+      continue;
+    }
     lane *l = &ln[g[k]];
     const emitter *e = l->ne;
     l->nee = false;
@@ -642,83 +690,71 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, pag
         sl[ns++] = g[k];
         if (ns == SPAWN_C) spawn_between_lanes(ls, terms, ln, &S, sl, ns), ns = 0;
       } else {
-        spawn_ray_to_far(&l->si, &l->ds, &l->sray);
+        /* wave_occluded's first test here, while the lane is in cache: a
+         * ray that cannot meet the scene (a sun's, leaving an
+         * Earth-observation scene) is clear without being stored. */
+        ray3 r;
+        spawn_ray_to_far(&l->si, &l->ds, &r);
+        if (cull && !ray_may_hit(&pb, &r)) {
+          l->nee = true;
+          l->occ = TRACE_MISS;
+          nc++;
+          continue;
+        }
+        l->sray = r;
       }
       l->nee = true;
-      g[(*n_sh)++] = g[k];
+      g[nq++] = g[k];
     }
   }
   if (te) spawn_between_lanes(te->shape, terms, ln, &S, sl, ns);
+  *n_sh = nq, *n_clear = nc;
 }
 
-/* Lanes g[0..*left) wait for a batched BSDF call: move up to `cap` of
- * those whose BSDF is g[0]'s into take[] (in lane order), keep the rest in
- * g (in order), and return how many were taken; *b is their BSDF. */
-static int take_bsdf_group(const lane *ln, int *g, int *left, int *take, int cap, const bsdf **b) {
-  *b = ln[g[0]].si.shape->bsdf;
+/* Lanes g[0..*left), of BSDFs gb[], wait for batched BSDF calls: move
+ * all of those whose BSDF is gb[0] into take[] (in lane order), keep the
+ * rest in g and gb (in order), and return how many were taken; *b is
+ * their BSDF. The BSDFs from gb, not the lanes: a wave's every group is
+ * one pass over a dense array (a scan of the lanes per call of 64 read
+ * each lane's line again and again). Without a branch on the BSDF. */
+static int take_bsdf_group(int *g, const bsdf **gb, int *left, int *take, const bsdf **b) {
+  *b = gb[0];
   int m = 0, rest = 0;
   for (int k = 0; k < *left; k++) {
-    if (m < cap && ln[g[k]].si.shape->bsdf == *b)
-      take[m++] = g[k];
-    else
-      g[rest++] = g[k];
+    bool on = gb[k] == *b;
+    take[m] = g[rest] = g[k];
+    gb[rest] = gb[k];
+    m += on, rest += !on;
   }
   *left = rest;
   return m;
 }
 
-/* The light samples of lanes idx[0..n) whose shadow ray was clear: the
- * BSDF's value and pdf towards each (l->nf, l->npdf), grouped by BSDF
- * through bsdf_ops.eval_pdf_batch where a BSDF has it, else per lane (a
- * bundle of pages: lane by lane, every page's value and the pages' mean
- * pdf). A lane's values depend on its own state only. g: n ints of
- * scratch. */
-static void wave_eval_bsdfs(const scene *sc, lane *ln, page_lane *pgs, const int *idx, int n, int *g) {
-  enum {
-    C = 64
-  };
-  int left = 0;
-  for (int k = 0; k < n; k++) {
-    lane *l = &ln[idx[k]];
-    if (!(l->nee && l->occ == TRACE_MISS)) continue;
-    const surface_interaction *si = &l->si;
-    const bsdf *b = si->shape->bsdf;
-    l->nwo = frame_to_local(&si->sh, l->ds.d);
-    if (pgs) { /* every page's value, and the pages' mean pdf (one-sample MIS), lane by lane */
-      color f[RENDER_MAX_PAGES];
-      l->npdf = bsdf_eval_pages(b, si, sc->pages, l->nwo, !l->ds.delta, f);
-      l->nf = f[0];
-      for (int p = 1; p < sc->pages; p++) pgs[idx[k]].nf[p - 1] = f[p];
-    } else if (b->ops->eval_pdf_batch) {
-      g[left++] = idx[k];
-    } else {
-      l->nf = b->ops->eval(b, si, l->nwo);
-      l->npdf = col_is_black(l->nf) || l->ds.delta ? 0.0 : b->ops->pdf(b, si, l->nwo);
-    }
+/* The batched BSDF calls of the lanes waiting in g, gb (take_bsdf_group;
+ * take: as many ints of scratch): each call's BSDF *b and lanes t[0..*m),
+ * at most BSDF_BATCH of them. False: none left. */
+enum {
+  BSDF_BATCH = 64
+};
+typedef struct bsdf_batches {
+  int *g, left, *take, taken, done;
+  const bsdf **gb, *b;
+} bsdf_batches;
+
+static bool next_bsdf_batch(bsdf_batches *q, const bsdf **b, const int **t, int *m) {
+  if (q->done == q->taken) {
+    if (q->left == 0) return false;
+    q->taken = take_bsdf_group(q->g, q->gb, &q->left, q->take, &q->b), q->done = 0;
   }
-  while (left > 0) {
-    const bsdf *b;
-    const surface_interaction *si[C];
-    vec3 wo[C];
-    color f[C];
-    double pdf[C];
-    int take[C];
-    int m = take_bsdf_group(ln, g, &left, take, C, &b);
-    for (int k = 0; k < m; k++) {
-      si[k] = &ln[take[k]].si;
-      wo[k] = ln[take[k]].nwo;
-    }
-    b->ops->eval_pdf_batch(b, m, si, wo, f, pdf);
-    for (int k = 0; k < m; k++) {
-      ln[take[k]].nf = f[k];
-      ln[take[k]].npdf = pdf[k];
-    }
-  }
+  *b = q->b, *t = q->take + q->done;
+  *m = q->taken - q->done < BSDF_BATCH ? q->taken - q->done : BSDF_BATCH;
+  q->done += *m;
+  return true;
 }
 
 /* The second half of lane l's vertex, first part: the light sample's
  * contribution if its shadow ray was clear (its BSDF value and pdf from
- * wave_eval_bsdfs). The BSDF sample's random numbers are drawn next, for
+ * wave_eval_bsdfs, which calls it). The BSDF sample's random numbers are drawn next, for
  * the lanes together (wave_run), in the one-path order; the sample itself
  * is taken by wave_sample_bsdfs. */
 static void shade_light(const scene *sc, lane *l, double *quv, pol_lane *pl, page_lane *pg) {
@@ -742,15 +778,72 @@ static void shade_light(const scene *sc, lane *l, double *quv, pol_lane *pl, pag
   }
 }
 
+/* The light samples of lanes idx[0..n) whose shadow ray was clear: the
+ * BSDF's value and pdf towards each (l->nf, l->npdf), grouped by BSDF
+ * through bsdf_ops.eval_pdf_batch where a BSDF has it, else per lane (a
+ * bundle of pages: lane by lane, every page's value and the pages' mean
+ * pdf), and at once the sample's contribution (shade_light), while the
+ * lane is in cache. A lane's values depend on its own state only, so
+ * the order its group puts it in changes nothing. quv (qs values a lane),
+ * pol: as wave_run's. g: n ints of scratch. */
+static void wave_eval_bsdfs(const scene *sc, lane *ln, page_lane *pgs, const int *idx, int n, int *g,
+                            const bsdf **gb, int *take, double *quv, int qs, pol_lane *pol) {
+  enum {
+    C = BSDF_BATCH
+  };
+  int left = 0;
+  for (int k = 0; k < n; k++) {
+    lane *l = &ln[idx[k]];
+    if (!(l->nee && l->occ == TRACE_MISS)) continue;
+    const surface_interaction *si = &l->si;
+    const bsdf *b = si->shape->bsdf;
+    l->nwo = frame_to_local(&si->sh, l->ds.d);
+    if (pgs) { /* every page's value, and the pages' mean pdf (one-sample MIS), lane by lane */
+      color f[RENDER_MAX_PAGES];
+      l->npdf = bsdf_eval_pages(b, si, sc->pages, l->nwo, !l->ds.delta, f);
+      l->nf = f[0];
+      for (int p = 1; p < sc->pages; p++) pgs[idx[k]].nf[p - 1] = f[p];
+    } else if (b->ops->eval_pdf_batch) {
+      gb[left] = b;
+      g[left++] = idx[k];
+      continue;
+    } else {
+      l->nf = b->ops->eval(b, si, l->nwo);
+      l->npdf = col_is_black(l->nf) || l->ds.delta ? 0.0 : b->ops->pdf(b, si, l->nwo);
+    }
+    int i = idx[k];
+    shade_light(sc, l, quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, pgs ? &pgs[i] : NULL);
+  }
+  bsdf_batches q = {.g = g, .gb = gb, .left = left, .take = take};
+  const bsdf *b;
+  const int *t;
+  int m;
+  while (next_bsdf_batch(&q, &b, &t, &m)) {
+    const surface_interaction *si[C];
+    vec3 wo[C];
+    color f[C];
+    double pdf[C];
+    for (int k = 0; k < m; k++) si[k] = &ln[t[k]].si, wo[k] = ln[t[k]].nwo;
+    b->ops->eval_pdf_batch(b, m, si, wo, f, pdf);
+    for (int k = 0; k < m; k++) {
+      int i = t[k];
+      ln[i].nf = f[k];
+      ln[i].npdf = pdf[k];
+      shade_light(sc, &ln[i], quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, NULL);
+    }
+  }
+}
+
 /* BSDF samples of the lanes idx[0..n): lanes whose BSDF has a batched
  * sample op are grouped by BSDF (one call per BSDF, vectorised at the
  * render's ISA); the others sample one by one. The grouping does not
  * change a lane's value (bsdf_ops.sample_batch). A bundle of pages
  * samples lane by lane for every page (integrators/pages.h). g: n ints of
  * scratch. */
-static void wave_sample_bsdfs(const scene *sc, lane *ln, page_lane *pgs, const int *idx, int n, int *g) {
+static void wave_sample_bsdfs(const scene *sc, lane *ln, page_lane *pgs, const int *idx, int n, int *g,
+                              const bsdf **gb, int *take) {
   enum {
-    C = 64
+    C = BSDF_BATCH
   };
   if (pgs) {
     for (int k = 0; k < n; k++) {
@@ -767,29 +860,23 @@ static void wave_sample_bsdfs(const scene *sc, lane *ln, page_lane *pgs, const i
     lane *l = &ln[idx[k]];
     const bsdf *b = l->si.shape->bsdf;
     if (b->ops->sample_batch)
-      g[left++] = idx[k];
+      gb[left] = b, g[left++] = idx[k];
     else
       l->weight = b->ops->sample(b, &l->si, l->u1, l->u2, &l->bs);
   }
-  while (left > 0) {
-    const bsdf *b;
+  bsdf_batches q = {.g = g, .gb = gb, .left = left, .take = take};
+  const bsdf *b;
+  const int *t;
+  int m;
+  while (next_bsdf_batch(&q, &b, &t, &m)) {
     const surface_interaction *si[C];
     double u1[C];
     vec2 u2[C];
     bsdf_sample bs[C];
     color w[C];
-    int take[C];
-    int m = take_bsdf_group(ln, g, &left, take, C, &b);
-    for (int k = 0; k < m; k++) {
-      si[k] = &ln[take[k]].si;
-      u1[k] = ln[take[k]].u1;
-      u2[k] = ln[take[k]].u2;
-    }
+    for (int k = 0; k < m; k++) si[k] = &ln[t[k]].si, u1[k] = ln[t[k]].u1, u2[k] = ln[t[k]].u2;
     b->ops->sample_batch(b, m, si, u1, u2, bs, w);
-    for (int k = 0; k < m; k++) {
-      ln[take[k]].bs = bs[k];
-      ln[take[k]].weight = w[k];
-    }
+    for (int k = 0; k < m; k++) ln[t[k]].bs = bs[k], ln[t[k]].weight = w[k];
   }
 }
 
@@ -840,7 +927,8 @@ typedef struct wave_scratch {
   lane *ln;
   pol_lane *pol; /* the polarized variants' payload, per lane (else NULL) */
   page_lane *pg; /* a bundle of pages: pages 1.., per lane (else NULL) */
-  int *idx, *sh, *ek, *ord;
+  int *idx, *sh, *ek, *ord, *cont, *take;
+  const bsdf **gb; /* the BSDFs of lanes waiting for a batch (take_bsdf_group) */
   double *d1;
   vec2 *d2;
 } wave_scratch;
@@ -851,7 +939,7 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
   lane *ln = ws->ln;
   pol_lane *pol = ws->pol;
   page_lane *pgs = ws->pg;
-  int *idx = ws->idx, *sh = ws->sh;
+  int *idx = ws->idx, *sh = ws->sh, *cont = ws->cont;
   const int qs = scene_extra_stride(sc);
   if (quv)
     for (int i = 0; i < qs * n; i++) quv[i] = 0;
@@ -892,32 +980,29 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
       int i = other[k];
       shade_emit(it, sc, &ln[i], quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, pgs ? &pgs[i] : NULL);
     }
-    int next = 0, n_nee = 0, n_sh = 0;
+    /* The hits' emission, and (in the same pass, while the lane is in
+     * cache) whether the path ends after its light sample: paths whose
+     * continuation cannot meet anything (continuation_escapes) take no
+     * BSDF sample, no roulette, nothing else drawn from their streams
+     * (cont: the others, in order). Not under a periodic boundary, with
+     * an environment, or in the polarized variants (their payload). */
+    int next = 0, n_nee = 0, n_sh = 0, n_clear = 0, n_cont = 0;
     for (int k = 0; k < n_hit; k++) {
       int i = hits[k];
       bool keep =
           shade_emit(it, sc, &ln[i], quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, pgs ? &pgs[i] : NULL);
-      idx[next] = sh[n_nee] = i;
+      idx[next] = sh[n_nee] = cont[n_cont] = i;
       next += keep, n_nee += keep & ln[i].nee;
+      n_cont += keep && !(escape_test && continuation_escapes(sc, &ln[i].si, pad));
     }
     live = next;
-    wave_light_samples(sc, st, ln, pgs, sh, n_nee, &n_sh, ws->d1, ws->d2, ws->ek, ws->ord);
+    wave_light_samples(sc, st, ln, pgs, sh, n_nee, &n_sh, &n_clear, ws->d1, ws->d2, ws->ek, ws->ord);
+    stats->shadow_rays += (uint64_t)n_clear;
     if (n_sh) wave_occluded(sc, ln, sh, n_sh, stats, timed);
-    wave_eval_bsdfs(sc, ln, pgs, idx, live, sh);
-    /* Each lane's light sample, then (in the same pass, while the lane is
-     * in cache) whether its path ends here: paths whose continuation
-     * cannot meet anything (continuation_escapes) take no BSDF sample, no
-     * roulette, nothing else drawn from their streams. Not under a
-     * periodic boundary, with an environment, or in the polarized variants
-     * (their payload). */
-    next = 0;
-    for (int k = 0; k < live; k++) {
-      int i = idx[k];
-      shade_light(sc, &ln[i], quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, pgs ? &pgs[i] : NULL);
-      idx[next] = i;
-      next += !(escape_test && continuation_escapes(sc, &ln[i].si, pad));
-    }
-    live = next;
+    /* Each lane's light sample. */
+    wave_eval_bsdfs(sc, ln, pgs, idx, live, sh, ws->gb, ws->take, quv, qs, pol);
+    for (int k = 0; k < n_cont; k++) idx[k] = cont[k];
+    live = n_cont;
     /* The BSDF samples' numbers, lobe then direction, for every lane. */
     if (live) {
       sampler_next_1d_2d_batch(smp, st, idx, live, ws->d1, ws->d2);
@@ -926,7 +1011,7 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
         ln[idx[k]].u2 = ws->d2[k];
       }
     }
-    wave_sample_bsdfs(sc, ln, pgs, idx, live, sh);
+    wave_sample_bsdfs(sc, ln, pgs, idx, live, sh, ws->gb, ws->take);
     next = 0;
     for (int k = 0; k < live; k++) { /* whether a BSDF sample failed is unpredictable: no branch */
       int i = idx[k];
@@ -948,20 +1033,25 @@ static bool path_Li_batch(const integrator *it, const scene *sc, sampler_state *
                           render_stats *stats, color *L, double *quv) {
   if (n <= 0) return true;
   wave_scratch ws = {.ln = malloc((size_t)n * sizeof *ws.ln),
-                     .idx = malloc(4 * (size_t)n * sizeof *ws.idx),
+                     .idx = malloc(6 * (size_t)n * sizeof *ws.idx),
+                     .gb = malloc((size_t)n * sizeof *ws.gb),
                      .d1 = malloc((size_t)n * sizeof *ws.d1),
                      .d2 = malloc((size_t)n * sizeof *ws.d2),
                      .pol = sc->polarized ? pol_alloc(n, pol_channels(sc)) : NULL,
                      .pg = sc->pages > 1 ? malloc((size_t)n * sizeof *ws.pg) : NULL};
-  bool ok = ws.ln && ws.idx && ws.d1 && ws.d2 && (ws.pol || !sc->polarized) && (ws.pg || sc->pages <= 1);
+  bool ok =
+      ws.ln && ws.idx && ws.gb && ws.d1 && ws.d2 && (ws.pol || !sc->polarized) && (ws.pg || sc->pages <= 1);
   if (ok) {
     ws.sh = ws.idx + n;
     ws.ek = ws.idx + 2 * (size_t)n;
     ws.ord = ws.idx + 3 * (size_t)n;
+    ws.cont = ws.idx + 4 * (size_t)n;
+    ws.take = ws.idx + 5 * (size_t)n;
     wave_run(it, sc, st, rays, n, stats, L, quv, &ws);
   }
   free(ws.ln);
   free(ws.idx);
+  free(ws.gb);
   free(ws.d1);
   free(ws.d2);
   free(ws.pg);
@@ -972,7 +1062,8 @@ static bool path_Li_batch(const integrator *it, const scene *sc, sampler_state *
 static color path_Li(const integrator *it, const scene *sc, sampler_state *st, ray3 ray, render_stats *stats,
                      double *quv) {
   lane ln;
-  int idx[4];
+  int idx[6];
+  const bsdf *gb[1];
   double d1[1];
   vec2 d2[1];
   mueller pm[3];
@@ -983,6 +1074,9 @@ static color path_Li(const integrator *it, const scene *sc, sampler_state *st, r
                      .sh = idx + 1,
                      .ek = idx + 2,
                      .ord = idx + 3,
+                     .cont = idx + 4,
+                     .take = idx + 5,
+                     .gb = gb,
                      .d1 = d1,
                      .d2 = d2,
                      .pol = sc->polarized ? &pl : NULL,
@@ -1012,11 +1106,13 @@ static rsw_status path_create(loader *ld, node *n, object **out) {
   it->max_depth = (int)md;
   it->rr_depth = (int)rr;
   it->pages = true;
-  /* Waves of 512 samples (render.c): on the AVX-512 machine of
-   * docs/performance.md the seed scene took 0.96x and the Cornell box
-   * 0.98x the CPU time of waves of 256 (the per-wave work, grouping by
-   * emitter and BSDF, the packets' tails, over more lanes). */
-  it->wave = 512;
+  /* Waves of 1024 samples (render.c): on the AVX-512 machine of
+   * docs/performance.md 512 took 0.96x (the seed scene) and 0.98x (the
+   * Cornell box) the CPU time of 256 (the per-wave work, grouping by
+   * emitter and BSDF, the packets' tails, over more lanes), and 1024
+   * 0.98x and 0.99x that of 512; 2048 took 1.03x (the seed scene: the
+   * lanes no longer stay in the core's cache). */
+  it->wave = 1024;
   *out = &it->base;
   return RSW_OK;
 }

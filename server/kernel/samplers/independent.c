@@ -26,7 +26,15 @@ static vec2 independent_next_2d(sampler_state *st) {
 
 static void independent_start_batch(const sampler *s, sampler_state *st, int n, uint64_t seed,
                                     const uint64_t *pixel, const uint32_t *sample_index, uint32_t spp) {
-  sampler_seed_streams(s, st, n, seed, pixel, sample_index, spp);
+  sampler_seed_streams(s, st, n, seed, pixel, sample_index, spp, NULL, NULL);
+}
+
+/* start_batch then next_2d_2d_batch (idx NULL), the first four numbers
+ * of each stream drawn as it is seeded, vectorised (sampler_seed_streams). */
+static void independent_start_2d_2d_batch(const sampler *s, sampler_state *st, int n, uint64_t seed,
+                                          const uint64_t *pixel, const uint32_t *sample_index, uint32_t spp,
+                                          vec2 *out1, vec2 *out2) {
+  sampler_seed_streams(s, st, n, seed, pixel, sample_index, spp, out1, out2);
 }
 
 /* The lanes' draws in one loop: each lane's PCG32 step is a serial chain,
@@ -84,6 +92,7 @@ static const sampler_ops independent_ops = {
     .next_2d_batch = independent_next_2d_batch,
     .next_1d_2d_batch = independent_next_1d_2d_batch,
     .next_2d_2d_batch = independent_next_2d_2d_batch,
+    .start_2d_2d_batch = independent_start_2d_2d_batch,
 };
 
 DEFINE_PLUGIN(independent, CLS_SAMPLER, .ops = &independent_ops);

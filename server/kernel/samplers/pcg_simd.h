@@ -11,4 +11,10 @@
 void sampler_pcg_seed_batch(int n, const uint64_t *key, const uint32_t *index, uint64_t *state,
                             uint64_t *inc);
 
+/* For n streams (state[k], inc[k]; pcg_simd.c, vectorised at the render's
+ * ISA, bitwise the scalar code): `draws` numbers of each as core/rng.h's
+ * pcg32_next_double gives them in turn, out[d * n + k], and state[k]
+ * advanced past them. */
+void sampler_pcg_draw_batch(int n, uint64_t *state, const uint64_t *inc, int draws, double *out);
+
 #endif

@@ -58,4 +58,17 @@ static inline void sampler_next_2d_2d_batch(const sampler *s, sampler_state *st,
   sampler_next_2d_batch(s, st, idx, n, out2);
 }
 
+/* sampler_start_batch, then two 2-D numbers per sample (out1[k],
+ * out2[k]): start_2d_2d_batch, or the two calls (the same numbers). */
+static inline void sampler_start_2d_2d_batch(const sampler *s, sampler_state *st, int n, uint64_t seed,
+                                             const uint64_t *pixel, const uint32_t *sample_index,
+                                             uint32_t spp, vec2 *out1, vec2 *out2) {
+  if (s->ops->start_2d_2d_batch) {
+    s->ops->start_2d_2d_batch(s, st, n, seed, pixel, sample_index, spp, out1, out2);
+    return;
+  }
+  sampler_start_batch(s, st, n, seed, pixel, sample_index, spp);
+  sampler_next_2d_2d_batch(s, st, NULL, n, out1, out2);
+}
+
 #endif

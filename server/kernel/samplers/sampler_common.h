@@ -42,13 +42,17 @@ static inline void sampler_seed_stream(const sampler *s, sampler_state *st, uint
 
 /* start_batch of both samplers: the pixel's key once per run of samples
  * of the same pixel (a wave holds consecutive samples of few pixels), the
- * streams seeded together. */
+ * streams seeded together. out1, out2 (NULL: none): the independent
+ * sampler's first two next_2d() of each stream, out1[k] then out2[k],
+ * drawn while the streams are at hand (the state left past them). */
 static inline void sampler_seed_streams(const sampler *s, sampler_state *st, int n, uint64_t seed,
-                                        const uint64_t *pixel, const uint32_t *sample_index, uint32_t spp) {
+                                        const uint64_t *pixel, const uint32_t *sample_index, uint32_t spp,
+                                        vec2 *out1, vec2 *out2) {
   enum {
     C = 64
   };
   uint64_t key[C], state[C], inc[C], last = 0;
+  double u[4 * C];
   for (int k0 = 0; k0 < n; k0 += C) {
     int m = n - k0 < C ? n - k0 : C;
     for (int k = 0; k < m; k++) {
@@ -57,13 +61,18 @@ static inline void sampler_seed_streams(const sampler *s, sampler_state *st, int
       key[k] = last;
     }
     sampler_pcg_seed_batch(m, key, sample_index + k0, state, inc);
+    if (out1) {
+      sampler_pcg_draw_batch(m, state, inc, 4, u);
+      for (int k = 0; k < m; k++)
+        out1[k0 + k] = v2(u[k], u[m + k]), out2[k0 + k] = v2(u[2 * m + k], u[3 * m + k]);
+    }
     for (int k = 0; k < m; k++) {
       sampler_state *q = &st[k0 + k];
       q->s = s;
       q->pixel_key = key[k];
       q->sample_index = sample_index[k0 + k];
       q->spp = spp;
-      q->dim = 0;
+      q->dim = out1 ? 2 : 0;
       q->rng.state = state[k];
       q->rng.inc = inc[k];
     }

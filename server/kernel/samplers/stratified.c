@@ -87,7 +87,7 @@ static vec2 stratified_next_2d(sampler_state *st) {
 
 static void stratified_start_batch(const sampler *s, sampler_state *st, int n, uint64_t seed,
                                    const uint64_t *pixel, const uint32_t *sample_index, uint32_t spp) {
-  sampler_seed_streams(s, st, n, seed, pixel, sample_index, spp);
+  sampler_seed_streams(s, st, n, seed, pixel, sample_index, spp, NULL, NULL);
 }
 
 /* The batches: each lane's stratum by the vectorised permutation

@@ -282,6 +282,80 @@ static void test_pcg_seed_batch(void) {
   CHECK(bad == 0, "%d seeded lanes differ from pcg32_seed's (or lanes past n written)", bad);
 }
 
+/* sampler_pcg_draw_batch (samplers/pcg_simd.h) draws, for every stream,
+ * the numbers of core/rng.h's pcg32_next_double in turn and leaves the
+ * stream past them, at every ISA, for 1 to 4 draws and every count from 1
+ * to 70 (whole vectors and every kind of tail); nothing past n written. */
+static void test_pcg_draw_batch(void) {
+  enum {
+    N = 70,
+    D = 4
+  };
+  uint64_t state0[N], inc[N], state[N];
+  double out[D * N];
+  for (int i = 0; i < N; i++) state0[i] = mix64(77 + (uint64_t)i), inc[i] = mix64(5000 + (uint64_t)i) | 1u;
+  int bad = 0, runs = 0;
+  for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
+    if (!rsw_isa_set((rsw_isa)isa)) continue;
+    for (int draws = 1; draws <= D; draws++)
+      for (int n = 1; n <= N; n++) {
+        memcpy(state, state0, sizeof state);
+        for (int i = 0; i < D * N; i++) out[i] = -1.0;
+        sampler_pcg_draw_batch(n, state, inc, draws, out);
+        for (int i = 0; i < N; i++) {
+          pcg32 r = {state0[i], inc[i]};
+          for (int d = 0; d < draws && i < n; d++) {
+            double x = pcg32_next_double(&r);
+            bad += memcmp(&x, &out[d * n + i], sizeof x) != 0;
+          }
+          bad += r.state != state[i]; /* streams past n untouched */
+        }
+        for (int i = draws * n; i < D * N; i++) bad += out[i] != -1.0;
+        runs++;
+      }
+  }
+  rsw_isa_set(rsw_isa_best());
+  CHECK(runs >= D * N, "ran at some ISA (%d runs)", runs);
+  CHECK(bad == 0, "%d draws or states differ from pcg32_next_double's (or written past n)", bad);
+}
+
+/* The independent sampler's start_2d_2d_batch gives every sample the
+ * numbers and the state of start() then next_2d() twice, at every ISA,
+ * for waves that span pixels and end in every kind of tail. */
+static void test_start_2d_2d_batch(void) {
+  enum {
+    N = 75
+  };
+  harness h;
+  CHECK(build(&h, "independent", 16, 3, -1) == RSW_OK, "built");
+  const sampler_ops *ops = h.s->ops;
+  CHECK(ops->start_2d_2d_batch != NULL, "independent has start_2d_2d_batch");
+  uint64_t pixel[N];
+  uint32_t index[N];
+  for (int i = 0; i < N; i++) pixel[i] = 40 + (uint64_t)(i / 16), index[i] = (uint32_t)(i % 16);
+  int bad = 0, runs = 0;
+  for (int isa = 0; isa < RSW_ISA__COUNT && ops->start_2d_2d_batch; isa++) {
+    if (!rsw_isa_set((rsw_isa)isa)) continue;
+    for (int n = 1; n <= N; n += 7) {
+      sampler_state st[N], ref;
+      vec2 a[N], b[N];
+      ops->start_2d_2d_batch(h.s, st, n, 11, pixel, index, 16, a, b);
+      for (int i = 0; i < n; i++) {
+        ops->start(h.s, &ref, 11, pixel[i], index[i], 16);
+        vec2 ra = ops->next_2d(&ref), rb = ops->next_2d(&ref);
+        bad += ra.x != a[i].x || ra.y != a[i].y || rb.x != b[i].x || rb.y != b[i].y;
+        bad += ref.rng.state != st[i].rng.state || ref.rng.inc != st[i].rng.inc || ref.dim != st[i].dim;
+        bad += ops->next_1d(&ref) != ops->next_1d(&st[i]); /* the streams go on alike */
+      }
+      runs++;
+    }
+  }
+  rsw_isa_set(rsw_isa_best());
+  CHECK(runs > 0, "ran at some ISA");
+  CHECK(bad == 0, "%d samples differ from start() then next_2d() twice", bad);
+  h_free(&h);
+}
+
 int main(void) {
   RSW_TEST_RUN(test_independent_determinism);
   RSW_TEST_RUN(test_independent_uniform);
@@ -290,5 +364,7 @@ int main(void) {
   RSW_TEST_RUN(test_stratified_no_jitter);
   RSW_TEST_RUN(test_sampler_bad_input);
   RSW_TEST_RUN(test_pcg_seed_batch);
+  RSW_TEST_RUN(test_pcg_draw_batch);
+  RSW_TEST_RUN(test_start_2d_2d_batch);
   RSW_TEST_END("test_samplers");
 }
