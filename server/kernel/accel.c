@@ -521,9 +521,10 @@ double accel_surface_error_at(const double t[8], const xform *X, vec3 p, vec3 n)
 
 /* accel_surface_error_at_n's loop, compiled per ISA below (a lane's
  * operations are surface_error_at's: the same bits at every ISA). */
-static inline __attribute__((always_inline)) void surface_error_n_body(const double t[8], const xform *X, int m,
-                                                                       const double *const p[3],
-                                                                       const double *const n[3], double *out) {
+static inline __attribute__((always_inline)) void surface_error_n_body(const double t[8], const xform *X,
+                                                                       int m, const double *const p[3],
+                                                                       const double *const n[3],
+                                                                       double *out) {
   for (int j = 0; j < m; j++)
     out[j] = surface_error_at(t, X, v3(p[0][j], p[1][j], p[2][j]), v3(n[0][j], n[1][j], n[2][j]));
 }
@@ -1190,8 +1191,8 @@ static unsigned packet_n(int n) {
  * lanes set), and packet_lanes_body's results for them. */
 typedef struct packet_lanes {
   double o[3][16], d[3][16], tmin[16], tmax[16];
-  float f[8][16];  /* out: fill_ray_f's floats (F_ORG ... F_TFAR) */
-  int32_t ok[16];  /* out: -1 where the lane is the common case, else 0 */
+  float f[8][16]; /* out: fill_ray_f's floats (F_ORG ... F_TFAR) */
+  int32_t ok[16]; /* out: -1 where the lane is the common case, else 0 */
 } packet_lanes;
 
 /* fill_ray_f for those lanes of L whose ray is the common case: a finite
@@ -1212,9 +1213,8 @@ static inline __attribute__((always_inline)) void packet_lanes_body(packet_lanes
     /* isfinite(x) as |x| <= DBL_MAX (false for a NaN): a compare that
      * vectorises. */
     bool ok = (fabs(ox) <= DBL_MAX) & (fabs(oy) <= DBL_MAX) & (fabs(oz) <= DBL_MAX) & (len2 > 0) &
-              (len2 <= DBL_MAX) & (tmin == tmin) & (tmax >= tmin) &
-              !(len2 > ACCEL_MAX_DIR * ACCEL_MAX_DIR) & !(len2 < 1.0 / (ACCEL_MAX_DIR * ACCEL_MAX_DIR)) &
-              !(q > 0);
+              (len2 <= DBL_MAX) & (tmin == tmin) & (tmax >= tmin) & !(len2 > ACCEL_MAX_DIR * ACCEL_MAX_DIR) &
+              !(len2 < 1.0 / (ACCEL_MAX_DIR * ACCEL_MAX_DIR)) & !(q > 0);
     /* fill_ray_f's (float)fmax(tmin, 0) and its tfar (infinite from
      * 3e38 on) as a conversion in every lane, then a choice of bits by a
      * mask: written as selects, GCC moves the conversions under branches
@@ -1240,9 +1240,8 @@ static inline __attribute__((always_inline)) void packet_lanes_body(packet_lanes
 }
 
 #if defined(__x86_64__) || defined(__i386__)
-static __attribute__((target("avx512f,avx512vl,avx512dq"))) void packet_lanes_avx512(packet_lanes *L,
-                                                                                    const double c[3],
-                                                                                    double clip2) {
+static __attribute__((target("avx512f,avx512vl,avx512dq"))) void
+packet_lanes_avx512(packet_lanes *L, const double c[3], double clip2) {
   packet_lanes_body(L, c, clip2);
 }
 static __attribute__((target("avx2,fma"))) void packet_lanes_avx2(packet_lanes *L, const double c[3],
