@@ -12,7 +12,6 @@
 
 #include <stdatomic.h>
 
-#include <float.h>
 #include <math.h>
 #include <pthread.h>
 #include <stdio.h>
@@ -1187,78 +1186,9 @@ static unsigned packet_n(int n) {
   return n <= 4 && w >= 4 ? 4u : n <= 8 && w >= 8 ? 8u : (unsigned)w;
 }
 
-/* A packet's rays in structure-of-arrays form (in: every one of the 16
- * lanes set), and packet_lanes_body's results for them. */
-typedef struct packet_lanes {
-  double o[3][16], d[3][16], tmin[16], tmax[16];
-  float f[8][16]; /* out: fill_ray_f's floats (F_ORG ... F_TFAR) */
-  int32_t ok[16]; /* out: -1 where the lane is the common case, else 0 */
-} packet_lanes;
-
-/* fill_ray_f for those lanes of L whose ray is the common case: a finite
- * ray within the clipping sphere (clip2: clip_r squared, the product
- * fill_ray_f forms) whose direction needs no rescaling (t0 = 0, ts = 1);
- * every other lane gets ok 0, for fill_ray_f to decide. The arithmetic of
- * each lane is fill_ray_f's, in its order (the kernel is built without
- * contraction), so the floats are its bits at every ISA; the loop, over
- * all 16 lanes, is compiled per ISA (packet_lanes_avx512 and so on). */
-static inline __attribute__((always_inline)) void packet_lanes_body(packet_lanes *L, const double c[3],
-                                                                    double clip2) {
-  for (int i = 0; i < 16; i++) {
-    double ox = L->o[0][i] - c[0], oy = L->o[1][i] - c[1], oz = L->o[2][i] - c[2];
-    double dx = L->d[0][i], dy = L->d[1][i], dz = L->d[2][i];
-    double tmin = L->tmin[i], tmax = L->tmax[i];
-    double len2 = dx * dx + dy * dy + dz * dz;
-    double q = (ox * ox + oy * oy + oz * oz) - clip2;
-    /* isfinite(x) as |x| <= DBL_MAX (false for a NaN): a compare that
-     * vectorises. */
-    bool ok = (fabs(ox) <= DBL_MAX) & (fabs(oy) <= DBL_MAX) & (fabs(oz) <= DBL_MAX) & (len2 > 0) &
-              (len2 <= DBL_MAX) & (tmin == tmin) & (tmax >= tmin) & !(len2 > ACCEL_MAX_DIR * ACCEL_MAX_DIR) &
-              !(len2 < 1.0 / (ACCEL_MAX_DIR * ACCEL_MAX_DIR)) & !(q > 0);
-    /* fill_ray_f's (float)fmax(tmin, 0) and its tfar (infinite from
-     * 3e38 on) as a conversion in every lane, then a choice of bits by a
-     * mask: written as selects, GCC moves the conversions under branches
-     * (they may raise a flag) and leaves the loop scalar. The values are
-     * fill_ray_f's. */
-    float tnear = (float)tmin, tfar = (float)tmax;
-    uint32_t bn, bf;
-    memcpy(&bn, &tnear, sizeof bn);
-    memcpy(&bf, &tfar, sizeof bf);
-    uint32_t pos = -(uint32_t)(tmin > 0.0), far = -(uint32_t)(tmax >= 3.0e38);
-    bn &= pos;                              /* +0.0f where tmin <= 0 or NaN */
-    bf = (bf & ~far) | (0x7f800000u & far); /* +infinity from 3e38 on */
-    L->f[F_ORG][i] = (float)ox;
-    L->f[F_ORG + 1][i] = (float)oy;
-    L->f[F_ORG + 2][i] = (float)oz;
-    memcpy(&L->f[F_TNEAR][i], &bn, sizeof bn);
-    L->f[F_DIR][i] = (float)dx;
-    L->f[F_DIR + 1][i] = (float)dy;
-    L->f[F_DIR + 2][i] = (float)dz;
-    memcpy(&L->f[F_TFAR][i], &bf, sizeof bf);
-    L->ok[i] = ok ? -1 : 0;
-  }
-}
-
-#if defined(__x86_64__) || defined(__i386__)
-static __attribute__((target("avx512f,avx512vl,avx512dq"))) void
-packet_lanes_avx512(packet_lanes *L, const double c[3], double clip2) {
-  packet_lanes_body(L, c, clip2);
-}
-static __attribute__((target("avx2,fma"))) void packet_lanes_avx2(packet_lanes *L, const double c[3],
-                                                                  double clip2) {
-  packet_lanes_body(L, c, clip2);
-}
-#endif
-/* sse2 (the x86-64 baseline) and generic. */
-static void packet_lanes_base(packet_lanes *L, const double c[3], double clip2) {
-  packet_lanes_body(L, c, clip2);
-}
-
 /* Lanes [0, n) of an N-wide packet from r (fill_ray's rules; the rest,
  * and rays fill_ray refuses, invalid); false when no lane holds a ray
- * Embree can trace. The lanes are written straight into the SOA layout:
- * the common case of every lane in one vectorised loop at the render's
- * ISA (packet_lanes_body), the others through fill_ray_f. */
+ * Embree can trace. The lanes are written straight into the SOA layout. */
 static bool packet_load(const accel *a, packet_buf *pb, unsigned N, const ray3 *const *r, int n,
                         unsigned mask) {
   float *p = pb->f;
@@ -1272,38 +1202,18 @@ static bool packet_load(const accel *a, packet_buf *pb, unsigned N, const ray3 *
     HITN_U(hit, N, HIT_INST, i) = RTC_INVALID_GEOMETRY_ID;
     pb->valid[i] = 0;
   }
-  packet_lanes L;
-  for (int i = 0; i < 16; i++) { /* lanes past n: ray 0 again (their results are not read) */
-    const ray3 *ri = r[i < n ? i : 0];
-    L.o[0][i] = ri->o.x, L.o[1][i] = ri->o.y, L.o[2][i] = ri->o.z;
-    L.d[0][i] = ri->d.x, L.d[1][i] = ri->d.y, L.d[2][i] = ri->d.z;
-    L.tmin[i] = ri->tmin, L.tmax[i] = ri->tmax;
-  }
-  const double c[3] = {a->origin.x, a->origin.y, a->origin.z};
-  const double clip2 = a->clip_r * a->clip_r;
-#if defined(__x86_64__) || defined(__i386__)
-  switch (rsw_isa_get()) {
-  case RSW_ISA_AVX512: packet_lanes_avx512(&L, c, clip2); break;
-  case RSW_ISA_AVX2: packet_lanes_avx2(&L, c, clip2); break;
-  default: packet_lanes_base(&L, c, clip2); break;
-  }
-#else
-  packet_lanes_base(&L, c, clip2);
-#endif
-  static const int field[8] = {RAY_ORG, RAY_ORG + 1, RAY_ORG + 2, RAY_TNEAR,
-                               RAY_DIR, RAY_DIR + 1, RAY_DIR + 2, RAY_TFAR};
-  for (int k = 0; k < 8; k++) memcpy(&RAYN_F(p, N, field[k], 0), L.f[k], (size_t)n * sizeof(float));
-  memcpy(pb->valid, L.ok, (size_t)n * sizeof(int));
   bool any = false;
   for (int i = 0; i < n; i++) {
-    pb->t0[i] = 0, pb->ts[i] = 1;
-    any |= L.ok[i] != 0;
-  }
-  for (int i = 0; i < n; i++) {
-    if (__builtin_expect(L.ok[i] != 0, 1)) continue;
     float f[8];
     if (!fill_ray_f(a, r[i], f, &pb->t0[i], &pb->ts[i])) continue;
-    for (int k = 0; k < 8; k++) RAYN_F(p, N, field[k], i) = f[k];
+    RAYN_F(p, N, RAY_ORG, i) = f[F_ORG];
+    RAYN_F(p, N, RAY_ORG + 1, i) = f[F_ORG + 1];
+    RAYN_F(p, N, RAY_ORG + 2, i) = f[F_ORG + 2];
+    RAYN_F(p, N, RAY_TNEAR, i) = f[F_TNEAR];
+    RAYN_F(p, N, RAY_DIR, i) = f[F_DIR];
+    RAYN_F(p, N, RAY_DIR + 1, i) = f[F_DIR + 1];
+    RAYN_F(p, N, RAY_DIR + 2, i) = f[F_DIR + 2];
+    RAYN_F(p, N, RAY_TFAR, i) = f[F_TFAR];
     pb->valid[i] = -1;
     any = true;
   }

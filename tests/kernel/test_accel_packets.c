@@ -1,15 +1,14 @@
 /* accel.c's packet queries against its one-ray queries, at every ISA and
- * packet width: packet_load's vectorised lanes (packet_lanes_body, per
- * ISA) hand Embree the floats fill_ray gives one ray, bit for bit (seen
- * through the query hook, accel_internal.h); the packets' occlusion
- * answers are the single queries', their hits too (bit for bit where both
- * find one primitive; Embree's packet and one-ray traversals may break a
- * tie of two primitives at one distance either way), and every ISA's
- * packets are the others', bit for bit. The rays cover
- * fill_ray's every branch: ordinary ones, origins beyond the clip sphere,
- * directions rescaled (long, short), negative tmin, tmax near float's
- * limit and infinite, and rays it refuses (NaN, zero direction,
- * tmax < tmin). Also accel_surface_error_at_n (per ISA) against
+ * packet width: packet_load hands Embree the floats fill_ray gives one
+ * ray, bit for bit (seen through the query hook, accel_internal.h); the
+ * packets' occlusion answers are the single queries', their hits too (bit
+ * for bit where both find one primitive; Embree's packet and one-ray
+ * traversals may break a tie of two primitives at one distance either
+ * way), and every ISA's packets are the others', bit for bit. The rays
+ * cover fill_ray's every branch: ordinary ones, origins beyond the clip
+ * sphere, directions rescaled (long, short), negative tmin, tmax near
+ * float's limit and infinite, and rays it refuses (NaN, zero direction,
+ * tmax < tmin). Also accel_surface_error_at_n (compiled per ISA) against
  * accel_surface_error_at. */
 #include <math.h>
 #include <stdio.h>
