@@ -18,6 +18,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "core/isa.h"
 #include "shapes/instance.h"
 
 struct accel {
@@ -517,10 +518,39 @@ double accel_surface_error_at(const double t[8], const xform *X, vec3 p, vec3 n)
   return surface_error_at(t, X, p, n);
 }
 
-void accel_surface_error_at_n(const double t[8], const xform *X, int m, const double *const p[3],
-                              const double *const n[3], double *out) {
+/* accel_surface_error_at_n's loop, compiled per ISA below (a lane's
+ * operations are surface_error_at's: the same bits at every ISA). */
+static inline __attribute__((always_inline)) void surface_error_n_body(const double t[8], const xform *X,
+                                                                       int m, const double *const p[3],
+                                                                       const double *const n[3],
+                                                                       double *out) {
   for (int j = 0; j < m; j++)
     out[j] = surface_error_at(t, X, v3(p[0][j], p[1][j], p[2][j]), v3(n[0][j], n[1][j], n[2][j]));
+}
+
+#if defined(__x86_64__) || defined(__i386__)
+static __attribute__((target("avx512f,avx512vl,avx512dq"))) void
+surface_error_n_avx512(const double t[8], const xform *X, int m, const double *const p[3],
+                       const double *const n[3], double *out) {
+  surface_error_n_body(t, X, m, p, n, out);
+}
+static __attribute__((target("avx2,fma"))) void surface_error_n_avx2(const double t[8], const xform *X, int m,
+                                                                     const double *const p[3],
+                                                                     const double *const n[3], double *out) {
+  surface_error_n_body(t, X, m, p, n, out);
+}
+#endif
+
+void accel_surface_error_at_n(const double t[8], const xform *X, int m, const double *const p[3],
+                              const double *const n[3], double *out) {
+#if defined(__x86_64__) || defined(__i386__)
+  switch (rsw_isa_get()) {
+  case RSW_ISA_AVX512: surface_error_n_avx512(t, X, m, p, n, out); return;
+  case RSW_ISA_AVX2: surface_error_n_avx2(t, X, m, p, n, out); return;
+  default: break;
+  }
+#endif
+  surface_error_n_body(t, X, m, p, n, out);
 }
 
 /* ---- build ------------------------------------------------------------------------------ */
