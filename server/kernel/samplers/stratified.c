@@ -149,28 +149,34 @@ static void stratified_permute_batch(int n, const uint32_t *in, uint32_t l, cons
   permute_plain(n, in, l, seed, out);
 }
 
-/* Strata of lanes q[0..m) in the current dimension; false when their spp
- * differ (nothing written). */
-static bool strata_batch(sampler_state *const *q, int m, uint32_t *sq, uint32_t *p) {
-  uint32_t spp = q[0]->spp, in[STRAT_C], seed[STRAT_C];
-  for (int k = 1; k < m; k++)
-    if (q[k]->spp != spp) return false;
+/* Strata of lanes q[0..m) in their current dimension (p0) and, when p1
+ * is not NULL, the next (p1); false when their spp differ (nothing
+ * written). One pass over the lanes' states: the spp compared as the
+ * indices and seeds are gathered (with the first lane's n^2, discarded
+ * when one differs). */
+static bool strata_batch(sampler_state *const *q, int m, uint32_t *sq, uint32_t *p0, uint32_t *p1) {
+  uint32_t spp = q[0]->spp, in[STRAT_C], seed0[STRAT_C], seed1[STRAT_C];
   uint32_t n = ceil_sqrt(spp ? spp : 1), n2 = n * n;
   /* A wave holds runs of samples of one pixel at one dimension: their
-   * seed is hashed once per run; an index below n^2 (every sample of a
+   * seeds are hashed once per run; an index below n^2 (every sample of a
    * render) needs no division. */
   uint64_t key = 0;
-  uint32_t dim = 0, h = 0;
+  uint32_t dim = 0, h0 = 0, h1 = 0;
+  bool same = true;
   for (int k = 0; k < m; k++) {
     uint32_t si = q[k]->sample_index;
+    same &= q[k]->spp == spp;
     in[k] = si < n2 ? si : si % n2;
     if (k == 0 || q[k]->pixel_key != key || q[k]->dim != dim) {
       key = q[k]->pixel_key, dim = q[k]->dim;
-      h = dim_seed(q[k]);
+      h0 = dim_seed(q[k]);
+      if (p1) h1 = (uint32_t)(mix64(key ^ (0x9e3779b97f4a7c15ULL * ((uint64_t)dim + 2))) >> 32);
     }
-    seed[k] = h;
+    seed0[k] = h0, seed1[k] = h1;
   }
-  stratified_permute_batch(m, in, n2, seed, p);
+  if (!same) return false;
+  stratified_permute_batch(m, in, n2, seed0, p0);
+  if (p1) stratified_permute_batch(m, in, n2, seed1, p1);
   *sq = n;
   return true;
 }
@@ -214,7 +220,7 @@ static void stratified_next_1d_batch(sampler_state *st, const int *idx, int n, d
     sampler_state *q[STRAT_C];
     uint32_t p[STRAT_C], sq;
     for (int k = 0; k < m; k++) q[k] = &st[idx ? idx[k0 + k] : k0 + k];
-    if (!strata_batch(q, m, &sq, p)) {
+    if (!strata_batch(q, m, &sq, p, NULL)) {
       for (int k = 0; k < m; k++) out[k0 + k] = stratified_next_1d(q[k]);
       continue;
     }
@@ -233,7 +239,7 @@ static void stratified_next_2d_batch(sampler_state *st, const int *idx, int n, v
     sampler_state *q[STRAT_C];
     uint32_t p[STRAT_C], sq;
     for (int k = 0; k < m; k++) q[k] = &st[idx ? idx[k0 + k] : k0 + k];
-    if (!strata_batch(q, m, &sq, p)) {
+    if (!strata_batch(q, m, &sq, p, NULL)) {
       for (int k = 0; k < m; k++) out[k0 + k] = stratified_next_2d(q[k]);
       continue;
     }
@@ -247,32 +253,6 @@ static void stratified_next_2d_batch(sampler_state *st, const int *idx, int n, v
   }
 }
 
-/* Strata of lanes q[0..m) in their current dimension (p0) and the next
- * (p1), in one pass over the lanes' states; false when their spp differ
- * (nothing written). The same permutations as two strata_batch calls. */
-static bool strata_pair_batch(sampler_state *const *q, int m, uint32_t *sq, uint32_t *p0, uint32_t *p1) {
-  uint32_t spp = q[0]->spp, in[STRAT_C], seed0[STRAT_C], seed1[STRAT_C];
-  for (int k = 1; k < m; k++)
-    if (q[k]->spp != spp) return false;
-  uint32_t n = ceil_sqrt(spp ? spp : 1), n2 = n * n;
-  uint64_t key = 0;
-  uint32_t dim = 0, h0 = 0, h1 = 0;
-  for (int k = 0; k < m; k++) {
-    uint32_t si = q[k]->sample_index;
-    in[k] = si < n2 ? si : si % n2;
-    if (k == 0 || q[k]->pixel_key != key || q[k]->dim != dim) {
-      key = q[k]->pixel_key, dim = q[k]->dim;
-      h0 = dim_seed(q[k]);
-      h1 = (uint32_t)(mix64(key ^ (0x9e3779b97f4a7c15ULL * ((uint64_t)dim + 2))) >> 32);
-    }
-    seed0[k] = h0, seed1[k] = h1;
-  }
-  stratified_permute_batch(m, in, n2, seed0, p0);
-  stratified_permute_batch(m, in, n2, seed1, p1);
-  *sq = n;
-  return true;
-}
-
 /* Two draws per lane in one pass over the lanes' states: a 1-D number
  * into first1 (non-NULL) or a 2-D one into first2, then a 2-D number into
  * second; each lane's jitters in its per-lane order. */
@@ -283,7 +263,7 @@ static void stratified_pair_batch(sampler_state *st, const int *idx, int n, doub
     sampler_state *q[STRAT_C];
     uint32_t p0[STRAT_C], p1[STRAT_C], sq;
     for (int k = 0; k < m; k++) q[k] = &st[idx ? idx[k0 + k] : k0 + k];
-    if (!strata_pair_batch(q, m, &sq, p0, p1)) {
+    if (!strata_batch(q, m, &sq, p0, p1)) {
       for (int k = 0; k < m; k++) {
         if (first1)
           first1[k0 + k] = stratified_next_1d(q[k]);
