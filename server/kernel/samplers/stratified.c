@@ -149,30 +149,69 @@ static void stratified_permute_batch(int n, const uint32_t *in, uint32_t l, cons
   permute_plain(n, in, l, seed, out);
 }
 
-/* Strata of lanes q[0..m) in the current dimension; false when their spp
- * differ (nothing written). */
-static bool strata_batch(sampler_state *const *q, int m, uint32_t *sq, uint32_t *p) {
-  uint32_t spp = q[0]->spp, in[STRAT_C], seed[STRAT_C];
-  for (int k = 1; k < m; k++)
-    if (q[k]->spp != spp) return false;
+/* Strata of lanes q[0..m) in their current dimension (p0) and, when p1
+ * is not NULL, the next (p1); false when their spp differ (nothing
+ * written). One pass over the lanes' states: the spp compared as the
+ * indices and seeds are gathered (with the first lane's n^2, discarded
+ * when one differs). */
+static bool strata_batch(sampler_state *const *q, int m, uint32_t *sq, uint32_t *p0, uint32_t *p1) {
+  uint32_t spp = q[0]->spp, in[STRAT_C], seed0[STRAT_C], seed1[STRAT_C];
   uint32_t n = ceil_sqrt(spp ? spp : 1), n2 = n * n;
   /* A wave holds runs of samples of one pixel at one dimension: their
-   * seed is hashed once per run; an index below n^2 (every sample of a
+   * seeds are hashed once per run; an index below n^2 (every sample of a
    * render) needs no division. */
   uint64_t key = 0;
-  uint32_t dim = 0, h = 0;
+  uint32_t dim = 0, h0 = 0, h1 = 0;
+  bool same = true;
   for (int k = 0; k < m; k++) {
     uint32_t si = q[k]->sample_index;
+    same &= q[k]->spp == spp;
     in[k] = si < n2 ? si : si % n2;
     if (k == 0 || q[k]->pixel_key != key || q[k]->dim != dim) {
       key = q[k]->pixel_key, dim = q[k]->dim;
-      h = dim_seed(q[k]);
+      h0 = dim_seed(q[k]);
+      if (p1) h1 = (uint32_t)(mix64(key ^ (0x9e3779b97f4a7c15ULL * ((uint64_t)dim + 2))) >> 32);
     }
-    seed[k] = h;
+    seed0[k] = h0, seed1[k] = h1;
   }
-  stratified_permute_batch(m, in, n2, seed, p);
+  if (!same) return false;
+  stratified_permute_batch(m, in, n2, seed0, p0);
+  if (p1) stratified_permute_batch(m, in, n2, seed1, p1);
   *sq = n;
   return true;
+}
+
+/* Stratum p of n^2 (n = sq) with jitter j as next_1d(). Apart from the
+ * streams: the divisions in vector lanes (IEEE division, the scalar's
+ * bits); by a power of two (spp 4^k) a product with its reciprocal, which
+ * is exact: the same bits. */
+static void strata_line(int m, uint32_t sq, const uint32_t *p, const double *j, double *out) {
+  double n2 = (double)(sq * sq);
+  if ((sq & (sq - 1)) == 0) {
+    const double inv = 1.0 / n2;
+    for (int k = 0; k < m; k++) out[k] = ((double)p[k] + j[k]) * inv;
+    return;
+  }
+  for (int k = 0; k < m; k++) out[k] = ((double)p[k] + j[k]) / n2;
+}
+
+/* Stratum p of a side-sq grid as a 2-D number with jitters (jx, jy), as
+ * next_2d(): the cell by a shift and mask and the division by the side a
+ * product with its reciprocal (exact) for a power-of-two side. */
+static void strata_cells(int m, uint32_t sq, const uint32_t *p, const double *jx, const double *jy,
+                         vec2 *out) {
+  double side = (double)sq;
+  if ((sq & (sq - 1)) == 0) {
+    int sh = __builtin_ctz(sq);
+    const double inv = 1.0 / side;
+    for (int k = 0; k < m; k++)
+      out[k] = v2(((double)(p[k] & (sq - 1)) + jx[k]) * inv, ((double)(p[k] >> sh) + jy[k]) * inv);
+    return;
+  }
+  for (int k = 0; k < m; k++) {
+    uint32_t y = p[k] / sq;
+    out[k] = v2(((double)(p[k] - y * sq) + jx[k]) / side, ((double)y + jy[k]) / side);
+  }
 }
 
 static void stratified_next_1d_batch(sampler_state *st, const int *idx, int n, double *out) {
@@ -181,24 +220,16 @@ static void stratified_next_1d_batch(sampler_state *st, const int *idx, int n, d
     sampler_state *q[STRAT_C];
     uint32_t p[STRAT_C], sq;
     for (int k = 0; k < m; k++) q[k] = &st[idx ? idx[k0 + k] : k0 + k];
-    if (!strata_batch(q, m, &sq, p)) {
+    if (!strata_batch(q, m, &sq, p, NULL)) {
       for (int k = 0; k < m; k++) out[k0 + k] = stratified_next_1d(q[k]);
       continue;
     }
-    double n2 = (double)(sq * sq), j[STRAT_C];
+    double j[STRAT_C];
     for (int k = 0; k < m; k++) {
       j[k] = jitter(q[k]);
       q[k]->dim++;
     }
-    /* Apart from the streams: the divisions in vector lanes (IEEE
-     * division, the scalar's bits); by a power of two (spp 4^k) a product
-     * with its reciprocal, which is exact: the same bits. */
-    if ((sq & (sq - 1)) == 0) {
-      const double inv = 1.0 / n2;
-      for (int k = 0; k < m; k++) out[k0 + k] = ((double)p[k] + j[k]) * inv;
-    } else {
-      for (int k = 0; k < m; k++) out[k0 + k] = ((double)p[k] + j[k]) / n2;
-    }
+    strata_line(m, sq, p, j, out + k0);
   }
 }
 
@@ -208,32 +239,62 @@ static void stratified_next_2d_batch(sampler_state *st, const int *idx, int n, v
     sampler_state *q[STRAT_C];
     uint32_t p[STRAT_C], sq;
     for (int k = 0; k < m; k++) q[k] = &st[idx ? idx[k0 + k] : k0 + k];
-    if (!strata_batch(q, m, &sq, p)) {
+    if (!strata_batch(q, m, &sq, p, NULL)) {
       for (int k = 0; k < m; k++) out[k0 + k] = stratified_next_2d(q[k]);
       continue;
     }
-    double jx[STRAT_C], jy[STRAT_C], fx[STRAT_C], fy[STRAT_C], side = (double)sq;
+    double jx[STRAT_C], jy[STRAT_C];
     for (int k = 0; k < m; k++) {
       jx[k] = jitter(q[k]);
       jy[k] = jitter(q[k]);
       q[k]->dim++;
     }
-    /* The cell: a shift and mask for a power-of-two side (spp 4^k), and
-     * the division by the side a product with its reciprocal (exact). */
-    if ((sq & (sq - 1)) == 0) {
-      int sh = __builtin_ctz(sq);
-      const double inv = 1.0 / side;
-      for (int k = 0; k < m; k++) fx[k] = (double)(p[k] & (sq - 1)), fy[k] = (double)(p[k] >> sh);
-      for (int k = 0; k < m; k++) out[k0 + k] = v2((fx[k] + jx[k]) * inv, (fy[k] + jy[k]) * inv);
-      continue;
-    } else {
-      for (int k = 0; k < m; k++) {
-        uint32_t y = p[k] / sq;
-        fx[k] = (double)(p[k] - y * sq), fy[k] = (double)y;
-      }
-    }
-    for (int k = 0; k < m; k++) out[k0 + k] = v2((fx[k] + jx[k]) / side, (fy[k] + jy[k]) / side);
+    strata_cells(m, sq, p, jx, jy, out + k0);
   }
+}
+
+/* Two draws per lane in one pass over the lanes' states: a 1-D number
+ * into first1 (non-NULL) or a 2-D one into first2, then a 2-D number into
+ * second; each lane's jitters in its per-lane order. */
+static void stratified_pair_batch(sampler_state *st, const int *idx, int n, double *first1, vec2 *first2,
+                                  vec2 *second) {
+  for (int k0 = 0; k0 < n; k0 += STRAT_C) {
+    int m = n - k0 < STRAT_C ? n - k0 : STRAT_C;
+    sampler_state *q[STRAT_C];
+    uint32_t p0[STRAT_C], p1[STRAT_C], sq;
+    for (int k = 0; k < m; k++) q[k] = &st[idx ? idx[k0 + k] : k0 + k];
+    if (!strata_batch(q, m, &sq, p0, p1)) {
+      for (int k = 0; k < m; k++) {
+        if (first1)
+          first1[k0 + k] = stratified_next_1d(q[k]);
+        else
+          first2[k0 + k] = stratified_next_2d(q[k]);
+        second[k0 + k] = stratified_next_2d(q[k]);
+      }
+      continue;
+    }
+    double ax[STRAT_C], ay[STRAT_C], bx[STRAT_C], by[STRAT_C];
+    for (int k = 0; k < m; k++) {
+      ax[k] = jitter(q[k]);
+      if (!first1) ay[k] = jitter(q[k]);
+      bx[k] = jitter(q[k]);
+      by[k] = jitter(q[k]);
+      q[k]->dim += 2;
+    }
+    if (first1)
+      strata_line(m, sq, p0, ax, first1 + k0);
+    else
+      strata_cells(m, sq, p0, ax, ay, first2 + k0);
+    strata_cells(m, sq, p1, bx, by, second + k0);
+  }
+}
+
+static void stratified_next_1d_2d_batch(sampler_state *st, const int *idx, int n, double *out1, vec2 *out2) {
+  stratified_pair_batch(st, idx, n, out1, NULL, out2);
+}
+
+static void stratified_next_2d_2d_batch(sampler_state *st, const int *idx, int n, vec2 *out1, vec2 *out2) {
+  stratified_pair_batch(st, idx, n, NULL, out1, out2);
 }
 
 static const sampler_ops stratified_ops = {
@@ -244,6 +305,8 @@ static const sampler_ops stratified_ops = {
     .start_batch = stratified_start_batch,
     .next_1d_batch = stratified_next_1d_batch,
     .next_2d_batch = stratified_next_2d_batch,
+    .next_1d_2d_batch = stratified_next_1d_2d_batch,
+    .next_2d_2d_batch = stratified_next_2d_2d_batch,
 };
 
 DEFINE_PLUGIN(stratified, CLS_SAMPLER, .ops = &stratified_ops);

@@ -376,7 +376,7 @@ static void test_sampler_batches(void) {
     const sampler *smp = s->sensors[0]->sampler;
     CHECK(smp->ops->start_batch && smp->ops->next_1d_batch && smp->ops->next_2d_batch, "%s has batch ops",
           types[t]);
-    CHECK(t == 1 || smp->ops->next_2d_2d_batch, "%s has next_2d_2d_batch", types[t]);
+    CHECK(smp->ops->next_2d_2d_batch && smp->ops->next_1d_2d_batch, "%s has the paired batches", types[t]);
     for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
       if (!rsw_isa_set((rsw_isa)isa)) continue;
       char what[64];
