@@ -569,17 +569,25 @@ enum {
  * surface, outside a periodic boundary: nee, and the shadow ray's
  * verdict as wave_light_samples' spawn pass and wave_occluded's culling
  * would give them (the same ray, the same test). */
-static inline int light_far(lane *l, const direction_sample *ds, color v, const pad_box *pb) {
-  l->nee = ds->pdf > 0 && !col_is_black(v);
-  if (!l->nee) return LIGHT_NONE;
+/* Lane l's shadow ray towards its far (not surface) light sample ds:
+ * wave_occluded's first test made here, while the lane is in cache
+ * (cull: outside a periodic boundary), so that a ray that cannot meet
+ * the scene (a sun's, leaving an Earth-observation scene) is clear
+ * without being stored. */
+static inline int far_shadow_ray(lane *l, const direction_sample *ds, const pad_box *pb, bool cull) {
   ray3 r;
   spawn_ray_to_far(&l->si, ds, &r);
-  if (!ray_may_hit(pb, &r)) {
+  if (cull && !ray_may_hit(pb, &r)) {
     l->occ = TRACE_MISS;
     return LIGHT_CLEAR;
   }
   l->sray = r;
   return LIGHT_QUERY;
+}
+
+static inline int light_far(lane *l, const direction_sample *ds, color v, const pad_box *pb) {
+  l->nee = ds->pdf > 0 && !col_is_black(v);
+  return l->nee ? far_shadow_ray(l, ds, pb, true) : LIGHT_NONE;
 }
 static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, page_lane *pgs, int *g, int n,
                                int *n_sh, int *n_clear, double *d1, vec2 *d2, int *ek, int *ord) {
@@ -689,19 +697,10 @@ static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, pag
         spawn_lane_in(&S, ns, &l->si, l->ds.p, l->ds.n);
         sl[ns++] = g[k];
         if (ns == SPAWN_C) spawn_between_lanes(ls, terms, ln, &S, sl, ns), ns = 0;
-      } else {
-        /* wave_occluded's first test here, while the lane is in cache: a
-         * ray that cannot meet the scene (a sun's, leaving an
-         * Earth-observation scene) is clear without being stored. */
-        ray3 r;
-        spawn_ray_to_far(&l->si, &l->ds, &r);
-        if (cull && !ray_may_hit(&pb, &r)) {
-          l->nee = true;
-          l->occ = TRACE_MISS;
-          nc++;
-          continue;
-        }
-        l->sray = r;
+      } else if (far_shadow_ray(l, &l->ds, &pb, cull) == LIGHT_CLEAR) {
+        l->nee = true;
+        nc++;
+        continue;
       }
       l->nee = true;
       g[nq++] = g[k];
