@@ -952,6 +952,20 @@ enum lane_outcome {
   EV_BOUNCE   /* surface_emit: a surface to scatter from */
 };
 
+/* Does lane l's path end, whatever its throughput, if its flight through
+ * the piece of its segment that the box walk bw is at passes (cross: a
+ * null box's side ends the piece, into medium next)? Its ray hits nothing
+ * (surface_emit: the path ends there), no environment sees it, and
+ * nothing beyond the piece can scatter it: the piece runs to the ray's
+ * end, or to the exit of the scene's only null box into no medium (the
+ * last crossing). Then a pass's weight (its exp) is not needed, and the
+ * film is the same bit for bit. Not with pages (each page's weight). */
+static inline bool escapes_after(const scene *sc, const vlane *l, const vpage *pg, bool cross,
+                                 const box_walk *bw, const medium *next) {
+  return !l->hit && !sc->environment && !pg &&
+         (!cross || (sc->null_boxes.n == 1 && (bw->ic & 1) && next == NULL));
+}
+
 /* The medium along lane l's segment, piece by piece between null boxes'
  * sides: the free flight's draws, the throughput, and at a collision
  * (EV_SCATTER) its point *mi. si: the query's hit (when l->hit), whose
@@ -997,7 +1011,8 @@ PIECE enum lane_outcome lane_flight(const volpath_integrator *vp, const scene *s
         color tr, pdf;
         double u = sops->next_1d(st);
         if (m->ops == &layered_medium_ops) /* (inline: the same code as its op) */
-          media_layers_sample_real(layers_page0(m), m, &seg, mint, maxt, u, c, mi, &tr, &pdf);
+          media_layers_sample_real_w(layers_page0(m), m, &seg, mint, maxt, u, c,
+                                     !escapes_after(sc, l, pg, cross, &bw, next), mi, &tr, &pdf);
         else
           m->ops->sample_real(m, &seg, mint, maxt, u, c, mi, &tr, &pdf);
         double pc = col_mean(pdf);
