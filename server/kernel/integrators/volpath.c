@@ -318,6 +318,21 @@ static inline bool media_clip(const scene *sc, const medium *m, const ray3 *r, c
   return m->ops->intersect_aabb(m, r, mint, maxt);
 }
 
+/* The atmosphere's case, worked out once per wave: the scene's only null
+ * box holds a layered medium whose box it is (media_null_box 0), sampled
+ * analytically, with no medium outside it. That medium, or NULL. The
+ * walks of rays that start inside it (the box's entry behind them, its
+ * exit ahead) then take a short way (lane_flight, shadow_step) with the
+ * same numbers as the walk's. */
+static const medium *one_box_medium(const volpath_integrator *vp, const scene *sc) {
+  if (!sc->null_boxes.on || sc->null_boxes.n != 1 || !vp->analytic) return NULL;
+  const struct scene_null_box *b = &sc->null_boxes.box[0];
+  const medium *m = b->in;
+  if (b->sh->interior == b->sh->exterior || b->out || !m || m->ops != &layered_medium_ops || m->absorbing_only)
+    return NULL;
+  return media_null_box(sc, m) == 0 ? m : NULL;
+}
+
 static int pick_channel(const medium *m, sampler_state *st) {
   if (!m->has_spectral_extinction) return 0;
   int c = (int)(st->s->ops->next_1d(st) * 3.0);
@@ -691,8 +706,24 @@ static __attribute__((noinline)) void tr_pages(const medium *m, const ray3 *r, d
  * segment's transmittance, then done (false) or a null surface crossed
  * (true: trace again). */
 static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l, pol_lane *vq, vpage *pg,
-                        bool hit, surface_interaction *si, sampler_state *st, face_plane *fp) {
+                        bool hit, surface_interaction *si, sampler_state *st, face_plane *fp,
+                        const medium *ob) {
   const int NP = sc->pages;
+  if (l->sm == ob && ob && !hit && !l->sfinite && !pg && !vq) {
+    /* one_box_medium's box, from inside (tn < 0 < tf): the walk's one
+     * piece [0, tf] (media_clip: [max(tn, 0), min(tf, tf)]), then no
+     * medium beyond the exit */
+    box_walk bw;
+    box_walk_start(sc, l->sp0, l->sray.d, &bw);
+    double tn = bw.t[0], tf = bw.t[1];
+    if (tn < 0.0 && tf > 0.0 && tf < INFINITY) {
+      ray3 seg = {l->sp0, l->sray.d, 0.0, tf};
+      l->str = col_mul(l->str, media_layers_transmittance(layers_page0(ob), &seg, 0.0, tf));
+      l->L = col_add(l->L, col_mul(l->sval, l->str));
+      l->sh = false;
+      return false;
+    }
+  }
   if (hit && !(l->sm || sc->null_boxes.on) && media_at(NULL, si))
     seg_end(sc, &l->sray, l->sp0, si, true, fp); /* the next segment's start (si->p) */
   if (l->sm || sc->null_boxes.on) {
@@ -1705,6 +1736,7 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
   hit_bounds hb;
   hit_bounds_init(sc, &hb);
   face_plane fp = {.sh = NULL};
+  const medium *ob = one_box_medium(vp, sc);
   /* (the pieces' pages and polarization: lane by lane; vs has no scratch
    * where the caller saw the stages switched off) */
   const bool staged = !vq && !pgs && vs->mi;
@@ -1737,7 +1769,7 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
       for (int k = 0; k < n_sh; k++) {
         int i = sh[k];
         if (shadow_step(vp, sc, &ln[i], vq ? &vq[i] : NULL, pgs ? &pgs[i] : NULL, hit[k], &si[k], &st[i],
-                        &fp))
+                        &fp, ob))
           sh[more++] = i;
       }
       n_sh = more;
