@@ -300,10 +300,9 @@ static inline int media_null_box(const scene *sc, const medium *m) {
  * +inf when missed), and the clip is [max(tmin, tn), min(tmax, tf)]:
  * the same maximum and minimum of the same numbers as the slab test
  * below (ties keep the earlier operand, tmin or tmax, in both). */
-static inline bool media_clip(const scene *sc, const medium *m, const ray3 *r, const box_walk *w,
-                              double *mint, double *maxt) {
+static inline bool media_clip_at(const scene *sc, const medium *m, const ray3 *r, const box_walk *w, int i,
+                                 double *mint, double *maxt) {
   if (w && m->ops == &layered_medium_ops) {
-    int i = media_null_box(sc, m);
     if (i >= 0) {
       double tn = w->t[2 * i], tf = w->t[2 * i + 1];
       double lo = tn > r->tmin ? tn : r->tmin, hi = tf < r->tmax ? tf : r->tmax;
@@ -318,19 +317,34 @@ static inline bool media_clip(const scene *sc, const medium *m, const ray3 *r, c
   return m->ops->intersect_aabb(m, r, mint, maxt);
 }
 
+/* media_clip_at with i = media_null_box(sc, m) (looked up only for a
+ * layered medium under a box walk). */
+static inline bool media_clip(const scene *sc, const medium *m, const ray3 *r, const box_walk *w,
+                              double *mint, double *maxt) {
+  int i = w && m->ops == &layered_medium_ops ? media_null_box(sc, m) : -1;
+  return media_clip_at(sc, m, r, w, i, mint, maxt);
+}
+
 /* The atmosphere's case, worked out once per wave: the scene's only null
- * box holds a layered medium whose box it is (media_null_box 0), sampled
- * analytically, with no medium outside it. That medium, or NULL. The
- * walks of rays that start inside it (the box's entry behind them, its
- * exit ahead) then take a short way (lane_flight, shadow_step) with the
- * same numbers as the walk's. */
-static const medium *one_box_medium(const volpath_integrator *vp, const scene *sc) {
-  if (!sc->null_boxes.on || sc->null_boxes.n != 1 || !vp->analytic) return NULL;
+ * box holds a layered medium (m), sampled analytically, with no medium
+ * outside the box; nbi: media_null_box(sc, m). m NULL: not so. The walks
+ * of rays that start inside the box (its entry behind them, its exit
+ * ahead) then take a short way (shadow_step) with the walk's numbers. */
+typedef struct one_box {
+  const medium *m;
+  int nbi;
+} one_box;
+
+static one_box one_box_of(const volpath_integrator *vp, const scene *sc) {
+  one_box ob = {NULL, -1};
+  if (!sc->null_boxes.on || sc->null_boxes.n != 1 || !vp->analytic) return ob;
   const struct scene_null_box *b = &sc->null_boxes.box[0];
   const medium *m = b->in;
   if (b->sh->interior == b->sh->exterior || b->out || !m || m->ops != &layered_medium_ops || m->absorbing_only)
-    return NULL;
-  return media_null_box(sc, m) == 0 ? m : NULL;
+    return ob;
+  ob.m = m;
+  ob.nbi = media_null_box(sc, m);
+  return ob;
 }
 
 static int pick_channel(const medium *m, sampler_state *st) {
@@ -707,18 +721,21 @@ static __attribute__((noinline)) void tr_pages(const medium *m, const ray3 *r, d
  * (true: trace again). */
 static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l, pol_lane *vq, vpage *pg,
                         bool hit, surface_interaction *si, sampler_state *st, face_plane *fp,
-                        const medium *ob) {
+                        const one_box *ob) {
   const int NP = sc->pages;
-  if (l->sm == ob && ob && !hit && !l->sfinite && !pg && !vq) {
-    /* one_box_medium's box, from inside (tn < 0 < tf): the walk's one
-     * piece [0, tf] (media_clip: [max(tn, 0), min(tf, tf)]), then no
-     * medium beyond the exit */
+  if (l->sm == ob->m && ob->m && !hit && !l->sfinite && !pg && !vq) {
+    /* one_box_of's box, from inside (tn < 0 < tf): the walk's one piece
+     * [0, tf] in the medium, then no medium beyond the exit */
     box_walk bw;
     box_walk_start(sc, l->sp0, l->sray.d, &bw);
     double tn = bw.t[0], tf = bw.t[1];
     if (tn < 0.0 && tf > 0.0 && tf < INFINITY) {
       ray3 seg = {l->sp0, l->sray.d, 0.0, tf};
-      l->str = col_mul(l->str, media_layers_transmittance(layers_page0(ob), &seg, 0.0, tf));
+      double mint, maxt;
+      color tr = media_clip_at(sc, ob->m, &seg, &bw, ob->nbi, &mint, &maxt)
+                     ? media_layers_transmittance(layers_page0(ob->m), &seg, mint, maxt)
+                     : col1(1.0);
+      l->str = col_mul(l->str, tr);
       l->L = col_add(l->L, col_mul(l->sval, l->str));
       l->sh = false;
       return false;
@@ -1736,7 +1753,7 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
   hit_bounds hb;
   hit_bounds_init(sc, &hb);
   face_plane fp = {.sh = NULL};
-  const medium *ob = one_box_medium(vp, sc);
+  const one_box ob = one_box_of(vp, sc);
   /* (the pieces' pages and polarization: lane by lane; vs has no scratch
    * where the caller saw the stages switched off) */
   const bool staged = !vq && !pgs && vs->mi;
@@ -1769,7 +1786,7 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
       for (int k = 0; k < n_sh; k++) {
         int i = sh[k];
         if (shadow_step(vp, sc, &ln[i], vq ? &vq[i] : NULL, pgs ? &pgs[i] : NULL, hit[k], &si[k], &st[i],
-                        &fp, ob))
+                        &fp, &ob))
           sh[more++] = i;
       }
       n_sh = more;
