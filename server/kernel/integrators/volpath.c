@@ -340,7 +340,8 @@ static one_box one_box_of(const volpath_integrator *vp, const scene *sc) {
   if (!sc->null_boxes.on || sc->null_boxes.n != 1 || !vp->analytic) return ob;
   const struct scene_null_box *b = &sc->null_boxes.box[0];
   const medium *m = b->in;
-  if (b->sh->interior == b->sh->exterior || b->out || !m || m->ops != &layered_medium_ops || m->absorbing_only)
+  if (b->sh->interior == b->sh->exterior || b->out || !m || m->ops != &layered_medium_ops ||
+      m->absorbing_only)
     return ob;
   ob.m = m;
   ob.nbi = media_null_box(sc, m);
@@ -1785,8 +1786,8 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
       int more = 0;
       for (int k = 0; k < n_sh; k++) {
         int i = sh[k];
-        if (shadow_step(vp, sc, &ln[i], vq ? &vq[i] : NULL, pgs ? &pgs[i] : NULL, hit[k], &si[k], &st[i],
-                        &fp, &ob))
+        if (shadow_step(vp, sc, &ln[i], vq ? &vq[i] : NULL, pgs ? &pgs[i] : NULL, hit[k], &si[k], &st[i], &fp,
+                        &ob))
           sh[more++] = i;
       }
       n_sh = more;
