@@ -1015,13 +1015,32 @@ static inline bool escapes_after(const scene *sc, const vlane *l, const vpage *p
          (!cross || (sc->null_boxes.n == 1 && (bw->ic & 1) && next == NULL));
 }
 
+/* An analytic free flight of lane l in medium m over [mint, maxt] of seg
+ * (no pages): its draws, the throughput, and at a collision (true) its
+ * point *mi. escapes: escapes_after's answer. */
+PIECE bool flight_analytic(const scene *sc, sampler_state *st, vlane *l, const medium *m, const ray3 *seg,
+                           double mint, double maxt, bool escapes, medium_interaction *mi) {
+  int c = pick_channel(m, st);
+  color tr, pdf;
+  double u = st->s->ops->next_1d(st);
+  if (m->ops == &layered_medium_ops) /* (inline: the same code as its op) */
+    media_layers_sample_real_w(layers_page0(m), m, seg, mint, maxt, u, c, !escapes, mi, &tr, &pdf);
+  else
+    m->ops->sample_real(m, seg, mint, maxt, u, c, mi, &tr, &pdf);
+  double pc = col_mean(pdf);
+  bool scattered = isfinite(mi->t);
+  color f = scattered ? col_mul(tr, mi->sigma_s) : tr;
+  l->T = pc > 0 ? col_scale(col_mul(l->T, f), 1.0 / pc) : col1(0.0);
+  return scattered;
+}
+
 /* The medium along lane l's segment, piece by piece between null boxes'
  * sides: the free flight's draws, the throughput, and at a collision
  * (EV_SCATTER) its point *mi. si: the query's hit (when l->hit), whose
  * point seg_end may move onto its face's plane. */
 PIECE enum lane_outcome lane_flight(const volpath_integrator *vp, const scene *sc, sampler_state *st,
                                     vlane *l, surface_interaction *si, vpage *pg, face_plane *fp,
-                                    medium_interaction *mi) {
+                                    const one_box *ob, medium_interaction *mi) {
   const int NP = sc->pages;
   const sampler_ops *sops = st->s->ops;
   bool hit = l->hit;
@@ -1030,6 +1049,29 @@ PIECE enum lane_outcome lane_flight(const volpath_integrator *vp, const scene *s
   double tend = hit ? seg_end(sc, &l->ray, l->seg_o, si, media_at(m, si), fp) : l->ray.tmax, t0 = 0.0;
   box_walk bw;
   if (sc->null_boxes.on) box_walk_start(sc, l->seg_o, l->ray.d, &bw);
+  if (ob && ob->m && !pg && (m == ob->m || !m)) {
+    /* one_box_of's box, from inside it (tn < 0 < tf) or entered from
+     * before it (0 <= tn < tend): the walk's one piece in the medium,
+     * from 0 or tn to tf or tend, the exit at tf (when tf < tend) into no
+     * medium */
+    double tn = bw.t[0], tf = bw.t[1];
+    bool inside = m && tn < 0.0 && tf > 0.0, enters = !m && tn >= 0.0 && tn < tend;
+    if ((inside || enters) && tf < INFINITY) {
+      if (enters) {
+        if (!(col_max(l->T) > 0)) return EV_END;
+        m = l->m = ob->m;
+        t0 = tn;
+      }
+      bool cross = tf < tend;
+      ray3 seg = {l->seg_o, l->ray.d, t0, cross ? tf : tend};
+      double mint, maxt;
+      if (seg.tmax > seg.tmin && media_clip_at(sc, m, &seg, &bw, ob->nbi, &mint, &maxt))
+        scattered = flight_analytic(sc, st, l, m, &seg, mint, maxt, !l->hit && !sc->environment, mi);
+      bool live = col_max(l->T) > 0;
+      if (!scattered && cross && live) l->m = NULL;
+      return !live ? EV_END : scattered ? EV_SCATTER : EV_SURFACE;
+    }
+  }
   for (;;) { /* the segment piece by piece between null boxes' sides */
     const medium *next = m;
     bool cross = sc->null_boxes.on && box_walk_next(sc, &bw, tend, &next);
@@ -1056,18 +1098,8 @@ PIECE enum lane_outcome lane_flight(const volpath_integrator *vp, const scene *s
         if (ev < 0) return EV_END;
         scattered = ev > 0;
       } else if (analytic_in(vp, m)) {
-        int c = pick_channel(m, st);
-        color tr, pdf;
-        double u = sops->next_1d(st);
-        if (m->ops == &layered_medium_ops) /* (inline: the same code as its op) */
-          media_layers_sample_real_w(layers_page0(m), m, &seg, mint, maxt, u, c,
-                                     !escapes_after(sc, l, pg, cross, &bw, next), mi, &tr, &pdf);
-        else
-          m->ops->sample_real(m, &seg, mint, maxt, u, c, mi, &tr, &pdf);
-        double pc = col_mean(pdf);
-        scattered = isfinite(mi->t);
-        color f = scattered ? col_mul(tr, mi->sigma_s) : tr;
-        l->T = pc > 0 ? col_scale(col_mul(l->T, f), 1.0 / pc) : col1(0.0);
+        scattered =
+            flight_analytic(sc, st, l, m, &seg, mint, maxt, escapes_after(sc, l, pg, cross, &bw, next), mi);
       } else {
         *mi = (medium_interaction){.medium = m, .wi = v3_neg(l->ray.d), .mint = mint};
         mi->p = v3_fma(seg.o, mint, seg.d);
@@ -1415,7 +1447,7 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
   const sampler_ops *sops = st->s->ops;
   l->sh = false;
   medium_interaction mi;
-  enum lane_outcome ev = lane_flight(vp, sc, st, l, si, pg, fp, &mi);
+  enum lane_outcome ev = lane_flight(vp, sc, st, l, si, pg, fp, NULL, &mi);
   if (ev == EV_END) return false;
   if (ev == EV_SCATTER) {
     if (!scatter_begin(vp, l, &mi)) return false;
@@ -1505,12 +1537,12 @@ static void stage_sample_numbers(const sampler *smp, sampler_state *st, const in
  * null surface crossed: goes on as it is) or EV_END. */
 static void stage_segments(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *ln,
                            const int *idx, int live, const bool *hit, surface_interaction *si, face_plane *fp,
-                           const vstage *vs) {
+                           const one_box *ob, const vstage *vs) {
   for (int k = 0; k < live; k++) {
     vlane *l = &ln[idx[k]];
     l->hit = hit[k];
     l->sh = false;
-    enum lane_outcome ev = lane_flight(vp, sc, &st[idx[k]], l, &si[k], NULL, fp, &vs->mi[k]);
+    enum lane_outcome ev = lane_flight(vp, sc, &st[idx[k]], l, &si[k], NULL, fp, ob, &vs->mi[k]);
     if (ev == EV_SCATTER)
       ev = scatter_begin(vp, l, &vs->mi[k]) ? EV_SCATTER : EV_END;
     else if (ev == EV_SURFACE)
@@ -1696,8 +1728,8 @@ static void stage_scatters(const volpath_integrator *vp, const scene *sc, sample
  * shadow ray to trace. */
 static void wave_events(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *ln,
                         const int *idx, int live, const bool *hit, surface_interaction *si, face_plane *fp,
-                        const vstage *vs) {
-  stage_segments(vp, sc, st, ln, idx, live, hit, si, fp, vs);
+                        const one_box *ob, const vstage *vs) {
+  stage_segments(vp, sc, st, ln, idx, live, hit, si, fp, ob, vs);
   int n = 0;
   for (int k = 0; k < live; k++) {
     vs->ks[n] = k;
@@ -1763,8 +1795,8 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
     camera = false;
     int next = 0, n_sh = 0;
     if (staged) {
-      wave_events(vp, sc, st, ln, idx, live, hit, si, &fp, vs); /* (si[k]: in place) */
-      for (int k = 0; k < live; k++) {                          /* (no branch on the outcomes) */
+      wave_events(vp, sc, st, ln, idx, live, hit, si, &fp, &ob, vs); /* (si[k]: in place) */
+      for (int k = 0; k < live; k++) {                               /* (no branch on the outcomes) */
         int i = idx[k];
         sh[n_sh] = idx[next] = i;
         n_sh += ln[i].sh;
