@@ -720,28 +720,43 @@ static __attribute__((noinline)) void tr_pages(const medium *m, const ray3 *r, d
 /* One round of lane l's shadow ray after its query (hit at si): the
  * segment's transmittance, then done (false) or a null surface crossed
  * (true: trace again). */
+/* Lane l's shadow ray (no pages, no polarization) when it hit nothing
+ * (its query's answer, or no query: may_hit_in) in the one-box case
+ * (one_box_of) from inside the box (tn < 0 < tf), its end at infinity:
+ * shadow_step's walk has one piece, [0, tf] in the box's medium, and no
+ * medium beyond the exit. Its transmittance and contribution as
+ * shadow_step's, the ray done (true); false: not that case. */
+static inline bool shadow_one_box(const scene *sc, const one_box *ob, vlane *l) {
+  if (l->sm != ob->m || !ob->m || l->sfinite) return false;
+  box_walk bw;
+  box_walk_start(sc, l->sp0, l->sray.d, &bw);
+  double tn = bw.t[0], tf = bw.t[1];
+  if (!(tn < 0.0 && tf > 0.0 && tf < INFINITY)) return false;
+  ray3 seg = {l->sp0, l->sray.d, 0.0, tf};
+  double mint, maxt;
+  color tr = media_clip_at(sc, ob->m, &seg, &bw, ob->nbi, &mint, &maxt)
+                 ? media_layers_transmittance(layers_page0(ob->m), &seg, mint, maxt)
+                 : col1(1.0);
+  l->str = col_mul(l->str, tr);
+  l->L = col_add(l->L, col_mul(l->sval, l->str));
+  l->sh = false;
+  return true;
+}
+
+/* A staged lane's shadow ray just started (l->sh), settled at once where
+ * it needs no query (may_hit_in) and shadow_one_box takes it: the lane
+ * is in cache, and the shadow rounds skip it. Its contribution is added
+ * where the rounds would add it (nothing else adds to l->L between the
+ * light sample and the rounds). */
+static inline void shadow_now(const scene *sc, const hit_bounds *hb, const one_box *ob, vlane *l) {
+  if (l->sh && ob->m && l->sm == ob->m && !may_hit_in(hb, &l->sray)) shadow_one_box(sc, ob, l);
+}
+
 static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l, pol_lane *vq, vpage *pg,
                         bool hit, surface_interaction *si, sampler_state *st, face_plane *fp,
                         const one_box *ob) {
   const int NP = sc->pages;
-  if (l->sm == ob->m && ob->m && !hit && !l->sfinite && !pg && !vq) {
-    /* one_box_of's box, from inside (tn < 0 < tf): the walk's one piece
-     * [0, tf] in the medium, then no medium beyond the exit */
-    box_walk bw;
-    box_walk_start(sc, l->sp0, l->sray.d, &bw);
-    double tn = bw.t[0], tf = bw.t[1];
-    if (tn < 0.0 && tf > 0.0 && tf < INFINITY) {
-      ray3 seg = {l->sp0, l->sray.d, 0.0, tf};
-      double mint, maxt;
-      color tr = media_clip_at(sc, ob->m, &seg, &bw, ob->nbi, &mint, &maxt)
-                     ? media_layers_transmittance(layers_page0(ob->m), &seg, mint, maxt)
-                     : col1(1.0);
-      l->str = col_mul(l->str, tr);
-      l->L = col_add(l->L, col_mul(l->sval, l->str));
-      l->sh = false;
-      return false;
-    }
-  }
+  if (!hit && !pg && !vq && shadow_one_box(sc, ob, l)) return false;
   if (hit && !(l->sm || sc->null_boxes.on) && media_at(NULL, si))
     seg_end(sc, &l->sray, l->sp0, si, true, fp); /* the next segment's start (si->p) */
   if (l->sm || sc->null_boxes.on) {
@@ -1645,7 +1660,8 @@ static void stage_bsdf_samples(int j0, int c, const vstage *vs, bsdf_sample *bs,
  * continuation rays (surface_continue), then the roulette. ev[k]:
  * EV_BOUNCE (goes on) or EV_END. ks is reordered. */
 static void stage_surfaces(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *ln,
-                           const int *idx, int *ks, int n, surface_interaction *si, const vstage *vs) {
+                           const int *idx, int *ks, int n, surface_interaction *si, const hit_bounds *hb,
+                           const one_box *ob, const vstage *vs) {
   if (n == 0) return;
   int *g = vs->sub, ng = 0;
   for (int j = 0; j < n; j++) {
@@ -1662,10 +1678,12 @@ static void stage_surfaces(const volpath_integrator *vp, const scene *sc, sample
     stage_bsdf_evals(j0, c, vs, wo, f, pdf);
     for (int i = 0; i < c; i++) {
       int j = j0 + i;
-      if (surface_light_lit(&vs->ds[j], vs->val[j]) && !col_is_black(f[i]))
+      if (surface_light_lit(&vs->ds[j], vs->val[j]) && !col_is_black(f[i])) {
         surface_light_at(sc, &ln[idx[g[j]]], &si[g[j]], sc->emitters[vs->ek[j]],
                          pick_probability(sc, vs->ek[j]), &vs->ds[j], vs->val[j], wo[i], f[i],
                          vs->ds[j].delta ? 0.0 : pdf[i], NULL);
+        shadow_now(sc, hb, ob, &ln[idx[g[j]]]);
+      }
     }
   }
   stage_lanes(idx, ks, n, vs->lid);
@@ -1694,7 +1712,8 @@ static void stage_surfaces(const volpath_integrator *vp, const scene *sc, sample
  * (together), the samples and the continuation rays (scatter_phase), then
  * the roulette. ev[k]: EV_SCATTER (goes on) or EV_END. ks is reordered. */
 static void stage_scatters(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *ln,
-                           const int *idx, int *ks, int n, const vstage *vs) {
+                           const int *idx, int *ks, int n, const hit_bounds *hb, const one_box *ob,
+                           const vstage *vs) {
   if (n == 0) return;
   int *g = vs->sub, ng = 0;
   for (int j = 0; j < n; j++) {
@@ -1704,9 +1723,11 @@ static void stage_scatters(const volpath_integrator *vp, const scene *sc, sample
   }
   if (ng > 0) {
     stage_light_samples(sc, st, idx, g, ng, vs);
-    for (int j = 0; j < ng; j++)
+    for (int j = 0; j < ng; j++) {
       scatter_light(sc, &ln[idx[g[j]]], &vs->mi[g[j]], sc->emitters[vs->ek[j]],
                     pick_probability(sc, vs->ek[j]), vs->d2[j], &vs->ds[j], vs->val[j], NULL, NULL);
+      shadow_now(sc, hb, ob, &ln[idx[g[j]]]);
+    }
   }
   stage_lanes(idx, ks, n, vs->lid);
   stage_sample_numbers(st[vs->lid[0]].s, st, vs->lid, n, vs);
@@ -1728,20 +1749,20 @@ static void stage_scatters(const volpath_integrator *vp, const scene *sc, sample
  * shadow ray to trace. */
 static void wave_events(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *ln,
                         const int *idx, int live, const bool *hit, surface_interaction *si, face_plane *fp,
-                        const one_box *ob, const vstage *vs) {
+                        const hit_bounds *hb, const one_box *ob, const vstage *vs) {
   stage_segments(vp, sc, st, ln, idx, live, hit, si, fp, ob, vs);
   int n = 0;
   for (int k = 0; k < live; k++) {
     vs->ks[n] = k;
     n += vs->ev[k] == EV_BOUNCE;
   }
-  stage_surfaces(vp, sc, st, ln, idx, vs->ks, n, si, vs);
+  stage_surfaces(vp, sc, st, ln, idx, vs->ks, n, si, hb, ob, vs);
   n = 0;
   for (int k = 0; k < live; k++) {
     vs->ks[n] = k;
     n += vs->ev[k] == EV_SCATTER;
   }
-  stage_scatters(vp, sc, st, ln, idx, vs->ks, n, vs);
+  stage_scatters(vp, sc, st, ln, idx, vs->ks, n, hb, ob, vs);
 }
 
 /* Run the wave over n lanes; scratch: ln (n lanes), idx and sh (n ints
@@ -1795,8 +1816,8 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
     camera = false;
     int next = 0, n_sh = 0;
     if (staged) {
-      wave_events(vp, sc, st, ln, idx, live, hit, si, &fp, &ob, vs); /* (si[k]: in place) */
-      for (int k = 0; k < live; k++) {                               /* (no branch on the outcomes) */
+      wave_events(vp, sc, st, ln, idx, live, hit, si, &fp, &hb, &ob, vs); /* (si[k]: in place) */
+      for (int k = 0; k < live; k++) {                                    /* (no branch on the outcomes) */
         int i = idx[k];
         sh[n_sh] = idx[next] = i;
         n_sh += ln[i].sh;
