@@ -1807,10 +1807,12 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
   hit_bounds hb;
   hit_bounds_init(sc, &hb);
   face_plane fp = {.sh = NULL};
-  const one_box ob = one_box_of(vp, sc);
   /* (the pieces' pages and polarization: lane by lane; vs has no scratch
    * where the caller saw the stages switched off) */
   const bool staged = !vq && !pgs && vs->mi;
+  /* (lane by lane, the walks all go the general way: test_volpath_stages
+   * compares the short ways with them) */
+  const one_box ob = staged ? one_box_of(vp, sc) : (one_box){NULL, -1};
   while (live > 0) {
     wave_trace(sc, &hb, ln, idx, live, false, camera, hit, si, stats);
     camera = false;
