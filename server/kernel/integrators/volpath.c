@@ -631,7 +631,9 @@ static void wave_trace(const scene *sc, const hit_bounds *hb, vlane *ln, const i
  * hit distance (or barycentrics) are off by a few float units of the
  * coordinates, 2e-4 at 3 km, which a dense medium far from the origin
  * turns into a transmittance error (docs/media.md#dense-media-the-roulette-and-the-segment-lengths). A
- * grazing hit keeps Embree's point. */
+ * grazing hit keeps Embree's point. The planes of the last two faces met
+ * are kept (fp[0], fp[1]: a ground of two triangles, hit at random, needs
+ * no more). */
 typedef struct face_plane {
   const shape *sh; /* NULL: empty */
   uint32_t prim;
@@ -646,8 +648,11 @@ static double seg_end(const scene *sc, const ray3 *r, vec3 o0, surface_interacti
   const shape *sh = si->shape;
   if (!media || !shape_is_mesh(sh) || sh->index >= sc->n_shapes || sc->shapes[sh->index] != sh ||
       si->prim >= sh->mesh.n_faces)
-    return t;                                 /* (an instance's member: its placement is not at hand) */
-  if (fp->sh != sh || fp->prim != si->prim) { /* (the last face's plane is kept: a ground has few faces) */
+    return t; /* (an instance's member: its placement is not at hand) */
+  if (fp[1].sh == sh && fp[1].prim == si->prim) {
+    fp = &fp[1];
+  } else if (fp->sh != sh || fp->prim != si->prim) {
+    fp[1] = fp[0];
     const uint32_t *ix = &sh->mesh.faces[3 * (size_t)si->prim];
     vec3 a = xf_point(&sh->to_world, mesh_vertex(&sh->mesh, ix[0]));
     vec3 b = xf_point(&sh->to_world, mesh_vertex(&sh->mesh, ix[1]));
@@ -1806,7 +1811,7 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
   bool camera = true;
   hit_bounds hb;
   hit_bounds_init(sc, &hb);
-  face_plane fp = {.sh = NULL};
+  face_plane fp[2] = {{.sh = NULL}, {.sh = NULL}};
   /* (the pieces' pages and polarization: lane by lane; vs has no scratch
    * where the caller saw the stages switched off) */
   const bool staged = !vq && !pgs && vs->mi;
@@ -1818,8 +1823,8 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
     camera = false;
     int next = 0, n_sh = 0;
     if (staged) {
-      wave_events(vp, sc, st, ln, idx, live, hit, si, &fp, &hb, &ob, vs); /* (si[k]: in place) */
-      for (int k = 0; k < live; k++) {                                    /* (no branch on the outcomes) */
+      wave_events(vp, sc, st, ln, idx, live, hit, si, fp, &hb, &ob, vs); /* (si[k]: in place) */
+      for (int k = 0; k < live; k++) {                                   /* (no branch on the outcomes) */
         int i = idx[k];
         sh[n_sh] = idx[next] = i;
         n_sh += ln[i].sh;
@@ -1830,7 +1835,7 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
         int i = idx[k];
         ln[i].hit = hit[k];
         bool alive = lane_event(vp, sc, &st[i], &ln[i], &si[k], vq ? &vq[i] : NULL, pgs ? &pgs[i] : NULL,
-                                &fp); /* (si[k]: in place) */
+                                fp); /* (si[k]: in place) */
         if (ln[i].sh) sh[n_sh++] = i;
         if (alive) idx[next++] = i;
       }
@@ -1841,7 +1846,7 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
       int more = 0;
       for (int k = 0; k < n_sh; k++) {
         int i = sh[k];
-        if (shadow_step(vp, sc, &ln[i], vq ? &vq[i] : NULL, pgs ? &pgs[i] : NULL, hit[k], &si[k], &st[i], &fp,
+        if (shadow_step(vp, sc, &ln[i], vq ? &vq[i] : NULL, pgs ? &pgs[i] : NULL, hit[k], &si[k], &st[i], fp,
                         &ob))
           sh[more++] = i;
       }
