@@ -286,10 +286,10 @@ static inline void media_layers_collision(const media_layers *L, const medium *m
  * left at 1 instead (no exp), for a caller to whom a pass's weight does
  * not matter (a path that ends there); the decision, and a collision's
  * numbers, are the same. */
-static inline void media_layers_sample_real_w(const media_layers *L, const medium *m, const ray3 *r,
-                                              double mint, double maxt, double u, int channel,
-                                              bool weigh_pass, medium_interaction *mi, color *tr,
-                                              color *pdf) {
+static inline __attribute__((always_inline)) void
+media_layers_sample_real_w(const media_layers *L, const medium *m, const ray3 *r, double mint, double maxt,
+                           double u, int channel, bool weigh_pass, medium_interaction *mi, color *tr,
+                           color *pdf) {
   media_flight f;
   media_flight_setup(L, r, mint, maxt, channel, &f);
   double target = 0.0;
