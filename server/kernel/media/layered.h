@@ -285,7 +285,8 @@ static inline void media_layers_collision(const media_layers *L, const medium *m
  * head gives the inversion). weigh_pass false: a pass's tr and pdf are
  * left at 1 instead (no exp), for a caller to whom a pass's weight does
  * not matter (a path that ends there); the decision, and a collision's
- * numbers, are the same. */
+ * numbers, are the same. Always inline: volpath's atmosphere renders 2 %
+ * faster than with GCC's one out-of-line copy (2026-11-29). */
 static inline __attribute__((always_inline)) void
 media_layers_sample_real_w(const media_layers *L, const medium *m, const ray3 *r, double mint, double maxt,
                            double u, int channel, bool weigh_pass, medium_interaction *mi, color *tr,
