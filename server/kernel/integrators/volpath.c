@@ -300,10 +300,9 @@ static inline int media_null_box(const scene *sc, const medium *m) {
  * +inf when missed), and the clip is [max(tmin, tn), min(tmax, tf)]:
  * the same maximum and minimum of the same numbers as the slab test
  * below (ties keep the earlier operand, tmin or tmax, in both). */
-static inline bool media_clip(const scene *sc, const medium *m, const ray3 *r, const box_walk *w,
-                              double *mint, double *maxt) {
+static inline bool media_clip_at(const scene *sc, const medium *m, const ray3 *r, const box_walk *w, int i,
+                                 double *mint, double *maxt) {
   if (w && m->ops == &layered_medium_ops) {
-    int i = media_null_box(sc, m);
     if (i >= 0) {
       double tn = w->t[2 * i], tf = w->t[2 * i + 1];
       double lo = tn > r->tmin ? tn : r->tmin, hi = tf < r->tmax ? tf : r->tmax;
@@ -316,6 +315,37 @@ static inline bool media_clip(const scene *sc, const medium *m, const ray3 *r, c
     if (b->aligned) return media_box_clip_aligned(b, r->o, r->d, r->tmin, r->tmax, w->inv, mint, maxt);
   }
   return m->ops->intersect_aabb(m, r, mint, maxt);
+}
+
+/* media_clip_at with i = media_null_box(sc, m) (looked up only for a
+ * layered medium under a box walk). */
+static inline bool media_clip(const scene *sc, const medium *m, const ray3 *r, const box_walk *w,
+                              double *mint, double *maxt) {
+  int i = w && m->ops == &layered_medium_ops ? media_null_box(sc, m) : -1;
+  return media_clip_at(sc, m, r, w, i, mint, maxt);
+}
+
+/* The atmosphere's case, worked out once per wave: the scene's only null
+ * box holds a layered medium (m), sampled analytically, with no medium
+ * outside the box; nbi: media_null_box(sc, m). m NULL: not so. The walks
+ * of rays that start inside the box (its entry behind them, its exit
+ * ahead) then take a short way (shadow_step) with the walk's numbers. */
+typedef struct one_box {
+  const medium *m;
+  int nbi;
+} one_box;
+
+static one_box one_box_of(const volpath_integrator *vp, const scene *sc) {
+  one_box ob = {NULL, -1};
+  if (!sc->null_boxes.on || sc->null_boxes.n != 1 || !vp->analytic) return ob;
+  const struct scene_null_box *b = &sc->null_boxes.box[0];
+  const medium *m = b->in;
+  if (b->sh->interior == b->sh->exterior || b->out || !m || m->ops != &layered_medium_ops ||
+      m->absorbing_only)
+    return ob;
+  ob.m = m;
+  ob.nbi = media_null_box(sc, m);
+  return ob;
 }
 
 static int pick_channel(const medium *m, sampler_state *st) {
@@ -601,7 +631,9 @@ static void wave_trace(const scene *sc, const hit_bounds *hb, vlane *ln, const i
  * hit distance (or barycentrics) are off by a few float units of the
  * coordinates, 2e-4 at 3 km, which a dense medium far from the origin
  * turns into a transmittance error (docs/media.md#dense-media-the-roulette-and-the-segment-lengths). A
- * grazing hit keeps Embree's point. */
+ * grazing hit keeps Embree's point. The planes of the last two faces met
+ * are kept (fp[0], fp[1]: a ground of two triangles, hit at random, needs
+ * no more). */
 typedef struct face_plane {
   const shape *sh; /* NULL: empty */
   uint32_t prim;
@@ -616,8 +648,11 @@ static double seg_end(const scene *sc, const ray3 *r, vec3 o0, surface_interacti
   const shape *sh = si->shape;
   if (!media || !shape_is_mesh(sh) || sh->index >= sc->n_shapes || sc->shapes[sh->index] != sh ||
       si->prim >= sh->mesh.n_faces)
-    return t;                                 /* (an instance's member: its placement is not at hand) */
-  if (fp->sh != sh || fp->prim != si->prim) { /* (the last face's plane is kept: a ground has few faces) */
+    return t; /* (an instance's member: its placement is not at hand) */
+  if (fp[1].sh == sh && fp[1].prim == si->prim) {
+    fp = &fp[1];
+  } else if (fp->sh != sh || fp->prim != si->prim) {
+    fp[1] = fp[0];
     const uint32_t *ix = &sh->mesh.faces[3 * (size_t)si->prim];
     vec3 a = xf_point(&sh->to_world, mesh_vertex(&sh->mesh, ix[0]));
     vec3 b = xf_point(&sh->to_world, mesh_vertex(&sh->mesh, ix[1]));
@@ -690,9 +725,43 @@ static __attribute__((noinline)) void tr_pages(const medium *m, const ray3 *r, d
 /* One round of lane l's shadow ray after its query (hit at si): the
  * segment's transmittance, then done (false) or a null surface crossed
  * (true: trace again). */
+/* Lane l's shadow ray (no pages, no polarization) when it hit nothing
+ * (its query's answer, or no query: may_hit_in) in the one-box case
+ * (one_box_of) from inside the box (tn < 0 < tf), its end at infinity:
+ * shadow_step's walk has one piece, [0, tf] in the box's medium, and no
+ * medium beyond the exit. Its transmittance and contribution as
+ * shadow_step's, the ray done (true); false: not that case. */
+static inline bool shadow_one_box(const scene *sc, const one_box *ob, vlane *l) {
+  if (l->sm != ob->m || !ob->m || l->sfinite) return false;
+  box_walk bw;
+  box_walk_start(sc, l->sp0, l->sray.d, &bw);
+  double tn = bw.t[0], tf = bw.t[1];
+  if (!(tn < 0.0 && tf > 0.0 && tf < INFINITY)) return false;
+  ray3 seg = {l->sp0, l->sray.d, 0.0, tf};
+  double mint, maxt;
+  color tr = media_clip_at(sc, ob->m, &seg, &bw, ob->nbi, &mint, &maxt)
+                 ? media_layers_transmittance(layers_page0(ob->m), &seg, mint, maxt)
+                 : col1(1.0);
+  l->str = col_mul(l->str, tr);
+  l->L = col_add(l->L, col_mul(l->sval, l->str));
+  l->sh = false;
+  return true;
+}
+
+/* A staged lane's shadow ray just started (l->sh), settled at once where
+ * it needs no query (may_hit_in) and shadow_one_box takes it: the lane
+ * is in cache, and the shadow rounds skip it. Its contribution is added
+ * where the rounds would add it (nothing else adds to l->L between the
+ * light sample and the rounds). */
+static inline void shadow_now(const scene *sc, const hit_bounds *hb, const one_box *ob, vlane *l) {
+  if (l->sh && ob->m && l->sm == ob->m && !may_hit_in(hb, &l->sray)) shadow_one_box(sc, ob, l);
+}
+
 static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l, pol_lane *vq, vpage *pg,
-                        bool hit, surface_interaction *si, sampler_state *st, face_plane *fp) {
+                        bool hit, surface_interaction *si, sampler_state *st, face_plane *fp,
+                        const one_box *ob) {
   const int NP = sc->pages;
+  if (!hit && !pg && !vq && shadow_one_box(sc, ob, l)) return false;
   if (hit && !(l->sm || sc->null_boxes.on) && media_at(NULL, si))
     seg_end(sc, &l->sray, l->sp0, si, true, fp); /* the next segment's start (si->p) */
   if (l->sm || sc->null_boxes.on) {
@@ -952,13 +1021,46 @@ enum lane_outcome {
   EV_BOUNCE   /* surface_emit: a surface to scatter from */
 };
 
+/* Does lane l's path end, whatever its throughput, if its flight through
+ * the piece of its segment that the box walk bw is at passes (cross: a
+ * null box's side ends the piece, into medium next)? Its ray hits nothing
+ * (surface_emit: the path ends there), no environment sees it, and
+ * nothing beyond the piece can scatter it: the piece runs to the ray's
+ * end, or to the exit of the scene's only null box into no medium (the
+ * last crossing). Then a pass's weight (its exp) is not needed, and the
+ * film is the same bit for bit. Not with pages (each page's weight). */
+static inline bool escapes_after(const scene *sc, const vlane *l, const vpage *pg, bool cross,
+                                 const box_walk *bw, const medium *next) {
+  return !l->hit && !sc->environment && !pg &&
+         (!cross || (sc->null_boxes.n == 1 && (bw->ic & 1) && next == NULL));
+}
+
+/* An analytic free flight of lane l in medium m over [mint, maxt] of seg
+ * (no pages): its draws, the throughput, and at a collision (true) its
+ * point *mi. escapes: escapes_after's answer. */
+PIECE bool flight_analytic(const scene *sc, sampler_state *st, vlane *l, const medium *m, const ray3 *seg,
+                           double mint, double maxt, bool escapes, medium_interaction *mi) {
+  int c = pick_channel(m, st);
+  color tr, pdf;
+  double u = st->s->ops->next_1d(st);
+  if (m->ops == &layered_medium_ops) /* (inline: the same code as its op) */
+    media_layers_sample_real_w(layers_page0(m), m, seg, mint, maxt, u, c, !escapes, mi, &tr, &pdf);
+  else
+    m->ops->sample_real(m, seg, mint, maxt, u, c, mi, &tr, &pdf);
+  double pc = col_mean(pdf);
+  bool scattered = isfinite(mi->t);
+  color f = scattered ? col_mul(tr, mi->sigma_s) : tr;
+  l->T = pc > 0 ? col_scale(col_mul(l->T, f), 1.0 / pc) : col1(0.0);
+  return scattered;
+}
+
 /* The medium along lane l's segment, piece by piece between null boxes'
  * sides: the free flight's draws, the throughput, and at a collision
  * (EV_SCATTER) its point *mi. si: the query's hit (when l->hit), whose
  * point seg_end may move onto its face's plane. */
 PIECE enum lane_outcome lane_flight(const volpath_integrator *vp, const scene *sc, sampler_state *st,
                                     vlane *l, surface_interaction *si, vpage *pg, face_plane *fp,
-                                    medium_interaction *mi) {
+                                    const one_box *ob, medium_interaction *mi) {
   const int NP = sc->pages;
   const sampler_ops *sops = st->s->ops;
   bool hit = l->hit;
@@ -967,6 +1069,29 @@ PIECE enum lane_outcome lane_flight(const volpath_integrator *vp, const scene *s
   double tend = hit ? seg_end(sc, &l->ray, l->seg_o, si, media_at(m, si), fp) : l->ray.tmax, t0 = 0.0;
   box_walk bw;
   if (sc->null_boxes.on) box_walk_start(sc, l->seg_o, l->ray.d, &bw);
+  if (ob && ob->m && !pg && (m == ob->m || !m)) {
+    /* one_box_of's box, from inside it (tn < 0 < tf) or entered from
+     * before it (0 <= tn < tend): the walk's one piece in the medium,
+     * from 0 or tn to tf or tend, the exit at tf (when tf < tend) into no
+     * medium */
+    double tn = bw.t[0], tf = bw.t[1];
+    bool inside = m && tn < 0.0 && tf > 0.0, enters = !m && tn >= 0.0 && tn < tend;
+    if ((inside || enters) && tf < INFINITY) {
+      if (enters) {
+        if (!(col_max(l->T) > 0)) return EV_END;
+        m = l->m = ob->m;
+        t0 = tn;
+      }
+      bool cross = tf < tend;
+      ray3 seg = {l->seg_o, l->ray.d, t0, cross ? tf : tend};
+      double mint, maxt;
+      if (seg.tmax > seg.tmin && media_clip_at(sc, m, &seg, &bw, ob->nbi, &mint, &maxt))
+        scattered = flight_analytic(sc, st, l, m, &seg, mint, maxt, !l->hit && !sc->environment, mi);
+      bool live = col_max(l->T) > 0;
+      if (!scattered && cross && live) l->m = NULL;
+      return !live ? EV_END : scattered ? EV_SCATTER : EV_SURFACE;
+    }
+  }
   for (;;) { /* the segment piece by piece between null boxes' sides */
     const medium *next = m;
     bool cross = sc->null_boxes.on && box_walk_next(sc, &bw, tend, &next);
@@ -993,17 +1118,8 @@ PIECE enum lane_outcome lane_flight(const volpath_integrator *vp, const scene *s
         if (ev < 0) return EV_END;
         scattered = ev > 0;
       } else if (analytic_in(vp, m)) {
-        int c = pick_channel(m, st);
-        color tr, pdf;
-        double u = sops->next_1d(st);
-        if (m->ops == &layered_medium_ops) /* (inline: the same code as its op) */
-          media_layers_sample_real(layers_page0(m), m, &seg, mint, maxt, u, c, mi, &tr, &pdf);
-        else
-          m->ops->sample_real(m, &seg, mint, maxt, u, c, mi, &tr, &pdf);
-        double pc = col_mean(pdf);
-        scattered = isfinite(mi->t);
-        color f = scattered ? col_mul(tr, mi->sigma_s) : tr;
-        l->T = pc > 0 ? col_scale(col_mul(l->T, f), 1.0 / pc) : col1(0.0);
+        scattered =
+            flight_analytic(sc, st, l, m, &seg, mint, maxt, escapes_after(sc, l, pg, cross, &bw, next), mi);
       } else {
         *mi = (medium_interaction){.medium = m, .wi = v3_neg(l->ray.d), .mint = mint};
         mi->p = v3_fma(seg.o, mint, seg.d);
@@ -1351,7 +1467,7 @@ static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_st
   const sampler_ops *sops = st->s->ops;
   l->sh = false;
   medium_interaction mi;
-  enum lane_outcome ev = lane_flight(vp, sc, st, l, si, pg, fp, &mi);
+  enum lane_outcome ev = lane_flight(vp, sc, st, l, si, pg, fp, NULL, &mi);
   if (ev == EV_END) return false;
   if (ev == EV_SCATTER) {
     if (!scatter_begin(vp, l, &mi)) return false;
@@ -1441,12 +1557,12 @@ static void stage_sample_numbers(const sampler *smp, sampler_state *st, const in
  * null surface crossed: goes on as it is) or EV_END. */
 static void stage_segments(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *ln,
                            const int *idx, int live, const bool *hit, surface_interaction *si, face_plane *fp,
-                           const vstage *vs) {
+                           const one_box *ob, const vstage *vs) {
   for (int k = 0; k < live; k++) {
     vlane *l = &ln[idx[k]];
     l->hit = hit[k];
     l->sh = false;
-    enum lane_outcome ev = lane_flight(vp, sc, &st[idx[k]], l, &si[k], NULL, fp, &vs->mi[k]);
+    enum lane_outcome ev = lane_flight(vp, sc, &st[idx[k]], l, &si[k], NULL, fp, ob, &vs->mi[k]);
     if (ev == EV_SCATTER)
       ev = scatter_begin(vp, l, &vs->mi[k]) ? EV_SCATTER : EV_END;
     else if (ev == EV_SURFACE)
@@ -1549,7 +1665,8 @@ static void stage_bsdf_samples(int j0, int c, const vstage *vs, bsdf_sample *bs,
  * continuation rays (surface_continue), then the roulette. ev[k]:
  * EV_BOUNCE (goes on) or EV_END. ks is reordered. */
 static void stage_surfaces(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *ln,
-                           const int *idx, int *ks, int n, surface_interaction *si, const vstage *vs) {
+                           const int *idx, int *ks, int n, surface_interaction *si, const hit_bounds *hb,
+                           const one_box *ob, const vstage *vs) {
   if (n == 0) return;
   int *g = vs->sub, ng = 0;
   for (int j = 0; j < n; j++) {
@@ -1566,10 +1683,12 @@ static void stage_surfaces(const volpath_integrator *vp, const scene *sc, sample
     stage_bsdf_evals(j0, c, vs, wo, f, pdf);
     for (int i = 0; i < c; i++) {
       int j = j0 + i;
-      if (surface_light_lit(&vs->ds[j], vs->val[j]) && !col_is_black(f[i]))
+      if (surface_light_lit(&vs->ds[j], vs->val[j]) && !col_is_black(f[i])) {
         surface_light_at(sc, &ln[idx[g[j]]], &si[g[j]], sc->emitters[vs->ek[j]],
                          pick_probability(sc, vs->ek[j]), &vs->ds[j], vs->val[j], wo[i], f[i],
                          vs->ds[j].delta ? 0.0 : pdf[i], NULL);
+        shadow_now(sc, hb, ob, &ln[idx[g[j]]]);
+      }
     }
   }
   stage_lanes(idx, ks, n, vs->lid);
@@ -1598,7 +1717,8 @@ static void stage_surfaces(const volpath_integrator *vp, const scene *sc, sample
  * (together), the samples and the continuation rays (scatter_phase), then
  * the roulette. ev[k]: EV_SCATTER (goes on) or EV_END. ks is reordered. */
 static void stage_scatters(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *ln,
-                           const int *idx, int *ks, int n, const vstage *vs) {
+                           const int *idx, int *ks, int n, const hit_bounds *hb, const one_box *ob,
+                           const vstage *vs) {
   if (n == 0) return;
   int *g = vs->sub, ng = 0;
   for (int j = 0; j < n; j++) {
@@ -1608,9 +1728,11 @@ static void stage_scatters(const volpath_integrator *vp, const scene *sc, sample
   }
   if (ng > 0) {
     stage_light_samples(sc, st, idx, g, ng, vs);
-    for (int j = 0; j < ng; j++)
+    for (int j = 0; j < ng; j++) {
       scatter_light(sc, &ln[idx[g[j]]], &vs->mi[g[j]], sc->emitters[vs->ek[j]],
                     pick_probability(sc, vs->ek[j]), vs->d2[j], &vs->ds[j], vs->val[j], NULL, NULL);
+      shadow_now(sc, hb, ob, &ln[idx[g[j]]]);
+    }
   }
   stage_lanes(idx, ks, n, vs->lid);
   stage_sample_numbers(st[vs->lid[0]].s, st, vs->lid, n, vs);
@@ -1632,20 +1754,20 @@ static void stage_scatters(const volpath_integrator *vp, const scene *sc, sample
  * shadow ray to trace. */
 static void wave_events(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *ln,
                         const int *idx, int live, const bool *hit, surface_interaction *si, face_plane *fp,
-                        const vstage *vs) {
-  stage_segments(vp, sc, st, ln, idx, live, hit, si, fp, vs);
+                        const hit_bounds *hb, const one_box *ob, const vstage *vs) {
+  stage_segments(vp, sc, st, ln, idx, live, hit, si, fp, ob, vs);
   int n = 0;
   for (int k = 0; k < live; k++) {
     vs->ks[n] = k;
     n += vs->ev[k] == EV_BOUNCE;
   }
-  stage_surfaces(vp, sc, st, ln, idx, vs->ks, n, si, vs);
+  stage_surfaces(vp, sc, st, ln, idx, vs->ks, n, si, hb, ob, vs);
   n = 0;
   for (int k = 0; k < live; k++) {
     vs->ks[n] = k;
     n += vs->ev[k] == EV_SCATTER;
   }
-  stage_scatters(vp, sc, st, ln, idx, vs->ks, n, vs);
+  stage_scatters(vp, sc, st, ln, idx, vs->ks, n, hb, ob, vs);
 }
 
 /* Run the wave over n lanes; scratch: ln (n lanes), idx and sh (n ints
@@ -1689,17 +1811,20 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
   bool camera = true;
   hit_bounds hb;
   hit_bounds_init(sc, &hb);
-  face_plane fp = {.sh = NULL};
+  face_plane fp[2] = {{.sh = NULL}, {.sh = NULL}};
   /* (the pieces' pages and polarization: lane by lane; vs has no scratch
    * where the caller saw the stages switched off) */
   const bool staged = !vq && !pgs && vs->mi;
+  /* (lane by lane, the walks all go the general way: test_volpath_stages
+   * compares the short ways with them) */
+  const one_box ob = staged ? one_box_of(vp, sc) : (one_box){NULL, -1};
   while (live > 0) {
     wave_trace(sc, &hb, ln, idx, live, false, camera, hit, si, stats);
     camera = false;
     int next = 0, n_sh = 0;
     if (staged) {
-      wave_events(vp, sc, st, ln, idx, live, hit, si, &fp, vs); /* (si[k]: in place) */
-      for (int k = 0; k < live; k++) {                          /* (no branch on the outcomes) */
+      wave_events(vp, sc, st, ln, idx, live, hit, si, fp, &hb, &ob, vs); /* (si[k]: in place) */
+      for (int k = 0; k < live; k++) {                                   /* (no branch on the outcomes) */
         int i = idx[k];
         sh[n_sh] = idx[next] = i;
         n_sh += ln[i].sh;
@@ -1710,7 +1835,7 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
         int i = idx[k];
         ln[i].hit = hit[k];
         bool alive = lane_event(vp, sc, &st[i], &ln[i], &si[k], vq ? &vq[i] : NULL, pgs ? &pgs[i] : NULL,
-                                &fp); /* (si[k]: in place) */
+                                fp); /* (si[k]: in place) */
         if (ln[i].sh) sh[n_sh++] = i;
         if (alive) idx[next++] = i;
       }
@@ -1721,8 +1846,8 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
       int more = 0;
       for (int k = 0; k < n_sh; k++) {
         int i = sh[k];
-        if (shadow_step(vp, sc, &ln[i], vq ? &vq[i] : NULL, pgs ? &pgs[i] : NULL, hit[k], &si[k], &st[i],
-                        &fp))
+        if (shadow_step(vp, sc, &ln[i], vq ? &vq[i] : NULL, pgs ? &pgs[i] : NULL, hit[k], &si[k], &st[i], fp,
+                        &ob))
           sh[more++] = i;
       }
       n_sh = more;

@@ -282,10 +282,15 @@ static inline void media_layers_collision(const media_layers *L, const medium *m
  * caller clips) with the random number u in channel `channel`: a collision
  * (mi->t finite, mi filled) or a pass (mi->t infinite; mi's medium, wi and
  * mint set); tr the transmittance to it, pdf its density (layered.h's
- * head gives the inversion). */
-static inline void media_layers_sample_real(const media_layers *L, const medium *m, const ray3 *r,
-                                            double mint, double maxt, double u, int channel,
-                                            medium_interaction *mi, color *tr, color *pdf) {
+ * head gives the inversion). weigh_pass false: a pass's tr and pdf are
+ * left at 1 instead (no exp), for a caller to whom a pass's weight does
+ * not matter (a path that ends there); the decision, and a collision's
+ * numbers, are the same. Always inline: volpath's atmosphere renders 2 %
+ * faster than with GCC's one out-of-line copy (2026-11-29). */
+static inline __attribute__((always_inline)) void
+media_layers_sample_real_w(const media_layers *L, const medium *m, const ray3 *r, double mint, double maxt,
+                           double u, int channel, bool weigh_pass, medium_interaction *mi, color *tr,
+                           color *pdf) {
   media_flight f;
   media_flight_setup(L, r, mint, maxt, channel, &f);
   double target = 0.0;
@@ -299,7 +304,7 @@ static inline void media_layers_sample_real(const media_layers *L, const medium 
     mi->wi = v3_neg(r->d);
     mi->t = INFINITY;
     mi->mint = mint;
-    *tr = *pdf = media_flight_passed(L, &f);
+    *tr = *pdf = weigh_pass ? media_flight_passed(L, &f) : col1(1.0);
     return;
   }
   double t;
@@ -307,6 +312,12 @@ static inline void media_layers_sample_real(const media_layers *L, const medium 
   media_flight_collide(L, &f, target, &t, &k);
   media_layers_collision(L, m, r, mint, t, k, mi);
   media_flight_weights(L, &f, u, t, k, tr, pdf);
+}
+
+static inline void media_layers_sample_real(const media_layers *L, const medium *m, const ray3 *r,
+                                            double mint, double maxt, double u, int channel,
+                                            medium_interaction *mi, color *tr, color *pdf) {
+  media_layers_sample_real_w(L, m, r, mint, maxt, u, channel, true, mi, tr, pdf);
 }
 
 /* n free flights at once, structure of arrays (media_layers_sample_real

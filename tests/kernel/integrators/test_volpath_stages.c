@@ -9,7 +9,9 @@
  * area light: the light samples grouped by emitter, emission hits), a
  * dielectric (no light sample), an environment (escapes), a medium that
  * takes no light samples, hidden emitters, max_depth and an early
- * roulette; with 1 and 2 threads. */
+ * roulette; with 1 and 2 threads; and layers in a null cube, whose
+ * flights and shadow rays the stages take a short way (one_box_of), lane
+ * by lane the general walk. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -53,6 +55,50 @@ static void test_atmosphere_example(void) {
     snprintf(what, sizeof what, "atmosphere.xml %s", variants[v]);
     check_same(s, 8, 1, what);
     check_same(s, 8, 2, what);
+    scene_free(s);
+  }
+}
+
+/* A layered atmosphere in a null cube (volpath.c one_box_of: the short
+ * ways of the flights and shadow rays, staged; lane by lane the general
+ * walk): the medium's box equal to the cube (cube_z0 0) or inside it
+ * (cube_z0 < 0), a sky or none (escapes: a passed flight's exp skipped),
+ * a camera above the cube (rays enter it) or inside it. */
+static scene *layered_scene(double cube_z0, bool sky, bool inside) {
+  char doc[4096];
+  const char *grid = "\"shape\": [6, 1, 1], \"filter_type\": \"nearest\","
+                     " \"to_world\": [{\"scale\": [20, 20, 6]}, {\"translate\": [-10, -10, 0]}]";
+  snprintf(doc, sizeof doc,
+           "{\"type\": \"scene\", \"integrator\": {\"type\": \"piecewise_volpath\"},"
+           " \"cam\": {\"type\": \"perspective\", \"fov\": 60,"
+           "   \"to_world\": [{\"lookat\": {\"origin\": [0.5, -1, %s], \"target\": [0, 0, 0], \"up\": [0, 0, "
+           "1]}}],"
+           "   \"film\": {\"type\": \"hdrfilm\", \"width\": 12, \"height\": 10}},"
+           " \"air\": {\"type\": \"piecewise\","
+           "   \"sigma_t\": {\"type\": \"gridvolume\", \"data\": [0.5, 0.3, 0.2, 0.1, 0.05, 0.02], %s},"
+           "   \"albedo\": {\"type\": \"gridvolume\", \"data\": [0.9, 0.9, 0.8, 0.95, 0.9, 0.9], %s},"
+           "   \"phase\": {\"type\": \"hg\", \"g\": 0.6}},"
+           " \"box\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
+           "   \"to_world\": [{\"scale\": [10, 10, %.17g]}, {\"translate\": [0, 0, %.17g]}],"
+           "   \"interior\": {\"type\": \"ref\", \"id\": \"air\"}},"
+           " \"ground\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 10}],"
+           "   \"bsdf\": {\"type\": \"rpv\", \"rho_0\": 0.2, \"k\": 0.8, \"g\": -0.1}},"
+           " \"sun\": {\"type\": \"directional\", \"direction\": [0.3, 0.2, -1], \"irradiance\": 2}%s}",
+           inside ? "3" : "9", grid, grid, (6.0 - cube_z0) / 2, (6.0 + cube_z0) / 2,
+           sky ? ", \"sky\": {\"type\": \"constant\", \"radiance\": 0.3}" : "");
+  return tsup_load(doc, "mono");
+}
+
+static void test_one_box(void) {
+  for (int v = 0; v < 8; v++) {
+    double z0 = v & 1 ? -0.5 : 0.0;
+    bool sky = v & 2, inside = v & 4;
+    scene *s = layered_scene(z0, sky, inside);
+    REQUIRE(s, "layered scene %d", v);
+    char what[128];
+    snprintf(what, sizeof what, "layers in a null cube (cube z0 %g, sky %d, camera inside %d)", z0, sky,
+             inside);
+    check_same(s, 16, 2, what);
     scene_free(s);
   }
 }
@@ -114,5 +160,6 @@ static void test_mixed_scenes(void) {
 int main(void) {
   RSW_TEST_RUN(test_atmosphere_example);
   RSW_TEST_RUN(test_mixed_scenes);
+  RSW_TEST_RUN(test_one_box);
   RSW_TEST_END("test_volpath_stages");
 }
