@@ -144,19 +144,27 @@ static void splat_filter(const job *jb, tile_buf *tb, double px, double py, colo
   if (ylo < tb->y0) ylo = tb->y0;
   if (xhi > tb->x0 + tb->w - 1) xhi = tb->x0 + tb->w - 1;
   if (yhi > tb->y0 + tb->h - 1) yhi = tb->y0 + tb->h - 1;
-  /* The filter's column weights once (the same values for every row). */
+  /* The filter's column and row weights once, in one batch where the
+   * filter has one (the gaussian's exp calls: 2 x 4 a sample); a larger
+   * footprint than FW_MAX takes its weights point by point. */
   enum {
-    FX_MAX = 64
+    FW_MAX = 128
   };
-  double fxs[FX_MAX];
-  bool cached = xhi - xlo < FX_MAX;
-  if (cached)
-    for (int x = xlo; x <= xhi; x++) fxs[x - xlo] = f->eval(f, px - (x + 0.5));
+  int nx = xhi - xlo + 1, ny = yhi - ylo + 1;
+  if (nx <= 0 || ny <= 0) return;
+  double fw[FW_MAX];
+  bool cached = nx + ny <= FW_MAX;
+  if (cached && f->eval_footprint) {
+    f->eval_footprint(f, px, xlo, nx, py, ylo, ny, fw);
+  } else if (cached) {
+    for (int x = xlo; x <= xhi; x++) fw[x - xlo] = f->eval(f, px - (x + 0.5));
+    for (int y = ylo; y <= yhi; y++) fw[nx + y - ylo] = f->eval(f, py - (y + 0.5));
+  }
   for (int y = ylo; y <= yhi; y++) {
-    double fy = f->eval(f, py - (y + 0.5));
+    double fy = cached ? fw[nx + y - ylo] : f->eval(f, py - (y + 0.5));
     if (fy == 0) continue;
     for (int x = xlo; x <= xhi; x++) {
-      double wgt = fy * (cached ? fxs[x - xlo] : f->eval(f, px - (x + 0.5)));
+      double wgt = fy * (cached ? fw[x - xlo] : f->eval(f, px - (x + 0.5)));
       if (wgt == 0) continue;
       double *a = &tb->acc[(size_t)S * ((size_t)(y - tb->y0) * tb->w + (x - tb->x0))];
       a[0] += wgt * v.c[0], a[1] += wgt * v.c[1], a[2] += wgt * v.c[2], a[3] += wgt;
