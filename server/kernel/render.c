@@ -135,14 +135,15 @@ static inline void splat(const job *jb, tile_buf *tb, double px, double py, colo
 }
 
 /* One pixel's sums a += wgt (v, 1, quv[0..nq)). */
-static inline void splat_add(double *a, double wgt, double v0, double v1, double v2, int nq, const double *quv) {
+static inline void splat_add(double *a, double wgt, double v0, double v1, double v2, int nq,
+                             const double *quv) {
   a[0] += wgt * v0, a[1] += wgt * v1, a[2] += wgt * v2, a[3] += wgt;
   for (int k = 0; k < nq; k++) a[4 + k] += wgt * quv[k];
 }
 
 /* Out of line: inlined into wave_flush its loop ran short of registers. */
 static __attribute__((noinline)) void splat_filter(const job *jb, tile_buf *tb, double px, double py, color v,
-                                                  const double *quv) {
+                                                   const double *quv) {
   int S = jb->stride;
   const rfilter *f = jb->fm->filter;
   double r = f->radius;
