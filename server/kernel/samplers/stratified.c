@@ -19,15 +19,9 @@
 #include "permute_lanes.h"
 #include "sampler_common.h"
 
-/* Kensler's permutation of [0, l) (samplers/permute_lanes.h). For l a
- * power of two (every square spp 4^k) one round lands and the modulo is a
- * mask, as in the lanes: the same value without the division. */
+/* Kensler's permutation of [0, l) (samplers/permute_lanes.h). */
 static uint32_t permute(uint32_t i, uint32_t l, uint32_t p) {
   uint32_t w = permute_mask(l);
-  if (w == l - 1) {
-    PERMUTE_HASH(i, p, w);
-    return (i + p) & w;
-  }
   do {
     PERMUTE_HASH(i, p, w);
   } while (i >= l);
