@@ -141,6 +141,32 @@ static inline void splat_add(double *a, double wgt, double v0, double v1, double
   for (int k = 0; k < nq; k++) a[4 + k] += wgt * quv[k];
 }
 
+/* The filtered sums of a footprint of nx x ny pixels, rows row_stride
+ * doubles apart from acc (the first pixel's), four doubles a pixel (no
+ * extra values): each pixel's a += wgt (v0, v1, v2, 1) in one AVX vector,
+ * the same products and sums as splat_add's (wgt * 1 is wgt): its bits. */
+#if defined(__x86_64__) || defined(__i386__)
+static __attribute__((target("avx2"))) void splat_sums_avx(double *acc, size_t row_stride, int nx, int ny,
+                                                           const double *fw, double v0, double v1,
+                                                           double v2) {
+  typedef double v4d __attribute__((vector_size(32)));
+  const v4d c = {v0, v1, v2, 1.0};
+  for (int y = 0; y < ny; y++) {
+    double fy = fw[nx + y];
+    if (fy == 0) continue;
+    double *row = acc + row_stride * (size_t)y;
+    for (int x = 0; x < nx; x++) {
+      double wgt = fy * fw[x];
+      if (wgt == 0) continue;
+      v4d a;
+      memcpy(&a, row + 4 * x, sizeof a);
+      a += c * wgt;
+      memcpy(row + 4 * x, &a, sizeof a);
+    }
+  }
+}
+#endif
+
 /* Out of line: inlined into wave_flush its loop ran short of registers. */
 static __attribute__((noinline)) void splat_filter(const job *jb, tile_buf *tb, double px, double py, color v,
                                                    const double *quv) {
@@ -184,12 +210,22 @@ static __attribute__((noinline)) void splat_filter(const job *jb, tile_buf *tb, 
     for (int x = xlo; x <= xhi; x++) fw[x - xlo] = f->eval(f, px - (x + 0.5));
     for (int y = ylo; y <= yhi; y++) fw[nx + y - ylo] = f->eval(f, py - (y + 0.5));
   }
-  /* The row's first pixel, the colour and the extra count in locals (read
-   * through tb and jb, GCC reloaded them after every store to the sums). */
+  /* The footprint's first pixel's sums. */
+  double *acc0 = &tb->acc[(size_t)S * ((size_t)(ylo - tb->y0) * tb->w + (xlo - tb->x0))];
+#if defined(__x86_64__) || defined(__i386__)
+  rsw_isa isa = rsw_isa_get();
+  if (S == 4 && (isa == RSW_ISA_AVX2 || isa == RSW_ISA_AVX512)) {
+    splat_sums_avx(acc0, (size_t)S * tb->w, nx, ny, fw, v0, v1, v2);
+    return;
+  }
+#endif
+  /* The rows' first pixels, the colour and the extra count in locals
+   * (read through tb and jb, GCC reloaded them after every store to the
+   * sums). */
   for (int y = 0; y < ny; y++) {
     double fy = fw[nx + y];
     if (fy == 0) continue;
-    double *row = &tb->acc[(size_t)S * ((size_t)(ylo + y - tb->y0) * tb->w + (xlo - tb->x0))];
+    double *row = acc0 + (size_t)S * tb->w * (size_t)y;
     for (int x = 0; x < nx; x++) {
       double wgt = fy * fw[x];
       if (wgt != 0) splat_add(row + (size_t)S * x, wgt, v0, v1, v2, nq, quv);
