@@ -387,6 +387,12 @@ typedef struct rfilter {
   object base;
   double radius;                                     /* pixels */
   double (*eval)(const struct rfilter *f, double x); /* 1-D, separable */
+  /* Optional (NULL: eval point by point): a sample's column and row
+   * weights in one batch, bit for bit eval's: out[i] =
+   * eval(px - ((xlo + i) + 0.5)) for i < nx, out[nx + j] =
+   * eval(py - ((ylo + j) + 0.5)) for j < ny. */
+  void (*eval_footprint)(const struct rfilter *f, double px, int xlo, int nx, double py, int ylo, int ny,
+                         double *out);
 } rfilter;
 
 /* PIXFMT_STOKES (mono only): channels S0..S3, the Stokes vector

@@ -134,7 +134,42 @@ static inline void splat(const job *jb, tile_buf *tb, double px, double py, colo
   splat_filter(jb, tb, px, py, v, quv);
 }
 
-static void splat_filter(const job *jb, tile_buf *tb, double px, double py, color v, const double *quv) {
+/* One pixel's sums a += wgt (v, 1, quv[0..nq)). */
+static inline void splat_add(double *a, double wgt, double v0, double v1, double v2, int nq,
+                             const double *quv) {
+  a[0] += wgt * v0, a[1] += wgt * v1, a[2] += wgt * v2, a[3] += wgt;
+  for (int k = 0; k < nq; k++) a[4 + k] += wgt * quv[k];
+}
+
+/* The filtered sums of a footprint of nx x ny pixels, rows row_stride
+ * doubles apart from acc (the first pixel's), four doubles a pixel (no
+ * extra values): each pixel's a += wgt (v0, v1, v2, 1) in one AVX vector,
+ * the same products and sums as splat_add's (wgt * 1 is wgt): its bits. */
+#if defined(__x86_64__) || defined(__i386__)
+static __attribute__((target("avx2"))) void splat_sums_avx(double *acc, size_t row_stride, int nx, int ny,
+                                                           const double *fw, double v0, double v1,
+                                                           double v2) {
+  typedef double v4d __attribute__((vector_size(32)));
+  const v4d c = {v0, v1, v2, 1.0};
+  for (int y = 0; y < ny; y++) {
+    double fy = fw[nx + y];
+    if (fy == 0) continue;
+    double *row = acc + row_stride * (size_t)y;
+    for (int x = 0; x < nx; x++) {
+      double wgt = fy * fw[x];
+      if (wgt == 0) continue;
+      v4d a;
+      memcpy(&a, row + 4 * x, sizeof a);
+      a += c * wgt;
+      memcpy(row + 4 * x, &a, sizeof a);
+    }
+  }
+}
+#endif
+
+/* Out of line: inlined into wave_flush its loop ran short of registers. */
+static __attribute__((noinline)) void splat_filter(const job *jb, tile_buf *tb, double px, double py, color v,
+                                                   const double *quv) {
   int S = jb->stride;
   const rfilter *f = jb->fm->filter;
   double r = f->radius;
@@ -144,23 +179,56 @@ static void splat_filter(const job *jb, tile_buf *tb, double px, double py, colo
   if (ylo < tb->y0) ylo = tb->y0;
   if (xhi > tb->x0 + tb->w - 1) xhi = tb->x0 + tb->w - 1;
   if (yhi > tb->y0 + tb->h - 1) yhi = tb->y0 + tb->h - 1;
-  /* The filter's column weights once (the same values for every row). */
+  int nx = xhi - xlo + 1, ny = yhi - ylo + 1;
+  if (nx <= 0 || ny <= 0) return;
+  const double v0 = v.c[0], v1 = v.c[1], v2 = v.c[2];
+  const int nq = jb->nq;
+  /* The filter's column and row weights once, in one batch where the
+   * filter has one (the gaussian's exp calls: 2 x 4 a sample); a larger
+   * footprint than FW_MAX (a plugin's filter wider than ours) takes its
+   * weights point by point. */
   enum {
-    FX_MAX = 64
+    FW_MAX = 128
   };
-  double fxs[FX_MAX];
-  bool cached = xhi - xlo < FX_MAX;
-  if (cached)
-    for (int x = xlo; x <= xhi; x++) fxs[x - xlo] = f->eval(f, px - (x + 0.5));
-  for (int y = ylo; y <= yhi; y++) {
-    double fy = f->eval(f, py - (y + 0.5));
+  if (nx + ny > FW_MAX) {
+    for (int y = ylo; y <= yhi; y++) {
+      double fy = f->eval(f, py - (y + 0.5));
+      if (fy == 0) continue;
+      for (int x = xlo; x <= xhi; x++) {
+        double wgt = fy * f->eval(f, px - (x + 0.5));
+        if (wgt == 0) continue;
+        splat_add(&tb->acc[(size_t)S * ((size_t)(y - tb->y0) * tb->w + (x - tb->x0))], wgt, v0, v1, v2, nq,
+                  quv);
+      }
+    }
+    return;
+  }
+  double fw[FW_MAX];
+  if (f->eval_footprint) {
+    f->eval_footprint(f, px, xlo, nx, py, ylo, ny, fw);
+  } else {
+    for (int x = xlo; x <= xhi; x++) fw[x - xlo] = f->eval(f, px - (x + 0.5));
+    for (int y = ylo; y <= yhi; y++) fw[nx + y - ylo] = f->eval(f, py - (y + 0.5));
+  }
+  /* The footprint's first pixel's sums. */
+  double *acc0 = &tb->acc[(size_t)S * ((size_t)(ylo - tb->y0) * tb->w + (xlo - tb->x0))];
+#if defined(__x86_64__) || defined(__i386__)
+  rsw_isa isa = rsw_isa_get();
+  if (S == 4 && (isa == RSW_ISA_AVX2 || isa == RSW_ISA_AVX512)) {
+    splat_sums_avx(acc0, (size_t)S * tb->w, nx, ny, fw, v0, v1, v2);
+    return;
+  }
+#endif
+  /* The rows' first pixels, the colour and the extra count in locals
+   * (read through tb and jb, GCC reloaded them after every store to the
+   * sums). */
+  for (int y = 0; y < ny; y++) {
+    double fy = fw[nx + y];
     if (fy == 0) continue;
-    for (int x = xlo; x <= xhi; x++) {
-      double wgt = fy * (cached ? fxs[x - xlo] : f->eval(f, px - (x + 0.5)));
-      if (wgt == 0) continue;
-      double *a = &tb->acc[(size_t)S * ((size_t)(y - tb->y0) * tb->w + (x - tb->x0))];
-      a[0] += wgt * v.c[0], a[1] += wgt * v.c[1], a[2] += wgt * v.c[2], a[3] += wgt;
-      for (int k = 0; k < jb->nq; k++) a[4 + k] += wgt * quv[k];
+    double *row = acc0 + (size_t)S * tb->w * (size_t)y;
+    for (int x = 0; x < nx; x++) {
+      double wgt = fy * fw[x];
+      if (wgt != 0) splat_add(row + (size_t)S * x, wgt, v0, v1, v2, nq, quv);
     }
   }
 }
