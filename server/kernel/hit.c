@@ -101,11 +101,6 @@ static inline void mesh_face_in(const shape *s, uint32_t f, bool nrm, bool uv, d
 #define HIT_FACE_GROUPS 64
 #define HIT_FACE_MIN    8
 #define HIT_MESH_MIN    4
-/* A mesh of at most this many faces (a rectangle's two) counts and sorts
- * its hits by face in one pass over them per face, comparing, instead of
- * through counters in memory: the counting sort's every increment of one
- * counter waits on the store of the one before. */
-#define HIT_FACE_SCAN   4
 /* Hits per chunk of hit_fill_interaction_batch (a multiple of 8): the
  * more hits a chunk holds, the more of a small mesh's faces have
  * HIT_FACE_MIN of them (the Cornell box: 256 took 0.97-0.98x the CPU
@@ -127,9 +122,7 @@ static int hit_fill_cached(const shape *s, const double t[8], int cnt, const int
    * HIT_FACE_MIN of them is filled with its data given once, the others
    * are left to the caller; a large mesh's lanes go lane by lane (runs[]:
    * a face, or -1 for lane by lane). */
-  int order[HIT_BATCH + 1], start[HIT_FACE_GROUPS + 1], n_runs = 0, rest = 0;
-  uint32_t prim[HIT_BATCH];
-  int face_n[HIT_FACE_SCAN];
+  int order[HIT_BATCH], start[HIT_FACE_GROUPS + 1], n_runs = 0, rest = 0;
   int run_face[HIT_FACE_GROUPS + 1], run_len[HIT_FACE_GROUPS + 1];
   const int *ls = lane;
   if (ms->n_faces <= HIT_FACE_GROUPS && cnt < HIT_FACE_MIN) { /* all by the scalar fill */
@@ -137,18 +130,8 @@ static int hit_fill_cached(const shape *s, const double t[8], int cnt, const int
     return cnt;
   }
   if (ms->n_faces <= HIT_FACE_GROUPS) {
-    const bool scan = ms->n_faces <= HIT_FACE_SCAN;
-    for (int j = 0; j < cnt; j++) prim[j] = h[lane[j]]->prim;
     memset(start, 0, (ms->n_faces + 1) * sizeof *start);
-    if (scan) {
-      for (uint32_t f = 0; f < ms->n_faces; f++) {
-        int c = 0;
-        for (int j = 0; j < cnt; j++) c += prim[j] == f;
-        start[f + 1] = face_n[f] = c;
-      }
-    } else {
-      for (int j = 0; j < cnt; j++) start[prim[j] + 1]++;
-    }
+    for (int j = 0; j < cnt; j++) start[h[lane[j]]->prim + 1]++;
     /* Faces with enough lanes first (in face order), then the rest. */
     int big = 0;
     for (uint32_t f = 0; f < ms->n_faces; f++)
@@ -168,19 +151,7 @@ static int hit_fill_cached(const shape *s, const double t[8], int cnt, const int
       }
     }
     rest = cnt - big;
-    if (scan) {
-      /* The faces' passes in the order of their ranges (the big faces',
-       * then the others'): a pass's one write past its last lane lands on
-       * the next range's first entry, which the next pass writes again
-       * (the last pass's: on order[]'s spare entry). */
-      for (int pass = 0; pass < 2; pass++)
-        for (uint32_t f = 0; f < ms->n_faces; f++) {
-          if ((face_n[f] >= HIT_FACE_MIN) != (pass == 0)) continue;
-          for (int j = 0, at = start[f]; j < cnt; j++) order[at] = lane[j], at += prim[j] == f;
-        }
-    } else {
-      for (int j = 0; j < cnt; j++) order[start[prim[j]]++] = lane[j];
-    }
+    for (int j = 0; j < cnt; j++) order[start[h[lane[j]]->prim]++] = lane[j];
     ls = order;
   } else {
     rest = cnt;

@@ -9,11 +9,6 @@
 
 /* Scenes with more emitters than this sample lane by lane. */
 #define WAVE_EMITTER_GROUPS 64
-/* Scenes with at most this many emitters (the seed scene's three suns)
- * group their lanes in one pass per emitter, comparing, instead of through
- * counters in memory (a counting sort's every increment of one counter
- * waits on the store of the one before). */
-#define WAVE_EMITTER_SCAN   4
 
 /* Lanes 0..n) grouped by their emitters ek[] (< sc->n_emitters <=
  * WAVE_EMITTER_GROUPS), a counting sort: emitter e's lanes are
@@ -23,15 +18,6 @@ static inline void wave_group_by_emitter(const scene *sc, const int *ek, int n,
   if (sc->n_emitters == 1) { /* every ek[j] is 0: the count's chain through memory is skipped */
     start[0] = 0, start[1] = n;
     for (int j = 0; j < n; j++) ord[j] = j;
-    return;
-  }
-  if (sc->n_emitters <= WAVE_EMITTER_SCAN) { /* the same start[] and ord[] */
-    int m = 0;
-    for (size_t e = 0; e < sc->n_emitters; e++) {
-      start[e] = m;
-      for (int j = 0; j < n && m < n; j++) ord[m] = j, m += ek[j] == (int)e; /* never ord[n] */
-    }
-    start[sc->n_emitters] = m;
     return;
   }
   int fill[WAVE_EMITTER_GROUPS];
