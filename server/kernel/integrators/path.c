@@ -123,6 +123,39 @@ static void add_polarization(double *quv, const emitter *e, vec3 d, double scale
  * traces in float32 behind fill_ray (accel.c). Contributions are summed
  * per path in double, in bounce order. */
 
+typedef struct lane {
+  /* What every bounce reads and writes first (wave_run's start and end
+   * touch these alone): together, so a lane's pass over them touches few
+   * cache lines; the BSDF sample and the previous vertex, which the seed
+   * scene's paths rarely reach, last. */
+  ray3 ray;
+  color T, L;
+  double eta, prev_pdf;
+  bool prev_delta, wrapped;
+  int depth;
+  trace_result hit;
+  /* Next-event estimation between the shading and the shading's end. */
+  bool nee;
+  trace_result occ;
+  surface_interaction si;
+  accel_hit h; /* the hit, between the packet queries and the surface data */
+  const emitter *ne;
+  double pe;
+  color value;
+  direction_sample ds;
+  /* The light sample's BSDF value and pdf (wave_eval_bsdfs). */
+  vec3 nwo;
+  color nf;
+  double npdf;
+  ray3 sray;
+  /* The BSDF sample: its random numbers, then its result. */
+  double u1;
+  vec2 u2;
+  bsdf_sample bs;
+  color weight;
+  surface_interaction prev_si;
+} lane;
+
 /* A bundle of pages (render_ctx.bundle > 3, docs/experiments.md#spectral-bundles):
  * a lane's throughput and radiance at pages 1.. (page 0's are the lane's
  * T and L) and what its vertex computes for them. The path is sampled
@@ -137,52 +170,6 @@ typedef struct page_lane {
   color nf[RENDER_MAX_PAGES - 1];     /* the BSDF towards the light sample */
   color weight[RENDER_MAX_PAGES - 1]; /* the BSDF sample's weight */
 } page_lane;
-
-typedef struct lane {
-  /* What most passes read and write: the throughput and radiance, the
-   * path's state, the light sample's scalars and the BSDF sample's
-   * numbers and weight, in about 240 bytes. The big per-lane records
-   * (the rays, the hit, the surface interactions, the light and BSDF
-   * samples) are in arrays of their own (wave_scratch), so that a pass
-   * over one of them reads it densely, lane after lane. */
-  color T, L;
-  double eta, prev_pdf;
-  bool prev_delta, wrapped;
-  /* Next-event estimation between the shading and the shading's end. */
-  bool nee;
-  int depth;
-  trace_result hit, occ;
-  const emitter *ne;
-  double pe;
-  color value;
-  /* The light sample's BSDF value and pdf (wave_eval_bsdfs). */
-  vec3 nwo;
-  color nf;
-  double npdf;
-  /* The BSDF sample's random numbers, then its weight. */
-  double u1;
-  vec2 u2;
-  color weight;
-} lane;
-
-/* A wave's state, lane i at index i of each array; scratch for a wave of
- * n lanes: the lanes, index lists and the batched draws. */
-typedef struct wave_scratch {
-  lane *ln;
-  ray3 *ray;                    /* the path's current ray */
-  accel_hit *h;                 /* its hit, between the packet queries and the surface data */
-  surface_interaction *si;      /* the vertex */
-  surface_interaction *prev_si; /* the vertex before (emitters' pdfs) */
-  direction_sample *ds;         /* the light sample */
-  ray3 *sray;                   /* its shadow ray */
-  bsdf_sample *bs;              /* the BSDF sample */
-  pol_lane *pol;                /* the polarized variants' payload, per lane (else NULL) */
-  page_lane *pg;                /* a bundle of pages: pages 1.., per lane (else NULL) */
-  int *idx, *sh, *ek, *ord, *cont, *take;
-  const bsdf **gb; /* the BSDFs of lanes waiting for a batch (take_bsdf_group) */
-  double *d1;
-  vec2 *d2;
-} wave_scratch;
 
 static double clock_s(void) {
   struct timespec ts;
@@ -250,16 +237,14 @@ static bool continuation_escapes(const scene *sc, const surface_interaction *si,
 /* Lanes idx[0..n) go to hit[0..*n_hit) (the ones whose ray hit, in the
  * order of idx) and the others to other[0..*n_other), without a branch
  * on the outcome (a camera ray's is unpredictable). */
-static void wave_trace(const scene *sc, const wave_scratch *ws, const int *idx, int n, render_stats *stats,
-                       bool coherent, bool timed, int *hit, int *n_hit, int *other, int *n_other) {
-  lane *ln = ws->ln;
+static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_stats *stats, bool coherent,
+                       bool timed, int *hit, int *n_hit, int *other, int *n_other) {
   int nh = 0, no = 0;
   if (sc->periodic.on) { /* the hit fill is counted as tracing here */
     double t0 = timed ? clock_s() : 0;
     for (int k = 0; k < n; k++) {
-      int i = idx[k];
-      lane *l = &ln[i];
-      l->hit = intersect(sc, &ws->ray[i], &ws->si[i], stats, &l->wrapped);
+      lane *l = &ln[idx[k]];
+      l->hit = intersect(sc, &l->ray, &l->si, stats, &l->wrapped);
       bool h = l->hit == TRACE_HIT;
       hit[nh] = other[no] = idx[k];
       nh += h, no += !h;
@@ -291,7 +276,7 @@ static void wave_trace(const scene *sc, const wave_scratch *ws, const int *idx, 
         int m = n - k < V ? n - k : V;
         double c[6][V];
         for (int j = 0; j < m; j++) {
-          const ray3 *r = &ws->ray[idx[k + j]];
+          const ray3 *r = &ln[idx[k + j]].ray;
           c[0][j] = r->o.x, c[1][j] = r->o.y, c[2][j] = r->o.z;
           c[3][j] = r->d.x, c[4][j] = r->d.y, c[5][j] = r->d.z;
         }
@@ -311,7 +296,7 @@ static void wave_trace(const scene *sc, const wave_scratch *ws, const int *idx, 
     const ray3 *rp[P];
     accel_hit *hp[P];
     bool h[P];
-    for (int j = 0; j < nq; j++) rp[j] = &ws->ray[q[j]], hp[j] = &ws->h[q[j]];
+    for (int j = 0; j < nq; j++) rp[j] = &ln[q[j]].ray, hp[j] = &ln[q[j]].h;
     accel_intersect_packet(sc->accel, rp, nq, hp, h, coherent);
     for (int j = 0; j < nq; j++) {
       ln[q[j]].hit = h[j] ? TRACE_HIT : TRACE_MISS;
@@ -334,17 +319,15 @@ static void wave_trace(const scene *sc, const wave_scratch *ws, const int *idx, 
   for (int k0 = 0; k0 < nh; k0 += C) {
     int m = nh - k0 < C ? nh - k0 : C;
     for (int j = 0; j < m; j++) {
-      int i = hit[k0 + j];
-      rr[j] = &ws->ray[i], hh[j] = &ws->h[i], ss[j] = &ws->si[i];
+      lane *l = &ln[hit[k0 + j]];
+      rr[j] = &l->ray, hh[j] = &l->h, ss[j] = &l->si;
     }
     hit_fill_interaction_batch(sc, m, rr, hh, ss);
   }
 }
 
 /* Trace the shadow rays of lanes idx[0..n) (each has nee set). */
-static void wave_occluded(const scene *sc, const wave_scratch *ws, const int *idx, int n, render_stats *stats,
-                          bool timed) {
-  lane *ln = ws->ln;
+static void wave_occluded(const scene *sc, lane *ln, const int *idx, int n, render_stats *stats, bool timed) {
   stats->shadow_rays += (uint64_t)n;
   double t0 = timed ? clock_s() : 0;
   if (sc->periodic.on) {
@@ -353,7 +336,7 @@ static void wave_occluded(const scene *sc, const wave_scratch *ws, const int *id
       /* Infinitely distant emitters give dist = INFINITY: the shadow ray
        * is unbounded (in a periodic scene, cut only by leaving the slab).
        * An unresolved one counts as blocked, never as lit. */
-      l->occ = scene_occluded(sc, &ws->sray[idx[k]]);
+      l->occ = scene_occluded(sc, &l->sray);
       if (l->occ == TRACE_UNRESOLVED) stats->unresolved++;
     }
     if (timed) stats->trace_s += clock_s() - t0;
@@ -366,8 +349,9 @@ static void wave_occluded(const scene *sc, const wave_scratch *ws, const int *id
   int q[P], nq = 0;
   for (int k = 0; k <= n; k++) {
     if (k < n) {
-      if (!ray_may_hit(&pb, &ws->sray[idx[k]])) {
-        ln[idx[k]].occ = TRACE_MISS;
+      lane *l = &ln[idx[k]];
+      if (!ray_may_hit(&pb, &l->sray)) {
+        l->occ = TRACE_MISS;
         continue;
       }
       q[nq++] = idx[k];
@@ -376,7 +360,7 @@ static void wave_occluded(const scene *sc, const wave_scratch *ws, const int *id
     if (!nq) continue;
     const ray3 *rp[P];
     bool occ[P];
-    for (int j = 0; j < nq; j++) rp[j] = &ws->sray[q[j]];
+    for (int j = 0; j < nq; j++) rp[j] = &ln[q[j]].sray;
     accel_occluded_packet(sc->accel, rp, nq, occ);
     for (int j = 0; j < nq; j++) ln[q[j]].occ = occ[j] ? TRACE_HIT : TRACE_MISS;
     nq = 0;
@@ -400,10 +384,8 @@ static void pages_add_emission(const scene *sc, page_lane *pg, const emitter *e,
 /* Emission seen by lane l's ray; l->nee: the vertex takes a light sample
  * (its random numbers and the sample itself come from wave_light_samples,
  * for the lanes together). False: the path ends here. */
-static bool shade_emit(const integrator *it, const scene *sc, const wave_scratch *ws, int i, double *quv,
-                       pol_lane *pl, page_lane *pg) {
-  lane *l = &ws->ln[i];
-  const ray3 *ray = &ws->ray[i];
+static bool shade_emit(const integrator *it, const scene *sc, lane *l, double *quv, pol_lane *pl,
+                       page_lane *pg) {
   l->nee = false;
   /* Emission seen by this ray (area light or the environment). */
   bool visible_emitter = !(it->hide_emitters && l->depth == 0);
@@ -412,39 +394,40 @@ static bool shade_emit(const integrator *it, const scene *sc, const wave_scratch
     if (env && visible_emitter && l->hit == TRACE_MISS) {
       double em_pdf = 0.0;
       if (!l->prev_delta) {
-        direction_sample ds = {.d = v3_norm(ray->d), .dist = INFINITY};
-        em_pdf = env->ops->pdf_direction(env, &ws->prev_si[i], &ds) * emitter_prob(sc, env);
+        direction_sample ds = {.d = v3_norm(l->ray.d), .dist = INFINITY};
+        em_pdf = env->ops->pdf_direction(env, &l->prev_si, &ds) * emitter_prob(sc, env);
       }
-      color Le = env->ops->eval(env, NULL, ray->d);
+      color Le = env->ops->eval(env, NULL, l->ray.d);
       double w = mis_weight(l->prev_pdf, em_pdf);
       l->L = col_add(l->L, col_scale(col_mul(l->T, Le), w));
-      pages_add_emission(sc, pg, env, NULL, ray->d, w);
+      pages_add_emission(sc, pg, env, NULL, l->ray.d, w);
       if (pl) {
-        pol_add_env(pl, env, ray->d, Le, col_scale(col_mul(l->T, Le), w), pol_channels(sc));
+        pol_add_env(pl, env, l->ray.d, Le, col_scale(col_mul(l->T, Le), w), pol_channels(sc));
       } else {
-        add_polarization(quv, env, v3_norm(ray->d), l->T.c[0] * w);
+        add_polarization(quv, env, v3_norm(l->ray.d), l->T.c[0] * w);
       }
     }
     return false;
   }
-  const surface_interaction *si = &ws->si[i];
+  const surface_interaction *si = &l->si;
   const emitter *em = si->shape->emitter;
   if (em && visible_emitter) {
-    color Le = em->ops->eval(em, si, ray->d);
+    color Le = em->ops->eval(em, si, l->ray.d);
     if (!col_is_black(Le) || pg) {
       double em_pdf = 0.0;
       /* Next-event estimation samples the emitter in the column only,
        * along a segment that never wraps: a copy reached through the
        * periodic boundary is BSDF sampling's alone (weight 1). */
       if (!l->prev_delta && !l->wrapped) {
-        direction_sample ds = {.p = si->p, .n = si->ng, .d = v3_norm(ray->d), .dist = si->t * v3_len(ray->d)};
-        em_pdf = em->ops->pdf_direction(em, &ws->prev_si[i], &ds) * emitter_prob(sc, em);
+        direction_sample ds = {
+            .p = si->p, .n = si->ng, .d = v3_norm(l->ray.d), .dist = si->t * v3_len(l->ray.d)};
+        em_pdf = em->ops->pdf_direction(em, &l->prev_si, &ds) * emitter_prob(sc, em);
       }
       double w = mis_weight(l->prev_pdf, em_pdf);
       color v = col_scale(col_mul(l->T, Le), w);
       l->L = col_add(l->L, v);
       if (pl) pol_add(pl, v, pol_channels(sc));
-      pages_add_emission(sc, pg, em, si, ray->d, w);
+      pages_add_emission(sc, pg, em, si, l->ray.d, w);
     }
   }
   if (!(it->max_depth < 0 || l->depth + 1 < it->max_depth)) return false;
@@ -540,13 +523,13 @@ static inline void spawn_lane_in(spawn_lanes *S, int j, const surface_interactio
 /* Lanes ln[sl[0..n)]'s shadow rays from S's inputs 0..n), towards the
  * surface of shape ls: the light's end's error bounds from the shape's
  * accel_surface_error_terms t (accel_surface_error_at_n), then the rays. */
-static void spawn_between_lanes(const shape *ls, const double t[8], ray3 *sray, spawn_lanes *S, const int *sl,
+static void spawn_between_lanes(const shape *ls, const double t[8], lane *ln, spawn_lanes *S, const int *sl,
                                 int n) {
   if (n == 0) return;
   const double *q[3] = {S->q[0], S->q[1], S->q[2]}, *nq[3] = {S->nq[0], S->nq[1], S->nq[2]};
   accel_surface_error_at_n(t, &ls->to_world, n, q, nq, S->qerr);
   spawn_between_run(rsw_isa_get(), S, n);
-  for (int j = 0; j < n; j++) sray[sl[j]] = spawn_lane_out(S, j);
+  for (int j = 0; j < n; j++) ln[sl[j]].sray = spawn_lane_out(S, j);
 }
 
 void spawn_rays_between_batch(rsw_isa isa, int n, const surface_interaction *const *si, const vec3 *q,
@@ -591,30 +574,23 @@ enum {
  * (cull: outside a periodic boundary), so that a ray that cannot meet
  * the scene (a sun's, leaving an Earth-observation scene) is clear
  * without being stored. */
-static inline int far_shadow_ray(const wave_scratch *ws, int i, const direction_sample *ds, const pad_box *pb,
-                                 bool cull) {
+static inline int far_shadow_ray(lane *l, const direction_sample *ds, const pad_box *pb, bool cull) {
   ray3 r;
-  spawn_ray_to_far(&ws->si[i], ds, &r);
+  spawn_ray_to_far(&l->si, ds, &r);
   if (cull && !ray_may_hit(pb, &r)) {
-    ws->ln[i].occ = TRACE_MISS;
+    l->occ = TRACE_MISS;
     return LIGHT_CLEAR;
   }
-  ws->sray[i] = r;
+  l->sray = r;
   return LIGHT_QUERY;
 }
 
-static inline int light_far(const wave_scratch *ws, int i, const direction_sample *ds, color v,
-                            const pad_box *pb) {
-  ws->ln[i].nee = ds->pdf > 0 && !col_is_black(v);
-  return ws->ln[i].nee ? far_shadow_ray(ws, i, ds, pb, true) : LIGHT_NONE;
+static inline int light_far(lane *l, const direction_sample *ds, color v, const pad_box *pb) {
+  l->nee = ds->pdf > 0 && !col_is_black(v);
+  return l->nee ? far_shadow_ray(l, ds, pb, true) : LIGHT_NONE;
 }
-static void wave_light_samples(const scene *sc, sampler_state *st, const wave_scratch *ws, int *g, int n,
-                               int *n_sh, int *n_clear) {
-  lane *ln = ws->ln;
-  page_lane *pgs = ws->pg;
-  double *d1 = ws->d1;
-  vec2 *d2 = ws->d2;
-  int *ek = ws->ek, *ord = ws->ord;
+static void wave_light_samples(const scene *sc, sampler_state *st, lane *ln, page_lane *pgs, int *g, int n,
+                               int *n_sh, int *n_clear, double *d1, vec2 *d2, int *ek, int *ord) {
   enum {
     C = 64
   };
@@ -639,7 +615,7 @@ static void wave_light_samples(const scene *sc, sampler_state *st, const wave_sc
       lane *l = &ln[g[k]];
       l->pe = pick_probability(sc, (size_t)ek[k]);
       l->ne = sc->emitters[ek[k]];
-      l->value = l->ne->ops->sample_direction(l->ne, &ws->si[g[k]], d2[k], &ws->ds[g[k]]);
+      l->value = l->ne->ops->sample_direction(l->ne, &l->si, d2[k], &l->ds);
     }
   } else {
     int start[EMITTER_GROUPS + 1];
@@ -656,18 +632,17 @@ static void wave_light_samples(const scene *sc, sampler_state *st, const wave_sc
         direction_sample ds[C];
         color val[C];
         for (int j = 0; j < m; j++) {
-          ref[j] = &ws->si[g[ord[j0 + j]]];
+          ref[j] = &ln[g[ord[j0 + j]]].si;
           u[j] = d2[ord[j0 + j]];
         }
         emitter_sample_direction_n(e, m, ref, u, ds, val);
         for (int j = 0; j < m; j++) {
-          int i = g[ord[j0 + j]];
-          lane *l = &ln[i];
+          lane *l = &ln[g[ord[j0 + j]]];
           l->pe = pe;
           l->ne = e;
-          ws->ds[i] = ds[j];
+          l->ds = ds[j];
           l->value = val[j];
-          if (far) verdict[ord[j0 + j]] = light_far(ws, i, &ds[j], val[j], &pb);
+          if (far) verdict[ord[j0 + j]] = light_far(l, &ds[j], val[j], &pb);
         }
       }
     }
@@ -681,7 +656,7 @@ static void wave_light_samples(const scene *sc, sampler_state *st, const wave_sc
     for (int p = 1; p < sc->pages; p++) {
       direction_sample ds;
       rsw_page = p;
-      color v = l->ne->ops->sample_direction(l->ne, &ws->si[g[k]], d2[k], &ds);
+      color v = l->ne->ops->sample_direction(l->ne, &l->si, d2[k], &ds);
       pgs[g[k]].value[p - 1] = v;
     }
     rsw_page = 0;
@@ -700,9 +675,7 @@ static void wave_light_samples(const scene *sc, sampler_state *st, const wave_sc
       nc += verdict[k] == LIGHT_CLEAR;
       continue;
     }
-    const int i = g[k];
-    lane *l = &ln[i];
-    direction_sample *lds = &ws->ds[i];
+    lane *l = &ln[g[k]];
     const emitter *e = l->ne;
     l->nee = false;
     /* Under `periodic`, the part of a surface emitter outside the column
@@ -710,21 +683,21 @@ static void wave_light_samples(const scene *sc, sampler_state *st, const wave_sc
      * zero. The in-column part keeps its density 1/area, which is what
      * pdf_direction gives an unwrapped emitter hit; its copies beyond the
      * walls are reached by BSDF sampling alone (weight 1). */
-    if (sc->periodic.on && (e->flags & EMITTER_SURFACE) && !in_column(&sc->periodic, lds->p)) lds->pdf = 0;
+    if (sc->periodic.on && (e->flags & EMITTER_SURFACE) && !in_column(&sc->periodic, l->ds.p)) l->ds.pdf = 0;
     bool lit = !col_is_black(l->value);
     for (int p = 1; pgs && p < sc->pages; p++) lit |= !col_is_black(pgs[g[k]].value[p - 1]);
-    if (lds->pdf > 0 && lit) {
+    if (l->ds.pdf > 0 && lit) {
       if ((e->flags & EMITTER_SURFACE) && e->shape) {
         const shape *ls = e->shape;
         if (e != te) {
-          if (te) spawn_between_lanes(te->shape, terms, ws->sray, &S, sl, ns), ns = 0;
+          if (te) spawn_between_lanes(te->shape, terms, ln, &S, sl, ns), ns = 0;
           accel_surface_error_terms(sc->accel, ls->index, &ls->to_world, terms);
           te = e;
         }
-        spawn_lane_in(&S, ns, &ws->si[i], lds->p, lds->n);
-        sl[ns++] = i;
-        if (ns == SPAWN_C) spawn_between_lanes(ls, terms, ws->sray, &S, sl, ns), ns = 0;
-      } else if (far_shadow_ray(ws, i, lds, &pb, cull) == LIGHT_CLEAR) {
+        spawn_lane_in(&S, ns, &l->si, l->ds.p, l->ds.n);
+        sl[ns++] = g[k];
+        if (ns == SPAWN_C) spawn_between_lanes(ls, terms, ln, &S, sl, ns), ns = 0;
+      } else if (far_shadow_ray(l, &l->ds, &pb, cull) == LIGHT_CLEAR) {
         l->nee = true;
         nc++;
         continue;
@@ -733,7 +706,7 @@ static void wave_light_samples(const scene *sc, sampler_state *st, const wave_sc
       g[nq++] = g[k];
     }
   }
-  if (te) spawn_between_lanes(te->shape, terms, ws->sray, &S, sl, ns);
+  if (te) spawn_between_lanes(te->shape, terms, ln, &S, sl, ns);
   *n_sh = nq, *n_clear = nc;
 }
 
@@ -783,11 +756,9 @@ static bool next_bsdf_batch(bsdf_batches *q, const bsdf **b, const int **t, int 
  * wave_eval_bsdfs, which calls it). The BSDF sample's random numbers are drawn next, for
  * the lanes together (wave_run), in the one-path order; the sample itself
  * is taken by wave_sample_bsdfs. */
-static void shade_light(const scene *sc, const wave_scratch *ws, int i, double *quv, pol_lane *pl,
-                        page_lane *pg) {
-  lane *l = &ws->ln[i];
+static void shade_light(const scene *sc, lane *l, double *quv, pol_lane *pl, page_lane *pg) {
   if (l->nee && l->occ == TRACE_MISS) {
-    const direction_sample *ds = &ws->ds[i];
+    const direction_sample *ds = &l->ds;
     const emitter *e = l->ne;
     color f = l->nf;
     double w = ds->delta ? 1.0 : mis_weight(ds->pdf * l->pe, l->npdf);
@@ -799,8 +770,7 @@ static void shade_light(const scene *sc, const wave_scratch *ws, int i, double *
       color v = col_scale(col_mul(l->T, col_mul(f, l->value)), w / l->pe);
       l->L = col_add(l->L, v);
       if (pl)
-        pol_collect_light(pl, &ws->si[i], l->nwo, 0, e, ds->d, v3_neg(v3_norm(ws->ray[i].d)), v,
-                          pol_channels(sc));
+        pol_collect_light(pl, &l->si, l->nwo, 0, e, ds->d, v3_neg(v3_norm(l->ray.d)), v, pol_channels(sc));
       else if (quv && (e->flags & EMITTER_INFINITE))
         add_polarization(quv, e, ds->d, l->T.c[0] * f.c[0] * w / (l->pe * ds->pdf));
     }
@@ -815,40 +785,35 @@ static void shade_light(const scene *sc, const wave_scratch *ws, int i, double *
  * lane is in cache. A lane's values depend on its own state only, so
  * the order its group puts it in changes nothing. quv (qs values a lane),
  * pol: as wave_run's. g: n ints of scratch. */
-static void wave_eval_bsdfs(const scene *sc, const wave_scratch *ws, const int *idx, int n, int *g,
-                            double *quv, int qs) {
-  lane *ln = ws->ln;
-  page_lane *pgs = ws->pg;
-  pol_lane *pol = ws->pol;
-  const bsdf **gb = ws->gb;
+static void wave_eval_bsdfs(const scene *sc, lane *ln, page_lane *pgs, const int *idx, int n, int *g,
+                            const bsdf **gb, int *take, double *quv, int qs, pol_lane *pol) {
   enum {
     C = BSDF_BATCH
   };
   int left = 0;
   for (int k = 0; k < n; k++) {
-    const int i = idx[k];
-    lane *l = &ln[i];
+    lane *l = &ln[idx[k]];
     if (!(l->nee && l->occ == TRACE_MISS)) continue;
-    const surface_interaction *si = &ws->si[i];
-    const direction_sample *ds = &ws->ds[i];
+    const surface_interaction *si = &l->si;
     const bsdf *b = si->shape->bsdf;
-    l->nwo = frame_to_local(&si->sh, ds->d);
+    l->nwo = frame_to_local(&si->sh, l->ds.d);
     if (pgs) { /* every page's value, and the pages' mean pdf (one-sample MIS), lane by lane */
       color f[RENDER_MAX_PAGES];
-      l->npdf = bsdf_eval_pages(b, si, sc->pages, l->nwo, !ds->delta, f);
+      l->npdf = bsdf_eval_pages(b, si, sc->pages, l->nwo, !l->ds.delta, f);
       l->nf = f[0];
-      for (int p = 1; p < sc->pages; p++) pgs[i].nf[p - 1] = f[p];
+      for (int p = 1; p < sc->pages; p++) pgs[idx[k]].nf[p - 1] = f[p];
     } else if (b->ops->eval_pdf_batch) {
       gb[left] = b;
-      g[left++] = i;
+      g[left++] = idx[k];
       continue;
     } else {
       l->nf = b->ops->eval(b, si, l->nwo);
-      l->npdf = col_is_black(l->nf) || ds->delta ? 0.0 : b->ops->pdf(b, si, l->nwo);
+      l->npdf = col_is_black(l->nf) || l->ds.delta ? 0.0 : b->ops->pdf(b, si, l->nwo);
     }
-    shade_light(sc, ws, i, quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, pgs ? &pgs[i] : NULL);
+    int i = idx[k];
+    shade_light(sc, l, quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, pgs ? &pgs[i] : NULL);
   }
-  bsdf_batches q = {.g = g, .gb = gb, .left = left, .take = ws->take};
+  bsdf_batches q = {.g = g, .gb = gb, .left = left, .take = take};
   const bsdf *b;
   const int *t;
   int m;
@@ -857,13 +822,13 @@ static void wave_eval_bsdfs(const scene *sc, const wave_scratch *ws, const int *
     vec3 wo[C];
     color f[C];
     double pdf[C];
-    for (int k = 0; k < m; k++) si[k] = &ws->si[t[k]], wo[k] = ln[t[k]].nwo;
+    for (int k = 0; k < m; k++) si[k] = &ln[t[k]].si, wo[k] = ln[t[k]].nwo;
     b->ops->eval_pdf_batch(b, m, si, wo, f, pdf);
     for (int k = 0; k < m; k++) {
       int i = t[k];
       ln[i].nf = f[k];
       ln[i].npdf = pdf[k];
-      shade_light(sc, ws, i, quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, NULL);
+      shade_light(sc, &ln[i], quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, NULL);
     }
   }
 }
@@ -874,19 +839,16 @@ static void wave_eval_bsdfs(const scene *sc, const wave_scratch *ws, const int *
  * change a lane's value (bsdf_ops.sample_batch). A bundle of pages
  * samples lane by lane for every page (integrators/pages.h). g: n ints of
  * scratch. */
-static void wave_sample_bsdfs(const scene *sc, const wave_scratch *ws, const int *idx, int n, int *g) {
-  lane *ln = ws->ln;
-  page_lane *pgs = ws->pg;
-  const bsdf **gb = ws->gb;
+static void wave_sample_bsdfs(const scene *sc, lane *ln, page_lane *pgs, const int *idx, int n, int *g,
+                              const bsdf **gb, int *take) {
   enum {
     C = BSDF_BATCH
   };
   if (pgs) {
     for (int k = 0; k < n; k++) {
-      const int i = idx[k];
-      lane *l = &ln[i];
+      lane *l = &ln[idx[k]];
       color w[RENDER_MAX_PAGES];
-      bsdf_sample_pages(ws->si[i].shape->bsdf, &ws->si[i], sc->pages, l->u1, l->u2, &ws->bs[i], w);
+      bsdf_sample_pages(l->si.shape->bsdf, &l->si, sc->pages, l->u1, l->u2, &l->bs, w);
       l->weight = w[0];
       for (int p = 1; p < sc->pages; p++) pgs[idx[k]].weight[p - 1] = w[p];
     }
@@ -894,15 +856,14 @@ static void wave_sample_bsdfs(const scene *sc, const wave_scratch *ws, const int
   }
   int left = 0;
   for (int k = 0; k < n; k++) {
-    const int i = idx[k];
-    lane *l = &ln[i];
-    const bsdf *b = ws->si[i].shape->bsdf;
+    lane *l = &ln[idx[k]];
+    const bsdf *b = l->si.shape->bsdf;
     if (b->ops->sample_batch)
-      gb[left] = b, g[left++] = i;
+      gb[left] = b, g[left++] = idx[k];
     else
-      l->weight = b->ops->sample(b, &ws->si[i], l->u1, l->u2, &ws->bs[i]);
+      l->weight = b->ops->sample(b, &l->si, l->u1, l->u2, &l->bs);
   }
-  bsdf_batches q = {.g = g, .gb = gb, .left = left, .take = ws->take};
+  bsdf_batches q = {.g = g, .gb = gb, .left = left, .take = take};
   const bsdf *b;
   const int *t;
   int m;
@@ -912,20 +873,19 @@ static void wave_sample_bsdfs(const scene *sc, const wave_scratch *ws, const int
     vec2 u2[C];
     bsdf_sample bs[C];
     color w[C];
-    for (int k = 0; k < m; k++) si[k] = &ws->si[t[k]], u1[k] = ln[t[k]].u1, u2[k] = ln[t[k]].u2;
+    for (int k = 0; k < m; k++) si[k] = &ln[t[k]].si, u1[k] = ln[t[k]].u1, u2[k] = ln[t[k]].u2;
     b->ops->sample_batch(b, m, si, u1, u2, bs, w);
-    for (int k = 0; k < m; k++) ws->bs[t[k]] = bs[k], ln[t[k]].weight = w[k];
+    for (int k = 0; k < m; k++) ln[t[k]].bs = bs[k], ln[t[k]].weight = w[k];
   }
 }
 
 /* The end of lane l's vertex: the continuation ray from its BSDF sample
  * and the roulette. False: the path ends here. */
-static bool shade_continue(const integrator *it, const scene *sc, sampler_state *st, const wave_scratch *ws,
-                           int i, pol_lane *pl, page_lane *pg) {
+static bool shade_continue(const integrator *it, const scene *sc, sampler_state *st, lane *l, pol_lane *pl,
+                           page_lane *pg) {
   const sampler_ops *sops = st->s->ops;
-  lane *l = &ws->ln[i];
-  const surface_interaction *si = &ws->si[i];
-  const bsdf_sample *bs = &ws->bs[i];
+  const surface_interaction *si = &l->si;
+  const bsdf_sample *bs = &l->bs;
   color weight = l->weight;
   bool lit = !col_is_black(weight);
   for (int p = 1; pg && p < sc->pages; p++) lit |= !col_is_black(pg->weight[p - 1]);
@@ -935,9 +895,9 @@ static bool shade_continue(const integrator *it, const scene *sc, sampler_state 
     mueller P[3];
     vec3 b_in = {0}, b_out = {0};
     const mueller *pp = pol_bsdf(si->shape->bsdf, si, bs->wo, bs->sampled_type, P, &b_in, &b_out);
-    pol_scatter(pl, v3_neg(v3_norm(ws->ray[i].d)), b_out, pp, b_in, pol_channels(sc));
+    pol_scatter(pl, v3_neg(v3_norm(l->ray.d)), b_out, pp, b_in, pol_channels(sc));
   }
-  ws->ray[i] = spawn_ray(si, wo_world);
+  l->ray = spawn_ray(si, wo_world);
   l->T = col_mul(l->T, weight);
   /* A bundle of pages: the roulette on the largest throughput of any page. */
   double tmax = col_max(l->T);
@@ -946,6 +906,7 @@ static bool shade_continue(const integrator *it, const scene *sc, sampler_state 
     tmax = fmax(tmax, col_max(pg->T[p - 1]));
   }
   l->eta *= bs->eta;
+  l->prev_si = *si;
   l->prev_pdf = bs->pdf;
   l->prev_delta = (bs->sampled_type & BSDF_DELTA) != 0;
   l->depth++;
@@ -959,10 +920,21 @@ static bool shade_continue(const integrator *it, const scene *sc, sampler_state 
   return tmax > 0;
 }
 
+/* Scratch for a wave of n lanes: the lanes, two index lists and the
+ * batched draws. */
+typedef struct wave_scratch {
+  lane *ln;
+  pol_lane *pol; /* the polarized variants' payload, per lane (else NULL) */
+  page_lane *pg; /* a bundle of pages: pages 1.., per lane (else NULL) */
+  int *idx, *sh, *ek, *ord, *cont, *take;
+  const bsdf **gb; /* the BSDFs of lanes waiting for a batch (take_bsdf_group) */
+  double *d1;
+  vec2 *d2;
+} wave_scratch;
+
 /* Run the wave over n lanes. */
 static void wave_run(const integrator *it, const scene *sc, sampler_state *st, const ray3 *rays, int n,
-                     render_stats *stats, color *L, double *quv, const wave_scratch *ws_in) {
-  wave_scratch wv = *ws_in, *ws = &wv; /* si and prev_si trade places at each bounce */
+                     render_stats *stats, color *L, double *quv, const wave_scratch *ws) {
   lane *ln = ws->ln;
   pol_lane *pol = ws->pol;
   page_lane *pgs = ws->pg;
@@ -979,9 +951,9 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
     }
   if (pol)
     for (int i = 0; i < n; i++) pol_start(&pol[i], rays[i].d, pol_channels(sc));
-  for (int i = 0; i < n; i++) ws->ray[i] = rays[i];
   for (int i = 0; i < n; i++) {
     lane *l = &ln[i];
+    l->ray = rays[i];
     l->T = col1(1);
     l->L = col1(0);
     l->eta = 1.0;
@@ -1001,11 +973,11 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
     /* The lanes whose ray hit (in order) and the others, in ws->ord and
      * ws->ek (wave_light_samples' scratch, free until then). */
     int *hits = ws->ord, *other = ws->ek, n_hit, n_other;
-    wave_trace(sc, ws, idx, live, stats, camera, timed, hits, &n_hit, other, &n_other);
+    wave_trace(sc, ln, idx, live, stats, camera, timed, hits, &n_hit, other, &n_other);
     camera = false;
     for (int k = 0; k < n_other; k++) { /* the environment's light; these paths end */
       int i = other[k];
-      shade_emit(it, sc, ws, i, quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, pgs ? &pgs[i] : NULL);
+      shade_emit(it, sc, &ln[i], quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, pgs ? &pgs[i] : NULL);
     }
     /* The hits' emission, and (in the same pass, while the lane is in
      * cache) whether the path ends after its light sample: paths whose
@@ -1017,17 +989,17 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
     for (int k = 0; k < n_hit; k++) {
       int i = hits[k];
       bool keep =
-          shade_emit(it, sc, ws, i, quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, pgs ? &pgs[i] : NULL);
+          shade_emit(it, sc, &ln[i], quv ? &quv[qs * i] : NULL, pol ? &pol[i] : NULL, pgs ? &pgs[i] : NULL);
       idx[next] = sh[n_nee] = cont[n_cont] = i;
       next += keep, n_nee += keep & ln[i].nee;
-      n_cont += keep && !(escape_test && continuation_escapes(sc, &ws->si[i], pad));
+      n_cont += keep && !(escape_test && continuation_escapes(sc, &ln[i].si, pad));
     }
     live = next;
-    wave_light_samples(sc, st, ws, sh, n_nee, &n_sh, &n_clear);
+    wave_light_samples(sc, st, ln, pgs, sh, n_nee, &n_sh, &n_clear, ws->d1, ws->d2, ws->ek, ws->ord);
     stats->shadow_rays += (uint64_t)n_clear;
-    if (n_sh) wave_occluded(sc, ws, sh, n_sh, stats, timed);
+    if (n_sh) wave_occluded(sc, ln, sh, n_sh, stats, timed);
     /* Each lane's light sample. */
-    wave_eval_bsdfs(sc, ws, idx, live, sh, quv, qs);
+    wave_eval_bsdfs(sc, ln, pgs, idx, live, sh, ws->gb, ws->take, quv, qs, pol);
     for (int k = 0; k < n_cont; k++) idx[k] = cont[k];
     live = n_cont;
     /* The BSDF samples' numbers, lobe then direction, for every lane. */
@@ -1038,20 +1010,15 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
         ln[idx[k]].u2 = ws->d2[k];
       }
     }
-    wave_sample_bsdfs(sc, ws, idx, live, sh);
+    wave_sample_bsdfs(sc, ln, pgs, idx, live, sh, ws->gb, ws->take);
     next = 0;
     for (int k = 0; k < live; k++) { /* whether a BSDF sample failed is unpredictable: no branch */
       int i = idx[k];
-      bool keep = shade_continue(it, sc, &st[i], ws, i, pol ? &pol[i] : NULL, pgs ? &pgs[i] : NULL);
+      bool keep = shade_continue(it, sc, &st[i], &ln[i], pol ? &pol[i] : NULL, pgs ? &pgs[i] : NULL);
       idx[next] = i;
       next += keep;
     }
     live = next;
-    /* The vertex becomes the previous one (the emitters' pdfs at the next
-     * hit read it): the arrays trade places, and the next bounce's hits
-     * fill the other. A path that ended reads neither again. */
-    surface_interaction *vertex = ws->si;
-    ws->si = ws->prev_si, ws->prev_si = vertex;
   }
   for (int i = 0; i < n; i++) L[i] = ln[i].L;
   for (int i = 0; pages_out && i < n; i++)
@@ -1061,34 +1028,19 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
     for (int i = 0; i < n; i++) pol_result(&pol[i], pol_channels(sc), &L[i], quv ? &quv[qs * i] : NULL);
 }
 
-/* One lane's records (wave_scratch), for the wave's one allocation. */
-#define WAVE_LANE_BYTES                                                                                      \
-  (sizeof(lane) + 2 * sizeof(ray3) + sizeof(accel_hit) + 2 * sizeof(surface_interaction) +                   \
-   sizeof(direction_sample) + sizeof(bsdf_sample) + 6 * sizeof(int) + sizeof(const bsdf *) +                 \
-   sizeof(double) + sizeof(vec2))
-
 static bool path_Li_batch(const integrator *it, const scene *sc, sampler_state *st, const ray3 *rays, int n,
                           render_stats *stats, color *L, double *quv) {
   if (n <= 0) return true;
-  /* The records by alignment, largest first, in one block. */
-  char *block = malloc((size_t)n * WAVE_LANE_BYTES);
-  wave_scratch ws = {.pol = sc->polarized ? pol_alloc(n, pol_channels(sc)) : NULL,
+  wave_scratch ws = {.ln = malloc((size_t)n * sizeof *ws.ln),
+                     .idx = malloc(6 * (size_t)n * sizeof *ws.idx),
+                     .gb = malloc((size_t)n * sizeof *ws.gb),
+                     .d1 = malloc((size_t)n * sizeof *ws.d1),
+                     .d2 = malloc((size_t)n * sizeof *ws.d2),
+                     .pol = sc->polarized ? pol_alloc(n, pol_channels(sc)) : NULL,
                      .pg = sc->pages > 1 ? malloc((size_t)n * sizeof *ws.pg) : NULL};
-  bool ok = block && (ws.pol || !sc->polarized) && (ws.pg || sc->pages <= 1);
+  bool ok =
+      ws.ln && ws.idx && ws.gb && ws.d1 && ws.d2 && (ws.pol || !sc->polarized) && (ws.pg || sc->pages <= 1);
   if (ok) {
-    char *b = block;
-    ws.si = (surface_interaction *)b, b += (size_t)n * sizeof *ws.si;
-    ws.prev_si = (surface_interaction *)b, b += (size_t)n * sizeof *ws.prev_si;
-    ws.ln = (lane *)b, b += (size_t)n * sizeof *ws.ln;
-    ws.ray = (ray3 *)b, b += (size_t)n * sizeof *ws.ray;
-    ws.sray = (ray3 *)b, b += (size_t)n * sizeof *ws.sray;
-    ws.ds = (direction_sample *)b, b += (size_t)n * sizeof *ws.ds;
-    ws.h = (accel_hit *)b, b += (size_t)n * sizeof *ws.h;
-    ws.bs = (bsdf_sample *)b, b += (size_t)n * sizeof *ws.bs;
-    ws.gb = (const bsdf **)b, b += (size_t)n * sizeof *ws.gb;
-    ws.d1 = (double *)b, b += (size_t)n * sizeof *ws.d1;
-    ws.d2 = (vec2 *)b, b += (size_t)n * sizeof *ws.d2;
-    ws.idx = (int *)b;
     ws.sh = ws.idx + n;
     ws.ek = ws.idx + 2 * (size_t)n;
     ws.ord = ws.idx + 3 * (size_t)n;
@@ -1096,7 +1048,11 @@ static bool path_Li_batch(const integrator *it, const scene *sc, sampler_state *
     ws.take = ws.idx + 5 * (size_t)n;
     wave_run(it, sc, st, rays, n, stats, L, quv, &ws);
   }
-  free(block);
+  free(ws.ln);
+  free(ws.idx);
+  free(ws.gb);
+  free(ws.d1);
+  free(ws.d2);
   free(ws.pg);
   pol_free(ws.pol);
   return ok;
@@ -1105,11 +1061,6 @@ static bool path_Li_batch(const integrator *it, const scene *sc, sampler_state *
 static color path_Li(const integrator *it, const scene *sc, sampler_state *st, ray3 ray, render_stats *stats,
                      double *quv) {
   lane ln;
-  ray3 r, sray;
-  accel_hit h;
-  surface_interaction si, prev_si;
-  direction_sample ds;
-  bsdf_sample bs;
   int idx[6];
   const bsdf *gb[1];
   double d1[1];
@@ -1118,13 +1069,6 @@ static color path_Li(const integrator *it, const scene *sc, sampler_state *st, r
   pol_lane pl = {.M = pm};
   page_lane pg;
   wave_scratch ws = {.ln = &ln,
-                     .ray = &r,
-                     .h = &h,
-                     .si = &si,
-                     .prev_si = &prev_si,
-                     .ds = &ds,
-                     .sray = &sray,
-                     .bs = &bs,
                      .idx = idx,
                      .sh = idx + 1,
                      .ek = idx + 2,
