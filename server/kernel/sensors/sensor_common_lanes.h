@@ -132,17 +132,19 @@ LANES_ATTR void LANES_FN(hdistant_rays)(int n, const double (*m)[4], const doubl
       d_concentric(ax, ay, &qx[v], &qy[v]);
     }
     double *ob = cnt < HD_CHUNK ? res : &out[8 * c0];
-    for (int v = 0; v < nv; v++) {
-      /* omega = norm(to_world hemisphere(fu)), d = -omega */
+    vdn wx[HV], wy[HV], wz[HV];
+    for (int v = 0; v < nv; v++) { /* omega = to_world hemisphere(fu) */
       vdn z = 1.0 - (px[v] * px[v] + py[v] * py[v]);
       vdn z1 = z + 1.0;
       vdn s = VSQRT_D(dsel(z1 > 0.0, z1, (vdn){0}));
       vdn vx = px[v] * s, vy = py[v] * s;
-      vdn wx = m[0][0] * vx + m[0][1] * vy + m[0][2] * z;
-      vdn wy = m[1][0] * vx + m[1][1] * vy + m[1][2] * z;
-      vdn wz = m[2][0] * vx + m[2][1] * vy + m[2][2] * z;
-      d_norm3(&wx, &wy, &wz);
-      vdn dx = -wx, dy = -wy, dz = -wz;
+      wx[v] = m[0][0] * vx + m[0][1] * vy + m[0][2] * z;
+      wy[v] = m[1][0] * vx + m[1][1] * vy + m[1][2] * z;
+      wz[v] = m[2][0] * vx + m[2][1] * vy + m[2][2] * z;
+    }
+    for (int v = 0; v < nv; v++) {
+      d_norm3(&wx[v], &wy[v], &wz[v]); /* omega normalised, d = -omega */
+      vdn dx = -wx[v], dy = -wy[v], dz = -wz[v];
       /* origin: centre + radius to_world (concentric(ap), 0), back by offset */
       vdn rx = m[0][0] * qx[v] + m[0][1] * qy[v] + m[0][2] * 0.0;
       vdn ry = m[1][0] * qx[v] + m[1][1] * qy[v] + m[1][2] * 0.0;
