@@ -197,7 +197,8 @@ SIMD_FN void mf_ggx_lanes(const float *wx, const float *wy, const float *wz, con
  * float rounding (~1e-6 relative), which is what an unbiased estimator
  * needs; pdf() in double is the density that the chi-square tests check
  * the m drawn against. pdf = 0 marks a failed sample. */
-SIMD_FN void mf_sample_tail_lanes(int ggx, const float *const *in, const float *m3, float *const *out, int k0) {
+SIMD_FN void mf_sample_tail_lanes(int ggx, const float *const *in, const float *m3, float *const *out,
+                                  int k0) {
   vf wx, wy, wz, au, av, mx, my, mz;
   __builtin_memcpy(&wx, in[0] + k0, sizeof wx);
   __builtin_memcpy(&wy, in[1] + k0, sizeof wy);
@@ -234,8 +235,8 @@ SIMD_FN void mf_sample_visible_lanes(int ggx, const float *const *in, float *con
     mf_ggx_lanes(in[0] + k0, in[1] + k0, in[2] + k0, in[3] + k0, in[4] + k0, in[5] + k0, in[6] + k0, m3,
                  m3 + W, m3 + 2 * W);
   else
-    mf_beckmann_lanes(in[0] + k0, in[1] + k0, in[2] + k0, in[3] + k0, in[4] + k0, in[5] + k0, in[6] + k0,
-                      m3, m3 + W, m3 + 2 * W);
+    mf_beckmann_lanes(in[0] + k0, in[1] + k0, in[2] + k0, in[3] + k0, in[4] + k0, in[5] + k0, in[6] + k0, m3,
+                      m3 + W, m3 + 2 * W);
   mf_sample_tail_lanes(ggx, in, m3, out, k0);
 }
 

@@ -82,7 +82,8 @@ SIMD_FN void d_store_rows8(double *ob, const vdn *r) {
   }
 #elif WD == 2
   for (int h = 0; h < 8; h += 2) {
-    vdn l0 = __builtin_shufflevector(r[h], r[h + 1], 0, 2), l1 = __builtin_shufflevector(r[h], r[h + 1], 1, 3);
+    vdn l0 = __builtin_shufflevector(r[h], r[h + 1], 0, 2),
+        l1 = __builtin_shufflevector(r[h], r[h + 1], 1, 3);
     __builtin_memcpy(ob + h, &l0, sizeof l0);
     __builtin_memcpy(ob + 8 + h, &l1, sizeof l1);
   }
