@@ -197,16 +197,17 @@ SIMD_FN void mf_ggx_lanes(const float *wx, const float *wy, const float *wz, con
  * float rounding (~1e-6 relative), which is what an unbiased estimator
  * needs; pdf() in double is the density that the chi-square tests check
  * the m drawn against. pdf = 0 marks a failed sample. */
-SIMD_FN void mf_sample_tail_lanes(int ggx, const float *in, float *out) {
+SIMD_FN void mf_sample_tail_lanes(int ggx, const float *const *in, const float *m3, float *const *out,
+                                  int k0) {
   vf wx, wy, wz, au, av, mx, my, mz;
-  __builtin_memcpy(&wx, in + 0 * W, sizeof wx);
-  __builtin_memcpy(&wy, in + 1 * W, sizeof wy);
-  __builtin_memcpy(&wz, in + 2 * W, sizeof wz);
-  __builtin_memcpy(&au, in + 3 * W, sizeof au);
-  __builtin_memcpy(&av, in + 4 * W, sizeof av);
-  __builtin_memcpy(&mx, out + 0 * W, sizeof mx);
-  __builtin_memcpy(&my, out + 1 * W, sizeof my);
-  __builtin_memcpy(&mz, out + 2 * W, sizeof mz);
+  __builtin_memcpy(&wx, in[0] + k0, sizeof wx);
+  __builtin_memcpy(&wy, in[1] + k0, sizeof wy);
+  __builtin_memcpy(&wz, in[2] + k0, sizeof wz);
+  __builtin_memcpy(&au, in[3] + k0, sizeof au);
+  __builtin_memcpy(&av, in[4] + k0, sizeof av);
+  __builtin_memcpy(&mx, m3 + 0 * W, sizeof mx);
+  __builtin_memcpy(&my, m3 + 1 * W, sizeof my);
+  __builtin_memcpy(&mz, m3 + 2 * W, sizeof mz);
   vf wi_m = wx * mx + wy * my + wz * mz;
   vf ox = 2.0f * wi_m * mx - wx, oy = 2.0f * wi_m * my - wy, oz = 2.0f * wi_m * mz - wz;
   vf wo_m = ox * mx + oy * my + oz * mz;
@@ -218,49 +219,62 @@ SIMD_FN void mf_sample_tail_lanes(int ggx, const float *in, float *out) {
   vf g_o = mf_g1_lanes(ggx, ox, oy, oz, mx, my, mz, au, av);
   vf g_i = mf_g1_lanes(ggx, wx, wy, wz, mx, my, mz, au, av);
   vf weight = vsel(ok, g_o * (g_i / vsel(ok, g1vis, vset(1.0f))), vset(0.0f));
-  __builtin_memcpy(out + 0 * W, &ox, sizeof ox);
-  __builtin_memcpy(out + 1 * W, &oy, sizeof oy);
-  __builtin_memcpy(out + 2 * W, &oz, sizeof oz);
-  __builtin_memcpy(out + 3 * W, &pdf, sizeof pdf);
-  __builtin_memcpy(out + 4 * W, &weight, sizeof weight);
-  __builtin_memcpy(out + 5 * W, &wi_m, sizeof wi_m);
+  __builtin_memcpy(out[0] + k0, &ox, sizeof ox);
+  __builtin_memcpy(out[1] + k0, &oy, sizeof oy);
+  __builtin_memcpy(out[2] + k0, &oz, sizeof oz);
+  __builtin_memcpy(out[3] + k0, &pdf, sizeof pdf);
+  __builtin_memcpy(out[4] + k0, &weight, sizeof weight);
+  __builtin_memcpy(out[5] + k0, &wi_m, sizeof wi_m);
 }
 
-/* n lanes (any n >= 0), processed W at a time (a partial tail is padded
- * with normal incidence, u = 1/2, alpha = 1; its results are dropped).
- * in[0..6]: wi xyz, alpha_u, alpha_v, u.x, u.y; out[0..5]: wo xyz, pdf,
- * weight without Fresnel, wi.m. */
+/* One vector of samples: lanes k0.. of in[0..6], results to out[0..5] +
+ * k0, the microfacet normals in between in a local vector triple. */
+SIMD_FN void mf_sample_visible_lanes(int ggx, const float *const *in, float *const *out, int k0) {
+  float m3[3 * W];
+  if (ggx)
+    mf_ggx_lanes(in[0] + k0, in[1] + k0, in[2] + k0, in[3] + k0, in[4] + k0, in[5] + k0, in[6] + k0, m3,
+                 m3 + W, m3 + 2 * W);
+  else
+    mf_beckmann_lanes(in[0] + k0, in[1] + k0, in[2] + k0, in[3] + k0, in[4] + k0, in[5] + k0, in[6] + k0, m3,
+                      m3 + W, m3 + 2 * W);
+  mf_sample_tail_lanes(ggx, in, m3, out, k0);
+}
+
+/* n lanes (any n >= 0): whole vectors straight from and to the caller's
+ * arrays; a partial tail through a padded copy (normal incidence, u =
+ * 1/2, alpha = 1; its results are dropped). in[0..6]: wi xyz, alpha_u,
+ * alpha_v, u.x, u.y; out[0..5]: wo xyz, pdf, weight without Fresnel,
+ * wi.m. */
 LANES_ATTR void LANES_FN(mf_sample_visible)(int ggx, int n, const float *const *in, float *const *out) {
-  for (int k0 = 0; k0 < n; k0 += W) {
-    int m = n - k0 < W ? n - k0 : W;
-    float a[7 * W], b[6 * W];
+  int k0 = 0;
+  for (; k0 + W <= n; k0 += W) mf_sample_visible_lanes(ggx, in, out, k0);
+  if (k0 < n) {
+    int m = n - k0;
+    float a[7][W], b[6][W];
     const float pad[7] = {0.0f, 0.0f, 1.0f, 1.0f, 1.0f, 0.5f, 0.5f};
-    for (int j = 0; j < 7; j++) /* whole vectors copied as such: scalar stores then a vector load stall */
-      if (m == W)
-        __builtin_memcpy(a + j * W, in[j] + k0, W * sizeof(float));
-      else
-        for (int k = 0; k < W; k++) a[j * W + k] = k < m ? in[j][k0 + k] : pad[j];
-    const float *wx = a, *wy = a + W, *wz = a + 2 * W, *au = a + 3 * W, *av = a + 4 * W;
-    if (ggx)
-      mf_ggx_lanes(wx, wy, wz, au, av, a + 5 * W, a + 6 * W, b, b + W, b + 2 * W);
-    else
-      mf_beckmann_lanes(wx, wy, wz, au, av, a + 5 * W, a + 6 * W, b, b + W, b + 2 * W);
-    mf_sample_tail_lanes(ggx, a, b);
+    for (int j = 0; j < 7; j++)
+      for (int k = 0; k < W; k++) a[j][k] = k < m ? in[j][k0 + k] : pad[j];
+    const float *ap[7] = {a[0], a[1], a[2], a[3], a[4], a[5], a[6]};
+    float *bp[6] = {b[0], b[1], b[2], b[3], b[4], b[5]};
+    mf_sample_visible_lanes(ggx, ap, bp, 0);
     for (int j = 0; j < 6; j++)
-      for (int k = 0; k < m; k++) out[j][k0 + k] = b[j * W + k];
+      for (int k = 0; k < m; k++) out[j][k0 + k] = b[j][k];
   }
 }
 
-SIMD_FN void mf_eval_lanes(int ggx, int visible, const float *in, float *out) {
+/* One vector of lanes from in[j] + k0 (8 arrays: wi xyz, wo xyz, alpha_u,
+ * alpha_v), results to out[j] + k0 (value, pdf, wi.h): loaded from and
+ * stored to the caller's arrays directly. */
+SIMD_FN void mf_eval_lanes(int ggx, int visible, const float *const *in, float *const *out, int k0) {
   vf wx, wy, wz, ox, oy, oz, au, av;
-  __builtin_memcpy(&wx, in + 0 * W, sizeof wx);
-  __builtin_memcpy(&wy, in + 1 * W, sizeof wy);
-  __builtin_memcpy(&wz, in + 2 * W, sizeof wz);
-  __builtin_memcpy(&ox, in + 3 * W, sizeof ox);
-  __builtin_memcpy(&oy, in + 4 * W, sizeof oy);
-  __builtin_memcpy(&oz, in + 5 * W, sizeof oz);
-  __builtin_memcpy(&au, in + 6 * W, sizeof au);
-  __builtin_memcpy(&av, in + 7 * W, sizeof av);
+  __builtin_memcpy(&wx, in[0] + k0, sizeof wx);
+  __builtin_memcpy(&wy, in[1] + k0, sizeof wy);
+  __builtin_memcpy(&wz, in[2] + k0, sizeof wz);
+  __builtin_memcpy(&ox, in[3] + k0, sizeof ox);
+  __builtin_memcpy(&oy, in[4] + k0, sizeof oy);
+  __builtin_memcpy(&oz, in[5] + k0, sizeof oz);
+  __builtin_memcpy(&au, in[6] + k0, sizeof au);
+  __builtin_memcpy(&av, in[7] + k0, sizeof av);
   vf hx = wx + ox, hy = wy + oy, hz = wz + oz;
   vf hl = VSQRT(hx * hx + hy * hy + hz * hz);
   vf ih = 1.0f / vsel(hl > 0.0f, hl, vset(1.0f));
@@ -277,26 +291,29 @@ SIMD_FN void mf_eval_lanes(int ggx, int visible, const float *in, float *out) {
   else
     pdf_m = D * hz;
   vf pdf = vsel((wi_h > 0.0f) & (wo_h > 0.0f), pdf_m / (4.0f * wo_h), vset(0.0f));
-  __builtin_memcpy(out + 0 * W, &value, sizeof value);
-  __builtin_memcpy(out + 1 * W, &pdf, sizeof pdf);
-  __builtin_memcpy(out + 2 * W, &wi_h, sizeof wi_h);
+  __builtin_memcpy(out[0] + k0, &value, sizeof value);
+  __builtin_memcpy(out[1] + k0, &pdf, sizeof pdf);
+  __builtin_memcpy(out[2] + k0, &wi_h, sizeof wi_h);
 }
 
 /* n lanes; in: 8 arrays of n (wi xyz, wo xyz, alpha_u, alpha_v); out: 3
- * arrays of n (value, pdf, wi.h). Padding: wi = wo = +z, alpha 1. */
+ * arrays of n (value, pdf, wi.h). Whole vectors straight from and to the
+ * caller's arrays; a partial tail through a padded copy (wi = wo = +z,
+ * alpha 1). */
 LANES_ATTR void LANES_FN(mf_eval)(int ggx, int visible, int n, const float *const *in, float *const *out) {
-  for (int k0 = 0; k0 < n; k0 += W) {
-    int m = n - k0 < W ? n - k0 : W;
-    float a[8 * W], b[3 * W];
+  int k0 = 0;
+  for (; k0 + W <= n; k0 += W) mf_eval_lanes(ggx, visible, in, out, k0);
+  if (k0 < n) {
+    int m = n - k0;
+    float a[8][W], b[3][W];
     const float pad[8] = {0.0f, 0.0f, 1.0f, 0.0f, 0.0f, 1.0f, 1.0f, 1.0f};
-    for (int j = 0; j < 8; j++) /* whole vectors copied as such (as above) */
-      if (m == W)
-        __builtin_memcpy(a + j * W, in[j] + k0, W * sizeof(float));
-      else
-        for (int k = 0; k < W; k++) a[j * W + k] = k < m ? in[j][k0 + k] : pad[j];
-    mf_eval_lanes(ggx, visible, a, b);
+    for (int j = 0; j < 8; j++)
+      for (int k = 0; k < W; k++) a[j][k] = k < m ? in[j][k0 + k] : pad[j];
+    const float *ap[8] = {a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7]};
+    float *bp[3] = {b[0], b[1], b[2]};
+    mf_eval_lanes(ggx, visible, ap, bp, 0);
     for (int j = 0; j < 3; j++)
-      for (int k = 0; k < m; k++) out[j][k0 + k] = b[j * W + k];
+      for (int k = 0; k < m; k++) out[j][k0 + k] = b[j][k];
   }
 }
 #endif

@@ -151,10 +151,13 @@ static void rough_sample_batch(const bsdf *b, int n, const surface_interaction *
   };
   rsw_isa isa = rsw_isa_get();
   rough_shared sh;
-  if (n > 0) rough_shared_at(r, si[0], &sh);
+  if (n <= 0) return;
+  rough_shared_at(r, si[0], &sh);
+  float in[7][C], out[6][C];
+  if (sh.distr) /* the lanes' roughness, converted once */
+    for (int j = 0; j < C; j++) in[3][j] = (float)sh.d.alpha_u, in[4][j] = (float)sh.d.alpha_v;
   for (int i0 = 0; i0 < n; i0 += C) {
     int m = n - i0 < C ? n - i0 : C;
-    float in[7][C], out[6][C];
     int lane[C], k = 0;
     for (int j = 0; j < m; j++) {
       const surface_interaction *s = si[i0 + j];
@@ -162,9 +165,11 @@ static void rough_sample_batch(const bsdf *b, int n, const surface_interaction *
         weight[i0 + j] = bsdf_fail(&bs[i0 + j]);
         continue;
       }
-      mf_distr d = sh.distr ? sh.d : distr_at(r, s);
       in[0][k] = (float)s->wi.x, in[1][k] = (float)s->wi.y, in[2][k] = (float)s->wi.z;
-      in[3][k] = (float)d.alpha_u, in[4][k] = (float)d.alpha_v;
+      if (!sh.distr) {
+        mf_distr d = distr_at(r, s);
+        in[3][k] = (float)d.alpha_u, in[4][k] = (float)d.alpha_v;
+      }
       in[5][k] = (float)u2[i0 + j].x, in[6][k] = (float)u2[i0 + j].y;
       lane[k++] = i0 + j;
     }
@@ -224,10 +229,13 @@ static void rough_eval_pdf_batch(const bsdf *b, int n, const surface_interaction
   };
   rsw_isa isa = rsw_isa_get();
   rough_shared sh;
-  if (n > 0) rough_shared_at(r, si[0], &sh);
+  if (n <= 0) return;
+  rough_shared_at(r, si[0], &sh);
+  float in[8][C], out[3][C];
+  if (sh.distr) /* the lanes' roughness, converted once */
+    for (int j = 0; j < C; j++) in[6][j] = (float)sh.d.alpha_u, in[7][j] = (float)sh.d.alpha_v;
   for (int i0 = 0; i0 < n; i0 += C) {
     int m = n - i0 < C ? n - i0 : C;
-    float in[8][C], out[3][C];
     int lane[C], k = 0;
     for (int j = 0; j < m; j++) {
       const surface_interaction *s = si[i0 + j];
@@ -235,10 +243,12 @@ static void rough_eval_pdf_batch(const bsdf *b, int n, const surface_interaction
       f[i0 + j] = col1(0.0);
       pdf[i0 + j] = 0.0;
       if (!(s->wi.z > 0.0) || !(o.z > 0.0)) continue;
-      mf_distr d = sh.distr ? sh.d : distr_at(r, s);
       in[0][k] = (float)s->wi.x, in[1][k] = (float)s->wi.y, in[2][k] = (float)s->wi.z;
       in[3][k] = (float)o.x, in[4][k] = (float)o.y, in[5][k] = (float)o.z;
-      in[6][k] = (float)d.alpha_u, in[7][k] = (float)d.alpha_v;
+      if (!sh.distr) {
+        mf_distr d = distr_at(r, s);
+        in[6][k] = (float)d.alpha_u, in[7][k] = (float)d.alpha_v;
+      }
       lane[k++] = i0 + j;
     }
     const float *ip[8] = {in[0], in[1], in[2], in[3], in[4], in[5], in[6], in[7]};

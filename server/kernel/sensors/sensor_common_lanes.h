@@ -24,6 +24,74 @@ SIMD_ISA_DECL(void, disk_origins,
                const double *center, double radius, double offset, double *out));
 
 #ifdef LANES_FN
+/* x and y of WD interleaved (x, y) pairs at p: two vector loads and two
+ * shuffles (element inserts of the pairs went through the stack). */
+SIMD_FN void d_deinterleave(const double *p, vdn *x, vdn *y) {
+  vdn lo, hi;
+  __builtin_memcpy(&lo, p, sizeof lo);
+  __builtin_memcpy(&hi, p + WD, sizeof hi);
+#if WD == 8
+  *x = __builtin_shufflevector(lo, hi, 0, 2, 4, 6, 8, 10, 12, 14);
+  *y = __builtin_shufflevector(lo, hi, 1, 3, 5, 7, 9, 11, 13, 15);
+#elif WD == 4
+  *x = __builtin_shufflevector(lo, hi, 0, 2, 4, 6);
+  *y = __builtin_shufflevector(lo, hi, 1, 3, 5, 7);
+#elif WD == 2
+  *x = __builtin_shufflevector(lo, hi, 0, 2);
+  *y = __builtin_shufflevector(lo, hi, 1, 3);
+#else
+#error "d_deinterleave: WD must be 2, 4 or 8"
+#endif
+}
+
+/* Lane k of the eight rows r[0..7] to ob[8 k .. 8 k + 7], for every lane:
+ * a transpose in shuffles (unpack pairs, then pairs of pairs, then
+ * halves), then whole-vector stores. */
+SIMD_FN void d_store_rows8(double *ob, const vdn *r) {
+#if WD == 8
+  vdn t[8], u[8];
+  for (int i = 0; i < 8; i += 2) {
+    t[i] = __builtin_shufflevector(r[i], r[i + 1], 0, 8, 2, 10, 4, 12, 6, 14);
+    t[i + 1] = __builtin_shufflevector(r[i], r[i + 1], 1, 9, 3, 11, 5, 13, 7, 15);
+  }
+  /* t[0] = (r0[0], r1[0], r0[2], r1[2], ..), t[1] the odd lanes. */
+  for (int i = 0; i < 8; i += 4)
+    for (int j = 0; j < 2; j++) {
+      u[i + j] = __builtin_shufflevector(t[i + j], t[i + j + 2], 0, 1, 8, 9, 4, 5, 12, 13);
+      u[i + j + 2] = __builtin_shufflevector(t[i + j], t[i + j + 2], 2, 3, 10, 11, 6, 7, 14, 15);
+    }
+  /* u[j] (j < 4): rows 0..3 of lanes j and j + 4; u[4 + j]: rows 4..7. */
+  for (int j = 0; j < 4; j++) {
+    vdn lo = __builtin_shufflevector(u[j], u[j + 4], 0, 1, 2, 3, 8, 9, 10, 11);
+    vdn hi = __builtin_shufflevector(u[j], u[j + 4], 4, 5, 6, 7, 12, 13, 14, 15);
+    __builtin_memcpy(ob + 8 * j, &lo, sizeof lo);
+    __builtin_memcpy(ob + 8 * (j + 4), &hi, sizeof hi);
+  }
+#elif WD == 4
+  for (int h = 0; h < 8; h += 4) { /* rows 0..3, then 4..7: two 4x4 transposes */
+    vdn t0 = __builtin_shufflevector(r[h], r[h + 1], 0, 4, 2, 6);
+    vdn t1 = __builtin_shufflevector(r[h], r[h + 1], 1, 5, 3, 7);
+    vdn t2 = __builtin_shufflevector(r[h + 2], r[h + 3], 0, 4, 2, 6);
+    vdn t3 = __builtin_shufflevector(r[h + 2], r[h + 3], 1, 5, 3, 7);
+    vdn l0 = __builtin_shufflevector(t0, t2, 0, 1, 4, 5), l2 = __builtin_shufflevector(t0, t2, 2, 3, 6, 7);
+    vdn l1 = __builtin_shufflevector(t1, t3, 0, 1, 4, 5), l3 = __builtin_shufflevector(t1, t3, 2, 3, 6, 7);
+    __builtin_memcpy(ob + h, &l0, sizeof l0);
+    __builtin_memcpy(ob + 8 + h, &l1, sizeof l1);
+    __builtin_memcpy(ob + 16 + h, &l2, sizeof l2);
+    __builtin_memcpy(ob + 24 + h, &l3, sizeof l3);
+  }
+#elif WD == 2
+  for (int h = 0; h < 8; h += 2) {
+    vdn l0 = __builtin_shufflevector(r[h], r[h + 1], 0, 2),
+        l1 = __builtin_shufflevector(r[h], r[h + 1], 1, 3);
+    __builtin_memcpy(ob + h, &l0, sizeof l0);
+    __builtin_memcpy(ob + 8 + h, &l1, sizeof l1);
+  }
+#else
+#error "d_store_rows8: WD must be 2, 4 or 8"
+#endif
+}
+
 /* n rays: rows m[3][3] of to_world; fu, ap film and aperture samples (x,
  * y interleaved per lane: fu[2 i], fu[2 i + 1]); out[8 i ..] = o, d, 0,
  * infinity (the layout of a ray3, which the caller's rays are).
@@ -56,26 +124,28 @@ LANES_ATTR void LANES_FN(hdistant_rays)(int n, const double (*m)[4], const doubl
     vdn px[HV], py[HV], qx[HV], qy[HV];
     for (int v = 0; v < nv; v++) { /* the film samples' disk points */
       vdn ux, uy;
-      for (int k = 0; k < WD; k++) ux[k] = fk[2 * (WD * v + k)], uy[k] = fk[2 * (WD * v + k) + 1];
+      d_deinterleave(fk + 2 * WD * v, &ux, &uy);
       d_concentric(ux, uy, &px[v], &py[v]);
     }
     for (int v = 0; v < nv; v++) { /* the aperture samples' */
       vdn ax, ay;
-      for (int k = 0; k < WD; k++) ax[k] = ak[2 * (WD * v + k)], ay[k] = ak[2 * (WD * v + k) + 1];
+      d_deinterleave(ak + 2 * WD * v, &ax, &ay);
       d_concentric(ax, ay, &qx[v], &qy[v]);
     }
     double *ob = cnt < HD_CHUNK ? res : &out[8 * c0];
-    for (int v = 0; v < nv; v++) {
-      /* omega = norm(to_world hemisphere(fu)), d = -omega */
+    vdn wx[HV], wy[HV], wz[HV];
+    for (int v = 0; v < nv; v++) { /* omega = to_world hemisphere(fu) */
       vdn z = 1.0 - (px[v] * px[v] + py[v] * py[v]);
       vdn z1 = z + 1.0;
       vdn s = VSQRT_D(dsel(z1 > 0.0, z1, (vdn){0}));
       vdn vx = px[v] * s, vy = py[v] * s;
-      vdn wx = m[0][0] * vx + m[0][1] * vy + m[0][2] * z;
-      vdn wy = m[1][0] * vx + m[1][1] * vy + m[1][2] * z;
-      vdn wz = m[2][0] * vx + m[2][1] * vy + m[2][2] * z;
-      d_norm3(&wx, &wy, &wz);
-      vdn dx = -wx, dy = -wy, dz = -wz;
+      wx[v] = m[0][0] * vx + m[0][1] * vy + m[0][2] * z;
+      wy[v] = m[1][0] * vx + m[1][1] * vy + m[1][2] * z;
+      wz[v] = m[2][0] * vx + m[2][1] * vy + m[2][2] * z;
+    }
+    for (int v = 0; v < nv; v++) {
+      d_norm3(&wx[v], &wy[v], &wz[v]); /* omega normalised, d = -omega */
+      vdn dx = -wx[v], dy = -wy[v], dz = -wz[v];
       /* origin: centre + radius to_world (concentric(ap), 0), back by offset */
       vdn rx = m[0][0] * qx[v] + m[0][1] * qy[v] + m[0][2] * 0.0;
       vdn ry = m[1][0] * qx[v] + m[1][1] * qy[v] + m[1][2] * 0.0;
@@ -83,12 +153,8 @@ LANES_ATTR void LANES_FN(hdistant_rays)(int n, const double (*m)[4], const doubl
       vdn ox = (center[0] + radius * rx) + -offset * dx;
       vdn oy = (center[1] + radius * ry) + -offset * dy;
       vdn oz = (center[2] + radius * rz) + -offset * dz;
-      for (int k = 0; k < WD; k++) {
-        double *o = &ob[8 * (WD * v + k)];
-        o[0] = ox[k], o[1] = oy[k], o[2] = oz[k];
-        o[3] = dx[k], o[4] = dy[k], o[5] = dz[k];
-        o[6] = 0.0, o[7] = INFINITY;
-      }
+      const vdn rows[8] = {ox, oy, oz, dx, dy, dz, (vdn){0}, (vdn){0} + INFINITY};
+      d_store_rows8(&ob[8 * WD * v], rows);
     }
     if (cnt < HD_CHUNK)
       for (int k = 0; k < 8 * cnt; k++) out[8 * c0 + k] = res[k];
