@@ -1188,9 +1188,11 @@ static unsigned packet_n(int n) {
 
 /* Lanes [0, n) of an N-wide packet from r (fill_ray's rules; the rest,
  * and rays fill_ray refuses, invalid); false when no lane holds a ray
- * Embree can trace. The lanes are written straight into the SOA layout. */
-static bool packet_load(const accel *a, packet_buf *pb, unsigned N, const ray3 *const *r, int n,
-                        unsigned mask) {
+ * Embree can trace. The lanes are written straight into the SOA layout.
+ * Inline, so that packet_load's constant N = 16 makes the invalid marks
+ * whole vector stores and the lanes' offsets constants. */
+static inline __attribute__((always_inline)) bool packet_load_n(const accel *a, packet_buf *pb, unsigned N,
+                                                                const ray3 *const *r, int n, unsigned mask) {
   float *p = pb->f;
   float *hit = p + (size_t)RAY_FIELDS * N;
   for (unsigned i = 0; i < N; i++) {
@@ -1218,6 +1220,42 @@ static bool packet_load(const accel *a, packet_buf *pb, unsigned N, const ray3 *
     any = true;
   }
   return any;
+}
+
+static bool packet_load(const accel *a, packet_buf *pb, unsigned N, const ray3 *const *r, int n,
+                        unsigned mask) {
+  return N == 16 ? packet_load_n(a, pb, 16, r, n, mask) : packet_load_n(a, pb, N, r, n, mask);
+}
+
+/* The packet query's results (intersect_packet): hit i to *h[i] as
+ * intersect_packet says. Inline, for a constant N. */
+static inline __attribute__((always_inline)) void packet_hits(const accel *a, const packet_buf *pb,
+                                                              unsigned N, int n, accel_hit *const *h,
+                                                              bool *hit, bool all) {
+  const float *p = pb->f;
+  const float *hb = p + (size_t)RAY_FIELDS * N;
+  for (int i = 0; i < n; i++) {
+    unsigned geom = HITN_U(hb, N, HIT_GEOM, i);
+    hit[i] = pb->valid[i] && geom != RTC_INVALID_GEOMETRY_ID;
+  }
+  for (int i = 0; i < n; i++) {
+    if (!all && !hit[i]) continue;
+    accel_hit *o = h[i];
+    o->t = pb->t0[i] + RAYN_F(p, N, RAY_TFAR, i) * pb->ts[i];
+    uint32_t id = HITN_U(hb, N, HIT_INST, i);
+    if (hit[i] & (id >= a->n_sub)) { /* one predictable branch: false for a miss too */
+      o->shape = a->list_shape[id - a->n_sub];
+      o->sub = a->list_sub[id - a->n_sub];
+    } else {
+      o->shape = id;
+      o->sub = 0;
+    }
+    o->member = HITN_U(hb, N, HIT_GEOM, i);
+    o->prim = HITN_U(hb, N, HIT_PRIM, i);
+    o->u = HITN_F(hb, N, HIT_U, i);
+    o->v = HITN_F(hb, N, HIT_V, i);
+    o->ng = v3(HITN_F(hb, N, HIT_NG, i), HITN_F(hb, N, HIT_NG + 1, i), HITN_F(hb, N, HIT_NG + 2, i));
+  }
 }
 
 /* The packet query of accel_intersect_packet: hit i written to *h[i];
@@ -1249,30 +1287,10 @@ static void intersect_packet(const accel *a, const ray3 *const *r, int n, accel_
     else
       rtcIntersect4(pb.valid, a->top, &ctx, (struct RTCRayHit4 *)pb.f);
   }
-  const float *p = pb.f;
-  const float *hb = p + (size_t)RAY_FIELDS * N;
-  for (int i = 0; i < n; i++) {
-    unsigned geom = HITN_U(hb, N, HIT_GEOM, i);
-    hit[i] = pb.valid[i] && geom != RTC_INVALID_GEOMETRY_ID;
-  }
-  for (int i = 0; i < n; i++) {
-    if (!all && !hit[i]) continue;
-    accel_hit *o = h[i];
-    o->t = pb.t0[i] + RAYN_F(p, N, RAY_TFAR, i) * pb.ts[i];
-    uint32_t id = HITN_U(hb, N, HIT_INST, i);
-    if (hit[i] & (id >= a->n_sub)) { /* one predictable branch: false for a miss too */
-      o->shape = a->list_shape[id - a->n_sub];
-      o->sub = a->list_sub[id - a->n_sub];
-    } else {
-      o->shape = id;
-      o->sub = 0;
-    }
-    o->member = HITN_U(hb, N, HIT_GEOM, i);
-    o->prim = HITN_U(hb, N, HIT_PRIM, i);
-    o->u = HITN_F(hb, N, HIT_U, i);
-    o->v = HITN_F(hb, N, HIT_V, i);
-    o->ng = v3(HITN_F(hb, N, HIT_NG, i), HITN_F(hb, N, HIT_NG + 1, i), HITN_F(hb, N, HIT_NG + 2, i));
-  }
+  if (N == 16) /* the usual width as a constant */
+    packet_hits(a, &pb, 16, n, h, hit, all);
+  else
+    packet_hits(a, &pb, N, n, h, hit, all);
 }
 
 void accel_intersect_packet(const accel *a, const ray3 *const *r, int n, accel_hit *const *h, bool *hit,
