@@ -155,8 +155,15 @@ static inline __attribute__((always_inline)) void exp_v8(v8d *xp) {
  * then the rare lanes beyond |x| < 512 through libm. */
 static inline __attribute__((always_inline)) void exp_body(int n, const double *restrict x,
                                                            double *restrict out) {
-  for (int i0 = 0; i0 < n; i0 += 8) {
-    int m = n - i0 < 8 ? n - i0 : 8;
+  int i0 = 0;
+  for (; i0 + 8 <= n; i0 += 8) { /* whole vectors: fixed-size copies, one load and one store each */
+    v8d v;
+    memcpy(&v, x + i0, sizeof v);
+    exp_v8(&v);
+    memcpy(out + i0, &v, sizeof v);
+  }
+  if (i0 < n) {
+    int m = n - i0;
     v8d v = {0};
     memcpy(&v, x + i0, sizeof(double) * (size_t)m);
     exp_v8(&v);

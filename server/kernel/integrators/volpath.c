@@ -725,13 +725,14 @@ static __attribute__((noinline)) void tr_pages(const medium *m, const ray3 *r, d
 /* One round of lane l's shadow ray after its query (hit at si): the
  * segment's transmittance, then done (false) or a null surface crossed
  * (true: trace again). */
-/* Lane l's shadow ray (no pages, no polarization) when it hit nothing
- * (its query's answer, or no query: may_hit_in) in the one-box case
- * (one_box_of) from inside the box (tn < 0 < tf), its end at infinity:
- * shadow_step's walk has one piece, [0, tf] in the box's medium, and no
- * medium beyond the exit. Its transmittance and contribution as
+/* Lane l's shadow ray (no polarization; pg: a bundle's pages 1.., or
+ * NULL) when it hit nothing (its query's answer, or no query: may_hit_in)
+ * in the one-box case (one_box_of) from inside the box (tn < 0 < tf), its
+ * end at infinity: shadow_step's walk has one piece, [0, tf] in the box's
+ * medium, and no medium beyond the exit. Its transmittances (the pages'
+ * exact, one_box_of's medium being analytic) and contributions as
  * shadow_step's, the ray done (true); false: not that case. */
-static inline bool shadow_one_box(const scene *sc, const one_box *ob, vlane *l) {
+static inline bool shadow_one_box(const scene *sc, const one_box *ob, vlane *l, vpage *pg) {
   if (l->sm != ob->m || !ob->m || l->sfinite) return false;
   box_walk bw;
   box_walk_start(sc, l->sp0, l->sray.d, &bw);
@@ -739,11 +740,20 @@ static inline bool shadow_one_box(const scene *sc, const one_box *ob, vlane *l) 
   if (!(tn < 0.0 && tf > 0.0 && tf < INFINITY)) return false;
   ray3 seg = {l->sp0, l->sray.d, 0.0, tf};
   double mint, maxt;
-  color tr = media_clip_at(sc, ob->m, &seg, &bw, ob->nbi, &mint, &maxt)
-                 ? media_layers_transmittance(layers_page0(ob->m), &seg, mint, maxt)
-                 : col1(1.0);
+  bool in = media_clip_at(sc, ob->m, &seg, &bw, ob->nbi, &mint, &maxt);
+  color tr = in ? media_layers_transmittance(layers_page0(ob->m), &seg, mint, maxt) : col1(1.0);
   l->str = col_mul(l->str, tr);
   l->L = col_add(l->L, col_mul(l->sval, l->str));
+  if (pg) {
+    const int NP = sc->pages;
+    if (in) {
+      color trp[RENDER_MAX_PAGES];
+      tr_pages(ob->m, &seg, mint, maxt, 1, NP, trp);
+      for (int p = 1; p < NP; p++) pg->str[p - 1] = col_mul(pg->str[p - 1], trp[p]);
+    }
+    for (int p = 1; p < NP; p++)
+      pg->L[p - 1] = col_add(pg->L[p - 1], col_mul(pg->sval[p - 1], pg->str[p - 1]));
+  }
   l->sh = false;
   return true;
 }
@@ -754,14 +764,14 @@ static inline bool shadow_one_box(const scene *sc, const one_box *ob, vlane *l) 
  * where the rounds would add it (nothing else adds to l->L between the
  * light sample and the rounds). */
 static inline void shadow_now(const scene *sc, const hit_bounds *hb, const one_box *ob, vlane *l) {
-  if (l->sh && ob->m && l->sm == ob->m && !may_hit_in(hb, &l->sray)) shadow_one_box(sc, ob, l);
+  if (l->sh && ob->m && l->sm == ob->m && !may_hit_in(hb, &l->sray)) shadow_one_box(sc, ob, l, NULL);
 }
 
 static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l, pol_lane *vq, vpage *pg,
                         bool hit, surface_interaction *si, sampler_state *st, face_plane *fp,
                         const one_box *ob) {
   const int NP = sc->pages;
-  if (!hit && !pg && !vq && shadow_one_box(sc, ob, l)) return false;
+  if (!hit && !vq && shadow_one_box(sc, ob, l, pg)) return false;
   if (hit && !(l->sm || sc->null_boxes.on) && media_at(NULL, si))
     seg_end(sc, &l->sray, l->sp0, si, true, fp); /* the next segment's start (si->p) */
   if (l->sm || sc->null_boxes.on) {
@@ -1069,7 +1079,7 @@ PIECE enum lane_outcome lane_flight(const volpath_integrator *vp, const scene *s
   double tend = hit ? seg_end(sc, &l->ray, l->seg_o, si, media_at(m, si), fp) : l->ray.tmax, t0 = 0.0;
   box_walk bw;
   if (sc->null_boxes.on) box_walk_start(sc, l->seg_o, l->ray.d, &bw);
-  if (ob && ob->m && !pg && (m == ob->m || !m)) {
+  if (ob && ob->m && (m == ob->m || !m)) {
     /* one_box_of's box, from inside it (tn < 0 < tf) or entered from
      * before it (0 <= tn < tend): the walk's one piece in the medium,
      * from 0 or tn to tf or tend, the exit at tf (when tf < tend) into no
@@ -1078,7 +1088,7 @@ PIECE enum lane_outcome lane_flight(const volpath_integrator *vp, const scene *s
     bool inside = m && tn < 0.0 && tf > 0.0, enters = !m && tn >= 0.0 && tn < tend;
     if ((inside || enters) && tf < INFINITY) {
       if (enters) {
-        if (!(col_max(l->T) > 0)) return EV_END;
+        if (!(pages_max(l->T, pg, pg ? pg->T : NULL, NP) > 0)) return EV_END;
         m = l->m = ob->m;
         t0 = tn;
       }
@@ -1086,8 +1096,9 @@ PIECE enum lane_outcome lane_flight(const volpath_integrator *vp, const scene *s
       ray3 seg = {l->seg_o, l->ray.d, t0, cross ? tf : tend};
       double mint, maxt;
       if (seg.tmax > seg.tmin && media_clip_at(sc, m, &seg, &bw, ob->nbi, &mint, &maxt))
-        scattered = flight_analytic(sc, st, l, m, &seg, mint, maxt, !l->hit && !sc->environment, mi);
-      bool live = col_max(l->T) > 0;
+        scattered = pg ? flight_pages(sc, m, &seg, mint, maxt, st, l, pg, mi)
+                       : flight_analytic(sc, st, l, m, &seg, mint, maxt, !l->hit && !sc->environment, mi);
+      bool live = pages_max(l->T, pg, pg ? pg->T : NULL, NP) > 0;
       if (!scattered && cross && live) l->m = NULL;
       return !live ? EV_END : scattered ? EV_SCATTER : EV_SURFACE;
     }
@@ -1463,11 +1474,11 @@ static bool lane_surface(const scene *sc, sampler_state *st, vlane *l, surface_i
  * for one lane. Sets up the shadow ray (l->sh) and the next ray. False:
  * the path ends (a pending shadow ray still counts). */
 static bool lane_event(const volpath_integrator *vp, const scene *sc, sampler_state *st, vlane *l,
-                       surface_interaction *si, pol_lane *vq, vpage *pg, face_plane *fp) {
+                       surface_interaction *si, pol_lane *vq, vpage *pg, face_plane *fp, const one_box *ob) {
   const sampler_ops *sops = st->s->ops;
   l->sh = false;
   medium_interaction mi;
-  enum lane_outcome ev = lane_flight(vp, sc, st, l, si, pg, fp, NULL, &mi);
+  enum lane_outcome ev = lane_flight(vp, sc, st, l, si, pg, fp, ob, &mi);
   if (ev == EV_END) return false;
   if (ev == EV_SCATTER) {
     if (!scatter_begin(vp, l, &mi)) return false;
@@ -1815,9 +1826,11 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
   /* (the pieces' pages and polarization: lane by lane; vs has no scratch
    * where the caller saw the stages switched off) */
   const bool staged = !vq && !pgs && vs->mi;
-  /* (lane by lane, the walks all go the general way: test_volpath_stages
-   * compares the short ways with them) */
-  const one_box ob = staged ? one_box_of(vp, sc) : (one_box){NULL, -1};
+  /* The short ways of one_box_of: by stages, and lane by lane for a
+   * bundle's pages; with the stages switched off (volpath_set_stages)
+   * every walk goes the general way, which test_volpath_stages compares
+   * them with. Not with polarization. */
+  const one_box ob = !vq && g_stages ? one_box_of(vp, sc) : (one_box){NULL, -1};
   while (live > 0) {
     wave_trace(sc, &hb, ln, idx, live, false, camera, hit, si, stats);
     camera = false;
@@ -1834,8 +1847,8 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
       for (int k = 0; k < live; k++) {
         int i = idx[k];
         ln[i].hit = hit[k];
-        bool alive = lane_event(vp, sc, &st[i], &ln[i], &si[k], vq ? &vq[i] : NULL, pgs ? &pgs[i] : NULL,
-                                fp); /* (si[k]: in place) */
+        bool alive = lane_event(vp, sc, &st[i], &ln[i], &si[k], vq ? &vq[i] : NULL, pgs ? &pgs[i] : NULL, fp,
+                                &ob); /* (si[k]: in place) */
         if (ln[i].sh) sh[n_sh++] = i;
         if (alive) idx[next++] = i;
       }

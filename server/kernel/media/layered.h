@@ -24,6 +24,7 @@
 
 #include "../core/fastmath.h"
 #include "../core/isa.h"
+#include "../films/filter_exp.h"
 #include "../kernel.h"
 #include "media.h"
 
@@ -396,17 +397,33 @@ static inline const media_layers *layered_layers(const medium *m) {
 
 /* A bundle of pages: the transmittance over [mint, maxt] of r at pages
  * p0..pages-1 into tr[p], the levels (and so the layers crossed) worked
- * out once: each page's media_layers_transmittance, bit for bit. */
+ * out once, and the pages' exps in one batch (filter_exp_batch: libm's
+ * exp in vector lanes, the same bits as libm's on a machine whose libm
+ * uses its FMA variant, as Debian 12's on x86-64 with FMA; within 1 ulp
+ * elsewhere, and the same at every ISA): each page's
+ * media_layers_transmittance, bit for bit where libm's bits are met.
+ * One libm call per channel was a fifth of a bundled atmosphere. */
 static inline void layered_transmittance_pages(const layered_medium *lm, const ray3 *r, double mint,
                                                double maxt, int p0, int pages, color *tr) {
   const media_layers *L = &lm->L;
   double oz = media_layers_z(L, r->o), dz = media_layers_dz(L, r->d);
   double z0 = oz + mint * dz, z1 = oz + maxt * dz;
   int k0 = media_layer_of(L, z0), k1 = media_layer_of(L, z1);
+  enum {
+    NX = (3 * RENDER_MAX_PAGES + 7) / 8 * 8 /* whole vectors of 8 */
+  };
+  double x[NX], e[NX];
+  int n = 0;
   for (int p = p0; p < pages; p++) {
     const media_layers *Lp = p ? &lm->Lp[p - 1] : L;
-    for (int c = 0; c < 3; c++) tr[p].c[c] = exp(-media_layers_tau(Lp, c, z0, z1, k0, k1, dz, maxt - mint));
+    for (int c = 0; c < 3; c++) x[n++] = -media_layers_tau(Lp, c, z0, z1, k0, k1, dz, maxt - mint);
   }
+  int nv = (n + 7) / 8 * 8;
+  for (int i = n; i < nv; i++) x[i] = 0.0;
+  filter_exp_batch(rsw_isa_get(), nv, x, e);
+  n = 0;
+  for (int p = p0; p < pages; p++)
+    for (int c = 0; c < 3; c++) tr[p].c[c] = e[n++];
 }
 
 #endif

@@ -11,7 +11,8 @@
  * takes no light samples, hidden emitters, max_depth and an early
  * roulette; with 1 and 2 threads; and layers in a null cube, whose
  * flights and shadow rays the stages take a short way (one_box_of), lane
- * by lane the general walk. */
+ * by lane the general walk; and the same short ways for a bundle's pages
+ * (lane by lane) against the general walk (the stages switched off). */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -103,6 +104,60 @@ static void test_one_box(void) {
   }
 }
 
+/* A bundle of k wavelengths 400, 410, ... nm (pages of three, lane by
+ * lane), rendered with the stages on (one_box_of's short ways for the
+ * pages too) and off (the general walk): every film bitwise equal. */
+static void check_same_bundle(scene *s, int k, uint32_t spp, int threads, const char *what) {
+  render_opts o = {.size = sizeof o, .spp = spp, .seed = 7, .threads = threads, .bundle = k};
+  for (int i = 0; i < RENDER_MAX_BUNDLE; i++) o.bundle_wl[i] = 400.0 + 10.0 * (i < k ? i : k - 1);
+  film_image a[RENDER_MAX_BUNDLE], b[RENDER_MAX_BUNDLE];
+  rsw_err err = {0};
+  volpath_set_stages(true);
+  bool ok_a = render_sensor_bundle(s, &o, a, NULL, &err) == RSW_OK;
+  volpath_set_stages(false);
+  bool ok_b = render_sensor_bundle(s, &o, b, NULL, &err) == RSW_OK;
+  volpath_set_stages(true);
+  REQUIRE(ok_a && ok_b, "%s: bundle render: %s", what, err.msg);
+  size_t same = 0, n = 0;
+  double sum = 0;
+  for (int f = 0; f < k; f++) {
+    size_t m = (size_t)a[f].width * a[f].height * a[f].channels;
+    bool dims = a[f].width == b[f].width && a[f].height == b[f].height && a[f].channels == b[f].channels;
+    for (size_t i = 0; dims && i < m; i++) {
+      same += memcmp(&a[f].data[i], &b[f].data[i], sizeof(float)) == 0;
+      sum += a[f].data[i];
+    }
+    n += m;
+    film_image_free(&a[f]);
+    film_image_free(&b[f]);
+  }
+  printf("  %s, bundle of %d: %zu of %zu values bitwise equal, mean %.6g\n", what, k, same, n,
+         sum / (double)n);
+  CHECK(same == n, "%s, bundle of %d: stages on and off differ (%zu of %zu equal)", what, k, same, n);
+  CHECK(sum > 0 && isfinite(sum), "%s, bundle of %d: empty films (%g)", what, k, sum);
+}
+
+/* The one-box short ways for a bundle's pages: the molecular atmosphere
+ * example (2,400 layers, spectral) and the layered cubes above. */
+static void test_one_box_pages(void) {
+  scene *s = tsup_load_file("proto/examples/atmosphere_molecular.json", "mono");
+  REQUIRE(s, "atmosphere_molecular.json");
+  check_same_bundle(s, 16, 4, 2, "atmosphere_molecular.json");
+  check_same_bundle(s, 7, 4, 1, "atmosphere_molecular.json");
+  scene_free(s);
+  for (int v = 0; v < 8; v++) {
+    double z0 = v & 1 ? -0.5 : 0.0;
+    bool sky = v & 2, inside = v & 4;
+    s = layered_scene(z0, sky, inside);
+    REQUIRE(s, "layered scene %d", v);
+    char what[128];
+    snprintf(what, sizeof what, "layers in a null cube (cube z0 %g, sky %d, camera inside %d)", z0, sky,
+             inside);
+    check_same_bundle(s, 16, 16, 2, what);
+    scene_free(s);
+  }
+}
+
 /* Medium med in a null sphere over a ground, a glass ball, an area
  * light and a sun under a sky, rendered by integrator integ. */
 static scene *mixed_scene(const char *integ, const char *med) {
@@ -161,5 +216,6 @@ int main(void) {
   RSW_TEST_RUN(test_atmosphere_example);
   RSW_TEST_RUN(test_mixed_scenes);
   RSW_TEST_RUN(test_one_box);
+  RSW_TEST_RUN(test_one_box_pages);
   RSW_TEST_END("test_volpath_stages");
 }
