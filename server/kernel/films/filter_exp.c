@@ -135,13 +135,12 @@ static inline __attribute__((always_inline)) void exp_v8(v8d *xp) {
   V8_FMA(r, kd, V8(NEG_LN2_HI_N), x);
   V8_FMA(r, kd, V8(NEG_LN2_LO_N), r);
   v8u idx = 2 * (ki % EXP_N);
-  v8d t;
-  v8u sbits;
+  v8u tbits, sbits;
   for (int k = 0; k < 8; k++) {
-    uint64_t tb = TAB[idx[k]];
-    memcpy(&t[k], &tb, sizeof tb);
+    tbits[k] = TAB[idx[k]];
     sbits[k] = TAB[idx[k] + 1];
   }
+  v8d t = (v8d)tbits; /* (a vector cast: the same bits) */
   v8d s = (v8d)(sbits + (ki << (52 - EXP_TABLE_BITS)));
   v8d r2 = r * r;
   V8_FMA(q, r, V8(C3), V8(C2));
