@@ -70,7 +70,7 @@ $(VOLPATH_O3): CFLAGS += -O3
 SEED_O3 := $(addprefix $(BUILD)/obj/server/kernel/,integrators/path.o hit.o render.o accel.o shapes/fill_simd.o \
              sensors/sensor_common.o samplers/independent.o samplers/pcg_simd.o simd/lanes_avx2.o \
              simd/lanes_avx512.o simd/lanes_sse2.o simd/lanes_generic.o bsdfs/roughconductor.o bsdfs/microfacet.o \
-             emitters/directional.o emitters/area.o films/filter_exp.o)
+             emitters/directional.o emitters/area.o films/filter_gaussian.o core/vexp.o)
 $(SEED_O3): CFLAGS += -O3
 LIBS := -lembree3 -lOpenEXRCore -lnetcdf -lpng16 -ljpeg -lexpat -lcjson -lpthread -ldl -lm
 DAEMON_LIBS := -lmicrohttpd -lcrypto

@@ -4,8 +4,9 @@
 #include <math.h>
 #include <stdlib.h>
 
+#include "../core/vexp.h"
 #include "../scene/plugin_def.h"
-#include "filter_exp.h"
+#include "filter_gaussian.h"
 
 /* box: radius 0.5 (fixed, no parameters), weight 1 on [-0.5, 0.5). */
 static double box_eval(const rfilter *f, double x) {
@@ -23,13 +24,13 @@ typedef struct gaussian_filter {
   double bias;  /* exp(alpha r^2) */
 } gaussian_filter;
 
-/* exp through films/filter_exp.c (libm's bits where libm's exp is its FMA
+/* exp through core/vexp.c (libm's bits where libm's exp is its FMA
  * variant; the same bits at every ISA); a sample's weights in one batch,
  * 8 lanes (4 columns, 4 rows at the default stddev). */
 static double gaussian_eval(const rfilter *f, double x) {
   const gaussian_filter *g = (const gaussian_filter *)f;
   double a = g->alpha * x * x, e;
-  filter_exp_batch(rsw_isa_get(), 1, &a, &e);
+  vexp_batch(rsw_isa_get(), 1, &a, &e);
   double v = e - g->bias;
   return v > 0.0 ? v : 0.0;
 }

@@ -24,7 +24,7 @@
 
 #include "../core/fastmath.h"
 #include "../core/isa.h"
-#include "../films/filter_exp.h"
+#include "../core/vexp.h"
 #include "../kernel.h"
 #include "media.h"
 
@@ -397,7 +397,7 @@ static inline const media_layers *layered_layers(const medium *m) {
 
 /* A bundle of pages: the transmittance over [mint, maxt] of r at pages
  * p0..pages-1 into tr[p], the levels (and so the layers crossed) worked
- * out once, and the pages' exps in one batch (filter_exp_batch: libm's
+ * out once, and the pages' exps in one batch (core/vexp.c: libm's
  * exp in vector lanes, the same bits as libm's on a machine whose libm
  * uses its FMA variant, as Debian 12's on x86-64 with FMA; within 1 ulp
  * elsewhere, and the same at every ISA): each page's
@@ -420,7 +420,7 @@ static inline void layered_transmittance_pages(const layered_medium *lm, const r
   }
   int nv = (n + 7) / 8 * 8;
   for (int i = n; i < nv; i++) x[i] = 0.0;
-  filter_exp_batch(rsw_isa_get(), nv, x, e);
+  vexp_batch(rsw_isa_get(), nv, x, e);
   n = 0;
   for (int p = p0; p < pages; p++)
     for (int c = 0; c < 3; c++) tr[p].c[c] = e[n++];

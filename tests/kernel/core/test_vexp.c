@@ -1,6 +1,7 @@
-/* films/filter_exp.c (the gaussian filter's exp) against libm, at every
- * ISA this CPU runs (core/isa.h), generic included:
- *  - filter_exp_batch(x) is within 1 ulp of libm's exp(x) (in units of
+/* core/vexp.c (exp in vector lanes) and the gaussian filter's weights
+ * built on it (films/filter_gaussian.c) against libm, at every ISA this
+ * CPU runs (core/isa.h), generic included:
+ *  - vexp_batch(x) is within 1 ulp of libm's exp(x) (in units of
  *    libm's value's last place) over the gaussian's whole domain [-8, 0]:
  *    2^20 points on a regular grid (0, -2^-17, ...) and 2^20 random doubles
  *    in it; over [-700, 700] (2^18 random), where the polynomial and the
@@ -39,7 +40,8 @@
 #include <string.h>
 
 #include "../../../server/kernel/core/isa.h"
-#include "../../../server/kernel/films/filter_exp.h"
+#include "../../../server/kernel/core/vexp.h"
+#include "../../../server/kernel/films/filter_gaussian.h"
 #include "../../support/test.h"
 #include "../../support/tsup.h"
 
@@ -98,10 +100,10 @@ static void test_exp_ulp(void) {
   REQUIRE(x, "memory");
   double *got = malloc(sizeof(double) * (size_t)n), *ref = malloc(sizeof(double) * (size_t)n);
   REQUIRE(got && ref, "memory");
-  filter_exp_batch(RSW_ISA_GENERIC, n, x, ref);
+  vexp_batch(RSW_ISA_GENERIC, n, x, ref);
   for (int isa = 0; isa < RSW_ISA__COUNT; isa++) {
     if (!rsw_isa_supported((rsw_isa)isa)) continue;
-    filter_exp_batch((rsw_isa)isa, n, x, got);
+    vexp_batch((rsw_isa)isa, n, x, got);
     double worst = 0, worst_x = 0;
     long differ = 0, not_generic = 0;
     for (int i = 0; i < n; i++) {
@@ -125,7 +127,7 @@ static void test_exp_ulp(void) {
     for (int len = 1; len < 20; len++)
       for (int i0 = 0; i0 + len <= 4000; i0 += len) {
         int off = (2 << 20) - 2000 + i0; /* random [-8, 0] then [-700, 700] */
-        filter_exp_batch((rsw_isa)isa, len, x + off, got);
+        vexp_batch((rsw_isa)isa, len, x + off, got);
         for (int k = 0; k < len; k++) bad += bits(got[k]) != bits(ref[off + k]);
       }
     CHECK(bad == 0, "%s: %ld results of short batches differ", rsw_isa_name((rsw_isa)isa), bad);
@@ -139,7 +141,7 @@ static void test_exp_ulp(void) {
  * batch of one (exp's bits: test_exp_ulp). */
 static double weight_ref(double alpha, double bias, double t) {
   double a = alpha * t * t, e;
-  filter_exp_batch(RSW_ISA_GENERIC, 1, &a, &e);
+  vexp_batch(RSW_ISA_GENERIC, 1, &a, &e);
   double v = e - bias;
   return v > 0.0 ? v : 0.0;
 }
@@ -266,5 +268,5 @@ int main(void) {
   RSW_TEST_RUN(test_footprints);
   RSW_TEST_RUN(test_rfilter_agrees);
   RSW_TEST_RUN(test_splat_isas);
-  RSW_TEST_END("test_filter_exp");
+  RSW_TEST_END("test_vexp");
 }
