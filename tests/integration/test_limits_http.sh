@@ -5,7 +5,9 @@
 # reports it; the directions of a film over 1024^2 pixels, a sensor named
 # twice in a context and a job of 100,001 contexts are refused with a
 # problem naming the field, the last in well under a second (153-185 s
-# before); the daemon keeps answering.
+# before); the daemon keeps answering. The time bounds are the refusals'
+# (a render or a pass over the list would take minutes) with room for a
+# loaded machine: a 1 s bound failed once at load 15.
 name=test_limits_http
 . "$(dirname "$0")/../support/shtest.sh"
 need_bins raysweepd
@@ -53,7 +55,7 @@ t0=$(date +%s.%N)
 st=$(call POST "/v1/scenes/$BIG:render" "$tmp/q")
 t1=$(date +%s.%N)
 problem "8192^2 render" "$st" 422 /sensor
-py "8192^2 refused in under a second" 'import sys; assert float(sys.argv[2]) - float(sys.argv[1]) < 1.0' "$t0" "$t1"
+py "8192^2 refused in under 10 s (rendering it took 4 minutes)" 'import sys; assert float(sys.argv[2]) - float(sys.argv[1]) < 10.0, float(sys.argv[2]) - float(sys.argv[1])' "$t0" "$t1"
 echo '{"contexts": [{"id": "a", "sensors": ["meter", "big"]}]}' >"$tmp/q"
 st=$(call POST "/v1/scenes/$BIG/jobs" "$tmp/q")
 problem "8192^2 in a job" "$st" 422 /contexts/0/sensors/1
@@ -83,7 +85,7 @@ t0=$(date +%s.%N)
 st=$(call POST "/v1/scenes/$SMALL/jobs" "$tmp/q")
 t1=$(date +%s.%N)
 problem "100,001 contexts" "$st" 422 /contexts
-py "100,001 contexts refused in under 2 s" 'import sys; assert float(sys.argv[2]) - float(sys.argv[1]) < 2.0, float(sys.argv[2]) - float(sys.argv[1])' "$t0" "$t1"
+py "100,001 contexts refused in under 20 s (153-185 s before)" 'import sys; assert float(sys.argv[2]) - float(sys.argv[1]) < 20.0, float(sys.argv[2]) - float(sys.argv[1])' "$t0" "$t1"
 
 st=$(curl -s -o /dev/null -w '%{http_code}' "$URL/v1/health/live")
 [ "$st" = 200 ] && ok || bad "health: $st"
