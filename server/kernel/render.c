@@ -31,7 +31,7 @@
 
 /* Tiles are TILE x TILE pixels; a box-filter film with few of them has
  * smaller ones (tile_size). */
-#define TILE 8
+#define TILE             8
 /* Tiles per thread tile_size aims at: the render ends when its slowest
  * thread does, and a thread that claims the last tile can finish up to a
  * tile's work after the others. */
