@@ -213,6 +213,16 @@ static void test_instanced_equals_separate(void) {
         "every disk's ray hits (%d of %d, %d the disk itself); the three lists' hits name the same "
         "placement (%d differ)",
         n_hit, NDISK, n_self, n_bad);
+  /* Bounds (hence the bounding sphere) agree too. */
+  CHECK(v3_len(v3_sub(s0->bbox_min, s1->bbox_min)) < 1e-6 &&
+            v3_len(v3_sub(s0->bbox_max, s1->bbox_max)) < 1e-6,
+        "same scene bounds");
+  /* What render.c sizes its waves by: the soil's 2 triangles, a disk
+   * each, the group's disk once. */
+  CHECK(scene_primitive_count(s0) == 2 + NDISK && scene_primitive_count(s1) == 3 + NDISK &&
+            scene_primitive_count(s2) == 3 + NDISK && scene_primitive_count(s3) == 3 + NDISK,
+        "primitives: %zu separate, %zu instances, %zu one list, %zu three lists", scene_primitive_count(s0),
+        scene_primitive_count(s1), scene_primitive_count(s2), scene_primitive_count(s3));
   film_image_free(&a), film_image_free(&b), film_image_free(&c), film_image_free(&d);
   scene_free(s0), scene_free(s1), scene_free(s2), scene_free(s3);
   free(t0), free(t1), free(t2), free(t3);
