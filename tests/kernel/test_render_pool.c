@@ -53,14 +53,19 @@ static void on_progress(void *user, size_t done, size_t total) {
   pthread_mutex_unlock(&t->lock);
 }
 
+/* render_sensor, its error printed. */
+static bool render_with(scene *s, const render_opts *o, film_image *out, render_result_stats *st) {
+  rsw_err err = {0};
+  bool ok = render_sensor(s, o, out, st, &err) == RSW_OK;
+  if (!ok) fprintf(stderr, "render: %s: %s\n", err.where, err.msg);
+  return ok;
+}
+
 static bool render(scene *s, size_t sensor_index, int threads, uint64_t seed, tids *t, film_image *out,
                    render_result_stats *st) {
   render_opts o = {.size = sizeof o, .sensor = sensor_index, .spp = 4, .seed = seed, .threads = threads};
   if (t) o.progress = on_progress, o.progress_user = t;
-  rsw_err err = {0};
-  bool ok = render_sensor(s, &o, out, st, &err) == RSW_OK;
-  if (!ok) fprintf(stderr, "render: %s: %s\n", err.where, err.msg);
-  return ok;
+  return render_with(s, &o, out, st);
 }
 
 static void test_no_thread_per_render(void) {
@@ -176,10 +181,7 @@ static bool render_small(scene *s, size_t sensor_index, int threads, bool varian
                    .variance = variance,
                    .progress = on_total,
                    .progress_user = tiles};
-  rsw_err err = {0};
-  bool ok = render_sensor(s, &o, out, NULL, &err) == RSW_OK;
-  if (!ok) fprintf(stderr, "render: %s: %s\n", err.where, err.msg);
-  return ok;
+  return render_with(s, &o, out, NULL);
 }
 
 static void test_small_box_film_tiles(void) {
