@@ -44,9 +44,14 @@ struct accel {
   const shape_group **grp;
   RTCScene *grp_scene;
   size_t n_grp;
-  /* Top-level ids >= n_sub are instancelist placements: their shape
-   * index and placement number. */
-  uint32_t *list_shape, *list_sub;
+  /* Top-level ids >= n_sub are instancelist placements, each list's in
+   * one run: list l (shape index list_owner[l]) holds the placements
+   * [list_first[l], list_first[l + 1]) of those ids less n_sub, placement
+   * k at list_first[l] + k. Per list, not per placement, so that a hit's
+   * shape and placement number cost no load that misses the cache
+   * (list_placement). */
+  uint32_t *list_first, *list_owner;
+  size_t n_lists;
   double *list_binv; /* |A^-1|_inf of each placement's float linear part (check_traceable) */
   size_t n_list;
   /* Precision (accel.h): Embree's frame is centred on `origin`; per
@@ -66,6 +71,21 @@ struct accel {
   size_t bytes;
   char error[512]; /* first Embree error seen during this build */
 };
+
+/* Top-level placement id j (less n_sub) as its instancelist's shape index
+ * and placement number: a binary search over the lists (none with one). */
+static inline void list_placement(const accel *a, uint32_t j, uint32_t *index, uint32_t *sub) {
+  size_t lo = 0, hi = a->n_lists;
+  while (hi - lo > 1) {
+    size_t mid = lo + (hi - lo) / 2;
+    if (a->list_first[mid] <= j)
+      lo = mid;
+    else
+      hi = mid;
+  }
+  *index = a->list_owner[lo];
+  *sub = j - a->list_first[lo];
+}
 
 /* One Embree device per process: devices are heavyweight (each owns its
  * thread arenas), and every scene of a daemon shares it. Embree reports
@@ -432,18 +452,21 @@ static rsw_status check_traceable(const accel *a, rsw_err *err) {
     if (st) return st;
   }
   /* instancelist placements: fixed at load, their inverse norms computed once. */
-  for (size_t j = 0; j < a->n_list; j++) {
-    const instance_shape *is = (const instance_shape *)s->shapes[a->list_shape[j]];
-    const double *t = &is->tr[3 * (size_t)a->list_sub[j]];
-    double tc = fmax(fabs(t[0] - a->origin.x), fmax(fabs(t[1] - a->origin.y), fabs(t[2] - a->origin.z)));
-    double b = a->list_binv[j], o_bound = b * (a->clip_r + tc), d_bound = b * ACCEL_MAX_DIR;
-    double ext = a->ext[a->list_shape[j]];
-    if (!(o_bound <= ACCEL_LIMIT) || !(d_bound <= ACCEL_LIMIT) || !(ext <= ACCEL_LIMIT)) {
-      const char *name = is->base.base.id ? is->base.base.id : "instancelist";
-      return rsw_fail(err, RSW_ERR_RANGE, name,
-                      "'%s': placement %u: float32 tracing cannot represent it in this scene (rays in its "
-                      "object space would reach %.3g, geometry %.3g; the limit is %.3g)",
-                      name, a->list_sub[j], fmax(o_bound, d_bound), ext, ACCEL_LIMIT);
+  for (size_t l = 0; l < a->n_lists; l++) {
+    const instance_shape *is = (const instance_shape *)s->shapes[a->list_owner[l]];
+    double ext = a->ext[a->list_owner[l]];
+    for (uint32_t k = 0; k < is->n; k++) {
+      const double *t = &is->tr[3 * (size_t)k];
+      double tc = fmax(fabs(t[0] - a->origin.x), fmax(fabs(t[1] - a->origin.y), fabs(t[2] - a->origin.z)));
+      double b = a->list_binv[a->list_first[l] + k], o_bound = b * (a->clip_r + tc),
+             d_bound = b * ACCEL_MAX_DIR;
+      if (!(o_bound <= ACCEL_LIMIT) || !(d_bound <= ACCEL_LIMIT) || !(ext <= ACCEL_LIMIT)) {
+        const char *name = is->base.base.id ? is->base.base.id : "instancelist";
+        return rsw_fail(err, RSW_ERR_RANGE, name,
+                        "'%s': placement %u: float32 tracing cannot represent it in this scene (rays in its "
+                        "object space would reach %.3g, geometry %.3g; the limit is %.3g)",
+                        name, k, fmax(o_bound, d_bound), ext, ACCEL_LIMIT);
+      }
     }
   }
   return RSW_OK;
@@ -460,11 +483,13 @@ static void rewrite_instances(accel *a) {
     set_instance_transform(a->inst[i], &sh->to_world, a->origin);
     rtcCommitGeometry(a->inst[i]);
   }
-  for (size_t j = 0; j < a->n_list; j++) {
-    RTCGeometry inst = rtcGetGeometry(a->top, (unsigned)(a->n_sub + j));
-    const instance_shape *is = (const instance_shape *)s->shapes[a->list_shape[j]];
-    set_placement_transform(inst, is, a->list_sub[j], a->origin);
-    rtcCommitGeometry(inst);
+  for (size_t l = 0; l < a->n_lists; l++) {
+    const instance_shape *is = (const instance_shape *)s->shapes[a->list_owner[l]];
+    for (uint32_t k = 0; k < is->n; k++) {
+      RTCGeometry inst = rtcGetGeometry(a->top, (unsigned)(a->n_sub + a->list_first[l] + k));
+      set_placement_transform(inst, is, k, a->origin);
+      rtcCommitGeometry(inst);
+    }
   }
   a->counters.origin_moves++;
 }
@@ -666,7 +691,8 @@ static void set_placement_transform(RTCGeometry inst, const instance_shape *is, 
 }
 
 /* Instances of a group at top-level ids: an `instance` at its shape index,
- * an instancelist's placements from *next_id on. */
+ * an instancelist's placements from *next_id on (accel_build's
+ * list_first gives the same ids). */
 static rsw_status build_instances(accel *a, const instance_shape *is, size_t i, size_t *next_id,
                                   rsw_err *err) {
   const shape *sh = &is->base;
@@ -685,8 +711,6 @@ static rsw_status build_instances(accel *a, const instance_shape *is, size_t i, 
     if (is->xf) {
       size_t id = (*next_id)++;
       rtcAttachGeometryByID(a->top, inst, (unsigned)id);
-      a->list_shape[id - a->n_sub] = (uint32_t)i;
-      a->list_sub[id - a->n_sub] = k;
       rtcReleaseGeometry(inst); /* never updated: the top level holds it */
     } else {
       rtcAttachGeometryByID(a->top, inst, (unsigned)i);
@@ -726,27 +750,28 @@ rsw_status accel_build(scene *s, rsw_err *err) {
   double radius;
   a->origin = frame_origin(a, &radius);
   a->clip_r = ACCEL_CLIP * radius;
-  size_t n_list = 0;
+  size_t n_list = 0, n_lists = 0;
   for (size_t i = 0; i < s->n_shapes; i++)
-    if (shape_is_instancing(s->shapes[i]) && ((const instance_shape *)s->shapes[i])->xf)
+    if (shape_is_instancing(s->shapes[i]) && ((const instance_shape *)s->shapes[i])->xf) {
       n_list += ((const instance_shape *)s->shapes[i])->n;
+      n_lists++;
+    }
   if (n_list + s->n_shapes >= 0xFFFFFFF0u) return rsw_fail(err, RSW_ERR_RANGE, "", "too many instances");
   if (n_list) {
-    a->list_shape = malloc(n_list * sizeof *a->list_shape);
-    a->list_sub = malloc(n_list * sizeof *a->list_sub);
+    a->list_first = malloc(n_lists * sizeof *a->list_first);
+    a->list_owner = malloc(n_lists * sizeof *a->list_owner);
     a->list_binv = malloc(n_list * sizeof *a->list_binv);
-    if (!a->list_shape || !a->list_sub || !a->list_binv)
+    if (!a->list_first || !a->list_owner || !a->list_binv)
       return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
     a->n_list = n_list;
+    a->n_lists = n_lists;
     /* Placements in top-level id order (as build_instances attaches them). */
-    size_t j = 0;
+    size_t j = 0, l = 0;
     for (size_t i = 0; i < s->n_shapes; i++) {
       const instance_shape *is = (const instance_shape *)s->shapes[i];
       if (!shape_is_instancing(s->shapes[i]) || !is->xf) continue;
-      for (uint32_t k = 0; k < is->n; k++, j++) {
-        a->list_shape[j] = (uint32_t)i, a->list_sub[j] = k;
-        a->list_binv[j] = placement_binv(&is->xf[12 * (size_t)k]);
-      }
+      a->list_first[l] = (uint32_t)j, a->list_owner[l++] = (uint32_t)i;
+      for (uint32_t k = 0; k < is->n; k++, j++) a->list_binv[j] = placement_binv(&is->xf[12 * (size_t)k]);
     }
   }
   {
@@ -834,8 +859,8 @@ void accel_free(accel *a) {
   for (size_t i = 0; release && i < a->n_grp; i++) rtcReleaseScene(a->grp_scene[i]);
   free(a->grp);
   free(a->grp_scene);
-  free(a->list_shape);
-  free(a->list_sub);
+  free(a->list_first);
+  free(a->list_owner);
   free(a->list_binv);
   free(a->sub);
   free(a->geom);
@@ -1083,8 +1108,7 @@ bool accel_intersect_mask(const accel *a, const ray3 *r, accel_hit *h, unsigned 
     h->shape = id;
     h->sub = 0;
   } else {
-    h->shape = a->list_shape[id - a->n_sub];
-    h->sub = a->list_sub[id - a->n_sub];
+    list_placement(a, id - (uint32_t)a->n_sub, &h->shape, &h->sub);
   }
   h->member = rh.hit.geomID;
   h->prim = rh.hit.primID;
@@ -1244,8 +1268,7 @@ static inline __attribute__((always_inline)) void packet_hits(const accel *a, co
     o->t = pb->t0[i] + RAYN_F(p, N, RAY_TFAR, i) * pb->ts[i];
     uint32_t id = HITN_U(hb, N, HIT_INST, i);
     if (hit[i] & (id >= a->n_sub)) { /* one predictable branch: false for a miss too */
-      o->shape = a->list_shape[id - a->n_sub];
-      o->sub = a->list_sub[id - a->n_sub];
+      list_placement(a, id - (uint32_t)a->n_sub, &o->shape, &o->sub);
     } else {
       o->shape = id;
       o->sub = 0;

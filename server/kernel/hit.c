@@ -46,6 +46,11 @@ static bool hit_fill_begin(const scene *sc, const ray3 *r, const accel_hit *h, s
   return done;
 }
 
+void hit_prefetch(const scene *sc, const accel_hit *h) {
+  const shape *top = sc->shapes[h->shape];
+  if (shape_is_instancing(top)) instance_prefetch((const instance_shape *)top, h->sub);
+}
+
 void hit_fill_interaction(const scene *sc, const ray3 *r, const accel_hit *h, surface_interaction *si) {
   vec3 sn, tangent;
   if (hit_fill_begin(sc, r, h, si, &sn, &tangent, NULL, NULL, NULL)) return;

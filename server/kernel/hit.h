@@ -19,4 +19,9 @@ void hit_fill_interaction(const scene *sc, const ray3 *r, const struct accel_hit
 void hit_fill_interaction_batch(const scene *sc, int n, const ray3 *const *r,
                                 const struct accel_hit *const *h, surface_interaction *const *si);
 
+/* Start fetching what hit_fill_interaction will read of hit h that the
+ * ray query has not brought into the cache: an instancelist placement's
+ * record (shapes/instance.h). Nothing else; a hint, no effect on results. */
+void hit_prefetch(const scene *sc, const struct accel_hit *h);
+
 #endif

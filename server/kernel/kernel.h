@@ -741,7 +741,8 @@ struct integrator {
    * pages 1.. of each path's radiance after page 0's, as quv (scene_extra_stride). */
   bool pages;
   /* Samples per Li_batch call it prefers (render.c's wave; 0: the default
-   * there; at most render.c's RENDER_WAVE_MAX). */
+   * there; at most render.c's RENDER_WAVE_MAX; a scene of many primitives
+   * gets at most the default, render.c job_wave). */
   int wave;
 };
 

@@ -29,7 +29,13 @@
 #include "samplers/sampler_batch.h"
 #include "scene/scene.h"
 
-#define TILE 8
+/* Tiles are TILE x TILE pixels; a box-filter film with few of them has
+ * smaller ones (tile_size). */
+#define TILE             8
+/* Tiles per thread tile_size aims at: the render ends when its slowest
+ * thread does, and a thread that claims the last tile can finish up to a
+ * tile's work after the others. */
+#define TILES_PER_THREAD 16
 
 _Thread_local int rsw_page;
 
@@ -53,6 +59,8 @@ typedef struct job {
   const render_opts *opts;
   uint32_t spp;
   int W, H, tiles_x, tiles_y;
+  int tw, th; /* tile width and height (tile_size) */
+  int wave;   /* samples per wave (job_wave) */
   size_t n_tiles;
   int margin;       /* pixels a splat can reach beyond its own */
   bool box;         /* box filter of radius 0.5: own pixel only */
@@ -255,6 +263,15 @@ static bool job_should_stop(job *jb) {
 #define WAVE 256
 #endif
 #define RENDER_WAVE_MAX 1024
+/* A scene of more primitives than this (scene_primitive_count) renders in
+ * waves of at most WAVE: its BVH and instance data need the core's L2
+ * that a larger wave's lanes take (path's 1,024 lanes hold about 1 MB).
+ * Measured in one-thread CPU time, waves of 256 against 1,024, alternating
+ * pairs: the canopy bench's scene (100,000 instanced leaves) 0.84x
+ * periodic and 0.91x without the boundary, mesh_1m's heightfield (10^6
+ * triangles) 0.95x; the small scenes (the seed scene's 2 triangles, the
+ * Cornell box's 34) keep the larger wave, where it measured best. */
+#define WAVE_BIG_SCENE  65536
 /* The extra values of a path (Stokes Q, U, V or a bundle's pages 1..):
  * Li's slots per path in wave_buf.quv (Li_batch packs nq per path). */
 #define LI_SLOTS        (SCENE_QUV_MAX > SCENE_EXTRA_MAX ? SCENE_QUV_MAX : SCENE_EXTRA_MAX)
@@ -410,9 +427,9 @@ static bool wave_flush(job *jb, tile_buf *tb, wave_buf *wb, int n, render_stats 
 
 static tile_buf *render_tile(job *jb, size_t t, render_stats *rs, uint64_t *samples, uint64_t *invalid) {
   int tx = (int)(t % (size_t)jb->tiles_x), ty = (int)(t / (size_t)jb->tiles_x);
-  int px0 = tx * TILE, py0 = ty * TILE;
-  int px1 = px0 + TILE < jb->W ? px0 + TILE : jb->W;
-  int py1 = py0 + TILE < jb->H ? py0 + TILE : jb->H;
+  int px0 = tx * jb->tw, py0 = ty * jb->th;
+  int px1 = px0 + jb->tw < jb->W ? px0 + jb->tw : jb->W;
+  int py1 = py0 + jb->th < jb->H ? py0 + jb->th : jb->H;
   tile_buf *tb = malloc(sizeof *tb);
   wave_buf *wb = malloc(sizeof *wb);
   if (!tb || !wb) {
@@ -432,8 +449,7 @@ static tile_buf *render_tile(job *jb, size_t t, render_stats *rs, uint64_t *samp
     free(wb);
     return NULL;
   }
-  const int iw = jb->sc->integrator->wave;
-  const int wave = iw > 0 && iw <= RENDER_WAVE_MAX ? iw : WAVE;
+  const int wave = jb->wave;
   /* Samples are taken pixel by pixel, sample by sample, `wave` at a time
    * (a wave may span pixels). Cancellation and deadlines are honoured
    * before each wave, so a film of a few pixels with a huge spp stops
@@ -474,6 +490,41 @@ fail:
   free(tb->acc);
   free(tb);
   return NULL;
+}
+
+/* The tile size of a render on `threads` threads: TILE x TILE, halved
+ * (down to one pixel) while that gives fewer than TILES_PER_THREAD tiles
+ * per thread and the halved tile still holds a wave of samples (`wave`:
+ * the integrator's; a smaller tile would trace part-filled waves). Only
+ * for the box filter: a pixel's sums then hold its own samples alone, in
+ * sample order, so the film is bitwise the same whatever the tiles (with
+ * a wider filter, a pixel's sums from neighbouring tiles are added per
+ * tile, and the grouping would change their rounding). A small film at a
+ * high spp (the canopy bench's 76 x 1 pixels at 1,000 spp on 2 threads: 10
+ * tiles of up to 8 pixels, 38 of 2) so keeps every thread busy to the
+ * end. */
+static void tile_size(const job *jb, int threads, int wave, int *tw, int *th) {
+  int w = TILE, h = TILE;
+  for (;;) {
+    if (!jb->box || threads <= 1 || (w == 1 && h == 1)) break;
+    size_t n = (size_t)((jb->W + w - 1) / w) * (size_t)((jb->H + h - 1) / h);
+    if (n >= (size_t)TILES_PER_THREAD * (size_t)threads) break;
+    int w2 = w > 1 ? w / 2 : 1, h2 = h > 1 ? h / 2 : 1;
+    uint64_t px = (uint64_t)(w2 < jb->W ? w2 : jb->W) * (uint64_t)(h2 < jb->H ? h2 : jb->H);
+    if (px * jb->spp < (uint64_t)wave) break;
+    w = w2, h = h2;
+  }
+  *tw = w, *th = h;
+}
+
+/* Samples per wave: the integrator's (integrator.wave), at most WAVE in a
+ * scene of more than WAVE_BIG_SCENE primitives. A path's value does not
+ * depend on its wave, so neither does the film. */
+static int job_wave(const scene *sc) {
+  const int iw = sc->integrator->wave;
+  int w = iw > 0 && iw <= RENDER_WAVE_MAX ? iw : WAVE;
+  if (w > WAVE && scene_primitive_count(sc) > WAVE_BIG_SCENE) w = WAVE;
+  return w;
 }
 
 static void merge_tile(job *jb, tile_buf *tb) {
@@ -782,10 +833,15 @@ rsw_status render_sensor_bundle(scene *sc, const render_opts *opts, film_image *
   jb.spp = spp;
   jb.W = fm->width;
   jb.H = fm->height;
-  jb.tiles_x = (jb.W + TILE - 1) / TILE;
-  jb.tiles_y = (jb.H + TILE - 1) / TILE;
-  jb.n_tiles = (size_t)jb.tiles_x * jb.tiles_y;
   jb.box = box;
+  int nt = opts->threads > 0 ? opts->threads : (int)sysconf(_SC_NPROCESSORS_ONLN);
+  if (nt < 1) nt = 1;
+  if (nt > 256) nt = 256;
+  jb.wave = job_wave(sc);
+  tile_size(&jb, nt, jb.wave, &jb.tw, &jb.th);
+  jb.tiles_x = (jb.W + jb.tw - 1) / jb.tw;
+  jb.tiles_y = (jb.H + jb.th - 1) / jb.th;
+  jb.n_tiles = (size_t)jb.tiles_x * jb.tiles_y;
   jb.stokes = sc->polarized || (fm->pixel_format == PIXFMT_STOKES && sc->variant == VARIANT_MONO);
   /* (a bundle sums its wavelengths' channels apart) */
   jb.lum = !jb.stokes && nb == 1 && (sc->variant == VARIANT_MONO || fm->pixel_format == PIXFMT_LUMINANCE);
@@ -803,9 +859,6 @@ rsw_status render_sensor_bundle(scene *sc, const render_opts *opts, film_image *
   }
   pthread_mutex_init(&jb.lock, NULL);
   pthread_cond_init(&jb.idle, NULL);
-  int nt = opts->threads > 0 ? opts->threads : (int)sysconf(_SC_NPROCESSORS_ONLN);
-  if (nt < 1) nt = 1;
-  if (nt > 256) nt = 256;
   if ((size_t)nt > jb.n_tiles) nt = (int)jb.n_tiles;
   jb.max_workers = nt;
   if (opts->samples) {

@@ -1,6 +1,8 @@
 /* The render worker pool (render.c): no thread per render, one-tile renders
- * on the caller's thread, and concurrent renders (each with several
- * threads) giving bitwise the film of a serial one-thread render. */
+ * on the caller's thread, concurrent renders (each with several
+ * threads) giving bitwise the film of a serial one-thread render, and a
+ * small box-filter film cut into smaller tiles on several threads
+ * (tile_size) with the one-thread film's bits. */
 #include <pthread.h>
 #include <stdio.h>
 #include <string.h>
@@ -51,14 +53,19 @@ static void on_progress(void *user, size_t done, size_t total) {
   pthread_mutex_unlock(&t->lock);
 }
 
+/* render_sensor, its error printed. */
+static bool render_with(scene *s, const render_opts *o, film_image *out, render_result_stats *st) {
+  rsw_err err = {0};
+  bool ok = render_sensor(s, o, out, st, &err) == RSW_OK;
+  if (!ok) fprintf(stderr, "render: %s: %s\n", err.where, err.msg);
+  return ok;
+}
+
 static bool render(scene *s, size_t sensor_index, int threads, uint64_t seed, tids *t, film_image *out,
                    render_result_stats *st) {
   render_opts o = {.size = sizeof o, .sensor = sensor_index, .spp = 4, .seed = seed, .threads = threads};
   if (t) o.progress = on_progress, o.progress_user = t;
-  rsw_err err = {0};
-  bool ok = render_sensor(s, &o, out, st, &err) == RSW_OK;
-  if (!ok) fprintf(stderr, "render: %s: %s\n", err.where, err.msg);
-  return ok;
+  return render_with(s, &o, out, st);
 }
 
 static void test_no_thread_per_render(void) {
@@ -139,9 +146,76 @@ static void test_concurrent_bitwise(void) {
   }
 }
 
+/* A box-filter film of 19 x 1 pixels: 3 tiles of 8 x 8 at most. At 1,024
+ * spp and two or more threads render.c cuts it into one-pixel tiles (the
+ * path integrator's waves of 1,024 still fill), and the film, with its
+ * variance, keeps the one-thread render's bits; a gaussian filter's
+ * tiles stay 8 x 8 (their sums would round otherwise). */
+static const char *SMALL =
+    "{\"type\": \"scene\", \"integrator\": {\"type\": \"path\"},"
+    " \"cam\": {\"type\": \"perspective\", \"fov\": 45,"
+    "   \"to_world\": [{\"lookat\": {\"origin\": [0, -4, 2], \"target\": [0, 0, 0], \"up\": [0, 0, 1]}}],"
+    "   \"film\": {\"type\": \"hdrfilm\", \"width\": 19, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},"
+    " \"gauss\": {\"type\": \"perspective\", \"fov\": 45,"
+    "   \"to_world\": [{\"lookat\": {\"origin\": [0, -4, 2], \"target\": [0, 0, 0], \"up\": [0, 0, 1]}}],"
+    "   \"film\": {\"type\": \"hdrfilm\", \"width\": 19, \"height\": 1, \"rfilter\": {\"type\": "
+    "\"gaussian\"}}},"
+    " \"sun\": {\"type\": \"directional\", \"direction\": [1, 1, -2]},"
+    " \"floor\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 3}],"
+    "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": {\"type\": \"checkerboard\"}}},"
+    " \"ball\": {\"type\": \"sphere\", \"center\": [0, 0, 0.6], \"radius\": 0.6}}";
+
+/* The tile count a render reports to its progress callback. */
+static void on_total(void *user, size_t done, size_t total) {
+  (void)done;
+  *(size_t *)user = total;
+}
+
+static bool render_small(scene *s, size_t sensor_index, int threads, bool variance, film_image *out,
+                         size_t *tiles) {
+  render_opts o = {.size = sizeof o,
+                   .sensor = sensor_index,
+                   .spp = 1024,
+                   .seed = 3,
+                   .threads = threads,
+                   .variance = variance,
+                   .progress = on_total,
+                   .progress_user = tiles};
+  return render_with(s, &o, out, NULL);
+}
+
+static void test_small_box_film_tiles(void) {
+  scene *s = tsup_load(SMALL, NULL);
+  REQUIRE(s, "scene");
+  for (int v = 0; v < 2; v++) {
+    film_image one;
+    size_t tiles1 = 0;
+    REQUIRE(render_small(s, 0, 1, v, &one, &tiles1), "one thread");
+    CHECK(tiles1 == 3, "one thread: 3 tiles of 8 x 8 (got %zu)", tiles1);
+    for (int threads = 2; threads <= 5; threads += 3) {
+      film_image img;
+      size_t tiles = 0;
+      REQUIRE(render_small(s, 0, threads, v, &img, &tiles), "%d threads", threads);
+      CHECK(tiles == 19, "%d threads: 19 one-pixel tiles (got %zu)", threads, tiles);
+      CHECK(same_bits(&one, &img), "box filter%s: %d threads' film != one thread's", v ? ", variance" : "",
+            threads);
+      film_image_free(&img);
+    }
+    film_image_free(&one);
+  }
+  film_image g1, g2;
+  size_t t1 = 0, t2 = 0;
+  REQUIRE(render_small(s, 1, 1, false, &g1, &t1) && render_small(s, 1, 2, false, &g2, &t2), "gaussian");
+  CHECK(t1 == 3 && t2 == 3, "a gaussian filter keeps 8 x 8 tiles (got %zu, %zu)", t1, t2);
+  CHECK(same_bits(&g1, &g2), "gaussian filter: 2 threads' film != one thread's");
+  film_image_free(&g1), film_image_free(&g2);
+  scene_free(s);
+}
+
 int main(void) {
   RSW_TEST_RUN(test_one_tile_on_caller);
   RSW_TEST_RUN(test_no_thread_per_render);
   RSW_TEST_RUN(test_concurrent_bitwise);
+  RSW_TEST_RUN(test_small_box_film_tiles);
   RSW_TEST_END("test_render_pool");
 }

@@ -62,27 +62,6 @@ static inline bool in_column(const periodic_bounds *b, vec3 p) {
   return p.x >= b->min[0] && p.x <= b->max[0] && p.y >= b->min[1] && p.y <= b->max[1];
 }
 
-/* TRACE_UNRESOLVED (periodic scenes, scene/periodic.h): the ray neither
- * hit nor escaped; the path ends there, without environment light.
- * *wrapped: the hit was reached through the periodic boundary (a copy of
- * the shape in another cell). */
-static trace_result intersect(const scene *sc, const ray3 *r, surface_interaction *si, render_stats *stats,
-                              bool *wrapped) {
-  accel_hit h;
-  stats->rays++;
-  ray3 seg = *r;
-  double off;
-  trace_result tr = scene_trace(sc, &seg, &h, &off);
-  if (tr != TRACE_HIT) {
-    if (tr == TRACE_UNRESOLVED) stats->unresolved++;
-    return tr;
-  }
-  hit_fill_interaction(sc, &seg, &h, si);
-  si->t += off; /* distance along the whole (possibly wrapped) ray */
-  *wrapped = off > 0;
-  return TRACE_HIT;
-}
-
 /* Stokes films of the unpolarized variants (mono, pixel_format "stokes"):
  * only an environment that reports polarisation carries Q, U, V; they are
  * scaled by the path throughput's intensity (BSDFs are treated as
@@ -131,6 +110,8 @@ typedef struct lane {
   ray3 ray;
   color T, L;
   double eta, prev_pdf;
+  /* wrapped: the hit was reached through the periodic boundary (a copy of
+   * the shape in another cell). */
   bool prev_delta, wrapped;
   int depth;
   trace_result hit;
@@ -242,13 +223,43 @@ static void wave_trace(const scene *sc, lane *ln, const int *idx, int n, render_
   int nh = 0, no = 0;
   if (sc->periodic.on) { /* the hit fill is counted as tracing here */
     double t0 = timed ? clock_s() : 0;
-    for (int k = 0; k < n; k++) {
-      lane *l = &ln[idx[k]];
-      l->hit = intersect(sc, &l->ray, &l->si, stats, &l->wrapped);
-      bool h = l->hit == TRACE_HIT;
-      hit[nh] = other[no] = idx[k];
-      nh += h, no += !h;
+    /* C rays walked one by one (scene_trace), then their hits' surface
+     * data together: each hit's placement record is fetched
+     * (hit_prefetch) while the next rays are traced, not waited for at
+     * once, and the frames are vectorised. Each si is what intersect()
+     * gives: hit_fill_interaction_batch is bitwise hit_fill_interaction.
+     * TRACE_UNRESOLVED (scene/periodic.h): the ray neither hit nor
+     * escaped; the path ends there, without environment light. */
+    enum {
+      C = 64
+    };
+    ray3 seg[C];
+    double off[C];
+    int at[C];
+    const ray3 *rr[C];
+    const accel_hit *hh[C];
+    surface_interaction *ss[C];
+    for (int k0 = 0; k0 < n; k0 += C) {
+      int m = n - k0 < C ? n - k0 : C, nm = 0;
+      for (int j = 0; j < m; j++) {
+        lane *l = &ln[idx[k0 + j]];
+        seg[nm] = l->ray;
+        l->hit = scene_trace(sc, &seg[nm], &l->h, &off[nm]);
+        bool h = l->hit == TRACE_HIT;
+        stats->unresolved += l->hit == TRACE_UNRESOLVED;
+        if (h) hit_prefetch(sc, &l->h);
+        at[nm] = hit[nh] = other[no] = idx[k0 + j];
+        nh += h, no += !h, nm += h;
+      }
+      for (int j = 0; j < nm; j++) rr[j] = &seg[j], hh[j] = &ln[at[j]].h, ss[j] = &ln[at[j]].si;
+      hit_fill_interaction_batch(sc, nm, rr, hh, ss);
+      for (int j = 0; j < nm; j++) {
+        lane *l = &ln[at[j]];
+        l->si.t += off[j]; /* distance along the whole (possibly wrapped) ray */
+        l->wrapped = off[j] > 0;
+      }
     }
+    stats->rays += (uint64_t)n;
     if (timed) stats->trace_s += clock_s() - t0;
     *n_hit = nh, *n_other = no;
     return;

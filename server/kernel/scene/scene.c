@@ -12,6 +12,8 @@
 #include "periodic.h"
 #include "scene.h"
 
+#include "../shapes/instance.h"
+
 /* ---- the scene plugin --------------------------------------------------------------- */
 
 static rsw_status push_ptr(void ***arr, size_t *n, void *p) {
@@ -212,4 +214,25 @@ void scene_free(scene *s) {
   free(s->periodic_z);
   node_free(s->doc);
   free(s);
+}
+
+/* A plain shape's primitives: its triangles, or 1 (analytic). */
+static size_t shape_primitives(const shape *sh) {
+  return shape_is_mesh(sh) ? sh->mesh.n_faces : 1;
+}
+
+size_t scene_primitive_count(const scene *s) {
+  size_t n = 0;
+  for (size_t i = 0; i < s->n_shapes; i++) {
+    const shape *sh = s->shapes[i];
+    if (shape_is_group(sh)) {
+      const shape_group *g = (const shape_group *)sh;
+      for (size_t k = 0; k < g->n_members; k++) n += shape_primitives(g->members[k]);
+    } else if (shape_is_instancing(sh)) {
+      n += ((const instance_shape *)sh)->n;
+    } else {
+      n += shape_primitives(sh);
+    }
+  }
+  return n;
 }

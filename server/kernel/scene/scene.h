@@ -75,4 +75,10 @@ uint64_t sensor_film_bytes(const sensor *se, rsw_variant variant, int *channels)
 /* Free the scene, every object it owns and its document. NULL is a no-op. */
 void scene_free(scene *s);
 
+/* The primitives the scene's acceleration structure holds: each mesh's
+ * triangles, one per analytic shape, and per instancing shape its
+ * placements (an instanced group's members counted once, as Embree holds
+ * them once). What render.c sizes its waves by. */
+size_t scene_primitive_count(const scene *s);
+
 #endif

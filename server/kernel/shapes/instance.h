@@ -47,6 +47,16 @@ static inline bool shape_is_instancing(const shape *s) {
 /* The placement transform of instance k of s (an instancing shape). */
 xform instance_transform(const instance_shape *s, uint32_t k);
 
+/* Start fetching placement k's record (what instance_transform reads). */
+static inline void instance_prefetch(const instance_shape *s, uint32_t k) {
+  if (!s->xf) return;
+  const char *m = (const char *)&s->xf[12 * (size_t)k], *t = (const char *)&s->tr[3 * (size_t)k];
+  __builtin_prefetch(m);
+  __builtin_prefetch(m + 12 * sizeof(float) - 1);
+  __builtin_prefetch(t);
+  __builtin_prefetch(t + 3 * sizeof(double) - 1);
+}
+
 /* Extend [lo, hi] by the world bounds of a group (nothing: not rendered)
  * or of an instancing shape (group box corners under each placement). */
 void instance_bbox(const shape *s, vec3 *lo, vec3 *hi);

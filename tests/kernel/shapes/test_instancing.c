@@ -7,7 +7,9 @@
  *    by the same instance matrix and accel.c uses the same callback.
  *  - An `instance`'s to_world update equals a reload, bitwise.
  *  - An instancelist of the same placements renders bitwise like the
- *    `instance`s (rows of 16 numbers hold the same float matrices).
+ *    `instance`s (rows of 16 numbers hold the same float matrices), and
+ *    so do the placements split into three instancelists, whose hits name
+ *    each list and the placement within it (accel.c's list_placement).
  *  - instancelist errors name file:line.
  *  - periodic: a plot with the periodic boundary against the plot with 8
  *    explicit copies around it, within 3 sigma, at 0, 15 and 30 degrees
@@ -23,6 +25,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "../../../server/kernel/accel.h"
 #include "../../../server/kernel/core/rng.h"
 #include "../../../server/kernel/core/transform.h"
 #include "../../../server/kernel/scene/params.h"
@@ -79,7 +82,25 @@ static void sb_matrix(sbuf *b, const double *q) {
 
 #define LEAF_BSDF "{\"type\": \"diffuse\", \"reflectance\": 0.45}"
 
-/* mode 0: separate disks; 1: `instance`s; 2: one instancelist (file). */
+/* The placements [lo, hi) of m as an instancelist file at path (rows of
+ * 16 numbers). */
+static void write_list(const char *path, const double (*m)[16], int lo, int hi) {
+  FILE *f = fopen(path, "w");
+  REQUIRE(f, "open %s", path);
+  fprintf(f, "# disks %d..%d, 4x4 row-major\n", lo, hi - 1);
+  for (int i = lo; i < hi; i++) {
+    for (int k = 0; k < 16; k++) fprintf(f, "%s%.9g", k ? " " : "", m[i][k]);
+    fprintf(f, "\n");
+  }
+  fclose(f);
+}
+
+/* mode 3's three lists: placements [0, 300), [300, 700), [700, 1000). */
+static const int list_lo[4] = {0, 300, 700, NDISK};
+
+/* mode 0: separate disks; 1: `instance`s; 2: one instancelist (file
+ * list_path); 3: three instancelists c0, c1, c2 (files list_path with
+ * ".0", ".1", ".2" appended). */
 static char *canopy_scene(int mode, const double (*m)[16], int n, const char *list_path) {
   sbuf b = {0};
   sb_printf(&b, "%s", HEAD);
@@ -91,6 +112,12 @@ static char *canopy_scene(int mode, const double (*m)[16], int n, const char *li
               ",\n\"canopy\": {\"type\": \"instancelist\", \"filename\": \"%s\", "
               "\"shapegroup\": {\"type\": \"ref\", \"id\": \"leaf\"}}",
               list_path);
+  } else if (mode == 3) {
+    for (int l = 0; l < 3; l++)
+      sb_printf(&b,
+                ",\n\"c%d\": {\"type\": \"instancelist\", \"filename\": \"%s.%d\", "
+                "\"shapegroup\": {\"type\": \"ref\", \"id\": \"leaf\"}}",
+                l, list_path, l);
   } else {
     for (int i = 0; i < n; i++) {
       if (mode == 0)
@@ -131,31 +158,76 @@ static void test_instanced_equals_separate(void) {
   char path[] = "/tmp/rsw_instlist_XXXXXX";
   int fd = mkstemp(path);
   REQUIRE(fd >= 0, "mkstemp");
-  FILE *f = fdopen(fd, "w");
-  fprintf(f, "# 1000 disks, 4x4 row-major\n");
-  for (int i = 0; i < NDISK; i++) {
-    for (int k = 0; k < 16; k++) fprintf(f, "%s%.9g", k ? " " : "", m[i][k]);
-    fprintf(f, "\n");
+  close(fd);
+  write_list(path, (const double(*)[16])m, 0, NDISK);
+  char parts[3][64];
+  for (int l = 0; l < 3; l++) {
+    snprintf(parts[l], sizeof parts[l], "%s.%d", path, l);
+    write_list(parts[l], (const double(*)[16])m, list_lo[l], list_lo[l + 1]);
   }
-  fclose(f);
   char *t2 = canopy_scene(2, (const double(*)[16])m, NDISK, path);
-  scene *s0 = tsup_load(t0, NULL), *s1 = tsup_load(t1, NULL), *s2 = tsup_load(t2, NULL);
-  REQUIRE(s0 && s1 && s2, "scenes load");
-  film_image a = {0}, b = {0}, c = {0};
-  REQUIRE(render(s0, 8, &a) && render(s1, 8, &b) && render(s2, 8, &c), "renders");
+  char *t3 = canopy_scene(3, (const double(*)[16])m, NDISK, path);
+  scene *s0 = tsup_load(t0, NULL), *s1 = tsup_load(t1, NULL), *s2 = tsup_load(t2, NULL),
+        *s3 = tsup_load(t3, NULL);
+  REQUIRE(s0 && s1 && s2 && s3, "scenes load");
+  film_image a = {0}, b = {0}, c = {0}, d = {0};
+  REQUIRE(render(s0, 8, &a) && render(s1, 8, &b) && render(s2, 8, &c) && render(s3, 8, &d), "renders");
   CHECK(film_sum(&a) > 0, "the canopy film is not black");
   CHECK(same_film(&a, &b), "1,000 instances render bitwise like 1,000 separate disks (sums %.9g vs %.9g)",
         film_sum(&a), film_sum(&b));
   CHECK(same_film(&a, &c), "an instancelist renders bitwise like the separate disks (sums %.9g vs %.9g)",
         film_sum(&a), film_sum(&c));
+  CHECK(same_film(&a, &d), "three instancelists render bitwise like the separate disks (sums %.9g vs %.9g)",
+        film_sum(&a), film_sum(&d));
+  /* A ray onto each disk, from 1 mm above its centre: the three lists'
+   * hit names the list holding the disk the one list's hit names (the
+   * disk itself, or one crossing in front of it) and its placement in
+   * that list. */
+  uint32_t index[3] = {UINT32_MAX, UINT32_MAX, UINT32_MAX};
+  for (size_t i = 0; i < s3->n_shapes; i++)
+    for (int l = 0; l < 3; l++) {
+      char id[4];
+      snprintf(id, sizeof id, "c%d", l);
+      if (s3->shapes[i]->base.id && strcmp(s3->shapes[i]->base.id, id) == 0) index[l] = (uint32_t)i;
+    }
+  REQUIRE(index[0] != UINT32_MAX && index[1] != UINT32_MAX && index[2] != UINT32_MAX, "shapes c0, c1, c2");
+  int n_hit = 0, n_bad = 0, n_self = 0;
+  for (int k = 0; k < NDISK; k++) {
+    const double *q = m[k];
+    vec3 ctr = v3(q[3], q[7], q[11]), nrm = v3_norm(v3(q[2], q[6], q[10]));
+    ray3 r = {.o = v3_fma(ctr, 1e-3, nrm), .d = v3_neg(nrm), .tmin = 0, .tmax = 2e-3};
+    accel_hit h1, h3;
+    bool hit1 = accel_intersect(s2->accel, &r, &h1), hit3 = accel_intersect(s3->accel, &r, &h3);
+    if (!hit1) {
+      n_bad += hit3;
+      continue;
+    }
+    int g = (int)h1.sub, l = g < list_lo[1] ? 0 : g < list_lo[2] ? 1 : 2;
+    bool ok = hit3 && h3.shape == index[l] && h3.sub == (uint32_t)(g - list_lo[l]);
+    if (!ok && n_bad < 3)
+      printf("  disk %d: one list's hit placement %d, three lists' %d: shape %u placement %u\n", k, g, hit3,
+             h3.shape, h3.sub);
+    n_hit++, n_bad += !ok, n_self += g == k;
+  }
+  CHECK(n_hit == NDISK && n_self > NDISK - 20 && n_bad == 0,
+        "every disk's ray hits (%d of %d, %d the disk itself); the three lists' hits name the same "
+        "placement (%d differ)",
+        n_hit, NDISK, n_self, n_bad);
   /* Bounds (hence the bounding sphere) agree too. */
   CHECK(v3_len(v3_sub(s0->bbox_min, s1->bbox_min)) < 1e-6 &&
             v3_len(v3_sub(s0->bbox_max, s1->bbox_max)) < 1e-6,
         "same scene bounds");
-  film_image_free(&a), film_image_free(&b), film_image_free(&c);
-  scene_free(s0), scene_free(s1), scene_free(s2);
-  free(t0), free(t1), free(t2);
+  /* What render.c sizes its waves by: the soil's 2 triangles, a disk
+   * each, the group's disk once. */
+  CHECK(scene_primitive_count(s0) == 2 + NDISK && scene_primitive_count(s1) == 3 + NDISK &&
+            scene_primitive_count(s2) == 3 + NDISK && scene_primitive_count(s3) == 3 + NDISK,
+        "primitives: %zu separate, %zu instances, %zu one list, %zu three lists", scene_primitive_count(s0),
+        scene_primitive_count(s1), scene_primitive_count(s2), scene_primitive_count(s3));
+  film_image_free(&a), film_image_free(&b), film_image_free(&c), film_image_free(&d);
+  scene_free(s0), scene_free(s1), scene_free(s2), scene_free(s3);
+  free(t0), free(t1), free(t2), free(t3);
   unlink(path);
+  for (int l = 0; l < 3; l++) unlink(parts[l]);
 }
 
 /* Moving one instance by a parameter update equals loading the moved
