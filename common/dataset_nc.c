@@ -1004,39 +1004,55 @@ static rsw_status define_sensor(writer *w, sensor_set *s, sensor_vars *v, size_t
 }
 
 /* Values of the layout: coords, context ids, wavelengths, the sun's
- * angles, node wavelengths and band ids. */
+ * angles, node wavelengths and band ids. Each variable in one write, its
+ * values in layout order (w->cell): a write costs HDF5 about as much for
+ * one value as for all of them. A wavelength or sun angle that is not
+ * finite is the variable's fill value, NaN. */
 static rsw_status put_layout(const writer *w, const file_vars *fv, rsw_err *err) {
   const nc_dataset *d = w->d;
   int ncid = w->ncid;
   const nc_coords *cs = d->coords && d->coords->n ? d->coords : NULL;
-  size_t start[NC_MAX_COORDS + 4];
-  for (size_t k = 0; cs && k < cs->n; k++) {
+  size_t n = d->n_contexts, most = n;
+  for (size_t k = 0; cs && w->grid && k < cs->n; k++) most = w->ax[k].n > most ? w->ax[k].n : most;
+  double *num = malloc((most ? most : 1) * sizeof *num);
+  const char **str = malloc((most ? most : 1) * sizeof *str);
+  int rc = num && str ? NC_NOERR : NC_ENOMEM;
+  const char *what = "layout";
+  for (size_t k = 0; rc == NC_NOERR && cs && k < cs->n; k++) {
     const nc_coord *c = &cs->c[k];
-    size_t len = w->grid ? w->ax[k].n : d->n_contexts;
+    size_t len = w->grid ? w->ax[k].n : n;
     for (size_t r = 0; r < len; r++) {
       size_t ctx = w->grid ? w->ax[k].first[r] : r;
-      start[0] = r;
-      if (c->is_string) {
-        const char *p = c->str[ctx];
-        NC_TRY(nc_put_var1_string(ncid, fv->coord[k], start, &p), c->name);
-      } else {
-        NC_TRY(nc_put_var1_double(ncid, fv->coord[k], start, &c->num[ctx]), c->name);
-      }
+      if (c->is_string)
+        str[r] = c->str[ctx];
+      else
+        num[r] = c->num[ctx];
     }
+    what = c->name;
+    rc = c->is_string ? nc_put_var_string(ncid, fv->coord[k], str) : nc_put_var_double(ncid, fv->coord[k], num);
   }
-  for (size_t ctx = 0; ctx < d->n_contexts; ctx++) {
-    cell_start(w, ctx, start);
-    const char *p = d->context_ids[ctx];
-    NC_TRY(nc_put_var1_string(ncid, fv->ctx, start, &p), "context");
-    if (fv->wl >= 0 && isfinite(d->wavelengths[ctx]))
-      NC_TRY(nc_put_var1_double(ncid, fv->wl, start, &d->wavelengths[ctx]), "wavelength");
+  if (rc == NC_NOERR) {
+    for (size_t ctx = 0; ctx < n; ctx++) str[w->cell[ctx]] = d->context_ids[ctx];
+    what = "context";
+    if (n) rc = nc_put_var_string(ncid, fv->ctx, str);
   }
-  for (int a = 0; a < 2; a++)
-    for (size_t ctx = 0; fv->sun[a] >= 0 && ctx < d->n_contexts; ctx++) {
-      cell_start(w, ctx, start);
-      if (isfinite(fv->sun_deg[2 * ctx + (size_t)a]))
-        NC_TRY(nc_put_var1_double(ncid, fv->sun[a], start, &fv->sun_deg[2 * ctx + (size_t)a]), sun_names[a]);
+  if (rc == NC_NOERR && fv->wl >= 0 && n) {
+    for (size_t ctx = 0; ctx < n; ctx++)
+      num[w->cell[ctx]] = isfinite(d->wavelengths[ctx]) ? d->wavelengths[ctx] : NAN;
+    what = "wavelength";
+    rc = nc_put_var_double(ncid, fv->wl, num);
+  }
+  for (int a = 0; rc == NC_NOERR && a < 2 && fv->sun[a] >= 0 && n; a++) {
+    for (size_t ctx = 0; ctx < n; ctx++) {
+      double v = fv->sun_deg[2 * ctx + (size_t)a];
+      num[w->cell[ctx]] = isfinite(v) ? v : NAN;
     }
+    what = sun_names[a];
+    rc = nc_put_var_double(ncid, fv->sun[a], num);
+  }
+  free(num);
+  free(str);
+  if (rc != NC_NOERR) return nc_fail(err, rc, what);
   if (fv->nodes >= 0) NC_TRY(nc_put_var_double(ncid, fv->nodes, d->nodes), "wavelength");
   for (size_t b = 0; fv->bands >= 0 && b < d->n_bands; b++) {
     const char *p = d->band_ids[b];
@@ -1074,18 +1090,7 @@ static rsw_status put_film(const writer *w, const sensor_set *s, const sensor_va
   size_t nd = w->n_cdims;
   if (has_mid) start[nd++] = mid;
   for (size_t q = 0; q < nd; q++) count[q] = 1;
-  if (!is_band) {
-    unsigned long long seed = f->seed;
-    NC_TRY(nc_put_var1_ulonglong(ncid, v->seed, start, &seed), "seed");
-    if (v->spp >= 0) {
-      unsigned spp = f->spp;
-      NC_TRY(nc_put_var1_uint(ncid, v->spp, start, &spp), "spp");
-    }
-    if (v->unres >= 0) {
-      unsigned long long u = f->unresolved_rays;
-      NC_TRY(nc_put_var1_ulonglong(ncid, v->unres, start, &u), "unresolved_rays");
-    }
-  }
+  /* (seed, spp and unresolved_rays: put_film_numbers, a variable at once) */
   int irr = is_band ? v->irr_srf : v->irr;
   if (irr >= 0 && f->has_irradiance) {
     /* Per colour: a Stokes film's E_h is its colours' (the first n_col
@@ -1183,6 +1188,36 @@ static rsw_status put_plugin_failures(const writer *w, const sensor_set *s, cons
   return st;
 }
 
+/* A sensor's seed, spp (when it varies) and unresolved rays, each
+ * variable in one call as put_plugin_failures: a missing film's seed and
+ * spp are 0 (their fill value when films are missing), its unresolved
+ * rays the fill value. */
+static rsw_status put_film_numbers(const writer *w, const sensor_set *s, const sensor_vars *v, rsw_err *err) {
+  size_t n = w->n_cells * w->slots;
+  if (!n) return RSW_OK;
+  unsigned long long *seed = malloc(n * sizeof *seed), *unres = malloc(n * sizeof *unres);
+  unsigned *spp = malloc(n * sizeof *spp);
+  rsw_status st = RSW_OK;
+  if (!seed || !unres || !spp) st = rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+  for (size_t k = 0; !st && k < n; k++) {
+    const nc_film *f = s->by_ctx[k];
+    size_t at = w->cell[k / w->slots] * w->slots + k % w->slots;
+    seed[at] = f ? f->seed : 0;
+    spp[at] = f ? f->spp : 0;
+    unres[at] = f ? f->unresolved_rays : NC_FILL_UINT64;
+  }
+  int rc = st ? NC_NOERR : nc_put_var_ulonglong(w->ncid, v->seed, seed);
+  const char *what = "seed";
+  if (rc == NC_NOERR && !st && v->spp >= 0) what = "spp", rc = nc_put_var_uint(w->ncid, v->spp, spp);
+  if (rc == NC_NOERR && !st && v->unres >= 0)
+    what = "unresolved_rays", rc = nc_put_var_ulonglong(w->ncid, v->unres, unres);
+  if (!st && rc != NC_NOERR) st = nc_fail(err, rc, what);
+  free(seed);
+  free(unres);
+  free(spp);
+  return st;
+}
+
 /* A sensor's films: its shared viewing angles, then node (or plain)
  * films, then band films. */
 static rsw_status put_sensor(const writer *w, const sensor_set *s, const sensor_vars *v, rsw_err *err) {
@@ -1203,6 +1238,7 @@ static rsw_status put_sensor(const writer *w, const sensor_set *s, const sensor_
     st = put_film(w, s, v, f, ctx, mid, is_band, deriv, err);
   }
   free(deriv);
+  if (!st) st = put_film_numbers(w, s, v, err);
   return st ? st : put_plugin_failures(w, s, v, err);
 }
 

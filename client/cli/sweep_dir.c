@@ -289,17 +289,21 @@ cJSON *sweep_index_line(const cJSON *r, const char *c, const char *sn, const cha
     cJSON_AddNumberToObject(line, "seed", seed->valuedouble);
   else
     cJSON_AddNullToObject(line, "seed");
-  cJSON_AddStringToObject(line, "file", rel);
+  if (rel)
+    cJSON_AddStringToObject(line, "file", rel);
+  else
+    cJSON_AddStringToObject(line, "dataset", DATASET_NAME);
   return line;
 }
 
 /* DIR/dataset.nc: the films of index entries e (sorted: write_index) as
- * one NetCDF-4 dataset, built by libraysweep from the JSON films, so the
- * dataset of merged shards is the unsharded one's. Contexts come in index
- * order with the wavelength and coords of their index lines; a context
- * without any film is not in it. */
+ * one NetCDF-4 dataset, built by libraysweep from the JSON films (or, for
+ * --format dataset, the daemon's EXRs in pack: the same dataset, byte for
+ * byte), so the dataset of merged shards is the unsharded one's. Contexts
+ * come in index order with the wavelength and coords of their index lines;
+ * a context without any film is not in it. */
 int sweep_write_dataset(const cli_ctx *ctx, const char *dir, const index_entry *e, size_t n, bool has_seed,
-                        long long seed) {
+                        long long seed, film_pack *pack) {
   rsw_dataset *d = NULL;
   if (rsw_dataset_new(&d)) return cli_fail(ctx, CLI_IO, "out of memory");
   char *out = sweep_dir_file(dir, DATASET_NAME);
@@ -321,7 +325,20 @@ int sweep_write_dataset(const cli_ctx *ctx, const char *dir, const index_entry *
       free(ctext);
       prev = c;
     }
-    if (!s) {
+    if (!s && pack) {
+      const pack_film *f = pack_find(pack, c, sn);
+      snprintf(where, sizeof where, "film %s/%s", c, sn);
+      const char *names[64];
+      int nn = 0;
+      const cJSON *ch;
+      if (f) cJSON_ArrayForEach(ch, f->channels) {
+          if (nn < 64 && cJSON_IsString(ch)) names[nn] = ch->valuestring;
+          nn++;
+        }
+      s = !f        ? RSW_ERR_INVALID
+          : nn > 64 ? RSW_ERR_LIMIT
+                    : rsw_dataset_add_film_exr(d, c, sn, f->bytes, f->len, f->channels ? names : NULL, nn);
+    } else if (!s) {
       snprintf(where, sizeof where, "%s/%s", dir, file ? file : "?");
       s = file ? rsw_dataset_add_film_file(d, c, sn, where) : RSW_ERR_INVALID;
     }
