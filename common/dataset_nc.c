@@ -1042,7 +1042,8 @@ static rsw_status put_layout(const writer *w, const file_vars *fv, rsw_err *err)
     what = "wavelength";
     rc = nc_put_var_double(ncid, fv->wl, num);
   }
-  for (int a = 0; rc == NC_NOERR && a < 2 && fv->sun[a] >= 0 && n; a++) {
+  for (int a = 0; rc == NC_NOERR && a < 2 && n; a++) {
+    if (fv->sun[a] < 0) continue; /* none, or a coord of that name labels the contexts */
     for (size_t ctx = 0; ctx < n; ctx++) {
       double v = fv->sun_deg[2 * ctx + (size_t)a];
       num[w->cell[ctx]] = isfinite(v) ? v : NAN;
