@@ -746,6 +746,7 @@ static int run_job(cli_ctx *ctx, const sweep_opts *o, const sweep_list *l, sweep
   free(warned);
   warned = NULL;
   if (!(incomplete = cJSON_CreateArray())) return cli_fail(ctx, CLI_IO, "out of memory");
+  if (l->pack && (rc = pack_open(ctx, &pack, dir, false, false, sorted, l->n))) goto out;
   if ((rc = fetch_all(ctx, job, dir, l->layout, o->fmt, sorted, l->n, job_params, incomplete,
                       l->pack ? &pack : NULL, &entries, &n_entries, &failed))) {
     if (cli_interrupted)

@@ -174,10 +174,25 @@ struct film_pack {
   bool sorted;
   int fd;           /* the spool (DIR/FILM_SPOOL) appended to, or -1 */
   char *spool_path; /* or NULL */
+  /* The dataset the films go into as they arrive (sweep_pack.c): every
+   * context of the sweep (items, borrowed) added first. */
+  sweep_item **items;
+  size_t n_items;
+  rsw_dataset *live;
+  bool live_ok; /* every context and film added so far was taken */
+  size_t live_films;
 };
-/* Start a pack; spool: append every film to DIR/FILM_SPOOL (created anew,
- * or with resume, its films read first). */
-int pack_open(const cli_ctx *ctx, film_pack *p, const char *dir, bool spool, bool resume);
+/* Start a pack for the sweep's contexts (sorted by id, n of them; borrowed
+ * until pack_close); spool: append every film to DIR/FILM_SPOOL (created
+ * anew, or with resume, its films read first). */
+int pack_open(const cli_ctx *ctx, film_pack *p, const char *dir, bool spool, bool resume, sweep_item **sorted,
+              size_t n);
+/* Add film f to d (rsw_dataset_add_film_exr, its channels in order). */
+int pack_film_add_to(rsw_dataset *d, const pack_film *f);
+/* The live dataset when it holds exactly the films of index entries e
+ * (sorted) with their contexts' wavelengths, ready to write; else NULL
+ * (build it again from the films). */
+rsw_dataset *pack_live(film_pack *p, const index_entry *e, size_t n);
 int pack_add(const cli_ctx *ctx, film_pack *p, const char *c, const char *sn, const cJSON *channels,
              const void *bytes, size_t len);
 /* The film of (c, sn) (the last kept), or NULL. */

@@ -304,14 +304,15 @@ cJSON *sweep_index_line(const cJSON *r, const char *c, const char *sn, const cha
  * a context without any film is not in it. */
 int sweep_write_dataset(const cli_ctx *ctx, const char *dir, const index_entry *e, size_t n, bool has_seed,
                         long long seed, film_pack *pack) {
-  rsw_dataset *d = NULL;
-  if (rsw_dataset_new(&d)) return cli_fail(ctx, CLI_IO, "out of memory");
+  /* --format dataset: the films went in as they arrived (sweep_pack.c) */
+  rsw_dataset *live = pack ? pack_live(pack, e, n) : NULL, *d = live;
+  if (!d && rsw_dataset_new(&d)) return cli_fail(ctx, CLI_IO, "out of memory");
   char *out = sweep_dir_file(dir, DATASET_NAME);
   rsw_status s = out ? RSW_OK : RSW_ERR_NOMEM;
   if (!s && has_seed) s = rsw_dataset_set_seed(d, seed);
   const char *prev = NULL;
   char where[4200] = "";
-  for (size_t i = 0; !s && i < n; i++) {
+  for (size_t i = 0; !s && !live && i < n; i++) {
     const cJSON *line = e[i].line;
     const char *c = e[i].context, *sn = e[i].sensor;
     const char *file = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(line, "file"));
@@ -328,16 +329,7 @@ int sweep_write_dataset(const cli_ctx *ctx, const char *dir, const index_entry *
     if (!s && pack) {
       const pack_film *f = pack_find(pack, c, sn);
       snprintf(where, sizeof where, "film %s/%s", c, sn);
-      const char *names[64];
-      int nn = 0;
-      const cJSON *ch;
-      if (f) cJSON_ArrayForEach(ch, f->channels) {
-          if (nn < 64 && cJSON_IsString(ch)) names[nn] = ch->valuestring;
-          nn++;
-        }
-      s = !f        ? RSW_ERR_INVALID
-          : nn > 64 ? RSW_ERR_LIMIT
-                    : rsw_dataset_add_film_exr(d, c, sn, f->bytes, f->len, f->channels ? names : NULL, nn);
+      s = f ? pack_film_add_to(d, f) : RSW_ERR_INVALID;
     } else if (!s) {
       snprintf(where, sizeof where, "%s/%s", dir, file ? file : "?");
       s = file ? rsw_dataset_add_film_file(d, c, sn, where) : RSW_ERR_INVALID;
@@ -354,6 +346,6 @@ int sweep_write_dataset(const cli_ctx *ctx, const char *dir, const index_entry *
   else if (!ctx->quiet)
     fprintf(stderr, "raysweep %s: dataset %s\n", ctx->cmd, out);
   free(out);
-  rsw_dataset_free(d);
+  if (!live) rsw_dataset_free(d); /* (the live one is the pack's) */
   return rc;
 }

@@ -3,6 +3,14 @@
  * appended to one spool file, DIR/sweep.films, so that a rerun after a
  * cut-off finds the films an earlier run delivered. No file per film.
  *
+ * The films go into the dataset as they arrive (decoded then, while the
+ * renders run, not all at the end): every context of the sweep is added
+ * first, in index order, with its wavelength and coords; when the sweep
+ * ends the dataset is written as it is if what arrived is what the index
+ * lists (each context with a film, its wavelength the one added, each film
+ * once), and otherwise built again from the films kept, in index order
+ * (sweep_write_dataset), as --format nc builds its own: the same file.
+ *
  * A spool record: "RSF1", the header's length (uint32, little-endian), the
  * EXR's length (uint64, little-endian), the header (JSON: {"context",
  * "sensor", "channels"}), the EXR bytes. One write(2) a record; a record
@@ -31,7 +39,20 @@ static uint64_t get_le(const unsigned char *p, int n) {
   return v;
 }
 
-/* Keep a film (bytes copied; channels: the result's list, copied). */
+int pack_film_add_to(rsw_dataset *d, const pack_film *f) {
+  const char *names[64];
+  int nn = 0;
+  const cJSON *ch;
+  cJSON_ArrayForEach(ch, f->channels) {
+    if (nn < 64 && cJSON_IsString(ch)) names[nn] = ch->valuestring;
+    nn++;
+  }
+  if (nn > 64) return RSW_ERR_LIMIT;
+  return rsw_dataset_add_film_exr(d, f->context, f->sensor, f->bytes, f->len, f->channels ? names : NULL, nn);
+}
+
+/* Keep a film (bytes copied; channels: the result's list, copied), and
+ * add it to the live dataset. */
 static int pack_keep(film_pack *p, const char *c, const char *sn, const cJSON *channels, const void *bytes,
                      size_t len) {
   if (p->n == p->cap) {
@@ -56,6 +77,12 @@ static int pack_keep(film_pack *p, const char *c, const char *sn, const cJSON *c
   memcpy(f->bytes, bytes, len);
   p->n++;
   p->sorted = false;
+  if (p->live && p->live_ok) { /* a film it refuses: the dataset is built again at the end, which says why */
+    if (pack_film_add_to(p->live, f))
+      p->live_ok = false;
+    else
+      p->live_films++;
+  }
   return 0;
 }
 
@@ -92,9 +119,21 @@ static int spool_read(const cli_ctx *ctx, film_pack *p) {
   return rc;
 }
 
-int pack_open(const cli_ctx *ctx, film_pack *p, const char *dir, bool spool, bool resume) {
+int pack_open(const cli_ctx *ctx, film_pack *p, const char *dir, bool spool, bool resume, sweep_item **sorted,
+              size_t n) {
   memset(p, 0, sizeof *p);
   p->fd = -1;
+  p->items = sorted, p->n_items = n;
+  if (n && rsw_dataset_new(&p->live) == RSW_OK) {
+    p->live_ok = true;
+    for (size_t i = 0; i < n && p->live_ok; i++) {
+      char *co = sorted[i]->coords ? cJSON_PrintUnformatted(sorted[i]->coords) : NULL;
+      p->live_ok = (!sorted[i]->coords || co) &&
+                   rsw_dataset_add_context(p->live, sorted[i]->id, sorted[i]->has_wl ? sorted[i]->wl : 0,
+                                           co) == RSW_OK;
+      free(co);
+    }
+  }
   if (!spool) return 0;
   if (!(p->spool_path = sweep_dir_file(dir, FILM_SPOOL))) return cli_fail(ctx, CLI_IO, "out of memory");
   int rc = resume ? spool_read(ctx, p) : 0;
@@ -167,7 +206,31 @@ const pack_film *pack_find(film_pack *p, const char *c, const char *sn) {
   return &p->f[lo - 1];
 }
 
+/* A context's wavelength as rsw_dataset_add_context keeps it. */
+static double kept_wl(double wl) {
+  return wl > 0 ? wl : -1;
+}
+
+rsw_dataset *pack_live(film_pack *p, const index_entry *e, size_t n) {
+  if (!p->live || !p->live_ok || p->live_films != n) return NULL;
+  size_t k = 0;
+  const char *prev = NULL;
+  for (size_t i = 0; i < n; i++) {
+    const char *c = e[i].context;
+    if (prev && strcmp(prev, c) == 0) continue;
+    if (k >= p->n_items || strcmp(p->items[k]->id, c) != 0) return NULL; /* a context without a film */
+    const cJSON *wl = cJSON_GetObjectItemCaseSensitive(e[i].line, "wavelength");
+    double want = kept_wl(cJSON_IsNumber(wl) ? wl->valuedouble : 0);
+    double had = kept_wl(p->items[k]->has_wl ? p->items[k]->wl : 0);
+    if (want != had) return NULL;
+    prev = c;
+    k++;
+  }
+  return k == p->n_items ? p->live : NULL;
+}
+
 void pack_close(film_pack *p, bool remove_spool) {
+  rsw_dataset_free(p->live);
   if (p->fd >= 0) close(p->fd);
   if (remove_spool && p->spool_path) unlink(p->spool_path);
   for (size_t i = 0; i < p->n; i++) {

@@ -145,7 +145,7 @@ int sweep_run_spread(cli_ctx *ctx, const cmdline_args *a, int k_shards, bool res
   }
   /* --format dataset: the films delivered, spooled for a rerun (resumed:
    * those of the run before, read back). */
-  if (l->pack && (rc = pack_open(ctx, &pack, dir, true, resume))) goto out;
+  if (l->pack && (rc = pack_open(ctx, &pack, dir, true, resume, sorted, l->n))) goto out;
   /* Written before any film: an interrupted sweep says so (merge lists it
    * as unfinished; a rerun of the command resumes it). */
   if (!resume && (rc = manifest_write(ctx, dir, fingerprint, scene, shard_i, shard_n, l, NULL, false, NULL)))

@@ -11,8 +11,9 @@
 #     "dataset.nc" in place of "file"; sweep.json says "output": "dataset";
 #   - --spread 2 over two daemons behind a balancer: the same dataset;
 #   - resume: a --spread run stopped (SIGTERM) after some contexts leaves its
-#     journal and its spool (sweep.films), no dataset; a partial record at
-#     the spool's end (a write cut short) is dropped, and the rerun resumes
+#     journal and its spool (sweep.films), no dataset; a film spooled twice
+#     is taken once, a partial record at the spool's end (a write cut
+#     short) is dropped, and the rerun resumes
 #     (films of the earlier run not fetched again) to the whole sweep's
 #     dataset, spool and journal removed; a spool gone missing is refused
 #     (naming sweep.films and --force), and --force starts over;
@@ -105,7 +106,17 @@ fi
 [ -s cut/sweep.films ] && [ ! -e cut/dataset.nc ] && ok || bad "stopped run: $(ls cut | tr '\n' ' ')"
 cp -a cut cut_nospool
 cp -a cut cut_force
-# a record cut short at the spool's end: dropped on resume
+# the spool's first film once more (a film spooled again, as when a run is
+# killed between its spool record and its journal line: the resumed
+# dataset is then built again from the films kept, the last of each), and
+# a record cut short at its end (dropped on resume)
+py "a film spooled twice" '
+import struct, sys
+b = open(sys.argv[1], "rb").read()
+assert b[:4] == b"RSF1", b[:4]
+hl, bl = struct.unpack("<IQ", b[4:16])
+open(sys.argv[1], "ab").write(b[:16 + hl + bl])
+' cut/sweep.films
 printf 'RSF1\x40\x00\x00\x00' >>cut/sweep.films
 "$bin/raysweep" --server "http://127.0.0.1:$plb" sweep "$scene" "${slow[@]}" --format dataset --spread 2 -o cut \
   >/dev/null 2>"$tmp/err"
