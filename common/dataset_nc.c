@@ -1336,6 +1336,12 @@ static size_t size_hint(const nc_dataset *d) {
   return b;
 }
 
+void nc_dataset_init(void) {
+  pthread_mutex_lock(&g_nc_lock);
+  nc_initialize(); /* (once: libnetcdf keeps that it is) */
+  pthread_mutex_unlock(&g_nc_lock);
+}
+
 rsw_status nc_dataset_write(const char *path, const nc_dataset *d, rsw_err *err) {
   if (!path || !*path) return rsw_fail(err, RSW_ERR_INVALID, "", "no path for the dataset");
   char tmp[4200];

@@ -246,6 +246,9 @@ typedef struct film_in {
 
 static rsw_status add_film(rsw_dataset *d, const char *context, const char *sensor, const film_in *in) {
   double *angles_in = in->angles;
+  /* The first film: libnetcdf's start-up now, while a sweep still waits
+   * for renders, not when the dataset is written at its end. */
+  if (!d->nf) nc_dataset_init();
   char what[400];
   snprintf(what, sizeof what, "film %.64s/%.256s", context, sensor);
   size_t ci;
