@@ -63,7 +63,8 @@ static bool band_quantity(const char *name) {
  * where a film has brf (brf_srf), the stderr and its irradiance. */
 static const struct derived {
   const char *name, *from, *needs;
-} derived[] = {{"brf_stderr", "radiance_stderr", "brf"}, {"brf_srf_stderr", "radiance_srf_stderr", "brf_srf"}};
+} derived[] = {{"brf_stderr", "radiance_stderr", "brf"},
+               {"brf_srf_stderr", "radiance_srf_stderr", "brf_srf"}};
 #define N_DERIVED 2
 
 /* The polarization quantities of Stokes films, from the Stokes vector of
@@ -84,11 +85,12 @@ static const struct polar *polar_find(const char *name) {
 }
 
 /* The AoLP convention, the aolp variables' comment (docs/polarization.md). */
-#define AOLP_COMMENT                                                                                          \
-  "0.5 atan2(S2, S1) in degrees, in (-90, 90], 0 where S1 = S2 = 0; from x towards y of the film's Stokes "    \
-  "basis (counter-clockwise as seen looking into the beam): for cameras x is the image's right, for distant " \
+#define AOLP_COMMENT                                                                                         \
+  "0.5 atan2(S2, S1) in degrees, in (-90, 90], 0 where S1 = S2 = 0; from x towards y of the film's Stokes "  \
+  "basis (counter-clockwise as seen looking into the beam): for cameras x is the image's right, for "        \
+  "distant "                                                                                                 \
   "sensors x is horizontal, perpendicular to the meridian plane (docs/polarization.md)"
-#define STOKES_COMMENT                                                                                        \
+#define STOKES_COMMENT                                                                                       \
   "S0..S3 = I, Q, U, V; Q = I_x - I_y, U = I_+45 - I_-45, V circular; for cameras x is the image's right, "  \
   "for distant sensors x is horizontal, perpendicular to the meridian plane (docs/polarization.md)"
 
@@ -102,8 +104,8 @@ const nc_quantity *nc_quantity_find(const char *name) {
  * take them. "wavelength" is allowed: a coord of that name replaces the
  * wavelength variable. */
 static const char *const reserved[] = {
-    "x", "y", "channel", "stokes", "context", "seed", "spp", "vza", "vaa", "unresolved_rays",
-    "plugin_failures", "plugin_failure",
+    "x",   "y",   "channel", "stokes",          "context",         "seed",
+    "spp", "vza", "vaa",     "unresolved_rays", "plugin_failures", "plugin_failure",
 };
 
 static bool valid_coord_name(const char *s) {
@@ -140,7 +142,8 @@ void nc_coords_free(nc_coords *c) {
 rsw_status nc_coords_copy(const nc_coords *src, nc_coords *out, rsw_err *err) {
   nc_coords c = {.n_contexts = src->n_contexts};
   size_t n = src->n_contexts;
-  if (src->n && !(c.c = calloc(src->n, sizeof *c.c))) return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+  if (src->n && !(c.c = calloc(src->n, sizeof *c.c)))
+    return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
   bool ok = true;
   for (size_t k = 0; k < src->n && ok; k++, c.n++) {
     const nc_coord *s = &src->c[k];
@@ -255,7 +258,8 @@ rsw_status nc_coords_build(const void *const *coords_json, size_t n, const char 
                         cc->name, first_i);
         else if (!valid_coord_string(k->valuestring))
           st = rsw_fail(err, RSW_ERR_INVALID, w,
-                        "a coord's string must have 1 to %d bytes and no control characters", NC_MAX_COORD_STR);
+                        "a coord's string must have 1 to %d bytes and no control characters",
+                        NC_MAX_COORD_STR);
         else if (!(cc->str[i] = strdup(k->valuestring)))
           st = rsw_fail(err, RSW_ERR_NOMEM, w, "out of memory");
       } else {
@@ -357,7 +361,7 @@ typedef struct writer {
   axis ax[NC_MAX_COORDS];
   size_t *cell; /* n_contexts: linear index of each context in the layout */
   size_t n_cells;
-  size_t slots;       /* films per (context, sensor): the node wavelengths, or 1 */
+  size_t slots;         /* films per (context, sensor): the node wavelengths, or 1 */
   int wl_dim, band_dim; /* -1: none */
   sensor_set *s;
   size_t n_s;
@@ -477,8 +481,8 @@ static rsw_status plan_sensors(writer *w, rsw_err *err) {
   for (size_t i = 0; i < d->n_films && !st; i++) {
     const nc_film *x = f[i];
     char where[320];
-    snprintf(where, sizeof where, "film %s/%.200s", x->context < d->n_contexts ? d->context_ids[x->context] : "?",
-             x->sensor);
+    snprintf(where, sizeof where, "film %s/%.200s",
+             x->context < d->n_contexts ? d->context_ids[x->context] : "?", x->sensor);
     if (i == 0 || strcmp(x->sensor, f[i - 1]->sensor) != 0) {
       sensor_set *s = &w->s[w->n_s++];
       s->id = x->sensor;
@@ -504,7 +508,8 @@ static rsw_status plan_sensors(writer *w, rsw_err *err) {
       st = rsw_fail(err, RSW_ERR_INVALID, where, "a film needs a size and channel names");
       break;
     }
-    if (x->band > d->n_bands || x->node > d->n_nodes || (x->band && x->node) || (d->n_nodes && !x->band && !x->node)) {
+    if (x->band > d->n_bands || x->node > d->n_nodes || (x->band && x->node) ||
+        (d->n_nodes && !x->band && !x->node)) {
       st = rsw_fail(err, RSW_ERR_INVALID, where, "a film's node or band is out of range");
       break;
     }
@@ -516,9 +521,11 @@ static rsw_status plan_sensors(writer *w, rsw_err *err) {
     }
     const nc_film *sh = s->shape;
     bool same = x->width == sh->width && x->height == sh->height && x->channels == sh->channels;
-    for (int c = 0; same && c < x->channels; c++) same = strcmp(x->channel_names[c], sh->channel_names[c]) == 0;
+    for (int c = 0; same && c < x->channels; c++)
+      same = strcmp(x->channel_names[c], sh->channel_names[c]) == 0;
     if (!same) {
-      st = rsw_fail(err, RSW_ERR_INVALID, where, "its shape or channels differ from the sensor's other films");
+      st =
+          rsw_fail(err, RSW_ERR_INVALID, where, "its shape or channels differ from the sensor's other films");
       break;
     }
     *slot = x;
@@ -614,8 +621,8 @@ static void coords_add(writer *w, const char *name) {
 
 /* Define a variable over the context layout dims, then `mid` (the
  * wavelength or band dimension; -1: none), then `extra` more. */
-static rsw_status def_ctx_var2(writer *w, const char *name, nc_type type, int mid, int n_extra, const int *extra,
-                               int *varid, rsw_err *err) {
+static rsw_status def_ctx_var2(writer *w, const char *name, nc_type type, int mid, int n_extra,
+                               const int *extra, int *varid, rsw_err *err) {
   int dims[NC_MAX_COORDS + 5];
   int nd = 0;
   for (size_t k = 0; k < w->n_cdims; k++) dims[nd++] = w->cdim[k];
@@ -627,8 +634,8 @@ static rsw_status def_ctx_var2(writer *w, const char *name, nc_type type, int mi
 
 /* A variable with one value or image per film: over the wavelength
  * dimension too in a job with bands. */
-static rsw_status def_ctx_var(writer *w, const char *name, nc_type type, int n_extra, const int *extra, int *varid,
-                              rsw_err *err) {
+static rsw_status def_ctx_var(writer *w, const char *name, nc_type type, int n_extra, const int *extra,
+                              int *varid, rsw_err *err) {
   return def_ctx_var2(w, name, type, w->wl_dim, n_extra, extra, varid, err);
 }
 
@@ -926,7 +933,8 @@ static rsw_status define_film_numbers(writer *w, const sensor_set *s, sensor_var
     /* A coord of that name (a sweep over an irradiance) labels the
      * contexts already: it wins, as for sza and saa. */
     if (coord_taken(w, nm)) continue;
-    TRY(def_ctx_var2(w, nm, NC_DOUBLE, b ? w->band_dim : w->wl_dim, s->dim_ch >= 0 ? 1 : 0, &s->dim_ch, id, err));
+    TRY(def_ctx_var2(w, nm, NC_DOUBLE, b ? w->band_dim : w->wl_dim, s->dim_ch >= 0 ? 1 : 0, &s->dim_ch, id,
+                     err));
     double fill = NAN;
     NC_TRY(nc_def_var_fill(ncid, *id, 0, &fill), nm);
     TRY(put_text_att(ncid, *id, "long_name",
@@ -1004,39 +1012,57 @@ static rsw_status define_sensor(writer *w, sensor_set *s, sensor_vars *v, size_t
 }
 
 /* Values of the layout: coords, context ids, wavelengths, the sun's
- * angles, node wavelengths and band ids. */
+ * angles, node wavelengths and band ids. Each variable in one write, its
+ * values in layout order (w->cell): a write costs HDF5 about as much for
+ * one value as for all of them. A wavelength or sun angle that is not
+ * finite is the variable's fill value, NaN. */
 static rsw_status put_layout(const writer *w, const file_vars *fv, rsw_err *err) {
   const nc_dataset *d = w->d;
   int ncid = w->ncid;
   const nc_coords *cs = d->coords && d->coords->n ? d->coords : NULL;
-  size_t start[NC_MAX_COORDS + 4];
-  for (size_t k = 0; cs && k < cs->n; k++) {
+  size_t n = d->n_contexts, most = n;
+  for (size_t k = 0; cs && w->grid && k < cs->n; k++) most = w->ax[k].n > most ? w->ax[k].n : most;
+  double *num = malloc((most ? most : 1) * sizeof *num);
+  const char **str = malloc((most ? most : 1) * sizeof *str);
+  int rc = num && str ? NC_NOERR : NC_ENOMEM;
+  const char *what = "layout";
+  for (size_t k = 0; rc == NC_NOERR && cs && k < cs->n; k++) {
     const nc_coord *c = &cs->c[k];
-    size_t len = w->grid ? w->ax[k].n : d->n_contexts;
+    size_t len = w->grid ? w->ax[k].n : n;
     for (size_t r = 0; r < len; r++) {
       size_t ctx = w->grid ? w->ax[k].first[r] : r;
-      start[0] = r;
-      if (c->is_string) {
-        const char *p = c->str[ctx];
-        NC_TRY(nc_put_var1_string(ncid, fv->coord[k], start, &p), c->name);
-      } else {
-        NC_TRY(nc_put_var1_double(ncid, fv->coord[k], start, &c->num[ctx]), c->name);
-      }
+      if (c->is_string)
+        str[r] = c->str[ctx];
+      else
+        num[r] = c->num[ctx];
     }
+    what = c->name;
+    rc = c->is_string ? nc_put_var_string(ncid, fv->coord[k], str)
+                      : nc_put_var_double(ncid, fv->coord[k], num);
   }
-  for (size_t ctx = 0; ctx < d->n_contexts; ctx++) {
-    cell_start(w, ctx, start);
-    const char *p = d->context_ids[ctx];
-    NC_TRY(nc_put_var1_string(ncid, fv->ctx, start, &p), "context");
-    if (fv->wl >= 0 && isfinite(d->wavelengths[ctx]))
-      NC_TRY(nc_put_var1_double(ncid, fv->wl, start, &d->wavelengths[ctx]), "wavelength");
+  if (rc == NC_NOERR) {
+    for (size_t ctx = 0; ctx < n; ctx++) str[w->cell[ctx]] = d->context_ids[ctx];
+    what = "context";
+    if (n) rc = nc_put_var_string(ncid, fv->ctx, str);
   }
-  for (int a = 0; a < 2; a++)
-    for (size_t ctx = 0; fv->sun[a] >= 0 && ctx < d->n_contexts; ctx++) {
-      cell_start(w, ctx, start);
-      if (isfinite(fv->sun_deg[2 * ctx + (size_t)a]))
-        NC_TRY(nc_put_var1_double(ncid, fv->sun[a], start, &fv->sun_deg[2 * ctx + (size_t)a]), sun_names[a]);
+  if (rc == NC_NOERR && fv->wl >= 0 && n) {
+    for (size_t ctx = 0; ctx < n; ctx++)
+      num[w->cell[ctx]] = isfinite(d->wavelengths[ctx]) ? d->wavelengths[ctx] : NAN;
+    what = "wavelength";
+    rc = nc_put_var_double(ncid, fv->wl, num);
+  }
+  for (int a = 0; rc == NC_NOERR && a < 2 && n; a++) {
+    if (fv->sun[a] < 0) continue; /* none, or a coord of that name labels the contexts */
+    for (size_t ctx = 0; ctx < n; ctx++) {
+      double v = fv->sun_deg[2 * ctx + (size_t)a];
+      num[w->cell[ctx]] = isfinite(v) ? v : NAN;
     }
+    what = sun_names[a];
+    rc = nc_put_var_double(ncid, fv->sun[a], num);
+  }
+  free(num);
+  free(str);
+  if (rc != NC_NOERR) return nc_fail(err, rc, what);
   if (fv->nodes >= 0) NC_TRY(nc_put_var_double(ncid, fv->nodes, d->nodes), "wavelength");
   for (size_t b = 0; fv->bands >= 0 && b < d->n_bands; b++) {
     const char *p = d->band_ids[b];
@@ -1053,7 +1079,8 @@ static rsw_status put_view_angles(const writer *w, const sensor_vars *v, const d
   if (!za) return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
   for (size_t p = 0; p < np; p++)
     za[p] = canonical_angle(angles[2 * p]), za[np + p] = canonical_angle(angles[2 * p + 1]);
-  int rc = start ? nc_put_vara_double(w->ncid, v->vza, start, count, za) : nc_put_var_double(w->ncid, v->vza, za);
+  int rc =
+      start ? nc_put_vara_double(w->ncid, v->vza, start, count, za) : nc_put_var_double(w->ncid, v->vza, za);
   if (rc == NC_NOERR)
     rc = start ? nc_put_vara_double(w->ncid, v->vaa, start, count, za + np)
                : nc_put_var_double(w->ncid, v->vaa, za + np);
@@ -1074,18 +1101,7 @@ static rsw_status put_film(const writer *w, const sensor_set *s, const sensor_va
   size_t nd = w->n_cdims;
   if (has_mid) start[nd++] = mid;
   for (size_t q = 0; q < nd; q++) count[q] = 1;
-  if (!is_band) {
-    unsigned long long seed = f->seed;
-    NC_TRY(nc_put_var1_ulonglong(ncid, v->seed, start, &seed), "seed");
-    if (v->spp >= 0) {
-      unsigned spp = f->spp;
-      NC_TRY(nc_put_var1_uint(ncid, v->spp, start, &spp), "spp");
-    }
-    if (v->unres >= 0) {
-      unsigned long long u = f->unresolved_rays;
-      NC_TRY(nc_put_var1_ulonglong(ncid, v->unres, start, &u), "unresolved_rays");
-    }
-  }
+  /* (seed, spp and unresolved_rays: put_film_numbers, a variable at once) */
   int irr = is_band ? v->irr_srf : v->irr;
   if (irr >= 0 && f->has_irradiance) {
     /* Per colour: a Stokes film's E_h is its colours' (the first n_col
@@ -1099,7 +1115,8 @@ static rsw_status put_film(const writer *w, const sensor_set *s, const sensor_va
   count[nd] = (size_t)f->height, count[nd + 1] = (size_t)f->width;
   if (s->stokes) count[nd + ncd++] = 4;
   if (s->dim_ch >= 0) count[nd + ncd++] = (size_t)s->n_col;
-  for (size_t q = 0; q < f->n_vars; q++) {
+  /* (a node or plain film's quantities: put_film_quantities, a variable at once) */
+  for (size_t q = 0; is_band && q < f->n_vars; q++) {
     size_t qi = 0;
     while (strcmp(s->qnames[qi], f->vars[q].name) != 0) qi++;
     NC_TRY(nc_put_vara_float(ncid, v->q[qi], start, count, f->vars[q].data), f->vars[q].name);
@@ -1115,8 +1132,7 @@ static rsw_status put_film(const writer *w, const sensor_set *s, const sensor_va
     while (qi < s->n_q && strcmp(s->qnames[qi], derived[dq].name) != 0) qi++;
     if (!from || !needs || qi == s->n_q) continue;
     size_t C = (size_t)f->channels, K = (size_t)s->n_col;
-    for (size_t p = 0; p < np * C; p++)
-      deriv[p] = (float)(M_PI * (double)from[p] / f->irradiance[p % C % K]);
+    for (size_t p = 0; p < np * C; p++) deriv[p] = (float)(M_PI * (double)from[p] / f->irradiance[p % C % K]);
     NC_TRY(nc_put_vara_float(ncid, v->q[qi], start, count, deriv), derived[dq].name);
   }
   /* DoLP and AoLP per pixel and colour, from the film's Stokes vector
@@ -1163,7 +1179,8 @@ static rsw_status put_labels(const writer *w, const sensor_set *s, const sensor_
 /* A sensor's plugin failures, each variable in one call (a call per film
  * doubled the time to encode 200 small films): counts and messages in the
  * variables' C order, the layout's cell (w->cell) then the node. */
-static rsw_status put_plugin_failures(const writer *w, const sensor_set *s, const sensor_vars *v, rsw_err *err) {
+static rsw_status put_plugin_failures(const writer *w, const sensor_set *s, const sensor_vars *v,
+                                      rsw_err *err) {
   size_t n = w->n_cells * w->slots;
   unsigned long long *count = malloc((n ? n : 1) * sizeof *count);
   const char **msg = malloc((n ? n : 1) * sizeof *msg);
@@ -1180,6 +1197,73 @@ static rsw_status put_plugin_failures(const writer *w, const sensor_set *s, cons
   if (!st && rc != NC_NOERR) st = nc_fail(err, rc, "plugin_failures");
   free(count);
   free(msg);
+  return st;
+}
+
+/* A sensor's node (or plain) films' quantities, each variable in one call
+ * (a call per film cost HDF5 about as much as the whole variable): the
+ * images in the variable's C order, the layout's cell (w->cell), the node,
+ * then y, x[, stokes][, channel]; NaN, the fill value, where a film is
+ * missing or lacks the quantity. */
+static rsw_status put_film_quantities(const writer *w, const sensor_set *s, const sensor_vars *v,
+                                      rsw_err *err) {
+  size_t n = w->n_cells * w->slots;
+  size_t img = (size_t)s->shape->width * (size_t)s->shape->height * (s->stokes ? 4 : 1) *
+               (s->dim_ch >= 0 ? (size_t)s->n_col : 1);
+  float *all = NULL;
+  rsw_status st = RSW_OK;
+  for (size_t qi = 0; !st && n && img && qi < s->n_q; qi++) {
+    bool any = false;
+    for (size_t k = 0; k < n && !any; k++)
+      for (size_t q = 0; s->by_ctx[k] && q < s->by_ctx[k]->n_vars && !any; q++)
+        any = strcmp(s->by_ctx[k]->vars[q].name, s->qnames[qi]) == 0;
+    if (!any) continue; /* derived, or a band quantity */
+    if (!all && !(all = malloc(n * img * sizeof *all))) {
+      st = rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+      break;
+    }
+    for (size_t i = 0; i < n * img; i++) all[i] = NAN;
+    for (size_t k = 0; k < n; k++) {
+      const nc_film *f = s->by_ctx[k];
+      size_t at = w->cell[k / w->slots] * w->slots + k % w->slots;
+      for (size_t q = 0; f && q < f->n_vars; q++)
+        if (strcmp(f->vars[q].name, s->qnames[qi]) == 0)
+          memcpy(all + at * img, f->vars[q].data, img * sizeof *all);
+    }
+    int rc = nc_put_var_float(w->ncid, v->q[qi], all);
+    if (rc != NC_NOERR) st = nc_fail(err, rc, s->qnames[qi]);
+  }
+  free(all);
+  return st;
+}
+
+/* A sensor's seed, spp (when it varies) and unresolved rays, each
+ * variable in one call as put_plugin_failures: a missing film's seed and
+ * spp are 0 (their fill value when films are missing), its unresolved
+ * rays the fill value. */
+static rsw_status put_film_numbers(const writer *w, const sensor_set *s, const sensor_vars *v, rsw_err *err) {
+  size_t n = w->n_cells * w->slots;
+  if (!n) return RSW_OK;
+  unsigned long long *seed = malloc(n * sizeof *seed), *unres = malloc(n * sizeof *unres);
+  unsigned *spp = malloc(n * sizeof *spp);
+  rsw_status st = RSW_OK;
+  if (!seed || !unres || !spp) st = rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+  for (size_t k = 0; !st && k < n; k++) {
+    const nc_film *f = s->by_ctx[k];
+    size_t at = w->cell[k / w->slots] * w->slots + k % w->slots;
+    seed[at] = f ? f->seed : 0;
+    spp[at] = f ? f->spp : 0;
+    unres[at] = f ? f->unresolved_rays : NC_FILL_UINT64;
+  }
+  int rc = st ? NC_NOERR : nc_put_var_ulonglong(w->ncid, v->seed, seed);
+  const char *what = "seed";
+  if (rc == NC_NOERR && !st && v->spp >= 0) what = "spp", rc = nc_put_var_uint(w->ncid, v->spp, spp);
+  if (rc == NC_NOERR && !st && v->unres >= 0)
+    what = "unresolved_rays", rc = nc_put_var_ulonglong(w->ncid, v->unres, unres);
+  if (!st && rc != NC_NOERR) st = nc_fail(err, rc, what);
+  free(seed);
+  free(unres);
+  free(spp);
   return st;
 }
 
@@ -1203,6 +1287,8 @@ static rsw_status put_sensor(const writer *w, const sensor_set *s, const sensor_
     st = put_film(w, s, v, f, ctx, mid, is_band, deriv, err);
   }
   free(deriv);
+  if (!st) st = put_film_quantities(w, s, v, err);
+  if (!st) st = put_film_numbers(w, s, v, err);
   return st ? st : put_plugin_failures(w, s, v, err);
 }
 
@@ -1250,6 +1336,12 @@ static size_t size_hint(const nc_dataset *d) {
   return b;
 }
 
+void nc_dataset_init(void) {
+  pthread_mutex_lock(&g_nc_lock);
+  nc_initialize(); /* (once: libnetcdf keeps that it is) */
+  pthread_mutex_unlock(&g_nc_lock);
+}
+
 rsw_status nc_dataset_write(const char *path, const nc_dataset *d, rsw_err *err) {
   if (!path || !*path) return rsw_fail(err, RSW_ERR_INVALID, "", "no path for the dataset");
   char tmp[4200];
@@ -1265,8 +1357,10 @@ rsw_status nc_dataset_write(const char *path, const nc_dataset *d, rsw_err *err)
   rsw_status st = build(ncid, d, err);
   rc = nc_close(ncid);
   pthread_mutex_unlock(&g_nc_lock);
-  if (!st && rc != NC_NOERR) st = rsw_fail(err, RSW_ERR_IO, path, "cannot write the dataset: %s", nc_strerror(rc));
-  if (!st && rename(tmp, path) != 0) st = rsw_fail(err, RSW_ERR_IO, path, "cannot rename the dataset into place");
+  if (!st && rc != NC_NOERR)
+    st = rsw_fail(err, RSW_ERR_IO, path, "cannot write the dataset: %s", nc_strerror(rc));
+  if (!st && rename(tmp, path) != 0)
+    st = rsw_fail(err, RSW_ERR_IO, path, "cannot rename the dataset into place");
   if (st) unlink(tmp);
   return st;
 }

@@ -189,6 +189,11 @@ typedef struct nc_dataset {
   const char *const *band_ids;
 } nc_dataset;
 
+/* Initialise libnetcdf (and HDF5: their run-time configuration, a few ms)
+ * now rather than at the first nc_dataset_write, for a caller that has
+ * time to spare before it writes. Thread-safe (serialised). */
+void nc_dataset_init(void);
+
 /* Write d to path (through "<path>.tmp.<pid>", renamed on success) or
  * encode it in memory (*bytes_out owned: free()). Borrows d. Errors:
  * RSW_ERR_INVALID (a film of another shape than its sensor's others, an

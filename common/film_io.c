@@ -13,15 +13,17 @@
 
 /* Most attributes an info gives: scene, revision, context, sensor, spp,
  * seed, variant, wavelength, zenith, azimuth, unresolved rays, plugin
- * failures and their message, isa, irradiance. */
-#define FILM_EXR_MAX_ATTRS 16
+ * failures and their message, isa, irradiance, the sun's zenith and
+ * azimuth. */
+#define FILM_EXR_MAX_ATTRS 18
 
 /* The attribute list of one info: entries point into info, the number
  * buffers here and the two angle lists (owned). */
 typedef struct attrs {
   exr_meta_entry e[FILM_EXR_MAX_ATTRS];
   size_t count;
-  char revision[24], spp[16], seed[24], wavelength[32], unresolved[24], plugin_failures[24], irradiance[12 * 26];
+  char revision[24], spp[16], seed[24], wavelength[32], unresolved[24], plugin_failures[24], irradiance[12 * 26],
+      sun_zenith[32], sun_azimuth[32];
   char *zenith, *azimuth;
 } attrs;
 
@@ -158,6 +160,12 @@ static rsw_status build_attrs(const film_exr_info *info, int width, int height, 
       len += (size_t)snprintf(a->irradiance + len, sizeof a->irradiance - len, c ? ",%.17g" : "%.17g",
                               info->irradiance[c]);
     add(a, "raysweep:irradiance", a->irradiance);
+  }
+  if (info->has_sun) { /* the JSON meta's sun_zenith_deg and sun_azimuth_deg, the same "%.9g" */
+    snprintf(a->sun_zenith, sizeof a->sun_zenith, "%.9g", info->sun_zenith);
+    snprintf(a->sun_azimuth, sizeof a->sun_azimuth, "%.9g", info->sun_azimuth);
+    add(a, "raysweep:sun_zenith_deg", a->sun_zenith);
+    add(a, "raysweep:sun_azimuth_deg", a->sun_azimuth);
   }
   return RSW_OK;
 }

@@ -31,6 +31,11 @@
  *   raysweep:irradiance     films with brdf/brf channels: the horizontal
  *                           irradiance E_h they divide by, per radiance
  *                           channel, %.17g, comma-separated
+ *   raysweep:sun_zenith_deg, raysweep:sun_azimuth_deg
+ *                           daemon films of a scene with one directional
+ *                           emitter: its zenith and azimuth in degrees
+ *                           (Eradiate's convention), %.9g, as the JSON
+ *                           meta's sun_zenith_deg and sun_azimuth_deg
  *
  * Planes beyond radiance are channels "<plane>.<channel>" (brf.Y,
  * radiance_stderr.R, ...), EXR's layer naming.
@@ -63,6 +68,10 @@ typedef struct film_exr_info {
    * radiance channel. */
   const double *irradiance;
   int n_irradiance;
+  /* The scene's one directional emitter (has_sun): its zenith and azimuth
+   * in degrees, Eradiate's convention. */
+  bool has_sun;
+  double sun_zenith, sun_azimuth;
 } film_exr_info;
 
 /* The text of raysweep:zenith_deg (k 0) or raysweep:azimuth_deg (k 1) for

@@ -77,12 +77,15 @@ static float float_from_half(uint16_t h) {
 /* ---- stream callbacks ---------------------------------------------------- */
 
 /* Where the library's bytes go or come from: a descriptor (fd >= 0), or,
- * for exr_encode_image, a growable memory buffer (fd < 0). */
+ * for exr_encode_image, a growable memory buffer (fd < 0), or, for
+ * exr_decode_image, borrowed bytes (src). */
 typedef struct exr_stream {
   int fd;
   char msg[512]; /* first message the library reported, or "" */
   uint8_t *mem;  /* memory sink: malloc'ed bytes, mem_len of them valid */
   size_t mem_len, mem_cap;
+  const uint8_t *src; /* memory source (fd < 0): src_len bytes */
+  size_t src_len;
 } exr_stream;
 
 /* The stream of the library call running on this thread, for the error
@@ -113,6 +116,12 @@ static int64_t stream_read(exr_const_context_t ctxt, void *ud, void *buffer, uin
     error_cb(ctxt, EXR_ERR_READ_IO, "read past any possible file end");
     return -1;
   }
+  if (st->fd < 0) { /* a memory source: what is there of [offset, offset + sz) */
+    if (offset >= st->src_len) return 0;
+    done = sz < st->src_len - offset ? sz : st->src_len - offset;
+    memcpy(p, st->src + offset, (size_t)done);
+    return (int64_t)done;
+  }
   while (done < sz) {
     ssize_t n = pread(st->fd, p + done, (size_t)(sz - done), (off_t)(offset + done));
     if (n < 0) {
@@ -130,6 +139,7 @@ static int64_t stream_read(exr_const_context_t ctxt, void *ud, void *buffer, uin
 static int64_t stream_size(exr_const_context_t ctxt, void *ud) {
   exr_stream *st = ud;
   struct stat sb;
+  if (st->fd < 0) return (int64_t)st->src_len;
   if (fstat(st->fd, &sb) != 0) return -1;
   return (int64_t)sb.st_size;
 }
@@ -635,42 +645,54 @@ static rsw_status read_pixels(exr_context_t ctx, const exr_stream *st, exr_stora
   return RSW_OK;
 }
 
-rsw_status exr_read_image(const char *path, exr_image *out, rsw_err *err) {
-  if (!path || !path[0]) return rsw_fail(err, RSW_ERR_INVALID, "", "EXR input path is empty");
-  exr_stream st = {.fd = -1};
-  st.fd = open(path, O_RDONLY | O_CLOEXEC);
-  if (st.fd < 0) return rsw_fail(err, RSW_ERR_FILE, path, "cannot open EXR file: %s", strerror(errno));
-  exr_context_initializer_t init = stream_init(&st);
+/* Read the image of st (a file or borrowed bytes); label names it in errors. */
+static rsw_status read_stream(exr_stream *st, const char *label, exr_image *out, rsw_err *err) {
+  exr_context_initializer_t init = stream_init(st);
   init.write_fn = NULL;
   /* Fail on a damaged chunk table instead of guessing at the chunks. */
   init.flags |= EXR_CONTEXT_FLAG_DISABLE_CHUNK_RECONSTRUCTION;
   exr_context_t ctx = NULL;
   exr_stream *outer = t_stream;
-  t_stream = &st;
-  exr_result_t rv = exr_start_read(&ctx, path, &init);
+  t_stream = st;
+  exr_result_t rv = exr_start_read(&ctx, label, &init);
   if (rv != EXR_ERR_SUCCESS) {
-    rsw_status s = exr_fail(err, RSW_ERR_FILE, path, &st, rv, "not a readable EXR file");
+    rsw_status s = exr_fail(err, RSW_ERR_FILE, label, st, rv, "not a readable EXR file");
     if (ctx) exr_finish(&ctx);
     t_stream = outer;
-    close(st.fd);
     return s;
   }
   exr_image img = {0};
   exr_storage_t storage;
   exr_attr_box2i_t dw;
   const exr_attr_chlist_t *chl = NULL;
-  rsw_status s = read_header(ctx, &st, &storage, &dw, &chl, &img, path, err);
-  if (s == RSW_OK) s = read_meta(ctx, &img, path, err);
-  if (s == RSW_OK) s = read_pixels(ctx, &st, storage, &dw, chl, &img, path, err);
+  rsw_status s = read_header(ctx, st, &storage, &dw, &chl, &img, label, err);
+  if (s == RSW_OK) s = read_meta(ctx, &img, label, err);
+  if (s == RSW_OK) s = read_pixels(ctx, st, storage, &dw, chl, &img, label, err);
   exr_finish(&ctx);
   t_stream = outer;
-  close(st.fd);
   if (s != RSW_OK) {
     exr_image_free(&img);
     return s;
   }
   *out = img;
   return RSW_OK;
+}
+
+rsw_status exr_read_image(const char *path, exr_image *out, rsw_err *err) {
+  if (!path || !path[0]) return rsw_fail(err, RSW_ERR_INVALID, "", "EXR input path is empty");
+  exr_stream st = {.fd = -1};
+  st.fd = open(path, O_RDONLY | O_CLOEXEC);
+  if (st.fd < 0) return rsw_fail(err, RSW_ERR_FILE, path, "cannot open EXR file: %s", strerror(errno));
+  rsw_status s = read_stream(&st, path, out, err);
+  close(st.fd);
+  return s;
+}
+
+rsw_status exr_decode_image(const void *bytes, size_t len, const char *label, exr_image *out, rsw_err *err) {
+  if (!label || !label[0]) label = "(EXR in memory)";
+  if (!bytes || !len) return rsw_fail(err, RSW_ERR_FILE, label, "no EXR bytes");
+  exr_stream st = {.fd = -1, .src = bytes, .src_len = len};
+  return read_stream(&st, label, out, err);
 }
 
 int exr_image_channel(const exr_image *img, const char *name) {

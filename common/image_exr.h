@@ -78,6 +78,11 @@ rsw_status exr_encode_image(int width, int height, int n_channels, const char *c
  * RSW_ERR_LIMIT (too large), RSW_ERR_NOMEM. Thread-safe. */
 rsw_status exr_read_image(const char *path, exr_image *out, rsw_err *err);
 
+/* The same from the len bytes of an EXR file in memory (borrowed), e.g.
+ * the daemon's image/x-exr answer; label names it in errors (NULL:
+ * "(EXR in memory)"). */
+rsw_status exr_decode_image(const void *bytes, size_t len, const char *label, exr_image *out, rsw_err *err);
+
 /* Index of the channel called name, or -1. */
 int exr_image_channel(const exr_image *img, const char *name);
 

@@ -151,6 +151,12 @@ static int merge_read_inputs(const cli_ctx *ctx, const cmdline_args *a, merge_in
     int mrc = manifest_read(ctx, a->pos[i], &in[i].m);
     if (mrc > 0) return mrc;
     in[i].has_manifest = mrc == 0;
+    if (in[i].has_manifest && in[i].m.pack)
+      return cli_usage(ctx,
+                       "%s was swept with --format dataset: its films are in %s alone, and merge joins film "
+                       "files; sweep the whole list in one run (--spread K runs its shards at once), or "
+                       "sweep the shards with --format nc to merge them",
+                       a->pos[i], DATASET_NAME);
     char *index = sweep_dir_file(a->pos[i], "index.jsonl");
     in[i].has_index = index && sweep_is_regular(index);
     free(index);
@@ -247,7 +253,7 @@ static int merge_dataset(const cli_ctx *ctx, const cmdline_args *a, const merge_
   for (size_t i = 0; i < a->n_pos && !seed; i++)
     if (in[i].has_manifest) seed = cJSON_GetObjectItemCaseSensitive(in[i].m.root, "seed");
   return sweep_write_dataset(ctx, out, e, n, sweep_json_is_int(seed, 0),
-                             sweep_json_is_int(seed, 0) ? (long long)seed->valuedouble : 0);
+                             sweep_json_is_int(seed, 0) ? (long long)seed->valuedouble : 0, NULL);
 }
 
 /* out/sweep.json when the inputs are the shards of one sweep: that sweep

@@ -44,9 +44,10 @@ const cmdline_opt cli_opts_sweep[] = {
      "carry K (1-16) wavelengths per path: each render with the next ones that differ only in wavelength; "
      "auto (the default): the most the daemon allows for the scene, 1 where it allows none; 1: one "
      "wavelength per path (docs/experiments.md#spectral-bundles)"},
-    {"--format", "exr|npy|json|nc", false,
+    {"--format", "exr|npy|json|nc|dataset", false,
      "film files: exr (default), npy or json; nc: json films plus DIR/dataset.nc, the sweep as one "
-     "NetCDF-4 dataset (xarray.open_dataset)"},
+     "NetCDF-4 dataset (xarray.open_dataset); dataset: DIR/dataset.nc alone, no file per film (the same "
+     "dataset; not with --shard or --layout)"},
     {"--layout", "dirs|flat", false,
      "where the films go: dirs (default): DIR/CONTEXT/SENSOR.EXT; flat: DIR/CONTEXT.SENSOR.EXT, no directory "
      "per context (faster to write; '%' and '.' in CONTEXT written %25 and %2E); index.jsonl names each "
@@ -519,7 +520,7 @@ static int build_contexts(const cli_ctx *ctx, const cmdline_args *a, const sweep
  * each. Failed renders are reported and counted. */
 static int fetch_all(cli_ctx *ctx, const char *job, const char *dir, sweep_layout layout, cli_format fmt,
                      sweep_item **sorted, size_t n, const cJSON *job_params, cJSON *incomplete,
-                     index_entry **entries_out, size_t *n_out, size_t *failed_out) {
+                     film_pack *pack, index_entry **entries_out, size_t *n_out, size_t *failed_out) {
   char *text = NULL;
   rsw_status s = rsw_job_results(ctx->client, job, &text);
   if (s) return cli_report(ctx, s, job);
@@ -554,8 +555,11 @@ static int fetch_all(cli_ctx *ctx, const char *job, const char *dir, sweep_layou
       continue;
     }
     char rel[1100], path[4096];
-    if ((rc = sweep_film_file(ctx, dir, layout, c, sn, fmt, true, rel, sizeof rel, path, sizeof path))) break;
-    /* EXR and NPY: the daemon's encoding is the file; JSON: decoded. */
+    if (!pack &&
+        (rc = sweep_film_file(ctx, dir, layout, c, sn, fmt, true, rel, sizeof rel, path, sizeof path)))
+      break;
+    /* EXR and NPY: the daemon's encoding is the file (or, --format dataset,
+     * kept for the dataset); JSON: decoded. */
     rsw_film *film = NULL;
     void *bytes = NULL;
     size_t len = 0;
@@ -567,11 +571,14 @@ static int fetch_all(cli_ctx *ctx, const char *job, const char *dir, sweep_layou
       rc = cli_report(ctx, s, what);
       break;
     }
-    rc = film ? cli_save_film(ctx, film, path, fmt) : cli_save_encoded(ctx, bytes, len, path);
+    if (pack)
+      rc = pack_add(ctx, pack, c, sn, cJSON_GetObjectItemCaseSensitive(r, "channels"), bytes, len);
+    else
+      rc = film ? cli_save_film(ctx, film, path, fmt) : cli_save_encoded(ctx, bytes, len, path);
     rsw_film_free(film);
     rsw_free(bytes);
     if (rc) break;
-    cJSON *line = sweep_index_line(r, c, sn, rel, sorted, n, job_params);
+    cJSON *line = sweep_index_line(r, c, sn, pack ? NULL : rel, sorted, n, job_params);
     e[ne].line = line;
     e[ne].context = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(line, "context"));
     e[ne].sensor = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(line, "sensor"));
@@ -593,7 +600,8 @@ typedef struct sweep_opts {
   const char *const *grids;
   size_t n_grids;
   cli_format fmt;
-  bool want_nc; /* --format nc: JSON films and DIR/dataset.nc */
+  bool want_nc;   /* --format nc: JSON films and DIR/dataset.nc */
+  bool want_pack; /* --format dataset: DIR/dataset.nc alone, built from the daemon's EXRs */
   sweep_layout layout;
   unsigned long long spp, seed, shard_i, shard_n, spread;
   double timeout;
@@ -612,10 +620,22 @@ static int read_sweep_options(const cli_ctx *ctx, const cmdline_args *a, sweep_o
   if (o->n_grids > MAX_GRIDS) return cli_usage(ctx, "at most %d --grid axes", MAX_GRIDS);
   const char *v;
   o->want_nc = (v = cmdline_get(a, "--format")) && strcmp(v, "nc") == 0;
+  o->want_pack = v && strcmp(v, "dataset") == 0;
   if (o->want_nc)
     o->fmt = CLI_FMT_JSON; /* the films the dataset is built from (and merge rebuilds it from) */
+  else if (o->want_pack)
+    o->fmt = CLI_FMT_EXR; /* as the daemon encodes them: pixels and angles binary, nothing parsed as JSON */
   else if (v && (o->fmt = cli_format_from_name(v)) == CLI_FMT_NONE)
-    return cli_usage(ctx, "--format needs exr, npy, json or nc (got '%s')", v);
+    return cli_usage(ctx, "--format needs exr, npy, json, nc or dataset (got '%s')", v);
+  /* One dataset of the whole sweep: shards could not be merged (merge joins
+   * film files), and there are no film files to lay out. */
+  if (o->want_pack && cmdline_has(a, "--shard"))
+    return cli_usage(ctx,
+                     "--shard: --format dataset writes the sweep as one dataset, which merge cannot join; "
+                     "use --spread K (its shards at once, one dataset), or --format nc to merge shards");
+  if (o->want_pack && cmdline_has(a, "--layout"))
+    return cli_usage(ctx, "--layout: --format dataset writes no film files (the films are in DIR/%s)",
+                     DATASET_NAME);
   if ((v = cmdline_get(a, "--spp")) && (!cli_parse_u64(v, 1ull << 31, &o->spp) || o->spp == 0))
     return cli_usage(ctx, "--spp needs a positive integer (got '%s')", v);
   if ((v = cmdline_get(a, "--seed")) && !cli_parse_u64(v, (1ull << 53) - 1, &o->seed))
@@ -693,6 +713,7 @@ static int run_job(cli_ctx *ctx, const sweep_opts *o, const sweep_list *l, sweep
   size_t n_entries = 0, failed = 0;
   cJSON *incomplete = NULL;
   char *warned = NULL; /* the job's warnings printed at submission */
+  film_pack pack = {.fd = -1};
   int rc;
   cli_catch_interrupt();
   rsw_status s = rsw_job_submit(ctx->client, scene, x, NULL, job);
@@ -725,8 +746,9 @@ static int run_job(cli_ctx *ctx, const sweep_opts *o, const sweep_list *l, sweep
   free(warned);
   warned = NULL;
   if (!(incomplete = cJSON_CreateArray())) return cli_fail(ctx, CLI_IO, "out of memory");
-  if ((rc = fetch_all(ctx, job, dir, l->layout, o->fmt, sorted, l->n, job_params, incomplete, &entries,
-                      &n_entries, &failed))) {
+  if (l->pack && (rc = pack_open(ctx, &pack, dir, false, false, sorted, l->n))) goto out;
+  if ((rc = fetch_all(ctx, job, dir, l->layout, o->fmt, sorted, l->n, job_params, incomplete,
+                      l->pack ? &pack : NULL, &entries, &n_entries, &failed))) {
     if (cli_interrupted)
       rc = cli_fail(ctx, cli_interrupted_code(),
                     "%s while fetching films; job %s is over and keeps its results on the daemon "
@@ -735,7 +757,9 @@ static int run_job(cli_ctx *ctx, const sweep_opts *o, const sweep_list *l, sweep
     goto out;
   }
   if ((rc = sweep_write_index(ctx, dir, entries, n_entries))) goto out;
-  if (o->want_nc && (rc = sweep_write_dataset(ctx, dir, entries, n_entries, true, l->seed))) goto out;
+  if ((o->want_nc || l->pack) &&
+      (rc = sweep_write_dataset(ctx, dir, entries, n_entries, true, l->seed, l->pack ? &pack : NULL)))
+    goto out;
   if ((rc = manifest_write(ctx, dir, fingerprint, scene, o->shard_i, o->shard_n, l, job, true, incomplete)))
     goto out;
   rc = job_rc;
@@ -755,6 +779,7 @@ static int run_job(cli_ctx *ctx, const sweep_opts *o, const sweep_list *l, sweep
 out:
   cJSON_Delete(incomplete);
   sweep_entries_free(entries, n_entries);
+  pack_close(&pack, false);
   return rc;
 }
 
@@ -770,7 +795,7 @@ int cmd_sweep(cli_ctx *ctx, const cmdline_args *a) {
   rc = cli_build_param_map(ctx, "--set", sets, n_sets, &job_params);
   if (rc) return rc;
 
-  sweep_list l = {.seed = (long long)o.seed, .dataset = o.want_nc, .layout = o.layout};
+  sweep_list l = {.seed = (long long)o.seed, .dataset = o.want_nc, .pack = o.want_pack, .layout = o.layout};
   grid_axis axes[MAX_GRIDS] = {{0}};
   sweep_item **sorted = NULL;
   rsw_contexts *x = NULL;

@@ -49,7 +49,7 @@ static const cli_command commands[] = {
     {"sweep", NULL,
      "ID|FILE (--contexts FILE.jsonl | --grid NAME=START:STOP:STEP...) [--set KEY=VALUE]... [--sensor S]... "
      "[--spp N] [--seed N] [--shard I/N] [--spread K] [--quantities LIST] [--variance] [--bundle K|auto] "
-     "[--format exr|npy|json|nc] [--layout dirs|flat] [--timeout S] -o DIR [--force]",
+     "[--format exr|npy|json|nc|dataset] [--layout dirs|flat] [--timeout S] -o DIR [--force]",
      "submit a job over many contexts, show progress, fetch every film into DIR with DIR/index.jsonl and "
      "DIR/sweep.json (Ctrl-C cancels the job)",
      cli_opts_sweep, 1, 1, true, cmd_sweep},

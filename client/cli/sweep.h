@@ -2,13 +2,16 @@
  * directory holds one film per (context, sensor), in DIR/<context>/ or,
  * with --layout flat, in DIR itself (sweep_film_file), DIR/index.jsonl
  * (one line per film), DIR/sweep.json (the manifest: what the directory
- * is meant to hold) and, with --format nc, DIR/dataset.nc.
+ * is meant to hold) and, with --format nc, DIR/dataset.nc. With --format
+ * dataset the films are in DIR/dataset.nc alone (no file per film).
  *
  *   cmd_sweep.c       the contexts (--contexts, --grid), the job, its films
  *   sweep_spread.c    --spread: the shards at once through a balancer, and
  *                     resuming an interrupted --spread run
  *   sweep_manifest.c  sweep.json, and --force (what an earlier sweep wrote)
  *   sweep_dir.c       index.jsonl, dataset.nc, context ids, file helpers
+ *   sweep_pack.c      --format dataset: the films kept until dataset.nc
+ *                     is built, and the spool a cut-off --spread resumes
  *   cmd_merge.c       raysweep merge (join shard directories) */
 #ifndef RSW_CLI_SWEEP_H
 #define RSW_CLI_SWEEP_H
@@ -31,7 +34,9 @@
  *    "bundle_shards": "rank" (with bundle_leads: group g, in the order of
  *      the groups' first contexts, is shard g mod N; absent, as written
  *      before this rule, a group is shard (its first context) mod N),
- *    "layout": "flat" (with --layout flat; absent: one directory per context)}
+ *    "layout": "flat" (with --layout flat; absent: one directory per context),
+ *    "output": "dataset" (with --format dataset: the films are in
+ *      dataset.nc alone; absent: a file per film)}
  * FINGERPRINT is FNV-1a 64 over everything that defines the unsharded
  * sweep (scene, contexts file or grid, --set, --sensor, --spp, --seed,
  * --format, --quantities, --variance, --bundle but 1) and not over --shard, so every shard of one sweep carries the
@@ -45,6 +50,9 @@
 /* The journal of a --spread sweep (rsw_spread_opts.state_path): there
  * while the sweep is unfinished, removed when it completes. */
 #define SPREAD_STATE    "sweep.spread.jsonl"
+/* --format dataset --spread: the films delivered so far (sweep_pack.c),
+ * there while the sweep is unfinished. */
+#define FILM_SPOOL      "sweep.films"
 #define MANIFEST_FORMAT "raysweep-sweep/1"
 
 /* Where a sweep puts its films (--layout). */
@@ -81,6 +89,7 @@ typedef struct sweep_list {
   size_t *leads, *keys;
   long long seed; /* --seed (0 by default): the job seed, in sweep.json */
   bool dataset;   /* --format nc: DIR/dataset.nc besides the (JSON) films */
+  bool pack;      /* --format dataset: DIR/dataset.nc alone (sweep_pack.c) */
   sweep_layout layout;
 } sweep_list;
 
@@ -106,6 +115,7 @@ typedef struct sweep_manifest {
   size_t n_incomplete;
   bool finished;
   sweep_layout layout; /* "layout" (absent: dirs) */
+  bool pack;           /* "output": "dataset" */
 } sweep_manifest;
 
 /* ---- sweep_dir.c -------------------------------------------------------- */
@@ -136,12 +146,59 @@ int sweep_read_index(const cli_ctx *ctx, const char *dir, size_t input, index_en
 void sweep_entries_free(index_entry *e, size_t n);
 /* The lines and sources of entries [from, to) (the array stays). */
 void sweep_entries_free_range(index_entry *e, size_t from, size_t to);
-/* The index line of film rel of result r (sorted: the sweep's items by id). */
+/* The index line of film rel of result r (sorted: the sweep's items by id);
+ * rel NULL: a film of the dataset alone ("dataset": "dataset.nc" in place
+ * of "file"). */
 cJSON *sweep_index_line(const cJSON *r, const char *c, const char *sn, const char *rel, sweep_item **sorted,
                         size_t n, const cJSON *job_params);
-/* DIR/dataset.nc from the films of index entries e (sorted). */
+/* DIR/dataset.nc from the films of index entries e (sorted): their files
+ * (pack NULL), or the EXRs kept in pack. */
+typedef struct film_pack film_pack;
 int sweep_write_dataset(const cli_ctx *ctx, const char *dir, const index_entry *e, size_t n, bool has_seed,
-                        long long seed);
+                        long long seed, film_pack *pack);
+
+/* ---- sweep_pack.c ------------------------------------------------------- */
+
+/* One film of --format dataset: the daemon's EXR and the film's channel
+ * order (its result's "channels"). */
+typedef struct pack_film {
+  char *context, *sensor;
+  void *bytes;
+  size_t len;
+  cJSON *channels; /* array of strings, or NULL */
+  size_t seq;      /* order kept */
+} pack_film;
+struct film_pack {
+  pack_film *f;
+  size_t n, cap;
+  bool sorted;
+  int fd;           /* the spool (DIR/FILM_SPOOL) appended to, or -1 */
+  char *spool_path; /* or NULL */
+  /* The dataset the films go into as they arrive (sweep_pack.c): every
+   * context of the sweep (items, borrowed) added first. */
+  sweep_item **items;
+  size_t n_items;
+  rsw_dataset *live;
+  bool live_ok; /* every context and film added so far was taken */
+  size_t live_films;
+};
+/* Start a pack for the sweep's contexts (sorted by id, n of them; borrowed
+ * until pack_close); spool: append every film to DIR/FILM_SPOOL (created
+ * anew, or with resume, its films read first). */
+int pack_open(const cli_ctx *ctx, film_pack *p, const char *dir, bool spool, bool resume, sweep_item **sorted,
+              size_t n);
+/* Add film f to d (rsw_dataset_add_film_exr, its channels in order). */
+int pack_film_add_to(rsw_dataset *d, const pack_film *f);
+/* The live dataset when it holds exactly the films of index entries e
+ * (sorted) with their contexts' wavelengths, ready to write; else NULL
+ * (build it again from the films). */
+rsw_dataset *pack_live(film_pack *p, const index_entry *e, size_t n);
+int pack_add(const cli_ctx *ctx, film_pack *p, const char *c, const char *sn, const cJSON *channels,
+             const void *bytes, size_t len);
+/* The film of (c, sn) (the last kept), or NULL. */
+const pack_film *pack_find(film_pack *p, const char *c, const char *sn);
+/* Free it; remove_spool: the sweep is done, the spool goes. */
+void pack_close(film_pack *p, bool remove_spool);
 
 /* --layout's value: dirs or flat; false for anything else. */
 bool sweep_layout_from_name(const char *name, sweep_layout *out);

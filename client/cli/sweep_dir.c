@@ -289,25 +289,30 @@ cJSON *sweep_index_line(const cJSON *r, const char *c, const char *sn, const cha
     cJSON_AddNumberToObject(line, "seed", seed->valuedouble);
   else
     cJSON_AddNullToObject(line, "seed");
-  cJSON_AddStringToObject(line, "file", rel);
+  if (rel)
+    cJSON_AddStringToObject(line, "file", rel);
+  else
+    cJSON_AddStringToObject(line, "dataset", DATASET_NAME);
   return line;
 }
 
 /* DIR/dataset.nc: the films of index entries e (sorted: write_index) as
- * one NetCDF-4 dataset, built by libraysweep from the JSON films, so the
- * dataset of merged shards is the unsharded one's. Contexts come in index
- * order with the wavelength and coords of their index lines; a context
- * without any film is not in it. */
+ * one NetCDF-4 dataset, built by libraysweep from the JSON films (or, for
+ * --format dataset, the daemon's EXRs in pack: the same dataset, byte for
+ * byte), so the dataset of merged shards is the unsharded one's. Contexts
+ * come in index order with the wavelength and coords of their index lines;
+ * a context without any film is not in it. */
 int sweep_write_dataset(const cli_ctx *ctx, const char *dir, const index_entry *e, size_t n, bool has_seed,
-                        long long seed) {
-  rsw_dataset *d = NULL;
-  if (rsw_dataset_new(&d)) return cli_fail(ctx, CLI_IO, "out of memory");
+                        long long seed, film_pack *pack) {
+  /* --format dataset: the films went in as they arrived (sweep_pack.c) */
+  rsw_dataset *live = pack ? pack_live(pack, e, n) : NULL, *d = live;
+  if (!d && rsw_dataset_new(&d)) return cli_fail(ctx, CLI_IO, "out of memory");
   char *out = sweep_dir_file(dir, DATASET_NAME);
   rsw_status s = out ? RSW_OK : RSW_ERR_NOMEM;
   if (!s && has_seed) s = rsw_dataset_set_seed(d, seed);
   const char *prev = NULL;
   char where[4200] = "";
-  for (size_t i = 0; !s && i < n; i++) {
+  for (size_t i = 0; !s && !live && i < n; i++) {
     const cJSON *line = e[i].line;
     const char *c = e[i].context, *sn = e[i].sensor;
     const char *file = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(line, "file"));
@@ -321,7 +326,11 @@ int sweep_write_dataset(const cli_ctx *ctx, const char *dir, const index_entry *
       free(ctext);
       prev = c;
     }
-    if (!s) {
+    if (!s && pack) {
+      const pack_film *f = pack_find(pack, c, sn);
+      snprintf(where, sizeof where, "film %s/%s", c, sn);
+      s = f ? pack_film_add_to(d, f) : RSW_ERR_INVALID;
+    } else if (!s) {
       snprintf(where, sizeof where, "%s/%s", dir, file ? file : "?");
       s = file ? rsw_dataset_add_film_file(d, c, sn, where) : RSW_ERR_INVALID;
     }
@@ -337,6 +346,6 @@ int sweep_write_dataset(const cli_ctx *ctx, const char *dir, const index_entry *
   else if (!ctx->quiet)
     fprintf(stderr, "raysweep %s: dataset %s\n", ctx->cmd, out);
   free(out);
-  rsw_dataset_free(d);
+  if (!live) rsw_dataset_free(d); /* (the live one is the pack's) */
   return rc;
 }

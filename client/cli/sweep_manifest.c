@@ -102,10 +102,12 @@ int manifest_read(const cli_ctx *ctx, const char *dir, sweep_manifest *m) {
   const cJSON *leads = cJSON_GetObjectItemCaseSensitive(r, "bundle_leads");
   m->finished = cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(r, "finished"));
   const cJSON *layout = cJSON_GetObjectItemCaseSensitive(r, "layout");
-  bool ok = (!layout || sweep_layout_from_name(cJSON_GetStringValue(layout), &m->layout)) && m->sweep &&
-            cJSON_IsArray(shard) && cJSON_GetArraySize(shard) == 2 && sweep_json_is_int(total, 0) &&
-            (ids ? cJSON_IsArray(ids) : sweep_json_is_int(width, 1)) && (!inc || cJSON_IsArray(inc)) &&
-            (!leads || cJSON_IsArray(leads));
+  const cJSON *output = cJSON_GetObjectItemCaseSensitive(r, "output");
+  m->pack = output && cJSON_IsString(output) && strcmp(output->valuestring, "dataset") == 0;
+  bool ok = (!layout || sweep_layout_from_name(cJSON_GetStringValue(layout), &m->layout)) &&
+            (!output || m->pack) && m->sweep && cJSON_IsArray(shard) && cJSON_GetArraySize(shard) == 2 &&
+            sweep_json_is_int(total, 0) && (ids ? cJSON_IsArray(ids) : sweep_json_is_int(width, 1)) &&
+            (!inc || cJSON_IsArray(inc)) && (!leads || cJSON_IsArray(leads));
   if (ok) {
     const cJSON *si = cJSON_GetArrayItem(shard, 0), *sn = cJSON_GetArrayItem(shard, 1);
     ok = sweep_json_is_int(si, 0) && sweep_json_is_int(sn, 1) && si->valuedouble < sn->valuedouble;
@@ -207,6 +209,7 @@ int manifest_write(const cli_ctx *ctx, const char *dir, const char *fingerprint,
   }
   if (l->layout != SWEEP_LAYOUT_DIRS) /* absent for the default: manifests as before --layout */
     cJSON_AddStringToObject(o, "layout", sweep_layout_name(l->layout));
+  if (l->pack) cJSON_AddStringToObject(o, "output", "dataset"); /* absent: a file per film */
   if (job && *job)
     cJSON_AddStringToObject(o, "job", job);
   else
@@ -333,6 +336,9 @@ int sweep_prepare_output(const cli_ctx *ctx, const char *dir, bool force) {
   char *state = sweep_dir_file(dir, SPREAD_STATE);
   if (state && sweep_is_regular(state)) unlink(state); /* the journal of an earlier --spread */
   free(state);
+  char *spool = sweep_dir_file(dir, FILM_SPOOL); /* and its films, with --format dataset */
+  if (spool && sweep_is_regular(spool)) unlink(spool);
+  free(spool);
   if (!has_index && !has_manifest) {
     free(index), free(manifest);
     return cli_usage(ctx,

@@ -41,6 +41,7 @@ typedef struct spread_sink {
   size_t failed;
   int rc;
   cli_progress *progress;
+  film_pack *pack; /* --format dataset: the films kept (and spooled), no file each */
 } spread_sink;
 
 /* Save the film (decoded, or the daemon's bytes; or, resumed, find the one
@@ -61,14 +62,24 @@ static int spread_save(spread_sink *k, const char *c, const char *sn, const char
     return 0;
   }
   char rel[1100], path[4096];
-  k->rc = sweep_film_file(k->ctx, k->dir, k->layout, c, sn, k->fmt, film || bytes, rel, sizeof rel, path,
-                          sizeof path);
-  if (!k->rc && (film || bytes))
-    k->rc = film ? cli_save_film(k->ctx, film, path, k->fmt) : cli_save_encoded(k->ctx, bytes, len, path);
-  else if (!k->rc && resumed && !sweep_is_regular(path))
-    k->rc = cli_fail(k->ctx, CLI_IO,
-                     "%s: %s says an earlier run saved it, but it is not there (start over with --force)",
-                     path, SPREAD_STATE);
+  if (k->pack) {
+    if (bytes)
+      k->rc = pack_add(k->ctx, k->pack, c, sn, cJSON_GetObjectItemCaseSensitive(r, "channels"), bytes, len);
+    else if (resumed && !pack_find(k->pack, c, sn))
+      k->rc = cli_fail(k->ctx, CLI_IO,
+                       "%s/%s: %s says an earlier run saved it, but %s/%s does not hold it (start over "
+                       "with --force)",
+                       c, sn, SPREAD_STATE, k->dir, FILM_SPOOL);
+  } else {
+    k->rc = sweep_film_file(k->ctx, k->dir, k->layout, c, sn, k->fmt, film || bytes, rel, sizeof rel, path,
+                            sizeof path);
+    if (!k->rc && (film || bytes))
+      k->rc = film ? cli_save_film(k->ctx, film, path, k->fmt) : cli_save_encoded(k->ctx, bytes, len, path);
+    else if (!k->rc && resumed && !sweep_is_regular(path))
+      k->rc = cli_fail(k->ctx, CLI_IO,
+                       "%s: %s says an earlier run saved it, but it is not there (start over with --force)",
+                       path, SPREAD_STATE);
+  }
   if (k->rc) {
     cJSON_Delete(r);
     return 1;
@@ -83,7 +94,7 @@ static int spread_save(spread_sink *k, const char *c, const char *sn, const char
     }
     k->e = ne, k->cap = nc;
   }
-  cJSON *line = sweep_index_line(r, c, sn, rel, k->sorted, k->n, k->job_params);
+  cJSON *line = sweep_index_line(r, c, sn, k->pack ? NULL : rel, k->sorted, k->n, k->job_params);
   cJSON_Delete(r);
   index_entry *e = &k->e[k->ne];
   memset(e, 0, sizeof *e);
@@ -115,6 +126,8 @@ int sweep_run_spread(cli_ctx *ctx, const cmdline_args *a, int k_shards, bool res
   char *state = sweep_dir_file(dir, SPREAD_STATE);
   cli_progress p;
   cli_progress_init(&p, ctx);
+  film_pack pack = {.fd = -1};
+  bool done = false;
   spread_sink sink = {.ctx = ctx,
                       .dir = dir,
                       .layout = l->layout,
@@ -123,12 +136,16 @@ int sweep_run_spread(cli_ctx *ctx, const cmdline_args *a, int k_shards, bool res
                       .n = l->n,
                       .job_params = job_params,
                       .incomplete = cJSON_CreateArray(),
-                      .progress = &p};
+                      .progress = &p,
+                      .pack = l->pack ? &pack : NULL};
   int rc = 0;
   if (!state || !sink.incomplete) {
     rc = cli_fail(ctx, CLI_IO, "out of memory");
     goto out;
   }
+  /* --format dataset: the films delivered, spooled for a rerun (resumed:
+   * those of the run before, read back). */
+  if (l->pack && (rc = pack_open(ctx, &pack, dir, true, resume, sorted, l->n))) goto out;
   /* Written before any film: an interrupted sweep says so (merge lists it
    * as unfinished; a rerun of the command resumes it). */
   if (!resume && (rc = manifest_write(ctx, dir, fingerprint, scene, shard_i, shard_n, l, NULL, false, NULL)))
@@ -185,7 +202,9 @@ int sweep_run_spread(cli_ctx *ctx, const cmdline_args *a, int k_shards, bool res
   char fp2[17];
   sweep_fingerprint(a, res.scene_id, fp2);
   if ((rc = sweep_write_index(ctx, dir, sink.e, sink.ne))) goto out;
-  if (l->dataset && (rc = sweep_write_dataset(ctx, dir, sink.e, sink.ne, true, l->seed))) goto out;
+  if ((l->dataset || l->pack) &&
+      (rc = sweep_write_dataset(ctx, dir, sink.e, sink.ne, true, l->seed, l->pack ? &pack : NULL)))
+    goto out;
   cJSON *inc = cJSON_CreateArray();
   const char *prev = NULL;
   /* incomplete ids sorted, each once */
@@ -202,6 +221,7 @@ int sweep_run_spread(cli_ctx *ctx, const cmdline_args *a, int k_shards, bool res
   cJSON_Delete(inc);
   if (rc) goto out;
   unlink(state);
+  done = true; /* the spool goes with the journal */
   rc = res.failed ? CLI_JOB : CLI_OK;
   if (ctx->json) {
     cJSON *o = cJSON_CreateObject();
@@ -224,6 +244,7 @@ int sweep_run_spread(cli_ctx *ctx, const cmdline_args *a, int k_shards, bool res
         res.resubmitted == 1 ? "" : "s", res.contexts_resubmitted, res.resumed);
   }
 out:
+  pack_close(&pack, done);
   sweep_entries_free(sink.e, sink.ne);
   cJSON_Delete(sink.incomplete);
   free(state);

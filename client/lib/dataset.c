@@ -12,6 +12,7 @@
 #include <unistd.h>
 
 #include "dataset_nc.h"
+#include "image_exr.h"
 #include "internal.h"
 #include "stokes.h"
 
@@ -91,6 +92,11 @@ struct rsw_dataset {
   char *scene, *variant;
   bool has_revision, has_seed;
   uint64_t revision, seed;
+  /* rsw_dataset_add_film_exr: the last angle lists parsed (a sweep's films
+   * share their sensor's), text and values (2 per pixel, n_angles pixels). */
+  char *angle_text[2];
+  double *angle_vals;
+  size_t n_angles;
   char error[1024];
 };
 
@@ -138,6 +144,9 @@ void rsw_dataset_free(rsw_dataset *d) {
   free(d->films);
   free(d->scene);
   free(d->variant);
+  free(d->angle_text[0]);
+  free(d->angle_text[1]);
+  free(d->angle_vals);
   free(d);
 }
 
@@ -226,35 +235,47 @@ static rsw_status same_string(rsw_dataset *d, const cJSON *meta, const char *key
   return RSW_OK;
 }
 
-rsw_status rsw_dataset_add_film(rsw_dataset *d, const char *context, const char *sensor,
-                                const rsw_film *film) {
-  if (!d) return RSW_ERR_INVALID;
-  d->error[0] = '\0';
-  if (!context || !sensor || !*sensor || !film)
-    return ds_fail(d, RSW_ERR_INVALID, "a film needs its context, sensor and film");
+/* A film's samples and labels, however they came (rsw_film, EXR bytes). */
+typedef struct film_in {
+  int width, height, channels; /* channels: every one, planes' too */
+  const char *const *names;
+  const float *data; /* HWC */
+  const cJSON *meta; /* the JSON film meta's members (the angles may be left out: angles) */
+  double *angles;    /* 2 per pixel, taken over; NULL: meta's zenith_deg, azimuth_deg */
+} film_in;
+
+static rsw_status add_film(rsw_dataset *d, const char *context, const char *sensor, const film_in *in) {
+  double *angles_in = in->angles;
+  /* The first film: libnetcdf's start-up now, while a sweep still waits
+   * for renders, not when the dataset is written at its end. */
+  if (!d->nf) nc_dataset_init();
   char what[400];
   snprintf(what, sizeof what, "film %.64s/%.256s", context, sensor);
   size_t ci;
-  if (!find_context(d, context, &ci))
+  if (!find_context(d, context, &ci)) {
+    free(angles_in);
     return ds_fail(d, RSW_ERR_INVALID, "%s: no context '%s' was added (rsw_dataset_add_context)", what,
                    context);
+  }
   if (d->nf == d->capf) {
     size_t cap = d->capf ? 2 * d->capf : 64;
     ds_film *nf = realloc(d->films, cap * sizeof *nf);
-    if (!nf) return ds_fail(d, RSW_ERR_NOMEM, "out of memory");
+    if (!nf) {
+      free(angles_in);
+      return ds_fail(d, RSW_ERR_NOMEM, "out of memory");
+    }
     d->films = nf, d->capf = cap;
   }
-  int all = rsw_film_channels(film);
-  ds_film f = {
-      .context = ci, .width = rsw_film_width(film), .height = rsw_film_height(film), .channels = all};
+  int all = in->channels;
+  ds_film f = {.context = ci, .width = in->width, .height = in->height, .channels = all, .angles = angles_in};
   /* The radiance channels come first; every channel after them is
    * "<plane>.<channel>", the planes one after another, each with as many
    * channels as the radiance. */
   int base = 0;
-  while (base < all && !plane_channel(rsw_film_channel_name(film, base))) base++;
+  while (base < all && !plane_channel(in->names[base])) base++;
   f.channels = base;
   size_t np = (size_t)f.width * (size_t)f.height, ns = np * (size_t)f.channels;
-  cJSON *meta = cJSON_Parse(rsw_film_meta(film));
+  const cJSON *meta = in->meta;
   rsw_status s = RSW_OK;
   if (base < 1 || (all - base) % base != 0 || (all - base) / base > DS_MAX_PLANES)
     s = ds_fail(d, RSW_ERR_INVALID, "%s: channels are not the radiance's followed by whole planes", what);
@@ -263,17 +284,16 @@ rsw_status rsw_dataset_add_film(rsw_dataset *d, const char *context, const char 
   f.data = malloc((ns ? ns : 1) * sizeof *f.data);
   if (!s && (!f.sensor || !f.names || !f.data)) s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");
   for (int i = 0; !s && i < f.channels; i++)
-    if (!(f.names[i] = strdup(rsw_film_channel_name(film, i))))
-      s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");
-  const float *src = rsw_film_data(film);
+    if (!(f.names[i] = strdup(in->names[i]))) s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");
+  const float *src = in->data;
   for (size_t px = 0; !s && px < np; px++)
     memcpy(f.data + px * (size_t)base, src + px * (size_t)all, (size_t)base * sizeof *f.data);
   for (int k = 0; !s && base > 0 && k < (all - base) / base; k++) {
-    const char *first = rsw_film_channel_name(film, base * (k + 1));
+    const char *first = in->names[base * (k + 1)];
     const char *dot = strchr(first, '.');
     size_t len = dot ? (size_t)(dot - first) : 0;
     for (int c = 0; !s && c < base; c++) {
-      const char *nm = rsw_film_channel_name(film, base * (k + 1) + c);
+      const char *nm = in->names[base * (k + 1) + c];
       if (!dot || strncmp(nm, first, len + 1) != 0 || strcmp(nm + len + 1, f.names[c]) != 0)
         s = ds_fail(d, RSW_ERR_INVALID, "%s: channel '%s' does not follow the plane layout", what, nm);
     }
@@ -331,7 +351,7 @@ rsw_status rsw_dataset_add_film(rsw_dataset *d, const char *context, const char 
       f.has_sun = true, f.sun_zenith = sz->valuedouble, f.sun_azimuth = sa->valuedouble;
     const cJSON *zen = cJSON_GetObjectItemCaseSensitive(meta, "zenith_deg");
     const cJSON *az = cJSON_GetObjectItemCaseSensitive(meta, "azimuth_deg");
-    if (!s && (zen || az)) {
+    if (!s && !f.angles && (zen || az)) {
       if (!cJSON_IsArray(zen) || !cJSON_IsArray(az) || (size_t)cJSON_GetArraySize(zen) != np ||
           (size_t)cJSON_GetArraySize(az) != np)
         s = ds_fail(d, RSW_ERR_PARSE, "%s: zenith_deg and azimuth_deg must list one angle per pixel", what);
@@ -351,13 +371,35 @@ rsw_status rsw_dataset_add_film(rsw_dataset *d, const char *context, const char 
       }
     }
   }
-  cJSON_Delete(meta);
   if (s) {
     film_clear(&f);
     return s;
   }
   d->films[d->nf++] = f;
   return RSW_OK;
+}
+
+rsw_status rsw_dataset_add_film(rsw_dataset *d, const char *context, const char *sensor,
+                                const rsw_film *film) {
+  if (!d) return RSW_ERR_INVALID;
+  d->error[0] = '\0';
+  if (!context || !sensor || !*sensor || !film)
+    return ds_fail(d, RSW_ERR_INVALID, "a film needs its context, sensor and film");
+  int nc = rsw_film_channels(film);
+  const char **names = malloc((size_t)(nc > 0 ? nc : 1) * sizeof *names);
+  if (!names) return ds_fail(d, RSW_ERR_NOMEM, "out of memory");
+  for (int i = 0; i < nc; i++) names[i] = rsw_film_channel_name(film, i);
+  cJSON *meta = cJSON_Parse(rsw_film_meta(film));
+  film_in in = {.width = rsw_film_width(film),
+                .height = rsw_film_height(film),
+                .channels = nc,
+                .names = names,
+                .data = rsw_film_data(film),
+                .meta = meta};
+  rsw_status s = add_film(d, context, sensor, &in);
+  cJSON_Delete(meta);
+  free(names);
+  return s;
 }
 
 rsw_status rsw_dataset_add_film_file(rsw_dataset *d, const char *context, const char *sensor,
@@ -401,6 +443,162 @@ rsw_status rsw_dataset_add_film_file(rsw_dataset *d, const char *context, const 
   free(tmp);
   if (!s) s = rsw_dataset_add_film(d, context, sensor, film);
   rsw_film_free(film);
+  return s;
+}
+
+/* n "%.9g" angles joined by ',' into out[2 i + k]; false when text is not
+ * exactly that. strtod, as cJSON reads the JSON meta's numbers. */
+static bool parse_angles(const char *text, size_t n, int k, double *out) {
+  const char *p = text;
+  for (size_t i = 0; i < n; i++) {
+    char *end;
+    if (i && *p++ != ',') return false;
+    out[2 * i + (size_t)k] = strtod(p, &end);
+    if (end == p) return false;
+    p = end;
+  }
+  return *p == '\0';
+}
+
+/* The pixel angles of an EXR film's lists (both present, or neither:
+ * *out NULL): malloc'ed, 2 per pixel. The lists of the film before are
+ * kept with their values, so a sweep's films parse them once. */
+static rsw_status exr_angles(rsw_dataset *d, const char *zen, const char *az, size_t np, const char *what,
+                             double **out) {
+  *out = NULL;
+  if (!zen && !az) return RSW_OK;
+  if (!zen || !az)
+    return ds_fail(d, RSW_ERR_PARSE, "%s: zenith_deg and azimuth_deg must list one angle per pixel", what);
+  double *a = malloc((np ? 2 * np : 1) * sizeof *a);
+  if (!a) return ds_fail(d, RSW_ERR_NOMEM, "out of memory");
+  if (d->angle_vals && d->n_angles == np && strcmp(d->angle_text[0], zen) == 0 &&
+      strcmp(d->angle_text[1], az) == 0) {
+    memcpy(a, d->angle_vals, 2 * np * sizeof *a);
+    *out = a;
+    return RSW_OK;
+  }
+  if (!parse_angles(zen, np, 0, a) || !parse_angles(az, np, 1, a)) {
+    free(a);
+    return ds_fail(d, RSW_ERR_PARSE, "%s: zenith_deg and azimuth_deg must list one angle per pixel", what);
+  }
+  char *t0 = strdup(zen), *t1 = strdup(az);
+  double *v = malloc(2 * np * sizeof *v);
+  if (t0 && t1 && v) { /* else no cache: the next film parses its own */
+    memcpy(v, a, 2 * np * sizeof *v);
+    free(d->angle_text[0]), free(d->angle_text[1]), free(d->angle_vals);
+    d->angle_text[0] = t0, d->angle_text[1] = t1, d->angle_vals = v, d->n_angles = np;
+  } else {
+    free(t0), free(t1), free(v);
+  }
+  *out = a;
+  return RSW_OK;
+}
+
+/* An EXR film's "raysweep:" attribute key, as a number member of meta
+ * (cJSON reads the JSON meta's numbers with strtod, as here). */
+static void meta_number(cJSON *meta, const exr_image *img, const char *attr, const char *key) {
+  const char *v = exr_image_meta(img, attr);
+  char *end;
+  double x = v ? strtod(v, &end) : 0;
+  if (v && end != v && !*end) cJSON_AddNumberToObject(meta, key, x);
+}
+
+rsw_status rsw_dataset_add_film_exr(rsw_dataset *d, const char *context, const char *sensor,
+                                    const void *bytes, size_t len, const char *const *channels,
+                                    int n_channels) {
+  if (!d) return RSW_ERR_INVALID;
+  d->error[0] = '\0';
+  if (!context || !sensor || !*sensor || !bytes)
+    return ds_fail(d, RSW_ERR_INVALID, "a film needs its context, sensor and EXR bytes");
+  char what[400];
+  snprintf(what, sizeof what, "film %.64s/%.256s", context, sensor);
+  exr_image img = {0};
+  rsw_err err = {0};
+  rsw_status s = exr_decode_image(bytes, len, what, &img, &err);
+  if (s) {
+    char buf[1100];
+    return ds_fail(d, s == RSW_ERR_NOMEM ? s : RSW_ERR_PARSE, "%s", rsw_err_format(&err, buf, sizeof buf));
+  }
+  int nc = img.n_channels;
+  size_t np = (size_t)img.width * (size_t)img.height, ns = np * (size_t)nc;
+  const char *const *names = (const char *const *)img.channel_names;
+  float *data = img.data;
+  if (channels) { /* the film's order (the file's is alphabetical) */
+    float *o = NULL;
+    if (n_channels != nc)
+      s = ds_fail(d, RSW_ERR_PARSE, "%s: the EXR has %d channels, not the %d of its result", what, nc,
+                  n_channels);
+    else if (!(o = malloc((ns ? ns : 1) * sizeof *o)))
+      s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");
+    for (int c = 0; !s && c < nc; c++) {
+      int from = exr_image_channel(&img, channels[c]);
+      if (from < 0) {
+        s = ds_fail(d, RSW_ERR_PARSE, "%s: the EXR has no channel '%s'", what,
+                    channels[c] ? channels[c] : "?");
+        break;
+      }
+      for (size_t px = 0; px < np; px++)
+        o[px * (size_t)nc + (size_t)c] = img.data[px * (size_t)nc + (size_t)from];
+    }
+    if (s) {
+      free(o);
+      exr_image_free(&img);
+      return s;
+    }
+    data = o, names = channels;
+  }
+  /* The JSON film writes non-finite samples as null, which reads as NaN:
+   * the same here, so both give one dataset. */
+  for (size_t i = 0; i < ns; i++)
+    if (!isfinite(data[i])) data[i] = NAN;
+  /* The meta members add_film reads, from their attributes (film_io.h). */
+  cJSON *meta = cJSON_CreateObject();
+  double *angles = NULL;
+  if (!meta) s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");
+  static const char *const strs[][2] = {{"raysweep:scene", "scene"},
+                                        {"raysweep:variant", "variant"},
+                                        {"raysweep:plugin_failure", "plugin_failure"}};
+  static const char *const nums[][2] = {{"raysweep:revision", "revision"},
+                                        {"raysweep:spp", "spp"},
+                                        {"raysweep:seed", "seed"},
+                                        {"raysweep:unresolved_rays", "unresolved_rays"},
+                                        {"raysweep:plugin_failures", "plugin_failures"},
+                                        {"raysweep:wavelength_nm", "wavelength"},
+                                        {"raysweep:sun_zenith_deg", "sun_zenith_deg"},
+                                        {"raysweep:sun_azimuth_deg", "sun_azimuth_deg"}};
+  for (size_t i = 0; !s && i < sizeof strs / sizeof strs[0]; i++) {
+    const char *v = exr_image_meta(&img, strs[i][0]);
+    if (v) cJSON_AddStringToObject(meta, strs[i][1], v);
+  }
+  for (size_t i = 0; !s && i < sizeof nums / sizeof nums[0]; i++)
+    meta_number(meta, &img, nums[i][0], nums[i][1]);
+  const char *ir = s ? NULL : exr_image_meta(&img, "raysweep:irradiance");
+  if (ir) {
+    cJSON *arr = cJSON_AddArrayToObject(meta, "irradiance");
+    for (const char *p = ir; arr && *p;) {
+      char *end;
+      double x = strtod(p, &end);
+      if (end == p) break;
+      cJSON_AddItemToArray(arr, cJSON_CreateNumber(x));
+      p = *end == ',' ? end + 1 : end;
+    }
+  }
+  if (!s)
+    s = exr_angles(d, exr_image_meta(&img, "raysweep:zenith_deg"),
+                   exr_image_meta(&img, "raysweep:azimuth_deg"), np, what, &angles);
+  if (!s) {
+    film_in in = {.width = img.width,
+                  .height = img.height,
+                  .channels = nc,
+                  .names = names,
+                  .data = data,
+                  .meta = meta,
+                  .angles = angles};
+    s = add_film(d, context, sensor, &in); /* takes angles over */
+  }
+  cJSON_Delete(meta);
+  if (data != img.data) free(data);
+  exr_image_free(&img);
   return s;
 }
 

@@ -229,6 +229,12 @@ rsw_status rsw_film_save_exr(const rsw_film *f, const char *path) {
       info.irradiance = irradiance;
       info.n_irradiance = ok ? n : 0;
     }
+    /* One directional emitter: its angles, as the daemon's EXR answers
+     * carry them. */
+    const cJSON *sz = cJSON_GetObjectItemCaseSensitive(meta, "sun_zenith_deg");
+    const cJSON *sa = cJSON_GetObjectItemCaseSensitive(meta, "sun_azimuth_deg");
+    if (ok && cJSON_IsNumber(sz) && cJSON_IsNumber(sa))
+      info.has_sun = true, info.sun_zenith = sz->valuedouble, info.sun_azimuth = sa->valuedouble;
     if (!ok) s = RSW_ERR_PARSE;
   } else if (f->meta && strcmp(f->meta, "{}") != 0) {
     s = RSW_ERR_PARSE;

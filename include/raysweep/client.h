@@ -344,6 +344,17 @@ rsw_status rsw_dataset_add_film(rsw_dataset *d, const char *context, const char 
  * `raysweep sweep --format json|nc`). */
 rsw_status rsw_dataset_add_film_file(rsw_dataset *d, const char *context, const char *sensor,
                                      const char *path);
+/* The same from the film's EXR as the daemon encodes it (image/x-exr,
+ * rsw_job_fetch_encoded; bytes borrowed, len of them): its pixels and its
+ * "raysweep:" attributes, angles included, with nothing formatted or
+ * parsed as JSON, so the cheap way to build a sweep's dataset. channels:
+ * the film's channel order (the job result's "channels"; the EXR's own is
+ * alphabetical), n_channels of them, or NULL for the file's order.
+ * Non-finite samples become NaN, as the JSON film has them, so the
+ * dataset is the one the JSON films give, byte for byte. */
+rsw_status rsw_dataset_add_film_exr(rsw_dataset *d, const char *context, const char *sensor,
+                                    const void *bytes, size_t len, const char *const *channels,
+                                    int n_channels);
 /* Write the dataset (through a temp file renamed on success). Errors: the
  * contexts' coords (RSW_ERR_TYPE, RSW_ERR_INVALID, RSW_ERR_MISSING,
  * RSW_ERR_LIMIT, naming "/contexts/<i>/coords/<name>", i in the order

@@ -340,6 +340,8 @@ rsw_status http_film_exr(const svc_film *f, void **bytes_out, size_t *len_out, r
   info.has_revision = true;
   info.revision = f->revision;
   info.context = f->context;
+  info.has_sun = im->has_sun; /* the meta's sun_zenith_deg, sun_azimuth_deg */
+  info.sun_zenith = im->sun_zenith, info.sun_azimuth = im->sun_azimuth;
   float *owned;
   const float *all = film_all(im, &owned);
   if (!all) return rsw_fail(err, RSW_ERR_NOMEM, "film EXR", "out of memory");

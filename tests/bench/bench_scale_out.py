@@ -2,17 +2,21 @@
 """make bench: scaling out behind a load balancer, one JSON line:
   {"bench": "scale_out", "contexts": 200, "one_daemon_contexts_per_s",
    "two_daemons_contexts_per_s", "efficiency", "balancer_added_ms_p50",
-   "balancer_added_ms_p99", ...}
+   "balancer_added_ms_p99", ..., "files": {...}}
 Throughput: `raysweep sweep` of one job of 200 small contexts (32x32 mono
 hdistant film, 16 spp) against one raysweepd (--threads 1), then
 `raysweep sweep --spread 2` through HAProxy (docker/lb/gen.py) in front of
 two raysweepd (--threads 1 each); wall time of the whole command (scene
 push, submission, progress, every film fetched and written), best of 3,
-the two set-ups alternating. The client (film fetches, EXR writes) and
-HAProxy share the machine's cores with the daemons. The films are written
-with `--layout flat` (one file each in the output directory, no directory
-per context: the cheaper layout for the file system, docs/client.md);
-RSW_SCALE_OUT_LAYOUT=dirs measures the default layout instead.
+the two set-ups alternating. The client (film fetches, the output) and
+HAProxy share the machine's cores with the daemons.
+The measured output is `--format dataset`: the sweep as one NetCDF-4
+dataset, DIR/dataset.nc, built from the daemon's EXRs with no file per
+film (docs/client.md). The same sweeps with one EXR file per film
+(`--format exr --layout flat`, the cheaper layout for the file system;
+RSW_SCALE_OUT_LAYOUT=dirs measures the default layout instead) run
+alternately with them and are reported under "files", with the same
+fields, so that what a file per film costs stays in view.
 efficiency = throughput(2) / (2 x throughput(1)); the target is >= 0.9
 on two free cores.
 The client's own cost per film: `client_cpu_ms_per_film`, the CPU time
@@ -86,12 +90,16 @@ def wait_ready(port):
     sys.exit(f"bench_scale_out: nothing ready on port {port}")
 
 
-def sweep(url, out, extra):
+# The outputs measured: the sweep as one dataset, and one EXR file per film.
+OUTPUTS = {"dataset": ["--format", "dataset"], "files": ["--format", "exr", "--layout", LAYOUT]}
+
+
+def sweep(url, out, extra, output="dataset"):
     # 200 contexts: wavelengths 400, 401.5, ..., 698.5 nm, one per path
     # (--bundle 1: each context its own render, so that the sweep's film
     # count and each film's cost are those this bench measures)
     cmd = [os.path.join(bindir, "raysweep"), "--server", url, "-q", "sweep", scene, "--grid",
-           "wavelength=400:698.5:1.5", "--spp", str(SPP), "--bundle", "1", "--layout", LAYOUT, "-o", out] + extra
+           "wavelength=400:698.5:1.5", "--spp", str(SPP), "--bundle", "1", "-o", out] + OUTPUTS[output] + extra
     ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.monotonic()
     r = subprocess.run(cmd, capture_output=True, text=True)
@@ -102,6 +110,8 @@ def sweep(url, out, extra):
     n = sum(1 for _ in open(os.path.join(out, "index.jsonl")))
     if n != N_CONTEXTS:
         sys.exit(f"bench_scale_out: {n} films, wanted {N_CONTEXTS}")
+    if output == "dataset" and sorted(os.listdir(out)) != ["dataset.nc", "index.jsonl", "sweep.json"]:
+        sys.exit(f"bench_scale_out: {out} holds {sorted(os.listdir(out))[:5]}, not the dataset alone")
     cpu = (ru1.ru_utime - ru0.ru_utime) + (ru1.ru_stime - ru0.ru_stime)
     return dt, cpu / n * 1e3
 
@@ -163,44 +173,56 @@ def main():
         wait_ready(lb)
         url2 = f"http://127.0.0.1:{lb}"
         # Warm-up (the scene is pushed, then resident), then the two set-ups
-        # alternately, so a shared machine's load falls on both alike.
+        # alternately, each output in turn, so a shared machine's load falls
+        # on all alike.
         sweep(url1, os.path.join(tmp, "o"), ["--spread", "1"])
         sweep(url2, os.path.join(tmp, "t"), ["--spread", "2"])
-        runs1, runs2, cpu1, cpu2, over1, jobs1, jobs2 = [], [], [], [], [], [], []
+        runs = {o: {"runs1": [], "runs2": [], "cpu1": [], "cpu2": [], "over1": [], "jobs1": [], "jobs2": []}
+                for o in OUTPUTS}
         for i in range(3):
-            dt, cpu = sweep(url1, os.path.join(tmp, f"o{i}"), ["--spread", "1"])
-            runs1.append(dt)
-            cpu1.append(cpu)
-            jobs1.append(last_job_seconds(one))
-            over1.append((dt - jobs1[-1]) / N_CONTEXTS * 1e3)
-            dt, cpu = sweep(url2, os.path.join(tmp, f"t{i}"), ["--spread", "2"])
-            runs2.append(dt)
-            cpu2.append(cpu)
-            jobs2.append(max(last_job_seconds(a), last_job_seconds(b)))
-        t1, t2 = min(runs1), min(runs2)
-        # The renders alone (the jobs' own seconds, the slower replica's for
-        # two): how much of a shortfall is the daemons' share of the cores.
-        j1, j2 = jobs1[runs1.index(t1)], jobs2[runs2.index(t2)]
-        th1, th2 = N_CONTEXTS / t1, N_CONTEXTS / t2
+            for o, r in runs.items():
+                dt, cpu = sweep(url1, os.path.join(tmp, f"o{o}{i}"), ["--spread", "1"], o)
+                r["runs1"].append(dt)
+                r["cpu1"].append(cpu)
+                r["jobs1"].append(last_job_seconds(one))
+                r["over1"].append((dt - r["jobs1"][-1]) / N_CONTEXTS * 1e3)
+                dt, cpu = sweep(url2, os.path.join(tmp, f"t{o}{i}"), ["--spread", "2"], o)
+                r["runs2"].append(dt)
+                r["cpu2"].append(cpu)
+                r["jobs2"].append(max(last_job_seconds(a), last_job_seconds(b)))
+
+        def figures(r):
+            t1, t2 = min(r["runs1"]), min(r["runs2"])
+            # The renders alone (the jobs' own seconds, the slower replica's
+            # for two): how much of a shortfall is the daemons' share of the cores.
+            j1, j2 = r["jobs1"][r["runs1"].index(t1)], r["jobs2"][r["runs2"].index(t2)]
+            th1, th2 = N_CONTEXTS / t1, N_CONTEXTS / t2
+            return {
+                "one_daemon_s": round(t1, 3),
+                "two_daemons_s": round(t2, 3),
+                "one_daemon_runs_s": [round(t, 3) for t in r["runs1"]],
+                "two_daemons_runs_s": [round(t, 3) for t in r["runs2"]],
+                "one_daemon_contexts_per_s": round(th1, 1),
+                "two_daemons_contexts_per_s": round(th2, 1),
+                "efficiency": round(th2 / (2 * th1), 3),
+                "client_cpu_ms_per_film": {"one_daemon": round(median(r["cpu1"]), 3),
+                                           "two_daemons": round(median(r["cpu2"]), 3)},
+                "one_daemon_overhead_ms_per_film": round(median(r["over1"]), 3),
+                "one_daemon_job_s": round(j1, 3),
+                "two_daemons_job_s": round(j2, 3),
+                "render_efficiency": round(j1 / (2 * j2), 3),
+            }
+
         d50, d99, v50, v99 = latencies(a, lb, 2000)
         print(json.dumps({
             "bench": "scale_out",
             "contexts": N_CONTEXTS,
             "spp": SPP,
             "threads_per_daemon": 1,
-            "layout": LAYOUT,
-            "one_daemon_s": round(t1, 3),
-            "two_daemons_s": round(t2, 3),
-            "one_daemon_runs_s": [round(t, 3) for t in runs1],
-            "two_daemons_runs_s": [round(t, 3) for t in runs2],
-            "one_daemon_contexts_per_s": round(th1, 1),
-            "two_daemons_contexts_per_s": round(th2, 1),
-            "efficiency": round(th2 / (2 * th1), 3),
-            "client_cpu_ms_per_film": {"one_daemon": round(median(cpu1), 3), "two_daemons": round(median(cpu2), 3)},
-            "one_daemon_overhead_ms_per_film": round(median(over1), 3),
-            "one_daemon_job_s": round(j1, 3),
-            "two_daemons_job_s": round(j2, 3),
-            "render_efficiency": round(j1 / (2 * j2), 3),
+            "output": "dataset",
+            **figures(runs["dataset"]),
+            # One EXR file per film (--layout LAYOUT), alternating with the above.
+            "files": {"layout": LAYOUT, **figures(runs["files"])},
             "direct_ms_p50": round(d50, 3),
             "direct_ms_p99": round(d99, 3),
             "via_haproxy_ms_p50": round(v50, 3),

@@ -301,6 +301,52 @@ static void test_tiled_read(void) {
   unlink(p);
 }
 
+/* exr_decode_image: the bytes exr_encode_image made read back as the file
+ * exr_read_image reads (pixels, channels, string attributes); every cut of
+ * them short of the whole, and no bytes at all, fail as RSW_ERR_FILE. */
+static void test_decode_from_memory(void) {
+  const int w = 21, h = 19;
+  float *data = malloc(sizeof(float) * w * h * 3);
+  for (int y = 0; y < h; y++)
+    for (int x = 0; x < w; x++)
+      for (int c = 0; c < 3; c++) data[(y * w + x) * 3 + c] = pattern(x, y, c);
+  const char *names[] = {"R", "G", "B"};
+  exr_meta_entry e[] = {{"raysweep:spp", "16"}, {"raysweep:zenith_deg", "1.5,2.25"}};
+  exr_meta meta = {.entries = e, .count = 2};
+  rsw_err err = {0};
+  void *bytes = NULL;
+  size_t len = 0;
+  REQUIRE(exr_encode_image(w, h, 3, names, data, false, &meta, &bytes, &len, &err) == RSW_OK, "encode: %s",
+          err.msg);
+  exr_image img;
+  REQUIRE(exr_decode_image(bytes, len, NULL, &img, &err) == RSW_OK, "decode: %s", err.msg);
+  CHECK(img.width == w && img.height == h && img.n_channels == 3, "%dx%dx%d", img.width, img.height,
+        img.n_channels);
+  CHECK(img.n_channels == 3 && strcmp(img.channel_names[0], "B") == 0, "channels in the file's order");
+  int ir = exr_image_channel(&img, "R"), bad = 0;
+  for (int i = 0; ir >= 0 && i < w * h; i++)
+    if (img.data[i * 3 + ir] != data[i * 3]) bad++;
+  CHECK(ir >= 0 && bad == 0, "%d R samples differ", bad);
+  const char *spp = exr_image_meta(&img, "raysweep:spp"), *zen = exr_image_meta(&img, "raysweep:zenith_deg");
+  CHECK(spp && strcmp(spp, "16") == 0 && zen && strcmp(zen, "1.5,2.25") == 0, "attributes %s %s",
+        spp ? spp : "(none)", zen ? zen : "(none)");
+  exr_image_free(&img);
+  int accepted = 0;
+  for (size_t cut = 0; cut < len; cut += cut < 400 ? 1 : 97) {
+    rsw_err e2 = {0};
+    rsw_status s = exr_decode_image(bytes, cut, "cut", &img, &e2);
+    if (s == RSW_OK) {
+      accepted++;
+      exr_image_free(&img);
+    } else {
+      CHECK(s == RSW_ERR_FILE, "cut at %zu: status %d", cut, (int)s);
+    }
+  }
+  CHECK(accepted == 0, "%d cuts short of the whole file decoded", accepted);
+  free(bytes);
+  free(data);
+}
+
 static void cleanup_dir(void) {
   DIR *d = opendir(tmpdir);
   if (!d) return;
@@ -325,6 +371,7 @@ int main(void) {
   RSW_TEST_RUN(test_bad_arguments);
   RSW_TEST_RUN(test_corrupt_files);
   RSW_TEST_RUN(test_tiled_read);
+  RSW_TEST_RUN(test_decode_from_memory);
   cleanup_dir();
   RSW_TEST_END("test_image_exr");
 }
