@@ -21,6 +21,7 @@
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <sys/types.h>
 
 #include "cli.h"
 
@@ -159,11 +160,12 @@ int sweep_write_dataset(const cli_ctx *ctx, const char *dir, const index_entry *
 
 /* ---- sweep_pack.c ------------------------------------------------------- */
 
-/* One film of --format dataset: the daemon's EXR and the film's channel
- * order (its result's "channels"). */
+/* One film of --format dataset: where the daemon's EXR lies in the pack's
+ * store (its bytes are not kept in memory: the live dataset holds the
+ * film decoded) and the film's channel order (its result's "channels"). */
 typedef struct pack_film {
   char *context, *sensor;
-  void *bytes;
+  off_t off; /* the EXR's first byte in the store */
   size_t len;
   cJSON *channels; /* array of strings, or NULL */
   size_t seq;      /* order kept */
@@ -172,8 +174,13 @@ struct film_pack {
   pack_film *f;
   size_t n, cap;
   bool sorted;
-  int fd;           /* the spool (DIR/FILM_SPOOL) appended to, or -1 */
-  char *spool_path; /* or NULL */
+  /* The store the films' EXRs are appended to, read back only when the
+   * dataset is built again (sweep_write_dataset): with --spread the spool
+   * DIR/FILM_SPOOL, which a rerun reads; else a file of DIR without a
+   * name (gone with the process). */
+  int fd;
+  off_t end;        /* the store's length */
+  char *spool_path; /* the spool's, or NULL */
   /* The dataset the films go into as they arrive (sweep_pack.c): every
    * context of the sweep (items, borrowed) added first. */
   sweep_item **items;
@@ -183,12 +190,13 @@ struct film_pack {
   size_t live_films;
 };
 /* Start a pack for the sweep's contexts (sorted by id, n of them; borrowed
- * until pack_close); spool: append every film to DIR/FILM_SPOOL (created
- * anew, or with resume, its films read first). */
+ * until pack_close); spool: its store is DIR/FILM_SPOOL (created anew, or
+ * with resume, its films read first), else a nameless file in DIR. */
 int pack_open(const cli_ctx *ctx, film_pack *p, const char *dir, bool spool, bool resume, sweep_item **sorted,
               size_t n);
-/* Add film f to d (rsw_dataset_add_film_exr, its channels in order). */
-int pack_film_add_to(rsw_dataset *d, const pack_film *f);
+/* Add film f of p to d (its EXR read back from p's store;
+ * rsw_dataset_add_film_exr, its channels in order). */
+int pack_film_add_to(const film_pack *p, rsw_dataset *d, const pack_film *f);
 /* The live dataset when it holds exactly the films of index entries e
  * (sorted) with their contexts' wavelengths, ready to write; else NULL
  * (build it again from the films). */

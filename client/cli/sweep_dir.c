@@ -329,7 +329,7 @@ int sweep_write_dataset(const cli_ctx *ctx, const char *dir, const index_entry *
     if (!s && pack) {
       const pack_film *f = pack_find(pack, c, sn);
       snprintf(where, sizeof where, "film %s/%s", c, sn);
-      s = f ? pack_film_add_to(d, f) : RSW_ERR_INVALID;
+      s = f ? pack_film_add_to(pack, d, f) : RSW_ERR_INVALID;
     } else if (!s) {
       snprintf(where, sizeof where, "%s/%s", dir, file ? file : "?");
       s = file ? rsw_dataset_add_film_file(d, c, sn, where) : RSW_ERR_INVALID;

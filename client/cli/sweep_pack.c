@@ -1,17 +1,21 @@
-/* sweep --format dataset: the films as the daemon encoded them (EXR), kept
- * in memory until DIR/dataset.nc is built from them, and, with --spread,
- * appended to one spool file, DIR/sweep.films, so that a rerun after a
- * cut-off finds the films an earlier run delivered. No file per film.
+/* sweep --format dataset: the films as the daemon encoded them (EXR),
+ * decoded into the dataset as they arrive and appended to one store file,
+ * which is read back only if the dataset has to be built again. With
+ * --spread the store is the spool, DIR/sweep.films, so that a rerun after
+ * a cut-off finds the films an earlier run delivered; otherwise it is a
+ * file of DIR without a name, gone with the process. No file per film,
+ * and no film's bytes held in memory (the dataset holds it decoded).
  *
  * The films go into the dataset as they arrive (decoded then, while the
  * renders run, not all at the end): every context of the sweep is added
  * first, in index order, with its wavelength and coords; when the sweep
  * ends the dataset is written as it is if what arrived is what the index
  * lists (each context with a film, its wavelength the one added, each film
- * once), and otherwise built again from the films kept, in index order
- * (sweep_write_dataset), as --format nc builds its own: the same file.
+ * once), and otherwise built again from the films in the store, in index
+ * order (sweep_write_dataset), as --format nc builds its own: the same
+ * file.
  *
- * A spool record: "RSF1", the header's length (uint32, little-endian), the
+ * A store record: "RSF1", the header's length (uint32, little-endian), the
  * EXR's length (uint64, little-endian), the header (JSON: {"context",
  * "sensor", "channels"}), the EXR bytes. One write(2) a record; a record
  * cut short (the process killed half-way) is dropped, and the spool cut
@@ -22,6 +26,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "sweep.h"
@@ -39,7 +44,8 @@ static uint64_t get_le(const unsigned char *p, int n) {
   return v;
 }
 
-int pack_film_add_to(rsw_dataset *d, const pack_film *f) {
+/* Add film f to d, its EXR being bytes (len f->len). */
+static int film_add(rsw_dataset *d, const pack_film *f, const void *bytes) {
   const char *names[64];
   int nn = 0;
   const cJSON *ch;
@@ -48,13 +54,28 @@ int pack_film_add_to(rsw_dataset *d, const pack_film *f) {
     nn++;
   }
   if (nn > 64) return RSW_ERR_LIMIT;
-  return rsw_dataset_add_film_exr(d, f->context, f->sensor, f->bytes, f->len, f->channels ? names : NULL, nn);
+  return rsw_dataset_add_film_exr(d, f->context, f->sensor, bytes, f->len, f->channels ? names : NULL, nn);
 }
 
-/* Keep a film (bytes copied; channels: the result's list, copied), and
- * add it to the live dataset. */
+int pack_film_add_to(const film_pack *p, rsw_dataset *d, const pack_film *f) {
+  unsigned char *b = malloc(f->len ? f->len : 1);
+  if (!b) return RSW_ERR_NOMEM;
+  size_t got = 0;
+  while (got < f->len) {
+    ssize_t r = pread(p->fd, b + got, f->len - got, f->off + (off_t)got);
+    if (r < 0 && errno == EINTR) continue;
+    if (r <= 0) break;
+    got += (size_t)r;
+  }
+  int s = got == f->len ? film_add(d, f, b) : RSW_ERR_IO;
+  free(b);
+  return s;
+}
+
+/* Keep a film (its EXR, bytes, at off in the store; channels: the
+ * result's list, copied), and add it to the live dataset. */
 static int pack_keep(film_pack *p, const char *c, const char *sn, const cJSON *channels, const void *bytes,
-                     size_t len) {
+                     size_t len, off_t off) {
   if (p->n == p->cap) {
     size_t cap = p->cap ? 2 * p->cap : 64;
     pack_film *nf = realloc(p->f, cap * sizeof *nf);
@@ -65,20 +86,19 @@ static int pack_keep(film_pack *p, const char *c, const char *sn, const cJSON *c
   memset(f, 0, sizeof *f);
   f->context = strdup(c);
   f->sensor = strdup(sn);
-  f->bytes = malloc(len ? len : 1);
   f->channels = channels ? cJSON_Duplicate(channels, 1) : NULL;
+  f->off = off;
   f->len = len;
   f->seq = p->n;
-  if (!f->context || !f->sensor || !f->bytes || (channels && !f->channels)) {
-    free(f->context), free(f->sensor), free(f->bytes);
+  if (!f->context || !f->sensor || (channels && !f->channels)) {
+    free(f->context), free(f->sensor);
     cJSON_Delete(f->channels);
     return -1;
   }
-  memcpy(f->bytes, bytes, len);
   p->n++;
   p->sorted = false;
   if (p->live && p->live_ok) { /* a film it refuses: the dataset is built again at the end, which says why */
-    if (pack_film_add_to(p->live, f))
+    if (film_add(p->live, f, bytes))
       p->live_ok = false;
     else
       p->live_films++;
@@ -107,7 +127,7 @@ static int spool_read(const cli_ctx *ctx, film_pack *p) {
       break;
     }
     if (pack_keep(p, c, sn, cJSON_GetObjectItemCaseSensitive(h, "channels"), b + at + SPOOL_HEAD + hl,
-                  (size_t)bl))
+                  (size_t)bl, (off_t)(at + SPOOL_HEAD + hl)))
       rc = cli_fail(ctx, CLI_IO, "out of memory");
     cJSON_Delete(h);
     at += SPOOL_HEAD + (size_t)hl + (size_t)bl;
@@ -116,6 +136,7 @@ static int spool_read(const cli_ctx *ctx, film_pack *p) {
   if (!rc && at < len && truncate(p->spool_path, (off_t)at) != 0)
     rc = cli_fail(ctx, CLI_IO, "cannot cut '%s' back to its whole records: %s", p->spool_path,
                   strerror(errno));
+  p->end = (off_t)at;
   return rc;
 }
 
@@ -134,19 +155,32 @@ int pack_open(const cli_ctx *ctx, film_pack *p, const char *dir, bool spool, boo
       free(co);
     }
   }
-  if (!spool) return 0;
+  if (!spool) {
+    /* A file without a name (O_TMPFILE; where the file system has none,
+     * one made and unlinked at once). */
+    p->fd = open(dir, O_TMPFILE | O_RDWR | O_CLOEXEC, 0600);
+    if (p->fd < 0) {
+      char *t = sweep_dir_file(dir, ".sweep.films.XXXXXX");
+      if (!t) return cli_fail(ctx, CLI_IO, "out of memory");
+      p->fd = mkostemp(t, O_CLOEXEC);
+      int e = errno;
+      if (p->fd >= 0) unlink(t);
+      free(t);
+      if (p->fd < 0) return cli_fail(ctx, CLI_IO, "cannot write a film store in '%s': %s", dir, strerror(e));
+    }
+    return 0;
+  }
   if (!(p->spool_path = sweep_dir_file(dir, FILM_SPOOL))) return cli_fail(ctx, CLI_IO, "out of memory");
   int rc = resume ? spool_read(ctx, p) : 0;
   if (rc) return rc;
-  p->fd = open(p->spool_path, O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC | (resume ? 0 : O_TRUNC), 0644);
+  p->fd = open(p->spool_path, O_RDWR | O_CREAT | O_APPEND | O_CLOEXEC | (resume ? 0 : O_TRUNC), 0644);
   if (p->fd < 0) return cli_fail(ctx, CLI_IO, "cannot write '%s': %s", p->spool_path, strerror(errno));
   return 0;
 }
 
 int pack_add(const cli_ctx *ctx, film_pack *p, const char *c, const char *sn, const cJSON *channels,
              const void *bytes, size_t len) {
-  if (pack_keep(p, c, sn, channels, bytes, len)) return cli_fail(ctx, CLI_IO, "out of memory");
-  if (p->fd < 0) return 0;
+  const char *where = p->spool_path ? p->spool_path : "the sweep's film store";
   cJSON *h = cJSON_CreateObject();
   cJSON_AddStringToObject(h, "context", c);
   cJSON_AddStringToObject(h, "sensor", sn);
@@ -174,7 +208,10 @@ int pack_add(const cli_ctx *ctx, film_pack *p, const char *c, const char *sn, co
   }
   int e = errno;
   free(rec);
-  if (done < total) return cli_fail(ctx, CLI_IO, "cannot write '%s': %s", p->spool_path, strerror(e));
+  if (done < total) return cli_fail(ctx, CLI_IO, "cannot write %s: %s", where, strerror(e));
+  off_t off = p->end + (off_t)(SPOOL_HEAD + hl);
+  p->end += (off_t)total;
+  if (pack_keep(p, c, sn, channels, bytes, len, off)) return cli_fail(ctx, CLI_IO, "out of memory");
   return 0;
 }
 
@@ -236,7 +273,6 @@ void pack_close(film_pack *p, bool remove_spool) {
   for (size_t i = 0; i < p->n; i++) {
     free(p->f[i].context);
     free(p->f[i].sensor);
-    free(p->f[i].bytes);
     cJSON_Delete(p->f[i].channels);
   }
   free(p->f);

@@ -58,6 +58,9 @@ cd "$tmp" || finish
 rs "$pa" sweep "$scene" "${grid[@]}" --format nc -o nc 2>"$tmp/err" || bad "--format nc: $(cat "$tmp/err")"
 rs "$pa" sweep "$scene" "${grid[@]}" --format dataset -o ds 2>"$tmp/err" || bad "--format dataset: $(cat "$tmp/err")"
 like_nc "mono, a sun" nc ds
+# The films' store is a file without a name: nothing but the three files.
+got=$(cd ds && ls -A | LC_ALL=C sort | tr '\n' ' ')
+[ "$got" = "dataset.nc index.jsonl sweep.json " ] && ok || bad "ds holds: $got"
 py "the EXR answers carry the sun's angles" '
 import json, sys
 meta = json.load(open(sys.argv[1]))["meta"]
