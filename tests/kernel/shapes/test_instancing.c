@@ -186,7 +186,7 @@ static void test_instanced_equals_separate(void) {
   uint32_t index[3] = {UINT32_MAX, UINT32_MAX, UINT32_MAX};
   for (size_t i = 0; i < s3->n_shapes; i++)
     for (int l = 0; l < 3; l++) {
-      char id[4];
+      char id[16];
       snprintf(id, sizeof id, "c%d", l);
       if (s3->shapes[i]->base.id && strcmp(s3->shapes[i]->base.id, id) == 0) index[l] = (uint32_t)i;
     }
