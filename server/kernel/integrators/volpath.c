@@ -921,15 +921,15 @@ static __attribute__((noinline)) bool flight_pages(const scene *sc, const medium
   for (int p = 0; p < NP; p++) {
     if (p != h) {
       pdf[p] = tr[p];
-      if (scattered) {
+      if (scattered && lm) { /* (the page's layer's coefficients alone) */
+        color sgt;
+        media_layers_sigmas(p ? &lm->Lp[p - 1] : &lm->L, k, &sgt, &ss[p]);
+        pdf[p] = col_mul(sgt, tr[p]);
+      } else if (scattered) {
         medium_interaction mp = *mi;
-        if (lm) {
-          media_layers_fill(p ? &lm->Lp[p - 1] : &lm->L, k, &mp);
-        } else {
-          rsw_page = p;
-          m->ops->coefficients(m, &mp);
-          rsw_page = 0;
-        }
+        rsw_page = p;
+        m->ops->coefficients(m, &mp);
+        rsw_page = 0;
         ss[p] = mp.sigma_s;
         pdf[p] = col_mul(mp.sigma_t, tr[p]);
       }

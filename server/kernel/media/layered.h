@@ -127,14 +127,25 @@ static inline double media_layers_tau(const media_layers *L, int c, double z0, d
   return fabs(media_layers_cum_in(L, c, k1, z1) - media_layers_cum_in(L, c, k0, z0)) / fabs(dz);
 }
 
-static inline void media_layers_fill(const media_layers *L, int k, medium_interaction *mi) {
+/* Layer k's sigma_t and sigma_s (what media_layers_fill writes), returned
+ * rather than stored into a medium_interaction: a bundle's pages read them
+ * at once, where whole-colour loads of a struct's just-stored channels
+ * waited on the store buffer. */
+static inline void media_layers_sigmas(const media_layers *L, int k, color *sigma_t, color *sigma_s) {
   const pw_layer *y = &L->lay[k];
   for (int c = 0; c < 3; c++) {
     double s = y->sig[c];
-    mi->sigma_t.c[c] = s;
-    mi->sigma_s.c[c] = s * (L->gray_alb ? y->alb0 : L->alb[3 * k + c]); /* (the line already read) */
-    mi->sigma_n.c[c] = rsw_fmax(mi->majorant.c[c] - s, 0.0);
+    sigma_t->c[c] = s;
+    sigma_s->c[c] = s * (L->gray_alb ? y->alb0 : L->alb[3 * k + c]); /* (the line already read) */
   }
+}
+
+static inline void media_layers_fill(const media_layers *L, int k, medium_interaction *mi) {
+  color st, ss;
+  media_layers_sigmas(L, k, &st, &ss);
+  mi->sigma_t = st;
+  mi->sigma_s = ss;
+  for (int c = 0; c < 3; c++) mi->sigma_n.c[c] = rsw_fmax(mi->majorant.c[c] - st.c[c], 0.0);
 }
 
 static inline void media_layers_coefficients(const media_layers *L, medium_interaction *mi) {
