@@ -706,16 +706,18 @@ static void start_shadow(const scene *sc, vlane *l, const surface_interaction *s
 }
 
 /* A bundle of pages: medium m's transmittance along r over [mint, maxt]
- * at pages p0..pages-1 into tr[p]. A layered medium works out the levels
+ * at pages p0..pages-1 but page skip (-1: none; tr[skip] left as it was)
+ * into tr[p]. A layered medium works out the levels
  * (and so the layers crossed) once for every page; another answers its
  * transmittance op at each page (rsw_page). */
 static __attribute__((noinline)) void tr_pages(const medium *m, const ray3 *r, double mint, double maxt,
-                                               int p0, int pages, color *tr) {
+                                               int p0, int pages, int skip, color *tr) {
   if (m->ops == &layered_medium_ops) {
-    layered_transmittance_pages((const layered_medium *)m, r, mint, maxt, p0, pages, tr);
+    layered_transmittance_pages((const layered_medium *)m, r, mint, maxt, p0, pages, skip, tr);
     return;
   }
   for (int p = p0; p < pages; p++) {
+    if (p == skip) continue;
     rsw_page = p;
     tr[p] = m->ops->transmittance(m, r, mint, maxt);
   }
@@ -748,7 +750,7 @@ static inline bool shadow_one_box(const scene *sc, const one_box *ob, vlane *l, 
     const int NP = sc->pages;
     if (in) {
       color trp[RENDER_MAX_PAGES];
-      tr_pages(ob->m, &seg, mint, maxt, 1, NP, trp);
+      tr_pages(ob->m, &seg, mint, maxt, 1, NP, -1, trp);
       for (int p = 1; p < NP; p++) pg->str[p - 1] = col_mul(pg->str[p - 1], trp[p]);
     }
     for (int p = 1; p < NP; p++)
@@ -808,7 +810,7 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
         double mint, maxt;
         color tr[RENDER_MAX_PAGES];
         if (media_clip(sc, l->sm, &seg, w, &mint, &maxt)) {
-          tr_pages(l->sm, &seg, mint, maxt, 1, NP, tr);
+          tr_pages(l->sm, &seg, mint, maxt, 1, NP, -1, tr);
           for (int p = 1; p < NP; p++) pg->str[p - 1] = col_mul(pg->str[p - 1], tr[p]);
         }
       }
@@ -913,9 +915,7 @@ static __attribute__((noinline)) bool flight_pages(const scene *sc, const medium
   bool scattered = isfinite(mi->t);
   double tend = scattered ? mi->t : maxt, pc = 0.0;
   rsw_page = 0;
-  color trh = tr[h];
-  tr_pages(m, seg, mint, tend, 0, NP, tr);
-  tr[h] = trh;
+  tr_pages(m, seg, mint, tend, 0, NP, h, tr); /* (the hero page's, sample_real's) */
   const layered_medium *lm = m->ops == &layered_medium_ops ? (const layered_medium *)m : NULL;
   int k = scattered && lm ? media_layer_of(&lm->L, media_layers_z(&lm->L, mi->p)) : 0;
   for (int p = 0; p < NP; p++) {
@@ -1119,7 +1119,7 @@ PIECE enum lane_outcome lane_flight(const volpath_integrator *vp, const scene *s
         l->T = col_mul(l->T, segment_tr(vp, sc, m, &seg, seg.tmin, seg.tmax, w, st));
         if (pg) { /* pages 1.. (exact) */
           color tr[RENDER_MAX_PAGES];
-          tr_pages(m, &seg, mint, maxt, 1, NP, tr);
+          tr_pages(m, &seg, mint, maxt, 1, NP, -1, tr);
           for (int p = 1; p < NP; p++) pg->T[p - 1] = col_mul(pg->T[p - 1], tr[p]);
         }
       } else if (pg && analytic_in(vp, m)) {
