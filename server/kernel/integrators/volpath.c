@@ -743,16 +743,16 @@ static inline bool shadow_one_box(const scene *sc, const one_box *ob, vlane *l, 
   ray3 seg = {l->sp0, l->sray.d, 0.0, tf};
   double mint, maxt;
   bool in = media_clip_at(sc, ob->m, &seg, &bw, ob->nbi, &mint, &maxt);
-  color tr = in ? media_layers_transmittance(layers_page0(ob->m), &seg, mint, maxt) : col1(1.0);
-  l->str = col_mul(l->str, tr);
+  color trp[RENDER_MAX_PAGES];
+  const int NP = sc->pages;
+  if (pg && in) /* (every page's in one batch, page 0's too: shadow_step's) */
+    tr_pages(ob->m, &seg, mint, maxt, 0, NP, -1, trp);
+  else
+    trp[0] = in ? media_layers_transmittance(layers_page0(ob->m), &seg, mint, maxt) : col1(1.0);
+  l->str = col_mul(l->str, trp[0]);
   l->L = col_add(l->L, col_mul(l->sval, l->str));
   if (pg) {
-    const int NP = sc->pages;
-    if (in) {
-      color trp[RENDER_MAX_PAGES];
-      tr_pages(ob->m, &seg, mint, maxt, 1, NP, -1, trp);
-      for (int p = 1; p < NP; p++) pg->str[p - 1] = col_mul(pg->str[p - 1], trp[p]);
-    }
+    for (int p = 1; in && p < NP; p++) pg->str[p - 1] = col_mul(pg->str[p - 1], trp[p]);
     for (int p = 1; p < NP; p++)
       pg->L[p - 1] = col_add(pg->L[p - 1], col_mul(pg->sval[p - 1], pg->str[p - 1]));
   }
@@ -789,12 +789,15 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
       bool cross = sc->null_boxes.on && box_walk_next(sc, &bw, tend, &next);
       double t1 = cross ? bw.tc : tend;
       const box_walk *w = sc->null_boxes.on ? &bw : NULL;
+      /* A bundle through a layered medium: page 0's transmittance in the
+       * pages' batch below (shadow_one_box's numbers). */
+      bool batch0 = pg && l->sm && t1 > t0 && vp->analytic && l->sm->ops == &layered_medium_ops;
       if (pg && l->sm && t1 > t0 && !exact_in(vp, l->sm)) { /* every page tracked at once */
         color tr[RENDER_MAX_PAGES];
         segment_tr_pages(sc, l->sm, &mr, t0, t1, w, st, NP, tr);
         l->str = col_mul(l->str, tr[0]);
         for (int p = 1; p < NP; p++) pg->str[p - 1] = col_mul(pg->str[p - 1], tr[p]);
-      } else if (l->sm && t1 > t0 && vp->analytic && l->sm->ops == &layered_medium_ops) {
+      } else if (l->sm && t1 > t0 && vp->analytic && l->sm->ops == &layered_medium_ops && !batch0) {
         /* segment_tr's exact case, inline */
         ray3 seg = {mr.o, mr.d, t0, t1};
         double mint, maxt;
@@ -802,15 +805,16 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
                        ? media_layers_transmittance(layers_page0(l->sm), &seg, mint, maxt)
                        : col1(1.0);
         l->str = col_mul(l->str, tr);
-      } else if (l->sm && t1 > t0) {
+      } else if (l->sm && t1 > t0 && !batch0) {
         l->str = col_mul(l->str, segment_tr(vp, sc, l->sm, &mr, t0, t1, w, st));
       }
-      if (pg && l->sm && t1 > t0 && exact_in(vp, l->sm)) { /* pages 1.. (exact) */
+      if (pg && l->sm && t1 > t0 && exact_in(vp, l->sm)) { /* pages 1.. (exact; 0.. with batch0) */
         ray3 seg = {mr.o, mr.d, t0, t1};
         double mint, maxt;
         color tr[RENDER_MAX_PAGES];
         if (media_clip(sc, l->sm, &seg, w, &mint, &maxt)) {
-          tr_pages(l->sm, &seg, mint, maxt, 1, NP, -1, tr);
+          tr_pages(l->sm, &seg, mint, maxt, batch0 ? 0 : 1, NP, -1, tr);
+          if (batch0) l->str = col_mul(l->str, tr[0]);
           for (int p = 1; p < NP; p++) pg->str[p - 1] = col_mul(pg->str[p - 1], tr[p]);
         }
       }
