@@ -18,7 +18,9 @@
  * Source: eradiate/mitsuba3 src/eradiate_plugins/bsdfs/rpv.cpp;
  * Rahman, Pinty, Verstraete (1993) JGR 98(D11); docs/kernel-conventions.md#rpv. */
 #include <math.h>
+#include <stdint.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "../scene/plugin_def.h"
 #include "../simd/simd.h"
@@ -86,18 +88,56 @@ static bool grey(color c) {
  * f_r cos / (cos / pi). Kept apart from the cosine so that k = 1, g = 0,
  * rho_c = 1 gives exactly diffuse's numbers (M = F = H = 1 exactly).
  * Grey parameters (every mono render) take one channel's work. */
+/* Do n doubles at a and b have the same bits? */
+static inline bool same_bits(const double *a, const double *b, int n) {
+  for (int i = 0; i < n; i++) {
+    uint64_t x, y;
+    memcpy(&x, &a[i], sizeof x);
+    memcpy(&y, &b[i], sizeof y);
+    if (x != y) return false;
+  }
+  return true;
+}
+
+/* This thread's last evaluation: its directions and geometry, and for grey
+ * parameters (rho_0, k, g, rho_c) the parameters and the value. A bundle
+ * of pages asks every page at the same directions (pages.h's
+ * bsdf_eval_pages, after the sample at one page), where the parameters
+ * are most often the same constants: the geometry once, and grey pages
+ * like the last one no pow at all. Keyed bit for bit, so a page's value
+ * is the one it would compute. */
+static _Thread_local struct {
+  bool ok;       /* dir and t set */
+  double dir[6]; /* wi, wo */
+  rpv_geom t;
+  double prm[4]; /* the grey parameters of v */
+  double v;      /* rpv_brf_geom's value (NAN: none) */
+} rpv_last = {.v = NAN};
+
 static color rpv_value(const rpv_bsdf *r, const surface_interaction *si, vec3 wo) {
   vec3 wi = si->wi;
   color rho_0 = tex_eval(r->rho_0, si), k = tex_eval(r->k, si), g = tex_eval(r->g, si);
   color rho_c = r->rho_c == r->rho_0 ? rho_0 : tex_eval(r->rho_c, si);
-  rpv_geom t = rpv_geometry(wi, wo);
+  const double dir[6] = {wi.x, wi.y, wi.z, wo.x, wo.y, wo.z};
+  if (!rpv_last.ok || !same_bits(dir, rpv_last.dir, 6)) {
+    rpv_last.ok = true;
+    memcpy(rpv_last.dir, dir, sizeof dir);
+    rpv_last.t = rpv_geometry(wi, wo);
+    rpv_last.v = NAN;
+  }
+  const rpv_geom *t = &rpv_last.t;
   if (grey(rho_0) && grey(k) && grey(g) && grey(rho_c)) {
-    double v = rpv_brf_geom(rho_0.c[0], k.c[0], g.c[0], rho_c.c[0], &t);
+    const double prm[4] = {rho_0.c[0], k.c[0], g.c[0], rho_c.c[0]};
+    if (isnan(rpv_last.v) || !same_bits(prm, rpv_last.prm, 4)) {
+      memcpy(rpv_last.prm, prm, sizeof prm);
+      rpv_last.v = rpv_brf_geom(prm[0], prm[1], prm[2], prm[3], t);
+    }
+    double v = rpv_last.v;
     return col1(isfinite(v) ? v : 0.0);
   }
   color out;
   for (int i = 0; i < 3; i++) {
-    double v = rpv_brf_geom(rho_0.c[i], k.c[i], g.c[i], rho_c.c[i], &t);
+    double v = rpv_brf_geom(rho_0.c[i], k.c[i], g.c[i], rho_c.c[i], t);
     out.c[i] = isfinite(v) ? v : 0.0;
   }
   return out;

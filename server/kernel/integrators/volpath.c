@@ -706,16 +706,18 @@ static void start_shadow(const scene *sc, vlane *l, const surface_interaction *s
 }
 
 /* A bundle of pages: medium m's transmittance along r over [mint, maxt]
- * at pages p0..pages-1 into tr[p]. A layered medium works out the levels
+ * at pages p0..pages-1 but page skip (-1: none; tr[skip] left as it was)
+ * into tr[p]. A layered medium works out the levels
  * (and so the layers crossed) once for every page; another answers its
  * transmittance op at each page (rsw_page). */
 static __attribute__((noinline)) void tr_pages(const medium *m, const ray3 *r, double mint, double maxt,
-                                               int p0, int pages, color *tr) {
+                                               int p0, int pages, int skip, color *tr) {
   if (m->ops == &layered_medium_ops) {
-    layered_transmittance_pages((const layered_medium *)m, r, mint, maxt, p0, pages, tr);
+    layered_transmittance_pages((const layered_medium *)m, r, mint, maxt, p0, pages, skip, tr);
     return;
   }
   for (int p = p0; p < pages; p++) {
+    if (p == skip) continue;
     rsw_page = p;
     tr[p] = m->ops->transmittance(m, r, mint, maxt);
   }
@@ -741,16 +743,16 @@ static inline bool shadow_one_box(const scene *sc, const one_box *ob, vlane *l, 
   ray3 seg = {l->sp0, l->sray.d, 0.0, tf};
   double mint, maxt;
   bool in = media_clip_at(sc, ob->m, &seg, &bw, ob->nbi, &mint, &maxt);
-  color tr = in ? media_layers_transmittance(layers_page0(ob->m), &seg, mint, maxt) : col1(1.0);
-  l->str = col_mul(l->str, tr);
+  color trp[RENDER_MAX_PAGES];
+  const int NP = sc->pages;
+  if (pg && in) /* (every page's in one batch, page 0's too: shadow_step's) */
+    tr_pages(ob->m, &seg, mint, maxt, 0, NP, -1, trp);
+  else
+    trp[0] = in ? media_layers_transmittance(layers_page0(ob->m), &seg, mint, maxt) : col1(1.0);
+  l->str = col_mul(l->str, trp[0]);
   l->L = col_add(l->L, col_mul(l->sval, l->str));
   if (pg) {
-    const int NP = sc->pages;
-    if (in) {
-      color trp[RENDER_MAX_PAGES];
-      tr_pages(ob->m, &seg, mint, maxt, 1, NP, trp);
-      for (int p = 1; p < NP; p++) pg->str[p - 1] = col_mul(pg->str[p - 1], trp[p]);
-    }
+    for (int p = 1; in && p < NP; p++) pg->str[p - 1] = col_mul(pg->str[p - 1], trp[p]);
     for (int p = 1; p < NP; p++)
       pg->L[p - 1] = col_add(pg->L[p - 1], col_mul(pg->sval[p - 1], pg->str[p - 1]));
   }
@@ -787,12 +789,15 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
       bool cross = sc->null_boxes.on && box_walk_next(sc, &bw, tend, &next);
       double t1 = cross ? bw.tc : tend;
       const box_walk *w = sc->null_boxes.on ? &bw : NULL;
+      /* A bundle through a layered medium: page 0's transmittance in the
+       * pages' batch below (shadow_one_box's numbers). */
+      bool batch0 = pg && l->sm && t1 > t0 && vp->analytic && l->sm->ops == &layered_medium_ops;
       if (pg && l->sm && t1 > t0 && !exact_in(vp, l->sm)) { /* every page tracked at once */
         color tr[RENDER_MAX_PAGES];
         segment_tr_pages(sc, l->sm, &mr, t0, t1, w, st, NP, tr);
         l->str = col_mul(l->str, tr[0]);
         for (int p = 1; p < NP; p++) pg->str[p - 1] = col_mul(pg->str[p - 1], tr[p]);
-      } else if (l->sm && t1 > t0 && vp->analytic && l->sm->ops == &layered_medium_ops) {
+      } else if (l->sm && t1 > t0 && vp->analytic && l->sm->ops == &layered_medium_ops && !batch0) {
         /* segment_tr's exact case, inline */
         ray3 seg = {mr.o, mr.d, t0, t1};
         double mint, maxt;
@@ -800,15 +805,16 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
                        ? media_layers_transmittance(layers_page0(l->sm), &seg, mint, maxt)
                        : col1(1.0);
         l->str = col_mul(l->str, tr);
-      } else if (l->sm && t1 > t0) {
+      } else if (l->sm && t1 > t0 && !batch0) {
         l->str = col_mul(l->str, segment_tr(vp, sc, l->sm, &mr, t0, t1, w, st));
       }
-      if (pg && l->sm && t1 > t0 && exact_in(vp, l->sm)) { /* pages 1.. (exact) */
+      if (pg && l->sm && t1 > t0 && exact_in(vp, l->sm)) { /* pages 1.. (exact; 0.. with batch0) */
         ray3 seg = {mr.o, mr.d, t0, t1};
         double mint, maxt;
         color tr[RENDER_MAX_PAGES];
         if (media_clip(sc, l->sm, &seg, w, &mint, &maxt)) {
-          tr_pages(l->sm, &seg, mint, maxt, 1, NP, tr);
+          tr_pages(l->sm, &seg, mint, maxt, batch0 ? 0 : 1, NP, -1, tr);
+          if (batch0) l->str = col_mul(l->str, tr[0]);
           for (int p = 1; p < NP; p++) pg->str[p - 1] = col_mul(pg->str[p - 1], tr[p]);
         }
       }
@@ -913,23 +919,21 @@ static __attribute__((noinline)) bool flight_pages(const scene *sc, const medium
   bool scattered = isfinite(mi->t);
   double tend = scattered ? mi->t : maxt, pc = 0.0;
   rsw_page = 0;
-  color trh = tr[h];
-  tr_pages(m, seg, mint, tend, 0, NP, tr);
-  tr[h] = trh;
+  tr_pages(m, seg, mint, tend, 0, NP, h, tr); /* (the hero page's, sample_real's) */
   const layered_medium *lm = m->ops == &layered_medium_ops ? (const layered_medium *)m : NULL;
   int k = scattered && lm ? media_layer_of(&lm->L, media_layers_z(&lm->L, mi->p)) : 0;
   for (int p = 0; p < NP; p++) {
     if (p != h) {
       pdf[p] = tr[p];
-      if (scattered) {
+      if (scattered && lm) { /* (the page's layer's coefficients alone) */
+        color sgt;
+        media_layers_sigmas(p ? &lm->Lp[p - 1] : &lm->L, k, &sgt, &ss[p]);
+        pdf[p] = col_mul(sgt, tr[p]);
+      } else if (scattered) {
         medium_interaction mp = *mi;
-        if (lm) {
-          media_layers_fill(p ? &lm->Lp[p - 1] : &lm->L, k, &mp);
-        } else {
-          rsw_page = p;
-          m->ops->coefficients(m, &mp);
-          rsw_page = 0;
-        }
+        rsw_page = p;
+        m->ops->coefficients(m, &mp);
+        rsw_page = 0;
         ss[p] = mp.sigma_s;
         pdf[p] = col_mul(mp.sigma_t, tr[p]);
       }
@@ -1119,7 +1123,7 @@ PIECE enum lane_outcome lane_flight(const volpath_integrator *vp, const scene *s
         l->T = col_mul(l->T, segment_tr(vp, sc, m, &seg, seg.tmin, seg.tmax, w, st));
         if (pg) { /* pages 1.. (exact) */
           color tr[RENDER_MAX_PAGES];
-          tr_pages(m, &seg, mint, maxt, 1, NP, tr);
+          tr_pages(m, &seg, mint, maxt, 1, NP, -1, tr);
           for (int p = 1; p < NP; p++) pg->T[p - 1] = col_mul(pg->T[p - 1], tr[p]);
         }
       } else if (pg && analytic_in(vp, m)) {

@@ -127,14 +127,25 @@ static inline double media_layers_tau(const media_layers *L, int c, double z0, d
   return fabs(media_layers_cum_in(L, c, k1, z1) - media_layers_cum_in(L, c, k0, z0)) / fabs(dz);
 }
 
-static inline void media_layers_fill(const media_layers *L, int k, medium_interaction *mi) {
+/* Layer k's sigma_t and sigma_s (what media_layers_fill writes), returned
+ * rather than stored into a medium_interaction: a bundle's pages read them
+ * at once, where whole-colour loads of a struct's just-stored channels
+ * waited on the store buffer. */
+static inline void media_layers_sigmas(const media_layers *L, int k, color *sigma_t, color *sigma_s) {
   const pw_layer *y = &L->lay[k];
   for (int c = 0; c < 3; c++) {
     double s = y->sig[c];
-    mi->sigma_t.c[c] = s;
-    mi->sigma_s.c[c] = s * (L->gray_alb ? y->alb0 : L->alb[3 * k + c]); /* (the line already read) */
-    mi->sigma_n.c[c] = rsw_fmax(mi->majorant.c[c] - s, 0.0);
+    sigma_t->c[c] = s;
+    sigma_s->c[c] = s * (L->gray_alb ? y->alb0 : L->alb[3 * k + c]); /* (the line already read) */
   }
+}
+
+static inline void media_layers_fill(const media_layers *L, int k, medium_interaction *mi) {
+  color st, ss;
+  media_layers_sigmas(L, k, &st, &ss);
+  mi->sigma_t = st;
+  mi->sigma_s = ss;
+  for (int c = 0; c < 3; c++) mi->sigma_n.c[c] = rsw_fmax(mi->majorant.c[c] - st.c[c], 0.0);
 }
 
 static inline void media_layers_coefficients(const media_layers *L, medium_interaction *mi) {
@@ -396,7 +407,8 @@ static inline const media_layers *layered_layers(const medium *m) {
 }
 
 /* A bundle of pages: the transmittance over [mint, maxt] of r at pages
- * p0..pages-1 into tr[p], the levels (and so the layers crossed) worked
+ * p0..pages-1 but page skip (-1: none; its tr[skip] left as it was) into
+ * tr[p], the levels (and so the layers crossed) worked
  * out once, and the pages' exps in one batch (core/vexp.c: libm's
  * exp in vector lanes, the same bits as libm's on a machine whose libm
  * uses its FMA variant, as Debian 12's on x86-64 with FMA; within 1 ulp
@@ -404,7 +416,7 @@ static inline const media_layers *layered_layers(const medium *m) {
  * media_layers_transmittance, bit for bit where libm's bits are met.
  * One libm call per channel was a fifth of a bundled atmosphere. */
 static inline void layered_transmittance_pages(const layered_medium *lm, const ray3 *r, double mint,
-                                               double maxt, int p0, int pages, color *tr) {
+                                               double maxt, int p0, int pages, int skip, color *tr) {
   const media_layers *L = &lm->L;
   double oz = media_layers_z(L, r->o), dz = media_layers_dz(L, r->d);
   double z0 = oz + mint * dz, z1 = oz + maxt * dz;
@@ -416,6 +428,7 @@ static inline void layered_transmittance_pages(const layered_medium *lm, const r
   int n = 0;
   for (int p = p0; p < pages; p++) {
     const media_layers *Lp = p ? &lm->Lp[p - 1] : L;
+    if (p == skip) continue;
     for (int c = 0; c < 3; c++) x[n++] = -media_layers_tau(Lp, c, z0, z1, k0, k1, dz, maxt - mint);
   }
   int nv = (n + 7) / 8 * 8;
@@ -423,7 +436,7 @@ static inline void layered_transmittance_pages(const layered_medium *lm, const r
   vexp_batch(rsw_isa_get(), nv, x, e);
   n = 0;
   for (int p = p0; p < pages; p++)
-    for (int c = 0; c < 3; c++) tr[p].c[c] = e[n++];
+    for (int c = 0; c < 3 && p != skip; c++) tr[p].c[c] = e[n++];
 }
 
 #endif

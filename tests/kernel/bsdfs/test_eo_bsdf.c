@@ -155,6 +155,49 @@ static void test_rpv_closed_form(void) {
   rpv_free(&l);
 }
 
+/* rpv.c keeps the thread's last geometry and grey value (a bundle's pages
+ * ask at the same directions): interleaved evaluations of BSDFs with other
+ * parameters (grey and coloured) at the same and other directions must
+ * each give the bits of an evaluation after an unrelated one (a value
+ * kept for other parameters, or a geometry for other directions, fails). */
+static void test_rpv_last_value(void) {
+  rpv_case a = rpv_make(0.183, 0.78, -0.1, -1.0), b = rpv_make(0.183, 0.9, -0.1, -1.0);
+  rpv_case c = rpv_make(0.2, 0.78, 0.3, 0.5);
+  spectrum s3 = {.kind = SPEC_RGB, .rgb = {0.05, 0.1, 0.3}};
+  texture *r3 = uniform_texture_new(&s3, "t");
+  bsdf *col3 = rpv_new(r3, a.k, a.g, NULL);
+  REQUIRE(a.b && b.b && c.b && r3 && col3, "rpv_new");
+  const bsdf *bs[4] = {a.b, b.b, c.b, col3};
+  vec3 wi[2] = {tb_dir_deg(30, 0), tb_dir_deg(55, 120)};
+  vec3 wo[2] = {tb_dir_deg(40, 200), tb_dir_deg(10, 80)};
+  color want[4][2][2];
+  surface_interaction far = tb_si_with(tb_dir_deg(70, 300));
+  for (int i = 0; i < 4; i++)
+    for (int j = 0; j < 2; j++)
+      for (int k = 0; k < 2; k++) {
+        bs[i]->ops->eval(bs[i], &far, tb_dir_deg(5, 5)); /* (another geometry first) */
+        surface_interaction si = tb_si_with(wi[j]);
+        want[i][j][k] = bs[i]->ops->eval(bs[i], &si, wo[k]);
+      }
+  pcg32 rng;
+  pcg32_seed(&rng, 7, 3);
+  int same = 0;
+  for (int n = 0; n < 400; n++) {
+    int i = (int)(pcg32_next_double(&rng) * 4), j = (int)(pcg32_next_double(&rng) * 2);
+    int k = (int)(pcg32_next_double(&rng) * 2);
+    surface_interaction si = tb_si_with(wi[j]);
+    color got = bs[i]->ops->eval(bs[i], &si, wo[k]);
+    for (int ch = 0; ch < 3; ch++) same += memcmp(&got.c[ch], &want[i][j][k].c[ch], sizeof(double)) == 0;
+  }
+  CHECK(same == 1200, "rpv: every interleaved evaluation bit for bit a fresh one's (%d of 1200)", same);
+  CHECK(want[0][0][0].c[0] != want[1][0][0].c[0], "rpv: k 0.78 and 0.9 differ");
+  tb_free_bsdf(col3);
+  tb_free_tex(r3);
+  rpv_free(&a);
+  rpv_free(&b);
+  rpv_free(&c);
+}
+
 /* F's x^1.5 is x sqrt(x) in rpv.c (a sixth of pow's time): with wi at the
  * pole, cos(Theta) = cos(theta_o) exactly and k = 1, rho_c = 1 make M = H =
  * 1, so rpv_fr is rho_0 F / pi; F must stay within 4 ulp of the pow form
@@ -354,6 +397,7 @@ int main(void) {
   RSW_TEST_RUN(test_rpv_chi2);
   RSW_TEST_RUN(test_rpv_reciprocity);
   RSW_TEST_RUN(test_rpv_closed_form);
+  RSW_TEST_RUN(test_rpv_last_value);
   RSW_TEST_RUN(test_rpv_phase_term_ulp);
   RSW_TEST_RUN(test_bilambertian);
   RSW_TEST_RUN(test_hapke_chi2);
