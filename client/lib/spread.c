@@ -662,11 +662,11 @@ typedef struct early {
   pthread_t th;
   pthread_mutex_t mu;
   pthread_cond_t cv;
-  size_t pending;        /* renders reported since the last pass */
-  size_t seen, total;    /* renders reported, and the job's (0: not known yet) */
-  size_t max_batch;      /* renders per pass while many are left */
-  bool finish;           /* the wait is over: stop */
-  rsw_status status;     /* a pass that failed, and whether the replica is lost */
+  size_t pending;     /* renders reported since the last pass */
+  size_t seen, total; /* renders reported, and the job's (0: not known yet) */
+  size_t max_batch;   /* renders per pass while many are left */
+  bool finish;        /* the wait is over: stop */
+  rsw_status status;  /* a pass that failed, and whether the replica is lost */
   bool lost;
   atomic_int failed;
 } early;
@@ -674,7 +674,7 @@ typedef struct early {
 /* Jobs of fewer contexts are handed over at their end only. */
 #define EARLY_MIN_CONTEXTS 8
 /* The fewest renders a pass waits for. */
-#define EARLY_MIN_BATCH 4
+#define EARLY_MIN_BATCH    4
 
 /* Renders the next pass waits for: an eighth of the job's, or half of
  * those left near the end (caller holds e->mu). */
