@@ -266,7 +266,7 @@ typedef struct film_in {
   int width, height, channels; /* channels: every one, planes' too */
   const char *const *names;
   const float *data; /* HWC */
-  const cJSON *meta;  /* the JSON film meta's members (the angles may be left out: angles) */
+  const cJSON *meta; /* the JSON film meta's members (the angles may be left out: angles) */
   ds_angles *angles; /* taken over (a reference); NULL: meta's zenith_deg, azimuth_deg */
 } film_in;
 
