@@ -325,7 +325,8 @@ static void fail_shard(shard *sh, rsw_client *c, rsw_status s, failure f, const 
  * did not succeed (or the film was delivered by an earlier run). */
 typedef struct fetched {
   rsw_film *film;
-  void *bytes;
+  const void *bytes; /* encoded: owned, or borrowed from a batch's answer (hand_results) */
+  void *owned;       /* bytes when owned (free()), else NULL */
   size_t len;
 } fetched;
 
@@ -341,7 +342,7 @@ static int hand_over(spread *sp, const char *id, const char *sensor, const char 
 
 /* Hand every result of one context to the caller and journal it: rs, the
  * job's nr results of context `id`, in the job's order; pre (or NULL: each
- * fetched here) their films fetched already, taken over. */
+ * fetched here) their films fetched already (fetch_ahead), moved out of pre. */
 static int deliver_context(shard *sh, rsw_client *c, const cJSON *const *rs, size_t nr, const char *id,
                            size_t cidx, fetched *pre, rsw_status *st_out) {
   spread *sp = sh->sp;
@@ -368,13 +369,14 @@ static int deliver_context(shard *sh, rsw_client *c, const cJSON *const *rs, siz
     fetched *f = &films[nf++];
     memset(f, 0, sizeof *f);
     if (pre && pre[ri].bytes && state && sensor && strcmp(state, "succeeded") == 0) {
-      *f = pre[ri]; /* fetched with others (fetch_batch): ours now */
+      *f = pre[ri]; /* fetched with others (fetch_ahead), borrowed from their answer */
       memset(&pre[ri], 0, sizeof pre[ri]);
     } else if (state && sensor && strcmp(state, "succeeded") == 0) {
       rsw_status s =
           sp->o->film_media_type
-              ? rsw_job_fetch_encoded(c, sh->job, id, sensor, sp->o->film_media_type, &f->bytes, &f->len)
+              ? rsw_job_fetch_encoded(c, sh->job, id, sensor, sp->o->film_media_type, &f->owned, &f->len)
               : rsw_job_fetch(c, sh->job, id, sensor, &f->film);
+      f->bytes = f->owned;
       if (s) {
         *st_out = s;
         break;
@@ -408,7 +410,7 @@ static int deliver_context(shard *sh, rsw_client *c, const cJSON *const *rs, siz
   }
   for (size_t i = 0; i < nf; i++) {
     rsw_film_free(films[i].film);
-    free(films[i].bytes);
+    free(films[i].owned);
   }
   free(films);
   cJSON_Delete(mine);
@@ -509,12 +511,13 @@ static bool to_deliver(const spread *sp, const ctx_result *by, size_t a, size_t 
 /* Fetch in one request (POST .../results:fetch) the films of the contexts
  * handed over next, from by[a] on: as many whole contexts as hold at most
  * CLIENT_FETCH_MAX films and about CLIENT_FETCH_BYTES. pre[i] gets result
- * by[i]'s film; returns the end of the results looked at (by index), a
- * when nothing was fetched (not EXR or NPY, a daemon without the route,
- * any failure: deliver_context then fetches them one by one, and says
- * what failed). */
+ * by[i]'s film, borrowed from *answer (the whole answer, owned: the films
+ * are not copied out of it); returns the end of the results looked at
+ * (by index), a when nothing was fetched (not EXR or NPY, a daemon without
+ * the route, any failure: deliver_context then fetches them one by one,
+ * and says what failed). */
 static size_t fetch_ahead(shard *sh, rsw_client *c, const ctx_result *by, size_t nres, size_t a, bool early,
-                          bool cancelled, fetched *pre) {
+                          bool cancelled, fetched *pre, char **answer) {
   spread *sp = sh->sp;
   const char *mt = sp->o->film_media_type;
   if (!mt || (strcmp(mt, "image/x-exr") != 0 && strcmp(mt, "application/x-npy") != 0)) return a;
@@ -547,9 +550,9 @@ static size_t fetch_ahead(shard *sh, rsw_client *c, const ctx_result *by, size_t
   }
   pthread_mutex_unlock(&sp->lock);
   if (n < 2) return a; /* one film: its GET is as cheap */
-  void *bytes[CLIENT_FETCH_MAX];
+  const void *bytes[CLIENT_FETCH_MAX];
   size_t len[CLIENT_FETCH_MAX];
-  if (client_job_fetch_encoded_many(c, sh->job, n, ctx, sen, mt, bytes, len)) return a;
+  if (client_job_fetch_encoded_many(c, sh->job, n, ctx, sen, mt, answer, bytes, len)) return a;
   for (size_t k = 0; k < n; k++) pre[at[k]].bytes = bytes[k], pre[at[k]].len = len[k];
   return end;
 }
@@ -596,9 +599,11 @@ static rsw_status hand_results(shard *sh, rsw_client *c, char *text, bool early,
   }
   qsort(by, nres, sizeof *by, cmp_ctx_result);
   /* Films fetched ahead, several contexts' in one request (fetch_ahead),
-   * by index in by; pre_end: the results looked at so far. */
+   * by index in by, borrowed from answer (the request's, for the results
+   * from ans_from on); pre_end: the results looked at so far. */
   fetched *pre = calloc(nres ? nres : 1, sizeof *pre);
-  size_t pre_end = 0;
+  size_t pre_end = 0, ans_from = 0;
+  char *answer = NULL;
   bool batches = pre != NULL;
   rsw_status s = RSW_OK;
   for (size_t a = 0, b; a < nres && !s; a = b) {
@@ -610,7 +615,12 @@ static rsw_status hand_results(shard *sh, rsw_client *c, char *text, bool early,
     if (!go) continue;
     const char *id = client_contexts_id(sp->x, ci);
     if (batches && a >= pre_end) {
-      pre_end = fetch_ahead(sh, c, by, nres, a, early, cancelled, pre);
+      /* The answer before: its films delivered (or passed over) by now. */
+      for (size_t i = ans_from; i < pre_end; i++) pre[i].bytes = NULL, pre[i].len = 0;
+      free(answer);
+      answer = NULL;
+      ans_from = a;
+      pre_end = fetch_ahead(sh, c, by, nres, a, early, cancelled, pre, &answer);
       batches = pre_end > a; /* a failure: one by one from here on */
     }
     rsw_status fs;
@@ -628,7 +638,7 @@ static rsw_status hand_results(shard *sh, rsw_client *c, char *text, bool early,
       s = fs;
     }
   }
-  for (size_t i = 0; pre && i < nres; i++) free(pre[i].bytes);
+  free(answer);
   free(pre);
   free(by);
   free(run);
