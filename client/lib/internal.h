@@ -75,6 +75,14 @@ rsw_status client_job_fetch_encoded_many(rsw_client *c, const char *job_id, size
                                          const char *media_type, char **answer_out, const void **bytes_out,
                                          size_t *len_out);
 
+/* rsw_spread_run's passes while a job runs (spread.c): the renders the
+ * next pass waits for, of a job of total renders (0: not known yet), seen
+ * reported so far, pending of them since the last pass: max_batch while
+ * many are left, then half of those left when the last pass started, and
+ * never fewer than CLIENT_EARLY_MIN_BATCH. */
+#define CLIENT_EARLY_MIN_BATCH 4
+size_t client_early_batch(size_t max_batch, size_t total, size_t seen, size_t pending);
+
 /* ---- HTTP (http.c) ---------------------------------------------------------- */
 
 typedef struct http_req {

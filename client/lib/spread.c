@@ -662,7 +662,7 @@ static rsw_status hand_results(shard *sh, rsw_client *c, char *text, bool early,
  * the whole job, which the daemon prints and the client parses, and one
  * POST results:fetch), so passes are few while many renders are left:
  * one per an eighth of the job's renders; then, as the end nears, one per
- * half of what is left (at least EARLY_MIN_BATCH), so that the last pass
+ * half of what is left (client_early_batch), so that the last pass
  * finds few films to fetch. (One per sixteenth throughout cost the sweep
  * bench's client ~13% more CPU; one per eighth throughout left ~12 films
  * to the last pass, ~4 ms more at the end.) */
@@ -683,15 +683,16 @@ typedef struct early {
 
 /* Jobs of fewer contexts are handed over at their end only. */
 #define EARLY_MIN_CONTEXTS 8
-/* The fewest renders a pass waits for. */
-#define EARLY_MIN_BATCH    4
 
-/* Renders the next pass waits for: an eighth of the job's, or half of
- * those left near the end (caller holds e->mu). */
+size_t client_early_batch(size_t max_batch, size_t total, size_t seen, size_t pending) {
+  size_t before = seen - pending, left = total > before ? total - before : 0, b = max_batch;
+  if (total && left / 2 < b) b = left / 2;
+  return b > CLIENT_EARLY_MIN_BATCH ? b : CLIENT_EARLY_MIN_BATCH;
+}
+
+/* (caller holds e->mu) */
 static size_t early_batch(const early *e) {
-  size_t left = e->total > e->seen ? e->total - e->seen + e->pending : 0, b = e->max_batch;
-  if (e->total && left / 2 < b) b = left / 2;
-  return b > EARLY_MIN_BATCH ? b : EARLY_MIN_BATCH;
+  return client_early_batch(e->max_batch, e->total, e->seen, e->pending);
 }
 
 /* A render reported (done of total: the job's renders, 0 not known). */
