@@ -538,7 +538,8 @@ static rsw_status plan_sensors(writer *w, rsw_err *err) {
     if (x->angles) {
       if (!s->any_angles)
         s->any_angles = true;
-      else if (memcmp(x->angles, sh->angles ? sh->angles : x->angles,
+      else if (x->angles != sh->angles && /* (a client's films share one block) */
+               memcmp(x->angles, sh->angles ? sh->angles : x->angles,
                       (size_t)x->width * (size_t)x->height * 2 * sizeof(double)) != 0)
         s->same_angles = false;
       if (!sh->angles) s->same_angles = false;

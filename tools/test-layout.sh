@@ -87,6 +87,7 @@ test_http_limits        http
 test_media_http         http
 test_oom                http
 test_client             client
+test_spread             client
 test_chi2               validation
 test_eo_reference       validation
 test_radiometry         validation

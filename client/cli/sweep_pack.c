@@ -17,7 +17,7 @@
  *
  * A store record: "RSF1", the header's length (uint32, little-endian), the
  * EXR's length (uint64, little-endian), the header (JSON: {"context",
- * "sensor", "channels"}), the EXR bytes. One write(2) a record; a record
+ * "sensor", "channels"}), the EXR bytes. One writev(2) a record; a record
  * cut short (the process killed half-way) is dropped, and the spool cut
  * back to the records before it, when a rerun reads it. */
 #include <cjson/cJSON.h>
@@ -27,6 +27,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <sys/uio.h>
 #include <unistd.h>
 
 #include "sweep.h"
@@ -187,27 +188,27 @@ int pack_add(const cli_ctx *ctx, film_pack *p, const char *c, const char *sn, co
   if (channels) cJSON_AddItemToObject(h, "channels", cJSON_Duplicate(channels, 1));
   char *ht = cJSON_PrintUnformatted(h);
   cJSON_Delete(h);
-  size_t hl = ht ? strlen(ht) : 0, total = SPOOL_HEAD + hl + len;
-  unsigned char *rec = ht ? malloc(total) : NULL;
-  if (!rec) {
-    free(ht);
-    return cli_fail(ctx, CLI_IO, "out of memory");
-  }
-  memcpy(rec, spool_magic, 4);
-  put_le(rec + 4, hl, 4);
-  put_le(rec + 8, len, 8);
-  memcpy(rec + SPOOL_HEAD, ht, hl);
-  memcpy(rec + SPOOL_HEAD + hl, bytes, len);
-  free(ht);
+  if (!ht) return cli_fail(ctx, CLI_IO, "out of memory");
+  size_t hl = strlen(ht), total = SPOOL_HEAD + hl + len;
+  unsigned char head[SPOOL_HEAD];
+  memcpy(head, spool_magic, 4);
+  put_le(head + 4, hl, 4);
+  put_le(head + 8, len, 8);
+  /* The record in one writev(2), the film's bytes not copied. */
+  struct iovec iov[3] = {{head, SPOOL_HEAD}, {ht, hl}, {(void *)bytes, len}};
+  int at = 0;
   size_t done = 0;
   while (done < total) {
-    ssize_t w = write(p->fd, rec + done, total - done);
+    ssize_t w = writev(p->fd, iov + at, 3 - at);
     if (w < 0 && errno == EINTR) continue;
     if (w <= 0) break;
     done += (size_t)w;
+    size_t k = (size_t)w; /* past what was written: a short write goes on where it stopped */
+    while (at < 3 && k >= iov[at].iov_len) k -= iov[at++].iov_len;
+    if (at < 3) iov[at].iov_base = (char *)iov[at].iov_base + k, iov[at].iov_len -= k;
   }
   int e = errno;
-  free(rec);
+  free(ht);
   if (done < total) return cli_fail(ctx, CLI_IO, "cannot write %s: %s", where, strerror(e));
   off_t off = p->end + (off_t)(SPOOL_HEAD + hl);
   p->end += (off_t)total;

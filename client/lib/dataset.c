@@ -58,13 +58,38 @@ rsw_status rsw_job_fetch_dataset(rsw_client *c, const char *job_id, int partial,
 /* ---- rsw_dataset -------------------------------------------------------------------- */
 
 #define DS_MAX_PLANES 3
+
+/* A film's pixel angles in degrees, 2 per pixel (zenith, azimuth), one
+ * block for every film whose lists are the same (a sweep's films share
+ * their sensor's: one copy, not one a film): refs counts the films and
+ * the dataset's cache that hold it. */
+typedef struct ds_angles {
+  size_t refs;
+  double v[];
+} ds_angles;
+
+static ds_angles *angles_new(size_t np) {
+  ds_angles *a = malloc(sizeof *a + (np ? 2 * np : 1) * sizeof(double));
+  if (a) a->refs = 1;
+  return a;
+}
+
+static ds_angles *angles_ref(ds_angles *a) {
+  if (a) a->refs++;
+  return a;
+}
+
+static void angles_unref(ds_angles *a) {
+  if (a && !--a->refs) free(a);
+}
+
 typedef struct ds_film {
   size_t context;
   char *sensor;
   int width, height, channels;
   char **names;
   float *data;
-  double *angles;
+  ds_angles *angles; /* NULL: none */
   uint32_t spp;
   uint64_t seed, unresolved;
   /* Planes after the radiance channels ("brf.Y", "radiance_stderr.R"):
@@ -93,9 +118,10 @@ struct rsw_dataset {
   bool has_revision, has_seed;
   uint64_t revision, seed;
   /* rsw_dataset_add_film_exr: the last angle lists parsed (a sweep's films
-   * share their sensor's), text and values (2 per pixel, n_angles pixels). */
+   * share their sensor's), text and values (n_angles pixels), the values
+   * shared with the films that have them. */
   char *angle_text[2];
-  double *angle_vals;
+  ds_angles *angle_vals;
   size_t n_angles;
   char error[1024];
 };
@@ -123,7 +149,7 @@ static void film_clear(ds_film *f) {
   for (int i = 0; f->names && i < f->channels; i++) free(f->names[i]);
   free(f->names);
   free(f->data);
-  free(f->angles);
+  angles_unref(f->angles);
   free(f->plugin_failure);
   for (int k = 0; k < f->n_planes; k++) {
     free(f->plane_names[k]);
@@ -146,7 +172,7 @@ void rsw_dataset_free(rsw_dataset *d) {
   free(d->variant);
   free(d->angle_text[0]);
   free(d->angle_text[1]);
-  free(d->angle_vals);
+  angles_unref(d->angle_vals);
   free(d);
 }
 
@@ -241,11 +267,11 @@ typedef struct film_in {
   const char *const *names;
   const float *data; /* HWC */
   const cJSON *meta; /* the JSON film meta's members (the angles may be left out: angles) */
-  double *angles;    /* 2 per pixel, taken over; NULL: meta's zenith_deg, azimuth_deg */
+  ds_angles *angles; /* taken over (a reference); NULL: meta's zenith_deg, azimuth_deg */
 } film_in;
 
 static rsw_status add_film(rsw_dataset *d, const char *context, const char *sensor, const film_in *in) {
-  double *angles_in = in->angles;
+  ds_angles *angles_in = in->angles;
   /* The first film: libnetcdf's start-up now, while a sweep still waits
    * for renders, not when the dataset is written at its end. */
   if (!d->nf) nc_dataset_init();
@@ -253,7 +279,7 @@ static rsw_status add_film(rsw_dataset *d, const char *context, const char *sens
   snprintf(what, sizeof what, "film %.64s/%.256s", context, sensor);
   size_t ci;
   if (!find_context(d, context, &ci)) {
-    free(angles_in);
+    angles_unref(angles_in);
     return ds_fail(d, RSW_ERR_INVALID, "%s: no context '%s' was added (rsw_dataset_add_context)", what,
                    context);
   }
@@ -261,7 +287,7 @@ static rsw_status add_film(rsw_dataset *d, const char *context, const char *sens
     size_t cap = d->capf ? 2 * d->capf : 64;
     ds_film *nf = realloc(d->films, cap * sizeof *nf);
     if (!nf) {
-      free(angles_in);
+      angles_unref(angles_in);
       return ds_fail(d, RSW_ERR_NOMEM, "out of memory");
     }
     d->films = nf, d->capf = cap;
@@ -355,7 +381,7 @@ static rsw_status add_film(rsw_dataset *d, const char *context, const char *sens
       if (!cJSON_IsArray(zen) || !cJSON_IsArray(az) || (size_t)cJSON_GetArraySize(zen) != np ||
           (size_t)cJSON_GetArraySize(az) != np)
         s = ds_fail(d, RSW_ERR_PARSE, "%s: zenith_deg and azimuth_deg must list one angle per pixel", what);
-      else if (!(f.angles = malloc(2 * np * sizeof *f.angles)))
+      else if (!(f.angles = angles_new(np)))
         s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");
       const cJSON *arr[2] = {zen, az};
       for (int k = 0; !s && k < 2; k++) {
@@ -366,7 +392,7 @@ static rsw_status add_film(rsw_dataset *d, const char *context, const char *sens
             s = ds_fail(d, RSW_ERR_PARSE, "%s: an angle is not a number", what);
             break;
           }
-          f.angles[2 * i++ + (size_t)k] = it->valuedouble;
+          f.angles->v[2 * i++ + (size_t)k] = it->valuedouble;
         }
       }
     }
@@ -461,34 +487,32 @@ static bool parse_angles(const char *text, size_t n, int k, double *out) {
 }
 
 /* The pixel angles of an EXR film's lists (both present, or neither:
- * *out NULL): malloc'ed, 2 per pixel. The lists of the film before are
- * kept with their values, so a sweep's films parse them once. */
+ * *out NULL): a reference for the caller. The lists of the film before
+ * are kept with their values, so a sweep's films parse them once and
+ * share one block of them. */
 static rsw_status exr_angles(rsw_dataset *d, const char *zen, const char *az, size_t np, const char *what,
-                             double **out) {
+                             ds_angles **out) {
   *out = NULL;
   if (!zen && !az) return RSW_OK;
   if (!zen || !az)
     return ds_fail(d, RSW_ERR_PARSE, "%s: zenith_deg and azimuth_deg must list one angle per pixel", what);
-  double *a = malloc((np ? 2 * np : 1) * sizeof *a);
-  if (!a) return ds_fail(d, RSW_ERR_NOMEM, "out of memory");
   if (d->angle_vals && d->n_angles == np && strcmp(d->angle_text[0], zen) == 0 &&
       strcmp(d->angle_text[1], az) == 0) {
-    memcpy(a, d->angle_vals, 2 * np * sizeof *a);
-    *out = a;
+    *out = angles_ref(d->angle_vals);
     return RSW_OK;
   }
-  if (!parse_angles(zen, np, 0, a) || !parse_angles(az, np, 1, a)) {
-    free(a);
+  ds_angles *a = angles_new(np);
+  if (!a) return ds_fail(d, RSW_ERR_NOMEM, "out of memory");
+  if (!parse_angles(zen, np, 0, a->v) || !parse_angles(az, np, 1, a->v)) {
+    angles_unref(a);
     return ds_fail(d, RSW_ERR_PARSE, "%s: zenith_deg and azimuth_deg must list one angle per pixel", what);
   }
   char *t0 = strdup(zen), *t1 = strdup(az);
-  double *v = malloc(2 * np * sizeof *v);
-  if (t0 && t1 && v) { /* else no cache: the next film parses its own */
-    memcpy(v, a, 2 * np * sizeof *v);
-    free(d->angle_text[0]), free(d->angle_text[1]), free(d->angle_vals);
-    d->angle_text[0] = t0, d->angle_text[1] = t1, d->angle_vals = v, d->n_angles = np;
+  if (t0 && t1) { /* else no cache: the next film parses its own */
+    free(d->angle_text[0]), free(d->angle_text[1]), angles_unref(d->angle_vals);
+    d->angle_text[0] = t0, d->angle_text[1] = t1, d->angle_vals = angles_ref(a), d->n_angles = np;
   } else {
-    free(t0), free(t1), free(v);
+    free(t0), free(t1);
   }
   *out = a;
   return RSW_OK;
@@ -553,7 +577,7 @@ rsw_status rsw_dataset_add_film_exr(rsw_dataset *d, const char *context, const c
     if (!isfinite(data[i])) data[i] = NAN;
   /* The meta members add_film reads, from their attributes (film_io.h). */
   cJSON *meta = cJSON_CreateObject();
-  double *angles = NULL;
+  ds_angles *angles = NULL;
   if (!meta) s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");
   static const char *const strs[][2] = {{"raysweep:scene", "scene"},
                                         {"raysweep:variant", "variant"},
@@ -625,7 +649,7 @@ rsw_status rsw_dataset_write(rsw_dataset *d, const char *path) {
                   .spp = f->spp,
                   .seed = f->seed,
                   .unresolved_rays = f->unresolved,
-                  .angles = f->angles,
+                  .angles = f->angles ? f->angles->v : NULL,
                   .vars = f->vars,
                   .n_vars = 1 + (size_t)f->n_planes,
                   .has_irradiance = f->has_irradiance,

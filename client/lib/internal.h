@@ -62,15 +62,26 @@ rsw_status client_status_for_http(long http_status);
 /* A media type rsw_job_fetch_encoded takes (jobs.c). */
 bool client_film_media_type_known(const char *media_type);
 /* Several films of a job in one request (POST /v1/jobs/{id}/results:fetch,
- * multipart/mixed): bytes_out[i] (malloc'ed) and len_out[i] for
- * (contexts[i], sensors[i]), each what rsw_job_fetch_encoded returns;
- * media_type image/x-exr or application/x-npy; 1 <= n <= CLIENT_FETCH_MAX.
- * All or nothing (on failure every bytes_out[i] is NULL). jobs.c. */
+ * multipart/mixed): bytes_out[i] and len_out[i] for (contexts[i],
+ * sensors[i]), each what rsw_job_fetch_encoded returns, borrowed from
+ * *answer_out (the whole answer, owned: free(); the films are not copied
+ * out of it); media_type image/x-exr or application/x-npy; 1 <= n <=
+ * CLIENT_FETCH_MAX. All or nothing (on failure *answer_out and every
+ * bytes_out[i] are NULL). jobs.c. */
 #define CLIENT_FETCH_MAX   32
 #define CLIENT_FETCH_BYTES (16.0 * 1024 * 1024) /* a batch's films, about (the daemon takes 64 MiB) */
 rsw_status client_job_fetch_encoded_many(rsw_client *c, const char *job_id, size_t n,
                                          const char *const *contexts, const char *const *sensors,
-                                         const char *media_type, void **bytes_out, size_t *len_out);
+                                         const char *media_type, char **answer_out, const void **bytes_out,
+                                         size_t *len_out);
+
+/* rsw_spread_run's passes while a job runs (spread.c): the renders the
+ * next pass waits for, of a job of total renders (0: not known yet), seen
+ * reported so far, pending of them since the last pass: max_batch while
+ * many are left, then half of those left when the last pass started, and
+ * never fewer than CLIENT_EARLY_MIN_BATCH. */
+#define CLIENT_EARLY_MIN_BATCH 4
+size_t client_early_batch(size_t max_batch, size_t total, size_t seen, size_t pending);
 
 /* ---- HTTP (http.c) ---------------------------------------------------------- */
 

@@ -539,8 +539,10 @@ static bool next_part(const char **p, const char *end, const char *dash_boundary
 
 rsw_status client_job_fetch_encoded_many(rsw_client *c, const char *job_id, size_t n,
                                          const char *const *contexts, const char *const *sensors,
-                                         const char *media_type, void **bytes_out, size_t *len_out) {
+                                         const char *media_type, char **answer_out, const void **bytes_out,
+                                         size_t *len_out) {
   size_t e = film_encoding(media_type);
+  *answer_out = NULL;
   if (e == N_FILM_ENCODINGS || n == 0 || n > CLIENT_FETCH_MAX)
     return client_fail(c, RSW_ERR_INVALID, "fetch: bad batch");
   for (size_t i = 0; i < n; i++) bytes_out[i] = NULL, len_out[i] = 0;
@@ -598,19 +600,17 @@ rsw_status client_job_fetch_encoded_many(rsw_client *c, const char *job_id, size
                       contexts[i], sensors[i]);
       break;
     }
-    if (!(bytes_out[i] = malloc(len ? len : 1))) {
-      s = client_fail(c, RSW_ERR_NOMEM, "out of memory");
-      break;
-    }
-    memcpy(bytes_out[i], bytes, len);
-    len_out[i] = len;
+    bytes_out[i] = bytes, len_out[i] = len;
   }
   if (!s && ((size_t)(end - p) < bl + 2 || memcmp(p, dash, bl) != 0 || memcmp(p + bl, "--", 2) != 0))
     s = client_fail(c, RSW_ERR_PARSE, "POST %s: the multipart answer does not end as it should", path);
-  if (s)
-    for (size_t i = 0; i < n; i++) free(bytes_out[i]), bytes_out[i] = NULL, len_out[i] = 0;
-  http_resp_free(&r);
-  return s;
+  if (s) {
+    for (size_t i = 0; i < n; i++) bytes_out[i] = NULL, len_out[i] = 0;
+    http_resp_free(&r);
+    return s;
+  }
+  *answer_out = r.body; /* the parts' bytes: taken over */
+  return RSW_OK;
 }
 
 /* ---- wait ---------------------------------------------------------------------------- */

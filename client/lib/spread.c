@@ -249,7 +249,7 @@ static rsw_status choose_keys(spread *sp, rsw_client *c) {
 
 /* ---- progress over every shard ---- */
 
-static void early_note(struct early *e);
+static void early_note(struct early *e, size_t total);
 static bool early_failed(struct early *e);
 
 static int on_progress(void *user, const char *context, const char *sensor, size_t done, size_t total,
@@ -258,7 +258,7 @@ static int on_progress(void *user, const char *context, const char *sensor, size
   spread *sp = sh->sp;
   if (atomic_load(&sp->stop) || (sh->early && early_failed(sh->early))) return 1;
   if (!context) return 0; /* the end-of-job call: the results decide */
-  if (sh->early) early_note(sh->early);
+  if (sh->early) early_note(sh->early, total);
   pthread_mutex_lock(&sp->lock);
   if (done > sh->cur_done) sh->cur_done = done;
   if (total) sh->cur_total = total;
@@ -325,7 +325,8 @@ static void fail_shard(shard *sh, rsw_client *c, rsw_status s, failure f, const 
  * did not succeed (or the film was delivered by an earlier run). */
 typedef struct fetched {
   rsw_film *film;
-  void *bytes;
+  const void *bytes; /* encoded: owned, or borrowed from a batch's answer (hand_results) */
+  void *owned;       /* bytes when owned (free()), else NULL */
   size_t len;
 } fetched;
 
@@ -341,7 +342,7 @@ static int hand_over(spread *sp, const char *id, const char *sensor, const char 
 
 /* Hand every result of one context to the caller and journal it: rs, the
  * job's nr results of context `id`, in the job's order; pre (or NULL: each
- * fetched here) their films fetched already, taken over. */
+ * fetched here) their films fetched already (fetch_ahead), moved out of pre. */
 static int deliver_context(shard *sh, rsw_client *c, const cJSON *const *rs, size_t nr, const char *id,
                            size_t cidx, fetched *pre, rsw_status *st_out) {
   spread *sp = sh->sp;
@@ -368,13 +369,14 @@ static int deliver_context(shard *sh, rsw_client *c, const cJSON *const *rs, siz
     fetched *f = &films[nf++];
     memset(f, 0, sizeof *f);
     if (pre && pre[ri].bytes && state && sensor && strcmp(state, "succeeded") == 0) {
-      *f = pre[ri]; /* fetched with others (fetch_batch): ours now */
+      *f = pre[ri]; /* fetched with others (fetch_ahead), borrowed from their answer */
       memset(&pre[ri], 0, sizeof pre[ri]);
     } else if (state && sensor && strcmp(state, "succeeded") == 0) {
       rsw_status s =
           sp->o->film_media_type
-              ? rsw_job_fetch_encoded(c, sh->job, id, sensor, sp->o->film_media_type, &f->bytes, &f->len)
+              ? rsw_job_fetch_encoded(c, sh->job, id, sensor, sp->o->film_media_type, &f->owned, &f->len)
               : rsw_job_fetch(c, sh->job, id, sensor, &f->film);
+      f->bytes = f->owned;
       if (s) {
         *st_out = s;
         break;
@@ -408,7 +410,7 @@ static int deliver_context(shard *sh, rsw_client *c, const cJSON *const *rs, siz
   }
   for (size_t i = 0; i < nf; i++) {
     rsw_film_free(films[i].film);
-    free(films[i].bytes);
+    free(films[i].owned);
   }
   free(films);
   cJSON_Delete(mine);
@@ -509,12 +511,13 @@ static bool to_deliver(const spread *sp, const ctx_result *by, size_t a, size_t 
 /* Fetch in one request (POST .../results:fetch) the films of the contexts
  * handed over next, from by[a] on: as many whole contexts as hold at most
  * CLIENT_FETCH_MAX films and about CLIENT_FETCH_BYTES. pre[i] gets result
- * by[i]'s film; returns the end of the results looked at (by index), a
- * when nothing was fetched (not EXR or NPY, a daemon without the route,
- * any failure: deliver_context then fetches them one by one, and says
- * what failed). */
+ * by[i]'s film, borrowed from *answer (the whole answer, owned: the films
+ * are not copied out of it); returns the end of the results looked at
+ * (by index), a when nothing was fetched (not EXR or NPY, a daemon without
+ * the route, any failure: deliver_context then fetches them one by one,
+ * and says what failed). */
 static size_t fetch_ahead(shard *sh, rsw_client *c, const ctx_result *by, size_t nres, size_t a, bool early,
-                          bool cancelled, fetched *pre) {
+                          bool cancelled, fetched *pre, char **answer) {
   spread *sp = sh->sp;
   const char *mt = sp->o->film_media_type;
   if (!mt || (strcmp(mt, "image/x-exr") != 0 && strcmp(mt, "application/x-npy") != 0)) return a;
@@ -547,9 +550,9 @@ static size_t fetch_ahead(shard *sh, rsw_client *c, const ctx_result *by, size_t
   }
   pthread_mutex_unlock(&sp->lock);
   if (n < 2) return a; /* one film: its GET is as cheap */
-  void *bytes[CLIENT_FETCH_MAX];
+  const void *bytes[CLIENT_FETCH_MAX];
   size_t len[CLIENT_FETCH_MAX];
-  if (client_job_fetch_encoded_many(c, sh->job, n, ctx, sen, mt, bytes, len)) return a;
+  if (client_job_fetch_encoded_many(c, sh->job, n, ctx, sen, mt, answer, bytes, len)) return a;
   for (size_t k = 0; k < n; k++) pre[at[k]].bytes = bytes[k], pre[at[k]].len = len[k];
   return end;
 }
@@ -596,9 +599,11 @@ static rsw_status hand_results(shard *sh, rsw_client *c, char *text, bool early,
   }
   qsort(by, nres, sizeof *by, cmp_ctx_result);
   /* Films fetched ahead, several contexts' in one request (fetch_ahead),
-   * by index in by; pre_end: the results looked at so far. */
+   * by index in by, borrowed from answer (the request's, for the results
+   * from ans_from on); pre_end: the results looked at so far. */
   fetched *pre = calloc(nres ? nres : 1, sizeof *pre);
-  size_t pre_end = 0;
+  size_t pre_end = 0, ans_from = 0;
+  char *answer = NULL;
   bool batches = pre != NULL;
   rsw_status s = RSW_OK;
   for (size_t a = 0, b; a < nres && !s; a = b) {
@@ -610,7 +615,12 @@ static rsw_status hand_results(shard *sh, rsw_client *c, char *text, bool early,
     if (!go) continue;
     const char *id = client_contexts_id(sp->x, ci);
     if (batches && a >= pre_end) {
-      pre_end = fetch_ahead(sh, c, by, nres, a, early, cancelled, pre);
+      /* The answer before: its films delivered (or passed over) by now. */
+      for (size_t i = ans_from; i < pre_end; i++) pre[i].bytes = NULL, pre[i].len = 0;
+      free(answer);
+      answer = NULL;
+      ans_from = a;
+      pre_end = fetch_ahead(sh, c, by, nres, a, early, cancelled, pre, &answer);
       batches = pre_end > a; /* a failure: one by one from here on */
     }
     rsw_status fs;
@@ -628,7 +638,7 @@ static rsw_status hand_results(shard *sh, rsw_client *c, char *text, bool early,
       s = fs;
     }
   }
-  for (size_t i = 0; pre && i < nres; i++) free(pre[i].bytes);
+  free(answer);
   free(pre);
   free(by);
   free(run);
@@ -640,22 +650,33 @@ static rsw_status hand_results(shard *sh, rsw_client *c, char *text, bool early,
 
 /* A shard's job streams its events on the shard's connection; a second
  * connection and thread hand over the finished contexts meanwhile: after
- * every `batch` renders, GET results and deliver the contexts whose
+ * every batch of renders, GET results and deliver the contexts whose
  * renders all succeeded. So films are fetched and written while the
  * daemon renders the next ones (the daemon's core is busy rendering, the
  * client's fetches and file writes wait on the network and the disk), and
  * a run that is cut off keeps the films delivered so far (the journal
  * names them). What is left when the job ends goes in follow()'s last
- * pass. */
+ * pass, after the renders: the fixed cost at a sweep's end.
+ *
+ * A pass costs about the same whatever it delivers (one GET results of
+ * the whole job, which the daemon prints and the client parses, and one
+ * POST results:fetch), so passes are few while many renders are left:
+ * one per an eighth of the job's renders; then, as the end nears, one per
+ * half of what is left (client_early_batch), so that the last pass
+ * finds few films to fetch. (One per sixteenth throughout cost the sweep
+ * bench's client ~13% more CPU; one per eighth throughout left ~12 films
+ * to the last pass, ~4 ms more at the end.) */
 typedef struct early {
   shard *sh;
   rsw_client *c; /* its own connection, on the shard's key */
   pthread_t th;
   pthread_mutex_t mu;
   pthread_cond_t cv;
-  size_t pending, batch; /* renders reported since the last pass; renders per pass */
-  bool finish;           /* the wait is over: stop */
-  rsw_status status;     /* a pass that failed, and whether the replica is lost */
+  size_t pending;     /* renders reported since the last pass */
+  size_t seen, total; /* renders reported, and the job's (0: not known yet) */
+  size_t max_batch;   /* renders per pass while many are left */
+  bool finish;        /* the wait is over: stop */
+  rsw_status status;  /* a pass that failed, and whether the replica is lost */
   bool lost;
   atomic_int failed;
 } early;
@@ -663,9 +684,23 @@ typedef struct early {
 /* Jobs of fewer contexts are handed over at their end only. */
 #define EARLY_MIN_CONTEXTS 8
 
-static void early_note(early *e) {
+size_t client_early_batch(size_t max_batch, size_t total, size_t seen, size_t pending) {
+  size_t before = seen - pending, left = total > before ? total - before : 0, b = max_batch;
+  if (total && left / 2 < b) b = left / 2;
+  return b > CLIENT_EARLY_MIN_BATCH ? b : CLIENT_EARLY_MIN_BATCH;
+}
+
+/* (caller holds e->mu) */
+static size_t early_batch(const early *e) {
+  return client_early_batch(e->max_batch, e->total, e->seen, e->pending);
+}
+
+/* A render reported (done of total: the job's renders, 0 not known). */
+static void early_note(early *e, size_t total) {
   pthread_mutex_lock(&e->mu);
-  if (++e->pending >= e->batch) pthread_cond_signal(&e->cv);
+  e->seen++;
+  if (total) e->total = total;
+  if (++e->pending >= early_batch(e)) pthread_cond_signal(&e->cv);
   pthread_mutex_unlock(&e->mu);
 }
 
@@ -678,7 +713,7 @@ static void *early_main(void *arg) {
   shard *sh = e->sh;
   for (;;) {
     pthread_mutex_lock(&e->mu);
-    while (!e->finish && e->pending < e->batch) pthread_cond_wait(&e->cv, &e->mu);
+    while (!e->finish && e->pending < early_batch(e)) pthread_cond_wait(&e->cv, &e->mu);
     bool finish = e->finish;
     e->pending = 0;
     pthread_mutex_unlock(&e->mu);
@@ -710,8 +745,7 @@ static bool early_start(shard *sh, early *e) {
   memset(e, 0, sizeof *e);
   if (sh->job_contexts < EARLY_MIN_CONTEXTS) return false;
   e->sh = sh;
-  /* About 16 passes a job: each is one GET results of the whole job. */
-  e->batch = sh->job_contexts / 16 > 4 ? sh->job_contexts / 16 : 4;
+  e->max_batch = sh->job_contexts / 8;
   rsw_client_opts co = *sh->sp->copts;
   co.size = sizeof co;
   co.route_key = sh->key;
