@@ -25,6 +25,7 @@
  * a render on 2 threads; the film's EXR written to a file and encoded in
  * memory (a distant sensor's film, with its per-pixel angle metadata). */
 #include <curl/curl.h>
+#include <dlfcn.h>
 #include <errno.h>
 #include <signal.h>
 #include <stdint.h>
@@ -180,6 +181,36 @@ typedef struct oom_op {
   bool skip_embree;
 } oom_op;
 
+/* Where the allocation made to fail was (a run that hung says nothing
+ * else): its stack as failmalloc took it, then the frames in this
+ * executable as functions and lines (addr2line, from binutils, when it is
+ * there). */
+static void print_failure_place(void) {
+  fflush(stdout);
+  failmalloc_print_failure(STDOUT_FILENO);
+  void *st[48];
+  int n = failmalloc_failure_stack(st, 48);
+  Dl_info self;
+  if (n <= 0 || !dladdr((void *)print_failure_place, &self) || !self.dli_fbase) return;
+  char cmd[2048];
+  int len = snprintf(cmd, sizeof cmd, "addr2line -f -i -p -e /proc/%ld/exe", (long)getpid());
+  int any = 0;
+  for (int i = 0; i < n && len < (int)sizeof cmd - 24; i++) {
+    Dl_info di;
+    if (dladdr(st[i], &di) && di.dli_fbase == self.dli_fbase) {
+      /* (a return address: the call is the byte before it) */
+      len += snprintf(cmd + len, sizeof cmd - (size_t)len, " %#lx",
+                      (unsigned long)((char *)st[i] - (char *)self.dli_fbase - 1));
+      any = 1;
+    }
+  }
+  if (!any) return;
+  snprintf(cmd + len, sizeof cmd - (size_t)len, " 2>/dev/null | sed 's/^/    /'");
+  printf("  its frames in %s:\n", self.dli_fname);
+  fflush(stdout);
+  if (system(cmd) != 0) printf("    (addr2line failed)\n");
+}
+
 static void sweep(const oom_op *op) {
   /* OOM_ONLY=name,name: only those operations (debugging). */
   const char *only = getenv("OOM_ONLY");
@@ -221,6 +252,7 @@ static void sweep(const oom_op *op) {
       op->teardown(st);
       CHECK(false, "%s: allocation %ld failing: the call took %.1f s (a hang cut short by a timeout)",
             op->name, n, secs);
+      print_failure_place();
       break;
     }
     bool injected = failmalloc_failed() > 0;

@@ -91,6 +91,14 @@ static _Thread_local bool t_excluded;
 /* failmalloc_skip_embree(true): the target allocation, when Embree's code
  * is on the stack, succeeds and the next one fails instead (see there). */
 static atomic_bool g_skip_embree;
+/* The stack of the allocation made to fail, and whether it was on the
+ * thread that armed (failmalloc_print_failure), so that a failure the run
+ * did not survive (a hang: nothing else names the place) says where it
+ * fell. */
+static void *g_fail_bt[48];
+static atomic_int g_fail_bt_n;
+static atomic_bool g_fail_on_armer;
+static _Thread_local bool t_armer;
 
 /* Threads. pthread_create is wrapped (this definition preempts libc's, or
  * ASan's, which it calls) so that each new thread starts in a trampoline:
@@ -168,6 +176,8 @@ static bool should_fail(void) {
       }
     }
   }
+  atomic_store(&g_fail_bt_n, backtrace(g_fail_bt, 48));
+  atomic_store(&g_fail_on_armer, t_armer);
   atomic_fetch_add(&g_failed, 1);
   return true;
 }
@@ -175,6 +185,15 @@ static bool should_fail(void) {
 FM_EXPORT void failmalloc_arm(long n) {
   MARK_STARTED();
   atomic_store(&g_armed, false);
+  /* backtrace() loads libgcc's unwinder (an allocation, a lock) at its
+   * first call: made here, unarmed, not inside an allocation made to fail. */
+  static atomic_bool warm;
+  if (!atomic_exchange(&warm, true)) {
+    void *b[4];
+    backtrace(b, 4);
+  }
+  t_armer = true;
+  atomic_store(&g_fail_bt_n, 0);
   atomic_store(&g_count, 0);
   atomic_store(&g_failed, 0);
   atomic_store(&g_target, n);
@@ -190,6 +209,21 @@ FM_EXPORT long failmalloc_disarm(void) {
 /* Failures injected since the last arm (0 or 1). */
 FM_EXPORT long failmalloc_failed(void) {
   return atomic_load(&g_failed);
+}
+
+FM_EXPORT void failmalloc_print_failure(int fd) {
+  int n = atomic_load(&g_fail_bt_n);
+  if (n <= 0) return;
+  dprintf(fd, "  the allocation made to fail, on %s:\n",
+          atomic_load(&g_fail_on_armer) ? "the thread that armed failmalloc" : "another thread");
+  backtrace_symbols_fd(g_fail_bt, n, fd);
+}
+
+FM_EXPORT int failmalloc_failure_stack(void **out, int max) {
+  int n = atomic_load(&g_fail_bt_n);
+  if (n > max) n = max;
+  for (int i = 0; i < n; i++) out[i] = g_fail_bt[i];
+  return n;
 }
 
 FM_EXPORT void failmalloc_exclude_thread(bool excluded) {

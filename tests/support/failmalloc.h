@@ -12,6 +12,11 @@ void failmalloc_arm(long n);
 long failmalloc_disarm(void);
 /* Failures injected since failmalloc_arm (0 or 1). */
 long failmalloc_failed(void);
+/* The stack of the allocation that the last arm made to fail (nothing if
+ * none), to fd (addresses in the executable as +offsets: addr2line -e BIN). */
+void failmalloc_print_failure(int fd);
+/* The same stack's return addresses into out[0..max); returns how many. */
+int failmalloc_failure_stack(void **out, int max);
 /* Exclude (or include again) the calling thread's allocations. */
 void failmalloc_exclude_thread(bool excluded);
 /* While on, a target allocation made with Embree's code on the stack
