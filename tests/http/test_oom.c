@@ -212,6 +212,12 @@ static void print_failure_place(void) {
 }
 
 static void sweep(const oom_op *op) {
+  /* OOM_SIDE=client|server: only the allocations of the test's own
+   * thread (the client library, libcurl), or only the others' (the
+   * daemon's threads): each side's in an order that the other's timing
+   * does not shift (debugging a failure seen once under load). */
+  const char *side = getenv("OOM_SIDE");
+  failmalloc_side(side && strcmp(side, "client") == 0 ? 1 : side && strcmp(side, "server") == 0 ? 2 : 0);
   /* OOM_ONLY=name,name: only those operations (debugging). */
   const char *only = getenv("OOM_ONLY");
   if (only && *only) {

@@ -99,6 +99,9 @@ static void *g_fail_bt[48];
 static atomic_int g_fail_bt_n;
 static atomic_bool g_fail_on_armer;
 static _Thread_local bool t_armer;
+/* failmalloc_side: 0 every thread, 1 only the arming thread, 2 every
+ * thread but it. */
+static atomic_int g_side;
 
 /* Threads. pthread_create is wrapped (this definition preempts libc's, or
  * ASan's, which it calls) so that each new thread starts in a trampoline:
@@ -163,6 +166,8 @@ int pthread_create(pthread_t *th, const pthread_attr_t *attr, void *(*fn)(void *
 /* True when this allocation is to fail. */
 static bool should_fail(void) {
   if (!atomic_load_explicit(&g_armed, memory_order_relaxed) || t_excluded || !THREAD_COUNTS()) return false;
+  int side = atomic_load_explicit(&g_side, memory_order_relaxed);
+  if (side && (side == 1) != t_armer) return false;
   long n = atomic_fetch_add(&g_count, 1) + 1;
   if (n != atomic_load(&g_target)) return false;
   if (atomic_load(&g_skip_embree)) {
@@ -224,6 +229,10 @@ FM_EXPORT int failmalloc_failure_stack(void **out, int max) {
   if (n > max) n = max;
   for (int i = 0; i < n; i++) out[i] = g_fail_bt[i];
   return n;
+}
+
+FM_EXPORT void failmalloc_side(int side) {
+  atomic_store(&g_side, side);
 }
 
 FM_EXPORT void failmalloc_exclude_thread(bool excluded) {

@@ -17,6 +17,9 @@ long failmalloc_failed(void);
 void failmalloc_print_failure(int fd);
 /* The same stack's return addresses into out[0..max); returns how many. */
 int failmalloc_failure_stack(void **out, int max);
+/* Which threads count (and so may fail): 0 all (the default), 1 only
+ * the thread that arms, 2 all but that one. */
+void failmalloc_side(int side);
 /* Exclude (or include again) the calling thread's allocations. */
 void failmalloc_exclude_thread(bool excluded);
 /* While on, a target allocation made with Embree's code on the stack
