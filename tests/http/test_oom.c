@@ -23,7 +23,13 @@
  * from XML; a parameter update (a spectrum, a mesh's transform, a
  * direction, a mesh's vertex positions: Embree instance update and refit);
  * a render on 2 threads; the film's EXR written to a file and encoded in
- * memory (a distant sensor's film, with its per-pixel angle metadata). */
+ * memory (a distant sensor's film, with its per-pixel angle metadata).
+ *
+ * Debugging: OOM_ONLY=name,name runs those operations alone; OOM_SIDE=
+ * client|server fails only the test thread's allocations or only the
+ * daemon threads'; FAILMALLOC_JITTER_US=N makes one allocation in 4 sleep
+ * up to N us first (other interleavings of the threads). A run that hangs
+ * prints where the failed allocation was. */
 #include <curl/curl.h>
 #include <dlfcn.h>
 #include <errno.h>

@@ -59,6 +59,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 #include <unistd.h>
 
 #ifdef FAILMALLOC_ASAN
@@ -102,6 +103,11 @@ static _Thread_local bool t_armer;
 /* failmalloc_side: 0 every thread, 1 only the arming thread, 2 every
  * thread but it. */
 static atomic_int g_side;
+/* FAILMALLOC_JITTER_US=N: while armed, one counted allocation in 4 first
+ * sleeps 0..N microseconds (a hash of its number), so that the threads'
+ * allocations interleave in orders a quiet machine does not give (hunting
+ * a failure seen once under load; the order is still the count's). */
+static long g_jitter_us;
 
 /* Threads. pthread_create is wrapped (this definition preempts libc's, or
  * ASan's, which it calls) so that each new thread starts in a trampoline:
@@ -169,6 +175,15 @@ static bool should_fail(void) {
   int side = atomic_load_explicit(&g_side, memory_order_relaxed);
   if (side && (side == 1) != t_armer) return false;
   long n = atomic_fetch_add(&g_count, 1) + 1;
+  if (g_jitter_us > 0) {
+    uint64_t h = (uint64_t)n * 0x9e3779b97f4a7c15ull;
+    h ^= h >> 29;
+    if ((h & 3) == 0) {
+      long us = (long)((h >> 8) % (uint64_t)(g_jitter_us + 1));
+      struct timespec ts = {us / 1000000, (us % 1000000) * 1000};
+      nanosleep(&ts, NULL);
+    }
+  }
   if (n != atomic_load(&g_target)) return false;
   if (atomic_load(&g_skip_embree)) {
     void *b[64];
@@ -364,6 +379,8 @@ static void report_at_exit(void) {
 }
 
 __attribute__((constructor)) static void failmalloc_init(void) {
+  const char *j = getenv("FAILMALLOC_JITTER_US");
+  if (j) g_jitter_us = atol(j);
   const char *e = getenv("FAILMALLOC_N");
   if (!e) return;
   g_env_n = atol(e);
