@@ -51,7 +51,7 @@ static rsw_status node_plugin(loader *ld, node *n, const plugin **out) {
 /* Build (or return the already built) object of node n, of class cls
  * (CLS__COUNT for any class). */
 static rsw_status ld_build(loader *ld, node *n, obj_class cls, object **out) {
-  const plugin *pl;
+  const plugin *pl = NULL;
   rsw_status st = node_plugin(ld, n, &pl);
   if (st) return st;
   if (cls != CLS__COUNT && pl->cls != cls)

@@ -461,7 +461,7 @@ static rsw_status gridvolume_fill(loader *ld, node *n, gridvolume *g) {
                    "gridvolume '%s': give exactly one of 'data' (with 'shape') and 'filename'", n->id);
   static const char *const filters[] = {"trilinear", "nearest"};
   static const char *const wraps[] = {"clamp", "repeat", "mirror"};
-  int f, w;
+  int f = 0, w = 0;
   rsw_status st = read_choice(ld, n, "filter_type", filters, 2, 0, &f);
   if (!st) st = read_choice(ld, n, "wrap_mode", wraps, 3, 0, &w);
   if (st) return st;
