@@ -241,8 +241,10 @@ $(BUILD)/tests/test_client: $(call test_obj,test_client) $(BUILD)/obj/tests/supp
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $< $(BUILD)/obj/tests/support/daemon.o $(CLIENT_A) $(CLIENT_LIBS)
 
-# libraysweep's internals alone (client/lib/internal.h), no daemon.
-$(BUILD)/tests/test_spread: $(call test_obj,test_spread) $(CLIENT_A)
+# libraysweep's internals alone (client/lib/internal.h), no daemon; and
+# its rsw_dataset with a film store (the EXRs made by common/film_io.c,
+# which the library holds).
+$(BUILD)/tests/test_spread $(BUILD)/tests/test_dataset_store: $(BUILD)/tests/%: $(BUILD)/obj/tests/client/%.o $(CLIENT_A)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $< $(CLIENT_A) $(CLIENT_LIBS)
 
@@ -301,7 +303,7 @@ $(BUILD)/tests/test_image_exr_stress: $(call test_obj,test_image_exr_stress) $(B
 
 # Every other test program, by its link class: one rule each. (Each
 # program's object is added as a prerequisite of its own.)
-TEST_SPECIAL := test_client test_spread test_http_encode test_oom test_image_exr_stress
+TEST_SPECIAL := test_client test_spread test_dataset_store test_http_encode test_oom test_image_exr_stress
 $(foreach s,$(TEST_SRC),$(eval $(call test_bin,$(s)): $(patsubst %.c,$(BUILD)/obj/%.o,$(s))))
 
 $(filter-out $(TEST_SPECIAL:%=$(BUILD)/tests/%),$(call test_bin,$(TEST_KERNEL_SRC))): $(TEST_SUPPORT_OBJ) $(KERNEL_LIB) $(COMMON_LIB)

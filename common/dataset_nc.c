@@ -1201,40 +1201,87 @@ static rsw_status put_plugin_failures(const writer *w, const sensor_set *s, cons
   return st;
 }
 
-/* A sensor's node (or plain) films' quantities, each variable in one call
- * (a call per film cost HDF5 about as much as the whole variable): the
- * images in the variable's C order, the layout's cell (w->cell), the node,
- * then y, x[, stokes][, channel]; NaN, the fill value, where a film is
- * missing or lacks the quantity. */
+/* A sensor's node (or plain) films' quantities, each variable in as few
+ * calls as d->slab_bytes allows (a call per film cost HDF5 about as much
+ * as the whole variable): the images in the variable's C order, the
+ * layout's cell (w->cell), the node, then y, x[, stokes][, channel]; NaN,
+ * the fill value, where a film is missing or lacks the quantity. A slab
+ * is a run of positions in that order that is a box of the leading
+ * dimensions: a fixed index in the dimensions before some j, a range in
+ * j, all of the ones after. */
 static rsw_status put_film_quantities(const writer *w, const sensor_set *s, const sensor_vars *v,
                                       rsw_err *err) {
   size_t n = w->n_cells * w->slots;
   size_t img = (size_t)s->shape->width * (size_t)s->shape->height * (s->stokes ? 4 : 1) *
                (s->dim_ch >= 0 ? (size_t)s->n_col : 1);
-  float *all = NULL;
-  rsw_status st = RSW_OK;
-  for (size_t qi = 0; !st && n && img && qi < s->n_q; qi++) {
+  if (!n || !img) return RSW_OK;
+  /* The leading dimensions (the layout's, then the node's where the job
+   * has bands) and their lengths; then the image's. */
+  size_t len[NC_MAX_COORDS + 5], start[NC_MAX_COORDS + 5], count[NC_MAX_COORDS + 5];
+  int m = 0;
+  for (size_t k = 0; k < w->n_cdims; k++) {
+    int rc = nc_inq_dimlen(w->ncid, w->cdim[k], &len[m++]);
+    if (rc != NC_NOERR) return nc_fail(err, rc, "dimensions");
+  }
+  if (w->wl_dim >= 0) len[m++] = w->slots;
+  int nd = m;
+  len[nd++] = (size_t)s->shape->height, len[nd++] = (size_t)s->shape->width;
+  if (s->stokes) len[nd++] = 4;
+  if (s->dim_ch >= 0) len[nd++] = (size_t)s->n_col;
+  /* The slab: inner[j] positions per step of dimension j; the first j
+   * whose step fits the budget (the last, one image a call, at least),
+   * and steps of it per call. */
+  size_t budget = w->d->slab_bytes ? w->d->slab_bytes : NC_SLAB_BYTES;
+  size_t max_imgs = budget / (img * sizeof(float)) ? budget / (img * sizeof(float)) : 1;
+  size_t inner[NC_MAX_COORDS + 5];
+  inner[m - 1] = 1;
+  for (int k = m - 2; k >= 0; k--) inner[k] = inner[k + 1] * len[k + 1];
+  int j = 0;
+  while (j < m - 1 && inner[j] > max_imgs) j++;
+  size_t step = max_imgs / inner[j] < len[j] ? max_imgs / inner[j] : len[j];
+  if (!step) step = 1;
+  size_t per_call = step * inner[j] < n ? step * inner[j] : n;
+  /* Which film (by_ctx index) each position holds, SIZE_MAX: none. */
+  size_t *at_pos = malloc(n * sizeof *at_pos);
+  float *buf = at_pos ? malloc(per_call * img * sizeof *buf) : NULL;
+  rsw_status st = buf ? RSW_OK : rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
+  for (size_t k = 0; !st && k < n; k++) at_pos[k] = SIZE_MAX;
+  for (size_t k = 0; !st && k < n; k++)
+    if (s->by_ctx[k]) at_pos[w->cell[k / w->slots] * w->slots + k % w->slots] = k;
+  for (size_t qi = 0; !st && qi < s->n_q; qi++) {
     bool any = false;
     for (size_t k = 0; k < n && !any; k++)
       for (size_t q = 0; s->by_ctx[k] && q < s->by_ctx[k]->n_vars && !any; q++)
         any = strcmp(s->by_ctx[k]->vars[q].name, s->qnames[qi]) == 0;
     if (!any) continue; /* derived, or a band quantity */
-    if (!all && !(all = malloc(n * img * sizeof *all))) {
-      st = rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
-      break;
+    for (size_t base = 0; !st && base < n;) {
+      /* The box at base: j's index runs to the end of its dimension at
+       * most (base is a multiple of inner[j]). */
+      size_t ij = base / inner[j] % len[j];
+      size_t steps = len[j] - ij < step ? len[j] - ij : step, cnt = steps * inner[j];
+      for (int k = 0; k < nd; k++) {
+        start[k] = k < m ? base / inner[k] % len[k] : 0;
+        count[k] = k < j ? 1 : k == j ? steps : len[k];
+      }
+      for (size_t i = 0; i < cnt; i++) {
+        size_t k = at_pos[base + i];
+        const nc_film *f = k == SIZE_MAX ? NULL : s->by_ctx[k];
+        const float *src = NULL;
+        for (size_t q = 0; f && q < f->n_vars && !src; q++)
+          if (strcmp(f->vars[q].name, s->qnames[qi]) == 0) src = f->vars[q].data;
+        if (src)
+          memcpy(buf + i * img, src, img * sizeof *buf);
+        else
+          for (size_t x = 0; x < img; x++) buf[i * img + x] = NAN;
+      }
+      int rc = cnt == n ? nc_put_var_float(w->ncid, v->q[qi], buf)
+                        : nc_put_vara_float(w->ncid, v->q[qi], start, count, buf);
+      if (rc != NC_NOERR) st = nc_fail(err, rc, s->qnames[qi]);
+      base += cnt;
     }
-    for (size_t i = 0; i < n * img; i++) all[i] = NAN;
-    for (size_t k = 0; k < n; k++) {
-      const nc_film *f = s->by_ctx[k];
-      size_t at = w->cell[k / w->slots] * w->slots + k % w->slots;
-      for (size_t q = 0; f && q < f->n_vars; q++)
-        if (strcmp(f->vars[q].name, s->qnames[qi]) == 0)
-          memcpy(all + at * img, f->vars[q].data, img * sizeof *all);
-    }
-    int rc = nc_put_var_float(w->ncid, v->q[qi], all);
-    if (rc != NC_NOERR) st = nc_fail(err, rc, s->qnames[qi]);
   }
-  free(all);
+  free(buf);
+  free(at_pos);
   return st;
 }
 

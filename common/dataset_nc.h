@@ -187,7 +187,15 @@ typedef struct nc_dataset {
   size_t n_nodes, n_bands;
   const double *nodes;
   const char *const *band_ids;
+  /* The most bytes a data variable is written from at once (0:
+   * NC_SLAB_BYTES): a variable over that goes in slabs of whole images,
+   * so that writing a dataset needs no copy of all its films' pixels at
+   * once; the file is the same either way (each chunk is one image, and
+   * the chunks go in the same order). */
+  size_t slab_bytes;
 } nc_dataset;
+
+#define NC_SLAB_BYTES ((size_t)64 << 20)
 
 /* Initialise libnetcdf (and HDF5: their run-time configuration, a few ms)
  * now rather than at the first nc_dataset_write, for a caller that has

@@ -627,6 +627,8 @@ static int read_sweep_options(const cli_ctx *ctx, const cmdline_args *a, sweep_o
     o->fmt = CLI_FMT_EXR; /* as the daemon encodes them: pixels and angles binary, nothing parsed as JSON */
   else if (v && (o->fmt = cli_format_from_name(v)) == CLI_FMT_NONE)
     return cli_usage(ctx, "--format needs exr, npy, json, nc or dataset (got '%s')", v);
+  unsigned long long mem;
+  if ((o->want_nc || o->want_pack) && sweep_dataset_memory(ctx, &mem)) return CLI_USAGE;
   /* One dataset of the whole sweep: shards could not be merged (merge joins
    * film files), and there are no film files to lay out. */
   if (o->want_pack && cmdline_has(a, "--shard"))

@@ -152,6 +152,16 @@ void sweep_entries_free_range(index_entry *e, size_t from, size_t to);
  * of "file"). */
 cJSON *sweep_index_line(const cJSON *r, const char *c, const char *sn, const char *rel, sweep_item **sorted,
                         size_t n, const cJSON *job_params);
+/* The films a dataset is built from stay in memory up to this many bytes
+ * of pixels, then go to a file without a name in DIR
+ * (rsw_dataset_set_store); RAYSWEEP_DATASET_MEMORY overrides it. */
+#define SWEEP_DATASET_MEMORY ((unsigned long long)512 << 20)
+/* d's film store in dir (SWEEP_DATASET_MEMORY or the environment's);
+ * CLI_USAGE for a bad RAYSWEEP_DATASET_MEMORY, CLI_IO if dir takes no
+ * file. */
+int sweep_dataset_store(const cli_ctx *ctx, rsw_dataset *d, const char *dir);
+/* The bytes of that (CLI_USAGE, said, for a bad RAYSWEEP_DATASET_MEMORY). */
+int sweep_dataset_memory(const cli_ctx *ctx, unsigned long long *out);
 /* DIR/dataset.nc from the films of index entries e (sorted): their files
  * (pack NULL), or the EXRs kept in pack. */
 typedef struct film_pack film_pack;

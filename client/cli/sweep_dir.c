@@ -302,11 +302,35 @@ cJSON *sweep_index_line(const cJSON *r, const char *c, const char *sn, const cha
  * byte), so the dataset of merged shards is the unsharded one's. Contexts
  * come in index order with the wavelength and coords of their index lines;
  * a context without any film is not in it. */
+int sweep_dataset_memory(const cli_ctx *ctx, unsigned long long *out) {
+  *out = SWEEP_DATASET_MEMORY;
+  const char *v = getenv("RAYSWEEP_DATASET_MEMORY");
+  if (v && *v && !cli_parse_u64(v, 1ULL << 50, out))
+    return cli_usage(ctx, "RAYSWEEP_DATASET_MEMORY needs a number of bytes (got '%s')", v);
+  return CLI_OK;
+}
+
+int sweep_dataset_store(const cli_ctx *ctx, rsw_dataset *d, const char *dir) {
+  unsigned long long mem;
+  int rc = sweep_dataset_memory(ctx, &mem);
+  if (rc) return rc;
+  if (rsw_dataset_set_store(d, dir, (size_t)mem))
+    return cli_fail(ctx, CLI_IO, "%s", rsw_dataset_last_error(d));
+  return CLI_OK;
+}
+
 int sweep_write_dataset(const cli_ctx *ctx, const char *dir, const index_entry *e, size_t n, bool has_seed,
                         long long seed, film_pack *pack) {
   /* --format dataset: the films went in as they arrived (sweep_pack.c) */
   rsw_dataset *live = pack ? pack_live(pack, e, n) : NULL, *d = live;
-  if (!d && rsw_dataset_new(&d)) return cli_fail(ctx, CLI_IO, "out of memory");
+  if (!d) {
+    if (rsw_dataset_new(&d)) return cli_fail(ctx, CLI_IO, "out of memory");
+    int rc = sweep_dataset_store(ctx, d, dir);
+    if (rc) {
+      rsw_dataset_free(d);
+      return rc;
+    }
+  }
   char *out = sweep_dir_file(dir, DATASET_NAME);
   rsw_status s = out ? RSW_OK : RSW_ERR_NOMEM;
   if (!s && has_seed) s = rsw_dataset_set_seed(d, seed);

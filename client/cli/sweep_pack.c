@@ -147,6 +147,8 @@ int pack_open(const cli_ctx *ctx, film_pack *p, const char *dir, bool spool, boo
   p->fd = -1;
   p->items = sorted, p->n_items = n;
   if (n && rsw_dataset_new(&p->live) == RSW_OK) {
+    int rc = sweep_dataset_store(ctx, p->live, dir);
+    if (rc) return rc;
     p->live_ok = true;
     for (size_t i = 0; i < n && p->live_ok; i++) {
       char *co = sorted[i]->coords ? cJSON_PrintUnformatted(sorted[i]->coords) : NULL;

@@ -4,11 +4,13 @@
  * merged) through the project's one writer, common/dataset_nc.c. */
 #include <cjson/cJSON.h>
 #include <errno.h>
+#include <fcntl.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/mman.h>
 #include <unistd.h>
 
 #include "dataset_nc.h"
@@ -59,18 +61,96 @@ rsw_status rsw_job_fetch_dataset(rsw_client *c, const char *job_id, int partial,
 
 #define DS_MAX_PLANES 3
 
+/* Where the films' pixels and angles go (rsw_dataset_set_store): the
+ * heap up to `memory` bytes of them, then a file without a name in the
+ * store's directory, mapped shared in blocks of STORE_BLOCK (a film over
+ * that: a block of its own) and fully allocated first (posix_fallocate),
+ * so that a full disk is an error here, never a SIGBUS at a page fault.
+ * The kernel writes such pages back to the file and drops them as memory
+ * runs short, so a dataset of any size is built in bounded memory. */
+#define STORE_BLOCK ((size_t)64 << 20)
+
+typedef struct ds_store {
+  int fd; /* -1: no store (everything on the heap) */
+  size_t memory, on_heap;
+  off_t size; /* of the file */
+  char *at;   /* the current block's free space */
+  size_t left;
+  struct {
+    void *p;
+    size_t len;
+  } * maps;
+  size_t n_maps, cap_maps;
+} ds_store;
+
+/* n bytes (> 0) for pixels or angles: from the heap (*mapped false; free
+ * them) while the heap holds under memory bytes of them, else from the
+ * file (*mapped true: freed with the store). NULL: out of memory, or the
+ * file could not grow (err says why). */
+static void *store_alloc(ds_store *st, size_t n, bool *mapped, char *err, size_t err_len) {
+  *mapped = false;
+  if (st->fd < 0 || st->on_heap + n <= st->memory) {
+    void *p = malloc(n);
+    if (p) st->on_heap += n;
+    if (!p) snprintf(err, err_len, "out of memory");
+    return p;
+  }
+  n = (n + 63) & ~(size_t)63;
+  if (st->left < n) {
+    size_t page = (size_t)sysconf(_SC_PAGESIZE);
+    size_t len = n > STORE_BLOCK ? (n + page - 1) / page * page : STORE_BLOCK;
+    if (st->n_maps == st->cap_maps) {
+      size_t cap = st->cap_maps ? 2 * st->cap_maps : 8;
+      void *m = realloc(st->maps, cap * sizeof *st->maps);
+      if (!m) {
+        snprintf(err, err_len, "out of memory");
+        return NULL;
+      }
+      st->maps = m, st->cap_maps = cap;
+    }
+    int e = posix_fallocate(st->fd, st->size, (off_t)len);
+    if (e) {
+      snprintf(err, err_len, "the film store cannot grow to %.1f MiB: %s",
+               (double)(st->size + (off_t)len) / 1048576.0, strerror(e));
+      return NULL;
+    }
+    void *p = mmap(NULL, len, PROT_READ | PROT_WRITE, MAP_SHARED, st->fd, st->size);
+    if (p == MAP_FAILED) {
+      snprintf(err, err_len, "cannot map the film store: %s", strerror(errno));
+      return NULL;
+    }
+    st->maps[st->n_maps].p = p, st->maps[st->n_maps++].len = len;
+    st->size += (off_t)len;
+    st->at = p, st->left = len;
+  }
+  void *p = st->at;
+  st->at += n, st->left -= n;
+  *mapped = true;
+  return p;
+}
+
+static void store_close(ds_store *st) {
+  for (size_t i = 0; i < st->n_maps; i++) munmap(st->maps[i].p, st->maps[i].len);
+  free(st->maps);
+  if (st->fd >= 0) close(st->fd);
+  *st = (ds_store){.fd = -1};
+}
+
 /* A film's pixel angles in degrees, 2 per pixel (zenith, azimuth), one
  * block for every film whose lists are the same (a sweep's films share
  * their sensor's: one copy, not one a film): refs counts the films and
- * the dataset's cache that hold it. */
+ * the dataset's cache that hold it. mapped: in the store's file (not
+ * freed). */
 typedef struct ds_angles {
   size_t refs;
+  bool mapped;
   double v[];
 } ds_angles;
 
-static ds_angles *angles_new(size_t np) {
-  ds_angles *a = malloc(sizeof *a + (np ? 2 * np : 1) * sizeof(double));
-  if (a) a->refs = 1;
+static ds_angles *angles_new(ds_store *st, size_t np, char *err, size_t err_len) {
+  bool mapped;
+  ds_angles *a = store_alloc(st, sizeof *a + (np ? 2 * np : 1) * sizeof(double), &mapped, err, err_len);
+  if (a) a->refs = 1, a->mapped = mapped;
   return a;
 }
 
@@ -80,7 +160,7 @@ static ds_angles *angles_ref(ds_angles *a) {
 }
 
 static void angles_unref(ds_angles *a) {
-  if (a && !--a->refs) free(a);
+  if (a && !--a->refs && !a->mapped) free(a);
 }
 
 typedef struct ds_film {
@@ -89,6 +169,7 @@ typedef struct ds_film {
   int width, height, channels;
   char **names;
   float *data;
+  bool mapped;       /* data and plane_data in the store's file (not freed) */
   ds_angles *angles; /* NULL: none */
   uint32_t spp;
   uint64_t seed, unresolved;
@@ -123,6 +204,7 @@ struct rsw_dataset {
   char *angle_text[2];
   ds_angles *angle_vals;
   size_t n_angles;
+  ds_store store;
   char error[1024];
 };
 
@@ -140,6 +222,7 @@ rsw_status rsw_dataset_new(rsw_dataset **out) {
   if (!out) return RSW_ERR_INVALID;
   rsw_dataset *d = calloc(1, sizeof *d);
   if (!d) return RSW_ERR_NOMEM;
+  d->store.fd = -1;
   *out = d;
   return RSW_OK;
 }
@@ -148,12 +231,11 @@ static void film_clear(ds_film *f) {
   free(f->sensor);
   for (int i = 0; f->names && i < f->channels; i++) free(f->names[i]);
   free(f->names);
-  free(f->data);
+  if (!f->mapped) free(f->data);
   angles_unref(f->angles);
   free(f->plugin_failure);
   for (int k = 0; k < f->n_planes; k++) {
-    free(f->plane_names[k]);
-    free(f->plane_data[k]);
+    free(f->plane_names[k]); /* (plane_data[k] lies in data) */
   }
 }
 
@@ -173,7 +255,33 @@ void rsw_dataset_free(rsw_dataset *d) {
   free(d->angle_text[0]);
   free(d->angle_text[1]);
   angles_unref(d->angle_vals);
+  store_close(&d->store);
   free(d);
+}
+
+rsw_status rsw_dataset_set_store(rsw_dataset *d, const char *dir, size_t memory_bytes) {
+  if (!d) return RSW_ERR_INVALID;
+  d->error[0] = '\0';
+  if (!dir || !*dir) return ds_fail(d, RSW_ERR_INVALID, "no directory for the film store");
+  if (d->store.fd >= 0) return ds_fail(d, RSW_ERR_INVALID, "the dataset has its film store already");
+  /* A file without a name (O_TMPFILE; where the file system has none, one
+   * made and unlinked at once): nothing is left behind, whatever ends the
+   * process. */
+  int fd = open(dir, O_TMPFILE | O_RDWR | O_CLOEXEC, 0600);
+  if (fd < 0) {
+    size_t n = strlen(dir) + 32;
+    char *t = malloc(n);
+    if (!t) return ds_fail(d, RSW_ERR_NOMEM, "out of memory");
+    snprintf(t, n, "%s/.dataset.store.XXXXXX", dir);
+    fd = mkostemp(t, O_CLOEXEC);
+    int e = errno;
+    if (fd >= 0) unlink(t);
+    free(t);
+    if (fd < 0) return ds_fail(d, RSW_ERR_IO, "cannot make a film store in '%s': %s", dir, strerror(e));
+  }
+  d->store.fd = fd;
+  d->store.memory = memory_bytes;
+  return RSW_OK;
 }
 
 const char *rsw_dataset_last_error(const rsw_dataset *d) {
@@ -307,8 +415,16 @@ static rsw_status add_film(rsw_dataset *d, const char *context, const char *sens
     s = ds_fail(d, RSW_ERR_INVALID, "%s: channels are not the radiance's followed by whole planes", what);
   f.sensor = strdup(sensor);
   f.names = calloc((size_t)(f.channels > 0 ? f.channels : 1), sizeof *f.names);
-  f.data = malloc((ns ? ns : 1) * sizeof *f.data);
-  if (!s && (!f.sensor || !f.names || !f.data)) s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");
+  if (!s && (!f.sensor || !f.names)) s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");
+  /* The radiance and its planes in one allocation (the heap's or the
+   * store's). */
+  int n_planes = base > 0 ? (all - base) / base : 0;
+  char why[200];
+  float *pix = s ? NULL
+                 : store_alloc(&d->store, (ns ? ns : 1) * sizeof(float) * (size_t)(1 + n_planes), &f.mapped,
+                               why, sizeof why);
+  if (!s && !pix) s = ds_fail(d, RSW_ERR_NOMEM, "%s: %s", what, why);
+  f.data = pix;
   for (int i = 0; !s && i < f.channels; i++)
     if (!(f.names[i] = strdup(in->names[i]))) s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");
   const float *src = in->data;
@@ -324,13 +440,11 @@ static rsw_status add_film(rsw_dataset *d, const char *context, const char *sens
         s = ds_fail(d, RSW_ERR_INVALID, "%s: channel '%s' does not follow the plane layout", what, nm);
     }
     if (s) break;
-    if (!(f.plane_names[k] = strndup(first, len)) ||
-        !(f.plane_data[k] = malloc((ns ? ns : 1) * sizeof(float)))) {
-      free(f.plane_names[k]);
-      f.plane_names[k] = NULL;
+    if (!(f.plane_names[k] = strndup(first, len))) {
       s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");
       break;
     }
+    f.plane_data[k] = pix + (ns ? ns : 1) * (size_t)(k + 1);
     f.n_planes = k + 1;
     for (size_t px = 0; px < np; px++)
       memcpy(f.plane_data[k] + px * (size_t)base, src + px * (size_t)all + (size_t)base * (size_t)(k + 1),
@@ -381,8 +495,8 @@ static rsw_status add_film(rsw_dataset *d, const char *context, const char *sens
       if (!cJSON_IsArray(zen) || !cJSON_IsArray(az) || (size_t)cJSON_GetArraySize(zen) != np ||
           (size_t)cJSON_GetArraySize(az) != np)
         s = ds_fail(d, RSW_ERR_PARSE, "%s: zenith_deg and azimuth_deg must list one angle per pixel", what);
-      else if (!(f.angles = angles_new(np)))
-        s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");
+      else if (!(f.angles = angles_new(&d->store, np, why, sizeof why)))
+        s = ds_fail(d, RSW_ERR_NOMEM, "%s: %s", what, why);
       const cJSON *arr[2] = {zen, az};
       for (int k = 0; !s && k < 2; k++) {
         size_t i = 0;
@@ -501,8 +615,9 @@ static rsw_status exr_angles(rsw_dataset *d, const char *zen, const char *az, si
     *out = angles_ref(d->angle_vals);
     return RSW_OK;
   }
-  ds_angles *a = angles_new(np);
-  if (!a) return ds_fail(d, RSW_ERR_NOMEM, "out of memory");
+  char why[200];
+  ds_angles *a = angles_new(&d->store, np, why, sizeof why);
+  if (!a) return ds_fail(d, RSW_ERR_NOMEM, "%s: %s", what, why);
   if (!parse_angles(zen, np, 0, a->v) || !parse_angles(az, np, 1, a->v)) {
     angles_unref(a);
     return ds_fail(d, RSW_ERR_PARSE, "%s: zenith_deg and azimuth_deg must list one angle per pixel", what);

@@ -355,6 +355,15 @@ rsw_status rsw_dataset_add_film_file(rsw_dataset *d, const char *context, const 
 rsw_status rsw_dataset_add_film_exr(rsw_dataset *d, const char *context, const char *sensor,
                                     const void *bytes, size_t len, const char *const *channels,
                                     int n_channels);
+/* Keep the films' pixels and angles past memory_bytes of them in a file
+ * without a name in dir (mapped: the kernel writes such pages back and
+ * drops them as memory runs short), so that a sweep's dataset of any size
+ * is built in bounded memory; the file takes their size on the disk until
+ * rsw_dataset_free. Without it every film is held on the heap. Call once,
+ * before the films. Errors: RSW_ERR_IO (no file can be made in dir); a
+ * film that the file cannot take (a full disk) is RSW_ERR_NOMEM from the
+ * call that adds it, naming the film and the cause. */
+rsw_status rsw_dataset_set_store(rsw_dataset *d, const char *dir, size_t memory_bytes);
 /* Write the dataset (through a temp file renamed on success). Errors: the
  * contexts' coords (RSW_ERR_TYPE, RSW_ERR_INVALID, RSW_ERR_MISSING,
  * RSW_ERR_LIMIT, naming "/contexts/<i>/coords/<name>", i in the order

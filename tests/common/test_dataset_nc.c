@@ -485,6 +485,137 @@ static void test_stokes_helpers(void) {
         "stokes_component");
 }
 
+/* A data variable over its slab budget goes in slabs of whole images
+ * (nc_dataset.slab_bytes): a 3 x 2 x 4 grid of 2 x 3 films, listed out of
+ * order with two missing, and two quantities; and a 5-context list with
+ * node films. Every budget, from one image a call to a slab over the
+ * grid's first dimension, gives the file of one call, byte for byte, with
+ * every film in its cell and NaN where one is missing. */
+#define SLAB_N 24
+/* A 3 x 2 film of "cam" for context ctx, one channel "Y", 4 spp. */
+static nc_film slab_film(size_t ctx, const char *const *ch, const nc_var *vars, size_t n_vars) {
+  return (nc_film){.context = ctx,
+                   .sensor = "cam",
+                   .width = 3,
+                   .height = 2,
+                   .channels = 1,
+                   .channel_names = ch,
+                   .spp = 4,
+                   .vars = vars,
+                   .n_vars = n_vars};
+}
+
+static void test_slabs(void) {
+  cJSON *co[SLAB_N];
+  const char *ids[SLAB_N];
+  char idbuf[SLAB_N][8];
+  static float data[SLAB_N][2][6];
+  nc_var vars[SLAB_N][2];
+  nc_film films[SLAB_N];
+  const char *ch[1] = {"Y"};
+  size_t nf = 0;
+  for (size_t i = 0; i < SLAB_N; i++) {
+    size_t k = (i * 7) % SLAB_N; /* context i holds grid position k */
+    co[i] = cJSON_CreateObject();
+    cJSON_AddNumberToObject(co[i], "a", (double)(k / 8));
+    cJSON_AddStringToObject(co[i], "b", k / 4 % 2 ? "y" : "x");
+    cJSON_AddNumberToObject(co[i], "c", 0.5 + (double)(k % 4));
+    snprintf(idbuf[i], sizeof idbuf[i], "c%zu", i);
+    ids[i] = idbuf[i];
+    for (int q = 0; q < 2; q++)
+      for (int p = 0; p < 6; p++) data[i][q][p] = (float)(1000 * q + 10 * k + (size_t)p);
+    if (i == 3 || i == 17) continue;
+    vars[nf][0] = (nc_var){"radiance", data[i][0]};
+    vars[nf][1] = (nc_var){"radiance_stderr", data[i][1]};
+    films[nf] = slab_film(i, ch, vars[nf], 2);
+    films[nf].seed = i;
+    nf++;
+  }
+  nc_coords c;
+  rsw_err err = {0};
+  REQUIRE(nc_coords_build((const void *const *)co, SLAB_N, "/contexts", &c, &err) == RSW_OK, "%s", err.msg);
+  for (size_t i = 0; i < SLAB_N; i++) cJSON_Delete(co[i]);
+  nc_dataset d = {.size = sizeof d,
+                  .scene = "s",
+                  .variant = "mono",
+                  .n_contexts = SLAB_N,
+                  .context_ids = ids,
+                  .coords = &c,
+                  .films = films,
+                  .n_films = nf};
+  void *one = NULL;
+  size_t one_len = 0;
+  REQUIRE(nc_dataset_encode(&d, &one, &one_len, &err) == RSW_OK, "one call: %s", err.msg);
+  /* budgets in images: 1, 2 (c by 2), 5 (b by 1: 4 images), 17 (a by 2,
+   * then 1), 23 (a by 2: 16, then 8) */
+  const size_t imgs[] = {1, 2, 5, 17, 23};
+  for (size_t t = 0; t < sizeof imgs / sizeof *imgs; t++) {
+    d.slab_bytes = imgs[t] * 6 * sizeof(float);
+    void *b = NULL;
+    size_t len = 0;
+    REQUIRE(nc_dataset_encode(&d, &b, &len, &err) == RSW_OK, "slabs of %zu: %s", imgs[t], err.msg);
+    CHECK(len == one_len && memcmp(b, one, len) == 0,
+          "slabs of %zu images: the one-call file (%zu, %zu bytes)", imgs[t], len, one_len);
+    int ncid, var;
+    float r[3][2][4][2][3];
+    REQUIRE(nc_open_mem("t.nc", NC_NOWRITE, len, b, &ncid) == NC_NOERR, "open");
+    REQUIRE(nc_inq_varid(ncid, "radiance_stderr", &var) == NC_NOERR &&
+                nc_get_var_float(ncid, var, &r[0][0][0][0][0]) == NC_NOERR,
+            "radiance_stderr");
+    int wrong = 0;
+    for (size_t k = 0; k < SLAB_N; k++)
+      for (int p = 0; p < 6; p++) {
+        float v = r[k / 8][k / 4 % 2][k % 4][p / 3][p % 3];
+        bool missing = k == (3 * 7) % SLAB_N || k == (17 * 7) % SLAB_N;
+        wrong += missing ? !isnan(v) : v != (float)(1000 + 10 * k + (size_t)p);
+      }
+    CHECK(wrong == 0, "slabs of %zu: %d values out of their cells", imgs[t], wrong);
+    nc_close(ncid);
+    free(b);
+  }
+  free(one);
+  nc_coords_free(&c);
+
+  /* Node films: contexts x wavelength nodes, a list (no coords). */
+  const double nodes[3] = {500, 550, 600};
+  nc_film nfilm[15];
+  nc_var nv[15];
+  static float nd[15][6];
+  size_t nn = 0;
+  for (size_t i = 0; i < 5; i++)
+    for (size_t w = 0; w < 3; w++) {
+      for (int p = 0; p < 6; p++) nd[nn][p] = (float)(100 * i + 10 * w + (size_t)p);
+      nv[nn] = (nc_var){"radiance", nd[nn]};
+      nfilm[nn] = slab_film(i, ch, &nv[nn], 1);
+      nfilm[nn].node = w + 1;
+      nn++;
+    }
+  const char *band_ids[1] = {"b1"};
+  nc_dataset e = {.size = sizeof e,
+                  .scene = "s",
+                  .variant = "mono",
+                  .n_contexts = 5,
+                  .context_ids = ids,
+                  .films = nfilm,
+                  .n_films = nn,
+                  .n_nodes = 3,
+                  .nodes = nodes,
+                  .n_bands = 1,
+                  .band_ids = band_ids};
+  REQUIRE(nc_dataset_encode(&e, &one, &one_len, &err) == RSW_OK, "nodes, one call: %s", err.msg);
+  const size_t nimgs[] = {1, 2, 4, 7};
+  for (size_t t = 0; t < sizeof nimgs / sizeof *nimgs; t++) {
+    e.slab_bytes = nimgs[t] * 6 * sizeof(float);
+    void *b = NULL;
+    size_t len = 0;
+    REQUIRE(nc_dataset_encode(&e, &b, &len, &err) == RSW_OK, "nodes, slabs of %zu: %s", nimgs[t], err.msg);
+    CHECK(len == one_len && memcmp(b, one, len) == 0, "nodes, slabs of %zu images: the one-call file",
+          nimgs[t]);
+    free(b);
+  }
+  free(one);
+}
+
 int main(void) {
   RSW_TEST_RUN(test_coords_errors);
   RSW_TEST_RUN(test_grid_any_order);
@@ -493,5 +624,6 @@ int main(void) {
   RSW_TEST_RUN(test_plugin_failures);
   RSW_TEST_RUN(test_stokes_helpers);
   RSW_TEST_RUN(test_stokes_films);
+  RSW_TEST_RUN(test_slabs);
   RSW_TEST_END("test_dataset_nc");
 }

@@ -10,6 +10,9 @@
 #     sweep.json only; index.jsonl is --format nc's but for "dataset":
 #     "dataset.nc" in place of "file"; sweep.json says "output": "dataset";
 #   - --spread 2 over two daemons behind a balancer: the same dataset;
+#   - RAYSWEEP_DATASET_MEMORY=0 (every film in the film store's file) and
+#     a budget of one film (--format nc): the same datasets; a bad value is
+#     a usage error naming it, before anything is created;
 #   - resume: a --spread run stopped (SIGTERM) after some contexts leaves its
 #     journal and its spool (sweep.films), no dataset; a film spooled twice
 #     is taken once, a partial record at the spool's end (a write cut
@@ -80,6 +83,21 @@ rs "$pa" sweep "$scene" "${planes[@]}" --format nc -o pl_nc 2>"$tmp/err" || bad 
 rs "$pa" sweep "$scene" "${planes[@]}" --format dataset -o pl_ds 2>"$tmp/err" ||
   bad "planes, dataset: $(cat "$tmp/err")"
 like_nc "brdf, brf, radiance_stderr" pl_nc pl_ds
+
+# ---- the films past RAYSWEEP_DATASET_MEMORY in a file without a name ----
+RAYSWEEP_DATASET_MEMORY=0 rs "$pa" sweep "$scene" "${grid[@]}" --format dataset -o ds_store 2>"$tmp/err" ||
+  bad "--format dataset, no memory budget: $(cat "$tmp/err")"
+like_nc "--format dataset, every film in the store" nc ds_store
+RAYSWEEP_DATASET_MEMORY=20000 rs "$pa" sweep "$scene" "${planes[@]}" --format nc -o pl_store 2>"$tmp/err" ||
+  bad "--format nc, a film on the heap, the rest in the store: $(cat "$tmp/err")"
+cmp -s pl_nc/dataset.nc pl_store/dataset.nc && ok || bad "--format nc with the store: another dataset"
+RAYSWEEP_DATASET_MEMORY=0 rs "$plb" sweep "$scene" "${grid[@]}" --format dataset --spread 2 -o spread_store \
+  2>"$tmp/err" || bad "--spread 2, every film in the store: $(cat "$tmp/err")"
+like_nc "--spread 2, every film in the store" nc spread_store
+RAYSWEEP_DATASET_MEMORY=lots expect 2 "a bad RAYSWEEP_DATASET_MEMORY" rs "$pa" sweep "$scene" "${grid[@]}" \
+  --format dataset -o bad_mem
+contains "the error names RAYSWEEP_DATASET_MEMORY" "$tmp/err" "RAYSWEEP_DATASET_MEMORY needs a number of bytes (got 'lots')"
+[ ! -e bad_mem ] && ok || bad "a bad RAYSWEEP_DATASET_MEMORY created bad_mem"
 
 # ---- --spread over two daemons ----
 rs "$plb" sweep "$scene" "${grid[@]}" --format dataset --spread 2 -o spread 2>"$tmp/err" ||
