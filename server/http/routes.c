@@ -653,13 +653,21 @@ static void h_job_dataset(http_req *r) {
   svc_error e = {0};
   void *bytes = NULL;
   size_t len = 0;
-  if (service_job_dataset(r->svc, r->params[0], partial, &bytes, &len, &e) != RSW_OK) {
+  int fd;
+  uint64_t fd_len = 0;
+  if (service_job_dataset_file(r->svc, r->params[0], partial, &fd, &fd_len, &bytes, &len, &e) != RSW_OK) {
     http_resp_svc_error(r, &e);
     return;
   }
   http_resp_clear(&r->resp);
   r->resp.status = 200;
   r->resp.content_type = "application/x-netcdf";
+  if (fd >= 0) { /* streamed from its file */
+    r->resp.has_fd = true;
+    r->resp.fd = fd;
+    r->resp.fd_len = fd_len;
+    return;
+  }
   r->resp.body = bytes;
   r->resp.len = len;
 }

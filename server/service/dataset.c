@@ -4,10 +4,13 @@
  * What the dataset needs is copied out under svc->lock (the job may be
  * deleted while the file is encoded), films kept on disk only are read
  * after it is released, and the encoding runs without it. */
+#include <fcntl.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include "service_internal.h"
 
@@ -112,8 +115,37 @@ static char *warnings_text(const cJSON *w) {
   return s;
 }
 
-rsw_status service_job_dataset(service *svc, const char *id, bool partial, void **bytes_out, size_t *len_out,
-                               svc_error *e) {
+/* The dataset written to a file in the blob directory, unlinked once open:
+ * its descriptor (read from the start) and length, or -1 where the
+ * directory took no file (then encoded in memory after all). */
+static int dataset_file(const service *svc, const nc_dataset *ds, uint64_t *len_out, rsw_err *err) {
+  /* A name no other request or replica (a blob directory may be shared)
+   * has: the writer's temporary file is named after it too. */
+  char path[4200];
+  snprintf(path, sizeof path, "%s/.dataset.XXXXXX", svc->blob_dir);
+  int made = mkostemp(path, O_CLOEXEC);
+  if (made < 0) return -1;
+  close(made);
+  rsw_err werr = {0};
+  rsw_status st = nc_dataset_write(path, ds, &werr);
+  if (st != RSW_OK) {
+    unlink(path);
+    if (st != RSW_ERR_IO) *err = werr; /* (a bad dataset: the same error in memory) */
+    return st == RSW_ERR_IO ? -1 : -2;
+  }
+  int fd = open(path, O_RDONLY | O_CLOEXEC);
+  unlink(path);
+  struct stat sb;
+  if (fd >= 0 && fstat(fd, &sb) != 0) {
+    close(fd);
+    fd = -1;
+  }
+  if (fd >= 0) *len_out = (uint64_t)sb.st_size;
+  return fd;
+}
+
+static rsw_status job_dataset(service *svc, const char *id, bool partial, int *fd_out, uint64_t *fd_len,
+                              void **bytes_out, size_t *len_out, svc_error *e) {
   pthread_mutex_lock(&svc->lock);
   job *j = svc_find_job_locked(svc, id);
   if (!j) {
@@ -308,7 +340,15 @@ rsw_status service_job_dataset(service *svc, const char *id, bool partial, void 
                      .nodes = bp.wl,
                      .n_bands = bp.n,
                      .band_ids = band_ids};
-    if (nc_dataset_encode(&ds, bytes_out, len_out, &err) != RSW_OK)
+    /* To a file when asked (the answer streams from it: no copy of the
+     * whole file in memory beside the films), else, or where no file can
+     * be made, in memory. */
+    int fd = fd_out ? dataset_file(svc, &ds, fd_len, &err) : -1;
+    if (fd == -2)
+      st = svc_fail(e, err.code, err.where, "%s", err.msg);
+    else if (fd >= 0)
+      *fd_out = fd;
+    else if (nc_dataset_encode(&ds, bytes_out, len_out, &err) != RSW_OK)
       st = svc_fail(e, err.code, err.where, "%s", err.msg);
   }
   for (size_t i = 0; it && i < n_items; i++) svc_film_free(&it[i].film);
@@ -326,4 +366,16 @@ rsw_status service_job_dataset(service *svc, const char *id, bool partial, void 
   free(warnings);
   nc_coords_free(&coords);
   return st;
+}
+
+rsw_status service_job_dataset(service *svc, const char *id, bool partial, void **bytes_out, size_t *len_out,
+                               svc_error *e) {
+  return job_dataset(svc, id, partial, NULL, NULL, bytes_out, len_out, e);
+}
+
+rsw_status service_job_dataset_file(service *svc, const char *id, bool partial, int *fd_out, uint64_t *fd_len,
+                                    void **bytes_out, size_t *len_out, svc_error *e) {
+  *fd_out = -1;
+  *bytes_out = NULL;
+  return job_dataset(svc, id, partial, fd_out, fd_len, bytes_out, len_out, e);
 }

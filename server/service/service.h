@@ -177,6 +177,13 @@ rsw_status service_job_results(service *svc, const char *job_id, char **json_out
  * the job is queued or running, unless partial (films not there are NaN). */
 rsw_status service_job_dataset(service *svc, const char *job_id, bool partial, void **bytes_out,
                                size_t *len_out, svc_error *e);
+/* The same written to a file in the blob directory, unlinked once open:
+ * *fd_out (>= 0: read it from the start, *fd_len bytes; the caller closes
+ * it), so that the whole file is not held in memory beside the films; or,
+ * where that directory takes no file, in memory (*fd_out -1, *bytes_out
+ * as above). */
+rsw_status service_job_dataset_file(service *svc, const char *job_id, bool partial, int *fd_out,
+                                    uint64_t *fd_len, void **bytes_out, size_t *len_out, svc_error *e);
 rsw_status service_job_result(service *svc, const char *job_id, const char *context, const char *sensor_id,
                               svc_film *out, svc_error *e);
 /* Jobs with bands (docs/experiments.md#spectral-response-functions-bands): the film of band `band`

@@ -10,7 +10,8 @@
 #     --spread 2: the same dataset as the unsharded one (every variable
 #     bitwise, the attributes equal);
 #   - a job whose coords are not a grid: one "context" dimension;
-#   - a finished job's dataset survives a restart with --state-dir;
+#   - a finished job's dataset survives a restart with --state-dir; it is
+#     answered from a file in the blob directory, which is gone after;
 #   - docs/client.md's xarray example (docs/examples/dataset.py) runs on it;
 #   - bad coords are 422 naming the JSON pointer; the dataset of a running
 #     job is 409 unless ?partial=1; a film's fetch cannot be .nc.
@@ -160,6 +161,13 @@ start_daemon "$tmp/d3" --state-dir "$tmp/st" --max-result-bytes 100
 url2=http://127.0.0.1:$started_port
 run "state: dataset after a restart" "$bin/raysweep" --server "$url2" fetch "$stjob" -o after.nc
 ds "state: the dataset survives a restart" same before.nc after.nc
+# The daemon writes a dataset to a file in its blob directory and answers
+# from it: the same bytes each time, and nothing left there.
+curl -s -o stream1.nc "$url2/v1/jobs/$stjob/dataset" && curl -s -o stream2.nc "$url2/v1/jobs/$stjob/dataset"
+cmp -s stream1.nc after.nc && cmp -s stream2.nc after.nc && ok ||
+  bad "state: the dataset streamed from its file is not the one fetched"
+left=$(ls -A "$tmp/st/blobs" | grep -c '^\.dataset')
+[ "$left" = 0 ] && ok || bad "state: $left dataset files left in the blob directory"
 "$py" -c 'import sys, xarray; d = xarray.open_dataset(sys.argv[1]); assert int(d.attrs["seed"]) == 9 and "a" in d.coords' \
   after.nc 2>pyerr && ok || bad "state: seed and coords after a restart: $(tail -n 2 pyerr)"
 
