@@ -24,6 +24,7 @@
 
 #include "../../server/service/bands.h"
 #include "../../server/service/service.h"
+#include "../support/svc_job.h"
 #include "../support/test.h"
 
 RSW_TEST_DEFINE_GLOBALS
@@ -70,22 +71,7 @@ static char *post(const char *doc) {
 
 /* Submit and wait for the end; the job id (free), or NULL. */
 static char *run_job(const char *scene_id, const char *body) {
-  char *jid = NULL, *json = NULL;
-  svc_error e = {0};
-  if (service_job_submit(svc, scene_id, body, strlen(body), NULL, &jid, &json, &e)) {
-    printf("  submit: %s (%s)\n", e.err.msg, e.err.where);
-    return NULL;
-  }
-  free(json);
-  uint64_t after = 0, seq;
-  bool end = false;
-  for (int guard = 0; !end && guard < 100000; guard++) {
-    char *ev = NULL;
-    if (service_job_next_event(svc, jid, after, 5000, &seq, &ev, &end, &e)) break;
-    if (ev) after = seq;
-    free(ev);
-  }
-  return jid;
+  return svc_test_run_job(svc, scene_id, body);
 }
 
 static bool parse_bands(const char *json, band_plan **p) {

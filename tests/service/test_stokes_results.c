@@ -24,6 +24,7 @@
 
 #include "../../server/kernel/extplugin/env_plugin.h"
 #include "../../server/service/service.h"
+#include "../support/svc_job.h"
 #include "../support/test.h"
 #include "../support/tsup.h"
 
@@ -85,22 +86,7 @@ static char *g_scene;
 
 /* Submit and wait for the end; the job id (free), or NULL. */
 static char *run_job(const char *body) {
-  char *jid = NULL, *json = NULL;
-  svc_error e = {0};
-  if (service_job_submit(svc, g_scene, body, strlen(body), NULL, &jid, &json, &e)) {
-    printf("  submit: %s (%s)\n", e.err.msg, e.err.where);
-    return NULL;
-  }
-  free(json);
-  uint64_t after = 0, seq;
-  bool end = false;
-  for (int guard = 0; !end && guard < 100000; guard++) {
-    char *ev = NULL;
-    if (service_job_next_event(svc, jid, after, 5000, &seq, &ev, &end, &e)) break;
-    if (ev) after = seq;
-    free(ev);
-  }
-  return jid;
+  return svc_test_run_job(svc, g_scene, body);
 }
 
 /* The dataset of job jid, open in memory (-1 on failure; *bytes to free). */
@@ -252,19 +238,7 @@ int main(void) {
     printf("load: %s\n", err.msg);
     return 1;
   }
-  service_opts o = {.size = sizeof o, .render_threads = 2};
-  if (service_new(&o, &svc, &err)) {
-    printf("service_new: %s\n", err.msg);
-    return 1;
-  }
-  bool created;
-  char *json = NULL;
-  svc_error e = {0};
-  if (service_scene_post(svc, SCENE, strlen(SCENE), false, NULL, &created, &g_scene, &json, &e)) {
-    printf("  post: %s (%s)\n", e.err.msg, e.err.where);
-    g_scene = NULL;
-  }
-  free(json);
+  if (!svc_test_start(&svc, SCENE, &g_scene)) return 1;
   if (g_scene) {
     RSW_TEST_RUN(test_job_with_templates);
     RSW_TEST_RUN(test_band_integrates_stokes);
