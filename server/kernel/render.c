@@ -910,8 +910,10 @@ rsw_status render_sensor_bundle(scene *sc, const render_opts *opts, film_image *
                                        : col1(e_hp[b / 3].c[b % 3])};
     if (!st) st = fm->ops->develop(fm, &sums, &out[b], err);
     if (acc != jb.film_acc) free(acc);
-    if (!st && se->ops->pixel_angles) {
-      out[b].angles = malloc((size_t)jb.W * jb.H * 2 * sizeof(double));
+    if (!st && se->ops->pixel_angles && b > 0) {
+      out[b].angles = film_angles_ref(out[0].angles); /* (a bundle's pages: one sensor, one block) */
+    } else if (!st && se->ops->pixel_angles) {
+      out[b].angles = film_angles_new((size_t)jb.W * jb.H);
       if (!out[b].angles) {
         film_image_free(&out[b]);
         st = rsw_fail(err, RSW_ERR_NOMEM, "film", "out of memory");

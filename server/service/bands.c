@@ -532,11 +532,7 @@ rsw_status bands_combine(const band *b, const film_image *const *nodes, film_ima
   for (size_t c = 0; f0->has_irradiance && c < C && c < FILM_MAX_CHANNELS; c++)
     o.irradiance[c] = e_srf[c % n_ir];
   bool ok = (o.data = malloc(n * sizeof *o.data)) != NULL;
-  if (ok && f0->angles) {
-    size_t na = (size_t)f0->width * (size_t)f0->height * 2;
-    ok = (o.angles = malloc(na * sizeof *o.angles)) != NULL;
-    if (ok) memcpy(o.angles, f0->angles, na * sizeof *o.angles);
-  }
+  if (ok) o.angles = film_angles_ref(f0->angles); /* (the nodes', shared) */
   for (int p = 0; ok && p < f0->n_planes; p++) {
     o.planes[p] = f0->planes[p];
     ok = (o.planes[p].data = malloc(n * sizeof(float))) != NULL;

@@ -60,8 +60,7 @@ typedef struct ds_item {
   size_t index; /* render item */
   size_t node;  /* render_item.node */
   bool present, from_disk;
-  bool angles_shared; /* film.img.angles is an earlier item's (not freed with this one) */
-  svc_film_ref ref;   /* from_disk: the film's place and identity */
+  svc_film_ref ref; /* from_disk: the film's place and identity */
   svc_film film;
   nc_var vars[MAX_FILM_VARS];
 } ds_item;
@@ -198,8 +197,10 @@ static rsw_status job_dataset(service *svc, const char *id, bool partial, int *f
   for (size_t c = 0; !st && c < n_ctx; c++) wl[c] = NAN;
   /* A job's films have their sensor's pixel angles, the same in every
    * context as a rule (16 bytes a pixel: more than a mono film's
-   * radiance): one copy for a run of films whose angles are equal. */
-  const double *last_angles = NULL;
+   * radiance), one block that the job's films share (item_done) and the
+   * copies here too; films read from disk share the one before theirs
+   * where it is equal. */
+  double *last_angles = NULL;
   size_t last_np = 0;
   for (size_t i = 0; !st && i < n_items; i++) {
     const render_item *ri = &j->items[i];
@@ -227,23 +228,14 @@ static rsw_status job_dataset(service *svc, const char *id, bool partial, int *f
           memcpy(d->film.img.planes[k].data, src->planes[k].data, plane_bytes);
       }
       d->film.img.data = malloc(plane_bytes);
-      d->angles_shared = src->angles && last_angles && last_np == np &&
-                         memcmp(last_angles, src->angles, np * 2 * sizeof(double)) == 0;
-      if (d->angles_shared)
-        d->film.img.angles = (double *)last_angles;
-      else if (src->angles)
-        d->film.img.angles = malloc(np * 2 * sizeof(double));
-      if (!planes_ok || !d->film.img.data || (src->angles && !d->film.img.angles)) {
-        if (d->angles_shared) d->film.img.angles = NULL;
+      d->film.img.angles = film_angles_ref(src->angles);
+      if (!planes_ok || !d->film.img.data) {
         svc_film_free(&d->film);
         st = svc_fail(e, RSW_ERR_NOMEM, id, "out of memory for the dataset");
         break;
       }
       memcpy(d->film.img.data, src->data, np * (size_t)src->channels * sizeof(float));
-      if (src->angles && !d->angles_shared) {
-        memcpy(d->film.img.angles, src->angles, np * 2 * sizeof(double));
-        last_angles = d->film.img.angles, last_np = np;
-      }
+      if (d->film.img.angles) last_angles = d->film.img.angles, last_np = np; /* (ours: held till the end) */
       d->present = true;
     } else if (ri->on_disk) {
       d->from_disk = true;
@@ -260,9 +252,8 @@ static rsw_status job_dataset(service *svc, const char *id, bool partial, int *f
     size_t np = (size_t)im->width * (size_t)im->height;
     if (!st && im->angles && last_angles && last_np == np &&
         memcmp(last_angles, im->angles, np * 2 * sizeof(double)) == 0) {
-      free(im->angles);
-      im->angles = (double *)last_angles;
-      it[i].angles_shared = true;
+      film_angles_unref(im->angles);
+      im->angles = film_angles_ref(last_angles);
     } else if (!st && im->angles) {
       last_angles = im->angles, last_np = np;
     }
@@ -376,10 +367,7 @@ static rsw_status job_dataset(service *svc, const char *id, bool partial, int *f
     else if (nc_dataset_encode(&ds, bytes_out, len_out, &err) != RSW_OK)
       st = svc_fail(e, err.code, err.where, "%s", err.msg);
   }
-  for (size_t i = 0; it && i < n_items; i++) {
-    if (it[i].angles_shared) it[i].film.img.angles = NULL;
-    svc_film_free(&it[i].film);
-  }
+  for (size_t i = 0; it && i < n_items; i++) svc_film_free(&it[i].film);
   for (size_t i = 0; i < n_bimg; i++) film_image_free(&bimg[i]);
   free(bimg);
   free(bvars);

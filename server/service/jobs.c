@@ -156,6 +156,7 @@ static void job_free(job *j) {
   nc_coords_free(&j->coords);
   cJSON_Delete(j->warnings);
   bands_free(j->bands);
+  film_angles_unref(j->angles);
   free(j);
 }
 
@@ -1319,10 +1320,26 @@ static void note_plugin_failures(job *j, const render_item *it) {
   cJSON_AddItemToArray(j->warnings, w);
 }
 
+/* Film im's pixel angles as the job's block (job.angles) where they are
+ * the same as the last film's, else its own, kept for the next. */
+static void share_angles(job *j, film_image *im) {
+  size_t n = (size_t)im->width * (size_t)im->height * 2;
+  if (!im->angles || im->angles == j->angles) return;
+  if (j->angles && j->angles_n == n && memcmp(j->angles, im->angles, n * sizeof(double)) == 0) {
+    film_angles_unref(im->angles);
+    im->angles = film_angles_ref(j->angles);
+    return;
+  }
+  film_angles_unref(j->angles);
+  j->angles = film_angles_ref(im->angles);
+  j->angles_n = n;
+}
+
 static void item_done(service *svc, job *j, size_t k, rsw_status st, svc_film *out, svc_error *e) {
   render_item *it = &j->items[k];
   size_t done = j->items_done + 1; /* only this worker writes it */
   if (!st) {
+    share_angles(j, &out->img);
     it->film = *out;
     /* The seed the film was rendered with: its bundle's (its leader's),
      * which GET .../results, the job's record and its dataset name. */

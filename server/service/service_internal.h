@@ -178,6 +178,12 @@ typedef struct job {
   /* The job's bands (bands.c), NULL without: each context renders once
    * per node wavelength, items context-major then node then sensor. */
   band_plan *bands;
+  /* The pixel angles of the last film with angles (a counted block,
+   * film_angles_ref; n doubles): the job's next films whose angles are
+   * the same share it (item_done), so a sweep holds one block of them,
+   * not one a film. Written by the job's worker alone. */
+  double *angles;
+  size_t angles_n;
   /* The render in progress (an index into items, SIZE_MAX when none) and
    * its samples, for the job's answers ("render"). */
   size_t current;

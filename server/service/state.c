@@ -1038,7 +1038,7 @@ rsw_status svc_state_film_read(service *svc, const svc_film_ref *ref, svc_film *
   film_image *im = &out->img;
   size_t want = (size_t)im->width * (size_t)im->height * (size_t)im->channels * (size_t)(1 + im->n_planes);
   float *all = malloc(want * sizeof(float));
-  if (t.angles && all) im->angles = malloc(t.angles);
+  if (t.angles && all) im->angles = film_angles_new(t.angles / 16);
   bool ok = all && (!t.angles || im->angles) &&
             read_at(fd, all, want * sizeof(float), (off_t)(t.npy - want * sizeof(float))) &&
             (!t.angles || read_at(fd, im->angles, t.angles, (off_t)t.npy));

@@ -1,7 +1,8 @@
 /* What a job's dataset costs the daemon in memory, in process (no HTTP):
  * 96 contexts of a 128 x 128 hdistant film, whose pixel angles (16 bytes
- * a pixel, 256 KiB a film) are the same in every context. The dataset
- * keeps one copy of them, not one a film: building it raises the
+ * a pixel, 256 KiB a film) are the same in every context. The job's films
+ * hold one block of them (a film fetched from it too), and so does the
+ * dataset: building it raises the
  * process's peak memory (VmHWM, reset before) by less than 1.5 x the 24
  * MiB that the angles of every film would take (the films' other copies
  * and the file take the rest), for a dataset whose angles are still every
@@ -73,6 +74,18 @@ static void test_angles_once(void) {
   snprintf(body + at, sizeof body - at, "]}");
   char *jid = svc_test_run_job(svc, scene_id, body);
   REQUIRE(jid, "the job ran");
+  /* The job's films hold one block of angles (item_done), and a film
+   * fetched holds it too (film_image_copy). */
+  svc_film f0, f1;
+  svc_error fe = {0};
+  memset(&f0, 0, sizeof f0), memset(&f1, 0, sizeof f1);
+  REQUIRE(service_job_result(svc, jid, "c00", "meter", &f0, &fe) == RSW_OK &&
+              service_job_result(svc, jid, "c95", "meter", &f1, &fe) == RSW_OK,
+          "results: %s", fe.err.msg);
+  CHECK(f0.img.angles && f0.img.angles == f1.img.angles, "contexts c00 and c95 share their angles (%p, %p)",
+        (void *)f0.img.angles, (void *)f1.img.angles);
+  svc_film_free(&f0);
+  svc_film_free(&f1);
   /* A first dataset (libnetcdf's start-up, the allocator's arenas), then
    * the one measured. */
   void *bytes = NULL;

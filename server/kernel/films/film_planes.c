@@ -2,6 +2,7 @@
  * interleaving for the one-array formats (EXR channels, .npy), and the
  * horizontal irradiance the BRDF and BRF divide by. */
 #include <math.h>
+#include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -238,15 +239,38 @@ static void *dup_bytes(const void *p, size_t n) {
   return q;
 }
 
+/* A block's count, before its angles (16 bytes: they stay aligned as
+ * malloc's). */
+typedef struct angles_head {
+  _Atomic size_t refs;
+  size_t pad;
+} angles_head;
+
+double *film_angles_new(size_t pixels) {
+  angles_head *h = malloc(sizeof *h + (pixels ? pixels : 1) * 2 * sizeof(double));
+  if (!h) return NULL;
+  atomic_init(&h->refs, 1);
+  return (double *)(h + 1);
+}
+
+double *film_angles_ref(double *a) {
+  if (a) atomic_fetch_add(&((angles_head *)a - 1)->refs, 1);
+  return a;
+}
+
+void film_angles_unref(double *a) {
+  if (!a) return;
+  angles_head *h = (angles_head *)a - 1;
+  if (atomic_fetch_sub(&h->refs, 1) == 1) free(h);
+}
+
 bool film_image_copy(const film_image *src, film_image *dst) {
   size_t n = (size_t)src->width * (size_t)src->height * (size_t)src->channels;
   film_image d = *src;
   d.data = NULL, d.angles = NULL;
   for (int p = 0; p < src->n_planes; p++) d.planes[p].data = NULL;
   bool ok = (d.data = dup_bytes(src->data, n * sizeof(float))) != NULL;
-  if (ok && src->angles)
-    ok = (d.angles = dup_bytes(src->angles, (size_t)src->width * (size_t)src->height * 2 * sizeof(double))) !=
-         NULL;
+  if (ok) d.angles = film_angles_ref(src->angles); /* (never written: shared) */
   for (int p = 0; ok && p < src->n_planes; p++)
     ok = (d.planes[p].data = dup_bytes(src->planes[p].data, n * sizeof(float))) != NULL;
   if (!ok) {
@@ -284,7 +308,7 @@ void film_image_free(film_image *img) {
   if (!img) return;
   free(img->data);
   img->data = NULL;
-  free(img->angles);
+  film_angles_unref(img->angles);
   img->angles = NULL;
   /* The planes' descriptions stay, like the film's size and channels. */
   for (int p = 0; p < img->n_planes; p++) {

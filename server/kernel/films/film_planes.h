@@ -48,7 +48,10 @@ typedef struct film_image {
   rsw_variant variant;
   bool polarized; /* a polarized variant's film (channels S0.Y..S3.Y, or S0.R..S3.B) */
   /* Viewing zenith, azimuth (degrees) of each pixel, 2 per pixel,
-   * row-major (owned); NULL when the sensor has no pixel_angles op. */
+   * row-major; NULL when the sensor has no pixel_angles op. A counted
+   * block (film_angles_new): films whose angles are the same (a bundle's
+   * pages, a job's contexts, a film and its copies) hold one, and
+   * film_image_free lets go of it. Never written once a film has it. */
   double *angles;
   /* Rays the periodic boundary could not resolve (render_stats.unresolved:
    * within ~1e-5 rad of horizontal, still inside the slab after 65,536
@@ -129,6 +132,14 @@ bool film_image_split(film_image *img, const char *const *plane_names, int n_pla
 /* Name, units, long name and channel names of plane `name` (one of
  * "brdf", "brf", "radiance_stderr") for img's channels; p->data untouched. */
 void film_plane_init(const film_image *img, const char *name, film_plane *p);
+/* A block of pixel angles for film_image.angles: 2 doubles for each of
+ * pixels, held once (NULL: out of memory). film_angles_ref: one more
+ * holder of a (NULL: none), returned; film_angles_unref: one fewer, freed
+ * with the last. Thread-safe (the count is atomic). */
+double *film_angles_new(size_t pixels);
+double *film_angles_ref(double *a);
+void film_angles_unref(double *a);
+
 /* Deep copy of src into *dst (pixels, angles, planes: release with
  * film_image_free); false when out of memory (then *dst holds nothing to
  * free). */
