@@ -120,8 +120,14 @@ static long g_jitter_us;
  *    thrown on a worker (the builder waits for that worker forever, or
  *    TBB terminates the process with missing_wait), a limitation of the
  *    library that no caller can handle, so failing there would only
- *    measure Embree. Failures on the thread that calls Embree (which takes
- *    part in the build too) still surface as RTC_ERROR_OUT_OF_MEMORY. */
+ *    measure Embree. The thread that calls Embree takes part in the build
+ *    too: there, an allocation inside a oneTBB task is not failed either
+ *    (should_fail), as the std::bad_alloc it throws can leave a spin lock
+ *    of Embree's held, and the next build, on any thread, spins on it
+ *    forever (test_oom's d_scene_push under load, 2026-11-29: allocations
+ *    1043-1048 failed inside tasks, then the push of run 1049 hung in
+ *    rtcCommitScene, on a `pause` loop). Its failures outside the tasks
+ *    still surface as RTC_ERROR_OUT_OF_MEMORY. */
 static _Thread_local bool t_started;
 
 typedef struct trampoline {
@@ -185,15 +191,19 @@ static bool should_fail(void) {
     }
   }
   if (n != atomic_load(&g_target)) return false;
-  if (atomic_load(&g_skip_embree)) {
-    void *b[64];
-    int k = backtrace(b, 64);
-    for (int q = 0; q < k; q++) {
-      Dl_info di;
-      if (dladdr(b[q], &di) && di.dli_fname && strstr(di.dli_fname, "libembree")) {
-        atomic_fetch_add(&g_target, 1);
-        return false;
-      }
+  /* Not inside a oneTBB task (libtbb on the stack: Embree's parallel
+   * build running on the thread that called it; see the threads above),
+   * nor, with failmalloc_skip_embree, anywhere in Embree: the next
+   * allocation fails instead. */
+  void *b[64];
+  int k = backtrace(b, 64);
+  bool embree = atomic_load(&g_skip_embree);
+  for (int q = 0; q < k; q++) {
+    Dl_info di;
+    if (dladdr(b[q], &di) && di.dli_fname &&
+        (strstr(di.dli_fname, "libtbb") || (embree && strstr(di.dli_fname, "libembree")))) {
+      atomic_fetch_add(&g_target, 1);
+      return false;
     }
   }
   atomic_store(&g_fail_bt_n, backtrace(g_fail_bt, 48));
