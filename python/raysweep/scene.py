@@ -186,16 +186,21 @@ class Scene:
         """
         # A Ctrl-C while the job is being submitted waits for the daemon's
         # answer, so that the job it may have accepted is known and cancelled.
-        with _deferred_interrupt() as interrupted:
-            job = self.submit(grid=grid, contexts=contexts, **options)
+        # One that comes as the block ends is raised by the handler it puts
+        # back (CPython runs the handler in place when it checks, not the one
+        # in place when the signal came), so the block is inside the try too.
+        job = None
         try:
+            with _deferred_interrupt() as interrupted:
+                job = self.submit(grid=grid, contexts=contexts, **options)
             if interrupted:
                 raise KeyboardInterrupt
             return job.result(timeout=timeout, progress=progress)
         except KeyboardInterrupt:
-            job.cancel()
-            import sys
-            print(f"raysweep: interrupted: cancelled job {job.id}", file=sys.stderr)
+            if job is not None:
+                job.cancel()
+                import sys
+                print(f"raysweep: interrupted: cancelled job {job.id}", file=sys.stderr)
             raise
 
 

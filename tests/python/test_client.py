@@ -623,6 +623,42 @@ class TestJobs(Base):
         job.wait(timeout=180)
         self.assertEqual(job.state, "cancelled")
 
+    def test_ctrl_c_as_submit_returns(self):
+        # A SIGINT that comes as the submit returns is run by the handler
+        # the deferral puts back (CPython runs the one in place when it
+        # checks): the job is still cancelled. Simulated by raising SIGINT
+        # right after the deferral's __exit__; it failed before the fix.
+        from unittest import mock
+        from raysweep import scene as scene_mod
+        hd = self.client.load_file(HDISTANT)
+        cancelled = []
+
+        class FakeJob:
+            id = "job-fake"
+
+            def cancel(self):
+                cancelled.append(self.id)
+
+            def result(self, **kw):
+                raise AssertionError("the job's result was waited for")
+
+        hd.submit = lambda **kw: FakeJob()
+        plain_exit = scene_mod._deferred_interrupt.__exit__
+
+        def exit_then_sigint(self, *exc):
+            plain_exit(self, *exc)
+            signal.raise_signal(signal.SIGINT)
+            return False
+
+        old = signal.signal(signal.SIGINT, signal.default_int_handler)
+        try:
+            with mock.patch.object(scene_mod._deferred_interrupt, "__exit__", exit_then_sigint):
+                with self.assertRaises(KeyboardInterrupt):
+                    hd.sweep(grid={"wavelength": [500]}, progress=False)
+        finally:
+            signal.signal(signal.SIGINT, old)
+        self.assertEqual(cancelled, ["job-fake"])
+
     def test_dataset_bytes_workaround(self):
         # What docs/python.md says: BytesIO has no engine; netCDF4 memory= does.
         import xarray as xr
