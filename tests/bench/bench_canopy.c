@@ -26,21 +26,11 @@
 #include "../../server/kernel/core/rng.h"
 #include "../../server/kernel/render.h"
 #include "../../server/kernel/scene/scene.h"
+#include "../support/tfile.h"
 #include "accel_bench.h"
 #include "bench.h"
 
 #define N_LEAVES 100000
-
-static double rss_bytes(void) {
-  FILE *f = fopen("/proc/self/status", "r");
-  if (!f) return 0;
-  char line[256];
-  double kb = 0;
-  while (fgets(line, sizeof line, f))
-    if (strncmp(line, "VmRSS:", 6) == 0) kb = atof(line + 6);
-  fclose(f);
-  return kb * 1024.0;
-}
 
 int main(void) {
   const char *e = getenv("RSW_BENCH_THREADS");
@@ -95,7 +85,7 @@ int main(void) {
       " \"plot\": {\"type\": \"periodic\", \"min\": [-10, -10], \"max\": [10, 10]}}\n",
       dirs, spp);
   fclose(f);
-  double rss0 = rss_bytes();
+  double rss0 = (double)tfile_proc_status_bytes("VmRSS");
   double emb0 = (double)accel_embree_bytes();
   rsw_err err = {0};
   scene *s = NULL;
@@ -106,7 +96,7 @@ int main(void) {
     return 1;
   }
   double load_s = bench_wall_s() - t0;
-  double rss1 = rss_bytes(), emb1 = (double)accel_embree_bytes();
+  double rss1 = (double)tfile_proc_status_bytes("VmRSS"), emb1 = (double)accel_embree_bytes();
   render_opts o = {.size = sizeof o, .spp = spp, .seed = 1, .threads = threads};
   film_image img;
   render_result_stats st;

@@ -29,6 +29,7 @@
 
 #include "../support/daemon.h"
 #include "../support/test.h"
+#include "../support/tfile.h"
 #include "image_exr.h"
 #include "raysweep/client.h"
 
@@ -47,23 +48,6 @@ static double now_s(void) {
   struct timespec ts;
   clock_gettime(CLOCK_MONOTONIC, &ts);
   return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
-static char *read_file(const char *path, size_t *len_out) {
-  FILE *f = fopen(path, "rb");
-  if (!f) return NULL;
-  fseek(f, 0, SEEK_END);
-  long n = ftell(f);
-  fseek(f, 0, SEEK_SET);
-  char *p = malloc((size_t)n + 1);
-  if (p && fread(p, 1, (size_t)n, f) != (size_t)n) {
-    free(p);
-    p = NULL;
-  }
-  fclose(f);
-  if (p) p[n] = '\0';
-  if (p && len_out) *len_out = (size_t)n;
-  return p;
 }
 
 static bool write_bytes(const char *path, const void *p, size_t n) {
@@ -213,7 +197,7 @@ static void test_push_json_with_blob(void) {
   snprintf(path, sizeof path, "%s/meshes", dir);
   mkdir(path, 0755);
   size_t len;
-  char *ply = read_file("tests/data/quad_le.ply", &len);
+  char *ply = tfile_read("tests/data/quad_le.ply", &len);
   REQUIRE(ply, "read tests/data/quad_le.ply");
   snprintf(path, sizeof path, "%s/meshes/quad.ply", dir);
   REQUIRE(write_bytes(path, ply, len), "copy the PLY");
@@ -372,7 +356,7 @@ static void test_params(void) {
 /* Parse an NPY v1.0 <f4 file: shape and data (owned). */
 static bool read_npy(const char *path, int shape[3], float **data, size_t *header_len) {
   size_t len;
-  unsigned char *p = (unsigned char *)read_file(path, &len);
+  unsigned char *p = (unsigned char *)tfile_read(path, &len);
   if (!p || len < 10 || memcmp(p, "\x93NUMPY\x01\x00", 8) != 0) {
     free(p);
     return false;
@@ -693,7 +677,7 @@ static void test_fetch_encoded(void) {
         static const char *types[] = {"image/x-exr", "application/x-npy"};
         for (int t = 0; t < 2; t++) {
           size_t want_len = 0, len = 0;
-          char *want = read_file(t ? npy : exr, &want_len);
+          char *want = tfile_read(t ? npy : exr, &want_len);
           void *bytes = NULL;
           s = rsw_job_fetch_encoded(c, job, ctxs[i], sensors[k], types[t], &bytes, &len);
           CHECK(s == RSW_OK, "fetch_encoded %s/%s %s: %s %s", ctxs[i], sensors[k], types[t], rsw_strerror(s),
@@ -1016,7 +1000,7 @@ static void test_push_wire(void) {
   snprintf(dir, sizeof dir, "%s/scene-json", tmpdir); /* holds meshes/quad.ply (test_push_json_with_blob) */
   snprintf(path, sizeof path, "%s/meshes/quad.ply", dir);
   size_t ply_len = 0;
-  char *ply = read_file(path, &ply_len);
+  char *ply = tfile_read(path, &ply_len);
   REQUIRE(ply, "read %s", path);
   free(ply);
   rsw_client *c = client_for(url, NULL, 0);

@@ -13,6 +13,7 @@
 #include <unistd.h>
 
 #include "../support/test.h"
+#include "../support/tfile.h"
 #include "film_io.h"
 #include "raysweep/client.h"
 
@@ -23,18 +24,6 @@ enum {
   H = 128,
   N_FILMS = 48
 };
-
-/* The process's anonymous resident memory, in bytes (0: unknown). */
-static size_t rss_anon(void) {
-  FILE *f = fopen("/proc/self/status", "r");
-  if (!f) return 0;
-  char line[256];
-  size_t kb = 0;
-  while (fgets(line, sizeof line, f))
-    if (sscanf(line, "RssAnon: %zu kB", &kb) == 1) break;
-  fclose(f);
-  return kb * 1024;
-}
 
 /* Film i as the daemon encodes it: radiance "Y" and "radiance_stderr.Y",
  * pixel angles that differ per film (so each film keeps its own block),
@@ -83,36 +72,20 @@ static bool build(void *const *exr, const size_t *len, const char *dir, size_t m
     snprintf(id, sizeof id, "c%02d", i);
     ok = rsw_dataset_add_context(d, id, 0, NULL) == RSW_OK;
   }
-  size_t before = rss_anon();
+  size_t before = tfile_proc_status_bytes("RssAnon");
   for (int i = 0; ok && i < N_FILMS; i++) {
     char id[16];
     snprintf(id, sizeof id, "c%02d", i);
     ok = rsw_dataset_add_film_exr(d, id, "cam", exr[i], len[i], NULL, 0) == RSW_OK;
     if (!ok) fprintf(stderr, "film %d: %s\n", i, rsw_dataset_last_error(d));
   }
-  size_t after = rss_anon();
+  size_t after = tfile_proc_status_bytes("RssAnon");
   *grew = after > before ? after - before : 0;
   ok = ok && rsw_dataset_write(d, out) == RSW_OK;
   if (!ok) fprintf(stderr, "write: %s\n", rsw_dataset_last_error(d));
   rsw_dataset_free(d);
   malloc_trim(0); /* (what the films took goes back: the next build's growth is its own) */
   return ok;
-}
-
-static char *slurp(const char *path, size_t *n) {
-  FILE *f = fopen(path, "rb");
-  if (!f) return NULL;
-  fseek(f, 0, SEEK_END);
-  long sz = ftell(f);
-  fseek(f, 0, SEEK_SET);
-  char *b = sz > 0 ? malloc((size_t)sz) : NULL;
-  if (b && fread(b, 1, (size_t)sz, f) != (size_t)sz) {
-    free(b);
-    b = NULL;
-  }
-  fclose(f);
-  *n = (size_t)sz;
-  return b;
 }
 
 static void test_store(void) {
@@ -134,7 +107,7 @@ static void test_store(void) {
   REQUIRE(build(exr, len, dir, 10 * film_bytes, half_nc, &grew_half), "10 films on the heap, then the store");
   REQUIRE(build(exr, len, NULL, 0, heap_nc, &grew_heap), "on the heap");
   size_t n1, n2, n3;
-  char *a = slurp(heap_nc, &n1), *b = slurp(store_nc, &n2), *c = slurp(half_nc, &n3);
+  char *a = tfile_read(heap_nc, &n1), *b = tfile_read(store_nc, &n2), *c = tfile_read(half_nc, &n3);
   CHECK(a && b && c && n1 == n2 && n1 == n3 && memcmp(a, b, n1) == 0 && memcmp(a, c, n1) == 0,
         "the three datasets are one, byte for byte (%zu, %zu, %zu bytes)", n1, n2, n3);
   free(a), free(b), free(c);

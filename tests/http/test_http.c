@@ -34,6 +34,7 @@
 
 #include "../support/daemon.h"
 #include "../support/test.h"
+#include "../support/tfile.h"
 #include "image_exr.h"
 
 RSW_TEST_DEFINE_GLOBALS
@@ -58,20 +59,6 @@ static double now_s(void) {
 static void sleep_ms(int ms) {
   struct timespec ts = {ms / 1000, (long)(ms % 1000) * 1000000L};
   nanosleep(&ts, NULL);
-}
-
-static char *read_file(const char *path, size_t *len) {
-  FILE *f = fopen(path, "rb");
-  if (!f) return NULL;
-  fseek(f, 0, SEEK_END);
-  long n = ftell(f);
-  fseek(f, 0, SEEK_SET);
-  char *buf = malloc((size_t)(n > 0 ? n : 0) + 1);
-  size_t got = n > 0 ? fread(buf, 1, (size_t)n, f) : 0;
-  buf[got] = '\0';
-  fclose(f);
-  if (len) *len = got;
-  return buf;
 }
 
 static bool write_bytes(const char *path, const void *data, size_t len) {
@@ -744,7 +731,7 @@ static void test_scenes_json(void) {
 
 static void test_scenes_xml_seed(void) {
   size_t len;
-  char *xml = read_file("proto/examples/hdistant_seed.xml", &len);
+  char *xml = tfile_read("proto/examples/hdistant_seed.xml", &len);
   REQUIRE(xml, "read proto/examples/hdistant_seed.xml");
   char id1[65], id2[65];
   /* The embedded default is the same scene, so the first POST may be 200. */
@@ -1508,7 +1495,7 @@ static void test_cancel(void) {
 
 static void test_blobs(void) {
   size_t len;
-  char *ply = read_file("tests/data/quad_le.ply", &len);
+  char *ply = tfile_read("tests/data/quad_le.ply", &len);
   REQUIRE(ply && len > 100, "read tests/data/quad_le.ply");
   char hex[65], other[65], path[256], body[512];
   sha256_hex(ply, len, hex);
@@ -1597,7 +1584,7 @@ static void test_paths_outside_data_root(void) {
   /* A real PLY, but outside --data-root (tmpdir/data). */
   snprintf(ply_abs, sizeof ply_abs, "%s/outside.ply", tmpdir);
   size_t len;
-  char *ply = read_file("tests/data/quad_le.ply", &len);
+  char *ply = tfile_read("tests/data/quad_le.ply", &len);
   if (ply) write_bytes(ply_abs, ply, len);
   free(ply);
   const char *names[] = {"../../etc/passwd", "/etc/passwd", "../outside.ply", ply_abs,
@@ -1978,7 +1965,7 @@ static void test_sigterm_main(void) {
   double secs = 0;
   int rc = daemon_stop(&main_d, 30, &secs);
   CHECK(rc == 0, "main daemon exit status %d after SIGTERM (%.2f s)", rc, secs);
-  char *log = read_file(main_d.t.log, NULL);
+  char *log = tfile_read(main_d.t.log, NULL);
   CHECK(log && strstr(log, "raysweepd: listening on http://127.0.0.1:"),
         "stderr announces the address: %.300s", log ? log : "");
   CHECK(log && strstr(log, "raysweepd: viewer: http://127.0.0.1:") && strstr(log, "/ui/\n"),
@@ -1994,7 +1981,7 @@ int main(void) {
   snprintf(data, sizeof data, "%s/data", tmpdir);
   mkdir(data, 0755);
   size_t len;
-  char *ply = read_file("tests/data/quad_le.ply", &len);
+  char *ply = tfile_read("tests/data/quad_le.ply", &len);
   snprintf(dst, sizeof dst, "%s/quad_le.ply", data);
   if (ply) write_bytes(dst, ply, len);
   free(ply);

@@ -21,6 +21,7 @@
 #include "../../server/service/service.h"
 #include "../support/svc_job.h"
 #include "../support/test.h"
+#include "../support/tfile.h"
 
 RSW_TEST_DEFINE_GLOBALS
 
@@ -42,18 +43,6 @@ static const char *SCENE =
     " \"sun\": {\"type\": \"directional\", \"direction\": [0.5, 0, -0.866], \"irradiance\": 1.0},"
     " \"plate\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [10, 10, 1]}],"
     "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.3}}}";
-
-/* The process's resident memory (VmRSS) or its peak (VmHWM), bytes. */
-static size_t vm(const char *what) {
-  FILE *f = fopen("/proc/self/status", "r");
-  size_t kb = 0;
-  char line[256], fmt[32];
-  snprintf(fmt, sizeof fmt, "%s: %%zu kB", what);
-  while (f && fgets(line, sizeof line, f))
-    if (sscanf(line, fmt, &kb) == 1) break;
-  if (f) fclose(f);
-  return kb * 1024;
-}
 
 /* The peak back to the present (Linux >= 4.0: clear_refs 5). */
 static bool reset_peak(void) {
@@ -94,11 +83,11 @@ static void test_angles_once(void) {
   REQUIRE(service_job_dataset(svc, jid, false, &bytes, &len, &e) == RSW_OK, "dataset: %s", e.err.msg);
   malloc_trim(0); /* (what the first took goes back: the second's peak is its own) */
   REQUIRE(reset_peak(), "VmHWM reset (/proc/self/clear_refs)");
-  size_t before = vm("VmRSS");
+  size_t before = tfile_proc_status_bytes("VmRSS");
   void *b2 = NULL;
   size_t len2 = 0;
   REQUIRE(service_job_dataset(svc, jid, false, &b2, &len2, &e) == RSW_OK, "dataset again: %s", e.err.msg);
-  size_t peak = vm("VmHWM"), grew = peak > before ? peak - before : 0;
+  size_t peak = tfile_proc_status_bytes("VmHWM"), grew = peak > before ? peak - before : 0;
   printf("  the dataset raised the peak by %.1f MiB\n", (double)grew / 1048576.0);
   size_t angles_all = (size_t)N_CTX * SIDE * SIDE * 2 * sizeof(double);
   /* With one copy of the angles: the films' radiance copied (6 MiB), the
