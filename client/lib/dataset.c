@@ -81,14 +81,17 @@ typedef struct ds_store {
     size_t len;
   } * maps;
   size_t n_maps, cap_maps;
+  char *dir;         /* where the file is (for errors) */
+  rsw_status failed; /* the last NULL's: RSW_ERR_NOMEM, or RSW_ERR_IO (the file) */
 } ds_store;
 
 /* n bytes (> 0) for pixels or angles: from the heap (*mapped false; free
  * them) while the heap holds under memory bytes of them, else from the
  * file (*mapped true: freed with the store). NULL: out of memory, or the
- * file could not grow (err says why). */
+ * file could not grow (st->failed and err say which and why). */
 static void *store_alloc(ds_store *st, size_t n, bool *mapped, char *err, size_t err_len) {
   *mapped = false;
+  st->failed = RSW_ERR_NOMEM;
   if (st->fd < 0 || st->on_heap + n <= st->memory) {
     void *p = malloc(n);
     if (p) st->on_heap += n;
@@ -108,15 +111,16 @@ static void *store_alloc(ds_store *st, size_t n, bool *mapped, char *err, size_t
       }
       st->maps = m, st->cap_maps = cap;
     }
+    st->failed = RSW_ERR_IO;
     int e = posix_fallocate(st->fd, st->size, (off_t)len);
     if (e) {
-      snprintf(err, err_len, "the film store cannot grow to %.1f MiB: %s",
+      snprintf(err, err_len, "the film store in '%s' cannot grow to %.1f MiB: %s", st->dir,
                (double)(st->size + (off_t)len) / 1048576.0, strerror(e));
       return NULL;
     }
     void *p = mmap(NULL, len, PROT_READ | PROT_WRITE, MAP_SHARED, st->fd, st->size);
     if (p == MAP_FAILED) {
-      snprintf(err, err_len, "cannot map the film store: %s", strerror(errno));
+      snprintf(err, err_len, "cannot map the film store in '%s': %s", st->dir, strerror(errno));
       return NULL;
     }
     st->maps[st->n_maps].p = p, st->maps[st->n_maps++].len = len;
@@ -132,6 +136,7 @@ static void *store_alloc(ds_store *st, size_t n, bool *mapped, char *err, size_t
 static void store_close(ds_store *st) {
   for (size_t i = 0; i < st->n_maps; i++) munmap(st->maps[i].p, st->maps[i].len);
   free(st->maps);
+  free(st->dir);
   if (st->fd >= 0) close(st->fd);
   *st = (ds_store){.fd = -1};
 }
@@ -279,6 +284,10 @@ rsw_status rsw_dataset_set_store(rsw_dataset *d, const char *dir, size_t memory_
     free(t);
     if (fd < 0) return ds_fail(d, RSW_ERR_IO, "cannot make a film store in '%s': %s", dir, strerror(e));
   }
+  if (!(d->store.dir = strdup(dir))) {
+    close(fd);
+    return ds_fail(d, RSW_ERR_NOMEM, "out of memory");
+  }
   d->store.fd = fd;
   d->store.memory = memory_bytes;
   return RSW_OK;
@@ -423,7 +432,7 @@ static rsw_status add_film(rsw_dataset *d, const char *context, const char *sens
   float *pix = s ? NULL
                  : store_alloc(&d->store, (ns ? ns : 1) * sizeof(float) * (size_t)(1 + n_planes), &f.mapped,
                                why, sizeof why);
-  if (!s && !pix) s = ds_fail(d, RSW_ERR_NOMEM, "%s: %s", what, why);
+  if (!s && !pix) s = ds_fail(d, d->store.failed, "%s: %s", what, why);
   f.data = pix;
   for (int i = 0; !s && i < f.channels; i++)
     if (!(f.names[i] = strdup(in->names[i]))) s = ds_fail(d, RSW_ERR_NOMEM, "out of memory");
@@ -496,7 +505,7 @@ static rsw_status add_film(rsw_dataset *d, const char *context, const char *sens
           (size_t)cJSON_GetArraySize(az) != np)
         s = ds_fail(d, RSW_ERR_PARSE, "%s: zenith_deg and azimuth_deg must list one angle per pixel", what);
       else if (!(f.angles = angles_new(&d->store, np, why, sizeof why)))
-        s = ds_fail(d, RSW_ERR_NOMEM, "%s: %s", what, why);
+        s = ds_fail(d, d->store.failed, "%s: %s", what, why);
       const cJSON *arr[2] = {zen, az};
       for (int k = 0; !s && k < 2; k++) {
         size_t i = 0;
@@ -617,7 +626,7 @@ static rsw_status exr_angles(rsw_dataset *d, const char *zen, const char *az, si
   }
   char why[200];
   ds_angles *a = angles_new(&d->store, np, why, sizeof why);
-  if (!a) return ds_fail(d, RSW_ERR_NOMEM, "%s: %s", what, why);
+  if (!a) return ds_fail(d, d->store.failed, "%s: %s", what, why);
   if (!parse_angles(zen, np, 0, a->v) || !parse_angles(az, np, 1, a->v)) {
     angles_unref(a);
     return ds_fail(d, RSW_ERR_PARSE, "%s: zenith_deg and azimuth_deg must list one angle per pixel", what);

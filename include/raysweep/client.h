@@ -361,8 +361,8 @@ rsw_status rsw_dataset_add_film_exr(rsw_dataset *d, const char *context, const c
  * is built in bounded memory; the file takes their size on the disk until
  * rsw_dataset_free. Without it every film is held on the heap. Call once,
  * before the films. Errors: RSW_ERR_IO (no file can be made in dir); a
- * film that the file cannot take (a full disk) is RSW_ERR_NOMEM from the
- * call that adds it, naming the film and the cause. */
+ * film that the file cannot take (a full disk) is RSW_ERR_IO from the
+ * call that adds it, naming the film, dir and the cause. */
 rsw_status rsw_dataset_set_store(rsw_dataset *d, const char *dir, size_t memory_bytes);
 /* Write the dataset (through a temp file renamed on success). Errors: the
  * contexts' coords (RSW_ERR_TYPE, RSW_ERR_INVALID, RSW_ERR_MISSING,

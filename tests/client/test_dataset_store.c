@@ -2,13 +2,16 @@
  * films past the memory budget go to a file without a name, the dataset
  * written from them is the one of films held on the heap, byte for byte,
  * and the process's own memory (RssAnon) does not grow with them. Also
- * bad store directories and the heap-only path's growth, which shows the
- * measurement can see films. */
+ * bad store directories, a store the disk cannot take (RSW_ERR_IO naming
+ * the film and the directory), and the heap-only path's growth, which
+ * shows the measurement can see films. */
 #include <malloc.h>
 #include <math.h>
+#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -128,6 +131,35 @@ static void test_store(void) {
   for (int i = 0; i < N_FILMS; i++) free(exr[i]);
 }
 
+/* A disk that cannot take the store (RLIMIT_FSIZE below the store's first
+ * block, SIGXFSZ ignored): the film is refused with RSW_ERR_IO, an error
+ * that names the film and the directory; nothing crashes. */
+static void test_store_full(void) {
+  char dir[] = "/tmp/rsw_store_full_XXXXXX";
+  REQUIRE(mkdtemp(dir), "temp dir");
+  size_t len;
+  void *exr = film_exr(0, &len);
+  REQUIRE(exr, "film encoded");
+  rsw_dataset *d;
+  REQUIRE(rsw_dataset_new(&d) == RSW_OK && rsw_dataset_set_store(d, dir, 0) == RSW_OK &&
+              rsw_dataset_add_context(d, "c00", 0, NULL) == RSW_OK,
+          "a dataset with a store");
+  struct rlimit old;
+  getrlimit(RLIMIT_FSIZE, &old);
+  struct rlimit lim = {1 << 20, old.rlim_max};
+  void (*was)(int) = signal(SIGXFSZ, SIG_IGN);
+  REQUIRE(setrlimit(RLIMIT_FSIZE, &lim) == 0, "RLIMIT_FSIZE");
+  rsw_status st = rsw_dataset_add_film_exr(d, "c00", "cam", exr, len, NULL, 0);
+  setrlimit(RLIMIT_FSIZE, &old);
+  signal(SIGXFSZ, was);
+  const char *msg = rsw_dataset_last_error(d);
+  CHECK(st == RSW_ERR_IO && strstr(msg, "film c00/cam") && strstr(msg, dir) && strstr(msg, "cannot grow"),
+        "a store that cannot grow: status %d, '%s'", (int)st, msg);
+  rsw_dataset_free(d);
+  free(exr);
+  CHECK(rmdir(dir) == 0, "nothing left in %s", dir);
+}
+
 static void test_store_errors(void) {
   rsw_dataset *d;
   REQUIRE(rsw_dataset_new(&d) == RSW_OK, "new");
@@ -145,6 +177,7 @@ static void test_store_errors(void) {
 
 int main(void) {
   RSW_TEST_RUN(test_store);
+  RSW_TEST_RUN(test_store_full);
   RSW_TEST_RUN(test_store_errors);
   RSW_TEST_END("test_dataset_store");
 }
