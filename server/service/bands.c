@@ -531,11 +531,11 @@ rsw_status bands_combine(const band *b, const film_image *const *nodes, film_ima
     }
   for (size_t c = 0; f0->has_irradiance && c < C && c < FILM_MAX_CHANNELS; c++)
     o.irradiance[c] = e_srf[c % n_ir];
-  bool ok = (o.data = malloc(n * sizeof *o.data)) != NULL;
+  bool ok = (o.data = film_pixels_new(n)) != NULL;
   if (ok) o.angles = film_angles_ref(f0->angles); /* (the nodes', shared) */
   for (int p = 0; ok && p < f0->n_planes; p++) {
     o.planes[p] = f0->planes[p];
-    ok = (o.planes[p].data = malloc(n * sizeof(float))) != NULL;
+    ok = (o.planes[p].data = film_pixels_new(n)) != NULL;
     o.n_planes = p + 1;
   }
   if (!ok) {
@@ -664,12 +664,8 @@ static rsw_status item_film_unlock(service *svc, job *j, size_t k, svc_film *out
     return st;
   }
   *out = it->film;
-  bool ok = film_image_copy(&it->film.img, &out->img);
+  film_image_share(&it->film.img, &out->img);
   pthread_mutex_unlock(&svc->lock);
-  if (!ok) {
-    memset(&out->img, 0, sizeof out->img);
-    return svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
-  }
   return RSW_OK;
 }
 

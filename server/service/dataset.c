@@ -1,9 +1,11 @@
 /* GET /v1/jobs/{id}/dataset: a job's films as one NetCDF-4 dataset
  * (common/dataset_nc.h has the layout).
  *
- * What the dataset needs is copied out under svc->lock (the job may be
- * deleted while the file is encoded), films kept on disk only are read
- * after it is released, and the encoding runs without it. */
+ * What the dataset needs is taken under svc->lock: the job's records
+ * copied, its films held (film_image_share: one more reference to their
+ * pixels and angles, since the job may be deleted while the file is
+ * encoded); films kept on disk only are read after it is released, and
+ * the encoding runs without it. */
 #include <fcntl.h>
 #include <math.h>
 #include <stdio.h>
@@ -213,28 +215,11 @@ static rsw_status job_dataset(service *svc, const char *id, bool partial, int *f
     if (ri->wavelength > 0 && !ri->node) wl[ri->context_index] = ri->wavelength;
     if (ri->state != JOB_SUCCEEDED) continue;
     if (ri->has_film) {
-      const film_image *src = &ri->film.img;
+      /* The film held, not copied (film_image_share): the job's lock is
+       * the service's, so the pixels stay where they are. */
       d->film = ri->film;
-      d->film.img.data = NULL;
-      d->film.img.angles = NULL;
-      size_t np = (size_t)src->width * (size_t)src->height;
-      size_t plane_bytes = np * (size_t)src->channels * sizeof(float);
-      bool planes_ok = true;
-      for (int k = 0; k < src->n_planes; k++) {
-        d->film.img.planes[k].data = src->planes[k].data ? malloc(plane_bytes) : NULL;
-        if (src->planes[k].data && !d->film.img.planes[k].data)
-          planes_ok = false;
-        else if (src->planes[k].data)
-          memcpy(d->film.img.planes[k].data, src->planes[k].data, plane_bytes);
-      }
-      d->film.img.data = malloc(plane_bytes);
-      d->film.img.angles = film_angles_ref(src->angles);
-      if (!planes_ok || !d->film.img.data) {
-        svc_film_free(&d->film);
-        st = svc_fail(e, RSW_ERR_NOMEM, id, "out of memory for the dataset");
-        break;
-      }
-      memcpy(d->film.img.data, src->data, np * (size_t)src->channels * sizeof(float));
+      film_image_share(&ri->film.img, &d->film.img);
+      size_t np = (size_t)ri->film.img.width * (size_t)ri->film.img.height;
       if (d->film.img.angles) last_angles = d->film.img.angles, last_np = np; /* (ours: held till the end) */
       d->present = true;
     } else if (ri->on_disk) {

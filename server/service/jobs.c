@@ -1793,14 +1793,10 @@ rsw_status service_job_result(service *svc, const char *id, const char *context,
       return svc_fail(e, RSW_ERR_NOT_FOUND, context, "context '%s' sensor '%s' has no film yet (%s)", context,
                       sensor_name, state_names[it->state]);
     }
-    /* A copy (pixels, angles and planes owned): the job may be deleted
-     * while the response is written. */
+    /* The film, held (its pixels, angles and planes: one more reference
+     * each): the job may be deleted while the response is written. */
     *out = it->film;
-    if (!film_image_copy(&it->film.img, &out->img)) {
-      memset(&out->img, 0, sizeof out->img);
-      pthread_mutex_unlock(&svc->lock);
-      return svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
-    }
+    film_image_share(&it->film.img, &out->img);
     pthread_mutex_unlock(&svc->lock);
     return RSW_OK;
   }

@@ -1037,7 +1037,8 @@ rsw_status svc_state_film_read(service *svc, const svc_film_ref *ref, svc_film *
                     ref->k, ref->job);
   film_image *im = &out->img;
   size_t want = (size_t)im->width * (size_t)im->height * (size_t)im->channels * (size_t)(1 + im->n_planes);
-  float *all = malloc(want * sizeof(float));
+  bool split = im->n_planes > 0; /* else all is the film's pixels */
+  float *all = split ? malloc(want * sizeof(float)) : film_pixels_new(want);
   if (t.angles && all) im->angles = film_angles_new(t.angles / 16);
   bool ok = all && (!t.angles || im->angles) &&
             read_at(fd, all, want * sizeof(float), (off_t)(t.npy - want * sizeof(float))) &&
@@ -1058,7 +1059,10 @@ rsw_status svc_state_film_read(service *svc, const svc_film_ref *ref, svc_film *
     for (int p = 0; p < im->n_planes; p++) names[p] = im->planes[p].name;
     ok = film_image_split(im, names, im->n_planes, all);
   }
-  free(all);
+  if (split)
+    free(all);
+  else
+    film_pixels_unref(all);
   if (!ok) {
     film_image_free(im);
     return svc_fail(e, RSW_ERR_IO, ref->job, "cannot read the stored film of render %zu of job %s", ref->k,

@@ -3,6 +3,7 @@
  * horizontal irradiance the BRDF and BRF divide by. */
 #include <math.h>
 #include <stdatomic.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -217,10 +218,10 @@ bool film_image_split(film_image *img, const char *const *names, int n_planes, c
     for (size_t c = 0; c < C; c++)
       if (!img->planes[p].channel_names[c]) return false;
   }
-  img->data = malloc(px * C * sizeof(float));
+  img->data = film_pixels_new(px * C);
   bool ok = img->data != NULL;
   for (int p = 0; p < n_planes; p++) {
-    img->planes[p].data = malloc(px * C * sizeof(float));
+    img->planes[p].data = film_pixels_new(px * C);
     if (!img->planes[p].data) ok = false;
     img->n_planes = p + 1; /* so film_image_free releases what exists */
   }
@@ -233,52 +234,62 @@ bool film_image_split(film_image *img, const char *const *names, int n_planes, c
   return true;
 }
 
-static void *dup_bytes(const void *p, size_t n) {
-  void *q = malloc(n ? n : 1);
-  if (q && n) memcpy(q, p, n);
-  return q;
-}
-
-/* A block's count, before its angles (16 bytes: they stay aligned as
+/* A block's count, before its values (16 bytes: they stay aligned as
  * malloc's). */
-typedef struct angles_head {
+typedef struct block_head {
   _Atomic size_t refs;
   size_t pad;
-} angles_head;
+} block_head;
 
-double *film_angles_new(size_t pixels) {
-  angles_head *h = malloc(sizeof *h + (pixels ? pixels : 1) * 2 * sizeof(double));
+static void *block_new(size_t bytes) {
+  if (bytes > SIZE_MAX - sizeof(block_head)) return NULL;
+  block_head *h = malloc(sizeof *h + (bytes ? bytes : 1));
   if (!h) return NULL;
   atomic_init(&h->refs, 1);
-  return (double *)(h + 1);
+  return h + 1;
 }
 
-double *film_angles_ref(double *a) {
-  if (a) atomic_fetch_add(&((angles_head *)a - 1)->refs, 1);
-  return a;
+static void *block_ref(void *b) {
+  if (b) atomic_fetch_add(&((block_head *)b - 1)->refs, 1);
+  return b;
 }
 
-void film_angles_unref(double *a) {
-  if (!a) return;
-  angles_head *h = (angles_head *)a - 1;
+static void block_unref(void *b) {
+  if (!b) return;
+  block_head *h = (block_head *)b - 1;
   if (atomic_fetch_sub(&h->refs, 1) == 1) free(h);
 }
 
-bool film_image_copy(const film_image *src, film_image *dst) {
-  size_t n = (size_t)src->width * (size_t)src->height * (size_t)src->channels;
+double *film_angles_new(size_t pixels) {
+  return pixels > SIZE_MAX / (2 * sizeof(double)) ? NULL : block_new(pixels * 2 * sizeof(double));
+}
+
+double *film_angles_ref(double *a) {
+  return block_ref(a);
+}
+
+void film_angles_unref(double *a) {
+  block_unref(a);
+}
+
+float *film_pixels_new(size_t values) {
+  return values > SIZE_MAX / sizeof(float) ? NULL : block_new(values * sizeof(float));
+}
+
+float *film_pixels_ref(float *p) {
+  return block_ref(p);
+}
+
+void film_pixels_unref(float *p) {
+  block_unref(p);
+}
+
+void film_image_share(const film_image *src, film_image *dst) {
   film_image d = *src;
-  d.data = NULL, d.angles = NULL;
-  for (int p = 0; p < src->n_planes; p++) d.planes[p].data = NULL;
-  bool ok = (d.data = dup_bytes(src->data, n * sizeof(float))) != NULL;
-  if (ok) d.angles = film_angles_ref(src->angles); /* (never written: shared) */
-  for (int p = 0; ok && p < src->n_planes; p++)
-    ok = (d.planes[p].data = dup_bytes(src->planes[p].data, n * sizeof(float))) != NULL;
-  if (!ok) {
-    film_image_free(&d);
-    return false;
-  }
+  d.data = film_pixels_ref(src->data);
+  d.angles = film_angles_ref(src->angles);
+  for (int p = 0; p < src->n_planes; p++) d.planes[p].data = film_pixels_ref(src->planes[p].data);
   *dst = d;
-  return true;
 }
 
 bool film_plane_known(const char *name) {
@@ -306,13 +317,13 @@ uint64_t film_image_nonfinite(const film_image *img) {
 
 void film_image_free(film_image *img) {
   if (!img) return;
-  free(img->data);
+  film_pixels_unref(img->data);
   img->data = NULL;
   film_angles_unref(img->angles);
   img->angles = NULL;
   /* The planes' descriptions stay, like the film's size and channels. */
   for (int p = 0; p < img->n_planes; p++) {
-    free(img->planes[p].data);
+    film_pixels_unref(img->planes[p].data);
     img->planes[p].data = NULL;
   }
 }

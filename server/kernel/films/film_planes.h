@@ -32,14 +32,14 @@ typedef struct film_plane {
   const char *units;                            /* CF/UDUNITS text: "sr-1", "1", radiance's units */
   const char *long_name;                        /* CF long_name */
   const char *channel_names[FILM_MAX_CHANNELS]; /* "<name>.<film channel>", static */
-  float *data;                                  /* owned */
+  float *data;                                  /* a counted block (film_pixels_new) */
 } film_plane;
 
 /* A developed film: HWC float32, row 0 = first (top) row. */
 typedef struct film_image {
   int width, height, channels;
   const char *channel_names[FILM_MAX_CHANNELS]; /* static: "R","G","B", "Y", "S0".."S3", "S0.Y".., "S0.R".. */
-  float *data;                                  /* owned */
+  float *data;                                  /* a counted block (film_pixels_new) */
   bool half;                                    /* the film asked for float16 storage */
   /* What was rendered (for metadata). */
   uint32_t spp;
@@ -132,18 +132,26 @@ bool film_image_split(film_image *img, const char *const *plane_names, int n_pla
 /* Name, units, long name and channel names of plane `name` (one of
  * "brdf", "brf", "radiance_stderr") for img's channels; p->data untouched. */
 void film_plane_init(const film_image *img, const char *name, film_plane *p);
-/* A block of pixel angles for film_image.angles: 2 doubles for each of
- * pixels, held once (NULL: out of memory). film_angles_ref: one more
- * holder of a (NULL: none), returned; film_angles_unref: one fewer, freed
- * with the last. Thread-safe (the count is atomic). */
+/* Counted blocks, for a film's pixels and its angles: films with the
+ * same values (a film and its copies, a bundle's pages' angles, a job's
+ * contexts' angles) hold one block, never written once a film has it.
+ * film_angles_new: 2 doubles for each of pixels (film_image.angles);
+ * film_pixels_new: values floats (film_image.data and each plane's data).
+ * NULL when out of memory. *_ref: one more holder of the block (NULL:
+ * none), returned; *_unref: one fewer, freed with the last. Thread-safe
+ * (the counts are atomic). */
 double *film_angles_new(size_t pixels);
 double *film_angles_ref(double *a);
 void film_angles_unref(double *a);
+float *film_pixels_new(size_t values);
+float *film_pixels_ref(float *p);
+void film_pixels_unref(float *p);
 
-/* Deep copy of src into *dst (pixels, angles, planes: release with
- * film_image_free); false when out of memory (then *dst holds nothing to
- * free). */
-bool film_image_copy(const film_image *src, film_image *dst);
+/* *dst: src, holding its pixels, planes and angles (one more reference
+ * to each; release with film_image_free). Never fails: nothing is
+ * copied. The film's values are never written once it is made, so the
+ * two stay equal. */
+void film_image_share(const film_image *src, film_image *dst);
 /* True when name is a plane ("brdf", "brf", "radiance_stderr"). */
 bool film_plane_known(const char *name);
 /* The static string of a film channel name ("R", "Y", "S0", "S0.Y", ...;

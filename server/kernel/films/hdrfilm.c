@@ -79,7 +79,7 @@ static rsw_status hdrfilm_develop(const film *fm, const film_sums *s, film_image
   img.variant = s->variant;
   img.polarized = s->polarized;
   size_t np = (size_t)s->width * s->height;
-  img.data = malloc(np * img.channels * sizeof(float));
+  img.data = film_pixels_new(np * img.channels);
   if (!img.data) return rsw_fail(err, RSW_ERR_NOMEM, "film", "out of memory");
   for (size_t i = 0; i < np; i++) {
     const double *a = &s->acc[(size_t)s->stride * i];
@@ -114,7 +114,7 @@ static rsw_status hdrfilm_develop(const film *fm, const film_sums *s, film_image
   for (int p = 0; p < n_want; p++) {
     film_plane *pl = &img.planes[p];
     film_plane_init(&img, want[p], pl);
-    pl->data = malloc(nv * sizeof(float));
+    pl->data = film_pixels_new(nv);
     img.n_planes = p + 1;
     if (!pl->data) {
       film_image_free(&img);
