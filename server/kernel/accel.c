@@ -17,6 +17,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include "core/isa.h"
 #include "shapes/instance.h"
@@ -95,8 +96,17 @@ static inline void list_placement(const accel *a, uint32_t j, uint32_t *index, u
 static RTCDevice g_device;
 static _Thread_local char t_embree_error[512];
 
+/* Embree's out-of-memory failures (accel_embree_stuck): how many, and
+ * whether one came since the last probe. */
+static _Atomic unsigned long long g_oom_count;
+static _Atomic bool g_oom_pending;
+
 static void on_embree_error(void *user, enum RTCError code, const char *str) {
   (void)user;
+  if (code == RTC_ERROR_OUT_OF_MEMORY) {
+    atomic_fetch_add(&g_oom_count, 1);
+    atomic_store(&g_oom_pending, true);
+  }
   if (!t_embree_error[0])
     snprintf(t_embree_error, sizeof t_embree_error, "Embree error %d: %s", (int)code, str ? str : "");
 }
@@ -154,6 +164,156 @@ static RTCDevice device_get(void) {
 static void embree_error_reset(RTCDevice d) {
   t_embree_error[0] = '\0';
   if (d) (void)rtcGetDeviceError(d);
+}
+
+/* ---- after Embree ran out of memory: the probe ---------------------------------------
+
+ * A failure inside one of Embree's parallel build tasks can leave a lock of
+ * Embree's held, and then every later build waits on it forever
+ * (docs/robustness.md#when-memory-runs-out); most failures do not (a large
+ * mesh's arrays are allocated before the tasks start). So after one, the
+ * next caller of accel_embree_stuck builds a one-triangle scene the way
+ * accel_build does (a shape scene, an instance, a top-level scene) on a
+ * thread of its own, and waits PROBE_S for it. One that does not finish
+ * means Embree is stuck for good in this process: the probe's thread and
+ * scene are left as they are. */
+#define PROBE_S 3.0
+
+static pthread_mutex_t g_probe_lock = PTHREAD_MUTEX_INITIALIZER;
+static _Atomic long long g_stuck_since; /* 0: not stuck */
+static void (*_Atomic g_probe_hook)(void);
+
+typedef struct probe_state {
+  pthread_mutex_t m;
+  pthread_cond_t c;
+  bool done;
+  int refs; /* the prober and the thread */
+} probe_state;
+
+static void probe_release(probe_state *p) {
+  pthread_mutex_lock(&p->m);
+  bool last = --p->refs == 0;
+  pthread_mutex_unlock(&p->m);
+  if (last) {
+    pthread_cond_destroy(&p->c);
+    pthread_mutex_destroy(&p->m);
+    free(p);
+  }
+}
+
+static void probe_build(void) {
+  RTCDevice d = device_get();
+  if (!d) return;
+  RTCScene sub = rtcNewScene(d), top = rtcNewScene(d);
+  RTCGeometry tri = rtcNewGeometry(d, RTC_GEOMETRY_TYPE_TRIANGLE);
+  RTCGeometry inst = rtcNewGeometry(d, RTC_GEOMETRY_TYPE_INSTANCE);
+  float *v =
+      tri ? rtcSetNewGeometryBuffer(tri, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), 3)
+          : NULL;
+  unsigned *f =
+      tri ? rtcSetNewGeometryBuffer(tri, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned), 1)
+          : NULL;
+  if (sub && top && v && f && inst) {
+    static const float corner[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+    memcpy(v, corner, sizeof corner);
+    f[0] = 0, f[1] = 1, f[2] = 2;
+    rtcCommitGeometry(tri);
+    rtcAttachGeometry(sub, tri);
+    rtcCommitScene(sub);
+    rtcSetGeometryInstancedScene(inst, sub);
+    rtcCommitGeometry(inst);
+    rtcAttachGeometry(top, inst);
+    rtcCommitScene(top);
+  }
+  if (inst) rtcReleaseGeometry(inst);
+  if (tri) rtcReleaseGeometry(tri);
+  if (top) rtcReleaseScene(top);
+  if (sub) rtcReleaseScene(sub);
+  /* (its errors, out of memory again among them, are this thread's own) */
+  (void)rtcGetDeviceError(d);
+}
+
+static void *probe_main(void *arg) {
+  probe_state *p = arg;
+  void (*hook)(void) = atomic_load(&g_probe_hook);
+  if (hook)
+    hook();
+  else
+    probe_build();
+  pthread_mutex_lock(&p->m);
+  p->done = true;
+  pthread_cond_signal(&p->c);
+  pthread_mutex_unlock(&p->m);
+  probe_release(p);
+  return NULL;
+}
+
+/* true: the probe's build finished within PROBE_S (or no thread could be
+ * started to run it: nothing is known then). */
+static bool probe_finishes(void) {
+  probe_state *p = calloc(1, sizeof *p);
+  if (!p) return true;
+  pthread_mutex_init(&p->m, NULL);
+  pthread_cond_init(&p->c, NULL);
+  p->refs = 2;
+  pthread_attr_t at;
+  pthread_t th;
+  bool started = pthread_attr_init(&at) == 0;
+  if (started) {
+    pthread_attr_setdetachstate(&at, PTHREAD_CREATE_DETACHED);
+    started = pthread_create(&th, &at, probe_main, p) == 0;
+    pthread_attr_destroy(&at);
+  }
+  if (!started) {
+    p->refs = 1;
+    probe_release(p);
+    return true;
+  }
+  struct timespec until;
+  clock_gettime(CLOCK_REALTIME, &until);
+  until.tv_sec += (time_t)PROBE_S;
+  pthread_mutex_lock(&p->m);
+  while (!p->done && pthread_cond_timedwait(&p->c, &p->m, &until) == 0) continue;
+  bool done = p->done;
+  pthread_mutex_unlock(&p->m);
+  probe_release(p);
+  return done;
+}
+
+bool accel_embree_stuck(time_t *since, unsigned long long *oom_count, bool probe) {
+  if (oom_count) *oom_count = atomic_load(&g_oom_count);
+  if (probe && !atomic_load(&g_stuck_since) && atomic_load(&g_oom_pending)) {
+    pthread_mutex_lock(&g_probe_lock);
+    if (!atomic_load(&g_stuck_since) && atomic_exchange(&g_oom_pending, false) && !probe_finishes())
+      atomic_store(&g_stuck_since, (long long)time(NULL));
+    pthread_mutex_unlock(&g_probe_lock);
+  }
+  long long t = atomic_load(&g_stuck_since);
+  if (since) *since = (time_t)t;
+  return t != 0;
+}
+
+void accel_set_probe_hook(void (*hook)(void)) {
+  atomic_store(&g_probe_hook, hook);
+}
+
+void accel_clear_embree_stuck(void) {
+  atomic_store(&g_stuck_since, 0);
+  atomic_store(&g_oom_pending, false);
+}
+
+/* Nothing more is built once Embree is stuck (accel_embree_stuck): the
+ * build would wait forever. */
+static rsw_status refuse_if_stuck(rsw_err *err, const char *where) {
+  time_t t;
+  if (!accel_embree_stuck(&t, NULL, true)) return RSW_OK;
+  struct tm tm;
+  char when[32] = "";
+  if (gmtime_r(&t, &tm)) strftime(when, sizeof when, "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return rsw_fail(err, RSW_ERR_UNAVAILABLE, where,
+                  "Embree cannot build any more in this process: after it ran out of memory, a test build "
+                  "did not finish within %.0f s (%s); restart the daemon (docs/robustness.md)",
+                  PROBE_S, when);
 }
 
 size_t accel_embree_bytes(void) {
@@ -721,6 +881,8 @@ static rsw_status build_instances(accel *a, const instance_shape *is, size_t i, 
 }
 
 rsw_status accel_build(scene *s, rsw_err *err) {
+  rsw_status refused = refuse_if_stuck(err, "");
+  if (refused) return refused;
   accel *a = calloc(1, sizeof *a);
   if (!a) return rsw_fail(err, RSW_ERR_NOMEM, "", "out of memory");
   a->device = device_get();
@@ -900,6 +1062,8 @@ static rsw_status check_embree(accel *a, rsw_err *err, const char *where, const 
 
 rsw_status accel_rebuild_shape(accel *a, const shape *sh, rsw_err *err) {
   unsigned i = sh->index;
+  rsw_status refused = refuse_if_stuck(err, sh->base.id);
+  if (refused) return refused;
   embree_error_reset(a->device);
   a->error[0] = '\0';
   RTCGeometry g = shape_geometry(a, sh, false);
@@ -927,6 +1091,8 @@ rsw_status accel_update_vertices(accel *a, const shape *sh, rsw_err *err) {
   size_t bytes = 3 * (size_t)sh->mesh.n_verts * sizeof(float);
   float *v = rtcGetGeometryBufferData(a->geom[i], RTC_BUFFER_TYPE_VERTEX, 0);
   if (!v || a->nverts[i] != sh->mesh.n_verts) return accel_rebuild_shape(a, sh, err);
+  rsw_status refused = refuse_if_stuck(err, sh->base.id);
+  if (refused) return refused;
   embree_error_reset(a->device);
   a->error[0] = '\0';
   memcpy(v, sh->mesh.pos, bytes);
@@ -944,6 +1110,8 @@ rsw_status accel_update_vertices(accel *a, const shape *sh, rsw_err *err) {
 
 rsw_status accel_commit(accel *a, rsw_err *err) {
   if (!a->top_dirty && !a->stale) return RSW_OK;
+  rsw_status refused = refuse_if_stuck(err, "");
+  if (refused) return refused;
   embree_error_reset(a->device);
   a->error[0] = '\0';
   if (a->stale) /* a failed update may have left shape scenes uncommitted */

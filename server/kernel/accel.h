@@ -27,6 +27,8 @@
 #ifndef RSW_ACCEL_H
 #define RSW_ACCEL_H
 
+#include <time.h>
+
 #include "accel_hit.h"
 #include <math.h>
 
@@ -203,6 +205,25 @@ size_t accel_memory(const accel *a);
  * monitor (rtcSetDeviceMemoryMonitorFunction): every scene, BVH and
  * geometry of the shared device. */
 size_t accel_embree_bytes(void);
+
+/* Whether Embree is stuck in this process. A failure for want of memory
+ * inside one of Embree's parallel build tasks can leave a lock of Embree's
+ * held, and every later build then waits on it forever
+ * (docs/robustness.md#when-memory-runs-out). So after Embree reports
+ * RTC_ERROR_OUT_OF_MEMORY, the next call builds a one-triangle scene on a
+ * thread of its own and waits up to 3 s for it; one that does not finish
+ * marks Embree stuck for good. From then on this is true (*since: when it
+ * was found), and accel_build, accel_rebuild_shape, accel_update_vertices
+ * and accel_commit (when it has something to commit), which call it first,
+ * refuse with RSW_ERR_UNAVAILABLE and a message that says why, instead of
+ * waiting forever; structures built before still trace. *oom_count (unless
+ * NULL): Embree's out-of-memory failures so far. probe false: what is
+ * known, without probing (for reports). Thread-safe. */
+bool accel_embree_stuck(time_t *since, unsigned long long *oom_count, bool probe);
+/* Test hooks: the probe runs hook instead of its build (NULL: the build);
+ * forget that Embree was found stuck. */
+void accel_set_probe_hook(void (*hook)(void));
+void accel_clear_embree_stuck(void);
 
 /* The ceilings make bench measures (Embree alone on the same structure)
  * live with the benchmarks, tests/bench/accel_bench.h, on accel_internal.h. */

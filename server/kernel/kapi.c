@@ -69,3 +69,10 @@ rsw_status kapi_pixel_directions(const scene *sc, size_t i, double *out, rsw_err
   free(xyz);
   return RSW_OK;
 }
+
+bool kapi_embree_stuck(long long *since, unsigned long long *oom_count, bool probe) {
+  time_t t = 0;
+  bool stuck = accel_embree_stuck(&t, oom_count, probe);
+  if (since) *since = (long long)t;
+  return stuck;
+}

@@ -36,6 +36,13 @@ uint32_t kapi_sensor_spp(const struct scene *sc, size_t i);
  * area tables. */
 size_t kapi_scene_bytes(const struct scene *sc);
 
+/* Whether Embree is stuck in this process (accel.h accel_embree_stuck:
+ * it ran out of memory, and a test build did not finish): no structure is
+ * built any more, and the daemon is not ready. *since: when it was found;
+ * *oom_count: Embree's out-of-memory failures so far (each may be NULL).
+ * probe false: what is known, without testing a build (for reports). */
+bool kapi_embree_stuck(long long *since, unsigned long long *oom_count, bool probe);
+
 /* ---- per-pixel viewing directions ----------------------------------------------- */
 
 /* Whether sensor i maps its pixels to directions (the distant family). */

@@ -90,6 +90,17 @@ char *service_metrics_text(service *svc) {
   for (int c = 0; c < 3; c++)
     svc_buf_printf(&b, "raysweep_updates_total{class=\"%s\"} %llu\n", classes[c],
                    (unsigned long long)svc->updates[c]);
+  long long stuck_since = 0;
+  unsigned long long ooms = 0;
+  bool stuck = kapi_embree_stuck(&stuck_since, &ooms, false);
+  svc_buf_printf(&b, "# HELP raysweep_embree_out_of_memory_total Embree's failures for want of memory.\n"
+                     "# TYPE raysweep_embree_out_of_memory_total counter\n");
+  svc_buf_printf(&b, "raysweep_embree_out_of_memory_total %llu\n", ooms);
+  svc_buf_printf(&b,
+                 "# HELP raysweep_embree_stuck_since When Embree was found unable to build any more (Unix "
+                 "time; 0: it is not). Non-zero: restart the daemon.\n"
+                 "# TYPE raysweep_embree_stuck_since gauge\n");
+  svc_buf_printf(&b, "raysweep_embree_stuck_since %lld\n", stuck ? stuck_since : 0LL);
   /* Memory budget, result storage and durable state. 0: no limit. */
   svc_buf_printf(&b, "# HELP raysweep_scene_bytes_limit The resident-scene budget (--max-scene-bytes; 0: "
                      "none).\n# TYPE raysweep_scene_bytes_limit gauge\n");

@@ -15,6 +15,7 @@
 
 #include "../kernel/core/isa.h"
 #include "../kernel/extplugin/env_plugin.h"
+#include "../kernel/kapi.h"
 #include "../kernel/scene/loader.h"
 #include "buf.h"
 #include "raysweep/version.h"
@@ -227,6 +228,11 @@ bool service_accepts_jobs(service *svc, const char **why_out) {
     pthread_mutex_lock(&svc->lock);
     if (svc->n_queue >= svc->opts.max_queue) why = "the job queue is full (--max-queue)";
     pthread_mutex_unlock(&svc->lock);
+    /* Embree ran out of memory and a test build did not finish: none
+     * will (accel.h), so this daemon must be restarted. */
+    if (!why && kapi_embree_stuck(NULL, NULL, true))
+      why = "Embree cannot build any more in this daemon (after it ran out of memory, a test build did not "
+            "finish): scenes, geometry updates and new views are refused; restart it (docs/robustness.md)";
     /* A state directory that cannot take writes: PATCHes, scene posts and
      * jobs would answer 507 (a probe write, at most once a second). */
     if (!why) svc_state_writable(svc, &why);

@@ -47,6 +47,7 @@
 #include "film_io.h"
 #include "http/http.h"
 #include "image_exr.h"
+#include "kernel/accel.h"
 #include "kernel/render.h"
 #include "kernel/scene/params.h"
 #include "kernel/scene/scene.h"
@@ -153,6 +154,87 @@ static scene *load(const char *text, bool xml, rsw_err *err) {
   return s;
 }
 
+/* Runs in which Embree ran out of memory, over all operations (main
+ * checks that some did), and whether a stuck Embree was played once. */
+static long embree_oom_runs;
+static bool stuck_played;
+static unsigned long long ooms_seen; /* Embree's failures counted so far */
+static char d_url[64];
+static service *d_svc;
+
+/* A probe build that does not finish within the probe's 3 s: what a lock
+ * left held by a failure inside Embree's build tasks does. */
+static void probe_stalls(void) {
+  sleep(4);
+}
+
+static void check_embree_stuck(const char *op, long n);
+
+/* Disarmed, after a run in which Embree ran out of memory. */
+static void check_embree_oom(const char *op, long n) {
+  embree_oom_runs++;
+  char *m = d_svc ? service_metrics_text(d_svc) : NULL;
+  const char *g = m ? strstr(m, "\nraysweep_embree_out_of_memory_total ") : NULL;
+  CHECK(!d_svc || (g && atoll(g + 37) > 0),
+        "%s: allocation %ld: Embree ran out of memory, but /metrics says %.60s", op, n,
+        g ? g + 1 : "nothing");
+  free(m);
+  /* Once, with the daemon up: a probe that stalls. Then loads are refused
+   * (RSW_ERR_UNAVAILABLE, saying why) instead of waiting forever, the
+   * daemon is not ready, scene posts answer 503, and /metrics says when. */
+  if (!stuck_played && d_url[0]) {
+    stuck_played = true;
+    check_embree_stuck(op, n);
+    return;
+  }
+  /* The failure was outside Embree's build tasks (failmalloc leaves those
+   * alone): no lock is held, the probe's build finishes, and a load builds
+   * as before. */
+  rsw_err err = {0};
+  scene *s = load(JSON_SCENE, false, &err);
+  CHECK(s && !accel_embree_stuck(NULL, NULL, false),
+        "%s: allocation %ld: Embree ran out of memory, then a load: %s", op, n, s ? "stuck" : err.msg);
+  scene_free(s);
+}
+
+static void check_embree_stuck(const char *op, long n) {
+  char *m;
+  const char *g;
+  scene *s;
+  accel_set_probe_hook(probe_stalls);
+  rsw_err e2 = {0};
+  s = load(JSON_SCENE, false, &e2);
+  CHECK(!s && e2.code == RSW_ERR_UNAVAILABLE && strstr(e2.msg, "Embree cannot build any more"),
+        "%s: allocation %ld, a probe that stalls, then a load: %s (code %d)", op, n, s ? "built" : e2.msg,
+        (int)e2.code);
+  scene_free(s);
+  m = service_metrics_text(d_svc);
+  g = m ? strstr(m, "\nraysweep_embree_stuck_since ") : NULL;
+  CHECK(g && atoll(g + 29) > 0, "%s: Embree stuck, /metrics says %.60s", op, g ? g + 1 : "nothing");
+  free(m);
+  rsw_client_opts o = {.size = sizeof o, .base_url = d_url, .timeout_s = 10, .max_retries = -1};
+  rsw_client *c = NULL;
+  REQUIRE(rsw_client_new(&o, &c) == RSW_OK, "a client");
+  rsw_status st = rsw_server_ready(c);
+  const rsw_error_info *ei = rsw_client_last_error(c);
+  CHECK(st != RSW_OK && ei->http_status == 503 && strstr(ei->message, "Embree cannot build any more"),
+        "%s: Embree stuck, then /v1/health/ready: HTTP %d %s", op, ei->http_status, ei->message);
+  /* A new scene (no mesh: nothing to upload first) */
+  static const char *plate = "{\"type\": \"scene\", \"p\": {\"type\": \"rectangle\"}, \"s\": "
+                             "{\"type\": \"perspective\"}, \"oom_check\": {\"type\": \"constant\"}}";
+  char id[65] = "";
+  int created = 0;
+  st = rsw_scene_push_buffer(c, plate, strlen(plate), data_dir, NULL, id, &created);
+  ei = rsw_client_last_error(c);
+  CHECK(st != RSW_OK && ei->http_status == 503 && strstr(ei->message, "Embree cannot build any more"),
+        "%s: Embree stuck, then POST /v1/scenes: HTTP %d %s", op, ei->http_status, ei->message);
+  accel_set_probe_hook(NULL);
+  accel_clear_embree_stuck();
+  CHECK(rsw_server_ready(c) == RSW_OK, "%s: ready again once the test forgot it", op);
+  rsw_client_free(c);
+  printf("    (a stalled probe, after allocation %ld of %s: loads refused, the daemon not ready)\n", n, op);
+}
+
 static rsw_status render(scene *s, film_image *out, rsw_err *err) {
   render_opts o = {.size = sizeof o, .spp = 4, .seed = 7, .threads = 2, .wavelength = 550};
   return render_sensor(s, &o, out, NULL, err);
@@ -246,7 +328,7 @@ static void sweep(const oom_op *op) {
   char buf[1100];
   REQUIRE(s == RSW_OK, "%s: clean run: %s", op->name, rsw_err_format(&err, buf, sizeof buf));
 
-  long runs = 0, errors = 0, absorbed = 0, bad = 0;
+  long runs = 0, errors = 0, absorbed = 0, bad = 0, embree_oom = 0;
   failmalloc_skip_embree(op->skip_embree);
   for (long n = 1;; n = n < FULL_N ? n + 1 : n + STRIDE) {
     cur_n = n;
@@ -268,6 +350,14 @@ static void sweep(const oom_op *op) {
       break;
     }
     bool injected = failmalloc_failed() > 0;
+    /* Embree reported running out of memory (check_embree_oom). */
+    unsigned long long ooms;
+    (void)accel_embree_stuck(NULL, &ooms, false);
+    if (ooms > ooms_seen) {
+      ooms_seen = ooms;
+      embree_oom++;
+      check_embree_oom(op->name, n);
+    }
     if (!injected) { /* ran to completion before allocation n */
       op->teardown(st);
       CHECK(s == RSW_OK, "%s: n = %ld, no failure injected but: %s", op->name, n,
@@ -302,8 +392,8 @@ static void sweep(const oom_op *op) {
   failmalloc_skip_embree(false);
   printf(
       "    %-14s %6ld allocations (clean run); %ld runs (each of 1..%d, then every %d-th): %ld clean errors, "
-      "%ld absorbed (result identical)\n",
-      op->name, total, runs, FULL_N, STRIDE, errors, absorbed);
+      "%ld absorbed (result identical); Embree out of memory in %ld\n",
+      op->name, total, runs, FULL_N, STRIDE, errors, absorbed, embree_oom);
 }
 
 /* ---- kernel operations ------------------------------------------------------------------ */
@@ -559,9 +649,7 @@ static void test_exr_encode(void) {
  * clean one (a status and a message), and the daemon must still answer
  * afterwards (checked disarmed after every run). */
 
-static service *d_svc;
 static http_server *d_srv;
-static char d_url[64];
 static char d_blobs[300];
 static char d_scene_id[65];
 
@@ -994,6 +1082,16 @@ static void test_daemon(void) {
   sweep(&save);
 }
 
+/* The loads, pushes and renders fail allocations inside Embree too
+ * (outside its build tasks), so some runs must have checked what follows
+ * Embree running out of memory (check_embree_oom). */
+static void test_embree_oom_seen(void) {
+  printf("  Embree out of memory in %ld runs: each time the probe's build finished and loads went on\n",
+         embree_oom_runs);
+  CHECK(embree_oom_runs > 0, "no run made Embree run out of memory");
+  CHECK(stuck_played, "no stalled probe was played");
+}
+
 int main(void) {
   setvbuf(stdout, NULL, _IOLBF, 0);
   signal(SIGALRM, on_fatal);
@@ -1016,6 +1114,8 @@ int main(void) {
   RSW_TEST_RUN(test_kernel_render);
   RSW_TEST_RUN(test_exr_encode);
   RSW_TEST_RUN(test_daemon);
+  const char *only = getenv("OOM_ONLY");
+  if (!only || !*only) RSW_TEST_RUN(test_embree_oom_seen);
   cur_op = "stopping the daemon";
   cur_n = 0;
   alarm(RUN_LIMIT_S); /* a server thread stuck for good would hang the join */
