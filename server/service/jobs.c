@@ -1136,8 +1136,11 @@ static rsw_status plan_job(service *svc, const scene *sc, job_req *q, job_check 
   uint64_t planes =
       (uint64_t)((q->quantities & RENDER_Q_BRDF) != 0) + ((q->quantities & RENDER_Q_BRF) != 0) + q->variance;
   *reserve = 0;
-  for (size_t i = 0; i < jb->n_items; i++) /* each plane as large as the film (angles overcounted) */
-    *reserve += svc_film_bytes(sc, jb->items[i].sensor_index) * (1 + planes);
+  for (size_t i = 0; i < jb->n_items; i++) { /* each plane as large as the film; angles once a film */
+    size_t si = jb->items[i].sensor_index;
+    uint64_t angles = svc_film_angle_bytes(sc, si);
+    *reserve += (svc_film_bytes(sc, si) - angles) * (1 + planes) + angles;
+  }
   *out = jb;
   return RSW_OK;
 }
@@ -1372,17 +1375,24 @@ static void item_done(service *svc, job *j, size_t k, rsw_status st, svc_film *o
   } else {
     it->state = JOB_SUCCEEDED;
     it->has_film = true;
+    /* In memory: the film's pixels, and its angles unless it holds the
+     * block counted with an earlier film of the job (share_angles). */
+    const film_image *im = &it->film.img;
+    uint64_t angles = im->angles ? (uint64_t)im->width * (uint64_t)im->height * 16 : 0;
     uint64_t mem = svc_film_mem(&it->film), cap = svc->opts.max_result_bytes;
+    uint64_t held = mem - (im->angles && im->angles == j->angles_counted ? angles : 0);
     if (it->on_disk) {
       svc->result_disk_bytes += mem;
       svc->results_on_disk++;
     }
-    if (it->on_disk && cap && svc->result_bytes + mem > cap) {
+    if (it->on_disk && cap && svc->result_bytes + held > cap) {
       /* Beyond the memory cap: served from disk only. */
       film_image_free(&it->film.img);
       it->has_film = false;
     } else {
-      svc->result_bytes += mem;
+      svc->result_bytes += held;
+      it->mem_held = held;
+      if (im->angles) j->angles_counted = im->angles;
     }
     svc->contexts_rendered++;
     if (it->film.img.plugin_failures) note_plugin_failures(j, it);
@@ -1511,7 +1521,7 @@ void svc_jobs_expire(service *svc) {
       resident *r = j->res; /* NULL once finished */
       bool free_scene = r && --r->refs == 0 && r->deleted;
       for (size_t k = 0; k < j->n_items; k++)
-        if (j->items[k].has_film) svc->result_bytes -= svc_film_mem(&j->items[k].film);
+        if (j->items[k].has_film) svc->result_bytes -= j->items[k].mem_held;
       svc->result_committed -= j->result_reserve;
       svc_state_job_remove(svc, j);
       job_free(j);

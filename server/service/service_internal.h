@@ -130,7 +130,8 @@ typedef struct render_item {
   job_state state;
   svc_film film;
   bool has_film;
-  bool on_disk; /* the film's files are in the state directory; when
+  uint64_t mem_held; /* what svc->result_bytes counts for its film while has_film (item_done) */
+  bool on_disk;      /* the film's files are in the state directory; when
                       !has_film, film.img holds its header (no data) */
   char error[600];
   char *result_json;   /* its result's text in GET results, kept (jobs.c result_text_kept) */
@@ -184,6 +185,9 @@ typedef struct job {
    * not one a film. Written by the job's worker alone. */
   double *angles;
   size_t angles_n;
+  /* The block of angles whose bytes svc->result_bytes counts for this job
+   * (item_done; compared, not held: a film of the job holds it). */
+  const double *angles_counted;
   /* The render in progress (an index into items, SIZE_MAX when none) and
    * its samples, for the job's answers ("render"). */
   size_t current;
@@ -482,6 +486,8 @@ void svc_state_restore(service *svc);
 void svc_state_resume_items(service *svc, job *j);
 /* Bytes a film of this sensor takes in memory (data and angles). */
 uint64_t svc_film_bytes(const scene *sc, size_t sensor_index);
+/* Of those, the pixel angles' (16 bytes a pixel; 0 for a sensor without). */
+uint64_t svc_film_angle_bytes(const scene *sc, size_t sensor_index);
 /* Jobs (jobs.c). */
 void *svc_worker_main(void *arg);
 void svc_jobs_free(service *svc);

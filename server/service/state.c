@@ -623,6 +623,11 @@ uint64_t svc_film_bytes(const scene *sc, size_t sensor_index) {
   return px * (uint64_t)ch * 4 + (se->ops->pixel_angles ? px * 16 : 0);
 }
 
+uint64_t svc_film_angle_bytes(const scene *sc, size_t sensor_index) {
+  const sensor *se = sc->sensors[sensor_index];
+  return se->ops->pixel_angles ? (uint64_t)se->film->width * (uint64_t)se->film->height * 16 : 0;
+}
+
 /* The channel names are static strings in a film_image. */
 static const char *static_channel(const char *name) {
   return film_channel_static(name);

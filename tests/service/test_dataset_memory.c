@@ -1,7 +1,8 @@
 /* What a job's dataset costs the daemon in memory, in process (no HTTP):
  * 96 contexts of a 128 x 128 hdistant film, whose pixel angles (16 bytes
  * a pixel, 256 KiB a film) are the same in every context. The job's films
- * hold one block of them, and a film fetched holds the job's pixels and
+ * hold one block of them (counted once in raysweep_result_bytes), and a
+ * film fetched holds the job's pixels and
  * angles (film_image_share), as the dataset does: building it raises the
  * process's peak memory (VmHWM, reset before) by less than 22 MiB (the
  * slab written from and the file encoded in memory; a copy of every
@@ -63,6 +64,16 @@ static void test_angles_once(void) {
   snprintf(body + at, sizeof body - at, "]}");
   char *jid = svc_test_run_job(svc, scene_id, body);
   REQUIRE(jid, "the job ran");
+  /* What the daemon counts against --max-result-bytes is what its films
+   * hold: every film's radiance and one block of angles (before: a block
+   * a film, 4.6 times as much). */
+  char *m = service_metrics_text(svc);
+  const char *g = m ? strstr(m, "\nraysweep_result_bytes ") : NULL;
+  unsigned long long counted = g ? strtoull(g + 23, NULL, 10) : 0,
+                     held =
+                         (unsigned long long)N_CTX * SIDE * SIDE * 4 + (unsigned long long)SIDE * SIDE * 16;
+  CHECK(counted == held, "raysweep_result_bytes %llu, the films hold %llu", counted, held);
+  free(m);
   /* The job's films hold one block of angles (item_done), and a film
    * fetched holds it too, and the job's pixels (film_image_share). */
   svc_film f0, f1, f0b;
