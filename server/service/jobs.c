@@ -156,7 +156,8 @@ static void job_free(job *j) {
   nc_coords_free(&j->coords);
   cJSON_Delete(j->warnings);
   bands_free(j->bands);
-  film_angles_unref(j->angles);
+  for (size_t s = 0; s < j->n_angle_slots; s++) film_angles_unref(j->angle_slots[s].block);
+  free(j->angle_slots);
   free(j);
 }
 
@@ -1323,26 +1324,40 @@ static void note_plugin_failures(job *j, const render_item *it) {
   cJSON_AddItemToArray(j->warnings, w);
 }
 
-/* Film im's pixel angles as the job's block (job.angles) where they are
- * the same as the last film's, else its own, kept for the next. */
-static void share_angles(job *j, film_image *im) {
+/* Sensor s's slot of job j's pixel angles (job.angle_slots), or NULL
+ * when out of memory (then nothing is shared). */
+static struct job_angles *angle_slot(job *j, size_t s) {
+  if (s >= j->n_angle_slots) {
+    struct job_angles *a = realloc(j->angle_slots, (s + 1) * sizeof *a);
+    if (!a) return NULL;
+    memset(a + j->n_angle_slots, 0, (s + 1 - j->n_angle_slots) * sizeof *a);
+    j->angle_slots = a, j->n_angle_slots = s + 1;
+  }
+  return &j->angle_slots[s];
+}
+
+/* Film im's pixel angles as its sensor's block (slot) where they are the
+ * same as that sensor's last film's, else its own, kept for the next. */
+static void share_angles(struct job_angles *slot, film_image *im) {
   size_t n = (size_t)im->width * (size_t)im->height * 2;
-  if (!im->angles || im->angles == j->angles) return;
-  if (j->angles && j->angles_n == n && memcmp(j->angles, im->angles, n * sizeof(double)) == 0) {
+  if (!slot || !im->angles || im->angles == slot->block) return;
+  if (slot->block && slot->n == n && memcmp(slot->block, im->angles, n * sizeof(double)) == 0) {
     film_angles_unref(im->angles);
-    im->angles = film_angles_ref(j->angles);
+    im->angles = film_angles_ref(slot->block);
     return;
   }
-  film_angles_unref(j->angles);
-  j->angles = film_angles_ref(im->angles);
-  j->angles_n = n;
+  film_angles_unref(slot->block);
+  slot->block = film_angles_ref(im->angles);
+  slot->n = n;
 }
 
 static void item_done(service *svc, job *j, size_t k, rsw_status st, svc_film *out, svc_error *e) {
   render_item *it = &j->items[k];
   size_t done = j->items_done + 1; /* only this worker writes it */
+  struct job_angles *slot = NULL;
   if (!st) {
-    share_angles(j, &out->img);
+    slot = angle_slot(j, it->sensor_index);
+    share_angles(slot, &out->img);
     it->film = *out;
     /* The seed the film was rendered with: its bundle's (its leader's),
      * which GET .../results, the job's record and its dataset name. */
@@ -1380,7 +1395,7 @@ static void item_done(service *svc, job *j, size_t k, rsw_status st, svc_film *o
     const film_image *im = &it->film.img;
     uint64_t angles = im->angles ? (uint64_t)im->width * (uint64_t)im->height * 16 : 0;
     uint64_t mem = svc_film_mem(&it->film), cap = svc->opts.max_result_bytes;
-    uint64_t held = mem - (im->angles && im->angles == j->angles_counted ? angles : 0);
+    uint64_t held = mem - (slot && im->angles && im->angles == slot->counted ? angles : 0);
     if (it->on_disk) {
       svc->result_disk_bytes += mem;
       svc->results_on_disk++;
@@ -1392,7 +1407,7 @@ static void item_done(service *svc, job *j, size_t k, rsw_status st, svc_film *o
     } else {
       svc->result_bytes += held;
       it->mem_held = held;
-      if (im->angles) j->angles_counted = im->angles;
+      if (slot && im->angles) slot->counted = im->angles;
     }
     svc->contexts_rendered++;
     if (it->film.img.plugin_failures) note_plugin_failures(j, it);

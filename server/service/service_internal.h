@@ -179,15 +179,19 @@ typedef struct job {
   /* The job's bands (bands.c), NULL without: each context renders once
    * per node wavelength, items context-major then node then sensor. */
   band_plan *bands;
-  /* The pixel angles of the last film with angles (a counted block,
-   * film_angles_ref; n doubles): the job's next films whose angles are
-   * the same share it (item_done), so a sweep holds one block of them,
-   * not one a film. Written by the job's worker alone. */
-  double *angles;
-  size_t angles_n;
-  /* The block of angles whose bytes svc->result_bytes counts for this job
-   * (item_done; compared, not held: a film of the job holds it). */
-  const double *angles_counted;
+  /* Per sensor (by sensor index; n_angle_slots of them, grown as films
+   * come), the pixel angles of its last film with angles (a counted
+   * block, film_angles_ref; n doubles): the sensor's next films whose
+   * angles are the same share it (item_done), so a sweep holds one block
+   * a sensor, not one a film, however its sensors' films interleave; and
+   * the block whose bytes svc->result_bytes counts (compared, not held: a
+   * film of the job holds it). Written by the job's worker alone. */
+  struct job_angles {
+    double *block;
+    size_t n;
+    const double *counted;
+  } * angle_slots;
+  size_t n_angle_slots;
   /* The render in progress (an index into items, SIZE_MAX when none) and
    * its samples, for the job's answers ("render"). */
   size_t current;

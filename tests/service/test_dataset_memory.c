@@ -172,11 +172,70 @@ static void test_angles_once(void) {
   free(jid);
 }
 
+static unsigned long long result_bytes(void) {
+  char *m = service_metrics_text(svc);
+  const char *g = m ? strstr(m, "\nraysweep_result_bytes ") : NULL;
+  unsigned long long v = g ? strtoull(g + 23, NULL, 10) : 0;
+  free(m);
+  return v;
+}
+
+/* Two sensors, whose films alternate in the job (context-major, then
+ * sensor): each sensor's films hold one block of angles, counted once. */
+static const char *SCENE2 =
+    "{\"type\": \"scene\", \"variant\": \"mono\","
+    " \"meter\": {\"type\": \"hdistant\", \"target\": [0, 0, 0],"
+    "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 1},"
+    "   \"film\": {\"type\": \"hdrfilm\", \"width\": 64, \"height\": 64, \"rfilter\": {\"type\": \"box\"}}},"
+    " \"meter2\": {\"type\": \"hdistant\", \"target\": [0, 0, 0],"
+    "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 1},"
+    "   \"film\": {\"type\": \"hdrfilm\", \"width\": 32, \"height\": 32, \"rfilter\": {\"type\": \"box\"}}},"
+    " \"integrator\": {\"type\": \"path\", \"max_depth\": 2},"
+    " \"sun\": {\"type\": \"directional\", \"direction\": [0.5, 0, -0.866], \"irradiance\": 1.0},"
+    " \"plate\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [10, 10, 1]}],"
+    "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.3}}}";
+
+static void test_two_sensors(void) {
+  bool created;
+  char *id = NULL, *json = NULL;
+  svc_error e = {0};
+  REQUIRE(service_scene_post(svc, SCENE2, strlen(SCENE2), false, NULL, &created, &id, &json, &e) == RSW_OK,
+          "post: %s", e.err.msg);
+  free(json);
+  char body[2048];
+  size_t at = (size_t)snprintf(body, sizeof body, "{\"contexts\": [");
+  for (int i = 0; i < 20; i++)
+    at += (size_t)snprintf(body + at, sizeof body - at, "%s{\"id\": \"c%02d\", \"wavelength\": %d}",
+                           i ? ", " : "", i, 400 + 10 * i);
+  snprintf(body + at, sizeof body - at, "]}");
+  unsigned long long before = result_bytes();
+  char *jid = svc_test_run_job(svc, id, body);
+  REQUIRE(jid, "the job ran");
+  unsigned long long counted = result_bytes() - before,
+                     held = 20ull * (64 * 64 + 32 * 32) * 4 + (64ull * 64 + 32 * 32) * 16;
+  CHECK(counted == held, "the two-sensor job counts %llu bytes, its films hold %llu", counted, held);
+  const char *sensors[2] = {"meter", "meter2"};
+  for (int k = 0; k < 2; k++) {
+    svc_film a, b;
+    memset(&a, 0, sizeof a), memset(&b, 0, sizeof b);
+    REQUIRE(service_job_result(svc, jid, "c00", sensors[k], &a, &e) == RSW_OK &&
+                service_job_result(svc, jid, "c19", sensors[k], &b, &e) == RSW_OK,
+            "results: %s", e.err.msg);
+    CHECK(a.img.angles && a.img.angles == b.img.angles, "%s: c00 and c19 share their angles (%p, %p)",
+          sensors[k], (void *)a.img.angles, (void *)b.img.angles);
+    svc_film_free(&a);
+    svc_film_free(&b);
+  }
+  free(jid);
+  free(id);
+}
+
 int main(void) {
   if (!svc_test_start(&svc, SCENE, &g_scene)) return 1;
-  if (g_scene)
+  if (g_scene) {
     RSW_TEST_RUN(test_angles_once);
-  else
+    RSW_TEST_RUN(test_two_sensors);
+  } else
     CHECK(false, "the scene loads");
   free(g_scene);
   service_free(svc);
