@@ -3,9 +3,16 @@
 The optional packages (xarray, netCDF4) are imported here only, when first needed.
 """
 
+import os
+import socket
+import tempfile
+
 import numpy as np
 
-from .errors import RaysweepError
+from .errors import ConnectionFailed, RaysweepError
+
+# What stream_to_file reads at a time.
+_CHUNK = 1 << 20
 
 # The radiance's units by variant (docs/client.md, "Sweep datasets").
 _UNITS = {"mono": "W m-2 sr-1 nm-1", "rgb": "W m-2 sr-1"}
@@ -184,6 +191,72 @@ def _attr(v):
     if isinstance(v, bool):
         return int(v)
     return v
+
+
+def stream_to_file(http, path, dest):
+    """GET ``path`` (a NetCDF-4 answer) into the file ``dest``, returned.
+
+    The answer goes to a new file beside ``dest``, ``_CHUNK`` bytes at a time,
+    and is renamed over ``dest`` once whole (its Content-Length, when the
+    daemon sends one, checked): memory stays small whatever the size, and
+    ``dest`` never holds part of an answer. Whatever goes wrong, the partial
+    file is removed and the error raised (:class:`ConnectionFailed` for an
+    answer cut short).
+    """
+    folder = os.path.dirname(os.path.abspath(dest))
+    fd, part = tempfile.mkstemp(prefix="." + os.path.basename(dest) + ".", suffix=".part", dir=folder)
+    try:
+        with os.fdopen(fd, "wb") as f, http.open("GET", path, accept="application/x-netcdf", timeout=None) as r:
+            want = r.headers.get("Content-Length")
+            got = 0
+            while True:
+                try:
+                    piece = r.read(_CHUNK)
+                except (socket.timeout, TimeoutError, ConnectionError, OSError) as e:
+                    raise ConnectionFailed(f"GET {path}: the answer stopped coming: {e}", method="GET",
+                                           path=path) from None
+                if not piece:
+                    break
+                f.write(piece)
+                got += len(piece)
+            if want is not None and want.isdigit() and got != int(want):
+                raise ConnectionFailed(f"GET {path}: the answer ended after {got} of its {want} bytes",
+                                       method="GET", path=path)
+        os.replace(part, dest)
+    except BaseException:
+        try:
+            os.unlink(part)
+        except OSError:
+            pass
+        raise
+    return dest
+
+
+def open_netcdf_file(path):
+    """The NetCDF-4 file ``path`` as an ``xarray.Dataset``, loaded into memory (the file closed)."""
+    try:
+        import xarray as xr
+    except ImportError:
+        raise ImportError("reading a dataset needs xarray (Debian: apt-get install python3-xarray "
+                          "python3-netcdf4); without it, use job.films() or job.save_dataset(path)") from None
+    try:
+        with xr.open_dataset(path) as ds:
+            return ds.load()
+    except (ImportError, ValueError) as e:
+        raise ImportError("reading a dataset needs netCDF4 (Debian: apt-get install python3-netcdf4) "
+                          f"or h5netcdf: {e}") from None
+
+
+def fetch_netcdf(http, path):
+    """GET ``path`` (a NetCDF-4 answer) as an ``xarray.Dataset`` loaded into memory, through a
+    temporary file ($TMPDIR, removed): the values are held once, not beside the file's bytes."""
+    folder = tempfile.mkdtemp(prefix="raysweep-")
+    try:
+        return open_netcdf_file(stream_to_file(http, path, os.path.join(folder, "dataset.nc")))
+    finally:
+        for name in os.listdir(folder):
+            os.unlink(os.path.join(folder, name))
+        os.rmdir(folder)
 
 
 def open_netcdf_bytes(data):

@@ -335,19 +335,26 @@ class Job:
         return self._http.request("GET", path, accept="application/x-netcdf", timeout=None)[2]
 
     def save_dataset(self, path, partial=False):
-        """Write the job's NetCDF-4 dataset to ``path`` (opens with ``xarray.open_dataset(path)``)."""
-        data = self.dataset_bytes(partial)
-        with open(path, "wb") as f:
-            f.write(data)
-        return path
+        """Write the job's NetCDF-4 dataset to ``path`` (opens with ``xarray.open_dataset(path)``).
+
+        The answer is streamed to a file beside ``path`` in 1 MiB pieces, then
+        renamed over it once whole: memory stays small however large the
+        dataset, and ``path`` is never left holding part of one.
+        """
+        query = "?partial=1" if partial else ""
+        return _data.stream_to_file(self._http, self._path + "/dataset" + query, path)
 
     def dataset(self, partial=False):
-        """The job's films as one ``xarray.Dataset`` (docs/client.md, "Sweep datasets"), loaded in memory."""
+        """The job's films as one ``xarray.Dataset`` (docs/client.md, "Sweep datasets"), loaded in memory.
+
+        The NetCDF file goes through a temporary file (``$TMPDIR``), so the
+        dataset's values are held once, not beside a copy of the file.
+        """
         if self._dataset is not None and not partial:
             return self._dataset
         if not _data.have_xarray():
             _data.open_netcdf_bytes(b"")  # raises the ImportError that says what to install
-        ds = _data.open_netcdf_bytes(self.dataset_bytes(partial))
+        ds = _data.fetch_netcdf(self._http, self._path + "/dataset" + ("?partial=1" if partial else ""))
         if not partial and self.state in _END_STATES:
             self._dataset = ds
         return ds

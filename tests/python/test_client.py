@@ -681,6 +681,74 @@ class TestJobs(Base):
             np.testing.assert_array_equal(ds2.radiance.values, ds.radiance.values)
 
 
+class TestDatasetFiles(Base):
+    """Datasets are streamed to files, not read whole into memory."""
+
+    def big_job(self):
+        # 151 films of 32x32 (docs' hdistant example): a dataset of about 1 MB
+        scene = self.client.load_file(HDISTANT)
+        job = scene.submit(grid={"wavelength": list(range(400, 702, 2))}, spp=1)
+        job.wait(timeout=120)
+        return job
+
+    def test_save_dataset_streams(self):
+        import tracemalloc
+        from raysweep import _data
+        job = self.big_job()
+        data = job.dataset_bytes()
+        old = getattr(_data, "_CHUNK", None)
+        _data._CHUNK = 64 << 10
+        try:
+            tracemalloc.start()
+            path = job.save_dataset(os.path.join(self.tmp, "big.nc"))
+            _, peak = tracemalloc.get_traced_memory()
+            tracemalloc.stop()
+        finally:
+            _data._CHUNK = old
+        with open(path, "rb") as f:
+            self.assertEqual(f.read(), data)
+        # Read whole, the answer alone would take len(data).
+        self.assertGreater(len(data), 512 << 10)
+        self.assertLess(peak, len(data) // 2, f"saving a {len(data)}-byte dataset peaked at {peak} bytes")
+        self.assertEqual([n for n in os.listdir(self.tmp) if n.endswith(".part")], [])
+
+    def test_dataset_through_a_temporary_file(self):
+        import xarray as xr
+        import netCDF4
+        job = self.big_job()
+        data = job.dataset_bytes()
+        nc = netCDF4.Dataset("in-memory.nc", memory=data)
+        ref = xr.open_dataset(xr.backends.NetCDF4DataStore(nc)).load()
+        nc.close()
+        tmp = os.path.join(self.tmp, "tmpdir")
+        os.makedirs(tmp)
+        old = tempfile.tempdir
+        tempfile.tempdir = tmp
+        try:
+            ds = job.dataset()
+        finally:
+            tempfile.tempdir = old
+        xr.testing.assert_identical(ds, ref)
+        self.assertEqual(os.listdir(tmp), [], "the temporary file is removed")
+
+    def test_cut_short(self):
+        from raysweep import _data
+
+        class Answer(io.BytesIO):
+            headers = {"Content-Length": "100"}
+
+        class Cut:
+            def open(self, *a, **kw):
+                return Answer(b"\x89HDF" + b"x" * 40)
+
+        dest = os.path.join(self.tmp, "cut.nc")
+        with self.assertRaises(rs.ConnectionFailed) as cm:
+            _data.stream_to_file(Cut(), "/v1/jobs/j/dataset", dest)
+        self.assertIn("after 44 of its 100 bytes", str(cm.exception))
+        self.assertFalse(os.path.exists(dest))
+        self.assertEqual([n for n in os.listdir(self.tmp) if n.startswith(".cut.nc")], [])
+
+
 class TestWithoutXarray(Base):
     def test_numpy_only(self):
         # Hide xarray: render gives numpy, sweep a dict of numpy films.
