@@ -254,7 +254,11 @@ static bool probe_finishes(void) {
   probe_state *p = calloc(1, sizeof *p);
   if (!p) return true;
   pthread_mutex_init(&p->m, NULL);
-  pthread_cond_init(&p->c, NULL);
+  pthread_condattr_t ca; /* (the wait measured on the monotonic clock: a clock step cannot stretch it) */
+  bool attr = pthread_condattr_init(&ca) == 0;
+  bool monotonic = attr && pthread_condattr_setclock(&ca, CLOCK_MONOTONIC) == 0;
+  pthread_cond_init(&p->c, monotonic ? &ca : NULL);
+  if (attr) pthread_condattr_destroy(&ca);
   p->refs = 2;
   pthread_attr_t at;
   pthread_t th;
@@ -270,7 +274,7 @@ static bool probe_finishes(void) {
     return true;
   }
   struct timespec until;
-  clock_gettime(CLOCK_REALTIME, &until);
+  clock_gettime(monotonic ? CLOCK_MONOTONIC : CLOCK_REALTIME, &until);
   until.tv_sec += (time_t)PROBE_S;
   pthread_mutex_lock(&p->m);
   while (!p->done && pthread_cond_timedwait(&p->c, &p->m, &until) == 0) continue;
