@@ -58,15 +58,7 @@ static const char *SKY =
 static service *svc;
 
 static char *post(const char *doc) {
-  bool created;
-  char *id = NULL, *json = NULL;
-  svc_error e = {0};
-  if (service_scene_post(svc, doc, strlen(doc), false, NULL, &created, &id, &json, &e)) {
-    printf("  post: %s\n", e.err.msg);
-    return NULL;
-  }
-  free(json);
-  return id;
+  return svc_test_post(svc, doc);
 }
 
 /* Submit and wait for the end; the job id (free), or NULL. */

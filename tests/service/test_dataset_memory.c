@@ -53,27 +53,39 @@ static bool reset_peak(void) {
   return ok;
 }
 
+/* The service's raysweep_result_bytes (/metrics): what it counts against
+ * --max-result-bytes. */
+static unsigned long long result_bytes(void) {
+  char *m = service_metrics_text(svc);
+  const char *g = m ? strstr(m, "\nraysweep_result_bytes ") : NULL;
+  unsigned long long v = g ? strtoull(g + 23, NULL, 10) : 0;
+  free(m);
+  return v;
+}
+
+/* body: a job of n contexts "c00", "c01", ... at wavelengths 400,
+ * 400 + step, ... nm. */
+static void wavelength_job(char *body, size_t size, int n, int step) {
+  size_t at = (size_t)snprintf(body, size, "{\"contexts\": [");
+  for (int i = 0; i < n && at < size; i++)
+    at += (size_t)snprintf(body + at, size - at, "%s{\"id\": \"c%02d\", \"wavelength\": %d}", i ? ", " : "",
+                           i, 400 + step * i);
+  if (at < size) snprintf(body + at, size - at, "]}");
+}
+
 static void test_angles_once(void) {
   const char *scene_id = g_scene;
   /* 96 wavelengths, one film each */
   char body[8192];
-  size_t at = (size_t)snprintf(body, sizeof body, "{\"contexts\": [");
-  for (int i = 0; i < N_CTX; i++)
-    at += (size_t)snprintf(body + at, sizeof body - at, "%s{\"id\": \"c%02d\", \"wavelength\": %d}",
-                           i ? ", " : "", i, 400 + 3 * i);
-  snprintf(body + at, sizeof body - at, "]}");
+  wavelength_job(body, sizeof body, N_CTX, 3);
   char *jid = svc_test_run_job(svc, scene_id, body);
   REQUIRE(jid, "the job ran");
   /* What the daemon counts against --max-result-bytes is what its films
    * hold: every film's radiance and one block of angles (before: a block
    * a film, 4.6 times as much). */
-  char *m = service_metrics_text(svc);
-  const char *g = m ? strstr(m, "\nraysweep_result_bytes ") : NULL;
-  unsigned long long counted = g ? strtoull(g + 23, NULL, 10) : 0,
-                     held =
-                         (unsigned long long)N_CTX * SIDE * SIDE * 4 + (unsigned long long)SIDE * SIDE * 16;
+  unsigned long long counted = result_bytes(), held = (unsigned long long)N_CTX * SIDE * SIDE * 4 +
+                                                      (unsigned long long)SIDE * SIDE * 16;
   CHECK(counted == held, "raysweep_result_bytes %llu, the films hold %llu", counted, held);
-  free(m);
   /* The job's films hold one block of angles (item_done), and a film
    * fetched holds it too, and the job's pixels (film_image_share). */
   svc_film f0, f1, f0b;
@@ -172,14 +184,6 @@ static void test_angles_once(void) {
   free(jid);
 }
 
-static unsigned long long result_bytes(void) {
-  char *m = service_metrics_text(svc);
-  const char *g = m ? strstr(m, "\nraysweep_result_bytes ") : NULL;
-  unsigned long long v = g ? strtoull(g + 23, NULL, 10) : 0;
-  free(m);
-  return v;
-}
-
 /* Two sensors, whose films alternate in the job (context-major, then
  * sensor): each sensor's films hold one block of angles, counted once. */
 static const char *SCENE2 =
@@ -196,18 +200,11 @@ static const char *SCENE2 =
     "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.3}}}";
 
 static void test_two_sensors(void) {
-  bool created;
-  char *id = NULL, *json = NULL;
+  char *id = svc_test_post(svc, SCENE2);
+  REQUIRE(id, "the two-sensor scene loads");
   svc_error e = {0};
-  REQUIRE(service_scene_post(svc, SCENE2, strlen(SCENE2), false, NULL, &created, &id, &json, &e) == RSW_OK,
-          "post: %s", e.err.msg);
-  free(json);
   char body[2048];
-  size_t at = (size_t)snprintf(body, sizeof body, "{\"contexts\": [");
-  for (int i = 0; i < 20; i++)
-    at += (size_t)snprintf(body + at, sizeof body - at, "%s{\"id\": \"c%02d\", \"wavelength\": %d}",
-                           i ? ", " : "", i, 400 + 10 * i);
-  snprintf(body + at, sizeof body - at, "]}");
+  wavelength_job(body, sizeof body, 20, 10);
   unsigned long long before = result_bytes();
   char *jid = svc_test_run_job(svc, id, body);
   REQUIRE(jid, "the job ran");

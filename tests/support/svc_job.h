@@ -32,6 +32,20 @@ static inline char *svc_test_run_job(service *svc, const char *scene_id, const c
   return jid;
 }
 
+/* scene_json (a JSON scene) posted: its id (free), or NULL (said why on
+ * stdout). */
+static inline char *svc_test_post(service *svc, const char *scene_json) {
+  bool created;
+  char *id = NULL, *json = NULL;
+  svc_error e = {0};
+  if (service_scene_post(svc, scene_json, strlen(scene_json), false, NULL, &created, &id, &json, &e)) {
+    printf("  post: %s (%s)\n", e.err.msg, e.err.where);
+    id = NULL;
+  }
+  free(json);
+  return id;
+}
+
 /* A service on 2 render threads (*svc) with scene_json posted (*scene_id,
  * free; NULL when it did not load); false when no service starts. Both
  * said on stdout. */
@@ -43,14 +57,7 @@ static inline bool svc_test_start(service **svc, const char *scene_json, char **
     printf("service_new: %s\n", err.msg);
     return false;
   }
-  bool created;
-  char *json = NULL;
-  svc_error e = {0};
-  if (service_scene_post(*svc, scene_json, strlen(scene_json), false, NULL, &created, scene_id, &json, &e)) {
-    printf("  post: %s (%s)\n", e.err.msg, e.err.where);
-    *scene_id = NULL;
-  }
-  free(json);
+  *scene_id = svc_test_post(*svc, scene_json);
   return true;
 }
 
