@@ -1096,6 +1096,45 @@ static bool plan_bundles(job *jb) {
   return ok;
 }
 
+/* Whether every key of a that sets a parameter of the sensor whose id is
+ * id (its key, aliases resolved, starts with "id.") is in b, with the same
+ * value. */
+static bool same_sensor_params(const scene *sc, const char *id, const cJSON *a, const cJSON *b) {
+  size_t n = strlen(id);
+  for (const cJSON *k = a ? a->child : NULL; k; k = k->next) {
+    size_t idx;
+    param_info pi;
+    rsw_err err = {0};
+    if (params_lookup(sc, k->string, &idx, &err) || !params_info(sc, idx, &pi)) return false;
+    if (strncmp(pi.key, id, n) != 0 || pi.key[n] != '.') continue;
+    const cJSON *v = cJSON_GetObjectItemCaseSensitive(b, k->string);
+    if (!v || !cJSON_Compare(k, v, true)) return false;
+  }
+  return true;
+}
+
+/* Whether the job's contexts all give sensor si the same parameters, so
+ * that its films' pixel angles are the same: held once (share_angles), and
+ * reserved once for --max-result-bytes. A parameter named two ways (a key
+ * and its alias) counts as different. */
+static bool sensor_still(const scene *sc, const job *jb, size_t si) {
+  const char *id = sc->sensors[si]->base.id;
+  if (!id || !*id) return false;
+  const render_item *first = NULL;
+  for (size_t i = 0; i < jb->n_items; i++) {
+    const render_item *it = &jb->items[i];
+    if (it->sensor_index != si) continue;
+    if (!first) {
+      first = it;
+      continue;
+    }
+    if (!same_sensor_params(sc, id, first->params, it->params) ||
+        !same_sensor_params(sc, id, it->params, first->params))
+      return false;
+  }
+  return true;
+}
+
 /* Stage 3: the job (*out) with its renders in context order, taking the
  * bands, coords and warnings; *reserve: the bytes its films will hold,
  * for --max-result-bytes. */
@@ -1134,13 +1173,27 @@ static rsw_status plan_job(service *svc, const scene *sc, job_req *q, job_check 
     return st;
   }
   jb->n_contexts = q->n_contexts;
+  jb->angle_slots = calloc(sc->n_sensors, sizeof *jb->angle_slots);
+  if (!jb->angle_slots) {
+    job_free(jb);
+    return svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
+  }
+  jb->n_angle_slots = sc->n_sensors;
   uint64_t planes =
       (uint64_t)((q->quantities & RENDER_Q_BRDF) != 0) + ((q->quantities & RENDER_Q_BRF) != 0) + q->variance;
   *reserve = 0;
-  for (size_t i = 0; i < jb->n_items; i++) { /* each plane as large as the film; angles once a film */
+  for (size_t si = 0; si < sc->n_sensors; si++) {
+    bool used = false;
+    for (size_t i = 0; i < jb->n_items && !used; i++) used = jb->items[i].sensor_index == si;
+    jb->angle_slots[si].once = used && sensor_still(sc, jb, si);
+    if (jb->angle_slots[si].once) *reserve += svc_film_angle_bytes(sc, si);
+  }
+  /* Each plane as large as the film; the angles once a film, or once for
+   * a sensor no context moves. */
+  for (size_t i = 0; i < jb->n_items; i++) {
     size_t si = jb->items[i].sensor_index;
     uint64_t angles = svc_film_angle_bytes(sc, si);
-    *reserve += (svc_film_bytes(sc, si) - angles) * (1 + planes) + angles;
+    *reserve += (svc_film_bytes(sc, si) - angles) * (1 + planes) + (jb->angle_slots[si].once ? 0 : angles);
   }
   *out = jb;
   return RSW_OK;
@@ -1396,6 +1449,7 @@ static void item_done(service *svc, job *j, size_t k, rsw_status st, svc_film *o
     uint64_t angles = im->angles ? (uint64_t)im->width * (uint64_t)im->height * 16 : 0;
     uint64_t mem = svc_film_mem(&it->film), cap = svc->opts.max_result_bytes;
     uint64_t held = mem - (slot && im->angles && im->angles == slot->counted ? angles : 0);
+
     if (it->on_disk) {
       svc->result_disk_bytes += mem;
       svc->results_on_disk++;

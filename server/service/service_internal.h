@@ -185,11 +185,15 @@ typedef struct job {
    * angles are the same share it (item_done), so a sweep holds one block
    * a sensor, not one a film, however its sensors' films interleave; and
    * the block whose bytes svc->result_bytes counts (compared, not held: a
-   * film of the job holds it). Written by the job's worker alone. */
+   * film of the job holds it). Written by the job's worker alone. once:
+   * the job's contexts all give the sensor the same parameters, so its
+   * films' angles are the same (the job renders at its scene's revision:
+   * nothing else moves the sensor), and were reserved once (plan_job). */
   struct job_angles {
     double *block;
     size_t n;
     const double *counted;
+    bool once;
   } * angle_slots;
   size_t n_angle_slots;
   /* The render in progress (an index into items, SIZE_MAX when none) and

@@ -91,13 +91,16 @@ A2=$(post_scene "$tmp/a.json")
 kill "${pids[-1]}" && wait "${pids[-1]}" 2>/dev/null
 start_daemon "$tmp/d2" --max-result-bytes 2000 --threads 2
 U=127.0.0.1:$started_port
-A=$(post_scene "$tmp/a.json") # 8x8 mono hdistant film: 64 * (4 + 16) = 1280 bytes
+# 8x8 mono hdistant film: 64 * 4 = 256 bytes of radiance, 64 * 16 = 1024 of
+# angles, reserved once for a sweep that does not move the sensor: four
+# wavelengths take 2048 bytes, two 1536.
+A=$(post_scene "$tmp/a.json")
 st=$(curl -s -o "$tmp/out" -w '%{http_code}' -XPOST "$U/v1/scenes/$A/jobs" -H 'Content-Type: application/json' \
-  -d '{"contexts":[{"id":"a","wavelength":500},{"id":"b","wavelength":550}]}')
+  -d '{"contexts":[{"id":"a","wavelength":500},{"id":"b","wavelength":550},{"id":"c","wavelength":600},{"id":"d","wavelength":650}]}')
 [ "$st" = 507 ] && [ "$(code_of "$tmp/out")" = RSW_ERR_STORAGE ] && ok ||
   bad "a job whose films exceed --max-result-bytes: $st $(head -c 300 "$tmp/out")"
 st=$(curl -s -o "$tmp/out" -w '%{http_code}' -XPOST "$U/v1/scenes/$A/jobs" -H 'Content-Type: application/json' \
-  -d '{"contexts":[{"id":"a","wavelength":500}]}')
+  -d '{"contexts":[{"id":"a","wavelength":500},{"id":"b","wavelength":550}]}')
 [ "$st" = 202 ] && ok || bad "a job that fits: $st $(head -c 300 "$tmp/out")"
 j=$(field "$tmp/out" id)
 [ "$(wait_job "$j" 20)" = succeeded ] && ok || bad "the job that fits"

@@ -9,7 +9,9 @@
  * film's radiance made it 25.2 MiB, a copy of every film's angles 49.2),
  * for a dataset whose angles are still every pixel's (vza over y, x), the
  * same as one film's. And the dataset answered from a file
- * (service_job_dataset_file) holds the one encoded in memory. */
+ * (service_job_dataset_file) holds the one encoded in memory. Under
+ * --max-result-bytes without a state directory, a job is reserved a
+ * sensor's angles once when its contexts do not move it (test_reserve). */
 #include <malloc.h>
 #include <math.h>
 #include <netcdf.h>
@@ -227,11 +229,150 @@ static void test_two_sensors(void) {
   free(id);
 }
 
+/* --max-result-bytes without a state directory: a job is reserved what
+ * its films will hold, a sensor's angles once when no two contexts give
+ * it different parameters (plan_job), once a film otherwise (a job renders
+ * at its scene's revision: nothing else moves its sensors while it runs).
+ * An `mdistant` sensor of
+ * 256 directions: its 256 x 1 film holds 1 KiB of radiance and 4 KiB of
+ * angles, which follow its directions. */
+enum {
+  N_DIR = 256,
+  RAD = N_DIR * 4,
+  ANG = N_DIR * 16
+};
+
+/* The 3 N_DIR numbers of directions looking down, tilted by tilt, with
+ * sep between numbers. */
+static void directions(char *out, size_t size, double tilt, const char *sep) {
+  size_t at = 0;
+  for (int i = 0; i < N_DIR && at < size; i++) {
+    double t = tilt + 0.6 * i / N_DIR, p = 0.1 * i;
+    at += (size_t)snprintf(out + at, size - at, "%s%.4f%s%.4f%s%.4f", i ? sep : "", sin(t) * cos(p), sep,
+                           sin(t) * sin(p), sep, -cos(t));
+  }
+}
+
+/* svc's gauge name (/metrics). */
+static unsigned long long gauge(service *s, const char *name) {
+  char *m = service_metrics_text(s), key[80];
+  snprintf(key, sizeof key, "\n%s ", name);
+  const char *g = m ? strstr(m, key) : NULL;
+  unsigned long long v = g ? strtoull(g + strlen(key), NULL, 10) : 0;
+  free(m);
+  return v;
+}
+
+/* A job of 20 contexts at 400, 410, ... nm, spp samples, into body; with
+ * tilt, context i sets meter.directions tilted by tilt(i). */
+static void mdistant_job(char *body, size_t size, int spp, double (*tilt)(int)) {
+  static char d[N_DIR * 3 * 12];
+  size_t at = (size_t)snprintf(body, size, "{\"defaults\": {\"spp\": %d}, \"contexts\": [", spp);
+  for (int i = 0; i < 20 && at < size; i++) {
+    at += (size_t)snprintf(body + at, size - at, "%s{\"id\": \"c%02d\", \"wavelength\": %d", i ? ", " : "", i,
+                           400 + 10 * i);
+    if (tilt) directions(d, sizeof d, tilt(i), ", ");
+    if (tilt && at < size)
+      at += (size_t)snprintf(body + at, size - at, ", \"params\": {\"meter.directions\": [%s]}", d);
+    if (at < size) at += (size_t)snprintf(body + at, size - at, "}");
+  }
+  if (at < size) snprintf(body + at, size - at, "]}");
+}
+
+static double tilted(int i) {
+  return 0.01 * i;
+}
+
+static double same(int i) {
+  (void)i;
+  return 0.1;
+}
+
+/* Submit body on s; the job id or NULL (e says why). */
+static char *submit(service *s, const char *id, const char *body, svc_error *e) {
+  char *jid = NULL, *json = NULL;
+  memset(e, 0, sizeof *e);
+  if (service_job_submit(s, id, body, strlen(body), NULL, &jid, &json, e)) jid = NULL;
+  free(json);
+  return jid;
+}
+
+/* Follow job jid's events to its end. */
+static void follow(service *s, const char *jid, svc_error *e) {
+  uint64_t after = 0, seq;
+  bool end = false;
+  for (int guard = 0; !end && guard < 1000; guard++) {
+    char *ev = NULL;
+    if (service_job_next_event(s, jid, after, 5000, &seq, &ev, &end, e)) break;
+    if (ev) after = seq;
+    free(ev);
+  }
+}
+
+static void test_reserve(void) {
+  static char text[N_DIR * 3 * 12 + 1024], body[20 * N_DIR * 3 * 12 + 4096], d[N_DIR * 3 * 12];
+  directions(d, sizeof d, 0.0, " ");
+  snprintf(
+      text, sizeof text,
+      "{\"type\": \"scene\", \"variant\": \"mono\","
+      " \"meter\": {\"type\": \"mdistant\", \"directions\": \"%s\", \"target\": [0, 0, 0],"
+      "   \"sampler\": {\"type\": \"independent\", \"sample_count\": 1},"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": %d, \"height\": 1, \"rfilter\": {\"type\": \"box\"}}},"
+      " \"integrator\": {\"type\": \"path\", \"max_depth\": 2},"
+      " \"sun\": {\"type\": \"directional\", \"direction\": [0.5, 0, -0.866], \"irradiance\": 1.0},"
+      " \"plate\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": [10, 10, 1]}],"
+      "   \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.3}}}",
+      d, N_DIR);
+  rsw_err err = {0};
+  service *s = NULL;
+  service_opts o = {.size = sizeof o, .render_threads = 2, .max_result_bytes = 32 << 10};
+  REQUIRE(service_new(&o, &s, &err) == RSW_OK, "service_new: %s", err.msg);
+  char *id = svc_test_post(s, text);
+  if (!id) service_free(s);
+  REQUIRE(id, "the mdistant scene loads");
+  svc_error e;
+  /* Still: 20 x 1 KiB + 4 KiB = 24 KiB (20 x 5 KiB = 100 KiB before,
+   * refused under 32 KiB). */
+  mdistant_job(body, sizeof body, 1, NULL);
+  char *jid = submit(s, id, body, &e);
+  CHECK(jid, "a sweep that does not move its sensor fits in 32 KiB: %s", e.err.msg);
+  CHECK(gauge(s, "raysweep_result_bytes_reserved") == 20 * RAD + ANG, "reserved %llu, want %d",
+        gauge(s, "raysweep_result_bytes_reserved"), 20 * RAD + ANG);
+  if (jid) {
+    follow(s, jid, &e);
+    CHECK(gauge(s, "raysweep_result_bytes") == 20 * RAD + ANG, "its films hold %llu, as reserved",
+          gauge(s, "raysweep_result_bytes"));
+    CHECK(service_job_delete(s, jid, &e) == RSW_OK, "delete: %s", e.err.msg);
+    free(jid);
+  }
+  CHECK(gauge(s, "raysweep_result_bytes_reserved") == 0, "nothing reserved once it is deleted (%llu)",
+        gauge(s, "raysweep_result_bytes_reserved"));
+  /* Every context the same directions: still. Each its own: 100 KiB. */
+  mdistant_job(body, sizeof body, 1, same);
+  jid = submit(s, id, body, &e);
+  CHECK(jid && gauge(s, "raysweep_result_bytes_reserved") == 20 * RAD + ANG,
+        "one set of directions for all: %s, reserved %llu", jid ? "accepted" : e.err.msg,
+        gauge(s, "raysweep_result_bytes_reserved"));
+  if (jid) {
+    follow(s, jid, &e);
+    CHECK(service_job_delete(s, jid, &e) == RSW_OK, "delete: %s", e.err.msg);
+    free(jid);
+  }
+  mdistant_job(body, sizeof body, 1, tilted);
+  jid = submit(s, id, body, &e);
+  CHECK(!jid && e.err.code == RSW_ERR_STORAGE, "20 sets of directions, 100 KiB, refused under 32 KiB (%s)",
+        jid ? "accepted" : e.err.msg);
+  free(jid);
+  free(id);
+  service_free(s);
+}
+
 int main(void) {
   if (!svc_test_start(&svc, SCENE, &g_scene)) return 1;
   if (g_scene) {
     RSW_TEST_RUN(test_angles_once);
     RSW_TEST_RUN(test_two_sensors);
+    RSW_TEST_RUN(test_reserve);
   } else
     CHECK(false, "the scene loads");
   free(g_scene);
