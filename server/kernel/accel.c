@@ -14,6 +14,7 @@
 
 #include <math.h>
 #include <pthread.h>
+#include <sched.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -176,7 +177,8 @@ static void embree_error_reset(RTCDevice d) {
  * accel_build does (a shape scene, an instance, a top-level scene) on a
  * thread of its own, and waits PROBE_S for it. One that does not finish
  * means Embree is stuck for good in this process: the probe's thread and
- * scene are left as they are. */
+ * scene are left as they are, the thread demoted to SCHED_IDLE (a thread
+ * stuck on a spin lock then takes only the cores nothing else wants). */
 #define PROBE_S 3.0
 
 static pthread_mutex_t g_probe_lock = PTHREAD_MUTEX_INITIALIZER;
@@ -279,6 +281,10 @@ static bool probe_finishes(void) {
   pthread_mutex_lock(&p->m);
   while (!p->done && pthread_cond_timedwait(&p->c, &p->m, &until) == 0) continue;
   bool done = p->done;
+  /* Stuck: the thread may spin on Embree's lock for good. It runs on only
+   * while no other thread wants a core (SCHED_IDLE). (It lives: it takes
+   * p->m to say it is done.) */
+  if (!done) (void)pthread_setschedparam(th, SCHED_IDLE, &(struct sched_param){.sched_priority = 0});
   pthread_mutex_unlock(&p->m);
   probe_release(p);
   return done;

@@ -32,6 +32,13 @@ runs' jobs (for two daemons the slower replica's job), and
 renders' own scaling, so that a shortfall of `efficiency` can be told
 apart as the daemons' share of the cores (other work on the machine) or
 the client's.
+`machine_pair_efficiency`: the machine's own ceiling for two busy
+single-threaded processes, with no daemon, client or balancer: the scene
+rendered by `raysweepd render --threads 1` alone, then by two such
+processes at once (render time from --stats, best of 3 each, run between
+the sweeps): alone / the slower of the pair. On a machine whose two cores
+are not two free cores (SMT siblings, a shared host), it falls below 1,
+and `efficiency` with it.
 Added latency: GET /v1/health/live on a kept-alive connection, 2000 times
 straight to a daemon and 2000 times through HAProxy (the routing header
 set); the difference of the percentiles.
@@ -39,6 +46,7 @@ set); the difference of the percentiles.
 import http.client
 import json
 import os
+import re
 import resource
 import shutil
 import socket
@@ -116,6 +124,29 @@ def sweep(url, out, extra, output="dataset"):
     return dt, cpu / n * 1e3
 
 
+PAIR_SPP = 2048  # (about the sweeps' render time, 0.4 s, on one core)
+
+
+def render_seconds(procs):
+    """Each process's render time (`raysweepd render --stats`), after it ends."""
+    out = []
+    for p in procs:
+        err = p.communicate()[1]
+        m = re.search(r"samples in ([0-9.]+) s", err)
+        if p.returncode != 0 or not m:
+            sys.exit(f"bench_scale_out: raysweepd render: exit {p.returncode}: {err[-300:]}")
+        out.append(float(m.group(1)))
+    return out
+
+
+def pair_run(tmp, n):
+    """n renders of the scene at once, one thread each: their render times."""
+    procs = [subprocess.Popen([os.path.join(bindir, "raysweepd"), "render", scene, "--threads", "1", "--spp",
+                               str(PAIR_SPP), "--stats", "-o", os.path.join(tmp, f"pair{k}.exr")],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True) for k in range(n)]
+    return render_seconds(procs)
+
+
 def last_job_seconds(port):
     """The render time of the newest job of the daemon on port."""
     c = http.client.HTTPConnection("127.0.0.1", port, timeout=10)
@@ -179,7 +210,10 @@ def main():
         sweep(url2, os.path.join(tmp, "t"), ["--spread", "2"])
         runs = {o: {"runs1": [], "runs2": [], "cpu1": [], "cpu2": [], "over1": [], "jobs1": [], "jobs2": []}
                 for o in OUTPUTS}
+        alone, pair = [], []
         for i in range(3):
+            alone.append(pair_run(tmp, 1)[0])
+            pair.append(max(pair_run(tmp, 2)))
             for o, r in runs.items():
                 dt, cpu = sweep(url1, os.path.join(tmp, f"o{o}{i}"), ["--spread", "1"], o)
                 r["runs1"].append(dt)
@@ -223,6 +257,9 @@ def main():
             **figures(runs["dataset"]),
             # One EXR file per film (--layout LAYOUT), alternating with the above.
             "files": {"layout": LAYOUT, **figures(runs["files"])},
+            "machine_pair_efficiency": round(min(alone) / min(pair), 3),
+            "pair_alone_s": [round(t, 3) for t in alone],
+            "pair_s": [round(t, 3) for t in pair],
             "direct_ms_p50": round(d50, 3),
             "direct_ms_p99": round(d99, 3),
             "via_haproxy_ms_p50": round(v50, 3),

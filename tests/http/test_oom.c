@@ -33,7 +33,9 @@
 #include <curl/curl.h>
 #include <dlfcn.h>
 #include <errno.h>
+#include <sched.h>
 #include <signal.h>
+#include <stdatomic.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -164,8 +166,11 @@ static service *d_svc;
 
 /* A probe build that does not finish within the probe's 3 s: what a lock
  * left held by a failure inside Embree's build tasks does. */
+static _Atomic int stalled_policy = -1; /* the stalled probe's, as it ends */
+
 static void probe_stalls(void) {
   sleep(4);
+  atomic_store(&stalled_policy, sched_getscheduler(0));
 }
 
 static void check_embree_stuck(const char *op, long n);
@@ -228,6 +233,12 @@ static void check_embree_stuck(const char *op, long n) {
   ei = rsw_client_last_error(c);
   CHECK(st != RSW_OK && ei->http_status == 503 && strstr(ei->message, "Embree cannot build any more"),
         "%s: Embree stuck, then POST /v1/scenes: HTTP %d %s", op, ei->http_status, ei->message);
+  /* The stalled probe's thread was demoted: stuck on a spin lock, it
+   * would take only the cores nothing else wants. */
+  for (int i = 0; i < 300 && atomic_load(&stalled_policy) < 0; i++) usleep(10000);
+  CHECK(atomic_load(&stalled_policy) == SCHED_IDLE,
+        "%s: the stalled probe's thread runs under policy %d, not SCHED_IDLE", op,
+        atomic_load(&stalled_policy));
   accel_set_probe_hook(NULL);
   accel_clear_embree_stuck();
   CHECK(rsw_server_ready(c) == RSW_OK, "%s: ready again once the test forgot it", op);
