@@ -354,16 +354,20 @@ static bool has_table(const cJSON *map) {
   return false;
 }
 
-/* A tabulated spectrum's range (nm): {"wavelengths": [...], ...} or
- * [[wl, value], ...], increasing. False for anything else. */
+/* A tabulated spectrum's range (nm), in the two forms a value takes
+ * (param_value_from_json): {"wavelengths": [...], "values": [...]} or
+ * {"type": "spectrum", "value": [[wl, value], ...]}, increasing. False for
+ * anything else: a bare list of rows is a matrix (a transform's 4 rows of
+ * 4), never a table. */
 static bool table_range(const cJSON *v, double *lo, double *hi) {
   const cJSON *first = NULL, *last = NULL;
   const cJSON *wl = cJSON_IsObject(v) ? cJSON_GetObjectItemCaseSensitive(v, "wavelengths") : NULL;
+  const cJSON *pairs = cJSON_IsObject(v) ? cJSON_GetObjectItemCaseSensitive(v, "value") : NULL;
   if (cJSON_IsArray(wl) && wl->child) {
     first = wl->child;
     for (last = first; last->next; last = last->next) {}
-  } else if (cJSON_IsArray(v) && cJSON_IsArray(v->child)) {
-    const cJSON *fp = v->child, *lp = fp;
+  } else if (cJSON_IsArray(pairs) && cJSON_IsArray(pairs->child)) {
+    const cJSON *fp = pairs->child, *lp = fp;
     while (lp->next) lp = lp->next;
     first = fp->child, last = cJSON_IsArray(lp) ? lp->child : NULL;
   }

@@ -1,6 +1,7 @@
 /* The service layer in process (no HTTP): scene ids, parameter patches
  * with revisions, synchronous renders with overrides that leave the base
- * state untouched, jobs with per-context wavelengths and events. */
+ * state untouched, jobs with per-context wavelengths and events, and the
+ * wavelength checks of a job's overrides. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -212,6 +213,60 @@ static void test_job_spectral_loop(void) {
   free(id);
 }
 
+/* A context's overrides against its wavelength (jobs.c, table_range): a
+ * transform written as 4 rows of 4 is no spectrum table (it was taken
+ * for [[wl, value], ...] and the job refused: "wavelength 550 nm lies
+ * outside the table of 'meter.to_world' [1, 0] nm"); a table written
+ * {"type": "spectrum", "value": [[wl, v], ...]} is one, and a wavelength
+ * outside it is refused up front, naming the key (it was taken, and its
+ * render failed). */
+static void test_job_override_tables(void) {
+  char *id = post_plate();
+  REQUIRE(id, "scene");
+  /* the sensor turned about x by 180 degrees: it still looks down (-z) */
+  const char *rows = "{\"contexts\": [{\"id\": \"r\", \"wavelength\": 550, \"spp\": 1, \"params\": "
+                     "{\"meter.to_world\": [[1, 0, 0, 0], [0, -1, 0, 0], [0, 0, -1, 0], [0, 0, 0, 1]]}}]}";
+  const char *table =
+      "{\"params\": {\"plate.bsdf.reflectance.value\": {\"type\": \"spectrum\", \"value\": "
+      "[[400, 0.2], [700, 0.8]]}}, \"contexts\": [{\"id\": \"t\", \"wavelength\": %d, \"spp\": 1}]}";
+  char *jid = NULL, *json = NULL;
+  svc_error e = {0};
+  rsw_status st = service_job_submit(svc, id, rows, strlen(rows), NULL, &jid, &json, &e);
+  CHECK(st == RSW_OK, "a transform as 4 rows of 4: %s (%s)", st ? e.err.msg : "accepted", e.err.where);
+  free(json), json = NULL;
+  if (!st) {
+    uint64_t after = 0, seq;
+    bool end = false;
+    for (int guard = 0; !end && guard < 200; guard++) {
+      char *ev = NULL;
+      if (service_job_next_event(svc, jid, after, 5000, &seq, &ev, &end, &e)) break;
+      if (ev) after = seq;
+      free(ev);
+    }
+    svc_film f;
+    REQUIRE(service_job_result(svc, jid, "r", "meter", &f, &e) == RSW_OK, "result r: %s", e.err.msg);
+    CHECK_REL(f.img.data[0], 0.5 / 3.14159265358979323846, 1e-6);
+    svc_film_free(&f);
+  }
+  free(jid), jid = NULL;
+  char body[512];
+  snprintf(body, sizeof body, table, 800);
+  memset(&e, 0, sizeof e);
+  st = service_job_submit(svc, id, body, strlen(body), NULL, &jid, &json, &e);
+  CHECK(st == RSW_ERR_RANGE && strstr(e.err.msg, "plate.bsdf.reflectance.value") &&
+            strstr(e.err.msg, "[400, 700]") && strcmp(e.err.where, "/contexts/0/wavelength") == 0,
+        "800 nm against a table of [wl, value] pairs: %d %s (%s)", (int)st, e.err.msg, e.err.where);
+  free(json), json = NULL;
+  free(jid), jid = NULL;
+  snprintf(body, sizeof body, table, 550);
+  memset(&e, 0, sizeof e);
+  st = service_job_submit(svc, id, body, strlen(body), NULL, &jid, &json, &e);
+  CHECK(st == RSW_OK, "550 nm in it: %s", st ? e.err.msg : "accepted");
+  free(json);
+  free(jid);
+  free(id);
+}
+
 int main(void) {
   service_opts o = {.size = sizeof o, .render_threads = 2};
   rsw_err err = {0};
@@ -224,6 +279,7 @@ int main(void) {
   RSW_TEST_RUN(test_patch_revisions);
   RSW_TEST_RUN(test_job_spectral_loop);
   RSW_TEST_RUN(test_patch_search_key_then_override_by_path);
+  RSW_TEST_RUN(test_job_override_tables);
   service_free(svc);
   RSW_TEST_END("test_service");
 }
