@@ -8,6 +8,7 @@
 #include <string.h>
 
 #include "../../server/service/service.h"
+#include "../support/svc_job.h"
 #include "../support/test.h"
 
 RSW_TEST_DEFINE_GLOBALS
@@ -229,20 +230,10 @@ static void test_job_override_tables(void) {
   const char *table =
       "{\"params\": {\"plate.bsdf.reflectance.value\": {\"type\": \"spectrum\", \"value\": "
       "[[400, 0.2], [700, 0.8]]}}, \"contexts\": [{\"id\": \"t\", \"wavelength\": %d, \"spp\": 1}]}";
-  char *jid = NULL, *json = NULL;
   svc_error e = {0};
-  rsw_status st = service_job_submit(svc, id, rows, strlen(rows), NULL, &jid, &json, &e);
-  CHECK(st == RSW_OK, "a transform as 4 rows of 4: %s (%s)", st ? e.err.msg : "accepted", e.err.where);
-  free(json), json = NULL;
-  if (!st) {
-    uint64_t after = 0, seq;
-    bool end = false;
-    for (int guard = 0; !end && guard < 200; guard++) {
-      char *ev = NULL;
-      if (service_job_next_event(svc, jid, after, 5000, &seq, &ev, &end, &e)) break;
-      if (ev) after = seq;
-      free(ev);
-    }
+  char *jid = svc_test_run_job(svc, id, rows), *json = NULL;
+  CHECK(jid, "a transform as 4 rows of 4 is accepted");
+  if (jid) {
     svc_film f;
     REQUIRE(service_job_result(svc, jid, "r", "meter", &f, &e) == RSW_OK, "result r: %s", e.err.msg);
     CHECK_REL(f.img.data[0], 0.5 / 3.14159265358979323846, 1e-6);
@@ -252,7 +243,7 @@ static void test_job_override_tables(void) {
   char body[512];
   snprintf(body, sizeof body, table, 800);
   memset(&e, 0, sizeof e);
-  st = service_job_submit(svc, id, body, strlen(body), NULL, &jid, &json, &e);
+  rsw_status st = service_job_submit(svc, id, body, strlen(body), NULL, &jid, &json, &e);
   CHECK(st == RSW_ERR_RANGE && strstr(e.err.msg, "plate.bsdf.reflectance.value") &&
             strstr(e.err.msg, "[400, 700]") && strcmp(e.err.where, "/contexts/0/wavelength") == 0,
         "800 nm against a table of [wl, value] pairs: %d %s (%s)", (int)st, e.err.msg, e.err.where);
