@@ -220,7 +220,8 @@ static void test_job_spectral_loop(void) {
  * outside the table of 'meter.to_world' [1, 0] nm"); a table written
  * {"type": "spectrum", "value": [[wl, v], ...]} is one, and a wavelength
  * outside it is refused up front, naming the key (it was taken, and its
- * render failed). */
+ * render failed; and a sweep over wavelengths with it was warned that the
+ * wavelength changes nothing). */
 static void test_job_override_tables(void) {
   char *id = post_plate();
   REQUIRE(id, "scene");
@@ -229,7 +230,8 @@ static void test_job_override_tables(void) {
                      "{\"meter.to_world\": [[1, 0, 0, 0], [0, -1, 0, 0], [0, 0, -1, 0], [0, 0, 0, 1]]}}]}";
   const char *table =
       "{\"params\": {\"plate.bsdf.reflectance.value\": {\"type\": \"spectrum\", \"value\": "
-      "[[400, 0.2], [700, 0.8]]}}, \"contexts\": [{\"id\": \"t\", \"wavelength\": %d, \"spp\": 1}]}";
+      "[[400, 0.2], [700, 0.8]]}}, \"contexts\": [{\"id\": \"t\", \"wavelength\": %d, \"spp\": 1}, "
+      "{\"id\": \"u\", \"wavelength\": 500, \"spp\": 1}]}";
   svc_error e = {0};
   char *jid = svc_test_run_job(svc, id, rows), *json = NULL;
   CHECK(jid, "a transform as 4 rows of 4 is accepted");
@@ -252,7 +254,9 @@ static void test_job_override_tables(void) {
   snprintf(body, sizeof body, table, 550);
   memset(&e, 0, sizeof e);
   st = service_job_submit(svc, id, body, strlen(body), NULL, &jid, &json, &e);
-  CHECK(st == RSW_OK, "550 nm in it: %s", st ? e.err.msg : "accepted");
+  CHECK(st == RSW_OK, "550 and 500 nm in it: %s", st ? e.err.msg : "accepted");
+  /* (the table makes the wavelength matter: it was said not to) */
+  CHECK(!json || !strstr(json, "wavelength_unused"), "no wavelength_unused warning: %s", json ? json : "");
   free(json);
   free(jid);
   free(id);
