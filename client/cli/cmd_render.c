@@ -1,10 +1,12 @@
-/* raysweep render (one synchronous render) and fetch (one film of a job). */
+/* raysweep render (one synchronous render, of a resident scene or a scene
+ * file pushed first) and fetch (one film of a job). */
 #include <cjson/cJSON.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
+#include <sys/stat.h>
 
 #include "cli.h"
 
@@ -202,10 +204,25 @@ int cmd_render(cli_ctx *ctx, const cmdline_args *a) {
     rc = cli_fail(ctx, CLI_IO, "out of memory");
     goto out;
   }
+  /* A scene FILE: pushed (with the files it references), then rendered by
+   * its id, as sweep does. */
+  const char *scene = a->pos[0];
+  char scene_id[65] = "";
+  struct stat sst;
+  if (stat(scene, &sst) == 0 && S_ISREG(sst.st_mode)) {
+    int created = 0;
+    rsw_status ps = rsw_scene_push_file(ctx->client, scene, NULL, scene_id, &created);
+    if (ps) {
+      free(text);
+      rc = cli_report(ctx, ps, scene);
+      goto out;
+    }
+    scene = scene_id;
+  }
   rsw_film *film = NULL;
   double t0 = cli_now();
   cli_catch_interrupt();
-  rsw_status s = rsw_render(ctx->client, a->pos[0], text, &film);
+  rsw_status s = rsw_render(ctx->client, scene, text, &film);
   double seconds = cli_now() - t0;
   free(text);
   if (s && cli_interrupted) {

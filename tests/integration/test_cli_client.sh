@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The `raysweep` CLI against the real daemon on an ephemeral loopback port:
-# every subcommand, a wavelength sweep on a Lambertian plate that must give
+# every subcommand (render and sweep of a resident scene or a scene file),
+# a wavelength sweep on a Lambertian plate that must give
 # L = rho(lambda) E cos(theta) / pi, sharded sweeps merged == the unsharded
 # sweep byte for byte, and the documented exit codes (1 server said no,
 # 2 usage, 3 cannot connect, 4 job cancelled, 5 timeout, 6 local I/O).
@@ -114,6 +115,13 @@ assert nv == struct.unpack("<f", struct.pack("<f", v))[0], (nv, v)
 '
 expect 0 "render --set --json" rs render "$plate" --set plate.bsdf.reflectance.value=0.25 --json -o r2.json
 py "render --set overrides for one render" 'import json,math; v=json.load(open("r2.json"))["data"][0]; assert abs(v-0.25/math.pi)<1e-6, v; assert json.load(open("out"))["file"]=="r2.json"'
+# A scene FILE: pushed, then rendered (its transform given as 4 rows of 4,
+# which a job's wavelength check once took for a spectrum table).
+expect 0 "render FILE" rs render plate.json --spp 4 --json -o r3.json \
+  --set 'nadir.to_world=[[1, 0, 0, 0], [0, -1, 0, 0], [0, 0, -1, 0], [0, 0, 0, 1]]'
+py "render FILE pushes it, then renders" 'import json,math; v=json.load(open("r3.json"))["data"][0]; assert abs(v-0.5/math.pi)<1e-6, v'
+expect 1 "render a FILE that is no scene" rs render r.json -o x.exr
+contains "render a FILE that is no scene: the push's error" err "r.json"
 expect 2 "render without -o" rs render "$plate"
 expect 2 "render unknown extension" rs render "$plate" -o r.txt
 expect 2 "render bad --spp" rs render "$plate" --spp 0 -o r.exr
