@@ -55,13 +55,17 @@ def grid_contexts(grid, param_keys=None):
         values = grid[name]
         if isinstance(values, (str, bytes)) or not hasattr(values, "__iter__"):
             raise TypeError(f"grid[{name!r}] must be a list of values, not {type(values).__name__}")
-        vals = [v.item() if hasattr(v, "item") else v for v in values]
+        # (numpy scalars as Python numbers; an array of several stays one,
+        # and is refused below)
+        vals = [v.item() if getattr(v, "ndim", None) == 0 else v for v in values]
         if not vals:
             raise ValueError(f"grid[{name!r}] is empty")
         for v in vals:
             if isinstance(v, bool) or not isinstance(v, (numbers.Real, str)):
-                raise TypeError(f"grid[{name!r}]: {v!r} is neither a number nor a string "
-                                "(give other values through contexts=[...])")
+                shown = v.tolist() if hasattr(v, "tolist") else v
+                raise TypeError(f"grid[{name!r}]: {shown!r} is neither a number nor a string: a grid axis "
+                                "takes one number a context (for vectors and transforms give each context "
+                                "its value through contexts=[...]; for sun and view angles, templates)")
         is_key = "." in name or ":" in name
         # An Eradiate search (TYPE:ID:PATH) is resolved by the daemon alone.
         if is_key and ":" not in name and param_keys is not None and name not in param_keys:

@@ -515,6 +515,15 @@ class TestSweep(Base):
         self.assertEqual(ctx[5]["coords"], {"wavelength": 600, "b": 3})
         with self.assertRaises(TypeError):
             rs.grid_contexts({"wavelength": 500})
+        # numpy scalars are numbers; numpy vectors are refused saying so (it was numpy's
+        # "can only convert an array of size 1 to a Python scalar")
+        ctx = rs.grid_contexts({"a.b.value": np.array([0.25, 0.5]), "wavelength": [np.int64(500)]})
+        self.assertEqual([c["params"]["a.b.value"] for c in ctx], [0.25, 0.5])
+        self.assertIs(type(ctx[0]["wavelength"]), int)
+        with self.assertRaises(TypeError) as cm:
+            rs.grid_contexts({"sun.direction": [np.array([0.0, 0, -1]), np.array([0.5, 0, -1])]})
+        self.assertIn("contexts=[...]", str(cm.exception))
+        self.assertIn("[0.0, 0.0, -1.0]", str(cm.exception))
 
     def test_progress_text_bar(self):
         out = io.StringIO()
