@@ -1453,7 +1453,6 @@ static void item_done(service *svc, job *j, size_t k, rsw_status st, svc_film *o
     uint64_t angles = im->angles ? (uint64_t)im->width * (uint64_t)im->height * 16 : 0;
     uint64_t mem = svc_film_mem(&it->film), cap = svc->opts.max_result_bytes;
     uint64_t held = mem - (slot && im->angles && im->angles == slot->counted ? angles : 0);
-
     if (it->on_disk) {
       svc->result_disk_bytes += mem;
       svc->results_on_disk++;
