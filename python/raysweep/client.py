@@ -79,7 +79,8 @@ class Client:
         declared after ``<scene>`` when the file has no default for it (on the
         same line, so the daemon's line numbers still match the file).
         Values are numbers, booleans, strings or sequences of numbers
-        (written ``"1, 2, 3"``). A JSON scene takes none (``TypeError``).
+        (written ``"1, 2, 3"``). One that the file neither declares nor uses
+        (``$name``) is a ``TypeError`` naming it, as is any for a JSON scene.
         """
         path = os.fspath(path)
         try:
@@ -240,10 +241,14 @@ def _xml_rewrite(text, base, upload, params=None):
     parser = xml.parsers.expat.ParserCreate()
     depth = [0]
     scene_end = []
+    declared, dollars = [], []  # the <default> names; the attribute values holding a '$'
 
     def start(name, attrs):
         depth[0] += 1
         at = parser.CurrentByteIndex
+        dollars.extend(v for v in attrs.values() if "$" in v)
+        if name == "default" and depth[0] == 2 and "name" in attrs:
+            declared.append(attrs["name"])
         if name == "scene" and depth[0] == 1:
             end = _tag_end(text, at)
             if end is not None:
@@ -280,6 +285,7 @@ def _xml_rewrite(text, base, upload, params=None):
                                 + ", ".join(sorted(params))) from None
         return text
     if pending:
+        _check_params_used(pending, declared, dollars)
         if not scene_end:
             raise RaysweepError("the XML document has no <scene> element to declare parameters in")
         decl = "".join(f'<default name="{_xml_value(k)}" value="{_xml_value(v)}"/>' for k, v in pending.items())
@@ -291,6 +297,30 @@ def _xml_rewrite(text, base, upload, params=None):
         r = b
     out.append(text[r:])
     return b"".join(out)
+
+
+def _check_params_used(pending, declared, dollars):
+    """A parameter the document neither declares (``<default>``) nor uses (``$name``) is a
+    ``TypeError`` naming it: a misspelt ``rh0=0.3`` would leave ``$rho`` at its default without a
+    word (the daemon refuses such a ``-D`` alike). At each ``$`` the longest name that follows is
+    the one used, as the daemon substitutes."""
+    names = set(declared) | set(pending)
+    used = set()
+    for v in dollars:
+        i = v.find("$")
+        while i >= 0:
+            hit = max((n for n in names if v.startswith(n, i + 1)), key=len, default=None)
+            if hit is not None:
+                used.add(hit)
+            i = v.find("$", i + 1)
+    for key in pending:
+        if key not in used:
+            from .errors import did_you_mean
+            cands = did_you_mean(key, declared)
+            hint = f"; did you mean {cands[0]!r}?" if cands else ""
+            have = ", ".join(declared) if declared else "none"
+            raise TypeError(f"parameter {key!r}: the XML document neither declares it (<default>) nor uses it "
+                            f"(${key}){hint} (it declares: {have})")
 
 
 def _tag_end(text, at):

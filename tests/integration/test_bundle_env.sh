@@ -35,7 +35,7 @@ plugins="$bin/../plugins"
 }
 # An RGB environment map: a rendered film (red, green and blue suns on a
 # rough conductor, 16x8).
-(cd "$root/proto/examples" && "$bin/raysweepd" render hdistant_seed.xml -D spp=64 -o "$tmp/env.exr" 2>"$tmp/env.err") ||
+(cd "$root/proto/examples" && "$bin/raysweepd" render hdistant_seed.xml --spp 64 -o "$tmp/env.exr" 2>"$tmp/env.err") ||
   bad "rendering the environment map: $(cat "$tmp/env.err")"
 python3 - "$root/proto/examples" "$tmp" <<'PY'
 import json, sys

@@ -204,6 +204,12 @@ class TestLoad(Base):
         self.assertIn("irr", str(cm.exception))
         with self.assertRaises(TypeError):
             self.client.load_file(PLATE, rho=0.3)                  # a JSON scene takes none
+        # A parameter the file neither declares nor uses is refused, naming it and the closest
+        # declared one (it was declared, and $rho silently kept its default)
+        with self.assertRaises(TypeError) as cm:
+            self.client.load_file(path, variant="mono", rh0=0.3, irr=2.0)
+        self.assertIn("'rh0'", str(cm.exception))
+        self.assertIn("did you mean 'rho'?", str(cm.exception))
 
 
 class TestParameters(Base):

@@ -32,9 +32,13 @@
  *     (parameters substitute in document order), and only once per name;
  *   - a -D define that no <default> declares is accepted and substituted
  *     wherever $name appears, as Mitsuba does (its parameter list is simply
- *     the defines plus the defaults); one never used is silently ignored.
+ *     the defines plus the defaults); but one that no <default> declares
+ *     and no $name uses is an error naming it (a misspelt -D rh0=0.3 would
+ *     otherwise leave $rho at its default without a word).
  */
 #include "node.h"
+
+#include "../core/strdist.h"
 
 #include <ctype.h>
 #include <expat.h>
@@ -75,6 +79,7 @@ typedef struct param {
   char *own_name, *own_value;
   bool from_define;
   bool declared; /* a <default> of this name was seen */
+  bool used;     /* a $name was substituted by it */
 } param;
 
 /* Explicit ids seen so far (open addressing; keys borrowed from nodes). */
@@ -307,8 +312,8 @@ static param *param_add(xml_ctx *c) {
 
 /* The parameter whose name starts at s (just after a '$'), the longest
  * such name winning, or NULL; *name_len gets its length. */
-static const param *param_at(const xml_ctx *c, const char *s, size_t *name_len) {
-  const param *best = NULL;
+static param *param_at(xml_ctx *c, const char *s, size_t *name_len) {
+  param *best = NULL;
   *name_len = 0;
   for (size_t i = 0; i < c->n_params; i++) {
     size_t len = strlen(c->params[i].name);
@@ -338,7 +343,7 @@ static char *substitute(xml_ctx *c, const char *attr_name, const char *raw) {
   const char *p = raw, *d;
   for (; (d = strchr(p, '$')); p = d + 1 + name_len) {
     out += (size_t)(d - p);
-    const param *best = param_at(c, d + 1, &name_len);
+    param *best = param_at(c, d + 1, &name_len);
     if (!best) {
       size_t id = 0;
       while (d[1 + id] && (isalnum((unsigned char)d[1 + id]) || d[1 + id] == '_') && id < 64) id++;
@@ -363,6 +368,7 @@ static char *substitute(xml_ctx *c, const char *attr_name, const char *raw) {
     }
     out += vlen;
     added += vlen;
+    best->used = true;
   }
   out += strlen(p);
   char *r = malloc(out + 1);
@@ -1161,6 +1167,37 @@ static rsw_status load_defines(xml_ctx *c, const scene_define *defines, size_t n
   return RSW_OK;
 }
 
+/* A define that no <default> declares and no $name used: an error naming
+ * it, with the parameters the document declares and the closest of them. */
+static rsw_status unused_define(xml_ctx *c) {
+  for (size_t i = 0; i < c->n_params; i++) {
+    const param *d = &c->params[i];
+    if (!d->from_define || d->declared || d->used) continue;
+    char names[512] = "";
+    size_t at = 0, best_dist = (size_t)-1;
+    const char *best = NULL;
+    for (size_t j = 0; j < c->n_params; j++) {
+      const param *q = &c->params[j];
+      if (!q->declared) continue;
+      if (at < sizeof names)
+        at += (size_t)snprintf(names + at, sizeof names - at, "%s%s", at ? ", " : "", q->name);
+      size_t dist = rsw_edit_distance(d->name, q->name);
+      if (dist < best_dist) best_dist = dist, best = q->name;
+    }
+    char where[RSW_MAX_NAME + 8];
+    snprintf(where, sizeof where, "-D %s", d->name);
+    if (best && best_dist <= 2)
+      return rsw_fail(&c->err, RSW_ERR_UNKNOWN_NAME, where,
+                      "the document neither declares nor uses a parameter \"%s\"; did you mean \"%s\"? (it "
+                      "declares: %s)",
+                      d->name, best, names);
+    return rsw_fail(&c->err, RSW_ERR_UNKNOWN_NAME, where,
+                    "the document neither declares nor uses a parameter \"%s\" (%s%s)", d->name,
+                    names[0] ? "it declares: " : "it declares none", names);
+  }
+  return RSW_OK;
+}
+
 /* Location prefix: the source name, cut from the left so that "name:line"
  * always fits in rsw_err.where. */
 static const char *short_name(const char *source_name) {
@@ -1214,6 +1251,7 @@ rsw_status scene_read_xml_limited(const char *text, size_t len, const char *sour
     rsw_fail(&c.err, RSW_ERR_PARSE, c.loc, "no <scene> element");
     goto done;
   }
+  if (unused_define(&c)) goto done;
   node_assign_ids(c.root, &c.err);
 
 done:

@@ -449,15 +449,36 @@ static void test_params(void) {
   CHECK(float_prop(root, "d") == 4, "d = $extra from -D");
   node_free(root);
 
-  /* defines override defaults; unused defines are ignored */
-  scene_define d2[] = {{"r", "3"}, {"extra", "0.5"}, {"unused", "x"}};
-  st = parse_str(xml, d2, 3, &root, &err);
+  /* defines override defaults */
+  scene_define d2[] = {{"r", "3"}, {"extra", "0.5"}};
+  st = parse_str(xml, d2, 2, &root, &err);
   REQUIRE(st == RSW_OK, "with overrides: %s %s", err.where, err.msg);
   CHECK(float_prop(root, "a") == 3, "a = -D r");
   CHECK(float_prop(root, "b") == 7, "b unaffected by -D r");
   CHECK(float_prop(root, "c") == 13.5, "c = 1$r.5 with r = 3");
   CHECK(float_prop(root, "d") == 0.5, "d = -D extra");
   node_free(root);
+
+  /* A define that no <default> declares and no $name uses is an error
+   * naming it (Mitsuba ignores it: a misspelt -D rr0=9 would leave $rr at
+   * its default without a word); the closest declared name is offered. */
+  scene_define d3[] = {{"extra", "1"}, {"unused", "x"}};
+  st = parse_str(xml, d3, 2, &root, &err);
+  CHECK(st == RSW_ERR_UNKNOWN_NAME && strcmp(err.where, "-D unused") == 0 &&
+            strstr(err.msg, "it declares: r, rr, kind"),
+        "an unused -D: %d %s %s", (int)st, err.where, err.msg);
+  if (st == RSW_OK) node_free(root);
+  scene_define d4[] = {{"extra", "1"}, {"rr0", "9"}};
+  st = parse_str(xml, d4, 2, &root, &err);
+  CHECK(st == RSW_ERR_UNKNOWN_NAME && strstr(err.msg, "did you mean \"rr\"?"), "a misspelt -D: %d %s",
+        (int)st, err.msg);
+  if (st == RSW_OK) node_free(root);
+  /* a declared default that nothing uses may still be set */
+  scene_define d5[] = {{"idle", "1"}};
+  st = parse_str("<scene version=\"3.0.0\">\n<default name=\"idle\" value=\"0\"/></scene>", d5, 1, &root,
+                 &err);
+  CHECK(st == RSW_OK, "a -D of a declared, unused default: %s %s", err.where, err.msg);
+  if (st == RSW_OK) node_free(root);
 
   /* a default must precede its use; one declaration per name */
   st = parse_str("<scene version=\"3.0.0\">\n<shape type=\"s\"><float name=\"a\" value=\"$r\"/>"
