@@ -803,6 +803,15 @@ int cmd_sweep(cli_ctx *ctx, const cmdline_args *a) {
   rsw_contexts *x = NULL;
   char fingerprint[17] = "", scene_id[65] = "";
   if ((rc = build_list(ctx, &o, axes, &l, &sorted))) goto out;
+  /* A key both swept and --set: every context sets its own value, so the
+   * --set would change nothing. */
+  for (size_t i = 0; i < o.n_grids && !o.contexts_file; i++)
+    if (axes[i].name && cJSON_GetObjectItemCaseSensitive(job_params, axes[i].name)) {
+      rc =
+          cli_usage(ctx, "--set %s: also a --grid axis, whose values every context sets; give one of the two",
+                    axes[i].name);
+      goto out;
+    }
   /* Everything the user described is checked: now the directory. */
   sweep_fingerprint(a, scene, fingerprint);
   sweep_layout was = SWEEP_LAYOUT_DIRS;

@@ -107,6 +107,14 @@ def submit(scene, grid=None, contexts=None, spp=None, seed=None, sensors=None, w
     if (grid is None) == (contexts is None):
         raise TypeError("give either grid={NAME: values} or contexts=[{...}, ...]")
     if grid is not None:
+        # What every context of a grid sets, a job-level value would not change.
+        both = [n for n in grid if params and n in params]
+        if both:
+            raise TypeError(f"params[{both[0]!r}]: also a grid axis, whose values every context sets; "
+                            "give one of the two")
+        if wavelength is not None and isinstance(grid, dict) and "wavelength" in grid:
+            raise TypeError("wavelength=: the grid's wavelength axis gives every context its own; "
+                            "give one of the two")
         keys = None
         if any("." in n and ":" not in n for n in grid):
             keys = set(scene._keys())

@@ -123,6 +123,12 @@ py "render FILE pushes it, then renders" 'import json,math; v=json.load(open("r3
 expect 1 "render a FILE that is no scene" rs render r.json -o x.exr
 contains "render a FILE that is no scene: the push's error" err "r.json"
 expect 2 "render without -o" rs render "$plate"
+# A key both swept and --set: the --set would change nothing (it was
+# silently overridden by every context's value).
+expect 2 "sweep --set of a --grid axis" rs sweep "$plate" --grid plate.bsdf.reflectance.value=0.1:0.2:0.1 \
+  --set plate.bsdf.reflectance.value=0.5 -o swept_twice
+contains "sweep --set of a --grid axis: says so" err "also a --grid axis"
+[ ! -e swept_twice ] && ok || bad "sweep --set of a --grid axis left swept_twice behind"
 expect 2 "render unknown extension" rs render "$plate" -o r.txt
 expect 2 "render bad --spp" rs render "$plate" --spp 0 -o r.exr
 expect 2 "render --set not JSON" rs render "$plate" --set plate.bsdf.reflectance.value=abc -o r.exr

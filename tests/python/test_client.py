@@ -508,6 +508,15 @@ class TestSweep(Base):
         np.testing.assert_allclose(ds.radiance.isel(y=0, x=0).values, np.array([0.1, 0.3]) / math.pi, atol=1e-5)
         self.assertIn("reflectance", ds.dims)
 
+    def test_grid_and_job_value(self):
+        # A grid axis also given job-wide: every context sets its own, so the job-wide value would
+        # change nothing (it was silently overridden)
+        with self.assertRaises(TypeError) as cm:
+            self.plate(0.5).sweep(grid={RHO_KEY: [0.1, 0.2]}, params={RHO_KEY: 0.5})
+        self.assertIn("also a grid axis", str(cm.exception))
+        with self.assertRaises(TypeError):
+            self.plate(0.5).sweep(grid={"wavelength": [500, 600]}, wavelength=550)
+
     def test_grid_typo(self):
         with self.assertRaises(KeyError) as cm:
             self.plate(0.5).sweep(grid={"plate.bsdf.reflectanc.value": [0.1]})
