@@ -144,17 +144,19 @@ class TestLoad(Base):
         # The filename rewrite must not move lines: the daemon's error names line 7.
         shutil.copy(os.path.join(ROOT, "tests", "data", "quad.obj"), self.tmp)
         path = os.path.join(self.tmp, "bad.xml")
-        with open(path, "w") as f:
-            f.write('<scene version="3.0.0">\n'
-                    '  <shape type="obj">\n'
-                    '    <string name="filename" value="quad.obj"/>\n'
-                    '  </shape>\n'
-                    '  <shape type="rectangle">\n'
-                    '    <bsdf type="diffuse"/>\n'
-                    '    <bsdf type="difuse_typo"/>\n'
-                    '  </shape>\n'
-                    '</scene>\n')
-        for params in ({}, {"unused": 1}):  # a declared parameter must not move lines either
+        # A parameter the file uses but does not declare is declared on line 1: lines must not move.
+        for line6, params in (('<bsdf type="diffuse"/>', {}),
+                              ('<bsdf type="diffuse"><float name="reflectance" value="$rho"/></bsdf>', {"rho": 0.5})):
+            with open(path, "w") as f:
+                f.write('<scene version="3.0.0">\n'
+                        '  <shape type="obj">\n'
+                        '    <string name="filename" value="quad.obj"/>\n'
+                        '  </shape>\n'
+                        '  <shape type="rectangle">\n'
+                        f'    {line6}\n'
+                        '    <bsdf type="difuse_typo"/>\n'
+                        '  </shape>\n'
+                        '</scene>\n')
             with self.assertRaises(rs.RaysweepError) as cm:
                 self.client.load_file(path, **params)
             e = cm.exception
