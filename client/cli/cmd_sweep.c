@@ -662,7 +662,9 @@ static int read_sweep_options(const cli_ctx *ctx, const cmdline_args *a, sweep_o
     else if (cli_parse_u64(v, RSW_BUNDLE_MAX, &k) && k >= 1)
       o->bundle = o->bundle_plan = (int)k;
     else
-      return cli_usage(ctx, "--bundle needs 1, 2, 3 or auto (wavelengths per path; got '%s')", v);
+      return cli_usage(ctx,
+                       "--bundle needs a number of wavelengths per path from 1 to %d, or auto (got '%s')",
+                       RSW_BUNDLE_MAX, v);
   }
   if ((v = cmdline_get(a, "--layout")) && !sweep_layout_from_name(v, &o->layout))
     return cli_usage(ctx, "--layout needs dirs or flat (got '%s')", v);

@@ -128,6 +128,8 @@ expect 2 "render without -o" rs render "$plate"
 expect 2 "sweep --set of a --grid axis" rs sweep "$plate" --grid plate.bsdf.reflectance.value=0.1:0.2:0.1 \
   --set plate.bsdf.reflectance.value=0.5 -o swept_twice
 contains "sweep --set of a --grid axis: says so" err "also a --grid axis"
+expect 2 "sweep --bundle 17" rs sweep "$plate" --grid wavelength=400:500:100 --bundle 17 -o bundled
+contains "sweep --bundle 17: the range" err "from 1 to 16, or auto"
 [ ! -e swept_twice ] && ok || bad "sweep --set of a --grid axis left swept_twice behind"
 expect 2 "render unknown extension" rs render "$plate" -o r.txt
 expect 2 "render bad --spp" rs render "$plate" --spp 0 -o r.exr
