@@ -19,7 +19,7 @@ import urllib.parse
 import xml.parsers.expat
 
 from ._http import DEFAULT_URL, Transport
-from .errors import RaysweepError
+from .errors import RaysweepError, did_you_mean
 from .scene import Scene
 
 __all__ = ["Client", "connect"]
@@ -315,7 +315,6 @@ def _check_params_used(pending, declared, dollars):
             i = v.find("$", i + 1)
     for key in pending:
         if key not in used:
-            from .errors import did_you_mean
             cands = did_you_mean(key, declared)
             hint = f"; did you mean {cands[0]!r}?" if cands else ""
             have = ", ".join(declared) if declared else "none"

@@ -1117,10 +1117,10 @@ static bool same_sensor_params(const scene *sc, const char *id, const cJSON *a, 
   return true;
 }
 
-/* Whether the job's contexts all give sensor si the same parameters, so
- * that its films' pixel angles are the same: held once (share_angles), and
- * reserved once for --max-result-bytes. A parameter named two ways (a key
- * and its alias) counts as different. */
+/* Whether the job renders sensor si and its contexts all give it the
+ * same parameters, so that its films' pixel angles are the same: held once
+ * (share_angles), and reserved once for --max-result-bytes. A parameter
+ * named two ways (a key and its alias) counts as different. */
 static bool sensor_still(const scene *sc, const job *jb, size_t si) {
   const char *id = sc->sensors[si]->base.id;
   if (!id || !*id) return false;
@@ -1136,7 +1136,7 @@ static bool sensor_still(const scene *sc, const job *jb, size_t si) {
         !same_sensor_params(sc, id, it->params, first->params))
       return false;
   }
-  return true;
+  return first != NULL;
 }
 
 /* Stage 3: the job (*out) with its renders in context order, taking the
@@ -1187,9 +1187,7 @@ static rsw_status plan_job(service *svc, const scene *sc, job_req *q, job_check 
       (uint64_t)((q->quantities & RENDER_Q_BRDF) != 0) + ((q->quantities & RENDER_Q_BRF) != 0) + q->variance;
   *reserve = 0;
   for (size_t si = 0; si < sc->n_sensors; si++) {
-    bool used = false;
-    for (size_t i = 0; i < jb->n_items && !used; i++) used = jb->items[i].sensor_index == si;
-    jb->angle_slots[si].once = used && sensor_still(sc, jb, si);
+    jb->angle_slots[si].once = sensor_still(sc, jb, si);
     if (jb->angle_slots[si].once) *reserve += svc_film_angle_bytes(sc, si);
   }
   /* Each plane as large as the film; the angles once a film, or once for
@@ -1381,16 +1379,11 @@ static void note_plugin_failures(job *j, const render_item *it) {
   cJSON_AddItemToArray(j->warnings, w);
 }
 
-/* Sensor s's slot of job j's pixel angles (job.angle_slots), or NULL
- * when out of memory (then nothing is shared). */
+/* Sensor s's slot of job j's pixel angles (job.angle_slots, one a
+ * sensor of its scene, made by plan_job), or NULL (then nothing is
+ * shared). */
 static struct job_angles *angle_slot(job *j, size_t s) {
-  if (s >= j->n_angle_slots) {
-    struct job_angles *a = realloc(j->angle_slots, (s + 1) * sizeof *a);
-    if (!a) return NULL;
-    memset(a + j->n_angle_slots, 0, (s + 1 - j->n_angle_slots) * sizeof *a);
-    j->angle_slots = a, j->n_angle_slots = s + 1;
-  }
-  return &j->angle_slots[s];
+  return s < j->n_angle_slots ? &j->angle_slots[s] : NULL;
 }
 
 /* Film im's pixel angles as its sensor's block (slot) where they are the

@@ -179,13 +179,14 @@ typedef struct job {
   /* The job's bands (bands.c), NULL without: each context renders once
    * per node wavelength, items context-major then node then sensor. */
   band_plan *bands;
-  /* Per sensor (by sensor index; n_angle_slots of them, grown as films
-   * come), the pixel angles of its last film with angles (a counted
-   * block, film_angles_ref; n doubles): the sensor's next films whose
-   * angles are the same share it (item_done), so a sweep holds one block
-   * a sensor, not one a film, however its sensors' films interleave; and
-   * the block whose bytes svc->result_bytes counts (compared, not held: a
-   * film of the job holds it). Written by the job's worker alone. once:
+  /* Per sensor (by sensor index; n_angle_slots of them, one a sensor of
+   * the scene, made by plan_job), the pixel angles of its last film with
+   * angles (a counted block, film_angles_ref; n doubles): the sensor's
+   * next films whose angles are the same share it (item_done), so a sweep
+   * holds one block a sensor, not one a film, however its sensors' films
+   * interleave; and the block whose bytes svc->result_bytes counts
+   * (compared, not held: a film of the job holds it). Written by the
+   * job's worker alone. once:
    * the job's contexts all give the sensor the same parameters, so its
    * films' angles are the same (the job renders at its scene's revision:
    * nothing else moves the sensor), and were reserved once (plan_job). */

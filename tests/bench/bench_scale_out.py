@@ -124,7 +124,7 @@ def sweep(url, out, extra, output="dataset"):
     return dt, cpu / n * 1e3
 
 
-PAIR_SPP = 2048  # (about the sweeps' render time, 0.4 s, on one core)
+PAIR_SPP = 2048  # (0.4 to 0.7 s on one core here: about as long as a sweep's renders)
 
 
 def render_seconds(procs):
