@@ -1029,6 +1029,12 @@ static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls,
   pthread_cond_broadcast(&srv->cond);
   pthread_mutex_unlock(&srv->lock);
   if (!cn) return;
+  /* A handler thread's answer that never went out: libmicrohttpd, resuming
+   * the connection, found its client gone before asking on_request for
+   * the answer (a synchronous render whose client hung up: the render
+   * stopped and answered 409). It is counted as answered, as it is when
+   * libmicrohttpd asks first; which comes first is a race. */
+  if (cn->task_started && cn->task_done) count(srv, cn->route, cn->resp.status);
   if (cn->has_early) http_resp_clear(&cn->early);
   http_resp_clear(&cn->resp);
   free(cn->raw_path);
