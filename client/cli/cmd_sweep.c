@@ -24,9 +24,10 @@
 
 const cmdline_opt cli_opts_sweep[] = {
     {"--contexts", "FILE.jsonl", false, "one Context object per line (id optional)"},
-    {"--grid", "NAME=START:STOP:STEP", true,
-     "a range, end included; NAME is wavelength or a parameter key; several form a product (each also "
-     "a coord of the contexts: wavelength, or the key's last name before .value)"},
+    {"--grid", "NAME=START:STOP:STEP|V1,V2,...", true,
+     "a range (end included) or a list of values; NAME is wavelength, a parameter key (it holds a '.' or "
+     "':'), or a coordinate that the scene's templates read (sza); several form a product (each also a "
+     "coord of the contexts: wavelength, the key's last name before .value, or NAME)"},
     {"--set", "KEY=VALUE", true, "job-level parameter for every context (VALUE is JSON)"},
     {"--sensor", "S", true, "sensor to render (default: every sensor)"},
     {"--spp", "N", false, "samples per pixel"},
@@ -67,11 +68,17 @@ const cmdline_opt cli_opts_sweep[] = {
 
 typedef struct grid_axis {
   char *name;     /* owned */
-  char coord[72]; /* the coord it fills: wavelength, or the key's last name */
+  char coord[72]; /* the coord it fills: wavelength, the key's last name, or the name */
   bool is_wavelength;
+  bool is_key; /* a parameter key (holds '.' or ':'); else wavelength or a coordinate alone */
   double start, step;
+  double *values; /* a list (owned), or NULL: the range start + k step */
   size_t n;
 } grid_axis;
+
+static double axis_value(const grid_axis *g, size_t k) {
+  return g->values ? g->values[k] : g->start + (double)k * g->step;
+}
 
 static void items_free(sweep_list *l) {
   for (size_t i = 0; i < l->n; i++) {
@@ -100,40 +107,102 @@ static sweep_item *items_push(sweep_list *l) {
   return it;
 }
 
-/* NAME=START:STOP:STEP. The count uses integer steps so 400:700:10 has 31
- * values whatever the rounding of (stop - start) / step:
- *   n = floor((stop - start) / step + 1e-9) + 1,  value_k = start + k step. */
+/* A name a coordinate alone may have (the daemon's and the dataset's
+ * rule): a letter, then up to 63 letters, digits or '_'. */
+static bool coord_name_ok(const char *name, size_t len) {
+  if (len == 0 || len > 64 || !((name[0] >= 'A' && name[0] <= 'Z') || (name[0] >= 'a' && name[0] <= 'z')))
+    return false;
+  for (size_t i = 1; i < len; i++) {
+    char c = name[i];
+    if (!((c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '_'))
+      return false;
+  }
+  return true;
+}
+
+/* V1,V2,... (at least one number) into g->values. */
+static int parse_grid_list(const cli_ctx *ctx, const char *spec, const char *list, grid_axis *g) {
+  size_t n = 1;
+  for (const char *p = list; *p; p++) n += *p == ',';
+  if (n > MAX_CONTEXTS) return cli_usage(ctx, "--grid %s: %zu values (at most %llu)", spec, n, MAX_CONTEXTS);
+  char *copy = strdup(list);
+  g->values = malloc(n * sizeof *g->values);
+  if (!copy || !g->values) {
+    free(copy);
+    return cli_fail(ctx, CLI_IO, "out of memory");
+  }
+  int rc = 0;
+  char *item = copy;
+  for (size_t k = 0; k < n && !rc; k++) {
+    char *comma = strchr(item, ',');
+    if (comma) *comma = '\0';
+    if (!cli_parse_double(item, &g->values[k]))
+      rc = cli_usage(ctx,
+                     "--grid %s: value %zu ('%s') is not a number (a list is V1,V2,...; a range "
+                     "START:STOP:STEP)",
+                     spec, k + 1, item);
+    item = comma ? comma + 1 : item;
+  }
+  free(copy);
+  g->n = n;
+  return rc;
+}
+
+/* NAME=START:STOP:STEP or NAME=V1,V2,... The count of a range uses integer
+ * steps so 400:700:10 has 31 values whatever the rounding of
+ * (stop - start) / step:
+ *   n = floor((stop - start) / step + 1e-9) + 1,  value_k = start + k step.
+ * NAME is wavelength, a parameter key (it holds '.' or ':', an Eradiate
+ * search TYPE:ID:PATH too), or a coordinate alone, which the scene's
+ * templates read (docs/experiments.md#templates), as the Python client's
+ * grid takes it. */
 static int parse_grid(const cli_ctx *ctx, const char *spec, grid_axis *g) {
   const char *eq = strchr(spec, '=');
-  if (!eq || eq == spec) return cli_usage(ctx, "--grid needs NAME=START:STOP:STEP (got '%s')", spec);
-  char *nums = strdup(eq + 1);
-  if (!nums) return cli_fail(ctx, CLI_IO, "out of memory");
-  char *p1 = strchr(nums, ':'), *p2 = p1 ? strchr(p1 + 1, ':') : NULL;
-  double start, stop, step;
+  if (!eq || eq == spec)
+    return cli_usage(ctx, "--grid needs NAME=START:STOP:STEP or NAME=V1,V2,... (got '%s')", spec);
+  size_t name_len = (size_t)(eq - spec);
+  bool is_key = memchr(spec, '.', name_len) || memchr(spec, ':', name_len);
+  bool is_wavelength = name_len == 10 && strncmp(spec, "wavelength", 10) == 0;
+  if (!is_key && !is_wavelength && !coord_name_ok(spec, name_len))
+    return cli_usage(ctx,
+                     "--grid %.*s: neither wavelength, a parameter key (with a '.'), nor a coordinate name "
+                     "(a letter, then letters, digits or '_')",
+                     (int)name_len, spec);
+  const char *vals = eq + 1;
   int rc = 0;
-  if (!p1 || !p2) {
-    rc = cli_usage(ctx, "--grid %s: the range needs START:STOP:STEP", spec);
+  if (!strchr(vals, ':')) {
+    rc = parse_grid_list(ctx, spec, vals, g);
   } else {
-    *p1 = *p2 = '\0';
-    if (!cli_parse_double(nums, &start) || !cli_parse_double(p1 + 1, &stop) ||
-        !cli_parse_double(p2 + 1, &step))
-      rc = cli_usage(ctx, "--grid %s: START, STOP and STEP must be numbers", spec);
-    else if (!(step > 0))
-      rc = cli_usage(ctx, "--grid %s: STEP must be positive", spec);
-    else if (stop < start)
-      rc = cli_usage(ctx, "--grid %s: STOP is below START", spec);
+    char *nums = strdup(vals);
+    if (!nums) return cli_fail(ctx, CLI_IO, "out of memory");
+    char *p1 = strchr(nums, ':'), *p2 = strchr(p1 + 1, ':');
+    double start, stop, step;
+    if (!p2) {
+      rc = cli_usage(ctx, "--grid %s: the range needs START:STOP:STEP", spec);
+    } else {
+      *p1 = *p2 = '\0';
+      if (!cli_parse_double(nums, &start) || !cli_parse_double(p1 + 1, &stop) ||
+          !cli_parse_double(p2 + 1, &step))
+        rc = cli_usage(ctx, "--grid %s: START, STOP and STEP must be numbers", spec);
+      else if (!(step > 0))
+        rc = cli_usage(ctx, "--grid %s: STEP must be positive", spec);
+      else if (stop < start)
+        rc = cli_usage(ctx, "--grid %s: STOP is below START", spec);
+    }
+    free(nums);
+    if (rc) return rc;
+    double n = floor((stop - start) / step + 1e-9) + 1;
+    if (!(n <= (double)MAX_CONTEXTS))
+      return cli_usage(ctx, "--grid %s: %.0f values (at most %llu)", spec, n, MAX_CONTEXTS);
+    g->start = start, g->step = step, g->n = (size_t)n;
   }
-  free(nums);
   if (rc) return rc;
-  double n = floor((stop - start) / step + 1e-9) + 1;
-  if (!(n <= (double)MAX_CONTEXTS))
-    return cli_usage(ctx, "--grid %s: %.0f values (at most %llu)", spec, n, MAX_CONTEXTS);
-  g->name = strndup(spec, (size_t)(eq - spec));
+  g->name = strndup(spec, name_len);
   if (!g->name) return cli_fail(ctx, CLI_IO, "out of memory");
-  g->is_wavelength = strcmp(g->name, "wavelength") == 0;
-  g->start = start, g->step = step, g->n = (size_t)n;
-  if (g->is_wavelength && !(start > 0))
-    return cli_usage(ctx, "--grid %s: wavelengths must be positive (nm)", spec);
+  g->is_wavelength = is_wavelength;
+  g->is_key = is_key;
+  for (size_t k = 0; is_wavelength && k < g->n; k++)
+    if (!(axis_value(g, k) > 0)) return cli_usage(ctx, "--grid %s: wavelengths must be positive (nm)", spec);
   return 0;
 }
 
@@ -184,7 +253,7 @@ static int grid_leads(const cli_ctx *ctx, const grid_axis *g, size_t n_axes, int
   for (size_t i = 0; i < n && !rc; i++) {
     size_t lo = i % stride, kw = i / stride % nw, hi = i / stride / nw;
     key[i] = (uint64_t)(hi * stride + lo);
-    wl[i] = g[wa].start + (double)kw * g[wa].step;
+    wl[i] = axis_value(&g[wa], kw);
   }
   if (!rc) rc = rsw_bundle_runs(n, key, wl, bundle, l->leads);
   if (!rc) rc = (l->keys = malloc(n * sizeof *l->keys)) ? 0 : -1;
@@ -223,13 +292,13 @@ static int build_grid(const cli_ctx *ctx, const grid_axis *g, size_t n_axes, siz
     /* The coords in axis order (the dataset's dimensions follow it). */
     if (n_axes && !(it->coords = cJSON_CreateObject())) return cli_fail(ctx, CLI_IO, "out of memory");
     for (size_t a = 0; a < n_axes; a++)
-      if (!cJSON_AddNumberToObject(it->coords, g[a].coord, g[a].start + (double)ks[a] * g[a].step))
+      if (!cJSON_AddNumberToObject(it->coords, g[a].coord, axis_value(&g[a], ks[a])))
         return cli_fail(ctx, CLI_IO, "out of memory");
     for (size_t a = n_axes; a-- > 0;) {
-      double v = g[a].start + (double)ks[a] * g[a].step;
+      double v = axis_value(&g[a], ks[a]);
       if (g[a].is_wavelength) {
         it->has_wl = true, it->wl = v;
-      } else {
+      } else if (g[a].is_key) {
         if (!it->params && !(it->params = cJSON_CreateObject()))
           return cli_fail(ctx, CLI_IO, "out of memory");
         cJSON_AddNumberToObject(it->params, g[a].name, v);
@@ -616,7 +685,8 @@ static int read_sweep_options(const cli_ctx *ctx, const cmdline_args *a, sweep_o
   o->grids = cmdline_get_all(a, "--grid", &o->n_grids);
   if (!o->dir) return cli_usage(ctx, "missing -o DIR");
   if (!o->contexts_file == !o->n_grids)
-    return cli_usage(ctx, "give either --contexts FILE.jsonl or --grid NAME=START:STOP:STEP");
+    return cli_usage(ctx,
+                     "give either --contexts FILE.jsonl or --grid NAME=START:STOP:STEP (or NAME=V1,V2,...)");
   if (o->n_grids > MAX_GRIDS) return cli_usage(ctx, "at most %d --grid axes", MAX_GRIDS);
   const char *v;
   o->want_nc = (v = cmdline_get(a, "--format")) && strcmp(v, "nc") == 0;
@@ -863,7 +933,7 @@ out:
   rsw_contexts_free(x);
   free(sorted);
   items_free(&l);
-  for (size_t i = 0; i < MAX_GRIDS; i++) free(axes[i].name);
+  for (size_t i = 0; i < MAX_GRIDS; i++) free(axes[i].name), free(axes[i].values);
   cJSON_Delete(job_params);
   return rc;
 }

@@ -47,7 +47,8 @@ static const cli_command commands[] = {
      "quick-look; Ctrl-C stops the render)",
      cli_opts_render, 1, 1, true, cmd_render},
     {"sweep", NULL,
-     "ID|FILE (--contexts FILE.jsonl | --grid NAME=START:STOP:STEP...) [--set KEY=VALUE]... [--sensor S]... "
+     "ID|FILE (--contexts FILE.jsonl | --grid NAME=START:STOP:STEP|V1,V2,...) [--set KEY=VALUE]... [--sensor "
+     "S]... "
      "[--spp N] [--seed N] [--shard I/N] [--spread K] [--quantities LIST] [--variance] [--bundle K|auto] "
      "[--format exr|npy|json|nc|dataset] [--layout dirs|flat] [--timeout S] -o DIR [--force]",
      "submit a job over many contexts, show progress, fetch every film into DIR with DIR/index.jsonl and "

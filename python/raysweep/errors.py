@@ -102,9 +102,11 @@ class ConnectionFailed(RaysweepError, ConnectionError):
 
 
 class JobFailed(RaysweepError):
-    """A job ended ``failed`` or ``cancelled``; ``job`` is the job, ``state`` its end state."""
+    """A job ended ``failed`` or ``cancelled``; ``job`` is the job, ``state`` its end state,
+    ``failures`` its failed renders as ``(context, sensor, error)`` (the message quotes the first)."""
 
-    def __init__(self, detail, job=None, state=None, **kw):
+    def __init__(self, detail, job=None, state=None, failures=None, **kw):
         self.job = job
         self.state = state
+        self.failures = list(failures or [])
         super().__init__(detail, **kw)

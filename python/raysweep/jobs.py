@@ -298,8 +298,24 @@ class Job:
             return None
         why = s.get("error") or (f"{s.get('renders_failed')} of {s.get('renders_total')} renders failed"
                                  if s.get("renders_failed") else "")
-        return JobFailed(f"job {self.id} {s.get('state')}" + (f": {why}" if why else ""), job=self,
-                         state=s.get("state"), code="RSW_ERR_CANCELLED" if s.get("state") == "cancelled" else None)
+        failures = self._render_failures() if s.get("renders_failed") else []
+        if failures:  # what went wrong, not only how often (the daemon says it per render)
+            c, se, e = failures[0]
+            why += f"; {c}/{se}: {e}" + (f" ({len(failures) - 1} more in .failures)" if len(failures) > 1 else "")
+        err = JobFailed(f"job {self.id} {s.get('state')}" + (f": {why}" if why else ""), job=self,
+                        state=s.get("state"), code="RSW_ERR_CANCELLED" if s.get("state") == "cancelled" else None)
+        err.failures = failures
+        return err
+
+    def _render_failures(self):
+        """[(context, sensor, error)] of the job's failed renders, in the job's order ([] when the
+        results cannot be read)."""
+        try:
+            res = self.results().get("results") or []
+        except (RaysweepError, OSError):
+            return []
+        return [(r.get("context"), r.get("sensor"), r.get("error") or "no reason given")
+                for r in res if isinstance(r, dict) and r.get("state") == "failed"]
 
     def result(self, timeout=None, progress=False):
         """Wait for the job and return its dataset (:meth:`dataset`), or its films without xarray.

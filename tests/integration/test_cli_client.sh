@@ -176,6 +176,36 @@ for l, rho in zip(lines, [0.1, 0.2, 0.3]):
     assert abs(v - r / math.pi) < 1e-6
 d = json.load(open("out")); assert d["films"] == 3 and d["state"] == "succeeded", d
 '
+# A list of values, and an axis that is a coordinate alone (no '.'): the
+# scene's template reads it (the CLI sent it as an unknown parameter 'sza'
+# before). The plate's sun at zenith sza: radiance rho cos(sza) / pi.
+cat >sunplate.json <<'EOF2'
+{"type": "scene", "variant": "mono",
+ "templates": {"sun.direction": {"sun": {"zenith": "sza", "azimuth": 0}}},
+ "camera": {"type": "distant", "direction": [0, 0, -1], "target": [0, 0, 0],
+            "film": {"type": "hdrfilm", "width": 1, "height": 1, "rfilter": {"type": "box"}}},
+ "sun": {"type": "directional", "direction": [0, 0, -1], "irradiance": 1},
+ "plate": {"type": "rectangle", "bsdf": {"type": "diffuse", "reflectance": 0.5}}}
+EOF2
+expect 0 "sweep --grid of a template's coordinate, as a list" rs -q sweep sunplate.json --grid sza=0,45,60 \
+  --grid wavelength=450,650 --spp 4 --format json -o sza
+py "grid lists: the product, coords, and the sun each context's template made" '
+import json, math
+lines = [json.loads(l) for l in open("sza/index.jsonl")]
+assert [(l["coords"]["sza"], l["wavelength"]) for l in lines] == [
+    (0, 450), (0, 650), (45, 450), (45, 650), (60, 450), (60, 650)], lines
+for l in lines:
+    assert l["params"] == {}, l
+    v = json.load(open("sza/" + l["file"]))["data"][0]
+    want = 0.5 * math.cos(math.radians(l["coords"]["sza"])) / math.pi
+    assert abs(v - want) < 1e-6, (l, v, want)
+'
+expect 2 "sweep --grid list with a word" rs sweep sunplate.json --grid sza=0,x,60 -o x
+contains "sweep --grid list: names the value" err "value 2 ('x') is not a number"
+expect 2 "sweep --grid with a name that is no coordinate" rs sweep sunplate.json --grid 2sza=0,30 -o x
+contains "sweep --grid bad name: says what NAME may be" err "neither wavelength, a parameter key"
+expect 2 "sweep --grid list of wavelengths with a zero" rs sweep sunplate.json --grid wavelength=450,0 -o x
+[ ! -e x ] && ok || bad "a refused --grid left x behind"
 expect 0 "sweep: a shard past the end" rs -q sweep "$plate" --grid wavelength=400:400:1 --shard 1/2 -o empty
 [ -f empty/index.jsonl ] && [ ! -s empty/index.jsonl ] && ok || bad "an empty shard should write an empty index"
 expect 1 "sweep --set unknown key" rs sweep "$plate" --grid wavelength=400:500:100 --set plate.bsdf.reflectanc.value=0.5 -o x

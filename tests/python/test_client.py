@@ -610,6 +610,21 @@ class TestJobs(Base):
         self.assertEqual(cm.exception.state, "cancelled")
         self.assertFalse(job.cancel(), "an ended job cannot be cancelled")
 
+    def test_failed_renders_say_why(self):
+        # A sun below the horizon has no horizontal irradiance to divide brf by: the daemon
+        # fails those renders and says why; the exception carries its words, not only a count.
+        d = plate_dict(0.47)
+        d["templates"] = {"sun.direction": {"sun": {"zenith": "sza", "azimuth": 0}}}
+        scene = self.client.load_dict(d)
+        with self.assertRaises(rs.JobFailed) as cm:
+            scene.sweep(grid={"sza": [30, 95, 120]}, quantities=["brf"], progress=False)
+        e = cm.exception
+        self.assertEqual(e.state, "failed")
+        self.assertEqual([(c, s) for c, s, _ in e.failures], [("c00001", "camera"), ("c00002", "camera")])
+        self.assertIn("at or below the horizon", e.failures[0][2])
+        self.assertIn("2 of 3 renders failed; c00001/camera: quantities: brdf and brf", str(e))
+        self.assertIn("(1 more in .failures)", str(e))
+
     def test_wait_timeout(self):
         hd = self.client.load_file(HDISTANT)
         job = self.long_job(hd)
