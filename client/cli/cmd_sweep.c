@@ -29,6 +29,11 @@ const cmdline_opt cli_opts_sweep[] = {
      "':'), or a coordinate that the scene's templates read (sza); several form a product (each also a "
      "coord of the contexts: wavelength, the key's last name before .value, or NAME)"},
     {"--set", "KEY=VALUE", true, "job-level parameter for every context (VALUE is JSON)"},
+    {"--templates", "FILE.json|JSON", false,
+     "the job's parameter-map templates, {KEY: template}: a file, or the JSON itself; each context's "
+     "coords render them, e.g. {\"sun.direction\": {\"sun\": {\"zenith\": \"sza\", \"azimuth\": 0}}} "
+     "with --grid sza=0,30,60 (docs/experiments.md#templates; a key the scene's templates also have: the "
+     "job's wins)"},
     {"--sensor", "S", true, "sensor to render (default: every sensor)"},
     {"--spp", "N", false, "samples per pixel"},
     {"--seed", "N", false, "job seed (default 0)"},
@@ -504,8 +509,8 @@ static int read_contexts(const cli_ctx *ctx, const char *path, size_t shard_i, s
 /* Feed the builder. Errors here are about the contexts the user described:
  * usage (2). */
 static int build_contexts(const cli_ctx *ctx, const cmdline_args *a, const sweep_item *items, size_t n,
-                          const cJSON *job_params, long long spp, long long seed, int bundle,
-                          rsw_contexts **out) {
+                          const cJSON *job_params, const char *tmpl, long long spp, long long seed,
+                          int bundle, rsw_contexts **out) {
   rsw_contexts *x = NULL;
   rsw_status s = rsw_contexts_new(&x);
   if (s) return cli_fail(ctx, CLI_IO, "cannot start a context list: %s", rsw_strerror(s));
@@ -572,6 +577,7 @@ static int build_contexts(const cli_ctx *ctx, const cmdline_args *a, const sweep
   }
   if (!s && cmdline_get(a, "--variance"))
     snprintf(what, sizeof what, "--variance"), s = rsw_contexts_set_variance(x, 1);
+  if (!s && tmpl) snprintf(what, sizeof what, "--templates"), s = rsw_contexts_set_templates(x, tmpl);
   if (!s && cmdline_get(a, "--bundle"))
     snprintf(what, sizeof what, "--bundle %s", cmdline_get(a, "--bundle")),
         s = rsw_contexts_set_bundle(x, bundle);
@@ -676,6 +682,7 @@ typedef struct sweep_opts {
   double timeout;
   int bundle;      /* --bundle: 1..RSW_BUNDLE_MAX or RSW_BUNDLE_AUTO (auto when absent) */
   int bundle_plan; /* the K its groups are planned with: RSW_BUNDLE_MAX for auto */
+  char *templates; /* --templates as compact JSON text (owned), or NULL */
 } sweep_opts;
 
 static int read_sweep_options(const cli_ctx *ctx, const cmdline_args *a, sweep_opts *o) {
@@ -740,6 +747,17 @@ static int read_sweep_options(const cli_ctx *ctx, const cmdline_args *a, sweep_o
     return cli_usage(ctx, "--layout needs dirs or flat (got '%s')", v);
   if ((v = cmdline_get(a, "--timeout")) && (!cli_parse_double(v, &o->timeout) || !(o->timeout > 0)))
     return cli_usage(ctx, "--timeout needs a positive number of seconds (got '%s')", v);
+  if ((v = cmdline_get(a, "--templates"))) {
+    cJSON *t;
+    int rc = cli_json_option(ctx, "--templates", v, &t);
+    if (!rc && !cJSON_IsObject(t))
+      rc =
+          cli_usage(ctx, "--templates: a JSON object {KEY: template} (docs/experiments.md#templates), not %s",
+                    cJSON_IsArray(t) ? "an array" : "a single value");
+    if (!rc && !(o->templates = cJSON_PrintUnformatted(t))) rc = cli_fail(ctx, CLI_IO, "out of memory");
+    cJSON_Delete(t);
+    if (rc) return rc;
+  }
   return 0;
 }
 
@@ -867,7 +885,10 @@ int cmd_sweep(cli_ctx *ctx, const cmdline_args *a) {
   const char *const *sets = cmdline_get_all(a, "--set", &n_sets);
   cJSON *job_params = NULL;
   rc = cli_build_param_map(ctx, "--set", sets, n_sets, &job_params);
-  if (rc) return rc;
+  if (rc) {
+    free(o.templates);
+    return rc;
+  }
 
   sweep_list l = {.seed = (long long)o.seed, .dataset = o.want_nc, .pack = o.want_pack, .layout = o.layout};
   grid_axis axes[MAX_GRIDS] = {{0}};
@@ -898,8 +919,8 @@ int cmd_sweep(cli_ctx *ctx, const cmdline_args *a) {
   if (!resume && (rc = sweep_prepare_output(ctx, dir, cmdline_has(a, "--force")))) goto out;
   /* The job lists the contexts in the order the user described them (an empty
    * shard's too: its options are checked before the scene is pushed). */
-  if ((rc = build_contexts(ctx, a, l.items, l.n, job_params, (long long)o.spp, (long long)o.seed, o.bundle,
-                           &x)))
+  if ((rc = build_contexts(ctx, a, l.items, l.n, job_params, o.templates, (long long)o.spp, (long long)o.seed,
+                           o.bundle, &x)))
     goto out;
   struct stat sst;
   if (!o.spread && stat(scene, &sst) == 0 && S_ISREG(sst.st_mode)) {
@@ -934,6 +955,7 @@ out:
   free(sorted);
   items_free(&l);
   for (size_t i = 0; i < MAX_GRIDS; i++) free(axes[i].name), free(axes[i].values);
+  free(o.templates);
   cJSON_Delete(job_params);
   return rc;
 }

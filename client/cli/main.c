@@ -47,9 +47,9 @@ static const cli_command commands[] = {
      "quick-look; Ctrl-C stops the render)",
      cli_opts_render, 1, 1, true, cmd_render},
     {"sweep", NULL,
-     "ID|FILE (--contexts FILE.jsonl | --grid NAME=START:STOP:STEP|V1,V2,...) [--set KEY=VALUE]... [--sensor "
-     "S]... "
-     "[--spp N] [--seed N] [--shard I/N] [--spread K] [--quantities LIST] [--variance] [--bundle K|auto] "
+     "ID|FILE (--contexts FILE.jsonl | --grid NAME=START:STOP:STEP|V1,V2,...) [--set KEY=VALUE]... "
+     "[--templates FILE.json|JSON] [--sensor S]... [--spp N] [--seed N] [--shard I/N] [--spread K] "
+     "[--quantities LIST] [--variance] [--bundle K|auto] "
      "[--format exr|npy|json|nc|dataset] [--layout dirs|flat] [--timeout S] -o DIR [--force]",
      "submit a job over many contexts, show progress, fetch every film into DIR with DIR/index.jsonl and "
      "DIR/sweep.json (Ctrl-C cancels the job)",

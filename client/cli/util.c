@@ -196,6 +196,41 @@ char *cli_read_file(const char *path, size_t *len_out) {
   return buf;
 }
 
+int cli_json_option(const cli_ctx *ctx, const char *opt, const char *arg, cJSON **out) {
+  *out = NULL;
+  const char *p = arg;
+  while (*p == ' ' || *p == '\t' || *p == '\n' || *p == '\r') p++;
+  bool inline_text = *p == '{' || *p == '[';
+  char *file = NULL;
+  const char *text = arg;
+  if (!inline_text) {
+    file = cli_read_file(arg, NULL);
+    if (!file)
+      return cli_usage(ctx, "%s %s: cannot read it (%s); give a file or the JSON itself", opt, arg,
+                       strerror(errno));
+    text = file;
+  }
+  const char *end = NULL;
+  cJSON *j = cJSON_ParseWithOpts(text, &end, true);
+  int rc = 0;
+  if (!j) {
+    /* cJSON points at the byte where it stopped: its line and column */
+    const char *at = end ? end : cJSON_GetErrorPtr();
+    size_t line = 1, col = 1;
+    for (const char *q = text; at && q < at && *q; q++) {
+      if (*q == '\n')
+        line++, col = 1;
+      else
+        col++;
+    }
+    rc = inline_text ? cli_usage(ctx, "%s: malformed JSON at line %zu, column %zu", opt, line, col)
+                     : cli_usage(ctx, "%s %s:%zu:%zu: malformed JSON", opt, arg, line, col);
+  }
+  free(file);
+  *out = j;
+  return rc;
+}
+
 int cli_write_file_atomic(const char *path, const char *data, size_t len) {
   size_t n = strlen(path) + 32;
   char *tmp = malloc(n);

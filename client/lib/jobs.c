@@ -219,6 +219,23 @@ rsw_status rsw_contexts_set_bundle_group(rsw_contexts *x, size_t index, long lon
   return set_int(x->items[index], "bundle_group", group);
 }
 
+rsw_status rsw_contexts_set_templates(rsw_contexts *x, const char *templates_json) {
+  if (!x) return RSW_ERR_INVALID;
+  cJSON_DeleteItemFromObjectCaseSensitive(x->root, "templates");
+  if (!templates_json || !*templates_json) return RSW_OK;
+  cJSON *t = cJSON_Parse(templates_json);
+  if (!t) return RSW_ERR_PARSE;
+  if (!cJSON_IsObject(t)) {
+    cJSON_Delete(t);
+    return RSW_ERR_TYPE;
+  }
+  if (!cJSON_AddItemToObject(x->root, "templates", t)) {
+    cJSON_Delete(t);
+    return RSW_ERR_NOMEM;
+  }
+  return RSW_OK;
+}
+
 /* ---- submit and status ---------------------------------------------------------------- */
 
 /* "/v1/jobs/<escaped id><suffix>" into path; false when too long. */

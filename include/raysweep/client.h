@@ -250,6 +250,11 @@ rsw_status rsw_contexts_set_bundle(rsw_contexts *x, int k);
  * bundles the same in every shard (docs/cluster.md#shards-and-spectral-bundles);
  * rsw_spread_run sets it from the daemon's rule where a context has none. */
 rsw_status rsw_contexts_set_bundle_group(rsw_contexts *x, size_t index, long long group);
+/* The job's parameter-map templates (docs/experiments.md#templates):
+ * templates_json is the text of a JSON object {KEY: template} (borrowed);
+ * NULL or "" removes them. RSW_ERR_PARSE when it is not JSON,
+ * RSW_ERR_TYPE when not an object; the server checks the keys and forms. */
+rsw_status rsw_contexts_set_templates(rsw_contexts *x, const char *templates_json);
 size_t rsw_contexts_count(const rsw_contexts *x);
 
 /* Submit a job. idempotency_key may be NULL. job_id_out: 40 bytes. */

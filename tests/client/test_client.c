@@ -27,6 +27,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "../../client/lib/internal.h"
 #include "../support/daemon.h"
 #include "../support/test.h"
 #include "../support/tfile.h"
@@ -493,6 +494,23 @@ static void test_contexts_builder(void) {
             rsw_contexts_set_seed(x, 0, -1) == RSW_OK && rsw_contexts_add_sensor(x, 0, "meter") == RSW_OK,
         "per-context settings");
   CHECK(rsw_contexts_count(x) == 1 && rsw_contexts_count(NULL) == 0, "count");
+  /* Templates: a JSON object, kept as given; anything else refused here. */
+  CHECK(rsw_contexts_set_templates(x, "{\"sun.direction\": {not json") == RSW_ERR_PARSE,
+        "bad templates JSON");
+  CHECK(rsw_contexts_set_templates(x, "[1, 2]") == RSW_ERR_TYPE, "templates as an array");
+  CHECK(rsw_contexts_set_templates(NULL, "{}") == RSW_ERR_INVALID, "no builder");
+  CHECK(rsw_contexts_set_templates(
+            x, "{\"sun.direction\": {\"sun\": {\"zenith\": \"sza\", \"azimuth\": 0}}}") == RSW_OK,
+        "templates");
+  char *body = client_contexts_print(x);
+  CHECK(body &&
+            strstr(body, "\"templates\":{\"sun.direction\":{\"sun\":{\"zenith\":\"sza\",\"azimuth\":0}}}"),
+        "the job body carries the templates: %s", body ? body : "(null)");
+  free(body);
+  CHECK(rsw_contexts_set_templates(x, NULL) == RSW_OK, "templates removed");
+  body = client_contexts_print(x);
+  CHECK(body && !strstr(body, "templates"), "no templates left: %s", body ? body : "(null)");
+  free(body);
   rsw_contexts_free(x);
   rsw_contexts_free(NULL);
 }

@@ -206,6 +206,49 @@ expect 2 "sweep --grid with a name that is no coordinate" rs sweep sunplate.json
 contains "sweep --grid bad name: says what NAME may be" err "neither wavelength, a parameter key"
 expect 2 "sweep --grid list of wavelengths with a zero" rs sweep sunplate.json --grid wavelength=450,0 -o x
 [ ! -e x ] && ok || bad "a refused --grid left x behind"
+# --templates: the job's templates, for a scene that has none (an XML
+# scene takes its templates from its jobs); inline JSON, or a file.
+cat >sunplate.xml <<'EOF2'
+<scene version="3.0.0">
+  <sensor type="distant" id="meter">
+    <vector name="direction" x="0" y="0" z="-1"/>
+    <point name="target" x="0" y="0" z="0"/>
+    <film type="hdrfilm"><integer name="width" value="1"/><integer name="height" value="1"/></film>
+  </sensor>
+  <emitter type="directional" id="sun"><vector name="direction" x="0" y="0" z="-1"/></emitter>
+  <shape type="rectangle" id="plate"><bsdf type="diffuse"><float name="reflectance" value="0.5"/></bsdf></shape>
+</scene>
+EOF2
+sun_tmpl='{"sun.direction": {"sun": {"zenith": "sza", "azimuth": 0}}}'
+expect 0 "sweep --templates inline" rs -q sweep sunplate.xml --templates "$sun_tmpl" --grid sza=0,60 --spp 4 \
+  --format json -o tmpl
+printf '%s\n' "$sun_tmpl" >tmpl.json
+expect 0 "sweep --templates FILE" rs -q sweep sunplate.xml --templates tmpl.json --grid sza=0,60 --spp 4 \
+  --format json -o tmplf
+py "sweep --templates: each context's sun from its sza (rgb: every channel rho cos(sza) / pi)" '
+import json, math
+for d in ("tmpl", "tmplf"):
+    lines = [json.loads(l) for l in open(d + "/index.jsonl")]
+    assert [l["coords"] for l in lines] == [{"sza": 0}, {"sza": 60}], lines
+    for l in lines:
+        v = json.load(open(d + "/" + l["file"]))["data"]
+        want = 0.5 * math.cos(math.radians(l["coords"]["sza"])) / math.pi
+        assert all(abs(c - want) < 1e-6 for c in v), (d, l, v, want)
+'
+printf '{\n  "sun.direction": {\n    "sun": {"zenith": sza}\n  }\n}\n' >badtmpl.json
+expect 2 "sweep --templates malformed file" rs sweep sunplate.xml --templates badtmpl.json --grid sza=0,60 -o x
+contains "sweep --templates: names the file, line and column" err "--templates badtmpl.json:3:23: malformed JSON"
+expect 2 "sweep --templates malformed inline" rs sweep sunplate.xml --templates '{"sun.direction": ' --grid sza=0 -o x
+contains "sweep --templates inline: says where" err "malformed JSON at line 1"
+expect 2 "sweep --templates an array" rs sweep sunplate.xml --templates '[1]' --grid sza=0 -o x
+contains "sweep --templates array: wants an object" err "a JSON object {KEY: template}"
+expect 2 "sweep --templates no such file" rs sweep sunplate.xml --templates nosuch.json --grid sza=0 -o x
+contains "sweep --templates no file: names it" err "--templates nosuch.json: cannot read it"
+[ ! -e x ] && ok || bad "a refused --templates left x behind"
+expect 1 "sweep --templates unknown key" rs sweep sunplate.xml --grid sza=0 -o tmplbad \
+  --templates '{"sun.directio": {"sun": {"zenith": "sza", "azimuth": 0}}}'
+contains "sweep --templates unknown key: the daemon's pointer" err "/templates/sun.directio"
+contains "sweep --templates unknown key: did you mean" err "did you mean: sun.direction"
 expect 0 "sweep: a shard past the end" rs -q sweep "$plate" --grid wavelength=400:400:1 --shard 1/2 -o empty
 [ -f empty/index.jsonl ] && [ ! -s empty/index.jsonl ] && ok || bad "an empty shard should write an empty index"
 expect 1 "sweep --set unknown key" rs sweep "$plate" --grid wavelength=400:500:100 --set plate.bsdf.reflectanc.value=0.5 -o x
