@@ -189,6 +189,7 @@ int cmd_merge(cli_ctx *ctx, const cmdline_args *a);
 int cmd_job_ls(cli_ctx *ctx, const cmdline_args *a);
 int cmd_job_show(cli_ctx *ctx, const cmdline_args *a);
 int cmd_job_watch(cli_ctx *ctx, const cmdline_args *a);
+int cmd_job_submit(cli_ctx *ctx, const cmdline_args *a);
 int cmd_job_cancel(cli_ctx *ctx, const cmdline_args *a);
 int cmd_job_rm(cli_ctx *ctx, const cmdline_args *a);
 

@@ -1,8 +1,9 @@
-/* raysweep job ls | show | watch | cancel | rm. */
+/* raysweep job submit | ls | show | watch | cancel | rm. */
 #include <cjson/cJSON.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 #include "cli.h"
 
@@ -23,6 +24,47 @@ static void print_status_json(const char *id, const rsw_job_status *st) {
   cJSON_AddNumberToObject(o, "seconds", st->seconds);
   if (st->error[0]) cJSON_AddStringToObject(o, "error", st->error);
   cli_print_json(o);
+}
+
+/* job submit ID|FILE REQUEST: a JobRequest as the daemon takes it (a file
+ * or the JSON itself), sent as it is: what sweep's options do not carry
+ * (bands, per-job defaults, a context list with templates) from a shell.
+ * Prints the job id; job watch and fetch -o FILE.nc follow. */
+int cmd_job_submit(cli_ctx *ctx, const cmdline_args *a) {
+  const char *scene = a->pos[0];
+  cJSON *req = NULL;
+  int rc = cli_json_option(ctx, "REQUEST", a->pos[1], &req);
+  if (!rc && !cJSON_IsObject(req))
+    rc = cli_usage(ctx, "REQUEST: a JSON object (a JobRequest: contexts, defaults, bands, templates, ...)");
+  char *body = rc ? NULL : cJSON_PrintUnformatted(req);
+  cJSON_Delete(req);
+  if (rc) return rc;
+  if (!body) return cli_fail(ctx, CLI_IO, "out of memory");
+  char scene_id[65] = "", job[40] = "";
+  struct stat sst;
+  rsw_status s = RSW_OK;
+  if (stat(scene, &sst) == 0 && S_ISREG(sst.st_mode)) { /* a scene FILE, pushed first, as sweep does */
+    int created = 0;
+    s = rsw_scene_push_file(ctx->client, scene, NULL, scene_id, &created);
+    if (s) {
+      free(body);
+      return cli_report(ctx, s, scene);
+    }
+    scene = scene_id;
+  }
+  s = rsw_job_submit_json(ctx->client, scene, body, NULL, job);
+  free(body);
+  if (s) return cli_report(ctx, s, scene);
+  cli_print_job_warnings(ctx, "raysweep job submit", job, NULL);
+  if (ctx->json) {
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "id", job);
+    cJSON_AddStringToObject(o, "scene", scene);
+    cli_print_json(o);
+  } else {
+    printf("%s\n", job);
+  }
+  return CLI_OK;
 }
 
 int cmd_job_ls(cli_ctx *ctx, const cmdline_args *a) {

@@ -246,18 +246,9 @@ static bool job_path(const char *job_id, const char *suffix, char *path, size_t 
   return n > 0 && (size_t)n < cap;
 }
 
-rsw_status rsw_job_submit(rsw_client *c, const char *scene_id, const rsw_contexts *x,
-                          const char *idempotency_key, char job_id_out[40]) {
-  if (!c) return RSW_ERR_INVALID;
-  client_clear_error(c);
-  char esc[256], path[300];
-  if (!scene_id || !client_escape(scene_id, esc, sizeof esc))
-    return client_fail(c, RSW_ERR_INVALID, "scene id missing or too long");
-  if (!x || !x->n || !job_id_out)
-    return client_fail(c, RSW_ERR_INVALID, "job submit: no contexts or no job_id_out");
-  snprintf(path, sizeof path, "/v1/scenes/%s/jobs", esc);
-  char *body = cJSON_PrintUnformatted(x->root);
-  if (!body) return client_fail(c, RSW_ERR_NOMEM, "cannot print the job request");
+/* POST body (a JobRequest) to scene_id's jobs; the answer's id. */
+static rsw_status submit_body(rsw_client *c, const char *path, const char *body, const char *idempotency_key,
+                              char job_id_out[40]) {
   http_resp r;
   rsw_status s = http_request(c,
                               &(http_req){.method = "POST",
@@ -268,7 +259,6 @@ rsw_status rsw_job_submit(rsw_client *c, const char *scene_id, const rsw_context
                                           .idempotency_key = idempotency_key,
                                           .computed = true},
                               &r);
-  free(body);
   if (s) return s;
   cJSON *a = cJSON_ParseWithLength(r.body, r.len);
   const cJSON *id = cJSON_GetObjectItemCaseSensitive(a, "id");
@@ -279,6 +269,47 @@ rsw_status rsw_job_submit(rsw_client *c, const char *scene_id, const rsw_context
   cJSON_Delete(a);
   http_resp_free(&r);
   return s;
+}
+
+/* "/v1/scenes/<escaped id>/jobs" into path (300 bytes). */
+static rsw_status jobs_path(rsw_client *c, const char *scene_id, char path[300]) {
+  char esc[256];
+  if (!scene_id || !client_escape(scene_id, esc, sizeof esc))
+    return client_fail(c, RSW_ERR_INVALID, "scene id missing or too long");
+  snprintf(path, 300, "/v1/scenes/%s/jobs", esc);
+  return RSW_OK;
+}
+
+rsw_status rsw_job_submit(rsw_client *c, const char *scene_id, const rsw_contexts *x,
+                          const char *idempotency_key, char job_id_out[40]) {
+  if (!c) return RSW_ERR_INVALID;
+  client_clear_error(c);
+  char path[300];
+  rsw_status s = jobs_path(c, scene_id, path);
+  if (s) return s;
+  if (!x || !x->n || !job_id_out)
+    return client_fail(c, RSW_ERR_INVALID, "job submit: no contexts or no job_id_out");
+  char *body = cJSON_PrintUnformatted(x->root);
+  if (!body) return client_fail(c, RSW_ERR_NOMEM, "cannot print the job request");
+  s = submit_body(c, path, body, idempotency_key, job_id_out);
+  free(body);
+  return s;
+}
+
+rsw_status rsw_job_submit_json(rsw_client *c, const char *scene_id, const char *request_json,
+                               const char *idempotency_key, char job_id_out[40]) {
+  if (!c) return RSW_ERR_INVALID;
+  client_clear_error(c);
+  char path[300];
+  rsw_status s = jobs_path(c, scene_id, path);
+  if (s) return s;
+  if (!request_json || !job_id_out)
+    return client_fail(c, RSW_ERR_INVALID, "job submit: no request or no job_id_out");
+  cJSON *j = cJSON_Parse(request_json);
+  bool object = cJSON_IsObject(j);
+  cJSON_Delete(j);
+  if (!object) return client_fail(c, RSW_ERR_PARSE, "job submit: the request is not a JSON object");
+  return submit_body(c, path, request_json, idempotency_key, job_id_out);
 }
 
 static const struct {

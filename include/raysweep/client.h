@@ -260,6 +260,12 @@ size_t rsw_contexts_count(const rsw_contexts *x);
 /* Submit a job. idempotency_key may be NULL. job_id_out: 40 bytes. */
 rsw_status rsw_job_submit(rsw_client *c, const char *scene_id, const rsw_contexts *x,
                           const char *idempotency_key, char job_id_out[40]);
+/* Submit a JobRequest given as JSON text (borrowed), sent as it is: any
+ * member the daemon takes (contexts, defaults, params, templates, bands,
+ * quantities, ...; docs/daemon.md). RSW_ERR_PARSE when it is not a JSON
+ * object; the daemon checks the rest. */
+rsw_status rsw_job_submit_json(rsw_client *c, const char *scene_id, const char *request_json,
+                               const char *idempotency_key, char job_id_out[40]);
 
 typedef enum rsw_job_state {
   RSW_JOB_QUEUED,

@@ -1451,6 +1451,13 @@ static void test_unknown_ids(void) {
   s = rsw_job_submit(c, zero, x, NULL, job);
   CHECK(s == RSW_ERR_NOT_FOUND, "a job on an unknown scene: %s", rsw_strerror(s));
   rsw_contexts_free(x);
+  /* The request as JSON text: the daemon's answer, or refused here when
+   * it is not an object. */
+  s = rsw_job_submit_json(c, zero, "{\"contexts\": [{\"id\": \"a\"}]}", NULL, job);
+  CHECK(s == RSW_ERR_NOT_FOUND, "a JSON job on an unknown scene: %s", rsw_strerror(s));
+  CHECK(rsw_job_submit_json(c, zero, "[{\"id\": \"a\"}]", NULL, job) == RSW_ERR_PARSE,
+        "a JSON job: an array");
+  CHECK(rsw_job_submit_json(c, zero, "{\"contexts\": ", NULL, job) == RSW_ERR_PARSE, "a JSON job: malformed");
   rsw_job_status st;
   CHECK(rsw_job_get(c, "no-such-job", &st) == RSW_ERR_NOT_FOUND, "unknown job");
   CHECK(rsw_job_cancel(c, "no-such-job") == RSW_ERR_NOT_FOUND, "cancel an unknown job");

@@ -249,6 +249,46 @@ expect 1 "sweep --templates unknown key" rs sweep sunplate.xml --grid sza=0 -o t
   --templates '{"sun.directio": {"sun": {"zenith": "sza", "azimuth": 0}}}'
 contains "sweep --templates unknown key: the daemon's pointer" err "/templates/sun.directio"
 contains "sweep --templates unknown key: did you mean" err "did you mean: sun.direction"
+# job submit: a JobRequest as the daemon takes it, here with bands (which
+# sweep's options do not carry), then job watch and fetch -o FILE.nc. The
+# plate's reflectance is a table over the wavelength: a band's radiance is
+# the SRF-weighted mean of rho(lambda) / pi.
+cat >bandjob.json <<'EOF2'
+{"seed": 3, "defaults": {"spp": 4},
+ "params": {"plate.bsdf.reflectance.value": {"wavelengths": [400, 700], "values": [0.2, 0.8]}},
+ "bands": [{"id": "blue", "srf": {"type": "uniform", "wmin": 450, "wmax": 520}},
+           {"id": "red", "srf": {"type": "uniform", "wmin": 620, "wmax": 680}}],
+ "contexts": [{"id": "only"}]}
+EOF2
+expect 0 "job submit FILE REQUEST" rs job submit plate.json bandjob.json
+bjob=$(cat out)
+py "job submit prints the job id" 'import re, sys; assert re.fullmatch(r"job-[0-9a-f]+-[0-9]+", sys.argv[1]), sys.argv[1]' "$bjob"
+expect 0 "job watch the submitted job" rs -q job watch "$bjob" --timeout 60
+expect 0 "fetch the submitted job's dataset" rs -q fetch "$bjob" -o bands.nc
+if /usr/bin/python3 -c 'import netCDF4' 2>/dev/null; then
+  /usr/bin/python3 - <<'EOF2' && ok || bad "job submit with bands: the band values"
+import math, netCDF4
+d = netCDF4.Dataset("bands.nc")
+bands = [str(b) for b in d["band"][:]]
+v = d["radiance_srf"][:].ravel()
+assert bands == ["blue", "red"], bands
+# rho is linear in lambda: a uniform band's mean is rho at its centre
+for b, x in zip(bands, v):
+    c = {"blue": 485.0, "red": 650.0}[b]
+    want = (0.2 + 0.6 * (c - 400) / 300) / math.pi
+    assert abs(x - want) < 1e-5 * want, (b, x, want)
+EOF2
+fi
+expect 0 "job submit inline JSON, --json" rs --json job submit "$plate" '{"contexts": [{"id": "a", "wavelength": 550}]}'
+py "job submit --json: id and scene" 'import json, sys; d = json.load(open("out")); assert d["id"].startswith("job-") and d["scene"] == sys.argv[1], d' "$plate"
+printf '{"contexts": [\n  {"id": "a",\n   "wavelength": 550,}\n]}\n' >badjob.json
+expect 2 "job submit malformed REQUEST file" rs job submit "$plate" badjob.json
+contains "job submit: names the file and line" err "REQUEST badjob.json:3:"
+expect 2 "job submit REQUEST not an object" rs job submit "$plate" '[{"id": "a"}]'
+contains "job submit array: wants an object" err "REQUEST: a JSON object"
+expect 1 "job submit: the daemon refuses a wavelength with bands" rs job submit "$plate" \
+  '{"bands": [{"id": "b", "srf": {"type": "uniform", "wmin": 450, "wmax": 520}}], "contexts": [{"id": "a", "wavelength": 500}]}'
+contains "job submit 422: the pointer" err "/contexts/0/wavelength"
 expect 0 "sweep: a shard past the end" rs -q sweep "$plate" --grid wavelength=400:400:1 --shard 1/2 -o empty
 [ -f empty/index.jsonl ] && [ ! -s empty/index.jsonl ] && ok || bad "an empty shard should write an empty index"
 expect 1 "sweep --set unknown key" rs sweep "$plate" --grid wavelength=400:500:100 --set plate.bsdf.reflectanc.value=0.5 -o x
