@@ -67,6 +67,34 @@ int cmd_job_submit(cli_ctx *ctx, const cmdline_args *a) {
   return CLI_OK;
 }
 
+/* What a job's failed renders say, not only how many there were: the
+ * first one's context, sensor and error on stderr ("and N more" when
+ * there are others; `fetch` or GET results list them all). Nothing when
+ * the results cannot be read. */
+static void print_first_failure(const cli_ctx *ctx, const char *id) {
+  char *text = NULL;
+  if (rsw_job_results(ctx->client, id, &text) != RSW_OK) return;
+  cJSON *res = cJSON_Parse(text);
+  rsw_free(text);
+  const cJSON *r, *first = NULL;
+  size_t n = 0;
+  cJSON_ArrayForEach(r, cJSON_GetObjectItemCaseSensitive(res, "results")) {
+    const char *state = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(r, "state"));
+    if (!state || strcmp(state, "failed") != 0) continue;
+    if (!n++) first = r;
+  }
+  if (first) {
+    const char *c = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(first, "context"));
+    const char *s = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(first, "sensor"));
+    const char *e = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(first, "error"));
+    fprintf(stderr, "raysweep %s: %s/%s failed: %s", ctx->cmd, c ? c : "?", s ? s : "?",
+            e ? e : "no reason given");
+    if (n > 1) fprintf(stderr, " (and %zu more)", n - 1);
+    fputc('\n', stderr);
+  }
+  cJSON_Delete(res);
+}
+
 int cmd_job_ls(cli_ctx *ctx, const cmdline_args *a) {
   (void)a;
   char *text = NULL;
@@ -156,6 +184,7 @@ int cmd_job_show(cli_ctx *ctx, const cmdline_args *a) {
     printf("rate:      %.2f renders/s  ETA %s\n", rate, eta);
   }
   if (st.error[0]) printf("error:     %s\n", st.error);
+  if (st.renders_failed) print_first_failure(ctx, id);
   return CLI_OK;
 }
 
@@ -173,6 +202,7 @@ int cmd_job_watch(cli_ctx *ctx, const cmdline_args *a) {
   cli_catch_interrupt();
   int rc = cli_wait_job(ctx, id, timeout, CLI_INTERRUPT_DETACH, &st);
   if (rc != CLI_OK && rc != CLI_JOB) return rc;
+  if (st.renders_failed) print_first_failure(ctx, id);
   if (ctx->json)
     print_status_json(id, &st);
   else

@@ -289,6 +289,16 @@ contains "job submit array: wants an object" err "REQUEST: a JSON object"
 expect 1 "job submit: the daemon refuses a wavelength with bands" rs job submit "$plate" \
   '{"bands": [{"id": "b", "srf": {"type": "uniform", "wmin": 450, "wmax": 520}}], "contexts": [{"id": "a", "wavelength": 500}]}'
 contains "job submit 422: the pointer" err "/contexts/0/wavelength"
+# A job whose renders fail: job watch and job show say why, not only how
+# many (a sun below the horizon leaves brf nothing to divide by).
+expect 0 "job submit renders that fail" rs job submit sunplate.json \
+  '{"quantities": ["brf"], "contexts": [{"id": "noon", "coords": {"sza": 10}}, {"id": "night", "coords": {"sza": 100}}, {"id": "night2", "coords": {"sza": 120}}]}'
+fjob=$(cat out)
+expect 4 "job watch: some renders failed" rs -q job watch "$fjob" --timeout 60
+contains "job watch: the first failure's reason" err "night/camera failed: quantities: brdf and brf divide by the horizontal irradiance"
+contains "job watch: how many more" err "(and 1 more)"
+expect 0 "job show of a job with failed renders" rs job show "$fjob"
+contains "job show: the first failure's reason" err "night/camera failed: quantities: brdf and brf"
 expect 0 "sweep: a shard past the end" rs -q sweep "$plate" --grid wavelength=400:400:1 --shard 1/2 -o empty
 [ -f empty/index.jsonl ] && [ ! -s empty/index.jsonl ] && ok || bad "an empty shard should write an empty index"
 expect 1 "sweep --set unknown key" rs sweep "$plate" --grid wavelength=400:500:100 --set plate.bsdf.reflectanc.value=0.5 -o x
