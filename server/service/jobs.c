@@ -803,8 +803,7 @@ static rsw_status check_context_sensors(ctx_scan *cs, const cJSON *c, size_t i, 
       char ep[120];
       snprintf(ep, sizeof ep, "%s/%zu", sens_ptr, n);
       if (!cJSON_IsString(s) || !svc_find_sensor(sc, s->valuestring, &si)) {
-        st = svc_fail(e, RSW_ERR_UNKNOWN_NAME, ep, "no sensor '%s' in the scene",
-                      cJSON_IsString(s) ? s->valuestring : "?");
+        st = svc_no_sensor(e, sc, ep, cJSON_IsString(s) ? s->valuestring : NULL);
         break;
       }
       if (cs->seen[si] == i + 1) {

@@ -7,6 +7,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "../kernel/core/strdist.h"
 #include "../kernel/kapi.h"
 #include "buf.h"
 #include "rsw_sha256.h"
@@ -14,6 +15,32 @@
 
 bool svc_find_sensor(const scene *sc, const char *name, size_t *index) {
   return kapi_find_sensor(sc, name, index);
+}
+
+/* A sensor that names nothing: the closest id (a misspelling) and the
+ * scene's sensors, so the answer says what to write instead. */
+rsw_status svc_no_sensor(svc_error *e, const scene *sc, const char *where, const char *name) {
+  char list[512] = "";
+  size_t len = 0, best_d = (size_t)-1;
+  const char *best = NULL;
+  for (size_t i = 0; i < sc->n_sensors; i++) {
+    const char *id = kapi_sensor_id(sc, i);
+    if (!id) continue;
+    if (len < sizeof list)
+      len += (size_t)snprintf(list + len, sizeof list - len, "%s%s", len ? ", " : "", id);
+    size_t d = name ? rsw_edit_distance(name, id) : (size_t)-1;
+    if (d < best_d) best_d = d, best = id;
+  }
+  if (len >= sizeof list) memcpy(list + sizeof list - 5, ", ...", 5); /* (its NUL kept) */
+  /* A misspelling: a third of the name's letters, at least 2, differ. */
+  size_t near = name ? strlen(name) / 3 : 0;
+  bool close = best && best_d <= (near > 2 ? near : 2);
+  rsw_status st = svc_fail(e, RSW_ERR_UNKNOWN_NAME, where, "no sensor '%s' in the scene%s%s%s (%s%s%s)",
+                           name ? name : "?", close ? "; did you mean '" : "", close ? best : "",
+                           close ? "'?" : "", sc->n_sensors ? "its sensors: " : "it has no sensor", list,
+                           sc->n_sensors ? "; an index counts from 0" : "");
+  if (close) snprintf(e->candidates[0], sizeof e->candidates[0], "%s", best);
+  return st;
 }
 
 rsw_status svc_check_film(const service *svc, const scene *sc, size_t si, unsigned quantities, bool variance,
@@ -408,8 +435,7 @@ rsw_status service_render(service *svc, const char *id, const char *body, size_t
         snprintf(buf, sizeof buf, "%.0f", k->valuedouble);
         name = buf;
       }
-      if (!name || !svc_find_sensor(r->sc, name, &rs.sensor_index))
-        st = svc_fail(e, RSW_ERR_UNKNOWN_NAME, ptr, "no sensor '%s' in the scene", name ? name : "?");
+      if (!name || !svc_find_sensor(r->sc, name, &rs.sensor_index)) st = svc_no_sensor(e, r->sc, ptr, name);
     } else if (strcmp(k->string, "spp") == 0) {
       if (!cJSON_IsNumber(k) || k->valuedouble < 1 || k->valuedouble > 4294967295.0 ||
           k->valuedouble != floor(k->valuedouble))

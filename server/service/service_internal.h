@@ -402,6 +402,10 @@ rsw_status svc_check_planes(const scene *sc, size_t si, uint32_t spp, unsigned q
 rsw_status svc_render_locked(service *svc, resident *r, const render_spec *rs, svc_film *out, svc_error *e);
 /* Resolve a sensor given by id or decimal index. */
 bool svc_find_sensor(const scene *sc, const char *name, size_t *index);
+/* RSW_ERR_UNKNOWN_NAME at where for a sensor name that names nothing: the
+ * closest id and the scene's sensors in the message, the closest in
+ * e->candidates. */
+rsw_status svc_no_sensor(svc_error *e, const scene *sc, const char *where, const char *name);
 /* Fill a JSON object with a scene's summary (id, variant, sensors, revision). */
 void svc_scene_summary(const resident *r, cJSON *o);
 /* Memory budget (scenes.c): the resident scene's bytes changed or a

@@ -89,6 +89,38 @@ static void test_render_overrides_restore_base(void) {
   free(id);
 }
 
+/* A sensor that names nothing: the answer names the closest id and the
+ * scene's sensors (it said only "no sensor 'metr' in the scene"), in a
+ * render and in a job's context. */
+static void test_unknown_sensor(void) {
+  char *id = post_plate();
+  REQUIRE(id, "scene");
+  svc_film f;
+  svc_error e = {0};
+  const char *q = "{\"sensor\": \"metr\"}";
+  CHECK(service_render(svc, id, q, strlen(q), NULL, &f, &e) == RSW_ERR_UNKNOWN_NAME, "a misspelt sensor");
+  CHECK(strcmp(e.err.where, "/sensor") == 0 && strstr(e.err.msg, "did you mean 'meter'?") &&
+            strstr(e.err.msg, "its sensors: meter"),
+        "render: %s at %s", e.err.msg, e.err.where);
+  CHECK(strcmp(e.candidates[0], "meter") == 0, "candidate: '%s'", e.candidates[0]);
+  e = (svc_error){0};
+  q = "{\"sensor\": 3}";
+  CHECK(service_render(svc, id, q, strlen(q), NULL, &f, &e) == RSW_ERR_UNKNOWN_NAME, "an index past the end");
+  CHECK(!strstr(e.err.msg, "did you mean") && strstr(e.err.msg, "its sensors: meter; an index counts from 0"),
+        "render by index: %s", e.err.msg);
+  e = (svc_error){0};
+  const char *job =
+      "{\"contexts\": [{\"id\": \"a\", \"wavelength\": 550, \"sensors\": [\"meter\", \"mter\"]}]}";
+  char *job_id = NULL, *json = NULL;
+  CHECK(service_job_submit(svc, id, job, strlen(job), NULL, &job_id, &json, &e) == RSW_ERR_UNKNOWN_NAME,
+        "a job's sensor");
+  CHECK(strcmp(e.err.where, "/contexts/0/sensors/1") == 0 && strstr(e.err.msg, "did you mean 'meter'?"),
+        "job: %s at %s", e.err.msg, e.err.where);
+  free(job_id);
+  free(json);
+  free(id);
+}
+
 static void test_patch_revisions(void) {
   char *id = post_plate();
   REQUIRE(id, "scene");
@@ -271,6 +303,7 @@ int main(void) {
   }
   RSW_TEST_RUN(test_scene_ids);
   RSW_TEST_RUN(test_render_overrides_restore_base);
+  RSW_TEST_RUN(test_unknown_sensor);
   RSW_TEST_RUN(test_patch_revisions);
   RSW_TEST_RUN(test_job_spectral_loop);
   RSW_TEST_RUN(test_patch_search_key_then_override_by_path);
