@@ -13,14 +13,22 @@ replicas; the balancer keeps no state. When a replica leaves the ring only
 its keys move (consistent hashing), and the client resubmits what it lost
 under a new key.
 
+A request without the header (or with an empty one) is routed as the key
+"-": all such requests reach one replica, so a client that sends no key
+(curl, the Python package, `raysweep sweep` without --spread) finds the
+scene it pushed and the job it submitted. Both balancers fall back to
+round-robin for a missing key (HAProxy's documented fallback for hdr();
+nginx's hash for an empty key), which sent a push and the job that
+followed it to different replicas: 404.
+
 - HAProxy: `balance hdr(X-Raysweep-Shard)` with `hash-type consistent`
-  (HAProxy configuration manual, "balance" and "hash-type"); active health
+  (HAProxy configuration manual, "balance" and "hash-type"), the key "-"
+  set first where none came (`http-request set-header`); active health
   checks on GET /v1/health/ready, which answers 503 while the replica is
   shutting down or its job queue is full, so such a replica drops out.
-  Requests without the header are balanced round-robin (HAProxy's
-  documented fallback for hdr()).
-- nginx: `hash $http_x_raysweep_shard consistent;` in the upstream (nginx
-  ngx_http_upstream_module, "hash", ketama). nginx open source has no
+- nginx: `hash $raysweep_shard consistent;` in the upstream (nginx
+  ngx_http_upstream_module, "hash", ketama), $raysweep_shard the header
+  or "-" (a `map`). nginx open source has no
   active health checks (`health_check` is NGINX Plus only): a replica is
   taken out passively (max_fails/fail_timeout) after connection errors
   and 502/503/504 answers, and proxy_next_upstream sends an idempotent
@@ -68,6 +76,10 @@ frontend raysweep
     default_backend replicas
 
 backend replicas
+    # No key (or an empty one): the key "-", one replica for all such
+    # requests (hdr() would balance them round-robin: a scene pushed to
+    # one replica, its job submitted to another).
+    http-request set-header {HEADER} - unless {{ req.hdr({HEADER}) -m len 1: }}
     balance hdr({HEADER})
     hash-type consistent
     # Ready = not shutting down and the job queue not full (raysweepd).
@@ -103,8 +115,16 @@ http {{
     uwsgi_temp_path {d}/uwsgi;
     scgi_temp_path {d}/scgi;
 
+    # No key (or an empty one): the key "-", one replica for all such
+    # requests (an empty key would be balanced round-robin: a scene pushed
+    # to one replica, its job submitted to another).
+    map $http_x_raysweep_shard $raysweep_shard {{
+        "" "-";
+        default $http_x_raysweep_shard;
+    }}
+
     upstream raysweep {{
-        hash $http_x_raysweep_shard consistent;
+        hash $raysweep_shard consistent;
 {servers}
         keepalive 32;
     }}

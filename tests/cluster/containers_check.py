@@ -456,6 +456,9 @@ def haproxy_check(label, cfg_text, want_servers=None, want_port=None, template=N
     lines = [l.split("#")[0].strip() for l in cfg_text.splitlines()]
     check("balance hdr(X-Raysweep-Shard)" in lines, f"{label}: no `balance hdr(X-Raysweep-Shard)`")
     check("hash-type consistent" in lines, f"{label}: no `hash-type consistent`")
+    # A request without a key goes as the key "-" (else round-robin: a job away from its scene)
+    check("http-request set-header X-Raysweep-Shard - unless { req.hdr(X-Raysweep-Shard) -m len 1: }" in lines,
+          f"{label}: requests without X-Raysweep-Shard are not given the key '-'")
     check("option httpchk GET /v1/health/ready" in lines, f"{label}: the health check is not GET /v1/health/ready")
     check("http-check expect status 200" in lines, f"{label}: the health check does not expect 200")
     servers = [l.split()[2] for l in lines if l.startswith("server ")]

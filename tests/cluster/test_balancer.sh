@@ -21,6 +21,8 @@
 #   - the same with --bundle 3 (a second replica killed): the shards keep
 #     the whole sweep's bundle groups, and a lost shard resubmits its
 #     groups whole, so the films are the one-daemon --bundle 3 sweep's;
+#   - clients that send no key (a sweep without --spread, curl with an
+#     empty header) reach one replica through either balancer;
 #   - the shipped docker/haproxy and docker/nginx configurations are the
 #     generator's current output and pass `haproxy -c` / `nginx -t`.
 name=test_balancer
@@ -103,9 +105,33 @@ wait_ready() {
   finish
 }
 
+# keyless LABEL PORT: clients that send no X-Raysweep-Shard (a sweep without
+# --spread, curl) through the balancer at PORT: a scene pushed and the job
+# on it reach one replica. Both balancers balanced such requests
+# round-robin: the job went to a replica without the scene, 404. Each run
+# pushes a document no replica holds yet.
+keyless() {
+  local label=$1 port=$2 i
+  for i in 1 2 3 4; do
+    printf '{"type": "scene", "variant": "mono", "camera": {"type": "distant", "direction": [0, 0, -1], "target": [0, 0, 0], "film": {"type": "hdrfilm", "width": 1, "height": 1}}, "sun": {"type": "directional", "direction": [0, 0, -1], "irradiance": 1}, "plate": {"type": "rectangle", "bsdf": {"type": "diffuse", "reflectance": 0.%s%s}}}\n' "$port" "$i" >"$tmp/kl.json"
+    expect 0 "$label: sweep $i without --spread (no key)" rsw "http://127.0.0.1:$port" -q sweep "$tmp/kl.json" \
+      --grid wavelength=500,600 --spp 4 --format json -o "$tmp/kl-$label-$i"
+  done
+  printf '{"type": "scene", "variant": "mono", "camera": {"type": "distant", "direction": [0, 0, -1], "target": [0, 0, 0], "film": {"type": "hdrfilm", "width": 1, "height": 1}}, "sun": {"type": "directional", "direction": [0, 0, -1], "irradiance": 1}, "plate": {"type": "rectangle", "bsdf": {"type": "diffuse", "reflectance": 0.%s9}}}\n' "$port" >"$tmp/kl.json"
+  local sid job code
+  sid=$(curl -sS -X POST "http://127.0.0.1:$port/v1/scenes" -H 'Content-Type: application/json' --data-binary @"$tmp/kl.json" |
+    python3 -c 'import json, sys; print(json.load(sys.stdin)["id"])')
+  for i in 1 2 3 4; do # an empty header counts as none
+    code=$(curl -s -o "$tmp/kl.job" -w '%{http_code}' -X POST "http://127.0.0.1:$port/v1/scenes/$sid/jobs" \
+      -H 'X-Raysweep-Shard;' -H 'Content-Type: application/json' -d '{"contexts": [{"id": "a", "wavelength": 550}]}')
+    [ "$code" = 202 ] && ok || bad "$label: curl job $i on a scene pushed without a key: HTTP $code $(head -c 300 "$tmp/kl.job")"
+  done
+}
+
 # ---- HAProxy: spread 3 ----
 lb=$(free_port)
 start_haproxy "$lb"
+keyless haproxy "$lb"
 before=($(counts))
 expect 0 "haproxy: sweep --spread 3" rsw "http://127.0.0.1:$lb" sweep "$scene" "${grid[@]}" --spp $spp --spread 3 -o "$tmp/h"
 same_sweep "haproxy" "$tmp/h"
@@ -184,6 +210,7 @@ nginx -p "$tmp/nginx" -c "$tmp/nginx/nginx.conf" >"$tmp/nginx.log" 2>&1 &
 ng_pid=$!
 pids+=($ng_pid)
 wait_ready "$lbn" nginx
+keyless nginx "$lbn"
 before=($(counts))
 expect 0 "nginx: sweep --spread 3" rsw "http://127.0.0.1:$lbn" sweep "$scene" "${grid[@]}" --spp $spp --spread 3 -o "$tmp/n"
 same_sweep "nginx" "$tmp/n"
