@@ -119,8 +119,8 @@ int cli_save_encoded(const cli_ctx *ctx, const void *bytes, size_t len, const ch
 
 /* Whole file into memory (NUL-terminated); NULL with errno on failure. */
 char *cli_read_file(const char *path, size_t *len_out);
-/* An option whose value is JSON given inline (it starts with '{' or '[')
- * or as a file: parsed into *out (owned). A usage error (exit 2) names
+/* An option whose value is JSON given inline (it starts with '{' or '['),
+ * as a file, or "-" for the standard input: parsed into *out (owned). A usage error (exit 2) names
  * the option, the file and the line and column of malformed JSON. */
 int cli_json_option(const cli_ctx *ctx, const char *opt, const char *arg, struct cJSON **out);
 /* Write text through a temp file renamed on success. 0 or -1 (errno). */

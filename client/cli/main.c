@@ -57,7 +57,7 @@ static const cli_command commands[] = {
     {"merge", NULL, "DIR... -o DIR [--partial]",
      "join sweep shard directories into one (films hard-linked or copied); fails listing missing contexts",
      cli_opts_merge, 1, (size_t)-1, false, cmd_merge},
-    {"job", "submit", "ID|FILE REQUEST.json|JSON",
+    {"job", "submit", "ID|FILE REQUEST.json|-|JSON",
      "submit a job request as the daemon takes it (contexts, defaults, bands, templates, ...); prints its id "
      "(then: job watch ID, fetch ID -o FILE.nc)",
      cli_opts_none, 2, 2, true, cmd_job_submit},

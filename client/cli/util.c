@@ -203,11 +203,13 @@ int cli_json_option(const cli_ctx *ctx, const char *opt, const char *arg, cJSON 
   bool inline_text = *p == '{' || *p == '[';
   char *file = NULL;
   const char *text = arg;
+  const bool std_in = strcmp(arg, "-") == 0; /* "-": the standard input */
   if (!inline_text) {
-    file = cli_read_file(arg, NULL);
+    file = cli_read_file(std_in ? "/dev/stdin" : arg, NULL);
     if (!file)
-      return cli_usage(ctx, "%s %s: cannot read it (%s); give a file or the JSON itself", opt, arg,
-                       strerror(errno));
+      return cli_usage(ctx,
+                       "%s %s: cannot read it (%s); give a file, - (the standard input) or the JSON itself",
+                       opt, std_in ? "stdin" : arg, strerror(errno));
     text = file;
   }
   const char *end = NULL;
@@ -223,8 +225,9 @@ int cli_json_option(const cli_ctx *ctx, const char *opt, const char *arg, cJSON 
       else
         col++;
     }
-    rc = inline_text ? cli_usage(ctx, "%s: malformed JSON at line %zu, column %zu", opt, line, col)
-                     : cli_usage(ctx, "%s %s:%zu:%zu: malformed JSON", opt, arg, line, col);
+    rc = inline_text
+             ? cli_usage(ctx, "%s: malformed JSON at line %zu, column %zu", opt, line, col)
+             : cli_usage(ctx, "%s %s:%zu:%zu: malformed JSON", opt, std_in ? "stdin" : arg, line, col);
   }
   free(file);
   *out = j;

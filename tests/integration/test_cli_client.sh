@@ -281,6 +281,12 @@ EOF2
 fi
 expect 0 "job submit inline JSON, --json" rs --json job submit "$plate" '{"contexts": [{"id": "a", "wavelength": 550}]}'
 py "job submit --json: id and scene" 'import json, sys; d = json.load(open("out")); assert d["id"].startswith("job-") and d["scene"] == sys.argv[1], d' "$plate"
+printf '{"contexts": [{"id": "s", "wavelength": 600}]}' >stdin.json
+expect 0 "job submit REQUEST from the standard input" rs job submit "$plate" - <stdin.json
+py "job submit -: a job id" 'import re, sys; assert re.fullmatch(r"job-[0-9a-f]+-[0-9]+\n?", open("out").read()), open("out").read()'
+printf '{"contexts": ' >stdin.json
+expect 2 "job submit malformed standard input" rs job submit "$plate" - <stdin.json
+contains "job submit -: names stdin" err "REQUEST stdin:1:"
 printf '{"contexts": [\n  {"id": "a",\n   "wavelength": 550,}\n]}\n' >badjob.json
 expect 2 "job submit malformed REQUEST file" rs job submit "$plate" badjob.json
 contains "job submit: names the file and line" err "REQUEST badjob.json:3:"
