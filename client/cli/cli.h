@@ -46,6 +46,7 @@ typedef struct cli_ctx {
   const char *cmd;        /* "scene push", for messages */
   const char *server_url; /* effective base URL */
   const char *token;      /* bearer token or NULL (for extra clients: sweep --spread) */
+  const char *route;      /* --route / RAYSWEEP_ROUTE: the requests' routing key, or NULL */
   bool json, quiet;
   bool stderr_tty;
   rsw_client *client; /* created before the handler when the command needs it */
@@ -78,6 +79,8 @@ int cli_report(const cli_ctx *ctx, rsw_status s, const char *what);
 int cli_exit_code(rsw_status s, const rsw_error_info *e);
 
 bool cli_parse_u64(const char *s, unsigned long long max, unsigned long long *out);
+/* A routing key (X-Raysweep-Shard): 1 to 64 of [A-Za-z0-9._-]. */
+bool cli_route_ok(const char *key);
 bool cli_parse_double(const char *s, double *out);
 /* Shortest "%.*g" that reads back as v exactly. buf >= 32 bytes. */
 void cli_format_double(char *buf, size_t n, double v);

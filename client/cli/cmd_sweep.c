@@ -731,6 +731,11 @@ static int read_sweep_options(const cli_ctx *ctx, const cmdline_args *a, sweep_o
   }
   if ((v = cmdline_get(a, "--spread")) && (!cli_parse_u64(v, 4096, &o->spread) || o->spread == 0))
     return cli_usage(ctx, "--spread needs a number of shards from 1 to 4096 (got '%s')", v);
+  if (o->spread && ctx->route)
+    return cli_usage(ctx,
+                     "--route %s: sweep --spread gives each shard a key of its own; drop --route (or "
+                     "RAYSWEEP_ROUTE) to spread, or --spread to send the whole sweep with this key",
+                     ctx->route);
   o->bundle = RSW_BUNDLE_AUTO, o->bundle_plan = RSW_BUNDLE_MAX; /* the daemon's default */
   if ((v = cmdline_get(a, "--bundle"))) {
     unsigned long long k;

@@ -87,6 +87,10 @@ static const char global_help[] =
     "  --stall-timeout S  give up a request that moves no byte for S seconds; 0: never (env\n"
     "                     RAYSWEEP_STALL_TIMEOUT; default 60; a render, scene push, PATCH, job\n"
     "                     submission or dataset waits for its answer to start)\n"
+    "  --route KEY        send X-Raysweep-Shard: KEY, so a load balancer routes every request to\n"
+    "                     the replica KEY hashes to (env RAYSWEEP_ROUTE; an unfinished --spread\n"
+    "                     run's shard keys are in DIR/sweep.spread.jsonl); none: the balancer's\n"
+    "                     default replica\n"
     "  --json             machine-readable output on stdout\n"
     "  --quiet, -q        no progress or informational messages on stderr (warnings stay)\n"
     "  --help, -h         this help; `raysweep COMMAND --help` for one command\n"
@@ -205,7 +209,7 @@ static int read_token(const cli_ctx *ctx, const char *token_file, char **out) {
 
 int main(int argc, char **argv) {
   cli_ctx ctx = {.cmd = "", .stderr_tty = isatty(STDERR_FILENO) == 1};
-  const char *server = NULL, *token_file = NULL, *connect_to = NULL, *stall_to = NULL;
+  const char *server = NULL, *token_file = NULL, *connect_to = NULL, *stall_to = NULL, *route = NULL;
   bool help = false, version = false;
   /* Global options anywhere before "--": take them out of argv. */
   char **rest = calloc((size_t)argc + 1, sizeof *rest);
@@ -241,6 +245,14 @@ int main(int argc, char **argv) {
       connect_to = arg + 18;
     } else if (strncmp(arg, "--stall-timeout=", 16) == 0) {
       stall_to = arg + 16;
+    } else if (strcmp(arg, "--route") == 0) {
+      if (i + 1 >= argc) {
+        free(rest);
+        return cli_usage(&ctx, "%s needs a value", arg);
+      }
+      route = argv[++i];
+    } else if (strncmp(arg, "--route=", 8) == 0) {
+      route = arg + 8;
     } else if (strncmp(arg, "--server=", 9) == 0) {
       server = arg + 9;
     } else if (strncmp(arg, "--token-file=", 13) == 0) {
@@ -321,13 +333,20 @@ int main(int argc, char **argv) {
       rc = transfer_limit(&ctx, "--connect-timeout", connect_to, "RAYSWEEP_CONNECT_TIMEOUT", false,
                           &connect_s);
     if (!rc) rc = transfer_limit(&ctx, "--stall-timeout", stall_to, "RAYSWEEP_STALL_TIMEOUT", true, &stall_s);
+    const char *route_opt = route ? "--route" : "RAYSWEEP_ROUTE";
+    if (!route) route = getenv("RAYSWEEP_ROUTE");
+    if (route && !*route) route = NULL;
+    if (!rc && route && !cli_route_ok(route))
+      rc = cli_usage(&ctx, "%s '%s': a routing key is 1 to 64 of A-Z a-z 0-9 . _ -", route_opt, route);
+    ctx.route = route;
     if (!rc) {
       rsw_client_opts o = {.size = sizeof o,
                            .base_url = ctx.server_url,
                            .token = token,
                            .interrupt = &cli_interrupted,
                            .connect_timeout_s = connect_s,
-                           .stall_timeout_s = stall_s};
+                           .stall_timeout_s = stall_s,
+                           .route_key = route};
       rsw_status s = rsw_client_new(&o, &ctx.client);
       if (s)
         rc = cli_fail(&ctx, s == RSW_ERR_INVALID ? CLI_USAGE : CLI_IO, "cannot create a client for '%s': %s",

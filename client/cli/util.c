@@ -196,6 +196,11 @@ char *cli_read_file(const char *path, size_t *len_out) {
   return buf;
 }
 
+bool cli_route_ok(const char *key) {
+  size_t n = strspn(key, "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789._-");
+  return n >= 1 && n <= 64 && key[n] == '\0';
+}
+
 int cli_json_option(const cli_ctx *ctx, const char *opt, const char *arg, cJSON **out) {
   *out = NULL;
   const char *p = arg;

@@ -5,6 +5,7 @@ threads at once: every request opens its own connection.
 """
 
 import json
+import re
 import socket
 import time
 import urllib.error
@@ -46,12 +47,18 @@ class Transport:
     ``max_retries`` and ``retry_backoff``: a refused connection, 429 and 503
     are retried that many times, waiting ``retry_backoff`` seconds and doubling
     (a ``Retry-After`` from the daemon wins), as libraysweep does (docs/client.md).
+    ``route``: the routing key sent as ``X-Raysweep-Shard`` on every request
+    (a load balancer sends all of them to the replica it hashes to;
+    docs/cluster.md), or ``None``.
     """
 
-    def __init__(self, url=DEFAULT_URL, token=None, timeout=60.0, max_retries=3, retry_backoff=0.2):
+    def __init__(self, url=DEFAULT_URL, token=None, timeout=60.0, max_retries=3, retry_backoff=0.2, route=None):
         parts = urllib.parse.urlsplit(url)
         if parts.scheme not in ("http", "https") or not parts.netloc:
             raise ValueError(f"url must be http://HOST:PORT or https://..., not {url!r}")
+        if route is not None and not re.fullmatch(r"[A-Za-z0-9._-]{1,64}", str(route)):
+            raise ValueError(f"route must be 1 to 64 of A-Z a-z 0-9 . _ -, not {route!r}")
+        self.route = route
         self.url = url.rstrip("/")
         self.token = token
         self.timeout = timeout
@@ -76,6 +83,8 @@ class Transport:
             hdrs["Accept"] = accept
         if self.token:
             hdrs["Authorization"] = f"Bearer {self.token}"
+        if self.route:
+            hdrs["X-Raysweep-Shard"] = self.route
         hdrs.update(headers or {})
         timeout = self.timeout if timeout == -1 else timeout
         wait = self.retry_backoff

@@ -27,20 +27,26 @@ __all__ = ["Client", "connect"]
 _SHA = "sha256:"
 
 
-def connect(url=None, token=None, timeout=60.0):
+def connect(url=None, token=None, timeout=60.0, route=None):
     """Connect to a daemon; returns a :class:`Client`.
 
     ``url`` defaults to ``$RAYSWEEP_URL``, else ``http://127.0.0.1:8350``;
     ``token`` to ``$RAYSWEEP_TOKEN`` (a daemon started with ``--token-file``
     wants it). ``timeout``: seconds to wait for an answer to an ordinary
-    request (renders and jobs take their own). Asks ``GET /v1`` once, so a
-    wrong address fails here (:class:`~raysweep.ConnectionFailed`), and a
-    wrong token too (:class:`~raysweep.RaysweepError`, status 401).
+    request (renders and jobs take their own). ``route`` (default
+    ``$RAYSWEEP_ROUTE``): behind a load balancer, the key every request
+    carries (``X-Raysweep-Shard``), so that all of them reach the replica it
+    hashes to; clients with different keys spread work over the replicas
+    (docs/cluster.md). Asks ``GET /v1`` once, so a wrong address fails here
+    (:class:`~raysweep.ConnectionFailed`), and a wrong token too
+    (:class:`~raysweep.RaysweepError`, status 401).
     """
     url = url or os.environ.get("RAYSWEEP_URL") or DEFAULT_URL
     if token is None:
         token = os.environ.get("RAYSWEEP_TOKEN") or None
-    client = Client(Transport(url, token, timeout=timeout))
+    if route is None:
+        route = os.environ.get("RAYSWEEP_ROUTE") or None
+    client = Client(Transport(url, token, timeout=timeout, route=route))
     client.info = client._http.json("GET", "/v1")
     # /v1 needs no token on some daemons; /v1/scenes always does when one is set.
     client._http.json("GET", "/v1/scenes")

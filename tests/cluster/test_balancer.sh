@@ -22,7 +22,8 @@
 #     the whole sweep's bundle groups, and a lost shard resubmits its
 #     groups whole, so the films are the one-daemon --bundle 3 sweep's;
 #   - clients that send no key (a sweep without --spread, curl with an
-#     empty header) reach one replica through either balancer;
+#     empty header) reach one replica through either balancer; --route KEY
+#     sends every request to KEY's replica;
 #   - the shipped docker/haproxy and docker/nginx configurations are the
 #     generator's current output and pass `haproxy -c` / `nginx -t`.
 name=test_balancer
@@ -132,6 +133,25 @@ keyless() {
 lb=$(free_port)
 start_haproxy "$lb"
 keyless haproxy "$lb"
+# --route KEY: every request to the replica KEY hashes to. Two keys that
+# reach different replicas (GET /v1's instance): a scene pushed with one
+# is unknown to the other's replica, and a sweep with the pushing key finds it.
+inst() { rsw "http://127.0.0.1:$lb" --route "$1" --json status | python3 -c 'import json, sys; print(json.load(sys.stdin)["instance"])'; }
+ka=ra0 kb=
+ia=$(inst "$ka")
+for c in rb0 rb1 rb2 rb3 rb4 rb5 rb6 rb7 rb8 rb9; do
+  [ "$(inst "$c")" != "$ia" ] && { kb=$c; break; }
+done
+if [ -n "$kb" ]; then
+  printf '{"type": "scene", "variant": "mono", "camera": {"type": "distant", "direction": [0, 0, -1], "target": [0, 0, 0], "film": {"type": "hdrfilm", "width": 1, "height": 1}}, "sun": {"type": "directional", "direction": [0, 0, -1], "irradiance": 1}, "plate": {"type": "rectangle", "bsdf": {"type": "diffuse", "reflectance": 0.123}}}\n' >"$tmp/routed.json"
+  rid=$(rsw "http://127.0.0.1:$lb" --route "$ka" -q scene push "$tmp/routed.json")
+  expect 1 "--route: another replica lacks the scene" rsw "http://127.0.0.1:$lb" --route "$kb" -q sweep "$rid" \
+    --grid wavelength=500 -o "$tmp/routed-b"
+  expect 0 "--route: the pushing key's replica has it" rsw "http://127.0.0.1:$lb" --route "$ka" -q sweep "$rid" \
+    --grid wavelength=500 -o "$tmp/routed-a"
+else
+  bad "--route: ten keys all reached the replica of $ka"
+fi
 before=($(counts))
 expect 0 "haproxy: sweep --spread 3" rsw "http://127.0.0.1:$lb" sweep "$scene" "${grid[@]}" --spp $spp --spread 3 -o "$tmp/h"
 same_sweep "haproxy" "$tmp/h"

@@ -47,6 +47,17 @@ contains "status ready" out "ready:     yes"
 expect 0 "status --json" rs status --json
 py "status --json is the server's GET /v1" 'import json,sys; d=json.load(open(sys.argv[1])); assert d["name"]=="raysweepd" and "mono" in d["variants"]' out
 
+# --route KEY (RAYSWEEP_ROUTE): X-Raysweep-Shard on every request; the
+# daemon ignores it (test_balancer checks the routing itself).
+expect 0 "--route with a daemon" rs --route shard-1.a status
+expect 2 "--route: a key with a space" rs --route 'two words' status
+contains "--route: says what a key is" err "a routing key is 1 to 64 of A-Z a-z 0-9 . _ -"
+expect 2 "RAYSWEEP_ROUTE: a key with a slash" env RAYSWEEP_ROUTE=a/b "$bin/raysweep" status
+contains "RAYSWEEP_ROUTE: names the variable" err "RAYSWEEP_ROUTE 'a/b'"
+expect 2 "--route with sweep --spread" rs --route k1 sweep plate.json --grid wavelength=400,500 --spread 2 -o routed
+contains "--route with --spread: says why" err "sweep --spread gives each shard a key of its own"
+[ ! -e routed ] && ok || bad "a refused --route left routed behind"
+
 # ---- scenes ----
 expect 0 "scene push xml" rs scene push "$root/proto/examples/hdistant_seed.xml"
 seed_id=$(cat out)

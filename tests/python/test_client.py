@@ -102,6 +102,48 @@ class TestConnect(Base):
         with self.assertRaises(ValueError):
             rs.connect("127.0.0.1:8350")
 
+    def test_route(self):
+        # route= (and $RAYSWEEP_ROUTE) is sent as X-Raysweep-Shard on every request, so a balancer
+        # keeps all of a client's requests on one replica; a key outside the pattern is refused.
+        import http.server
+        import threading
+        seen = []
+
+        class H(http.server.BaseHTTPRequestHandler):
+            def log_message(self, *a):
+                pass
+
+            def do_GET(self):
+                seen.append(self.headers.get("X-Raysweep-Shard"))
+                body = json.dumps({"name": "raysweepd", "variants": ["mono"], "scenes": []}).encode()
+                self.send_response(200)
+                self.send_header("Content-Type", "application/json")
+                self.send_header("Content-Length", str(len(body)))
+                self.end_headers()
+                self.wfile.write(body)
+
+        srv = http.server.HTTPServer(("127.0.0.1", 0), H)
+        t = threading.Thread(target=srv.serve_forever, daemon=True)
+        t.start()
+        url = f"http://127.0.0.1:{srv.server_address[1]}"
+        try:
+            rs.connect(url, route="shard-a.1")
+            self.assertEqual(seen, ["shard-a.1", "shard-a.1"])  # GET /v1, GET /v1/scenes
+            os.environ["RAYSWEEP_ROUTE"] = "from-env"
+            try:
+                rs.connect(url)
+            finally:
+                del os.environ["RAYSWEEP_ROUTE"]
+            self.assertEqual(seen[2:], ["from-env", "from-env"])
+            rs.connect(url)
+            self.assertEqual(seen[4:], [None, None])
+            for bad in ("two words", "", "x" * 65, "k/1"):
+                with self.assertRaises(ValueError, msg=repr(bad)):
+                    rs.connect(url, route=bad)
+        finally:
+            srv.shutdown()
+            srv.server_close()
+
 
 class TestLoad(Base):
     def test_load_file_json_same_id_as_cli(self):
