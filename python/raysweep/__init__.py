@@ -16,7 +16,7 @@ The manual is docs/python.md; the HTTP API docs/daemon.md.
 
 from ._data import aolp, dolp
 from .client import Client, connect
-from .errors import ConnectionFailed, JobFailed, RaysweepError, UnknownKeyError
+from .errors import ConnectionFailed, JobFailed, RaysweepError, SweepWarning, UnknownKeyError
 from .jobs import Job, as_completed, grid_contexts
 from .scene import Scene, SceneParameters
 
@@ -30,6 +30,7 @@ __all__ = [
     "RaysweepError",
     "Scene",
     "SceneParameters",
+    "SweepWarning",
     "UnknownKeyError",
     "aolp",
     "as_completed",

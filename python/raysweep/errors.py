@@ -14,6 +14,7 @@ __all__ = [
     "UnknownKeyError",
     "ConnectionFailed",
     "JobFailed",
+    "SweepWarning",
     "did_you_mean",
 ]
 
@@ -110,3 +111,18 @@ class JobFailed(RaysweepError):
         self.state = state
         self.failures = list(failures or [])
         super().__init__(detail, **kw)
+
+
+class SweepWarning(UserWarning):
+    """The daemon's warning about a job it accepted: its contexts differ in a coordinate, or in
+    the wavelength, that changes nothing they render (``coordinate_unused``,
+    ``wavelength_unused``; docs/experiments.md#templates). ``code``, ``coordinate`` and
+    ``job`` (the job's id) as the daemon gives them. Raised through :mod:`warnings` at
+    submission, so it shows in a notebook or a script like any warning (``warnings.simplefilter``
+    turns it into an error or silences it)."""
+
+    def __init__(self, message, code=None, coordinate=None, job=None):
+        super().__init__(message)
+        self.code = code
+        self.coordinate = coordinate
+        self.job = job

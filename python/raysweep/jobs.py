@@ -12,9 +12,10 @@ import queue
 import re
 import threading
 import time
+import warnings
 
 from . import _data, _progress
-from .errors import ConnectionFailed, JobFailed, RaysweepError
+from .errors import ConnectionFailed, JobFailed, RaysweepError, SweepWarning
 
 __all__ = ["Job", "as_completed", "grid_contexts"]
 
@@ -101,8 +102,12 @@ def grid_contexts(grid, param_keys=None):
 
 
 def submit(scene, grid=None, contexts=None, spp=None, seed=None, sensors=None, wavelength=None, params=None,
-           quantities=None, variance=False, bands=None, templates=None, idempotency_key=None, bundle=None):
-    """Submit a job on ``scene`` (see :meth:`raysweep.Scene.sweep` for the arguments); a :class:`Job`."""
+           quantities=None, variance=False, bands=None, templates=None, idempotency_key=None, bundle=None,
+           _stacklevel=3):
+    """Submit a job on ``scene`` (see :meth:`raysweep.Scene.sweep` for the arguments); a :class:`Job`.
+
+    The job's warnings are raised as :class:`~raysweep.SweepWarning` (``_stacklevel``: the
+    frame they name, the caller of ``Scene.submit`` or ``Scene.sweep``)."""
     from .scene import _encode_values
     if (grid is None) == (contexts is None):
         raise TypeError("give either grid={NAME: values} or contexts=[{...}, ...]")
@@ -155,6 +160,14 @@ def submit(scene, grid=None, contexts=None, spp=None, seed=None, sensors=None, w
         status = scene._http.json("POST", f"{scene._path}/jobs", body, headers=headers, timeout=None)
     except RaysweepError as e:
         raise scene._suggest(e) from None
+    # A sweep that changes nothing along an axis is said at once, not left in the
+    # dataset's attributes: the job's warnings as Python warnings (stacklevel: the
+    # caller of sweep() or submit()).
+    for w in status.get("warnings") or []:
+        if isinstance(w, dict):
+            warnings.warn(SweepWarning(f"job {status.get('id')}: {w.get('code')} ({w.get('coordinate')}): "
+                                       f"{w.get('detail')}", code=w.get("code"), coordinate=w.get("coordinate"),
+                                       job=status.get("id")), stacklevel=_stacklevel)
     return Job(scene.client, status, scene=scene)
 
 

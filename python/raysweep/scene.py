@@ -192,7 +192,7 @@ class Scene:
         job = None
         try:
             with _deferred_interrupt() as interrupted:
-                job = self.submit(grid=grid, contexts=contexts, **options)
+                job = self.submit(grid=grid, contexts=contexts, _stacklevel=4, **options)
             if interrupted:
                 raise KeyboardInterrupt
             return job.result(timeout=timeout, progress=progress)

@@ -24,6 +24,7 @@ import sys
 import tempfile
 import time
 import unittest
+import warnings
 
 import numpy as np
 
@@ -651,6 +652,28 @@ class TestJobs(Base):
             job.result()
         self.assertEqual(cm.exception.state, "cancelled")
         self.assertFalse(job.cancel(), "an ended job cannot be cancelled")
+
+    def test_sweep_warnings(self):
+        # A sweep whose axis changes nothing (no template reads 'sza') says so at once, as a
+        # SweepWarning naming the caller's line, not only in the dataset's attributes.
+        scene = self.plate(0.48)
+        with self.assertWarns(rs.SweepWarning) as cm:
+            ds = scene.sweep(grid={"sza": [0, 60]}, progress=False)
+        w = cm.warning
+        self.assertEqual((w.code, w.coordinate), ("coordinate_unused", "sza"))
+        self.assertIn("coordinate_unused (sza)", str(w))
+        self.assertEqual(os.path.basename(cm.filename), os.path.basename(__file__))
+        self.assertIn("coordinate_unused", ds.attrs["warnings"])
+        with self.assertWarns(rs.SweepWarning) as cm:
+            job = scene.submit(grid={"sza": [0, 60]})
+        self.assertEqual(os.path.basename(cm.filename), os.path.basename(__file__))
+        self.assertEqual(cm.warning.job, job.id)
+        job.wait(timeout=60)
+        # With the template that reads it: no warning.
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", rs.SweepWarning)
+            scene.sweep(grid={"sza": [0, 60]}, templates={"sun.direction": {"sun": {"zenith": "sza", "azimuth": 0}}},
+                        progress=False)
 
     def test_failed_renders_say_why(self):
         # A sun below the horizon has no horizontal irradiance to divide brf by: the daemon
