@@ -16,6 +16,11 @@ const cmdline_opt cli_opts_render[] = {
     {"--seed", "N", false, "sampler seed (default 0)"},
     {"--wavelength", "NM", false, "wavelength in nm (mono variant; default 550)"},
     {"--set", "KEY=VALUE", true, "parameter override for this render only (VALUE is JSON)"},
+    {"--coord", "NAME=VALUE", true,
+     "a coordinate the scene's (or --templates') templates render this render's overrides from, e.g. "
+     "--coord sza=30 (docs/experiments.md#templates)"},
+    {"--templates", "FILE.json|-|JSON", false,
+     "templates for this render, {KEY: template}: a file, - or the JSON"},
     {"--timeout", "S", false, "seconds the server may spend (exit 5 past it)"},
     {"--quantities", "LIST", false, "comma-separated, of radiance, brdf, brf: adds brdf and brf channels"},
     {"--variance", NULL, false, "adds radiance_stderr channels (standard error of each pixel's mean)"},
@@ -198,6 +203,33 @@ int cmd_render(cli_ctx *ctx, const cmdline_args *a) {
     cJSON *map;
     if ((rc = cli_build_param_map(ctx, "--set", sets, n_sets, &map))) goto out;
     cJSON_AddItemToObject(req, "params", map);
+  }
+  size_t n_coords;
+  const char *const *coords = cmdline_get_all(a, "--coord", &n_coords);
+  cJSON *co = n_coords ? cJSON_AddObjectToObject(req, "coords") : NULL;
+  for (size_t i = 0; i < n_coords; i++) {
+    const char *eq = strchr(coords[i], '=');
+    if (!eq || eq == coords[i] || !cli_parse_double(eq + 1, &d)) {
+      rc = cli_usage(ctx, "--coord needs NAME=NUMBER (got '%s')", coords[i]);
+      goto out;
+    }
+    char name[72];
+    snprintf(name, sizeof name, "%.*s", (int)(eq - coords[i] < 64 ? eq - coords[i] : 64), coords[i]);
+    if (cJSON_GetObjectItemCaseSensitive(co, name)) {
+      rc = cli_usage(ctx, "--coord %s given twice", name);
+      goto out;
+    }
+    cJSON_AddNumberToObject(co, name, d);
+  }
+  if ((v = cmdline_get(a, "--templates"))) {
+    cJSON *t;
+    if ((rc = cli_json_option(ctx, "--templates", v, &t))) goto out;
+    if (!cJSON_IsObject(t)) {
+      cJSON_Delete(t);
+      rc = cli_usage(ctx, "--templates: a JSON object {KEY: template} (docs/experiments.md#templates)");
+      goto out;
+    }
+    cJSON_AddItemToObject(req, "templates", t);
   }
   char *text = cJSON_PrintUnformatted(req);
   if (!text) {

@@ -41,8 +41,10 @@ static const cli_command commands[] = {
      "update parameters atomically (VALUE is JSON); prints each key's old and new value and the new revision",
      cli_opts_set, 2, (size_t)-1, true, cmd_set},
     {"render", NULL,
-     "ID|FILE [--sensor S] [--spp N] [--seed N] [--wavelength NM] [--set KEY=VALUE]... [--timeout S] "
-     "[--quantities LIST] [--variance] [--exposure EV|auto] [--colormap MAP] -o OUT.exr|.npy|.json|.png",
+     "ID|FILE [--sensor S] [--spp N] [--seed N] [--wavelength NM] [--set KEY=VALUE]... [--coord "
+     "NAME=VALUE]... "
+     "[--templates FILE.json|-|JSON] [--timeout S] [--quantities LIST] [--variance] [--exposure EV|auto] "
+     "[--colormap MAP] -o OUT.exr|.npy|.json|.png",
      "render one context synchronously (format by extension; .json is the film JSON, .png a tone-mapped "
      "quick-look; Ctrl-C stops the render)",
      cli_opts_render, 1, 1, true, cmd_render},

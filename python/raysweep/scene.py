@@ -104,7 +104,7 @@ class Scene:
     # ---- renders and jobs -----------------------------------------------------------------
 
     def render(self, spp=None, seed=0, wavelength=None, sensor=None, quantities=None, variance=False,
-               params=None, timeout=None, xarray=None):
+               params=None, timeout=None, xarray=None, coords=None, templates=None):
         """Render one film synchronously (Mitsuba's ``mi.render(scene, spp=, seed=, sensor=)``).
 
         ``spp``: samples per pixel (default the sensor's sampler's);
@@ -112,7 +112,10 @@ class Scene:
         index (default the first); ``quantities``: planes beyond radiance
         (``["brf"]``, ``["brdf", "brf"]``); ``variance``: add
         ``radiance_stderr``; ``params``: overrides for this render only;
-        ``timeout``: seconds, after which the daemon stops the render (504).
+        ``timeout``: seconds, after which the daemon stops the render (504);
+        ``coords``: the render's coordinates (``{"sza": 30}``), from which the
+        scene's templates and ``templates`` (this render's, ``{key: template}``)
+        render its overrides, as for a sweep's context (docs/experiments.md).
 
         Returns an ``xarray.DataArray`` over (y, x, channel) with the viewing
         angles as coordinates when xarray is installed (``xarray=False``: never),
@@ -134,6 +137,10 @@ class Scene:
             body["params"] = _encode_values(params)
         if timeout is not None:
             body["timeout_s"] = float(timeout)
+        if coords:
+            body["coords"] = {str(k): _number(v, f"coords[{k!r}]") for k, v in dict(coords).items()}
+        if templates:
+            body["templates"] = dict(templates)
         try:
             film = self._http.json("POST", self._path + ":render", body, timeout=None)
         except RaysweepError as e:
@@ -433,3 +440,12 @@ class SceneParameters:
             rows.append(f" {mark} {k:<{width}}  {e.get('type', ''):<9} {e.get('class', ''):<9} "
                         f"{text[:60]}")
         return "\n".join(rows) + "\n]"
+
+
+def _number(v, what):
+    """A coordinate's value as a JSON number (numpy scalars too); a TypeError naming it otherwise."""
+    if getattr(v, "ndim", None) == 0:
+        v = v.item()
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise TypeError(f"{what} must be a number, not {type(v).__name__}")
+    return v

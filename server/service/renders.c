@@ -12,6 +12,7 @@
 #include "buf.h"
 #include "rsw_sha256.h"
 #include "service_internal.h"
+#include "templates.h"
 
 bool svc_find_sensor(const scene *sc, const char *name, size_t *index) {
   return kapi_find_sensor(sc, name, index);
@@ -415,13 +416,54 @@ rsw_status svc_render_locked(service *svc, resident *r, const render_spec *rs, s
   return st;
 }
 
+/* A render's coords and templates: the scene's templates and the
+ * request's (req_tmpl) compiled, every coordinate read by one of them
+ * (else a 422 at /coords/NAME: a misspelt coordinate would render the
+ * document's values), coords.wavelength checked against the request's
+ * wavelength (wl_field) and taken as the wavelength when there is none,
+ * and the templates rendered into *rendered (a copy of the request's
+ * params, which win), which rs->overrides then points at. */
+static rsw_status render_templates(const resident *r, const cJSON *coords, const cJSON *req_tmpl,
+                                   const cJSON *wl_field, render_spec *rs, tmpl_set **ts, cJSON **rendered,
+                                   svc_error *e) {
+  const scene *sc = r->sc;
+  rsw_status st = tmpl_compile(sc, r->templates, "/scene/templates", req_tmpl, rs->overrides, ts, e);
+  if (st) return st;
+  const cJSON *cw = coords ? cJSON_GetObjectItemCaseSensitive(coords, "wavelength") : NULL;
+  if (cw && (st = tmpl_check_coord_wavelength(sc, wl_field, cw, "", e))) return st;
+  if (cw && !wl_field) rs->wavelength = cw->valuedouble;
+  for (const cJSON *c = coords ? coords->child : NULL; c; c = c->next) {
+    if (strcmp(c->string, "wavelength") == 0) continue;
+    if (!*ts || !tmpl_uses_coord(*ts, c->string)) {
+      char ptr[300];
+      snprintf(ptr, sizeof ptr, "/coords/%.280s", c->string);
+      const char *why = !r->templates && !req_tmpl ? "the scene has no templates, and the request gives none"
+                        : rs->overrides && rs->overrides->child
+                            ? "nor does one whose parameter the request's params set: explicit values win"
+                            : "the templates read other coordinates";
+      return svc_fail(e, RSW_ERR_UNUSED_PROPERTY, ptr,
+                      "no template reads the coordinate '%s' (%s): the render would not depend on it",
+                      c->string, why);
+    }
+  }
+  if (!*ts) return RSW_OK;
+  *rendered = rs->overrides ? cJSON_Duplicate(rs->overrides, true) : cJSON_CreateObject();
+  if (!*rendered) return svc_fail(e, RSW_ERR_NOMEM, "/coords", "out of memory");
+  double wl = sc->variant != VARIANT_MONO ? 0 : rs->wavelength > 0 ? rs->wavelength : 550;
+  st = tmpl_render(*ts, sc, coords, wl, *rendered, "", e);
+  if (!st) rs->overrides = *rendered;
+  return st;
+}
+
 rsw_status service_render(service *svc, const char *id, const char *body, size_t len,
                           const atomic_int *cancel, svc_film *out, svc_error *e) {
   if (!service_ready(svc)) return svc_fail(e, RSW_ERR_UNAVAILABLE, "", "the server is shutting down");
   resident *r = svc_scene_acquire(svc, id);
   if (!r) return svc_no_scene(e, id);
   memset(out, 0, sizeof *out);
-  cJSON *j = NULL;
+  cJSON *j = NULL, *rendered = NULL;
+  const cJSON *coords = NULL, *req_tmpl = NULL, *wl_field = NULL;
+  tmpl_set *ts = NULL;
   render_spec rs = {.seed = 0, .cancel = cancel};
   rsw_status st = svc_parse_body(body, len, &j, e);
   if (!st && !cJSON_IsObject(j)) st = svc_fail(e, RSW_ERR_TYPE, "", "the body must be a JSON object");
@@ -452,7 +494,18 @@ rsw_status service_render(service *svc, const char *id, const char *body, size_t
       if (!cJSON_IsNumber(k) || !(k->valuedouble > 0) || !isfinite(k->valuedouble))
         st = svc_fail(e, RSW_ERR_INVALID, ptr, "wavelength must be a positive number of nm");
       else
-        rs.wavelength = k->valuedouble;
+        rs.wavelength = k->valuedouble, wl_field = k;
+    } else if (strcmp(k->string, "coords") == 0) {
+      if (!cJSON_IsObject(k))
+        st = svc_fail(e, RSW_ERR_TYPE, ptr,
+                      "coords must be an object {name: value} (the templates' coordinates)");
+      else
+        coords = k;
+    } else if (strcmp(k->string, "templates") == 0) {
+      if (!cJSON_IsObject(k))
+        st = svc_fail(e, RSW_ERR_TYPE, ptr, "templates must be an object {key: template}");
+      else
+        req_tmpl = k;
     } else if (strcmp(k->string, "params") == 0) {
       if (!cJSON_IsObject(k))
         st = svc_fail(e, RSW_ERR_TYPE, ptr, "params must be an object {key: value}");
@@ -470,11 +523,16 @@ rsw_status service_render(service *svc, const char *id, const char *body, size_t
     } else {
       st = svc_fail(
           e, RSW_ERR_UNUSED_PROPERTY, ptr,
-          "unknown field '%s' (expected sensor, spp, seed, wavelength, params, timeout_s, quantities, "
-          "variance)",
+          "unknown field '%s' (expected sensor, spp, seed, wavelength, params, coords, templates, timeout_s, "
+          "quantities, variance)",
           k->string);
     }
   }
+  /* coords (and the request's templates): the render is a context whose
+   * templates, the scene's and the request's, render into its overrides
+   * as a job's do (docs/experiments.md#templates); explicit params win. */
+  if (!st && (coords || req_tmpl))
+    st = render_templates(r, coords, req_tmpl, wl_field, &rs, &ts, &rendered, e);
   if (!st && r->sc->n_sensors && (rs.quantities || rs.variance))
     st = svc_check_planes(r->sc, rs.sensor_index, rs.spp, rs.quantities, rs.variance, "/quantities",
                           "/variance", e);
@@ -502,7 +560,20 @@ rsw_status service_render(service *svc, const char *id, const char *body, size_t
     if (!st) svc->contexts_rendered++;
     pthread_mutex_unlock(&svc->lock);
     if (!st) snprintf(out->context, sizeof out->context, "render");
+    /* A value a template rendered that the parameter refuses: the
+     * template is named, as for a job. */
+    char tp[300];
+    if (st && ts && e->key[0] &&
+        !(j && cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(j, "params"), e->key)) &&
+        tmpl_origin(ts, e->key, tp, sizeof tp)) {
+      char msg[sizeof e->err.msg];
+      memcpy(msg, e->err.msg, sizeof msg);
+      snprintf(e->err.where, sizeof e->err.where, "%.250s", tp);
+      snprintf(e->err.msg, sizeof e->err.msg, "rendered for /coords: %.700s", msg);
+    }
   }
+  tmpl_free(ts);
+  cJSON_Delete(rendered);
   cJSON_Delete(j);
   svc_scene_release(svc, r);
   return st;

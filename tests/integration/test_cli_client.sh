@@ -260,6 +260,19 @@ expect 1 "sweep --templates unknown key" rs sweep sunplate.xml --grid sza=0 -o t
   --templates '{"sun.directio": {"sun": {"zenith": "sza", "azimuth": 0}}}'
 contains "sweep --templates unknown key: the daemon's pointer" err "/templates/sun.directio"
 contains "sweep --templates unknown key: did you mean" err "did you mean: sun.direction"
+# render --coord NAME=VALUE (and --templates): the templates render the
+# render's overrides, as a job context's (a render took no coords).
+expect 0 "render --coord" rs render sunplate.json --coord sza=60 -o coord.json
+py "render --coord: the sun at zenith 60" 'import json, math; v = json.load(open("coord.json"))["data"][0]; assert abs(v - 0.5 * 0.5 / math.pi) < 1e-6, v'
+expect 0 "render --coord --templates" rs render sunplate.xml --coord vza=60 -o coordt.json \
+  --templates '{"sun.direction": {"sun": {"zenith": "vza", "azimuth": 0}}}'
+py "render --coord --templates: the sun at zenith 60" 'import json, math; v = json.load(open("coordt.json"))["data"]; assert all(abs(c - 0.5 * 0.5 / math.pi) < 1e-6 for c in v), v'
+expect 1 "render --coord that no template reads" rs render sunplate.xml --coord sza=60 -o coordx.json
+contains "render --coord unread: the pointer" err "/coords/sza"
+expect 2 "render --coord without a number" rs render sunplate.json --coord sza=high -o coordx.json
+contains "render --coord: says what it needs" err "--coord needs NAME=NUMBER"
+[ ! -e coordx.json ] && ok || bad "a refused render wrote coordx.json"
+
 # job submit: a JobRequest as the daemon takes it, here with bands (which
 # sweep's options do not carry), then job watch and fetch -o FILE.nc. The
 # plate's reflectance is a table over the wavelength: a band's radiance is

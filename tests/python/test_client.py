@@ -418,6 +418,26 @@ def stokes_dict(p=0.6, chi=30.0):
             "sky": {"type": "polarized_sky", "polarization": p, "polarization_angle": chi}}
 
 
+class TestRenderCoords(Base):
+    def test_render_coords(self):
+        # A render's coords drive the scene's templates (and the render's own): the plate under a
+        # sun at zenith sza gives rho cos(sza) / pi; a coordinate no template reads is refused.
+        d = plate_dict(0.46)
+        d["templates"] = {"sun.direction": {"sun": {"zenith": "sza", "azimuth": 0}}}
+        scene = self.client.load_dict(d)
+        a = scene.render(coords={"sza": np.float64(60)}, xarray=False)
+        self.assertAlmostEqual(float(a.ravel()[0]), 0.46 * 0.5 / math.pi, delta=1e-6)
+        plain = self.plate(0.46)
+        b = plain.render(coords={"vza": 60}, templates={"sun.direction": {"sun": {"zenith": "vza", "azimuth": 0}}},
+                         xarray=False)
+        self.assertAlmostEqual(float(b.ravel()[0]), 0.46 * 0.5 / math.pi, delta=1e-6)
+        with self.assertRaises(rs.RaysweepError) as cm:
+            plain.render(coords={"sza": 60})
+        self.assertEqual(cm.exception.pointer, "/coords/sza")
+        with self.assertRaises(TypeError):
+            scene.render(coords={"sza": "sixty"})
+
+
 @unittest.skipUnless(os.environ.get("RSW_STOKES"), "needs a daemon with tests/plugins (RSW_STOKES=1)")
 class TestStokes(Base):
     """Stokes films (docs/polarization.md): every escaped ray sees DoLP p and AoLP chi exactly."""

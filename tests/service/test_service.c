@@ -89,6 +89,85 @@ static void test_render_overrides_restore_base(void) {
   free(id);
 }
 
+/* A render with coords: the scene's templates and the request's render
+ * into its overrides, as for a job's context (a render could take no
+ * coords: a templated scene rendered its document's values). The plate
+ * under a sun at zenith sza: rho cos(sza) / pi. */
+static void test_render_coords(void) {
+  static const char *doc =
+      "{\"type\": \"scene\", \"variant\": \"mono\","
+      " \"templates\": {\"sun.direction\": {\"sun\": {\"zenith\": \"sza\", \"azimuth\": 0}},"
+      "   \"plate.bsdf.reflectance.value\": {\"coord\": \"wavelength\", \"x\": [400, 700], \"y\": [0.2, "
+      "0.8]}},"
+      " \"meter\": {\"type\": \"distant\", \"direction\": [0, 0, -1], \"target\": [0, 0, 0],"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}},"
+      " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1], \"irradiance\": 1.0},"
+      " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}";
+  bool created;
+  char *id = NULL, *json = NULL;
+  svc_error e = {0};
+  REQUIRE(service_scene_post(svc, doc, strlen(doc), false, NULL, &created, &id, &json, &e) == RSW_OK,
+          "post: %s", e.err.msg);
+  free(json);
+  const double pi = 3.14159265358979323846;
+  struct {
+    const char *body;
+    double want;
+  } ok[] = {
+      /* the sun from sza; the reflectance table at the render's wavelength (550: 0.5) */
+      {"{\"coords\": {\"sza\": 60}, \"spp\": 4}", 0.5 * 0.5 / pi},
+      /* coords.wavelength is the render's wavelength */
+      {"{\"coords\": {\"sza\": 0, \"wavelength\": 700}, \"spp\": 4}", 0.8 / pi},
+      /* the request's params win over the scene's template */
+      {"{\"coords\": {\"sza\": 60}, \"params\": {\"plate.bsdf.reflectance.value\": 0.3}, \"spp\": 4}",
+       0.3 * 0.5 / pi},
+      /* the request's template replaces the scene's for its key */
+      {"{\"coords\": {\"sza\": 60, \"vza\": 0}, \"spp\": 4, \"templates\": {\"sun.direction\": {\"sun\": "
+       "{\"zenith\": \"vza\", \"azimuth\": 0}}}}",
+       0.5 / pi},
+  };
+  for (size_t i = 0; i < sizeof ok / sizeof ok[0]; i++) {
+    svc_film f;
+    e = (svc_error){0};
+    rsw_status st = service_render(svc, id, ok[i].body, strlen(ok[i].body), NULL, &f, &e);
+    CHECK(st == RSW_OK, "%s: %s at %s", ok[i].body, e.err.msg, e.err.where);
+    if (st) continue;
+    CHECK_REL(f.img.data[0], ok[i].want, 1e-5);
+    svc_film_free(&f);
+  }
+  struct {
+    const char *body, *where, *says;
+  } bad[] = {
+      {"{\"coords\": {\"sz\": 60}}", "/coords/sz", "no template reads the coordinate 'sz'"},
+      {"{\"coords\": {\"sza\": 200}}", "/coords/sza", "outside [0, 180]"},
+      {"{\"coords\": {}}", "/coords/sza", "sza"},
+      {"{\"coords\": {\"sza\": 0, \"wavelength\": 700}, \"wavelength\": 500}", "/coords/wavelength",
+       "differs"},
+      {"{\"coords\": [60]}", "/coords", "coords must be an object"},
+      {"{\"coords\": {\"sza\": 10}, \"templates\": {\"sun.direction\": {\"value\": [0, 0, 0]}}}",
+       "/templates/sun.direction", "rendered for /coords"},
+      {"{\"coords\": {\"sza\": 10}, \"templates\": {\"sun.directio\": {\"value\": [0, 0, -1]}}}",
+       "/templates/sun.directio", "sun.direction"},
+  };
+  for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+    svc_film f;
+    e = (svc_error){0};
+    rsw_status st = service_render(svc, id, bad[i].body, strlen(bad[i].body), NULL, &f, &e);
+    CHECK(st != RSW_OK && strcmp(e.err.where, bad[i].where) == 0 &&
+              (strstr(e.err.msg, bad[i].says) || strcmp(e.candidates[0], bad[i].says) == 0),
+          "%s: %s: %s at %s", bad[i].body, rsw_status_name(st), e.err.msg, e.err.where);
+    if (!st) svc_film_free(&f);
+  }
+  /* Without coords a templated scene renders its document's values, as before. */
+  svc_film f;
+  e = (svc_error){0};
+  const char *plain = "{\"spp\": 4}";
+  REQUIRE(service_render(svc, id, plain, strlen(plain), NULL, &f, &e) == RSW_OK, "plain: %s", e.err.msg);
+  CHECK_REL(f.img.data[0], 0.5 / pi, 1e-5);
+  svc_film_free(&f);
+  free(id);
+}
+
 /* A sensor that names nothing: the answer names the closest id and the
  * scene's sensors (it said only "no sensor 'metr' in the scene"), in a
  * render and in a job's context. */
@@ -304,6 +383,7 @@ int main(void) {
   RSW_TEST_RUN(test_scene_ids);
   RSW_TEST_RUN(test_render_overrides_restore_base);
   RSW_TEST_RUN(test_unknown_sensor);
+  RSW_TEST_RUN(test_render_coords);
   RSW_TEST_RUN(test_patch_revisions);
   RSW_TEST_RUN(test_job_spectral_loop);
   RSW_TEST_RUN(test_patch_search_key_then_override_by_path);
