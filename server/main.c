@@ -31,6 +31,7 @@
 #include "raysweep/version.h"
 #include "rsw_file.h"
 #include "serve.h"
+#include "service/templates.h"
 
 #define MAX_DEFINES 256
 #define MAX_SETS    1024
@@ -74,7 +75,20 @@ static bool parse_pos_double(const char *s, double *out) {
   return true;
 }
 
-static int apply_sets(const char *cmd, scene *sc, const char *const *sets, size_t n);
+/* A finite number, the whole of s. */
+static bool parse_double(const char *s, double *out) {
+  if (!s || !*s) return false;
+  char *end;
+  errno = 0;
+  double v = strtod(s, &end);
+  if (errno || *end || !isfinite(v)) return false;
+  *out = v;
+  return true;
+}
+
+static int apply_sets(const char *cmd, const char *what, scene *sc, const char *const *sets, size_t n);
+struct render_req;
+static int apply_coords(const struct render_req *r, const char *scene_path, scene *sc);
 
 /* A command's option values, one at a time, in table order: o is the
  * option, typed the name as the user wrote it, val its value (NULL: the
@@ -178,7 +192,9 @@ enum {
   R_SET,
   R_PLUGIN_DIR,
   R_STATS,
-  R_DEFINE
+  R_DEFINE,
+  R_COORD,
+  R_TEMPLATES
 };
 static const cmdline_opt render_cmd_opts[] = {
     [R_OUT] = {"-o", "OUT"},
@@ -198,22 +214,28 @@ static const cmdline_opt render_cmd_opts[] = {
     [R_PLUGIN_DIR] = {"--plugin-dir", "DIR"},
     [R_STATS] = {"--stats"},
     [R_DEFINE] = {"-D", "name=value", CMDLINE_REPEAT | CMDLINE_ATTACHED},
+    [R_COORD] = {"--coord", "NAME=VALUE", CMDLINE_REPEAT},
+    [R_TEMPLATES] = {"--templates", "FILE.json|-|JSON"},
     {NULL},
 };
 
 /* What raysweepd render was asked. */
-typedef struct render_req {
+typedef struct render_req render_req;
+struct render_req {
   const char *out_path, *sensor_id, *variant_name, *plugin_dir;
   scene_define defines[MAX_DEFINES];
   size_t n_defines;
   const char *sets[MAX_SETS];
   size_t n_sets;
+  const char *coords[MAX_SETS]; /* --coord NAME=VALUE */
+  size_t n_coords;
+  const char *templates; /* --templates: a file, - or the JSON */
   unsigned long long spp, seed, threads;
   double wavelength;
   unsigned quantities;
   bool variance, stats;
   png_look look;
-} render_req;
+};
 
 static int render_value(void *req, const cmdline_opt *o, const char *typed, const char *val) {
   render_req *r = req;
@@ -285,6 +307,19 @@ static int render_value(void *req, const cmdline_opt *o, const char *typed, cons
     if (r->n_sets == MAX_SETS) return usage_error("render", "too many --set (at most %d)", MAX_SETS);
     r->sets[r->n_sets++] = val;
     break;
+  case R_COORD: {
+    const char *eq = val ? strchr(val, '=') : NULL;
+    double d;
+    if (!eq || eq == val || !parse_double(eq + 1, &d))
+      return usage_error("render", "--coord needs NAME=NUMBER (got '%s')", v);
+    if (r->n_coords == MAX_SETS) return usage_error("render", "too many --coord (at most %d)", MAX_SETS);
+    r->coords[r->n_coords++] = val;
+    break;
+  }
+  case R_TEMPLATES:
+    if (!val) return usage_error("render", "%s needs a file, - or the JSON", typed);
+    r->templates = val;
+    break;
   case R_PLUGIN_DIR:
     if (!val) return usage_error("render", "%s needs a directory", typed);
     r->plugin_dir = val;
@@ -347,7 +382,8 @@ static int cmd_render(int argc, char **argv) {
     fprintf(stderr, "raysweepd render: %s\n", rsw_err_format(&err, msg, sizeof msg));
     goto out;
   }
-  if (r.n_sets && apply_sets("render", sc, r.sets, r.n_sets)) goto out;
+  if (r.n_sets && apply_sets("render", "--set", sc, r.sets, r.n_sets)) goto out;
+  if ((r.n_coords || r.templates) && apply_coords(&r, scene_path, sc)) goto out;
   size_t sensor_index = 0;
   if (sensor_id) {
     if (!scene_find_sensor(sc, sensor_id, &sensor_index)) {
@@ -415,7 +451,7 @@ out:
 
 /* Apply --set KEY=VALUE updates (VALUE is JSON) as one atomic update.
  * Returns non-zero after printing the error. */
-static int apply_sets(const char *cmd, scene *sc, const char *const *sets, size_t n) {
+static int apply_sets(const char *cmd, const char *what, scene *sc, const char *const *sets, size_t n) {
   param_update *items = calloc(n, sizeof *items);
   char **keys = calloc(n, sizeof *keys);
   rsw_err err = {0};
@@ -435,20 +471,188 @@ static int apply_sets(const char *cmd, scene *sc, const char *const *sets, size_
     }
     items[i].key = keys[i];
     if (param_value_parse(eq + 1, keys[i], &items[i].value, &err)) {
-      fprintf(stderr, "raysweepd %s: --set %s\n", cmd, rsw_err_format(&err, msg, sizeof msg));
+      fprintf(stderr, "raysweepd %s: %s %s\n", cmd, what, rsw_err_format(&err, msg, sizeof msg));
       rc = 1;
       break;
     }
     parsed = i + 1;
   }
   if (!rc && scene_update(sc, items, n, NULL, &err)) {
-    fprintf(stderr, "raysweepd %s: --set: %s\n", cmd, rsw_err_format(&err, msg, sizeof msg));
+    fprintf(stderr, "raysweepd %s: %s: %s\n", cmd, what, rsw_err_format(&err, msg, sizeof msg));
     rc = 1;
   }
   for (size_t i = 0; i < parsed; i++) param_value_free(&items[i].value);
   for (size_t i = 0; keys && i < n; i++) free(keys[i]);
   free(keys);
   free(items);
+  return rc;
+}
+
+/* A whole file, NUL-terminated (at most 64 MiB); NULL with errno set. */
+static char *read_text(const char *path) {
+  FILE *f = fopen(path, "rb");
+  if (!f) return NULL;
+  size_t cap = 1 << 16, len = 0;
+  char *buf = malloc(cap);
+  while (buf) {
+    if (len + 1 == cap) {
+      char *nb = cap < (64u << 20) ? realloc(buf, cap * 2) : NULL;
+      if (!nb) {
+        free(buf);
+        buf = NULL;
+        errno = cap < (64u << 20) ? ENOMEM : EFBIG;
+        break;
+      }
+      buf = nb, cap *= 2;
+    }
+    size_t got = fread(buf + len, 1, cap - len - 1, f);
+    len += got;
+    if (got == 0) {
+      if (ferror(f)) free(buf), buf = NULL, errno = EIO;
+      break;
+    }
+  }
+  fclose(f);
+  if (buf) buf[len] = '\0';
+  return buf;
+}
+
+/* JSON text from an option: inline (it starts with '{'), - (the standard
+ * input) or a file; NULL after the message. */
+static cJSON *json_option(const char *opt, const char *arg) {
+  const char *p = arg;
+  while (*p == ' ' || *p == '\t' || *p == '\n' || *p == '\r') p++;
+  bool inline_text = *p == '{' || *p == '[', std_in = strcmp(arg, "-") == 0;
+  char *file = NULL;
+  if (!inline_text && !(file = read_text(std_in ? "/dev/stdin" : arg))) {
+    fprintf(stderr, "raysweepd render: %s %s: cannot read it (%s)\n", opt, std_in ? "stdin" : arg,
+            strerror(errno));
+    return NULL;
+  }
+  const char *text = inline_text ? arg : file;
+  const char *end = NULL;
+  cJSON *j = cJSON_ParseWithOpts(text, &end, true);
+  if (!j) {
+    size_t line = 1, col = 1;
+    for (const char *q = text; end && q < end && *q; q++) line += *q == '\n', col = *q == '\n' ? 1 : col + 1;
+    fprintf(stderr, "raysweepd render: %s %s:%zu:%zu: malformed JSON\n", opt,
+            inline_text ? "(inline)"
+            : std_in    ? "stdin"
+                        : arg,
+            line, col);
+  }
+  free(file);
+  return j;
+}
+
+/* --coord and --templates: the document's templates (a JSON scene's
+ * top-level "templates") and --templates' rendered from the coords into
+ * overrides, as the daemon does for a render's coords
+ * (docs/experiments.md#templates); --set keys win (a scene template on one
+ * is dropped, a --templates one refused). Every coordinate must be read by
+ * a template. Returns 0, or 1 after the message. */
+static int apply_coords(const render_req *r, const char *scene_path, scene *sc) {
+  int rc = 1;
+  cJSON *coords = cJSON_CreateObject(), *sets = cJSON_CreateObject(), *req = NULL, *doc = NULL, *out = NULL;
+  tmpl_set *ts = NULL;
+  svc_error e = {0};
+  char **lines = NULL;
+  size_t n = 0;
+  if (!coords || !sets) goto oom;
+  for (size_t i = 0; i < r->n_coords; i++) {
+    const char *eq = strchr(r->coords[i], '=');
+    char name[80];
+    snprintf(name, sizeof name, "%.*s", (int)(eq - r->coords[i] < 72 ? eq - r->coords[i] : 72), r->coords[i]);
+    double d = 0;
+    parse_double(eq + 1, &d); /* (checked when read) */
+    if (cJSON_GetObjectItemCaseSensitive(coords, name)) {
+      fprintf(stderr, "raysweepd render: --coord %s given twice\n", name);
+      goto done;
+    }
+    if (!cJSON_AddNumberToObject(coords, name, d)) goto oom;
+  }
+  for (size_t i = 0; i < r->n_sets; i++) {
+    char key[512];
+    snprintf(key, sizeof key, "%.*s", (int)(strchr(r->sets[i], '=') - r->sets[i]), r->sets[i]);
+    if (!cJSON_GetObjectItemCaseSensitive(sets, key) && !cJSON_AddNullToObject(sets, key)) goto oom;
+  }
+  if (r->templates) {
+    if (!(req = json_option("--templates", r->templates))) goto done;
+    if (!cJSON_IsObject(req)) {
+      fprintf(stderr, "raysweepd render: --templates: a JSON object {KEY: template}\n");
+      goto done;
+    }
+  }
+  /* A JSON scene's own templates (an XML scene has none). */
+  char *text = read_text(scene_path);
+  if (text) {
+    doc = cJSON_Parse(text);
+    free(text);
+  }
+  const cJSON *doc_tmpl = cJSON_IsObject(doc) ? cJSON_GetObjectItemCaseSensitive(doc, "templates") : NULL;
+  char ptr[600];
+  snprintf(ptr, sizeof ptr, "%.500s#/templates", scene_path);
+  rsw_status st = tmpl_compile(sc, doc_tmpl, ptr, req, sets, &ts, &e);
+  const cJSON *cw = cJSON_GetObjectItemCaseSensitive(coords, "wavelength");
+  if (!st && cw && r->wavelength > 0 && cw->valuedouble != r->wavelength) {
+    fprintf(stderr, "raysweepd render: --coord wavelength=%g differs from --wavelength %g\n", cw->valuedouble,
+            r->wavelength);
+    goto done;
+  }
+  for (const cJSON *c = coords->child; !st && c; c = c->next)
+    if (strcmp(c->string, "wavelength") != 0 && (!ts || !tmpl_uses_coord(ts, c->string))) {
+      fprintf(stderr,
+              "raysweepd render: --coord %s: no template reads it (%s): the render would not depend on it\n",
+              c->string,
+              doc_tmpl || req ? "the templates read other coordinates, or --set gives their value"
+                              : "the scene has no templates, and --templates gives none");
+      goto done;
+    }
+  double wl = sc->variant != VARIANT_MONO ? 0
+              : cw                        ? cw->valuedouble
+              : r->wavelength > 0         ? r->wavelength
+                                          : 550;
+  if (!st && ts && !(out = cJSON_CreateObject())) goto oom;
+  if (!st && ts) st = tmpl_render(ts, sc, coords, wl, out, "", &e);
+  if (st) {
+    const char *w = e.err.where;
+    bool coord = strncmp(w, "/coords/", 8) == 0;
+    fprintf(stderr, "raysweepd render: %s%s: %s\n", coord ? "--coord " : "",
+            coord  ? w + 8
+            : w[0] ? w
+                   : "--coord",
+            e.err.msg);
+    goto done;
+  }
+  /* The rendered overrides as KEY=JSON, applied as --set's are. */
+  n = (size_t)cJSON_GetArraySize(out);
+  lines = calloc(n ? n : 1, sizeof *lines);
+  if (!lines) goto oom;
+  size_t k = 0;
+  for (const cJSON *v = out ? out->child : NULL; v; v = v->next, k++) {
+    char *val = cJSON_PrintUnformatted(v);
+    size_t sz = strlen(v->string) + (val ? strlen(val) : 0) + 2;
+    lines[k] = val ? malloc(sz) : NULL;
+    if (!lines[k]) {
+      free(val);
+      goto oom;
+    }
+    snprintf(lines[k], sz, "%s=%s", v->string, val);
+    free(val);
+  }
+  rc = n ? apply_sets("render", "--coord (a template's value)", sc, (const char *const *)lines, n) : 0;
+  goto done;
+oom:
+  fprintf(stderr, "raysweepd render: out of memory\n");
+done:
+  for (size_t i = 0; lines && i < n; i++) free(lines[i]);
+  free(lines);
+  tmpl_free(ts);
+  cJSON_Delete(coords);
+  cJSON_Delete(sets);
+  cJSON_Delete(req);
+  cJSON_Delete(doc);
+  cJSON_Delete(out);
   return rc;
 }
 
@@ -609,7 +813,9 @@ static int cmd_version(int argc, char **argv) {
 
 static const command commands[] = {
     {"render",
-     "render SCENE [-D name=value]... [--set KEY=VALUE]... [--sensor ID] [--spp N] [--seed S] "
+     "render SCENE [-D name=value]... [--set KEY=VALUE]... [--coord NAME=VALUE]... [--templates "
+     "FILE.json|-|JSON] "
+     "[--sensor ID] [--spp N] [--seed S] "
      "[--wavelength NM] [--threads N] [--isa auto|avx512|avx2|sse2|generic] [--variant "
      "mono|rgb|mono_polarized|rgb_polarized] "
      "[--plugin-dir DIR] "
@@ -622,6 +828,9 @@ static const command commands[] = {
      "                      sends them), .png a tone-mapped 8-bit quick-look; any other is refused\n"
      "  -D name=value       sets an XML $name parameter (not for JSON scenes)\n"
      "  --set KEY=VALUE     a parameter update after loading; VALUE is JSON (all --set form one update)\n"
+     "  --coord NAME=VALUE  a coordinate the scene's templates (a JSON scene's \"templates\") and\n"
+     "                      --templates' render overrides from, as the daemon's render coords\n"
+     "  --templates T       templates for this render, {KEY: template}: a file, - or the JSON\n"
      "  --sensor ID         a sensor id or index (default: the first sensor)\n"
      "  --spp N             samples per pixel (default: the sensor's sampler sample_count)\n"
      "  --seed S            an integer >= 0, added to the sampler's seed (default 0)\n"

@@ -199,6 +199,58 @@ static void test_defines_and_sensor(void) {
   exr_image_free(&img);
 }
 
+/* --coord NAME=VALUE (and --templates): the scene's templates and the
+ * option's render the overrides, as the daemon does for a render's coords;
+ * the plate under a sun at zenith 60 reads 0.5 cos 60 / pi. */
+static void test_coords(void) {
+  char scene[128], out[128], err[4096];
+  snprintf(scene, sizeof scene, "%s/sun.json", tmpdir);
+  snprintf(out, sizeof out, "%s/sun.exr", tmpdir);
+  write_file(
+      scene,
+      "{\"type\": \"scene\", \"variant\": \"mono\","
+      " \"templates\": {\"sun.direction\": {\"sun\": {\"zenith\": \"sza\", \"azimuth\": 0}}},"
+      " \"s\": {\"type\": \"distant\", \"direction\": [0, 0, -1], \"target\": [0, 0, 0],"
+      "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"component_format\": \"float32\"}},"
+      " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1]},"
+      " \"p\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}");
+  const double want = 0.5 * 0.5 / 3.14159265358979323846;
+  exr_image img;
+  rsw_err e = {0};
+  const char *a1[] = {"render", scene, "--coord", "sza=60", "--spp", "4", "-o", out, NULL};
+  int rc = run(err, sizeof err, a1);
+  REQUIRE(rc == 0, "exit %d: %s", rc, err);
+  REQUIRE(exr_read_image(out, &img, &e) == RSW_OK, "read back: %s", e.msg);
+  CHECK(fabs(img.data[0] - want) < 1e-6, "--coord sza=60 reads %g, want %g", img.data[0], want);
+  exr_image_free(&img);
+  /* --templates of the render's own (a key of the scene's replaced). */
+  const char *a2[] = {"render",      scene,
+                      "--coord",     "sza=0",
+                      "--coord",     "vza=60",
+                      "--spp",       "4",
+                      "--templates", "{\"sun.direction\": {\"sun\": {\"zenith\": \"vza\", \"azimuth\": 0}}}",
+                      "-o",          out,
+                      NULL};
+  rc = run(err, sizeof err, a2);
+  REQUIRE(rc == 0, "exit %d: %s", rc, err);
+  REQUIRE(exr_read_image(out, &img, &e) == RSW_OK, "read back: %s", e.msg);
+  CHECK(fabs(img.data[0] - want) < 1e-6, "--templates on vza=60 reads %g, want %g", img.data[0], want);
+  exr_image_free(&img);
+  struct {
+    const char *coord, *says;
+  } bad[] = {{"sz=60", "--coord sz: no template reads it"},
+             {"sza=200", "--coord sza: 200 degrees lies outside [0, 180]"},
+             {"sza=high", "--coord needs NAME=NUMBER"}};
+  for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+    char never[160];
+    snprintf(never, sizeof never, "%s/never%zu.exr", tmpdir, i);
+    const char *a[] = {"render", scene, "--coord", bad[i].coord, "-o", never, NULL};
+    rc = run(err, sizeof err, a);
+    CHECK(rc != 0 && strstr(err, bad[i].says) && !exists(never), "--coord %s: exit %d: %s", bad[i].coord, rc,
+          err);
+  }
+}
+
 static void test_failure_leaves_no_file(void) {
   char scene[128], out[128], err[4096];
   snprintf(scene, sizeof scene, "%s/oob.json", tmpdir);
@@ -234,6 +286,7 @@ int main(void) {
   RSW_TEST_RUN(test_defines_and_sensor);
   RSW_TEST_RUN(test_isa);
   RSW_TEST_RUN(test_failure_leaves_no_file);
+  RSW_TEST_RUN(test_coords);
   char cmd[128];
   snprintf(cmd, sizeof cmd, "rm -rf %s", tmpdir);
   if (system(cmd)) fprintf(stderr, "could not remove %s\n", tmpdir);
