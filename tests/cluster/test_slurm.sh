@@ -259,7 +259,7 @@ else
 fi
 
 # ---- a failing task: the merge job never runs ----
-if jobs=$("$submit_sh" --shards 2 --out "$tmp/bad" "$scene" --grid nosuchparam=1:2:1 --spp 1 2>"$tmp/err"); then
+if jobs=$("$submit_sh" --shards 2 --out "$tmp/bad" "$scene" --grid no.such.param=1:2:1 --spp 1 2>"$tmp/err"); then
   read -r array2 merge2 <<<"$jobs"
   wait_jobs 120 "$array2" "$merge2" || bad "the failing array did not end within 120 s"
   st=$(job_states "$array2")
