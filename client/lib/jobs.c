@@ -271,24 +271,25 @@ static rsw_status submit_body(rsw_client *c, const char *path, const char *body,
   return s;
 }
 
-/* "/v1/scenes/<escaped id>/jobs" into path (300 bytes). */
-static rsw_status jobs_path(rsw_client *c, const char *scene_id, char path[300]) {
+/* A submission's start: the client's last error cleared, job_id_out
+ * given, and "/v1/scenes/<escaped id>/jobs" into path (300 bytes). */
+static rsw_status submit_start(rsw_client *c, const char *scene_id, const char *job_id_out, char path[300]) {
+  if (!c) return RSW_ERR_INVALID;
+  client_clear_error(c);
   char esc[256];
   if (!scene_id || !client_escape(scene_id, esc, sizeof esc))
     return client_fail(c, RSW_ERR_INVALID, "scene id missing or too long");
+  if (!job_id_out) return client_fail(c, RSW_ERR_INVALID, "job submit: no job_id_out");
   snprintf(path, 300, "/v1/scenes/%s/jobs", esc);
   return RSW_OK;
 }
 
 rsw_status rsw_job_submit(rsw_client *c, const char *scene_id, const rsw_contexts *x,
                           const char *idempotency_key, char job_id_out[40]) {
-  if (!c) return RSW_ERR_INVALID;
-  client_clear_error(c);
   char path[300];
-  rsw_status s = jobs_path(c, scene_id, path);
+  rsw_status s = submit_start(c, scene_id, job_id_out, path);
   if (s) return s;
-  if (!x || !x->n || !job_id_out)
-    return client_fail(c, RSW_ERR_INVALID, "job submit: no contexts or no job_id_out");
+  if (!x || !x->n) return client_fail(c, RSW_ERR_INVALID, "job submit: no contexts");
   char *body = cJSON_PrintUnformatted(x->root);
   if (!body) return client_fail(c, RSW_ERR_NOMEM, "cannot print the job request");
   s = submit_body(c, path, body, idempotency_key, job_id_out);
@@ -298,13 +299,10 @@ rsw_status rsw_job_submit(rsw_client *c, const char *scene_id, const rsw_context
 
 rsw_status rsw_job_submit_json(rsw_client *c, const char *scene_id, const char *request_json,
                                const char *idempotency_key, char job_id_out[40]) {
-  if (!c) return RSW_ERR_INVALID;
-  client_clear_error(c);
   char path[300];
-  rsw_status s = jobs_path(c, scene_id, path);
+  rsw_status s = submit_start(c, scene_id, job_id_out, path);
   if (s) return s;
-  if (!request_json || !job_id_out)
-    return client_fail(c, RSW_ERR_INVALID, "job submit: no request or no job_id_out");
+  if (!request_json) return client_fail(c, RSW_ERR_INVALID, "job submit: no request");
   cJSON *j = cJSON_Parse(request_json);
   bool object = cJSON_IsObject(j);
   cJSON_Delete(j);

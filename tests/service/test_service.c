@@ -54,13 +54,19 @@ static void test_scene_ids(void) {
         rsw_status_http(e2.err.code), e2.err.where);
 }
 
-static char *post_plate(void) {
+/* Post a scene document; its id (owned), or NULL after a failed check. */
+static char *post_doc(const char *doc) {
   bool created;
   char *id = NULL, *json = NULL;
   svc_error e = {0};
-  if (service_scene_post(svc, PLATE, strlen(PLATE), false, NULL, &created, &id, &json, &e)) return NULL;
+  rsw_status st = service_scene_post(svc, doc, strlen(doc), false, NULL, &created, &id, &json, &e);
+  CHECK(st == RSW_OK, "post: %s", e.err.msg);
   free(json);
-  return id;
+  return st ? NULL : id;
+}
+
+static char *post_plate(void) {
+  return post_doc(PLATE);
 }
 
 static void test_render_overrides_restore_base(void) {
@@ -103,12 +109,9 @@ static void test_render_coords(void) {
       "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1}},"
       " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1], \"irradiance\": 1.0},"
       " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.5}}}";
-  bool created;
-  char *id = NULL, *json = NULL;
+  char *id = post_doc(doc);
+  REQUIRE(id, "scene");
   svc_error e = {0};
-  REQUIRE(service_scene_post(svc, doc, strlen(doc), false, NULL, &created, &id, &json, &e) == RSW_OK,
-          "post: %s", e.err.msg);
-  free(json);
   const double pi = 3.14159265358979323846;
   struct {
     const char *body;
@@ -239,12 +242,9 @@ static void test_patch_search_key_then_override_by_path(void) {
       "   \"film\": {\"type\": \"hdrfilm\", \"width\": 1, \"height\": 1, \"component_format\": \"float32\"}},"
       " \"sun\": {\"type\": \"directional\", \"direction\": [0, 0, -1], \"irradiance\": 1.0},"
       " \"plate\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.6}}}";
-  bool created;
-  char *id = NULL, *json = NULL;
+  char *id = post_doc(doc), *json = NULL;
+  REQUIRE(id, "scene");
   svc_error e = {0};
-  REQUIRE(service_scene_post(svc, doc, strlen(doc), false, NULL, &created, &id, &json, &e) == RSW_OK,
-          "post: %s", e.err.msg);
-  free(json);
   static const char *const patches[] = {"{\"texture:bsdf:value\": 0.4}",
                                         "{\"plate.bsdf.reflectance.value\": 0.3}",
                                         "{\"texture:bsdf:value\": 0.35}"};
