@@ -911,7 +911,8 @@ int cmd_sweep(cli_ctx *ctx, const cmdline_args *a) {
       goto out;
     }
   /* Everything the user described is checked: now the directory. */
-  sweep_fingerprint(a, scene, fingerprint);
+  l.templates = o.templates;
+  sweep_fingerprint(a, scene, l.templates, fingerprint);
   sweep_layout was = SWEEP_LAYOUT_DIRS;
   bool resume = o.spread && !cmdline_has(a, "--force") && sweep_spread_resumable(dir, fingerprint, &was);
   if (resume && was != o.layout) {
@@ -939,7 +940,7 @@ int cmd_sweep(cli_ctx *ctx, const cmdline_args *a) {
       goto out;
     }
     scene = scene_id;
-    sweep_fingerprint(a, scene, fingerprint);
+    sweep_fingerprint(a, scene, l.templates, fingerprint);
   }
   if (l.n == 0) {
     /* A shard past the end of a short list: nothing to submit, an empty

@@ -92,6 +92,7 @@ typedef struct sweep_list {
   bool dataset;   /* --format nc: DIR/dataset.nc besides the (JSON) films */
   bool pack;      /* --format dataset: DIR/dataset.nc alone (sweep_pack.c) */
   sweep_layout layout;
+  const char *templates; /* --templates as compact JSON (borrowed), or NULL: part of the fingerprint */
 } sweep_list;
 
 /* One film of the index: its line (owned) and, for merge, the source. */
@@ -237,7 +238,10 @@ bool sweep_flat_context(const char *name, char *out);
 
 /* ---- sweep_manifest.c --------------------------------------------------- */
 
-void sweep_fingerprint(const cmdline_args *a, const char *scene, char out[17]);
+/* The sweep's identity for merge and resume: the scene, the options that
+ * shape its films, a --contexts file's bytes and --templates' JSON
+ * (templates: compact JSON, or NULL). */
+void sweep_fingerprint(const cmdline_args *a, const char *scene, const char *templates, char out[17]);
 /* 0, or -1 when DIR has no sweep.json (errno ENOENT), or a CLI exit code
  * after printing. */
 int manifest_read(const cli_ctx *ctx, const char *dir, sweep_manifest *m);

@@ -22,7 +22,7 @@ static uint64_t fnv1a_str(uint64_t h, const char *s) {
   return fnv1a(h, s ? s : "", s ? strlen(s) : 0);
 }
 
-void sweep_fingerprint(const cmdline_args *a, const char *scene, char out[17]) {
+void sweep_fingerprint(const cmdline_args *a, const char *scene, const char *templates, char out[17]) {
   uint64_t h = 0xcbf29ce484222325ull;
   h = fnv1a_str(h, MANIFEST_FORMAT);
   h = fnv1a_str(h, scene);
@@ -47,6 +47,9 @@ void sweep_fingerprint(const cmdline_args *a, const char *scene, char out[17]) {
   const char *bundle = cmdline_get(a, "--bundle");
   if (!bundle) bundle = "auto";
   if (strcmp(bundle, "1") != 0) h = fnv1a_str(fnv1a_str(h, "--bundle"), bundle);
+  /* --templates by their JSON, not the argument (a file or stdin); only
+   * when given, so that sweeps without them keep their fingerprints */
+  if (templates) h = fnv1a_str(fnv1a_str(h, "--templates"), templates);
   snprintf(out, 17, "%016llx", (unsigned long long)h);
 }
 

@@ -200,7 +200,7 @@ int sweep_run_spread(cli_ctx *ctx, const cmdline_args *a, int k_shards, bool res
    * sorted by context and sensor, sweep.json with that sweep's
    * fingerprint. */
   char fp2[17];
-  sweep_fingerprint(a, res.scene_id, fp2);
+  sweep_fingerprint(a, res.scene_id, l->templates, fp2);
   if ((rc = sweep_write_index(ctx, dir, sink.e, sink.ne))) goto out;
   if ((l->dataset || l->pack) &&
       (rc = sweep_write_dataset(ctx, dir, sink.e, sink.ne, true, l->seed, l->pack ? &pack : NULL)))

@@ -246,6 +246,19 @@ for d in ("tmpl", "tmplf"):
         want = 0.5 * math.cos(math.radians(l["coords"]["sza"])) / math.pi
         assert all(abs(c - want) < 1e-6 for c in v), (d, l, v, want)
 '
+# The templates are part of the sweep's identity: shards swept with other
+# templates are other sweeps, and merge does not join them (it did, and
+# mixed their films).
+sun_v='{"sun.direction": {"sun": {"zenith": "sza", "azimuth": 180}}}'
+for t in 0 1; do
+  expect 0 "sweep --templates shard $t/2" rs -q sweep sunplate.xml --templates "$sun_tmpl" --grid sza=0,30,60 \
+    --spp 4 --bundle 1 --shard $t/2 -o tshard$t
+done
+expect 0 "sweep --templates shard 1/2, other templates" rs -q sweep sunplate.xml --templates "$sun_v" \
+  --grid sza=0,30,60 --spp 4 --bundle 1 --shard 1/2 -o tshard1v
+expect 0 "merge shards of one --templates" rs -q merge tshard0 tshard1 -o tmerged
+expect 6 "merge shards of other --templates" rs -q merge tshard0 tshard1v -o tmerged_bad
+contains "merge of other --templates: says what is missing" err "are missing"
 printf '{\n  "sun.direction": {\n    "sun": {"zenith": sza}\n  }\n}\n' >badtmpl.json
 expect 2 "sweep --templates malformed file" rs sweep sunplate.xml --templates badtmpl.json --grid sza=0,60 -o x
 contains "sweep --templates: names the file, line and column" err "--templates badtmpl.json:3:23: malformed JSON"
