@@ -25,4 +25,19 @@ const char *rsw_open_strerror(int err);
  * temporary file is removed). false with errno set. */
 bool rsw_write_replace(const char *path, const void *data, size_t len);
 
+/* A whole file into memory, NUL-terminated (*len_out, may be NULL: its
+ * length); NULL with errno set. Plain fopen: "/dev/stdin" reads the
+ * standard input. */
+char *rsw_read_file(const char *path, size_t *len_out);
+
+/* Line and column (1-based) of byte offset off (at most text's length) of text. */
+void rsw_line_col(const char *text, size_t off, size_t *line, size_t *col);
+
+struct cJSON;
+/* The JSON value of a command-line option: the text itself when it starts
+ * with '{' or '[', the standard input for "-", else the file it names.
+ * NULL with why[] saying what went wrong, opt and the file (or stdin) and
+ * the line and column of malformed JSON named. Owned: cJSON_Delete. */
+struct cJSON *rsw_json_arg(const char *opt, const char *arg, char *why, size_t cap);
+
 #endif

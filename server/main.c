@@ -488,63 +488,6 @@ static int apply_sets(const char *cmd, const char *what, scene *sc, const char *
   return rc;
 }
 
-/* A whole file, NUL-terminated (at most 64 MiB); NULL with errno set. */
-static char *read_text(const char *path) {
-  FILE *f = fopen(path, "rb");
-  if (!f) return NULL;
-  size_t cap = 1 << 16, len = 0;
-  char *buf = malloc(cap);
-  while (buf) {
-    if (len + 1 == cap) {
-      char *nb = cap < (64u << 20) ? realloc(buf, cap * 2) : NULL;
-      if (!nb) {
-        free(buf);
-        buf = NULL;
-        errno = cap < (64u << 20) ? ENOMEM : EFBIG;
-        break;
-      }
-      buf = nb, cap *= 2;
-    }
-    size_t got = fread(buf + len, 1, cap - len - 1, f);
-    len += got;
-    if (got == 0) {
-      if (ferror(f)) free(buf), buf = NULL, errno = EIO;
-      break;
-    }
-  }
-  fclose(f);
-  if (buf) buf[len] = '\0';
-  return buf;
-}
-
-/* JSON text from an option: inline (it starts with '{'), - (the standard
- * input) or a file; NULL after the message. */
-static cJSON *json_option(const char *opt, const char *arg) {
-  const char *p = arg;
-  while (*p == ' ' || *p == '\t' || *p == '\n' || *p == '\r') p++;
-  bool inline_text = *p == '{' || *p == '[', std_in = strcmp(arg, "-") == 0;
-  char *file = NULL;
-  if (!inline_text && !(file = read_text(std_in ? "/dev/stdin" : arg))) {
-    fprintf(stderr, "raysweepd render: %s %s: cannot read it (%s)\n", opt, std_in ? "stdin" : arg,
-            strerror(errno));
-    return NULL;
-  }
-  const char *text = inline_text ? arg : file;
-  const char *end = NULL;
-  cJSON *j = cJSON_ParseWithOpts(text, &end, true);
-  if (!j) {
-    size_t line = 1, col = 1;
-    for (const char *q = text; end && q < end && *q; q++) line += *q == '\n', col = *q == '\n' ? 1 : col + 1;
-    fprintf(stderr, "raysweepd render: %s %s:%zu:%zu: malformed JSON\n", opt,
-            inline_text ? "(inline)"
-            : std_in    ? "stdin"
-                        : arg,
-            line, col);
-  }
-  free(file);
-  return j;
-}
-
 /* --coord and --templates: the document's templates (a JSON scene's
  * top-level "templates") and --templates' rendered from the coords into
  * overrides, as the daemon does for a render's coords
@@ -577,14 +520,18 @@ static int apply_coords(const render_req *r, const char *scene_path, scene *sc) 
     if (!cJSON_GetObjectItemCaseSensitive(sets, key) && !cJSON_AddNullToObject(sets, key)) goto oom;
   }
   if (r->templates) {
-    if (!(req = json_option("--templates", r->templates))) goto done;
+    char why[1200];
+    if (!(req = rsw_json_arg("--templates", r->templates, why, sizeof why))) {
+      fprintf(stderr, "raysweepd render: %s\n", why);
+      goto done;
+    }
     if (!cJSON_IsObject(req)) {
       fprintf(stderr, "raysweepd render: --templates: a JSON object {KEY: template}\n");
       goto done;
     }
   }
   /* A JSON scene's own templates (an XML scene has none). */
-  char *text = read_text(scene_path);
+  char *text = rsw_read_file(scene_path, NULL);
   if (text) {
     doc = cJSON_Parse(text);
     free(text);

@@ -13,6 +13,7 @@
 
 #include "cmdline.h"
 #include "raysweep/client.h"
+#include "rsw_file.h"
 
 /* Exit codes, documented in `raysweep --help`. */
 enum {
@@ -79,8 +80,6 @@ int cli_report(const cli_ctx *ctx, rsw_status s, const char *what);
 int cli_exit_code(rsw_status s, const rsw_error_info *e);
 
 bool cli_parse_u64(const char *s, unsigned long long max, unsigned long long *out);
-/* A routing key (X-Raysweep-Shard): 1 to 64 of [A-Za-z0-9._-]. */
-bool cli_route_ok(const char *key);
 bool cli_parse_double(const char *s, double *out);
 /* Shortest "%.*g" that reads back as v exactly. buf >= 32 bytes. */
 void cli_format_double(char *buf, size_t n, double v);
@@ -120,8 +119,6 @@ const char *cli_format_media_type(cli_format f);
  * success); returns a CLI exit code after printing. */
 int cli_save_encoded(const cli_ctx *ctx, const void *bytes, size_t len, const char *path);
 
-/* Whole file into memory (NUL-terminated); NULL with errno on failure. */
-char *cli_read_file(const char *path, size_t *len_out);
 /* An option whose value is JSON given inline (it starts with '{' or '['),
  * as a file, or "-" for the standard input: parsed into *out (owned). A usage error (exit 2) names
  * the option, the file and the line and column of malformed JSON. */

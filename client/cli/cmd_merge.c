@@ -19,7 +19,7 @@ const cmdline_opt cli_opts_merge[] = {
 
 static bool same_bytes(const char *a, const char *b) {
   size_t la, lb;
-  char *x = cli_read_file(a, &la), *y = cli_read_file(b, &lb);
+  char *x = rsw_read_file(a, &la), *y = rsw_read_file(b, &lb);
   bool same = x && y && la == lb && memcmp(x, y, la) == 0;
   free(x);
   free(y);
@@ -32,7 +32,7 @@ static int link_or_copy(const char *src, const char *dst) {
   unlink(dst);
   if (link(src, dst) == 0) return 0;
   size_t len;
-  char *data = cli_read_file(src, &len);
+  char *data = rsw_read_file(src, &len);
   if (!data) return -1;
   int rc = cli_write_file_atomic(dst, data, len);
   free(data);

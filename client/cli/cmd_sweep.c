@@ -377,7 +377,7 @@ static int file_leads(const cli_ctx *ctx, const char *text, size_t total, int bu
 static int read_contexts(const cli_ctx *ctx, const char *path, size_t shard_i, size_t shard_n, int bundle,
                          sweep_list *l) {
   size_t len;
-  char *text = cli_read_file(path, &len);
+  char *text = rsw_read_file(path, &len);
   if (!text) return cli_fail(ctx, CLI_IO, "--contexts: cannot read '%s': %s", path, strerror(errno));
   int rc = 0;
   /* First pass: count the contexts so generated ids have their width. */

@@ -193,7 +193,7 @@ static int read_token(const cli_ctx *ctx, const char *token_file, char **out) {
   *out = NULL;
   if (token_file) {
     size_t len;
-    char *t = cli_read_file(token_file, &len);
+    char *t = rsw_read_file(token_file, &len);
     if (!t) return cli_fail(ctx, CLI_IO, "--token-file: cannot read '%s': %s", token_file, strerror(errno));
     while (len && (t[len - 1] == '\n' || t[len - 1] == '\r' || t[len - 1] == ' ' || t[len - 1] == '\t'))
       t[--len] = '\0';
@@ -338,8 +338,6 @@ int main(int argc, char **argv) {
     const char *route_opt = route ? "--route" : "RAYSWEEP_ROUTE";
     if (!route) route = getenv("RAYSWEEP_ROUTE");
     if (route && !*route) route = NULL;
-    if (!rc && route && !cli_route_ok(route))
-      rc = cli_usage(&ctx, "%s '%s': a routing key is 1 to 64 of A-Z a-z 0-9 . _ -", route_opt, route);
     ctx.route = route;
     if (!rc) {
       rsw_client_opts o = {.size = sizeof o,
@@ -347,12 +345,16 @@ int main(int argc, char **argv) {
                            .token = token,
                            .interrupt = &cli_interrupted,
                            .connect_timeout_s = connect_s,
-                           .stall_timeout_s = stall_s,
-                           .route_key = route};
+                           .stall_timeout_s = stall_s};
       rsw_status s = rsw_client_new(&o, &ctx.client);
       if (s)
         rc = cli_fail(&ctx, s == RSW_ERR_INVALID ? CLI_USAGE : CLI_IO, "cannot create a client for '%s': %s",
                       ctx.server_url, rsw_strerror(s));
+      /* (the library's rule for a key, and its own error) */
+      else if (route && (s = rsw_client_set_route(ctx.client, route)))
+        rc = s == RSW_ERR_INVALID
+                 ? cli_usage(&ctx, "%s '%s': a routing key is 1 to 64 of A-Z a-z 0-9 . _ -", route_opt, route)
+                 : cli_fail(&ctx, CLI_IO, "out of memory");
     }
   }
   if (!rc) rc = cmd->run(&ctx, &args);

@@ -208,7 +208,7 @@ int sweep_read_index(const cli_ctx *ctx, const char *dir, size_t input, index_en
   char *path = malloc(pn);
   if (!path) return cli_fail(ctx, CLI_IO, "out of memory");
   snprintf(path, pn, "%s/index.jsonl", dir);
-  char *text = cli_read_file(path, NULL);
+  char *text = rsw_read_file(path, NULL);
   if (!text) {
     int rc = cli_fail(ctx, CLI_IO, "cannot read '%s': %s", path, strerror(errno));
     free(path);

@@ -29,7 +29,7 @@ void sweep_fingerprint(const cmdline_args *a, const char *scene, const char *tem
   const char *file = cmdline_get(a, "--contexts");
   if (file) {
     size_t len = 0;
-    char *text = cli_read_file(file, &len);
+    char *text = rsw_read_file(file, &len);
     h = fnv1a(h, text ? text : "", text ? len : 0);
     free(text);
   }
@@ -85,7 +85,7 @@ int manifest_read(const cli_ctx *ctx, const char *dir, sweep_manifest *m) {
   char *path = sweep_dir_file(dir, MANIFEST_NAME);
   if (!path) return cli_fail(ctx, CLI_IO, "out of memory");
   size_t len;
-  char *text = cli_read_file(path, &len);
+  char *text = rsw_read_file(path, &len);
   if (!text) {
     int e = errno;
     int rc = e == ENOENT ? -1 : cli_fail(ctx, CLI_IO, "cannot read '%s': %s", path, strerror(e));
@@ -352,7 +352,7 @@ int sweep_prepare_output(const cli_ctx *ctx, const char *dir, bool force) {
   size_t removed = 0;
   context_set flat = {0};
   if (has_index) { /* every context the index names */
-    char *text = cli_read_file(index, NULL);
+    char *text = rsw_read_file(index, NULL);
     for (char *s = text, *nl; s && *s; s = nl ? nl + 1 : s + strlen(s)) {
       nl = strchr(s, '\n');
       if (nl) *nl = '\0';

@@ -110,7 +110,7 @@ static int pack_keep(film_pack *p, const char *c, const char *sn, const cJSON *c
 /* Read the spool's records into p; cut a partial last record off. */
 static int spool_read(const cli_ctx *ctx, film_pack *p) {
   size_t len = 0;
-  char *text = cli_read_file(p->spool_path, &len);
+  char *text = rsw_read_file(p->spool_path, &len);
   if (!text)
     return errno == ENOENT ? 0
                            : cli_fail(ctx, CLI_IO, "cannot read '%s': %s", p->spool_path, strerror(errno));

@@ -162,81 +162,10 @@ int cli_split_set(const cli_ctx *ctx, const char *opt, const char *kv, char **ke
 
 /* ---- files ---- */
 
-char *cli_read_file(const char *path, size_t *len_out) {
-  FILE *f = fopen(path, "rb");
-  if (!f) return NULL;
-  size_t cap = 4096, len = 0;
-  char *buf = malloc(cap);
-  while (buf) {
-    if (len + 1 >= cap) {
-      char *nb = realloc(buf, cap * 2);
-      if (!nb) {
-        free(buf);
-        buf = NULL;
-        errno = ENOMEM;
-        break;
-      }
-      buf = nb, cap *= 2;
-    }
-    size_t got = fread(buf + len, 1, cap - len - 1, f);
-    len += got;
-    if (got == 0) {
-      if (ferror(f)) {
-        free(buf);
-        buf = NULL;
-        errno = EIO;
-      }
-      break;
-    }
-  }
-  fclose(f);
-  if (!buf) return NULL;
-  buf[len] = '\0';
-  if (len_out) *len_out = len;
-  return buf;
-}
-
-bool cli_route_ok(const char *key) {
-  size_t n = strspn(key, "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789._-");
-  return n >= 1 && n <= 64 && key[n] == '\0';
-}
-
 int cli_json_option(const cli_ctx *ctx, const char *opt, const char *arg, cJSON **out) {
-  *out = NULL;
-  const char *p = arg;
-  while (*p == ' ' || *p == '\t' || *p == '\n' || *p == '\r') p++;
-  bool inline_text = *p == '{' || *p == '[';
-  char *file = NULL;
-  const char *text = arg;
-  const bool std_in = strcmp(arg, "-") == 0; /* "-": the standard input */
-  if (!inline_text) {
-    file = cli_read_file(std_in ? "/dev/stdin" : arg, NULL);
-    if (!file)
-      return cli_usage(ctx,
-                       "%s %s: cannot read it (%s); give a file, - (the standard input) or the JSON itself",
-                       opt, std_in ? "stdin" : arg, strerror(errno));
-    text = file;
-  }
-  const char *end = NULL;
-  cJSON *j = cJSON_ParseWithOpts(text, &end, true);
-  int rc = 0;
-  if (!j) {
-    /* cJSON points at the byte where it stopped: its line and column */
-    const char *at = end ? end : cJSON_GetErrorPtr();
-    size_t line = 1, col = 1;
-    for (const char *q = text; at && q < at && *q; q++) {
-      if (*q == '\n')
-        line++, col = 1;
-      else
-        col++;
-    }
-    rc = inline_text
-             ? cli_usage(ctx, "%s: malformed JSON at line %zu, column %zu", opt, line, col)
-             : cli_usage(ctx, "%s %s:%zu:%zu: malformed JSON", opt, std_in ? "stdin" : arg, line, col);
-  }
-  free(file);
-  *out = j;
-  return rc;
+  char why[1200];
+  *out = rsw_json_arg(opt, arg, why, sizeof why);
+  return *out ? 0 : cli_usage(ctx, "%s", why);
 }
 
 int cli_write_file_atomic(const char *path, const char *data, size_t len) {

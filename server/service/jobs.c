@@ -315,18 +315,11 @@ static rsw_status check_merged(const scene *sc, const cJSON *m, const cJSON *cp,
     if (st) st = svc_update_error(e, sc, u, n, &err);
   }
   if (st) {
-    char tp[300];
     bool own = cp && cJSON_GetObjectItemCaseSensitive(cp, e->key);
-    if (own) {
+    if (own)
       snprintf(e->err.where, sizeof e->err.where, "%.64s/params/%.180s", ctx_ptr, e->key);
-    } else if (tmpl_origin(ts, e->key, tp, sizeof tp)) {
-      char msg[sizeof e->err.msg];
-      memcpy(msg, e->err.msg, sizeof msg);
-      snprintf(e->err.where, sizeof e->err.where, "%.250s", tp);
-      snprintf(e->err.msg, sizeof e->err.msg, "rendered for %.64s: %.660s", ctx_ptr, msg);
-    } else {
+    else if (!tmpl_blame(ts, ctx_ptr, e))
       snprintf(e->err.where, sizeof e->err.where, "/params/%.240s", e->key);
-    }
   }
   svc_free_updates(u, n);
   return st;

@@ -562,15 +562,9 @@ rsw_status service_render(service *svc, const char *id, const char *body, size_t
     if (!st) snprintf(out->context, sizeof out->context, "render");
     /* A value a template rendered that the parameter refuses: the
      * template is named, as for a job. */
-    char tp[300];
-    if (st && ts && e->key[0] &&
-        !(j && cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(j, "params"), e->key)) &&
-        tmpl_origin(ts, e->key, tp, sizeof tp)) {
-      char msg[sizeof e->err.msg];
-      memcpy(msg, e->err.msg, sizeof msg);
-      snprintf(e->err.where, sizeof e->err.where, "%.250s", tp);
-      snprintf(e->err.msg, sizeof e->err.msg, "rendered for /coords: %.700s", msg);
-    }
+    if (st && e->key[0] &&
+        !cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(j, "params"), e->key))
+      tmpl_blame(ts, "/coords", e);
   }
   tmpl_free(ts);
   cJSON_Delete(rendered);

@@ -740,3 +740,13 @@ cJSON *tmpl_sweep_warnings(const tmpl_ctx_sig *ctx, size_t n, bool spectral) {
   }
   return a;
 }
+
+bool tmpl_blame(const tmpl_set *t, const char *ctx, svc_error *e) {
+  char tp[300];
+  if (!t || !e->key[0] || !tmpl_origin(t, e->key, tp, sizeof tp)) return false;
+  char msg[sizeof e->err.msg];
+  memcpy(msg, e->err.msg, sizeof msg);
+  snprintf(e->err.where, sizeof e->err.where, "%.250s", tp);
+  snprintf(e->err.msg, sizeof e->err.msg, "rendered for %.64s: %.660s", ctx, msg);
+  return true;
+}

@@ -71,6 +71,10 @@ rsw_status tmpl_render(const tmpl_set *t, const scene *sc, const cJSON *coords, 
 /* Whether key (as written in out by tmpl_render) came from a template of
  * t, and which pointer names it ("/templates/KEY", or the scene's). */
 bool tmpl_origin(const tmpl_set *t, const char *key, char *ptr, size_t cap);
+/* An error about a rendered value (e->key): when a template of t made it,
+ * e points at that template, its message prefixed "rendered for CTX: ",
+ * and true. */
+bool tmpl_blame(const tmpl_set *t, const char *ctx, svc_error *e);
 
 /* The coordinate `wavelength` (cw) sets the context's wavelength: a
  * positive finite number of nm, in a mono scene, equal to the context's

@@ -30,6 +30,7 @@
 #include "../core/jsonscan.h"
 #include "../media/atmo_data.h"
 #include "node.h"
+#include "rsw_file.h"
 
 #define TWO_POW_53 9007199254740992.0
 
@@ -736,21 +737,6 @@ done:
   return RSW_OK;
 }
 
-/* Line and column (1-based) of a byte offset, for parse errors. */
-static void line_col(const char *text, size_t off, int *line, int *colno) {
-  int l = 1, cc = 1;
-  for (size_t i = 0; i < off; i++) {
-    if (text[i] == '\n') {
-      l++;
-      cc = 1;
-    } else {
-      cc++;
-    }
-  }
-  *line = l;
-  *colno = cc;
-}
-
 rsw_status scene_read_json(const char *text, size_t len, const char *source_name, node **root_out,
                            char **variant_out, rsw_err *err) {
   return scene_read_json_limited(text, len, source_name, NULL, root_out, variant_out, err);
@@ -770,21 +756,21 @@ rsw_status scene_read_json_limited(const char *text, size_t len, const char *sou
   cJSON *doc = cJSON_ParseWithLengthOpts(text, len, &end, 0);
   if (!doc) {
     size_t off = end && end >= text && end <= text + len ? (size_t)(end - text) : 0;
-    int line, colno;
-    line_col(text, off, &line, &colno);
+    size_t line, colno;
+    rsw_line_col(text, off, &line, &colno);
     char w[600];
-    snprintf(w, sizeof w, "%s:%d:%d", c.source, line, colno);
-    return fail(&c, RSW_ERR_PARSE, w, "malformed JSON near line %d, column %d", line, colno);
+    snprintf(w, sizeof w, "%s:%zu:%zu", c.source, line, colno);
+    return fail(&c, RSW_ERR_PARSE, w, "malformed JSON near line %zu, column %zu", line, colno);
   }
   /* Trailing garbage after the document. */
   if (end) {
     const char *e = end;
     while (e < text + len && (*e == ' ' || *e == '\t' || *e == '\n' || *e == '\r' || *e == '\0')) e++;
     if (e < text + len) {
-      int line, colno;
-      line_col(text, (size_t)(e - text), &line, &colno);
+      size_t line, colno;
+      rsw_line_col(text, (size_t)(e - text), &line, &colno);
       char w[600];
-      snprintf(w, sizeof w, "%s:%d:%d", c.source, line, colno);
+      snprintf(w, sizeof w, "%s:%zu:%zu", c.source, line, colno);
       cJSON_Delete(doc);
       return fail(&c, RSW_ERR_PARSE, w, "unexpected content after the JSON document");
     }
@@ -793,10 +779,10 @@ rsw_status scene_read_json_limited(const char *text, size_t len, const char *sou
   char member[128];
   long nul = json_find_nul_escape(text, len, member, sizeof member);
   if (nul >= 0) {
-    int line, colno;
-    line_col(text, (size_t)nul, &line, &colno);
+    size_t line, colno;
+    rsw_line_col(text, (size_t)nul, &line, &colno);
     char w[600];
-    snprintf(w, sizeof w, "%s:%d:%d", c.source, line, colno);
+    snprintf(w, sizeof w, "%s:%zu:%zu", c.source, line, colno);
     cJSON_Delete(doc);
     return fail(&c, RSW_ERR_INVALID, w,
                 "%s%s%sa string contains \\u0000 (NUL), which no name, id or value may hold",
