@@ -36,6 +36,7 @@ const sceneLabel = (id) => {
 const state = {
   scenes: [],
   scene: null, // SceneInfo of the selected scene
+  opening: 0, // the number of the latest selectScene: only its answers are shown
   params: [], // its ParamEntry list
   revision: 0,
   sensorTypes: new Map(), // scene id → Map(sensor id → plugin type)
@@ -111,17 +112,24 @@ function typesFrom(params) {
   return m;
 }
 
+// Opening a scene takes two requests. Each opening has a number, and only
+// the latest one is shown: a click on a scene while the page still opens the
+// first one by itself (or while an edit reloads the table) wins, whichever
+// answers arrive last.
 async function selectScene(id) {
+  const opening = ++state.opening;
+  let info, table;
   try {
-    const { data: info } = await api('GET', `/v1/scenes/${encodeURIComponent(id)}`);
-    state.scene = info;
-    await loadParams();
+    ({ data: info } = await api('GET', `/v1/scenes/${encodeURIComponent(id)}`));
+    table = await fetchParams(id);
   } catch (e) {
-    report(e, 'opening the scene');
+    if (opening === state.opening) report(e, 'opening the scene');
     return;
   }
+  if (opening !== state.opening) return;
+  state.scene = info;
+  showParams(table);
   for (const li of $('scenes').children) li.classList.toggle('selected', li.dataset.scene === id);
-  $('scene-title').textContent = `${sceneLabel(id)} · ${state.scene.variant}`;
   const sel = $('r-sensor');
   const types = state.sensorTypes.get(id) || new Map();
   const opts = () => state.scene.sensors.map((s) => el('option', { value: s }, types.has(s) ? `${s} (${types.get(s)})` : s));
@@ -131,15 +139,27 @@ async function selectScene(id) {
   $('r-wl-label').hidden = state.scene.variant !== 'mono';
 }
 
-async function loadParams(flashKey) {
-  const id = state.scene.id;
+async function fetchParams(id) {
   const { data } = await api('GET', `/v1/scenes/${encodeURIComponent(id)}/params`);
+  return data;
+}
+
+function showParams(data, flashKey) {
+  const id = state.scene.id;
   state.params = data.params;
   state.revision = data.revision;
   state.sensorTypes.set(id, typesFrom(data.params));
   $('params').dataset.revision = data.revision;
   $('scene-title').textContent = `${sceneLabel(id)} · ${state.scene.variant} · revision ${data.revision}`;
   renderParams(flashKey);
+}
+
+// Reload the open scene's table (after an edit); dropped if another scene
+// was opened meanwhile.
+async function loadParams(flashKey) {
+  const opening = state.opening;
+  const data = await fetchParams(state.scene.id);
+  if (opening === state.opening) showParams(data, flashKey);
 }
 
 // ---- the parameter table -----------------------------------------------------------

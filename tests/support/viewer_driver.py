@@ -849,14 +849,30 @@ def run(a, profile, browser):
         st2, sc = http("POST", f"{base}/v1/scenes", STOKES_SCENE)
         if st2 not in (200, 201):
             return f"posting the Stokes scene: {st2} {sc}"
+        # The page opens its first scene by itself. A click on another scene
+        # while that first scene is still loading must win: hold the first
+        # scene's answers back 1.5 s, so they arrive after the click's.
+        st2, listing = http("GET", f"{base}/v1/scenes")
+        first = listing["scenes"][0]["id"]
+        hold = page.call("Page.addScriptToEvaluateOnNewDocument", {"source": (
+            "(() => { const f = window.fetch; window.fetch = async (u, o) => { const r = await f(u, o);"
+            f" if (String(u).startsWith('/v1/scenes/{first}')) await new Promise((k) => setTimeout(k, 1500));"
+            " return r; }; })();")})
         page.goto(f"{base}/ui/")
+        page.call("Page.removeScriptToEvaluateOnNewDocument", {"identifier": hold["identifier"]})
         li = f'#scenes li[data-scene="{sc["id"]}"]'
         if not page.wait(f"document.querySelector('{li}')", 30):
             return "the Stokes scene is not listed"
         page.click(li)
-        if not page.wait(f"(document.querySelector('#scenes li.selected') || {{dataset: {{}}}}).dataset.scene === '{sc['id']}'"
-                         " && document.getElementById('r-sensor').value === 'cam'", 30):
+        chosen = (f"(document.querySelector('#scenes li.selected') || {{dataset: {{}}}}).dataset.scene === '{sc['id']}'"
+                  " && document.getElementById('r-sensor').value === 'cam'")
+        if not page.wait(chosen, 30):
             return "the Stokes scene was not selected"
+        time.sleep(3.5)  # both held answers (the scene, its parameters) have arrived
+        if not page.js(chosen):
+            return (f"the Stokes scene was clicked, but the page then opened "
+                    f"{page.js('(document.querySelector(`#scenes li.selected`) || {dataset: {}}).dataset.scene')}, "
+                    f"the scene it opens by itself")
         page.type_into("#r-spp", "4")
         page.js("document.getElementById('film').dataset.ready = ''")
         page.click("#render")
