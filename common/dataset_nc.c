@@ -899,7 +899,7 @@ static rsw_status define_quantities(writer *w, const sensor_set *s, sensor_vars 
 }
 
 /* A sensor's per-film numbers: seed, spp (when it varies), E_h, the
- * rays the periodic boundary could not resolve and the environment plugin
+ * rays that could not be resolved (UNRESOLVED_WHY) and the environment plugin
  * answers replaced by black. */
 static rsw_status define_film_numbers(writer *w, const sensor_set *s, sensor_vars *v, rsw_err *err) {
   int ncid = w->ncid;
@@ -949,7 +949,7 @@ static rsw_status define_film_numbers(writer *w, const sensor_set *s, sensor_var
   if (s->any_unresolved) {
     name_cat(nm, sizeof nm, s->prefix, "unresolved_rays");
     TRY(def_ctx_var(w, nm, NC_UINT64, 0, NULL, &v->unres, err));
-    TRY(put_text_att(ncid, v->unres, "long_name", "rays the periodic boundary could not resolve", err));
+    TRY(put_text_att(ncid, v->unres, "long_name", "rays that could not be resolved (periodic slab, media tracks given up)", err));
     TRY(put_text_att(ncid, v->unres, "units", "1", err));
   }
   /* Plugin failures: always there, 0 and "" for a clean film, so that

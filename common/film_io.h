@@ -20,8 +20,8 @@
  *                           east-right convention), %.9g, comma-separated,
  *                           row-major
  *   raysweep:unresolved_rays
- *                           only when non-zero: rays the periodic boundary
- *                           could not resolve (render.h), decimal
+ *                           only when non-zero: rays that could not be
+ *                           resolved (UNRESOLVED_WHY), decimal
  *   raysweep:plugin_failures, raysweep:plugin_failure
  *                           only when non-zero: environment plugin answers
  *                           the render replaced by black (decimal), and the
@@ -51,6 +51,16 @@
 #include <stdint.h>
 
 #include "rsw_error.h"
+
+/* What a film's unresolved_rays counts, for the warnings that print it
+ * after the count (render_stats.unresolved): a periodic slab's rays that
+ * stayed near-horizontal inside it for 65,536 cell walls
+ * (docs/mitsuba-differences.md), and media tracks given up
+ * (docs/media.md#tracks-given-up). */
+#define UNRESOLVED_WHY                                                                                     \
+  "rays could not be resolved and ended their paths or were counted as blocked (a periodic slab's "      \
+  "near-horizontal rays after 65,536 cell walls, or media tracks given up: docs/media.md#tracks-given-up); " \
+  "the film depends on that policy"
 
 typedef struct film_exr_info {
   const char *scene, *context, *sensor, *variant; /* NULL or "": not written */

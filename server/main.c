@@ -17,6 +17,7 @@
 #include <strings.h>
 
 #include "cmdline.h"
+#include "film_io.h"
 #include "http/encode.h"
 #include "image_exr.h"
 #include "image_png.h"
@@ -416,10 +417,7 @@ static int cmd_render(int argc, char **argv) {
     fprintf(stderr, "raysweepd render: warning: %llu samples were NaN or infinite and were dropped\n",
             (unsigned long long)rs.invalid_samples);
   if (rs.rays.unresolved)
-    fprintf(stderr,
-            "raysweepd render: warning: %llu rays stayed within ~1e-5 rad of horizontal inside the periodic "
-            "slab for 65,536 cell walls and were counted as blocked (unresolved); the film depends on that "
-            "policy\n",
+    fprintf(stderr, "raysweepd render: warning: %llu " UNRESOLVED_WHY "\n",
             (unsigned long long)rs.rays.unresolved);
   if (img.plugin_failures)
     fprintf(stderr,

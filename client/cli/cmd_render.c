@@ -9,6 +9,7 @@
 #include <sys/stat.h>
 
 #include "cli.h"
+#include "film_io.h"
 
 const cmdline_opt cli_opts_render[] = {
     {"--sensor", "S", false, "sensor id or index (default: the first)"},
@@ -102,11 +103,8 @@ static void report_written(const cli_ctx *ctx, const rsw_film *f, const char *pa
   cJSON *m = cJSON_Parse(rsw_film_meta(f));
   const cJSON *u = cJSON_GetObjectItemCaseSensitive(m, "unresolved_rays");
   if (cJSON_IsNumber(u) && u->valuedouble > 0)
-    fprintf(stderr,
-            "raysweep %s: warning: %.0f rays of %s stayed within ~1e-5 rad of horizontal inside the periodic "
-            "slab for 65,536 cell walls and were counted as blocked (unresolved); the film depends on that "
-            "policy\n",
-            ctx->cmd, u->valuedouble, path);
+    fprintf(stderr, "raysweep %s: warning: %.0f rays of %s " UNRESOLVED_WHY "\n", ctx->cmd, u->valuedouble,
+            path);
   const cJSON *pf = cJSON_GetObjectItemCaseSensitive(m, "plugin_failures");
   const cJSON *pm = cJSON_GetObjectItemCaseSensitive(m, "plugin_failure");
   if (cJSON_IsNumber(pf) && pf->valuedouble > 0)

@@ -240,7 +240,7 @@ rsw_status http_film_json(const svc_film *f, char **bytes_out, size_t *len_out, 
     }
     http_buf_puts(&b, "]");
   }
-  /* Only when non-zero: rays the periodic boundary could not resolve. */
+  /* Only when non-zero: rays that could not be resolved (UNRESOLVED_WHY). */
   if (im->unresolved_rays)
     http_buf_printf(&b, ",\"unresolved_rays\":%llu", (unsigned long long)im->unresolved_rays);
   /* Only when non-zero: environment plugin answers replaced by black, and

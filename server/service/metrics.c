@@ -69,8 +69,8 @@ char *service_metrics_text(service *svc) {
   svc_buf_printf(&b, "# TYPE raysweep_render_seconds_total counter\nraysweep_render_seconds_total %.6f\n",
                  svc->render_seconds);
   svc_buf_printf(&b,
-                 "# HELP raysweep_unresolved_rays_total Rays a periodic boundary could not resolve (counted "
-                 "as blocked).\n");
+                 "# HELP raysweep_unresolved_rays_total Rays that could not be resolved (a periodic slab's "
+                 "near-horizontal rays, media tracks given up), counted as blocked or ending their path.\n");
   svc_buf_printf(&b, "# TYPE raysweep_unresolved_rays_total counter\nraysweep_unresolved_rays_total %llu\n",
                  (unsigned long long)svc->unresolved_rays);
   svc_buf_printf(&b, "# HELP raysweep_films_nonfinite_total Films rendered with an inf or NaN value (their "

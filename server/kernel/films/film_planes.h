@@ -53,7 +53,7 @@ typedef struct film_image {
    * pages, a job's contexts, a film and its copies) hold one, and
    * film_image_free lets go of it. Never written once a film has it. */
   double *angles;
-  /* Rays the periodic boundary could not resolve (render_stats.unresolved:
+  /* Rays that could not be resolved (render_stats.unresolved, UNRESOLVED_WHY:
    * within ~1e-5 rad of horizontal, still inside the slab after 65,536
    * walls), each counted as blocked / ending its path. Non-zero means the
    * film depends on that policy; written to the film's metadata. */

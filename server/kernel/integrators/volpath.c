@@ -398,12 +398,37 @@ static double coefficients_pages(const medium *m, medium_interaction *mi, double
   return mean / pages;
 }
 
+/* A tracking loop's guard (docs/media.md#tracks-given-up). A track is
+ * given up, and its path counted as unresolved (render_stats.unresolved),
+ * after TRACK_MAX_STEPS tentative collisions, or after TRACK_MAX_STUCK in
+ * a row that no longer move t: a majorant whose mean free path is below
+ * the resolution of t (1e91 per metre at t = 1 takes steps of 1e-91,
+ * which t + dt rounds away) would otherwise loop for ever, and a
+ * majorant millions of times the density it bounds for the life of the
+ * render (the render checks its deadline between waves only). A track
+ * given up scatters nothing and transmits nothing: its path ends there. */
+#define TRACK_MAX_STEPS (1u << 20)
+#define TRACK_MAX_STUCK 64u
+
+typedef struct track_guard {
+  unsigned steps, stuck;
+} track_guard;
+
+/* t advanced by dt (a free flight's step); false: give the track up. */
+static inline bool track_step(track_guard *g, double *t, double dt) {
+  double tn = *t + dt;
+  g->stuck = tn > *t ? 0 : g->stuck + 1;
+  *t = tn;
+  return ++g->steps <= TRACK_MAX_STEPS && g->stuck <= TRACK_MAX_STUCK;
+}
+
 /* The transmittance of a tracked medium m along r over [tstart, tend] at
  * pages 0..pages-1 into tr[p] (one page: segment_tr's), by one ratio track
  * for all: each page's sigma_n over the majorant of every page's channels,
  * so that each page's estimate is unbiased, and a roulette on the largest
- * page's weight below 0.1 that keeps long tracks bounded (unbiased). */
-static __attribute__((noinline)) void segment_tr_pages(const scene *sc, const medium *m, const ray3 *r,
+ * page's weight below 0.1 that keeps long tracks bounded (unbiased).
+ * False: the track was given up (track_step), tr is 0. */
+static __attribute__((noinline)) bool segment_tr_pages(const scene *sc, const medium *m, const ray3 *r,
                                                        double tstart, double tend, const box_walk *w,
                                                        sampler_state *st, int pages, color *tr) {
   for (int p = 0; p < pages; p++) tr[p] = col1(1.0);
@@ -411,16 +436,20 @@ static __attribute__((noinline)) void segment_tr_pages(const scene *sc, const me
   seg.tmin = tstart;
   seg.tmax = tend;
   double mint, maxt;
-  if (!media_clip(sc, m, &seg, w, &mint, &maxt)) return;
+  if (!media_clip(sc, m, &seg, w, &mint, &maxt)) return true;
   const sampler_ops *sops = st->s->ops;
   medium_interaction mi = {.medium = m, .wi = v3_neg(r->d)};
   mi.p = v3_fma(r->o, mint, r->d);
   double mu = majorant_pages(m, &mi, pages);
-  if (!(mu > 0)) return;
+  if (!(mu > 0)) return true;
   color ss[RENDER_MAX_PAGES], sn[RENDER_MAX_PAGES];
   double t = mint;
+  track_guard g = {0, 0};
   for (;;) {
-    t -= log1p(-sops->next_1d(st)) / mu;
+    if (!track_step(&g, &t, -log1p(-sops->next_1d(st)) / mu)) {
+      for (int p = 0; p < pages; p++) tr[p] = col1(0.0);
+      return false;
+    }
     if (!(t < maxt)) break;
     mi.t = t;
     mi.p = v3_fma(r->o, t, r->d);
@@ -437,12 +466,14 @@ static __attribute__((noinline)) void segment_tr_pages(const scene *sc, const me
       if (!live) break;
     }
   }
+  return true;
 }
 
 /* Transmittance of m along r over [tstart, tend] (a shadow ray's segment):
- * exact where analytic, else ratio tracking (segment_tr_pages' one page). */
+ * exact where analytic, else ratio tracking (segment_tr_pages' one page;
+ * a track given up sets *unres and transmits nothing). */
 static color segment_tr(const volpath_integrator *vp, const scene *sc, const medium *m, const ray3 *r,
-                        double tstart, double tend, const box_walk *w, sampler_state *st) {
+                        double tstart, double tend, const box_walk *w, sampler_state *st, bool *unres) {
   ray3 seg = *r;
   seg.tmin = tstart;
   seg.tmax = tend;
@@ -453,7 +484,7 @@ static color segment_tr(const volpath_integrator *vp, const scene *sc, const med
   if (m->ops->transmittance && (analytic_in(vp, m) || m->is_homogeneous))
     return m->ops->transmittance(m, &seg, mint, maxt);
   color tr;
-  segment_tr_pages(sc, m, r, tstart, tend, w, st, 1, &tr);
+  if (!segment_tr_pages(sc, m, r, tstart, tend, w, st, 1, &tr)) *unres = true;
   return tr;
 }
 
@@ -514,7 +545,8 @@ typedef struct vlane {
   bool prev_delta;
   surface_interaction prev; /* the last scattering vertex (its p), for MIS */
   int depth, crossings;
-  bool hit; /* (its hit record stays in wave_run's array) */
+  bool hit;   /* (its hit record stays in wave_run's array) */
+  bool unres; /* a track given up (track_step): counted in render_stats.unresolved */
   /* The shadow ray of this event, while it is being traced. */
   bool sh;
   ray3 sray;
@@ -794,7 +826,7 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
       bool batch0 = pg && l->sm && t1 > t0 && vp->analytic && l->sm->ops == &layered_medium_ops;
       if (pg && l->sm && t1 > t0 && !exact_in(vp, l->sm)) { /* every page tracked at once */
         color tr[RENDER_MAX_PAGES];
-        segment_tr_pages(sc, l->sm, &mr, t0, t1, w, st, NP, tr);
+        if (!segment_tr_pages(sc, l->sm, &mr, t0, t1, w, st, NP, tr)) l->unres = true;
         l->str = col_mul(l->str, tr[0]);
         for (int p = 1; p < NP; p++) pg->str[p - 1] = col_mul(pg->str[p - 1], tr[p]);
       } else if (l->sm && t1 > t0 && vp->analytic && l->sm->ops == &layered_medium_ops && !batch0) {
@@ -806,7 +838,7 @@ static bool shadow_step(const volpath_integrator *vp, const scene *sc, vlane *l,
                        : col1(1.0);
         l->str = col_mul(l->str, tr);
       } else if (l->sm && t1 > t0 && !batch0) {
-        l->str = col_mul(l->str, segment_tr(vp, sc, l->sm, &mr, t0, t1, w, st));
+        l->str = col_mul(l->str, segment_tr(vp, sc, l->sm, &mr, t0, t1, w, st, &l->unres));
       }
       if (pg && l->sm && t1 > t0 && exact_in(vp, l->sm)) { /* pages 1.. (exact; 0.. with batch0) */
         ray3 seg = {mr.o, mr.d, t0, t1};
@@ -979,8 +1011,12 @@ static __attribute__((noinline)) int track_pages(const scene *sc, const medium *
   double mu = majorant_pages(m, mi, NP);
   color ss[RENDER_MAX_PAGES], sn[RENDER_MAX_PAGES];
   double t = mint;
+  track_guard g = {0, 0};
   while (mu > 0) {
-    t -= log1p(-sops->next_1d(st)) / mu;
+    if (!track_step(&g, &t, -log1p(-sops->next_1d(st)) / mu)) {
+      l->unres = true;
+      return -1;
+    }
     if (!(t < maxt)) break;
     mi->t = t;
     mi->p = v3_fma(seg->o, t, seg->d);
@@ -1116,11 +1152,11 @@ PIECE enum lane_outcome lane_flight(const volpath_integrator *vp, const scene *s
     if (m && seg.tmax > seg.tmin && media_clip(sc, m, &seg, w, &mint, &maxt)) {
       if (m->absorbing_only && pg && !exact_in(vp, m)) { /* every page tracked at once */
         color tr[RENDER_MAX_PAGES];
-        segment_tr_pages(sc, m, &seg, seg.tmin, seg.tmax, w, st, NP, tr);
+        if (!segment_tr_pages(sc, m, &seg, seg.tmin, seg.tmax, w, st, NP, tr)) l->unres = true;
         l->T = col_mul(l->T, tr[0]);
         for (int p = 1; p < NP; p++) pg->T[p - 1] = col_mul(pg->T[p - 1], tr[p]);
       } else if (m->absorbing_only) {
-        l->T = col_mul(l->T, segment_tr(vp, sc, m, &seg, seg.tmin, seg.tmax, w, st));
+        l->T = col_mul(l->T, segment_tr(vp, sc, m, &seg, seg.tmin, seg.tmax, w, st, &l->unres));
         if (pg) { /* pages 1.. (exact) */
           color tr[RENDER_MAX_PAGES];
           tr_pages(m, &seg, mint, maxt, 1, NP, -1, tr);
@@ -1140,8 +1176,12 @@ PIECE enum lane_outcome lane_flight(const volpath_integrator *vp, const scene *s
         mi->p = v3_fma(seg.o, mint, seg.d);
         double mu = col_max(m->ops->majorant(m, mi));
         double t = mint;
+        track_guard g = {0, 0};
         while (mu > 0) {
-          t -= log1p(-sops->next_1d(st)) / mu;
+          if (!track_step(&g, &t, -log1p(-sops->next_1d(st)) / mu)) {
+            l->unres = true;
+            return EV_END;
+          }
           if (!(t < maxt)) break;
           mi->t = t;
           mi->p = v3_fma(seg.o, t, seg.d);
@@ -1811,7 +1851,7 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
     l->prev_pdf = 1.0;
     l->prev_delta = true;
     l->depth = l->crossings = 0;
-    l->hit = l->sh = false;
+    l->hit = l->sh = l->unres = false;
     ray3 r = rays[i];
     double len = v3_len(r.d);
     if (!(len > 0) || vp->base.max_depth == 0) continue;
@@ -1870,7 +1910,10 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
       n_sh = more;
     }
   }
-  for (int i = 0; i < n; i++) L[i] = ln[i].L;
+  for (int i = 0; i < n; i++) {
+    L[i] = ln[i].L;
+    stats->unresolved += ln[i].unres;
+  }
   const int qs = scene_extra_stride(sc);
   if (quv)
     for (int i = 0; i < qs * n; i++) quv[i] = 0; /* unpolarized variants: no polarisation through media */

@@ -14,14 +14,22 @@
  *  - The roulette's backstop ends paths in an unbounded lossless medium;
  *    rr_rule "mitsuba" restores Mitsuba's rule, and a bad rr_rule is
  *    refused naming the key.
+ *  - Tracks given up (docs/media.md#tracks-given-up): a tracked medium
+ *    whose majorant's steps no longer move t (sigma_t 1e91 beside 1.5 and
+ *    0.1: the fuzzer's scene that never finished rendering), and one whose
+ *    majorant is 1e12 times the density along a path, render in bounded
+ *    time and count their given-up paths; an ordinary gridded medium gives
+ *    up none.
  *
  * Monte Carlo estimates: REPS independent renders (seeds 1..REPS), mean
  * and standard error over the renders (fixed seeds: a deterministic
  * outcome). */
 #include <math.h>
+#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "../../../server/kernel/scene/scene.h"
 #include "../../support/test.h"
@@ -253,7 +261,86 @@ static void test_thin_atmosphere_rules_agree(void) {
   CHECK(se[0] < 0.01 * m[0], "thin atmosphere: standard error %.3g too large", se[0]);
 }
 
+/* ---- tracks given up ---------------------------------------------------------- */
+
+static void watchdog(int sig) {
+  (void)sig;
+  static const char msg[] = "FAIL test_tracks_given_up: a render did not end within 120 s\n";
+  ssize_t w = write(1, msg, sizeof msg - 1);
+  (void)w;
+  _exit(1);
+}
+
+/* An rgb volpath scene: a unit-scaled cube of a gridded medium (grid
+ * values along x, as given) over a grey ground under a sun, seen from
+ * above by an hdistant sensor of 2 x 2 pixels. */
+static char *gridded_cube(const char *data) {
+  sbuf b = {0};
+  sb_printf(
+      &b,
+      "{\"type\": \"scene\", \"integrator\": {\"type\": \"volpath\", \"max_depth\": 4},"
+      " \"s\": {\"type\": \"hdistant\", \"film\": {\"type\": \"hdrfilm\", \"width\": 2, \"height\": 2}},"
+      " \"sun\": {\"type\": \"directional\", \"direction\": [0.3, 0, -1], \"irradiance\": 1},"
+      " \"ground\": {\"type\": \"rectangle\", \"to_world\": [{\"scale\": 2}]},"
+      " \"atmo\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"},"
+      "  \"to_world\": [{\"scale\": [1, 2, 0.6]}, {\"translate\": [0, 0, 0.5]}],"
+      "  \"interior\": {\"type\": \"heterogeneous\", \"albedo\": 0.8, \"phase\": {\"type\": \"hg\", \"g\": "
+      "0.6},"
+      "   \"sigma_t\": {\"type\": \"gridvolume\", \"shape\": [3, 1, 1], \"data\": [%s],"
+      "    \"to_world\": [{\"translate\": [-0.5, -0.5, 0]}, {\"scale\": [4, 4, 1]}]}}}}",
+      data);
+  return b.p;
+}
+
+/* Renders scene text at spp on one thread: the unresolved count, or -1
+ * when the render failed or its film is not finite. */
+static long long render_unresolved(const char *text, uint32_t spp) {
+  scene *s = tsup_load(text, "rgb");
+  if (!s) return -1;
+  render_opts o = {.size = sizeof o, .sensor = 0, .spp = spp, .seed = 1, .threads = 1};
+  film_image img;
+  render_result_stats rs = {0};
+  rsw_err err = {0};
+  long long n = -1;
+  if (render_sensor(s, &o, &img, &rs, &err) == RSW_OK) {
+    bool finite = true;
+    for (size_t i = 0; i < (size_t)img.width * img.height * img.channels; i++)
+      finite &= isfinite(img.data[i]);
+    if (finite && img.unresolved_rays == rs.rays.unresolved) n = (long long)rs.rays.unresolved;
+    film_image_free(&img);
+  } else {
+    char buf[1200];
+    printf("  render failed: %s\n", rsw_err_format(&err, buf, sizeof buf));
+  }
+  scene_free(s);
+  return n;
+}
+
+static void test_tracks_given_up(void) {
+  signal(SIGALRM, watchdog);
+  alarm(120);
+  /* Steps of 1e-91 at t about 1: t + dt == t, every step. */
+  char *text = gridded_cube("1.5, 1e91, 0.1");
+  long long n = render_unresolved(text, 4);
+  free(text);
+  printf("  sigma_t 1.5, 1e91, 0.1: %lld unresolved\n", n);
+  CHECK(n > 0, "sigma_t 1e91: %lld unresolved (want > 0, a finite film)", n);
+  /* Steps that move t, but 1e12 of them where the grid is thin. */
+  text = gridded_cube("1e12, 0.001, 0.001");
+  n = render_unresolved(text, 4);
+  free(text);
+  printf("  sigma_t 1e12, 0.001, 0.001: %lld unresolved\n", n);
+  CHECK(n > 0, "sigma_t 1e12: %lld unresolved (want > 0, a finite film)", n);
+  /* An ordinary medium gives up nothing. */
+  text = gridded_cube("1.5, 8, 0.1");
+  n = render_unresolved(text, 256);
+  free(text);
+  CHECK(n == 0, "sigma_t 1.5, 8, 0.1: %lld unresolved (want 0)", n);
+  alarm(0);
+}
+
 int main(void) {
+  RSW_TEST_RUN(test_tracks_given_up);
   RSW_TEST_RUN(test_thin_atmosphere_rules_agree);
   RSW_TEST_RUN(test_rr_rule);
   RSW_TEST_RUN(test_far_slab_beer_lambert);
