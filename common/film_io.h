@@ -53,14 +53,14 @@
 #include "rsw_error.h"
 
 /* What a film's unresolved_rays counts, for the warnings that print it
- * after the count (render_stats.unresolved): a periodic slab's rays that
+ * after "N rays" (render_stats.unresolved): a periodic slab's rays that
  * stayed near-horizontal inside it for 65,536 cell walls
  * (docs/mitsuba-differences.md), and media tracks given up
  * (docs/media.md#tracks-given-up). */
-#define UNRESOLVED_WHY                                                                                     \
-  "rays could not be resolved and ended their paths or were counted as blocked (a periodic slab's "      \
-  "near-horizontal rays after 65,536 cell walls, or media tracks given up: docs/media.md#tracks-given-up); " \
-  "the film depends on that policy"
+#define UNRESOLVED_WHY                                                                                   \
+  "were unresolved (a periodic slab's near-horizontal rays after 65,536 cell walls, or media tracks "  \
+  "given up: docs/media.md#tracks-given-up) and ended their paths or were counted as blocked; the film " \
+  "depends on that policy"
 
 typedef struct film_exr_info {
   const char *scene, *context, *sensor, *variant; /* NULL or "": not written */

@@ -417,7 +417,7 @@ static int cmd_render(int argc, char **argv) {
     fprintf(stderr, "raysweepd render: warning: %llu samples were NaN or infinite and were dropped\n",
             (unsigned long long)rs.invalid_samples);
   if (rs.rays.unresolved)
-    fprintf(stderr, "raysweepd render: warning: %llu " UNRESOLVED_WHY "\n",
+    fprintf(stderr, "raysweepd render: warning: %llu rays " UNRESOLVED_WHY "\n",
             (unsigned long long)rs.rays.unresolved);
   if (img.plugin_failures)
     fprintf(stderr,
