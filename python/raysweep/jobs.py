@@ -230,7 +230,7 @@ class Job:
         return self.done() and self.state == "cancelled"
 
     def cancel(self):
-        """Ask the daemon to cancel the job (it stops at the next tile); ``False`` if it had already ended.
+        """Ask the daemon to cancel the job (its render stops within 16 bounces); ``False`` if it had ended.
 
         A cancelled job keeps the films it finished.
         """

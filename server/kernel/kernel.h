@@ -713,6 +713,15 @@ typedef struct render_stats {
   uint64_t camera_rays; /* paths started (sensor rays with a non-zero weight), counted in rays too */
 } render_stats;
 
+/* Whether the render this thread works on must stop: cancelled, or past
+ * its deadline (render.c; false outside a render). The batched
+ * integrators ask it every WAVE_STOP_EVERY bounces of a wave, so that a
+ * wave of very long paths (an unbounded lossless medium: 65,536 bounces
+ * a path) holds a cancel or a deadline back by a few bounces, not by the
+ * whole wave; a wave cut short is discarded with its render. */
+bool render_stop_requested(void);
+#define WAVE_STOP_EVERY 16
+
 typedef struct integrator integrator;
 typedef struct integrator_ops {
   /* Radiance arriving at ray.o along -ray.d. When quv is not NULL (Stokes

@@ -254,6 +254,14 @@ static bool job_should_stop(job *jb) {
   return false;
 }
 
+/* The render this thread is working on (run_tile), for
+ * render_stop_requested. */
+static _Thread_local job *t_job;
+
+bool render_stop_requested(void) {
+  return t_job && job_should_stop(t_job);
+}
+
 /* Samples per wave (integrator_ops.Li_batch): enough paths that each
  * bounce fills Embree packets and the shading stages stay hot in the
  * instruction cache, few enough that the lanes' state stays in L2. An
@@ -545,7 +553,9 @@ static void run_tile(job *jb, size_t t) {
   render_stats rs = {0};
   uint64_t samples = 0, invalid = 0;
   double t0 = now_s();
+  t_job = jb;
   tile_buf *tb = render_tile(jb, t, &rs, &samples, &invalid);
+  t_job = NULL;
   double busy = now_s() - t0;
   pthread_mutex_lock(&jb->lock);
   jb->busy_s += busy;

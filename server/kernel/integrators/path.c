@@ -980,7 +980,8 @@ static void wave_run(const integrator *it, const scene *sc, sampler_state *st, c
   const sampler *smp = n > 0 ? st[0].s : NULL;
   const bool escape_test = !sc->periodic.on && !sc->environment && !pol;
   const double pad = scene_pad(sc);
-  while (live > 0) {
+  for (unsigned bounce = 1; live > 0; bounce++) {
+    if (bounce % WAVE_STOP_EVERY == 0 && render_stop_requested()) break; /* (discarded) */
     /* The lanes whose ray hit (in order) and the others, in ws->ord and
      * ws->ek (wave_light_samples' scratch, free until then). */
     int *hits = ws->ord, *other = ws->ek, n_hit, n_other;

@@ -1875,7 +1875,8 @@ static void wave_run(const volpath_integrator *vp, const scene *sc, sampler_stat
    * every walk goes the general way, which test_volpath_stages compares
    * them with. Not with polarization. */
   const one_box ob = !vq && g_stages ? one_box_of(vp, sc) : (one_box){NULL, -1};
-  while (live > 0) {
+  for (unsigned bounce = 1; live > 0; bounce++) {
+    if (bounce % WAVE_STOP_EVERY == 0 && render_stop_requested()) break; /* (discarded) */
     wave_trace(sc, &hb, ln, idx, live, false, camera, hit, si, stats);
     camera = false;
     int next = 0, n_sh = 0;
