@@ -405,8 +405,9 @@ static double coefficients_pages(const medium *m, medium_interaction *mi, double
  * the resolution of t (1e91 per metre at t = 1 takes steps of 1e-91,
  * which t + dt rounds away) would otherwise loop for ever, and a
  * majorant millions of times the density it bounds for the life of the
- * render (the render checks its deadline between waves only). A track
- * given up scatters nothing and transmits nothing: its path ends there. */
+ * render (a deadline or a cancel is asked between bounces, not within a
+ * track). A track given up scatters nothing and transmits nothing: its
+ * path ends there. */
 #define TRACK_MAX_STEPS (1u << 20)
 #define TRACK_MAX_STUCK 64u
 
