@@ -99,8 +99,13 @@ class Client:
         is_xml = lower.endswith(".xml") or (not lower.endswith(".json") and _looks_xml(text))
         label = os.path.basename(path)
         if is_xml:
-            doc = _xml_rewrite(text, base, self._upload_missing, params)
-            return self._push(doc, "application/xml", variant, label)
+            refs = {}
+
+            def upload(found):  # (kept for a spread sweep's replicas)
+                refs.update(found)
+                self._upload_missing(found)
+            doc = _xml_rewrite(text, base, upload, params)
+            return self._push(doc, "application/xml", variant, label, refs)
         if params:
             raise TypeError(f"{label} is a JSON scene: it takes no parameters ({', '.join(sorted(params))}); "
                             "set them with scene.traverse() after loading")
@@ -121,7 +126,7 @@ class Client:
         _json_refs(doc, base_dir or os.getcwd(), refs)
         self._upload_missing(refs)
         from ._http import dumps
-        return self._push(dumps(doc), "application/json", variant, None)
+        return self._push(dumps(doc), "application/json", variant, None, refs)
 
     def scene(self, scene_id):
         """The resident scene ``scene_id`` (as ``load_*`` returned, or listed by :meth:`scenes`)."""
@@ -149,21 +154,25 @@ class Client:
             doc = json.loads(text)
         except ValueError:
             doc = None  # the daemon's answer says where it is wrong
+        refs = {}
         if isinstance(doc, dict):
-            refs = {}
             _json_refs(doc, base, refs)
             if refs:
                 self._upload_missing(refs)
                 from ._http import dumps
                 text = dumps(doc)
-        return self._push(text, "application/json", variant, label)
+        return self._push(text, "application/json", variant, label, refs)
 
-    def _push(self, body, content_type, variant, label):
+    def _push(self, body, content_type, variant, label, refs=None):
+        """Push a scene document (its files, refs, already uploaded); the Scene keeps what it
+        needs to push the same document to other replicas (``sweep(spread=K)``)."""
         path = "/v1/scenes"
         if variant:
             path += "?variant=" + _q(variant)
         info = self._http.json("POST", path, bytes(body), content_type=content_type, timeout=None)
-        return Scene(self, info, label=label)
+        scene = Scene(self, info, label=label)
+        scene._doc = (bytes(body), content_type, variant, dict(refs or {}))
+        return scene
 
     def _upload_missing(self, refs):
         """Upload the files of ``refs`` (hex digest -> local path) that the daemon lacks."""

@@ -101,13 +101,8 @@ def grid_contexts(grid, param_keys=None):
     return contexts
 
 
-def submit(scene, grid=None, contexts=None, spp=None, seed=None, sensors=None, wavelength=None, params=None,
-           quantities=None, variance=False, bands=None, templates=None, idempotency_key=None, bundle=None,
-           _stacklevel=3):
-    """Submit a job on ``scene`` (see :meth:`raysweep.Scene.sweep` for the arguments); a :class:`Job`.
-
-    The job's warnings are raised as :class:`~raysweep.SweepWarning` (``_stacklevel``: the
-    frame they name, the caller of ``Scene.submit`` or ``Scene.sweep``)."""
+def job_contexts(scene, grid=None, contexts=None, params=None, wavelength=None):
+    """The contexts a job on ``scene`` renders, from ``grid`` or ``contexts`` (ids given to those without)."""
     from .scene import _encode_values
     if (grid is None) == (contexts is None):
         raise TypeError("give either grid={NAME: values} or contexts=[{...}, ...]")
@@ -123,14 +118,26 @@ def submit(scene, grid=None, contexts=None, spp=None, seed=None, sensors=None, w
         keys = None
         if any("." in n and ":" not in n for n in grid):
             keys = set(scene._keys())
-        contexts = grid_contexts(grid, keys)
-    else:
-        contexts = [dict(c) for c in contexts]
-        width = max(5, len(str(len(contexts) - 1)))
-        for i, c in enumerate(contexts):
-            c.setdefault("id", f"c{i:0{width}d}")
-            if "params" in c:
-                c["params"] = _encode_values(c["params"])
+        return grid_contexts(grid, keys)
+    contexts = [dict(c) for c in contexts]
+    width = max(5, len(str(len(contexts) - 1)))
+    for i, c in enumerate(contexts):
+        c.setdefault("id", f"c{i:0{width}d}")
+        if "params" in c:
+            c["params"] = _encode_values(c["params"])
+    return contexts
+
+
+def submit(scene, grid=None, contexts=None, spp=None, seed=None, sensors=None, wavelength=None, params=None,
+           quantities=None, variance=False, bands=None, templates=None, idempotency_key=None, bundle=None,
+           _stacklevel=3, _warn=True):
+    """Submit a job on ``scene`` (see :meth:`raysweep.Scene.sweep` for the arguments); a :class:`Job`.
+
+    The job's warnings are raised as :class:`~raysweep.SweepWarning` (``_stacklevel``: the
+    frame they name, the caller of ``Scene.submit`` or ``Scene.sweep``; none with ``_warn``
+    false)."""
+    from .scene import _encode_values
+    contexts = job_contexts(scene, grid, contexts, params, wavelength)
     body = {"contexts": contexts}
     defaults = {}
     if spp is not None:
@@ -163,7 +170,7 @@ def submit(scene, grid=None, contexts=None, spp=None, seed=None, sensors=None, w
     # A sweep that changes nothing along an axis is said at once, not left in the
     # dataset's attributes: the job's warnings as Python warnings (stacklevel: the
     # caller of sweep() or submit()).
-    for w in status.get("warnings") or []:
+    for w in (status.get("warnings") or []) if _warn else []:
         if isinstance(w, dict):
             warnings.warn(SweepWarning(f"job {status.get('id')}: {w.get('code')} ({w.get('coordinate')}): "
                                        f"{w.get('detail')}", code=w.get("code"), coordinate=w.get("coordinate"),

@@ -24,6 +24,7 @@ class Scene:
     """
 
     def __init__(self, client, info, label=None):
+        self._doc = None  # (body, content type, variant, files) as pushed by this client: spread=
         self.client = client
         self.id = info["id"]
         self.variant = info.get("variant")
@@ -156,7 +157,7 @@ class Scene:
         from .jobs import submit
         return submit(self, grid=grid, contexts=contexts, **options)
 
-    def sweep(self, grid=None, contexts=None, progress=None, timeout=None, **options):
+    def sweep(self, grid=None, contexts=None, progress=None, timeout=None, spread=None, **options):
         """Run a job of kernel contexts and return its dataset (an ``xarray.Dataset``).
 
         Give either ``grid`` or ``contexts``:
@@ -190,7 +191,22 @@ class Scene:
         raises ``KeyboardInterrupt``. A job that fails raises
         :class:`~raysweep.JobFailed`. Without xarray the result is a dict
         ``{(context, sensor): numpy array}``.
+
+        ``spread``: a number of shards K, for a client connected to a load
+        balancer in front of several daemons (docs/cluster.md): the sweep is
+        cut into K shards as ``raysweep sweep --spread K`` cuts it (whole
+        bundle groups), each shard runs on a replica of its own (its
+        routing key is chosen so), a shard whose replica is lost runs again
+        elsewhere, and the result is the dataset of the unsharded sweep,
+        film for film (its ``job`` attribute lists the shards' jobs). The
+        scene must be one this client loaded (its document is pushed to
+        every replica) and unchanged since (revision 0).
         """
+        if spread is not None:
+            from . import _spread
+            from .jobs import job_contexts
+            ctxs = job_contexts(self, grid, contexts, options.get("params"), options.get("wavelength"))
+            return _spread.run(self, ctxs, spread, options, progress=progress, timeout=timeout)
         # A Ctrl-C while the job is being submitted waits for the daemon's
         # answer, so that the job it may have accepted is known and cancelled.
         # One that comes as the block ends is raised by the handler it puts

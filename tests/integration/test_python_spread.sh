@@ -1,0 +1,33 @@
+#!/usr/bin/env bash
+# The Python package's Scene.sweep(spread=K) (docs/python.md, "Sweeps over
+# several daemons"), through tests/support/shard_lb.py in front of two
+# daemons, against the same sweeps on one daemon
+# (tests/support/python_spread_check.py):
+#   - a 3 x 5 grid at bundle None, 1 and 3: the dataset is the unsharded
+#     one (xarray identical but for the job attribute; dims over the grid),
+#     and both replicas rendered contexts;
+#   - contexts that are no complete grid: the unsharded dataset, over a
+#     context dimension;
+#   - one replica SIGKILLed mid-sweep: its shard is submitted again under
+#     a key that reaches the other, and the dataset is the unsharded one;
+#   - spread 0, 2.5 or True, a scene found by id (no document to push) and
+#     a scene with parameters set since its push are refused, naming why.
+name=test_python_spread
+source "$(dirname "$0")/../support/shtest.sh"
+need_bins raysweepd
+need_cmd python3 "for the balancer"
+need_xarray
+start_spread_pair # $pa, $pb and the balancer $plb
+start_daemon "$tmp/ref" --threads 1
+pref=$started_port
+[ -n "$pref" ] || { bad "the reference daemon did not start: $(cat "$tmp/ref/log")"; finish; }
+kill_pid=${pids[1]} # daemon b (start_spread_pair: a, b, the balancer)
+out=$("$py" "$root/tests/support/python_spread_check.py" "http://127.0.0.1:$plb" "http://127.0.0.1:$pref" \
+  "$pa" "$pb" --kill "$kill_pid" 2>&1)
+echo "$out" | grep -v '^ok   '
+p=$(echo "$out" | grep -c '^ok   ')
+f=$(echo "$out" | grep -c '^FAIL ')
+pass=$((pass + p))
+fail=$((fail + f))
+[ "$p" -eq 6 ] || bad "python_spread_check.py passed $p checks, want 6: $(echo "$out" | tail -n 3)"
+finish

@@ -1,0 +1,130 @@
+#!/usr/bin/env python3
+"""tests/integration/test_python_spread.sh's checks of ``Scene.sweep(spread=K)``.
+
+Usage: python_spread_check.py LB_URL REF_URL REPLICA_PORT... --kill PID
+
+Each check prints ``ok   NAME`` or ``FAIL NAME: why``. The reference sweeps
+run on one daemon (REF_URL); the spread ones through the balancer (LB_URL).
+"""
+import os
+import signal
+import sys
+import threading
+import time
+import urllib.request
+
+root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+sys.path.insert(0, os.path.join(root, "python"))
+import raysweep as rs  # noqa: E402
+import xarray as xr  # noqa: E402
+
+SCENE = os.path.join(root, "proto", "examples", "hdistant_lambertian.json")
+
+
+def rendered(port):
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}/metrics") as r:
+        for line in r.read().decode().splitlines():
+            if line.startswith("raysweep_contexts_rendered_total "):
+                return float(line.split()[1])
+    return 0.0
+
+
+def same(ref, got):
+    """None when got is ref but for the job attribute, else what differs."""
+    a, b = ref.copy(), got.copy()
+    a.attrs.pop("job", None)
+    b.attrs.pop("job", None)
+    try:
+        xr.testing.assert_identical(a, b)
+    except AssertionError as e:
+        return str(e)[:600]
+    for v in a.variables:  # (assert_identical leaves a coordinate's attributes out)
+        if a[v].attrs != b[v].attrs:
+            return f"{v}'s attributes: {a[v].attrs} != {b[v].attrs}"
+    return None
+
+
+def check(name, fn):
+    try:
+        why = fn()
+    except Exception as e:  # noqa: BLE001 (a failed check names what it raised)
+        why = f"{type(e).__name__}: {e}"
+    print(f"ok   {name}" if why is None else f"FAIL {name}: {why}", flush=True)
+
+
+def main():
+    args = sys.argv[1:]
+    kill = int(args[args.index("--kill") + 1])
+    lb, ref_url, ports = args[0], args[1], [int(p) for p in args[2:args.index("--kill")]]
+    one = rs.connect(ref_url)
+    bal = rs.connect(lb)
+    # wavelength fastest, 3 x 5: at --bundle 3, groups {0,1,2} {3,4} {5,6,7} ...
+    grid = {"surface.bsdf.reflectance.value": [0.2, 0.5, 0.8], "wavelength": [450, 500, 550, 600, 650]}
+
+    for bundle in (None, 1, 3):
+        def whole(bundle=bundle):
+            ref = one.load_file(SCENE).sweep(grid=grid, spp=8, bundle=bundle, progress=False)
+            before = [rendered(p) for p in ports]
+            got = bal.load_file(SCENE).sweep(grid=grid, spp=8, bundle=bundle, spread=2, progress=False)
+            did = [rendered(p) - b for p, b in zip(ports, before)]
+            why = same(ref, got)
+            if why:
+                return why
+            if got.radiance.dims != ("reflectance", "wavelength", "y", "x"):
+                return f"dims {got.radiance.dims}"
+            if len(got.attrs["job"].split(", ")) != 2 or min(did) == 0 or sum(did) != 15:
+                return f"jobs {got.attrs['job']}, contexts rendered per replica {did} (want both, 15 in all)"
+            return None
+        check(f"spread=2, bundle {bundle}: the unsharded dataset, both replicas rendering", whole)
+
+    def not_grid():
+        ctx = rs.grid_contexts(grid)[::2]  # no complete grid: a context dimension
+        ref = one.load_file(SCENE).sweep(contexts=ctx, spp=8, progress=False)
+        got = bal.load_file(SCENE).sweep(contexts=ctx, spp=8, spread=2, progress=False)
+        if "context" not in got.radiance.dims:
+            return f"dims {got.radiance.dims}"
+        return same(ref, got)
+    check("spread=2 of contexts that are no grid: the unsharded dataset (a context dimension)", not_grid)
+
+    def replica_lost():
+        g = {"wavelength": [450, 500, 550, 600, 650, 700], "surface.bsdf.reflectance.value": [0.2, 0.5, 0.8]}
+        ref = one.load_file(SCENE).sweep(grid=g, spp=512, bundle=1, progress=False)
+        t = threading.Timer(0.5, lambda: os.kill(kill, signal.SIGKILL))
+        t.start()
+        t0 = time.monotonic()
+        got = bal.load_file(SCENE).sweep(grid=g, spp=512, bundle=1, spread=2, progress=False)
+        t.join()
+        print(f"  replica killed at 0.5 s: the sweep took {time.monotonic() - t0:.2f} s, jobs {got.attrs['job']}")
+        return same(ref, got)
+    check("a replica killed mid-sweep: its shard runs again elsewhere, the unsharded dataset", replica_lost)
+
+    def refusals():
+        s = bal.load_file(SCENE)
+        for bad, exc, words in ((0, ValueError, "spread must be"), (2.5, ValueError, "spread must be"),
+                                (True, ValueError, "spread must be")):
+            try:
+                s.sweep(grid={"wavelength": [500]}, spread=bad, progress=False)
+                return f"spread={bad!r} was taken"
+            except exc as e:
+                if words not in str(e):
+                    return f"spread={bad!r}: {e}"
+        try:
+            bal.scene(s.id).sweep(grid={"wavelength": [500]}, spread=2, progress=False)
+            return "a scene found by id was spread"
+        except TypeError as e:
+            if "load_file" not in str(e):
+                return f"a scene found by id: {e}"
+        edited = one.load_file(SCENE)
+        edited.traverse().update({"surface.bsdf.reflectance.value": 0.3})
+        try:
+            edited.sweep(grid={"wavelength": [500]}, spread=2, progress=False)
+            return "an edited scene was spread"
+        except rs.RaysweepError as e:
+            if "revision 1" not in str(e):
+                return f"an edited scene: {e}"
+        return None
+    check("refuses a bad spread, a scene found by id, an edited scene", refusals)
+
+
+if __name__ == "__main__":
+    main()
