@@ -284,6 +284,9 @@ def _as_contexts(ds):
     if "context" in ds.dims:
         return ds
     dims = list(ds["context"].dims)
+    if len(dims) == 1:  # (one coord: its index swapped for the ids')
+        out = ds.rename({"context": "_id"}).swap_dims({dims[0]: "_id"}).rename({"_id": "context"})
+        return out.transpose("context", ...)
     ids = ds["context"].stack(_c=dims).values
     out = ds.drop_vars("context").stack(_c=dims).reset_index("_c")
     out = out.assign_coords(context=("_c", ids)).swap_dims({"_c": "context"})
@@ -312,7 +315,9 @@ def _as_grid(ds, names):
     """A ``context``-dimension dataset over a complete grid laid out over its coords, values sorted."""
     ds = ds.assign_coords(_id=("context", ds["context"].values))
     ds = ds.drop_vars("context").rename({"context": "_c"}) if "context" in ds.coords else ds
-    # (a complete grid: unstack fills nothing, and 0 spares the integers a cast of NaN)
-    ds = ds.set_index(_c=names).unstack("_c", fill_value=0)
+    if len(names) == 1:  # (one coord: an index of its own, not a MultiIndex to unstack)
+        ds = ds.swap_dims({"_c": names[0]}).sortby(names[0])
+    else:  # (a complete grid: unstack fills nothing, and 0 spares the integers a cast of NaN)
+        ds = ds.set_index(_c=names).unstack("_c", fill_value=0)
     ds = ds.rename({"_id": "context"})
     return ds.transpose(*names, ...)

@@ -6,8 +6,9 @@
 #   - a 3 x 5 grid at bundle None, 1 and 3: the dataset is the unsharded
 #     one (xarray identical but for the job attribute; dims over the grid),
 #     and both replicas rendered contexts;
-#   - contexts that are no complete grid: the unsharded dataset, over a
-#     context dimension;
+#   - one axis (wavelength); bands with brf and variance over a reflectance
+#     axis; contexts that are no complete grid (a context dimension): the
+#     unsharded dataset;
 #   - one replica SIGKILLed mid-sweep: its shard is submitted again under
 #     a key that reaches the other, and the dataset is the unsharded one;
 #   - spread 0, 2.5 or True, a scene found by id (no document to push) and
@@ -29,5 +30,5 @@ p=$(echo "$out" | grep -c '^ok   ')
 f=$(echo "$out" | grep -c '^FAIL ')
 pass=$((pass + p))
 fail=$((fail + f))
-[ "$p" -eq 6 ] || bad "python_spread_check.py passed $p checks, want 6: $(echo "$out" | tail -n 3)"
+[ "$p" -eq 8 ] || bad "python_spread_check.py passed $p checks, want 8: $(echo "$out" | tail -n 3)"
 finish

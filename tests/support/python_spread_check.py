@@ -77,6 +77,27 @@ def main():
             return None
         check(f"spread=2, bundle {bundle}: the unsharded dataset, both replicas rendering", whole)
 
+    def one_axis():
+        g = {"wavelength": [400, 450, 500, 550, 600, 650, 700]}
+        ref = one.load_file(SCENE).sweep(grid=g, spp=8, bundle=1, progress=False)
+        got = bal.load_file(SCENE).sweep(grid=g, spp=8, bundle=1, spread=2, progress=False)
+        if got.radiance.dims != ("wavelength", "y", "x") or len(got.attrs["job"].split(", ")) != 2:
+            return f"dims {got.radiance.dims}, jobs {got.attrs['job']}"
+        return same(ref, got)
+    check("spread=2 of one axis (wavelength, bundle 1: two shards): the unsharded dataset", one_axis)
+
+    def bands():
+        b = [{"id": "blue", "srf": {"type": "uniform", "wmin": 450, "wmax": 520}},
+             {"id": "red", "srf": {"type": "gaussian", "mean": 640, "fwhm": 30}}]
+        g = {"surface.bsdf.reflectance.value": [0.2, 0.5, 0.8]}
+        ref = one.load_file(SCENE).sweep(grid=g, spp=8, bands=b, quantities=["brf"], variance=True, progress=False)
+        got = bal.load_file(SCENE).sweep(grid=g, spp=8, bands=b, quantities=["brf"], variance=True, spread=2,
+                                         progress=False)
+        if got.brf_srf.dims != ("reflectance", "band", "y", "x"):
+            return f"brf_srf dims {got.brf_srf.dims}"
+        return same(ref, got)
+    check("spread=2 with bands, brf and variance: the unsharded dataset", bands)
+
     def not_grid():
         ctx = rs.grid_contexts(grid)[::2]  # no complete grid: a context dimension
         ref = one.load_file(SCENE).sweep(contexts=ctx, spp=8, progress=False)
