@@ -146,8 +146,8 @@ def _submit(scene, sh, options):
     opts = dict(options)
     if opts.get("idempotency_key"):  # (one job a shard, each its own key)
         opts["idempotency_key"] = f"{opts['idempotency_key']}-shard{sh.k}"
-    # (the daemon's warnings about the sweep once, from the first shard, at sweep()'s caller)
-    sh.job = submit(there, contexts=sh.contexts, _stacklevel=6, _warn=sh.k == 0 and sh.tries == 0, **opts)
+    # (the sweep's warnings came from its dry run, once)
+    sh.job = submit(there, contexts=sh.contexts, _warn=False, **opts)
 
 
 def _start(scene, sh, options, why=None):
@@ -185,6 +185,11 @@ def run(scene, contexts, n_shards, options, progress=None, timeout=None):
         raise RaysweepError(f"spread= renders the scene's document on every replica, but this scene is at "
                             f"revision {rev} (parameters set since it was loaded, on one replica only): give "
                             "them to the sweep as params=, or load the edited document", code="RSW_ERR_CONFLICT")
+    # The whole sweep checked once (nothing queued): a bad request fails here, before any
+    # shard runs, and the warnings about the sweep (a coordinate along which it changes
+    # nothing, which a shard alone may not show) are raised at sweep()'s caller.
+    from .jobs import submit
+    submit(scene, contexts=contexts, _stacklevel=4, _dry_run=True, **options)
     lead = bundle_leads(contexts, options.get("bundle"))
     which = shard_of(lead, n_shards)
     shards = []

@@ -130,12 +130,13 @@ def job_contexts(scene, grid=None, contexts=None, params=None, wavelength=None):
 
 def submit(scene, grid=None, contexts=None, spp=None, seed=None, sensors=None, wavelength=None, params=None,
            quantities=None, variance=False, bands=None, templates=None, idempotency_key=None, bundle=None,
-           _stacklevel=3, _warn=True):
+           _stacklevel=3, _warn=True, _dry_run=False):
     """Submit a job on ``scene`` (see :meth:`raysweep.Scene.sweep` for the arguments); a :class:`Job`.
 
     The job's warnings are raised as :class:`~raysweep.SweepWarning` (``_stacklevel``: the
     frame they name, the caller of ``Scene.submit`` or ``Scene.sweep``; none with ``_warn``
-    false)."""
+    false). ``_dry_run``: check the job (``?dry_run=1``), raise its warnings, queue nothing
+    and return the daemon's JobDryRun dict."""
     from .scene import _encode_values
     contexts = job_contexts(scene, grid, contexts, params, wavelength)
     body = {"contexts": contexts}
@@ -162,20 +163,26 @@ def submit(scene, grid=None, contexts=None, spp=None, seed=None, sensors=None, w
         body["templates"] = dict(templates)
     if bundle is not None:
         body["bundle"] = "auto" if bundle == "auto" else int(bundle)
-    headers = {"Idempotency-Key": idempotency_key} if idempotency_key else None
+    headers = {"Idempotency-Key": idempotency_key} if idempotency_key and not _dry_run else None
     try:
-        status = scene._http.json("POST", f"{scene._path}/jobs", body, headers=headers, timeout=None)
+        status = scene._http.json("POST", f"{scene._path}/jobs" + ("?dry_run=1" if _dry_run else ""), body,
+                                  headers=headers, timeout=None)
     except RaysweepError as e:
         raise scene._suggest(e) from None
+    if _dry_run and not status.get("dry_run"):
+        # A daemon from before ?dry_run queued the job: take it back.
+        Job(scene.client, status, scene=scene).delete()
+        return {"dry_run": False}
     # A sweep that changes nothing along an axis is said at once, not left in the
     # dataset's attributes: the job's warnings as Python warnings (stacklevel: the
     # caller of sweep() or submit()).
+    who = f"job {status.get('id')}" if status.get("id") else "the sweep"
     for w in (status.get("warnings") or []) if _warn else []:
         if isinstance(w, dict):
-            warnings.warn(SweepWarning(f"job {status.get('id')}: {w.get('code')} ({w.get('coordinate')}): "
+            warnings.warn(SweepWarning(f"{who}: {w.get('code')} ({w.get('coordinate')}): "
                                        f"{w.get('detail')}", code=w.get("code"), coordinate=w.get("coordinate"),
                                        job=status.get("id")), stacklevel=_stacklevel)
-    return Job(scene.client, status, scene=scene)
+    return status if _dry_run else Job(scene.client, status, scene=scene)
 
 
 class Job:

@@ -380,8 +380,15 @@ static void h_job_submit(http_req *r) {
       return;
     }
   }
+  bool dry = false;
+  if (!query_bool(r, "dry_run", r->q_dry_run, &dry)) return;
   svc_error e = {0};
   char *job = NULL, *json = NULL;
+  if (dry) { /* checked and planned, not queued (an Idempotency-Key records nothing) */
+    rsw_status s = service_job_check(r->svc, r->params[0], r->body, r->body_len, &json, &e);
+    resp_result(r, s, 200, json, &e);
+    return;
+  }
   rsw_status s =
       service_job_submit(r->svc, r->params[0], r->body, r->body_len, r->idempotency_key, &job, &json, &e);
   if (s == RSW_OK && job) snprintf(r->resp.location, sizeof r->resp.location, "/v1/jobs/%s", job);

@@ -79,6 +79,7 @@ struct http_req {
   const char *q_name;                  /* POST /v1/scenes: a label, e.g. the pushed file's name */
   const char *q_exposure, *q_colormap; /* PNG films (image/png) */
   const char *q_band, *q_node;         /* job results of a job with bands */
+  const char *q_dry_run;               /* POST .../jobs?dry_run=1 */
   /* headers */
   const char *content_type, *accept, *if_match, *idempotency_key, *last_event_id, *if_none_match;
   const char *body;

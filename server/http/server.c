@@ -894,6 +894,7 @@ static enum MHD_Result dispatch(struct MHD_Connection *c, conn *cn, const char *
       .q_colormap = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "colormap"),
       .q_band = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "band"),
       .q_node = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "node"),
+      .q_dry_run = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "dry_run"),
       .content_type = ct,
       .accept = header(c, MHD_HTTP_HEADER_ACCEPT),
       .if_match = header(c, MHD_HTTP_HEADER_IF_MATCH),

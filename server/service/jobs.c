@@ -1314,6 +1314,43 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   return enqueue_job(svc, r, jb, reserve, idem_key, digest, body, len, jm, job_id_out, json_out, e);
 }
 
+/* A dry run: the submission's stages but the queue. */
+rsw_status service_job_check(service *svc, const char *scene_id, const char *body, size_t len,
+                             char **json_out, svc_error *e) {
+  if (!service_ready(svc)) return svc_fail(e, RSW_ERR_UNAVAILABLE, "", "the server is shutting down");
+  resident *r = svc_scene_acquire(svc, scene_id);
+  if (!r) return svc_no_scene(e, scene_id);
+  unsigned jm = svc_json_mark();
+  job_req q = {0};
+  job_check k = {0};
+  job *jb = NULL;
+  uint64_t reserve = 0;
+  rsw_status st = parse_request(body, len, &q, e);
+  if (!st) st = validate_request(svc, r, &q, &k, e);
+  if (!st) st = plan_job(svc, r->sc, &q, &k, &jb, &reserve, e);
+  job_check_free(&k, q.n_contexts);
+  job_req_free(&q);
+  if (!st) {
+    /* What the job would be: its size, what "bundle" comes to, its warnings. */
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddBoolToObject(o, "dry_run", true);
+    cJSON_AddStringToObject(o, "scene", r->id);
+    cJSON_AddNumberToObject(o, "revision", (double)r->revision);
+    cJSON_AddNumberToObject(o, "contexts_total", (double)jb->n_contexts);
+    cJSON_AddNumberToObject(o, "renders_total", (double)jb->n_items);
+    if (jb->bundle_asked) {
+      cJSON_AddNumberToObject(o, "bundle", jb->bundle);
+      if (jb->bundle_why[0]) cJSON_AddStringToObject(o, "bundle_why", jb->bundle_why);
+    }
+    cJSON_AddNumberToObject(o, "result_bytes", (double)reserve);
+    if (jb->warnings) svc_json_put(o, "warnings", cJSON_Duplicate(jb->warnings, 1));
+    if (!(*json_out = svc_print_json(o, jm))) st = svc_fail(e, RSW_ERR_NOMEM, "", "out of memory");
+    job_free(jb);
+  }
+  svc_scene_release(svc, r);
+  return st;
+}
+
 /* ---- the worker ------------------------------------------------------------------ */
 
 static void finish_job(service *svc, job *j) {

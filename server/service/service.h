@@ -167,6 +167,11 @@ rsw_status service_blobs_missing(service *svc, const char *body, size_t len, cha
 /* idem_key may be NULL. *job_id_out (malloc'ed) for the Location header. */
 rsw_status service_job_submit(service *svc, const char *scene_id, const char *body, size_t len,
                               const char *idem_key, char **job_id_out, char **json_out, svc_error *e);
+/* POST .../jobs?dry_run=1: the request checked and planned as a submission
+ * is, nothing queued; *json_out {dry_run, scene, revision, contexts_total,
+ * renders_total, bundle, bundle_why, result_bytes, warnings}. */
+rsw_status service_job_check(service *svc, const char *scene_id, const char *body, size_t len,
+                             char **json_out, svc_error *e);
 rsw_status service_job_list(service *svc, char **json_out, svc_error *e);
 rsw_status service_job_get(service *svc, const char *job_id, char **json_out, svc_error *e);
 rsw_status service_job_cancel(service *svc, const char *job_id, char **json_out, svc_error *e);

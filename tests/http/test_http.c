@@ -1183,6 +1183,48 @@ static const char *spectral_body(int from, int to, int seed) {
   return spectral_body_k(from, to, seed, 0);
 }
 
+/* POST .../jobs?dry_run=1: checked and planned as a submission is, nothing
+ * queued: 200 with the job's size and its warnings (a coordinate nothing
+ * reads), no job listed; a bad request is the submission's 422; a bad
+ * value of dry_run is a 400 naming it. */
+static void test_jobs_dry_run(void) {
+  char id[65], body[1024], path[512];
+  REQUIRE(plate_scene(&main_d, "0.5", id), "scene");
+  resp r = get(&main_d, "/v1/jobs");
+  cJSON *j = jparse(&r);
+  int before = cJSON_GetArraySize(cJSON_GetObjectItemCaseSensitive(j, "jobs"));
+  cJSON_Delete(j);
+  resp_free(&r);
+  jq(body, sizeof body,
+     "{'contexts': [{'id': 'a', 'wavelength': 500, 'coords': {'sza': 0}},"
+     " {'id': 'b', 'wavelength': 500, 'coords': {'sza': 30}}], 'defaults': {'spp': 2}}");
+  snprintf(path, sizeof path, "/v1/scenes/%s/jobs?dry_run=1", id);
+  r = post_json(&main_d, path, body);
+  j = jparse(&r);
+  const cJSON *w = cJSON_GetArrayItem(cJSON_GetObjectItemCaseSensitive(j, "warnings"), 0);
+  CHECK(r.status == 200 && cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(j, "dry_run")) &&
+            jstr_is(j, "scene", id) && jnum(j, "contexts_total") == 2 && jnum(j, "renders_total") == 4 &&
+            !jstr(j, "id") && jstr_is(w, "code", "coordinate_unused") && jstr_is(w, "coordinate", "sza"),
+        "dry run: %ld %.600s", r.status, r.body);
+  cJSON_Delete(j);
+  resp_free(&r);
+  r = get(&main_d, "/v1/jobs");
+  j = jparse(&r);
+  CHECK(cJSON_GetArraySize(cJSON_GetObjectItemCaseSensitive(j, "jobs")) == before,
+        "a dry run listed a job: %.300s", r.body);
+  cJSON_Delete(j);
+  resp_free(&r);
+  jq(body, sizeof body, "{'contexts': [{'id': 'a', 'wavelength': -5}]}");
+  r = post_json(&main_d, path, body);
+  CHECK(r.status == 422 && strstr(r.body, "/contexts/0/wavelength"), "dry run of a bad request: %ld %.300s",
+        r.status, r.body);
+  resp_free(&r);
+  snprintf(path, sizeof path, "/v1/scenes/%s/jobs?dry_run=maybe", id);
+  r = post_json(&main_d, path, body);
+  CHECK(r.status == 400 && strstr(r.body, "dry_run"), "dry_run=maybe: %ld %.300s", r.status, r.body);
+  resp_free(&r);
+}
+
 static void test_spectral_job(void) {
   char id[65], job[128];
   REQUIRE(plate_scene(&main_d, "0.5", id), "scene");
@@ -2003,6 +2045,7 @@ int main(void) {
     RSW_TEST_RUN(test_directions);
     RSW_TEST_RUN(test_patch_equals_reload);
     RSW_TEST_RUN(test_jobs_routes);
+    RSW_TEST_RUN(test_jobs_dry_run);
     RSW_TEST_RUN(test_spectral_job);
     RSW_TEST_RUN(test_split_job_bitwise);
     RSW_TEST_RUN(test_events);

@@ -119,6 +119,22 @@ def main():
         return same(ref, got)
     check("a replica killed mid-sweep: its shard runs again elsewhere, the unsharded dataset", replica_lost)
 
+    def warned():
+        import warnings
+        s = bal.load_file(SCENE)
+        with warnings.catch_warnings(record=True) as got:
+            warnings.simplefilter("always")
+            line = sys._getframe().f_lineno + 1
+            s.sweep(grid={"sza": [0, 30]}, spp=4, spread=2, progress=False)
+        ours = [w for w in got if issubclass(w.category, rs.SweepWarning)]
+        if len(ours) != 1 or ours[0].message.code != "coordinate_unused" or ours[0].message.coordinate != "sza":
+            return f"warnings {[str(w.message) for w in got]} (want one coordinate_unused on sza)"
+        if ours[0].lineno != line or ours[0].filename != __file__:
+            return f"the warning names {ours[0].filename}:{ours[0].lineno}, not the sweep's line {line}"
+        # (each shard holds one sza: only the whole sweep's dry run sees the coordinate change nothing)
+        return None
+    check("a sweep over a coordinate nothing reads warns once, at the caller's line", warned)
+
     def refusals():
         s = bal.load_file(SCENE)
         for bad, exc, words in ((0, ValueError, "spread must be"), (2.5, ValueError, "spread must be"),
