@@ -117,6 +117,18 @@ static int spread_film_encoded(void *user, const char *c, const char *sn, const 
   return spread_save(user, c, sn, result_json, NULL, bytes, len, resumed);
 }
 
+/* The whole sweep's warnings (its dry run: rsw_spread_opts.on_warnings), a
+ * line each, as the unsharded sweep prints its job's (even with -q). */
+static void spread_warnings(void *user, const char *text) {
+  (void)user;
+  for (const char *line = text; line && *line;) {
+    const char *end = strchr(line, '\n');
+    int n = end ? (int)(end - line) : (int)strlen(line);
+    fprintf(stderr, "raysweep sweep: warning: the sweep: %.*s\n", n, line);
+    line = end ? end + 1 : NULL;
+  }
+}
+
 int sweep_run_spread(cli_ctx *ctx, const cmdline_args *a, int k_shards, bool resume, cli_format fmt,
                      double timeout, const sweep_list *l, sweep_item **sorted, const cJSON *job_params,
                      const rsw_contexts *x, const char *fingerprint, size_t shard_i, size_t shard_n) {
@@ -156,6 +168,7 @@ int sweep_run_spread(cli_ctx *ctx, const cmdline_args *a, int k_shards, bool res
   rsw_client_opts co = {
       .size = sizeof co, .base_url = ctx->server_url, .token = ctx->token, .interrupt = &cli_interrupted};
   rsw_spread_opts so = {.size = sizeof so,
+                        .on_warnings = spread_warnings,
                         .shards = k_shards,
                         .scene_file = scene_is_file ? scene : NULL,
                         .state_path = state,

@@ -377,20 +377,10 @@ rsw_status rsw_job_get(rsw_client *c, const char *job_id, rsw_job_status *out) {
   return s;
 }
 
-rsw_status rsw_job_warnings(rsw_client *c, const char *job_id, char **text_out) {
-  if (!c) return RSW_ERR_INVALID;
-  client_clear_error(c);
-  char path[320];
-  if (!job_path(job_id, "", path, sizeof path))
-    return client_fail(c, RSW_ERR_INVALID, "job id missing or too long");
-  if (!text_out) return client_fail(c, RSW_ERR_INVALID, "job warnings: text_out is NULL");
+/* A Job's (or JobDryRun's) warnings as rsw_job_warnings' text into *text_out
+ * (NULL when none). */
+static rsw_status warnings_text(rsw_client *c, const cJSON *a, char **text_out) {
   *text_out = NULL;
-  http_resp r;
-  rsw_status s = http_request(c, &(http_req){.method = "GET", .path = path}, &r);
-  if (s) return s;
-  cJSON *a = cJSON_ParseWithLength(r.body, r.len);
-  http_resp_free(&r);
-  if (!a) return client_fail(c, RSW_ERR_PARSE, "GET %s: the answer is not JSON", path);
   const cJSON *w = cJSON_GetObjectItemCaseSensitive(a, "warnings");
   size_t n = 0;
   for (int pass = 0; pass < 2 && cJSON_IsArray(w) && w->child; pass++) {
@@ -405,13 +395,66 @@ rsw_status rsw_job_warnings(rsw_client *c, const char *job_id, char **text_out) 
                        cJSON_IsString(detail) ? detail->valuestring : "");
       at += k > 0 ? (size_t)k : 0;
     }
-    if (!pass && !(*text_out = malloc((n = at) + 1))) {
-      cJSON_Delete(a);
-      return client_fail(c, RSW_ERR_NOMEM, "out of memory");
-    }
+    if (!pass && !(*text_out = malloc((n = at) + 1))) return client_fail(c, RSW_ERR_NOMEM, "out of memory");
   }
-  cJSON_Delete(a);
   return RSW_OK;
+}
+
+rsw_status rsw_job_warnings(rsw_client *c, const char *job_id, char **text_out) {
+  if (!c) return RSW_ERR_INVALID;
+  client_clear_error(c);
+  char path[320];
+  if (!job_path(job_id, "", path, sizeof path))
+    return client_fail(c, RSW_ERR_INVALID, "job id missing or too long");
+  if (!text_out) return client_fail(c, RSW_ERR_INVALID, "job warnings: text_out is NULL");
+  *text_out = NULL;
+  http_resp r;
+  rsw_status s = http_request(c, &(http_req){.method = "GET", .path = path}, &r);
+  if (s) return s;
+  cJSON *a = cJSON_ParseWithLength(r.body, r.len);
+  http_resp_free(&r);
+  if (!a) return client_fail(c, RSW_ERR_PARSE, "GET %s: the answer is not JSON", path);
+  s = warnings_text(c, a, text_out);
+  cJSON_Delete(a);
+  return s;
+}
+
+rsw_status rsw_job_check(rsw_client *c, const char *scene_id, const rsw_contexts *x, size_t *renders_out,
+                         char **warnings_out) {
+  char path[300], unused[40];
+  rsw_status s = submit_start(c, scene_id, unused, path);
+  if (s) return s;
+  if (!x || !x->n) return client_fail(c, RSW_ERR_INVALID, "job check: no contexts");
+  if (warnings_out) *warnings_out = NULL;
+  char *body = cJSON_PrintUnformatted(x->root);
+  if (!body) return client_fail(c, RSW_ERR_NOMEM, "cannot print the job request");
+  strcat(path, "?dry_run=1");
+  http_resp r;
+  s = http_request(c,
+                   &(http_req){.method = "POST",
+                               .path = path,
+                               .content_type = "application/json",
+                               .body = body,
+                               .body_len = strlen(body),
+                               .computed = true},
+                   &r);
+  free(body);
+  if (s) return s;
+  cJSON *a = cJSON_ParseWithLength(r.body, r.len);
+  http_resp_free(&r);
+  if (!cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(a, "dry_run"))) {
+    /* A daemon from before ?dry_run queued it: take the job back. */
+    const cJSON *id = cJSON_GetObjectItemCaseSensitive(a, "id");
+    if (cJSON_IsString(id)) rsw_job_delete(c, id->valuestring);
+    cJSON_Delete(a);
+    return client_fail(c, RSW_ERR_UNSUPPORTED,
+                       "POST %s: the daemon has no dry runs (a job was queued, and deleted)", path);
+  }
+  const cJSON *n = cJSON_GetObjectItemCaseSensitive(a, "renders_total");
+  if (renders_out) *renders_out = cJSON_IsNumber(n) && n->valuedouble >= 0 ? (size_t)n->valuedouble : 0;
+  s = warnings_out ? warnings_text(c, a, warnings_out) : RSW_OK;
+  cJSON_Delete(a);
+  return s;
 }
 
 rsw_status rsw_job_cancel(rsw_client *c, const char *job_id) {

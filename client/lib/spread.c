@@ -1153,6 +1153,16 @@ rsw_status rsw_spread_run(const rsw_client_opts *copts, const char *scene_id, co
       s = rsw_client_set_route(c, sp.shards[0].base);
       if (!s) s = client_scene_push_file(c, o.scene_file, o.variant, sp.scene_id, sp.doc_id, NULL);
     }
+    if (!s && o.on_warnings) { /* the whole sweep's dry run, where shard 0 runs */
+      what = "checking the sweep";
+      shard_key(&sp.shards[0]);
+      char *w = NULL;
+      s = rsw_client_set_route(c, sp.shards[0].base);
+      if (!s) s = rsw_job_check(c, sp.scene_id, x, NULL, &w);
+      if (s == RSW_ERR_UNSUPPORTED) s = RSW_OK;
+      if (!s && w) o.on_warnings(o.warnings_user, w);
+      rsw_free(w);
+    }
     if (s) {
       const rsw_error_info *e = rsw_client_last_error(c);
       if (c && e->http_status == 0 && s == RSW_ERR_UNAVAILABLE)

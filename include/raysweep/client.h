@@ -289,6 +289,14 @@ rsw_status rsw_job_get(rsw_client *c, const char *job_id, rsw_job_status *out);
  * (coordinate): detail" a line; *text_out is NULL when there are none,
  * else owned: rsw_free. */
 rsw_status rsw_job_warnings(rsw_client *c, const char *job_id, char **text_out);
+/* A dry run of rsw_job_submit (POST .../jobs?dry_run=1): the request is
+ * checked and planned as a submission is and nothing is queued; the
+ * submission's error, or *renders_out (may be NULL) the renders it would
+ * run and *warnings_out (may be NULL; owned: rsw_free) its warnings as
+ * rsw_job_warnings gives them. RSW_ERR_UNSUPPORTED from a daemon without
+ * dry runs (the job it queued is deleted). */
+rsw_status rsw_job_check(rsw_client *c, const char *scene_id, const rsw_contexts *x, size_t *renders_out,
+                         char **warnings_out);
 /* Progress callback: one call per finished (context, sensor) and once at
  * the end. Return non-zero to stop waiting (the job keeps running). */
 typedef int (*rsw_progress_fn)(void *user, const char *context, const char *sensor, size_t done, size_t total,
@@ -442,6 +450,14 @@ typedef struct rsw_spread_opts {
    * undecoded, and reach on_film_encoded (with film_user) instead. */
   const char *film_media_type;
   rsw_spread_encoded_fn on_film_encoded;
+  /* NULL: not asked. Else the whole sweep is dry-run once (rsw_job_check,
+   * through shard 0's key) before any shard runs, so a request the daemon
+   * refuses fails at once, and this is called with its warnings (text
+   * borrowed for the call) when it has some: a shard alone may not differ
+   * along the coordinate a warning names. A daemon without dry runs is
+   * skipped. */
+  void (*on_warnings)(void *user, const char *text);
+  void *warnings_user;
 } rsw_spread_opts;
 
 typedef struct rsw_spread_result {

@@ -1196,6 +1196,69 @@ static int on_spread_film(void *user, const char *context, const char *sensor, c
  * 12 contexts in 3 shards, each film delivered once and right; a second
  * run with the same state file renders nothing and hands every film back
  * as resumed; a state file of another sweep is refused. */
+/* rsw_job_check (POST .../jobs?dry_run=1): nothing queued, the renders a
+ * submission would run, its warnings (a coordinate nothing reads); a bad
+ * request the submission's error. rsw_spread_opts.on_warnings: the whole
+ * sweep's warnings once, though each shard holds one value of the
+ * coordinate (which a shard's own job cannot see). */
+typedef struct warned_log {
+  int calls;
+  char text[2048];
+} warned_log;
+
+static void on_warned(void *user, const char *text) {
+  warned_log *w = user;
+  w->calls++;
+  snprintf(w->text, sizeof w->text, "%s", text);
+}
+
+static int count_film(void *user, const char *c, const char *sn, const char *result_json,
+                      const rsw_film *film, int resumed) {
+  (void)c, (void)sn, (void)result_json, (void)film, (void)resumed;
+  (*(int *)user)++;
+  return 0;
+}
+
+static void test_job_check(void) {
+  rsw_client *c = client_for(main_d.base_url, NULL, 0);
+  REQUIRE(c, "client");
+  char id[65];
+  REQUIRE(plate_scene(c, "0.5", id), "scene");
+  rsw_contexts *x = NULL;
+  REQUIRE(rsw_contexts_new(&x) == RSW_OK, "contexts");
+  rsw_contexts_add(x, "s0", 500, NULL);
+  rsw_contexts_add(x, "s30", 500, NULL);
+  rsw_contexts_set_coord(x, 0, "sza", "0");
+  rsw_contexts_set_coord(x, 1, "sza", "30");
+  rsw_contexts_add_default_sensor(x, "meter");
+  rsw_contexts_set_default_spp(x, 2);
+  size_t renders = 0;
+  char *w = NULL;
+  rsw_status s = rsw_job_check(c, id, x, &renders, &w);
+  CHECK(s == RSW_OK && renders == 2 && w && strstr(w, "coordinate_unused (sza)"),
+        "check: %s (%s), %zu renders, %s", rsw_strerror(s), why(c), renders, w ? w : "(no warnings)");
+  rsw_free(w);
+  rsw_client_opts co = {.size = sizeof co, .base_url = main_d.base_url, .retry_backoff_s = 0.01};
+  warned_log wl = {0};
+  int films = 0;
+  rsw_spread_opts so = {.size = sizeof so,
+                        .shards = 2,
+                        .on_film = count_film,
+                        .film_user = &films,
+                        .on_warnings = on_warned,
+                        .warnings_user = &wl};
+  rsw_spread_result r;
+  s = rsw_spread_run(&co, id, x, &so, &r);
+  CHECK(s == RSW_OK && films == 2 && wl.calls == 1 && strstr(wl.text, "coordinate_unused (sza)"),
+        "spread: %s (%s), %d films, %d warning calls: %s", rsw_strerror(s), rsw_spread_last_error(), films,
+        wl.calls, wl.text);
+  rsw_contexts_add_default_sensor(x, "nosuch");
+  s = rsw_job_check(c, id, x, &renders, NULL);
+  CHECK(s != RSW_OK && strstr(why(c), "nosuch"), "a bad request: %s (%s)", rsw_strerror(s), why(c));
+  rsw_contexts_free(x);
+  rsw_client_free(c);
+}
+
 static void test_spread(void) {
   rsw_client *c = client_for(main_d.base_url, NULL, 0);
   REQUIRE(c, "client");
@@ -1554,6 +1617,7 @@ int main(void) {
     RSW_TEST_RUN(test_contexts_builder);
     RSW_TEST_RUN(test_dataset_builder);
     RSW_TEST_RUN(test_job_sweep);
+    RSW_TEST_RUN(test_job_check);
     RSW_TEST_RUN(test_fetch_encoded);
     RSW_TEST_RUN(test_fetch_encoded_wrong_type);
     RSW_TEST_RUN(test_wait_timeout_stop_cancel);

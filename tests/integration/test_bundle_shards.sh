@@ -24,7 +24,10 @@
 #     accepted, with the reason, on an rgb scene and a Stokes film
 #     (environment plugins: test_bundle_env.sh); "bundle"
 #     0, 17, "x", -1 and a context's bundle_group "a" are 4xx naming the
-#     pointer; `sweep --bundle 17` and `--bundle x` are usage errors.
+#     pointer; `sweep --bundle 17` and `--bundle x` are usage errors;
+#   - --spread checks the whole sweep first (?dry_run=1): a sweep over sza
+#     that nothing reads warns once, though each shard holds one value;
+#     an unknown sensor fails before either replica queues a job.
 name=test_bundle_shards
 source "$(dirname "$0")/../support/shtest.sh"
 need_bins raysweepd raysweep
@@ -267,4 +270,19 @@ fa, fb, fc = h.films(port, a), h.films(port, b), h.films(port, c)
 assert fa["w420"] == fb["w420"] and fa["w430"] == fb["w430"], "a group alone differs from the group in the job"
 assert fa["w420"] != fc["w420"], "bundle_group changed nothing"
 ' "$tmp" "$pa" "$scene"
+
+# --spread dry-runs the whole sweep first (POST .../jobs?dry_run=1): its
+# warnings once, though each shard holds one value of sza (a shard's own
+# job cannot see that sza changes nothing: none was printed before), and a
+# request the daemon refuses fails before any shard's job is queued.
+jobs_now() { curl -s "http://127.0.0.1:$1/v1/jobs" | python3 -c 'import json, sys; print(len(json.load(sys.stdin)["jobs"]))'; }
+expect 0 "spread 2 over a coordinate nothing reads" rs "$plb" sweep "$scene" --grid sza=0,30 --spp 2 --spread 2 -o sza
+n=$(grep -c "warning: the sweep: coordinate_unused (sza)" "$tmp/err")
+[ "$n" = 1 ] && ok || bad "spread 2 over sza: $n coordinate_unused warnings, want 1: $(head -c 600 "$tmp/err")"
+before="$(jobs_now "$pa") $(jobs_now "$pb")"
+expect 1 "spread 2 with an unknown sensor" rs "$plb" sweep "$scene" --grid wavelength=500,600 --sensor nosuch \
+  --spp 2 --spread 2 -o nosuch
+contains "spread 2 with an unknown sensor: named" "$tmp/err" "no sensor 'nosuch'"
+after="$(jobs_now "$pa") $(jobs_now "$pb")"
+[ "$before" = "$after" ] && ok || bad "spread 2 with an unknown sensor queued jobs: $before before, $after after"
 finish
