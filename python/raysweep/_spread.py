@@ -230,7 +230,14 @@ def run(scene, contexts, n_shards, options, progress=None, timeout=None):
             films.update(sh.job.films())
         return films
     for sh in shards:
-        sh.dataset = sh.job.dataset()
+        while sh.dataset is None:
+            try:
+                sh.dataset = sh.job.dataset()
+            except (ConnectionFailed, RaysweepError) as e:  # (its replica lost since the job ended)
+                if not _lost(e):
+                    raise
+                _start(scene, sh, options, why=e)
+                _follow(scene, [sh], options, deadline, None, 0)
     return _join(shards, contexts)
 
 
