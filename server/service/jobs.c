@@ -1285,6 +1285,20 @@ static rsw_status enqueue_job(service *svc, resident *r, job *jb, uint64_t reser
   return RSW_OK;
 }
 
+/* A request's parse, checks and plan on resident r: the job in *jb_out
+ * (not queued) and the result memory it reserves. */
+static rsw_status plan_request(service *svc, resident *r, const char *body, size_t len, job **jb_out,
+                               uint64_t *reserve, svc_error *e) {
+  job_req q = {0};
+  job_check k = {0};
+  rsw_status st = parse_request(body, len, &q, e);
+  if (!st) st = validate_request(svc, r, &q, &k, e);
+  if (!st) st = plan_job(svc, r->sc, &q, &k, jb_out, reserve, e);
+  job_check_free(&k, q.n_contexts);
+  job_req_free(&q);
+  return st;
+}
+
 rsw_status service_job_submit(service *svc, const char *scene_id, const char *body, size_t len,
                               const char *idem_key, char **job_id_out, char **json_out, svc_error *e) {
   if (!service_ready(svc)) return svc_fail(e, RSW_ERR_UNAVAILABLE, "", "the server is shutting down");
@@ -1298,15 +1312,9 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   }
   resident *r = svc_scene_acquire(svc, scene_id);
   if (!r) return svc_no_scene(e, scene_id);
-  job_req q = {0};
-  job_check k = {0};
   job *jb = NULL;
   uint64_t reserve = 0;
-  rsw_status st = parse_request(body, len, &q, e);
-  if (!st) st = validate_request(svc, r, &q, &k, e);
-  if (!st) st = plan_job(svc, r->sc, &q, &k, &jb, &reserve, e);
-  job_check_free(&k, q.n_contexts);
-  job_req_free(&q);
+  rsw_status st = plan_request(svc, r, body, len, &jb, &reserve, e);
   if (st) {
     svc_scene_release(svc, r);
     return st;
@@ -1321,15 +1329,9 @@ rsw_status service_job_check(service *svc, const char *scene_id, const char *bod
   resident *r = svc_scene_acquire(svc, scene_id);
   if (!r) return svc_no_scene(e, scene_id);
   unsigned jm = svc_json_mark();
-  job_req q = {0};
-  job_check k = {0};
   job *jb = NULL;
   uint64_t reserve = 0;
-  rsw_status st = parse_request(body, len, &q, e);
-  if (!st) st = validate_request(svc, r, &q, &k, e);
-  if (!st) st = plan_job(svc, r->sc, &q, &k, &jb, &reserve, e);
-  job_check_free(&k, q.n_contexts);
-  job_req_free(&q);
+  rsw_status st = plan_request(svc, r, body, len, &jb, &reserve, e);
   if (!st) {
     /* What the job would be: its size, what "bundle" comes to, its warnings. */
     cJSON *o = cJSON_CreateObject();

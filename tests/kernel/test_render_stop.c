@@ -85,16 +85,25 @@ static const char *FOG =
 
 #define FOG_WAVE 256 /* samples: one wave (render.c's WAVE) */
 
+/* Seconds the fog's whole wave takes, from a 4-sample render; -1 when it
+ * fails. */
+static double fog_wave_s(scene *s) {
+  film_image img = {0};
+  double t0 = now();
+  if (!tsup_render(s, 4, 1, 1, &img)) return -1;
+  double full = (now() - t0) * (FOG_WAVE / 4.0);
+  film_image_free(&img);
+  return full;
+}
+
 static void test_deadline_inside_a_wave(void) {
   scene *s = tsup_load(FOG, "mono");
   REQUIRE(s, "scene loads");
+  double full = fog_wave_s(s);
+  REQUIRE(full > 0, "calibration render");
   film_image img = {0};
-  double t0 = now();
-  REQUIRE(tsup_render(s, 4, 1, 1, &img), "calibration render");
-  double full = (now() - t0) * (FOG_WAVE / 4.0);
-  film_image_free(&img);
   rsw_err err = {0};
-  t0 = now();
+  double t0 = now();
   render_opts o = {.size = sizeof o, .spp = FOG_WAVE, .seed = 1, .threads = 1, .deadline = t0 + 0.2};
   rsw_status st = render_sensor(s, &o, &img, NULL, &err);
   double dt = now() - t0;
@@ -142,17 +151,15 @@ static void test_cancel_inside_a_pixel(void) {
 static void test_cancel_inside_a_wave(void) {
   scene *s = tsup_load(FOG, "mono");
   REQUIRE(s, "scene loads");
+  double full = fog_wave_s(s);
+  REQUIRE(full > 0, "calibration render");
   film_image img = {0};
-  double t0 = now();
-  REQUIRE(tsup_render(s, 4, 1, 1, &img), "calibration render");
-  double full = (now() - t0) * (FOG_WAVE / 4.0);
-  film_image_free(&img);
   canceller c;
   atomic_init(&c.flag, 0);
   pthread_t th;
   REQUIRE(pthread_create(&th, NULL, cancel_soon, &c) == 0, "thread");
   rsw_err err = {0};
-  t0 = now();
+  double t0 = now();
   render_opts o = {.size = sizeof o, .spp = FOG_WAVE, .seed = 1, .threads = 1, .cancel = &c.flag};
   rsw_status st = render_sensor(s, &o, &img, NULL, &err);
   double dt = now() - t0;
