@@ -802,14 +802,15 @@ static int build_list(const cli_ctx *ctx, const sweep_opts *o, grid_axis *axes, 
  * it in DIR/sweep.json, wait (Ctrl-C cancels it), fetch every film, write
  * the index, the dataset and the finished manifest. */
 static int run_job(cli_ctx *ctx, const sweep_opts *o, const sweep_list *l, sweep_item **sorted,
-                   const cJSON *job_params, const rsw_contexts *x, const char *scene,
-                   const char *fingerprint) {
+                   const cJSON *job_params, const rsw_contexts *x, const char *scene, const char *fingerprint,
+                   char *warned_whole) {
   const char *dir = o->dir;
   char job[40] = "";
   index_entry *entries = NULL;
   size_t n_entries = 0, failed = 0;
   cJSON *incomplete = NULL;
-  char *warned = NULL; /* the job's warnings printed at submission */
+  /* the warnings printed: the whole sweep's (--shard; taken over), then the job's */
+  char *warned = warned_whole;
   film_pack pack = {.fd = -1};
   int rc;
   cli_catch_interrupt();
@@ -878,6 +879,41 @@ out:
   sweep_entries_free(entries, n_entries);
   pack_close(&pack, false);
   return rc;
+}
+
+/* --shard I/N: the whole sweep's dry run (POST .../jobs?dry_run=1, nothing
+ * queued) on this shard's daemon, whose warnings no shard's own job may
+ * show (a coordinate that changes nothing, one value a shard): printed as
+ * --spread prints them, and returned (malloc'd lines, or NULL) so that the
+ * shard's job does not print them again. A daemon without dry runs, or a
+ * refusal (the shard's own job then says why), prints nothing. */
+static char *warn_whole_sweep(cli_ctx *ctx, const cmdline_args *a, const sweep_opts *o,
+                              const cJSON *job_params, const char *scene) {
+  sweep_opts whole = *o;
+  whole.shard_i = 0, whole.shard_n = 1;
+  sweep_list l = {.seed = (long long)o->seed};
+  grid_axis axes[MAX_GRIDS] = {{0}};
+  sweep_item **sorted = NULL;
+  rsw_contexts *x = NULL;
+  char *w = NULL, *out = NULL;
+  if (!build_list(ctx, &whole, axes, &l, &sorted) &&
+      !build_contexts(ctx, a, l.items, l.n, job_params, o->templates, (long long)o->spp, (long long)o->seed,
+                      o->bundle, &x) &&
+      rsw_job_check(ctx->client, scene, x, NULL, &w) == RSW_OK && w) {
+    for (const char *line = w; *line;) {
+      const char *end = strchr(line, '\n');
+      int n = end ? (int)(end - line) : (int)strlen(line);
+      fprintf(stderr, "raysweep sweep: warning: the sweep: %.*s\n", n, line);
+      line = end ? end + 1 : line + n;
+    }
+    out = strdup(w);
+  }
+  rsw_free(w);
+  rsw_contexts_free(x);
+  free(sorted);
+  items_free(&l);
+  for (size_t i = 0; i < MAX_GRIDS; i++) free(axes[i].name), free(axes[i].values);
+  return out;
 }
 
 int cmd_sweep(cli_ctx *ctx, const cmdline_args *a) {
@@ -955,7 +991,8 @@ int cmd_sweep(cli_ctx *ctx, const cmdline_args *a) {
     rc = sweep_run_spread(ctx, a, (int)o.spread, resume, o.fmt, o.timeout, &l, sorted, job_params, x,
                           fingerprint, (size_t)o.shard_i, (size_t)o.shard_n);
   else
-    rc = run_job(ctx, &o, &l, sorted, job_params, x, scene, fingerprint);
+    rc = run_job(ctx, &o, &l, sorted, job_params, x, scene, fingerprint,
+                 o.shard_n > 1 ? warn_whole_sweep(ctx, a, &o, job_params, scene) : NULL);
 out:
   rsw_contexts_free(x);
   free(sorted);

@@ -27,7 +27,8 @@
 #     pointer; `sweep --bundle 17` and `--bundle x` are usage errors;
 #   - --spread checks the whole sweep first (?dry_run=1): a sweep over sza
 #     that nothing reads warns once, though each shard holds one value;
-#     an unknown sensor fails before either replica queues a job.
+#     an unknown sensor fails before either replica queues a job; so does
+#     --shard I/N on its daemon: each of two shards over sza warns once.
 name=test_bundle_shards
 source "$(dirname "$0")/../support/shtest.sh"
 need_bins raysweepd raysweep
@@ -285,4 +286,15 @@ expect 1 "spread 2 with an unknown sensor" rs "$plb" sweep "$scene" --grid wavel
 contains "spread 2 with an unknown sensor: named" "$tmp/err" "no sensor 'nosuch'"
 after="$(jobs_now "$pa") $(jobs_now "$pb")"
 [ "$before" = "$after" ] && ok || bad "spread 2 with an unknown sensor queued jobs: $before before, $after after"
+# --shard I/N dry-runs the whole sweep on its daemon too: each of two
+# shards of one sza value warns once (its own job cannot see it); a shard
+# whose own job also warns prints the warning once.
+for i in 0 1; do
+  expect 0 "--shard $i/2 over a coordinate nothing reads" rs "$pa" sweep "$scene" --grid sza=0,30 --spp 2 --shard $i/2 -o szash$i
+  n=$(grep -c "warning: the sweep: coordinate_unused (sza)" "$tmp/err")
+  [ "$n" = 1 ] && ok || bad "--shard $i/2 over sza: $n coordinate_unused warnings, want 1: $(head -c 600 "$tmp/err")"
+done
+expect 0 "--shard 0/2 of three sza values" rs "$pa" sweep "$scene" --grid sza=0,30,60 --spp 2 --shard 0/2 -o szash3
+n=$(grep -c "coordinate_unused (sza)" "$tmp/err")
+[ "$n" = 1 ] && ok || bad "--shard 0/2 of three sza: $n coordinate_unused warnings, want 1: $(head -c 600 "$tmp/err")"
 finish
