@@ -1322,7 +1322,8 @@ rsw_status service_job_submit(service *svc, const char *scene_id, const char *bo
   return enqueue_job(svc, r, jb, reserve, idem_key, digest, body, len, jm, job_id_out, json_out, e);
 }
 
-/* A dry run: the submission's stages but the queue. */
+/* A dry run: the submission's stages (room for it now included) but the
+ * queue. */
 rsw_status service_job_check(service *svc, const char *scene_id, const char *body, size_t len,
                              char **json_out, svc_error *e) {
   if (!service_ready(svc)) return svc_fail(e, RSW_ERR_UNAVAILABLE, "", "the server is shutting down");
@@ -1332,6 +1333,12 @@ rsw_status service_job_check(service *svc, const char *scene_id, const char *bod
   job *jb = NULL;
   uint64_t reserve = 0;
   rsw_status st = plan_request(svc, r, body, len, &jb, &reserve, e);
+  if (!st) { /* room for it now (result storage, the queue), as a submission would find */
+    pthread_mutex_lock(&svc->lock);
+    st = check_room_locked(svc, reserve, e);
+    pthread_mutex_unlock(&svc->lock);
+    if (st) job_free(jb);
+  }
   if (!st) {
     /* What the job would be: its size, what "bundle" comes to, its warnings. */
     cJSON *o = cJSON_CreateObject();

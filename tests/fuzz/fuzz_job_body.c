@@ -2,8 +2,10 @@
  * the harness scene: refused with an error naming the field, or accepted
  * and run to its end event, and its dataset encodes. Every context is validated before the 202, so
  * an accepted job must succeed with no failed render. The job is deleted after, and the scene's own
- * parameters must be unchanged. Inputs over 8 KiB are skipped (a context
- * costs a render). */
+ * parameters must be unchanged. Its dry run (?dry_run=1,
+ * service_job_check) first: it refuses exactly what the submission refuses,
+ * with the same error, and accepts with the renders the job then has.
+ * Inputs over 8 KiB are skipped (a context costs a render). */
 #include <cjson/cJSON.h>
 
 #include "fuzz_service.h"
@@ -17,11 +19,26 @@ int LLVMFuzzerInitialize(int *argc, char ***argv) {
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
   if (size > 8192) return 0;
-  char *job_id = NULL, *json = NULL;
-  svc_error e = {0};
+  char *job_id = NULL, *json = NULL, *dry = NULL;
+  svc_error e = {0}, de = {0};
+  rsw_status dst = service_job_check(fuzz_svc, fuzz_scene_id, (const char *)data, size, &dry, &de);
+  fuzz_check_error(dst, &de, "job dry run");
   rsw_status st =
       service_job_submit(fuzz_svc, fuzz_scene_id, (const char *)data, size, NULL, &job_id, &json, &e);
   fuzz_check_error(st, &e, "job submit");
+  FUZZ_CHECK(dst == st && (st == RSW_OK || strcmp(de.err.msg, e.err.msg) == 0),
+             "the dry run answered %d (%s), the submission %d (%s)", (int)dst, de.err.msg, (int)st,
+             e.err.msg);
+  if (st == RSW_OK) {
+    cJSON *a = cJSON_Parse(dry), *b = cJSON_Parse(json);
+    const cJSON *na = cJSON_GetObjectItemCaseSensitive(a, "renders_total");
+    const cJSON *nb = cJSON_GetObjectItemCaseSensitive(b, "renders_total");
+    FUZZ_CHECK(cJSON_IsNumber(na) && cJSON_IsNumber(nb) && na->valuedouble == nb->valuedouble,
+               "the dry run's renders_total is not the job's: %s vs %s", dry, json);
+    cJSON_Delete(a);
+    cJSON_Delete(b);
+  }
+  free(dry);
   free(json);
   if (st == RSW_OK) {
     FUZZ_CHECK(job_id != NULL, "accepted without a job id");
