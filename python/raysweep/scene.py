@@ -152,8 +152,11 @@ class Scene:
     def submit(self, grid=None, contexts=None, **options):
         """Submit a job of kernel contexts and return at once with a :class:`~raysweep.Job` (a future).
 
-        Takes the arguments of :meth:`sweep` but ``progress``.
+        Takes the arguments of :meth:`sweep` but ``progress``, ``timeout`` and ``spread``.
         """
+        if "spread" in options:
+            raise TypeError("submit() runs one job on one daemon; spread= is sweep()'s (it runs the shards' "
+                            "jobs and joins their datasets)")
         from .jobs import submit
         return submit(self, grid=grid, contexts=contexts, **options)
 

@@ -146,6 +146,12 @@ def main():
                 if words not in str(e):
                     return f"spread={bad!r}: {e}"
         try:
+            s.submit(grid={"wavelength": [500]}, spread=2)
+            return "submit(spread=2) was taken"
+        except TypeError as e:
+            if "sweep()" not in str(e):
+                return f"submit(spread=2): {e}"
+        try:
             bal.scene(s.id).sweep(grid={"wavelength": [500]}, spread=2, progress=False)
             return "a scene found by id was spread"
         except TypeError as e:
@@ -160,7 +166,7 @@ def main():
             if "revision 1" not in str(e):
                 return f"an edited scene: {e}"
         return None
-    check("refuses a bad spread, a scene found by id, an edited scene", refusals)
+    check("refuses a bad spread, submit(spread=), a scene found by id, an edited scene", refusals)
 
 
 if __name__ == "__main__":
