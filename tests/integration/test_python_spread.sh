@@ -25,8 +25,11 @@ start_daemon "$tmp/ref" --threads 1
 pref=$started_port
 [ -n "$pref" ] || { bad "the reference daemon did not start: $(cat "$tmp/ref/log")"; finish; }
 kill_pid=${pids[1]} # daemon b (start_spread_pair: a, b, the balancer)
+exec 3>&2 2>/dev/null # (bash's notice of the replica the check kills; the check's own stderr is in $out)
 out=$("$py" "$root/tests/support/python_spread_check.py" "http://127.0.0.1:$plb" "http://127.0.0.1:$pref" \
   "$pa" "$pb" --kill "$kill_pid" 2>&1)
+wait "$kill_pid"
+exec 2>&3 3>&-
 echo "$out" | grep -v '^ok   '
 p=$(echo "$out" | grep -c '^ok   ')
 f=$(echo "$out" | grep -c '^FAIL ')
