@@ -39,7 +39,7 @@ done
 exec 3>&2 2>/dev/null # (bash's notice of the replica the check kills; the check's own stderr is in $out)
 out=$("$py" "$root/tests/support/python_spread_check.py" "http://127.0.0.1:$lb" "http://127.0.0.1:$pref" \
   "${ports[@]}" --kill "$kill_pid" 2>&1)
-wait "$kill_pid"
+kill -9 "$kill_pid" 2>/dev/null; wait "$kill_pid" # (gone already, unless the check failed first)
 exec 2>&3 3>&-
 echo "$out" | grep -v '^ok   '
 p=$(echo "$out" | grep -c '^ok   ')

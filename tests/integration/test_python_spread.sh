@@ -28,7 +28,7 @@ kill_pid=${pids[1]} # daemon b (start_spread_pair: a, b, the balancer)
 exec 3>&2 2>/dev/null # (bash's notice of the replica the check kills; the check's own stderr is in $out)
 out=$("$py" "$root/tests/support/python_spread_check.py" "http://127.0.0.1:$plb" "http://127.0.0.1:$pref" \
   "$pa" "$pb" --kill "$kill_pid" 2>&1)
-wait "$kill_pid"
+kill -9 "$kill_pid" 2>/dev/null; wait "$kill_pid" # (gone already, unless the check failed first)
 exec 2>&3 3>&-
 echo "$out" | grep -v '^ok   '
 p=$(echo "$out" | grep -c '^ok   ')
