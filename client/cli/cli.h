@@ -171,6 +171,9 @@ const char *cli_job_state_name(rsw_job_state s);
  * NULL): the lines printed before, skipped, and replaced by the job's
  * whole text now (the caller frees it with free). */
 void cli_print_job_warnings(cli_ctx *ctx, const char *who, const char *job_id, char **seen);
+/* Warnings text (rsw_job_warnings' lines) on stderr, "WHO: warning: SUBJECT:
+ * LINE" each, but the lines seen (may be NULL) already holds. */
+void cli_print_warnings(const char *who, const char *subject, const char *text, const char *seen);
 
 /* ---- handlers ---- */
 int cmd_status(cli_ctx *ctx, const cmdline_args *a);

@@ -900,12 +900,7 @@ static char *warn_whole_sweep(cli_ctx *ctx, const cmdline_args *a, const sweep_o
       !build_contexts(ctx, a, l.items, l.n, job_params, o->templates, (long long)o->spp, (long long)o->seed,
                       o->bundle, &x) &&
       rsw_job_check(ctx->client, scene, x, NULL, &w) == RSW_OK && w) {
-    for (const char *line = w; *line;) {
-      const char *end = strchr(line, '\n');
-      int n = end ? (int)(end - line) : (int)strlen(line);
-      fprintf(stderr, "raysweep sweep: warning: the sweep: %.*s\n", n, line);
-      line = end ? end + 1 : line + n;
-    }
+    cli_print_warnings("raysweep sweep", "the sweep", w, NULL);
     out = strdup(w);
   }
   rsw_free(w);

@@ -121,12 +121,7 @@ static int spread_film_encoded(void *user, const char *c, const char *sn, const 
  * line each, as the unsharded sweep prints its job's (even with -q). */
 static void spread_warnings(void *user, const char *text) {
   (void)user;
-  for (const char *line = text; line && *line;) {
-    const char *end = strchr(line, '\n');
-    int n = end ? (int)(end - line) : (int)strlen(line);
-    fprintf(stderr, "raysweep sweep: warning: the sweep: %.*s\n", n, line);
-    line = end ? end + 1 : NULL;
-  }
+  cli_print_warnings("raysweep sweep", "the sweep", text, NULL);
 }
 
 int sweep_run_spread(cli_ctx *ctx, const cmdline_args *a, int k_shards, bool resume, cli_format fmt,

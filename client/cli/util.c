@@ -420,21 +420,31 @@ static bool has_line(const char *text, const char *line) {
   return false;
 }
 
+void cli_print_warnings(const char *who, const char *subject, const char *text, const char *seen) {
+  for (const char *line = text; line && *line;) {
+    const char *end = strchr(line, '\n');
+    size_t n = end ? (size_t)(end - line) : strlen(line);
+    char *one = strndup(line, n);
+    if (one && !(seen && has_line(seen, one))) fprintf(stderr, "%s: warning: %s: %s\n", who, subject, one);
+    free(one);
+    line = end ? end + 1 : NULL;
+  }
+}
+
 void cli_print_job_warnings(cli_ctx *ctx, const char *who, const char *job_id, char **seen) {
   char *text = NULL;
   if (rsw_job_warnings(ctx->client, job_id, &text) != RSW_OK || !text) return;
-  char *all = seen ? strdup(text) : NULL;
-  for (char *line = text, *next; line && *line; line = next) {
-    next = strchr(line, '\n');
-    if (next) *next++ = '\0';
-    if (seen && *seen && has_line(*seen, line)) continue;
-    fprintf(stderr, "%s: warning: job %s: %s\n", who, job_id, line);
+  char subject[64];
+  snprintf(subject, sizeof subject, "job %s", job_id);
+  cli_print_warnings(who, subject, text, seen ? *seen : NULL);
+  if (seen) {
+    char *all = strdup(text);
+    if (all) {
+      free(*seen);
+      *seen = all;
+    }
   }
   rsw_free(text);
-  if (seen && all) {
-    free(*seen);
-    *seen = all;
-  }
 }
 
 const char *cli_job_state_name(rsw_job_state s) {

@@ -36,15 +36,5 @@ for _ in $(seq 100); do
   curl -sf -o /dev/null "http://127.0.0.1:$lb/v1/health/ready" && break
   sleep 0.1
 done
-exec 3>&2 2>/dev/null # (bash's notice of the replica the check kills; the check's own stderr is in $out)
-out=$("$py" "$root/tests/support/python_spread_check.py" "http://127.0.0.1:$lb" "http://127.0.0.1:$pref" \
-  "${ports[@]}" --kill "$kill_pid" 2>&1)
-kill -9 "$kill_pid" 2>/dev/null; wait "$kill_pid" # (gone already, unless the check failed first)
-exec 2>&3 3>&-
-echo "$out" | grep -v '^ok   '
-p=$(echo "$out" | grep -c '^ok   ')
-f=$(echo "$out" | grep -c '^FAIL ')
-pass=$((pass + p))
-fail=$((fail + f))
-[ "$p" -eq 9 ] || bad "python_spread_check.py passed $p checks, want 9: $(echo "$out" | tail -n 3)"
+python_spread_check "http://127.0.0.1:$lb" "http://127.0.0.1:$pref" "$kill_pid" "${ports[@]}"
 finish

@@ -25,15 +25,5 @@ start_daemon "$tmp/ref" --threads 1
 pref=$started_port
 [ -n "$pref" ] || { bad "the reference daemon did not start: $(cat "$tmp/ref/log")"; finish; }
 kill_pid=${pids[1]} # daemon b (start_spread_pair: a, b, the balancer)
-exec 3>&2 2>/dev/null # (bash's notice of the replica the check kills; the check's own stderr is in $out)
-out=$("$py" "$root/tests/support/python_spread_check.py" "http://127.0.0.1:$plb" "http://127.0.0.1:$pref" \
-  "$pa" "$pb" --kill "$kill_pid" 2>&1)
-kill -9 "$kill_pid" 2>/dev/null; wait "$kill_pid" # (gone already, unless the check failed first)
-exec 2>&3 3>&-
-echo "$out" | grep -v '^ok   '
-p=$(echo "$out" | grep -c '^ok   ')
-f=$(echo "$out" | grep -c '^FAIL ')
-pass=$((pass + p))
-fail=$((fail + f))
-[ "$p" -eq 9 ] || bad "python_spread_check.py passed $p checks, want 9: $(echo "$out" | tail -n 3)"
+python_spread_check "http://127.0.0.1:$plb" "http://127.0.0.1:$pref" "$kill_pid" "$pa" "$pb"
 finish

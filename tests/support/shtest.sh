@@ -102,6 +102,24 @@ need_xarray() {
     finish
   }
 }
+# python_spread_check LB_URL REF_URL KILL_PID REPLICA_PORT...: the checks of
+# tests/support/python_spread_check.py (need_xarray first), each counted;
+# all 9 must pass. KILL_PID is the replica the checks SIGKILL mid-sweep.
+python_spread_check() {
+  local lb=$1 ref=$2 kill_pid=$3 out p f
+  shift 3
+  exec 3>&2 2>/dev/null # (bash's notice of the killed replica; the checks' own stderr is in $out)
+  out=$("$py" "$root/tests/support/python_spread_check.py" "$lb" "$ref" "$@" --kill "$kill_pid" 2>&1)
+  kill -9 "$kill_pid" 2>/dev/null
+  wait "$kill_pid" # (gone already, unless the checks failed first)
+  exec 2>&3 3>&-
+  echo "$out" | grep -v '^ok   '
+  p=$(echo "$out" | grep -c '^ok   ')
+  f=$(echo "$out" | grep -c '^FAIL ')
+  pass=$((pass + p))
+  fail=$((fail + f))
+  [ "$p" -eq 9 ] || bad "python_spread_check.py passed $p checks, want 9: $(echo "$out" | tail -n 3)"
+}
 # ds LABEL CHECK ARGS...: a tests/support/dataset_check.py check must pass
 # (need_xarray first).
 ds() {
