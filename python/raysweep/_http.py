@@ -106,8 +106,9 @@ class Transport:
                     time.sleep(wait)
                     wait *= 2
                     continue
-                raise ConnectionFailed(f"cannot reach the daemon at {self.url}: {e.reason}",
-                                       method=method, path=path) from None
+                err = ConnectionFailed(f"cannot reach the daemon at {self.url}: {e.reason}", method=method, path=path)
+                err.refused = refused  # (nothing listens at the address: no other routing key reaches anything)
+                raise err from None
             except (socket.timeout, TimeoutError):
                 raise ConnectionFailed(f"{method} {path}: no answer from {self.url} within {timeout} s",
                                        method=method, path=path) from None

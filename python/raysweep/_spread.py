@@ -14,8 +14,15 @@ or the replica refuses with 503) is submitted again under another key. The
 shards' datasets are joined along their contexts and, when the whole sweep is a
 complete grid over its coords, laid out over them as the daemon lays out the
 unsharded sweep's (docs/client.md, "Sweep datasets").
+
+With ``journal=PATH`` the shards' routing keys and jobs are kept in a file,
+rewritten whenever one changes: the same sweep run again (after a Ctrl-C, a
+timeout, a lost balancer, a dead kernel) follows the jobs the replicas kept and
+submits only the shards whose jobs are gone. The file goes when the sweep
+completes.
 """
 
+import hashlib
 import json
 import os
 import secrets
@@ -87,7 +94,73 @@ class _Shard:
         self.base = None  # the first key chosen (its resubmissions' keys extend it)
         self.tries = 0
         self.job = None
+        self.job_id = None  # (a journal's job, before it is found again)
         self.dataset = None
+
+
+class _Journal:
+    """``journal=PATH``: the shards' keys and jobs, and the sweep they belong to (a digest of
+    the scene's document, the contexts, the options and the shard count)."""
+
+    def __init__(self, path, sweep, shards):
+        self.path = os.fspath(path)
+        self.sweep = sweep
+        self.shards = shards
+
+    def load(self):
+        """Take the shards' keys and jobs from the file; False when there is none."""
+        try:
+            with open(self.path, encoding="utf-8") as f:
+                text = f.read()
+        except FileNotFoundError:
+            return False
+        try:
+            doc = json.loads(text)
+            entries = {e["shard"]: e for e in doc["shards"]}
+            ok = doc.get("raysweep") == "spread journal" and isinstance(doc.get("sweep"), str)
+        except (ValueError, KeyError, TypeError):
+            ok = False
+        if not ok:
+            raise ValueError(f"journal {self.path}: not a raysweep spread journal (delete it, or give "
+                             "another path)")
+        if doc["sweep"] != self.sweep or sorted(entries) != sorted(sh.k for sh in self.shards):
+            raise ValueError(f"journal {self.path} records another sweep (another scene document, other "
+                             "contexts, options or spread): delete it to start over, or give another path")
+        for sh in self.shards:
+            e = entries[sh.k]
+            sh.key, sh.base, sh.tries, sh.job_id = e.get("key"), e.get("base"), int(e.get("tries") or 0), e.get("job")
+            if not isinstance(sh.key, str) or not isinstance(sh.base, str):
+                raise ValueError(f"journal {self.path}: shard {sh.k} has no routing key (delete it to start over)")
+        return True
+
+    def save(self):
+        """Write the file anew beside itself, then over it (never half a journal)."""
+        doc = {"raysweep": "spread journal", "version": 1, "sweep": self.sweep,
+               "shards": [{"shard": sh.k, "key": sh.key, "base": sh.base, "tries": sh.tries,
+                           "job": sh.job.id if sh.job is not None else sh.job_id} for sh in self.shards]}
+        tmp = f"{self.path}.tmp{os.getpid()}"
+        with open(tmp, "w", encoding="utf-8") as f:
+            json.dump(doc, f, indent=1)
+            f.write("\n")
+        os.replace(tmp, self.path)
+
+    def remove(self):
+        try:
+            os.remove(self.path)
+        except FileNotFoundError:
+            pass
+
+
+def _sweep_digest(scene, contexts, n_shards, options):
+    """What a journal belongs to: the scene's document (and its files), the contexts, the
+    options but the idempotency key, and the number of shards."""
+    body, content_type, variant, refs = scene._doc
+    what = {"scene": hashlib.sha256(body).hexdigest(), "content_type": content_type, "variant": variant,
+            "files": sorted(refs), "contexts": contexts, "spread": n_shards,
+            "options": {k: v for k, v in options.items() if k != "idempotency_key"}}
+    from ._http import _json_default
+    text = json.dumps(what, default=_json_default, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def _client_for(base, key):
@@ -103,6 +176,8 @@ def _probe(scene, key):
     try:
         return _client_for(scene.client, key)._http.json("GET", "/v1").get("instance") or "?"
     except (ConnectionFailed, RaysweepError) as e:
+        if getattr(e, "refused", False):  # (the balancer itself is gone: other keys would not help)
+            raise ConnectionFailed(f"spread: the balancer at {scene.client.url} refuses connections") from None
         if _lost(e):
             return None
         raise
@@ -150,9 +225,10 @@ def _submit(scene, sh, options):
     sh.job = submit(there, contexts=sh.contexts, _warn=False, **opts)
 
 
-def _start(scene, sh, options, why=None):
+def _start(scene, sh, options, why=None, jr=None):
     """Submit the shard (again, with why: the error that lost its job), under a new key
-    for each try after the first; at most _RESUBMITS times again."""
+    for each try after the first; at most _RESUBMITS times again. jr: the journal that
+    records the shard's new job."""
     while True:
         if why is not None:
             sh.tries += 1
@@ -162,6 +238,8 @@ def _start(scene, sh, options, why=None):
             _pick_key(scene, sh, f"{sh.base}.r{sh.tries}", set())
         try:
             _submit(scene, sh, options)
+            if jr is not None:
+                jr.save()
             return
         except (ConnectionFailed, RaysweepError) as e:
             if not _lost(e):
@@ -169,12 +247,30 @@ def _start(scene, sh, options, why=None):
             why = e
 
 
+def _reattach(scene, sh, options, jr):
+    """A journal's shard: its job found again through its key, else (gone with its replica or
+    its results, or cancelled) submitted again; a shard that had no job yet is submitted."""
+    if sh.job_id is None:
+        _start(scene, sh, options, jr=jr)
+        return
+    try:
+        sh.job = _client_for(scene.client, sh.key).job(sh.job_id)
+    except (ConnectionFailed, RaysweepError) as e:
+        if not _lost(e):
+            raise
+        _start(scene, sh, options, why=e, jr=jr)
+        return
+    if sh.job.state == "cancelled":  # (someone cancelled it: this run wants its films)
+        _start(scene, sh, options, why=f"job {sh.job.id} was cancelled", jr=jr)
+
+
 def _lost(e):
     return isinstance(e, ConnectionFailed) or (isinstance(e, RaysweepError) and getattr(e, "status", None) in _LOST)
 
 
-def run(scene, contexts, n_shards, options, progress=None, timeout=None):
-    """The sweep of ``contexts`` (ids set) in ``n_shards`` shards: its dataset."""
+def run(scene, contexts, n_shards, options, progress=None, timeout=None, journal=None):
+    """The sweep of ``contexts`` (ids set) in ``n_shards`` shards: its dataset. ``journal``: a
+    path that records the shards' keys and jobs, so that the same sweep run again resumes."""
     if not isinstance(n_shards, int) or isinstance(n_shards, bool) or not 1 <= n_shards <= 256:
         raise ValueError(f"spread must be a number of shards from 1 to 256, not {n_shards!r}")
     if getattr(scene, "_doc", None) is None:
@@ -197,28 +293,61 @@ def run(scene, contexts, n_shards, options, progress=None, timeout=None):
         mine = [dict(c, bundle_group=lead[i]) for i, c in enumerate(contexts) if which[i] == k]
         if mine:
             shards.append(_Shard(k, mine))
-    prefix = f"py{os.getpid()}-{secrets.token_hex(4)}"
-    _choose_keys(scene, shards, prefix)
-    for sh in shards:
-        sh.base = sh.key
-    for sh in shards:
-        _start(scene, sh, options)
+    jr = None
+    if journal is not None:
+        jr = _Journal(journal, _sweep_digest(scene, contexts, n_shards, options), shards)
+    try:
+        if jr is not None and jr.load():
+            for sh in shards:
+                _reattach(scene, sh, options, jr)
+        else:
+            prefix = f"py{os.getpid()}-{secrets.token_hex(4)}"
+            _choose_keys(scene, shards, prefix)
+            for sh in shards:
+                sh.base = sh.key
+            if jr is not None:
+                jr.save()
+            for sh in shards:
+                _start(scene, sh, options, jr=jr)
+        ds = _finish(scene, shards, contexts, options, progress, timeout, jr)
+    except KeyboardInterrupt:
+        if jr is not None:  # (the jobs kept running, for the run that resumes them)
+            import sys
+            ids = ", ".join(sh.job.id for sh in shards if sh.job is not None)
+            print(f"raysweep: interrupted: jobs {ids or '(none yet)'} keep running; the same sweep with "
+                  f"journal={jr.path!r} follows them", file=sys.stderr)
+        raise
+    except ConnectionFailed as e:
+        if jr is None or not os.path.exists(jr.path):
+            raise
+        raise ConnectionFailed(f"{e}; the shards' jobs are recorded in {jr.path}: run the same sweep "
+                               "again (journal= that file) to follow them once the balancer answers") from None
+    if jr is not None:
+        jr.remove()
+    return ds
+
+
+def _finish(scene, shards, contexts, options, progress, timeout, jr):
+    """Follow the shards' jobs and join their datasets."""
     deadline = None if timeout is None else time.monotonic() + timeout
     from . import _progress
     total = sum(sh.job.status.get("renders_total") or 0 for sh in shards)
     bar = _progress.make_bar(progress, total, f"{len(shards)} shards")
     state = None
     try:
-        _follow(scene, shards, options, deadline, bar, total)
+        _follow(scene, shards, options, deadline, bar, total, jr)
         state = "succeeded"
     except KeyboardInterrupt:
+        if jr is not None:  # (run() says so: the jobs keep running)
+            raise
         import sys
+        ids = ", ".join(sh.job.id for sh in shards)
         for sh in shards:
             try:
                 sh.job.cancel()
             except (ConnectionFailed, RaysweepError):
                 pass
-        print(f"raysweep: interrupted: cancelled jobs {', '.join(sh.job.id for sh in shards)}", file=sys.stderr)
+        print(f"raysweep: interrupted: cancelled jobs {ids}", file=sys.stderr)
         raise
     finally:
         if bar is not None:
@@ -236,12 +365,12 @@ def run(scene, contexts, n_shards, options, progress=None, timeout=None):
             except (ConnectionFailed, RaysweepError) as e:  # (its replica lost since the job ended)
                 if not _lost(e):
                     raise
-                _start(scene, sh, options, why=e)
-                _follow(scene, [sh], options, deadline, None, 0)
+                _start(scene, sh, options, why=e, jr=jr)
+                _follow(scene, [sh], options, deadline, None, 0, jr)
     return _join(shards, contexts)
 
 
-def _follow(scene, shards, options, deadline, bar, total):
+def _follow(scene, shards, options, deadline, bar, total, jr=None):
     """Poll the shards' jobs until each has ended; submit a shard again under another key when
     its job was lost with its replica."""
     left = list(shards)
@@ -252,7 +381,7 @@ def _follow(scene, shards, options, deadline, bar, total):
             except (ConnectionFailed, RaysweepError) as e:
                 if not _lost(e):
                     raise
-                _start(scene, sh, options, why=e)
+                _start(scene, sh, options, why=e, jr=jr)
                 continue
             if st.get("state") in ("succeeded", "failed", "cancelled"):
                 if st["state"] != "succeeded":
@@ -263,7 +392,8 @@ def _follow(scene, shards, options, deadline, bar, total):
         if left:
             if deadline is not None and time.monotonic() > deadline:
                 raise TimeoutError(f"spread: {len(left)} of {len(shards)} shards still running after the "
-                                   "timeout (their jobs keep running)")
+                                   "timeout (their jobs keep running" +
+                                   (f"; the same sweep with journal={jr.path!r} follows them)" if jr else ")"))
             time.sleep(0.1)
 
 

@@ -99,7 +99,10 @@ class UnknownKeyError(RaysweepError, KeyError):
 
 
 class ConnectionFailed(RaysweepError, ConnectionError):
-    """The daemon could not be reached (refused, timed out, the connection dropped)."""
+    """The daemon could not be reached (refused, timed out, the connection dropped); ``refused``
+    is true when nothing listened at its address (after the retries)."""
+
+    refused = False
 
 
 class JobFailed(RaysweepError):

@@ -160,7 +160,7 @@ class Scene:
         from .jobs import submit
         return submit(self, grid=grid, contexts=contexts, **options)
 
-    def sweep(self, grid=None, contexts=None, progress=None, timeout=None, spread=None, **options):
+    def sweep(self, grid=None, contexts=None, progress=None, timeout=None, spread=None, journal=None, **options):
         """Run a job of kernel contexts and return its dataset (an ``xarray.Dataset``).
 
         Give either ``grid`` or ``contexts``:
@@ -204,12 +204,23 @@ class Scene:
         film for film (its ``job`` attribute lists the shards' jobs). The
         scene must be one this client loaded (its document is pushed to
         every replica) and unchanged since (revision 0).
+
+        ``journal``: with ``spread``, a file that records the shards' routing
+        keys and jobs while the sweep runs. The same sweep run again with
+        the same ``journal`` (after a Ctrl-C, which then leaves the jobs
+        running, a timeout, a lost balancer, or a restarted kernel) follows
+        the jobs that the replicas kept, and submits again only the shards
+        whose jobs are gone. A journal of another sweep is refused
+        (``ValueError``). The file is removed when the sweep completes.
         """
+        if journal is not None and spread is None:
+            raise TypeError("journal= records the shards of a spread sweep: give spread=K too (spread=1 "
+                            "runs the sweep as one shard)")
         if spread is not None:
             from . import _spread
             from .jobs import job_contexts
             ctxs = job_contexts(self, grid, contexts, options.get("params"), options.get("wavelength"))
-            return _spread.run(self, ctxs, spread, options, progress=progress, timeout=timeout)
+            return _spread.run(self, ctxs, spread, options, progress=progress, timeout=timeout, journal=journal)
         # A Ctrl-C while the job is being submitted waits for the daemon's
         # answer, so that the job it may have accepted is known and cancelled.
         # One that comes as the block ends is raised by the handler it puts

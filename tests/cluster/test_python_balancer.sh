@@ -6,7 +6,8 @@
 # checks of tests/support/python_spread_check.py (grids at bundle None, 1
 # and 3, one axis, bands, contexts that are no grid, the sweep's warning
 # once, a replica SIGKILLed mid-sweep whose
-# shard runs again on the other, the refusals), here with a real balancer,
+# shard runs again on the other, journals that resume the shards' jobs,
+# the refusals), here with a real balancer,
 # which answers for a dead replica as HAProxy does (503, or its keys
 # moved to the live one: the job not found there).
 name=test_python_balancer

@@ -13,6 +13,13 @@
 #     one SweepWarning at the caller's line (from the whole sweep's dry run);
 #   - one replica SIGKILLed mid-sweep: its shard is submitted again under
 #     a key that reaches the other, and the dataset is the unsharded one;
+#   - journals: the sweep's process SIGKILLed or sent SIGINT once its
+#     shards' jobs run, then the same sweep run again: the unsharded
+#     dataset from those jobs, none submitted again, the journal removed
+#     (SIGINT: the jobs left running, and said so); a balancer of the
+#     check's own killed mid-sweep: the sweep fails within seconds naming
+#     its journal, and resumes through another balancer; journal= without
+#     spread=, another sweep's journal and a file that is none refused;
 #   - spread 0, 2.5 or True, a scene found by id (no document to push) and
 #     a scene with parameters set since its push are refused, naming why.
 name=test_python_spread

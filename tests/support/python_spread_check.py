@@ -6,9 +6,12 @@ Usage: python_spread_check.py LB_URL REF_URL REPLICA_PORT... --kill PID
 Each check prints ``ok   NAME`` or ``FAIL NAME: why``. The reference sweeps
 run on one daemon (REF_URL); the spread ones through the balancer (LB_URL).
 """
+import json
 import os
 import signal
+import subprocess
 import sys
+import tempfile
 import threading
 import time
 import urllib.request
@@ -27,6 +30,40 @@ def rendered(port):
             if line.startswith("raysweep_contexts_rendered_total "):
                 return float(line.split()[1])
     return 0.0
+
+
+def jobs_on(ports):
+    """The ids of the jobs the replicas hold."""
+    out = set()
+    for p in ports:
+        with urllib.request.urlopen(f"http://127.0.0.1:{p}/v1/jobs") as r:
+            out |= {j["id"] for j in json.load(r)["jobs"]}
+    return out
+
+
+# A spread sweep with a journal in a process of its own: argv LB JOURNAL GRID(JSON) SPP.
+CHILD = """
+import json, sys
+sys.path.insert(0, %r)
+import raysweep as rs
+lb, path, grid, spp = sys.argv[1], sys.argv[2], json.loads(sys.argv[3]), int(sys.argv[4])
+rs.connect(lb).load_file(%r).sweep(grid=grid, spp=spp, bundle=1, spread=2, journal=path, progress=False)
+""" % (os.path.join(root, "python"), SCENE)
+
+
+def journal_jobs(path, timeout=60.0):
+    """The jobs a journal records, once it records one for every shard (None after timeout s)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        try:
+            with open(path) as f:
+                ids = [e["job"] for e in json.load(f)["shards"]]
+            if ids and all(ids):
+                return ids
+        except (OSError, ValueError):
+            pass
+        time.sleep(0.01)
+    return None
 
 
 def same(ref, got):
@@ -106,6 +143,121 @@ def main():
             return f"dims {got.radiance.dims}"
         return same(ref, got)
     check("spread=2 of contexts that are no grid: the unsharded dataset (a context dimension)", not_grid)
+
+    tmp = tempfile.mkdtemp(prefix="rsw-journal-")
+    g = {"wavelength": [450, 500, 550, 600], "surface.bsdf.reflectance.value": [0.2, 0.5, 0.8]}
+    ref_j = one.load_file(SCENE).sweep(grid=g, spp=1024, bundle=1, progress=False)
+
+    def interrupted(sig, label):
+        """A journal sweep's process stopped by sig once its shards' jobs run; the same sweep
+        run again here: the unsharded dataset, from the same jobs."""
+        path = os.path.join(tmp, f"{label}.json")
+        before = jobs_on(ports)
+        child = subprocess.Popen([sys.executable, "-c", CHILD, lb, path, json.dumps(g), "1024"],
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        ids = journal_jobs(path)
+        if ids is None:
+            child.kill()
+            return f"no journal with both shards' jobs after 60 s: {child.communicate()[1][-400:]}"
+        child.send_signal(sig)
+        err = child.communicate()[1]
+        live = set()
+        for p in ports:
+            with urllib.request.urlopen(f"http://127.0.0.1:{p}/v1/jobs") as r:
+                live |= {x["id"] for x in json.load(r)["jobs"] if x["state"] in ("queued", "running", "succeeded")}
+        if not set(ids) <= live:
+            return f"the journal's jobs {ids} are not all running or done after the signal (live: {sorted(live)})"
+        if sig == signal.SIGINT and "keep running" not in err:
+            return f"Ctrl-C did not say the jobs keep running: {err[-400:]}"
+        t0 = time.monotonic()
+        got = bal.load_file(SCENE).sweep(grid=g, spp=1024, bundle=1, spread=2, journal=path, progress=False)
+        new = jobs_on(ports) - before
+        print(f"  {label}: stopped once both jobs were submitted, resumed in {time.monotonic() - t0:.2f} s, jobs {ids}")
+        if new != set(ids):
+            return f"jobs submitted: {sorted(new)}, want only the journal's {ids} (nothing submitted again)"
+        if sorted(got.attrs["job"].split(", ")) != sorted(ids):
+            return f"the dataset's jobs {got.attrs['job']}, want the journal's {ids}"
+        if os.path.exists(path):
+            return "the journal is still there after the sweep completed"
+        return same(ref_j, got)
+    check("journal: a sweep whose process is killed resumes its shards' jobs (none submitted again)",
+          lambda: interrupted(signal.SIGKILL, "killed"))
+    check("journal: Ctrl-C leaves the shards' jobs running, and the same sweep follows them",
+          lambda: interrupted(signal.SIGINT, "ctrl-c"))
+
+    def balancer_lost():
+        """A journal sweep through a balancer of its own, which goes away once the shards' jobs
+        run: the sweep fails naming the journal; through a new balancer (another address), the
+        same sweep follows the same jobs."""
+        lbs = []
+
+        def balancer():
+            pf = os.path.join(tmp, f"lb{len(lbs)}.port")
+            lbs.append(subprocess.Popen([sys.executable, os.path.join(root, "tests", "support", "shard_lb.py"), pf]
+                                        + [str(p) for p in ports], stderr=subprocess.DEVNULL))
+            for _ in range(500):
+                if os.path.exists(pf) and open(pf).read().strip():
+                    return f"http://127.0.0.1:{open(pf).read().strip()}"
+                time.sleep(0.01)
+            raise RuntimeError("the test's balancer did not start")
+        try:
+            path = os.path.join(tmp, "lost.json")
+            before = jobs_on(ports)
+            child = subprocess.Popen([sys.executable, "-c", CHILD, balancer(), path, json.dumps(g), "1024"],
+                                     stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+            ids = journal_jobs(path)
+            if ids is None:
+                child.kill()
+                return f"no journal with both shards' jobs after 60 s: {child.communicate()[1][-400:]}"
+            lbs[0].kill()
+            t0 = time.monotonic()
+            err = child.communicate(timeout=60)[1]
+            failed_s = time.monotonic() - t0
+            if child.returncode == 0 or "ConnectionFailed" not in err or path not in err:
+                return f"the sweep without its balancer: exit {child.returncode}, {err[-500:]}"
+            got = rs.connect(balancer()).load_file(SCENE).sweep(grid=g, spp=1024, bundle=1, spread=2, journal=path,
+                                                                progress=False)
+            new = jobs_on(ports) - before
+            print(f"  balancer lost: the sweep failed {failed_s:.2f} s after, naming its journal; resumed through "
+                  f"another balancer, jobs {ids}")
+            if new != set(ids):
+                return f"jobs submitted: {sorted(new)}, want only the journal's {ids} (nothing submitted again)"
+            return same(ref_j, got)
+        finally:
+            for p in lbs:
+                p.kill()
+                p.wait()
+    check("journal: a sweep whose balancer goes away names its journal; through another balancer it resumes",
+          balancer_lost)
+
+    def journal_refusals():
+        s = bal.load_file(SCENE)
+        try:
+            s.sweep(grid={"wavelength": [500]}, journal=os.path.join(tmp, "x.json"), progress=False)
+            return "journal= without spread= was taken"
+        except TypeError as e:
+            if "spread=K" not in str(e):
+                return f"journal= without spread=: {e}"
+        for label, text, words in (("another sweep's", json.dumps({"raysweep": "spread journal", "version": 1,
+                                                                   "sweep": "0" * 64, "shards": [
+                                                                       {"shard": 0, "key": "k", "base": "k",
+                                                                        "tries": 0, "job": "job-x"}]}),
+                                    "records another sweep"),
+                                   ("a file that is no journal", "[1, 2]", "not a raysweep spread journal")):
+            path = os.path.join(tmp, "other.json")
+            with open(path, "w") as f:
+                f.write(text)
+            try:
+                s.sweep(grid={"wavelength": [500, 600]}, spp=4, spread=2, journal=path, progress=False)
+                return f"{label} journal was taken"
+            except ValueError as e:
+                if words not in str(e) or path not in str(e):
+                    return f"{label} journal: {e}"
+            with open(path) as f:
+                if f.read() != text:
+                    return f"{label} journal was changed"
+        return None
+    check("journal: without spread=, another sweep's and a file that is no journal are refused", journal_refusals)
 
     def replica_lost():
         g = {"wavelength": [450, 500, 550, 600, 650, 700], "surface.bsdf.reflectance.value": [0.2, 0.5, 0.8]}

@@ -104,7 +104,7 @@ need_xarray() {
 }
 # python_spread_check LB_URL REF_URL KILL_PID REPLICA_PORT...: the checks of
 # tests/support/python_spread_check.py (need_xarray first), each counted;
-# all 9 must pass. KILL_PID is the replica the checks SIGKILL mid-sweep.
+# all 13 must pass. KILL_PID is the replica the checks SIGKILL mid-sweep.
 python_spread_check() {
   local lb=$1 ref=$2 kill_pid=$3 out p f
   shift 3
@@ -118,7 +118,7 @@ python_spread_check() {
   f=$(echo "$out" | grep -c '^FAIL ')
   pass=$((pass + p))
   fail=$((fail + f))
-  [ "$p" -eq 9 ] || bad "python_spread_check.py passed $p checks, want 9: $(echo "$out" | tail -n 3)"
+  [ "$p" -eq 13 ] || bad "python_spread_check.py passed $p checks, want 13: $(echo "$out" | tail -n 3)"
 }
 # ds LABEL CHECK ARGS...: a tests/support/dataset_check.py check must pass
 # (need_xarray first).
