@@ -47,6 +47,7 @@ typedef enum obj_class {
   CLS_MEDIUM,
   CLS_PHASE,
   CLS_VOLUME,
+  CLS_EXTREMUM, /* a medium's local majorants (extremum_grid, extremum_global) */
   CLS__COUNT
 } obj_class;
 
@@ -537,6 +538,12 @@ struct sensor {
  * .vol order). After prepare() the grid is what a render sees (in mono a
  * tabulated spectrum per cell is evaluated at the context's wavelength). */
 typedef struct volume volume;
+/* volume.wrap: a grid's wrap_mode (clamp for every other volume). */
+enum {
+  VOLUME_WRAP_CLAMP,
+  VOLUME_WRAP_REPEAT,
+  VOLUME_WRAP_MIRROR
+};
 typedef struct volume_ops {
   /* Value at world point p (mono: the value in every channel of the color;
    * one-channel grids in rgb: likewise). Outside the box: the plugin's
@@ -559,6 +566,8 @@ struct volume {
   vec3 bbox_min, bbox_max; /* world bounds of the box */
   uint32_t res[3];         /* 1 x 1 x 1 for constvolume */
   uint32_t channels;       /* 1 or 3 */
+  int wrap;                /* VOLUME_WRAP_*: how eval reaches cells past the grid's edges */
+  bool trilinear;          /* eval interpolates between cell centres (else: the nearest cell) */
   const double *data;      /* res[0] res[1] res[2] channels values (owned by the plugin) */
   double max;              /* largest value over cells and channels (majorants) */
   /* Values the volume may take: the intersection of the ranges of the
@@ -643,6 +652,7 @@ struct phase {
 /* A participating medium (Mitsuba's Medium: homogeneous, heterogeneous;
  * Eradiate's piecewise). Coefficients in inverse scene length units. */
 typedef struct medium medium;
+struct track_walk;
 typedef struct medium_ops {
   /* The part [*mint, *maxt] of ray r (within [0, r->tmax]) where the
    * medium can interact: its volumes' box for grid media, the whole ray
@@ -668,6 +678,11 @@ typedef struct medium_ops {
    * eval_transmittance_pdf_real. heterogeneous: exact only for uniform
    * grids (is_homogeneous). */
   color (*transmittance)(const medium *m, const ray3 *r, double mint, double maxt);
+  /* Optional, tracked media with local majorants (heterogeneous with an
+   * extremum_grid): the majorants along r over [mint, maxt] as a walk
+   * over their pieces (media/majorant_grid.h). False: none, the majorant
+   * op's serves the whole segment. */
+  bool (*majorant_walk)(const medium *m, const ray3 *r, double mint, double maxt, struct track_walk *w);
 } medium_ops;
 struct medium {
   object base;

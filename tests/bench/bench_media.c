@@ -24,6 +24,18 @@
  *                             render, variance x time and mean squared
  *                             error x time (docs/media.md#dense-media-the-roulette-and-the-segment-lengths).
  *
+ *  media_cloud                a 64^3 cloud (tests/support/tsup.c
+ *                             tsup_cloud_scene: a ball of sigma_t up to
+ *                             40 in an empty box, albedo 0.95, hg 0.85)
+ *                             under volpath, hdistant 16x16 at 64 spp: CPU
+ *                             ns per sample with the global majorant, with
+ *                             an automatic extremum_grid (16^3) and with
+ *                             one cell per 2^3 voxels (32^3), the speedups
+ *                             over the global majorant, and the film means
+ *                             with their standard errors over the
+ *                             REPEATS renders (the estimates must agree:
+ *                             docs/media.md#local-majorants).
+ *
  * Medians of REPEATS timings. $RSW_BENCH_ONLY=prefix runs the figures
  * whose name starts with it. */
 #include <math.h>
@@ -259,7 +271,52 @@ static void bench_dense(void) {
   }
 }
 
+static void bench_cloud(void) {
+  if (!wanted("media_cloud")) return;
+  enum {
+    RES = 64,
+    SPP = 64
+  };
+  const int threads = bench_threads();
+  const char *ex[3] = {"", "\"ex\": {\"type\": \"extremum_grid\"},",
+                       "\"ex\": {\"type\": \"extremum_grid\", \"resolution\": [32, 32, 32]},"};
+  double ns[3], mean[3], se[3];
+  for (int k = 0; k < 3; k++) {
+    char *text = tsup_cloud_scene(RES, ex[k], SPP);
+    scene *s = tsup_load(text, "mono");
+    free(text);
+    if (!s) return;
+    double t[REPEATS], sum = 0, sum2 = 0;
+    for (int r = 0; r < REPEATS; r++) {
+      film_image img;
+      double t0 = bench_process_cpu_s();
+      if (!tsup_render(s, SPP, (uint64_t)r + 1, threads, &img)) {
+        scene_free(s);
+        return;
+      }
+      t[r] = (bench_process_cpu_s() - t0) / (16.0 * 16.0 * SPP);
+      double m, e;
+      tsup_stats(&img, 0, &m, &e);
+      sum += m, sum2 += m * m;
+      film_image_free(&img);
+    }
+    scene_free(s);
+    ns[k] = bench_median(t, REPEATS) * 1e9;
+    mean[k] = sum / REPEATS;
+    se[k] = sqrt(fmax(sum2 / REPEATS - mean[k] * mean[k], 0) / (REPEATS - 1));
+  }
+  printf("{\"bench\": \"media_cloud\", \"voxels\": \"%dx%dx%d\", \"spp\": %d, \"threads\": %d,"
+         " \"global_cpu_ns_per_sample\": %.1f, \"extremum_auto_cpu_ns_per_sample\": %.1f,"
+         " \"extremum_32_cpu_ns_per_sample\": %.1f, \"speedup_auto\": %.2f, \"speedup_32\": %.2f,"
+         " \"mean_global\": %.5f, \"se_global\": %.5f, \"mean_auto\": %.5f, \"se_auto\": %.5f,"
+         " \"mean_32\": %.5f, \"se_32\": %.5f, \"repeats\": %d}\n",
+         RES, RES, RES, SPP, threads, ns[0], ns[1], ns[2], ns[0] / ns[1], ns[0] / ns[2], mean[0], se[0],
+         mean[1], se[1], mean[2], se[2], REPEATS);
+  fflush(stdout);
+}
+
 int main(void) {
+  bench_cloud();
   bench_dense();
   bench_ops(1);
   bench_ops(2400);

@@ -130,6 +130,15 @@ volpath = '{"type":"scene","variant":"mono","s":{"type":"hdistant","sampler":{"t
 put("scene_render", "volpath_mono.json", volpath)
 put("scene_render", "volpath_rgb.json",
     volpath.replace('"variant":"mono"', '"variant":"rgb"').replace('"piecewise_volpath"', '"volpath"'))
+# Local majorants: the ball's heterogeneous medium with an extremum_grid
+# (volpath tracks it over the grid's cells), rgb and mono.
+extremum = '"interior":{"type":"heterogeneous","ex":{"type":"extremum_grid","resolution":[2,1,2]},"albedo":0.8,'
+put("scene_render", "volpath_extremum_rgb.json",
+    volpath.replace('"variant":"mono"', '"variant":"rgb"').replace('"piecewise_volpath"', '"volpath"')
+    .replace('"interior":{"type":"heterogeneous","albedo":0.8,', extremum))
+put("scene_render", "volpath_extremum_mono.json",
+    volpath.replace('"piecewise_volpath"', '"volpath"').replace('"interior":{"type":"heterogeneous","albedo":0.8,',
+                                                                 extremum))
 put("scene_render", "projective.json", base % ("mono", "hdistant", 2,
     '"r":{"type":"rectangle","to_world":[[1,0,0,0],[0,1,0,0],[0,0,1,0],[1,0,0,1]]}'))
 

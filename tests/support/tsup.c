@@ -161,6 +161,36 @@ char *tsup_dense_slab(const char *integ, const char *med, double th0) {
   return b.p;
 }
 
+char *tsup_cloud_scene(int res, const char *extremum, int spp) {
+  sbuf b = {0};
+  sb_printf(
+      &b,
+      "{\"type\": \"scene\", \"integrator\": {\"type\": \"volpath\", \"max_depth\": -1},"
+      " \"s\": {\"type\": \"hdistant\", \"sampler\": {\"type\": \"independent\", \"sample_count\": %d},"
+      "  \"film\": {\"type\": \"hdrfilm\", \"width\": 16, \"height\": 16}},"
+      " \"sun\": {\"type\": \"directional\", \"direction\": [0.5, 0, -0.8660254037844386], \"irradiance\": "
+      "1},"
+      " \"ground\": {\"type\": \"rectangle\", \"bsdf\": {\"type\": \"diffuse\", \"reflectance\": 0.3},"
+      "  \"to_world\": [{\"scale\": 3}, {\"translate\": [0, 0, -1]}]},"
+      " \"box\": {\"type\": \"cube\", \"bsdf\": {\"type\": \"null\"}, \"interior\": {\"type\": \"ref\", "
+      "\"id\": \"cloud\"}},"
+      " \"cloud\": {\"type\": \"heterogeneous\", \"albedo\": 0.95, \"phase\": {\"type\": \"hg\", \"g\": "
+      "0.85}, %s"
+      "  \"sigma_t\": {\"type\": \"gridvolume\", \"filter_type\": \"nearest\", \"shape\": [%d, %d, %d],"
+      "   \"to_world\": [{\"translate\": [-0.5, -0.5, -0.5]}, {\"scale\": 2}], \"data\": [",
+      spp, extremum, res, res, res);
+  for (int z = 0; z < res; z++)
+    for (int y = 0; y < res; y++)
+      for (int x = 0; x < res; x++) {
+        double px = -1 + 2 * (x + 0.5) / res - 0.2, py = -1 + 2 * (y + 0.5) / res + 0.1,
+               pz = -1 + 2 * (z + 0.5) / res;
+        double q = (px * px + py * py + pz * pz) / (0.45 * 0.45);
+        sb_printf(&b, "%s%.6g", x + y + z ? ", " : "", q < 1 ? 40 * (1 - q) : 0.0);
+      }
+  sb_printf(&b, "]}}}");
+  return b.p;
+}
+
 bool tsup_build_plugin(const char *src, const char *name, char *dir) {
   snprintf(dir, 64, "/tmp/rsw-plugin-XXXXXX");
   if (!mkdtemp(dir)) {

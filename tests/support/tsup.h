@@ -36,6 +36,15 @@ void tsup_random_leaves(double (*m)[16], int n, uint64_t seed, uint64_t stream, 
  * malloc'ed. */
 char *tsup_dense_slab(const char *integ, const char *med, double th0);
 
+/* A cloud (docs/media.md#local-majorants): a res^3 nearest gridvolume over
+ * the cube [-1, 1]^3 (a null cube holding a `heterogeneous` medium),
+ * sigma_t 40 (1 - (r / 0.45)^2) within r < 0.45 of (0.2, -0.1, 0) and 0
+ * elsewhere, albedo 0.95, hg g 0.85, over a diffuse ground of reflectance
+ * 0.3 at z = -1 under a sun 30 degrees off zenith, seen straight down by
+ * an hdistant sensor of 16 x 16 at spp; volpath. extremum: members
+ * added to the medium (e.g. an extremum_grid; "" none). malloc'ed. */
+char *tsup_cloud_scene(int res, const char *extremum, int spp);
+
 /* Compile an environment plugin's C source (src: the whole file) as
  * <dir>/<name>.so against include/raysweep/plugin.h (under $RSW_TEST_DIR/..,
  * else ./), warnings as errors; dir (room for 64 bytes) receives a fresh

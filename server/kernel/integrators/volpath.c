@@ -80,6 +80,7 @@
 #include "../accel.h"
 #include "../hit.h"
 #include "../media/layered.h"
+#include "../media/majorant_grid.h"
 #include "../phase/phase.h"
 #include "../samplers/sampler_batch.h"
 #include "../scene/periodic.h"
@@ -423,6 +424,40 @@ static inline bool track_step(track_guard *g, double *t, double dt) {
   return ++g->steps <= TRACK_MAX_STEPS && g->stuck <= TRACK_MAX_STUCK;
 }
 
+/* The walk of a track of m along r over [mint, maxt] (media/majorant_grid.h):
+ * m's local majorants where it has them, else one piece at mu, the
+ * majorant that the track would take without them. */
+static inline void track_walk_start(const medium *m, const ray3 *r, double mint, double maxt, double mu,
+                                    track_walk *w) {
+  if (!m->ops->majorant_walk || !m->ops->majorant_walk(m, r, mint, maxt, w)) track_walk_global(w, mu);
+}
+
+/* Does the walk take tentative collisions at all from where it is (a
+ * piece ahead, or a majorant on the last)? */
+static inline bool track_walk_live(const track_walk *w) {
+  return w->mu > 0 || w->b < INFINITY;
+}
+
+/* A track's next tentative collision from *t: optical thickness tau (the
+ * majorant's units: -ln(1 - u)) spent over the walk's pieces, those of
+ * majorant 0 crossed for free. 1: a collision at *t < maxt, at majorant
+ * w->mu; 0: the track passes maxt; -1: given up (track_step). With one
+ * piece this is t + tau / mu, the global majorant's step, bit for bit. */
+static inline int walk_step(track_walk *w, track_guard *g, double *t, double tau, double maxt) {
+  while (w->b < INFINITY) {
+    double len = w->b - *t;
+    if (len > 0) {
+      if (w->mu > 0 && tau < w->mu * len) break;
+      tau -= w->mu * len;
+      *t = w->b;
+    }
+    track_walk_next(w);
+  }
+  if (!(w->mu > 0)) return 0;
+  if (!track_step(g, t, tau / w->mu)) return -1;
+  return *t < maxt ? 1 : 0;
+}
+
 /* The transmittance of a tracked medium m along r over [tstart, tend] at
  * pages 0..pages-1 into tr[p] (one page: segment_tr's), by one ratio track
  * for all: each page's sigma_n over the majorant of every page's channels,
@@ -441,17 +476,20 @@ static __attribute__((noinline)) bool segment_tr_pages(const scene *sc, const me
   const sampler_ops *sops = st->s->ops;
   medium_interaction mi = {.medium = m, .wi = v3_neg(r->d)};
   mi.p = v3_fma(r->o, mint, r->d);
-  double mu = majorant_pages(m, &mi, pages);
-  if (!(mu > 0)) return true;
+  track_walk tw;
+  track_walk_start(m, r, mint, maxt, majorant_pages(m, &mi, pages), &tw);
+  if (!track_walk_live(&tw)) return true;
   color ss[RENDER_MAX_PAGES], sn[RENDER_MAX_PAGES];
   double t = mint;
   track_guard g = {0, 0};
   for (;;) {
-    if (!track_step(&g, &t, -log1p(-sops->next_1d(st)) / mu)) {
+    int ev = walk_step(&tw, &g, &t, -log1p(-sops->next_1d(st)), maxt);
+    if (ev < 0) {
       for (int p = 0; p < pages; p++) tr[p] = col1(0.0);
       return false;
     }
-    if (!(t < maxt)) break;
+    if (ev == 0) break;
+    double mu = tw.mu;
     mi.t = t;
     mi.p = v3_fma(r->o, t, r->d);
     coefficients_pages(m, &mi, mu, pages, ss, sn);
@@ -1009,16 +1047,19 @@ static __attribute__((noinline)) int track_pages(const scene *sc, const medium *
   if (chromatic && pg->hero < 0) draw_hero(m, nch, sops->next_1d(st), pg);
   *mi = (medium_interaction){.medium = m, .wi = v3_neg(seg->d), .mint = mint};
   mi->p = v3_fma(seg->o, mint, seg->d);
-  double mu = majorant_pages(m, mi, NP);
+  track_walk tw;
+  track_walk_start(m, seg, mint, maxt, majorant_pages(m, mi, NP), &tw);
   color ss[RENDER_MAX_PAGES], sn[RENDER_MAX_PAGES];
   double t = mint;
   track_guard g = {0, 0};
-  while (mu > 0) {
-    if (!track_step(&g, &t, -log1p(-sops->next_1d(st)) / mu)) {
+  while (track_walk_live(&tw)) {
+    int ev = walk_step(&tw, &g, &t, -log1p(-sops->next_1d(st)), maxt);
+    if (ev < 0) {
       l->unres = true;
       return -1;
     }
-    if (!(t < maxt)) break;
+    if (ev == 0) break;
+    double mu = tw.mu;
     mi->t = t;
     mi->p = v3_fma(seg->o, t, seg->d);
     double p_real = coefficients_pages(m, mi, mu, NP, ss, sn) / mu;
@@ -1175,15 +1216,18 @@ PIECE enum lane_outcome lane_flight(const volpath_integrator *vp, const scene *s
       } else {
         *mi = (medium_interaction){.medium = m, .wi = v3_neg(l->ray.d), .mint = mint};
         mi->p = v3_fma(seg.o, mint, seg.d);
-        double mu = col_max(m->ops->majorant(m, mi));
+        track_walk tw;
+        track_walk_start(m, &seg, mint, maxt, col_max(m->ops->majorant(m, mi)), &tw);
         double t = mint;
         track_guard g = {0, 0};
-        while (mu > 0) {
-          if (!track_step(&g, &t, -log1p(-sops->next_1d(st)) / mu)) {
+        while (track_walk_live(&tw)) {
+          int ev = walk_step(&tw, &g, &t, -log1p(-sops->next_1d(st)), maxt);
+          if (ev < 0) {
             l->unres = true;
             return EV_END;
           }
-          if (!(t < maxt)) break;
+          if (ev == 0) break;
+          double mu = tw.mu;
           mi->t = t;
           mi->p = v3_fma(seg.o, t, seg.d);
           mi->majorant = col1(mu);

@@ -13,12 +13,17 @@
  * page rsw_page names and their max covers every page, so the majorant
  * serves them all (volpath's track_pages). Uniform means uniform at every
  * page and channel.
- * Source: mitsuba3 src/media/heterogeneous.cpp. */
+ * A nested extremum_grid (media/extremum.c) gives the tracks local
+ * majorants instead: a coarse grid over the sigma_t box whose cells bound
+ * sigma_t in them, rebuilt with the majorant (docs/media.md#local-majorants).
+ * Source: mitsuba3 src/media/heterogeneous.cpp; eradiate/mitsuba3's
+ * extremum structures. */
 #include <math.h>
 #include <stdlib.h>
 
 #include "../scene/plugin_def.h"
 #include "../volumes/volume.h"
+#include "majorant_grid.h"
 #include "media.h"
 
 typedef struct heterogeneous_medium {
@@ -26,6 +31,10 @@ typedef struct heterogeneous_medium {
   volume *sigma_t, *albedo;
   color maj; /* scale * max sigma_t (over every page) */
   int pages; /* of the bundle the last prepare() was for (1: none) */
+  /* A nested extremum_grid: its cells (res[a] 0: automatic), and the grid
+   * built from sigma_t (grid.mu NULL: none, or not built: out of memory). */
+  const extremum_object *extremum;
+  majorant_grid grid;
 } heterogeneous_medium;
 
 static bool het_intersect_aabb(const medium *m, const ray3 *r, double *mint, double *maxt) {
@@ -62,10 +71,16 @@ static color het_transmittance(const medium *m, const ray3 *r, double mint, doub
   return col(exp(-s.c[0] * l), exp(-s.c[1] * l), exp(-s.c[2] * l));
 }
 
+static bool het_majorant_walk(const medium *m, const ray3 *r, double mint, double maxt, track_walk *w) {
+  const heterogeneous_medium *h = (const heterogeneous_medium *)m;
+  return h->grid.mu && track_walk_grid(w, &h->grid, &h->sigma_t->to_world, r, mint, maxt);
+}
+
 static const medium_ops het_ops = {.intersect_aabb = het_intersect_aabb,
                                    .majorant = het_majorant,
                                    .coefficients = het_coefficients,
-                                   .transmittance = het_transmittance};
+                                   .transmittance = het_transmittance,
+                                   .majorant_walk = het_majorant_walk};
 
 /* Smallest and largest value of a volume's grid over pages 0..pages-1. */
 static void grid_range(const volume *v, int pages, double *lo, double *hi) {
@@ -90,6 +105,16 @@ static void het_refresh(heterogeneous_medium *h) {
   h->base.is_homogeneous = slo == shi && alo == ahi;
   h->base.has_spectral_extinction = h->sigma_t->channels == 3;
   h->base.absorbing_only = ahi == 0.0;
+  if (h->extremum && h->extremum->local) {
+    const volume *v = h->sigma_t;
+    for (int a = 0; a < 3; a++) {
+      int want = h->extremum->res[a];
+      h->grid.res[a] =
+          want > 0 ? want
+                   : (int)(v->res[a] < MAJORANT_GRID_AUTO_CELLS ? v->res[a] : MAJORANT_GRID_AUTO_CELLS);
+    }
+    if (!majorant_grid_build(&h->grid, v, h->pages, h->base.scale)) majorant_grid_free(&h->grid);
+  }
 }
 
 static rsw_status het_prepare(object *o, const render_ctx *rc, rsw_err *err) {
@@ -112,10 +137,13 @@ static rsw_status heterogeneous_create(loader *ld, node *n, object **out) {
   rsw_status st = medium_read_common(ld, n, &h->base);
   if (!st) st = ld_volume(ld, n, "sigma_t", 1.0, 0.0, INFINITY, &h->sigma_t);
   if (!st) st = ld_volume(ld, n, "albedo", 0.75, 0.0, 1.0, &h->albedo);
+  object *ex = NULL;
+  if (!st) st = ld_child(ld, n, NULL, CLS_EXTREMUM, &ex);
   if (st) {
     free(h);
     return st;
   }
+  h->extremum = (const extremum_object *)ex;
   *out = &h->base.base;
   return RSW_OK;
 }
@@ -127,5 +155,12 @@ static void het_traverse(object *o, param_visitor *v) {
   pv_object(v, "albedo", &h->albedo->base, 0.0, 1.0);
 }
 
+static void het_destroy(object *o) {
+  heterogeneous_medium *h = (heterogeneous_medium *)o;
+  majorant_grid_free(&h->grid);
+  free(h);
+}
+
 DEFINE_PLUGIN(heterogeneous, CLS_MEDIUM, .prepare = het_prepare, .ops = &het_ops, .traverse = het_traverse,
-              .parameters_changed = het_parameters_changed, .pages = plugin_pages_any);
+              .parameters_changed = het_parameters_changed, .pages = plugin_pages_any,
+              .destroy = het_destroy);

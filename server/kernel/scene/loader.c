@@ -582,11 +582,11 @@ const plugin *ld_find_plugin(loader *ld, const char *type) {
 /* ---- class names ------------------------------------------------------------------ */
 
 static const char *const class_names[CLS__COUNT] = {
-    [CLS_SCENE] = "scene",     [CLS_SHAPE] = "shape",     [CLS_BSDF] = "bsdf",
-    [CLS_EMITTER] = "emitter", [CLS_SENSOR] = "sensor",   [CLS_FILM] = "film",
-    [CLS_SAMPLER] = "sampler", [CLS_RFILTER] = "rfilter", [CLS_INTEGRATOR] = "integrator",
-    [CLS_TEXTURE] = "texture", [CLS_MEDIUM] = "medium",   [CLS_PHASE] = "phase",
-    [CLS_VOLUME] = "volume",
+    [CLS_SCENE] = "scene",     [CLS_SHAPE] = "shape",       [CLS_BSDF] = "bsdf",
+    [CLS_EMITTER] = "emitter", [CLS_SENSOR] = "sensor",     [CLS_FILM] = "film",
+    [CLS_SAMPLER] = "sampler", [CLS_RFILTER] = "rfilter",   [CLS_INTEGRATOR] = "integrator",
+    [CLS_TEXTURE] = "texture", [CLS_MEDIUM] = "medium",     [CLS_PHASE] = "phase",
+    [CLS_VOLUME] = "volume",   [CLS_EXTREMUM] = "extremum",
 };
 
 const char *variant_name(rsw_variant v, bool polarized) {

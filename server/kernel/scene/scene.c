@@ -84,7 +84,8 @@ rsw_status scene_create(loader *ld, node *n, object **out) {
     case CLS_TEXTURE:
     case CLS_MEDIUM:
     case CLS_PHASE:
-    case CLS_VOLUME: break; /* declared at the top level to be referenced */
+    case CLS_VOLUME:
+    case CLS_EXTREMUM: break; /* declared at the top level to be referenced */
     case CLS_SCENE:
       if (o->plugin == &plugin_periodic) {
         if (s->periodic.on)

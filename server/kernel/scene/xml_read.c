@@ -1025,6 +1025,7 @@ static const tag_def tag_table[] = {
     {"medium", IN_OBJECT, start_object},
     {"phase", IN_OBJECT, start_object},
     {"volume", IN_OBJECT, start_object},
+    {"extremum", IN_OBJECT, start_object},
     {"thermoprops", IN_OBJECT, start_group},
     {"particle_layer", IN_OBJECT, start_group},
     {"distribution", IN_OBJECT, start_group},

@@ -53,9 +53,9 @@ typedef enum grid_filter {
   FILTER_NEAREST
 } grid_filter;
 typedef enum grid_wrap {
-  WRAP_CLAMP,
-  WRAP_REPEAT,
-  WRAP_MIRROR
+  WRAP_CLAMP = VOLUME_WRAP_CLAMP,
+  WRAP_REPEAT = VOLUME_WRAP_REPEAT,
+  WRAP_MIRROR = VOLUME_WRAP_MIRROR
 } grid_wrap;
 
 typedef struct gridvolume {
@@ -83,15 +83,7 @@ static size_t cells_of(const volume *v) {
 }
 
 static int wrap_index(int i, int n, grid_wrap w) {
-  switch (w) {
-  case WRAP_CLAMP: return i < 0 ? 0 : i >= n ? n - 1 : i;
-  case WRAP_REPEAT: i %= n; return i < 0 ? i + n : i;
-  case WRAP_MIRROR:
-    i %= 2 * n;
-    if (i < 0) i += 2 * n;
-    return i >= n ? 2 * n - 1 - i : i;
-  }
-  return 0;
+  return volume_wrap_index(i, n, (int)w);
 }
 
 /* The values at page p (volume_ops.page_data): a table's grid of that
@@ -467,6 +459,8 @@ static rsw_status gridvolume_fill(loader *ld, node *n, gridvolume *g) {
   if (st) return st;
   g->filter = (grid_filter)f;
   g->wrap = (grid_wrap)w;
+  g->base.wrap = w;
+  g->base.trilinear = g->filter == FILTER_TRILINEAR;
   xform to_world;
   st = volume_read_to_world(ld, n, &to_world);
   if (st) return st;

@@ -8,6 +8,20 @@
 #include "../scene/loader.h"
 #include "../scene/params.h"
 
+/* Cell index i (any integer) of an axis of n cells as the grid's wrap mode
+ * (volume.wrap) reaches it: clamped to [0, n - 1], periodic in n
+ * (repeat), or reflected at each edge (mirror). */
+static inline int volume_wrap_index(int i, int n, int wrap) {
+  switch (wrap) {
+  case VOLUME_WRAP_REPEAT: i %= n; return i < 0 ? i + n : i;
+  case VOLUME_WRAP_MIRROR:
+    i %= 2 * n;
+    if (i < 0) i += 2 * n;
+    return i >= n ? 2 * n - 1 - i : i;
+  default: return i < 0 ? 0 : i >= n ? n - 1 : i;
+  }
+}
+
 /* Value at world point p (kernel.h volume_ops.eval). */
 static inline color volume_eval(const volume *v, vec3 p) {
   return v->ops->eval(v, p);

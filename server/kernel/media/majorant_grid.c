@@ -1,0 +1,134 @@
+/* Local majorant grids (majorant_grid.h): the build, a separable running
+ * maximum over the voxels that reach each cell, and the start of a walk. */
+#include "majorant_grid.h"
+
+#include <stdlib.h>
+
+#include "../volumes/volume.h"
+
+/* The voxels of an axis of n voxels whose lookups reach points of cell c
+ * of r cells, [c / r, (c + 1) / r): nearest, floor(x n) for x in it,
+ * voxels floor(c n / r) to ceil((c + 1) n / r) - 1; trilinear, the pair
+ * floor(x n - 1/2) and the one after, voxels floor(c n / r - 1/2) to
+ * floor((c + 1) n / r - 1/2) + 1. Integer arithmetic, exact. (A
+ * collision rounded across a cell's side by the last bits of t is not
+ * covered: its sigma_t may exceed the majorant, and it is then taken as
+ * real with probability 1, a bias of the order of the rounding.) */
+static void voxel_span(int c, int r, int n, bool trilinear, int *lo, int *hi) {
+  if (!trilinear) {
+    *lo = (int)((long long)c * n / r);
+    *hi = (int)(((long long)(c + 1) * n + r - 1) / r) - 1;
+    return;
+  }
+  /* floor((2 c n - r) / (2 r)) with a numerator that may be negative */
+  long long num = 2LL * c * n - r, den = 2LL * r;
+  long long f = num >= 0 ? num / den : -((-num + den - 1) / den);
+  long long num1 = 2LL * (c + 1) * n - r;
+  long long f1 = num1 >= 0 ? num1 / den : -((-num1 + den - 1) / den);
+  *lo = (int)f;
+  *hi = (int)f1 + 1;
+}
+
+/* out[i][c] = max over j in cell c's voxel span (wrapped) of in[i][j], for
+ * `rows` rows of n values into rows of r values. */
+static void max_along(const double *in, double *out, size_t rows, int n, int r, int wrap, bool trilinear,
+                      size_t in_stride, size_t in_step, size_t out_stride, size_t out_step) {
+  for (size_t i = 0; i < rows; i++) {
+    const double *row = in + i * in_stride;
+    double *o = out + i * out_stride;
+    for (int c = 0; c < r; c++) {
+      int lo, hi;
+      voxel_span(c, r, n, trilinear && n > 1, &lo, &hi);
+      double m = 0.0;
+      for (int j = lo; j <= hi; j++) {
+        double x = row[(size_t)volume_wrap_index(j, n, wrap) * in_step];
+        m = x > m ? x : m;
+      }
+      o[(size_t)c * out_step] = m;
+    }
+  }
+}
+
+bool majorant_grid_build(majorant_grid *g, const volume *v, int pages, double scale) {
+  const int nx = (int)v->res[0], ny = (int)v->res[1], nz = (int)v->res[2];
+  const int rx = g->res[0], ry = g->res[1], rz = g->res[2];
+  const size_t ch = v->channels, cells = (size_t)rx * ry * rz;
+  const bool tri = v->trilinear;
+  /* Pass 0: each voxel's largest value over channels and pages, reduced
+   * along x at once: a[z][y][cx]. Then along y: b[z][cy][cx], along z:
+   * the cells. */
+  double *a = malloc((size_t)nz * ny * rx * sizeof *a);
+  double *b = malloc((size_t)nz * ry * rx * sizeof *b);
+  double *row = malloc((size_t)nx * sizeof *row);
+  double *mu = cells > g->cap ? malloc(cells * sizeof *mu) : g->mu;
+  if (!a || !b || !row || !mu) {
+    free(a), free(b), free(row);
+    if (mu != g->mu) free(mu);
+    return false;
+  }
+  for (int z = 0; z < nz; z++)
+    for (int y = 0; y < ny; y++) {
+      for (int x = 0; x < nx; x++) row[x] = 0.0;
+      for (int p = 0; p < pages; p++) {
+        const double *d = volume_page_data(v, p) + (((size_t)z * ny + y) * nx) * ch;
+        for (int x = 0; x < nx; x++)
+          for (size_t c = 0; c < ch; c++) row[x] = d[x * ch + c] > row[x] ? d[x * ch + c] : row[x];
+      }
+      max_along(row, a + ((size_t)z * ny + y) * rx, 1, nx, rx, v->wrap, tri, 0, 1, 0, 1);
+    }
+  for (int z = 0; z < nz; z++) /* rows: cx; along y */
+    max_along(a + (size_t)z * ny * rx, b + (size_t)z * ry * rx, (size_t)rx, ny, ry, v->wrap, tri, 1,
+              (size_t)rx, 1, (size_t)rx);
+  /* rows: (cy, cx) pairs; along z */
+  max_along(b, mu, (size_t)ry * rx, nz, rz, v->wrap, tri, 1, (size_t)ry * rx, 1, (size_t)ry * rx);
+  const double margin = 1.0 + 0x1p-40;
+  for (size_t i = 0; i < cells; i++) mu[i] *= scale * margin;
+  free(a), free(b), free(row);
+  if (mu != g->mu) {
+    free(g->mu);
+    g->mu = mu;
+    g->cap = cells;
+  }
+  return true;
+}
+
+void majorant_grid_free(majorant_grid *g) {
+  free(g->mu);
+  g->mu = NULL;
+  g->cap = 0;
+}
+
+bool track_walk_grid(track_walk *w, const majorant_grid *g, const xform *to_world, const ray3 *r, double mint,
+                     double maxt) {
+  const double(*m)[4] = to_world->inv;
+  if (m[3][0] != 0.0 || m[3][1] != 0.0 || m[3][2] != 0.0 || m[3][3] != 1.0) return false;
+  const double o[3] = {r->o.x, r->o.y, r->o.z}, d[3] = {r->d.x, r->d.y, r->d.z};
+  w->cells = g->mu;
+  w->maxt = maxt;
+  for (int a = 0; a < 3; a++) {
+    double ol = m[a][0] * o[0] + m[a][1] * o[1] + m[a][2] * o[2] + m[a][3];
+    double dl = m[a][0] * d[0] + m[a][1] * d[1] + m[a][2] * d[2];
+    int n = g->res[a];
+    w->res[a] = n;
+    double f = (ol + mint * dl) * n;
+    int c = f > 0.0 ? (f < n ? (int)f : n - 1) : 0; /* (NaN: 0) */
+    w->cell[a] = c;
+    if (dl > 0.0) {
+      w->step[a] = 1;
+      w->tnext[a] = ((double)(c + 1) / n - ol) / dl;
+      w->tdelta[a] = 1.0 / (n * dl);
+    } else if (dl < 0.0) {
+      w->step[a] = -1;
+      w->tnext[a] = ((double)c / n - ol) / dl;
+      w->tdelta[a] = -1.0 / (n * dl);
+    } else {
+      w->step[a] = 0;
+      w->tnext[a] = INFINITY;
+      w->tdelta[a] = INFINITY;
+    }
+  }
+  w->mu = g->mu[((size_t)w->cell[2] * g->res[1] + w->cell[1]) * g->res[0] + w->cell[0]];
+  double b = fmin(w->tnext[0], fmin(w->tnext[1], w->tnext[2]));
+  w->b = b < maxt ? b : INFINITY;
+  return true;
+}
