@@ -680,9 +680,15 @@ typedef struct medium_ops {
   color (*transmittance)(const medium *m, const ray3 *r, double mint, double maxt);
   /* Optional, tracked media with local majorants (heterogeneous with an
    * extremum_grid): the majorants along r over [mint, maxt] as a walk
-   * over their pieces (media/majorant_grid.h). False: none, the majorant
-   * op's serves the whole segment. */
-  bool (*majorant_walk)(const medium *m, const ray3 *r, double mint, double maxt, struct track_walk *w);
+   * over their pieces (media/majorant_grid.h), with the cells' minorants
+   * as the pieces' controls when rrt. False: none, the majorant op's
+   * serves the whole segment. */
+  bool (*majorant_walk)(const medium *m, const ray3 *r, double mint, double maxt, bool rrt,
+                        struct track_walk *w);
+  /* Optional, tracked media: a lower bound of sigma_t over the medium, in
+   * every channel and page (the control of residual ratio tracking
+   * without local minorants); NULL: 0. */
+  double (*minorant)(const medium *m);
 } medium_ops;
 struct medium {
   object base;
@@ -692,6 +698,7 @@ struct medium {
   bool is_homogeneous;          /* coefficients do not depend on position */
   bool has_spectral_extinction; /* sigma_t differs between channels */
   bool sample_emitters;         /* NEE from scattering events (Mitsuba's sample_emitters, default true) */
+  bool use_rrt; /* shadow rays by residual ratio tracking (Eradiate's use_rrt, default true) */
   /* sigma_s = 0 wherever sigma_t > 0 (albedo 0; set by prepare): the
    * volumetric integrators then weight a flight by its transmittance
    * instead of sampling collisions (exact for analytic media). */

@@ -426,36 +426,51 @@ static inline bool track_step(track_guard *g, double *t, double dt) {
 
 /* The walk of a track of m along r over [mint, maxt] (media/majorant_grid.h):
  * m's local majorants where it has them, else one piece at mu, the
- * majorant that the track would take without them. */
+ * majorant that the track would take without them. rrt (a transmittance's
+ * track where m->use_rrt): each piece's control is its minorant (the
+ * cell's, else the medium's), else 0. */
 static inline void track_walk_start(const medium *m, const ray3 *r, double mint, double maxt, double mu,
-                                    track_walk *w) {
-  if (!m->ops->majorant_walk || !m->ops->majorant_walk(m, r, mint, maxt, w)) track_walk_global(w, mu);
+                                    bool rrt, track_walk *w) {
+  if (!m->ops->majorant_walk || !m->ops->majorant_walk(m, r, mint, maxt, rrt, w))
+    track_walk_global(w, mu, rrt && m->ops->minorant ? m->ops->minorant(m) : 0.0);
 }
 
 /* Does the walk take tentative collisions at all from where it is (a
- * piece ahead, or a majorant on the last)? */
+ * piece ahead, or a residual majorant on the last)? */
 static inline bool track_walk_live(const track_walk *w) {
-  return w->mu > 0 || w->b < INFINITY;
+  return w->mu - w->ctl > 0 || w->b < INFINITY;
 }
 
-/* A track's next tentative collision from *t: optical thickness tau (the
- * majorant's units: -ln(1 - u)) spent over the walk's pieces, those of
- * majorant 0 crossed for free. 1: a collision at *t < maxt, at majorant
- * w->mu; 0: the track passes maxt; -1: given up (track_step). With one
- * piece this is t + tau / mu, the global majorant's step, bit for bit. */
-static inline int walk_step(track_walk *w, track_guard *g, double *t, double tau, double maxt) {
+/* A track's next tentative collision from *t: optical thickness tau (in
+ * units of the residual majorant mu - ctl, -ln(1 - u)) spent over the
+ * walk's pieces, those of residual 0 crossed for free; *ctl_tau gains the
+ * control's optical thickness over the way travelled (residual ratio
+ * tracking, Novak et al. 2014; 0 without a control). 1: a collision at
+ * *t < maxt, at majorant w->mu; 0: the track passes maxt; -1: given up
+ * (track_step). With one piece and no control this is t + tau / mu, the
+ * global majorant's step, bit for bit. */
+static inline int walk_step(track_walk *w, track_guard *g, double *t, double tau, double maxt,
+                            double *ctl_tau) {
   while (w->b < INFINITY) {
     double len = w->b - *t;
     if (len > 0) {
-      if (w->mu > 0 && tau < w->mu * len) break;
-      tau -= w->mu * len;
+      double res = w->mu - w->ctl;
+      if (res > 0 && tau < res * len) break;
+      tau -= res * len;
+      *ctl_tau += w->ctl * len;
       *t = w->b;
     }
     track_walk_next(w);
   }
-  if (!(w->mu > 0)) return 0;
-  if (!track_step(g, t, tau / w->mu)) return -1;
-  return *t < maxt ? 1 : 0;
+  double res = w->mu - w->ctl, t0 = *t;
+  if (!(res > 0)) {
+    *ctl_tau += w->ctl * (maxt - t0);
+    return 0;
+  }
+  if (!track_step(g, t, tau / res)) return -1;
+  bool in = *t < maxt;
+  *ctl_tau += w->ctl * ((in ? *t : maxt) - t0);
+  return in;
 }
 
 /* The transmittance of a tracked medium m along r over [tstart, tend] at
@@ -477,13 +492,18 @@ static __attribute__((noinline)) bool segment_tr_pages(const scene *sc, const me
   medium_interaction mi = {.medium = m, .wi = v3_neg(r->d)};
   mi.p = v3_fma(r->o, mint, r->d);
   track_walk tw;
-  track_walk_start(m, r, mint, maxt, majorant_pages(m, &mi, pages), &tw);
-  if (!track_walk_live(&tw)) return true;
+  track_walk_start(m, r, mint, maxt, majorant_pages(m, &mi, pages), m->use_rrt, &tw);
+  double ctl_tau = 0.0; /* (residual ratio tracking: the control's part, exact) */
+  if (!track_walk_live(&tw)) {
+    if (tw.ctl > 0)
+      for (int p = 0; p < pages; p++) tr[p] = col1(exp(-tw.ctl * (maxt - mint)));
+    return true;
+  }
   color ss[RENDER_MAX_PAGES], sn[RENDER_MAX_PAGES];
   double t = mint;
   track_guard g = {0, 0};
   for (;;) {
-    int ev = walk_step(&tw, &g, &t, -log1p(-sops->next_1d(st)), maxt);
+    int ev = walk_step(&tw, &g, &t, -log1p(-sops->next_1d(st)), maxt, &ctl_tau);
     if (ev < 0) {
       for (int p = 0; p < pages; p++) tr[p] = col1(0.0);
       return false;
@@ -493,9 +513,9 @@ static __attribute__((noinline)) bool segment_tr_pages(const scene *sc, const me
     mi.t = t;
     mi.p = v3_fma(r->o, t, r->d);
     coefficients_pages(m, &mi, mu, pages, ss, sn);
-    double q = 0.0;
+    double q = 0.0, k = 1.0 / (mu - tw.ctl); /* (sigma_n over the residual majorant) */
     for (int p = 0; p < pages; p++) {
-      tr[p] = col_mul(tr[p], col_scale(sn[p], 1.0 / mu));
+      tr[p] = col_mul(tr[p], col_scale(sn[p], k));
       q = fmax(q, col_max(tr[p]));
     }
     if (q <= 0) break;
@@ -504,6 +524,10 @@ static __attribute__((noinline)) bool segment_tr_pages(const scene *sc, const me
       for (int p = 0; p < pages; p++) tr[p] = live ? col_scale(tr[p], 1.0 / q) : col1(0.0);
       if (!live) break;
     }
+  }
+  if (ctl_tau > 0) {
+    double c = exp(-ctl_tau);
+    for (int p = 0; p < pages; p++) tr[p] = col_scale(tr[p], c);
   }
   return true;
 }
@@ -1048,12 +1072,13 @@ static __attribute__((noinline)) int track_pages(const scene *sc, const medium *
   *mi = (medium_interaction){.medium = m, .wi = v3_neg(seg->d), .mint = mint};
   mi->p = v3_fma(seg->o, mint, seg->d);
   track_walk tw;
-  track_walk_start(m, seg, mint, maxt, majorant_pages(m, mi, NP), &tw);
+  track_walk_start(m, seg, mint, maxt, majorant_pages(m, mi, NP), false, &tw);
+  double ctl_tau = 0.0; /* (no control: a free flight samples sigma_t itself) */
   color ss[RENDER_MAX_PAGES], sn[RENDER_MAX_PAGES];
   double t = mint;
   track_guard g = {0, 0};
   while (track_walk_live(&tw)) {
-    int ev = walk_step(&tw, &g, &t, -log1p(-sops->next_1d(st)), maxt);
+    int ev = walk_step(&tw, &g, &t, -log1p(-sops->next_1d(st)), maxt, &ctl_tau);
     if (ev < 0) {
       l->unres = true;
       return -1;
@@ -1217,11 +1242,12 @@ PIECE enum lane_outcome lane_flight(const volpath_integrator *vp, const scene *s
         *mi = (medium_interaction){.medium = m, .wi = v3_neg(l->ray.d), .mint = mint};
         mi->p = v3_fma(seg.o, mint, seg.d);
         track_walk tw;
-        track_walk_start(m, &seg, mint, maxt, col_max(m->ops->majorant(m, mi)), &tw);
+        track_walk_start(m, &seg, mint, maxt, col_max(m->ops->majorant(m, mi)), false, &tw);
+        double ctl_tau = 0.0; /* (no control: a free flight samples sigma_t itself) */
         double t = mint;
         track_guard g = {0, 0};
         while (track_walk_live(&tw)) {
-          int ev = walk_step(&tw, &g, &t, -log1p(-sops->next_1d(st)), maxt);
+          int ev = walk_step(&tw, &g, &t, -log1p(-sops->next_1d(st)), maxt, &ctl_tau);
           if (ev < 0) {
             l->unres = true;
             return EV_END;

@@ -5,8 +5,9 @@
  *
  * Collisions are sampled by delta tracking against the majorant
  * mu = scale * max(sigma_t grid) (null collisions have sigma_n =
- * mu - sigma_t), and transmittance is estimated by ratio tracking
- * (integrators/volpath.c). A grid whose sigma_t and albedo are uniform is
+ * mu - sigma_t), and transmittance is estimated by ratio tracking, or
+ * by residual ratio tracking with the grid's smallest value as control
+ * (use_rrt, the default; integrators/volpath.c). A grid whose sigma_t and albedo are uniform is
  * a homogeneous box: it is flagged is_homogeneous and its transmittance
  * is exact (exp(-sigma_t l) over the length l inside the box).
  * A bundle of pages (render_ctx.bundle > 3): the volumes answer at the
@@ -29,8 +30,9 @@
 typedef struct heterogeneous_medium {
   medium base;
   volume *sigma_t, *albedo;
-  color maj; /* scale * max sigma_t (over every page) */
-  int pages; /* of the bundle the last prepare() was for (1: none) */
+  color maj;       /* scale * max sigma_t (over every page) */
+  double minorant; /* scale * min sigma_t (every page and channel) * (1 - 2^-40) */
+  int pages;       /* of the bundle the last prepare() was for (1: none) */
   /* A nested extremum_grid: its cells (res[a] 0: automatic), and the grid
    * built from sigma_t (grid.mu NULL: none, or not built: out of memory). */
   const extremum_object *extremum;
@@ -71,16 +73,22 @@ static color het_transmittance(const medium *m, const ray3 *r, double mint, doub
   return col(exp(-s.c[0] * l), exp(-s.c[1] * l), exp(-s.c[2] * l));
 }
 
-static bool het_majorant_walk(const medium *m, const ray3 *r, double mint, double maxt, track_walk *w) {
+static bool het_majorant_walk(const medium *m, const ray3 *r, double mint, double maxt, bool rrt,
+                              track_walk *w) {
   const heterogeneous_medium *h = (const heterogeneous_medium *)m;
-  return h->grid.mu && track_walk_grid(w, &h->grid, &h->sigma_t->to_world, r, mint, maxt);
+  return h->grid.mu && track_walk_grid(w, &h->grid, &h->sigma_t->to_world, r, mint, maxt, rrt);
+}
+
+static double het_minorant(const medium *m) {
+  return ((const heterogeneous_medium *)m)->minorant;
 }
 
 static const medium_ops het_ops = {.intersect_aabb = het_intersect_aabb,
                                    .majorant = het_majorant,
                                    .coefficients = het_coefficients,
                                    .transmittance = het_transmittance,
-                                   .majorant_walk = het_majorant_walk};
+                                   .majorant_walk = het_majorant_walk,
+                                   .minorant = het_minorant};
 
 /* Smallest and largest value of a volume's grid over pages 0..pages-1. */
 static void grid_range(const volume *v, int pages, double *lo, double *hi) {
@@ -102,6 +110,7 @@ static void het_refresh(heterogeneous_medium *h) {
   grid_range(h->sigma_t, h->pages, &slo, &shi);
   grid_range(h->albedo, h->pages, &alo, &ahi);
   h->maj = col1(h->base.scale * h->sigma_t->max);
+  h->minorant = slo > 0 ? h->base.scale * slo * (1.0 - 0x1p-40) : 0.0;
   h->base.is_homogeneous = slo == shi && alo == ahi;
   h->base.has_spectral_extinction = h->sigma_t->channels == 3;
   h->base.absorbing_only = ahi == 0.0;

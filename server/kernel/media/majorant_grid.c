@@ -29,22 +29,25 @@ static void voxel_span(int c, int r, int n, bool trilinear, int *lo, int *hi) {
   *hi = (int)f1 + 1;
 }
 
-/* out[i][c] = max over j in cell c's voxel span (wrapped) of in[i][j], for
- * `rows` rows of n values into rows of r values. */
-static void max_along(const double *in, double *out, size_t rows, int n, int r, int wrap, bool trilinear,
-                      size_t in_stride, size_t in_step, size_t out_stride, size_t out_step) {
+/* out[i][c] = max (min: the second pair) over j in cell c's voxel span
+ * (wrapped) of in[i][j], for `rows` rows of n values into rows of r
+ * values; in and out hold (max, min) pairs. */
+static void extremes_along(const double *in, double *out, size_t rows, int n, int r, int wrap, bool trilinear,
+                           size_t in_stride, size_t in_step, size_t out_stride, size_t out_step) {
   for (size_t i = 0; i < rows; i++) {
-    const double *row = in + i * in_stride;
-    double *o = out + i * out_stride;
+    const double *row = in + 2 * i * in_stride;
+    double *o = out + 2 * i * out_stride;
     for (int c = 0; c < r; c++) {
       int lo, hi;
       voxel_span(c, r, n, trilinear && n > 1, &lo, &hi);
-      double m = 0.0;
+      double mx = 0.0, mn = INFINITY;
       for (int j = lo; j <= hi; j++) {
-        double x = row[(size_t)volume_wrap_index(j, n, wrap) * in_step];
-        m = x > m ? x : m;
+        const double *x = row + 2 * (size_t)volume_wrap_index(j, n, wrap) * in_step;
+        mx = x[0] > mx ? x[0] : mx;
+        mn = x[1] < mn ? x[1] : mn;
       }
-      o[(size_t)c * out_step] = m;
+      o[2 * (size_t)c * out_step] = mx;
+      o[2 * (size_t)c * out_step + 1] = mn;
     }
   }
 }
@@ -54,39 +57,50 @@ bool majorant_grid_build(majorant_grid *g, const volume *v, int pages, double sc
   const int rx = g->res[0], ry = g->res[1], rz = g->res[2];
   const size_t ch = v->channels, cells = (size_t)rx * ry * rz;
   const bool tri = v->trilinear;
-  /* Pass 0: each voxel's largest value over channels and pages, reduced
-   * along x at once: a[z][y][cx]. Then along y: b[z][cy][cx], along z:
-   * the cells. */
-  double *a = malloc((size_t)nz * ny * rx * sizeof *a);
-  double *b = malloc((size_t)nz * ry * rx * sizeof *b);
-  double *row = malloc((size_t)nx * sizeof *row);
+  /* Pass 0: each voxel's largest and smallest value over channels and
+   * pages, reduced along x at once: a[z][y][cx]. Then along y:
+   * b[z][cy][cx], along z: the cells (c). (max, min) pairs throughout. */
+  double *a = malloc((size_t)nz * ny * rx * 2 * sizeof *a);
+  double *b = malloc((size_t)nz * ry * rx * 2 * sizeof *b);
+  double *row = malloc((size_t)nx * 2 * sizeof *row);
+  double *c = malloc(cells * 2 * sizeof *c);
   double *mu = cells > g->cap ? malloc(cells * sizeof *mu) : g->mu;
-  if (!a || !b || !row || !mu) {
-    free(a), free(b), free(row);
+  double *lo = cells > g->cap ? malloc(cells * sizeof *lo) : g->lo;
+  if (!a || !b || !row || !c || !mu || !lo) {
+    free(a), free(b), free(row), free(c);
     if (mu != g->mu) free(mu);
+    if (lo != g->lo) free(lo);
     return false;
   }
   for (int z = 0; z < nz; z++)
     for (int y = 0; y < ny; y++) {
-      for (int x = 0; x < nx; x++) row[x] = 0.0;
+      for (int x = 0; x < nx; x++) row[2 * x] = 0.0, row[2 * x + 1] = INFINITY;
       for (int p = 0; p < pages; p++) {
         const double *d = volume_page_data(v, p) + (((size_t)z * ny + y) * nx) * ch;
         for (int x = 0; x < nx; x++)
-          for (size_t c = 0; c < ch; c++) row[x] = d[x * ch + c] > row[x] ? d[x * ch + c] : row[x];
+          for (size_t k = 0; k < ch; k++) {
+            double val = d[x * ch + k];
+            row[2 * x] = val > row[2 * x] ? val : row[2 * x];
+            row[2 * x + 1] = val < row[2 * x + 1] ? val : row[2 * x + 1];
+          }
       }
-      max_along(row, a + ((size_t)z * ny + y) * rx, 1, nx, rx, v->wrap, tri, 0, 1, 0, 1);
+      extremes_along(row, a + 2 * ((size_t)z * ny + y) * rx, 1, nx, rx, v->wrap, tri, 0, 1, 0, 1);
     }
   for (int z = 0; z < nz; z++) /* rows: cx; along y */
-    max_along(a + (size_t)z * ny * rx, b + (size_t)z * ry * rx, (size_t)rx, ny, ry, v->wrap, tri, 1,
-              (size_t)rx, 1, (size_t)rx);
+    extremes_along(a + 2 * (size_t)z * ny * rx, b + 2 * (size_t)z * ry * rx, (size_t)rx, ny, ry, v->wrap, tri,
+                   1, (size_t)rx, 1, (size_t)rx);
   /* rows: (cy, cx) pairs; along z */
-  max_along(b, mu, (size_t)ry * rx, nz, rz, v->wrap, tri, 1, (size_t)ry * rx, 1, (size_t)ry * rx);
-  const double margin = 1.0 + 0x1p-40;
-  for (size_t i = 0; i < cells; i++) mu[i] *= scale * margin;
-  free(a), free(b), free(row);
+  extremes_along(b, c, (size_t)ry * rx, nz, rz, v->wrap, tri, 1, (size_t)ry * rx, 1, (size_t)ry * rx);
+  const double up = 1.0 + 0x1p-40, down = 1.0 - 0x1p-40;
+  for (size_t i = 0; i < cells; i++) {
+    mu[i] = c[2 * i] * scale * up;
+    lo[i] = c[2 * i + 1] * scale * down;
+  }
+  free(a), free(b), free(row), free(c);
   if (mu != g->mu) {
-    free(g->mu);
+    free(g->mu), free(g->lo);
     g->mu = mu;
+    g->lo = lo;
     g->cap = cells;
   }
   return true;
@@ -94,16 +108,18 @@ bool majorant_grid_build(majorant_grid *g, const volume *v, int pages, double sc
 
 void majorant_grid_free(majorant_grid *g) {
   free(g->mu);
-  g->mu = NULL;
+  free(g->lo);
+  g->mu = g->lo = NULL;
   g->cap = 0;
 }
 
 bool track_walk_grid(track_walk *w, const majorant_grid *g, const xform *to_world, const ray3 *r, double mint,
-                     double maxt) {
+                     double maxt, bool rrt) {
   const double(*m)[4] = to_world->inv;
   if (m[3][0] != 0.0 || m[3][1] != 0.0 || m[3][2] != 0.0 || m[3][3] != 1.0) return false;
   const double o[3] = {r->o.x, r->o.y, r->o.z}, d[3] = {r->d.x, r->d.y, r->d.z};
   w->cells = g->mu;
+  w->ctls = rrt ? g->lo : NULL;
   w->maxt = maxt;
   for (int a = 0; a < 3; a++) {
     double ol = m[a][0] * o[0] + m[a][1] * o[1] + m[a][2] * o[2] + m[a][3];
@@ -127,7 +143,9 @@ bool track_walk_grid(track_walk *w, const majorant_grid *g, const xform *to_worl
       w->tdelta[a] = INFINITY;
     }
   }
-  w->mu = g->mu[((size_t)w->cell[2] * g->res[1] + w->cell[1]) * g->res[0] + w->cell[0]];
+  size_t i = ((size_t)w->cell[2] * g->res[1] + w->cell[1]) * g->res[0] + w->cell[0];
+  w->mu = g->mu[i];
+  w->ctl = w->ctls ? w->ctls[i] : 0.0;
   double b = fmin(w->tnext[0], fmin(w->tnext[1], w->tnext[2]));
   w->b = b < maxt ? b : INFINITY;
   return true;

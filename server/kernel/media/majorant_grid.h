@@ -30,14 +30,16 @@
 typedef struct majorant_grid {
   int res[3];
   double *mu;
-  size_t cap; /* cells allocated */
+  double *lo; /* each cell's minorant: scale x the smallest value reached in it */
+  size_t cap; /* cells allocated (each array) */
 } majorant_grid;
 
 /* Build g (g->res set, each >= 1) over volume v at pages 0..pages-1, its
  * values times scale. A cell holds the largest value of the voxels that
  * v's lookups (nearest or trilinear) reach from a point in it, those past
  * the grid's edges as v's wrap mode reaches them, times 1 + 2^-40 (the
- * interpolation's rounding). False: out of memory (g unchanged). */
+ * interpolation's rounding); its minorant the smallest such value times
+ * 1 - 2^-40. False: out of memory (g unchanged). */
 bool majorant_grid_build(majorant_grid *g, const volume *v, int pages, double scale);
 void majorant_grid_free(majorant_grid *g);
 
@@ -60,23 +62,27 @@ typedef struct extremum_object {
  * one piece. */
 typedef struct track_walk {
   double mu, b;
+  double ctl;          /* the piece's control extinction (residual ratio tracking), 0 without */
   const double *cells; /* NULL: one piece */
+  const double *ctls;  /* the cells' controls, or NULL (0) */
   int res[3], cell[3], step[3];
   double tnext[3], tdelta[3], maxt;
 } track_walk;
 
-static inline void track_walk_global(track_walk *w, double mu) {
+static inline void track_walk_global(track_walk *w, double mu, double ctl) {
   w->mu = mu;
+  w->ctl = ctl;
   w->b = INFINITY;
   w->cells = NULL;
+  w->ctls = NULL;
 }
 
 /* The walk of ray r (world; its parameter is the distance t) over
- * [mint, maxt] through g's cells, under the volume box to_world (affine).
- * False: to_world is not affine (the caller walks with the global
- * majorant). */
+ * [mint, maxt] through g's cells, under the volume box to_world (affine);
+ * rrt: each piece's control is its cell's minorant (else 0). False:
+ * to_world is not affine (the caller walks with the global majorant). */
 bool track_walk_grid(track_walk *w, const majorant_grid *g, const xform *to_world, const ray3 *r, double mint,
-                     double maxt);
+                     double maxt, bool rrt);
 
 /* Move the walk to the next piece (the caller has reached w->b). */
 static inline void track_walk_next(track_walk *w) {
@@ -89,7 +95,9 @@ static inline void track_walk_next(track_walk *w) {
   }
   w->cell[a] = c;
   w->tnext[a] += w->tdelta[a];
-  w->mu = w->cells[((size_t)w->cell[2] * w->res[1] + w->cell[1]) * w->res[0] + w->cell[0]];
+  size_t i = ((size_t)w->cell[2] * w->res[1] + w->cell[1]) * w->res[0] + w->cell[0];
+  w->mu = w->cells[i];
+  w->ctl = w->ctls ? w->ctls[i] : 0.0;
   double b = fmin(w->tnext[0], fmin(w->tnext[1], w->tnext[2]));
   w->b = b < w->maxt ? b : INFINITY;
 }

@@ -21,7 +21,9 @@ rsw_status medium_read_common(loader *ld, node *n, medium *m) {
   m->phase = (phase *)o;
   st = ld_float_range(ld, n, "scale", 1.0, 0.0, INFINITY, &m->scale);
   if (st) return st;
-  return ld_bool(ld, n, "sample_emitters", true, &m->sample_emitters);
+  st = ld_bool(ld, n, "sample_emitters", true, &m->sample_emitters);
+  if (st) return st;
+  return ld_bool(ld, n, "use_rrt", true, &m->use_rrt);
 }
 
 void medium_traverse_common(medium *m, param_visitor *v) {

@@ -115,7 +115,8 @@ static void bounds_case(int nx, int ny, int nz, int ch, const char *filter, cons
     double mint, maxt;
     if (!m->ops->intersect_aabb(m, &ray, &mint, &maxt) || !(mint < maxt)) continue;
     track_walk w;
-    REQUIRE(m->ops->majorant_walk(m, &ray, mint, maxt, &w), "a walk");
+    bool walked = m->ops->majorant_walk(m, &ray, mint, maxt, true, &w);
+    REQUIRE(walked, "a walk");
     rays++;
     double a = mint;
     for (int guard = 0; guard < 10000; guard++) {
@@ -129,10 +130,13 @@ static void bounds_case(int nx, int ny, int nz, int ch, const char *filter, cons
         mi.p = v3_fma(ray.o, mi.t, ray.d);
         mi.majorant = col1(w.mu);
         m->ops->coefficients(m, &mi);
-        if (col_max(mi.sigma_t) > w.mu && getenv("MG_DEBUG") && bad < 5)
+        if ((col_max(mi.sigma_t) > w.mu ||
+             fmin(mi.sigma_t.c[0], fmin(mi.sigma_t.c[1], mi.sigma_t.c[2])) < w.ctl) &&
+            getenv("MG_DEBUG") && bad < 5)
           printf("    t %.17g in [%.17g, %.17g] p %.17g %.17g %.17g cell %d %d %d mu %g st %g\n", mi.t, a, b,
                  mi.p.x, mi.p.y, mi.p.z, w.cell[0], w.cell[1], w.cell[2], w.mu, col_max(mi.sigma_t));
-        bad += col_max(mi.sigma_t) > w.mu;
+        bad += col_max(mi.sigma_t) > w.mu ||
+               fmin(mi.sigma_t.c[0], fmin(mi.sigma_t.c[1], mi.sigma_t.c[2])) < w.ctl;
       }
       pieces++;
       if (w.b == INFINITY) break;
@@ -143,8 +147,8 @@ static void bounds_case(int nx, int ny, int nz, int ch, const char *filter, cons
   printf("  %dx%dx%d x%d %s %s res %s: %ld rays, %ld pieces\n", nx, ny, nz, ch, filter, wrap,
          res ? res : "auto", rays, pieces);
   CHECK(rays > 100 && pieces > rays, "too few rays (%ld) or pieces (%ld) to test", rays, pieces);
-  CHECK(bad == 0, "%s %s res %s: %ld points with sigma_t above their piece's majorant", filter, wrap,
-        res ? res : "auto", bad);
+  CHECK(bad == 0, "%s %s res %s: %ld points with sigma_t above their piece's majorant or below its minorant",
+        filter, wrap, res ? res : "auto", bad);
   CHECK(order == 0, "%s %s res %s: %ld pieces out of order", filter, wrap, res ? res : "auto", order);
   scene_free(s);
 }
@@ -203,21 +207,68 @@ static void test_transmittance_exact(void) {
   double tau = 0;
   for (int z = 0; z < NZ; z++) tau += v[z][1][0] * 2.0 / NZ;
   const double want = exp(-tau);
-  const char *extra[2] = {"", "\"ex\": {\"type\": \"extremum_grid\", \"resolution\": [2, 3, 3]},"};
-  for (int k = 0; k < 2; k++) {
+  static const char *const extra[3] = {
+      "", "\"ex\": {\"type\": \"extremum_grid\", \"resolution\": [2, 3, 3]}, \"use_rrt\": false,",
+      "\"ex\": {\"type\": \"extremum_grid\", \"resolution\": [2, 3, 3]},"};
+  static const char *const what[3] = {"global", "extremum_grid, ratio tracking", "extremum_grid, residual"};
+  double se_k[3];
+  for (int k = 0; k < 3; k++) {
     char *text = grid_scene("", NX, NY, NZ, 1, d.p, "nearest", "clamp", extra[k], 0.0, tx, ty, "");
     scene *s = tsup_load(text, "mono");
     free(text);
     REQUIRE(s, "scene");
     double m = 0, se = 0;
     estimate(s, REPS, 64, &m, &se, NULL);
-    printf("  absorbing grid, %s: T %.6f +- %.6f, exact %.6f (tau %.4f)\n", k ? "extremum_grid" : "global", m,
-           se, want, tau);
-    CHECK(fabs(m - want) <= 4 * se + 1e-12, "%s: T %.6g vs exact %.6g beyond 4 sigma (%.3g)",
-          k ? "extremum_grid" : "global", m, want, 4 * se);
+    printf("  absorbing grid, %s: T %.6f +- %.6f, exact %.6f (tau %.4f)\n", what[k], m, se, want, tau);
+    CHECK(fabs(m - want) <= 4 * se + 1e-12, "%s: T %.6g vs exact %.6g beyond 4 sigma (%.3g)", what[k], m,
+          want, 4 * se);
     CHECK(se < 0.05 * want, "standard error %.3g too large for a meaningful test", se);
+    se_k[k] = se;
     scene_free(s);
   }
+  /* the column's cells have a positive minorant: most of tau is the
+   * control's, exact */
+  CHECK(se_k[2] < 0.75 * se_k[1],
+        "residual ratio tracking's error %.3g is not below 3/4 of ratio tracking's %.3g", se_k[2], se_k[1]);
+  free(d.p);
+}
+
+/* Residual ratio tracking with the medium's global minorant (no extremum):
+ * a grid of values in [0.5, 1.5] seen through, against exp(-tau), with
+ * use_rrt true (the default) and false. */
+static void test_residual_global(void) {
+  enum {
+    N = 4,
+    REPS = 24
+  };
+  double v[N][N][N];
+  sbuf d = {0};
+  for (int z = 0; z < N; z++)
+    for (int y = 0; y < N; y++)
+      for (int x = 0; x < N; x++) {
+        v[z][y][x] = 0.5 + urand();
+        sb_printf(&d, "%s%.17g", d.n ? ", " : "", v[z][y][x]);
+      }
+  double tau = 0; /* the column under (0.3, -0.3): local (0.65, 0.35), voxel (2, 1) */
+  for (int z = 0; z < N; z++) tau += v[z][1][2] * 2.0 / N;
+  const double want = exp(-tau);
+  double se_k[2];
+  for (int k = 0; k < 2; k++) {
+    char *text = grid_scene("", N, N, N, 1, d.p, "nearest", "clamp", k ? "" : "\"use_rrt\": false,", 0.0, 0.3,
+                            -0.3, "");
+    scene *s = tsup_load(text, "mono");
+    free(text);
+    REQUIRE(s, "scene");
+    double m = 0, se = 0;
+    estimate(s, REPS, 64, &m, &se, NULL);
+    printf("  grid in [0.5, 1.5], %s: T %.6f +- %.6f, exact %.6f\n",
+           k ? "residual (global minorant)" : "ratio", m, se, want);
+    CHECK(fabs(m - want) <= 4 * se + 1e-12, "T %.6g vs exact %.6g beyond 4 sigma (%.3g)", m, want, 4 * se);
+    se_k[k] = se;
+    scene_free(s);
+  }
+  CHECK(se_k[1] < se_k[0], "residual ratio tracking's error %.3g is not below ratio tracking's %.3g", se_k[1],
+        se_k[0]);
   free(d.p);
 }
 
@@ -305,7 +356,8 @@ static void test_dense_cell_resolved(void) {
   CHECK(rs.rays.unresolved == 0, "%llu tracks given up (want none)", (unsigned long long)rs.rays.unresolved);
   /* (ratio tracking at a majorant equal to sigma_t: a path's T is 1, or
    * about 2^-40 when it takes a tentative collision (probability 1 - T):
-   * standard error sqrt(T (1 - T) / spp)) */
+   * standard error sqrt(T (1 - T) / spp); residual ratio tracking, the
+   * default, with a control equal to sigma_t: exact) */
   double se = sqrt(want * (1 - want) / 4096);
   CHECK(fabs(v - want) <= 4 * se, "T %.9g vs exact %.9g beyond 4 sigma (%.3g)", v, want, 4 * se);
   film_image_free(&img);
@@ -399,6 +451,7 @@ static void test_refusals(void) {
 int main(void) {
   RSW_TEST_RUN(test_cells_bound_the_extinction);
   RSW_TEST_RUN(test_transmittance_exact);
+  RSW_TEST_RUN(test_residual_global);
   RSW_TEST_RUN(test_scattering_agrees);
   RSW_TEST_RUN(test_dense_cell_resolved);
   RSW_TEST_RUN(test_cloud_agrees);
