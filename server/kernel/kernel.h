@@ -568,8 +568,13 @@ struct volume {
   uint32_t channels;       /* 1 or 3 */
   int wrap;                /* VOLUME_WRAP_*: how eval reaches cells past the grid's edges */
   bool trilinear;          /* eval interpolates between cell centres (else: the nearest cell) */
-  const double *data;      /* res[0] res[1] res[2] channels values (owned by the plugin) */
-  double max;              /* largest value over cells and channels (majorants) */
+  /* data is a grid of res cells over the box (gridvolume, constvolume);
+   * false (sphericalcoordsvolume): only eval, max and value_range mean
+   * anything, and inner is the volume it reads. */
+  bool box_grid;
+  struct volume *inner;
+  const double *data; /* res[0] res[1] res[2] channels values (owned by the plugin) */
+  double max;         /* largest value over cells and channels (majorants) */
   /* Values the volume may take: the intersection of the ranges of the
    * slots that hold it (ld_volume), checked again on every update of its
    * parameters. [-inf, inf] when no slot constrains it. */

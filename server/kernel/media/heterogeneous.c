@@ -92,6 +92,10 @@ static const medium_ops het_ops = {.intersect_aabb = het_intersect_aabb,
 
 /* Smallest and largest value of a volume's grid over pages 0..pages-1. */
 static void grid_range(const volume *v, int pages, double *lo, double *hi) {
+  if (!v->box_grid) { /* (a sphericalcoordsvolume: its range at every wavelength) */
+    v->ops->value_range(v, lo, hi);
+    return;
+  }
   size_t n = (size_t)v->res[0] * v->res[1] * v->res[2] * v->channels;
   double a = INFINITY, b = -INFINITY;
   for (int p = 0; p < pages; p++) {
@@ -114,7 +118,7 @@ static void het_refresh(heterogeneous_medium *h) {
   h->base.is_homogeneous = slo == shi && alo == ahi;
   h->base.has_spectral_extinction = h->sigma_t->channels == 3;
   h->base.absorbing_only = ahi == 0.0;
-  if (h->extremum && h->extremum->local) {
+  if (h->extremum && h->extremum->local && h->sigma_t->box_grid) {
     const volume *v = h->sigma_t;
     for (int a = 0; a < 3; a++) {
       int want = h->extremum->res[a];
@@ -144,8 +148,8 @@ static rsw_status heterogeneous_create(loader *ld, node *n, object **out) {
   h->base.ops = &het_ops;
   h->pages = 1;
   rsw_status st = medium_read_common(ld, n, &h->base);
-  if (!st) st = ld_volume(ld, n, "sigma_t", 1.0, 0.0, INFINITY, &h->sigma_t);
-  if (!st) st = ld_volume(ld, n, "albedo", 0.75, 0.0, 1.0, &h->albedo);
+  if (!st) st = ld_volume_mapped(ld, n, "sigma_t", 1.0, 0.0, INFINITY, &h->sigma_t);
+  if (!st) st = ld_volume_mapped(ld, n, "albedo", 0.75, 0.0, 1.0, &h->albedo);
   object *ex = NULL;
   if (!st) st = ld_child(ld, n, NULL, CLS_EXTREMUM, &ex);
   if (st) {

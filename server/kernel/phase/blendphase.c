@@ -228,7 +228,7 @@ static rsw_status blendphase_create(loader *ld, node *n, object **out) {
   b->ph[0] = (phase *)kids[swap ? 1 : 0];
   b->ph[1] = (phase *)kids[swap ? 0 : 1];
   free(kids);
-  st = ld_volume(ld, n, "weight", 0.5, 0.0, 1.0, &b->weight);
+  st = ld_volume_mapped(ld, n, "weight", 0.5, 0.0, 1.0, &b->weight);
   if (st) {
     free(b);
     return st;

@@ -105,6 +105,12 @@ rsw_status ld_texture_opt(loader *ld, node *n, const char *name, double lo, text
  * the volume's lo/hi, on every update of its parameters
  * (volumes/constvolume.c). *out is owned by the scene. */
 rsw_status ld_volume(loader *ld, node *n, const char *name, double def, double lo, double hi, volume **out);
+/* ld_volume for slots that only evaluate the volume (a heterogeneous
+ * medium's sigma_t and albedo, a blend weight): it also takes volumes
+ * that are no grid over a box (sphericalcoordsvolume), which ld_volume
+ * refuses naming the slot. */
+rsw_status ld_volume_mapped(loader *ld, node *n, const char *name, double def, double lo, double hi,
+                            volume **out);
 
 /* The nested object (or referenced object) of class cls. With name NULL,
  * the one child of that class whatever its key (error if several); with a

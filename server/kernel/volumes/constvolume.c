@@ -148,7 +148,8 @@ static const char *range_text(double lo, double hi, char *buf, size_t len) {
   return buf;
 }
 
-rsw_status ld_volume(loader *ld, node *n, const char *name, double def, double lo, double hi, volume **out) {
+static rsw_status get_volume(loader *ld, node *n, const char *name, double def, double lo, double hi,
+                             bool mapped, volume **out) {
   prop *p = node_find(n, name);
   volume *v = NULL;
   bool nested_texture = false;
@@ -161,6 +162,12 @@ rsw_status ld_volume(loader *ld, node *n, const char *name, double def, double l
     rsw_status st = ld_child(ld, n, name, CLS_VOLUME, &o);
     if (st) return st;
     v = (volume *)o;
+    if (!v->box_grid && !mapped)
+      return ld_fail(
+          ld, n, name, RSW_ERR_TYPE,
+          "property '%s' reads a grid over a box (a gridvolume, a constvolume or a number), not the "
+          "%s '%s' (a heterogeneous medium's sigma_t or albedo, or a blend weight, takes it)",
+          name, o->plugin->name, o->id ? o->id : "");
   } else {
     /* A constant: a uniform texture wrapped in a constvolume. ld_texture
      * checks the lower bound of constants and the type. */
@@ -190,8 +197,19 @@ rsw_status ld_volume(loader *ld, node *n, const char *name, double def, double l
   }
   /* A volume shared by several slots must satisfy all of them, now and
    * on every update. */
-  v->lo = fmax(v->lo, lo);
-  v->hi = fmin(v->hi, hi);
+  for (volume *w = v; w; w = w->inner) { /* (and the volumes it reads through) */
+    w->lo = fmax(w->lo, lo);
+    w->hi = fmin(w->hi, hi);
+  }
   *out = v;
   return RSW_OK;
+}
+
+rsw_status ld_volume(loader *ld, node *n, const char *name, double def, double lo, double hi, volume **out) {
+  return get_volume(ld, n, name, def, lo, hi, false, out);
+}
+
+rsw_status ld_volume_mapped(loader *ld, node *n, const char *name, double def, double lo, double hi,
+                            volume **out) {
+  return get_volume(ld, n, name, def, lo, hi, true, out);
 }

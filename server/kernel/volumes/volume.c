@@ -26,6 +26,7 @@ void volume_init(volume *v, const volume_ops *ops, const xform *to_world) {
   v->to_world = *to_world;
   v->lo = -INFINITY;
   v->hi = INFINITY;
+  v->box_grid = true;
   volume_update_bbox(v);
 }
 
