@@ -1,5 +1,7 @@
 #include "tsup.h"
 
+#include "../../server/kernel/media/majorant_grid.h"
+
 #include "../../server/kernel/core/rng.h"
 
 #include <math.h>
@@ -221,4 +223,48 @@ void tsup_remove_dir(const char *dir) {
   char cmd[128];
   snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
   if (system(cmd)) fprintf(stderr, "could not remove %s\n", dir);
+}
+
+static double walk_urand(uint64_t *x) {
+  *x ^= *x << 13, *x ^= *x >> 7, *x ^= *x << 17;
+  return (double)(*x >> 11) * 0x1p-53;
+}
+
+void tsup_walk_check(const medium *m, vec3 lo, vec3 hi, int n, uint64_t *rng, tsup_walk_stats *st) {
+  *st = (tsup_walk_stats){0};
+  for (int k = 0; k < n; k++) {
+    vec3 o = v3(lo.x + (hi.x - lo.x) * walk_urand(rng), lo.y + (hi.y - lo.y) * walk_urand(rng),
+                lo.z + (hi.z - lo.z) * walk_urand(rng));
+    double z = 2 * walk_urand(rng) - 1, ph = 2 * 3.14159265358979323846 * walk_urand(rng),
+           r = sqrt(fmax(0, 1 - z * z));
+    ray3 ray = {o, v3(r * cos(ph), r * sin(ph), z), 0, INFINITY};
+    double mint, maxt;
+    if (!m->ops->intersect_aabb(m, &ray, &mint, &maxt) || !(mint < maxt)) continue;
+    track_walk w;
+    if (!m->ops->majorant_walk(m, &ray, mint, maxt, true, &w)) continue;
+    st->rays++;
+    st->radial += w.radial;
+    double a = mint;
+    for (int guard = 0; guard < 100000; guard++) {
+      double b = w.b < INFINITY ? w.b : maxt;
+      st->order += b < a - 1e-12;
+      for (int q = 0; q < 64 && b - a > 1e-9; q++) {
+        medium_interaction mi = {.medium = m, .t = a + (b - a) * (1e-9 + (1 - 2e-9) * walk_urand(rng))};
+        mi.p = v3_fma(ray.o, mi.t, ray.d);
+        mi.majorant = col1(w.mu);
+        m->ops->coefficients(m, &mi);
+        double smax = col_max(mi.sigma_t),
+               smin = fmin(mi.sigma_t.c[0], fmin(mi.sigma_t.c[1], mi.sigma_t.c[2]));
+        bool out = smax > w.mu || smin < w.ctl;
+        if (out && st->bad < 5)
+          printf("    t %.17g in [%.17g, %.17g] at (%.9g, %.9g, %.9g): sigma_t %g..%g outside [%g, %g]\n",
+                 mi.t, a, b, mi.p.x, mi.p.y, mi.p.z, smin, smax, w.ctl, w.mu);
+        st->bad += out;
+      }
+      st->pieces++;
+      if (w.b == INFINITY) break;
+      a = w.b;
+      track_walk_next(&w);
+    }
+  }
 }

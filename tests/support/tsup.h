@@ -45,6 +45,19 @@ char *tsup_dense_slab(const char *integ, const char *med, double th0);
  * added to the medium (e.g. an extremum_grid; "" none). malloc'ed. */
 char *tsup_cloud_scene(int res, const char *extremum, int spp);
 
+/* Checks medium m's majorant walks (media/majorant_grid.h; m must have
+ * majorant_walk): n rays from uniform points of the box lo..hi in
+ * isotropic directions (xorshift state *rng), those that meet m's box
+ * walked with controls (rrt). Each walk's pieces must tile [mint, maxt] in
+ * order, and sigma_t at 64 points of each piece (off its ends by 1e-9 of
+ * its length: a point that rounds across a side is the rounding
+ * majorant_grid.c leaves) must lie within [ctl, mu] in every channel;
+ * the first few that do not are printed. */
+typedef struct tsup_walk_stats {
+  long rays, pieces, bad, order, radial;
+} tsup_walk_stats;
+void tsup_walk_check(const medium *m, vec3 lo, vec3 hi, int n, uint64_t *rng, tsup_walk_stats *st);
+
 /* Compile an environment plugin's C source (src: the whole file) as
  * <dir>/<name>.so against include/raysweep/plugin.h (under $RSW_TEST_DIR/..,
  * else ./), warnings as errors; dir (room for 64 bytes) receives a fresh

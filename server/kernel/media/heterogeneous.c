@@ -76,7 +76,9 @@ static color het_transmittance(const medium *m, const ray3 *r, double mint, doub
 static bool het_majorant_walk(const medium *m, const ray3 *r, double mint, double maxt, bool rrt,
                               track_walk *w) {
   const heterogeneous_medium *h = (const heterogeneous_medium *)m;
-  return h->grid.mu && track_walk_grid(w, &h->grid, &h->sigma_t->to_world, r, mint, maxt, rrt);
+  if (!h->grid.mu) return false;
+  if (h->grid.radial) return track_walk_radial(w, &h->grid, r, mint, maxt, rrt);
+  return track_walk_grid(w, &h->grid, &h->sigma_t->to_world, r, mint, maxt, rrt);
 }
 
 static double het_minorant(const medium *m) {
@@ -118,7 +120,21 @@ static void het_refresh(heterogeneous_medium *h) {
   h->base.is_homogeneous = slo == shi && alo == ahi;
   h->base.has_spectral_extinction = h->sigma_t->channels == 3;
   h->base.absorbing_only = ahi == 0.0;
-  if (h->extremum && h->extremum->local && h->sigma_t->box_grid) {
+  if (h->extremum && h->extremum->spherical) {
+    double rmin, rmax, f0, f1;
+    const xform *sph;
+    const volume *v = h->sigma_t;
+    if (volume_sphere(v, &rmin, &rmax, &f0, &f1, &sph)) {
+      int want = h->extremum->res[0];
+      h->grid.res[1] = h->grid.res[2] = 1;
+      if (want > 0) {
+        h->grid.res[0] = want;
+        if (!majorant_grid_build_radial(&h->grid, v, h->pages, h->base.scale)) majorant_grid_free(&h->grid);
+      } else if (!majorant_grid_radial_auto(&h->grid, v, h->pages, h->base.scale)) {
+        majorant_grid_free(&h->grid);
+      }
+    }
+  } else if (h->extremum && h->extremum->local && h->sigma_t->box_grid) {
     const volume *v = h->sigma_t;
     for (int a = 0; a < 3; a++) {
       int want = h->extremum->res[a];
@@ -157,6 +173,27 @@ static rsw_status heterogeneous_create(loader *ld, node *n, object **out) {
     return st;
   }
   h->extremum = (const extremum_object *)ex;
+  /* an extremum over the kind of volume it walks */
+  double rmin, rmax, f0, f1;
+  const xform *sph;
+  bool sphere = volume_sphere(h->sigma_t, &rmin, &rmax, &f0, &f1, &sph);
+  const extremum_object *e = h->extremum;
+  const char *why = NULL;
+  if (e && e->spherical && !sphere)
+    why = "extremum_spherical walks a sphericalcoordsvolume sigma_t's shells; this sigma_t is a grid over a "
+          "box "
+          "(give it an extremum_grid)";
+  else if (e && e->local && !e->spherical && sphere)
+    why = "extremum_grid walks a grid over a box; this sigma_t is a sphericalcoordsvolume (give it an "
+          "extremum_spherical)";
+  else if (e && e->spherical &&
+           ((!isnan(e->rmin) && fabs(e->rmin - rmin) > 1e-6 * rmax) ||
+            (!isnan(e->rmax) && fabs(e->rmax - rmax) > 1e-6 * rmax)))
+    why = "extremum_spherical's rmin and rmax must be its sigma_t volume's";
+  if (why) {
+    free(h);
+    return ld_fail(ld, n, NULL, RSW_ERR_INVALID, "heterogeneous: %s", why);
+  }
   *out = &h->base.base;
   return RSW_OK;
 }

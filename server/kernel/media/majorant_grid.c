@@ -121,6 +121,7 @@ bool track_walk_grid(track_walk *w, const majorant_grid *g, const xform *to_worl
   w->cells = g->mu;
   w->ctls = rrt ? g->lo : NULL;
   w->maxt = maxt;
+  w->radial = false;
   for (int a = 0; a < 3; a++) {
     double ol = m[a][0] * o[0] + m[a][1] * o[1] + m[a][2] * o[2] + m[a][3];
     double dl = m[a][0] * d[0] + m[a][1] * d[1] + m[a][2] * d[2];
@@ -149,4 +150,142 @@ bool track_walk_grid(track_walk *w, const majorant_grid *g, const xform *to_worl
   double b = fmin(w->tnext[0], fmin(w->tnext[1], w->tnext[2]));
   w->b = b < maxt ? b : INFINITY;
   return true;
+}
+
+bool majorant_grid_build_radial(majorant_grid *g, const volume *v, int pages, double scale) {
+  double rmin, rmax, fill0, fill1;
+  const xform *sph;
+  if (!volume_sphere(v, &rmin, &rmax, &fill0, &fill1, &sph)) return false;
+  const volume *in = v->inner;
+  if (!in->box_grid) return false;
+  const int nx = (int)in->res[0], ny = (int)in->res[1], nz = (int)in->res[2], nr = g->res[0];
+  const size_t ch = in->channels, cells = (size_t)nr + 2;
+  const bool tri = in->trilinear && nx > 1;
+  /* each radial voxel column x: its extremes over theta, phi, channels
+   * and pages */
+  double *col = malloc((size_t)nx * 2 * sizeof *col), *c = malloc(cells * 2 * sizeof *c);
+  double *mu = cells > g->cap ? malloc(cells * sizeof *mu) : g->mu;
+  double *lo = cells > g->cap ? malloc(cells * sizeof *lo) : g->lo;
+  if (!col || !c || !mu || !lo) {
+    free(col), free(c);
+    if (mu != g->mu) free(mu);
+    if (lo != g->lo) free(lo);
+    return false;
+  }
+  for (int x = 0; x < nx; x++) col[2 * x] = 0.0, col[2 * x + 1] = INFINITY;
+  for (int p = 0; p < pages; p++) {
+    const double *d = volume_page_data(in, p);
+    for (int z = 0; z < nz; z++)
+      for (int y = 0; y < ny; y++)
+        for (int x = 0; x < nx; x++)
+          for (size_t k = 0; k < ch; k++) {
+            double val = d[(((size_t)z * ny + y) * nx + x) * ch + k];
+            col[2 * x] = val > col[2 * x] ? val : col[2 * x];
+            col[2 * x + 1] = val < col[2 * x + 1] ? val : col[2 * x + 1];
+          }
+  }
+  extremes_along(col, c + 2, 1, nx, nr, in->wrap, tri, 0, 1, 0, 1);
+  c[0] = c[1] = fill0;
+  c[2 * (nr + 1)] = c[2 * (nr + 1) + 1] = fill1;
+  const double up = 1.0 + 0x1p-40, down = 1.0 - 0x1p-40;
+  for (size_t i = 0; i < cells; i++) {
+    mu[i] = c[2 * i] * scale * up;
+    lo[i] = c[2 * i + 1] * scale * down;
+  }
+  free(col), free(c);
+  if (mu != g->mu) {
+    free(g->mu), free(g->lo);
+    g->mu = mu;
+    g->lo = lo;
+    g->cap = cells;
+  }
+  g->radial = true;
+  g->rmin = rmin, g->rmax = rmax;
+  g->frame = sph;
+  return true;
+}
+
+void track_walk_radial_boundary(track_walk *w, double t) {
+  double b = INFINITY;
+  if (!w->out) { /* inward: the bin's inner sphere, if the ray reaches it, else the turn */
+    if (w->bin >= 0) {
+      double R = w->r0 + w->bin * w->dr;
+      double disc = w->qb * w->qb - w->qa * (w->qc - R * R);
+      if (disc >= 0) {
+        double tr = (-w->qb - sqrt(disc)) / w->qa;
+        if (tr >= t) {
+          b = tr, w->nbin = w->bin - 1, w->nout = false;
+          goto done;
+        }
+      }
+    }
+    b = fmax(-w->qb / w->qa, t), w->nbin = w->bin, w->nout = true;
+  } else if (w->bin < w->nr) { /* outward: the bin's outer sphere */
+    double R = w->r0 + (w->bin + 1) * w->dr;
+    double disc = fmax(w->qb * w->qb - w->qa * (w->qc - R * R), 0.0);
+    b = fmax((-w->qb + sqrt(disc)) / w->qa, t), w->nbin = w->bin + 1, w->nout = true;
+  }
+done:
+  w->b = b < w->maxt ? b : INFINITY;
+}
+
+bool track_walk_radial(track_walk *w, const majorant_grid *g, const ray3 *r, double mint, double maxt,
+                       bool rrt) {
+  const double(*m)[4] = g->frame->inv;
+  if (m[3][0] != 0.0 || m[3][1] != 0.0 || m[3][2] != 0.0 || m[3][3] != 1.0) return false;
+  const double o[3] = {r->o.x, r->o.y, r->o.z}, d[3] = {r->d.x, r->d.y, r->d.z};
+  double ol[3], dl[3];
+  for (int a = 0; a < 3; a++) {
+    ol[a] = m[a][0] * o[0] + m[a][1] * o[1] + m[a][2] * o[2] + m[a][3];
+    dl[a] = m[a][0] * d[0] + m[a][1] * d[1] + m[a][2] * d[2];
+  }
+  w->qa = dl[0] * dl[0] + dl[1] * dl[1] + dl[2] * dl[2];
+  if (!(w->qa > 0)) return false;
+  w->qb = ol[0] * dl[0] + ol[1] * dl[1] + ol[2] * dl[2];
+  w->qc = ol[0] * ol[0] + ol[1] * ol[1] + ol[2] * ol[2];
+  w->radial = true;
+  w->cells = g->mu;
+  w->ctls = rrt ? g->lo : NULL;
+  w->maxt = maxt;
+  w->nr = g->res[0];
+  w->r0 = g->rmin;
+  w->dr = (g->rmax - g->rmin) / g->res[0];
+  double rr = sqrt(fmax(w->qa * mint * mint + 2 * w->qb * mint + w->qc, 0.0));
+  int bin = rr < g->rmin ? -1 : rr >= g->rmax ? w->nr : (int)((rr - g->rmin) / w->dr);
+  w->bin = bin < w->nr ? bin : w->nr - 1;
+  if (rr >= g->rmax) w->bin = w->nr;
+  w->out = mint >= -w->qb / w->qa;
+  w->mu = w->cells[w->bin + 1];
+  w->ctl = w->ctls ? w->ctls[w->bin + 1] : 0.0;
+  track_walk_radial_boundary(w, mint);
+  return true;
+}
+
+/* The length in the world of a unit along the sphere's frame (its
+ * columns' mean length: a sphere is scaled alike along its axes). */
+static double frame_scale(const xform *f) {
+  double s = 0;
+  for (int c = 0; c < 3; c++)
+    s += sqrt(f->m[0][c] * f->m[0][c] + f->m[1][c] * f->m[1][c] + f->m[2][c] * f->m[2][c]);
+  return s / 3;
+}
+
+bool majorant_grid_radial_auto(majorant_grid *g, const volume *v, int pages, double scale) {
+  double rmin, rmax, f0, f1;
+  const xform *sph;
+  if (!volume_sphere(v, &rmin, &rmax, &f0, &f1, &sph) || !v->inner->box_grid) return false;
+  const int nx = (int)v->inner->res[0];
+  const double len = (rmax - rmin) * frame_scale(sph);
+  int best = 1;
+  double best_cost = INFINITY;
+  for (int n = 1;; n = n * 2 < nx ? n * 2 : nx) {
+    g->res[0] = n;
+    if (!majorant_grid_build_radial(g, v, pages, scale)) return false;
+    double cost = MAJORANT_SHELL_CROSSING * n;
+    for (int k = 1; k <= n; k++) cost += g->mu[k] * len / n;
+    if (cost < best_cost) best_cost = cost, best = n;
+    if (n >= nx) break;
+  }
+  g->res[0] = best;
+  return majorant_grid_build_radial(g, v, pages, scale);
 }

@@ -28,7 +28,7 @@
   X(isotropic) X(hg) X(blendphase) X(rayleigh) X(rayleigh_polarized)        \
   X(tabphase) X(tabphase_polarized)                                          \
   X(constvolume) X(gridvolume) X(sphericalcoordsvolume)                    \
-  X(extremum_grid) X(extremum_global)                                         \
+  X(extremum_grid) X(extremum_global) X(extremum_spherical)                   \
   X(null) X(homogeneous) X(heterogeneous) X(piecewise) X(molecular_atmosphere) \
   X(volpath) X(piecewise_volpath)
 // clang-format on

@@ -123,3 +123,12 @@ static rsw_status sphericalcoordsvolume_create(loader *ld, node *n, object **out
   }
   return plugin_created(ld, n, s ? &s->base.base : NULL, out);
 }
+
+bool volume_sphere(const volume *v, double *rmin, double *rmax, double *fillmin, double *fillmax,
+                   const xform **sph) {
+  if (v->base.plugin != &plugin_sphericalcoordsvolume) return false;
+  const sphcoords *s = (const sphcoords *)v;
+  *rmin = s->rmin, *rmax = s->rmax, *fillmin = s->fillmin, *fillmax = s->fillmax;
+  *sph = &s->frame;
+  return true;
+}

@@ -22,6 +22,11 @@ static inline int volume_wrap_index(int i, int n, int wrap) {
   }
 }
 
+/* A sphericalcoordsvolume's shell (its rmin, rmax, fills, and the unit
+ * sphere's frame: to_world as given); false for any other volume. */
+bool volume_sphere(const volume *v, double *rmin, double *rmax, double *fillmin, double *fillmax,
+                   const xform **sph);
+
 /* Value at world point p (kernel.h volume_ops.eval). */
 static inline color volume_eval(const volume *v, vec3 p) {
   return v->ops->eval(v, p);

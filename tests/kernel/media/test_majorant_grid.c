@@ -106,44 +106,9 @@ static void bounds_case(int nx, int ny, int nz, int ch, const char *filter, cons
   REQUIRE(prepare(s), "render");
   const medium *m = (const medium *)find_cls(s, "m", CLS_MEDIUM);
   REQUIRE(m && m->ops->majorant_walk, "the medium and its walk");
-  long bad = 0, pieces = 0, rays = 0, order = 0;
-  for (int k = 0; k < 400; k++) {
-    /* a ray from a random point near the box in a random direction */
-    vec3 o = v3(3 * urand() - 1.5, 3 * urand() - 1.5, 3 * urand() - 1.5);
-    double z = 2 * urand() - 1, ph = 2 * 3.14159265358979 * urand(), r = sqrt(fmax(0, 1 - z * z));
-    ray3 ray = {o, v3(r * cos(ph), r * sin(ph), z), 0, INFINITY};
-    double mint, maxt;
-    if (!m->ops->intersect_aabb(m, &ray, &mint, &maxt) || !(mint < maxt)) continue;
-    track_walk w;
-    bool walked = m->ops->majorant_walk(m, &ray, mint, maxt, true, &w);
-    REQUIRE(walked, "a walk");
-    rays++;
-    double a = mint;
-    for (int guard = 0; guard < 10000; guard++) {
-      double b = w.b < INFINITY ? w.b : maxt;
-      order += b < a - 1e-12;
-      /* (points off the pieces' ends by 1e-9 of their length: a point that
-       * rounds across a cell's side, or onto the box's face where repeat
-       * wraps to the far voxel, is the rounding majorant_grid.c leaves) */
-      for (int q = 0; q < 64 && b - a > 1e-9; q++) {
-        medium_interaction mi = {.medium = m, .t = a + (b - a) * (1e-9 + (1 - 2e-9) * urand())};
-        mi.p = v3_fma(ray.o, mi.t, ray.d);
-        mi.majorant = col1(w.mu);
-        m->ops->coefficients(m, &mi);
-        if ((col_max(mi.sigma_t) > w.mu ||
-             fmin(mi.sigma_t.c[0], fmin(mi.sigma_t.c[1], mi.sigma_t.c[2])) < w.ctl) &&
-            getenv("MG_DEBUG") && bad < 5)
-          printf("    t %.17g in [%.17g, %.17g] p %.17g %.17g %.17g cell %d %d %d mu %g st %g\n", mi.t, a, b,
-                 mi.p.x, mi.p.y, mi.p.z, w.cell[0], w.cell[1], w.cell[2], w.mu, col_max(mi.sigma_t));
-        bad += col_max(mi.sigma_t) > w.mu ||
-               fmin(mi.sigma_t.c[0], fmin(mi.sigma_t.c[1], mi.sigma_t.c[2])) < w.ctl;
-      }
-      pieces++;
-      if (w.b == INFINITY) break;
-      a = w.b;
-      track_walk_next(&w);
-    }
-  }
+  tsup_walk_stats w;
+  tsup_walk_check(m, v3(-1.5, -1.5, -1.5), v3(1.5, 1.5, 1.5), 400, &rng, &w);
+  long bad = w.bad, pieces = w.pieces, rays = w.rays, order = w.order;
   printf("  %dx%dx%d x%d %s %s res %s: %ld rays, %ld pieces\n", nx, ny, nz, ch, filter, wrap,
          res ? res : "auto", rays, pieces);
   CHECK(rays > 100 && pieces > rays, "too few rays (%ld) or pieces (%ld) to test", rays, pieces);
