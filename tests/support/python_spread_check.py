@@ -42,8 +42,12 @@ def jobs_on(ports):
 
 
 # A spread sweep with a journal in a process of its own: argv LB JOURNAL GRID(JSON) SPP.
+# SIGINT raises KeyboardInterrupt there as at a terminal: a process started in
+# the background by a non-interactive shell (make test) inherits SIGINT
+# ignored, and Python then installs no handler of its own.
 CHILD = """
-import json, sys
+import json, signal, sys
+signal.signal(signal.SIGINT, signal.default_int_handler)
 sys.path.insert(0, %r)
 import raysweep as rs
 lb, path, grid, spp = sys.argv[1], sys.argv[2], json.loads(sys.argv[3]), int(sys.argv[4])
