@@ -360,7 +360,8 @@ static void bench_shell(void) {
   }
   free(doc), free(ex.p);
   printf("{\"bench\": \"media_shell\", \"layers\": 120, \"spp\": %d, \"threads\": %d,"
-         " \"global_cpu_ns_per_sample\": %.1f, \"extremum_spherical_cpu_ns_per_sample\": %.1f, \"speedup\": %.2f,"
+         " \"global_cpu_ns_per_sample\": %.1f, \"extremum_spherical_cpu_ns_per_sample\": %.1f, \"speedup\": "
+         "%.2f,"
          " \"value_global\": %.6f, \"se_global\": %.6f, \"value_extremum\": %.6f, \"se_extremum\": %.6f,"
          " \"repeats\": %d}\n",
          SPP, threads, ns[0], ns[1], ns[0] / ns[1], mean[0], se[0], mean[1], se[1], REPEATS);
