@@ -268,3 +268,17 @@ void tsup_walk_check(const medium *m, vec3 lo, vec3 hi, int n, uint64_t *rng, ts
     }
   }
 }
+
+bool tsup_pixel_estimate(scene *s, uint32_t spp, int reps, double *mean, double *se) {
+  double sum = 0, sum2 = 0;
+  for (int r = 1; r <= reps; r++) {
+    film_image img;
+    if (!tsup_render(s, spp, (uint64_t)r, 0, &img)) return false;
+    double v = img.data[0];
+    film_image_free(&img);
+    sum += v, sum2 += v * v;
+  }
+  *mean = sum / reps;
+  *se = sqrt(fmax(sum2 / reps - *mean * *mean, 0) / (reps - 1));
+  return true;
+}

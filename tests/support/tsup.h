@@ -19,6 +19,10 @@ char *tsup_read_file(const char *path, size_t *len);
 /* Render sensor 0 (spp 0 = the scene's); returns false (and prints) on
  * failure. */
 bool tsup_render(scene *s, uint32_t spp, uint64_t seed, int threads, film_image *out);
+/* Mean and standard error of the mean of pixel 0's channel 0 over reps
+ * renders of sensor 0 at spp, seeds 1..reps (the Monte Carlo estimate of
+ * a one-pixel film); false (and prints) when a render fails. */
+bool tsup_pixel_estimate(scene *s, uint32_t spp, int reps, double *mean, double *se);
 /* Mean and standard error of the mean over all pixels of channel c. */
 void tsup_stats(const film_image *img, int c, double *mean, double *sem);
 

@@ -125,14 +125,9 @@ static void het_refresh(heterogeneous_medium *h) {
     const xform *sph;
     const volume *v = h->sigma_t;
     if (volume_sphere(v, &rmin, &rmax, &f0, &f1, &sph)) {
-      int want = h->extremum->res[0];
+      h->grid.res[0] = h->extremum->res[0]; /* (0: automatic) */
       h->grid.res[1] = h->grid.res[2] = 1;
-      if (want > 0) {
-        h->grid.res[0] = want;
-        if (!majorant_grid_build_radial(&h->grid, v, h->pages, h->base.scale)) majorant_grid_free(&h->grid);
-      } else if (!majorant_grid_radial_auto(&h->grid, v, h->pages, h->base.scale)) {
-        majorant_grid_free(&h->grid);
-      }
+      if (!majorant_grid_build_radial(&h->grid, v, h->pages, h->base.scale)) majorant_grid_free(&h->grid);
     }
   } else if (h->extremum && h->extremum->local && h->sigma_t->box_grid) {
     const volume *v = h->sigma_t;

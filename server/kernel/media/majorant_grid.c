@@ -152,24 +152,47 @@ bool track_walk_grid(track_walk *w, const majorant_grid *g, const xform *to_worl
   return true;
 }
 
+/* The length in the world of a unit along the sphere's frame (its
+ * columns' mean length: a sphere is scaled alike along its axes). */
+static double frame_scale(const xform *f) {
+  double s = 0;
+  for (int c = 0; c < 3; c++)
+    s += sqrt(f->m[0][c] * f->m[0][c] + f->m[1][c] * f->m[1][c] + f->m[2][c] * f->m[2][c]);
+  return s / 3;
+}
+
+/* The automatic shell count over the radial columns col (nx (max, min)
+ * pairs): the one of 1, 2, 4, ... and nx whose radial crossing costs
+ * least, MAJORANT_SHELL_CROSSING a shell crossed plus sum(mu_k dr_k)
+ * (len: the shell's thickness in the world). c: room for nx + 2 pairs. */
+static int auto_shells(const double *col, int nx, int wrap, bool tri, double scale, double len, double *c) {
+  int best = 1;
+  double best_cost = INFINITY;
+  for (int n = 1;; n = n * 2 < nx ? n * 2 : nx) {
+    extremes_along(col, c, 1, nx, n, wrap, tri, 0, 1, 0, 1);
+    double cost = MAJORANT_SHELL_CROSSING * n;
+    for (int k = 0; k < n; k++) cost += c[2 * k] * scale * len / n;
+    if (cost < best_cost) best_cost = cost, best = n;
+    if (n >= nx) break;
+  }
+  return best;
+}
+
 bool majorant_grid_build_radial(majorant_grid *g, const volume *v, int pages, double scale) {
   double rmin, rmax, fill0, fill1;
   const xform *sph;
   if (!volume_sphere(v, &rmin, &rmax, &fill0, &fill1, &sph)) return false;
   const volume *in = v->inner;
   if (!in->box_grid) return false;
-  const int nx = (int)in->res[0], ny = (int)in->res[1], nz = (int)in->res[2], nr = g->res[0];
-  const size_t ch = in->channels, cells = (size_t)nr + 2;
+  const int nx = (int)in->res[0], ny = (int)in->res[1], nz = (int)in->res[2];
+  const size_t ch = in->channels;
   const bool tri = in->trilinear && nx > 1;
   /* each radial voxel column x: its extremes over theta, phi, channels
-   * and pages */
-  double *col = malloc((size_t)nx * 2 * sizeof *col), *c = malloc(cells * 2 * sizeof *c);
-  double *mu = cells > g->cap ? malloc(cells * sizeof *mu) : g->mu;
-  double *lo = cells > g->cap ? malloc(cells * sizeof *lo) : g->lo;
-  if (!col || !c || !mu || !lo) {
+   * and pages (read once, whatever the shell counts tried) */
+  double *col = malloc((size_t)nx * 2 * sizeof *col);
+  double *c = malloc(((size_t)(g->res[0] > nx ? g->res[0] : nx) + 2) * 2 * sizeof *c);
+  if (!col || !c) {
     free(col), free(c);
-    if (mu != g->mu) free(mu);
-    if (lo != g->lo) free(lo);
     return false;
   }
   for (int x = 0; x < nx; x++) col[2 * x] = 0.0, col[2 * x + 1] = INFINITY;
@@ -183,6 +206,18 @@ bool majorant_grid_build_radial(majorant_grid *g, const volume *v, int pages, do
             col[2 * x] = val > col[2 * x] ? val : col[2 * x];
             col[2 * x + 1] = val < col[2 * x + 1] ? val : col[2 * x + 1];
           }
+  }
+  const int nr = g->res[0] > 0
+                     ? g->res[0]
+                     : auto_shells(col, nx, in->wrap, tri, scale, (rmax - rmin) * frame_scale(sph), c);
+  const size_t cells = (size_t)nr + 2;
+  double *mu = cells > g->cap ? malloc(cells * sizeof *mu) : g->mu;
+  double *lo = cells > g->cap ? malloc(cells * sizeof *lo) : g->lo;
+  if (!mu || !lo) {
+    free(col), free(c);
+    if (mu != g->mu) free(mu);
+    if (lo != g->lo) free(lo);
+    return false;
   }
   extremes_along(col, c + 2, 1, nx, nr, in->wrap, tri, 0, 1, 0, 1);
   c[0] = c[1] = fill0;
@@ -199,6 +234,7 @@ bool majorant_grid_build_radial(majorant_grid *g, const volume *v, int pages, do
     g->lo = lo;
     g->cap = cells;
   }
+  g->res[0] = nr;
   g->radial = true;
   g->rmin = rmin, g->rmax = rmax;
   g->frame = sph;
@@ -259,33 +295,4 @@ bool track_walk_radial(track_walk *w, const majorant_grid *g, const ray3 *r, dou
   w->ctl = w->ctls ? w->ctls[w->bin + 1] : 0.0;
   track_walk_radial_boundary(w, mint);
   return true;
-}
-
-/* The length in the world of a unit along the sphere's frame (its
- * columns' mean length: a sphere is scaled alike along its axes). */
-static double frame_scale(const xform *f) {
-  double s = 0;
-  for (int c = 0; c < 3; c++)
-    s += sqrt(f->m[0][c] * f->m[0][c] + f->m[1][c] * f->m[1][c] + f->m[2][c] * f->m[2][c]);
-  return s / 3;
-}
-
-bool majorant_grid_radial_auto(majorant_grid *g, const volume *v, int pages, double scale) {
-  double rmin, rmax, f0, f1;
-  const xform *sph;
-  if (!volume_sphere(v, &rmin, &rmax, &f0, &f1, &sph) || !v->inner->box_grid) return false;
-  const int nx = (int)v->inner->res[0];
-  const double len = (rmax - rmin) * frame_scale(sph);
-  int best = 1;
-  double best_cost = INFINITY;
-  for (int n = 1;; n = n * 2 < nx ? n * 2 : nx) {
-    g->res[0] = n;
-    if (!majorant_grid_build_radial(g, v, pages, scale)) return false;
-    double cost = MAJORANT_SHELL_CROSSING * n;
-    for (int k = 1; k <= n; k++) cost += g->mu[k] * len / n;
-    if (cost < best_cost) best_cost = cost, best = n;
-    if (n >= nx) break;
-  }
-  g->res[0] = best;
-  return majorant_grid_build_radial(g, v, pages, scale);
 }

@@ -49,16 +49,15 @@ typedef struct majorant_grid {
  * interpolation's rounding); its minorant the smallest such value times
  * 1 - 2^-40. False: out of memory (g unchanged). */
 bool majorant_grid_build(majorant_grid *g, const volume *v, int pages, double scale);
-/* The radial grid (g->res[0] shells) over sphericalcoordsvolume v; false:
- * out of memory, or v's nested volume is no grid over a box (g
- * unchanged). */
-bool majorant_grid_build_radial(majorant_grid *g, const volume *v, int pages, double scale);
-/* The radial grid over v with the number of shells that a radial crossing
- * of the shell finds cheapest: 1, 2, 4, ... up to the nested grid's radial
- * voxels, and that count, each costing MAJORANT_SHELL_CROSSING tentative
+/* The radial grid (g->res[0] shells) over sphericalcoordsvolume v;
+ * g->res[0] 0: the number of shells that a radial crossing of the shell
+ * finds cheapest, among 1, 2, 4, ... up to the nested grid's radial
+ * voxels and that count, each costing MAJORANT_SHELL_CROSSING tentative
  * collisions a shell crossed plus its majorants' optical thickness
- * sum(mu_k dr_k) (Yue et al. 2011's trade-off, along the radius). */
-bool majorant_grid_radial_auto(majorant_grid *g, const volume *v, int pages, double scale);
+ * sum(mu_k dr_k) (Yue et al. 2011's trade-off, along the radius); g->res[0]
+ * is then that count. False: out of memory, or v's nested volume is no
+ * grid over a box (g unchanged). */
+bool majorant_grid_build_radial(majorant_grid *g, const volume *v, int pages, double scale);
 
 /* What crossing a shell costs, in tentative collisions (measured on
  * docs/examples/spherical_shell.json: a crossing is a square root and a

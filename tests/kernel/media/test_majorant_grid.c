@@ -131,25 +131,6 @@ static void test_cells_bound_the_extinction(void) {
 
 /* ---- estimates ------------------------------------------------------------------ */
 
-/* Mean and standard error of channel 0 of REPS one-pixel renders at spp
- * (seeds 1..REPS); optionally their wall time. */
-static void estimate(scene *s, int reps, uint32_t spp, double *mean, double *se, double *secs) {
-  double sum = 0, sum2 = 0;
-  struct timespec t0, t1;
-  clock_gettime(CLOCK_MONOTONIC, &t0);
-  for (int r = 1; r <= reps; r++) {
-    film_image img;
-    REQUIRE(tsup_render(s, spp, (uint64_t)r, 0, &img), "render");
-    double v = img.data[0];
-    film_image_free(&img);
-    sum += v, sum2 += v * v;
-  }
-  clock_gettime(CLOCK_MONOTONIC, &t1);
-  *mean = sum / reps;
-  *se = sqrt(fmax(sum2 / reps - *mean * *mean, 0) / (reps - 1));
-  if (secs) *secs = (double)(t1.tv_sec - t0.tv_sec) + 1e-9 * (double)(t1.tv_nsec - t0.tv_nsec);
-}
-
 /* An absorbing 4 x 3 x 6 nearest grid: the column under (tx, ty) is
  * voxel (ix, iy); straight down through the cube (length 2), tau is the
  * sum of its 6 values times 2/6. */
@@ -183,7 +164,7 @@ static void test_transmittance_exact(void) {
     free(text);
     REQUIRE(s, "scene");
     double m = 0, se = 0;
-    estimate(s, REPS, 64, &m, &se, NULL);
+    REQUIRE(tsup_pixel_estimate(s, 64, REPS, &m, &se), "renders");
     printf("  absorbing grid, %s: T %.6f +- %.6f, exact %.6f (tau %.4f)\n", what[k], m, se, want, tau);
     CHECK(fabs(m - want) <= 4 * se + 1e-12, "%s: T %.6g vs exact %.6g beyond 4 sigma (%.3g)", what[k], m,
           want, 4 * se);
@@ -225,7 +206,7 @@ static void test_residual_global(void) {
     free(text);
     REQUIRE(s, "scene");
     double m = 0, se = 0;
-    estimate(s, REPS, 64, &m, &se, NULL);
+    REQUIRE(tsup_pixel_estimate(s, 64, REPS, &m, &se), "renders");
     printf("  grid in [0.5, 1.5], %s: T %.6f +- %.6f, exact %.6f\n",
            k ? "residual (global minorant)" : "ratio", m, se, want);
     CHECK(fabs(m - want) <= 4 * se + 1e-12, "T %.6g vs exact %.6g beyond 4 sigma (%.3g)", m, want, 4 * se);

@@ -128,24 +128,9 @@ static char *shell_scene(double rmin, const char *inner, double b) {
   return s.p;
 }
 
-static void transmittance(scene *s, double *mean, double *se) {
-  enum {
-    REPS = 24
-  };
-  double sum = 0, sum2 = 0;
-  for (int r = 1; r <= REPS; r++) {
-    film_image img;
-    REQUIRE(tsup_render(s, 1024, (uint64_t)r, 0, &img), "render");
-    sum += img.data[0], sum2 += img.data[0] * img.data[0];
-    film_image_free(&img);
-  }
-  *mean = sum / REPS;
-  *se = sqrt(fmax(sum2 / REPS - *mean * *mean, 0) / (REPS - 1));
-}
-
 static void check_t(const char *what, scene *s, double want) {
   double m, se;
-  transmittance(s, &m, &se);
+  REQUIRE(tsup_pixel_estimate(s, 1024, 24, &m, &se), "renders");
   printf("  %s: T %.5f +- %.5f, exact %.5f\n", what, m, se, want);
   /* (+ 1e-6: the sphere's boundary comes from Embree's single-precision
    * hit, and a shell's residual ratio tracking with a control equal to its
@@ -375,17 +360,7 @@ static void test_shell_vs_plane_parallel(void) {
   REQUIRE(pp, "the plane-parallel scene");
   double m[2], se[2];
   scene *sc[2] = {sh, pp};
-  for (int k = 0; k < 2; k++) {
-    double sum = 0, sum2 = 0;
-    for (int r = 1; r <= REPS; r++) {
-      film_image img;
-      REQUIRE(tsup_render(sc[k], 16384, (uint64_t)r, 0, &img), "render");
-      sum += img.data[0], sum2 += img.data[0] * img.data[0];
-      film_image_free(&img);
-    }
-    m[k] = sum / REPS;
-    se[k] = sqrt(fmax(sum2 / REPS - m[k] * m[k], 0) / (REPS - 1));
-  }
+  for (int k = 0; k < 2; k++) REQUIRE(tsup_pixel_estimate(sc[k], 16384, REPS, &m[k], &se[k]), "renders");
   double diff = m[0] - m[1], tol = 4 * sqrt(se[0] * se[0] + se[1] * se[1]) + 0.005 * m[1];
   printf("  nadir radiance: spherical shell %.6f +- %.6f, plane-parallel %.6f +- %.6f (%+.2f%%)\n", m[0],
          se[0], m[1], se[1], 100 * diff / m[1]);
